@@ -1,0 +1,81 @@
+"""Shared pieces of the command line: consoles, errors, unit options, JSON output.
+
+Every command exits 2 with a one-line reason on bad input (never a traceback),
+offers ``--json`` where it prints results, and labels units in what people read.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import NoReturn
+
+import typer
+from rich.console import Console
+
+from ..units import UnitError, parse_angle, parse_length
+
+console = Console()
+err_console = Console(stderr=True)
+
+EXIT_BAD_INPUT = 2
+
+
+def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
+    """Print ``error: message`` to stderr and exit with ``code`` (2 = bad input)."""
+    for line in str(message).splitlines() or [""]:
+        err_console.print(f"[bold red]error:[/] {line}", highlight=False, markup=True, soft_wrap=True)
+    raise typer.Exit(code)
+
+
+def warn(message: str) -> None:
+    """Print ``warning: message`` to stderr."""
+    err_console.print(f"[bold yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+
+
+@contextmanager
+def user_errors(*types: type[BaseException]) -> Iterator[None]:
+    """Turn the given exception types (and ValueError, OSError) into ``fail(str(e))``."""
+    catch = types + (ValueError, OSError)
+    try:
+        yield
+    except typer.Exit:
+        raise
+    except catch as e:  # noqa: B902
+        fail(str(e))
+
+
+def print_json(obj: object) -> None:
+    """Print ``obj`` as JSON on stdout (NaN/inf become null)."""
+    sys.stdout.write(json.dumps(_clean(obj), indent=2) + "\n")
+
+
+def _clean(obj: object) -> object:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if hasattr(obj, "item") and callable(obj.item):  # numpy scalars
+        return _clean(obj.item())
+    return obj
+
+
+def _unit_parser(parse: Callable[[str], float], what: str) -> Callable[[str | None], float | None]:
+    def callback(value: str | None) -> float | None:
+        if value is None:
+            return None
+        try:
+            return parse(value)
+        except UnitError as e:
+            raise typer.BadParameter(f"{e} ({what})") from None
+
+    return callback
+
+
+angle_option = _unit_parser(parse_angle, "an angle: radians, or with deg / mrad / urad")
+length_option = _unit_parser(parse_length, "a length: metres, or with mm / um / nm")

@@ -1,0 +1,125 @@
+"""The one interface every stick-slip controller backend implements.
+
+Nothing above this layer knows which backend it talks to: traverses, planning-driven
+moves and the demo take a :class:`Controller` and nothing else. Backends are opened
+from a URL by :func:`open_device`; the scheme picks the backend::
+
+    sim://                      the simulated MM3A (default)
+    sim://?seed=3&day=2026-11-22
+    mm3a:///dev/ttyUSB0         Kleindiek NanoControl over a serial port
+    anc300://host[:7230]        Attocube ANC300
+
+Backends register a factory with :func:`register_backend`; the registry imports
+backend modules lazily so optional extras (pyserial, pymeasure) are needed only by
+the URLs that use them.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+from urllib.parse import urlsplit
+
+__all__ = ["Controller", "DeviceInfo", "DeviceError", "BACKENDS", "register_backend", "open_device"]
+
+
+class DeviceError(RuntimeError):
+    """A controller refused, timed out, or could not be opened. The message says which and why."""
+
+
+@dataclass(frozen=True)
+class DeviceInfo:
+    """What a controller says about itself.
+
+    Attributes
+    ----------
+    url : str
+        The URL it was opened with.
+    model : str
+        Human-readable model, e.g. ``"simulated MM3A"`` or ``"Kleindiek NanoControl 3.1"``.
+    joints : tuple of int
+        The joints it drives (1, 2, 3 for an MM3A).
+    extra : dict
+        Backend-specific details (firmware version, channel map, ...).
+    """
+
+    url: str
+    model: str
+    joints: tuple[int, ...] = (1, 2, 3)
+    extra: dict[str, object] = field(default_factory=dict)
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """A stick-slip controller: step a joint by a signed number of steps, stop, report settings.
+
+    Step counts are signed (``+`` = joint coordinate increasing, DESIGN.md section 2).
+    Frequencies are in Hz. Every setter validates its argument and raises
+    ``ValueError`` naming the allowed range; nothing is clipped silently.
+    """
+
+    @property
+    def info(self) -> DeviceInfo:
+        """Model, URL and joints of this controller."""
+        ...
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        """Set the stepping frequency of ``joint`` (Hz). Raises ``ValueError`` out of range."""
+        ...
+
+    def frequency(self, joint: int) -> float:
+        """The stepping frequency of ``joint`` (Hz)."""
+        ...
+
+    def step(self, joint: int, n: int) -> None:
+        """Command ``n`` signed steps on ``joint`` at its frequency; returns once they are issued.
+
+        The burst takes ``|n| / frequency`` seconds on the device. Raises
+        :class:`DeviceError` if the controller does not accept the command.
+        """
+        ...
+
+    def stop(self, joint: int | None = None) -> None:
+        """Stop ``joint`` (or all joints) now."""
+        ...
+
+    def settings(self) -> dict[str, object]:
+        """Current settings (frequencies in Hz, amplitudes in V, channel map, ...)."""
+        ...
+
+    def close(self) -> None:
+        """Stop everything and release the transport."""
+        ...
+
+
+Factory = Callable[[str], Controller]
+
+BACKENDS: dict[str, str | Factory] = {
+    # scheme -> factory, or "module:function" imported on first use
+    "sim": "stickslip.devices.simulator:open_url",
+}
+
+
+def register_backend(scheme: str, factory: str | Factory) -> None:
+    """Make ``scheme://...`` URLs open with ``factory(url)`` (a callable or ``"module:function"``)."""
+    BACKENDS[scheme] = factory
+
+
+def open_device(url: str = "sim://") -> Controller:
+    """Open the controller a URL names. Raises :class:`DeviceError` for an unknown scheme."""
+    scheme = urlsplit(url).scheme or "sim"
+    base_scheme = scheme.split("+", 1)[0]
+    factory = BACKENDS.get(scheme) or BACKENDS.get(base_scheme)
+    if factory is None:
+        known = ", ".join(f"{s}://" for s in sorted(BACKENDS))
+        raise DeviceError(f"unknown device URL scheme {scheme!r} in {url!r} (known: {known})")
+    if isinstance(factory, str):
+        mod_name, func_name = factory.split(":")
+        try:
+            module = importlib.import_module(mod_name)
+        except ImportError as e:
+            raise DeviceError(f"the backend for {scheme}:// could not be loaded: {e}") from e
+        factory = getattr(module, func_name)
+    return factory(url)

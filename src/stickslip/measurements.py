@@ -1,0 +1,297 @@
+"""The measurement table: one traverse per row (DESIGN.md section 7).
+
+CSV header, exactly::
+
+    day,joint,direction,q1,q2,q3,theta,psi,start,end,steps
+
+``day`` is a session label (ISO date preferred); ``q1, q2, q3`` hold the fixed joints
+(the moving joint's column is ignored); ``start, end`` is the traversed interval of
+the moving joint; ``steps`` a positive integer. All values SI (rad, m).
+
+Rows that break these rules are never skipped: :func:`read_measurements` collects
+every problem as ``file:line: reason`` and raises :class:`TableError`.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+import numpy as np
+
+from . import kinematics as kin
+from .models import direction_label
+
+__all__ = [
+    "HEADER",
+    "POSE_COLUMNS",
+    "Traverse",
+    "TableError",
+    "read_measurements",
+    "parse_measurements",
+    "write_measurements",
+    "measurements_to_csv",
+    "check_pose",
+]
+
+HEADER = ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
+POSE_COLUMNS = ("q1", "q2", "q3", "theta", "psi")
+_TILT_LIMIT = math.pi + 1e-6
+
+
+@dataclass(frozen=True)
+class Traverse:
+    """One measured traverse of one joint (a row of the measurement table).
+
+    Attributes
+    ----------
+    day : str
+        Session label (ISO date preferred).
+    joint : int
+        Moving joint, 1, 2 or 3.
+    direction : str
+        ``"+"`` (q increasing) or ``"-"``.
+    q1, q2, q3 : float
+        Fixed joints (rad, rad, m); the moving joint's value is ignored.
+    theta, psi : float
+        Base tilt, rad.
+    start, end : float
+        Traversed interval of the moving joint (rad or m).
+    steps : int
+        Steps counted, > 0.
+    """
+
+    day: str
+    joint: int
+    direction: str
+    q1: float
+    q2: float
+    q3: float
+    theta: float
+    psi: float
+    start: float
+    end: float
+    steps: int
+
+    @property
+    def gamma(self) -> float:
+        """Average step size ``|end - start| / steps`` (m or rad)."""
+        return abs(self.end - self.start) / self.steps
+
+    @property
+    def sign(self) -> int:
+        return 1 if self.direction == "+" else -1
+
+    def pose(self) -> dict[str, float]:
+        """The fixed pose as a dict of ``q1, q2, q3, theta, psi``."""
+        return {k: getattr(self, k) for k in POSE_COLUMNS}
+
+    def as_row(self) -> dict[str, object]:
+        return asdict(self)
+
+    def with_moving(self, q: float) -> Traverse:
+        """A copy whose moving joint's column holds ``q`` (handy for evaluating the model)."""
+        return replace(self, **{f"q{self.joint}": q})
+
+
+class TableError(ValueError):
+    """A measurement (or pose) table has problems; ``problems`` holds one line each.
+
+    Each line reads ``file:line: reason`` (line 1 is the header).
+    """
+
+    def __init__(self, problems: Sequence[str]):
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))
+
+
+def check_pose(joint: int, values: dict[str, float]) -> list[str]:
+    """Range problems of a pose for a traverse of ``joint`` (empty if fine).
+
+    The fixed joints must lie within their stops; ``theta`` and ``psi`` within
+    [-pi, pi]. Values use the tolerance of :meth:`JointSpec.contains`.
+    """
+    problems = []
+    for j in (1, 2, 3):
+        if j == joint:
+            continue
+        spec = kin.JOINTS[j]
+        v = values[f"q{j}"]
+        if not spec.contains(v):
+            problems.append(
+                f"q{j} = {v:.6g} {spec.unit} is outside joint {j}'s range [{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+            )
+    for name in ("theta", "psi"):
+        v = values[name]
+        if not -_TILT_LIMIT <= v <= _TILT_LIMIT:
+            problems.append(f"{name} = {v:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    return problems
+
+
+def _parse_float(name: str, text: str) -> tuple[float | None, str | None]:
+    try:
+        v = float(text)
+    except ValueError:
+        return None, f"{name} must be a number in SI units, got {text!r}"
+    if not math.isfinite(v):
+        return None, f"{name} must be finite, got {text!r}"
+    return v, None
+
+
+def _parse_steps(text: str) -> tuple[int | None, str | None]:
+    t = text.strip()
+    try:
+        v = int(t)
+    except ValueError:
+        try:
+            f = float(t)
+        except ValueError:
+            return None, f"steps must be a positive integer, got {text!r}"
+        if not math.isfinite(f) or f != int(f):
+            return None, f"steps must be a positive integer, got {text!r}"
+        v = int(f)
+    if v <= 0:
+        return None, f"steps must be a positive integer, got {text!r}"
+    return v, None
+
+
+def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
+    """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
+    problems: list[str] = []
+    day = (row.get("day") or "").strip()
+    if not day:
+        problems.append(f"{where}: day is empty (use a session label, e.g. an ISO date)")
+    jtext = (row.get("joint") or "").strip()
+    joint: int | None
+    try:
+        joint = int(jtext)
+        kin.joint_spec(joint)
+    except ValueError:
+        problems.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
+        joint = None
+    dtext = (row.get("direction") or "").strip()
+    try:
+        direction = direction_label(dtext)
+    except ValueError:
+        problems.append(f"{where}: direction must be '+' or '-', got {dtext!r}")
+        direction = None
+    nums: dict[str, float] = {}
+    for name in ("q1", "q2", "q3", "theta", "psi", "start", "end"):
+        v, err = _parse_float(name, (row.get(name) or "").strip())
+        if err:
+            problems.append(f"{where}: {err}")
+        else:
+            nums[name] = v  # type: ignore[assignment]
+    steps, err = _parse_steps(row.get("steps") or "")
+    if err:
+        problems.append(f"{where}: {err}")
+    if problems or joint is None or direction is None or steps is None:
+        return None, problems
+    start, end = nums["start"], nums["end"]
+    if end == start:
+        problems.append(f"{where}: start and end are equal ({start:.6g}): a traverse must move")
+    elif (end > start) != (direction == "+"):
+        problems.append(
+            f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g} "
+            "('+' means end > start)"
+        )
+    spec = kin.JOINTS[joint]
+    for name in ("start", "end"):
+        if not spec.contains(nums[name]):
+            problems.append(
+                f"{where}: {name} = {nums[name]:.6g} {spec.unit} is outside joint {joint}'s range "
+                f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+            )
+    problems += [f"{where}: {p}" for p in check_pose(joint, nums)]
+    if problems:
+        return None, problems
+    return Traverse(day, joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"],
+                    start, end, steps), []
+
+
+def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
+    """Parse measurement-table CSV text. Raises :class:`TableError` listing every bad row."""
+    reader = csv.reader(io.StringIO(text))
+    try:
+        header = next(reader)
+    except StopIteration:
+        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"]) from None
+    header = [h.strip() for h in header]
+    if tuple(header) != HEADER:
+        missing = [h for h in HEADER if h not in header]
+        extra = [h for h in header if h not in HEADER]
+        detail = []
+        if missing:
+            detail.append("missing " + ", ".join(missing))
+        if extra:
+            detail.append("unexpected " + ", ".join(extra))
+        if not detail:
+            detail.append("columns out of order")
+        raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
+    out: list[Traverse] = []
+    problems: list[str] = []
+    for lineno, cells in enumerate(reader, start=2):
+        if not cells or all(not c.strip() for c in cells):
+            continue  # blank line: not data
+        where = f"{source}:{lineno}"
+        if len(cells) != len(HEADER):
+            problems.append(f"{where}: expected {len(HEADER)} columns, found {len(cells)}")
+            continue
+        t, errs = parse_row(dict(zip(HEADER, cells, strict=True)), where)
+        if errs:
+            problems += errs
+        else:
+            out.append(t)  # type: ignore[arg-type]
+    if problems:
+        raise TableError(problems)
+    if not out:
+        raise TableError([f"{source}:2: the table has a header but no rows"])
+    return out
+
+
+def read_measurements(path: str | Path) -> list[Traverse]:
+    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise TableError([f"{p}: no such file"]) from None
+    except UnicodeDecodeError:
+        raise TableError([f"{p}:1: not a UTF-8 text file"]) from None
+    return parse_measurements(text, str(path))
+
+
+def _fmt(v: object) -> str:
+    if isinstance(v, float):
+        return repr(v)
+    return str(v)
+
+
+def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
+    """The CSV text of a measurement table (full float precision)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(HEADER)
+    for t in traverses:
+        w.writerow([_fmt(getattr(t, f.name)) for f in fields(Traverse)])
+    return buf.getvalue()
+
+
+def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
+    """Write a measurement table to a CSV file."""
+    Path(path).write_text(measurements_to_csv(traverses), encoding="utf-8")
+
+
+def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:
+    """Column arrays of a list of traverses (for vectorised model evaluation)."""
+    cols = {f.name: [getattr(t, f.name) for t in traverses] for f in fields(Traverse)}
+    out: dict[str, np.ndarray] = {}
+    for k, v in cols.items():
+        out[k] = np.asarray(v, dtype=object if k in ("day", "direction") else float)
+    out["joint"] = out["joint"].astype(int)
+    out["steps"] = out["steps"].astype(int)
+    return out

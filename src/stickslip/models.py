@@ -1,0 +1,432 @@
+"""Load-aware mean step-size models (the paper's Eqs. 2, 3, 7, 8) and traverse averages.
+
+All functions are pure and vectorised over poses; SI units throughout (step sizes in
+metres for the prismatic joint, radians for rotary joints).
+
+Prismatic joint 3, direction ``i``::
+
+    eta_i(q2)  = 1 - b_i |cos q2|                                  (2)
+    gamma_3i   = eta_i(q2) (a_i - c_i L3),   L3 = cos(zeta) cos(theta) at q1 = 0   (3)
+
+Rotary joints 1 and 2, direction ``i``::
+
+    gamma_ji   = gamma_ji0(q3) + d_i(q3) L_j                       (7), (8)
+
+with ``L2 = sin(zeta) cos(theta)`` at ``q1 = 0`` and the load terms of
+:mod:`stickslip.kinematics` in general. ``gamma_ji0`` and ``d_i`` are interpolated
+linearly in ``q3`` between the values calibrated at ``q3 = 0`` and ``q3 = 12 mm``.
+
+The *average step over a traverse* from ``start`` to ``end`` is
+``|end - start| / N`` with ``N = integral dq / gamma(q)``. For rotary joints
+``gamma(q) = A + B cos(q - phi)``-type, so ``N`` has a closed form
+(:func:`steps_between`), cross-checked against adaptive quadrature
+(:func:`steps_between_quad`) and a step-by-step simulation
+(:func:`simulate_traverse_steps`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import kinematics as kin
+
+__all__ = [
+    "DIRECTIONS",
+    "direction_sign",
+    "direction_label",
+    "eta",
+    "gamma_prismatic",
+    "gamma_rotary",
+    "interp_q3",
+    "PrismaticParams",
+    "RotaryParams",
+    "JointModel",
+    "NonPhysicalError",
+    "antiderivative_inverse_step",
+    "steps_between",
+    "steps_between_quad",
+    "simulate_traverse_steps",
+    "position_after_steps",
+]
+
+DIRECTIONS = ("+", "-")
+
+
+def direction_sign(direction: str | int) -> int:
+    """``+1`` for ``"+"`` (or ``1``), ``-1`` for ``"-"``/``"−"`` (or ``-1``)."""
+    if direction in ("+", 1, "1", "+1", "pos"):
+        return 1
+    if direction in ("-", "−", -1, "-1", "neg"):
+        return -1
+    raise ValueError(f"direction must be '+' or '-', got {direction!r}")
+
+
+def direction_label(sign: int | str) -> str:
+    """``"+"`` or ``"-"`` for a direction given as a sign or label."""
+    return "+" if direction_sign(sign) > 0 else "-"
+
+
+class NonPhysicalError(ValueError):
+    """A parameter set that would give a step size <= 0 somewhere, or b outside [0, 1)."""
+
+
+# ---------------------------------------------------------------- pure model functions
+
+
+def eta(q2: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    """Stepping efficiency of the prismatic joint, Eq. (2): ``1 - b |cos q2|``.
+
+    Parameters
+    ----------
+    q2 : array_like
+        Joint-2 angle, rad.
+    b : array_like
+        Efficiency loss when the arm is perpendicular to the outstretched pose (1).
+    """
+    return 1.0 - np.asarray(b, dtype=float) * np.abs(np.cos(np.asarray(q2, dtype=float)))
+
+
+def gamma_prismatic(
+    q2: ArrayLike,
+    theta: ArrayLike,
+    psi: ArrayLike,
+    a: ArrayLike,
+    b: ArrayLike,
+    c: ArrayLike,
+    q1: ArrayLike = 0.0,
+) -> NDArray[np.float64]:
+    """Mean step of prismatic joint 3, Eq. (3): ``eta(q2) (a - c cos(zeta) cos(theta))``, m.
+
+    Parameters
+    ----------
+    q2, theta, psi, q1 : array_like
+        Pose, rad. The axial load term is ``-g0 . z2`` (``cos(zeta) cos(theta)`` at q1 = 0).
+    a : array_like
+        Step with no axial load and full efficiency (q2 = -pi/2, theta = 0), m. Eq. (4).
+    b : array_like
+        Efficiency loss, dimensionless. Eq. (5).
+    c : array_like
+        Change of step per unit axial load, m. Eq. (6).
+    """
+    load = kin.prismatic_load(q1, q2, theta, psi)
+    return eta(q2, b) * (np.asarray(a, dtype=float) - np.asarray(c, dtype=float) * load)
+
+
+def gamma_rotary(load: ArrayLike, gamma0: ArrayLike, d: ArrayLike) -> NDArray[np.float64]:
+    """Mean step of a rotary joint, Eq. (8): ``gamma0 + d L``, rad.
+
+    Parameters
+    ----------
+    load : array_like
+        Load term ``L`` (``sin(zeta) cos(theta)`` for joint 2 at q1 = 0), dimensionless.
+    gamma0 : array_like
+        Step with no gravity torque (theta = +-pi/2), rad.
+    d : array_like
+        Change of step per unit load, rad.
+    """
+    return np.asarray(gamma0, dtype=float) + np.asarray(d, dtype=float) * np.asarray(load, dtype=float)
+
+
+def interp_q3(q3: ArrayLike, knots: tuple[float, float], values: tuple[float, float]) -> NDArray[np.float64]:
+    """Linear interpolation (and extrapolation) in ``q3`` (m) between two calibrated values."""
+    q3 = np.asarray(q3, dtype=float)
+    (x0, x1), (v0, v1) = knots, values
+    return v0 + (v1 - v0) * (q3 - x0) / (x1 - x0)
+
+
+# ---------------------------------------------------------------- parameter containers
+
+
+@dataclass(frozen=True)
+class PrismaticParams:
+    """Parameters of Eq. (3) for one direction of the prismatic joint.
+
+    Attributes
+    ----------
+    a : float
+        Step with no load at full efficiency, m.
+    b : float
+        Efficiency loss, dimensionless, in [0, 1).
+    c : float
+        Change of step per unit axial load, m.
+    """
+
+    a: float
+    b: float
+    c: float
+
+    kind = "prismatic"
+
+    def names(self) -> list[tuple[str, float | None]]:
+        return [("a", None), ("b", None), ("c", None)]
+
+    def as_vector(self) -> NDArray[np.float64]:
+        return np.array([self.a, self.b, self.c])
+
+    @classmethod
+    def from_vector(cls, v: ArrayLike) -> PrismaticParams:
+        a, b, c = (float(x) for x in np.asarray(v, dtype=float))
+        return cls(a, b, c)
+
+    def check_physical(self) -> None:
+        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose."""
+        if not (0.0 <= self.b < 1.0) or not math.isfinite(self.b):
+            raise NonPhysicalError(f"b = {self.b:.4g} is outside [0, 1): the efficiency 1 - b|cos q2| would be <= 0")
+        if not self.a - abs(self.c) > 0.0:
+            raise NonPhysicalError(
+                f"a - |c| = {(self.a - abs(self.c)) * 1e9:.4g} nm <= 0: the step would be <= 0 "
+                "when the axial load is "
+                f"{'+1' if self.c > 0 else '-1'} (cos(zeta) cos(theta) = {'1' if self.c > 0 else '-1'})"
+            )
+
+
+@dataclass(frozen=True)
+class RotaryParams:
+    """Parameters of Eq. (8) for one direction of a rotary joint, at two extensions of q3.
+
+    Attributes
+    ----------
+    gamma0 : tuple of float
+        Step with no gravity torque at ``q3 = knots[0]`` and ``knots[1]``, rad.
+    d : tuple of float
+        Change of step per unit load at the same extensions, rad.
+    knots : tuple of float
+        The two q3 values (m) the parameters were calibrated at; default (0, 12 mm).
+    """
+
+    gamma0: tuple[float, float]
+    d: tuple[float, float]
+    knots: tuple[float, float] = field(default=(0.0, kin.Q3_MAX))
+
+    kind = "rotary"
+
+    def at(self, q3: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(gamma0, d)`` at extension ``q3`` (m), interpolated linearly."""
+        return interp_q3(q3, self.knots, self.gamma0), interp_q3(q3, self.knots, self.d)
+
+    def names(self) -> list[tuple[str, float | None]]:
+        k0, k1 = self.knots
+        return [("gamma0", k0), ("gamma0", k1), ("d", k0), ("d", k1)]
+
+    def as_vector(self) -> NDArray[np.float64]:
+        return np.array([self.gamma0[0], self.gamma0[1], self.d[0], self.d[1]])
+
+    @classmethod
+    def from_vector(cls, v: ArrayLike, knots: tuple[float, float] = (0.0, kin.Q3_MAX)) -> RotaryParams:
+        g00, g01, d0, d1 = (float(x) for x in np.asarray(v, dtype=float))
+        return cls((g00, g01), (d0, d1), knots)
+
+    def check_physical(self, load_bound: float = 1.0) -> None:
+        """Raise :class:`NonPhysicalError` unless the step is > 0 for every |load| <= ``load_bound``.
+
+        ``gamma0 - |d|`` is concave in q3 between the knots, so checking the knots
+        covers the whole stroke.
+        """
+        for k, g0, d in zip(self.knots, self.gamma0, self.d, strict=True):
+            if not g0 - abs(d) * load_bound > 0.0:
+                raise NonPhysicalError(
+                    f"at q3 = {k * 1e3:g} mm, gamma0 - |d| = {(g0 - abs(d) * load_bound) * 1e6:.4g} µrad <= 0: "
+                    "the step would be <= 0 where the gravity torque is largest"
+                )
+
+
+Params = PrismaticParams | RotaryParams
+
+
+@dataclass(frozen=True)
+class JointModel:
+    """The step-size model of one joint in one direction.
+
+    Attributes
+    ----------
+    joint : int
+        1, 2 or 3.
+    direction : str
+        ``"+"`` or ``"-"``.
+    params : PrismaticParams or RotaryParams
+    """
+
+    joint: int
+    direction: str
+    params: Params
+
+    def gamma(self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
+        """Mean step size in a pose (m or rad). The moving joint's own column matters for rotary joints."""
+        p = self.params
+        if isinstance(p, PrismaticParams):
+            return gamma_prismatic(q2, theta, psi, p.a, p.b, p.c, q1=q1)
+        g0, d = p.at(q3)
+        return gamma_rotary(kin.load_term(self.joint, q1, q2, q3, theta, psi), g0, d)
+
+    def rotary_coefficients(self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike):
+        """``(A, alpha, beta)`` with ``gamma(q) = A + alpha cos q + beta sin q`` along the joint's travel.
+
+        For the prismatic joint the step does not depend on q3, so ``alpha = beta = 0``
+        and ``A`` is the step size.
+        """
+        p = self.params
+        if isinstance(p, PrismaticParams):
+            g = gamma_prismatic(q2, theta, psi, p.a, p.b, p.c, q1=q1)
+            z = np.zeros_like(g)
+            return g, z, z
+        g0, d = p.at(q3)
+        al, be = kin.rotary_load_coefficients(self.joint, q1, q2, q3, theta, psi)
+        return np.broadcast_arrays(g0, d * al, d * be)
+
+    def average_gamma(self, start: ArrayLike, end: ArrayLike, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike,
+                      theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
+        """Average step over a traverse from ``start`` to ``end``: ``|end - start| / N`` (m or rad).
+
+        Exact: ``N`` is the closed-form integral of ``1 / gamma`` along the traverse.
+        The fixed joints are taken from ``q1, q2, q3``; the moving joint's column is ignored.
+        """
+        A, al, be = self.rotary_coefficients(q1, q2, q3, theta, psi)
+        n = steps_between(start, end, A, al, be)
+        return np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)) / n
+
+
+# ---------------------------------------------------------------- traverse integrals
+
+
+def _as_amp_phase(alpha: NDArray, beta: NDArray) -> tuple[NDArray, NDArray]:
+    """``alpha cos q + beta sin q = B sin(q + phi)``: returns ``(B, phi)`` with B >= 0."""
+    return np.hypot(alpha, beta), np.arctan2(alpha, beta)
+
+
+def antiderivative_inverse_step(q: ArrayLike, A: ArrayLike, alpha: ArrayLike, beta: ArrayLike) -> NDArray[np.float64]:
+    """A continuous antiderivative of ``1 / (A + alpha cos q + beta sin q)`` in ``q``.
+
+    Valid where ``A > sqrt(alpha**2 + beta**2)`` (the step is positive on the whole
+    circle). With ``x = q + phi`` and ``B sin x = alpha cos q + beta sin q``::
+
+        F(x) = 2/s [ atan((A tan(x/2) + B) / s) + pi * round(x / (2 pi)) ],  s = sqrt(A^2 - B^2)
+
+    The ``round`` term removes the jumps of ``tan(x/2)`` at odd multiples of pi, so
+    ``F`` is continuous and increasing. For ``B -> 0`` it tends to ``q / A``.
+    """
+    q = np.asarray(q, dtype=float)
+    A = np.asarray(A, dtype=float)
+    B, phi = _as_amp_phase(np.asarray(alpha, dtype=float), np.asarray(beta, dtype=float))
+    s = np.sqrt((A - B) * (A + B))
+    x = q + phi
+    k = np.round(x / (2.0 * np.pi))
+    xr = x - 2.0 * np.pi * k  # in [-pi, pi]
+    return 2.0 / s * (np.arctan((A * np.tan(xr / 2.0) + B) / s) + np.pi * k)
+
+
+def steps_between(
+    start: ArrayLike,
+    end: ArrayLike,
+    A: ArrayLike,
+    alpha: ArrayLike = 0.0,
+    beta: ArrayLike = 0.0,
+) -> NDArray[np.float64]:
+    """Number of steps (real-valued) to travel from ``start`` to ``end``: ``|integral dq / gamma(q)|``.
+
+    ``gamma(q) = A + alpha cos q + beta sin q`` (m or rad). Closed form where the step
+    is positive on the whole circle; adaptive quadrature (relative 1e-12) where it
+    is positive only along the traverse. Raises :class:`NonPhysicalError` if the step
+    is <= 0 somewhere on the way (the joint would stall).
+    """
+    start, end, A, alpha, beta = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta)))
+    B = np.hypot(alpha, beta)
+    closed = A > B * (1.0 + 1e-12)
+    out = np.empty(start.shape, dtype=float)
+    if np.any(closed):
+        sl = closed
+        Fa = antiderivative_inverse_step(start[sl], A[sl], alpha[sl], beta[sl])
+        Fb = antiderivative_inverse_step(end[sl], A[sl], alpha[sl], beta[sl])
+        out[sl] = np.abs(Fb - Fa)
+    if not np.all(closed):
+        for idx in zip(*np.nonzero(~closed), strict=True):
+            out[idx] = steps_between_quad(float(start[idx]), float(end[idx]), float(A[idx]),
+                                          float(alpha[idx]), float(beta[idx]))
+    return out
+
+
+def _min_step_on_interval(lo: float, hi: float, A: float, alpha: float, beta: float) -> float:
+    """Minimum of ``A + alpha cos q + beta sin q`` for q in [lo, hi]."""
+    B, phi = math.hypot(alpha, beta), math.atan2(alpha, beta)
+    cands = [lo, hi]
+    # minimum of B sin(q + phi) is at q + phi = -pi/2 + 2 pi k
+    if B > 0:
+        k0 = math.ceil((lo + phi + math.pi / 2) / (2 * math.pi))
+        q = -math.pi / 2 - phi + 2 * math.pi * k0
+        if lo <= q <= hi:
+            cands.append(q)
+    return min(A + alpha * math.cos(q) + beta * math.sin(q) for q in cands)
+
+
+def steps_between_quad(start: float, end: float, A: float, alpha: float = 0.0, beta: float = 0.0) -> float:
+    """Same as :func:`steps_between` by adaptive Gauss–Kronrod quadrature (scipy.integrate.quad).
+
+    Relative tolerance 1e-12. Raises :class:`NonPhysicalError` where the step is
+    <= 0 on the way.
+    """
+    from scipy import integrate
+
+    lo, hi = min(start, end), max(start, end)
+    if _min_step_on_interval(lo, hi, A, alpha, beta) <= 0.0:
+        raise NonPhysicalError(
+            f"the step size reaches zero between {lo:.6g} and {hi:.6g}: the joint would stall there"
+        )
+    val, _err = integrate.quad(
+        lambda q: 1.0 / (A + alpha * math.cos(q) + beta * math.sin(q)), lo, hi, epsabs=0.0, epsrel=1e-12, limit=200
+    )
+    return val
+
+
+def simulate_traverse_steps(start: float, end: float, gamma: Callable[[float], float], max_steps: int = 10_000_000) -> int:
+    """Count discrete steps from ``start`` until ``end`` is reached or passed.
+
+    Each step moves by ``gamma(q)`` evaluated where the step begins (the seed's
+    simulation, its Fig. 8). ``gamma`` returns a positive step size (m or rad).
+    """
+    sign = 1.0 if end >= start else -1.0
+    q, n = start, 0
+    while (end - q) * sign > 0.0:
+        g = gamma(q)
+        if not g > 0.0:
+            raise NonPhysicalError(f"step size {g!r} <= 0 at q = {q:.6g}: the joint stalls")
+        q += sign * g
+        n += 1
+        if n >= max_steps:
+            raise RuntimeError(f"more than {max_steps} steps: step size too small")
+    return n
+
+
+def position_after_steps(
+    start: float, n_steps: float, direction: int, A: float, alpha: float = 0.0, beta: float = 0.0
+) -> float:
+    """Dead reckoning: where a joint ends after ``n_steps`` steps from ``start`` in ``direction``.
+
+    Solves ``integral_start^q dq / gamma = n_steps`` for ``q`` (monotone, so a bracketed
+    root find on the closed form). ``gamma(q) = A + alpha cos q + beta sin q`` > 0.
+    """
+    start, n_steps, A, alpha, beta = (float(x) for x in (start, n_steps, A, alpha, beta))
+    direction = direction_sign(direction)
+    if n_steps == 0:
+        return start
+    if alpha == 0.0 and beta == 0.0:
+        return float(start + direction * n_steps * A)
+    from scipy.optimize import brentq
+
+    B = math.hypot(alpha, beta)
+    if not A > B:
+        raise NonPhysicalError("dead reckoning needs a step size that is positive on the whole circle")
+    F0 = float(antiderivative_inverse_step(start, A, alpha, beta))
+
+    def f(q: float) -> float:
+        return direction * (float(antiderivative_inverse_step(q, A, alpha, beta)) - F0) - n_steps
+
+    lo_step, hi_step = A - B, A + B
+    # the answer lies between n * min step and n * max step away
+    a = start + direction * n_steps * lo_step
+    b = start + direction * n_steps * hi_step
+    lo, hi = min(a, b), max(a, b)
+    return float(brentq(f, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200))

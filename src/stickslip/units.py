@@ -1,0 +1,142 @@
+"""Units at the human-facing edges.
+
+Everything inside stickslip is SI (metres, radians, seconds, hertz). This module
+parses quantities people type (``-90deg``, ``12mm``, ``850nm``, ``40urad``) into SI
+floats and formats SI floats for people (``972.0 nm``, ``38.41 µrad``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+
+__all__ = [
+    "LENGTH_UNITS",
+    "ANGLE_UNITS",
+    "UnitError",
+    "parse_quantity",
+    "parse_angle",
+    "parse_length",
+    "format_step",
+    "format_quantity",
+]
+
+LENGTH_UNITS: dict[str, float] = {
+    "m": 1.0,
+    "mm": 1e-3,
+    "um": 1e-6,
+    "µm": 1e-6,
+    "μm": 1e-6,
+    "nm": 1e-9,
+    "pm": 1e-12,
+}
+ANGLE_UNITS: dict[str, float] = {
+    "rad": 1.0,
+    "mrad": 1e-3,
+    "urad": 1e-6,
+    "µrad": 1e-6,
+    "μrad": 1e-6,
+    "nrad": 1e-9,
+    "deg": math.pi / 180.0,
+    "°": math.pi / 180.0,
+}
+
+_NUMBER = r"[+-−]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_PI = r"(?:(?P<pimul>" + _NUMBER + r")?\*?pi(?:/(?P<pidiv>\d+(?:\.\d*)?))?)"
+_QUANTITY = re.compile(
+    r"^\s*(?:(?P<num>" + _NUMBER + r")|(?P<sign>[+-−])?" + _PI + r")\s*(?P<unit>[^\d\s]*)\s*$"
+)
+
+
+class UnitError(ValueError):
+    """A quantity could not be read, or has the wrong kind of unit."""
+
+
+def parse_quantity(text: str | float, kind: str | None = None) -> float:
+    """Parse a number with an optional unit suffix into SI.
+
+    Parameters
+    ----------
+    text : str or float
+        ``"12mm"``, ``"-90deg"``, ``"850 nm"``, ``"40urad"``, ``"-pi/2"``,
+        ``"0.5"`` (a bare number is already SI), or a float.
+    kind : {"length", "angle", None}
+        Which units are allowed. ``None`` accepts either.
+
+    Returns
+    -------
+    float
+        The value in metres (length) or radians (angle).
+
+    Raises
+    ------
+    UnitError
+        If the text is not a number with a known unit of the right kind.
+    """
+    if isinstance(text, (int, float)):
+        return float(text)
+    m = _QUANTITY.match(str(text).replace("−", "-"))
+    if not m:
+        raise UnitError(f"cannot read {text!r} as a number with an optional unit")
+    if m.group("num") is not None:
+        value = float(m.group("num"))
+    else:
+        mul = m.group("pimul")
+        value = (float(mul) if mul not in (None, "", "+", "-") else 1.0) * math.pi
+        if mul == "-" or m.group("sign") == "-":
+            value = -value
+        if m.group("pidiv"):
+            value /= float(m.group("pidiv"))
+    unit = m.group("unit")
+    if not unit:
+        return value
+    table: dict[str, float] = {}
+    if kind in (None, "length"):
+        table.update(LENGTH_UNITS)
+    if kind in (None, "angle"):
+        table.update(ANGLE_UNITS)
+    if unit not in table:
+        allowed = ", ".join(sorted({k for k in table if k.isascii()}))
+        what = f"{kind} " if kind else ""
+        raise UnitError(f"unknown {what}unit {unit!r} in {text!r} (use one of: {allowed})")
+    return value * table[unit]
+
+
+def parse_angle(text: str | float) -> float:
+    """Parse an angle (``-90deg``, ``40urad``, ``-pi/2``, bare radians) to radians."""
+    return parse_quantity(text, "angle")
+
+
+def parse_length(text: str | float) -> float:
+    """Parse a length (``12mm``, ``850nm``, bare metres) to metres."""
+    return parse_quantity(text, "length")
+
+
+def format_quantity(value: float, unit: str, digits: int = 4) -> str:
+    """Format an SI value in the given display unit, e.g. ``format_quantity(9.7e-7, "nm")``."""
+    table = {**LENGTH_UNITS, **ANGLE_UNITS}
+    if unit not in table:
+        raise UnitError(f"unknown unit {unit!r}")
+    return f"{value / table[unit]:.{digits}g} {unit}"
+
+
+def step_display_unit(joint: int) -> str:
+    """The unit people read step sizes of ``joint`` in: nm for the prismatic, µrad for rotary."""
+    return "nm" if joint == 3 else "µrad"
+
+
+def position_display_unit(joint: int) -> str:
+    """The unit people read positions of ``joint`` in: µm for the prismatic, degrees for rotary."""
+    return "µm" if joint == 3 else "deg"
+
+
+def format_step(value: float, joint: int, digits: int = 4) -> str:
+    """Format a step size for ``joint`` (nm for the prismatic joint, µrad for rotary ones)."""
+    return format_quantity(value, step_display_unit(joint), digits)
+
+
+def format_position(value: float, joint: int, digits: int = 6) -> str:
+    """Format a joint position (µm for the prismatic joint, degrees for rotary ones)."""
+    if joint == 3:
+        return format_quantity(value, "µm", digits)
+    return format_quantity(value, "deg", digits)
