@@ -34,11 +34,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
+    "Pose",
     "JointSpec",
     "JOINTS",
     "Q3_MAX",
@@ -60,6 +62,20 @@ ROTARY_SPAN = 4.0 * math.pi / 3.0
 """Range of motion of rotary joints 1 and 2, rad (the paper's R_j)."""
 Q3_MAX = 0.012
 """Stroke of prismatic joint 3, m."""
+
+
+class Pose(NamedTuple):
+    """A configuration of the arm and its base: joints (rad, rad, m) and tilt (rad).
+
+    For a traverse or a move of joint j, ``q{j}`` is ignored (the moving joint's own
+    coordinate comes separately).
+    """
+
+    q1: float = 0.0
+    q2: float = -math.pi / 2
+    q3: float = 0.0
+    theta: float = 0.0
+    psi: float = 0.0
 
 
 @dataclass(frozen=True)
