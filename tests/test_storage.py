@@ -1,0 +1,224 @@
+"""The SQLite store: round trips, schema versioning, concurrent writers, crash safety."""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+import multiprocessing as mp
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from stickslip import storage
+from stickslip.measurements import Traverse
+from stickslip.storage import SCHEMA_VERSION, Store, StoreError, stale_message, warn_if_stale
+
+
+def _t(day="2026-11-20", joint=3, direction="+", steps=12000, q2=-math.pi / 2, theta=0.0):
+    start, end = (0.0, 0.012) if direction == "+" else (0.012, 0.0)
+    return Traverse(day, joint, direction, 0.0, q2, 0.0, theta, 0.0, start, end, steps)
+
+
+def test_round_trip_keeps_every_field_exactly(tmp_path):
+    rows = [
+        _t(steps=12001, q2=-1.2345678901234567),
+        _t(direction="-", steps=13313, theta=-0.5),
+        Traverse(
+            "day2",
+            2,
+            "-",
+            0.1,
+            0.0,
+            0.012,
+            -math.pi / 2,
+            0.25,
+            math.pi / 6,
+            -7 * math.pi / 6,
+            104729,
+        ),
+    ]
+    with Store.open(tmp_path / "s.db") as st:
+        ids = [st.add_traverse(t, device="sim://", how="simulated") for t in rows]
+        assert ids == sorted(ids) and len(set(ids)) == 3
+        assert st.traverses() == rows  # floats survive bit for bit (REAL is a double)
+        assert st.traverses(day="day2") == [rows[2]]
+        assert st.traverses(joint=3) == rows[:2]
+        assert st.traverses(device="other://") == []
+        assert st.days() == ["2026-11-20", "day2"]
+        rec = st.traverse_records(day="day2")[0]
+        assert rec["how"] == "simulated" and rec["device"] == "sim://"
+
+
+def test_measured_at_is_stored_as_utc(tmp_path):
+    when = dt.datetime(2026, 11, 20, 9, 30, tzinfo=dt.timezone(dt.timedelta(hours=2)))
+    with Store.open(tmp_path / "s.db") as st:
+        st.add_traverse(_t(), measured_at=when)
+        assert st.traverse_records()[0]["measured_at"] == "2026-11-20T07:30:00.000000+00:00"
+
+
+def test_add_traverses_is_all_or_nothing(tmp_path):
+    bad = Traverse("", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 10)
+    with Store.open(tmp_path / "s.db") as st:
+        with pytest.raises(ValueError, match="empty day"):
+            st.add_traverses([_t(), bad])
+        assert st.count_traverses() == 0
+        # the database's own CHECK constraints hold too, and roll the batch back
+        with pytest.raises(sqlite3.IntegrityError):
+            st.add_traverses([_t(), Traverse("d", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 0)])
+        assert st.count_traverses() == 0
+        ids = st.add_traverses(
+            [_t(), _t(direction="-")], device="sim://", how="imported", source="abc"
+        )
+        assert len(ids) == 2 and st.has_source("abc") and not st.has_source("xyz")
+
+
+def test_history_counts_per_day_and_direction(tmp_path):
+    with Store.open(tmp_path / "s.db") as st:
+        for _ in range(3):
+            st.add_traverse(_t("2026-11-20"))
+        st.add_traverse(_t("2026-11-20", direction="-"))
+        st.add_traverse(
+            _t("2026-11-21", joint=2, direction="-", steps=5), device="serial:///dev/ttyUSB0"
+        )
+        h = st.history()
+        assert [(e["device"], e["day"], e["traverses"]) for e in h] == [
+            ("serial:///dev/ttyUSB0", "2026-11-21", 1),
+            ("sim://", "2026-11-20", 4),
+        ]
+        assert h[1]["by_joint"] == {"3+": 3, "3-": 1}
+        assert st.history(device="sim://") == h[1:]
+        assert st.days(device="sim://") == ["2026-11-20"]
+
+
+def test_device_state_round_trip(tmp_path):
+    with Store.open(tmp_path / "s.db") as st:
+        assert st.get_state("sim://", "position") is None
+        st.set_state("sim://", "position", {"q1": 0.0, "q2": -1.5707963267948966, "q3": 0.006})
+        st.set_state(
+            "sim://", "position", '{"q1": 0.1, "q2": -1.0, "q3": 0.001}'
+        )  # JSON text works too
+        assert st.get_state("sim://", "position") == {"q1": 0.1, "q2": -1.0, "q3": 0.001}
+        assert st.get_state("other://", "position", default=7) == 7
+
+
+def test_schema_is_versioned_and_newer_files_are_refused(tmp_path):
+    p = tmp_path / "s.db"
+    with Store.open(p) as st:
+        assert st.schema_version == SCHEMA_VERSION == len(storage.MIGRATIONS)
+        assert st.integrity_check() == "ok"
+    con = sqlite3.connect(p)
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    con.commit()
+    con.close()
+    with pytest.raises(StoreError, match="newer than this stickslip"):
+        Store.open(p)
+
+
+def test_not_a_database_is_a_clear_error(tmp_path):
+    p = tmp_path / "junk.db"
+    p.write_bytes(b"this is not sqlite" * 100)
+    with pytest.raises(StoreError, match="junk.db"):
+        Store.open(p)
+
+
+def test_path_resolution(tmp_path, monkeypatch):
+    monkeypatch.setenv("STICKSLIP_DB", str(tmp_path / "env.db"))
+    assert storage.resolve_db_path() == tmp_path / "env.db"
+    assert storage.resolve_db_path(tmp_path / "x.db") == tmp_path / "x.db"
+    monkeypatch.delenv("STICKSLIP_DB")
+    if sys.platform.startswith("linux"):
+        monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+        assert storage.resolve_db_path() == tmp_path / "xdg" / "stickslip" / "stickslip.db"
+        monkeypatch.delenv("XDG_DATA_HOME")
+        monkeypatch.setenv("HOME", str(tmp_path))
+        assert (
+            storage.default_db_path()
+            == tmp_path / ".local" / "share" / "stickslip" / "stickslip.db"
+        )
+
+
+def test_stale_warning():
+    msg = stale_message("2026-11-20", today="2026-11-21")
+    assert msg == (
+        "calibration is from 2026-11-20, today is 2026-11-21: recalibrate "
+        "(the seed found day-to-day changes significant)"
+    )
+    assert stale_message("2026-11-21", today="2026-11-21") is None
+    assert stale_message("2026-11-22", today="2026-11-21") is None  # later is not stale
+    assert stale_message("day1", today="day2") is not None  # unordered labels: differ -> warn
+    assert stale_message(None, today="day2") is None
+
+    class Cal:
+        day = "2020-01-01"
+
+    assert "recalibrate" in warn_if_stale(Cal())  # default today = the real date
+
+
+# ---------------------------------------------------------------- concurrency and crashes
+
+
+def _writer(path: str, who: int, n: int) -> None:
+    with Store.open(path) as st:
+        for k in range(n):
+            st.add_traverse(_t(day=f"w{who}", steps=1000 * (who + 1) + k), device=f"sim://{who}")
+
+
+def test_concurrent_writers_lose_no_rows(tmp_path):
+    """4 processes x 25 traverses each, all opening a fresh file at once: 100 rows, none lost."""
+    path = str(tmp_path / "c.db")
+    n_proc, n_rows = 4, 25
+    ctx = mp.get_context("spawn")
+    procs = [ctx.Process(target=_writer, args=(path, w, n_rows)) for w in range(n_proc)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(60)
+        assert p.exitcode == 0
+    with Store.open(path) as st:
+        assert st.count_traverses() == n_proc * n_rows
+        for w in range(n_proc):
+            got = sorted(t.steps for t in st.traverses(device=f"sim://{w}"))
+            assert got == [1000 * (w + 1) + k for k in range(n_rows)]
+        assert st.integrity_check() == "ok"
+
+
+_KILL_SCRIPT = textwrap.dedent("""
+    import sys
+    from stickslip.measurements import Traverse
+    from stickslip.storage import Store
+    with Store.open(sys.argv[1]) as st:
+        k = 0
+        while True:
+            k += 1
+            st.add_traverse(Traverse("2026-11-20", 3, "+", 0.0, -1.5, 0.0, 0.0, 0.0, 0.0, 0.012, k))
+            print(k, flush=True)
+""")
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_kill_minus_9_mid_session_keeps_every_completed_traverse(tmp_path):
+    path = tmp_path / "k.db"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILL_SCRIPT, str(path)], stdout=subprocess.PIPE, text=True
+    )
+    done = 0
+    for line in proc.stdout:  # noqa: B007  (read until enough rows are committed)
+        done = int(line)
+        if done >= 40:
+            break
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(10)
+    proc.stdout.close()
+    assert proc.returncode == -signal.SIGKILL
+    with Store.open(path) as st:
+        assert st.integrity_check() == "ok"
+        steps = [t.steps for t in st.traverses()]
+    # every traverse reported as committed is there, in order, with nothing half-written
+    assert steps[:done] == list(range(1, done + 1))
+    assert steps == list(range(1, len(steps) + 1))
