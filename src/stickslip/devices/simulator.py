@@ -1,0 +1,681 @@
+"""The simulated MM3A: the default backend (``sim://``), on a virtual clock.
+
+A three-joint stick-slip arm with the paper's ranges (DESIGN.md section 2) whose
+*true* mean step follows the load-aware models of :mod:`stickslip.models`, with
+parameters that drift a few % from day to day (seeded by ``(seed, day)``), and
+whose physics is deliberately **not** exactly Eqs. 3/8, so calibrations are tested
+honestly:
+
+* every step is drawn around the mean with multiplicative lognormal noise of
+  relative standard deviation ``step_noise`` (mean exactly 1);
+* the mean step carries a small smooth ripple along the joint's travel,
+  ``1 + RIPPLE * sin(2 pi m (q - lower) / span + phase)`` (< 1 %, an integer number
+  ``m`` of periods over the full range);
+* the step is evaluated at the moving joint's *current* position at every step (the
+  seed's step-by-step simulation, its Fig. 8), not averaged.
+
+The *true parameters* (:meth:`SimulatedMM3A.true_parameters`) are those of Eq. 3/8
+that reproduce the simulator's mean behaviour over full-range traverses: the ripple
+has whole periods over the range, so it averages out to second order
+(``RIPPLE**2 / 2`` ~ 1e-5 relative) and the lognormal noise has mean 1.
+
+Hard end stops: a step that would cross a stop ends at the stop; steps that begin
+at the stop do not move the joint and are recorded as *at-stop* steps, which the
+virtual microphone (:class:`VirtualMicrophone`) renders with the joint's end-stop
+sound through :class:`stickslip.audio.synth.Soundscape`.
+
+The virtual clock ``clock_s`` advances by ``|n| / frequency`` per burst; a burst is
+simulated at once with numpy (chunked fixed-point iteration of the step positions),
+so a 90 s rotary traverse takes a few milliseconds.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass
+from urllib.parse import parse_qsl, urlsplit
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import kinematics as kin
+from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
+from .base import DeviceError, DeviceInfo
+
+__all__ = [
+    "NOMINAL",
+    "FREQUENCY_RANGE",
+    "RIPPLE",
+    "SimulatedMM3A",
+    "VirtualMicrophone",
+    "open_url",
+    "day_key",
+]
+
+FREQUENCY_RANGE = (1.0, 5000.0)
+"""Allowed stepping frequencies of the simulated controller, Hz."""
+
+RIPPLE = 0.004
+"""Relative amplitude of the smooth position-dependent ripple of the true mean step."""
+
+_RIPPLE_PERIODS = {1: 7, 2: 7, 3: 5}
+_CHUNK = 4096
+_MAX_BURST = 10_000_000
+
+# Nominal (undrifted) true parameters. Prismatic: the paper's published values
+# (DESIGN.md section 3, units nm). Joint 2: d from the paper's Fig. 10 (q3 = 0:
+# d- = 3.83, d+ = -8.15 urad; q3 = 12 mm: d- = 23.94, d+ = -19.40 urad); gamma0 in the
+# 40-60 urad the paper's rotary steps show. Joint 1 is not calibrated in the paper:
+# values of the same size.
+NOMINAL: dict[tuple[int, str], PrismaticParams | RotaryParams] = {
+    (3, "+"): PrismaticParams(972e-9, 0.27, 372e-9),
+    (3, "-"): PrismaticParams(899e-9, 0.25, -436e-9),
+    (2, "+"): RotaryParams((52.0e-6, 47.0e-6), (-8.15e-6, -19.40e-6)),
+    (2, "-"): RotaryParams((49.0e-6, 45.0e-6), (3.83e-6, 23.94e-6)),
+    (1, "+"): RotaryParams((50.0e-6, 46.0e-6), (-7.0e-6, -15.0e-6)),
+    (1, "-"): RotaryParams((48.0e-6, 44.0e-6), (5.0e-6, 17.0e-6)),
+}
+
+
+def day_key(day: str | int) -> int:
+    """A stable integer for a day label (an int is used as is; a string is hashed with CRC-32)."""
+    if isinstance(day, (int, np.integer)):
+        return int(day) & 0xFFFFFFFF
+    return zlib.crc32(str(day).strip().encode("utf-8"))
+
+
+def _drifted(params: PrismaticParams | RotaryParams, rng: np.random.Generator, drift: float):
+    """``params`` with every value multiplied by ``1 + drift * z``, z ~ N(0, 1) clipped to +-2.5."""
+
+    def f() -> float:
+        return 1.0 + drift * float(np.clip(rng.standard_normal(), -2.5, 2.5))
+
+    if isinstance(params, PrismaticParams):
+        return PrismaticParams(params.a * f(), params.b * f(), params.c * f())
+    return RotaryParams(
+        (params.gamma0[0] * f(), params.gamma0[1] * f()),
+        (params.d[0] * f(), params.d[1] * f()),
+        params.knots,
+    )
+
+
+@dataclass
+class _Burst:
+    """One burst of steps, for the virtual microphone: steps at ``t0 + k / hz``, k < n."""
+
+    t0: float
+    hz: float
+    joint: int
+    n: int
+    k_stop: int  # steps with k >= k_stop began at the end stop (did not move)
+
+    @property
+    def t_end(self) -> float:
+        return self.t0 + self.n / self.hz
+
+
+class SimulatedMM3A:
+    """A simulated Kleindiek MM3A on a virtual clock (a :class:`~.base.Controller`).
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the day-to-day drift of the true parameters, the per-step noise and the
+        room sound.
+    day : str or int
+        Session label (ISO date preferred); the true parameters drift with ``(seed, day)``.
+    step_noise : float
+        Relative standard deviation of a single step around its mean (lognormal,
+        mean 1), dimensionless, in [0, 0.5]. Default 0.03.
+    drift : float
+        Relative standard deviation of the day-to-day drift of every true parameter
+        from :data:`NOMINAL`, dimensionless, in [0, 0.2]. Default 0.03.
+    sample_rate : int
+        Sample rate of the virtual microphone, Hz.
+    soundscape_kwargs : dict, optional
+        Passed to :class:`stickslip.audio.synth.Soundscape` (gain_db, noise_db, hum,
+        knocks_per_min, babble, ...).
+    pose : Pose, optional
+        Initial pose (joints rad, rad, m; tilt rad). Default: the outstretched pose
+        ``q1 = 0, q2 = -pi/2, q3 = 0``, level base.
+    url : str
+        The URL it was opened with (for :attr:`info`).
+
+    Examples
+    --------
+    >>> sim = SimulatedMM3A(seed=1, day="2026-11-22")
+    >>> sim.step(3, 1000)            # 1000 steps out, 1 s on the virtual clock
+    >>> round(sim.clock_s, 3)
+    1.0
+    """
+
+    def __init__(
+        self,
+        seed: int = 0,
+        day: str | int = 0,
+        step_noise: float = 0.03,
+        drift: float = 0.03,
+        sample_rate: int = 48_000,
+        soundscape_kwargs: dict | None = None,
+        pose: kin.Pose | None = None,
+        url: str = "sim://",
+    ):
+        if not 0.0 <= float(step_noise) <= 0.5:
+            raise ValueError(
+                f"step_noise = {step_noise!r} is outside [0, 0.5] (relative standard deviation)"
+            )
+        if not 0.0 <= float(drift) <= 0.2:
+            raise ValueError(f"drift = {drift!r} is outside [0, 0.2] (relative standard deviation)")
+        if not 8000 <= int(sample_rate) <= 384_000:
+            raise ValueError(f"sample_rate = {sample_rate!r} Hz is outside [8000, 384000] Hz")
+        self.seed = int(seed)
+        self.day = day
+        self.day_label = str(day)
+        self.step_noise = float(step_noise)
+        self.drift = float(drift)
+        self.sample_rate = int(sample_rate)
+        self.soundscape_kwargs = dict(soundscape_kwargs or {})
+        self._url = url
+        key = day_key(day)
+        drift_rng = np.random.default_rng([self.seed, key, 0])
+        self._models: dict[tuple[int, str], JointModel] = {}
+        for (joint, direction), nominal in NOMINAL.items():
+            self._models[(joint, direction)] = JointModel(
+                joint, direction, _drifted(nominal, drift_rng, self.drift)
+            )
+        self._ripple_phase = {j: float(drift_rng.uniform(0.0, 2.0 * math.pi)) for j in (1, 2, 3)}
+        self._rng = np.random.default_rng([self.seed, key, 1])
+        self._sigma = math.sqrt(math.log1p(self.step_noise**2))
+        p = pose if pose is not None else kin.Pose()
+        self._q = {1: 0.0, 2: 0.0, 3: 0.0}
+        self._theta = 0.0
+        self._psi = 0.0
+        self.set_pose(*p)
+        self._hz = {1: 1000.0, 2: 1000.0, 3: 1000.0}
+        self.clock_s = 0.0
+        self._bursts: list[_Burst] = []
+        self._burst_ends: list[float] = []
+        self._soundscape = None
+        self.steps_simulated = 0
+        self._closed = False
+
+    # ------------------------------------------------------------ Controller protocol
+
+    @property
+    def info(self) -> DeviceInfo:
+        """Model, URL, joints and the simulation settings (seed, day, noise, drift)."""
+        return DeviceInfo(
+            self._url,
+            "simulated MM3A",
+            (1, 2, 3),
+            {
+                "seed": self.seed,
+                "day": self.day_label,
+                "step_noise": self.step_noise,
+                "drift": self.drift,
+                "sample_rate_hz": self.sample_rate,
+            },
+        )
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        """Set the stepping frequency of ``joint``, Hz, in [1, 5000]; else ``ValueError``."""
+        joint = self._joint(joint)
+        lo, hi = FREQUENCY_RANGE
+        try:
+            value = float(hz)
+        except (TypeError, ValueError):
+            raise ValueError(f"frequency must be a number in Hz, got {hz!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise ValueError(
+                f"frequency {hz!r} Hz is outside the allowed range [{lo:g}, {hi:g}] Hz"
+            )
+        self._hz[joint] = value
+
+    def frequency(self, joint: int) -> float:
+        """The stepping frequency of ``joint``, Hz (default 1000 Hz)."""
+        return self._hz[self._joint(joint)]
+
+    def step(self, joint: int, n: int) -> None:
+        """Step ``joint`` by ``n`` signed steps; the virtual clock advances by ``|n| / f``.
+
+        Stepping into an end stop does not move the joint past it; those steps are
+        recorded as at-stop steps (heard by the virtual microphone).
+        """
+        self._check_open()
+        joint = self._joint(joint)
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
+            if isinstance(n, float) and n.is_integer():
+                n = int(n)
+            else:
+                raise ValueError(f"step count must be an integer, got {n!r}")
+        n = int(n)
+        if n == 0:
+            return
+        if abs(n) > _MAX_BURST:
+            raise DeviceError(
+                f"a burst of {abs(n)} steps is more than the controller accepts ({_MAX_BURST})"
+            )
+        sign = 1 if n > 0 else -1
+        hz = self._hz[joint]
+        k_stop, q_end = self._advance(joint, sign, abs(n))
+        self._q[joint] = q_end
+        self._bursts.append(_Burst(self.clock_s, hz, joint, abs(n), k_stop))
+        self._burst_ends.append(self.clock_s + abs(n) / hz)
+        self.clock_s += abs(n) / hz
+        self.steps_simulated += abs(n)
+
+    def stop(self, joint: int | None = None) -> None:
+        """Stop ``joint`` (or all). Bursts complete at once on the virtual clock: a no-op."""
+        if joint is not None:
+            self._joint(joint)
+
+    def settings(self) -> dict[str, object]:
+        """Frequencies (Hz) per joint and the simulation settings."""
+        return {
+            "frequency_hz": dict(self._hz),
+            "seed": self.seed,
+            "day": self.day_label,
+            "step_noise": self.step_noise,
+            "drift": self.drift,
+            "sample_rate_hz": self.sample_rate,
+        }
+
+    def close(self) -> None:
+        """Stop everything; further steps raise :class:`DeviceError`."""
+        self._closed = True
+
+    def __enter__(self) -> SimulatedMM3A:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ------------------------------------------------------------ the experimenter's hands
+
+    def set_pose(
+        self,
+        q1: float | None = None,
+        q2: float | None = None,
+        q3: float | None = None,
+        theta: float | None = None,
+        psi: float | None = None,
+    ) -> None:
+        """Place joints and tilt the base (teleport; no steps, no sound). ``None`` keeps a value.
+
+        Joints rad, rad, m within their stops; ``theta`` and ``psi`` rad within [-pi, pi].
+        Raises ``ValueError`` naming the allowed range.
+        """
+        for j, v in ((1, q1), (2, q2), (3, q3)):
+            if v is None:
+                continue
+            spec = kin.JOINTS[j]
+            v = float(v)
+            if not spec.contains(v):
+                raise ValueError(
+                    f"q{j} = {v:.6g} {spec.unit} is outside joint {j}'s range "
+                    f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+                )
+            self._q[j] = min(max(v, spec.lower), spec.upper)  # within the contains() tolerance
+        for name, v in (("theta", theta), ("psi", psi)):
+            if v is None:
+                continue
+            v = float(v)
+            if not -math.pi - 1e-9 <= v <= math.pi + 1e-9:
+                raise ValueError(f"{name} = {v:.6g} rad is outside [-pi, pi]")
+            setattr(self, f"_{name}", v)
+
+    @property
+    def pose(self) -> kin.Pose:
+        """The current true pose (joints rad, rad, m; tilt rad)."""
+        return kin.Pose(self._q[1], self._q[2], self._q[3], self._theta, self._psi)
+
+    def position(self, joint: int) -> float:
+        """True position of ``joint`` (rad or m)."""
+        return self._q[self._joint(joint)]
+
+    def at_stop(self, joint: int) -> str | None:
+        """``"lower"`` or ``"upper"`` if ``joint`` rests on that end stop, else ``None``."""
+        spec = kin.JOINTS[self._joint(joint)]
+        q = self._q[joint]
+        if q <= spec.lower:
+            return "lower"
+        if q >= spec.upper:
+            return "upper"
+        return None
+
+    def wait(self, seconds: float) -> None:
+        """Let ``seconds`` pass on the virtual clock without stepping (the room is heard)."""
+        if not seconds >= 0.0:
+            raise ValueError(f"wait time must be >= 0 s, got {seconds!r}")
+        self.clock_s += float(seconds)
+
+    # ------------------------------------------------------------ the truth
+
+    def true_models(self) -> dict[tuple[int, str], JointModel]:
+        """The day's true mean-step models, ``{(joint, direction): JointModel}`` (SI)."""
+        return dict(self._models)
+
+    def true_parameters(self) -> list[dict[str, object]]:
+        """The day's true parameters, in the record shape of ``Calibration.parameters()``.
+
+        Each record: ``joint``, ``direction``, ``name`` (``a``, ``b``, ``c``, ``gamma0``,
+        ``d``), ``q3`` (m, rotary only, else ``None``), ``value`` (SI), ``stderr``
+        (``None``) and ``unit`` (``"m"``, ``"1"`` or ``"rad"``).
+        """
+        out: list[dict[str, object]] = []
+        for joint in (3, 2, 1):
+            for direction in DIRECTIONS:
+                p = self._models[(joint, direction)].params
+                if isinstance(p, PrismaticParams):
+                    for name, value, unit in (("a", p.a, "m"), ("b", p.b, "1"), ("c", p.c, "m")):
+                        out.append(
+                            {
+                                "joint": joint,
+                                "direction": direction,
+                                "name": name,
+                                "q3": None,
+                                "value": value,
+                                "stderr": None,
+                                "unit": unit,
+                            }
+                        )
+                else:
+                    for name, values in (("gamma0", p.gamma0), ("d", p.d)):
+                        for k, value in zip(p.knots, values, strict=True):
+                            out.append(
+                                {
+                                    "joint": joint,
+                                    "direction": direction,
+                                    "name": name,
+                                    "q3": k,
+                                    "value": value,
+                                    "stderr": None,
+                                    "unit": "rad",
+                                }
+                            )
+        return out
+
+    def true_mean_step(
+        self, joint: int, direction: str | int, q: float | NDArray | None = None
+    ) -> NDArray:
+        """The true mean step (m or rad) of ``joint`` in ``direction`` at position ``q``.
+
+        Includes the ripple (what a single step averages to); the other joints and the
+        tilt are the current pose.
+        """
+        joint = self._joint(joint)
+        sign = direction_sign(direction)
+        A, al, be = self._coefficients(joint, sign)
+        qq = self._q[joint] if q is None else q
+        return self._mean_step(joint, np.asarray(qq, dtype=float), A, al, be)
+
+    # ------------------------------------------------------------ physics
+
+    @staticmethod
+    def _joint(joint: int) -> int:
+        try:
+            j = int(joint)
+        except (TypeError, ValueError):
+            j = -1
+        if j not in (1, 2, 3) or (isinstance(joint, float) and not joint.is_integer()):
+            raise ValueError(f"unknown joint {joint!r}: joints are 1, 2 (rotary) and 3 (prismatic)")
+        return j
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise DeviceError("the simulated MM3A is closed")
+
+    def _coefficients(self, joint: int, sign: int) -> tuple[float, float, float]:
+        """``(A, alpha, beta)``: model step along the travel ``A + alpha cos q + beta sin q``."""
+        model = self._models[(joint, "+" if sign > 0 else "-")]
+        q1, q2, q3, theta, psi = self.pose
+        A, al, be = model.rotary_coefficients(q1, q2, q3, theta, psi)
+        return float(A), float(al), float(be)
+
+    def _mean_step(self, joint: int, q: NDArray, A: float, al: float, be: float) -> NDArray:
+        spec = kin.JOINTS[joint]
+        base = A if (al == 0.0 and be == 0.0) else A + al * np.cos(q) + be * np.sin(q)
+        phase = (
+            2.0 * math.pi * _RIPPLE_PERIODS[joint] * (q - spec.lower) / spec.span
+            + self._ripple_phase[joint]
+        )
+        return base * (1.0 + RIPPLE * np.sin(phase))
+
+    def _advance(self, joint: int, sign: int, n: int) -> tuple[int, float]:
+        """Simulate ``n`` steps of ``joint`` in direction ``sign``; returns ``(k_stop, q_end)``.
+
+        ``k_stop`` is the index of the first step that began at the end stop (``n``
+        if none did). Step positions within a chunk are found by fixed-point
+        iteration of ``p_k = q + sign * sum_{j<k} gamma(p_j) eps_j`` (converges to
+        1e-12 of the span in a few rounds, since gamma changes slowly).
+        """
+        spec = kin.JOINTS[joint]
+        stop = spec.upper if sign > 0 else spec.lower
+        q = self._q[joint]
+        if sign * (stop - q) <= 0.0:
+            return 0, stop
+        A, al, be = self._coefficients(joint, sign)
+        if not A - math.hypot(al, be) > 0.0:
+            raise DeviceError(f"the true step of joint {joint} would be <= 0 in this pose")
+        tol = 1e-12 * spec.span
+        done = 0
+        while done < n:
+            m = min(_CHUNK, n - done)
+            eps = np.exp(self._sigma * self._rng.standard_normal(m) - 0.5 * self._sigma**2)
+            p = np.full(m, q)
+            for _ in range(12):
+                sizes = self._mean_step(joint, p, A, al, be) * eps
+                csum = np.cumsum(sizes)
+                p_new = q + sign * np.concatenate(([0.0], csum[:-1]))
+                change = float(np.max(np.abs(p_new - p)))
+                p = p_new
+                if change <= tol:
+                    break
+            sizes = self._mean_step(joint, p, A, al, be) * eps
+            ends = p + sign * sizes
+            hit = np.nonzero(sign * (ends - stop) >= 0.0)[0]
+            if hit.size:
+                return done + int(hit[0]) + 1, stop
+            q = float(ends[-1])
+            done += m
+        return n, q
+
+    # ------------------------------------------------------------ sound
+
+    @property
+    def soundscape(self):
+        """The :class:`stickslip.audio.synth.Soundscape` the virtual microphone renders with."""
+        if self._soundscape is None:
+            from ..audio.synth import Soundscape
+
+            self._soundscape = Soundscape(
+                sample_rate=self.sample_rate, seed=self.seed, **self.soundscape_kwargs
+            )
+        return self._soundscape
+
+    def step_events(self, t_from: float, t_to: float) -> tuple[NDArray, NDArray, NDArray]:
+        """Step events with ``t_from <= t < t_to``: ``(times_s, joints, at_stop)`` arrays."""
+        times, joints, stops = [], [], []
+        first = bisect.bisect_right(self._burst_ends, t_from)
+        for b in self._bursts[first:]:
+            if b.t0 >= t_to:
+                break
+            if b.t_end <= t_from:
+                continue
+            k0 = max(0, math.ceil((t_from - b.t0) * b.hz - 1e-9))
+            k1 = min(b.n, math.ceil((t_to - b.t0) * b.hz - 1e-9))
+            if k1 <= k0:
+                continue
+            k = np.arange(k0, k1)
+            times.append(b.t0 + k / b.hz)
+            joints.append(np.full(k.size, b.joint, dtype=np.int64))
+            stops.append(k >= b.k_stop)
+        if not times:
+            return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=bool)
+        return np.concatenate(times), np.concatenate(joints), np.concatenate(stops)
+
+    def stop_times(self, joint: int | None = None) -> list[float]:
+        """Times (s, virtual clock) when a burst first stepped against an end stop (true stops)."""
+        out = []
+        for b in self._bursts:
+            if (joint is None or b.joint == joint) and b.k_stop < b.n:
+                out.append(b.t0 + b.k_stop / b.hz)
+        return out
+
+    def microphone(self, block: int = 1024) -> VirtualMicrophone:
+        """A virtual microphone starting now on the virtual clock (blocks of ``block`` samples)."""
+        return VirtualMicrophone(self, block)
+
+    def labelled_recording(
+        self, joint: int, direction: str | int = "+", before_s: float = 2.0, after_s: float = 1.0
+    ) -> tuple[NDArray[np.float32], int, float]:
+        """Record stepping into an end stop, for tuning the limit switch.
+
+        Places ``joint`` so that stepping in ``direction`` reaches its stop after about
+        ``before_s`` seconds, steps for ``before_s + after_s`` seconds and returns
+        ``(samples, sample_rate, stop_at_s)`` with the true time of the first at-stop
+        step, s from the start of the recording.
+        """
+        joint = self._joint(joint)
+        sign = direction_sign(direction)
+        spec = kin.JOINTS[joint]
+        hz = self._hz[joint]
+        stop = spec.upper if sign > 0 else spec.lower
+        n_before = int(round(before_s * hz))
+        mean = float(self.true_mean_step(joint, sign, stop))
+        start = stop - sign * min(n_before * mean, 0.9 * spec.span)
+        self.set_pose(**{f"q{joint}": start})
+        mic = self.microphone()
+        t0 = self.clock_s
+        n_total = int(round((before_s + after_s) * hz))
+        self.step(joint, sign * n_total)
+        stops = [t for t in self.stop_times(joint) if t >= t0]
+        if not stops:
+            raise DeviceError("the recording never reached the stop (internal error)")
+        samples = mic.read_until(self.clock_s)
+        return samples, self.sample_rate, stops[0] - t0
+
+
+class VirtualMicrophone:
+    """What a microphone beside the simulated arm hears, on the virtual clock.
+
+    Blocks are rendered by the simulator's :class:`~stickslip.audio.synth.Soundscape`
+    from the recorded step events. The stream starts at the simulator's clock when the
+    microphone is made; only complete blocks up to the current clock are available
+    (the future has not been stepped yet).
+
+    Use it as a callable (``mic()`` returns the list of blocks recorded since the last
+    call: the traverse procedure's ``audio_blocks``) or iterate over it (finite:
+    the blocks available now).
+    """
+
+    def __init__(self, sim: SimulatedMM3A, block: int = 1024):
+        if not 16 <= int(block) <= 1 << 20:
+            raise ValueError(f"block = {block!r} samples is outside [16, 1048576]")
+        self.sim = sim
+        self.block = int(block)
+        self.sample_rate = sim.sample_rate
+        self._next = int(math.ceil(sim.clock_s * self.sample_rate - 1e-6))
+
+    @property
+    def t_s(self) -> float:
+        """Stream time of the next sample, s (virtual clock)."""
+        return self._next / self.sample_rate
+
+    def _render(self, n: int) -> NDArray[np.float32]:
+        scape = self.sim.soundscape
+        t0 = self.t_s
+        t1 = (self._next + n) / self.sample_rate
+        tail = float(getattr(scape, "tail_s", 0.1))
+        times, joints, stops = self.sim.step_events(t0 - tail, t1)
+        out = np.asarray(scape.render(t0, n, times, joints, stops), dtype=np.float32)
+        self._next += n
+        return out
+
+    def read_until(self, t_s: float) -> NDArray[np.float32]:
+        """All samples from the stream position up to time ``t_s`` (s), as one array."""
+        n = int(math.floor(t_s * self.sample_rate + 1e-6)) - self._next
+        if n <= 0:
+            return np.empty(0, dtype=np.float32)
+        parts = []
+        while n > 0:
+            m = min(n, 1 << 18)
+            parts.append(self._render(m))
+            n -= m
+        return np.concatenate(parts)
+
+    def __call__(self) -> list[NDArray[np.float32]]:
+        """The complete blocks recorded since the last call (may be empty)."""
+        n_avail = int(math.floor(self.sim.clock_s * self.sample_rate + 1e-6)) - self._next
+        n_blocks = n_avail // self.block
+        if n_blocks <= 0:
+            return []
+        out: list[NDArray[np.float32]] = []
+        per_chunk = max(1, (1 << 17) // self.block)
+        while n_blocks > 0:
+            m = min(n_blocks, per_chunk)
+            chunk = self._render(m * self.block)
+            out.extend(chunk[i * self.block : (i + 1) * self.block] for i in range(m))
+            n_blocks -= m
+        return out
+
+    def __iter__(self) -> Iterator[NDArray[np.float32]]:
+        return iter(self())
+
+    def skip_to(self, t_s: float | None = None) -> None:
+        """Jump the stream to time ``t_s`` (default: now), dropping the audio in between."""
+        t = self.sim.clock_s if t_s is None else float(t_s)
+        self._next = max(self._next, int(math.ceil(t * self.sample_rate - 1e-6)))
+
+
+# ---------------------------------------------------------------- URL
+
+
+_URL_KEYS = {
+    "seed": int,
+    "day": str,
+    "noise": float,
+    "drift": float,
+    "rate": int,
+    "gain_db": float,
+}
+
+
+def open_url(url: str = "sim://") -> SimulatedMM3A:
+    """Open a simulated MM3A from a ``sim://`` URL.
+
+    Query options: ``seed`` (int), ``day`` (label), ``noise`` (relative per-step
+    noise, e.g. 0.03), ``drift`` (relative day-to-day drift), ``rate`` (microphone
+    sample rate, Hz), ``gain_db`` (microphone gain, dB). Example:
+    ``sim://?seed=3&day=2026-11-22&noise=0.03``. Unknown keys or bad values raise
+    ``ValueError`` naming them.
+    """
+    parts = urlsplit(url)
+    if parts.scheme not in ("sim", ""):
+        raise ValueError(f"not a sim:// URL: {url!r}")
+    if parts.path not in ("", "/") or parts.netloc not in ("", "mm3a", "localhost"):
+        raise ValueError(f"a sim:// URL takes only query options (e.g. sim://?seed=3), got {url!r}")
+    opts: dict[str, object] = {}
+    for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
+        if key not in _URL_KEYS:
+            known = ", ".join(sorted(_URL_KEYS))
+            raise ValueError(f"unknown sim:// option {key!r} in {url!r} (known: {known})")
+        try:
+            opts[key] = _URL_KEYS[key](value)
+        except ValueError:
+            raise ValueError(
+                f"sim:// option {key}={value!r} is not a valid {_URL_KEYS[key].__name__}"
+            ) from None
+    scape = {"gain_db": opts["gain_db"]} if "gain_db" in opts else None
+    return SimulatedMM3A(
+        seed=int(opts.get("seed", 0)),  # type: ignore[arg-type]
+        day=opts.get("day", 0),  # type: ignore[arg-type]
+        step_noise=float(opts.get("noise", 0.03)),  # type: ignore[arg-type]
+        drift=float(opts.get("drift", 0.03)),  # type: ignore[arg-type]
+        sample_rate=int(opts.get("rate", 48_000)),  # type: ignore[arg-type]
+        soundscape_kwargs=scape,
+        url=url,
+    )
