@@ -99,6 +99,8 @@ Factory = Callable[[str], Controller]
 BACKENDS: dict[str, str | Factory] = {
     # scheme -> factory, or "module:function" imported on first use
     "sim": "stickslip.devices.simulator:open_url",
+    "mm3a": "stickslip.devices.nanocontrol:open_url",
+    "anc300": "stickslip.devices.anc300:open_url",
 }
 
 

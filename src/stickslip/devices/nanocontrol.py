@@ -1,0 +1,451 @@
+"""Kleindiek NanoControl backend for the MM3A, over a serial line (or serial-over-TCP).
+
+URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`)::
+
+    mm3a:///dev/ttyUSB0                      serial port, 19200 baud 8N1
+    mm3a:///dev/ttyUSB0?timeout=5&channels=CBA
+    mm3a+socket://192.168.1.20:4001          a serial-over-network adapter (raw TCP)
+
+Query options: ``timeout`` (s to wait for a reply, default 2), ``channels`` (the
+channel letters of joints 1, 2, 3, default ``ABC``), ``baud`` (default 19200),
+``hz`` (the stepping frequency assumed until a speed is set, default 1000),
+``ack=0`` (the controller sends no replies: fire and forget, wait out each burst).
+
+Protocol (what public code sends to this controller)
+----------------------------------------------------
+Commands are ASCII, terminated by ``;``, no newline::
+
+    coarse A +N;        N signed coarse steps on channel A (|N| <= 65535 per command)
+    speed A n;          speed level n on channel A (integer 1..15)
+    amplitudepos A n;   amplitude of + steps, 1..80
+    amplitudeneg A n;   amplitude of - steps, 1..80
+    pause ms;           the controller waits ms milliseconds (1..65535)
+    counterread;        the coarse step counters of all channels
+    counterreset;       zero the counters
+    version;            firmware identification
+    stop;               stop all channels (newer firmware; sent best-effort)
+
+Assumptions about replies (no public source documents the old firmware's replies;
+these follow the NanoControl's documented newer console, and are lenient):
+
+* every command is answered, after it has been carried out, by one line ending in
+  CR (a following LF is ignored): ``<status><TAB><message>`` with status ``o`` (ok),
+  ``e`` (error) or ``i`` (information, e.g. a piezo voltage breakdown; logged as a
+  warning, and the answer still follows);
+* a printable line without the ``<status><TAB>`` prefix is taken as an ok answer
+  whose message is the whole line, unless it starts with ``error``;
+* ``counterread`` answers with whitespace-separated integers, one per channel A, B, ...;
+* a reply with non-printable bytes is garbage: :class:`DeviceError`, and the joint is
+  stopped;
+* a ``coarse`` answer arrives once the steps are done, so each burst waits up to
+  ``timeout + 1.5 |N| / f`` with ``f`` the stepping frequency of the channel;
+* the speed levels' stepping frequencies are not published: :data:`SPEED_HZ` is a
+  placeholder table (measure yours: time a burst of 10 000 steps) and can be passed in.
+
+Every message sent and received is logged on logger ``"stickslip.devices.nanocontrol"``
+(DEBUG level; ``stickslip -v`` or ``logging.basicConfig(level=logging.DEBUG)`` shows it).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Mapping
+from urllib.parse import parse_qs, urlsplit
+
+from .base import DeviceError, DeviceInfo
+from .transport import SerialTransport, SocketTransport, Transport
+
+__all__ = [
+    "NanoControl",
+    "open_url",
+    "SPEED_HZ",
+    "AMPLITUDE_RANGE",
+    "MAX_COARSE",
+    "PAUSE_RANGE_MS",
+    "DEFAULT_CHANNELS",
+]
+
+log = logging.getLogger("stickslip.devices.nanocontrol")
+
+SPEED_HZ: dict[int, float] = {
+    1: 1.0,
+    2: 2.0,
+    3: 5.0,
+    4: 10.0,
+    5: 20.0,
+    6: 50.0,
+    7: 100.0,
+    8: 200.0,
+    9: 500.0,
+    10: 1000.0,
+    11: 1500.0,
+    12: 2000.0,
+    13: 3000.0,
+    14: 4000.0,
+    15: 5000.0,
+}
+"""Speed level -> stepping frequency, Hz. A placeholder: calibrate it on your controller."""
+
+AMPLITUDE_RANGE = (1, 80)
+"""Allowed ``amplitudepos``/``amplitudeneg`` values (controller units), inclusive."""
+
+MAX_COARSE = 65535
+"""Largest |N| of one ``coarse`` command; longer moves are split."""
+
+PAUSE_RANGE_MS = (1, 65535)
+"""Allowed ``pause`` argument, ms, inclusive."""
+
+DEFAULT_CHANNELS: dict[int, str] = {1: "A", 2: "B", 3: "C"}
+
+_STATUS = {"o": "ok", "e": "error", "i": "info"}
+
+
+class NanoControl:
+    """A Kleindiek NanoControl driving an MM3A, as a :class:`~stickslip.devices.base.Controller`.
+
+    Parameters
+    ----------
+    transport : Transport
+        An open byte transport (serial port, socket, or a :class:`FakeTransport`).
+    channels : mapping of int to str
+        Channel letter (``A``-``D``) of each joint; default joints 1, 2, 3 -> A, B, C.
+    timeout : float
+        Time to wait for a reply beyond a burst's own duration, s.
+    speed_hz : mapping of int to float
+        Stepping frequency of each speed level, Hz (default :data:`SPEED_HZ`).
+    nominal_hz : float
+        Stepping frequency assumed for a channel whose speed was never set, Hz.
+    ack : bool
+        Whether the controller answers commands (default True).
+    url : str
+        The URL it was opened with (for :attr:`info`).
+    query_version : bool
+        Ask ``version;`` on opening (a quick check that something answers).
+
+    Raises
+    ------
+    DeviceError
+        If the controller does not answer ``version;`` within ``timeout``.
+    """
+
+    def __init__(
+        self,
+        transport: Transport,
+        *,
+        channels: Mapping[int, str] | None = None,
+        timeout: float = 2.0,
+        speed_hz: Mapping[int, float] | None = None,
+        nominal_hz: float = 1000.0,
+        ack: bool = True,
+        url: str = "mm3a://",
+        query_version: bool = True,
+    ) -> None:
+        self.transport = transport
+        self.channels = _check_channels(channels or DEFAULT_CHANNELS)
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        self.timeout = float(timeout)
+        self.speed_hz = dict(speed_hz or SPEED_HZ)
+        if not nominal_hz > 0:
+            raise ValueError(f"nominal_hz must be > 0 Hz, got {nominal_hz!r}")
+        self.ack = ack
+        self.url = url
+        self._hz = {j: float(nominal_hz) for j in self.channels}
+        self._speed: dict[int, int | None] = {j: None for j in self.channels}
+        self._amp: dict[int, dict[str, int | None]] = {
+            j: {"+": None, "-": None} for j in self.channels
+        }
+        self._lock = threading.RLock()
+        self.version = ""
+        if query_version and ack:
+            self.version = self.command("version")
+
+    # -- the wire -----------------------------------------------------------------------
+    def command(self, text: str, timeout: float | None = None) -> str:
+        """Send ``text;`` and return the message of its answer (without the status).
+
+        Raises
+        ------
+        DeviceError
+            On no answer within ``timeout`` (default :attr:`timeout`), an ``e`` answer,
+            or garbage; the message says what was sent.
+        """
+        wire = f"{text};".encode("ascii")
+        wait = self.timeout if timeout is None else timeout
+        with self._lock:
+            log.debug("-> %s", wire.decode())
+            self.transport.write(wire)
+            if not self.ack:
+                return ""
+            while True:
+                try:
+                    raw = self.transport.read_until((b"\r", b"\n"), timeout=wait)
+                except DeviceError as e:
+                    raise DeviceError(
+                        f"NanoControl on {self.transport.name} did not answer "
+                        f"{wire.decode()!r}: {e}"
+                    ) from None
+                log.debug("<- %r", raw)
+                line = raw.rstrip(b"\r\n")
+                if not line.strip():
+                    continue  # the LF of a CRLF, or an empty line
+                status, message = _parse_reply(line, wire, self.transport.name)
+                if status == "info":
+                    log.warning("NanoControl says: %s (after %s)", message, wire.decode())
+                    continue
+                if status == "error":
+                    raise DeviceError(f"NanoControl refused {wire.decode()!r}: {message}")
+                return message
+
+    def _channel(self, joint: int) -> str:
+        try:
+            return self.channels[int(joint)]
+        except (KeyError, ValueError, TypeError):
+            raise ValueError(
+                f"joint must be one of {sorted(self.channels)}, got {joint!r}"
+            ) from None
+
+    # -- settings -----------------------------------------------------------------------
+    def set_speed(self, joint: int, level: int) -> None:
+        """Set the speed level of ``joint`` (integer 1..15 in the default table; ``speed X n;``)."""
+        ch = self._channel(joint)
+        allowed = sorted(self.speed_hz)
+        if isinstance(level, bool) or not isinstance(level, int) or level not in self.speed_hz:
+            raise ValueError(
+                f"speed level must be an integer in {allowed[0]}..{allowed[-1]}, got {level!r}"
+            )
+        self.command(f"speed {ch} {level}")
+        self._speed[joint] = level
+        self._hz[joint] = float(self.speed_hz[level])
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        """Set the stepping frequency of ``joint``, Hz: one of the speed table's frequencies.
+
+        Raises ``ValueError`` naming the allowed frequencies for any other value
+        (the NanoControl has discrete speed levels; nothing is rounded).
+        """
+        self._channel(joint)
+        for level, f in self.speed_hz.items():
+            if math.isclose(float(hz), f, rel_tol=1e-9):
+                self.set_speed(joint, level)
+                return
+        allowed = ", ".join(f"{f:g}" for f in sorted(self.speed_hz.values()))
+        raise ValueError(
+            "the NanoControl steps at discrete speeds; frequency must be one of "
+            f"{allowed} Hz, got {hz!r}"
+        )
+
+    def frequency(self, joint: int) -> float:
+        """Stepping frequency of ``joint``, Hz (the nominal one until a speed is set)."""
+        self._channel(joint)
+        return self._hz[joint]
+
+    def set_amplitude(
+        self, joint: int, positive: int | None = None, negative: int | None = None
+    ) -> None:
+        """Set the step amplitude of ``joint`` for + and/or - steps (integers 1..80)."""
+        ch = self._channel(joint)
+        lo, hi = AMPLITUDE_RANGE
+        for name, value in (("positive", positive), ("negative", negative)):
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+                raise ValueError(
+                    f"{name} amplitude must be an integer in {lo}..{hi}, got {value!r}"
+                )
+        if positive is not None:
+            self.command(f"amplitudepos {ch} {positive}")
+            self._amp[joint]["+"] = positive
+        if negative is not None:
+            self.command(f"amplitudeneg {ch} {negative}")
+            self._amp[joint]["-"] = negative
+
+    def pause(self, ms: int) -> None:
+        """Let the controller wait ``ms`` milliseconds (integer 1..65535)."""
+        lo, hi = PAUSE_RANGE_MS
+        if isinstance(ms, bool) or not isinstance(ms, int) or not lo <= ms <= hi:
+            raise ValueError(f"pause must be an integer number of ms in {lo}..{hi}, got {ms!r}")
+        self.command(f"pause {ms}", timeout=self.timeout + ms / 1000.0)
+
+    def counters(self) -> dict[int, int]:
+        """The controller's coarse step counters, per joint (``counterread;``)."""
+        message = self.command("counterread")
+        try:
+            values = [int(v) for v in message.replace(",", " ").split()]
+        except ValueError:
+            raise DeviceError(
+                f"NanoControl on {self.transport.name}: cannot read counters from {message!r}"
+            ) from None
+        out = {}
+        for joint, ch in self.channels.items():
+            i = ord(ch) - ord("A")
+            if i >= len(values):
+                raise DeviceError(
+                    f"NanoControl on {self.transport.name}: no counter for channel {ch} "
+                    f"in {message!r}"
+                )
+            out[joint] = values[i]
+        return out
+
+    def reset_counters(self) -> None:
+        """Zero the coarse step counters (``counterreset;``)."""
+        self.command("counterreset")
+
+    # -- motion -------------------------------------------------------------------------
+    def step(self, joint: int, n: int) -> None:
+        """Make ``n`` signed coarse steps on ``joint`` and return when the controller has done them.
+
+        Bursts longer than :data:`MAX_COARSE` are split. ``n = 0`` sends nothing.
+        If the controller fails to answer or answers garbage, the joint is sent a stop
+        (best effort) and :class:`DeviceError` is raised.
+        """
+        ch = self._channel(joint)
+        if isinstance(n, bool) or not isinstance(n, int):
+            if isinstance(n, float) and n.is_integer():
+                n = int(n)
+            else:
+                raise ValueError(f"step count must be an integer, got {n!r}")
+        remaining = int(n)
+        while remaining:
+            chunk = max(-MAX_COARSE, min(MAX_COARSE, remaining))
+            duration = abs(chunk) / self._hz[joint]
+            try:
+                if self.ack:
+                    self.command(f"coarse {ch} {chunk:+d}", timeout=self.timeout + 1.5 * duration)
+                else:
+                    self.command(f"coarse {ch} {chunk:+d}")
+                    _sleep(duration)
+            except DeviceError:
+                self.stop(joint)
+                raise
+            remaining -= chunk
+
+    def stop(self, joint: int | None = None) -> None:
+        """Stop all channels now (``stop;``: there is no per-channel stop). Never raises."""
+        try:
+            with self._lock:
+                log.debug("-> stop;")
+                self.transport.write(b"stop;")
+                if self.ack:
+                    try:
+                        self.transport.read_available(quiet=0.02, limit=min(self.timeout, 0.2))
+                    except DeviceError:  # pragma: no cover - best effort
+                        pass
+        except DeviceError as e:
+            log.warning("could not send stop to %s: %s", self.transport.name, e)
+
+    # -- protocol -----------------------------------------------------------------------
+    @property
+    def info(self) -> DeviceInfo:
+        """Model, URL, joints, channel map and firmware version."""
+        return DeviceInfo(
+            url=self.url,
+            model=f"Kleindiek NanoControl{' ' + self.version if self.version else ''}",
+            joints=tuple(sorted(self.channels)),
+            extra={
+                "channels": dict(self.channels),
+                "version": self.version,
+                "port": self.transport.name,
+            },
+        )
+
+    def settings(self) -> dict[str, object]:
+        """Channel map, speed level, frequency (Hz), amplitudes (None = never set), timeout (s)."""
+        return {
+            "channels": {str(j): c for j, c in self.channels.items()},
+            "speed_level": {str(j): s for j, s in self._speed.items()},
+            "frequency_hz": {str(j): f for j, f in self._hz.items()},
+            "amplitude_pos": {str(j): a["+"] for j, a in self._amp.items()},
+            "amplitude_neg": {str(j): a["-"] for j, a in self._amp.items()},
+            "timeout_s": self.timeout,
+            "port": self.transport.name,
+        }
+
+    def close(self) -> None:
+        """Stop and release the transport."""
+        if not self.transport.closed:
+            self.stop()
+            self.transport.close()
+
+    def __enter__(self) -> NanoControl:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _sleep(seconds: float) -> None:
+    import time
+
+    time.sleep(seconds)
+
+
+def _parse_reply(line: bytes, sent: bytes, port: str) -> tuple[str, str]:
+    try:
+        text = line.decode("ascii")
+    except UnicodeDecodeError:
+        text = None
+    if text is None or any(not (c.isprintable() or c == "\t") for c in text):
+        raise DeviceError(f"NanoControl on {port}: garbage reply {line!r} to {sent.decode()!r}")
+    if len(text) >= 2 and text[1] == "\t" and text[0] in _STATUS:
+        return _STATUS[text[0]], text[2:].strip()
+    if text.strip().lower().startswith("error"):
+        return "error", text.strip()
+    return "ok", text.strip()
+
+
+def _check_channels(channels: Mapping[int, str]) -> dict[int, str]:
+    out: dict[int, str] = {}
+    for j, c in channels.items():
+        c = str(c).upper()
+        if c not in ("A", "B", "C", "D"):
+            raise ValueError(f"channel of joint {j} must be one of A, B, C, D, got {c!r}")
+        out[int(j)] = c
+    if len(set(out.values())) != len(out):
+        raise ValueError(f"two joints share a channel: {out}")
+    return out
+
+
+def open_url(url: str) -> NanoControl:
+    """Open ``mm3a:///dev/ttyUSB0[?options]`` or ``mm3a+socket://host:port[?options]``.
+
+    See the module docstring for the options. Raises :class:`DeviceError` if the port
+    cannot be opened or nothing answers, ``ValueError`` for a malformed URL.
+    """
+    parts = urlsplit(url)
+    opts = {k: v[-1] for k, v in parse_qs(parts.query).items()}
+    known = {"timeout", "channels", "baud", "hz", "ack"}
+    unknown = sorted(set(opts) - known)
+    if unknown:
+        raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
+    try:
+        timeout = float(opts.get("timeout", 2.0))
+        baud = int(opts.get("baud", 19200))
+        hz = float(opts.get("hz", 1000.0))
+    except ValueError as e:
+        raise ValueError(f"bad option in {url!r}: {e}") from None
+    letters = opts.get("channels", "ABC")
+    channels = _check_channels({i + 1: c for i, c in enumerate(letters)})
+    ack = opts.get("ack", "1").lower() not in ("0", "no", "false", "off")
+    if parts.scheme == "mm3a+socket":
+        if not parts.hostname or not parts.port:
+            raise ValueError(f"{url!r}: give host and port, e.g. mm3a+socket://192.168.1.20:4001")
+        transport: Transport = SocketTransport(parts.hostname, parts.port, timeout=timeout)
+    elif parts.scheme == "mm3a":
+        port = parts.path or parts.netloc
+        if not port:
+            raise ValueError(f"{url!r}: give the serial port, e.g. mm3a:///dev/ttyUSB0")
+        transport = SerialTransport(port, baudrate=baud, timeout=timeout)
+    else:
+        raise ValueError(
+            f"not a NanoControl URL: {url!r} (use mm3a:///dev/ttyUSB0 or mm3a+socket://host:port)"
+        )
+    try:
+        return NanoControl(
+            transport, channels=channels, timeout=timeout, nominal_hz=hz, ack=ack, url=url
+        )
+    except Exception:
+        transport.close()
+        raise

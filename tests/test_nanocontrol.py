@@ -1,0 +1,176 @@
+"""NanoControl driver against exact command transcripts (no hardware, no emulator).
+
+The transcripts follow the command set in stickslip.devices.nanocontrol's docstring:
+`;`-terminated commands, one `<status>\\t<message>\\r` answer each.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import pytest
+
+from stickslip.devices.base import DeviceError, open_device
+from stickslip.devices.nanocontrol import MAX_COARSE, NanoControl
+from stickslip.devices.transport import FakeTransport, TranscriptError
+
+VERSION = ("version;", "o\tNanoControl 3.1\r")
+
+
+def nc(transcript, **kw):
+    t = FakeTransport([VERSION, *transcript], name="/dev/fake")
+    return t, NanoControl(t, timeout=kw.pop("timeout", 0.05), **kw)
+
+
+def test_open_asks_version_and_reports_it():
+    t, dev = nc([])
+    with t:
+        assert dev.version == "NanoControl 3.1"
+        assert dev.info.model == "Kleindiek NanoControl NanoControl 3.1"
+        assert dev.info.joints == (1, 2, 3)
+
+
+def test_step_sends_signed_coarse_on_mapped_channel():
+    t, dev = nc([("coarse C +1200;", "o\t\r"), ("coarse A -35;", "o\t\r")])
+    with t:
+        dev.step(3, 1200)
+        dev.step(1, -35)
+
+
+def test_custom_channel_map():
+    t, dev = nc([("coarse A +5;", "o\t\r")], channels={1: "C", 2: "B", 3: "A"})
+    with t:
+        dev.step(3, 5)
+
+
+def test_long_burst_is_split_at_max_coarse():
+    n = MAX_COARSE + 10
+    t, dev = nc([(f"coarse B -{MAX_COARSE};", "o\t\r"), ("coarse B -10;", "o\t\r")], nominal_hz=1e7)
+    with t:
+        dev.step(2, -n)
+
+
+def test_zero_steps_sends_nothing():
+    t, dev = nc([])
+    with t:
+        dev.step(1, 0)
+
+
+def test_settings_commands_and_ranges():
+    t, dev = nc(
+        [
+            ("speed A 13;", "o\t\r"),
+            ("amplitudepos B 80;", "o\t\r"),
+            ("amplitudeneg B 1;", "o\t\r"),
+            ("pause 250;", "o\t\r"),
+            ("counterreset;", "o\t\r"),
+            ("counterread;", "o\t120 -3 7 0\r"),
+        ]
+    )
+    with t:
+        dev.set_speed(1, 13)
+        assert dev.frequency(1) == 3000.0  # SPEED_HZ[13]
+        dev.set_amplitude(2, positive=80, negative=1)
+        dev.pause(250)
+        dev.reset_counters()
+        assert dev.counters() == {1: 120, 2: -3, 3: 7}
+        s = dev.settings()
+        assert s["speed_level"]["1"] == 13 and s["amplitude_neg"]["2"] == 1
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda d: d.set_amplitude(1, positive=81), r"1\.\.80"),
+        (lambda d: d.set_amplitude(1, negative=0), r"1\.\.80"),
+        (lambda d: d.set_amplitude(1, positive=40.5), r"integer"),
+        (lambda d: d.set_speed(1, 16), r"1\.\.15"),
+        (lambda d: d.set_speed(1, 0), r"1\.\.15"),
+        (lambda d: d.set_frequency(1, 1234.0), r"one of .*1000.* Hz"),
+        (lambda d: d.pause(0), r"1\.\.65535"),
+        (lambda d: d.step(4, 10), r"joint must be one of \[1, 2, 3\]"),
+        (lambda d: d.step(1, 2.5), r"integer"),
+    ],
+)
+def test_out_of_range_settings_raise_and_send_nothing(call, match):
+    t, dev = nc([])
+    with t:  # FakeTransport fails on any message: nothing may be sent
+        with pytest.raises(ValueError, match=match):
+            call(dev)
+
+
+def test_set_frequency_picks_the_speed_level():
+    t, dev = nc([("speed C 10;", "o\t\r")])
+    with t:
+        dev.set_frequency(3, 1000.0)
+        assert dev.settings()["speed_level"]["3"] == 10
+
+
+def test_info_lines_are_logged_and_skipped(caplog):
+    t, dev = nc([("coarse A +10;", "i\tPiezo voltage breakdown\ro\t\r")])
+    with t, caplog.at_level(logging.DEBUG, logger="stickslip.devices.nanocontrol"):
+        dev.step(1, 10)
+    msgs = [r.getMessage() for r in caplog.records]
+    assert "-> coarse A +10;" in msgs
+    assert any("Piezo voltage breakdown" in m for m in msgs)
+
+
+def test_crlf_replies_and_plain_lines_are_accepted():
+    t, dev = nc([("coarse A +10;", "ok\r\n"), ("counterread;", "1 2 3\r\n")])
+    with t:
+        dev.step(1, 10)
+        assert dev.counters() == {1: 1, 2: 2, 3: 3}
+
+
+def test_error_reply_raises_device_error_and_stops():
+    t, dev = nc([("coarse A +10;", "e\tchannel not connected\r"), ("stop;", "o\t\r")])
+    with t:
+        with pytest.raises(DeviceError, match="refused 'coarse A \\+10;': channel not connected"):
+            dev.step(1, 10)
+
+
+def test_garbage_reply_raises_and_stops():
+    t, dev = nc([("coarse B -10;", b"\x00\xff\x13\r"), ("stop;", "o\t\r")])
+    with t:
+        with pytest.raises(DeviceError, match="garbage reply"):
+            dev.step(2, -10)
+
+
+def test_no_answer_times_out_within_timeout_and_stops():
+    # reply None = the device stays silent
+    t, dev = nc([("coarse A +10;", None), ("stop;", None)], nominal_hz=1e6, timeout=0.2)
+    with t:
+        t0 = time.monotonic()
+        with pytest.raises(DeviceError, match=r"did not answer 'coarse A \+10;'.*within 0\.2"):
+            dev.step(1, 10)
+        elapsed = time.monotonic() - t0
+    assert elapsed < 0.2 + 0.2 + 0.3  # reply timeout + stop's short wait + slack
+
+
+def test_fake_transport_fails_on_unexpected_and_leftover_messages():
+    t = FakeTransport([("version;", "o\tx\r"), ("coarse A +1;", "o\t\r")])
+    dev = NanoControl(t, timeout=0.05)
+    with pytest.raises(TranscriptError, match="left over"):
+        t.assert_done()
+    with pytest.raises(TranscriptError, match="expected b'coarse A \\+1;'"):
+        dev.step(1, 2)
+
+
+def test_ack_off_sends_without_waiting_for_replies():
+    t = FakeTransport([("coarse A +5;", None)])
+    dev = NanoControl(t, timeout=0.05, ack=False, nominal_hz=1e5)
+    with t:
+        dev.step(1, 5)
+
+
+def test_unplugged_port_names_the_port():
+    with pytest.raises(DeviceError, match="/dev/ttyNOPE"):
+        open_device("mm3a:///dev/ttyNOPE?timeout=0.1")
+
+
+def test_bad_url_options():
+    with pytest.raises(ValueError, match="unknown option"):
+        open_device("mm3a:///dev/ttyUSB0?sped=3")
+    with pytest.raises(ValueError, match="channel of joint 2"):
+        open_device("mm3a:///dev/ttyUSB0?channels=AXC")
