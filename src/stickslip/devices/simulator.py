@@ -53,6 +53,7 @@ __all__ = [
     "VirtualMicrophone",
     "open_url",
     "day_key",
+    "OracleStopDetector",
 ]
 
 FREQUENCY_RANGE = (1.0, 5000.0)
@@ -679,3 +680,72 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
         soundscape_kwargs=scape,
         url=url,
     )
+
+
+# ---------------------------------------------------------------- a stand-in for the limit switch
+
+
+@dataclass(frozen=True)
+class OracleEvent:
+    """A stop event of :class:`OracleStopDetector` (same fields as ``StopEvent``)."""
+
+    detected_at_s: float
+    onset_s: float
+    level_db: float = 0.0
+
+
+class OracleStopDetector:
+    """A limit switch that cheats: it knows the simulator's true stop times.
+
+    For tests and emulators that need the traverse procedure without audio. It
+    consumes blocks like :class:`~stickslip.audio.detector.StopDetector` (the stream
+    time advances by the block length) and fires once per stop, at the end of the
+    first block that reaches ``true stop + delay_s``; its onset estimate is the true
+    stop plus ``onset_error_s``.
+
+    Parameters
+    ----------
+    sim : SimulatedMM3A
+    joint : int
+        The joint whose stops it hears.
+    delay_s : float
+        Detection delay after the true stop, s.
+    onset_error_s : float
+        Error of the onset estimate, s.
+    """
+
+    def __init__(
+        self,
+        sim: SimulatedMM3A,
+        joint: int,
+        delay_s: float = 0.03,
+        onset_error_s: float = 0.0,
+        t0_s: float = 0.0,
+    ):
+        self.sim = sim
+        self.joint = int(joint)
+        self.delay_s = float(delay_s)
+        self.onset_error_s = float(onset_error_s)
+        self.sample_rate = sim.sample_rate
+        self.reset(t0_s)
+
+    @property
+    def latency_s(self) -> float:
+        """The detection delay, s."""
+        return self.delay_s
+
+    def reset(self, t0_s: float = 0.0) -> None:
+        """Restart the stream at ``t0_s`` (s); stops before it are forgotten."""
+        self.t_s = float(t0_s)
+        self._fired_upto = float(t0_s)
+
+    def feed(self, block: NDArray) -> list[OracleEvent]:
+        """Consume a block; the events whose detection time falls within it."""
+        t_end = self.t_s + len(block) / self.sample_rate
+        self.t_s = t_end
+        out = []
+        for t in self.sim.stop_times(self.joint):
+            if t >= self._fired_upto and t + self.delay_s <= t_end:
+                out.append(OracleEvent(t_end, t + self.onset_error_s))
+                self._fired_upto = t_end
+        return out

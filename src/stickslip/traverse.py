@@ -1,0 +1,393 @@
+"""Measure a joint's average step: count the steps between its two end stops, by ear.
+
+The traverse procedure (DESIGN.md section 5), for any :class:`~stickslip.devices.base.Controller`:
+
+1. *Drive to the start stop*: step the joint the other way until the limit switch
+   hears that stop (``predrive="listen"``), or overdrive it by more steps than the
+   whole range can take (``predrive="overdrive"``; no listening needed).
+2. *Measure*: step in bursts in the measured direction while the
+   :class:`~stickslip.audio.detector.StopDetector` listens to the audio recorded
+   during each burst; stop at the first event.
+3. *Count*: every burst is logged as ``(stream time it began, steps, frequency)``.
+   The steps that moved the joint are those issued before the stop's onset; the
+   rest were commanded after the stop (``steps = commanded - steps after the
+   event``). Without correction the count would run to the *detection* time and
+   include ``f_step x latency`` extra steps (20 steps at 1 kHz and 20 ms: 0.17 %
+   of a 12 000-step traverse); with ``latency="onset"`` (default) the event's onset
+   estimate is used, with ``latency="fixed"`` ``detected_at - detector.latency_s``.
+
+Audio arrives through ``audio_blocks``: either a callable returning the blocks
+recorded since its previous call (the simulator's
+:class:`~stickslip.devices.simulator.VirtualMicrophone`), or an iterator yielding
+blocks as they are recorded (a live microphone). Stream time and the controller's
+clock must agree: by default the clock is ``controller.clock_s`` if the controller
+has one (the simulator), else the wall clock since the start of the traverse.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import kinematics as kin
+from .devices.base import Controller
+from .measurements import Traverse
+from .models import direction_label, direction_sign
+
+__all__ = ["TraverseError", "TraverseResult", "measure_traverse", "MIN_STEP_PRIOR", "LATENCY_MODES"]
+
+LATENCY_MODES = ("onset", "fixed", "none")
+
+MIN_STEP_PRIOR = {1: 15e-6, 2: 15e-6, 3: 300e-9}
+"""A lower bound on a joint's step size (rad, rad, m), used to size overdrives and the
+give-up limit: no MM3A-type joint steps less than this in any pose."""
+
+
+class TraverseError(RuntimeError):
+    """A traverse could not be completed (no stop heard, device refused, ...)."""
+
+
+@dataclass(frozen=True)
+class TraverseResult:
+    """One measured traverse.
+
+    Attributes
+    ----------
+    traverse : Traverse
+        The measurement-table row (start, end = the joint's stops, ``steps`` counted).
+    steps : int
+        Steps that moved the joint.
+    commanded_steps : int
+        Steps commanded in the measured direction in total.
+    steps_after_stop : int
+        ``commanded_steps - steps``: steps issued after the estimated stop.
+    latency_steps_corrected : int
+        Steps removed by the latency correction (between the estimated onset and the
+        detection), ``0`` with ``latency="none"``.
+    detected_at_s, onset_s : float
+        The stop event's detection and onset times, s (stream time).
+    elapsed_device_s : float
+        Time the measured stepping took on the device clock, s.
+    frequency_hz : float
+        Stepping frequency, Hz.
+    predrive_steps : int
+        Steps commanded to reach the start stop.
+    """
+
+    traverse: Traverse
+    steps: int
+    commanded_steps: int
+    steps_after_stop: int
+    latency_steps_corrected: int
+    detected_at_s: float
+    onset_s: float
+    elapsed_device_s: float
+    frequency_hz: float
+    predrive_steps: int = 0
+    bursts: tuple[tuple[float, int], ...] = field(default=(), repr=False)
+
+    @property
+    def gamma(self) -> float:
+        """Average step ``|end - start| / steps`` (m or rad)."""
+        return self.traverse.gamma
+
+    def report(self) -> str:
+        """One line a person can read (units labelled)."""
+        t = self.traverse
+        unit, scale = ("nm", 1e9) if t.joint == 3 else ("µrad", 1e6)
+        return (
+            f"joint {t.joint} {t.direction}: {self.steps} steps, "
+            f"gamma = {self.gamma * scale:.2f} {unit} "
+            f"({self.elapsed_device_s:.1f} s at {self.frequency_hz:g} Hz; "
+            f"{self.steps_after_stop} steps after the stop, "
+            f"{self.latency_steps_corrected} for latency)"
+        )
+
+
+def _count_before(t_s: float, bursts: list[tuple[float, int]], hz: float) -> int:
+    """Steps issued before time ``t_s``: steps of a burst begun at ``b`` are at ``b + k / hz``."""
+    total = 0
+    for b, n in bursts:
+        total += int(min(max(round((t_s - b) * hz), 0), n))
+    return total
+
+
+class _Listener:
+    """Feeds audio to the detector up to a stream time; returns the first event."""
+
+    def __init__(self, detector: Any, audio_blocks: Any, sample_rate: float):
+        self.detector = detector
+        self.sample_rate = float(sample_rate)
+        self._callable = callable(audio_blocks) and not isinstance(audio_blocks, Iterator)
+        self.source = audio_blocks if self._callable else iter(audio_blocks)
+        self.t_s = 0.0
+
+    def start(self, t0_s: float) -> None:
+        """Begin listening at stream time ``t0_s``: drop older audio, reset the detector."""
+        skip = getattr(self.source, "skip_to", None)
+        if skip is not None:
+            skip(t0_s)
+        elif self._callable:
+            self.source()
+        self.detector.reset(t0_s)
+        self.t_s = t0_s
+
+    def _blocks(self, until_s: float) -> Iterable[np.ndarray]:
+        if self._callable:
+            yield from self.source()
+            return
+        while self.t_s < until_s:
+            try:
+                block = next(self.source)
+            except StopIteration:
+                return
+            if isinstance(block, tuple):  # (samples, sample_rate) pairs from file sources
+                block = block[0]
+            yield block
+
+    def listen(self, until_s: float):
+        """Feed the audio recorded up to ``until_s``; the first event, or ``None``."""
+        for block in self._blocks(until_s):
+            block = np.asarray(block, dtype=np.float32)
+            if block.ndim > 1:
+                block = block.mean(axis=1)
+            self.t_s += block.shape[0] / self.sample_rate
+            events = self.detector.feed(block)
+            if events:
+                return events[0]
+        return None
+
+
+def _sample_rate(detector: Any, audio_blocks: Any) -> float:
+    for obj in (audio_blocks, getattr(detector, "tuning", None), detector):
+        sr = getattr(obj, "sample_rate", None)
+        if sr:
+            return float(sr)
+    return 48_000.0
+
+
+def _progress_callback(
+    progress: bool | Callable[[int, float], None], joint: int, direction: str, expected: int | None
+):
+    """A callable ``(steps, device_s)`` and a closer, for ``progress`` True / callable / False."""
+    if callable(progress):
+        return progress, lambda: None
+    if not progress:
+        return (lambda steps, t: None), lambda: None
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    bar = Progress(
+        TextColumn(f"joint {joint} {direction}"),
+        BarColumn(),
+        TextColumn("{task.completed:>7.0f} steps"),
+        TextColumn("{task.fields[device]:>6.1f} s on the device"),
+        TimeElapsedColumn(),
+        transient=True,
+    )
+    bar.start()
+    task = bar.add_task("traverse", total=expected, device=0.0)
+
+    def update(steps: int, t: float) -> None:
+        bar.update(task, completed=steps, device=t)
+
+    return update, bar.stop
+
+
+def measure_traverse(
+    controller: Controller,
+    joint: int,
+    direction: str | int,
+    *,
+    detector: Any,
+    audio_blocks: Callable[[], Iterable[np.ndarray]] | Iterable[np.ndarray],
+    pose: kin.Pose,
+    day: str,
+    burst_steps: int = 2000,
+    predrive: str = "listen",
+    latency: str = "onset",
+    max_steps: int | None = None,
+    expected_steps: int | None = None,
+    clock: Callable[[], float] | None = None,
+    progress: bool | Callable[[int, float], None] = False,
+    settle_s: float = 0.05,
+) -> TraverseResult:
+    """Measure a full-range traverse of ``joint``: count the steps between its end stops.
+
+    Parameters
+    ----------
+    controller : Controller
+        Any backend (``sim://``, ``mm3a://``, ...).
+    joint : int
+        1, 2 or 3.
+    direction : {"+", "-"}
+        ``"+"`` traverses from the lower stop to the upper one.
+    detector : StopDetector
+        Tuned for this joint (``feed(block) -> events``, ``reset(t0_s)``, ``latency_s``).
+    audio_blocks : callable or iterable
+        Audio in step with the controller: a callable returning the blocks recorded
+        since its previous call, or an iterator yielding blocks (blocking) as recorded.
+    pose : Pose
+        The fixed pose (joints rad, rad, m; tilt rad) to write into the row.
+    day : str
+        Session label for the row.
+    burst_steps : int
+        Steps per burst (at 1 kHz, 2000 steps = 2 s between checks).
+    predrive : {"listen", "overdrive", "none"}
+        How to reach the start stop: step the other way until that stop is heard
+        (default), or command more steps than the range can take without listening,
+        or assume the joint already rests on it.
+    latency : {"onset", "fixed", "none"}
+        Which stop time to count to: the event's onset estimate (default), the
+        detection time minus the detector's typical latency, or the raw detection time
+        (no correction; the count then includes ``f_step x latency`` extra steps).
+    max_steps : int, optional
+        Give up (``TraverseError``) after this many steps without hearing a stop.
+        Default: twice the range over :data:`MIN_STEP_PRIOR`.
+    expected_steps : int, optional
+        For the progress bar's total.
+    clock : callable, optional
+        Returns the stream time (s) now. Default: ``controller.clock_s`` if present,
+        else the wall clock.
+    progress : bool or callable
+        ``True`` shows a rich progress bar; a callable gets ``(steps, device_s)`` after
+        every burst.
+    settle_s : float
+        Events with an onset within this time (s) of the start of the measured
+        stepping are the start stop still ringing, and are ignored.
+
+    Returns
+    -------
+    TraverseResult
+    """
+    spec = kin.joint_spec(joint)
+    sign = direction_sign(direction)
+    label = direction_label(sign)
+    if latency not in LATENCY_MODES:
+        raise ValueError(f"latency must be one of {', '.join(LATENCY_MODES)}, got {latency!r}")
+    if predrive not in ("listen", "overdrive", "none"):
+        raise ValueError(f"predrive must be 'listen', 'overdrive' or 'none', got {predrive!r}")
+    if not (isinstance(burst_steps, int) and 1 <= burst_steps <= 1_000_000):
+        raise ValueError(f"burst_steps = {burst_steps!r} is outside [1, 1000000]")
+    limit = (
+        int(max_steps)
+        if max_steps is not None
+        else int(2 * spec.span / MIN_STEP_PRIOR[spec.number])
+    )
+    hz = float(controller.frequency(joint))
+    if clock is None:
+        if hasattr(controller, "clock_s"):
+
+            def clock() -> float:
+                return float(controller.clock_s)  # type: ignore[attr-defined]
+        else:
+            w0 = time.monotonic()
+
+            def clock() -> float:
+                return time.monotonic() - w0
+
+    listener = _Listener(detector, audio_blocks, _sample_rate(detector, audio_blocks))
+
+    # 1. to the start stop
+    predrive_steps = 0
+    if predrive == "overdrive":
+        remaining = int(math.ceil(1.3 * spec.span / MIN_STEP_PRIOR[spec.number]))
+        while remaining > 0:
+            n = min(remaining, 100 * burst_steps)
+            controller.step(joint, -sign * n)
+            remaining -= n
+            predrive_steps += n
+    elif predrive == "listen":
+        listener.start(clock())
+        while True:
+            if predrive_steps >= limit:
+                raise TraverseError(
+                    f"joint {joint}: no stop heard after {predrive_steps} steps towards the "
+                    "start stop "
+                    f"(direction {direction_label(-sign)}); check the tuning and the microphone"
+                )
+            n = min(burst_steps, limit - predrive_steps)
+            controller.step(joint, -sign * n)
+            predrive_steps += n
+            if listener.listen(clock()) is not None:
+                controller.stop(joint)
+                break
+
+    # 2. measure
+    t_start = clock()
+    listener.start(t_start)
+    bursts: list[tuple[float, int]] = []
+    commanded = 0
+    event = None
+    update, close_bar = _progress_callback(progress, joint, label, expected_steps)
+    try:
+        while event is None:
+            if commanded >= limit:
+                raise TraverseError(
+                    f"joint {joint}: no stop heard after {commanded} steps in direction {label} "
+                    f"({commanded / hz:.1f} s at {hz:g} Hz); "
+                    "check the tuning, the microphone and the joint"
+                )
+            n = min(burst_steps, limit - commanded)
+            bursts.append((clock(), n))
+            controller.step(joint, sign * n)
+            commanded += n
+            event = listener.listen(clock())
+            while event is not None and float(event.onset_s) < t_start + settle_s:
+                # the start stop's sound still ringing as the joint leaves it: not our stop
+                listener.detector.reset(listener.t_s)
+                event = listener.listen(clock())
+            update(commanded, clock() - t_start)
+        controller.stop(joint)
+    finally:
+        close_bar()
+
+    # 3. count
+    detected = float(event.detected_at_s)
+    if latency == "onset":
+        t_stop = float(event.onset_s)
+    elif latency == "fixed":
+        t_stop = detected - float(getattr(detector, "latency_s", 0.0))
+    else:
+        t_stop = detected
+    steps = _count_before(t_stop, bursts, hz)
+    steps_uncorrected = _count_before(detected, bursts, hz)
+    if steps <= 0:
+        raise TraverseError(
+            f"joint {joint}: the stop was heard at once ({steps} steps before it): "
+            "the joint did not "
+            f"start from the opposite stop, or the detector fired on the start stop's sound"
+        )
+    start, end = (spec.lower, spec.upper) if sign > 0 else (spec.upper, spec.lower)
+    values = {"q1": pose.q1, "q2": pose.q2, "q3": pose.q3}
+    values[f"q{joint}"] = start
+    row = Traverse(
+        day=str(day),
+        joint=spec.number,
+        direction=label,
+        q1=float(values["q1"]),
+        q2=float(values["q2"]),
+        q3=float(values["q3"]),
+        theta=float(pose.theta),
+        psi=float(pose.psi),
+        start=start,
+        end=end,
+        steps=int(steps),
+    )
+    return TraverseResult(
+        traverse=row,
+        steps=int(steps),
+        commanded_steps=commanded,
+        steps_after_stop=commanded - int(steps),
+        latency_steps_corrected=steps_uncorrected - int(steps),
+        detected_at_s=detected,
+        onset_s=float(event.onset_s),
+        elapsed_device_s=clock() - t_start,
+        frequency_hz=hz,
+        predrive_steps=predrive_steps,
+        bursts=tuple(bursts),
+    )
