@@ -1,0 +1,597 @@
+"""Statistics on measured step sizes: day-to-day ANOVA (the seed's Section 3.1) and fit residuals.
+
+ANOVA
+-----
+The seed recalibrates every day because a one-way ANOVA of the average step size
+``gamma = |end - start| / steps`` across days was significant (p < 0.05), and so was
+the difference between the + and - directions within a day. :func:`anova` repeats
+those tests on any measurement table:
+
+``day`` tests
+    For each joint, direction and *pose*, one-way ANOVA of gamma with the day as the
+    factor (:func:`scipy.stats.f_oneway`).
+``direction`` tests
+    For each joint, day and pose, one-way ANOVA of gamma with the direction as the
+    factor (+ against -; equivalent to a pooled two-sample t test, F = t^2).
+``two-way`` tests
+    For each joint and pose, the two-way table ``gamma ~ C(day) * C(direction)``
+    (ordinary least squares, type-II sums of squares, statsmodels ``anova_lm``): one
+    row per term ``day``, ``direction`` and ``day:direction``.
+
+Grouping rule (which traverses are "the same pose")
+    Traverses of one joint belong to the same pose when their fixed joints (the moving
+    joint's own column is ignored), ``theta``, ``psi`` and the traversed interval
+    ``[min(start, end), max(start, end)]`` agree within ``angle_tol`` (rad) for angles
+    and ``length_tol`` (m) for lengths -- default 1e-3 rad (0.06 degrees) and 10 µm,
+    far below what a pose can be set to by hand and far above rounding in a file.
+    Groups are formed greedily: each traverse joins the first group whose first member
+    matches it.
+
+When a test is made
+    A ``day`` test needs the pose measured on at least two days and at least one
+    degree of freedom within days (``n > number of days``): every traverse of that
+    joint, direction and pose enters, grouped by day (a day with a single traverse
+    still counts as a group). A ``direction`` test needs both directions in that pose
+    on that day and ``n >= 3``. A ``two-way`` table needs at least two days, both
+    directions, every day x direction cell filled, and ``n`` greater than the number of
+    cells. Poses that do not qualify are listed in :attr:`AnovaResult.skipped`.
+
+If the spread within groups is exactly zero the F statistic is infinite (p = 0) when
+the group means differ and undefined (NaN) when they do not.
+
+Residuals
+---------
+:func:`residual_summary` compares a calibration's exact traverse-average prediction
+with every measured traverse: per joint and direction, n, RMS and maximum relative
+residual and the same in nm (prismatic) or µrad (rotary).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .measurements import Traverse
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .calibration import Calibration
+
+__all__ = [
+    "ALPHA",
+    "AnovaResult",
+    "AnovaTest",
+    "PoseGroup",
+    "ResidualRow",
+    "ResidualSummary",
+    "anova",
+    "group_poses",
+    "one_way",
+    "residual_summary",
+]
+
+ALPHA = 0.05
+ANGLE_TOL = 1e-3
+LENGTH_TOL = 1e-5
+_POSE_KEYS = ("q1", "q2", "q3", "theta", "psi")
+
+
+def _scale(joint: int) -> tuple[float, str]:
+    """Display factor and unit for step sizes of ``joint``."""
+    return (1e9, "nm") if joint == 3 else (1e6, "µrad")
+
+
+# ---------------------------------------------------------------- pose groups
+
+
+@dataclass
+class PoseGroup:
+    """Traverses of one joint in the same pose (see the module's grouping rule).
+
+    Attributes
+    ----------
+    joint : int
+    pose : dict
+        ``q1, q2, q3, theta, psi`` of the group's first traverse (rad, m); the moving
+        joint's entry is that traverse's column and carries no meaning.
+    interval : tuple of float
+        ``(min(start, end), max(start, end))`` of the first traverse (rad or m).
+    traverses : list of Traverse
+    """
+
+    joint: int
+    pose: dict[str, float]
+    interval: tuple[float, float]
+    traverses: list[Traverse] = field(default_factory=list)
+
+    def matches(self, t: Traverse, angle_tol: float, length_tol: float) -> bool:
+        if t.joint != self.joint:
+            return False
+        for k in _POSE_KEYS:
+            if k == f"q{t.joint}":
+                continue
+            tol = length_tol if k == "q3" else angle_tol
+            if abs(getattr(t, k) - self.pose[k]) > tol:
+                return False
+        tol = length_tol if t.joint == 3 else angle_tol
+        lo, hi = sorted((t.start, t.end))
+        return abs(lo - self.interval[0]) <= tol and abs(hi - self.interval[1]) <= tol
+
+    def describe(self) -> str:
+        """Short human label: the fixed joints, tilt and interval with units."""
+        parts = []
+        for k in _POSE_KEYS:
+            if k == f"q{self.joint}":
+                continue
+            v = self.pose[k]
+            parts.append(f"{k}={v * 1e3:.4g}mm" if k == "q3" else f"{k}={math.degrees(v):.4g}°")
+        lo, hi = self.interval
+        if self.joint == 3:
+            parts.append(f"q3 {lo * 1e3:.4g}..{hi * 1e3:.4g}mm")
+        else:
+            parts.append(f"q{self.joint} {math.degrees(lo):.4g}..{math.degrees(hi):.4g}°")
+        return " ".join(parts)
+
+
+def group_poses(
+    traverses: Sequence[Traverse], angle_tol: float = ANGLE_TOL, length_tol: float = LENGTH_TOL
+) -> list[PoseGroup]:
+    """Group traverses by joint and pose (fixed joints, tilt, traversed interval).
+
+    Parameters
+    ----------
+    traverses : sequence of Traverse
+    angle_tol : float
+        Largest difference of angles (rad) within one pose.
+    length_tol : float
+        Largest difference of lengths (m) within one pose.
+    """
+    groups: list[PoseGroup] = []
+    for t in traverses:
+        for g in groups:
+            if g.matches(t, angle_tol, length_tol):
+                g.traverses.append(t)
+                break
+        else:
+            lo, hi = sorted((t.start, t.end))
+            groups.append(PoseGroup(t.joint, t.pose(), (lo, hi), [t]))
+    return groups
+
+
+# ---------------------------------------------------------------- tests
+
+
+def one_way(samples: Sequence[Sequence[float]]) -> tuple[float, float, int, int]:
+    """One-way ANOVA of ``samples`` (one sequence per group): ``(F, p, df_between, df_within)``.
+
+    :func:`scipy.stats.f_oneway`, with the degenerate case of zero spread within
+    groups made explicit (F = inf, p = 0 if the means differ; NaN otherwise).
+    """
+    from scipy import stats
+
+    arrays = [np.asarray(s, dtype=float) for s in samples]
+    k = len(arrays)
+    n = sum(a.size for a in arrays)
+    dfb, dfw = k - 1, n - k
+    if k < 2 or dfw < 1 or any(a.size == 0 for a in arrays):
+        raise ValueError(
+            f"one-way ANOVA needs >= 2 non-empty groups and n > groups (got {k} groups, n = {n})"
+        )
+    grand = np.concatenate(arrays).mean()
+    ssw = sum(float(((a - a.mean()) ** 2).sum()) for a in arrays)
+    ssb = sum(a.size * float((a.mean() - grand) ** 2) for a in arrays)
+    scale = max(float(np.abs(np.concatenate(arrays)).max()), 1e-300) ** 2 * n
+    if ssw <= 1e-28 * scale:
+        if ssb <= 1e-28 * scale:
+            return math.nan, math.nan, dfb, dfw
+        return math.inf, 0.0, dfb, dfw
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = stats.f_oneway(*arrays)
+    return float(res.statistic), float(res.pvalue), dfb, dfw
+
+
+@dataclass(frozen=True)
+class AnovaTest:
+    """One F test.
+
+    Attributes
+    ----------
+    test : {"day", "direction", "two-way"}
+    joint : int
+    direction : str or None
+        For ``day`` tests (``None`` otherwise).
+    day : str or None
+        For ``direction`` tests (``None`` otherwise).
+    term : str or None
+        For ``two-way`` rows: ``"day"``, ``"direction"`` or ``"day:direction"``.
+    pose : dict
+        ``q1, q2, q3, theta, psi`` (rad, m) the test grouped on.
+    interval : tuple of float
+        Traversed interval of the moving joint (rad or m).
+    F, p : float
+    df_num, df_den : int
+        Degrees of freedom of the term and of the residual.
+    n : int
+        Traverses in the test.
+    groups : list of dict
+        ``{"label", "n", "mean", "sd"}`` per level of the factor, mean and sd in the
+        display unit (nm or µrad).
+    unit : str
+    """
+
+    test: str
+    joint: int
+    direction: str | None
+    day: str | None
+    term: str | None
+    pose: dict[str, float]
+    interval: tuple[float, float]
+    F: float
+    p: float
+    df_num: int
+    df_den: int
+    n: int
+    groups: tuple[dict[str, Any], ...] = ()
+    unit: str = ""
+
+    def significant(self, alpha: float = ALPHA) -> bool:
+        """Whether p < alpha (False for an undefined p)."""
+        return bool(self.p < alpha)
+
+    def verdict(self, alpha: float = ALPHA) -> str:
+        if not math.isfinite(self.p):
+            return "undefined (no spread)"
+        return "significant" if self.significant(alpha) else "not significant"
+
+    def as_dict(self, alpha: float = ALPHA) -> dict[str, Any]:
+        d: dict[str, Any] = {"test": self.test, "joint": self.joint}
+        if self.test == "day":
+            d["direction"] = self.direction
+        elif self.test == "direction":
+            d["day"] = self.day
+        else:
+            d["term"] = self.term
+        d.update(
+            pose=dict(self.pose),
+            interval=list(self.interval),
+            F=self.F,
+            p=self.p,
+            df_num=self.df_num,
+            df_den=self.df_den,
+            n=self.n,
+            significant=self.significant(alpha),
+            alpha=alpha,
+            groups=[dict(g) for g in self.groups],
+            unit=self.unit,
+        )
+        return d
+
+
+def _groups_summary(
+    labels: Sequence[str], samples: Sequence[np.ndarray], joint: int
+) -> tuple[dict, ...]:
+    k, _unit = _scale(joint)
+    out = []
+    for lab, s in zip(labels, samples, strict=True):
+        sd = float(np.std(s, ddof=1) * k) if s.size > 1 else math.nan
+        out.append({"label": lab, "n": int(s.size), "mean": float(s.mean() * k), "sd": sd})
+    return tuple(out)
+
+
+@dataclass
+class AnovaResult:
+    """All tests of :func:`anova`, with what was skipped and why.
+
+    Attributes
+    ----------
+    tests : list of AnovaTest
+    skipped : list of str
+        One line per pose or cell that could not be tested, with the reason.
+    alpha : float
+        Significance level of the verdicts.
+    """
+
+    tests: list[AnovaTest]
+    skipped: list[str]
+    alpha: float = ALPHA
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One JSON-ready dict per test (see :meth:`AnovaTest.as_dict`)."""
+        return [t.as_dict(self.alpha) for t in self.tests]
+
+    def report(self) -> str:
+        """Plain-text table of every test with F, p and the verdict."""
+        lines = [f"ANOVA of the average step size (alpha = {self.alpha:g})"]
+        if not self.tests:
+            lines.append("  no testable groups (a pose must be repeated; see the skipped list)")
+        for t in self.tests:
+            what = {
+                "day": f"days      joint {t.joint}{t.direction}",
+                "direction": f"+ vs -    joint {t.joint} day {t.day}",
+                "two-way": f"two-way   joint {t.joint} {t.term}",
+            }[t.test]
+            pose = PoseGroup(t.joint, t.pose, t.interval).describe()
+            lines.append(
+                f"  {what:<36} F({t.df_num},{t.df_den}) = {t.F:10.4g}  p = {t.p:.3g}  "
+                f"{t.verdict(self.alpha):<16} [{pose}]"
+            )
+        if self.skipped:
+            lines.append(f"skipped ({len(self.skipped)}):")
+            lines += [f"  {s}" for s in self.skipped]
+        return "\n".join(lines)
+
+
+def _two_way(g: PoseGroup, scale: float) -> list[tuple[str, float, float, int, int]]:
+    try:
+        import pandas as pd
+        import statsmodels.formula.api as smf
+        from statsmodels.stats.anova import anova_lm
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "the two-way ANOVA needs statsmodels and pandas: pip install 'stickslip[stats]'"
+        ) from None
+    df = pd.DataFrame(
+        {
+            "gamma": [t.gamma * scale for t in g.traverses],
+            "day": [str(t.day) for t in g.traverses],
+            "direction": ["pos" if t.direction == "+" else "neg" for t in g.traverses],
+        }
+    )
+    model = smf.ols("gamma ~ C(day) * C(direction)", data=df).fit()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        table = anova_lm(model, typ=2)
+    dfres = int(round(float(table.loc["Residual", "df"])))
+    names = {"C(day)": "day", "C(direction)": "direction", "C(day):C(direction)": "day:direction"}
+    out = []
+    for idx, term in names.items():
+        out.append(
+            (
+                term,
+                float(table.loc[idx, "F"]),
+                float(table.loc[idx, "PR(>F)"]),
+                int(round(float(table.loc[idx, "df"]))),
+                dfres,
+            )
+        )
+    return out
+
+
+def anova(
+    traverses: Sequence[Traverse],
+    alpha: float = ALPHA,
+    two_way: bool = True,
+    angle_tol: float = ANGLE_TOL,
+    length_tol: float = LENGTH_TOL,
+) -> AnovaResult:
+    """Day-to-day and direction ANOVA of the average step size, as the seed's Section 3.1.
+
+    Parameters
+    ----------
+    traverses : sequence of Traverse
+        A measurement table (any joints, days and poses).
+    alpha : float
+        Significance level for the verdicts, in (0, 1).
+    two_way : bool
+        Also compute the day x direction table with interaction (needs statsmodels).
+    angle_tol, length_tol : float
+        Pose-matching tolerances, rad and m (see the module docstring).
+
+    Returns
+    -------
+    AnovaResult
+        ``day`` tests, then ``direction`` tests, then ``two-way`` rows.
+    """
+    if not 0.0 < alpha < 1.0:
+        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
+    if not traverses:
+        raise ValueError("no traverses to analyse")
+    groups = group_poses(traverses, angle_tol, length_tol)
+    day_tests: list[AnovaTest] = []
+    dir_tests: list[AnovaTest] = []
+    tw_tests: list[AnovaTest] = []
+    skipped: list[str] = []
+    for g in sorted(groups, key=lambda g: g.joint):
+        _k, unit = _scale(g.joint)
+        where = f"joint {g.joint} [{g.describe()}]"
+        # across days, per direction
+        for d in ("+", "-"):
+            ts = [t for t in g.traverses if t.direction == d]
+            if not ts:
+                continue
+            days = sorted({t.day for t in ts})
+            if len(days) < 2:
+                skipped.append(f"days: {where} {d}: measured on one day only ({days[0]})")
+                continue
+            if len(ts) <= len(days):
+                skipped.append(f"days: {where} {d}: one traverse per day, no spread within days")
+                continue
+            samples = [np.array([t.gamma for t in ts if t.day == day]) for day in days]
+            F, p, dfb, dfw = one_way(samples)
+            day_tests.append(
+                AnovaTest(
+                    "day",
+                    g.joint,
+                    d,
+                    None,
+                    None,
+                    dict(g.pose),
+                    g.interval,
+                    F,
+                    p,
+                    dfb,
+                    dfw,
+                    len(ts),
+                    _groups_summary(days, samples, g.joint),
+                    unit,
+                )
+            )
+        # + against -, per day
+        for day in sorted({t.day for t in g.traverses}):
+            ts = [t for t in g.traverses if t.day == day]
+            plus = np.array([t.gamma for t in ts if t.direction == "+"])
+            minus = np.array([t.gamma for t in ts if t.direction == "-"])
+            if plus.size == 0 or minus.size == 0:
+                continue
+            if plus.size + minus.size < 3:
+                skipped.append(f"direction: {where} day {day}: one traverse each way, no spread")
+                continue
+            F, p, dfb, dfw = one_way([plus, minus])
+            dir_tests.append(
+                AnovaTest(
+                    "direction",
+                    g.joint,
+                    None,
+                    day,
+                    None,
+                    dict(g.pose),
+                    g.interval,
+                    F,
+                    p,
+                    dfb,
+                    dfw,
+                    int(plus.size + minus.size),
+                    _groups_summary(["+", "-"], [plus, minus], g.joint),
+                    unit,
+                )
+            )
+        # day x direction
+        if two_way:
+            days = sorted({t.day for t in g.traverses})
+            dirs = {t.direction for t in g.traverses}
+            if len(days) < 2 or len(dirs) < 2:
+                continue
+            cells = {(t.day, t.direction) for t in g.traverses}
+            if len(cells) < 2 * len(days):
+                skipped.append(f"two-way: {where}: not every day has both directions")
+                continue
+            if len(g.traverses) <= len(cells):
+                skipped.append(f"two-way: {where}: one traverse per day and direction, no residual")
+                continue
+            k, _ = _scale(g.joint)
+            for term, F, p, dfn, dfd in _two_way(g, k):
+                tw_tests.append(
+                    AnovaTest(
+                        "two-way",
+                        g.joint,
+                        None,
+                        None,
+                        term,
+                        dict(g.pose),
+                        g.interval,
+                        F,
+                        p,
+                        dfn,
+                        dfd,
+                        len(g.traverses),
+                        (),
+                        unit,
+                    )
+                )
+    return AnovaResult(day_tests + dir_tests + tw_tests, skipped, alpha)
+
+
+# ---------------------------------------------------------------- fit residuals
+
+
+@dataclass(frozen=True)
+class ResidualRow:
+    """Residuals of one joint and direction: measured minus predicted average step.
+
+    Attributes
+    ----------
+    joint : int
+    direction : str
+    n : int
+    rms_rel, max_rel : float
+        RMS and largest absolute relative residual, ``(measured - predicted) / measured``
+        (fraction; multiply by 100 for %).
+    rms_abs, max_abs : float
+        The same in SI (m or rad).
+    """
+
+    joint: int
+    direction: str
+    n: int
+    rms_rel: float
+    max_rel: float
+    rms_abs: float
+    max_abs: float
+
+    @property
+    def unit(self) -> str:
+        return _scale(self.joint)[1]
+
+    def as_dict(self) -> dict[str, Any]:
+        k, unit = _scale(self.joint)
+        return {
+            "joint": self.joint,
+            "direction": self.direction,
+            "n": self.n,
+            "rms_rel_percent": 100 * self.rms_rel,
+            "max_rel_percent": 100 * self.max_rel,
+            f"rms_{'nm' if self.joint == 3 else 'urad'}": self.rms_abs * k,
+            f"max_{'nm' if self.joint == 3 else 'urad'}": self.max_abs * k,
+            "rms_si": self.rms_abs,
+            "max_si": self.max_abs,
+        }
+
+
+@dataclass
+class ResidualSummary:
+    """Residuals of a calibration against a measurement table, per joint and direction."""
+
+    rows_: list[ResidualRow]
+
+    def rows(self) -> list[dict[str, Any]]:
+        return [r.as_dict() for r in self.rows_]
+
+    def report(self) -> str:
+        lines = [
+            "Residuals (measured - model average over each traverse)",
+            "  joint  n     RMS %    max %    RMS        max",
+        ]
+        for r in self.rows_:
+            k, unit = _scale(r.joint)
+            lines.append(
+                f"  {r.joint}{r.direction:<4} {r.n:<4} "
+                f"{100 * r.rms_rel:7.3f}  {100 * r.max_rel:7.3f}  "
+                f"{r.rms_abs * k:8.4g} {unit:<4} {r.max_abs * k:8.4g} {unit}"
+            )
+        return "\n".join(lines)
+
+
+def residual_summary(calibration: Calibration, traverses: Sequence[Traverse]) -> ResidualSummary:
+    """Residuals of ``calibration`` on ``traverses`` (only joints/directions it models).
+
+    The prediction for a traverse is the exact average step over its interval
+    (``calibration.predict``), so long rotary traverses are compared fairly.
+    """
+    out: list[ResidualRow] = []
+    keys = sorted({(t.joint, t.direction) for t in traverses}, key=lambda k: (k[0], k[1] != "+"))
+    for joint, d in keys:
+        ts = [t for t in traverses if t.joint == joint and t.direction == d]
+        try:
+            pred = np.array([float(calibration.predict(t)) for t in ts])
+        except (KeyError, ValueError, LookupError):
+            continue  # the calibration does not model this joint/direction
+        meas = np.array([t.gamma for t in ts])
+        res = meas - pred
+        rel = res / meas
+        out.append(
+            ResidualRow(
+                joint,
+                d,
+                len(ts),
+                float(np.sqrt(np.mean(rel**2))),
+                float(np.max(np.abs(rel))),
+                float(np.sqrt(np.mean(res**2))),
+                float(np.max(np.abs(res))),
+            )
+        )
+    return ResidualSummary(out)
