@@ -310,7 +310,7 @@ def measure_traverse(
                     "start stop "
                     f"(direction {direction_label(-sign)}); check the tuning and the microphone"
                 )
-            n = min(burst_steps, limit - predrive_steps)
+            n = min(max(1, burst_steps // 4), limit - predrive_steps)
             controller.step(joint, -sign * n)
             predrive_steps += n
             if listener.listen(clock()) is not None:

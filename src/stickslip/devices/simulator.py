@@ -526,9 +526,9 @@ class SimulatedMM3A:
                 out.append(b.t0 + b.k_stop / b.hz)
         return out
 
-    def microphone(self, block: int = 1024) -> VirtualMicrophone:
+    def microphone(self, block: int = 1024, silent: bool = False) -> VirtualMicrophone:
         """A virtual microphone starting now on the virtual clock (blocks of ``block`` samples)."""
-        return VirtualMicrophone(self, block)
+        return VirtualMicrophone(self, block, silent=silent)
 
     def labelled_recording(
         self, joint: int, direction: str | int = "+", before_s: float = 2.0, after_s: float = 1.0
@@ -570,15 +570,17 @@ class VirtualMicrophone:
 
     Use it as a callable (``mic()`` returns the list of blocks recorded since the last
     call: the traverse procedure's ``audio_blocks``) or iterate over it (finite:
-    the blocks available now).
+    the blocks available now). A ``silent`` microphone gives zeros without rendering
+    (for :class:`OracleStopDetector` runs).
     """
 
-    def __init__(self, sim: SimulatedMM3A, block: int = 1024):
+    def __init__(self, sim: SimulatedMM3A, block: int = 1024, silent: bool = False):
         if not 16 <= int(block) <= 1 << 20:
             raise ValueError(f"block = {block!r} samples is outside [16, 1048576]")
         self.sim = sim
         self.block = int(block)
         self.sample_rate = sim.sample_rate
+        self.silent = bool(silent)
         self._next = int(math.ceil(sim.clock_s * self.sample_rate - 1e-6))
 
     @property
@@ -587,6 +589,9 @@ class VirtualMicrophone:
         return self._next / self.sample_rate
 
     def _render(self, n: int) -> NDArray[np.float32]:
+        if self.silent:
+            self._next += n
+            return np.zeros(n, dtype=np.float32)
         scape = self.sim.soundscape
         t0 = self.t_s
         t1 = (self._next + n) / self.sample_rate

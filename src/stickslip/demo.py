@@ -1,0 +1,486 @@
+"""The whole story on the simulated MM3A: tune, measure, calibrate, compare, validate, save.
+
+:func:`run_demo` is what ``stickslip demo`` prints. On a fresh
+:class:`~stickslip.devices.simulator.SimulatedMM3A` it
+
+1. tunes the audio limit switch for each joint from a labelled recording made on
+   the simulator (stepping into a stop);
+2. runs the seed's 14 calibration traverses (6 of the prismatic joint at
+   ``(q2, theta, psi) = (-pi/2, 0, 0), (0, -pi/2, 0), (0, 0, 0)``, 8 of joint 2 over
+   its full range at ``(q3, theta, psi) = (0, 0, 0), (12 mm, 0, 0), (12 mm, -pi/2, 0),
+   (0, -pi/2, 0)``, each in ``+`` and ``-``), timed by ear with
+   :func:`stickslip.traverse.measure_traverse`;
+3. calibrates (:func:`stickslip.calibration.calibrate`) and sets every parameter
+   beside the simulator's truth;
+4. validates the model against traverses in other poses (model against the
+   constant-step comparator, :func:`stickslip.calibration.validate`);
+5. saves the measurements (CSV), the validation traverses (CSV), the calibration
+   and the tunings (JSON) and a summary (JSON) into a results folder.
+
+Storage hook: pass ``store`` (an object with ``add_traverse(traverse, device=, how=)``
+returning an id and ``add_calibration(calibration, device, traverse_ids)``, e.g.
+:class:`stickslip.storage.Store`) and every traverse and the calibration are kept
+there too; ``on_traverse(result)`` is called after every traverse.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from . import kinematics as kin
+from .calibration import Calibration, ValidationResult, calibrate, validate
+from .devices.simulator import OracleStopDetector, SimulatedMM3A
+from .measurements import write_measurements
+from .traverse import TraverseResult, measure_traverse
+
+__all__ = [
+    "CALIBRATION_PLAN",
+    "VALIDATION_PLAN",
+    "DemoResult",
+    "run_demo",
+]
+
+PI = math.pi
+
+# (joint, {pose keys}) in the order measured; each pose is traversed + then -.
+CALIBRATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
+    (3, {"q1": 0.0, "q2": -PI / 2, "theta": 0.0, "psi": 0.0}),
+    (3, {"q1": 0.0, "q2": 0.0, "theta": -PI / 2, "psi": 0.0}),
+    (3, {"q1": 0.0, "q2": 0.0, "theta": 0.0, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": 0.0, "theta": 0.0, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": kin.Q3_MAX, "theta": 0.0, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": kin.Q3_MAX, "theta": -PI / 2, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 2, "psi": 0.0}),
+)
+"""The seed's calibration poses (Eqs. 4-6 and Fig. 7): rad and m."""
+
+VALIDATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
+    (3, {"q1": 0.0, "q2": -PI / 4, "theta": 0.0, "psi": 0.0}),
+    (3, {"q1": 0.0, "q2": -3 * PI / 4, "theta": 0.0, "psi": 0.0}),
+    (3, {"q1": 0.0, "q2": -PI, "theta": -PI / 4, "psi": 0.0}),
+    (3, {"q1": 0.0, "q2": PI / 6, "theta": 0.0, "psi": PI / 6}),
+    (3, {"q1": 0.0, "q2": -PI / 3, "theta": -PI / 4, "psi": -PI / 6}),
+    (2, {"q1": 0.0, "q3": 0.006, "theta": 0.0, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 4, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": kin.Q3_MAX, "theta": -PI / 4, "psi": 0.0}),
+)
+"""A sweep of other poses the calibration has not seen (the paper validates joint 2 at
+theta = -pi/4); each traversed + then -."""
+
+
+@dataclass
+class DemoResult:
+    """Everything the demo did and found.
+
+    Attributes
+    ----------
+    seed, day : int, str
+        The simulator's seed and day label.
+    tunings : dict
+        ``{joint: Tuning}`` of the limit switch.
+    traverses, validation_traverses : list of TraverseResult
+        The 14 calibration traverses and the validation sweep.
+    calibration : Calibration
+    validation : ValidationResult or None
+    truth : list of dict
+        The simulator's true parameters (``SimulatedMM3A.true_parameters()``).
+    parameters : list of dict
+        Calibrated parameters beside the truth: ``joint, direction, name, q3, value,
+        stderr, true, error, rel_error, unit`` (SI).
+    elapsed_s : float
+        Wall time of the whole run, s.
+    device_s : float
+        Time on the simulator's virtual clock, s.
+    files : dict
+        What was saved where (``measurements``, ``validation``, ``calibration``, ...).
+    """
+
+    seed: int
+    day: str
+    tunings: dict[int, Any]
+    traverses: list[TraverseResult]
+    validation_traverses: list[TraverseResult]
+    calibration: Calibration
+    validation: ValidationResult | None
+    truth: list[dict[str, object]]
+    parameters: list[dict[str, object]]
+    elapsed_s: float
+    device_s: float
+    files: dict[str, str] = field(default_factory=dict)
+    steps_simulated: int = 0
+
+    def to_dict(self) -> dict[str, object]:
+        """The JSON summary (SI units; ``elapsed_s`` in wall-clock seconds)."""
+        return {
+            "seed": self.seed,
+            "day": self.day,
+            "elapsed_s": self.elapsed_s,
+            "device_s": self.device_s,
+            "steps_simulated": self.steps_simulated,
+            "method": self.calibration.method,
+            "parameters": self.parameters,
+            "traverses": [_traverse_record(r) for r in self.traverses],
+            "validation": {
+                "rows": self.validation.rows() if self.validation is not None else [],
+                "traverses": [_traverse_record(r) for r in self.validation_traverses],
+            },
+            "tunings": {str(j): _tuning_dict(t) for j, t in self.tunings.items()},
+            "files": dict(self.files),
+        }
+
+    def report(self) -> str:
+        """A plain-text summary (units labelled)."""
+        lines = [
+            f"stickslip demo: simulated MM3A, seed {self.seed}, day {self.day}",
+            f"{len(self.traverses)} calibration traverses, {len(self.validation_traverses)} "
+            f"validation traverses, {self.device_s:.0f} s on the device, "
+            f"{self.elapsed_s:.1f} s wall",
+            "",
+            "parameter         calibrated        true     error",
+        ]
+        for p in self.parameters:
+            scale, unit = _display(str(p["name"]), int(p["joint"]))  # type: ignore[arg-type]
+            lines.append(
+                f"{_param_label(p):<14} {p['value'] * scale:>11.4g} {p['true'] * scale:>11.4g} "  # type: ignore[operator]
+                f"{_error_text(p):>9}  {unit}"
+            )
+        if self.validation is not None:
+            lines += [
+                "",
+                "validation (relative error of the average step):",
+                self.validation.report(),
+            ]
+        if self.files:
+            lines += ["", "saved:"] + [f"  {k}: {v}" for k, v in self.files.items()]
+        return "\n".join(lines)
+
+
+def _display(name: str, joint: int) -> tuple[float, str]:
+    if name == "b":
+        return 1.0, ""
+    if joint == 3:
+        return 1e9, "nm"
+    return 1e6, "µrad"
+
+
+def _param_label(p: dict[str, object]) -> str:
+    where = f" (q3={float(p['q3']) * 1e3:g} mm)" if p.get("q3") is not None else ""  # type: ignore[arg-type]
+    return f"j{p['joint']} {p['name']}{p['direction']}{where}"
+
+
+def _error_text(p: dict[str, object]) -> str:
+    if p["name"] in ("b",):
+        return f"{p['error']:+.4f}"
+    return f"{p['rel_error']:+.2%}"
+
+
+def _traverse_record(r: TraverseResult) -> dict[str, object]:
+    rec = dict(r.traverse.as_row())
+    rec.update(
+        gamma=r.gamma,
+        commanded_steps=r.commanded_steps,
+        steps_after_stop=r.steps_after_stop,
+        latency_steps_corrected=r.latency_steps_corrected,
+        elapsed_device_s=r.elapsed_device_s,
+    )
+    return rec
+
+
+def _tuning_dict(tuning: Any) -> object:
+    to_dict = getattr(tuning, "to_dict", None)
+    return to_dict() if callable(to_dict) else repr(tuning)
+
+
+def compare_parameters(
+    calibrated: list[dict[str, object]], truth: list[dict[str, object]]
+) -> list[dict]:
+    """Calibrated parameter records beside the true ones (matched on joint, direction, name, q3)."""
+
+    def key(p: dict[str, object]) -> tuple:
+        q3 = p.get("q3")
+        return (
+            int(p["joint"]),
+            str(p["direction"]),
+            str(p["name"]),  # type: ignore[arg-type]
+            None if q3 is None else round(float(q3), 9),
+        )  # type: ignore[arg-type]
+
+    true_by_key = {key(p): p for p in truth}
+    out = []
+    for p in calibrated:
+        t = true_by_key.get(key(p))
+        if t is None:
+            continue
+        value, true = float(p["value"]), float(t["value"])  # type: ignore[arg-type]
+        out.append(
+            {
+                "joint": int(p["joint"]),  # type: ignore[arg-type]
+                "direction": str(p["direction"]),
+                "name": str(p["name"]),
+                "q3": p.get("q3"),
+                "value": value,
+                "stderr": p.get("stderr"),
+                "true": true,
+                "error": value - true,
+                "rel_error": (value - true) / abs(true) if true != 0.0 else math.inf,
+                "unit": str(p.get("unit", t.get("unit", ""))),
+            }
+        )
+    return out
+
+
+def _pose_for(sim: SimulatedMM3A, joint: int, pose: dict[str, float], start: float) -> kin.Pose:
+    sim.set_pose(**{**pose, f"q{joint}": start})
+    return sim.pose
+
+
+def run_demo(
+    seed: int = 0,
+    day: str | None = None,
+    out: str | Path | None = "stickslip-results",
+    *,
+    progress: bool | Callable[[str, int, int], None] = False,
+    on_traverse: Callable[[TraverseResult], None] | None = None,
+    store: Any = None,
+    validation: bool = True,
+    burst_steps: int = 2000,
+    step_noise: float = 0.03,
+    soundscape_kwargs: dict | None = None,
+    switch: str = "audio",
+) -> DemoResult:
+    """Run the whole calibration story on a simulated MM3A and return what happened.
+
+    Parameters
+    ----------
+    seed : int
+        Simulator seed (drift of the true parameters, step noise, room sound).
+    day : str, optional
+        Session label; the true parameters drift with it. Default: today's ISO date.
+    out : path or None
+        Results folder (created); ``None`` saves nothing.
+    progress : bool or callable
+        ``True`` shows rich progress bars on stderr; a callable gets
+        ``(stage, done, total)`` after every traverse.
+    on_traverse : callable, optional
+        Called with every :class:`~stickslip.traverse.TraverseResult` as it is measured.
+    store : Store-like, optional
+        Keeps every traverse and the calibration (see the module docstring).
+    validation : bool
+        Measure and evaluate the validation sweep (:data:`VALIDATION_PLAN`).
+    burst_steps : int
+        Steps per burst of the traverse procedure.
+    step_noise : float
+        Relative per-step noise of the simulator.
+    soundscape_kwargs : dict, optional
+        Room sound options for the simulator's microphone.
+    switch : {"audio", "oracle"}
+        The limit switch: the tuned audio detector on the virtual microphone
+        (default), or :class:`~stickslip.devices.simulator.OracleStopDetector`, which
+        knows the true stops (no sound rendered; for fast tests).
+    """
+    if switch not in ("audio", "oracle"):
+        raise ValueError(f"switch must be 'audio' or 'oracle', got {switch!r}")
+    t_wall = time.perf_counter()
+    day = day or _dt.date.today().isoformat()
+    url = f"sim://?seed={seed}&day={day}"
+    sim = SimulatedMM3A(
+        seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url
+    )
+    n_cal = 2 * len(CALIBRATION_PLAN)
+    n_val = 2 * len(VALIDATION_PLAN) if validation else 0
+
+    bar = _Bars(progress, n_cal + n_val)
+    try:
+        # 1. tune the limit switch per joint from a labelled recording on the simulator
+        tunings: dict[int, Any] = {}
+        detectors: dict[int, Any] = {}
+        if switch == "audio":
+            from .audio.detector import StopDetector
+            from .audio.tuning import tune
+
+            for joint in (1, 2, 3):
+                bar.stage(f"tuning the limit switch of joint {joint}")
+                samples, rate, stop_at = sim.labelled_recording(
+                    joint, "+", before_s=2.0, after_s=1.0
+                )
+                tunings[joint] = tune(samples, rate, stop_at, joint=joint)
+                detectors[joint] = StopDetector(tunings[joint], sim.clock_s)
+            mic = sim.microphone()
+        else:
+            detectors = {j: OracleStopDetector(sim, j, delay_s=0.03) for j in (1, 2, 3)}
+            mic = sim.microphone(silent=True)
+
+        def run(plan, stage: str) -> list[TraverseResult]:
+            results = []
+            for joint, pose in plan:
+                spec = kin.JOINTS[joint]
+                for direction in ("+", "-"):
+                    start = spec.lower if direction == "+" else spec.upper
+                    if (
+                        direction == "+"
+                    ):  # the experimenter sets the pose; the joint rests on a stop
+                        _pose_for(sim, joint, pose, start)
+                    bar.stage(f"{stage}: joint {joint} {direction}")
+                    r = measure_traverse(
+                        sim,
+                        joint,
+                        direction,
+                        detector=detectors[joint],
+                        audio_blocks=mic,
+                        pose=sim.pose,
+                        day=day,
+                        burst_steps=burst_steps,
+                        progress=bar.traverse_callback(),
+                    )
+                    results.append(r)
+                    bar.advance()
+                    if on_traverse is not None:
+                        on_traverse(r)
+            return results
+
+        traverses = run(CALIBRATION_PLAN, "calibration")
+        rows = [r.traverse for r in traverses]
+        cal = calibrate(rows, day=day, source=url)
+        truth = sim.true_parameters()
+        parameters = compare_parameters(cal.parameters(), truth)
+        val_results: list[TraverseResult] = []
+        val: ValidationResult | None = None
+        if validation:
+            val_results = run(VALIDATION_PLAN, "validation")
+            val = validate(cal, [r.traverse for r in val_results])
+    finally:
+        bar.close()
+
+    result = DemoResult(
+        seed=seed,
+        day=day,
+        tunings=tunings,
+        traverses=traverses,
+        validation_traverses=val_results,
+        calibration=cal,
+        validation=val,
+        truth=truth,
+        parameters=parameters,
+        elapsed_s=0.0,
+        device_s=sim.clock_s,
+        steps_simulated=sim.steps_simulated,
+    )
+    if store is not None:
+        ids = [store.add_traverse(t, device=url, how="simulated") for t in rows]
+        for r in val_results:
+            store.add_traverse(r.traverse, device=url, how="simulated")
+        store.add_calibration(cal, url, ids)
+        result.files["store"] = str(getattr(store, "path", "store"))
+    if out is not None:
+        result.files.update(save_results(result, out))
+    result.elapsed_s = time.perf_counter() - t_wall
+    if out is not None:
+        _write_summary(result, Path(out))
+    return result
+
+
+def save_results(result: DemoResult, out: str | Path) -> dict[str, str]:
+    """Save measurements (CSV), validation traverses (CSV), calibration and tunings (JSON)."""
+    folder = Path(out)
+    folder.mkdir(parents=True, exist_ok=True)
+    files: dict[str, str] = {}
+    path = folder / "measurements.csv"
+    write_measurements(path, [r.traverse for r in result.traverses])
+    files["measurements"] = str(path)
+    if result.validation_traverses:
+        path = folder / "validation.csv"
+        write_measurements(path, [r.traverse for r in result.validation_traverses])
+        files["validation"] = str(path)
+    path = folder / "calibration.json"
+    result.calibration.save(path)
+    files["calibration"] = str(path)
+    for joint, tuning in result.tunings.items():
+        path = folder / f"tuning-joint{joint}.json"
+        save = getattr(tuning, "save", None)
+        if callable(save):
+            save(path)
+        else:
+            path.write_text(json.dumps(_tuning_dict(tuning), indent=2) + "\n", encoding="utf-8")
+        files[f"tuning_joint{joint}"] = str(path)
+    files["summary"] = str(folder / "summary.json")
+    return files
+
+
+def _write_summary(result: DemoResult, folder: Path) -> None:
+    def clean(o: object) -> object:
+        if isinstance(o, float):
+            return o if math.isfinite(o) else None
+        if isinstance(o, dict):
+            return {str(k): clean(v) for k, v in o.items()}
+        if isinstance(o, (list, tuple)):
+            return [clean(v) for v in o]
+        return o
+
+    (folder / "summary.json").write_text(
+        json.dumps(clean(result.to_dict()), indent=2) + "\n", encoding="utf-8"
+    )
+
+
+class _Bars:
+    """Progress for the demo: an overall bar over traverses and one for the traverse in flight."""
+
+    def __init__(self, progress: bool | Callable[[str, int, int], None], total: int):
+        self.total = total
+        self.done = 0
+        self.callback = progress if callable(progress) else None
+        self._label = ""
+        self._bar = None
+        if progress is True:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+            )
+
+            self._bar = Progress(
+                TextColumn("{task.description:<40}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[info]}"),
+                TimeElapsedColumn(),
+                console=Console(stderr=True),
+                transient=True,
+            )
+            self._bar.start()
+            self._overall = self._bar.add_task("traverses", total=total, info="")
+            self._current = self._bar.add_task("", total=None, info="")
+
+    def stage(self, label: str) -> None:
+        self._label = label
+        if self._bar is not None:
+            self._bar.update(self._current, description=label, completed=0, info="")
+
+    def traverse_callback(self) -> Callable[[int, float], None]:
+        def update(steps: int, device_s: float) -> None:
+            if self._bar is not None:
+                self._bar.update(
+                    self._current, completed=steps, info=f"{device_s:5.1f} s on the device"
+                )
+
+        return update
+
+    def advance(self) -> None:
+        self.done += 1
+        if self._bar is not None:
+            self._bar.update(self._overall, completed=self.done)
+        if self.callback is not None:
+            self.callback(self._label, self.done, self.total)
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
