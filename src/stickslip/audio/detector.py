@@ -1,0 +1,427 @@
+"""Streaming end-stop detector: band power per frame, threshold, hysteresis, hold.
+
+Per frame of ``frame`` samples (every ``hop`` samples) the detector takes a
+Hann-windowed rfft and the power in the joint's band ``band_hz``, in dB relative to
+full scale (``10 log10`` of the mean square the band contributes, so white noise of
+variance s^2 spread over the whole spectrum sums to ``10 log10 s^2`` over all bands).
+
+A stop is declared when the band level stays at or above ``threshold_db`` for
+``hold_s`` (a knock or a burst of speech is shorter); it then stays latched until the
+level has been below ``threshold_db - hysteresis_db`` for ``release_s``, so one stop
+gives one event. There is no look-ahead beyond one frame.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "StopDetector",
+    "StopEvent",
+    "Tuning",
+    "TuningFileError",
+    "band_levels_db",
+    "detect",
+    "frame_levels_db",
+]
+
+_FLOOR = 1e-20
+_KIND = "stickslip.audio.Tuning"
+
+
+class TuningFileError(ValueError):
+    """A tuning file or dictionary that cannot be used (names the key and the reason)."""
+
+
+def default_frame(sample_rate: int) -> int:
+    """Frame length in samples: the power of two closest to 10.7 ms (512 at 48 kHz)."""
+    return int(2 ** round(math.log2(sample_rate * 512 / 48_000)))
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """How to hear one joint's end stop.
+
+    Parameters
+    ----------
+    band_hz : (float, float)
+        Lower and upper edge of the band whose power is watched, Hz.
+    threshold_db : float
+        Band level at or above which a frame counts as "stop", dBFS.
+    sample_rate : int
+        Sample rate the tuning was made for, Hz.
+    frame : int
+        Frame length, samples (Hann window, rfft).
+    hop : int
+        Hop between frames, samples.
+    hold_s : float
+        How long the level must stay above threshold before the event fires, s.
+    hysteresis_db : float
+        The level must fall this far below threshold to re-arm, dB.
+    release_s : float
+        ... for this long, s.
+    onset_lag_s : float
+        Time from the true onset of the stop to the interpolated threshold crossing, s
+        (measured by :func:`stickslip.audio.tuning.tune`); used for ``onset_s``.
+    joint : int or None
+        Joint the tuning belongs to (informational).
+    contrast_db, margin_db, stepping_db, stopped_db : float or None
+        What tuning saw: stopped-part low percentile minus stepping-part high percentile,
+        threshold minus stepping high percentile, and those two levels (dBFS).
+    latency_measured_s : float or None
+        detected_at - stop onset on the tuning recording, s.
+    """
+
+    band_hz: tuple[float, float]
+    threshold_db: float
+    sample_rate: int = 48_000
+    frame: int = 512
+    hop: int = 128
+    hold_s: float = 0.010
+    hysteresis_db: float = 6.0
+    release_s: float = 0.25
+    onset_lag_s: float = 0.003
+    joint: int | None = None
+    contrast_db: float | None = None
+    margin_db: float | None = None
+    stepping_db: float | None = None
+    stopped_db: float | None = None
+    latency_measured_s: float | None = None
+    extra: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        lo, hi = (float(v) for v in self.band_hz)
+        object.__setattr__(self, "band_hz", (lo, hi))
+        nyq = self.sample_rate / 2
+        if not 8_000 <= self.sample_rate <= 192_000:
+            raise ValueError(f"sample_rate {self.sample_rate} Hz is outside 8000-192000 Hz")
+        if not 0 <= lo < hi <= nyq:
+            raise ValueError(f"band_hz ({lo:g}, {hi:g}) must satisfy 0 <= low < high <= {nyq:g} Hz")
+        if not (self.frame >= 32 and self.frame & (self.frame - 1) == 0):
+            raise ValueError(f"frame {self.frame} must be a power of two >= 32 samples")
+        if not 1 <= self.hop <= self.frame:
+            raise ValueError(f"hop {self.hop} must be between 1 and frame ({self.frame}) samples")
+        if hi - lo < 2 * self.sample_rate / self.frame:
+            raise ValueError(
+                f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
+                f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
+            )
+        if not math.isfinite(self.threshold_db) or not -200 <= self.threshold_db <= 50:
+            raise ValueError(f"threshold_db {self.threshold_db} must be within -200..50 dBFS")
+        for name, lo_, hi_ in (
+            ("hold_s", 0, 1),
+            ("release_s", 0, 10),
+            ("hysteresis_db", 0, 60),
+            ("onset_lag_s", -1, 1),
+        ):
+            v = getattr(self, name)
+            if not lo_ <= v <= hi_:
+                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+
+    # ------------------------------------------------------------- derived
+    @property
+    def hold_frames(self) -> int:
+        """Consecutive above-threshold frames needed to fire (>= 1)."""
+        return max(1, int(math.ceil(self.hold_s * self.sample_rate / self.hop - 1e-9)))
+
+    @property
+    def latency_s(self) -> float:
+        """Typical detected_at - true onset, s (measured when tuned, else estimated)."""
+        if self.latency_measured_s is not None:
+            return float(self.latency_measured_s)
+        return self.onset_lag_s + self.hold_frames * self.hop / self.sample_rate
+
+    def for_sample_rate(self, sample_rate: int) -> Tuning:
+        """The same tuning for another sample rate (same durations; band must fit)."""
+        if sample_rate == self.sample_rate:
+            return self
+        frame = default_frame(sample_rate) * self.frame // default_frame(self.sample_rate)
+        hop = max(1, frame * self.hop // self.frame)
+        return replace(self, sample_rate=int(sample_rate), frame=int(frame), hop=int(hop))
+
+    # ------------------------------------------------------------- files
+    def to_dict(self) -> dict:
+        """JSON-ready dict; units are in the key names (frame and hop are samples)."""
+        d = asdict(self)
+        d.pop("extra")
+        d["band_hz"] = list(self.band_hz)
+        d["latency_s"] = self.latency_s
+        return {"kind": _KIND, "version": 1, **d, **({"extra": self.extra} if self.extra else {})}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Tuning:
+        """Inverse of :meth:`to_dict`; raises :class:`TuningFileError` naming the problem."""
+        if not isinstance(d, dict):
+            raise TuningFileError("a tuning must be a JSON object")
+        if d.get("kind", _KIND) != _KIND:
+            raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
+        for key in ("band_hz", "threshold_db"):
+            if key not in d:
+                raise TuningFileError(f"tuning lacks {key!r}")
+        known = {f for f in cls.__dataclass_fields__}
+        kwargs = {k: v for k, v in d.items() if k in known}
+        try:
+            band = kwargs["band_hz"]
+            if not (isinstance(band, (list, tuple)) and len(band) == 2):
+                raise TuningFileError("band_hz must be [low_Hz, high_Hz]")
+            kwargs["band_hz"] = (float(band[0]), float(band[1]))
+            for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s"):
+                if k in kwargs:
+                    kwargs[k] = float(kwargs[k])
+            for k in ("sample_rate", "frame", "hop"):
+                if k in kwargs:
+                    v = kwargs[k]
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
+                        raise TuningFileError(f"{k} must be an integer, got {v!r}")
+                    kwargs[k] = int(v)
+            return cls(**kwargs)
+        except TuningFileError:
+            raise
+        except (TypeError, ValueError) as e:
+            raise TuningFileError(f"bad tuning: {e}") from None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the tuning as JSON; returns the path."""
+        p = Path(path)
+        p.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path) -> Tuning:
+        """Read a tuning written by :meth:`save` (raises TuningFileError / OSError)."""
+        p = Path(path)
+        text = p.read_text(encoding="utf-8")
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise TuningFileError(f"{p}: not JSON ({e.msg} at line {e.lineno})") from None
+        try:
+            return cls.from_dict(d)
+        except TuningFileError as e:
+            raise TuningFileError(f"{p}: {e}") from None
+
+    def report(self) -> str:
+        """A few human lines: band, threshold, contrast and margin."""
+        lines = [
+            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, "
+            f"threshold {self.threshold_db:.1f} dBFS",
+            f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
+            f"hop {self.hop} ({1e3 * self.hop / self.sample_rate:.2f} ms), "
+            f"hold {1e3 * self.hold_s:.1f} ms, hysteresis {self.hysteresis_db:.1f} dB",
+        ]
+        if self.contrast_db is not None:
+            lines.append(
+                f"stepping <= {self.stepping_db:.1f} dBFS, stopped >= {self.stopped_db:.1f} dBFS: "
+                f"contrast {self.contrast_db:.1f} dB, margin {self.margin_db:.1f} dB"
+            )
+        lines.append(f"latency {1e3 * self.latency_s:.1f} ms")
+        return "\n".join(lines)
+
+
+@dataclass(frozen=True)
+class StopEvent:
+    """One end stop heard.
+
+    Attributes
+    ----------
+    detected_at_s : float
+        Stream time of the last sample consumed when the event fired, s.
+    onset_s : float
+        Estimated time the stop actually began, s.
+    level_db : float
+        Band level of the frame that fired, dBFS.
+    """
+
+    detected_at_s: float
+    onset_s: float
+    level_db: float
+
+    def to_dict(self) -> dict:
+        return {
+            "detected_at_s": self.detected_at_s,
+            "onset_s": self.onset_s,
+            "level_db": self.level_db,
+        }
+
+
+def _band_bins(tuning_or_band, sample_rate: int, frame: int) -> tuple[int, int]:
+    lo, hi = tuning_or_band
+    freqs = np.fft.rfftfreq(frame, 1 / sample_rate)
+    i0 = int(np.searchsorted(freqs, lo, side="left"))
+    i1 = int(np.searchsorted(freqs, hi, side="right"))
+    return i0, max(i1, i0 + 1)
+
+
+def _window(frame: int) -> tuple[np.ndarray, float]:
+    w = np.hanning(frame + 1)[:-1]  # periodic Hann
+    scale = 2.0 / (frame * float(np.sum(w**2)))
+    return w, scale
+
+
+def frame_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray:
+    """Per-frame one-sided power spectra (frames x bins), scaled so bins sum to mean square.
+
+    Frame ``i`` covers samples ``[i*hop, i*hop + frame)``.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    if x.size < frame:
+        return np.zeros((0, frame // 2 + 1))
+    frames = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
+    w, scale = _window(frame)
+    spec = np.fft.rfft(frames * w, axis=1)
+    p = (spec.real**2 + spec.imag**2) * scale
+    p[:, 0] *= 0.5
+    if frame % 2 == 0:
+        p[:, -1] *= 0.5
+    return p
+
+
+def frame_levels_db(samples: np.ndarray, tuning: Tuning) -> np.ndarray:
+    """Band level of every frame of ``samples`` (frame i ends at sample i*hop+frame-1), dBFS."""
+    return band_levels_db(samples, tuning.sample_rate, tuning.frame, tuning.hop, tuning.band_hz)
+
+
+def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz) -> np.ndarray:
+    """Band level per frame, dBFS (see :func:`frame_power_spectra`)."""
+    p = frame_power_spectra(samples, frame, hop)
+    i0, i1 = _band_bins(band_hz, sample_rate, frame)
+    return 10 * np.log10(p[:, i0:i1].sum(axis=1) + _FLOOR)
+
+
+class StopDetector:
+    """Streaming end-stop detector: ``feed`` blocks of samples, get :class:`StopEvent` s.
+
+    Parameters
+    ----------
+    tuning : Tuning
+        Band, threshold and timing (its ``sample_rate`` must be the stream's).
+    t0_s : float
+        Stream time of the first sample fed, s.
+
+    Examples
+    --------
+    >>> det = StopDetector(Tuning(band_hz=(5600, 7100), threshold_db=-50))
+    >>> det.feed(np.zeros(4800, dtype=np.float32))
+    []
+    """
+
+    def __init__(self, tuning: Tuning, t0_s: float = 0.0) -> None:
+        self.tuning = tuning
+        self._w, self._scale = _window(tuning.frame)
+        self._i0, self._i1 = _band_bins(tuning.band_hz, tuning.sample_rate, tuning.frame)
+        self._hold = tuning.hold_frames
+        self._release = max(1, int(math.ceil(tuning.release_s * tuning.sample_rate / tuning.hop)))
+        self.reset(t0_s)
+
+    def reset(self, t0_s: float = 0.0) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s``."""
+        self._t0 = float(t0_s)
+        self._buf = np.zeros(0, dtype=np.float64)
+        self._buf_start = 0  # absolute sample index of _buf[0]
+        self._next = 0  # absolute sample index where the next frame starts
+        self._count = 0
+        self._latched = False
+        self._below = 0
+        self._prev_db = -np.inf
+        self._cross_t = math.nan
+        self.levels_seen = 0
+
+    @property
+    def latency_s(self) -> float:
+        """Typical detected_at - true onset, s (for a traverse's latency correction)."""
+        return self.tuning.latency_s
+
+    @property
+    def latched(self) -> bool:
+        """True while a stop is being heard (after it fired, until released)."""
+        return self._latched
+
+    def feed(self, block: np.ndarray) -> list[StopEvent]:
+        """Consume a block of mono samples; return the stops that fired in it."""
+        x = np.asarray(block, dtype=np.float64)
+        if x.ndim != 1:
+            raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        tu = self.tuning
+        F, H = tu.frame, tu.hop
+        self._buf = np.concatenate((self._buf, x)) if self._buf.size else x.copy()
+        avail_end = self._buf_start + self._buf.size
+        n_frames = (avail_end - F - self._next) // H + 1 if avail_end - self._next >= F else 0
+        events: list[StopEvent] = []
+        if n_frames > 0:
+            off = self._next - self._buf_start
+            view = np.lib.stride_tricks.sliding_window_view(self._buf[off:], F)[::H][:n_frames]
+            spec = np.fft.rfft(view * self._w, axis=1)[:, self._i0 : self._i1]
+            power = (spec.real**2 + spec.imag**2).sum(axis=1) * self._scale
+            levels = 10 * np.log10(power + _FLOOR)
+            ends = self._next + np.arange(n_frames) * H + F - 1
+            events = self._run(levels, ends)
+            self._next += n_frames * H
+            self.levels_seen += n_frames
+        drop = self._next - self._buf_start
+        if drop > 0:
+            self._buf = self._buf[drop:]
+            self._buf_start += drop
+        return events
+
+    def _run(self, levels: np.ndarray, ends: np.ndarray) -> list[StopEvent]:
+        tu = self.tuning
+        thr, rel = tu.threshold_db, tu.threshold_db - tu.hysteresis_db
+        sr, H = tu.sample_rate, tu.hop
+        events = []
+        prev = self._prev_db
+        for lev, end in zip(levels.tolist(), ends.tolist(), strict=True):
+            if self._latched:
+                if lev < rel:
+                    self._below += 1
+                    if self._below >= self._release:
+                        self._latched = False
+                        self._count = 0
+                else:
+                    self._below = 0
+            else:
+                if lev >= thr:
+                    if self._count == 0:
+                        # interpolate the crossing between the previous frame and this one
+                        t_end = self._t0 + end / sr
+                        if math.isfinite(prev) and prev < thr and lev > prev:
+                            frac = (thr - prev) / (lev - prev)
+                            self._cross_t = float(t_end - (1 - frac) * H / sr)
+                        else:
+                            self._cross_t = t_end
+                    self._count += 1
+                    if self._count >= self._hold:
+                        self._latched = True
+                        self._below = 0
+                        events.append(
+                            StopEvent(
+                                detected_at_s=self._t0 + end / sr,
+                                onset_s=self._cross_t - tu.onset_lag_s,
+                                level_db=float(lev),
+                            )
+                        )
+                else:
+                    self._count = 0  # debounce: the hold must be unbroken
+            prev = lev
+        self._prev_db = prev
+        return events
+
+
+def detect(
+    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 4096
+) -> list[StopEvent]:
+    """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks)."""
+    det = StopDetector(tuning, t0_s)
+    events: list[StopEvent] = []
+    if isinstance(samples, np.ndarray):
+        for i in range(0, samples.size, block):
+            events += det.feed(samples[i : i + block])
+    else:
+        for b in samples:
+            events += det.feed(b)
+    return events
