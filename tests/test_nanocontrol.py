@@ -27,7 +27,7 @@ def test_open_asks_version_and_reports_it():
     t, dev = nc([])
     with t:
         assert dev.version == "NanoControl 3.1"
-        assert dev.info.model == "Kleindiek NanoControl NanoControl 3.1"
+        assert dev.info.model == "Kleindiek NanoControl (NanoControl 3.1)"
         assert dev.info.joints == (1, 2, 3)
 
 

@@ -342,7 +342,7 @@ class NanoControl:
         """Model, URL, joints, channel map and firmware version."""
         return DeviceInfo(
             url=self.url,
-            model=f"Kleindiek NanoControl{' ' + self.version if self.version else ''}",
+            model=f"Kleindiek NanoControl{f' ({self.version})' if self.version else ''}",
             joints=tuple(sorted(self.channels)),
             extra={
                 "channels": dict(self.channels),

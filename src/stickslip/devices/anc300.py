@@ -1,0 +1,387 @@
+"""Attocube ANC300 backend: pymeasure's driver (extra ``anc300``) behind our Controller.
+
+URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`)::
+
+    anc300://192.168.1.2                 the telnet console, port 7230
+    anc300://192.168.1.2:7230?password=123456&axes=1,2,3&timeout=2
+    anc300:///dev/ttyUSB0                the USB/serial console, 38400 baud 8N1
+
+Query options: ``password`` (console password, default ``123456``, the factory
+default), ``axes`` (the ANC300 axis numbers of joints 1, 2, 3, default ``1,2,3``),
+``timeout`` (s beyond a burst's own duration, default 2), ``delay`` (s between a
+command and reading its answer, pymeasure's ``query_delay``, default 0.05),
+``baud`` (serial only, default 38400).
+
+The protocol is pymeasure's :class:`pymeasure.instruments.attocube.ANC300Controller`
+(password prompt, ``echo off``, answers ending in ``OK`` or ``ERROR``); this module
+only carries its bytes over our transports (:class:`TransportAdapter`) and wraps it:
+
+* a step of ``n`` sends ``stepu AXIS n`` or ``stepd AXIS |n|`` with ``n`` never 0
+  (``stepu AXIS 0`` or ``c`` would start a continuous move), after setting mode
+  ``stp`` once, then waits with ``stepw AXIS`` until the burst is done;
+* ``setf`` takes integer Hz in 1..10000 and ``setv`` volts in 0..150 (validated here
+  first, naming the range; nothing is clipped);
+* ``stop AXIS`` stops; closing stops every axis and grounds it (mode ``gnd``).
+
+Assumption: the serial console speaks the same console as telnet, password prompt
+included. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import contextmanager
+from typing import TypeVar
+from urllib.parse import parse_qs, unquote, urlsplit
+
+from .base import DeviceError, DeviceInfo
+from .transport import SerialTransport, SocketTransport, Transport
+
+__all__ = ["ANC300", "TransportAdapter", "open_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
+
+log = logging.getLogger("stickslip.devices.anc300")
+
+FREQUENCY_RANGE = (1, 10000)
+"""Allowed stepping frequencies (``setf``), integer Hz, inclusive."""
+VOLTAGE_RANGE = (0.0, 150.0)
+"""Allowed step amplitudes (``setv``), V, inclusive."""
+DEFAULT_PORT = 7230
+DEFAULT_PASSWORD = "123456"
+
+T = TypeVar("T")
+
+
+def _pymeasure():
+    try:
+        from pymeasure.adapters import Adapter  # noqa: PLC0415
+        from pymeasure.instruments.attocube import ANC300Controller  # noqa: PLC0415
+    except ImportError as e:
+        raise DeviceError(
+            f"the ANC300 backend needs pymeasure: pip install 'stickslip[anc300]' ({e})"
+        ) from e
+    return Adapter, ANC300Controller
+
+
+def TransportAdapter(transport: Transport, timeout: float | None = None):  # noqa: N802
+    """A pymeasure ``Adapter`` that talks through one of our transports (CRLF lines).
+
+    Lines with bytes other than printable ASCII, tab, CR or LF are garbage and raise
+    :class:`DeviceError`; so does a line that does not arrive within the timeout.
+    """
+    Adapter, _ = _pymeasure()
+
+    class _TransportAdapter(Adapter):
+        def __init__(self) -> None:
+            super().__init__(log=log)
+            self.transport = transport
+            self.connection = transport
+            self.read_timeout = timeout
+
+        def _write(self, command: str, **kwargs) -> None:
+            self.transport.write((command + "\r\n").encode("ascii"))
+
+        def _write_bytes(self, content: bytes, **kwargs) -> None:
+            self.transport.write(content)
+
+        def _read(self, **kwargs) -> str:
+            raw = self.transport.read_until(b"\r\n", timeout=self.read_timeout)
+            line = raw[:-2]
+            try:
+                text = line.decode("ascii")
+            except UnicodeDecodeError:
+                text = None
+            if text is None or any(not (c.isprintable() or c in "\t\r\n") for c in text):
+                raise DeviceError(f"ANC300 on {self.transport.name}: garbage reply {line!r}")
+            return text
+
+        def _read_bytes(self, count: int, break_on_termchar: bool, **kwargs) -> bytes:
+            if count < 0:
+                return self.transport.read_available()
+            data = b""
+            while len(data) < count:
+                data += self.transport.read_until(b"", timeout=self.read_timeout)[:count]
+            return data
+
+        def flush_read_buffer(self) -> None:
+            dropped = self.transport.read_available(quiet=0.05)
+            if dropped:
+                log.debug("flushed %r", dropped)
+
+        def __repr__(self) -> str:
+            return f"<TransportAdapter {self.transport.name}>"
+
+    return _TransportAdapter()
+
+
+class ANC300:
+    """An Attocube ANC300 as a :class:`~stickslip.devices.base.Controller`, via pymeasure.
+
+    Parameters
+    ----------
+    transport : Transport
+        An open byte transport to the console (TCP port 7230, or the serial port).
+    password : str
+        Console password (asked on telnet connections).
+    axes : mapping of int to int
+        ANC300 axis number (1..7) of each joint; default joints 1, 2, 3 -> axes 1, 2, 3.
+    timeout : float
+        Time to wait for an answer beyond a burst's own duration, s.
+    query_delay : float
+        Delay between a command and reading its answer, s (pymeasure's ``query_delay``).
+    url : str
+        The URL it was opened with.
+
+    Raises
+    ------
+    DeviceError
+        If pymeasure is missing, the password is refused or the console does not answer.
+    """
+
+    def __init__(
+        self,
+        transport: Transport,
+        *,
+        password: str = DEFAULT_PASSWORD,
+        axes: Mapping[int, int] | None = None,
+        timeout: float = 2.0,
+        query_delay: float = 0.05,
+        url: str = "anc300://",
+    ) -> None:
+        _, ANC300Controller = _pymeasure()
+        self.axes = _check_axes(axes or {1: 1, 2: 2, 3: 3})
+        if not timeout > 0:
+            raise ValueError(f"timeout must be > 0 s, got {timeout!r}")
+        if not query_delay >= 0:
+            raise ValueError(f"query_delay must be >= 0 s, got {query_delay!r}")
+        self.timeout = float(timeout)
+        self.transport = transport
+        self.url = url
+        self.adapter = TransportAdapter(transport, timeout=self.timeout)
+        names = [f"axis{i}" for i in range(1, max(self.axes.values()) + 1)]
+        try:
+            self._ctrl = ANC300Controller(
+                self.adapter, axisnames=names, passwd=password, query_delay=query_delay
+            )
+        except DeviceError:
+            raise
+        except Exception as e:  # pymeasure raises a bare Exception on a wrong password
+            raise DeviceError(f"ANC300 on {transport.name}: {e}") from None
+        self._mode: dict[int, str | None] = dict.fromkeys(self.axes)
+        self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
+        self._volt: dict[int, float | None] = dict.fromkeys(self.axes)
+        self.version = self._device(lambda: str(self._ctrl.version), "ver")
+
+    # -- helpers --------------------------------------------------------------------------
+    def _axis(self, joint: int):
+        try:
+            number = self.axes[int(joint)]
+        except (KeyError, ValueError, TypeError):
+            raise ValueError(f"joint must be one of {sorted(self.axes)}, got {joint!r}") from None
+        return getattr(self._ctrl, f"axis{number}")
+
+    def _device(self, call: Callable[[], T], what: str) -> T:
+        """Run a pymeasure call; the device's ``ERROR`` answers become :class:`DeviceError`."""
+        try:
+            return call()
+        except DeviceError as e:
+            raise DeviceError(f"ANC300 on {self.transport.name}, {what!r}: {e}") from None
+        except ValueError as e:  # pymeasure: "Error after previous command with message ..."
+            raise DeviceError(f"ANC300 on {self.transport.name} refused {what!r}: {e}") from None
+
+    @contextmanager
+    def _read_timeout(self, seconds: float):
+        old = self.adapter.read_timeout
+        self.adapter.read_timeout = seconds
+        try:
+            yield
+        finally:
+            self.adapter.read_timeout = old
+
+    # -- settings -------------------------------------------------------------------------
+    def set_frequency(self, joint: int, hz: float) -> None:
+        """Set the stepping frequency of ``joint`` (``setf``): integer Hz in 1..10000."""
+        ax = self._axis(joint)
+        lo, hi = FREQUENCY_RANGE
+        try:
+            value = float(hz)
+        except (TypeError, ValueError):
+            raise ValueError(f"frequency must be a number in Hz, got {hz!r}") from None
+        if not (math.isfinite(value) and value.is_integer() and lo <= value <= hi):
+            raise ValueError(f"frequency must be an integer number of Hz in {lo}..{hi}, got {hz!r}")
+        self._device(lambda: setattr(ax, "frequency", int(value)), f"setf {ax.id} {int(value)}")
+        self._hz[int(joint)] = value
+
+    def frequency(self, joint: int) -> float:
+        """The stepping frequency of ``joint``, Hz (``getf``, cached after the first read)."""
+        ax = self._axis(joint)
+        if self._hz[int(joint)] is None:
+            self._hz[int(joint)] = float(self._device(lambda: ax.frequency, f"getf {ax.id}"))
+        return float(self._hz[int(joint)])  # type: ignore[arg-type]
+
+    def set_voltage(self, joint: int, volts: float) -> None:
+        """Set the step amplitude of ``joint`` (``setv``), V, in 0..150."""
+        ax = self._axis(joint)
+        lo, hi = VOLTAGE_RANGE
+        try:
+            value = float(volts)
+        except (TypeError, ValueError):
+            raise ValueError(f"voltage must be a number in V, got {volts!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise ValueError(f"voltage must be in {lo:g}..{hi:g} V, got {volts!r}")
+        self._device(lambda: setattr(ax, "voltage", value), f"setv {ax.id} {value:g}")
+        self._volt[int(joint)] = value
+
+    def voltage(self, joint: int) -> float:
+        """The step amplitude of ``joint``, V (``getv``)."""
+        ax = self._axis(joint)
+        return float(self._device(lambda: ax.voltage, f"getv {ax.id}"))
+
+    # -- motion ---------------------------------------------------------------------------
+    def step(self, joint: int, n: int) -> None:
+        """Make ``n`` signed steps on ``joint`` and return when they are done (``stepw``).
+
+        ``n = 0`` sends nothing (the ANC300 would read 0 as "move until stopped").
+        On an error or no answer the axis is stopped (best effort) and
+        :class:`DeviceError` raised.
+        """
+        ax = self._axis(joint)
+        if isinstance(n, bool) or not isinstance(n, int):
+            if isinstance(n, float) and n.is_integer():
+                n = int(n)
+            else:
+                raise ValueError(f"step count must be an integer, got {n!r}")
+        n = int(n)
+        if n == 0:
+            return
+        try:
+            if self._mode[int(joint)] != "stp":
+                self._device(lambda: setattr(ax, "mode", "stp"), f"setm {ax.id} stp")
+                self._mode[int(joint)] = "stp"
+            hz = self.frequency(joint)
+            cmd = f"stepu {ax.id} {n}" if n > 0 else f"stepd {ax.id} {-n}"
+            assert n != 0  # never "stepu X 0": that is a continuous move
+            self._device(lambda: ax.move_raw(n), cmd)
+            with self._read_timeout(self.timeout + 1.5 * abs(n) / hz):
+                self._device(lambda: ax.ask("stepw"), f"stepw {ax.id}")
+        except DeviceError:
+            self.stop(joint)
+            raise
+
+    def stop(self, joint: int | None = None) -> None:
+        """Stop ``joint`` (or every joint) now (``stop AXIS``). Never raises."""
+        joints = sorted(self.axes) if joint is None else [int(joint)]
+        for j in joints:
+            ax = self._axis(j)
+            try:
+                with self._read_timeout(min(self.timeout, 0.5)):
+                    ax.stop()
+            except Exception as e:  # noqa: BLE001 - best effort, the caller has a real error
+                log.warning("could not stop axis %s on %s: %s", ax.id, self.transport.name, e)
+                try:
+                    self.adapter.flush_read_buffer()
+                except Exception:  # noqa: BLE001
+                    pass
+
+    # -- protocol -------------------------------------------------------------------------
+    @property
+    def info(self) -> DeviceInfo:
+        """Model, URL, joints, axis map and version."""
+        return DeviceInfo(
+            url=self.url,
+            model=f"Attocube ANC300 ({self.version})" if self.version else "Attocube ANC300",
+            joints=tuple(sorted(self.axes)),
+            extra={"axes": dict(self.axes), "version": self.version, "port": self.transport.name},
+        )
+
+    def settings(self) -> dict[str, object]:
+        """Axis map, frequencies (Hz) and voltages (V) as last set or read (None = unknown)."""
+        return {
+            "axes": {str(j): a for j, a in self.axes.items()},
+            "frequency_hz": {str(j): f for j, f in self._hz.items()},
+            "voltage_v": {str(j): v for j, v in self._volt.items()},
+            "timeout_s": self.timeout,
+            "port": self.transport.name,
+        }
+
+    def close(self) -> None:
+        """Stop every axis, ground it (mode ``gnd``), and release the transport."""
+        if self.transport.closed:
+            return
+        try:
+            self.stop()
+            for j in sorted(self.axes):
+                ax = self._axis(j)
+                try:
+                    with self._read_timeout(min(self.timeout, 0.5)):
+                        ax.mode = "gnd"
+                except Exception as e:  # noqa: BLE001
+                    log.warning("could not ground axis %s: %s", ax.id, e)
+        finally:
+            self.transport.close()
+
+    def __enter__(self) -> ANC300:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _check_axes(axes: Mapping[int, int]) -> dict[int, int]:
+    out = {}
+    for j, a in axes.items():
+        a = int(a)
+        if not 1 <= a <= 7:
+            raise ValueError(f"ANC300 axis of joint {j} must be in 1..7, got {a}")
+        out[int(j)] = a
+    if len(set(out.values())) != len(out):
+        raise ValueError(f"two joints share an axis: {out}")
+    return out
+
+
+def _parse_axes(text: str) -> dict[int, int]:
+    try:
+        numbers: Sequence[int] = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise ValueError(
+            f"axes must be comma-separated axis numbers, e.g. 1,2,3; got {text!r}"
+        ) from None
+    return _check_axes({i + 1: a for i, a in enumerate(numbers)})
+
+
+def open_url(url: str) -> ANC300:
+    """Open ``anc300://host[:7230][?options]`` or ``anc300:///dev/ttyUSB0[?options]``.
+
+    See the module docstring for the options. Raises :class:`DeviceError` if the
+    console cannot be reached or refuses the password, ``ValueError`` for a bad URL.
+    """
+    parts = urlsplit(url)
+    opts = {k: v[-1] for k, v in parse_qs(parts.query).items()}
+    known = {"password", "axes", "timeout", "delay", "baud"}
+    unknown = sorted(set(opts) - known)
+    if unknown:
+        raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
+    try:
+        timeout = float(opts.get("timeout", 2.0))
+        delay = float(opts.get("delay", 0.05))
+        baud = int(opts.get("baud", 38400))
+    except ValueError as e:
+        raise ValueError(f"bad option in {url!r}: {e}") from None
+    axes = _parse_axes(opts.get("axes", "1,2,3"))
+    password = unquote(opts.get("password", DEFAULT_PASSWORD))
+    if parts.hostname:
+        transport: Transport = SocketTransport(parts.hostname, parts.port or DEFAULT_PORT, timeout)
+    elif parts.path:
+        transport = SerialTransport(parts.path, baudrate=baud, timeout=timeout)
+    else:
+        raise ValueError(
+            f"{url!r}: give a host (anc300://192.168.1.2) or a port (anc300:///dev/ttyUSB0)"
+        )
+    try:
+        return ANC300(
+            transport, password=password, axes=axes, timeout=timeout, query_delay=delay, url=url
+        )
+    except Exception:
+        transport.close()
+        raise
