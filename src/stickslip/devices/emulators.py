@@ -65,6 +65,7 @@ class _Emulator:
         self.received: list[str] = []
         self.fault: str | None = None
         self._fault_after: int | None = None
+        self._fault_now = False
         self.step_commands = 0
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -122,9 +123,9 @@ class _Emulator:
 
     # -- faults ---------------------------------------------------------------------------
     def inject(self, fault: str | None, after: int = 0) -> None:
-        """Misbehave from now (or after ``after`` more step commands): silent, garbage, error.
+        """Misbehave from now on (``after=0``) or from the ``after + 1``-th step command on.
 
-        ``None`` heals the device.
+        ``fault`` is ``"silent"``, ``"garbage"`` or ``"error"``; ``None`` heals the device.
         """
         if fault is not None and fault not in FAULTS:
             raise ValueError(f"fault must be one of {FAULTS} or None, got {fault!r}")
@@ -133,16 +134,19 @@ class _Emulator:
         with self._lock:
             self.fault = fault
             self._fault_after = self.step_commands + after if fault else None
+            self._fault_now = fault is not None and after == 0
 
     def _fault_for(self, is_step: bool) -> str | None:
         """The fault that applies to the command just received (counting step commands)."""
         with self._lock:
-            before = self.step_commands
             if is_step:
                 self.step_commands += 1
             if self.fault is None or self._fault_after is None:
                 return None
-            return self.fault if before >= self._fault_after else None
+            if self._fault_now or self.step_commands > self._fault_after:
+                self._fault_now = True
+                return self.fault
+            return None
 
     # -- serving --------------------------------------------------------------------------
     def _serve(self) -> None:

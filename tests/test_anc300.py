@@ -1,0 +1,196 @@
+"""ANC300 backend: pymeasure's driver over our transports, against exact transcripts and
+the loopback-TCP emulator.
+
+Transcript lines follow pymeasure's own ANC300 tests (tests/instruments/attocube/
+test_anc300.py in pymeasure): password echoed as stars, "Authorization success",
+"echo off" echoed once, every answer ending in OK or ERROR.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+pytest.importorskip("pymeasure")
+
+from stickslip import kinematics as kin  # noqa: E402
+from stickslip.devices import DeviceError, open_device  # noqa: E402
+from stickslip.devices.anc300 import ANC300  # noqa: E402
+from stickslip.devices.emulators import ANC300Emulator  # noqa: E402
+from stickslip.devices.simulator import SimulatedMM3A  # noqa: E402
+from stickslip.devices.transport import FakeTransport  # noqa: E402
+
+PASSWORD = "secret"
+LOGIN = [
+    (None, b"\xff\xfb\x01attocube ANC300\r\nAuthorization code: "),
+    (f"{PASSWORD}\r\n", "*" * len(PASSWORD) + "\r\nAuthorization success\r\n"),
+    ("echo off\r\n", "> echo off\r\nOK\r\n"),
+    ("ver\r\n", "attocube ANC300 controller version 1.1.0\r\nOK\r\n"),
+]
+
+
+def anc(transcript, **kw):
+    t = FakeTransport([*LOGIN, *transcript], name="fake:7230")
+    return t, ANC300(t, password=PASSWORD, timeout=0.1, query_delay=0.0, **kw)
+
+
+def _lines(*cmds_and_replies):
+    return [(f"{c}\r\n", r) for c, r in cmds_and_replies]
+
+
+def test_login_and_version():
+    t, dev = anc([])
+    with t:
+        assert dev.version == "attocube ANC300 controller version 1.1.0"
+        assert dev.info.model.startswith("Attocube ANC300")
+
+
+def test_step_sets_mode_once_reads_frequency_and_waits():
+    t, dev = anc(
+        _lines(
+            ("setm 1 stp", "OK\r\n"),
+            ("getf 1", "frequency = 1000 Hz\n\r\nOK\r\n"),
+            ("stepu 1 15", "OK\r\n"),
+            ("stepw 1", "OK\r\n"),
+            ("stepd 1 20", "OK\r\n"),
+            ("stepw 1", "OK\r\n"),
+        )
+    )
+    with t:
+        dev.step(1, 15)
+        dev.step(1, -20)
+        assert dev.frequency(1) == 1000.0
+
+
+def test_axis_map():
+    t, dev = anc(
+        _lines(
+            ("setm 5 stp", "OK\r\n"),
+            ("getf 5", "frequency = 200 Hz\r\nOK\r\n"),
+            ("stepd 5 7", "OK\r\n"),
+            ("stepw 5", "OK\r\n"),
+        ),
+        axes={1: 4, 2: 6, 3: 5},
+    )
+    with t:
+        dev.step(3, -7)
+
+
+def test_zero_steps_never_reach_the_wire():
+    # "stepu 1 0" would start a continuous move
+    t, dev = anc([])
+    with t:
+        dev.step(1, 0)
+        dev.step(2, 0.0)
+
+
+def test_settings_and_their_ranges():
+    t, dev = anc(_lines(("setf 2 500.000", "OK\r\n"), ("setv 3 42.500", "OK\r\n")))
+    with t:
+        dev.set_frequency(2, 500)
+        dev.set_voltage(3, 42.5)
+        for bad in (0, 10001, 99.5, math.nan):
+            with pytest.raises(ValueError, match=r"1\.\.10000"):
+                dev.set_frequency(1, bad)
+        for bad in (-1, 150.5):
+            with pytest.raises(ValueError, match=r"0\.\.150 V"):
+                dev.set_voltage(1, bad)
+        with pytest.raises(ValueError, match="integer"):
+            dev.step(1, 1.5)
+        with pytest.raises(ValueError, match="joint must be one of"):
+            dev.step(4, 1)
+        assert dev.settings()["frequency_hz"]["2"] == 500
+
+
+def test_error_answer_raises_and_stops_the_axis():
+    t, dev = anc(
+        _lines(
+            ("setm 2 stp", "OK\r\n"),
+            ("getf 2", "frequency = 1000 Hz\r\nOK\r\n"),
+            ("stepu 2 10", "Axis in wrong mode\r\nERROR\r\n"),
+            ("stop 2", "OK\r\n"),
+        )
+    )
+    with t:
+        with pytest.raises(DeviceError, match="refused 'stepu 2 10'.*wrong mode"):
+            dev.step(2, 10)
+
+
+def test_wrong_password_is_a_device_error():
+    t = FakeTransport(
+        [LOGIN[0], (f"{PASSWORD}\r\n", "******\r\nAuthorization failed\r\n")], name="fake"
+    )
+    with pytest.raises(DeviceError, match="Authorization failed"):
+        ANC300(t, password=PASSWORD, timeout=0.1, query_delay=0.0)
+
+
+# ---------------------------------------------------------------- the emulator
+
+
+def _sim():
+    sim = SimulatedMM3A(seed=2, day="2026-11-22", sample_rate=8000)
+    sim.set_pose(q2=-math.pi / 2, q3=0.0)
+    return sim
+
+
+def test_end_to_end_on_the_emulator_steps_the_simulated_joint():
+    sim = _sim()
+    with ANC300Emulator(sim, password="pw") as emu:
+        dev = open_device(emu.url.replace("pw", "pw") + "&delay=0.005")
+        dev.set_frequency(3, 2000)
+        dev.step(3, -20000)  # to the lower stop
+        assert sim.at_stop(3) == "lower"
+        dev.step(3, 3000)
+        expected = float(
+            sim.true_models()[(3, "+")].average_gamma(0.0, sim.position(3), *sim.pose)
+        )
+        assert sim.position(3) / 3000 == pytest.approx(expected, rel=0.01)
+        dev.close()
+        assert emu.continuous_moves == 0
+        assert emu.mode == {1: "gnd", 2: "gnd", 3: "gnd"}  # grounded on close
+        assert "stepd 3 20000" in emu.received and "stepw 3" in emu.received
+        assert emu.hz[3] == 2000
+
+
+def test_emulator_wrong_password():
+    with ANC300Emulator(_sim(), password="right") as emu:
+        url = emu.url.replace("password=right", "password=wrong") + "&delay=0.005"
+        with pytest.raises(DeviceError, match="Authorization failed"):
+            open_device(url)
+
+
+@pytest.mark.parametrize("fault, match", [("silent", "no complete reply"), ("garbage", "garbage")])
+def test_emulator_faults_raise_stop_and_do_not_hang(fault, match):
+    sim = _sim()
+    with ANC300Emulator(sim) as emu:
+        dev = open_device(emu.url + "&delay=0.005&timeout=0.3")
+        dev.step(3, 100)
+        emu.inject(fault, after=1)
+        dev.step(3, 100)  # still fine
+        t0 = time.monotonic()
+        with pytest.raises(DeviceError, match=match):
+            dev.step(3, 100)
+        assert time.monotonic() - t0 < 0.3 + 1.5 * 100 / 1000 + 0.5 + 0.5
+        assert any(m == "stop 3" for m in emu.received)
+        dev.close()
+
+
+def test_unreachable_host_names_it():
+    with ANC300Emulator(_sim()) as emu:
+        port = emu.port
+    with pytest.raises(DeviceError, match=f"127.0.0.1:{port}"):
+        open_device(f"anc300://127.0.0.1:{port}?timeout=0.3")
+
+
+def test_q3_stays_in_range_after_emulated_continuous_move():
+    # the emulator honours "stepu X c" (our driver never sends it): the joint runs to its stop
+    sim = _sim()
+    with ANC300Emulator(sim) as emu:
+        dev = open_device(emu.url + "&delay=0.005")
+        dev._ctrl.axis3.mode = "stp"
+        dev._ctrl.axis3.move_raw(float("inf"))
+        assert sim.at_stop(3) == "upper" and sim.position(3) == kin.Q3_MAX
+        assert emu.continuous_moves == 1
+        dev.close()
