@@ -36,8 +36,9 @@ from typing import Any
 
 from . import kinematics as kin
 from .calibration import Calibration, ValidationResult, calibrate, validate
-from .devices.simulator import OracleStopDetector, SimulatedMM3A
+from .devices.simulator import NOMINAL, OracleStopDetector, SimulatedMM3A
 from .measurements import write_measurements
+from .models import JointModel
 from .traverse import TraverseResult, measure_traverse
 
 __all__ = [
@@ -250,10 +251,11 @@ def run_demo(
     on_traverse: Callable[[TraverseResult], None] | None = None,
     store: Any = None,
     validation: bool = True,
-    burst_steps: int = 2000,
+    burst_steps: int = 1000,
     step_noise: float = 0.03,
     soundscape_kwargs: dict | None = None,
     switch: str = "audio",
+    listen_from: float = 0.8,
 ) -> DemoResult:
     """Run the whole calibration story on a simulated MM3A and return what happened.
 
@@ -284,7 +286,16 @@ def run_demo(
         The limit switch: the tuned audio detector on the virtual microphone
         (default), or :class:`~stickslip.devices.simulator.OracleStopDetector`, which
         knows the true stops (no sound rendered; for fast tests).
+    listen_from : float
+        Start listening after this fraction of the step count predicted by the
+        previous calibration (for the calibration traverses: the nominal parameters
+        :data:`~stickslip.devices.simulator.NOMINAL`, standing in for yesterday's
+        calibration; for the validation sweep: today's). The stop cannot come much
+        earlier; if it does, :func:`~stickslip.traverse.measure_traverse` measures
+        again listening all along. 0 listens from the start. In [0, 0.95].
     """
+    if not 0.0 <= listen_from <= 0.95:
+        raise ValueError(f"listen_from = {listen_from!r} is outside [0, 0.95]")
     if switch not in ("audio", "oracle"):
         raise ValueError(f"switch must be 'audio' or 'oracle', got {switch!r}")
     t_wall = time.perf_counter()
@@ -317,17 +328,20 @@ def run_demo(
             detectors = {j: OracleStopDetector(sim, j, delay_s=0.03) for j in (1, 2, 3)}
             mic = sim.microphone(silent=True)
 
-        def run(plan, stage: str) -> list[TraverseResult]:
+        def run(plan, stage: str, prior: Callable[[int, str], JointModel]) -> list[TraverseResult]:
             results = []
             for joint, pose in plan:
                 spec = kin.JOINTS[joint]
                 for direction in ("+", "-"):
-                    start = spec.lower if direction == "+" else spec.upper
-                    if (
-                        direction == "+"
-                    ):  # the experimenter sets the pose; the joint rests on a stop
+                    start, end = (spec.lower, spec.upper)
+                    if direction == "-":
+                        start, end = end, start
+                    else:
+                        # the experimenter sets the pose; the joint rests on its start stop
                         _pose_for(sim, joint, pose, start)
                     bar.stage(f"{stage}: joint {joint} {direction}")
+                    gamma = prior(joint, direction).average_gamma(start, end, *sim.pose)
+                    expected = spec.span / float(gamma)
                     r = measure_traverse(
                         sim,
                         joint,
@@ -338,6 +352,8 @@ def run_demo(
                         day=day,
                         burst_steps=burst_steps,
                         progress=bar.traverse_callback(),
+                        expected_steps=int(expected),
+                        listen_after_steps=int(listen_from * expected),
                     )
                     results.append(r)
                     bar.advance()
@@ -345,7 +361,10 @@ def run_demo(
                         on_traverse(r)
             return results
 
-        traverses = run(CALIBRATION_PLAN, "calibration")
+        def nominal(joint: int, direction: str) -> JointModel:
+            return JointModel(joint, direction, NOMINAL[(joint, direction)])
+
+        traverses = run(CALIBRATION_PLAN, "calibration", nominal)
         rows = [r.traverse for r in traverses]
         cal = calibrate(rows, day=day, source=url)
         truth = sim.true_parameters()
@@ -353,7 +372,7 @@ def run_demo(
         val_results: list[TraverseResult] = []
         val: ValidationResult | None = None
         if validation:
-            val_results = run(VALIDATION_PLAN, "validation")
+            val_results = run(VALIDATION_PLAN, "validation", cal.model)
             val = validate(cal, [r.traverse for r in val_results])
     finally:
         bar.close()

@@ -215,6 +215,7 @@ def measure_traverse(
     clock: Callable[[], float] | None = None,
     progress: bool | Callable[[int, float], None] = False,
     settle_s: float = 0.05,
+    listen_after_steps: int = 0,
 ) -> TraverseResult:
     """Measure a full-range traverse of ``joint``: count the steps between its end stops.
 
@@ -259,6 +260,13 @@ def measure_traverse(
     settle_s : float
         Events with an onset within this time (s) of the start of the measured
         stepping are the start stop still ringing, and are ignored.
+    listen_after_steps : int
+        Steps to command before the limit switch starts listening (0: listen from
+        the start). A stop cannot come before the range divided by the largest
+        plausible step, or before, say, 80 % of the count a previous calibration
+        predicts; not listening that long saves the audio processing. If the stop is
+        heard as soon as listening starts (it came earlier), the traverse is measured
+        again listening from the start.
 
     Returns
     -------
@@ -273,6 +281,8 @@ def measure_traverse(
         raise ValueError(f"predrive must be 'listen', 'overdrive' or 'none', got {predrive!r}")
     if not (isinstance(burst_steps, int) and 1 <= burst_steps <= 1_000_000):
         raise ValueError(f"burst_steps = {burst_steps!r} is outside [1, 1000000]")
+    if not (isinstance(listen_after_steps, int) and listen_after_steps >= 0):
+        raise ValueError(f"listen_after_steps = {listen_after_steps!r} must be an integer >= 0")
     limit = (
         int(max_steps)
         if max_steps is not None
@@ -319,12 +329,20 @@ def measure_traverse(
 
     # 2. measure
     t_start = clock()
-    listener.start(t_start)
     bursts: list[tuple[float, int]] = []
     commanded = 0
     event = None
+    early = False
     update, close_bar = _progress_callback(progress, joint, label, expected_steps)
     try:
+        while commanded < listen_after_steps:  # the stop cannot be this close: do not listen yet
+            n = min(listen_after_steps - commanded, 50 * burst_steps)
+            bursts.append((clock(), n))
+            controller.step(joint, sign * n)
+            commanded += n
+            update(commanded, clock() - t_start)
+        t_listen = clock()
+        listener.start(t_listen)
         while event is None:
             if commanded >= limit:
                 raise TraverseError(
@@ -337,6 +355,14 @@ def measure_traverse(
             controller.step(joint, sign * n)
             commanded += n
             event = listener.listen(clock())
+            if (
+                event is not None
+                and listen_after_steps
+                and float(event.onset_s) < t_listen + settle_s
+            ):
+                # the stop was there as soon as we listened: it came before listen_after_steps
+                early = True
+                break
             while event is not None and float(event.onset_s) < t_start + settle_s:
                 # the start stop's sound still ringing as the joint leaves it: not our stop
                 listener.detector.reset(listener.t_s)
@@ -345,6 +371,25 @@ def measure_traverse(
         controller.stop(joint)
     finally:
         close_bar()
+    if early:
+        return measure_traverse(
+            controller,
+            joint,
+            direction,
+            detector=detector,
+            audio_blocks=audio_blocks,
+            pose=pose,
+            day=day,
+            burst_steps=burst_steps,
+            predrive="listen",
+            latency=latency,
+            max_steps=max_steps,
+            expected_steps=expected_steps,
+            clock=clock,
+            progress=progress,
+            settle_s=settle_s,
+            listen_after_steps=0,
+        )
 
     # 3. count
     detected = float(event.detected_at_s)
