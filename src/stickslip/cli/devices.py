@@ -1,5 +1,292 @@
-"""Commands of this area are added here (see stickslip.cli)."""
+"""Device commands: ``move`` (a planned move, in bursts) and ``where`` (dead-reckoned positions).
+
+Positions are kept per device in the database (``--db``, default ``$STICKSLIP_DB`` or
+the user's data directory) under the device URL without its query options, so every
+invocation continues from where the last one left the arm. A ``sim://`` device is
+opened at the kept positions (each invocation starts a fresh simulator).
+"""
 
 from __future__ import annotations
 
-from . import app  # noqa: F401
+import math
+from pathlib import Path
+
+import typer
+
+from .. import kinematics as kin
+from ..devices.base import DeviceError, open_device
+from ..devices.positions import DeviceState, device_key, load_state, save_state
+from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit
+from . import app
+from ._common import angle_option, console, fail, length_option, print_json, user_errors
+
+_DB_HELP = (
+    "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
+)
+_Q1 = "Record q1 (angle: -30deg, 0.1) first."
+_Q2 = "Record q2 (angle: -90deg, -pi/2) first."
+_Q3 = "Record q3 (length: 2mm, 0) first."
+_THETA = "Record the base tilt theta (angle)."
+_PSI = "Record the base tilt psi (angle)."
+_DEVICE_HELP = (
+    "Controller URL: sim:// (default), mm3a:///dev/ttyUSB0, mm3a+socket://host:port, "
+    "anc300://host[:7230]?password=..."
+)
+
+
+def _open_store(db: Path | None):
+    from ..storage import Store, StoreError
+
+    with user_errors(StoreError):
+        return Store.open(db)
+
+
+def _parse_joint_value(joint: int, text: str, what: str) -> float:
+    """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
+    try:
+        return parse_length(text) if joint == 3 else parse_angle(text)
+    except UnitError as e:
+        kind = "a length (e.g. 30um, 1.5mm)" if joint == 3 else "an angle (e.g. 2deg, 40urad)"
+        fail(f"{what}: {e}; joint {joint} takes {kind}")
+
+
+def _apply_pose_options(state: DeviceState, q1, q2, q3, theta, psi) -> list[str]:
+    changed = []
+    for j, v in ((1, q1), (2, q2), (3, q3)):
+        if v is not None:
+            with user_errors():
+                state.set_position(j, v, "set")
+            changed.append(f"q{j}")
+    with user_errors():
+        state.set_tilt(theta, psi)
+    changed += [n for n, v in (("theta", theta), ("psi", psi)) if v is not None]
+    return changed
+
+
+def _plan(cal, joint: int, q_from: float, q_to: float, pose: kin.Pose):
+    """``(steps (signed int), q_end_predicted, dead_reckon(n) -> q)`` from stickslip.planning."""
+    from ..planning import dead_reckon, plan_move
+
+    plan = plan_move(cal, joint, q_from, q_to, pose)
+    sign = 1 if plan.direction in ("+", 1) else -1
+    steps = sign * int(plan.steps)
+
+    def reckon(n_signed: int) -> float:
+        return float(dead_reckon(cal, joint, q_from, n_signed, pose))
+
+    return steps, float(plan.q_end_predicted), reckon
+
+
+def _state_rows(state: DeviceState) -> list[dict[str, object]]:
+    rows = []
+    for j in (1, 2, 3):
+        spec = kin.JOINTS[j]
+        rows.append(
+            {
+                "joint": j,
+                "q": state.positions[j],
+                "unit": spec.unit,
+                "display": format_position(state.positions[j], j),
+                "source": state.sources[j],
+            }
+        )
+    return rows
+
+
+@app.command()
+def move(
+    joint: int = typer.Option(..., "--joint", "-j", min=1, max=3, help="Joint to move: 1, 2 or 3."),
+    by: str | None = typer.Option(
+        None, "--by", help="Move by: 30um, -0.5mm (joint 3); 2deg, -500urad (joints 1, 2)."
+    ),
+    to: str | None = typer.Option(
+        None, "--to", help="Move to this position (same units as --by); 'min'/'max' = an end stop."
+    ),
+    calibration: Path = typer.Option(
+        ..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."
+    ),
+    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help=_Q1),
+    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help=_Q2),
+    q3: str | None = typer.Option(None, "--q3", callback=length_option, help=_Q3),
+    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
+    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
+    burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Steps per burst."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
+) -> None:
+    """Move a joint by a distance or to a position, with the calibrated step-size model.
+
+    The pose is the one kept for the device (see `stickslip where`).
+
+    --q1 --q2 --q3 --theta --psi record a new pose first.
+
+    Steps come from the calibration's model in that pose (exact for rotary joints).
+
+    They are sent in bursts; the dead-reckoned position is kept after every burst.
+
+    Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
+    """
+    if (by is None) == (to is None):
+        fail("give exactly one of --by and --to")
+    from ..calibration import Calibration
+
+    with user_errors(KeyError):
+        cal = Calibration.load(calibration)
+    key = device_key(device)
+    spec = kin.JOINTS[joint]
+    with _open_store(db) as store:
+        with user_errors():
+            state = load_state(store, key)
+        _apply_pose_options(state, q1, q2, q3, theta, psi)
+        q_from = state.positions[joint]
+        if to is not None:
+            word = to.strip().lower()
+            if word in ("min", "lower"):
+                q_to = spec.lower
+            elif word in ("max", "upper"):
+                q_to = spec.upper
+            else:
+                q_to = _parse_joint_value(joint, to, "--to")
+        else:
+            q_to = q_from + _parse_joint_value(joint, by, "--by")  # type: ignore[arg-type]
+        if not spec.contains(q_to):
+            unit = position_display_unit(joint)
+            fail(
+                f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
+                f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
+                f"(from {format_position(q_from, joint)}); positions are in {unit}"
+            )
+        q_to = min(max(q_to, spec.lower), spec.upper)
+        pose = state.pose
+        with user_errors(KeyError):
+            steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
+        save_state(store, state)  # the recorded pose, even if nothing moves
+
+        sent = 0
+        bursts: list[int] = []
+        error: str | None = None
+        sim_true: float | None = None
+        if steps:
+            sign = 1 if steps > 0 else -1
+            try:
+                dev = open_device(device)
+            except (DeviceError, ValueError) as e:
+                fail(str(e))
+            try:
+                if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
+                    dev.set_pose(*pose)
+                while sent != steps:
+                    n = sign * min(burst, abs(steps - sent))
+                    dev.step(joint, n)
+                    sent += n
+                    bursts.append(n)
+                    if sent != steps:
+                        state.set_position(joint, reckon(sent), "dead-reckoned")
+                        save_state(store, state)
+                if hasattr(dev, "position"):
+                    sim_true = float(dev.position(joint))
+            except DeviceError as e:
+                error = str(e)
+            finally:
+                try:
+                    dev.close()
+                except DeviceError:
+                    pass
+            if error is None:
+                state.set_position(joint, q_end, "dead-reckoned")
+            else:
+                state.set_position(joint, reckon(sent) if sent else q_from, "dead-reckoned")
+            save_state(store, state)
+    if error is not None:
+        fail(
+            f"{error}\nsent {sent} of {steps} steps; joint {joint}'s dead-reckoned position "
+            f"{format_position(state.positions[joint], joint)} is kept"
+        )
+    result = {
+        "device": key,
+        "joint": joint,
+        "direction": "+" if steps >= 0 else "-",
+        "steps": abs(steps),
+        "steps_signed": steps,
+        "bursts": bursts,
+        "q_from": q_from,
+        "q_to": q_to,
+        "q_end_predicted": q_end,
+        "unit": spec.unit,
+    }
+    if sim_true is not None:
+        result["sim_true_end"] = sim_true
+    if json_out:
+        print_json(result)
+        return
+    console.print(
+        f"joint {joint}: {format_position(q_from, joint)} -> {format_position(q_to, joint)}: "
+        f"{steps:+d} steps in {len(bursts)} burst(s); planned end {format_position(q_end, joint)}",
+        highlight=False,
+    )
+    if sim_true is not None:
+        err = sim_true - q_end
+        shown = f"{err * 1e9:+.1f} nm" if joint == 3 else f"{math.degrees(err):+.4f} deg"
+        console.print(
+            f"simulator's true end {format_position(sim_true, joint)} ({shown})", highlight=False
+        )
+
+
+@app.command()
+def where(
+    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    set_: list[str] = typer.Option(
+        None, "--set", help="Reset a joint at a known point: 3=0, 3=min, 2=max, 1=-30deg."
+    ),
+    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help=_Q1),
+    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help=_Q2),
+    q3: str | None = typer.Option(None, "--q3", callback=length_option, help=_Q3),
+    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
+    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print the positions as JSON (SI units)."),
+) -> None:
+    """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
+
+    Source: default (never set; outstretched pose assumed), set, or dead-reckoned.
+
+    Reset a joint at an end stop after a traverse, a crash or a manual move.
+
+    Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
+    """
+    key = device_key(device)
+    with _open_store(db) as store:
+        with user_errors():
+            state = load_state(store, key)
+        changed = _apply_pose_options(state, q1, q2, q3, theta, psi)
+        for item in set_ or []:
+            j_text, sep, value = item.partition("=")
+            if not sep or j_text.strip() not in ("1", "2", "3"):
+                fail(f"--set {item!r}: write JOINT=VALUE, e.g. 3=0, 3=min, 2=-90deg")
+            j = int(j_text)
+            spec = kin.JOINTS[j]
+            word = value.strip().lower()
+            if word in ("min", "lower"):
+                q = spec.lower
+            elif word in ("max", "upper"):
+                q = spec.upper
+            else:
+                q = _parse_joint_value(j, value, f"--set {item}")
+            with user_errors():
+                state.set_position(j, q, "set")
+            changed.append(f"q{j}")
+        if changed:
+            save_state(store, state)
+    rows = _state_rows(state)
+    if json_out:
+        print_json({"device": key, "joints": rows, "theta": state.theta, "psi": state.psi})
+        return
+    console.print(f"[bold]{key}[/]", highlight=False)
+    for r in rows:
+        console.print(f"  joint {r['joint']}: {r['display']:>14}  ({r['source']})", highlight=False)
+    console.print(
+        f"  tilt: theta = {math.degrees(state.theta):.4g} deg, "
+        f"psi = {math.degrees(state.psi):.4g} deg",
+        highlight=False,
+    )

@@ -1,0 +1,198 @@
+"""Dead-reckoned joint positions and the configured pose of each device, kept between runs.
+
+The MM3A's joints have no sensors: where a joint is comes from where it was last put
+(an end stop, or a pose the user entered) plus the model's prediction for every step
+sent since. This module keeps that per device URL:
+
+* ``positions``: ``q1, q2, q3`` (rad, rad, m), each with its *source*: ``"default"``
+  (never set: the outstretched pose is assumed), ``"set"`` (the user put it there, e.g.
+  at an end stop) or ``"dead-reckoned"`` (moved by the model since);
+* ``tilt``: the base tilt ``theta, psi`` (rad) the device is set up with.
+
+Where it is kept is injected (this layer sits below :mod:`stickslip.storage`): any
+object with ``set_state(device, key, value)`` / ``get_state(device, key, default)``
+— the :class:`stickslip.storage.Store` — or, without a database, a
+:class:`JsonStateFile`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Protocol
+
+from .. import kinematics as kin
+
+__all__ = [
+    "StateStore",
+    "JsonStateFile",
+    "DeviceState",
+    "SOURCES",
+    "load_state",
+    "save_state",
+    "device_key",
+]
+
+SOURCES = ("default", "set", "dead-reckoned")
+
+
+class StateStore(Protocol):
+    """Where per-device state lives (``stickslip.storage.Store`` implements it)."""
+
+    def set_state(self, device: str, key: str, value_json: Any) -> None: ...
+
+    def get_state(self, device: str, key: str, default: Any = None) -> Any: ...
+
+
+class JsonStateFile:
+    """Per-device state in one JSON file ``{device: {key: value}}``, replaced atomically."""
+
+    def __init__(self, path: str | os.PathLike[str]):
+        self.path = Path(path).expanduser()
+
+    def _read(self) -> dict[str, dict[str, Any]]:
+        try:
+            text = self.path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            return {}
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise ValueError(f"{self.path} is not valid JSON ({e}); fix or delete it") from None
+        if not isinstance(data, dict):
+            raise ValueError(f"{self.path}: expected a JSON object of devices")
+        return data
+
+    def get_state(self, device: str, key: str, default: Any = None) -> Any:
+        """The value stored under ``key`` for ``device``, or ``default``."""
+        return self._read().get(device, {}).get(key, default)
+
+    def set_state(self, device: str, key: str, value_json: Any) -> None:
+        """Store ``value_json`` (JSON text or a JSON-serialisable object) for ``device``."""
+        value = json.loads(value_json) if isinstance(value_json, str) else value_json
+        data = self._read()
+        data.setdefault(device, {})[key] = value
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".state-", dir=self.path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                json.dump(data, f, indent=2)
+            os.replace(tmp, self.path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+
+
+@dataclass
+class DeviceState:
+    """Where a device's joints are believed to be, and how its base is tilted.
+
+    Attributes
+    ----------
+    device : str
+        The device URL.
+    positions : dict
+        ``{1: q1 (rad), 2: q2 (rad), 3: q3 (m)}``.
+    sources : dict
+        ``{joint: "default" | "set" | "dead-reckoned"}``.
+    theta, psi : float
+        Base tilt, rad.
+    """
+
+    device: str
+    positions: dict[int, float] = field(default_factory=dict)
+    sources: dict[int, str] = field(default_factory=dict)
+    theta: float = 0.0
+    psi: float = 0.0
+
+    @classmethod
+    def default(cls, device: str) -> DeviceState:
+        """The outstretched pose (``q2 = -pi/2``), level base, nothing known."""
+        p = kin.Pose()
+        return cls(device, {1: p.q1, 2: p.q2, 3: p.q3}, dict.fromkeys((1, 2, 3), "default"))
+
+    @property
+    def pose(self) -> kin.Pose:
+        """The pose these positions and this tilt make (joints rad, rad, m; tilt rad)."""
+        q = self.positions
+        return kin.Pose(q[1], q[2], q[3], self.theta, self.psi)
+
+    def set_position(self, joint: int, q: float, source: str = "set") -> None:
+        """Record ``q`` (rad or m) for ``joint``; ``ValueError`` outside its end stops."""
+        spec = kin.joint_spec(joint)
+        q = float(q)
+        if not (math.isfinite(q) and spec.contains(q)):
+            raise ValueError(
+                f"q{spec.number} = {q:.6g} {spec.unit} is outside joint {spec.number}'s range "
+                f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+            )
+        if source not in SOURCES:
+            raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
+        self.positions[spec.number] = min(max(q, spec.lower), spec.upper)
+        self.sources[spec.number] = source
+
+    def set_tilt(self, theta: float | None = None, psi: float | None = None) -> None:
+        """Record the base tilt (rad, each within [-pi, pi]); ``None`` keeps a value."""
+        for name, v in (("theta", theta), ("psi", psi)):
+            if v is None:
+                continue
+            v = float(v)
+            if not (math.isfinite(v) and -math.pi - 1e-12 <= v <= math.pi + 1e-12):
+                raise ValueError(f"{name} = {v:.6g} rad is outside [-pi, pi]")
+            setattr(self, name, v)
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON shape kept in the store (SI units)."""
+        return {
+            "positions": {str(j): self.positions[j] for j in sorted(self.positions)},
+            "sources": {str(j): self.sources[j] for j in sorted(self.sources)},
+            "theta": self.theta,
+            "psi": self.psi,
+        }
+
+
+_KEY = "positions"
+
+
+def load_state(store: StateStore, device: str) -> DeviceState:
+    """The stored state of ``device`` (the default state if none was stored)."""
+    state = DeviceState.default(device)
+    raw = store.get_state(device, _KEY)
+    if not raw:
+        return state
+    if isinstance(raw, str):
+        raw = json.loads(raw)
+    try:
+        for j, q in raw.get("positions", {}).items():
+            state.positions[int(j)] = float(q)
+        for j, s in raw.get("sources", {}).items():
+            state.sources[int(j)] = str(s)
+        state.theta = float(raw.get("theta", 0.0))
+        state.psi = float(raw.get("psi", 0.0))
+    except (TypeError, ValueError, AttributeError) as e:
+        raise ValueError(f"the stored positions of {device} are unreadable: {e}") from None
+    return state
+
+
+def save_state(store: StateStore, state: DeviceState) -> None:
+    """Store ``state`` under its device URL."""
+    store.set_state(state.device, _KEY, state.to_json())
+
+
+def device_key(url: str) -> str:
+    """The name positions are kept under: the URL without its query for real controllers.
+
+    Options such as ``?timeout=5`` (or an ANC300 password) do not change which arm is
+    at the other end and are not stored; a ``sim://`` URL keeps its query, since
+    ``seed`` and ``day`` pick the simulated arm.
+    """
+    from urllib.parse import urlsplit, urlunsplit
+
+    parts = urlsplit(url or "sim://")
+    if (parts.scheme or "sim") == "sim":
+        return url or "sim://"
+    return urlunsplit((parts.scheme, parts.netloc, parts.path, "", ""))
