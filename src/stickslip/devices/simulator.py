@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import threading
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -112,6 +113,7 @@ class _Burst:
     joint: int
     n: int
     k_stop: int  # steps with k >= k_stop began at the end stop (did not move)
+    sign: int = 1
 
     @property
     def t_end(self) -> float:
@@ -199,6 +201,7 @@ class SimulatedMM3A:
         self.clock_s = 0.0
         self._bursts: list[_Burst] = []
         self._burst_ends: list[float] = []
+        self._lock = threading.RLock()  # emulators step from a server thread
         self._soundscape = None
         self.steps_simulated = 0
         self._closed = False
@@ -260,13 +263,14 @@ class SimulatedMM3A:
                 f"a burst of {abs(n)} steps is more than the controller accepts ({_MAX_BURST})"
             )
         sign = 1 if n > 0 else -1
-        hz = self._hz[joint]
-        k_stop, q_end = self._advance(joint, sign, abs(n))
-        self._q[joint] = q_end
-        self._bursts.append(_Burst(self.clock_s, hz, joint, abs(n), k_stop))
-        self._burst_ends.append(self.clock_s + abs(n) / hz)
-        self.clock_s += abs(n) / hz
-        self.steps_simulated += abs(n)
+        with self._lock:
+            hz = self._hz[joint]
+            k_stop, q_end = self._advance(joint, sign, abs(n))
+            self._q[joint] = q_end
+            self._bursts.append(_Burst(self.clock_s, hz, joint, abs(n), k_stop, sign))
+            self._burst_ends.append(self.clock_s + abs(n) / hz)
+            self.clock_s += abs(n) / hz
+            self.steps_simulated += abs(n)
 
     def stop(self, joint: int | None = None) -> None:
         """Stop ``joint`` (or all). Bursts complete at once on the virtual clock: a no-op."""
@@ -500,8 +504,10 @@ class SimulatedMM3A:
     def step_events(self, t_from: float, t_to: float) -> tuple[NDArray, NDArray, NDArray]:
         """Step events with ``t_from <= t < t_to``: ``(times_s, joints, at_stop)`` arrays."""
         times, joints, stops = [], [], []
-        first = bisect.bisect_right(self._burst_ends, t_from)
-        for b in self._bursts[first:]:
+        with self._lock:
+            first = bisect.bisect_right(self._burst_ends, t_from)
+            bursts = self._bursts[first:]
+        for b in bursts:
             if b.t0 >= t_to:
                 break
             if b.t_end <= t_from:
@@ -518,13 +524,38 @@ class SimulatedMM3A:
             return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=bool)
         return np.concatenate(times), np.concatenate(joints), np.concatenate(stops)
 
+    def stop_runs(self, joint: int | None = None) -> list[tuple[float, float]]:
+        """``(begin, end)`` times (s, virtual clock) of runs of steps against an end stop.
+
+        A run begins with the first step that began at a stop and lasts while the
+        joint keeps stepping into it without a pause.
+        """
+        runs: list[list[float]] = []
+        with self._lock:
+            bursts = list(self._bursts)
+        prev: _Burst | None = None
+        for b in bursts:
+            if joint is not None and b.joint != joint:
+                continue
+            if b.k_stop < b.n:
+                continued = (
+                    prev is not None
+                    and b.k_stop == 0
+                    and prev.sign == b.sign
+                    and prev.k_stop < prev.n
+                    and abs(prev.t_end - b.t0) < 0.5 / b.hz
+                    and bool(runs)
+                )
+                if continued:
+                    runs[-1][1] = b.t_end
+                else:
+                    runs.append([b.t0 + b.k_stop / b.hz, b.t_end])
+            prev = b
+        return [(a, e) for a, e in runs]
+
     def stop_times(self, joint: int | None = None) -> list[float]:
-        """Times (s, virtual clock) when a burst first stepped against an end stop (true stops)."""
-        out = []
-        for b in self._bursts:
-            if (joint is None or b.joint == joint) and b.k_stop < b.n:
-                out.append(b.t0 + b.k_stop / b.hz)
-        return out
+        """Times (s, virtual clock) when ``joint`` began stepping against a stop (true stops)."""
+        return [a for a, _ in self.stop_runs(joint)]
 
     def microphone(self, block: int = 1024, silent: bool = False) -> VirtualMicrophone:
         """A virtual microphone starting now on the virtual clock (blocks of ``block`` samples)."""
@@ -706,7 +737,8 @@ class OracleStopDetector:
     consumes blocks like :class:`~stickslip.audio.detector.StopDetector` (the stream
     time advances by the block length) and fires once per stop, at the end of the
     first block that reaches ``true stop + delay_s``; its onset estimate is the true
-    stop plus ``onset_error_s``.
+    stop plus ``onset_error_s``. A stop already sounding when the stream starts (or
+    is reset) is heard from that moment, as a real detector would.
 
     Parameters
     ----------
@@ -749,8 +781,10 @@ class OracleStopDetector:
         t_end = self.t_s + len(block) / self.sample_rate
         self.t_s = t_end
         out = []
-        for t in self.sim.stop_times(self.joint):
-            if t >= self._fired_upto and t + self.delay_s <= t_end:
-                out.append(OracleEvent(t_end, t + self.onset_error_s))
-                self._fired_upto = t_end
+        for begin, end in self.sim.stop_runs(self.joint):
+            # a run already under way when listening began is heard from then on
+            onset = max(begin, self._fired_upto)
+            if onset < end and onset + self.delay_s <= t_end:
+                out.append(OracleEvent(t_end, onset + self.onset_error_s))
+                self._fired_upto = max(end, t_end)
         return out
