@@ -1,0 +1,247 @@
+"""`stickslip move` / `stickslip where`: planned steps sent in bursts, positions kept per device.
+
+Reference values: stickslip.planning.plan_move / dead_reckon for the same calibration
+and pose (what `stickslip plan` prints); the calibration here is the simulator's own
+true model, so on sim:// the true end must match the planned end within the per-step
+noise (3 % per step, independent: ~3 %/sqrt(N) over N steps) and the ripple (0.4 %).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from stickslip import kinematics as kin
+from stickslip.cli import app
+from stickslip.devices.emulators import NanoControlEmulator
+from stickslip.devices.simulator import SimulatedMM3A
+
+planning = pytest.importorskip("stickslip.planning")
+calibration = pytest.importorskip("stickslip.calibration")
+
+runner = CliRunner()
+DAY = "2026-11-22"
+
+
+@pytest.fixture()
+def cal_path(tmp_path):
+    """A calibration holding the true models of sim://?seed=4&day=DAY (exact by construction)."""
+    sim = SimulatedMM3A(seed=4, day=DAY)
+    models = sim.true_models()
+    cal = calibration.Calibration(
+        models=models,
+        stderr=dict.fromkeys(models),
+        constant_steps={
+            k: float(m.average_gamma(*_full(k[0], k[1]), *kin.Pose())) for k, m in models.items()
+        },
+        day=DAY,
+        method="seed",
+    )
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    return path
+
+
+def _full(joint, direction):
+    spec = kin.JOINTS[joint]
+    return (spec.lower, spec.upper) if direction == "+" else (spec.upper, spec.lower)
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def where_json(db, device):
+    r = run("where", "--device", device, "--db", db, "--json")
+    assert r.exit_code == 0, r.output
+    return json.loads(r.stdout)
+
+
+def test_where_defaults_and_set(tmp_path):
+    db = tmp_path / "s.db"
+    w = where_json(db, "sim://")
+    assert [j["source"] for j in w["joints"]] == ["default"] * 3
+    assert w["joints"][1]["q"] == pytest.approx(-math.pi / 2)
+    r = run(
+        "where",
+        "--db",
+        db,
+        "--set",
+        "3=max",
+        "--set",
+        "2=min",
+        "--set",
+        "1=-30deg",
+        "--theta",
+        "-45deg",
+    )
+    assert r.exit_code == 0, r.output
+    w = where_json(db, "sim://")
+    assert [j["q"] for j in w["joints"]] == pytest.approx(
+        [-math.pi / 6, -7 * math.pi / 6, kin.Q3_MAX]
+    )
+    assert [j["source"] for j in w["joints"]] == ["set"] * 3
+    assert w["theta"] == pytest.approx(-math.pi / 4)
+    # another device keeps its own positions; query options do not make a new device
+    assert where_json(db, "mm3a:///dev/ttyX")["joints"][2]["source"] == "default"
+    run("where", "--db", db, "-d", "mm3a:///dev/ttyX?timeout=5", "--set", "3=1mm")
+    assert where_json(db, "mm3a:///dev/ttyX")["joints"][2]["q"] == pytest.approx(1e-3)
+
+
+@pytest.mark.parametrize(
+    "bad, msg",
+    [
+        ("3=20mm", "outside joint 3's range"),
+        ("4=0", "JOINT=VALUE"),
+        ("3=5deg", "takes a length"),
+        ("x", "JOINT=VALUE"),
+    ],
+)
+def test_where_set_rejects_bad_values(tmp_path, bad, msg):
+    r = run("where", "--db", tmp_path / "s.db", "--set", bad)
+    assert r.exit_code == 2
+    assert msg in r.output
+
+
+def test_move_on_sim_sends_the_planned_steps_and_keeps_the_position(tmp_path, cal_path):
+    db = tmp_path / "s.db"
+    dev = f"sim://?seed=4&day={DAY}"
+    cal = calibration.Calibration.load(cal_path)
+    r = run(
+        "move",
+        "-d",
+        dev,
+        "-c",
+        cal_path,
+        "--db",
+        db,
+        "--joint",
+        3,
+        "--by",
+        "30um",
+        "--burst",
+        10,
+        "--json",
+    )
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    plan = planning.plan_move(cal, 3, 0.0, 30e-6, kin.Pose())
+    assert out["steps"] == plan.steps and out["direction"] == "+"
+    assert sum(out["bursts"]) == plan.steps and max(out["bursts"]) <= 10
+    assert out["q_end_predicted"] == pytest.approx(plan.q_end_predicted, abs=1e-15)
+    # true end of the simulated arm vs the plan: per-step noise + ripple
+    assert out["sim_true_end"] == pytest.approx(30e-6, rel=0.03)
+    w = where_json(db, dev)
+    assert w["joints"][2]["q"] == pytest.approx(plan.q_end_predicted, abs=1e-15)
+    assert w["joints"][2]["source"] == "dead-reckoned"
+    # a second move continues from there
+    r = run("move", "-d", dev, "-c", cal_path, "--db", db, "--joint", 3, "--by", "-10um", "--json")
+    out2 = json.loads(r.stdout)
+    assert out2["q_from"] == pytest.approx(plan.q_end_predicted)
+    assert out2["direction"] == "-"
+    plan2 = planning.plan_move(
+        cal, 3, plan.q_end_predicted, plan.q_end_predicted - 10e-6, kin.Pose()
+    )
+    assert out2["steps"] == plan2.steps
+
+
+def test_rotary_move_in_a_recorded_pose_matches_the_plan(tmp_path, cal_path):
+    db = tmp_path / "s.db"
+    cal = calibration.Calibration.load(cal_path)
+    r = run(
+        "move", "-c", cal_path, "--db", db, "--joint", 2, "--to", "-60deg",
+        "--q3", "6mm", "--theta", "-30deg", "--json",
+    )  # fmt: skip
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    pose = kin.Pose(0.0, -math.pi / 2, 6e-3, -math.pi / 6, 0.0)
+    plan = planning.plan_move(cal, 2, -math.pi / 2, math.radians(-60), pose)
+    assert out["steps"] == plan.steps and out["direction"] == "+"
+    w = where_json(db, "sim://")
+    assert w["joints"][1]["q"] == pytest.approx(plan.q_end_predicted, abs=1e-12)
+    assert w["joints"][2] == {**w["joints"][2], "q": pytest.approx(6e-3), "source": "set"}
+    assert w["theta"] == pytest.approx(-math.pi / 6)
+
+
+@pytest.mark.parametrize(
+    "args, msg",
+    [
+        (["--joint", 3, "--by", "20mm"], "outside joint 3's range"),
+        (["--joint", 3, "--by", "1um", "--to", "2um"], "exactly one of --by and --to"),
+        (["--joint", 3], "exactly one of --by and --to"),
+        (["--joint", 2, "--by", "3um"], "takes an angle"),
+        (["--joint", 3, "--by", "3um", "--q2", "40deg"], "outside joint 2's range"),
+    ],
+)
+def test_move_rejects_bad_input(tmp_path, cal_path, args, msg):
+    r = run("move", "-c", cal_path, "--db", tmp_path / "s.db", *args)
+    assert r.exit_code == 2, r.output
+    assert msg in r.output
+
+
+def test_move_missing_calibration_is_a_clean_error(tmp_path):
+    r = run(
+        "move", "-c", tmp_path / "nope.json", "--db", tmp_path / "s.db", "--joint", 3, "--by", "1um"
+    )
+    assert r.exit_code == 2 and "nope.json" in r.output
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+def test_move_over_the_emulated_nanocontrol(tmp_path, cal_path):
+    """The issue's check: only well-formed commands, step counts adding up to the plan."""
+    db = tmp_path / "s.db"
+    cal = calibration.Calibration.load(cal_path)
+    with NanoControlEmulator() as emu:
+        url = emu.url
+        r = run("where", "-d", url, "--db", db, "--set", "3=min", "--q2", "-90deg")
+        assert r.exit_code == 0, r.output
+        r = run("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "0.5mm",
+                "--burst", 100, "--json")  # fmt: skip
+        assert r.exit_code == 0, r.output
+        r2 = run(
+            "move", "-d", url, "-c", cal_path, "--db", db, "--joint", 2, "--by", "-5deg", "--json"
+        )
+        assert r2.exit_code == 0, r2.output
+        sent = list(emu.received)
+    out, out2 = json.loads(r.stdout), json.loads(r2.stdout)
+    pat = re.compile(r"^(version|stop|coarse [ABC] [+-][1-9]\d*)$")
+    assert all(pat.match(m) for m in sent), sent
+    c = [int(m.split()[2]) for m in sent if m.startswith("coarse C")]
+    b = [int(m.split()[2]) for m in sent if m.startswith("coarse B")]
+    plan = planning.plan_move(cal, 3, 0.0, 0.5e-3, kin.Pose())
+    assert sum(c) == plan.steps == out["steps"] and max(map(abs, c)) <= 100
+    pose2 = kin.Pose(0.0, -math.pi / 2, plan.q_end_predicted, 0.0, 0.0)
+    plan2 = planning.plan_move(cal, 2, -math.pi / 2, -math.pi / 2 - math.radians(5), pose2)
+    assert -sum(b) == plan2.steps == out2["steps"]
+    w = where_json(db, url)
+    assert [w["joints"][1]["q"], w["joints"][2]["q"]] == pytest.approx(
+        [plan2.q_end_predicted, plan.q_end_predicted], abs=1e-12
+    )
+
+
+@pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
+def test_device_failing_mid_move_keeps_the_dead_reckoned_position(tmp_path, cal_path):
+    db = tmp_path / "s.db"
+    cal = calibration.Calibration.load(cal_path)
+    with NanoControlEmulator() as emu:
+        emu.inject("silent", after=3)
+        r = run("move", "-d", emu.url + "?timeout=0.2", "-c", cal_path, "--db", db, "--joint", 3,
+                "--by", "100um", "--burst", 10)  # fmt: skip
+        url = emu.url
+    assert r.exit_code == 2
+    assert "did not answer" in r.output and "sent 30 of" in r.output
+    w = where_json(db, url)
+    expected = planning.dead_reckon(cal, 3, 0.0, 30, kin.Pose())
+    assert w["joints"][2]["q"] == pytest.approx(float(np.asarray(expected)), abs=1e-15)
+
+
+def test_help_texts():
+    for cmd in ("move", "where"):
+        r = run(cmd, "--help")
+        assert r.exit_code == 0 and "Example" in r.output
