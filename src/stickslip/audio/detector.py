@@ -83,7 +83,7 @@ class Tuning:
     sample_rate: int = 48_000
     frame: int = 512
     hop: int = 128
-    hold_s: float = 0.010
+    hold_s: float = 0.016
     hysteresis_db: float = 6.0
     release_s: float = 0.25
     onset_lag_s: float = 0.003

@@ -152,8 +152,7 @@ class Soundscape:
     _KNOCK_SEG_S = 1.0
     _SYL_SEG_S = 0.25
     _SYL_MAX_S = 0.30
-    _NOISE_CHUNK = 8192
-    _NOISE_FIR = 63
+    _RATTLE_JITTER_S = 5e-4
 
     def __init__(
         self,
@@ -184,13 +183,20 @@ class Soundscape:
         self.babble_db = float(babble_db)
         self._gain = 10 ** (self.gain_db / 20)
         self._tail = int(round(self.tail_s * self.sample_rate))
+        self._jit = int(round(self._RATTLE_JITTER_S * self.sample_rate))
         self._kernels = {j: self._joint_kernels(j) for j in JOINT_SOUNDS}
-        self._noise_fir = self._make_noise_fir()
+        self._noise_a, self._noise_b = self._make_noise_tables()
         self._knock_len = int(round(self._KNOCK_S * self.sample_rate))
+        self._hum_table: np.ndarray | None = None
+        self._syl_cache: dict[int, tuple[int, np.ndarray] | None] = {}
+        from scipy.signal import butter
+
+        hi_f = min(7000.0, 0.45 * self.sample_rate)
+        self._fric_sos = butter(2, [3500.0, hi_f], btype="band", fs=self.sample_rate, output="sos")
 
     # ------------------------------------------------------------------ kernels
     def _joint_kernels(self, joint: int) -> tuple[np.ndarray, np.ndarray]:
-        """(click kernel, at-stop kernel) of one joint, each ``tail_s`` long."""
+        """(click kernel, rattle kernel) of one joint; the rattle starts up to 0.5 ms late."""
         js = JOINT_SOUNDS[joint]
         sr = self.sample_rate
         t = np.arange(self._tail) / sr
@@ -199,24 +205,29 @@ class Soundscape:
         click = _modes(t, js.click_modes_hz, js.click_decay_s, js.click_weights) + 0.08 * burst
         click = _normalise(click, js.click_db, sr)
         # rattle: the stop rings, and the slider bounces once ~0.6 ms later
-        ring = np.exp(-t / js.stop_decay_s) * np.sin(2 * np.pi * js.stop_hz * t)
-        ring *= 1 + 0.3 * np.sin(2 * np.pi * 340.0 * t)  # buzz: the bounce beats the ring
+        tr = t[: self._tail - self._jit]
+        ring = np.exp(-tr / js.stop_decay_s) * np.sin(2 * np.pi * js.stop_hz * tr)
+        ring *= 1 + 0.3 * np.sin(2 * np.pi * 340.0 * tr)  # buzz: the bounce beats the ring
         lag = int(round(6e-4 * sr))
         bounce = np.zeros_like(ring)
-        bounce[lag:] = 0.5 * ring[: self._tail - lag]
+        bounce[lag:] = 0.5 * ring[: ring.size - lag]
         rattle = _normalise(ring + bounce, js.stop_db, sr)
-        at_stop = 0.5 * click + rattle
-        return click.astype(np.float64), at_stop.astype(np.float64)
+        return click, rattle
 
-    def _make_noise_fir(self) -> np.ndarray:
-        from scipy.signal import firwin2
-
-        nyq = self.sample_rate / 2
-        f = np.array([0.0, 100.0, 1000.0, 4000.0, 16000.0, nyq])
-        f = np.unique(np.clip(f, 0, nyq))
-        gain = np.sqrt(1000.0 / np.maximum(f, 100.0))  # pinkish: -3 dB per octave above 100 Hz
-        fir = firwin2(self._NOISE_FIR, f / nyq, gain)
-        return fir / np.sqrt(np.sum(fir**2)) * 10 ** (self.noise_db / 20)
+    def _make_noise_tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """Two seeded tables of pinkish noise (-3 dB/octave above 100 Hz), shaped in
+        the frequency domain so each wraps seamlessly. Summed at coprime lengths they
+        repeat only after hours, and a block's noise is two cheap look-ups."""
+        sr = self.sample_rate
+        tables = []
+        for tag, size in ((10, 1 << 18), (11, 3**11)):
+            rng = np.random.default_rng([self.seed & 0xFFFFFFFF, tag])
+            spec = np.fft.rfft(rng.standard_normal(size))
+            f = np.fft.rfftfreq(size, 1 / sr)
+            spec *= np.sqrt(1000.0 / np.maximum(f, 100.0))
+            x = np.fft.irfft(spec, size)
+            tables.append(x / np.sqrt(np.mean(x**2)) * 10 ** (self.noise_db / 20) / np.sqrt(2))
+        return tables[0], tables[1]
 
     # ------------------------------------------------------------------ render
     def render(
@@ -283,42 +294,51 @@ class Soundscape:
         if not keep.any():
             return
         idx, joints, stops = idx[keep], joints[keep], stops[keep]
-        # per-step amplitude jitter (+-25 %), a pure function of the step's sample index
+        # per-step jitter, a pure function of the step's sample index: click amplitude
+        # +-25 %; at the stop the click is halved and the stop rattles, its amplitude
+        # +-40 % and its start 0-0.5 ms late (the slider meets the stop a little
+        # differently every time, which also smears the step-rate harmonics)
         amp = 0.75 + 0.5 * _hash_uniform(self.seed, 1, idx)
+        amp = np.where(stops, 0.5 * amp, amp)
         base = s0 - L + 1
         for j in np.unique(joints):
-            click, at_stop = self._kernels[int(j)]
-            for flag, kernel in ((False, click), (True, at_stop)):
-                sel = (joints == j) & (stops == flag)
-                if not sel.any():
-                    continue
-                train = np.zeros(n + L - 1)
-                np.add.at(train, idx[sel] - base, amp[sel])
-                out += oaconvolve(train, kernel, mode="valid")
-
-    def _white(self, start: int, stop: int, tag: int) -> np.ndarray:
-        """Deterministic white noise for absolute samples [start, stop)."""
-        C = self._NOISE_CHUNK
-        parts = []
-        for c in range(start // C, (stop - 1) // C + 1):
-            rng = np.random.default_rng([self.seed & 0xFFFFFFFF, tag, c + (1 << 40)])
-            chunk = rng.standard_normal(C)
-            lo = max(start - c * C, 0)
-            hi = min(stop - c * C, C)
-            parts.append(chunk[lo:hi])
-        return np.concatenate(parts)
+            click, rattle = self._kernels[int(j)]
+            sel = joints == j
+            train = np.zeros(n + L - 1)
+            np.add.at(train, idx[sel] - base, amp[sel])
+            out += oaconvolve(train, click, mode="valid")
+            sel &= stops
+            if sel.any():
+                r_idx = idx[sel] + np.floor(
+                    _hash_uniform(self.seed, 8, idx[sel]) * (self._jit + 1)
+                ).astype(np.int64)
+                r_amp = 0.6 + 0.8 * _hash_uniform(self.seed, 9, idx[sel])
+                base_r = s0 - rattle.size + 1
+                ok = (r_idx >= base_r) & (r_idx < s0 + n)
+                train = np.zeros(n + rattle.size - 1)
+                np.add.at(train, r_idx[ok] - base_r, r_amp[ok])
+                out += oaconvolve(train, rattle, mode="valid")
 
     def _add_noise(self, out, s0) -> None:
-        from scipy.signal import oaconvolve
+        i = s0 + np.arange(out.size)
+        out += self._noise_a[i % self._noise_a.size]
+        out += self._noise_b[i % self._noise_b.size]
 
-        L = self._noise_fir.size
-        w = self._white(s0 - L + 1, s0 + out.size, tag=2)
-        out += oaconvolve(w, self._noise_fir, mode="valid")
+    def _hum(self, t: np.ndarray) -> np.ndarray:
+        h = np.zeros_like(t)
+        for k, db in ((1, -50.0), (2, -62.0), (3, -56.0), (5, -64.0)):
+            h += np.sqrt(2) * 10 ** (db / 20) * np.sin(2 * np.pi * 50.0 * k * t + 0.7 * k)
+        return h
 
     def _add_hum(self, out, s0) -> None:
-        t = (s0 + np.arange(out.size)) / self.sample_rate
-        for k, db in ((1, -50.0), (2, -62.0), (3, -56.0), (5, -64.0)):
-            out += np.sqrt(2) * 10 ** (db / 20) * np.sin(2 * np.pi * 50.0 * k * t + 0.7 * k)
+        sr = self.sample_rate
+        if sr % 50 == 0:  # exactly periodic in samples: look one 20 ms period up
+            period = sr // 50
+            if self._hum_table is None:
+                self._hum_table = self._hum(np.arange(period) / sr)
+            out += self._hum_table[(s0 + np.arange(out.size)) % period]
+        else:
+            out += self._hum((s0 + np.arange(out.size)) / sr)
 
     def _knock_kernel(self, u: np.ndarray) -> np.ndarray:
         """One knock: a low thump plus a brief bright contact click; ``u`` shapes it."""
@@ -349,47 +369,56 @@ class Soundscape:
                 kern = self._knock_kernel(u) * 10 ** (level_db / 20)
                 out[lo - s0 : hi - s0] += kern[lo - start : hi - start]
 
+    def _syllable(self, k: int) -> tuple[int, np.ndarray] | None:
+        """Syllable ``k`` of the babble (start sample, samples) or None; cached."""
+        if k in self._syl_cache:
+            return self._syl_cache[k]
+        from scipy.signal import lfilter, sosfilt
+
+        sr = self.sample_rate
+        seg = int(round(self._SYL_SEG_S * sr))
+        rng = np.random.default_rng([self.seed & 0xFFFFFFFF, 4, k + (1 << 40)])
+        talking = _hash_uniform(self.seed, 5, np.array([k // 12]))[0] < 0.7  # 3 s turns
+        result = None
+        if talking and rng.random() < 0.85:
+            dur = int(rng.uniform(0.08, self._SYL_MAX_S) * sr)
+            start = k * seg + int(rng.integers(seg // 4))
+            t = np.arange(dur) / sr
+            env = np.sin(np.pi * t / (dur / sr)) ** 2
+            # voiced: a glottal pulse train (gliding pitch) through three formants
+            f0 = rng.uniform(95.0, 230.0) * (1 + rng.uniform(-0.2, 0.2) * t / t[-1])
+            pulses = np.zeros(dur)
+            pulses[np.flatnonzero(np.diff(np.floor(np.cumsum(f0 / sr)), prepend=0.0))] = 1.0
+            pulses = lfilter([1.0], [1.0, -0.9], pulses)  # glottal roll-off
+            voiced = np.zeros(dur)
+            for fm_lo, fm_hi, bw in ((300, 850, 90.0), (900, 2300, 120.0), (2400, 3200, 180.0)):
+                fm = rng.uniform(fm_lo, fm_hi)
+                r = np.exp(-np.pi * bw / sr)
+                a = [1.0, -2 * r * np.cos(2 * np.pi * fm / sr), r * r]
+                voiced += lfilter([1.0 - r], a, pulses)
+            voiced /= np.sqrt(np.mean(voiced**2)) + 1e-30
+            syl = voiced * env
+            if rng.random() < 0.3:  # a fricative ('s', 'f'): band noise 3.5-7 kHz, weaker
+                noise = rng.standard_normal(dur)
+                syl = syl + 0.25 * sosfilt(self._fric_sos, noise) * env
+            result = (start, syl * 10 ** (self.babble_db / 20))
+        if len(self._syl_cache) > 64:
+            self._syl_cache.clear()
+        self._syl_cache[k] = result
+        return result
+
     def _add_babble(self, out, s0) -> None:
         sr, n = self.sample_rate, out.size
         seg = int(round(self._SYL_SEG_S * sr))
-        maxlen = int(round(self._SYL_MAX_S * sr))
-        first = (s0 - maxlen) // seg
-        last = (s0 + n - 1) // seg
-        amp = 10 ** (self.babble_db / 20)
-        for k in range(first, last + 1):
-            rng = np.random.default_rng([self.seed & 0xFFFFFFFF, 4, k + (1 << 40)])
-            talking = _hash_uniform(self.seed, 5, np.array([k // 12]))[0] < 0.7  # 3 s turns
-            if not talking or rng.random() > 0.85:
+        maxlen = int(round(self._SYL_MAX_S * sr)) + seg // 4
+        for k in range((s0 - maxlen) // seg, (s0 + n - 1) // seg + 1):
+            syl = self._syllable(k)
+            if syl is None:
                 continue
-            dur = int(rng.uniform(0.08, self._SYL_MAX_S) * sr)
-            start = k * seg + int(rng.integers(seg // 4))
-            lo, hi = max(start, s0), min(start + dur, s0 + n)
-            if lo >= hi:
-                continue
-            t = np.arange(lo - start, hi - start) / sr
-            env = np.sin(np.pi * t / (dur / sr)) ** 2
-            f0 = rng.uniform(95.0, 230.0)
-            glide = rng.uniform(-0.25, 0.25)
-            phase = 2 * np.pi * f0 * (t + 0.5 * glide * t**2 / (dur / sr))
-            formants = (rng.uniform(300, 850), rng.uniform(900, 2300), rng.uniform(2400, 3200))
-            nh = int(5000.0 / f0)
-            h = np.arange(1, nh + 1)
-            fh = h * f0
-            weight = np.zeros(nh)
-            for fm, bw in zip(formants, (90.0, 120.0, 180.0), strict=True):
-                weight += 1.0 / (1.0 + ((fh - fm) / bw) ** 2)
-            weight /= h**0.5  # glottal tilt
-            voiced = (weight[:, None] * np.sin(h[:, None] * phase[None, :])).sum(axis=0)
-            voiced /= np.sqrt(0.5 * np.sum(weight**2))
-            syl = voiced * env
-            if rng.random() < 0.3:  # a fricative ('s', 'f'): band noise 3.5-7 kHz, weaker
-                noise = self._white(lo, hi, tag=6)
-                from scipy.signal import butter, sosfilt
-
-                hi_f = min(7000.0, 0.45 * sr)
-                sos = butter(2, [3500.0 / (sr / 2), hi_f / (sr / 2)], btype="band", output="sos")
-                syl = syl + 0.25 * sosfilt(sos, noise) * env
-            out[lo - s0 : hi - s0] += amp * syl
+            start, x = syl
+            lo, hi = max(start, s0), min(start + x.size, s0 + n)
+            if lo < hi:
+                out[lo - s0 : hi - s0] += x[lo - start : hi - start]
 
 
 def render_traverse_recording(
