@@ -265,7 +265,7 @@ class ANC300:
             self._device(lambda: ax.move_raw(n), cmd)
             with self._read_timeout(self.timeout + 1.5 * abs(n) / hz):
                 self._device(lambda: ax.ask("stepw"), f"stepw {ax.id}")
-        except DeviceError:
+        except BaseException:  # refused, unanswered, garbage, or Ctrl-C: stop the axis
             self.stop(joint)
             raise
 

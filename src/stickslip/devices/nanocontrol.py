@@ -23,7 +23,8 @@ Commands are ASCII, terminated by ``;``, no newline::
     counterread;        the coarse step counters of all channels
     counterreset;       zero the counters
     version;            firmware identification
-    stop;               stop all channels (newer firmware; sent best-effort)
+    stop;               stop all channels (newer firmware; sent only after a failed
+                        coarse command, best-effort)
 
 Assumptions about replies (no public source documents the old firmware's replies;
 these follow the NanoControl's documented newer console, and are lenient):
@@ -158,6 +159,7 @@ class NanoControl:
             j: {"+": None, "-": None} for j in self.channels
         }
         self._lock = threading.RLock()
+        self._busy = False
         self.version = ""
         if query_version and ack:
             self.version = self.command("version")
@@ -311,30 +313,42 @@ class NanoControl:
         while remaining:
             chunk = max(-MAX_COARSE, min(MAX_COARSE, remaining))
             duration = abs(chunk) / self._hz[joint]
+            self._busy = True
             try:
                 if self.ack:
                     self.command(f"coarse {ch} {chunk:+d}", timeout=self.timeout + 1.5 * duration)
                 else:
                     self.command(f"coarse {ch} {chunk:+d}")
                     _sleep(duration)
-            except DeviceError:
-                self.stop(joint)
+            except BaseException:  # a refused or unanswered burst, or Ctrl-C: stop the joint
+                self._send_stop()
                 raise
+            self._busy = False
             remaining -= chunk
 
     def stop(self, joint: int | None = None) -> None:
-        """Stop all channels now (``stop;``: there is no per-channel stop). Never raises."""
+        """Stop all channels now (``stop;``: there is no per-channel stop). Never raises.
+
+        A burst is over once the controller has answered it, so ``stop;`` is sent only
+        while a burst may still be running (from another thread, or after a burst that
+        failed or was interrupted); otherwise there is nothing to stop and nothing is sent.
+        """
+        if self._busy or not self.ack:
+            self._send_stop()
+
+    def _send_stop(self) -> None:
         try:
-            with self._lock:
-                log.debug("-> stop;")
-                self.transport.write(b"stop;")
-                if self.ack:
-                    try:
-                        self.transport.read_available(quiet=0.02, limit=min(self.timeout, 0.2))
-                    except DeviceError:  # pragma: no cover - best effort
-                        pass
+            log.debug("-> stop;")
+            self.transport.write(b"stop;")
+            if self.ack:
+                try:
+                    self.transport.read_available(quiet=0.02, limit=min(self.timeout, 0.2))
+                except DeviceError:  # pragma: no cover - best effort
+                    pass
         except DeviceError as e:
             log.warning("could not send stop to %s: %s", self.transport.name, e)
+        finally:
+            self._busy = False
 
     # -- protocol -----------------------------------------------------------------------
     @property
@@ -364,9 +378,13 @@ class NanoControl:
         }
 
     def close(self) -> None:
-        """Stop and release the transport."""
+        """Release the transport.
+
+        Nothing is moving then: every ``coarse`` has been answered once done, and a
+        failed one was already followed by ``stop;``. So a normal session sends only
+        the documented command set.
+        """
         if not self.transport.closed:
-            self.stop()
             self.transport.close()
 
     def __enter__(self) -> NanoControl:
