@@ -509,5 +509,46 @@ def _float(word: str) -> float:
         raise _Refuse(f"Error: {word!r} is not a number") from None
 
 
-def _sleep(seconds: float) -> None:  # pragma: no cover - kept for symmetry with drivers
-    time.sleep(seconds)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Serve an emulator until Ctrl-C: ``python -m stickslip.devices.emulators [anc300]``.
+
+    Prints the URL to open it with (e.g. ``mm3a:///dev/pts/7``), so that the command
+    line can be tried without hardware:
+    ``stickslip move --device mm3a:///dev/pts/7 --calibration cal.json --joint 3 --by 30um``.
+    """
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python -m stickslip.devices.emulators",
+        description="Serve a controller emulator driving a simulated MM3A (Ctrl-C stops).",
+    )
+    parser.add_argument(
+        "device", nargs="?", default="nanocontrol", choices=("nanocontrol", "anc300")
+    )
+    parser.add_argument("--tcp", action="store_true", help="NanoControl on a loopback TCP port")
+    parser.add_argument("--seed", type=int, default=0, help="simulator seed")
+    parser.add_argument("--day", default="emulator", help="simulator day label")
+    parser.add_argument("--realtime", type=float, default=0.0, help="1 = take as long as a device")
+    parser.add_argument("--password", default="123456", help="ANC300 console password")
+    args = parser.parse_args(argv)
+    sim = SimulatedMM3A(seed=args.seed, day=args.day)
+    emu: _Emulator
+    if args.device == "anc300":
+        emu = ANC300Emulator(sim, password=args.password, realtime=args.realtime)
+    else:
+        emu = NanoControlEmulator(sim, "tcp" if args.tcp else "pty", realtime=args.realtime)
+    with emu:
+        print(emu.url, flush=True)
+        try:
+            while True:
+                time.sleep(3600)
+        except KeyboardInterrupt:
+            pass
+        print(f"{len(emu.received)} commands received", flush=True)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())
