@@ -34,7 +34,7 @@ def _root() -> None:
     """stickslip: calibrate, predict and plan stick-slip steps (see the commands below)."""
 
 
-from . import core, devices, history, measure  # noqa: E402,F401  (they register their commands)
+from . import audio, core, devices, history, measure  # noqa: E402,F401  (they register their commands)
 
 
 def main() -> None:

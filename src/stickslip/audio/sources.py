@@ -1,0 +1,197 @@
+"""Where the detector's audio comes from: WAV files in blocks, or a live microphone.
+
+The simulator's virtual microphone lives with the simulator
+(:mod:`stickslip.devices.simulator`); it yields blocks the same way.
+Both sources here import their optional dependency lazily and say which extra to
+install when it is missing.
+"""
+
+from __future__ import annotations
+
+import queue
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["AudioSourceError", "Microphone", "read_wav", "wav_blocks", "wav_info"]
+
+_AUDIO_EXTRA = "install the audio extra: pip install 'stickslip[audio]'"
+
+
+class AudioSourceError(OSError):
+    """An audio source that cannot be opened or read (the message says why)."""
+
+
+def _soundfile():
+    try:
+        import soundfile
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise AudioSourceError(f"reading WAV files needs soundfile; {_AUDIO_EXTRA}") from e
+    except OSError as e:  # pragma: no cover - libsndfile missing
+        raise AudioSourceError(
+            f"soundfile cannot load libsndfile ({e}); apt-get install libsndfile1"
+        ) from e
+    return soundfile
+
+
+def _open_error(path: Path, e: Exception) -> AudioSourceError:
+    if not path.exists():
+        return AudioSourceError(f"{path}: no such file")
+    if path.is_dir():
+        return AudioSourceError(f"{path}: is a directory, not a WAV file")
+    return AudioSourceError(f"{path}: not a readable audio file ({e})")
+
+
+def wav_info(path: str | Path) -> tuple[int, int, float]:
+    """(sample rate Hz, channels, duration s) of an audio file."""
+    sf = _soundfile()
+    p = Path(path)
+    try:
+        info = sf.info(str(p))
+    except Exception as e:  # soundfile raises LibsndfileError / RuntimeError / TypeError
+        raise _open_error(p, e) from None
+    return int(info.samplerate), int(info.channels), float(info.frames) / info.samplerate
+
+
+def wav_blocks(path: str | Path, block: int = 1024) -> Iterator[tuple[np.ndarray, int]]:
+    """Read an audio file in blocks: yields ``(mono float32 samples, sample rate Hz)``.
+
+    Multi-channel files are mixed down to mono (mean of the channels). The last block
+    may be shorter.
+    """
+    if int(block) < 1:
+        raise ValueError(f"block must be >= 1 sample, got {block}")
+    sf = _soundfile()
+    p = Path(path)
+    try:
+        f = sf.SoundFile(str(p))
+    except Exception as e:
+        raise _open_error(p, e) from None
+    with f:
+        rate = int(f.samplerate)
+        for data in f.blocks(blocksize=int(block), dtype="float32", always_2d=True):
+            yield data.mean(axis=1, dtype=np.float32) if data.shape[1] > 1 else data[:, 0], rate
+
+
+def read_wav(path: str | Path) -> tuple[np.ndarray, int]:
+    """A whole audio file as ``(mono float32 samples, sample rate Hz)``."""
+    rate = wav_info(path)[0]
+    blocks = [b for b, _ in wav_blocks(path, block=1 << 16)]
+    return (np.concatenate(blocks) if blocks else np.zeros(0, np.float32)), rate
+
+
+def write_wav(path: str | Path, samples: np.ndarray, sample_rate: int) -> Path:
+    """Write mono samples as a 32-bit float WAV file."""
+    sf = _soundfile()
+    p = Path(path)
+    sf.write(str(p), np.asarray(samples, dtype=np.float32), int(sample_rate), subtype="FLOAT")
+    return p
+
+
+class Microphone:
+    """A live microphone through python-sounddevice (PortAudio).
+
+    The stream's callback only copies each block into a queue; :meth:`blocks` hands
+    them out in the caller's thread, so detection never runs inside the audio callback.
+
+    Parameters
+    ----------
+    sample_rate : int
+        Sample rate, Hz.
+    block : int
+        Samples per block.
+    device : int or str, optional
+        PortAudio input device (index or name); default the system's input.
+    channels : int
+        Channels to record; they are mixed to mono.
+
+    Raises
+    ------
+    AudioSourceError
+        When sounddevice or PortAudio is missing, or no input device can be opened.
+
+    Examples
+    --------
+    >>> with Microphone() as mic:                      # doctest: +SKIP
+    ...     for block in mic.blocks():
+    ...         events = detector.feed(block)
+    """
+
+    def __init__(
+        self,
+        sample_rate: int = 48_000,
+        block: int = 1024,
+        device: int | str | None = None,
+        channels: int = 1,
+    ) -> None:
+        self.sample_rate = int(sample_rate)
+        self.block = int(block)
+        self.device = device
+        self.channels = int(channels)
+        self.overflows = 0
+        self._queue: queue.Queue[np.ndarray] = queue.Queue()
+        self._stream = None
+
+    @staticmethod
+    def _sounddevice():
+        try:
+            import sounddevice
+        except ImportError as e:
+            raise AudioSourceError(f"live input needs python-sounddevice; {_AUDIO_EXTRA}") from e
+        except OSError as e:  # sounddevice raises OSError when PortAudio is absent
+            raise AudioSourceError(
+                f"PortAudio is not installed ({e}); apt-get install libportaudio2"
+            ) from e
+        return sounddevice
+
+    def _callback(self, indata, frames, time_info, status) -> None:  # PortAudio's thread
+        if status and getattr(status, "input_overflow", False):
+            self.overflows += 1
+        self._queue.put(indata.copy())
+
+    def start(self) -> Microphone:
+        """Open and start the input stream."""
+        sd = self._sounddevice()
+        try:
+            self._stream = sd.InputStream(
+                samplerate=self.sample_rate,
+                blocksize=self.block,
+                device=self.device,
+                channels=self.channels,
+                dtype="float32",
+                callback=self._callback,
+            )
+            self._stream.start()
+        except Exception as e:  # PortAudioError, ValueError for a bad device
+            self._stream = None
+            raise AudioSourceError(f"cannot open the microphone: {e}") from None
+        return self
+
+    def stop(self) -> None:
+        """Stop and close the stream (safe to call twice)."""
+        if self._stream is not None:
+            try:
+                self._stream.stop()
+                self._stream.close()
+            finally:
+                self._stream = None
+
+    def __enter__(self) -> Microphone:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    def blocks(self, timeout_s: float = 2.0) -> Iterator[np.ndarray]:
+        """Yield mono float32 blocks as they arrive; raises if none comes for ``timeout_s``."""
+        if self._stream is None:
+            self.start()
+        while True:
+            try:
+                data = self._queue.get(timeout=timeout_s)
+            except queue.Empty:
+                raise AudioSourceError(
+                    f"no audio from the microphone for {timeout_s:g} s"
+                ) from None
+            yield data.mean(axis=1) if data.ndim == 2 and data.shape[1] > 1 else data.reshape(-1)
