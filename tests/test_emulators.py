@@ -62,7 +62,7 @@ def test_calibration_traverse_over_pty_measures_the_true_step():
         start, end = (0.0, kin.Q3_MAX) if d == "+" else (kin.Q3_MAX, 0.0)
         true = model.average_gamma(start, end, *POSE)
         assert res.traverse.steps > 5000
-        assert res.gamma == pytest.approx(float(true), rel=0.01)
+        assert res.gamma == pytest.approx(float(true), rel=0.003)  # noise ~0.03 %: 10x room
     # every message on the wire is a well-formed command of the set
     import re
 
@@ -83,7 +83,7 @@ def test_rotary_traverse_over_tcp_socket():
     true = sim.true_models()[(2, "-")].average_gamma(
         kin.JOINTS[2].upper, kin.JOINTS[2].lower, *POSE
     )
-    assert res.gamma == pytest.approx(float(true), rel=0.01)
+    assert res.gamma == pytest.approx(float(true), rel=0.003)
 
 
 def test_settings_reach_the_emulated_device():

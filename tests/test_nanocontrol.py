@@ -7,9 +7,12 @@ The transcripts follow the command set in stickslip.devices.nanocontrol's docstr
 from __future__ import annotations
 
 import logging
+import re
 import time
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from stickslip.devices.base import DeviceError, open_device
 from stickslip.devices.nanocontrol import MAX_COARSE, NanoControl
@@ -174,3 +177,31 @@ def test_bad_url_options():
         open_device("mm3a:///dev/ttyUSB0?sped=3")
     with pytest.raises(ValueError, match="channel of joint 2"):
         open_device("mm3a:///dev/ttyUSB0?channels=AXC")
+
+
+class _AutoAck(FakeTransport):
+    """Answers every `;`-terminated command with "o\\t\\r" and records it."""
+
+    def __init__(self):
+        super().__init__([], name="auto")
+        self.commands: list[str] = []
+
+    def _send(self, data: bytes) -> None:
+        for part in data.decode().split(";")[:-1]:
+            self.commands.append(part)
+            self._buffer += b"o\tNC\r" if part == "version" else b"o\t\r"
+
+
+@given(n=st.integers(-3 * MAX_COARSE - 5, 3 * MAX_COARSE + 5), joint=st.sampled_from([1, 2, 3]))
+@settings(max_examples=60, deadline=None)
+def test_any_step_count_is_sent_as_well_formed_bursts_summing_to_it(n, joint):
+    t = _AutoAck()
+    dev = NanoControl(t, timeout=0.05, nominal_hz=1e9)
+    dev.step(joint, n)
+    coarse = t.commands[1:]
+    ch = "ABC"[joint - 1]
+    assert all(re.fullmatch(rf"coarse {ch} [+-][1-9]\d*", c) for c in coarse)
+    counts = [int(c.split()[2]) for c in coarse]
+    assert sum(counts) == n
+    assert all(0 < abs(k) <= MAX_COARSE for k in counts)
+    assert len(counts) == -(-abs(n) // MAX_COARSE)  # the fewest bursts

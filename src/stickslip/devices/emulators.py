@@ -333,7 +333,7 @@ class NanoControlEmulator(_Emulator):
 
 
 class ANC300Emulator(_Emulator):
-    """An Attocube ANC300 telnet console on a loopback TCP port.
+    """An Attocube ANC300 console on a loopback TCP port (telnet) or a pseudo-terminal (serial).
 
     On connection it sends a banner (with telnet negotiation bytes) and asks for the
     password; it echoes the password as ``*``, answers ``Authorization success`` (or
@@ -354,8 +354,9 @@ class ANC300Emulator(_Emulator):
         password: str = "123456",
         realtime: float = 0.0,
         axes: int = 3,
+        transport: str = "tcp",
     ):
-        super().__init__(sim, "tcp", realtime, {str(i): i for i in (1, 2, 3)})
+        super().__init__(sim, transport, realtime, {str(i): i for i in (1, 2, 3)})
         self.password = password
         self.n_axes = int(axes)
         self.mode = dict.fromkeys(range(1, self.n_axes + 1), "gnd")
@@ -370,6 +371,8 @@ class ANC300Emulator(_Emulator):
         """The URL a driver opens this emulator with (password included)."""
         if self.port is None:
             raise RuntimeError("start the emulator first")
+        if self.transport == "pty":
+            return f"anc300://{self.port}?password={self.password}"
         return f"anc300://127.0.0.1:{self.port}?password={self.password}"
 
     def _on_connect(self, send) -> None:
@@ -528,6 +531,7 @@ def main(argv: list[str] | None = None) -> int:
         "device", nargs="?", default="nanocontrol", choices=("nanocontrol", "anc300")
     )
     parser.add_argument("--tcp", action="store_true", help="NanoControl on a loopback TCP port")
+    parser.add_argument("--pty", action="store_true", help="ANC300 on a pseudo-terminal (serial)")
     parser.add_argument("--seed", type=int, default=0, help="simulator seed")
     parser.add_argument("--day", default="emulator", help="simulator day label")
     parser.add_argument("--realtime", type=float, default=0.0, help="1 = take as long as a device")
@@ -536,7 +540,8 @@ def main(argv: list[str] | None = None) -> int:
     sim = SimulatedMM3A(seed=args.seed, day=args.day)
     emu: _Emulator
     if args.device == "anc300":
-        emu = ANC300Emulator(sim, password=args.password, realtime=args.realtime)
+        kind = "pty" if args.pty else "tcp"
+        emu = ANC300Emulator(sim, args.password, args.realtime, transport=kind)
     else:
         emu = NanoControlEmulator(sim, "tcp" if args.tcp else "pty", realtime=args.realtime)
     with emu:

@@ -44,7 +44,7 @@ these follow the NanoControl's documented newer console, and are lenient):
   placeholder table (measure yours: time a burst of 10 000 steps) and can be passed in.
 
 Every message sent and received is logged on logger ``"stickslip.devices.nanocontrol"``
-(DEBUG level; ``stickslip -v`` or ``logging.basicConfig(level=logging.DEBUG)`` shows it).
+(DEBUG level; ``logging.basicConfig(level=logging.DEBUG)`` shows it).
 """
 
 from __future__ import annotations
