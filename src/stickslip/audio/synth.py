@@ -26,6 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -117,6 +118,24 @@ def _normalise(kernel: np.ndarray, level_db: float, sample_rate: int) -> np.ndar
     return kernel * np.sqrt(target / energy)
 
 
+@lru_cache(maxsize=16)
+def _noise_tables(sample_rate: int, seed: int, noise_db: float) -> tuple[np.ndarray, np.ndarray]:
+    """Two seeded tables of pinkish room noise (-3 dB/octave above 100 Hz), shaped in the
+    frequency domain so each wraps seamlessly. Summed at coprime lengths (2**18 and
+    3**11) they repeat only after hours, and a block's noise is two cheap look-ups."""
+    tables = []
+    for tag, size in ((10, 1 << 18), (11, 3**11)):
+        rng = np.random.default_rng([seed & 0xFFFFFFFF, tag])
+        spec = np.fft.rfft(rng.standard_normal(size))
+        f = np.fft.rfftfreq(size, 1 / sample_rate)
+        spec *= np.sqrt(1000.0 / np.maximum(f, 100.0))
+        x = np.fft.irfft(spec, size)
+        x *= 10 ** (noise_db / 20) / np.sqrt(2 * np.mean(x**2))
+        x.flags.writeable = False
+        tables.append(x)
+    return tables[0], tables[1]
+
+
 class Soundscape:
     """What the room hears at ``sample_rate``: steps, end-stop rattles and the room.
 
@@ -185,7 +204,7 @@ class Soundscape:
         self._tail = int(round(self.tail_s * self.sample_rate))
         self._jit = int(round(self._RATTLE_JITTER_S * self.sample_rate))
         self._kernels = {j: self._joint_kernels(j) for j in JOINT_SOUNDS}
-        self._noise_a, self._noise_b = self._make_noise_tables()
+        self._noise_a, self._noise_b = _noise_tables(self.sample_rate, self.seed, self.noise_db)
         self._knock_len = int(round(self._KNOCK_S * self.sample_rate))
         self._hum_table: np.ndarray | None = None
         self._syl_cache: dict[int, tuple[int, np.ndarray] | None] = {}
@@ -213,21 +232,6 @@ class Soundscape:
         bounce[lag:] = 0.5 * ring[: ring.size - lag]
         rattle = _normalise(ring + bounce, js.stop_db, sr)
         return click, rattle
-
-    def _make_noise_tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """Two seeded tables of pinkish noise (-3 dB/octave above 100 Hz), shaped in
-        the frequency domain so each wraps seamlessly. Summed at coprime lengths they
-        repeat only after hours, and a block's noise is two cheap look-ups."""
-        sr = self.sample_rate
-        tables = []
-        for tag, size in ((10, 1 << 18), (11, 3**11)):
-            rng = np.random.default_rng([self.seed & 0xFFFFFFFF, tag])
-            spec = np.fft.rfft(rng.standard_normal(size))
-            f = np.fft.rfftfreq(size, 1 / sr)
-            spec *= np.sqrt(1000.0 / np.maximum(f, 100.0))
-            x = np.fft.irfft(spec, size)
-            tables.append(x / np.sqrt(np.mean(x**2)) * 10 ** (self.noise_db / 20) / np.sqrt(2))
-        return tables[0], tables[1]
 
     # ------------------------------------------------------------------ render
     def render(
