@@ -67,8 +67,15 @@ def test_one_stop_fires_once_through_dropouts_and_rearms_after_release():
     """Gaps shorter than release_s keep the event latched; a second stop after a long
     quiet fires again."""
     x = _quiet_then(
-        (0.3, 0.0), (0.2, 0.1), (0.05, 0.0), (0.2, 0.1), (0.1, 0.0), (0.2, 0.1),  # one stop
-        (0.6, 0.0), (0.2, 0.1), (0.2, 0.0),  # a second one
+        (0.3, 0.0),
+        (0.2, 0.1),
+        (0.05, 0.0),
+        (0.2, 0.1),
+        (0.1, 0.0),
+        (0.2, 0.1),  # one stop
+        (0.6, 0.0),
+        (0.2, 0.1),
+        (0.2, 0.0),  # a second one
     )
     events = detect(x, TUNING)
     assert len(events) == 2
@@ -125,8 +132,16 @@ def test_latency_estimate_without_measurement():
 
 
 def test_tuning_round_trip(tmp_path):
-    t = Tuning(band_hz=BAND, threshold_db=-41.5, joint=2, contrast_db=20.0, margin_db=10.0,
-               stepping_db=-51.5, stopped_db=-31.5, latency_measured_s=0.019)
+    t = Tuning(
+        band_hz=BAND,
+        threshold_db=-41.5,
+        joint=2,
+        contrast_db=20.0,
+        margin_db=10.0,
+        stepping_db=-51.5,
+        stopped_db=-31.5,
+        latency_measured_s=0.019,
+    )
     d = t.to_dict()
     assert d["band_hz"] == [5000.0, 7000.0] and d["threshold_db"] == -41.5
     assert {"frame", "hop", "sample_rate", "hold_s", "latency_s"} <= set(d)

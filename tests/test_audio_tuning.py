@@ -49,8 +49,14 @@ def test_targets_on_unseen_recordings(tunings):
         for k, (rate, gain) in enumerate(zip(RATES, GAINS, strict=True)):
             stop_at = 1.0 + 0.07 * k
             x, _ = render_traverse_recording(
-                joint, rate, stop_at, stop_at + 0.6, seed=200 + 10 * joint + k,
-                gain_db=gain, babble=True, knocks_per_min=30.0,
+                joint,
+                rate,
+                stop_at,
+                stop_at + 0.6,
+                seed=200 + 10 * joint + k,
+                gain_db=gain,
+                babble=True,
+                knocks_per_min=30.0,
             )
             events = detect(x, tuning, block=1024)
             assert len(events) == 1, (joint, rate, gain, events)

@@ -1,0 +1,190 @@
+"""CLI: stickslip tune / listen on WAV files, and their one-line errors."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from stickslip.audio.sources import (
+    AudioSourceError,
+    Microphone,
+    read_wav,
+    wav_blocks,
+    write_wav,
+)
+from stickslip.audio.synth import render_traverse_recording
+from stickslip.cli import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def wavs(tmp_path_factory):
+    d = tmp_path_factory.mktemp("wav")
+    x, sr = render_traverse_recording(3, 1000.0, 2.0, 3.0, seed=21)
+    write_wav(d / "tune.wav", x, sr)
+    y, _ = render_traverse_recording(3, 1250.0, 1.3, 2.0, seed=22, gain_db=2.0, babble=True)
+    write_wav(d / "test.wav", y, sr)
+    z, _ = render_traverse_recording(3, 1000.0, 1e9, 3.0, seed=23)
+    write_wav(d / "no_stop.wav", z, sr)
+    return d
+
+
+def _one_line_error(result, *words):
+    assert result.exit_code == 2, result.output
+    text = result.stderr if hasattr(result, "stderr") else result.output
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:"), text
+    for w in words:
+        assert w in lines[0], (w, lines[0])
+
+
+def test_tune_then_listen_json(wavs):
+    out = wavs / "tuning.json"
+    r = runner.invoke(
+        app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"]
+    )
+    assert r.exit_code == 0, r.output
+    assert "Hz" in r.output and "dBFS" in r.output and "contrast" in r.output
+    saved = json.loads(out.read_text())
+    assert saved["joint"] == 3 and saved["band_hz"][0] < 4600 < saved["band_hz"][1]
+
+    r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    (ev,) = json.loads(r.stdout)
+    assert abs(ev["onset_s"] - 1.3) < 0.025
+    assert 0 < ev["detected_at_s"] - 1.3 < 0.05
+    assert "level_db" in ev
+
+    r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out)])
+    assert r.exit_code == 0 and "detected at 1.3" in r.output
+
+
+def test_tune_json_output(wavs, tmp_path):
+    r = runner.invoke(
+        app,
+        [
+            "tune",
+            str(wavs / "tune.wav"),
+            "--stop-at",
+            "2",
+            "-o",
+            str(tmp_path / "t.json"),
+            "--json",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["threshold_db"] < 0
+
+
+def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):
+    r = runner.invoke(
+        app, ["tune", str(wavs / "no_stop.wav"), "--stop-at", "1.5", "-o", str(tmp_path / "t.json")]
+    )
+    _one_line_error(r, "sound alike")
+    assert not (tmp_path / "t.json").exists()
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["tune", "{d}/missing.wav", "--stop-at", "1", "-o", "{d}/x.json"], ["no such file"]),
+        (
+            ["tune", "{d}/tuning_bad.json", "--stop-at", "1", "-o", "{d}/x.json"],
+            ["not a readable audio file"],
+        ),
+        (["tune", "{d}/tune.wav", "--stop-at", "7", "-o", "{d}/x.json"], ["outside the recording"]),
+        (["tune", "{d}/tune.wav", "--stop-at", "0.2", "-o", "{d}/x.json"], ["must lie within"]),
+        (
+            ["tune", "{d}/tune.wav", "--stop-at", "2", "-o", "{d}/x.json", "--joint", "5"],
+            ["--joint"],
+        ),
+        (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json"], ["threshold_db"]),
+        (["listen", "{d}/test.wav", "--tuning", "{d}/nothing.json"], ["cannot read tuning"]),
+        (["listen", "--tuning", "{d}/tuning_bad.json"], ["--mic"]),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(wavs, args, words):
+    (wavs / "tuning_bad.json").write_text('{"band_hz": [4000, 5000]}')
+    r = runner.invoke(app, [a.format(d=wavs) for a in args])
+    _one_line_error(r, *words)
+
+
+def test_listen_mic_without_portaudio_is_one_line(wavs, monkeypatch):
+    def broken(self):
+        raise AudioSourceError("PortAudio is not installed; apt-get install libportaudio2")
+
+    monkeypatch.setattr(Microphone, "_sounddevice", broken)
+    r = runner.invoke(
+        app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")]
+    )
+    r = runner.invoke(app, ["listen", "--mic", "--tuning", str(wavs / "m.json")])
+    _one_line_error(r, "libportaudio2")
+
+
+def test_help_names_units():
+    for cmd in ("tune", "listen"):
+        r = runner.invoke(app, [cmd, "--help"])
+        assert r.exit_code == 0 and "Example" in r.output
+
+
+# ---------------------------------------------------------------- sources
+
+
+def test_wav_blocks_mix_to_mono_and_cover_the_file(tmp_path):
+    import soundfile as sf
+
+    left = np.linspace(-0.5, 0.5, 2500, dtype=np.float32)
+    sf.write(tmp_path / "st.wav", np.c_[left, -0.5 * left], 8000, subtype="FLOAT")
+    blocks = list(wav_blocks(tmp_path / "st.wav", block=1000))
+    assert [b.size for b, _ in blocks] == [1000, 1000, 500]
+    assert all(rate == 8000 and b.dtype == np.float32 for b, rate in blocks)
+    np.testing.assert_allclose(np.concatenate([b for b, _ in blocks]), 0.25 * left, atol=1e-7)
+    x, rate = read_wav(tmp_path / "st.wav")
+    assert rate == 8000 and x.size == 2500
+
+
+class _FakeStream:
+    def __init__(self, callback, channels, blocksize, **kw):
+        self.callback, self.channels, self.blocksize = callback, channels, blocksize
+
+    def start(self):  # deliver two blocks at once, as PortAudio's thread would
+        for v in (0.1, 0.2):
+            self.callback(np.full((self.blocksize, self.channels), v, np.float32), 0, None, None)
+
+    def stop(self):
+        pass
+
+    def close(self):
+        pass
+
+
+def test_microphone_queues_blocks_in_the_callback(monkeypatch):
+    fake = types.SimpleNamespace(InputStream=_FakeStream)
+    monkeypatch.setitem(sys.modules, "sounddevice", fake)
+    with Microphone(block=256, channels=2) as mic:
+        it = mic.blocks(timeout_s=0.05)
+        a, b = next(it), next(it)
+        assert a.shape == (256,) and np.allclose(a, 0.1) and np.allclose(b, 0.2)
+        with pytest.raises(AudioSourceError, match="no audio"):
+            next(it)
+
+
+def test_microphone_without_sounddevice_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "sounddevice", None)
+    with pytest.raises(AudioSourceError, match=r"stickslip\[audio\]"):
+        Microphone().start()
+
+
+def test_microphone_without_an_input_device(monkeypatch):
+    def no_device(**kw):
+        raise ValueError("No input device matching 'usb'")
+
+    monkeypatch.setitem(sys.modules, "sounddevice", types.SimpleNamespace(InputStream=no_device))
+    with pytest.raises(AudioSourceError, match="cannot open the microphone: No input device"):
+        Microphone(device="usb").start()
