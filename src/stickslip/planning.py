@@ -1,0 +1,263 @@
+"""Planning moves with a calibration: steps for a move, and dead reckoning after N steps.
+
+The number of steps to move rotary joint ``j`` from ``q`` to ``q'`` is the exact
+integral ``integral_q^q' dq / gamma(q)`` (the step size changes along the way as the
+gravity torque changes), rounded to the nearest integer. The prismatic joint's step
+does not depend on its own position, so there it is ``|q' - q| / gamma``.
+
+Dead reckoning is the inverse: where the joint ends after ``N`` steps. A plan and its
+dead reckoning agree to within half a step (the rounding).
+
+The hot path is built for teleoperation loops at 1 kHz: :class:`Planner` precomputes
+the step-size coefficients of a joint in a pose, and :meth:`Planner.steps` then costs
+a few microseconds (pure ``math``, no numpy). :func:`plan_move` is the one-call form.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from . import kinematics as kin
+from .calibration import Calibration
+from .models import JointModel, NonPhysicalError, PrismaticParams, direction_label, position_after_steps
+
+__all__ = ["MovePlan", "Planner", "plan_move", "dead_reckon"]
+
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class MovePlan:
+    """A planned move of one joint.
+
+    Attributes
+    ----------
+    joint : int
+    direction : str
+        ``"+"`` or ``"-"``.
+    steps : int
+        Number of steps to command (>= 0; the sign is in ``direction``).
+    q_from, q_to : float
+        Requested start and target (rad or m).
+    q_end_predicted : float
+        Where the joint is predicted to end after ``steps`` (rad or m); within half a
+        step of ``q_to``.
+    exact_steps : float
+        The unrounded integral.
+    gamma_start, gamma_end : float
+        Predicted step size at the start and at the target (rad or m).
+    """
+
+    joint: int
+    direction: str
+    steps: int
+    q_from: float
+    q_to: float
+    q_end_predicted: float
+    exact_steps: float
+    gamma_start: float
+    gamma_end: float
+
+    @property
+    def signed_steps(self) -> int:
+        """Steps with the direction's sign (what a controller's ``step(joint, n)`` takes)."""
+        return self.steps if self.direction == "+" else -self.steps
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "joint": self.joint, "direction": self.direction, "steps": self.steps,
+            "signed_steps": self.signed_steps, "from": self.q_from, "to": self.q_to,
+            "end_predicted": self.q_end_predicted, "exact_steps": self.exact_steps,
+            "gamma_start": self.gamma_start, "gamma_end": self.gamma_end,
+            "unit": "m" if self.joint == 3 else "rad",
+        }
+
+
+class _DirCoeffs:
+    """Step size ``A + alpha cos q + beta sin q`` as amplitude/phase, with the constants of F."""
+
+    __slots__ = ("A", "alpha", "beta", "B", "phi", "s", "kind")
+
+    def __init__(self, A: float, alpha: float, beta: float):
+        self.A, self.alpha, self.beta = A, alpha, beta
+        self.B = math.hypot(alpha, beta)
+        self.phi = math.atan2(alpha, beta)
+        if self.B == 0.0:
+            self.kind = "const"
+            self.s = 0.0
+        elif A > self.B:
+            self.kind = "atan"
+            self.s = math.sqrt((A - self.B) * (A + self.B))
+        else:
+            self.kind = "other"
+            self.s = 0.0
+
+    def gamma(self, q: float) -> float:
+        return self.A + self.alpha * math.cos(q) + self.beta * math.sin(q)
+
+    def inverse(self, q0: float, n: float, sign: int) -> float:
+        """Solve ``sign (F(q) - F(q0)) = n`` for ``q`` by safeguarded Newton (``F' = 1/gamma``)."""
+        if self.kind == "const":
+            return q0 + sign * n * self.A
+        if self.kind != "atan":
+            return position_after_steps(q0, n, sign, self.A, self.alpha, self.beta)
+        F0 = self.F(q0)
+        lo_q = q0 + sign * n * (self.A - self.B)  # bracket: n min steps .. n max steps away
+        hi_q = q0 + sign * n * (self.A + self.B)
+        lo, hi = min(lo_q, hi_q), max(lo_q, hi_q)
+        q = q0 + sign * n * self.gamma(q0)
+        q = min(max(q, lo), hi)
+        tol = 1e-13 * max(1.0, abs(q))
+        for _ in range(60):
+            r = sign * (self.F(q) - F0) - n  # increasing in sign * q
+            if r == 0.0:
+                return q
+            if sign * r > 0:
+                hi = q
+            else:
+                lo = q
+            q_new = q - sign * r * self.gamma(q)
+            if not lo < q_new < hi:
+                q_new = 0.5 * (lo + hi)
+            if abs(q_new - q) <= tol:
+                return q_new
+            q = q_new
+        return q
+
+    def F(self, q: float) -> float:
+        """Antiderivative of 1/gamma (the atan form; see models.antiderivative_inverse_step)."""
+        x = q + self.phi
+        k = round(x / _TWO_PI)
+        xr = x - _TWO_PI * k
+        return 2.0 / self.s * (math.atan((self.A * math.tan(0.5 * xr) + self.B) / self.s) + math.pi * k)
+
+
+def _scalar_coefficients(model: JointModel, pose: kin.Pose) -> tuple[float, float, float]:
+    """``(A, alpha, beta)`` of ``model`` in ``pose``, with ``math`` (the planner's hot path).
+
+    The same numbers as :meth:`JointModel.rotary_coefficients` (a test checks it), without
+    numpy's per-call overhead on scalars.
+    """
+    q1, q2, q3, th, ps = pose
+    ct = math.cos(th)
+    gx, gy, gz = ct * math.sin(ps), -math.sin(th), -ct * math.cos(ps)  # gravity_base
+    p = model.params
+    if isinstance(p, PrismaticParams):
+        gx1 = math.cos(q1) * gx + math.sin(q1) * gy  # gravity in the frame turned by q1
+        load = math.sin(q2) * gx1 - math.cos(q2) * gz  # prismatic_load
+        return (1.0 - p.b * abs(math.cos(q2))) * (p.a - p.c * load), 0.0, 0.0
+    k0, k1 = p.knots
+    w = (q3 - k0) / (k1 - k0)
+    g0 = p.gamma0[0] + (p.gamma0[1] - p.gamma0[0]) * w
+    d = p.d[0] + (p.d[1] - p.d[0]) * w
+    if model.joint == 2:
+        al, be = math.cos(q1) * gx + math.sin(q1) * gy, gz
+    else:
+        reach = -math.sin(q2)
+        al, be = reach * math.sin(th), reach * ct * math.sin(ps)
+    return g0, d * al, d * be
+
+
+class Planner:
+    """Plans moves of one joint in one pose; build once, call :meth:`steps` many times.
+
+    Parameters
+    ----------
+    calibration : Calibration
+    joint : int
+        1, 2 or 3.
+    pose : Pose
+        The other joints and the tilt; the joint's own coordinate in it is ignored.
+
+    Examples
+    --------
+    >>> planner = Planner(cal, 3, Pose(q2=-math.pi / 2))      # doctest: +SKIP
+    >>> planner.steps(0.0, 30e-6)                              # doctest: +SKIP
+    31
+    """
+
+    def __init__(self, calibration: Calibration, joint: int, pose: kin.Pose):
+        self.joint = int(joint)
+        self.spec = kin.joint_spec(joint)
+        self.pose = pose
+        self._coeffs: dict[int, _DirCoeffs] = {}
+        for sign, label in ((1, "+"), (-1, "-")):
+            try:
+                m = calibration.model(joint, label)
+            except KeyError:
+                continue
+            self._coeffs[sign] = _DirCoeffs(*_scalar_coefficients(m, pose))
+        if not self._coeffs:
+            raise KeyError(f"joint {joint} is not in this calibration")
+
+    def _dir(self, sign: int) -> _DirCoeffs:
+        try:
+            return self._coeffs[sign]
+        except KeyError:
+            raise KeyError(f"joint {self.joint} direction {direction_label(sign)} is not in this calibration") from None
+
+    def _check_range(self, q: float, what: str) -> None:
+        if not self.spec.contains(q):
+            unit = self.spec.unit
+            raise ValueError(f"{what} = {q:.6g} {unit} is outside joint {self.joint}'s range "
+                             f"[{self.spec.lower:.6g}, {self.spec.upper:.6g}] {unit}")
+
+    def exact_steps(self, q_from: float, q_to: float) -> float:
+        """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""
+        if q_to == q_from:
+            return 0.0
+        c = self._dir(1 if q_to > q_from else -1)
+        if c.kind == "const":
+            if not c.A > 0:
+                raise NonPhysicalError(f"joint {self.joint}: step size {c.A:.3g} <= 0 in this pose")
+            return abs(q_to - q_from) / c.A
+        if c.kind == "atan":
+            return abs(c.F(q_to) - c.F(q_from))
+        from .models import steps_between
+
+        return float(steps_between(q_from, q_to, c.A, c.alpha, c.beta))
+
+    def steps(self, q_from: float, q_to: float) -> int:
+        """Steps to command to move from ``q_from`` to ``q_to`` (>= 0; direction from the sign)."""
+        return int(round(self.exact_steps(q_from, q_to)))
+
+    def gamma(self, q: float, direction: str | int) -> float:
+        """Predicted step size at ``q`` in ``direction`` (rad or m)."""
+        from .models import direction_sign
+
+        return self._dir(direction_sign(direction)).gamma(q)
+
+    def position_after(self, q_start: float, signed_steps: int | float) -> float:
+        """Dead reckoning: where the joint is after ``signed_steps`` steps from ``q_start``."""
+        if signed_steps == 0:
+            return float(q_start)
+        sign = 1 if signed_steps > 0 else -1
+        return self._dir(sign).inverse(float(q_start), float(abs(signed_steps)), sign)
+
+    def plan(self, q_from: float, q_to: float, check_range: bool = True) -> MovePlan:
+        """A full :class:`MovePlan` (with the dead-reckoned end point)."""
+        if check_range:
+            self._check_range(q_from, "start")
+            self._check_range(q_to, "target")
+        sign = 1 if q_to >= q_from else -1
+        exact = self.exact_steps(q_from, q_to)
+        n = int(round(exact))
+        end = self.position_after(q_from, sign * n)
+        c = self._dir(sign)
+        return MovePlan(self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact,
+                        c.gamma(q_from), c.gamma(q_to))
+
+
+def plan_move(calibration: Calibration, joint: int, q_from: float, q_to: float, pose: kin.Pose) -> MovePlan:
+    """Plan a move of ``joint`` from ``q_from`` to ``q_to`` (rad or m) in ``pose``.
+
+    Raises ``ValueError`` if either end is outside the joint's range, ``KeyError`` if
+    the calibration lacks that joint/direction.
+    """
+    return Planner(calibration, joint, pose).plan(q_from, q_to)
+
+
+def dead_reckon(calibration: Calibration, joint: int, q_start: float, signed_steps: int, pose: kin.Pose) -> float:
+    """Where ``joint`` ends after ``signed_steps`` steps from ``q_start`` in ``pose`` (rad or m)."""
+    return Planner(calibration, joint, pose).position_after(q_start, signed_steps)
