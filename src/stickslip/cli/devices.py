@@ -68,8 +68,7 @@ def _plan(cal, joint: int, q_from: float, q_to: float, pose: kin.Pose):
     from ..planning import dead_reckon, plan_move
 
     plan = plan_move(cal, joint, q_from, q_to, pose)
-    sign = 1 if plan.direction in ("+", 1) else -1
-    steps = sign * int(plan.steps)
+    steps = int(plan.signed_steps)
 
     def reckon(n_signed: int) -> float:
         return float(dead_reckon(cal, joint, q_from, n_signed, pose))
