@@ -7,3 +7,25 @@
 """
 
 from __future__ import annotations
+
+from .detector import StopDetector, StopEvent, Tuning, TuningFileError, detect
+from .sources import AudioSourceError, Microphone, read_wav, wav_blocks, write_wav
+from .synth import Soundscape, render_traverse_recording
+from .tuning import TuningError, tune
+
+__all__ = [
+    "AudioSourceError",
+    "Microphone",
+    "Soundscape",
+    "StopDetector",
+    "StopEvent",
+    "Tuning",
+    "TuningError",
+    "TuningFileError",
+    "detect",
+    "read_wav",
+    "render_traverse_recording",
+    "tune",
+    "wav_blocks",
+    "write_wav",
+]

@@ -355,7 +355,13 @@ class StopDetector:
         events: list[StopEvent] = []
         if n_frames > 0:
             off = self._next - self._buf_start
-            view = np.lib.stride_tricks.sliding_window_view(self._buf[off:], F)[::H][:n_frames]
+            seg = self._buf[off:]
+            view = np.lib.stride_tricks.as_strided(
+                seg,
+                shape=(n_frames, F),
+                strides=(H * seg.strides[0], seg.strides[0]),
+                writeable=False,
+            )
             spec = np.fft.rfft(view * self._w, axis=1)[:, self._i0 : self._i1]
             power = (spec.real**2 + spec.imag**2).sum(axis=1) * self._scale
             levels = 10 * np.log10(power + _FLOOR)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AudioSourceError", "Microphone", "read_wav", "wav_blocks", "wav_info"]
+__all__ = ["AudioSourceError", "Microphone", "read_wav", "wav_blocks", "wav_info", "write_wav"]
 
 _AUDIO_EXTRA = "install the audio extra: pip install 'stickslip[audio]'"
 
