@@ -91,7 +91,10 @@ def test_where_defaults_and_set(tmp_path):
     # another device keeps its own positions; query options do not make a new device
     assert where_json(db, "mm3a:///dev/ttyX")["joints"][2]["source"] == "default"
     run("where", "--db", db, "-d", "mm3a:///dev/ttyX?timeout=5", "--set", "3=1mm")
-    assert where_json(db, "mm3a:///dev/ttyX")["joints"][2]["q"] == pytest.approx(1e-3)
+    w = where_json(db, "mm3a:///dev/ttyX")
+    assert w["joints"][2]["q"] == pytest.approx(1e-3)
+    assert w["device"] == "mm3a:///dev/ttyX"
+    assert where_json(db, "anc300://10.0.0.2:7230?password=pw")["device"] == "anc300://10.0.0.2:7230"
 
 
 @pytest.mark.parametrize(

@@ -190,9 +190,9 @@ def device_key(url: str) -> str:
     at the other end and are not stored; a ``sim://`` URL keeps its query, since
     ``seed`` and ``day`` pick the simulated arm.
     """
-    from urllib.parse import urlsplit, urlunsplit
+    from urllib.parse import urlsplit
 
     parts = urlsplit(url or "sim://")
     if (parts.scheme or "sim") == "sim":
         return url or "sim://"
-    return urlunsplit((parts.scheme, parts.netloc, parts.path, "", ""))
+    return f"{parts.scheme}://{parts.netloc}{parts.path}"
