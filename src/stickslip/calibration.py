@@ -82,8 +82,13 @@ _POSE_TOL = 1e-3  # rad; poses typed by hand to 3-4 decimals still match
 _Q3_TOL = 1e-5  # m
 _LOAD_ZERO = 1e-6  # a load coefficient below this counts as "no gravity torque"
 
-UNITS = {("prismatic", "a"): "m", ("prismatic", "b"): "1", ("prismatic", "c"): "m",
-         ("rotary", "gamma0"): "rad", ("rotary", "d"): "rad"}
+UNITS = {
+    ("prismatic", "a"): "m",
+    ("prismatic", "b"): "1",
+    ("prismatic", "c"): "m",
+    ("rotary", "gamma0"): "rad",
+    ("rotary", "d"): "rad",
+}
 
 
 class CalibrationError(ValueError):
@@ -159,8 +164,7 @@ def invert_d_exact(
     hi = d_hi * (1 - shrink) if math.isfinite(d_hi) else 50 * gamma0
     # The step count is convex in d, so the average has a single maximum at d_peak.
     # The physical root lies on the side of d_peak that contains d = 0 (no load effect).
-    res = minimize_scalar(lambda d: -avg(d), bounds=(lo, hi), method="bounded",
-                          options={"xatol": 1e-9 * gamma0})
+    res = minimize_scalar(lambda d: -avg(d), bounds=(lo, hi), method="bounded", options={"xatol": 1e-9 * gamma0})
     d_peak = float(res.x)
     g_peak = avg(d_peak)
     if gamma_measured >= g_peak:
@@ -214,8 +218,9 @@ class SeedQuadratic:
         return p2 * delta**2 + p1 * delta + p0
 
 
-def _simulate_full_range_averages(gamma0: NDArray, d: NDArray, start: float, end: float,
-                                  alpha: float, beta: float) -> NDArray:
+def _simulate_full_range_averages(
+    gamma0: NDArray, d: NDArray, start: float, end: float, alpha: float, beta: float
+) -> NDArray:
     """Step-by-step simulation of each (gamma0, d) pair (the seed's Fig. 8 simulation)."""
     sign = 1.0 if end > start else -1.0
     cos, sin = math.cos, math.sin
@@ -311,7 +316,7 @@ class Calibration:
     day: str
     method: str
     provenance: dict[str, object] = field(default_factory=dict)
-    created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
+    created: str = field(default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
 
     # -- access
     @property
@@ -350,9 +355,12 @@ class Calibration:
         for key, idx in groups.items():
             m = self.model(*key)
             ts = [traverses[i] for i in idx]
-            cols = {k: np.array([getattr(t, k) for t in ts]) for k in ("start", "end", "q1", "q2", "q3", "theta", "psi")}
-            out[idx] = m.average_gamma(cols["start"], cols["end"], cols["q1"], cols["q2"], cols["q3"],
-                                       cols["theta"], cols["psi"])
+            cols = {
+                k: np.array([getattr(t, k) for t in ts]) for k in ("start", "end", "q1", "q2", "q3", "theta", "psi")
+            }
+            out[idx] = m.average_gamma(
+                cols["start"], cols["end"], cols["q1"], cols["q2"], cols["q3"], cols["theta"], cols["psi"]
+            )
         return out
 
     def parameters(self) -> list[dict[str, object]]:
@@ -361,11 +369,17 @@ class Calibration:
         for (j, d), m in sorted(self.models.items()):
             se = self.stderr.get((j, d))
             for i, ((name, q3), value) in enumerate(zip(m.params.names(), m.params.as_vector(), strict=True)):
-                out.append({
-                    "joint": j, "direction": d, "name": name, "q3": q3, "value": float(value),
-                    "stderr": None if se is None or not np.isfinite(se[i]) else float(se[i]),
-                    "unit": UNITS[(m.params.kind, name)],
-                })
+                out.append(
+                    {
+                        "joint": j,
+                        "direction": d,
+                        "name": name,
+                        "q3": q3,
+                        "value": float(value),
+                        "stderr": None if se is None or not np.isfinite(se[i]) else float(se[i]),
+                        "unit": UNITS[(m.params.kind, name)],
+                    }
+                )
         return out
 
     # -- persistence
@@ -390,9 +404,11 @@ class Calibration:
     def from_dict(cls, data: dict) -> Calibration:
         """Rebuild from :meth:`to_dict` output; raises ``ValueError`` with the reason on bad input."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise ValueError(f"not a stickslip calibration (expected \"format\": \"{FORMAT}\")")
+            raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
         if data.get("version") != FORMAT_VERSION:
-            raise ValueError(f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION})")
+            raise ValueError(
+                f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION})"
+            )
         try:
             by_key: dict[tuple[int, str], list[dict]] = {}
             for rec in data["parameters"]:
@@ -408,16 +424,30 @@ class Calibration:
                     if len(knots) != 2:
                         raise ValueError(f"joint {j}{d}: expected gamma0 at two q3 values, found {len(knots)}")
                     names = [("gamma0", knots[0]), ("gamma0", knots[1]), ("d", knots[0]), ("d", knots[1])]
-                    params = RotaryParams((vals[names[0]][0], vals[names[1]][0]), (vals[names[2]][0], vals[names[3]][0]),
-                                          (knots[0], knots[1]))
+                    params = RotaryParams(
+                        (vals[names[0]][0], vals[names[1]][0]),
+                        (vals[names[2]][0], vals[names[3]][0]),
+                        (knots[0], knots[1]),
+                    )
                 models[(j, d)] = JointModel(j, d, params)
                 se = [vals[n][1] for n in names]
-                stderr[(j, d)] = None if all(s is None for s in se) else np.array([np.nan if s is None else s for s in se])
-            consts = {(int(c["joint"]), direction_label(c["direction"])): float(c["value"]) for c in data["constant_steps"]}
+                stderr[(j, d)] = (
+                    None if all(s is None for s in se) else np.array([np.nan if s is None else s for s in se])
+                )
+            consts = {
+                (int(c["joint"]), direction_label(c["direction"])): float(c["value"]) for c in data["constant_steps"]
+            }
         except (KeyError, TypeError) as e:
             raise ValueError(f"calibration file is missing or has a malformed field: {e}") from None
-        return cls(models, stderr, consts, str(data.get("day", "")), str(data.get("method", "")),
-                   dict(data.get("provenance") or {}), str(data.get("created", "")))
+        return cls(
+            models,
+            stderr,
+            consts,
+            str(data.get("day", "")),
+            str(data.get("method", "")),
+            dict(data.get("provenance") or {}),
+            str(data.get("created", "")),
+        )
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
@@ -451,7 +481,9 @@ class Calibration:
                 scale, unit = _display(rec["name"], j)
                 where = f" @ q3 = {rec['q3'] * 1e3:g} mm" if rec["q3"] is not None else ""
                 se = f" ± {rec['stderr'] * scale:.3g}" if rec["stderr"] is not None else ""
-                lines.append(f"  {rec['name']}{rec['direction']}{where}: {rec['value'] * scale:.5g}{se} {unit}".rstrip())
+                lines.append(
+                    f"  {rec['name']}{rec['direction']}{where}: {rec['value'] * scale:.5g}{se} {unit}".rstrip()
+                )
             for d in DIRECTIONS:
                 if (j, d) in self.constant_steps:
                     scale, unit = _display("a" if j == 3 else "gamma0", j)
@@ -568,8 +600,13 @@ def _group(traverses: Iterable[Traverse]) -> dict[tuple[int, str], list[Traverse
     return g
 
 
-def calibrate_seed(traverses: Sequence[Traverse], day: str | None = None, source: str | None = None,
-                   rotary_inversion: str = "exact", quadratic: SeedQuadratic | None = None) -> Calibration:
+def calibrate_seed(
+    traverses: Sequence[Traverse],
+    day: str | None = None,
+    source: str | None = None,
+    rotary_inversion: str = "exact",
+    quadratic: SeedQuadratic | None = None,
+) -> Calibration:
     """The paper's procedure: Eqs. (4)–(6) for joint 3, exact inversion of Eq. (8) for rotary joints.
 
     Repeated traverses at the same calibration pose are averaged (mean of their
@@ -599,11 +636,17 @@ def calibrate_seed(traverses: Sequence[Traverse], day: str | None = None, source
         if j == 3:
             rows = _seed_prismatic_rows(ts)
             if rows is None:
-                missing = [f"(q2, theta, psi) = ({', '.join(f'{v:.4g}' for v in pose)})"
-                           for k, pose in PRISMATIC_SEED_POSES.items()
-                           if not any(_close(t.q2, pose[0]) and _close(t.theta, pose[1]) and _close(t.psi, pose[2]) for t in ts)]
-                raise CalibrationError(f"joint 3{d}: the seed method needs traverses at {', '.join(missing)} (rad); "
-                                       "use method 'lsq' for other poses")
+                missing = [
+                    f"(q2, theta, psi) = ({', '.join(f'{v:.4g}' for v in pose)})"
+                    for k, pose in PRISMATIC_SEED_POSES.items()
+                    if not any(
+                        _close(t.q2, pose[0]) and _close(t.theta, pose[1]) and _close(t.psi, pose[2]) for t in ts
+                    )
+                ]
+                raise CalibrationError(
+                    f"joint 3{d}: the seed method needs traverses at {', '.join(missing)} (rad); "
+                    "use method 'lsq' for other poses"
+                )
             g = {k: float(np.mean([t.gamma for t in rows[k]])) for k in rows}
             a = g["a"]  # Eq. (4)
             b = 1.0 - g["b"] / a  # Eq. (5)
@@ -617,7 +660,8 @@ def calibrate_seed(traverses: Sequence[Traverse], day: str | None = None, source
             if rows is None:
                 raise CalibrationError(
                     f"joint {j}{d}: the seed method needs full-range traverses at q3 = 0 and 12 mm, each with and "
-                    "without gravity torque (for joint 2: theta = 0 and theta = -pi/2); use method 'lsq' for other poses"
+                    "without gravity torque (for joint 2: theta = 0 and theta = -pi/2); "
+                    "use method 'lsq' for other poses"
                 )
             g0s, dvals = [], []
             for knot in (0, 1):
@@ -631,19 +675,29 @@ def calibrate_seed(traverses: Sequence[Traverse], day: str | None = None, source
                         assert quadratic is not None
                         ds.append(float(quadratic.d(t.gamma - g0)))
                     else:
-                        raise ValueError(f"rotary_inversion must be 'exact' or 'seed-quadratic', got {rotary_inversion!r}")
+                        raise ValueError(
+                            f"rotary_inversion must be 'exact' or 'seed-quadratic', got {rotary_inversion!r}"
+                        )
                 g0s.append(g0)
                 dvals.append(float(np.mean(ds)))
                 used += len(rows[(knot, "free")]) + len(rows[(knot, "loaded")])
             models[(j, d)] = JointModel(j, d, RotaryParams((g0s[0], g0s[1]), (dvals[0], dvals[1])))
     _check_physical(models)
     if used < len(traverses):
-        notes.append(f"{len(traverses) - used} of {len(traverses)} traverses are not at the seed's calibration "
-                     "poses and were not used (method 'lsq' fits all of them)")
+        notes.append(
+            f"{len(traverses) - used} of {len(traverses)} traverses are not at the seed's calibration "
+            "poses and were not used (method 'lsq' fits all of them)"
+        )
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
     method = "seed" if rotary_inversion == "exact" else "seed-quadratic"
-    return Calibration(models, {k: None for k in models}, consts, _day_of(traverses, day), method,
-                       _provenance(traverses, source, used, notes))
+    return Calibration(
+        models,
+        {k: None for k in models},
+        consts,
+        _day_of(traverses, day),
+        method,
+        _provenance(traverses, source, used, notes),
+    )
 
 
 # ----------------------------------------------------------------------------- least squares
@@ -660,8 +714,10 @@ _HINTS = {
 
 
 def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
-    cols = {k: np.array([getattr(t, k) for t in ts], dtype=float)
-            for k in ("start", "end", "q1", "q2", "q3", "theta", "psi")}
+    cols = {
+        k: np.array([getattr(t, k) for t in ts], dtype=float)
+        for k in ("start", "end", "q1", "q2", "q3", "theta", "psi")
+    }
     meas = np.array([t.gamma for t in ts])
     span = np.abs(cols["end"] - cols["start"])
     if j == 3:
@@ -731,8 +787,12 @@ def _identifiability(j: int, d: str, names: list[tuple[str, float | None]], jac:
     )
 
 
-def calibrate_lsq(traverses: Sequence[Traverse], day: str | None = None, source: str | None = None,
-                  knots: tuple[float, float] = (0.0, kin.Q3_MAX)) -> Calibration:
+def calibrate_lsq(
+    traverses: Sequence[Traverse],
+    day: str | None = None,
+    source: str | None = None,
+    knots: tuple[float, float] = (0.0, kin.Q3_MAX),
+) -> Calibration:
     """Nonlinear least squares on any set of traverses, per joint and direction.
 
     Minimises the relative residuals ``gamma_pred / gamma_meas - 1`` of the traverse
@@ -768,8 +828,9 @@ def calibrate_lsq(traverses: Sequence[Traverse], day: str | None = None, source:
         # identifiability at a generic point (non-zero load sensitivity), before fitting
         jac0 = _numjac(resid, probe)
         _identifiability(j, d, names, jac0)
-        res = least_squares(resid, x0, bounds=(lb, ub), x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14,
-                            max_nfev=2000, method="trf")
+        res = least_squares(
+            resid, x0, bounds=(lb, ub), x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000, method="trf"
+        )
         if not np.all(np.isfinite(res.fun)):
             raise CalibrationError(f"joint {j}{d}: the fit did not converge to a physical model (a step would be <= 0)")
         jac = _numjac(resid, res.x)
@@ -791,8 +852,9 @@ def calibrate_lsq(traverses: Sequence[Traverse], day: str | None = None, source:
         models[(j, d)] = JointModel(j, d, params)
     _check_physical(models)
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    return Calibration(models, stderr, consts, _day_of(traverses, day), "lsq",
-                       _provenance(traverses, source, len(traverses), notes))
+    return Calibration(
+        models, stderr, consts, _day_of(traverses, day), "lsq", _provenance(traverses, source, len(traverses), notes)
+    )
 
 
 def _numjac(f, x: NDArray) -> NDArray:
@@ -808,8 +870,9 @@ def _numjac(f, x: NDArray) -> NDArray:
     return jac
 
 
-def calibrate(traverses: Sequence[Traverse], method: str = "auto", day: str | None = None,
-              source: str | None = None) -> Calibration:
+def calibrate(
+    traverses: Sequence[Traverse], method: str = "auto", day: str | None = None, source: str | None = None
+) -> Calibration:
     """Calibrate every joint and direction present in ``traverses``.
 
     Parameters
@@ -871,18 +934,25 @@ class ValidationResult:
         for j in sorted(set(joints.tolist())):
             sel = joints == j
             me, ce = np.abs(self.model_error[sel]), np.abs(self.constant_error[sel])
-            out.append({
-                "joint": int(j), "n": int(sel.sum()),
-                "model_max_rel_error": float(me.max()), "model_mean_rel_error": float(me.mean()),
-                "constant_max_rel_error": float(ce.max()), "constant_mean_rel_error": float(ce.mean()),
-            })
+            out.append(
+                {
+                    "joint": int(j),
+                    "n": int(sel.sum()),
+                    "model_max_rel_error": float(me.max()),
+                    "model_mean_rel_error": float(me.mean()),
+                    "constant_max_rel_error": float(ce.max()),
+                    "constant_mean_rel_error": float(ce.mean()),
+                }
+            )
         return out
 
     def report(self) -> str:
         lines = ["joint   n   model max  model mean   const max  const mean"]
         for r in self.rows():
-            lines.append(f"{r['joint']:>5} {r['n']:>3} {r['model_max_rel_error']:>10.2%} {r['model_mean_rel_error']:>11.2%} "
-                         f"{r['constant_max_rel_error']:>11.2%} {r['constant_mean_rel_error']:>11.2%}")
+            lines.append(
+                f"{r['joint']:>5} {r['n']:>3} {r['model_max_rel_error']:>10.2%} {r['model_mean_rel_error']:>11.2%} "
+                f"{r['constant_max_rel_error']:>11.2%} {r['constant_mean_rel_error']:>11.2%}"
+            )
         return "\n".join(lines)
 
     def plot(self, ax=None):

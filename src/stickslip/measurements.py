@@ -123,7 +123,8 @@ def check_pose(joint: int, values: dict[str, float]) -> list[str]:
         v = values[f"q{j}"]
         if not spec.contains(v):
             problems.append(
-                f"q{j} = {v:.6g} {spec.unit} is outside joint {j}'s range [{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+                f"q{j} = {v:.6g} {spec.unit} is outside joint {j}'s range "
+                f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
             )
     for name in ("theta", "psi"):
         v = values[name]
@@ -196,8 +197,7 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
         problems.append(f"{where}: start and end are equal ({start:.6g}): a traverse must move")
     elif (end > start) != (direction == "+"):
         problems.append(
-            f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g} "
-            "('+' means end > start)"
+            f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
         )
     spec = kin.JOINTS[joint]
     for name in ("start", "end"):
@@ -209,8 +209,9 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
     problems += [f"{where}: {p}" for p in check_pose(joint, nums)]
     if problems:
         return None, problems
-    return Traverse(day, joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"],
-                    start, end, steps), []
+    return Traverse(
+        day, joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"], start, end, steps
+    ), []
 
 
 def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
@@ -295,3 +296,137 @@ def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:
     out["joint"] = out["joint"].astype(int)
     out["steps"] = out["steps"].astype(int)
     return out
+
+
+# ----------------------------------------------------------------------------- pose tables (predict)
+
+POSE_TABLE_REQUIRED = ("joint", "direction", "q1", "q2", "q3", "theta", "psi")
+
+
+@dataclass(frozen=True)
+class PoseQuery:
+    """One row of a pose table for ``predict``.
+
+    ``start``/``end`` given: the average step over that traverse is asked for.
+    Otherwise: the step size at the pose (the moving joint at ``q{joint}``).
+    """
+
+    joint: int
+    direction: str
+    q1: float
+    q2: float
+    q3: float
+    theta: float
+    psi: float
+    start: float | None = None
+    end: float | None = None
+
+    @property
+    def is_traverse(self) -> bool:
+        return self.start is not None
+
+
+def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
+    """Parse a pose table (CSV): columns joint, direction, q1, q2, q3, theta, psi, optionally start, end.
+
+    Other columns (day, steps, notes, ...) are kept and passed through. Returns the
+    header, the raw rows and the parsed queries; raises :class:`TableError` listing
+    every bad row as ``file:line: reason``.
+    """
+    reader = csv.DictReader(io.StringIO(text))
+    header = [h.strip() for h in (reader.fieldnames or [])]
+    if not header:
+        raise TableError([f"{source}:1: the file is empty (expected a header with {','.join(POSE_TABLE_REQUIRED)})"])
+    reader.fieldnames = header
+    missing = [c for c in POSE_TABLE_REQUIRED if c not in header]
+    if missing:
+        raise TableError(
+            [
+                f"{source}:1: header lacks {', '.join(missing)} (needs {','.join(POSE_TABLE_REQUIRED)}, "
+                "optionally start,end)"
+            ]
+        )
+    has_traverse = "start" in header and "end" in header
+    rows: list[dict[str, str]] = []
+    queries: list[PoseQuery] = []
+    problems: list[str] = []
+    for lineno, row in enumerate(reader, start=2):
+        if None in row:
+            problems.append(f"{source}:{lineno}: more cells than header columns")
+            continue
+        if all(not (v or "").strip() for v in row.values()):
+            continue
+        where = f"{source}:{lineno}"
+        errs: list[str] = []
+        jtext = (row.get("joint") or "").strip()
+        try:
+            joint = int(jtext)
+            kin.joint_spec(joint)
+        except ValueError:
+            errs.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
+            joint = 0
+        try:
+            direction = direction_label((row.get("direction") or "").strip())
+        except ValueError:
+            errs.append(f"{where}: direction must be '+' or '-', got {row.get('direction')!r}")
+            direction = "+"
+        nums: dict[str, float] = {}
+        for name in ("q1", "q2", "q3", "theta", "psi"):
+            v, err = _parse_float(name, (row.get(name) or "").strip())
+            if err:
+                errs.append(f"{where}: {err}")
+            else:
+                nums[name] = v  # type: ignore[assignment]
+        start = end = None
+        if has_traverse:
+            st, en = (row.get("start") or "").strip(), (row.get("end") or "").strip()
+            if st or en:
+                if not (st and en):
+                    errs.append(f"{where}: give both start and end (a traverse) or neither (a pose)")
+                else:
+                    start, e1 = _parse_float("start", st)
+                    end, e2 = _parse_float("end", en)
+                    errs += [f"{where}: {e}" for e in (e1, e2) if e]
+        if not errs and joint:
+            spec = kin.JOINTS[joint]
+            if start is not None and end is not None:
+                if start == end:
+                    errs.append(f"{where}: start and end are equal: a traverse must move")
+                elif (end > start) != (direction == "+"):
+                    errs.append(f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g}")
+                for name, v in (("start", start), ("end", end)):
+                    if not spec.contains(v):
+                        errs.append(
+                            f"{where}: {name} = {v:.6g} {spec.unit} is outside joint {joint}'s range "
+                            f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+                        )
+            else:
+                own = nums[f"q{joint}"]
+                if not spec.contains(own):
+                    errs.append(
+                        f"{where}: q{joint} = {own:.6g} {spec.unit} is outside joint {joint}'s range "
+                        f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
+                    )
+            errs += [f"{where}: {p}" for p in check_pose(joint, nums)]
+        if errs:
+            problems += errs
+            continue
+        rows.append({k: (v or "") for k, v in row.items()})
+        queries.append(
+            PoseQuery(joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"], start, end)
+        )
+    if problems:
+        raise TableError(problems)
+    return header, rows, queries
+
+
+def read_pose_table(path: str | Path) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
+    """Read a pose table from a CSV file (see :func:`parse_pose_table`)."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise TableError([f"{p}: no such file"]) from None
+    except UnicodeDecodeError:
+        raise TableError([f"{p}:1: not a UTF-8 text file"]) from None
+    return parse_pose_table(text, str(path))

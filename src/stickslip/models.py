@@ -255,7 +255,9 @@ class JointModel:
     direction: str
     params: Params
 
-    def gamma(self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
+    def gamma(
+        self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
+    ) -> NDArray[np.float64]:
         """Mean step size in a pose (m or rad). The moving joint's own column matters for rotary joints."""
         p = self.params
         if isinstance(p, PrismaticParams):
@@ -278,8 +280,16 @@ class JointModel:
         al, be = kin.rotary_load_coefficients(self.joint, q1, q2, q3, theta, psi)
         return np.broadcast_arrays(g0, d * al, d * be)
 
-    def average_gamma(self, start: ArrayLike, end: ArrayLike, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike,
-                      theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
+    def average_gamma(
+        self,
+        start: ArrayLike,
+        end: ArrayLike,
+        q1: ArrayLike,
+        q2: ArrayLike,
+        q3: ArrayLike,
+        theta: ArrayLike,
+        psi: ArrayLike,
+    ) -> NDArray[np.float64]:
         """Average step over a traverse from ``start`` to ``end``: ``|end - start| / N`` (m or rad).
 
         Exact: ``N`` is the closed-form integral of ``1 / gamma`` along the traverse.
@@ -365,7 +375,9 @@ def steps_between(
     somewhere on the way (the joint would stall). Agrees with adaptive quadrature
     (:func:`steps_between_quad`) to ~1e-12 relative.
     """
-    start, end, A, alpha, beta = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta)))
+    start, end, A, alpha, beta = np.broadcast_arrays(
+        *(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta))
+    )
     B = np.hypot(alpha, beta)
     out = np.empty(start.shape, dtype=float)
     closed = A > B * (1.0 + 1e-12)
@@ -384,7 +396,9 @@ def steps_between(
         vals = np.empty(lo.shape)
         if np.any(logform):
             f = logform
-            vals[f] = np.abs(_antiderivative_log(hi[f], a[f], al[f], be[f]) - _antiderivative_log(lo[f], a[f], al[f], be[f]))
+            vals[f] = np.abs(
+                _antiderivative_log(hi[f], a[f], al[f], be[f]) - _antiderivative_log(lo[f], a[f], al[f], be[f])
+            )
         for i in np.nonzero(~logform)[0]:  # A == B to 1e-12: rare; quadrature
             vals[i] = steps_between_quad(float(lo[i]), float(hi[i]), float(a[i]), float(al[i]), float(be[i]))
         out[rest] = vals
@@ -414,16 +428,16 @@ def steps_between_quad(start: float, end: float, A: float, alpha: float = 0.0, b
 
     lo, hi = min(start, end), max(start, end)
     if _min_step_on_interval(lo, hi, A, alpha, beta) <= 0.0:
-        raise NonPhysicalError(
-            f"the step size reaches zero between {lo:.6g} and {hi:.6g}: the joint would stall there"
-        )
+        raise NonPhysicalError(f"the step size reaches zero between {lo:.6g} and {hi:.6g}: the joint would stall there")
     val, _err = integrate.quad(
         lambda q: 1.0 / (A + alpha * math.cos(q) + beta * math.sin(q)), lo, hi, epsabs=0.0, epsrel=1e-12, limit=200
     )
     return val
 
 
-def simulate_traverse_steps(start: float, end: float, gamma: Callable[[float], float], max_steps: int = 10_000_000) -> int:
+def simulate_traverse_steps(
+    start: float, end: float, gamma: Callable[[float], float], max_steps: int = 10_000_000
+) -> int:
     """Count discrete steps from ``start`` until ``end`` is reached or passed.
 
     Each step moves by ``gamma(q)`` evaluated where the step begins (the seed's

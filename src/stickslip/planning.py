@@ -66,10 +66,16 @@ class MovePlan:
 
     def as_dict(self) -> dict[str, object]:
         return {
-            "joint": self.joint, "direction": self.direction, "steps": self.steps,
-            "signed_steps": self.signed_steps, "from": self.q_from, "to": self.q_to,
-            "end_predicted": self.q_end_predicted, "exact_steps": self.exact_steps,
-            "gamma_start": self.gamma_start, "gamma_end": self.gamma_end,
+            "joint": self.joint,
+            "direction": self.direction,
+            "steps": self.steps,
+            "signed_steps": self.signed_steps,
+            "from": self.q_from,
+            "to": self.q_to,
+            "end_predicted": self.q_end_predicted,
+            "exact_steps": self.exact_steps,
+            "gamma_start": self.gamma_start,
+            "gamma_end": self.gamma_end,
             "unit": "m" if self.joint == 3 else "rad",
         }
 
@@ -200,8 +206,10 @@ class Planner:
     def _check_range(self, q: float, what: str) -> None:
         if not self.spec.contains(q):
             unit = self.spec.unit
-            raise ValueError(f"{what} = {q:.6g} {unit} is outside joint {self.joint}'s range "
-                             f"[{self.spec.lower:.6g}, {self.spec.upper:.6g}] {unit}")
+            raise ValueError(
+                f"{what} = {q:.6g} {unit} is outside joint {self.joint}'s range "
+                f"[{self.spec.lower:.6g}, {self.spec.upper:.6g}] {unit}"
+            )
 
     def exact_steps(self, q_from: float, q_to: float) -> float:
         """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""
@@ -245,8 +253,9 @@ class Planner:
         n = int(round(exact))
         end = self.position_after(q_from, sign * n)
         c = self._dir(sign)
-        return MovePlan(self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact,
-                        c.gamma(q_from), c.gamma(q_to))
+        return MovePlan(
+            self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from), c.gamma(q_to)
+        )
 
 
 def plan_move(calibration: Calibration, joint: int, q_from: float, q_to: float, pose: kin.Pose) -> MovePlan:

@@ -2,4 +2,309 @@
 
 from __future__ import annotations
 
-from . import app  # noqa: F401
+import csv
+import io
+import math
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from ..calibration import Calibration, CalibrationError, calibrate, validate
+from ..kinematics import JOINTS, Pose
+from ..measurements import TableError, read_measurements, read_pose_table
+from ..models import NonPhysicalError
+from ..units import format_position, format_step
+from . import app
+from ._common import angle_option, console, fail, length_option, print_json, user_errors, warn
+
+CalibrationOpt = Annotated[
+    Path, typer.Option("--calibration", "-c", help="Calibration JSON written by 'stickslip calibrate' or 'fit'.")
+]
+JsonOpt = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON instead of a table.")]
+
+
+def _fail_table(e: TableError) -> None:
+    fail("\n".join(e.problems))
+
+
+def _load_calibration(path: Path) -> Calibration:
+    with user_errors():
+        cal = Calibration.load(path)
+    try:
+        from ..storage import warn_if_stale
+    except ImportError:  # pragma: no cover - storage is part of the package
+        return cal
+    msg = warn_if_stale(cal)
+    if msg:
+        warn(msg)
+    return cal
+
+
+def _read_table(path: Path):
+    try:
+        return read_measurements(path)
+    except TableError as e:
+        _fail_table(e)
+
+
+def _step_unit(joint: int) -> tuple[float, str]:
+    return (1e9, "nm") if joint == 3 else (1e6, "µrad")
+
+
+def _params_table(cal: Calibration, title: str) -> Table:
+    t = Table(title=title)
+    for col in ("joint", "dir", "parameter", "q3", "value", "std. error", "unit"):
+        t.add_column(col, justify="right" if col in ("value", "std. error") else "left")
+    for r in cal.parameters():
+        if r["name"] == "b":
+            scale, unit = 1.0, "1"
+        else:
+            scale, unit = _step_unit(int(r["joint"]))
+        q3 = f"{r['q3'] * 1e3:g} mm" if r["q3"] is not None else ""
+        se = f"{r['stderr'] * scale:.3g}" if r["stderr"] is not None else "—"
+        t.add_row(str(r["joint"]), str(r["direction"]), str(r["name"]), q3, f"{r['value'] * scale:.5g}", se, unit)
+    return t
+
+
+@app.command("calibrate")
+def calibrate_cmd(
+    measurements: Annotated[
+        Path,
+        typer.Argument(
+            help="Measurement table (CSV, header day,joint,direction,q1,q2,q3,theta,psi,start,end,steps; SI units)."
+        ),
+    ],
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the calibration JSON here.")] = None,
+    method: Annotated[
+        str,
+        typer.Option(
+            help="auto | seed | seed-quadratic | lsq. 'auto' uses the paper's procedure when the table "
+            "has its calibration poses, least squares otherwise."
+        ),
+    ] = "auto",
+    day: Annotated[
+        str | None, typer.Option(help="Session label to record (default: the latest day in the table).")
+    ] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Calibrate the step-size models from measured traverses.
+
+    The paper's procedure needs, for the prismatic joint, traverses in + and - at
+    (q2, theta, psi) = (-90deg, 0, 0), (0, -90deg, 0), (0, 0, 0) (Eqs. 4-6), and for
+    joint 2 full-range traverses at (q3, theta, psi) = (0, 0, 0), (12mm, 0, 0),
+    (12mm, -90deg, 0), (0, -90deg, 0); d is found by inverting the exact average-step
+    integral. Any other set of traverses is fitted by least squares, with standard errors.
+
+    Example: stickslip calibrate day1.csv -o cal.json
+    """
+    traverses = _read_table(measurements)
+    try:
+        cal = calibrate(traverses, method=method, day=day, source=str(measurements))
+    except (CalibrationError, NonPhysicalError, ValueError) as e:
+        fail(str(e))
+    if output is not None:
+        with user_errors():
+            cal.save(output)
+    if json_out:
+        print_json(cal.to_dict())
+        return
+    console.print(_params_table(cal, f"calibration — day {cal.day}, method {cal.method}, {len(traverses)} traverses"))
+    for n in cal.provenance.get("notes", []) or []:
+        console.print(f"[dim]note:[/] {n}", highlight=False)
+    if output is not None:
+        console.print(f"saved to {output}")
+
+
+@app.command("show")
+def show_cmd(
+    calibration: Annotated[Path, typer.Argument(help="Calibration JSON.")],
+    json_out: JsonOpt = False,
+) -> None:
+    """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints)."""
+    with user_errors():
+        cal = Calibration.load(calibration)
+    if json_out:
+        print_json(cal.to_dict())
+        return
+    console.print(_params_table(cal, f"{calibration} — day {cal.day}, method {cal.method}"))
+    for (j, d), v in sorted(cal.constant_steps.items()):
+        s, u = _step_unit(j)
+        console.print(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}", highlight=False)
+
+
+@app.command("predict")
+def predict_cmd(
+    poses: Annotated[
+        Path,
+        typer.Argument(
+            help="Pose table (CSV): joint,direction,q1,q2,q3,theta,psi[,start,end], SI units; "
+            "other columns are passed through."
+        ),
+    ],
+    calibration: CalibrationOpt,
+    output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the CSV here instead of stdout.")] = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Predict step sizes: adds a gamma_pred column (m for joint 3, rad for joints 1, 2).
+
+    A row with start,end gets the average step over that traverse (exact integral);
+    a row without them gets the step size at its pose (the moving joint at q1/q2/q3).
+
+    Example: stickslip predict -c cal.json poses.csv -o predicted.csv
+    """
+    cal = _load_calibration(calibration)
+    try:
+        header, rows, queries = read_pose_table(poses)
+    except TableError as e:
+        _fail_table(e)
+    preds = []
+    for i, q in enumerate(queries, start=1):
+        try:
+            m = cal.model(q.joint, q.direction)
+            if q.is_traverse:
+                g = float(m.average_gamma(q.start, q.end, q.q1, q.q2, q.q3, q.theta, q.psi))
+            else:
+                g = float(m.gamma(q.q1, q.q2, q.q3, q.theta, q.psi))
+        except KeyError as e:
+            fail(f"{poses}: row {i}: {e.args[0]}")
+        except NonPhysicalError as e:
+            fail(f"{poses}: row {i}: {e}")
+        preds.append(g)
+    out_header = header + (["gamma_pred"] if "gamma_pred" not in header else [])
+    records = []
+    for row, g in zip(rows, preds, strict=True):
+        rec = dict(row)
+        rec["gamma_pred"] = repr(g)
+        records.append(rec)
+    if json_out:
+        out = []
+        for rec, g in zip(records, preds, strict=True):
+            r = {k: _maybe_number(v) for k, v in rec.items()}
+            r["gamma_pred"] = g
+            out.append(r)
+        print_json(out)
+        return
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=out_header, lineterminator="\n", extrasaction="ignore")
+    w.writeheader()
+    w.writerows(records)
+    if output is None:
+        sys.stdout.write(buf.getvalue())
+    else:
+        with user_errors():
+            output.write_text(buf.getvalue(), encoding="utf-8")
+        console.print(f"wrote {len(records)} rows to {output}")
+
+
+def _maybe_number(v: str) -> object:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return v
+    if x.is_integer() and v.strip().lstrip("+-").isdigit():
+        return int(x)
+    return x
+
+
+@app.command("validate")
+def validate_cmd(
+    measurements: Annotated[Path, typer.Argument(help="Measurement table (CSV) to compare with.")],
+    calibration: CalibrationOpt,
+    json_out: JsonOpt = False,
+) -> None:
+    """Compare the model with measured traverses, against the paper's constant-step model.
+
+    For each joint: the maximum and mean relative error of the calibrated model's
+    average step, and of a constant step (the paper's comparator: the unloaded
+    prismatic step a_i; for joint 2 the full-range average at q3 = 0, theta = 0).
+
+    Example: stickslip validate -c cal.json day1-sweep.csv
+    """
+    cal = _load_calibration(calibration)
+    traverses = _read_table(measurements)
+    try:
+        res = validate(cal, traverses)
+    except KeyError as e:
+        fail(str(e.args[0]))
+    except NonPhysicalError as e:
+        fail(str(e))
+    rows = res.rows()
+    if json_out:
+        print_json(rows)
+        return
+    t = Table(title=f"model vs constant step on {len(traverses)} traverses (relative error of the average step)")
+    for col in ("joint", "n", "model max", "model mean", "constant max", "constant mean", "better"):
+        t.add_column(col, justify="right")
+    for r in rows:
+        better = "model" if r["model_max_rel_error"] < r["constant_max_rel_error"] else "constant"
+        t.add_row(
+            str(r["joint"]),
+            str(r["n"]),
+            f"{r['model_max_rel_error']:.2%}",
+            f"{r['model_mean_rel_error']:.2%}",
+            f"{r['constant_max_rel_error']:.2%}",
+            f"{r['constant_mean_rel_error']:.2%}",
+            better,
+        )
+    console.print(t)
+
+
+@app.command("plan")
+def plan_cmd(
+    calibration: CalibrationOpt,
+    joint: Annotated[int, typer.Option("--joint", "-j", help="Joint to move: 1, 2 (rotary) or 3 (prismatic).")],
+    q_from: Annotated[str, typer.Option("--from", help="Start position: rad / m, or with units (-30deg, 2mm).")],
+    q_to: Annotated[str, typer.Option("--to", help="Target position: rad / m, or with units (-60deg, 2.03mm).")],
+    q1: Annotated[str, typer.Option(help="Joint 1 angle (ignored when moving joint 1).")] = "0",
+    q2: Annotated[
+        str, typer.Option(help="Joint 2 angle; -90deg holds the arm out (ignored when moving joint 2).")
+    ] = "-90deg",
+    q3: Annotated[str, typer.Option(help="Joint 3 extension (ignored when moving joint 3).")] = "0",
+    theta: Annotated[str, typer.Option(help="Base tilt about x0.")] = "0",
+    psi: Annotated[str, typer.Option(help="Base tilt about the new y0.")] = "0",
+    json_out: JsonOpt = False,
+) -> None:
+    """Plan a move: how many steps take a joint from one position to another in a pose.
+
+    Rotary joints integrate the step size along the way (it changes with the gravity
+    torque); the predicted end point is where those whole steps land.
+
+    Example: stickslip plan -c cal.json --joint 3 --from 2mm --to 2.03mm --q2 -60deg
+    """
+    if joint not in JOINTS:
+        fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
+    from ..planning import plan_move
+
+    pos = length_option if joint == 3 else angle_option
+    try:
+        qa, qb = pos(q_from), pos(q_to)
+        pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
+    except typer.BadParameter as e:
+        fail(str(e))
+    cal = _load_calibration(calibration)
+    try:
+        plan = plan_move(cal, joint, qa, qb, pose)  # type: ignore[arg-type]
+    except KeyError as e:
+        fail(str(e.args[0]))
+    except (ValueError, NonPhysicalError) as e:
+        fail(str(e))
+    if json_out:
+        print_json(plan.as_dict())
+        return
+    err = plan.q_end_predicted - plan.q_to
+    console.print(
+        f"joint {joint}: {plan.steps} steps in direction {plan.direction} "
+        f"from {format_position(plan.q_from, joint)} to {format_position(plan.q_to, joint)}",
+        highlight=False,
+    )
+    console.print(
+        f"  predicted end {format_position(plan.q_end_predicted, joint)} "
+        f"(off by {format_position(err, joint, 3)}; step {format_step(plan.gamma_start, joint)} at the start, "
+        f"{format_step(plan.gamma_end, joint)} at the target)",
+        highlight=False,
+    )
+    if math.isclose(plan.q_from, plan.q_to):
+        console.print("  nothing to do: start and target are the same")
