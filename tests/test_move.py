@@ -248,3 +248,26 @@ def test_help_texts():
     for cmd in ("move", "where"):
         r = run(cmd, "--help")
         assert r.exit_code == 0 and "Example" in r.output
+
+
+def test_move_over_the_emulated_anc300(tmp_path, cal_path):
+    pytest.importorskip("pymeasure")
+    from stickslip.devices.emulators import ANC300Emulator
+
+    db = tmp_path / "s.db"
+    cal = calibration.Calibration.load(cal_path)
+    with ANC300Emulator() as emu:
+        url = emu.url + "&delay=0.002"
+        r = run("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "40um",
+                "--burst", 20, "--json")  # fmt: skip
+        assert r.exit_code == 0, r.output
+        sent = list(emu.received)
+        assert emu.continuous_moves == 0
+    plan = planning.plan_move(cal, 3, 0.0, 40e-6, kin.Pose())
+    ups = [int(m.split()[2]) for m in sent if m.startswith("stepu 3 ")]
+    assert sum(ups) == plan.steps == json.loads(r.stdout)["steps"] and max(ups) <= 20
+    assert not any(m.startswith("stepd") for m in sent)
+    # the password is not kept with the positions
+    w = where_json(db, url)
+    assert "password" not in w["device"]
+    assert w["joints"][2]["q"] == pytest.approx(plan.q_end_predicted, abs=1e-15)

@@ -544,6 +544,12 @@ def main(argv: list[str] | None = None) -> int:
         emu = ANC300Emulator(sim, args.password, args.realtime, transport=kind)
     else:
         emu = NanoControlEmulator(sim, "tcp" if args.tcp else "pty", realtime=args.realtime)
+    import signal
+
+    def _terminate(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, _terminate)
     with emu:
         print(emu.url, flush=True)
         try:
