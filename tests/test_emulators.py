@@ -162,3 +162,20 @@ def test_emulator_rejects_malformed_commands():
                 dev.command("coarse A +70000")
             with pytest.raises(DeviceError, match="unknown command"):
                 dev.command("jump A 3")
+
+
+def test_a_port_in_use_is_refused_with_a_clear_reason():
+    with NanoControlEmulator(_sim()) as emu:
+        with open_device(emu.url):
+            with pytest.raises(DeviceError, match="another program"):
+                open_device(emu.url + "?timeout=0.2")
+
+
+def test_late_reply_from_a_timed_out_command_is_discarded():
+    """A reply that arrives after its timeout must not be taken for the next command's."""
+    with NanoControlEmulator(_sim(), realtime=1.0) as emu:
+        with open_device(emu.url + "?timeout=0.05&hz=1000000") as dev:
+            with pytest.raises(DeviceError, match="did not answer"):
+                dev.step(3, 300)  # the emulator needs 0.3 s; we wait 0.05 + a few us
+            time.sleep(1.0)  # the late "o" (and the stop's answer) arrive meanwhile
+            assert dev.counters()[3] == 300  # the counters answer, not a stale "o\t"

@@ -177,6 +177,9 @@ class NanoControl:
         wire = f"{text};".encode("ascii")
         wait = self.timeout if timeout is None else timeout
         with self._lock:
+            stale = self.transport.drain()
+            if stale:
+                log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
             log.debug("-> %s", wire.decode())
             self.transport.write(wire)
             if not self.ack:

@@ -22,6 +22,7 @@ its ``with`` block) fails if any expected message was never sent.
 from __future__ import annotations
 
 import logging
+import os
 import select
 import socket
 import time
@@ -125,6 +126,19 @@ class Transport:
             data += chunk
         return data
 
+    def drain(self) -> bytes:
+        """Take whatever has arrived unasked (buffered or waiting now), without waiting."""
+        data, self._buffer = self._buffer, b""
+        try:
+            while not self.closed:
+                chunk = self._recv(0.0)
+                if not chunk:
+                    break
+                data += chunk
+        except (OSError, DeviceError):
+            pass
+        return data
+
     def close(self) -> None:
         """Release the port (idempotent)."""
         if not self.closed:
@@ -171,12 +185,20 @@ class SerialTransport(Transport):
             import serial  # noqa: PLC0415
         except ImportError as e:
             raise DeviceError("serial ports need pyserial: pip install 'stickslip[serial]'") from e
+        exclusive = True if os.name == "posix" else None  # one program per port
         try:
             self._port = serial.Serial(
-                port, baudrate=baudrate, bytesize=8, parity="N", stopbits=1, timeout=0
+                port,
+                baudrate=baudrate,
+                bytesize=8,
+                parity="N",
+                stopbits=1,
+                timeout=0,
+                exclusive=exclusive,
             )
         except (serial.SerialException, OSError, ValueError) as e:
-            raise DeviceError(f"cannot open serial port {port}: {e} (is it plugged in?)") from e
+            hint = "is another program using it?" if "lock" in str(e).lower() else "is it plugged in?"
+            raise DeviceError(f"cannot open serial port {port}: {e} ({hint})") from e
         self._serial_exception = serial.SerialException
         log.debug("opened %s at %d baud 8N1", port, baudrate)
 
