@@ -281,6 +281,14 @@ def fit_seed_quadratic(
         avg = abs(end - start) / steps_between(start, end, g0a, da * alpha, da * beta)
     else:
         raise ValueError(f"simulate must be 'steps' or 'exact', got {simulate!r}")
+    # keep the physical branch only: for each gamma0 the average must still rise with d
+    keep = np.ones(len(g0a), dtype=bool)
+    for g0 in np.unique(g0a):
+        idx = np.nonzero(g0a == g0)[0]
+        falling = np.nonzero(np.diff(avg[idx]) <= 0)[0]
+        if len(falling):
+            keep[idx[falling[0] + 1 :]] = False
+    g0a, da, avg = g0a[keep], da[keep], avg[keep]
     delta = avg - g0a
     p2, p1, p0 = np.polyfit(delta, da, 2)
     return SeedQuadratic((float(p2), float(p1), float(p0)), {"gamma0": g0a, "d": da, "delta": delta})

@@ -468,11 +468,11 @@ def position_after_steps(
     direction = direction_sign(direction)
     if n_steps == 0:
         return start
-    if alpha == 0.0 and beta == 0.0:
+    B = math.hypot(alpha, beta)
+    if B <= 1e-13 * abs(A):  # no load variation along the way (to double precision)
         return float(start + direction * n_steps * A)
     from scipy.optimize import brentq
 
-    B = math.hypot(alpha, beta)
     if not A > B:
         raise NonPhysicalError("dead reckoning needs a step size that is positive on the whole circle")
     F0 = float(antiderivative_inverse_step(start, A, alpha, beta))
@@ -484,5 +484,6 @@ def position_after_steps(
     # the answer lies between n * min step and n * max step away
     a = start + direction * n_steps * lo_step
     b = start + direction * n_steps * hi_step
-    lo, hi = min(a, b), max(a, b)
+    pad = 1e-9 * abs(b - start) + 1e-300
+    lo, hi = min(a, b) - pad, max(a, b) + pad
     return float(brentq(f, lo, hi, xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200))

@@ -41,9 +41,9 @@ ANGLE_UNITS: dict[str, float] = {
     "°": math.pi / 180.0,
 }
 
-_NUMBER = r"[+-−]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+_NUMBER = r"[-+−]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
 _PI = r"(?:(?P<pimul>" + _NUMBER + r")?\*?pi(?:/(?P<pidiv>\d+(?:\.\d*)?))?)"
-_QUANTITY = re.compile(r"^\s*(?:(?P<num>" + _NUMBER + r")|(?P<sign>[+-−])?" + _PI + r")\s*(?P<unit>[^\d\s]*)\s*$")
+_QUANTITY = re.compile(r"^\s*(?:(?P<num>" + _NUMBER + r")|(?P<sign>[-+−])?" + _PI + r")\s*(?P<unit>[^\d\s]*)\s*$")
 
 
 class UnitError(ValueError):
