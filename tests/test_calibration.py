@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from stickslip import calibration as C
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
-from stickslip.models import JointModel, PrismaticParams, RotaryParams, steps_between
+from stickslip.models import JointModel, PrismaticParams, steps_between
 from synth import PAPER_PRISMATIC, PAPER_ROTARY, random_poses, seed_table, traverse_from_model
 
 LO, HI = JOINTS[2].lower, JOINTS[2].upper

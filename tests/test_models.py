@@ -72,7 +72,7 @@ def test_discrete_simulation_agrees_with_integral():
         lo, hi = JOINTS[2].lower, JOINTS[2].upper
         start, end = (lo, hi) if d_sign == "+" else (hi, lo)
         exact = float(m.steps_between(start, end, A, al, be))
-        n = m.simulate_traverse_steps(start, end, lambda q: A + al * math.cos(q) + be * math.sin(q))
+        n = m.simulate_traverse_steps(start, end, lambda q, A=A, al=al, be=be: A + al * math.cos(q) + be * math.sin(q))
         # Euler stepping overshoots the end by < 1 step; the discretisation error is O(d gamma/dq) ~ 1 step
         assert abs(n - exact) < 2.0, (n, exact)
 
