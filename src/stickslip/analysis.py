@@ -128,12 +128,13 @@ class PoseGroup:
             if k == f"q{self.joint}":
                 continue
             v = self.pose[k]
-            parts.append(f"{k}={v * 1e3:.4g}mm" if k == "q3" else f"{k}={math.degrees(v):.4g}°")
+            name = {"theta": "θ", "psi": "ψ"}.get(k, k)
+            parts.append(f"{name}={v * 1e3:.4g}mm" if k == "q3" else f"{name}={math.degrees(v):.4g}°")
         lo, hi = self.interval
         if self.joint == 3:
-            parts.append(f"q3 {lo * 1e3:.4g}..{hi * 1e3:.4g}mm")
+            parts.append(f"q3:{lo * 1e3:.4g}..{hi * 1e3:.4g}mm")
         else:
-            parts.append(f"q{self.joint} {math.degrees(lo):.4g}..{math.degrees(hi):.4g}°")
+            parts.append(f"q{self.joint}:{math.degrees(lo):.4g}..{math.degrees(hi):.4g}°")
         return " ".join(parts)
 
 

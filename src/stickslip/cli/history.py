@@ -1,5 +1,306 @@
-"""Commands of this area are added here (see stickslip.cli)."""
+"""History and analysis commands: history, export, import, anova, fit, report.
+
+The database is the embedded SQLite file of :mod:`stickslip.storage` (``--db PATH``,
+else ``$STICKSLIP_DB``, else the user's data directory).
+"""
 
 from __future__ import annotations
 
-from . import app  # noqa: F401
+import hashlib
+import math
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from . import app
+from ._common import console, fail, print_json, user_errors, warn
+
+_DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
+
+
+def _open_store(db: Path | None):
+    from ..storage import Store, StoreError
+
+    with user_errors(StoreError):
+        return Store.open(db)
+
+
+def _read_table(path: Path):
+    from ..measurements import TableError, read_measurements
+
+    try:
+        return read_measurements(path)
+    except TableError as e:
+        n = len(e.problems)
+        fail(f"{path}: {n} problem{'s' if n != 1 else ''}; nothing was read\n" + "\n".join(e.problems))
+
+
+def _traverses_from(meas: Path | None, db: Path | None, device: str | None, day: str | None):
+    """Traverses from a CSV file, or else from the database."""
+    if meas is not None:
+        ts = _read_table(meas)
+        if day is not None:
+            ts = [t for t in ts if t.day == day]
+            if not ts:
+                fail(f"{meas}: no traverses on day {day!r}")
+        return ts, str(meas)
+    with _open_store(db) as st:
+        ts = st.traverses(device=device, day=day)
+        where = f"the database {st.path}"
+    if not ts:
+        what = " and ".join(x for x in (f"device {device}" if device else "", f"day {day}" if day else "") if x)
+        fail(f"no traverses in {where}{' for ' + what if what else ''}: pass MEAS.csv or import one first")
+    return ts, where
+
+
+# ---------------------------------------------------------------- history / export / import
+
+
+@app.command()
+def history(
+    device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per device and day."),
+) -> None:
+    """Show the stored sessions: traverses per day and joint, and the calibrations made.
+
+    Example: [bold]stickslip history --device sim://[/]
+    """
+    with _open_store(db) as st:
+        entries = st.history(device)
+        path = st.path
+    if json_out:
+        print_json(entries)
+        return
+    if not entries:
+        console.print(f"no sessions stored in {path}" + (f" for device {device}" if device else ""))
+        return
+    table = Table(title=f"stickslip history ({path})")
+    for col in ("device", "day", "traverses", "by joint", "measured (UTC)", "calibrations"):
+        table.add_column(col)
+    for e in entries:
+        span = ""
+        if e["first_measured_at"]:
+            span = f"{e['first_measured_at'][:16]} .. {e['last_measured_at'][11:16]}"
+        cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
+        by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
+        table.add_row(e["device"], e["day"], str(e["traverses"]), by, span, cals)
+    console.print(table)
+
+
+@app.command()
+def export(
+    out: Path = typer.Option(..., "-o", "--output", help="Measurement table to write (CSV, SI units)."),
+    day: str | None = typer.Option(None, "--day", help="Only this session day (e.g. 2026-11-21); default all."),
+    device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
+    joint: int | None = typer.Option(None, "--joint", "-j", help="Only this joint (1, 2 or 3)."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+) -> None:
+    """Write stored traverses to a measurement table (day,joint,direction,q1,...,steps; SI).
+
+    Example: [bold]stickslip export --day 2026-11-21 -o meas.csv[/]
+    """
+    from ..measurements import write_measurements
+
+    if joint is not None and joint not in (1, 2, 3):
+        fail(f"--joint must be 1, 2 or 3, got {joint}")
+    with _open_store(db) as st:
+        ts = st.traverses(device=device, day=day, joint=joint)
+        if not ts:
+            days = st.days(device)
+            hint = f" (stored days: {', '.join(days)})" if days else " (the database is empty)"
+            fail("no traverses match" + (f" day {day!r}" if day else "") + hint)
+    with user_errors():
+        write_measurements(out, ts)
+    console.print(f"wrote {len(ts)} traverses to {out}")
+
+
+@app.command("import")
+def import_(
+    meas: Path = typer.Argument(..., help="Measurement table (CSV) to store.", show_default=False),
+    device: str = typer.Option("sim://", "--device", "-d", help="Device URL the table was measured on."),
+    how: str = typer.Option("imported", "--how", help="How it was measured: imported, audio, simulated ..."),
+    force: bool = typer.Option(False, "--force", help="Import even if this exact file was imported before."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print the new traverse ids as JSON."),
+) -> None:
+    """Store every row of a measurement table (validated first: on any bad row nothing is stored).
+
+    Example: [bold]stickslip import meas.csv --device sim://[/]
+    """
+    ts = _read_table(meas)
+    digest = "sha256:" + hashlib.sha256(meas.read_bytes()).hexdigest()
+    with _open_store(db) as st:
+        if st.has_source(digest) and not force:
+            fail(f"{meas} was imported before (same contents); use --force to import it again")
+        with user_errors():
+            ids = st.add_traverses(ts, device=device, how=how, source=digest)
+        path = st.path
+    if json_out:
+        print_json({"imported": len(ids), "ids": ids, "db": str(path)})
+    else:
+        days = sorted({t.day for t in ts})
+        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {device} into {path}")
+
+
+# ---------------------------------------------------------------- anova
+
+
+@app.command()
+def anova(
+    meas: Path | None = typer.Argument(None, help="Measurement table (CSV); default: the database."),
+    device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
+    alpha: float = typer.Option(0.05, "--alpha", help="Significance level, in (0, 1)."),
+    two_way: bool = typer.Option(True, "--two-way/--no-two-way", help="Also the day x direction table."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per test."),
+) -> None:
+    """Is the step size different from day to day, and between + and -? (the seed's ANOVA)
+
+    For each joint and direction: one-way ANOVA of the average step across days, in
+    poses repeated on several days. For each joint and day: + against -. With
+    --two-way, the day x direction table with interaction. Poses match when fixed
+    joints, tilt and traversed interval agree within 1e-3 rad / 10 um.
+
+    Example: [bold]stickslip anova meas.csv --json[/]
+    """
+    from ..analysis import anova as run_anova
+
+    if not 0.0 < alpha < 1.0:
+        fail(f"--alpha must be in (0, 1), got {alpha}")
+    ts, where = _traverses_from(meas, db, device, None)
+    with user_errors(ImportError):
+        res = run_anova(ts, alpha=alpha, two_way=two_way)
+    if json_out:
+        print_json(res.rows())
+        return
+    console.print(f"ANOVA of the average step size, {len(ts)} traverses from {where}")
+    if not res.tests:
+        warn("no testable groups: a pose must be measured on several days (or both ways on one day), repeated")
+    else:
+        table = Table()
+        for col in ("test", "joint", "day / dir / term", "pose", "n", "F", "df", "p", f"at alpha={alpha:g}"):
+            table.add_column(col)
+        from ..analysis import PoseGroup
+
+        for t in res.tests:
+            what = {"day": t.direction, "direction": t.day, "two-way": t.term}[t.test]
+            verdict = t.verdict(alpha)
+            style = "bold red" if t.significant(alpha) else ""
+            table.add_row(
+                {"day": "across days", "direction": "+ vs -", "two-way": "two-way"}[t.test],
+                str(t.joint),
+                str(what),
+                PoseGroup(t.joint, t.pose, t.interval).describe(),
+                str(t.n),
+                f"{t.F:.4g}",
+                f"{t.df_num},{t.df_den}",
+                f"{t.p:.3g}" if math.isfinite(t.p) else "-",
+                f"[{style}]{verdict}[/]" if style else verdict,
+            )
+        console.print(table)
+    for s in res.skipped:
+        console.print(f"[dim]skipped: {s}[/]")
+
+
+# ---------------------------------------------------------------- fit
+
+
+@app.command()
+def fit(
+    meas: Path | None = typer.Argument(None, help="Measurement table (CSV); default: the database."),
+    out: Path | None = typer.Option(None, "-o", "--output", help="Write the calibration JSON here."),
+    day: str | None = typer.Option(None, "--day", help="Only traverses of this session day."),
+    device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
+    record: bool = typer.Option(False, "--record", help="Also store the calibration in the database."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
+) -> None:
+    """Fit each joint's model to all rows by nonlinear least squares, with standard errors.
+
+    Traverse averages are predicted exactly (closed-form integral along the traverse),
+    so long rotary traverses count as what they are. Prints every parameter with its
+    standard error (nm, µrad) and the residuals per joint and direction.
+
+    Example: [bold]stickslip fit meas.csv -o cal.json[/]
+    """
+    from ..analysis import residual_summary
+    from ..calibration import CalibrationError, calibrate
+
+    ts, where = _traverses_from(meas, db, device, day)
+    with user_errors(CalibrationError):
+        cal = calibrate(ts, method="lsq", day=day, source=str(meas) if meas else where)
+    res = residual_summary(cal, ts)
+    if out is not None:
+        with user_errors():
+            cal.save(out)
+    cal_id = None
+    if record:
+        with _open_store(db) as st:
+            with user_errors():
+                cal_id = st.add_calibration(cal, device=device or "sim://")
+    if json_out:
+        print_json(
+            {
+                "calibration": cal.to_dict(),
+                "residuals": res.rows(),
+                "output": str(out) if out else None,
+                "stored_id": cal_id,
+            }
+        )
+        return
+    console.print(cal.report(), highlight=False)
+    console.print(res.report(), highlight=False)
+    if out is not None:
+        console.print(f"wrote {out}")
+    if cal_id is not None:
+        console.print(f"stored as calibration #{cal_id}")
+
+
+# ---------------------------------------------------------------- report
+
+
+@app.command()
+def report(
+    meas: Path | None = typer.Argument(None, help="Measurement table (CSV) to plot over the model."),
+    calibration: Path | None = typer.Option(
+        None, "--calibration", "-c", help="Calibration JSON (default: fit the table by least squares)."
+    ),
+    out: Path = typer.Option(Path("stickslip-report"), "-o", "--output", help="Directory for the PNGs and index.html."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP + " Used when MEAS.csv is not given."),
+    device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
+    json_out: bool = typer.Option(False, "--json", help="Print the list of files written as JSON."),
+) -> None:
+    """Write the seed's figures (Figs. 4, 6/10, 8, 9) and an HTML page with the validation table.
+
+    Figures: prismatic step against zeta for several theta with the model; rotary step
+    per pi/6 interval against zeta at q3 = 0 and 12 mm; simulated step along the
+    range; d against the step difference, exact relation vs the seed's quadratic.
+
+    Example: [bold]stickslip report --calibration cal.json meas.csv -o report/[/]
+    """
+    from ..calibration import Calibration, CalibrationError, calibrate
+    from ..report import build_report
+
+    ts, _where = _traverses_from(meas, db, device, None)
+    if calibration is not None:
+        with user_errors():
+            cal = Calibration.load(calibration)
+    else:
+        with user_errors(CalibrationError):
+            cal = calibrate(ts, method="lsq")
+    from ..storage import warn_if_stale
+
+    latest = max(t.day for t in ts)
+    msg = warn_if_stale(cal, today=latest)
+    if msg:
+        warn(msg)
+    with user_errors(ImportError):
+        rep = build_report(cal, ts, out)
+    if json_out:
+        print_json({"directory": str(out), "html": str(rep.html), "figures": [str(p) for p in rep.figures]})
+        return
+    for p in rep.figures:
+        console.print(f"wrote {p}")
+    console.print(f"open {rep.html}")
