@@ -118,41 +118,60 @@ def _count_before(t_s: float, bursts: list[tuple[float, int]], hz: float) -> int
 
 
 class _Listener:
-    """Feeds audio to the detector up to a stream time; returns the first event."""
+    """Feeds audio to the detector up to a stream time; returns the first event.
+
+    Keeps the stream time of the next sample (``t_s``): the source is taken to start
+    at the controller clock when listening first starts, and to run continuously.
+    """
 
     def __init__(self, detector: Any, audio_blocks: Any, sample_rate: float):
         self.detector = detector
         self.sample_rate = float(sample_rate)
         self._callable = callable(audio_blocks) and not isinstance(audio_blocks, Iterator)
         self.source = audio_blocks if self._callable else iter(audio_blocks)
-        self.t_s = 0.0
+        self.t_s: float | None = None
+        self._last_block_s = 0.0
 
     def start(self, t0_s: float) -> None:
         """Begin listening at stream time ``t0_s``: drop older audio, reset the detector."""
+        first = self.t_s is None
+        if first:
+            self.t_s = t0_s
         skip = getattr(self.source, "skip_to", None)
         if skip is not None:
             skip(t0_s)
+            self.t_s = float(getattr(self.source, "t_s", t0_s))
         elif self._callable:
-            self.source()
-        self.detector.reset(t0_s)
-        self.t_s = t0_s
+            for block in self.source():
+                self.t_s += len(block) / self.sample_rate
+        elif not first:
+            for block in self._blocks(t0_s):
+                if isinstance(block, tuple):
+                    block = block[0]
+                self.t_s += len(block) / self.sample_rate
+        self.detector.reset(self.t_s)
 
     def _blocks(self, until_s: float) -> Iterable[np.ndarray]:
         if self._callable:
             yield from self.source()
             return
-        while self.t_s < until_s:
+        # pull until less than one block of audio is missing (a block can only be
+        # complete once the device clock has passed its end)
+        while until_s - self.t_s >= max(self._last_block_s, 1e-9):
             try:
                 block = next(self.source)
             except StopIteration:
                 return
             if isinstance(block, tuple):  # (samples, sample_rate) pairs from file sources
                 block = block[0]
+            self._last_block_s = len(block) / self.sample_rate
             yield block
 
     def listen(self, until_s: float):
         """Feed the audio recorded up to ``until_s``; the first event, or ``None``."""
         for block in self._blocks(until_s):
+            if isinstance(block, tuple):
+                block = block[0]
             block = np.asarray(block, dtype=np.float32)
             if block.ndim > 1:
                 block = block.mean(axis=1)

@@ -64,22 +64,28 @@ def demo(
         f"in {result.elapsed_s:.1f} s), method {result.calibration.method}"
     )
     table = Table(title="Calibrated parameters beside the simulator's truth")
-    for col in ("joint", "dir", "parameter", "q3", "calibrated", "± s.e.", "true", "error"):
-        table.add_column(col, justify="right" if col not in ("parameter",) else "left")
+    with_se = any(p.get("stderr") is not None for p in result.parameters)
+    cols = ["joint", "dir", "parameter", "q3", "calibrated", "true", "error"]
+    if with_se:
+        cols.insert(5, "± s.e.")
+    for col in cols:
+        table.add_column(col, justify="left" if col == "parameter" else "right")
     for p in result.parameters:
         scale, unit = _scale(p["name"], p["joint"])
         se = p.get("stderr")
         error = f"{p['error']:+.4f}" if p["name"] == "b" else f"{p['rel_error']:+.2%}"
-        table.add_row(
+        cells = [
             str(p["joint"]),
             p["direction"],
-            p["name"],
+            f"{p['name']} [{unit}]" if unit else p["name"],
             "" if p["q3"] is None else f"{p['q3'] * 1e3:g} mm",
-            f"{p['value'] * scale:.4g} {unit}".strip(),
-            "" if se is None else f"{se * scale:.2g}",
-            f"{p['true'] * scale:.4g} {unit}".strip(),
+            f"{p['value'] * scale:.4g}",
+            f"{p['true'] * scale:.4g}",
             error,
-        )
+        ]
+        if with_se:
+            cells.insert(5, "" if se is None else f"{se * scale:.2g}")
+        table.add_row(*cells)
     console.print(table)
     if result.validation is not None:
         vt = Table(title="Validation on other poses: |relative error| of the average step")

@@ -494,11 +494,7 @@ class SimulatedMM3A:
     def soundscape(self):
         """The :class:`stickslip.audio.synth.Soundscape` the virtual microphone renders with."""
         if self._soundscape is None:
-            from ..audio.synth import Soundscape
-
-            self._soundscape = Soundscape(
-                sample_rate=self.sample_rate, seed=self.seed, **self.soundscape_kwargs
-            )
+            self._soundscape = _soundscape(self.sample_rate, self.seed, self.soundscape_kwargs)
         return self._soundscape
 
     def step_events(self, t_from: float, t_to: float) -> tuple[NDArray, NDArray, NDArray]:
@@ -589,6 +585,22 @@ class SimulatedMM3A:
             raise DeviceError("the recording never reached the stop (internal error)")
         samples = mic.read_until(self.clock_s)
         return samples, self.sample_rate, stops[0] - t0
+
+
+_SCAPES: dict[tuple, object] = {}
+
+
+def _soundscape(sample_rate: int, seed: int, kwargs: dict):
+    """A shared :class:`~stickslip.audio.synth.Soundscape` (stateless renders; costly to build)."""
+    from ..audio.synth import Soundscape
+
+    key = (sample_rate, seed, tuple(sorted((k, repr(v)) for k, v in kwargs.items())))
+    scape = _SCAPES.get(key)
+    if scape is None:
+        if len(_SCAPES) >= 8:
+            _SCAPES.pop(next(iter(_SCAPES)))
+        scape = _SCAPES[key] = Soundscape(sample_rate=sample_rate, seed=seed, **kwargs)
+    return scape
 
 
 class VirtualMicrophone:
