@@ -185,3 +185,13 @@ def test_for_sample_rate_keeps_durations():
 def test_feed_rejects_stereo():
     with pytest.raises(ValueError, match="mono"):
         StopDetector(TUNING).feed(np.zeros((100, 2)))
+
+
+def test_plot_levels_draws_threshold_and_event():
+    from stickslip.audio.detector import plot_levels
+
+    x = _quiet_then((0.3, 0.0), (0.3, 0.1))
+    ax = plot_levels(x, TUNING, stop_at_s=0.3)
+    labels = [ln.get_label() for ln in ax.get_lines()]
+    assert {"threshold", "detected", "true stop"} <= set(labels)
+    assert ax.get_ylabel() == "band level (dBFS)"

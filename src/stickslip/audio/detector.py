@@ -6,7 +6,8 @@ full scale (``10 log10`` of the mean square the band contributes, so white noise
 variance s^2 spread over the whole spectrum sums to ``10 log10 s^2`` over all bands).
 
 A stop is declared when the band level stays at or above ``threshold_db`` for
-``hold_s`` (a knock or a burst of speech is shorter); it then stays latched until the
+``hold_s`` (a knock or a burst of speech is shorter; up to ``max_dips`` frames of the
+hold may dip below); it then stays latched until the
 level has been below ``threshold_db - hysteresis_db`` for ``release_s``, so one stop
 gives one event. There is no look-ahead beyond one frame.
 """
@@ -29,6 +30,7 @@ __all__ = [
     "band_levels_db",
     "detect",
     "frame_levels_db",
+    "plot_levels",
 ]
 
 _FLOOR = 1e-20
@@ -66,6 +68,9 @@ class Tuning:
         The level must fall this far below threshold to re-arm, dB.
     release_s : float
         ... for this long, s.
+    max_dips : int
+        Frames below threshold tolerated within the hold: the event fires when
+        ``hold_frames`` of the last ``hold_frames + max_dips`` frames were above.
     onset_lag_s : float
         Time from the true onset of the stop to the interpolated threshold crossing, s
         (measured by :func:`stickslip.audio.tuning.tune`); used for ``onset_s``.
@@ -86,6 +91,7 @@ class Tuning:
     hold_s: float = 0.016
     hysteresis_db: float = 6.0
     release_s: float = 0.25
+    max_dips: int = 2
     onset_lag_s: float = 0.003
     joint: int | None = None
     contrast_db: float | None = None
@@ -112,6 +118,8 @@ class Tuning:
                 f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
                 f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
             )
+        if not 0 <= self.max_dips <= 16:
+            raise ValueError(f"max_dips {self.max_dips} is outside the allowed 0..16 frames")
         if not math.isfinite(self.threshold_db) or not -200 <= self.threshold_db <= 50:
             raise ValueError(f"threshold_db {self.threshold_db} must be within -200..50 dBFS")
         for name, lo_, hi_ in (
@@ -174,7 +182,7 @@ class Tuning:
             for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s"):
                 if k in kwargs:
                     kwargs[k] = float(kwargs[k])
-            for k in ("sample_rate", "frame", "hop"):
+            for k in ("sample_rate", "frame", "hop", "max_dips"):
                 if k in kwargs:
                     v = kwargs[k]
                     if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
@@ -209,8 +217,7 @@ class Tuning:
     def report(self) -> str:
         """A few human lines: band, threshold, contrast and margin."""
         lines = [
-            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, "
-            f"threshold {self.threshold_db:.1f} dBFS",
+            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} dBFS",
             f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
             f"hop {self.hop} ({1e3 * self.hop / self.sample_rate:.2f} ms), "
             f"hold {1e3 * self.hold_s:.1f} ms, hysteresis {self.hysteresis_db:.1f} dB",
@@ -316,6 +323,7 @@ class StopDetector:
         self._w, self._scale = _window(tuning.frame)
         self._i0, self._i1 = _band_bins(tuning.band_hz, tuning.sample_rate, tuning.frame)
         self._hold = tuning.hold_frames
+        self._full = (1 << (self._hold + tuning.max_dips)) - 1
         self._release = max(1, int(math.ceil(tuning.release_s * tuning.sample_rate / tuning.hop)))
         self.reset(t0_s)
 
@@ -325,7 +333,7 @@ class StopDetector:
         self._buf = np.zeros(0, dtype=np.float64)
         self._buf_start = 0  # absolute sample index of _buf[0]
         self._next = 0  # absolute sample index where the next frame starts
-        self._count = 0
+        self._mask = 0  # bit i: frame i hops ago was above threshold
         self._latched = False
         self._below = 0
         self._prev_db = -np.inf
@@ -379,40 +387,44 @@ class StopDetector:
         tu = self.tuning
         thr, rel = tu.threshold_db, tu.threshold_db - tu.hysteresis_db
         sr, H = tu.sample_rate, tu.hop
+        if not self._latched and self._mask == 0 and float(levels.max()) < thr:
+            self._prev_db = float(levels[-1])  # fast path: nothing near a stop
+            return []
         events = []
         prev = self._prev_db
+        full = self._full
         for lev, end in zip(levels.tolist(), ends.tolist(), strict=True):
             if self._latched:
                 if lev < rel:
                     self._below += 1
                     if self._below >= self._release:
                         self._latched = False
-                        self._count = 0
+                        self._mask = 0
                 else:
                     self._below = 0
             else:
-                if lev >= thr:
-                    if self._count == 0:
-                        # interpolate the crossing between the previous frame and this one
-                        t_end = self._t0 + end / sr
-                        if math.isfinite(prev) and prev < thr and lev > prev:
-                            frac = (thr - prev) / (lev - prev)
-                            self._cross_t = float(t_end - (1 - frac) * H / sr)
-                        else:
-                            self._cross_t = t_end
-                    self._count += 1
-                    if self._count >= self._hold:
-                        self._latched = True
-                        self._below = 0
-                        events.append(
-                            StopEvent(
-                                detected_at_s=self._t0 + end / sr,
-                                onset_s=self._cross_t - tu.onset_lag_s,
-                                level_db=float(lev),
-                            )
+                above = lev >= thr
+                if above and self._mask == 0:
+                    # interpolate the crossing between the previous frame and this one
+                    t_end = self._t0 + end / sr
+                    if math.isfinite(prev) and prev < thr and lev > prev:
+                        frac = (thr - prev) / (lev - prev)
+                        self._cross_t = float(t_end - (1 - frac) * H / sr)
+                    else:
+                        self._cross_t = t_end
+                # debounce: hold_frames above threshold among the last
+                # hold_frames + max_dips frames (a knock lights fewer; a stop all)
+                self._mask = ((self._mask << 1) | above) & full
+                if above and self._mask.bit_count() >= self._hold:
+                    self._latched = True
+                    self._below = 0
+                    events.append(
+                        StopEvent(
+                            detected_at_s=self._t0 + end / sr,
+                            onset_s=self._cross_t - tu.onset_lag_s,
+                            level_db=float(lev),
                         )
-                else:
-                    self._count = 0  # debounce: the hold must be unbroken
+                    )
             prev = lev
         self._prev_db = prev
         return events
@@ -431,3 +443,62 @@ def detect(
         for b in samples:
             events += det.feed(b)
     return events
+
+
+def plot_levels(
+    samples: np.ndarray,
+    tuning: Tuning,
+    t0_s: float = 0.0,
+    stop_at_s: float | None = None,
+    ax=None,
+):
+    """Plot the band level of a recording over time with the threshold and the events.
+
+    Parameters
+    ----------
+    samples : numpy.ndarray
+        Mono recording at ``tuning.sample_rate``.
+    tuning : Tuning
+        Band and threshold to show.
+    t0_s : float
+        Stream time of the first sample, s.
+    stop_at_s : float, optional
+        True stop time, s, drawn as a dashed line.
+    ax : matplotlib.axes.Axes, optional
+        Axes to draw on (default: a new figure).
+
+    Returns
+    -------
+    matplotlib.axes.Axes
+    """
+    try:
+        import matplotlib
+
+        if ax is None and not _has_display():
+            matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("plotting needs matplotlib: pip install 'stickslip[plot]'") from e
+    levels = frame_levels_db(samples, tuning)
+    t = t0_s + (np.arange(levels.size) * tuning.hop + tuning.frame - 1) / tuning.sample_rate
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 3))
+    lo, hi = tuning.band_hz
+    ax.plot(t, levels, lw=0.8, label=f"band {lo:.0f}-{hi:.0f} Hz")
+    ax.axhline(tuning.threshold_db, color="C3", lw=1, label="threshold")
+    ax.axhline(tuning.threshold_db - tuning.hysteresis_db, color="C3", lw=0.8, ls=":", label="re-arm level")
+    for i, e in enumerate(detect(samples, tuning, t0_s=t0_s)):
+        ax.axvline(e.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
+    if stop_at_s is not None:
+        ax.axvline(stop_at_s, color="k", ls="--", lw=1, label="true stop")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("band level (dBFS)")
+    ax.legend(loc="best", fontsize="small")
+    return ax
+
+
+def _has_display() -> bool:
+    import os
+    import sys
+
+    return sys.platform in ("win32", "darwin") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))

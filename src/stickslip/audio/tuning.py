@@ -82,6 +82,9 @@ def tune(
     min_part_s: float = 0.5,
     f_min_hz: float = 200.0,
     min_band_hz: float = 1400.0,
+    rate_shift_hz: float = 650.0,
+    max_stepping_s: float = 20.0,
+    max_stopped_s: float = 10.0,
 ) -> Tuning:
     """Choose band and threshold that tell stepping from stepping against the stop.
 
@@ -119,6 +122,11 @@ def tune(
         use: the steps sound as a line spectrum at multiples of the step rate, and a
         narrower band tuned at one rate can sit between two harmonics there and on
         top of one at another rate.
+    rate_shift_hz : float
+        The stepping level of a band is the highest of the band shifted by up to this
+        much either way, Hz (half the highest step rate; 0 to judge the band as is).
+    max_stepping_s, max_stopped_s : float
+        Analyse at most this much of the recording before and after the stop, s.
 
     Returns
     -------
@@ -160,13 +168,26 @@ def tune(
         raise TuningError(
             f"no band at least {min_band_hz:g} Hz wide fits below {sample_rate / 2:g} Hz"
         )
-    levels = _band_level_matrix(x, sample_rate, frame, hop, bands)
-    starts = np.arange(levels.shape[0]) * hop / sample_rate
+    # analyse at most max_stepping_s before the stop and max_stopped_s after it
+    first = max(0, int((stop_at_s - max_stepping_s) * sample_rate) // hop * hop)
+    last = min(x.size, int((stop_at_s + max_stopped_s) * sample_rate))
+    seg = x[first:last]
+    t_first = first / sample_rate
+    levels = _band_level_matrix(seg, sample_rate, frame, hop, bands)
+    starts = t_first + np.arange(levels.shape[0]) * hop / sample_rate
     ends = starts + (frame - 1) / sample_rate
-    stepping = levels[ends < stop_at_s - guard_s]
+    stepping_rows = ends < stop_at_s - guard_s
     stopped = levels[starts >= stop_at_s + guard_s]
-    step_hi = np.percentile(stepping, stepping_percentile, axis=0)
     stop_lo = np.percentile(stopped, stopped_percentile, axis=0)
+    # The steps sound as a line spectrum at multiples of the step rate; at another rate
+    # the lines fall elsewhere in the band. Judge the stepping level by the loudest of
+    # the band and its copies shifted by up to +-rate_shift_hz (half the highest step
+    # rate covers every placement of the lines), so the threshold holds at any rate.
+    step_hi = np.full(len(bands), -np.inf)
+    for shift in np.linspace(-rate_shift_hz, rate_shift_hz, 5) if rate_shift_hz else [0.0]:
+        moved = [(max(lo + shift, 0.0), min(hi + shift, sample_rate / 2)) for lo, hi in bands]
+        lv = _band_level_matrix(seg, sample_rate, frame, hop, moved)[stepping_rows]
+        step_hi = np.maximum(step_hi, np.percentile(lv, stepping_percentile, axis=0))
     contrast = stop_lo - step_hi
     best = int(np.argmax(contrast))
     band = bands[best]
