@@ -1,0 +1,153 @@
+"""CLI: calibrate, predict, validate, plan, show — and their one-line errors (exit 2, no traceback)."""
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from stickslip.calibration import Calibration, calibrate
+from stickslip.cli import app
+from stickslip.kinematics import Pose
+from stickslip.measurements import measurements_to_csv
+from stickslip.planning import plan_move
+from synth import seed_table
+
+runner = CliRunner()
+
+
+@pytest.fixture()
+def files(tmp_path):
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(seed_table()))
+    return tmp_path, meas
+
+
+def _cal(tmp, meas):
+    out = tmp / "cal.json"
+    r = runner.invoke(app, ["calibrate", str(meas), "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+def _bad(result, *words):
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and "Traceback" not in result.stderr
+    assert result.stderr.startswith("error: ")
+    for w in words:
+        assert w in result.stderr, result.stderr
+
+
+def test_calibrate_json_and_file(files):
+    tmp, meas = files
+    r = runner.invoke(app, ["calibrate", str(meas), "--json", "-o", str(tmp / "c.json")])
+    assert r.exit_code == 0, r.output
+    data = json.loads(r.stdout)
+    a_plus = next(p for p in data["parameters"] if p["joint"] == 3 and p["name"] == "a" and p["direction"] == "+")
+    assert a_plus["value"] == pytest.approx(972e-9, rel=1e-4) and a_plus["unit"] == "m"
+    assert Calibration.load(tmp / "c.json").parameters() == Calibration.from_dict(data).parameters()
+
+
+def test_calibrate_table_output_has_units(files):
+    tmp, meas = files
+    r = runner.invoke(app, ["calibrate", str(meas)])
+    assert r.exit_code == 0 and "nm" in r.stdout and "µrad" in r.stdout and "971.9" in r.stdout
+
+
+def test_predict_adds_gamma_pred(files):
+    tmp, meas = files
+    cal_path = _cal(tmp, meas)
+    poses = tmp / "poses.csv"
+    poses.write_text(
+        "joint,direction,q1,q2,q3,theta,psi,start,end,label\n"
+        "3,+,0,-1.5707963267948966,0,0,0,,,unloaded\n"
+        f"2,-,0,0,0,0,0,{math.pi / 6},{-7 * math.pi / 6},full range\n"
+    )
+    r = runner.invoke(app, ["predict", "-c", str(cal_path), str(poses)])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader(io.StringIO(r.stdout)))
+    assert rows[0]["label"] == "unloaded"
+    cal = calibrate(seed_table())
+    assert float(rows[0]["gamma_pred"]) == pytest.approx(cal.gamma(3, "+", Pose()), rel=1e-12)
+    full = next(t for t in seed_table() if t.joint == 2 and t.direction == "-" and t.q3 == 0 and t.theta == 0)
+    assert float(rows[1]["gamma_pred"]) == pytest.approx(full.gamma, rel=1e-4)
+    r = runner.invoke(app, ["predict", "-c", str(cal_path), str(poses), "--json"])
+    recs = json.loads(r.stdout)
+    assert recs[1]["label"] == "full range" and recs[1]["joint"] == 2 and isinstance(recs[1]["gamma_pred"], float)
+
+
+def test_plan_json_matches_library(files):
+    tmp, meas = files
+    cal_path = _cal(tmp, meas)
+    r = runner.invoke(app, ["plan", "-c", str(cal_path), "--joint", "2", "--from", "10deg", "--to", "-100deg",
+                            "--q3", "6mm", "--theta", "-0.3", "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    lib = plan_move(Calibration.load(cal_path), 2, math.radians(10), math.radians(-100), Pose(q3=0.006, theta=-0.3))
+    assert out["steps"] == lib.steps and isinstance(out["steps"], int)
+    assert out["end_predicted"] == pytest.approx(lib.q_end_predicted, abs=1e-15)
+    r = runner.invoke(app, ["plan", "-c", str(cal_path), "--joint", "3", "--from", "2mm", "--to", "2.03mm"])
+    assert r.exit_code == 0 and "steps in direction +" in r.stdout and "µm" in r.stdout
+
+
+def test_validate(files):
+    tmp, meas = files
+    cal_path = _cal(tmp, meas)
+    r = runner.invoke(app, ["validate", "-c", str(cal_path), str(meas), "--json"])
+    rows = json.loads(r.stdout)
+    assert {row["joint"] for row in rows} == {2, 3}
+    for row in rows:
+        assert row["model_max_rel_error"] < 1e-3 < row["constant_max_rel_error"]
+
+
+def test_show(files):
+    tmp, meas = files
+    r = runner.invoke(app, ["show", str(_cal(tmp, meas))])
+    assert r.exit_code == 0 and "gamma0" in r.stdout and "constant-step comparator" in r.stdout
+
+
+def test_bad_inputs_give_one_line_reasons(files):
+    tmp, meas = files
+    bad = tmp / "bad.csv"
+    bad.write_text("day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\nd,3,+,0,0,0,0,0,0,0.01,-4\n")
+    _bad(runner.invoke(app, ["calibrate", str(bad)]), f"{bad}:2: steps must be a positive integer")
+    _bad(runner.invoke(app, ["calibrate", str(tmp / "missing.csv")]), "no such file")
+    cal_path = _cal(tmp, meas)
+    _bad(runner.invoke(app, ["plan", "-c", str(cal_path), "--joint", "3", "--from", "2mm", "--to", "20mm"]),
+         "outside joint 3's range")
+    _bad(runner.invoke(app, ["plan", "-c", str(cal_path), "--joint", "3", "--from", "2parsec", "--to", "2mm"]),
+         "unknown length unit")
+    _bad(runner.invoke(app, ["plan", "-c", str(cal_path), "--joint", "7", "--from", "0", "--to", "1"]), "unknown joint")
+    _bad(runner.invoke(app, ["plan", "-c", str(tmp / "nope.json"), "--joint", "3", "--from", "0", "--to", "1mm"]),
+         "no such calibration file")
+    only_3 = tmp / "only3.csv"
+    only_3.write_text(measurements_to_csv([t for t in seed_table() if t.joint == 3]))
+    _bad(runner.invoke(app, ["calibrate", str(only_3), "--method", "magic"]), "unknown calibration method")
+
+
+def test_nonphysical_table_is_refused(files):
+    tmp, _ = files
+    rows = [t for t in seed_table() if t.joint == 3]
+    # make the (0, -pi/2, 0) traverse faster than the unloaded one: b < 0
+    rows = [t if not (t.q2 == 0 and t.theta != 0) else t.__class__(**{**t.as_row(), "steps": t.steps // 2}) for t in rows]
+    p = tmp / "np.csv"
+    p.write_text(measurements_to_csv(rows))
+    _bad(runner.invoke(app, ["calibrate", str(p)]), "non-physical")
+
+
+@pytest.mark.parametrize("cmd", ["calibrate", "predict", "validate", "plan", "show", "demo", "tune", "listen",
+                                 "anova", "fit", "report", "history", "export", "import", "move", "where"])
+def test_every_command_has_help(cmd):
+    r = runner.invoke(app, [cmd, "--help"])
+    assert r.exit_code == 0, r.output
+    assert "Usage" in r.stdout and len(r.stdout) > 300
+
+
+def test_top_level_help_lists_commands():
+    r = runner.invoke(app, ["--help"])
+    for cmd in ("calibrate", "predict", "plan", "demo"):
+        assert cmd in r.stdout
+    np.testing.assert_equal(r.exit_code, 0)

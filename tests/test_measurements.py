@@ -1,0 +1,91 @@
+"""The measurement table: exact header, every bad row reported with file:line and reason."""
+
+import math
+
+import pytest
+
+from stickslip.measurements import (
+    HEADER,
+    TableError,
+    measurements_to_csv,
+    parse_measurements,
+    parse_pose_table,
+    read_measurements,
+)
+from synth import seed_table
+
+GOOD = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n2026-11-22,3,+,0,-1.5707963,0,0,0,0,0.012,12345\n"
+
+
+def test_round_trip(tmp_path):
+    rows = seed_table()
+    p = tmp_path / "m.csv"
+    p.write_text(measurements_to_csv(rows))
+    assert read_measurements(p) == rows
+    assert p.read_text().splitlines()[0] == ",".join(HEADER)
+
+
+def test_good_row():
+    (t,) = parse_measurements(GOOD)
+    assert t.joint == 3 and t.direction == "+" and t.steps == 12345
+    assert t.gamma == pytest.approx(0.012 / 12345)
+
+
+@pytest.mark.parametrize(
+    "row, reason",
+    [
+        ("d,4,+,0,0,0,0,0,0,1,3", "unknown joint '4'"),
+        ("d,3,up,0,0,0,0,0,0,0.01,3", "direction must be '+' or '-'"),
+        ("d,3,+,0,x,0,0,0,0,0.01,3", "q2 must be a number"),
+        ("d,3,+,0,nan,0,0,0,0,0.01,3", "q2 must be finite"),
+        ("d,3,+,0,0,0,0,0,0,0.01,-2", "steps must be a positive integer"),
+        ("d,3,+,0,0,0,0,0,0,0.01,2.5", "steps must be a positive integer"),
+        ("d,3,+,0,0,0,0,0,0.01,0.001,3", "direction '+' disagrees with end - start"),
+        ("d,3,-,0,0,0,0,0,0.001,0.01,3", "direction '-' disagrees"),
+        ("d,3,+,0,0,0,0,0,0,0.02,3", "end = 0.02 m is outside joint 3's range"),
+        ("d,3,+,0,1.0,0,0,0,0,0.01,3", "q2 = 1 rad is outside joint 2's range"),
+        ("d,2,+,0,0,0.02,0,0,-1,0,3", "q3 = 0.02 m is outside joint 3's range"),
+        ("d,3,+,0,0,0,4.0,0,0,0.01,3", "theta = 4 rad is outside [-pi, pi]"),
+        (",3,+,0,0,0,0,0,0,0.01,3", "day is empty"),
+        ("d,3,+,0,0,0,0,0,0.005,0.005,3", "start and end are equal"),
+        ("d,3,+,0,0,0", "expected 11 columns, found 6"),
+    ],
+)
+def test_bad_rows_are_reported_with_line_and_reason(row, reason):
+    text = GOOD + row + "\n"
+    with pytest.raises(TableError) as e:
+        parse_measurements(text, "m.csv")
+    assert any(p.startswith("m.csv:3: ") and reason in p for p in e.value.problems), e.value.problems
+
+
+def test_every_bad_row_is_reported_not_just_the_first():
+    text = GOOD + "d,4,+,0,0,0,0,0,0,1,3\n" + GOOD.splitlines()[1] + "\n" + "d,3,+,0,0,0,0,0,0,0.01,0\n"
+    with pytest.raises(TableError) as e:
+        parse_measurements(text, "m.csv")
+    assert [p.split(":")[1] for p in e.value.problems] == ["3", "5"]
+
+
+def test_header_must_be_exact():
+    with pytest.raises(TableError, match=r"m.csv:1: header must be exactly .*missing steps"):
+        parse_measurements("day,joint,direction,q1,q2,q3,theta,psi,start,end\n", "m.csv")
+    with pytest.raises(TableError, match="columns out of order"):
+        parse_measurements("joint,day,direction,q1,q2,q3,theta,psi,start,end,steps\n", "m.csv")
+    with pytest.raises(TableError, match="empty"):
+        parse_measurements("", "m.csv")
+
+
+def test_rounded_stops_are_accepted():
+    # pi/6 written to 6 decimals lies 2.4e-7 rad beyond the stop: accepted, not clipped
+    (t,) = parse_measurements(GOOD.splitlines()[0] + "\nd,2,-,0,0,0,0,0,0.523599,-3.665191,83000\n")
+    assert t.start == 0.523599 and math.isclose(t.end, -3.665191)
+
+
+def test_pose_table():
+    text = "joint,direction,q1,q2,q3,theta,psi,start,end,note\n3,+,0,0,0,0,0,,,a\n2,-,0,0,0,0,0,0.5,-3,b\n"
+    header, rows, queries = parse_pose_table(text, "p.csv")
+    assert header[-1] == "note" and rows[1]["note"] == "b"
+    assert not queries[0].is_traverse and queries[1].is_traverse
+    with pytest.raises(TableError, match="p.csv:2: give both start and end"):
+        parse_pose_table("joint,direction,q1,q2,q3,theta,psi,start,end\n3,+,0,0,0,0,0,0.001,\n", "p.csv")
+    with pytest.raises(TableError, match="header lacks psi"):
+        parse_pose_table("joint,direction,q1,q2,q3,theta\n", "p.csv")
