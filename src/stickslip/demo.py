@@ -298,6 +298,11 @@ def run_demo(
         raise ValueError(f"listen_from = {listen_from!r} is outside [0, 0.95]")
     if switch not in ("audio", "oracle"):
         raise ValueError(f"switch must be 'audio' or 'oracle', got {switch!r}")
+    if out is not None:  # fail before the work, not after it
+        try:
+            Path(out).mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise OSError(f"cannot use {str(out)!r} as the results folder: {e.strerror or e}") from e
     t_wall = time.perf_counter()
     day = day or _dt.date.today().isoformat()
     url = f"sim://?seed={seed}&day={day}"
