@@ -132,7 +132,9 @@ def test_nonphysical_table_is_refused(files):
     tmp, _ = files
     rows = [t for t in seed_table() if t.joint == 3]
     # make the (0, -pi/2, 0) traverse faster than the unloaded one: b < 0
-    rows = [t if not (t.q2 == 0 and t.theta != 0) else t.__class__(**{**t.as_row(), "steps": t.steps // 2}) for t in rows]
+    rows = [
+        t if not (t.q2 == 0 and t.theta != 0) else t.__class__(**{**t.as_row(), "steps": t.steps // 2}) for t in rows
+    ]
     p = tmp / "np.csv"
     p.write_text(measurements_to_csv(rows))
     _bad(runner.invoke(app, ["calibrate", str(p)]), "non-physical")
