@@ -13,9 +13,16 @@ import math
 import numpy as np
 import pytest
 from scipy import stats
+from typer.testing import CliRunner
 
-from stickslip.analysis import anova, group_poses, one_way
-from stickslip.measurements import Traverse, measurements_to_csv
+from stickslip.analysis import anova, group_poses, one_way, residual_summary
+from stickslip.calibration import Calibration, calibrate
+from stickslip.cli import app
+from stickslip.measurements import Traverse, measurements_to_csv, write_measurements
+from stickslip.models import JointModel, PrismaticParams, RotaryParams
+from stickslip.storage import Store
+
+runner = CliRunner()
 
 L3 = 0.012  # prismatic stroke, m
 
@@ -122,9 +129,7 @@ def test_two_way_equals_type2_sums_of_squares_from_nested_fits():
 def test_pose_grouping_tolerance_moving_column_and_reversed_interval():
     a = _row("d1", "+", 12000, q2=-math.pi / 2)
     b = _row("d1", "-", 12100, q2=-math.pi / 2 + 2e-4)  # within 1e-3 rad; start/end swapped
-    c = Traverse(
-        "d1", 3, "+", 0.0, -math.pi / 2, 0.005, 0.0, 0.0, 0.0, L3, 12050
-    )  # q3 column ignored
+    c = Traverse("d1", 3, "+", 0.0, -math.pi / 2, 0.005, 0.0, 0.0, 0.0, L3, 12050)  # q3 column ignored
     d = _row("d1", "+", 12000, q2=-math.pi / 2 + 5e-3)  # a different pose
     e = Traverse("d1", 3, "+", 0.0, -math.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.006, 6000)  # other interval
     groups = group_poses([a, b, c, d, e])
@@ -170,3 +175,140 @@ def test_rows_are_json_ready_with_the_documented_keys(tmp_path):
         if r["test"] == "direction":
             assert r["day"] in {"d1", "d2", "d3"} and "direction" not in r
     assert measurements_to_csv(_table(seed=4)).startswith("day,joint")
+
+
+# ---------------------------------------------------------------- regression fit: coverage and residuals
+
+TRUE_PRISMATIC = {"+": PrismaticParams(972e-9, 0.27, 372e-9), "-": PrismaticParams(899e-9, 0.25, -436e-9)}
+"""The seed's published prismatic values (its Fig. 4b caption), SI."""
+TRUE_ROTARY = {
+    "-": RotaryParams((45e-6, 50e-6), (3.83e-6, 23.94e-6)),
+    "+": RotaryParams((42e-6, 47e-6), (-8.15e-6, -19.4e-6)),
+}
+"""d from the seed's Fig. 10 (q3 = 0 and 12 mm); gamma0 of the size its Fig. 6 shows."""
+
+
+def simulated_table(seed: int, noise: float = 0.02, day: str = "2026-11-22") -> list[Traverse]:
+    """Rows from the true models with multiplicative noise: gamma_row = gamma_model (1 + noise N(0, 1)).
+
+    Joint 3: q2 in {0, -30, ..., -180} deg x theta in {0, -60, -90} deg, psi = 0 (the seed's
+    experiment 1). Joint 2: full range at q3 in {0, 12 mm} x theta in {0, -90} deg, and the
+    eight pi/6 intervals at theta = 0 for both q3 (the seed's Fig. 6 data).
+    """
+    rng = np.random.default_rng(seed)
+    rows = []
+    for d in ("+", "-"):
+        m3, m2 = JointModel(3, d, TRUE_PRISMATIC[d]), JointModel(2, d, TRUE_ROTARY[d])
+        s3, e3 = (0.0, L3) if d == "+" else (L3, 0.0)
+        for q2 in np.arange(7) * -math.pi / 6:
+            for th in (0.0, -math.pi / 3, -math.pi / 2):
+                g = float(m3.average_gamma(s3, e3, 0.0, q2, 0.0, th, 0.0)) * (1 + noise * rng.standard_normal())
+                rows.append(Traverse(day, 3, d, 0.0, float(q2), 0.0, th, 0.0, s3, e3, round(L3 / g)))
+        edges = np.linspace(-7 * math.pi / 6, math.pi / 6, 9)
+        spans = [(edges[0], edges[-1], th) for th in (0.0, -math.pi / 2)] + [
+            (lo, hi, 0.0) for lo, hi in zip(edges[:-1], edges[1:], strict=True)
+        ]
+        for q3 in (0.0, 0.012):
+            for lo, hi, th in spans:
+                s, e = (float(lo), float(hi)) if d == "+" else (float(hi), float(lo))
+                g = float(m2.average_gamma(s, e, 0.0, 0.0, q3, th, 0.0)) * (1 + noise * rng.standard_normal())
+                rows.append(Traverse(day, 2, d, 0.0, 0.0, q3, th, 0.0, s, e, round(abs(e - s) / g)))
+    return rows
+
+
+def _truth_vector(joint, d):
+    return (TRUE_PRISMATIC[d] if joint == 3 else TRUE_ROTARY[d]).as_vector()
+
+
+def test_fit_recovers_known_parameters_within_their_standard_errors():
+    """Coverage over 60 seeds x 14 parameters: |fit - truth| <= 2 SE in >= 90 % (expected ~94 %
+    for a t distribution with n - p = 17-18 degrees of freedom), and <= 1 SE near 68 %."""
+    within1 = within2 = total = 0
+    rms = []
+    for seed in range(60):
+        rows = simulated_table(seed)
+        cal = calibrate(rows, method="lsq")
+        for (j, d), m in cal.models.items():
+            se = cal.stderr[(j, d)]
+            assert se is not None and np.all(np.isfinite(se)) and np.all(se > 0)
+            z = np.abs(m.params.as_vector() - _truth_vector(j, d)) / se
+            within1 += int(np.sum(z <= 1))
+            within2 += int(np.sum(z <= 2))
+            total += z.size
+        rms += [r.rms_rel for r in residual_summary(cal, rows).rows_]
+    assert total == 60 * 14
+    cover1, cover2 = within1 / total, within2 / total
+    print(f"coverage: |err| <= 1 SE {cover1:.1%}, <= 2 SE {cover2:.1%} of {total} parameters")
+    assert cover2 >= 0.90
+    assert 0.60 <= cover1 <= 0.76
+    # the residuals measure the noise put in (2 %), slightly less by the fitted degrees of freedom
+    assert 0.017 <= np.mean(rms) <= 0.021
+
+
+def test_residual_summary_is_exact_on_noise_free_rows_and_counts_per_direction():
+    rows = simulated_table(0, noise=0.0)
+    truth = calibrate(simulated_table(1, noise=0.0), method="lsq")
+    res = residual_summary(truth, rows)
+    assert [(r.joint, r.direction, r.n) for r in res.rows_] == [(2, "+", 20), (2, "-", 20), (3, "+", 21), (3, "-", 21)]
+    # only the rounding of the step count remains: |rel| <= 0.5 / steps
+    for r in res.rows_:
+        ts = [t for t in rows if (t.joint, t.direction) == (r.joint, r.direction)]
+        assert r.max_rel <= 0.5 / min(t.steps for t in ts) * 1.01
+    text = res.report()
+    assert "nm" in text and "µrad" in text
+
+
+# ---------------------------------------------------------------- command line
+
+
+def test_cli_anova_json_equals_scipy(tmp_path):
+    rows = _table(seed=5)
+    p = tmp_path / "meas.csv"
+    write_measurements(p, rows)
+    r = runner.invoke(app, ["anova", str(p), "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    day = [o for o in out if o["test"] == "day"]
+    assert len(day) == 4
+    for o in day:
+        ts = [t for t in rows if t.direction == o["direction"] and abs(t.q2 - o["pose"]["q2"]) < 1e-9]
+        ref = stats.f_oneway(*[[t.gamma for t in ts if t.day == d] for d in sorted({t.day for t in ts})])
+        assert abs(o["p"] - ref.pvalue) < 1e-6 and o["F"] == pytest.approx(ref.statistic, rel=1e-9)
+    r = runner.invoke(app, ["anova", str(p)])
+    assert r.exit_code == 0 and "SIGNIFICANT" in r.stdout and "F" in r.stdout
+
+
+def test_cli_anova_reads_the_database_and_rejects_bad_input(tmp_path):
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        st.add_traverses(_table(seed=6), device="sim://")
+    r = runner.invoke(app, ["anova", "--db", str(db), "--device", "sim://", "--json"])
+    assert r.exit_code == 0 and len(json.loads(r.stdout)) > 0
+    r = runner.invoke(app, ["anova", "--db", str(db), "--device", "nope://"])
+    assert r.exit_code == 2 and "no traverses" in r.output
+    bad = tmp_path / "bad.csv"
+    bad.write_text("day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\nd1,4,+,0,0,0,0,0,0,0.012,10\n")
+    r = runner.invoke(app, ["anova", str(bad)])
+    assert r.exit_code == 2 and "bad.csv:2: unknown joint" in r.output
+    r = runner.invoke(app, ["anova", str(bad), "--alpha", "2"])
+    assert r.exit_code == 2
+
+
+def test_cli_fit_writes_a_calibration_with_standard_errors(tmp_path):
+    p, out = tmp_path / "meas.csv", tmp_path / "cal.json"
+    write_measurements(p, simulated_table(7))
+    r = runner.invoke(app, ["fit", str(p), "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(r.stdout)
+    assert doc["calibration"]["method"] == "lsq"
+    assert {(x["joint"], x["direction"]) for x in doc["residuals"]} == {(2, "+"), (2, "-"), (3, "+"), (3, "-")}
+    cal = Calibration.load(out)
+    a = next(x for x in cal.parameters() if x["name"] == "a" and x["direction"] == "+")
+    assert abs(a["value"] - 972e-9) < 3 * a["stderr"]
+    r = runner.invoke(app, ["fit", str(p)])
+    assert r.exit_code == 0 and "± " in r.stdout and "RMS" in r.stdout
+    # a table that cannot determine the parameters: one pose only
+    one = tmp_path / "one.csv"
+    write_measurements(one, [t for t in simulated_table(7) if t.joint == 3 and t.q2 == 0.0 and t.theta == 0.0])
+    r = runner.invoke(app, ["fit", str(one)])
+    assert r.exit_code == 2 and "cannot determine" in r.output

@@ -179,25 +179,29 @@ def anova(
     if not res.tests:
         warn("no testable groups: a pose must be measured on several days (or both ways on one day), repeated")
     else:
-        table = Table()
-        for col in ("test", "joint", "day / dir / term", "pose", "n", "F", "df", "p", f"at alpha={alpha:g}"):
-            table.add_column(col)
         from ..analysis import PoseGroup
 
+        table = Table(pad_edge=False)
+        table.add_column("test", no_wrap=True)
+        table.add_column("pose", overflow="fold", ratio=1)
+        table.add_column("n", justify="right", no_wrap=True)
+        table.add_column("F", justify="right", no_wrap=True)
+        table.add_column("p", justify="right", no_wrap=True)
+        table.add_column(f"α={alpha:g}", no_wrap=True)
         for t in res.tests:
-            what = {"day": t.direction, "direction": t.day, "two-way": t.term}[t.test]
-            verdict = t.verdict(alpha)
-            style = "bold red" if t.significant(alpha) else ""
+            what = {
+                "day": f"days {t.joint}{t.direction}",
+                "direction": f"+/- {t.joint} {t.day}",
+                "two-way": f"2-way {t.joint} {t.term}",
+            }[t.test]
+            verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
             table.add_row(
-                {"day": "across days", "direction": "+ vs -", "two-way": "two-way"}[t.test],
-                str(t.joint),
-                str(what),
+                what,
                 PoseGroup(t.joint, t.pose, t.interval).describe(),
                 str(t.n),
                 f"{t.F:.4g}",
-                f"{t.df_num},{t.df_den}",
                 f"{t.p:.3g}" if math.isfinite(t.p) else "-",
-                f"[{style}]{verdict}[/]" if style else verdict,
+                f"[bold red]{verdict}[/]" if t.significant(alpha) else verdict,
             )
         console.print(table)
     for s in res.skipped:
