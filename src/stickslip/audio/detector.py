@@ -238,7 +238,9 @@ class StopEvent:
     Attributes
     ----------
     detected_at_s : float
-        Stream time of the last sample consumed when the event fired, s.
+        Stream time of the last sample consumed when the event fired, s: the last
+        sample of the frame that completed the hold. It does not depend on how the
+        stream was cut into blocks (later samples of the same block were not needed).
     onset_s : float
         Estimated time the stop actually began, s.
     level_db : float
