@@ -751,7 +751,11 @@ figcaption { font-size: 0.92em; color: #444; }
 
 
 def build_report(
-    calibration: Calibration, traverses: Sequence[Traverse], directory: str | Path, dpi: int = 120
+    calibration: Calibration,
+    traverses: Sequence[Traverse],
+    directory: str | Path,
+    dpi: int = 120,
+    seed_simulation: str = "steps",
 ) -> Report:
     """Write the seed-style figures and ``index.html`` into ``directory`` (created if needed).
 
@@ -759,6 +763,9 @@ def build_report(
     against the constant-step comparator, :func:`stickslip.calibration.validate`), the
     residuals per joint and direction, and every figure (PNG files referenced by
     relative path, so the directory can be moved or zipped as a whole).
+
+    ``seed_simulation`` is how the seed's Eq. 9 comparator gets its averages:
+    ``"steps"`` (step-by-step, as the seed did) or ``"exact"`` (faster, same curve).
     """
     from .analysis import residual_summary
     from .calibration import validate
@@ -805,7 +812,7 @@ def build_report(
             "Fig. 8 after the seed: step-by-step simulation of the calibrated joint 2 over its full range at "
             "θ = ψ = 0 (dashed: the average step range/steps; dotted: γ0, the step without gravity torque).",
         )
-        rel = d_relation_data(calibration, 2)
+        rel = d_relation_data(calibration, 2, simulate=seed_simulation)
         rel_holder.append(rel)
         fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
         rel.plot(ax)
