@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import json
 import math
 import multiprocessing as mp
 import os
@@ -71,9 +72,7 @@ def test_add_traverses_is_all_or_nothing(tmp_path):
         with pytest.raises(sqlite3.IntegrityError):
             st.add_traverses([_t(), Traverse("d", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 0)])
         assert st.count_traverses() == 0
-        ids = st.add_traverses(
-            [_t(), _t(direction="-")], device="sim://", how="imported", source="abc"
-        )
+        ids = st.add_traverses([_t(), _t(direction="-")], device="sim://", how="imported", source="abc")
         assert len(ids) == 2 and st.has_source("abc") and not st.has_source("xyz")
 
 
@@ -82,9 +81,7 @@ def test_history_counts_per_day_and_direction(tmp_path):
         for _ in range(3):
             st.add_traverse(_t("2026-11-20"))
         st.add_traverse(_t("2026-11-20", direction="-"))
-        st.add_traverse(
-            _t("2026-11-21", joint=2, direction="-", steps=5), device="serial:///dev/ttyUSB0"
-        )
+        st.add_traverse(_t("2026-11-21", joint=2, direction="-", steps=5), device="serial:///dev/ttyUSB0")
         h = st.history()
         assert [(e["device"], e["day"], e["traverses"]) for e in h] == [
             ("serial:///dev/ttyUSB0", "2026-11-21", 1),
@@ -99,9 +96,7 @@ def test_device_state_round_trip(tmp_path):
     with Store.open(tmp_path / "s.db") as st:
         assert st.get_state("sim://", "position") is None
         st.set_state("sim://", "position", {"q1": 0.0, "q2": -1.5707963267948966, "q3": 0.006})
-        st.set_state(
-            "sim://", "position", '{"q1": 0.1, "q2": -1.0, "q3": 0.001}'
-        )  # JSON text works too
+        st.set_state("sim://", "position", '{"q1": 0.1, "q2": -1.0, "q3": 0.001}')  # JSON text works too
         assert st.get_state("sim://", "position") == {"q1": 0.1, "q2": -1.0, "q3": 0.001}
         assert st.get_state("other://", "position", default=7) == 7
 
@@ -137,10 +132,7 @@ def test_path_resolution(tmp_path, monkeypatch):
         assert storage.resolve_db_path() == tmp_path / "xdg" / "stickslip" / "stickslip.db"
         monkeypatch.delenv("XDG_DATA_HOME")
         monkeypatch.setenv("HOME", str(tmp_path))
-        assert (
-            storage.default_db_path()
-            == tmp_path / ".local" / "share" / "stickslip" / "stickslip.db"
-        )
+        assert storage.default_db_path() == tmp_path / ".local" / "share" / "stickslip" / "stickslip.db"
 
 
 def test_stale_warning():
@@ -204,9 +196,7 @@ _KILL_SCRIPT = textwrap.dedent("""
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 def test_kill_minus_9_mid_session_keeps_every_completed_traverse(tmp_path):
     path = tmp_path / "k.db"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", _KILL_SCRIPT, str(path)], stdout=subprocess.PIPE, text=True
-    )
+    proc = subprocess.Popen([sys.executable, "-c", _KILL_SCRIPT, str(path)], stdout=subprocess.PIPE, text=True)
     done = 0
     for line in proc.stdout:  # noqa: B007  (read until enough rows are committed)
         done = int(line)
@@ -222,3 +212,83 @@ def test_kill_minus_9_mid_session_keeps_every_completed_traverse(tmp_path):
     # every traverse reported as committed is there, in order, with nothing half-written
     assert steps[:done] == list(range(1, done + 1))
     assert steps == list(range(1, len(steps) + 1))
+
+
+# ---------------------------------------------------------------- calibrations
+
+
+def _calibration(day="2026-11-20"):
+    from stickslip.calibration import calibrate
+
+    rows = []
+    for q2, th, n_plus, n_minus in (
+        (-math.pi / 2, 0.0, 12346, 13348),
+        (0.0, -math.pi / 2, 16900, 17790),
+        (0.0, 0.0, 25010, 11100),
+        (-1.0, -0.5, 13000, 14000),
+    ):
+        rows.append(Traverse(day, 3, "+", 0.0, q2, 0.0, th, 0.0, 0.0, 0.012, n_plus))
+        rows.append(Traverse(day, 3, "-", 0.0, q2, 0.0, th, 0.0, 0.012, 0.0, n_minus))
+    return calibrate(rows, method="lsq"), rows
+
+
+def test_calibrations_round_trip_with_their_traverses(tmp_path):
+    cal, rows = _calibration()
+    with Store.open(tmp_path / "s.db") as st:
+        assert st.latest_calibration() is None
+        ids = st.add_traverses(rows, device="sim://")
+        cid = st.add_calibration(cal, "sim://", ids)
+        back = st.latest_calibration("sim://")
+        assert back.to_dict() == cal.to_dict()
+        assert st.calibration(cid).parameters() == cal.parameters()
+        assert st.calibration_traverses(cid) == rows
+        assert st.latest_calibration("other://") is None
+        with pytest.raises(ValueError, match="no stored traverse with id 999"):
+            st.add_calibration(cal, "sim://", [999])
+        h = st.history("sim://")
+        assert h[0]["calibrations"][0]["method"] == "lsq" and h[0]["traverses"] == 8
+
+
+# ---------------------------------------------------------------- command line
+
+
+def test_cli_import_history_export_round_trip(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import read_measurements, write_measurements
+
+    runner = CliRunner()
+    db, meas, out = tmp_path / "s.db", tmp_path / "m.csv", tmp_path / "out.csv"
+    rows = [_t("2026-11-20"), _t("2026-11-20", direction="-", steps=13000), _t("2026-11-21", steps=12500)]
+    write_measurements(meas, rows)
+    r = runner.invoke(app, ["import", str(meas), "--db", str(db), "--device", "sim://", "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["imported"] == 3
+    r = runner.invoke(app, ["import", str(meas), "--db", str(db)])
+    assert r.exit_code == 2 and "imported before" in r.output  # same file twice: refused
+    r = runner.invoke(app, ["history", "--db", str(db), "--json"])
+    assert [(e["day"], e["traverses"]) for e in json.loads(r.stdout)] == [("2026-11-20", 2), ("2026-11-21", 1)]
+    r = runner.invoke(app, ["export", "--db", str(db), "--day", "2026-11-20", "-o", str(out)])
+    assert r.exit_code == 0 and read_measurements(out) == rows[:2]
+    r = runner.invoke(app, ["export", "--db", str(db), "--day", "2020-01-01", "-o", str(out)])
+    assert r.exit_code == 2 and "stored days: 2026-11-20, 2026-11-21" in r.output
+
+
+def test_cli_import_reports_every_bad_row_and_stores_nothing(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    db, bad = tmp_path / "s.db", tmp_path / "bad.csv"
+    bad.write_text(
+        "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
+        "d1,3,+,0,0,0,0,0,0,0.012,12000\n"
+        "d1,3,+,0,0,0,0,0,0,0.012,-5\n"
+        "d1,7,+,0,0,0,0,0,0,0.012,12000\n"
+    )
+    r = CliRunner().invoke(app, ["import", str(bad), "--db", str(db)])
+    assert r.exit_code == 2
+    assert "bad.csv:3: steps must be a positive integer" in r.output and "bad.csv:4: unknown joint" in r.output
+    with Store.open(db) as st:
+        assert st.count_traverses() == 0
