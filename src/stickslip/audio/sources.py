@@ -165,7 +165,10 @@ class Microphone:
             self._stream.start()
         except Exception as e:  # PortAudioError, ValueError for a bad device
             self._stream = None
-            raise AudioSourceError(f"cannot open the microphone: {e}") from None
+            raise AudioSourceError(
+                f"cannot open the microphone: {e} (is an input device connected? "
+                "'python -m sounddevice' lists them; choose one with --device)"
+            ) from None
         return self
 
     def stop(self) -> None:
