@@ -48,6 +48,7 @@ __all__ = [
     "JointModel",
     "NonPhysicalError",
     "antiderivative_inverse_step",
+    "StepProfile",
     "steps_between",
     "steps_between_quad",
     "simulate_traverse_steps",
@@ -359,6 +360,80 @@ def _min_step(lo: NDArray, hi: NDArray, A: NDArray, alpha: NDArray, beta: NDArra
     return np.where(inside, np.minimum(m, A - B), m)
 
 
+_TWO_PI = 2.0 * math.pi
+
+
+class StepProfile:
+    """The step size along a joint's travel, ``gamma(q) = A + alpha cos q + beta sin q``, for scalars.
+
+    A pure-``math`` twin of :func:`steps_between` / :func:`position_after_steps` for hot
+    paths (planning inside a 1 kHz loop): microseconds per call instead of numpy's
+    per-call overhead. ``A`` in m or rad; ``alpha``, ``beta`` in the same unit.
+    """
+
+    __slots__ = ("A", "alpha", "beta", "B", "phi", "s", "kind")
+
+    def __init__(self, A: float, alpha: float = 0.0, beta: float = 0.0):
+        self.A, self.alpha, self.beta = float(A), float(alpha), float(beta)
+        self.B = math.hypot(alpha, beta)
+        self.phi = math.atan2(alpha, beta)
+        if self.B <= 1e-13 * abs(self.A):
+            self.kind, self.s = "const", 0.0  # no variation along the travel (to double precision)
+        elif self.A > self.B * (1.0 + 1e-12):
+            self.kind, self.s = "atan", math.sqrt((self.A - self.B) * (self.A + self.B))
+        else:
+            self.kind, self.s = "other", 0.0
+
+    def gamma(self, q: float) -> float:
+        """Mean step size at ``q``."""
+        return self.A + self.alpha * math.cos(q) + self.beta * math.sin(q)
+
+    def F(self, q: float) -> float:
+        """The arctangent antiderivative of ``1 / gamma`` (see :func:`antiderivative_inverse_step`)."""
+        x = q + self.phi
+        k = round(x / _TWO_PI)
+        xr = x - _TWO_PI * k
+        return 2.0 / self.s * (math.atan((self.A * math.tan(0.5 * xr) + self.B) / self.s) + math.pi * k)
+
+    def steps(self, q0: float, q1: float) -> float:
+        """Real-valued number of steps from ``q0`` to ``q1`` (>= 0)."""
+        if self.kind == "const":
+            if not self.A > 0:
+                raise NonPhysicalError(f"step size {self.A:.3g} <= 0: the joint cannot move")
+            return abs(q1 - q0) / self.A
+        if self.kind == "atan":
+            return abs(self.F(q1) - self.F(q0))
+        return float(_steps_between_arrays(q0, q1, self.A, self.alpha, self.beta))
+
+    def inverse(self, q0: float, n: float, sign: int) -> float:
+        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``)."""
+        if self.kind == "const":
+            return q0 + sign * n * self.A
+        if self.kind != "atan":
+            return position_after_steps(q0, n, sign, self.A, self.alpha, self.beta)
+        F0 = self.F(q0)
+        lo_q = q0 + sign * n * (self.A - self.B)  # between n smallest and n largest steps away
+        hi_q = q0 + sign * n * (self.A + self.B)
+        lo, hi = min(lo_q, hi_q), max(lo_q, hi_q)
+        q = min(max(q0 + sign * n * self.gamma(q0), lo), hi)
+        tol = 1e-13 * max(1.0, abs(q))
+        for _ in range(100):
+            r = sign * (self.F(q) - F0) - n  # increasing in sign * q
+            if r == 0.0:
+                return q
+            if sign * r > 0:
+                hi = q
+            else:
+                lo = q
+            q_new = q - sign * r * self.gamma(q)
+            if not lo < q_new < hi:
+                q_new = 0.5 * (lo + hi)
+            if abs(q_new - q) <= tol:
+                return q_new
+            q = q_new
+        return q
+
+
 def steps_between(
     start: ArrayLike,
     end: ArrayLike,
@@ -373,8 +448,14 @@ def steps_between(
     (``A > sqrt(alpha^2 + beta^2)``), the logarithmic one where it is positive only
     along the traverse. Raises :class:`NonPhysicalError` if the step is <= 0
     somewhere on the way (the joint would stall). Agrees with adaptive quadrature
-    (:func:`steps_between_quad`) to ~1e-12 relative.
+    (:func:`steps_between_quad`) to ~1e-12 relative. Scalars take a pure-``math`` path.
     """
+    if all(isinstance(x, (float, int)) for x in (start, end, A, alpha, beta)):
+        return np.float64(StepProfile(A, alpha, beta).steps(start, end))
+    return _steps_between_arrays(start, end, A, alpha, beta)
+
+
+def _steps_between_arrays(start, end, A, alpha, beta) -> NDArray[np.float64]:
     start, end, A, alpha, beta = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta))
     )

@@ -20,12 +20,9 @@ from dataclasses import dataclass
 
 from . import kinematics as kin
 from .calibration import Calibration
-from .models import JointModel, NonPhysicalError, PrismaticParams, direction_label, position_after_steps
+from .models import JointModel, PrismaticParams, StepProfile, direction_label
 
 __all__ = ["MovePlan", "Planner", "plan_move", "dead_reckon"]
-
-_TWO_PI = 2.0 * math.pi
-
 
 @dataclass(frozen=True)
 class MovePlan:
@@ -80,65 +77,6 @@ class MovePlan:
         }
 
 
-class _DirCoeffs:
-    """Step size ``A + alpha cos q + beta sin q`` as amplitude/phase, with the constants of F."""
-
-    __slots__ = ("A", "alpha", "beta", "B", "phi", "s", "kind")
-
-    def __init__(self, A: float, alpha: float, beta: float):
-        self.A, self.alpha, self.beta = A, alpha, beta
-        self.B = math.hypot(alpha, beta)
-        self.phi = math.atan2(alpha, beta)
-        if self.B == 0.0:
-            self.kind = "const"
-            self.s = 0.0
-        elif A > self.B:
-            self.kind = "atan"
-            self.s = math.sqrt((A - self.B) * (A + self.B))
-        else:
-            self.kind = "other"
-            self.s = 0.0
-
-    def gamma(self, q: float) -> float:
-        return self.A + self.alpha * math.cos(q) + self.beta * math.sin(q)
-
-    def inverse(self, q0: float, n: float, sign: int) -> float:
-        """Solve ``sign (F(q) - F(q0)) = n`` for ``q`` by safeguarded Newton (``F' = 1/gamma``)."""
-        if self.kind == "const":
-            return q0 + sign * n * self.A
-        if self.kind != "atan":
-            return position_after_steps(q0, n, sign, self.A, self.alpha, self.beta)
-        F0 = self.F(q0)
-        lo_q = q0 + sign * n * (self.A - self.B)  # bracket: n min steps .. n max steps away
-        hi_q = q0 + sign * n * (self.A + self.B)
-        lo, hi = min(lo_q, hi_q), max(lo_q, hi_q)
-        q = q0 + sign * n * self.gamma(q0)
-        q = min(max(q, lo), hi)
-        tol = 1e-13 * max(1.0, abs(q))
-        for _ in range(60):
-            r = sign * (self.F(q) - F0) - n  # increasing in sign * q
-            if r == 0.0:
-                return q
-            if sign * r > 0:
-                hi = q
-            else:
-                lo = q
-            q_new = q - sign * r * self.gamma(q)
-            if not lo < q_new < hi:
-                q_new = 0.5 * (lo + hi)
-            if abs(q_new - q) <= tol:
-                return q_new
-            q = q_new
-        return q
-
-    def F(self, q: float) -> float:
-        """Antiderivative of 1/gamma (the atan form; see models.antiderivative_inverse_step)."""
-        x = q + self.phi
-        k = round(x / _TWO_PI)
-        xr = x - _TWO_PI * k
-        return 2.0 / self.s * (math.atan((self.A * math.tan(0.5 * xr) + self.B) / self.s) + math.pi * k)
-
-
 def _scalar_coefficients(model: JointModel, pose: kin.Pose) -> tuple[float, float, float]:
     """``(A, alpha, beta)`` of ``model`` in ``pose``, with ``math`` (the planner's hot path).
 
@@ -187,17 +125,17 @@ class Planner:
         self.joint = int(joint)
         self.spec = kin.joint_spec(joint)
         self.pose = pose
-        self._coeffs: dict[int, _DirCoeffs] = {}
+        self._coeffs: dict[int, StepProfile] = {}
         for sign, label in ((1, "+"), (-1, "-")):
             try:
                 m = calibration.model(joint, label)
             except KeyError:
                 continue
-            self._coeffs[sign] = _DirCoeffs(*_scalar_coefficients(m, pose))
+            self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, pose))
         if not self._coeffs:
             raise KeyError(f"joint {joint} is not in this calibration")
 
-    def _dir(self, sign: int) -> _DirCoeffs:
+    def _dir(self, sign: int) -> StepProfile:
         try:
             return self._coeffs[sign]
         except KeyError:
@@ -215,16 +153,7 @@ class Planner:
         """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""
         if q_to == q_from:
             return 0.0
-        c = self._dir(1 if q_to > q_from else -1)
-        if c.kind == "const":
-            if not c.A > 0:
-                raise NonPhysicalError(f"joint {self.joint}: step size {c.A:.3g} <= 0 in this pose")
-            return abs(q_to - q_from) / c.A
-        if c.kind == "atan":
-            return abs(c.F(q_to) - c.F(q_from))
-        from .models import steps_between
-
-        return float(steps_between(q_from, q_to, c.A, c.alpha, c.beta))
+        return self._dir(1 if q_to > q_from else -1).steps(q_from, q_to)
 
     def steps(self, q_from: float, q_to: float) -> int:
         """Steps to command to move from ``q_from`` to ``q_to`` (>= 0; direction from the sign)."""
