@@ -79,7 +79,7 @@ def tune(
     stopped_percentile: float = 5.0,
     margin: float = 0.5,
     min_contrast_db: float = 6.0,
-    min_part_s: float = 0.5,
+    min_part_s: float = 0.25,
     f_min_hz: float = 200.0,
     min_band_hz: float = 1400.0,
     rate_shift_hz: float = 650.0,
