@@ -217,3 +217,20 @@ def test_seed_quadratic_method_differs_from_exact_by_urad():
     diffs = [abs(a["value"] - b["value"]) for a, b in zip(exact.parameters(), quad.parameters(), strict=True)
              if a["name"] == "d"]
     assert 0.05e-6 < max(diffs) < 5e-6
+
+
+def test_plot_draws_the_model_curves():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    cal = C.calibrate(seed_table())
+    ax = cal.plot(3)
+    line = ax.get_lines()[0]  # gamma3+ at theta = 0: Eq. 3 in nm against zeta in degrees
+    z, g = line.get_data()
+    p = cal.model(3, "+").params
+    q2 = -np.radians(z)
+    np.testing.assert_allclose(g, (1 - p.b * np.abs(np.cos(q2))) * (p.a - p.c * np.cos(-q2)) * 1e9, rtol=1e-12)
+    assert g.max() == pytest.approx(p.a * 1e9, rel=2e-3)  # the peak of curve 2 is a (q2 = -90 deg)
+    assert "nm" in ax.get_ylabel() and len(ax.get_lines()) == 6
+    ax2 = cal.plot(2)
+    assert "µrad" in ax2.get_ylabel() and len(ax2.get_lines()) == 4

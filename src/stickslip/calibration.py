@@ -504,6 +504,39 @@ class Calibration:
     def __str__(self) -> str:
         return self.report()
 
+    def plot(self, joint: int = 3, ax=None, thetas: Sequence[float] = (0.0, -math.pi / 3, -math.pi / 2)):
+        """Model step size against zeta (psi = 0, q1 = 0), like the paper's Figs. 4 and 10.
+
+        Joint 3: one curve per direction and tilt ``theta`` (nm). Rotary joints: one curve
+        per direction at q3 = 0 and 12 mm, theta = 0 (µrad). Returns the matplotlib Axes.
+        """
+        import matplotlib.pyplot as plt
+
+        if ax is None:
+            _, ax = plt.subplots(figsize=(6, 4))
+        spec = kin.JOINTS[2]
+        q2 = np.linspace(spec.lower, spec.upper, 400)
+        zeta_deg = np.degrees(-q2)
+        for d in DIRECTIONS:
+            if (joint, d) not in self.models:
+                continue
+            m = self.models[(joint, d)]
+            if joint == 3:
+                for th in thetas:
+                    g = m.gamma(0.0, q2, 0.0, th, 0.0)
+                    ax.plot(zeta_deg, g * 1e9, label=f"γ3{d}, θ = {math.degrees(th):.0f}°")
+            else:
+                for q3 in (0.0, kin.Q3_MAX):
+                    qj = q2 if joint == 2 else np.linspace(kin.JOINTS[1].lower, kin.JOINTS[1].upper, 400)
+                    args = (0.0, qj, q3, 0.0, 0.0) if joint == 2 else (qj, -math.pi / 2, q3, -math.pi / 2, 0.0)
+                    ax.plot(zeta_deg if joint == 2 else np.degrees(qj), m.gamma(*args) * 1e6,
+                            label=f"γ{joint}{d}, q3 = {q3 * 1e3:g} mm")
+        ax.set_xlabel("ζ = ψ − q2 (deg)" if joint != 1 else "q1 (deg)")
+        ax.set_ylabel("mean step size (nm)" if joint == 3 else "mean step size (µrad)")
+        ax.set_title(f"joint {joint}, calibration of {self.day} ({self.method})")
+        ax.legend(fontsize="small")
+        return ax
+
 
 def _display(name: str, joint: int) -> tuple[float, str]:
     if name == "b":
