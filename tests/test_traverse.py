@@ -135,6 +135,7 @@ def test_stop_before_listening_starts_is_measured_again():
     """listen_after_steps beyond the stop: the stop sounds at once, so the traverse is redone."""
     sim = SimulatedMM3A(seed=1, day=DAY, step_noise=0.0)
     r = _oracle_traverse(sim, 3, "+", listen_after_steps=20_000, latency="onset")
+    assert r.retried and r.listen_after_steps == 0
     assert abs(r.steps - _true_steps(sim, r, 3)) <= 1
     model = sim.true_models()[(3, "+")]
     exact = kin.Q3_MAX / float(model.average_gamma(0.0, kin.Q3_MAX, *sim.pose))
@@ -151,6 +152,7 @@ def test_traverse_row_is_a_valid_measurement_row():
     assert parse_measurements(measurements_to_csv([t])) == [t]
     assert r.gamma == pytest.approx(kin.ROTARY_SPAN / r.steps)
     assert r.commanded_steps == r.steps + r.steps_after_stop
+    assert not r.retried
     assert "joint 2 -" in r.report() and "µrad" in r.report()
 
 

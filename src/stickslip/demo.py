@@ -190,6 +190,7 @@ def _traverse_record(r: TraverseResult) -> dict[str, object]:
         steps_after_stop=r.steps_after_stop,
         latency_steps_corrected=r.latency_steps_corrected,
         elapsed_device_s=r.elapsed_device_s,
+        retried=r.retried,
     )
     return rec
 

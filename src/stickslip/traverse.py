@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -77,6 +77,13 @@ class TraverseResult:
         Stepping frequency, Hz.
     predrive_steps : int
         Steps commanded to reach the start stop.
+    listen_after_steps : int
+        Steps commanded before the limit switch listened.
+    retried : bool
+        The stop came before listening began, so the traverse was measured again
+        listening from the start (this result is the second measurement).
+    bursts : tuple of (float, int)
+        Stream time (s) each burst began and its steps, in the measured direction.
     """
 
     traverse: Traverse
@@ -89,6 +96,8 @@ class TraverseResult:
     elapsed_device_s: float
     frequency_hz: float
     predrive_steps: int = 0
+    listen_after_steps: int = 0
+    retried: bool = False
     bursts: tuple[tuple[float, int], ...] = field(default=(), repr=False)
 
     @property
@@ -391,7 +400,7 @@ def measure_traverse(
     finally:
         close_bar()
     if early:
-        return measure_traverse(
+        redo = measure_traverse(
             controller,
             joint,
             direction,
@@ -409,6 +418,7 @@ def measure_traverse(
             settle_s=settle_s,
             listen_after_steps=0,
         )
+        return replace(redo, retried=True)
 
     # 3. count
     detected = float(event.detected_at_s)
@@ -453,5 +463,6 @@ def measure_traverse(
         elapsed_device_s=clock() - t_start,
         frequency_hz=hz,
         predrive_steps=predrive_steps,
+        listen_after_steps=listen_after_steps,
         bursts=tuple(bursts),
     )
