@@ -293,3 +293,5 @@ def test_open_url_and_registry():
     with pytest.raises(ValueError, match=r"noise.*outside \[0, 0.5\]"):
         SimulatedMM3A(step_noise=0.9)
     assert sim.settings()["frequency_hz"] == {1: 1000.0, 2: 1000.0, 3: 1000.0}
+    with pytest.raises(DeviceError, match=r"unknown device URL scheme 'foo'.*sim://"):
+        open_device("foo://x")

@@ -58,6 +58,10 @@ class Controller(Protocol):
     Step counts are signed (``+`` = joint coordinate increasing, DESIGN.md section 2).
     Frequencies are in Hz. Every setter validates its argument and raises
     ``ValueError`` naming the allowed range; nothing is clipped silently.
+
+    Optional: a backend on a virtual clock (the simulator) exposes ``clock_s``, the
+    device time in s; :func:`stickslip.traverse.measure_traverse` then keeps its audio
+    in step with it (otherwise it uses the wall clock).
     """
 
     @property
