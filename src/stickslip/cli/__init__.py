@@ -3,7 +3,8 @@
 Each area keeps its commands in its own module, which adds them to :data:`app`:
 
 * :mod:`.core`     calibrate, predict, validate, plan, show
-* :mod:`.measure`  demo, tune, listen
+* :mod:`.measure`  demo
+* :mod:`.audio`    tune, listen
 * :mod:`.history`  history, export, import, anova, fit, report
 * :mod:`.devices`  move, where
 """
