@@ -116,7 +116,7 @@ class Series:
 
 def _series_axes(plt, n: int, ax):
     if ax is None:
-        fig, axes = plt.subplots(1, n, figsize=(5.2 * n, 4.2), sharey=False, constrained_layout=True)
+        fig, axes = plt.subplots(1, n, figsize=(5.5 * n, 5.6), sharey=False, constrained_layout=True)
         return fig, np.atleast_1d(axes)
     axes = np.atleast_1d(ax)
     if axes.size != n:
@@ -131,10 +131,13 @@ def _plot_series(
     unit: str,
     title: str,
     directions=("+", "-"),
-    legend_title: str = "dots: measured; lines: model",
+    legend_title: str = "markers: measured; lines: model",
 ):
     plt = _plt()
     cmap = plt.get_cmap("tab10")
+    markers = "o^sDvP*Xh<>"
+    all_days = sorted({day for s in series for day in s.days})
+    marker_of = {day: markers[i % len(markers)] for i, day in enumerate(all_days)}
     for ax, d in zip(axes, directions, strict=True):
         ss = [s for s in series if s.direction == d]
         for i, s in enumerate(ss):
@@ -157,13 +160,35 @@ def _plot_series(
             else:
                 ax.plot(_deg(s.zeta_model), s.gamma_model * scale, "-", color=color, lw=1.5, label=s.label)
             if s.zeta_data.size:
-                ax.plot(_deg(s.zeta_data), s.gamma_data * scale, "o", color=color, ms=4, alpha=0.8)
+                days_here = np.array(s.days)
+                for day in sorted(set(s.days)):
+                    sel = days_here == day
+                    ax.plot(
+                        _deg(s.zeta_data[sel]),
+                        s.gamma_data[sel] * scale,
+                        marker_of[day],
+                        color=color,
+                        ms=4,
+                        alpha=0.8,
+                        ls="none",
+                    )
+        if len(marker_of) > 1 and ss:
+            for day, mk in marker_of.items():  # legend entries for the days (marker shape)
+                ax.plot([], [], mk, color="0.3", ms=4, ls="none", label=f"day {day}")
         ax.set_xlabel("ζ = ψ − q2 (degrees)")
         ax.set_ylabel(f"step size γ{d} ({unit})")
         ax.set_title(title.format(d=d))
         ax.grid(True, alpha=0.3)
         if ss:
-            ax.legend(fontsize=7, title=legend_title, title_fontsize=7)
+            ax.legend(
+                fontsize=7,
+                title=legend_title,
+                title_fontsize=7,
+                loc="upper center",
+                bbox_to_anchor=(0.5, -0.14),
+                ncol=2,
+                frameon=False,
+            )
         else:
             ax.text(0.5, 0.5, "not calibrated", ha="center", va="center", transform=ax.transAxes)
     return axes
@@ -304,7 +329,7 @@ class RotaryIntervalFigure:
             "µrad",
             f"rotary joint {self.joint}, direction {{d}}, per π/6 interval",
             directions=("-", "+"),
-            legend_title="dots: measured; squares: model average over the interval",
+            legend_title="filled: measured; open squares: model average over the interval",
         )
 
 
@@ -797,7 +822,7 @@ def build_report(
         figures.append((p, caption))
 
     if 3 in joints:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), constrained_layout=True)
+        fig, axes = plt.subplots(1, 2, figsize=(11, 6.0), constrained_layout=True)
         prismatic_data(calibration, traverses).plot(axes)
         save(
             fig,
@@ -806,7 +831,7 @@ def build_report(
             "measured (points) and the calibrated model, Eq. (3) (lines), per tilt θ.",
         )
     if 2 in joints:
-        fig, axes = plt.subplots(1, 2, figsize=(11, 4.4), constrained_layout=True)
+        fig, axes = plt.subplots(1, 2, figsize=(11, 6.0), constrained_layout=True)
         rotary_interval_data(calibration, traverses, 2).plot(axes)
         save(
             fig,
@@ -975,7 +1000,8 @@ def build_report(
             "<p>For this calibration's joint-2 models: D is the full-range average step at θ = ψ = 0 "
             "minus γ0; d the calibrated value (exact relation); the seed's method reads d off a quadratic "
             "fitted to step-by-step simulations. Over the plotted grid the quadratic is "
-            f"{html.escape(_err_by_gamma0(rel))} (largest where a curve turns steep: there the average step hardly changes with d).</p>"
+            f"{html.escape(_err_by_gamma0(rel))} (largest where a curve turns steep: "
+            "there the average step hardly changes with d).</p>"
         )
         parts.append(
             _table_html(

@@ -11,6 +11,7 @@ import math
 from pathlib import Path
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from . import app
@@ -205,7 +206,7 @@ def anova(
             )
         console.print(table)
     for s in res.skipped:
-        console.print(f"[dim]skipped: {s}[/]")
+        console.print(f"[dim]skipped: {escape(s)}[/]")
 
 
 # ---------------------------------------------------------------- fit
