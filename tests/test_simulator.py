@@ -295,3 +295,23 @@ def test_open_url_and_registry():
     assert sim.settings()["frequency_hz"] == {1: 1000.0, 2: 1000.0, 3: 1000.0}
     with pytest.raises(DeviceError, match=r"unknown device URL scheme 'foo'.*sim://"):
         open_device("foo://x")
+
+
+def test_long_sessions_forget_what_every_microphone_has_heard():
+    """Burst records are dropped once all live microphones have rendered past them."""
+    sim = SimulatedMM3A(seed=0, day=DAY, sample_rate=8000)
+    sim.set_pose(q3=0.006)
+    mic = sim.microphone(block=400, silent=True)
+    for k in range(5000):
+        sim.step(3, 10 if k % 2 == 0 else -10)
+        if k % 100 == 0:
+            mic()
+    assert len(sim._bursts) < 5000  # pruned ...
+    times, _, _ = sim.step_events(mic.t_s, sim.clock_s)
+    assert times.size == pytest.approx((sim.clock_s - mic.t_s) * 1000, abs=2)  # ... not what is unheard
+    lagging = sim.microphone(silent=True)  # a new microphone keeps everything from now on
+    for _ in range(5000):
+        sim.step(3, 1)
+        sim.step(3, -1)
+    assert lagging.t_s == 50.0 and len(sim._bursts) >= 10_000
+    assert sim.stop_runs(3) == []

@@ -34,6 +34,7 @@ from __future__ import annotations
 import bisect
 import math
 import threading
+import weakref
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -65,6 +66,7 @@ RIPPLE = 0.004
 
 _RIPPLE_PERIODS = {1: 7, 2: 7, 3: 5}
 _CHUNK = 4096
+_KEEP_BURSTS = 4096  # burst records kept before those all microphones have heard are dropped
 _MAX_BURST = 10_000_000
 
 # Nominal (undrifted) true parameters. Prismatic: the paper's published values
@@ -167,9 +169,7 @@ class SimulatedMM3A:
         url: str = "sim://",
     ):
         if not 0.0 <= float(step_noise) <= 0.5:
-            raise ValueError(
-                f"step_noise = {step_noise!r} is outside [0, 0.5] (relative standard deviation)"
-            )
+            raise ValueError(f"step_noise = {step_noise!r} is outside [0, 0.5] (relative standard deviation)")
         if not 0.0 <= float(drift) <= 0.2:
             raise ValueError(f"drift = {drift!r} is outside [0, 0.2] (relative standard deviation)")
         if not 8000 <= int(sample_rate) <= 384_000:
@@ -186,9 +186,7 @@ class SimulatedMM3A:
         drift_rng = np.random.default_rng([self.seed, key, 0])
         self._models: dict[tuple[int, str], JointModel] = {}
         for (joint, direction), nominal in NOMINAL.items():
-            self._models[(joint, direction)] = JointModel(
-                joint, direction, _drifted(nominal, drift_rng, self.drift)
-            )
+            self._models[(joint, direction)] = JointModel(joint, direction, _drifted(nominal, drift_rng, self.drift))
         self._ripple_phase = {j: float(drift_rng.uniform(0.0, 2.0 * math.pi)) for j in (1, 2, 3)}
         self._rng = np.random.default_rng([self.seed, key, 1])
         self._sigma = math.sqrt(math.log1p(self.step_noise**2))
@@ -201,6 +199,9 @@ class SimulatedMM3A:
         self.clock_s = 0.0
         self._bursts: list[_Burst] = []
         self._burst_ends: list[float] = []
+        self._runs: dict[int, list[list[float]]] = {1: [], 2: [], 3: []}
+        self._last_burst: dict[int, _Burst | None] = {1: None, 2: None, 3: None}
+        self._mics: weakref.WeakSet[VirtualMicrophone] = weakref.WeakSet()
         self._lock = threading.RLock()  # emulators step from a server thread
         self._soundscape = None
         self.steps_simulated = 0
@@ -233,9 +234,7 @@ class SimulatedMM3A:
         except (TypeError, ValueError):
             raise ValueError(f"frequency must be a number in Hz, got {hz!r}") from None
         if not (math.isfinite(value) and lo <= value <= hi):
-            raise ValueError(
-                f"frequency {hz!r} Hz is outside the allowed range [{lo:g}, {hi:g}] Hz"
-            )
+            raise ValueError(f"frequency {hz!r} Hz is outside the allowed range [{lo:g}, {hi:g}] Hz")
         self._hz[joint] = value
 
     def frequency(self, joint: int) -> float:
@@ -259,16 +258,18 @@ class SimulatedMM3A:
         if n == 0:
             return
         if abs(n) > _MAX_BURST:
-            raise DeviceError(
-                f"a burst of {abs(n)} steps is more than the controller accepts ({_MAX_BURST})"
-            )
+            raise DeviceError(f"a burst of {abs(n)} steps is more than the controller accepts ({_MAX_BURST})")
         sign = 1 if n > 0 else -1
         with self._lock:
             hz = self._hz[joint]
             k_stop, q_end = self._advance(joint, sign, abs(n))
             self._q[joint] = q_end
-            self._bursts.append(_Burst(self.clock_s, hz, joint, abs(n), k_stop, sign))
-            self._burst_ends.append(self.clock_s + abs(n) / hz)
+            burst = _Burst(self.clock_s, hz, joint, abs(n), k_stop, sign)
+            self._bursts.append(burst)
+            self._burst_ends.append(burst.t_end)
+            self._note_stop_run(burst)
+            if len(self._bursts) > _KEEP_BURSTS:
+                self._forget_heard()
             self.clock_s += abs(n) / hz
             self.steps_simulated += abs(n)
 
@@ -403,9 +404,7 @@ class SimulatedMM3A:
                             )
         return out
 
-    def true_mean_step(
-        self, joint: int, direction: str | int, q: float | NDArray | None = None
-    ) -> NDArray:
+    def true_mean_step(self, joint: int, direction: str | int, q: float | NDArray | None = None) -> NDArray:
         """The true mean step (m or rad) of ``joint`` in ``direction`` at position ``q``.
 
         Includes the ripple (what a single step averages to); the other joints and the
@@ -443,10 +442,7 @@ class SimulatedMM3A:
     def _mean_step(self, joint: int, q: NDArray, A: float, al: float, be: float) -> NDArray:
         spec = kin.JOINTS[joint]
         base = A if (al == 0.0 and be == 0.0) else A + al * np.cos(q) + be * np.sin(q)
-        phase = (
-            2.0 * math.pi * _RIPPLE_PERIODS[joint] * (q - spec.lower) / spec.span
-            + self._ripple_phase[joint]
-        )
+        phase = 2.0 * math.pi * _RIPPLE_PERIODS[joint] * (q - spec.lower) / spec.span + self._ripple_phase[joint]
         return base * (1.0 + RIPPLE * np.sin(phase))
 
     def _advance(self, joint: int, sign: int, n: int) -> tuple[int, float]:
@@ -488,6 +484,34 @@ class SimulatedMM3A:
             done += m
         return n, q
 
+    def _note_stop_run(self, b: _Burst) -> None:
+        """Extend or start a run of at-stop steps (see :meth:`stop_runs`)."""
+        prev = self._last_burst[b.joint]
+        self._last_burst[b.joint] = b
+        if b.k_stop >= b.n:
+            return
+        runs = self._runs[b.joint]
+        continued = (
+            prev is not None
+            and runs
+            and b.k_stop == 0
+            and prev.sign == b.sign
+            and prev.k_stop < prev.n
+            and abs(prev.t_end - b.t0) < 0.5 / b.hz
+        )
+        if continued:
+            runs[-1][1] = b.t_end
+        else:
+            runs.append([b.t0 + b.k_stop / b.hz, b.t_end])
+
+    def _forget_heard(self) -> None:
+        """Drop burst records every live microphone has rendered (keeps long sessions lean)."""
+        horizon = min((m.t_s for m in list(self._mics)), default=self.clock_s) - 1.0
+        k = bisect.bisect_left(self._burst_ends, horizon)
+        if k > 0:
+            del self._bursts[:k]
+            del self._burst_ends[:k]
+
     # ------------------------------------------------------------ sound
 
     @property
@@ -526,28 +550,10 @@ class SimulatedMM3A:
         A run begins with the first step that began at a stop and lasts while the
         joint keeps stepping into it without a pause.
         """
-        runs: list[list[float]] = []
         with self._lock:
-            bursts = list(self._bursts)
-        prev: _Burst | None = None
-        for b in bursts:
-            if joint is not None and b.joint != joint:
-                continue
-            if b.k_stop < b.n:
-                continued = (
-                    prev is not None
-                    and b.k_stop == 0
-                    and prev.sign == b.sign
-                    and prev.k_stop < prev.n
-                    and abs(prev.t_end - b.t0) < 0.5 / b.hz
-                    and bool(runs)
-                )
-                if continued:
-                    runs[-1][1] = b.t_end
-                else:
-                    runs.append([b.t0 + b.k_stop / b.hz, b.t_end])
-            prev = b
-        return [(a, e) for a, e in runs]
+            joints = (joint,) if joint is not None else (1, 2, 3)
+            runs = [(a, e) for j in joints for a, e in self._runs[self._joint(j)]]
+        return sorted(runs)
 
     def stop_times(self, joint: int | None = None) -> list[float]:
         """Times (s, virtual clock) when ``joint`` began stepping against a stop (true stops)."""
@@ -625,6 +631,7 @@ class VirtualMicrophone:
         self.sample_rate = sim.sample_rate
         self.silent = bool(silent)
         self._next = int(math.ceil(sim.clock_s * self.sample_rate - 1e-6))
+        sim._mics.add(self)  # the simulator keeps the step events this microphone still needs
 
     @property
     def t_s(self) -> float:
@@ -715,9 +722,7 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
         try:
             opts[key] = _URL_KEYS[key](value)
         except ValueError:
-            raise ValueError(
-                f"sim:// option {key}={value!r} is not a valid {_URL_KEYS[key].__name__}"
-            ) from None
+            raise ValueError(f"sim:// option {key}={value!r} is not a valid {_URL_KEYS[key].__name__}") from None
     scape = {"gain_db": opts["gain_db"]} if "gain_db" in opts else None
     return SimulatedMM3A(
         seed=int(opts.get("seed", 0)),  # type: ignore[arg-type]
