@@ -78,6 +78,11 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
     assert len(store.traverses) == n_cal + n_val
     assert {d for _, d, _ in store.traverses} == {"sim://?seed=4&day=2026-11-22"}
     assert store.calibrations[0][2] == list(range(1, n_cal + 1))
+    # compute, then plot: one point per parameter, in % of the truth
+    ax = res.plot()
+    (points,) = [line for line in ax.lines if line.get_marker() == "o"]
+    assert len(points.get_xdata()) == len(res.parameters)
+    assert max(abs(v) for v in points.get_ydata()) < 1.0
 
 
 def test_run_demo_rejects_bad_settings():

@@ -136,6 +136,34 @@ class DemoResult:
             "files": dict(self.files),
         }
 
+    def plot(self, ax=None):
+        """Error of every calibrated parameter against the truth, % (b: in units of 0.01).
+
+        The shaded band is the acceptance tolerance of each parameter (a, gamma0: 1 %;
+        b: 0.01; c, d: 3 %). Returns the matplotlib Axes.
+        """
+        plt = _pyplot()
+        if ax is None:
+            _, ax = plt.subplots(figsize=(8, 3.5))
+        labels, errors, tols = [], [], []
+        for p in self.parameters:
+            labels.append(_param_label(p).replace(" (q3=", "\n(q3="))
+            if p["name"] == "b":
+                errors.append(100 * float(p["error"]))  # type: ignore[arg-type]
+            else:
+                errors.append(100 * float(p["rel_error"]))  # type: ignore[arg-type]
+            tols.append({"a": 1.0, "gamma0": 1.0, "b": 1.0}.get(str(p["name"]), 3.0))
+        x = range(len(labels))
+        ax.bar(x, [2 * t for t in tols], bottom=[-t for t in tols], width=0.8, color="0.9", label="tolerance")
+        ax.plot(list(x), errors, "o", color="C0", label="calibrated - true")
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_xticks(list(x))
+        ax.set_xticklabels(labels, rotation=90, fontsize=7)
+        ax.set_ylabel("error, % (b: x 0.01)")
+        ax.set_title(f"stickslip demo, seed {self.seed}, day {self.day}: calibrated vs true")
+        ax.legend(fontsize=8)
+        return ax
+
     def report(self) -> str:
         """A plain-text summary (units labelled)."""
         lines = [
@@ -161,6 +189,24 @@ class DemoResult:
         if self.files:
             lines += ["", "saved:"] + [f"  {k}: {v}" for k, v in self.files.items()]
         return "\n".join(lines)
+
+
+def _pyplot():
+    """matplotlib.pyplot (Agg backend when there is no display), or a clear ImportError."""
+    import os
+    import sys
+
+    try:
+        import matplotlib
+
+        if "matplotlib.pyplot" not in sys.modules and not (
+            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or sys.platform in ("darwin", "win32")
+        ):
+            matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("plotting needs matplotlib: pip install 'stickslip[plot]'") from e
+    return plt
 
 
 def _display(name: str, joint: int) -> tuple[float, str]:
@@ -200,9 +246,7 @@ def _tuning_dict(tuning: Any) -> object:
     return to_dict() if callable(to_dict) else repr(tuning)
 
 
-def compare_parameters(
-    calibrated: list[dict[str, object]], truth: list[dict[str, object]]
-) -> list[dict]:
+def compare_parameters(calibrated: list[dict[str, object]], truth: list[dict[str, object]]) -> list[dict]:
     """Calibrated parameter records beside the true ones (matched on joint, direction, name, q3)."""
 
     def key(p: dict[str, object]) -> tuple:
@@ -307,9 +351,7 @@ def run_demo(
     t_wall = time.perf_counter()
     day = day or _dt.date.today().isoformat()
     url = f"sim://?seed={seed}&day={day}"
-    sim = SimulatedMM3A(
-        seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url
-    )
+    sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
     n_cal = 2 * len(CALIBRATION_PLAN)
     n_val = 2 * len(VALIDATION_PLAN) if validation else 0
 
@@ -324,9 +366,7 @@ def run_demo(
 
             for joint in (1, 2, 3):
                 bar.stage(f"tuning the limit switch of joint {joint}")
-                samples, rate, stop_at = sim.labelled_recording(
-                    joint, "+", before_s=2.0, after_s=1.0
-                )
+                samples, rate, stop_at = sim.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
                 tunings[joint] = tune(samples, rate, stop_at, joint=joint)
                 detectors[joint] = StopDetector(tunings[joint], sim.clock_s)
             mic = sim.microphone()
@@ -448,9 +488,7 @@ def _write_summary(result: DemoResult, folder: Path) -> None:
             return [clean(v) for v in o]
         return o
 
-    (folder / "summary.json").write_text(
-        json.dumps(clean(result.to_dict()), indent=2) + "\n", encoding="utf-8"
-    )
+    (folder / "summary.json").write_text(json.dumps(clean(result.to_dict()), indent=2) + "\n", encoding="utf-8")
 
 
 class _Bars:
@@ -493,9 +531,7 @@ class _Bars:
     def traverse_callback(self) -> Callable[[int, float], None]:
         def update(steps: int, device_s: float) -> None:
             if self._bar is not None:
-                self._bar.update(
-                    self._current, completed=steps, info=f"{device_s:5.1f} s on the device"
-                )
+                self._bar.update(self._current, completed=steps, info=f"{device_s:5.1f} s on the device")
 
         return update
 
