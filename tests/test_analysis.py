@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 from scipy import stats
 from typer.testing import CliRunner
 
@@ -312,3 +314,31 @@ def test_cli_fit_writes_a_calibration_with_standard_errors(tmp_path):
     write_measurements(one, [t for t in simulated_table(7) if t.joint == 3 and t.q2 == 0.0 and t.theta == 0.0])
     r = runner.invoke(app, ["fit", str(one)])
     assert r.exit_code == 2 and "cannot determine" in r.output
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.lists(
+        st.lists(st.floats(min_value=-1e3, max_value=1e3, allow_nan=False), min_size=1, max_size=6),
+        min_size=2,
+        max_size=5,
+    ),
+    st.floats(min_value=1e-9, max_value=1e6),
+    st.floats(min_value=-1e3, max_value=1e3),
+)
+def test_one_way_equals_scipy_and_is_invariant_under_affine_changes_of_unit(groups, scale, shift):
+    n = sum(len(g) for g in groups)
+    assume(n > len(groups))
+    flat = np.concatenate([np.asarray(g) for g in groups])
+    assume(np.ptp(flat) > 1e-6 * max(1.0, np.max(np.abs(flat))))
+    within = sum(float(np.sum((np.asarray(g) - np.mean(g)) ** 2)) for g in groups)
+    assume(within > 1e-9 * max(1.0, float(np.sum(flat**2))))  # away from the degenerate case
+    F, p, dfb, dfw = one_way(groups)
+    ref = stats.f_oneway(*groups)
+    assert (dfb, dfw) == (len(groups) - 1, n - len(groups))
+    assert F == pytest.approx(ref.statistic, rel=1e-6)
+    assert abs(p - ref.pvalue) < 1e-6
+    # gamma in nm or in m, with an offset: the same test
+    F2, p2, *_ = one_way([[scale * x + shift for x in g] for g in groups])
+    assert F2 == pytest.approx(F, rel=1e-5)
+    assert abs(p2 - p) < 1e-6

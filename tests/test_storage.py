@@ -292,3 +292,26 @@ def test_cli_import_reports_every_bad_row_and_stores_nothing(tmp_path):
     assert "bad.csv:3: steps must be a positive integer" in r.output and "bad.csv:4: unknown joint" in r.output
     with Store.open(db) as st:
         assert st.count_traverses() == 0
+
+
+def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(tmp_path, monkeypatch):
+    p = tmp_path / "s.db"
+    with Store.open(p) as st:
+        st.add_traverse(_t(steps=4242))
+    future = (*storage.MIGRATIONS, "ALTER TABLE traverses ADD COLUMN note TEXT; CREATE TABLE extra (x INTEGER)")
+    monkeypatch.setattr(storage, "MIGRATIONS", future)
+    monkeypatch.setattr(storage, "SCHEMA_VERSION", len(future))
+    with Store.open(p) as st:
+        assert st.schema_version == 2
+        assert [t.steps for t in st.traverses()] == [4242]
+        cols = [r[1] for r in st._con.execute("PRAGMA table_info(traverses)")]
+        assert "note" in cols
+    # a migration that fails leaves the file at its old version, untouched
+    broken = (*future, "CREATE TABLE extra (x INTEGER)")  # 'extra' exists already
+    monkeypatch.setattr(storage, "MIGRATIONS", broken)
+    monkeypatch.setattr(storage, "SCHEMA_VERSION", len(broken))
+    with pytest.raises(StoreError, match="not a usable stickslip database"):
+        Store.open(p)
+    con = sqlite3.connect(p)
+    assert con.execute("PRAGMA user_version").fetchone()[0] == 2
+    con.close()
