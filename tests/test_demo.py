@@ -118,6 +118,13 @@ def test_cli_demo_bad_output_folder_is_one_line_error(tmp_path):
     assert text.startswith("error:") and "Traceback" not in text
 
 
+def test_cli_demo_negative_seed_is_one_line_error(tmp_path):
+    r = runner.invoke(app, ["demo", "--seed", "-3", "--out", str(tmp_path)])
+    assert r.exit_code == 2
+    text = r.stderr if hasattr(r, "stderr") else r.output
+    assert "error: seed = -3 must be an integer" in text
+
+
 def test_cli_demo_help_names_units_and_example():
     r = runner.invoke(app, ["demo", "--help"])
     assert r.exit_code == 0

@@ -290,6 +290,8 @@ def test_open_url_and_registry():
         open_url("sim://?sed=3")
     with pytest.raises(ValueError, match="not a valid int"):
         open_url("sim://?seed=three")
+    with pytest.raises(ValueError, match=r"seed = -1 must be an integer in \[0, 2\*\*63\)"):
+        open_url("sim://?seed=-1")
     with pytest.raises(ValueError, match=r"noise.*outside \[0, 0.5\]"):
         SimulatedMM3A(step_noise=0.9)
     assert sim.settings()["frequency_hz"] == {1: 1000.0, 2: 1000.0, 3: 1000.0}

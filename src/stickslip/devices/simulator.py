@@ -168,6 +168,8 @@ class SimulatedMM3A:
         pose: kin.Pose | None = None,
         url: str = "sim://",
     ):
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**63:
+            raise ValueError(f"seed = {seed!r} must be an integer in [0, 2**63)")
         if not 0.0 <= float(step_noise) <= 0.5:
             raise ValueError(f"step_noise = {step_noise!r} is outside [0, 0.5] (relative standard deviation)")
         if not 0.0 <= float(drift) <= 0.2:
