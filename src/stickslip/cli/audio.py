@@ -82,7 +82,11 @@ def listen(
         ..., "--tuning", help="Tuning JSON written by 'stickslip tune'."
     ),
     mic: bool = typer.Option(False, "--mic", help="Listen live to the microphone until Ctrl-C."),
-    device: str = typer.Option(None, "--device", help="Input device (index or name) for --mic."),
+    device: str = typer.Option(
+        None,
+        "--input",
+        help="Audio input device (index or name) for --mic; `python -m sounddevice` lists them.",
+    ),
     json_out: bool = typer.Option(
         False,
         "--json",
