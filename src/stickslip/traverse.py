@@ -281,7 +281,9 @@ def measure_traverse(
         For the progress bar's total.
     clock : callable, optional
         Returns the stream time (s) now. Default: ``controller.clock_s`` if present,
-        else the wall clock.
+        else the wall clock. After every burst the audio is heard up to the burst's
+        end (``start + n / f``); with a real-time device give an iterator source, which
+        blocks until the microphone has recorded that far.
     progress : bool or callable
         ``True`` shows a rich progress bar; a callable gets ``(steps, device_s)`` after
         every burst.
@@ -349,9 +351,10 @@ def measure_traverse(
                     f"(direction {direction_label(-sign)}); check the tuning and the microphone"
                 )
             n = min(max(1, burst_steps // 4), limit - predrive_steps)
+            b0 = clock()
             controller.step(joint, -sign * n)
             predrive_steps += n
-            if listener.listen(clock()) is not None:
+            if listener.listen(max(clock(), b0 + n / hz)) is not None:
                 controller.stop(joint)
                 break
 
@@ -379,10 +382,12 @@ def measure_traverse(
                     "check the tuning, the microphone and the joint"
                 )
             n = min(burst_steps, limit - commanded)
-            bursts.append((clock(), n))
+            b0 = clock()
+            bursts.append((b0, n))
             controller.step(joint, sign * n)
             commanded += n
-            event = listener.listen(clock())
+            # a real device may return before the burst is done: hear it to its end
+            event = listener.listen(max(clock(), b0 + n / hz))
             if (
                 event is not None
                 and listen_after_steps
