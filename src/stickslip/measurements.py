@@ -254,16 +254,22 @@ def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
     return out
 
 
-def read_measurements(path: str | Path) -> list[Traverse]:
-    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
+def _read_table_text(path: str | Path) -> str:
+    """The text of a CSV table; a missing or non-UTF-8 file raises :class:`TableError`."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8-sig")
+        return p.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise TableError([f"{p}: no such file"]) from None
+    except IsADirectoryError:
+        raise TableError([f"{p}: is a folder, not a CSV file"]) from None
     except UnicodeDecodeError:
         raise TableError([f"{p}:1: not a UTF-8 text file"]) from None
-    return parse_measurements(text, str(path))
+
+
+def read_measurements(path: str | Path) -> list[Traverse]:
+    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
+    return parse_measurements(_read_table_text(path), str(path))
 
 
 def _fmt(v: object) -> str:
@@ -422,11 +428,4 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
 
 def read_pose_table(path: str | Path) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
     """Read a pose table from a CSV file (see :func:`parse_pose_table`)."""
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise TableError([f"{p}: no such file"]) from None
-    except UnicodeDecodeError:
-        raise TableError([f"{p}:1: not a UTF-8 text file"]) from None
-    return parse_pose_table(text, str(path))
+    return parse_pose_table(_read_table_text(path), str(path))
