@@ -316,7 +316,7 @@ def test_cli_fit_writes_a_calibration_with_standard_errors(tmp_path):
     assert r.exit_code == 2 and "cannot determine" in r.output
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=60, deadline=None, derandomize=True)
 @given(
     st.lists(
         st.lists(st.floats(min_value=-1e3, max_value=1e3, allow_nan=False), min_size=1, max_size=6),
@@ -336,9 +336,12 @@ def test_one_way_equals_scipy_and_is_invariant_under_affine_changes_of_unit(grou
     F, p, dfb, dfw = one_way(groups)
     ref = stats.f_oneway(*groups)
     assert (dfb, dfw) == (len(groups) - 1, n - len(groups))
-    assert F == pytest.approx(ref.statistic, rel=1e-6)
-    assert abs(p - ref.pvalue) < 1e-6
+    if np.isfinite(ref.pvalue):
+        assert F == pytest.approx(ref.statistic, rel=1e-6, abs=1e-9)
+        assert abs(p - ref.pvalue) < 1e-6
+    else:  # equal group means: scipy returns F ~ -1e-33 and p = NaN; the answer is F = 0, p = 1
+        assert abs(F) < 1e-9 and p == pytest.approx(1.0)
     # gamma in nm or in m, with an offset: the same test
     F2, p2, *_ = one_way([[scale * x + shift for x in g] for g in groups])
-    assert F2 == pytest.approx(F, rel=1e-5)
+    assert F2 == pytest.approx(F, rel=1e-5, abs=1e-9)
     assert abs(p2 - p) < 1e-6

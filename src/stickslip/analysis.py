@@ -169,8 +169,9 @@ def group_poses(
 def one_way(samples: Sequence[Sequence[float]]) -> tuple[float, float, int, int]:
     """One-way ANOVA of ``samples`` (one sequence per group): ``(F, p, df_between, df_within)``.
 
-    :func:`scipy.stats.f_oneway`, with the degenerate case of zero spread within
-    groups made explicit (F = inf, p = 0 if the means differ; NaN otherwise).
+    :func:`scipy.stats.f_oneway`, with the degenerate cases made explicit: zero
+    spread within groups gives F = inf, p = 0 if the means differ (NaN otherwise);
+    equal group means give F = 0, p = 1 (scipy can return a tiny negative F and NaN).
     """
     from scipy import stats
 
@@ -193,7 +194,12 @@ def one_way(samples: Sequence[Sequence[float]]) -> tuple[float, float, int, int]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = stats.f_oneway(*arrays)
-    return float(res.statistic), float(res.pvalue), dfb, dfw
+    F, p = float(res.statistic), float(res.pvalue)
+    if not (math.isfinite(p) and F >= 0.0):
+        # equal group means: scipy's F can come out as -1e-33 and its p as NaN; F = 0, p = 1
+        F = max(0.0, (ssb / dfb) / (ssw / dfw))
+        p = float(stats.f.sf(F, dfb, dfw))
+    return F, p, dfb, dfw
 
 
 @dataclass(frozen=True)
