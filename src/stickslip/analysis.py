@@ -356,16 +356,15 @@ def _two_way(g: PoseGroup, scale: float) -> list[tuple[str, float, float, int, i
     dfres = int(round(float(table.loc["Residual", "df"])))
     names = {"C(day)": "day", "C(direction)": "direction", "C(day):C(direction)": "day:direction"}
     out = []
+    from scipy import stats
+
     for idx, term in names.items():
-        out.append(
-            (
-                term,
-                float(table.loc[idx, "F"]),
-                float(table.loc[idx, "PR(>F)"]),
-                int(round(float(table.loc[idx, "df"]))),
-                dfres,
-            )
-        )
+        F, p, dfn = float(table.loc[idx, "F"]), float(table.loc[idx, "PR(>F)"]), int(round(float(table.loc[idx, "df"])))
+        if math.isfinite(F) and F < 0.0:  # a sum of squares of -1e-30 from rounding: no effect at all
+            F, p = 0.0, 1.0
+        elif math.isfinite(F) and not math.isfinite(p):
+            p = float(stats.f.sf(F, dfn, dfres))
+        out.append((term, F, p, dfn, dfres))
     return out
 
 
