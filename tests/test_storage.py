@@ -315,3 +315,15 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(tm
     con = sqlite3.connect(p)
     assert con.execute("PRAGMA user_version").fetchone()[0] == 2
     con.close()
+
+
+def test_cli_reading_commands_refuse_a_missing_database(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    missing = tmp_path / "nope.db"
+    for args in (["history"], ["export", "-o", str(tmp_path / "x.csv")], ["anova"], ["fit"]):
+        r = CliRunner().invoke(app, [*args, "--db", str(missing)])
+        assert r.exit_code == 2 and "no database at" in r.output, args
+    assert not missing.exists()

@@ -20,11 +20,15 @@ from ._common import console, fail, print_json, user_errors, warn
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
 
 
-def _open_store(db: Path | None):
-    from ..storage import Store, StoreError
+def _open_store(db: Path | None, must_exist: bool = True):
+    """Open the database; commands that only read refuse a file that does not exist yet."""
+    from ..storage import Store, StoreError, resolve_db_path
 
+    path = resolve_db_path(db)
+    if must_exist and not path.exists():
+        fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
     with user_errors(StoreError):
-        return Store.open(db)
+        return Store.open(path)
 
 
 def _read_table(path: Path):
@@ -132,7 +136,7 @@ def import_(
     """
     ts = _read_table(meas)
     digest = "sha256:" + hashlib.sha256(meas.read_bytes()).hexdigest()
-    with _open_store(db) as st:
+    with _open_store(db, must_exist=False) as st:
         if st.has_source(digest) and not force:
             fail(f"{meas} was imported before (same contents); use --force to import it again")
         with user_errors():
@@ -242,7 +246,7 @@ def fit(
             cal.save(out)
     cal_id = None
     if record:
-        with _open_store(db) as st:
+        with _open_store(db, must_exist=False) as st:
             with user_errors():
                 cal_id = st.add_calibration(cal, device=device or "sim://")
     if json_out:
