@@ -130,3 +130,16 @@ def test_cli_demo_help_names_units_and_example():
     assert r.exit_code == 0
     assert "--seed" in r.output and "--json" in r.output and "µrad" in r.output
     assert "stickslip demo --seed" in r.output
+
+
+def test_cli_demo_records_every_traverse_and_the_calibration(tmp_path):
+    from stickslip.storage import Store
+
+    db = tmp_path / "demo.db"
+    r = CliRunner().invoke(app, ["demo", "--no-validation", "--json", "--out", str(tmp_path / "res"), "--db", str(db)])
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        assert st.count_traverses() == 14  # the seed's 6 prismatic + 8 rotary calibration traverses
+        cal = st.latest_calibration()
+        assert cal is not None and cal.method == "seed"
+        assert st.integrity_check() == "ok"

@@ -374,7 +374,9 @@ def run_demo(
             detectors = {j: OracleStopDetector(sim, j, delay_s=0.03) for j in (1, 2, 3)}
             mic = sim.microphone(silent=True)
 
-        def run(plan, stage: str, prior: Callable[[int, str], JointModel]) -> list[TraverseResult]:
+        how = "simulated, audio switch" if switch == "audio" else "simulated, oracle switch"
+
+        def run(plan, stage: str, prior: Callable[[int, str], JointModel], ids: list[int]) -> list[TraverseResult]:
             results = []
             for joint, pose in plan:
                 spec = kin.JOINTS[joint]
@@ -402,6 +404,8 @@ def run_demo(
                         listen_after_steps=int(listen_from * expected),
                     )
                     results.append(r)
+                    if store is not None:  # one transaction per traverse: a kill loses at most this one
+                        ids.append(store.add_traverse(r.traverse, device=url, how=how))
                     bar.advance()
                     if on_traverse is not None:
                         on_traverse(r)
@@ -410,15 +414,18 @@ def run_demo(
         def nominal(joint: int, direction: str) -> JointModel:
             return JointModel(joint, direction, NOMINAL[(joint, direction)])
 
-        traverses = run(CALIBRATION_PLAN, "calibration", nominal)
+        cal_ids: list[int] = []
+        traverses = run(CALIBRATION_PLAN, "calibration", nominal, cal_ids)
         rows = [r.traverse for r in traverses]
         cal = calibrate(rows, day=day, source=url)
+        if store is not None:
+            store.add_calibration(cal, url, cal_ids)
         truth = sim.true_parameters()
         parameters = compare_parameters(cal.parameters(), truth)
         val_results: list[TraverseResult] = []
         val: ValidationResult | None = None
         if validation:
-            val_results = run(VALIDATION_PLAN, "validation", cal.model)
+            val_results = run(VALIDATION_PLAN, "validation", cal.model, [])
             val = validate(cal, [r.traverse for r in val_results])
     finally:
         bar.close()
@@ -438,10 +445,6 @@ def run_demo(
         steps_simulated=sim.steps_simulated,
     )
     if store is not None:
-        ids = [store.add_traverse(t, device=url, how="simulated") for t in rows]
-        for r in val_results:
-            store.add_traverse(r.traverse, device=url, how="simulated")
-        store.add_calibration(cal, url, ids)
         result.files["store"] = str(getattr(store, "path", "store"))
     if out is not None:
         result.files.update(save_results(result, out))

@@ -65,6 +65,27 @@ def _clean(obj: object) -> object:
     return obj
 
 
+def validation_table(rows: list[dict], title: str):
+    """A rich table of :meth:`ValidationResult.rows` (model vs constant step, per joint)."""
+    from rich.table import Table
+
+    t = Table(title=title)
+    for col in ("joint", "traverses", "model max", "model mean", "constant max", "constant mean", "better"):
+        t.add_column(col, justify="right")
+    for r in rows:
+        better = "model" if r["model_max_rel_error"] < r["constant_max_rel_error"] else "constant"
+        t.add_row(
+            str(r["joint"]),
+            str(r["n"]),
+            f"{r['model_max_rel_error']:.2%}",
+            f"{r['model_mean_rel_error']:.2%}",
+            f"{r['constant_max_rel_error']:.2%}",
+            f"{r['constant_mean_rel_error']:.2%}",
+            better,
+        )
+    return t
+
+
 def _unit_parser(parse: Callable[[str], float], what: str) -> Callable[[str | None], float | None]:
     def callback(value: str | None) -> float | None:
         if value is None:

@@ -18,7 +18,7 @@ from ..measurements import TableError, read_measurements, read_pose_table
 from ..models import NonPhysicalError
 from ..units import format_position, format_step
 from . import app
-from ._common import angle_option, console, fail, length_option, print_json, user_errors, warn
+from ._common import angle_option, console, fail, length_option, print_json, user_errors, validation_table, warn
 
 CalibrationOpt = Annotated[
     Path, typer.Option("--calibration", "-c", help="Calibration JSON written by 'stickslip calibrate' or 'fit'.")
@@ -235,21 +235,8 @@ def validate_cmd(
     if json_out:
         print_json(rows)
         return
-    t = Table(title=f"model vs constant step on {len(traverses)} traverses (relative error of the average step)")
-    for col in ("joint", "n", "model max", "model mean", "constant max", "constant mean", "better"):
-        t.add_column(col, justify="right")
-    for r in rows:
-        better = "model" if r["model_max_rel_error"] < r["constant_max_rel_error"] else "constant"
-        t.add_row(
-            str(r["joint"]),
-            str(r["n"]),
-            f"{r['model_max_rel_error']:.2%}",
-            f"{r['model_mean_rel_error']:.2%}",
-            f"{r['constant_max_rel_error']:.2%}",
-            f"{r['constant_mean_rel_error']:.2%}",
-            better,
-        )
-    console.print(t)
+    title = f"model vs constant step on {len(traverses)} traverses (relative error of the average step)"
+    console.print(validation_table(rows, title))
 
 
 @app.command("plan")

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from . import app
-from ._common import console, print_json, user_errors
+from ._common import console, print_json, user_errors, validation_table
 
 
 def _scale(name: str, joint: int) -> tuple[float, str]:
@@ -39,6 +39,13 @@ def demo(
     json_out: bool = typer.Option(
         False, "--json", help="Print the summary as one JSON object (SI units)."
     ),
+    db: Path = typer.Option(
+        None,
+        "--db",
+        help="Record every traverse and the calibration in this SQLite file "
+        "(default: $STICKSLIP_DB, else the user's data folder).",
+    ),
+    use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record into the database (default) or not."),
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
 
@@ -48,10 +55,18 @@ def demo(
     """  # noqa: E501
     from ..calibration import CalibrationError
     from ..demo import run_demo
+    from ..storage import Store, StoreError
     from ..traverse import TraverseError
 
-    with user_errors(CalibrationError, TraverseError):
-        result = run_demo(seed=seed, day=day, out=out, progress=not json_out, validation=validation)
+    with user_errors(CalibrationError, TraverseError, StoreError):
+        store = Store.open(db) if use_db else None
+        try:
+            result = run_demo(
+                seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store
+            )
+        finally:
+            if store is not None:
+                store.close()
     if json_out:
         print_json(result.to_dict())
         return
@@ -88,25 +103,7 @@ def demo(
         table.add_row(*cells)
     console.print(table)
     if result.validation is not None:
-        vt = Table(title="Validation on other poses: |relative error| of the average step")
-        for col in (
-            "joint",
-            "traverses",
-            "model max",
-            "model mean",
-            "constant max",
-            "constant mean",
-        ):
-            vt.add_column(col, justify="right")
-        for r in result.validation.rows():
-            vt.add_row(
-                str(r["joint"]),
-                str(r["n"]),
-                f"{r['model_max_rel_error']:.2%}",
-                f"{r['model_mean_rel_error']:.2%}",
-                f"{r['constant_max_rel_error']:.2%}",
-                f"{r['constant_mean_rel_error']:.2%}",
-            )
-        console.print(vt)
+        title = "Validation on other poses: |relative error| of the average step"
+        console.print(validation_table(result.validation.rows(), title))
     for what, path in result.files.items():
         console.print(f"saved {what}: {path}", highlight=False)
