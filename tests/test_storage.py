@@ -327,3 +327,21 @@ def test_cli_reading_commands_refuse_a_missing_database(tmp_path):
         r = CliRunner().invoke(app, [*args, "--db", str(missing)])
         assert r.exit_code == 2 and "no database at" in r.output, args
     assert not missing.exists()
+
+
+def test_cli_fit_record_from_the_database_links_the_traverses(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    db = tmp_path / "s.db"
+    cal, rows = _calibration("2026-11-21")
+    with Store.open(db) as st:
+        st.add_traverses(rows, device="mm3a:///dev/ttyUSB0")
+    r = CliRunner().invoke(app, ["fit", "--db", str(db), "--record", "--json"])
+    assert r.exit_code == 0, r.output
+    cid = json.loads(r.stdout)["stored_id"]
+    with Store.open(db) as st:
+        assert st.calibrations()[0]["device"] == "mm3a:///dev/ttyUSB0"
+        assert st.calibration_traverses(cid) == rows
+        assert st.latest_calibration("mm3a:///dev/ttyUSB0").day == "2026-11-21"

@@ -82,12 +82,18 @@ def history(
         console.print(f"no sessions stored in {path}" + (f" for device {device}" if device else ""))
         return
     table = Table(title=f"stickslip history ({path})")
-    for col in ("device", "day", "traverses", "by joint", "measured (UTC)", "calibrations"):
-        table.add_column(col)
+    table.add_column("device", overflow="fold")
+    table.add_column("day", no_wrap=True)
+    table.add_column("n", justify="right")
+    table.add_column("by joint")
+    table.add_column("measured (UTC)")
+    table.add_column("calibrations", no_wrap=True)
     for e in entries:
         span = ""
         if e["first_measured_at"]:
-            span = f"{e['first_measured_at'][:16]} .. {e['last_measured_at'][11:16]}"
+            span = f"{e['first_measured_at'][11:16]}-{e['last_measured_at'][11:16]}"
+            if e["first_measured_at"][:10] != e["day"]:
+                span = f"{e['first_measured_at'][:10]} {span}"
         cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
         by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
         table.add_row(e["device"], e["day"], str(e["traverses"]), by, span, cals)
@@ -222,7 +228,9 @@ def fit(
     out: Path | None = typer.Option(None, "-o", "--output", help="Write the calibration JSON here."),
     day: str | None = typer.Option(None, "--day", help="Only traverses of this session day."),
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
-    record: bool = typer.Option(False, "--record", help="Also store the calibration in the database."),
+    record: bool = typer.Option(
+        False, "--record", help="Also store the calibration in the database (for --device, default sim://)."
+    ),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
 ) -> None:
@@ -238,6 +246,15 @@ def fit(
     from ..calibration import CalibrationError, calibrate
 
     ts, where = _traverses_from(meas, db, device, day)
+    ids: list[int] = []
+    if record and meas is None:  # link the stored traverses the fit used
+        with _open_store(db) as st:
+            recs = st.traverse_records(device=device, day=day)
+        devices = sorted({r["device"] for r in recs})
+        if len(devices) > 1:
+            fail(f"the traverses come from several devices ({', '.join(devices)}): pick one with --device")
+        device = device or devices[0]
+        ids = [int(r["id"]) for r in recs]
     with user_errors(CalibrationError):
         cal = calibrate(ts, method="lsq", day=day, source=str(meas) if meas else where)
     res = residual_summary(cal, ts)
@@ -248,7 +265,7 @@ def fit(
     if record:
         with _open_store(db, must_exist=False) as st:
             with user_errors():
-                cal_id = st.add_calibration(cal, device=device or "sim://")
+                cal_id = st.add_calibration(cal, device=device or "sim://", traverse_ids=ids)
     if json_out:
         print_json(
             {
