@@ -167,7 +167,7 @@ class Microphone:
             self._stream = None
             raise AudioSourceError(
                 f"cannot open the microphone: {e} (is an input device connected? "
-                "'python -m sounddevice' lists them; choose one with --device)"
+                "'python -m sounddevice' lists them; choose one with --input)"
             ) from None
         return self
 

@@ -107,3 +107,97 @@ def demo(
         console.print(validation_table(result.validation.rows(), title))
     for what, path in result.files.items():
         console.print(f"saved {what}: {path}", highlight=False)
+
+
+@app.command("traverse")
+def traverse_cmd(
+    joint: int = typer.Option(..., "--joint", "-j", help="Joint to traverse: 1, 2 (rotary) or 3 (prismatic)."),
+    direction: str = typer.Option(..., "--direction", "-d", help="'+' (lower stop to upper) or '-'."),
+    tuning: Path = typer.Option(..., "--tuning", help="This joint's limit-switch tuning (stickslip tune, or demo)."),
+    device: str = typer.Option("sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."),
+    audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
+    q1: str = typer.Option("0", help="Joint 1 angle (ignored when traversing joint 1)."),
+    q2: str = typer.Option("-90deg", help="Joint 2 angle (ignored when traversing joint 2)."),
+    q3: str = typer.Option("0", help="Joint 3 extension (ignored when traversing joint 3)."),
+    theta: str = typer.Option("0", help="Base tilt about x0."),
+    psi: str = typer.Option("0", help="Base tilt about the new y0."),
+    day: str = typer.Option(None, "--day", help="Session label (default: today's ISO date)."),
+    append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
+    db: Path = typer.Option(None, "--db", help="SQLite database (default: $STICKSLIP_DB, else your data folder)."),
+    use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
+    burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
+    json_out: bool = typer.Option(False, "--json", help="Print the measured row as JSON (SI units)."),
+) -> None:
+    """Measure one traverse: count the steps between a joint's end stops, timed by ear.
+
+    Drives the joint to its start stop, then steps in bursts in the measured direction
+    while the tuned audio limit switch listens; stops at the end stop and counts the
+    steps that moved the joint (latency corrected). The pose options say how the arm
+    and base are set (on a real manipulator you set them; the simulator is placed there).
+    The row goes to the database and, with --append, to a measurement table.
+
+    Example: stickslip traverse --joint 3 -d + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
+    """
+    import datetime as _dt
+
+    from ..audio.detector import StopDetector, Tuning
+    from ..devices import DeviceError, open_device
+    from ..kinematics import JOINTS, Pose
+    from ..measurements import HEADER, measurements_to_csv
+    from ..models import direction_label
+    from ..storage import Store, StoreError
+    from ..traverse import TraverseError, measure_traverse
+    from ..units import format_step
+    from ._common import angle_option, fail, length_option
+
+    if joint not in JOINTS:
+        fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
+    try:
+        label = direction_label(direction)
+        pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
+    except (ValueError, typer.BadParameter) as e:
+        fail(str(e))
+    day = day or _dt.date.today().isoformat()
+    with user_errors(DeviceError, TraverseError, StoreError):
+        tun = Tuning.load(tuning)
+        if getattr(tun, "joint", None) not in (None, joint):
+            fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
+        ctrl = open_device(device)
+        mic = None
+        try:
+            if hasattr(ctrl, "set_pose"):  # the simulator: place the fixed joints and tilt the base
+                fixed = {k: v for k, v in pose._asdict().items() if k != f"q{joint}"}
+                ctrl.set_pose(**fixed)
+            if hasattr(ctrl, "microphone"):
+                blocks = ctrl.microphone()
+                t0 = float(ctrl.clock_s)
+            else:
+                from ..audio.sources import Microphone
+
+                mic = Microphone(sample_rate=int(tun.sample_rate), device=audio_input).start()
+                blocks, t0 = mic.blocks(), 0.0
+            result = measure_traverse(
+                ctrl, joint, label, detector=StopDetector(tun, t0), audio_blocks=blocks, pose=pose, day=day,
+                burst_steps=burst, progress=not json_out,
+            )
+        finally:
+            if mic is not None:
+                mic.stop()
+            ctrl.close()
+        row = result.traverse
+        if use_db:
+            with Store.open(db) as st:
+                st.add_traverse(row, device=device.split("?")[0], how="audio")
+        if append is not None:
+            new = not append.exists() or append.stat().st_size == 0
+            text = measurements_to_csv([row])
+            with append.open("a", encoding="utf-8") as f:
+                f.write(text if new else text.split("\n", 1)[1])
+    if json_out:
+        print_json({**row.as_row(), "gamma": row.gamma, "header": list(HEADER)})
+        return
+    console.print(
+        f"joint {joint}{label}: {row.steps} steps from {row.start:.6g} to {row.end:.6g} "
+        f"{JOINTS[joint].unit}: average step {format_step(row.gamma, joint)}",
+        highlight=False,
+    )
