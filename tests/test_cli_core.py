@@ -141,7 +141,7 @@ def test_nonphysical_table_is_refused(files):
 
 
 @pytest.mark.parametrize("cmd", ["calibrate", "predict", "validate", "plan", "show", "demo", "tune", "listen",
-                                 "anova", "fit", "report", "history", "export", "import", "move", "where"])
+                                 "anova", "fit", "report", "history", "export", "import", "move", "where", "traverse"])
 def test_every_command_has_help(cmd):
     r = runner.invoke(app, [cmd, "--help"])
     assert r.exit_code == 0, r.output
