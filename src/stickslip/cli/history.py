@@ -68,7 +68,7 @@ def history(
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per device and day."),
 ) -> None:
-    """Show the stored sessions: traverses per day and joint, and the calibrations made.
+    """Show stored sessions: traverses per day and joint, and calibrations made.
 
     Example: [bold]stickslip history --device sim://[/]
     """
@@ -108,7 +108,7 @@ def export(
     joint: int | None = typer.Option(None, "--joint", "-j", help="Only this joint (1, 2 or 3)."),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
 ) -> None:
-    """Write stored traverses to a measurement table (day,joint,direction,q1,...,steps; SI).
+    """Write stored traverses to a measurement table (CSV, SI units).
 
     Example: [bold]stickslip export --day 2026-11-21 -o meas.csv[/]
     """
@@ -136,7 +136,7 @@ def import_(
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the new traverse ids as JSON."),
 ) -> None:
-    """Store every row of a measurement table (validated first: on any bad row nothing is stored).
+    """Store a measurement table; on any bad row nothing is stored.
 
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
@@ -167,12 +167,12 @@ def anova(
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per test."),
 ) -> None:
-    """Is the step size different from day to day, and between + and -? (the seed's ANOVA)
+    """ANOVA: does the step size change from day to day, and between + and -?
 
-    For each joint and direction: one-way ANOVA of the average step across days, in
-    poses repeated on several days. For each joint and day: + against -. With
-    --two-way, the day x direction table with interaction. Poses match when fixed
-    joints, tilt and traversed interval agree within 1e-3 rad / 10 um.
+    For each joint and direction: one-way ANOVA of the average step across days,
+    in poses repeated on several days. For each joint and day: + against -. With
+    --two-way, the day x direction table with interaction. Poses match when
+    fixed joints, tilt and traversed interval agree within 1e-3 rad / 10 um.
 
     Example: [bold]stickslip anova meas.csv --json[/]
     """
@@ -234,11 +234,12 @@ def fit(
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
 ) -> None:
-    """Fit each joint's model to all rows by nonlinear least squares, with standard errors.
+    """Fit each joint's model to all rows (nonlinear least squares, with SEs).
 
-    Traverse averages are predicted exactly (closed-form integral along the traverse),
-    so long rotary traverses count as what they are. Prints every parameter with its
-    standard error (nm, µrad) and the residuals per joint and direction.
+    Traverse averages are predicted exactly (closed-form integral along the
+    traverse), so long rotary traverses count as what they are. Prints every
+    parameter with its standard error (nm, µrad) and the residuals per joint and
+    direction.
 
     Example: [bold]stickslip fit meas.csv -o cal.json[/]
     """
@@ -298,11 +299,12 @@ def report(
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
     json_out: bool = typer.Option(False, "--json", help="Print the list of files written as JSON."),
 ) -> None:
-    """Write the seed's figures (Figs. 4, 6/10, 8, 9) and an HTML page with the validation table.
+    """Write the seed's figures (Figs. 4, 6/10, 8, 9) and an HTML validation page.
 
-    Figures: prismatic step against zeta for several theta with the model; rotary step
-    per pi/6 interval against zeta at q3 = 0 and 12 mm; simulated step along the
-    range; d against the step difference, exact relation vs the seed's quadratic.
+    Figures: prismatic step against zeta for several theta with the model;
+    rotary step per pi/6 interval against zeta at q3 = 0 and 12 mm; simulated
+    step along the range; d against the step difference, exact relation vs the
+    seed's quadratic.
 
     Example: [bold]stickslip report --calibration cal.json meas.csv -o report/[/]
     """
