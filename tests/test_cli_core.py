@@ -152,4 +152,7 @@ def test_top_level_help_lists_commands():
     r = runner.invoke(app, ["--help"])
     for cmd in ("calibrate", "predict", "plan", "demo"):
         assert cmd in r.stdout
+    for panel in ("Measure", "Calibrate and predict", "Drive a manipulator", "Keep and study"):
+        assert panel in r.stdout
+    assert "─ Other ─" not in r.stdout  # every command sits in a workflow panel
     np.testing.assert_equal(r.exit_code, 0)

@@ -11,6 +11,8 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 
 from __future__ import annotations
 
+import inspect
+
 import typer
 
 app = typer.Typer(
@@ -36,6 +38,43 @@ def _root() -> None:
 
 
 from . import audio, core, devices, history, measure  # noqa: E402,F401  (they register their commands)
+
+
+def _unwrap(doc: str) -> str:
+    """Join the hard-wrapped lines of each paragraph, so rich wraps help text to the terminal.
+
+    Paragraphs are separated by blank lines; lines that start a list item or are indented
+    keep their breaks.
+    """
+    out = []
+    for para in inspect.cleandoc(doc).split("\n\n"):
+        lines = para.splitlines()
+        if any(ln.startswith((" ", "-", "*", "$")) for ln in lines[1:]):
+            out.append(para)
+        else:
+            out.append(" ".join(ln.strip() for ln in lines))
+    return "\n\n".join(out)
+
+
+_PANELS = {
+    "Measure": ("demo", "traverse", "tune", "listen"),
+    "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
+    "Drive a manipulator": ("move", "where"),
+    "Keep and study": ("history", "import", "export", "anova", "report"),
+}
+_PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}
+_ORDER = [name for names in _PANELS.values() for name in names]
+
+
+def _name(info) -> str:
+    return info.name or info.callback.__name__.replace("_cmd", "").replace("_", "-")
+
+
+for _info in app.registered_commands:
+    if _info.callback is not None and _info.callback.__doc__ and _info.help is None:
+        _info.callback.__doc__ = _unwrap(_info.callback.__doc__)
+    _info.rich_help_panel = _PANEL_OF.get(_name(_info), "Other")
+app.registered_commands.sort(key=lambda i: _ORDER.index(_name(i)) if _name(i) in _ORDER else len(_ORDER))
 
 
 def main() -> None:
