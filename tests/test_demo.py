@@ -76,7 +76,7 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
     assert summary["elapsed_s"] == pytest.approx(res.elapsed_s)
     # storage hook
     assert len(store.traverses) == n_cal + n_val
-    assert {d for _, d, _ in store.traverses} == {"sim://?seed=4&day=2026-11-22"}
+    assert {d for _, d, _ in store.traverses} == {"sim://?seed=4"}  # the arm, not the session
     assert store.calibrations[0][2] == list(range(1, n_cal + 1))
     # compute, then plot: one point per parameter, in % of the truth
     ax = res.plot()

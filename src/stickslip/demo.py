@@ -36,6 +36,7 @@ from typing import Any
 
 from . import kinematics as kin
 from .calibration import Calibration, ValidationResult, calibrate, validate
+from .devices.base import device_key
 from .devices.simulator import NOMINAL, OracleStopDetector, SimulatedMM3A
 from .measurements import write_measurements
 from .models import JointModel
@@ -405,7 +406,7 @@ def run_demo(
                     )
                     results.append(r)
                     if store is not None:  # one transaction per traverse: a kill loses at most this one
-                        ids.append(store.add_traverse(r.traverse, device=url, how=how))
+                        ids.append(store.add_traverse(r.traverse, device=device_key(url), how=how))
                     bar.advance()
                     if on_traverse is not None:
                         on_traverse(r)
@@ -419,7 +420,7 @@ def run_demo(
         rows = [r.traverse for r in traverses]
         cal = calibrate(rows, day=day, source=url)
         if store is not None:
-            store.add_calibration(cal, url, cal_ids)
+            store.add_calibration(cal, device_key(url), cal_ids)
         truth = sim.true_parameters()
         parameters = compare_parameters(cal.parameters(), truth)
         val_results: list[TraverseResult] = []

@@ -141,7 +141,7 @@ def traverse_cmd(
     import datetime as _dt
 
     from ..audio.detector import StopDetector, Tuning
-    from ..devices import DeviceError, open_device
+    from ..devices import DeviceError, device_key, open_device
     from ..kinematics import JOINTS, Pose
     from ..measurements import HEADER, measurements_to_csv
     from ..models import direction_label
@@ -187,7 +187,7 @@ def traverse_cmd(
         row = result.traverse
         if use_db:
             with Store.open(db) as st:
-                st.add_traverse(row, device=device.split("?")[0], how="audio")
+                st.add_traverse(row, device=device_key(device), how="audio")
         if append is not None:
             new = not append.exists() or append.stat().st_size == 0
             text = measurements_to_csv([row])

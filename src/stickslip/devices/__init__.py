@@ -4,6 +4,6 @@
 register their URL schemes in :data:`stickslip.devices.base.BACKENDS`.
 """
 
-from .base import BACKENDS, Controller, DeviceError, DeviceInfo, open_device, register_backend
+from .base import BACKENDS, Controller, DeviceError, DeviceInfo, device_key, open_device, register_backend
 
-__all__ = ["BACKENDS", "Controller", "DeviceError", "DeviceInfo", "open_device", "register_backend"]
+__all__ = ["BACKENDS", "Controller", "DeviceError", "DeviceInfo", "device_key", "open_device", "register_backend"]

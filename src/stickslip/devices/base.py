@@ -20,9 +20,9 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
-from urllib.parse import urlsplit
+from urllib.parse import parse_qs, urlsplit
 
-__all__ = ["Controller", "DeviceInfo", "DeviceError", "BACKENDS", "register_backend", "open_device"]
+__all__ = ["Controller", "DeviceInfo", "DeviceError", "BACKENDS", "register_backend", "open_device", "device_key"]
 
 
 class DeviceError(RuntimeError):
@@ -129,3 +129,23 @@ def open_device(url: str = "sim://") -> Controller:
             raise DeviceError(f"the backend for {scheme}:// could not be loaded: {e}") from e
         factory = getattr(module, func_name)
     return factory(url)
+
+
+def device_key(url: str) -> str:
+    """The name a device's data is kept under: its URL without options.
+
+    Options such as ``?timeout=5`` (or an ANC300 password) do not change which arm is at
+    the other end and are never stored. For ``sim://`` the ``seed`` picks the simulated
+    arm and is kept; its ``day`` is a session, not an arm, and is dropped.
+
+    >>> device_key("anc300://192.168.1.2:7230?password=123456")
+    'anc300://192.168.1.2:7230'
+    >>> device_key("sim://?seed=3&day=2026-11-22")
+    'sim://?seed=3'
+    """
+    parts = urlsplit(url or "sim://")
+    scheme = parts.scheme or "sim"
+    if scheme == "sim":
+        seed = parse_qs(parts.query).get("seed")
+        return "sim://" + (f"?seed={seed[-1]}" if seed else "")
+    return f"{scheme}://{parts.netloc}{parts.path}"

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from .. import kinematics as kin
+from .base import device_key
 
 __all__ = [
     "StateStore",
@@ -182,17 +183,3 @@ def save_state(store: StateStore, state: DeviceState) -> None:
     """Store ``state`` under its device URL."""
     store.set_state(state.device, _KEY, state.to_json())
 
-
-def device_key(url: str) -> str:
-    """The name positions are kept under: the URL without its query for real controllers.
-
-    Options such as ``?timeout=5`` (or an ANC300 password) do not change which arm is
-    at the other end and are not stored; a ``sim://`` URL keeps its query, since
-    ``seed`` and ``day`` pick the simulated arm.
-    """
-    from urllib.parse import urlsplit
-
-    parts = urlsplit(url or "sim://")
-    if (parts.scheme or "sim") == "sim":
-        return url or "sim://"
-    return f"{parts.scheme}://{parts.netloc}{parts.path}"
