@@ -235,3 +235,16 @@ def test_plot_draws_the_model_curves():
     assert "nm" in ax.get_ylabel() and len(ax.get_lines()) == 6
     ax2 = cal.plot(2)
     assert "µrad" in ax2.get_ylabel() and len(ax2.get_lines()) == 4
+
+
+def test_validation_plot_shows_relative_errors_in_percent():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    cal = C.calibrate(seed_table())
+    res = C.validate(cal, noisy_sweep(np.random.default_rng(2), n_per=5, noise=0.01))
+    ax = res.plot()
+    plotted = np.concatenate([ln.get_data()[1] for ln in ax.get_lines() if len(ln.get_data()[1]) > 2])
+    every_error = np.concatenate([res.model_error, res.constant_error]) * 100
+    np.testing.assert_allclose(np.sort(plotted), np.sort(every_error), rtol=1e-12)
+    assert "%" in ax.get_ylabel()

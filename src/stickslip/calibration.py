@@ -997,21 +997,26 @@ class ValidationResult:
         return "\n".join(lines)
 
     def plot(self, ax=None):
-        """Predicted against measured average step, model and constant step; returns the Axes."""
+        """Relative error of each traverse's average step, model against constant step; returns the Axes.
+
+        Relative errors (%) put the prismatic (nm) and rotary (µrad) joints on one honest
+        axis. Traverses are grouped by joint along x.
+        """
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots()
+            _, ax = plt.subplots(figsize=(7, 4))
+        x0 = 0
         for j in sorted({t.joint for t in self.traverses}):
             sel = np.array([t.joint == j for t in self.traverses])
-            s = 1e9 if j == 3 else 1e6
-            ax.plot(self.measured[sel] * s, self.predicted[sel] * s, "o", label=f"joint {j} model")
-            ax.plot(self.measured[sel] * s, self.constant[sel] * s, "x", label=f"joint {j} constant step")
-        lim = ax.get_xlim()
-        ax.plot(lim, lim, "k:", lw=1)
-        ax.set_xlabel("measured average step (nm or µrad)")
-        ax.set_ylabel("predicted average step (nm or µrad)")
-        ax.legend()
+            x = x0 + np.arange(int(sel.sum()))
+            ax.plot(x, self.model_error[sel] * 100, "o", label=f"joint {j}: calibrated model")
+            ax.plot(x, self.constant_error[sel] * 100, "x", label=f"joint {j}: constant step (paper's comparator)")
+            x0 += int(sel.sum()) + 1
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_xlabel("traverse (grouped by joint)")
+        ax.set_ylabel("predicted / measured average step − 1 (%)")
+        ax.legend(fontsize="small")
         return ax
 
 
