@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from stickslip.calibration import Calibration
 from stickslip.cli import app
-from stickslip.demo import CALIBRATION_PLAN, VALIDATION_PLAN, run_demo
+from stickslip.demo import CALIBRATION_PLAN, REPEAT_PLAN, VALIDATION_PLAN, run_demo
 from stickslip.measurements import read_measurements
 
 runner = CliRunner()
@@ -59,7 +59,16 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
         seed=4, day="2026-11-22", out=tmp_path / "out", switch="oracle", store=store, on_traverse=seen.append
     )
     n_cal, n_val = 2 * len(CALIBRATION_PLAN), 2 * len(VALIDATION_PLAN)
-    assert (len(res.traverses), len(res.validation_traverses), len(seen)) == (14, n_val, 14 + n_val)
+    n_rep = 2 * 2 * len(REPEAT_PLAN)  # two more readings each way at the seed's ANOVA poses (default repeats=2)
+    assert (len(res.traverses), len(res.validation_traverses), len(res.repeat_traverses), len(seen)) == (
+        14, n_val, n_rep, 14 + n_val + n_rep)
+    # with the calibration traverse, each ANOVA pose now has three readings per direction (Section 3.1)
+    rows = [r.traverse for r in res.traverses + res.repeat_traverses]
+    for joint, pose in REPEAT_PLAN:
+        for d in "+-":
+            same = [t for t in rows if t.joint == joint and t.direction == d
+                    and all(abs(getattr(t, k) - v) < 1e-12 for k, v in pose.items())]
+            assert len(same) == 3
     assert res.calibration.method == "seed"
     _check_acceptance(res.parameters)
     # the model beats the constant step on the validation sweep (paper: 15 % vs 40 %, 2 % vs 7 %)
@@ -70,12 +79,13 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
     out = tmp_path / "out"
     assert [t.steps for t in read_measurements(out / "measurements.csv")] == [r.traverse.steps for r in res.traverses]
     assert len(read_measurements(out / "validation.csv")) == n_val
+    assert len(read_measurements(out / "repeats.csv")) == n_rep
     cal = Calibration.load(out / "calibration.json")
     assert cal.parameters() == res.calibration.parameters()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["elapsed_s"] == pytest.approx(res.elapsed_s)
     # storage hook
-    assert len(store.traverses) == n_cal + n_val
+    assert len(store.traverses) == n_cal + n_val + n_rep
     assert {d for _, d, _ in store.traverses} == {"sim://?seed=4"}  # the arm, not the session
     assert store.calibrations[0][2] == list(range(1, n_cal + 1))
     # compute, then plot: one point per parameter, in % of the truth
@@ -139,7 +149,21 @@ def test_cli_demo_records_every_traverse_and_the_calibration(tmp_path):
     r = CliRunner().invoke(app, ["demo", "--no-validation", "--json", "--out", str(tmp_path / "res"), "--db", str(db)])
     assert r.exit_code == 0, r.output
     with Store.open(db) as st:
-        assert st.count_traverses() == 14  # the seed's 6 prismatic + 8 rotary calibration traverses
+        # the seed's 6 prismatic + 8 rotary calibration traverses, and 8 repeats for the ANOVA
+        assert st.count_traverses() == 14 + 8
         cal = st.latest_calibration()
         assert cal is not None and cal.method == "seed"
         assert st.integrity_check() == "ok"
+
+
+def test_two_demo_days_give_the_seeds_anova_verdict(tmp_path):
+    # Section 3.1: the step size differs significantly from day to day (the simulator drifts ~3 %/day)
+    from stickslip.analysis import anova
+
+    rows = []
+    for day in ("2026-11-20", "2026-11-21"):
+        res = run_demo(seed=6, day=day, out=None, switch="oracle", validation=False)
+        rows += [r.traverse for r in res.traverses + res.repeat_traverses]
+    tests = [t for t in anova(rows).tests if t.test == "day"]
+    assert {(t.joint, t.direction) for t in tests} == {(3, "+"), (3, "-"), (2, "+"), (2, "-")}
+    assert all(t.p < 0.05 for t in tests)

@@ -45,6 +45,7 @@ from .traverse import TraverseResult, measure_traverse
 __all__ = [
     "CALIBRATION_PLAN",
     "VALIDATION_PLAN",
+    "REPEAT_PLAN",
     "DemoResult",
     "run_demo",
 ]
@@ -76,6 +77,14 @@ VALIDATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
 """A sweep of other poses the calibration has not seen (the paper validates joint 2 at
 theta = -pi/4); each traversed + then -."""
 
+REPEAT_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
+    (3, {"q1": 0.0, "q2": -PI / 2, "theta": 0.0, "psi": 0.0}),
+    (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 2, "psi": 0.0}),
+)
+"""The seed's ANOVA poses (Section 3.1: no gravity effect on the joint), measured again
+``repeats`` times after the calibration so each day has three readings there and
+``stickslip anova`` can test day-to-day and + against - differences."""
+
 
 @dataclass
 class DemoResult:
@@ -89,6 +98,8 @@ class DemoResult:
         ``{joint: Tuning}`` of the limit switch.
     traverses, validation_traverses : list of TraverseResult
         The 14 calibration traverses and the validation sweep.
+    repeat_traverses : list of TraverseResult
+        Repeats at the seed's ANOVA poses (:data:`REPEAT_PLAN`).
     calibration : Calibration
     validation : ValidationResult or None
     truth : list of dict
@@ -117,6 +128,7 @@ class DemoResult:
     device_s: float
     files: dict[str, str] = field(default_factory=dict)
     steps_simulated: int = 0
+    repeat_traverses: list[TraverseResult] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, object]:
         """The JSON summary (SI units; ``elapsed_s`` in wall-clock seconds)."""
@@ -133,6 +145,7 @@ class DemoResult:
                 "rows": self.validation.rows() if self.validation is not None else [],
                 "traverses": [_traverse_record(r) for r in self.validation_traverses],
             },
+            "repeats": [_traverse_record(r) for r in self.repeat_traverses],
             "tunings": {str(j): _tuning_dict(t) for j, t in self.tunings.items()},
             "files": dict(self.files),
         }
@@ -302,6 +315,7 @@ def run_demo(
     soundscape_kwargs: dict | None = None,
     switch: str = "audio",
     listen_from: float = 0.8,
+    repeats: int = 2,
 ) -> DemoResult:
     """Run the whole calibration story on a simulated MM3A and return what happened.
 
@@ -332,6 +346,9 @@ def run_demo(
         The limit switch: the tuned audio detector on the virtual microphone
         (default), or :class:`~stickslip.devices.simulator.OracleStopDetector`, which
         knows the true stops (no sound rendered; for fast tests).
+    repeats : int
+        After the calibration, measure the seed's ANOVA poses (:data:`REPEAT_PLAN`)
+        this many more times in each direction, so the day has three readings there.
     listen_from : float
         Start listening after this fraction of the step count predicted by the
         previous calibration (for the calibration traverses: the nominal parameters
@@ -355,8 +372,11 @@ def run_demo(
     sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
     n_cal = 2 * len(CALIBRATION_PLAN)
     n_val = 2 * len(VALIDATION_PLAN) if validation else 0
+    if not (isinstance(repeats, int) and 0 <= repeats <= 10):
+        raise ValueError(f"repeats = {repeats!r} is outside [0, 10]")
+    n_rep = 2 * len(REPEAT_PLAN) * repeats
 
-    bar = _Bars(progress, n_cal + n_val)
+    bar = _Bars(progress, n_cal + n_val + n_rep)
     try:
         # 1. tune the limit switch per joint from a labelled recording on the simulator
         tunings: dict[int, Any] = {}
@@ -428,6 +448,7 @@ def run_demo(
         if validation:
             val_results = run(VALIDATION_PLAN, "validation", cal.model, [])
             val = validate(cal, [r.traverse for r in val_results])
+        rep_results: list[TraverseResult] = run(REPEAT_PLAN * repeats, "repeats for the ANOVA", cal.model, [])
     finally:
         bar.close()
 
@@ -437,6 +458,7 @@ def run_demo(
         tunings=tunings,
         traverses=traverses,
         validation_traverses=val_results,
+        repeat_traverses=rep_results,
         calibration=cal,
         validation=val,
         truth=truth,
@@ -467,6 +489,10 @@ def save_results(result: DemoResult, out: str | Path) -> dict[str, str]:
         path = folder / "validation.csv"
         write_measurements(path, [r.traverse for r in result.validation_traverses])
         files["validation"] = str(path)
+    if result.repeat_traverses:
+        path = folder / "repeats.csv"
+        write_measurements(path, [r.traverse for r in result.repeat_traverses])
+        files["repeats"] = str(path)
     path = folder / "calibration.json"
     result.calibration.save(path)
     files["calibration"] = str(path)

@@ -166,6 +166,7 @@ def anova(
     two_way: bool = typer.Option(True, "--two-way/--no-two-way", help="Also the day x direction table."),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per test."),
+    show_skipped: bool = typer.Option(False, "--show-skipped", help="List every pose group that could not be tested."),
 ) -> None:
     """ANOVA: does the step size change from day to day, and between + and -?
 
@@ -215,8 +216,14 @@ def anova(
                 f"[bold red]{verdict}[/]" if t.significant(alpha) else verdict,
             )
         console.print(table)
-    for s in res.skipped:
-        console.print(f"[dim]skipped: {escape(s)}[/]")
+    if show_skipped:
+        for s in res.skipped:
+            console.print(f"[dim]skipped: {escape(s)}[/]")
+    elif res.skipped:
+        console.print(
+            f"[dim]{len(res.skipped)} pose groups could not be tested (one traverse per day or direction); "
+            "--show-skipped lists them[/]"
+        )
 
 
 # ---------------------------------------------------------------- fit
