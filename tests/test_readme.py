@@ -60,3 +60,9 @@ def test_python_example_runs(tour_dir, monkeypatch):
     ns: dict = {}
     exec(compile(_block("## In Python", "python"), "README.md", "exec"), ns)
     assert ns["n"] > 0 and abs(ns["where"] - 0.00203) < ns["planner"].gamma(0.002, "+")
+
+
+def test_emulator_example_runs():
+    ns: dict = {}
+    exec(compile(_block("No controller at hand?", "python"), "README.md", "exec"), ns)
+    assert ns["emu"].url.startswith("mm3a://")
