@@ -167,3 +167,15 @@ def test_two_demo_days_give_the_seeds_anova_verdict(tmp_path):
     tests = [t for t in anova(rows).tests if t.test == "day"]
     assert {(t.joint, t.direction) for t in tests} == {(3, "+"), (3, "-"), (2, "+"), (2, "-")}
     assert all(t.p < 0.05 for t in tests)
+
+
+def test_demo_device_takes_a_sim_url_and_refuses_real_controllers(tmp_path):
+    r = runner.invoke(app, ["demo", "--device", "mm3a:///dev/ttyUSB0", "--no-db"])
+    assert r.exit_code == 2 and "stickslip traverse --device mm3a:///dev/ttyUSB0" in r.stderr
+    r = runner.invoke(app, ["demo", "--device", "sim://?seed=2&day=2026-11-19&noise=1", "--no-db"])
+    assert r.exit_code == 2 and "not noise" in r.stderr
+    r = runner.invoke(app, ["demo", "--device", "sim://?seed=2&day=2026-11-19", "--no-db", "--no-validation",
+                            "--json", "--out", str(tmp_path / "o")])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert (out["seed"], out["day"]) == (2, "2026-11-19")

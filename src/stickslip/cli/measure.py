@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from . import app
-from ._common import console, print_json, user_errors, validation_table
+from ._common import console, fail, print_json, user_errors, validation_table
 
 
 def _scale(name: str, joint: int) -> tuple[float, str]:
@@ -46,6 +46,12 @@ def demo(
         "(default: $STICKSLIP_DB, else the user's data folder).",
     ),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record into the database (default) or not."),
+    device: str = typer.Option(
+        None,
+        "--device",
+        help="A simulator URL, sim://?seed=3&day=2026-11-22 (same as --seed/--day). The demo compares "
+        "with the simulator's truth; on a real manipulator use 'stickslip traverse' and 'calibrate'.",
+    ),
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
 
@@ -58,6 +64,8 @@ def demo(
     from ..storage import Store, StoreError
     from ..traverse import TraverseError
 
+    if device is not None:
+        seed, day = _sim_seed_day(device, seed, day)
     with user_errors(CalibrationError, TraverseError, StoreError):
         store = Store.open(db) if use_db else None
         try:
@@ -109,6 +117,28 @@ def demo(
         console.print(f"saved {what}: {path}", highlight=False)
 
 
+def _sim_seed_day(device: str, seed: int, day: str | None) -> tuple[int, str | None]:
+    """Seed and day from a ``sim://`` URL; any other controller is refused with the way to go."""
+    from urllib.parse import parse_qs, urlsplit
+
+    parts = urlsplit(device)
+    if (parts.scheme or "sim") != "sim":
+        fail(
+            "the demo runs on the simulator only (it compares the calibration with the simulator's truth); "
+            f"on {device} measure each calibration traverse with 'stickslip traverse --device {device} ...' "
+            "and calibrate with 'stickslip calibrate' (README: checklist for the first calibration day)"
+        )
+    query = parse_qs(parts.query)
+    unknown = sorted(set(query) - {"seed", "day"})
+    if unknown:
+        fail(f"the demo takes seed and day from a sim:// URL, not {', '.join(unknown)}")
+    try:
+        seed = int(query.get("seed", [seed])[-1])
+    except ValueError:
+        fail(f"seed must be an integer in {device}")
+    return seed, query.get("day", [day])[-1]
+
+
 @app.command("traverse")
 def traverse_cmd(
     joint: int = typer.Option(..., "--joint", "-j", help="Joint to traverse: 1, 2 (rotary) or 3 (prismatic)."),
@@ -148,7 +178,7 @@ def traverse_cmd(
     from ..storage import Store, StoreError
     from ..traverse import TraverseError, measure_traverse
     from ..units import format_step
-    from ._common import angle_option, fail, length_option
+    from ._common import angle_option, length_option
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
