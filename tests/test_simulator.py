@@ -166,7 +166,7 @@ def test_clock_and_frequency():
     assert sim.clock_s == pytest.approx(2.0)
     lo, hi = FREQUENCY_RANGE
     for bad in (0.0, hi + 1, -5, float("nan")):
-        with pytest.raises(ValueError, match=r"\[1, 5000\] Hz"):
+        with pytest.raises(ValueError, match=r"1\.\.5000 Hz"):
             sim.set_frequency(1, bad)
     assert sim.frequency(2) == 500.0  # unchanged, not clipped
     with pytest.raises(ValueError, match="joints are 1, 2"):

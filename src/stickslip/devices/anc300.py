@@ -30,13 +30,12 @@ included. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import contextmanager
 from typing import TypeVar
-from urllib.parse import parse_qs, unquote, urlsplit
+from urllib.parse import unquote, urlsplit
 
-from .base import DeviceError, DeviceInfo
+from .base import DeviceError, DeviceInfo, check_setting, url_options
 from .transport import SerialTransport, SocketTransport, Transport
 
 __all__ = ["ANC300", "TransportAdapter", "open_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
@@ -203,15 +202,9 @@ class ANC300:
     def set_frequency(self, joint: int, hz: float) -> None:
         """Set the stepping frequency of ``joint`` (``setf``): integer Hz in 1..10000."""
         ax = self._axis(joint)
-        lo, hi = FREQUENCY_RANGE
-        try:
-            value = float(hz)
-        except (TypeError, ValueError):
-            raise ValueError(f"frequency must be a number in Hz, got {hz!r}") from None
-        if not (math.isfinite(value) and value.is_integer() and lo <= value <= hi):
-            raise ValueError(f"frequency must be an integer number of Hz in {lo}..{hi}, got {hz!r}")
-        self._device(lambda: setattr(ax, "frequency", int(value)), f"setf {ax.id} {int(value)}")
-        self._hz[int(joint)] = value
+        value = check_setting("frequency", hz, *FREQUENCY_RANGE, unit="Hz", integer=True)
+        self._device(lambda: setattr(ax, "frequency", value), f"setf {ax.id} {value}")
+        self._hz[int(joint)] = float(value)
 
     def frequency(self, joint: int) -> float:
         """The stepping frequency of ``joint``, Hz (``getf``, cached after the first read)."""
@@ -223,13 +216,7 @@ class ANC300:
     def set_voltage(self, joint: int, volts: float) -> None:
         """Set the step amplitude of ``joint`` (``setv``), V, in 0..150."""
         ax = self._axis(joint)
-        lo, hi = VOLTAGE_RANGE
-        try:
-            value = float(volts)
-        except (TypeError, ValueError):
-            raise ValueError(f"voltage must be a number in V, got {volts!r}") from None
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise ValueError(f"voltage must be in {lo:g}..{hi:g} V, got {volts!r}")
+        value = check_setting("voltage", volts, *VOLTAGE_RANGE, unit="V")
         self._device(lambda: setattr(ax, "voltage", value), f"setv {ax.id} {value:g}")
         self._volt[int(joint)] = value
 
@@ -357,11 +344,7 @@ def open_url(url: str) -> ANC300:
     console cannot be reached or refuses the password, ``ValueError`` for a bad URL.
     """
     parts = urlsplit(url)
-    opts = {k: v[-1] for k, v in parse_qs(parts.query).items()}
-    known = {"password", "axes", "timeout", "delay", "baud"}
-    unknown = sorted(set(opts) - known)
-    if unknown:
-        raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
+    opts = url_options(url, {"password", "axes", "timeout", "delay", "baud"})
     try:
         timeout = float(opts.get("timeout", 2.0))
         delay = float(opts.get("delay", 0.05))

@@ -17,12 +17,23 @@ the URLs that use them.
 from __future__ import annotations
 
 import importlib
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 from urllib.parse import parse_qs, urlsplit
 
-__all__ = ["Controller", "DeviceInfo", "DeviceError", "BACKENDS", "register_backend", "open_device", "device_key"]
+__all__ = [
+    "Controller",
+    "DeviceInfo",
+    "DeviceError",
+    "BACKENDS",
+    "register_backend",
+    "open_device",
+    "device_key",
+    "check_setting",
+    "url_options",
+]
 
 
 class DeviceError(RuntimeError):
@@ -149,3 +160,41 @@ def device_key(url: str) -> str:
         seed = parse_qs(parts.query).get("seed")
         return "sim://" + (f"?seed={seed[-1]}" if seed else "")
     return f"{scheme}://{parts.netloc}{parts.path}"
+
+
+def check_setting(what: str, value: object, lo: float, hi: float, unit: str = "", integer: bool = False) -> float:
+    """Validate a controller setting: a finite number (a whole one if ``integer``) in ``[lo, hi]``.
+
+    Returns the value (an ``int`` if ``integer``). Raises ``ValueError`` naming the allowed
+    range and the value given; nothing is ever clipped.
+
+    >>> check_setting("frequency", 1200, 1, 5000, "Hz")
+    1200.0
+    >>> check_setting("amplitude", 90, 1, 80, integer=True)
+    Traceback (most recent call last):
+    ...
+    ValueError: amplitude must be an integer in 1..80, got 90
+    """
+    kind = "an integer" if integer else "a number"
+    allowed = f"{kind} in {lo:g}..{hi:g}" + (f" {unit}" if unit else "")
+    if isinstance(value, bool):
+        raise ValueError(f"{what} must be {allowed}, got {value!r}")
+    try:
+        v = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be {allowed}, got {value!r}") from None
+    if not (math.isfinite(v) and lo <= v <= hi) or (integer and not v.is_integer()):
+        raise ValueError(f"{what} must be {allowed}, got {value!r}")
+    return int(v) if integer else v
+
+
+def url_options(url: str, known: set[str] | frozenset[str]) -> dict[str, str]:
+    """The ``?key=value`` options of a device URL (last one wins); unknown keys are refused.
+
+    Raises ``ValueError`` naming the unknown option(s) and the known ones.
+    """
+    opts = {k: v[-1] for k, v in parse_qs(urlsplit(url).query).items()}
+    unknown = sorted(set(opts) - set(known))
+    if unknown:
+        raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
+    return opts

@@ -53,9 +53,9 @@ import logging
 import math
 import threading
 from collections.abc import Mapping
-from urllib.parse import parse_qs, urlsplit
+from urllib.parse import urlsplit
 
-from .base import DeviceError, DeviceInfo
+from .base import DeviceError, DeviceInfo, check_setting, url_options
 from .transport import SerialTransport, SocketTransport, Transport
 
 __all__ = [
@@ -252,14 +252,9 @@ class NanoControl:
     ) -> None:
         """Set the step amplitude of ``joint`` for + and/or - steps (integers 1..80)."""
         ch = self._channel(joint)
-        lo, hi = AMPLITUDE_RANGE
         for name, value in (("positive", positive), ("negative", negative)):
-            if value is None:
-                continue
-            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-                raise ValueError(
-                    f"{name} amplitude must be an integer in {lo}..{hi}, got {value!r}"
-                )
+            if value is not None:
+                check_setting(f"{name} amplitude", value, *AMPLITUDE_RANGE, integer=True)
         if positive is not None:
             self.command(f"amplitudepos {ch} {positive}")
             self._amp[joint]["+"] = positive
@@ -436,11 +431,7 @@ def open_url(url: str) -> NanoControl:
     cannot be opened or nothing answers, ``ValueError`` for a malformed URL.
     """
     parts = urlsplit(url)
-    opts = {k: v[-1] for k, v in parse_qs(parts.query).items()}
-    known = {"timeout", "channels", "baud", "hz", "ack"}
-    unknown = sorted(set(opts) - known)
-    if unknown:
-        raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
+    opts = url_options(url, {"timeout", "channels", "baud", "hz", "ack"})
     try:
         timeout = float(opts.get("timeout", 2.0))
         baud = int(opts.get("baud", 19200))

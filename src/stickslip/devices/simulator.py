@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
-from .base import DeviceError, DeviceInfo
+from .base import DeviceError, DeviceInfo, check_setting
 
 __all__ = [
     "NOMINAL",
@@ -230,14 +230,7 @@ class SimulatedMM3A:
     def set_frequency(self, joint: int, hz: float) -> None:
         """Set the stepping frequency of ``joint``, Hz, in [1, 5000]; else ``ValueError``."""
         joint = self._joint(joint)
-        lo, hi = FREQUENCY_RANGE
-        try:
-            value = float(hz)
-        except (TypeError, ValueError):
-            raise ValueError(f"frequency must be a number in Hz, got {hz!r}") from None
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise ValueError(f"frequency {hz!r} Hz is outside the allowed range [{lo:g}, {hi:g}] Hz")
-        self._hz[joint] = value
+        self._hz[joint] = check_setting("frequency", hz, *FREQUENCY_RANGE, unit="Hz")
 
     def frequency(self, joint: int) -> float:
         """The stepping frequency of ``joint``, Hz (default 1000 Hz)."""

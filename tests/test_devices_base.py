@@ -1,0 +1,37 @@
+"""The device layer's shared helpers: settings checked against their range, URL options, device keys."""
+
+import doctest
+
+import pytest
+
+from stickslip.devices import base
+
+
+def test_doctests():
+    assert doctest.testmod(base).failed == 0
+
+
+@pytest.mark.parametrize("value", [0, 5000.5, float("nan"), float("inf"), "fast", None, True])
+def test_settings_out_of_range_are_refused_not_clipped(value):
+    with pytest.raises(ValueError, match=r"frequency must be a number in 1\.\.5000 Hz, got"):
+        base.check_setting("frequency", value, 1, 5000, "Hz")
+
+
+def test_integer_settings():
+    assert base.check_setting("amplitude", 80, 1, 80, integer=True) == 80
+    assert isinstance(base.check_setting("amplitude", 7.0, 1, 80, integer=True), int)
+    with pytest.raises(ValueError, match="an integer in 1..80"):
+        base.check_setting("amplitude", 7.5, 1, 80, integer=True)
+
+
+def test_url_options():
+    assert base.url_options("mm3a:///dev/ttyUSB0?timeout=1&timeout=3", {"timeout"}) == {"timeout": "3"}
+    with pytest.raises(ValueError, match=r"unknown option\(s\) \['speed'\].*known: \['timeout'\]"):
+        base.url_options("mm3a:///dev/ttyUSB0?speed=3", {"timeout"})
+
+
+def test_device_key_keeps_identity_and_drops_secrets():
+    assert base.device_key("anc300://10.0.0.2:7230?password=123456") == "anc300://10.0.0.2:7230"
+    assert base.device_key("mm3a:///dev/ttyUSB0?timeout=5") == "mm3a:///dev/ttyUSB0"
+    assert base.device_key("sim://?day=2026-11-22&seed=7") == "sim://?seed=7"
+    assert base.device_key("sim://") == "sim://"
