@@ -54,7 +54,7 @@ def test_log_form_where_step_positive_only_along_the_way(A, ratio, phase, a, spa
     B = ratio * A
     al, be = B * math.sin(phase), B * math.cos(phase)
     lo, hi = a, a + span
-    assume(float(m._min_step(np.array(lo), np.array(hi), np.array(A), np.array(al), np.array(be))) > 0.05 * A)
+    assume(A + float(m.sinusoid_range(lo, hi, al, be)[0]) > 0.05 * A)
     exact = float(m.steps_between(lo, hi, A, al, be))
     assert exact == pytest.approx(m.steps_between_quad(lo, hi, A, al, be), rel=1e-10)
 
@@ -102,3 +102,14 @@ def test_nonphysical_parameters():
     with pytest.raises(m.NonPhysicalError, match="q3 = 12 mm"):
         m.RotaryParams((40e-6, 20e-6), (5e-6, 25e-6)).check_physical()
     m.PrismaticParams(972e-9, 0.27, 372e-9).check_physical()
+
+
+@settings(max_examples=200, deadline=None)
+@given(al=st.floats(-2, 2), be=st.floats(-2, 2), lo=st.floats(-8, 8), span=st.floats(0, 8))
+def test_sinusoid_range_equals_dense_sampling(al, be, lo, span):
+    q = np.linspace(lo, lo + span, 20001)
+    f = al * np.cos(q) + be * np.sin(q)
+    mn, mx = m.sinusoid_range(lo, lo + span, al, be)
+    # the sampled extremes bracket the exact ones from inside, to the grid's resolution
+    assert f.min() >= mn - 1e-12 and f.max() <= mx + 1e-12
+    assert f.min() - mn < 1e-6 * (abs(al) + abs(be) + 1) and mx - f.max() < 1e-6 * (abs(al) + abs(be) + 1)

@@ -45,6 +45,7 @@ from .models import (
     PrismaticParams,
     RotaryParams,
     direction_label,
+    sinusoid_range,
     steps_between,
 )
 
@@ -99,17 +100,9 @@ class CalibrationError(ValueError):
 
 
 def _load_range(start: float, end: float, alpha: float, beta: float) -> tuple[float, float]:
-    """Min and max of ``alpha cos q + beta sin q`` for q between start and end."""
-    lo, hi = min(start, end), max(start, end)
-    B, phi = math.hypot(alpha, beta), math.atan2(alpha, beta)
-    vals = [alpha * math.cos(q) + beta * math.sin(q) for q in (lo, hi)]
-    if B > 0:
-        for target in (math.pi / 2, -math.pi / 2):  # extrema of B sin(q + phi)
-            k = math.ceil((lo + phi - target) / (2 * math.pi))
-            q = target - phi + 2 * math.pi * k
-            if lo <= q <= hi:
-                vals.append(alpha * math.cos(q) + beta * math.sin(q))
-    return min(vals), max(vals)
+    """Min and max of the load ``alpha cos q + beta sin q`` for q between start and end."""
+    mn, mx = sinusoid_range(min(start, end), max(start, end), alpha, beta)
+    return float(mn), float(mx)
 
 
 def invert_d_exact(

@@ -49,6 +49,7 @@ __all__ = [
     "NonPhysicalError",
     "antiderivative_inverse_step",
     "StepProfile",
+    "sinusoid_range",
     "steps_between",
     "steps_between_quad",
     "simulate_traverse_steps",
@@ -348,16 +349,27 @@ def _antiderivative_log(q: NDArray, A: NDArray, alpha: NDArray, beta: NDArray) -
     return np.where(np.isfinite(t), val, 0.0)
 
 
-def _min_step(lo: NDArray, hi: NDArray, A: NDArray, alpha: NDArray, beta: NDArray) -> NDArray:
-    """Minimum of ``A + alpha cos q + beta sin q`` over ``q`` in ``[lo, hi]`` (vectorised)."""
+def sinusoid_range(lo: ArrayLike, hi: ArrayLike, alpha: ArrayLike, beta: ArrayLike) -> tuple[NDArray, NDArray]:
+    """Minimum and maximum of ``alpha cos q + beta sin q`` for ``q`` in ``[lo, hi]`` (vectorised).
+
+    The load term of a rotary joint along its travel has this form, so this gives the
+    smallest and largest load (and, plus ``A``, the smallest and largest step) on a traverse.
+    """
+    lo, hi, alpha, beta = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (lo, hi, alpha, beta)))
     B, phi = _as_amp_phase(alpha, beta)
-    g = lambda q: A + alpha * np.cos(q) + beta * np.sin(q)  # noqa: E731
-    m = np.minimum(g(lo), g(hi))
-    # the minimum of B sin(q + phi) is at q = -pi/2 - phi + 2 pi k
-    k = np.ceil((lo + phi + np.pi / 2) / (2 * np.pi))
-    qmin = -np.pi / 2 - phi + 2 * np.pi * k
-    inside = (qmin >= lo) & (qmin <= hi)
-    return np.where(inside, np.minimum(m, A - B), m)
+    f_lo = alpha * np.cos(lo) + beta * np.sin(lo)
+    f_hi = alpha * np.cos(hi) + beta * np.sin(hi)
+    mn, mx = np.minimum(f_lo, f_hi), np.maximum(f_lo, f_hi)
+    # B sin(q + phi) has its minimum at q = -pi/2 - phi + 2 pi k and its maximum at pi/2 - phi + 2 pi k
+    for target, is_max in ((-np.pi / 2, False), (np.pi / 2, True)):
+        k = np.ceil((lo + phi - target) / (2 * np.pi))
+        q = target - phi + 2 * np.pi * k
+        inside = q <= hi
+        if is_max:
+            mx = np.where(inside, np.maximum(mx, B), mx)
+        else:
+            mn = np.where(inside, np.minimum(mn, -B), mn)
+    return mn, mx
 
 
 _TWO_PI = 2.0 * math.pi
@@ -471,7 +483,7 @@ def _steps_between_arrays(start, end, A, alpha, beta) -> NDArray[np.float64]:
     if np.any(rest):
         lo, hi = np.minimum(start, end)[rest], np.maximum(start, end)[rest]
         a, al, be = A[rest], alpha[rest], beta[rest]
-        if np.any(_min_step(lo, hi, a, al, be) <= 0.0):
+        if np.any(a + sinusoid_range(lo, hi, al, be)[0] <= 0.0):
             raise NonPhysicalError("the step size reaches zero along the traverse: the joint would stall there")
         logform = (B[rest] > a * (1.0 + 1e-12)) & (a > 0)
         vals = np.empty(lo.shape)
@@ -486,19 +498,6 @@ def _steps_between_arrays(start, end, A, alpha, beta) -> NDArray[np.float64]:
     return out
 
 
-def _min_step_on_interval(lo: float, hi: float, A: float, alpha: float, beta: float) -> float:
-    """Minimum of ``A + alpha cos q + beta sin q`` for q in [lo, hi]."""
-    B, phi = math.hypot(alpha, beta), math.atan2(alpha, beta)
-    cands = [lo, hi]
-    # minimum of B sin(q + phi) is at q + phi = -pi/2 + 2 pi k
-    if B > 0:
-        k0 = math.ceil((lo + phi + math.pi / 2) / (2 * math.pi))
-        q = -math.pi / 2 - phi + 2 * math.pi * k0
-        if lo <= q <= hi:
-            cands.append(q)
-    return min(A + alpha * math.cos(q) + beta * math.sin(q) for q in cands)
-
-
 def steps_between_quad(start: float, end: float, A: float, alpha: float = 0.0, beta: float = 0.0) -> float:
     """Same as :func:`steps_between` by adaptive Gauss–Kronrod quadrature (scipy.integrate.quad).
 
@@ -508,7 +507,7 @@ def steps_between_quad(start: float, end: float, A: float, alpha: float = 0.0, b
     from scipy import integrate
 
     lo, hi = min(start, end), max(start, end)
-    if _min_step_on_interval(lo, hi, A, alpha, beta) <= 0.0:
+    if A + float(sinusoid_range(lo, hi, alpha, beta)[0]) <= 0.0:
         raise NonPhysicalError(f"the step size reaches zero between {lo:.6g} and {hi:.6g}: the joint would stall there")
     val, _err = integrate.quad(
         lambda q: 1.0 / (A + alpha * math.cos(q) + beta * math.sin(q)), lo, hi, epsabs=0.0, epsrel=1e-12, limit=200
