@@ -35,3 +35,12 @@ def test_device_key_keeps_identity_and_drops_secrets():
     assert base.device_key("mm3a:///dev/ttyUSB0?timeout=5") == "mm3a:///dev/ttyUSB0"
     assert base.device_key("sim://?day=2026-11-22&seed=7") == "sim://?seed=7"
     assert base.device_key("sim://") == "sim://"
+
+
+def test_step_counts():
+    import numpy as np
+
+    assert base.check_steps(-12) == -12 and base.check_steps(np.int64(7)) == 7 and base.check_steps(3.0) == 3
+    for bad in (True, 2.5, "10", None, float("nan")):
+        with pytest.raises(ValueError, match="step count must be an integer"):
+            base.check_steps(bad)

@@ -35,7 +35,7 @@ from contextlib import contextmanager
 from typing import TypeVar
 from urllib.parse import unquote, urlsplit
 
-from .base import DeviceError, DeviceInfo, check_setting, url_options
+from .base import DeviceError, DeviceInfo, check_setting, check_steps, url_options
 from .transport import SerialTransport, SocketTransport, Transport
 
 __all__ = ["ANC300", "TransportAdapter", "open_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
@@ -234,12 +234,7 @@ class ANC300:
         :class:`DeviceError` raised.
         """
         ax = self._axis(joint)
-        if isinstance(n, bool) or not isinstance(n, int):
-            if isinstance(n, float) and n.is_integer():
-                n = int(n)
-            else:
-                raise ValueError(f"step count must be an integer, got {n!r}")
-        n = int(n)
+        n = check_steps(n)
         if n == 0:
             return
         try:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -32,6 +33,7 @@ __all__ = [
     "open_device",
     "device_key",
     "check_setting",
+    "check_steps",
     "url_options",
 ]
 
@@ -198,3 +200,18 @@ def url_options(url: str, known: set[str] | frozenset[str]) -> dict[str, str]:
     if unknown:
         raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
     return opts
+
+
+def check_steps(n: object) -> int:
+    """A signed step count as an ``int``: integers (numpy's too) and whole floats pass.
+
+    Anything else (``True``, ``2.5``, ``"10"``) raises ``ValueError``. Every backend's
+    ``step(joint, n)`` starts with it.
+    """
+    if isinstance(n, bool):
+        raise ValueError(f"step count must be an integer, got {n!r}")
+    if isinstance(n, numbers.Integral):
+        return int(n)
+    if isinstance(n, float) and n.is_integer():
+        return int(n)
+    raise ValueError(f"step count must be an integer, got {n!r}")

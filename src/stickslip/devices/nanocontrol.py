@@ -55,7 +55,7 @@ import threading
 from collections.abc import Mapping
 from urllib.parse import urlsplit
 
-from .base import DeviceError, DeviceInfo, check_setting, url_options
+from .base import DeviceError, DeviceInfo, check_setting, check_steps, url_options
 from .transport import SerialTransport, SocketTransport, Transport
 
 __all__ = [
@@ -302,12 +302,7 @@ class NanoControl:
         (best effort) and :class:`DeviceError` is raised.
         """
         ch = self._channel(joint)
-        if isinstance(n, bool) or not isinstance(n, int):
-            if isinstance(n, float) and n.is_integer():
-                n = int(n)
-            else:
-                raise ValueError(f"step count must be an integer, got {n!r}")
-        remaining = int(n)
+        remaining = check_steps(n)
         while remaining:
             chunk = max(-MAX_COARSE, min(MAX_COARSE, remaining))
             duration = abs(chunk) / self._hz[joint]

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
-from .base import DeviceError, DeviceInfo, check_setting
+from .base import DeviceError, DeviceInfo, check_setting, check_steps
 
 __all__ = [
     "NOMINAL",
@@ -244,12 +244,7 @@ class SimulatedMM3A:
         """
         self._check_open()
         joint = self._joint(joint)
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)):
-            if isinstance(n, float) and n.is_integer():
-                n = int(n)
-            else:
-                raise ValueError(f"step count must be an integer, got {n!r}")
-        n = int(n)
+        n = check_steps(n)
         if n == 0:
             return
         if abs(n) > _MAX_BURST:
