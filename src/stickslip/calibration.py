@@ -736,8 +736,9 @@ def calibrate_seed(
 
 # ----------------------------------------------------------------------------- least squares
 
-_SCALE = {3: np.array([1e-9, 1.0, 1e-9])}  # work in nm / µrad so the problem is well scaled
-_ROT_SCALE = np.array([1e-6, 1e-6, 1e-6, 1e-6])
+# the fit works in nm (a, c), 1 (b) and µrad (gamma0, d) so the problem is well scaled
+_PRISMATIC_SCALE = np.array([1e-9, 1.0, 1e-9])
+_ROTARY_SCALE = np.array([1e-6, 1e-6, 1e-6, 1e-6])
 _HINTS = {
     "a": "traverses at two different |cos q2| (e.g. q2 = -pi/2 and q2 = 0) with a known axial load",
     "b": "traverses at two different |cos q2| (e.g. q2 = -pi/2 and q2 = 0)",
@@ -748,6 +749,11 @@ _HINTS = {
 
 
 def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
+    """Relative residuals of joint ``j``'s traverses as a function of the scaled parameters.
+
+    Returns ``(resid, scale)``: ``resid(x)`` is ``predicted / measured - 1`` per traverse
+    with SI parameters ``x * scale``.
+    """
     cols = {
         k: np.array([getattr(t, k) for t in ts], dtype=float)
         for k in ("start", "end", "q1", "q2", "q3", "theta", "psi")
@@ -757,7 +763,7 @@ def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
     if j == 3:
         load = kin.prismatic_load(cols["q1"], cols["q2"], cols["theta"], cols["psi"])
         absc = np.abs(np.cos(cols["q2"]))
-        scale = _SCALE[3]
+        scale = _PRISMATIC_SCALE
 
         def pred(x: NDArray) -> NDArray:
             a, b, c = x * scale
@@ -765,7 +771,7 @@ def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
     else:
         al, be = kin.rotary_load_coefficients(j, cols["q1"], cols["q2"], cols["q3"], cols["theta"], cols["psi"])
         w = (cols["q3"] - knots[0]) / (knots[1] - knots[0])
-        scale = _ROT_SCALE
+        scale = _ROTARY_SCALE
 
         def pred(x: NDArray) -> NDArray:
             g00, g01, d0, d1 = x * scale
@@ -784,7 +790,7 @@ def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
     def resid(x: NDArray) -> NDArray:
         return pred(x) / meas - 1.0
 
-    return resid, pred, scale
+    return resid, scale
 
 
 def _initial_guess(j: int, ts: Sequence[Traverse]) -> NDArray:
@@ -849,7 +855,7 @@ def calibrate_lsq(
     stderr: dict[tuple[int, str], NDArray | None] = {}
     notes: list[str] = []
     for (j, d), ts in sorted(groups.items()):
-        resid, _pred, scale = _residual_fn(j, ts, knots)
+        resid, scale = _residual_fn(j, ts, knots)
         x0 = _initial_guess(j, ts)
         if j == 3:
             names = PrismaticParams(0, 0, 0).names()
