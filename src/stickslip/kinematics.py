@@ -114,6 +114,15 @@ class JointSpec:
             tol = 1e-5 * self.span
         return self.lower - tol <= q <= self.upper + tol
 
+    def range_problem(self, name: str, q: float) -> str | None:
+        """``"name = q unit is outside joint j's range [lo, hi] unit"``, or ``None`` if ``q`` is within it."""
+        if math.isfinite(q) and self.contains(q):
+            return None
+        return (
+            f"{name} = {q:.6g} {self.unit} is outside joint {self.number}'s range "
+            f"[{self.lower:.6g}, {self.upper:.6g}] {self.unit}"
+        )
+
 
 # Joint 1's stops are not given by the paper; we take the same span as joint 2,
 # centred on zero. Joint 2: q2 in [-7pi/6, pi/6]. Joint 3: [0, 12 mm].

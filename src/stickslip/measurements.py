@@ -119,13 +119,9 @@ def check_pose(joint: int, values: dict[str, float]) -> list[str]:
     for j in (1, 2, 3):
         if j == joint:
             continue
-        spec = kin.JOINTS[j]
-        v = values[f"q{j}"]
-        if not spec.contains(v):
-            problems.append(
-                f"q{j} = {v:.6g} {spec.unit} is outside joint {j}'s range "
-                f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
-            )
+        problem = kin.JOINTS[j].range_problem(f"q{j}", values[f"q{j}"])
+        if problem:
+            problems.append(problem)
     for name in ("theta", "psi"):
         v = values[name]
         if not -_TILT_LIMIT <= v <= _TILT_LIMIT:
@@ -199,13 +195,10 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
         problems.append(
             f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
         )
-    spec = kin.JOINTS[joint]
     for name in ("start", "end"):
-        if not spec.contains(nums[name]):
-            problems.append(
-                f"{where}: {name} = {nums[name]:.6g} {spec.unit} is outside joint {joint}'s range "
-                f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
-            )
+        problem = kin.JOINTS[joint].range_problem(name, nums[name])
+        if problem:
+            problems.append(f"{where}: {problem}")
     problems += [f"{where}: {p}" for p in check_pose(joint, nums)]
     if problems:
         return None, problems
@@ -400,19 +393,10 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
                     errs.append(f"{where}: start and end are equal: a traverse must move")
                 elif (end > start) != (direction == "+"):
                     errs.append(f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g}")
-                for name, v in (("start", start), ("end", end)):
-                    if not spec.contains(v):
-                        errs.append(
-                            f"{where}: {name} = {v:.6g} {spec.unit} is outside joint {joint}'s range "
-                            f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
-                        )
+                checks = [("start", start), ("end", end)]
             else:
-                own = nums[f"q{joint}"]
-                if not spec.contains(own):
-                    errs.append(
-                        f"{where}: q{joint} = {own:.6g} {spec.unit} is outside joint {joint}'s range "
-                        f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
-                    )
+                checks = [(f"q{joint}", nums[f"q{joint}"])]
+            errs += [f"{where}: {p}" for name, v in checks if (p := spec.range_problem(name, v))]
             errs += [f"{where}: {p}" for p in check_pose(joint, nums)]
         if errs:
             problems += errs

@@ -142,12 +142,9 @@ class Planner:
             raise KeyError(f"joint {self.joint} direction {direction_label(sign)} is not in this calibration") from None
 
     def _check_range(self, q: float, what: str) -> None:
-        if not self.spec.contains(q):
-            unit = self.spec.unit
-            raise ValueError(
-                f"{what} = {q:.6g} {unit} is outside joint {self.joint}'s range "
-                f"[{self.spec.lower:.6g}, {self.spec.upper:.6g}] {unit}"
-            )
+        problem = self.spec.range_problem(what, q)
+        if problem:
+            raise ValueError(problem)
 
     def exact_steps(self, q_from: float, q_to: float) -> float:
         """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""

@@ -126,11 +126,9 @@ class DeviceState:
         """Record ``q`` (rad or m) for ``joint``; ``ValueError`` outside its end stops."""
         spec = kin.joint_spec(joint)
         q = float(q)
-        if not (math.isfinite(q) and spec.contains(q)):
-            raise ValueError(
-                f"q{spec.number} = {q:.6g} {spec.unit} is outside joint {spec.number}'s range "
-                f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
-            )
+        problem = spec.range_problem(f"q{spec.number}", q)
+        if problem:
+            raise ValueError(problem)
         if source not in SOURCES:
             raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
         self.positions[spec.number] = min(max(q, spec.lower), spec.upper)

@@ -309,11 +309,9 @@ class SimulatedMM3A:
                 continue
             spec = kin.JOINTS[j]
             v = float(v)
-            if not spec.contains(v):
-                raise ValueError(
-                    f"q{j} = {v:.6g} {spec.unit} is outside joint {j}'s range "
-                    f"[{spec.lower:.6g}, {spec.upper:.6g}] {spec.unit}"
-                )
+            problem = spec.range_problem(f"q{j}", v)
+            if problem:
+                raise ValueError(problem)
             self._q[j] = min(max(v, spec.lower), spec.upper)  # within the contains() tolerance
         for name, v in (("theta", theta), ("psi", psi)):
             if v is None:
