@@ -248,3 +248,20 @@ def test_validation_plot_shows_relative_errors_in_percent():
     every_error = np.concatenate([res.model_error, res.constant_error]) * 100
     np.testing.assert_allclose(np.sort(plotted), np.sort(every_error), rtol=1e-12)
     assert "%" in ax.get_ylabel()
+
+
+def test_auto_uses_the_papers_procedure_wherever_its_poses_are():
+    # joint 3 at the paper's poses, joint 2 only on a random sweep: seed for 3, least squares for 2
+    rng = np.random.default_rng(8)
+    prismatic = [t for t in seed_table() if t.joint == 3]
+    rotary = [traverse_from_model(JointModel(2, d, p), pose, rng=rng, noise=0.003)
+              for d, p in PAPER_ROTARY.items() for pose in random_poses(rng, 2, 12)]
+    cal = C.calibrate(prismatic + rotary)
+    assert cal.method == "seed (3+ 3-), lsq (2+ 2-)"
+    seed_only = C.calibrate(prismatic)
+    for d in "+-":
+        assert cal.model(3, d).params == seed_only.model(3, d).params  # exactly the paper's Eqs. 4-6
+        assert cal.stderr[(2, d)] is not None  # least squares, with standard errors
+        np.testing.assert_allclose(cal.model(2, d).params.d, PAPER_ROTARY[d].d, atol=1.5e-6)
+    back = C.Calibration.from_dict(json.loads(json.dumps(cal.to_dict())))
+    assert back.method == cal.method and back.parameters() == cal.parameters()

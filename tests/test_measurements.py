@@ -89,3 +89,8 @@ def test_pose_table():
         parse_pose_table("joint,direction,q1,q2,q3,theta,psi,start,end\n3,+,0,0,0,0,0,0.001,\n", "p.csv")
     with pytest.raises(TableError, match="header lacks psi"):
         parse_pose_table("joint,direction,q1,q2,q3,theta\n", "p.csv")
+    # no direction column: a traverse's direction is the sign of end - start; a pose needs one
+    _, _, qs = parse_pose_table("joint,q1,q2,q3,theta,psi,start,end\n2,0,0,0,0,0,0.5,-3\n3,0,0,0,0,0,0,0.01\n")
+    assert [q.direction for q in qs] == ["-", "+"]
+    with pytest.raises(TableError, match="p.csv:2: the step size at a pose needs a direction"):
+        parse_pose_table("joint,q1,q2,q3,theta,psi\n3,0,0,0,0,0\n", "p.csv")

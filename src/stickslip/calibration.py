@@ -919,8 +919,9 @@ def calibrate(
     ----------
     traverses : sequence of Traverse
     method : {"auto", "seed", "seed-quadratic", "lsq"}
-        ``auto`` uses the paper's procedure when the table has its calibration poses
-        for every joint and direction, and least squares otherwise.
+        ``auto`` uses the paper's procedure for every joint and direction whose
+        calibration poses the table has, and least squares for the others (the
+        calibration's method then reads e.g. ``"seed (3+ 3-), lsq (2+ 2-)"``).
     day : str, optional
         Session label (default: the latest day among the traverses).
     source : str, optional
@@ -928,7 +929,16 @@ def calibrate(
     """
     traverses = list(traverses)
     if method == "auto":
-        method = "seed" if seed_applicable(traverses) else "lsq"
+        groups = _group(traverses)
+        seed_keys = {k for k, ts in groups.items() if seed_applicable(ts)}
+        if not seed_keys:
+            method = "lsq"
+        elif len(seed_keys) == len(groups):
+            method = "seed"
+        else:
+            by_seed = [t for t in traverses if (t.joint, t.direction) in seed_keys]
+            by_lsq = [t for t in traverses if (t.joint, t.direction) not in seed_keys]
+            return _merge(calibrate_seed(by_seed, day, source), calibrate_lsq(by_lsq, day, source), traverses, day)
     if method == "seed":
         return calibrate_seed(traverses, day, source)
     if method == "seed-quadratic":
@@ -936,6 +946,30 @@ def calibrate(
     if method == "lsq":
         return calibrate_lsq(traverses, day, source)
     raise ValueError(f"unknown calibration method {method!r} (use auto, seed, seed-quadratic or lsq)")
+
+
+def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], day: str | None) -> Calibration:
+    """One calibration from a seed-method part and a least-squares part (disjoint joints/directions)."""
+
+    def keys(c: Calibration) -> str:
+        return " ".join(f"{j}{d}" for j, d in sorted(c.models))
+
+    notes = [
+        f"the paper's procedure for {keys(seed)}; least squares for {keys(lsq)}, whose traverses are not all "
+        "at the paper's calibration poses",
+        *seed.provenance.get("notes", []),  # type: ignore[misc]
+        *lsq.provenance.get("notes", []),  # type: ignore[misc]
+    ]
+    prov = _provenance(traverses, seed.provenance.get("source"), len(traverses), notes)  # type: ignore[arg-type]
+    prov["rows_used"] = int(seed.provenance["rows_used"]) + int(lsq.provenance["rows_used"])  # type: ignore[call-overload]
+    return Calibration(
+        {**seed.models, **lsq.models},
+        {**seed.stderr, **lsq.stderr},
+        {**seed.constant_steps, **lsq.constant_steps},
+        _day_of(traverses, day),
+        f"seed ({keys(seed)}), lsq ({keys(lsq)})",
+        prov,
+    )
 
 
 # ----------------------------------------------------------------------------- validation

@@ -299,7 +299,7 @@ def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:
 
 # ----------------------------------------------------------------------------- pose tables (predict)
 
-POSE_TABLE_REQUIRED = ("joint", "direction", "q1", "q2", "q3", "theta", "psi")
+POSE_TABLE_REQUIRED = ("joint", "q1", "q2", "q3", "theta", "psi")
 
 
 @dataclass(frozen=True)
@@ -326,9 +326,11 @@ class PoseQuery:
 
 
 def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
-    """Parse a pose table (CSV): columns joint, direction, q1, q2, q3, theta, psi, optionally start, end.
+    """Parse a pose table (CSV): columns joint, q1, q2, q3, theta, psi, and direction and/or start, end.
 
-    Other columns (day, steps, notes, ...) are kept and passed through. Returns the
+    A row with start and end is a traverse; its direction may be left out (it is the
+    sign of end - start). A row without them asks for the step size at the pose and
+    needs a direction. Other columns (day, steps, notes, ...) are kept and passed through. Returns the
     header, the raw rows and the parsed queries; raises :class:`TableError` listing
     every bad row as ``file:line: reason``.
     """
@@ -342,7 +344,7 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
         raise TableError(
             [
                 f"{source}:1: header lacks {', '.join(missing)} (needs {','.join(POSE_TABLE_REQUIRED)}, "
-                "optionally start,end)"
+                "and direction and/or start,end)"
             ]
         )
     has_traverse = "start" in header and "end" in header
@@ -364,11 +366,13 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
         except ValueError:
             errs.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
             joint = 0
-        try:
-            direction = direction_label((row.get("direction") or "").strip())
-        except ValueError:
-            errs.append(f"{where}: direction must be '+' or '-', got {row.get('direction')!r}")
-            direction = "+"
+        dtext = (row.get("direction") or "").strip()
+        direction: str | None = None
+        if dtext:
+            try:
+                direction = direction_label(dtext)
+            except ValueError:
+                errs.append(f"{where}: direction must be '+' or '-', got {dtext!r}")
         nums: dict[str, float] = {}
         for name in ("q1", "q2", "q3", "theta", "psi"):
             v, err = _parse_float(name, (row.get(name) or "").strip())
@@ -391,10 +395,14 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
             if start is not None and end is not None:
                 if start == end:
                     errs.append(f"{where}: start and end are equal: a traverse must move")
+                elif direction is None:
+                    direction = "+" if end > start else "-"
                 elif (end > start) != (direction == "+"):
                     errs.append(f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g}")
                 checks = [("start", start), ("end", end)]
             else:
+                if direction is None:
+                    errs.append(f"{where}: the step size at a pose needs a direction ('+' or '-')")
                 checks = [(f"q{joint}", nums[f"q{joint}"])]
             errs += [f"{where}: {p}" for name, v in checks if (p := spec.range_problem(name, v))]
             errs += [f"{where}: {p}" for p in check_pose(joint, nums)]
@@ -402,6 +410,7 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
             problems += errs
             continue
         rows.append({k: (v or "") for k, v in row.items()})
+        assert direction is not None
         queries.append(
             PoseQuery(joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"], start, end)
         )

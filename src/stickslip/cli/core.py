@@ -141,7 +141,7 @@ def predict_cmd(
         Path,
         typer.Argument(
             help="Pose table (CSV): joint,direction,q1,q2,q3,theta,psi[,start,end], SI units; "
-            "other columns are passed through."
+            "direction may be left out on rows with start,end; other columns are passed through."
         ),
     ],
     calibration: CalibrationOpt,
