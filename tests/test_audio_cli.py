@@ -50,9 +50,11 @@ def test_tune_then_listen_json(wavs):
         app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"]
     )
     assert r.exit_code == 0, r.output
-    assert "Hz" in r.output and "dBFS" in r.output and "contrast" in r.output
+    # the level is the band relative to the broadband level, and says so
+    assert "Hz" in r.output and "dB re 200-21600 Hz" in r.output and "contrast" in r.output
     saved = json.loads(out.read_text())
     assert saved["joint"] == 3 and saved["band_hz"][0] < 4600 < saved["band_hz"][1]
+    assert saved["reference_hz"] == [200.0, 21600.0]
 
     r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out), "--json"])
     assert r.exit_code == 0, r.output

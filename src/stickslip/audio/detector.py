@@ -99,6 +99,7 @@ class Tuning:
     stepping_db: float | None = None
     stopped_db: float | None = None
     latency_measured_s: float | None = None
+    reference_hz: tuple[float, float] | None = None
     extra: dict = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
@@ -118,6 +119,11 @@ class Tuning:
                 f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
                 f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
             )
+        if self.reference_hz is not None:
+            r0, r1 = (float(v) for v in self.reference_hz)
+            object.__setattr__(self, "reference_hz", (r0, r1))
+            if not (0 <= r0 < r1 <= nyq and r1 - r0 >= 2 * self.sample_rate / self.frame):
+                raise ValueError(f"reference_hz ({r0:g}, {r1:g}) must be a band of at least two bins below {nyq:g} Hz")
         if not 0 <= self.max_dips <= 16:
             raise ValueError(f"max_dips {self.max_dips} is outside the allowed 0..16 frames")
         if not math.isfinite(self.threshold_db) or not -200 <= self.threshold_db <= 50:
@@ -145,6 +151,13 @@ class Tuning:
             return float(self.latency_measured_s)
         return self.onset_lag_s + self.hold_frames * self.hop / self.sample_rate
 
+    @property
+    def level_unit(self) -> str:
+        """``"dBFS"`` for an absolute band level; ``"dB re a-b Hz"`` for one relative to the reference band."""
+        if self.reference_hz is None:
+            return "dBFS"
+        return f"dB re {self.reference_hz[0]:.0f}-{self.reference_hz[1]:.0f} Hz"
+
     def for_sample_rate(self, sample_rate: int) -> Tuning:
         """The same tuning for another sample rate (same durations; band must fit)."""
         if sample_rate == self.sample_rate:
@@ -159,6 +172,7 @@ class Tuning:
         d = asdict(self)
         d.pop("extra")
         d["band_hz"] = list(self.band_hz)
+        d["reference_hz"] = list(self.reference_hz) if self.reference_hz is not None else None
         d["latency_s"] = self.latency_s
         return {"kind": _KIND, "version": 1, **d, **({"extra": self.extra} if self.extra else {})}
 
@@ -179,6 +193,11 @@ class Tuning:
             if not (isinstance(band, (list, tuple)) and len(band) == 2):
                 raise TuningFileError("band_hz must be [low_Hz, high_Hz]")
             kwargs["band_hz"] = (float(band[0]), float(band[1]))
+            ref = kwargs.get("reference_hz")
+            if ref is not None:
+                if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
+                    raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
+                kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
             for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s"):
                 if k in kwargs:
                     kwargs[k] = float(kwargs[k])
@@ -217,14 +236,15 @@ class Tuning:
     def report(self) -> str:
         """A few human lines: band, threshold, contrast and margin."""
         lines = [
-            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} dBFS",
+            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} {self.level_unit}",
             f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
             f"hop {self.hop} ({1e3 * self.hop / self.sample_rate:.2f} ms), "
             f"hold {1e3 * self.hold_s:.1f} ms, hysteresis {self.hysteresis_db:.1f} dB",
         ]
         if self.contrast_db is not None:
             lines.append(
-                f"stepping <= {self.stepping_db:.1f} dBFS, stopped >= {self.stopped_db:.1f} dBFS: "
+                f"stepping <= {self.stepping_db:.1f} {self.level_unit}, stopped >= {self.stopped_db:.1f} "
+                f"{self.level_unit}: "
                 f"contrast {self.contrast_db:.1f} dB, margin {self.margin_db:.1f} dB"
             )
         lines.append(f"latency {1e3 * self.latency_s:.1f} ms")
@@ -292,15 +312,22 @@ def frame_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray
 
 
 def frame_levels_db(samples: np.ndarray, tuning: Tuning) -> np.ndarray:
-    """Band level of every frame of ``samples`` (frame i ends at sample i*hop+frame-1), dBFS."""
-    return band_levels_db(samples, tuning.sample_rate, tuning.frame, tuning.hop, tuning.band_hz)
+    """The detector's level for every frame of ``samples`` (frame i ends at sample i*hop+frame-1).
+
+    dBFS, or dB relative to the reference band when the tuning has one.
+    """
+    return band_levels_db(samples, tuning.sample_rate, tuning.frame, tuning.hop, tuning.band_hz, tuning.reference_hz)
 
 
-def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz) -> np.ndarray:
-    """Band level per frame, dBFS (see :func:`frame_power_spectra`)."""
+def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz, reference_hz=None) -> np.ndarray:
+    """Band level per frame, dBFS (see :func:`frame_power_spectra`); minus the reference band's if given."""
     p = frame_power_spectra(samples, frame, hop)
     i0, i1 = _band_bins(band_hz, sample_rate, frame)
-    return 10 * np.log10(p[:, i0:i1].sum(axis=1) + _FLOOR)
+    level = 10 * np.log10(p[:, i0:i1].sum(axis=1) + _FLOOR)
+    if reference_hz is not None:
+        r0, r1 = _band_bins(reference_hz, sample_rate, frame)
+        level -= 10 * np.log10(p[:, r0:r1].sum(axis=1) + _FLOOR)
+    return level
 
 
 class StopDetector:
@@ -324,6 +351,9 @@ class StopDetector:
         self.tuning = tuning
         self._w, self._scale = _window(tuning.frame)
         self._i0, self._i1 = _band_bins(tuning.band_hz, tuning.sample_rate, tuning.frame)
+        self._ref = (
+            _band_bins(tuning.reference_hz, tuning.sample_rate, tuning.frame) if tuning.reference_hz else None
+        )
         self._hold = tuning.hold_frames
         self._full = (1 << (self._hold + tuning.max_dips)) - 1
         self._release = max(1, int(math.ceil(tuning.release_s * tuning.sample_rate / tuning.hop)))
@@ -372,9 +402,17 @@ class StopDetector:
                 strides=(H * seg.strides[0], seg.strides[0]),
                 writeable=False,
             )
-            spec = np.fft.rfft(view * self._w, axis=1)[:, self._i0 : self._i1]
-            power = (spec.real**2 + spec.imag**2).sum(axis=1) * self._scale
-            levels = 10 * np.log10(power + _FLOOR)
+            if self._ref is None:
+                spec = np.fft.rfft(view * self._w, axis=1)[:, self._i0 : self._i1]
+                power = (spec.real**2 + spec.imag**2).sum(axis=1) * self._scale
+                levels = 10 * np.log10(power + _FLOOR)
+            else:  # the band relative to the reference band: a microphone gain change cancels
+                spec = np.fft.rfft(view * self._w, axis=1)
+                p = spec.real**2 + spec.imag**2
+                r0, r1 = self._ref
+                levels = 10 * np.log10(p[:, self._i0 : self._i1].sum(axis=1) * self._scale + _FLOOR) - 10 * np.log10(
+                    p[:, r0:r1].sum(axis=1) * self._scale + _FLOOR
+                )
             ends = self._next + np.arange(n_frames) * H + F - 1
             events = self._run(levels, ends)
             self._next += n_frames * H
@@ -494,7 +532,7 @@ def plot_levels(
     if stop_at_s is not None:
         ax.axvline(stop_at_s, color="k", ls="--", lw=1, label="true stop")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("band level (dBFS)")
+    ax.set_ylabel(f"band level ({tuning.level_unit})")
     ax.legend(loc="best", fontsize="small")
     return ax
 

@@ -2,9 +2,14 @@
 
 The recording holds stepping before ``stop_at_s`` and stepping against the stop after.
 For every candidate band (centres 1/12 octave apart, widths 1/6 to 1 octave) tuning
-measures the band level of every frame in both parts and scores the band by its
-*contrast*: the stopped part's low percentile (default 5th) minus the stepping part's
-high percentile (default 99.5th). The band with the largest contrast wins, and the
+measures the detector's level of every frame in both parts: by default the band level
+*relative to the broadband level* (a change of microphone gain cancels, and a stop that
+moves energy into its band and out of the stepping resonances moves it both ways), or
+the absolute band level (``relative=False``). It judges each part the way the detector
+decides: by the level that ``hold`` of every ``hold + max_dips`` consecutive frames reach
+(a rank filter), not by single frames, so a lone transient does not count. A band is
+scored by its *contrast*: the stopped part's low percentile (default 5th) minus the
+stepping part's high percentile (default 99.5th). The band with the largest contrast wins, and the
 threshold is put ``margin`` of the way from the stepping level to the stopped level
 (default half-way, so a change of microphone gain of up to about a quarter of the
 contrast in either direction still works). Tuning then runs the detector over the
@@ -17,8 +22,11 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy.ndimage import rank_filter
 
 from .detector import StopDetector, Tuning, _band_bins, default_frame, frame_power_spectra
+
+_DEFAULT_MAX_DIPS = Tuning.__dataclass_fields__["max_dips"].default
 
 __all__ = ["TuningError", "candidate_bands", "tune"]
 
@@ -82,9 +90,10 @@ def tune(
     min_part_s: float = 0.25,
     f_min_hz: float = 200.0,
     min_band_hz: float = 1400.0,
-    rate_shift_hz: float = 650.0,
+    rate_shift_hz: float = 0.0,
     max_stepping_s: float = 20.0,
     max_stopped_s: float = 10.0,
+    relative: bool = True,
 ) -> Tuning:
     """Choose band and threshold that tell stepping from stepping against the stop.
 
@@ -123,10 +132,16 @@ def tune(
         narrower band tuned at one rate can sit between two harmonics there and on
         top of one at another rate.
     rate_shift_hz : float
-        The stepping level of a band is the highest of the band shifted by up to this
-        much either way, Hz (half the highest step rate; 0 to judge the band as is).
+        Judge the stepping level of a band as the highest of the band shifted by up to
+        this much either way, Hz (0, the default, judges the band as is). ``min_band_hz``
+        already keeps a harmonic of any step rate inside every band; a shift is more
+        conservative still, but a neighbouring stepping resonance then eats the contrast.
     max_stepping_s, max_stopped_s : float
         Analyse at most this much of the recording before and after the stop, s.
+    relative : bool
+        Measure the band relative to the broadband level (``f_min_hz`` to 0.9 of the
+        Nyquist frequency; default), so that the threshold does not move with the
+        microphone gain; ``False`` uses the absolute band level in dBFS.
 
     Returns
     -------
@@ -173,7 +188,16 @@ def tune(
     last = min(x.size, int((stop_at_s + max_stopped_s) * sample_rate))
     seg = x[first:last]
     t_first = first / sample_rate
-    levels = _band_level_matrix(seg, sample_rate, frame, hop, bands)
+    reference = (float(f_min_hz), round(0.9 * sample_rate / 2, 1)) if relative else None
+    ref_level = _band_level_matrix(seg, sample_rate, frame, hop, [reference])[:, :1] if reference else 0.0
+    hold = max(1, int(math.ceil(hold_s * sample_rate / hop - 1e-9)))
+    window = hold + _DEFAULT_MAX_DIPS
+
+    def decided(lv: np.ndarray) -> np.ndarray:
+        """The level ``hold`` of every ``window`` consecutive frames reach: what the detector decides on."""
+        return rank_filter(lv - ref_level, rank=window - hold, size=(window, 1), mode="nearest")
+
+    levels = decided(_band_level_matrix(seg, sample_rate, frame, hop, bands))
     starts = t_first + np.arange(levels.shape[0]) * hop / sample_rate
     ends = starts + (frame - 1) / sample_rate
     stepping_rows = ends < stop_at_s - guard_s
@@ -186,7 +210,7 @@ def tune(
     step_hi = np.full(len(bands), -np.inf)
     for shift in np.linspace(-rate_shift_hz, rate_shift_hz, 5) if rate_shift_hz else [0.0]:
         moved = [(max(lo + shift, 0.0), min(hi + shift, sample_rate / 2)) for lo, hi in bands]
-        lv = _band_level_matrix(seg, sample_rate, frame, hop, moved)[stepping_rows]
+        lv = decided(_band_level_matrix(seg, sample_rate, frame, hop, moved))[stepping_rows]
         step_hi = np.maximum(step_hi, np.percentile(lv, stepping_percentile, axis=0))
     contrast = stop_lo - step_hi
     best = int(np.argmax(contrast))
@@ -214,6 +238,7 @@ def tune(
         margin_db=round(threshold - float(step_hi[best]), 2),
         stepping_db=round(float(step_hi[best]), 2),
         stopped_db=round(float(stop_lo[best]), 2),
+        reference_hz=reference,
     )
     # check: one event, at the stop; measure the lag of the threshold crossing
     det = StopDetector(tuning)
@@ -222,7 +247,7 @@ def tune(
     if len(events) != 1 or len(near) != 1:
         where = ", ".join(f"{e.detected_at_s:.3f} s" for e in events) or "never"
         raise TuningError(
-            f"band {band[0]:.0f}-{band[1]:.0f} Hz at {threshold:.1f} dBFS fired {where}; "
+            f"band {band[0]:.0f}-{band[1]:.0f} Hz at {threshold:.1f} {tuning.level_unit} fired {where}; "
             f"expected once just after {stop_at_s:g} s. The recording may hold other stops "
             "or loud interference in the stepping part"
         )

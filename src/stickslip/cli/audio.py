@@ -29,7 +29,7 @@ def tune(
         ..., "--stop-at", help="When the joint reached its stop, seconds from the start."
     ),
     out: Path = typer.Option(
-        ..., "-o", "--out", help="Where to write the tuning (JSON: band in Hz, threshold in dBFS)."
+        ..., "-o", "--out", help="Where to write the tuning (JSON: band in Hz, threshold in dB re the broadband level)."
     ),
     joint: int = typer.Option(None, "--joint", help="Joint 1, 2 or 3 the recording belongs to."),
     min_band: float = typer.Option(
@@ -44,7 +44,8 @@ def tune(
     Searches bands (1/6 to 1.5 octaves, at least --min-band Hz wide) for the one whose
     level when stopped (5th percentile) most exceeds its level while stepping (99.5th
     percentile), puts the threshold half-way between, checks that the tuned detector
-    fires once at the stop, and saves band (Hz), threshold (dBFS) and latency (s).
+    fires once at the stop, and saves band (Hz), threshold (dB relative to the broadband level, so a
+    change of microphone gain does not move it) and latency (s).
 
     Example: stickslip tune joint2.wav --stop-at 4.2 --joint 2 -o joint2-tuning.json
     """
@@ -91,7 +92,7 @@ def listen(
         False,
         "--json",
         help=(
-            "Print a JSON list of events: detected_at_s, onset_s (s), level_db (dBFS); "
+            "Print a JSON list of events: detected_at_s, onset_s (s), level_db (dB, as the tuning's threshold); "
             "with --mic one JSON object per line as they happen."
         ),
     ),
@@ -99,7 +100,7 @@ def listen(
     """Listen for end stops in a recording (or live) with a tuned detector.
 
     Prints each event: when it was detected, the estimated onset of the stop (s from
-    the start) and the band level (dBFS).
+    the start) and the band level (dB, in the tuning's unit).
 
     Examples: stickslip listen joint2.wav --tuning joint2-tuning.json --json
               stickslip listen --mic --tuning joint2-tuning.json
@@ -140,7 +141,7 @@ def listen(
     for e in events:
         console.print(
             f"stop: detected at {e.detected_at_s:.4f} s, onset {e.onset_s:.4f} s, "
-            f"level {e.level_db:.1f} dBFS",
+            f"level {e.level_db:.1f} {tuning.level_unit}",
             highlight=False,
         )
 
@@ -166,7 +167,7 @@ def _listen_live(tuning, device: str | None, json_out: bool) -> None:
                 else:
                     console.print(
                         f"stop: detected at {e.detected_at_s:.3f} s, onset {e.onset_s:.3f} s, "
-                        f"level {e.level_db:.1f} dBFS",
+                        f"level {e.level_db:.1f} {tuning.level_unit}",
                         highlight=False,
                     )
     except KeyboardInterrupt:
