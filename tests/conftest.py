@@ -1,9 +1,23 @@
-"""Test-wide settings: no test touches the user's real database or data folder."""
+"""Test-wide settings: no test touches the user's real database or data folder, and none reads the calendar.
+
+"Today" is pinned (``$STICKSLIP_TODAY``, read by :func:`stickslip.clock.today`), so the
+suite gives the same answers on any date and in any time zone. The pinned day is the
+session label of the synthetic tables in ``synth.py``: a calibration made from them is
+today's, and tests that want an old calibration say so with an earlier label.
+Subprocesses inherit the pin through the environment.
+"""
 
 import pytest
+
+PINNED_TODAY = "2026-11-22"
 
 
 @pytest.fixture(autouse=True)
 def _private_database(tmp_path, monkeypatch):
     monkeypatch.setenv("STICKSLIP_DB", str(tmp_path / "stickslip-test.db"))
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg-data"))
+
+
+@pytest.fixture(autouse=True)
+def _pinned_today(monkeypatch):
+    monkeypatch.setenv("STICKSLIP_TODAY", PINNED_TODAY)

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from conftest import PINNED_TODAY
 from stickslip.calibration import PRISMATIC_SEED_POSES, ROTARY_SEED_POSES
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
@@ -28,7 +29,7 @@ def full_range(joint: int, direction: str) -> tuple[float, float]:
 def traverse_from_model(
     model: JointModel,
     pose: dict,
-    day: str = "2026-11-22",
+    day: str = PINNED_TODAY,
     rng=None,
     noise: float = 0.0,
     start_end: tuple[float, float] | None = None,
@@ -44,7 +45,7 @@ def traverse_from_model(
     return Traverse(day, j, d, p["q1"], p["q2"], p["q3"], p["theta"], p["psi"], start, end, steps)
 
 
-def seed_table(prismatic=PAPER_PRISMATIC, rotary=PAPER_ROTARY, day="2026-11-22", rng=None, noise=0.0) -> list[Traverse]:
+def seed_table(prismatic=PAPER_PRISMATIC, rotary=PAPER_ROTARY, day=PINNED_TODAY, rng=None, noise=0.0) -> list[Traverse]:
     """The paper's 14 calibration traverses (6 prismatic, 8 of joint 2) generated from a truth."""
     rows = []
     for d, p in prismatic.items():

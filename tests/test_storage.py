@@ -138,9 +138,12 @@ def test_path_resolution(tmp_path, monkeypatch):
 def test_stale_warning():
     msg = stale_message("2026-11-20", today="2026-11-21")
     assert msg == (
-        "calibration is from 2026-11-20, today is 2026-11-21: recalibrate "
-        "(the seed found day-to-day changes significant)"
+        "calibration is from 2026-11-20, today is 2026-11-21 (1 day old): recalibrate "
+        "(the paper found day-to-day changes significant)"
     )
+    assert "(3 days old)" in stale_message("2026-11-18", today="2026-11-21")
+    assert stale_message("2026-11-18", today="2026-11-21", max_age_days=3) is None
+    assert stale_message("2026-11-17", today="2026-11-21", max_age_days=3) is not None
     assert stale_message("2026-11-21", today="2026-11-21") is None
     assert stale_message("2026-11-22", today="2026-11-21") is None  # later is not stale
     assert stale_message("day1", today="day2") is not None  # unordered labels: differ -> warn
@@ -149,7 +152,7 @@ def test_stale_warning():
     class Cal:
         day = "2020-01-01"
 
-    assert "recalibrate" in warn_if_stale(Cal())  # default today = the real date
+    assert "today is 2026-11-22 " in warn_if_stale(Cal())  # default today: the pinned one (conftest)
 
 
 # ---------------------------------------------------------------- concurrency and crashes

@@ -24,7 +24,6 @@ All values SI: prismatic steps in m, rotary steps in rad.
 
 from __future__ import annotations
 
-import datetime as _dt
 import hashlib
 import json
 import math
@@ -36,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kinematics as kin
+from .clock import now_utc
 from .measurements import Traverse, measurements_to_csv
 from .models import (
     DIRECTIONS,
@@ -317,7 +317,7 @@ class Calibration:
     day: str
     method: str
     provenance: dict[str, object] = field(default_factory=dict)
-    created: str = field(default_factory=lambda: _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"))
+    created: str = field(default_factory=lambda: now_utc().isoformat(timespec="seconds"))
 
     # -- access
     @property

@@ -25,7 +25,6 @@ there too; ``on_traverse(result)`` is called after every traverse.
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import math
 import time
@@ -36,6 +35,7 @@ from typing import Any
 
 from . import kinematics as kin
 from .calibration import Calibration, ValidationResult, calibrate, validate
+from .clock import today_label
 from .devices.base import device_key
 from .devices.simulator import NOMINAL, OracleStopDetector, SimulatedMM3A
 from .measurements import write_measurements
@@ -367,7 +367,7 @@ def run_demo(
         except OSError as e:
             raise OSError(f"cannot use {str(out)!r} as the results folder: {e.strerror or e}") from e
     t_wall = time.perf_counter()
-    day = day or _dt.date.today().isoformat()
+    day = day or today_label()
     url = f"sim://?seed={seed}&day={day}"
     sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
     n_cal = 2 * len(CALIBRATION_PLAN)

@@ -38,6 +38,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .clock import now_utc, stale_message
 from .measurements import Traverse
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -157,7 +158,7 @@ def resolve_db_path(path: str | os.PathLike[str] | None = None) -> Path:
 
 
 def _now() -> str:
-    return _dt.datetime.now(_dt.UTC).isoformat(timespec="microseconds")
+    return now_utc().isoformat(timespec="microseconds")
 
 
 def _iso(t: _dt.datetime | None) -> str:
@@ -171,43 +172,13 @@ def _iso(t: _dt.datetime | None) -> str:
 # ---------------------------------------------------------------- staleness
 
 
-def _as_date(day: str) -> _dt.date | None:
-    try:
-        return _dt.date.fromisoformat(day.strip()[:10])
-    except (ValueError, AttributeError):
-        return None
+def warn_if_stale(cal: Calibration, today: str | None = None, max_age_days: int = 0) -> str | None:
+    """Warning text if ``cal`` is older than ``max_age_days`` (default: from an earlier day), else ``None``.
 
-
-def stale_message(cal_day: str | None, today: str | None = None) -> str | None:
-    """The recalibration warning for a calibration made on ``cal_day``, or ``None``.
-
-    ``today`` is today's session label (default: today's local date, ISO). When both
-    labels are ISO dates the warning comes only if the calibration is earlier; other
-    session labels (``day1``, ``morning``) warn whenever they differ, since their order
-    is unknown. A calibration without a day never warns.
+    Text: ``"calibration is from DAY, today is TODAY (N days old): recalibrate ..."``.
+    Today and a calibration's age are defined once, in :mod:`stickslip.clock`.
     """
-    if not cal_day:
-        return None
-    if today is None:
-        today = _dt.date.today().isoformat()
-    a, b = _as_date(cal_day), _as_date(today)
-    stale = (a < b) if (a is not None and b is not None) else (cal_day.strip() != today.strip())
-    if not stale:
-        return None
-    return (
-        f"calibration is from {cal_day}, today is {today}: recalibrate "
-        "(the seed found day-to-day changes significant)"
-    )
-
-
-def warn_if_stale(cal: Calibration, today: str | None = None) -> str | None:
-    """Warning text if ``cal`` is from an earlier day than today's session, else ``None``.
-
-    Text: ``"calibration is from DAY, today is TODAY: recalibrate (the seed found
-    day-to-day changes significant)"``. Commands that use a calibration print it.
-    See :func:`stale_message` for how session labels compare.
-    """
-    return stale_message(getattr(cal, "day", None), today)
+    return stale_message(getattr(cal, "day", None), today, max_age_days)
 
 
 # ---------------------------------------------------------------- the store

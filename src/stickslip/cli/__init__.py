@@ -15,6 +15,8 @@ import inspect
 
 import typer
 
+from ._common import drop_warnings, flush_warnings
+
 app = typer.Typer(
     name="stickslip",
     help=(
@@ -31,10 +33,15 @@ app = typer.Typer(
 )
 
 
+def _done(*_args: object, **_kwargs: object) -> None:
+    """A command that returned normally prints the warnings it queued (a failed one does not)."""
+    flush_warnings()
 
-@app.callback()
+
+@app.callback(result_callback=_done)
 def _root() -> None:
     """stickslip: calibrate, predict and plan stick-slip steps (see the commands below)."""
+    drop_warnings()
 
 
 from . import audio, core, devices, history, measure  # noqa: E402,F401  (they register their commands)

@@ -36,6 +36,31 @@ def warn(message: str) -> None:
     err_console.print(f"[bold yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
 
 
+_pending_warnings: list[str] = []
+
+
+def warn_later(message: str) -> None:
+    """Queue a warning that matters only if the command goes on (a stale calibration, say).
+
+    Queued warnings are printed by :func:`flush_warnings`: when the command has checked
+    its input and is about to act, or when it ends successfully. A command that fails
+    prints only its error, never a warning ahead of it.
+    """
+    if message not in _pending_warnings:
+        _pending_warnings.append(message)
+
+
+def flush_warnings() -> None:
+    """Print the queued warnings (once each) and empty the queue."""
+    while _pending_warnings:
+        warn(_pending_warnings.pop(0))
+
+
+def drop_warnings() -> None:
+    """Forget the queued warnings (at the start of each command)."""
+    _pending_warnings.clear()
+
+
 @contextmanager
 def user_errors(*types: type[BaseException]) -> Iterator[None]:
     """Turn the given exception types (and ValueError, OSError) into ``fail(str(e))``."""

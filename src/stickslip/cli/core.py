@@ -13,12 +13,13 @@ import typer
 from rich.table import Table
 
 from ..calibration import Calibration, CalibrationError, calibrate, validate
+from ..clock import stale_message
 from ..kinematics import JOINTS, Pose
 from ..measurements import TableError, read_measurements, read_pose_table
 from ..models import NonPhysicalError
 from ..units import format_position, format_step
 from . import app
-from ._common import angle_option, console, fail, length_option, print_json, user_errors, validation_table, warn
+from ._common import angle_option, console, fail, length_option, print_json, user_errors, validation_table, warn_later
 
 CalibrationOpt = Annotated[
     Path, typer.Option("--calibration", "-c", help="Calibration JSON written by 'stickslip calibrate' or 'fit'.")
@@ -33,13 +34,9 @@ def _fail_table(e: TableError) -> None:
 def _load_calibration(path: Path) -> Calibration:
     with user_errors():
         cal = Calibration.load(path)
-    try:
-        from ..storage import warn_if_stale
-    except ImportError:  # pragma: no cover - storage is part of the package
-        return cal
-    msg = warn_if_stale(cal)
+    msg = stale_message(cal.day)
     if msg:
-        warn(msg)
+        warn_later(msg)
     return cal
 
 

@@ -14,11 +14,12 @@ from pathlib import Path
 import typer
 
 from .. import kinematics as kin
+from ..clock import stale_message
 from ..devices.base import DeviceError, open_device
 from ..devices.positions import DeviceState, device_key, load_state, save_state
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit
 from . import app
-from ._common import angle_option, console, fail, length_option, print_json, user_errors
+from ._common import angle_option, console, fail, flush_warnings, length_option, print_json, user_errors, warn_later
 
 _DB_HELP = (
     "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
@@ -161,6 +162,10 @@ def move(
         with user_errors(KeyError):
             steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
         save_state(store, state)  # the recorded pose, even if nothing moves
+        stale = stale_message(cal.day)
+        if stale:
+            warn_later(stale)
+        flush_warnings()  # the input is good: say it before driving
 
         sent = 0
         bursts: list[int] = []

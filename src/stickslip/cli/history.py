@@ -15,7 +15,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from . import app
-from ._common import console, fail, print_json, user_errors, warn
+from ._common import console, fail, print_json, user_errors, warn, warn_later
 
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
 
@@ -325,12 +325,13 @@ def report(
     else:
         with user_errors(CalibrationError):
             cal = calibrate(ts, method="lsq")
-    from ..storage import warn_if_stale
+    from ..clock import age_days
 
     latest = max(t.day for t in ts)
-    msg = warn_if_stale(cal, today=latest)
-    if msg:
-        warn(msg)
+    age = age_days(cal.day, latest)
+    if age is not None and age > 0:
+        warn_later(f"calibration is from {cal.day}, {age} day(s) before the latest data ({latest}): "
+                   "the figures compare it with later days")
     with user_errors(ImportError):
         rep = build_report(cal, ts, out)
     if json_out:

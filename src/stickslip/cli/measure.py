@@ -168,9 +168,8 @@ def traverse_cmd(
 
     Example: stickslip traverse --joint 3 -d + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
     """
-    import datetime as _dt
-
     from ..audio.detector import StopDetector, Tuning
+    from ..clock import today_label
     from ..devices import DeviceError, device_key, open_device
     from ..kinematics import JOINTS, Pose
     from ..measurements import HEADER, measurements_to_csv
@@ -187,7 +186,7 @@ def traverse_cmd(
         pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
     except (ValueError, typer.BadParameter) as e:
         fail(str(e))
-    day = day or _dt.date.today().isoformat()
+    day = day or today_label()
     with user_errors(DeviceError, TraverseError, StoreError):
         tun = Tuning.load(tuning)
         if getattr(tun, "joint", None) not in (None, joint):

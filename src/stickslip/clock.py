@@ -1,0 +1,123 @@
+"""One clock for the whole project: what "today" is, and how old a calibration is.
+
+Definitions (stated once, used by every warning that compares dates):
+
+* **Today** is the *local calendar date* of the machine that runs the command: the
+  lab's working day, the one an operator writes on a session label. Set
+  ``STICKSLIP_TODAY=YYYY-MM-DD`` to pin it (tests do; so can a user who replays an
+  old session). Nothing else in the package reads the calendar.
+* **Instants** stored in the database (``measured_at``, ``created``) are UTC, from
+  :func:`now_utc`, so that a database moved between time zones keeps its order.
+* **A calibration's age** is the number of calendar days from its session label
+  (``day``, an ISO date) to today. A label that is not an ISO date (``day1``,
+  ``morning``) has no age; it is compared with today's label for equality only.
+
+The paper recalibrates every session because day-to-day changes are significant, so
+a calibration is *stale* when its age exceeds ``max_age_days`` (default 0: any
+earlier day).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+
+__all__ = [
+    "ENV_TODAY",
+    "today",
+    "today_label",
+    "now_utc",
+    "parse_day",
+    "age_days",
+    "stale_message",
+]
+
+ENV_TODAY = "STICKSLIP_TODAY"
+"""Environment variable that pins :func:`today` (an ISO date, ``YYYY-MM-DD``)."""
+
+
+def today() -> _dt.date:
+    """Today's date: ``$STICKSLIP_TODAY`` if set, else the machine's local calendar date.
+
+    Raises
+    ------
+    ValueError
+        If ``$STICKSLIP_TODAY`` is set but is not an ISO date.
+    """
+    pinned = os.environ.get(ENV_TODAY, "").strip()
+    if pinned:
+        try:
+            return _dt.date.fromisoformat(pinned)
+        except ValueError:
+            raise ValueError(f"{ENV_TODAY}={pinned!r} is not a date; use YYYY-MM-DD, e.g. 2026-11-23") from None
+    return _dt.date.today()
+
+
+_today = today  # for functions whose ``today`` parameter hides this one
+
+
+def today_label() -> str:
+    """Today's session label, the ISO date of :func:`today` (``"2026-11-23"``)."""
+    return today().isoformat()
+
+
+def now_utc() -> _dt.datetime:
+    """The current instant, timezone-aware UTC (for timestamps stored in files and the database)."""
+    return _dt.datetime.now(_dt.UTC)
+
+
+def parse_day(label: str | None) -> _dt.date | None:
+    """The date of a session label that starts with an ISO date (``2026-11-22``, ``2026-11-22 am``), else ``None``."""
+    if not isinstance(label, str):
+        return None
+    try:
+        return _dt.date.fromisoformat(label.strip()[:10])
+    except ValueError:
+        return None
+
+
+def age_days(day: str | None, today: str | _dt.date | None = None) -> int | None:
+    """Calendar days from session label ``day`` to ``today`` (default: :func:`today`); ``None`` if either is not a date.
+
+    Negative when ``day`` is later than today (a calibration dated ahead of the clock).
+    """
+    a = parse_day(day)
+    if today is None:
+        b: _dt.date | None = _today()
+    elif isinstance(today, _dt.date):
+        b = today
+    else:
+        b = parse_day(today)
+    if a is None or b is None:
+        return None
+    return (b - a).days
+
+
+def stale_message(cal_day: str | None, today: str | None = None, max_age_days: int = 0) -> str | None:
+    """The recalibration warning for a calibration made on ``cal_day``, or ``None`` if it is fresh.
+
+    Parameters
+    ----------
+    cal_day : str or None
+        The calibration's session label. A calibration without one never warns.
+    today : str, optional
+        Today's session label (default :func:`today_label`).
+    max_age_days : int
+        Largest age in days that is still fresh (default 0: only today's calibration).
+
+    When both labels are ISO dates the warning comes only if the calibration is more
+    than ``max_age_days`` older; other labels warn whenever they differ from today's,
+    since their order is unknown.
+    """
+    if not cal_day:
+        return None
+    label = today_label() if today is None else today
+    age = age_days(cal_day, label)
+    stale = age > max_age_days if age is not None else cal_day.strip() != label.strip()
+    if not stale:
+        return None
+    when = f"{age} day{'s' if age != 1 else ''} old" if age is not None else "from another session"
+    return (
+        f"calibration is from {cal_day}, today is {label} ({when}): recalibrate "
+        "(the paper found day-to-day changes significant)"
+    )
