@@ -1,0 +1,63 @@
+"""The command-line reference (``docs/cli.md``), generated from the commands themselves.
+
+Run ``python -m stickslip.cli.reference > docs/cli.md`` after changing a command; a
+test fails when the page and the code disagree, so the reference cannot rot.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import Any
+
+import typer
+
+__all__ = ["render"]
+
+
+def _param_line(p: Any) -> str:
+    if not p.opts or not p.opts[0].startswith("-"):
+        name = f"`{(p.name or '').upper()}`"
+        what = getattr(p, "help", None) or ""
+        return f"| {name} | argument{'' if p.required else ', optional'} | {what} |"
+    opts = ", ".join(f"`{o}`" for o in (*p.opts, *p.secondary_opts))
+    what = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
+    default = p.default if not callable(p.default) else None
+    shown = "" if default in (None, False, ()) or getattr(p, "is_flag", False) else f" (default: `{default}`)"
+    return f"| {opts} | option | {what}{shown} |"
+
+
+def _section(name: str, cmd: Any) -> list[str]:
+    out = [f"## `stickslip {name}`", ""]
+    doc = (cmd.help or "").strip()
+    out += [doc.replace("[bold]", "").replace("[/]", ""), ""]
+    params = [p for p in cmd.params if p.name != "help"]
+    if params:
+        out += ["| name | kind | meaning |", "| --- | --- | --- |"]
+        out += [_param_line(p) for p in params]
+        out.append("")
+    return out
+
+
+def render() -> str:
+    """The Markdown reference of every ``stickslip`` command, in the order of ``stickslip --help``."""
+    from . import app
+
+    group: Any = typer.main.get_command(app)
+    ctx = group.make_context("stickslip", ["--help"], resilient_parsing=True)
+    lines = [
+        "# Command-line reference",
+        "",
+        "Generated from the code by `python -m stickslip.cli.reference`; do not edit by hand.",
+        "Lengths and angles take units on the command line (`12mm`, `850nm`, `-90deg`, `40urad`,",
+        "`-pi/2`); files are SI. Every command exits 2 with a one-line `error:` on bad input.",
+        "",
+    ]
+    for name in group.list_commands(ctx):
+        cmd = group.get_command(ctx, name)
+        if cmd is not None and not cmd.hidden:
+            lines += _section(name, cmd)
+    return "\n".join(lines).rstrip() + "\n"
+
+
+if __name__ == "__main__":  # pragma: no cover - exercised through the test of docs/cli.md
+    sys.stdout.write(render())

@@ -1,0 +1,18 @@
+"""The documentation in docs/ matches the code: the CLI reference is regenerated and compared."""
+
+from pathlib import Path
+
+from stickslip.cli.reference import render
+
+DOCS = Path(__file__).resolve().parents[1] / "docs"
+
+
+def test_cli_reference_is_up_to_date():
+    page = (DOCS / "cli.md").read_text(encoding="utf-8")
+    assert page == render(), "docs/cli.md is stale: run  python -m stickslip.cli.reference > docs/cli.md"
+
+
+def test_cli_reference_covers_every_command():
+    page = render()
+    for name in ("demo", "calibrate", "predict", "validate", "plan", "tune", "listen", "anova", "report", "move"):
+        assert f"## `stickslip {name}`" in page
