@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import records
+
 __all__ = [
     "StopDetector",
     "StopEvent",
@@ -223,7 +225,7 @@ class Tuning:
     def load(cls, path: str | Path) -> Tuning:
         """Read a tuning written by :meth:`save` (raises TuningFileError / OSError)."""
         p = Path(path)
-        text = p.read_text(encoding="utf-8")
+        text = records.read_tuning_text(p, TuningFileError)
         try:
             d = json.loads(text)
         except json.JSONDecodeError as e:
