@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .clock import now_utc, stale_message
+from .devices.base import redact_url
 from .measurements import Traverse
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -304,7 +305,7 @@ class Store:
     # -- devices and sessions
 
     def _device_id(self, con: sqlite3.Connection, url: str, model: str | None = None) -> int:
-        url = str(url).strip()
+        url = redact_url(str(url).strip())  # a secret in a URL is never stored
         if not url:
             raise ValueError("device URL is empty (e.g. sim://)")
         row = con.execute("SELECT id, model FROM devices WHERE url = ?", (url,)).fetchone()
@@ -446,7 +447,7 @@ class Store:
         args: list[Any] = []
         if device is not None:
             sql += " AND d.url = ?"
-            args.append(device)
+            args.append(redact_url(device))
         if day is not None:
             sql += " AND s.day = ?"
             args.append(day)
@@ -501,7 +502,7 @@ class Store:
             self._con.execute(
                 "SELECT COUNT(*) FROM traverses t JOIN sessions s ON s.id = t.session_id "
                 "JOIN devices d ON d.id = s.device_id WHERE d.url = ?",
-                (device,),
+                (redact_url(device),),
             ).fetchone()[0]
         )
 
@@ -520,7 +521,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         days = {r[0] for r in self._con.execute(sql, args)}
         csql = (
             "SELECT DISTINCT c.day FROM calibrations c JOIN devices d ON d.id = c.device_id "
@@ -592,7 +593,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         row = self._con.execute(sql + " ORDER BY c.id DESC LIMIT 1", args).fetchone()
         return None if row is None else self._load_cal(row[0])
 
@@ -624,7 +625,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         return [dict(r) for r in self._con.execute(sql + " ORDER BY c.id", args)]
 
     # -- history
@@ -645,7 +646,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         sql += " GROUP BY d.url, s.day, t.joint, t.direction"
         entries: dict[tuple[str, str], dict[str, Any]] = {}
         for r in self._con.execute(sql, args):
@@ -706,7 +707,7 @@ class Store:
         row = self._con.execute(
             "SELECT s.value FROM device_state s JOIN devices d ON d.id = s.device_id "
             "WHERE d.url = ? AND s.key = ?",
-            (device, key),
+            (redact_url(device), key),
         ).fetchone()
         return default if row is None else json.loads(row[0])
 
