@@ -711,11 +711,63 @@ class Store:
         ).fetchone()
         return default if row is None else json.loads(row[0])
 
+    # -- one process drives a device at a time
+
+    def acquire_lock(self, device: str, holder: dict[str, Any]) -> dict[str, Any] | None:
+        """Take ``device``'s lock for ``holder`` (``{"pid", "host", "since"}``), atomically.
+
+        Returns ``None`` when taken, else the current holder (the caller refuses, naming
+        it). A lock whose holder is a process on this host that no longer exists (POSIX
+        only; elsewhere a lock is released only by its holder) is taken over.
+        """
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            row = con.execute(
+                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+            ).fetchone()
+            if row is not None:
+                current = json.loads(row[0])
+                if isinstance(current, dict) and _alive(current):
+                    return dict(current)
+            con.execute(
+                "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
+                "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
+                "updated_at = excluded.updated_at",
+                (dev, json.dumps(holder), _now()),
+            )
+        return None
+
+    def release_lock(self, device: str, pid: int) -> None:
+        """Release ``device``'s lock if process ``pid`` holds it."""
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            row = con.execute(
+                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+            ).fetchone()
+            if row is not None and json.loads(row[0]).get("pid") == pid:
+                con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
+
     # -- maintenance
 
     def integrity_check(self) -> str:
         """``PRAGMA integrity_check`` (``"ok"`` when the file is sound)."""
         return "; ".join(r[0] for r in self._con.execute("PRAGMA integrity_check"))
+
+
+def _alive(holder: dict[str, Any]) -> bool:
+    """Whether a lock holder may still be running (unknown counts as running)."""
+    import socket
+
+    pid = holder.get("pid")
+    if not isinstance(pid, int) or holder.get("host") != socket.gethostname() or os.name != "posix":
+        return True
+    try:
+        os.kill(pid, 0)  # POSIX: signal 0 only checks that the process exists
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 def _split_sql(script: str) -> list[str]:

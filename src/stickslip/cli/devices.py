@@ -87,10 +87,82 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
                 "q": state.positions[j],
                 "unit": spec.unit,
                 "display": format_position(state.positions[j], j),
-                "source": state.sources[j],
+                "source": "uncertain" if j in state.uncertain else state.sources[j],
+                "uncertain": list(state.uncertain[j]) if j in state.uncertain else None,
             }
         )
     return rows
+
+
+def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> tuple[float, float]:
+    spec = kin.JOINTS[joint]
+    q_from = state.positions[joint]
+    if to is not None:
+        word = to.strip().lower()
+        if word in ("min", "lower"):
+            q_to = spec.lower
+        elif word in ("max", "upper"):
+            q_to = spec.upper
+        else:
+            q_to = _parse_joint_value(joint, to, "--to")
+    else:
+        q_to = q_from + _parse_joint_value(joint, by or "", "--by")
+    if not spec.contains(q_to):
+        unit = position_display_unit(joint)
+        fail(
+            f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
+            f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
+            f"(from {format_position(q_from, joint)}); positions are in {unit}"
+        )
+    return q_from, min(max(q_to, spec.lower), spec.upper)
+
+
+def _move_locked(store, key, device, cal, joint, by, to, burst, pose_opts, drive):
+    """The part of `move` that runs holding the device lock: plan from the kept state, drive."""
+    from ..procedures.move import MoveOutcome
+
+    with user_errors():
+        state = load_state(store, key)
+    _apply_pose_options(state, *pose_opts)
+    problem = state.uncertainty_problem(joint)
+    if problem:
+        fail(problem)
+    q_from, q_to = _target(joint, state, by, to)
+    pose = state.pose
+    with user_errors(KeyError):
+        steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
+    with user_errors():
+        save_state(store, state)  # the recorded pose, even if nothing moves
+    stale = stale_message(cal.day)
+    if stale:
+        warn_later(stale)
+    flush_warnings()  # the input is good: say it before driving
+    outcome, sim_true = MoveOutcome(), None
+    if steps:
+        try:
+            dev = open_device(device)
+        except (DeviceError, ValueError) as e:
+            fail(str(e))
+        try:
+            if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
+                dev.set_pose(*pose)
+
+            def save(st: DeviceState) -> None:
+                with user_errors():
+                    save_state(store, st)
+
+            outcome = drive(dev, state, joint, steps, burst, reckon, save)
+            if outcome.error is None:
+                state.set_position(joint, q_end, "dead-reckoned")
+                save(state)
+                if hasattr(dev, "position"):
+                    sim_true = float(dev.position(joint))
+        finally:
+            try:
+                dev.close()
+            except DeviceError:
+                pass
+    return outcome, state, steps, q_from, q_to, q_end, sim_true
 
 
 @app.command()
@@ -133,80 +205,28 @@ def move(
 
     with user_errors(KeyError):
         cal = Calibration.load(calibration)
-    key = device_key(device)
+    with user_errors():
+        key = device_key(device)
     spec = kin.JOINTS[joint]
-    with _open_store(db) as store:
-        with user_errors():
-            state = load_state(store, key)
-        _apply_pose_options(state, q1, q2, q3, theta, psi)
-        q_from = state.positions[joint]
-        if to is not None:
-            word = to.strip().lower()
-            if word in ("min", "lower"):
-                q_to = spec.lower
-            elif word in ("max", "upper"):
-                q_to = spec.upper
-            else:
-                q_to = _parse_joint_value(joint, to, "--to")
-        else:
-            q_to = q_from + _parse_joint_value(joint, by, "--by")  # type: ignore[arg-type]
-        if not spec.contains(q_to):
-            unit = position_display_unit(joint)
-            fail(
-                f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
-                f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
-                f"(from {format_position(q_from, joint)}); positions are in {unit}"
-            )
-        q_to = min(max(q_to, spec.lower), spec.upper)
-        pose = state.pose
-        with user_errors(KeyError):
-            steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
-        save_state(store, state)  # the recorded pose, even if nothing moves
-        stale = stale_message(cal.day)
-        if stale:
-            warn_later(stale)
-        flush_warnings()  # the input is good: say it before driving
+    from ..procedures.move import DeviceBusy, device_lock, drive
 
-        sent = 0
-        bursts: list[int] = []
-        error: str | None = None
-        sim_true: float | None = None
-        if steps:
-            sign = 1 if steps > 0 else -1
-            try:
-                dev = open_device(device)
-            except (DeviceError, ValueError) as e:
-                fail(str(e))
-            try:
-                if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
-                    dev.set_pose(*pose)
-                while sent != steps:
-                    n = sign * min(burst, abs(steps - sent))
-                    dev.step(joint, n)
-                    sent += n
-                    bursts.append(n)
-                    if sent != steps:
-                        state.set_position(joint, reckon(sent), "dead-reckoned")
-                        save_state(store, state)
-                if hasattr(dev, "position"):
-                    sim_true = float(dev.position(joint))
-            except DeviceError as e:
-                error = str(e)
-            finally:
-                try:
-                    dev.close()
-                except DeviceError:
-                    pass
-            if error is None:
-                state.set_position(joint, q_end, "dead-reckoned")
-            else:
-                state.set_position(joint, reckon(sent) if sent else q_from, "dead-reckoned")
-            save_state(store, state)
-    if error is not None:
-        fail(
-            f"{error}\nsent {sent} of {steps} steps; joint {joint}'s dead-reckoned position "
-            f"{format_position(state.positions[joint], joint)} is kept"
-        )
+    with _open_store(db) as store, user_errors(DeviceBusy):
+        with device_lock(store, key):
+            outcome, state, steps, q_from, q_to, q_end, sim_true = _move_locked(
+                store, key, device, cal, joint, by, to, burst, (q1, q2, q3, theta, psi), drive
+            )
+    if outcome.error is not None:
+        if joint in state.uncertain:
+            lo, hi = state.uncertain[joint]
+            kept = (
+                f"joint {joint}'s position is now uncertain, between {format_position(lo, joint)} "
+                f"and {format_position(hi, joint)}; re-reference it (stickslip where --set {joint}=min "
+                f"at the lower stop) before the next move"
+            )
+        else:
+            kept = f"joint {joint}'s dead-reckoned position {format_position(q_from, joint)} is kept"
+        fail(f"{outcome.error}; sent {outcome.sent} of {steps} steps; {kept}")
+    sent, bursts = outcome.sent, outcome.bursts
     result = {
         "device": key,
         "joint": joint,
@@ -237,6 +257,23 @@ def move(
         )
 
 
+def _probe(device: str) -> str:
+    """Open ``device`` and close it again: its model line, or ``fail`` naming why it does not answer."""
+    try:
+        dev = open_device(device)
+    except (DeviceError, ValueError, OSError) as e:
+        fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
+    try:
+        return str(dev.info.model)
+    except (DeviceError, ValueError, OSError) as e:
+        fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
+    finally:
+        try:
+            dev.close()
+        except (DeviceError, OSError):
+            pass
+
+
 @app.command()
 def where(
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
@@ -249,18 +286,32 @@ def where(
     theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
     psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    offline: bool = typer.Option(
+        False, "--offline", help="Do not open the device: only show the kept positions."
+    ),
+    unlock: bool = typer.Option(
+        False, "--unlock", help="Release the device's lock left by a process that is gone."
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print the positions as JSON (SI units)."),
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, or dead-reckoned.
+    Source: default (never set; outstretched pose assumed), set, dead-reckoned, or
+    uncertain (a move was interrupted: the bounds are shown; re-reference with --set).
 
     Reset a joint at an end stop after a traverse, a crash or a manual move.
 
+    Without --set or a pose option the device is opened to say whether it answers
+    (--offline skips that); a device that does not answer exits 2.
+
     Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
     """
-    key = device_key(device)
+    with user_errors():
+        key = device_key(device)
     with _open_store(db) as store:
+        if unlock:
+            with user_errors():
+                store.set_state(key, "lock", "null")
         with user_errors():
             state = load_state(store, key)
         changed = _apply_pose_options(state, q1, q2, q3, theta, psi)
@@ -281,14 +332,25 @@ def where(
                 state.set_position(j, q, "set")
             changed.append(f"q{j}")
         if changed:
-            save_state(store, state)
+            with user_errors():
+                save_state(store, state)
+    answers = None if (changed or offline) else _probe(device)
     rows = _state_rows(state)
     if json_out:
-        print_json({"device": key, "joints": rows, "theta": state.theta, "psi": state.psi})
+        print_json(
+            {"device": key, "joints": rows, "theta": state.theta, "psi": state.psi, "answers": answers}
+        )
         return
-    console.print(f"[bold]{key}[/]", highlight=False)
+    console.print(f"[bold]{key}[/]" + (f" (answers: {answers})" if answers else ""), highlight=False)
     for r in rows:
-        console.print(f"  joint {r['joint']}: {r['display']:>14}  ({r['source']})", highlight=False)
+        extra = ""
+        if r["uncertain"]:
+            lo, hi = r["uncertain"]
+            j = int(r["joint"])  # type: ignore[call-overload]
+            extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
+        console.print(
+            f"  joint {r['joint']}: {r['display']:>14}  ({r['source']}{extra})", highlight=False
+        )
     console.print(
         f"  tilt: theta = {math.degrees(state.theta):.4g} deg, "
         f"psi = {math.degrees(state.psi):.4g} deg",
