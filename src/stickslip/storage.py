@@ -123,8 +123,12 @@ SCHEMA_VERSION = len(MIGRATIONS)
 _COLUMNS = ("joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
 
 
-class StoreError(RuntimeError):
-    """The database cannot be opened or used (the message says why and where)."""
+class StoreError(OSError):
+    """The database cannot be opened, read or written (the message says why and where).
+
+    An ``OSError``: storage is the environment, and every command turns ``OSError`` into
+    one ``error:`` line.
+    """
 
 
 # ---------------------------------------------------------------- where the file lives
@@ -249,9 +253,11 @@ class Store:
         except sqlite3.DatabaseError as e:
             con.close()
             raise StoreError(f"{p} is not a usable stickslip database: {e}") from None
-        except StoreError:
+        except StoreError as e:
             con.close()
-            raise
+            if "newer than" in str(e):
+                raise
+            raise StoreError(f"{p} is not a usable stickslip database: {e}") from None
         return store
 
     def close(self) -> None:
@@ -275,14 +281,36 @@ class Store:
     def _write(self) -> Iterator[sqlite3.Connection]:
         """One write transaction, taken with ``BEGIN IMMEDIATE`` (waits on busy_timeout)."""
         con = self._con
-        con.execute("BEGIN IMMEDIATE")
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.DatabaseError as e:
+            raise StoreError(self._write_problem(e)) from None
         try:
             yield con
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-        else:
             con.execute("COMMIT")
+        except BaseException as e:
+            if con.in_transaction:
+                try:
+                    con.execute("ROLLBACK")
+                except sqlite3.DatabaseError:
+                    pass  # SQLite rolls back itself when the file cannot be written
+            if isinstance(e, sqlite3.DatabaseError) and not isinstance(e, sqlite3.IntegrityError):
+                raise StoreError(self._write_problem(e)) from None
+            raise
+
+    def _write_problem(self, e: sqlite3.DatabaseError) -> str:
+        text = str(e)
+        hint = {
+            "disk I/O error": "is the disk full, or the file too large for a quota?",
+            "database or disk is full": "free some space",
+            "attempt to write a readonly database": "the file or its folder is read-only",
+            "database is locked": "another process kept it busy for 30 s",
+        }.get(text, "")
+        return (
+            f"cannot write to the database {self.path}: {text}"
+            + (f" ({hint})" if hint else "")
+            + "; nothing of this change was stored"
+        )
 
     def _migrate(self) -> None:
         version = self.schema_version

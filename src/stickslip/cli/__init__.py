@@ -15,10 +15,11 @@ import inspect
 
 import typer
 
-from ._common import drop_warnings, flush_warnings
+from ._common import OneLineErrors, drop_warnings, flush_warnings
 
 app = typer.Typer(
     name="stickslip",
+    cls=OneLineErrors,
     help=(
         "Make piezoelectric stick-slip micromanipulators predictable without joint sensors.\n\n"
         "Measure a joint's average step size between its end stops, calibrate the load-aware "

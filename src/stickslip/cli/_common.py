@@ -15,13 +15,59 @@ from typing import NoReturn
 
 import typer
 from rich.console import Console
+from typer.core import TyperGroup
+
+try:  # recent typer vendors click; older ones use the click package
+    from typer._click.exceptions import ClickException, UsageError
+except ImportError:  # pragma: no cover - depends on the installed typer
+    from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..units import UnitError, parse_angle, parse_length
 
 console = Console()
 err_console = Console(stderr=True)
 
+EXIT_OK = 0
+EXIT_ABORTED = 1
 EXIT_BAD_INPUT = 2
+EXIT_CODES = {
+    EXIT_OK: "success",
+    EXIT_ABORTED: "interrupted (Ctrl-C) or declined at a confirmation",
+    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault: one `error:` line says which",
+}
+"""The documented exit codes of every command."""
+
+
+class OneLineErrors(TyperGroup):
+    """The command group, with click's usage errors as one ``error: ...`` line (exit 2).
+
+    Click prints usage errors (a missing option, ``--joint 4``, a count out of range)
+    as a multi-line panel; here they become the same one line as every other error.
+    """
+
+    def main(self, *args: object, standalone_mode: bool = True, **kwargs: object):  # type: ignore[override]  # click's signature
+        try:
+            rv = super().main(*args, standalone_mode=False, **kwargs)  # type: ignore[arg-type]  # same
+        except UsageError as e:
+            hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
+            message = " ".join(e.format_message().split())
+            if not standalone_mode:
+                raise
+            err_console.print(f"[bold red]error:[/] {message}{hint}", highlight=False, markup=True, soft_wrap=True)
+            sys.exit(EXIT_BAD_INPUT)
+        except ClickException as e:
+            if not standalone_mode:
+                raise
+            err_console.print(f"[bold red]error:[/] {' '.join(e.format_message().split())}", highlight=False, soft_wrap=True)
+            sys.exit(e.exit_code)
+        except (typer.Abort, KeyboardInterrupt):
+            if not standalone_mode:
+                raise
+            err_console.print("[bold red]error:[/] interrupted", highlight=False)
+            sys.exit(EXIT_ABORTED)
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else EXIT_OK)
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
@@ -116,9 +162,14 @@ def _unit_parser(parse: Callable[[str], float], what: str) -> Callable[[str | No
         if value is None:
             return None
         try:
-            return parse(value)
+            v = parse(value)
         except UnitError as e:
             raise typer.BadParameter(f"{e} ({what})") from None
+        except (ArithmeticError, ValueError, TypeError) as e:  # pi/0, 1e999: never a traceback
+            raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
+        if not math.isfinite(v):
+            raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
+        return v
 
     return callback
 

@@ -45,10 +45,13 @@ def _open_store(db: Path | None):
 def _parse_joint_value(joint: int, text: str, what: str) -> float:
     """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
     try:
-        return parse_length(text) if joint == 3 else parse_angle(text)
-    except UnitError as e:
+        v = parse_length(text) if joint == 3 else parse_angle(text)
+    except (UnitError, ArithmeticError, ValueError, TypeError) as e:
         kind = "a length (e.g. 30um, 1.5mm)" if joint == 3 else "an angle (e.g. 2deg, 40urad)"
         fail(f"{what}: {e}; joint {joint} takes {kind}")
+    if not math.isfinite(v):
+        fail(f"{what}: {text!r} is not a finite value")
+    return v
 
 
 def _apply_pose_options(state: DeviceState, q1, q2, q3, theta, psi) -> list[str]:

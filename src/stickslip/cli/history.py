@@ -15,6 +15,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from . import app
+from ..devices.base import redact_url
 from ._common import console, fail, print_json, user_errors, warn, warn_later
 
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
@@ -54,7 +55,7 @@ def _traverses_from(meas: Path | None, db: Path | None, device: str | None, day:
         ts = st.traverses(device=device, day=day)
         where = f"the database {st.path}"
     if not ts:
-        what = " and ".join(x for x in (f"device {device}" if device else "", f"day {day}" if day else "") if x)
+        what = " and ".join(x for x in (f"device {redact_url(device)}" if device else "", f"day {day}" if day else "") if x)
         fail(f"no traverses in {where}{' for ' + what if what else ''}: pass MEAS.csv or import one first")
     return ts, where
 
@@ -79,7 +80,7 @@ def history(
         print_json(entries)
         return
     if not entries:
-        console.print(f"no sessions stored in {path}" + (f" for device {device}" if device else ""))
+        console.print(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""))
         return
     table = Table(title=f"stickslip history ({path})")
     table.add_column("device", overflow="fold")
@@ -152,7 +153,7 @@ def import_(
         print_json({"imported": len(ids), "ids": ids, "db": str(path)})
     else:
         days = sorted({t.day for t in ts})
-        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {device} into {path}")
+        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {redact_url(device)} into {path}")
 
 
 # ---------------------------------------------------------------- anova
