@@ -52,9 +52,11 @@ class FaultyController:
     def set_frequency(self, joint: int, hz: float) -> None: ...
     def frequency(self, joint: int) -> float:
         return 1000.0
+
     def stop(self, joint: int | None = None) -> None: ...
     def settings(self) -> dict[str, object]:
         return {}
+
     def close(self) -> None: ...
 
 

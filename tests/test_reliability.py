@@ -175,10 +175,9 @@ def _all_db_bytes(db: Path) -> bytes:
 def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch, cal_path):
     """import / fit --record / move / where / history --json with a password: absent everywhere."""
     pytest.importorskip("pymeasure")
-    from synth import seed_table
-
     from stickslip.devices.emulators import ANC300Emulator
     from stickslip.measurements import measurements_to_csv
+    from synth import seed_table
 
     caplog.set_level(logging.DEBUG)
     db = tmp_path / "s.db"
@@ -196,8 +195,19 @@ def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch,
             ("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "20um", "--burst", 10),
             ("where", "-d", url, "--db", db, "--json"),
             ("history", "--db", db, "--json"),
-            ("move", "-d", url.replace("delay=", "bogus=1&delay="), "-c", cal_path, "--db", db,
-             "--joint", 3, "--by", "1um"),
+            (
+                "move",
+                "-d",
+                url.replace("delay=", "bogus=1&delay="),
+                "-c",
+                cal_path,
+                "--db",
+                db,
+                "--joint",
+                3,
+                "--by",
+                "1um",
+            ),
         ):
             r = run(*args)
             outputs.append((args[0], r.exit_code, r.output))
@@ -251,8 +261,11 @@ def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faul
     truth = float(planning.dead_reckon(cal, 3, 0.0, moved, pose))
     assert lo <= truth <= hi  # never silently wrong: the truth is inside the bounds
     # move refuses to plan from it; joints 1 and 2 are unaffected
-    one_error(run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3, "--by", "1um"),
-              "uncertain", "--set 3=min")
+    one_error(
+        run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3, "--by", "1um"),
+        "uncertain",
+        "--set 3=min",
+    )
     assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 2, "--by", "1deg").exit_code == 0
     # re-referenced at the stop: planning works again
     assert run("where", "-d", "faulty://arm", "--db", db, "--set", "3=min").exit_code == 0
@@ -307,13 +320,34 @@ def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path)
     script = tmp_path / "worker.py"
     script.write_text(_WORKER.format(tests=str(Path(__file__).parent)))
     env = {**os.environ, "STICKSLIP_DB": str(db)}
-    subprocess.run([sys.executable, str(script), "where", "-d", url, "--set", "3=min", "--offline"],
-                   env=env, check=True, capture_output=True, timeout=60)
+    subprocess.run(
+        [sys.executable, str(script), "where", "-d", url, "--set", "3=min", "--offline"],
+        env=env,
+        check=True,
+        capture_output=True,
+        timeout=60,
+    )
     procs = [
         subprocess.Popen(
-            [sys.executable, str(script), "move", "-d", url, "-c", str(cal_path), "--joint", "3",
-             "--by", "50um", "--burst", "5"],
-            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            [
+                sys.executable,
+                str(script),
+                "move",
+                "-d",
+                url,
+                "-c",
+                str(cal_path),
+                "--joint",
+                "3",
+                "--by",
+                "50um",
+                "--burst",
+                "5",
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
         )
         for _ in range(4)
     ]
@@ -326,9 +360,16 @@ def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path)
     cal = calibration.Calibration.load(cal_path)
     moved = sum(int(x) for x in log.read_text().split())
     steps_each = planning.plan_move(cal, 3, 0.0, 50e-6, kin.Pose()).steps
-    w = json.loads(subprocess.run(
-        [sys.executable, str(script), "where", "-d", url, "--json", "--offline"],
-        env=env, check=True, capture_output=True, text=True, timeout=60).stdout)
+    w = json.loads(
+        subprocess.run(
+            [sys.executable, str(script), "where", "-d", url, "--json", "--offline"],
+            env=env,
+            check=True,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        ).stdout
+    )
     q = w["joints"][2]["q"]
     # what the hardware did equals what the database says (the sum of the moves that ran)
     assert moved > 0 and moved % steps_each == 0 or len(ok) > 1
@@ -383,10 +424,9 @@ _FSIZE = textwrap.dedent(
 @pytest.mark.skipif(not hasattr(os, "setrlimit") and sys.platform == "win32", reason="RLIMIT_FSIZE is POSIX")
 def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
     pytest.importorskip("resource")
-    from synth import seed_table
-
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
+    from synth import seed_table
 
     db = tmp_path / "s.db"
     small, big = tmp_path / "small.csv", tmp_path / "big.csv"
@@ -395,14 +435,24 @@ def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
     env = {**os.environ, "STICKSLIP_DB": str(db)}
     script = tmp_path / "fsize.py"
     script.write_text(_FSIZE)
-    ok = subprocess.run([sys.executable, str(script), str(10**9), "import", str(small)],
-                        env=env, capture_output=True, text=True, timeout=60)
+    ok = subprocess.run(
+        [sys.executable, str(script), str(10**9), "import", str(small)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert ok.returncode == 0, ok.stderr
     with Store.open(db) as st:
         before = st.count_traverses()
     size = sum(f.stat().st_size for f in tmp_path.glob("s.db*"))
-    r = subprocess.run([sys.executable, str(script), str(size + 8192), "import", str(big)],
-                       env=env, capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [sys.executable, str(script), str(size + 8192), "import", str(big)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 2, (r.returncode, r.stderr)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error:") and "Traceback" not in r.stderr, r.stderr
@@ -420,3 +470,19 @@ def test_foreign_sqlite_and_read_only_database(tmp_path):
     con.close()
     one_error(run("history", "--db", foreign), "newer")
     one_error(run("where", "--db", tmp_path / "nodb.db", "--offline", "--set", "3=min", "--q2", "pi/0"))
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["move", "-j", "2", "--by", "-60"], ["outside joint 2's range", "did you mean -60deg?"]),
+        (["move", "-j", "1", "--to", "45"], ["did you mean 45deg?"]),
+        (["where", "--offline", "--set", "2=-60"], ["did you mean -60deg?"]),
+    ],
+)
+def test_bare_numbers_outside_the_range_suggest_degrees(tmp_path, cal_path, args, words):
+    extra = ["-c", cal_path] if args[0] == "move" else []
+    one_error(run(*args, *extra, "--db", tmp_path / "s.db"), *words)
+    # in range, a bare number is radians, as documented
+    r = run("move", "-j", "2", "--by", "-0.01", "-c", cal_path, "--db", tmp_path / "s.db", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["q_to"] == pytest.approx(-math.pi / 2 - 0.01)

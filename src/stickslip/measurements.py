@@ -25,6 +25,7 @@ import numpy as np
 
 from . import kinematics as kin
 from .models import direction_label
+from .records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 
 __all__ = [
     "HEADER",
@@ -248,16 +249,18 @@ def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
 
 
 def _read_table_text(path: str | Path) -> str:
-    """The text of a CSV table; a missing or non-UTF-8 file raises :class:`TableError`."""
+    """The text of a CSV table (a regular file, at most :data:`records.MAX_TABLE_BYTES`).
+
+    A missing file, a folder, a pipe or device (never opened, so it cannot hang), a file
+    over the size limit or non-UTF-8 text raises :class:`TableError`.
+    """
     p = Path(path)
+    if not p.exists():
+        raise TableError([f"{p}: no such file"])
     try:
-        return p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise TableError([f"{p}: no such file"]) from None
-    except IsADirectoryError:
-        raise TableError([f"{p}: is a folder, not a CSV file"]) from None
-    except UnicodeDecodeError:
-        raise TableError([f"{p}:1: not a UTF-8 text file"]) from None
+        return read_text_bounded(p, "CSV", MAX_TABLE_BYTES)
+    except ValueError as e:
+        raise TableError([str(e)]) from None
 
 
 def read_measurements(path: str | Path) -> list[Traverse]:
@@ -283,7 +286,7 @@ def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
 
 def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
     """Write a measurement table to a CSV file."""
-    Path(path).write_text(measurements_to_csv(traverses), encoding="utf-8")
+    atomic_write_text(path, measurements_to_csv(traverses))  # a failed write keeps the old file
 
 
 def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:

@@ -125,9 +125,7 @@ def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
         raise ValueError(f"{where} must be a positive step size in {unit}, got {v!r}")
     if size > hi or (not signed and size < lo):
         hint = " (nm or urad written where SI metres/radians are expected?)" if size > hi else ""
-        raise ValueError(
-            f"{where} = {v!r} {unit} is outside the plausible range {lo:g}..{hi:g} {unit}{hint}"
-        )
+        raise ValueError(f"{where} = {v!r} {unit} is outside the plausible range {lo:g}..{hi:g} {unit}{hint}")
 
 
 def _check_parameter(rec: object, i: int) -> None:

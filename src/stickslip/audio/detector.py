@@ -218,7 +218,7 @@ class Tuning:
     def save(self, path: str | Path) -> Path:
         """Write the tuning as JSON; returns the path."""
         p = Path(path)
-        p.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        records.atomic_write_text(p, json.dumps(self.to_dict(), indent=2) + "\n")
         return p
 
     @classmethod

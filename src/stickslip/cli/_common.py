@@ -15,6 +15,7 @@ from typing import NoReturn
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from typer.core import TyperGroup
 
 try:  # recent typer vendors click; older ones use the click package
@@ -53,12 +54,12 @@ class OneLineErrors(TyperGroup):
             message = " ".join(e.format_message().split())
             if not standalone_mode:
                 raise
-            err_console.print(f"[bold red]error:[/] {message}{hint}", highlight=False, markup=True, soft_wrap=True)
+            _print_error(message + hint)
             sys.exit(EXIT_BAD_INPUT)
         except ClickException as e:
             if not standalone_mode:
                 raise
-            err_console.print(f"[bold red]error:[/] {' '.join(e.format_message().split())}", highlight=False, soft_wrap=True)
+            _print_error(e.format_message())
             sys.exit(e.exit_code)
         except (typer.Abort, KeyboardInterrupt):
             if not standalone_mode:
@@ -72,14 +73,24 @@ class OneLineErrors(TyperGroup):
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
     """Print ``error: message`` to stderr and exit with ``code`` (2 = bad input)."""
-    for line in str(message).splitlines() or [""]:
-        err_console.print(f"[bold red]error:[/] {line}", highlight=False, markup=True, soft_wrap=True)
+    _print_error(message)
     raise typer.Exit(code)
+
+
+def _print_error(message: object) -> None:
+    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+
+
+def one_line(message: object) -> str:
+    """``message`` as one printable line: line breaks become ``; ``, control characters escapes."""
+    parts = [p.strip() for p in str(message).splitlines() if p.strip()]
+    text = "; ".join(parts)
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def warn(message: str) -> None:
     """Print ``warning: message`` to stderr."""
-    err_console.print(f"[bold yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+    err_console.print(f"[bold yellow]warning:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
 
 
 _pending_warnings: list[str] = []

@@ -97,6 +97,17 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
     return rows
 
 
+def _degree_hint(joint: int, text: str | None) -> str:
+    """For a bare number on a rotary joint: ``"; a bare number is radians: did you mean 5deg?"``."""
+    if joint == 3 or text is None:
+        return ""
+    try:
+        float(text.strip())
+    except ValueError:
+        return ""
+    return f"; a bare number is radians: did you mean {text.strip()}deg?"
+
+
 def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> tuple[float, float]:
     spec = kin.JOINTS[joint]
     q_from = state.positions[joint]
@@ -116,6 +127,7 @@ def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> t
             f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
             f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
             f"(from {format_position(q_from, joint)}); positions are in {unit}"
+            + _degree_hint(joint, to if to is not None else by)
         )
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
@@ -229,7 +241,7 @@ def move(
         else:
             kept = f"joint {joint}'s dead-reckoned position {format_position(q_from, joint)} is kept"
         fail(f"{outcome.error}; sent {outcome.sent} of {steps} steps; {kept}")
-    sent, bursts = outcome.sent, outcome.bursts
+    bursts = outcome.bursts
     result = {
         "device": key,
         "joint": joint,
@@ -331,8 +343,10 @@ def where(
                 q = spec.upper
             else:
                 q = _parse_joint_value(j, value, f"--set {item}")
-            with user_errors():
+            try:
                 state.set_position(j, q, "set")
+            except ValueError as e:
+                fail(f"--set {item}: {e}{_degree_hint(j, value)}")
             changed.append(f"q{j}")
         if changed:
             with user_errors():

@@ -14,8 +14,8 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from . import app
 from ..devices.base import redact_url
+from . import app
 from ._common import console, fail, print_json, user_errors, warn, warn_later
 
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
@@ -55,7 +55,8 @@ def _traverses_from(meas: Path | None, db: Path | None, device: str | None, day:
         ts = st.traverses(device=device, day=day)
         where = f"the database {st.path}"
     if not ts:
-        what = " and ".join(x for x in (f"device {redact_url(device)}" if device else "", f"day {day}" if day else "") if x)
+        dev_text = f"device {redact_url(device)}" if device else ""
+        what = " and ".join(x for x in (dev_text, f"day {day}" if day else "") if x)
         fail(f"no traverses in {where}{' for ' + what if what else ''}: pass MEAS.csv or import one first")
     return ts, where
 

@@ -48,10 +48,10 @@ from .base import (
     secret_from_env,
     url_options,
 )
+from .transport import SerialTransport, SocketTransport, Transport
 
 PASSWORD_ENV = "STICKSLIP_ANC300_PASSWORD"
 """Environment variable holding the ANC300 console password."""
-from .transport import SerialTransport, SocketTransport, Transport
 
 __all__ = ["ANC300", "TransportAdapter", "open_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
 
