@@ -486,3 +486,37 @@ def test_bare_numbers_outside_the_range_suggest_degrees(tmp_path, cal_path, args
     # in range, a bare number is radians, as documented
     r = run("move", "-j", "2", "--by", "-0.01", "-c", cal_path, "--db", tmp_path / "s.db", "--json")
     assert r.exit_code == 0 and json.loads(r.stdout)["q_to"] == pytest.approx(-math.pi / 2 - 0.01)
+
+
+# -- 5: duplicates ----------------------------------------------------------------------------
+
+
+def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path):
+    import dataclasses
+
+    from synth import seed_table
+
+    from stickslip.measurements import measurements_to_csv
+
+    db = tmp_path / "s.db"
+    t = seed_table()[0]
+    shift = lambda tr, d: dataclasses.replace(tr, q1=tr.q1 + d)  # noqa: E731  (same pose group within 1e-3 rad)
+    day2 = dataclasses.replace(t, day="2026-11-21", steps=t.steps + 7)
+    # each day: two repeats with exactly equal average steps (zero spread within days)
+    rows = [t, shift(t, 1e-6), day2, shift(day2, 1e-6)]
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    a.write_text(measurements_to_csv(rows))
+    b.write_text(measurements_to_csv(rows) + "\n")  # the same rows again, another file
+    assert run("import", a, "--db", db).exit_code == 0
+    one_error(run("import", a, "--db", db), "imported before")
+    assert run("import", b, "--db", db).exit_code == 0
+    r = run("anova", "--db", db, "--json")
+    assert r.exit_code == 0, r.output
+    assert "4 traverse(s) are exact copies" in r.stderr and "no spread" in r.stderr
+    out = json.loads(r.stdout)
+    assert out and all(row["F"] is None or math.isfinite(row["F"]) for row in out)
+    degenerate = [row for row in out if row.get("verdict") == "degenerate"]
+    assert degenerate and not any(row["significant"] for row in degenerate)
+    r = run("anova", "--db", db)
+    assert r.exit_code == 0 and "inf" not in r.stdout and "degenerate" in r.stdout
+    assert "SIGNIFICANT" not in r.stdout

@@ -160,6 +160,19 @@ def import_(
 # ---------------------------------------------------------------- anova
 
 
+def _without_duplicates(ts: list) -> tuple[list, int]:
+    """``ts`` with exact copies removed (same day, joint, direction, pose, range, steps), and how many."""
+    seen: set[tuple] = set()
+    kept = []
+    for t in ts:
+        key = tuple(getattr(t, f) for f in ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi",
+                                             "start", "end", "steps"))
+        if key not in seen:
+            seen.add(key)
+            kept.append(t)
+    return kept, len(ts) - len(kept)
+
+
 @app.command()
 def anova(
     meas: Path | None = typer.Argument(None, help="Measurement table (CSV); default: the database."),
@@ -184,10 +197,26 @@ def anova(
     if not 0.0 < alpha < 1.0:
         fail(f"--alpha must be in (0, 1), got {alpha}")
     ts, where = _traverses_from(meas, db, device, None)
+    ts, dups = _without_duplicates(ts)
+    if dups:
+        warn_later(
+            f"{dups} traverse(s) are exact copies of others (a table imported twice, a demo run twice?); "
+            "each is counted once"
+        )
     with user_errors(ImportError):
         res = run_anova(ts, alpha=alpha, two_way=two_way)
+    degenerate = [t for t in res.tests if not math.isfinite(t.F)]
+    if degenerate:
+        warn_later(
+            f"{len(degenerate)} test(s) have no spread within their groups (F undefined): identical repeats "
+            "cannot show a difference; they are marked 'degenerate', not significant"
+        )
     if json_out:
-        print_json(res.rows())
+        rows = res.rows()
+        for row, t in zip(rows, res.tests):
+            if not math.isfinite(t.F):
+                row.update(F=None, p=None, significant=False, verdict="degenerate")
+        print_json(rows)
         return
     console.print(f"ANOVA of the average step size, {len(ts)} traverses from {where}")
     if not res.tests:
@@ -209,13 +238,15 @@ def anova(
                 "two-way": f"2-way {t.joint} {t.term}",
             }[t.test]
             verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
+            if not math.isfinite(t.F):
+                verdict = "degenerate"
             table.add_row(
                 what,
                 PoseGroup(t.joint, t.pose, t.interval).describe(),
                 str(t.n),
-                f"{t.F:.4g}",
-                f"{t.p:.3g}" if math.isfinite(t.p) else "-",
-                f"[bold red]{verdict}[/]" if t.significant(alpha) else verdict,
+                f"{t.F:.4g}" if math.isfinite(t.F) else "-",
+                f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
+                f"[bold red]{verdict}[/]" if verdict == "SIGNIFICANT" else verdict,
             )
         console.print(table)
     if show_skipped:
