@@ -213,7 +213,7 @@ def anova(
         )
     if json_out:
         rows = res.rows()
-        for row, t in zip(rows, res.tests):
+        for row, t in zip(rows, res.tests, strict=True):
             if not math.isfinite(t.F):
                 row.update(F=None, p=None, significant=False, verdict="degenerate")
         print_json(rows)
