@@ -494,9 +494,8 @@ def test_bare_numbers_outside_the_range_suggest_degrees(tmp_path, cal_path, args
 def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path):
     import dataclasses
 
-    from synth import seed_table
-
     from stickslip.measurements import measurements_to_csv
+    from synth import seed_table
 
     db = tmp_path / "s.db"
     t = seed_table()[0]
