@@ -204,6 +204,8 @@ cells = st.one_of(
 @FUZZ
 @given(header=st.lists(header_cells, min_size=1, max_size=12), rows=st.lists(st.lists(cells, max_size=12), max_size=4))
 def test_tables(tmp_path, header, rows):
+    if len(header) > 1 and header[0] == "day":  # often a well-formed header, to reach the cells
+        header = ["day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps"]
     p = tmp_path / "t.csv"
     p.write_text("\n".join(",".join(r) for r in [header, *rows]) + "\n")
     check(["calibrate", p, "-o", tmp_path / "c.json"])

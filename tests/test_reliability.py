@@ -519,3 +519,34 @@ def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path)
     r = run("anova", "--db", db)
     assert r.exit_code == 0 and "inf" not in r.stdout and "degenerate" in r.stdout
     assert "SIGNIFICANT" not in r.stdout
+
+
+GOOD_ROW = {"day": DAY, "joint": "3", "direction": "+", "q1": "0", "q2": "-1.5707963", "q3": "0",
+            "theta": "0", "psi": "0", "start": "0", "end": "0.012", "steps": "12000"}  # fmt: skip
+
+
+@pytest.mark.parametrize("column", list(GOOD_ROW))
+@pytest.mark.parametrize("value", ["9223372036854775808", "1e999", "nan", "pi/0", "x" * 200_000, "-1", ""])
+def test_one_hostile_cell_in_a_good_table(tmp_path, column, value):
+    row = {**GOOD_ROW, column: value}
+    p = tmp_path / "t.csv"
+    p.write_text(",".join(GOOD_ROW) + "\n" + ",".join(row.values()) + "\n")
+    for cmd in (["import", p, "--db", tmp_path / "s.db"], ["calibrate", p], ["anova", p], ["fit", p]):
+        r = run(*cmd)
+        assert r.exception is None or isinstance(r.exception, SystemExit), (cmd, column, repr(r.exception))
+        if r.exit_code != 0:
+            one_error(r)
+
+
+def test_duplicated_column_is_refused(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text(",".join([*GOOD_ROW, "steps"]) + "\n" + ",".join([*GOOD_ROW.values(), "5"]) + "\n")
+    one_error(run("import", p, "--db", tmp_path / "s.db"), "steps")
+
+
+def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
+    p = tmp_path / "poses.csv"
+    p.write_text("joint,direction,q1,q2,q3,theta,psi,q2\n3,+,0,-1.57,0,0,0,0\n")
+    one_error(run("predict", "-c", cal_path, p), "q2", "more than once")
+    p.write_text("joint,direction,q1,q2,q3,theta,psi,note\n3,+,0,-1.57,0,0,0," + "x" * 200_000 + "\n")
+    one_error(run("predict", "-c", cal_path, p), "longer than")
