@@ -550,3 +550,36 @@ def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
     one_error(run("predict", "-c", cal_path, p), "q2", "more than once")
     p.write_text("joint,direction,q1,q2,q3,theta,psi,note\n3,+,0,-1.57,0,0,0," + "x" * 200_000 + "\n")
     one_error(run("predict", "-c", cal_path, p), "longer than")
+
+
+def test_delete_traverses_and_sessions_with_confirmation(tmp_path):
+    from synth import seed_table
+
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    ts = seed_table()
+    p = tmp_path / "a.csv"
+    p.write_text(measurements_to_csv([*ts, *(dataclasses_replace(t, day="2026-11-21") for t in ts)]))
+    assert run("import", p, "--db", db).exit_code == 0
+    r = runner.invoke(app, ["delete", "--day", "2026-11-21", "--db", str(db)], input="n\n")
+    assert r.exit_code == 1 and "nothing deleted" in r.stderr
+    with Store.open(db) as st:
+        assert st.count_traverses() == 2 * len(ts)
+        first = st.traverse_ids(day=DAY)[0]
+    r = run("delete", "--day", "2026-11-21", "--db", db, "--yes", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout) == {"traverses": len(ts), "calibration_links": 0, "integrity": "ok"}
+    one_error(run("delete", "-t", 999999, "-t", first, "--db", db, "--yes"), "999999")
+    r = runner.invoke(app, ["delete", "-t", str(first), "--db", str(db)], input="y\n")
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        assert st.count_traverses() == len(ts) - 1 and st.days() == [DAY]
+        assert st.integrity_check() == "ok"
+
+
+def dataclasses_replace(t, **kw):
+    import dataclasses
+
+    return dataclasses.replace(t, **kw)

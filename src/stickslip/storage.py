@@ -739,6 +739,37 @@ class Store:
         ).fetchone()
         return default if row is None else json.loads(row[0])
 
+    # -- deleting
+
+    def traverse_ids(self, device: str | None = None, day: str | None = None) -> list[int]:
+        """Ids of the stored traverses (of one device and/or session day)."""
+        return [int(r["id"]) for r in self._traverse_rows(device, day, None)]
+
+    def delete_traverses(self, ids: Sequence[int]) -> dict[str, int]:
+        """Delete traverses by id in one transaction; ``{"traverses": n, "calibration_links": m}``.
+
+        Calibrations made from them keep their stored parameters (their JSON is complete);
+        only the links to the deleted rows go. Sessions left empty are removed. Raises
+        ``ValueError`` naming ids that do not exist (and deletes nothing).
+        """
+        ids = sorted({int(i) for i in ids})
+        if not ids:
+            return {"traverses": 0, "calibration_links": 0}
+        marks = ",".join("?" * len(ids))
+        with self._write() as con:
+            found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
+            missing = [i for i in ids if i not in found]
+            if missing:
+                raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
+            links = con.execute(f"DELETE FROM calibration_traverses WHERE traverse_id IN ({marks})", ids).rowcount
+            n = con.execute(f"DELETE FROM traverses WHERE id IN ({marks})", ids).rowcount
+            con.execute(
+                "DELETE FROM sessions WHERE id NOT IN (SELECT session_id FROM traverses) "
+                "AND NOT EXISTS (SELECT 1 FROM calibrations c WHERE c.device_id = sessions.device_id "
+                "AND c.day = sessions.day)"
+            )
+        return {"traverses": int(n), "calibration_links": int(links)}
+
     # -- one process drives a device at a time
 
     def acquire_lock(self, device: str, holder: dict[str, Any]) -> dict[str, Any] | None:

@@ -157,6 +157,49 @@ def import_(
         console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {redact_url(device)} into {path}")
 
 
+# ---------------------------------------------------------------- delete
+
+
+@app.command()
+def delete(
+    traverse: list[int] = typer.Option(None, "--traverse", "-t", help="Id of a traverse to delete (repeatable)."),
+    day: str | None = typer.Option(None, "--day", help="Delete every traverse of this session day."),
+    device: str | None = typer.Option(None, "--device", "-d", help="With --day: only this device."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print what was deleted as JSON."),
+) -> None:
+    """Delete stored traverses (by id, or a whole session day), after confirmation.
+
+    Calibrations made from them keep their parameters; only their links to the rows go.
+    Ids are in `stickslip export` and `stickslip history --json`.
+
+    Example: [bold]stickslip delete --day 2026-11-22 --device sim:// --yes[/]
+    """
+    if not traverse and day is None:
+        fail("give --traverse ID (repeatable) or --day DAY")
+    with _open_store(db) as st:
+        ids = list(traverse or [])
+        if day is not None:
+            ids += st.traverse_ids(device=device, day=day)
+            if not ids:
+                fail(f"no stored traverses for day {day}" + (f" of {redact_url(device)}" if device else ""))
+        what = f"{len(set(ids))} traverse(s)" + (f" of day {day}" if day else "")
+        if not yes and not typer.confirm(f"delete {what} from {st.path}?", default=False, err=True):
+            fail("nothing deleted (not confirmed; --yes skips the question)", code=1)
+        with user_errors():
+            done = st.delete_traverses(ids)
+        ok = st.integrity_check()
+    if json_out:
+        print_json({**done, "integrity": ok})
+        return
+    console.print(
+        f"deleted {done['traverses']} traverse(s)"
+        + (f"; {done['calibration_links']} calibration link(s) removed" if done["calibration_links"] else ""),
+        highlight=False,
+    )
+
+
 # ---------------------------------------------------------------- anova
 
 
