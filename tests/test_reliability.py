@@ -553,10 +553,9 @@ def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
 
 
 def test_delete_traverses_and_sessions_with_confirmation(tmp_path):
-    from synth import seed_table
-
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
+    from synth import seed_table
 
     db = tmp_path / "s.db"
     ts = seed_table()
