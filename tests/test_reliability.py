@@ -582,3 +582,29 @@ def dataclasses_replace(t, **kw):
     import dataclasses
 
     return dataclasses.replace(t, **kw)
+
+
+def test_exclude_keeps_rows_out_of_analyses_and_undo_brings_them_back(tmp_path):
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.storage import Store
+    from synth import seed_table
+
+    db = tmp_path / "s.db"
+    ts = seed_table()
+    p = tmp_path / "a.csv"
+    p.write_text(measurements_to_csv(ts))
+    assert run("import", p, "--db", db).exit_code == 0
+    with Store.open(db) as st:
+        ids = st.traverse_ids()
+    one_error(run("exclude", "-t", ids[0], "--db", db), "--reason")
+    one_error(run("exclude", "-t", 10**9, "--reason", "x", "--db", db), str(10**9))
+    assert run("exclude", "-t", ids[0], "-t", ids[1], "--reason", "cable snagged", "--db", db).exit_code == 0
+    with Store.open(db) as st:
+        assert len(st.traverses()) == len(ts) - 2
+        (entry,) = st.history()
+        assert entry["traverses"] == len(ts) - 2 and entry["excluded"] == 2
+    # the excluded rows are not fitted: two of joint 3+'s three poses are gone
+    one_error(run("fit", "--db", db, "--json"), "joint 3+", "1 traverse")
+    assert run("exclude", "-t", ids[0], "-t", ids[1], "--undo", "--db", db).exit_code == 0
+    with Store.open(db) as st:
+        assert len(st.traverses()) == len(ts)

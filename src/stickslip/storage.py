@@ -117,6 +117,10 @@ MIGRATIONS: tuple[str, ...] = (
         PRIMARY KEY (device_id, key)
     );
     """,
+    # version 1 -> 2: a traverse can be excluded from analyses (the reason is kept; NULL = used)
+    """
+    ALTER TABLE traverses ADD COLUMN excluded TEXT
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -467,11 +471,14 @@ class Store:
         day: str | None,
         joint: int | None,
         ids: Sequence[int] | None = None,
+        include_excluded: bool = False,
     ) -> list[sqlite3.Row]:
         sql = (
             "SELECT t.*, s.day AS day, d.url AS device FROM traverses t "
             "JOIN sessions s ON s.id = t.session_id JOIN devices d ON d.id = s.device_id WHERE 1=1"
         )
+        if not include_excluded:
+            sql += " AND t.excluded IS NULL"
         args: list[Any] = []
         if device is not None:
             sql += " AND d.url = ?"
@@ -667,7 +674,8 @@ class Store:
         """
         sql = (
             "SELECT d.url AS device, s.day AS day, t.joint AS joint, t.direction AS direction, "
-            "COUNT(t.id) AS n, MIN(t.measured_at) AS first, MAX(t.measured_at) AS last "
+            "COUNT(t.id) AS n, SUM(t.excluded IS NOT NULL) AS x, "
+            "MIN(t.measured_at) AS first, MAX(t.measured_at) AS last "
             "FROM sessions s JOIN devices d ON d.id = s.device_id "
             "LEFT JOIN traverses t ON t.session_id = s.id"
         )
@@ -684,6 +692,7 @@ class Store:
                     "device": r["device"],
                     "day": r["day"],
                     "traverses": 0,
+                    "excluded": 0,
                     "by_joint": {},
                     "first_measured_at": None,
                     "last_measured_at": None,
@@ -692,8 +701,10 @@ class Store:
             )
             if r["joint"] is None:
                 continue
-            e["traverses"] += int(r["n"])
-            e["by_joint"][f"{r['joint']}{r['direction']}"] = int(r["n"])
+            used = int(r["n"]) - int(r["x"] or 0)
+            e["traverses"] += used
+            e["excluded"] += int(r["x"] or 0)
+            e["by_joint"][f"{r['joint']}{r['direction']}"] = used
             if e["first_measured_at"] is None or r["first"] < e["first_measured_at"]:
                 e["first_measured_at"] = r["first"]
             if e["last_measured_at"] is None or r["last"] > e["last_measured_at"]:
@@ -743,7 +754,24 @@ class Store:
 
     def traverse_ids(self, device: str | None = None, day: str | None = None) -> list[int]:
         """Ids of the stored traverses (of one device and/or session day)."""
-        return [int(r["id"]) for r in self._traverse_rows(device, day, None)]
+        return [int(r["id"]) for r in self._traverse_rows(device, day, None, include_excluded=True)]
+
+    def set_excluded(self, ids: Sequence[int], reason: str | None) -> int:
+        """Exclude traverses from analyses (``reason``, kept) or include them again (``None``).
+
+        Excluded traverses stay stored (``export``/``history`` count them apart) but are not
+        returned by :meth:`traverses`. Raises ``ValueError`` naming unknown ids (nothing changes).
+        """
+        ids = sorted({int(i) for i in ids})
+        if reason is not None and not reason.strip():
+            raise ValueError("give a reason for excluding (e.g. 'cable snagged')")
+        marks = ",".join("?" * len(ids))
+        with self._write() as con:
+            found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
+            missing = [i for i in ids if i not in found]
+            if missing:
+                raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
+            return int(con.execute(f"UPDATE traverses SET excluded = ? WHERE id IN ({marks})", [reason, *ids]).rowcount)
 
     def delete_traverses(self, ids: Sequence[int]) -> dict[str, int]:
         """Delete traverses by id in one transaction; ``{"traverses": n, "calibration_links": m}``.

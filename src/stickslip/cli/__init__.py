@@ -68,7 +68,7 @@ _PANELS = {
     "Measure": ("demo", "traverse", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
     "Drive a manipulator": ("move", "where"),
-    "Keep and study": ("history", "import", "export", "anova", "report"),
+    "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}
 _ORDER = [name for names in _PANELS.values() for name in names]

@@ -98,7 +98,8 @@ def history(
                 span = f"{e['first_measured_at'][:10]} {span}"
         cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
         by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
-        table.add_row(e["device"], e["day"], str(e["traverses"]), by, span, cals)
+        n = str(e["traverses"]) + (f" (+{e['excluded']} excluded)" if e.get("excluded") else "")
+        table.add_row(e["device"], e["day"], n, by, span, cals)
     console.print(table)
 
 
@@ -157,7 +158,26 @@ def import_(
         console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {redact_url(device)} into {path}")
 
 
-# ---------------------------------------------------------------- delete
+# ---------------------------------------------------------------- exclude / delete
+
+
+@app.command()
+def exclude(
+    traverse: list[int] = typer.Option(..., "--traverse", "-t", help="Id of a traverse (repeatable)."),
+    reason: str | None = typer.Option(None, "--reason", "-r", help="Why (kept with the row), e.g. 'cable snagged'."),
+    undo: bool = typer.Option(False, "--undo", help="Use the traverses again."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+) -> None:
+    """Exclude stored traverses from calibration and analyses (kept, with the reason), or --undo.
+
+    Example: [bold]stickslip exclude -t 12 -t 13 --reason "arm touched the sample"[/]
+    """
+    if undo == (reason is not None):
+        fail("give --reason TEXT to exclude, or --undo to use the traverses again")
+    with _open_store(db) as st, user_errors():
+        n = st.set_excluded(traverse, None if undo else reason)
+    console.print(f"{'included' if undo else 'excluded'} {n} traverse(s)", highlight=False)
+
 
 
 @app.command()
