@@ -608,3 +608,20 @@ def test_exclude_keeps_rows_out_of_analyses_and_undo_brings_them_back(tmp_path):
     assert run("exclude", "-t", ids[0], "-t", ids[1], "--undo", "--db", db).exit_code == 0
     with Store.open(db) as st:
         assert len(st.traverses()) == len(ts)
+
+
+def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path, faulty):
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:  # a holder on another host: never taken over automatically
+        assert (
+            st.acquire_lock("faulty://arm", {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"}) is None
+        )
+    one_error(
+        run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um"),
+        "pid 4242 on bench-pc since 2026-11-22T10:00:00",
+        "--unlock",
+    )
+    assert run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline").exit_code == 0
+    assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um").exit_code == 0

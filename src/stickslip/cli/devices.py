@@ -9,7 +9,9 @@ opened at the kept positions (each invocation starts a fresh simulator).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -132,7 +134,18 @@ def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> t
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
 
-def _move_locked(store, key, device, cal, joint, by, to, burst, pose_opts, drive):
+def _move_locked(
+    store: Any,
+    key: str,
+    device: str,
+    cal: Any,
+    joint: int,
+    by: str | None,
+    to: str | None,
+    burst: int,
+    pose_opts: tuple[float | None, ...],
+    drive: Callable[..., Any],
+) -> tuple[Any, DeviceState, int, float, float, float, float | None]:
     """The part of `move` that runs holding the device lock: plan from the kept state, drive."""
     from ..procedures.move import MoveOutcome
 

@@ -50,7 +50,8 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     if holder is not None:
         raise DeviceBusy(
             f"{device} is being driven by another stickslip process (pid {holder.get('pid')} on "
-            f"{holder.get('host')} since {holder.get('since')}); wait for it to finish"
+            f"{holder.get('host')} since {holder.get('since')}); wait for it to finish, or if that "
+            f"process is gone, release the lock with `stickslip where -d {device} --unlock`"
         )
     try:
         yield me
