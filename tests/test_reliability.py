@@ -625,3 +625,11 @@ def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path,
     )
     assert run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline").exit_code == 0
     assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um").exit_code == 0
+
+
+@pytest.mark.parametrize("cmd", [["plan", "-j", "3", "--from", "2mm", "--to", "2.03mm"], ["where", "--offline"]])
+def test_a_bare_angle_beyond_a_turn_suggests_degrees(tmp_path, cal_path, cmd):
+    extra = ["-c", cal_path] if cmd[0] == "plan" else ["--db", tmp_path / "s.db"]
+    one_error(run(*cmd, *extra, "--q2", "-60"), "did you mean -60deg?")
+    r = run(*cmd, *extra, "--q2", "-60deg")
+    assert r.exit_code == 0, r.output

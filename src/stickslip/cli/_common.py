@@ -180,9 +180,22 @@ def _unit_parser(parse: Callable[[str], float], what: str) -> Callable[[str | No
             raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
         if not math.isfinite(v):
             raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
+        if parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
+            raise typer.BadParameter(
+                f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
+                f"did you mean {value.strip()}deg?"
+            )
         return v
 
     return callback
+
+
+def _bare_number(text: str) -> bool:
+    try:
+        float(text.strip())
+    except ValueError:
+        return False
+    return True
 
 
 angle_option = _unit_parser(parse_angle, "an angle: radians, or with deg / mrad / urad")
