@@ -58,7 +58,7 @@ def run(*args):
 
 
 def where_json(db, device):
-    r = run("where", "--device", device, "--db", db, "--json")
+    r = run("where", "--device", device, "--db", db, "--json", "--offline")
     assert r.exit_code == 0, r.output
     return json.loads(r.stdout)
 

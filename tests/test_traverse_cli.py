@@ -54,3 +54,24 @@ def test_traverse_bad_pose_and_device(tuning3):
     assert r.exit_code == 2 and "unknown angle unit" in r.stderr
     r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--device", "warp://x"])
     assert r.exit_code == 2 and "unknown device URL scheme" in r.stderr
+
+
+def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):
+    """After an interrupted move the joint is uncertain; a traverse ends at a stop and sets it."""
+    from stickslip.devices.positions import load_state, save_state
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        state = load_state(st, "sim://?seed=4")
+        state.set_position(3, 5e-3, "set")
+        state.intend(3, 6e-3)
+        save_state(st, state)
+    args = ["traverse", "--joint", "3", "-d", "-", "--tuning", str(tuning3), "--device", URL, "--q2", "0",
+            "--theta", "-90deg", "--day", "2026-11-20", "--db", str(db), "--json"]  # fmt: skip
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        state = load_state(st, "sim://?seed=4")
+    assert 3 not in state.uncertain and state.sources[3] == "set"
+    assert state.positions[3] == pytest.approx(json.loads(r.stdout)["end"]) and state.positions[3] == 0.0

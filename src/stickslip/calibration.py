@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from . import kinematics as kin
+from . import records
 from .clock import now_utc
 from .measurements import Traverse, measurements_to_csv
 from .models import (
@@ -406,6 +407,7 @@ class Calibration:
         """Rebuild from :meth:`to_dict` output; raises ``ValueError`` with the reason on bad input."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
+        records.check_calibration_dict(data)
         if data.get("version") != FORMAT_VERSION:
             raise ValueError(
                 f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION})"
@@ -452,14 +454,14 @@ class Calibration:
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        records.atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
         """Read a calibration JSON file; raises ``ValueError`` naming the file and the reason."""
         p = Path(path)
         try:
-            data = json.loads(p.read_text(encoding="utf-8"))
+            data = json.loads(records.read_json_text(p, "calibration"))
         except FileNotFoundError:
             raise ValueError(f"{p}: no such calibration file") from None
         except json.JSONDecodeError as e:

@@ -25,6 +25,7 @@ import numpy as np
 
 from . import kinematics as kin
 from .models import direction_label
+from .records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 
 __all__ = [
     "HEADER",
@@ -139,6 +140,10 @@ def _parse_float(name: str, text: str) -> tuple[float | None, str | None]:
     return v, None
 
 
+MAX_STEPS = 10**12
+"""Largest step count accepted in a table (a full traverse is ~1e4..1e7 steps; SQLite holds < 2**63)."""
+
+
 def _parse_steps(text: str) -> tuple[int | None, str | None]:
     t = text.strip()
     try:
@@ -153,6 +158,8 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
         v = int(f)
     if v <= 0:
         return None, f"steps must be a positive integer, got {text!r}"
+    if v > MAX_STEPS:
+        return None, f"steps = {text.strip()[:30]} is more than {MAX_STEPS:.0e} steps (over any joint's full range)"
     return v, None
 
 
@@ -209,6 +216,20 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
 
 def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
     """Parse measurement-table CSV text. Raises :class:`TableError` listing every bad row."""
+    try:
+        return _parse_measurements(text, source)
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+
+
+def _csv_problem(source: str, e: csv.Error) -> str:
+    text = str(e)
+    if "field limit" in text:
+        text = f"a cell is longer than {csv.field_size_limit()} characters"
+    return f"{source}: not a readable CSV table ({text})"
+
+
+def _parse_measurements(text: str, source: str) -> list[Traverse]:
     reader = csv.reader(io.StringIO(text))
     try:
         header = next(reader)
@@ -248,16 +269,18 @@ def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
 
 
 def _read_table_text(path: str | Path) -> str:
-    """The text of a CSV table; a missing or non-UTF-8 file raises :class:`TableError`."""
+    """The text of a CSV table (a regular file, at most :data:`records.MAX_TABLE_BYTES`).
+
+    A missing file, a folder, a pipe or device (never opened, so it cannot hang), a file
+    over the size limit or non-UTF-8 text raises :class:`TableError`.
+    """
     p = Path(path)
+    if not p.exists():
+        raise TableError([f"{p}: no such file"])
     try:
-        return p.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise TableError([f"{p}: no such file"]) from None
-    except IsADirectoryError:
-        raise TableError([f"{p}: is a folder, not a CSV file"]) from None
-    except UnicodeDecodeError:
-        raise TableError([f"{p}:1: not a UTF-8 text file"]) from None
+        return read_text_bounded(p, "CSV", MAX_TABLE_BYTES)
+    except ValueError as e:
+        raise TableError([str(e)]) from None
 
 
 def read_measurements(path: str | Path) -> list[Traverse]:
@@ -283,7 +306,7 @@ def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
 
 def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
     """Write a measurement table to a CSV file."""
-    Path(path).write_text(measurements_to_csv(traverses), encoding="utf-8")
+    atomic_write_text(path, measurements_to_csv(traverses))  # a failed write keeps the old file
 
 
 def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:
@@ -334,8 +357,21 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
     header, the raw rows and the parsed queries; raises :class:`TableError` listing
     every bad row as ``file:line: reason``.
     """
+    try:
+        return _parse_pose_table(text, source)
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+
+
+def _parse_pose_table(text: str, source: str) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
     reader = csv.DictReader(io.StringIO(text))
-    header = [h.strip() for h in (reader.fieldnames or [])]
+    try:
+        header = [h.strip() for h in (reader.fieldnames or [])]
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+    dup = sorted({h for h in header if h and header.count(h) > 1})
+    if dup:
+        raise TableError([f"{source}:1: column(s) {', '.join(dup)} appear more than once; keep one of each"])
     if not header:
         raise TableError([f"{source}:1: the file is empty (expected a header with {','.join(POSE_TABLE_REQUIRED)})"])
     reader.fieldnames = header

@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .clock import now_utc, stale_message
+from .devices.base import redact_url
 from .measurements import Traverse
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -116,14 +117,22 @@ MIGRATIONS: tuple[str, ...] = (
         PRIMARY KEY (device_id, key)
     );
     """,
+    # version 1 -> 2: a traverse can be excluded from analyses (the reason is kept; NULL = used)
+    """
+    ALTER TABLE traverses ADD COLUMN excluded TEXT
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
 _COLUMNS = ("joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
 
 
-class StoreError(RuntimeError):
-    """The database cannot be opened or used (the message says why and where)."""
+class StoreError(OSError):
+    """The database cannot be opened, read or written (the message says why and where).
+
+    An ``OSError``: storage is the environment, and every command turns ``OSError`` into
+    one ``error:`` line.
+    """
 
 
 # ---------------------------------------------------------------- where the file lives
@@ -248,9 +257,11 @@ class Store:
         except sqlite3.DatabaseError as e:
             con.close()
             raise StoreError(f"{p} is not a usable stickslip database: {e}") from None
-        except StoreError:
+        except StoreError as e:
             con.close()
-            raise
+            if "newer than" in str(e):
+                raise
+            raise StoreError(f"{p} is not a usable stickslip database: {e}") from None
         return store
 
     def close(self) -> None:
@@ -274,14 +285,36 @@ class Store:
     def _write(self) -> Iterator[sqlite3.Connection]:
         """One write transaction, taken with ``BEGIN IMMEDIATE`` (waits on busy_timeout)."""
         con = self._con
-        con.execute("BEGIN IMMEDIATE")
+        try:
+            con.execute("BEGIN IMMEDIATE")
+        except sqlite3.DatabaseError as e:
+            raise StoreError(self._write_problem(e)) from None
         try:
             yield con
-        except BaseException:
-            con.execute("ROLLBACK")
-            raise
-        else:
             con.execute("COMMIT")
+        except BaseException as e:
+            if con.in_transaction:
+                try:
+                    con.execute("ROLLBACK")
+                except sqlite3.DatabaseError:
+                    pass  # SQLite rolls back itself when the file cannot be written
+            if isinstance(e, sqlite3.DatabaseError) and not isinstance(e, sqlite3.IntegrityError):
+                raise StoreError(self._write_problem(e)) from None
+            raise
+
+    def _write_problem(self, e: sqlite3.DatabaseError) -> str:
+        text = str(e)
+        hint = {
+            "disk I/O error": "is the disk full, or the file too large for a quota?",
+            "database or disk is full": "free some space",
+            "attempt to write a readonly database": "the file or its folder is read-only",
+            "database is locked": "another process kept it busy for 30 s",
+        }.get(text, "")
+        return (
+            f"cannot write to the database {self.path}: {text}"
+            + (f" ({hint})" if hint else "")
+            + "; nothing of this change was stored"
+        )
 
     def _migrate(self) -> None:
         version = self.schema_version
@@ -304,7 +337,7 @@ class Store:
     # -- devices and sessions
 
     def _device_id(self, con: sqlite3.Connection, url: str, model: str | None = None) -> int:
-        url = str(url).strip()
+        url = redact_url(str(url).strip())  # a secret in a URL is never stored
         if not url:
             raise ValueError("device URL is empty (e.g. sim://)")
         row = con.execute("SELECT id, model FROM devices WHERE url = ?", (url,)).fetchone()
@@ -438,15 +471,18 @@ class Store:
         day: str | None,
         joint: int | None,
         ids: Sequence[int] | None = None,
+        include_excluded: bool = False,
     ) -> list[sqlite3.Row]:
         sql = (
             "SELECT t.*, s.day AS day, d.url AS device FROM traverses t "
             "JOIN sessions s ON s.id = t.session_id JOIN devices d ON d.id = s.device_id WHERE 1=1"
         )
+        if not include_excluded:
+            sql += " AND t.excluded IS NULL"
         args: list[Any] = []
         if device is not None:
             sql += " AND d.url = ?"
-            args.append(device)
+            args.append(redact_url(device))
         if day is not None:
             sql += " AND s.day = ?"
             args.append(day)
@@ -501,7 +537,7 @@ class Store:
             self._con.execute(
                 "SELECT COUNT(*) FROM traverses t JOIN sessions s ON s.id = t.session_id "
                 "JOIN devices d ON d.id = s.device_id WHERE d.url = ?",
-                (device,),
+                (redact_url(device),),
             ).fetchone()[0]
         )
 
@@ -520,7 +556,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         days = {r[0] for r in self._con.execute(sql, args)}
         csql = (
             "SELECT DISTINCT c.day FROM calibrations c JOIN devices d ON d.id = c.device_id "
@@ -592,7 +628,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         row = self._con.execute(sql + " ORDER BY c.id DESC LIMIT 1", args).fetchone()
         return None if row is None else self._load_cal(row[0])
 
@@ -624,7 +660,7 @@ class Store:
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         return [dict(r) for r in self._con.execute(sql + " ORDER BY c.id", args)]
 
     # -- history
@@ -638,14 +674,15 @@ class Store:
         """
         sql = (
             "SELECT d.url AS device, s.day AS day, t.joint AS joint, t.direction AS direction, "
-            "COUNT(t.id) AS n, MIN(t.measured_at) AS first, MAX(t.measured_at) AS last "
+            "COUNT(t.id) AS n, SUM(t.excluded IS NOT NULL) AS x, "
+            "MIN(t.measured_at) AS first, MAX(t.measured_at) AS last "
             "FROM sessions s JOIN devices d ON d.id = s.device_id "
             "LEFT JOIN traverses t ON t.session_id = s.id"
         )
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (device,)
+            args = (redact_url(device),)
         sql += " GROUP BY d.url, s.day, t.joint, t.direction"
         entries: dict[tuple[str, str], dict[str, Any]] = {}
         for r in self._con.execute(sql, args):
@@ -655,6 +692,7 @@ class Store:
                     "device": r["device"],
                     "day": r["day"],
                     "traverses": 0,
+                    "excluded": 0,
                     "by_joint": {},
                     "first_measured_at": None,
                     "last_measured_at": None,
@@ -663,8 +701,10 @@ class Store:
             )
             if r["joint"] is None:
                 continue
-            e["traverses"] += int(r["n"])
-            e["by_joint"][f"{r['joint']}{r['direction']}"] = int(r["n"])
+            used = int(r["n"]) - int(r["x"] or 0)
+            e["traverses"] += used
+            e["excluded"] += int(r["x"] or 0)
+            e["by_joint"][f"{r['joint']}{r['direction']}"] = used
             if e["first_measured_at"] is None or r["first"] < e["first_measured_at"]:
                 e["first_measured_at"] = r["first"]
             if e["last_measured_at"] is None or r["last"] > e["last_measured_at"]:
@@ -706,15 +746,115 @@ class Store:
         row = self._con.execute(
             "SELECT s.value FROM device_state s JOIN devices d ON d.id = s.device_id "
             "WHERE d.url = ? AND s.key = ?",
-            (device, key),
+            (redact_url(device), key),
         ).fetchone()
         return default if row is None else json.loads(row[0])
+
+    # -- deleting
+
+    def traverse_ids(self, device: str | None = None, day: str | None = None) -> list[int]:
+        """Ids of the stored traverses (of one device and/or session day)."""
+        return [int(r["id"]) for r in self._traverse_rows(device, day, None, include_excluded=True)]
+
+    def set_excluded(self, ids: Sequence[int], reason: str | None) -> int:
+        """Exclude traverses from analyses (``reason``, kept) or include them again (``None``).
+
+        Excluded traverses stay stored (``export``/``history`` count them apart) but are not
+        returned by :meth:`traverses`. Raises ``ValueError`` naming unknown ids (nothing changes).
+        """
+        ids = sorted({int(i) for i in ids})
+        if reason is not None and not reason.strip():
+            raise ValueError("give a reason for excluding (e.g. 'cable snagged')")
+        marks = ",".join("?" * len(ids))
+        with self._write() as con:
+            found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
+            missing = [i for i in ids if i not in found]
+            if missing:
+                raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
+            return int(con.execute(f"UPDATE traverses SET excluded = ? WHERE id IN ({marks})", [reason, *ids]).rowcount)
+
+    def delete_traverses(self, ids: Sequence[int]) -> dict[str, int]:
+        """Delete traverses by id in one transaction; ``{"traverses": n, "calibration_links": m}``.
+
+        Calibrations made from them keep their stored parameters (their JSON is complete);
+        only the links to the deleted rows go. Sessions left empty are removed. Raises
+        ``ValueError`` naming ids that do not exist (and deletes nothing).
+        """
+        ids = sorted({int(i) for i in ids})
+        if not ids:
+            return {"traverses": 0, "calibration_links": 0}
+        marks = ",".join("?" * len(ids))
+        with self._write() as con:
+            found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
+            missing = [i for i in ids if i not in found]
+            if missing:
+                raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
+            links = con.execute(f"DELETE FROM calibration_traverses WHERE traverse_id IN ({marks})", ids).rowcount
+            n = con.execute(f"DELETE FROM traverses WHERE id IN ({marks})", ids).rowcount
+            con.execute(
+                "DELETE FROM sessions WHERE id NOT IN (SELECT session_id FROM traverses) "
+                "AND NOT EXISTS (SELECT 1 FROM calibrations c WHERE c.device_id = sessions.device_id "
+                "AND c.day = sessions.day)"
+            )
+        return {"traverses": int(n), "calibration_links": int(links)}
+
+    # -- one process drives a device at a time
+
+    def acquire_lock(self, device: str, holder: dict[str, Any]) -> dict[str, Any] | None:
+        """Take ``device``'s lock for ``holder`` (``{"pid", "host", "since"}``), atomically.
+
+        Returns ``None`` when taken, else the current holder (the caller refuses, naming
+        it). A lock whose holder is a process on this host that no longer exists (POSIX
+        only; elsewhere a lock is released only by its holder) is taken over.
+        """
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            row = con.execute(
+                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+            ).fetchone()
+            if row is not None:
+                current = json.loads(row[0])
+                if isinstance(current, dict) and _alive(current):
+                    return dict(current)
+            con.execute(
+                "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
+                "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
+                "updated_at = excluded.updated_at",
+                (dev, json.dumps(holder), _now()),
+            )
+        return None
+
+    def release_lock(self, device: str, pid: int) -> None:
+        """Release ``device``'s lock if process ``pid`` holds it."""
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            row = con.execute(
+                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+            ).fetchone()
+            if row is not None and json.loads(row[0]).get("pid") == pid:
+                con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
 
     # -- maintenance
 
     def integrity_check(self) -> str:
         """``PRAGMA integrity_check`` (``"ok"`` when the file is sound)."""
         return "; ".join(r[0] for r in self._con.execute("PRAGMA integrity_check"))
+
+
+def _alive(holder: dict[str, Any]) -> bool:
+    """Whether a lock holder may still be running (unknown counts as running)."""
+    import socket
+
+    pid = holder.get("pid")
+    if not isinstance(pid, int) or holder.get("host") != socket.gethostname() or os.name != "posix":
+        return True
+    try:
+        os.kill(pid, 0)  # POSIX: signal 0 only checks that the process exists
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
 
 
 def _split_sql(script: str) -> list[str]:

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import records
+
 __all__ = [
     "StopDetector",
     "StopEvent",
@@ -216,14 +218,14 @@ class Tuning:
     def save(self, path: str | Path) -> Path:
         """Write the tuning as JSON; returns the path."""
         p = Path(path)
-        p.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        records.atomic_write_text(p, json.dumps(self.to_dict(), indent=2) + "\n")
         return p
 
     @classmethod
     def load(cls, path: str | Path) -> Tuning:
         """Read a tuning written by :meth:`save` (raises TuningFileError / OSError)."""
         p = Path(path)
-        text = p.read_text(encoding="utf-8")
+        text = records.read_tuning_text(p, TuningFileError)
         try:
             d = json.loads(text)
         except json.JSONDecodeError as e:

@@ -15,10 +15,11 @@ import inspect
 
 import typer
 
-from ._common import drop_warnings, flush_warnings
+from ._common import OneLineErrors, drop_warnings, flush_warnings
 
 app = typer.Typer(
     name="stickslip",
+    cls=OneLineErrors,
     help=(
         "Make piezoelectric stick-slip micromanipulators predictable without joint sensors.\n\n"
         "Measure a joint's average step size between its end stops, calibrate the load-aware "
@@ -67,7 +68,7 @@ _PANELS = {
     "Measure": ("demo", "traverse", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
     "Drive a manipulator": ("move", "where"),
-    "Keep and study": ("history", "import", "export", "anova", "report"),
+    "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}
 _ORDER = [name for names in _PANELS.values() for name in names]

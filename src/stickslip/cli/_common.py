@@ -15,25 +15,82 @@ from typing import NoReturn
 
 import typer
 from rich.console import Console
+from rich.markup import escape
+from typer.core import TyperGroup
+
+try:  # recent typer vendors click; older ones use the click package
+    from typer._click.exceptions import ClickException, UsageError
+except ImportError:  # pragma: no cover - depends on the installed typer
+    from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..units import UnitError, parse_angle, parse_length
 
 console = Console()
 err_console = Console(stderr=True)
 
+EXIT_OK = 0
+EXIT_ABORTED = 1
 EXIT_BAD_INPUT = 2
+EXIT_CODES = {
+    EXIT_OK: "success",
+    EXIT_ABORTED: "interrupted (Ctrl-C) or declined at a confirmation",
+    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault: one `error:` line says which",
+}
+"""The documented exit codes of every command."""
+
+
+class OneLineErrors(TyperGroup):
+    """The command group, with click's usage errors as one ``error: ...`` line (exit 2).
+
+    Click prints usage errors (a missing option, ``--joint 4``, a count out of range)
+    as a multi-line panel; here they become the same one line as every other error.
+    """
+
+    def main(self, *args: object, standalone_mode: bool = True, **kwargs: object):  # type: ignore[override]  # click's signature
+        try:
+            rv = super().main(*args, standalone_mode=False, **kwargs)  # type: ignore[arg-type]  # same
+        except UsageError as e:
+            hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
+            message = " ".join(e.format_message().split())
+            if not standalone_mode:
+                raise
+            _print_error(message + hint)
+            sys.exit(EXIT_BAD_INPUT)
+        except ClickException as e:
+            if not standalone_mode:
+                raise
+            _print_error(e.format_message())
+            sys.exit(e.exit_code)
+        except (typer.Abort, KeyboardInterrupt):
+            if not standalone_mode:
+                raise
+            err_console.print("[bold red]error:[/] interrupted", highlight=False)
+            sys.exit(EXIT_ABORTED)
+        if not standalone_mode:
+            return rv
+        sys.exit(rv if isinstance(rv, int) else EXIT_OK)
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
     """Print ``error: message`` to stderr and exit with ``code`` (2 = bad input)."""
-    for line in str(message).splitlines() or [""]:
-        err_console.print(f"[bold red]error:[/] {line}", highlight=False, markup=True, soft_wrap=True)
+    _print_error(message)
     raise typer.Exit(code)
+
+
+def _print_error(message: object) -> None:
+    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+
+
+def one_line(message: object) -> str:
+    """``message`` as one printable line: line breaks become ``; ``, control characters escapes."""
+    parts = [p.strip() for p in str(message).splitlines() if p.strip()]
+    text = "; ".join(parts)
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
 def warn(message: str) -> None:
     """Print ``warning: message`` to stderr."""
-    err_console.print(f"[bold yellow]warning:[/] {message}", highlight=False, soft_wrap=True)
+    err_console.print(f"[bold yellow]warning:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
 
 
 _pending_warnings: list[str] = []
@@ -116,11 +173,29 @@ def _unit_parser(parse: Callable[[str], float], what: str) -> Callable[[str | No
         if value is None:
             return None
         try:
-            return parse(value)
+            v = parse(value)
         except UnitError as e:
             raise typer.BadParameter(f"{e} ({what})") from None
+        except (ArithmeticError, ValueError, TypeError) as e:  # pi/0, 1e999: never a traceback
+            raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
+        if not math.isfinite(v):
+            raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
+        if parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
+            raise typer.BadParameter(
+                f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
+                f"did you mean {value.strip()}deg?"
+            )
+        return v
 
     return callback
+
+
+def _bare_number(text: str) -> bool:
+    try:
+        float(text.strip())
+    except ValueError:
+        return False
+    return True
 
 
 angle_option = _unit_parser(parse_angle, "an angle: radians, or with deg / mrad / urad")

@@ -9,7 +9,9 @@ opened at the kept positions (each invocation starts a fresh simulator).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -45,10 +47,13 @@ def _open_store(db: Path | None):
 def _parse_joint_value(joint: int, text: str, what: str) -> float:
     """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
     try:
-        return parse_length(text) if joint == 3 else parse_angle(text)
-    except UnitError as e:
+        v = parse_length(text) if joint == 3 else parse_angle(text)
+    except (UnitError, ArithmeticError, ValueError, TypeError) as e:
         kind = "a length (e.g. 30um, 1.5mm)" if joint == 3 else "an angle (e.g. 2deg, 40urad)"
         fail(f"{what}: {e}; joint {joint} takes {kind}")
+    if not math.isfinite(v):
+        fail(f"{what}: {text!r} is not a finite value")
+    return v
 
 
 def _apply_pose_options(state: DeviceState, q1, q2, q3, theta, psi) -> list[str]:
@@ -87,10 +92,105 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
                 "q": state.positions[j],
                 "unit": spec.unit,
                 "display": format_position(state.positions[j], j),
-                "source": state.sources[j],
+                "source": "uncertain" if j in state.uncertain else state.sources[j],
+                "uncertain": list(state.uncertain[j]) if j in state.uncertain else None,
             }
         )
     return rows
+
+
+def _degree_hint(joint: int, text: str | None) -> str:
+    """For a bare number on a rotary joint: ``"; a bare number is radians: did you mean 5deg?"``."""
+    if joint == 3 or text is None:
+        return ""
+    try:
+        float(text.strip())
+    except ValueError:
+        return ""
+    return f"; a bare number is radians: did you mean {text.strip()}deg?"
+
+
+def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> tuple[float, float]:
+    spec = kin.JOINTS[joint]
+    q_from = state.positions[joint]
+    if to is not None:
+        word = to.strip().lower()
+        if word in ("min", "lower"):
+            q_to = spec.lower
+        elif word in ("max", "upper"):
+            q_to = spec.upper
+        else:
+            q_to = _parse_joint_value(joint, to, "--to")
+    else:
+        q_to = q_from + _parse_joint_value(joint, by or "", "--by")
+    if not spec.contains(q_to):
+        unit = position_display_unit(joint)
+        fail(
+            f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
+            f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
+            f"(from {format_position(q_from, joint)}); positions are in {unit}"
+            + _degree_hint(joint, to if to is not None else by)
+        )
+    return q_from, min(max(q_to, spec.lower), spec.upper)
+
+
+def _move_locked(
+    store: Any,
+    key: str,
+    device: str,
+    cal: Any,
+    joint: int,
+    by: str | None,
+    to: str | None,
+    burst: int,
+    pose_opts: tuple[float | None, ...],
+    drive: Callable[..., Any],
+) -> tuple[Any, DeviceState, int, float, float, float, float | None]:
+    """The part of `move` that runs holding the device lock: plan from the kept state, drive."""
+    from ..procedures.move import MoveOutcome
+
+    with user_errors():
+        state = load_state(store, key)
+    _apply_pose_options(state, *pose_opts)
+    problem = state.uncertainty_problem(joint)
+    if problem:
+        fail(problem)
+    q_from, q_to = _target(joint, state, by, to)
+    pose = state.pose
+    with user_errors(KeyError):
+        steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
+    with user_errors():
+        save_state(store, state)  # the recorded pose, even if nothing moves
+    stale = stale_message(cal.day)
+    if stale:
+        warn_later(stale)
+    flush_warnings()  # the input is good: say it before driving
+    outcome, sim_true = MoveOutcome(), None
+    if steps:
+        try:
+            dev = open_device(device)
+        except (DeviceError, ValueError) as e:
+            fail(str(e))
+        try:
+            if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
+                dev.set_pose(*pose)
+
+            def save(st: DeviceState) -> None:
+                with user_errors():
+                    save_state(store, st)
+
+            outcome = drive(dev, state, joint, steps, burst, reckon, save)
+            if outcome.error is None:
+                state.set_position(joint, q_end, "dead-reckoned")
+                save(state)
+                if hasattr(dev, "position"):
+                    sim_true = float(dev.position(joint))
+        finally:
+            try:
+                dev.close()
+            except DeviceError:
+                pass
+    return outcome, state, steps, q_from, q_to, q_end, sim_true
 
 
 @app.command()
@@ -133,80 +233,28 @@ def move(
 
     with user_errors(KeyError):
         cal = Calibration.load(calibration)
-    key = device_key(device)
+    with user_errors():
+        key = device_key(device)
     spec = kin.JOINTS[joint]
-    with _open_store(db) as store:
-        with user_errors():
-            state = load_state(store, key)
-        _apply_pose_options(state, q1, q2, q3, theta, psi)
-        q_from = state.positions[joint]
-        if to is not None:
-            word = to.strip().lower()
-            if word in ("min", "lower"):
-                q_to = spec.lower
-            elif word in ("max", "upper"):
-                q_to = spec.upper
-            else:
-                q_to = _parse_joint_value(joint, to, "--to")
-        else:
-            q_to = q_from + _parse_joint_value(joint, by, "--by")  # type: ignore[arg-type]
-        if not spec.contains(q_to):
-            unit = position_display_unit(joint)
-            fail(
-                f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
-                f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
-                f"(from {format_position(q_from, joint)}); positions are in {unit}"
-            )
-        q_to = min(max(q_to, spec.lower), spec.upper)
-        pose = state.pose
-        with user_errors(KeyError):
-            steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
-        save_state(store, state)  # the recorded pose, even if nothing moves
-        stale = stale_message(cal.day)
-        if stale:
-            warn_later(stale)
-        flush_warnings()  # the input is good: say it before driving
+    from ..procedures.move import DeviceBusy, device_lock, drive
 
-        sent = 0
-        bursts: list[int] = []
-        error: str | None = None
-        sim_true: float | None = None
-        if steps:
-            sign = 1 if steps > 0 else -1
-            try:
-                dev = open_device(device)
-            except (DeviceError, ValueError) as e:
-                fail(str(e))
-            try:
-                if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
-                    dev.set_pose(*pose)
-                while sent != steps:
-                    n = sign * min(burst, abs(steps - sent))
-                    dev.step(joint, n)
-                    sent += n
-                    bursts.append(n)
-                    if sent != steps:
-                        state.set_position(joint, reckon(sent), "dead-reckoned")
-                        save_state(store, state)
-                if hasattr(dev, "position"):
-                    sim_true = float(dev.position(joint))
-            except DeviceError as e:
-                error = str(e)
-            finally:
-                try:
-                    dev.close()
-                except DeviceError:
-                    pass
-            if error is None:
-                state.set_position(joint, q_end, "dead-reckoned")
-            else:
-                state.set_position(joint, reckon(sent) if sent else q_from, "dead-reckoned")
-            save_state(store, state)
-    if error is not None:
-        fail(
-            f"{error}\nsent {sent} of {steps} steps; joint {joint}'s dead-reckoned position "
-            f"{format_position(state.positions[joint], joint)} is kept"
-        )
+    with _open_store(db) as store, user_errors(DeviceBusy):
+        with device_lock(store, key):
+            outcome, state, steps, q_from, q_to, q_end, sim_true = _move_locked(
+                store, key, device, cal, joint, by, to, burst, (q1, q2, q3, theta, psi), drive
+            )
+    if outcome.error is not None:
+        if joint in state.uncertain:
+            lo, hi = state.uncertain[joint]
+            kept = (
+                f"joint {joint}'s position is now uncertain, between {format_position(lo, joint)} "
+                f"and {format_position(hi, joint)}; re-reference it (stickslip where --set {joint}=min "
+                f"at the lower stop) before the next move"
+            )
+        else:
+            kept = f"joint {joint}'s dead-reckoned position {format_position(q_from, joint)} is kept"
+        fail(f"{outcome.error}; sent {outcome.sent} of {steps} steps; {kept}")
+    bursts = outcome.bursts
     result = {
         "device": key,
         "joint": joint,
@@ -237,6 +285,23 @@ def move(
         )
 
 
+def _probe(device: str) -> str:
+    """Open ``device`` and close it again: its model line, or ``fail`` naming why it does not answer."""
+    try:
+        dev = open_device(device)
+    except (DeviceError, ValueError, OSError) as e:
+        fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
+    try:
+        return str(dev.info.model)
+    except (DeviceError, ValueError, OSError) as e:
+        fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
+    finally:
+        try:
+            dev.close()
+        except (DeviceError, OSError):
+            pass
+
+
 @app.command()
 def where(
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
@@ -249,18 +314,32 @@ def where(
     theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
     psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    offline: bool = typer.Option(
+        False, "--offline", help="Do not open the device: only show the kept positions."
+    ),
+    unlock: bool = typer.Option(
+        False, "--unlock", help="Release the device's lock left by a process that is gone."
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print the positions as JSON (SI units)."),
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, or dead-reckoned.
+    Source: default (never set; outstretched pose assumed), set, dead-reckoned, or
+    uncertain (a move was interrupted: the bounds are shown; re-reference with --set).
 
     Reset a joint at an end stop after a traverse, a crash or a manual move.
 
+    Without --set or a pose option the device is opened to say whether it answers
+    (--offline skips that); a device that does not answer exits 2.
+
     Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
     """
-    key = device_key(device)
+    with user_errors():
+        key = device_key(device)
     with _open_store(db) as store:
+        if unlock:
+            with user_errors():
+                store.set_state(key, "lock", "null")
         with user_errors():
             state = load_state(store, key)
         changed = _apply_pose_options(state, q1, q2, q3, theta, psi)
@@ -277,18 +356,31 @@ def where(
                 q = spec.upper
             else:
                 q = _parse_joint_value(j, value, f"--set {item}")
-            with user_errors():
+            try:
                 state.set_position(j, q, "set")
+            except ValueError as e:
+                fail(f"--set {item}: {e}{_degree_hint(j, value)}")
             changed.append(f"q{j}")
         if changed:
-            save_state(store, state)
+            with user_errors():
+                save_state(store, state)
+    answers = None if (changed or offline) else _probe(device)
     rows = _state_rows(state)
     if json_out:
-        print_json({"device": key, "joints": rows, "theta": state.theta, "psi": state.psi})
+        print_json(
+            {"device": key, "joints": rows, "theta": state.theta, "psi": state.psi, "answers": answers}
+        )
         return
-    console.print(f"[bold]{key}[/]", highlight=False)
+    console.print(f"[bold]{key}[/]" + (f" (answers: {answers})" if answers else ""), highlight=False)
     for r in rows:
-        console.print(f"  joint {r['joint']}: {r['display']:>14}  ({r['source']})", highlight=False)
+        extra = ""
+        if r["uncertain"]:
+            lo, hi = r["uncertain"]
+            j = int(r["joint"])  # type: ignore[call-overload]
+            extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
+        console.print(
+            f"  joint {r['joint']}: {r['display']:>14}  ({r['source']}{extra})", highlight=False
+        )
     console.print(
         f"  tilt: theta = {math.degrees(state.theta):.4g} deg, "
         f"psi = {math.degrees(state.psi):.4g} deg",

@@ -14,6 +14,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
+from ..devices.base import redact_url
 from . import app
 from ._common import console, fail, print_json, user_errors, warn, warn_later
 
@@ -54,7 +55,8 @@ def _traverses_from(meas: Path | None, db: Path | None, device: str | None, day:
         ts = st.traverses(device=device, day=day)
         where = f"the database {st.path}"
     if not ts:
-        what = " and ".join(x for x in (f"device {device}" if device else "", f"day {day}" if day else "") if x)
+        dev_text = f"device {redact_url(device)}" if device else ""
+        what = " and ".join(x for x in (dev_text, f"day {day}" if day else "") if x)
         fail(f"no traverses in {where}{' for ' + what if what else ''}: pass MEAS.csv or import one first")
     return ts, where
 
@@ -79,7 +81,7 @@ def history(
         print_json(entries)
         return
     if not entries:
-        console.print(f"no sessions stored in {path}" + (f" for device {device}" if device else ""))
+        console.print(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""))
         return
     table = Table(title=f"stickslip history ({path})")
     table.add_column("device", overflow="fold")
@@ -96,7 +98,8 @@ def history(
                 span = f"{e['first_measured_at'][:10]} {span}"
         cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
         by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
-        table.add_row(e["device"], e["day"], str(e["traverses"]), by, span, cals)
+        n = str(e["traverses"]) + (f" (+{e['excluded']} excluded)" if e.get("excluded") else "")
+        table.add_row(e["device"], e["day"], n, by, span, cals)
     console.print(table)
 
 
@@ -152,10 +155,85 @@ def import_(
         print_json({"imported": len(ids), "ids": ids, "db": str(path)})
     else:
         days = sorted({t.day for t in ts})
-        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {device} into {path}")
+        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {redact_url(device)} into {path}")
+
+
+# ---------------------------------------------------------------- exclude / delete
+
+
+@app.command()
+def exclude(
+    traverse: list[int] = typer.Option(..., "--traverse", "-t", help="Id of a traverse (repeatable)."),
+    reason: str | None = typer.Option(None, "--reason", "-r", help="Why (kept with the row), e.g. 'cable snagged'."),
+    undo: bool = typer.Option(False, "--undo", help="Use the traverses again."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+) -> None:
+    """Exclude stored traverses from calibration and analyses (kept, with the reason), or --undo.
+
+    Example: [bold]stickslip exclude -t 12 -t 13 --reason "arm touched the sample"[/]
+    """
+    if undo == (reason is not None):
+        fail("give --reason TEXT to exclude, or --undo to use the traverses again")
+    with _open_store(db) as st, user_errors():
+        n = st.set_excluded(traverse, None if undo else reason)
+    console.print(f"{'included' if undo else 'excluded'} {n} traverse(s)", highlight=False)
+
+
+
+@app.command()
+def delete(
+    traverse: list[int] = typer.Option(None, "--traverse", "-t", help="Id of a traverse to delete (repeatable)."),
+    day: str | None = typer.Option(None, "--day", help="Delete every traverse of this session day."),
+    device: str | None = typer.Option(None, "--device", "-d", help="With --day: only this device."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print what was deleted as JSON."),
+) -> None:
+    """Delete stored traverses (by id, or a whole session day), after confirmation.
+
+    Calibrations made from them keep their parameters; only their links to the rows go.
+    Ids are in `stickslip export` and `stickslip history --json`.
+
+    Example: [bold]stickslip delete --day 2026-11-22 --device sim:// --yes[/]
+    """
+    if not traverse and day is None:
+        fail("give --traverse ID (repeatable) or --day DAY")
+    with _open_store(db) as st:
+        ids = list(traverse or [])
+        if day is not None:
+            ids += st.traverse_ids(device=device, day=day)
+            if not ids:
+                fail(f"no stored traverses for day {day}" + (f" of {redact_url(device)}" if device else ""))
+        what = f"{len(set(ids))} traverse(s)" + (f" of day {day}" if day else "")
+        if not yes and not typer.confirm(f"delete {what} from {st.path}?", default=False, err=True):
+            fail("nothing deleted (not confirmed; --yes skips the question)", code=1)
+        with user_errors():
+            done = st.delete_traverses(ids)
+        ok = st.integrity_check()
+    if json_out:
+        print_json({**done, "integrity": ok})
+        return
+    console.print(
+        f"deleted {done['traverses']} traverse(s)"
+        + (f"; {done['calibration_links']} calibration link(s) removed" if done["calibration_links"] else ""),
+        highlight=False,
+    )
 
 
 # ---------------------------------------------------------------- anova
+
+
+def _without_duplicates(ts: list) -> tuple[list, int]:
+    """``ts`` with exact copies removed (same day, joint, direction, pose, range, steps), and how many."""
+    seen: set[tuple] = set()
+    kept = []
+    for t in ts:
+        key = tuple(getattr(t, f) for f in ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi",
+                                             "start", "end", "steps"))
+        if key not in seen:
+            seen.add(key)
+            kept.append(t)
+    return kept, len(ts) - len(kept)
 
 
 @app.command()
@@ -182,10 +260,26 @@ def anova(
     if not 0.0 < alpha < 1.0:
         fail(f"--alpha must be in (0, 1), got {alpha}")
     ts, where = _traverses_from(meas, db, device, None)
+    ts, dups = _without_duplicates(ts)
+    if dups:
+        warn_later(
+            f"{dups} traverse(s) are exact copies of others (a table imported twice, a demo run twice?); "
+            "each is counted once"
+        )
     with user_errors(ImportError):
         res = run_anova(ts, alpha=alpha, two_way=two_way)
+    degenerate = [t for t in res.tests if not math.isfinite(t.F)]
+    if degenerate:
+        warn_later(
+            f"{len(degenerate)} test(s) have no spread within their groups (F undefined): identical repeats "
+            "cannot show a difference; they are marked 'degenerate', not significant"
+        )
     if json_out:
-        print_json(res.rows())
+        rows = res.rows()
+        for row, t in zip(rows, res.tests, strict=True):
+            if not math.isfinite(t.F):
+                row.update(F=None, p=None, significant=False, verdict="degenerate")
+        print_json(rows)
         return
     console.print(f"ANOVA of the average step size, {len(ts)} traverses from {where}")
     if not res.tests:
@@ -207,13 +301,15 @@ def anova(
                 "two-way": f"2-way {t.joint} {t.term}",
             }[t.test]
             verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
+            if not math.isfinite(t.F):
+                verdict = "degenerate"
             table.add_row(
                 what,
                 PoseGroup(t.joint, t.pose, t.interval).describe(),
                 str(t.n),
-                f"{t.F:.4g}",
-                f"{t.p:.3g}" if math.isfinite(t.p) else "-",
-                f"[bold red]{verdict}[/]" if t.significant(alpha) else verdict,
+                f"{t.F:.4g}" if math.isfinite(t.F) else "-",
+                f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
+                f"[bold red]{verdict}[/]" if verdict == "SIGNIFICANT" else verdict,
             )
         console.print(table)
     if show_skipped:

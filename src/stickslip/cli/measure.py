@@ -217,6 +217,11 @@ def traverse_cmd(
         if use_db:
             with Store.open(db) as st:
                 st.add_traverse(row, device=device_key(device), how="audio")
+                from ..devices.positions import load_state, save_state  # the joint is at a stop: re-referenced
+
+                state = load_state(st, device_key(device))
+                state.set_position(joint, row.end, "set")
+                save_state(st, state)
         if append is not None:
             new = not append.exists() or append.stat().st_size == 0
             text = measurements_to_csv([row])

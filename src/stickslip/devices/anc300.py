@@ -6,8 +6,11 @@ URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`):
     anc300://192.168.1.2:7230?password=123456&axes=1,2,3&timeout=2
     anc300:///dev/ttyUSB0                the USB/serial console, 38400 baud 8N1
 
-Query options: ``password`` (console password, default ``123456``, the factory
-default), ``axes`` (the ANC300 axis numbers of joints 1, 2, 3, default ``1,2,3``),
+The console password comes from the environment variable ``STICKSLIP_ANC300_PASSWORD``
+(default ``123456``, the factory default); a ``password`` option in the URL is still
+accepted but discouraged (shells keep history). It is never stored, logged (the driver's
+log records are redacted), printed or echoed: the URL is redacted at every boundary.
+Other query options: ``axes`` (the ANC300 axis numbers of joints 1, 2, 3, default ``1,2,3``),
 ``timeout`` (s beyond a burst's own duration, default 2), ``delay`` (s between a
 command and reading its answer, pymeasure's ``query_delay``, default 0.05),
 ``baud`` (serial only, default 38400).
@@ -35,8 +38,20 @@ from contextlib import contextmanager
 from typing import TypeVar
 from urllib.parse import unquote, urlsplit
 
-from .base import DeviceError, DeviceInfo, check_setting, check_steps, url_options
+from .base import (
+    DeviceError,
+    DeviceInfo,
+    RedactSecrets,
+    check_setting,
+    check_steps,
+    redact_url,
+    secret_from_env,
+    url_options,
+)
 from .transport import SerialTransport, SocketTransport, Transport
+
+PASSWORD_ENV = "STICKSLIP_ANC300_PASSWORD"
+"""Environment variable holding the ANC300 console password."""
 
 __all__ = ["ANC300", "TransportAdapter", "open_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
 
@@ -156,9 +171,10 @@ class ANC300:
             raise ValueError(f"query_delay must be >= 0 s, got {query_delay!r}")
         self.timeout = float(timeout)
         self.transport = transport
-        self.url = url
+        self.url = redact_url(url)
         self.adapter = TransportAdapter(transport, timeout=self.timeout)
         names = [f"axis{i}" for i in range(1, max(self.axes.values()) + 1)]
+        self.adapter.log.addFilter(RedactSecrets(password))
         try:
             self._ctrl = ANC300Controller(
                 self.adapter, axisnames=names, passwd=password, query_delay=query_delay
@@ -166,7 +182,8 @@ class ANC300:
         except DeviceError:
             raise
         except Exception as e:  # pymeasure raises a bare Exception on a wrong password
-            raise DeviceError(f"ANC300 on {transport.name}: {e}") from None
+            msg = str(e).replace(password, "***") if password else str(e)
+            raise DeviceError(f"ANC300 on {transport.name}: {msg}") from None
         self._mode: dict[int, str | None] = dict.fromkeys(self.axes)
         self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
         self._volt: dict[int, float | None] = dict.fromkeys(self.axes)
@@ -345,16 +362,16 @@ def open_url(url: str) -> ANC300:
         delay = float(opts.get("delay", 0.05))
         baud = int(opts.get("baud", 38400))
     except ValueError as e:
-        raise ValueError(f"bad option in {url!r}: {e}") from None
+        raise ValueError(f"bad option in {redact_url(url)!r}: {e}") from None
     axes = _parse_axes(opts.get("axes", "1,2,3"))
-    password = unquote(opts.get("password", DEFAULT_PASSWORD))
+    password = unquote(opts.get("password") or secret_from_env(PASSWORD_ENV) or DEFAULT_PASSWORD)
     if parts.hostname:
         transport: Transport = SocketTransport(parts.hostname, parts.port or DEFAULT_PORT, timeout)
     elif parts.path:
         transport = SerialTransport(parts.path, baudrate=baud, timeout=timeout)
     else:
         raise ValueError(
-            f"{url!r}: give a host (anc300://192.168.1.2) or a port (anc300:///dev/ttyUSB0)"
+            f"{redact_url(url)!r}: give a host (anc300://192.168.1.2) or a port (anc300:///dev/ttyUSB0)"
         )
     try:
         return ANC300(

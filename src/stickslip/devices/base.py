@@ -17,8 +17,11 @@ the URLs that use them.
 from __future__ import annotations
 
 import importlib
+import logging
 import math
 import numbers
+import os
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
@@ -35,7 +38,56 @@ __all__ = [
     "check_setting",
     "check_steps",
     "url_options",
+    "redact_url",
+    "RedactSecrets",
+    "SECRET_OPTIONS",
 ]
+
+SECRET_OPTIONS = frozenset({"password", "passwd", "pw", "pass", "secret", "token"})
+"""URL query options whose values are secrets: never stored, logged, printed or echoed."""
+
+_SECRET_QUERY = re.compile(
+    r"(?i)(^|[?&;])(" + "|".join(sorted(SECRET_OPTIONS)) + r")=([^&;#]*)"
+)
+
+
+def redact_url(url: str) -> str:
+    """``url`` with every secret (``user:PASSWORD@``, ``?password=...``) replaced by ``***``.
+
+    Used at every boundary a URL crosses (error messages, logs, the database, JSON
+    output). Never raises, even on a malformed URL.
+
+    >>> redact_url("anc300://admin:hunter2@10.0.0.2:7230?password=123&axes=1,2,3")
+    'anc300://admin:***@10.0.0.2:7230?password=***&axes=1,2,3'
+    """
+    text = str(url)
+    text = re.sub(r"(?<=://)([^/@?#]*?):([^/@?#]*)@", r"\1:***@", text)
+    return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}{m.group(2)}=***", text)
+
+
+class RedactSecrets(logging.Filter):
+    """A logging filter that replaces given secret strings in every record by ``***``.
+
+    Attach it to a logger that may see a secret (a driver that writes a password to the
+    wire and logs what it writes). The record's message is rendered, redacted and frozen.
+    """
+
+    def __init__(self, *secrets: str) -> None:
+        super().__init__()
+        self.secrets = [s for s in secrets if s]
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        msg = record.getMessage()
+        for s in self.secrets:
+            msg = msg.replace(s, "***")
+        record.msg, record.args = msg, None
+        return True
+
+
+def secret_from_env(name: str) -> str | None:
+    """The secret in environment variable ``name`` (``None`` if unset or empty)."""
+    value = os.environ.get(name)
+    return value or None
 
 
 class DeviceError(RuntimeError):
@@ -127,13 +179,22 @@ def register_backend(scheme: str, factory: str | Factory) -> None:
 
 
 def open_device(url: str = "sim://") -> Controller:
-    """Open the controller a URL names. Raises :class:`DeviceError` for an unknown scheme."""
-    scheme = urlsplit(url).scheme or "sim"
+    """Open the controller a URL names.
+
+    Raises :class:`DeviceError` for an unknown scheme or a device that cannot be opened,
+    ``ValueError`` for a malformed URL or option; messages never contain a secret.
+    """
+    try:
+        scheme = urlsplit(url).scheme or "sim"
+    except ValueError as e:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
     base_scheme = scheme.split("+", 1)[0]
     factory = BACKENDS.get(scheme) or BACKENDS.get(base_scheme)
     if factory is None:
         known = ", ".join(f"{s}://" for s in sorted(BACKENDS))
-        raise DeviceError(f"unknown device URL scheme {scheme!r} in {url!r} (known: {known})")
+        raise DeviceError(
+            f"unknown device URL scheme {scheme!r} in {redact_url(url)!r} (known: {known})"
+        )
     if isinstance(factory, str):
         mod_name, func_name = factory.split(":")
         try:
@@ -141,7 +202,10 @@ def open_device(url: str = "sim://") -> Controller:
         except ImportError as e:
             raise DeviceError(f"the backend for {scheme}:// could not be loaded: {e}") from e
         factory = getattr(module, func_name)
-    return factory(url)
+    try:
+        return factory(url)
+    except (DeviceError, ValueError) as e:
+        raise type(e)(redact_url(str(e))) from None
 
 
 def device_key(url: str) -> str:
@@ -155,13 +219,25 @@ def device_key(url: str) -> str:
     'anc300://192.168.1.2:7230'
     >>> device_key("sim://?seed=3&day=2026-11-22")
     'sim://?seed=3'
+    >>> device_key("anc300://admin:secret@[fe80::1]:7230")
+    'anc300://[fe80::1]:7230'
+
+    A user name or password in the URL is dropped too. Raises ``ValueError`` (without the
+    secret) for a malformed URL such as ``anc300://[::1``.
     """
-    parts = urlsplit(url or "sim://")
-    scheme = parts.scheme or "sim"
-    if scheme == "sim":
-        seed = parse_qs(parts.query).get("seed")
-        return "sim://" + (f"?seed={seed[-1]}" if seed else "")
-    return f"{scheme}://{parts.netloc}{parts.path}"
+    try:
+        parts = urlsplit(url or "sim://")
+        scheme = parts.scheme or "sim"
+        if scheme == "sim":
+            seed = parse_qs(parts.query).get("seed")
+            return "sim://" + (f"?seed={seed[-1]}" if seed else "")
+        host = parts.hostname or ""
+        if ":" in host:
+            host = f"[{host}]"
+        port = f":{parts.port}" if parts.port is not None else ""
+    except ValueError as e:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
+    return f"{scheme}://{host}{port}{parts.path}"
 
 
 def check_setting(what: str, value: object, lo: float, hi: float, unit: str = "", integer: bool = False) -> float:
@@ -198,7 +274,9 @@ def url_options(url: str, known: set[str] | frozenset[str]) -> dict[str, str]:
     opts = {k: v[-1] for k, v in parse_qs(urlsplit(url).query).items()}
     unknown = sorted(set(opts) - set(known))
     if unknown:
-        raise ValueError(f"unknown option(s) {unknown} in {url!r} (known: {sorted(known)})")
+        raise ValueError(
+            f"unknown option(s) {unknown} in {redact_url(url)!r} (known: {sorted(known)})"
+        )
     return opts
 
 

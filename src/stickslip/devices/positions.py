@@ -7,7 +7,13 @@ sent since. This module keeps that per device URL:
 * ``positions``: ``q1, q2, q3`` (rad, rad, m), each with its *source*: ``"default"``
   (never set: the outstretched pose is assumed), ``"set"`` (the user put it there, e.g.
   at an end stop) or ``"dead-reckoned"`` (moved by the model since);
-* ``tilt``: the base tilt ``theta, psi`` (rad) the device is set up with.
+* ``tilt``: the base tilt ``theta, psi`` (rad) the device is set up with;
+* ``uncertain``: the write-ahead journal of a move. Before a burst is sent the joint is
+  recorded as *in flight* between its last confirmed position and the burst's intended
+  end (:meth:`DeviceState.intend`); when the controller confirms the burst the new
+  position is recorded and the mark cleared. A link drop or a crash in between leaves
+  the joint *uncertain* with those bounds, never silently wrong, until it is
+  re-referenced (:meth:`DeviceState.set_position` with source ``"set"``).
 
 Where it is kept is injected (this layer sits below :mod:`stickslip.storage`): any
 object with ``set_state(device, key, value)`` / ``get_state(device, key, default)``
@@ -109,6 +115,7 @@ class DeviceState:
     sources: dict[int, str] = field(default_factory=dict)
     theta: float = 0.0
     psi: float = 0.0
+    uncertain: dict[int, tuple[float, float]] = field(default_factory=dict)
 
     @classmethod
     def default(cls, device: str) -> DeviceState:
@@ -133,6 +140,30 @@ class DeviceState:
             raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
         self.positions[spec.number] = min(max(q, spec.lower), spec.upper)
         self.sources[spec.number] = source
+        self.uncertain.pop(spec.number, None)
+
+    def intend(self, joint: int, q_intended: float) -> None:
+        """Journal a burst about to be sent: ``joint`` is in flight to ``q_intended`` (rad or m).
+
+        Until :meth:`set_position` records the confirmed end, the joint is *uncertain*
+        between its last confirmed position and ``q_intended``.
+        """
+        spec = kin.joint_spec(joint)
+        q = min(max(float(q_intended), spec.lower), spec.upper)
+        confirmed = self.positions[spec.number]
+        self.uncertain[spec.number] = (min(confirmed, q), max(confirmed, q))
+
+    def uncertainty_problem(self, joint: int) -> str | None:
+        """Why ``joint``'s position cannot be planned from (``None`` if it can)."""
+        if joint not in self.uncertain:
+            return None
+        lo, hi = self.uncertain[joint]
+        unit = "m" if joint == 3 else "rad"
+        return (
+            f"joint {joint}'s position is uncertain (a move was interrupted): between {lo:.9g} and "
+            f"{hi:.9g} {unit}; re-reference it at an end stop first, e.g. "
+            f"`stickslip where --set {joint}=min` after driving it to the lower stop"
+        )
 
     def set_tilt(self, theta: float | None = None, psi: float | None = None) -> None:
         """Record the base tilt (rad, each within [-pi, pi]); ``None`` keeps a value."""
@@ -151,6 +182,7 @@ class DeviceState:
             "sources": {str(j): self.sources[j] for j in sorted(self.sources)},
             "theta": self.theta,
             "psi": self.psi,
+            "uncertain": {str(j): list(b) for j, b in sorted(self.uncertain.items())},
         }
 
 
@@ -172,6 +204,8 @@ def load_state(store: StateStore, device: str) -> DeviceState:
             state.sources[int(j)] = str(s)
         state.theta = float(raw.get("theta", 0.0))
         state.psi = float(raw.get("psi", 0.0))
+        for j, (lo, hi) in (raw.get("uncertain") or {}).items():
+            state.uncertain[int(j)] = (float(lo), float(hi))
     except (TypeError, ValueError, AttributeError) as e:
         raise ValueError(f"the stored positions of {device} are unreadable: {e}") from None
     return state

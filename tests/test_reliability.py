@@ -1,0 +1,635 @@
+"""Issue 11: one error path, validated files, secrets, positions that cannot silently lie, safe writes.
+
+The journal and the lock are tested against tests/faults.py (an independent fault
+injector), the lock with real subprocesses.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import sqlite3
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from stickslip import kinematics as kin
+from stickslip import records
+from stickslip.cli import app
+from stickslip.devices.base import device_key, redact_url
+from stickslip.devices.simulator import SimulatedMM3A
+
+sys.path.insert(0, str(Path(__file__).parent))
+import faults  # noqa: E402
+
+calibration = pytest.importorskip("stickslip.calibration")
+planning = pytest.importorskip("stickslip.planning")
+
+runner = CliRunner()
+DAY = "2026-11-22"
+SECRET = "Zq7-hunter2-secret"
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def one_error(r, *words):
+    """Exit 2, stderr exactly one ``error:`` line (warnings allowed before it), no traceback."""
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ln.startswith("error:")]
+    assert len(errors) == 1 and lines[-1] == errors[0], r.stderr
+    assert all(ln.startswith(("error:", "warning:")) for ln in lines), r.stderr
+    for w in words:
+        assert w in errors[0], (w, errors[0])
+    return errors[0]
+
+
+@pytest.fixture()
+def cal_dict():
+    sim = SimulatedMM3A(seed=4, day=DAY)
+    models = sim.true_models()
+    cal = calibration.Calibration(
+        models=models,
+        stderr=dict.fromkeys(models),
+        constant_steps={k: 1e-6 if k[0] == 3 else 3e-5 for k in models},
+        day=DAY,
+        method="seed",
+    )
+    return cal.to_dict()
+
+
+@pytest.fixture()
+def cal_path(tmp_path, cal_dict):
+    p = tmp_path / "cal.json"
+    p.write_text(json.dumps(cal_dict))
+    return p
+
+
+# -- 1/2: bounded reads and validated files --------------------------------------------------
+
+
+def _mutate(d, joint, name, value):
+    d = json.loads(json.dumps(d))
+    for rec in d["parameters"]:
+        if rec["joint"] == joint and rec["name"] == name:
+            rec["value"] = value
+    return d
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        (lambda d: _mutate(d, 3, "b", 1.5), ["0 <= b < 1"]),
+        (lambda d: _mutate(d, 3, "a", 972.0), ["plausible range", "nm or urad"]),
+        (lambda d: _mutate(d, 2, "gamma0", -1e-5), ["positive step size"]),
+        (lambda d: {**d, "provenance": [1, 2]}, ["provenance must be an object"]),
+        (lambda d: {**d, "constant_steps": [{"joint": 3, "direction": "+", "value": 0}]}, ["positive"]),
+        (lambda d: {**d, "parameters": "x"}, ["parameters must be a list"]),
+    ],
+)
+def test_implausible_calibrations_are_refused_with_the_reason(tmp_path, cal_dict, change, words):
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(change(cal_dict)))
+    with pytest.raises(ValueError) as e:
+        calibration.Calibration.load(p)
+    for w in words:
+        assert w in str(e.value)
+    one_error(run("move", "-c", p, "--joint", 3, "--by", "1um", "--db", tmp_path / "s.db"), *words)
+
+
+def test_the_good_calibration_still_loads(cal_path):
+    cal = calibration.Calibration.load(cal_path)
+    assert cal.models[(3, "+")].params.b == pytest.approx(
+        SimulatedMM3A(seed=4, day=DAY).true_models()[(3, "+")].params.b
+    )
+
+
+@pytest.mark.parametrize(
+    "content, words",
+    [
+        ("[" * 100000 + "]" * 100000, ["nested deeper than 32"]),
+        ('{"format": "stickslip-calibration", "frame": Infinity}', ["NaN/Infinity"]),
+        ('{"a": NaN}', ["NaN/Infinity"]),
+        (b"\xff\xfe\x00garbage", ["not UTF-8"]),
+    ],
+)
+def test_hostile_json_is_one_line(tmp_path, content, words):
+    p = tmp_path / "x.json"
+    (p.write_bytes if isinstance(content, bytes) else p.write_text)(content)
+    one_error(run("move", "-c", p, "--joint", 3, "--by", "1um", "--db", tmp_path / "s.db"), *words)
+
+
+def test_a_huge_file_is_refused_by_size(tmp_path):
+    p = tmp_path / "big.json"
+    p.write_text(" " * (records.MAX_JSON_BYTES + 10))
+    one_error(run("move", "-c", p, "--joint", 3, "--by", "1um"), "KiB limit")
+
+
+def test_folder_dev_zero_and_fifo_never_hang(tmp_path):
+    one_error(run("move", "-c", tmp_path, "--joint", 3, "--by", "1um"), "folder")
+    if os.path.exists("/dev/zero"):
+        one_error(run("move", "-c", "/dev/zero", "--joint", 3, "--by", "1um"), "not a regular file")
+    if hasattr(os, "mkfifo"):
+        fifo = tmp_path / "pipe.json"
+        os.mkfifo(fifo)  # nobody writes: opening it for reading would block forever
+        one_error(run("move", "-c", fifo, "--joint", 3, "--by", "1um"), "not a regular file")
+
+
+def test_tuning_ranges(tmp_path):
+    from stickslip.audio.detector import Tuning, TuningFileError
+
+    p = tmp_path / "t.json"
+    p.write_text(json.dumps({"band_hz": [100, 90000], "threshold_db": 10, "sample_rate": 48000}))
+    with pytest.raises(TuningFileError, match="Nyquist"):
+        Tuning.load(p)
+    p.write_text(json.dumps({"band_hz": [100, 2000], "threshold_db": 10, "frame": 1e300}))
+    with pytest.raises(TuningFileError, match="frame"):
+        Tuning.load(p)
+
+
+# -- 3: secrets -----------------------------------------------------------------------------
+
+
+def test_redaction_and_device_key():
+    url = f"anc300://admin:{SECRET}@[fe80::1]:7230?axes=1,2,3&password={SECRET}"
+    assert SECRET not in redact_url(url) and "axes=1,2,3" in redact_url(url)
+    assert device_key(url) == "anc300://[fe80::1]:7230"
+    with pytest.raises(ValueError, match="malformed device URL") as e:
+        device_key(f"anc300://u:{SECRET}@[::1?password={SECRET}")
+    assert SECRET not in str(e.value)
+
+
+def _all_db_bytes(db: Path) -> bytes:
+    return b"".join(f.read_bytes() for f in db.parent.glob(db.name + "*"))
+
+
+def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch, cal_path):
+    """import / fit --record / move / where / history --json with a password: absent everywhere."""
+    pytest.importorskip("pymeasure")
+    from stickslip.devices.emulators import ANC300Emulator
+    from stickslip.measurements import measurements_to_csv
+    from synth import seed_table
+
+    caplog.set_level(logging.DEBUG)
+    db = tmp_path / "s.db"
+    table = tmp_path / "t.csv"
+    table.write_text(measurements_to_csv(seed_table()))
+    outputs = []
+    with ANC300Emulator(password=SECRET) as emu:
+        url = emu.url + "&delay=0.002"
+        assert SECRET in url
+        base = url.split("?")[0]
+        for args in (
+            ("import", table, "--device", url, "--db", db),
+            ("fit", "--db", db, "--device", url, "--record", "-o", tmp_path / "fit.json"),
+            ("where", "-d", url, "--db", db, "--set", "3=min"),
+            ("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "20um", "--burst", 10),
+            ("where", "-d", url, "--db", db, "--json"),
+            ("history", "--db", db, "--json"),
+            (
+                "move",
+                "-d",
+                url.replace("delay=", "bogus=1&delay="),
+                "-c",
+                cal_path,
+                "--db",
+                db,
+                "--joint",
+                3,
+                "--by",
+                "1um",
+            ),
+        ):
+            r = run(*args)
+            outputs.append((args[0], r.exit_code, r.output))
+        monkeypatch.setenv("STICKSLIP_ANC300_PASSWORD", SECRET)  # the recommended way
+        r = run("move", "-d", base + "?delay=0.002", "-c", cal_path, "--db", db, "--joint", 3, "--by", "5um")
+        outputs.append(("move-env", r.exit_code, r.output))
+        monkeypatch.setenv("STICKSLIP_ANC300_PASSWORD", SECRET + "x")  # a wrong one: refused, not echoed
+        r = run("where", "-d", base + "?delay=0.002", "--db", db)
+        outputs.append(("where-wrong", r.exit_code, r.output))
+    codes = [code for _, code, _ in outputs]
+    assert codes == [0, 0, 0, 0, 0, 0, 2, 0, 2], outputs
+    assert "password=***" in outputs[-3][2]  # the unknown-option error shows the URL redacted
+    for name, _, text in outputs:
+        assert SECRET not in text, (name, text)
+    assert any("WRITE" in rec.getMessage() for rec in caplog.records)  # the driver did log its writes
+    assert SECRET not in caplog.text
+    assert all(SECRET not in rec.getMessage() for rec in caplog.records)
+    assert SECRET.encode() not in _all_db_bytes(db)
+
+
+# -- 4: the journal and the lock --------------------------------------------------------------
+
+
+@pytest.fixture()
+def faulty():
+    faults.install()
+
+
+def _where(db, url):
+    r = run("where", "-d", url, "--db", db, "--json", "--offline")
+    assert r.exit_code == 0, r.output
+    return json.loads(r.stdout)
+
+
+def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faulty):
+    db, log = tmp_path / "s.db", tmp_path / "moved.txt"
+    url = f"faulty://arm?drop_after=3&partial=0.5&log={log}"
+    cal = calibration.Calibration.load(cal_path)
+    assert run("where", "-d", url, "--db", db, "--set", "3=min").exit_code == 0
+    r = run("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "100um", "--burst", 10)
+    one_error(r, "link dropped", "sent 30 of", "uncertain")
+    moved = sum(int(x) for x in log.read_text().split())
+    assert moved == 35  # 3 bursts of 10 and half of the 4th: the truth the database cannot know
+    w = _where(db, "faulty://arm")
+    j3 = w["joints"][2]
+    assert j3["source"] == "uncertain"
+    lo, hi = j3["uncertain"]
+    pose = kin.Pose()
+    assert lo == pytest.approx(float(planning.dead_reckon(cal, 3, 0.0, 30, pose)), abs=1e-15)
+    assert hi == pytest.approx(float(planning.dead_reckon(cal, 3, 0.0, 40, pose)), abs=1e-15)
+    truth = float(planning.dead_reckon(cal, 3, 0.0, moved, pose))
+    assert lo <= truth <= hi  # never silently wrong: the truth is inside the bounds
+    # move refuses to plan from it; joints 1 and 2 are unaffected
+    one_error(
+        run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3, "--by", "1um"),
+        "uncertain",
+        "--set 3=min",
+    )
+    assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 2, "--by", "1deg").exit_code == 0
+    # re-referenced at the stop: planning works again
+    assert run("where", "-d", "faulty://arm", "--db", db, "--set", "3=min").exit_code == 0
+    assert _where(db, "faulty://arm")["joints"][2]["source"] == "set"
+    r = run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3, "--by", "1um", "--json")
+    assert r.exit_code == 0, r.output
+
+
+def test_a_crash_between_intent_and_confirmation_is_uncertain(tmp_path, cal_path):
+    """Kill -9 semantics: the intent row is already committed when the burst is sent."""
+    from stickslip.devices.positions import load_state, save_state
+    from stickslip.procedures.move import drive
+    from stickslip.storage import Store
+
+    class Crash(Exception):
+        pass
+
+    class Crashing(faults.FaultyController):
+        def step(self, joint, n):
+            if self.bursts == 2:
+                raise Crash  # the process dies here (not a DeviceError)
+            super().step(joint, n)
+
+    with Store.open(tmp_path / "s.db") as st:
+        state = load_state(st, "faulty://x")
+        state.set_position(3, 0.0, "set")
+        with pytest.raises(Crash):
+            drive(Crashing("faulty://x"), state, 3, 50, 10, lambda n: n * 1e-6, lambda s: save_state(st, s))
+    with Store.open(tmp_path / "s.db") as st:
+        again = load_state(st, "faulty://x")
+        assert again.uncertain[3] == pytest.approx((20e-6, 30e-6))
+        assert again.positions[3] == pytest.approx(20e-6)
+        assert st.integrity_check() == "ok"
+
+
+_WORKER = textwrap.dedent(
+    """
+    import sys
+    sys.path.insert(0, {tests!r})
+    import faults
+    faults.install()
+    from stickslip.cli import app
+    sys.argv = ["stickslip", *sys.argv[1:]]
+    app()
+    """
+)
+
+
+def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path):
+    db, log = tmp_path / "s.db", tmp_path / "moved.txt"
+    url = f"faulty://arm?delay=0.05&log={log}"
+    script = tmp_path / "worker.py"
+    script.write_text(_WORKER.format(tests=str(Path(__file__).parent)))
+    env = {**os.environ, "STICKSLIP_DB": str(db)}
+    subprocess.run(
+        [sys.executable, str(script), "where", "-d", url, "--set", "3=min", "--offline"],
+        env=env,
+        check=True,
+        capture_output=True,
+        timeout=60,
+    )
+    procs = [
+        subprocess.Popen(
+            [
+                sys.executable,
+                str(script),
+                "move",
+                "-d",
+                url,
+                "-c",
+                str(cal_path),
+                "--joint",
+                "3",
+                "--by",
+                "50um",
+                "--burst",
+                "5",
+            ],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for _ in range(4)
+    ]
+    results = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
+    ok = [code for code, _ in results if code == 0]
+    refused = [err for code, err in results if code == 2]
+    assert len(ok) + len(refused) == 4 and ok, results
+    for err in refused:
+        assert "being driven by another stickslip process (pid" in err and "Traceback" not in err, err
+    cal = calibration.Calibration.load(cal_path)
+    moved = sum(int(x) for x in log.read_text().split())
+    steps_each = planning.plan_move(cal, 3, 0.0, 50e-6, kin.Pose()).steps
+    w = json.loads(
+        subprocess.run(
+            [sys.executable, str(script), "where", "-d", url, "--json", "--offline"],
+            env=env,
+            check=True,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        ).stdout
+    )
+    q = w["joints"][2]["q"]
+    # what the hardware did equals what the database says (the sum of the moves that ran)
+    assert moved > 0 and moved % steps_each == 0 or len(ok) > 1
+    assert q == pytest.approx(float(planning.dead_reckon(cal, 3, 0.0, moved, kin.Pose())), rel=1e-3)
+    assert q == pytest.approx(len(ok) * 50e-6, rel=0.02)
+
+
+# -- 6: safe writes and storage faults -------------------------------------------------------
+
+
+def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
+    p = tmp_path / "out.json"
+    p.write_text("old")
+
+    def half(f):
+        f.write("new and half")
+        raise RuntimeError("writer failed")
+
+    with pytest.raises(RuntimeError):
+        records.atomic_write(p, half)
+    assert p.read_text() == "old" and [x.name for x in tmp_path.iterdir()] == ["out.json"]
+    records.atomic_write_text(p, "new")
+    assert p.read_text() == "new"
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="POSIX permissions; root ignores them")
+def test_read_only_folder_keeps_the_old_file(tmp_path):
+    d = tmp_path / "ro"
+    d.mkdir()
+    (d / "out.json").write_text("old")
+    d.chmod(0o500)
+    try:
+        with pytest.raises(OSError):
+            records.atomic_write_text(d / "out.json", "new")
+        assert (d / "out.json").read_text() == "old"
+    finally:
+        d.chmod(0o700)
+
+
+_FSIZE = textwrap.dedent(
+    """
+    import resource, signal, sys
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (int(sys.argv[1]), int(sys.argv[1])))
+    from stickslip.cli import app
+    sys.argv = ["stickslip", *sys.argv[2:]]
+    app()
+    """
+)
+
+
+@pytest.mark.skipif(not hasattr(os, "setrlimit") and sys.platform == "win32", reason="RLIMIT_FSIZE is POSIX")
+def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
+    pytest.importorskip("resource")
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.storage import Store
+    from synth import seed_table
+
+    db = tmp_path / "s.db"
+    small, big = tmp_path / "small.csv", tmp_path / "big.csv"
+    small.write_text(measurements_to_csv(seed_table()))
+    big.write_text(measurements_to_csv(seed_table(day="2026-11-21") * 200))
+    env = {**os.environ, "STICKSLIP_DB": str(db)}
+    script = tmp_path / "fsize.py"
+    script.write_text(_FSIZE)
+    ok = subprocess.run(
+        [sys.executable, str(script), str(10**9), "import", str(small)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert ok.returncode == 0, ok.stderr
+    with Store.open(db) as st:
+        before = st.count_traverses()
+    size = sum(f.stat().st_size for f in tmp_path.glob("s.db*"))
+    r = subprocess.run(
+        [sys.executable, str(script), str(size + 8192), "import", str(big)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and "Traceback" not in r.stderr, r.stderr
+    with Store.open(db) as st:
+        assert st.count_traverses() == before > 0
+        assert st.integrity_check() == "ok"
+
+
+def test_foreign_sqlite_and_read_only_database(tmp_path):
+    foreign = tmp_path / "other.db"
+    con = sqlite3.connect(foreign)
+    con.execute("CREATE TABLE devices (x)")
+    con.execute("PRAGMA user_version = 77")
+    con.commit()
+    con.close()
+    one_error(run("history", "--db", foreign), "newer")
+    one_error(run("where", "--db", tmp_path / "nodb.db", "--offline", "--set", "3=min", "--q2", "pi/0"))
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["move", "-j", "2", "--by", "-60"], ["outside joint 2's range", "did you mean -60deg?"]),
+        (["move", "-j", "1", "--to", "45"], ["did you mean 45deg?"]),
+        (["where", "--offline", "--set", "2=-60"], ["did you mean -60deg?"]),
+    ],
+)
+def test_bare_numbers_outside_the_range_suggest_degrees(tmp_path, cal_path, args, words):
+    extra = ["-c", cal_path] if args[0] == "move" else []
+    one_error(run(*args, *extra, "--db", tmp_path / "s.db"), *words)
+    # in range, a bare number is radians, as documented
+    r = run("move", "-j", "2", "--by", "-0.01", "-c", cal_path, "--db", tmp_path / "s.db", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["q_to"] == pytest.approx(-math.pi / 2 - 0.01)
+
+
+# -- 5: duplicates ----------------------------------------------------------------------------
+
+
+def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path):
+    import dataclasses
+
+    from stickslip.measurements import measurements_to_csv
+    from synth import seed_table
+
+    db = tmp_path / "s.db"
+    t = seed_table()[0]
+    shift = lambda tr, d: dataclasses.replace(tr, q1=tr.q1 + d)  # noqa: E731  (same pose group within 1e-3 rad)
+    day2 = dataclasses.replace(t, day="2026-11-21", steps=t.steps + 7)
+    # each day: two repeats with exactly equal average steps (zero spread within days)
+    rows = [t, shift(t, 1e-6), day2, shift(day2, 1e-6)]
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    a.write_text(measurements_to_csv(rows))
+    b.write_text(measurements_to_csv(rows) + "\n")  # the same rows again, another file
+    assert run("import", a, "--db", db).exit_code == 0
+    one_error(run("import", a, "--db", db), "imported before")
+    assert run("import", b, "--db", db).exit_code == 0
+    r = run("anova", "--db", db, "--json")
+    assert r.exit_code == 0, r.output
+    assert "4 traverse(s) are exact copies" in r.stderr and "no spread" in r.stderr
+    out = json.loads(r.stdout)
+    assert out and all(row["F"] is None or math.isfinite(row["F"]) for row in out)
+    degenerate = [row for row in out if row.get("verdict") == "degenerate"]
+    assert degenerate and not any(row["significant"] for row in degenerate)
+    r = run("anova", "--db", db)
+    assert r.exit_code == 0 and "inf" not in r.stdout and "degenerate" in r.stdout
+    assert "SIGNIFICANT" not in r.stdout
+
+
+GOOD_ROW = {"day": DAY, "joint": "3", "direction": "+", "q1": "0", "q2": "-1.5707963", "q3": "0",
+            "theta": "0", "psi": "0", "start": "0", "end": "0.012", "steps": "12000"}  # fmt: skip
+
+
+@pytest.mark.parametrize("column", list(GOOD_ROW))
+@pytest.mark.parametrize("value", ["9223372036854775808", "1e999", "nan", "pi/0", "x" * 200_000, "-1", ""])
+def test_one_hostile_cell_in_a_good_table(tmp_path, column, value):
+    row = {**GOOD_ROW, column: value}
+    p = tmp_path / "t.csv"
+    p.write_text(",".join(GOOD_ROW) + "\n" + ",".join(row.values()) + "\n")
+    for cmd in (["import", p, "--db", tmp_path / "s.db"], ["calibrate", p], ["anova", p], ["fit", p]):
+        r = run(*cmd)
+        assert r.exception is None or isinstance(r.exception, SystemExit), (cmd, column, repr(r.exception))
+        if r.exit_code != 0:
+            one_error(r)
+
+
+def test_duplicated_column_is_refused(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text(",".join([*GOOD_ROW, "steps"]) + "\n" + ",".join([*GOOD_ROW.values(), "5"]) + "\n")
+    one_error(run("import", p, "--db", tmp_path / "s.db"), "steps")
+
+
+def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
+    p = tmp_path / "poses.csv"
+    p.write_text("joint,direction,q1,q2,q3,theta,psi,q2\n3,+,0,-1.57,0,0,0,0\n")
+    one_error(run("predict", "-c", cal_path, p), "q2", "more than once")
+    p.write_text("joint,direction,q1,q2,q3,theta,psi,note\n3,+,0,-1.57,0,0,0," + "x" * 200_000 + "\n")
+    one_error(run("predict", "-c", cal_path, p), "longer than")
+
+
+def test_delete_traverses_and_sessions_with_confirmation(tmp_path):
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.storage import Store
+    from synth import seed_table
+
+    db = tmp_path / "s.db"
+    ts = seed_table()
+    p = tmp_path / "a.csv"
+    p.write_text(measurements_to_csv([*ts, *(dataclasses_replace(t, day="2026-11-21") for t in ts)]))
+    assert run("import", p, "--db", db).exit_code == 0
+    r = runner.invoke(app, ["delete", "--day", "2026-11-21", "--db", str(db)], input="n\n")
+    assert r.exit_code == 1 and "nothing deleted" in r.stderr
+    with Store.open(db) as st:
+        assert st.count_traverses() == 2 * len(ts)
+        first = st.traverse_ids(day=DAY)[0]
+    r = run("delete", "--day", "2026-11-21", "--db", db, "--yes", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout) == {"traverses": len(ts), "calibration_links": 0, "integrity": "ok"}
+    one_error(run("delete", "-t", 999999, "-t", first, "--db", db, "--yes"), "999999")
+    r = runner.invoke(app, ["delete", "-t", str(first), "--db", str(db)], input="y\n")
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        assert st.count_traverses() == len(ts) - 1 and st.days() == [DAY]
+        assert st.integrity_check() == "ok"
+
+
+def dataclasses_replace(t, **kw):
+    import dataclasses
+
+    return dataclasses.replace(t, **kw)
+
+
+def test_exclude_keeps_rows_out_of_analyses_and_undo_brings_them_back(tmp_path):
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.storage import Store
+    from synth import seed_table
+
+    db = tmp_path / "s.db"
+    ts = seed_table()
+    p = tmp_path / "a.csv"
+    p.write_text(measurements_to_csv(ts))
+    assert run("import", p, "--db", db).exit_code == 0
+    with Store.open(db) as st:
+        ids = st.traverse_ids()
+    one_error(run("exclude", "-t", ids[0], "--db", db), "--reason")
+    one_error(run("exclude", "-t", 10**9, "--reason", "x", "--db", db), str(10**9))
+    assert run("exclude", "-t", ids[0], "-t", ids[1], "--reason", "cable snagged", "--db", db).exit_code == 0
+    with Store.open(db) as st:
+        assert len(st.traverses()) == len(ts) - 2
+        (entry,) = st.history()
+        assert entry["traverses"] == len(ts) - 2 and entry["excluded"] == 2
+    # the excluded rows are not fitted: two of joint 3+'s three poses are gone
+    one_error(run("fit", "--db", db, "--json"), "joint 3+", "1 traverse")
+    assert run("exclude", "-t", ids[0], "-t", ids[1], "--undo", "--db", db).exit_code == 0
+    with Store.open(db) as st:
+        assert len(st.traverses()) == len(ts)
+
+
+def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path, faulty):
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:  # a holder on another host: never taken over automatically
+        assert (
+            st.acquire_lock("faulty://arm", {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"}) is None
+        )
+    one_error(
+        run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um"),
+        "pid 4242 on bench-pc since 2026-11-22T10:00:00",
+        "--unlock",
+    )
+    assert run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline").exit_code == 0
+    assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um").exit_code == 0
+
+
+@pytest.mark.parametrize("cmd", [["plan", "-j", "3", "--from", "2mm", "--to", "2.03mm"], ["where", "--offline"]])
+def test_a_bare_angle_beyond_a_turn_suggests_degrees(tmp_path, cal_path, cmd):
+    extra = ["-c", cal_path] if cmd[0] == "plan" else ["--db", tmp_path / "s.db"]
+    one_error(run(*cmd, *extra, "--q2", "-60"), "did you mean -60deg?")
+    r = run(*cmd, *extra, "--q2", "-60deg")
+    assert r.exit_code == 0, r.output
