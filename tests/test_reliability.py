@@ -508,7 +508,8 @@ def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path)
     b.write_text(measurements_to_csv(rows) + "\n")  # the same rows again, another file
     assert run("import", a, "--db", db).exit_code == 0
     one_error(run("import", a, "--db", db), "imported before")
-    assert run("import", b, "--db", db).exit_code == 0
+    one_error(run("import", b, "--db", db), "4 of 4 rows are already stored")  # same rows, another file
+    assert run("import", b, "--db", db, "--allow-duplicates").exit_code == 0  # forced in: anova copes
     r = run("anova", "--db", db, "--json")
     assert r.exit_code == 0, r.output
     assert "4 traverse(s) are exact copies" in r.stderr and "no spread" in r.stderr

@@ -348,3 +348,63 @@ def test_cli_fit_record_from_the_database_links_the_traverses(tmp_path):
         assert st.calibrations()[0]["device"] == "mm3a:///dev/ttyUSB0"
         assert st.calibration_traverses(cid) == rows
         assert st.latest_calibration("mm3a:///dev/ttyUSB0").day == "2026-11-21"
+
+
+# ---------------------------------------------------------------- duplicates
+
+
+def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import measurements_to_csv
+    from synth import seed_table
+
+    runner = CliRunner()
+    db = tmp_path / "d.db"
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    rows = seed_table()
+    a.write_text(measurements_to_csv(rows))
+    b.write_text(measurements_to_csv(rows[:3]) + "\n")  # other bytes, the same three measurements
+    assert runner.invoke(app, ["import", str(a), "--db", str(db)]).exit_code == 0
+    r = runner.invoke(app, ["import", str(b), "--db", str(db)])
+    assert r.exit_code == 2 and "3 of 3 rows are already stored for sim:// (same day, pose" in r.stderr
+    assert "rows 2, 3, 4" in r.stderr
+    with Store.open(db) as st:
+        assert st.count_traverses() == 14
+    r = runner.invoke(app, ["import", str(b), "--db", str(db), "--allow-duplicates"])
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        assert st.count_traverses() == 17
+        assert st.duplicates(rows[:2], "sim://") == [0, 1]
+        assert st.duplicates(rows[:2], "sim://?seed=9") == []  # another device: not a duplicate
+
+
+def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
+    import sqlite3
+
+    from stickslip.storage import MIGRATIONS, _split_sql, content_key
+    from synth import seed_table
+
+    path = tmp_path / "old.db"
+    con = sqlite3.connect(path)
+    for script in MIGRATIONS[:2]:
+        for stmt in _split_sql(script):
+            con.execute(stmt)
+    con.execute("PRAGMA user_version = 2")
+    con.execute("INSERT INTO devices (id, url, created_at) VALUES (1, 'sim://', 'x')")
+    con.execute("INSERT INTO sessions (id, device_id, day, created_at) VALUES (1, 1, '2026-11-22', 'x')")
+    t = seed_table()[0]
+    con.execute(
+        'INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, start, "end", steps, '
+        "measured_at, how) VALUES (1, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 'x', 'old')",
+        (t.joint, t.direction, t.q1, t.q2, t.q3, t.theta, t.psi, t.start, t.end, t.steps),
+    )
+    con.commit()
+    con.close()
+    with Store.open(path) as st:
+        assert st.schema_version == SCHEMA_VERSION == 3
+        assert st.duplicates([t], "sim://") == [0]
+        key = st._con.execute("SELECT content FROM traverses").fetchone()[0]
+        assert key == content_key(t, "sim://")
+        assert st.integrity_check() == "ok"

@@ -28,6 +28,7 @@ measurement-table row, when and how it was measured, where it came from),
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import os
 import sqlite3
@@ -121,10 +122,28 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE traverses ADD COLUMN excluded TEXT
     """,
+    # version 2 -> 3: a content key per traverse (device, day and the row's values), so that the
+    # same measurement stored twice (a demo run twice, a table imported twice) is found
+    """
+    ALTER TABLE traverses ADD COLUMN content TEXT;
+    CREATE INDEX traverses_content ON traverses(content)
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
 _COLUMNS = ("joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
+
+
+def content_key(t: Traverse, device: str) -> str:
+    """A key equal for two traverses with the same device, day and row values (floats to 12 digits).
+
+    Two real traverses can share it (a repeat that happened to take exactly as many steps);
+    commands that refuse duplicates therefore offer ``--allow-duplicates``.
+    """
+    values = [redact_url(str(device).strip()), str(t.day).strip(), str(int(t.joint)), t.direction]
+    values += [f"{float(getattr(t, c)):.12g}" for c in ("q1", "q2", "q3", "theta", "psi", "start", "end")]
+    values.append(str(int(t.steps)))
+    return "sha256:" + hashlib.sha256("\x1f".join(values).encode()).hexdigest()
 
 
 class StoreError(OSError):
@@ -333,6 +352,17 @@ class Store:
                 for stmt in _split_sql(MIGRATIONS[k]):
                     con.execute(stmt)
                 con.execute(f"PRAGMA user_version = {k + 1}")
+            if version < 3:
+                self._backfill_content(con)
+
+    def _backfill_content(self, con: sqlite3.Connection) -> None:
+        rows = con.execute(
+            "SELECT t.*, s.day AS day, d.url AS url FROM traverses t JOIN sessions s ON s.id = t.session_id "
+            "JOIN devices d ON d.id = s.device_id WHERE t.content IS NULL"
+        ).fetchall()
+        for r in rows:
+            key = content_key(self._to_traverse(r), r["url"])
+            con.execute("UPDATE traverses SET content = ? WHERE id = ?", (key, r["id"]))
 
     # -- devices and sessions
 
@@ -393,10 +423,11 @@ class Store:
         source: str | None,
     ) -> int:
         sid = self._session_id(con, device_id, str(t.day))
+        url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
         cur = con.execute(
             "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
             '    start, "end", steps, '
-            "measured_at, how, source) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (
                 sid,
                 int(t.joint),
@@ -412,9 +443,21 @@ class Store:
                 measured_at,
                 how,
                 source,
+                content_key(t, url),
             ),
         )
         return int(cur.lastrowid)
+
+    def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
+        """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
+        out = []
+        for k, t in enumerate(traverses):
+            hit = self._con.execute(
+                "SELECT 1 FROM traverses WHERE content = ? LIMIT 1", (content_key(t, device),)
+            ).fetchone()
+            if hit is not None:
+                out.append(k)
+        return out
 
     def add_traverse(
         self,

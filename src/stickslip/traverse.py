@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from . import kinematics as kin
+from .audio.guard import NoSignalError, SignalGuard
 from .devices.base import Controller
 from .measurements import Traverse
 from .models import direction_label, direction_sign
@@ -140,6 +141,10 @@ class _Listener:
         self.source = audio_blocks if self._callable else iter(audio_blocks)
         self.t_s: float | None = None
         self._last_block_s = 0.0
+        # a dead input must never look like a stop; only a detector that declares it does not
+        # listen to the samples (the simulator's oracle) is exempt
+        listens = getattr(detector, "uses_audio", True)
+        self.guard = SignalGuard(self.sample_rate) if listens else None
 
     def start(self, t0_s: float) -> None:
         """Begin listening at stream time ``t0_s``: drop older audio, reset the detector."""
@@ -184,8 +189,15 @@ class _Listener:
             block = np.asarray(block, dtype=np.float32)
             if block.ndim > 1:
                 block = block.mean(axis=1)
+            try:
+                alive = self.guard is None or self.guard.check(block)
+            except NoSignalError as e:
+                raise TraverseError(str(e)) from None
             self.t_s += block.shape[0] / self.sample_rate
             events = self.detector.feed(block)
+            if events and not alive:  # heard in a dead input: not a stop; start afresh, in step
+                self.detector.reset(self.t_s)
+                continue
             if events:
                 return events[0]
         return None

@@ -136,10 +136,17 @@ def import_(
     device: str = typer.Option("sim://", "--device", "-d", help="Device URL the table was measured on."),
     how: str = typer.Option("imported", "--how", help="How it was measured: imported, audio, simulated ..."),
     force: bool = typer.Option(False, "--force", help="Import even if this exact file was imported before."),
+    allow_duplicates: bool = typer.Option(
+        False, "--allow-duplicates", help="Store rows identical to stored ones (same device, day, pose, steps)."
+    ),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the new traverse ids as JSON."),
 ) -> None:
     """Store a measurement table; on any bad row nothing is stored.
+
+    A row identical to a stored traverse of the same device (day, pose, interval and
+    steps) is taken for the same measurement stored twice, and the import is refused
+    unless --allow-duplicates (a genuine repeat can take exactly as many steps).
 
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
@@ -148,6 +155,14 @@ def import_(
     with _open_store(db, must_exist=False) as st:
         if st.has_source(digest) and not force:
             fail(f"{meas} was imported before (same contents); use --force to import it again")
+        dup = [] if allow_duplicates else st.duplicates(ts, device)
+        if dup:
+            rows = ", ".join(str(k + 2) for k in dup[:5]) + (" ..." if len(dup) > 5 else "")
+            fail(
+                f"{meas}: {len(dup)} of {len(ts)} rows are already stored for {redact_url(device)} "
+                f"(same day, pose, interval and steps; rows {rows}); nothing imported. "
+                "Use --allow-duplicates if they are genuine repeats"
+            )
         with user_errors():
             ids = st.add_traverses(ts, device=device, how=how, source=digest)
         path = st.path

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 
+from ..clock import today_label
 from . import app
 from ._common import console, fail, print_json, user_errors, validation_table
 
@@ -52,6 +54,9 @@ def demo(
         help="A simulator URL, sim://?seed=3&day=2026-11-22 (same as --seed/--day). The demo compares "
         "with the simulator's truth; on a real manipulator use 'stickslip traverse' and 'calibrate'.",
     ),
+    allow_duplicates: bool = typer.Option(
+        False, "--allow-duplicates", help="Record even if this seed and day are already in the database."
+    ),
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
 
@@ -68,6 +73,8 @@ def demo(
         seed, day = _sim_seed_day(device, seed, day)
     with user_errors(CalibrationError, TraverseError, StoreError):
         store = Store.open(db) if use_db else None
+        if store is not None and not allow_duplicates:
+            _refuse_a_second_demo(store, seed, day or today_label())
         try:
             result = run_demo(
                 seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store
@@ -115,6 +122,21 @@ def demo(
         console.print(validation_table(result.validation.rows(), title))
     for what, path in result.files.items():
         console.print(f"saved {what}: {path}", highlight=False)
+
+
+def _refuse_a_second_demo(store: Any, seed: int, day: str) -> None:
+    """The simulator is deterministic: the same seed and day would store the same traverses again."""
+    from ..devices.base import device_key
+
+    key = device_key(f"sim://?seed={seed}")
+    n = len(store.traverse_ids(device=key, day=day))
+    if n:
+        store.close()
+        fail(
+            f"the database {store.path} already holds {n} traverses of {key} on {day} (a demo run before); "
+            "the same seed and day give the same traverses. Use another --seed or --day, --no-db, "
+            "or --allow-duplicates"
+        )
 
 
 def _sim_seed_day(device: str, seed: int, day: str | None) -> tuple[int, str | None]:

@@ -756,6 +756,9 @@ class OracleStopDetector:
         Error of the onset estimate, s.
     """
 
+    uses_audio = False
+    """It never looks at the samples, so the traverse's no-signal guard does not apply."""
+
     def __init__(
         self,
         sim: SimulatedMM3A,
