@@ -5,11 +5,18 @@ static load and pose change it (Damani, Nambi & Abbott's Eqs. 2-9), calibrate th
 model from a handful of traverses, and plan moves in any pose. SI units throughout.
 """
 
+import logging as _logging
+
 from .kinematics import JOINTS, gravity_base, load_term, zeta
 from .measurements import Traverse, read_measurements, write_measurements
 from .models import JointModel, PrismaticParams, RotaryParams, eta, gamma_prismatic, gamma_rotary
 
 __version__ = "0.1.0"
+
+# A library logs, the application decides what to show: without this, Python's last-resort
+# handler prints every warning (a stop that could not be sent, a NanoControl "i" answer)
+# to stderr beside the command's own one-line error.
+_logging.getLogger(__name__).addHandler(_logging.NullHandler())
 
 __all__ = [
     "JOINTS",

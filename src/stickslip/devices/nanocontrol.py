@@ -178,7 +178,7 @@ class NanoControl:
         wait = self.timeout if timeout is None else timeout
         with self._lock:
             stale = self.transport.drain()
-            if stale:
+            if stale.strip(b"\r\n\t "):  # the LF of a CRLF answer is no news
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
             log.debug("-> %s", wire.decode())
             self.transport.write(wire)
@@ -201,7 +201,9 @@ class NanoControl:
                     log.warning("NanoControl says: %s (after %s)", message, wire.decode())
                     continue
                 if status == "error":
-                    raise DeviceError(f"NanoControl refused {wire.decode()!r}: {message}")
+                    raise DeviceError(
+                        f"NanoControl on {self.transport.name} refused {wire.decode()!r}: {message}"
+                    )
                 return message
 
     def _channel(self, joint: int) -> str:

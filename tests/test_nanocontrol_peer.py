@@ -1,0 +1,79 @@
+"""`stickslip move` against an independent NanoControl on a pseudo-terminal (tests/nanocontrol_peer.py).
+
+Good moves send exactly the planned steps with nothing on stderr; each injected fault ends
+within the configured timeout plus the burst's own duration with one line naming the port,
+and a stop is sent. CR LF answers are accepted without complaint.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+import pytest
+
+from stickslip.measurements import measurements_to_csv
+from synth import seed_table
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
+if sys.platform != "win32":
+    from nanocontrol_peer import NanoControlPeer
+
+MAIN = "import sys; from stickslip.cli import main; sys.argv[0] = 'stickslip'; main()"
+
+
+def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", MAIN, *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture()
+def cal(tmp_path):
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(seed_table()))
+    out = tmp_path / "cal.json"
+    r = _cli("calibrate", str(meas), "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    return out
+
+
+def _planned(cal, frm: str, to: str) -> int:
+    r = _cli("plan", "-c", str(cal), "--joint", "3", "--from", frm, "--to", to, "--q2", "-90deg", "--json")
+    assert r.returncode == 0, r.stderr
+    return int(json.loads(r.stdout)["steps"])
+
+
+def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal, tmp_path):
+    db = str(tmp_path / "s.db")
+    with NanoControlPeer() as peer:
+        assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
+        r = _cli("move", "-d", peer.url, "-c", str(cal), "--joint", "3", "--by", "300um", "--q2", "-90deg",
+                 "--burst", "100", "--db", db)
+        assert r.returncode == 0, r.stderr
+        assert r.stderr == ""
+        planned = _planned(cal, "2mm", "2.3mm")
+        assert planned > 100  # several bursts
+        assert peer.steps == {"A": 0, "B": 0, "C": planned, "D": 0}
+        assert all(c.startswith(("version", "coarse C +")) for c in peer.log), peer.log
+
+
+@pytest.mark.parametrize("fault,words", [
+    ("error", "refused 'coarse C +"),
+    ("silent", "did not answer 'coarse C +"),
+    ("garbage", "garbage reply"),
+])
+def test_each_fault_is_one_line_naming_the_port_with_a_stop_sent(cal, tmp_path, fault, words):
+    db = str(tmp_path / "s.db")
+    with NanoControlPeer(fault=fault) as peer:
+        assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
+        t0 = time.monotonic()
+        r = _cli("move", "-d", peer.url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg", "--db", db)
+        elapsed = time.monotonic() - t0
+        assert r.returncode == 2, r.stderr
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
+        assert peer.port in lines[0] and words in lines[0], lines[0]
+        assert "stop" in peer.log, peer.log
+        # timeout 0.5 s + 1.5 x the burst (~35 steps at the assumed 1 kHz) + start-up of the CLI
+        assert elapsed < 10
