@@ -1,6 +1,7 @@
 """Planning: steps for a move, dead reckoning, and the fast scalar path."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -74,3 +75,19 @@ def test_out_of_range_and_missing_direction():
 def test_zero_move():
     plan = plan_move(CAL, 2, -1.0, -1.0, Pose())
     assert plan.steps == 0 and plan.q_end_predicted == -1.0
+
+
+@pytest.mark.parametrize(
+    "pose,words",
+    [
+        (Pose(q2=-5.0), "q2 = -5 rad is outside joint 2's range"),
+        (Pose(q2=1.0), "q2 = 1 rad is outside joint 2's range"),
+        (Pose(theta=4.0), "theta = 4 rad is outside [-pi, pi]"),
+        (Pose(q3=0.02), "q3 = 0.02 m is outside joint 3's range"),
+    ],
+)
+def test_a_pose_the_arm_cannot_take_is_never_planned_in(pose, words):
+    cal = calibrate(seed_table())
+    joint = 2 if pose.q3 else 3
+    with pytest.raises(ValueError, match=re.escape(words)):
+        plan_move(cal, joint, -0.5 if joint == 2 else 0.002, -0.6 if joint == 2 else 0.003, pose)

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from . import kinematics as kin
 from .calibration import Calibration
+from .measurements import check_pose
 from .models import JointModel, PrismaticParams, StepProfile, direction_label
 
 __all__ = ["MovePlan", "Planner", "plan_move", "dead_reckon"]
@@ -124,6 +125,9 @@ class Planner:
     def __init__(self, calibration: Calibration, joint: int, pose: kin.Pose):
         self.joint = int(joint)
         self.spec = kin.joint_spec(joint)
+        problems = check_pose(self.joint, dict(zip(kin.Pose._fields, map(float, pose), strict=True)))
+        if problems:  # a pose the arm cannot take is never planned in
+            raise ValueError(f"pose for a move of joint {joint}: " + "; ".join(problems))
         self.pose = pose
         self._coeffs: dict[int, StepProfile] = {}
         for sign, label in ((1, "+"), (-1, "-")):
