@@ -12,6 +12,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 from __future__ import annotations
 
 import inspect
+from pathlib import Path
 
 import typer
 
@@ -39,10 +40,57 @@ def _done(*_args: object, **_kwargs: object) -> None:
     flush_warnings()
 
 
+def _version(value: bool) -> None:
+    if value:
+        from .. import __version__
+
+        typer.echo(f"stickslip {__version__}")
+        raise typer.Exit()
+
+
+def _logging(verbose: int, log_file: Path | None) -> None:
+    """-v: INFO to stderr, -vv: DEBUG (every message to and from a controller); --log-file: DEBUG to a file."""
+    import logging
+
+    log = logging.getLogger("stickslip")
+    for h in [h for h in log.handlers if getattr(h, "_stickslip_cli", False)]:
+        log.removeHandler(h)
+        h.close()
+    fmt = logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
+    handlers: list[logging.Handler] = []
+    if verbose:
+        h: logging.Handler = logging.StreamHandler()
+        h.setLevel(logging.INFO if verbose == 1 else logging.DEBUG)
+        handlers.append(h)
+    if log_file is not None:
+        try:
+            h = logging.FileHandler(log_file, encoding="utf-8")
+        except OSError as e:
+            raise typer.BadParameter(f"cannot write the log file: {e}", param_hint="--log-file") from None
+        h.setLevel(logging.DEBUG)
+        handlers.append(h)
+    for h in handlers:
+        h.setFormatter(fmt)
+        h._stickslip_cli = True  # type: ignore[attr-defined]  # to find ours again on the next call
+        log.addHandler(h)
+    log.setLevel(logging.DEBUG if handlers else logging.NOTSET)
+
+
 @app.callback(result_callback=_done)
-def _root() -> None:
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
+    verbose: int = typer.Option(
+        0, "--verbose", "-v", count=True, help="-v: progress messages; -vv: also every message to and from a device."
+    ),
+    log_file: Path | None = typer.Option(
+        None, "--log-file", help="Also write a DEBUG log (device traffic, passwords redacted) to this file."
+    ),
+) -> None:
     """stickslip: calibrate, predict and plan stick-slip steps (see the commands below)."""
     drop_warnings()
+    _logging(verbose, log_file)
 
 
 from . import audio, core, devices, history, measure  # noqa: E402,F401  (they register their commands)
