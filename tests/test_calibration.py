@@ -71,7 +71,7 @@ def test_exact_inversion_to_1e3_urad_across_the_issue_range(g0, d, down):
 
 
 def test_small_delta_slope_is_about_2_4():
-    # DESIGN.md: "the exact relation gives d ≈ 2.5·Δ for small Δ"; exactly 1/mean(-sin q2) = 4pi/3 / sqrt(3)
+    # docs/design.md: "the exact relation gives d ≈ 2.5·Δ for small Δ"; exactly 1/mean(-sin q2) = 4pi/3 / sqrt(3)
     g0, delta = 50e-6, 0.01e-6
     d = C.invert_d_exact(g0 + delta, g0, HI, LO, 0.0, -1.0)
     assert d / delta == pytest.approx((4 * math.pi / 3) / math.sqrt(3), rel=1e-3)

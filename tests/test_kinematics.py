@@ -1,4 +1,4 @@
-"""Kinematics: the general gravity projection reproduces the paper's load terms (DESIGN.md section 2)."""
+"""Kinematics: the general gravity projection reproduces the paper's load terms (docs/design.md §2)."""
 
 import math
 
@@ -53,7 +53,7 @@ def test_general_projection_matches_vectors_for_any_q1(q1, q2, theta, psi):
 
 @given(q1=angle, q2=q2s, theta=angle, psi=angle)
 def test_joint1_term_is_design_formula(q1, q2, theta, psi):
-    # DESIGN.md: torque about z0 ∝ -r (sin θ cos q1 + cos θ sin ψ sin q1), r = horizontal reach = -sin q2
+    # docs/design.md: torque about z0 ∝ -r (sin θ cos q1 + cos θ sin ψ sin q1), r = horizontal reach = -sin q2
     r = -math.sin(q2)
     expected = r * (math.sin(theta) * math.cos(q1) + math.cos(theta) * math.sin(psi) * math.sin(q1))
     assert abs(float(kin.joint1_load(q1, q2, theta, psi)) - expected) < 1e-14

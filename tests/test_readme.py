@@ -1,4 +1,4 @@
-"""The README's tour and Python example run as written (STYLE.md: examples run)."""
+"""The README's tour and Python example run as written (docs/style.md: examples run)."""
 
 import os
 import re

@@ -115,7 +115,7 @@ def test_d_relation_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(c
             else:
                 assert rel.d_exact[i, j] == pytest.approx(invert_d_exact(*args), rel=1e-4, abs=1e-10)
     assert np.isnan(rel.d_exact[0, -1]) and np.isfinite(rel.d_exact[1]).all()
-    # small D: d / D tends to range / integral of the load = 1 / mean(sin zeta) = 2.418 (DESIGN.md: ~2.4-2.5)
+    # small D: d / D tends to range / integral of the load = 1 / mean(sin zeta) = 2.418 (docs/design.md: ~2.4-2.5)
     mean_load = (math.cos(-math.pi / 6) - math.cos(7 * math.pi / 6)) / (4 * math.pi / 3)
     slope = np.gradient(rel.d_exact[1], rel.delta)[4]
     assert slope == pytest.approx(1 / mean_load, rel=0.02)

@@ -1,6 +1,6 @@
 """Frames, joint ranges and the static-load terms of the MM3A-type arm.
 
-Conventions (DESIGN.md section 2): joints 1 and 2 are rotary (radians), joint 3 is
+Conventions (docs/design.md §2): joints 1 and 2 are rotary (radians), joint 3 is
 prismatic (metres). With z0 vertical, the base frame is rotated by ``theta`` about
 x0, then by ``psi`` about the new y0, so unit gravity in the base frame is
 
@@ -231,7 +231,7 @@ def joint1_load(q1: ArrayLike, q2: ArrayLike, theta: ArrayLike, psi: ArrayLike) 
     """Minus the unit gravity torque about z0 from a mass on the arm (joint 1).
 
     ``-sin(q2) (sin(theta) cos(q1) + cos(theta) sin(psi) sin(q1))``: the horizontal
-    reach of the arm (``-sin q2``, 1 when outstretched) times the DESIGN.md term.
+    reach of the arm (``-sin q2``, 1 when outstretched) times the docs/design.md term.
     Zero at ``theta = psi = 0``; largest at ``theta = -pi/2`` (the paper's
     "interchanged" roles for joint 1).
     """

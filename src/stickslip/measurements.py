@@ -1,4 +1,4 @@
-"""The measurement table: one traverse per row (DESIGN.md section 7).
+"""The measurement table: one traverse per row (docs/design.md §7).
 
 CSV header, exactly::
 

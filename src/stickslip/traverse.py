@@ -1,6 +1,6 @@
 """Measure a joint's average step: count the steps between its two end stops, by ear.
 
-The traverse procedure (DESIGN.md section 5), for any :class:`~stickslip.devices.base.Controller`:
+The traverse procedure (docs/design.md §5), for any :class:`~stickslip.devices.base.Controller`:
 
 1. *Drive to the start stop*: step the joint the other way until the limit switch
    hears that stop (``predrive="listen"``), or overdrive it by more steps than the

@@ -120,7 +120,7 @@ class DeviceInfo:
 class Controller(Protocol):
     """A stick-slip controller: step a joint by a signed number of steps, stop, report settings.
 
-    Step counts are signed (``+`` = joint coordinate increasing, DESIGN.md section 2).
+    Step counts are signed (``+`` = joint coordinate increasing, docs/design.md §2).
     Frequencies are in Hz. Every setter validates its argument and raises
     ``ValueError`` naming the allowed range; nothing is clipped silently.
 

@@ -1,6 +1,6 @@
 """The simulated MM3A: the default backend (``sim://``), on a virtual clock.
 
-A three-joint stick-slip arm with the paper's ranges (DESIGN.md section 2) whose
+A three-joint stick-slip arm with the paper's ranges (docs/design.md §2) whose
 *true* mean step follows the load-aware models of :mod:`stickslip.models`, with
 parameters that drift a few % from day to day (seeded by ``(seed, day)``), and
 whose physics is deliberately **not** exactly Eqs. 3/8, so calibrations are tested
@@ -70,7 +70,7 @@ _KEEP_BURSTS = 4096  # burst records kept before those all microphones have hear
 _MAX_BURST = 10_000_000
 
 # Nominal (undrifted) true parameters. Prismatic: the paper's published values
-# (DESIGN.md section 3, units nm). Joint 2: d from the paper's Fig. 10 (q3 = 0:
+# (docs/design.md §3, units nm). Joint 2: d from the paper's Fig. 10 (q3 = 0:
 # d- = 3.83, d+ = -8.15 urad; q3 = 12 mm: d- = 23.94, d+ = -19.40 urad); gamma0 in the
 # 40-60 urad the paper's rotary steps show. Joint 1 is not calibrated in the paper:
 # values of the same size.
