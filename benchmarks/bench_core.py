@@ -17,11 +17,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from stickslip.calibration import calibrate, fit_seed_quadratic, invert_d_exact  # noqa: E402
+from stickslip.calibration import calibrate, fit_paper_quadratic, invert_d_exact  # noqa: E402
 from stickslip.kinematics import JOINTS, Pose  # noqa: E402
 from stickslip.models import simulate_traverse_steps, steps_between, steps_between_quad  # noqa: E402
 from stickslip.planning import Planner, plan_move  # noqa: E402
-from synth import seed_table  # noqa: E402
+from synth import paper_table  # noqa: E402
 
 
 def per_call(fn, n: int) -> float:
@@ -36,7 +36,7 @@ def per_call(fn, n: int) -> float:
 
 
 def main() -> None:
-    cal = calibrate(seed_table())
+    cal = calibrate(paper_table())
     pose = Pose(q3=0.006, theta=-0.3)
     planner = Planner(cal, 2, pose)
     lo, hi = JOINTS[2].lower, JOINTS[2].upper
@@ -71,12 +71,12 @@ def main() -> None:
     print(f"  closed form, 1000 traverses vectorised: {t_vec / 1000 * 1e6:.2f} µs each "
           f"({t_exact / (t_vec / 1000):.0f}x the single call)")
 
-    print("\nrotary calibration: exact inversion vs the seed's Eq. 9 method (simulate grid, fit quadratic)")
+    print("\nrotary calibration: exact inversion vs the paper's Eq. 9 method (simulate grid, fit quadratic)")
     t0 = time.perf_counter()
-    quad_steps = fit_seed_quadratic(simulate="steps")
+    quad_steps = fit_paper_quadratic(simulate="steps")
     t_fit_steps = time.perf_counter() - t0
     t0 = time.perf_counter()
-    quad_exact = fit_seed_quadratic(simulate="exact")
+    quad_exact = fit_paper_quadratic(simulate="exact")
     t_fit_exact = time.perf_counter() - t0
     p2, p1, p0 = quad_steps.coefficients
     print(f"  our Eq. 9 refit (step simulation, {t_fit_steps:.1f} s; exact-integral grid {t_fit_exact * 1e3:.0f} ms): "

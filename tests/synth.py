@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from conftest import PINNED_TODAY
-from stickslip.calibration import PRISMATIC_SEED_POSES, ROTARY_SEED_POSES
+from stickslip.calibration import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
 from stickslip.models import JointModel, PrismaticParams, RotaryParams
@@ -45,16 +45,18 @@ def traverse_from_model(
     return Traverse(day, j, d, p["q1"], p["q2"], p["q3"], p["theta"], p["psi"], start, end, steps)
 
 
-def seed_table(prismatic=PAPER_PRISMATIC, rotary=PAPER_ROTARY, day=PINNED_TODAY, rng=None, noise=0.0) -> list[Traverse]:
+def paper_table(
+    prismatic=PAPER_PRISMATIC, rotary=PAPER_ROTARY, day=PINNED_TODAY, rng=None, noise=0.0
+) -> list[Traverse]:
     """The paper's 14 calibration traverses (6 prismatic, 8 of joint 2) generated from a truth."""
     rows = []
     for d, p in prismatic.items():
         m = JointModel(3, d, p)
-        for q2, th, ps in PRISMATIC_SEED_POSES.values():
+        for q2, th, ps in PRISMATIC_PAPER_POSES.values():
             rows.append(traverse_from_model(m, {"q2": q2, "theta": th, "psi": ps}, day, rng, noise))
     for d, p in rotary.items():
         m = JointModel(2, d, p)
-        for q3, th, ps in ROTARY_SEED_POSES:
+        for q3, th, ps in ROTARY_PAPER_POSES:
             rows.append(traverse_from_model(m, {"q2": 0.0, "q3": q3, "theta": th, "psi": ps}, day, rng, noise))
     return rows
 

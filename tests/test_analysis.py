@@ -1,4 +1,4 @@
-"""ANOVA of step sizes (the seed's Section 3.1) and fit residuals.
+"""ANOVA of step sizes (the paper's Section 3.1) and fit residuals.
 
 Reference values: a one-way ANOVA worked by hand; for the two-way table, type-II sums
 of squares computed independently from nested least-squares fits (numpy.linalg.lstsq);
@@ -182,20 +182,20 @@ def test_rows_are_json_ready_with_the_documented_keys(tmp_path):
 # ---------------------------------------------------------------- regression fit: coverage and residuals
 
 TRUE_PRISMATIC = {"+": PrismaticParams(972e-9, 0.27, 372e-9), "-": PrismaticParams(899e-9, 0.25, -436e-9)}
-"""The seed's published prismatic values (its Fig. 4b caption), SI."""
+"""The paper's published prismatic values (its Fig. 4b caption), SI."""
 TRUE_ROTARY = {
     "-": RotaryParams((45e-6, 50e-6), (3.83e-6, 23.94e-6)),
     "+": RotaryParams((42e-6, 47e-6), (-8.15e-6, -19.4e-6)),
 }
-"""d from the seed's Fig. 10 (q3 = 0 and 12 mm); gamma0 of the size its Fig. 6 shows."""
+"""d from the paper's Fig. 10 (q3 = 0 and 12 mm); gamma0 of the size its Fig. 6 shows."""
 
 
 def simulated_table(seed: int, noise: float = 0.02, day: str = "2026-11-22") -> list[Traverse]:
     """Rows from the true models with multiplicative noise: gamma_row = gamma_model (1 + noise N(0, 1)).
 
-    Joint 3: q2 in {0, -30, ..., -180} deg x theta in {0, -60, -90} deg, psi = 0 (the seed's
+    Joint 3: q2 in {0, -30, ..., -180} deg x theta in {0, -60, -90} deg, psi = 0 (the paper's
     experiment 1). Joint 2: full range at q3 in {0, 12 mm} x theta in {0, -90} deg, and the
-    eight pi/6 intervals at theta = 0 for both q3 (the seed's Fig. 6 data).
+    eight pi/6 intervals at theta = 0 for both q3 (the paper's Fig. 6 data).
     """
     rng = np.random.default_rng(seed)
     rows = []

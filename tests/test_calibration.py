@@ -12,15 +12,15 @@ from stickslip import calibration as C
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
 from stickslip.models import JointModel, PrismaticParams, steps_between
-from synth import PAPER_PRISMATIC, PAPER_ROTARY, random_poses, seed_table, traverse_from_model
+from synth import PAPER_PRISMATIC, PAPER_ROTARY, paper_table, random_poses, traverse_from_model
 
 LO, HI = JOINTS[2].lower, JOINTS[2].upper
 SPAN = HI - LO
 
 
 def exact_prismatic_rows(params=PAPER_PRISMATIC, order=(0, 1, 2)):
-    """Traverses whose average step is exactly Eq. 3 at the seed's poses (no rounding of the model)."""
-    poses = list(C.PRISMATIC_SEED_POSES.values())
+    """Traverses whose average step is exactly Eq. 3 at the paper's poses (no rounding of the model)."""
+    poses = list(C.PRISMATIC_PAPER_POSES.values())
     rows = []
     for d, p in params.items():
         model = JointModel(3, d, p)
@@ -37,12 +37,19 @@ def exact_prismatic_rows(params=PAPER_PRISMATIC, order=(0, 1, 2)):
 @pytest.mark.parametrize("order", [(0, 1, 2), (1, 2, 0), (2, 0, 1)])
 def test_paper_prismatic_values_recovered_exactly_in_any_order(order):
     # Fig. 4b caption: a+ = 972, b+ = 0.27, c+ = 372, a- = 899, b- = 0.25, c- = -436 (nm)
-    cal = C.calibrate(exact_prismatic_rows(order=order), method="seed")
+    cal = C.calibrate(exact_prismatic_rows(order=order), method="paper")
     for d, p in PAPER_PRISMATIC.items():
         got = cal.model(3, d).params
         assert got.a == pytest.approx(p.a, rel=1e-12)
         assert got.b == pytest.approx(p.b, rel=1e-11)
         assert got.c == pytest.approx(p.c, rel=1e-11)
+
+
+def test_the_old_method_names_still_work():
+    rows = exact_prismatic_rows()
+    assert C.calibrate(rows, method="seed").method == "paper"  # the name of earlier versions
+    new = C.calibrate(rows, method="paper").model(3, "+").params
+    assert C.calibrate(rows, method="seed").model(3, "+").params == new
 
 
 def full_range_average(g0, d, alpha=0.0, beta=-1.0, start=HI, end=LO):
@@ -86,7 +93,7 @@ def test_eq9_as_printed_is_inconsistent_with_fig10():
 
 def test_seed_quadratic_comparator_error_is_several_urad():
     # the paper's grid: |Δ| <= 9.2 µrad; typical gamma0 of Fig. 6
-    quad = C.fit_seed_quadratic(gamma0_values=np.linspace(30e-6, 100e-6, 5), delta_range=9.2e-6)
+    quad = C.fit_paper_quadratic(gamma0_values=np.linspace(30e-6, 100e-6, 5), delta_range=9.2e-6)
     # linear coefficient near the exact small-Δ slope
     assert quad.coefficients[1] == pytest.approx(2.418, abs=0.2)
     errs = []
@@ -101,7 +108,7 @@ def test_seed_quadratic_comparator_error_is_several_urad():
 
 
 def test_seed_quadratic_step_simulation_matches_exact_grid():
-    # the seed simulated step by step; the exact integral gives the same grid to < 1 step in ~1e5
+    # the paper simulated step by step; the exact integral gives the same grid to < 1 step in ~1e5
     g0 = np.array([40e-6, 60e-6])
     d = np.array([10e-6, -10e-6])
     sim = C._simulate_full_range_averages(g0, d, HI, LO, 0.0, -1.0)
@@ -110,8 +117,8 @@ def test_seed_quadratic_step_simulation_matches_exact_grid():
 
 
 def test_seed_table_calibration_recovers_truth():
-    cal = C.calibrate(seed_table())
-    assert cal.method == "seed"
+    cal = C.calibrate(paper_table())
+    assert cal.method == "paper"
     for d in "+-":
         got, true = cal.model(2, d).params, PAPER_ROTARY[d]
         np.testing.assert_allclose(got.gamma0, true.gamma0, rtol=2e-5)  # one step in ~1e5 of rounding
@@ -119,7 +126,7 @@ def test_seed_table_calibration_recovers_truth():
 
 
 def test_json_round_trip(tmp_path):
-    cal = C.calibrate(seed_table())
+    cal = C.calibrate(paper_table())
     path = tmp_path / "cal.json"
     cal.save(path)
     data = json.loads(path.read_text())
@@ -127,7 +134,7 @@ def test_json_round_trip(tmp_path):
     assert {p["unit"] for p in data["parameters"]} == {"m", "rad", "1"}
     back = C.Calibration.load(path)
     assert back.parameters() == cal.parameters()
-    rows = seed_table()
+    rows = paper_table()
     np.testing.assert_array_equal(back.predict_many(rows), cal.predict_many(rows))
     assert "a+" in back.report() and "nm" in back.report()
 
@@ -148,7 +155,7 @@ def test_nonphysical_calibration_refused():
     bad = [r if not (r.q2 == 0.0 and r.theta != 0.0) else
            Traverse(r.day, 3, "+", 0.0, 0.0, 0.0, r.theta, 0.0, 0.0, 0.012, 10_000) for r in rows]
     with pytest.raises(C.CalibrationError, match="non-physical"):
-        C.calibrate(bad, method="seed")
+        C.calibrate(bad, method="paper")
 
 
 def noisy_sweep(rng, n_per=40, noise=0.005):
@@ -166,7 +173,7 @@ def test_lsq_recovers_parameters_within_standard_errors():
     rng = np.random.default_rng(11)
     rows = noisy_sweep(rng)
     cal = C.calibrate(rows)
-    assert cal.method == "lsq"  # random poses: not the seed's
+    assert cal.method == "lsq"  # random poses: not the paper's
     z = []
     for rec in cal.parameters():
         j, d = rec["joint"], rec["direction"]
@@ -195,14 +202,14 @@ def test_lsq_refuses_undetermined_parameters():
 
 
 def test_seed_method_requires_its_poses():
-    rows = [r for r in seed_table() if not (r.joint == 3 and r.q2 == 0.0 and r.theta == 0.0)]
-    with pytest.raises(C.CalibrationError, match="seed method needs traverses at"):
-        C.calibrate(rows, method="seed")
-    assert C.calibrate(seed_table() + noisy_sweep(np.random.default_rng(1), 2)).method == "seed"
+    rows = [r for r in paper_table() if not (r.joint == 3 and r.q2 == 0.0 and r.theta == 0.0)]
+    with pytest.raises(C.CalibrationError, match="paper's method needs traverses at"):
+        C.calibrate(rows, method="paper")
+    assert C.calibrate(paper_table() + noisy_sweep(np.random.default_rng(1), 2)).method == "paper"
 
 
 def test_validation_model_beats_constant_step():
-    cal = C.calibrate(seed_table())
+    cal = C.calibrate(paper_table())
     sweep = noisy_sweep(np.random.default_rng(5), n_per=15, noise=0.01)
     res = C.validate(cal, sweep)
     for row in res.rows():
@@ -211,9 +218,9 @@ def test_validation_model_beats_constant_step():
 
 
 def test_seed_quadratic_method_differs_from_exact_by_urad():
-    rows = seed_table()
-    exact = C.calibrate(rows, method="seed")
-    quad = C.calibrate(rows, method="seed-quadratic")
+    rows = paper_table()
+    exact = C.calibrate(rows, method="paper")
+    quad = C.calibrate(rows, method="paper-quadratic")
     diffs = [abs(a["value"] - b["value"]) for a, b in zip(exact.parameters(), quad.parameters(), strict=True)
              if a["name"] == "d"]
     assert 0.05e-6 < max(diffs) < 5e-6
@@ -223,7 +230,7 @@ def test_plot_draws_the_model_curves():
     import matplotlib
 
     matplotlib.use("Agg")
-    cal = C.calibrate(seed_table())
+    cal = C.calibrate(paper_table())
     ax = cal.plot(3)
     line = ax.get_lines()[0]  # gamma3+ at theta = 0: Eq. 3 in nm against zeta in degrees
     z, g = line.get_data()
@@ -241,7 +248,7 @@ def test_validation_plot_shows_relative_errors_in_percent():
     import matplotlib
 
     matplotlib.use("Agg")
-    cal = C.calibrate(seed_table())
+    cal = C.calibrate(paper_table())
     res = C.validate(cal, noisy_sweep(np.random.default_rng(2), n_per=5, noise=0.01))
     ax = res.plot()
     plotted = np.concatenate([ln.get_data()[1] for ln in ax.get_lines() if len(ln.get_data()[1]) > 2])
@@ -253,11 +260,11 @@ def test_validation_plot_shows_relative_errors_in_percent():
 def test_auto_uses_the_papers_procedure_wherever_its_poses_are():
     # joint 3 at the paper's poses, joint 2 only on a random sweep: seed for 3, least squares for 2
     rng = np.random.default_rng(8)
-    prismatic = [t for t in seed_table() if t.joint == 3]
+    prismatic = [t for t in paper_table() if t.joint == 3]
     rotary = [traverse_from_model(JointModel(2, d, p), pose, rng=rng, noise=0.003)
               for d, p in PAPER_ROTARY.items() for pose in random_poses(rng, 2, 12)]
     cal = C.calibrate(prismatic + rotary)
-    assert cal.method == "seed (3+ 3-), lsq (2+ 2-)"
+    assert cal.method == "paper (3+ 3-), lsq (2+ 2-)"
     seed_only = C.calibrate(prismatic)
     for d in "+-":
         assert cal.model(3, d).params == seed_only.model(3, d).params  # exactly the paper's Eqs. 4-6

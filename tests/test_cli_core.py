@@ -14,7 +14,7 @@ from stickslip.cli import app
 from stickslip.kinematics import Pose
 from stickslip.measurements import measurements_to_csv
 from stickslip.planning import plan_move
-from synth import seed_table
+from synth import paper_table
 
 runner = CliRunner()
 
@@ -22,7 +22,7 @@ runner = CliRunner()
 @pytest.fixture()
 def files(tmp_path):
     meas = tmp_path / "meas.csv"
-    meas.write_text(measurements_to_csv(seed_table()))
+    meas.write_text(measurements_to_csv(paper_table()))
     return tmp_path, meas
 
 
@@ -70,9 +70,9 @@ def test_predict_adds_gamma_pred(files):
     assert r.exit_code == 0, r.output
     rows = list(csv.DictReader(io.StringIO(r.stdout)))
     assert rows[0]["label"] == "unloaded"
-    cal = calibrate(seed_table())
+    cal = calibrate(paper_table())
     assert float(rows[0]["gamma_pred"]) == pytest.approx(cal.gamma(3, "+", Pose()), rel=1e-12)
-    full = next(t for t in seed_table() if t.joint == 2 and t.direction == "-" and t.q3 == 0 and t.theta == 0)
+    full = next(t for t in paper_table() if t.joint == 2 and t.direction == "-" and t.q3 == 0 and t.theta == 0)
     assert float(rows[1]["gamma_pred"]) == pytest.approx(full.gamma, rel=1e-4)
     r = runner.invoke(app, ["predict", "-c", str(cal_path), str(poses), "--json"])
     recs = json.loads(r.stdout)
@@ -124,13 +124,13 @@ def test_bad_inputs_give_one_line_reasons(files):
     _bad(runner.invoke(app, ["plan", "-c", str(tmp / "nope.json"), "--joint", "3", "--from", "0", "--to", "1mm"]),
          "no such calibration file")
     only_3 = tmp / "only3.csv"
-    only_3.write_text(measurements_to_csv([t for t in seed_table() if t.joint == 3]))
+    only_3.write_text(measurements_to_csv([t for t in paper_table() if t.joint == 3]))
     _bad(runner.invoke(app, ["calibrate", str(only_3), "--method", "magic"]), "unknown calibration method")
 
 
 def test_nonphysical_table_is_refused(files):
     tmp, _ = files
-    rows = [t for t in seed_table() if t.joint == 3]
+    rows = [t for t in paper_table() if t.joint == 3]
     # make the (0, -pi/2, 0) traverse faster than the unloaded one: b < 0
     rows = [
         t if not (t.q2 == 0 and t.theta != 0) else t.__class__(**{**t.as_row(), "steps": t.steps // 2}) for t in rows

@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from stickslip import clock
 from stickslip.cli import app
 from stickslip.measurements import measurements_to_csv
-from synth import seed_table
+from synth import paper_table
 
 runner = CliRunner()
 FAR = dt.date(2099, 12, 31)  # a pinned day far in the future, at a year's end
@@ -77,7 +77,7 @@ def far_future(monkeypatch, tmp_path):
 
 def _calibration(tmp, day: str):
     meas = tmp / f"meas-{day}.csv"
-    meas.write_text(measurements_to_csv(seed_table(day=day)))
+    meas.write_text(measurements_to_csv(paper_table(day=day)))
     out = tmp / f"cal-{day}.json"
     r = runner.invoke(app, ["calibrate", str(meas), "-o", str(out)])
     assert r.exit_code == 0, r.output
@@ -108,7 +108,7 @@ def _repeats(days: list[str], seed: int = 0):
     rng = np.random.default_rng(seed)
     rows = []
     for k, day in enumerate(days):
-        table = seed_table(day=day)
+        table = paper_table(day=day)
         for t in (table[0], table[3]):  # 3+ and 3- at (q2, theta, psi) = (-90deg, 0, 0)
             for _ in range(3):
                 steps = round(t.steps * (1 + 0.02 * k) * (1 + 0.001 * rng.standard_normal()))
@@ -141,7 +141,7 @@ def test_report_says_when_the_calibration_predates_the_data(far_future):
     pytest.importorskip("matplotlib")
     cal = _calibration(far_future, _day(-2))
     table = far_future / "meas.csv"
-    table.write_text(measurements_to_csv(seed_table(day=_day(0))))
+    table.write_text(measurements_to_csv(paper_table(day=_day(0))))
     r = runner.invoke(app, ["report", str(table), "-c", str(cal), "-o", str(far_future / "rep"), "--json"])
     assert r.exit_code == 0, r.output
     assert f"calibration is from {_day(-2)}, 2 day(s) before the latest data ({_day(0)})" in r.stderr

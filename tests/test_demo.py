@@ -59,7 +59,7 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
         seed=4, day="2026-11-22", out=tmp_path / "out", switch="oracle", store=store, on_traverse=seen.append
     )
     n_cal, n_val = 2 * len(CALIBRATION_PLAN), 2 * len(VALIDATION_PLAN)
-    n_rep = 2 * 2 * len(REPEAT_PLAN)  # two more readings each way at the seed's ANOVA poses (default repeats=2)
+    n_rep = 2 * 2 * len(REPEAT_PLAN)  # two more readings each way at the paper's ANOVA poses (default repeats=2)
     assert (len(res.traverses), len(res.validation_traverses), len(res.repeat_traverses), len(seen)) == (
         14, n_val, n_rep, 14 + n_val + n_rep)
     # with the calibration traverse, each ANOVA pose now has three readings per direction (Section 3.1)
@@ -69,7 +69,7 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
             same = [t for t in rows if t.joint == joint and t.direction == d
                     and all(abs(getattr(t, k) - v) < 1e-12 for k, v in pose.items())]
             assert len(same) == 3
-    assert res.calibration.method == "seed"
+    assert res.calibration.method == "paper"
     _check_acceptance(res.parameters)
     # the model beats the constant step on the validation sweep (paper: 15 % vs 40 %, 2 % vs 7 %)
     for row in res.validation.rows():
@@ -149,10 +149,10 @@ def test_cli_demo_records_every_traverse_and_the_calibration(tmp_path):
     r = CliRunner().invoke(app, ["demo", "--no-validation", "--json", "--out", str(tmp_path / "res"), "--db", str(db)])
     assert r.exit_code == 0, r.output
     with Store.open(db) as st:
-        # the seed's 6 prismatic + 8 rotary calibration traverses, and 8 repeats for the ANOVA
+        # the paper's 6 prismatic + 8 rotary calibration traverses, and 8 repeats for the ANOVA
         assert st.count_traverses() == 14 + 8
         cal = st.latest_calibration()
-        assert cal is not None and cal.method == "seed"
+        assert cal is not None and cal.method == "paper"
         assert st.integrity_check() == "ok"
     # the simulator is deterministic: the same seed and day again would store the same traverses
     r = CliRunner().invoke(app, ["demo", "--no-validation", "--json", "--out", str(tmp_path / "res"), "--db", str(db)])

@@ -12,13 +12,13 @@ from stickslip.measurements import (
     parse_pose_table,
     read_measurements,
 )
-from synth import seed_table
+from synth import paper_table
 
 GOOD = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n2026-11-22,3,+,0,-1.5707963,0,0,0,0,0.012,12345\n"
 
 
 def test_round_trip(tmp_path):
-    rows = seed_table()
+    rows = paper_table()
     p = tmp_path / "m.csv"
     p.write_text(measurements_to_csv(rows))
     assert read_measurements(p) == rows

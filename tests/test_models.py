@@ -26,7 +26,7 @@ def test_eta_eq2():
 
 
 def test_downward_steps_bigger_than_upward():
-    # Section 3.4: with the seed's signs, gravity helps '-' where sin(zeta) > 0 (arm outstretched)
+    # Section 3.4: with the paper's signs, gravity helps '-' where sin(zeta) > 0 (arm outstretched)
     g_minus = m.JointModel(2, "-", PAPER_ROTARY["-"]).gamma(0, -math.pi / 2, 0.012, 0, 0)
     g_plus = m.JointModel(2, "+", PAPER_ROTARY["+"]).gamma(0, -math.pi / 2, 0.012, 0, 0)
     assert g_minus > PAPER_ROTARY["-"].gamma0[1] and g_plus < PAPER_ROTARY["+"].gamma0[1]
@@ -65,7 +65,7 @@ def test_stall_is_refused():
 
 
 def test_discrete_simulation_agrees_with_integral():
-    # the seed's step-by-step simulation (Fig. 8) vs the exact integral over joint 2's range
+    # the paper's step-by-step simulation (Fig. 8) vs the exact integral over joint 2's range
     for d_sign in ("+", "-"):
         model = m.JointModel(2, d_sign, PAPER_ROTARY[d_sign])
         A, al, be = (float(x) for x in model.rotary_coefficients(0, 0, 0.012, 0, 0))

@@ -41,7 +41,7 @@ def cal_path(tmp_path):
             k: float(m.average_gamma(*_full(k[0], k[1]), *kin.Pose())) for k, m in models.items()
         },
         day=DAY,
-        method="seed",
+        method="paper",
     )
     path = tmp_path / "cal.json"
     cal.save(path)

@@ -15,7 +15,7 @@ import time
 import pytest
 
 from stickslip.measurements import measurements_to_csv
-from synth import seed_table
+from synth import paper_table
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
 if sys.platform != "win32":
@@ -31,7 +31,7 @@ def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
 @pytest.fixture()
 def cal(tmp_path):
     meas = tmp_path / "meas.csv"
-    meas.write_text(measurements_to_csv(seed_table()))
+    meas.write_text(measurements_to_csv(paper_table()))
     out = tmp_path / "cal.json"
     r = _cli("calibrate", str(meas), "-o", str(out))
     assert r.returncode == 0, r.stderr

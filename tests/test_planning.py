@@ -12,9 +12,9 @@ from stickslip.calibration import calibrate
 from stickslip.kinematics import JOINTS, Pose
 from stickslip.models import simulate_traverse_steps
 from stickslip.planning import Planner, _scalar_coefficients, dead_reckon, plan_move
-from synth import seed_table
+from synth import paper_table
 
-CAL = calibrate(seed_table())
+CAL = calibrate(paper_table())
 
 poses = st.builds(
     Pose,
@@ -67,7 +67,7 @@ def test_rotary_plan_matches_step_by_step_count():
 def test_out_of_range_and_missing_direction():
     with pytest.raises(ValueError, match="outside joint 3's range"):
         plan_move(CAL, 3, 0.001, 0.02, Pose())
-    only_plus = calibrate([t for t in seed_table() if t.direction == "+"])
+    only_plus = calibrate([t for t in paper_table() if t.direction == "+"])
     with pytest.raises(KeyError, match="direction -"):
         plan_move(only_plus, 3, 0.002, 0.001, Pose())
 
@@ -87,7 +87,7 @@ def test_zero_move():
     ],
 )
 def test_a_pose_the_arm_cannot_take_is_never_planned_in(pose, words):
-    cal = calibrate(seed_table())
+    cal = calibrate(paper_table())
     joint = 2 if pose.q3 else 3
     with pytest.raises(ValueError, match=re.escape(words)):
         plan_move(cal, joint, -0.5 if joint == 2 else 0.002, -0.6 if joint == 2 else 0.003, pose)

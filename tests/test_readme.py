@@ -10,7 +10,7 @@ import pytest
 from typer.testing import CliRunner
 
 from stickslip.measurements import measurements_to_csv
-from synth import seed_table
+from synth import paper_table
 
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
 runner = CliRunner()
@@ -64,7 +64,7 @@ def test_python_example_runs(tour_dir, monkeypatch):
     meas = tour_dir / "stickslip-results" / "measurements.csv"
     if not meas.exists():  # run alone: the paper's 14 traverses stand in for the demo's
         meas.parent.mkdir(exist_ok=True)
-        meas.write_text(measurements_to_csv(seed_table()))
+        meas.write_text(measurements_to_csv(paper_table()))
     monkeypatch.chdir(tour_dir)
     ns: dict = {}
     exec(compile(_block("## In Python", "python"), "README.md", "exec"), ns)

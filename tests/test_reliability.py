@@ -62,7 +62,7 @@ def cal_dict():
         stderr=dict.fromkeys(models),
         constant_steps={k: 1e-6 if k[0] == 3 else 3e-5 for k in models},
         day=DAY,
-        method="seed",
+        method="paper",
     )
     return cal.to_dict()
 
@@ -177,12 +177,12 @@ def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch,
     pytest.importorskip("pymeasure")
     from stickslip.devices.emulators import ANC300Emulator
     from stickslip.measurements import measurements_to_csv
-    from synth import seed_table
+    from synth import paper_table
 
     caplog.set_level(logging.DEBUG)
     db = tmp_path / "s.db"
     table = tmp_path / "t.csv"
-    table.write_text(measurements_to_csv(seed_table()))
+    table.write_text(measurements_to_csv(paper_table()))
     outputs = []
     with ANC300Emulator(password=SECRET) as emu:
         url = emu.url + "&delay=0.002"
@@ -426,12 +426,12 @@ def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
     pytest.importorskip("resource")
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
-    from synth import seed_table
+    from synth import paper_table
 
     db = tmp_path / "s.db"
     small, big = tmp_path / "small.csv", tmp_path / "big.csv"
-    small.write_text(measurements_to_csv(seed_table()))
-    big.write_text(measurements_to_csv(seed_table(day="2026-11-21") * 200))
+    small.write_text(measurements_to_csv(paper_table()))
+    big.write_text(measurements_to_csv(paper_table(day="2026-11-21") * 200))
     env = {**os.environ, "STICKSLIP_DB": str(db)}
     script = tmp_path / "fsize.py"
     script.write_text(_FSIZE)
@@ -495,10 +495,10 @@ def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path)
     import dataclasses
 
     from stickslip.measurements import measurements_to_csv
-    from synth import seed_table
+    from synth import paper_table
 
     db = tmp_path / "s.db"
-    t = seed_table()[0]
+    t = paper_table()[0]
     shift = lambda tr, d: dataclasses.replace(tr, q1=tr.q1 + d)  # noqa: E731  (same pose group within 1e-3 rad)
     day2 = dataclasses.replace(t, day="2026-11-21", steps=t.steps + 7)
     # each day: two repeats with exactly equal average steps (zero spread within days)
@@ -556,10 +556,10 @@ def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
 def test_delete_traverses_and_sessions_with_confirmation(tmp_path):
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
-    from synth import seed_table
+    from synth import paper_table
 
     db = tmp_path / "s.db"
-    ts = seed_table()
+    ts = paper_table()
     p = tmp_path / "a.csv"
     p.write_text(measurements_to_csv([*ts, *(dataclasses_replace(t, day="2026-11-21") for t in ts)]))
     assert run("import", p, "--db", db).exit_code == 0
@@ -588,10 +588,10 @@ def dataclasses_replace(t, **kw):
 def test_exclude_keeps_rows_out_of_analyses_and_undo_brings_them_back(tmp_path):
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
-    from synth import seed_table
+    from synth import paper_table
 
     db = tmp_path / "s.db"
-    ts = seed_table()
+    ts = paper_table()
     p = tmp_path / "a.csv"
     p.write_text(measurements_to_csv(ts))
     assert run("import", p, "--db", db).exit_code == 0

@@ -2,7 +2,7 @@
 
 Reference values: the models' closed-form traverse averages (stickslip.models), the
 step-by-step count of stickslip.models.simulate_traverse_steps, the exact inversion
-stickslip.calibration.invert_d_exact, and Eq. 9 as printed in the seed (Section 3.5).
+stickslip.calibration.invert_d_exact, and Eq. 9 as printed in the paper (Section 3.5).
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ def test_step_simulation_counts_like_the_models_simulator_and_averages_like_the_
         # the discrete count differs from the integral by less than one step
         exact = float(m.average_gamma(r["start"], r["end"], 0.0, 0.0, r["q3"], 0.0, 0.0))
         assert abs(spec.span / exact - r["steps"]) < 1.0
-        # the negative direction starts at the upper stop (pi/6), as in the seed's Fig. 8
+        # the negative direction starts at the upper stop (pi/6), as in the paper's Fig. 8
         assert r["start"] == (spec.upper if r["direction"] == "-" else spec.lower)
         assert r["q"][0] == r["start"] and np.all(r["gamma"] > 0)
     q, g = simulate_steps(0.0, 1.0, 0.125, 0.0, 0.0)  # binary fractions: no rounding in the sums
@@ -120,7 +120,7 @@ def test_d_relation_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(c
     slope = np.gradient(rel.d_exact[1], rel.delta)[4]
     assert slope == pytest.approx(1 / mean_load, rel=0.02)
     assert np.all(np.abs(rel.d_printed) < 1e-6)  # Eq. 9 as printed: d < 1 µrad over +-9.2 µrad
-    assert np.nanmax(np.abs(rel.d_exact)) > 15e-6  # while the exact relation reaches ~ the seed's Fig. 10
+    assert np.nanmax(np.abs(rel.d_exact)) > 15e-6  # while the exact relation reaches ~ the paper's Fig. 10
     # the calibration's own points lie on the exact relation (d from the model, D from its average)
     for c in rel.calibrated:
         m = cal.model(2, c["direction"])

@@ -2,7 +2,7 @@
 
 Reference values: the exact traverse integral of :mod:`stickslip.models`
 (``steps_between``, cross-checked there against quadrature) and a plain Python
-step-by-step loop (the seed's Fig. 8 simulation) on the simulator's own mean-step
+step-by-step loop (the paper's Fig. 8 simulation) on the simulator's own mean-step
 function. The ripple has whole periods over the range, so a full-range traverse
 matches Eq. 3/8 to second order (``RIPPLE**2 / 2`` = 8e-6 relative); we allow 1e-4.
 """

@@ -358,12 +358,12 @@ def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
 
     from stickslip.cli import app
     from stickslip.measurements import measurements_to_csv
-    from synth import seed_table
+    from synth import paper_table
 
     runner = CliRunner()
     db = tmp_path / "d.db"
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
-    rows = seed_table()
+    rows = paper_table()
     a.write_text(measurements_to_csv(rows))
     b.write_text(measurements_to_csv(rows[:3]) + "\n")  # other bytes, the same three measurements
     assert runner.invoke(app, ["import", str(a), "--db", str(db)]).exit_code == 0
@@ -384,7 +384,7 @@ def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
     import sqlite3
 
     from stickslip.storage import MIGRATIONS, _split_sql, content_key
-    from synth import seed_table
+    from synth import paper_table
 
     path = tmp_path / "old.db"
     con = sqlite3.connect(path)
@@ -394,7 +394,7 @@ def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
     con.execute("PRAGMA user_version = 2")
     con.execute("INSERT INTO devices (id, url, created_at) VALUES (1, 'sim://', 'x')")
     con.execute("INSERT INTO sessions (id, device_id, day, created_at) VALUES (1, 1, '2026-11-22', 'x')")
-    t = seed_table()[0]
+    t = paper_table()[0]
     con.execute(
         'INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, start, "end", steps, '
         "measured_at, how) VALUES (1, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 'x', 'old')",

@@ -117,7 +117,7 @@ def test_prismatic_round_trip_recovers_the_true_parameters():
                 listen_after_steps=8000,
             )
             rows.append(r.traverse)
-    cal = calibrate(rows, method="seed")
+    cal = calibrate(rows, method="paper")
     truth = {
         (p["direction"], p["name"]): p["value"] for p in sim.true_parameters() if p["joint"] == 3
     }

@@ -1,8 +1,8 @@
-"""Statistics on measured step sizes: day-to-day ANOVA (the seed's Section 3.1) and fit residuals.
+"""Statistics on measured step sizes: day-to-day ANOVA (the paper's Section 3.1) and fit residuals.
 
 ANOVA
 -----
-The seed recalibrates every day because a one-way ANOVA of the average step size
+The paper recalibrates every day because a one-way ANOVA of the average step size
 ``gamma = |end - start| / steps`` across days was significant (p < 0.05), and so was
 the difference between the + and - directions within a day. :func:`anova` repeats
 those tests on any measurement table:
@@ -375,7 +375,7 @@ def anova(
     angle_tol: float = ANGLE_TOL,
     length_tol: float = LENGTH_TOL,
 ) -> AnovaResult:
-    """Day-to-day and direction ANOVA of the average step size, as the seed's Section 3.1.
+    """Day-to-day and direction ANOVA of the average step size, as the paper's Section 3.1.
 
     Parameters
     ----------

@@ -2,15 +2,15 @@
 
 Three ways in, one result object (:class:`Calibration`):
 
-* **seed** — the paper's procedure. Prismatic joint: six traverses at
+* **paper** — the paper's procedure. Prismatic joint: six traverses at
   ``(q2, theta, psi) = (-pi/2, 0, 0), (0, -pi/2, 0), (0, 0, 0)``, Eqs. (4)–(6), in any
   order. Rotary joint: eight full-range traverses at ``(q3, theta, psi) = (0, 0, 0),
   (12 mm, 0, 0), (12 mm, -pi/2, 0), (0, -pi/2, 0)``; the unloaded ones give
   ``gamma0`` directly, and ``d`` is found by *inverting the exact relation*
   ``gamma_measured = range / integral dq / (gamma0 + d L(q))`` with a bracketed root
   find (:func:`invert_d_exact`), where the paper fitted a quadratic to simulations.
-* **seed-quadratic** — the paper's own Eq. 9 method, kept as a comparator
-  (:func:`fit_seed_quadratic`): simulate many ``(gamma0, d)``, fit
+* **paper-quadratic** — the paper's own Eq. 9 method, kept as a comparator
+  (:func:`fit_paper_quadratic`): simulate many ``(gamma0, d)``, fit
   ``d = p2 D^2 + p1 D + p0`` with ``D = gamma(theta=0) - gamma0``, invert with it.
   Eq. 9 *as printed* (``3.41 D^2 + 0.025 D + 6.42e-7``) cannot be right: for the
   ``|D| <= 9.2 µrad`` the paper quotes it gives ``d < 1 µrad``, while Fig. 10 reports
@@ -54,30 +54,35 @@ __all__ = [
     "CalibrationError",
     "Calibration",
     "calibrate",
-    "calibrate_seed",
+    "calibrate_paper",
     "calibrate_lsq",
     "invert_d_exact",
-    "SeedQuadratic",
-    "fit_seed_quadratic",
+    "PaperQuadratic",
+    "fit_paper_quadratic",
     "EQ9_PRINTED",
     "eq9_printed",
     "ValidationResult",
     "validate",
-    "PRISMATIC_SEED_POSES",
-    "ROTARY_SEED_POSES",
+    "PRISMATIC_PAPER_POSES",
+    "ROTARY_PAPER_POSES",
 ]
 
 FORMAT = "stickslip.calibration"
 FORMAT_VERSION = 1
 
-PRISMATIC_SEED_POSES = {
+PRISMATIC_PAPER_POSES = {
     "a": (-math.pi / 2, 0.0, 0.0),  # Eq. (4): no axial load, full efficiency
     "b": (0.0, -math.pi / 2, 0.0),  # Eq. (5): no axial load, efficiency 1 - b
     "c": (0.0, 0.0, 0.0),  # Eq. (6): full axial load, efficiency 1 - b
 }
 """The paper's prismatic calibration poses ``(q2, theta, psi)`` (rad), by the parameter each yields."""
 
-ROTARY_SEED_POSES = ((0.0, 0.0, 0.0), (kin.Q3_MAX, 0.0, 0.0), (kin.Q3_MAX, -math.pi / 2, 0.0), (0.0, -math.pi / 2, 0.0))
+ROTARY_PAPER_POSES = (
+    (0.0, 0.0, 0.0),
+    (kin.Q3_MAX, 0.0, 0.0),
+    (kin.Q3_MAX, -math.pi / 2, 0.0),
+    (0.0, -math.pi / 2, 0.0),
+)
 """The paper's joint-2 calibration poses ``(q3 [m], theta, psi)`` (Fig. 7)."""
 
 _POSE_TOL = 1e-3  # rad; poses typed by hand to 3-4 decimals still match
@@ -180,7 +185,7 @@ def invert_d_exact(
 # ----------------------------------------------------------------------------- Eq. 9 comparator
 
 EQ9_PRINTED = (3.41, 0.025, 6.42e-7)
-"""Eq. 9 as printed in the seed paper: ``d = 3.41 D^2 + 0.025 D + 6.42e-7`` (SI, rad)."""
+"""Eq. 9 as printed in the paper: ``d = 3.41 D^2 + 0.025 D + 6.42e-7`` (SI, rad)."""
 
 
 def eq9_printed(delta: float | NDArray[np.float64]) -> NDArray[np.float64]:
@@ -191,8 +196,8 @@ def eq9_printed(delta: float | NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 @dataclass(frozen=True)
-class SeedQuadratic:
-    """The seed's simulate-and-fit relation ``d = p2 D^2 + p1 D + p0`` (its Eq. 9 method).
+class PaperQuadratic:
+    """The paper's simulate-and-fit relation ``d = p2 D^2 + p1 D + p0`` (its Eq. 9 method).
 
     Attributes
     ----------
@@ -215,7 +220,7 @@ class SeedQuadratic:
 def _simulate_full_range_averages(
     gamma0: NDArray, d: NDArray, start: float, end: float, alpha: float, beta: float
 ) -> NDArray:
-    """Step-by-step simulation of each (gamma0, d) pair (the seed's Fig. 8 simulation)."""
+    """Step-by-step simulation of each (gamma0, d) pair (the paper's Fig. 8 simulation)."""
     sign = 1.0 if end > start else -1.0
     cos, sin = math.cos, math.sin
     out = np.empty(len(gamma0))
@@ -232,7 +237,7 @@ def _simulate_full_range_averages(
     return out
 
 
-def fit_seed_quadratic(
+def fit_paper_quadratic(
     gamma0_values: Sequence[float] = tuple(np.linspace(20e-6, 100e-6, 5)),
     delta_range: float = 9.2e-6,
     n_d: int = 9,
@@ -241,19 +246,19 @@ def fit_seed_quadratic(
     alpha: float = 0.0,
     beta: float = -1.0,
     simulate: str = "exact",
-) -> SeedQuadratic:
-    """Reproduce the seed's Eq. 9 method: simulate a grid of ``(gamma0, d)``, fit a quadratic.
+) -> PaperQuadratic:
+    """Reproduce the paper's Eq. 9 method: simulate a grid of ``(gamma0, d)``, fit a quadratic.
 
     For each ``gamma0`` the ``d`` grid is chosen so that ``D = gamma(theta=0) - gamma0``
     spans about ``±delta_range`` (the paper used ±9.2 µrad). Averages come from a
-    step-by-step simulation (``simulate="steps"``, as the seed did; seconds) or from the
+    step-by-step simulation (``simulate="steps"``, as the paper did; seconds) or from the
     exact integral (``"exact"``, the default; the two differ by less than one step in
     ~10^5). The default traverse is joint 2 over its full range at
     ``theta = psi = 0`` (load ``-sin q2``).
 
     Returns
     -------
-    SeedQuadratic
+    PaperQuadratic
     """
     g0s, ds = [], []
     # first-order slope: D ≈ d * mean load along the traverse
@@ -285,7 +290,7 @@ def fit_seed_quadratic(
     g0a, da, avg = g0a[keep], da[keep], avg[keep]
     delta = avg - g0a
     p2, p1, p0 = np.polyfit(delta, da, 2)
-    return SeedQuadratic((float(p2), float(p1), float(p0)), {"gamma0": g0a, "d": da, "delta": delta})
+    return PaperQuadratic((float(p2), float(p1), float(p0)), {"gamma0": g0a, "d": da, "delta": delta})
 
 
 # ----------------------------------------------------------------------------- the result object
@@ -307,7 +312,7 @@ class Calibration:
     day : str
         Session label of the traverses (ISO date preferred).
     method : str
-        ``"seed"``, ``"seed-quadratic"`` or ``"lsq"``.
+        ``"paper"``, ``"paper-quadratic"`` or ``"lsq"`` (older files say ``"seed"``).
     provenance : dict
         Where the traverses came from (file, sha256, rows used, notes).
     """
@@ -588,13 +593,13 @@ def _check_physical(models: dict[tuple[int, str], JointModel]) -> None:
             raise CalibrationError(f"joint {j}{d}: non-physical calibration refused: {e}") from None
 
 
-# ----------------------------------------------------------------------------- seed method
+# ----------------------------------------------------------------------------- paper's method
 
 
-def _seed_prismatic_rows(ts: Sequence[Traverse]) -> dict[str, list[Traverse]] | None:
-    found: dict[str, list[Traverse]] = {k: [] for k in PRISMATIC_SEED_POSES}
+def _paper_prismatic_rows(ts: Sequence[Traverse]) -> dict[str, list[Traverse]] | None:
+    found: dict[str, list[Traverse]] = {k: [] for k in PRISMATIC_PAPER_POSES}
     for t in ts:
-        for k, (q2, th, ps) in PRISMATIC_SEED_POSES.items():
+        for k, (q2, th, ps) in PRISMATIC_PAPER_POSES.items():
             if _close(t.q2, q2) and _close(t.theta, th) and _close(t.psi, ps):
                 found[k].append(t)
     return found if all(found.values()) else None
@@ -605,7 +610,7 @@ def _classify_rotary(t: Traverse) -> tuple[float, float]:
     return float(al), float(be)
 
 
-def _seed_rotary_rows(ts: Sequence[Traverse]) -> dict[tuple[int, str], list[Traverse]] | None:
+def _paper_rotary_rows(ts: Sequence[Traverse]) -> dict[tuple[int, str], list[Traverse]] | None:
     """Group rotary traverses by (q3 knot, 'free'|'loaded'); None unless all four groups exist."""
     found: dict[tuple[int, str], list[Traverse]] = {(k, s): [] for k in (0, 1) for s in ("free", "loaded")}
     for t in ts:
@@ -618,13 +623,13 @@ def _seed_rotary_rows(ts: Sequence[Traverse]) -> dict[tuple[int, str], list[Trav
     return found if all(found.values()) else None
 
 
-def seed_applicable(traverses: Sequence[Traverse]) -> bool:
+def paper_applicable(traverses: Sequence[Traverse]) -> bool:
     """Whether every (joint, direction) present has the paper's calibration poses."""
     groups = _group(traverses)
     if not groups:
         return False
     for (j, _d), ts in groups.items():
-        if (_seed_prismatic_rows(ts) if j == 3 else _seed_rotary_rows(ts)) is None:
+        if (_paper_prismatic_rows(ts) if j == 3 else _paper_rotary_rows(ts)) is None:
             return False
     return True
 
@@ -636,12 +641,12 @@ def _group(traverses: Iterable[Traverse]) -> dict[tuple[int, str], list[Traverse
     return g
 
 
-def calibrate_seed(
+def calibrate_paper(
     traverses: Sequence[Traverse],
     day: str | None = None,
     source: str | None = None,
     rotary_inversion: str = "exact",
-    quadratic: SeedQuadratic | None = None,
+    quadratic: PaperQuadratic | None = None,
 ) -> Calibration:
     """The paper's procedure: Eqs. (4)–(6) for joint 3, exact inversion of Eq. (8) for rotary joints.
 
@@ -656,9 +661,9 @@ def calibrate_seed(
         Session label; default the latest day in the traverses.
     source : str, optional
         Where the traverses came from (file name), for the provenance.
-    rotary_inversion : {"exact", "seed-quadratic"}
-        ``"seed-quadratic"`` reproduces the paper's Eq. 9 method (with ``quadratic``,
-        default :func:`fit_seed_quadratic`) instead of the exact inversion.
+    rotary_inversion : {"exact", "paper-quadratic"}
+        ``"paper-quadratic"`` reproduces the paper's Eq. 9 method (with ``quadratic``,
+        default :func:`fit_paper_quadratic`) instead of the exact inversion.
     """
     groups = _group(traverses)
     if not groups:
@@ -666,21 +671,21 @@ def calibrate_seed(
     models: dict[tuple[int, str], JointModel] = {}
     used = 0
     notes: list[str] = []
-    if rotary_inversion == "seed-quadratic" and quadratic is None:
-        quadratic = fit_seed_quadratic()
+    if rotary_inversion == "paper-quadratic" and quadratic is None:
+        quadratic = fit_paper_quadratic()
     for (j, d), ts in sorted(groups.items()):
         if j == 3:
-            rows = _seed_prismatic_rows(ts)
+            rows = _paper_prismatic_rows(ts)
             if rows is None:
                 missing = [
                     f"(q2, theta, psi) = ({', '.join(f'{v:.4g}' for v in pose)})"
-                    for k, pose in PRISMATIC_SEED_POSES.items()
+                    for k, pose in PRISMATIC_PAPER_POSES.items()
                     if not any(
                         _close(t.q2, pose[0]) and _close(t.theta, pose[1]) and _close(t.psi, pose[2]) for t in ts
                     )
                 ]
                 raise CalibrationError(
-                    f"joint 3{d}: the seed method needs traverses at {', '.join(missing)} (rad); "
+                    f"joint 3{d}: the paper's method needs traverses at {', '.join(missing)} (rad); "
                     "use method 'lsq' for other poses"
                 )
             g = {k: float(np.mean([t.gamma for t in rows[k]])) for k in rows}
@@ -692,10 +697,10 @@ def calibrate_seed(
             models[(j, d)] = JointModel(j, d, PrismaticParams(a, b, c))
             used += sum(len(v) for v in rows.values())
         else:
-            rows = _seed_rotary_rows(ts)
+            rows = _paper_rotary_rows(ts)
             if rows is None:
                 raise CalibrationError(
-                    f"joint {j}{d}: the seed method needs full-range traverses at q3 = 0 and 12 mm, each with and "
+                    f"joint {j}{d}: the paper's method needs full-range traverses at q3 = 0 and 12 mm, each with and "
                     "without gravity torque (for joint 2: theta = 0 and theta = -pi/2); "
                     "use method 'lsq' for other poses"
                 )
@@ -707,12 +712,12 @@ def calibrate_seed(
                     al, be = _classify_rotary(t)
                     if rotary_inversion == "exact":
                         ds.append(invert_d_exact(t.gamma, g0, t.start, t.end, al, be))
-                    elif rotary_inversion == "seed-quadratic":
+                    elif rotary_inversion == "paper-quadratic":
                         assert quadratic is not None
                         ds.append(float(quadratic.d(t.gamma - g0)))
                     else:
                         raise ValueError(
-                            f"rotary_inversion must be 'exact' or 'seed-quadratic', got {rotary_inversion!r}"
+                            f"rotary_inversion must be 'exact' or 'paper-quadratic', got {rotary_inversion!r}"
                         )
                 g0s.append(g0)
                 dvals.append(float(np.mean(ds)))
@@ -721,11 +726,11 @@ def calibrate_seed(
     _check_physical(models)
     if used < len(traverses):
         notes.append(
-            f"{len(traverses) - used} of {len(traverses)} traverses are not at the seed's calibration "
+            f"{len(traverses) - used} of {len(traverses)} traverses are not at the paper's calibration "
             "poses and were not used (method 'lsq' fits all of them)"
         )
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    method = "seed" if rotary_inversion == "exact" else "seed-quadratic"
+    method = "paper" if rotary_inversion == "exact" else "paper-quadratic"
     return Calibration(
         models,
         {k: None for k in models},
@@ -912,6 +917,10 @@ def _numjac(f, x: NDArray) -> NDArray:
     return jac
 
 
+_OLD_METHOD_NAMES = {"seed": "paper", "seed-quadratic": "paper-quadratic"}
+"""Method names of earlier versions (the paper was called "the seed"), still accepted."""
+
+
 def calibrate(
     traverses: Sequence[Traverse], method: str = "auto", day: str | None = None, source: str | None = None
 ) -> Calibration:
@@ -920,38 +929,40 @@ def calibrate(
     Parameters
     ----------
     traverses : sequence of Traverse
-    method : {"auto", "seed", "seed-quadratic", "lsq"}
+    method : {"auto", "paper", "paper-quadratic", "lsq"}
         ``auto`` uses the paper's procedure for every joint and direction whose
         calibration poses the table has, and least squares for the others (the
-        calibration's method then reads e.g. ``"seed (3+ 3-), lsq (2+ 2-)"``).
+        calibration's method then reads e.g. ``"paper (3+ 3-), lsq (2+ 2-)"``). The names
+        ``"seed"`` and ``"seed-quadratic"`` of earlier versions are still accepted.
     day : str, optional
         Session label (default: the latest day among the traverses).
     source : str, optional
         Where the traverses came from, for the provenance.
     """
     traverses = list(traverses)
+    method = _OLD_METHOD_NAMES.get(method, method)
     if method == "auto":
         groups = _group(traverses)
-        seed_keys = {k for k, ts in groups.items() if seed_applicable(ts)}
+        seed_keys = {k for k, ts in groups.items() if paper_applicable(ts)}
         if not seed_keys:
             method = "lsq"
         elif len(seed_keys) == len(groups):
-            method = "seed"
+            method = "paper"
         else:
             by_seed = [t for t in traverses if (t.joint, t.direction) in seed_keys]
             by_lsq = [t for t in traverses if (t.joint, t.direction) not in seed_keys]
-            return _merge(calibrate_seed(by_seed, day, source), calibrate_lsq(by_lsq, day, source), traverses, day)
-    if method == "seed":
-        return calibrate_seed(traverses, day, source)
-    if method == "seed-quadratic":
-        return calibrate_seed(traverses, day, source, rotary_inversion="seed-quadratic")
+            return _merge(calibrate_paper(by_seed, day, source), calibrate_lsq(by_lsq, day, source), traverses, day)
+    if method == "paper":
+        return calibrate_paper(traverses, day, source)
+    if method == "paper-quadratic":
+        return calibrate_paper(traverses, day, source, rotary_inversion="paper-quadratic")
     if method == "lsq":
         return calibrate_lsq(traverses, day, source)
-    raise ValueError(f"unknown calibration method {method!r} (use auto, seed, seed-quadratic or lsq)")
+    raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
 
 
 def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], day: str | None) -> Calibration:
-    """One calibration from a seed-method part and a least-squares part (disjoint joints/directions)."""
+    """One calibration from a paper's-procedure part and a least-squares part (disjoint joints/directions)."""
 
     def keys(c: Calibration) -> str:
         return " ".join(f"{j}{d}" for j, d in sorted(c.models))
@@ -969,7 +980,7 @@ def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], d
         {**seed.stderr, **lsq.stderr},
         {**seed.constant_steps, **lsq.constant_steps},
         _day_of(traverses, day),
-        f"seed ({keys(seed)}), lsq ({keys(lsq)})",
+        f"paper ({keys(seed)}), lsq ({keys(lsq)})",
         prov,
     )
 

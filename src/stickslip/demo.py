@@ -5,7 +5,7 @@
 
 1. tunes the audio limit switch for each joint from a labelled recording made on
    the simulator (stepping into a stop);
-2. runs the seed's 14 calibration traverses (6 of the prismatic joint at
+2. runs the paper's 14 calibration traverses (6 of the prismatic joint at
    ``(q2, theta, psi) = (-pi/2, 0, 0), (0, -pi/2, 0), (0, 0, 0)``, 8 of joint 2 over
    its full range at ``(q3, theta, psi) = (0, 0, 0), (12 mm, 0, 0), (12 mm, -pi/2, 0),
    (0, -pi/2, 0)``, each in ``+`` and ``-``), timed by ear with
@@ -62,7 +62,7 @@ CALIBRATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
     (2, {"q1": 0.0, "q3": kin.Q3_MAX, "theta": -PI / 2, "psi": 0.0}),
     (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 2, "psi": 0.0}),
 )
-"""The seed's calibration poses (Eqs. 4-6 and Fig. 7): rad and m."""
+"""The paper's calibration poses (Eqs. 4-6 and Fig. 7): rad and m."""
 
 VALIDATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
     (3, {"q1": 0.0, "q2": -PI / 4, "theta": 0.0, "psi": 0.0}),
@@ -81,7 +81,7 @@ REPEAT_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
     (3, {"q1": 0.0, "q2": -PI / 2, "theta": 0.0, "psi": 0.0}),
     (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 2, "psi": 0.0}),
 )
-"""The seed's ANOVA poses (Section 3.1: no gravity effect on the joint), measured again
+"""The paper's ANOVA poses (Section 3.1: no gravity effect on the joint), measured again
 ``repeats`` times after the calibration so each day has three readings there and
 ``stickslip anova`` can test day-to-day and + against - differences."""
 
@@ -99,7 +99,7 @@ class DemoResult:
     traverses, validation_traverses : list of TraverseResult
         The 14 calibration traverses and the validation sweep.
     repeat_traverses : list of TraverseResult
-        Repeats at the seed's ANOVA poses (:data:`REPEAT_PLAN`).
+        Repeats at the paper's ANOVA poses (:data:`REPEAT_PLAN`).
     calibration : Calibration
     validation : ValidationResult or None
     truth : list of dict
@@ -347,7 +347,7 @@ def run_demo(
         (default), or :class:`~stickslip.devices.simulator.OracleStopDetector`, which
         knows the true stops (no sound rendered; for fast tests).
     repeats : int
-        After the calibration, measure the seed's ANOVA poses (:data:`REPEAT_PLAN`)
+        After the calibration, measure the paper's ANOVA poses (:data:`REPEAT_PLAN`)
         this many more times in each direction, so the day has three readings there.
     listen_from : float
         Start listening after this fraction of the step count predicted by the

@@ -520,7 +520,7 @@ def simulate_traverse_steps(
 ) -> int:
     """Count discrete steps from ``start`` until ``end`` is reached or passed.
 
-    Each step moves by ``gamma(q)`` evaluated where the step begins (the seed's
+    Each step moves by ``gamma(q)`` evaluated where the step begins (the paper's
     simulation, its Fig. 8). ``gamma`` returns a positive step size (m or rad).
     """
     sign = 1.0 if end >= start else -1.0

@@ -1,4 +1,4 @@
-"""Figures in the manner of the seed paper's, and a self-contained HTML report.
+"""Figures in the manner of the paper's, and a self-contained HTML report.
 
 Compute, then plot: each ``*_data`` function returns a small result object holding
 arrays in SI units; its ``.plot(ax=None)`` draws it with labelled display units
@@ -13,7 +13,7 @@ lazily, with the Agg backend when there is no display.
 * :func:`step_simulation_data` -- Fig. 8: step-by-step simulation of joint 2 over its
   full range.
 * :func:`d_relation_data` -- Fig. 9: ``d`` against ``D = gamma(theta=0) -
-  gamma0`` from the exact relation, the seed's simulate-and-fit quadratic, and its
+  gamma0`` from the exact relation, the paper's simulate-and-fit quadratic, and its
   Eq. 9 as printed.
 * :func:`build_report` -- all of the above as PNGs plus ``index.html`` with the
   calibration, the validation table (model against constant step) and residuals.
@@ -57,7 +57,7 @@ __all__ = [
 _TOL = 1e-3  # rad: poses typed by hand still match
 _Q3_TOL = 1e-5  # m
 SEED_DELTA_RANGE = 9.2e-6
-"""The range of ``gamma(theta=0) - gamma0`` the seed observed, ±9.2 µrad (its Section 3.5)."""
+"""The range of ``gamma(theta=0) - gamma0`` the paper observed, ±9.2 µrad (its Section 3.5)."""
 
 
 def _plt():
@@ -196,7 +196,7 @@ def _plot_series(
 
 @dataclass
 class PrismaticFigure:
-    """Data of the seed's Fig. 4: joint-3 step against ζ for several θ (see :func:`prismatic_data`)."""
+    """Data of the paper's Fig. 4: joint-3 step against ζ for several θ (see :func:`prismatic_data`)."""
 
     series: list[Series]
 
@@ -208,10 +208,10 @@ class PrismaticFigure:
 
 
 def prismatic_data(calibration: Calibration, traverses: Sequence[Traverse]) -> PrismaticFigure:
-    """Joint-3 traverses grouped into curves of the seed's Fig. 4, with the model.
+    """Joint-3 traverses grouped into curves of the paper's Fig. 4, with the model.
 
     Traverses at the same direction, ``theta`` and ``psi`` with several ``q2`` form a
-    curve over ``q2`` (the seed's experiment 1); the rest at the same ``theta`` and
+    curve over ``q2`` (the paper's experiment 1); the rest at the same ``theta`` and
     ``q2`` with several ``psi`` form a curve over ``psi`` (experiment 2). Without
     such data the model alone is drawn at ``theta = 0, -pi/3, -pi/2`` (``psi = 0``).
     The model is the calibration's Eq. (3) at each curve's ``q1``.
@@ -313,7 +313,7 @@ def prismatic_data(calibration: Calibration, traverses: Sequence[Traverse]) -> P
 
 @dataclass
 class RotaryIntervalFigure:
-    """Data of the seed's Figs. 6/10 (see :func:`rotary_interval_data`)."""
+    """Data of the paper's Figs. 6/10 (see :func:`rotary_interval_data`)."""
 
     joint: int
     series: list[Series]
@@ -342,12 +342,12 @@ def _pi6_intervals(spec: kin.JointSpec) -> list[tuple[float, float]]:
 def rotary_interval_data(
     calibration: Calibration, traverses: Sequence[Traverse], joint: int = 2, max_interval: float = math.pi / 3 + 1e-3
 ) -> RotaryIntervalFigure:
-    """Rotary traverses over short intervals (the seed used π/6), against ζ at the midpoint.
+    """Rotary traverses over short intervals (the paper used π/6), against ζ at the midpoint.
 
     Traverses of ``joint`` no longer than ``max_interval`` (rad) are grouped by
     direction and pose (q1, q3, θ, ψ); each group is a curve: the measured average
     step of every interval, plotted at its midpoint ``zeta = psi - q_mid``, and the
-    model's *exact average over the same interval* (the seed plotted the interval
+    model's *exact average over the same interval* (the paper plotted the interval
     average at the midpoint too), with the pointwise model as a thin line. Without
     such data the model alone is drawn for the π/6 intervals of the range at
     q3 = 0 and 12 mm, θ = ψ = 0.
@@ -415,7 +415,7 @@ def simulate_steps(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Step from ``start`` until ``end`` is reached, each step ``A + alpha cos q + beta sin q``.
 
-    The seed's simulation (its Fig. 8): the step is evaluated where it begins. Returns
+    The paper's simulation (its Fig. 8): the step is evaluated where it begins. Returns
     ``(q, gamma)``: the position before each step and the step size (rad). The number of
     steps equals :func:`stickslip.models.simulate_traverse_steps` on the same model.
     """
@@ -438,7 +438,7 @@ def simulate_steps(
 
 @dataclass
 class StepSimulation:
-    """The seed's Fig. 8: simulated step along a full-range traverse, per direction and q3.
+    """The paper's Fig. 8: simulated step along a full-range traverse, per direction and q3.
 
     Attributes
     ----------
@@ -499,7 +499,7 @@ class StepSimulation:
 def step_simulation_data(
     calibration: Calibration, joint: int = 2, theta: float = 0.0, psi: float = 0.0
 ) -> StepSimulation:
-    """Simulate the calibrated joint step by step over its full range (the seed's Fig. 8).
+    """Simulate the calibrated joint step by step over its full range (the paper's Fig. 8).
 
     Negative direction from the upper stop to the lower (π/6 → −7π/6 for joint 2),
     positive the other way, at q3 = 0 and 12 mm, arm outstretched for joint 1.
@@ -538,18 +538,18 @@ def step_simulation_data(
 
 @dataclass
 class DRelation:
-    """The seed's Fig. 9: ``d`` against ``D = gamma(theta=0) - gamma0`` (all rad).
+    """The paper's Fig. 9: ``d`` against ``D = gamma(theta=0) - gamma0`` (all rad).
 
     Attributes
     ----------
     delta : ndarray
-        Grid of ``D`` (rad), ±9.2 µrad as in the seed.
+        Grid of ``D`` (rad), ±9.2 µrad as in the paper.
     gamma0 : ndarray
         ``gamma0`` values of the exact curves (rad).
     d_exact : ndarray
         ``(len(gamma0), len(delta))`` exact inversions (rad).
     d_quadratic : ndarray
-        The seed's method (simulate, fit a quadratic) on the same grid (rad).
+        The paper's method (simulate, fit a quadratic) on the same grid (rad).
     quadratic : tuple
         Its coefficients ``(p2, p1, p0)`` (SI).
     d_printed : ndarray
@@ -597,9 +597,9 @@ class DRelation:
             self.d_quadratic * 1e6,
             "k--",
             lw=1.5,
-            label=f"seed method: quadratic fit to simulations (max error {self.max_quadratic_error * 1e6:.2f} µrad)",
+            label=f"paper's method: quadratic fit to simulations (max error {self.max_quadratic_error * 1e6:.2f} µrad)",
         )
-        ax.plot(self.delta * 1e6, self.d_printed * 1e6, "r:", lw=1.5, label="Eq. 9 as printed in the seed")
+        ax.plot(self.delta * 1e6, self.d_printed * 1e6, "r:", lw=1.5, label="Eq. 9 as printed in the paper")
         for c in self.calibrated:
             ax.plot(
                 c["delta"] * 1e6,
@@ -626,15 +626,15 @@ def d_relation_data(
     n: int = 41,
     simulate: str = "steps",
 ) -> DRelation:
-    """``d`` against ``D`` for a full-range traverse of joint 2 at θ = ψ = 0 (the seed's Fig. 9).
+    """``d`` against ``D`` for a full-range traverse of joint 2 at θ = ψ = 0 (the paper's Fig. 9).
 
     Exact curves come from :func:`stickslip.calibration.invert_d_exact` for each
-    ``gamma0``; the seed's comparator from :func:`stickslip.calibration.fit_seed_quadratic`
+    ``gamma0``; the paper's comparator from :func:`stickslip.calibration.fit_paper_quadratic`
     (step-by-step simulations of the same ``gamma0`` grid, fitted by a quadratic);
     Eq. 9 as printed from :func:`stickslip.calibration.eq9_printed`. The calibration's
     own ``(D, d)`` points are added when it models the joint.
     """
-    from .calibration import eq9_printed, fit_seed_quadratic
+    from .calibration import eq9_printed, fit_paper_quadratic
     from .models import steps_between
 
     spec = kin.JOINTS[joint]
@@ -657,7 +657,7 @@ def d_relation_data(
         avg = span / steps_between(start, end, g0, dd * al, dd * be)
         k = int(np.argmax(avg)) + 1
         exact[i] = np.interp(delta, avg[:k] - g0, dd[:k], left=np.nan, right=np.nan)
-    quad = fit_seed_quadratic(
+    quad = fit_paper_quadratic(
         gamma0_values=tuple(g0s),
         delta_range=SEED_DELTA_RANGE,
         start=start,
@@ -793,15 +793,15 @@ def build_report(
     dpi: int = 120,
     seed_simulation: str = "steps",
 ) -> Report:
-    """Write the seed-style figures and ``index.html`` into ``directory`` (created if needed).
+    """Write the paper-style figures and ``index.html`` into ``directory`` (created if needed).
 
     The page shows the calibration with standard errors, the validation table (model
     against the constant-step comparator, :func:`stickslip.calibration.validate`), the
     residuals per joint and direction, and every figure (PNG files referenced by
     relative path, so the directory can be moved or zipped as a whole).
 
-    ``seed_simulation`` is how the seed's Eq. 9 comparator gets its averages:
-    ``"steps"`` (step-by-step, as the seed did) or ``"exact"`` (faster, same curve).
+    ``seed_simulation`` is how the paper's Eq. 9 comparator gets its averages:
+    ``"steps"`` (step-by-step, as the paper did) or ``"exact"`` (faster, same curve).
     """
     from .analysis import residual_summary
     from .calibration import validate
@@ -827,7 +827,7 @@ def build_report(
         save(
             fig,
             "fig4_prismatic.png",
-            "Fig. 4 after the seed: average step of prismatic joint 3 against ζ = ψ − q2, "
+            "Fig. 4 after the paper: average step of prismatic joint 3 against ζ = ψ − q2, "
             "measured (points) and the calibrated model, Eq. (3) (lines), per tilt θ.",
         )
     if 2 in joints:
@@ -836,7 +836,7 @@ def build_report(
         save(
             fig,
             "fig6_rotary_intervals.png",
-            "Figs. 6 and 10 after the seed: average step of joint 2 over each π/6 interval, plotted at the "
+            "Figs. 6 and 10 after the paper: average step of joint 2 over each π/6 interval, plotted at the "
             "interval's midpoint ζ, at q3 = 0 and 12 mm; squares are the model's exact average over the same "
             "interval, the thin line the pointwise model, Eq. (8).",
         )
@@ -845,7 +845,7 @@ def build_report(
         save(
             fig,
             "fig8_simulated_steps.png",
-            "Fig. 8 after the seed: step-by-step simulation of the calibrated joint 2 over its full range at "
+            "Fig. 8 after the paper: step-by-step simulation of the calibrated joint 2 over its full range at "
             "θ = ψ = 0 (dashed: the average step range/steps; dotted: γ0, the step without gravity torque).",
         )
         rel = d_relation_data(calibration, 2, simulate=seed_simulation)
@@ -855,10 +855,10 @@ def build_report(
         save(
             fig,
             "fig9_d_relation.png",
-            "Fig. 9 after the seed: d against D = γ(θ = 0) − γ0 for a full-range traverse of joint 2. "
-            "Solid: the exact relation for several γ0; dashed: the seed's method (quadratic fitted to "
+            "Fig. 9 after the paper: d against D = γ(θ = 0) − γ0 for a full-range traverse of joint 2. "
+            "Solid: the exact relation for several γ0; dashed: the paper's method (quadratic fitted to "
             f"step-by-step simulations), {_err_by_gamma0(rel)}; dotted: "
-            "Eq. 9 as printed, which gives d < 1 µrad and cannot match the seed's own Fig. 10.",
+            "Eq. 9 as printed, which gives d < 1 µrad and cannot match the paper's own Fig. 10.",
         )
     rel = rel_holder[0] if rel_holder else None
     anova_rows: list[dict[str, Any]] = []
@@ -924,7 +924,7 @@ def build_report(
         ]
         parts.append("<h2>Validation: model against constant step</h2>")
         parts.append(
-            "<p>Relative error of the predicted average step over each traverse. The seed reports a "
+            "<p>Relative error of the predicted average step over each traverse. The paper reports a "
             "maximum error of about 15 % (prismatic) and 2 % (rotary) for its model, against 40 % and "
             "7 % for a constant step.</p>"
         )
@@ -995,10 +995,10 @@ def build_report(
             }
             for c in rel.calibrated
         ]
-        parts.append("<h2>d from the full-range average: exact against the seed's quadratic</h2>")
+        parts.append("<h2>d from the full-range average: exact against the paper's quadratic</h2>")
         parts.append(
             "<p>For this calibration's joint-2 models: D is the full-range average step at θ = ψ = 0 "
-            "minus γ0; d the calibrated value (exact relation); the seed's method reads d off a quadratic "
+            "minus γ0; d the calibrated value (exact relation); the paper's method reads d off a quadratic "
             "fitted to step-by-step simulations. Over the plotted grid the quadratic is "
             f"{html.escape(_err_by_gamma0(rel))} (largest where a curve turns steep: "
             "there the average step hardly changes with d).</p>"
@@ -1020,7 +1020,7 @@ def build_report(
         parts.append("<h2>Day-to-day and direction ANOVA</h2>")
         parts.append(
             "<p>One-way ANOVA of the average step across days (per joint, direction and repeated pose) "
-            "and of + against − (per joint, day and pose); significant at α = 0.05 means the seed's "
+            "and of + against − (per joint, day and pose); significant at α = 0.05 means the paper's "
             "advice holds: recalibrate every day, and per direction.</p>"
         )
         parts.append(

@@ -78,7 +78,8 @@ def calibrate_cmd(
     method: Annotated[
         str,
         typer.Option(
-            help="auto | seed | seed-quadratic | lsq. 'auto' uses the paper's procedure when the table "
+            help="auto | paper | paper-quadratic | lsq (the old names seed, seed-quadratic still work). "
+            "'auto' uses the paper's procedure when the table "
             "has its calibration poses, least squares otherwise."
         ),
     ] = "auto",

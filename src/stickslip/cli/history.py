@@ -417,12 +417,12 @@ def report(
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
     json_out: bool = typer.Option(False, "--json", help="Print the list of files written as JSON."),
 ) -> None:
-    """Write the seed's figures (Figs. 4, 6/10, 8, 9) and an HTML validation page.
+    """Write the paper's figures (Figs. 4, 6/10, 8, 9) and an HTML validation page.
 
     Figures: prismatic step against zeta for several theta with the model;
     rotary step per pi/6 interval against zeta at q3 = 0 and 12 mm; simulated
     step along the range; d against the step difference, exact relation vs the
-    seed's quadratic.
+    paper's quadratic.
 
     Example: [bold]stickslip report --calibration cal.json meas.csv -o report/[/]
     """

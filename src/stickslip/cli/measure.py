@@ -60,7 +60,7 @@ def demo(
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
 
-    Tunes the audio limit switch for each joint from a simulated recording, runs the seed's 14 calibration traverses (6 prismatic, 8 of joint 2) timed by ear, calibrates, prints the parameters beside the simulator's truth (nm, µrad) with their errors, validates the model against other poses (model vs constant step) and saves measurements (CSV), calibration and tunings (JSON) into --out.
+    Tunes the audio limit switch for each joint from a simulated recording, runs the paper's 14 calibration traverses (6 prismatic, 8 of joint 2) timed by ear, calibrates, prints the parameters beside the simulator's truth (nm, µrad) with their errors, validates the model against other poses (model vs constant step) and saves measurements (CSV), calibration and tunings (JSON) into --out.
 
     Example: stickslip demo --seed 3 --day 2026-11-22 --out results/
     """  # noqa: E501

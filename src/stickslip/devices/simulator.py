@@ -12,7 +12,7 @@ honestly:
   ``1 + RIPPLE * sin(2 pi m (q - lower) / span + phase)`` (< 1 %, an integer number
   ``m`` of periods over the full range);
 * the step is evaluated at the moving joint's *current* position at every step (the
-  seed's step-by-step simulation, its Fig. 8), not averaged.
+  paper's step-by-step simulation, its Fig. 8), not averaged.
 
 The *true parameters* (:meth:`SimulatedMM3A.true_parameters`) are those of Eq. 3/8
 that reproduce the simulator's mean behaviour over full-range traverses: the ripple
