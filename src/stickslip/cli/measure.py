@@ -9,7 +9,7 @@ import typer
 
 from ..clock import today_label
 from . import app
-from ._common import console, fail, print_json, user_errors, validation_table
+from ._common import console, fail, print_json, user_errors, validation_table, warn_later
 
 
 def _scale(name: str, joint: int) -> tuple[float, str]:
@@ -55,7 +55,9 @@ def demo(
         "with the simulator's truth; on a real manipulator use 'stickslip traverse' and 'calibrate'.",
     ),
     allow_duplicates: bool = typer.Option(
-        False, "--allow-duplicates", help="Record even if this seed and day are already in the database."
+        False,
+        "--allow-duplicates",
+        help="Record even if this seed and day are already in the database (by default a repeat run is not recorded).",
     ),
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
@@ -73,8 +75,9 @@ def demo(
         seed, day = _sim_seed_day(device, seed, day)
     with user_errors(CalibrationError, TraverseError, StoreError):
         store = Store.open(db) if use_db else None
-        if store is not None and not allow_duplicates:
-            _refuse_a_second_demo(store, seed, day or today_label())
+        if store is not None and not allow_duplicates and _already_recorded(store, seed, day or today_label()):
+            store.close()
+            store = None  # the demo still runs; its traverses are not stored a second time
         try:
             result = run_demo(
                 seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store
@@ -124,19 +127,19 @@ def demo(
         console.print(f"saved {what}: {path}", highlight=False)
 
 
-def _refuse_a_second_demo(store: Any, seed: int, day: str) -> None:
-    """The simulator is deterministic: the same seed and day would store the same traverses again."""
+def _already_recorded(store: Any, seed: int, day: str) -> bool:
+    """True (and a warning) if this seed and day are in the database: the simulator is deterministic,
+    so the same seed and day would store the same traverses again."""
     from ..devices.base import device_key
 
     key = device_key(f"sim://?seed={seed}")
     n = len(store.traverse_ids(device=key, day=day))
     if n:
-        store.close()
-        fail(
-            f"the database {store.path} already holds {n} traverses of {key} on {day} (a demo run before); "
-            "the same seed and day give the same traverses. Use another --seed or --day, --no-db, "
-            "or --allow-duplicates"
+        warn_later(
+            f"the database {store.path} already holds {n} traverses of {key} on {day} (a demo run before): "
+            "this run's traverses were not recorded again (use --allow-duplicates to record a second copy)"
         )
+    return n > 0
 
 
 def _sim_seed_day(device: str, seed: int, day: str | None) -> tuple[int, str | None]:
