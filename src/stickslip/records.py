@@ -128,13 +128,19 @@ def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
         raise ValueError(f"{where} = {v!r} {unit} is outside the plausible range {lo:g}..{hi:g} {unit}{hint}")
 
 
-def _check_parameter(rec: object, i: int) -> None:
-    where = f"parameters[{i}]"
+def _record_joint(rec: object, where: str) -> tuple[dict[str, Any], int]:
+    """The record (an object) and its joint (1, 2 or 3), or ``ValueError`` naming ``where``."""
     if not isinstance(rec, dict):
         raise ValueError(f"{where} must be an object, got {type(rec).__name__}")
     joint = rec.get("joint")
     if joint not in (1, 2, 3) or isinstance(joint, bool):
         raise ValueError(f"{where}.joint must be 1, 2 or 3, got {joint!r}")
+    return rec, int(joint)
+
+
+def _check_parameter(rec_: object, i: int) -> None:
+    where = f"parameters[{i}]"
+    rec, joint = _record_joint(rec_, where)
     name = rec.get("name")
     kinds = _PRISMATIC if joint == 3 else _ROTARY
     if name not in kinds:
@@ -179,12 +185,8 @@ def check_calibration_dict(data: object) -> None:
         _check_parameter(rec, i)
     for i, rec in enumerate(data.get("constant_steps") or []):
         where = f"constant_steps[{i}]"
-        if not isinstance(rec, dict):
-            raise ValueError(f"{where} must be an object, got {type(rec).__name__}")
-        joint = rec.get("joint")
-        if joint not in (1, 2, 3) or isinstance(joint, bool):
-            raise ValueError(f"{where}.joint must be 1, 2 or 3, got {joint!r}")
-        v = _finite(rec.get("value"), f"{where} (joint {joint})")
+        step, joint = _record_joint(rec, where)
+        v = _finite(step.get("value"), f"{where} (joint {joint})")
         _check_scale(v, "m" if joint == 3 else "rad", f"{where} (joint {joint})", signed=False)
 
 

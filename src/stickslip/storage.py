@@ -810,10 +810,7 @@ class Store:
             raise ValueError("give a reason for excluding (e.g. 'cable snagged')")
         marks = ",".join("?" * len(ids))
         with self._write() as con:
-            found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
-            missing = [i for i in ids if i not in found]
-            if missing:
-                raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
+            _require_traverses(con, ids, marks)
             return int(con.execute(f"UPDATE traverses SET excluded = ? WHERE id IN ({marks})", [reason, *ids]).rowcount)
 
     def delete_traverses(self, ids: Sequence[int]) -> dict[str, int]:
@@ -828,10 +825,7 @@ class Store:
             return {"traverses": 0, "calibration_links": 0}
         marks = ",".join("?" * len(ids))
         with self._write() as con:
-            found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
-            missing = [i for i in ids if i not in found]
-            if missing:
-                raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
+            _require_traverses(con, ids, marks)
             links = con.execute(f"DELETE FROM calibration_traverses WHERE traverse_id IN ({marks})", ids).rowcount
             n = con.execute(f"DELETE FROM traverses WHERE id IN ({marks})", ids).rowcount
             con.execute(
@@ -882,6 +876,14 @@ class Store:
     def integrity_check(self) -> str:
         """``PRAGMA integrity_check`` (``"ok"`` when the file is sound)."""
         return "; ".join(r[0] for r in self._con.execute("PRAGMA integrity_check"))
+
+
+def _require_traverses(con: sqlite3.Connection, ids: list[int], marks: str) -> None:
+    """Raise ``ValueError`` naming the ids (of ``ids``) that are not stored traverses."""
+    found = {int(r[0]) for r in con.execute(f"SELECT id FROM traverses WHERE id IN ({marks})", ids)}
+    missing = [i for i in ids if i not in found]
+    if missing:
+        raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
 
 
 def _alive(holder: dict[str, Any]) -> bool:
