@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stickslip.audio.detector import StopDetector, Tuning
-from stickslip.audio.synth import render_traverse_recording
 from stickslip.audio.tuning import tune
+from stickslip.sim.sound import render_traverse_recording
 
 TOL_S = 0.025
 BLOCK = 1024

@@ -5,7 +5,7 @@ Measured in one run and printed as a table:
 * moving steps simulated per second by ``SimulatedMM3A.step`` (bursts back and forth
   about mid-range, prismatic joint 3 and rotary joint 2, whose step depends on its
   position);
-* full-range traverses with :func:`stickslip.traverse.measure_traverse`: wall time
+* full-range traverses with :func:`stickslip.procedures.traverse.measure_traverse`: wall time
   against the time on the simulator's virtual clock, with the limit switch
   (a) the tuned audio detector on the rendered virtual microphone, listening all the
   way, (b) the same listening only after 80 % of the predicted count (what the demo
@@ -22,7 +22,7 @@ import math
 import time
 
 from stickslip import kinematics as kin
-from stickslip.devices.simulator import OracleStopDetector, SimulatedMM3A
+from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A
 
 DAY = "2026-11-22"
 
@@ -46,7 +46,7 @@ def _steps_per_second(joint: int, burst: int, total: int = 1_000_000) -> float:
 
 
 def _traverse(joint: int, switch: str, listen_fraction: float) -> tuple[float, float, int]:
-    from stickslip.traverse import measure_traverse
+    from stickslip.procedures.traverse import measure_traverse
 
     sim = SimulatedMM3A(seed=1, day=DAY)
     sim.set_pose(q2=-math.pi / 2, q3=0.0, theta=0.0, psi=0.0)
@@ -98,7 +98,7 @@ def main() -> None:
                     f"{wall:.2f} s wall for {device:.1f} s device ({steps} steps, x{device / wall:.0f} real time)",
                 )
             )
-    from stickslip.demo import run_demo
+    from stickslip.procedures.demo import run_demo
 
     t = time.perf_counter()
     res = run_demo(seed=0, day=DAY, out=None)

@@ -1,7 +1,7 @@
 """An independent NanoControl (legacy command set) on a pseudo-terminal, for the tests.
 
 Written from the command-set description only, sharing no code with
-``stickslip.devices.emulators``: commands end in ``;``, answers are ``o<TAB>text`` /
+``stickslip.sim.emulators``: commands end in ``;``, answers are ``o<TAB>text`` /
 ``e<TAB>text`` ended by CR LF (the project's emulator uses a bare CR), a ``coarse``
 burst is answered once its steps are done at the channel's stepping frequency, and the
 peer keeps a log of every command and the steps each channel made. It moves no arm:

@@ -18,9 +18,9 @@ pytest.importorskip("pymeasure")
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.devices import DeviceError, open_device  # noqa: E402
 from stickslip.devices.anc300 import ANC300  # noqa: E402
-from stickslip.devices.emulators import ANC300Emulator  # noqa: E402
-from stickslip.devices.simulator import SimulatedMM3A  # noqa: E402
 from stickslip.devices.transport import FakeTransport  # noqa: E402
+from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
+from stickslip.sim.emulators import ANC300Emulator  # noqa: E402
 
 PASSWORD = "secret"
 LOGIN = [
@@ -198,8 +198,8 @@ def test_q3_stays_in_range_after_emulated_continuous_move():
 
 def test_serial_console_on_a_pseudo_terminal_and_a_traverse():
     """anc300:///dev/pts/N through the serial transport; a traverse finds the true step."""
-    from stickslip.devices.simulator import OracleStopDetector, VirtualMicrophone
-    from stickslip.traverse import measure_traverse
+    from stickslip.procedures.traverse import measure_traverse
+    from stickslip.sim.arm import OracleStopDetector, VirtualMicrophone
 
     sim = _sim()
     with ANC300Emulator(sim, transport="pty") as emu:

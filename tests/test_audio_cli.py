@@ -17,8 +17,8 @@ from stickslip.audio.sources import (
     wav_blocks,
     write_wav,
 )
-from stickslip.audio.synth import render_traverse_recording
 from stickslip.cli import app
+from stickslip.sim.sound import render_traverse_recording
 
 runner = CliRunner()
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stickslip.audio.synth import JOINT_SOUNDS, Soundscape, render_traverse_recording
+from stickslip.sim.sound import JOINT_SOUNDS, Soundscape, render_traverse_recording
 
 SR = 48_000
 

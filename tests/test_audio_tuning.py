@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from stickslip.audio.detector import detect
-from stickslip.audio.synth import render_traverse_recording
 from stickslip.audio.tuning import TuningError, candidate_bands, tune
+from stickslip.sim.sound import render_traverse_recording
 
 TUNE_STOP_S = 2.0
 
@@ -33,7 +33,7 @@ GAINS = [-3.0, 3.0, -1.5, 2.0, 0.5, -2.5, 3.0, -3.0]
 
 
 def test_tuning_picks_the_joints_own_band(tunings):
-    from stickslip.audio.synth import JOINT_SOUNDS
+    from stickslip.sim.sound import JOINT_SOUNDS
 
     for joint, t in tunings.items():
         lo, hi = t.band_hz

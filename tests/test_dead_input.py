@@ -13,8 +13,8 @@ import pytest
 from stickslip.audio.detector import StopDetector
 from stickslip.audio.guard import NoSignalError, SignalGuard, block_problem
 from stickslip.audio.tuning import tune
-from stickslip.devices.simulator import SimulatedMM3A
-from stickslip.traverse import TraverseError, measure_traverse
+from stickslip.procedures.traverse import TraverseError, measure_traverse
+from stickslip.sim.arm import SimulatedMM3A
 
 DAY = "2026-11-22"
 RATE = 48_000

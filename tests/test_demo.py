@@ -1,4 +1,4 @@
-"""``stickslip demo`` and :func:`stickslip.demo.run_demo`: the whole story on the simulator.
+"""``stickslip demo`` and :func:`stickslip.procedures.demo.run_demo`: the whole story on the simulator.
 
 Acceptance (issue 3): calibrated a and gamma0 within 1 % of the simulator's truth, b
 within 0.01, c and d within 3 % (or 0.5 µrad for d). The truth is
@@ -15,8 +15,8 @@ from typer.testing import CliRunner
 
 from stickslip.calibration import Calibration
 from stickslip.cli import app
-from stickslip.demo import CALIBRATION_PLAN, REPEAT_PLAN, VALIDATION_PLAN, run_demo
 from stickslip.measurements import read_measurements
+from stickslip.procedures.demo import CALIBRATION_PLAN, REPEAT_PLAN, VALIDATION_PLAN, run_demo
 
 runner = CliRunner()
 

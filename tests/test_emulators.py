@@ -16,9 +16,9 @@ import pytest
 
 from stickslip import kinematics as kin
 from stickslip.devices import DeviceError, open_device
-from stickslip.devices.emulators import NanoControlEmulator
-from stickslip.devices.simulator import OracleStopDetector, SimulatedMM3A, VirtualMicrophone
-from stickslip.traverse import measure_traverse
+from stickslip.procedures.traverse import measure_traverse
+from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A, VirtualMicrophone
+from stickslip.sim.emulators import NanoControlEmulator
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 

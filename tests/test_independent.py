@@ -17,7 +17,7 @@ from scipy import integrate, optimize
 from typer.testing import CliRunner
 
 from stickslip.cli import app
-from stickslip.demo import run_demo
+from stickslip.procedures.demo import run_demo
 
 runner = CliRunner()
 

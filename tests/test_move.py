@@ -19,8 +19,8 @@ from typer.testing import CliRunner
 
 from stickslip import kinematics as kin
 from stickslip.cli import app
-from stickslip.devices.emulators import NanoControlEmulator
-from stickslip.devices.simulator import SimulatedMM3A
+from stickslip.sim.arm import SimulatedMM3A
+from stickslip.sim.emulators import NanoControlEmulator
 
 planning = pytest.importorskip("stickslip.planning")
 calibration = pytest.importorskip("stickslip.calibration")
@@ -252,7 +252,7 @@ def test_help_texts():
 
 def test_move_over_the_emulated_anc300(tmp_path, cal_path):
     pytest.importorskip("pymeasure")
-    from stickslip.devices.emulators import ANC300Emulator
+    from stickslip.sim.emulators import ANC300Emulator
 
     db = tmp_path / "s.db"
     cal = calibration.Calibration.load(cal_path)

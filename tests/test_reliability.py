@@ -23,7 +23,7 @@ from stickslip import kinematics as kin
 from stickslip import records
 from stickslip.cli import app
 from stickslip.devices.base import device_key, redact_url
-from stickslip.devices.simulator import SimulatedMM3A
+from stickslip.sim.arm import SimulatedMM3A
 
 sys.path.insert(0, str(Path(__file__).parent))
 import faults  # noqa: E402
@@ -175,8 +175,8 @@ def _all_db_bytes(db: Path) -> bytes:
 def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch, cal_path):
     """import / fit --record / move / where / history --json with a password: absent everywhere."""
     pytest.importorskip("pymeasure")
-    from stickslip.devices.emulators import ANC300Emulator
     from stickslip.measurements import measurements_to_csv
+    from stickslip.sim.emulators import ANC300Emulator
     from synth import paper_table
 
     caplog.set_level(logging.DEBUG)

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from stickslip import kinematics as kin
 from stickslip.devices import Controller, DeviceError, open_device
-from stickslip.devices.simulator import (
+from stickslip.sim.arm import (
     FREQUENCY_RANGE,
     NOMINAL,
     RIPPLE,

@@ -13,9 +13,9 @@ import pytest
 
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
-from stickslip.devices.simulator import OracleStopDetector, SimulatedMM3A
 from stickslip.measurements import measurements_to_csv, parse_measurements
-from stickslip.traverse import TraverseError, _count_before, measure_traverse
+from stickslip.procedures.traverse import TraverseError, _count_before, measure_traverse
+from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A
 
 DAY = "2026-11-22"
 

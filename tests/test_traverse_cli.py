@@ -8,8 +8,8 @@ from typer.testing import CliRunner
 
 from stickslip.audio.tuning import tune
 from stickslip.cli import app
-from stickslip.devices.simulator import SimulatedMM3A
 from stickslip.measurements import read_measurements
+from stickslip.sim.arm import SimulatedMM3A
 from stickslip.storage import Store
 
 runner = CliRunner()

@@ -1,6 +1,5 @@
 """The audio limit switch: hear a joint reach its end stop.
 
-* :mod:`.synth`    what the room hears (the simulator's virtual microphone)
 * :mod:`.detector` streaming band-power detector and its :class:`Tuning`
 * :mod:`.tuning`   choose band and threshold from a labelled recording
 * :mod:`.sources`  WAV files in blocks, a live microphone
@@ -10,13 +9,11 @@ from __future__ import annotations
 
 from .detector import StopDetector, StopEvent, Tuning, TuningFileError, detect
 from .sources import AudioSourceError, Microphone, read_wav, wav_blocks, write_wav
-from .synth import Soundscape, render_traverse_recording
 from .tuning import TuningError, tune
 
 __all__ = [
     "AudioSourceError",
     "Microphone",
-    "Soundscape",
     "StopDetector",
     "StopEvent",
     "Tuning",
@@ -24,7 +21,6 @@ __all__ = [
     "TuningFileError",
     "detect",
     "read_wav",
-    "render_traverse_recording",
     "tune",
     "wav_blocks",
     "write_wav",

@@ -1,7 +1,7 @@
 """Where the detector's audio comes from: WAV files in blocks, or a live microphone.
 
 The simulator's virtual microphone lives with the simulator
-(:mod:`stickslip.devices.simulator`); it yields blocks the same way.
+(:mod:`stickslip.sim.arm`); it yields blocks the same way.
 Both sources here import their optional dependency lazily and say which extra to
 install when it is missing.
 """

@@ -67,9 +67,9 @@ def demo(
     Example: stickslip demo --seed 3 --day 2026-11-22 --out results/
     """  # noqa: E501
     from ..calibration import CalibrationError
-    from ..demo import run_demo
+    from ..procedures.demo import run_demo
+    from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
-    from ..traverse import TraverseError
 
     if device is not None:
         seed, day = _sim_seed_day(device, seed, day)
@@ -199,8 +199,8 @@ def traverse_cmd(
     from ..kinematics import JOINTS, Pose
     from ..measurements import HEADER, measurements_to_csv
     from ..models import direction_label
+    from ..procedures.traverse import TraverseError, measure_traverse
     from ..storage import Store, StoreError
-    from ..traverse import TraverseError, measure_traverse
     from ..units import format_step
     from ._common import angle_option, length_option
 

@@ -125,7 +125,7 @@ class Controller(Protocol):
     ``ValueError`` naming the allowed range; nothing is clipped silently.
 
     Optional: a backend on a virtual clock (the simulator) exposes ``clock_s``, the
-    device time in s; :func:`stickslip.traverse.measure_traverse` then keeps its audio
+    device time in s; :func:`stickslip.procedures.traverse.measure_traverse` then keeps its audio
     in step with it (otherwise it uses the wall clock).
     """
 
@@ -167,7 +167,7 @@ Factory = Callable[[str], Controller]
 
 BACKENDS: dict[str, str | Factory] = {
     # scheme -> factory, or "module:function" imported on first use
-    "sim": "stickslip.devices.simulator:open_url",
+    "sim": "stickslip.sim.arm:open_url",
     "mm3a": "stickslip.devices.nanocontrol:open_url",
     "anc300": "stickslip.devices.anc300:open_url",
 }

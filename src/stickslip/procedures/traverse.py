@@ -18,7 +18,7 @@ The traverse procedure (docs/design.md §5), for any :class:`~stickslip.devices.
 
 Audio arrives through ``audio_blocks``: either a callable returning the blocks
 recorded since its previous call (the simulator's
-:class:`~stickslip.devices.simulator.VirtualMicrophone`), or an iterator yielding
+:class:`~stickslip.sim.arm.VirtualMicrophone`), or an iterator yielding
 blocks as they are recorded (a live microphone). Stream time and the controller's
 clock must agree: by default the clock is ``controller.clock_s`` if the controller
 has one (the simulator), else the wall clock since the start of the traverse.
@@ -34,11 +34,11 @@ from typing import Any
 
 import numpy as np
 
-from . import kinematics as kin
-from .audio.guard import NoSignalError, SignalGuard
-from .devices.base import Controller
-from .measurements import Traverse
-from .models import direction_label, direction_sign
+from .. import kinematics as kin
+from ..audio.guard import NoSignalError, SignalGuard
+from ..devices.base import Controller
+from ..measurements import Traverse
+from ..models import direction_label, direction_sign
 
 __all__ = ["TraverseError", "TraverseResult", "measure_traverse", "MIN_STEP_PRIOR", "LATENCY_MODES"]
 

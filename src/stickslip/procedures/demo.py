@@ -1,7 +1,7 @@
 """The whole story on the simulated MM3A: tune, measure, calibrate, compare, validate, save.
 
 :func:`run_demo` is what ``stickslip demo`` prints. On a fresh
-:class:`~stickslip.devices.simulator.SimulatedMM3A` it
+:class:`~stickslip.sim.arm.SimulatedMM3A` it
 
 1. tunes the audio limit switch for each joint from a labelled recording made on
    the simulator (stepping into a stop);
@@ -9,7 +9,7 @@
    ``(q2, theta, psi) = (-pi/2, 0, 0), (0, -pi/2, 0), (0, 0, 0)``, 8 of joint 2 over
    its full range at ``(q3, theta, psi) = (0, 0, 0), (12 mm, 0, 0), (12 mm, -pi/2, 0),
    (0, -pi/2, 0)``, each in ``+`` and ``-``), timed by ear with
-   :func:`stickslip.traverse.measure_traverse`;
+   :func:`stickslip.procedures.traverse.measure_traverse`;
 3. calibrates (:func:`stickslip.calibration.calibrate`) and sets every parameter
    beside the simulator's truth;
 4. validates the model against traverses in other poses (model against the
@@ -33,13 +33,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from . import kinematics as kin
-from .calibration import Calibration, ValidationResult, calibrate, validate
-from .clock import today_label
-from .devices.base import device_key
-from .devices.simulator import NOMINAL, OracleStopDetector, SimulatedMM3A
-from .measurements import write_measurements
-from .models import JointModel
+from .. import kinematics as kin
+from ..calibration import Calibration, ValidationResult, calibrate, validate
+from ..clock import today_label
+from ..devices.base import device_key
+from ..measurements import write_measurements
+from ..models import JointModel
+from ..sim.arm import NOMINAL, OracleStopDetector, SimulatedMM3A
 from .traverse import TraverseResult, measure_traverse
 
 __all__ = [
@@ -331,7 +331,7 @@ def run_demo(
         ``True`` shows rich progress bars on stderr; a callable gets
         ``(stage, done, total)`` after every traverse.
     on_traverse : callable, optional
-        Called with every :class:`~stickslip.traverse.TraverseResult` as it is measured.
+        Called with every :class:`~stickslip.procedures.traverse.TraverseResult` as it is measured.
     store : Store-like, optional
         Keeps every traverse and the calibration (see the module docstring).
     validation : bool
@@ -344,7 +344,7 @@ def run_demo(
         Room sound options for the simulator's microphone.
     switch : {"audio", "oracle"}
         The limit switch: the tuned audio detector on the virtual microphone
-        (default), or :class:`~stickslip.devices.simulator.OracleStopDetector`, which
+        (default), or :class:`~stickslip.sim.arm.OracleStopDetector`, which
         knows the true stops (no sound rendered; for fast tests).
     repeats : int
         After the calibration, measure the paper's ANOVA poses (:data:`REPEAT_PLAN`)
@@ -352,9 +352,9 @@ def run_demo(
     listen_from : float
         Start listening after this fraction of the step count predicted by the
         previous calibration (for the calibration traverses: the nominal parameters
-        :data:`~stickslip.devices.simulator.NOMINAL`, standing in for yesterday's
+        :data:`~stickslip.sim.arm.NOMINAL`, standing in for yesterday's
         calibration; for the validation sweep: today's). The stop cannot come much
-        earlier; if it does, :func:`~stickslip.traverse.measure_traverse` measures
+        earlier; if it does, :func:`~stickslip.procedures.traverse.measure_traverse` measures
         again listening all along. 0 listens from the start. In [0, 0.95].
     """
     if not 0.0 <= listen_from <= 0.95:
@@ -382,8 +382,8 @@ def run_demo(
         tunings: dict[int, Any] = {}
         detectors: dict[int, Any] = {}
         if switch == "audio":
-            from .audio.detector import StopDetector
-            from .audio.tuning import tune
+            from ..audio.detector import StopDetector
+            from ..audio.tuning import tune
 
             for joint in (1, 2, 3):
                 bar.stage(f"tuning the limit switch of joint {joint}")

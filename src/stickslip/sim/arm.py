@@ -22,7 +22,7 @@ has whole periods over the range, so it averages out to second order
 Hard end stops: a step that would cross a stop ends at the stop; steps that begin
 at the stop do not move the joint and are recorded as *at-stop* steps, which the
 virtual microphone (:class:`VirtualMicrophone`) renders with the joint's end-stop
-sound through :class:`stickslip.audio.synth.Soundscape`.
+sound through :class:`stickslip.sim.sound.Soundscape`.
 
 The virtual clock ``clock_s`` advances by ``|n| / frequency`` per burst; a burst is
 simulated at once with numpy (chunked fixed-point iteration of the step positions),
@@ -44,8 +44,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
+from ..devices.base import DeviceError, DeviceInfo, check_setting, check_steps
 from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
-from .base import DeviceError, DeviceInfo, check_setting, check_steps
 
 __all__ = [
     "NOMINAL",
@@ -141,7 +141,7 @@ class SimulatedMM3A:
     sample_rate : int
         Sample rate of the virtual microphone, Hz.
     soundscape_kwargs : dict, optional
-        Passed to :class:`stickslip.audio.synth.Soundscape` (gain_db, noise_db, hum,
+        Passed to :class:`stickslip.sim.sound.Soundscape` (gain_db, noise_db, hum,
         knocks_per_min, babble, ...).
     pose : Pose, optional
         Initial pose (joints rad, rad, m; tilt rad). Default: the outstretched pose
@@ -504,7 +504,7 @@ class SimulatedMM3A:
 
     @property
     def soundscape(self):
-        """The :class:`stickslip.audio.synth.Soundscape` the virtual microphone renders with."""
+        """The :class:`stickslip.sim.sound.Soundscape` the virtual microphone renders with."""
         if self._soundscape is None:
             self._soundscape = _soundscape(self.sample_rate, self.seed, self.soundscape_kwargs)
         return self._soundscape
@@ -585,8 +585,8 @@ _SCAPES: dict[tuple, object] = {}
 
 
 def _soundscape(sample_rate: int, seed: int, kwargs: dict):
-    """A shared :class:`~stickslip.audio.synth.Soundscape` (stateless renders; costly to build)."""
-    from ..audio.synth import Soundscape
+    """A shared :class:`~stickslip.sim.sound.Soundscape` (stateless renders; costly to build)."""
+    from .sound import Soundscape
 
     key = (sample_rate, seed, tuple(sorted((k, repr(v)) for k, v in kwargs.items())))
     scape = _SCAPES.get(key)
@@ -600,7 +600,7 @@ def _soundscape(sample_rate: int, seed: int, kwargs: dict):
 class VirtualMicrophone:
     """What a microphone beside the simulated arm hears, on the virtual clock.
 
-    Blocks are rendered by the simulator's :class:`~stickslip.audio.synth.Soundscape`
+    Blocks are rendered by the simulator's :class:`~stickslip.sim.sound.Soundscape`
     from the recorded step events. The stream starts at the simulator's clock when the
     microphone is made; only complete blocks up to the current clock are available
     (the future has not been stepped yet).

@@ -2,13 +2,13 @@
 
 Each emulator answers its controller's command set the way
 :mod:`stickslip.devices.nanocontrol` and :mod:`stickslip.devices.anc300` expect the
-real device to, and moves a :class:`~stickslip.devices.simulator.SimulatedMM3A` with
+real device to, and moves a :class:`~stickslip.sim.arm.SimulatedMM3A` with
 every step command, so a traverse measured through the emulator finds the
 simulator's load-dependent step size. It runs in a background thread; use it as a
 context manager, or call :meth:`start` and :meth:`stop`::
 
     from stickslip.devices import open_device
-    from stickslip.devices.emulators import NanoControlEmulator
+    from stickslip.sim.emulators import NanoControlEmulator
 
     with NanoControlEmulator() as emu:           # a pseudo-terminal, e.g. /dev/pts/7
         dev = open_device(emu.url)               # "mm3a:///dev/pts/7"
@@ -34,12 +34,12 @@ import threading
 import time
 import tty
 
-from .nanocontrol import AMPLITUDE_RANGE, MAX_COARSE, PAUSE_RANGE_MS, SPEED_HZ
-from .simulator import FREQUENCY_RANGE, SimulatedMM3A
+from ..devices.nanocontrol import AMPLITUDE_RANGE, MAX_COARSE, PAUSE_RANGE_MS, SPEED_HZ
+from .arm import FREQUENCY_RANGE, SimulatedMM3A
 
 __all__ = ["NanoControlEmulator", "ANC300Emulator", "FAULTS"]
 
-log = logging.getLogger("stickslip.devices.emulators")
+log = logging.getLogger("stickslip.sim.emulators")
 
 FAULTS = ("silent", "garbage", "error")
 GARBAGE = b"\x00\xfe#\x13\x9c\x07~\r\n"
@@ -515,7 +515,7 @@ def _float(word: str) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Serve an emulator until Ctrl-C: ``python -m stickslip.devices.emulators [anc300]``.
+    """Serve an emulator until Ctrl-C: ``python -m stickslip.sim.emulators [anc300]``.
 
     Prints the URL to open it with (e.g. ``mm3a:///dev/pts/7``), so that the command
     line can be tried without hardware:
@@ -524,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
 
     parser = argparse.ArgumentParser(
-        prog="python -m stickslip.devices.emulators",
+        prog="python -m stickslip.sim.emulators",
         description="Serve a controller emulator driving a simulated MM3A (Ctrl-C stops).",
     )
     parser.add_argument(
