@@ -9,6 +9,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from stickslip import calibration as C
+from stickslip.calibration.inversion import _simulate_full_range_averages
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
 from stickslip.models import JointModel, PrismaticParams, steps_between
@@ -111,7 +112,7 @@ def test_seed_quadratic_step_simulation_matches_exact_grid():
     # the paper simulated step by step; the exact integral gives the same grid to < 1 step in ~1e5
     g0 = np.array([40e-6, 60e-6])
     d = np.array([10e-6, -10e-6])
-    sim = C._simulate_full_range_averages(g0, d, HI, LO, 0.0, -1.0)
+    sim = _simulate_full_range_averages(g0, d, HI, LO, 0.0, -1.0)
     exact = SPAN / steps_between(HI, LO, g0, 0.0, -d)
     np.testing.assert_allclose(sim, exact, rtol=3e-5)
 

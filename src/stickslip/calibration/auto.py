@@ -1,0 +1,80 @@
+"""One entry point: :func:`calibrate` picks the paper's procedure or least squares per
+joint and direction (``method="auto"``) and merges the parts."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from ..measurements import Traverse
+from .lsq import calibrate_lsq
+from .paper import calibrate_paper, paper_applicable
+from .result import Calibration, _day_of, _group, _provenance
+
+_OLD_METHOD_NAMES = {"seed": "paper", "seed-quadratic": "paper-quadratic"}
+"""Method names of earlier versions (the paper was called "the seed"), still accepted."""
+
+
+def calibrate(
+    traverses: Sequence[Traverse], method: str = "auto", day: str | None = None, source: str | None = None
+) -> Calibration:
+    """Calibrate every joint and direction present in ``traverses``.
+
+    Parameters
+    ----------
+    traverses : sequence of Traverse
+    method : {"auto", "paper", "paper-quadratic", "lsq"}
+        ``auto`` uses the paper's procedure for every joint and direction whose
+        calibration poses the table has, and least squares for the others (the
+        calibration's method then reads e.g. ``"paper (3+ 3-), lsq (2+ 2-)"``). The names
+        ``"seed"`` and ``"seed-quadratic"`` of earlier versions are still accepted.
+    day : str, optional
+        Session label (default: the latest day among the traverses).
+    source : str, optional
+        Where the traverses came from, for the provenance.
+    """
+    traverses = list(traverses)
+    method = _OLD_METHOD_NAMES.get(method, method)
+    if method == "auto":
+        groups = _group(traverses)
+        seed_keys = {k for k, ts in groups.items() if paper_applicable(ts)}
+        if not seed_keys:
+            method = "lsq"
+        elif len(seed_keys) == len(groups):
+            method = "paper"
+        else:
+            by_seed = [t for t in traverses if (t.joint, t.direction) in seed_keys]
+            by_lsq = [t for t in traverses if (t.joint, t.direction) not in seed_keys]
+            return _merge(calibrate_paper(by_seed, day, source), calibrate_lsq(by_lsq, day, source), traverses, day)
+    if method == "paper":
+        return calibrate_paper(traverses, day, source)
+    if method == "paper-quadratic":
+        return calibrate_paper(traverses, day, source, rotary_inversion="paper-quadratic")
+    if method == "lsq":
+        return calibrate_lsq(traverses, day, source)
+    raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
+
+
+def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], day: str | None) -> Calibration:
+    """One calibration from a paper's-procedure part and a least-squares part (disjoint joints/directions)."""
+
+    def keys(c: Calibration) -> str:
+        return " ".join(f"{j}{d}" for j, d in sorted(c.models))
+
+    notes = [
+        f"the paper's procedure for {keys(seed)}; least squares for {keys(lsq)}, whose traverses are not all "
+        "at the paper's calibration poses",
+        *seed.provenance.get("notes", []),  # type: ignore[misc]
+        *lsq.provenance.get("notes", []),  # type: ignore[misc]
+    ]
+    prov = _provenance(traverses, seed.provenance.get("source"), len(traverses), notes)  # type: ignore[arg-type]
+    prov["rows_used"] = int(seed.provenance["rows_used"]) + int(lsq.provenance["rows_used"])  # type: ignore[call-overload]
+    return Calibration(
+        {**seed.models, **lsq.models},
+        {**seed.stderr, **lsq.stderr},
+        {**seed.constant_steps, **lsq.constant_steps},
+        _day_of(traverses, day),
+        f"paper ({keys(seed)}), lsq ({keys(lsq)})",
+        prov,
+    )
+
+
