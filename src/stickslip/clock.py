@@ -23,6 +23,7 @@ import datetime as _dt
 import os
 
 __all__ = [
+    "max_age_days",
     "ENV_TODAY",
     "today",
     "today_label",
@@ -33,6 +34,7 @@ __all__ = [
 ]
 
 ENV_TODAY = "STICKSLIP_TODAY"
+ENV_MAX_AGE = "STICKSLIP_MAX_AGE_DAYS"
 """Environment variable that pins :func:`today` (an ISO date, ``YYYY-MM-DD``)."""
 
 
@@ -91,6 +93,27 @@ def age_days(day: str | None, today: str | _dt.date | None = None) -> int | None
     if a is None or b is None:
         return None
     return (b - a).days
+
+
+def max_age_days(value: int | None = None) -> int:
+    """The largest age (days) of a calibration still used without a warning.
+
+    ``value`` if given, else ``$STICKSLIP_MAX_AGE_DAYS``, else 0 (only today's calibration
+    is fresh: the paper found the day-to-day changes significant).
+
+    Raises
+    ------
+    ValueError
+        If the value is not a whole number of days in 0..36500.
+    """
+    raw: object = value if value is not None else os.environ.get(ENV_MAX_AGE, "").strip() or 0
+    try:
+        days = int(str(raw))
+    except ValueError:
+        raise ValueError(f"${ENV_MAX_AGE} = {raw!r} is not a whole number of days") from None
+    if not 0 <= days <= 36500:
+        raise ValueError(f"the largest calibration age must be 0..36500 days, got {days}")
+    return days
 
 
 def stale_message(cal_day: str | None, today: str | None = None, max_age_days: int = 0) -> str | None:

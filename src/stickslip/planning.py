@@ -74,7 +74,7 @@ class MovePlan:
             "exact_steps": self.exact_steps,
             "gamma_start": self.gamma_start,
             "gamma_end": self.gamma_end,
-            "unit": "m" if self.joint == 3 else "rad",
+            "unit": kin.joint_spec(self.joint).unit,
         }
 
 

@@ -27,6 +27,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from .joints import joint_spec
+
 MAX_JSON_BYTES = 4 * 1024 * 1024
 """Largest JSON document read (bytes); calibrations and tunings are a few kB."""
 MAX_TABLE_BYTES = 64 * 1024 * 1024
@@ -142,7 +144,7 @@ def _check_parameter(rec_: object, i: int) -> None:
     where = f"parameters[{i}]"
     rec, joint = _record_joint(rec_, where)
     name = rec.get("name")
-    kinds = _PRISMATIC if joint == 3 else _ROTARY
+    kinds = _PRISMATIC if joint_spec(joint).prismatic else _ROTARY
     if name not in kinds:
         raise ValueError(f"{where}.name must be one of {sorted(kinds)} for joint {joint}, got {name!r}")
     where = f"{where} (joint {joint} {name})"
@@ -151,12 +153,12 @@ def _check_parameter(rec_: object, i: int) -> None:
         if not 0.0 <= v < 1.0:
             raise ValueError(f"{where} must satisfy 0 <= b < 1 (eta = 1 - b|cos q2| > 0), got {v!r}")
     else:
-        _check_scale(v, "m" if joint == 3 else "rad", where, signed=kinds[name] == "term")
+        _check_scale(v, joint_spec(joint).unit, where, signed=kinds[name] == "term")
     if rec.get("stderr") is not None:
         se = _finite(rec.get("stderr"), f"{where} stderr")
         if se < 0:
             raise ValueError(f"{where} stderr must be >= 0, got {se!r}")
-    if joint != 3:
+    if joint_spec(joint).rotary:
         q3 = _finite(rec.get("q3"), f"{where} q3")
         if not -1e-3 <= q3 <= 0.1:
             raise ValueError(f"{where} q3 = {q3!r} m is outside 0..0.1 m")
@@ -187,7 +189,7 @@ def check_calibration_dict(data: object) -> None:
         where = f"constant_steps[{i}]"
         step, joint = _record_joint(rec, where)
         v = _finite(step.get("value"), f"{where} (joint {joint})")
-        _check_scale(v, "m" if joint == 3 else "rad", f"{where} (joint {joint})", signed=False)
+        _check_scale(v, joint_spec(joint).unit, f"{where} (joint {joint})", signed=False)
 
 
 # -- tuning documents ----------------------------------------------------------------------------

@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 import re
 
+from .joints import joint_spec
+
 __all__ = [
     "LENGTH_UNITS",
     "ANGLE_UNITS",
@@ -18,6 +20,12 @@ __all__ = [
     "parse_angle",
     "parse_length",
     "format_step",
+    "format_position",
+    "step_scale",
+    "param_scale",
+    "position_scale",
+    "step_display_unit",
+    "position_display_unit",
     "format_quantity",
 ]
 
@@ -118,14 +126,39 @@ def format_quantity(value: float, unit: str, digits: int = 4) -> str:
     return f"{value / table[unit]:.{digits}g} {unit}"
 
 
+def step_scale(joint: int) -> tuple[float, str]:
+    """``(factor, unit)`` to show a step size of ``joint``: SI value × factor is in ``unit``.
+
+    nm for the prismatic joint, µrad for rotary ones (the paper's units).
+
+    >>> step_scale(3), step_scale(2)
+    ((1000000000.0, 'nm'), (1000000.0, 'µrad'))
+    """
+    return (1e6, "µrad") if joint_spec(joint).rotary else (1e9, "nm")
+
+
+def param_scale(name: str, joint: int) -> tuple[float, str]:
+    """``(factor, unit)`` to show calibration parameter ``name`` of ``joint``.
+
+    The dimensionless ``b`` of Eq. (2) is shown as is (unit ``""``); every other
+    parameter is a step size or a step-size slope and shown like :func:`step_scale`.
+    """
+    return (1.0, "") if name == "b" else step_scale(joint)
+
+
+def position_scale(joint: int) -> tuple[float, str]:
+    """``(factor, unit)`` to show a position of ``joint``: µm for the prismatic, degrees for rotary."""
+    return (180.0 / math.pi, "deg") if joint_spec(joint).rotary else (1e6, "µm")
+
+
 def step_display_unit(joint: int) -> str:
     """The unit people read step sizes of ``joint`` in: nm for the prismatic, µrad for rotary."""
-    return "nm" if joint == 3 else "µrad"
+    return step_scale(joint)[1]
 
 
 def position_display_unit(joint: int) -> str:
     """The unit people read positions of ``joint`` in: µm for the prismatic, degrees for rotary."""
-    return "µm" if joint == 3 else "deg"
+    return position_scale(joint)[1]
 
 
 def format_step(value: float, joint: int, digits: int = 4) -> str:
@@ -135,6 +168,4 @@ def format_step(value: float, joint: int, digits: int = 4) -> str:
 
 def format_position(value: float, joint: int, digits: int = 6) -> str:
     """Format a joint position (µm for the prismatic joint, degrees for rotary ones)."""
-    if joint == 3:
-        return format_quantity(value, "µm", digits)
-    return format_quantity(value, "deg", digits)
+    return format_quantity(value, position_display_unit(joint), digits)

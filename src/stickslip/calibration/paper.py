@@ -73,7 +73,7 @@ def paper_applicable(traverses: Sequence[Traverse]) -> bool:
     if not groups:
         return False
     for (j, _d), ts in groups.items():
-        if (_paper_prismatic_rows(ts) if j == 3 else _paper_rotary_rows(ts)) is None:
+        if (_paper_prismatic_rows(ts) if kin.joint_spec(j).prismatic else _paper_rotary_rows(ts)) is None:
             return False
     return True
 
@@ -113,7 +113,7 @@ def calibrate_paper(
     if rotary_inversion == "paper-quadratic" and quadratic is None:
         quadratic = fit_paper_quadratic()
     for (j, d), ts in sorted(groups.items()):
-        if j == 3:
+        if kin.joint_spec(j).prismatic:
             rows = _paper_prismatic_rows(ts)
             if rows is None:
                 missing = [

@@ -26,6 +26,7 @@ from ..models import (
     RotaryParams,
     direction_label,
 )
+from ..units import param_scale, step_scale
 
 FORMAT = "stickslip.calibration"
 FORMAT_VERSION = 1
@@ -41,6 +42,88 @@ UNITS = {
 
 class CalibrationError(ValueError):
     """The traverses given cannot produce a (physical) calibration; the message says why."""
+
+
+_CONDITION_RANGES = {"frequency_hz": (1e-3, 1e6), "amplitude_v": (0.0, 1e3), "temperature_c": (-273.15, 500.0)}
+
+
+@dataclass(frozen=True)
+class Conditions:
+    """What a calibration was made with, so that using it elsewhere can be questioned.
+
+    Every field is optional (``None`` = not recorded); older calibration files have none.
+
+    Attributes
+    ----------
+    device : str or None
+        The device's identity (its URL without options or secrets, as
+        :func:`stickslip.devices.device_key` gives it).
+    frequency_hz : float or None
+        Stepping (drive) frequency of the traverses, Hz.
+    amplitude_v : float or None
+        Drive amplitude, V (or the controller's amplitude units, as the controller reports it).
+    temperature_c : float or None
+        Room or stage temperature, °C, if known.
+    """
+
+    device: str | None = None
+    frequency_hz: float | None = None
+    amplitude_v: float | None = None
+    temperature_c: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.device is not None and (not isinstance(self.device, str) or len(self.device) > 2000):
+            raise ValueError(f"conditions.device must be a device URL string, got {self.device!r:.80}")
+        for name, (lo, hi) in _CONDITION_RANGES.items():
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or not lo <= v <= hi:
+                raise ValueError(f"conditions.{name} must be a finite number in [{lo:g}, {hi:g}], got {v!r}")
+
+    @property
+    def recorded(self) -> bool:
+        """Whether anything is recorded."""
+        return any(getattr(self, k) is not None for k in ("device", "frequency_hz", "amplitude_v", "temperature_c"))
+
+    def to_dict(self) -> dict[str, object]:
+        """The recorded fields (SI-labelled names), ``None`` where not recorded."""
+        return {
+            "device": self.device,
+            "frequency_hz": self.frequency_hz,
+            "amplitude_v": self.amplitude_v,
+            "temperature_c": self.temperature_c,
+        }
+
+    @classmethod
+    def from_dict(cls, data: object) -> Conditions:
+        """Rebuild from :meth:`to_dict` output; ``ValueError`` names the bad field."""
+        if data is None:
+            return cls()
+        if not isinstance(data, dict):
+            raise ValueError(f"conditions must be an object, got {type(data).__name__}")
+        unknown = sorted(set(data) - {"device", "frequency_hz", "amplitude_v", "temperature_c"})
+        if unknown:
+            raise ValueError(f"conditions: unknown field(s) {', '.join(map(str, unknown))}")
+        return cls(**{k: data.get(k) for k in ("device", "frequency_hz", "amplitude_v", "temperature_c")})
+
+    def differences(self, now: Conditions, rel_tol: float = 0.01, temp_tol_c: float = 2.0) -> list[str]:
+        """How ``now`` differs from these conditions, one phrase per field that both record.
+
+        Frequencies and amplitudes differ when they are more than ``rel_tol`` apart
+        (relative); temperatures when more than ``temp_tol_c`` °C apart.
+        """
+        out: list[str] = []
+        if self.device and now.device and self.device != now.device:
+            out.append(f"made on {self.device}, this is {now.device}")
+        for name, label, unit in (("frequency_hz", "stepping frequency", "Hz"), ("amplitude_v", "amplitude", "V")):
+            a, b = getattr(self, name), getattr(now, name)
+            if a is not None and b is not None and abs(a - b) > rel_tol * max(abs(a), abs(b)):
+                out.append(f"{label} {a:g} {unit} then, {b:g} {unit} now")
+        a, b = self.temperature_c, now.temperature_c
+        if a is not None and b is not None and abs(a - b) > temp_tol_c:
+            out.append(f"temperature {a:g} °C then, {b:g} °C now")
+        return out
 
 
 # ----------------------------------------------------------------------------- the result object
@@ -65,6 +148,10 @@ class Calibration:
         ``"paper"``, ``"paper-quadratic"`` or ``"lsq"`` (older files say ``"seed"``).
     provenance : dict
         Where the traverses came from (file, sha256, rows used, notes).
+    created : str
+        When the calibration was computed (UTC, ISO 8601).
+    conditions : Conditions
+        Device, drive frequency, amplitude and temperature it was made with, where known.
     """
 
     models: dict[tuple[int, str], JointModel]
@@ -74,6 +161,7 @@ class Calibration:
     method: str
     provenance: dict[str, object] = field(default_factory=dict)
     created: str = field(default_factory=lambda: now_utc().isoformat(timespec="seconds"))
+    conditions: Conditions = field(default_factory=Conditions)
 
     # -- access
     @property
@@ -151,10 +239,11 @@ class Calibration:
             "units": "SI: prismatic steps in m, rotary steps in rad, q3 in m; b is dimensionless",
             "parameters": self.parameters(),
             "constant_steps": [
-                {"joint": j, "direction": d, "value": v, "unit": "m" if j == 3 else "rad"}
+                {"joint": j, "direction": d, "value": v, "unit": kin.joint_spec(j).unit}
                 for (j, d), v in sorted(self.constant_steps.items())
             ],
             "provenance": self.provenance,
+            "conditions": self.conditions.to_dict(),
         }
 
     @classmethod
@@ -174,7 +263,7 @@ class Calibration:
             models, stderr = {}, {}
             for (j, d), recs in by_key.items():
                 vals = {(r["name"], r.get("q3")): (float(r["value"]), r.get("stderr")) for r in recs}
-                if j == 3:
+                if kin.joint_spec(j).prismatic:
                     names = [("a", None), ("b", None), ("c", None)]
                     params: Params = PrismaticParams(*(vals[n][0] for n in names))
                 else:
@@ -195,6 +284,7 @@ class Calibration:
             consts = {
                 (int(c["joint"]), direction_label(c["direction"])): float(c["value"]) for c in data["constant_steps"]
             }
+            conditions = Conditions.from_dict(data.get("conditions"))
         except (KeyError, TypeError) as e:
             raise ValueError(f"calibration file is missing or has a malformed field: {e}") from None
         return cls(
@@ -205,6 +295,7 @@ class Calibration:
             str(data.get("method", "")),
             dict(data.get("provenance") or {}),
             str(data.get("created", "")),
+            conditions,
         )
 
     def save(self, path: str | Path) -> None:
@@ -231,12 +322,12 @@ class Calibration:
         """A readable text report of the parameters with standard errors (nm, µrad)."""
         lines = [f"stickslip calibration — day {self.day or '?'}, method {self.method}"]
         for j in self.joints:
-            kind = "prismatic" if j == 3 else "rotary"
+            kind = kin.joint_spec(j).kind
             lines.append(f"joint {j} ({kind}):")
             for rec in self.parameters():
                 if rec["joint"] != j:
                     continue
-                scale, unit = _display(rec["name"], j)
+                scale, unit = param_scale(rec["name"], j)
                 where = f" @ q3 = {rec['q3'] * 1e3:g} mm" if rec["q3"] is not None else ""
                 se = f" ± {rec['stderr'] * scale:.3g}" if rec["stderr"] is not None else ""
                 lines.append(
@@ -244,8 +335,17 @@ class Calibration:
                 )
             for d in DIRECTIONS:
                 if (j, d) in self.constant_steps:
-                    scale, unit = _display("a" if j == 3 else "gamma0", j)
+                    scale, unit = step_scale(j)
                     lines.append(f"  constant-step comparator {d}: {self.constant_steps[(j, d)] * scale:.5g} {unit}")
+        if self.conditions.recorded:
+            c = self.conditions
+            parts = [
+                f"device {c.device}" if c.device else None,
+                f"{c.frequency_hz:g} Hz" if c.frequency_hz is not None else None,
+                f"{c.amplitude_v:g} V" if c.amplitude_v is not None else None,
+                f"{c.temperature_c:g} °C" if c.temperature_c is not None else None,
+            ]
+            lines.append("made with: " + ", ".join(x for x in parts if x))
         notes = self.provenance.get("notes") if isinstance(self.provenance, dict) else None
         for n in notes or []:
             lines.append(f"note: {n}")
@@ -271,27 +371,21 @@ class Calibration:
             if (joint, d) not in self.models:
                 continue
             m = self.models[(joint, d)]
-            if joint == 3:
+            if kin.joint_spec(joint).prismatic:
                 for th in thetas:
                     g = m.gamma(0.0, q2, 0.0, th, 0.0)
-                    ax.plot(zeta_deg, g * 1e9, label=f"γ3{d}, θ = {math.degrees(th):.0f}°")
+                    ax.plot(zeta_deg, g * step_scale(joint)[0], label=f"γ3{d}, θ = {math.degrees(th):.0f}°")
             else:
                 for q3 in (0.0, kin.Q3_MAX):
                     qj = q2 if joint == 2 else np.linspace(kin.JOINTS[1].lower, kin.JOINTS[1].upper, 400)
                     args = (0.0, qj, q3, 0.0, 0.0) if joint == 2 else (qj, -math.pi / 2, q3, -math.pi / 2, 0.0)
-                    ax.plot(zeta_deg if joint == 2 else np.degrees(qj), m.gamma(*args) * 1e6,
+                    ax.plot(zeta_deg if joint == 2 else np.degrees(qj), m.gamma(*args) * step_scale(joint)[0],
                             label=f"γ{joint}{d}, q3 = {q3 * 1e3:g} mm")
         ax.set_xlabel("ζ = ψ − q2 (deg)" if joint != 1 else "q1 (deg)")
-        ax.set_ylabel("mean step size (nm)" if joint == 3 else "mean step size (µrad)")
+        ax.set_ylabel(f"mean step size ({step_scale(joint)[1]})")
         ax.set_title(f"joint {joint}, calibration of {self.day} ({self.method})")
         ax.legend(fontsize="small")
         return ax
-
-
-def _display(name: str, joint: int) -> tuple[float, str]:
-    if name == "b":
-        return 1.0, ""
-    return (1e9, "nm") if joint == 3 else (1e6, "µrad")
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -306,7 +400,7 @@ def _constant_step(joint: int, direction: str, model: JointModel) -> float:
     ``(q3, theta, psi) = (0, 0, 0)``. Joint 1 (roles interchanged): the full-range
     average at ``theta = -pi/2``, arm outstretched, ``q3 = 0``.
     """
-    if joint == 3:
+    if kin.joint_spec(joint).prismatic:
         return float(model.gamma(0.0, -math.pi / 2, 0.0, 0.0, 0.0))
     spec = kin.JOINTS[joint]
     start, end = (spec.lower, spec.upper) if direction == "+" else (spec.upper, spec.lower)

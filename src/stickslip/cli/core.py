@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 import sys
@@ -12,12 +13,13 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from ..calibration import Calibration, CalibrationError, calibrate, validate
+from ..calibration import Calibration, CalibrationError, Conditions, calibrate, validate
 from ..clock import stale_message
-from ..kinematics import JOINTS, Pose
+from ..devices.base import device_key
+from ..kinematics import JOINTS, Pose, joint_spec
 from ..measurements import TableError, read_measurements, read_pose_table
 from ..models import NonPhysicalError
-from ..units import format_position, format_step
+from ..units import format_position, format_step, step_scale
 from . import app
 from ._common import angle_option, console, fail, length_option, print_json, user_errors, validation_table, warn_later
 
@@ -47,10 +49,6 @@ def _read_table(path: Path):
         _fail_table(e)
 
 
-def _step_unit(joint: int) -> tuple[float, str]:
-    return (1e9, "nm") if joint == 3 else (1e6, "µrad")
-
-
 def _params_table(cal: Calibration, title: str) -> Table:
     t = Table(title=title)
     for col in ("joint", "dir", "parameter", "q3", "value", "std. error", "unit"):
@@ -59,7 +57,7 @@ def _params_table(cal: Calibration, title: str) -> Table:
         if r["name"] == "b":
             scale, unit = 1.0, "1"
         else:
-            scale, unit = _step_unit(int(r["joint"]))
+            scale, unit = step_scale(int(r["joint"]))
         q3 = f"{r['q3'] * 1e3:g} mm" if r["q3"] is not None else ""
         se = f"{r['stderr'] * scale:.3g}" if r["stderr"] is not None else "—"
         t.add_row(str(r["joint"]), str(r["direction"]), str(r["name"]), q3, f"{r['value'] * scale:.5g}", se, unit)
@@ -86,6 +84,17 @@ def calibrate_cmd(
     day: Annotated[
         str | None, typer.Option(help="Session label to record (default: the latest day in the table).")
     ] = None,
+    device: Annotated[
+        str | None,
+        typer.Option(help="Device URL the traverses were measured on (recorded without options or secrets)."),
+    ] = None,
+    frequency: Annotated[
+        float | None, typer.Option(help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).")
+    ] = None,
+    amplitude: Annotated[
+        float | None, typer.Option(help="Drive amplitude of the traverses, V (recorded; move warns on a change).")
+    ] = None,
+    temperature: Annotated[float | None, typer.Option(help="Temperature during the traverses, °C (recorded).")] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Calibrate the step-size models from measured traverses.
@@ -100,9 +109,13 @@ def calibrate_cmd(
     """
     traverses = _read_table(measurements)
     try:
+        conditions = Conditions(
+            device_key(device) if device else None, frequency, amplitude, temperature
+        )
         cal = calibrate(traverses, method=method, day=day, source=str(measurements))
     except (CalibrationError, NonPhysicalError, ValueError) as e:
         fail(str(e))
+    cal = dataclasses.replace(cal, conditions=conditions)
     if output is not None:
         with user_errors():
             cal.save(output)
@@ -129,7 +142,7 @@ def show_cmd(
         return
     console.print(_params_table(cal, f"{calibration} — day {cal.day}, method {cal.method}"))
     for (j, d), v in sorted(cal.constant_steps.items()):
-        s, u = _step_unit(j)
+        s, u = step_scale(j)
         console.print(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}", highlight=False)
 
 
@@ -263,7 +276,7 @@ def plan_cmd(
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
     from ..planning import plan_move
 
-    pos = length_option if joint == 3 else angle_option
+    pos = angle_option if joint_spec(joint).rotary else length_option
     try:
         qa, qb = pos(q_from), pos(q_to)
         pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))

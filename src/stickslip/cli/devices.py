@@ -16,10 +16,10 @@ from typing import Any
 import typer
 
 from .. import kinematics as kin
-from ..clock import stale_message
+from ..clock import max_age_days
 from ..devices.base import DeviceError, open_device
 from ..devices.positions import DeviceState, device_key, load_state, save_state
-from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit
+from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
 from . import app
 from ._common import angle_option, console, fail, flush_warnings, length_option, print_json, user_errors, warn_later
 
@@ -46,10 +46,11 @@ def _open_store(db: Path | None):
 
 def _parse_joint_value(joint: int, text: str, what: str) -> float:
     """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
+    rotary = kin.joint_spec(joint).rotary
     try:
-        v = parse_length(text) if joint == 3 else parse_angle(text)
+        v = parse_angle(text) if rotary else parse_length(text)
     except (UnitError, ArithmeticError, ValueError, TypeError) as e:
-        kind = "a length (e.g. 30um, 1.5mm)" if joint == 3 else "an angle (e.g. 2deg, 40urad)"
+        kind = "an angle (e.g. 2deg, 40urad)" if rotary else "a length (e.g. 30um, 1.5mm)"
         fail(f"{what}: {e}; joint {joint} takes {kind}")
     if not math.isfinite(v):
         fail(f"{what}: {text!r} is not a finite value")
@@ -101,7 +102,7 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
 
 def _degree_hint(joint: int, text: str | None) -> str:
     """For a bare number on a rotary joint: ``"; a bare number is radians: did you mean 5deg?"``."""
-    if joint == 3 or text is None:
+    if not kin.joint_spec(joint).rotary or text is None:
         return ""
     try:
         float(text.strip())
@@ -145,8 +146,10 @@ def _move_locked(
     burst: int,
     pose_opts: tuple[float | None, ...],
     drive: Callable[..., Any],
+    max_age: int = 0,
 ) -> tuple[Any, DeviceState, int, float, float, float, float | None]:
     """The part of `move` that runs holding the device lock: plan from the kept state, drive."""
+    from ..procedures.conditions import usage_warnings
     from ..procedures.move import MoveOutcome
 
     with user_errors():
@@ -161,17 +164,20 @@ def _move_locked(
         steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
     with user_errors():
         save_state(store, state)  # the recorded pose, even if nothing moves
-    stale = stale_message(cal.day)
-    if stale:
-        warn_later(stale)
-    flush_warnings()  # the input is good: say it before driving
     outcome, sim_true = MoveOutcome(), None
+    if not steps:
+        for w in usage_warnings(cal, None, device, joint, max_age):
+            warn_later(w)
+        flush_warnings()
     if steps:
         try:
             dev = open_device(device)
         except (DeviceError, ValueError) as e:
             fail(str(e))
         try:
+            for w in usage_warnings(cal, dev, device, joint, max_age):
+                warn_later(w)
+            flush_warnings()  # the input is good: say it before driving
             if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
                 dev.set_pose(*pose)
 
@@ -212,6 +218,10 @@ def move(
     theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
     psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Steps per burst."),
+    max_age: int | None = typer.Option(
+        None, "--max-age", min=0, max=36500,
+        help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, else 0).",
+    ),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
 ) -> None:
@@ -235,13 +245,14 @@ def move(
         cal = Calibration.load(calibration)
     with user_errors():
         key = device_key(device)
+        days = max_age_days(max_age)
     spec = kin.JOINTS[joint]
     from ..procedures.move import DeviceBusy, device_lock, drive
 
     with _open_store(db) as store, user_errors(DeviceBusy):
         with device_lock(store, key):
             outcome, state, steps, q_from, q_to, q_end, sim_true = _move_locked(
-                store, key, device, cal, joint, by, to, burst, (q1, q2, q3, theta, psi), drive
+                store, key, device, cal, joint, by, to, burst, (q1, q2, q3, theta, psi), drive, days
             )
     if outcome.error is not None:
         if joint in state.uncertain:
@@ -279,7 +290,8 @@ def move(
     )
     if sim_true is not None:
         err = sim_true - q_end
-        shown = f"{err * 1e9:+.1f} nm" if joint == 3 else f"{math.degrees(err):+.4f} deg"
+        k, unit = step_scale(joint)
+        shown = f"{err * k:+.1f} {unit}"
         console.print(
             f"simulator's true end {format_position(sim_true, joint)} ({shown})", highlight=False
         )

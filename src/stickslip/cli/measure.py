@@ -8,14 +8,9 @@ from typing import Any
 import typer
 
 from ..clock import today_label
+from ..units import param_scale
 from . import app
 from ._common import console, fail, print_json, user_errors, validation_table, warn_later
-
-
-def _scale(name: str, joint: int) -> tuple[float, str]:
-    if name == "b":
-        return 1.0, ""
-    return (1e9, "nm") if joint == 3 else (1e6, "µrad")
 
 
 @app.command()
@@ -104,7 +99,7 @@ def demo(
     for col in cols:
         table.add_column(col, justify="left" if col == "parameter" else "right")
     for p in result.parameters:
-        scale, unit = _scale(p["name"], p["joint"])
+        scale, unit = param_scale(p["name"], p["joint"])
         se = p.get("stderr")
         error = f"{p['error']:+.4f}" if p["name"] == "b" else f"{p['rel_error']:+.2%}"
         cells = [

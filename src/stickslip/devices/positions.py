@@ -158,7 +158,7 @@ class DeviceState:
         if joint not in self.uncertain:
             return None
         lo, hi = self.uncertain[joint]
-        unit = "m" if joint == 3 else "rad"
+        unit = kin.joint_spec(joint).unit
         return (
             f"joint {joint}'s position is uncertain (a move was interrupted): between {lo:.9g} and "
             f"{hi:.9g} {unit}; re-reference it at an end stop first, e.g. "

@@ -25,6 +25,7 @@ there too; ``on_traverse(result)`` is called after every traverse.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -40,6 +41,8 @@ from ..devices.base import device_key
 from ..measurements import write_measurements
 from ..models import JointModel
 from ..sim.arm import NOMINAL, OracleStopDetector, SimulatedMM3A
+from ..units import param_scale
+from .conditions import conditions_of
 from .traverse import TraverseResult, measure_traverse
 
 __all__ = [
@@ -189,7 +192,7 @@ class DemoResult:
             "parameter         calibrated        true     error",
         ]
         for p in self.parameters:
-            scale, unit = _display(str(p["name"]), int(p["joint"]))  # type: ignore[arg-type]
+            scale, unit = param_scale(str(p["name"]), int(p["joint"]))  # type: ignore[arg-type]
             lines.append(
                 f"{_param_label(p):<14} {p['value'] * scale:>11.4g} {p['true'] * scale:>11.4g} "  # type: ignore[operator]
                 f"{_error_text(p):>9}  {unit}"
@@ -221,14 +224,6 @@ def _pyplot():
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise ImportError("plotting needs matplotlib: pip install 'stickslip[plot]'") from e
     return plt
-
-
-def _display(name: str, joint: int) -> tuple[float, str]:
-    if name == "b":
-        return 1.0, ""
-    if joint == 3:
-        return 1e9, "nm"
-    return 1e6, "µrad"
 
 
 def _param_label(p: dict[str, object]) -> str:
@@ -438,7 +433,7 @@ def run_demo(
         cal_ids: list[int] = []
         traverses = run(CALIBRATION_PLAN, "calibration", nominal, cal_ids)
         rows = [r.traverse for r in traverses]
-        cal = calibrate(rows, day=day, source=url)
+        cal = dataclasses.replace(calibrate(rows, day=day, source=url), conditions=conditions_of(sim, url))
         if store is not None:
             store.add_calibration(cal, device_key(url), cal_ids)
         truth = sim.true_parameters()

@@ -39,6 +39,7 @@ from ..audio.guard import NoSignalError, SignalGuard
 from ..devices.base import Controller
 from ..measurements import Traverse
 from ..models import direction_label, direction_sign
+from ..units import step_scale
 
 __all__ = ["TraverseError", "TraverseResult", "measure_traverse", "MIN_STEP_PRIOR", "LATENCY_MODES"]
 
@@ -109,7 +110,7 @@ class TraverseResult:
     def report(self) -> str:
         """One line a person can read (units labelled)."""
         t = self.traverse
-        unit, scale = ("nm", 1e9) if t.joint == 3 else ("µrad", 1e6)
+        scale, unit = step_scale(t.joint)
         return (
             f"joint {t.joint} {t.direction}: {self.steps} steps, "
             f"gamma = {self.gamma * scale:.2f} {unit} "
