@@ -305,8 +305,8 @@ def test_cli_fit_writes_a_calibration_with_standard_errors(tmp_path):
     assert doc["calibration"]["method"] == "lsq"
     assert {(x["joint"], x["direction"]) for x in doc["residuals"]} == {(2, "+"), (2, "-"), (3, "+"), (3, "-")}
     cal = Calibration.load(out)
-    a = next(x for x in cal.parameters() if x["name"] == "a" and x["direction"] == "+")
-    assert abs(a["value"] - 972e-9) < 3 * a["stderr"]
+    a = next(x for x in cal.parameters() if x.name == "a" and x.direction == "+")
+    assert a.stderr is not None and abs(a.value - 972e-9) < 3 * a.stderr
     r = runner.invoke(app, ["fit", str(p)])
     assert r.exit_code == 0 and "± " in r.stdout and "RMS" in r.stdout
     # a table that cannot determine the parameters: one pose only

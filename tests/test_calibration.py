@@ -176,7 +176,7 @@ def test_lsq_recovers_parameters_within_standard_errors():
     cal = C.calibrate(rows)
     assert cal.method == "lsq"  # random poses: not the paper's
     z = []
-    for rec in cal.parameters():
+    for rec in (p.to_dict() for p in cal.parameters()):
         j, d = rec["joint"], rec["direction"]
         true = (PAPER_PRISMATIC if j == 3 else PAPER_ROTARY)[d]
         names = true.names()
@@ -185,8 +185,8 @@ def test_lsq_recovers_parameters_within_standard_errors():
         z.append((rec["value"] - true.as_vector()[idx]) / rec["stderr"])
     assert np.max(np.abs(z)) < 4.0, z
     # and the uncertainty is honest, not huge: a+ known to better than 1 %
-    a_plus = next(r for r in cal.parameters() if r["joint"] == 3 and r["name"] == "a" and r["direction"] == "+")
-    assert a_plus["stderr"] / a_plus["value"] < 0.01
+    a_plus = next(r for r in cal.parameters() if r.joint == 3 and r.name == "a" and r.direction == "+")
+    assert a_plus.stderr is not None and a_plus.stderr / a_plus.value < 0.01
 
 
 def test_lsq_refuses_undetermined_parameters():
@@ -222,8 +222,8 @@ def test_seed_quadratic_method_differs_from_exact_by_urad():
     rows = paper_table()
     exact = C.calibrate(rows, method="paper")
     quad = C.calibrate(rows, method="paper-quadratic")
-    diffs = [abs(a["value"] - b["value"]) for a, b in zip(exact.parameters(), quad.parameters(), strict=True)
-             if a["name"] == "d"]
+    diffs = [abs(a.value - b.value) for a, b in zip(exact.parameters(), quad.parameters(), strict=True)
+             if a.name == "d"]
     assert 0.05e-6 < max(diffs) < 5e-6
 
 

@@ -70,7 +70,7 @@ def test_run_demo_with_the_oracle_switch_saves_and_recovers_the_truth(tmp_path):
                     and all(abs(getattr(t, k) - v) < 1e-12 for k, v in pose.items())]
             assert len(same) == 3
     assert res.calibration.method == "paper"
-    _check_acceptance(res.parameters)
+    _check_acceptance([c.to_dict() for c in res.parameters])
     # the model beats the constant step on the validation sweep (paper: 15 % vs 40 %, 2 % vs 7 %)
     for row in res.validation.rows():
         assert row["model_max_rel_error"] < 0.01

@@ -114,7 +114,7 @@ def test_truth_drifts_with_the_day_and_is_reproducible():
     b = SimulatedMM3A(seed=1, day=DAY).true_parameters()
     c = SimulatedMM3A(seed=1, day="2026-11-23").true_parameters()
     assert a == b
-    va, vc = np.array([p["value"] for p in a]), np.array([p["value"] for p in c])
+    va, vc = np.array([p.value for p in a]), np.array([p.value for p in c])
     rel = np.abs(vc / va - 1)
     assert rel.max() > 0.005  # it drifts ...
     assert rel.max() < 0.25  # ... by a few %, 2.5 sigma at most each
@@ -125,7 +125,7 @@ def test_truth_drifts_with_the_day_and_is_reproducible():
 
 
 def test_true_parameters_records():
-    recs = SimulatedMM3A(seed=0, day=DAY).true_parameters()
+    recs = [p.to_dict() for p in SimulatedMM3A(seed=0, day=DAY).true_parameters()]
     assert len(recs) == 6 + 16
     names = {(r["joint"], r["direction"], r["name"], r["q3"]) for r in recs}
     assert (3, "+", "a", None) in names and (2, "-", "d", kin.Q3_MAX) in names

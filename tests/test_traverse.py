@@ -119,16 +119,16 @@ def test_prismatic_round_trip_recovers_the_true_parameters():
             rows.append(r.traverse)
     cal = calibrate(rows, method="paper")
     truth = {
-        (p["direction"], p["name"]): p["value"] for p in sim.true_parameters() if p["joint"] == 3
+        (p.direction, p.name): p.value for p in sim.true_parameters() if p.joint == 3
     }
     for p in cal.parameters():
-        true = truth[(p["direction"], p["name"])]
-        if p["name"] == "b":
-            assert p["value"] == pytest.approx(true, abs=0.005)
-        elif p["name"] == "a":
-            assert p["value"] == pytest.approx(true, rel=0.005)
+        true = truth[(p.direction, p.name)]
+        if p.name == "b":
+            assert p.value == pytest.approx(true, abs=0.005)
+        elif p.name == "a":
+            assert p.value == pytest.approx(true, rel=0.005)
         else:
-            assert p["value"] == pytest.approx(true, rel=0.02)
+            assert p.value == pytest.approx(true, rel=0.02)
 
 
 def test_stop_before_listening_starts_is_measured_again():

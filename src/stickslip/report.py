@@ -970,7 +970,7 @@ def build_report(
             )
         )
     prow = []
-    for p in calibration.parameters():
+    for p in (rec.to_dict() for rec in calibration.parameters()):
         j, name = p["joint"], p["name"]
         k, unit = (1.0, "") if name == "b" else ((1e9, "nm") if j == 3 else (1e6, "µrad"))
         se = p["stderr"]

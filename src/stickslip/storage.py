@@ -378,7 +378,7 @@ class Store:
         cur = con.execute(
             "INSERT INTO devices (url, model, created_at) VALUES (?, ?, ?)", (url, model, _now())
         )
-        return int(cur.lastrowid)
+        return _rowid(cur)
 
     def _session_id(self, con: sqlite3.Connection, device_id: int, day: str) -> int:
         row = con.execute(
@@ -390,7 +390,7 @@ class Store:
             "INSERT INTO sessions (device_id, day, created_at) VALUES (?, ?, ?)",
             (device_id, day, _now()),
         )
-        return int(cur.lastrowid)
+        return _rowid(cur)
 
     def add_device(self, url: str, model: str | None = None) -> int:
         """Register a device URL (and its model name); returns its id. Idempotent."""
@@ -446,7 +446,7 @@ class Store:
                 content_key(t, url),
             ),
         )
-        return int(cur.lastrowid)
+        return _rowid(cur)
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
@@ -645,7 +645,7 @@ class Store:
                 "VALUES (?, ?, ?, ?, ?)",
                 (dev, day, method, _now(), doc),
             )
-            cid = int(cur.lastrowid)
+            cid = _rowid(cur)
             con.executemany(
                 "INSERT OR IGNORE INTO calibration_traverses VALUES (?, ?)", [(cid, i) for i in ids]
             )
@@ -876,6 +876,14 @@ class Store:
     def integrity_check(self) -> str:
         """``PRAGMA integrity_check`` (``"ok"`` when the file is sound)."""
         return "; ".join(r[0] for r in self._con.execute("PRAGMA integrity_check"))
+
+
+
+def _rowid(cur: sqlite3.Cursor) -> int:
+    """The id of the row an INSERT just wrote."""
+    if cur.lastrowid is None:  # pragma: no cover - sqlite3 sets it after every INSERT
+        raise StoreError("the database did not report the id of the row it wrote")
+    return int(cur.lastrowid)
 
 
 def _require_traverses(con: sqlite3.Connection, ids: list[int], marks: str) -> None:

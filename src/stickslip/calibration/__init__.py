@@ -28,13 +28,15 @@ from .auto import calibrate
 from .inversion import EQ9_PRINTED, PaperQuadratic, eq9_printed, fit_paper_quadratic, invert_d_exact
 from .lsq import calibrate_lsq
 from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES, calibrate_paper, paper_applicable
-from .result import FORMAT, FORMAT_VERSION, UNITS, Calibration, CalibrationError, Conditions
+from .result import FORMAT, FORMAT_VERSION, UNITS, Calibration, CalibrationError, Conditions, Parameter, Provenance
 from .validation import ValidationResult, validate
 
 __all__ = [
     "CalibrationError",
     "Calibration",
     "Conditions",
+    "Parameter",
+    "Provenance",
     "calibrate",
     "calibrate_paper",
     "calibrate_lsq",

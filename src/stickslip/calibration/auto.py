@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from ..measurements import Traverse
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
-from .result import Calibration, _day_of, _group, _provenance
+from .result import Calibration, Provenance, _day_of, _group
 
 _OLD_METHOD_NAMES = {"seed": "paper", "seed-quadratic": "paper-quadratic"}
 """Method names of earlier versions (the paper was called "the seed"), still accepted."""
@@ -63,11 +63,11 @@ def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], d
     notes = [
         f"the paper's procedure for {keys(seed)}; least squares for {keys(lsq)}, whose traverses are not all "
         "at the paper's calibration poses",
-        *seed.provenance.get("notes", []),  # type: ignore[misc]
-        *lsq.provenance.get("notes", []),  # type: ignore[misc]
+        *seed.provenance.notes,
+        *lsq.provenance.notes,
     ]
-    prov = _provenance(traverses, seed.provenance.get("source"), len(traverses), notes)  # type: ignore[arg-type]
-    prov["rows_used"] = int(seed.provenance["rows_used"]) + int(lsq.provenance["rows_used"])  # type: ignore[call-overload]
+    used = seed.provenance.rows_used + lsq.provenance.rows_used
+    prov = Provenance.of(traverses, seed.provenance.source, used, notes)
     return Calibration(
         {**seed.models, **lsq.models},
         {**seed.stderr, **lsq.stderr},

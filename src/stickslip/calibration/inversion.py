@@ -137,8 +137,8 @@ class PaperQuadratic:
 
 
 def _simulate_full_range_averages(
-    gamma0: NDArray, d: NDArray, start: float, end: float, alpha: float, beta: float
-) -> NDArray:
+    gamma0: NDArray[np.float64], d: NDArray[np.float64], start: float, end: float, alpha: float, beta: float
+) -> NDArray[np.float64]:
     """Step-by-step simulation of each (gamma0, d) pair (the paper's Fig. 8 simulation)."""
     sign = 1.0 if end > start else -1.0
     cos, sin = math.cos, math.sin

@@ -17,7 +17,7 @@ from ..models import (
     RotaryParams,
     steps_between,
 )
-from .result import Calibration, CalibrationError, _check_physical, _constant_step, _day_of, _group, _provenance
+from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _group
 
 # ----------------------------------------------------------------------------- least squares
 
@@ -178,7 +178,7 @@ def calibrate_lsq(
     _check_physical(models)
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
     return Calibration(
-        models, stderr, consts, _day_of(traverses, day), "lsq", _provenance(traverses, source, len(traverses), notes)
+        models, stderr, consts, _day_of(traverses, day), "lsq", Provenance.of(traverses, source, len(traverses), notes)
     )
 
 

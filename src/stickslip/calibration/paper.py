@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -16,7 +16,7 @@ from ..models import (
     RotaryParams,
 )
 from .inversion import _LOAD_ZERO, PaperQuadratic, fit_paper_quadratic, invert_d_exact
-from .result import Calibration, CalibrationError, _check_physical, _constant_step, _day_of, _group, _provenance
+from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _group
 
 PRISMATIC_PAPER_POSES = {
     "a": (-math.pi / 2, 0.0, 0.0),  # Eq. (4): no axial load, full efficiency
@@ -104,64 +104,28 @@ def calibrate_paper(
         ``"paper-quadratic"`` reproduces the paper's Eq. 9 method (with ``quadratic``,
         default :func:`fit_paper_quadratic`) instead of the exact inversion.
     """
+    if rotary_inversion not in ("exact", "paper-quadratic"):
+        raise ValueError(f"rotary_inversion must be 'exact' or 'paper-quadratic', got {rotary_inversion!r}")
     groups = _group(traverses)
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
+    if rotary_inversion == "paper-quadratic":
+        quad = quadratic or fit_paper_quadratic()
+
+        def invert(t: Traverse, g0: float, alpha: float, beta: float) -> float:
+            return float(quad.d(t.gamma - g0))
+    else:
+
+        def invert(t: Traverse, g0: float, alpha: float, beta: float) -> float:
+            return invert_d_exact(t.gamma, g0, t.start, t.end, alpha, beta)
+
     models: dict[tuple[int, str], JointModel] = {}
     used = 0
     notes: list[str] = []
-    if rotary_inversion == "paper-quadratic" and quadratic is None:
-        quadratic = fit_paper_quadratic()
     for (j, d), ts in sorted(groups.items()):
-        if kin.joint_spec(j).prismatic:
-            rows = _paper_prismatic_rows(ts)
-            if rows is None:
-                missing = [
-                    f"(q2, theta, psi) = ({', '.join(f'{v:.4g}' for v in pose)})"
-                    for k, pose in PRISMATIC_PAPER_POSES.items()
-                    if not any(
-                        _close(t.q2, pose[0]) and _close(t.theta, pose[1]) and _close(t.psi, pose[2]) for t in ts
-                    )
-                ]
-                raise CalibrationError(
-                    f"joint 3{d}: the paper's method needs traverses at {', '.join(missing)} (rad); "
-                    "use method 'lsq' for other poses"
-                )
-            g = {k: float(np.mean([t.gamma for t in rows[k]])) for k in rows}
-            a = g["a"]  # Eq. (4)
-            b = 1.0 - g["b"] / a  # Eq. (5)
-            if not b < 1.0:
-                raise CalibrationError(f"joint 3{d}: b = {b:.4g} >= 1 from Eq. (5): non-physical calibration refused")
-            c = a - g["c"] / (1.0 - b)  # Eq. (6)
-            models[(j, d)] = JointModel(j, d, PrismaticParams(a, b, c))
-            used += sum(len(v) for v in rows.values())
-        else:
-            rows = _paper_rotary_rows(ts)
-            if rows is None:
-                raise CalibrationError(
-                    f"joint {j}{d}: the paper's method needs full-range traverses at q3 = 0 and 12 mm, each with and "
-                    "without gravity torque (for joint 2: theta = 0 and theta = -pi/2); "
-                    "use method 'lsq' for other poses"
-                )
-            g0s, dvals = [], []
-            for knot in (0, 1):
-                g0 = float(np.mean([t.gamma for t in rows[(knot, "free")]]))
-                ds = []
-                for t in rows[(knot, "loaded")]:
-                    al, be = _classify_rotary(t)
-                    if rotary_inversion == "exact":
-                        ds.append(invert_d_exact(t.gamma, g0, t.start, t.end, al, be))
-                    elif rotary_inversion == "paper-quadratic":
-                        assert quadratic is not None
-                        ds.append(float(quadratic.d(t.gamma - g0)))
-                    else:
-                        raise ValueError(
-                            f"rotary_inversion must be 'exact' or 'paper-quadratic', got {rotary_inversion!r}"
-                        )
-                g0s.append(g0)
-                dvals.append(float(np.mean(ds)))
-                used += len(rows[(knot, "free")]) + len(rows[(knot, "loaded")])
-            models[(j, d)] = JointModel(j, d, RotaryParams((g0s[0], g0s[1]), (dvals[0], dvals[1])))
+        params, n = _paper_prismatic(d, ts) if kin.joint_spec(j).prismatic else _paper_rotary(j, d, ts, invert)
+        models[(j, d)] = JointModel(j, d, params)
+        used += n
     _check_physical(models)
     if used < len(traverses):
         notes.append(
@@ -176,8 +140,50 @@ def calibrate_paper(
         consts,
         _day_of(traverses, day),
         method,
-        _provenance(traverses, source, used, notes),
+        Provenance.of(traverses, source, used, notes),
     )
+
+
+def _paper_prismatic(d: str, ts: Sequence[Traverse]) -> tuple[PrismaticParams, int]:
+    """Eqs. (4)-(6) from the traverses of joint 3 in direction ``d``; the parameters and how many rows they used."""
+    rows = _paper_prismatic_rows(ts)
+    if rows is None:
+        missing = [
+            f"(q2, theta, psi) = ({', '.join(f'{v:.4g}' for v in pose)})"
+            for pose in PRISMATIC_PAPER_POSES.values()
+            if not any(_close(t.q2, pose[0]) and _close(t.theta, pose[1]) and _close(t.psi, pose[2]) for t in ts)
+        ]
+        raise CalibrationError(
+            f"joint 3{d}: the paper's method needs traverses at {', '.join(missing)} (rad); "
+            "use method 'lsq' for other poses"
+        )
+    g = {k: float(np.mean([t.gamma for t in rows[k]])) for k in rows}
+    a = g["a"]  # Eq. (4)
+    b = 1.0 - g["b"] / a  # Eq. (5)
+    if not b < 1.0:
+        raise CalibrationError(f"joint 3{d}: b = {b:.4g} >= 1 from Eq. (5): non-physical calibration refused")
+    c = a - g["c"] / (1.0 - b)  # Eq. (6)
+    return PrismaticParams(a, b, c), sum(len(v) for v in rows.values())
+
+
+def _paper_rotary(
+    j: int, d: str, ts: Sequence[Traverse], invert: Callable[[Traverse, float, float, float], float]
+) -> tuple[RotaryParams, int]:
+    """gamma0 from the unloaded traverses and d by ``invert`` from the loaded ones, at q3 = 0 and 12 mm."""
+    rot = _paper_rotary_rows(ts)
+    if rot is None:
+        raise CalibrationError(
+            f"joint {j}{d}: the paper's method needs full-range traverses at q3 = 0 and 12 mm, each with and "
+            "without gravity torque (for joint 2: theta = 0 and theta = -pi/2); "
+            "use method 'lsq' for other poses"
+        )
+    g0s, dvals, used = [], [], 0
+    for knot in (0, 1):
+        g0 = float(np.mean([t.gamma for t in rot[(knot, "free")]]))
+        dvals.append(float(np.mean([invert(t, g0, *_classify_rotary(t)) for t in rot[(knot, "loaded")]])))
+        g0s.append(g0)
+        used += len(rot[(knot, "free")]) + len(rot[(knot, "loaded")])
+    return RotaryParams((g0s[0], g0s[1]), (dvals[0], dvals[1])), used
 
 
 def _close(a: float, b: float, tol: float = _POSE_TOL) -> bool:

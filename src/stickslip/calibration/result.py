@@ -3,18 +3,23 @@ errors, the constant-step comparator, provenance; JSON save/load, report and plo
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
 from .. import kinematics as kin
-from .. import records
+from .. import plotting, records
 from ..clock import now_utc
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
@@ -126,6 +131,137 @@ class Conditions:
         return out
 
 
+@dataclass(frozen=True)
+class Parameter:
+    """One calibrated (or true) parameter of a joint's step-size model, in SI units.
+
+    Attributes
+    ----------
+    joint : int
+        1, 2 or 3.
+    direction : str
+        ``"+"`` or ``"-"``.
+    name : str
+        ``a``, ``b``, ``c`` (prismatic, Eqs. 2-3) or ``gamma0``, ``d`` (rotary, Eq. 8).
+    q3 : float or None
+        The knot (m) a rotary parameter belongs to; ``None`` for the prismatic joint.
+    value : float
+        The value (m for a, c; 1 for b; rad for gamma0, d).
+    stderr : float or None
+        Its standard error, same unit (``None`` where the procedure gives none).
+    unit : str
+        ``"m"``, ``"1"`` or ``"rad"``.
+    """
+
+    joint: int
+    direction: str
+    name: str
+    q3: float | None
+    value: float
+    stderr: float | None
+    unit: str
+
+    @property
+    def key(self) -> tuple[int, str, str, float | None]:
+        """What identifies the parameter: joint, direction, name and knot (q3 rounded to 1 nm)."""
+        return (self.joint, self.direction, self.name, None if self.q3 is None else round(self.q3, 9))
+
+    @property
+    def label(self) -> str:
+        """A short label people read, e.g. ``"j2 d+ (q3=12 mm)"``."""
+        where = f" (q3={self.q3 * 1e3:g} mm)" if self.q3 is not None else ""
+        return f"j{self.joint} {self.name}{self.direction}{where}"
+
+    def to_dict(self) -> dict[str, object]:
+        """The JSON record (the calibration file's ``parameters`` entries)."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Provenance:
+    """Where a calibration's traverses came from.
+
+    Attributes
+    ----------
+    source : str or None
+        The table's file name or the device URL they were measured on.
+    sha256 : str or None
+        Hash of the traverses as a measurement table (design.md §7), to recognise the data.
+    rows, rows_used : int
+        Traverses given, and used by the method.
+    days : tuple of str
+        Session labels among them.
+    notes : tuple of str
+        What the method did that a reader should know (poses not used, methods merged).
+    extra : dict
+        Any other fields of the file, kept as they were.
+    """
+
+    source: str | None = None
+    sha256: str | None = None
+    rows: int = 0
+    rows_used: int = 0
+    days: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    extra: dict[str, object] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, traverses: Sequence[Traverse], source: str | None, used: int, notes: Sequence[str]) -> Provenance:
+        """The provenance of a calibration from ``traverses`` (``used`` of them) with ``notes``."""
+        return cls(
+            source=source,
+            sha256=hashlib.sha256(measurements_to_csv(traverses).encode()).hexdigest(),
+            rows=len(traverses),
+            rows_used=used,
+            days=tuple(sorted({t.day for t in traverses})),
+            notes=tuple(notes),
+        )
+
+    def to_dict(self) -> dict[str, object]:
+        """The JSON record (``extra`` fields merged back in)."""
+        return {
+            **self.extra,
+            "source": self.source,
+            "sha256": self.sha256,
+            "rows": self.rows,
+            "rows_used": self.rows_used,
+            "days": list(self.days),
+            "notes": list(self.notes),
+        }
+
+    @classmethod
+    def from_dict(cls, data: object) -> Provenance:
+        """Rebuild from :meth:`to_dict` output (missing fields take their defaults); ``ValueError`` if malformed."""
+        if data is None:
+            return cls()
+        if not isinstance(data, dict):
+            raise ValueError(f"provenance must be an object, got {type(data).__name__}")
+        known = {"source", "sha256", "rows", "rows_used", "days", "notes"}
+
+        def text(key: str) -> str | None:
+            v = data.get(key)
+            if v is not None and not isinstance(v, str):
+                raise ValueError(f"provenance.{key} must be a string, got {v!r:.60}")
+            return v
+
+        def count(key: str) -> int:
+            v = data.get(key, 0)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"provenance.{key} must be a count >= 0, got {v!r:.60}")
+            return v
+
+        def texts(key: str) -> tuple[str, ...]:
+            v = data.get(key) or []
+            if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+                raise ValueError(f"provenance.{key} must be a list of strings")
+            return tuple(v)
+
+        return cls(
+            text("source"), text("sha256"), count("rows"), count("rows_used"), texts("days"), texts("notes"),
+            {k: v for k, v in data.items() if k not in known},
+        )
+
+
 # ----------------------------------------------------------------------------- the result object
 
 
@@ -146,7 +282,7 @@ class Calibration:
         Session label of the traverses (ISO date preferred).
     method : str
         ``"paper"``, ``"paper-quadratic"`` or ``"lsq"`` (older files say ``"seed"``).
-    provenance : dict
+    provenance : Provenance
         Where the traverses came from (file, sha256, rows used, notes).
     created : str
         When the calibration was computed (UTC, ISO 8601).
@@ -159,7 +295,7 @@ class Calibration:
     constant_steps: dict[tuple[int, str], float]
     day: str
     method: str
-    provenance: dict[str, object] = field(default_factory=dict)
+    provenance: Provenance = field(default_factory=Provenance)
     created: str = field(default_factory=lambda: now_utc().isoformat(timespec="seconds"))
     conditions: Conditions = field(default_factory=Conditions)
 
@@ -208,23 +344,14 @@ class Calibration:
             )
         return out
 
-    def parameters(self) -> list[dict[str, object]]:
-        """Every parameter as a record: joint, direction, name, q3 (rotary), value, stderr, unit (SI)."""
+    def parameters(self) -> list[Parameter]:
+        """Every parameter as a :class:`Parameter` (SI), by joint, direction and name."""
         out = []
         for (j, d), m in sorted(self.models.items()):
             se = self.stderr.get((j, d))
             for i, ((name, q3), value) in enumerate(zip(m.params.names(), m.params.as_vector(), strict=True)):
-                out.append(
-                    {
-                        "joint": j,
-                        "direction": d,
-                        "name": name,
-                        "q3": q3,
-                        "value": float(value),
-                        "stderr": None if se is None or not np.isfinite(se[i]) else float(se[i]),
-                        "unit": UNITS[(m.params.kind, name)],
-                    }
-                )
+                err = None if se is None or not np.isfinite(se[i]) else float(se[i])
+                out.append(Parameter(j, d, name, q3, float(value), err, UNITS[(m.params.kind, name)]))
         return out
 
     # -- persistence
@@ -237,17 +364,17 @@ class Calibration:
             "method": self.method,
             "created": self.created,
             "units": "SI: prismatic steps in m, rotary steps in rad, q3 in m; b is dimensionless",
-            "parameters": self.parameters(),
+            "parameters": [p.to_dict() for p in self.parameters()],
             "constant_steps": [
                 {"joint": j, "direction": d, "value": v, "unit": kin.joint_spec(j).unit}
                 for (j, d), v in sorted(self.constant_steps.items())
             ],
-            "provenance": self.provenance,
+            "provenance": self.provenance.to_dict(),
             "conditions": self.conditions.to_dict(),
         }
 
     @classmethod
-    def from_dict(cls, data: dict) -> Calibration:
+    def from_dict(cls, data: dict[str, Any]) -> Calibration:
         """Rebuild from :meth:`to_dict` output; raises ``ValueError`` with the reason on bad input."""
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
@@ -257,17 +384,19 @@ class Calibration:
                 f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION})"
             )
         try:
-            by_key: dict[tuple[int, str], list[dict]] = {}
+            by_key: dict[tuple[int, str], list[dict[str, Any]]] = {}
             for rec in data["parameters"]:
                 by_key.setdefault((int(rec["joint"]), direction_label(rec["direction"])), []).append(rec)
-            models, stderr = {}, {}
+            models: dict[tuple[int, str], JointModel] = {}
+            stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
             for (j, d), recs in by_key.items():
                 vals = {(r["name"], r.get("q3")): (float(r["value"]), r.get("stderr")) for r in recs}
+                names: list[tuple[str, float | None]]
                 if kin.joint_spec(j).prismatic:
                     names = [("a", None), ("b", None), ("c", None)]
                     params: Params = PrismaticParams(*(vals[n][0] for n in names))
                 else:
-                    knots = sorted({float(q3) for (n, q3) in vals if n == "gamma0"})
+                    knots = sorted({float(q3) for (n, q3) in vals if n == "gamma0" and q3 is not None})
                     if len(knots) != 2:
                         raise ValueError(f"joint {j}{d}: expected gamma0 at two q3 values, found {len(knots)}")
                     names = [("gamma0", knots[0]), ("gamma0", knots[1]), ("d", knots[0]), ("d", knots[1])]
@@ -293,7 +422,7 @@ class Calibration:
             consts,
             str(data.get("day", "")),
             str(data.get("method", "")),
-            dict(data.get("provenance") or {}),
+            Provenance.from_dict(data.get("provenance")),
             str(data.get("created", "")),
             conditions,
         )
@@ -325,14 +454,12 @@ class Calibration:
             kind = kin.joint_spec(j).kind
             lines.append(f"joint {j} ({kind}):")
             for rec in self.parameters():
-                if rec["joint"] != j:
+                if rec.joint != j:
                     continue
-                scale, unit = param_scale(rec["name"], j)
-                where = f" @ q3 = {rec['q3'] * 1e3:g} mm" if rec["q3"] is not None else ""
-                se = f" ± {rec['stderr'] * scale:.3g}" if rec["stderr"] is not None else ""
-                lines.append(
-                    f"  {rec['name']}{rec['direction']}{where}: {rec['value'] * scale:.5g}{se} {unit}".rstrip()
-                )
+                scale, unit = param_scale(rec.name, j)
+                where = f" @ q3 = {rec.q3 * 1e3:g} mm" if rec.q3 is not None else ""
+                se = f" ± {rec.stderr * scale:.3g}" if rec.stderr is not None else ""
+                lines.append(f"  {rec.name}{rec.direction}{where}: {rec.value * scale:.5g}{se} {unit}".rstrip())
             for d in DIRECTIONS:
                 if (j, d) in self.constant_steps:
                     scale, unit = step_scale(j)
@@ -346,24 +473,22 @@ class Calibration:
                 f"{c.temperature_c:g} °C" if c.temperature_c is not None else None,
             ]
             lines.append("made with: " + ", ".join(x for x in parts if x))
-        notes = self.provenance.get("notes") if isinstance(self.provenance, dict) else None
-        for n in notes or []:
+        for n in self.provenance.notes:
             lines.append(f"note: {n}")
         return "\n".join(lines)
 
     def __str__(self) -> str:
         return self.report()
 
-    def plot(self, joint: int = 3, ax=None, thetas: Sequence[float] = (0.0, -math.pi / 3, -math.pi / 2)):
+    def plot(
+        self, joint: int = 3, ax: Axes | None = None, thetas: Sequence[float] = (0.0, -math.pi / 3, -math.pi / 2)
+    ) -> Axes:
         """Model step size against zeta (psi = 0, q1 = 0), like the paper's Figs. 4 and 10.
 
         Joint 3: one curve per direction and tilt ``theta`` (nm). Rotary joints: one curve
         per direction at q3 = 0 and 12 mm, theta = 0 (µrad). Returns the matplotlib Axes.
         """
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            _, ax = plt.subplots(figsize=(6, 4))
+        ax = plotting.axes(ax, (6, 4))
         spec = kin.JOINTS[2]
         q2 = np.linspace(spec.lower, spec.upper, 400)
         zeta_deg = np.degrees(-q2)
@@ -406,18 +531,6 @@ def _constant_step(joint: int, direction: str, model: JointModel) -> float:
     start, end = (spec.lower, spec.upper) if direction == "+" else (spec.upper, spec.lower)
     theta = 0.0 if joint == 2 else -math.pi / 2
     return float(model.average_gamma(start, end, 0.0, -math.pi / 2, 0.0, theta, 0.0))
-
-
-def _provenance(traverses: Sequence[Traverse], source: str | None, used: int, notes: list[str]) -> dict:
-    text = measurements_to_csv(traverses)
-    return {
-        "source": source,
-        "sha256": hashlib.sha256(text.encode()).hexdigest(),
-        "rows": len(traverses),
-        "rows_used": used,
-        "days": sorted({t.day for t in traverses}),
-        "notes": notes,
-    }
 
 
 def _day_of(traverses: Sequence[Traverse], day: str | None) -> str:

@@ -5,10 +5,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+
+from .. import plotting
 from ..measurements import Traverse
 from .result import Calibration
 
@@ -41,7 +46,7 @@ class ValidationResult:
         """Relative error of the constant step per traverse."""
         return self.constant / self.measured - 1.0
 
-    def rows(self) -> list[dict[str, object]]:
+    def rows(self) -> list[dict[str, float]]:
         """Per joint: n, max and mean |relative error| of model and constant step (fractions)."""
         out = []
         joints = np.array([t.joint for t in self.traverses])
@@ -69,16 +74,13 @@ class ValidationResult:
             )
         return "\n".join(lines)
 
-    def plot(self, ax=None):
+    def plot(self, ax: Axes | None = None) -> Axes:
         """Relative error of each traverse's average step, model against constant step; returns the Axes.
 
         Relative errors (%) put the prismatic (nm) and rotary (µrad) joints on one honest
         axis. Traverses are grouped by joint along x.
         """
-        import matplotlib.pyplot as plt
-
-        if ax is None:
-            _, ax = plt.subplots(figsize=(7, 4))
+        ax = plotting.axes(ax, (7, 4))
         x0 = 0
         for j in sorted({t.joint for t in self.traverses}):
             sel = np.array([t.joint == j for t in self.traverses])

@@ -19,7 +19,7 @@ from ..devices.base import device_key
 from ..kinematics import JOINTS, Pose, joint_spec
 from ..measurements import TableError, read_measurements, read_pose_table
 from ..models import NonPhysicalError
-from ..units import format_position, format_step, step_scale
+from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import angle_option, console, fail, length_option, print_json, user_errors, validation_table, warn_later
 
@@ -54,13 +54,10 @@ def _params_table(cal: Calibration, title: str) -> Table:
     for col in ("joint", "dir", "parameter", "q3", "value", "std. error", "unit"):
         t.add_column(col, justify="right" if col in ("value", "std. error") else "left")
     for r in cal.parameters():
-        if r["name"] == "b":
-            scale, unit = 1.0, "1"
-        else:
-            scale, unit = step_scale(int(r["joint"]))
-        q3 = f"{r['q3'] * 1e3:g} mm" if r["q3"] is not None else ""
-        se = f"{r['stderr'] * scale:.3g}" if r["stderr"] is not None else "—"
-        t.add_row(str(r["joint"]), str(r["direction"]), str(r["name"]), q3, f"{r['value'] * scale:.5g}", se, unit)
+        scale, unit = param_scale(r.name, r.joint)
+        q3 = f"{r.q3 * 1e3:g} mm" if r.q3 is not None else ""
+        se = f"{r.stderr * scale:.3g}" if r.stderr is not None else "—"
+        t.add_row(str(r.joint), r.direction, r.name, q3, f"{r.value * scale:.5g}", se, unit or "1")
     return t
 
 
@@ -123,7 +120,7 @@ def calibrate_cmd(
         print_json(cal.to_dict())
         return
     console.print(_params_table(cal, f"calibration — day {cal.day}, method {cal.method}, {len(traverses)} traverses"))
-    for n in cal.provenance.get("notes", []) or []:
+    for n in cal.provenance.notes:
         console.print(f"[dim]note:[/] {n}", highlight=False)
     if output is not None:
         console.print(f"saved to {output}")

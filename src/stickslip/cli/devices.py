@@ -17,7 +17,7 @@ import typer
 
 from .. import kinematics as kin
 from ..clock import max_age_days
-from ..devices.base import DeviceError, open_device
+from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, open_device
 from ..devices.positions import DeviceState, device_key, load_state, save_state
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
 from . import app
@@ -178,7 +178,7 @@ def _move_locked(
             for w in usage_warnings(cal, dev, device, joint, max_age):
                 warn_later(w)
             flush_warnings()  # the input is good: say it before driving
-            if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
+            if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
                 dev.set_pose(*pose)
 
             def save(st: DeviceState) -> None:
@@ -189,7 +189,7 @@ def _move_locked(
             if outcome.error is None:
                 state.set_position(joint, q_end, "dead-reckoned")
                 save(state)
-                if hasattr(dev, "position"):
+                if isinstance(dev, KnowsTruePosition):
                     sim_true = float(dev.position(joint))
         finally:
             try:

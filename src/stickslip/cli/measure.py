@@ -92,27 +92,26 @@ def demo(
         f"in {result.elapsed_s:.1f} s), method {result.calibration.method}"
     )
     table = Table(title="Calibrated parameters beside the simulator's truth")
-    with_se = any(p.get("stderr") is not None for p in result.parameters)
+    with_se = any(c.parameter.stderr is not None for c in result.parameters)
     cols = ["joint", "dir", "parameter", "q3", "calibrated", "true", "error"]
     if with_se:
         cols.insert(5, "± s.e.")
     for col in cols:
         table.add_column(col, justify="left" if col == "parameter" else "right")
-    for p in result.parameters:
-        scale, unit = param_scale(p["name"], p["joint"])
-        se = p.get("stderr")
-        error = f"{p['error']:+.4f}" if p["name"] == "b" else f"{p['rel_error']:+.2%}"
+    for c in result.parameters:
+        p = c.parameter
+        scale, unit = param_scale(p.name, p.joint)
         cells = [
-            str(p["joint"]),
-            p["direction"],
-            f"{p['name']} [{unit}]" if unit else p["name"],
-            "" if p["q3"] is None else f"{p['q3'] * 1e3:g} mm",
-            f"{p['value'] * scale:.4g}",
-            f"{p['true'] * scale:.4g}",
-            error,
+            str(p.joint),
+            p.direction,
+            f"{p.name} [{unit}]" if unit else p.name,
+            "" if p.q3 is None else f"{p.q3 * 1e3:g} mm",
+            f"{p.value * scale:.4g}",
+            f"{c.true * scale:.4g}",
+            c.error_text(),
         ]
         if with_se:
-            cells.insert(5, "" if se is None else f"{se * scale:.2g}")
+            cells.insert(5, "" if p.stderr is None else f"{p.stderr * scale:.2g}")
         table.add_row(*cells)
     console.print(table)
     if result.validation is not None:
@@ -188,13 +187,14 @@ def traverse_cmd(
 
     Example: stickslip traverse --joint 3 -d + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
     """
-    from ..audio.detector import StopDetector, Tuning
+    from ..audio.detector import Tuning
     from ..clock import today_label
-    from ..devices import DeviceError, device_key, open_device
+    from ..devices import DeviceError, open_device
     from ..kinematics import JOINTS, Pose
-    from ..measurements import HEADER, measurements_to_csv
+    from ..measurements import HEADER
     from ..models import direction_label
-    from ..procedures.traverse import TraverseError, measure_traverse
+    from ..procedures.session import append_row, record_traverse, traverse_on_device
+    from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
     from ..units import format_step
     from ._common import angle_option, length_option
@@ -212,41 +212,18 @@ def traverse_cmd(
         if getattr(tun, "joint", None) not in (None, joint):
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
         ctrl = open_device(device)
-        mic = None
         try:
-            if hasattr(ctrl, "set_pose"):  # the simulator: place the fixed joints and tilt the base
-                fixed = {k: v for k, v in pose._asdict().items() if k != f"q{joint}"}
-                ctrl.set_pose(**fixed)
-            if hasattr(ctrl, "microphone"):
-                blocks = ctrl.microphone()
-                t0 = float(ctrl.clock_s)
-            else:
-                from ..audio.sources import Microphone
-
-                mic = Microphone(sample_rate=int(tun.sample_rate), device=audio_input).start()
-                blocks, t0 = mic.blocks(), 0.0
-            result = measure_traverse(
-                ctrl, joint, label, detector=StopDetector(tun, t0), audio_blocks=blocks, pose=pose, day=day,
-                burst_steps=burst, progress=not json_out,
+            result = traverse_on_device(
+                ctrl, joint, label, pose, day, tun, audio_input=audio_input, burst_steps=burst, progress=not json_out
             )
         finally:
-            if mic is not None:
-                mic.stop()
             ctrl.close()
         row = result.traverse
         if use_db:
             with Store.open(db) as st:
-                st.add_traverse(row, device=device_key(device), how="audio")
-                from ..devices.positions import load_state, save_state  # the joint is at a stop: re-referenced
-
-                state = load_state(st, device_key(device))
-                state.set_position(joint, row.end, "set")
-                save_state(st, state)
+                record_traverse(st, device, row, how="audio")
         if append is not None:
-            new = not append.exists() or append.stat().st_size == 0
-            text = measurements_to_csv([row])
-            with append.open("a", encoding="utf-8") as f:
-                f.write(text if new else text.split("\n", 1)[1])
+            append_row(append, row)
     if json_out:
         print_json({**row.as_row(), "gamma": row.gamma, "header": list(HEADER)})
         return

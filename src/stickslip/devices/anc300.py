@@ -33,9 +33,9 @@ included. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from typing import TypeVar
+from typing import Any, TypeVar
 from urllib.parse import unquote, urlsplit
 
 from .base import (
@@ -67,7 +67,7 @@ DEFAULT_PASSWORD = "123456"
 T = TypeVar("T")
 
 
-def _pymeasure():
+def _pymeasure() -> tuple[Any, Any]:
     try:
         from pymeasure.adapters import Adapter  # noqa: PLC0415
         from pymeasure.instruments.attocube import ANC300Controller  # noqa: PLC0415
@@ -78,7 +78,7 @@ def _pymeasure():
     return Adapter, ANC300Controller
 
 
-def TransportAdapter(transport: Transport, timeout: float | None = None):  # noqa: N802
+def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:  # noqa: N802
     """A pymeasure ``Adapter`` that talks through one of our transports (CRLF lines).
 
     Lines with bytes other than printable ASCII, tab, CR or LF are garbage and raise
@@ -86,20 +86,20 @@ def TransportAdapter(transport: Transport, timeout: float | None = None):  # noq
     """
     Adapter, _ = _pymeasure()
 
-    class _TransportAdapter(Adapter):
+    class _TransportAdapter(Adapter):  # type: ignore[misc,valid-type]  # pymeasure ships no types
         def __init__(self) -> None:
             super().__init__(log=log)
             self.transport = transport
             self.connection = transport
             self.read_timeout = timeout
 
-        def _write(self, command: str, **kwargs) -> None:
+        def _write(self, command: str, **kwargs: Any) -> None:
             self.transport.write((command + "\r\n").encode("ascii"))
 
-        def _write_bytes(self, content: bytes, **kwargs) -> None:
+        def _write_bytes(self, content: bytes, **kwargs: Any) -> None:
             self.transport.write(content)
 
-        def _read(self, **kwargs) -> str:
+        def _read(self, **kwargs: Any) -> str:
             raw = self.transport.read_until(b"\r\n", timeout=self.read_timeout)
             line = raw[:-2]
             try:
@@ -110,7 +110,7 @@ def TransportAdapter(transport: Transport, timeout: float | None = None):  # noq
                 raise DeviceError(f"ANC300 on {self.transport.name}: garbage reply {line!r}")
             return text
 
-        def _read_bytes(self, count: int, break_on_termchar: bool, **kwargs) -> bytes:
+        def _read_bytes(self, count: int, break_on_termchar: bool, **kwargs: Any) -> bytes:
             if count < 0:
                 return self.transport.read_available()
             data = b""
@@ -190,7 +190,7 @@ class ANC300:
         self.version = self._device(lambda: str(self._ctrl.version), "ver")
 
     # -- helpers --------------------------------------------------------------------------
-    def _axis(self, joint: int):
+    def _axis(self, joint: int) -> Any:
         try:
             number = self.axes[int(joint)]
         except (KeyError, ValueError, TypeError):
@@ -207,7 +207,7 @@ class ANC300:
             raise DeviceError(f"ANC300 on {self.transport.name} refused {what!r}: {e}") from None
 
     @contextmanager
-    def _read_timeout(self, seconds: float):
+    def _read_timeout(self, seconds: float) -> Iterator[None]:
         old = self.adapter.read_timeout
         self.adapter.read_timeout = seconds
         try:

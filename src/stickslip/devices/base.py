@@ -24,11 +24,15 @@ import os
 import re
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 from urllib.parse import parse_qs, urlsplit
 
 __all__ = [
     "Controller",
+    "PoseSettable",
+    "KnowsTruePosition",
+    "VirtualClock",
+    "HasMicrophone",
     "DeviceInfo",
     "DeviceError",
     "BACKENDS",
@@ -160,6 +164,57 @@ class Controller(Protocol):
 
     def close(self) -> None:
         """Stop everything and release the transport."""
+        ...
+
+
+# -- capabilities: what some controllers can do beyond the interface ---------------------------
+# Declared as protocols so that code asks ``isinstance(dev, PoseSettable)`` of a type the
+# checker knows, instead of probing attribute names. The simulator has them all; a real
+# controller has none (its pose is set by hand, its truth is unknown, it runs on wall time).
+
+
+@runtime_checkable
+class PoseSettable(Protocol):
+    """Capability: the controller can be placed in a pose (joints rad, rad, m; tilt rad)."""
+
+    def set_pose(
+        self,
+        q1: float | None = None,
+        q2: float | None = None,
+        q3: float | None = None,
+        theta: float | None = None,
+        psi: float | None = None,
+    ) -> None:
+        """Place the joints and tilt the base; ``None`` keeps a value."""
+        ...
+
+
+@runtime_checkable
+class KnowsTruePosition(Protocol):
+    """Capability: the controller knows where a joint really is (a simulator's truth)."""
+
+    def position(self, joint: int) -> float:
+        """True position of ``joint`` (rad or m)."""
+        ...
+
+
+@runtime_checkable
+class VirtualClock(Protocol):
+    """Capability: the controller runs on its own clock, which audio and timing must follow."""
+
+    clock_s: float
+    """Device time, s."""
+
+
+@runtime_checkable
+class HasMicrophone(Protocol):
+    """Capability: the controller renders what a microphone beside the arm hears."""
+
+    sample_rate: int
+    """Sample rate of the rendered sound, Hz."""
+
+    def microphone(self, block: int = 1024, silent: bool = False) -> Callable[[], list[Any]]:
+        """A virtual microphone starting now: calling it returns the blocks recorded since the last call."""
         ...
 
 

@@ -29,21 +29,25 @@ import dataclasses
 import json
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from .. import kinematics as kin
-from ..calibration import Calibration, ValidationResult, calibrate, validate
+from .. import plotting
+from ..calibration import Calibration, Parameter, ValidationResult, calibrate, validate
 from ..clock import today_label
 from ..devices.base import device_key
-from ..measurements import write_measurements
+from ..measurements import Traverse, write_measurements
 from ..models import JointModel
 from ..sim.arm import NOMINAL, OracleStopDetector, SimulatedMM3A
 from ..units import param_scale
 from .conditions import conditions_of
 from .traverse import TraverseResult, measure_traverse
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = [
     "CALIBRATION_PLAN",
@@ -56,7 +60,10 @@ __all__ = [
 PI = math.pi
 
 # (joint, {pose keys}) in the order measured; each pose is traversed + then -.
-CALIBRATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
+TraversePlan = tuple[tuple[int, dict[str, float]], ...]
+"""Traverses to measure: (joint, pose of the other joints and the tilt), each in + and -."""
+
+CALIBRATION_PLAN: TraversePlan = (
     (3, {"q1": 0.0, "q2": -PI / 2, "theta": 0.0, "psi": 0.0}),
     (3, {"q1": 0.0, "q2": 0.0, "theta": -PI / 2, "psi": 0.0}),
     (3, {"q1": 0.0, "q2": 0.0, "theta": 0.0, "psi": 0.0}),
@@ -67,7 +74,7 @@ CALIBRATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
 )
 """The paper's calibration poses (Eqs. 4-6 and Fig. 7): rad and m."""
 
-VALIDATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
+VALIDATION_PLAN: TraversePlan = (
     (3, {"q1": 0.0, "q2": -PI / 4, "theta": 0.0, "psi": 0.0}),
     (3, {"q1": 0.0, "q2": -3 * PI / 4, "theta": 0.0, "psi": 0.0}),
     (3, {"q1": 0.0, "q2": -PI, "theta": -PI / 4, "psi": 0.0}),
@@ -80,7 +87,7 @@ VALIDATION_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
 """A sweep of other poses the calibration has not seen (the paper validates joint 2 at
 theta = -pi/4); each traversed + then -."""
 
-REPEAT_PLAN: tuple[tuple[int, dict[str, float]], ...] = (
+REPEAT_PLAN: TraversePlan = (
     (3, {"q1": 0.0, "q2": -PI / 2, "theta": 0.0, "psi": 0.0}),
     (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 2, "psi": 0.0}),
 )
@@ -105,9 +112,9 @@ class DemoResult:
         Repeats at the paper's ANOVA poses (:data:`REPEAT_PLAN`).
     calibration : Calibration
     validation : ValidationResult or None
-    truth : list of dict
+    truth : list of Parameter
         The simulator's true parameters (``SimulatedMM3A.true_parameters()``).
-    parameters : list of dict
+    parameters : list of ParameterComparison
         Calibrated parameters beside the truth: ``joint, direction, name, q3, value,
         stderr, true, error, rel_error, unit`` (SI).
     elapsed_s : float
@@ -125,8 +132,8 @@ class DemoResult:
     validation_traverses: list[TraverseResult]
     calibration: Calibration
     validation: ValidationResult | None
-    truth: list[dict[str, object]]
-    parameters: list[dict[str, object]]
+    truth: list[Parameter]
+    parameters: list[ParameterComparison]
     elapsed_s: float
     device_s: float
     files: dict[str, str] = field(default_factory=dict)
@@ -142,7 +149,7 @@ class DemoResult:
             "device_s": self.device_s,
             "steps_simulated": self.steps_simulated,
             "method": self.calibration.method,
-            "parameters": self.parameters,
+            "parameters": [p.to_dict() for p in self.parameters],
             "traverses": [_traverse_record(r) for r in self.traverses],
             "validation": {
                 "rows": self.validation.rows() if self.validation is not None else [],
@@ -153,23 +160,18 @@ class DemoResult:
             "files": dict(self.files),
         }
 
-    def plot(self, ax=None):
+    def plot(self, ax: Axes | None = None) -> Axes:
         """Error of every calibrated parameter against the truth, % (b: in units of 0.01).
 
         The shaded band is the acceptance tolerance of each parameter (a, gamma0: 1 %;
         b: 0.01; c, d: 3 %). Returns the matplotlib Axes.
         """
-        plt = _pyplot()
-        if ax is None:
-            _, ax = plt.subplots(figsize=(8, 3.5))
+        ax = plotting.axes(ax, (8, 3.5))
         labels, errors, tols = [], [], []
         for p in self.parameters:
-            labels.append(_param_label(p).replace(" (q3=", "\n(q3="))
-            if p["name"] == "b":
-                errors.append(100 * float(p["error"]))  # type: ignore[arg-type]
-            else:
-                errors.append(100 * float(p["rel_error"]))  # type: ignore[arg-type]
-            tols.append({"a": 1.0, "gamma0": 1.0, "b": 1.0}.get(str(p["name"]), 3.0))
+            labels.append(p.parameter.label.replace(" (q3=", "\n(q3="))
+            errors.append(100 * (p.error if p.parameter.name == "b" else p.rel_error))
+            tols.append({"a": 1.0, "gamma0": 1.0, "b": 1.0}.get(p.parameter.name, 3.0))
         x = range(len(labels))
         ax.bar(x, [2 * t for t in tols], bottom=[-t for t in tols], width=0.8, color="0.9", label="tolerance")
         ax.plot(list(x), errors, "o", color="C0", label="calibrated - true")
@@ -192,10 +194,10 @@ class DemoResult:
             "parameter         calibrated        true     error",
         ]
         for p in self.parameters:
-            scale, unit = param_scale(str(p["name"]), int(p["joint"]))  # type: ignore[arg-type]
+            scale, unit = param_scale(p.parameter.name, p.parameter.joint)
             lines.append(
-                f"{_param_label(p):<14} {p['value'] * scale:>11.4g} {p['true'] * scale:>11.4g} "  # type: ignore[operator]
-                f"{_error_text(p):>9}  {unit}"
+                f"{p.parameter.label:<14} {p.parameter.value * scale:>11.4g} {p.true * scale:>11.4g} "
+                f"{p.error_text():>9}  {unit}"
             )
         if self.validation is not None:
             lines += [
@@ -206,35 +208,6 @@ class DemoResult:
         if self.files:
             lines += ["", "saved:"] + [f"  {k}: {v}" for k, v in self.files.items()]
         return "\n".join(lines)
-
-
-def _pyplot():
-    """matplotlib.pyplot (Agg backend when there is no display), or a clear ImportError."""
-    import os
-    import sys
-
-    try:
-        import matplotlib
-
-        if "matplotlib.pyplot" not in sys.modules and not (
-            os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY") or sys.platform in ("darwin", "win32")
-        ):
-            matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError as e:  # pragma: no cover - depends on the environment
-        raise ImportError("plotting needs matplotlib: pip install 'stickslip[plot]'") from e
-    return plt
-
-
-def _param_label(p: dict[str, object]) -> str:
-    where = f" (q3={float(p['q3']) * 1e3:g} mm)" if p.get("q3") is not None else ""  # type: ignore[arg-type]
-    return f"j{p['joint']} {p['name']}{p['direction']}{where}"
-
-
-def _error_text(p: dict[str, object]) -> str:
-    if p["name"] in ("b",):
-        return f"{p['error']:+.4f}"
-    return f"{p['rel_error']:+.2%}"
 
 
 def _traverse_record(r: TraverseResult) -> dict[str, object]:
@@ -255,45 +228,134 @@ def _tuning_dict(tuning: Any) -> object:
     return to_dict() if callable(to_dict) else repr(tuning)
 
 
-def compare_parameters(calibrated: list[dict[str, object]], truth: list[dict[str, object]]) -> list[dict]:
-    """Calibrated parameter records beside the true ones (matched on joint, direction, name, q3)."""
+@dataclass(frozen=True)
+class ParameterComparison:
+    """A calibrated parameter beside the simulator's true value (SI)."""
 
-    def key(p: dict[str, object]) -> tuple:
-        q3 = p.get("q3")
-        return (
-            int(p["joint"]),
-            str(p["direction"]),
-            str(p["name"]),  # type: ignore[arg-type]
-            None if q3 is None else round(float(q3), 9),
-        )  # type: ignore[arg-type]
+    parameter: Parameter
+    true: float
 
-    true_by_key = {key(p): p for p in truth}
-    out = []
-    for p in calibrated:
-        t = true_by_key.get(key(p))
-        if t is None:
-            continue
-        value, true = float(p["value"]), float(t["value"])  # type: ignore[arg-type]
-        out.append(
-            {
-                "joint": int(p["joint"]),  # type: ignore[arg-type]
-                "direction": str(p["direction"]),
-                "name": str(p["name"]),
-                "q3": p.get("q3"),
-                "value": value,
-                "stderr": p.get("stderr"),
-                "true": true,
-                "error": value - true,
-                "rel_error": (value - true) / abs(true) if true != 0.0 else math.inf,
-                "unit": str(p.get("unit", t.get("unit", ""))),
-            }
+    @property
+    def error(self) -> float:
+        """Calibrated minus true, in the parameter's unit."""
+        return self.parameter.value - self.true
+
+    @property
+    def rel_error(self) -> float:
+        """``error / |true|`` (inf for a true value of 0)."""
+        return self.error / abs(self.true) if self.true != 0.0 else math.inf
+
+    def error_text(self) -> str:
+        """The error as people read it: absolute for the dimensionless b, else relative (%)."""
+        return f"{self.error:+.4f}" if self.parameter.name == "b" else f"{self.rel_error:+.2%}"
+
+    def to_dict(self) -> dict[str, object]:
+        """The record of ``demo --json``: the parameter's fields, ``true``, ``error``, ``rel_error``."""
+        return {**self.parameter.to_dict(), "true": self.true, "error": self.error, "rel_error": self.rel_error}
+
+
+def compare_parameters(calibrated: Sequence[Parameter], truth: Sequence[Parameter]) -> list[ParameterComparison]:
+    """Calibrated parameters beside the true ones (matched on joint, direction, name and knot)."""
+    true_by_key = {t.key: t.value for t in truth}
+    return [ParameterComparison(p, true_by_key[p.key]) for p in calibrated if p.key in true_by_key]
+
+
+class DemoStore(Protocol):
+    """What the demo records into (``stickslip.storage.Store`` is one)."""
+
+    def add_traverse(self, t: Traverse, device: str = ..., how: str = ...) -> int: ...
+
+    def add_calibration(self, cal: Calibration, device: str = ..., traverse_ids: Sequence[int] = ...) -> int: ...
+
+
+@dataclass
+class _Runner:
+    """Measures the demo's traverses on the simulator, one plan at a time, and records each as it is done."""
+
+    sim: SimulatedMM3A
+    detectors: dict[int, Any]
+    mic: Any
+    bar: _Bars
+    day: str
+    url: str
+    how: str
+    burst_steps: int
+    listen_from: float
+    store: DemoStore | None = None
+    on_traverse: Callable[[TraverseResult], None] | None = None
+
+    def run(
+        self, plan: TraversePlan, stage: str, prior: Callable[[int, str], JointModel], ids: list[int]
+    ) -> list[TraverseResult]:
+        """Traverse every (joint, pose) of ``plan`` in + then -; ``prior`` predicts the step count to expect."""
+        return [self._one(joint, pose, direction, stage, prior, ids) for joint, pose in plan for direction in "+-"]
+
+    def _one(
+        self,
+        joint: int,
+        pose: dict[str, float],
+        direction: str,
+        stage: str,
+        prior: Callable[[int, str], JointModel],
+        ids: list[int],
+    ) -> TraverseResult:
+        spec = kin.JOINTS[joint]
+        start, end = (spec.lower, spec.upper) if direction == "+" else (spec.upper, spec.lower)
+        if direction == "+":  # the experimenter sets the pose; the joint rests on its start stop
+            self.sim.set_pose(**{**pose, f"q{joint}": start})
+        self.bar.stage(f"{stage}: joint {joint} {direction}")
+        expected = spec.span / float(prior(joint, direction).average_gamma(start, end, *self.sim.pose))
+        r = measure_traverse(
+            self.sim,
+            joint,
+            direction,
+            detector=self.detectors[joint],
+            audio_blocks=self.mic,
+            pose=self.sim.pose,
+            day=self.day,
+            burst_steps=self.burst_steps,
+            progress=self.bar.traverse_callback(),
+            expected_steps=int(expected),
+            listen_after_steps=int(self.listen_from * expected),
         )
-    return out
+        if self.store is not None:  # one transaction per traverse: a kill loses at most this one
+            ids.append(self.store.add_traverse(r.traverse, device=device_key(self.url), how=self.how))
+        self.bar.advance()
+        if self.on_traverse is not None:
+            self.on_traverse(r)
+        return r
 
 
-def _pose_for(sim: SimulatedMM3A, joint: int, pose: dict[str, float], start: float) -> kin.Pose:
-    sim.set_pose(**{**pose, f"q{joint}": start})
-    return sim.pose
+def _check_arguments(listen_from: float, switch: str, repeats: int, out: str | Path | None) -> None:
+    """Refuse bad demo options before any work, and make the results folder."""
+    if not 0.0 <= listen_from <= 0.95:
+        raise ValueError(f"listen_from = {listen_from!r} is outside [0, 0.95]")
+    if switch not in ("audio", "oracle"):
+        raise ValueError(f"switch must be 'audio' or 'oracle', got {switch!r}")
+    if not (isinstance(repeats, int) and 0 <= repeats <= 10):
+        raise ValueError(f"repeats = {repeats!r} is outside [0, 10]")
+    if out is not None:  # fail before the work, not after it
+        try:
+            Path(out).mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise OSError(f"cannot use {str(out)!r} as the results folder: {e.strerror or e}") from e
+
+
+def _limit_switches(sim: SimulatedMM3A, switch: str, bar: _Bars) -> tuple[dict[int, Any], dict[int, Any], Any]:
+    """Tunings, detectors and microphone per joint: tuned from labelled recordings, or the oracle."""
+    if switch != "audio":
+        return {}, {j: OracleStopDetector(sim, j, delay_s=0.03) for j in (1, 2, 3)}, sim.microphone(silent=True)
+    from ..audio.detector import StopDetector
+    from ..audio.tuning import tune
+
+    tunings: dict[int, Any] = {}
+    detectors: dict[int, Any] = {}
+    for joint in (1, 2, 3):
+        bar.stage(f"tuning the limit switch of joint {joint}")
+        samples, rate, stop_at = sim.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
+        tunings[joint] = tune(samples, rate, stop_at, joint=joint)
+        detectors[joint] = StopDetector(tunings[joint], sim.clock_s)
+    return tunings, detectors, sim.microphone()
 
 
 def run_demo(
@@ -303,11 +365,11 @@ def run_demo(
     *,
     progress: bool | Callable[[str, int, int], None] = False,
     on_traverse: Callable[[TraverseResult], None] | None = None,
-    store: Any = None,
+    store: DemoStore | None = None,
     validation: bool = True,
     burst_steps: int = 1000,
     step_noise: float = 0.03,
-    soundscape_kwargs: dict | None = None,
+    soundscape_kwargs: dict[str, Any] | None = None,
     switch: str = "audio",
     listen_from: float = 0.8,
     repeats: int = 2,
@@ -327,7 +389,7 @@ def run_demo(
         ``(stage, done, total)`` after every traverse.
     on_traverse : callable, optional
         Called with every :class:`~stickslip.procedures.traverse.TraverseResult` as it is measured.
-    store : Store-like, optional
+    store : DemoStore, optional
         Keeps every traverse and the calibration (see the module docstring).
     validation : bool
         Measure and evaluate the validation sweep (:data:`VALIDATION_PLAN`).
@@ -352,86 +414,23 @@ def run_demo(
         earlier; if it does, :func:`~stickslip.procedures.traverse.measure_traverse` measures
         again listening all along. 0 listens from the start. In [0, 0.95].
     """
-    if not 0.0 <= listen_from <= 0.95:
-        raise ValueError(f"listen_from = {listen_from!r} is outside [0, 0.95]")
-    if switch not in ("audio", "oracle"):
-        raise ValueError(f"switch must be 'audio' or 'oracle', got {switch!r}")
-    if out is not None:  # fail before the work, not after it
-        try:
-            Path(out).mkdir(parents=True, exist_ok=True)
-        except OSError as e:
-            raise OSError(f"cannot use {str(out)!r} as the results folder: {e.strerror or e}") from e
+    _check_arguments(listen_from, switch, repeats, out)
     t_wall = time.perf_counter()
     day = day or today_label()
     url = f"sim://?seed={seed}&day={day}"
     sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
-    n_cal = 2 * len(CALIBRATION_PLAN)
     n_val = 2 * len(VALIDATION_PLAN) if validation else 0
-    if not (isinstance(repeats, int) and 0 <= repeats <= 10):
-        raise ValueError(f"repeats = {repeats!r} is outside [0, 10]")
-    n_rep = 2 * len(REPEAT_PLAN) * repeats
-
-    bar = _Bars(progress, n_cal + n_val + n_rep)
+    bar = _Bars(progress, 2 * len(CALIBRATION_PLAN) + n_val + 2 * len(REPEAT_PLAN) * repeats)
     try:
-        # 1. tune the limit switch per joint from a labelled recording on the simulator
-        tunings: dict[int, Any] = {}
-        detectors: dict[int, Any] = {}
-        if switch == "audio":
-            from ..audio.detector import StopDetector
-            from ..audio.tuning import tune
-
-            for joint in (1, 2, 3):
-                bar.stage(f"tuning the limit switch of joint {joint}")
-                samples, rate, stop_at = sim.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
-                tunings[joint] = tune(samples, rate, stop_at, joint=joint)
-                detectors[joint] = StopDetector(tunings[joint], sim.clock_s)
-            mic = sim.microphone()
-        else:
-            detectors = {j: OracleStopDetector(sim, j, delay_s=0.03) for j in (1, 2, 3)}
-            mic = sim.microphone(silent=True)
-
+        tunings, detectors, mic = _limit_switches(sim, switch, bar)
         how = "simulated, audio switch" if switch == "audio" else "simulated, oracle switch"
-
-        def run(plan, stage: str, prior: Callable[[int, str], JointModel], ids: list[int]) -> list[TraverseResult]:
-            results = []
-            for joint, pose in plan:
-                spec = kin.JOINTS[joint]
-                for direction in ("+", "-"):
-                    start, end = (spec.lower, spec.upper)
-                    if direction == "-":
-                        start, end = end, start
-                    else:
-                        # the experimenter sets the pose; the joint rests on its start stop
-                        _pose_for(sim, joint, pose, start)
-                    bar.stage(f"{stage}: joint {joint} {direction}")
-                    gamma = prior(joint, direction).average_gamma(start, end, *sim.pose)
-                    expected = spec.span / float(gamma)
-                    r = measure_traverse(
-                        sim,
-                        joint,
-                        direction,
-                        detector=detectors[joint],
-                        audio_blocks=mic,
-                        pose=sim.pose,
-                        day=day,
-                        burst_steps=burst_steps,
-                        progress=bar.traverse_callback(),
-                        expected_steps=int(expected),
-                        listen_after_steps=int(listen_from * expected),
-                    )
-                    results.append(r)
-                    if store is not None:  # one transaction per traverse: a kill loses at most this one
-                        ids.append(store.add_traverse(r.traverse, device=device_key(url), how=how))
-                    bar.advance()
-                    if on_traverse is not None:
-                        on_traverse(r)
-            return results
+        runner = _Runner(sim, detectors, mic, bar, day, url, how, burst_steps, listen_from, store, on_traverse)
 
         def nominal(joint: int, direction: str) -> JointModel:
             return JointModel(joint, direction, NOMINAL[(joint, direction)])
 
         cal_ids: list[int] = []
-        traverses = run(CALIBRATION_PLAN, "calibration", nominal, cal_ids)
+        traverses = runner.run(CALIBRATION_PLAN, "calibration", nominal, cal_ids)
         rows = [r.traverse for r in traverses]
         cal = dataclasses.replace(calibrate(rows, day=day, source=url), conditions=conditions_of(sim, url))
         if store is not None:
@@ -441,9 +440,9 @@ def run_demo(
         val_results: list[TraverseResult] = []
         val: ValidationResult | None = None
         if validation:
-            val_results = run(VALIDATION_PLAN, "validation", cal.model, [])
+            val_results = runner.run(VALIDATION_PLAN, "validation", cal.model, [])
             val = validate(cal, [r.traverse for r in val_results])
-        rep_results: list[TraverseResult] = run(REPEAT_PLAN * repeats, "repeats for the ANOVA", cal.model, [])
+        rep_results = runner.run(REPEAT_PLAN * repeats, "repeats for the ANOVA", cal.model, [])
     finally:
         bar.close()
 

@@ -45,7 +45,8 @@ class LockStore(Protocol):
 @contextmanager
 def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     """Hold ``device``'s lock for the ``with`` block; :class:`DeviceBusy` if another process has it."""
-    me = {"pid": os.getpid(), "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
+    pid = os.getpid()
+    me: dict[str, Any] = {"pid": pid, "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
     holder = store.acquire_lock(device, me)
     if holder is not None:
         raise DeviceBusy(
@@ -56,7 +57,7 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     try:
         yield me
     finally:
-        store.release_lock(device, me["pid"])
+        store.release_lock(device, pid)
 
 
 @dataclass

@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import kinematics as kin
 from ..audio.guard import NoSignalError, SignalGuard
-from ..devices.base import Controller
+from ..devices.base import Controller, VirtualClock
 from ..measurements import Traverse
 from ..models import direction_label, direction_sign
 from ..units import step_scale
@@ -333,10 +333,11 @@ def measure_traverse(
     )
     hz = float(controller.frequency(joint))
     if clock is None:
-        if hasattr(controller, "clock_s"):
+        if isinstance(controller, VirtualClock):
+            device_clock = controller
 
             def clock() -> float:
-                return float(controller.clock_s)  # type: ignore[attr-defined]
+                return float(device_clock.clock_s)
         else:
             w0 = time.monotonic()
 

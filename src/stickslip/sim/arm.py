@@ -38,14 +38,19 @@ import weakref
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qsl, urlsplit
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
+from ..calibration.result import Parameter
 from ..devices.base import DeviceError, DeviceInfo, check_setting, check_steps
 from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
+
+if TYPE_CHECKING:
+    from .sound import Soundscape
 
 __all__ = [
     "NOMINAL",
@@ -91,7 +96,9 @@ def day_key(day: str | int) -> int:
     return zlib.crc32(str(day).strip().encode("utf-8"))
 
 
-def _drifted(params: PrismaticParams | RotaryParams, rng: np.random.Generator, drift: float):
+def _drifted(
+    params: PrismaticParams | RotaryParams, rng: np.random.Generator, drift: float
+) -> PrismaticParams | RotaryParams:
     """``params`` with every value multiplied by ``1 + drift * z``, z ~ N(0, 1) clipped to +-2.5."""
 
     def f() -> float:
@@ -164,7 +171,7 @@ class SimulatedMM3A:
         step_noise: float = 0.03,
         drift: float = 0.03,
         sample_rate: int = 48_000,
-        soundscape_kwargs: dict | None = None,
+        soundscape_kwargs: dict[str, Any] | None = None,
         pose: kin.Pose | None = None,
         url: str = "sim://",
     ):
@@ -205,7 +212,7 @@ class SimulatedMM3A:
         self._last_burst: dict[int, _Burst | None] = {1: None, 2: None, 3: None}
         self._mics: weakref.WeakSet[VirtualMicrophone] = weakref.WeakSet()
         self._lock = threading.RLock()  # emulators step from a server thread
-        self._soundscape = None
+        self._soundscape: Soundscape | None = None
         self.steps_simulated = 0
         self._closed = False
 
@@ -352,47 +359,27 @@ class SimulatedMM3A:
         """The day's true mean-step models, ``{(joint, direction): JointModel}`` (SI)."""
         return dict(self._models)
 
-    def true_parameters(self) -> list[dict[str, object]]:
-        """The day's true parameters, in the record shape of ``Calibration.parameters()``.
+    def true_parameters(self) -> list[Parameter]:
+        """The day's true parameters, as :meth:`Calibration.parameters` gives calibrated ones.
 
-        Each record: ``joint``, ``direction``, ``name`` (``a``, ``b``, ``c``, ``gamma0``,
-        ``d``), ``q3`` (m, rotary only, else ``None``), ``value`` (SI), ``stderr``
-        (``None``) and ``unit`` (``"m"``, ``"1"`` or ``"rad"``).
+        ``stderr`` is ``None``; values are SI (m, 1, rad).
         """
-        out: list[dict[str, object]] = []
+        out: list[Parameter] = []
         for joint in (3, 2, 1):
             for direction in DIRECTIONS:
                 p = self._models[(joint, direction)].params
                 if isinstance(p, PrismaticParams):
                     for name, value, unit in (("a", p.a, "m"), ("b", p.b, "1"), ("c", p.c, "m")):
-                        out.append(
-                            {
-                                "joint": joint,
-                                "direction": direction,
-                                "name": name,
-                                "q3": None,
-                                "value": value,
-                                "stderr": None,
-                                "unit": unit,
-                            }
-                        )
+                        out.append(Parameter(joint, direction, name, None, float(value), None, unit))
                 else:
                     for name, values in (("gamma0", p.gamma0), ("d", p.d)):
                         for k, value in zip(p.knots, values, strict=True):
-                            out.append(
-                                {
-                                    "joint": joint,
-                                    "direction": direction,
-                                    "name": name,
-                                    "q3": k,
-                                    "value": value,
-                                    "stderr": None,
-                                    "unit": "rad",
-                                }
-                            )
+                            out.append(Parameter(joint, direction, name, float(k), float(value), None, "rad"))
         return out
 
-    def true_mean_step(self, joint: int, direction: str | int, q: float | NDArray | None = None) -> NDArray:
+    def true_mean_step(
+        self, joint: int, direction: str | int, q: float | NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
         """The true mean step (m or rad) of ``joint`` in ``direction`` at position ``q``.
 
         Includes the ripple (what a single step averages to); the other joints and the
@@ -412,7 +399,7 @@ class SimulatedMM3A:
             j = int(joint)
         except (TypeError, ValueError):
             j = -1
-        if j not in (1, 2, 3) or (isinstance(joint, float) and not joint.is_integer()):
+        if j not in (1, 2, 3) or (isinstance(joint, float) and not float(joint).is_integer()):
             raise ValueError(f"unknown joint {joint!r}: joints are 1, 2 (rotary) and 3 (prismatic)")
         return j
 
@@ -427,7 +414,9 @@ class SimulatedMM3A:
         A, al, be = model.rotary_coefficients(q1, q2, q3, theta, psi)
         return float(A), float(al), float(be)
 
-    def _mean_step(self, joint: int, q: NDArray, A: float, al: float, be: float) -> NDArray:
+    def _mean_step(
+        self, joint: int, q: NDArray[np.float64], A: float, al: float, be: float
+    ) -> NDArray[np.float64]:
         spec = kin.JOINTS[joint]
         base = A if (al == 0.0 and be == 0.0) else A + al * np.cos(q) + be * np.sin(q)
         phase = 2.0 * math.pi * _RIPPLE_PERIODS[joint] * (q - spec.lower) / spec.span + self._ripple_phase[joint]
@@ -503,13 +492,15 @@ class SimulatedMM3A:
     # ------------------------------------------------------------ sound
 
     @property
-    def soundscape(self):
+    def soundscape(self) -> Soundscape:
         """The :class:`stickslip.sim.sound.Soundscape` the virtual microphone renders with."""
         if self._soundscape is None:
             self._soundscape = _soundscape(self.sample_rate, self.seed, self.soundscape_kwargs)
         return self._soundscape
 
-    def step_events(self, t_from: float, t_to: float) -> tuple[NDArray, NDArray, NDArray]:
+    def step_events(
+        self, t_from: float, t_to: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
         """Step events with ``t_from <= t < t_to``: ``(times_s, joints, at_stop)`` arrays."""
         times, joints, stops = [], [], []
         with self._lock:
@@ -581,10 +572,10 @@ class SimulatedMM3A:
         return samples, self.sample_rate, stops[0] - t0
 
 
-_SCAPES: dict[tuple, object] = {}
+_SCAPES: dict[tuple[object, ...], Soundscape] = {}
 
 
-def _soundscape(sample_rate: int, seed: int, kwargs: dict):
+def _soundscape(sample_rate: int, seed: int, kwargs: dict[str, Any]) -> Soundscape:
     """A shared :class:`~stickslip.sim.sound.Soundscape` (stateless renders; costly to build)."""
     from .sound import Soundscape
 
@@ -702,7 +693,7 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
         raise ValueError(f"not a sim:// URL: {url!r}")
     if parts.path not in ("", "/") or parts.netloc not in ("", "mm3a", "localhost"):
         raise ValueError(f"a sim:// URL takes only query options (e.g. sim://?seed=3), got {url!r}")
-    opts: dict[str, object] = {}
+    opts: dict[str, Any] = {}
     for key, value in parse_qsl(parts.query, keep_blank_values=True, strict_parsing=False):
         if key not in _URL_KEYS:
             known = ", ".join(sorted(_URL_KEYS))
@@ -713,11 +704,11 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
             raise ValueError(f"sim:// option {key}={value!r} is not a valid {_URL_KEYS[key].__name__}") from None
     scape = {"gain_db": opts["gain_db"]} if "gain_db" in opts else None
     return SimulatedMM3A(
-        seed=int(opts.get("seed", 0)),  # type: ignore[arg-type]
-        day=opts.get("day", 0),  # type: ignore[arg-type]
-        step_noise=float(opts.get("noise", 0.03)),  # type: ignore[arg-type]
-        drift=float(opts.get("drift", 0.03)),  # type: ignore[arg-type]
-        sample_rate=int(opts.get("rate", 48_000)),  # type: ignore[arg-type]
+        seed=int(opts.get("seed", 0)),
+        day=opts.get("day", 0),
+        step_noise=float(opts.get("noise", 0.03)),
+        drift=float(opts.get("drift", 0.03)),
+        sample_rate=int(opts.get("rate", 48_000)),
         soundscape_kwargs=scape,
         url=url,
     )
@@ -784,7 +775,7 @@ class OracleStopDetector:
         self.t_s = float(t0_s)
         self._fired_upto = float(t0_s)
 
-    def feed(self, block: NDArray) -> list[OracleEvent]:
+    def feed(self, block: NDArray[np.float64]) -> list[OracleEvent]:
         """Consume a block; the events whose detection time falls within it."""
         t_end = self.t_s + len(block) / self.sample_rate
         self.t_s = t_end

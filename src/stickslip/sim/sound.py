@@ -27,8 +27,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
 
 __all__ = [
     "JOINT_SOUNDS",
@@ -104,7 +108,9 @@ def _hash_uniform(seed: int, tag: int, idx: np.ndarray) -> np.ndarray:
     return (h >> np.uint64(11)).astype(np.float64) / float(1 << 53)
 
 
-def _modes(t: np.ndarray, freqs, decays, weights, phase: float = 0.0) -> np.ndarray:
+def _modes(
+    t: FloatArray, freqs: Sequence[float], decays: Sequence[float], weights: Sequence[float], phase: float = 0.0
+) -> FloatArray:
     out = np.zeros_like(t)
     for f, tau, w in zip(freqs, decays, weights, strict=True):
         out += w * np.exp(-t / tau) * np.sin(2 * np.pi * f * t + phase)
@@ -115,7 +121,8 @@ def _normalise(kernel: np.ndarray, level_db: float, sample_rate: int) -> np.ndar
     """Scale a per-step kernel so that stepping at 1 kHz gives ``level_db`` mean square."""
     energy = float(np.sum(kernel**2))
     target = 10 ** (level_db / 10) * sample_rate / _REF_RATE_HZ
-    return kernel * np.sqrt(target / energy)
+    out: FloatArray = kernel * np.sqrt(target / energy)
+    return out
 
 
 @lru_cache(maxsize=16)
@@ -289,7 +296,9 @@ class Soundscape:
         out *= self._gain
         return out.astype(np.float32)
 
-    def _add_steps(self, out, s0, times, joints, stops) -> None:
+    def _add_steps(
+        self, out: FloatArray, s0: int, times: FloatArray, joints: NDArray[np.int64], stops: NDArray[np.bool_]
+    ) -> None:
         from scipy.signal import oaconvolve
 
         n, L = out.size, self._tail
@@ -323,7 +332,7 @@ class Soundscape:
                 np.add.at(train, r_idx[ok] - base_r, r_amp[ok])
                 out += oaconvolve(train, rattle, mode="valid")
 
-    def _add_noise(self, out, s0) -> None:
+    def _add_noise(self, out: FloatArray, s0: int) -> None:
         i = s0 + np.arange(out.size)
         out += self._noise_a[i % self._noise_a.size]
         out += self._noise_b[i % self._noise_b.size]
@@ -334,7 +343,7 @@ class Soundscape:
             h += np.sqrt(2) * 10 ** (db / 20) * np.sin(2 * np.pi * 50.0 * k * t + 0.7 * k)
         return h
 
-    def _add_hum(self, out, s0) -> None:
+    def _add_hum(self, out: FloatArray, s0: int) -> None:
         sr = self.sample_rate
         if sr % 50 == 0:  # exactly periodic in samples: look one 20 ms period up
             period = sr // 50
@@ -354,7 +363,7 @@ class Soundscape:
         contact = rng.standard_normal(t.size) * np.exp(-t / 4e-4) * 0.35
         return thump + contact
 
-    def _add_knocks(self, out, s0) -> None:
+    def _add_knocks(self, out: FloatArray, s0: int) -> None:
         sr, n = self.sample_rate, out.size
         seg = int(round(self._KNOCK_SEG_S * sr))
         first = (s0 - self._knock_len) // seg
@@ -411,7 +420,7 @@ class Soundscape:
         self._syl_cache[k] = result
         return result
 
-    def _add_babble(self, out, s0) -> None:
+    def _add_babble(self, out: FloatArray, s0: int) -> None:
         sr, n = self.sample_rate, out.size
         seg = int(round(self._SYL_SEG_S * sr))
         maxlen = int(round(self._SYL_MAX_S * sr)) + seg // 4
@@ -431,8 +440,8 @@ def render_traverse_recording(
     stop_at_s: float,
     duration_s: float,
     seed: int = 0,
-    **soundscape_kwargs,
-) -> tuple[np.ndarray, int]:
+    **soundscape_kwargs: Any,
+) -> tuple[NDArray[np.float32], int]:
     """A labelled recording of one traverse's end: stepping, then stepping against the stop.
 
     Parameters

@@ -1,0 +1,92 @@
+"""One audio-timed traverse on a device, and keeping it: the workflow behind
+``stickslip traverse`` (and what a calibration day repeats).
+
+:func:`traverse_on_device` places the arm where it can be placed (the simulator), listens
+with the device's own microphone where it has one (the simulator) or the sound card
+otherwise, and counts the steps between the end stops (:func:`~.traverse.measure_traverse`).
+:func:`record_traverse` stores the row and, since the joint now rests at an end stop,
+re-references the joint's kept position there.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Protocol
+
+from .. import kinematics as kin
+from ..audio.detector import StopDetector, Tuning
+from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock, device_key
+from ..devices.positions import StateStore, load_state, save_state
+from ..measurements import Traverse, measurements_to_csv
+from .traverse import TraverseResult, measure_traverse
+
+__all__ = ["TraverseStore", "append_row", "record_traverse", "traverse_on_device"]
+
+
+class TraverseStore(StateStore, Protocol):
+    """What :func:`record_traverse` needs of a store (``stickslip.storage.Store`` is one)."""
+
+    def add_traverse(self, t: Traverse, device: str = ..., how: str = ...) -> int: ...
+
+
+def traverse_on_device(
+    ctrl: Controller,
+    joint: int,
+    direction: str,
+    pose: kin.Pose,
+    day: str,
+    tuning: Tuning,
+    *,
+    audio_input: str | int | None = None,
+    burst_steps: int = 2000,
+    progress: bool = True,
+) -> TraverseResult:
+    """Measure one traverse of ``joint`` in ``direction`` on ``ctrl``, timed by the tuned limit switch.
+
+    Parameters
+    ----------
+    pose : Pose
+        The other joints (rad, rad, m) and the base tilt (rad). A controller that can be
+        placed (:class:`~stickslip.devices.base.PoseSettable`) is placed there; on a real
+        arm the user has set it.
+    tuning : Tuning
+        The joint's limit-switch tuning.
+    audio_input : str or int, optional
+        Sound-card input for a controller without a microphone of its own.
+    """
+    if isinstance(ctrl, PoseSettable):
+        ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
+    if isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):
+        t0 = float(ctrl.clock_s)
+        return measure_traverse(
+            ctrl, joint, direction, detector=StopDetector(tuning, t0), audio_blocks=ctrl.microphone(),
+            pose=pose, day=day, burst_steps=burst_steps, progress=progress,
+        )
+    from ..audio.sources import Microphone
+
+    mic = Microphone(sample_rate=int(tuning.sample_rate), device=audio_input).start()
+    try:
+        return measure_traverse(
+            ctrl, joint, direction, detector=StopDetector(tuning, 0.0), audio_blocks=mic.blocks(),
+            pose=pose, day=day, burst_steps=burst_steps, progress=progress,
+        )
+    finally:
+        mic.stop()
+
+
+def record_traverse(store: TraverseStore, device_url: str, row: Traverse, how: str = "audio") -> int:
+    """Store ``row`` for the device and re-reference its joint at the end stop it reached; returns the id."""
+    key = device_key(device_url)
+    tid = store.add_traverse(row, device=key, how=how)
+    state = load_state(store, key)
+    state.set_position(row.joint, row.end, "set")
+    save_state(store, state)
+    return tid
+
+
+def append_row(path: Path, row: Traverse) -> None:
+    """Append ``row`` to a measurement table (design.md §7), writing the header if the file is new or empty."""
+    new = not path.exists() or path.stat().st_size == 0
+    text = measurements_to_csv([row])
+    with path.open("a", encoding="utf-8", newline="") as f:
+        f.write(text if new else text.split("\n", 1)[1])
