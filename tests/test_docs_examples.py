@@ -1,0 +1,127 @@
+"""Every shell and Python example in the README and in docs/ runs (docs/style.md: examples run).
+
+* Console blocks (lines starting with ``$ ``) of docs/*.md run as written in bash, from a
+  fresh folder that holds only the project's ``.venv`` (as after the README's two set-up
+  commands), one block after another so later blocks see what earlier ones made.
+* The README's blocks for hardware run against stand-ins the tests make: a recording from
+  the simulator's sound for ``tune``/``listen``, the NanoControl protocol emulator on a
+  pseudo-terminal for ``where``/``move`` (its URL in place of ``mm3a:///dev/ttyUSB0``).
+  The live-microphone line needs a sound card and is the one line not run.
+* A block marked ```text (a picture, a file format) is not code and is not run.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+POSIX = pytest.mark.skipif(sys.platform == "win32", reason="the examples are POSIX shell sessions (bash)")
+
+
+def console_lines(text: str) -> list[list[str]]:
+    """The ``$ `` lines of every console block, block by block."""
+    blocks = re.findall(r"```console\n(.*?)```", text, re.S)
+    return [[ln[2:] for ln in b.splitlines() if ln.startswith("$ ")] for b in blocks]
+
+
+def _venv_folder(tmp: Path) -> dict[str, str]:
+    venv = Path(sys.prefix)
+    if not (venv / "bin" / "activate").exists() or not (venv / "bin" / "stickslip").exists():
+        pytest.skip("not running inside the project's virtual environment (make test builds it)")
+    (tmp / ".venv").symlink_to(venv, target_is_directory=True)
+    env = {k: v for k, v in os.environ.items() if k != "VIRTUAL_ENV"}
+    env["PATH"] = "/usr/bin:/bin"  # nothing of the project's on the PATH until the example activates it
+    env["COLUMNS"] = "120"
+    return env
+
+
+def _bash(lines: list[str], cwd: Path, env: dict[str, str], timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    script = "set -euo pipefail\n" + "\n".join(lines) + "\n"
+    return subprocess.run(["bash", "-c", script], cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout)
+
+
+def test_every_docs_page_with_console_blocks_is_listed_here():
+    """A new page with shell examples must be run by a test: this list names the pages that have them."""
+    pages = sorted(p.name for p in DOCS.glob("*.md") if console_lines(p.read_text(encoding="utf-8")))
+    assert pages == sorted(RUN_PAGES), f"pages with console blocks: {pages}; run them in this module"
+
+
+RUN_PAGES = ["tutorial.md"]
+
+
+@POSIX
+@pytest.mark.parametrize("page", RUN_PAGES)
+def test_docs_page_runs_as_written(page, tmp_path):
+    env = _venv_folder(tmp_path)
+    blocks = console_lines((DOCS / page).read_text(encoding="utf-8"))
+    assert blocks and blocks[0][0].startswith(". .venv/bin/activate")
+    r = _bash([ln for b in blocks for ln in b], tmp_path, env)
+    assert r.returncode == 0, f"{page}:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    assert "Traceback" not in r.stderr
+
+
+@POSIX
+def test_tutorial_ends_thirty_microns_further_out(tmp_path):
+    """The tutorial's move: where says the joint is at 2.03 mm (dead reckoning lands within half a step)."""
+    env = _venv_folder(tmp_path)
+    lines = [ln for b in console_lines((DOCS / "tutorial.md").read_text(encoding="utf-8"))[:3] for ln in b]
+    lines += ["stickslip where -d 'sim://?seed=3' --offline --json > where.json"]
+    r = _bash(lines, tmp_path, env)
+    assert r.returncode == 0, r.stderr[-3000:]
+    q3 = json.loads((tmp_path / "where.json").read_text())["joints"][2]["q"]
+    assert abs(q3 - 0.00203) < 1e-6, q3
+
+
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+
+def _readme_block_after(heading: str) -> list[str]:
+    start = README.index(heading)
+    return console_lines(README[start:])[0]
+
+
+@POSIX
+def test_readme_audio_example_runs_on_a_recording(tmp_path):
+    """`tune` and `listen` as the README writes them, on a recording whose stop is at 4.2 s."""
+    from stickslip.audio.sources import write_wav
+    from stickslip.sim.sound import render_traverse_recording
+
+    samples, rate = render_traverse_recording(3, 1000.0, stop_at_s=4.2, duration_s=6.0, seed=5)
+    write_wav(tmp_path / "joint3.wav", samples, rate)
+    env = _venv_folder(tmp_path)
+    lines = [ln for ln in _readme_block_after("## The audio limit switch") if "--mic" not in ln]
+    assert len(lines) == 2
+    r = _bash([". .venv/bin/activate", *lines], tmp_path, env, timeout=300)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = r.stdout.splitlines()
+    first = next(i for i, ln in enumerate(out) if ln.startswith(("[", "{")))  # listen --json follows tune's text
+    events = json.loads("\n".join(out[first:]))
+    found = events["events"] if isinstance(events, dict) else events
+    assert len(found) == 1 and abs(found[0]["onset_s"] - 4.2) < 0.025
+
+
+@POSIX
+def test_readme_hardware_moves_run_against_the_emulator(tmp_path):
+    """`where`/`move` on mm3a:///dev/ttyUSB0 as written, the emulator's pseudo-terminal standing in for the port."""
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.sim.emulators import NanoControlEmulator
+    from synth import paper_table
+
+    env = _venv_folder(tmp_path)
+    env["STICKSLIP_DB"] = str(tmp_path / "hw.db")
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    lines = _readme_block_after("### Moving with the model")
+    with NanoControlEmulator() as emu:
+        lines = [ln.replace("mm3a:///dev/ttyUSB0", emu.url) for ln in lines]
+        r = _bash([". .venv/bin/activate", "stickslip calibrate meas.csv -o cal.json", *lines], tmp_path, env)
+    assert r.returncode == 0, f"{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    assert "Traceback" not in r.stderr
