@@ -52,7 +52,7 @@ def test_prismatic_steps_are_distance_over_step():
     p = Planner(CAL, 3, pose)
     g = CAL.gamma(3, "+", pose)
     assert p.exact_steps(0.002, 0.00203) == pytest.approx(30e-6 / g, rel=1e-12)
-    assert p.steps(0.00203, 0.002) == round(30e-6 / CAL.gamma(3, "-", pose))
+    assert p.steps(0.00203, 0.002) == -round(30e-6 / CAL.gamma(3, "-", pose))  # signed: - moves in
 
 
 def test_rotary_plan_matches_step_by_step_count():
@@ -61,7 +61,7 @@ def test_rotary_plan_matches_step_by_step_count():
     for q_from, q_to in ((0.5, -3.5), (-3.5, 0.5), (-1.0, -1.2)):
         c = p._dir(1 if q_to > q_from else -1)
         n = simulate_traverse_steps(q_from, q_to, c.gamma)
-        assert abs(p.steps(q_from, q_to) - n) <= 2  # Euler stepping vs the exact integral
+        assert abs(abs(p.steps(q_from, q_to)) - n) <= 2  # Euler stepping vs the exact integral
 
 
 def test_out_of_range_and_missing_direction():
@@ -91,3 +91,13 @@ def test_a_pose_the_arm_cannot_take_is_never_planned_in(pose, words):
     joint = 2 if pose.q3 else 3
     with pytest.raises(ValueError, match=re.escape(words)):
         plan_move(cal, joint, -0.5 if joint == 2 else 0.002, -0.6 if joint == 2 else 0.003, pose)
+
+
+@pytest.mark.parametrize("q_from, q_to", [(0.002, 0.00203), (0.00203, 0.002), (0.011, 0.0005)])
+def test_steps_are_signed_so_dead_reckoning_lands_on_the_target(q_from, q_to):
+    """steps() -> position_after() round trip, up and down: within half a step of the target."""
+    p = Planner(CAL, 3, Pose(q2=-math.pi / 3, theta=0.2))
+    n = p.steps(q_from, q_to)
+    assert (n > 0) == (q_to > q_from)
+    where = p.position_after(q_from, n)
+    assert abs(where - q_to) <= 0.5 * p.gamma(q_to, "+" if n > 0 else "-")

@@ -120,6 +120,8 @@ class Planner:
     >>> planner = Planner(cal, 3, Pose(q2=-math.pi / 2))      # doctest: +SKIP
     >>> planner.steps(0.0, 30e-6)                              # doctest: +SKIP
     31
+    >>> planner.steps(30e-6, 0.0)                              # doctest: +SKIP
+    -32
     """
 
     def __init__(self, calibration: Calibration, joint: int, pose: kin.Pose):
@@ -157,8 +159,13 @@ class Planner:
         return self._dir(1 if q_to > q_from else -1).steps(q_from, q_to)
 
     def steps(self, q_from: float, q_to: float) -> int:
-        """Steps to command to move from ``q_from`` to ``q_to`` (>= 0; direction from the sign)."""
-        return int(round(self.exact_steps(q_from, q_to)))
+        """Signed steps to command to move from ``q_from`` to ``q_to``: negative when ``q_to < q_from``.
+
+        The sign is the direction (docs/design.md §2), so the result can be handed to
+        :meth:`position_after` or to a controller's ``step`` as it is.
+        """
+        n = int(round(self.exact_steps(q_from, q_to)))
+        return n if q_to >= q_from else -n
 
     def gamma(self, q: float, direction: str | int) -> float:
         """Predicted step size at ``q`` in ``direction`` (rad or m)."""
