@@ -36,7 +36,6 @@ import math
 import threading
 import weakref
 import zlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qsl, urlsplit
@@ -48,6 +47,7 @@ from .. import kinematics as kin
 from ..calibration.result import Parameter
 from ..devices.base import DeviceError, DeviceInfo, check_setting, check_steps
 from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
+from .microphone import VirtualMicrophone, _soundscape
 
 if TYPE_CHECKING:
     from .sound import Soundscape
@@ -572,100 +572,6 @@ class SimulatedMM3A:
         return samples, self.sample_rate, stops[0] - t0
 
 
-_SCAPES: dict[tuple[object, ...], Soundscape] = {}
-
-
-def _soundscape(sample_rate: int, seed: int, kwargs: dict[str, Any]) -> Soundscape:
-    """A shared :class:`~stickslip.sim.sound.Soundscape` (stateless renders; costly to build)."""
-    from .sound import Soundscape
-
-    key = (sample_rate, seed, tuple(sorted((k, repr(v)) for k, v in kwargs.items())))
-    scape = _SCAPES.get(key)
-    if scape is None:
-        if len(_SCAPES) >= 8:
-            _SCAPES.pop(next(iter(_SCAPES)))
-        scape = _SCAPES[key] = Soundscape(sample_rate=sample_rate, seed=seed, **kwargs)
-    return scape
-
-
-class VirtualMicrophone:
-    """What a microphone beside the simulated arm hears, on the virtual clock.
-
-    Blocks are rendered by the simulator's :class:`~stickslip.sim.sound.Soundscape`
-    from the recorded step events. The stream starts at the simulator's clock when the
-    microphone is made; only complete blocks up to the current clock are available
-    (the future has not been stepped yet).
-
-    Use it as a callable (``mic()`` returns the list of blocks recorded since the last
-    call: the traverse procedure's ``audio_blocks``) or iterate over it (finite:
-    the blocks available now). A ``silent`` microphone gives zeros without rendering
-    (for :class:`OracleStopDetector` runs).
-    """
-
-    def __init__(self, sim: SimulatedMM3A, block: int = 1024, silent: bool = False):
-        if not 16 <= int(block) <= 1 << 20:
-            raise ValueError(f"block = {block!r} samples is outside [16, 1048576]")
-        self.sim = sim
-        self.block = int(block)
-        self.sample_rate = sim.sample_rate
-        self.silent = bool(silent)
-        self._next = int(math.ceil(sim.clock_s * self.sample_rate - 1e-6))
-        sim._mics.add(self)  # the simulator keeps the step events this microphone still needs
-
-    @property
-    def t_s(self) -> float:
-        """Stream time of the next sample, s (virtual clock)."""
-        return self._next / self.sample_rate
-
-    def _render(self, n: int) -> NDArray[np.float32]:
-        if self.silent:
-            self._next += n
-            return np.zeros(n, dtype=np.float32)
-        scape = self.sim.soundscape
-        t0 = self.t_s
-        t1 = (self._next + n) / self.sample_rate
-        tail = float(getattr(scape, "tail_s", 0.1))
-        times, joints, stops = self.sim.step_events(t0 - tail, t1)
-        out = np.asarray(scape.render(t0, n, times, joints, stops), dtype=np.float32)
-        self._next += n
-        return out
-
-    def read_until(self, t_s: float) -> NDArray[np.float32]:
-        """All samples from the stream position up to time ``t_s`` (s), as one array."""
-        n = int(math.floor(t_s * self.sample_rate + 1e-6)) - self._next
-        if n <= 0:
-            return np.empty(0, dtype=np.float32)
-        parts = []
-        while n > 0:
-            m = min(n, 1 << 18)
-            parts.append(self._render(m))
-            n -= m
-        return np.concatenate(parts)
-
-    def __call__(self) -> list[NDArray[np.float32]]:
-        """The complete blocks recorded since the last call (may be empty)."""
-        n_avail = int(math.floor(self.sim.clock_s * self.sample_rate + 1e-6)) - self._next
-        n_blocks = n_avail // self.block
-        if n_blocks <= 0:
-            return []
-        out: list[NDArray[np.float32]] = []
-        per_chunk = max(1, (1 << 17) // self.block)
-        while n_blocks > 0:
-            m = min(n_blocks, per_chunk)
-            chunk = self._render(m * self.block)
-            out.extend(chunk[i * self.block : (i + 1) * self.block] for i in range(m))
-            n_blocks -= m
-        return out
-
-    def __iter__(self) -> Iterator[NDArray[np.float32]]:
-        return iter(self())
-
-    def skip_to(self, t_s: float | None = None) -> None:
-        """Jump the stream to time ``t_s`` (default: now), dropping the audio in between."""
-        t = self.sim.clock_s if t_s is None else float(t_s)
-        self._next = max(self._next, int(math.ceil(t * self.sample_rate - 1e-6)))
-
-
 # ---------------------------------------------------------------- URL
 
 
@@ -714,76 +620,4 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
     )
 
 
-# ---------------------------------------------------------------- a stand-in for the limit switch
-
-
-@dataclass(frozen=True)
-class OracleEvent:
-    """A stop event of :class:`OracleStopDetector` (same fields as ``StopEvent``)."""
-
-    detected_at_s: float
-    onset_s: float
-    level_db: float = 0.0
-
-
-class OracleStopDetector:
-    """A limit switch that cheats: it knows the simulator's true stop times.
-
-    For tests and emulators that need the traverse procedure without audio. It
-    consumes blocks like :class:`~stickslip.audio.detector.StopDetector` (the stream
-    time advances by the block length) and fires once per stop, at the end of the
-    first block that reaches ``true stop + delay_s``; its onset estimate is the true
-    stop plus ``onset_error_s``. A stop already sounding when the stream starts (or
-    is reset) is heard from that moment, as a real detector would.
-
-    Parameters
-    ----------
-    sim : SimulatedMM3A
-    joint : int
-        The joint whose stops it hears.
-    delay_s : float
-        Detection delay after the true stop, s.
-    onset_error_s : float
-        Error of the onset estimate, s.
-    """
-
-    uses_audio = False
-    """It never looks at the samples, so the traverse's no-signal guard does not apply."""
-
-    def __init__(
-        self,
-        sim: SimulatedMM3A,
-        joint: int,
-        delay_s: float = 0.03,
-        onset_error_s: float = 0.0,
-        t0_s: float = 0.0,
-    ):
-        self.sim = sim
-        self.joint = int(joint)
-        self.delay_s = float(delay_s)
-        self.onset_error_s = float(onset_error_s)
-        self.sample_rate = sim.sample_rate
-        self.reset(t0_s)
-
-    @property
-    def latency_s(self) -> float:
-        """The detection delay, s."""
-        return self.delay_s
-
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Restart the stream at ``t0_s`` (s); stops before it are forgotten."""
-        self.t_s = float(t0_s)
-        self._fired_upto = float(t0_s)
-
-    def feed(self, block: NDArray[np.float64]) -> list[OracleEvent]:
-        """Consume a block; the events whose detection time falls within it."""
-        t_end = self.t_s + len(block) / self.sample_rate
-        self.t_s = t_end
-        out = []
-        for begin, end in self.sim.stop_runs(self.joint):
-            # a run already under way when listening began is heard from then on
-            onset = max(begin, self._fired_upto)
-            if onset < end and onset + self.delay_s <= t_end:
-                out.append(OracleEvent(t_end, onset + self.onset_error_s))
-                self._fired_upto = max(end, t_end)
-        return out
+from .oracle import OracleStopDetector  # noqa: E402  (re-exported: the arm's limit-switch stand-in)
