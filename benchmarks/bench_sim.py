@@ -22,7 +22,8 @@ import math
 import time
 
 from stickslip import kinematics as kin
-from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A
+from stickslip.sim.arm import SimulatedMM3A
+from stickslip.sim.oracle import OracleStopDetector
 
 DAY = "2026-11-22"
 

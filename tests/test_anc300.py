@@ -199,7 +199,8 @@ def test_q3_stays_in_range_after_emulated_continuous_move():
 def test_serial_console_on_a_pseudo_terminal_and_a_traverse():
     """anc300:///dev/pts/N through the serial transport; a traverse finds the true step."""
     from stickslip.procedures.traverse import measure_traverse
-    from stickslip.sim.arm import OracleStopDetector, VirtualMicrophone
+    from stickslip.sim.microphone import VirtualMicrophone
+    from stickslip.sim.oracle import OracleStopDetector
 
     sim = _sim()
     with ANC300Emulator(sim, transport="pty") as emu:

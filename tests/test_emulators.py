@@ -17,8 +17,10 @@ import pytest
 from stickslip import kinematics as kin
 from stickslip.devices import DeviceError, open_device
 from stickslip.procedures.traverse import measure_traverse
-from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A, VirtualMicrophone
+from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.emulators import NanoControlEmulator
+from stickslip.sim.microphone import VirtualMicrophone
+from stickslip.sim.oracle import OracleStopDetector
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 

@@ -23,10 +23,10 @@ from stickslip.sim.arm import (
     FREQUENCY_RANGE,
     NOMINAL,
     RIPPLE,
-    OracleStopDetector,
     SimulatedMM3A,
     open_url,
 )
+from stickslip.sim.oracle import OracleStopDetector
 
 DAY = "2026-11-22"
 

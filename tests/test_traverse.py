@@ -15,7 +15,8 @@ from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
 from stickslip.measurements import measurements_to_csv, parse_measurements
 from stickslip.procedures.traverse import TraverseError, _count_before, measure_traverse
-from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A
+from stickslip.sim.arm import SimulatedMM3A
+from stickslip.sim.oracle import OracleStopDetector
 
 DAY = "2026-11-22"
 

@@ -41,7 +41,8 @@ from ..clock import today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
 from ..models import JointModel
-from ..sim.arm import NOMINAL, OracleStopDetector, SimulatedMM3A
+from ..sim.arm import NOMINAL, SimulatedMM3A
+from ..sim.oracle import OracleStopDetector
 from ..units import param_scale
 from .conditions import conditions_of
 from .traverse import TraverseResult, measure_traverse
@@ -401,7 +402,7 @@ def run_demo(
         Room sound options for the simulator's microphone.
     switch : {"audio", "oracle"}
         The limit switch: the tuned audio detector on the virtual microphone
-        (default), or :class:`~stickslip.sim.arm.OracleStopDetector`, which
+        (default), or :class:`~stickslip.sim.oracle.OracleStopDetector`, which
         knows the true stops (no sound rendered; for fast tests).
     repeats : int
         After the calibration, measure the paper's ANOVA poses (:data:`REPEAT_PLAN`)

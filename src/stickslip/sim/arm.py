@@ -57,10 +57,8 @@ __all__ = [
     "FREQUENCY_RANGE",
     "RIPPLE",
     "SimulatedMM3A",
-    "VirtualMicrophone",
     "open_url",
     "day_key",
-    "OracleStopDetector",
 ]
 
 FREQUENCY_RANGE = (1.0, 5000.0)
@@ -538,6 +536,10 @@ class SimulatedMM3A:
         """Times (s, virtual clock) when ``joint`` began stepping against a stop (true stops)."""
         return [a for a, _ in self.stop_runs(joint)]
 
+    def add_listener(self, mic: VirtualMicrophone) -> None:
+        """Keep the step events ``mic`` has not heard yet (held weakly: a dropped microphone frees them)."""
+        self._mics.add(mic)
+
     def microphone(self, block: int = 1024, silent: bool = False) -> VirtualMicrophone:
         """A virtual microphone starting now on the virtual clock (blocks of ``block`` samples)."""
         return VirtualMicrophone(self, block, silent=silent)
@@ -619,5 +621,3 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
         url=url,
     )
 
-
-from .oracle import OracleStopDetector  # noqa: E402  (re-exported: the arm's limit-switch stand-in)

@@ -5,15 +5,30 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterator
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .sound import Soundscape
 
-if TYPE_CHECKING:
-    from .arm import SimulatedMM3A
+
+class SoundingArm(Protocol):
+    """What a virtual microphone needs of the arm it listens to (``SimulatedMM3A`` is one)."""
+
+    sample_rate: int
+    clock_s: float
+
+    @property
+    def soundscape(self) -> Soundscape: ...
+
+    def step_events(
+        self, t_from: float, t_to: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]: ...
+
+    def add_listener(self, mic: VirtualMicrophone) -> None:
+        """Keep the step events this microphone has not heard yet."""
+        ...
 
 __all__ = ["VirtualMicrophone"]
 
@@ -46,7 +61,7 @@ class VirtualMicrophone:
     (for :class:`OracleStopDetector` runs).
     """
 
-    def __init__(self, sim: SimulatedMM3A, block: int = 1024, silent: bool = False):
+    def __init__(self, sim: SoundingArm, block: int = 1024, silent: bool = False):
         if not 16 <= int(block) <= 1 << 20:
             raise ValueError(f"block = {block!r} samples is outside [16, 1048576]")
         self.sim = sim
@@ -54,7 +69,7 @@ class VirtualMicrophone:
         self.sample_rate = sim.sample_rate
         self.silent = bool(silent)
         self._next = int(math.ceil(sim.clock_s * self.sample_rate - 1e-6))
-        sim._mics.add(self)  # the simulator keeps the step events this microphone still needs
+        sim.add_listener(self)  # the arm keeps the step events this microphone still needs
 
     @property
     def t_s(self) -> float:

@@ -4,13 +4,20 @@ emulators that need the traverse procedure without audio)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:
-    from .arm import SimulatedMM3A
+
+class StoppingArm(Protocol):
+    """What the oracle needs of the arm (``SimulatedMM3A`` is one)."""
+
+    sample_rate: int
+
+    def stop_runs(self, joint: int | None = None) -> list[tuple[float, float]]:
+        """``(begin, end)`` times (s) of runs of steps against an end stop."""
+        ...
 
 __all__ = ["OracleEvent", "OracleStopDetector"]
 
@@ -50,7 +57,7 @@ class OracleStopDetector:
 
     def __init__(
         self,
-        sim: SimulatedMM3A,
+        sim: StoppingArm,
         joint: int,
         delay_s: float = 0.03,
         onset_error_s: float = 0.0,
