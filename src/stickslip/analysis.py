@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -143,6 +143,12 @@ def group_poses(
 ) -> list[PoseGroup]:
     """Group traverses by joint and pose (fixed joints, tilt, traversed interval).
 
+    The greedy rule of the module docstring (each traverse joins the first group whose
+    first member matches it), found through a grid of cells ``2 tol`` wide so that the
+    cost grows with the number of traverses, not with traverses x groups: a matching
+    first member lies in one of the neighbouring cells, and of the matching groups the
+    oldest wins, exactly as in a scan of the list.
+
     Parameters
     ----------
     traverses : sequence of Traverse
@@ -151,6 +157,71 @@ def group_poses(
     length_tol : float
         Largest difference of lengths (m) within one pose.
     """
+    if not (0.0 < angle_tol < math.inf and 0.0 < length_tol < math.inf):
+        return _group_poses_scan(traverses, angle_tol, length_tol)
+    groups: list[PoseGroup] = []
+    # per joint: a trie of cell indices (one level per coordinate) whose leaves list group numbers
+    tries: dict[int, dict[int, Any]] = {}
+    # a traverse whose coordinates equal an earlier one's joins that one's group
+    exact: dict[tuple[int, tuple[float, ...]], int] = {}
+    for t in traverses:
+        coords, tols = _pose_coordinates(t, angle_tol, length_tol)
+        key = (t.joint, coords)
+        hit = exact.get(key)
+        if hit is None:
+            scaled = [c / (2.0 * tol) for c, tol in zip(coords, tols, strict=True)]
+            if not all(map(math.isfinite, scaled)):  # huge or NaN values (not from a table): no grid
+                return _group_poses_scan(traverses, angle_tol, length_tol)
+            cells = [math.floor(x) for x in scaled]
+            trie = tries.setdefault(t.joint, {})
+            best = -1
+            for gi in _neighbours(trie, cells, 0):
+                if (best < 0 or gi < best) and groups[gi].matches(t, angle_tol, length_tol):
+                    best = gi
+            if best < 0:
+                lo, hi = sorted((t.start, t.end))
+                groups.append(PoseGroup(t.joint, t.pose(), (lo, hi), []))
+                best = len(groups) - 1
+                node = trie
+                for c in cells[:-1]:
+                    node = node.setdefault(c, {})
+                node.setdefault(cells[-1], []).append(best)
+            hit = exact[key] = best
+        groups[hit].traverses.append(t)
+    return groups
+
+
+def _pose_coordinates(t: Traverse, angle_tol: float, length_tol: float) -> tuple[tuple[float, ...], list[float]]:
+    """The coordinates :meth:`PoseGroup.matches` compares, and the tolerance of each."""
+    coords: list[float] = []
+    tols: list[float] = []
+    for k in _POSE_KEYS:
+        if k == f"q{t.joint}":
+            continue
+        coords.append(float(getattr(t, k)))
+        tols.append(length_tol if k == "q3" else angle_tol)
+    lo, hi = sorted((t.start, t.end))
+    tol = length_tol if t.joint == 3 else angle_tol
+    coords += [float(lo), float(hi)]
+    tols += [tol, tol]
+    return tuple(coords), tols
+
+
+def _neighbours(node: dict[int, Any], cells: list[int], level: int) -> Iterator[int]:
+    """Group numbers stored in the trie within one cell of ``cells`` on every level."""
+    c = cells[level]
+    for k in (c - 1, c, c + 1):
+        child = node.get(k)
+        if child is None:
+            continue
+        if level == len(cells) - 1:
+            yield from child
+        else:
+            yield from _neighbours(child, cells, level + 1)
+
+
+def _group_poses_scan(traverses: Sequence[Traverse], angle_tol: float, length_tol: float) -> list[PoseGroup]:
+    """The greedy rule by a plain scan (for tolerances of zero, below zero or infinite)."""
     groups: list[PoseGroup] = []
     for t in traverses:
         for g in groups:
