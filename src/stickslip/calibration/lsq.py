@@ -92,7 +92,8 @@ def _identifiability(j: int, d: str, names: list[tuple[str, float | None]], jac:
     colnorm = np.linalg.norm(jac, axis=0)
     colnorm[colnorm == 0] = 1.0
     jn = jac / colnorm
-    _, s, vt = np.linalg.svd(jn, full_matrices=True)
+    # thin SVD: V is all that is needed (p x p when n >= p); the full U would be n x n (80 GB at n = 1e5)
+    _, s, vt = np.linalg.svd(jn, full_matrices=n < p)
     s_full = np.zeros(p)
     s_full[: len(s)] = s
     tol = max(n, p) * np.finfo(float).eps * 1e4 * (s_full[0] if s_full[0] > 0 else 1.0)

@@ -6,11 +6,13 @@ offers ``--json`` where it prints results, and labels units in what people read.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from types import ModuleType
 from typing import NoReturn
 
 import typer
@@ -24,6 +26,26 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..units import UnitError, parse_angle, parse_length
+
+
+def lazy_import(name: str) -> ModuleType:
+    """The module ``name``, loaded on first attribute access (so ``--help`` never loads numpy).
+
+    For a command module whose module-level names come from the numpy layers; a module
+    already loaded is returned as it is.
+    """
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None:  # pragma: no cover - a packaging fault
+        raise ImportError(f"no module named {name!r}")
+    loader = importlib.util.LazyLoader(spec.loader)
+    spec.loader = loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    loader.exec_module(module)
+    return module
+
 
 console = Console()
 err_console = Console(stderr=True)

@@ -11,17 +11,38 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from .. import kinematics as kin
 from ..clock import stale_message
-from ..devices.base import DeviceError, open_device
-from ..devices.positions import DeviceState, device_key, load_state, save_state
+from ..devices.base import DeviceError, device_key, open_device
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit
 from . import app
-from ._common import angle_option, console, fail, flush_warnings, length_option, print_json, user_errors, warn_later
+from ._common import (
+    angle_option,
+    console,
+    fail,
+    flush_warnings,
+    lazy_import,
+    length_option,
+    print_json,
+    user_errors,
+    warn_later,
+)
+
+if TYPE_CHECKING:
+    from .. import kinematics as kin
+    from ..devices.positions import DeviceState, load_state, save_state
+else:  # numpy loads when a command first needs it, not for --help
+    kin = lazy_import("stickslip.kinematics")
+    _positions = lazy_import("stickslip.devices.positions")
+
+    def load_state(*args, **kwargs):
+        return _positions.load_state(*args, **kwargs)
+
+    def save_state(*args, **kwargs):
+        return _positions.save_state(*args, **kwargs)
 
 _DB_HELP = (
     "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
