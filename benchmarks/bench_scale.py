@@ -136,9 +136,8 @@ def run_child(argv: Sequence[str], env: dict[str, str]) -> dict[str, float]:
 def numpy_predict(path: Path) -> float:
     """Plain numpy: load the columns, evaluate Eq. 3 and the rotary closed form, no checks."""
     sys.path.insert(0, str(HERE.parent / "tests"))
-    from synth import PAPER_PRISMATIC, PAPER_ROTARY
-
     from stickslip.models import gamma_prismatic, steps_between
+    from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
     t = time.perf_counter()
     a = np.genfromtxt(path, delimiter=",", skip_header=1, filling_values=np.nan)
@@ -199,12 +198,11 @@ def anova_baselines(path: Path) -> dict[str, float]:
 
 def planner_rows(moves: int) -> list[tuple[str, float]]:
     sys.path.insert(0, str(HERE.parent / "tests"))
-    from synth import paper_table
-
     from stickslip.calibration import calibrate
     from stickslip.kinematics import Pose
     from stickslip.models import simulate_traverse_steps, steps_between_quad
     from stickslip.planning import Planner, plan_move
+    from synth import paper_table
 
     cal = calibrate(paper_table())
     pose = Pose(q3=0.006, theta=-0.3)
@@ -248,7 +246,8 @@ def startup(env: dict[str, str], runs: int = 7) -> tuple[float, float]:
             ts.append(time.perf_counter() - t)
         return float(np.median(ts))
 
-    return med([sys.executable, "-m", "stickslip.cli", "--help"]), med([sys.executable, "-c", "pass"])
+    cli = "import sys; from stickslip.cli import main; sys.argv = ['stickslip', '--help']; main()"
+    return med([sys.executable, "-c", cli]), med([sys.executable, "-c", "pass"])
 
 
 # ----------------------------------------------------------------------------- main
@@ -268,7 +267,8 @@ def machine() -> str:
                 break
     except OSError:
         pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}, {platform.system()}"
+    py = platform.python_version()
+    return f"{cpu}, {os.cpu_count()} cores, Python {py}, numpy {np.__version__}, {platform.system()}"
 
 
 def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
@@ -308,7 +308,8 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                 r = run_child(argv_, env)
                 times.append(float(r["seconds"]))
                 rows.append({"command": cmd, "rows": n, **r})
-                print(f"{cmd:10s} {n:9d} {r['seconds']:9.3f} {r['seconds'] / n * 1e6:8.2f} {r['peak_mib']:9.0f}   {base}")
+                sec, peak = r["seconds"], r["peak_mib"]
+                print(f"{cmd:10s} {n:9d} {sec:9.3f} {sec / n * 1e6:8.2f} {peak:9.0f}   {base}")
             k = exponent(ns, times)
             rows.append({"command": cmd, "exponent": k})
             print(f"{cmd:10s} growth exponent {k:.2f} (time ~ rows^k, two largest sizes)")
@@ -324,8 +325,9 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     base = prow[0][1]
     for name, t in prow:
         print(f"  {name:40s} {t * 1e6:10.2f} {t / base:8.1f}x")
-    quad = dict(prow)["per-move quadrature (scipy quad)"]
-    print(f"  Planner.plan is {quad / dict(prow)['Planner.plan (with dead reckoning)']:.1f}x faster than per-move quadrature")
+    quad, plan = dict(prow)["per-move quadrature (scipy quad)"], dict(prow)["Planner.plan (with dead reckoning)"]
+    print(f"  Planner.plan is {quad / plan:.1f}x faster than per-move quadrature")
+    rows.append({"planner_plan_us": plan * 1e6, "quadrature_us": quad * 1e6})
     helpt, bare = startup(env, 3 if quick else 7)
     print(f"\nstart-up: stickslip --help {helpt:.3f} s, bare python {bare:.3f} s ({helpt / bare:.1f}x)")
     rows.append({"startup_help_s": helpt, "startup_python_s": bare})

@@ -13,12 +13,12 @@ import io
 import math
 from dataclasses import astuple
 
-import measurements_rowwise as old
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import measurements_rowwise as old
 from stickslip import measurements as new
 
 NUMBERS = [
@@ -141,7 +141,10 @@ def test_a_valid_table_takes_the_fast_path_with_exact_values():
     rng = np.random.default_rng(3)
     n = 500
     q2 = rng.uniform(-3.6, 0.5, n)
-    rows = [["d", "3", "+", "0.0", repr(float(a)), "0.0", "-0.1", "0.2", "0.0", "0.012", str(10000 + i)] for i, a in enumerate(q2)]
+    rows = [
+        ["d", "3", "+", "0.0", repr(float(a)), "0.0", "-0.1", "0.2", "0.0", "0.012", str(10000 + i)]
+        for i, a in enumerate(q2)
+    ]
     table = new.parse_measurement_table(_csv(list(new.HEADER), rows), "m.csv")
     assert table.q2.tolist() == q2.tolist()
     assert table.lines.tolist() == list(range(2, n + 2))

@@ -50,7 +50,6 @@ residual and the same in nm (prismatic) or µrad (rotary).
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any

@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import ModuleType
-from typing import NoReturn
+from typing import TYPE_CHECKING, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -26,6 +26,9 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..units import UnitError, parse_angle, parse_length
+
+if TYPE_CHECKING:
+    from rich.table import Table
 
 
 def lazy_import(name: str) -> ModuleType:
@@ -68,9 +71,9 @@ class OneLineErrors(TyperGroup):
     as a multi-line panel; here they become the same one line as every other error.
     """
 
-    def main(self, *args: object, standalone_mode: bool = True, **kwargs: object):  # type: ignore[override]  # click's signature
+    def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         try:
-            rv = super().main(*args, standalone_mode=False, **kwargs)  # type: ignore[arg-type]  # same
+            rv = super().main(*args, **{**kwargs, "standalone_mode": False})
         except UsageError as e:
             hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
             message = " ".join(e.format_message().split())
@@ -169,7 +172,7 @@ def _clean(obj: object) -> object:
     return obj
 
 
-def validation_table(rows: list[dict], title: str):
+def validation_table(rows: list[dict[str, Any]], title: str) -> Table:
     """A rich table of :meth:`ValidationResult.rows` (model vs constant step, per joint)."""
     from rich.table import Table
 
