@@ -15,8 +15,9 @@ those tests on any measurement table:
     factor (+ against -; equivalent to a pooled two-sample t test, F = t^2).
 ``two-way`` tests
     For each joint and pose, the two-way table ``gamma ~ C(day) * C(direction)``
-    (ordinary least squares, type-II sums of squares, statsmodels ``anova_lm``): one
-    row per term ``day``, ``direction`` and ``day:direction``.
+    (ordinary least squares, type-II sums of squares, as statsmodels ``anova_lm``
+    reports them; computed in closed form from group sums, O(n)): one row per term
+    ``day``, ``direction`` and ``day:direction``.
 
 Grouping rule (which traverses are "the same pose")
     Traverses of one joint belong to the same pose when their fixed joints (the moving
@@ -25,7 +26,7 @@ Grouping rule (which traverses are "the same pose")
     and ``length_tol`` (m) for lengths -- default 1e-3 rad (0.06 degrees) and 10 µm,
     far below what a pose can be set to by hand and far above rounding in a file.
     Groups are formed greedily: each traverse joins the first group whose first member
-    matches it.
+    matches it (found through a grid of cells, so grouping costs O(n), not O(n x groups)).
 
 When a test is made
     A ``day`` test needs the pose measured on at least two days and at least one
@@ -49,12 +50,12 @@ residual and the same in nm (prismatic) or µrad (rotary).
 from __future__ import annotations
 
 import math
-import warnings
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .measurements import Traverse
 
@@ -143,6 +144,12 @@ def group_poses(
 ) -> list[PoseGroup]:
     """Group traverses by joint and pose (fixed joints, tilt, traversed interval).
 
+    The greedy rule of the module docstring (each traverse joins the first group whose
+    first member matches it), found through a grid of cells ``2 tol`` wide so that the
+    cost grows with the number of traverses, not with traverses x groups: a matching
+    first member lies in one of the neighbouring cells, and of the matching groups the
+    oldest wins, exactly as in a scan of the list.
+
     Parameters
     ----------
     traverses : sequence of Traverse
@@ -151,6 +158,71 @@ def group_poses(
     length_tol : float
         Largest difference of lengths (m) within one pose.
     """
+    if not (0.0 < angle_tol < math.inf and 0.0 < length_tol < math.inf):
+        return _group_poses_scan(traverses, angle_tol, length_tol)
+    groups: list[PoseGroup] = []
+    # per joint: a trie of cell indices (one level per coordinate) whose leaves list group numbers
+    tries: dict[int, dict[int, Any]] = {}
+    # a traverse whose coordinates equal an earlier one's joins that one's group
+    exact: dict[tuple[int, tuple[float, ...]], int] = {}
+    for t in traverses:
+        coords, tols = _pose_coordinates(t, angle_tol, length_tol)
+        key = (t.joint, coords)
+        hit = exact.get(key)
+        if hit is None:
+            scaled = [c / (2.0 * tol) for c, tol in zip(coords, tols, strict=True)]
+            if not all(map(math.isfinite, scaled)):  # huge or NaN values (not from a table): no grid
+                return _group_poses_scan(traverses, angle_tol, length_tol)
+            cells = [math.floor(x) for x in scaled]
+            trie = tries.setdefault(t.joint, {})
+            best = -1
+            for gi in _neighbours(trie, cells, 0):
+                if (best < 0 or gi < best) and groups[gi].matches(t, angle_tol, length_tol):
+                    best = gi
+            if best < 0:
+                lo, hi = sorted((t.start, t.end))
+                groups.append(PoseGroup(t.joint, t.pose(), (lo, hi), []))
+                best = len(groups) - 1
+                node = trie
+                for c in cells[:-1]:
+                    node = node.setdefault(c, {})
+                node.setdefault(cells[-1], []).append(best)
+            hit = exact[key] = best
+        groups[hit].traverses.append(t)
+    return groups
+
+
+def _pose_coordinates(t: Traverse, angle_tol: float, length_tol: float) -> tuple[tuple[float, ...], list[float]]:
+    """The coordinates :meth:`PoseGroup.matches` compares, and the tolerance of each."""
+    coords: list[float] = []
+    tols: list[float] = []
+    for k in _POSE_KEYS:
+        if k == f"q{t.joint}":
+            continue
+        coords.append(float(getattr(t, k)))
+        tols.append(length_tol if k == "q3" else angle_tol)
+    lo, hi = sorted((t.start, t.end))
+    tol = length_tol if t.joint == 3 else angle_tol
+    coords += [float(lo), float(hi)]
+    tols += [tol, tol]
+    return tuple(coords), tols
+
+
+def _neighbours(node: dict[int, Any], cells: list[int], level: int) -> Iterator[int]:
+    """Group numbers stored in the trie within one cell of ``cells`` on every level."""
+    c = cells[level]
+    for k in (c - 1, c, c + 1):
+        child = node.get(k)
+        if child is None:
+            continue
+        if level == len(cells) - 1:
+            yield from child
+        else:
+            yield from _neighbours(child, cells, level + 1)
+
+
+def _group_poses_scan(traverses: Sequence[Traverse], angle_tol: float, length_tol: float) -> list[PoseGroup]:
+    """The greedy rule by a plain scan (for tolerances of zero, below zero or infinite)."""
     groups: list[PoseGroup] = []
     for t in traverses:
         for g in groups:
@@ -166,14 +238,16 @@ def group_poses(
 # ---------------------------------------------------------------- tests
 
 
-def one_way(samples: Sequence[Sequence[float]]) -> tuple[float, float, int, int]:
+def one_way(samples: Sequence[Sequence[float] | NDArray[np.float64]]) -> tuple[float, float, int, int]:
     """One-way ANOVA of ``samples`` (one sequence per group): ``(F, p, df_between, df_within)``.
 
-    :func:`scipy.stats.f_oneway`, with the degenerate cases made explicit: zero
-    spread within groups gives F = inf, p = 0 if the means differ (NaN otherwise);
-    equal group means give F = 0, p = 1 (scipy can return a tiny negative F and NaN).
+    The F test of :func:`scipy.stats.f_oneway` computed directly (two-pass sums of
+    squares, p from the F distribution's survival function): the same numbers without
+    its per-call overhead, which dominated tables of many days. The degenerate cases are
+    explicit: zero spread within groups gives F = inf, p = 0 if the means differ (NaN
+    otherwise); equal group means give F = 0, p = 1.
     """
-    from scipy import stats
+    from scipy import special
 
     arrays = [np.asarray(s, dtype=float) for s in samples]
     k = len(arrays)
@@ -183,23 +257,17 @@ def one_way(samples: Sequence[Sequence[float]]) -> tuple[float, float, int, int]
         raise ValueError(
             f"one-way ANOVA needs >= 2 non-empty groups and n > groups (got {k} groups, n = {n})"
         )
-    grand = np.concatenate(arrays).mean()
+    every = np.concatenate(arrays)
+    grand = every.mean()
     ssw = sum(float(((a - a.mean()) ** 2).sum()) for a in arrays)
     ssb = sum(a.size * float((a.mean() - grand) ** 2) for a in arrays)
-    scale = max(float(np.abs(np.concatenate(arrays)).max()), 1e-300) ** 2 * n
+    scale = max(float(np.abs(every).max()), 1e-300) ** 2 * n
     if ssw <= 1e-28 * scale:
         if ssb <= 1e-28 * scale:
             return math.nan, math.nan, dfb, dfw
         return math.inf, 0.0, dfb, dfw
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        res = stats.f_oneway(*arrays)
-    F, p = float(res.statistic), float(res.pvalue)
-    if not (math.isfinite(p) and F >= 0.0):
-        # equal group means: scipy's F can come out as -1e-33 and its p as NaN; F = 0, p = 1
-        F = max(0.0, (ssb / dfb) / (ssw / dfw))
-        p = float(stats.f.sf(F, dfb, dfw))
-    return F, p, dfb, dfw
+    F = max(0.0, (ssb / dfb) / (ssw / dfw))
+    return F, float(special.fdtrc(dfb, dfw, F)), dfb, dfw
 
 
 @dataclass(frozen=True)
@@ -280,8 +348,8 @@ class AnovaTest:
 
 
 def _groups_summary(
-    labels: Sequence[str], samples: Sequence[np.ndarray], joint: int
-) -> tuple[dict, ...]:
+    labels: Sequence[str], samples: Sequence[NDArray[np.float64]], joint: int
+) -> tuple[dict[str, Any], ...]:
     k, _unit = _scale(joint)
     out = []
     for lab, s in zip(labels, samples, strict=True):
@@ -333,38 +401,59 @@ class AnovaResult:
         return "\n".join(lines)
 
 
-def _two_way(g: PoseGroup, scale: float) -> list[tuple[str, float, float, int, int]]:
-    try:
-        import pandas as pd
-        import statsmodels.formula.api as smf
-        from statsmodels.stats.anova import anova_lm
-    except ImportError:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            "the two-way ANOVA needs statsmodels and pandas: pip install 'stickslip[stats]'"
-        ) from None
-    df = pd.DataFrame(
-        {
-            "gamma": [t.gamma * scale for t in g.traverses],
-            "day": [str(t.day) for t in g.traverses],
-            "direction": ["pos" if t.direction == "+" else "neg" for t in g.traverses],
-        }
-    )
-    model = smf.ols("gamma ~ C(day) * C(direction)", data=df).fit()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        table = anova_lm(model, typ=2)
-    dfres = int(round(float(table.loc["Residual", "df"])))
-    names = {"C(day)": "day", "C(direction)": "direction", "C(day):C(direction)": "day:direction"}
-    out = []
-    from scipy import stats
+def _two_way(
+    gamma: NDArray[np.float64], day: Sequence[str], plus: NDArray[np.bool_]
+) -> list[tuple[str, float, float, int, int]]:
+    """Type-II two-way ANOVA of ``gamma ~ C(day) * C(direction)`` in closed form, O(n).
 
-    for idx, term in names.items():
-        F, p, dfn = float(table.loc[idx, "F"]), float(table.loc[idx, "PR(>F)"]), int(round(float(table.loc[idx, "df"])))
+    With every day x direction cell filled (the caller checks it), the residual sums of
+    the four nested models follow from group sums: within days, within directions,
+    within cells, and the additive model ``day + direction``, whose direction effect is
+    the within-day regression on the direction indicator. The type-II sums are
+    ``SS(day | direction) = RSS(direction) - RSS(day + direction)``, the same for
+    direction, and ``SS(day:direction) = RSS(day + direction) - RSS(cells)`` -- what
+    statsmodels' ``anova_lm(ols(...).fit(), typ=2)`` reports (the tests compare them),
+    without building an n x (2 days) design matrix.
+    """
+    from scipy import special
+
+    y = np.asarray(gamma, dtype=float)
+    x = plus.astype(float)
+    _, d_idx = np.unique(np.asarray(day, dtype=object).astype(str), return_inverse=True)
+    n_days = int(d_idx.max()) + 1
+    cell = d_idx * 2 + plus.astype(np.intp)
+
+    def within(groups: NDArray[np.intp], v: NDArray[np.float64], k: int) -> NDArray[np.float64]:
+        """``v`` minus the mean of its group."""
+        cnt = np.bincount(groups, minlength=k)
+        return v - (np.bincount(groups, weights=v, minlength=k) / np.maximum(cnt, 1))[groups]
+
+    yd, xd = within(d_idx, y, n_days), within(d_idx, x, n_days)
+    rss_day = float(yd @ yd)
+    yc = within(cell, y, 2 * n_days)
+    rss_cells = float(yc @ yc)
+    ydir = within(plus.astype(np.intp), y, 2)
+    rss_dir = float(ydir @ ydir)
+    sxx = float(xd @ xd)
+    b = float(xd @ yd) / sxx if sxx > 0 else 0.0
+    r_add = yd - b * xd
+    rss_add = float(r_add @ r_add)
+    df_res = y.size - 2 * n_days
+    terms = (
+        ("day", rss_dir - rss_add, n_days - 1),
+        ("direction", rss_day - rss_add, 1),
+        ("day:direction", rss_add - rss_cells, n_days - 1),
+    )
+    out = []
+    mse = rss_cells / df_res
+    for term, ss, df in terms:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            F = float(np.float64(ss / df) / np.float64(mse))
         if math.isfinite(F) and F < 0.0:  # a sum of squares of -1e-30 from rounding: no effect at all
             F, p = 0.0, 1.0
-        elif math.isfinite(F) and not math.isfinite(p):
-            p = float(stats.f.sf(F, dfn, dfres))
-        out.append((term, F, p, dfn, dfres))
+        else:
+            p = float(special.fdtrc(df, df_res, F)) if not math.isnan(F) else math.nan
+        out.append((term, F, p, df, df_res))
     return out
 
 
@@ -384,7 +473,7 @@ def anova(
     alpha : float
         Significance level for the verdicts, in (0, 1).
     two_way : bool
-        Also compute the day x direction table with interaction (needs statsmodels).
+        Also compute the day x direction table with interaction.
     angle_tol, length_tol : float
         Pose-matching tolerances, rad and m (see the module docstring).
 
@@ -405,19 +494,24 @@ def anova(
     for g in sorted(groups, key=lambda g: g.joint):
         _k, unit = _scale(g.joint)
         where = f"joint {g.joint} [{g.describe()}]"
+        # the group's average steps by (direction, day), in table order, in one pass
+        cells: dict[tuple[str, str], list[float]] = {}
+        for t in g.traverses:
+            cells.setdefault((t.direction, t.day), []).append(t.gamma)
+        all_days = sorted({day for _, day in cells})
         # across days, per direction
         for d in ("+", "-"):
-            ts = [t for t in g.traverses if t.direction == d]
-            if not ts:
+            days = [day for day in all_days if (d, day) in cells]
+            if not days:
                 continue
-            days = sorted({t.day for t in ts})
+            n_d = sum(len(cells[(d, day)]) for day in days)
             if len(days) < 2:
                 skipped.append(f"days: {where} {d}: measured on one day only ({days[0]})")
                 continue
-            if len(ts) <= len(days):
+            if n_d <= len(days):
                 skipped.append(f"days: {where} {d}: one traverse per day, no spread within days")
                 continue
-            samples = [np.array([t.gamma for t in ts if t.day == day]) for day in days]
+            samples = [np.array(cells[(d, day)]) for day in days]
             F, p, dfb, dfw = one_way(samples)
             day_tests.append(
                 AnovaTest(
@@ -432,16 +526,15 @@ def anova(
                     p,
                     dfb,
                     dfw,
-                    len(ts),
+                    n_d,
                     _groups_summary(days, samples, g.joint),
                     unit,
                 )
             )
         # + against -, per day
-        for day in sorted({t.day for t in g.traverses}):
-            ts = [t for t in g.traverses if t.day == day]
-            plus = np.array([t.gamma for t in ts if t.direction == "+"])
-            minus = np.array([t.gamma for t in ts if t.direction == "-"])
+        for day in all_days:
+            plus = np.array(cells.get(("+", day), []))
+            minus = np.array(cells.get(("-", day), []))
             if plus.size == 0 or minus.size == 0:
                 continue
             if plus.size + minus.size < 3:
@@ -468,19 +561,19 @@ def anova(
             )
         # day x direction
         if two_way:
-            days = sorted({t.day for t in g.traverses})
-            dirs = {t.direction for t in g.traverses}
-            if len(days) < 2 or len(dirs) < 2:
+            dirs = {d for d, _ in cells}
+            if len(all_days) < 2 or len(dirs) < 2:
                 continue
-            cells = {(t.day, t.direction) for t in g.traverses}
-            if len(cells) < 2 * len(days):
+            if len(cells) < 2 * len(all_days):
                 skipped.append(f"two-way: {where}: not every day has both directions")
                 continue
             if len(g.traverses) <= len(cells):
                 skipped.append(f"two-way: {where}: one traverse per day and direction, no residual")
                 continue
             k, _ = _scale(g.joint)
-            for term, F, p, dfn, dfd in _two_way(g, k):
+            gam = np.array([t.gamma * k for t in g.traverses])
+            pl = np.array([t.direction == "+" for t in g.traverses])
+            for term, F, p, dfn, dfd in _two_way(gam, [str(t.day) for t in g.traverses], pl):
                 tw_tests.append(
                     AnovaTest(
                         "two-way",
@@ -579,11 +672,13 @@ def residual_summary(calibration: Calibration, traverses: Sequence[Traverse]) ->
     (``calibration.predict``), so long rotary traverses are compared fairly.
     """
     out: list[ResidualRow] = []
-    keys = sorted({(t.joint, t.direction) for t in traverses}, key=lambda k: (k[0], k[1] != "+"))
-    for joint, d in keys:
-        ts = [t for t in traverses if t.joint == joint and t.direction == d]
+    by_key: dict[tuple[int, str], list[Traverse]] = {}
+    for t in traverses:
+        by_key.setdefault((t.joint, t.direction), []).append(t)
+    for joint, d in sorted(by_key, key=lambda k: (k[0], k[1] != "+")):
+        ts = by_key[(joint, d)]
         try:
-            pred = np.array([float(calibration.predict(t)) for t in ts])
+            pred = calibration.predict_many(ts)  # vectorised: one closed form per joint and direction
         except (KeyError, ValueError, LookupError):
             continue  # the calibration does not model this joint/direction
         meas = np.array([t.gamma for t in ts])

@@ -16,12 +16,15 @@ from __future__ import annotations
 
 import csv
 import io
+import itertools
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from . import kinematics as kin
 from .models import direction_label
@@ -31,9 +34,15 @@ __all__ = [
     "HEADER",
     "POSE_COLUMNS",
     "Traverse",
+    "TraverseTable",
+    "PoseTable",
     "TableError",
     "read_measurements",
     "parse_measurements",
+    "read_measurement_table",
+    "parse_measurement_table",
+    "read_pose_columns",
+    "parse_pose_columns",
     "write_measurements",
     "measurements_to_csv",
     "check_pose",
@@ -96,7 +105,11 @@ class Traverse:
 
     def with_moving(self, q: float) -> Traverse:
         """A copy whose moving joint's column holds ``q`` (handy for evaluating the model)."""
-        return replace(self, **{f"q{self.joint}": q})
+        if self.joint == 1:
+            return replace(self, q1=q)
+        if self.joint == 2:
+            return replace(self, q2=q)
+        return replace(self, q3=q)
 
 
 class TableError(ValueError):
@@ -229,8 +242,185 @@ def _csv_problem(source: str, e: csv.Error) -> str:
     return f"{source}: not a readable CSV table ({text})"
 
 
+CHUNK_ROWS = 65536
+"""Rows parsed at a time: memory stays bounded by the chunk, not the table, beyond the result arrays."""
+
+
+@dataclass(frozen=True, eq=False)
+class TraverseTable:
+    """A measurement table as columns (one numpy array per column of design.md §7).
+
+    The columnar form of a list of :class:`Traverse`: what :func:`parse_measurement_table`
+    returns, so that a table of a million rows is parsed, checked and modelled without a
+    Python object per row. :meth:`traverses` gives the row objects when wanted.
+
+    Attributes
+    ----------
+    day : ndarray of str (object)
+        Session labels.
+    joint : ndarray of int
+        Moving joint, 1, 2 or 3.
+    direction : ndarray of str
+        ``"+"`` or ``"-"``.
+    q1, q2, q3, theta, psi : ndarray of float
+        Fixed joints (rad, rad, m) and base tilt (rad).
+    start, end : ndarray of float
+        Traversed interval (rad or m).
+    steps : ndarray of int
+        Steps counted, > 0.
+    lines : ndarray of int
+        Line of each row in its file (record number; the header is line 1).
+    """
+
+    day: NDArray[np.object_]
+    joint: NDArray[np.int64]
+    direction: NDArray[np.str_]
+    q1: NDArray[np.float64]
+    q2: NDArray[np.float64]
+    q3: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    psi: NDArray[np.float64]
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+    steps: NDArray[np.int64]
+    lines: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.joint.size)
+
+    @property
+    def gamma(self) -> NDArray[np.float64]:
+        """Average step sizes ``|end - start| / steps`` (m or rad)."""
+        return np.abs(self.end - self.start) / self.steps
+
+    def traverses(self) -> list[Traverse]:
+        """The rows as :class:`Traverse` objects (Python floats and ints, as :func:`parse_row` makes them)."""
+        cols = [getattr(self, f.name).tolist() for f in fields(Traverse)]
+        return list(map(Traverse, *cols))
+
+    @classmethod
+    def from_traverses(cls, traverses: Sequence[Traverse], lines: Sequence[int] | None = None) -> TraverseTable:
+        """The columns of a sequence of traverses (``lines`` default 2, 3, ...)."""
+        n = len(traverses)
+        cols: dict[str, Any] = {f.name: [getattr(t, f.name) for t in traverses] for f in fields(Traverse)}
+        def f(k: str) -> NDArray[np.float64]:
+            return np.array(cols[k], dtype=float).reshape(n)
+
+        return cls(
+            np.array(cols["day"], dtype=object).reshape(n),
+            np.array(cols["joint"], dtype=np.int64).reshape(n),
+            np.array(cols["direction"], dtype="<U1").reshape(n),
+            f("q1"),
+            f("q2"),
+            f("q3"),
+            f("theta"),
+            f("psi"),
+            f("start"),
+            f("end"),
+            np.array(cols["steps"], dtype=np.int64).reshape(n),
+            np.arange(2, n + 2, dtype=np.int64) if lines is None else np.array(lines, dtype=np.int64).reshape(n),
+        )
+
+    @classmethod
+    def concat(cls, parts: Sequence[TraverseTable]) -> TraverseTable:
+        """One table of several, in order."""
+        names = [f.name for f in fields(cls)]
+        if not parts:
+            return cls.from_traverses([])
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in names))
+
+    def take(self, index: NDArray[np.intp] | NDArray[np.bool_]) -> TraverseTable:
+        """The rows selected by an index array or a boolean mask."""
+        return TraverseTable(*(getattr(self, f.name)[index] for f in fields(TraverseTable)))
+
+
+def _floats(cells: Sequence[str]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """``float(cell)`` of each cell and whether it is a finite number (vectorised where all parse)."""
+    n = len(cells)
+    try:
+        v = np.fromiter(map(float, cells), dtype=float, count=n)
+    except ValueError:
+        v = np.empty(n)
+        for i, c in enumerate(cells):
+            try:
+                v[i] = float(c)
+            except ValueError:
+                v[i] = math.nan
+    return v, np.isfinite(v)
+
+
+def _ints(cells: Sequence[str], lo: int, hi: int) -> tuple[NDArray[np.int64], NDArray[np.bool_]]:
+    """``int(cell)`` of each cell and whether it is an integer in ``[lo, hi]``."""
+    n = len(cells)
+    try:
+        v = np.fromiter(map(int, cells), dtype=np.int64, count=n)
+        return v, (v >= lo) & (v <= hi)
+    except (ValueError, OverflowError):
+        v = np.zeros(n, dtype=np.int64)
+        ok = np.zeros(n, dtype=bool)
+        for i, c in enumerate(cells):
+            try:
+                x = int(c)
+            except ValueError:
+                continue
+            if lo <= x <= hi:
+                v[i], ok[i] = x, True
+        return v, ok
+
+
+def _within(joint: int, q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Vectorised :meth:`JointSpec.contains` (same tolerance, same comparisons)."""
+    spec = kin.JOINTS[joint]
+    tol = 1e-5 * spec.span
+    return (spec.lower - tol <= q) & (q <= spec.upper + tol)
+
+
+def _pose_ok(joint: NDArray[np.int64], nums: dict[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
+    """Vectorised ``not check_pose(joint, nums)``: fixed joints within their stops, tilt within [-pi, pi]."""
+    ok = np.ones(joint.size, dtype=bool)
+    for j in (1, 2, 3):
+        ok &= (joint == j) | _within(j, nums[f"q{j}"])
+    for name in ("theta", "psi"):
+        v = nums[name]
+        ok &= (-_TILT_LIMIT <= v) & (v <= _TILT_LIMIT)
+    return ok
+
+
+def _moving_within(joint: NDArray[np.int64], q: NDArray[np.float64]) -> NDArray[np.bool_]:
+    """Whether ``q`` lies within the range of each row's own joint."""
+    ok = np.zeros(joint.size, dtype=bool)
+    for j in (1, 2, 3):
+        sel = joint == j
+        ok[sel] = _within(j, q[sel])
+    return ok
+
+
+_JOINT_CELL = {"1": 1, "2": 2, "3": 3}
+
+
+def _records(text: str) -> Iterator[list[str]]:
+    return csv.reader(io.StringIO(text))
+
+
 def _parse_measurements(text: str, source: str) -> list[Traverse]:
-    reader = csv.reader(io.StringIO(text))
+    return _parse_measurement_columns(text, source).traverses()
+
+
+def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTable:
+    """Parse measurement-table CSV text into columns. Raises :class:`TableError` listing every bad row.
+
+    The same rules, row numbers and messages as :func:`parse_measurements`; the rows are
+    checked a chunk at a time with numpy, and only rows that fail a check are parsed one
+    by one (by :func:`parse_row`) to say why.
+    """
+    try:
+        return _parse_measurement_columns(text, source)
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+
+
+def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
+    reader = _records(text)
     try:
         header = next(reader)
     except StopIteration:
@@ -247,25 +437,92 @@ def _parse_measurements(text: str, source: str) -> list[Traverse]:
         if not detail:
             detail.append("columns out of order")
         raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
-    out: list[Traverse] = []
-    problems: list[str] = []
-    for lineno, cells in enumerate(reader, start=2):
-        if not cells or all(not c.strip() for c in cells):
-            continue  # blank line: not data
-        where = f"{source}:{lineno}"
-        if len(cells) != len(HEADER):
-            problems.append(f"{where}: expected {len(HEADER)} columns, found {len(cells)}")
-            continue
-        t, errs = parse_row(dict(zip(HEADER, cells, strict=True)), where)
-        if errs:
+    parts: list[TraverseTable] = []
+    problems: list[tuple[int, str]] = []  # (line, reason): sorted by line at the end, stable within a line
+    lineno = 1
+    while True:
+        chunk = list(itertools.islice(reader, CHUNK_ROWS))
+        if not chunk:
+            break
+        rows: list[list[str]] = []
+        lines: list[int] = []
+        for cells in chunk:
+            lineno += 1
+            if not cells or all(not c.strip() for c in cells):
+                continue  # blank line: not data
+            if len(cells) != len(HEADER):
+                problems.append((lineno, f"{source}:{lineno}: expected {len(HEADER)} columns, found {len(cells)}"))
+                continue
+            rows.append(cells)
+            lines.append(lineno)
+        if rows:
+            part, errs = _measurement_chunk(rows, lines, source)
+            parts.append(part)
             problems += errs
-        else:
-            out.append(t)  # type: ignore[arg-type]
     if problems:
-        raise TableError(problems)
-    if not out:
+        raise TableError([p for _, p in sorted(problems, key=lambda lp: lp[0])])
+    table = TraverseTable.concat(parts)
+    if not len(table):
         raise TableError([f"{source}:2: the table has a header but no rows"])
-    return out
+    return table
+
+
+def _measurement_chunk(
+    rows: list[list[str]], lines: list[int], source: str
+) -> tuple[TraverseTable, list[tuple[int, str]]]:
+    """Check a chunk of 11-cell rows with numpy; rows that fail anything are re-parsed by :func:`parse_row`."""
+    n = len(rows)
+    cols = list(zip(*rows, strict=True))
+    days = [c.strip() for c in cols[0]]
+    ok = np.fromiter((bool(d) for d in days), dtype=bool, count=n)
+    jmap = _JOINT_CELL.get
+    joint = np.fromiter((jmap(c, 0) for c in cols[1]), dtype=np.int64, count=n)
+    ok &= joint > 0
+    dcol = cols[2]
+    plus = np.fromiter((c == "+" for c in dcol), dtype=bool, count=n)
+    ok &= plus | np.fromiter((c == "-" for c in dcol), dtype=bool, count=n)
+    nums: dict[str, NDArray[np.float64]] = {}
+    for i, name in enumerate(("q1", "q2", "q3", "theta", "psi", "start", "end"), start=3):
+        v, good = _floats(cols[i])
+        nums[name] = v
+        ok &= good
+    steps, good = _ints(cols[10], 1, MAX_STEPS)
+    ok &= good
+    start, end = nums["start"], nums["end"]
+    with np.errstate(invalid="ignore"):
+        ok &= (end != start) & ((end > start) == plus)
+        ok &= _moving_within(joint, start) & _moving_within(joint, end)
+        ok &= _pose_ok(joint, nums)
+    problems: list[tuple[int, str]] = []
+    bad = np.flatnonzero(~ok)
+    for i in bad.tolist():
+        t, errs = parse_row(dict(zip(HEADER, rows[i], strict=True)), f"{source}:{lines[i]}")
+        if errs or t is None:
+            problems += [(lines[i], e) for e in errs]
+            continue
+        # a row the vector check was too strict for (" 3", "+1", "1e3" steps): take parse_row's values
+        ok[i] = True
+        days[i] = t.day
+        joint[i] = t.joint
+        plus[i] = t.direction == "+"
+        for name in ("q1", "q2", "q3", "theta", "psi", "start", "end"):
+            nums[name][i] = getattr(t, name)
+        steps[i] = t.steps
+    table = TraverseTable(
+        np.array(days, dtype=object),
+        joint,
+        np.where(plus, "+", "-"),
+        nums["q1"],
+        nums["q2"],
+        nums["q3"],
+        nums["theta"],
+        nums["psi"],
+        start,
+        end,
+        steps,
+        np.array(lines, dtype=np.int64),
+    )
+    return (table.take(ok) if bad.size else table), problems
 
 
 def _read_table_text(path: str | Path) -> str:
@@ -286,6 +543,11 @@ def _read_table_text(path: str | Path) -> str:
 def read_measurements(path: str | Path) -> list[Traverse]:
     """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
     return parse_measurements(_read_table_text(path), str(path))
+
+
+def read_measurement_table(path: str | Path) -> TraverseTable:
+    """Read a measurement table from a CSV file into columns (see :func:`parse_measurement_table`)."""
+    return parse_measurement_table(_read_table_text(path), str(path))
 
 
 def _fmt(v: object) -> str:
@@ -363,18 +625,17 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
         raise TableError([_csv_problem(source, e)]) from None
 
 
-def _parse_pose_table(text: str, source: str) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
-    reader = csv.DictReader(io.StringIO(text))
+def _pose_header(reader: Iterator[list[str]], source: str) -> list[str]:
+    """The stripped header of a pose table, checked (as ``csv.DictReader`` reads it: the first record)."""
     try:
-        header = [h.strip() for h in (reader.fieldnames or [])]
-    except csv.Error as e:
-        raise TableError([_csv_problem(source, e)]) from None
+        header = [h.strip() for h in next(reader)]
+    except StopIteration:
+        header = []
     dup = sorted({h for h in header if h and header.count(h) > 1})
     if dup:
         raise TableError([f"{source}:1: column(s) {', '.join(dup)} appear more than once; keep one of each"])
     if not header:
         raise TableError([f"{source}:1: the file is empty (expected a header with {','.join(POSE_TABLE_REQUIRED)})"])
-    reader.fieldnames = header
     missing = [c for c in POSE_TABLE_REQUIRED if c not in header]
     if missing:
         raise TableError(
@@ -383,76 +644,293 @@ def _parse_pose_table(text: str, source: str) -> tuple[list[str], list[dict[str,
                 "and direction and/or start,end)"
             ]
         )
-    has_traverse = "start" in header and "end" in header
-    rows: list[dict[str, str]] = []
-    queries: list[PoseQuery] = []
-    problems: list[str] = []
-    for lineno, row in enumerate(reader, start=2):
-        if None in row:
-            problems.append(f"{source}:{lineno}: more cells than header columns")
+    return header
+
+
+def _pose_records(reader: Iterator[list[str]], header: list[str]) -> Iterator[tuple[int, list[str] | None]]:
+    """``(line, cells)`` of each data record of a pose table, as ``csv.DictReader`` numbers them.
+
+    Empty records are skipped without being counted (DictReader's rule); records whose
+    cells are blank (of a repeated column name, the last cell) are counted and skipped;
+    a record with more cells than the header comes with ``None``. Shorter records are
+    padded with empty cells.
+    """
+    width = len(header)
+    used = sorted({h: i for i, h in enumerate(header)}.values())
+    lineno = 1
+    for cells in reader:
+        if not cells:
             continue
-        if all(not (v or "").strip() for v in row.values()):
+        lineno += 1
+        if len(cells) > width:
+            yield lineno, None
             continue
-        where = f"{source}:{lineno}"
-        errs: list[str] = []
-        jtext = (row.get("joint") or "").strip()
+        if all(i >= len(cells) or not cells[i].strip() for i in used):
+            continue
+        if len(cells) < width:
+            cells = cells + [""] * (width - len(cells))
+        yield lineno, cells
+
+
+def _pose_row(
+    row: dict[str, str], where: str, has_traverse: bool
+) -> tuple[PoseQuery | None, list[str]]:
+    """Validate one pose-table row (a dict of strings, missing cells empty): the query or the problems."""
+    errs: list[str] = []
+    jtext = (row.get("joint") or "").strip()
+    try:
+        joint = int(jtext)
+        kin.joint_spec(joint)
+    except ValueError:
+        errs.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
+        joint = 0
+    dtext = (row.get("direction") or "").strip()
+    direction: str | None = None
+    if dtext:
         try:
-            joint = int(jtext)
-            kin.joint_spec(joint)
+            direction = direction_label(dtext)
         except ValueError:
-            errs.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
-            joint = 0
-        dtext = (row.get("direction") or "").strip()
-        direction: str | None = None
-        if dtext:
-            try:
-                direction = direction_label(dtext)
-            except ValueError:
-                errs.append(f"{where}: direction must be '+' or '-', got {dtext!r}")
-        nums: dict[str, float] = {}
-        for name in ("q1", "q2", "q3", "theta", "psi"):
-            v, err = _parse_float(name, (row.get(name) or "").strip())
-            if err:
-                errs.append(f"{where}: {err}")
+            errs.append(f"{where}: direction must be '+' or '-', got {dtext!r}")
+    nums: dict[str, float] = {}
+    for name in ("q1", "q2", "q3", "theta", "psi"):
+        v, err = _parse_float(name, (row.get(name) or "").strip())
+        if err or v is None:
+            errs.append(f"{where}: {err}")
+        else:
+            nums[name] = v
+    start = end = None
+    if has_traverse:
+        st, en = (row.get("start") or "").strip(), (row.get("end") or "").strip()
+        if st or en:
+            if not (st and en):
+                errs.append(f"{where}: give both start and end (a traverse) or neither (a pose)")
             else:
-                nums[name] = v  # type: ignore[assignment]
-        start = end = None
-        if has_traverse:
-            st, en = (row.get("start") or "").strip(), (row.get("end") or "").strip()
-            if st or en:
-                if not (st and en):
-                    errs.append(f"{where}: give both start and end (a traverse) or neither (a pose)")
-                else:
-                    start, e1 = _parse_float("start", st)
-                    end, e2 = _parse_float("end", en)
-                    errs += [f"{where}: {e}" for e in (e1, e2) if e]
-        if not errs and joint:
-            spec = kin.JOINTS[joint]
-            if start is not None and end is not None:
-                if start == end:
-                    errs.append(f"{where}: start and end are equal: a traverse must move")
-                elif direction is None:
-                    direction = "+" if end > start else "-"
-                elif (end > start) != (direction == "+"):
-                    errs.append(f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g}")
-                checks = [("start", start), ("end", end)]
-            else:
-                if direction is None:
-                    errs.append(f"{where}: the step size at a pose needs a direction ('+' or '-')")
-                checks = [(f"q{joint}", nums[f"q{joint}"])]
-            errs += [f"{where}: {p}" for name, v in checks if (p := spec.range_problem(name, v))]
-            errs += [f"{where}: {p}" for p in check_pose(joint, nums)]
-        if errs:
-            problems += errs
+                start, e1 = _parse_float("start", st)
+                end, e2 = _parse_float("end", en)
+                errs += [f"{where}: {e}" for e in (e1, e2) if e]
+    if not errs and joint:
+        spec = kin.JOINTS[joint]
+        if start is not None and end is not None:
+            if start == end:
+                errs.append(f"{where}: start and end are equal: a traverse must move")
+            elif direction is None:
+                direction = "+" if end > start else "-"
+            elif (end > start) != (direction == "+"):
+                errs.append(f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g}")
+            checks = [("start", start), ("end", end)]
+        else:
+            if direction is None:
+                errs.append(f"{where}: the step size at a pose needs a direction ('+' or '-')")
+            checks = [(f"q{joint}", nums[f"q{joint}"])]
+        errs += [f"{where}: {p}" for name, v in checks if (p := spec.range_problem(name, v))]
+        errs += [f"{where}: {p}" for p in check_pose(joint, nums)]
+    if errs:
+        return None, errs
+    assert direction is not None
+    return PoseQuery(joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"], start, end), []
+
+
+@dataclass(frozen=True, eq=False)
+class PoseTable:
+    """A pose table for ``predict`` as columns, with the text to pass its cells through.
+
+    Attributes
+    ----------
+    header : list of str
+        The stripped header.
+    joint : ndarray of int
+    direction : ndarray of str
+        ``"+"`` or ``"-"`` (for a traverse row without one: the sign of ``end - start``).
+    q1, q2, q3, theta, psi : ndarray of float
+        The pose (rad, m).
+    start, end : ndarray of float
+        The traversed interval, NaN on rows that ask for the step at the pose.
+    lines : ndarray of int
+        Line of each row (as :func:`parse_pose_table` numbers them).
+    """
+
+    header: list[str]
+    joint: NDArray[np.int64]
+    direction: NDArray[np.str_]
+    q1: NDArray[np.float64]
+    q2: NDArray[np.float64]
+    q3: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    psi: NDArray[np.float64]
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+    lines: NDArray[np.int64]
+    text: str = ""
+
+    def __len__(self) -> int:
+        return int(self.joint.size)
+
+    @property
+    def is_traverse(self) -> NDArray[np.bool_]:
+        """Rows with ``start, end`` (the average over a traverse is asked for)."""
+        return ~np.isnan(self.start)
+
+    def cells(self) -> Iterator[list[str]]:
+        """Each row's cells, as many as the header has (missing cells empty), read again from the text."""
+        reader = _records(self.text)
+        next(reader, None)
+        for _line, cells in _pose_records(reader, self.header):
+            if cells is not None:
+                yield cells
+
+    def queries(self) -> list[PoseQuery]:
+        """The rows as :class:`PoseQuery` objects."""
+        st = [None if math.isnan(v) else v for v in self.start.tolist()]
+        en = [None if math.isnan(v) else v for v in self.end.tolist()]
+        cols = [getattr(self, k).tolist() for k in ("joint", "direction", "q1", "q2", "q3", "theta", "psi")]
+        return list(map(PoseQuery, *cols, st, en))
+
+
+def _parse_pose_table(text: str, source: str) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
+    table = _parse_pose_columns(text, source)
+    rows = [dict(zip(table.header, cells, strict=True)) for cells in table.cells()]
+    return table.header, rows, table.queries()
+
+
+def parse_pose_columns(text: str, source: str = "<string>") -> PoseTable:
+    """Parse a pose table (see :func:`parse_pose_table`) into columns; the same rules and messages."""
+    try:
+        return _parse_pose_columns(text, source)
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+
+
+def read_pose_columns(path: str | Path) -> PoseTable:
+    """Read a pose table from a CSV file into columns (see :func:`parse_pose_columns`)."""
+    return parse_pose_columns(_read_table_text(path), str(path))
+
+
+def _parse_pose_columns(text: str, source: str) -> PoseTable:
+    reader = _records(text)
+    header = _pose_header(reader, source)
+    has_traverse = "start" in header and "end" in header
+    # the cell a column's value comes from: the last of equal names, as in a dict (only '' can repeat)
+    where_col = {h: i for i, h in enumerate(header)}
+    problems: list[tuple[int, str]] = []  # (line, reason), sorted by line at the end
+    parts: list[tuple[NDArray[np.int64], NDArray[np.str_], dict[str, NDArray[np.float64]], NDArray[np.int64]]] = []
+    records = _pose_records(reader, header)
+    while True:
+        chunk = list(itertools.islice(records, CHUNK_ROWS))
+        if not chunk:
+            break
+        rows: list[list[str]] = []
+        lines: list[int] = []
+        for lineno, cells in chunk:
+            if cells is None:
+                problems.append((lineno, f"{source}:{lineno}: more cells than header columns"))
+                continue
+            rows.append(cells)
+            lines.append(lineno)
+        if not rows:
             continue
-        rows.append({k: (v or "") for k, v in row.items()})
-        assert direction is not None
-        queries.append(
-            PoseQuery(joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"], start, end)
-        )
+        part, errs = _pose_chunk(rows, lines, source, where_col, has_traverse, header)
+        problems += errs
+        parts.append(part)
     if problems:
-        raise TableError(problems)
-    return header, rows, queries
+        raise TableError([p for _, p in sorted(problems, key=lambda lp: lp[0])])
+    if parts:
+        joint = np.concatenate([p[0] for p in parts])
+        direction = np.concatenate([p[1] for p in parts])
+        nums = {k: np.concatenate([p[2][k] for p in parts]) for k in parts[0][2]}
+        lines_a = np.concatenate([p[3] for p in parts])
+    else:
+        joint, direction, lines_a = np.zeros(0, np.int64), np.zeros(0, "<U1"), np.zeros(0, np.int64)
+        nums = {k: np.zeros(0) for k in ("q1", "q2", "q3", "theta", "psi", "start", "end")}
+    return PoseTable(
+        header,
+        joint,
+        direction,
+        nums["q1"],
+        nums["q2"],
+        nums["q3"],
+        nums["theta"],
+        nums["psi"],
+        nums["start"],
+        nums["end"],
+        lines_a,
+        text,
+    )
+
+
+def _pose_chunk(
+    rows: list[list[str]],
+    lines: list[int],
+    source: str,
+    where_col: dict[str, int],
+    has_traverse: bool,
+    header: list[str],
+) -> tuple[
+    tuple[NDArray[np.int64], NDArray[np.str_], dict[str, NDArray[np.float64]], NDArray[np.int64]],
+    list[tuple[int, str]],
+]:
+    """Check a chunk of pose rows with numpy; rows that fail anything are re-parsed by :func:`_pose_row`."""
+    n = len(rows)
+    cols = list(zip(*rows, strict=True))
+
+    def col(name: str) -> Sequence[str]:
+        return cols[where_col[name]] if name in where_col else ("",) * n
+
+    jmap = _JOINT_CELL.get
+    joint = np.fromiter((jmap(c, 0) for c in col("joint")), dtype=np.int64, count=n)
+    ok = joint > 0
+    dcol = col("direction")
+    plus = np.fromiter((c == "+" for c in dcol), dtype=bool, count=n)
+    minus = np.fromiter((c == "-" for c in dcol), dtype=bool, count=n)
+    nodir = np.fromiter((c == "" for c in dcol), dtype=bool, count=n)
+    ok &= plus | minus | nodir
+    nums: dict[str, NDArray[np.float64]] = {}
+    for name in ("q1", "q2", "q3", "theta", "psi"):
+        v, good = _floats(col(name))
+        nums[name] = v
+        ok &= good
+    if has_traverse:
+        scol, ecol = col("start"), col("end")
+        both_empty = np.fromiter((a == "" and b == "" for a, b in zip(scol, ecol, strict=True)), dtype=bool, count=n)
+        start, sgood = _floats(scol)
+        end, egood = _floats(ecol)
+        trav = sgood & egood
+        ok &= trav | both_empty
+        start[~trav] = np.nan
+        end[~trav] = np.nan
+    else:
+        trav = np.zeros(n, dtype=bool)
+        start, end = np.full(n, np.nan), np.full(n, np.nan)
+    with np.errstate(invalid="ignore"):
+        up = end > start
+        # a traverse moves and agrees with its direction (or gives it); a pose needs a direction
+        ok &= np.where(trav, (end != start) & (nodir | (up == plus)), ~nodir)
+        plus = np.where(trav & nodir, up, plus)
+        own = nums["q1"].copy()
+        own[joint == 2] = nums["q2"][joint == 2]
+        own[joint == 3] = nums["q3"][joint == 3]
+        ok &= np.where(trav, _moving_within(joint, start) & _moving_within(joint, end), _moving_within(joint, own))
+        ok &= _pose_ok(joint, nums)
+    problems: list[tuple[int, str]] = []
+    bad = np.flatnonzero(~ok)
+    for i in bad.tolist():
+        q, errs = _pose_row(dict(zip(header, rows[i], strict=True)), f"{source}:{lines[i]}", has_traverse)
+        if errs or q is None:
+            problems += [(lines[i], e) for e in errs]
+            continue
+        ok[i] = True  # a row the vector check was too strict for (" 3", "pos", " 0.1"): take _pose_row's values
+        joint[i] = q.joint
+        plus[i] = q.direction == "+"
+        for name in ("q1", "q2", "q3", "theta", "psi"):
+            nums[name][i] = getattr(q, name)
+        start[i] = math.nan if q.start is None else q.start
+        end[i] = math.nan if q.end is None else q.end
+    nums["start"], nums["end"] = start, end
+    keep = ok if bad.size else slice(None)
+    direction = np.where(plus, "+", "-")
+    return (
+        (joint[keep], direction[keep], {k: v[keep] for k, v in nums.items()}, np.array(lines, dtype=np.int64)[keep]),
+        problems,
+    )
 
 
 def read_pose_table(path: str | Path) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:

@@ -131,21 +131,21 @@ class Planner:
         if problems:  # a pose the arm cannot take is never planned in
             raise ValueError(f"pose for a move of joint {joint}: " + "; ".join(problems))
         self.pose = pose
-        self._coeffs: dict[int, StepProfile] = {}
-        for sign, label in ((1, "+"), (-1, "-")):
-            try:
-                m = calibration.model(joint, label)
-            except KeyError:
-                continue
-            self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, pose))
-        if not self._coeffs:
+        models = calibration.models
+        self._models = {s: models[(self.joint, lab)] for s, lab in ((1, "+"), (-1, "-")) if (self.joint, lab) in models}
+        if not self._models:
             raise KeyError(f"joint {joint} is not in this calibration")
+        self._coeffs: dict[int, StepProfile] = {}  # per direction, made on first use (a move needs one)
 
     def _dir(self, sign: int) -> StepProfile:
-        try:
-            return self._coeffs[sign]
-        except KeyError:
-            raise KeyError(f"joint {self.joint} direction {direction_label(sign)} is not in this calibration") from None
+        c = self._coeffs.get(sign)
+        if c is not None:
+            return c
+        m = self._models.get(sign)
+        if m is None:
+            raise KeyError(f"joint {self.joint} direction {direction_label(sign)} is not in this calibration")
+        c = self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, self.pose))
+        return c
 
     def _check_range(self, q: float, what: str) -> None:
         problem = self.spec.range_problem(what, q)
@@ -186,10 +186,11 @@ class Planner:
             self._check_range(q_from, "start")
             self._check_range(q_to, "target")
         sign = 1 if q_to >= q_from else -1
-        exact = self.exact_steps(q_from, q_to)
-        n = int(round(exact))
-        end = self.position_after(q_from, sign * n)
         c = self._dir(sign)
+        exact = 0.0 if q_to == q_from else c.steps(q_from, q_to)
+        n = int(round(exact))
+        # whole steps land within a step of the target: Newton starts there
+        end = float(q_from) if n == 0 else c.inverse(float(q_from), float(n), sign, guess=float(q_to))
         return MovePlan(
             self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from), c.gamma(q_to)
         )

@@ -3,7 +3,7 @@ and a check that the poses determine every parameter."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,6 +19,8 @@ from ..models import (
 )
 from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _group
 
+FloatArray = NDArray[np.float64]
+
 # ----------------------------------------------------------------------------- least squares
 
 # the fit works in nm (a, c), 1 (b) and µrad (gamma0, d) so the problem is well scaled
@@ -33,7 +35,9 @@ _HINTS = {
 }
 
 
-def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
+def _residual_fn(
+    j: int, ts: Sequence[Traverse], knots: tuple[float, float]
+) -> tuple[Callable[[FloatArray], FloatArray], FloatArray]:
     """Relative residuals of joint ``j``'s traverses as a function of the scaled parameters.
 
     Returns ``(resid, scale)``: ``resid(x)`` is ``predicted / measured - 1`` per traverse
@@ -50,15 +54,16 @@ def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
         absc = np.abs(np.cos(cols["q2"]))
         scale = _PRISMATIC_SCALE
 
-        def pred(x: NDArray) -> NDArray:
+        def pred(x: FloatArray) -> FloatArray:
             a, b, c = x * scale
-            return (1.0 - b * absc) * (a - c * load)
+            out: FloatArray = (1.0 - b * absc) * (a - c * load)
+            return out
     else:
         al, be = kin.rotary_load_coefficients(j, cols["q1"], cols["q2"], cols["q3"], cols["theta"], cols["psi"])
         w = (cols["q3"] - knots[0]) / (knots[1] - knots[0])
         scale = _ROTARY_SCALE
 
-        def pred(x: NDArray) -> NDArray:
+        def pred(x: FloatArray) -> FloatArray:
             g00, g01, d0, d1 = x * scale
             g0 = g00 + (g01 - g00) * w
             d = d0 + (d1 - d0) * w
@@ -70,15 +75,17 @@ def _residual_fn(j: int, ts: Sequence[Traverse], knots: tuple[float, float]):
                 n = np.full(A.shape, np.inf)
                 if ok.any():
                     n[ok] = steps_between(cols["start"][ok], cols["end"][ok], A[ok], (d * al)[ok], (d * be)[ok])
-            return span / n
+            out: FloatArray = span / n
+            return out
 
-    def resid(x: NDArray) -> NDArray:
-        return pred(x) / meas - 1.0
+    def resid(x: FloatArray) -> FloatArray:
+        out: FloatArray = pred(x) / meas - 1.0
+        return out
 
     return resid, scale
 
 
-def _initial_guess(j: int, ts: Sequence[Traverse]) -> NDArray:
+def _initial_guess(j: int, ts: Sequence[Traverse]) -> FloatArray:
     g = np.array([t.gamma for t in ts])
     if j == 3:
         return np.array([np.max(g) * 1e9, 0.2, 0.0])
@@ -86,13 +93,14 @@ def _initial_guess(j: int, ts: Sequence[Traverse]) -> NDArray:
     return np.array([m, m, 0.0, 0.0])
 
 
-def _identifiability(j: int, d: str, names: list[tuple[str, float | None]], jac: NDArray) -> None:
+def _identifiability(j: int, d: str, names: list[tuple[str, float | None]], jac: FloatArray) -> None:
     """Refuse when the Jacobian is rank deficient, naming the parameters the poses leave free."""
     n, p = jac.shape
     colnorm = np.linalg.norm(jac, axis=0)
     colnorm[colnorm == 0] = 1.0
     jn = jac / colnorm
-    _, s, vt = np.linalg.svd(jn, full_matrices=True)
+    # thin SVD: V is all that is needed (p x p when n >= p); the full U would be n x n (80 GB at n = 1e5)
+    _, s, vt = np.linalg.svd(jn, full_matrices=n < p)
     s_full = np.zeros(p)
     s_full[: len(s)] = s
     tol = max(n, p) * np.finfo(float).eps * 1e4 * (s_full[0] if s_full[0] > 0 else 1.0)
@@ -137,7 +145,7 @@ def calibrate_lsq(
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
     models: dict[tuple[int, str], JointModel] = {}
-    stderr: dict[tuple[int, str], NDArray | None] = {}
+    stderr: dict[tuple[int, str], FloatArray | None] = {}
     notes: list[str] = []
     for (j, d), ts in sorted(groups.items()):
         resid, scale = _residual_fn(j, ts, knots)
@@ -182,7 +190,7 @@ def calibrate_lsq(
     )
 
 
-def _numjac(f, x: NDArray) -> NDArray:
+def _numjac(f: Callable[[FloatArray], FloatArray], x: FloatArray) -> FloatArray:
     """Central-difference Jacobian of ``f`` at ``x`` (x is well scaled: nm / µrad / 1)."""
     x = np.asarray(x, dtype=float)
     f0 = f(x)

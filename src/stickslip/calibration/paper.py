@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -50,7 +51,13 @@ def _paper_prismatic_rows(ts: Sequence[Traverse]) -> dict[str, list[Traverse]] |
 
 
 def _classify_rotary(t: Traverse) -> tuple[float, float]:
-    al, be = kin.rotary_load_coefficients(t.joint, t.q1, t.q2, t.q3, t.theta, t.psi)
+    return _load_coefficients(t.joint, t.q1, t.q2, t.q3, t.theta, t.psi)
+
+
+@functools.lru_cache(maxsize=4096)
+def _load_coefficients(joint: int, q1: float, q2: float, q3: float, theta: float, psi: float) -> tuple[float, float]:
+    """Load coefficients of a pose, memoised: a long table repeats a few calibration poses."""
+    al, be = kin.rotary_load_coefficients(joint, q1, q2, q3, theta, psi)
     return float(al), float(be)
 
 
@@ -115,9 +122,14 @@ def calibrate_paper(
         def invert(t: Traverse, g0: float, alpha: float, beta: float) -> float:
             return float(quad.d(t.gamma - g0))
     else:
+        # one root find per distinct (average, pose): repeated traverses share step counts
+        solved: dict[tuple[float, float, float, float, float, float], float] = {}
 
         def invert(t: Traverse, g0: float, alpha: float, beta: float) -> float:
-            return invert_d_exact(t.gamma, g0, t.start, t.end, alpha, beta)
+            key = (t.gamma, g0, t.start, t.end, alpha, beta)
+            if key not in solved:
+                solved[key] = invert_d_exact(*key)
+            return solved[key]
 
     models: dict[tuple[int, str], JointModel] = {}
     used = 0

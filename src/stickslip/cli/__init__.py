@@ -15,6 +15,7 @@ import inspect
 from pathlib import Path
 
 import typer
+from typer.models import CommandInfo
 
 from ._common import OneLineErrors, drop_warnings, flush_warnings
 
@@ -53,9 +54,9 @@ def _logging(verbose: int, log_file: Path | None) -> None:
     import logging
 
     log = logging.getLogger("stickslip")
-    for h in [h for h in log.handlers if getattr(h, "_stickslip_cli", False)]:
-        log.removeHandler(h)
-        h.close()
+    for old in [h for h in log.handlers if getattr(h, "_stickslip_cli", False)]:
+        log.removeHandler(old)
+        old.close()
     fmt = logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
     handlers: list[logging.Handler] = []
     if verbose:
@@ -122,8 +123,11 @@ _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}
 _ORDER = [name for names in _PANELS.values() for name in names]
 
 
-def _name(info) -> str:
-    return info.name or info.callback.__name__.replace("_cmd", "").replace("_", "-")
+def _name(info: CommandInfo) -> str:
+    if info.name:
+        return info.name
+    callback = info.callback
+    return "" if callback is None else callback.__name__.replace("_cmd", "").replace("_", "-")
 
 
 for _info in app.registered_commands:

@@ -6,12 +6,14 @@ offers ``--json`` where it prints results, and labels units in what people read.
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import NoReturn
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, NoReturn, overload
 
 import typer
 from rich.console import Console
@@ -24,6 +26,34 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..units import UnitError, parse_angle, parse_length
+
+if TYPE_CHECKING:
+    from pathlib import Path
+
+    from rich.table import Table
+
+    from ..measurements import TableError, Traverse
+    from ..storage import Store
+
+
+def lazy_import(name: str) -> ModuleType:
+    """The module ``name``, loaded on first attribute access (so ``--help`` never loads numpy).
+
+    For a command module whose module-level names come from the numpy layers; a module
+    already loaded is returned as it is.
+    """
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    if spec is None or spec.loader is None:  # pragma: no cover - a packaging fault
+        raise ImportError(f"no module named {name!r}")
+    loader = importlib.util.LazyLoader(spec.loader)
+    spec.loader = loader
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    loader.exec_module(module)
+    return module
+
 
 console = Console()
 err_console = Console(stderr=True)
@@ -46,9 +76,9 @@ class OneLineErrors(TyperGroup):
     as a multi-line panel; here they become the same one line as every other error.
     """
 
-    def main(self, *args: object, standalone_mode: bool = True, **kwargs: object):  # type: ignore[override]  # click's signature
+    def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         try:
-            rv = super().main(*args, standalone_mode=False, **kwargs)  # type: ignore[arg-type]  # same
+            rv = super().main(*args, **{**kwargs, "standalone_mode": False})
         except UsageError as e:
             hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
             message = " ".join(e.format_message().split())
@@ -147,7 +177,7 @@ def _clean(obj: object) -> object:
     return obj
 
 
-def validation_table(rows: list[dict], title: str):
+def validation_table(rows: list[dict[str, Any]], title: str) -> Table:
     """A rich table of :meth:`ValidationResult.rows` (model vs constant step, per joint)."""
     from rich.table import Table
 
@@ -168,26 +198,41 @@ def validation_table(rows: list[dict], title: str):
     return t
 
 
-def _unit_parser(parse: Callable[[str], float], what: str) -> Callable[[str | None], float | None]:
-    def callback(value: str | None) -> float | None:
+class _UnitOption:
+    """Parse an option value with units into SI (a typer callback; also called directly).
+
+    ``None`` stays ``None`` (an option not given); a bad value raises ``typer.BadParameter``
+    with the reason, which the CLI prints as one ``error:`` line.
+    """
+
+    def __init__(self, parse: Callable[[str], float], what: str) -> None:
+        self.parse = parse
+        self.what = what
+
+    @overload
+    def __call__(self, value: str) -> float: ...
+
+    @overload
+    def __call__(self, value: None) -> None: ...
+
+    def __call__(self, value: str | None) -> float | None:
         if value is None:
             return None
+        what = self.what
         try:
-            v = parse(value)
+            v = self.parse(value)
         except UnitError as e:
             raise typer.BadParameter(f"{e} ({what})") from None
         except (ArithmeticError, ValueError, TypeError) as e:  # pi/0, 1e999: never a traceback
             raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
         if not math.isfinite(v):
             raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
-        if parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
+        if self.parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
             raise typer.BadParameter(
                 f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
                 f"did you mean {value.strip()}deg?"
             )
         return v
-
-    return callback
 
 
 def _bare_number(text: str) -> bool:
@@ -198,5 +243,36 @@ def _bare_number(text: str) -> bool:
     return True
 
 
-angle_option = _unit_parser(parse_angle, "an angle: radians, or with deg / mrad / urad")
-length_option = _unit_parser(parse_length, "a length: metres, or with mm / um / nm")
+angle_option = _UnitOption(parse_angle, "an angle: radians, or with deg / mrad / urad")
+length_option = _UnitOption(parse_length, "a length: metres, or with mm / um / nm")
+
+
+def open_store(db: Path | None, must_exist: bool = False) -> Store:
+    """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the data folder).
+
+    A command that only reads passes ``must_exist=True`` and refuses a file that does not
+    exist yet instead of creating an empty one; storage faults are one ``error:`` line.
+    """
+    from ..storage import Store, StoreError, resolve_db_path
+
+    path = resolve_db_path(db)
+    if must_exist and not path.exists():
+        fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
+    with user_errors(StoreError):
+        return Store.open(path)
+    raise AssertionError("unreachable")  # pragma: no cover - user_errors exits on a StoreError
+
+
+def fail_table(e: TableError) -> NoReturn:
+    """Every problem of a bad table, one line each (``file:line: reason``), then exit 2."""
+    fail("\n".join(e.problems))
+
+
+def read_table(path: Path) -> list[Traverse]:
+    """The traverses of a measurement table, or every bad row's reason and exit 2 (nothing is read)."""
+    from ..measurements import TableError, read_measurements
+
+    try:
+        return read_measurements(path)
+    except TableError as e:
+        fail_table(e)

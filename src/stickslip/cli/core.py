@@ -8,20 +8,35 @@ import io
 import math
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.table import Table
 
-from ..calibration import Calibration, CalibrationError, Conditions, calibrate, validate
+if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --help starts fast
+    import numpy as np
+    from numpy.typing import NDArray
+
+    from ..calibration import Calibration
+    from ..measurements import PoseTable
+
 from ..clock import stale_message
 from ..devices.base import device_key
-from ..kinematics import JOINTS, Pose, joint_spec
-from ..measurements import TableError, read_measurements, read_pose_table
-from ..models import NonPhysicalError
+from ..joints import joint_spec
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
-from ._common import angle_option, console, fail, length_option, print_json, user_errors, validation_table, warn_later
+from ._common import (
+    angle_option,
+    console,
+    fail,
+    fail_table,
+    length_option,
+    print_json,
+    read_table,
+    user_errors,
+    validation_table,
+    warn_later,
+)
 
 CalibrationOpt = Annotated[
     Path, typer.Option("--calibration", "-c", help="Calibration JSON written by 'stickslip calibrate' or 'fit'.")
@@ -29,24 +44,15 @@ CalibrationOpt = Annotated[
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON instead of a table.")]
 
 
-def _fail_table(e: TableError) -> None:
-    fail("\n".join(e.problems))
-
-
 def _load_calibration(path: Path) -> Calibration:
+    from ..calibration import Calibration
+
     with user_errors():
         cal = Calibration.load(path)
     msg = stale_message(cal.day)
     if msg:
         warn_later(msg)
     return cal
-
-
-def _read_table(path: Path):
-    try:
-        return read_measurements(path)
-    except TableError as e:
-        _fail_table(e)
 
 
 def _params_table(cal: Calibration, title: str) -> Table:
@@ -104,7 +110,10 @@ def calibrate_cmd(
 
     Example: stickslip calibrate day1.csv -o cal.json
     """
-    traverses = _read_table(measurements)
+    from ..calibration import CalibrationError, Conditions, calibrate
+    from ..models import NonPhysicalError
+
+    traverses = read_table(measurements)
     try:
         conditions = Conditions(
             device_key(device) if device else None, frequency, amplitude, temperature
@@ -132,6 +141,8 @@ def show_cmd(
     json_out: JsonOpt = False,
 ) -> None:
     """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints)."""
+    from ..calibration import Calibration
+
     with user_errors():
         cal = Calibration.load(calibration)
     if json_out:
@@ -163,48 +174,94 @@ def predict_cmd(
 
     Example: stickslip predict -c cal.json poses.csv -o predicted.csv
     """
+    from ..measurements import TableError, read_pose_columns
+
     cal = _load_calibration(calibration)
     try:
-        header, rows, queries = read_pose_table(poses)
+        table = read_pose_columns(poses)
     except TableError as e:
-        _fail_table(e)
-    preds = []
-    for i, q in enumerate(queries, start=1):
-        try:
-            m = cal.model(q.joint, q.direction)
-            if q.is_traverse:
-                g = float(m.average_gamma(q.start, q.end, q.q1, q.q2, q.q3, q.theta, q.psi))
-            else:
-                g = float(m.gamma(q.q1, q.q2, q.q3, q.theta, q.psi))
-        except KeyError as e:
-            fail(f"{poses}: row {i}: {e.args[0]}")
-        except NonPhysicalError as e:
-            fail(f"{poses}: row {i}: {e}")
-        preds.append(g)
-    out_header = header + (["gamma_pred"] if "gamma_pred" not in header else [])
-    records = []
-    for row, g in zip(rows, preds, strict=True):
-        rec = dict(row)
-        rec["gamma_pred"] = repr(g)
-        records.append(rec)
+        fail_table(e)
+    preds = _predict_columns(cal, table, poses)
+    header = table.header
+    gamma_at = [i for i, h in enumerate(header) if h == "gamma_pred"]
+    out_header = header + (["gamma_pred"] if not gamma_at else [])
+    # a cell of a repeated (empty) column name holds the last such cell, as a dict of the row would
+    last = {h: i for i, h in enumerate(header)}
+    take = [last[h] for h in header]
+    texts = map(repr, preds.tolist())
     if json_out:
         out = []
-        for rec, g in zip(records, preds, strict=True):
-            r = {k: _maybe_number(v) for k, v in rec.items()}
+        for cells, g in zip(table.cells(), preds.tolist(), strict=True):
+            r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
             r["gamma_pred"] = g
             out.append(r)
         print_json(out)
         return
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=out_header, lineterminator="\n", extrasaction="ignore")
-    w.writeheader()
-    w.writerows(records)
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(out_header)
+    if gamma_at:
+        w.writerows([*(cells[i] for i in take[: gamma_at[0]]), g, *(cells[i] for i in take[gamma_at[0] + 1 :])]
+                    for cells, g in zip(table.cells(), texts, strict=True))
+    else:
+        w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts, strict=True))
     if output is None:
         sys.stdout.write(buf.getvalue())
     else:
         with user_errors():
             output.write_text(buf.getvalue(), encoding="utf-8")
-        console.print(f"wrote {len(records)} rows to {output}")
+        console.print(f"wrote {len(table)} rows to {output}")
+
+
+def _predict_columns(cal: Calibration, table: PoseTable, poses: Path) -> NDArray[np.float64]:
+    """gamma_pred of every row, vectorised per joint, direction and kind (pose or traverse).
+
+    A row the calibration cannot answer fails the command with the first such row's
+    number (counted from 1 over the table's rows) and the reason.
+    """
+    import numpy as np
+
+    from ..models import NonPhysicalError
+
+    out = np.empty(len(table))
+    trav = table.is_traverse
+    first_error: tuple[int, str] | None = None
+    cols = (table.q1, table.q2, table.q3, table.theta, table.psi)
+    for j in np.unique(table.joint).tolist():
+        for d in ("+", "-"):
+            group = (table.joint == j) & (table.direction == d)
+            if not group.any():
+                continue
+            try:
+                m = cal.model(j, d)
+            except KeyError as e:
+                first = int(np.flatnonzero(group)[0])
+                first_error = min(first_error or (first, ""), (first, str(e.args[0])))
+                continue
+            for kind in (True, False):
+                idx = np.flatnonzero(group & (trav == kind))
+                if not idx.size:
+                    continue
+                c = [v[idx] for v in cols]
+                try:
+                    if kind:
+                        out[idx] = m.average_gamma(table.start[idx], table.end[idx], *c)
+                    else:
+                        out[idx] = m.gamma(*c)
+                except NonPhysicalError:
+                    for i in idx.tolist():  # the first row that fails, as a row-by-row loop would find it
+                        try:
+                            v = [float(x[i]) for x in cols]
+                            if kind:
+                                m.average_gamma(float(table.start[i]), float(table.end[i]), *v)
+                            else:
+                                m.gamma(*v)
+                        except NonPhysicalError as e:
+                            first_error = min(first_error or (i, ""), (i, str(e)))
+                            break
+    if first_error is not None:
+        fail(f"{poses}: row {first_error[0] + 1}: {first_error[1]}")
+    return out
 
 
 def _maybe_number(v: str) -> object:
@@ -231,8 +288,11 @@ def validate_cmd(
 
     Example: stickslip validate -c cal.json day1-sweep.csv
     """
+    from ..calibration import validate
+    from ..models import NonPhysicalError
+
     cal = _load_calibration(calibration)
-    traverses = _read_table(measurements)
+    traverses = read_table(measurements)
     try:
         res = validate(cal, traverses)
     except KeyError as e:
@@ -269,6 +329,9 @@ def plan_cmd(
 
     Example: stickslip plan -c cal.json --joint 3 --from 2mm --to 2.03mm --q2 -60deg
     """
+    from ..kinematics import JOINTS, Pose
+    from ..models import NonPhysicalError
+
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
     from ..planning import plan_move
@@ -281,7 +344,7 @@ def plan_cmd(
         fail(str(e))
     cal = _load_calibration(calibration)
     try:
-        plan = plan_move(cal, joint, qa, qb, pose)  # type: ignore[arg-type]
+        plan = plan_move(cal, joint, qa, qb, pose)
     except KeyError as e:
         fail(str(e.args[0]))
     except (ValueError, NonPhysicalError) as e:

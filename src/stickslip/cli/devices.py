@@ -11,17 +11,41 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from .. import kinematics as kin
 from ..clock import max_age_days
-from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, open_device
-from ..devices.positions import DeviceState, device_key, load_state, save_state
+from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
+from ..joints import JOINTS, joint_spec
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
 from . import app
-from ._common import angle_option, console, fail, flush_warnings, length_option, print_json, user_errors, warn_later
+from ._common import (
+    angle_option,
+    console,
+    fail,
+    flush_warnings,
+    lazy_import,
+    length_option,
+    open_store,
+    print_json,
+    user_errors,
+    warn_later,
+)
+
+if TYPE_CHECKING:
+    from .. import kinematics as kin
+    from ..calibration import Calibration
+    from ..devices.positions import DeviceState, load_state, save_state
+else:  # numpy loads when a command first needs it, not for --help
+    kin = lazy_import("stickslip.kinematics")
+    _positions = lazy_import("stickslip.devices.positions")
+
+    def load_state(*args, **kwargs):
+        return _positions.load_state(*args, **kwargs)
+
+    def save_state(*args, **kwargs):
+        return _positions.save_state(*args, **kwargs)
 
 _DB_HELP = (
     "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
@@ -37,16 +61,9 @@ _DEVICE_HELP = (
 )
 
 
-def _open_store(db: Path | None):
-    from ..storage import Store, StoreError
-
-    with user_errors(StoreError):
-        return Store.open(db)
-
-
 def _parse_joint_value(joint: int, text: str, what: str) -> float:
     """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
-    rotary = kin.joint_spec(joint).rotary
+    rotary = joint_spec(joint).rotary
     try:
         v = parse_angle(text) if rotary else parse_length(text)
     except (UnitError, ArithmeticError, ValueError, TypeError) as e:
@@ -57,7 +74,9 @@ def _parse_joint_value(joint: int, text: str, what: str) -> float:
     return v
 
 
-def _apply_pose_options(state: DeviceState, q1, q2, q3, theta, psi) -> list[str]:
+def _apply_pose_options(
+    state: DeviceState, q1: float | None, q2: float | None, q3: float | None, theta: float | None, psi: float | None
+) -> list[str]:
     changed = []
     for j, v in ((1, q1), (2, q2), (3, q3)):
         if v is not None:
@@ -70,7 +89,9 @@ def _apply_pose_options(state: DeviceState, q1, q2, q3, theta, psi) -> list[str]
     return changed
 
 
-def _plan(cal, joint: int, q_from: float, q_to: float, pose: kin.Pose):
+def _plan(
+    cal: Calibration, joint: int, q_from: float, q_to: float, pose: kin.Pose
+) -> tuple[int, float, Callable[[int], float]]:
     """``(steps (signed int), q_end_predicted, dead_reckon(n) -> q)`` from stickslip.planning."""
     from ..planning import dead_reckon, plan_move
 
@@ -84,9 +105,9 @@ def _plan(cal, joint: int, q_from: float, q_to: float, pose: kin.Pose):
 
 
 def _state_rows(state: DeviceState) -> list[dict[str, object]]:
-    rows = []
+    rows: list[dict[str, object]] = []
     for j in (1, 2, 3):
-        spec = kin.JOINTS[j]
+        spec = JOINTS[j]
         rows.append(
             {
                 "joint": j,
@@ -102,7 +123,7 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
 
 def _degree_hint(joint: int, text: str | None) -> str:
     """For a bare number on a rotary joint: ``"; a bare number is radians: did you mean 5deg?"``."""
-    if not kin.joint_spec(joint).rotary or text is None:
+    if not joint_spec(joint).rotary or text is None:
         return ""
     try:
         float(text.strip())
@@ -112,7 +133,7 @@ def _degree_hint(joint: int, text: str | None) -> str:
 
 
 def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> tuple[float, float]:
-    spec = kin.JOINTS[joint]
+    spec = JOINTS[joint]
     q_from = state.positions[joint]
     if to is not None:
         word = to.strip().lower()
@@ -212,11 +233,11 @@ def move(
         ..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."
     ),
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
-    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help=_Q1),
-    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help=_Q2),
-    q3: str | None = typer.Option(None, "--q3", callback=length_option, help=_Q3),
-    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
-    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
+    q1: float | None = typer.Option(None, "--q1", parser=angle_option, help=_Q1),
+    q2: float | None = typer.Option(None, "--q2", parser=angle_option, help=_Q2),
+    q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
+    theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
+    psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Steps per burst."),
     max_age: int | None = typer.Option(
         None, "--max-age", min=0, max=36500,
@@ -246,10 +267,10 @@ def move(
     with user_errors():
         key = device_key(device)
         days = max_age_days(max_age)
-    spec = kin.JOINTS[joint]
+    spec = JOINTS[joint]
     from ..procedures.move import DeviceBusy, device_lock, drive
 
-    with _open_store(db) as store, user_errors(DeviceBusy):
+    with open_store(db) as store, user_errors(DeviceBusy):
         with device_lock(store, key):
             outcome, state, steps, q_from, q_to, q_end, sim_true = _move_locked(
                 store, key, device, cal, joint, by, to, burst, (q1, q2, q3, theta, psi), drive, days
@@ -320,11 +341,11 @@ def where(
     set_: list[str] = typer.Option(
         None, "--set", help="Reset a joint at a known point: 3=0, 3=min, 2=max, 1=-30deg."
     ),
-    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help=_Q1),
-    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help=_Q2),
-    q3: str | None = typer.Option(None, "--q3", callback=length_option, help=_Q3),
-    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help=_THETA),
-    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help=_PSI),
+    q1: float | None = typer.Option(None, "--q1", parser=angle_option, help=_Q1),
+    q2: float | None = typer.Option(None, "--q2", parser=angle_option, help=_Q2),
+    q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
+    theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
+    psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     offline: bool = typer.Option(
         False, "--offline", help="Do not open the device: only show the kept positions."
@@ -348,7 +369,7 @@ def where(
     """
     with user_errors():
         key = device_key(device)
-    with _open_store(db) as store:
+    with open_store(db) as store:
         if unlock:
             with user_errors():
                 store.set_state(key, "lock", "null")
@@ -360,7 +381,7 @@ def where(
             if not sep or j_text.strip() not in ("1", "2", "3"):
                 fail(f"--set {item!r}: write JOINT=VALUE, e.g. 3=0, 3=min, 2=-90deg")
             j = int(j_text)
-            spec = kin.JOINTS[j]
+            spec = JOINTS[j]
             word = value.strip().lower()
             if word in ("min", "lower"):
                 q = spec.lower
@@ -384,14 +405,13 @@ def where(
         )
         return
     console.print(f"[bold]{key}[/]" + (f" (answers: {answers})" if answers else ""), highlight=False)
-    for r in rows:
+    for r, j in zip(rows, (1, 2, 3), strict=True):
         extra = ""
-        if r["uncertain"]:
-            lo, hi = r["uncertain"]
-            j = int(r["joint"])  # type: ignore[call-overload]
+        if j in state.uncertain:
+            lo, hi = state.uncertain[j]
             extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
         console.print(
-            f"  joint {r['joint']}: {r['display']:>14}  ({r['source']}{extra})", highlight=False
+            f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", highlight=False
         )
     console.print(
         f"  tilt: theta = {math.degrees(state.theta):.4g} deg, "

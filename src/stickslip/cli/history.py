@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import typer
 from rich.markup import escape
@@ -16,42 +17,26 @@ from rich.table import Table
 
 from ..devices.base import redact_url
 from . import app
-from ._common import console, fail, print_json, user_errors, warn, warn_later
+from ._common import console, fail, open_store, print_json, read_table, user_errors, warn, warn_later
+
+if TYPE_CHECKING:
+    from ..measurements import Traverse
 
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
 
 
-def _open_store(db: Path | None, must_exist: bool = True):
-    """Open the database; commands that only read refuse a file that does not exist yet."""
-    from ..storage import Store, StoreError, resolve_db_path
-
-    path = resolve_db_path(db)
-    if must_exist and not path.exists():
-        fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
-    with user_errors(StoreError):
-        return Store.open(path)
-
-
-def _read_table(path: Path):
-    from ..measurements import TableError, read_measurements
-
-    try:
-        return read_measurements(path)
-    except TableError as e:
-        n = len(e.problems)
-        fail(f"{path}: {n} problem{'s' if n != 1 else ''}; nothing was read\n" + "\n".join(e.problems))
-
-
-def _traverses_from(meas: Path | None, db: Path | None, device: str | None, day: str | None):
+def _traverses_from(
+    meas: Path | None, db: Path | None, device: str | None, day: str | None
+) -> tuple[list[Traverse], str]:
     """Traverses from a CSV file, or else from the database."""
     if meas is not None:
-        ts = _read_table(meas)
+        ts = read_table(meas)
         if day is not None:
             ts = [t for t in ts if t.day == day]
             if not ts:
                 fail(f"{meas}: no traverses on day {day!r}")
         return ts, str(meas)
-    with _open_store(db) as st:
+    with open_store(db, must_exist=True) as st:
         ts = st.traverses(device=device, day=day)
         where = f"the database {st.path}"
     if not ts:
@@ -74,7 +59,7 @@ def history(
 
     Example: [bold]stickslip history --device sim://[/]
     """
-    with _open_store(db) as st:
+    with open_store(db, must_exist=True) as st:
         entries = st.history(device)
         path = st.path
     if json_out:
@@ -119,7 +104,7 @@ def export(
 
     if joint is not None and joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
-    with _open_store(db) as st:
+    with open_store(db, must_exist=True) as st:
         ts = st.traverses(device=device, day=day, joint=joint)
         if not ts:
             days = st.days(device)
@@ -150,9 +135,9 @@ def import_(
 
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
-    ts = _read_table(meas)
+    ts = read_table(meas)
     digest = "sha256:" + hashlib.sha256(meas.read_bytes()).hexdigest()
-    with _open_store(db, must_exist=False) as st:
+    with open_store(db) as st:
         if st.has_source(digest) and not force:
             fail(f"{meas} was imported before (same contents); use --force to import it again")
         dup = [] if allow_duplicates else st.duplicates(ts, device)
@@ -189,7 +174,7 @@ def exclude(
     """
     if undo == (reason is not None):
         fail("give --reason TEXT to exclude, or --undo to use the traverses again")
-    with _open_store(db) as st, user_errors():
+    with open_store(db, must_exist=True) as st, user_errors():
         n = st.set_excluded(traverse, None if undo else reason)
     console.print(f"{'included' if undo else 'excluded'} {n} traverse(s)", highlight=False)
 
@@ -213,7 +198,7 @@ def delete(
     """
     if not traverse and day is None:
         fail("give --traverse ID (repeatable) or --day DAY")
-    with _open_store(db) as st:
+    with open_store(db, must_exist=True) as st:
         ids = list(traverse or [])
         if day is not None:
             ids += st.traverse_ids(device=device, day=day)
@@ -238,9 +223,9 @@ def delete(
 # ---------------------------------------------------------------- anova
 
 
-def _without_duplicates(ts: list) -> tuple[list, int]:
+def _without_duplicates(ts: list[Traverse]) -> tuple[list[Traverse], int]:
     """``ts`` with exact copies removed (same day, joint, direction, pose, range, steps), and how many."""
-    seen: set[tuple] = set()
+    seen: set[tuple[object, ...]] = set()
     kept = []
     for t in ts:
         key = tuple(getattr(t, f) for f in ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi",
@@ -367,7 +352,7 @@ def fit(
     ts, where = _traverses_from(meas, db, device, day)
     ids: list[int] = []
     if record and meas is None:  # link the stored traverses the fit used
-        with _open_store(db) as st:
+        with open_store(db, must_exist=True) as st:
             recs = st.traverse_records(device=device, day=day)
         devices = sorted({r["device"] for r in recs})
         if len(devices) > 1:
@@ -382,7 +367,7 @@ def fit(
             cal.save(out)
     cal_id = None
     if record:
-        with _open_store(db, must_exist=False) as st:
+        with open_store(db) as st:
             with user_errors():
                 cal_id = st.add_calibration(cal, device=device or "sim://", traverse_ids=ids)
     if json_out:

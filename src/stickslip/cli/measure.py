@@ -18,7 +18,7 @@ def demo(
     seed: int = typer.Option(
         0, "--seed", help="Simulator seed: drift of the true parameters, step noise, room sound."
     ),
-    day: str = typer.Option(
+    day: str | None = typer.Option(
         None,
         "--day",
         help="Session label, e.g. 2026-11-22 (default: today). The truth drifts from day to day.",

@@ -1,0 +1,338 @@
+"""Scaling benchmark: how each command's time and peak memory grow with the table's rows.
+
+For each command and size the table is written to a temporary folder and the command is
+run in a fresh Python process (so that its peak memory is its own), timed inside that
+process around the command itself (start-up is measured on its own, below). From each
+series the growth exponent k of ``time ~ rows^k`` is fitted over the two largest sizes
+(k = 1: linear; 2: quadratic). Baselines run side by side in the same run:
+
+* predict: a plain numpy evaluation of the same closed form on the same columns
+  (parsing with ``numpy.loadtxt``), i.e. what a user would write by hand;
+* anova: scipy's ``f_oneway`` and statsmodels' ``ols`` + ``anova_lm`` on the same
+  groups, given the groups (no parsing, no pose grouping);
+* planner: the same moves by adaptive quadrature per move (scipy ``quad``) and by
+  stepping through the move one step at a time;
+* start-up: ``stickslip --help`` against a bare ``python -c pass``.
+
+The audio path (our detector against aubio and librosa onset detection) is
+``bench_audio.py``.
+
+Run: ``.venv/bin/python benchmarks/bench_scale.py`` (``make bench``; sizes 1e3 .. 1e6,
+several minutes) or ``--quick`` (tiny sizes, seconds: what CI runs through
+``tests/test_bench_smoke.py``). ``--markdown`` also prints the table for the README.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SRC = HERE.parent / "src"
+
+FULL = {
+    "predict": (1_000, 10_000, 100_000, 1_000_000),
+    "calibrate": (1_000, 10_000, 100_000),
+    "fit": (1_000, 10_000, 100_000),
+    "anova": (1_000, 3_000, 10_000),
+    "import": (1_000, 10_000, 100_000),
+}
+QUICK = {k: (200, 400) for k in FULL}
+
+
+# ----------------------------------------------------------------------------- tables
+
+
+def measurement_table(path: Path, n: int, seed: int = 0, distinct_poses: bool = False) -> None:
+    """``n`` traverses: the paper's calibration poses (joints 3 and 2, both ways) over many days.
+
+    Steps are drawn around the model's prediction (2 % noise), values written to 7
+    significant digits as a logger would. With ``distinct_poses`` every row has a pose
+    of its own (the worst case for pose grouping).
+    """
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from synth import paper_table
+
+    rng = np.random.default_rng(seed)
+    base = paper_table()
+    lines = ["day,joint,direction,q1,q2,q3,theta,psi,start,end,steps"]
+    for i in range(n):
+        t = base[i % len(base)]
+        day = (datetime.date(2026, 1, 1) + datetime.timedelta(days=i // (3 * len(base)))).isoformat()  # 3 repeats a day
+        q2, theta = t.q2, t.theta
+        if distinct_poses:
+            if t.joint == 3:
+                q2 = -math.pi / 2 + 1.5 * rng.random()
+            theta = -math.pi / 2 * rng.random()
+        steps = max(1, round(t.steps * (1 + 0.02 * rng.standard_normal())))
+        lines.append(
+            f"{day},{t.joint},{t.direction},{t.q1:.7g},{q2:.7g},{t.q3:.7g},{theta:.7g},{t.psi:.7g},"
+            f"{t.start:.7g},{t.end:.7g},{steps}"
+        )
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def pose_table(path: Path, n: int, seed: int = 0) -> None:
+    """``n`` poses of joint 3 (step at a pose) and joint 2 (average over a traverse), alternating."""
+    rng = np.random.default_rng(seed)
+    q2 = rng.uniform(-3.6, 0.5, n)
+    q3 = rng.uniform(0.0, 0.012, n)
+    th = rng.uniform(-1.5, 0.0, n)
+    lines = ["joint,direction,q1,q2,q3,theta,psi,start,end"]
+    for i in range(n):
+        if i % 2:
+            lines.append(f"3,{'+-'[i % 4 // 2]},0,{q2[i]:.7g},0,{th[i]:.7g},0,,")
+        else:
+            lines.append(f"2,,0,0,{q3[i]:.7g},{th[i]:.7g},0,0.5,-3.5")
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+# ----------------------------------------------------------------------------- child process
+
+
+def child(argv: Sequence[str]) -> None:
+    """Run one command in this process; print its time (s) and this process's peak memory (MiB)."""
+    from stickslip.cli import app
+
+    t = time.perf_counter()
+    try:
+        app(list(argv), standalone_mode=False)
+        code = 0
+    except SystemExit as e:  # pragma: no cover - a failed command
+        code = int(e.code or 0)
+    dt = time.perf_counter() - t
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # kB on Linux
+    print(json.dumps({"seconds": dt, "peak_mib": peak, "exit": code}))
+
+
+def run_child(argv: Sequence[str], env: dict[str, str]) -> dict[str, float]:
+    out = subprocess.run(
+        [sys.executable, __file__, "--child", *argv], capture_output=True, text=True, env=env, check=False
+    )
+    last = [ln for ln in out.stdout.splitlines() if ln.startswith("{")]
+    if not last:
+        raise RuntimeError(f"{argv[0]} failed: {out.stderr.strip()[-500:]}")
+    res = json.loads(last[-1])
+    if res["exit"]:
+        raise RuntimeError(f"{argv[0]} exited {res['exit']}: {out.stderr.strip()[-500:]}")
+    return res
+
+
+# ----------------------------------------------------------------------------- baselines
+
+
+def numpy_predict(path: Path) -> float:
+    """Plain numpy: load the columns, evaluate Eq. 3 and the rotary closed form, no checks."""
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from stickslip.models import gamma_prismatic, steps_between
+    from synth import PAPER_PRISMATIC, PAPER_ROTARY
+
+    t = time.perf_counter()
+    a = np.genfromtxt(path, delimiter=",", skip_header=1, filling_values=np.nan)
+    joint, q2, q3, th, st, en = a[:, 0], a[:, 3], a[:, 4], a[:, 5], a[:, 7], a[:, 8]
+    out = np.empty(len(a))
+    j3 = joint == 3
+    p = PAPER_PRISMATIC["+"]
+    out[j3] = gamma_prismatic(q2[j3], th[j3], 0.0, p.a, p.b, p.c)
+    r = PAPER_ROTARY["-"]
+    j2 = ~j3
+    g0, d = r.at(q3[j2])
+    n = steps_between(st[j2], en[j2], g0, d * np.cos(th[j2]) * 0.0, -d * np.cos(th[j2]))
+    out[j2] = np.abs(en[j2] - st[j2]) / n
+    return time.perf_counter() - t
+
+
+def anova_baselines(path: Path) -> dict[str, float]:
+    """scipy f_oneway and statsmodels ols + anova_lm on the same pose groups (grouping given)."""
+    import warnings
+
+    from scipy import stats
+
+    warnings.simplefilter("ignore")
+
+    from stickslip.analysis import group_poses
+    from stickslip.measurements import read_measurements
+
+    groups = [g for g in group_poses(read_measurements(path)) if len({t.day for t in g.traverses}) > 1]
+    out: dict[str, float] = {}
+    t = time.perf_counter()
+    for g in groups:
+        for d in "+-":
+            days: dict[str, list[float]] = {}
+            for tr in g.traverses:
+                if tr.direction == d:
+                    days.setdefault(tr.day, []).append(tr.gamma)
+            if len(days) > 1:
+                stats.f_oneway(*days.values())
+    out["scipy f_oneway (groups given)"] = time.perf_counter() - t
+    try:
+        import pandas as pd
+        import statsmodels.formula.api as smf
+        from statsmodels.stats.anova import anova_lm
+    except ImportError:  # pragma: no cover
+        return out
+    t = time.perf_counter()
+    for g in groups:
+        if len({(x.day, x.direction) for x in g.traverses}) >= len(g.traverses):
+            continue  # no residual degrees of freedom: our anova skips it too
+        df = pd.DataFrame(
+            {"gamma": [x.gamma * 1e9 for x in g.traverses], "day": [x.day for x in g.traverses],
+             "direction": [x.direction for x in g.traverses]}
+        )
+        anova_lm(smf.ols("gamma ~ C(day) * C(direction)", data=df).fit(), typ=2)
+    out["statsmodels ols + anova_lm (groups given)"] = time.perf_counter() - t
+    return out
+
+
+def planner_rows(moves: int) -> list[tuple[str, float]]:
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from stickslip.calibration import calibrate
+    from stickslip.kinematics import Pose
+    from stickslip.models import simulate_traverse_steps, steps_between_quad
+    from stickslip.planning import Planner, plan_move
+    from synth import paper_table
+
+    cal = calibrate(paper_table())
+    pose = Pose(q3=0.006, theta=-0.3)
+    planner = Planner(cal, 2, pose)
+    A, al, be = (float(x) for x in cal.model(2, "-").rotary_coefficients(0, 0, 0.006, -0.3, 0))
+    rng = np.random.default_rng(1)
+    pairs = [(float(a), float(b)) for a, b in rng.uniform(-3.5, 0.5, (moves, 2)) if a > b]
+
+    def per_move(fn: Callable[[float, float], object], pairs: list[tuple[float, float]]) -> float:
+        best = math.inf
+        for _ in range(3):
+            t = time.perf_counter()
+            for a, b in pairs:
+                fn(a, b)
+            best = min(best, (time.perf_counter() - t) / len(pairs))
+        return best
+
+    return [
+        ("Planner.steps", per_move(planner.steps, pairs)),
+        ("Planner.plan (with dead reckoning)", per_move(planner.plan, pairs)),
+        ("plan_move (new pose each call)", per_move(lambda a, b: plan_move(cal, 2, a, b, pose), pairs)),
+        ("per-move quadrature (scipy quad)", per_move(lambda a, b: steps_between_quad(a, b, A, al, be), pairs[:200])),
+        (
+            "per-move step-by-step simulation",
+            per_move(
+                lambda a, b: simulate_traverse_steps(a, b, lambda q: A + al * math.cos(q) + be * math.sin(q)),
+                pairs[:5],
+            ),
+        ),
+    ]
+
+
+def startup(env: dict[str, str], runs: int = 7) -> tuple[float, float]:
+    """Median wall time of ``stickslip --help`` and of a bare ``python -c pass`` (s)."""
+
+    def med(cmd: list[str]) -> float:
+        ts = []
+        for _ in range(runs):
+            t = time.perf_counter()
+            subprocess.run(cmd, capture_output=True, env=env, check=True)
+            ts.append(time.perf_counter() - t)
+        return float(np.median(ts))
+
+    cli = "import sys; from stickslip.cli import main; sys.argv = ['stickslip', '--help']; main()"
+    return med([sys.executable, "-c", cli]), med([sys.executable, "-c", "pass"])
+
+
+# ----------------------------------------------------------------------------- main
+
+
+def exponent(ns: Sequence[int], ts: Sequence[float]) -> float:
+    """Growth exponent over the two largest sizes: log(t2 / t1) / log(n2 / n1)."""
+    return math.log(ts[-1] / ts[-2]) / math.log(ns[-1] / ns[-2])
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for ln in Path("/proc/cpuinfo").read_text().splitlines():
+            if ln.startswith("model name"):
+                cpu = ln.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    py = platform.python_version()
+    return f"{cpu}, {os.cpu_count()} cores, Python {py}, numpy {np.__version__}, {platform.system()}"
+
+
+def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args[:1] == ["--child"]:
+        child(args[1:])
+        return []
+    quick = "--quick" in args
+    sizes = QUICK if quick else FULL
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
+    rows: list[dict[str, object]] = []
+    print(f"machine: {machine()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        cal = d / "cal.json"
+        measurement_table(d / "cal.csv", 14)
+        run_child(["calibrate", str(d / "cal.csv"), "-o", str(cal), "--json"], env)
+        print(f"\n{'command':10s} {'rows':>9s} {'seconds':>9s} {'µs/row':>8s} {'peak MiB':>9s}   baseline")
+        for cmd, ns in sizes.items():
+            times = []
+            for n in ns:
+                meas = d / f"m{n}.csv"
+                base = ""
+                if cmd == "predict":
+                    pose_table(d / f"p{n}.csv", n)
+                    argv_ = ["predict", str(d / f"p{n}.csv"), "-c", str(cal), "-o", str(d / "out.csv")]
+                    tb = numpy_predict(d / f"p{n}.csv")
+                    base = f"plain numpy (genfromtxt + closed form): {tb:.3g} s"
+                else:
+                    measurement_table(meas, n, distinct_poses=(cmd == "anova"))
+                    argv_ = {
+                        "calibrate": ["calibrate", str(meas), "--json"],
+                        "fit": ["fit", str(meas), "--json"],
+                        "anova": ["anova", str(meas), "--json"],
+                        "import": ["import", str(meas), "--db", str(d / f"db{n}.sqlite"), "--json"],
+                    }[cmd]
+                r = run_child(argv_, env)
+                times.append(float(r["seconds"]))
+                rows.append({"command": cmd, "rows": n, **r})
+                sec, peak = r["seconds"], r["peak_mib"]
+                print(f"{cmd:10s} {n:9d} {sec:9.3f} {sec / n * 1e6:8.2f} {peak:9.0f}   {base}")
+            k = exponent(ns, times)
+            rows.append({"command": cmd, "exponent": k})
+            print(f"{cmd:10s} growth exponent {k:.2f} (time ~ rows^k, two largest sizes)")
+        # anova with repeats (pose groups that are tested), against scipy and statsmodels
+        n = sizes["anova"][-1]
+        measurement_table(d / "rep.csv", n)
+        r = run_child(["anova", str(d / "rep.csv"), "--json"], env)
+        print(f"\nanova, {n} rows in 14 repeated poses: {r['seconds']:.3f} s (grouping, one-way and two-way tests)")
+        for name, t in anova_baselines(d / "rep.csv").items():
+            print(f"  baseline {name}: {t:.3f} s")
+    print("\nplanning one move of joint 2 (µs per move)")
+    prow = planner_rows(200 if quick else 2000)
+    base = prow[0][1]
+    for name, t in prow:
+        print(f"  {name:40s} {t * 1e6:10.2f} {t / base:8.1f}x")
+    quad, plan = dict(prow)["per-move quadrature (scipy quad)"], dict(prow)["Planner.plan (with dead reckoning)"]
+    print(f"  Planner.plan is {quad / plan:.1f}x faster than per-move quadrature")
+    rows.append({"planner_plan_us": plan * 1e6, "quadrature_us": quad * 1e6})
+    helpt, bare = startup(env, 3 if quick else 7)
+    print(f"\nstart-up: stickslip --help {helpt:.3f} s, bare python {bare:.3f} s ({helpt / bare:.1f}x)")
+    rows.append({"startup_help_s": helpt, "startup_python_s": bare})
+    return rows
+
+
+if __name__ == "__main__":
+    main()

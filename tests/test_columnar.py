@@ -1,0 +1,154 @@
+"""The columnar (vectorised) table parsers against the row-by-row parser they replaced.
+
+``measurements_rowwise`` is the parser as it was before it was vectorised. On hostile
+tables (hypothesis: odd numbers, whitespace, unicode, wrong lengths, quoted line breaks,
+blank lines, chunk boundaries) both must accept the same rows with the same values, or
+refuse with the same messages (file, line, reason) in the same order.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import astuple
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import measurements_rowwise as old
+from stickslip import measurements as new
+
+NUMBERS = [
+    "0", "0.0", "-0", "1e-3", "0.006", "0.012", "0.0120001", "0.013", "-1.5707963267948966", "-1.5707963", "1.5707963",
+    "3.14159", "3.1416", "-3.2", "0.5235987755982988", "-3.665191429188092", "-3.67", "2.2", " 0.1 ", "\u20030.2",
+    "1_0", "nan", "inf", "-inf", "1e999", "", " ", "abc", "0x10", "١", "+0.5", ".5", "5.", "1e-320",
+]
+JOINTS = ["1", "2", "3", " 3", "03", "+2", "4", "0", "", "x", "3.0"]
+DIRS = ["+", "-", " +", "pos", "neg", "−", "1", "-1", "+1", "", "x"]
+STEPS = ["1", "100", "12000", "0", "-5", "1e3", "12.5", "12.0", "1_000", "10000000000000", "99999999999999999999", "",
+         " 7 ", "inf", "nan"]
+DAYS = ["2026-01-02", "d1", " d2 ", "", " ", "ä", "a,b", "x\ny"]
+
+cell = st.sampled_from
+measurement_row = st.tuples(
+    cell(DAYS), cell(JOINTS), cell(DIRS), *(cell(NUMBERS) for _ in range(7)), cell(STEPS)
+).map(list)
+odd_row = st.one_of(
+    st.just([]),
+    st.just(["", " ", ""]),
+    st.lists(cell(NUMBERS), min_size=1, max_size=13),
+)
+rows_strategy = st.lists(st.one_of(measurement_row, measurement_row, measurement_row, odd_row), max_size=25)
+
+
+def _csv(header: list[str], rows: list[list[str]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    for r in rows:
+        w.writerow(r)
+    return buf.getvalue()
+
+
+def _outcome(parse, text: str):
+    try:
+        return "ok", parse(text)
+    except old.TableError as e:  # the reference's own class
+        return "error", e.problems
+    except new.TableError as e:
+        return "error", e.problems
+
+
+@pytest.fixture(params=[3, new.CHUNK_ROWS], ids=["chunks of 3", "default chunks"])
+def chunk(request, monkeypatch):
+    monkeypatch.setattr(new, "CHUNK_ROWS", request.param)
+    return request.param
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=rows_strategy)
+def test_measurement_table_agrees_with_the_row_by_row_parser(chunk, rows):
+    text = _csv(list(new.HEADER), rows)
+    kind_old, res_old = _outcome(lambda t: old.parse_measurements(t, "m.csv"), text)
+    kind_new, res_new = _outcome(lambda t: new.parse_measurements(t, "m.csv"), text)
+    assert kind_new == kind_old, (res_old, res_new)
+    if kind_old == "error":
+        assert res_new == res_old
+        return
+    assert [astuple(t) for t in res_new] == [astuple(t) for t in res_old]
+    for a, b in zip(res_new, res_old, strict=True):  # same types too (int steps, str day)
+        assert [type(x) for x in astuple(a)] == [type(x) for x in astuple(b)]
+    table = new.parse_measurement_table(text, "m.csv")
+    np.testing.assert_array_equal(table.gamma, [t.gamma for t in res_old])
+
+
+pose_header = st.lists(
+    st.sampled_from(["joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "day", "", " note "]),
+    min_size=5, max_size=12,
+)
+pose_row = st.lists(st.one_of(cell(NUMBERS), cell(JOINTS), cell(DIRS)), min_size=0, max_size=13)
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(header=pose_header, rows=st.lists(pose_row, max_size=20))
+def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows):
+    text = _csv(header, rows)
+    kind_old, res_old = _outcome(lambda t: old.parse_pose_table(t, "p.csv"), text)
+    kind_new, res_new = _outcome(lambda t: new.parse_pose_table(t, "p.csv"), text)
+    assert kind_new == kind_old, (res_old, res_new)
+    if kind_old == "error":
+        assert res_new == res_old
+        return
+    h_old, r_old, q_old = res_old
+    h_new, r_new, q_new = res_new
+    assert h_new == h_old
+    assert r_new == r_old
+    assert [astuple(q) for q in q_new] == [astuple(q) for q in q_old]
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    rows=st.lists(
+        st.tuples(
+            st.sampled_from(["1", "2", "3"]),
+            st.sampled_from(["+", "-", ""]),
+            *(st.floats(-0.5, 0.5).map(repr) for _ in range(5)),
+            st.floats(-0.3, 0.3).map(repr),
+            st.floats(-0.3, 0.3).map(repr),
+        ).map(list),
+        min_size=1,
+        max_size=30,
+    )
+)
+def test_valid_pose_tables_parse_alike(chunk, rows):
+    """Mostly valid tables (random finite values): the fast path, not only the fallback, is exercised."""
+    header = ["joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end"]
+    text = _csv(header, rows)
+    kind_old, res_old = _outcome(lambda t: old.parse_pose_table(t, "p.csv"), text)
+    kind_new, res_new = _outcome(lambda t: new.parse_pose_table(t, "p.csv"), text)
+    assert kind_new == kind_old
+    if kind_old == "ok":
+        assert [astuple(q) for q in res_new[2]] == [astuple(q) for q in res_old[2]]
+    else:
+        assert res_new == res_old
+
+
+def test_a_valid_table_takes_the_fast_path_with_exact_values():
+    """A clean table of full-precision floats: every value as float() reads it, line numbers from 2."""
+    rng = np.random.default_rng(3)
+    n = 500
+    q2 = rng.uniform(-3.6, 0.5, n)
+    rows = [
+        ["d", "3", "+", "0.0", repr(float(a)), "0.0", "-0.1", "0.2", "0.0", "0.012", str(10000 + i)]
+        for i, a in enumerate(q2)
+    ]
+    table = new.parse_measurement_table(_csv(list(new.HEADER), rows), "m.csv")
+    assert table.q2.tolist() == q2.tolist()
+    assert table.lines.tolist() == list(range(2, n + 2))
+    assert table.steps.tolist() == [10000 + i for i in range(n)]
+    assert math.isclose(table.gamma[0], 0.012 / 10000, rel_tol=0, abs_tol=0)
+    again = new.TraverseTable.from_traverses(table.traverses())
+    assert again.q2.tolist() == table.q2.tolist() and again.day.tolist() == table.day.tolist()
