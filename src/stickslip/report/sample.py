@@ -98,7 +98,11 @@ def classify_days(calibration: Calibration, traverses: Sequence[Traverse], separ
         elif separate:
             out[d] = Sample("out-of-sample", f"a separate validation table; day {d} is also a day of {own}")
         else:
-            out[d] = Sample("overlapping", f"day {d} is a day of {own}, but the rows differ: they may share traverses")
+            out[d] = Sample(
+                "overlapping",
+                f"day {d} is a day of {own}, but the rows differ: they may share traverses "
+                "(a table that holds none of them is out-of-sample when given as a separate validation table)",
+            )
     return out
 
 
