@@ -121,9 +121,10 @@ class StepFigure:
     def plot(self, ax: Axes | Sequence[Axes] | AxesArray | None = None) -> AxesArray:
         """Draw one row per day, one column per direction; returns the ``(days, directions)`` Axes array.
 
-        Lines: the model per pose; filled markers: measured averages (a horizontal bar
-        spans a rotary traverse's interval); open squares: the model's prediction for
-        the same traverse. Steps in nm or µrad, the coordinate in degrees.
+        Lines: the model per pose (the legend names each pose by its colour); filled
+        markers: measured averages (a horizontal bar spans a rotary traverse's
+        interval); open squares: the model's prediction for the same traverse. Steps
+        in nm or µrad, the coordinate in degrees.
         """
         days, dirs = self.days, self.directions
         axes = panel_grid(len(days), len(dirs), ax, height=6.0)
@@ -151,7 +152,7 @@ def _draw_panel(a: Axes, panel: Panel, colour: dict[str, Any], scale: float) -> 
     """The lines, measured points and predictions of one panel, with its legend."""
     for cv in panel.curves:
         col = colour[cv.label]
-        a.plot(np.degrees(cv.x_model), cv.gamma_model * scale, "-", color=col, lw=1.3, label=f"model, {cv.label}")
+        a.plot(np.degrees(cv.x_model), cv.gamma_model * scale, "-", color=col, lw=1.3, label=cv.label)
         if cv.gamma_data.size:
             xerr = np.degrees(cv.x_halfwidth) if np.any(cv.x_halfwidth > 0) else None
             a.errorbar(
@@ -163,7 +164,6 @@ def _draw_panel(a: Axes, panel: Panel, colour: dict[str, Any], scale: float) -> 
                 ms=5,
                 elinewidth=1.0,
                 capsize=2,
-                label=f"measured, {cv.label}",
             )
             a.plot(np.degrees(cv.x_data), cv.gamma_pred * scale, "s", color=col, mfc="none", ms=8, mew=1.2)
         elif cv.gamma_pred.size:  # model only: its average over each interval
@@ -176,13 +176,17 @@ def _draw_panel(a: Axes, panel: Panel, colour: dict[str, Any], scale: float) -> 
                 mfc="none",
                 ms=7,
                 capsize=2,
-                label=f"model's average over each π/6 interval, {cv.label}",
             )
+    # one legend entry per pose (its colour), then what the markers mean
     if any(cv.gamma_data.size for cv in panel.curves):
+        bars = any(np.any(cv.x_halfwidth > 0) for cv in panel.curves)
+        a.plot([], [], "o", color="0.3", ms=5, label="measured" + (" (bar: traversed interval)" if bars else ""))
         a.plot([], [], "s", color="0.3", mfc="none", ms=8, label="model's prediction for the same traverse")
+    elif any(cv.gamma_pred.size for cv in panel.curves):
+        a.plot([], [], "s", color="0.3", mfc="none", ms=7, label="model's average over each π/6 interval")
     a.grid(True, alpha=0.3)
     if panel.curves:
-        a.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.18), ncol=2, frameon=False)
+        a.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     else:
         a.text(
             0.5,
