@@ -1,109 +1,212 @@
-"""Seed-style figures: the numbers behind them, and the HTML report.
+"""Paper-style figures: the numbers behind them, per-day panels, in-/out-of-sample labels, the page.
 
-Reference values: the models' closed-form traverse averages (stickslip.models), the
-step-by-step count of stickslip.models.simulate_traverse_steps, the exact inversion
-stickslip.calibration.invert_d_exact, and Eq. 9 as printed in the paper (Section 3.5).
+Reference values come from outside the report package: Eq. (3) and Eq. (8) written out
+here from docs/design.md §3, averages over a traverse by adaptive quadrature of
+1 / gamma (scipy.integrate.quad, not the models' closed form), the average step of a
+row recomputed from its raw columns, |end - start| / steps (design.md §2), and the
+step-by-step count of stickslip.models.simulate_traverse_steps.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import re
 
 import numpy as np
 import pytest
+from scipy import integrate
 from typer.testing import CliRunner
 
 from stickslip import kinematics as kin
-from stickslip.calibration import Calibration, CalibrationError, calibrate, invert_d_exact
+from stickslip.calibration import Calibration, CalibrationError, Provenance, calibrate, invert_d_exact
 from stickslip.cli import app
-from stickslip.measurements import write_measurements
-from stickslip.models import JointModel, simulate_traverse_steps
+from stickslip.measurements import Traverse, write_measurements
+from stickslip.models import iter_traverse_steps, simulate_traverse_steps
 from stickslip.report import (
+    MODEL_ONLY,
     build_report,
+    classify_days,
+    classify_sample,
     d_relation_data,
     prismatic_data,
     rotary_interval_data,
-    simulate_steps,
     step_simulation_data,
     validation_data,
 )
-from test_analysis import TRUE_PRISMATIC, TRUE_ROTARY, simulated_table  # tests/ is on sys.path
+from stickslip.report._units import param_scale, position_scale, step_scale
+from test_analysis import simulated_table  # tests/ is on sys.path
 
 pytest.importorskip("matplotlib")
 runner = CliRunner()
+DAY1, DAY2 = "2026-11-20", "2026-11-21"
 
 
 @pytest.fixture(scope="module")
-def table():
-    return simulated_table(11, noise=0.01)
+def table() -> list[Traverse]:
+    return simulated_table(11, noise=0.01, day=DAY1)
 
 
 @pytest.fixture(scope="module")
-def cal(table):
+def two_days(table: list[Traverse]) -> list[Traverse]:
+    return table + simulated_table(12, noise=0.01, day=DAY2)
+
+
+@pytest.fixture(scope="module")
+def cal(table: list[Traverse]) -> Calibration:
     return calibrate(table, method="lsq")
 
 
-def test_step_simulation_counts_like_the_models_simulator_and_averages_like_the_closed_form(cal):
-    sim = step_simulation_data(cal, 2)
-    assert {(r["direction"], r["q3"]) for r in sim.runs} == {("-", 0.0), ("-", 0.012), ("+", 0.0), ("+", 0.012)}
-    spec = kin.JOINTS[2]
-    for r in sim.runs:
-        m = cal.model(2, r["direction"])
-        A, al, be = (float(np.asarray(x)) for x in m.rotary_coefficients(0.0, 0.0, r["q3"], 0.0, 0.0))
-        n = simulate_traverse_steps(
-            r["start"], r["end"], lambda q, A=A, al=al, be=be: A + al * math.cos(q) + be * math.sin(q)
-        )
-        assert r["steps"] == n
-        # the discrete count differs from the integral by less than one step
-        exact = float(m.average_gamma(r["start"], r["end"], 0.0, 0.0, r["q3"], 0.0, 0.0))
-        assert abs(spec.span / exact - r["steps"]) < 1.0
-        # the negative direction starts at the upper stop (pi/6), as in the paper's Fig. 8
-        assert r["start"] == (spec.upper if r["direction"] == "-" else spec.lower)
-        assert r["q"][0] == r["start"] and np.all(r["gamma"] > 0)
-    q, g = simulate_steps(0.0, 1.0, 0.125, 0.0, 0.0)  # binary fractions: no rounding in the sums
-    assert q.size == 8 and np.all(g == 0.125) and q[-1] == 0.875
+def _gamma_row(t: Traverse) -> float:
+    """A row's average step from its raw columns (design.md §2)."""
+    return abs(t.end - t.start) / t.steps
 
 
-def test_rotary_intervals_plot_the_exact_interval_average_at_the_midpoint(cal, table):
-    fig = rotary_interval_data(cal, table, 2)
-    labels = {(s.direction, s.label) for s in fig.series}
-    assert labels == {(d, f"q3 = {q:.0f} mm, θ = 0°") for d in "+-" for q in (0, 12)}
-    for s in fig.series:
-        q3 = 0.0 if "q3 = 0 mm" in s.label else 0.012
-        assert s.zeta_model.size == 8 and s.zeta_data.size == 8
-        m = cal.model(2, s.direction)
-        for z, g in zip(s.zeta_model, s.gamma_model, strict=True):
-            mid = -z  # zeta = psi - q2 with psi = 0
-            lo, hi = mid - math.pi / 12, mid + math.pi / 12
-            start, end = (lo, hi) if s.direction == "+" else (hi, lo)
-            assert g == pytest.approx(float(m.average_gamma(start, end, 0.0, 0.0, q3, 0.0, 0.0)), rel=1e-9)
-        # the data are the table's own pi/6 traverses
-        assert np.all(np.abs(np.abs(np.diff(np.sort(s.zeta_data))) - math.pi / 6) < 1e-9)
-    # full-range traverses are not interval data
-    assert all(np.all(np.abs(s.zeta_data - math.pi / 2) > 1e-6) for s in fig.series)
+def _eq8_average(g0: float, d: float, start: float, end: float, theta: float, psi: float) -> float:
+    """Eq. (8) at q1 = 0, gamma = g0 + d sin(psi - q2) cos(theta), averaged by quadrature."""
+    n, _ = integrate.quad(
+        lambda q: 1.0 / (g0 + d * math.sin(psi - q) * math.cos(theta)),
+        min(start, end),
+        max(start, end),
+        epsabs=0.0,
+        epsrel=1e-12,
+        limit=200,
+    )
+    return abs(end - start) / n
 
 
-def test_rotary_intervals_without_data_draw_the_model_for_the_seeds_intervals(cal):
-    fig = rotary_interval_data(cal, [], 2)
-    assert len(fig.series) == 4 and all(s.zeta_model.size == 8 and s.zeta_data.size == 0 for s in fig.series)
-    z = np.sort(fig.series[0].zeta_model)
-    assert np.allclose(np.degrees(z), np.arange(-15, 196, 30))  # midpoints of the eight pi/6 intervals
+# ---------------------------------------------------------------- Fig. 4
 
 
-def test_prismatic_curves_follow_eq3_per_theta(cal, table):
+def test_fig4_has_a_model_line_per_tilt_equal_to_eq3(cal, table):
     fig = prismatic_data(cal, table)
-    plus = [s for s in fig.series if s.direction == "+"]
-    assert [s.label for s in plus] == [f"θ = {t}°, ψ = 0° (q2 varied)" for t in (0, -60, -90)]
-    for s in fig.series:
-        th = math.radians(float(re.search(r"θ = (-?\d+)°", s.label).group(1)))
-        m = cal.model(3, s.direction)
-        q2 = -s.zeta_model  # psi = 0
-        assert np.allclose(s.gamma_model, m.gamma(0.0, q2, 0.0, th, 0.0), rtol=1e-12)
-        assert s.zeta_data.size == 7
+    assert fig.days == [DAY1] and fig.directions == ["+", "-"]
+    for d in "+-":
+        curves = fig.panel(DAY1, d).curves
+        assert [c.label for c in curves] == ["θ = 0°, ψ = 0°", "θ = -60°, ψ = 0°", "θ = -90°, ψ = 0°"]
+        p = cal.model(3, d).params
+        for c, th in zip(curves, (0.0, -math.pi / 3, -math.pi / 2), strict=True):
+            q2 = -c.x_model  # zeta = psi - q2, psi = 0
+            zeta = c.x_model
+            eq3 = (1 - p.b * np.abs(np.cos(q2))) * (p.a - p.c * np.cos(zeta) * math.cos(th))
+            np.testing.assert_allclose(c.gamma_model, eq3, rtol=1e-12)
+        # at theta = -pi/2 there is no axial load: the line is a (1 - b |cos q2|)
+        flat = curves[2]
+        np.testing.assert_allclose(flat.gamma_model, p.a * (1 - p.b * np.abs(np.cos(flat.x_model))), rtol=1e-12)
 
 
-def test_d_relation_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(cal):
+def test_fig4_points_are_the_tables_rows(cal, table):
+    fig = prismatic_data(cal, table)
+    for d in "+-":
+        rows = [t for t in table if t.joint == 3 and t.direction == d]
+        curves = fig.panel(DAY1, d).curves
+        got = sorted((round(x, 9), g) for c in curves for x, g in zip(c.x_data, c.gamma_data, strict=True))
+        want = sorted((round(t.psi - t.q2, 9), _gamma_row(t)) for t in rows)
+        assert len(got) == len(want) == 21
+        for (xg, gg), (xw, gw) in zip(got, want, strict=True):
+            assert xg == xw and gg == pytest.approx(gw, rel=1e-12)
+        for c in curves:  # the model's value for each traverse lies on the curve's own line
+            np.testing.assert_allclose(
+                c.gamma_pred, np.interp(c.x_data, c.x_model[::-1], c.gamma_model[::-1]), rtol=1e-3
+            )
+
+
+def test_fig4_a_single_traverse_at_a_new_tilt_gets_its_own_line(cal, table):
+    one = Traverse(DAY1, 3, "+", 0.0, -math.pi / 4, 0.0, -math.pi / 4, math.pi / 6, 0.0, 0.012, 15000)
+    fig = prismatic_data(cal, [*table, one])
+    c = [c for c in fig.panel(DAY1, "+").curves if c.label == "θ = -45°, ψ = 30°"]
+    assert len(c) == 1 and c[0].gamma_data.tolist() == [0.012 / 15000]
+    p = cal.model(3, "+").params
+    zeta = math.pi / 6 + math.pi / 4
+    eq3 = (1 - p.b * abs(math.cos(-math.pi / 4))) * (p.a - p.c * math.cos(zeta) * math.cos(-math.pi / 4))
+    assert c[0].gamma_pred[0] == pytest.approx(eq3, rel=1e-12)
+
+
+def test_fig4_splits_days_into_panels_and_never_pools_them(cal, two_days):
+    fig = prismatic_data(cal, two_days)
+    assert fig.days == [DAY1, DAY2]
+    for day in (DAY1, DAY2):
+        for d in "+-":
+            want = sorted(_gamma_row(t) for t in two_days if t.day == day and t.joint == 3 and t.direction == d)
+            got = sorted(g for c in fig.panel(day, d).curves for g in c.gamma_data)
+            assert got == pytest.approx(want, rel=1e-12) and len(got) == 21
+    axes = fig.plot()
+    assert axes.shape == (2, 2)
+    assert DAY1 in axes[0, 0].get_title() and DAY2 in axes[1, 1].get_title()
+    assert axes[0, 0].get_ylabel() == "step size γ3+ (nm)" and "degrees" in axes[0, 0].get_xlabel()
+
+
+def test_fig4_without_data_draws_the_model_alone(cal):
+    fig = prismatic_data(cal, [])
+    assert fig.days == [MODEL_ONLY]
+    assert all(c.gamma_data.size == 0 for p in fig.panels for c in p.curves)
+    assert [len(p.curves) for p in fig.panels] == [3, 3]
+
+
+# ---------------------------------------------------------------- Figs. 6 / 10
+
+
+def test_fig6_every_rotary_traverse_is_a_point_beside_the_exact_interval_average(cal, table):
+    fig = rotary_interval_data(cal, table, 2)
+    for d in "+-":
+        curves = fig.panel(DAY1, d).curves
+        rows = [t for t in table if t.joint == 2 and t.direction == d]
+        assert sum(c.gamma_data.size for c in curves) == len(rows) == 20  # 8 + 8 intervals, 4 full range
+        m = cal.model(2, d)
+        for c in curves:
+            q3 = 0.012 if "q3 = 12 mm" in c.label else 0.0
+            th = -math.pi / 2 if "θ = -90°" in c.label else 0.0
+            g0, dd = (float(x) for x in m.params.at(q3))
+            for x, hw, gp in zip(c.x_data, c.x_halfwidth, c.gamma_pred, strict=True):
+                mid = -x  # zeta = psi - q2 at the midpoint, psi = 0
+                start, end = (mid - hw, mid + hw) if d == "+" else (mid + hw, mid - hw)
+                assert gp == pytest.approx(_eq8_average(g0, dd, start, end, th, 0.0), rel=1e-9)
+        halfwidths = sorted({round(h, 9) for c in curves for h in c.x_halfwidth})
+        assert halfwidths == [round(math.pi / 12, 9), round(2 * math.pi / 3, 9)]  # pi/6 intervals, full range
+        got = sorted(g for c in curves for g in c.gamma_data)
+        assert got == pytest.approx(sorted(_gamma_row(t) for t in rows), rel=1e-12)
+
+
+def test_fig6_without_data_draws_the_models_pi6_averages(cal):
+    fig = rotary_interval_data(cal, [], 2)
+    assert fig.days == [MODEL_ONLY] and len(fig.panels) == 2
+    for p in fig.panels:
+        assert len(p.curves) == 2 and all(c.gamma_data.size == 0 and c.gamma_pred.size == 8 for c in p.curves)
+        assert np.allclose(np.sort(np.degrees(p.curves[0].x_data)), np.arange(-15, 196, 30))
+
+
+def test_fig6_per_day_panels(cal, two_days):
+    fig = rotary_interval_data(cal, two_days, 2, {DAY1: "in-sample", DAY2: "out-of-sample"})
+    assert fig.days == [DAY1, DAY2] and [p.n_traverses for p in fig.panels] == [20, 20, 20, 20]
+    axes = fig.plot()
+    assert "in-sample" in axes[0, 0].get_title() and "out-of-sample" in axes[1, 0].get_title()
+    assert axes[0, 0].get_ylabel() == "step size γ2- (µrad)"
+
+
+# ---------------------------------------------------------------- Fig. 8
+
+
+def test_fig8_counts_like_the_models_simulator_and_averages_like_the_closed_form(cal):
+    sim = step_simulation_data(cal, 2)
+    assert {(r.direction, r.q3) for r in sim.runs} == {("-", 0.0), ("-", 0.012), ("+", 0.0), ("+", 0.012)}
+    spec = kin.joint_spec(2)
+    for r in sim.runs:
+        g0, d = (float(x) for x in cal.model(2, r.direction).params.at(r.q3))
+        n = simulate_traverse_steps(r.start, r.end, lambda q, g0=g0, d=d: g0 + d * math.sin(-q))  # Eq. 8, theta=psi=0
+        assert r.steps == n
+        # the discrete count differs from the integral by less than one step
+        assert abs(spec.span / _eq8_average(g0, d, r.start, r.end, 0.0, 0.0) - r.steps) < 1.0
+        assert r.start == (spec.upper if r.direction == "-" else spec.lower)  # as in the paper's Fig. 8
+        assert r.q[0] == r.start and np.all(r.gamma > 0) and r.gamma0 == g0
+    walk = list(iter_traverse_steps(0.0, 1.0, lambda q: 0.125))  # binary fractions: no rounding in the sums
+    assert walk == [(k / 8, 0.125) for k in range(8)]
+
+
+# ---------------------------------------------------------------- Fig. 9
+
+
+def test_fig9_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(cal):
     rel = d_relation_data(cal, 2, gamma0_values=(40e-6, 80e-6), n=9, simulate="exact")
     assert rel.d_exact.shape == (2, 9)
     for i, g0 in enumerate(rel.gamma0):
@@ -115,57 +218,129 @@ def test_d_relation_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(c
             else:
                 assert rel.d_exact[i, j] == pytest.approx(invert_d_exact(*args), rel=1e-4, abs=1e-10)
     assert np.isnan(rel.d_exact[0, -1]) and np.isfinite(rel.d_exact[1]).all()
-    # small D: d / D tends to range / integral of the load = 1 / mean(sin zeta) = 2.418 (docs/design.md: ~2.4-2.5)
+    # small D: d / D tends to range / integral of the load = 1 / mean(sin zeta) = 2.418 (design.md §4: ~2.4)
     mean_load = (math.cos(-math.pi / 6) - math.cos(7 * math.pi / 6)) / (4 * math.pi / 3)
-    slope = np.gradient(rel.d_exact[1], rel.delta)[4]
-    assert slope == pytest.approx(1 / mean_load, rel=0.02)
+    assert np.gradient(rel.d_exact[1], rel.delta)[4] == pytest.approx(1 / mean_load, rel=0.02)
     assert np.all(np.abs(rel.d_printed) < 1e-6)  # Eq. 9 as printed: d < 1 µrad over +-9.2 µrad
     assert np.nanmax(np.abs(rel.d_exact)) > 15e-6  # while the exact relation reaches ~ the paper's Fig. 10
-    # the calibration's own points lie on the exact relation (d from the model, D from its average)
-    for c in rel.calibrated:
-        m = cal.model(2, c["direction"])
-        g0 = float(m.params.at(c["q3"])[0])
-        ref = invert_d_exact(g0 + c["delta"], g0, math.pi / 6, -7 * math.pi / 6, 0.0, -1.0)
-        assert c["d"] == pytest.approx(ref, rel=1e-6)
+    assert len(rel.calibrated) == 4
+    for c in rel.calibrated:  # the calibration's own points lie on the exact relation
+        g0 = float(cal.model(2, c.direction).params.at(c.q3)[0])
+        ref = invert_d_exact(g0 + c.delta, g0, math.pi / 6, -7 * math.pi / 6, 0.0, -1.0)
+        assert c.d == pytest.approx(ref, rel=1e-6)
 
 
-def test_validation_data_splits_errors_per_joint(cal, table):
-    v = validation_data(cal, table)
-    assert v.joints == [2, 3]
-    assert sum(a.size for a in v.measured.values()) == len(table)
-    assert max(np.max(np.abs(e)) for e in v.model_error.values()) < 0.05  # 1 % noise
-    assert max(np.max(np.abs(e)) for e in v.constant_error.values()) > 0.2  # the constant step is far off
+# ---------------------------------------------------------------- in-sample / out-of-sample
 
 
-def test_build_report_writes_figures_and_a_self_contained_page(cal, table, tmp_path):
+def test_the_calibrations_own_table_is_in_sample(cal, table):
+    s = classify_sample(cal, table)
+    assert s.kind == "in-sample" and f"{len(table)} rows" in s.reason
+    assert classify_sample(cal, list(reversed(table))).kind == "overlapping"  # another row order: not the table
+    assert classify_sample(cal, table, separate=True).kind == "in-sample"  # even when passed as "separate"
+
+
+def test_another_day_is_out_of_sample_and_a_mixed_table_is_labelled_per_day(cal, table, two_days):
+    other = [t for t in two_days if t.day == DAY2]
+    assert classify_sample(cal, other).kind == "out-of-sample"
+    by_day = classify_days(cal, two_days)
+    assert {d: s.kind for d, s in by_day.items()} == {DAY1: "in-sample", DAY2: "out-of-sample"}
+    assert classify_sample(cal, two_days).kind == "mixed"
+    # a separate table of the calibration's day with other rows: out-of-sample, and it says the day is shared
+    sep = classify_days(cal, table[:-1], separate=True)[DAY1]
+    assert sep.kind == "out-of-sample" and "also a day of" in sep.reason
+    assert classify_sample(cal, table[:-1]).kind == "overlapping"
+    bare = dataclasses.replace(cal, provenance=Provenance())
+    assert classify_sample(bare, table).kind == "unknown"
+
+
+def test_validation_figure_per_day_with_labels(cal, two_days):
+    v = validation_data(cal, two_days, {DAY1: "in-sample", DAY2: "out-of-sample"})
+    assert v.days == [DAY1, DAY2] and v.joints == [2, 3]
+    assert sum(c.n for c in v.cells) == len(two_days)
+    for c in v.cells:
+        rows = [t for t in two_days if t.day == c.day and t.joint == c.joint]
+        np.testing.assert_allclose(np.sort(c.measured), np.sort([_gamma_row(t) for t in rows]), rtol=1e-12)
+        pred = np.array([cal.predict(t) for t in rows])
+        np.testing.assert_allclose(
+            np.sort(c.model_error), np.sort(pred / [_gamma_row(t) for t in rows] - 1), rtol=1e-9, atol=1e-15
+        )
+    assert max(np.max(np.abs(c.model_error)) for c in v.cells) < 0.05  # 1 % noise
+    assert max(np.max(np.abs(c.constant_error)) for c in v.cells) > 0.2  # the constant step is far off
+    axes = v.plot()
+    assert axes.shape == (2, 2)
+    assert axes[0, 1].get_title() == f"validation, joint 3, day {DAY1} — in-sample"
+    assert axes[1, 0].get_title() == f"validation, joint 2, day {DAY2} — out-of-sample"
+    assert axes[0, 1].get_xlabel() == "measured average step (nm)"
+
+
+# ---------------------------------------------------------------- the report
+
+
+def test_build_report_writes_labelled_figures_and_a_self_contained_page(cal, table, two_days, tmp_path):
+    import matplotlib.pyplot as plt
+
+    before = set(plt.get_fignums())
     rep = build_report(cal, table, tmp_path / "r", dpi=40, seed_simulation="exact")
+    assert set(plt.get_fignums()) == before  # every figure closed, none shown
     names = sorted(p.name for p in rep.figures)
-    assert names == ["fig4_prismatic.png", "fig6_rotary_intervals.png", "fig8_simulated_steps.png",
-                     "fig9_d_relation.png", "validation.png"]
+    assert names == [
+        "fig4_prismatic.png",
+        "fig6_rotary_intervals.png",
+        "fig8_simulated_steps.png",
+        "fig9_d_relation.png",
+        "validation.png",
+    ]
     for p in rep.figures:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     page = rep.html.read_text()
     assert sorted(re.findall(r"<img src='([^']+)'", page)) == names  # relative references only
+    assert rep.sample.kind == "in-sample" and "Validation (in-sample)" in page
+    assert "out-of-sample" not in page
     assert "model max" in page and "constant-step max" in page and "standard error" in page
+    other = [t for t in two_days if t.day == DAY2]
+    rep2 = build_report(cal, table, tmp_path / "r2", dpi=40, seed_simulation="exact", validation=other)
+    page2 = rep2.html.read_text()
+    assert rep2.sample.kind == "out-of-sample" and "Validation (out-of-sample)" in page2
+    assert {"fig4_prismatic_validation.png", "fig6_rotary_intervals_validation.png"} <= {p.name for p in rep2.figures}
+    assert f"<td>{DAY2}</td><td>out-of-sample</td>" in page2
 
 
-def test_cli_report_and_fit_round_trip(tmp_path, table):
-    meas, calp = tmp_path / "meas.csv", tmp_path / "cal.json"
+def test_display_units_follow_the_joint_kind():
+    assert step_scale(3) == (1e9, "nm") and step_scale(2) == step_scale(1) == (1e6, "µrad")
+    assert param_scale("b", 3) == (1.0, "") and param_scale("c", 3) == (1e9, "nm")
+    assert param_scale("d", 2) == (1e6, "µrad")
+    assert position_scale(3) == (1e3, "mm") and position_scale(2)[0] == pytest.approx(180 / math.pi)
+    with pytest.raises(ValueError):
+        step_scale(4)
+
+
+# ---------------------------------------------------------------- the command
+
+
+def test_cli_report_says_in_sample_for_the_fitted_table_and_out_of_sample_for_another(tmp_path, table, two_days):
+    meas, calp, other = tmp_path / "meas.csv", tmp_path / "cal.json", tmp_path / "other.csv"
     prism = [t for t in table if t.joint == 3]
     write_measurements(meas, prism)
+    write_measurements(other, [t for t in two_days if t.day == DAY2 and t.joint == 3])
     assert runner.invoke(app, ["fit", str(meas), "-o", str(calp)]).exit_code == 0
     r = runner.invoke(app, ["report", "--calibration", str(calp), str(meas), "-o", str(tmp_path / "rep"), "--json"])
     assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["validation"]["sample"] == "in-sample"
     assert (tmp_path / "rep" / "index.html").exists() and (tmp_path / "rep" / "fig4_prismatic.png").exists()
+    r = runner.invoke(
+        app, ["report", "-c", str(calp), str(meas), "--validate-on", str(other), "-o", str(tmp_path / "rep2"), "--json"]
+    )
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["validation"]["sample"] == "out-of-sample"
     assert Calibration.load(calp).joints == [3]
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
     r = runner.invoke(app, ["report", "--calibration", str(bad), str(meas), "-o", str(tmp_path / "x")])
     assert r.exit_code == 2 and "not a stickslip calibration" in r.output
-
-
-def test_truth_is_what_the_generator_uses():
-    # guard: the figures' tests assume these models are physical
-    for d in "+-":
-        JointModel(3, d, TRUE_PRISMATIC[d]).params.check_physical()
-        JointModel(2, d, TRUE_ROTARY[d]).params.check_physical()
+    broken = tmp_path / "broken.csv"
+    broken.write_text("day,joint\n1,2\n")
+    r = runner.invoke(
+        app, ["report", "-c", str(calp), str(meas), "--validate-on", str(broken), "-o", str(tmp_path / "y")]
+    )
+    assert r.exit_code == 2 and "header must be exactly" in r.output and "Traceback" not in r.output

@@ -27,7 +27,7 @@ The *average step over a traverse* from ``start`` to ``end`` is
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -52,6 +52,7 @@ __all__ = [
     "sinusoid_range",
     "steps_between",
     "steps_between_quad",
+    "iter_traverse_steps",
     "simulate_traverse_steps",
     "position_after_steps",
 ]
@@ -519,24 +520,58 @@ def steps_between_quad(start: float, end: float, A: float, alpha: float = 0.0, b
     return val
 
 
+def iter_traverse_steps(
+    start: float, end: float, gamma: Callable[[float], float], max_steps: int = 10_000_000
+) -> Iterator[tuple[float, float]]:
+    """The paper's step-by-step simulation of a traverse (its Fig. 8): yields ``(q, gamma(q))`` per step.
+
+    Starting at ``start``, each step moves towards ``end`` by ``gamma(q)`` evaluated
+    where the step begins, until ``end`` is reached or passed. With ``gamma`` the mean
+    step of Eq. (8), ``gamma(q) = A + alpha cos q + beta sin q``
+    (:meth:`StepProfile.gamma`), this is the simulation behind the paper's Fig. 8 and
+    its Eq. 9 method. This is the one step-by-step loop of stickslip: the count
+    (:func:`simulate_traverse_steps`), the Eq. 9 comparator and the report's Fig. 8
+    all iterate it.
+
+    Parameters
+    ----------
+    start, end : float
+        The traversed interval, m or rad.
+    gamma : callable
+        Mean step size at a position, m or rad; must stay > 0.
+    max_steps : int
+        Refuse to go on after this many steps (a step size too small to finish).
+
+    Yields
+    ------
+    (q, g) : tuple of float
+        The position before the step and the step size, m or rad.
+    """
+    sign = 1.0 if end >= start else -1.0
+    q, n = float(start), 0
+    while (end - q) * sign > 0.0:
+        g = gamma(q)
+        if not g > 0.0:
+            raise NonPhysicalError(f"step size {g!r} <= 0 at q = {q:.6g}: the joint stalls")
+        yield q, g
+        q += sign * g
+        n += 1
+        if n >= max_steps:
+            raise RuntimeError(f"more than {max_steps} steps: step size too small")
+
+
 def simulate_traverse_steps(
     start: float, end: float, gamma: Callable[[float], float], max_steps: int = 10_000_000
 ) -> int:
     """Count discrete steps from ``start`` until ``end`` is reached or passed.
 
-    Each step moves by ``gamma(q)`` evaluated where the step begins (the paper's
-    simulation, its Fig. 8). ``gamma`` returns a positive step size (m or rad).
+    The count of :func:`iter_traverse_steps` (the paper's Fig. 8 simulation):
+    each step moves by ``gamma(q)`` evaluated where the step begins. ``gamma`` returns
+    a positive step size (m or rad).
     """
-    sign = 1.0 if end >= start else -1.0
-    q, n = start, 0
-    while (end - q) * sign > 0.0:
-        g = gamma(q)
-        if not g > 0.0:
-            raise NonPhysicalError(f"step size {g!r} <= 0 at q = {q:.6g}: the joint stalls")
-        q += sign * g
+    n = 0
+    for _ in iter_traverse_steps(start, end, gamma, max_steps):
         n += 1
-        if n >= max_steps:
-            raise RuntimeError(f"more than {max_steps} steps: step size too small")
     return n
 
 

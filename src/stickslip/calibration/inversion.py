@@ -13,6 +13,8 @@ from numpy.typing import NDArray
 from .. import kinematics as kin
 from ..models import (
     NonPhysicalError,
+    StepProfile,
+    simulate_traverse_steps,
     sinusoid_range,
     steps_between,
 )
@@ -139,19 +141,18 @@ class PaperQuadratic:
 def _simulate_full_range_averages(
     gamma0: NDArray[np.float64], d: NDArray[np.float64], start: float, end: float, alpha: float, beta: float
 ) -> NDArray[np.float64]:
-    """Step-by-step simulation of each (gamma0, d) pair (the paper's Fig. 8 simulation)."""
-    sign = 1.0 if end > start else -1.0
-    cos, sin = math.cos, math.sin
+    """Step-by-step simulation of each (gamma0, d) pair (the paper's Fig. 8 simulation).
+
+    Each average is ``|end - start| / N`` with ``N`` from
+    :func:`stickslip.models.simulate_traverse_steps` on Eq. (8),
+    ``gamma(q) = gamma0 + d (alpha cos q + beta sin q)``.
+    """
     out = np.empty(len(gamma0))
     for i, (g0, dd) in enumerate(zip(gamma0.tolist(), d.tolist(), strict=True)):
-        a, b = dd * alpha, dd * beta
-        q, n = float(start), 0
-        while (end - q) * sign > 0.0:
-            g = g0 + a * cos(q) + b * sin(q)
-            if g <= 0.0:
-                raise NonPhysicalError("a simulated step size is <= 0: shrink the grid")
-            q += sign * g
-            n += 1
+        try:
+            n = simulate_traverse_steps(start, end, StepProfile(g0, dd * alpha, dd * beta).gamma)
+        except NonPhysicalError:
+            raise NonPhysicalError("a simulated step size is <= 0: shrink the grid") from None
         out[i] = abs(end - start) / n
     return out
 

@@ -400,16 +400,24 @@ def report(
     out: Path = typer.Option(Path("stickslip-report"), "-o", "--output", help="Directory for the PNGs and index.html."),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP + " Used when MEAS.csv is not given."),
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
+    validate_on: Path | None = typer.Option(
+        None,
+        "--validate-on",
+        help="A separate measurement table (CSV) to validate on, out-of-sample. Without it the report "
+        "validates on MEAS.csv and says in-sample when that is the table the calibration was made from.",
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print the list of files written as JSON."),
 ) -> None:
     """Write the paper's figures (Figs. 4, 6/10, 8, 9) and an HTML validation page.
 
-    Figures: prismatic step against zeta for several theta with the model;
-    rotary step per pi/6 interval against zeta at q3 = 0 and 12 mm; simulated
-    step along the range; d against the step difference, exact relation vs the
-    paper's quadratic.
+    Figures: measured prismatic steps against zeta with a model line per tilt;
+    rotary steps per traversed interval beside the model's average over it (one
+    panel row per day in both); simulated steps along the range; d against the
+    step difference, exact relation vs the paper's quadratic; the validation,
+    labelled in-sample (MEAS.csv is the calibration's own table, by its sha256)
+    or out-of-sample (--validate-on).
 
-    Example: [bold]stickslip report --calibration cal.json meas.csv -o report/[/]
+    Example: [bold]stickslip report -c cal.json meas.csv --validate-on other-day.csv -o report/[/]
     """
     from ..calibration import Calibration, CalibrationError, calibrate
     from ..report import build_report
@@ -428,11 +436,20 @@ def report(
     if age is not None and age > 0:
         warn_later(f"calibration is from {cal.day}, {age} day(s) before the latest data ({latest}): "
                    "the figures compare it with later days")
+    val = read_table(validate_on) if validate_on is not None else None
     with user_errors(ImportError):
-        rep = build_report(cal, ts, out)
+        rep = build_report(cal, ts, out, validation=val)
     if json_out:
-        print_json({"directory": str(out), "html": str(rep.html), "figures": [str(p) for p in rep.figures]})
+        print_json(
+            {
+                "directory": str(out),
+                "html": str(rep.html),
+                "figures": [str(p) for p in rep.figures],
+                "validation": {"sample": rep.sample.kind, "reason": rep.sample.reason},
+            }
+        )
         return
     for p in rep.figures:
         console.print(f"wrote {p}")
+    console.print(f"validation {rep.sample.kind}: {rep.sample.reason}", highlight=False)
     console.print(f"open {rep.html}")
