@@ -19,8 +19,8 @@ then (counted from the wall clock) move the simulated joint::
 The power-on stepping frequency is 700 Hz (not the 1000 Hz a driver might assume), the
 power-on profiles are ``c16`` on every channel, profile 1 active. Everything received
 is kept in :attr:`received`; :meth:`inject` makes it fail (``"silent"``: carry out but
-never answer; ``"garbage"``: carry out and answer noise; ``"error"``: refuse), counting
-``go`` commands; :meth:`unplug` closes the line. Run it by hand with
+never answer; ``"garbage"``: carry out and answer noise; ``"error"``: refuse every
+command, ``stop`` too), counting ``go`` commands (``stopnack`` always halts, unanswered); :meth:`unplug` closes the line. Run it by hand with
 ``python -m stickslip.sim.console_emulator`` (prints the URL).
 """
 
@@ -140,6 +140,9 @@ class ConsoleEmulator(_Emulator):
         words = message.split(" ")
         name = words[0]
         fault = self._fault_for(name == "go")
+        if name == "stopnack" and message == "stopnack":  # halts, never answered, faulty or not
+            self._halt()
+            return b"", False
         if fault == "error":
             return b"e\tinternal error (injected)\r", False
         try:

@@ -40,7 +40,7 @@ from urllib.parse import urlsplit
 from ..base import DeviceError, url_options
 from ..transport import SerialTransport, SocketTransport, Transport
 from ._common import DEFAULT_CHANNELS, check_channels, log, parse_console_reply
-from .console import CONSOLE_BAUD, MAX_BURST, NanoControlConsole, split_burst
+from .console import CONSOLE_BAUD, FREQUENCY_RANGE_HZ, MAX_BURST, PROFILES, NanoControlConsole, split_burst
 from .legacy import (
     AMPLITUDE_RANGE,
     LEGACY_BAUD,
@@ -194,6 +194,12 @@ def open_url(url: str) -> NanoControl | NanoControlConsole:
     if baud is not None and baud <= 0:
         raise ValueError(f"baud must be a positive integer, got {baud}")
     fwc = _fine_with_coarse(opts["finewithcoarse"]) if "finewithcoarse" in opts else None
+    if profile not in PROFILES:
+        raise ValueError(f"profile (the scratch speed profile) must be an integer in 1..6, got {profile}")
+    if not 1e-3 <= margin <= 10.0:
+        raise ValueError(f"margin must be in 0.001..10 s, got {margin!r}")
+    if dialect == "console":
+        _console_hz(hz_text)  # refuse a bad frequency before opening the port
     channels = check_channels({i + 1: c for i, c in enumerate(opts.get("channels", "ABC"))})
     if parts.scheme == "mm3a+socket":
         if not parts.hostname or not parts.port:
@@ -249,6 +255,7 @@ def _console_hz(text: str | None) -> int:
         value = float(text)
     except ValueError:
         raise ValueError(f"hz must be an integer in 300..20000 Hz, got {text!r}") from None
-    if not value.is_integer():
-        raise ValueError(f"hz must be an integer in 300..20000 Hz, got {text!r}")
+    lo, hi = FREQUENCY_RANGE_HZ
+    if not (value.is_integer() and lo <= value <= hi):
+        raise ValueError(f"hz must be an integer in {lo}..{hi} Hz for the console dialect, got {text!r}")
     return int(value)

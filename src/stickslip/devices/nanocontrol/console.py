@@ -421,7 +421,7 @@ class NanoControlConsole:
         sign = 1 if m > 0 else -1
         f = self._hz[ch]
         d = steps / f
-        t_ms = math.ceil(1000.0 * (d + self.margin + 2.0 * self.timeout))
+        t_ms = math.ceil(round(1000.0 * (d + self.margin + 2.0 * self.timeout), 6))
         if t_ms > T_MAX_MS:
             raise DeviceError(
                 f"a burst of {steps} steps at {f} Hz needs a go interval of {t_ms} ms, more than "
