@@ -20,8 +20,9 @@ The power-on stepping frequency is 700 Hz (not the 1000 Hz a driver might assume
 power-on profiles are ``c16`` on every channel, profile 1 active. Everything received
 is kept in :attr:`received`; :meth:`inject` makes it fail (``"silent"``: carry out but
 never answer; ``"garbage"``: carry out and answer noise; ``"error"``: refuse every
-command, ``stop`` too), counting ``go`` commands (``stopnack`` always halts, unanswered); :meth:`unplug` closes the line. Run it by hand with
-``python -m stickslip.sim.console_emulator`` (prints the URL).
+command, ``stop`` too), counting ``go`` commands (``stopnack`` always halts, unanswered);
+:meth:`unplug` closes the line. Run it by hand with ``python -m stickslip.sim.console_emulator``
+(prints the URL).
 """
 
 from __future__ import annotations
