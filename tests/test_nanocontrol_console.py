@@ -249,6 +249,31 @@ def test_an_unanswered_stop_after_a_full_burst_keeps_its_steps_and_opens_the_bou
         dev.close()
 
 
+class Unplugged(FakeTransport):
+    """The cable is pulled as `go` is written: that write and every later one fail."""
+
+    def __init__(self, transcript):
+        super().__init__(transcript, name="/dev/fake")
+        self.pulled = False
+
+    def _send(self, data: bytes) -> None:
+        if data.startswith(b"go") or self.pulled:
+            self.pulled = True
+            raise OSError(5, "Input/output error")
+        super()._send(data)
+
+
+def test_an_unplugged_line_at_go_says_no_stop_could_be_sent():
+    clock = Clock()
+    t = Unplugged([*OPEN, FREQ, ("speed 6 c01 c01 c50 c01\r", "o\t\r"), ("speed 6\r", "o\t\r")])
+    dev = NanoControlConsole(t, timeout=TIMEOUT, margin=MARGIN, clock=clock, sleep=clock.sleep)
+    with t:
+        with pytest.raises(StepsUncertain, match=r"/dev/fake.*Input/output error.*no stop could be sent") as e:
+            dev.step(3, 1000)
+        assert (e.value.made, e.value.at_most) == (0, None)
+        dev.close()  # never raises
+
+
 def test_a_failure_in_a_later_burst_keeps_the_earlier_bursts():
     t, dev, _ = console(
         [

@@ -80,8 +80,8 @@ def test_a_fault_at_go_stops_the_channel_and_bounds_the_steps(fault, match):
     assert e.value.made == 960
     assert e.value.at_most is None  # the faulty emulator refuses or ignores stop too: maybe still driving
     assert received[received.index(next(m for m in reversed(received) if m.startswith("go"))) + 1] == "stopnack"
-    # the go's answer (timeout) + the stop's short wait (min(timeout, 0.5)) + slack
-    assert elapsed < 2 * timeout + 1.0
+    # the go's answer (timeout) + the stop's short wait (min(timeout, 0.25 s)) + slack
+    assert elapsed < timeout + 0.25 + 1.0
 
 
 @pty_only

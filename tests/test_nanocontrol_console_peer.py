@@ -99,7 +99,7 @@ def test_a_fault_at_go_is_one_line_naming_the_port_with_a_stop_sent(cal, tmp_pat
     first_go = next(i for i, c in enumerate(cmds) if c.startswith("go "))
     assert cmds[first_go + 1] == "stopnack" and "stop" in cmds[first_go + 2 :], cmds
     assert not driving_at_end
-    # a few CLI start-ups (~1-2 s each on a loaded machine) + timeout 0.5 s + the stop's 0.5 s
+    # a few CLI start-ups (~1-2 s each on a loaded machine) + timeout 0.5 s + the stop's 0.25 s
     assert elapsed < 15
     q3 = json.loads(w.stdout)["joints"][2]
     if fault == "error":  # refused and acknowledged stop: at most the refused go's steps

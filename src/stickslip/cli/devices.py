@@ -83,7 +83,7 @@ def _plan(cal, joint: int, q_from: float, q_to: float, pose: kin.Pose):
 
 
 def _state_rows(state: DeviceState) -> list[dict[str, object]]:
-    rows = []
+    rows: list[dict[str, object]] = []
     for j in (1, 2, 3):
         spec = kin.JOINTS[j]
         rows.append(
@@ -401,11 +401,10 @@ def where(
     line = _info_line(info) if info else None
     if line:
         console.print(f"  {line}", highlight=False)
-    for r in rows:
+    for r, j in zip(rows, (1, 2, 3), strict=True):
         extra = ""
-        if r["uncertain"]:
-            lo, hi = r["uncertain"]
-            j = int(r["joint"])  # type: ignore[call-overload]
+        if j in state.uncertain:
+            lo, hi = state.uncertain[j]
             extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
         console.print(
             f"  joint {r['joint']}: {r['display']:>14}  ({r['source']}{extra})", highlight=False

@@ -54,8 +54,8 @@ steps; writing a profile does not change the active one until ``speed P`` is sen
 ``T`` may be as large as 65535 ms.
 
 Stops that hold: an error, a timeout or Ctrl-C while a channel may be driving sends
-``stopnack`` at once, then ``stop``; :meth:`NanoControlConsole.close` does the same if
-a ``go`` was never confirmed stopped.
+``stopnack`` at once, then ``stop`` (its answer awaited at most 0.25 s);
+:meth:`NanoControlConsole.close` does the same if a ``go`` was never confirmed stopped.
 """
 
 from __future__ import annotations
@@ -437,16 +437,17 @@ class NanoControlConsole:
             t_answer = self._clock()
             self._wait_until(t_answer + d + self.margin)
         except BaseException as e:
-            acked = self._emergency_stop()
+            outcome = self._emergency_stop()
+            acked = outcome == "acknowledged"
             what = "interrupted (Ctrl-C)" if isinstance(e, KeyboardInterrupt) else str(e)
             if not isinstance(e, DeviceError) and acked:
                 raise  # Ctrl-C, stopped: the caller's journal covers this burst
-            tail = (
-                "; stopnack and stop were sent and the stop was acknowledged"
-                if acked
-                else "; stopnack and stop were sent but the stop was not acknowledged: "
-                f"channel {ch} may still be driving"
-            )
+            tail = {
+                "acknowledged": "; stopnack and stop were sent and the stop was acknowledged",
+                "unanswered": "; stopnack and stop were sent but the stop was not acknowledged: "
+                f"channel {ch} may still be driving",
+                "unsent": f"; no stop could be sent (the line is down): channel {ch} may still be driving",
+            }[outcome]
             raise StepsUncertain(
                 what + tail, made, made + sign * steps if acked else None
             ) from (None if isinstance(e, DeviceError) else e)
@@ -479,20 +480,24 @@ class NanoControlConsole:
                 return
             self._sleep(min(left, 0.05))
 
-    def _emergency_stop(self) -> bool:
-        """``stopnack`` at once, then ``stop``; whether the stop was acknowledged. Never raises."""
+    def _emergency_stop(self, wait: float = 0.25) -> str:
+        """``stopnack`` at once, then ``stop``, its answer awaited at most ``min(timeout, wait)`` s.
+
+        Returns ``"acknowledged"``, ``"unanswered"`` or ``"unsent"`` (the line is down).
+        Never raises.
+        """
         try:
             self._write("stopnack")
         except DeviceError as e:
             log.warning("could not send stopnack to %s: %s", self.transport.name, e)
-            return False
+            return "unsent"
         try:
-            self.command("stop", timeout=min(self.timeout, 0.5))
+            self.command("stop", timeout=min(self.timeout, wait))
         except DeviceError as e:
             log.warning("no answer to stop from %s: %s", self.transport.name, e)
-            return False
+            return "unanswered"
         self._driving = False
-        return True
+        return "acknowledged"
 
     def stop(self, joint: int | None = None) -> None:
         """Stop every channel now (the console has no per-channel stop). Never raises.
@@ -555,8 +560,8 @@ class NanoControlConsole:
         if self.transport.closed:
             return
         try:
-            if self._driving:
-                self._emergency_stop()
+            if self._driving:  # a go never confirmed stopped: stop it, without waiting long
+                self._emergency_stop(wait=0.1)
             if self._profile_dirty or (self.user_profile is not None and self._active != self.user_profile):
                 self._restore_quietly()
         finally:
