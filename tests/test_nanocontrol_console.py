@@ -24,7 +24,7 @@ from stickslip.devices.nanocontrol import (
     split_burst,
 )
 from stickslip.devices.nanocontrol.console import parse_profile
-from stickslip.devices.transport import FakeTransport
+from stickslip.devices.transport import FakeTransport, TranscriptError
 
 TIMEOUT = 0.05
 MARGIN = 0.05
@@ -476,3 +476,54 @@ def test_bad_url_options_are_refused_before_the_port_is_opened(query, match):
 def test_an_unplugged_port_names_the_port():
     with pytest.raises(DeviceError, match="/dev/ttyNOPE"):
         open_device("mm3a:///dev/ttyNOPE?timeout=0.1")
+
+
+# -- fuzzing the answers, and Ctrl-C inside the move loop -----------------------------------
+
+
+@given(reply=st.binary(min_size=0, max_size=40))
+@settings(max_examples=200, deadline=None)
+def test_any_answer_to_version_is_a_version_or_one_device_error(reply):
+    t = FakeTransport([("version\r", reply + b"\r")], name="/dev/fake")
+    try:
+        message = NanoControlConsole(t, timeout=TIMEOUT).version
+    except DeviceError as e:
+        assert "/dev/fake" in str(e)
+        return
+    except TranscriptError:  # it answered version well, then `speed ?` found the transcript used up
+        first = reply.split(b"\r")[0].lstrip(b"\n")
+        assert first[:2] in (b"o\t", b"i\t") and all(c == 9 or 32 <= c < 127 for c in first)
+        return
+    pytest.fail(f"opened without asking the profile: {message!r}")
+
+
+def test_ctrl_c_in_the_move_loop_leaves_the_burst_journalled_and_nothing_driving():
+    from stickslip.devices.positions import DeviceState
+    from stickslip.procedures.move import drive
+
+    clock = Clock(interrupt_after=30)  # 30 sleeps of 0.05 s: inside the second burst
+    t, dev, _ = console(
+        [
+            FREQ,
+            ("speed 6 c01 c01 c50 c01\r", "o\t\r"),
+            ("speed 6\r", "o\t\r"),
+            (f"go 0 0 20 0 {T(1000)}\r", "o\t\r"),
+            ("stop\r", "o\t\r"),
+            ("speed 3\r", "o\t\r"),
+            ("speed 6\r", "o\t\r"),
+            (f"go 0 0 20 0 {T(1000)}\r", "o\t\r"),
+            ("stopnack\r", None),
+            ("stop\r", "o\t\r"),
+            ("speed 3\r", "o\t\r"),
+        ],
+        clock=clock,
+    )
+    state = DeviceState.default("mm3a:///dev/fake")
+    state.set_position(3, 1e-3, "set")
+    with t:
+        with pytest.raises(KeyboardInterrupt):
+            drive(dev, state, 3, 2000, 1000, lambda n: 1e-3 + n * 1e-6, lambda s: None)
+        dev.close()
+    # the first burst is kept; the second is journalled: uncertain between its start and end
+    assert state.positions[3] == pytest.approx(1e-3 + 1000e-6, abs=1e-15)
+    assert state.uncertain[3] == pytest.approx((1e-3 + 1000e-6, 1e-3 + 2000e-6), abs=1e-15)

@@ -191,3 +191,18 @@ def test_drive_with_nothing_made_and_nothing_possible_keeps_the_source():
     state.set_position(3, 1e-3, "set")
     out = drive(failing, state, 3, 50, 100, lambda n: 1e-3 + n * 1e-6, lambda s: None)
     assert out.sent == 0 and state.sources[3] == "set" and 3 not in state.uncertain
+
+
+@pty_only
+def test_where_reports_dialect_version_frequencies_and_profile(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    with ConsoleEmulator(_sim()) as emu:
+        r = CliRunner().invoke(app, ["where", "-d", emu.url, "--db", str(tmp_path / "s.db")])
+    assert r.exit_code == 0, r.output
+    out = " ".join(r.stdout.split())  # the console may wrap long lines
+    assert "console dialect; firmware NanoControl console emulator 1.0 (stickslip)" in out
+    assert "C 1000 Hz" in out and "not yet set on the controller" in out
+    assert "active speed profile 1 (c16 c16 c16 c16)" in out
