@@ -527,3 +527,22 @@ def test_ctrl_c_in_the_move_loop_leaves_the_burst_journalled_and_nothing_driving
     # the first burst is kept; the second is journalled: uncertain between its start and end
     assert state.positions[3] == pytest.approx(1e-3 + 1000e-6, abs=1e-15)
     assert state.uncertain[3] == pytest.approx((1e-3 + 1000e-6, 1e-3 + 2000e-6), abs=1e-15)
+
+
+def test_a_long_timeout_caps_the_go_interval_at_65535_ms():
+    t = FakeTransport(
+        [
+            *OPEN,
+            FREQ,
+            ("speed 6 c01 c01 c64 c01\r", "o\t\r"),
+            ("speed 6\r", "o\t\r"),
+            ("go 0 0 100 0 65535\r", "o\t\r"),  # 6.4 s + 0.05 s + 2 x 30 s would be 66450 ms
+            ("stop\r", "o\t\r"),
+            ("speed 3\r", "o\t\r"),
+        ],
+        name="/dev/fake",
+    )
+    clock = Clock()
+    dev = NanoControlConsole(t, timeout=30, margin=MARGIN, clock=clock, sleep=clock.sleep)
+    with t:
+        dev.step(3, 6400)

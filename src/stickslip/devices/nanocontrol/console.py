@@ -28,8 +28,8 @@ therefore timed. N (at most :data:`MAX_BURST` = 6400) is split into at most two 
 ``count x multiplier`` (:func:`split_burst`). For each part the scratch profile
 (``?profile=``, default 6) gets ``c<count>`` on the joint's channel, is made active, and
 ``go`` is sent with multiplier ``m`` on that channel only (0 on the others) and an
-interval ``T`` longer than the part's duration ``d = count |m| / f`` plus the margin
-plus twice the timeout. Once ``go`` is answered, the driver waits ``d + margin`` and
+interval ``T``: the part's duration ``d = count |m| / f`` plus the margin plus twice the
+timeout, at most :data:`T_MAX_MS`. Once ``go`` is answered, the driver waits ``d + margin`` and
 sends ``stop``. Then:
 
 * ``go`` was received between its sending and its answer, and ``stop`` between its
@@ -104,6 +104,8 @@ T_MAX_MS = 65535
 """Longest ``go`` interval this driver sends, ms (an assumption: see the module docstring)."""
 
 _CHANNELS = "ABCD"
+_MIN_SLACK_MS = 200.0
+"""Least time between a burst's stop being due and the next interval when T is capped, ms."""
 
 
 def split_burst(n: int) -> list[tuple[int, int]]:
@@ -421,11 +423,12 @@ class NanoControlConsole:
         sign = 1 if m > 0 else -1
         f = self._hz[ch]
         d = steps / f
-        t_ms = math.ceil(round(1000.0 * (d + self.margin + 2.0 * self.timeout), 6))
-        if t_ms > T_MAX_MS:
+        # room for both answers' latency; capped (whether stop came on time is measured anyway)
+        t_ms = min(math.ceil(round(1000.0 * (d + self.margin + 2.0 * self.timeout), 6)), T_MAX_MS)
+        if t_ms == T_MAX_MS and t_ms < 1000.0 * (d + self.margin) + _MIN_SLACK_MS:
             raise DeviceError(
-                f"a burst of {steps} steps at {f} Hz needs a go interval of {t_ms} ms, more than "
-                f"{T_MAX_MS} ms; raise the frequency or lower the timeout"
+                f"a burst of {steps} steps at {f} Hz lasts {d:.3f} s, too long for the longest go "
+                f"interval sent ({T_MAX_MS} ms); raise the frequency (?hz=)"
             )
         self._write_scratch(ch, count)
         mults = " ".join(str(m) if c == ch else "0" for c in _CHANNELS)
