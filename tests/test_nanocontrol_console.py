@@ -10,6 +10,8 @@ stickslip.devices.nanocontrol.console); steps = count x |m| per go.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -39,7 +41,7 @@ def T(steps: int, hz: int = 1000) -> int:
 class Clock:
     """A fake monotonic clock; ``sleep`` advances it (and may raise, as Ctrl-C would)."""
 
-    def __init__(self, interrupt_after: int | None = None):
+    def __init__(self, interrupt_after: int | None = None) -> None:
         self.t = 100.0
         self.slept = 0.0
         self.calls = 0
@@ -56,7 +58,12 @@ class Clock:
         self.slept += dt
 
 
-def console(transcript, clock=None, **kw):
+Entry = tuple[str | bytes | None, str | bytes | None]
+
+
+def console(
+    transcript: Sequence[Entry], clock: Clock | None = None, **kw: Any
+) -> tuple[FakeTransport, NanoControlConsole, Clock]:
     clock = clock or Clock()
     t = FakeTransport([*OPEN, *transcript], name="/dev/fake")
     dev = NanoControlConsole(t, timeout=TIMEOUT, margin=MARGIN, clock=clock, sleep=clock.sleep, **kw)
@@ -66,7 +73,7 @@ def console(transcript, clock=None, **kw):
 FREQ = ("frequency 1000 1000 1000 1000\r", "o\t\r")
 
 
-def test_open_asks_version_and_the_active_profile_and_reports_them():
+def test_open_asks_version_and_the_active_profile_and_reports_them() -> None:
     t, dev, _ = console([])
     with t:
         info = dev.info
@@ -80,7 +87,7 @@ def test_open_asks_version_and_the_active_profile_and_reports_them():
     assert dev.settings()["scratch_profile"] == 6
 
 
-def test_an_exact_burst_sets_frequency_writes_scratch_goes_stops_and_restores():
+def test_an_exact_burst_sets_frequency_writes_scratch_goes_stops_and_restores() -> None:
     t, dev, clock = console(
         [
             FREQ,
@@ -98,7 +105,7 @@ def test_an_exact_burst_sets_frequency_writes_scratch_goes_stops_and_restores():
         dev.close()  # nothing more to send: stopped and restored
 
 
-def test_a_burst_that_does_not_factor_takes_two_gos_and_negative_steps_reverse():
+def test_a_burst_that_does_not_factor_takes_two_gos_and_negative_steps_reverse() -> None:
     n = 1009  # prime: 64 x 15 + 49 x 1
     t, dev, clock = console(
         [
@@ -119,7 +126,7 @@ def test_a_burst_that_does_not_factor_takes_two_gos_and_negative_steps_reverse()
         assert clock.slept == pytest.approx(n / 1000 + 2 * MARGIN, abs=1e-12)
 
 
-def test_frequency_and_channel_map_are_used_for_timing():
+def test_frequency_and_channel_map_are_used_for_timing() -> None:
     t, dev, clock = console(
         [
             ("frequency 1000 1000 1000 20000\r", "o\t\r"),
@@ -137,7 +144,7 @@ def test_frequency_and_channel_map_are_used_for_timing():
         assert clock.slept == pytest.approx(6400 / 20000 + MARGIN, abs=1e-12)
 
 
-def test_when_the_users_profile_is_the_scratch_one_its_values_are_written_back():
+def test_when_the_users_profile_is_the_scratch_one_its_values_are_written_back() -> None:
     t, dev, _ = console(
         [
             FREQ,
@@ -154,7 +161,7 @@ def test_when_the_users_profile_is_the_scratch_one_its_values_are_written_back()
         dev.step(3, 5)
 
 
-def _burst(go_reply, *after):
+def _burst(go_reply: str | bytes | None, *after: Entry) -> list[Entry]:
     return [
         FREQ,
         ("speed 6 c01 c01 c50 c01\r", "o\t\r"),
@@ -164,7 +171,7 @@ def _burst(go_reply, *after):
     ]
 
 
-def test_an_error_answer_to_go_sends_stopnack_then_stop_and_names_command_and_port():
+def test_an_error_answer_to_go_sends_stopnack_then_stop_and_names_command_and_port() -> None:
     t, dev, _ = console(
         _burst("e\tmotor driver fault\r", ("stopnack\r", None), ("stop\r", "o\t\r"), ("speed 3\r", "o\t\r"))
     )
@@ -175,7 +182,9 @@ def test_an_error_answer_to_go_sends_stopnack_then_stop_and_names_command_and_po
 
 
 @pytest.mark.parametrize("reply, words", [(None, "did not answer 'go"), (b"\x00\xff\r", "garbage reply")])
-def test_silence_or_garbage_after_go_stops_and_leaves_the_bound_open_if_unacknowledged(reply, words):
+def test_silence_or_garbage_after_go_stops_and_leaves_the_bound_open_if_unacknowledged(
+    reply: bytes | None, words: str
+) -> None:
     t, dev, _ = console(
         _burst(reply, ("stopnack\r", None), ("stop\r", None), ("stopnack\r", None), ("stop\r", None))
     )
@@ -187,7 +196,7 @@ def test_silence_or_garbage_after_go_stops_and_leaves_the_bound_open_if_unacknow
         dev.close()  # closing tries again: stopnack, stop
 
 
-def test_ctrl_c_mid_burst_sends_stopnack_at_once_then_stop_and_propagates():
+def test_ctrl_c_mid_burst_sends_stopnack_at_once_then_stop_and_propagates() -> None:
     clock = Clock(interrupt_after=3)
     t, dev, _ = console(
         _burst("o\t\r", ("stopnack\r", None), ("stop\r", "o\t\r"), ("speed 3\r", "o\t\r")), clock=clock
@@ -198,7 +207,7 @@ def test_ctrl_c_mid_burst_sends_stopnack_at_once_then_stop_and_propagates():
         dev.close()  # stopped and restored: nothing to send
 
 
-def test_ctrl_c_with_an_unanswered_stop_becomes_an_open_bound():
+def test_ctrl_c_with_an_unanswered_stop_becomes_an_open_bound() -> None:
     clock = Clock(interrupt_after=0)
     t, dev, _ = console(
         _burst("o\t\r", ("stopnack\r", None), ("stop\r", None), ("stopnack\r", None), ("stop\r", "o\t\r"),
@@ -216,7 +225,7 @@ def test_ctrl_c_with_an_unanswered_stop_becomes_an_open_bound():
 class LateStop(FakeTransport):
     """The answer to `stop` comes `delay` s (fake clock) after it is sent."""
 
-    def __init__(self, transcript, clock, delay):
+    def __init__(self, transcript: Sequence[Entry], clock: Clock, delay: float) -> None:
         super().__init__(transcript, name="/dev/fake")
         self.clock, self.delay = clock, delay
 
@@ -226,7 +235,7 @@ class LateStop(FakeTransport):
         super()._send(data)
 
 
-def test_a_late_stop_records_the_first_interval_and_bounds_the_rest():
+def test_a_late_stop_records_the_first_interval_and_bounds_the_rest() -> None:
     clock = Clock()
     t = LateStop([*OPEN, *_burst("o\t\r", ("stop\r", "o\t\r"), ("speed 3\r", "o\t\r"))], clock, delay=2.0)
     dev = NanoControlConsole(t, timeout=TIMEOUT, margin=MARGIN, clock=clock, sleep=clock.sleep)
@@ -237,7 +246,7 @@ def test_a_late_stop_records_the_first_interval_and_bounds_the_rest():
     assert (e.value.made, e.value.at_most) == (1000, 3000)
 
 
-def test_an_unanswered_stop_after_a_full_burst_keeps_its_steps_and_opens_the_bound():
+def test_an_unanswered_stop_after_a_full_burst_keeps_its_steps_and_opens_the_bound() -> None:
     t, dev, _ = console(
         _burst("o\t\r", ("stop\r", None), ("stopnack\r", None), ("stop\r", None), ("stopnack\r", None),
                ("stop\r", None))
@@ -252,7 +261,7 @@ def test_an_unanswered_stop_after_a_full_burst_keeps_its_steps_and_opens_the_bou
 class Unplugged(FakeTransport):
     """The cable is pulled as `go` is written: that write and every later one fail."""
 
-    def __init__(self, transcript):
+    def __init__(self, transcript: Sequence[Entry]) -> None:
         super().__init__(transcript, name="/dev/fake")
         self.pulled = False
 
@@ -263,7 +272,7 @@ class Unplugged(FakeTransport):
         super()._send(data)
 
 
-def test_an_unplugged_line_at_go_says_no_stop_could_be_sent():
+def test_an_unplugged_line_at_go_says_no_stop_could_be_sent() -> None:
     clock = Clock()
     t = Unplugged([*OPEN, FREQ, ("speed 6 c01 c01 c50 c01\r", "o\t\r"), ("speed 6\r", "o\t\r")])
     dev = NanoControlConsole(t, timeout=TIMEOUT, margin=MARGIN, clock=clock, sleep=clock.sleep)
@@ -274,7 +283,7 @@ def test_an_unplugged_line_at_go_says_no_stop_could_be_sent():
         dev.close()  # never raises
 
 
-def test_a_failure_in_a_later_burst_keeps_the_earlier_bursts():
+def test_a_failure_in_a_later_burst_keeps_the_earlier_bursts() -> None:
     t, dev, _ = console(
         [
             FREQ,
@@ -294,7 +303,7 @@ def test_a_failure_in_a_later_burst_keeps_the_earlier_bursts():
     assert (e.value.made, e.value.at_most) == (6400, 12800)
 
 
-def test_an_unreadable_profile_refuses_bursts_and_sends_nothing():
+def test_an_unreadable_profile_refuses_bursts_and_sends_nothing() -> None:
     t = FakeTransport([("version\r", "o\tNC\r"), ("speed ?\r", "o\tprofile one\r")], name="/dev/fake")
     dev = NanoControlConsole(t, timeout=TIMEOUT)
     with t:
@@ -303,14 +312,14 @@ def test_an_unreadable_profile_refuses_bursts_and_sends_nothing():
         assert dev.info.extra["active_profile"] is None
 
 
-def test_info_answers_are_answers_and_are_logged(caplog):
+def test_info_answers_are_answers_and_are_logged(caplog: pytest.LogCaptureFixture) -> None:
     t, dev, _ = console([("beep 1500 150\r", "i\tPiezo voltage breakdown\r")])
     with t, caplog.at_level("WARNING", logger="stickslip.devices.nanocontrol"):
-        assert dev.beep(1500, 150) is None
+        dev.beep(1500, 150)  # an i answer is an answer: no error
     assert any("Piezo voltage breakdown" in r.getMessage() for r in caplog.records)
 
 
-def test_fine_with_coarse_is_sent_for_all_four_channels():
+def test_fine_with_coarse_is_sent_for_all_four_channels() -> None:
     t, dev, _ = console([("finewithcoarse 0 1 0 0\r", "o\t\r")])
     with t:
         dev.set_fine_with_coarse({"A": False, "B": True, "C": False, "D": False})
@@ -328,7 +337,7 @@ def test_fine_with_coarse_is_sent_for_all_four_channels():
         (lambda d: d.set_fine_with_coarse({"A": True}), r"every channel"),
     ],
 )
-def test_out_of_range_settings_raise_and_send_nothing(call, match):
+def test_out_of_range_settings_raise_and_send_nothing(call: Callable[[NanoControlConsole], None], match: str) -> None:
     t, dev, _ = console([])
     with t:
         with pytest.raises(ValueError, match=match):
@@ -336,7 +345,7 @@ def test_out_of_range_settings_raise_and_send_nothing(call, match):
 
 
 @pytest.mark.parametrize("kw, match", [({"profile": 7}, "1..6"), ({"margin": 0}, "margin"), ({"hz": 100}, "300")])
-def test_bad_construction_options(kw, match):
+def test_bad_construction_options(kw: dict[str, Any], match: str) -> None:
     t = FakeTransport([], name="/dev/fake")
     with pytest.raises(ValueError, match=match):
         NanoControlConsole(t, **kw)
@@ -344,24 +353,24 @@ def test_bad_construction_options(kw, match):
 
 @given(n=st.integers(1, MAX_BURST))
 @settings(max_examples=300, deadline=None)
-def test_split_burst_is_exact_with_at_most_two_valid_parts(n):
+def test_split_burst_is_exact_with_at_most_two_valid_parts(n: int) -> None:
     parts = split_burst(n)
     assert 1 <= len(parts) <= 2
     assert sum(c * m for c, m in parts) == n
     assert all(1 <= c <= 64 and 1 <= m <= 100 for c, m in parts)
 
 
-def test_split_burst_prefers_one_go_and_refuses_nonsense():
+def test_split_burst_prefers_one_go_and_refuses_nonsense() -> None:
     assert split_burst(6400) == [(64, 100)] and split_burst(1) == [(1, 1)] and split_burst(97) == [(1, 97)]
     for bad in (0, 6401, -5, 2.0, True):
         with pytest.raises(ValueError):
-            split_burst(bad)
+            split_burst(bad)  # type: ignore[arg-type]  # wrong types on purpose
 
 
 class AutoConsole(FakeTransport):
     """Answers every console command `o` (`speed ?` with a profile; nothing to `stopnack`)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__([], name="auto")
         self.commands: list[str] = []
 
@@ -376,7 +385,7 @@ class AutoConsole(FakeTransport):
 
 @given(n=st.integers(-3 * MAX_BURST - 7, 3 * MAX_BURST + 7), joint=st.sampled_from([1, 2, 3]))
 @settings(max_examples=60, deadline=None)
-def test_any_step_count_is_made_of_gos_on_one_channel_summing_to_it(n, joint):
+def test_any_step_count_is_made_of_gos_on_one_channel_summing_to_it(n: int, joint: int) -> None:
     """An independent reading of the transcript: each go's steps = the count last written x |m|."""
     clock = Clock()
     t = AutoConsole()
@@ -400,7 +409,7 @@ def test_any_step_count_is_made_of_gos_on_one_channel_summing_to_it(n, joint):
     assert t.commands[-1] == ("speed 1" if n else "speed ?")  # the user's profile active again
 
 
-def test_parse_profile_refuses_malformed_answers():
+def test_parse_profile_refuses_malformed_answers() -> None:
     assert parse_profile("6 c1 c064 f64 C02") == (6, ("c01", "c64", "f64", "c02"))
     for bad in ("1 c064 c032 f008", "7 c01 c01 c01 c01", "x c01 c01 c01 c01", "1 c00 c01 c01 c01", "1 d01 c1 c1 c1"):
         with pytest.raises(ValueError):
@@ -410,20 +419,20 @@ def test_parse_profile_refuses_malformed_answers():
 # -- detection ---------------------------------------------------------------------------
 
 
-def test_detection_finds_the_console_with_one_version_at_115200():
+def test_detection_finds_the_console_with_one_version_at_115200() -> None:
     t = FakeTransport([("version\r", "o\tNanoControl 4.2\r")], name="/dev/fake")
     with t:
         assert detect_dialect(t, timeout=TIMEOUT) == ("console", "NanoControl 4.2")
     assert t.baudrates == [115200]
 
 
-def test_detection_retries_once_after_an_error_answer():
+def test_detection_retries_once_after_an_error_answer() -> None:
     t = FakeTransport([("version\r", "e\tunknown command\r"), ("version\r", "o\tNC 4\r")], name="/dev/fake")
     with t:
         assert detect_dialect(t, timeout=TIMEOUT) == ("console", "NC 4")
 
 
-def test_detection_falls_back_to_legacy_at_19200_ending_the_probe_with_a_semicolon():
+def test_detection_falls_back_to_legacy_at_19200_ending_the_probe_with_a_semicolon() -> None:
     t = FakeTransport(
         [("version\r", None), (";", "e\tunknown command\r"), ("version;", "o\tNanoControl 2.1\r")], name="/dev/fake"
     )
@@ -432,14 +441,14 @@ def test_detection_falls_back_to_legacy_at_19200_ending_the_probe_with_a_semicol
     assert t.baudrates == [115200, 19200]
 
 
-def test_detection_honours_a_baud_override_for_both_probes():
+def test_detection_honours_a_baud_override_for_both_probes() -> None:
     t = FakeTransport([("version\r", None), (";", None), ("version;", "o\tNC\r")], name="/dev/fake")
     with t:
         assert detect_dialect(t, timeout=TIMEOUT, baud=9600) == ("legacy", "NC")
     assert t.baudrates == [9600, 9600]
 
 
-def test_detection_that_hears_nothing_names_the_port_and_both_probes():
+def test_detection_that_hears_nothing_names_the_port_and_both_probes() -> None:
     t = FakeTransport([("version\r", None), (";", None), ("version;", None)], name="/dev/fake")
     with t:
         with pytest.raises(DeviceError) as e:
@@ -448,7 +457,7 @@ def test_detection_that_hears_nothing_names_the_port_and_both_probes():
     assert "/dev/fake" in msg and "115200" in msg and "19200" in msg and "?dialect=" in msg
 
 
-def test_the_legacy_dialect_transcript_is_unchanged_when_forced():
+def test_the_legacy_dialect_transcript_is_unchanged_when_forced() -> None:
     t = FakeTransport([("version;", "o\tNC 3.1\r"), ("coarse C +12;", "o\t\r")], name="/dev/fake")
     with t:
         dev = NanoControl(t, timeout=TIMEOUT)
@@ -468,12 +477,12 @@ def test_the_legacy_dialect_transcript_is_unchanged_when_forced():
         ("speed=3", "unknown option"),
     ],
 )
-def test_bad_url_options_are_refused_before_the_port_is_opened(query, match):
+def test_bad_url_options_are_refused_before_the_port_is_opened(query: str, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         open_device(f"mm3a:///dev/ttyNOPE?{query}")
 
 
-def test_an_unplugged_port_names_the_port():
+def test_an_unplugged_port_names_the_port() -> None:
     with pytest.raises(DeviceError, match="/dev/ttyNOPE"):
         open_device("mm3a:///dev/ttyNOPE?timeout=0.1")
 
@@ -483,7 +492,7 @@ def test_an_unplugged_port_names_the_port():
 
 @given(reply=st.binary(min_size=0, max_size=40))
 @settings(max_examples=200, deadline=None)
-def test_any_answer_to_version_is_a_version_or_one_device_error(reply):
+def test_any_answer_to_version_is_a_version_or_one_device_error(reply: bytes) -> None:
     t = FakeTransport([("version\r", reply + b"\r")], name="/dev/fake")
     try:
         message = NanoControlConsole(t, timeout=TIMEOUT).version
@@ -497,7 +506,7 @@ def test_any_answer_to_version_is_a_version_or_one_device_error(reply):
     pytest.fail(f"opened without asking the profile: {message!r}")
 
 
-def test_ctrl_c_in_the_move_loop_leaves_the_burst_journalled_and_nothing_driving():
+def test_ctrl_c_in_the_move_loop_leaves_the_burst_journalled_and_nothing_driving() -> None:
     from stickslip.devices.positions import DeviceState
     from stickslip.procedures.move import drive
 
@@ -529,7 +538,7 @@ def test_ctrl_c_in_the_move_loop_leaves_the_burst_journalled_and_nothing_driving
     assert state.uncertain[3] == pytest.approx((1e-3 + 1000e-6, 1e-3 + 2000e-6), abs=1e-15)
 
 
-def test_a_long_timeout_caps_the_go_interval_at_65535_ms():
+def test_a_long_timeout_caps_the_go_interval_at_65535_ms() -> None:
     t = FakeTransport(
         [
             *OPEN,

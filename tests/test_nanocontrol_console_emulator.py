@@ -11,13 +11,16 @@ from __future__ import annotations
 
 import os
 import time
+from pathlib import Path
+from typing import Any, cast
 
 import pytest
 
 from stickslip import kinematics as kin
-from stickslip.devices.base import DeviceError, StepsUncertain, open_device
+from stickslip.devices.base import Controller, DeviceError, StepsUncertain
+from stickslip.devices.nanocontrol import open_url
 from stickslip.devices.positions import DeviceState
-from stickslip.procedures.move import drive
+from stickslip.procedures.move import MoveOutcome, drive
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.console_emulator import POWER_ON_HZ, ConsoleEmulator, steps_by
 from stickslip.sim.emulators import NanoControlEmulator
@@ -25,18 +28,18 @@ from stickslip.sim.emulators import NanoControlEmulator
 pty_only = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 
 
-def _sim():
+def _sim() -> SimulatedMM3A:
     sim = SimulatedMM3A(seed=4, day="2026-11-22")
     sim.set_pose(0.0, -1.5707963267948966, 1e-3, 0.0, 0.0)
     return sim
 
 
 @pty_only
-def test_bursts_through_the_emulator_make_exactly_the_steps_and_move_the_arm():
+def test_bursts_through_the_emulator_make_exactly_the_steps_and_move_the_arm() -> None:
     sim, twin = _sim(), _sim()
     with ConsoleEmulator(sim) as emu:
         assert emu.hz["C"] == POWER_ON_HZ != 1000
-        with open_device(emu.url + "?hz=20000&timeout=0.5") as dev:
+        with open_url(emu.url + "?hz=20000&timeout=0.5") as dev:
             assert dev.info.extra["dialect"] == "console"
             dev.step(3, 1009)
             dev.step(3, -2 * 6400 - 3)
@@ -53,10 +56,10 @@ def test_bursts_through_the_emulator_make_exactly_the_steps_and_move_the_arm():
 
 
 @pty_only
-def test_the_emulator_also_serves_tcp():
+def test_the_emulator_also_serves_tcp() -> None:
     with ConsoleEmulator(_sim(), transport="tcp") as emu:
         assert emu.url.startswith("mm3a+socket://127.0.0.1:")
-        with open_device(emu.url + "?hz=20000&dialect=console") as dev:
+        with open_url(emu.url + "?hz=20000&dialect=console") as dev:
             dev.step(1, 64)
         assert emu.steps["A"] == 64
 
@@ -64,10 +67,10 @@ def test_the_emulator_also_serves_tcp():
 @pty_only
 @pytest.mark.parametrize("fault, match", [("error", "refused 'go"), ("silent", "did not answer 'go"),
                                           ("garbage", "garbage reply")])
-def test_a_fault_at_go_stops_the_channel_and_bounds_the_steps(fault, match):
+def test_a_fault_at_go_stops_the_channel_and_bounds_the_steps(fault: str, match: str) -> None:
     timeout = 0.3
     with ConsoleEmulator(_sim()) as emu:
-        dev = open_device(f"{emu.url}?hz=20000&timeout={timeout}")
+        dev = open_url(f"{emu.url}?hz=20000&timeout={timeout}")
         dev.step(3, 100)
         emu.inject(fault, after=1)  # the next go works, the one after fails
         t0 = time.monotonic()
@@ -85,9 +88,9 @@ def test_a_fault_at_go_stops_the_channel_and_bounds_the_steps(fault, match):
 
 
 @pty_only
-def test_unplugged_mid_run_raises_device_error_quickly():
+def test_unplugged_mid_run_raises_device_error_quickly() -> None:
     with ConsoleEmulator(_sim()) as emu:
-        dev = open_device(emu.url + "?timeout=0.3&hz=20000")
+        dev = open_url(emu.url + "?timeout=0.3&hz=20000")
         dev.step(3, 100)
         emu.unplug()
         t0 = time.monotonic()
@@ -98,9 +101,9 @@ def test_unplugged_mid_run_raises_device_error_quickly():
 
 
 @pty_only
-def test_the_emulator_refuses_malformed_commands():
+def test_the_emulator_refuses_malformed_commands() -> None:
     with ConsoleEmulator(_sim()) as emu:
-        with open_device(emu.url + "?dialect=console") as dev:
+        with open_url(emu.url + "?dialect=console") as dev:
             for cmd, words in [("go 0 0 101 0 10", "out of range"), ("speed 7", "out of range"),
                                ("speed 1 c65 c01 c01 c01", "not c01..c64"), ("frequency 200 1 1 1", "out of range"),
                                ("coarse A +5", "unknown command")]:
@@ -109,25 +112,25 @@ def test_the_emulator_refuses_malformed_commands():
 
 
 @pty_only
-def test_the_legacy_dialect_forced_sends_exactly_what_it_always_sent():
+def test_the_legacy_dialect_forced_sends_exactly_what_it_always_sent() -> None:
     with NanoControlEmulator(_sim()) as emu:
-        with open_device(emu.url + "?dialect=legacy") as dev:
+        with open_url(emu.url + "?dialect=legacy") as dev:
             dev.step(3, 25)
             assert dev.info.extra["dialect"] == "legacy"
         assert emu.received == ["version", "coarse C +25"]
 
 
 @pty_only
-def test_detection_on_the_legacy_emulator_ends_in_the_legacy_dialect():
+def test_detection_on_the_legacy_emulator_ends_in_the_legacy_dialect() -> None:
     with NanoControlEmulator(_sim()) as emu:
-        with open_device(emu.url + "?timeout=0.3") as dev:
+        with open_url(emu.url + "?timeout=0.3") as dev:
             assert dev.info.extra["dialect"] == "legacy"
             dev.step(3, 25)
         assert emu.received[-1] == "coarse C +25"
         assert all(m == "version" for m in emu.received[:-1])
 
 
-def test_steps_by_counts_whole_intervals_and_the_part_of_the_current_one():
+def test_steps_by_counts_whole_intervals_and_the_part_of_the_current_one() -> None:
     # 100 steps per 0.5 s interval at 1000 Hz: 0.25 s in -> 100 (interval 1 done at 0.1 s)
     assert steps_by(0.25, 100, 0.5, 1000.0) == 100
     assert steps_by(0.05, 100, 0.5, 1000.0) == 50
@@ -141,60 +144,62 @@ def test_steps_by_counts_whole_intervals_and_the_part_of_the_current_one():
 class Failing:
     """A controller whose second step() raises the given StepsUncertain."""
 
-    def __init__(self, error):
+    def __init__(self, error: StepsUncertain) -> None:
         self.error = error
         self.calls = 0
 
-    def step(self, joint, n):
+    def step(self, joint: int, n: int) -> None:
         self.calls += 1
         if self.calls == 2:
             raise self.error
 
 
-def _drive(error):
+def _drive(error: StepsUncertain) -> tuple[MoveOutcome, DeviceState, list[dict[str, Any]]]:
     state = DeviceState.default("x")
     state.set_position(3, 1e-3, "set")
-    saved = []
+    saved: list[dict[str, Any]] = []
     step_m = 1e-6  # 1 um per step: reckon(n) = 1 mm + n um
 
-    out = drive(Failing(error), state, 3, 500, 100, lambda n: 1e-3 + n * step_m, lambda s: saved.append(s.to_json()))
+    dev = cast(Controller, Failing(error))
+    out = drive(dev, state, 3, 500, 100, lambda n: 1e-3 + n * step_m, lambda s: saved.append(s.to_json()))
     return out, state, saved
 
 
-def test_drive_keeps_the_certain_steps_of_a_failed_burst():
+def test_drive_keeps_the_certain_steps_of_a_failed_burst() -> None:
     out, state, _ = _drive(StepsUncertain("late", made=40, at_most=40))
     assert out.sent == 140 and out.error == "late"
     assert state.positions[3] == pytest.approx(1e-3 + 140e-6, abs=1e-15) and 3 not in state.uncertain
 
 
-def test_drive_bounds_a_late_stop_between_made_and_at_most():
+def test_drive_bounds_a_late_stop_between_made_and_at_most() -> None:
     out, state, _ = _drive(StepsUncertain("late", made=100, at_most=300))
     assert out.sent == 200
     assert state.uncertain[3] == pytest.approx((1e-3 + 200e-6, 1e-3 + 400e-6), abs=1e-15)
 
 
-def test_drive_bounds_an_unacknowledged_stop_by_the_end_stop():
+def test_drive_bounds_an_unacknowledged_stop_by_the_end_stop() -> None:
     out, state, saved = _drive(StepsUncertain("no stop", made=0, at_most=None))
     assert out.sent == 100
     assert state.uncertain[3] == pytest.approx((1e-3 + 100e-6, kin.JOINTS[3].upper), abs=1e-15)
     assert saved[-1]["uncertain"]["3"] == list(state.uncertain[3])
 
 
-def test_drive_with_nothing_made_and_nothing_possible_keeps_the_source():
+def test_drive_with_nothing_made_and_nothing_possible_keeps_the_source() -> None:
     state = DeviceState.default("x")
     state.set_position(3, 1e-3, "set")
-    out = drive(Failing(StepsUncertain("refused", 0, 0)), state, 3, 50, 100, lambda n: 1e-3 + n * 1e-6, lambda s: None)
+    dev = cast(Controller, Failing(StepsUncertain("refused", 0, 0)))
+    out = drive(dev, state, 3, 50, 100, lambda n: 1e-3 + n * 1e-6, lambda s: None)
     # the first burst is the failing one only if calls == 2; here one burst of 50 succeeds
     assert out.sent == 50 and out.error is None
     failing = Failing(StepsUncertain("refused", 0, 0))
     failing.calls = 1
     state.set_position(3, 1e-3, "set")
-    out = drive(failing, state, 3, 50, 100, lambda n: 1e-3 + n * 1e-6, lambda s: None)
+    out = drive(cast(Controller, failing), state, 3, 50, 100, lambda n: 1e-3 + n * 1e-6, lambda s: None)
     assert out.sent == 0 and state.sources[3] == "set" and 3 not in state.uncertain
 
 
 @pty_only
-def test_where_reports_dialect_version_frequencies_and_profile(tmp_path):
+def test_where_reports_dialect_version_frequencies_and_profile(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
     from stickslip.cli import app

@@ -13,6 +13,8 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -26,12 +28,12 @@ if sys.platform != "win32":
 MAIN = "import sys; from stickslip.cli import main; sys.argv[0] = 'stickslip'; main()"
 
 
-def _cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+def _cli(*args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-c", MAIN, *args], capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.fixture(scope="module")
-def cal(tmp_path_factory):
+def cal(tmp_path_factory: pytest.TempPathFactory) -> Path:
     tmp = tmp_path_factory.mktemp("cal")
     meas = tmp / "meas.csv"
     meas.write_text(measurements_to_csv(paper_table()))
@@ -41,13 +43,14 @@ def cal(tmp_path_factory):
     return out
 
 
-def _plan(cal, frm: str, to: str) -> dict:
+def _plan(cal: Path, frm: str, to: str) -> dict[str, Any]:
     r = _cli("plan", "-c", str(cal), "--joint", "3", "--from", frm, "--to", to, "--q2", "-90deg", "--json")
     assert r.returncode == 0, r.stderr
-    return json.loads(r.stdout)
+    plan: dict[str, Any] = json.loads(r.stdout)
+    return plan
 
 
-def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal, tmp_path):
+def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal: Path, tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     plan = _plan(cal, "2mm", "3mm")
     with ConsolePeer() as peer:
@@ -81,7 +84,9 @@ def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal, tmp_pa
     ("error", "refused 'go 0 0 "),
     ("silent", "did not answer 'go 0 0 "),
 ])
-def test_a_fault_at_go_is_one_line_naming_the_port_with_a_stop_sent(cal, tmp_path, fault, words):
+def test_a_fault_at_go_is_one_line_naming_the_port_with_a_stop_sent(
+    cal: Path, tmp_path: Path, fault: str, words: str
+) -> None:
     db = str(tmp_path / "s.db")
     with ConsolePeer(fault=fault) as peer:
         url = peer.url + "?timeout=0.5"
