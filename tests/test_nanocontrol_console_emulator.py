@@ -211,3 +211,24 @@ def test_where_reports_dialect_version_frequencies_and_profile(tmp_path: Path) -
     assert "console dialect; firmware NanoControl console emulator 1.0 (stickslip)" in out
     assert "C 1000 Hz" in out and "not yet set on the controller" in out
     assert "active speed profile 1 (c16 c16 c16 c16)" in out
+
+
+@pty_only
+def test_stop_from_another_thread_ends_a_burst_early_and_leaves_nothing_driving() -> None:
+    import threading
+
+    with ConsoleEmulator(_sim()) as emu:
+        with open_url(emu.url + "?timeout=0.5") as dev:  # 1000 Hz: 6400 steps take 6.4 s
+            timer = threading.Timer(0.5, dev.stop)
+            timer.start()
+            t0 = time.monotonic()
+            dev.step(3, 6400)  # returns early: asked to stop
+            elapsed = time.monotonic() - t0
+            timer.join()
+        assert emu.driving == []
+        made = emu.steps["C"]
+        received = list(emu.received)
+    assert elapsed < 3.0
+    assert 0 < made < 6400  # about 0.5 s x 1000 Hz
+    go = next(i for i, m in enumerate(received) if m.startswith("go"))
+    assert received[go + 1 : go + 3] == ["stopnack", "stop"]

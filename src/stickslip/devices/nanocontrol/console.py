@@ -228,6 +228,7 @@ class NanoControlConsole:
         self._frequency_sent = False
         self._driving = False  # a go was sent and not yet confirmed stopped
         self._halt = False  # stop() from another thread during a burst
+        self._in_step = False
         self._active: int | None = None
         self._scratch_values: tuple[str, str, str, str] | None = None
         self._profile_dirty = False
@@ -390,6 +391,7 @@ class NanoControlConsole:
         made = 0
         self._halt = False
         with self._lock:
+            self._in_step = True
             try:
                 if not self._frequency_sent:
                     self._send_frequency()
@@ -404,9 +406,10 @@ class NanoControlConsole:
                     left -= chunk
             except StepsUncertain:
                 raise
-            except DeviceError as e:  # before any go of this call: nothing moved
+            except DeviceError as e:  # a setting was refused between gos: nothing more moved
                 raise StepsUncertain(str(e), made, made) from None
             finally:
+                self._in_step = False
                 self._restore_quietly()
 
     def _restore_quietly(self) -> None:
@@ -505,15 +508,17 @@ class NanoControlConsole:
     def stop(self, joint: int | None = None) -> None:
         """Stop every channel now (the console has no per-channel stop). Never raises.
 
-        During a burst (from another thread) it sends ``stopnack`` at once and the burst
-        ends early; otherwise ``stop``.
+        During a ``step()`` (from another thread) it sends ``stopnack`` at once if a
+        channel is driving, and the ``step()`` ends early, sending ``stop`` itself;
+        otherwise it sends ``stop``.
         """
-        if self._driving:
+        if self._driving or self._in_step:
             self._halt = True
-            try:
-                self._write("stopnack")
-            except DeviceError as e:
-                log.warning("could not send stopnack to %s: %s", self.transport.name, e)
+            if self._driving:
+                try:
+                    self._write("stopnack")
+                except DeviceError as e:
+                    log.warning("could not send stopnack to %s: %s", self.transport.name, e)
             return
         try:
             self.command("stop")
