@@ -209,7 +209,7 @@ def test_where_reports_dialect_version_frequencies_and_profile(tmp_path: Path) -
     assert r.exit_code == 0, r.output
     out = " ".join(r.stdout.split())  # the console may wrap long lines
     assert "console dialect; firmware NanoControl console emulator 1.0 (stickslip)" in out
-    assert "C 1000 Hz" in out and "not yet set on the controller" in out
+    assert "C 1000 Hz" in out and "sent before this session's first burst" in out
     assert "active speed profile 1 (c16 c16 c16 c16)" in out
 
 

@@ -316,7 +316,12 @@ def _info_line(info: dict[str, Any]) -> str | None:
         parts.append(f"firmware {info['version']}")
     hz = info.get("frequency_hz")
     if isinstance(hz, dict) and hz:
-        sent = "" if info.get("frequency_sent", True) else " (not yet set on the controller)"
+        if info.get("frequency_sent", True):
+            sent = ""
+        elif info.get("dialect") == "console":
+            sent = " (sent before this session's first burst; the controller's present values cannot be read)"
+        else:
+            sent = " (assumed until a speed is set)"
         parts.append("stepping " + ", ".join(f"{c} {f:g} Hz" for c, f in hz.items()) + sent)
     if info.get("active_profile") is not None:
         values = info.get("active_profile_values") or []
