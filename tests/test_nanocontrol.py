@@ -9,6 +9,8 @@ from __future__ import annotations
 import logging
 import re
 import time
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -21,12 +23,14 @@ from stickslip.devices.transport import FakeTransport, TranscriptError
 VERSION = ("version;", "o\tNanoControl 3.1\r")
 
 
-def nc(transcript, **kw):
+def nc(
+    transcript: list[tuple[str | bytes | None, str | bytes | None]], **kw: Any
+) -> tuple[FakeTransport, NanoControl]:
     t = FakeTransport([VERSION, *transcript], name="/dev/fake")
     return t, NanoControl(t, timeout=kw.pop("timeout", 0.05), **kw)
 
 
-def test_open_asks_version_and_reports_it():
+def test_open_asks_version_and_reports_it() -> None:
     t, dev = nc([])
     with t:
         assert dev.version == "NanoControl 3.1"
@@ -34,33 +38,33 @@ def test_open_asks_version_and_reports_it():
         assert dev.info.joints == (1, 2, 3)
 
 
-def test_step_sends_signed_coarse_on_mapped_channel():
+def test_step_sends_signed_coarse_on_mapped_channel() -> None:
     t, dev = nc([("coarse C +1200;", "o\t\r"), ("coarse A -35;", "o\t\r")])
     with t:
         dev.step(3, 1200)
         dev.step(1, -35)
 
 
-def test_custom_channel_map():
+def test_custom_channel_map() -> None:
     t, dev = nc([("coarse A +5;", "o\t\r")], channels={1: "C", 2: "B", 3: "A"})
     with t:
         dev.step(3, 5)
 
 
-def test_long_burst_is_split_at_max_coarse():
+def test_long_burst_is_split_at_max_coarse() -> None:
     n = MAX_COARSE + 10
     t, dev = nc([(f"coarse B -{MAX_COARSE};", "o\t\r"), ("coarse B -10;", "o\t\r")], nominal_hz=1e7)
     with t:
         dev.step(2, -n)
 
 
-def test_zero_steps_sends_nothing():
+def test_zero_steps_sends_nothing() -> None:
     t, dev = nc([])
     with t:
         dev.step(1, 0)
 
 
-def test_settings_commands_and_ranges():
+def test_settings_commands_and_ranges() -> None:
     t, dev = nc(
         [
             ("speed A 13;", "o\t\r"),
@@ -78,7 +82,7 @@ def test_settings_commands_and_ranges():
         dev.pause(250)
         dev.reset_counters()
         assert dev.counters() == {1: 120, 2: -3, 3: 7}
-        s = dev.settings()
+        s: dict[str, Any] = dev.settings()
         assert s["speed_level"]["1"] == 13 and s["amplitude_neg"]["2"] == 1
 
 
@@ -96,21 +100,22 @@ def test_settings_commands_and_ranges():
         (lambda d: d.step(1, 2.5), r"integer"),
     ],
 )
-def test_out_of_range_settings_raise_and_send_nothing(call, match):
+def test_out_of_range_settings_raise_and_send_nothing(call: Callable[[NanoControl], None], match: str) -> None:
     t, dev = nc([])
     with t:  # FakeTransport fails on any message: nothing may be sent
         with pytest.raises(ValueError, match=match):
             call(dev)
 
 
-def test_set_frequency_picks_the_speed_level():
+def test_set_frequency_picks_the_speed_level() -> None:
     t, dev = nc([("speed C 10;", "o\t\r")])
     with t:
         dev.set_frequency(3, 1000.0)
-        assert dev.settings()["speed_level"]["3"] == 10
+        levels: Any = dev.settings()["speed_level"]
+        assert levels["3"] == 10
 
 
-def test_info_lines_are_logged_and_skipped(caplog):
+def test_info_lines_are_logged_and_skipped(caplog: pytest.LogCaptureFixture) -> None:
     t, dev = nc([("coarse A +10;", "i\tPiezo voltage breakdown\ro\t\r")])
     with t, caplog.at_level(logging.DEBUG, logger="stickslip.devices.nanocontrol"):
         dev.step(1, 10)
@@ -119,28 +124,28 @@ def test_info_lines_are_logged_and_skipped(caplog):
     assert any("Piezo voltage breakdown" in m for m in msgs)
 
 
-def test_crlf_replies_and_plain_lines_are_accepted():
+def test_crlf_replies_and_plain_lines_are_accepted() -> None:
     t, dev = nc([("coarse A +10;", "ok\r\n"), ("counterread;", "1 2 3\r\n")])
     with t:
         dev.step(1, 10)
         assert dev.counters() == {1: 1, 2: 2, 3: 3}
 
 
-def test_error_reply_raises_device_error_and_stops():
+def test_error_reply_raises_device_error_and_stops() -> None:
     t, dev = nc([("coarse A +10;", "e\tchannel not connected\r"), ("stop;", "o\t\r")])
     with t:
         with pytest.raises(DeviceError, match="refused 'coarse A \\+10;': channel not connected"):
             dev.step(1, 10)
 
 
-def test_garbage_reply_raises_and_stops():
+def test_garbage_reply_raises_and_stops() -> None:
     t, dev = nc([("coarse B -10;", b"\x00\xff\x13\r"), ("stop;", "o\t\r")])
     with t:
         with pytest.raises(DeviceError, match="garbage reply"):
             dev.step(2, -10)
 
 
-def test_no_answer_times_out_within_timeout_and_stops():
+def test_no_answer_times_out_within_timeout_and_stops() -> None:
     # reply None = the device stays silent
     t, dev = nc([("coarse A +10;", None), ("stop;", None)], nominal_hz=1e6, timeout=0.2)
     with t:
@@ -151,7 +156,7 @@ def test_no_answer_times_out_within_timeout_and_stops():
     assert elapsed < 0.2 + 0.2 + 0.3  # reply timeout + stop's short wait + slack
 
 
-def test_fake_transport_fails_on_unexpected_and_leftover_messages():
+def test_fake_transport_fails_on_unexpected_and_leftover_messages() -> None:
     t = FakeTransport([("version;", "o\tx\r"), ("coarse A +1;", "o\t\r")])
     dev = NanoControl(t, timeout=0.05)
     with pytest.raises(TranscriptError, match="left over"):
@@ -160,19 +165,19 @@ def test_fake_transport_fails_on_unexpected_and_leftover_messages():
         dev.step(1, 2)
 
 
-def test_ack_off_sends_without_waiting_for_replies():
+def test_ack_off_sends_without_waiting_for_replies() -> None:
     t = FakeTransport([("coarse A +5;", None)])
     dev = NanoControl(t, timeout=0.05, ack=False, nominal_hz=1e5)
     with t:
         dev.step(1, 5)
 
 
-def test_unplugged_port_names_the_port():
+def test_unplugged_port_names_the_port() -> None:
     with pytest.raises(DeviceError, match="/dev/ttyNOPE"):
         open_device("mm3a:///dev/ttyNOPE?timeout=0.1")
 
 
-def test_bad_url_options():
+def test_bad_url_options() -> None:
     with pytest.raises(ValueError, match="unknown option"):
         open_device("mm3a:///dev/ttyUSB0?sped=3")
     with pytest.raises(ValueError, match="channel of joint 2"):
@@ -182,7 +187,7 @@ def test_bad_url_options():
 class _AutoAck(FakeTransport):
     """Answers every `;`-terminated command with "o\\t\\r" and records it."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         super().__init__([], name="auto")
         self.commands: list[str] = []
 
@@ -194,7 +199,7 @@ class _AutoAck(FakeTransport):
 
 @given(n=st.integers(-3 * MAX_COARSE - 5, 3 * MAX_COARSE + 5), joint=st.sampled_from([1, 2, 3]))
 @settings(max_examples=60, deadline=None)
-def test_any_step_count_is_sent_as_well_formed_bursts_summing_to_it(n, joint):
+def test_any_step_count_is_sent_as_well_formed_bursts_summing_to_it(n: int, joint: int) -> None:
     t = _AutoAck()
     dev = NanoControl(t, timeout=0.05, nominal_hz=1e9)
     dev.step(joint, n)

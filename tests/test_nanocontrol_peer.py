@@ -11,6 +11,7 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -24,12 +25,12 @@ if sys.platform != "win32":
 MAIN = "import sys; from stickslip.cli import main; sys.argv[0] = 'stickslip'; main()"
 
 
-def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-c", MAIN, *args], capture_output=True, text=True, timeout=timeout)
 
 
 @pytest.fixture()
-def cal(tmp_path):
+def cal(tmp_path: Path) -> Path:
     meas = tmp_path / "meas.csv"
     meas.write_text(measurements_to_csv(paper_table()))
     out = tmp_path / "cal.json"
@@ -38,13 +39,13 @@ def cal(tmp_path):
     return out
 
 
-def _planned(cal, frm: str, to: str) -> int:
+def _planned(cal: Path, frm: str, to: str) -> int:
     r = _cli("plan", "-c", str(cal), "--joint", "3", "--from", frm, "--to", to, "--q2", "-90deg", "--json")
     assert r.returncode == 0, r.stderr
     return int(json.loads(r.stdout)["steps"])
 
 
-def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal, tmp_path):
+def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal: Path, tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     with NanoControlPeer() as peer:
         assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
@@ -63,7 +64,9 @@ def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal, 
     ("silent", "did not answer 'coarse C +"),
     ("garbage", "garbage reply"),
 ])
-def test_each_fault_is_one_line_naming_the_port_with_a_stop_sent(cal, tmp_path, fault, words):
+def test_each_fault_is_one_line_naming_the_port_with_a_stop_sent(
+    cal: Path, tmp_path: Path, fault: str, words: str
+) -> None:
     db = str(tmp_path / "s.db")
     with NanoControlPeer(fault=fault) as peer:
         assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0

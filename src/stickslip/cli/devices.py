@@ -284,7 +284,7 @@ def move(
                 f"at the lower stop) before the next move"
             )
         else:
-            kept = f"joint {joint}'s dead-reckoned position {format_position(q_from, joint)} is kept"
+            kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], joint)} is kept"
         fail(f"{outcome.error}; sent {outcome.sent} of {steps} steps; {kept}")
     bursts = outcome.bursts
     result = {
@@ -318,14 +318,19 @@ def move(
         )
 
 
-def _probe(device: str) -> str:
-    """Open ``device`` and close it again: its model line, or ``fail`` naming why it does not answer."""
+def _probe(device: str) -> dict[str, Any]:
+    """Open ``device`` and close it again: what it says about itself, or ``fail`` naming why it does not answer.
+
+    ``{"model": ..., **info.extra}``: for a NanoControl the dialect, firmware version,
+    stepping frequencies and active speed profile (docs/devices/nanocontrol.md).
+    """
     try:
         dev = open_device(device)
     except (DeviceError, ValueError, OSError) as e:
         fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
     try:
-        return str(dev.info.model)
+        info = dev.info
+        return {"model": str(info.model), **{str(k): v for k, v in info.extra.items()}}
     except (DeviceError, ValueError, OSError) as e:
         fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
     finally:
@@ -333,6 +338,28 @@ def _probe(device: str) -> str:
             dev.close()
         except (DeviceError, OSError):
             pass
+
+
+def _info_line(info: dict[str, Any]) -> str | None:
+    """One line of a device's dialect, version, frequencies (Hz) and active profile, if it says."""
+    parts = []
+    if info.get("dialect"):
+        parts.append(f"{info['dialect']} dialect")
+    if info.get("version"):
+        parts.append(f"firmware {info['version']}")
+    hz = info.get("frequency_hz")
+    if isinstance(hz, dict) and hz:
+        if info.get("frequency_sent", True):
+            sent = ""
+        elif info.get("dialect") == "console":
+            sent = " (sent before this session's first burst; the controller's present values cannot be read)"
+        else:
+            sent = " (assumed until a speed is set)"
+        parts.append("stepping " + ", ".join(f"{c} {f:g} Hz" for c, f in hz.items()) + sent)
+    if info.get("active_profile") is not None:
+        values = info.get("active_profile_values") or []
+        parts.append(f"active speed profile {info['active_profile']} ({' '.join(values)})")
+    return "; ".join(parts) or None
 
 
 @app.command()
@@ -363,7 +390,9 @@ def where(
     Reset a joint at an end stop after a traverse, a crash or a manual move.
 
     Without --set or a pose option the device is opened to say whether it answers
-    (--offline skips that); a device that does not answer exits 2.
+    (--offline skips that); a device that does not answer exits 2. A NanoControl
+    also reports its dialect (console or legacy), firmware version, stepping
+    frequencies and active speed profile (in --json: "info").
 
     Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
     """
@@ -397,14 +426,19 @@ def where(
         if changed:
             with user_errors():
                 save_state(store, state)
-    answers = None if (changed or offline) else _probe(device)
+    info = None if (changed or offline) else _probe(device)
+    answers = info["model"] if info else None
     rows = _state_rows(state)
     if json_out:
         print_json(
-            {"device": key, "joints": rows, "theta": state.theta, "psi": state.psi, "answers": answers}
+            {"device": key, "joints": rows, "theta": state.theta, "psi": state.psi, "answers": answers,
+             "info": info}
         )
         return
     console.print(f"[bold]{key}[/]" + (f" (answers: {answers})" if answers else ""), highlight=False)
+    line = _info_line(info) if info else None
+    if line:
+        console.print(f"  {line}", highlight=False)
     for r, j in zip(rows, (1, 2, 3), strict=True):
         extra = ""
         if j in state.uncertain:

@@ -35,6 +35,7 @@ __all__ = [
     "HasMicrophone",
     "DeviceInfo",
     "DeviceError",
+    "StepsUncertain",
     "BACKENDS",
     "register_backend",
     "open_device",
@@ -96,6 +97,22 @@ def secret_from_env(name: str) -> str | None:
 
 class DeviceError(RuntimeError):
     """A controller refused, timed out, or could not be opened. The message says which and why."""
+
+
+class StepsUncertain(DeviceError):
+    """A step command failed part-way, and the controller says how far it may have gone.
+
+    Raised by backends that know more than "the burst failed": ``made`` signed steps
+    were certainly made by the failed ``step()`` call (bursts stopped on time), and at
+    most ``at_most`` (same sign; ``None`` if a channel may still be driving, so only the
+    joint's end stop bounds it). :func:`stickslip.procedures.move.drive` keeps the
+    position of ``made`` steps and marks the joint uncertain up to ``at_most``.
+    """
+
+    def __init__(self, message: str, made: int, at_most: int | None) -> None:
+        super().__init__(message)
+        self.made = int(made)
+        self.at_most = None if at_most is None else int(at_most)
 
 
 @dataclass(frozen=True)

@@ -139,6 +139,10 @@ class Transport:
             pass
         return data
 
+    def set_baudrate(self, baudrate: int) -> None:
+        """Switch the line to ``baudrate`` (8N1). A link without a baud rate (TCP) ignores it."""
+        log.debug("%s: no baud rate to set (%d ignored)", self.name, baudrate)
+
     def close(self) -> None:
         """Release the port (idempotent)."""
         if not self.closed:
@@ -182,7 +186,7 @@ class SerialTransport(Transport):
     def __init__(self, port: str, baudrate: int = 19200, timeout: float = 2.0) -> None:
         super().__init__(port, timeout)
         try:
-            import serial  # noqa: PLC0415
+            import serial  # noqa: PLC0415  (optional extra, imported when a port is opened)
         except ImportError as e:
             raise DeviceError("serial ports need pyserial: pip install 'stickslip[serial]'") from e
         exclusive = True if os.name == "posix" else None  # one program per port
@@ -202,6 +206,14 @@ class SerialTransport(Transport):
         self._serial_exception = serial.SerialException
         log.debug("opened %s at %d baud 8N1", port, baudrate)
 
+    def set_baudrate(self, baudrate: int) -> None:
+        """Switch the open port to ``baudrate`` (8N1); :class:`DeviceError` if it cannot."""
+        try:
+            self._port.baudrate = int(baudrate)
+        except (self._serial_exception, OSError, ValueError) as e:
+            raise DeviceError(f"{self.name}: cannot set {baudrate} baud: {e}") from e
+        log.debug("%s now at %d baud 8N1", self.name, baudrate)
+
     def _send(self, data: bytes) -> None:
         try:
             self._port.write(data)
@@ -219,12 +231,13 @@ class SerialTransport(Transport):
                 ready, _, _ = select.select([fd], [], [], timeout)
                 if not ready:
                     return b""
-                data = self._port.read(self._port.in_waiting or 1)
+                data: bytes = self._port.read(self._port.in_waiting or 1)
                 if not data:
                     raise DeviceError(f"{self.name}: the port went away (unplugged?)")
                 return data
             time.sleep(min(timeout, 0.01))
-            return self._port.read(self._port.in_waiting or 0)
+            polled: bytes = self._port.read(self._port.in_waiting or 0)
+            return polled
         except self._serial_exception as e:
             raise DeviceError(f"{self.name}: read failed: {e} (unplugged?)") from e
 
@@ -300,7 +313,12 @@ class FakeTransport(Transport):
         self._expected = [(_b(s), _b(r)) for s, r in transcript]
         self._pending = b""
         self.sent: list[bytes] = []
+        self.baudrates: list[int] = []
         self._release_unprompted()
+
+    def set_baudrate(self, baudrate: int) -> None:
+        """Record the baud rate asked for (:attr:`baudrates`), so tests can check it."""
+        self.baudrates.append(int(baudrate))
 
     def _release_unprompted(self) -> None:
         while self._expected and self._expected[0][0] is None:
@@ -347,9 +365,9 @@ class FakeTransport(Transport):
                 + (f"; partial write {self._pending!r}" if self._pending else "")
             )
 
-    def __exit__(self, exc_type: object, *exc: object) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.close()
-        if exc_type is None:
+        if not exc or exc[0] is None:  # leaving without an exception: all must have been sent
             self.assert_done()
 
 

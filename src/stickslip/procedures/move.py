@@ -23,8 +23,9 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from .. import kinematics as kin
 from ..clock import now_utc
-from ..devices.base import Controller, DeviceError
+from ..devices.base import Controller, DeviceError, StepsUncertain
 from ..devices.positions import DeviceState
 
 __all__ = ["DeviceBusy", "LockStore", "MoveOutcome", "device_lock", "drive"]
@@ -84,6 +85,9 @@ def drive(
     the start; ``save(state)`` stores the state (one transaction). A :class:`DeviceError`
     stops the loop and is returned in the outcome with the joint left *uncertain* over
     the failed burst; any other exception (Ctrl-C) propagates with the journal saved.
+    A :class:`~stickslip.devices.base.StepsUncertain` narrows that: its ``made`` steps
+    are kept as dead-reckoned, the joint is uncertain only up to ``at_most`` (up to its
+    end stop if ``None``: a channel may still be driving), or not at all if they agree.
     """
     out = MoveOutcome()
     if burst < 1:
@@ -95,6 +99,21 @@ def drive(
         save(state)  # write-ahead: intended before it is sent
         try:
             dev.step(joint, n)
+        except StepsUncertain as e:
+            out.error = str(e)
+            if e.made:
+                out.sent += e.made
+                out.bursts.append(e.made)
+                state.set_position(joint, reckon(out.sent), "dead-reckoned")
+            else:  # nothing certainly made: back to the confirmed position, then widen below
+                state.set_position(joint, state.positions[joint], state.sources[joint])
+            if e.at_most is None:
+                spec = kin.joint_spec(joint)
+                state.intend(joint, spec.upper if sign > 0 else spec.lower)
+            elif e.at_most != e.made:
+                state.intend(joint, reckon(out.sent - e.made + e.at_most))
+            save(state)
+            return out
         except DeviceError as e:
             out.error = str(e)
             return out

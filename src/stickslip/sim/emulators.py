@@ -27,6 +27,7 @@ TCP emulators listen on 127.0.0.1 only.
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 import os
 import select
 import socket
@@ -115,7 +116,7 @@ class _Emulator:
         """Close the line as if the cable were pulled."""
         self.stop()
 
-    def __enter__(self):
+    def __enter__(self) -> _Emulator:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -166,12 +167,12 @@ class _Emulator:
         except Exception:  # pragma: no cover - a crash must not hang the tests
             log.exception("%s crashed", type(self).__name__)
 
-    def _session(self, stream, is_socket: bool) -> None:
+    def _session(self, stream: socket.socket | int, is_socket: bool) -> None:
         def send(data: bytes) -> None:
             if not data:
                 return
             try:
-                if is_socket:
+                if isinstance(stream, socket.socket):
                     stream.sendall(data)
                 else:
                     os.write(stream, data)
@@ -185,7 +186,7 @@ class _Emulator:
             if not ready:
                 continue
             try:
-                chunk = stream.recv(4096) if is_socket else os.read(stream, 4096)
+                chunk = stream.recv(4096) if isinstance(stream, socket.socket) else os.read(stream, 4096)
             except OSError:
                 return
             if not chunk:
@@ -205,7 +206,7 @@ class _Emulator:
             self._stop.wait(seconds * self.realtime)
 
     # -- to implement ---------------------------------------------------------------------
-    def _on_connect(self, send) -> None:
+    def _on_connect(self, send: Callable[[bytes], None]) -> None:
         pass
 
     def _split(self, buffer: bytes) -> tuple[list[str], bytes]:  # pragma: no cover
@@ -375,7 +376,7 @@ class ANC300Emulator(_Emulator):
             return f"anc300://{self.port}?password={self.password}"
         return f"anc300://127.0.0.1:{self.port}?password={self.password}"
 
-    def _on_connect(self, send) -> None:
+    def _on_connect(self, send: Callable[[bytes], None]) -> None:
         self._authorized = False
         self._echo = True
         send(b"\xff\xfb\x01\xff\xfb\x03attocube ANC300 controller (stickslip emulator)\r\n")
@@ -453,7 +454,7 @@ class ANC300Emulator(_Emulator):
                 raise _Refuse(f"Error: frequency out of range ({lo}..{hi} Hz)")
             self.hz[axis] = int(value)
             if axis in self.joints.values():
-                hz = min(max(value, FREQUENCY_RANGE[0]), FREQUENCY_RANGE[1])
+                hz = float(min(max(value, FREQUENCY_RANGE[0]), FREQUENCY_RANGE[1]))
                 self.sim.set_frequency(axis, hz)
             return []
         if name == "getv":
@@ -461,9 +462,9 @@ class ANC300Emulator(_Emulator):
         if name == "setv":
             _nargs(rest, 1)
             value = _float(rest[0])
-            lo, hi = self.VOLTAGE_RANGE
-            if not lo <= value <= hi:
-                raise _Refuse(f"Error: voltage out of range ({lo:g}..{hi:g} V)")
+            vlo, vhi = self.VOLTAGE_RANGE
+            if not vlo <= value <= vhi:
+                raise _Refuse(f"Error: voltage out of range ({vlo:g}..{vhi:g} V)")
             self.voltage[axis] = value
             return []
         if name == "getc":

@@ -1,13 +1,7 @@
-"""Kleindiek NanoControl backend for the MM3A, over a serial line (or serial-over-TCP).
+"""The NanoControl's legacy dialect: the ``;``-terminated command set of 2002-2015 public code.
 
-URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`)::
-
-    mm3a:///dev/ttyUSB0                      serial port, 19200 baud 8N1
-    mm3a:///dev/ttyUSB0?timeout=5&channels=CBA
-    mm3a+socket://192.168.1.20:4001          a serial-over-network adapter (raw TCP)
-
-Query options: ``timeout`` (s to wait for a reply, default 2), ``channels`` (the
-channel letters of joints 1, 2, 3, default ``ABC``), ``baud`` (default 19200),
+Opened by :func:`stickslip.devices.nanocontrol.open_url` when the controller answers
+``version;`` at 19200 baud (or with ``?dialect=legacy``). URL options of this dialect:
 ``hz`` (the stepping frequency assumed until a speed is set, default 1000),
 ``ack=0`` (the controller sends no replies: fire and forget, wait out each burst).
 
@@ -49,26 +43,28 @@ Every message sent and received is logged on logger ``"stickslip.devices.nanocon
 
 from __future__ import annotations
 
-import logging
 import math
 import threading
 from collections.abc import Mapping
-from urllib.parse import urlsplit
 
-from .base import DeviceError, DeviceInfo, check_setting, check_steps, url_options
-from .transport import SerialTransport, SocketTransport, Transport
+from ..base import DeviceError, DeviceInfo, check_setting, check_steps
+from ..transport import Transport
+from ._common import DEFAULT_CHANNELS, log
+from ._common import check_channels as _check_channels
+from ._common import parse_reply as _parse_reply_text
 
 __all__ = [
     "NanoControl",
-    "open_url",
     "SPEED_HZ",
     "AMPLITUDE_RANGE",
     "MAX_COARSE",
     "PAUSE_RANGE_MS",
     "DEFAULT_CHANNELS",
+    "LEGACY_BAUD",
 ]
 
-log = logging.getLogger("stickslip.devices.nanocontrol")
+LEGACY_BAUD = 19200
+"""The legacy dialect's baud rate (8N1), as public code of 2002-2015 opens the port."""
 
 SPEED_HZ: dict[int, float] = {
     1: 1.0,
@@ -97,10 +93,6 @@ MAX_COARSE = 65535
 
 PAUSE_RANGE_MS = (1, 65535)
 """Allowed ``pause`` argument, ms, inclusive."""
-
-DEFAULT_CHANNELS: dict[int, str] = {1: "A", 2: "B", 3: "C"}
-
-_STATUS = {"o": "ok", "e": "error", "i": "info"}
 
 
 class NanoControl:
@@ -354,15 +346,19 @@ class NanoControl:
             model=f"Kleindiek NanoControl{f' ({self.version})' if self.version else ''}",
             joints=tuple(sorted(self.channels)),
             extra={
+                "dialect": "legacy",
                 "channels": dict(self.channels),
                 "version": self.version,
                 "port": self.transport.name,
+                "frequency_hz": {self.channels[j]: f for j, f in sorted(self._hz.items())},
+                "frequency_sent": all(v is not None for v in self._speed.values()),
             },
         )
 
     def settings(self) -> dict[str, object]:
         """Channel map, speed level, frequency (Hz), amplitudes (None = never set), timeout (s)."""
         return {
+            "dialect": "legacy",
             "channels": {str(j): c for j, c in self.channels.items()},
             "speed_level": {str(j): s for j, s in self._speed.items()},
             "frequency_hz": {str(j): f for j, f in self._hz.items()},
@@ -396,65 +392,4 @@ def _sleep(seconds: float) -> None:
 
 
 def _parse_reply(line: bytes, sent: bytes, port: str) -> tuple[str, str]:
-    try:
-        text = line.decode("ascii")
-    except UnicodeDecodeError:
-        text = None
-    if text is None or any(not (c.isprintable() or c == "\t") for c in text):
-        raise DeviceError(f"NanoControl on {port}: garbage reply {line!r} to {sent.decode()!r}")
-    if len(text) >= 2 and text[1] == "\t" and text[0] in _STATUS:
-        return _STATUS[text[0]], text[2:].strip()
-    if text.strip().lower().startswith("error"):
-        return "error", text.strip()
-    return "ok", text.strip()
-
-
-def _check_channels(channels: Mapping[int, str]) -> dict[int, str]:
-    out: dict[int, str] = {}
-    for j, c in channels.items():
-        c = str(c).upper()
-        if c not in ("A", "B", "C", "D"):
-            raise ValueError(f"channel of joint {j} must be one of A, B, C, D, got {c!r}")
-        out[int(j)] = c
-    if len(set(out.values())) != len(out):
-        raise ValueError(f"two joints share a channel: {out}")
-    return out
-
-
-def open_url(url: str) -> NanoControl:
-    """Open ``mm3a:///dev/ttyUSB0[?options]`` or ``mm3a+socket://host:port[?options]``.
-
-    See the module docstring for the options. Raises :class:`DeviceError` if the port
-    cannot be opened or nothing answers, ``ValueError`` for a malformed URL.
-    """
-    parts = urlsplit(url)
-    opts = url_options(url, {"timeout", "channels", "baud", "hz", "ack"})
-    try:
-        timeout = float(opts.get("timeout", 2.0))
-        baud = int(opts.get("baud", 19200))
-        hz = float(opts.get("hz", 1000.0))
-    except ValueError as e:
-        raise ValueError(f"bad option in {url!r}: {e}") from None
-    letters = opts.get("channels", "ABC")
-    channels = _check_channels({i + 1: c for i, c in enumerate(letters)})
-    ack = opts.get("ack", "1").lower() not in ("0", "no", "false", "off")
-    if parts.scheme == "mm3a+socket":
-        if not parts.hostname or not parts.port:
-            raise ValueError(f"{url!r}: give host and port, e.g. mm3a+socket://192.168.1.20:4001")
-        transport: Transport = SocketTransport(parts.hostname, parts.port, timeout=timeout)
-    elif parts.scheme == "mm3a":
-        port = parts.path or parts.netloc
-        if not port:
-            raise ValueError(f"{url!r}: give the serial port, e.g. mm3a:///dev/ttyUSB0")
-        transport = SerialTransport(port, baudrate=baud, timeout=timeout)
-    else:
-        raise ValueError(
-            f"not a NanoControl URL: {url!r} (use mm3a:///dev/ttyUSB0 or mm3a+socket://host:port)"
-        )
-    try:
-        return NanoControl(
-            transport, channels=channels, timeout=timeout, nominal_hz=hz, ack=ack, url=url
-        )
-    except Exception:
-        transport.close()
-        raise
+    return _parse_reply_text(line, sent.decode("ascii", "replace"), port)

@@ -1,0 +1,261 @@
+"""Kleindiek NanoControl backend for the MM3A, in both of its dialects, over serial or TCP.
+
+URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`)::
+
+    mm3a:///dev/ttyUSB0                      detect the dialect, then drive
+    mm3a:///dev/ttyUSB0?dialect=console      the current console, 115200 baud
+    mm3a:///dev/ttyUSB0?dialect=legacy       the 2002-2015 command set, 19200 baud
+    mm3a:///dev/ttyUSB0?timeout=5&channels=CBA
+    mm3a+socket://192.168.1.20:4001          a serial-over-network adapter (raw TCP)
+
+Two dialects (docs/devices/nanocontrol.md lists the commands of each):
+
+* ``console`` (:mod:`.console`, :class:`NanoControlConsole`): the controller sold
+  today; CR-terminated commands at 115200 baud, speed profiles and timed ``go``/``stop``
+  bursts;
+* ``legacy`` (:mod:`.legacy`, :class:`NanoControl`): ``coarse A +N;`` at 19200 baud.
+
+Detection (no ``dialect`` option) moves nothing: it sends ``version<CR>`` at 115200 baud
+and waits up to ``min(timeout, 0.5 s)``; a well-formed ``o<TAB>...`` answer means the
+console. Otherwise it switches to 19200 baud, sends ``;`` (which ends the probe for a
+legacy controller that buffered it; its answer is read and dropped) and asks
+``version;``; an answer means the legacy dialect. An ``e`` answer to either probe
+(bytes left on the line) is retried once. Both probes and the result are logged
+(logger ``stickslip.devices.nanocontrol``: INFO for the result, DEBUG for the bytes).
+
+Query options: ``dialect`` (``console`` or ``legacy``), ``timeout`` (s to wait for an
+answer, default 2), ``channels`` (channel letters of joints 1, 2, 3, default ``ABC``),
+``baud`` (both dialects; default 115200 for the console, 19200 for legacy), ``hz``
+(console: every channel's stepping frequency, an integer in 300..20000 Hz, default 1000;
+legacy: the frequency assumed until a speed is set), console only: ``profile`` (the
+scratch speed profile, 1..6, default 6), ``margin`` (s added to a burst before ``stop``,
+default 0.05), ``finewithcoarse`` (``0``/``1`` for every channel, or four digits, sent on
+opening); legacy only: ``ack=0`` (no answers; implies ``dialect=legacy``).
+"""
+
+from __future__ import annotations
+
+from urllib.parse import urlsplit
+
+from ..base import DeviceError, url_options
+from ..transport import SerialTransport, SocketTransport, Transport
+from ._common import DEFAULT_CHANNELS, check_channels, log, parse_console_reply
+from .console import CONSOLE_BAUD, FREQUENCY_RANGE_HZ, MAX_BURST, PROFILES, NanoControlConsole, split_burst
+from .legacy import (
+    AMPLITUDE_RANGE,
+    LEGACY_BAUD,
+    MAX_COARSE,
+    PAUSE_RANGE_MS,
+    SPEED_HZ,
+    NanoControl,
+)
+
+__all__ = [
+    "NanoControl",
+    "NanoControlConsole",
+    "open_url",
+    "detect_dialect",
+    "DIALECTS",
+    "SPEED_HZ",
+    "AMPLITUDE_RANGE",
+    "MAX_COARSE",
+    "PAUSE_RANGE_MS",
+    "DEFAULT_CHANNELS",
+    "CONSOLE_BAUD",
+    "LEGACY_BAUD",
+    "MAX_BURST",
+    "split_burst",
+]
+
+DIALECTS = ("console", "legacy")
+"""The command sets a NanoControl may speak; ``?dialect=`` picks one."""
+
+_OPTIONS = frozenset(
+    {"dialect", "timeout", "channels", "baud", "hz", "ack", "profile", "margin", "finewithcoarse"}
+)
+_PROBE_S = 0.5
+"""Longest wait for the console's answer to the first probe, s (a device answers in ms)."""
+_FLUSH_S = 0.25
+"""Longest wait for a legacy controller's answer to the ``;`` that ends the console probe, s."""
+
+
+def _probe_console(transport: Transport, wait: float) -> tuple[str | None, str]:
+    """``(version, "")`` if ``version<CR>`` gets a console answer, else ``(None, why not)``."""
+    why = ""
+    for _ in range(2):
+        transport.drain()
+        log.debug("-> version<CR> (console probe)")
+        transport.write(b"version\r")
+        try:
+            raw = transport.read_until(b"\r", timeout=wait)
+        except DeviceError as e:
+            return None, str(e)
+        log.debug("<- %r", raw)
+        try:
+            status, message = parse_console_reply(raw[:-1], "version", transport.name)
+        except DeviceError as e:
+            return None, str(e)
+        if status != "error":
+            return message, ""
+        why = f"answered {raw!r}"  # bytes left on the line before the probe: ask once more
+    return None, why
+
+
+def _probe_legacy(transport: Transport, timeout: float) -> tuple[str | None, str]:
+    """``(version, "")`` if ``version;`` gets an answer, else ``(None, why not)``."""
+    log.debug("-> ; (ends the console probe for a controller that buffered it)")
+    try:
+        transport.write(b";")
+        flushed = transport.read_until((b"\r", b"\n"), timeout=min(timeout, _FLUSH_S))
+        flushed += transport.read_available(quiet=0.02, limit=0.1)
+        log.debug("<- %r (dropped)", flushed)
+    except DeviceError:
+        pass
+    dev = NanoControl(transport, timeout=timeout, query_version=False)
+    why = ""
+    for _ in range(2):
+        try:
+            return dev.command("version"), ""
+        except DeviceError as e:
+            why = str(e)
+            if "refused" not in why:
+                return None, why
+    return None, why
+
+
+def detect_dialect(transport: Transport, timeout: float = 2.0, baud: int | None = None) -> tuple[str, str]:
+    """Which dialect the controller on ``transport`` speaks, and its firmware version.
+
+    Sends only ``version`` (in both forms) and ``;``; nothing moves. ``baud`` (if given)
+    is used for both probes, else each dialect's own. Returns ``(dialect, version)``.
+
+    Raises
+    ------
+    DeviceError
+        If neither probe is answered, naming the port and what each probe got.
+    """
+    console_baud = baud or CONSOLE_BAUD
+    legacy_baud = baud or LEGACY_BAUD
+    transport.set_baudrate(console_baud)
+    version, why_console = _probe_console(transport, min(timeout, _PROBE_S))
+    if version is not None:
+        log.info("NanoControl on %s speaks the console dialect (%s)", transport.name, version)
+        return "console", version
+    log.info("NanoControl on %s: no console answer (%s); trying the legacy dialect", transport.name, why_console)
+    transport.set_baudrate(legacy_baud)
+    version, why_legacy = _probe_legacy(transport, timeout)
+    if version is not None:
+        log.info("NanoControl on %s speaks the legacy dialect (%s)", transport.name, version)
+        return "legacy", version
+    raise DeviceError(
+        f"NanoControl on {transport.name} did not answer 'version' in either dialect "
+        f"(console, 'version<CR>' at {console_baud} baud: {why_console}; legacy, 'version;' at "
+        f"{legacy_baud} baud: {why_legacy}); is it on, connected, and is this its port? "
+        "(?dialect=console or ?dialect=legacy skips detection)"
+    )
+
+
+def _fine_with_coarse(text: str) -> dict[str, bool]:
+    digits = text.strip()
+    if digits in ("0", "1"):
+        digits *= 4
+    if len(digits) != 4 or set(digits) - {"0", "1"}:
+        raise ValueError(f"finewithcoarse must be 0, 1 or four digits 0/1 (A..D), got {text!r}")
+    return {c: d == "1" for c, d in zip("ABCD", digits, strict=True)}
+
+
+def open_url(url: str) -> NanoControl | NanoControlConsole:
+    """Open ``mm3a:///dev/ttyUSB0[?options]`` or ``mm3a+socket://host:port[?options]``.
+
+    See the module docstring for the options and how the dialect is detected. Raises
+    :class:`DeviceError` if the port cannot be opened or nothing answers, ``ValueError``
+    for a malformed URL or option (before the port is opened).
+    """
+    parts = urlsplit(url)
+    opts = url_options(url, _OPTIONS)
+    dialect = opts.get("dialect", "").lower() or None
+    if dialect is not None and dialect not in DIALECTS:
+        raise ValueError(f"dialect must be one of {', '.join(DIALECTS)}, got {opts['dialect']!r}")
+    ack = opts.get("ack", "1").lower() not in ("0", "no", "false", "off")
+    if not ack:
+        if dialect == "console":
+            raise ValueError("ack=0 is a legacy-dialect option: the console always answers")
+        dialect = "legacy"  # nothing answers, so nothing can be detected
+    try:
+        timeout = float(opts.get("timeout", 2.0))
+        baud = int(opts["baud"]) if "baud" in opts else None
+        hz_text = opts.get("hz")
+        profile = int(opts.get("profile", 6))
+        margin = float(opts.get("margin", 0.05))
+    except ValueError as e:
+        raise ValueError(f"bad option in {url!r}: {e}") from None
+    if not timeout > 0:
+        raise ValueError(f"timeout must be > 0 s, got {opts.get('timeout')!r}")
+    if baud is not None and baud <= 0:
+        raise ValueError(f"baud must be a positive integer, got {baud}")
+    fwc = _fine_with_coarse(opts["finewithcoarse"]) if "finewithcoarse" in opts else None
+    if profile not in PROFILES:
+        raise ValueError(f"profile (the scratch speed profile) must be an integer in 1..6, got {profile}")
+    if not 1e-3 <= margin <= 10.0:
+        raise ValueError(f"margin must be in 0.001..10 s, got {margin!r}")
+    if dialect == "console":
+        _console_hz(hz_text)  # refuse a bad frequency before opening the port
+    channels = check_channels({i + 1: c for i, c in enumerate(opts.get("channels", "ABC"))})
+    if parts.scheme == "mm3a+socket":
+        if not parts.hostname or not parts.port:
+            raise ValueError(f"{url!r}: give host and port, e.g. mm3a+socket://192.168.1.20:4001")
+        transport: Transport = SocketTransport(parts.hostname, parts.port, timeout=timeout)
+    elif parts.scheme == "mm3a":
+        port = parts.path or parts.netloc
+        if not port:
+            raise ValueError(f"{url!r}: give the serial port, e.g. mm3a:///dev/ttyUSB0")
+        first = baud or (LEGACY_BAUD if dialect == "legacy" else CONSOLE_BAUD)
+        transport = SerialTransport(port, baudrate=first, timeout=timeout)
+    else:
+        raise ValueError(
+            f"not a NanoControl URL: {url!r} (use mm3a:///dev/ttyUSB0 or mm3a+socket://host:port)"
+        )
+    try:
+        version: str | None = None
+        if dialect is None:
+            dialect, version = detect_dialect(transport, timeout, baud)
+        else:
+            log.info("NanoControl on %s: %s dialect (from the URL)", transport.name, dialect)
+        if dialect == "legacy":
+            hz = float(hz_text) if hz_text is not None else 1000.0
+            legacy = NanoControl(
+                transport, channels=channels, timeout=timeout, nominal_hz=hz, ack=ack, url=url,
+                query_version=version is None,
+            )
+            if version is not None:
+                legacy.version = version
+            return legacy
+        console = NanoControlConsole(
+            transport,
+            channels=channels,
+            timeout=timeout,
+            hz=_console_hz(hz_text),
+            profile=profile,
+            margin=margin,
+            url=url,
+            version=version,
+        )
+        if fwc is not None:
+            console.set_fine_with_coarse(fwc)
+        return console
+    except BaseException:
+        transport.close()
+        raise
+
+
+def _console_hz(text: str | None) -> int:
+    if text is None:
+        return 1000
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"hz must be an integer in 300..20000 Hz, got {text!r}") from None
+    lo, hi = FREQUENCY_RANGE_HZ
+    if not (value.is_integer() and lo <= value <= hi):
+        raise ValueError(f"hz must be an integer in {lo}..{hi} Hz for the console dialect, got {text!r}")
+    return int(value)
