@@ -27,13 +27,13 @@ TCP emulators listen on 127.0.0.1 only.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
 import os
 import select
 import socket
 import threading
 import time
 import tty
+from collections.abc import Callable
 
 from ..devices.nanocontrol import AMPLITUDE_RANGE, MAX_COARSE, PAUSE_RANGE_MS, SPEED_HZ
 from .arm import FREQUENCY_RANGE, SimulatedMM3A
