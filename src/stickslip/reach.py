@@ -9,10 +9,14 @@ segments along the straight line. For each segment:
 2. each joint's increment is measured from the *predicted* position after the
    previous segment's whole steps, so the fraction of a step not taken in one segment
    (the rounding remainder) is carried into the next one;
-3. the signed step count of joint 1, then 2, then 3 (the order they are stepped in)
-   comes from the calibrated step-size model in the current pose (gravity and
-   direction included; rotary joints integrated exactly, as :mod:`stickslip.planning`
-   does), and the predicted position after those whole steps is dead-reckoned.
+3. the exact (real) step count of joint 1, then 2, then 3 (the order they are
+   stepped in) comes from the calibrated step-size model in the current pose (gravity
+   and direction included; rotary joints integrated exactly, as
+   :mod:`stickslip.planning` does), and the predicted position after whole steps is
+   dead-reckoned. Each count is rounded down or up: of those (at most 8) choices the
+   one that keeps the tip closest to the line is taken (on the last segment, the one
+   that ends closest to the target), so every joint stays within a step of its ideal
+   position and the predicted end is within half a step of each joint of the target.
 
 A segment is no longer than ``segment`` (default 10 µm) and, so that the staircase of
 joint-by-joint stepping stays close to the line on short moves, no longer than
@@ -307,6 +311,79 @@ def _ideal_path(
     return out
 
 
+_ALONG_WEIGHT = 0.25  # how much a segment's lag along the line counts against its distance from it
+
+
+def _segment_steps(
+    calibration: Calibration,
+    step_model: str,
+    q: Vec3,
+    goal: NDArray[np.float64],
+    tilt: tuple[float, float],
+    geometry: kin.Geometry,
+    p0: NDArray[np.float64],
+    p1: NDArray[np.float64],
+    aim: NDArray[np.float64],
+    last: bool,
+) -> tuple[tuple[int, int, int], Vec3]:
+    """Whole steps of joints 1, 2, 3 for one segment, and the predicted joints after them.
+
+    Each joint's exact (real) count from its predicted position to ``goal`` is rounded
+    down or up; of those (at most 8) choices, stepped in the order 1, 2, 3, the one
+    whose tip stays closest to the line (the largest distance after each joint, plus
+    :data:`_ALONG_WEIGHT` times the distance from ``aim``) is taken, and on the last
+    segment the one that ends closest to the target. Either way every joint is within
+    one step of its ideal position, and the fraction not taken is carried to the next
+    segment (its counts start from the predicted position).
+    """
+    d = p1 - p0
+    dd = float(d @ d)
+
+    def off_line(p: NDArray[np.float64]) -> float:
+        r = p - p0
+        return float(np.linalg.norm(r - (float(r @ d) / dd) * d))
+
+    best: tuple[float, tuple[int, int, int], Vec3] | None = None
+
+    def expand(j: int, qq: Vec3, steps: tuple[int, ...], worst: float) -> None:
+        nonlocal best
+        if j == 4:
+            tip_end = kin.tip(qq, geometry)
+            miss = float(np.linalg.norm(tip_end - aim))
+            score = miss if last else worst + _ALONG_WEIGHT * miss
+            if best is None or score < best[0]:
+                best = (score, (steps[0], steps[1], steps[2]), qq)
+            return
+        target = float(goal[j - 1])
+        if target == qq[j - 1]:  # a joint the move does not use needs no calibration
+            expand(j + 1, qq, (*steps, 0), worst)
+            return
+        here = kin.Pose(qq[0], qq[1], qq[2], *tilt)
+        try:
+            stepper = JointStepper(calibration, j, here, step_model)
+            exact = stepper.exact_steps(qq[j - 1], target)
+        except NonPhysicalError as e:
+            raise ValueError(f"joint {j} cannot step in this pose: {e}") from None
+        spec = kin.JOINTS[j]
+        choices: set[tuple[int, float]] = set()
+        for nj in {math.floor(exact), math.ceil(exact)}:
+            q_new = stepper.position_after(qq[j - 1], nj)
+            while nj and not spec.lower <= q_new <= spec.upper:  # never plan past an end stop
+                nj -= 1 if nj > 0 else -1
+                q_new = stepper.position_after(qq[j - 1], nj)
+            choices.add((nj, q_new))
+        for nj, q_new in sorted(choices):
+            moved = list(qq)
+            moved[j - 1] = q_new
+            q_next = (moved[0], moved[1], moved[2])
+            worst_next = max(worst, off_line(kin.tip(q_next, geometry))) if dd else 0.0
+            expand(j + 1, q_next, (*steps, nj), worst_next)
+
+    expand(1, q, (), 0.0)
+    assert best is not None  # every branch reaches joint 3 (a choice past a stop is cut back to it)
+    return best[1], best[2]
+
+
 def plan_reach(
     calibration: Calibration,
     pose: kin.Pose,
@@ -369,29 +446,10 @@ def plan_reach(
         _check_line_clear_of_axis(p0, p1, min_reach)
     ideal = _ideal_path(q0, p0, p1, n, geometry, min_reach)
     theta, psi = float(pose[3]), float(pose[4])
-    q = [float(v) for v in q0]
+    q: Vec3 = _vec(q0)
     segments: list[ReachSegment] = []
     for k, goal in enumerate(ideal, start=1):
-        steps = [0, 0, 0]
-        for j in (1, 2, 3):
-            if float(goal[j - 1]) == q[j - 1]:
-                continue  # nothing to do: a joint the move does not use needs no calibration
-            here = kin.Pose(q[0], q[1], q[2], theta, psi)
-            try:
-                stepper = JointStepper(calibration, j, here, step_model)
-                exact = stepper.exact_steps(q[j - 1], float(goal[j - 1]))
-            except NonPhysicalError as e:
-                raise ValueError(f"joint {j} cannot step in this pose: {e}") from None
-            nj = int(round(exact))
-            spec = kin.JOINTS[j]
-            q_new = stepper.position_after(q[j - 1], nj)
-            while nj and not spec.lower <= q_new <= spec.upper:  # never plan past an end stop
-                nj -= 1 if nj > 0 else -1
-                q_new = stepper.position_after(q[j - 1], nj)
-            steps[j - 1] = nj
-            q[j - 1] = q_new
         aim = p0 + (p1 - p0) * (k / n)
-        segments.append(
-            ReachSegment((steps[0], steps[1], steps[2]), (q[0], q[1], q[2]), _vec(kin.tip(q, geometry)), _vec(aim))
-        )
+        steps, q = _segment_steps(calibration, step_model, q, goal, (theta, psi), geometry, p0, p1, aim, k == n)
+        segments.append(ReachSegment(steps, q, _vec(kin.tip(q, geometry)), _vec(aim)))
     return ReachPlan(_vec(q0), _vec(p0), _vec(p1), segments, geometry, theta, psi, step_model, seg_len)
