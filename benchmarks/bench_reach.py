@@ -108,7 +108,9 @@ def main() -> None:
         rows.append(row)
     print(f"{moves} moves x 2 plans executed step by step in {time.perf_counter() - t:.1f} s\n")
     a = np.array(rows)
-    print("| moves | steps from | end error, median / 95 % / max | largest distance from the line, median / 95 % / max |")
+    print(
+        "| moves | steps from | end error, median / 95 % / max | largest distance from the line, median / 95 % / max |"
+    )
     print("| --- | --- | --- | --- |")
     for lo, hi in BINS:
         sel = a[(a[:, 0] >= lo) & (a[:, 0] <= hi)]
@@ -117,9 +119,7 @@ def main() -> None:
         label = f"{lo * 1e6:.0f}–{hi * 1e6:.0f} µm (n = {len(sel)})"
         for name, col in (("model", 1), ("constant", 3)):
             end, dev = sel[:, col] / sel[:, 0], sel[:, col + 1] / sel[:, 0]
-            cells = [
-                " / ".join(f"{np.percentile(x, p):.1%}" for p in (50, 95, 100)) for x in (end, dev)
-            ]
+            cells = [" / ".join(f"{np.percentile(x, p):.1%}" for p in (50, 95, 100)) for x in (end, dev)]
             um = f" ({np.median(sel[:, col]) * 1e6:.2f} µm median end error)"
             print(f"| {label} | {name} | {cells[0]}{um} | {cells[1]} |")
 

@@ -230,3 +230,219 @@ def _print_plan(plan: Any, json_out: bool, device: str | None, sim_true: list[fl
     if true_tip is not None:
         err = math.dist(true_tip, plan.target)
         console.print(f"simulator's true tip {_um(true_tip)}, {err * 1e9:.0f} nm from the target", highlight=False)
+
+
+# ---------------------------------------------------------------- jog: the terminal part
+
+
+class _Keys:
+    """Raw key input from the terminal: POSIX ``termios``/``tty`` (cbreak) or Windows ``msvcrt``."""
+
+    def __init__(self) -> None:
+        import sys
+
+        self._saved: Any = None
+        self._fd = -1
+        if sys.platform == "win32":  # pragma: no cover - exercised on Windows only
+            return
+        import termios
+        import tty
+
+        if not sys.stdin.isatty():
+            fail("jog needs a terminal: its keys are read from stdin, which is not a terminal here")
+        self._fd = sys.stdin.fileno()
+        self._saved = termios.tcgetattr(self._fd)
+        tty.setcbreak(self._fd)  # keys at once, no echo; Ctrl-C still interrupts
+
+    def read(self, timeout: float) -> list[str]:
+        """Key names typed within ``timeout`` seconds."""
+        from ..procedures.jog import parse_keys
+
+        if self._fd < 0:  # pragma: no cover - Windows
+            import msvcrt
+            import time
+
+            end = time.monotonic() + timeout
+            data = b""
+            while time.monotonic() < end:
+                while msvcrt.kbhit():  # type: ignore[attr-defined]  # msvcrt exists on Windows only
+                    data += msvcrt.getch()  # type: ignore[attr-defined]  # same
+                if data:
+                    break
+                time.sleep(0.01)
+            return parse_keys(data)
+        import os
+        import select
+
+        ready, _, _ = select.select([self._fd], [], [], timeout)
+        if not ready:
+            return []
+        return parse_keys(os.read(self._fd, 256))
+
+    def close(self) -> None:
+        if self._saved is not None:
+            import termios
+
+            termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+            self._saved = None
+
+
+_KEY_HELP = (
+    "keys: arrows or A/D, W/S: -x/+x, +y/-y; PgUp/PgDn or R/F: +z/-z; space: stop; 1-7: speed; "
+    "m: single-step; b: base/image frame; [ ]: turn image frame; q: quit"
+)
+
+
+def _status_lines(s: Any) -> list[str]:
+    names = ("joint 1", "joint 2", "joint 3")
+    lines = [
+        "tip (predicted, base frame): "
+        + ", ".join(f"{a} = {v * 1e6:10.2f} µm" for a, v in zip("xyz", s.tip, strict=True))
+    ]
+    for j, name in enumerate(names, start=1):
+        q, lim = s.q[j - 1], s.to_limits[j - 1]
+        if j == 3:
+            shown, left = f"{q * 1e6:10.2f} µm", f"{lim * 1e6:.2f} µm"
+        else:
+            shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
+        lines.append(f"{name}: {shown}   to its nearer limit {left}   sent {s.sent[j - 1]:+d} steps")
+    mode = f"single-step: {s.speed * 1e6:g} µm per press" if s.single_step else f"speed {s.speed * 1e6:g} µm/s"
+    frame = f"image frame ({math.degrees(s.image_angle):+.0f} deg)" if s.image_frame else "base frame"
+    rates = ", ".join(f"{r:+.0f}" for r in s.rates)
+    lines.append(f"{mode} | {frame} | step rates {rates} /s")
+    lines.append(s.message or "")
+    lines.append(_KEY_HELP)
+    return lines
+
+
+class _Screen:
+    """Redraws the status lines in place (ANSI cursor movement)."""
+
+    def __init__(self) -> None:
+        import sys
+
+        self._out = sys.stdout
+        self._shown: list[str] = []
+
+    def show(self, status: Any) -> None:
+        lines = _status_lines(status)
+        if lines == self._shown:
+            return
+        text = "" if not self._shown else f"\x1b[{len(self._shown)}F"
+        text += "".join(f"\x1b[2K{line}\n" for line in lines)
+        self._out.write(text)
+        self._out.flush()
+        self._shown = lines
+
+
+@app.command()
+def jog(
+    calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."),
+    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help="Record q1 (angle) first."),
+    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help="Record q2 (angle) first."),
+    q3: str | None = typer.Option(None, "--q3", callback=length_option, help="Record q3 (length) first."),
+    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help="Record the base tilt theta."),
+    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help="Record the base tilt psi."),
+    geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
+    image_angle: str = typer.Option(
+        "0", "--image-angle", callback=angle_option, help="Image frame's turn about z0 (angle; keys [ ] change it)."
+    ),
+    speed: int = typer.Option(4, "--speed", min=1, max=7, help="Speed preset 1-7: 0.1, 0.3, 1, 3, 10, 30, 100 µm/s."),
+    max_rate: float = typer.Option(
+        1000.0, "--max-rate", min=1.0, max=20000.0, help="Most steps per second of any joint (also the controller's)."
+    ),
+    hold: float = typer.Option(
+        0.5, "--hold", min=0.0, max=10.0, help="Seconds a direction key keeps moving without a repeat (0: until space)."
+    ),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+) -> None:
+    """Steer the tip from the keyboard (teleoperation in task space).
+
+    Arrow keys or W/A/S/D move the tip along x and y, PgUp/PgDn or R/F along z, in the
+    base frame or in an image frame turned about z0 to match the microscope (b toggles,
+    [ and ] turn it by 15 deg). Keys 1-7 pick the speed (0.1 to 100 µm/s); m toggles
+    single-step mode, where each press moves the tip by the preset's distance
+    (0.1 to 100 µm); space stops at once; q quits.
+
+    The tip velocity becomes joint velocities through the inverse Jacobian and step
+    rates through the calibrated step sizes in the current pose, capped at --max-rate
+    (all joints slowed together, so the direction is kept). The predicted tip, the
+    joints and their distance to the end stops are shown live; positions are kept after
+    every burst, as for `move`. Motion stops near an end stop or joint 1's axis.
+
+    Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
+    """
+    import time
+
+    from ..calibration import Calibration
+    from ..procedures.jog import JogController, run_jog
+    from ..procedures.move import DeviceBusy, device_lock
+
+    geom = parse_geometry(geometry)
+    with user_errors(KeyError):
+        cal = Calibration.load(calibration)
+    with user_errors():
+        key = device_key(device)
+    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
+    with _open_store(db) as store, user_errors(DeviceBusy):
+        with device_lock(store, key):
+            state = _start_state(store, key, pose_opts)
+            missing = [j for j in (1, 2, 3) if j not in cal.joints]
+            if missing:
+                fail(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
+            with user_errors():
+                save_state(store, state)
+            stale = stale_message(cal.day)
+            if stale:
+                warn_later(stale)
+            flush_warnings()
+            try:
+                dev = open_device(device)
+            except (DeviceError, ValueError) as e:
+                fail(str(e))
+            error = None
+            keys = None
+            try:
+                if hasattr(dev, "set_pose"):
+                    dev.set_pose(*state.pose)
+                rates = []
+                for j in (1, 2, 3):
+                    try:
+                        rates.append(min(max_rate, float(dev.frequency(j))))
+                    except (DeviceError, ValueError, AttributeError):
+                        rates.append(max_rate)
+                ctl = JogController(
+                    cal,
+                    [state.positions[j] for j in (1, 2, 3)],
+                    state.theta,
+                    state.psi,
+                    geom,
+                    (rates[0], rates[1], rates[2]),
+                    float(image_angle),
+                    hold,
+                    speed - 1,
+                )
+
+                def save(st: DeviceState) -> None:
+                    with user_errors():
+                        save_state(store, st)
+
+                keys = _Keys()
+                try:
+                    error = run_jog(dev, state, ctl, keys.read, _Screen().show, save, time.monotonic)
+                except KeyboardInterrupt:
+                    error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
+            finally:
+                if keys is not None:
+                    keys.close()
+                try:
+                    dev.close()
+                except DeviceError:
+                    pass
+    if error is not None:
+        fail(f"{error}; the session ended; positions are kept (see `stickslip where`)")
+    s = ctl.status()
+    console.print(
+        f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}; positions kept for {key}", highlight=False
+    )
