@@ -24,7 +24,7 @@ from hidden_arm import distance_from_segment, tip_of
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration
 from stickslip.cli import app
-from stickslip.reach import LINE_FRACTION, ReachPlan, plan_reach
+from stickslip.reach import LINE_FRACTION, ReachPlan, borrow_joint1, plan_reach
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.emulators import NanoControlEmulator
 
@@ -197,6 +197,32 @@ def test_a_joint_the_move_does_not_use_needs_no_calibration():
     assert plan.total_steps[0] == 0 and plan.end_error < 1e-6
     with pytest.raises(KeyError, match="joint 1"):
         plan_reach(cal23, pose, by=(0.0, 30e-6, 0.0))
+
+
+def test_joint1_borrows_joint2_when_it_is_not_calibrated(tmp_path):
+    cal23 = true_calibration(joints=(2, 3))
+    same, borrowed = borrow_joint1(CAL)
+    assert same is CAL and not borrowed
+    cal, borrowed = borrow_joint1(cal23)
+    assert borrowed and cal23.joints == [2, 3] and cal.joints == [1, 2, 3]
+    for d in "+-":
+        assert cal.model(1, d).params == cal23.model(2, d).params
+    # joint 1's own load: at theta = -90 deg the outstretched arm's joint 1 feels gravity, joint 2's model would not
+    pose = kin.Pose(0.3, -math.pi / 2, 0.0, -math.pi / 2, 0.0)
+    assert cal.gamma(1, "+", pose) != pytest.approx(cal23.gamma(2, "+", pose), rel=1e-3)
+    cal3 = true_calibration(joints=(3,))
+    assert borrow_joint1(cal3)[0] is cal3 and not borrow_joint1(cal3)[1]  # nothing to borrow from
+    # the command line borrows, says so, and plans the sideways move
+    path = tmp_path / "cal23.json"
+    cal23.save(path)
+    r = run("reach", "-c", path, "--db", tmp_path / "s.db", "--by", "0,20um,0", "--dry-run", "--json")
+    assert r.exit_code == 0, r.output
+    assert "warning: joint 1 is not in this calibration" in r.stderr
+    assert json.loads(r.stdout)["end"]["q"][0] > 0
+    path3 = tmp_path / "cal3.json"
+    true_calibration(joints=(3,)).save(path3)
+    r = run("reach", "-c", path3, "--db", tmp_path / "s.db", "--by", "0,20um,0", "--dry-run")
+    assert r.exit_code == 2 and "joint 1" in r.output and r.output.count("error:") == 1
 
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

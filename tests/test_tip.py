@@ -93,7 +93,9 @@ def test_jacobian_columns_orthogonal_with_lengths_rho_r_1(q, g):
     np.testing.assert_allclose(np.diag(gram), [rho**2, r**2, 1.0], rtol=1e-12, atol=1e-18)
     off = gram - np.diag(np.diag(gram))
     assert np.max(np.abs(off)) < 1e-15
-    assert abs(np.linalg.det(J)) == pytest.approx(rho * r, rel=1e-9, abs=1e-18)
+    with np.errstate(divide="ignore", invalid="ignore"):  # LAPACK's det at rho = 0 exactly
+        det = np.linalg.det(J)
+    assert abs(det) == pytest.approx(rho * r, rel=1e-9, abs=1e-18)
 
 
 @settings(max_examples=300, deadline=None)

@@ -34,7 +34,7 @@ replaces the model: the comparator of the benchmark.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics as kin
 from .calibration import Calibration
-from .models import NonPhysicalError
+from .models import JointModel, NonPhysicalError
 from .planning import Planner
 
 __all__ = [
@@ -53,6 +53,7 @@ __all__ = [
     "ReachPlan",
     "JointStepper",
     "plan_reach",
+    "borrow_joint1",
 ]
 
 LINE_FRACTION = 0.02
@@ -197,6 +198,35 @@ def line_distance(points: ArrayLike, a: ArrayLike, b: ArrayLike) -> NDArray[np.f
     dd = float(d @ d)
     t = np.zeros(p.shape[:-1]) if dd == 0.0 else np.clip(((p - a_) @ d) / dd, 0.0, 1.0)
     return np.asarray(np.linalg.norm(p - (a_ + t[..., None] * d), axis=-1), dtype=float)
+
+
+def borrow_joint1(calibration: Calibration) -> tuple[Calibration, bool]:
+    """A calibration whose joint 1 borrows joint 2's parameters, if it has none of its own.
+
+    The paper (Section 4): joint 1 "has the same range as joint 2 and the same
+    properties except for the change in static load value". So, for a calibration with
+    joint 2 but no joint 1 (the paper's procedure and ``stickslip demo`` calibrate
+    joints 2 and 3 only), joint 1's step is planned with joint 2's ``gamma0`` and ``d``
+    and joint 1's *own* gravity load term. Returns ``(calibration, borrowed)``; the
+    input is returned unchanged (``borrowed`` False) if joint 1 has a model or joint 2
+    has none. Callers should say so: the step sizes of joint 1 are then not measured.
+    """
+    joints = {j for j, _ in calibration.models}
+    if 1 in joints or 2 not in joints:
+        return calibration, False
+    models = dict(calibration.models)
+    stderr = dict(calibration.stderr)
+    constant = dict(calibration.constant_steps)
+    for (j, d), m in calibration.models.items():
+        if j == 2:
+            models[(1, d)] = JointModel(1, d, m.params)
+            stderr[(1, d)] = None
+            if (2, d) in constant:
+                constant[(1, d)] = constant[(2, d)]
+    old = calibration.provenance.get("notes")
+    notes = [*(old if isinstance(old, list) else []), "joint 1 borrows joint 2's parameters (not measured)"]
+    provenance = {**calibration.provenance, "notes": notes}
+    return replace(calibration, models=models, stderr=stderr, constant_steps=constant, provenance=provenance), True
 
 
 class JointStepper:

@@ -31,6 +31,12 @@ _GEOMETRY_HELP = (
 )
 
 
+_BORROWED = (
+    "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "
+    "gravity load (the paper: the same actuator); calibrate joint 1 for accurate moves across the arm's plane"
+)
+
+
 def parse_point(text: str, what: str) -> tuple[float, float, float]:
     """``"X,Y,Z"`` lengths with units (``20um,-10um,5um``; bare numbers are metres) to metres."""
     parts = text.split(",")
@@ -133,10 +139,10 @@ def reach(
     geom = parse_geometry(geometry)
     seg = float(segment)
     from ..calibration import Calibration
-    from ..reach import plan_reach
+    from ..reach import borrow_joint1, plan_reach
 
     with user_errors(KeyError):
-        cal = Calibration.load(calibration)
+        cal, borrowed = borrow_joint1(Calibration.load(calibration))
     with user_errors():
         key = device_key(device)
     pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
@@ -144,8 +150,12 @@ def reach(
     def plan_from(state: DeviceState) -> Any:
         with user_errors(KeyError):  # OutOfReach and SingularPose are ValueErrors
             if to is not None:
-                return plan_reach(cal, state.pose, to=point, geometry=geom, segment=seg)
-            return plan_reach(cal, state.pose, by=point, geometry=geom, segment=seg)
+                plan = plan_reach(cal, state.pose, to=point, geometry=geom, segment=seg)
+            else:
+                plan = plan_reach(cal, state.pose, by=point, geometry=geom, segment=seg)
+        if borrowed and plan.total_steps[0]:
+            warn_later(_BORROWED)
+        return plan
 
     if dry_run:
         with _open_store(db) as store:
@@ -378,10 +388,13 @@ def jog(
     from ..calibration import Calibration
     from ..procedures.jog import JogController, run_jog
     from ..procedures.move import DeviceBusy, device_lock
+    from ..reach import borrow_joint1
 
     geom = parse_geometry(geometry)
     with user_errors(KeyError):
-        cal = Calibration.load(calibration)
+        cal, borrowed = borrow_joint1(Calibration.load(calibration))
+    if borrowed:
+        warn_later(_BORROWED)
     with user_errors():
         key = device_key(device)
     pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
