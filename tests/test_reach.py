@@ -356,3 +356,30 @@ def test_cli_device_failing_mid_move_leaves_the_joint_uncertain(tmp_path, cal_pa
 def test_help():
     r = run("reach", "--help")
     assert r.exit_code == 0 and "Example" in r.output and "--dry-run" in r.output
+
+
+_TEXT = st.one_of(
+    st.text(max_size=30),
+    st.lists(st.sampled_from(["1", "-2.5", "20um", "3mm", "nan", "inf", "1e400", "pi", "4deg", "", " ", "0x1"]),
+             min_size=0, max_size=4).map(",".join),
+)  # fmt: skip
+
+
+@settings(max_examples=60, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])  # fmt: skip
+@given(_TEXT, _TEXT, _TEXT)
+def test_fuzz_cli_inputs_give_a_plan_or_one_error_line(tmp_path, cal_path, by, geometry, segment):
+    args = ["reach", "-c", cal_path, "--db", tmp_path / "s.db", "--dry-run", "--json", "--by", by]
+    if geometry:
+        args += ["--geometry", geometry]
+    if segment:
+        args += ["--segment", segment]
+    r = run(*args)
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+    assert r.exit_code in (0, 2), r.output
+    if r.exit_code:
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert lines and lines[-1].startswith("error:") and sum(ln.startswith("error:") for ln in lines) == 1
+    else:
+        out = json.loads(r.stdout)
+        assert math.dist(out["end"]["tip"], out["target"]) < 2e-6

@@ -306,10 +306,13 @@ def _check_line_clear_of_axis(p0: NDArray[np.float64], p1: NDArray[np.float64], 
     t = 0.0 if dd == 0.0 else min(max(-float(a @ d) / dd, 0.0), 1.0)
     rho = float(np.linalg.norm(a + t * d))
     if rho < min_reach:
-        where = "the target is" if t == 1.0 else f"the straight line passes {t:.0%} of the way"
+        where = (
+            f"the target is {rho * 1e3:.3g} mm from joint 1's axis"
+            if t == 1.0
+            else f"the straight line passes {rho * 1e3:.3g} mm from joint 1's axis ({t:.0%} of the way)"
+        )
         raise kin.SingularPose(
-            f"{where} {rho * 1e3:.3g} mm from joint 1's axis, "
-            f"closer than {min_reach * 1e3:.3g} mm: a singular pose; move in two legs around it, "
+            f"{where}, closer than {min_reach * 1e3:.3g} mm: a singular pose; move in two legs around it, "
             f"or tilt the arm (joint 2) away from the vertical first"
         )
 
