@@ -303,3 +303,27 @@ def test_jog_refuses_without_a_terminal(tmp_path):
         timeout=60,
     )
     assert r.returncode == 2 and b"needs a terminal" in r.stderr and r.stderr.count(b"error:") == 1
+
+
+def test_run_jog_over_the_emulated_anc300():
+    """The same law over the ANC300's protocol: +z at the outstretched pose is joint 2 (axis 2) only, upwards."""
+    pytest.importorskip("pymeasure")
+    from stickslip.devices.base import open_device
+    from stickslip.sim.emulators import ANC300Emulator
+
+    with ANC300Emulator() as emu:
+        dev = open_device(emu.url + "&delay=0.002")
+        try:
+            state = DeviceState("anc", {1: OUT.q1, 2: OUT.q2, 3: OUT.q3}, dict.fromkeys((1, 2, 3), "set"))
+            c = ctl(speed_index=6, hold=0.0)
+            clock = iter(np.arange(0.0, 100.0, 0.05))
+            script = [["r"]] + [[]] * 10 + [["q"]]
+            err = run_jog(dev, state, c, lambda t: script.pop(0), lambda s: None, lambda s: None,
+                          lambda: float(next(clock)))  # fmt: skip
+        finally:
+            dev.close()
+        sent = list(emu.received)
+    assert err is None and c.sent[1] > 0 and c.sent[0] == c.sent[2] == 0
+    ups = [int(m.split()[2]) for m in sent if m.startswith("stepu 2 ")]
+    assert sum(ups) == c.sent[1]
+    assert not any(m.startswith(("stepu 1", "stepu 3", "stepd")) for m in sent), sent
