@@ -19,7 +19,17 @@ from ..devices.base import DeviceError, open_device
 from ..devices.positions import DeviceState, device_key, load_state, save_state
 from ..units import UnitError, parse_length
 from . import app
-from ._common import angle_option, console, fail, flush_warnings, length_option, print_json, user_errors, warn_later
+from ._common import (
+    angle_option,
+    console,
+    fail,
+    flush_warnings,
+    length_option,
+    print_json,
+    user_errors,
+    warn,
+    warn_later,
+)
 
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
 _DEVICE_HELP = (
@@ -459,3 +469,8 @@ def jog(
     console.print(
         f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}; positions kept for {key}", highlight=False
     )
+    if state.uncertain:  # Ctrl-C in the middle of a burst
+        joints = ", ".join(str(j) for j in sorted(state.uncertain))
+        warn(
+            f"joint(s) {joints} were interrupted mid-burst and are uncertain: re-reference them (stickslip where --set)"
+        )
