@@ -7,6 +7,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.audio`    tune, listen
 * :mod:`.history`  history, export, import, anova, fit, report
 * :mod:`.devices`  move, where
+* :mod:`.taskspace` reach, jog
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, core, devices, history, measure  # noqa: E402,F401  (they register their commands)
+from . import audio, core, devices, history, measure, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:
@@ -116,7 +117,7 @@ def _unwrap(doc: str) -> str:
 _PANELS = {
     "Measure": ("demo", "traverse", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
-    "Drive a manipulator": ("move", "where"),
+    "Drive a manipulator": ("move", "where", "reach", "jog"),
     "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}

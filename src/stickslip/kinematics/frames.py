@@ -75,7 +75,7 @@ class Pose(NamedTuple):
 
 def zeta(q2: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
     """The paper's ``zeta = psi - q2`` (rad)."""
-    return np.asarray(psi, dtype=float) - np.asarray(q2, dtype=float)
+    return np.asarray(np.asarray(psi, dtype=float) - np.asarray(q2, dtype=float), dtype=float)
 
 
 def _rx(a: float) -> NDArray[np.float64]:
@@ -145,7 +145,7 @@ def prismatic_load(q1: ArrayLike, q2: ArrayLike, theta: ArrayLike, psi: ArrayLik
     """
     g = _gravity_arm_frame(q1, theta, psi)
     q2 = np.asarray(q2, dtype=float)
-    return np.sin(q2) * g[..., 0] - np.cos(q2) * g[..., 2]
+    return np.asarray(np.sin(q2) * g[..., 0] - np.cos(q2) * g[..., 2], dtype=float)
 
 
 def joint2_load(q1: ArrayLike, q2: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
@@ -156,7 +156,7 @@ def joint2_load(q1: ArrayLike, q2: ArrayLike, theta: ArrayLike, psi: ArrayLike) 
     """
     alpha, beta = rotary_load_coefficients(2, q1, q2, 0.0, theta, psi)
     q2 = np.asarray(q2, dtype=float)
-    return alpha * np.cos(q2) + beta * np.sin(q2)
+    return np.asarray(alpha * np.cos(q2) + beta * np.sin(q2), dtype=float)
 
 
 def joint1_load(q1: ArrayLike, q2: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
@@ -169,7 +169,7 @@ def joint1_load(q1: ArrayLike, q2: ArrayLike, theta: ArrayLike, psi: ArrayLike) 
     """
     alpha, beta = rotary_load_coefficients(1, q1, q2, 0.0, theta, psi)
     q1 = np.asarray(q1, dtype=float)
-    return alpha * np.cos(q1) + beta * np.sin(q1)
+    return np.asarray(alpha * np.cos(q1) + beta * np.sin(q1), dtype=float)
 
 
 def load_term(

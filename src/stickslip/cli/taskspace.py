@@ -1,0 +1,476 @@
+"""Task-space commands: ``reach`` (a straight tip move) and ``jog`` (teleoperation from the keyboard).
+
+The tip is in the base frame before the base tilt (docs/design.md §9), metres inside;
+on the command line coordinates take units (``--by 20um,-10um,5um``). Positions are
+kept per device in the database exactly as for ``move`` and ``where``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from .. import kinematics as kin
+from ..clock import stale_message
+from ..devices.base import DeviceError, open_device
+from ..devices.positions import DeviceState, device_key, load_state, save_state
+from ..units import UnitError, parse_length
+from . import app
+from ._common import (
+    angle_option,
+    console,
+    fail,
+    flush_warnings,
+    length_option,
+    print_json,
+    user_errors,
+    warn,
+    warn_later,
+)
+
+_DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
+_DEVICE_HELP = (
+    "Controller URL: sim:// (default), mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230]?password=..."
+)
+_GEOMETRY_HELP = (
+    "OFFSET,LENGTH of the arm: joint-1 axis to joint-2 axis, joint-2 axis to the tip at q3 = 0 "
+    "(default 0mm,21mm; measure yours, see docs/taskspace.md)."
+)
+
+
+_BORROWED = (
+    "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "
+    "gravity load (the paper: the same actuator); calibrate joint 1 for accurate moves across the arm's plane"
+)
+
+
+def parse_point(text: str, what: str) -> tuple[float, float, float]:
+    """``"X,Y,Z"`` lengths with units (``20um,-10um,5um``; bare numbers are metres) to metres."""
+    parts = text.split(",")
+    if len(parts) != 3:
+        fail(f"{what} {text!r}: write three lengths X,Y,Z, e.g. 20um,-10um,5um")
+    out = []
+    for axis, part in zip("XYZ", parts, strict=True):
+        try:
+            v = parse_length(part)
+        except (UnitError, ArithmeticError, ValueError) as e:
+            fail(f"{what} {axis} = {part.strip()!r}: {e}")
+        if not math.isfinite(v) or abs(v) > 1.0:
+            fail(f"{what} {axis} = {part.strip()!r} is not a length within 1 m")
+        out.append(v)
+    return (out[0], out[1], out[2])
+
+
+def parse_geometry(text: str | None) -> kin.Geometry:
+    """``--geometry OFFSET,LENGTH`` to a :class:`~stickslip.kinematics.Geometry` (default if ``None``)."""
+    if text is None:
+        return kin.DEFAULT_GEOMETRY
+    try:
+        return kin.Geometry.parse(text)
+    except ValueError as e:
+        fail(f"--geometry: {e}")
+
+
+def _open_store(db: Path | None) -> Any:
+    from ..storage import Store, StoreError
+
+    with user_errors(StoreError):
+        return Store.open(db)
+
+
+def _apply_pose(state: DeviceState, pose_opts: tuple[float | None, ...]) -> None:
+    q1, q2, q3, theta, psi = pose_opts
+    for j, v in ((1, q1), (2, q2), (3, q3)):
+        if v is not None:
+            with user_errors():
+                state.set_position(j, v, "set")
+    with user_errors():
+        state.set_tilt(theta, psi)
+
+
+def _start_state(store: Any, key: str, pose_opts: tuple[float | None, ...]) -> DeviceState:
+    with user_errors():
+        state = load_state(store, key)
+    _apply_pose(state, pose_opts)
+    for j in (1, 2, 3):
+        problem = state.uncertainty_problem(j)
+        if problem:
+            fail(problem)
+    return state
+
+
+def _um(v: tuple[float, float, float] | list[float]) -> str:
+    return "(" + ", ".join(f"{x * 1e6:.2f}" for x in v) + ") µm"
+
+
+@app.command()
+def reach(
+    calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."),
+    to: str | None = typer.Option(None, "--to", help="Tip target X,Y,Z in the base frame: 21mm,0,50um."),
+    by: str | None = typer.Option(None, "--by", help="Tip displacement DX,DY,DZ: 20um,-10um,5um."),
+    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help="Record q1 (angle) first."),
+    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help="Record q2 (angle) first."),
+    q3: str | None = typer.Option(None, "--q3", callback=length_option, help="Record q3 (length) first."),
+    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help="Record the base tilt theta."),
+    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help="Record the base tilt psi."),
+    geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
+    segment: str = typer.Option(
+        "10um", "--segment", callback=length_option, help="Longest segment of the line (length; default 10um)."
+    ),
+    burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
+    dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
+) -> None:
+    """Move the tip in a straight line to a point or by a displacement (task space).
+
+    The tip is in the base frame before the base tilt (x along the outstretched arm at
+    q1 = 0, z up the joint-1 axis), from the positions kept for the device (see
+    `stickslip where`); --q1 --q2 --q3 --theta --psi record a new pose first.
+
+    The line is cut into segments (at most --segment, and at most 2 % of the move);
+    each segment's joint increments come from the inverse kinematics and its steps from
+    the calibrated models in the current pose, joints 1, 2, 3 in that order, rounding
+    remainders carried to the next segment.
+
+    A target out of reach or a line near joint 1's axis (a singular pose) is refused
+    before any step is sent. Without --dry-run the positions are kept after every burst,
+    as for `move`.
+
+    Example: stickslip reach -c cal.json -d mm3a:///dev/ttyUSB0 --by 20um,-10um,5um
+    """
+    if (by is None) == (to is None):
+        fail("give exactly one of --by and --to")
+    point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
+    geom = parse_geometry(geometry)
+    seg = float(segment)
+    from ..calibration import Calibration
+    from ..reach import borrow_joint1, plan_reach
+
+    with user_errors(KeyError):
+        cal, borrowed = borrow_joint1(Calibration.load(calibration))
+    with user_errors():
+        key = device_key(device)
+    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
+
+    def plan_from(state: DeviceState) -> Any:
+        with user_errors(KeyError):  # OutOfReach and SingularPose are ValueErrors
+            if to is not None:
+                plan = plan_reach(cal, state.pose, to=point, geometry=geom, segment=seg)
+            else:
+                plan = plan_reach(cal, state.pose, by=point, geometry=geom, segment=seg)
+        if borrowed and plan.total_steps[0]:
+            warn_later(_BORROWED)
+        return plan
+
+    if dry_run:
+        with _open_store(db) as store:
+            state = _start_state(store, key, pose_opts)
+        plan = plan_from(state)
+        _print_plan(plan, json_out, None, None)
+        return
+
+    from ..procedures.move import DeviceBusy, device_lock
+    from ..procedures.reach import ReachOutcome, drive_reach
+
+    with _open_store(db) as store, user_errors(DeviceBusy):
+        with device_lock(store, key):
+            state = _start_state(store, key, pose_opts)
+            plan = plan_from(state)
+            with user_errors():
+                save_state(store, state)  # the recorded pose, even if nothing moves
+            stale = stale_message(cal.day)
+            if stale:
+                warn_later(stale)
+            flush_warnings()
+            outcome, sim_true = ReachOutcome(), None
+            if any(plan.total_steps):
+                try:
+                    dev = open_device(device)
+                except (DeviceError, ValueError) as e:
+                    fail(str(e))
+                try:
+                    if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
+                        dev.set_pose(*state.pose)
+
+                    def save(st: DeviceState) -> None:
+                        with user_errors():
+                            save_state(store, st)
+
+                    outcome = drive_reach(dev, state, plan, cal, save, burst)
+                    if outcome.error is None and hasattr(dev, "position"):
+                        sim_true = [float(dev.position(j)) for j in (1, 2, 3)]
+                finally:
+                    try:
+                        dev.close()
+                    except DeviceError:
+                        pass
+    if outcome.error is not None:
+        j = outcome.joint or 0
+        if j in state.uncertain:
+            kept = (
+                f"joint {j}'s position is now uncertain; re-reference it (stickslip where --set {j}=min at the "
+                f"lower stop) before the next move"
+            )
+        else:
+            kept = "the dead-reckoned positions are kept"
+        fail(
+            f"{outcome.error}; stopped in segment {outcome.segments_done + 1} of {len(plan.segments)} "
+            f"(steps sent per joint: {outcome.sent}); {kept}"
+        )
+    _print_plan(plan, json_out, key, sim_true)
+
+
+def _print_plan(plan: Any, json_out: bool, device: str | None, sim_true: list[float] | None) -> None:
+    geom = plan.geometry
+    true_tip = None if sim_true is None else [float(v) for v in kin.tip(sim_true, geom)]
+    if json_out:
+        out = plan.as_dict()
+        if sim_true is not None:
+            out["sim_true"] = {"q": sim_true, "tip": true_tip}
+        print_json(out)
+        return
+    n1, n2, n3 = plan.total_steps
+    verb = "moved" if device else "plan"
+    console.print(
+        f"{verb}: tip {_um(plan.tip_start)} -> {_um(plan.target)} ({plan.length * 1e6:.2f} µm) in "
+        f"{len(plan.segments)} segment(s); steps |joint 1| {n1}, |joint 2| {n2}, |joint 3| {n3}",
+        highlight=False,
+    )
+    console.print(
+        f"predicted end {_um(plan.tip_end)}, {plan.end_error * 1e9:.0f} nm from the target; joints "
+        f"q1 = {math.degrees(plan.q_end[0]):.4f} deg, q2 = {math.degrees(plan.q_end[1]):.4f} deg, "
+        f"q3 = {plan.q_end[2] * 1e6:.2f} µm",
+        highlight=False,
+    )
+    if true_tip is not None:
+        err = math.dist(true_tip, plan.target)
+        console.print(f"simulator's true tip {_um(true_tip)}, {err * 1e9:.0f} nm from the target", highlight=False)
+
+
+# ---------------------------------------------------------------- jog: the terminal part
+
+
+class _Keys:
+    """Raw key input from the terminal: POSIX ``termios``/``tty`` (cbreak) or Windows ``msvcrt``."""
+
+    def __init__(self) -> None:
+        import sys
+
+        self._saved: Any = None
+        self._fd = -1
+        if sys.platform == "win32":  # pragma: no cover - exercised on Windows only
+            return
+        import termios
+        import tty
+
+        if not sys.stdin.isatty():
+            fail("jog needs a terminal: its keys are read from stdin, which is not a terminal here")
+        self._fd = sys.stdin.fileno()
+        self._saved = termios.tcgetattr(self._fd)
+        tty.setcbreak(self._fd)  # keys at once, no echo; Ctrl-C still interrupts
+
+    def read(self, timeout: float) -> list[str]:
+        """Key names typed within ``timeout`` seconds."""
+        from ..procedures.jog import parse_keys
+
+        if self._fd < 0:  # pragma: no cover - Windows
+            import msvcrt
+            import time
+
+            end = time.monotonic() + timeout
+            data = b""
+            while time.monotonic() < end:
+                while msvcrt.kbhit():  # type: ignore[attr-defined]  # msvcrt exists on Windows only
+                    data += msvcrt.getch()  # type: ignore[attr-defined]  # same
+                if data:
+                    break
+                time.sleep(0.01)
+            return parse_keys(data)
+        import os
+        import select
+
+        ready, _, _ = select.select([self._fd], [], [], timeout)
+        if not ready:
+            return []
+        return parse_keys(os.read(self._fd, 256))
+
+    def close(self) -> None:
+        if self._saved is not None:
+            import termios
+
+            termios.tcsetattr(self._fd, termios.TCSADRAIN, self._saved)
+            self._saved = None
+
+
+_KEY_HELP = (
+    "keys: arrows or A/D, W/S: -x/+x, +y/-y; PgUp/PgDn or R/F: +z/-z; space: stop; 1-7: speed; "
+    "m: single-step; b: base/image frame; [ ]: turn image frame; q: quit"
+)
+
+
+def _status_lines(s: Any) -> list[str]:
+    names = ("joint 1", "joint 2", "joint 3")
+    lines = [
+        "tip (predicted, base frame): "
+        + ", ".join(f"{a} = {v * 1e6:10.2f} µm" for a, v in zip("xyz", s.tip, strict=True))
+    ]
+    for j, name in enumerate(names, start=1):
+        q, lim = s.q[j - 1], s.to_limits[j - 1]
+        if j == 3:
+            shown, left = f"{q * 1e6:10.2f} µm", f"{lim * 1e6:.2f} µm"
+        else:
+            shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
+        lines.append(f"{name}: {shown}   to its nearer limit {left}   sent {s.sent[j - 1]:+d} steps")
+    mode = f"single-step: {s.speed * 1e6:g} µm per press" if s.single_step else f"speed {s.speed * 1e6:g} µm/s"
+    frame = f"image frame ({math.degrees(s.image_angle):+.0f} deg)" if s.image_frame else "base frame"
+    rates = ", ".join(f"{r:+.0f}" for r in s.rates)
+    lines.append(f"{mode} | {frame} | step rates {rates} /s")
+    lines.append(s.message or "")
+    lines.append(_KEY_HELP)
+    return lines
+
+
+class _Screen:
+    """Redraws the status lines in place (ANSI cursor movement)."""
+
+    def __init__(self) -> None:
+        import sys
+
+        self._out = sys.stdout
+        self._shown: list[str] = []
+
+    def show(self, status: Any) -> None:
+        lines = _status_lines(status)
+        if lines == self._shown:
+            return
+        text = "" if not self._shown else f"\x1b[{len(self._shown)}F"
+        text += "".join(f"\x1b[2K{line}\n" for line in lines)
+        self._out.write(text)
+        self._out.flush()
+        self._shown = lines
+
+
+@app.command()
+def jog(
+    calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."),
+    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help="Record q1 (angle) first."),
+    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help="Record q2 (angle) first."),
+    q3: str | None = typer.Option(None, "--q3", callback=length_option, help="Record q3 (length) first."),
+    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help="Record the base tilt theta."),
+    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help="Record the base tilt psi."),
+    geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
+    image_angle: str = typer.Option(
+        "0", "--image-angle", callback=angle_option, help="Image frame's turn about z0 (angle; keys [ ] change it)."
+    ),
+    speed: int = typer.Option(4, "--speed", min=1, max=7, help="Speed preset 1-7: 0.1, 0.3, 1, 3, 10, 30, 100 µm/s."),
+    max_rate: float = typer.Option(
+        1000.0, "--max-rate", min=1.0, max=20000.0, help="Most steps per second of any joint (also the controller's)."
+    ),
+    hold: float = typer.Option(
+        0.5, "--hold", min=0.0, max=10.0, help="Seconds a direction key keeps moving without a repeat (0: until space)."
+    ),
+    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+) -> None:
+    """Steer the tip from the keyboard (teleoperation in task space).
+
+    Arrow keys or W/A/S/D move the tip along x and y, PgUp/PgDn or R/F along z, in the
+    base frame or in an image frame turned about z0 to match the microscope (b toggles,
+    [ and ] turn it by 15 deg). Keys 1-7 pick the speed (0.1 to 100 µm/s); m toggles
+    single-step mode, where each press moves the tip by the preset's distance
+    (0.1 to 100 µm); space stops at once; q quits.
+
+    The tip velocity becomes joint velocities through the inverse Jacobian and step
+    rates through the calibrated step sizes in the current pose, capped at --max-rate
+    (all joints slowed together, so the direction is kept). The predicted tip, the
+    joints and their distance to the end stops are shown live; positions are kept after
+    every burst, as for `move`. Motion stops near an end stop or joint 1's axis.
+
+    Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
+    """
+    import time
+
+    from ..calibration import Calibration
+    from ..procedures.jog import JogController, run_jog
+    from ..procedures.move import DeviceBusy, device_lock
+    from ..reach import borrow_joint1
+
+    geom = parse_geometry(geometry)
+    with user_errors(KeyError):
+        cal, borrowed = borrow_joint1(Calibration.load(calibration))
+    if borrowed:
+        warn_later(_BORROWED)
+    with user_errors():
+        key = device_key(device)
+    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
+    with _open_store(db) as store, user_errors(DeviceBusy):
+        with device_lock(store, key):
+            state = _start_state(store, key, pose_opts)
+            missing = [j for j in (1, 2, 3) if j not in cal.joints]
+            if missing:
+                fail(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
+            with user_errors():
+                save_state(store, state)
+            stale = stale_message(cal.day)
+            if stale:
+                warn_later(stale)
+            flush_warnings()
+            try:
+                dev = open_device(device)
+            except (DeviceError, ValueError) as e:
+                fail(str(e))
+            error = None
+            keys = None
+            try:
+                if hasattr(dev, "set_pose"):
+                    dev.set_pose(*state.pose)
+                rates = []
+                for j in (1, 2, 3):
+                    try:
+                        rates.append(min(max_rate, float(dev.frequency(j))))
+                    except (DeviceError, ValueError, AttributeError):
+                        rates.append(max_rate)
+                ctl = JogController(
+                    cal,
+                    [state.positions[j] for j in (1, 2, 3)],
+                    state.theta,
+                    state.psi,
+                    geom,
+                    (rates[0], rates[1], rates[2]),
+                    float(image_angle),
+                    hold,
+                    speed - 1,
+                )
+
+                def save(st: DeviceState) -> None:
+                    with user_errors():
+                        save_state(store, st)
+
+                keys = _Keys()
+                try:
+                    error = run_jog(dev, state, ctl, keys.read, _Screen().show, save, time.monotonic)
+                except KeyboardInterrupt:
+                    error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
+            finally:
+                if keys is not None:
+                    keys.close()
+                try:
+                    dev.close()
+                except DeviceError:
+                    pass
+    if error is not None:
+        fail(f"{error}; the session ended; positions are kept (see `stickslip where`)")
+    s = ctl.status()
+    console.print(
+        f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}; positions kept for {key}", highlight=False
+    )
+    if state.uncertain:  # Ctrl-C in the middle of a burst
+        joints = ", ".join(str(j) for j in sorted(state.uncertain))
+        warn(
+            f"joint(s) {joints} were interrupted mid-burst and are uncertain: re-reference them (stickslip where --set)"
+        )
