@@ -223,9 +223,8 @@ def borrow_joint1(calibration: Calibration) -> tuple[Calibration, bool]:
             stderr[(1, d)] = None
             if (2, d) in constant:
                 constant[(1, d)] = constant[(2, d)]
-    old = calibration.provenance.get("notes")
-    notes = [*(old if isinstance(old, list) else []), "joint 1 borrows joint 2's parameters (not measured)"]
-    provenance = {**calibration.provenance, "notes": notes}
+    notes = (*calibration.provenance.notes, "joint 1 borrows joint 2's parameters (not measured)")
+    provenance = replace(calibration.provenance, notes=notes)
     return replace(calibration, models=models, stderr=stderr, constant_steps=constant, provenance=provenance), True
 
 

@@ -198,41 +198,40 @@ def validation_table(rows: list[dict[str, Any]], title: str) -> Table:
     return t
 
 
-class _UnitOption:
-    """Parse an option value with units into SI (a typer callback; also called directly).
+def _parse_unit(parse: Callable[[str], float], what: str, value: str) -> float:
+    """SI value of an option given with units; ``typer.BadParameter`` (one ``error:`` line) with the reason."""
+    try:
+        v = parse(value)
+    except UnitError as e:
+        raise typer.BadParameter(f"{e} ({what})") from None
+    except (ArithmeticError, ValueError, TypeError) as e:  # pi/0, 1e999: never a traceback
+        raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
+    if not math.isfinite(v):
+        raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
+    if parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
+        raise typer.BadParameter(
+            f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
+            f"did you mean {value.strip()}deg?"
+        )
+    return v
 
-    ``None`` stays ``None`` (an option not given); a bad value raises ``typer.BadParameter``
-    with the reason, which the CLI prints as one ``error:`` line.
-    """
 
-    def __init__(self, parse: Callable[[str], float], what: str) -> None:
-        self.parse = parse
-        self.what = what
+@overload
+def angle_option(value: str) -> float: ...
+@overload
+def angle_option(value: None) -> None: ...
+def angle_option(value: str | None) -> float | None:
+    """An angle option in rad (``-90deg``, ``-pi/2``, ``500urad``); ``None`` if not given (typer parser or callback)."""
+    return None if value is None else _parse_unit(parse_angle, "an angle: radians, or with deg / mrad / urad", value)
 
-    @overload
-    def __call__(self, value: str) -> float: ...
 
-    @overload
-    def __call__(self, value: None) -> None: ...
-
-    def __call__(self, value: str | None) -> float | None:
-        if value is None:
-            return None
-        what = self.what
-        try:
-            v = self.parse(value)
-        except UnitError as e:
-            raise typer.BadParameter(f"{e} ({what})") from None
-        except (ArithmeticError, ValueError, TypeError) as e:  # pi/0, 1e999: never a traceback
-            raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
-        if not math.isfinite(v):
-            raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
-        if self.parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
-            raise typer.BadParameter(
-                f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
-                f"did you mean {value.strip()}deg?"
-            )
-        return v
+@overload
+def length_option(value: str) -> float: ...
+@overload
+def length_option(value: None) -> None: ...
+def length_option(value: str | None) -> float | None:
+    """A length option in m (``2mm``, ``30um``, ``850nm``); ``None`` if not given (typer parser or callback)."""
+    return None if value is None else _parse_unit(parse_length, "a length: metres, or with mm / um / nm", value)
 
 
 def _bare_number(text: str) -> bool:
@@ -243,8 +242,6 @@ def _bare_number(text: str) -> bool:
     return True
 
 
-angle_option = _UnitOption(parse_angle, "an angle: radians, or with deg / mrad / urad")
-length_option = _UnitOption(parse_length, "a length: metres, or with mm / um / nm")
 
 
 def open_store(db: Path | None, must_exist: bool = False) -> Store:

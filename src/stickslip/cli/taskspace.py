@@ -112,14 +112,14 @@ def reach(
     to: str | None = typer.Option(None, "--to", help="Tip target X,Y,Z in the base frame: 21mm,0,50um."),
     by: str | None = typer.Option(None, "--by", help="Tip displacement DX,DY,DZ: 20um,-10um,5um."),
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
-    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help="Record q1 (angle) first."),
-    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help="Record q2 (angle) first."),
-    q3: str | None = typer.Option(None, "--q3", callback=length_option, help="Record q3 (length) first."),
-    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help="Record the base tilt theta."),
-    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help="Record the base tilt psi."),
+    q1: float | None = typer.Option(None, "--q1", parser=angle_option, help="Record q1 (angle) first."),
+    q2: float | None = typer.Option(None, "--q2", parser=angle_option, help="Record q2 (angle) first."),
+    q3: float | None = typer.Option(None, "--q3", parser=length_option, help="Record q3 (length) first."),
+    theta: float | None = typer.Option(None, "--theta", parser=angle_option, help="Record the base tilt theta."),
+    psi: float | None = typer.Option(None, "--psi", parser=angle_option, help="Record the base tilt psi."),
     geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
-    segment: str = typer.Option(
-        "10um", "--segment", callback=length_option, help="Longest segment of the line (length; default 10um)."
+    segment: float = typer.Option(
+        "10um", "--segment", parser=length_option, help="Longest segment of the line (length).",
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
@@ -155,7 +155,7 @@ def reach(
         cal, borrowed = borrow_joint1(Calibration.load(calibration))
     with user_errors():
         key = device_key(device)
-    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
+    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)
 
     def plan_from(state: DeviceState) -> Any:
         with user_errors(KeyError):  # OutOfReach and SingularPose are ValueErrors
@@ -359,14 +359,14 @@ class _Screen:
 def jog(
     calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."),
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
-    q1: str | None = typer.Option(None, "--q1", callback=angle_option, help="Record q1 (angle) first."),
-    q2: str | None = typer.Option(None, "--q2", callback=angle_option, help="Record q2 (angle) first."),
-    q3: str | None = typer.Option(None, "--q3", callback=length_option, help="Record q3 (length) first."),
-    theta: str | None = typer.Option(None, "--theta", callback=angle_option, help="Record the base tilt theta."),
-    psi: str | None = typer.Option(None, "--psi", callback=angle_option, help="Record the base tilt psi."),
+    q1: float | None = typer.Option(None, "--q1", parser=angle_option, help="Record q1 (angle) first."),
+    q2: float | None = typer.Option(None, "--q2", parser=angle_option, help="Record q2 (angle) first."),
+    q3: float | None = typer.Option(None, "--q3", parser=length_option, help="Record q3 (length) first."),
+    theta: float | None = typer.Option(None, "--theta", parser=angle_option, help="Record the base tilt theta."),
+    psi: float | None = typer.Option(None, "--psi", parser=angle_option, help="Record the base tilt psi."),
     geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
-    image_angle: str = typer.Option(
-        "0", "--image-angle", callback=angle_option, help="Image frame's turn about z0 (angle; keys [ ] change it)."
+    image_angle: float = typer.Option(
+        "0", "--image-angle", parser=angle_option, help="Image frame's turn about z0 (angle; keys [ ] change it)."
     ),
     speed: int = typer.Option(4, "--speed", min=1, max=7, help="Speed preset 1-7: 0.1, 0.3, 1, 3, 10, 30, 100 µm/s."),
     max_rate: float = typer.Option(
@@ -407,7 +407,7 @@ def jog(
         warn_later(_BORROWED)
     with user_errors():
         key = device_key(device)
-    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)  # type: ignore[assignment]  # callbacks made floats
+    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)
     with _open_store(db) as store, user_errors(DeviceBusy):
         with device_lock(store, key):
             state = _start_state(store, key, pose_opts)
