@@ -35,6 +35,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from . import kinematics as kin
 
+FloatArray = NDArray[np.float64]
+
 __all__ = [
     "DIRECTIONS",
     "direction_sign",
@@ -91,7 +93,8 @@ def eta(q2: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     b : array_like
         Efficiency loss when the arm is perpendicular to the outstretched pose (1).
     """
-    return 1.0 - np.asarray(b, dtype=float) * np.abs(np.cos(np.asarray(q2, dtype=float)))
+    out: NDArray[np.float64] = 1.0 - np.asarray(b, dtype=float) * np.abs(np.cos(np.asarray(q2, dtype=float)))
+    return out
 
 
 def gamma_prismatic(
@@ -132,7 +135,8 @@ def gamma_rotary(load: ArrayLike, gamma0: ArrayLike, d: ArrayLike) -> NDArray[np
     d : array_like
         Change of step per unit load, rad.
     """
-    return np.asarray(gamma0, dtype=float) + np.asarray(d, dtype=float) * np.asarray(load, dtype=float)
+    out: FloatArray = np.asarray(gamma0, dtype=float) + np.asarray(d, dtype=float) * np.asarray(load, dtype=float)
+    return out
 
 
 def interp_q3(q3: ArrayLike, knots: tuple[float, float], values: tuple[float, float]) -> NDArray[np.float64]:
@@ -268,7 +272,9 @@ class JointModel:
         g0, d = p.at(q3)
         return gamma_rotary(kin.load_term(self.joint, q1, q2, q3, theta, psi), g0, d)
 
-    def rotary_coefficients(self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike):
+    def rotary_coefficients(
+        self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
+    ) -> tuple[FloatArray, ...]:
         """``(A, alpha, beta)`` with ``gamma(q) = A + alpha cos q + beta sin q`` along the joint's travel.
 
         For the prismatic joint the step does not depend on q3, so ``alpha = beta = 0``
@@ -281,7 +287,7 @@ class JointModel:
             return g, z, z
         g0, d = p.at(q3)
         al, be = kin.rotary_load_coefficients(self.joint, q1, q2, q3, theta, psi)
-        return np.broadcast_arrays(g0, d * al, d * be)
+        return tuple(np.broadcast_arrays(g0, d * al, d * be))
 
     def average_gamma(
         self,
@@ -300,13 +306,14 @@ class JointModel:
         """
         A, al, be = self.rotary_coefficients(q1, q2, q3, theta, psi)
         n = steps_between(start, end, A, al, be)
-        return np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)) / n
+        out: NDArray[np.float64] = np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)) / n
+        return out
 
 
 # ---------------------------------------------------------------- traverse integrals
 
 
-def _as_amp_phase(alpha: NDArray, beta: NDArray) -> tuple[NDArray, NDArray]:
+def _as_amp_phase(alpha: FloatArray, beta: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``alpha cos q + beta sin q = B sin(q + phi)``: returns ``(B, phi)`` with B >= 0."""
     return np.hypot(alpha, beta), np.arctan2(alpha, beta)
 
@@ -329,10 +336,11 @@ def antiderivative_inverse_step(q: ArrayLike, A: ArrayLike, alpha: ArrayLike, be
     x = q + phi
     k = np.round(x / (2.0 * np.pi))
     xr = x - 2.0 * np.pi * k  # in [-pi, pi]
-    return 2.0 / s * (np.arctan((A * np.tan(xr / 2.0) + B) / s) + np.pi * k)
+    out: FloatArray = 2.0 / s * (np.arctan((A * np.tan(xr / 2.0) + B) / s) + np.pi * k)
+    return out
 
 
-def _antiderivative_log(q: NDArray, A: NDArray, alpha: NDArray, beta: NDArray) -> NDArray:
+def _antiderivative_log(q: FloatArray, A: FloatArray, alpha: FloatArray, beta: FloatArray) -> FloatArray:
     """Antiderivative of ``1 / (A + B sin x)`` for ``B > A > 0`` (step positive only on part of the circle).
 
     ``F(x) = 1/s ln|(A tan(x/2) + B - s) / (A tan(x/2) + B + s)|``, ``s = sqrt(B^2 - A^2)``.
@@ -350,7 +358,9 @@ def _antiderivative_log(q: NDArray, A: NDArray, alpha: NDArray, beta: NDArray) -
     return np.where(np.isfinite(t), val, 0.0)
 
 
-def sinusoid_range(lo: ArrayLike, hi: ArrayLike, alpha: ArrayLike, beta: ArrayLike) -> tuple[NDArray, NDArray]:
+def sinusoid_range(
+    lo: ArrayLike, hi: ArrayLike, alpha: ArrayLike, beta: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
     """Minimum and maximum of ``alpha cos q + beta sin q`` for ``q`` in ``[lo, hi]`` (vectorised).
 
     The load term of a rotary joint along its travel has this form, so this gives the
@@ -467,12 +477,20 @@ def steps_between(
     somewhere on the way (the joint would stall). Agrees with adaptive quadrature
     (:func:`steps_between_quad`) to ~1e-12 relative. Scalars take a pure-``math`` path.
     """
-    if all(isinstance(x, (float, int)) for x in (start, end, A, alpha, beta)):
-        return np.float64(StepProfile(A, alpha, beta).steps(start, end))
+    if (
+        isinstance(start, float | int)
+        and isinstance(end, float | int)
+        and isinstance(A, float | int)
+        and isinstance(alpha, float | int)
+        and isinstance(beta, float | int)
+    ):
+        return np.asarray(StepProfile(float(A), float(alpha), float(beta)).steps(float(start), float(end)))
     return _steps_between_arrays(start, end, A, alpha, beta)
 
 
-def _steps_between_arrays(start, end, A, alpha, beta) -> NDArray[np.float64]:
+def _steps_between_arrays(
+    start: ArrayLike, end: ArrayLike, A: ArrayLike, alpha: ArrayLike, beta: ArrayLike
+) -> NDArray[np.float64]:
     start, end, A, alpha, beta = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta))
     )
@@ -517,7 +535,7 @@ def steps_between_quad(start: float, end: float, A: float, alpha: float = 0.0, b
     val, _err = integrate.quad(
         lambda q: 1.0 / (A + alpha * math.cos(q) + beta * math.sin(q)), lo, hi, epsabs=0.0, epsrel=1e-12, limit=200
     )
-    return val
+    return float(val)
 
 
 def iter_traverse_steps(
