@@ -18,6 +18,7 @@ import csv
 import io
 import itertools
 import math
+import operator
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -395,11 +396,28 @@ def _moving_within(joint: NDArray[np.int64], q: NDArray[np.float64]) -> NDArray[
     return ok
 
 
-_JOINT_CELL = {"1": 1, "2": 2, "3": 3}
+def _joint_cells(cells: Sequence[str]) -> NDArray[np.int64]:
+    """1, 2 or 3 where a cell is exactly that digit, else 0 (the row is then checked one by one)."""
+    a = np.array(cells, dtype=str) if len(cells) else np.zeros(0, dtype="<U1")
+    return np.select([a == "1", a == "2", a == "3"], [1, 2, 3], 0).astype(np.int64)
+
+
+def _equal(cells: Sequence[str], text: str) -> NDArray[np.bool_]:
+    """Cells exactly equal to ``text``, vectorised."""
+    a = np.array(cells, dtype=str) if len(cells) else np.zeros(0, dtype="<U1")
+    return np.asarray(a == text, dtype=bool)
 
 
 def _records(text: str) -> Iterator[list[str]]:
     return csv.reader(io.StringIO(text))
+
+
+def _all_wide_and_filled(chunk: list[list[str]], width: int, key: int) -> bool:
+    """Whether every record has exactly ``width`` cells and a non-blank cell ``key`` (so none is blank)."""
+    if not chunk or width == 0:
+        return False
+    widths = set(map(len, chunk))
+    return widths == {width} and all(map(str.strip, map(operator.itemgetter(key), chunk)))
 
 
 def _parse_measurements(text: str, source: str) -> list[Traverse]:
@@ -446,6 +464,10 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
             break
         rows: list[list[str]] = []
         lines: list[int] = []
+        if _all_wide_and_filled(chunk, len(HEADER), 0):  # the common case, at C speed: no blank or short rows
+            rows, lines = chunk, list(range(lineno + 1, lineno + 1 + len(chunk)))
+            lineno += len(chunk)
+            chunk = []
         for cells in chunk:
             lineno += 1
             if not cells or all(not c.strip() for c in cells):
@@ -474,13 +496,11 @@ def _measurement_chunk(
     n = len(rows)
     cols = list(zip(*rows, strict=True))
     days = [c.strip() for c in cols[0]]
-    ok = np.fromiter((bool(d) for d in days), dtype=bool, count=n)
-    jmap = _JOINT_CELL.get
-    joint = np.fromiter((jmap(c, 0) for c in cols[1]), dtype=np.int64, count=n)
+    ok = ~_equal(days, "")
+    joint = _joint_cells(cols[1])
     ok &= joint > 0
-    dcol = cols[2]
-    plus = np.fromiter((c == "+" for c in dcol), dtype=bool, count=n)
-    ok &= plus | np.fromiter((c == "-" for c in dcol), dtype=bool, count=n)
+    plus = _equal(cols[2], "+")
+    ok &= plus | _equal(cols[2], "-")
     nums: dict[str, NDArray[np.float64]] = {}
     for i, name in enumerate(("q1", "q2", "q3", "theta", "psi", "start", "end"), start=3):
         v, good = _floats(cols[i])
@@ -550,19 +570,13 @@ def read_measurement_table(path: str | Path) -> TraverseTable:
     return parse_measurement_table(_read_table_text(path), str(path))
 
 
-def _fmt(v: object) -> str:
-    if isinstance(v, float):
-        return repr(v)
-    return str(v)
-
-
 def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
-    """The CSV text of a measurement table (full float precision)."""
+    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(HEADER)
-    for t in traverses:
-        w.writerow([_fmt(getattr(t, f.name)) for f in fields(Traverse)])
+    row = operator.attrgetter(*HEADER)
+    w.writerows(map(row, traverses))
     return buf.getvalue()
 
 
@@ -647,29 +661,43 @@ def _pose_header(reader: Iterator[list[str]], source: str) -> list[str]:
     return header
 
 
-def _pose_records(reader: Iterator[list[str]], header: list[str]) -> Iterator[tuple[int, list[str] | None]]:
-    """``(line, cells)`` of each data record of a pose table, as ``csv.DictReader`` numbers them.
+def _pose_records(reader: Iterator[list[str]], header: list[str]) -> Iterator[tuple[list[int], list[list[str] | None]]]:
+    """Chunks of ``(lines, cells)`` of the data records of a pose table, numbered as ``csv.DictReader`` does.
 
     Empty records are skipped without being counted (DictReader's rule); records whose
     cells are blank (of a repeated column name, the last cell) are counted and skipped;
-    a record with more cells than the header comes with ``None``. Shorter records are
+    a record with more cells than the header comes as ``None``. Shorter records are
     padded with empty cells.
     """
     width = len(header)
     used = sorted({h: i for i, h in enumerate(header)}.values())
+    key = header.index("joint") if "joint" in header else 0
     lineno = 1
-    for cells in reader:
-        if not cells:
+    while True:
+        chunk = list(itertools.islice(reader, CHUNK_ROWS))
+        if not chunk:
+            return
+        if _all_wide_and_filled(chunk, width, key):  # the common case at C speed
+            yield list(range(lineno + 1, lineno + 1 + len(chunk))), list(chunk)
+            lineno += len(chunk)
             continue
-        lineno += 1
-        if len(cells) > width:
-            yield lineno, None
-            continue
-        if all(i >= len(cells) or not cells[i].strip() for i in used):
-            continue
-        if len(cells) < width:
-            cells = cells + [""] * (width - len(cells))
-        yield lineno, cells
+        lines: list[int] = []
+        out: list[list[str] | None] = []
+        for cells in chunk:
+            if not cells:
+                continue
+            lineno += 1
+            if len(cells) > width:
+                lines.append(lineno)
+                out.append(None)
+                continue
+            if all(i >= len(cells) or not cells[i].strip() for i in used):
+                continue
+            if len(cells) < width:
+                cells = cells + [""] * (width - len(cells))
+            lines.append(lineno)
+            out.append(cells)
+        yield lines, out
 
 
 def _pose_row(
@@ -774,9 +802,10 @@ class PoseTable:
         """Each row's cells, as many as the header has (missing cells empty), read again from the text."""
         reader = _records(self.text)
         next(reader, None)
-        for _line, cells in _pose_records(reader, self.header):
-            if cells is not None:
-                yield cells
+        for _lines, chunk in _pose_records(reader, self.header):
+            for cells in chunk:
+                if cells is not None:
+                    yield cells
 
     def queries(self) -> list[PoseQuery]:
         """The rows as :class:`PoseQuery` objects."""
@@ -813,14 +842,10 @@ def _parse_pose_columns(text: str, source: str) -> PoseTable:
     where_col = {h: i for i, h in enumerate(header)}
     problems: list[tuple[int, str]] = []  # (line, reason), sorted by line at the end
     parts: list[tuple[NDArray[np.int64], NDArray[np.str_], dict[str, NDArray[np.float64]], NDArray[np.int64]]] = []
-    records = _pose_records(reader, header)
-    while True:
-        chunk = list(itertools.islice(records, CHUNK_ROWS))
-        if not chunk:
-            break
+    for chunk_lines, chunk in _pose_records(reader, header):
         rows: list[list[str]] = []
         lines: list[int] = []
-        for lineno, cells in chunk:
+        for lineno, cells in zip(chunk_lines, chunk, strict=True):
             if cells is None:
                 problems.append((lineno, f"{source}:{lineno}: more cells than header columns"))
                 continue
@@ -875,13 +900,10 @@ def _pose_chunk(
     def col(name: str) -> Sequence[str]:
         return cols[where_col[name]] if name in where_col else ("",) * n
 
-    jmap = _JOINT_CELL.get
-    joint = np.fromiter((jmap(c, 0) for c in col("joint")), dtype=np.int64, count=n)
+    joint = _joint_cells(col("joint"))
     ok = joint > 0
     dcol = col("direction")
-    plus = np.fromiter((c == "+" for c in dcol), dtype=bool, count=n)
-    minus = np.fromiter((c == "-" for c in dcol), dtype=bool, count=n)
-    nodir = np.fromiter((c == "" for c in dcol), dtype=bool, count=n)
+    plus, minus, nodir = _equal(dcol, "+"), _equal(dcol, "-"), _equal(dcol, "")
     ok &= plus | minus | nodir
     nums: dict[str, NDArray[np.float64]] = {}
     for name in ("q1", "q2", "q3", "theta", "psi"):
@@ -890,7 +912,7 @@ def _pose_chunk(
         ok &= good
     if has_traverse:
         scol, ecol = col("start"), col("end")
-        both_empty = np.fromiter((a == "" and b == "" for a, b in zip(scol, ecol, strict=True)), dtype=bool, count=n)
+        both_empty = _equal(scol, "") & _equal(ecol, "")
         start, sgood = _floats(scol)
         end, egood = _floats(ecol)
         trav = sgood & egood

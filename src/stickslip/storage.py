@@ -424,6 +424,12 @@ class Store:
     ) -> int:
         sid = self._session_id(con, device_id, str(t.day))
         url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
+        return self._insert_row(con, t, sid, url, how, measured_at, source)
+
+    @staticmethod
+    def _insert_row(
+        con: sqlite3.Connection, t: Traverse, sid: int, url: str, how: str, measured_at: str, source: str | None
+    ) -> int:
         cur = con.execute(
             "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
             '    start, "end", steps, '
@@ -450,14 +456,16 @@ class Store:
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
-        out = []
-        for k, t in enumerate(traverses):
-            hit = self._con.execute(
-                "SELECT 1 FROM traverses WHERE content = ? LIMIT 1", (content_key(t, device),)
-            ).fetchone()
-            if hit is not None:
-                out.append(k)
-        return out
+        keys = [content_key(t, device) for t in traverses]
+        stored: set[str] = set()
+        step = 500  # keys per query (SQLite allows 999 parameters in old builds)
+        for i in range(0, len(keys), step):
+            part = keys[i : i + step]
+            rows = self._con.execute(
+                f"SELECT DISTINCT content FROM traverses WHERE content IN ({','.join('?' * len(part))})", part
+            )
+            stored.update(r[0] for r in rows)
+        return [k for k, key in enumerate(keys) if key in stored]
 
     def add_traverse(
         self,
@@ -506,7 +514,16 @@ class Store:
         when = _iso(measured_at)
         with self._write() as con:
             dev = self._device_id(con, device)
-            return [self._insert_traverse(con, t, dev, how, when, source) for t in ts]
+            url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
+            sessions: dict[str, int] = {}  # one look-up per day, not per row
+            ids = []
+            for t in ts:
+                day = str(t.day)
+                sid = sessions.get(day)
+                if sid is None:
+                    sid = sessions[day] = self._session_id(con, dev, day)
+                ids.append(self._insert_row(con, t, sid, url, how, when, source))
+            return ids
 
     def _traverse_rows(
         self,

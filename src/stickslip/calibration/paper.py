@@ -16,7 +16,7 @@ from ..models import (
     PrismaticParams,
     RotaryParams,
 )
-from .inversion import _LOAD_ZERO, PaperQuadratic, fit_paper_quadratic, invert_d_exact
+from .inversion import _LOAD_ZERO, PaperQuadratic, fit_paper_quadratic, invert_d_exact_many
 from .result import Calibration, CalibrationError, _check_physical, _constant_step, _day_of, _group, _provenance
 
 PRISMATIC_PAPER_POSES = {
@@ -151,25 +151,25 @@ def calibrate_paper(
                     "use method 'lsq' for other poses"
                 )
             g0s, dvals = [], []
-            # one root find per distinct (average, pose): repeated traverses share step counts
-            solved: dict[tuple[float, float, float, float, float, float], float] = {}
             for knot in (0, 1):
                 g0 = float(np.mean([t.gamma for t in rows[(knot, "free")]]))
-                ds = []
-                for t in rows[(knot, "loaded")]:
-                    al, be = _classify_rotary(t)
-                    if rotary_inversion == "exact":
-                        key = (t.gamma, g0, t.start, t.end, al, be)
-                        if key not in solved:
-                            solved[key] = invert_d_exact(*key)
-                        ds.append(solved[key])
-                    elif rotary_inversion == "paper-quadratic":
-                        assert quadratic is not None
-                        ds.append(float(quadratic.d(t.gamma - g0)))
-                    else:
-                        raise ValueError(
-                            f"rotary_inversion must be 'exact' or 'paper-quadratic', got {rotary_inversion!r}"
-                        )
+                ds = np.empty(len(rows[(knot, "loaded")]))
+                if rotary_inversion == "exact":
+                    # one bracket per traverse and pose, then every average of it at once (a long log
+                    # repeats the same few calibration traverses thousands of times)
+                    by_pose: dict[tuple[float, float, float, float], list[int]] = {}
+                    for i, t in enumerate(rows[(knot, "loaded")]):
+                        by_pose.setdefault((t.start, t.end, *_classify_rotary(t)), []).append(i)
+                    for (st, en, al, be), idx in by_pose.items():
+                        gam = np.array([rows[(knot, "loaded")][i].gamma for i in idx])
+                        ds[idx] = invert_d_exact_many(gam, g0, st, en, al, be)
+                elif rotary_inversion == "paper-quadratic":
+                    assert quadratic is not None
+                    ds[:] = [float(quadratic.d(t.gamma - g0)) for t in rows[(knot, "loaded")]]
+                else:
+                    raise ValueError(
+                        f"rotary_inversion must be 'exact' or 'paper-quadratic', got {rotary_inversion!r}"
+                    )
                 g0s.append(g0)
                 dvals.append(float(np.mean(ds)))
                 used += len(rows[(knot, "free")]) + len(rows[(knot, "loaded")])
