@@ -493,7 +493,6 @@ def _measurement_chunk(
     rows: list[list[str]], lines: list[int], source: str
 ) -> tuple[TraverseTable, list[tuple[int, str]]]:
     """Check a chunk of 11-cell rows with numpy; rows that fail anything are re-parsed by :func:`parse_row`."""
-    n = len(rows)
     cols = list(zip(*rows, strict=True))
     days = [c.strip() for c in cols[0]]
     ok = ~_equal(days, "")
