@@ -22,14 +22,14 @@ import operator
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
 
 from . import kinematics as kin
 from .models import direction_label
-from .records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
+from .records import MAX_TABLE_BYTES, atomic_write, read_text_bounded
 
 __all__ = [
     "HEADER",
@@ -580,8 +580,19 @@ def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
 
 
 def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
-    """Write a measurement table to a CSV file."""
-    atomic_write_text(path, measurements_to_csv(traverses))  # a failed write keeps the old file
+    """Write a measurement table to a CSV file, row by row as ``traverses`` yields them.
+
+    Streamed (an iterator of a million stored traverses is never held as text); the
+    file appears only when complete: a failed write keeps the old file.
+    """
+    row = operator.attrgetter(*HEADER)
+
+    def write(f: TextIO) -> None:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(HEADER)
+        w.writerows(map(row, traverses))
+
+    atomic_write(path, write)
 
 
 def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:

@@ -533,6 +533,16 @@ class Store:
         ids: Sequence[int] | None = None,
         include_excluded: bool = False,
     ) -> list[sqlite3.Row]:
+        return self._traverse_cursor(device, day, joint, ids, include_excluded).fetchall()
+
+    def _traverse_cursor(
+        self,
+        device: str | None,
+        day: str | None,
+        joint: int | None,
+        ids: Sequence[int] | None = None,
+        include_excluded: bool = False,
+    ) -> sqlite3.Cursor:
         sql = (
             "SELECT t.*, s.day AS day, d.url AS device FROM traverses t "
             "JOIN sessions s ON s.id = t.session_id JOIN devices d ON d.id = s.device_id WHERE 1=1"
@@ -553,7 +563,15 @@ class Store:
             sql += f" AND t.id IN ({','.join('?' * len(ids))})"
             args += [int(i) for i in ids]
         sql += " ORDER BY t.id"
-        return self._con.execute(sql, args).fetchall()
+        return self._con.execute(sql, args)
+
+    def iter_traverses(
+        self, device: str | None = None, day: str | None = None, joint: int | None = None, chunk: int = 10_000
+    ) -> Iterator[Traverse]:
+        """Like :meth:`traverses`, read ``chunk`` rows at a time (exports of any size in bounded memory)."""
+        cur = self._traverse_cursor(device, day, joint)
+        while rows := cur.fetchmany(chunk):
+            yield from map(self._to_traverse, rows)
 
     @staticmethod
     def _to_traverse(r: sqlite3.Row) -> Traverse:
