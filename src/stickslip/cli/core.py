@@ -179,7 +179,7 @@ def predict_cmd(
     # a cell of a repeated (empty) column name holds the last such cell, as a dict of the row would
     last = {h: i for i, h in enumerate(header)}
     take = [last[h] for h in header]
-    texts = map(repr, preds.tolist())
+    texts = repr(preds.tolist())[1:-1].split(", ") if len(preds) else []  # repr of each float, in C
     if json_out:
         out = []
         for cells, g in zip(table.cells(), preds.tolist(), strict=True):
@@ -191,7 +191,10 @@ def predict_cmd(
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(out_header)
-    if gamma_at:
+    if table.raw is not None and not gamma_at:
+        # plain rows (no quotes, none blank or short): csv would write each back as it stands
+        buf.write("".join(map("{},{}\n".format, table.raw, texts)))
+    elif gamma_at:
         w.writerows([*(cells[i] for i in take[: gamma_at[0]]), g, *(cells[i] for i in take[gamma_at[0] + 1 :])]
                     for cells, g in zip(table.cells(), texts, strict=True))
     else:
