@@ -140,10 +140,24 @@ def content_key(t: Traverse, device: str) -> str:
     Two real traverses can share it (a repeat that happened to take exactly as many steps);
     commands that refuse duplicates therefore offer ``--allow-duplicates``.
     """
-    values = [redact_url(str(device).strip()), str(t.day).strip(), str(int(t.joint)), t.direction]
-    values += [f"{float(getattr(t, c)):.12g}" for c in ("q1", "q2", "q3", "theta", "psi", "start", "end")]
-    values.append(str(int(t.steps)))
-    return "sha256:" + hashlib.sha256("\x1f".join(values).encode()).hexdigest()
+    return _content_keys([t], device)[0]
+
+
+def _content_keys(traverses: Iterable[Traverse], device: str) -> list[str]:
+    """:func:`content_key` of many traverses of one device (the URL redacted once, not per row)."""
+    url = redact_url(str(device).strip())
+    fmt = "\x1f".join([url, "{}", "{}", "{}", *["{:.12g}"] * 7, "{}"]).format
+    sha = hashlib.sha256
+    return [
+        "sha256:"
+        + sha(
+            fmt(
+                str(t.day).strip(), int(t.joint), t.direction, float(t.q1), float(t.q2), float(t.q3),
+                float(t.theta), float(t.psi), float(t.start), float(t.end), int(t.steps),
+            ).encode()
+        ).hexdigest()
+        for t in traverses
+    ]
 
 
 class StoreError(OSError):
@@ -424,11 +438,11 @@ class Store:
     ) -> int:
         sid = self._session_id(con, device_id, str(t.day))
         url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
-        return self._insert_row(con, t, sid, url, how, measured_at, source)
+        return self._insert_row(con, t, sid, how, measured_at, source, content_key(t, url))
 
     @staticmethod
     def _insert_row(
-        con: sqlite3.Connection, t: Traverse, sid: int, url: str, how: str, measured_at: str, source: str | None
+        con: sqlite3.Connection, t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
     ) -> int:
         cur = con.execute(
             "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
@@ -449,14 +463,14 @@ class Store:
                 measured_at,
                 how,
                 source,
-                content_key(t, url),
+                key,
             ),
         )
         return int(cur.lastrowid)
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
-        keys = [content_key(t, device) for t in traverses]
+        keys = _content_keys(traverses, device)
         stored: set[str] = set()
         step = 500  # keys per query (SQLite allows 999 parameters in old builds)
         for i in range(0, len(keys), step):
@@ -517,12 +531,12 @@ class Store:
             url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
             sessions: dict[str, int] = {}  # one look-up per day, not per row
             ids = []
-            for t in ts:
+            for t, key in zip(ts, _content_keys(ts, url), strict=True):
                 day = str(t.day)
                 sid = sessions.get(day)
                 if sid is None:
                     sid = sessions[day] = self._session_id(con, dev, day)
-                ids.append(self._insert_row(con, t, sid, url, how, when, source))
+                ids.append(self._insert_row(con, t, sid, how, when, source, key))
             return ids
 
     def _traverse_rows(
