@@ -303,7 +303,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
         head = f"{'command':10s} {'rows':>9s} {'seconds':>9s} {'cpu s':>8s} {'µs/row':>8s} {'peak MiB':>9s}"
         print(f"\n{head}   baseline")
         for cmd, ns in sizes.items():
-            times = []
+            times, cpus = [], []
             for n in ns:
                 meas = d / f"m{n}.csv"
                 base = ""
@@ -322,12 +322,13 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                     }[cmd]
                 r = run_child(argv_, env)
                 times.append(float(r["seconds"]))
+                cpus.append(float(r["cpu_seconds"]))
                 rows.append({"command": cmd, "rows": n, **r})
                 sec, cpu, peak = r["seconds"], r["cpu_seconds"], r["peak_mib"]
                 print(f"{cmd:10s} {n:9d} {sec:9.3f} {cpu:8.3f} {sec / n * 1e6:8.2f} {peak:9.0f}   {base}")
-            k = exponent(ns, times)
-            rows.append({"command": cmd, "exponent": k})
-            print(f"{cmd:10s} growth exponent {k:.2f} (time ~ rows^k, two largest sizes)")
+            k, kc = exponent(ns, times), exponent(ns, cpus)
+            rows.append({"command": cmd, "exponent": k, "exponent_cpu": kc})
+            print(f"{cmd:10s} growth exponent {k:.2f} wall, {kc:.2f} CPU (time ~ rows^k, two largest sizes)")
         # anova with repeats (pose groups that are tested), against scipy and statsmodels
         n = sizes["anova"][-1]
         measurement_table(d / "rep.csv", n)
