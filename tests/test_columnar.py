@@ -24,10 +24,10 @@ from stickslip import measurements as new
 NUMBERS = [
     "0", "0.0", "-0", "1e-3", "0.006", "0.012", "0.0120001", "0.013", "-1.5707963267948966", "-1.5707963", "1.5707963",
     "3.14159", "3.1416", "-3.2", "0.5235987755982988", "-3.665191429188092", "-3.67", "2.2", " 0.1 ", "\u20030.2",
-    "1_0", "nan", "inf", "-inf", "1e999", "", " ", "abc", "0x10", "١", "+0.5", ".5", "5.", "1e-320",
+    "1_0", "nan", "inf", "-inf", "1e999", "", " ", "abc", "0x10", "١", "+0.5", ".5", "5.", "1e-320", "0\x00",
 ]
-JOINTS = ["1", "2", "3", " 3", "03", "+2", "4", "0", "", "x", "3.0"]
-DIRS = ["+", "-", " +", "pos", "neg", "−", "1", "-1", "+1", "", "x"]
+JOINTS = ["1", "2", "3", " 3", "03", "+2", "4", "0", "", "x", "3.0", "3\x00"]
+DIRS = ["+", "-", " +", "pos", "neg", "−", "1", "-1", "+1", "", "x", "+\x00"]
 STEPS = ["1", "100", "12000", "0", "-5", "1e3", "12.5", "12.0", "1_000", "10000000000000", "99999999999999999999", "",
          " 7 ", "inf", "nan"]
 DAYS = ["2026-01-02", "d1", " d2 ", "", " ", "ä", "a,b", "x\ny"]
@@ -69,9 +69,13 @@ def chunk(request, monkeypatch):
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(rows=rows_strategy)
-def test_measurement_table_agrees_with_the_row_by_row_parser(chunk, rows):
+@given(rows=rows_strategy, layout=st.sampled_from(["plain", "crlf", "blank lines"]))
+def test_measurement_table_agrees_with_the_row_by_row_parser(chunk, rows, layout):
     text = _csv(list(new.HEADER), rows)
+    if layout == "crlf":
+        text = text.replace("\n", "\r\n")
+    elif layout == "blank lines":
+        text = text.replace("\n", "\n\n", 3)
     kind_old, res_old = _outcome(lambda t: old.parse_measurements(t, "m.csv"), text)
     kind_new, res_new = _outcome(lambda t: new.parse_measurements(t, "m.csv"), text)
     assert kind_new == kind_old, (res_old, res_new)

@@ -396,16 +396,17 @@ def _moving_within(joint: NDArray[np.int64], q: NDArray[np.float64]) -> NDArray[
     return ok
 
 
+_JOINT_CELL = {"1": 1, "2": 2, "3": 3}
+
+
 def _joint_cells(cells: Sequence[str]) -> NDArray[np.int64]:
     """1, 2 or 3 where a cell is exactly that digit, else 0 (the row is then checked one by one)."""
-    a = np.array(cells, dtype=str) if len(cells) else np.zeros(0, dtype="<U1")
-    return np.select([a == "1", a == "2", a == "3"], [1, 2, 3], 0).astype(np.int64)
+    return np.fromiter(map(_JOINT_CELL.get, cells, itertools.repeat(0)), dtype=np.int64, count=len(cells))
 
 
 def _equal(cells: Sequence[str], text: str) -> NDArray[np.bool_]:
-    """Cells exactly equal to ``text``, vectorised."""
-    a = np.array(cells, dtype=str) if len(cells) else np.zeros(0, dtype="<U1")
-    return np.asarray(a == text, dtype=bool)
+    """Cells exactly equal to ``text`` (Python string equality: numpy's str arrays would drop trailing NULs)."""
+    return np.fromiter(map(text.__eq__, cells), dtype=bool, count=len(cells))
 
 
 def _records(text: str) -> Iterator[list[str]]:
