@@ -43,7 +43,8 @@ def test_many_equals_one_at_a_time(g0, deltas, beta, alpha, down):
         assert str(e.value) == str(e1.value)
         return
     got = invert_d_exact_many(gam, g0, start, end, alpha, beta)
-    np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-17)
+    # both solve to ~1e-17 rad; d near 0 (no load effect) differs only at that level
+    np.testing.assert_allclose(got, want, rtol=1e-11, atol=1e-15)
 
 
 def test_a_long_log_calibrates_like_its_distinct_rows():
