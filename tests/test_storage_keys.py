@@ -37,3 +37,20 @@ def test_bulk_keys_equal_the_definition(rows, device):
     want = [_key_as_defined(t, device) for t in rows]
     assert _content_keys(rows, device) == want
     assert [content_key(t, device) for t in rows] == want
+
+
+def test_bulk_insert_returns_the_ids_of_the_rows_in_order(tmp_path):
+    """add_traverses inserts with one executemany: the ids it returns are the new rows, in the order given."""
+    from stickslip.storage import Store
+    from synth import paper_table
+
+    ts = paper_table()
+    with Store.open(tmp_path / "s.db") as st:
+        first = st.add_traverses(ts[:5], device="sim://")
+        st.delete_traverses([first[-1]])  # the largest id is free again
+        ids = st.add_traverses(ts, device="sim://a")
+        recs = {r["id"]: r for r in st.traverse_records(device="sim://a")}
+    assert ids == sorted(ids) and len(set(ids)) == len(ts) and min(ids) > max(first[:-1])
+    for i, t in zip(ids, ts, strict=True):
+        r = recs[i]
+        assert (r["day"], r["joint"], r["direction"], r["q2"], r["steps"]) == (t.day, t.joint, t.direction, t.q2, t.steps)

@@ -440,33 +440,40 @@ class Store:
         url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
         return self._insert_row(con, t, sid, how, measured_at, source, content_key(t, url))
 
+    _INSERT = (
+        "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
+        '    start, "end", steps, '
+        "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+    )
+
     @staticmethod
     def _insert_row(
         con: sqlite3.Connection, t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
     ) -> int:
-        cur = con.execute(
-            "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
-            '    start, "end", steps, '
-            "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (
-                sid,
-                int(t.joint),
-                t.direction,
-                float(t.q1),
-                float(t.q2),
-                float(t.q3),
-                float(t.theta),
-                float(t.psi),
-                float(t.start),
-                float(t.end),
-                int(t.steps),
-                measured_at,
-                how,
-                source,
-                key,
-            ),
-        )
+        cur = con.execute(Store._INSERT, Store._row_values(t, sid, how, measured_at, source, key))
         return int(cur.lastrowid)
+
+    @staticmethod
+    def _row_values(
+        t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
+    ) -> tuple[object, ...]:
+        return (
+            sid,
+            int(t.joint),
+            t.direction,
+            float(t.q1),
+            float(t.q2),
+            float(t.q3),
+            float(t.theta),
+            float(t.psi),
+            float(t.start),
+            float(t.end),
+            int(t.steps),
+            measured_at,
+            how,
+            source,
+            key,
+        )
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
@@ -530,13 +537,19 @@ class Store:
             dev = self._device_id(con, device)
             url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
             sessions: dict[str, int] = {}  # one look-up per day, not per row
-            ids = []
+            values = []
             for t, key in zip(ts, _content_keys(ts, url), strict=True):
                 day = str(t.day)
                 sid = sessions.get(day)
                 if sid is None:
                     sid = sessions[day] = self._session_id(con, dev, day)
-                ids.append(self._insert_row(con, t, sid, how, when, source, key))
+                values.append(self._row_values(t, sid, how, when, source, key))
+            # one executemany; in this write transaction the new rows are exactly those above the old largest id
+            before = int(con.execute("SELECT COALESCE(MAX(id), 0) FROM traverses").fetchone()[0])
+            con.executemany(self._INSERT, values)
+            ids = [int(r[0]) for r in con.execute("SELECT id FROM traverses WHERE id > ? ORDER BY id", (before,))]
+            if len(ids) != len(values):  # pragma: no cover - would mean another writer inside our transaction
+                raise StoreError(f"{self.path}: stored {len(ids)} rows for {len(values)} traverses; nothing kept")
             return ids
 
     def _traverse_rows(
