@@ -53,4 +53,5 @@ def test_bulk_insert_returns_the_ids_of_the_rows_in_order(tmp_path):
     assert ids == sorted(ids) and len(set(ids)) == len(ts) and min(ids) > max(first[:-1])
     for i, t in zip(ids, ts, strict=True):
         r = recs[i]
-        assert (r["day"], r["joint"], r["direction"], r["q2"], r["steps"]) == (t.day, t.joint, t.direction, t.q2, t.steps)
+        got = (r["day"], r["joint"], r["direction"], r["q2"], r["steps"])
+        assert got == (t.day, t.joint, t.direction, t.q2, t.steps)
