@@ -18,17 +18,18 @@ import csv
 import io
 import itertools
 import math
-from collections.abc import Iterable, Iterator, Sequence
+import operator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 from numpy.typing import NDArray
 
 from . import kinematics as kin
 from .models import direction_label
-from .records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
+from .records import MAX_TABLE_BYTES, atomic_write, read_text_bounded
 
 __all__ = [
     "HEADER",
@@ -398,8 +399,98 @@ def _moving_within(joint: NDArray[np.int64], q: NDArray[np.float64]) -> NDArray[
 _JOINT_CELL = {"1": 1, "2": 2, "3": 3}
 
 
+def _joint_cells(cells: Sequence[str]) -> NDArray[np.int64]:
+    """1, 2 or 3 where a cell is exactly that digit, else 0 (the row is then checked one by one)."""
+    return np.fromiter(map(_JOINT_CELL.get, cells, itertools.repeat(0)), dtype=np.int64, count=len(cells))
+
+
+def _equal(cells: Sequence[str], text: str) -> NDArray[np.bool_]:
+    """Cells exactly equal to ``text`` (Python string equality: numpy's str arrays would drop trailing NULs)."""
+    return np.fromiter(map(text.__eq__, cells), dtype=bool, count=len(cells))
+
+
 def _records(text: str) -> Iterator[list[str]]:
     return csv.reader(io.StringIO(text))
+
+
+@dataclass
+class _Chunk:
+    """Up to :data:`CHUNK_ROWS` records after the header, as columns when they are all regular.
+
+    ``cols`` (the fast case): every record has the table's width and a non-blank key
+    cell, so none is blank or short; one sequence per column. Otherwise ``records``:
+    the records as :mod:`csv` reads them (``[]`` for an empty line), to be sorted out
+    one by one. ``lines``: the chunk's raw text lines when the text is plain (see
+    :func:`_plain_lines`), for passing rows through unchanged.
+    """
+
+    n: int
+    cols: list[Sequence[str]] | None = None
+    records: list[list[str]] | None = None
+    lines: list[str] | None = None
+
+
+def _plain_lines(text: str) -> list[str] | None:
+    """The text's lines when :mod:`csv` would read each line as one record split at commas.
+
+    True when there are no quotes, carriage returns or NULs and no line is longer than
+    csv's cell limit: then the records are exactly ``line.split(",")`` (``[]`` for an
+    empty line), and ``str.split`` is several times faster than the csv reader. ``None``
+    otherwise (the csv reader is used).
+    """
+    if '"' in text or "\r" in text or "\x00" in text:
+        return None
+    lines = text.split("\n")
+    if lines[-1] == "":
+        lines.pop()  # the newline that ends the last line starts no record
+    if lines and max(map(len, lines)) > csv.field_size_limit():
+        return None
+    return lines
+
+
+def _open_table(text: str) -> tuple[list[str] | None, Callable[[int, int], Iterator[_Chunk]]]:
+    """The header record (``None`` for an empty text) and a function that yields the rest in chunks.
+
+    ``chunks(width, key)`` yields :class:`_Chunk` objects; a chunk comes as columns when
+    all its records have ``width`` cells and a non-blank cell ``key``.
+    """
+    plain = _plain_lines(text)
+    if plain is None:
+        reader = _records(text)
+        header = next(reader, None)
+
+        def csv_chunks(width: int, key: int) -> Iterator[_Chunk]:
+            while chunk := list(itertools.islice(reader, CHUNK_ROWS)):
+                if _all_wide_and_filled(chunk, width, key):
+                    yield _Chunk(len(chunk), cols=list(zip(*chunk, strict=True)))
+                else:
+                    yield _Chunk(len(chunk), records=chunk)
+
+        return header, csv_chunks
+    if not plain:
+        return None, lambda width, key: iter(())
+    head, body = plain[0], plain[1:]
+
+    def plain_chunks(width: int, key: int) -> Iterator[_Chunk]:
+        for i in range(0, len(body), CHUNK_ROWS):
+            part = body[i : i + CHUNK_ROWS]
+            if width >= 2 and set(map(str.count, part, itertools.repeat(","))) == {width - 1}:
+                cells = ",".join(part).split(",")
+                cols: list[Sequence[str]] = [cells[k::width] for k in range(width)]
+                if all(map(str.strip, cols[key])):
+                    yield _Chunk(len(part), cols=cols, lines=part)
+                    continue
+            yield _Chunk(len(part), records=[ln.split(",") if ln else [] for ln in part], lines=part)
+
+    return (head.split(",") if head else []), plain_chunks
+
+
+def _all_wide_and_filled(chunk: list[list[str]], width: int, key: int) -> bool:
+    """Whether every record has exactly ``width`` cells and a non-blank cell ``key`` (so none is blank)."""
+    if not chunk or width == 0:
+        return False
+    widths = set(map(len, chunk))
+    return widths == {width} and all(map(str.strip, map(operator.itemgetter(key), chunk)))
 
 
 def _parse_measurements(text: str, source: str) -> list[Traverse]:
@@ -420,11 +511,9 @@ def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTabl
 
 
 def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
-    reader = _records(text)
-    try:
-        header = next(reader)
-    except StopIteration:
-        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"]) from None
+    header, chunks = _open_table(text)
+    if header is None:
+        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"])
     header = [h.strip() for h in header]
     if tuple(header) != HEADER:
         missing = [h for h in HEADER if h not in header]
@@ -440,23 +529,28 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
     parts: list[TraverseTable] = []
     problems: list[tuple[int, str]] = []  # (line, reason): sorted by line at the end, stable within a line
     lineno = 1
-    while True:
-        chunk = list(itertools.islice(reader, CHUNK_ROWS))
-        if not chunk:
-            break
-        rows: list[list[str]] = []
-        lines: list[int] = []
-        for cells in chunk:
-            lineno += 1
-            if not cells or all(not c.strip() for c in cells):
-                continue  # blank line: not data
-            if len(cells) != len(HEADER):
-                problems.append((lineno, f"{source}:{lineno}: expected {len(HEADER)} columns, found {len(cells)}"))
-                continue
-            rows.append(cells)
-            lines.append(lineno)
-        if rows:
-            part, errs = _measurement_chunk(rows, lines, source)
+    for chunk in chunks(len(HEADER), 0):
+        if chunk.cols is not None:  # the common case: no blank or short rows
+            lines = list(range(lineno + 1, lineno + 1 + chunk.n))
+            lineno += chunk.n
+            cols = chunk.cols
+        else:
+            rows: list[list[str]] = []
+            lines = []
+            for cells in chunk.records or []:
+                lineno += 1
+                if not cells or all(not c.strip() for c in cells):
+                    continue  # blank line: not data
+                if len(cells) != len(HEADER):
+                    problems.append(
+                        (lineno, f"{source}:{lineno}: expected {len(HEADER)} columns, found {len(cells)}")
+                    )
+                    continue
+                rows.append(cells)
+                lines.append(lineno)
+            cols = list(zip(*rows, strict=True))
+        if lines:
+            part, errs = _measurement_chunk(cols, lines, source)
             parts.append(part)
             problems += errs
     if problems:
@@ -468,19 +562,15 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
 
 
 def _measurement_chunk(
-    rows: list[list[str]], lines: list[int], source: str
+    cols: Sequence[Sequence[str]], lines: list[int], source: str
 ) -> tuple[TraverseTable, list[tuple[int, str]]]:
-    """Check a chunk of 11-cell rows with numpy; rows that fail anything are re-parsed by :func:`parse_row`."""
-    n = len(rows)
-    cols = list(zip(*rows, strict=True))
+    """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`."""
     days = [c.strip() for c in cols[0]]
-    ok = np.fromiter((bool(d) for d in days), dtype=bool, count=n)
-    jmap = _JOINT_CELL.get
-    joint = np.fromiter((jmap(c, 0) for c in cols[1]), dtype=np.int64, count=n)
+    ok = ~_equal(days, "")
+    joint = _joint_cells(cols[1])
     ok &= joint > 0
-    dcol = cols[2]
-    plus = np.fromiter((c == "+" for c in dcol), dtype=bool, count=n)
-    ok &= plus | np.fromiter((c == "-" for c in dcol), dtype=bool, count=n)
+    plus = _equal(cols[2], "+")
+    ok &= plus | _equal(cols[2], "-")
     nums: dict[str, NDArray[np.float64]] = {}
     for i, name in enumerate(("q1", "q2", "q3", "theta", "psi", "start", "end"), start=3):
         v, good = _floats(cols[i])
@@ -496,7 +586,7 @@ def _measurement_chunk(
     problems: list[tuple[int, str]] = []
     bad = np.flatnonzero(~ok)
     for i in bad.tolist():
-        t, errs = parse_row(dict(zip(HEADER, rows[i], strict=True)), f"{source}:{lines[i]}")
+        t, errs = parse_row({h: c[i] for h, c in zip(HEADER, cols, strict=True)}, f"{source}:{lines[i]}")
         if errs or t is None:
             problems += [(lines[i], e) for e in errs]
             continue
@@ -550,25 +640,30 @@ def read_measurement_table(path: str | Path) -> TraverseTable:
     return parse_measurement_table(_read_table_text(path), str(path))
 
 
-def _fmt(v: object) -> str:
-    if isinstance(v, float):
-        return repr(v)
-    return str(v)
-
-
 def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
-    """The CSV text of a measurement table (full float precision)."""
+    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(HEADER)
-    for t in traverses:
-        w.writerow([_fmt(getattr(t, f.name)) for f in fields(Traverse)])
+    row = operator.attrgetter(*HEADER)
+    w.writerows(map(row, traverses))
     return buf.getvalue()
 
 
 def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
-    """Write a measurement table to a CSV file."""
-    atomic_write_text(path, measurements_to_csv(traverses))  # a failed write keeps the old file
+    """Write a measurement table to a CSV file, row by row as ``traverses`` yields them.
+
+    Streamed (an iterator of a million stored traverses is never held as text); the
+    file appears only when complete: a failed write keeps the old file.
+    """
+    row = operator.attrgetter(*HEADER)
+
+    def write(f: TextIO) -> None:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(HEADER)
+        w.writerows(map(row, traverses))
+
+    atomic_write(path, write)
 
 
 def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:
@@ -625,12 +720,9 @@ def parse_pose_table(text: str, source: str = "<string>") -> tuple[list[str], li
         raise TableError([_csv_problem(source, e)]) from None
 
 
-def _pose_header(reader: Iterator[list[str]], source: str) -> list[str]:
+def _pose_header(record: list[str] | None, source: str) -> list[str]:
     """The stripped header of a pose table, checked (as ``csv.DictReader`` reads it: the first record)."""
-    try:
-        header = [h.strip() for h in next(reader)]
-    except StopIteration:
-        header = []
+    header = [h.strip() for h in record or []]
     dup = sorted({h for h in header if h and header.count(h) > 1})
     if dup:
         raise TableError([f"{source}:1: column(s) {', '.join(dup)} appear more than once; keep one of each"])
@@ -647,29 +739,44 @@ def _pose_header(reader: Iterator[list[str]], source: str) -> list[str]:
     return header
 
 
-def _pose_records(reader: Iterator[list[str]], header: list[str]) -> Iterator[tuple[int, list[str] | None]]:
-    """``(line, cells)`` of each data record of a pose table, as ``csv.DictReader`` numbers them.
+def _pose_records(
+    chunks: Iterator[_Chunk], header: list[str]
+) -> Iterator[tuple[list[int], list[Sequence[str]], list[int], list[str] | None]]:
+    """Per chunk of a pose table: ``(lines, cols, overlong, raw)``, numbered as ``csv.DictReader`` does.
 
-    Empty records are skipped without being counted (DictReader's rule); records whose
-    cells are blank (of a repeated column name, the last cell) are counted and skipped;
-    a record with more cells than the header comes with ``None``. Shorter records are
-    padded with empty cells.
+    ``cols`` holds the data rows as columns, padded with empty cells to the header's
+    width; ``lines`` their line numbers. Empty records are skipped without being
+    counted (DictReader's rule); records whose cells are blank (of a repeated column
+    name, the last cell) are counted and skipped; ``overlong`` lists the lines of
+    records with more cells than the header. ``raw``: the chunk's text lines when
+    every one of them is a data row as it stands (for passing rows through), else None.
     """
     width = len(header)
     used = sorted({h: i for i, h in enumerate(header)}.values())
     lineno = 1
-    for cells in reader:
-        if not cells:
+    for chunk in chunks:
+        if chunk.cols is not None:  # the common case: every record full and not blank
+            yield list(range(lineno + 1, lineno + 1 + chunk.n)), chunk.cols, [], chunk.lines
+            lineno += chunk.n
             continue
-        lineno += 1
-        if len(cells) > width:
-            yield lineno, None
-            continue
-        if all(i >= len(cells) or not cells[i].strip() for i in used):
-            continue
-        if len(cells) < width:
-            cells = cells + [""] * (width - len(cells))
-        yield lineno, cells
+        lines: list[int] = []
+        overlong: list[int] = []
+        rows: list[list[str]] = []
+        for cells in chunk.records or []:
+            if not cells:
+                continue
+            lineno += 1
+            if len(cells) > width:
+                overlong.append(lineno)
+                continue
+            if all(i >= len(cells) or not cells[i].strip() for i in used):
+                continue
+            if len(cells) < width:
+                cells = cells + [""] * (width - len(cells))
+            lines.append(lineno)
+            rows.append(cells)
+        cols: list[Sequence[str]] = list(zip(*rows, strict=True)) if rows else [()] * width
+        yield lines, cols, overlong, None
 
 
 def _pose_row(
@@ -747,6 +854,9 @@ class PoseTable:
         The traversed interval, NaN on rows that ask for the step at the pose.
     lines : ndarray of int
         Line of each row (as :func:`parse_pose_table` numbers them).
+    raw : list of str or None
+        The rows' text lines, when each is a row as it stands: no quotes, no blank or
+        short rows (then a row can be passed through without parsing it again).
     """
 
     header: list[str]
@@ -761,6 +871,7 @@ class PoseTable:
     end: NDArray[np.float64]
     lines: NDArray[np.int64]
     text: str = ""
+    raw: list[str] | None = None
 
     def __len__(self) -> int:
         return int(self.joint.size)
@@ -770,13 +881,12 @@ class PoseTable:
         """Rows with ``start, end`` (the average over a traverse is asked for)."""
         return ~np.isnan(self.start)
 
-    def cells(self) -> Iterator[list[str]]:
+    def cells(self) -> Iterator[Sequence[str]]:
         """Each row's cells, as many as the header has (missing cells empty), read again from the text."""
-        reader = _records(self.text)
-        next(reader, None)
-        for _line, cells in _pose_records(reader, self.header):
-            if cells is not None:
-                yield cells
+        _, chunks = _open_table(self.text)
+        key = self.header.index("joint")
+        for _lines, cols, _overlong, _raw in _pose_records(chunks(len(self.header), key), self.header):
+            yield from zip(*cols, strict=True)
 
     def queries(self) -> list[PoseQuery]:
         """The rows as :class:`PoseQuery` objects."""
@@ -806,29 +916,23 @@ def read_pose_columns(path: str | Path) -> PoseTable:
 
 
 def _parse_pose_columns(text: str, source: str) -> PoseTable:
-    reader = _records(text)
-    header = _pose_header(reader, source)
+    record, chunks = _open_table(text)
+    header = _pose_header(record, source)
     has_traverse = "start" in header and "end" in header
     # the cell a column's value comes from: the last of equal names, as in a dict (only '' can repeat)
     where_col = {h: i for i, h in enumerate(header)}
     problems: list[tuple[int, str]] = []  # (line, reason), sorted by line at the end
     parts: list[tuple[NDArray[np.int64], NDArray[np.str_], dict[str, NDArray[np.float64]], NDArray[np.int64]]] = []
-    records = _pose_records(reader, header)
-    while True:
-        chunk = list(itertools.islice(records, CHUNK_ROWS))
-        if not chunk:
-            break
-        rows: list[list[str]] = []
-        lines: list[int] = []
-        for lineno, cells in chunk:
-            if cells is None:
-                problems.append((lineno, f"{source}:{lineno}: more cells than header columns"))
-                continue
-            rows.append(cells)
-            lines.append(lineno)
-        if not rows:
+    raw: list[str] | None = []
+    for lines, cols, overlong, raw_part in _pose_records(chunks(len(header), header.index("joint")), header):
+        problems += [(n, f"{source}:{n}: more cells than header columns") for n in overlong]
+        if raw is not None and raw_part is not None:
+            raw += raw_part
+        else:
+            raw = None
+        if not lines:
             continue
-        part, errs = _pose_chunk(rows, lines, source, where_col, has_traverse, header)
+        part, errs = _pose_chunk(cols, lines, source, where_col, has_traverse, header)
         problems += errs
         parts.append(part)
     if problems:
@@ -854,11 +958,12 @@ def _parse_pose_columns(text: str, source: str) -> PoseTable:
         nums["end"],
         lines_a,
         text,
+        raw if raw is not None and len(set(header)) == len(header) else None,
     )
 
 
 def _pose_chunk(
-    rows: list[list[str]],
+    cols: Sequence[Sequence[str]],
     lines: list[int],
     source: str,
     where_col: dict[str, int],
@@ -869,19 +974,15 @@ def _pose_chunk(
     list[tuple[int, str]],
 ]:
     """Check a chunk of pose rows with numpy; rows that fail anything are re-parsed by :func:`_pose_row`."""
-    n = len(rows)
-    cols = list(zip(*rows, strict=True))
+    n = len(lines)
 
     def col(name: str) -> Sequence[str]:
         return cols[where_col[name]] if name in where_col else ("",) * n
 
-    jmap = _JOINT_CELL.get
-    joint = np.fromiter((jmap(c, 0) for c in col("joint")), dtype=np.int64, count=n)
+    joint = _joint_cells(col("joint"))
     ok = joint > 0
     dcol = col("direction")
-    plus = np.fromiter((c == "+" for c in dcol), dtype=bool, count=n)
-    minus = np.fromiter((c == "-" for c in dcol), dtype=bool, count=n)
-    nodir = np.fromiter((c == "" for c in dcol), dtype=bool, count=n)
+    plus, minus, nodir = _equal(dcol, "+"), _equal(dcol, "-"), _equal(dcol, "")
     ok &= plus | minus | nodir
     nums: dict[str, NDArray[np.float64]] = {}
     for name in ("q1", "q2", "q3", "theta", "psi"):
@@ -890,7 +991,7 @@ def _pose_chunk(
         ok &= good
     if has_traverse:
         scol, ecol = col("start"), col("end")
-        both_empty = np.fromiter((a == "" and b == "" for a, b in zip(scol, ecol, strict=True)), dtype=bool, count=n)
+        both_empty = _equal(scol, "") & _equal(ecol, "")
         start, sgood = _floats(scol)
         end, egood = _floats(ecol)
         trav = sgood & egood
@@ -913,7 +1014,8 @@ def _pose_chunk(
     problems: list[tuple[int, str]] = []
     bad = np.flatnonzero(~ok)
     for i in bad.tolist():
-        q, errs = _pose_row(dict(zip(header, rows[i], strict=True)), f"{source}:{lines[i]}", has_traverse)
+        row = {h: c[i] for h, c in zip(header, cols, strict=True)}
+        q, errs = _pose_row(row, f"{source}:{lines[i]}", has_traverse)
         if errs or q is None:
             problems += [(lines[i], e) for e in errs]
             continue

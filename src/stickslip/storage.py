@@ -140,10 +140,24 @@ def content_key(t: Traverse, device: str) -> str:
     Two real traverses can share it (a repeat that happened to take exactly as many steps);
     commands that refuse duplicates therefore offer ``--allow-duplicates``.
     """
-    values = [redact_url(str(device).strip()), str(t.day).strip(), str(int(t.joint)), t.direction]
-    values += [f"{float(getattr(t, c)):.12g}" for c in ("q1", "q2", "q3", "theta", "psi", "start", "end")]
-    values.append(str(int(t.steps)))
-    return "sha256:" + hashlib.sha256("\x1f".join(values).encode()).hexdigest()
+    return _content_keys([t], device)[0]
+
+
+def _content_keys(traverses: Iterable[Traverse], device: str) -> list[str]:
+    """:func:`content_key` of many traverses of one device (the URL redacted once, not per row)."""
+    url = redact_url(str(device).strip())
+    fmt = "\x1f".join([url, "{}", "{}", "{}", *["{:.12g}"] * 7, "{}"]).format
+    sha = hashlib.sha256
+    return [
+        "sha256:"
+        + sha(
+            fmt(
+                str(t.day).strip(), int(t.joint), t.direction, float(t.q1), float(t.q2), float(t.q3),
+                float(t.theta), float(t.psi), float(t.start), float(t.end), int(t.steps),
+            ).encode()
+        ).hexdigest()
+        for t in traverses
+    ]
 
 
 class StoreError(OSError):
@@ -424,40 +438,55 @@ class Store:
     ) -> int:
         sid = self._session_id(con, device_id, str(t.day))
         url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
-        cur = con.execute(
-            "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
-            '    start, "end", steps, '
-            "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (
-                sid,
-                int(t.joint),
-                t.direction,
-                float(t.q1),
-                float(t.q2),
-                float(t.q3),
-                float(t.theta),
-                float(t.psi),
-                float(t.start),
-                float(t.end),
-                int(t.steps),
-                measured_at,
-                how,
-                source,
-                content_key(t, url),
-            ),
-        )
+        return self._insert_row(con, t, sid, how, measured_at, source, content_key(t, url))
+
+    _INSERT = (
+        "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
+        '    start, "end", steps, '
+        "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+    )
+
+    @staticmethod
+    def _insert_row(
+        con: sqlite3.Connection, t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
+    ) -> int:
+        cur = con.execute(Store._INSERT, Store._row_values(t, sid, how, measured_at, source, key))
         return _rowid(cur)
+
+    @staticmethod
+    def _row_values(
+        t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
+    ) -> tuple[object, ...]:
+        return (
+            sid,
+            int(t.joint),
+            t.direction,
+            float(t.q1),
+            float(t.q2),
+            float(t.q3),
+            float(t.theta),
+            float(t.psi),
+            float(t.start),
+            float(t.end),
+            int(t.steps),
+            measured_at,
+            how,
+            source,
+            key,
+        )
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
-        out = []
-        for k, t in enumerate(traverses):
-            hit = self._con.execute(
-                "SELECT 1 FROM traverses WHERE content = ? LIMIT 1", (content_key(t, device),)
-            ).fetchone()
-            if hit is not None:
-                out.append(k)
-        return out
+        keys = _content_keys(traverses, device)
+        stored: set[str] = set()
+        step = 500  # keys per query (SQLite allows 999 parameters in old builds)
+        for i in range(0, len(keys), step):
+            part = keys[i : i + step]
+            rows = self._con.execute(
+                f"SELECT DISTINCT content FROM traverses WHERE content IN ({','.join('?' * len(part))})", part
+            )
+            stored.update(r[0] for r in rows)
+        return [k for k, key in enumerate(keys) if key in stored]
 
     def add_traverse(
         self,
@@ -506,7 +535,22 @@ class Store:
         when = _iso(measured_at)
         with self._write() as con:
             dev = self._device_id(con, device)
-            return [self._insert_traverse(con, t, dev, how, when, source) for t in ts]
+            url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
+            sessions: dict[str, int] = {}  # one look-up per day, not per row
+            values = []
+            for t, key in zip(ts, _content_keys(ts, url), strict=True):
+                day = str(t.day)
+                sid = sessions.get(day)
+                if sid is None:
+                    sid = sessions[day] = self._session_id(con, dev, day)
+                values.append(self._row_values(t, sid, how, when, source, key))
+            # one executemany; in this write transaction the new rows are exactly those above the old largest id
+            before = int(con.execute("SELECT COALESCE(MAX(id), 0) FROM traverses").fetchone()[0])
+            con.executemany(self._INSERT, values)
+            ids = [int(r[0]) for r in con.execute("SELECT id FROM traverses WHERE id > ? ORDER BY id", (before,))]
+            if len(ids) != len(values):  # pragma: no cover - would mean another writer inside our transaction
+                raise StoreError(f"{self.path}: stored {len(ids)} rows for {len(values)} traverses; nothing kept")
+            return ids
 
     def _traverse_rows(
         self,
@@ -516,6 +560,16 @@ class Store:
         ids: Sequence[int] | None = None,
         include_excluded: bool = False,
     ) -> list[sqlite3.Row]:
+        return self._traverse_cursor(device, day, joint, ids, include_excluded).fetchall()
+
+    def _traverse_cursor(
+        self,
+        device: str | None,
+        day: str | None,
+        joint: int | None,
+        ids: Sequence[int] | None = None,
+        include_excluded: bool = False,
+    ) -> sqlite3.Cursor:
         sql = (
             "SELECT t.*, s.day AS day, d.url AS device FROM traverses t "
             "JOIN sessions s ON s.id = t.session_id JOIN devices d ON d.id = s.device_id WHERE 1=1"
@@ -536,7 +590,15 @@ class Store:
             sql += f" AND t.id IN ({','.join('?' * len(ids))})"
             args += [int(i) for i in ids]
         sql += " ORDER BY t.id"
-        return self._con.execute(sql, args).fetchall()
+        return self._con.execute(sql, args)
+
+    def iter_traverses(
+        self, device: str | None = None, day: str | None = None, joint: int | None = None, chunk: int = 10_000
+    ) -> Iterator[Traverse]:
+        """Like :meth:`traverses`, read ``chunk`` rows at a time (exports of any size in bounded memory)."""
+        cur = self._traverse_cursor(device, day, joint)
+        while rows := cur.fetchmany(chunk):
+            yield from map(self._to_traverse, rows)
 
     @staticmethod
     def _to_traverse(r: sqlite3.Row) -> Traverse:

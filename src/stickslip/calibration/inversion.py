@@ -103,6 +103,73 @@ def invert_d_exact(
     return float(brentq(lambda d: avg(d) - gamma_measured, a, b, xtol=1e-18, rtol=1e-14, maxiter=500))
 
 
+def invert_d_exact_many(
+    gamma_measured: NDArray[np.float64],
+    gamma0: float,
+    start: float,
+    end: float,
+    alpha: float,
+    beta: float,
+) -> NDArray[np.float64]:
+    """:func:`invert_d_exact` for many averages measured over the same traverse and pose, at once.
+
+    The traverse's bracket (the ``d`` domain where the step stays positive and the
+    ``d`` of the largest reachable average) depends only on the pose and ``gamma0``, so
+    it is found once; every average is then solved by bisection on that bracket, all
+    together with numpy, to 1e-18 rad or 1e-14 relative (as :func:`invert_d_exact`'s
+    Brent solve). The same refusals: the first average that cannot be inverted raises
+    :func:`invert_d_exact`'s own error for it.
+    """
+    from scipy.optimize import minimize_scalar
+
+    g = np.asarray(gamma_measured, dtype=float).reshape(-1)
+    if g.size == 0:
+        return np.zeros(0)
+    if not (np.all(g > 0) and gamma0 > 0):
+        first = int(np.flatnonzero(~(g > 0))[0]) if not np.all(g > 0) else 0
+        return np.array([invert_d_exact(float(g[first]), gamma0, start, end, alpha, beta)])  # raises
+    lmin, lmax = _load_range(start, end, alpha, beta)
+    if max(abs(lmin), abs(lmax)) < _LOAD_ZERO:
+        return np.array([invert_d_exact(float(g[0]), gamma0, start, end, alpha, beta)])  # raises
+    span = abs(end - start)
+
+    def avg(d: NDArray[np.float64] | float) -> NDArray[np.float64]:
+        d = np.asarray(d, dtype=float)
+        return np.asarray(span / steps_between(start, end, gamma0, d * alpha, d * beta), dtype=float)
+
+    d_lo = -gamma0 / lmax if lmax > 0 else -math.inf
+    d_hi = gamma0 / (-lmin) if lmin < 0 else math.inf
+    shrink = 1e-7
+    lo = d_lo * (1 - shrink) if math.isfinite(d_lo) else -50 * gamma0
+    hi = d_hi * (1 - shrink) if math.isfinite(d_hi) else 50 * gamma0
+    res = minimize_scalar(
+        lambda d: -float(avg(d)), bounds=(lo, hi), method="bounded", options={"xatol": 1e-9 * gamma0}
+    )
+    d_peak = float(res.x)
+    g_peak = float(avg(d_peak))
+    a, b = (lo, d_peak) if d_peak >= 0.0 else (d_peak, hi)
+    fa, fb = float(avg(a)), float(avg(b))
+    at_peak = g >= g_peak
+    unreachable = (at_peak & (g > g_peak * (1 + 1e-9))) | (~at_peak & ((fa - g) * (fb - g) > 0))
+    if unreachable.any():
+        first = int(np.flatnonzero(unreachable)[0])
+        return np.array([invert_d_exact(float(g[first]), gamma0, start, end, alpha, beta)])  # raises
+    # bisection on [a, b], where avg - g changes sign; which end is below depends on the branch
+    rising = fb > fa
+    left = np.full(g.size, a)
+    right = np.full(g.size, b)
+    for _ in range(200):
+        mid = 0.5 * (left + right)
+        above = avg(mid) > g
+        go_left = above if rising else ~above
+        right = np.where(go_left, mid, right)
+        left = np.where(go_left, left, mid)
+        if np.all(right - left <= 1e-18 + 1e-14 * np.abs(mid)):
+            break
+    d = 0.5 * (left + right)
+    return np.where(at_peak, d_peak, d)
+
+
 # ----------------------------------------------------------------------------- Eq. 9 comparator
 
 EQ9_PRINTED = (3.41, 0.025, 6.42e-7)

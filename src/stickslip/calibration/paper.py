@@ -8,6 +8,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..measurements import Traverse
@@ -16,7 +17,7 @@ from ..models import (
     PrismaticParams,
     RotaryParams,
 )
-from .inversion import _LOAD_ZERO, PaperQuadratic, fit_paper_quadratic, invert_d_exact
+from .inversion import _LOAD_ZERO, PaperQuadratic, fit_paper_quadratic, invert_d_exact_many
 from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _group
 
 PRISMATIC_PAPER_POSES = {
@@ -119,17 +120,21 @@ def calibrate_paper(
     if rotary_inversion == "paper-quadratic":
         quad = quadratic or fit_paper_quadratic()
 
-        def invert(t: Traverse, g0: float, alpha: float, beta: float) -> float:
-            return float(quad.d(t.gamma - g0))
+        def invert(loaded: Sequence[Traverse], g0: float) -> NDArray[np.float64]:
+            return np.array([float(quad.d(t.gamma - g0)) for t in loaded])
     else:
-        # one root find per distinct (average, pose): repeated traverses share step counts
-        solved: dict[tuple[float, float, float, float, float, float], float] = {}
 
-        def invert(t: Traverse, g0: float, alpha: float, beta: float) -> float:
-            key = (t.gamma, g0, t.start, t.end, alpha, beta)
-            if key not in solved:
-                solved[key] = invert_d_exact(*key)
-            return solved[key]
+        def invert(loaded: Sequence[Traverse], g0: float) -> NDArray[np.float64]:
+            # one bracket per traverse and pose, then every average of it at once (a long log repeats the
+            # same few calibration traverses thousands of times)
+            ds = np.empty(len(loaded))
+            by_pose: dict[tuple[float, float, float, float], list[int]] = {}
+            for i, t in enumerate(loaded):
+                by_pose.setdefault((t.start, t.end, *_classify_rotary(t)), []).append(i)
+            for (start, end, al, be), idx in by_pose.items():
+                gam = np.array([loaded[i].gamma for i in idx])
+                ds[idx] = invert_d_exact_many(gam, g0, start, end, al, be)
+            return ds
 
     models: dict[tuple[int, str], JointModel] = {}
     used = 0
@@ -179,7 +184,7 @@ def _paper_prismatic(d: str, ts: Sequence[Traverse]) -> tuple[PrismaticParams, i
 
 
 def _paper_rotary(
-    j: int, d: str, ts: Sequence[Traverse], invert: Callable[[Traverse, float, float, float], float]
+    j: int, d: str, ts: Sequence[Traverse], invert: Callable[[Sequence[Traverse], float], NDArray[np.float64]]
 ) -> tuple[RotaryParams, int]:
     """gamma0 from the unloaded traverses and d by ``invert`` from the loaded ones, at q3 = 0 and 12 mm."""
     rot = _paper_rotary_rows(ts)
@@ -192,7 +197,7 @@ def _paper_rotary(
     g0s, dvals, used = [], [], 0
     for knot in (0, 1):
         g0 = float(np.mean([t.gamma for t in rot[(knot, "free")]]))
-        dvals.append(float(np.mean([invert(t, g0, *_classify_rotary(t)) for t in rot[(knot, "loaded")]])))
+        dvals.append(float(np.mean(invert(rot[(knot, "loaded")], g0))))
         g0s.append(g0)
         used += len(rot[(knot, "free")]) + len(rot[(knot, "loaded")])
     return RotaryParams((g0s[0], g0s[1]), (dvals[0], dvals[1])), used

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import io
+import itertools
 import math
 import sys
+from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated
+from typing import TYPE_CHECKING, Annotated, TextIO
 
 import typer
 from rich.table import Table
@@ -23,6 +24,7 @@ if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --h
 from ..clock import stale_message
 from ..devices.base import device_key
 from ..joints import joint_spec
+from ..records import atomic_write
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
@@ -188,7 +190,6 @@ def predict_cmd(
     # a cell of a repeated (empty) column name holds the last such cell, as a dict of the row would
     last = {h: i for i, h in enumerate(header)}
     take = [last[h] for h in header]
-    texts = map(repr, preds.tolist())
     if json_out:
         out = []
         for cells, g in zip(table.cells(), preds.tolist(), strict=True):
@@ -197,19 +198,34 @@ def predict_cmd(
             out.append(r)
         print_json(out)
         return
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(out_header)
-    if gamma_at:
-        w.writerows([*(cells[i] for i in take[: gamma_at[0]]), g, *(cells[i] for i in take[gamma_at[0] + 1 :])]
-                    for cells, g in zip(table.cells(), texts, strict=True))
-    else:
-        w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts, strict=True))
+
+    def texts() -> Iterator[str]:
+        """repr of each prediction, a chunk at a time (one repr of a list runs in C)."""
+        for i in range(0, len(preds), 65536):
+            yield from repr(preds[i : i + 65536].tolist())[1:-1].split(", ")
+
+    def emit(f: TextIO) -> None:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(out_header)
+        if table.raw is not None and not gamma_at:
+            # plain rows (no quotes, none blank or short): csv would write each back as it stands
+            rows = map("{},{}\n".format, table.raw, texts())
+            while part := "".join(itertools.islice(rows, 65536)):
+                f.write(part)
+        elif gamma_at:
+            k = gamma_at[0]
+            w.writerows(
+                [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :])]
+                for cells, g in zip(table.cells(), texts(), strict=True)
+            )
+        else:
+            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts(), strict=True))
+
     if output is None:
-        sys.stdout.write(buf.getvalue())
+        emit(sys.stdout)
     else:
         with user_errors():
-            output.write_text(buf.getvalue(), encoding="utf-8")
+            atomic_write(output, emit)  # streamed; a failed write leaves no half file
         console.print(f"wrote {len(table)} rows to {output}")
 
 

@@ -100,19 +100,30 @@ def export(
 
     Example: [bold]stickslip export --day 2026-11-21 -o meas.csv[/]
     """
+    import itertools
+    from collections.abc import Iterator
+
     from ..measurements import write_measurements
 
     if joint is not None and joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     with open_store(db, must_exist=True) as st:
-        ts = st.traverses(device=device, day=day, joint=joint)
-        if not ts:
+        rows = st.iter_traverses(device=device, day=day, joint=joint)  # streamed: any size in bounded memory
+        first = next(rows, None)
+        if first is None:
             days = st.days(device)
             hint = f" (stored days: {', '.join(days)})" if days else " (the database is empty)"
             fail("no traverses match" + (f" day {day!r}" if day else "") + hint)
-    with user_errors():
-        write_measurements(out, ts)
-    console.print(f"wrote {len(ts)} traverses to {out}")
+        count = [0]
+
+        def counted(it: Iterator[Traverse]) -> Iterator[Traverse]:
+            for t in it:
+                count[0] += 1
+                yield t
+
+        with user_errors():
+            write_measurements(out, counted(itertools.chain([first], rows)))
+    console.print(f"wrote {count[0]} traverses to {out}")
 
 
 @app.command("import")

@@ -1,0 +1,29 @@
+"""The scaling benchmark runs end to end at tiny sizes (what CI runs; timings are printed, never asserted).
+
+``make bench`` runs it at full size (1e3 .. 1e6 rows); see README "Performance".
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+BENCH = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_scale.py"
+
+
+def test_scaling_benchmark_runs_quick(capsys):
+    spec = importlib.util.spec_from_file_location("bench_scale", BENCH)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["bench_scale"] = mod
+    spec.loader.exec_module(mod)
+    rows = mod.main(["--quick"])
+    out = capsys.readouterr().out
+    series = [r for r in rows if "rows" in r]
+    assert {r["command"] for r in series} == {"predict", "calibrate", "fit", "anova", "import"}
+    assert all(r["exit"] == 0 and r["seconds"] > 0 and r["peak_mib"] > 0 for r in series)
+    assert all(math.isfinite(r["exponent"]) for r in rows if "exponent" in r)
+    for what in ("growth exponent", "pandas read_csv", "statsmodels", "per-move quadrature", "start-up"):
+        assert what in out
