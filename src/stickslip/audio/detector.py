@@ -19,10 +19,13 @@ import math
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import records
+from .template import CHUNK, TemplateParams, TemplateState, levels_from_frames
 
 __all__ = [
     "StopDetector",
@@ -83,6 +86,35 @@ class Tuning:
         threshold minus stepping high percentile, and those two levels (dBFS).
     latency_measured_s : float or None
         detected_at - stop onset on the tuning recording, s.
+    reference_hz : (float, float) or None
+        ``"band"`` method: the band level is taken relative to this band's, Hz.
+    method : str
+        ``"template"``: the spectral-template change detector (:mod:`.template`; what
+        :func:`~stickslip.audio.tuning.tune` makes). ``"band"``: the band-power detector
+        of tuning files version 1 (band level against ``threshold_db``).
+    edges_hz : tuple of float
+        ``"template"``: sub-band edges, Hz (``band_hz`` is their span).
+    signature_db : tuple of float
+        ``"template"``: the stop's departure from stepping per sub-band, dB.
+    spread_db : tuple of float
+        ``"template"``: frame-to-frame spread of stepping per sub-band, dB.
+    residual_max : float
+        ``"template"``: largest residual (in spreads) a frame may have and still count.
+    decay_ratio : float
+        ``"template"``: the firing frame's stop-likeness must be at least this fraction
+        of the largest in the hold window (a decaying transient is not a stop).
+    tau_s : float
+        ``"template"``: time constant of the running stepping template, s.
+    warmup_s : float
+        ``"template"``: stepping heard before the detector can fire, s.
+    trim : int
+        ``"template"``: sub-bands dropped from each frame's fit (those that fit worst).
+    checks : dict or None
+        What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
+        interference injected, latency); informational.
+
+    For ``"template"`` tunings ``threshold_db`` is the threshold on the stop-likeness
+    (0 stepping, 1 the tuned stop; dimensionless) and ``hysteresis_db`` its hysteresis.
     """
 
     band_hz: tuple[float, float]
@@ -102,7 +134,17 @@ class Tuning:
     stopped_db: float | None = None
     latency_measured_s: float | None = None
     reference_hz: tuple[float, float] | None = None
-    extra: dict = field(default_factory=dict, compare=False)
+    method: str = "band"
+    edges_hz: tuple[float, ...] | None = None
+    signature_db: tuple[float, ...] | None = None
+    spread_db: tuple[float, ...] | None = None
+    residual_max: float = 4.0
+    decay_ratio: float = 0.5
+    tau_s: float = 0.5
+    warmup_s: float = 0.15
+    trim: int = 0
+    checks: dict[str, Any] | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         lo, hi = (float(v) for v in self.band_hz)
@@ -121,6 +163,10 @@ class Tuning:
                 f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
                 f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
             )
+        if self.method not in ("band", "template"):
+            raise ValueError(f"method {self.method!r} must be 'band' or 'template'")
+        if self.method == "template":
+            self._check_template()
         if self.reference_hz is not None:
             r0, r1 = (float(v) for v in self.reference_hz)
             object.__setattr__(self, "reference_hz", (r0, r1))
@@ -136,6 +182,32 @@ class Tuning:
             ("hysteresis_db", 0, 60),
             ("onset_lag_s", -1, 1),
         ):
+            v = getattr(self, name)
+            if not lo_ <= v <= hi_:
+                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+
+    def _check_template(self) -> None:
+        if self.edges_hz is None or self.signature_db is None or self.spread_db is None:
+            raise ValueError("a template tuning needs edges_hz, signature_db and spread_db")
+        edges = tuple(float(e) for e in self.edges_hz)
+        sig = tuple(float(e) for e in self.signature_db)
+        spr = tuple(float(e) for e in self.spread_db)
+        object.__setattr__(self, "edges_hz", edges)
+        object.__setattr__(self, "signature_db", sig)
+        object.__setattr__(self, "spread_db", spr)
+        nb = len(edges) - 1
+        if nb < 1 or len(sig) != nb or len(spr) != nb:
+            raise ValueError(f"edges_hz ({len(edges)}), signature_db ({len(sig)}) and spread_db ({len(spr)}) disagree")
+        if any(not b > a for a, b in zip(edges, edges[1:], strict=False)) or edges[-1] > self.sample_rate / 2:
+            raise ValueError(f"edges_hz must increase and stay below {self.sample_rate / 2:g} Hz")
+        if not all(math.isfinite(v) for v in sig) or not any(abs(v) > 0 for v in sig):
+            raise ValueError("signature_db must be finite and not all zero")
+        if not all(math.isfinite(v) and v > 0 for v in spr):
+            raise ValueError("spread_db must be finite and positive")
+        if not 0 <= self.trim < nb:
+            raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
+        for name, lo_, hi_ in (("residual_max", 0.1, 1e3), ("decay_ratio", 0, 1), ("tau_s", 0.01, 100),
+                               ("warmup_s", 0, 10)):
             v = getattr(self, name)
             if not lo_ <= v <= hi_:
                 raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
@@ -156,6 +228,8 @@ class Tuning:
     @property
     def level_unit(self) -> str:
         """``"dBFS"`` for an absolute band level; ``"dB re a-b Hz"`` for one relative to the reference band."""
+        if self.method == "template":
+            return "(stop-likeness: 0 stepping, 1 the tuned stop)"
         if self.reference_hz is None:
             return "dBFS"
         return f"dB re {self.reference_hz[0]:.0f}-{self.reference_hz[1]:.0f} Hz"
@@ -176,7 +250,16 @@ class Tuning:
         d["band_hz"] = list(self.band_hz)
         d["reference_hz"] = list(self.reference_hz) if self.reference_hz is not None else None
         d["latency_s"] = self.latency_s
-        return {"kind": _KIND, "version": 1, **d, **({"extra": self.extra} if self.extra else {})}
+        version = 1
+        if self.method == "template":
+            version = 2
+            for k in ("edges_hz", "signature_db", "spread_db"):
+                d[k] = list(d[k])
+        else:
+            for k in ("method", "edges_hz", "signature_db", "spread_db", "residual_max", "decay_ratio", "tau_s",
+                      "warmup_s", "trim", "checks"):
+                d.pop(k)
+        return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> Tuning:
@@ -185,6 +268,12 @@ class Tuning:
             raise TuningFileError("a tuning must be a JSON object")
         if d.get("kind", _KIND) != _KIND:
             raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
+        version = d.get("version", 1)
+        if version not in (1, 2):
+            raise TuningFileError(
+                f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
+                "upgrade stickslip or re-tune with 'stickslip tune'"
+            )
         for key in ("band_hz", "threshold_db"):
             if key not in d:
                 raise TuningFileError(f"tuning lacks {key!r}")
@@ -200,10 +289,18 @@ class Tuning:
                 if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
                     raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
                 kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
-            for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s"):
+            for k in ("edges_hz", "signature_db", "spread_db"):
+                if kwargs.get(k) is not None:
+                    if not isinstance(kwargs[k], (list, tuple)):
+                        raise TuningFileError(f"{k} must be a list of numbers")
+                    kwargs[k] = tuple(float(v) for v in kwargs[k])
+            if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
+                raise TuningFileError("checks must be an object or null")
+            for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s", "residual_max",
+                      "decay_ratio", "tau_s", "warmup_s"):
                 if k in kwargs:
                     kwargs[k] = float(kwargs[k])
-            for k in ("sample_rate", "frame", "hop", "max_dips"):
+            for k in ("sample_rate", "frame", "hop", "max_dips", "trim"):
                 if k in kwargs:
                     v = kwargs[k]
                     if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
@@ -237,6 +334,8 @@ class Tuning:
 
     def report(self) -> str:
         """A few human lines: band, threshold, contrast and margin."""
+        if self.method == "template":
+            return self._template_report()
         lines = [
             f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} {self.level_unit}",
             f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
@@ -251,6 +350,58 @@ class Tuning:
             )
         lines.append(f"latency {1e3 * self.latency_s:.1f} ms")
         return "\n".join(lines)
+
+    def _template_report(self) -> str:
+        assert self.edges_hz is not None and self.signature_db is not None
+        sig = np.asarray(self.signature_db)
+        k = int(np.argmax(np.abs(sig)))
+        e = self.edges_hz
+        lines = [
+            f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands; the stop departs most "
+            f"at {e[k]:.0f}-{e[k + 1]:.0f} Hz ({sig[k]:+.1f} dB)",
+            f"stop signature {', '.join(f'{v:+.0f}' for v in sig)} dB",
+            f"fires at stop-likeness {self.threshold_db:.2f} (stepping 0, the stop 1) held "
+            f"{1e3 * self.hold_s:.1f} ms, residual <= {self.residual_max:.1f}; frame "
+            f"{self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), hop {self.hop}",
+        ]
+        if self.contrast_db is not None:
+            lines.append(
+                f"worst stepping frame {self.stepping_db:.2f}, stop's low {self.stopped_db:.2f}: "
+                f"margin {self.margin_db:.2f} (stop-likeness), stop departure {self.contrast_db:.1f} dB"
+            )
+        lines.append(f"latency {1e3 * self.latency_s:.1f} ms, onset lag {1e3 * self.onset_lag_s:.1f} ms")
+        c = self.checks or {}
+        if "false_alarms_per_hour" in c:
+            lines.append(
+                f"self-check with knocks, babble, +-20 dB gain and a second click train: "
+                f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
+                f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
+                f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"
+            )
+        return "\n".join(lines)
+
+    def template_params(self) -> TemplateParams:
+        """The template detector's parameters (``method == "template"`` only)."""
+        assert self.edges_hz is not None and self.signature_db is not None and self.spread_db is not None
+        return TemplateParams(
+            sample_rate=self.sample_rate,
+            frame=self.frame,
+            hop=self.hop,
+            edges_hz=self.edges_hz,
+            signature_db=self.signature_db,
+            spread_db=self.spread_db,
+            threshold=self.threshold_db,
+            residual_max=self.residual_max,
+            hold_frames=self.hold_frames,
+            max_dips=self.max_dips,
+            release_frames=max(1, int(math.ceil(self.release_s * self.sample_rate / self.hop))),
+            hysteresis=self.hysteresis_db,
+            decay_ratio=self.decay_ratio,
+            tau_s=self.tau_s,
+            warmup_chunks=max(1, int(math.ceil(self.warmup_s * self.sample_rate / self.hop / CHUNK - 1e-9))),
+            trim=self.trim,
+            onset_lag_s=self.onset_lag_s,
+        )
 
 
 @dataclass(frozen=True)
@@ -351,6 +502,12 @@ class StopDetector:
 
     def __init__(self, tuning: Tuning, t0_s: float = 0.0) -> None:
         self.tuning = tuning
+        self._template: TemplateState | None = None
+        if tuning.method == "template":
+            assert tuning.edges_hz is not None
+            self._template = TemplateState(tuning.template_params(), t0_s)
+            freqs = np.fft.rfftfreq(tuning.frame, 1 / tuning.sample_rate)
+            self._edge_bins = np.asarray(np.searchsorted(freqs, np.asarray(tuning.edges_hz), side="left"), dtype=np.intp)
         self._w, self._scale = _window(tuning.frame)
         self._i0, self._i1 = _band_bins(tuning.band_hz, tuning.sample_rate, tuning.frame)
         self._ref = (
@@ -373,6 +530,8 @@ class StopDetector:
         self._prev_db = -np.inf
         self._cross_t = math.nan
         self.levels_seen = 0
+        if self._template is not None:
+            self._template.reset(t0_s)
 
     @property
     def latency_s(self) -> float:
@@ -382,7 +541,21 @@ class StopDetector:
     @property
     def latched(self) -> bool:
         """True while a stop is being heard (after it fired, until released)."""
+        if self._template is not None:
+            return self._template.latched
         return self._latched
+
+    @property
+    def level(self) -> float:
+        """The latest frame's level in the tuning's unit (stop-likeness for a template tuning)."""
+        if self._template is not None:
+            return self._template.last_a
+        return float(self._prev_db)
+
+    @property
+    def ready(self) -> bool:
+        """False while a template detector is still learning the stepping sound (it cannot fire yet)."""
+        return self._template is None or not self._template.warming
 
     def feed(self, block: np.ndarray) -> list[StopEvent]:
         """Consume a block of mono samples; return the stops that fired in it."""
@@ -404,7 +577,19 @@ class StopDetector:
                 strides=(H * seg.strides[0], seg.strides[0]),
                 writeable=False,
             )
-            if self._ref is None:
+            if self._template is not None:
+                v = levels_from_frames(view, self._w, self._scale, self._edge_bins)
+                ends = self._next + np.arange(n_frames, dtype=np.int64) * H + F - 1
+                for dec in self._template.process(v, ends):
+                    events.append(
+                        StopEvent(
+                            detected_at_s=self._t0 + dec.end_sample / tu.sample_rate,
+                            onset_s=dec.cross_t_s - tu.onset_lag_s,
+                            level_db=dec.a,
+                        )
+                    )
+                levels = None
+            elif self._ref is None:
                 spec = np.fft.rfft(view * self._w, axis=1)[:, self._i0 : self._i1]
                 power = (spec.real**2 + spec.imag**2).sum(axis=1) * self._scale
                 levels = 10 * np.log10(power + _FLOOR)
@@ -415,8 +600,9 @@ class StopDetector:
                 levels = 10 * np.log10(p[:, self._i0 : self._i1].sum(axis=1) * self._scale + _FLOOR) - 10 * np.log10(
                     p[:, r0:r1].sum(axis=1) * self._scale + _FLOOR
                 )
-            ends = self._next + np.arange(n_frames) * H + F - 1
-            events = self._run(levels, ends)
+            if levels is not None:
+                ends = self._next + np.arange(n_frames) * H + F - 1
+                events = self._run(levels, ends)
             self._next += n_frames * H
             self.levels_seen += n_frames
         drop = self._next - self._buf_start

@@ -1,0 +1,302 @@
+"""The spectral-template change detector: an end stop is a lasting departure from stepping.
+
+While a joint steps, its sound has a steady spectral signature: per frame (``frame``
+samples every ``hop``), the level of each of ``B`` sub-bands spanning the stepping
+sound's band, ``v_b`` in dB. The detector keeps a *running template* ``T_b`` of that
+signature (the median of the first frames, then an exponential average with time
+constant ``tau_s``, frozen while the sound departs from it) and reads every frame as a
+departure ``d_b = v_b - T_b`` (dB). Because the template follows the input, a microphone
+gain, a distance or a step rate that differs from the tuning recording's cancels.
+
+Tuning measured the end stop's own departure, the *signature* ``delta_b`` (dB per
+sub-band: positive where the stop is louder, negative where it is quieter, so louder,
+quieter, duller and brighter stops are all one case), and the frame-to-frame spread
+``sigma_b`` of stepping. Each frame is fitted as ``d = a * delta + e`` by weighted least
+squares (weights ``1 / sigma_b**2``), trimmed: the ``trim`` sub-bands that fit worst are
+dropped and the fit repeated, so a voice or a fan that covers a few sub-bands does not
+move ``a``. Two numbers come out per frame:
+
+* ``a``, the *stop-likeness*: 0 while stepping, 1 at a stop like the tuning's;
+* ``rho``, the root-mean-square of the kept residuals in units of ``sigma_b``: how
+  unlike *both* stepping and the stop the frame is (a knock, a door slam).
+
+A frame is *hot* when ``a >= threshold`` and ``rho <= residual_max``. The detector
+fires when ``hold`` of the last ``hold + max_dips`` frames were hot, the current one
+included, and the current ``a`` has not decayed below ``decay_ratio`` of the largest in
+that window (a transient rings down, a stop does not). It then stays latched until
+``a`` has stayed below ``threshold - hysteresis`` for ``release_s``.
+
+Everything that changes the detector's state happens at frame boundaries counted from
+the stream start (the template is updated every :data:`CHUNK` frames), so the events do
+not depend on how the stream is cut into blocks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "CHUNK",
+    "TemplateParams",
+    "TemplateState",
+    "fit_departure",
+    "subband_edges",
+    "subband_levels_db",
+]
+
+#: template update period and warm-up unit, frames
+CHUNK = 32
+_FLOOR = 1e-20
+_CLIP_DB = 40.0
+
+FloatArray = NDArray[np.float64]
+
+
+def subband_edges(lo_hz: float, hi_hz: float, sample_rate: int, frame: int, per_octave: float = 3.0) -> list[float]:
+    """Edges of log-spaced sub-bands from ``lo_hz`` to ``hi_hz``, each at least two bins wide, Hz."""
+    bin_hz = sample_rate / frame
+    edges = [float(lo_hz)]
+    step = 2 ** (1 / per_octave)
+    while edges[-1] < hi_hz:
+        nxt = max(edges[-1] * step, edges[-1] + 2 * bin_hz)
+        if hi_hz - nxt < 2 * bin_hz:
+            nxt = hi_hz
+        edges.append(float(min(nxt, hi_hz)))
+    return [round(e, 1) for e in edges]
+
+
+def _bins(edges: tuple[float, ...] | list[float], sample_rate: int, frame: int) -> NDArray[np.intp]:
+    freqs = np.fft.rfftfreq(frame, 1 / sample_rate)
+    idx = np.searchsorted(freqs, np.asarray(edges, dtype=np.float64), side="left")
+    return np.asarray(idx, dtype=np.intp)
+
+
+def window(frame: int) -> tuple[FloatArray, float]:
+    """Periodic Hann window and the scale that makes one-sided bins sum to the mean square."""
+    w = np.hanning(frame + 1)[:-1]
+    return w, 2.0 / (frame * float(np.sum(w**2)))
+
+
+def levels_from_frames(frames: FloatArray, w: FloatArray, scale: float, idx: NDArray[np.intp]) -> FloatArray:
+    """Sub-band levels (frames x bands), dB, of windowed frames; ``idx`` are bin edges."""
+    spec = np.fft.rfft(frames * w, axis=1)
+    p = spec.real**2 + spec.imag**2
+    c = np.concatenate((np.zeros((p.shape[0], 1)), np.cumsum(p[:, : int(idx[-1])], axis=1)), axis=1)
+    band = (c[:, idx[1:]] - c[:, idx[:-1]]) * scale
+    return np.asarray(10 * np.log10(band + _FLOOR), dtype=np.float64)
+
+
+def subband_levels_db(
+    samples: NDArray[np.floating] | FloatArray, sample_rate: int, frame: int, hop: int, edges: tuple[float, ...] | list[float]
+) -> FloatArray:
+    """Sub-band levels of every frame of a recording (frames x bands), dBFS.
+
+    Frame ``i`` covers samples ``[i*hop, i*hop + frame)``.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    idx = _bins(edges, sample_rate, frame)
+    nb = len(edges) - 1
+    if x.size < frame:
+        return np.zeros((0, nb))
+    w, scale = window(frame)
+    view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
+    out = np.empty((view.shape[0], nb))
+    for f0 in range(0, view.shape[0], 4096):
+        out[f0 : f0 + 4096] = levels_from_frames(view[f0 : f0 + 4096], w, scale, idx)
+    return out
+
+
+def fit_departure(
+    d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int, explained: bool = False
+) -> tuple[FloatArray, FloatArray]:
+    """Stop-likeness ``a`` and residual ``rho`` of departures ``d`` (frames x bands, dB).
+
+    Weighted least squares ``d = a * delta + e`` (weights ``1/sigma**2``), then the same
+    with the ``trim`` worst-fitting bands of each frame dropped. ``rho`` is the RMS of the
+    kept residuals in units of ``sigma``.
+    """
+    d = np.clip(d, -_CLIP_DB, _CLIP_DB)
+    z = d / sigma  # normalised departures
+    g = delta / sigma  # normalised signature
+    gg = float(g @ g)
+    a = (z @ g) / gg
+    if trim > 0:
+        r = np.abs(z - a[:, None] * g)
+        worst = np.argpartition(-r, trim - 1, axis=1)[:, :trim]
+        keep = np.ones_like(z, dtype=bool)
+        np.put_along_axis(keep, worst, False, axis=1)
+        zk = np.where(keep, z, 0.0)
+        gk2 = (keep * g**2).sum(axis=1)
+        a = (zk @ g) / np.maximum(gk2, 1e-12)
+        res = np.where(keep, z - a[:, None] * g, 0.0)
+        rho = np.sqrt((res**2).sum(axis=1) / keep.sum(axis=1))
+        if explained:
+            rho = 1.0 - (res**2).sum(axis=1) / np.maximum((zk**2).sum(axis=1), 1e-12)
+    else:
+        res = z - a[:, None] * g
+        rho = np.sqrt(np.mean(res**2, axis=1))
+        if explained:
+            rho = 1.0 - (res**2).sum(axis=1) / np.maximum((z**2).sum(axis=1), 1e-12)
+    return np.asarray(a, dtype=np.float64), np.asarray(rho, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class TemplateParams:
+    """What the template detector needs (a view of :class:`~stickslip.audio.detector.Tuning`)."""
+
+    sample_rate: int
+    frame: int
+    hop: int
+    edges_hz: tuple[float, ...]
+    signature_db: tuple[float, ...]
+    spread_db: tuple[float, ...]
+    threshold: float
+    residual_max: float
+    hold_frames: int
+    max_dips: int
+    release_frames: int
+    hysteresis: float
+    decay_ratio: float
+    tau_s: float
+    warmup_chunks: int
+    trim: int
+    onset_lag_s: float
+
+
+@dataclass
+class Decision:
+    """One fired event, in the template detector's own terms."""
+
+    end_sample: int
+    cross_t_s: float
+    a: float
+
+
+class TemplateState:
+    """The streaming state of the template detector (see the module docstring).
+
+    :meth:`process` takes the sub-band levels of consecutive frames and their end-sample
+    indices and returns the decisions that fired.
+    """
+
+    def __init__(self, p: TemplateParams, t0_s: float = 0.0) -> None:
+        self.p = p
+        self.delta = np.asarray(p.signature_db, dtype=np.float64)
+        self.sigma = np.asarray(p.spread_db, dtype=np.float64)
+        self.reset(t0_s)
+
+    def reset(self, t0_s: float = 0.0) -> None:
+        """Forget the template and every decision."""
+        self.t0 = float(t0_s)
+        self.frame_no = 0
+        self.template: FloatArray | None = None
+        self._warm: list[FloatArray] = []
+        self._acc = np.zeros_like(self.delta)
+        self._acc_n = 0
+        self.mask = 0
+        self.recent: list[float] = []
+        self.latched = False
+        self.below = 0
+        self.prev_a = -math.inf
+        self.cross_t = math.nan
+        self.last_a = 0.0
+        self.last_rho = 0.0
+
+    @property
+    def warming(self) -> bool:
+        """True until the template has been learned from the first frames."""
+        return self.template is None or self.frame_no < self.p.warmup_chunks * CHUNK
+
+    def process(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
+        """Consume the levels ``v`` (frames x bands, dB) of the next frames; ends are sample indices."""
+        out: list[Decision] = []
+        i = 0
+        n = v.shape[0]
+        while i < n:
+            room = CHUNK - self.frame_no % CHUNK
+            j = min(n, i + room)
+            out += self._segment(v[i:j], ends[i:j])
+            self.frame_no += j - i
+            i = j
+            if self.frame_no % CHUNK == 0:
+                self._chunk_done()
+        return out
+
+    def _chunk_done(self) -> None:
+        p = self.p
+        if self.frame_no <= p.warmup_chunks * CHUNK:
+            self.template = np.median(np.concatenate(self._warm), axis=0)
+            if self.frame_no == p.warmup_chunks * CHUNK:
+                self._warm = []
+            return
+        if self._acc_n and self.template is not None and not self.latched:
+            mean_departure = self._acc / self._acc_n
+            alpha = 1.0 - math.exp(-self._acc_n * p.hop / p.sample_rate / p.tau_s)
+            self.template = self.template + alpha * mean_departure
+        self._acc[:] = 0.0
+        self._acc_n = 0
+
+    def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
+        p = self.p
+        if self.frame_no < p.warmup_chunks * CHUNK or self.template is None:
+            self._warm.append(v.copy())
+            return []
+        d = v - self.template
+        a, rho = fit_departure(d, self.delta, self.sigma, p.trim)
+        self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
+        # the template follows stepping only: frames that look like stepping, clipped
+        quiet = (a < 0.3 * p.threshold) & (rho <= p.residual_max)
+        if quiet.any():
+            self._acc += np.clip(d[quiet], -3.0, 3.0).sum(axis=0)  # departures, clipped: a knock only nudges
+            self._acc_n += int(quiet.sum())
+        hot = (a >= p.threshold) & (rho <= p.residual_max)
+        if not self.latched and self.mask == 0 and not hot.any():
+            self.prev_a = float(a[-1])
+            return []
+        return self._decide(a, hot, ends)
+
+    def _decide(self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64]) -> list[Decision]:
+        p = self.p
+        sr, H = p.sample_rate, p.hop
+        full = (1 << (p.hold_frames + p.max_dips)) - 1
+        window_n = p.hold_frames + p.max_dips
+        rel = p.threshold - p.hysteresis
+        out: list[Decision] = []
+        prev = self.prev_a
+        for ai, hi, end in zip(a.tolist(), hot.tolist(), ends.tolist(), strict=True):
+            if self.latched:
+                if ai < rel:
+                    self.below += 1
+                    if self.below >= p.release_frames:
+                        self.latched = False
+                        self.mask = 0
+                        self.recent = []
+                else:
+                    self.below = 0
+            else:
+                if hi and self.mask == 0:
+                    t_end = self.t0 + end / sr
+                    if math.isfinite(prev) and prev < p.threshold and ai > prev:
+                        frac = (p.threshold - prev) / (ai - prev)
+                        self.cross_t = float(t_end - (1 - frac) * H / sr)
+                    else:
+                        self.cross_t = t_end
+                self.mask = ((self.mask << 1) | int(hi)) & full
+                self.recent = (self.recent + [ai])[-window_n:]
+                if (
+                    hi
+                    and self.mask.bit_count() >= p.hold_frames
+                    and ai >= p.decay_ratio * max(self.recent)
+                ):
+                    self.latched = True
+                    self.below = 0
+                    out.append(Decision(int(end), self.cross_t, float(ai)))
+                if self.mask == 0:
+                    self.recent = []
+            prev = ai
+        self.prev_a = prev
+        return out
