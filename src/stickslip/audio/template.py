@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "CHUNK",
+    "QUANTILE",
     "TemplateParams",
     "TemplateState",
     "fit_departure",
@@ -50,6 +51,11 @@ __all__ = [
 
 #: template update period and warm-up unit, frames
 CHUNK = 32
+#: the template tracks this quantile of the stepping levels: interference only adds sound, so a
+#: low quantile follows the stepping sound under intermittent speech, knocks or a second instrument
+QUANTILE = 0.3
+#: residual allowance per unit of fitted departure (see :func:`fit_departure`)
+RESIDUAL_SLOPE = 0.35
 _FLOOR = 1e-20
 _CLIP_DB = 40.0
 
@@ -117,7 +123,8 @@ def fit_departure(
 
     Weighted least squares ``d = a * delta + e`` (weights ``1/sigma**2``), then the same
     with the ``trim`` worst-fitting bands of each frame dropped. ``rho`` is the RMS of the
-    kept residuals in units of ``sigma``.
+    kept residuals in units of ``sigma``, less :data:`RESIDUAL_SLOPE` times the fitted
+    departure's RMS (also in units of ``sigma``): the residual a stop of that size may have.
     """
     d = np.clip(d, -_CLIP_DB, _CLIP_DB)
     z = d / sigma  # normalised departures
@@ -125,7 +132,9 @@ def fit_departure(
     gg = float(g @ g)
     a = (z @ g) / gg
     if trim > 0:
-        r = np.abs(z - a[:, None] * g)
+        # interference adds sound: drop the bands with the most unexplained *excess*, never a
+        # band whose expected rise is missing (that is evidence against a stop)
+        r = z - a[:, None] * g
         worst = np.argpartition(-r, trim - 1, axis=1)[:, :trim]
         keep = np.ones_like(z, dtype=bool)
         np.put_along_axis(keep, worst, False, axis=1)
@@ -141,6 +150,10 @@ def fit_departure(
         rho = np.sqrt(np.mean(res**2, axis=1))
         if explained:
             rho = 1.0 - (res**2).sum(axis=1) / np.maximum((z**2).sum(axis=1), 1e-12)
+    if not explained:
+        # a stop's own sound varies in proportion to its size (another step rate moves its lines):
+        # allow a residual that grows with the fitted departure
+        rho = rho - RESIDUAL_SLOPE * np.maximum(a, 0.0) * float(np.sqrt(np.mean(g**2)))
     return np.asarray(a, dtype=np.float64), np.asarray(rho, dtype=np.float64)
 
 
@@ -195,7 +208,7 @@ class TemplateState:
         self.frame_no = 0
         self.template: FloatArray | None = None
         self._warm: list[FloatArray] = []
-        self._acc = np.zeros_like(self.delta)
+        self._acc_list: list[FloatArray] = []
         self._acc_n = 0
         self.mask = 0
         self.recent: list[float] = []
@@ -229,15 +242,15 @@ class TemplateState:
     def _chunk_done(self) -> None:
         p = self.p
         if self.frame_no <= p.warmup_chunks * CHUNK:
-            self.template = np.median(np.concatenate(self._warm), axis=0)
+            self.template = np.percentile(np.concatenate(self._warm), 100 * QUANTILE, axis=0)
             if self.frame_no == p.warmup_chunks * CHUNK:
                 self._warm = []
             return
         if self._acc_n and self.template is not None and not self.latched:
-            mean_departure = self._acc / self._acc_n
+            q = np.percentile(np.concatenate(self._acc_list), 100 * QUANTILE, axis=0)
             alpha = 1.0 - math.exp(-self._acc_n * p.hop / p.sample_rate / p.tau_s)
-            self.template = self.template + alpha * mean_departure
-        self._acc[:] = 0.0
+            self.template = self.template + alpha * q
+        self._acc_list = []
         self._acc_n = 0
 
     def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
@@ -251,7 +264,7 @@ class TemplateState:
         # the template follows stepping only: frames that look like stepping, clipped
         quiet = (a < 0.3 * p.threshold) & (rho <= p.residual_max)
         if quiet.any():
-            self._acc += np.clip(d[quiet], -3.0, 3.0).sum(axis=0)  # departures, clipped: a knock only nudges
+            self._acc_list.append(np.clip(d[quiet], -3.0, 3.0))  # departures, clipped: a knock only nudges
             self._acc_n += int(quiet.sum())
         hot = (a >= p.threshold) & (rho <= p.residual_max)
         if not self.latched and self.mask == 0 and not hot.any():
@@ -278,7 +291,8 @@ class TemplateState:
                 else:
                     self.below = 0
             else:
-                if hi and self.mask == 0:
+                if hi and (self.mask == 0 or (not self.mask & 1 and self.mask.bit_count() < max(1, p.hold_frames // 2))):
+                    # the latest upward crossing that starts a run (a lone earlier hot frame is forgotten)
                     t_end = self.t0 + end / sr
                     if math.isfinite(prev) and prev < p.threshold and ai > prev:
                         frac = (p.threshold - prev) / (ai - prev)
