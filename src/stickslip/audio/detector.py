@@ -109,6 +109,9 @@ class Tuning:
         ``"template"``: stepping heard before the detector can fire, s.
     trim : int
         ``"template"``: sub-bands dropped from each frame's fit (those that fit worst).
+    stepping_levels_db : tuple of float or None
+        ``"template"``: stepping's level per sub-band in the tuning recording, dBFS; lets the
+        detector tell that it began listening at the stop (see :mod:`.template`).
     checks : dict or None
         What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
         interference injected, latency); informational.
@@ -143,6 +146,7 @@ class Tuning:
     tau_s: float = 0.5
     warmup_s: float = 0.15
     trim: int = 0
+    stepping_levels_db: tuple[float, ...] | None = None
     checks: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -204,6 +208,11 @@ class Tuning:
             raise ValueError("signature_db must be finite and not all zero")
         if not all(math.isfinite(v) and v > 0 for v in spr):
             raise ValueError("spread_db must be finite and positive")
+        if self.stepping_levels_db is not None:
+            lv = tuple(float(v) for v in self.stepping_levels_db)
+            object.__setattr__(self, "stepping_levels_db", lv)
+            if len(lv) != nb or not all(math.isfinite(v) for v in lv):
+                raise ValueError(f"stepping_levels_db must hold {nb} finite levels")
         if not 0 <= self.trim < nb:
             raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
         for name, lo_, hi_ in (("residual_max", 0.1, 1e3), ("decay_ratio", 0, 1), ("tau_s", 0.01, 100),
@@ -253,11 +262,11 @@ class Tuning:
         version = 1
         if self.method == "template":
             version = 2
-            for k in ("edges_hz", "signature_db", "spread_db"):
-                d[k] = list(d[k])
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
+                d[k] = list(d[k]) if d[k] is not None else None
         else:
             for k in ("method", "edges_hz", "signature_db", "spread_db", "residual_max", "decay_ratio", "tau_s",
-                      "warmup_s", "trim", "checks"):
+                      "warmup_s", "trim", "checks", "stepping_levels_db"):
                 d.pop(k)
         return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
 
@@ -289,7 +298,7 @@ class Tuning:
                 if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
                     raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
                 kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
-            for k in ("edges_hz", "signature_db", "spread_db"):
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
                 if kwargs.get(k) is not None:
                     if not isinstance(kwargs[k], (list, tuple)):
                         raise TuningFileError(f"{k} must be a list of numbers")
@@ -401,6 +410,7 @@ class Tuning:
             warmup_chunks=max(1, int(math.ceil(self.warmup_s * self.sample_rate / self.hop / CHUNK - 1e-9))),
             trim=self.trim,
             onset_lag_s=self.onset_lag_s,
+            stepping_levels_db=self.stepping_levels_db,
         )
 
 
@@ -659,7 +669,7 @@ class StopDetector:
 
 
 def detect(
-    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 4096
+    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 1 << 16
 ) -> list[StopEvent]:
     """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks)."""
     det = StopDetector(tuning, t0_s)

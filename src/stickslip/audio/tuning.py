@@ -575,7 +575,7 @@ def tune(
     for cand in candidates[:8]:
         if cand.margin <= 0.05:
             break
-        tu = _make_tuning(cand, edges, delta, sigma, sample_rate, frame, hop, hold_s, release_s, joint)
+        tu = _make_tuning(cand, edges, delta, sigma, sample_rate, frame, hop, hold_s, release_s, joint, mu_step)
         events = StopDetector(tu).feed(x)
         near = [e for e in events if stop_s - g <= e.detected_at_s <= stop_s + 0.2]
         if len(events) == 1 and len(near) == 1:
@@ -681,7 +681,7 @@ def _candidates(
 
 def _make_tuning(
     c: _Candidate, edges: list[float], delta: FloatArray, sigma: FloatArray, sample_rate: int, frame: int, hop: int,
-    hold_s: float, release_s: float, joint: int | None,
+    hold_s: float, release_s: float, joint: int | None, stepping_levels: FloatArray,
 ) -> Tuning:
     b0, b1 = c.bands[0], c.bands[-1] + 1
     sub_edges = tuple(edges[b0 : b1 + 1])
@@ -706,6 +706,7 @@ def _make_tuning(
         spread_db=tuple(round(float(v), 3) for v in sigma[b0:b1]),
         residual_max=round(c.residual_max, 3),
         trim=c.trim,
+        stepping_levels_db=tuple(round(float(v), 3) for v in stepping_levels[b0:b1]),
     )
 
 
