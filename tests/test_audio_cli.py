@@ -50,11 +50,12 @@ def test_tune_then_listen_json(wavs):
         app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"]
     )
     assert r.exit_code == 0, r.output
-    # the level is the band relative to the broadband level, and says so
-    assert "Hz" in r.output and "dB re 200-21600 Hz" in r.output and "contrast" in r.output
+    # the report names the template's span, the stop's strongest sub-band and the self-check
+    assert "spectral template over" in r.output and "Hz" in r.output and "false alarms per hour" in r.output
     saved = json.loads(out.read_text())
-    assert saved["joint"] == 3 and saved["band_hz"][0] < 4600 < saved["band_hz"][1]
-    assert saved["reference_hz"] == [200.0, 21600.0]
+    assert saved["joint"] == 3 and saved["version"] == 2 and saved["method"] == "template"
+    k = max(range(len(saved["signature_db"])), key=lambda i: saved["signature_db"][i])
+    assert saved["edges_hz"][k] < 4600 < saved["edges_hz"][k + 1]  # joint 3's rattle
 
     r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out), "--json"])
     assert r.exit_code == 0, r.output
@@ -81,7 +82,8 @@ def test_tune_json_output(wavs, tmp_path):
         ],
     )
     assert r.exit_code == 0, r.output
-    assert json.loads(r.stdout)["threshold_db"] < 0
+    d = json.loads(r.stdout)
+    assert 0 < d["threshold_db"] < 1 and d["checks"]["stops_found"] == d["checks"]["stops"]
 
 
 def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):

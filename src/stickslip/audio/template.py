@@ -319,7 +319,7 @@ class TemplateState:
             self.template = self.template - b * self.delta
             self.latched = True
             self.below = 0
-            self._pending.append(Decision(int(end), self.t0, float(b)))
+            self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(b)))  # onset: the start
 
     def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
         p = self.p

@@ -524,9 +524,10 @@ def tune(
     if strength < 1.0:
         k = int(np.argmax(np.abs(delta0)))
         raise TuningError(
-            f"the stepping and stopped parts sound alike: the stop changes no sub-band of "
-            f"{edges[0]:.0f}-{edges[-1]:.0f} Hz by more than {abs(delta0[k]):.1f} dB "
-            f"(at {edges[k]:.0f}-{edges[k + 1]:.0f} Hz); check --stop-at and that the recording reaches the end stop"
+            f"the stepping and stopped parts sound alike: nothing changes near the labelled stop at {stop_at_s:g} s "
+            f"(no sub-band of "
+            f"{edges[0]:.0f}-{edges[-1]:.0f} Hz changes by more than {abs(delta0[k]):.1f} dB, "
+            f"at {edges[k]:.0f}-{edges[k + 1]:.0f} Hz); check --stop-at and that the recording reaches the end stop"
         )
     trim_all = nb // 5
     a0, _ = fit_departure(V - mu_step, delta0, sigma, trim_all)

@@ -29,49 +29,69 @@ def tune(
         ..., "--stop-at", help="When the joint reached its stop, seconds from the start."
     ),
     out: Path = typer.Option(
-        ..., "-o", "--out", help="Where to write the tuning (JSON: band in Hz, threshold in dB re the broadband level)."
+        ..., "-o", "--out", help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB)."
     ),
     joint: int = typer.Option(None, "--joint", help="Joint 1, 2 or 3 the recording belongs to."),
     min_band: float = typer.Option(
         1400.0,
         "--min-band",
-        help="Narrowest band considered, Hz; keep it above your highest step rate.",
+        help="--method band only: narrowest band considered, Hz; keep it above your highest step rate.",
+    ),
+    method: str = typer.Option(
+        "template",
+        "--method",
+        help="'template' (the spectral-template change detector) or 'band' (the version-1 band-power detector).",
+    ),
+    self_check: bool = typer.Option(
+        True,
+        "--self-check/--no-self-check",
+        help="Check the tuning on the recording with knocks, babble, +-20 dB gain and a second click train added.",
     ),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
 ) -> None:
     """Tune the audio limit switch of one joint from a labelled recording.
 
-    Searches bands (1/6 to 1.5 octaves, at least --min-band Hz wide) for the one whose
-    level when stopped (5th percentile) most exceeds its level while stepping (99.5th
-    percentile), puts the threshold half-way between, checks that the tuned detector
-    fires once at the stop, and saves band (Hz), threshold (dB relative to the broadband level, so a
-    change of microphone gain does not move it) and latency (s).
+    Learns the stepping sound's spectral template (sub-bands over the band where stepping
+    is heard, never above 0.42 of the sample rate) and the end stop's signature: how
+    much each sub-band changes at the stop, in dB (louder, quieter, duller or brighter).
+    Candidates are scored on their worst stepping frames and verified best first on the
+    recording; a label that disagrees with where the sound changes is a warning, one
+    where nothing changes is refused. The self-check reports the expected false alarms
+    per hour with interference added, and the latency.
 
     Example: stickslip tune joint2.wav --stop-at 4.2 --joint 2 -o joint2-tuning.json
     """
     from ..audio.tuning import TuningError
     from ..audio.tuning import tune as tune_
+    from ..audio.tuning import tune_band
 
     if joint is not None and joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
+    if method not in ("template", "band"):
+        fail(f"--method must be 'template' or 'band', got {method!r}")
     samples, rate = _load_wav(recording)
     duration = samples.size / rate
     if not 0 < stop_at < duration:
         fail(f"--stop-at {stop_at:g} s is outside the recording (0..{duration:.3f} s)")
     try:
-        tuning = tune_(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
+        if method == "band":
+            tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
+        else:
+            tuning = tune_(samples, rate, stop_at, joint=joint, self_check=self_check)
     except TuningError as e:
         fail(f"{recording}: {e}")
     try:
         tuning.save(out)
     except OSError as e:
         fail(f"cannot write {out}: {e.strerror or e}")
+    for w in (tuning.checks or {}).get("warnings", []):
+        err_console.print(f"warning: {w}", highlight=False, soft_wrap=True)
     if json_out:
         print_json(tuning.to_dict())
         return
     console.print(f"[bold]tuning for {recording}[/] (joint {joint if joint else '?'})")
-    console.print(tuning.report(), highlight=False)
-    console.print(f"saved to {out}")
+    console.print(tuning.report(), highlight=False, soft_wrap=True)
+    console.print(f"saved to {out}", soft_wrap=True)
 
 
 @app.command()
@@ -121,18 +141,30 @@ def listen(
 
     from ..audio.sources import AudioSourceError, wav_blocks
 
+    from ..audio.guard import block_problem
+
+    if tuning.method == "band":
+        err_console.print(
+            f"note: {tuning_path} is a version-1 band-power tuning; re-tune with 'stickslip tune' for the "
+            "spectral-template detector (it rejects knocks and hears quieter or duller stops)",
+            highlight=False,
+        )
     events = []
+    problems: set[str | None] = set()
     try:
         det = None
-        for block, rate in wav_blocks(recording, block=4096):
+        for block, rate in wav_blocks(recording, block=1 << 16):
             if det is None:
                 try:
                     det = StopDetector(tuning.for_sample_rate(rate))
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
+            problems.add(block_problem(block))
             events += det.feed(block)
     except AudioSourceError as e:
         fail(str(e))
+    if problems and None not in problems:
+        err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
     if json_out:
         print_json([e.to_dict() for e in events])
         return
