@@ -192,3 +192,40 @@ def test_microphone_without_an_input_device(monkeypatch):
     monkeypatch.setitem(sys.modules, "sounddevice", types.SimpleNamespace(InputStream=no_device))
     with pytest.raises(AudioSourceError, match="cannot open the microphone: No input device"):
         Microphone(device="usb").start()
+
+
+def test_record_on_the_simulator_then_tune_and_listen(tmp_path):
+    """record drives sim:// into its stop, labels it from the simulator, tunes; listen finds the stop."""
+    wav, tj = tmp_path / "rec.wav", tmp_path / "t.json"
+    r = runner.invoke(app, ["record", str(wav), "--joint", "1", "--device", "sim://?seed=4&day=2026-11-22",
+                            "--before", "1.5", "--after", "0.8", "--tune", str(tj), "--json"])
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    label = json.loads(wav.with_suffix(".json").read_text())
+    assert label == out["label"] and label["joint"] == 1 and label["label_from"] == "the simulator's stop time"
+    assert abs(label["stop_at_s"] - 1.5) < 0.05 and out["tuning"]["method"] == "template"
+    r = runner.invoke(app, ["listen", str(wav), "--tuning", str(tj), "--json"])
+    (ev,) = json.loads(r.stdout)
+    assert abs(ev["onset_s"] - label["stop_at_s"]) < 0.01
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--joint", "4"], ["--joint"]),
+        (["--joint", "1", "--direction", "x"], ["direction"]),
+        (["--joint", "1", "--before", "0.1"], ["--before"]),
+    ],
+)
+def test_record_bad_input_is_one_line(tmp_path, extra, words):
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), *extra])
+    _one_line_error(r, *words)
+
+
+def test_listen_warns_on_a_dead_file(wavs, tmp_path):
+    write_wav(tmp_path / "silence.wav", np.zeros(48_000, np.float32), 48_000)
+    out = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(out)]).exit_code == 0
+    r = runner.invoke(app, ["listen", str(tmp_path / "silence.wav"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0 and json.loads(r.stdout) == []
+    assert "carries no signal (silence)" in r.stderr

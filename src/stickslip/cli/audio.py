@@ -1,14 +1,15 @@
-"""Audio limit switch commands: ``tune`` (from a labelled recording) and ``listen``."""
+"""Audio limit switch commands: ``record`` (a labelled recording), ``tune`` (from it) and ``listen``."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import typer
 
 from . import app
-from ._common import console, err_console, fail, print_json
+from ._common import console, err_console, fail, print_json, user_errors
 
 
 def _load_wav(path: Path):
@@ -173,8 +174,9 @@ def listen(
     for e in events:
         console.print(
             f"stop: detected at {e.detected_at_s:.4f} s, onset {e.onset_s:.4f} s, "
-            f"level {e.level_db:.1f} {tuning.level_unit}",
+            f"level {e.level_db:.2f} {tuning.level_unit}",
             highlight=False,
+            soft_wrap=True,
         )
 
 
@@ -208,3 +210,165 @@ def _listen_live(tuning, device: str | None, json_out: bool) -> None:
         fail(str(e))
     finally:
         mic.stop()
+
+
+@app.command()
+def record(
+    out: Path = typer.Argument(..., help="WAV file to write (a JSON label file is written beside it).", metavar="OUT.wav"),
+    joint: int = typer.Option(..., "--joint", help="Joint 1, 2 or 3 to drive into its end stop."),
+    direction: str = typer.Option("+", "--direction", "-d", help="'+' (towards the upper stop) or '-'."),
+    device: str = typer.Option("sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."),
+    audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
+    steps: int = typer.Option(None, "--steps", help="Real controller: steps to issue in all (past the stop)."),
+    stop_at_step: int = typer.Option(
+        None, "--stop-at-step", help="Real controller: the step count at which the joint reaches its stop (the label)."
+    ),
+    key: bool = typer.Option(False, "--key", help="Real controller: label the stop by pressing Enter when you hear it."),
+    before: float = typer.Option(2.0, "--before", help="Simulator: seconds of stepping before the stop."),
+    after: float = typer.Option(1.0, "--after", help="Simulator: seconds against the stop."),
+    tune_out: Path = typer.Option(None, "--tune", help="Also tune from the recording and write the tuning here."),
+    json_out: bool = typer.Option(False, "--json", help="Print the label (and tuning) as JSON."),
+) -> None:
+    """Record a joint stepping into its end stop, labelled, for 'stickslip tune'.
+
+    On the simulator (sim://) the joint is placed --before seconds from its stop and the
+    label is the simulator's own stop time. On a real controller the joint steps --steps
+    steps at its set frequency while the sound card records; the label is the time of
+    step --stop-at-step (you know the joint's travel in steps), or the moment you press
+    Enter (--key; your reaction time, ~0.2 s, makes it late: tune corrects a label that
+    disagrees with the sound and says so). A live meter shows the input level (dBFS).
+
+    Example: stickslip record j2.wav --joint 2 --device sim://?seed=3 --tune j2-tuning.json
+    """
+    from ..audio.sources import AudioSourceError, write_wav
+    from ..devices import DeviceError, open_device
+    from ..models import direction_label
+
+    if joint not in (1, 2, 3):
+        fail(f"--joint must be 1, 2 or 3, got {joint}")
+    try:
+        sign_label = direction_label(direction)
+    except ValueError as e:
+        fail(str(e))
+    with user_errors(DeviceError, AudioSourceError):
+        ctrl = open_device(device)
+        try:
+            if hasattr(ctrl, "labelled_recording"):
+                if not (0.3 <= before <= 60 and 0.3 <= after <= 60):
+                    fail("--before and --after must be 0.3-60 s")
+                samples, rate, stop_at = ctrl.labelled_recording(joint, sign_label, before_s=before, after_s=after)
+                how = "the simulator's stop time"
+            else:
+                samples, rate, stop_at, how = _record_real(ctrl, joint, sign_label, steps, stop_at_step, key, audio_input)
+        finally:
+            ctrl.close()
+    try:
+        write_wav(out, samples, rate)
+        label = {"recording": str(out), "stop_at_s": round(float(stop_at), 6), "sample_rate_hz": int(rate),
+                 "joint": joint, "direction": sign_label, "label_from": how}
+        out.with_suffix(".json").write_text(json.dumps(label, indent=2) + "\n", encoding="utf-8")
+    except OSError as e:
+        fail(f"cannot write {out}: {e.strerror or e}")
+    result: dict[str, object] = {"label": label}
+    if tune_out is not None:
+        from ..audio.tuning import TuningError
+        from ..audio.tuning import tune as tune_
+
+        try:
+            tuning = tune_(samples, rate, float(stop_at), joint=joint)
+            tuning.save(tune_out)
+        except TuningError as e:
+            fail(f"{out}: {e}")
+        except OSError as e:
+            fail(f"cannot write {tune_out}: {e.strerror or e}")
+        result["tuning"] = tuning.to_dict()
+        for w in (tuning.checks or {}).get("warnings", []):
+            err_console.print(f"warning: {w}", highlight=False, soft_wrap=True)
+    if json_out:
+        print_json(result)
+        return
+    console.print(f"recorded {samples.size / rate:.2f} s at {rate} Hz to {out}; stop at {stop_at:.3f} s ({how})",
+                  highlight=False, soft_wrap=True)
+    if tune_out is None:
+        console.print(f"next: stickslip tune {out} --stop-at {stop_at:.3f} --joint {joint} -o tuning-joint{joint}.json",
+                      highlight=False, soft_wrap=True)
+    else:
+        console.print(f"tuned and saved to {tune_out}", soft_wrap=True)
+
+
+def _record_real(ctrl, joint: int, direction: str, steps: int | None, stop_at_step: int | None, key: bool,
+                 audio_input: str | None) -> tuple[Any, int, float, str]:
+    """Step a real controller into its stop while the sound card records; a level meter on stderr."""
+    import threading
+    import time
+
+    import numpy as np
+
+    from ..audio.sources import Microphone
+
+    if steps is None or steps < 1:
+        fail("a real controller needs --steps (how many to issue, past the stop)")
+    if (stop_at_step is None) == (not key):
+        fail("give --stop-at-step N or --key to label the stop")
+    if stop_at_step is not None and not 1 <= stop_at_step < steps:
+        fail(f"--stop-at-step must be 1..{steps - 1}")
+    hz = float(ctrl.frequency(joint))
+    dev: int | str | None = int(audio_input) if audio_input is not None and audio_input.isdigit() else audio_input
+    mic = Microphone(sample_rate=48_000, block=1024, device=dev).start()
+    pressed: list[float] = []
+    t0 = time.monotonic()
+    if key:
+        threading.Thread(target=lambda: (input(), pressed.append(time.monotonic() - t0)), daemon=True).start()
+        err_console.print("press Enter when you hear the stop")
+    blocks: list[Any] = []
+    sign = 1 if direction == "+" else -1
+    try:
+        t_first = time.monotonic() - t0
+        burst = max(1, int(hz * 0.1))
+        issued = 0
+        while issued < steps:
+            n = min(burst, steps - issued)
+            tb = time.monotonic()
+            ctrl.step(joint, sign * n)
+            issued += n
+            for b in _drain(mic, tb + n / hz):
+                blocks.append(b)
+                _meter(b)
+        blocks += list(_drain(mic, time.monotonic() + 0.3))
+        ctrl.stop(joint)
+    finally:
+        mic.stop()
+        err_console.print()
+    samples = np.concatenate(blocks) if blocks else np.zeros(0, np.float32)
+    if key:
+        if not pressed:
+            fail("no key press: the stop was not labelled")
+        return samples, 48_000, pressed[0], "a key press"
+    assert stop_at_step is not None
+    return samples, 48_000, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
+
+
+def _drain(mic, until: float):
+    import queue
+    import time
+
+    while True:
+        left = until - time.monotonic()
+        try:
+            data = mic._queue.get(timeout=max(left, 0.0) + 0.01)
+        except queue.Empty:
+            if left <= 0:
+                return
+            continue
+        yield data.mean(axis=1) if data.ndim == 2 else data.reshape(-1)
+
+
+def _meter(block) -> None:
+    """One line on stderr: the block's level in dBFS as a bar."""
+    import math
+
+    import numpy as np
+
+    level = 10 * math.log10(float(np.mean(np.square(block, dtype=np.float64))) + 1e-20)
+    n = int(max(0.0, min(50.0, (level + 90.0) / 90.0 * 50.0)))
+    err_console.print(f"\r{level:6.1f} dBFS |{'#' * n}{' ' * (50 - n)}|", end="", highlight=False)
