@@ -150,7 +150,9 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
     elif s.stop_kind == "spectral":
         moved = [(f * (0.8 if k == 1 else 1.0), bw, g) for k, (f, bw, g) in enumerate(modes)]
         stop = _bank(stop_train, moved, sr)
-        stop *= np.sqrt(np.mean(step[: int(0.9 * (s.stop_at or 0) * sr)] ** 2) / max(np.mean(stop[stop != 0] ** 2), 1e-30))
+        stop *= np.sqrt(
+            np.mean(step[: int(0.9 * (s.stop_at or 0) * sr)] ** 2) / max(np.mean(stop[stop != 0] ** 2), 1e-30)
+        )
     else:
         raise ValueError(s.stop_kind)
     x = step + stop

@@ -62,17 +62,25 @@ CONDITIONS = [
     Condition("knocks in training", variant(P, knocks_every_s=0.4), _test(P, 21)),
     Condition("speech (espeak-ng) in test", P, _test(P, 22, speech="espeak")),
     Condition("speech (espeak-ng) in training", variant(Q, speech="espeak"), _test(Q, 23)),
-    Condition("loud speech (espeak-ng, +6 dB) in test", Q, _test(Q, 24, speech="espeak", speech_db=6.0),
-              known_failure="speech 6 dB louder than the stepping, with energy in joint Q's stop band (3.6 kHz): "
-                            "a syllable there looks like the stop to a spectral detector"),
+    Condition(
+        "loud speech (espeak-ng, +6 dB) in test",
+        Q,
+        _test(Q, 24, speech="espeak", speech_db=6.0),
+        known_failure="speech 6 dB louder than the stepping, with energy in joint Q's stop band (3.6 kHz): "
+        "a syllable there looks like the stop to a spectral detector",
+    ),
     Condition("formant babble in test", P, _test(P, 25, speech="babble")),
     Condition("formant babble in training", variant(P, speech="babble"), _test(P, 26)),
     Condition("door slam in test", P, _test(P, 27, door_at=0.9)),
     Condition("door slam in test, joint Q", Q, _test(Q, 28, door_at=1.2)),
     Condition("door slam in training", variant(P, door_at=1.1), _test(P, 29)),
-    Condition("second instrument from 0.8 s", P, _test(P, 30, second_rate=730.0, second_from=0.8),
-              known_failure="the second instrument rings at 5.4 kHz, inside joint P's stop band (5.2 kHz), and masks "
-                            "the stop's rise there; telling them apart needs the stop's synchrony with the steps"),
+    Condition(
+        "second instrument from 0.8 s",
+        P,
+        _test(P, 30, second_rate=730.0, second_from=0.8),
+        known_failure="the second instrument rings at 5.4 kHz, inside joint P's stop band (5.2 kHz), and masks "
+        "the stop's rise there; telling them apart needs the stop's synchrony with the steps",
+    ),
     Condition("second instrument throughout", Q, _test(Q, 31, second_rate=1230.0)),
     Condition("second instrument in training", variant(P, second_rate=730.0, second_from=1.0), _test(P, 32)),
     Condition("fan", P, _test(P, 33, fan=True)),
@@ -84,13 +92,19 @@ CONDITIONS = [
     Condition("stereo test file", Q, _test(Q, 39, stereo=True)),
     Condition("stereo training and test", variant(P, stereo=True), _test(P, 40, stereo=True)),
     Condition("quieter stop", variant(P, stop_kind="quieter"), _test(P, 41, stop_kind="quieter")),
-    Condition("quieter stop, joint Q, knocks", variant(Q, stop_kind="quieter"),
-              _test(Q, 42, stop_kind="quieter", knocks_every_s=0.3)),
+    Condition(
+        "quieter stop, joint Q, knocks",
+        variant(Q, stop_kind="quieter"),
+        _test(Q, 42, stop_kind="quieter", knocks_every_s=0.3),
+    ),
     Condition("duller stop", variant(P, stop_kind="duller"), _test(P, 43, stop_kind="duller")),
     Condition("duller stop, speech", variant(Q, stop_kind="duller"), _test(Q, 44, stop_kind="duller", speech="espeak")),
     Condition("spectral-only stop", variant(P, stop_kind="spectral"), _test(P, 45, stop_kind="spectral")),
-    Condition("spectral-only stop, gain -12 dB, rate 900 Hz", variant(Q, stop_kind="spectral"),
-              _test(Q, 46, stop_kind="spectral", gain_db=-12.0, rate=900.0)),
+    Condition(
+        "spectral-only stop, gain -12 dB, rate 900 Hz",
+        variant(Q, stop_kind="spectral"),
+        _test(Q, 46, stop_kind="spectral", gain_db=-12.0, rate=900.0),
+    ),
     Condition("label 0.1 s late", P, _test(P, 47), label_s=2.1, warn=True),
     Condition("label 0.1 s early", Q, _test(Q, 48), label_s=1.9, warn=True),
     Condition("label where nothing changes", variant(P, stop_at=None), _test(P, 49), label_s=1.5, expect="refused"),
@@ -185,8 +199,13 @@ def test_condition(cond: Condition) -> None:
 
 
 def test_latency_targets_over_the_battery() -> None:
-    lat = [o.latency_s for c in CONDITIONS if not (_needs_espeak(c) and espeak_speech(48_000) is None)
-           for o in [outcome(c)] if o.latency_s is not None]
+    lat = [
+        o.latency_s
+        for c in CONDITIONS
+        if not (_needs_espeak(c) and espeak_speech(48_000) is None)
+        for o in [outcome(c)]
+        if o.latency_s is not None
+    ]
     assert len(lat) >= 30
     assert np.median(lat) <= 0.030 and np.percentile(lat, 95) <= 0.050, lat
 
@@ -202,8 +221,10 @@ def table() -> str:
         found = str(len(o.hits)) if o.true_stop_s is not None else "-"
         rows.append(f"{c.name:48s} {ok:8s} {found:>5s} {o.false_alarms:>3d} {lat:>10s} {err:>12s}  {note}")
     lat_all = [o.latency_s for o in _CACHE.values() if o.latency_s is not None]
-    rows.append(f"latency over {len(lat_all)} stops: median {1e3 * np.median(lat_all):.1f} ms, "
-                f"p95 {1e3 * np.percentile(lat_all, 95):.1f} ms")
+    rows.append(
+        f"latency over {len(lat_all)} stops: median {1e3 * np.median(lat_all):.1f} ms, "
+        f"p95 {1e3 * np.percentile(lat_all, 95):.1f} ms"
+    )
     return "\n".join(rows)
 
 

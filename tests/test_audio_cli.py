@@ -46,9 +46,7 @@ def _one_line_error(result, *words):
 
 def test_tune_then_listen_json(wavs):
     out = wavs / "tuning.json"
-    r = runner.invoke(
-        app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"]
-    )
+    r = runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"])
     assert r.exit_code == 0, r.output
     # the report names the template's span, the stop's strongest sub-band and the self-check
     assert "spectral template over" in r.output and "Hz" in r.output and "false alarms per hour" in r.output
@@ -87,9 +85,7 @@ def test_tune_json_output(wavs, tmp_path):
 
 
 def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):
-    r = runner.invoke(
-        app, ["tune", str(wavs / "no_stop.wav"), "--stop-at", "1.5", "-o", str(tmp_path / "t.json")]
-    )
+    r = runner.invoke(app, ["tune", str(wavs / "no_stop.wav"), "--stop-at", "1.5", "-o", str(tmp_path / "t.json")])
     _one_line_error(r, "sound alike")
     assert not (tmp_path / "t.json").exists()
 
@@ -124,9 +120,7 @@ def test_listen_mic_without_portaudio_is_one_line(wavs, monkeypatch):
         raise AudioSourceError("PortAudio is not installed; apt-get install libportaudio2")
 
     monkeypatch.setattr(Microphone, "_sounddevice", broken)
-    r = runner.invoke(
-        app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")]
-    )
+    r = runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")])
     r = runner.invoke(app, ["listen", "--mic", "--tuning", str(wavs / "m.json")])
     _one_line_error(r, "libportaudio2")
 
@@ -197,8 +191,24 @@ def test_microphone_without_an_input_device(monkeypatch):
 def test_record_on_the_simulator_then_tune_and_listen(tmp_path):
     """record drives sim:// into its stop, labels it from the simulator, tunes; listen finds the stop."""
     wav, tj = tmp_path / "rec.wav", tmp_path / "t.json"
-    r = runner.invoke(app, ["record", str(wav), "--joint", "1", "--device", "sim://?seed=4&day=2026-11-22",
-                            "--before", "1.5", "--after", "0.8", "--tune", str(tj), "--json"])
+    r = runner.invoke(
+        app,
+        [
+            "record",
+            str(wav),
+            "--joint",
+            "1",
+            "--device",
+            "sim://?seed=4&day=2026-11-22",
+            "--before",
+            "1.5",
+            "--after",
+            "0.8",
+            "--tune",
+            str(tj),
+            "--json",
+        ],
+    )
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
     label = json.loads(wav.with_suffix(".json").read_text())

@@ -47,7 +47,9 @@ def test_tuning_learns_the_joints_own_stop(tunings):
         assert t.stepping_db < t.threshold_db < t.stopped_db  # worst stepping frame < threshold < stop's low
         # the self-check ran and found the stop in every variant (knocks, babble, second train, +-20 dB)
         assert t.checks["stops_found"] == t.checks["stops"] == 5 and t.checks["false_alarms"] <= 1
-        assert t.checks["false_alarms_per_hour"] == pytest.approx(t.checks["false_alarms"] / t.checks["checked_s"] * 3600, abs=0.1)
+        assert t.checks["false_alarms_per_hour"] == pytest.approx(
+            t.checks["false_alarms"] / t.checks["checked_s"] * 3600, abs=0.1
+        )
 
 
 def test_version_1_band_tuning_still_loads_and_runs(tmp_path):
@@ -129,9 +131,7 @@ def test_targets_on_unseen_recordings(tunings):
     assert np.median(latencies) <= 0.030
     assert np.percentile(latencies, 95) <= 0.050
     # the latency the traverse corrects with is what actually happens, +-3 ms
-    assert np.median(latencies) == pytest.approx(
-        np.median([t.latency_s for t in tunings.values()]), abs=0.003
-    )
+    assert np.median(latencies) == pytest.approx(np.median([t.latency_s for t in tunings.values()]), abs=0.003)
 
 
 @pytest.mark.parametrize("joint, rate", [(1, 1300.0), (2, 800.0), (3, 1050.0)])
@@ -146,9 +146,7 @@ def test_tuning_at_44k1():
     x, sr = render_traverse_recording(2, 1000.0, 1.5, 2.5, seed=3, sample_rate=44_100)
     t = tune(x, sr, 1.5, joint=2)
     assert t.sample_rate == 44_100 and t.frame == 512
-    y, _ = render_traverse_recording(
-        2, 1200.0, 1.2, 2.0, seed=4, sample_rate=44_100, gain_db=-3.0, babble=True
-    )
+    y, _ = render_traverse_recording(2, 1200.0, 1.2, 2.0, seed=4, sample_rate=44_100, gain_db=-3.0, babble=True)
     (ev,) = detect(y, t)
     assert abs(ev.onset_s - 1.2) < 0.025 and ev.detected_at_s - 1.2 < 0.05
 

@@ -68,7 +68,13 @@ def test_a_traverse_on_a_dead_input_records_nothing(tuning, kind):
     sim = SimulatedMM3A(seed=5, day=DAY)
     with pytest.raises(TraverseError, match="no signal from the audio input") as e:
         measure_traverse(
-            sim, 3, "+", detector=StopDetector(tuning), audio_blocks=_dead(kind), pose=sim.pose, day=DAY,
+            sim,
+            3,
+            "+",
+            detector=StopDetector(tuning),
+            audio_blocks=_dead(kind),
+            pose=sim.pose,
+            day=DAY,
             burst_steps=1000,
         )
     assert "nothing was recorded" in str(e.value) and "\n" not in str(e.value)
@@ -88,7 +94,13 @@ def test_a_microphone_unplugged_mid_traverse_stops_it(tuning):
 
     with pytest.raises(TraverseError, match="no signal from the audio input: silence"):
         measure_traverse(
-            sim, 3, "+", detector=StopDetector(tuning), audio_blocks=blocks(), pose=sim.pose, day=DAY,
+            sim,
+            3,
+            "+",
+            detector=StopDetector(tuning),
+            audio_blocks=blocks(),
+            pose=sim.pose,
+            day=DAY,
             burst_steps=1000,
         )
 
@@ -107,7 +119,14 @@ def test_a_live_room_without_the_joints_steps_stops_the_traverse(tuning):
     sim = SimulatedMM3A(seed=5, day=DAY)
     with pytest.raises(TraverseError, match=r"no stepping sound at \d+ Hz in the audio input") as e:
         measure_traverse(
-            sim, 3, "+", detector=StopDetector(tuning), audio_blocks=room(), pose=sim.pose, day=DAY, burst_steps=1000,
+            sim,
+            3,
+            "+",
+            detector=StopDetector(tuning),
+            audio_blocks=room(),
+            pose=sim.pose,
+            day=DAY,
+            burst_steps=1000,
         )
     assert "nothing was recorded" in str(e.value) and "\n" not in str(e.value)
 

@@ -215,8 +215,12 @@ class Tuning:
                 raise ValueError(f"stepping_levels_db must hold {nb} finite levels")
         if not 0 <= self.trim < nb:
             raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
-        for name, lo_, hi_ in (("residual_max", 0.1, 1e3), ("decay_ratio", 0, 1), ("tau_s", 0.01, 100),
-                               ("warmup_s", 0, 10)):
+        for name, lo_, hi_ in (
+            ("residual_max", 0.1, 1e3),
+            ("decay_ratio", 0, 1),
+            ("tau_s", 0.01, 100),
+            ("warmup_s", 0, 10),
+        ):
             v = getattr(self, name)
             if not lo_ <= v <= hi_:
                 raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
@@ -252,7 +256,7 @@ class Tuning:
         return replace(self, sample_rate=int(sample_rate), frame=int(frame), hop=int(hop))
 
     # ------------------------------------------------------------- files
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; units are in the key names (frame and hop are samples)."""
         d = asdict(self)
         d.pop("extra")
@@ -265,13 +269,24 @@ class Tuning:
             for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
                 d[k] = list(d[k]) if d[k] is not None else None
         else:
-            for k in ("method", "edges_hz", "signature_db", "spread_db", "residual_max", "decay_ratio", "tau_s",
-                      "warmup_s", "trim", "checks", "stepping_levels_db"):
+            for k in (
+                "method",
+                "edges_hz",
+                "signature_db",
+                "spread_db",
+                "residual_max",
+                "decay_ratio",
+                "tau_s",
+                "warmup_s",
+                "trim",
+                "checks",
+                "stepping_levels_db",
+            ):
                 d.pop(k)
         return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
 
     @classmethod
-    def from_dict(cls, d: dict) -> Tuning:
+    def from_dict(cls, d: dict[str, Any]) -> Tuning:
         """Inverse of :meth:`to_dict`; raises :class:`TuningFileError` naming the problem."""
         if not isinstance(d, dict):
             raise TuningFileError("a tuning must be a JSON object")
@@ -305,8 +320,17 @@ class Tuning:
                     kwargs[k] = tuple(float(v) for v in kwargs[k])
             if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
                 raise TuningFileError("checks must be an object or null")
-            for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s", "residual_max",
-                      "decay_ratio", "tau_s", "warmup_s"):
+            for k in (
+                "threshold_db",
+                "hold_s",
+                "hysteresis_db",
+                "release_s",
+                "onset_lag_s",
+                "residual_max",
+                "decay_ratio",
+                "tau_s",
+                "warmup_s",
+            ):
                 if k in kwargs:
                     kwargs[k] = float(kwargs[k])
             for k in ("sample_rate", "frame", "hop", "max_dips", "trim"):
@@ -434,7 +458,7 @@ class StopEvent:
     onset_s: float
     level_db: float
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, float]:
         return {
             "detected_at_s": self.detected_at_s,
             "onset_s": self.onset_s,
@@ -442,7 +466,7 @@ class StopEvent:
         }
 
 
-def _band_bins(tuning_or_band, sample_rate: int, frame: int) -> tuple[int, int]:
+def _band_bins(tuning_or_band: tuple[float, float], sample_rate: int, frame: int) -> tuple[int, int]:
     lo, hi = tuning_or_band
     freqs = np.fft.rfftfreq(frame, 1 / sample_rate)
     i0 = int(np.searchsorted(freqs, lo, side="left"))
@@ -477,12 +501,26 @@ def frame_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray
 def frame_levels_db(samples: np.ndarray, tuning: Tuning) -> np.ndarray:
     """The detector's level for every frame of ``samples`` (frame i ends at sample i*hop+frame-1).
 
-    dBFS, or dB relative to the reference band when the tuning has one.
+    dBFS, or dB relative to the reference band when the tuning has one; for a template
+    tuning the stop-likeness (dimensionless, NaN while the template is learned).
     """
+    if tuning.method == "template":
+        det = StopDetector(tuning)
+        assert det._template is not None
+        det._template.trace = []
+        det.feed(np.asarray(samples))
+        return np.asarray(det._template.trace, dtype=np.float64)
     return band_levels_db(samples, tuning.sample_rate, tuning.frame, tuning.hop, tuning.band_hz, tuning.reference_hz)
 
 
-def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz, reference_hz=None) -> np.ndarray:
+def band_levels_db(
+    samples: NDArray[Any],
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    band_hz: tuple[float, float],
+    reference_hz: tuple[float, float] | None = None,
+) -> NDArray[np.float64]:
     """Band level per frame, dBFS (see :func:`frame_power_spectra`); minus the reference band's if given."""
     p = frame_power_spectra(samples, frame, hop)
     i0, i1 = _band_bins(band_hz, sample_rate, frame)
@@ -490,7 +528,7 @@ def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz, ref
     if reference_hz is not None:
         r0, r1 = _band_bins(reference_hz, sample_rate, frame)
         level -= 10 * np.log10(p[:, r0:r1].sum(axis=1) + _FLOOR)
-    return level
+    return np.asarray(level, dtype=np.float64)
 
 
 class StopDetector:
@@ -517,12 +555,12 @@ class StopDetector:
             assert tuning.edges_hz is not None
             self._template = TemplateState(tuning.template_params(), t0_s)
             freqs = np.fft.rfftfreq(tuning.frame, 1 / tuning.sample_rate)
-            self._edge_bins = np.asarray(np.searchsorted(freqs, np.asarray(tuning.edges_hz), side="left"), dtype=np.intp)
+            self._edge_bins = np.asarray(
+                np.searchsorted(freqs, np.asarray(tuning.edges_hz), side="left"), dtype=np.intp
+            )
         self._w, self._scale = _window(tuning.frame)
         self._i0, self._i1 = _band_bins(tuning.band_hz, tuning.sample_rate, tuning.frame)
-        self._ref = (
-            _band_bins(tuning.reference_hz, tuning.sample_rate, tuning.frame) if tuning.reference_hz else None
-        )
+        self._ref = _band_bins(tuning.reference_hz, tuning.sample_rate, tuning.frame) if tuning.reference_hz else None
         self._hold = tuning.hold_frames
         self._full = (1 << (self._hold + tuning.max_dips)) - 1
         self._release = max(1, int(math.ceil(tuning.release_s * tuning.sample_rate / tuning.hop)))
@@ -688,8 +726,8 @@ def plot_levels(
     tuning: Tuning,
     t0_s: float = 0.0,
     stop_at_s: float | None = None,
-    ax=None,
-):
+    ax: Any = None,
+) -> Any:
     """Plot the band level of a recording over time with the threshold and the events.
 
     Parameters
@@ -725,8 +763,8 @@ def plot_levels(
     ax.plot(t, levels, lw=0.8, label=f"band {lo:.0f}-{hi:.0f} Hz")
     ax.axhline(tuning.threshold_db, color="C3", lw=1, label="threshold")
     ax.axhline(tuning.threshold_db - tuning.hysteresis_db, color="C3", lw=0.8, ls=":", label="re-arm level")
-    for i, e in enumerate(detect(samples, tuning, t0_s=t0_s)):
-        ax.axvline(e.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
+    for i, ev in enumerate(detect(samples, tuning, t0_s=t0_s)):
+        ax.axvline(ev.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
     if stop_at_s is not None:
         ax.axvline(stop_at_s, color="k", ls="--", lw=1, label="true stop")
     ax.set_xlabel("time (s)")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
+from scipy.signal import lfilter  # type: ignore[import-untyped]  # scipy ships no type stubs
 
 __all__ = ["babble", "click_train", "knocks"]
 
@@ -63,8 +63,9 @@ def babble(n: int, sample_rate: int, rms: float, rng: np.random.Generator, level
             for lo, hi, bw in ((300, 900, 80.0), (900, 2400, 120.0), (2400, 3500, 200.0))
         )
         if rng.random() < 0.35:  # a fricative
-            fric = _resonance(rng.standard_normal(m), rng.uniform(3500, min(8000, 0.4 * sample_rate)), 2500.0,
-                              sample_rate)
+            fric = _resonance(
+                rng.standard_normal(m), rng.uniform(3500, min(8000, 0.4 * sample_rate)), 2500.0, sample_rate
+            )
             syl = syl + fric * (np.std(syl) / max(float(np.std(fric)), 1e-12)) * 0.5
         syl = np.asarray(syl, dtype=np.float64) * np.sin(np.pi * tt / tt[-1]) ** 2
         syl *= rms * 10 ** (level_db / 20) / max(float(np.sqrt(np.mean(syl**2))), 1e-12)

@@ -95,7 +95,7 @@ def levels_from_frames(frames: FloatArray, w: FloatArray, scale: float, idx: NDA
     Single precision FFTs in cache-sized chunks: the levels are good to far better than
     0.01 dB, and this is most of the detector's cost.
     """
-    from scipy import fft as sfft
+    from scipy import fft as sfft  # type: ignore[import-untyped]  # scipy ships no type stubs
 
     n = frames.shape[0]
     nb = idx.size - 1
@@ -116,7 +116,11 @@ def levels_from_frames(frames: FloatArray, w: FloatArray, scale: float, idx: NDA
 
 
 def subband_levels_db(
-    samples: NDArray[np.floating] | FloatArray, sample_rate: int, frame: int, hop: int, edges: tuple[float, ...] | list[float]
+    samples: NDArray[np.floating] | FloatArray,
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    edges: tuple[float, ...] | list[float],
 ) -> FloatArray:
     """Sub-band levels of every frame of a recording (frames x bands), dBFS.
 
@@ -218,6 +222,8 @@ class TemplateState:
 
     def __init__(self, p: TemplateParams, t0_s: float = 0.0) -> None:
         self.p = p
+        #: set to a list to collect every frame's stop-likeness (NaN while warming up)
+        self.trace: list[float] | None = None
         self.delta = np.asarray(p.signature_db, dtype=np.float64)
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
         self.reset(t0_s)
@@ -314,7 +320,9 @@ class TemplateState:
         r_gain = (y - float(np.sum(w * y) / np.sum(w))) / self.sigma
         r_both = (y - X @ np.array([c, b])) / self.sigma
         clear = float(np.sum(r_both**2)) <= 0.25 * float(np.sum(r_gain**2))
-        fits = float(np.sqrt(np.mean(r_both**2))) <= 2.0 + RESIDUAL_SLOPE * b * float(np.sqrt(np.mean((self.delta / self.sigma) ** 2)))
+        fits = float(np.sqrt(np.mean(r_both**2))) <= 2.0 + RESIDUAL_SLOPE * b * float(
+            np.sqrt(np.mean((self.delta / self.sigma) ** 2))
+        )
         if b >= max(p.threshold, 0.6) and clear and fits and float(np.min(self.template)) > -150.0:
             self.template = self.template - b * self.delta
             self.latched = True
@@ -325,10 +333,14 @@ class TemplateState:
         p = self.p
         if self.frame_no < p.warmup_chunks * CHUNK or self.template is None:
             self._warm.append(v.copy())
+            if self.trace is not None:
+                self.trace.extend([math.nan] * v.shape[0])
             return []
         d = v - self.template
         a, rho = fit_departure(d, self.delta, self.sigma, p.trim)
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
+        if self.trace is not None:
+            self.trace.extend(a.tolist())
         # the template follows stepping only: frames that look like stepping, clipped
         # the template follows every frame that is not stop-like (the low quantile taken per chunk
         # ignores knocks and voices); a chunk that fits neither stepping nor the stop at all means
@@ -364,7 +376,9 @@ class TemplateState:
                 else:
                     self.below = 0
             else:
-                if hi and (self.mask == 0 or (not self.mask & 1 and self.mask.bit_count() < max(1, p.hold_frames // 2))):
+                if hi and (
+                    self.mask == 0 or (not self.mask & 1 and self.mask.bit_count() < max(1, p.hold_frames // 2))
+                ):
                     # the latest upward crossing that starts a run (a lone earlier hot frame is forgotten)
                     t_end = self.t0 + end / sr
                     if math.isfinite(prev) and prev < p.threshold and ai > prev:
@@ -374,11 +388,7 @@ class TemplateState:
                         self.cross_t = t_end
                 self.mask = ((self.mask << 1) | int(hi)) & full
                 self.recent = (self.recent + [ai])[-window_n:]
-                if (
-                    hi
-                    and self.mask.bit_count() >= p.hold_frames
-                    and ai >= p.decay_ratio * max(self.recent)
-                ):
+                if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):
                     self.latched = True
                     self.below = 0
                     out.append(Decision(int(end), self.cross_t, float(ai)))

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import median_filter, percentile_filter, rank_filter
+from scipy.ndimage import median_filter, percentile_filter, rank_filter  # type: ignore[import-untyped]  # scipy ships no type stubs
 
 from .detector import StopDetector, Tuning, _band_bins, default_frame, frame_power_spectra
 from .template import CHUNK, QUANTILE, fit_departure, subband_edges, subband_levels_db
@@ -41,7 +41,7 @@ MIN_THRESHOLD = 0.4
 #: default hold: how long a stop must last before the detector fires, s
 HOLD_S = 0.021
 
-_DEFAULT_MAX_DIPS = Tuning.__dataclass_fields__["max_dips"].default
+_DEFAULT_MAX_DIPS: int = Tuning(band_hz=(1000.0, 2000.0), threshold_db=0.0).max_dips
 
 __all__ = ["TuningError", "candidate_bands", "tune", "tune_band"]
 
@@ -72,7 +72,9 @@ def candidate_bands(
     return out
 
 
-def _band_level_matrix(samples, sample_rate, frame, hop, bands, chunk=4096) -> np.ndarray:
+def _band_level_matrix(
+    samples: NDArray[Any], sample_rate: int, frame: int, hop: int, bands: list[tuple[float, float]], chunk: int = 4096
+) -> NDArray[np.float64]:
     """frames x bands matrix of band levels, dBFS (spectra computed in chunks)."""
     idx = [_band_bins(b, sample_rate, frame) for b in bands]
     n_frames = (samples.size - frame) // hop + 1
@@ -195,9 +197,7 @@ def tune_band(
     hop = int(hop or max(1, frame // 4))
     bands = candidate_bands(sample_rate, frame, f_min_hz, min_band_hz=min_band_hz)
     if not bands:
-        raise TuningError(
-            f"no band at least {min_band_hz:g} Hz wide fits below {sample_rate / 2:g} Hz"
-        )
+        raise TuningError(f"no band at least {min_band_hz:g} Hz wide fits below {sample_rate / 2:g} Hz")
     # analyse at most max_stepping_s before the stop and max_stopped_s after it
     first = max(0, int((stop_at_s - max_stepping_s) * sample_rate) // hop * hop)
     last = min(x.size, int((stop_at_s + max_stopped_s) * sample_rate))
@@ -210,7 +210,7 @@ def tune_band(
 
     def decided(lv: np.ndarray) -> np.ndarray:
         """The level ``hold`` of every ``window`` consecutive frames reach: what the detector decides on."""
-        return rank_filter(lv - ref_level, rank=window - hold, size=(window, 1), mode="nearest")
+        return np.asarray(rank_filter(lv - ref_level, rank=window - hold, size=(window, 1), mode="nearest"))
 
     levels = decided(_band_level_matrix(seg, sample_rate, frame, hop, bands))
     starts = t_first + np.arange(levels.shape[0]) * hop / sample_rate
@@ -293,7 +293,12 @@ class _Candidate:
 
 
 def stepping_band(
-    x: FloatArray, sample_rate: int, frame: int, hop: int, f_min_hz: float = 300.0, f_max_frac: float = 0.42,
+    x: FloatArray,
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    f_min_hz: float = 300.0,
+    f_max_frac: float = 0.42,
     range_db: float = 25.0,
 ) -> tuple[float, float]:
     """Where the stepping sound is: the span of frequencies within ``range_db`` of its spectral peak, Hz.
@@ -343,9 +348,7 @@ def _fmt_spans(spans: list[tuple[float, float]], limit: int = 6) -> str:
     return s + (f" and {len(spans) - limit} more" if len(spans) > limit else "")
 
 
-def _change_point(
-    a: FloatArray, t_end: FloatArray, label_s: float, search_s: float, hold: int
-) -> float | None:
+def _change_point(a: FloatArray, t_end: FloatArray, label_s: float, search_s: float, hold: int) -> float | None:
     """First time near the label from which the stop-likeness stays above 0.5 for 60 ms, s."""
     above = a >= 0.5
     n_keep = max(hold, 1)
@@ -568,7 +571,7 @@ def tune(
         raise TuningError("no sub-band of the stepping sound changes at the stop")
     # the whole template first unless a sub-range separates clearly better: more sub-bands, more to
     # tell a stop from a voice or a second instrument by
-    candidates.sort(key=lambda c: (c.name != 'all sub-bands' or c.margin < 0.3, -c.margin))
+    candidates.sort(key=lambda c: (c.name != "all sub-bands" or c.margin < 0.3, -c.margin))
 
     # 3. verify best first; walk down the ranking
     passing: list[tuple[Tuning, float, float]] = []
@@ -604,13 +607,13 @@ def tune(
             f"{hint}: cut those spans out of the recording or record again"
         )
     # 4. self-check with interference; the quietest passing candidate wins
-    results = []
+    results: list[tuple[int, int, Tuning, float, float, dict[str, Any]]] = []
     for tu, lag, lat in passing:
-        checks = _self_check(tu, x, sample_rate, stop_s, g, seed) if self_check else {}
+        checks: dict[str, Any] = _self_check(tu, x, sample_rate, stop_s, g, seed) if self_check else {}
         # the ranking stands unless the self-check fails clearly (more than one false alarm, or a stop missed)
-        bad = int(checks.get("false_alarms", 0) > 1 or checks.get("stops_found") != checks.get("stops"))
-        results.append((bad, len(results), tu, lag, lat, checks))
-        if not bad:
+        failed = int(checks.get("false_alarms", 0) > 1 or checks.get("stops_found") != checks.get("stops"))
+        results.append((failed, len(results), tu, lag, lat, checks))
+        if not failed:
             break
     results.sort(key=lambda r: (r[0], r[1]))
     _, _, tu, lag, lat, checks = results[0]
@@ -648,8 +651,13 @@ def _running_template(V: FloatArray, stepping: NDArray[np.bool_], hop_s: float, 
 
 
 def _candidates(
-    D: FloatArray, sigma: FloatArray, delta: FloatArray, stepping: NDArray[np.bool_],
-    stopped: NDArray[np.bool_], hold: int, window: int,
+    D: FloatArray,
+    sigma: FloatArray,
+    delta: FloatArray,
+    stepping: NDArray[np.bool_],
+    stopped: NDArray[np.bool_],
+    hold: int,
+    window: int,
 ) -> list[_Candidate]:
     nb = delta.size
     strength = np.abs(delta) / sigma
@@ -675,14 +683,24 @@ def _candidates(
         thr = float(np.clip(max(step_hi, 0.0) + 0.4 * margin, MIN_THRESHOLD, 0.7))
         if not max(step_hi, 0.0) < thr < stop_lo:
             thr = max(step_hi, 0.0) + 0.4 * margin
-        out.append(_Candidate(name, bands, margin, thr, rmax, trim, step_hi, stop_lo,
-                              float(np.sqrt(np.sum(delta[sub] ** 2)))))
+        out.append(
+            _Candidate(name, bands, margin, thr, rmax, trim, step_hi, stop_lo, float(np.sqrt(np.sum(delta[sub] ** 2))))
+        )
     return out
 
 
 def _make_tuning(
-    c: _Candidate, edges: list[float], delta: FloatArray, sigma: FloatArray, sample_rate: int, frame: int, hop: int,
-    hold_s: float, release_s: float, joint: int | None, stepping_levels: FloatArray,
+    c: _Candidate,
+    edges: list[float],
+    delta: FloatArray,
+    sigma: FloatArray,
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    hold_s: float,
+    release_s: float,
+    joint: int | None,
+    stepping_levels: FloatArray,
 ) -> Tuning:
     b0, b1 = c.bands[0], c.bands[-1] + 1
     sub_edges = tuple(edges[b0 : b1 + 1])
@@ -711,14 +729,16 @@ def _make_tuning(
     )
 
 
-def _self_check(tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int) -> dict[str, Any]:
+def _self_check(
+    tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int
+) -> dict[str, Any]:
     """Run ``tu`` on the recording with interference injected; count false alarms and stops found."""
     from . import inject
 
     rng = np.random.default_rng(seed)
     n_stop = int(stop_s * sample_rate)
     lo, hi = tu.band_hz
-    from scipy.signal import butter, sosfilt
+    from scipy.signal import butter, sosfilt  # type: ignore[import-untyped]  # scipy ships no type stubs
 
     sos = butter(4, [lo, min(hi, 0.49 * sample_rate)], btype="band", fs=sample_rate, output="sos")
     rms = float(np.sqrt(np.mean(sosfilt(sos, x[:n_stop]) ** 2)))

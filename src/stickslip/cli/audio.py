@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +13,7 @@ from . import app
 from ._common import console, err_console, fail, print_json, user_errors
 
 
-def _load_wav(path: Path):
+def _load_wav(path: Path) -> tuple[Any, int]:
     from ..audio.sources import AudioSourceError, read_wav
 
     try:
@@ -26,9 +27,7 @@ def tune(
     recording: Path = typer.Argument(
         ..., help="WAV recording: stepping, then stepping against the end stop.", metavar="REC.wav"
     ),
-    stop_at: float = typer.Option(
-        ..., "--stop-at", help="When the joint reached its stop, seconds from the start."
-    ),
+    stop_at: float = typer.Option(..., "--stop-at", help="When the joint reached its stop, seconds from the start."),
     out: Path = typer.Option(
         ..., "-o", "--out", help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB)."
     ),
@@ -62,9 +61,8 @@ def tune(
 
     Example: stickslip tune joint2.wav --stop-at 4.2 --joint 2 -o joint2-tuning.json
     """
-    from ..audio.tuning import TuningError
+    from ..audio.tuning import TuningError, tune_band
     from ..audio.tuning import tune as tune_
-    from ..audio.tuning import tune_band
 
     if joint is not None and joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
@@ -97,12 +95,8 @@ def tune(
 
 @app.command()
 def listen(
-    recording: Path = typer.Argument(
-        None, help="WAV file to listen to (or use --mic).", metavar="[REC.wav]"
-    ),
-    tuning_path: Path = typer.Option(
-        ..., "--tuning", help="Tuning JSON written by 'stickslip tune'."
-    ),
+    recording: Path = typer.Argument(None, help="WAV file to listen to (or use --mic).", metavar="[REC.wav]"),
+    tuning_path: Path = typer.Option(..., "--tuning", help="Tuning JSON written by 'stickslip tune'."),
     mic: bool = typer.Option(False, "--mic", help="Listen live to the microphone until Ctrl-C."),
     device: str = typer.Option(
         None,
@@ -140,9 +134,8 @@ def listen(
         _listen_live(tuning, device, json_out)
         return
 
-    from ..audio.sources import AudioSourceError, wav_blocks
-
     from ..audio.guard import block_problem
+    from ..audio.sources import AudioSourceError, wav_blocks
 
     if tuning.method == "band":
         err_console.print(
@@ -162,8 +155,8 @@ def listen(
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
             problems.add(block_problem(block))
             events += det.feed(block)
-    except AudioSourceError as e:
-        fail(str(e))
+    except AudioSourceError as err:
+        fail(str(err))
     if problems and None not in problems:
         err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
     if json_out:
@@ -171,16 +164,16 @@ def listen(
         return
     if not events:
         console.print("no end stop heard")
-    for e in events:
+    for ev in events:
         console.print(
-            f"stop: detected at {e.detected_at_s:.4f} s, onset {e.onset_s:.4f} s, "
-            f"level {e.level_db:.2f} {tuning.level_unit}",
+            f"stop: detected at {ev.detected_at_s:.4f} s, onset {ev.onset_s:.4f} s, "
+            f"level {ev.level_db:.2f} {tuning.level_unit}",
             highlight=False,
             soft_wrap=True,
         )
 
 
-def _listen_live(tuning, device: str | None, json_out: bool) -> None:
+def _listen_live(tuning: Any, device: str | None, json_out: bool) -> None:
     from ..audio.detector import StopDetector
     from ..audio.sources import AudioSourceError, Microphone
 
@@ -189,41 +182,48 @@ def _listen_live(tuning, device: str | None, json_out: bool) -> None:
     det = StopDetector(tuning)
     try:
         mic.start()
-    except AudioSourceError as e:
-        fail(str(e))
+    except AudioSourceError as err:
+        fail(str(err))
     if not json_out:
         err_console.print(f"listening at {tuning.sample_rate} Hz; Ctrl-C to stop")
     try:
         for block in mic.blocks():
-            for e in det.feed(block):
+            for ev in det.feed(block):
                 if json_out:
-                    typer.echo(json.dumps(e.to_dict()))
+                    typer.echo(json.dumps(ev.to_dict()))
                 else:
                     console.print(
-                        f"stop: detected at {e.detected_at_s:.3f} s, onset {e.onset_s:.3f} s, "
-                        f"level {e.level_db:.1f} {tuning.level_unit}",
+                        f"stop: detected at {ev.detected_at_s:.3f} s, onset {ev.onset_s:.3f} s, "
+                        f"level {ev.level_db:.2f} {tuning.level_unit}",
                         highlight=False,
+                        soft_wrap=True,
                     )
     except KeyboardInterrupt:
         pass
-    except AudioSourceError as e:
-        fail(str(e))
+    except AudioSourceError as err:
+        fail(str(err))
     finally:
         mic.stop()
 
 
 @app.command()
 def record(
-    out: Path = typer.Argument(..., help="WAV file to write (a JSON label file is written beside it).", metavar="OUT.wav"),
+    out: Path = typer.Argument(
+        ..., help="WAV file to write (a JSON label file is written beside it).", metavar="OUT.wav"
+    ),
     joint: int = typer.Option(..., "--joint", help="Joint 1, 2 or 3 to drive into its end stop."),
     direction: str = typer.Option("+", "--direction", "-d", help="'+' (towards the upper stop) or '-'."),
-    device: str = typer.Option("sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."),
+    device: str = typer.Option(
+        "sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."
+    ),
     audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
     steps: int = typer.Option(None, "--steps", help="Real controller: steps to issue in all (past the stop)."),
     stop_at_step: int = typer.Option(
         None, "--stop-at-step", help="Real controller: the step count at which the joint reaches its stop (the label)."
     ),
-    key: bool = typer.Option(False, "--key", help="Real controller: label the stop by pressing Enter when you hear it."),
+    key: bool = typer.Option(
+        False, "--key", help="Real controller: label the stop by pressing Enter when you hear it."
+    ),
     before: float = typer.Option(2.0, "--before", help="Simulator: seconds of stepping before the stop."),
     after: float = typer.Option(1.0, "--after", help="Simulator: seconds against the stop."),
     tune_out: Path = typer.Option(None, "--tune", help="Also tune from the recording and write the tuning here."),
@@ -259,13 +259,21 @@ def record(
                 samples, rate, stop_at = ctrl.labelled_recording(joint, sign_label, before_s=before, after_s=after)
                 how = "the simulator's stop time"
             else:
-                samples, rate, stop_at, how = _record_real(ctrl, joint, sign_label, steps, stop_at_step, key, audio_input)
+                samples, rate, stop_at, how = _record_real(
+                    ctrl, joint, sign_label, steps, stop_at_step, key, audio_input
+                )
         finally:
             ctrl.close()
     try:
         write_wav(out, samples, rate)
-        label = {"recording": str(out), "stop_at_s": round(float(stop_at), 6), "sample_rate_hz": int(rate),
-                 "joint": joint, "direction": sign_label, "label_from": how}
+        label = {
+            "recording": str(out),
+            "stop_at_s": round(float(stop_at), 6),
+            "sample_rate_hz": int(rate),
+            "joint": joint,
+            "direction": sign_label,
+            "label_from": how,
+        }
         out.with_suffix(".json").write_text(json.dumps(label, indent=2) + "\n", encoding="utf-8")
     except OSError as e:
         fail(f"cannot write {out}: {e.strerror or e}")
@@ -287,17 +295,30 @@ def record(
     if json_out:
         print_json(result)
         return
-    console.print(f"recorded {samples.size / rate:.2f} s at {rate} Hz to {out}; stop at {stop_at:.3f} s ({how})",
-                  highlight=False, soft_wrap=True)
+    console.print(
+        f"recorded {samples.size / rate:.2f} s at {rate} Hz to {out}; stop at {stop_at:.3f} s ({how})",
+        highlight=False,
+        soft_wrap=True,
+    )
     if tune_out is None:
-        console.print(f"next: stickslip tune {out} --stop-at {stop_at:.3f} --joint {joint} -o tuning-joint{joint}.json",
-                      highlight=False, soft_wrap=True)
+        console.print(
+            f"next: stickslip tune {out} --stop-at {stop_at:.3f} --joint {joint} -o tuning-joint{joint}.json",
+            highlight=False,
+            soft_wrap=True,
+        )
     else:
         console.print(f"tuned and saved to {tune_out}", soft_wrap=True)
 
 
-def _record_real(ctrl, joint: int, direction: str, steps: int | None, stop_at_step: int | None, key: bool,
-                 audio_input: str | None) -> tuple[Any, int, float, str]:
+def _record_real(
+    ctrl: Any,
+    joint: int,
+    direction: str,
+    steps: int | None,
+    stop_at_step: int | None,
+    key: bool,
+    audio_input: str | None,
+) -> tuple[Any, int, float, str]:
     """Step a real controller into its stop while the sound card records; a level meter on stderr."""
     import threading
     import time
@@ -318,7 +339,12 @@ def _record_real(ctrl, joint: int, direction: str, steps: int | None, stop_at_st
     pressed: list[float] = []
     t0 = time.monotonic()
     if key:
-        threading.Thread(target=lambda: (input(), pressed.append(time.monotonic() - t0)), daemon=True).start()
+
+        def wait_for_enter() -> None:
+            input()
+            pressed.append(time.monotonic() - t0)
+
+        threading.Thread(target=wait_for_enter, daemon=True).start()
         err_console.print("press Enter when you hear the stop")
     blocks: list[Any] = []
     sign = 1 if direction == "+" else -1
@@ -348,7 +374,7 @@ def _record_real(ctrl, joint: int, direction: str, steps: int | None, stop_at_st
     return samples, 48_000, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
 
 
-def _drain(mic, until: float):
+def _drain(mic: Any, until: float) -> Iterator[Any]:
     import queue
     import time
 
@@ -363,7 +389,7 @@ def _drain(mic, until: float):
         yield data.mean(axis=1) if data.ndim == 2 else data.reshape(-1)
 
 
-def _meter(block) -> None:
+def _meter(block: Any) -> None:
     """One line on stderr: the block's level in dBFS as a bar."""
     import math
 
