@@ -139,45 +139,52 @@ def subband_levels_db(
     return out
 
 
-def fit_departure(
-    d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int, explained: bool = False
-) -> tuple[FloatArray, FloatArray]:
+def fit_departure(d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int) -> tuple[FloatArray, FloatArray]:
     """Stop-likeness ``a`` and residual ``rho`` of departures ``d`` (frames x bands, dB).
 
     Weighted least squares ``d = a * delta + e`` (weights ``1/sigma**2``), then the same
-    with the ``trim`` worst-fitting bands of each frame dropped. ``rho`` is the RMS of the
-    kept residuals in units of ``sigma``, less :data:`RESIDUAL_SLOPE` times the fitted
-    departure's RMS (also in units of ``sigma``): the residual a stop of that size may have.
+    with the ``trim`` bands of each frame that have the most unexplained *excess* dropped
+    (interference adds sound; a band whose expected rise is missing is evidence against a
+    stop and is never dropped). ``rho`` is the RMS of the kept residuals in units of
+    ``sigma``, less :data:`RESIDUAL_SLOPE` times the signature's RMS (in units of ``sigma``)
+    times ``a``: the residual a stop of that size may have (another step rate moves the
+    lines of its sound).
     """
-    d = np.clip(d, -_CLIP_DB, _CLIP_DB)
-    z = d / sigma  # normalised departures
-    g = delta / sigma  # normalised signature
-    gg = float(g @ g)
-    a = (z @ g) / gg
-    if trim > 0:
-        # interference adds sound: drop the bands with the most unexplained *excess*, never a
-        # band whose expected rise is missing (that is evidence against a stop)
-        r = z - a[:, None] * g
-        kth = -np.partition(-r, trim - 1, axis=1)[:, trim - 1 : trim]
-        keep = r < kth  # ties (rare) drop one band more
-        keep |= ~keep.any(axis=1, keepdims=True)  # all tied (a constant input): keep every band
-        zk = np.where(keep, z, 0.0)
-        gk2 = (keep * g**2).sum(axis=1)
-        a = (zk @ g) / np.maximum(gk2, 1e-12)
-        res = np.where(keep, z - a[:, None] * g, 0.0)
-        rho = np.sqrt((res**2).sum(axis=1) / keep.sum(axis=1))
-        if explained:
-            rho = 1.0 - (res**2).sum(axis=1) / np.maximum((zk**2).sum(axis=1), 1e-12)
-    else:
-        res = z - a[:, None] * g
-        rho = np.sqrt(np.mean(res**2, axis=1))
-        if explained:
-            rho = 1.0 - (res**2).sum(axis=1) / np.maximum((z**2).sum(axis=1), 1e-12)
-    if not explained:
-        # a stop's own sound varies in proportion to its size (another step rate moves its lines):
-        # allow a residual that grows with the fitted departure
-        rho = rho - RESIDUAL_SLOPE * np.maximum(a, 0.0) * float(np.sqrt(np.mean(g**2)))
-    return np.asarray(a, dtype=np.float64), np.asarray(rho, dtype=np.float64)
+    return _Fitter(delta, sigma, trim)(d)
+
+
+class _Fitter:
+    """:func:`fit_departure` with the signature's constants computed once."""
+
+    def __init__(self, delta: FloatArray, sigma: FloatArray, trim: int) -> None:
+        self.inv_sigma = 1.0 / np.asarray(sigma, dtype=np.float64)
+        self.g = np.asarray(delta, dtype=np.float64) * self.inv_sigma
+        self.g2 = self.g**2
+        self.gg = float(self.g2.sum())
+        self.slope = RESIDUAL_SLOPE * float(np.sqrt(np.mean(self.g2)))
+        self.trim = int(trim)
+
+    def __call__(self, d: FloatArray) -> tuple[FloatArray, FloatArray]:
+        g = self.g
+        z = np.clip(d, -_CLIP_DB, _CLIP_DB) * self.inv_sigma
+        a = (z @ g) / self.gg
+        if self.trim > 0:
+            r = z - a[:, None] * g
+            if self.trim == 1:
+                kth = r.max(axis=1, keepdims=True)
+            else:
+                kth = -np.partition(-r, self.trim - 1, axis=1)[:, self.trim - 1 : self.trim]
+            keep = r < kth  # ties (rare) drop one band more
+            keep |= ~keep.any(axis=1, keepdims=True)  # all tied (a constant input): keep every band
+            zk = z * keep
+            a = (zk @ g) / np.maximum(keep @ self.g2, 1e-12)
+            res = zk - (a[:, None] * g) * keep
+            rho = np.sqrt(np.einsum("ij,ij->i", res, res) / keep.sum(axis=1))
+        else:
+            res = z - a[:, None] * g
+            rho = np.sqrt(np.einsum("ij,ij->i", res, res) / z.shape[1])
+        rho = rho - self.slope * np.maximum(a, 0.0)
+        return a, rho
 
 
 @dataclass(frozen=True)
@@ -226,6 +233,7 @@ class TemplateState:
         self.trace: list[float] | None = None
         self.delta = np.asarray(p.signature_db, dtype=np.float64)
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
+        self._fit = _Fitter(self.delta, self.sigma, p.trim)
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -280,7 +288,8 @@ class TemplateState:
             return
         if self._chunk_rho and not self.latched and self.template is not None:
             rho_all = np.concatenate(self._chunk_rho)
-            if rho_all.size >= CHUNK // 2 and float(np.median(rho_all)) > STALE_RESIDUAL * p.residual_max:
+            mid = rho_all.size // 2
+            if rho_all.size >= CHUNK // 2 and float(np.partition(rho_all, mid)[mid]) > STALE_RESIDUAL * p.residual_max:
                 self.template = np.percentile(np.concatenate(self._chunk_v), 100 * QUANTILE, axis=0)
                 self._acc_n = 0
         self._chunk_rho, self._chunk_v = [], []
@@ -337,7 +346,7 @@ class TemplateState:
                 self.trace.extend([math.nan] * v.shape[0])
             return []
         d = v - self.template
-        a, rho = fit_departure(d, self.delta, self.sigma, p.trim)
+        a, rho = self._fit(d)
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
