@@ -183,3 +183,13 @@ def test_tunes_on_a_short_stop():
 def test_candidate_bands_respect_width_and_nyquist():
     bands = candidate_bands(48_000, 512, min_band_hz=1400.0)
     assert bands and all(hi - lo >= 1400.0 and hi <= 0.98 * 24_000 for lo, hi in bands)
+
+
+def test_refusal_names_the_spans_that_spoil_the_recording():
+    """A stretch of stop sound pasted into the stepping part (a second stop heard): tune names where."""
+    x, sr = render_traverse_recording(2, 1000.0, 2.0, 3.0, seed=19)
+    x = x.copy()
+    x[int(0.9 * sr) : int(1.3 * sr)] = x[int(2.2 * sr) : int(2.6 * sr)]  # the stop, heard at 0.9-1.3 s
+    with pytest.raises(TuningError, match=r"sounds like the stop at 0\.9\d-1\.[23]\d s") as e:
+        tune(x, sr, 2.0)
+    assert "cut those spans out" in str(e.value)
