@@ -39,6 +39,7 @@ __all__ = [
 ]
 
 _FLOOR = 1e-20
+_LIMIT = 1e15  # samples beyond this (full scale is 1) are clipped: their squares stay finite in float32
 _KIND = "stickslip.audio.Tuning"
 
 
@@ -610,6 +611,8 @@ class StopDetector:
         x = np.asarray(block, dtype=np.float64)
         if x.ndim != 1:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        if x.size and not float(np.max(np.abs(x))) <= _LIMIT:  # NaN, infinity or absurd values: bounded
+            x = np.clip(np.nan_to_num(x, nan=0.0, posinf=_LIMIT, neginf=-_LIMIT), -_LIMIT, _LIMIT)
         tu = self.tuning
         F, H = tu.frame, tu.hop
         self._buf = np.concatenate((self._buf, x)) if self._buf.size else x.copy()
