@@ -8,7 +8,7 @@ nothing changes, a dead input), when ``tune`` refuses or ``listen`` hears nothin
 latency targets (median <= 30 ms, 95th percentile <= 50 ms) are checked over all the
 conditions that find a stop.
 
-Run ``python tests/test_audio_battery.py`` for the table.
+Run ``python tests/test_audio_battery.py`` for the table (44 conditions).
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ class Condition:
     expect: str = "found"  # "found", "refused" (tune must refuse), "silent" (listen hears nothing)
     warn: bool = False  # tune must warn that the label disagrees with the sound
     known_failure: str | None = None  # why this condition is expected to fail today (strict xfail)
+    lead_s: float = 0.0  # seconds of room sound (no stepping) before the test recording
 
 
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)
@@ -110,6 +111,7 @@ CONDITIONS = [
     Condition("label where nothing changes", variant(P, stop_at=None), _test(P, 49), label_s=1.5, expect="refused"),
     Condition("label 0.8 s off", P, _test(P, 50), label_s=1.2, expect="refused"),
     Condition("silent training file", variant(P, silence=True), _test(P, 51), expect="refused"),
+    Condition("0.5 s of room sound before the stepping", P, _test(P, 54), lead_s=0.5),
     Condition("silence in test", P, variant(P, silence=True, seed=52), expect="silent"),
     Condition("constant in test", P, variant(P, constant=0.2, seed=53), expect="silent"),
 ]
@@ -158,12 +160,15 @@ def run(c: Condition) -> Outcome:
     y, sr_t = render(c.test)
     if y.ndim == 2:
         y = y.mean(axis=1)
+    if c.lead_s:
+        room = 10 ** (-65 / 20) * np.random.default_rng(c.test.seed).standard_normal(int(c.lead_s * sr_t))
+        y = np.concatenate((room.astype(np.float32), y))
     events = detect(y, tu.for_sample_rate(sr_t), block=1024)
     return Outcome(
         warnings=tuple((tu.checks or {}).get("warnings", [])),
         events=tuple(e.detected_at_s for e in events),
         onsets=tuple(e.onset_s for e in events),
-        true_stop_s=c.test.stop_at if not (c.test.silence or c.test.constant is not None) else None,
+        true_stop_s=(c.test.stop_at or 0.0) + c.lead_s if not (c.test.silence or c.test.constant is not None) else None,
     )
 
 
