@@ -193,3 +193,9 @@ def test_refusal_names_the_spans_that_spoil_the_recording():
     with pytest.raises(TuningError, match=r"sounds like the stop at 0\.9\d-1\.[23]\d s") as e:
         tune(x, sr, 2.0)
     assert "cut those spans out" in str(e.value)
+
+
+def test_a_label_far_off_is_refused_naming_where_the_sound_changes():
+    x, sr = render_traverse_recording(1, 1000.0, 2.0, 3.5, seed=20)
+    with pytest.raises(TuningError, match=r"nothing changes near the labelled stop at 2\.7 s .*changes at (1\.99|2\.00)\d s"):
+        tune(x, sr, 2.7)

@@ -360,7 +360,9 @@ def _change_point(a: FloatArray, t_end: FloatArray, label_s: float, search_s: fl
     for i in range(a.size - 1, -1, -1):
         run[i] = run[i + 1] + 1 if above[i] else 0
     need = max(n_keep, int(round(0.06 / max(float(np.median(np.diff(t_end))), 1e-9))))
-    hits = ok[run[ok] >= need]
+    starts_run = np.ones(a.size, dtype=bool)
+    starts_run[1:] = ~above[:-1]  # a genuine rise, not the middle of a change that began earlier
+    hits = ok[(run[ok] >= need) & starts_run[ok]]
     if hits.size == 0:
         return None
     i = int(hits[0])
@@ -537,8 +539,14 @@ def tune(
     a0s = np.asarray(median_filter(a0, size=window), dtype=np.float64)
     change = _change_point(a0s, ends, stop_at_s, search_s, hold)
     if change is None:
+        elsewhere = _change_point(a0s, ends, stop_at_s, float(ends[-1] - ends[0]), hold)
+        where = (
+            f"; the sound changes at {elsewhere - 0.5 * frame / sample_rate:.3f} s"
+            if elsewhere is not None and abs(elsewhere - stop_at_s) > search_s
+            else ""
+        )
         raise TuningError(
-            f"nothing changes near the labelled stop at {stop_at_s:g} s (searched +-{search_s:g} s): "
+            f"nothing changes near the labelled stop at {stop_at_s:g} s (searched +-{search_s:g} s){where}: "
             "check --stop-at (seconds from the start of the recording) and that the joint reached its end stop"
         )
     # the change point is found on frames that end after it; its time is the frame's end minus the
