@@ -197,5 +197,7 @@ def test_refusal_names_the_spans_that_spoil_the_recording():
 
 def test_a_label_far_off_is_refused_naming_where_the_sound_changes():
     x, sr = render_traverse_recording(1, 1000.0, 2.0, 3.5, seed=20)
-    with pytest.raises(TuningError, match=r"nothing changes near the labelled stop at 2\.7 s .*changes at (1\.99|2\.00)\d s"):
+    with pytest.raises(
+        TuningError, match=r"nothing changes near the labelled stop at 2\.7 s .*changes at (1\.99|2\.00)\d s"
+    ):
         tune(x, sr, 2.7)
