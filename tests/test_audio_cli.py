@@ -239,3 +239,76 @@ def test_listen_warns_on_a_dead_file(wavs, tmp_path):
     r = runner.invoke(app, ["listen", str(tmp_path / "silence.wav"), "--tuning", str(out), "--json"])
     assert r.exit_code == 0 and json.loads(r.stdout) == []
     assert "carries no signal (silence)" in r.stderr
+
+
+class _FakeController:
+    """A controller without a simulator's shortcuts: steps take their time at 4000 Hz."""
+
+    def __init__(self) -> None:
+        self.steps: list[tuple[int, int]] = []
+        self.closed = False
+
+    def frequency(self, joint: int) -> float:
+        return 4000.0
+
+    def step(self, joint: int, n: int) -> None:
+        self.steps.append((joint, n))
+
+    def stop(self, joint: int | None = None) -> None:
+        pass
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class _FakeMic:
+    def __init__(self, sample_rate: int = 48_000, block: int = 1024, device=None) -> None:
+        import queue
+
+        self._queue: queue.Queue = queue.Queue()
+        for k in range(12):
+            self._queue.put(np.full((block, 1), 0.01 * (k + 1), np.float32))
+
+    def start(self) -> _FakeMic:
+        return self
+
+    def stop(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(
+    "label_args, how", [(["--stop-at-step", "300"], "step 300 at 4000 Hz"), (["--key"], "a key press")]
+)
+def test_record_on_a_controller_labels_from_the_step_count_or_a_key(tmp_path, monkeypatch, label_args, how):
+    import stickslip.audio.sources as sources
+    import stickslip.devices as devices
+
+    ctrl = _FakeController()
+    monkeypatch.setattr(devices, "open_device", lambda url: ctrl)
+    monkeypatch.setattr(sources, "Microphone", _FakeMic)
+    wav = tmp_path / "real.wav"
+    r = runner.invoke(
+        app,
+        ["record", str(wav), "--joint", "2", "--device", "mm3a:///dev/fake", "--steps", "400", *label_args, "--json"],
+        input="\n",
+    )
+    assert r.exit_code == 0, r.output
+    label = json.loads(r.stdout)["label"]
+    assert label["label_from"] == how and ctrl.closed
+    assert sum(n for _, n in ctrl.steps) == 400 and all(j == 2 and n > 0 for j, n in ctrl.steps)
+    x, sr = read_wav(wav)
+    assert sr == 48_000 and x.size == 12 * 1024 and np.allclose(x[:1024], 0.01)  # every block, in order
+    if how.startswith("step"):
+        assert label["stop_at_s"] == pytest.approx(300 / 4000.0, abs=0.05)
+    else:
+        assert 0.0 <= label["stop_at_s"] < 1.0
+
+
+def test_record_on_a_controller_needs_steps_and_a_label(tmp_path, monkeypatch):
+    import stickslip.devices as devices
+
+    monkeypatch.setattr(devices, "open_device", lambda url: _FakeController())
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), "--joint", "2", "--device", "mm3a:///dev/fake"])
+    _one_line_error(r, "--steps")
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), "--joint", "2", "--device", "mm3a:///x", "--steps", "9"])
+    _one_line_error(r, "--stop-at-step", "--key")
