@@ -15,7 +15,10 @@ default thresholds), on the raw signal and band-prefiltered to the tuned band (a
 causal 4th-order Butterworth band-pass), and ``librosa.onset.onset_detect``. They are
 optional (``pip install 'stickslip[bench]'``); a missing one is reported in the table.
 
-Run: ``.venv/bin/python benchmarks/bench_audio.py`` (about a minute on 2 cores).
+Then the real-time table: latency (median, p95) and speed for live blocks of 128-4096
+samples and for a whole recording (blocks of 65536).
+
+Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stickslip.audio.detector import StopDetector, Tuning
-from stickslip.audio.tuning import tune
+from stickslip.audio.tuning import tune, tune_band
 from stickslip.sim.sound import render_traverse_recording
 
 TOL_S = 0.025
@@ -132,6 +135,46 @@ def run_ours(tuning: Tuning, rec: Recording) -> list[tuple[float, float]]:
     return out
 
 
+_BAND_TUNINGS: dict[int, Tuning] = {}
+
+
+def run_ours_band(tuning: Tuning, rec: Recording) -> list[tuple[float, float]]:
+    """The version-1 band-power detector, tuned on the same recording (for comparison)."""
+    if tuning.joint not in _BAND_TUNINGS:
+        x, sr = render_traverse_recording(int(tuning.joint or 1), 1000.0, 2.0, 3.5, seed=11)
+        _BAND_TUNINGS[int(tuning.joint or 1)] = tune_band(x, sr, 2.0, joint=tuning.joint)
+    return run_ours(_BAND_TUNINGS[int(tuning.joint or 1)], rec)
+
+
+def realtime(tuning: Tuning) -> None:
+    """Latency and speed by block size: live blocks of 128-4096 samples, and a whole recording."""
+    print("\nreal time (joint 2, 48 kHz; latency over 12 stops at 800-1300 Hz with knocks and babble):")
+    recs = []
+    for k in range(12):
+        stop_at = 1.0 + 0.05 * k
+        y, sr = render_traverse_recording(
+            2, 800.0 + 45.0 * k, stop_at, stop_at + 0.5, seed=9000 + k, babble=True, knocks_per_min=30.0
+        )
+        recs.append((y, stop_at))
+    long_y, _ = render_traverse_recording(2, 1100.0, 1e12, 60.0, seed=9100, babble=True, knocks_per_min=20.0)
+    for block in (128, 512, 1024, 4096, 1 << 16):
+        lat = []
+        for y, stop_at in recs:
+            det = StopDetector(tuning)
+            ev = [e for i in range(0, y.size, block) for e in det.feed(y[i : i + block])]
+            lat += [e.detected_at_s - stop_at for e in ev[:1]]
+        det = StopDetector(tuning)
+        t = time.perf_counter()
+        for i in range(0, long_y.size, block):
+            det.feed(long_y[i : i + block])
+        rtf = 60.0 / (time.perf_counter() - t)
+        lat_ms = np.array(lat) * 1e3
+        print(
+            f"  block {block:6d}: found {len(lat)}/12, latency median {np.median(lat_ms):.1f} ms, "
+            f"p95 {np.percentile(lat_ms, 95):.1f} ms; {rtf:.0f}x faster than real time"
+        )
+
+
 def _bandpass(tuning: Tuning, x: np.ndarray) -> np.ndarray:
     from scipy.signal import butter, sosfilt
 
@@ -194,7 +237,8 @@ def main() -> list[Score]:
     t_render = time.perf_counter() - t0
     audio_s = sum(r.samples.size for r in recs) / recs[0].sample_rate
     methods = [
-        ("stickslip StopDetector (tuned band)", lambda: run_ours),
+        ("stickslip StopDetector (spectral template)", lambda: run_ours),
+        ("stickslip StopDetector (v1 tuned band)", lambda: run_ours_band),
         ("aubio hfc", lambda: aubio_runner("hfc", False)),
         ("aubio hfc, band-prefiltered", lambda: aubio_runner("hfc", True)),
         ("aubio specflux", lambda: aubio_runner("specflux", False)),
@@ -224,6 +268,7 @@ def main() -> list[Score]:
         print("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
         if i == 0:
             print("  ".join("-" * w for w in widths))
+    realtime(tunings[2])
     return scores
 
 

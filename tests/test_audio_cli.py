@@ -46,15 +46,14 @@ def _one_line_error(result, *words):
 
 def test_tune_then_listen_json(wavs):
     out = wavs / "tuning.json"
-    r = runner.invoke(
-        app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"]
-    )
+    r = runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--joint", "3"])
     assert r.exit_code == 0, r.output
-    # the level is the band relative to the broadband level, and says so
-    assert "Hz" in r.output and "dB re 200-21600 Hz" in r.output and "contrast" in r.output
+    # the report names the template's span, the stop's strongest sub-band and the self-check
+    assert "spectral template over" in r.output and "Hz" in r.output and "false alarms per hour" in r.output
     saved = json.loads(out.read_text())
-    assert saved["joint"] == 3 and saved["band_hz"][0] < 4600 < saved["band_hz"][1]
-    assert saved["reference_hz"] == [200.0, 21600.0]
+    assert saved["joint"] == 3 and saved["version"] == 2 and saved["method"] == "template"
+    k = max(range(len(saved["signature_db"])), key=lambda i: saved["signature_db"][i])
+    assert saved["edges_hz"][k] < 4600 < saved["edges_hz"][k + 1]  # joint 3's rattle
 
     r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out), "--json"])
     assert r.exit_code == 0, r.output
@@ -81,13 +80,12 @@ def test_tune_json_output(wavs, tmp_path):
         ],
     )
     assert r.exit_code == 0, r.output
-    assert json.loads(r.stdout)["threshold_db"] < 0
+    d = json.loads(r.stdout)
+    assert 0 < d["threshold_db"] < 1 and d["checks"]["stops_found"] == d["checks"]["stops"]
 
 
 def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):
-    r = runner.invoke(
-        app, ["tune", str(wavs / "no_stop.wav"), "--stop-at", "1.5", "-o", str(tmp_path / "t.json")]
-    )
+    r = runner.invoke(app, ["tune", str(wavs / "no_stop.wav"), "--stop-at", "1.5", "-o", str(tmp_path / "t.json")])
     _one_line_error(r, "sound alike")
     assert not (tmp_path / "t.json").exists()
 
@@ -122,9 +120,7 @@ def test_listen_mic_without_portaudio_is_one_line(wavs, monkeypatch):
         raise AudioSourceError("PortAudio is not installed; apt-get install libportaudio2")
 
     monkeypatch.setattr(Microphone, "_sounddevice", broken)
-    r = runner.invoke(
-        app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")]
-    )
+    r = runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")])
     r = runner.invoke(app, ["listen", "--mic", "--tuning", str(wavs / "m.json")])
     _one_line_error(r, "libportaudio2")
 
@@ -190,3 +186,129 @@ def test_microphone_without_an_input_device(monkeypatch):
     monkeypatch.setitem(sys.modules, "sounddevice", types.SimpleNamespace(InputStream=no_device))
     with pytest.raises(AudioSourceError, match="cannot open the microphone: No input device"):
         Microphone(device="usb").start()
+
+
+def test_record_on_the_simulator_then_tune_and_listen(tmp_path):
+    """record drives sim:// into its stop, labels it from the simulator, tunes; listen finds the stop."""
+    wav, tj = tmp_path / "rec.wav", tmp_path / "t.json"
+    r = runner.invoke(
+        app,
+        [
+            "record",
+            str(wav),
+            "--joint",
+            "1",
+            "--device",
+            "sim://?seed=4&day=2026-11-22",
+            "--before",
+            "1.5",
+            "--after",
+            "0.8",
+            "--tune",
+            str(tj),
+            "--json",
+        ],
+    )
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    label = json.loads(wav.with_suffix(".json").read_text())
+    assert label == out["label"] and label["joint"] == 1 and label["label_from"] == "the simulator's stop time"
+    assert abs(label["stop_at_s"] - 1.5) < 0.05 and out["tuning"]["method"] == "template"
+    r = runner.invoke(app, ["listen", str(wav), "--tuning", str(tj), "--json"])
+    (ev,) = json.loads(r.stdout)
+    assert abs(ev["onset_s"] - label["stop_at_s"]) < 0.01
+
+
+@pytest.mark.parametrize(
+    "extra, words",
+    [
+        (["--joint", "4"], ["--joint"]),
+        (["--joint", "1", "--direction", "x"], ["direction"]),
+        (["--joint", "1", "--before", "0.1"], ["--before"]),
+    ],
+)
+def test_record_bad_input_is_one_line(tmp_path, extra, words):
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), *extra])
+    _one_line_error(r, *words)
+
+
+def test_listen_warns_on_a_dead_file(wavs, tmp_path):
+    write_wav(tmp_path / "silence.wav", np.zeros(48_000, np.float32), 48_000)
+    out = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(out)]).exit_code == 0
+    r = runner.invoke(app, ["listen", str(tmp_path / "silence.wav"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0 and json.loads(r.stdout) == []
+    assert "carries no signal (silence)" in r.stderr
+
+
+class _FakeController:
+    """A controller without a simulator's shortcuts: steps take their time at 4000 Hz."""
+
+    def __init__(self) -> None:
+        self.steps: list[tuple[int, int]] = []
+        self.closed = False
+
+    def frequency(self, joint: int) -> float:
+        return 4000.0
+
+    def step(self, joint: int, n: int) -> None:
+        self.steps.append((joint, n))
+
+    def stop(self, joint: int | None = None) -> None:
+        pass
+
+    def close(self) -> None:
+        self.closed = True
+
+
+class _FakeMic:
+    def __init__(self, sample_rate: int = 48_000, block: int = 1024, device=None) -> None:
+        import queue
+
+        self._queue: queue.Queue = queue.Queue()
+        for k in range(12):
+            self._queue.put(np.full((block, 1), 0.01 * (k + 1), np.float32))
+
+    def start(self) -> _FakeMic:
+        return self
+
+    def stop(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize(
+    "label_args, how", [(["--stop-at-step", "300"], "step 300 at 4000 Hz"), (["--key"], "a key press")]
+)
+def test_record_on_a_controller_labels_from_the_step_count_or_a_key(tmp_path, monkeypatch, label_args, how):
+    import stickslip.audio.sources as sources
+    import stickslip.devices as devices
+
+    ctrl = _FakeController()
+    monkeypatch.setattr(devices, "open_device", lambda url: ctrl)
+    monkeypatch.setattr(sources, "Microphone", _FakeMic)
+    wav = tmp_path / "real.wav"
+    r = runner.invoke(
+        app,
+        ["record", str(wav), "--joint", "2", "--device", "mm3a:///dev/fake", "--steps", "400", *label_args, "--json"],
+        input="\n",
+    )
+    assert r.exit_code == 0, r.output
+    label = json.loads(r.stdout)["label"]
+    assert label["label_from"] == how and ctrl.closed
+    assert sum(n for _, n in ctrl.steps) == 400 and all(j == 2 and n > 0 for j, n in ctrl.steps)
+    x, sr = read_wav(wav)
+    assert sr == 48_000 and x.size == 12 * 1024 and np.allclose(x[:1024], 0.01)  # every block, in order
+    if how.startswith("step"):
+        assert label["stop_at_s"] == pytest.approx(300 / 4000.0, abs=0.05)
+    else:
+        assert 0.0 <= label["stop_at_s"] < 1.0
+
+
+def test_record_on_a_controller_needs_steps_and_a_label(tmp_path, monkeypatch):
+    import stickslip.devices as devices
+
+    monkeypatch.setattr(devices, "open_device", lambda url: _FakeController())
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), "--joint", "2", "--device", "mm3a:///dev/fake"])
+    _one_line_error(r, "--steps")
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), "--joint", "2", "--device", "mm3a:///x", "--steps", "9"])
+    _one_line_error(r, "--stop-at-step", "--key")

@@ -195,3 +195,58 @@ def test_plot_levels_draws_threshold_and_event():
     labels = [ln.get_label() for ln in ax.get_lines()]
     assert {"threshold", "detected", "true stop"} <= set(labels)
     assert ax.get_ylabel() == "band level (dBFS)"
+
+
+_TEMPLATE: dict[str, object] = {}
+
+
+def _template_case():
+    """A template tuning (simulator, joint 1) and a test recording with two stops, 0.6 s apart."""
+    if not _TEMPLATE:
+        from stickslip.audio.tuning import tune
+        from stickslip.sim.sound import render_traverse_recording
+
+        x, sr = render_traverse_recording(1, 1000.0, 1.0, 1.6, seed=31)
+        t = tune(x, sr, 1.0, self_check=False)
+        a, _ = render_traverse_recording(1, 1100.0, 0.6, 1.0, seed=32)
+        b, _ = render_traverse_recording(1, 1100.0, 0.5, 0.9, seed=33)
+        _TEMPLATE.update(tuning=t, x=np.concatenate((a, b)))
+    return _TEMPLATE["tuning"], _TEMPLATE["x"]
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.integers(1, 5000), min_size=1, max_size=30))
+def test_template_detector_events_do_not_depend_on_block_sizes(sizes):
+    tuning, x = _template_case()
+    reference = detect(x, tuning)
+    det, events, i, k = StopDetector(tuning), [], 0, 0
+    while i < x.size:
+        n = sizes[k % len(sizes)]
+        events += det.feed(x[i : i + n])
+        i, k = i + n, k + 1
+    assert [e.detected_at_s for e in events] == [e.detected_at_s for e in reference]
+    for e, r in zip(events, reference, strict=True):  # the same to float rounding (BLAS sums in another order)
+        assert e.onset_s == pytest.approx(r.onset_s, abs=1e-9) and e.level_db == pytest.approx(r.level_db, abs=1e-9)
+    assert [round(e.onset_s, 2) for e in reference] == [0.6, 1.5]  # re-armed in the stepping between the stops
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.sampled_from(["zeros", "constant", "noise", "full-scale square", "huge", "nan"]),
+    st.integers(100, 40_000),
+)
+def test_template_detector_never_crashes_and_never_fires_on_dead_input(kind, n):
+    tuning, _ = _template_case()
+    rng = np.random.default_rng(n)
+    x = {
+        "zeros": np.zeros(n),
+        "constant": np.full(n, 0.3),
+        "noise": 1e-4 * rng.standard_normal(n),
+        "full-scale square": np.sign(np.sin(np.arange(n) / 7.0)),
+        "huge": 1e30 * rng.standard_normal(n),
+        "nan": np.where(rng.random(n) < 0.1, np.nan, 1e-3 * rng.standard_normal(n)),
+    }[kind].astype(np.float32)
+    events = detect(x, tuning)
+    assert all(np.isfinite([e.onset_s, e.detected_at_s, e.level_db]).all() for e in events)
+    if kind in ("zeros", "constant"):
+        assert events == []

@@ -68,7 +68,13 @@ def test_a_traverse_on_a_dead_input_records_nothing(tuning, kind):
     sim = SimulatedMM3A(seed=5, day=DAY)
     with pytest.raises(TraverseError, match="no signal from the audio input") as e:
         measure_traverse(
-            sim, 3, "+", detector=StopDetector(tuning), audio_blocks=_dead(kind), pose=sim.pose, day=DAY,
+            sim,
+            3,
+            "+",
+            detector=StopDetector(tuning),
+            audio_blocks=_dead(kind),
+            pose=sim.pose,
+            day=DAY,
             burst_steps=1000,
         )
     assert "nothing was recorded" in str(e.value) and "\n" not in str(e.value)
@@ -88,6 +94,49 @@ def test_a_microphone_unplugged_mid_traverse_stops_it(tuning):
 
     with pytest.raises(TraverseError, match="no signal from the audio input: silence"):
         measure_traverse(
-            sim, 3, "+", detector=StopDetector(tuning), audio_blocks=blocks(), pose=sim.pose, day=DAY,
+            sim,
+            3,
+            "+",
+            detector=StopDetector(tuning),
+            audio_blocks=blocks(),
+            pose=sim.pose,
+            day=DAY,
             burst_steps=1000,
         )
+
+
+def test_a_live_room_without_the_joints_steps_stops_the_traverse(tuning):
+    """The microphone hears a room (noise and a 50 Hz hum) but not the joint: no stepping at the commanded rate."""
+    rng = np.random.default_rng(3)
+
+    def room():
+        t0 = 0
+        while True:
+            t = (t0 + np.arange(1024)) / RATE
+            t0 += 1024
+            yield (1e-3 * rng.standard_normal(1024) + 3e-3 * np.sin(2 * np.pi * 50 * t)).astype(np.float32)
+
+    sim = SimulatedMM3A(seed=5, day=DAY)
+    with pytest.raises(TraverseError, match=r"no stepping sound at \d+ Hz in the audio input") as e:
+        measure_traverse(
+            sim,
+            3,
+            "+",
+            detector=StopDetector(tuning),
+            audio_blocks=room(),
+            pose=sim.pose,
+            day=DAY,
+            burst_steps=1000,
+        )
+    assert "nothing was recorded" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_step_line_is_strong_for_stepping_and_weak_for_noise():
+    from stickslip.audio.guard import step_line_db
+    from stickslip.sim.sound import render_traverse_recording
+
+    x, sr = render_traverse_recording(2, 1000.0, 1e9, 0.5, seed=9, babble=True)
+    assert step_line_db(x[: sr // 4], sr, 1000.0) > 20.0
+    assert step_line_db(x[: sr // 4], sr, 1370.0) < 10.0  # the wrong rate
+    assert step_line_db(np.random.default_rng(0).standard_normal(sr // 4), sr, 1000.0) < 8.0
+    assert step_line_db(x[:100], sr, 1000.0) == float("inf")  # too short to judge

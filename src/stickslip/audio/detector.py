@@ -19,10 +19,13 @@ import math
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import records
+from .template import CHUNK, TemplateParams, TemplateState, levels_from_frames
 
 __all__ = [
     "StopDetector",
@@ -36,6 +39,7 @@ __all__ = [
 ]
 
 _FLOOR = 1e-20
+_LIMIT = 1e15  # samples beyond this (full scale is 1) are clipped: their squares stay finite in float32
 _KIND = "stickslip.audio.Tuning"
 
 
@@ -83,6 +87,38 @@ class Tuning:
         threshold minus stepping high percentile, and those two levels (dBFS).
     latency_measured_s : float or None
         detected_at - stop onset on the tuning recording, s.
+    reference_hz : (float, float) or None
+        ``"band"`` method: the band level is taken relative to this band's, Hz.
+    method : str
+        ``"template"``: the spectral-template change detector (:mod:`.template`; what
+        :func:`~stickslip.audio.tuning.tune` makes). ``"band"``: the band-power detector
+        of tuning files version 1 (band level against ``threshold_db``).
+    edges_hz : tuple of float
+        ``"template"``: sub-band edges, Hz (``band_hz`` is their span).
+    signature_db : tuple of float
+        ``"template"``: the stop's departure from stepping per sub-band, dB.
+    spread_db : tuple of float
+        ``"template"``: frame-to-frame spread of stepping per sub-band, dB.
+    residual_max : float
+        ``"template"``: largest residual (in spreads) a frame may have and still count.
+    decay_ratio : float
+        ``"template"``: the firing frame's stop-likeness must be at least this fraction
+        of the largest in the hold window (a decaying transient is not a stop).
+    tau_s : float
+        ``"template"``: time constant of the running stepping template, s.
+    warmup_s : float
+        ``"template"``: stepping heard before the detector can fire, s.
+    trim : int
+        ``"template"``: sub-bands dropped from each frame's fit (those that fit worst).
+    stepping_levels_db : tuple of float or None
+        ``"template"``: stepping's level per sub-band in the tuning recording, dBFS; lets the
+        detector tell that it began listening at the stop (see :mod:`.template`).
+    checks : dict or None
+        What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
+        interference injected, latency); informational.
+
+    For ``"template"`` tunings ``threshold_db`` is the threshold on the stop-likeness
+    (0 stepping, 1 the tuned stop; dimensionless) and ``hysteresis_db`` its hysteresis.
     """
 
     band_hz: tuple[float, float]
@@ -102,7 +138,18 @@ class Tuning:
     stopped_db: float | None = None
     latency_measured_s: float | None = None
     reference_hz: tuple[float, float] | None = None
-    extra: dict = field(default_factory=dict, compare=False)
+    method: str = "band"
+    edges_hz: tuple[float, ...] | None = None
+    signature_db: tuple[float, ...] | None = None
+    spread_db: tuple[float, ...] | None = None
+    residual_max: float = 4.0
+    decay_ratio: float = 0.5
+    tau_s: float = 0.5
+    warmup_s: float = 0.15
+    trim: int = 0
+    stepping_levels_db: tuple[float, ...] | None = None
+    checks: dict[str, Any] | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
         lo, hi = (float(v) for v in self.band_hz)
@@ -121,6 +168,10 @@ class Tuning:
                 f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
                 f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
             )
+        if self.method not in ("band", "template"):
+            raise ValueError(f"method {self.method!r} must be 'band' or 'template'")
+        if self.method == "template":
+            self._check_template()
         if self.reference_hz is not None:
             r0, r1 = (float(v) for v in self.reference_hz)
             object.__setattr__(self, "reference_hz", (r0, r1))
@@ -135,6 +186,41 @@ class Tuning:
             ("release_s", 0, 10),
             ("hysteresis_db", 0, 60),
             ("onset_lag_s", -1, 1),
+        ):
+            v = getattr(self, name)
+            if not lo_ <= v <= hi_:
+                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+
+    def _check_template(self) -> None:
+        if self.edges_hz is None or self.signature_db is None or self.spread_db is None:
+            raise ValueError("a template tuning needs edges_hz, signature_db and spread_db")
+        edges = tuple(float(e) for e in self.edges_hz)
+        sig = tuple(float(e) for e in self.signature_db)
+        spr = tuple(float(e) for e in self.spread_db)
+        object.__setattr__(self, "edges_hz", edges)
+        object.__setattr__(self, "signature_db", sig)
+        object.__setattr__(self, "spread_db", spr)
+        nb = len(edges) - 1
+        if nb < 1 or len(sig) != nb or len(spr) != nb:
+            raise ValueError(f"edges_hz ({len(edges)}), signature_db ({len(sig)}) and spread_db ({len(spr)}) disagree")
+        if any(not b > a for a, b in zip(edges, edges[1:], strict=False)) or edges[-1] > self.sample_rate / 2:
+            raise ValueError(f"edges_hz must increase and stay below {self.sample_rate / 2:g} Hz")
+        if not all(math.isfinite(v) for v in sig) or not any(abs(v) > 0 for v in sig):
+            raise ValueError("signature_db must be finite and not all zero")
+        if not all(math.isfinite(v) and v > 0 for v in spr):
+            raise ValueError("spread_db must be finite and positive")
+        if self.stepping_levels_db is not None:
+            lv = tuple(float(v) for v in self.stepping_levels_db)
+            object.__setattr__(self, "stepping_levels_db", lv)
+            if len(lv) != nb or not all(math.isfinite(v) for v in lv):
+                raise ValueError(f"stepping_levels_db must hold {nb} finite levels")
+        if not 0 <= self.trim < nb:
+            raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
+        for name, lo_, hi_ in (
+            ("residual_max", 0.1, 1e3),
+            ("decay_ratio", 0, 1),
+            ("tau_s", 0.01, 100),
+            ("warmup_s", 0, 10),
         ):
             v = getattr(self, name)
             if not lo_ <= v <= hi_:
@@ -156,6 +242,8 @@ class Tuning:
     @property
     def level_unit(self) -> str:
         """``"dBFS"`` for an absolute band level; ``"dB re a-b Hz"`` for one relative to the reference band."""
+        if self.method == "template":
+            return "(stop-likeness: 0 stepping, 1 the tuned stop)"
         if self.reference_hz is None:
             return "dBFS"
         return f"dB re {self.reference_hz[0]:.0f}-{self.reference_hz[1]:.0f} Hz"
@@ -169,22 +257,48 @@ class Tuning:
         return replace(self, sample_rate=int(sample_rate), frame=int(frame), hop=int(hop))
 
     # ------------------------------------------------------------- files
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; units are in the key names (frame and hop are samples)."""
         d = asdict(self)
         d.pop("extra")
         d["band_hz"] = list(self.band_hz)
         d["reference_hz"] = list(self.reference_hz) if self.reference_hz is not None else None
         d["latency_s"] = self.latency_s
-        return {"kind": _KIND, "version": 1, **d, **({"extra": self.extra} if self.extra else {})}
+        version = 1
+        if self.method == "template":
+            version = 2
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
+                d[k] = list(d[k]) if d[k] is not None else None
+        else:
+            for k in (
+                "method",
+                "edges_hz",
+                "signature_db",
+                "spread_db",
+                "residual_max",
+                "decay_ratio",
+                "tau_s",
+                "warmup_s",
+                "trim",
+                "checks",
+                "stepping_levels_db",
+            ):
+                d.pop(k)
+        return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
 
     @classmethod
-    def from_dict(cls, d: dict) -> Tuning:
+    def from_dict(cls, d: dict[str, Any]) -> Tuning:
         """Inverse of :meth:`to_dict`; raises :class:`TuningFileError` naming the problem."""
         if not isinstance(d, dict):
             raise TuningFileError("a tuning must be a JSON object")
         if d.get("kind", _KIND) != _KIND:
             raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
+        version = d.get("version", 1)
+        if version not in (1, 2):
+            raise TuningFileError(
+                f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
+                "upgrade stickslip or re-tune with 'stickslip tune'"
+            )
         for key in ("band_hz", "threshold_db"):
             if key not in d:
                 raise TuningFileError(f"tuning lacks {key!r}")
@@ -200,10 +314,27 @@ class Tuning:
                 if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
                     raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
                 kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
-            for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s"):
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
+                if kwargs.get(k) is not None:
+                    if not isinstance(kwargs[k], (list, tuple)):
+                        raise TuningFileError(f"{k} must be a list of numbers")
+                    kwargs[k] = tuple(float(v) for v in kwargs[k])
+            if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
+                raise TuningFileError("checks must be an object or null")
+            for k in (
+                "threshold_db",
+                "hold_s",
+                "hysteresis_db",
+                "release_s",
+                "onset_lag_s",
+                "residual_max",
+                "decay_ratio",
+                "tau_s",
+                "warmup_s",
+            ):
                 if k in kwargs:
                     kwargs[k] = float(kwargs[k])
-            for k in ("sample_rate", "frame", "hop", "max_dips"):
+            for k in ("sample_rate", "frame", "hop", "max_dips", "trim"):
                 if k in kwargs:
                     v = kwargs[k]
                     if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
@@ -237,6 +368,8 @@ class Tuning:
 
     def report(self) -> str:
         """A few human lines: band, threshold, contrast and margin."""
+        if self.method == "template":
+            return self._template_report()
         lines = [
             f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} {self.level_unit}",
             f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
@@ -251,6 +384,59 @@ class Tuning:
             )
         lines.append(f"latency {1e3 * self.latency_s:.1f} ms")
         return "\n".join(lines)
+
+    def _template_report(self) -> str:
+        assert self.edges_hz is not None and self.signature_db is not None
+        sig = np.asarray(self.signature_db)
+        k = int(np.argmax(np.abs(sig)))
+        e = self.edges_hz
+        lines = [
+            f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands; the stop departs most "
+            f"at {e[k]:.0f}-{e[k + 1]:.0f} Hz ({sig[k]:+.1f} dB)",
+            f"stop signature {', '.join(f'{v:+.0f}' for v in sig)} dB",
+            f"fires at stop-likeness {self.threshold_db:.2f} (stepping 0, the stop 1) held "
+            f"{1e3 * self.hold_s:.1f} ms, residual <= {self.residual_max:.1f}; frame "
+            f"{self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), hop {self.hop}",
+        ]
+        if self.contrast_db is not None:
+            lines.append(
+                f"worst stepping frame {self.stepping_db:.2f}, stop's low {self.stopped_db:.2f}: "
+                f"margin {self.margin_db:.2f} (stop-likeness), stop departure {self.contrast_db:.1f} dB"
+            )
+        lines.append(f"latency {1e3 * self.latency_s:.1f} ms, onset lag {1e3 * self.onset_lag_s:.1f} ms")
+        c = self.checks or {}
+        if "false_alarms_per_hour" in c:
+            lines.append(
+                f"self-check with knocks, babble, +-20 dB gain and a second click train: "
+                f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
+                f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
+                f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"
+            )
+        return "\n".join(lines)
+
+    def template_params(self) -> TemplateParams:
+        """The template detector's parameters (``method == "template"`` only)."""
+        assert self.edges_hz is not None and self.signature_db is not None and self.spread_db is not None
+        return TemplateParams(
+            sample_rate=self.sample_rate,
+            frame=self.frame,
+            hop=self.hop,
+            edges_hz=self.edges_hz,
+            signature_db=self.signature_db,
+            spread_db=self.spread_db,
+            threshold=self.threshold_db,
+            residual_max=self.residual_max,
+            hold_frames=self.hold_frames,
+            max_dips=self.max_dips,
+            release_frames=max(1, int(math.ceil(self.release_s * self.sample_rate / self.hop))),
+            hysteresis=self.hysteresis_db,
+            decay_ratio=self.decay_ratio,
+            tau_s=self.tau_s,
+            warmup_chunks=max(1, int(math.ceil(self.warmup_s * self.sample_rate / self.hop / CHUNK - 1e-9))),
+            trim=self.trim,
+            onset_lag_s=self.onset_lag_s,
+            stepping_levels_db=self.stepping_levels_db,
+        )
 
 
 @dataclass(frozen=True)
@@ -273,7 +459,7 @@ class StopEvent:
     onset_s: float
     level_db: float
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, float]:
         return {
             "detected_at_s": self.detected_at_s,
             "onset_s": self.onset_s,
@@ -281,7 +467,7 @@ class StopEvent:
         }
 
 
-def _band_bins(tuning_or_band, sample_rate: int, frame: int) -> tuple[int, int]:
+def _band_bins(tuning_or_band: tuple[float, float], sample_rate: int, frame: int) -> tuple[int, int]:
     lo, hi = tuning_or_band
     freqs = np.fft.rfftfreq(frame, 1 / sample_rate)
     i0 = int(np.searchsorted(freqs, lo, side="left"))
@@ -316,12 +502,26 @@ def frame_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray
 def frame_levels_db(samples: np.ndarray, tuning: Tuning) -> np.ndarray:
     """The detector's level for every frame of ``samples`` (frame i ends at sample i*hop+frame-1).
 
-    dBFS, or dB relative to the reference band when the tuning has one.
+    dBFS, or dB relative to the reference band when the tuning has one; for a template
+    tuning the stop-likeness (dimensionless, NaN while the template is learned).
     """
+    if tuning.method == "template":
+        det = StopDetector(tuning)
+        assert det._template is not None
+        det._template.trace = []
+        det.feed(np.asarray(samples))
+        return np.asarray(det._template.trace, dtype=np.float64)
     return band_levels_db(samples, tuning.sample_rate, tuning.frame, tuning.hop, tuning.band_hz, tuning.reference_hz)
 
 
-def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz, reference_hz=None) -> np.ndarray:
+def band_levels_db(
+    samples: NDArray[Any],
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    band_hz: tuple[float, float],
+    reference_hz: tuple[float, float] | None = None,
+) -> NDArray[np.float64]:
     """Band level per frame, dBFS (see :func:`frame_power_spectra`); minus the reference band's if given."""
     p = frame_power_spectra(samples, frame, hop)
     i0, i1 = _band_bins(band_hz, sample_rate, frame)
@@ -329,7 +529,7 @@ def band_levels_db(samples, sample_rate: int, frame: int, hop: int, band_hz, ref
     if reference_hz is not None:
         r0, r1 = _band_bins(reference_hz, sample_rate, frame)
         level -= 10 * np.log10(p[:, r0:r1].sum(axis=1) + _FLOOR)
-    return level
+    return np.asarray(level, dtype=np.float64)
 
 
 class StopDetector:
@@ -351,11 +551,17 @@ class StopDetector:
 
     def __init__(self, tuning: Tuning, t0_s: float = 0.0) -> None:
         self.tuning = tuning
+        self._template: TemplateState | None = None
+        if tuning.method == "template":
+            assert tuning.edges_hz is not None
+            self._template = TemplateState(tuning.template_params(), t0_s)
+            freqs = np.fft.rfftfreq(tuning.frame, 1 / tuning.sample_rate)
+            self._edge_bins = np.asarray(
+                np.searchsorted(freqs, np.asarray(tuning.edges_hz), side="left"), dtype=np.intp
+            )
         self._w, self._scale = _window(tuning.frame)
         self._i0, self._i1 = _band_bins(tuning.band_hz, tuning.sample_rate, tuning.frame)
-        self._ref = (
-            _band_bins(tuning.reference_hz, tuning.sample_rate, tuning.frame) if tuning.reference_hz else None
-        )
+        self._ref = _band_bins(tuning.reference_hz, tuning.sample_rate, tuning.frame) if tuning.reference_hz else None
         self._hold = tuning.hold_frames
         self._full = (1 << (self._hold + tuning.max_dips)) - 1
         self._release = max(1, int(math.ceil(tuning.release_s * tuning.sample_rate / tuning.hop)))
@@ -373,6 +579,8 @@ class StopDetector:
         self._prev_db = -np.inf
         self._cross_t = math.nan
         self.levels_seen = 0
+        if self._template is not None:
+            self._template.reset(t0_s)
 
     @property
     def latency_s(self) -> float:
@@ -382,13 +590,29 @@ class StopDetector:
     @property
     def latched(self) -> bool:
         """True while a stop is being heard (after it fired, until released)."""
+        if self._template is not None:
+            return self._template.latched
         return self._latched
+
+    @property
+    def level(self) -> float:
+        """The latest frame's level in the tuning's unit (stop-likeness for a template tuning)."""
+        if self._template is not None:
+            return self._template.last_a
+        return float(self._prev_db)
+
+    @property
+    def ready(self) -> bool:
+        """False while a template detector is still learning the stepping sound (it cannot fire yet)."""
+        return self._template is None or not self._template.warming
 
     def feed(self, block: np.ndarray) -> list[StopEvent]:
         """Consume a block of mono samples; return the stops that fired in it."""
         x = np.asarray(block, dtype=np.float64)
         if x.ndim != 1:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        if x.size and not float(np.max(np.abs(x))) <= _LIMIT:  # NaN, infinity or absurd values: bounded
+            x = np.clip(np.nan_to_num(x, nan=0.0, posinf=_LIMIT, neginf=-_LIMIT), -_LIMIT, _LIMIT)
         tu = self.tuning
         F, H = tu.frame, tu.hop
         self._buf = np.concatenate((self._buf, x)) if self._buf.size else x.copy()
@@ -404,7 +628,19 @@ class StopDetector:
                 strides=(H * seg.strides[0], seg.strides[0]),
                 writeable=False,
             )
-            if self._ref is None:
+            if self._template is not None:
+                v = levels_from_frames(view, self._w, self._scale, self._edge_bins)
+                ends = self._next + np.arange(n_frames, dtype=np.int64) * H + F - 1
+                for dec in self._template.process(v, ends):
+                    events.append(
+                        StopEvent(
+                            detected_at_s=self._t0 + dec.end_sample / tu.sample_rate,
+                            onset_s=dec.cross_t_s - tu.onset_lag_s,
+                            level_db=dec.a,
+                        )
+                    )
+                levels = None
+            elif self._ref is None:
                 spec = np.fft.rfft(view * self._w, axis=1)[:, self._i0 : self._i1]
                 power = (spec.real**2 + spec.imag**2).sum(axis=1) * self._scale
                 levels = 10 * np.log10(power + _FLOOR)
@@ -415,8 +651,9 @@ class StopDetector:
                 levels = 10 * np.log10(p[:, self._i0 : self._i1].sum(axis=1) * self._scale + _FLOOR) - 10 * np.log10(
                     p[:, r0:r1].sum(axis=1) * self._scale + _FLOOR
                 )
-            ends = self._next + np.arange(n_frames) * H + F - 1
-            events = self._run(levels, ends)
+            if levels is not None:
+                ends = self._next + np.arange(n_frames) * H + F - 1
+                events = self._run(levels, ends)
             self._next += n_frames * H
             self.levels_seen += n_frames
         drop = self._next - self._buf_start
@@ -473,7 +710,7 @@ class StopDetector:
 
 
 def detect(
-    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 4096
+    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 1 << 16
 ) -> list[StopEvent]:
     """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks)."""
     det = StopDetector(tuning, t0_s)
@@ -492,8 +729,8 @@ def plot_levels(
     tuning: Tuning,
     t0_s: float = 0.0,
     stop_at_s: float | None = None,
-    ax=None,
-):
+    ax: Any = None,
+) -> Any:
     """Plot the band level of a recording over time with the threshold and the events.
 
     Parameters
@@ -529,8 +766,8 @@ def plot_levels(
     ax.plot(t, levels, lw=0.8, label=f"band {lo:.0f}-{hi:.0f} Hz")
     ax.axhline(tuning.threshold_db, color="C3", lw=1, label="threshold")
     ax.axhline(tuning.threshold_db - tuning.hysteresis_db, color="C3", lw=0.8, ls=":", label="re-arm level")
-    for i, e in enumerate(detect(samples, tuning, t0_s=t0_s)):
-        ax.axvline(e.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
+    for i, ev in enumerate(detect(samples, tuning, t0_s=t0_s)):
+        ax.axvline(ev.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
     if stop_at_s is not None:
         ax.axvline(stop_at_s, color="k", ls="--", lw=1, label="true stop")
     ax.set_xlabel("time (s)")

@@ -11,7 +11,13 @@ Thresholds (samples are floats in [-1, 1], full scale 1):
 * silence: peak amplitude below ``floor`` (default 1e-6, -120 dBFS; a real microphone's
   self-noise is far above it);
 * constant: peak-to-peak below ``floor`` (a DC offset, however large);
-* clipping: more than half the samples at or beyond 0.999 of full scale.
+* clipping: more than half the samples at or beyond 0.999 of full scale;
+* no stepping (when the commanded step rate ``step_hz`` is given): in every window of
+  ``window_s`` for ``no_step_s`` without a break, the envelope of the sound (the
+  first-differenced signal squared, so hum and thumps count little) shows no line at the
+  step rate (within +-3 %) at least ``min_line_db`` above its neighbourhood
+  (:func:`step_line_db`). A microphone that hears the room but not the joint - unplugged
+  from the arm's mount, pointed away, a preamplifier's hiss - trips this.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["NoSignalError", "SignalGuard", "block_problem"]
+__all__ = ["NoSignalError", "SignalGuard", "block_problem", "step_line_db"]
 
 
 class NoSignalError(RuntimeError):
@@ -45,6 +51,30 @@ def block_problem(block: ArrayLike, floor: float = 1e-6) -> str | None:
     return None
 
 
+def step_line_db(x: ArrayLike, sample_rate: float, step_hz: float, tolerance: float = 0.03) -> float:
+    """How far the step-rate line stands above the envelope spectrum around it, dB.
+
+    The envelope is the first-differenced signal squared (a click train's envelope has
+    lines at the step rate and its multiples); the line is the largest bin within
+    ``tolerance`` of ``step_hz``, compared with the median of the bins from 0.5 to 1.5
+    times ``step_hz`` outside that range. Stepping gives tens of dB; noise, speech and
+    hum a few. Needs at least 20 step periods of samples (else returns ``inf``: no verdict).
+    """
+    v = np.asarray(x, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    if not (step_hz > 0 and v.size >= 20 * sr / step_hz and step_hz < sr / 4):
+        return float("inf")
+    e = np.diff(v) ** 2
+    e = (e - e.mean()) * np.hanning(e.size)
+    p = np.abs(np.fft.rfft(e)) ** 2
+    f = np.fft.rfftfreq(e.size, 1 / sr)
+    near = np.abs(f - step_hz) <= tolerance * step_hz
+    around = (f >= 0.5 * step_hz) & (f <= 1.5 * step_hz) & ~near
+    if not near.any() or not around.any():
+        return float("inf")
+    return float(10 * np.log10((p[near].max() + 1e-300) / (np.median(p[around]) + 1e-300)))
+
+
 @dataclass
 class SignalGuard:
     """Raise :class:`NoSignalError` when the input stays dead for ``hold_s`` seconds.
@@ -57,12 +87,30 @@ class SignalGuard:
         How long the input must be dead without a break before the guard trips, s.
     floor : float
         Amplitude below which a block is silent (full scale 1).
+    step_hz : float, optional
+        The commanded step rate, Hz; when given, the guard also trips when the sound shows
+        no stepping at that rate for ``no_step_s`` (see the module docstring).
+    no_step_s : float
+        How long without a stepping line before the guard trips, s.
+    window_s : float
+        Length of audio judged at a time for the stepping line, s.
+    min_line_db : float
+        The step-rate line must stand this far above its neighbourhood, dB.
     """
 
     sample_rate: float
     hold_s: float = 0.2
     floor: float = 1e-6
     dead_s: float = 0.0
+    step_hz: float | None = None
+    no_step_s: float = 1.0
+    window_s: float = 0.25
+    min_line_db: float = 8.0
+    no_step_for_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        self._window: list[np.ndarray] = []
+        self._window_n = 0
 
     def check(self, block: ArrayLike) -> bool:
         """Account for one block: ``True`` if it is alive, ``False`` if it is dead.
@@ -75,6 +123,8 @@ class SignalGuard:
         problem = block_problem(x, self.floor)
         if problem is None:
             self.dead_s = 0.0
+            if self.step_hz:
+                self._check_stepping(x)
             return True
         self.dead_s += x.shape[0] / self.sample_rate
         if self.dead_s >= self.hold_s:
@@ -83,3 +133,28 @@ class SignalGuard:
                 "(is the microphone plugged in, switched on and not muted?); nothing was recorded"
             )
         return False
+
+    def restart_stepping_check(self) -> None:
+        """Forget the audio judged for stepping (call when stepping (re)starts after a pause)."""
+        self._window, self._window_n, self.no_step_for_s = [], 0, 0.0
+
+    def _check_stepping(self, x: np.ndarray) -> None:
+        assert self.step_hz is not None
+        self._window.append(np.asarray(x, dtype=np.float64).reshape(x.shape[0], -1).mean(axis=1))
+        self._window_n += x.shape[0]
+        need = int(self.window_s * self.sample_rate)
+        if self._window_n < need:
+            return
+        w = np.concatenate(self._window)
+        self._window, self._window_n = [], 0
+        line = step_line_db(w, self.sample_rate, self.step_hz)
+        if line >= self.min_line_db:
+            self.no_step_for_s = 0.0
+            return
+        self.no_step_for_s += w.size / self.sample_rate
+        if self.no_step_for_s >= self.no_step_s:
+            raise NoSignalError(
+                f"no stepping sound at {self.step_hz:g} Hz in the audio input for {self.no_step_for_s:.2f} s "
+                f"(the step-rate line is {line:.0f} dB above its neighbourhood, {self.min_line_db:g} dB needed): "
+                "is the microphone near the joint and is the controller stepping? nothing was recorded"
+            )

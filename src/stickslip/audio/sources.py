@@ -11,6 +11,7 @@ from __future__ import annotations
 import queue
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,15 +24,13 @@ class AudioSourceError(OSError):
     """An audio source that cannot be opened or read (the message says why)."""
 
 
-def _soundfile():
+def _soundfile() -> Any:
     try:
-        import soundfile
+        import soundfile  # type: ignore[import-untyped]  # soundfile ships no type stubs
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise AudioSourceError(f"reading WAV files needs soundfile; {_AUDIO_EXTRA}") from e
     except OSError as e:  # pragma: no cover - libsndfile missing
-        raise AudioSourceError(
-            f"soundfile cannot load libsndfile ({e}); apt-get install libsndfile1"
-        ) from e
+        raise AudioSourceError(f"soundfile cannot load libsndfile ({e}); apt-get install libsndfile1") from e
     return soundfile
 
 
@@ -131,21 +130,19 @@ class Microphone:
         self.channels = int(channels)
         self.overflows = 0
         self._queue: queue.Queue[np.ndarray] = queue.Queue()
-        self._stream = None
+        self._stream: Any = None
 
     @staticmethod
-    def _sounddevice():
+    def _sounddevice() -> Any:
         try:
-            import sounddevice
+            import sounddevice  # type: ignore[import-untyped]  # sounddevice ships no type stubs
         except ImportError as e:
             raise AudioSourceError(f"live input needs python-sounddevice; {_AUDIO_EXTRA}") from e
         except OSError as e:  # sounddevice raises OSError when PortAudio is absent
-            raise AudioSourceError(
-                f"PortAudio is not installed ({e}); apt-get install libportaudio2"
-            ) from e
+            raise AudioSourceError(f"PortAudio is not installed ({e}); apt-get install libportaudio2") from e
         return sounddevice
 
-    def _callback(self, indata, frames, time_info, status) -> None:  # PortAudio's thread
+    def _callback(self, indata: np.ndarray, frames: int, time_info: Any, status: Any) -> None:  # PortAudio's thread
         if status and getattr(status, "input_overflow", False):
             self.overflows += 1
         self._queue.put(indata.copy())
@@ -183,7 +180,7 @@ class Microphone:
     def __enter__(self) -> Microphone:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()
 
     def blocks(self, timeout_s: float = 2.0) -> Iterator[np.ndarray]:
@@ -194,7 +191,5 @@ class Microphone:
             try:
                 data = self._queue.get(timeout=timeout_s)
             except queue.Empty:
-                raise AudioSourceError(
-                    f"no audio from the microphone for {timeout_s:g} s"
-                ) from None
+                raise AudioSourceError(f"no audio from the microphone for {timeout_s:g} s") from None
             yield data.mean(axis=1) if data.ndim == 2 and data.shape[1] > 1 else data.reshape(-1)

@@ -115,7 +115,7 @@ def _unwrap(doc: str) -> str:
 
 
 _PANELS = {
-    "Measure": ("demo", "traverse", "tune", "listen"),
+    "Measure": ("demo", "traverse", "record", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
     "Drive a manipulator": ("move", "where", "reach", "jog"),
     "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),

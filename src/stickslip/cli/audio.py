@@ -1,17 +1,19 @@
-"""Audio limit switch commands: ``tune`` (from a labelled recording) and ``listen``."""
+"""Audio limit switch commands: ``record`` (a labelled recording), ``tune`` (from it) and ``listen``."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import typer
 
 from . import app
-from ._common import console, err_console, fail, print_json
+from ._common import console, err_console, fail, print_json, user_errors
 
 
-def _load_wav(path: Path):
+def _load_wav(path: Path) -> tuple[Any, int]:
     from ..audio.sources import AudioSourceError, read_wav
 
     try:
@@ -25,63 +27,76 @@ def tune(
     recording: Path = typer.Argument(
         ..., help="WAV recording: stepping, then stepping against the end stop.", metavar="REC.wav"
     ),
-    stop_at: float = typer.Option(
-        ..., "--stop-at", help="When the joint reached its stop, seconds from the start."
-    ),
+    stop_at: float = typer.Option(..., "--stop-at", help="When the joint reached its stop, seconds from the start."),
     out: Path = typer.Option(
-        ..., "-o", "--out", help="Where to write the tuning (JSON: band in Hz, threshold in dB re the broadband level)."
+        ..., "-o", "--out", help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB)."
     ),
     joint: int = typer.Option(None, "--joint", help="Joint 1, 2 or 3 the recording belongs to."),
     min_band: float = typer.Option(
         1400.0,
         "--min-band",
-        help="Narrowest band considered, Hz; keep it above your highest step rate.",
+        help="--method band only: narrowest band considered, Hz; keep it above your highest step rate.",
+    ),
+    method: str = typer.Option(
+        "template",
+        "--method",
+        help="'template' (the spectral-template change detector) or 'band' (the version-1 band-power detector).",
+    ),
+    self_check: bool = typer.Option(
+        True,
+        "--self-check/--no-self-check",
+        help="Check the tuning on the recording with knocks, babble, +-20 dB gain and a second click train added.",
     ),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
 ) -> None:
     """Tune the audio limit switch of one joint from a labelled recording.
 
-    Searches bands (1/6 to 1.5 octaves, at least --min-band Hz wide) for the one whose
-    level when stopped (5th percentile) most exceeds its level while stepping (99.5th
-    percentile), puts the threshold half-way between, checks that the tuned detector
-    fires once at the stop, and saves band (Hz), threshold (dB relative to the broadband level, so a
-    change of microphone gain does not move it) and latency (s).
+    Learns the stepping sound's spectral template (sub-bands over the band where stepping
+    is heard, never above 0.42 of the sample rate) and the end stop's signature: how
+    much each sub-band changes at the stop, in dB (louder, quieter, duller or brighter).
+    Candidates are scored on their worst stepping frames and verified best first on the
+    recording; a label that disagrees with where the sound changes is a warning, one
+    where nothing changes is refused. The self-check reports the expected false alarms
+    per hour with interference added, and the latency.
 
     Example: stickslip tune joint2.wav --stop-at 4.2 --joint 2 -o joint2-tuning.json
     """
-    from ..audio.tuning import TuningError
+    from ..audio.tuning import TuningError, tune_band
     from ..audio.tuning import tune as tune_
 
     if joint is not None and joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
+    if method not in ("template", "band"):
+        fail(f"--method must be 'template' or 'band', got {method!r}")
     samples, rate = _load_wav(recording)
     duration = samples.size / rate
     if not 0 < stop_at < duration:
         fail(f"--stop-at {stop_at:g} s is outside the recording (0..{duration:.3f} s)")
     try:
-        tuning = tune_(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
+        if method == "band":
+            tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
+        else:
+            tuning = tune_(samples, rate, stop_at, joint=joint, self_check=self_check)
     except TuningError as e:
         fail(f"{recording}: {e}")
     try:
         tuning.save(out)
     except OSError as e:
         fail(f"cannot write {out}: {e.strerror or e}")
+    for w in (tuning.checks or {}).get("warnings", []):
+        err_console.print(f"warning: {w}", highlight=False, soft_wrap=True)
     if json_out:
         print_json(tuning.to_dict())
         return
     console.print(f"[bold]tuning for {recording}[/] (joint {joint if joint else '?'})")
-    console.print(tuning.report(), highlight=False)
-    console.print(f"saved to {out}")
+    console.print(tuning.report(), highlight=False, soft_wrap=True)
+    console.print(f"saved to {out}", soft_wrap=True)
 
 
 @app.command()
 def listen(
-    recording: Path = typer.Argument(
-        None, help="WAV file to listen to (or use --mic).", metavar="[REC.wav]"
-    ),
-    tuning_path: Path = typer.Option(
-        ..., "--tuning", help="Tuning JSON written by 'stickslip tune'."
-    ),
+    recording: Path = typer.Argument(None, help="WAV file to listen to (or use --mic).", metavar="[REC.wav]"),
+    tuning_path: Path = typer.Option(..., "--tuning", help="Tuning JSON written by 'stickslip tune'."),
     mic: bool = typer.Option(False, "--mic", help="Listen live to the microphone until Ctrl-C."),
     device: str = typer.Option(
         None,
@@ -119,34 +134,46 @@ def listen(
         _listen_live(tuning, device, json_out)
         return
 
+    from ..audio.guard import block_problem
     from ..audio.sources import AudioSourceError, wav_blocks
 
+    if tuning.method == "band":
+        err_console.print(
+            f"note: {tuning_path} is a version-1 band-power tuning; re-tune with 'stickslip tune' for the "
+            "spectral-template detector (it rejects knocks and hears quieter or duller stops)",
+            highlight=False,
+        )
     events = []
+    problems: set[str | None] = set()
     try:
         det = None
-        for block, rate in wav_blocks(recording, block=4096):
+        for block, rate in wav_blocks(recording, block=1 << 16):
             if det is None:
                 try:
                     det = StopDetector(tuning.for_sample_rate(rate))
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
+            problems.add(block_problem(block))
             events += det.feed(block)
-    except AudioSourceError as e:
-        fail(str(e))
+    except AudioSourceError as err:
+        fail(str(err))
+    if problems and None not in problems:
+        err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
     if json_out:
         print_json([e.to_dict() for e in events])
         return
     if not events:
         console.print("no end stop heard")
-    for e in events:
+    for ev in events:
         console.print(
-            f"stop: detected at {e.detected_at_s:.4f} s, onset {e.onset_s:.4f} s, "
-            f"level {e.level_db:.1f} {tuning.level_unit}",
+            f"stop: detected at {ev.detected_at_s:.4f} s, onset {ev.onset_s:.4f} s, "
+            f"level {ev.level_db:.2f} {tuning.level_unit}",
             highlight=False,
+            soft_wrap=True,
         )
 
 
-def _listen_live(tuning, device: str | None, json_out: bool) -> None:
+def _listen_live(tuning: Any, device: str | None, json_out: bool) -> None:
     from ..audio.detector import StopDetector
     from ..audio.sources import AudioSourceError, Microphone
 
@@ -155,24 +182,219 @@ def _listen_live(tuning, device: str | None, json_out: bool) -> None:
     det = StopDetector(tuning)
     try:
         mic.start()
-    except AudioSourceError as e:
-        fail(str(e))
+    except AudioSourceError as err:
+        fail(str(err))
     if not json_out:
         err_console.print(f"listening at {tuning.sample_rate} Hz; Ctrl-C to stop")
     try:
         for block in mic.blocks():
-            for e in det.feed(block):
+            for ev in det.feed(block):
                 if json_out:
-                    typer.echo(json.dumps(e.to_dict()))
+                    typer.echo(json.dumps(ev.to_dict()))
                 else:
                     console.print(
-                        f"stop: detected at {e.detected_at_s:.3f} s, onset {e.onset_s:.3f} s, "
-                        f"level {e.level_db:.1f} {tuning.level_unit}",
+                        f"stop: detected at {ev.detected_at_s:.3f} s, onset {ev.onset_s:.3f} s, "
+                        f"level {ev.level_db:.2f} {tuning.level_unit}",
                         highlight=False,
+                        soft_wrap=True,
                     )
     except KeyboardInterrupt:
         pass
-    except AudioSourceError as e:
-        fail(str(e))
+    except AudioSourceError as err:
+        fail(str(err))
     finally:
         mic.stop()
+
+
+@app.command()
+def record(
+    out: Path = typer.Argument(
+        ..., help="WAV file to write (a JSON label file is written beside it).", metavar="OUT.wav"
+    ),
+    joint: int = typer.Option(..., "--joint", help="Joint 1, 2 or 3 to drive into its end stop."),
+    direction: str = typer.Option("+", "--direction", "-d", help="'+' (towards the upper stop) or '-'."),
+    device: str = typer.Option(
+        "sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."
+    ),
+    audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
+    steps: int = typer.Option(None, "--steps", help="Real controller: steps to issue in all (past the stop)."),
+    stop_at_step: int = typer.Option(
+        None, "--stop-at-step", help="Real controller: the step count at which the joint reaches its stop (the label)."
+    ),
+    key: bool = typer.Option(
+        False, "--key", help="Real controller: label the stop by pressing Enter when you hear it."
+    ),
+    before: float = typer.Option(2.0, "--before", help="Simulator: seconds of stepping before the stop."),
+    after: float = typer.Option(1.0, "--after", help="Simulator: seconds against the stop."),
+    tune_out: Path = typer.Option(None, "--tune", help="Also tune from the recording and write the tuning here."),
+    json_out: bool = typer.Option(False, "--json", help="Print the label (and tuning) as JSON."),
+) -> None:
+    """Record a joint stepping into its end stop, labelled, for 'stickslip tune'.
+
+    On the simulator (sim://) the joint is placed --before seconds from its stop and the
+    label is the simulator's own stop time. On a real controller the joint steps --steps
+    steps at its set frequency while the sound card records; the label is the time of
+    step --stop-at-step (you know the joint's travel in steps), or the moment you press
+    Enter (--key; your reaction time, ~0.2 s, makes it late: tune corrects a label that
+    disagrees with the sound and says so). A live meter shows the input level (dBFS).
+
+    Example: stickslip record j2.wav --joint 2 --device sim://?seed=3 --tune j2-tuning.json
+    """
+    from ..audio.sources import AudioSourceError, write_wav
+    from ..devices import DeviceError, open_device
+    from ..models import direction_label
+
+    if joint not in (1, 2, 3):
+        fail(f"--joint must be 1, 2 or 3, got {joint}")
+    try:
+        sign_label = direction_label(direction)
+    except ValueError as e:
+        fail(str(e))
+    with user_errors(DeviceError, AudioSourceError):
+        ctrl = open_device(device)
+        try:
+            if hasattr(ctrl, "labelled_recording"):
+                if not (0.3 <= before <= 60 and 0.3 <= after <= 60):
+                    fail("--before and --after must be 0.3-60 s")
+                samples, rate, stop_at = ctrl.labelled_recording(joint, sign_label, before_s=before, after_s=after)
+                how = "the simulator's stop time"
+            else:
+                samples, rate, stop_at, how = _record_real(
+                    ctrl, joint, sign_label, steps, stop_at_step, key, audio_input
+                )
+        finally:
+            ctrl.close()
+    try:
+        write_wav(out, samples, rate)
+        label = {
+            "recording": str(out),
+            "stop_at_s": round(float(stop_at), 6),
+            "sample_rate_hz": int(rate),
+            "joint": joint,
+            "direction": sign_label,
+            "label_from": how,
+        }
+        out.with_suffix(".json").write_text(json.dumps(label, indent=2) + "\n", encoding="utf-8")
+    except OSError as e:
+        fail(f"cannot write {out}: {e.strerror or e}")
+    result: dict[str, object] = {"label": label}
+    if tune_out is not None:
+        from ..audio.tuning import TuningError
+        from ..audio.tuning import tune as tune_
+
+        try:
+            tuning = tune_(samples, rate, float(stop_at), joint=joint)
+            tuning.save(tune_out)
+        except TuningError as e:
+            fail(f"{out}: {e}")
+        except OSError as e:
+            fail(f"cannot write {tune_out}: {e.strerror or e}")
+        result["tuning"] = tuning.to_dict()
+        for w in (tuning.checks or {}).get("warnings", []):
+            err_console.print(f"warning: {w}", highlight=False, soft_wrap=True)
+    if json_out:
+        print_json(result)
+        return
+    console.print(
+        f"recorded {samples.size / rate:.2f} s at {rate} Hz to {out}; stop at {stop_at:.3f} s ({how})",
+        highlight=False,
+        soft_wrap=True,
+    )
+    if tune_out is None:
+        console.print(
+            f"next: stickslip tune {out} --stop-at {stop_at:.3f} --joint {joint} -o tuning-joint{joint}.json",
+            highlight=False,
+            soft_wrap=True,
+        )
+    else:
+        console.print(f"tuned and saved to {tune_out}", soft_wrap=True)
+
+
+def _record_real(
+    ctrl: Any,
+    joint: int,
+    direction: str,
+    steps: int | None,
+    stop_at_step: int | None,
+    key: bool,
+    audio_input: str | None,
+) -> tuple[Any, int, float, str]:
+    """Step a real controller into its stop while the sound card records; a level meter on stderr."""
+    import threading
+    import time
+
+    import numpy as np
+
+    from ..audio.sources import Microphone
+
+    if steps is None or steps < 1:
+        fail("a real controller needs --steps (how many to issue, past the stop)")
+    if (stop_at_step is None) == (not key):
+        fail("give --stop-at-step N or --key to label the stop")
+    if stop_at_step is not None and not 1 <= stop_at_step < steps:
+        fail(f"--stop-at-step must be 1..{steps - 1}")
+    hz = float(ctrl.frequency(joint))
+    dev: int | str | None = int(audio_input) if audio_input is not None and audio_input.isdigit() else audio_input
+    mic = Microphone(sample_rate=48_000, block=1024, device=dev).start()
+    pressed: list[float] = []
+    t0 = time.monotonic()
+    if key:
+
+        def wait_for_enter() -> None:
+            input()
+            pressed.append(time.monotonic() - t0)
+
+        threading.Thread(target=wait_for_enter, daemon=True).start()
+        err_console.print("press Enter when you hear the stop")
+    blocks: list[Any] = []
+    sign = 1 if direction == "+" else -1
+    try:
+        t_first = time.monotonic() - t0
+        burst = max(1, int(hz * 0.1))
+        issued = 0
+        while issued < steps:
+            n = min(burst, steps - issued)
+            tb = time.monotonic()
+            ctrl.step(joint, sign * n)
+            issued += n
+            for b in _drain(mic, tb + n / hz):
+                blocks.append(b)
+                _meter(b)
+        blocks += list(_drain(mic, time.monotonic() + 0.3))
+        ctrl.stop(joint)
+    finally:
+        mic.stop()
+        err_console.print()
+    samples = np.concatenate(blocks) if blocks else np.zeros(0, np.float32)
+    if key:
+        if not pressed:
+            fail("no key press: the stop was not labelled")
+        return samples, 48_000, pressed[0], "a key press"
+    assert stop_at_step is not None
+    return samples, 48_000, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
+
+
+def _drain(mic: Any, until: float) -> Iterator[Any]:
+    import queue
+    import time
+
+    while True:
+        left = until - time.monotonic()
+        try:
+            data = mic._queue.get(timeout=max(left, 0.0) + 0.01)
+        except queue.Empty:
+            if left <= 0:
+                return
+            continue
+        yield data.mean(axis=1) if data.ndim == 2 else data.reshape(-1)
+
+
+def _meter(block: Any) -> None:
+    """One line on stderr: the block's level in dBFS as a bar."""
+    import math
+
+    import numpy as np
+
+    level = 10 * math.log10(float(np.mean(np.square(block, dtype=np.float64))) + 1e-20)
+    n = int(max(0.0, min(50.0, (level + 90.0) / 90.0 * 50.0)))
+    err_console.print(f"\r{level:6.1f} dBFS |{'#' * n}{' ' * (50 - n)}|", end="", highlight=False)

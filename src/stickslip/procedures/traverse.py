@@ -135,7 +135,7 @@ class _Listener:
     at the controller clock when listening first starts, and to run continuously.
     """
 
-    def __init__(self, detector: Any, audio_blocks: Any, sample_rate: float):
+    def __init__(self, detector: Any, audio_blocks: Any, sample_rate: float, step_hz: float | None = None):
         self.detector = detector
         self.sample_rate = float(sample_rate)
         self._callable = callable(audio_blocks) and not isinstance(audio_blocks, Iterator)
@@ -145,7 +145,8 @@ class _Listener:
         # a dead input must never look like a stop; only a detector that declares it does not
         # listen to the samples (the simulator's oracle) is exempt
         listens = getattr(detector, "uses_audio", True)
-        self.guard = SignalGuard(self.sample_rate) if listens else None
+        # ... and the joint's stepping must be heard at the commanded rate
+        self.guard = SignalGuard(self.sample_rate, step_hz=step_hz) if listens else None
 
     def start(self, t0_s: float) -> None:
         """Begin listening at stream time ``t0_s``: drop older audio, reset the detector."""
@@ -165,6 +166,8 @@ class _Listener:
                     block = block[0]
                 self.t_s += len(block) / self.sample_rate
         self.detector.reset(self.t_s)
+        if self.guard is not None:
+            self.guard.restart_stepping_check()
 
     def _blocks(self, until_s: float) -> Iterable[np.ndarray]:
         if self._callable:
@@ -344,7 +347,7 @@ def measure_traverse(
             def clock() -> float:
                 return time.monotonic() - w0
 
-    listener = _Listener(detector, audio_blocks, _sample_rate(detector, audio_blocks))
+    listener = _Listener(detector, audio_blocks, _sample_rate(detector, audio_blocks), step_hz=hz)
 
     # 1. to the start stop
     predrive_steps = 0

@@ -1,0 +1,408 @@
+"""The spectral-template change detector: an end stop is a lasting departure from stepping.
+
+While a joint steps, its sound has a steady spectral signature: per frame (``frame``
+samples every ``hop``), the level of each of ``B`` sub-bands spanning the stepping
+sound's band, ``v_b`` in dB. The detector keeps a *running template* ``T_b`` of that
+signature (the median of the first frames, then an exponential average with time
+constant ``tau_s``, frozen while the sound departs from it) and reads every frame as a
+departure ``d_b = v_b - T_b`` (dB). Because the template follows the input, a microphone
+gain, a distance or a step rate that differs from the tuning recording's cancels.
+
+Tuning measured the end stop's own departure, the *signature* ``delta_b`` (dB per
+sub-band: positive where the stop is louder, negative where it is quieter, so louder,
+quieter, duller and brighter stops are all one case), and the frame-to-frame spread
+``sigma_b`` of stepping. Each frame is fitted as ``d = a * delta + e`` by weighted least
+squares (weights ``1 / sigma_b**2``), trimmed: the ``trim`` sub-bands that fit worst are
+dropped and the fit repeated, so a voice or a fan that covers a few sub-bands does not
+move ``a``. Two numbers come out per frame:
+
+* ``a``, the *stop-likeness*: 0 while stepping, 1 at a stop like the tuning's;
+* ``rho``, the root-mean-square of the kept residuals in units of ``sigma_b``: how
+  unlike *both* stepping and the stop the frame is (a knock, a door slam).
+
+A frame is *hot* when ``a >= threshold`` and ``rho <= residual_max``. The detector
+fires when ``hold`` of the last ``hold + max_dips`` frames were hot, the current one
+included, and the current ``a`` has not decayed below ``decay_ratio`` of the largest in
+that window (a transient rings down, a stop does not). It then stays latched until
+``a`` has stayed below ``threshold - hysteresis`` for ``release_s``.
+
+Everything that changes the detector's state happens at frame boundaries counted from
+the stream start (the template is updated every :data:`CHUNK` frames), so the events do
+not depend on how the stream is cut into blocks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "CHUNK",
+    "QUANTILE",
+    "TemplateParams",
+    "TemplateState",
+    "fit_departure",
+    "subband_edges",
+    "subband_levels_db",
+]
+
+#: template update period and warm-up unit, frames
+CHUNK = 64
+#: the template tracks this quantile of the stepping levels: interference only adds sound, so a
+#: low quantile follows the stepping sound under intermittent speech, knocks or a second instrument
+QUANTILE = 0.3
+#: a chunk whose median residual exceeds this many times ``residual_max`` re-learns the template
+STALE_RESIDUAL = 2.0
+#: residual allowance per unit of fitted departure (see :func:`fit_departure`)
+RESIDUAL_SLOPE = 0.35
+_FLOOR = 1e-20
+_CLIP_DB = 40.0
+
+FloatArray = NDArray[np.float64]
+
+
+def subband_edges(lo_hz: float, hi_hz: float, sample_rate: int, frame: int, per_octave: float = 3.0) -> list[float]:
+    """Edges of log-spaced sub-bands from ``lo_hz`` to ``hi_hz``, each at least two bins wide, Hz."""
+    bin_hz = sample_rate / frame
+    edges = [float(lo_hz)]
+    step = 2 ** (1 / per_octave)
+    while edges[-1] < hi_hz:
+        nxt = max(edges[-1] * step, edges[-1] + 2 * bin_hz)
+        if hi_hz - nxt < 2 * bin_hz:
+            nxt = hi_hz
+        edges.append(float(min(nxt, hi_hz)))
+    return [round(e, 1) for e in edges]
+
+
+def _bins(edges: tuple[float, ...] | list[float], sample_rate: int, frame: int) -> NDArray[np.intp]:
+    freqs = np.fft.rfftfreq(frame, 1 / sample_rate)
+    idx = np.searchsorted(freqs, np.asarray(edges, dtype=np.float64), side="left")
+    return np.asarray(idx, dtype=np.intp)
+
+
+def window(frame: int) -> tuple[FloatArray, float]:
+    """Periodic Hann window and the scale that makes one-sided bins sum to the mean square."""
+    w = np.hanning(frame + 1)[:-1]
+    return w, 2.0 / (frame * float(np.sum(w**2)))
+
+
+def levels_from_frames(frames: FloatArray, w: FloatArray, scale: float, idx: NDArray[np.intp]) -> FloatArray:
+    """Sub-band levels (frames x bands), dB, of windowed frames; ``idx`` are bin edges.
+
+    Single precision FFTs in cache-sized chunks: the levels are good to far better than
+    0.01 dB, and this is most of the detector's cost.
+    """
+    from scipy import fft as sfft  # type: ignore[import-untyped]  # scipy ships no type stubs
+
+    n = frames.shape[0]
+    nb = idx.size - 1
+    out = np.empty((n, nb))
+    w32 = w.astype(np.float32)
+    lo, hi = int(idx[0]), int(idx[-1])
+    starts = (idx[:-1] - lo).astype(np.intp)
+    for f0 in range(0, n, 1024):
+        seg = np.asarray(frames[f0 : f0 + 1024], dtype=np.float32) * w32
+        spec = sfft.rfft(seg, axis=1)[:, lo:hi]
+        p = spec.real**2 + spec.imag**2
+        band = np.add.reduceat(p, starts, axis=1, dtype=np.float64) * scale
+        empty = idx[1:] <= idx[:-1]
+        if empty.any():
+            band[:, empty] = 0.0
+        out[f0 : f0 + 1024] = 10 * np.log10(band + _FLOOR)
+    return out
+
+
+def subband_levels_db(
+    samples: NDArray[np.floating] | FloatArray,
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    edges: tuple[float, ...] | list[float],
+) -> FloatArray:
+    """Sub-band levels of every frame of a recording (frames x bands), dBFS.
+
+    Frame ``i`` covers samples ``[i*hop, i*hop + frame)``.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    idx = _bins(edges, sample_rate, frame)
+    nb = len(edges) - 1
+    if x.size < frame:
+        return np.zeros((0, nb))
+    w, scale = window(frame)
+    view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
+    out = np.empty((view.shape[0], nb))
+    for f0 in range(0, view.shape[0], 4096):
+        out[f0 : f0 + 4096] = levels_from_frames(view[f0 : f0 + 4096], w, scale, idx)
+    return out
+
+
+def fit_departure(d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int) -> tuple[FloatArray, FloatArray]:
+    """Stop-likeness ``a`` and residual ``rho`` of departures ``d`` (frames x bands, dB).
+
+    Weighted least squares ``d = a * delta + e`` (weights ``1/sigma**2``), then the same
+    with the ``trim`` bands of each frame that have the most unexplained *excess* dropped
+    (interference adds sound; a band whose expected rise is missing is evidence against a
+    stop and is never dropped). ``rho`` is the RMS of the kept residuals in units of
+    ``sigma``, less :data:`RESIDUAL_SLOPE` times the signature's RMS (in units of ``sigma``)
+    times ``a``: the residual a stop of that size may have (another step rate moves the
+    lines of its sound).
+    """
+    return _Fitter(delta, sigma, trim)(d)
+
+
+class _Fitter:
+    """:func:`fit_departure` with the signature's constants computed once."""
+
+    def __init__(self, delta: FloatArray, sigma: FloatArray, trim: int) -> None:
+        self.inv_sigma = 1.0 / np.asarray(sigma, dtype=np.float64)
+        self.g = np.asarray(delta, dtype=np.float64) * self.inv_sigma
+        self.g2 = self.g**2
+        self.gg = float(self.g2.sum())
+        self.slope = RESIDUAL_SLOPE * float(np.sqrt(np.mean(self.g2)))
+        self.trim = int(trim)
+
+    def __call__(self, d: FloatArray) -> tuple[FloatArray, FloatArray]:
+        g = self.g
+        z = np.clip(d, -_CLIP_DB, _CLIP_DB) * self.inv_sigma
+        a = (z @ g) / self.gg
+        if self.trim > 0:
+            r = z - a[:, None] * g
+            if self.trim == 1:
+                kth = r.max(axis=1, keepdims=True)
+            else:
+                kth = -np.partition(-r, self.trim - 1, axis=1)[:, self.trim - 1 : self.trim]
+            keep = r < kth  # ties (rare) drop one band more
+            keep |= ~keep.any(axis=1, keepdims=True)  # all tied (a constant input): keep every band
+            zk = z * keep
+            a = (zk @ g) / np.maximum(keep @ self.g2, 1e-12)
+            res = zk - (a[:, None] * g) * keep
+            rho = np.sqrt(np.einsum("ij,ij->i", res, res) / keep.sum(axis=1))
+        else:
+            res = z - a[:, None] * g
+            rho = np.sqrt(np.einsum("ij,ij->i", res, res) / z.shape[1])
+        rho = rho - self.slope * np.maximum(a, 0.0)
+        return a, rho
+
+
+@dataclass(frozen=True)
+class TemplateParams:
+    """What the template detector needs (a view of :class:`~stickslip.audio.detector.Tuning`)."""
+
+    sample_rate: int
+    frame: int
+    hop: int
+    edges_hz: tuple[float, ...]
+    signature_db: tuple[float, ...]
+    spread_db: tuple[float, ...]
+    threshold: float
+    residual_max: float
+    hold_frames: int
+    max_dips: int
+    release_frames: int
+    hysteresis: float
+    decay_ratio: float
+    tau_s: float
+    warmup_chunks: int
+    trim: int
+    onset_lag_s: float
+    stepping_levels_db: tuple[float, ...] | None = None
+
+
+@dataclass
+class Decision:
+    """One fired event, in the template detector's own terms."""
+
+    end_sample: int
+    cross_t_s: float
+    a: float
+
+
+class TemplateState:
+    """The streaming state of the template detector (see the module docstring).
+
+    :meth:`process` takes the sub-band levels of consecutive frames and their end-sample
+    indices and returns the decisions that fired.
+    """
+
+    def __init__(self, p: TemplateParams, t0_s: float = 0.0) -> None:
+        self.p = p
+        #: set to a list to collect every frame's stop-likeness (NaN while warming up)
+        self.trace: list[float] | None = None
+        self.delta = np.asarray(p.signature_db, dtype=np.float64)
+        self.sigma = np.asarray(p.spread_db, dtype=np.float64)
+        self._fit = _Fitter(self.delta, self.sigma, p.trim)
+        self.reset(t0_s)
+
+    def reset(self, t0_s: float = 0.0) -> None:
+        """Forget the template and every decision."""
+        self.t0 = float(t0_s)
+        self.frame_no = 0
+        self.template: FloatArray | None = None
+        self._warm: list[FloatArray] = []
+        self._acc_list: list[FloatArray] = []
+        self._acc_n = 0
+        self._chunk_rho: list[FloatArray] = []
+        self._chunk_v: list[FloatArray] = []
+        self.mask = 0
+        self.recent: list[float] = []
+        self.latched = False
+        self.below = 0
+        self.prev_a = -math.inf
+        self.cross_t = math.nan
+        self.last_a = 0.0
+        self.last_rho = 0.0
+        self._pending: list[Decision] = []
+
+    @property
+    def warming(self) -> bool:
+        """True until the template has been learned from the first frames."""
+        return self.template is None or self.frame_no < self.p.warmup_chunks * CHUNK
+
+    def process(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
+        """Consume the levels ``v`` (frames x bands, dB) of the next frames; ends are sample indices."""
+        out: list[Decision] = []
+        i = 0
+        n = v.shape[0]
+        while i < n:
+            room = CHUNK - self.frame_no % CHUNK
+            j = min(n, i + room)
+            out += self._segment(v[i:j], ends[i:j])
+            self.frame_no += j - i
+            i = j
+            if self.frame_no % CHUNK == 0:
+                self._chunk_done(int(ends[j - 1]))
+                out += self._pending
+                self._pending = []
+        return out
+
+    def _chunk_done(self, end: int) -> None:
+        p = self.p
+        if self.frame_no <= p.warmup_chunks * CHUNK:
+            self.template = np.percentile(np.concatenate(self._warm), 100 * QUANTILE, axis=0)
+            if self.frame_no == p.warmup_chunks * CHUNK:
+                self._warm = []
+                self._started_at_stop(end)
+            return
+        if self._chunk_rho and not self.latched and self.template is not None:
+            rho_all = np.concatenate(self._chunk_rho)
+            mid = rho_all.size // 2
+            if rho_all.size >= CHUNK // 2 and float(np.partition(rho_all, mid)[mid]) > STALE_RESIDUAL * p.residual_max:
+                self.template = np.percentile(np.concatenate(self._chunk_v), 100 * QUANTILE, axis=0)
+                self._acc_n = 0
+        self._chunk_rho, self._chunk_v = [], []
+        if self._acc_n and self.template is not None and not self.latched:
+            acc = np.concatenate(self._acc_list)
+            k = int(QUANTILE * (acc.shape[0] - 1))
+            q = np.partition(acc, k, axis=0)[k]
+            alpha = 1.0 - math.exp(-self._acc_n * p.hop / p.sample_rate / p.tau_s)
+            self.template = self.template + alpha * q
+        self._acc_list = []
+        self._acc_n = 0
+
+    def _started_at_stop(self, end: int) -> None:
+        """Was the stop there from the start? Compare the learned template with the tuning's stepping.
+
+        The first frames' template ``T`` minus the tuning's stepping levels is fitted as a
+        gain offset (the same in every sub-band) plus ``b`` times the stop's signature;
+        ``b`` at or above the threshold means the detector began listening at the stop: it
+        fires at once (onset: the start of listening) and takes ``T - b * delta`` as the
+        stepping template. A signature that is a gain change only (a uniformly quieter
+        stop) cannot be told from a gain change this way and is taken as stepping.
+        """
+        p = self.p
+        if p.stepping_levels_db is None or self.template is None:
+            return
+        w = 1.0 / self.sigma**2
+        X = np.stack((np.ones_like(self.delta), self.delta), axis=1)
+        y = self.template - np.asarray(p.stepping_levels_db)
+        A = X.T @ (X * w[:, None])
+        if np.linalg.cond(A) > 1e6:
+            return
+        c, b = np.linalg.solve(A, X.T @ (w * y))
+        shape = self.delta - float(np.sum(w * self.delta) / np.sum(w))
+        if float(np.sqrt(np.mean((shape / self.sigma) ** 2))) < 1.0:
+            return  # the stop is (nearly) a gain change: undecidable from levels alone
+        # demand a clear case: the stop explains most of what a gain change leaves, and fits well
+        r_gain = (y - float(np.sum(w * y) / np.sum(w))) / self.sigma
+        r_both = (y - X @ np.array([c, b])) / self.sigma
+        clear = float(np.sum(r_both**2)) <= 0.25 * float(np.sum(r_gain**2))
+        fits = float(np.sqrt(np.mean(r_both**2))) <= 2.0 + RESIDUAL_SLOPE * b * float(
+            np.sqrt(np.mean((self.delta / self.sigma) ** 2))
+        )
+        if b >= max(p.threshold, 0.6) and clear and fits and float(np.min(self.template)) > -150.0:
+            self.template = self.template - b * self.delta
+            self.latched = True
+            self.below = 0
+            self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(b)))  # onset: the start
+
+    def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
+        p = self.p
+        if self.frame_no < p.warmup_chunks * CHUNK or self.template is None:
+            self._warm.append(v.copy())
+            if self.trace is not None:
+                self.trace.extend([math.nan] * v.shape[0])
+            return []
+        d = v - self.template
+        a, rho = self._fit(d)
+        self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
+        if self.trace is not None:
+            self.trace.extend(a.tolist())
+        # the template follows stepping only: frames that look like stepping, clipped
+        # the template follows every frame that is not stop-like (the low quantile taken per chunk
+        # ignores knocks and voices); a chunk that fits neither stepping nor the stop at all means
+        # the template is stale (listening began in silence, the microphone moved): learn it anew
+        quiet = a < 0.3 * p.threshold
+        if quiet.any():
+            self._acc_list.append(d[quiet])
+            self._acc_n += int(quiet.sum())
+        self._chunk_rho.append(rho)
+        self._chunk_v.append(v)
+        hot = (a >= p.threshold) & (rho <= p.residual_max)
+        if not self.latched and self.mask == 0 and not hot.any():
+            self.prev_a = float(a[-1])
+            return []
+        return self._decide(a, hot, ends)
+
+    def _decide(self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64]) -> list[Decision]:
+        p = self.p
+        sr, H = p.sample_rate, p.hop
+        full = (1 << (p.hold_frames + p.max_dips)) - 1
+        window_n = p.hold_frames + p.max_dips
+        rel = p.threshold - p.hysteresis
+        out: list[Decision] = []
+        prev = self.prev_a
+        for ai, hi, end in zip(a.tolist(), hot.tolist(), ends.tolist(), strict=True):
+            if self.latched:
+                if ai < rel:
+                    self.below += 1
+                    if self.below >= p.release_frames:
+                        self.latched = False
+                        self.mask = 0
+                        self.recent = []
+                else:
+                    self.below = 0
+            else:
+                if hi and (
+                    self.mask == 0 or (not self.mask & 1 and self.mask.bit_count() < max(1, p.hold_frames // 2))
+                ):
+                    # the latest upward crossing that starts a run (a lone earlier hot frame is forgotten)
+                    t_end = self.t0 + end / sr
+                    if math.isfinite(prev) and prev < p.threshold and ai > prev:
+                        frac = (p.threshold - prev) / (ai - prev)
+                        self.cross_t = float(t_end - (1 - frac) * H / sr)
+                    else:
+                        self.cross_t = t_end
+                self.mask = ((self.mask << 1) | int(hi)) & full
+                self.recent = (self.recent + [ai])[-window_n:]
+                if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):
+                    self.latched = True
+                    self.below = 0
+                    out.append(Decision(int(end), self.cross_t, float(ai)))
+                if self.mask == 0:
+                    self.recent = []
+            prev = ai
+        self.prev_a = prev
+        return out

@@ -1,0 +1,125 @@
+"""The limit switch on other sensors: an accelerometer's vibration stream and a position read-back.
+
+The vibration is written here, by a generator of its own (not the sound synthesisers): an
+accelerometer on the arm's base at 25 kHz, in vacuum (no room sound; a turbo pump's
+lines and the sensor's noise instead). Each step is a half-sine force pulse of 40 us
+driving three structural modes (decaying 2-5 ms); at the end stop the slider rests on
+the stop, which stiffens the structure: the second mode moves up by 25 % and the pulse
+transmits 4 dB more. Samples are in m/s^2 with a +-50 m/s^2 full scale.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from stickslip.audio.detector import StopDetector, detect
+from stickslip.audio.sources import AudioSourceError, write_wav
+from stickslip.audio.tuning import tune
+from stickslip.audio.vibration import ReadbackStopDetector, SerialSamples, read_vibration
+
+SR = 25_000
+
+
+def accel(rate: float, stop_at: float, dur: float, seed: int, gain: float = 1.0) -> np.ndarray:
+    """Acceleration, m/s^2, of the arm's base while stepping at ``rate`` Hz into the stop at ``stop_at`` s."""
+    rng = np.random.default_rng(seed)
+    n = int(dur * SR)
+    t_steps = np.arange(0.0, dur, 1 / rate) + rng.normal(0, 10e-6, int(np.ceil(dur * rate)))
+    t_steps = t_steps[(t_steps >= 0) & (t_steps < dur)]
+    out = np.zeros(n)
+    for at_stop in (False, True):
+        sel = (t_steps >= stop_at) == at_stop
+        x = np.zeros(n)
+        x[(t_steps[sel] * SR).astype(int)] = rng.uniform(0.85, 1.15, int(sel.sum())) * (1.58 if at_stop else 1.0)
+        x = np.convolve(x, np.sin(np.pi * np.arange(2) / 2) + 0.5)[:n]  # ~40 us half-sine pulse
+        for k, (f, tau, g) in enumerate(((1300.0, 5e-3, 1.0), (3400.0, 3e-3, 0.8), (7100.0, 2e-3, 0.5))):
+            if at_stop and k == 1:
+                f *= 1.25
+            r = np.exp(-1 / (tau * SR))
+            out += g * lfilter([1.0], [1, -2 * r * np.cos(2 * np.pi * f / SR), r * r], x)
+    t = np.arange(n) / SR
+    out *= 2.0 / np.std(out[: int(stop_at * SR)])  # ~2 m/s^2 RMS while stepping
+    out += sum(0.05 * np.sin(2 * np.pi * 833.3 * k * t + k) for k in (1, 2, 3))  # turbo pump lines
+    out += 0.02 * rng.standard_normal(n)  # sensor noise
+    return gain * out
+
+
+def _csv(path, x: np.ndarray, with_time: bool) -> None:
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(f"# accelerometer, m/s^2\n# sample_rate_hz={SR}\n")
+        f.write("time_s,accel\n" if with_time else "accel\n")
+        for i, v in enumerate(x):
+            f.write(f"{i / SR:.7f},{v:.5f}\n" if with_time else f"{v:.5f}\n")
+
+
+def test_the_same_detector_on_a_vibration_stream_from_csv_and_wav(tmp_path):
+    _csv(tmp_path / "train.csv", accel(1000.0, 2.0, 3.0, seed=1), with_time=False)
+    x, rate = read_vibration(tmp_path / "train.csv", full_scale=50.0)
+    assert rate == SR and np.max(np.abs(x)) < 1.0
+    tu = tune(x, rate, 2.0)
+    assert tu.edges_hz[-1] <= 0.42 * SR
+    lat = []
+    for k, (r, stop_at, gain, with_time) in enumerate(((900.0, 1.4, 0.5, True), (1150.0, 1.1, 2.0, False))):
+        _csv(tmp_path / f"test{k}.csv", accel(r, stop_at, stop_at + 0.5, seed=10 + k, gain=gain), with_time)
+        y, _ = read_vibration(tmp_path / f"test{k}.csv", full_scale=50.0)
+        (ev,) = detect(y, tu)
+        assert abs(ev.onset_s - stop_at) <= 0.025
+        lat.append(ev.detected_at_s - stop_at)
+    write_wav(tmp_path / "test.wav", accel(1000.0, 1.3, 1.8, seed=20) / 50.0, SR)
+    y, _ = read_vibration(tmp_path / "test.wav")
+    (ev,) = detect(y, tu)
+    assert abs(ev.onset_s - 1.3) <= 0.025
+    assert max(lat) <= 0.050
+
+
+def test_read_vibration_refuses_what_it_cannot_use(tmp_path):
+    (tmp_path / "norate.csv").write_text("1\n2\n3\n")
+    with pytest.raises(AudioSourceError, match="no sample rate"):
+        read_vibration(tmp_path / "norate.csv")
+    (tmp_path / "jitter.csv").write_text("0,1\n0.001,2\n0.0015,3\n")
+    with pytest.raises(AudioSourceError, match="not uniformly spaced"):
+        read_vibration(tmp_path / "jitter.csv")
+    (tmp_path / "bad.csv").write_text("# sample_rate_hz=10000\n1\nx\n")
+    with pytest.raises(AudioSourceError, match="bad.csv:3: not a number"):
+        read_vibration(tmp_path / "bad.csv")
+    with pytest.raises(AudioSourceError, match="no such file"):
+        read_vibration(tmp_path / "missing.csv")
+
+
+class _FakeSerial:
+    def __init__(self, values: np.ndarray):
+        self._f = io.BytesIO("".join(f"{v:.5f}\r\n" for v in values).encode())
+
+    def readline(self) -> bytes:
+        return self._f.readline()
+
+
+def test_a_live_serial_stream_feeds_the_detector_in_blocks():
+    x = accel(1000.0, 2.0, 3.0, seed=3)
+    tu = tune(x / 50.0, SR, 2.0, self_check=False)
+    y = accel(1000.0, 0.9, 1.4, seed=4)
+    src = SerialSamples(sample_rate=SR, block=256, full_scale=50.0, serial=_FakeSerial(y))
+    det = StopDetector(tu)
+    events = []
+    with pytest.raises(AudioSourceError, match="no vibration samples"):
+        for block in src:
+            assert block.shape == (256,)
+            events += det.feed(block)
+    (ev,) = events
+    assert abs(ev.onset_s - 0.9) <= 0.025
+
+
+def test_position_readback_stops_when_the_position_stalls():
+    """A capacitive sensor at 1 kHz: 50 nm steps at 500 Hz, the stop at 0.6 s, sensor noise 5 nm."""
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 1.0, 1e-3)
+    pos = 50e-9 * np.floor(np.minimum(t, 0.6) * 500) + 5e-9 * rng.standard_normal(t.size)
+    det = ReadbackStopDetector(1000.0, min_motion=40e-9, window_s=0.02)
+    events = [e for i in range(0, t.size, 64) for e in det.feed(pos[i : i + 64])]
+    (ev,) = events
+    assert abs(ev.onset_s - 0.6) <= 0.005 and 0.015 <= ev.detected_at_s - 0.6 <= 0.03
+    assert ReadbackStopDetector.uses_audio is False
