@@ -203,7 +203,7 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
         if err:
             problems.append(f"{where}: {err}")
         else:
-            nums[name] = v  # type: ignore[assignment]
+            nums[name] = v  # type: ignore[assignment]  # no error: _parse_float gave a float
     steps, err = _parse_steps(row.get("steps") or "")
     if err:
         problems.append(f"{where}: {err}")

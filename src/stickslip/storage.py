@@ -301,7 +301,7 @@ class Store:
         """Close the connection (idempotent)."""
         if self._con is not None:
             self._con.close()
-            self._con = None  # type: ignore[assignment]
+            self._con = None  # type: ignore[assignment]  # a closed store has no connection; using it raises
 
     def __enter__(self) -> Store:
         return self

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter  # type: ignore[import-untyped]  # scipy ships no type stubs
+from scipy.signal import lfilter
 
 __all__ = ["babble", "click_train", "knocks"]
 

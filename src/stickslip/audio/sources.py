@@ -26,7 +26,7 @@ class AudioSourceError(OSError):
 
 def _soundfile() -> Any:
     try:
-        import soundfile  # type: ignore[import-untyped]  # soundfile ships no type stubs
+        import soundfile
     except ImportError as e:  # pragma: no cover - depends on the environment
         raise AudioSourceError(f"reading WAV files needs soundfile; {_AUDIO_EXTRA}") from e
     except OSError as e:  # pragma: no cover - libsndfile missing
@@ -135,7 +135,7 @@ class Microphone:
     @staticmethod
     def _sounddevice() -> Any:
         try:
-            import sounddevice  # type: ignore[import-untyped]  # sounddevice ships no type stubs
+            import sounddevice
         except ImportError as e:
             raise AudioSourceError(f"live input needs python-sounddevice; {_AUDIO_EXTRA}") from e
         except OSError as e:  # sounddevice raises OSError when PortAudio is absent

@@ -95,7 +95,7 @@ def levels_from_frames(frames: FloatArray, w: FloatArray, scale: float, idx: NDA
     Single precision FFTs in cache-sized chunks: the levels are good to far better than
     0.01 dB, and this is most of the detector's cost.
     """
-    from scipy import fft as sfft  # type: ignore[import-untyped]  # scipy ships no type stubs
+    from scipy import fft as sfft
 
     n = frames.shape[0]
     nb = idx.size - 1

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import median_filter, percentile_filter, rank_filter  # type: ignore[import-untyped]  # scipy ships no type stubs
+from scipy.ndimage import median_filter, percentile_filter, rank_filter
 
 from .detector import StopDetector, Tuning, _band_bins, default_frame, frame_power_spectra
 from .template import CHUNK, QUANTILE, fit_departure, subband_edges, subband_levels_db
@@ -746,7 +746,7 @@ def _self_check(
     rng = np.random.default_rng(seed)
     n_stop = int(stop_s * sample_rate)
     lo, hi = tu.band_hz
-    from scipy.signal import butter, sosfilt  # type: ignore[import-untyped]  # scipy ships no type stubs
+    from scipy.signal import butter, sosfilt
 
     sos = butter(4, [lo, min(hi, 0.49 * sample_rate)], btype="band", fs=sample_rate, output="sos")
     rms = float(np.sqrt(np.mean(sosfilt(sos, x[:n_stop]) ** 2)))

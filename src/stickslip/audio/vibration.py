@@ -157,7 +157,7 @@ class SerialSamples:
         self.timeout_s = float(timeout_s)
         if serial is None:
             try:
-                import serial as pyserial  # type: ignore[import-untyped]  # pyserial ships no type stubs
+                import serial as pyserial
             except ImportError as e:  # pragma: no cover - pyserial is a core dependency
                 raise AudioSourceError("a serial vibration source needs pyserial") from e
             try:

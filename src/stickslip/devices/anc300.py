@@ -228,7 +228,9 @@ class ANC300:
         ax = self._axis(joint)
         if self._hz[int(joint)] is None:
             self._hz[int(joint)] = float(self._device(lambda: ax.frequency, f"getf {ax.id}"))
-        return float(self._hz[int(joint)])  # type: ignore[arg-type]
+        hz = self._hz[int(joint)]
+        assert hz is not None  # read from the controller just above
+        return float(hz)
 
     def set_voltage(self, joint: int, volts: float) -> None:
         """Set the step amplitude of ``joint`` (``setv``), V, in 0..150."""

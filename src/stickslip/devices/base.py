@@ -330,7 +330,7 @@ def check_setting(what: str, value: object, lo: float, hi: float, unit: str = ""
     if isinstance(value, bool):
         raise ValueError(f"{what} must be {allowed}, got {value!r}")
     try:
-        v = float(value)  # type: ignore[arg-type]
+        v = float(value)  # type: ignore[arg-type]  # any object: what float() refuses is caught below
     except (TypeError, ValueError):
         raise ValueError(f"{what} must be {allowed}, got {value!r}") from None
     if not (math.isfinite(v) and lo <= v <= hi) or (integer and not v.is_integer()):

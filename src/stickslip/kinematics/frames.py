@@ -218,5 +218,6 @@ def rotary_load_coefficients(
         reach = -np.sin(q2)
         alpha = reach * np.sin(theta)
         beta = reach * np.cos(theta) * np.sin(psi)
-        return np.broadcast_arrays(alpha, beta)  # type: ignore[return-value]
+        a, b = np.broadcast_arrays(alpha, beta)
+        return a, b
     raise ValueError(f"joint {joint!r} is not rotary")

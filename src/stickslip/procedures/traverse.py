@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..audio.guard import NoSignalError, SignalGuard
@@ -140,7 +141,8 @@ class _Listener:
         self.sample_rate = float(sample_rate)
         self._callable = callable(audio_blocks) and not isinstance(audio_blocks, Iterator)
         self.source = audio_blocks if self._callable else iter(audio_blocks)
-        self.t_s: float | None = None
+        self.t_s = 0.0
+        self._started = False
         self._last_block_s = 0.0
         # a dead input must never look like a stop; only a detector that declares it does not
         # listen to the samples (the simulator's oracle) is exempt
@@ -150,7 +152,8 @@ class _Listener:
 
     def start(self, t0_s: float) -> None:
         """Begin listening at stream time ``t0_s``: drop older audio, reset the detector."""
-        first = self.t_s is None
+        first = not self._started
+        self._started = True
         if first:
             self.t_s = t0_s
         skip = getattr(self.source, "skip_to", None)
@@ -169,7 +172,7 @@ class _Listener:
         if self.guard is not None:
             self.guard.restart_stepping_check()
 
-    def _blocks(self, until_s: float) -> Iterable[np.ndarray]:
+    def _blocks(self, until_s: float) -> Iterator[NDArray[np.float32]]:
         if self._callable:
             yield from self.source()
             return
@@ -185,7 +188,7 @@ class _Listener:
             self._last_block_s = len(block) / self.sample_rate
             yield block
 
-    def listen(self, until_s: float):
+    def listen(self, until_s: float) -> Any:
         """Feed the audio recorded up to ``until_s``; the first event, or ``None``."""
         for block in self._blocks(until_s):
             if isinstance(block, tuple):
@@ -217,7 +220,7 @@ def _sample_rate(detector: Any, audio_blocks: Any) -> float:
 
 def _progress_callback(
     progress: bool | Callable[[int, float], None], joint: int, direction: str, expected: int | None
-):
+) -> tuple[Callable[[int, float], None], Callable[[], None]]:
     """A callable ``(steps, device_s)`` and a closer, for ``progress`` True / callable / False."""
     if callable(progress):
         return progress, lambda: None
