@@ -9,7 +9,7 @@ See docs/bluesky.md.
 """
 
 from .axis import DeviceLink, MoveError, StickSlipAxis
-
-
+from .manipulator import StickSlipManipulator
+from .plans import PAPER_POSES, calibration_day
 
 __all__ = ["DeviceLink", "MoveError", "StickSlipAxis", "StickSlipManipulator", "PAPER_POSES", "calibration_day"]

@@ -198,8 +198,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         or a :class:`DeviceLink` shared with the other axes of the arm.
     joint : int
         1, 2 (rotary, rad) or 3 (prismatic, m).
-    calibration : Calibration or path
-        The calibration (or its JSON file, from ``stickslip calibrate``).
+    calibration : Calibration, path or None
+        The calibration (or its JSON file, from ``stickslip calibrate``); ``None``: moves
+        are refused until :meth:`use_calibration` gives one (e.g. after a calibration day).
     name : str
         Device name (the readback's data key).
     burst : int
@@ -226,7 +227,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         self,
         device: str | Controller | DeviceLink,
         joint: int,
-        calibration: Calibration | str | os.PathLike[str],
+        calibration: Calibration | str | os.PathLike[str] | None,
         name: str = "",
         *,
         burst: int = 1000,
@@ -237,9 +238,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         if isinstance(burst, bool) or not isinstance(burst, int) or not 1 <= burst <= 65535:
             raise ValueError(f"burst must be an integer number of steps in 1..65535, got {burst!r}")
         self.burst = burst
-        self.calibration = calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
-        if self.joint not in self.calibration.joints:
-            raise ValueError(f"joint {self.joint} is not in this calibration (it has joints {self.calibration.joints})")
+        self.calibration: Calibration | None = None
+        if calibration is not None:
+            self.use_calibration(calibration)
         self.link = device if isinstance(device, DeviceLink) else DeviceLink(device, db)
         unit = self.spec.unit
         with self.add_children_as_readables(Format.HINTED_SIGNAL):
@@ -260,10 +261,26 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         super().set_name(name, child_name_separator=child_name_separator)
         self.readback.set_name(name)  # the readback's data key is the axis's name (as ophyd motors do)
 
+    def use_calibration(self, calibration: Calibration | str | os.PathLike[str]) -> None:
+        """Plan moves with ``calibration`` (or its JSON file) from now on; ``ValueError`` if it lacks this joint."""
+        cal = calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
+        if self.joint not in cal.joints:
+            raise ValueError(f"joint {self.joint} is not in this calibration (it has joints {cal.joints})")
+        self.calibration = cal
+
+    def _calibration(self) -> Calibration:
+        if self.calibration is None:
+            raise MoveError(
+                f"{self.name or f'joint {self.joint}'} has no calibration: give one (use_calibration), "
+                f"or run the calibration_day plan first"
+            )
+        return self.calibration
+
     def __repr__(self) -> str:
+        day = None if self.calibration is None else self.calibration.day
         return (
             f"StickSlipAxis(name={self.name!r}, device={self.link.key!r}, joint={self.joint}, "
-            f"unit={self.spec.unit!r}, calibration day={self.calibration.day!r})"
+            f"unit={self.spec.unit!r}, calibration_day={day!r})"
         )
 
     # ------------------------------------------------------------------ state
@@ -328,7 +345,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             if problem:
                 raise MoveError(problem)
             q_from = state.positions[joint]
-            planner = Planner(self.calibration, joint, state.pose)
+            planner = Planner(self._calibration(), joint, state.pose)
             plan = planner.plan(q_from, target)
             steps = plan.signed_steps
             publish(state)
@@ -382,6 +399,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         ``stop(success=False)``.
         """
         await self.check_value(value)
+        self._calibration()
         target = float(value)
         loop = asyncio.get_running_loop()
         queue: asyncio.Queue[DeviceState] = asyncio.Queue()
@@ -459,4 +477,4 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     def describe_move(self, target: float) -> dict[str, Any]:
         """What a move to ``target`` (m or rad) would do from the kept state: the plan's fields (SI)."""
         state = self.link.load()
-        return Planner(self.calibration, self.joint, state.pose).plan(state.positions[self.joint], target).as_dict()
+        return Planner(self._calibration(), self.joint, state.pose).plan(state.positions[self.joint], target).as_dict()
