@@ -263,7 +263,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
 
     def use_calibration(self, calibration: Calibration | str | os.PathLike[str]) -> None:
         """Plan moves with ``calibration`` (or its JSON file) from now on; ``ValueError`` if it lacks this joint."""
-        cal = calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
+        cal = calibration if isinstance(calibration, Calibration) else Calibration.load(Path(calibration))
         if self.joint not in cal.joints:
             raise ValueError(f"joint {self.joint} is not in this calibration (it has joints {cal.joints})")
         self.calibration = cal
@@ -412,12 +412,13 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             self._stop_event.clear()
             self._stop_success = False
             self._set_setpoint(target)
-            task: asyncio.Future[_MoveResult] = asyncio.ensure_future(asyncio.to_thread(self._move_sync, target, publish))
+            task = asyncio.ensure_future(asyncio.to_thread(self._move_sync, target, publish))
             self._task = task
             try:
                 while True:
                     getter = asyncio.ensure_future(queue.get())
-                    await asyncio.wait({task, getter}, return_when=asyncio.FIRST_COMPLETED)
+                    waiting: list[asyncio.Future[Any]] = [task, getter]
+                    await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
                     if not getter.done():
                         getter.cancel()
                         break
@@ -472,7 +473,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             await asyncio.to_thread(self.link.controller().stop, self.joint)
         except DeviceError:
             pass  # the burst loop sends nothing more either way
-        await asyncio.wait({task}, timeout=2.0)
+        await asyncio.wait([task], timeout=2.0)
 
     def describe_move(self, target: float) -> dict[str, Any]:
         """What a move to ``target`` (m or rad) would do from the kept state: the plan's fields (SI)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import os
+from pathlib import Path
 
 from ophyd_async.core import StandardReadable, soft_signal_r_and_setter
 from ophyd_async.core import StandardReadableFormat as Format
@@ -139,4 +140,4 @@ class StickSlipManipulator(StandardReadable):
 
 
 def _load(calibration: Calibration | str | os.PathLike[str]) -> Calibration:
-    return calibration if isinstance(calibration, Calibration) else Calibration.load(calibration)
+    return calibration if isinstance(calibration, Calibration) else Calibration.load(Path(calibration))

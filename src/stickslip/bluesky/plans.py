@@ -63,7 +63,9 @@ class _Switch:
         self.mic: Any = None
         if isinstance(detector, str):
             if detector not in DETECTORS:
-                raise ValueError(f"detector must be one of {DETECTORS} or a {{joint: Tuning}} mapping, got {detector!r}")
+                raise ValueError(
+                    f"detector must be one of {DETECTORS} or a {{joint: Tuning}} mapping, got {detector!r}"
+                )
             if not isinstance(ctrl, SimulatedMM3A):
                 raise ValueError(
                     f"detector={detector!r} tunes itself on the simulator only; on a real arm give the "
@@ -75,8 +77,11 @@ class _Switch:
         ctrl = self.ctrl
         if self.kind == "tunings":
             if joint not in self.tunings:
-                raise ValueError(f"no limit-switch tuning for joint {joint} (tunings are for joints {sorted(self.tunings)})")
-            return traverse_on_device(ctrl, joint, direction, pose, day, self.tunings[joint], burst_steps=burst, progress=False)
+                raise ValueError(
+                    f"no limit-switch tuning for joint {joint} (tunings are for joints {sorted(self.tunings)})"
+                )
+            tuning = self.tunings[joint]
+            return traverse_on_device(ctrl, joint, direction, pose, day, tuning, burst_steps=burst, progress=False)
         assert isinstance(ctrl, SimulatedMM3A)
         ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
         if self.kind == "oracle":
@@ -177,13 +182,14 @@ def calibration_day(
 
     made: list[Calibration] = []
 
-    @bpp.run_decorator(md=metadata)
     def inner() -> Generator[Msg, Any, None]:
         rows: list[Traverse] = []
         ids: list[int] = []
         for joint, given in plan:
             for direction in "+-":
-                def one(joint: int = joint, given: dict[str, float] = given, direction: str = direction) -> tuple[Traverse, int]:
+                def one(
+                    joint: int = joint, given: dict[str, float] = given, direction: str = direction
+                ) -> tuple[Traverse, int]:
                     now = ctrl.pose if isinstance(ctrl, SimulatedMM3A) else link.load().pose
                     pose = _pose(joint, given, now)
                     r = switch.measure(joint, direction, pose, day, burst_steps)
@@ -199,7 +205,8 @@ def calibration_day(
                 yield from bps.trigger_and_read([manipulator.traverse])
 
         def fit() -> Calibration:
-            cal = dataclasses.replace(calibrate(rows, day=day, source=link.url), conditions=conditions_of(ctrl, link.url))
+            fitted = calibrate(rows, day=day, source=link.url)
+            cal = dataclasses.replace(fitted, conditions=conditions_of(ctrl, link.url))
             with link.store() as store:
                 store.add_calibration(cal, link.key, ids)
             return cal
@@ -212,7 +219,7 @@ def calibration_day(
             yield from bps.wait_for([axis.refresh])
         made.append(cal)
 
-    yield from inner()
+    yield from bpp.run_wrapper(inner(), md=metadata)  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
     return made[0]
 
 
