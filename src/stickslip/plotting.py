@@ -1,9 +1,10 @@
 """One way into matplotlib for every plot the package draws.
 
 Plots are drawn only when asked for (``.plot(ax=None)`` on a result object returns the
-Axes, on a figure pyplot does not manage, so nothing is shown implicitly); matplotlib is an optional extra (``stickslip[plot]``) imported here, lazily, and
-switched to the non-interactive Agg backend on a machine without a display, so a plot
-made in a script or a test never tries to open a window.
+Axes, on a figure pyplot does not manage, so nothing is shown implicitly); matplotlib
+is an optional extra (``stickslip[plot]``) imported here, lazily, and switched to the
+non-interactive Agg backend on a machine without a display, so a plot made in a script
+or a test never tries to open a window.
 """
 
 from __future__ import annotations
