@@ -108,3 +108,20 @@ def test_plots_return_axes_and_show_nothing():
     plt = sys.modules.get("matplotlib.pyplot")
     if plt is not None:  # pyplot does not hold the figure, so a notebook does not show it at the cell's end
         assert all(plt.figure(n) is not ax.figure for n in plt.get_fignums())
+
+
+def test_the_python_example_in_docs_bluesky_runs(capsys):
+    """docs/bluesky.md's example runs as written (docs/style.md: examples run)."""
+    pytest.importorskip("bluesky")
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "bluesky.md").read_text(encoding="utf-8")
+    (code,) = re.findall(r"```python\n(.*?)```", page, re.S)
+    ns: dict[str, object] = {"__name__": "docs_bluesky"}
+    exec(compile(code, "docs/bluesky.md", "exec"), ns)
+    out = capsys.readouterr().out
+    assert "Calibration(day=" in out
+    sim = ns["sim"]
+    assert abs(sim.position(3) - 1.5e-3) < 15e-6  # the calibrated model on the simulator: within 1 %
+    assert abs(sim.position(2) + math.pi / 3) < 0.01 * (math.pi / 6)
