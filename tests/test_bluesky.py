@@ -39,7 +39,7 @@ from ophyd_async.core import init_devices  # noqa: E402
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, calibration_day  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402
-from stickslip.devices.base import DeviceInfo  # noqa: E402
+from stickslip.devices.base import DeviceError, DeviceInfo  # noqa: E402
 from stickslip.devices.positions import load_state  # noqa: E402
 from stickslip.planning import Planner  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
@@ -247,7 +247,9 @@ def test_stop_during_a_long_move_returns_at_once_and_leaves_an_honest_position(s
         state = load_state(store, "sim://")
     assert 3 in state.uncertain  # a burst was cut short: how far it went is not known to the model
     lo, hi = state.uncertain[3]
-    assert lo <= sim.position(3) <= hi
+    ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
+    assert lo - ripple <= sim.position(3) <= hi + ripple
+    assert hi - lo <= 1000 * one_step(cal, 3, hi)  # one burst wide
     uncertain = asyncio.run(axis.uncertain.get_value())
     assert uncertain is True
     with pytest.raises(MoveError, match="uncertain"):
@@ -317,3 +319,51 @@ def test_calibration_day_on_the_simulator(RE):
             assert float(got) == pytest.approx(float(want), rel=0.01)
     RE(bps.mv(arm.q3, 4e-3))  # the axes now move with today's calibration, from the pose the day left
     assert sim.position(3) == pytest.approx(4e-3, abs=40e-6)
+
+
+def test_a_stop_before_the_first_burst_sends_nothing(sim):
+    cal = true_calibration(sim)
+
+    async def scenario() -> BaseException | None:
+        axis = StickSlipAxis(sim, 3, cal, name="q3")
+        await axis.connect()
+        status = axis.set(5e-3)
+        await axis.stop()  # before the move's worker has begun
+        try:
+            await status
+        except RuntimeError as e:
+            return e
+        return None
+
+    error = asyncio.run(scenario())
+    assert error is not None and "after 0 of" in str(error)
+    assert sim.steps_simulated == 0 and kept(3) == (0.0, False)
+
+
+class FailingArm(PacedArm):
+    """A controller that refuses its third burst (a dropped link): nothing of that burst moves."""
+
+    calls = 0
+
+    def step(self, joint: int, n: int) -> None:
+        self.calls += 1
+        if self.calls == 3:
+            raise DeviceError("no answer from the controller within 2 s")
+        self.sim.step(joint, n)
+
+
+def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_position(RE, sim):
+    cal = true_calibration(sim)
+    with init_devices():
+        axis = StickSlipAxis(FailingArm(sim), 3, cal, name="q3", burst=500)
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 3e-3))
+    text = str(e.value.__cause__)
+    assert "no answer from the controller within 2 s; sent 1000 of" in text
+    assert "uncertain" in text and "re-reference" in text
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+    lo, hi = state.uncertain[3]
+    ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
+    assert lo - ripple <= sim.position(3) <= hi + ripple
+    assert sim.steps_simulated == 1000

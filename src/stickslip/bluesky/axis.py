@@ -389,8 +389,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             kept = f"joint {j}'s dead-reckoned position {format_position(q_from, j)} is kept"
         return f"{error}; sent {sent} of {steps} steps; {kept}"
 
-    @WatchableAsyncStatus.wrap
-    async def set(self, value: float) -> AsyncIterator[WatcherUpdate[float]]:
+    def set(self, value: float) -> WatchableAsyncStatus[float]:
         """Move the joint to ``value`` (m or rad) in bursts; progress is reported after every burst.
 
         The status fails with :class:`ValueError` for a target outside the joint's range
@@ -398,6 +397,12 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         says what was sent and what the kept position is), and ``RuntimeError`` after
         ``stop(success=False)``.
         """
+        self._stop_event.clear()  # here, not in the task: a stop() once set() has returned stops this move
+        self._stop_success = False
+        return self._set(value)
+
+    @WatchableAsyncStatus.wrap
+    async def _set(self, value: float) -> AsyncIterator[WatcherUpdate[float]]:
         await self.check_value(value)
         self._calibration()
         target = float(value)
@@ -409,8 +414,6 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
 
         async with self.link.lock:
             initial = float((await self.refresh()).positions[self.joint])
-            self._stop_event.clear()
-            self._stop_success = False
             self._set_setpoint(target)
             task = asyncio.ensure_future(asyncio.to_thread(self._move_sync, target, publish))
             self._task = task
