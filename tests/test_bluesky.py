@@ -20,6 +20,7 @@ import os
 import socket
 import threading
 import time
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -57,11 +58,11 @@ def true_calibration(sim: SimulatedMM3A) -> Calibration:
 
 
 @pytest.fixture()
-def RE() -> Any:
+def RE() -> Iterator[Any]:
     re = RunEngine({}, call_returns_result=True)
     yield re
     if re.state != "idle":
-        re.halt()
+        re.halt()  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
 
 
 @pytest.fixture()
@@ -88,7 +89,7 @@ def kept(joint: int, url: str = "sim://") -> tuple[float, bool]:
 
 
 @pytest.mark.parametrize("joint, target", [(3, 1.5e-3), (2, -1.2)])
-def test_mv_ends_within_one_step_of_the_target(RE, sim, joint, target):
+def test_mv_ends_within_one_step_of_the_target(RE: Any, sim: SimulatedMM3A, joint: int, target: float) -> None:
     cal = true_calibration(sim)
     with init_devices():
         axis = StickSlipAxis(sim, joint, cal, name="ax")
@@ -103,7 +104,7 @@ def test_mv_ends_within_one_step_of_the_target(RE, sim, joint, target):
     assert q_kept == pytest.approx(location["readback"], abs=1e-15) and not uncertain
 
 
-def test_scan_emits_five_events_whose_readbacks_increase_through_the_targets(RE, sim):
+def test_scan_emits_five_events_whose_readbacks_increase_through_the_targets(RE: Any, sim: SimulatedMM3A) -> None:
     cal = true_calibration(sim)
     with init_devices():
         axis = StickSlipAxis(sim, 3, cal, name="q3")
@@ -126,7 +127,7 @@ def test_scan_emits_five_events_whose_readbacks_increase_through_the_targets(RE,
 
 
 @pytest.mark.parametrize("target", [0.02, -1e-6, math.nan, math.inf])
-def test_a_bad_target_fails_the_status_and_sends_no_step(RE, sim, target):
+def test_a_bad_target_fails_the_status_and_sends_no_step(RE: Any, sim: SimulatedMM3A, target: float) -> None:
     with init_devices():
         axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3")
     before = sim.steps_simulated
@@ -141,7 +142,7 @@ def test_a_bad_target_fails_the_status_and_sends_no_step(RE, sim, target):
 
 @settings(max_examples=200, deadline=None)
 @given(st.floats(allow_nan=True, allow_infinity=True))
-def test_target_check_agrees_with_the_joint_range(q):
+def test_target_check_agrees_with_the_joint_range(q: float) -> None:
     axis = StickSlipAxis(SimulatedMM3A(), 2, true_calibration(SimulatedMM3A()), name="q2")
     inside = math.isfinite(q) and -7 * math.pi / 6 - 1e-4 <= q <= math.pi / 6 + 1e-4
     far_outside = not math.isfinite(q) or q < -7 * math.pi / 6 - 1e-3 or q > math.pi / 6 + 1e-3
@@ -152,7 +153,7 @@ def test_target_check_agrees_with_the_joint_range(q):
         assert problem is not None and "outside joint 2's range" in problem
 
 
-def test_moves_of_two_axes_run_one_after_the_other_and_both_arrive(RE, sim):
+def test_moves_of_two_axes_run_one_after_the_other_and_both_arrive(RE: Any, sim: SimulatedMM3A) -> None:
     cal = true_calibration(sim)
     with init_devices():
         arm = StickSlipManipulator(sim, cal)
@@ -162,7 +163,7 @@ def test_moves_of_two_axes_run_one_after_the_other_and_both_arrive(RE, sim):
     assert kept(3)[0] == pytest.approx(2e-3, abs=one_step(cal, 3, 2e-3))
 
 
-def test_a_lock_held_by_another_process_fails_the_move_naming_it(RE, sim):
+def test_a_lock_held_by_another_process_fails_the_move_naming_it(RE: Any, sim: SimulatedMM3A) -> None:
     with init_devices():
         axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3")
     other = {"pid": os.getppid(), "host": socket.gethostname(), "since": "2026-11-22T10:00:00+00:00"}
@@ -176,7 +177,7 @@ def test_a_lock_held_by_another_process_fails_the_move_naming_it(RE, sim):
     assert sim.steps_simulated == before
 
 
-def test_no_calibration_refuses_to_move(RE, sim):
+def test_no_calibration_refuses_to_move(RE: Any, sim: SimulatedMM3A) -> None:
     with init_devices():
         axis = StickSlipAxis(sim, 3, None, name="q3")
     with pytest.raises(FailedStatus) as e:
@@ -220,7 +221,7 @@ class PacedArm:
         self.sim.close()
 
 
-def test_stop_during_a_long_move_returns_at_once_and_leaves_an_honest_position(sim):
+def test_stop_during_a_long_move_returns_at_once_and_leaves_an_honest_position(sim: SimulatedMM3A) -> None:
     """The issue's acceptance: stop() within 0.5 s (a move of ~5 s on a paced controller)."""
     cal = true_calibration(sim)
     arm = PacedArm(sim)
@@ -261,7 +262,7 @@ async def _move(axis: StickSlipAxis, target: float) -> None:
     await axis.set(target)
 
 
-def test_stop_between_bursts_keeps_an_exact_position(sim):
+def test_stop_between_bursts_keeps_an_exact_position(sim: SimulatedMM3A) -> None:
     """On the simulator a burst completes at once: a stop lands between bursts and the position stays exact."""
     cal = true_calibration(sim)
 
@@ -283,7 +284,7 @@ def test_stop_between_bursts_keeps_an_exact_position(sim):
     assert abs(sim.position(3) - q) <= one_step(cal, 3, q) + 0.005 * q
 
 
-def test_calibration_day_on_the_simulator(RE):
+def test_calibration_day_on_the_simulator(RE: Any) -> None:
     sim = SimulatedMM3A(seed=4, day=DAY)
     truth = sim.true_models()
     docs = collect(RE)
@@ -298,7 +299,7 @@ def test_calibration_day_on_the_simulator(RE):
     for e in events:
         data = e["data"]
         j, direction = data["arm-traverse-joint"], data["arm-traverse-direction"]
-        pose = [data[f"arm-traverse-{k}"] for k in ("q1", "q2", "q3", "theta", "psi")]
+        pose = [float(data[f"arm-traverse-{k}"]) for k in ("q1", "q2", "q3", "theta", "psi")]
         true_gamma = truth[(j, direction)].average_gamma(data["arm-traverse-start"], data["arm-traverse-end"], *pose)
         assert data["arm-traverse-gamma"] == pytest.approx(float(true_gamma), rel=0.01)
         assert data["arm-traverse-steps"] * data["arm-traverse-gamma"] == pytest.approx(kin.JOINTS[j].span)
@@ -313,15 +314,15 @@ def test_calibration_day_on_the_simulator(RE):
         if j == 1:
             continue
         spec = kin.JOINTS[j]
-        for pose in (kin.Pose(q2=-math.pi / 4, q3=0.006), kin.Pose(q3=0.006, theta=-math.pi / 4)):
-            got = arm.calibration.model(j, direction).average_gamma(spec.lower, spec.upper, *pose)
-            want = model.average_gamma(spec.lower, spec.upper, *pose)
+        for other in (kin.Pose(q2=-math.pi / 4, q3=0.006), kin.Pose(q3=0.006, theta=-math.pi / 4)):
+            got = arm.calibration.model(j, direction).average_gamma(spec.lower, spec.upper, *other)
+            want = model.average_gamma(spec.lower, spec.upper, *other)
             assert float(got) == pytest.approx(float(want), rel=0.01)
     RE(bps.mv(arm.q3, 4e-3))  # the axes now move with today's calibration, from the pose the day left
     assert sim.position(3) == pytest.approx(4e-3, abs=40e-6)
 
 
-def test_a_stop_before_the_first_burst_sends_nothing(sim):
+def test_a_stop_before_the_first_burst_sends_nothing(sim: SimulatedMM3A) -> None:
     cal = true_calibration(sim)
 
     async def scenario() -> BaseException | None:
@@ -352,7 +353,7 @@ class FailingArm(PacedArm):
         self.sim.step(joint, n)
 
 
-def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_position(RE, sim):
+def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_truth(RE: Any, sim: SimulatedMM3A) -> None:
     cal = true_calibration(sim)
     with init_devices():
         axis = StickSlipAxis(FailingArm(sim), 3, cal, name="q3", burst=500)

@@ -6,6 +6,7 @@ Reference values: the objects' own SI fields, scaled by hand here (nm = 1e9 m,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 
@@ -14,6 +15,7 @@ import pytest
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, validate
 from stickslip.measurements import TableError, Traverse, parse_measurements
+from stickslip.models import PrismaticParams
 from stickslip.planning import plan_move
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.tables import TraverseTable, from_pandas, to_pandas
@@ -37,18 +39,20 @@ def _rows() -> list[Traverse]:
     ]
 
 
-def test_calibration_reprs():
+def test_calibration_reprs() -> None:
     cal = _cal()
     # joint 3: a, b, c in + and -; joints 1, 2: gamma0, d at two q3 knots in + and -: 6 + 8 + 8
     assert repr(cal) == "Calibration(day='2026-11-22', method='paper', joints=[1, 2, 3], parameters=22, units=SI)"
     page = cal._repr_html_()
-    a_plus = cal.models[(3, "+")].params.a
+    params = cal.models[(3, "+")].params
+    assert isinstance(params, PrismaticParams)
+    a_plus = params.a
     assert f"<td>{a_plus * 1e9:.5g}</td>" in page  # a+ in nm
     assert page.count("<tr>") == 1 + 22
     assert "<script" not in page
 
 
-def test_plan_reprs():
+def test_plan_reprs() -> None:
     cal = _cal()
     plan = plan_move(cal, 3, 0.0, 30e-6, kin.Pose())
     text = repr(plan)
@@ -60,13 +64,13 @@ def test_plan_reprs():
     assert f"<td>{math.degrees(-0.5):.6g}</td>" in down._repr_html_()
 
 
-def test_validation_reprs():
+def test_validation_reprs() -> None:
     cal = _cal()
     sim = SimulatedMM3A(seed=2, day=DAY)
     rows = []
     for t in _rows():
         true = sim.true_models()[(t.joint, t.direction)].average_gamma(t.start, t.end, t.q1, t.q2, t.q3, t.theta, t.psi)
-        rows.append(Traverse(**{**t.as_row(), "steps": round(abs(t.end - t.start) / float(true))}))
+        rows.append(dataclasses.replace(t, steps=round(abs(t.end - t.start) / float(true))))
     res = validate(cal, rows)
     assert "2 traverses" in repr(res)
     page = res._repr_html_()
@@ -74,7 +78,7 @@ def test_validation_reprs():
         assert f"<td>{100 * r['model_max_rel_error']:.2f}</td>" in page
 
 
-def test_traverse_table_round_trips_through_pandas_exactly():
+def test_traverse_table_round_trips_through_pandas_exactly() -> None:
     pytest.importorskip("pandas")
     rows = _rows()
     df = to_pandas(rows)
@@ -87,7 +91,7 @@ def test_traverse_table_round_trips_through_pandas_exactly():
     assert f"{rows[0].gamma * 1e9:.5g} nm" in table._repr_html_()
 
 
-def test_from_pandas_refuses_bad_rows_like_the_csv_reader():
+def test_from_pandas_refuses_bad_rows_like_the_csv_reader() -> None:
     pd = pytest.importorskip("pandas")
     df = to_pandas(_rows())
     bad = df.copy()
@@ -101,7 +105,7 @@ def test_from_pandas_refuses_bad_rows_like_the_csv_reader():
         from_pandas(pd.DataFrame({"joint": [3]}))
 
 
-def test_plots_return_axes_and_show_nothing():
+def test_plots_return_axes_and_show_nothing() -> None:
     pytest.importorskip("matplotlib")
     ax = _cal().plot(3)
     assert ax.figure is not None
@@ -110,7 +114,7 @@ def test_plots_return_axes_and_show_nothing():
         assert all(plt.figure(n) is not ax.figure for n in plt.get_fignums())
 
 
-def test_the_python_example_in_docs_bluesky_runs(capsys):
+def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """docs/bluesky.md's example runs as written (docs/style.md: examples run)."""
     pytest.importorskip("bluesky")
     import re
@@ -123,5 +127,6 @@ def test_the_python_example_in_docs_bluesky_runs(capsys):
     out = capsys.readouterr().out
     assert "Calibration(day=" in out
     sim = ns["sim"]
+    assert isinstance(sim, SimulatedMM3A)
     assert abs(sim.position(3) - 1.5e-3) < 15e-6  # the calibrated model on the simulator: within 1 %
     assert abs(sim.position(2) + math.pi / 3) < 0.01 * (math.pi / 6)
