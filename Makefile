@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[plot,stats,audio,serial,anc300,dev]'
+	$(PY) -m pip install --quiet -e '.[plot,stats,audio,serial,anc300,dev,bluesky]'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -28,7 +28,8 @@ from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, calibrate
 from stickslip.procedures.traverse import measure_traverse
 from stickslip.reach import ReachPlan, line_distance, plan_reach
-from stickslip.sim.arm import OracleStopDetector, SimulatedMM3A
+from stickslip.sim.arm import SimulatedMM3A
+from stickslip.sim.oracle import OracleStopDetector
 
 DAY = "2026-11-22"
 P = math.pi

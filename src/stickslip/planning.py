@@ -62,6 +62,31 @@ class MovePlan:
         """Steps with the direction's sign (what a controller's ``step(joint, n)`` takes)."""
         return self.steps if self.direction == "+" else -self.steps
 
+    def __repr__(self) -> str:
+        from .units import format_position, format_step
+
+        j = self.joint
+        return (
+            f"MovePlan(joint {j}: {format_position(self.q_from, j)} -> {format_position(self.q_to, j)}, "
+            f"{self.signed_steps:+d} steps, predicted end {format_position(self.q_end_predicted, j)}, "
+            f"step {format_step(self.gamma_start, j)} -> {format_step(self.gamma_end, j)})"
+        )
+
+    def _repr_html_(self) -> str:
+        """The plan as a one-row table (positions in µm or deg, steps in nm or µrad), for Jupyter."""
+        from .notebook import html_table
+        from .units import position_scale, step_scale
+
+        k, pu = position_scale(self.joint)
+        s, su = step_scale(self.joint)
+        return html_table(
+            f"move of joint {self.joint}",
+            ["steps", f"from ({pu})", f"to ({pu})", f"predicted end ({pu})", f"step at start ({su})",
+             f"step at target ({su})"],
+            [[f"{self.signed_steps:+d}", f"{self.q_from * k:.6g}", f"{self.q_to * k:.6g}",
+              f"{self.q_end_predicted * k:.6g}", f"{self.gamma_start * s:.5g}", f"{self.gamma_end * s:.5g}"]],
+        )
+
     def as_dict(self) -> dict[str, object]:
         return {
             "joint": self.joint,

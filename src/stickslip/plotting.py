@@ -1,9 +1,10 @@
 """One way into matplotlib for every plot the package draws.
 
 Plots are drawn only when asked for (``.plot(ax=None)`` on a result object returns the
-Axes); matplotlib is an optional extra (``stickslip[plot]``) imported here, lazily, and
-switched to the non-interactive Agg backend on a machine without a display, so a plot
-made in a script or a test never tries to open a window.
+Axes, on a figure pyplot does not manage, so nothing is shown implicitly); matplotlib
+is an optional extra (``stickslip[plot]``) imported here, lazily, and switched to the
+non-interactive Agg backend on a machine without a display, so a plot made in a script
+or a test never tries to open a window.
 """
 
 from __future__ import annotations
@@ -47,6 +48,11 @@ def axes(ax: Axes | None = None, figsize: tuple[float, float] = (6.0, 4.0)) -> A
     """``ax`` if given, else the Axes of a new figure of ``figsize`` inches."""
     if ax is not None:
         return ax
-    _, new = pyplot().subplots(figsize=figsize)
-    out: Axes = new
+    try:
+        from matplotlib.figure import Figure
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError("plotting needs matplotlib: pip install 'stickslip[plot]'") from e
+    # a Figure pyplot does not manage: returned, never shown implicitly (a notebook shows
+    # ``ax.figure`` when asked; a script saves it with ``ax.figure.savefig``)
+    out: Axes = Figure(figsize=figsize).subplots()
     return out

@@ -480,6 +480,29 @@ class Calibration:
     def __str__(self) -> str:
         return self.report()
 
+    def __repr__(self) -> str:
+        return (
+            f"Calibration(day={self.day!r}, method={self.method!r}, joints={self.joints}, "
+            f"parameters={len(self.parameters())}, units=SI)"
+        )
+
+    def _repr_html_(self) -> str:
+        """The parameters as a table (nm, µrad; b dimensionless), for Jupyter."""
+        from ..notebook import html_table
+
+        rows = []
+        for rec in self.parameters():
+            scale, unit = param_scale(rec.name, rec.joint)
+            rows.append([
+                rec.joint, rec.direction, rec.name, "" if rec.q3 is None else f"{rec.q3 * 1e3:g}",
+                f"{rec.value * scale:.5g}", "" if rec.stderr is None else f"{rec.stderr * scale:.3g}", unit or "1",
+            ])
+        notes = [line for line in self.report().splitlines() if line.startswith(("made with", "note"))]
+        return html_table(
+            f"stickslip calibration: day {self.day or '?'}, method {self.method}",
+            ["joint", "dir", "parameter", "q3 knot (mm)", "value", "std. error", "unit"], rows, notes,
+        )
+
     def plot(
         self, joint: int = 3, ax: Axes | None = None, thetas: Sequence[float] = (0.0, -math.pi / 3, -math.pi / 2)
     ) -> Axes:

@@ -74,6 +74,25 @@ class ValidationResult:
             )
         return "\n".join(lines)
 
+    def __repr__(self) -> str:
+        worst = ", ".join(f"joint {r['joint']}: {r['model_max_rel_error']:.2%}" for r in self.rows())
+        return f"ValidationResult({len(self.traverses)} traverses; model max |relative error| {worst})"
+
+    def _repr_html_(self) -> str:
+        """Per joint: the model's and the constant step's relative errors (%), for Jupyter."""
+        from ..notebook import html_table
+
+        rows = [
+            [r["joint"], r["n"]] + [f"{100 * r[k]:.2f}" for k in (
+                "model_max_rel_error", "model_mean_rel_error", "constant_max_rel_error", "constant_mean_rel_error"
+            )]
+            for r in self.rows()
+        ]
+        return html_table(
+            "validation: |predicted / measured average step - 1|",
+            ["joint", "n", "model max (%)", "model mean (%)", "constant max (%)", "constant mean (%)"], rows,
+        )
+
     def plot(self, ax: Axes | None = None) -> Axes:
         """Relative error of each traverse's average step, model against constant step; returns the Axes.
 

@@ -1,0 +1,15 @@
+"""Bluesky / ophyd-async devices and plans for stick-slip manipulators (the ``bluesky`` extra).
+
+* :class:`StickSlipAxis`: one joint as an ophyd-async device (Movable, Locatable,
+  Stoppable, Readable), moved with the calibrated load-aware step-size model;
+* :class:`StickSlipManipulator`: the three joints of one arm on one controller;
+* :func:`calibration_day`: the paper's calibration traverses as a Bluesky plan.
+
+See docs/bluesky.md.
+"""
+
+from .axis import DeviceLink, MoveError, StickSlipAxis
+from .manipulator import StickSlipManipulator
+from .plans import PAPER_POSES, calibration_day
+
+__all__ = ["DeviceLink", "MoveError", "StickSlipAxis", "StickSlipManipulator", "PAPER_POSES", "calibration_day"]

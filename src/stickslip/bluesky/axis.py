@@ -1,0 +1,484 @@
+"""One joint of a stick-slip manipulator as an ophyd-async device (Movable, Locatable, Stoppable, Readable).
+
+:class:`StickSlipAxis` moves a joint the way ``stickslip move`` does, from the library
+pieces the CLI uses: the position kept for the device in the database
+(:func:`~stickslip.devices.positions.load_state`), the calibration's step-size model in
+that pose (:class:`~stickslip.planning.Planner`), the burst loop with its write-ahead
+journal (:func:`~stickslip.procedures.move.drive`) and the one-process-per-device lock
+(:func:`~stickslip.procedures.move.device_lock`). A move made here is seen by
+``stickslip where`` and the other way round.
+
+Positions are SI: m for the prismatic joint 3, rad for the rotary joints 1 and 2; the
+units are in ``describe()``. The MM3A has no sensors, so the readback is the
+*dead-reckoned* position (the model's prediction for the steps sent), not a measurement.
+
+Blocking controller calls run in a worker thread (one move at a time per controller);
+the event loop stays free for :meth:`StickSlipAxis.stop`, which makes the loop send no
+further burst and tells the controller to stop. After a stop the kept position is
+honest: exact (to the model) when the stop fell between bursts, else *uncertain*
+between the last confirmed position and the interrupted burst's end (the ``uncertain``
+signal is true and the next move refuses until the joint is re-referenced).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import threading
+from collections.abc import AsyncIterator, Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from bluesky.protocols import Checkable, Locatable, Location, Stoppable
+from ophyd_async.core import (
+    Array1D,
+    Device,
+    DeviceConnector,
+    StandardReadable,
+    WatchableAsyncStatus,
+    WatcherUpdate,
+    soft_signal_r_and_setter,
+)
+from ophyd_async.core import StandardReadableFormat as Format
+
+from .. import kinematics as kin
+from ..calibration import Calibration
+from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, VirtualClock, device_key, open_device
+from ..devices.positions import DeviceState, load_state, save_state
+from ..planning import Planner
+from ..procedures.move import DeviceBusy, device_lock, drive
+from ..storage import Store, StoreError
+from ..units import format_position, position_display_unit
+
+__all__ = ["DeviceLink", "MoveError", "StickSlipAxis"]
+
+POSE_UNITS = "rad, rad, m, rad, rad"
+"""Units of the ``pose`` signal's five elements ``q1, q2, q3, theta, psi``."""
+
+
+class MoveError(RuntimeError):
+    """A move was refused or failed; the message says why and what the kept position is."""
+
+
+class _Stopped(Exception):
+    """Raised inside the burst loop when a stop was requested (``partial``: during a burst)."""
+
+    def __init__(self, partial: bool):
+        super().__init__("stopped")
+        self.partial = partial
+
+
+class DeviceLink:
+    """One controller and database shared by the axes of one manipulator.
+
+    The controller is opened once (lazily, from its URL) and kept open; moves through it
+    run one at a time (an :class:`asyncio.Lock` in this process, the database lock
+    between processes).
+
+    Parameters
+    ----------
+    device : str or Controller
+        A controller URL (``sim://``, ``mm3a:///dev/ttyUSB0``, ...) or an open
+        controller (its ``info.url`` names it in the database).
+    db : path, optional
+        The SQLite database (default ``$STICKSLIP_DB``, else the user's data folder).
+    """
+
+    def __init__(self, device: str | Controller, db: str | os.PathLike[str] | None = None):
+        if isinstance(device, str):
+            self.url = device
+            self._ctrl: Controller | None = None
+        else:
+            self.url = device.info.url
+            self._ctrl = device
+        self.owned = isinstance(device, str)
+        self.key = device_key(self.url)
+        self.db = None if db is None else Path(db)
+        self.lock = asyncio.Lock()
+        self._open_lock = threading.Lock()
+
+    def store(self) -> Store:
+        """The database, opened for one unit of work (close it after; SQLite is per thread)."""
+        return Store.open(self.db)
+
+    def load(self) -> DeviceState:
+        """The kept state of the device (positions, tilt, journal)."""
+        with self.store() as store:
+            return load_state(store, self.key)
+
+    def controller(self) -> Controller:
+        """The open controller; opened on first use (a simulator is placed at the kept pose)."""
+        with self._open_lock:
+            if self._ctrl is None:
+                ctrl = open_device(self.url)
+                if isinstance(ctrl, PoseSettable):  # a fresh simulator starts where the positions say
+                    ctrl.set_pose(*self.load().pose)
+                self._ctrl = ctrl
+            return self._ctrl
+
+    def close(self) -> None:
+        """Close the controller if this link opened it."""
+        with self._open_lock:
+            if self._ctrl is not None and self.owned:
+                try:
+                    self._ctrl.close()
+                except DeviceError:
+                    pass
+                self._ctrl = None
+
+
+class _Interruptible:
+    """A :class:`Controller` that sends no burst once ``stop`` is set, and says whether one was cut short.
+
+    ``atomic``: the controller completes a burst at once (a simulator on a virtual
+    clock), so a stop during its call never cuts it.
+    """
+
+    def __init__(self, dev: Controller, stop: threading.Event, atomic: bool):
+        self.dev = dev
+        self.stop_event = stop
+        self.atomic = atomic
+        self.sent = 0
+
+    @property
+    def info(self) -> DeviceInfo:
+        return self.dev.info
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        self.dev.set_frequency(joint, hz)
+
+    def frequency(self, joint: int) -> float:
+        return self.dev.frequency(joint)
+
+    def step(self, joint: int, n: int) -> None:
+        if self.stop_event.is_set():
+            raise _Stopped(partial=False)
+        self.dev.step(joint, n)
+        if self.stop_event.is_set() and not self.atomic:
+            raise _Stopped(partial=True)
+        self.sent += n
+
+    def stop(self, joint: int | None = None) -> None:
+        self.dev.stop(joint)
+
+    def settings(self) -> dict[str, object]:
+        return self.dev.settings()
+
+    def close(self) -> None:
+        self.dev.close()
+
+
+@dataclass(frozen=True)
+class _MoveResult:
+    steps: int
+    sent: int
+    stopped: bool
+    state: DeviceState
+
+
+class _AxisConnector(DeviceConnector):
+    """Connects the soft signals, then opens the controller and reads the kept position."""
+
+    async def connect_real(self, device: Device, timeout: float, force_reconnect: bool) -> None:
+        await super().connect_real(device, timeout, force_reconnect)
+        if isinstance(device, StickSlipAxis):
+            await device.refresh(open_controller=True)
+
+
+class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[float]):
+    """One joint of a stick-slip manipulator, moved with a calibrated load-aware step-size model.
+
+    Parameters
+    ----------
+    device : str, Controller or DeviceLink
+        Controller URL (``sim://``, ``mm3a:///dev/ttyUSB0``, ...), an open controller,
+        or a :class:`DeviceLink` shared with the other axes of the arm.
+    joint : int
+        1, 2 (rotary, rad) or 3 (prismatic, m).
+    calibration : Calibration, path or None
+        The calibration (or its JSON file, from ``stickslip calibrate``); ``None``: moves
+        are refused until :meth:`use_calibration` gives one (e.g. after a calibration day).
+    name : str
+        Device name (the readback's data key).
+    burst : int
+        Steps per burst, 1..65535 (as ``stickslip move --burst``); a stop takes effect
+        between bursts.
+    db : path, optional
+        The database keeping positions (default ``$STICKSLIP_DB``, else the user's data folder).
+
+    Signals
+    -------
+    readback : m or rad
+        Dead-reckoned position (hinted).
+    setpoint : m or rad
+        The last target.
+    last_steps : int
+        Signed steps planned for the last move (0 before any).
+    uncertain : bool
+        The position is uncertain (an interrupted burst); re-reference the joint.
+    pose : array of 5 floats
+        ``q1, q2, q3`` (rad, rad, m) and the base tilt ``theta, psi`` (rad) kept for the device.
+    """
+
+    def __init__(
+        self,
+        device: str | Controller | DeviceLink,
+        joint: int,
+        calibration: Calibration | str | os.PathLike[str] | None,
+        name: str = "",
+        *,
+        burst: int = 1000,
+        db: str | os.PathLike[str] | None = None,
+    ) -> None:
+        self.spec = kin.joint_spec(joint)
+        self.joint = self.spec.number
+        if isinstance(burst, bool) or not isinstance(burst, int) or not 1 <= burst <= 65535:
+            raise ValueError(f"burst must be an integer number of steps in 1..65535, got {burst!r}")
+        self.burst = burst
+        self.calibration: Calibration | None = None
+        if calibration is not None:
+            self.use_calibration(calibration)
+        self.link = device if isinstance(device, DeviceLink) else DeviceLink(device, db)
+        unit = self.spec.unit
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.readback, self._set_readback = soft_signal_r_and_setter(float, math.nan, units=unit)
+        with self.add_children_as_readables(Format.UNCACHED_SIGNAL):
+            self.setpoint, self._set_setpoint = soft_signal_r_and_setter(float, math.nan, units=unit)
+            self.last_steps, self._set_last_steps = soft_signal_r_and_setter(int, 0, units="steps")
+            self.uncertain, self._set_uncertain = soft_signal_r_and_setter(bool, False)
+            self.pose, self._set_pose = soft_signal_r_and_setter(
+                Array1D[np.float64], np.full(5, math.nan), units=POSE_UNITS
+            )
+        self._stop_event = threading.Event()
+        self._stop_success = False
+        self._task: asyncio.Future[_MoveResult] | None = None
+        super().__init__(name=name, connector=_AxisConnector())
+
+    def set_name(self, name: str, *, child_name_separator: str | None = None) -> None:
+        super().set_name(name, child_name_separator=child_name_separator)
+        self.readback.set_name(name)  # the readback's data key is the axis's name (as ophyd motors do)
+
+    def use_calibration(self, calibration: Calibration | str | os.PathLike[str]) -> None:
+        """Plan moves with ``calibration`` (or its JSON file) from now on; ``ValueError`` if it lacks this joint."""
+        cal = calibration if isinstance(calibration, Calibration) else Calibration.load(Path(calibration))
+        if self.joint not in cal.joints:
+            raise ValueError(f"joint {self.joint} is not in this calibration (it has joints {cal.joints})")
+        self.calibration = cal
+
+    def _calibration(self) -> Calibration:
+        if self.calibration is None:
+            raise MoveError(
+                f"{self.name or f'joint {self.joint}'} has no calibration: give one (use_calibration), "
+                f"or run the calibration_day plan first"
+            )
+        return self.calibration
+
+    def __repr__(self) -> str:
+        day = None if self.calibration is None else self.calibration.day
+        return (
+            f"StickSlipAxis(name={self.name!r}, device={self.link.key!r}, joint={self.joint}, "
+            f"unit={self.spec.unit!r}, calibration_day={day!r})"
+        )
+
+    # ------------------------------------------------------------------ state
+
+    def _publish(self, state: DeviceState) -> None:
+        """Put the kept state into the signals (runs on the event loop)."""
+        self._set_readback(float(state.positions[self.joint]))
+        self._set_uncertain(self.joint in state.uncertain)
+        p = state.pose
+        self._set_pose(np.array([p.q1, p.q2, p.q3, p.theta, p.psi], dtype=np.float64))
+
+    async def refresh(self, open_controller: bool = False) -> DeviceState:
+        """Read the kept position from the database into the signals (another process may have moved the joint)."""
+        try:
+            if open_controller:
+                await asyncio.to_thread(self.link.controller)
+            state = await asyncio.to_thread(self.link.load)
+        except (StoreError, DeviceError, ValueError) as e:
+            raise MoveError(str(e)) from None
+        self._publish(state)
+        if math.isnan(await self.setpoint.get_value()):
+            self._set_setpoint(float(state.positions[self.joint]))
+        return state
+
+    async def locate(self) -> Location[float]:
+        """Setpoint (the last target) and readback (the dead-reckoned position), m or rad."""
+        await self.refresh()
+        return Location(setpoint=await self.setpoint.get_value(), readback=await self.readback.get_value())
+
+    # ------------------------------------------------------------------ checks
+
+    def target_problem(self, value: object) -> str | None:
+        """Why ``value`` cannot be a target of this joint (``None`` if it can)."""
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+            return f"the target of joint {self.joint} must be a number in {self.spec.unit}, got {value!r}"
+        q = float(value)
+        if not math.isfinite(q) or not self.spec.contains(q):
+            lo, hi = self.spec.lower, self.spec.upper
+            shown = format_position(q, self.joint) if math.isfinite(q) else repr(q)
+            return (
+                f"the target {shown} ({q:.6g} {self.spec.unit}) is outside joint {self.joint}'s range "
+                f"[{format_position(lo, self.joint)}, {format_position(hi, self.joint)}]; "
+                f"{self.name or 'the axis'} takes SI units ({self.spec.unit}; displayed in "
+                f"{position_display_unit(self.joint)})"
+            )
+        return None
+
+    async def check_value(self, value: float) -> None:
+        """Raise ``ValueError`` (nothing moves) if ``value`` is not a reachable target."""
+        problem = self.target_problem(value)
+        if problem:
+            raise ValueError(problem)
+
+    # ------------------------------------------------------------------ moving
+
+    def _move_sync(self, target: float, publish: Callable[[DeviceState], None]) -> _MoveResult:
+        """The whole move, in a worker thread: lock, plan from the kept state, drive in bursts, record."""
+        joint = self.joint
+        with self.link.store() as store, device_lock(store, self.link.key):
+            state = load_state(store, self.link.key)
+            problem = state.uncertainty_problem(joint)
+            if problem:
+                raise MoveError(problem)
+            q_from = state.positions[joint]
+            planner = Planner(self._calibration(), joint, state.pose)
+            plan = planner.plan(q_from, target)
+            steps = plan.signed_steps
+            publish(state)
+            if steps == 0:
+                return _MoveResult(0, 0, False, state)
+            dev = self.link.controller()
+            proxy = _Interruptible(dev, self._stop_event, atomic=isinstance(dev, VirtualClock))
+            source = state.sources[joint]
+
+            def reckon(n: int) -> float:
+                return planner.position_after(q_from, n)
+
+            def save(st: DeviceState) -> None:
+                save_state(store, st)
+                publish(st)
+
+            try:
+                outcome = drive(proxy, state, joint, steps, self.burst, reckon, save)
+            except _Stopped as s:
+                if not s.partial:  # the next burst was never sent: the confirmed position stands
+                    state.set_position(joint, reckon(proxy.sent), "dead-reckoned" if proxy.sent else source)
+                    save(state)
+                return _MoveResult(steps, proxy.sent, True, state)
+            if outcome.error is not None:
+                raise MoveError(self._failure_text(outcome.error, outcome.sent, steps, state, q_from))
+            state.set_position(joint, plan.q_end_predicted, "dead-reckoned")
+            save(state)
+            return _MoveResult(steps, outcome.sent, False, state)
+
+    def _failure_text(self, error: str, sent: int, steps: int, state: DeviceState, q_from: float) -> str:
+        """The CLI's message for a failed move: what was sent, and what the kept position is."""
+        j = self.joint
+        if j in state.uncertain:
+            lo, hi = state.uncertain[j]
+            kept = (
+                f"joint {j}'s position is now uncertain, between {format_position(lo, j)} and "
+                f"{format_position(hi, j)}; re-reference it (stickslip where --set {j}=min at the lower "
+                f"stop) before the next move"
+            )
+        else:
+            kept = f"joint {j}'s dead-reckoned position {format_position(q_from, j)} is kept"
+        return f"{error}; sent {sent} of {steps} steps; {kept}"
+
+    def set(self, value: float) -> WatchableAsyncStatus[float]:
+        """Move the joint to ``value`` (m or rad) in bursts; progress is reported after every burst.
+
+        The status fails with :class:`ValueError` for a target outside the joint's range
+        (nothing is sent), :class:`MoveError` for a refused or failed move (the message
+        says what was sent and what the kept position is), and ``RuntimeError`` after
+        ``stop(success=False)``.
+        """
+        self._stop_event.clear()  # here, not in the task: a stop() once set() has returned stops this move
+        self._stop_success = False
+        return self._set(value)
+
+    @WatchableAsyncStatus.wrap
+    async def _set(self, value: float) -> AsyncIterator[WatcherUpdate[float]]:
+        await self.check_value(value)
+        self._calibration()
+        target = float(value)
+        loop = asyncio.get_running_loop()
+        queue: asyncio.Queue[DeviceState] = asyncio.Queue()
+
+        def publish(state: DeviceState) -> None:  # from the worker thread
+            loop.call_soon_threadsafe(queue.put_nowait, state)
+
+        async with self.link.lock:
+            initial = float((await self.refresh()).positions[self.joint])
+            self._set_setpoint(target)
+            task = asyncio.ensure_future(asyncio.to_thread(self._move_sync, target, publish))
+            self._task = task
+            try:
+                while True:
+                    getter = asyncio.ensure_future(queue.get())
+                    waiting: list[asyncio.Future[Any]] = [task, getter]
+                    await asyncio.wait(waiting, return_when=asyncio.FIRST_COMPLETED)
+                    if not getter.done():
+                        getter.cancel()
+                        break
+                    state = getter.result()
+                    self._publish(state)
+                    yield WatcherUpdate(
+                        current=float(state.positions[self.joint]), initial=initial, target=target,
+                        name=self.name, unit=self.spec.unit,
+                    )
+                while not queue.empty():
+                    self._publish(queue.get_nowait())
+                try:
+                    result = task.result()
+                except (DeviceBusy, StoreError, DeviceError, KeyError) as e:
+                    raise MoveError(str(e).strip("'\"")) from None
+            except asyncio.CancelledError:  # the status was cancelled: send no further burst
+                self._stop_event.set()
+                raise
+            finally:
+                self._task = None
+        self._set_last_steps(result.steps)
+        self._publish(result.state)
+        if result.stopped and not self._stop_success:
+            raise RuntimeError(self._stopped_text(result))
+
+    def _stopped_text(self, result: _MoveResult) -> str:
+        j = self.joint
+        state = result.state
+        if j in state.uncertain:
+            lo, hi = state.uncertain[j]
+            where = (
+                f"its position is uncertain, between {format_position(lo, j)} and {format_position(hi, j)} "
+                f"(a burst was cut short); re-reference it (stickslip where --set {j}=min at the lower stop)"
+            )
+        else:
+            where = f"its dead-reckoned position is {format_position(state.positions[j], j)}"
+        return f"{self.name or f'joint {j}'} was stopped after {result.sent} of {result.steps} steps; {where}"
+
+    async def stop(self, success: bool = False) -> None:
+        """Stop now: no further burst is sent and the controller is told to stop.
+
+        Returns once the move's worker has finished (at most the burst in flight; 2 s at
+        the longest), so the kept position and the signals are settled. With
+        ``success=False`` the move's status fails; with ``True`` it completes.
+        """
+        self._stop_success = success
+        self._stop_event.set()
+        task = self._task
+        if task is None:
+            return
+        try:
+            await asyncio.to_thread(self.link.controller().stop, self.joint)
+        except DeviceError:
+            pass  # the burst loop sends nothing more either way
+        await asyncio.wait([task], timeout=2.0)
+
+    def describe_move(self, target: float) -> dict[str, Any]:
+        """What a move to ``target`` (m or rad) would do from the kept state: the plan's fields (SI)."""
+        state = self.link.load()
+        return Planner(self._calibration(), self.joint, state.pose).plan(state.positions[self.joint], target).as_dict()

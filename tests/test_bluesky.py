@@ -1,0 +1,370 @@
+"""stickslip.bluesky: a joint as an ophyd-async device, run by a bluesky RunEngine on the simulator.
+
+Independent views, not the device's own:
+* where the joint really is: the simulator's true position (``SimulatedMM3A.position``), with
+  the calibration equal to the simulator's true models and no per-step noise, so the truth
+  must land within one step plus the position ripple (0.4 % of a step's size, summed over
+  the move: < 0.5 % of the distance);
+* what bluesky saw: the documents a collecting callback received;
+* what was kept: the database read back with ``load_state`` (what ``stickslip where`` shows);
+* a stop: a stand-in for a real controller (``PacedArm``: a burst takes |n|/f of wall time
+  and ``stop()`` cuts it short, as the NanoControl does), whose true position must lie in
+  the uncertainty the axis reports.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("bluesky")
+pytest.importorskip("ophyd_async")
+
+import bluesky.plan_stubs as bps  # noqa: E402
+import bluesky.plans as bp  # noqa: E402
+from bluesky import RunEngine  # noqa: E402
+from bluesky.utils import FailedStatus  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from ophyd_async.core import init_devices  # noqa: E402
+
+from stickslip import kinematics as kin  # noqa: E402
+from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, calibration_day  # noqa: E402
+from stickslip.calibration import Calibration  # noqa: E402
+from stickslip.devices.base import DeviceError, DeviceInfo  # noqa: E402
+from stickslip.devices.positions import load_state  # noqa: E402
+from stickslip.planning import Planner  # noqa: E402
+from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
+from stickslip.storage import Store  # noqa: E402
+
+DAY = "2026-11-22"
+
+
+def true_calibration(sim: SimulatedMM3A) -> Calibration:
+    """The simulator's own models as a calibration (exact by construction)."""
+    models = sim.true_models()
+    return Calibration(
+        models=models, stderr=dict.fromkeys(models), constant_steps=dict.fromkeys(models, 1e-6), day=DAY, method="paper"
+    )
+
+
+@pytest.fixture()
+def RE() -> Iterator[Any]:
+    re = RunEngine({}, call_returns_result=True)
+    yield re
+    if re.state != "idle":
+        re.halt()  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
+
+
+@pytest.fixture()
+def sim() -> SimulatedMM3A:
+    return SimulatedMM3A(seed=4, day=DAY, step_noise=0.0)
+
+
+def collect(re: Any) -> list[tuple[str, dict[str, Any]]]:
+    docs: list[tuple[str, dict[str, Any]]] = []
+    re.subscribe(lambda name, doc: docs.append((name, doc)))
+    return docs
+
+
+def one_step(cal: Calibration, joint: int, q: float) -> float:
+    """The step size at ``q`` in the outstretched pose (m or rad), the larger of the two directions."""
+    p = Planner(cal, joint, kin.Pose())
+    return max(p.gamma(q, "+"), p.gamma(q, "-"))
+
+
+def kept(joint: int, url: str = "sim://") -> tuple[float, bool]:
+    with Store.open() as store:
+        state = load_state(store, url)
+    return state.positions[joint], joint in state.uncertain
+
+
+@pytest.mark.parametrize("joint, target", [(3, 1.5e-3), (2, -1.2)])
+def test_mv_ends_within_one_step_of_the_target(RE: Any, sim: SimulatedMM3A, joint: int, target: float) -> None:
+    cal = true_calibration(sim)
+    with init_devices():
+        axis = StickSlipAxis(sim, joint, cal, name="ax")
+    q0 = sim.position(joint)
+    RE(bps.mv(axis, target))
+    location = RE(bps.locate(axis)).plan_result
+    gamma = one_step(cal, joint, target)
+    assert abs(location["readback"] - target) <= gamma
+    assert location["setpoint"] == target
+    assert abs(sim.position(joint) - target) <= gamma + 0.005 * abs(target - q0)
+    q_kept, uncertain = kept(joint)
+    assert q_kept == pytest.approx(location["readback"], abs=1e-15) and not uncertain
+
+
+def test_scan_emits_five_events_whose_readbacks_increase_through_the_targets(RE: Any, sim: SimulatedMM3A) -> None:
+    cal = true_calibration(sim)
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, cal, name="q3")
+    docs = collect(RE)
+    a, b = 1e-3, 3e-3
+    RE(bp.scan([], axis, a, b, 5))
+    events = [d for n, d in docs if n == "event"]
+    assert len(events) == 5
+    readbacks = np.array([e["data"]["q3"] for e in events])
+    targets = np.linspace(a, b, 5)
+    assert np.all(np.diff(readbacks) > 0)
+    gamma = one_step(cal, 3, b)
+    assert np.max(np.abs(readbacks - targets)) <= gamma
+    (descriptor,) = [d for n, d in docs if n == "descriptor"]
+    assert descriptor["data_keys"]["q3"]["units"] == "m"
+    assert descriptor["data_keys"]["q3-pose"]["units"] == "rad, rad, m, rad, rad"
+    steps = [e["data"]["q3-last_steps"] for e in events]
+    assert steps[1:] == [pytest.approx(steps[1], abs=1)] * 4  # equal 0.5 mm moves, same load
+    assert abs(sim.position(3) - b) <= gamma + 0.005 * b
+
+
+@pytest.mark.parametrize("target", [0.02, -1e-6, math.nan, math.inf])
+def test_a_bad_target_fails_the_status_and_sends_no_step(RE: Any, sim: SimulatedMM3A, target: float) -> None:
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3")
+    before = sim.steps_simulated
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, target))
+    err = e.value.__cause__
+    assert isinstance(err, ValueError)
+    assert "outside joint 3's range [0 µm, 12000 µm]" in str(err)
+    assert sim.steps_simulated == before
+    assert kept(3) == (0.0, False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(allow_nan=True, allow_infinity=True))
+def test_target_check_agrees_with_the_joint_range(q: float) -> None:
+    axis = StickSlipAxis(SimulatedMM3A(), 2, true_calibration(SimulatedMM3A()), name="q2")
+    inside = math.isfinite(q) and -7 * math.pi / 6 - 1e-4 <= q <= math.pi / 6 + 1e-4
+    far_outside = not math.isfinite(q) or q < -7 * math.pi / 6 - 1e-3 or q > math.pi / 6 + 1e-3
+    problem = axis.target_problem(q)
+    if inside:
+        assert problem is None
+    if far_outside:
+        assert problem is not None and "outside joint 2's range" in problem
+
+
+def test_moves_of_two_axes_run_one_after_the_other_and_both_arrive(RE: Any, sim: SimulatedMM3A) -> None:
+    cal = true_calibration(sim)
+    with init_devices():
+        arm = StickSlipManipulator(sim, cal)
+    RE(bps.mv(arm.q3, 2e-3, arm.q2, -1.0))
+    assert abs(sim.position(3) - 2e-3) <= one_step(cal, 3, 2e-3) + 1e-5
+    assert abs(sim.position(2) + 1.0) <= 2 * one_step(cal, 2, -1.0) + 0.005 * abs(-1.0 + math.pi / 2)
+    assert kept(3)[0] == pytest.approx(2e-3, abs=one_step(cal, 3, 2e-3))
+
+
+def test_a_lock_held_by_another_process_fails_the_move_naming_it(RE: Any, sim: SimulatedMM3A) -> None:
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3")
+    other = {"pid": os.getppid(), "host": socket.gethostname(), "since": "2026-11-22T10:00:00+00:00"}
+    with Store.open() as store:
+        assert store.acquire_lock("sim://", other) is None
+    before = sim.steps_simulated
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 1e-3))
+    assert isinstance(e.value.__cause__, MoveError)
+    assert f"pid {os.getppid()}" in str(e.value.__cause__)
+    assert sim.steps_simulated == before
+
+
+def test_no_calibration_refuses_to_move(RE: Any, sim: SimulatedMM3A) -> None:
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, None, name="q3")
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 1e-3))
+    assert "has no calibration" in str(e.value.__cause__)
+    assert sim.steps_simulated == 0
+
+
+class PacedArm:
+    """A stand-in for a real controller: a burst takes |n| / f of wall time; stop() cuts it short."""
+
+    def __init__(self, sim: SimulatedMM3A):
+        self.sim = sim
+        self.halt = threading.Event()
+
+    @property
+    def info(self) -> DeviceInfo:
+        return self.sim.info
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        self.sim.set_frequency(joint, hz)
+
+    def frequency(self, joint: int) -> float:
+        return self.sim.frequency(joint)
+
+    def step(self, joint: int, n: int) -> None:
+        hz = self.sim.frequency(joint)
+        t0 = time.monotonic()
+        self.halt.wait(abs(n) / hz)
+        done = min(abs(n), int((time.monotonic() - t0) * hz))
+        if done:
+            self.sim.step(joint, done if n > 0 else -done)
+
+    def stop(self, joint: int | None = None) -> None:
+        self.halt.set()
+
+    def settings(self) -> dict[str, object]:
+        return self.sim.settings()
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+def test_stop_during_a_long_move_returns_at_once_and_leaves_an_honest_position(sim: SimulatedMM3A) -> None:
+    """The issue's acceptance: stop() within 0.5 s (a move of ~5 s on a paced controller)."""
+    cal = true_calibration(sim)
+    arm = PacedArm(sim)
+
+    async def scenario() -> tuple[float, Exception | None, StickSlipAxis]:
+        axis = StickSlipAxis(arm, 3, cal, name="q3", burst=1000)
+        await axis.connect()
+        status = axis.set(5e-3)
+        await asyncio.sleep(0.3)
+        t0 = time.monotonic()
+        await axis.stop()
+        took = time.monotonic() - t0
+        try:
+            await status
+        except Exception as e:  # noqa: BLE001 - the status's error is what is checked
+            return took, e, axis
+        return took, None, axis
+
+    took, error, axis = asyncio.run(scenario())
+    assert took < 0.5
+    assert isinstance(error, RuntimeError) and "was stopped" in str(error)
+    assert 0.0 < sim.position(3) < 5e-3  # it moved, and not all the way
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+    assert 3 in state.uncertain  # a burst was cut short: how far it went is not known to the model
+    lo, hi = state.uncertain[3]
+    ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
+    assert lo - ripple <= sim.position(3) <= hi + ripple
+    assert hi - lo <= 1000 * one_step(cal, 3, hi)  # one burst wide
+    uncertain = asyncio.run(axis.uncertain.get_value())
+    assert uncertain is True
+    with pytest.raises(MoveError, match="uncertain"):
+        asyncio.run(_move(axis, 1e-3))
+
+
+async def _move(axis: StickSlipAxis, target: float) -> None:
+    await axis.connect()
+    await axis.set(target)
+
+
+def test_stop_between_bursts_keeps_an_exact_position(sim: SimulatedMM3A) -> None:
+    """On the simulator a burst completes at once: a stop lands between bursts and the position stays exact."""
+    cal = true_calibration(sim)
+
+    async def scenario() -> tuple[StickSlipAxis, int]:
+        axis = StickSlipAxis(sim, 3, cal, name="q3", burst=50)
+        await axis.connect()
+        status = axis.set(8e-3)
+        while await axis.readback.get_value() < 1e-3:
+            await asyncio.sleep(0.001)
+        await axis.stop(success=True)
+        await status  # success=True: the status completes
+        return axis, sim.steps_simulated
+
+    axis, sent = asyncio.run(scenario())
+    q, uncertain = kept(3)
+    assert not uncertain and 1e-3 <= q < 8e-3
+    assert sent % 50 == 0  # whole bursts only
+    assert q == pytest.approx(Planner(cal, 3, kin.Pose()).position_after(0.0, sent), abs=1e-12)
+    assert abs(sim.position(3) - q) <= one_step(cal, 3, q) + 0.005 * q
+
+
+def test_calibration_day_on_the_simulator(RE: Any) -> None:
+    sim = SimulatedMM3A(seed=4, day=DAY)
+    truth = sim.true_models()
+    docs = collect(RE)
+    with init_devices():
+        arm = StickSlipManipulator(sim)
+    RE(calibration_day(arm, detector="oracle", day=DAY))
+    (start,) = [d for n, d in docs if n == "start"]
+    assert start["plan_name"] == "calibration_day" and start["device"] == "sim://"
+    streams = {d["uid"]: d["name"] for n, d in docs if n == "descriptor"}
+    events = [d for n, d in docs if n == "event" and streams[d["descriptor"]] == "primary"]
+    assert len(events) == 14
+    for e in events:
+        data = e["data"]
+        j, direction = data["arm-traverse-joint"], data["arm-traverse-direction"]
+        pose = [float(data[f"arm-traverse-{k}"]) for k in ("q1", "q2", "q3", "theta", "psi")]
+        true_gamma = truth[(j, direction)].average_gamma(data["arm-traverse-start"], data["arm-traverse-end"], *pose)
+        assert data["arm-traverse-gamma"] == pytest.approx(float(true_gamma), rel=0.01)
+        assert data["arm-traverse-steps"] * data["arm-traverse-gamma"] == pytest.approx(kin.JOINTS[j].span)
+    (cal_event,) = [d for n, d in docs if n == "event" and streams[d["descriptor"]] == "calibration"]
+    assert cal_event["data"]["arm-calibration_readout-day"] == DAY
+    with Store.open() as store:
+        assert store.count_traverses("sim://") == 14
+        stored = store.latest_calibration("sim://")
+    assert stored is not None and arm.calibration is not None
+    assert sorted(arm.calibration.models) == [(2, "+"), (2, "-"), (3, "+"), (3, "-")]  # the paper's poses
+    for (j, direction), model in truth.items():  # full-range average steps in poses not calibrated at
+        if j == 1:
+            continue
+        spec = kin.JOINTS[j]
+        for other in (kin.Pose(q2=-math.pi / 4, q3=0.006), kin.Pose(q3=0.006, theta=-math.pi / 4)):
+            got = arm.calibration.model(j, direction).average_gamma(spec.lower, spec.upper, *other)
+            want = model.average_gamma(spec.lower, spec.upper, *other)
+            assert float(got) == pytest.approx(float(want), rel=0.01)
+    RE(bps.mv(arm.q3, 4e-3))  # the axes now move with today's calibration, from the pose the day left
+    assert sim.position(3) == pytest.approx(4e-3, abs=40e-6)
+
+
+def test_a_stop_before_the_first_burst_sends_nothing(sim: SimulatedMM3A) -> None:
+    cal = true_calibration(sim)
+
+    async def scenario() -> BaseException | None:
+        axis = StickSlipAxis(sim, 3, cal, name="q3")
+        await axis.connect()
+        status = axis.set(5e-3)
+        await axis.stop()  # before the move's worker has begun
+        try:
+            await status
+        except RuntimeError as e:
+            return e
+        return None
+
+    error = asyncio.run(scenario())
+    assert error is not None and "after 0 of" in str(error)
+    assert sim.steps_simulated == 0 and kept(3) == (0.0, False)
+
+
+class FailingArm(PacedArm):
+    """A controller that refuses its third burst (a dropped link): nothing of that burst moves."""
+
+    calls = 0
+
+    def step(self, joint: int, n: int) -> None:
+        self.calls += 1
+        if self.calls == 3:
+            raise DeviceError("no answer from the controller within 2 s")
+        self.sim.step(joint, n)
+
+
+def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_truth(RE: Any, sim: SimulatedMM3A) -> None:
+    cal = true_calibration(sim)
+    with init_devices():
+        axis = StickSlipAxis(FailingArm(sim), 3, cal, name="q3", burst=500)
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 3e-3))
+    text = str(e.value.__cause__)
+    assert "no answer from the controller within 2 s; sent 1000 of" in text
+    assert "uncertain" in text and "re-reference" in text
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+    lo, hi = state.uncertain[3]
+    ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
+    assert lo - ripple <= sim.position(3) <= hi + ripple
+    assert sim.steps_simulated == 1000
