@@ -428,12 +428,8 @@ class StepProfile:
             return abs(self.F(q1) - self.F(q0))
         return float(_steps_between_arrays(q0, q1, self.A, self.alpha, self.beta))
 
-    def inverse(self, q0: float, n: float, sign: int, guess: float | None = None) -> float:
-        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``).
-
-        ``guess`` (optional) starts Newton there: a planner knows the target, within a
-        step of the answer, and saves most iterations.
-        """
+    def inverse(self, q0: float, n: float, sign: int) -> float:
+        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``)."""
         if self.kind == "const":
             return q0 + sign * n * self.A
         if self.kind != "atan":
@@ -442,7 +438,7 @@ class StepProfile:
         lo_q = q0 + sign * n * (self.A - self.B)  # between n smallest and n largest steps away
         hi_q = q0 + sign * n * (self.A + self.B)
         lo, hi = min(lo_q, hi_q), max(lo_q, hi_q)
-        q = min(max(q0 + sign * n * self.gamma(q0) if guess is None else guess, lo), hi)
+        q = min(max(q0 + sign * n * self.gamma(q0), lo), hi)
         tol = 1e-13 * max(1.0, abs(q))
         for _ in range(100):
             r = sign * (self.F(q) - F0) - n  # increasing in sign * q

@@ -181,7 +181,8 @@ class Planner:
         """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""
         if q_to == q_from:
             return 0.0
-        return self._dir(1 if q_to > q_from else -1).steps(q_from, q_to)
+        sign = 1 if q_to > q_from else -1
+        return (self._coeffs.get(sign) or self._dir(sign)).steps(q_from, q_to)
 
     def steps(self, q_from: float, q_to: float) -> int:
         """Signed steps to command to move from ``q_from`` to ``q_to``: negative when ``q_to < q_from``.
@@ -189,8 +190,10 @@ class Planner:
         The sign is the direction (docs/design.md §2), so the result can be handed to
         :meth:`position_after` or to a controller's ``step`` as it is.
         """
-        n = int(round(self.exact_steps(q_from, q_to)))
-        return n if q_to >= q_from else -n
+        if q_to == q_from:
+            return 0
+        sign = 1 if q_to > q_from else -1
+        return sign * round((self._coeffs.get(sign) or self._dir(sign)).steps(q_from, q_to))  # the hot path
 
     def gamma(self, q: float, direction: str | int) -> float:
         """Predicted step size at ``q`` in ``direction`` (rad or m)."""
@@ -213,9 +216,8 @@ class Planner:
         sign = 1 if q_to >= q_from else -1
         c = self._dir(sign)
         exact = 0.0 if q_to == q_from else c.steps(q_from, q_to)
-        n = int(round(exact))
-        # whole steps land within a step of the target: Newton starts there
-        end = float(q_from) if n == 0 else c.inverse(float(q_from), float(n), sign, guess=float(q_to))
+        n = round(exact)
+        end = self.position_after(q_from, sign * n)  # exactly what dead_reckon gives for these steps
         return MovePlan(
             self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from), c.gamma(q_to)
         )
