@@ -302,8 +302,8 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(tm
     with Store.open(p) as st:
         st.add_traverse(_t(steps=4242))
     future = (*storage.MIGRATIONS, "ALTER TABLE traverses ADD COLUMN note TEXT; CREATE TABLE extra (x INTEGER)")
-    monkeypatch.setattr(storage, "MIGRATIONS", future)
-    monkeypatch.setattr(storage, "SCHEMA_VERSION", len(future))
+    monkeypatch.setattr(storage.base, "MIGRATIONS", future)
+    monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(future))
     with Store.open(p) as st:
         assert st.schema_version == len(future)
         assert [t.steps for t in st.traverses()] == [4242]
@@ -311,8 +311,8 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(tm
         assert "note" in cols
     # a migration that fails leaves the file at its old version, untouched
     broken = (*future, "CREATE TABLE extra (x INTEGER)")  # 'extra' exists already
-    monkeypatch.setattr(storage, "MIGRATIONS", broken)
-    monkeypatch.setattr(storage, "SCHEMA_VERSION", len(broken))
+    monkeypatch.setattr(storage.base, "MIGRATIONS", broken)
+    monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(broken))
     with pytest.raises(StoreError, match="not a usable stickslip database"):
         Store.open(p)
     con = sqlite3.connect(p)
@@ -383,7 +383,8 @@ def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
 def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
     import sqlite3
 
-    from stickslip.storage import MIGRATIONS, _split_sql, content_key
+    from stickslip.storage import MIGRATIONS, content_key
+    from stickslip.storage.schema import _split_sql
     from synth import paper_table
 
     path = tmp_path / "old.db"

@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from stickslip.devices.base import redact_url
 from stickslip.measurements import Traverse
-from stickslip.storage import _content_keys, content_key
+from stickslip.storage import content_key
+from stickslip.storage.schema import _content_keys
 
 
 def _key_as_defined(t: Traverse, device: str) -> str:

@@ -1,0 +1,75 @@
+"""Calibration history and every measured traverse, kept in an embedded SQLite file.
+
+The database lives in the user's data directory by default
+(``$XDG_DATA_HOME/stickslip/stickslip.db``, else ``~/.local/share/stickslip/stickslip.db``;
+``~/Library/Application Support/stickslip`` on macOS, ``%LOCALAPPDATA%\\stickslip`` on
+Windows). The environment variable ``STICKSLIP_DB`` or an explicit path overrides it.
+
+Safety
+------
+* WAL journal, ``synchronous=FULL``, ``busy_timeout`` and foreign keys on every
+  connection; every write is one ``BEGIN IMMEDIATE ... COMMIT`` transaction, so a crash
+  (or Ctrl-C, or ``kill -9``) loses at most the write in flight and never corrupts the
+  file, and several processes may write at once without losing rows.
+* :meth:`Store.add_traverse` commits each traverse on its own: a measurement session
+  that dies keeps every traverse completed before it died.
+* The schema is versioned with ``PRAGMA user_version``; :data:`MIGRATIONS` is the
+  ordered list of SQL scripts that bring a file from version *k* to *k + 1*. Opening a
+  file runs the missing ones in one transaction; a file from a newer stickslip is
+  refused rather than guessed at.
+
+Tables: ``devices`` (url, model), ``sessions`` (device, day), ``traverses`` (the
+measurement-table row, when and how it was measured, where it came from),
+``calibrations`` (the Calibration's JSON, day, method, created_at),
+``calibration_traverses`` (which traverses a calibration used) and ``device_state``
+(small per-device key/value JSON, e.g. dead-reckoned joint positions).
+"""
+
+
+from __future__ import annotations
+
+from ..clock import stale_message
+from .calibrations import CalibrationStore
+from .schema import (
+    BUSY_TIMEOUT_MS,
+    DEFAULT_DEVICE,
+    ENV_VAR,
+    MIGRATIONS,
+    SCHEMA_VERSION,
+    StoreError,
+    content_key,
+    default_db_path,
+    resolve_db_path,
+    warn_if_stale,
+)
+from .state import StateStore
+from .traverses import TraverseStore
+
+__all__ = [
+    "BUSY_TIMEOUT_MS",
+    "DEFAULT_DEVICE",
+    "ENV_VAR",
+    "MIGRATIONS",
+    "SCHEMA_VERSION",
+    "Store",
+    "StoreError",
+    "content_key",
+    "default_db_path",
+    "resolve_db_path",
+    "warn_if_stale",
+    "stale_message",
+]
+
+
+class Store(TraverseStore, CalibrationStore, StateStore):
+    """The SQLite store of devices, sessions, traverses, calibrations and device state.
+
+    Open with :meth:`Store.open` (a context manager)::
+
+        with Store.open() as store:               # default path, or $STICKSLIP_DB
+            tid = store.add_traverse(t, device="sim://", how="simulated")
+            cal = store.latest_calibration("sim://")
+
+    Device URLs name a controller (``sim://``, ``serial:///dev/ttyUSB0`` ...); a device
+    row is created the first time a URL is used.
+    """

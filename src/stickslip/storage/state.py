@@ -1,0 +1,106 @@
+"""Per-device state and the device lock."""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import TYPE_CHECKING, Any
+
+from ..devices.base import redact_url
+from .base import _Base
+from .schema import _now
+
+if TYPE_CHECKING:  # pragma: no cover
+    pass
+
+
+class StateStore(_Base):
+    """Small per-device state (positions, the move journal) and the one-process device lock."""
+
+    # -- per-device state
+
+    def set_state(self, device: str, key: str, value_json: Any) -> None:
+        """Store a small JSON value under ``key`` for ``device`` (replaces the old one).
+
+        ``value_json`` is JSON text, or any JSON-serialisable object (it is dumped).
+        """
+        if isinstance(value_json, str):
+            try:
+                json.loads(value_json)
+                text = value_json
+            except json.JSONDecodeError:
+                text = json.dumps(value_json)
+        else:
+            text = json.dumps(value_json)
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            con.execute(
+                "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, ?, ?, ?) "
+                "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
+                "updated_at = excluded.updated_at",
+                (dev, key, text, _now()),
+            )
+
+    def get_state(self, device: str, key: str, default: Any = None) -> Any:
+        """The decoded JSON value stored under ``key`` for ``device``, or ``default``."""
+        row = self._con.execute(
+            "SELECT s.value FROM device_state s JOIN devices d ON d.id = s.device_id "
+            "WHERE d.url = ? AND s.key = ?",
+            (redact_url(device), key),
+        ).fetchone()
+        return default if row is None else json.loads(row[0])
+
+    # -- one process drives a device at a time
+
+    def acquire_lock(self, device: str, holder: dict[str, Any]) -> dict[str, Any] | None:
+        """Take ``device``'s lock for ``holder`` (``{"pid", "host", "since"}``), atomically.
+
+        Returns ``None`` when taken, else the current holder (the caller refuses, naming
+        it). A lock whose holder is a process on this host that no longer exists (POSIX
+        only; elsewhere a lock is released only by its holder) is taken over.
+        """
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            row = con.execute(
+                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+            ).fetchone()
+            if row is not None:
+                current = json.loads(row[0])
+                if isinstance(current, dict) and _alive(current):
+                    return dict(current)
+            con.execute(
+                "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
+                "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
+                "updated_at = excluded.updated_at",
+                (dev, json.dumps(holder), _now()),
+            )
+        return None
+
+    def release_lock(self, device: str, pid: int) -> None:
+        """Release ``device``'s lock if process ``pid`` holds it."""
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            row = con.execute(
+                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+            ).fetchone()
+            if row is not None and json.loads(row[0]).get("pid") == pid:
+                con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
+
+
+
+def _alive(holder: dict[str, Any]) -> bool:
+    """Whether a lock holder may still be running (unknown counts as running)."""
+    import socket
+
+    pid = holder.get("pid")
+    if not isinstance(pid, int) or holder.get("host") != socket.gethostname() or os.name != "posix":
+        return True
+    try:
+        os.kill(pid, 0)  # POSIX: signal 0 only checks that the process exists
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+

@@ -1,0 +1,261 @@
+"""Traverses in the database."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import sqlite3
+from collections.abc import Iterable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any
+
+from ..devices.base import redact_url
+from ..measurements import Traverse
+from .base import _Base, _require_traverses, _rowid
+from .schema import _COLUMNS, DEFAULT_DEVICE, StoreError, _content_keys, _iso, content_key
+
+if TYPE_CHECKING:  # pragma: no cover
+    pass
+
+
+class TraverseStore(_Base):
+    """Traverses: add (with duplicate detection), read, count, exclude and delete."""
+
+    # -- traverses
+
+    @staticmethod
+    def _check(t: Traverse) -> None:
+        if not isinstance(t, Traverse):
+            raise TypeError(f"expected a Traverse, got {type(t).__name__}")
+        if not str(t.day).strip():
+            raise ValueError("traverse has an empty day (session label)")
+
+    def _insert_traverse(
+        self,
+        con: sqlite3.Connection,
+        t: Traverse,
+        device_id: int,
+        how: str,
+        measured_at: str,
+        source: str | None,
+    ) -> int:
+        sid = self._session_id(con, device_id, str(t.day))
+        url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
+        return self._insert_row(con, t, sid, how, measured_at, source, content_key(t, url))
+
+    _INSERT = (
+        "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
+        '    start, "end", steps, '
+        "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+    )
+
+    @staticmethod
+    def _insert_row(
+        con: sqlite3.Connection, t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
+    ) -> int:
+        cur = con.execute(TraverseStore._INSERT, TraverseStore._row_values(t, sid, how, measured_at, source, key))
+        return _rowid(cur)
+
+    @staticmethod
+    def _row_values(
+        t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
+    ) -> tuple[object, ...]:
+        return (
+            sid,
+            int(t.joint),
+            t.direction,
+            float(t.q1),
+            float(t.q2),
+            float(t.q3),
+            float(t.theta),
+            float(t.psi),
+            float(t.start),
+            float(t.end),
+            int(t.steps),
+            measured_at,
+            how,
+            source,
+            key,
+        )
+
+    def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
+        """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
+        keys = _content_keys(traverses, device)
+        stored: set[str] = set()
+        step = 500  # keys per query (SQLite allows 999 parameters in old builds)
+        for i in range(0, len(keys), step):
+            part = keys[i : i + step]
+            rows = self._con.execute(
+                f"SELECT DISTINCT content FROM traverses WHERE content IN ({','.join('?' * len(part))})", part
+            )
+            stored.update(r[0] for r in rows)
+        return [k for k, key in enumerate(keys) if key in stored]
+
+    def add_traverse(
+        self,
+        traverse: Traverse,
+        device: str = DEFAULT_DEVICE,
+        how: str = "measured",
+        measured_at: _dt.datetime | None = None,
+        source: str | None = None,
+    ) -> int:
+        """Record one traverse in its own transaction; returns its id.
+
+        Parameters
+        ----------
+        traverse : Traverse
+            The measurement-table row (SI units).
+        device : str
+            Device URL, e.g. ``"sim://"``.
+        how : str
+            How it was measured: ``"simulated"``, ``"audio"``, ``"imported"``, ``"measured"`` ...
+        measured_at : datetime, optional
+            When (default now); naive datetimes are local time, stored as UTC.
+        source : str, optional
+            Provenance (e.g. the file it was imported from).
+        """
+        self._check(traverse)
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            return self._insert_traverse(con, traverse, dev, how, _iso(measured_at), source)
+
+    def add_traverses(
+        self,
+        traverses: Iterable[Traverse],
+        device: str = DEFAULT_DEVICE,
+        how: str = "measured",
+        measured_at: _dt.datetime | None = None,
+        source: str | None = None,
+    ) -> list[int]:
+        """Record many traverses in ONE transaction (all or nothing); returns their ids.
+
+        Use it for imports; use :meth:`add_traverse` while measuring, so that each
+        completed traverse is safe on its own.
+        """
+        ts = list(traverses)
+        for t in ts:
+            self._check(t)
+        when = _iso(measured_at)
+        with self._write() as con:
+            dev = self._device_id(con, device)
+            url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
+            sessions: dict[str, int] = {}  # one look-up per day, not per row
+            values = []
+            for t, key in zip(ts, _content_keys(ts, url), strict=True):
+                day = str(t.day)
+                sid = sessions.get(day)
+                if sid is None:
+                    sid = sessions[day] = self._session_id(con, dev, day)
+                values.append(self._row_values(t, sid, how, when, source, key))
+            # one executemany; in this write transaction the new rows are exactly those above the old largest id
+            before = int(con.execute("SELECT COALESCE(MAX(id), 0) FROM traverses").fetchone()[0])
+            con.executemany(self._INSERT, values)
+            ids = [int(r[0]) for r in con.execute("SELECT id FROM traverses WHERE id > ? ORDER BY id", (before,))]
+            if len(ids) != len(values):  # pragma: no cover - would mean another writer inside our transaction
+                raise StoreError(f"{self.path}: stored {len(ids)} rows for {len(values)} traverses; nothing kept")
+            return ids
+
+    def iter_traverses(
+        self, device: str | None = None, day: str | None = None, joint: int | None = None, chunk: int = 10_000
+    ) -> Iterator[Traverse]:
+        """Like :meth:`traverses`, read ``chunk`` rows at a time (exports of any size in bounded memory)."""
+        cur = self._traverse_cursor(device, day, joint)
+        while rows := cur.fetchmany(chunk):
+            yield from map(self._to_traverse, rows)
+
+    def traverses(
+        self, device: str | None = None, day: str | None = None, joint: int | None = None
+    ) -> list[Traverse]:
+        """Stored traverses in the order they were recorded, optionally filtered."""
+        return [self._to_traverse(r) for r in self._traverse_rows(device, day, joint)]
+
+    def traverse_records(
+        self, device: str | None = None, day: str | None = None, joint: int | None = None
+    ) -> list[dict[str, Any]]:
+        """Like :meth:`traverses`, as dicts with ``id, device, measured_at, how, source`` too."""
+        out = []
+        for r in self._traverse_rows(device, day, joint):
+            d = {
+                k: r[k] for k in ("id", "device", "day", *_COLUMNS, "measured_at", "how", "source")
+            }
+            out.append(d)
+        return out
+
+    def count_traverses(self, device: str | None = None) -> int:
+        """Number of stored traverses (of one device, or all)."""
+        if device is None:
+            return int(self._con.execute("SELECT COUNT(*) FROM traverses").fetchone()[0])
+        return int(
+            self._con.execute(
+                "SELECT COUNT(*) FROM traverses t JOIN sessions s ON s.id = t.session_id "
+                "JOIN devices d ON d.id = s.device_id WHERE d.url = ?",
+                (redact_url(device),),
+            ).fetchone()[0]
+        )
+
+    def has_source(self, source: str) -> bool:
+        """Whether traverses from ``source`` (e.g. a file's checksum) were stored already."""
+        return (
+            self._con.execute(
+                "SELECT 1 FROM traverses WHERE source = ? LIMIT 1", (source,)
+            ).fetchone()
+            is not None
+        )
+
+    def days(self, device: str | None = None) -> list[str]:
+        """Session labels that hold traverses or calibrations, sorted."""
+        sql = "SELECT DISTINCT s.day FROM sessions s JOIN devices d ON d.id = s.device_id"
+        args: tuple[Any, ...] = ()
+        if device is not None:
+            sql += " WHERE d.url = ?"
+            args = (redact_url(device),)
+        days = {r[0] for r in self._con.execute(sql, args)}
+        csql = (
+            "SELECT DISTINCT c.day FROM calibrations c JOIN devices d ON d.id = c.device_id "
+            "WHERE c.day IS NOT NULL"
+        )
+        if device is not None:
+            csql += " AND d.url = ?"
+        days |= {r[0] for r in self._con.execute(csql, args)}
+        return sorted(days)
+
+    # -- deleting
+
+    def traverse_ids(self, device: str | None = None, day: str | None = None) -> list[int]:
+        """Ids of the stored traverses (of one device and/or session day)."""
+        return [int(r["id"]) for r in self._traverse_rows(device, day, None, include_excluded=True)]
+
+    def set_excluded(self, ids: Sequence[int], reason: str | None) -> int:
+        """Exclude traverses from analyses (``reason``, kept) or include them again (``None``).
+
+        Excluded traverses stay stored (``export``/``history`` count them apart) but are not
+        returned by :meth:`traverses`. Raises ``ValueError`` naming unknown ids (nothing changes).
+        """
+        ids = sorted({int(i) for i in ids})
+        if reason is not None and not reason.strip():
+            raise ValueError("give a reason for excluding (e.g. 'cable snagged')")
+        marks = ",".join("?" * len(ids))
+        with self._write() as con:
+            _require_traverses(con, ids, marks)
+            return int(con.execute(f"UPDATE traverses SET excluded = ? WHERE id IN ({marks})", [reason, *ids]).rowcount)
+
+    def delete_traverses(self, ids: Sequence[int]) -> dict[str, int]:
+        """Delete traverses by id in one transaction; ``{"traverses": n, "calibration_links": m}``.
+
+        Calibrations made from them keep their stored parameters (their JSON is complete);
+        only the links to the deleted rows go. Sessions left empty are removed. Raises
+        ``ValueError`` naming ids that do not exist (and deletes nothing).
+        """
+        ids = sorted({int(i) for i in ids})
+        if not ids:
+            return {"traverses": 0, "calibration_links": 0}
+        marks = ",".join("?" * len(ids))
+        with self._write() as con:
+            _require_traverses(con, ids, marks)
+            links = con.execute(f"DELETE FROM calibration_traverses WHERE traverse_id IN ({marks})", ids).rowcount
+            n = con.execute(f"DELETE FROM traverses WHERE id IN ({marks})", ids).rowcount
+            con.execute(
+                "DELETE FROM sessions WHERE id NOT IN (SELECT session_id FROM traverses) "
+                "AND NOT EXISTS (SELECT 1 FROM calibrations c WHERE c.device_id = sessions.device_id "
+                "AND c.day = sessions.day)"
+            )
+        return {"traverses": int(n), "calibration_links": int(links)}
+
