@@ -90,22 +90,20 @@ def _readme_block_after(heading: str) -> list[str]:
 
 @POSIX
 def test_readme_audio_example_runs_on_a_recording(tmp_path):
-    """`tune` and `listen` as the README writes them, on a recording whose stop is at 4.2 s."""
-    from stickslip.audio.sources import write_wav
-    from stickslip.sim.sound import render_traverse_recording
-
-    samples, rate = render_traverse_recording(3, 1000.0, stop_at_s=4.2, duration_s=6.0, seed=5)
-    write_wav(tmp_path / "joint3.wav", samples, rate)
+    """`record`, `listen` and `tune` as the README writes them (record makes the recording on sim://)."""
     env = _venv_folder(tmp_path)
+    env["STICKSLIP_DB"] = str(tmp_path / "audio.db")
     lines = [ln for ln in _readme_block_after("## The audio limit switch") if "--mic" not in ln]
-    assert len(lines) == 2
+    assert len(lines) == 3 and lines[0].startswith("stickslip record")
     r = _bash([". .venv/bin/activate", *lines], tmp_path, env, timeout=300)
     assert r.returncode == 0, r.stderr[-3000:]
+    stop = float(re.search(r"stop at ([0-9.]+) s", r.stdout).group(1))  # record says where it put the stop
     out = r.stdout.splitlines()
-    first = next(i for i, ln in enumerate(out) if ln.startswith(("[", "{")))  # listen --json follows tune's text
-    events = json.loads("\n".join(out[first:]))
-    found = events["events"] if isinstance(events, dict) else events
-    assert len(found) == 1 and abs(found[0]["onset_s"] - 4.2) < 0.025
+    first = next(i for i, ln in enumerate(out) if ln.startswith(("[", "{")))  # listen --json
+    last = next(i for i in range(first, len(out)) if out[i].startswith(("]", "}")))
+    found = json.loads("\n".join(out[first : last + 1]))
+    assert len(found) == 1 and abs(found[0]["onset_s"] - stop) < 0.025
+    assert (tmp_path / "joint3-tuning.json").exists()
 
 
 @POSIX
