@@ -324,6 +324,56 @@ def measure_traverse(
     spec = kin.joint_spec(joint)
     sign = direction_sign(direction)
     label = direction_label(sign)
+    _check_options(latency, predrive, burst_steps, listen_after_steps)
+    limit = int(max_steps) if max_steps is not None else int(2 * spec.span / MIN_STEP_PRIOR[spec.number])
+    hz = float(controller.frequency(joint))
+    clock = clock or _device_clock(controller)
+    listener = _Listener(detector, audio_blocks, _sample_rate(detector, audio_blocks), step_hz=hz)
+    run = _Run(controller, joint, sign, hz, clock, listener, burst_steps, limit)
+
+    predrive_steps = run.to_start_stop(predrive)  # 1. to the start stop
+    t_start = clock()
+    update, close_bar = _progress_callback(progress, joint, label, expected_steps)
+    try:  # 2. step until the end stop is heard
+        event = run.until_heard(t_start, listen_after_steps, settle_s, update)
+    finally:
+        close_bar()
+    if event is None:  # heard as soon as listening began: the stop came earlier; listen all along
+        redo = measure_traverse(
+            controller, joint, direction, detector=detector, audio_blocks=audio_blocks, pose=pose, day=day,
+            burst_steps=burst_steps, predrive="listen", latency=latency, max_steps=max_steps,
+            expected_steps=expected_steps, clock=clock, progress=progress, settle_s=settle_s, listen_after_steps=0,
+        )
+        return replace(redo, retried=True)
+
+    # 3. count the steps made before the stop, latency corrected
+    detected = float(event.detected_at_s)
+    t_stop = {"onset": float(event.onset_s), "fixed": detected - float(getattr(detector, "latency_s", 0.0))}.get(
+        latency, detected
+    )
+    steps = _count_before(t_stop, run.bursts, hz)
+    if steps <= 0:
+        raise TraverseError(
+            f"joint {joint}: the stop was heard at once ({steps} steps before it): the joint did not "
+            "start from the opposite stop, or the detector fired on the start stop's sound"
+        )
+    return TraverseResult(
+        traverse=_row(spec, sign, pose, day, steps),
+        steps=int(steps),
+        commanded_steps=run.commanded,
+        steps_after_stop=run.commanded - int(steps),
+        latency_steps_corrected=_count_before(detected, run.bursts, hz) - int(steps),
+        detected_at_s=detected,
+        onset_s=float(event.onset_s),
+        elapsed_device_s=clock() - t_start,
+        frequency_hz=hz,
+        predrive_steps=predrive_steps,
+        listen_after_steps=listen_after_steps,
+        bursts=tuple(run.bursts),
+    )
+
+
+def _check_options(latency: str, predrive: str, burst_steps: int, listen_after_steps: int) -> None:
     if latency not in LATENCY_MODES:
         raise ValueError(f"latency must be one of {', '.join(LATENCY_MODES)}, got {latency!r}")
     if predrive not in ("listen", "overdrive", "none"):
@@ -332,142 +382,26 @@ def measure_traverse(
         raise ValueError(f"burst_steps = {burst_steps!r} is outside [1, 1000000]")
     if not (isinstance(listen_after_steps, int) and listen_after_steps >= 0):
         raise ValueError(f"listen_after_steps = {listen_after_steps!r} must be an integer >= 0")
-    limit = (
-        int(max_steps)
-        if max_steps is not None
-        else int(2 * spec.span / MIN_STEP_PRIOR[spec.number])
-    )
-    hz = float(controller.frequency(joint))
-    if clock is None:
-        if isinstance(controller, VirtualClock):
-            device_clock = controller
 
-            def clock() -> float:
-                return float(device_clock.clock_s)
-        else:
-            w0 = time.monotonic()
 
-            def clock() -> float:
-                return time.monotonic() - w0
+def _device_clock(controller: Controller) -> Callable[[], float]:
+    """Stream time (s): the controller's own clock where it has one, else the wall clock from now."""
+    if isinstance(controller, VirtualClock):
+        device = controller
+        return lambda: float(device.clock_s)
+    w0 = time.monotonic()
+    return lambda: time.monotonic() - w0
 
-    listener = _Listener(detector, audio_blocks, _sample_rate(detector, audio_blocks), step_hz=hz)
 
-    # 1. to the start stop
-    predrive_steps = 0
-    if predrive == "overdrive":
-        remaining = int(math.ceil(1.3 * spec.span / MIN_STEP_PRIOR[spec.number]))
-        while remaining > 0:
-            n = min(remaining, 100 * burst_steps)
-            controller.step(joint, -sign * n)
-            remaining -= n
-            predrive_steps += n
-    elif predrive == "listen":
-        listener.start(clock())
-        while True:
-            if predrive_steps >= limit:
-                raise TraverseError(
-                    f"joint {joint}: no stop heard after {predrive_steps} steps towards the "
-                    "start stop "
-                    f"(direction {direction_label(-sign)}); check the tuning and the microphone"
-                )
-            n = min(max(1, burst_steps // 4), limit - predrive_steps)
-            b0 = clock()
-            controller.step(joint, -sign * n)
-            predrive_steps += n
-            if listener.listen(max(clock(), b0 + n / hz)) is not None:
-                controller.stop(joint)
-                break
-
-    # 2. measure
-    t_start = clock()
-    bursts: list[tuple[float, int]] = []
-    commanded = 0
-    event = None
-    early = False
-    update, close_bar = _progress_callback(progress, joint, label, expected_steps)
-    try:
-        while commanded < listen_after_steps:  # the stop cannot be this close: do not listen yet
-            n = min(listen_after_steps - commanded, 50 * burst_steps)
-            bursts.append((clock(), n))
-            controller.step(joint, sign * n)
-            commanded += n
-            update(commanded, clock() - t_start)
-        t_listen = clock()
-        listener.start(t_listen)
-        while event is None:
-            if commanded >= limit:
-                raise TraverseError(
-                    f"joint {joint}: no stop heard after {commanded} steps in direction {label} "
-                    f"({commanded / hz:.1f} s at {hz:g} Hz); "
-                    "check the tuning, the microphone and the joint"
-                )
-            n = min(burst_steps, limit - commanded)
-            b0 = clock()
-            bursts.append((b0, n))
-            controller.step(joint, sign * n)
-            commanded += n
-            # a real device may return before the burst is done: hear it to its end
-            event = listener.listen(max(clock(), b0 + n / hz))
-            if (
-                event is not None
-                and listen_after_steps
-                and float(event.onset_s) < t_listen + settle_s
-            ):
-                # the stop was there as soon as we listened: it came before listen_after_steps
-                early = True
-                break
-            while event is not None and float(event.onset_s) < t_start + settle_s:
-                # the start stop's sound still ringing as the joint leaves it: not our stop
-                listener.detector.reset(listener.t_s)
-                event = listener.listen(clock())
-            update(commanded, clock() - t_start)
-        controller.stop(joint)
-    finally:
-        close_bar()
-    if early:
-        redo = measure_traverse(
-            controller,
-            joint,
-            direction,
-            detector=detector,
-            audio_blocks=audio_blocks,
-            pose=pose,
-            day=day,
-            burst_steps=burst_steps,
-            predrive="listen",
-            latency=latency,
-            max_steps=max_steps,
-            expected_steps=expected_steps,
-            clock=clock,
-            progress=progress,
-            settle_s=settle_s,
-            listen_after_steps=0,
-        )
-        return replace(redo, retried=True)
-
-    # 3. count
-    detected = float(event.detected_at_s)
-    if latency == "onset":
-        t_stop = float(event.onset_s)
-    elif latency == "fixed":
-        t_stop = detected - float(getattr(detector, "latency_s", 0.0))
-    else:
-        t_stop = detected
-    steps = _count_before(t_stop, bursts, hz)
-    steps_uncorrected = _count_before(detected, bursts, hz)
-    if steps <= 0:
-        raise TraverseError(
-            f"joint {joint}: the stop was heard at once ({steps} steps before it): "
-            "the joint did not "
-            f"start from the opposite stop, or the detector fired on the start stop's sound"
-        )
+def _row(spec: kin.JointSpec, sign: int, pose: kin.Pose, day: str, steps: int) -> Traverse:
+    """The measurement-table row of a full-range traverse of ``spec``'s joint in direction ``sign``."""
     start, end = (spec.lower, spec.upper) if sign > 0 else (spec.upper, spec.lower)
     values = {"q1": pose.q1, "q2": pose.q2, "q3": pose.q3}
-    values[f"q{joint}"] = start
-    row = Traverse(
+    values[f"q{spec.number}"] = start
+    return Traverse(
         day=str(day),
         joint=spec.number,
-        direction=label,
+        direction=direction_label(sign),
         q1=float(values["q1"]),
         q2=float(values["q2"]),
         q3=float(values["q3"]),
@@ -477,17 +411,86 @@ def measure_traverse(
         end=end,
         steps=int(steps),
     )
-    return TraverseResult(
-        traverse=row,
-        steps=int(steps),
-        commanded_steps=commanded,
-        steps_after_stop=commanded - int(steps),
-        latency_steps_corrected=steps_uncorrected - int(steps),
-        detected_at_s=detected,
-        onset_s=float(event.onset_s),
-        elapsed_device_s=clock() - t_start,
-        frequency_hz=hz,
-        predrive_steps=predrive_steps,
-        listen_after_steps=listen_after_steps,
-        bursts=tuple(bursts),
-    )
+
+
+@dataclass
+class _Run:
+    """One traverse's stepping: bursts sent (stream time, steps) and the steps commanded so far."""
+
+    controller: Controller
+    joint: int
+    sign: int
+    hz: float
+    clock: Callable[[], float]
+    listener: _Listener
+    burst_steps: int
+    limit: int
+    bursts: list[tuple[float, int]] = field(default_factory=list)
+    commanded: int = 0
+
+    def to_start_stop(self, predrive: str) -> int:
+        """Drive to the start stop (listening, or overdriving blind, or not at all); the steps it took."""
+        steps = 0
+        if predrive == "overdrive":
+            spec = kin.joint_spec(self.joint)
+            remaining = int(math.ceil(1.3 * spec.span / MIN_STEP_PRIOR[spec.number]))
+            while remaining > 0:
+                n = min(remaining, 100 * self.burst_steps)
+                self.controller.step(self.joint, -self.sign * n)
+                remaining -= n
+                steps += n
+        elif predrive == "listen":
+            self.listener.start(self.clock())
+            while True:
+                if steps >= self.limit:
+                    raise TraverseError(
+                        f"joint {self.joint}: no stop heard after {steps} steps towards the start stop "
+                        f"(direction {direction_label(-self.sign)}); check the tuning and the microphone"
+                    )
+                n = min(max(1, self.burst_steps // 4), self.limit - steps)
+                b0 = self.clock()
+                self.controller.step(self.joint, -self.sign * n)
+                steps += n
+                if self.listener.listen(max(self.clock(), b0 + n / self.hz)) is not None:
+                    self.controller.stop(self.joint)
+                    break
+        return steps
+
+    def _burst(self, n: int) -> float:
+        b0 = self.clock()
+        self.bursts.append((b0, n))
+        self.controller.step(self.joint, self.sign * n)
+        self.commanded += n
+        return b0
+
+    def until_heard(
+        self, t_start: float, listen_after_steps: int, settle_s: float, update: Callable[[int, float], None]
+    ) -> Any:
+        """Step in bursts until the end stop is heard; its event, or ``None`` if it was heard at once."""
+        while self.commanded < listen_after_steps:  # the stop cannot be this close: do not listen yet
+            self._burst(min(listen_after_steps - self.commanded, 50 * self.burst_steps))
+            update(self.commanded, self.clock() - t_start)
+        t_listen = self.clock()
+        self.listener.start(t_listen)
+        event = None
+        while event is None:
+            if self.commanded >= self.limit:
+                raise TraverseError(
+                    f"joint {self.joint}: no stop heard after {self.commanded} steps in direction "
+                    f"{direction_label(self.sign)} ({self.commanded / self.hz:.1f} s at {self.hz:g} Hz); "
+                    "check the tuning, the microphone and the joint"
+                )
+            n = min(self.burst_steps, self.limit - self.commanded)
+            b0 = self._burst(n)
+            # a real device may return before the burst is done: hear it to its end
+            event = self.listener.listen(max(self.clock(), b0 + n / self.hz))
+            if event is not None and listen_after_steps and float(event.onset_s) < t_listen + settle_s:
+                self.controller.stop(self.joint)
+                return None  # the stop was there as soon as we listened: it came before listen_after_steps
+            while event is not None and float(event.onset_s) < t_start + settle_s:
+                # the start stop's sound still ringing as the joint leaves it: not our stop
+                self.listener.detector.reset(self.listener.t_s)
+                event = self.listener.listen(self.clock())
+            update(self.commanded, self.clock() - t_start)
+        self.controller.stop(self.joint)
+        return event
