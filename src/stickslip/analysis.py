@@ -58,6 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .measurements import Traverse
+from .units import step_scale
 
 if TYPE_CHECKING:  # pragma: no cover
     from .calibration import Calibration
@@ -79,11 +80,6 @@ ALPHA = 0.05
 ANGLE_TOL = 1e-3
 LENGTH_TOL = 1e-5
 _POSE_KEYS = ("q1", "q2", "q3", "theta", "psi")
-
-
-def _scale(joint: int) -> tuple[float, str]:
-    """Display factor and unit for step sizes of ``joint``."""
-    return (1e9, "nm") if joint == 3 else (1e6, "µrad")
 
 
 # ---------------------------------------------------------------- pose groups
@@ -350,7 +346,7 @@ class AnovaTest:
 def _groups_summary(
     labels: Sequence[str], samples: Sequence[NDArray[np.float64]], joint: int
 ) -> tuple[dict[str, Any], ...]:
-    k, _unit = _scale(joint)
+    k, _unit = step_scale(joint)
     out = []
     for lab, s in zip(labels, samples, strict=True):
         sd = float(np.std(s, ddof=1) * k) if s.size > 1 else math.nan
@@ -486,113 +482,88 @@ def anova(
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
     if not traverses:
         raise ValueError("no traverses to analyse")
-    groups = group_poses(traverses, angle_tol, length_tol)
     day_tests: list[AnovaTest] = []
     dir_tests: list[AnovaTest] = []
     tw_tests: list[AnovaTest] = []
     skipped: list[str] = []
-    for g in sorted(groups, key=lambda g: g.joint):
-        _k, unit = _scale(g.joint)
-        where = f"joint {g.joint} [{g.describe()}]"
+    for g in sorted(group_poses(traverses, angle_tol, length_tol), key=lambda g: g.joint):
         # the group's average steps by (direction, day), in table order, in one pass
         cells: dict[tuple[str, str], list[float]] = {}
         for t in g.traverses:
             cells.setdefault((t.direction, t.day), []).append(t.gamma)
-        all_days = sorted({day for _, day in cells})
-        # across days, per direction
-        for d in ("+", "-"):
-            days = [day for day in all_days if (d, day) in cells]
-            if not days:
-                continue
-            n_d = sum(len(cells[(d, day)]) for day in days)
-            if len(days) < 2:
-                skipped.append(f"days: {where} {d}: measured on one day only ({days[0]})")
-                continue
-            if n_d <= len(days):
-                skipped.append(f"days: {where} {d}: one traverse per day, no spread within days")
-                continue
-            samples = [np.array(cells[(d, day)]) for day in days]
-            F, p, dfb, dfw = one_way(samples)
-            day_tests.append(
-                AnovaTest(
-                    "day",
-                    g.joint,
-                    d,
-                    None,
-                    None,
-                    dict(g.pose),
-                    g.interval,
-                    F,
-                    p,
-                    dfb,
-                    dfw,
-                    n_d,
-                    _groups_summary(days, samples, g.joint),
-                    unit,
-                )
-            )
-        # + against -, per day
-        for day in all_days:
-            plus = np.array(cells.get(("+", day), []))
-            minus = np.array(cells.get(("-", day), []))
-            if plus.size == 0 or minus.size == 0:
-                continue
-            if plus.size + minus.size < 3:
-                skipped.append(f"direction: {where} day {day}: one traverse each way, no spread")
-                continue
-            F, p, dfb, dfw = one_way([plus, minus])
-            dir_tests.append(
-                AnovaTest(
-                    "direction",
-                    g.joint,
-                    None,
-                    day,
-                    None,
-                    dict(g.pose),
-                    g.interval,
-                    F,
-                    p,
-                    dfb,
-                    dfw,
-                    int(plus.size + minus.size),
-                    _groups_summary(["+", "-"], [plus, minus], g.joint),
-                    unit,
-                )
-            )
-        # day x direction
+        day_tests += _day_tests(g, cells, skipped)
+        dir_tests += _direction_tests(g, cells, skipped)
         if two_way:
-            dirs = {d for d, _ in cells}
-            if len(all_days) < 2 or len(dirs) < 2:
-                continue
-            if len(cells) < 2 * len(all_days):
-                skipped.append(f"two-way: {where}: not every day has both directions")
-                continue
-            if len(g.traverses) <= len(cells):
-                skipped.append(f"two-way: {where}: one traverse per day and direction, no residual")
-                continue
-            k, _ = _scale(g.joint)
-            gam = np.array([t.gamma * k for t in g.traverses])
-            pl = np.array([t.direction == "+" for t in g.traverses])
-            for term, F, p, dfn, dfd in _two_way(gam, [str(t.day) for t in g.traverses], pl):
-                tw_tests.append(
-                    AnovaTest(
-                        "two-way",
-                        g.joint,
-                        None,
-                        None,
-                        term,
-                        dict(g.pose),
-                        g.interval,
-                        F,
-                        p,
-                        dfn,
-                        dfd,
-                        len(g.traverses),
-                        (),
-                        unit,
-                    )
-                )
+            tw_tests += _two_way_tests(g, cells, skipped)
     return AnovaResult(day_tests + dir_tests + tw_tests, skipped, alpha)
+
+
+def _test(kind: str, g: PoseGroup, stat: tuple[float, float, int, int], n: int, **kw: Any) -> AnovaTest:
+    """An :class:`AnovaTest` of ``kind`` on group ``g`` from ``(F, p, df1, df2)``."""
+    F, p, df1, df2 = stat
+    return AnovaTest(
+        kind, g.joint, kw.get("direction"), kw.get("day"), kw.get("term"), dict(g.pose), g.interval,
+        F, p, df1, df2, n, kw.get("groups", ()), step_scale(g.joint)[1],
+    )
+
+
+def _day_tests(g: PoseGroup, cells: dict[tuple[str, str], list[float]], skipped: list[str]) -> list[AnovaTest]:
+    """Across days, per direction (the paper's day-to-day question)."""
+    where = f"joint {g.joint} [{g.describe()}]"
+    all_days = sorted({day for _, day in cells})
+    out = []
+    for d in ("+", "-"):
+        days = [day for day in all_days if (d, day) in cells]
+        if not days:
+            continue
+        n_d = sum(len(cells[(d, day)]) for day in days)
+        if len(days) < 2:
+            skipped.append(f"days: {where} {d}: measured on one day only ({days[0]})")
+            continue
+        if n_d <= len(days):
+            skipped.append(f"days: {where} {d}: one traverse per day, no spread within days")
+            continue
+        samples = [np.array(cells[(d, day)]) for day in days]
+        out.append(_test("day", g, one_way(samples), n_d, direction=d, groups=_groups_summary(days, samples, g.joint)))
+    return out
+
+
+def _direction_tests(g: PoseGroup, cells: dict[tuple[str, str], list[float]], skipped: list[str]) -> list[AnovaTest]:
+    """+ against -, per day."""
+    where = f"joint {g.joint} [{g.describe()}]"
+    out = []
+    for day in sorted({day for _, day in cells}):
+        plus = np.array(cells.get(("+", day), []))
+        minus = np.array(cells.get(("-", day), []))
+        if plus.size == 0 or minus.size == 0:
+            continue
+        if plus.size + minus.size < 3:
+            skipped.append(f"direction: {where} day {day}: one traverse each way, no spread")
+            continue
+        summary = _groups_summary(["+", "-"], [plus, minus], g.joint)
+        out.append(_test("direction", g, one_way([plus, minus]), int(plus.size + minus.size), day=day, groups=summary))
+    return out
+
+
+def _two_way_tests(g: PoseGroup, cells: dict[tuple[str, str], list[float]], skipped: list[str]) -> list[AnovaTest]:
+    """Day x direction with interaction (type II), where every day has both directions and a residual."""
+    where = f"joint {g.joint} [{g.describe()}]"
+    all_days = {day for _, day in cells}
+    if len(all_days) < 2 or len({d for d, _ in cells}) < 2:
+        return []
+    if len(cells) < 2 * len(all_days):
+        skipped.append(f"two-way: {where}: not every day has both directions")
+        return []
+    if len(g.traverses) <= len(cells):
+        skipped.append(f"two-way: {where}: one traverse per day and direction, no residual")
+        return []
+    k, _ = step_scale(g.joint)
+    gam = np.array([t.gamma * k for t in g.traverses])
+    pl = np.array([t.direction == "+" for t in g.traverses])
+    return [
+        _test("two-way", g, (F, p, dfn, dfd), len(g.traverses), term=term)
+        for term, F, p, dfn, dfd in _two_way(gam, [str(t.day) for t in g.traverses], pl)
+    ]
 
 
 # ---------------------------------------------------------------- fit residuals
@@ -624,10 +595,10 @@ class ResidualRow:
 
     @property
     def unit(self) -> str:
-        return _scale(self.joint)[1]
+        return step_scale(self.joint)[1]
 
     def as_dict(self) -> dict[str, Any]:
-        k, unit = _scale(self.joint)
+        k, unit = step_scale(self.joint)
         return {
             "joint": self.joint,
             "direction": self.direction,
@@ -656,7 +627,7 @@ class ResidualSummary:
             "  joint  n     RMS %    max %    RMS        max",
         ]
         for r in self.rows_:
-            k, unit = _scale(r.joint)
+            k, unit = step_scale(r.joint)
             lines.append(
                 f"  {r.joint}{r.direction:<4} {r.n:<4} "
                 f"{100 * r.rms_rel:7.3f}  {100 * r.max_rel:7.3f}  "
