@@ -74,6 +74,12 @@ class Calibration:
     method: str
     provenance: dict[str, object] = field(default_factory=dict)
     created: str = field(default_factory=lambda: now_utc().isoformat(timespec="seconds"))
+    covariance: dict[tuple[int, str], NDArray[np.float64]] = field(default_factory=dict)
+    """``(joint, direction) -> covariance`` of the parameters (SI, order of ``params.names()``), where known."""
+    sigma_model: dict[tuple[int, str], float] = field(default_factory=dict)
+    """``(joint, direction) ->`` relative model error (1 sigma) for prediction intervals, where known."""
+    selection: dict[tuple[int, str], dict[str, object]] = field(default_factory=dict)
+    """``(joint, direction) ->`` the family chosen, why, and the CV error of every family."""
 
     # -- access
     @property
@@ -134,17 +140,25 @@ class Calibration:
                         "q3": q3,
                         "value": float(value),
                         "stderr": None if se is None or not np.isfinite(se[i]) else float(se[i]),
-                        "unit": UNITS[(m.params.kind, name)],
+                        "unit": m.params.unit(name) if hasattr(m.params, "unit") else UNITS[(m.params.kind, name)],
                     }
                 )
         return out
 
     # -- persistence
     def to_dict(self) -> dict[str, object]:
-        """A JSON-ready dict (SI units, named)."""
-        return {
+        """A JSON-ready dict (SI units, named).
+
+        A calibration with a model family beyond the paper's is written as version 2 (its
+        parameters under ``families``, so that a reader of version 1 refuses it instead of
+        misreading it); the others stay version 1, readable by every earlier release.
+        """
+        from ._ext_json import ext_fields
+
+        ext = ext_fields(self)
+        base = {
             "format": FORMAT,
-            "version": FORMAT_VERSION,
+            "version": FORMAT_VERSION if not ext.get("families") else 2,
             "day": self.day,
             "method": self.method,
             "created": self.created,
@@ -156,6 +170,9 @@ class Calibration:
             ],
             "provenance": self.provenance,
         }
+        base["parameters"] = [p for p in self.parameters() if not _is_family(self, p)]
+        base.update(ext)
+        return base
 
     @classmethod
     def from_dict(cls, data: dict) -> Calibration:
@@ -163,9 +180,9 @@ class Calibration:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
         records.check_calibration_dict(data)
-        if data.get("version") != FORMAT_VERSION:
+        if data.get("version") not in (FORMAT_VERSION, 2):
             raise ValueError(
-                f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION})"
+                f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION} or 2)"
             )
         try:
             by_key: dict[tuple[int, str], list[dict]] = {}
@@ -197,7 +214,7 @@ class Calibration:
             }
         except (KeyError, TypeError) as e:
             raise ValueError(f"calibration file is missing or has a malformed field: {e}") from None
-        return cls(
+        cal = cls(
             models,
             stderr,
             consts,
@@ -206,6 +223,10 @@ class Calibration:
             dict(data.get("provenance") or {}),
             str(data.get("created", "")),
         )
+        from ._ext_json import read_ext_fields
+
+        read_ext_fields(cal, data)
+        return cal
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
@@ -288,8 +309,13 @@ class Calibration:
         return ax
 
 
+def _is_family(cal: Calibration, rec: dict[str, object]) -> bool:
+    m = cal.models.get((int(rec["joint"]), str(rec["direction"])))  # type: ignore[call-overload]
+    return m is not None and hasattr(m.params, "family")
+
+
 def _display(name: str, joint: int) -> tuple[float, str]:
-    if name == "b":
+    if name in ("b", "b2"):
         return 1.0, ""
     return (1e9, "nm") if joint == 3 else (1e6, "µrad")
 
