@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from . import kinematics as kin
 from .calibration import Calibration
+from .families import FamilyModel, TabulatedProfile
 from .measurements import check_pose
 from .models import JointModel, PrismaticParams, StepProfile, direction_label
 
@@ -129,17 +130,20 @@ class Planner:
         if problems:  # a pose the arm cannot take is never planned in
             raise ValueError(f"pose for a move of joint {joint}: " + "; ".join(problems))
         self.pose = pose
-        self._coeffs: dict[int, StepProfile] = {}
+        self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}
         for sign, label in ((1, "+"), (-1, "-")):
             try:
                 m = calibration.model(joint, label)
             except KeyError:
                 continue
-            self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, pose))
+            if isinstance(m, FamilyModel):  # a family beyond the paper's: its own profile along the travel
+                self._coeffs[sign] = m.profile(pose)
+            else:
+                self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, pose))
         if not self._coeffs:
             raise KeyError(f"joint {joint} is not in this calibration")
 
-    def _dir(self, sign: int) -> StepProfile:
+    def _dir(self, sign: int) -> StepProfile | TabulatedProfile:
         try:
             return self._coeffs[sign]
         except KeyError:

@@ -45,6 +45,8 @@ def calibrate(
     """
     traverses = list(traverses)
     method = _OLD_METHOD_NAMES.get(method, method)
+    if method not in ("auto", "paper", "paper-quadratic", "lsq"):
+        raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
     if model != "paper":
         return _calibrate_models(traverses, method, day, source, model)
     if method == "auto":

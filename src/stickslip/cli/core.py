@@ -86,6 +86,26 @@ def calibrate_cmd(
     day: Annotated[
         str | None, typer.Option(help="Session label to record (default: the latest day in the table).")
     ] = None,
+    model: Annotated[
+        str,
+        typer.Option(
+            "--model",
+            help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
+            "traverses are exactly the paper's poses, else every model family the data identify, chosen by "
+            "leave-one-pose-out cross-validation. 'paper': the paper's models only.",
+        ),
+    ] = "auto",
+    prior: Annotated[
+        Path | None,
+        typer.Option(
+            "--prior",
+            help="An earlier calibration to bring up to date with these (few) traverses: the step scale of "
+            "each joint and direction measured is updated (Bayesian), the rest kept.",
+        ),
+    ] = None,
+    drift: Annotated[
+        float, typer.Option(help="With --prior: prior standard deviation of a day's change of step scale (relative).")
+    ] = 0.15,
     json_out: JsonOpt = False,
 ) -> None:
     """Calibrate the step-size models from measured traverses.
@@ -96,13 +116,26 @@ def calibrate_cmd(
     (12mm, -90deg, 0), (0, -90deg, 0); d is found by inverting the exact average-step
     integral. Any other set of traverses is fitted by least squares, with standard errors.
 
+    With more traverses than the paper's poses, every model family the data can
+    identify is fitted and one is chosen by leave-one-pose-out cross-validation; the
+    table says which, why, and the CV error of each. With --prior, an earlier
+    calibration is brought up to date with as few as one traverse per joint and direction.
+
     Example: stickslip calibrate day1.csv -o cal.json
+    Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     """
     traverses = _read_table(measurements)
     try:
-        cal = calibrate(traverses, method=method, day=day, source=str(measurements))
-    except (CalibrationError, NonPhysicalError, ValueError) as e:
-        fail(str(e))
+        if prior is not None:
+            from ..calibration.update import update_calibration
+
+            with user_errors():
+                old = Calibration.load(prior)
+            cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=str(measurements))
+        else:
+            cal = calibrate(traverses, method=method, day=day, source=str(measurements), model=model)
+    except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
+        fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     if output is not None:
         with user_errors():
             cal.save(output)
@@ -110,10 +143,28 @@ def calibrate_cmd(
         print_json(cal.to_dict())
         return
     console.print(_params_table(cal, f"calibration — day {cal.day}, method {cal.method}, {len(traverses)} traverses"))
+    if cal.selection:
+        console.print(_selection_table(cal))
     for n in cal.provenance.get("notes", []) or []:
         console.print(f"[dim]note:[/] {n}", highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
+
+
+def _selection_table(cal: Calibration) -> Table:
+    t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
+    for col in ("joint", "dir", "family", "params", "CV RMS", "CV max", "fit RMS", "status"):
+        t.add_column(col, justify="right" if col.startswith(("CV", "fit", "params")) else "left")
+    for (j, d), sel in sorted(cal.selection.items()):
+        chosen = sel.get("chosen")
+        for sc in sel.get("scores", []) or []:  # type: ignore[union-attr]
+            def pct(x: object) -> str:
+                return f"{float(x) * 100:.2f} %" if isinstance(x, (int, float)) else "—"
+
+            mark = " ◀ chosen" if sc["family"] == chosen else ""
+            t.add_row(str(j), d, f"{sc['family']}{mark}", str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
+                      pct(sc["fit_rms"]), str(sc["status"]))
+    return t
 
 
 @app.command("show")
@@ -146,7 +197,11 @@ def predict_cmd(
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the CSV here instead of stdout.")] = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Predict step sizes: adds a gamma_pred column (m for joint 3, rad for joints 1, 2).
+    """Predict step sizes: adds gamma_pred and gamma_pi95 columns (m for joint 3, rad for joints 1, 2).
+
+    gamma_pi95 is the half-width of a 95 % prediction interval: 1.96 times the
+    calibration's relative model error (its leave-one-pose-out error; an assumed one
+    for the paper's exactly determined procedure) times gamma_pred.
 
     A row with start,end gets the average step over that traverse (exact integral);
     a row without them gets the step size at its pose (the moving joint at q1/q2/q3).
@@ -158,7 +213,10 @@ def predict_cmd(
         header, rows, queries = read_pose_table(poses)
     except TableError as e:
         _fail_table(e)
+    from ..calibration.update import prediction_sd
+
     preds = []
+    sds = []
     for i, q in enumerate(queries, start=1):
         try:
             m = cal.model(q.joint, q.direction)
@@ -171,17 +229,21 @@ def predict_cmd(
         except NonPhysicalError as e:
             fail(f"{poses}: row {i}: {e}")
         preds.append(g)
-    out_header = header + (["gamma_pred"] if "gamma_pred" not in header else [])
+        sds.append(prediction_sd(cal, q.joint, q.direction)[0])
+    extra = [c for c in ("gamma_pi95", "gamma_pred") if c not in header]  # gamma_pred stays last
+    out_header = header + extra
     records = []
-    for row, g in zip(rows, preds, strict=True):
+    for row, g, sd in zip(rows, preds, sds, strict=True):
         rec = dict(row)
         rec["gamma_pred"] = repr(g)
+        rec["gamma_pi95"] = repr(1.96 * sd * g)
         records.append(rec)
     if json_out:
         out = []
-        for rec, g in zip(records, preds, strict=True):
+        for rec, g, sd in zip(records, preds, sds, strict=True):
             r = {k: _maybe_number(v) for k, v in rec.items()}
             r["gamma_pred"] = g
+            r["gamma_pi95"] = 1.96 * sd * g
             out.append(r)
         print_json(out)
         return
@@ -276,8 +338,15 @@ def plan_cmd(
         fail(str(e.args[0]))
     except (ValueError, NonPhysicalError) as e:
         fail(str(e))
+    from ..calibration.update import prediction_sd
+
+    sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1))
+    half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
-        print_json(plan.as_dict())
+        d = plan.as_dict()
+        d["pi95"] = half
+        d["pi95_assumed"] = assumed
+        print_json(d)
         return
     err = plan.q_end_predicted - plan.q_to
     console.print(
@@ -289,6 +358,11 @@ def plan_cmd(
         f"  predicted end {format_position(plan.q_end_predicted, joint)} "
         f"(off by {format_position(err, joint, 3)}; step {format_step(plan.gamma_start, joint)} at the start, "
         f"{format_step(plan.gamma_end, joint)} at the target)",
+        highlight=False,
+    )
+    console.print(
+        f"  95 % prediction interval of the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
+        f"± {format_position(half, joint, 3)}" + (" (model error assumed: the calibration has none)" if assumed else ""),
         highlight=False,
     )
     if math.isclose(plan.q_from, plan.q_to):
