@@ -12,6 +12,11 @@ Prismatic joint 3, direction i (every family is this equation with some terms ze
     gamma_3 = s * eta(q2) * (a - c L - e L^2 - f X - h Y)                  (F1)
     eta(q2) = 1 - b |cos q2| - b2 cos^2 q2                                 (F2)
 
+and the family ``friction-ratio``, where the load acts through its ratio to the
+friction capacity, which the normal load ``X`` changes::
+
+    gamma_3 = s * eta(q2) * (a - c Λ - e Λ^2 - f X),  Λ = L / (1 + k X)     (F4)
+
 with ``L = -g0 . z2`` (the paper's axial load, ``cos(zeta) cos(theta)`` at q1 = 0),
 ``X = -g0 . x2`` and ``Y = -g0 . z1`` the two components of gravity across the axis
 (``x2 = z1 x z2``; ``L^2 + X^2 + Y^2 = 1``).
@@ -53,9 +58,17 @@ __all__ = [
     "Features",
     "features",
     "TabulatedProfile",
+    "RATIO_NAMES",
+    "BOUNDS",
 ]
 
 Q3_MID = kin.Q3_MAX / 2.0
+
+RATIO_NAMES = ("b", "b2", "k")
+"""Dimensionless parameters (all others are steps: m for joint 3, rad for rotary joints)."""
+
+BOUNDS = {"a": (0.0, math.inf), "gamma0": (-math.inf, math.inf), "b": (0.0, 0.95), "b2": (-0.95, 0.95), "k": (-0.9, 0.9)}
+"""Ranges a fit keeps parameters in (so that eta > 0 and 1 + k X > 0); the rest are free."""
 
 
 @dataclass(frozen=True)
@@ -119,6 +132,11 @@ FAMILIES: dict[str, FamilySpec] = {
             "load2-normal", "prismatic",
             (("a", None), ("b", None), ("c", None), ("e", None), ("f", None), ("h", None)),
             "quadratic load plus normal-load terms",
+        ),
+        FamilySpec(
+            "friction-ratio", "prismatic",
+            (("a", None), ("b", None), ("b2", None), ("c", None), ("e", None), ("k", None), ("f", None)),
+            "the load over the friction capacity, L / (1 + k X), quadratic; normal load f X",
         ),
         FamilySpec(
             "full", "prismatic",
@@ -246,7 +264,8 @@ def evaluate(spec: FamilySpec, values: ArrayLike, f: Features, scale: float = 1.
 
     if spec.kind == "prismatic":
         eta = 1.0 - scalar("b") * f.abs_cos_q2 - scalar("b2") * f.abs_cos_q2**2
-        core = scalar("a") - scalar("c") * f.L - scalar("e") * f.L**2 - scalar("f") * f.X - scalar("h") * f.Y
+        lam = f.L / (1.0 + scalar("k") * f.X) if "k" in groups else f.L  # (F4): load over friction capacity
+        core = scalar("a") - scalar("c") * lam - scalar("e") * lam**2 - scalar("f") * f.X - scalar("h") * f.Y
         out: NDArray[np.float64] = scale * eta * core
         return out
     g0 = of_q3("gamma0")
@@ -350,7 +369,7 @@ class FamilyParams:
         return list(self.spec.names)
 
     def unit(self, name: str) -> str:
-        if name in ("b", "b2"):
+        if name in RATIO_NAMES:
             return "1"
         return "m" if self.joint == 3 else "rad"
 

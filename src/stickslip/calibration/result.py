@@ -315,7 +315,7 @@ def _is_family(cal: Calibration, rec: dict[str, object]) -> bool:
 
 
 def _display(name: str, joint: int) -> tuple[float, str]:
-    if name in ("b", "b2"):
+    if name in ("b", "b2", "k"):
         return 1.0, ""
     return (1e9, "nm") if joint == 3 else (1e6, "µrad")
 

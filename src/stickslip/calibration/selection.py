@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from ..families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
 from ..measurements import Traverse
-from .families import FamilyFit, fit_family, predict_columns, traverse_columns
+from .families import Columns, FamilyFit, JointFit, fit_family, fit_joint, predict_columns, shared_names, traverse_columns
 from .result import Calibration, CalibrationError, _constant_step, _day_of, _group, _provenance
 
 __all__ = ["CVScore", "select_family", "calibrate_families", "pose_groups", "PREFER_SIMPLER"]
@@ -144,6 +144,117 @@ def select_family(
     raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
 
 
+def _criterion(s: CVScore) -> float:
+    """What the selection minimises: the mean of the CV RMS and the CV largest error.
+
+    The largest left-out error guards against a family that fits the poses it has and
+    swings between them; the RMS keeps one unlucky pose from deciding alone.
+    """
+    return 0.5 * (s.cv_rms + s.cv_max)
+
+
+def _joint_pose_groups(joint: int, by_dir: dict[str, Sequence[Traverse]]) -> dict[str, NDArray[np.int64]]:
+    keys: dict[tuple[float, ...], int] = {}
+    out: dict[str, NDArray[np.int64]] = {}
+    for d, ts in sorted(by_dir.items()):
+        idx = []
+        for t in ts:
+            vals = [t.q1, t.q2, t.q3, t.theta, t.psi]
+            vals[joint - 1] = 0.0
+            idx.append(keys.setdefault(tuple(round(v, 4) for v in vals), len(keys)))
+        out[d] = np.array(idx, dtype=np.int64)
+    return out
+
+
+def _cv_joint(
+    spec: FamilySpec, joint: int, cols: dict[str, Columns], groups: dict[str, NDArray[np.int64]], full: JointFit
+) -> tuple[float, float]:
+    all_groups = np.unique(np.concatenate(list(groups.values())))
+    errs = {d: np.full(len(cols[d]), np.nan) for d in cols}
+    for g in all_groups:
+        train = {d: cols[d].subset(groups[d] != g) for d in cols}
+        if any(len(c) == 0 for c in train.values()):
+            return np.nan, np.nan
+        fit = fit_joint(spec, joint, train, full.shared, x0=full.values)
+        if not fit.identifiable:
+            return np.nan, np.nan
+        for d in cols:
+            test = groups[d] == g
+            if np.any(test):
+                held = cols[d].subset(test)
+                errs[d][test] = predict_columns(spec, joint, fit.values[d], held) / held.gamma - 1.0
+    e = np.concatenate(list(errs.values()))
+    if not np.all(np.isfinite(e)):
+        return np.inf, np.inf
+    return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e)))
+
+
+def select_joint(
+    joint: int, by_dir: dict[str, Sequence[Traverse]], candidates: Sequence[str] | None = None
+) -> tuple[JointFit, list[CVScore], str]:
+    """Fit every identifiable family (separate and with shared terms) to both directions of
+    ``joint`` and pick one by leave-one-pose-out CV over both directions.
+
+    ``candidates`` names families, ``"name+shared"`` for the shared variant. Returns
+    ``(fit on all traverses, scores, reason)``.
+    """
+    cols = {d: traverse_columns(ts) for d, ts in sorted(by_dir.items()) if ts}
+    groups = _joint_pose_groups(joint, {d: by_dir[d] for d in cols})
+    poses = {d: len(set(g.tolist())) for d, g in groups.items()}
+    n_poses = len(set(np.concatenate(list(groups.values())).tolist()))
+    variants: list[tuple[FamilySpec, tuple[str, ...]]] = []
+    if candidates is None:
+        for spec in families_for(joint):
+            variants.append((spec, ()))
+            sh = shared_names(spec)
+            if sh and len(cols) == 2:
+                variants.append((spec, sh))
+    else:
+        for c in candidates:
+            name, _, tail = c.partition("+")
+            spec = family_spec(joint, name)
+            variants.append((spec, shared_names(spec) if tail == "shared" and len(cols) == 2 else ()))
+    scores: list[CVScore] = []
+    fits: dict[str, JointFit] = {}
+    for spec, sh in variants:
+        label = spec.name + ("+shared" if sh else "")
+        own = sum(1 for n, _ in spec.names if n not in sh)
+        short = [d for d in cols if poses[d] < own + 1] if spec.name != "constant" else []
+        n_sh = spec.n_params - own
+        p_total = own * len(cols) + n_sh
+        if short:
+            scores.append(CVScore(label, p_total, f"too few poses in {', '.join(short)}", np.nan, np.nan, np.nan))
+            continue
+        fit = fit_joint(spec, joint, cols, sh)
+        if not fit.identifiable:
+            scores.append(CVScore(label, p_total, "not identifiable from these poses", np.nan, np.nan, fit.rms))
+            continue
+        fits[label] = fit
+        rms, mx = _cv_joint(spec, joint, cols, groups, fit) if n_poses >= 2 else (np.nan, np.nan)
+        status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
+        scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
+    scored = [s for s in scores if s.status == "ok"]
+    if scored:
+        best = min(scored, key=_criterion)
+        chosen = min(
+            (s for s in scored if _criterion(s) <= PREFER_SIMPLER * _criterion(best)), key=lambda s: (s.n_params, _criterion(s))
+        )
+        reason = (
+            f"smallest leave-one-pose-out error (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} % "
+            f"over {n_poses} poses)"
+        )
+        if chosen.family != best.family:
+            reason = (
+                f"within {100 * (PREFER_SIMPLER - 1):.0f} % of the best CV error ({best.family}) with fewer "
+                f"parameters (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} %)"
+            )
+        return fits[chosen.family], scores, reason
+    if fits:
+        name = min(fits, key=lambda k: fits[k].n_params)
+        return fits[name], scores, f"{n_poses} pose(s): the simplest identifiable family, not cross-validated"
+    raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
+
+
 def calibrate_families(
     traverses: Sequence[Traverse],
     day: str | None = None,
@@ -166,28 +277,35 @@ def calibrate_families(
     sigma: dict[tuple[int, str], float] = {}
     selection: dict[tuple[int, str], dict[str, object]] = {}
     notes: list[str] = []
-    for (j, d), ts in sorted(groups.items()):
+    for j in sorted({j for j, _ in groups}):
+        by_dir = {d: groups[(j, d)] for (jj, d) in groups if jj == j}
         candidates = None if model == "auto" else [model]
-        fit, scores, reason = select_family(j, ts, candidates)
-        params = FamilyParams(fit.spec.name, j, tuple(float(v) for v in fit.values))
-        models[(j, d)] = FamilyModel(j, d, params)
-        if fit.cov is not None:
-            cov[(j, d)] = fit.cov
-            stderr[(j, d)] = np.sqrt(np.clip(np.diag(fit.cov), 0.0, None))
-        else:
-            stderr[(j, d)] = None
-        chosen = next(s for s in scores if s.family == fit.spec.name)
+        fit, scores, reason = select_joint(j, by_dir, candidates)
+        chosen = next(s for s in scores if s.family == fit.label)
         sig = chosen.cv_rms if np.isfinite(chosen.cv_rms) else fit.rms
-        sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
-        selection[(j, d)] = {"chosen": fit.spec.name, "reason": reason, "scores": [s.as_dict() for s in scores]}
-        notes.append(f"joint {j}{d}: family {fit.spec.name} — {reason}")
+        for d in sorted(by_dir):
+            params = FamilyParams(fit.spec.name, j, tuple(float(v) for v in fit.values[d]))
+            models[(j, d)] = FamilyModel(j, d, params)
+            c = fit.cov[d]
+            if c is not None:
+                cov[(j, d)] = c
+                stderr[(j, d)] = np.sqrt(np.clip(np.diag(c), 0.0, None))
+            else:
+                stderr[(j, d)] = None
+            sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
+            selection[(j, d)] = {
+                "chosen": fit.label, "shared": list(fit.shared), "reason": reason,
+                "scores": [s.as_dict() for s in scores],
+            }
+        notes.append(f"joint {j}: family {fit.label} — {reason}")
     for (j, d), m in models.items():
         try:
             m.params.check_physical()
         except ValueError as e:
             notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    method = "families (" + ", ".join(f"{j}{d} {m.family}" for (j, d), m in sorted(models.items())) + ")"
+    labels = {j: str(selection[(j, d)]["chosen"]) for (j, d) in selection}
+    method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
     cal = Calibration(
         dict(models), stderr, consts, _day_of(traverses, day), method,
         _provenance(traverses, source, len(traverses), notes),

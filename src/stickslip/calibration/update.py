@@ -172,13 +172,13 @@ def update_calibration(
             p = models[key].params
             # only step-valued parameters scale; b, b2 are ratios
             names = p.names()
-            f = np.array([1.0 if n in ("b", "b2") or isinstance(models[key], FamilyModel) else factor
+            f = np.array([1.0 if n in ("b", "b2", "k") or isinstance(models[key], FamilyModel) else factor
                           for n, _ in names])
             cov[key] = cov[key] * np.outer(f, f)
         se = stderr.get(key)
         if se is not None and not isinstance(models[key], FamilyModel):
             names = models[key].params.names()
-            stderr[key] = np.array([s if n in ("b", "b2") else s * factor for s, (n, _) in zip(se, names, strict=True)])
+            stderr[key] = np.array([s if n in ("b", "b2", "k") else s * factor for s, (n, _) in zip(se, names, strict=True)])
         sigma[key] = math.hypot(sig, sd)
         updates.append(ScaleUpdate(j, d, len(ts), factor, sd))
         notes.append(

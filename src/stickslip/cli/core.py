@@ -56,7 +56,7 @@ def _params_table(cal: Calibration, title: str) -> Table:
     for col in ("joint", "dir", "parameter", "q3", "value", "std. error", "unit"):
         t.add_column(col, justify="right" if col in ("value", "std. error") else "left")
     for r in cal.parameters():
-        if r["name"] in ("b", "b2"):
+        if r["name"] in ("b", "b2", "k"):
             scale, unit = 1.0, "1"
         else:
             scale, unit = _step_unit(int(r["joint"]))

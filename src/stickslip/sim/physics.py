@@ -276,8 +276,8 @@ LEVER_R0 = 0.020
 """Lever of the distal mass about joints 1, 2 at q3 = 0, m (the arm's length beyond the joints)."""
 
 NOMINAL_PHYSICS: dict[tuple[int, str], JointPhysics] = {
-    (3, "+"): JointPhysics(2.0e-6, 0.26, 0.12, 0.0, 1.0e-3, 0.0, 0.2, 1.0, 0.03, 0.4e-6),
-    (3, "-"): JointPhysics(1.9e-6, 0.30, 0.10, 0.0, 1.1e-3, 0.0, 0.2, 0.9, 0.03, 0.4e-6),
+    (3, "+"): JointPhysics(1.9e-6, 0.18, 0.12, 0.0, 1.0e-3, 0.0, 0.2, 1.0, 0.03, 0.4e-6),
+    (3, "-"): JointPhysics(1.8e-6, 0.20, 0.10, 0.0, 1.1e-3, 0.0, 0.2, 0.9, 0.03, 0.4e-6),
     (2, "+"): JointPhysics(100e-6, 0.33, 0.10, 0.08, 0.9e-3, 1.2, 0.4, 0.0, 0.02, 20e-6),
     (2, "-"): JointPhysics(95e-6, 0.36, 0.12, 0.06, 0.9e-3, 1.3, 0.4, 0.0, 0.02, 20e-6),
     (1, "+"): JointPhysics(98e-6, 0.30, 0.08, 0.06, 1.0e-3, 1.1, 0.4, 0.0, 0.02, 20e-6),
