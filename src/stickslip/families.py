@@ -67,7 +67,7 @@ Q3_MID = kin.Q3_MAX / 2.0
 RATIO_NAMES = ("b", "b2", "k")
 """Dimensionless parameters (all others are steps: m for joint 3, rad for rotary joints)."""
 
-BOUNDS = {"a": (0.0, math.inf), "gamma0": (-math.inf, math.inf), "b": (0.0, 0.95), "b2": (-0.95, 0.95), "k": (-0.9, 0.9)}
+BOUNDS = {"a": (0.0, math.inf), "b": (0.0, 0.95), "b2": (-0.95, 0.95), "k": (-0.9, 0.9)}
 """Ranges a fit keeps parameters in (so that eta > 0 and 1 + k X > 0); the rest are free."""
 
 
@@ -287,7 +287,7 @@ def traverse_features(
     theta: ArrayLike,
     psi: ArrayLike,
 ) -> Features:
-    """Features along traverses: shape ``(n,)`` for joint 3, ``(n, 48)`` at the Gauss-Legendre nodes for rotary joints."""
+    """Features along traverses: shape ``(n,)`` for joint 3, ``(n, 48)`` at the Gauss-Legendre nodes (rotary)."""
     st, en, a1, a2, a3, th, ps = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (start, end, q1, q2, q3, theta, psi))
     )
@@ -377,15 +377,14 @@ class FamilyParams:
         return np.array(self.values, dtype=float)
 
     def at(self, q3: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Rotary: ``(gamma0, d)`` at ``q3`` (m) with no T^2, radial or normal term (for figures)."""
-        f0 = Features(*(np.zeros(np.shape(q3)) for _ in range(7)), np.asarray(q3, dtype=float))
+        """Rotary: ``(gamma0, d)`` at ``q3`` (m): the step with no load and its change per unit torque term."""
+        q = np.asarray(q3, dtype=float)
+        z = np.zeros_like(q)
         spec = self.spec
-        g0 = evaluate(spec, self.values, f0, self.scale)
-        f1 = Features(*(np.zeros(np.shape(q3)) for _ in range(4)), np.ones(np.shape(q3)),
-                      *(np.zeros(np.shape(q3)) for _ in range(2)), np.asarray(q3, dtype=float))
-        d = evaluate(spec, [v if n != "t2" else 0.0 for (n, _), v in zip(spec.names, self.values, strict=True)],
-                     f1, self.scale) - g0
-        return g0, d
+        linear = [0.0 if n == "t2" else v for (n, _), v in zip(spec.names, self.values, strict=True)]
+        g0 = evaluate(spec, linear, Features(z, z, z, z, z, z, z, q), self.scale)
+        g1 = evaluate(spec, linear, Features(z, z, z, z, z + 1.0, z, z, q), self.scale)
+        return g0, g1 - g0
 
     def scaled(self, factor: float) -> FamilyParams:
         """The same model with every step multiplied by ``factor``."""
@@ -453,8 +452,7 @@ class FamilyModel(JointModel):
     def profile(self, pose: kin.Pose) -> StepProfile | TabulatedProfile:
         """The step along the joint's own travel in ``pose`` (for planning and dead reckoning)."""
         if self.joint == 3:
-            g = float(self.gamma(pose.q1, pose.q2, pose.q3, pose.theta, pose.psi))
-            return StepProfile(g)
+            return StepProfile(float(self.gamma(pose.q1, pose.q2, pose.q3, pose.theta, pose.psi)))
         spec = kin.JOINTS[self.joint]
         pad = 0.05 * spec.span
         q = np.linspace(spec.lower - pad, spec.upper + pad, 4097)

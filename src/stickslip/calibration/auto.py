@@ -98,7 +98,8 @@ def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], d
 def _calibrate_models(
     traverses: list[Traverse], method: str, day: str | None, source: str | None, model: str
 ) -> Calibration:
-    """``model="auto"`` or a family name: the paper's procedure where the data are exactly its poses, families elsewhere."""
+    """``model="auto"`` or a family name: the paper's procedure where the data are exactly its poses,
+    families elsewhere."""
     from .paper import only_paper_poses
     from .selection import calibrate_families
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..families import BOUNDS, RATIO_NAMES, Features, FamilySpec, average_from_features, traverse_features
+from ..families import BOUNDS, RATIO_NAMES, FamilySpec, Features, average_from_features, traverse_features
 from ..measurements import Traverse
 
 __all__ = ["FamilyFit", "fit_family", "traverse_columns", "unit_scale"]
@@ -56,7 +56,7 @@ PRIOR_SD = {"e": 0.3, "f": 0.2, "h": 0.2, "t2": 0.3, "b2": 0.3, "k": 0.3}
 for step-valued terms, absolute for b2 and k): a gentle ridge towards the paper's model, so
 that a family with more terms than the poses pin down does not swing wildly between them."""
 
-PRIOR_WEIGHT = 0.1
+PRIOR_WEIGHT = 0.03
 """The ridge's residuals are ``PRIOR_WEIGHT * value / prior_sd``: the prior counts like one
 traverse with a 3 % relative error per term."""
 
@@ -138,7 +138,7 @@ def fit_family(
     Never raises for a bad fit: a non-identifiable family comes back with
     ``identifiable=False``.
     """
-    from scipy.optimize import least_squares
+    from scipy.optimize import least_squares  # type: ignore[import-untyped]  # scipy ships no type stubs
 
     cols = cols if cols is not None else traverse_columns(ts)
     scale = unit_scale(spec, joint)

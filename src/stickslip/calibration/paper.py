@@ -91,11 +91,13 @@ def only_paper_poses(ts: Sequence[Traverse]) -> bool:
     for t in ts:
         if j == 3:
             ok = _close(t.q1, 0.0) and any(
-                _close(t.q2, q2) and _close(t.theta, th) and _close(t.psi, ps) for q2, th, ps in PRISMATIC_PAPER_POSES.values()
+                _close(t.q2, q2) and _close(t.theta, th) and _close(t.psi, ps)
+                for q2, th, ps in PRISMATIC_PAPER_POSES.values()
             )
         elif j == 2:
             ok = _close(t.q1, 0.0) and any(
-                abs(t.q3 - q3) <= _Q3_TOL and _close(t.theta, th) and _close(t.psi, ps) for q3, th, ps in ROTARY_PAPER_POSES
+                abs(t.q3 - q3) <= _Q3_TOL and _close(t.theta, th) and _close(t.psi, ps)
+                for q3, th, ps in ROTARY_PAPER_POSES
             )
         else:
             ok = True

@@ -13,7 +13,7 @@ direction present has one traverse.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,7 +21,16 @@ from numpy.typing import NDArray
 
 from ..families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
 from ..measurements import Traverse
-from .families import Columns, FamilyFit, JointFit, fit_family, fit_joint, predict_columns, shared_names, traverse_columns
+from .families import (
+    Columns,
+    FamilyFit,
+    JointFit,
+    fit_family,
+    fit_joint,
+    predict_columns,
+    shared_names,
+    traverse_columns,
+)
 from .result import Calibration, CalibrationError, _constant_step, _day_of, _group, _provenance
 
 __all__ = ["CVScore", "select_family", "calibrate_families", "pose_groups", "PREFER_SIMPLER"]
@@ -153,7 +162,35 @@ def _criterion(s: CVScore) -> float:
     return 0.5 * (s.cv_rms + s.cv_max)
 
 
-def _joint_pose_groups(joint: int, by_dir: dict[str, Sequence[Traverse]]) -> dict[str, NDArray[np.int64]]:
+def _anchor_groups(
+    joint: int, by_dir: Mapping[str, Sequence[Traverse]], groups: dict[str, NDArray[np.int64]]
+) -> frozenset[int]:
+    """Pose groups at the paper's calibration poses: they anchor every family and are not held out
+    (when at least three other poses are), so CV measures prediction at new poses in the workspace."""
+    from .paper import only_paper_poses
+
+    out = set()
+    for d, ts in by_dir.items():
+        for t, g in zip(ts, groups[d], strict=True):
+            if only_paper_poses([t]) or (joint != 1 and _at_paper_pose(t)):
+                out.add(int(g))
+    return frozenset(out)
+
+
+def _at_paper_pose(t: Traverse) -> bool:
+    from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
+
+    tol = 1e-3
+    if abs(t.q1) > tol:
+        return False
+    if t.joint == 3:
+        return any(abs(t.q2 - a) <= tol and abs(t.theta - b) <= tol and abs(t.psi - c) <= tol
+                   for a, b, c in PRISMATIC_PAPER_POSES.values())
+    return any(abs(t.q3 - a) <= 1e-5 and abs(t.theta - b) <= tol and abs(t.psi - c) <= tol
+               for a, b, c in ROTARY_PAPER_POSES)
+
+
+def _joint_pose_groups(joint: int, by_dir: Mapping[str, Sequence[Traverse]]) -> dict[str, NDArray[np.int64]]:
     keys: dict[tuple[float, ...], int] = {}
     out: dict[str, NDArray[np.int64]] = {}
     for d, ts in sorted(by_dir.items()):
@@ -167,11 +204,19 @@ def _joint_pose_groups(joint: int, by_dir: dict[str, Sequence[Traverse]]) -> dic
 
 
 def _cv_joint(
-    spec: FamilySpec, joint: int, cols: dict[str, Columns], groups: dict[str, NDArray[np.int64]], full: JointFit
+    spec: FamilySpec,
+    joint: int,
+    cols: dict[str, Columns],
+    groups: dict[str, NDArray[np.int64]],
+    full: JointFit,
+    anchors: frozenset[int] = frozenset(),
 ) -> tuple[float, float]:
     all_groups = np.unique(np.concatenate(list(groups.values())))
+    held_out = [g for g in all_groups if g not in anchors]
+    if len(held_out) < 3:
+        held_out = list(all_groups)
     errs = {d: np.full(len(cols[d]), np.nan) for d in cols}
-    for g in all_groups:
+    for g in held_out:
         train = {d: cols[d].subset(groups[d] != g) for d in cols}
         if any(len(c) == 0 for c in train.values()):
             return np.nan, np.nan
@@ -183,14 +228,14 @@ def _cv_joint(
             if np.any(test):
                 held = cols[d].subset(test)
                 errs[d][test] = predict_columns(spec, joint, fit.values[d], held) / held.gamma - 1.0
-    e = np.concatenate(list(errs.values()))
+    e = np.concatenate([v[np.isin(groups[d], held_out)] for d, v in errs.items()])
     if not np.all(np.isfinite(e)):
         return np.inf, np.inf
     return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e)))
 
 
 def select_joint(
-    joint: int, by_dir: dict[str, Sequence[Traverse]], candidates: Sequence[str] | None = None
+    joint: int, by_dir: Mapping[str, Sequence[Traverse]], candidates: Sequence[str] | None = None
 ) -> tuple[JointFit, list[CVScore], str]:
     """Fit every identifiable family (separate and with shared terms) to both directions of
     ``joint`` and pick one by leave-one-pose-out CV over both directions.
@@ -200,6 +245,7 @@ def select_joint(
     """
     cols = {d: traverse_columns(ts) for d, ts in sorted(by_dir.items()) if ts}
     groups = _joint_pose_groups(joint, {d: by_dir[d] for d in cols})
+    anchors = _anchor_groups(joint, {d: by_dir[d] for d in cols}, groups)
     poses = {d: len(set(g.tolist())) for d, g in groups.items()}
     n_poses = len(set(np.concatenate(list(groups.values())).tolist()))
     variants: list[tuple[FamilySpec, tuple[str, ...]]] = []
@@ -230,14 +276,15 @@ def select_joint(
             scores.append(CVScore(label, p_total, "not identifiable from these poses", np.nan, np.nan, fit.rms))
             continue
         fits[label] = fit
-        rms, mx = _cv_joint(spec, joint, cols, groups, fit) if n_poses >= 2 else (np.nan, np.nan)
+        rms, mx = _cv_joint(spec, joint, cols, groups, fit, anchors) if n_poses >= 2 else (np.nan, np.nan)
         status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
         scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
     scored = [s for s in scores if s.status == "ok"]
     if scored:
         best = min(scored, key=_criterion)
         chosen = min(
-            (s for s in scored if _criterion(s) <= PREFER_SIMPLER * _criterion(best)), key=lambda s: (s.n_params, _criterion(s))
+            (s for s in scored if _criterion(s) <= PREFER_SIMPLER * _criterion(best)),
+            key=lambda s: (s.n_params, _criterion(s)),
         )
         reason = (
             f"smallest leave-one-pose-out error (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} % "

@@ -14,6 +14,13 @@ explain even on its own day). The posterior is normal:
     precision = 1 / drift^2 + sum_k 1 / sigma_model^2
     log s     = (sum_k r_k / sigma_model^2) / precision,   var(log s) = 1 / precision
 
+Friction also drifts, and with it how strongly a load changes the step, in both
+directions of a joint alike: a second parameter per joint, the load sensitivity
+``1 + lambda`` (every gravity-load term multiplied by it; prior ``N(0, load_drift^2)``),
+enters the same linear-Gaussian update through ``d log gamma / d lambda`` at each new
+traverse's pose. A traverse without load leaves it at the prior; a loaded + and -
+pair pins it down.
+
 Everything the new traverses cannot identify (the shape parameters, the joints and
 directions without a new traverse) is kept from the prior; the uncertainty that
 follows is carried into ``sigma_model`` (``sqrt(sigma_model^2 + var(log s))``; a joint
@@ -120,12 +127,44 @@ def scaled_model(model: JointModel, factor: float) -> JointModel:
     raise TypeError(f"cannot scale a model with parameters {type(p).__name__}")
 
 
+LOAD_PRIOR = 0.10
+"""Default prior standard deviation of a day's change of a joint's load sensitivity (relative):
+friction (humidity, wear) changes how much a given load changes the step, in both directions."""
+
+_LOAD_TERMS = {"c", "e", "f", "h", "d", "t2"}
+
+
+def load_scaled(model: JointModel, factor: float) -> JointModel:
+    """``model`` with every gravity-load term (c, e, f, h; rotary d, t2, e, f) multiplied by ``factor``."""
+    p = model.params
+    if isinstance(model, FamilyModel):
+        fp = model.params
+        vals = tuple(v * factor if n in _LOAD_TERMS else v for (n, _), v in zip(fp.names(), fp.values, strict=True))
+        return FamilyModel(model.joint, model.direction, type(fp)(fp.family, fp.joint, vals, fp.scale))
+    if isinstance(p, PrismaticParams):
+        return JointModel(model.joint, model.direction, PrismaticParams(p.a, p.b, p.c * factor))
+    if isinstance(p, RotaryParams):
+        return JointModel(
+            model.joint, model.direction, RotaryParams(p.gamma0, (p.d[0] * factor, p.d[1] * factor), p.knots)
+        )
+    raise TypeError(f"cannot scale a model with parameters {type(p).__name__}")
+
+
+def _average(model: JointModel, ts: Sequence[Traverse]) -> np.ndarray:
+    cols = {k: np.array([float(getattr(t, k)) for t in ts]) for k in ("start", "end", "q1", "q2", "q3", "theta", "psi")}
+    return np.asarray(
+        model.average_gamma(cols["start"], cols["end"], cols["q1"], cols["q2"], cols["q3"], cols["theta"], cols["psi"]),
+        dtype=float,
+    )
+
+
 def update_calibration(
     prior: Calibration,
     traverses: Sequence[Traverse],
     drift: float = DRIFT_PRIOR,
     day: str | None = None,
     source: str | None = None,
+    load_drift: float = LOAD_PRIOR,
 ) -> tuple[Calibration, list[ScaleUpdate]]:
     """Update ``prior`` with new ``traverses`` (as few as one per joint and direction).
 
@@ -152,39 +191,65 @@ def update_calibration(
     stderr = dict(prior.stderr)
     updates: list[ScaleUpdate] = []
     notes = [f"updated from the calibration of {prior.day or '?'} ({prior.method}) with {len(traverses)} traverses"]
-    for key in sorted(prior.models):
-        j, d = key
-        sig, assumed = model_sigma(prior, j, d)
-        ts = groups.get(key, [])
-        if not ts:
-            sigma[key] = math.hypot(sig, drift)
-            notes.append(f"joint {j}{d}: no new traverse; kept from the prior, uncertainty widened by the drift")
-            continue
-        pred = prior.predict_many(ts)
-        meas = np.array([t.gamma for t in ts])
-        r = np.log(meas / pred)
-        precision = 1.0 / drift**2 + len(ts) / sig**2
-        mean = float(np.sum(r) / sig**2 / precision)
-        sd = 1.0 / math.sqrt(precision)
-        factor = math.exp(mean)
-        models[key] = scaled_model(prior.models[key], factor)
-        if key in cov:
-            p = models[key].params
-            # only step-valued parameters scale; b, b2 are ratios
-            names = p.names()
-            f = np.array([1.0 if n in ("b", "b2", "k") or isinstance(models[key], FamilyModel) else factor
-                          for n, _ in names])
-            cov[key] = cov[key] * np.outer(f, f)
-        se = stderr.get(key)
-        if se is not None and not isinstance(models[key], FamilyModel):
-            names = models[key].params.names()
-            stderr[key] = np.array([s if n in ("b", "b2", "k") else s * factor for s, (n, _) in zip(se, names, strict=True)])
-        sigma[key] = math.hypot(sig, sd)
-        updates.append(ScaleUpdate(j, d, len(ts), factor, sd))
-        notes.append(
-            f"joint {j}{d}: step scale x{factor:.4f} (± {sd * 100:.2g} %) from {len(ts)} traverse(s)"
-            + (" (prior model error assumed)" if assumed else "")
-        )
+    for j in sorted({jj for jj, _ in prior.models}):
+        dirs = sorted(d for jj, d in prior.models if jj == j)
+        sig = {d: model_sigma(prior, j, d) for d in dirs}
+        rows: list[list[float]] = []
+        resid: list[float] = []
+        weights: list[float] = []
+        for k, d in enumerate(dirs):
+            ts = groups.get((j, d), [])
+            if not ts:
+                continue
+            m0 = prior.models[(j, d)]
+            base = _average(m0, ts)
+            h = 1e-4
+            grad = (np.log(_average(load_scaled(m0, 1.0 + h), ts)) - np.log(base)) / h
+            meas = np.array([t.gamma for t in ts])
+            for r, g in zip(np.log(meas / base), grad, strict=True):
+                row = [0.0] * (len(dirs) + 1)
+                row[k] = 1.0
+                row[-1] = float(g)
+                rows.append(row)
+                resid.append(float(r))
+                weights.append(1.0 / sig[d][0] ** 2)
+        p0 = np.diag([1.0 / drift**2] * len(dirs) + [1.0 / load_drift**2])
+        if rows:
+            H, r_, w = np.array(rows), np.array(resid), np.array(weights)
+            prec = p0 + H.T @ (H * w[:, None])
+            post_cov = np.linalg.inv(prec)
+            mean = post_cov @ (H.T @ (w * r_))
+        else:
+            post_cov, mean = np.linalg.inv(p0), np.zeros(len(dirs) + 1)
+        lam = float(mean[-1])
+        for k, d in enumerate(dirs):
+            key = (j, d)
+            s0, assumed = sig[d]
+            n_new = len(groups.get(key, []))
+            factor = math.exp(float(mean[k]))
+            sd = math.sqrt(float(post_cov[k, k]))
+            if n_new == 0 and abs(lam) < 1e-12:
+                sigma[key] = math.hypot(s0, drift)
+                notes.append(f"joint {j}{d}: no new traverse; kept from the prior, uncertainty widened by the drift")
+                continue
+            models[key] = scaled_model(load_scaled(prior.models[key], 1.0 + lam), factor)
+            if key in cov and not isinstance(models[key], FamilyModel):
+                names = models[key].params.names()
+                fvec = np.array([1.0 if n in ("b", "b2", "k") else factor for n, _ in names])
+                cov[key] = cov[key] * np.outer(fvec, fvec)
+            se = stderr.get(key)
+            if se is not None and not isinstance(models[key], FamilyModel):
+                names = models[key].params.names()
+                stderr[key] = np.array(
+                    [x if n in ("b", "b2", "k") else x * factor for x, (n, _) in zip(se, names, strict=True)]
+                )
+            sigma[key] = math.hypot(s0, sd)
+            if n_new:
+                updates.append(ScaleUpdate(j, d, n_new, factor, sd))
+            notes.append(
+                f"joint {j}{d}: step scale x{factor:.4f} (± {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
+                f"from {n_new} traverse(s)" + (" (prior model error assumed)" if assumed else "")
+            )
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
     all_ts = list(traverses)
     prov = _provenance(all_ts, source, len(all_ts), notes)

@@ -362,7 +362,8 @@ def plan_cmd(
     )
     console.print(
         f"  95 % prediction interval of the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
-        f"± {format_position(half, joint, 3)}" + (" (model error assumed: the calibration has none)" if assumed else ""),
+        f"± {format_position(half, joint, 3)}"
+        + (" (model error assumed: the calibration has none)" if assumed else ""),
         highlight=False,
     )
     if math.isclose(plan.q_from, plan.q_to):

@@ -196,7 +196,7 @@ def step_grid(cell: CellParams = CellParams()) -> tuple[tuple[NDArray[np.float64
     """The mean step (strokes) on the grid ``(u, n, mount, kappa)``, computed once per process."""
     axes = (GRID_U, GRID_N, GRID_MOUNT, GRID_KAPPA)
     mesh = np.meshgrid(*axes, indexing="ij")
-    values = simulate_cell(*mesh, cell=cell)
+    values = simulate_cell(mesh[0], mesh[1], mesh[2], mesh[3], cell=cell)
     return axes, values
 
 
@@ -413,9 +413,9 @@ class PhysicsMM3A(SimulatedMM3A):
     def info(self) -> DeviceInfo:
         """Model, URL, joints and the simulation settings."""
         base = super().info
-        settings = dict(base.settings)
-        settings.update({"physics": True, "warmup": self.warmup, "warmup_tau_s": self.warmup_tau})
-        return DeviceInfo(base.url, "simulated MM3A (physics)", base.joints, settings)
+        extra = dict(base.extra)
+        extra.update({"physics": True, "warmup": self.warmup, "warmup_tau_s": self.warmup_tau})
+        return DeviceInfo(base.url, "simulated MM3A (physics)", base.joints, extra)
 
     # ------------------------------------------------------------ the truth
 
@@ -516,7 +516,7 @@ def traverse(arm: PhysicsMM3A, joint: int, direction: str, pose: kin.Pose, day: 
     arm.set_pose(**{f"q{k}": v for k, v in zip((1, 2, 3), pose[:3], strict=True) if k != joint})
     arm.set_pose(theta=pose.theta, psi=pose.psi)
     arm.set_pose(**{f"q{joint}": start + 0.02 * sign * spec.span})
-    arm.step(joint, -sign * 200_000)  # onto the start stop
+    arm.step(joint, -sign * 5_000)  # onto the start stop (2 % of the travel is < 2000 steps)
     arm.set_pose(**{f"q{joint}": start})
     total = 0
     while True:
