@@ -9,6 +9,7 @@ import pytest
 from typer.testing import CliRunner
 
 from physics_scenarios import max_errors, paper14, random_pose, spread
+from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, CalibrationError, calibrate
 from stickslip.calibration.update import model_sigma, prediction_sd, update_calibration
 from stickslip.cli import app
@@ -97,3 +98,32 @@ def test_cli_prior_round_trip(tmp_path):
     assert cal.method.endswith("+ update") and cal.provenance["updates"]
     r = runner.invoke(app, ["calibrate", str(new), "--prior", str(tmp_path / "missing.json")])
     assert r.exit_code == 2 and "no such calibration file" in r.stderr
+
+
+def test_suggest_picks_informative_poses(tmp_path):
+    # greedy I-optimal design: the suggested pose is the candidate that most reduces the workspace's
+    # prediction variance, so it beats every other candidate, e.g. the paper's unloaded pose
+    from stickslip.calibration import design
+
+    arm = ph.PhysicsMM3A(seed=51, day="x")
+    cal = calibrate(paper14(arm, "x") + spread(arm, "x", np.random.default_rng(51), 4), model="auto")
+    (first,) = design.suggest_poses(cal, 3, 1)
+    assert first.rms_sd_after < first.rms_sd_before
+    orig = design.workspace_poses
+    try:  # offer only the suggested pose and the unloaded pose (q2 = -90°, level): it must pick the first
+        design.workspace_poses = lambda j, n, seed=0: (  # type: ignore[assignment]
+            [first.pose, kin.Pose(0.0, -math.pi / 2, 0.0, 0.0, 0.0)] if seed == 1 else orig(j, n, seed)
+        )
+        (again,) = design.suggest_poses(cal, 3, 1, candidates=2)
+    finally:
+        design.workspace_poses = orig
+    assert again.pose == first.pose
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    out = tmp_path / "next.csv"
+    r = CliRunner().invoke(app, ["suggest", "-c", str(path), "--n", "2", "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    lines = out.read_text().splitlines()
+    assert lines[0] == "joint,direction,q1,q2,q3,theta,psi" and len(lines) == 1 + 2 * 2 * 2
+    r = CliRunner().invoke(app, ["suggest", "-c", str(path), "--n", "0"])
+    assert r.exit_code == 2 and "outside 1..20" in r.stderr

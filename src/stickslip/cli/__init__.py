@@ -6,6 +6,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.measure`  demo
 * :mod:`.audio`    tune, listen
 * :mod:`.history`  history, export, import, anova, fit, report
+* :mod:`.models`   suggest
 * :mod:`.devices`  move, where
 """
 
@@ -93,7 +94,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, core, devices, history, measure  # noqa: E402,F401  (they register their commands)
+from . import audio, core, devices, history, measure, models  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:
@@ -114,7 +115,7 @@ def _unwrap(doc: str) -> str:
 
 _PANELS = {
     "Measure": ("demo", "traverse", "tune", "listen"),
-    "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
+    "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan", "suggest"),
     "Drive a manipulator": ("move", "where"),
     "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
 }
