@@ -127,7 +127,10 @@ def demo(
         if with_se:
             cells.insert(5, "" if se is None else f"{se * scale:.2g}")
         table.add_row(*cells)
-    console.print(table)
+    if result.parameters:
+        console.print(table)
+    else:  # the physics arm has no Eq. 3/8 truth
+        console.print("the physics arm has no true Eq. 3/8 parameters to compare with (docs/models.md)")
     if result.validation is not None:
         title = "Validation on other poses: |relative error| of the average step"
         console.print(validation_table(result.validation.rows(), title))
