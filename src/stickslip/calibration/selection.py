@@ -270,7 +270,7 @@ def select_joint(
         n_sh = spec.n_params - own
         # at least two poses per parameter of a direction (a shared one counts half): fewer, and a
         # family fits the poses it has and swings between them (the benchmark's worst cases)
-        need = math.ceil(2 * (own + n_sh / max(len(cols), 1)))
+        need = math.ceil(2 * (own + n_sh / max(len(cols), 1))) if candidates is None else own + 1  # asked for: fit it
         short = [d for d in cols if poses[d] < need] if spec.name != "constant" else []
         p_total = own * len(cols) + n_sh
         if short:

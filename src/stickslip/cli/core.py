@@ -153,16 +153,21 @@ def calibrate_cmd(
 
 def _selection_table(cal: Calibration) -> Table:
     t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
-    for col in ("joint", "dir", "family", "params", "CV RMS", "CV max", "fit RMS", "status"):
+    for col in ("joint", "family", "params (+ and -)", "CV RMS", "CV max", "fit RMS", "status"):
         t.add_column(col, justify="right" if col.startswith(("CV", "fit", "params")) else "left")
-    for (j, d), sel in sorted(cal.selection.items()):
+    seen: set[int] = set()
+    for (j, _d), sel in sorted(cal.selection.items()):
+        if j in seen:  # one selection per joint (both directions are fitted together)
+            continue
+        seen.add(j)
         chosen = sel.get("chosen")
         for sc in sel.get("scores", []) or []:  # type: ignore[union-attr]
+
             def pct(x: object) -> str:
                 return f"{float(x) * 100:.2f} %" if isinstance(x, (int, float)) else "—"
 
             mark = " ◀ chosen" if sc["family"] == chosen else ""
-            t.add_row(str(j), d, f"{sc['family']}{mark}", str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
+            t.add_row(str(j), f"{sc['family']}{mark}", str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
                       pct(sc["fit_rms"]), str(sc["status"]))
     return t
 
