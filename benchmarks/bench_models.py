@@ -83,16 +83,21 @@ def main(seeds: tuple[int, ...] = (101, 102, 103)) -> None:
                         errs[label][j].append(e)
             prev = auto
     print(f"seeds {', '.join(map(str, seeds))}; days {', '.join(DAYS)}; 32 validation traverses per day\n")
-    print("| calibration | prismatic max | prismatic mean | rotary max | rotary mean |")
-    print("| --- | ---: | ---: | ---: | ---: |")
+    print("Largest |relative error| of a day's validation traverses: on the median day and the worst day;")
+    print("mean |relative error| over all days. The issue's targets with 46 traverses: 7.5 % / 3.5 %;")
+    print("yesterday's plus 4: 10 % / 5 %.\n")
+    print("| calibration | prismatic max, median day | worst day | mean | rotary max, median day | worst day | mean |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for label, by_j in errs.items():
         cells = []
         for j in (3, 2):
             if by_j[j]:
+                day_max = np.array([d.max() for d in by_j[j]])
                 e = np.concatenate(by_j[j])
-                cells += [f"{100 * e.max():.1f} %", f"{100 * e.mean():.1f} %"]
+                cells += [f"{100 * np.median(day_max):.1f} %", f"{100 * day_max.max():.1f} %"]
+                cells.append(f"{100 * e.mean():.1f} %")
             else:
-                cells += ["—", "—"]
+                cells += ["—", "—", "—"]
         print(f"| {label} | " + " | ".join(cells) + " |")
     print("\nfamilies chosen by --model auto (joint: family: days):",
           ", ".join(f"{k}: {v}" for k, v in sorted(chosen.items())))
