@@ -155,3 +155,27 @@ def test_joint_one_with_few_traverses_falls_back():
     ts.append(ph.traverse(arm, 1, "+", kin.Pose(0.0, -math.pi / 2, 0.0, -math.pi / 2, 0.0), "x"))
     cal = calibrate(ts, model="auto")
     assert cal.models[(1, "+")].params.family == "constant"
+
+
+def test_cli_calibrate_and_fit_with_families(tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    arm = ph.PhysicsMM3A(seed=43, day="2026-04-02")
+    ts = paper14(arm, "2026-04-02") + spread(arm, "2026-04-02", np.random.default_rng(43), 6)
+    meas = tmp_path / "m.csv"
+    write_measurements(meas, ts)
+    runner = CliRunner()
+    r = runner.invoke(app, ["calibrate", str(meas), "-o", str(tmp_path / "c.json")])
+    assert r.exit_code == 0, r.output
+    assert "leave-one-pose-out" in r.output and "chosen" in r.output
+    r = runner.invoke(app, ["fit", str(meas), "--model", "auto", "--json"])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["calibrate", str(meas), "--model", "nonsense"])
+    assert r.exit_code == 2 and "no model family 'nonsense'" in r.stderr
+    r = runner.invoke(app, ["plan", "-c", str(tmp_path / "c.json"), "--joint", "2", "--from", "-30deg",
+                            "--to", "-60deg", "--q3", "6mm", "--json"])
+    assert r.exit_code == 0, r.output
+    assert "pi95" in r.output
