@@ -179,3 +179,17 @@ def test_cli_calibrate_and_fit_with_families(tmp_path):
                             "--to", "-60deg", "--q3", "6mm", "--json"])
     assert r.exit_code == 0, r.output
     assert "pi95" in r.output
+
+
+def test_sinusoidal_form_of_a_family_is_exact_where_it_exists():
+    # the paper family's (A, alpha, beta) equal Eq. 8's; the radial and normal terms are sinusoids too
+    rp = RotaryParams((52e-6, 47e-6), (-8.15e-6, -19.4e-6))
+    pr = JointModel(2, "+", rp)
+    fr = FamilyModel(2, "+", FamilyParams("paper", 2, (52e-6, 47e-6, -8.15e-6, -19.4e-6)))
+    args = (np.array([0.1, -0.3]), 0.0, np.array([0.004, 0.011]), np.array([-0.3, 0.7]), 0.2)
+    for a, b in zip(fr.rotary_coefficients(*args), pr.rotary_coefficients(*args), strict=True):
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-18)
+    rad = FamilyModel(2, "+", FamilyParams("radial", 2, (52e-6, 47e-6, -8.15e-6, -19.4e-6, 3e-6)))
+    A, al, be = rad.rotary_coefficients(0.2, 0.0, 0.005, -0.4, 0.3)
+    q = np.linspace(-3.0, 0.4, 7)
+    np.testing.assert_allclose(A + al * np.cos(q) + be * np.sin(q), rad.gamma(0.2, q, 0.005, -0.4, 0.3), rtol=1e-12)

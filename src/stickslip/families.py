@@ -428,9 +428,29 @@ class FamilyModel(JointModel):
         p = self.params
         return evaluate(p.spec, p.values, features(self.joint, q1, q2, q3, theta, psi), p.scale)
 
-    def rotary_coefficients(self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike):  # type: ignore[no-untyped-def]  # noqa: E501
-        """Only the paper family has the ``A + alpha cos q + beta sin q`` form: raises ``NotImplementedError``."""
-        raise NotImplementedError(f"family {self.family} has no sinusoidal form; use profile() or average_gamma()")
+    def rotary_coefficients(
+        self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``(A, alpha, beta)`` with ``gamma(q) ~ A + alpha cos q + beta sin q`` along the joint's travel.
+
+        Exact for every family whose step is sinusoidal along the travel (all but those
+        with ``t2``); for those, the least-squares sinusoid over the travel (9 points), for
+        the paper's figures. Prismatic: ``(gamma, 0, 0)``.
+        """
+        if self.joint == 3:
+            g = self.gamma(q1, q2, q3, theta, psi)
+            z = np.zeros_like(g)
+            return g, z, z
+        spec = kin.JOINTS[self.joint]
+        qs = np.linspace(spec.lower, spec.upper, 9)
+        design = np.stack([np.ones_like(qs), np.cos(qs), np.sin(qs)], axis=1)
+        pinv = np.linalg.pinv(design)  # (3, 9)
+        cols = list(np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (q1, q2, q3, theta, psi))))
+        args = [c[..., None] for c in cols]
+        args[self.joint - 1] = np.broadcast_to(qs, cols[0].shape + qs.shape)
+        g = self.gamma(args[0], args[1], args[2], args[3], args[4])
+        coef = np.einsum("kn,...n->...k", pinv, g)
+        return coef[..., 0], coef[..., 1], coef[..., 2]
 
     def average_gamma(
         self,
