@@ -193,3 +193,48 @@ def test_sinusoidal_form_of_a_family_is_exact_where_it_exists():
     A, al, be = rad.rotary_coefficients(0.2, 0.0, 0.005, -0.4, 0.3)
     q = np.linspace(-3.0, 0.4, 7)
     np.testing.assert_allclose(A + al * np.cos(q) + be * np.sin(q), rad.gamma(0.2, q, 0.005, -0.4, 0.3), rtol=1e-12)
+
+
+def _family_doc() -> dict:
+    arm = ph.PhysicsMM3A(seed=44, day="f")
+    ts = paper14(arm, "f") + spread(arm, "f", np.random.default_rng(44), 4)
+    return calibrate(ts, model="auto").to_dict()
+
+
+_DOC = None
+
+
+@pytest.mark.parametrize("seed", range(150))
+def test_mangled_family_files_give_one_reason(seed):
+    # fuzz: replace one field anywhere in the families / uncertainty entries with a hostile value;
+    # loading either works or raises ValueError, never anything else
+    global _DOC
+    if _DOC is None:
+        _DOC = _family_doc()
+    doc = json.loads(json.dumps(_DOC))
+    rng = np.random.default_rng(seed)
+    hostile = [None, "x", -1, 0, 1e308, -1e308, [], {}, True, [1, 2], {"a": 1}, "NaN"]
+    paths = []
+
+    def walk(node, path):
+        if isinstance(node, dict):
+            for k, v in node.items():
+                paths.append((*path, k))
+                walk(v, (*path, k))
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                paths.append((*path, i))
+                walk(v, (*path, i))
+
+    for key in ("families", "uncertainty", "selection"):
+        walk(doc[key], (key,))
+    path = paths[int(rng.integers(len(paths)))]
+    target = doc
+    for k in path[:-1]:
+        target = target[k]
+    target[path[-1]] = hostile[int(rng.integers(len(hostile)))]
+    try:
+        cal = Calibration.from_dict(doc)
+    except ValueError:
+        return
+    cal.predict_many([t for t in paper_table() if (t.joint, t.direction) in cal.models][:4])

@@ -97,6 +97,11 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
                 p = by_name[(name, None if q3 is None else round(q3, 9))]
                 values.append(_finite(p["value"], f"{where} {name}"))
                 ses.append(p.get("stderr"))
+            if j not in (1, 2, 3):
+                raise ValueError(f"{where}: joint must be 1, 2 or 3, got {j!r}")
+            ses = [None if x is None else _finite(x, f"{where} stderr") for x in ses]
+            if any(x is not None and x < 0 for x in ses):
+                raise ValueError(f"{where}: a standard error is negative")
             scale = _finite(rec.get("scale", 1.0), f"{where} scale")
             if not scale > 0:
                 raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
@@ -104,7 +109,7 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
             raise ValueError(f"{where}: missing or malformed field {e}") from None
         cal.models[(j, d)] = FamilyModel(j, d, FamilyParams(spec.name, j, tuple(values), scale))
         cal.stderr[(j, d)] = (
-            None if all(s is None for s in ses) else np.array([np.nan if s is None else float(s) for s in ses])
+            None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
         )
     unc = data.get("uncertainty") or []
     if not isinstance(unc, list):
@@ -124,15 +129,21 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
             cal.sigma_model[key] = sv
         c = rec.get("covariance")
         if c is not None:
-            arr = np.asarray(c, dtype=float)
+            try:
+                arr = np.asarray(c, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"uncertainty[{i}].covariance must be a matrix of numbers") from None
             m = cal.models.get(key)
             n = len(m.params.names()) if m is not None else -1
             if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
                 raise ValueError(f"uncertainty[{i}].covariance must be a finite {n}x{n} matrix")
             cal.covariance[key] = arr
     sel = data.get("selection") or []
-    if isinstance(sel, list):
-        for rec in sel:
-            if isinstance(rec, dict) and "joint" in rec and "direction" in rec:
-                key = (int(rec["joint"]), direction_label(rec["direction"]))
-                cal.selection[key] = {k: v for k, v in rec.items() if k not in ("joint", "direction")}
+    if not isinstance(sel, list):
+        raise ValueError("selection must be a list")
+    for i, rec in enumerate(sel):
+        try:
+            key = (int(rec["joint"]), direction_label(rec["direction"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"selection[{i}]: bad joint or direction ({e})") from None
+        cal.selection[key] = {k: v for k, v in rec.items() if k not in ("joint", "direction")}
