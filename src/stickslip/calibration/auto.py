@@ -36,17 +36,22 @@ def calibrate(
     source : str, optional
         Where the traverses came from, for the provenance.
     model : str
-        ``"paper"`` (default here; the paper's models, calibrated by ``method``);
+        ``"paper"`` (default here, as before families existed; the command line defaults to
+        ``"auto"``): the paper's models, calibrated by ``method``;
         ``"auto"``: the paper's procedure for every joint and direction whose traverses
         are all at the paper's calibration poses, and for the others every model family
         the data can identify, chosen by leave-one-pose-out cross-validation
         (:func:`~stickslip.calibration.selection.calibrate_families`); or a family's name
-        (docs/models.md §2) to fit that family everywhere.
+        (docs/models.md §2) to fit that family everywhere. With ``method`` other than
+        ``"auto"``, ``"auto"`` means ``"paper"`` (the method names how to calibrate the
+        paper's models).
     """
     traverses = list(traverses)
     method = _OLD_METHOD_NAMES.get(method, method)
     if method not in ("auto", "paper", "paper-quadratic", "lsq"):
         raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
+    if model == "auto" and method != "auto":
+        model = "paper"  # a method names how to calibrate the paper's models (as before families existed)
     if model != "paper":
         return _calibrate_models(traverses, method, day, source, model)
     if method == "auto":

@@ -92,7 +92,8 @@ def calibrate_cmd(
             "--model",
             help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
             "traverses are exactly the paper's poses, else every model family the data identify, chosen by "
-            "leave-one-pose-out cross-validation. 'paper': the paper's models only.",
+            "leave-one-pose-out cross-validation. 'paper': the paper's models only (also what 'auto' means "
+            "with a --method other than auto).",
         ),
     ] = "auto",
     prior: Annotated[
