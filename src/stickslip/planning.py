@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 from . import kinematics as kin
 from .calibration import Calibration
+from .families import FamilyModel, TabulatedProfile
 from .measurements import check_pose
 from .models import JointModel, PrismaticParams, StepProfile, direction_label
 
@@ -160,16 +161,19 @@ class Planner:
         self._models = {s: models[(self.joint, lab)] for s, lab in ((1, "+"), (-1, "-")) if (self.joint, lab) in models}
         if not self._models:
             raise KeyError(f"joint {joint} is not in this calibration")
-        self._coeffs: dict[int, StepProfile] = {}  # per direction, made on first use (a move needs one)
+        self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
 
-    def _dir(self, sign: int) -> StepProfile:
+    def _dir(self, sign: int) -> StepProfile | TabulatedProfile:
         c = self._coeffs.get(sign)
         if c is not None:
             return c
         m = self._models.get(sign)
         if m is None:
             raise KeyError(f"joint {self.joint} direction {direction_label(sign)} is not in this calibration")
-        c = self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, self.pose))
+        if isinstance(m, FamilyModel):  # a family beyond the paper's: its own profile along the travel
+            c = self._coeffs[sign] = m.profile(self.pose)
+        else:
+            c = self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, self.pose))
         return c
 
     def _check_range(self, q: float, what: str) -> None:

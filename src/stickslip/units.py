@@ -23,6 +23,7 @@ __all__ = [
     "format_position",
     "step_scale",
     "param_scale",
+    "DIMENSIONLESS_PARAMETERS",
     "position_scale",
     "step_display_unit",
     "position_display_unit",
@@ -137,13 +138,18 @@ def step_scale(joint: int) -> tuple[float, str]:
     return (1e6, "µrad") if joint_spec(joint).rotary else (1e9, "nm")
 
 
+DIMENSIONLESS_PARAMETERS = frozenset({"b", "b2", "k"})
+"""Model parameters without a unit: ``b`` of Eq. (2) and the ratios of the model families beyond it."""
+
+
 def param_scale(name: str, joint: int) -> tuple[float, str]:
     """``(factor, unit)`` to show calibration parameter ``name`` of ``joint``.
 
-    The dimensionless ``b`` of Eq. (2) is shown as is (unit ``""``); every other
-    parameter is a step size or a step-size slope and shown like :func:`step_scale`.
+    Dimensionless parameters (``b`` of Eq. (2), :data:`DIMENSIONLESS_PARAMETERS`) are shown
+    as they are (unit ``""``); every other parameter is a step size or a step-size slope
+    and shown like :func:`step_scale`.
     """
-    return (1.0, "") if name == "b" else step_scale(joint)
+    return (1.0, "") if name in DIMENSIONLESS_PARAMETERS else step_scale(joint)
 
 
 def position_scale(joint: int) -> tuple[float, str]:

@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import records
+from ..plotting import has_display
 from .template import CHUNK, TemplateParams, TemplateState, levels_from_frames
 
 __all__ = [
@@ -753,7 +754,7 @@ def plot_levels(
     try:
         import matplotlib
 
-        if ax is None and not _has_display():
+        if ax is None and not has_display():
             matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError as e:  # pragma: no cover - depends on the environment
@@ -774,10 +775,3 @@ def plot_levels(
     ax.set_ylabel(f"band level ({tuning.level_unit})")
     ax.legend(loc="best", fontsize="small")
     return ax
-
-
-def _has_display() -> bool:
-    import os
-    import sys
-
-    return sys.platform in ("win32", "darwin") or bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))

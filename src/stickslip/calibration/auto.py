@@ -15,7 +15,11 @@ _OLD_METHOD_NAMES = {"seed": "paper", "seed-quadratic": "paper-quadratic"}
 
 
 def calibrate(
-    traverses: Sequence[Traverse], method: str = "auto", day: str | None = None, source: str | None = None
+    traverses: Sequence[Traverse],
+    method: str = "auto",
+    day: str | None = None,
+    source: str | None = None,
+    model: str = "paper",
 ) -> Calibration:
     """Calibrate every joint and direction present in ``traverses``.
 
@@ -31,9 +35,25 @@ def calibrate(
         Session label (default: the latest day among the traverses).
     source : str, optional
         Where the traverses came from, for the provenance.
+    model : str
+        ``"paper"`` (default here, as before families existed; the command line defaults to
+        ``"auto"``): the paper's models, calibrated by ``method``;
+        ``"auto"``: the paper's procedure for every joint and direction whose traverses
+        are all at the paper's calibration poses, and for the others every model family
+        the data can identify, chosen by leave-one-pose-out cross-validation
+        (:func:`~stickslip.calibration.selection.calibrate_families`); or a family's name
+        (docs/models.md §2) to fit that family everywhere. With ``method`` other than
+        ``"auto"``, ``"auto"`` means ``"paper"`` (the method names how to calibrate the
+        paper's models).
     """
     traverses = list(traverses)
     method = _OLD_METHOD_NAMES.get(method, method)
+    if method not in ("auto", "paper", "paper-quadratic", "lsq"):
+        raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
+    if model == "auto" and method != "auto":
+        model = "paper"  # a method names how to calibrate the paper's models (as before families existed)
+    if model != "paper":
+        return _calibrate_models(traverses, method, day, source, model)
     if method == "auto":
         groups = _group(traverses)
         seed_keys = {k for k, ts in groups.items() if paper_applicable(ts)}
@@ -78,3 +98,30 @@ def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], d
     )
 
 
+
+
+def _calibrate_models(
+    traverses: list[Traverse], method: str, day: str | None, source: str | None, model: str
+) -> Calibration:
+    """``model="auto"`` or a family name: the paper's procedure where the data are exactly its poses,
+    families elsewhere."""
+    from .paper import only_paper_poses
+    from .selection import calibrate_families
+
+    if model != "auto":
+        return calibrate_families(traverses, day, source, model=model)
+    groups = _group(traverses)
+    paper_keys = {k for k, ts in groups.items() if only_paper_poses(ts)} if method in ("auto", "paper") else set()
+    rest = [t for t in traverses if (t.joint, t.direction) not in paper_keys]
+    if not rest:
+        return calibrate_paper(traverses, day, source)
+    fam = calibrate_families(rest, day, source, model="auto")
+    if not paper_keys:
+        return fam
+    by_paper = [t for t in traverses if (t.joint, t.direction) in paper_keys]
+    merged = _merge(calibrate_paper(by_paper, day, source), fam, traverses, day)
+    merged.method = merged.method.replace("lsq (", "families (")
+    merged.covariance.update(fam.covariance)
+    merged.sigma_model.update(fam.sigma_model)
+    merged.selection.update(fam.selection)
+    return merged

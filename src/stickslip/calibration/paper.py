@@ -88,6 +88,32 @@ def paper_applicable(traverses: Sequence[Traverse]) -> bool:
 
 
 
+def only_paper_poses(ts: Sequence[Traverse]) -> bool:
+    """Whether the traverses of one joint and direction are the paper's calibration set and nothing else."""
+    if not ts:
+        return False
+    j = ts[0].joint
+    rows = _paper_prismatic_rows(ts) if j == 3 else _paper_rotary_rows(ts)
+    if rows is None or sum(len(v) for v in rows.values()) != len(ts):
+        return False
+    for t in ts:
+        if j == 3:
+            ok = _close(t.q1, 0.0) and any(
+                _close(t.q2, q2) and _close(t.theta, th) and _close(t.psi, ps)
+                for q2, th, ps in PRISMATIC_PAPER_POSES.values()
+            )
+        elif j == 2:
+            ok = _close(t.q1, 0.0) and any(
+                abs(t.q3 - q3) <= _Q3_TOL and _close(t.theta, th) and _close(t.psi, ps)
+                for q3, th, ps in ROTARY_PAPER_POSES
+            )
+        else:
+            ok = True
+        if not ok:
+            return False
+    return True
+
+
 def calibrate_paper(
     traverses: Sequence[Traverse],
     day: str | None = None,

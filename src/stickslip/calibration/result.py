@@ -21,6 +21,7 @@ if TYPE_CHECKING:
 from .. import kinematics as kin
 from .. import plotting, records
 from ..clock import now_utc
+from ..families import FamilyParams
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
     DIRECTIONS,
@@ -298,6 +299,12 @@ class Calibration:
     provenance: Provenance = field(default_factory=Provenance)
     created: str = field(default_factory=lambda: now_utc().isoformat(timespec="seconds"))
     conditions: Conditions = field(default_factory=Conditions)
+    covariance: dict[tuple[int, str], NDArray[np.float64]] = field(default_factory=dict)
+    """``(joint, direction) -> covariance`` of the parameters (SI, order of ``params.names()``), where known."""
+    sigma_model: dict[tuple[int, str], float] = field(default_factory=dict)
+    """``(joint, direction) ->`` relative model error (1 sigma) for prediction intervals, where known."""
+    selection: dict[tuple[int, str], dict[str, object]] = field(default_factory=dict)
+    """``(joint, direction) ->`` the family chosen, why, and the CV error of every family."""
 
     # -- access
     @property
@@ -351,20 +358,29 @@ class Calibration:
             se = self.stderr.get((j, d))
             for i, ((name, q3), value) in enumerate(zip(m.params.names(), m.params.as_vector(), strict=True)):
                 err = None if se is None or not np.isfinite(se[i]) else float(se[i])
-                out.append(Parameter(j, d, name, q3, float(value), err, UNITS[(m.params.kind, name)]))
+                unit = m.params.unit(name) if isinstance(m.params, FamilyParams) else UNITS[(m.params.kind, name)]
+                out.append(Parameter(j, d, name, q3, float(value), err, unit))
         return out
 
     # -- persistence
     def to_dict(self) -> dict[str, object]:
-        """A JSON-ready dict (SI units, named)."""
-        return {
+        """A JSON-ready dict (SI units, named).
+
+        A calibration with a model family beyond the paper's is written as version 2 (its
+        parameters under ``families``, so that a reader of version 1 refuses it instead of
+        misreading it); the others stay version 1, readable by every earlier release.
+        """
+        from ._ext_json import ext_fields
+
+        ext = ext_fields(self)
+        base = {
             "format": FORMAT,
-            "version": FORMAT_VERSION,
+            "version": FORMAT_VERSION if not ext.get("families") else 2,
             "day": self.day,
             "method": self.method,
             "created": self.created,
             "units": "SI: prismatic steps in m, rotary steps in rad, q3 in m; b is dimensionless",
-            "parameters": [p.to_dict() for p in self.parameters()],
+            "parameters": [p.to_dict() for p in self.parameters() if not _is_family(self, p)],
             "constant_steps": [
                 {"joint": j, "direction": d, "value": v, "unit": kin.joint_spec(j).unit}
                 for (j, d), v in sorted(self.constant_steps.items())
@@ -372,6 +388,8 @@ class Calibration:
             "provenance": self.provenance.to_dict(),
             "conditions": self.conditions.to_dict(),
         }
+        base.update(ext)
+        return base
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Calibration:
@@ -379,9 +397,9 @@ class Calibration:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
         records.check_calibration_dict(data)
-        if data.get("version") != FORMAT_VERSION:
+        if data.get("version") not in (FORMAT_VERSION, 2):
             raise ValueError(
-                f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION})"
+                f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION} or 2)"
             )
         try:
             by_key: dict[tuple[int, str], list[dict[str, Any]]] = {}
@@ -416,7 +434,7 @@ class Calibration:
             conditions = Conditions.from_dict(data.get("conditions"))
         except (KeyError, TypeError) as e:
             raise ValueError(f"calibration file is missing or has a malformed field: {e}") from None
-        return cls(
+        cal = cls(
             models,
             stderr,
             consts,
@@ -426,6 +444,10 @@ class Calibration:
             str(data.get("created", "")),
             conditions,
         )
+        from ._ext_json import read_ext_fields
+
+        read_ext_fields(cal, data)
+        return cal
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
@@ -534,6 +556,12 @@ class Calibration:
         ax.set_title(f"joint {joint}, calibration of {self.day} ({self.method})")
         ax.legend(fontsize="small")
         return ax
+
+
+def _is_family(cal: Calibration, p: Parameter) -> bool:
+    """Whether ``p`` belongs to a model family beyond the paper's (written under ``families``)."""
+    m = cal.models.get((p.joint, p.direction))
+    return m is not None and isinstance(m.params, FamilyParams)
 
 
 # ----------------------------------------------------------------------------- helpers

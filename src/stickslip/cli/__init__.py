@@ -6,6 +6,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.measure`  demo
 * :mod:`.audio`    tune, listen
 * :mod:`.history`  history, export, import, anova, fit, report
+* :mod:`.models`   suggest
 * :mod:`.devices`  move, where
 * :mod:`.taskspace` reach, jog
 """
@@ -95,7 +96,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, core, devices, history, measure, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, core, devices, history, measure, models, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:
@@ -116,7 +117,7 @@ def _unwrap(doc: str) -> str:
 
 _PANELS = {
     "Measure": ("demo", "traverse", "record", "tune", "listen"),
-    "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan"),
+    "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan", "suggest"),
     "Drive a manipulator": ("move", "where", "reach", "jog"),
     "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
 }

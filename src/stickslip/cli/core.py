@@ -100,6 +100,27 @@ def calibrate_cmd(
         float | None, typer.Option(help="Drive amplitude of the traverses, V (recorded; move warns on a change).")
     ] = None,
     temperature: Annotated[float | None, typer.Option(help="Temperature during the traverses, °C (recorded).")] = None,
+    model: Annotated[
+        str,
+        typer.Option(
+            "--model",
+            help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
+            "traverses are exactly the paper's poses, else every model family the data identify, chosen by "
+            "leave-one-pose-out cross-validation. 'paper': the paper's models only (also what 'auto' means "
+            "with a --method other than auto).",
+        ),
+    ] = "auto",
+    prior: Annotated[
+        Path | None,
+        typer.Option(
+            "--prior",
+            help="An earlier calibration to bring up to date with these (few) traverses: the step scale of "
+            "each joint and direction measured is updated (Bayesian), the rest kept.",
+        ),
+    ] = None,
+    drift: Annotated[
+        float, typer.Option(help="With --prior: prior standard deviation of a day's change of step scale (relative).")
+    ] = 0.15,
     json_out: JsonOpt = False,
 ) -> None:
     """Calibrate the step-size models from measured traverses.
@@ -110,19 +131,30 @@ def calibrate_cmd(
     (12mm, -90deg, 0), (0, -90deg, 0); d is found by inverting the exact average-step
     integral. Any other set of traverses is fitted by least squares, with standard errors.
 
+    With more traverses than the paper's poses, every model family the data can
+    identify is fitted and one is chosen by leave-one-pose-out cross-validation; the
+    table says which, why, and the CV error of each. With --prior, an earlier
+    calibration is brought up to date with as few as one traverse per joint and direction.
+
     Example: stickslip calibrate day1.csv -o cal.json
+    Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     """
     from ..calibration import CalibrationError, Conditions, calibrate
     from ..models import NonPhysicalError
 
     traverses = read_table(measurements)
     try:
-        conditions = Conditions(
-            device_key(device) if device else None, frequency, amplitude, temperature
-        )
-        cal = calibrate(traverses, method=method, day=day, source=str(measurements))
-    except (CalibrationError, NonPhysicalError, ValueError) as e:
-        fail(str(e))
+        conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
+        if prior is not None:
+            from ..calibration.update import update_calibration
+
+            with user_errors():
+                old = Calibration.load(prior)
+            cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=str(measurements))
+        else:
+            cal = calibrate(traverses, method=method, day=day, source=str(measurements), model=model)
+    except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
+        fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
     if output is not None:
         with user_errors():
@@ -131,10 +163,34 @@ def calibrate_cmd(
         print_json(cal.to_dict())
         return
     console.print(_params_table(cal, f"calibration — day {cal.day}, method {cal.method}, {len(traverses)} traverses"))
+    if cal.selection:
+        console.print(_selection_table(cal))
     for n in cal.provenance.notes:
         console.print(f"[dim]note:[/] {n}", highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
+
+
+def _selection_table(cal: Calibration) -> Table:
+    t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
+    for col in ("joint", "family", "params (+ and -)", "CV RMS", "CV max", "fit RMS", "status"):
+        t.add_column(col, justify="right" if col.startswith(("CV", "fit", "params")) else "left")
+    seen: set[int] = set()
+    for (j, _d), sel in sorted(cal.selection.items()):
+        if j in seen:  # one selection per joint (both directions are fitted together)
+            continue
+        seen.add(j)
+        chosen = sel.get("chosen")
+        scores = sel.get("scores") or []
+        for sc in scores if isinstance(scores, list) else []:
+
+            def pct(x: object) -> str:
+                return f"{float(x) * 100:.2f} %" if isinstance(x, (int, float)) else "—"
+
+            mark = " ◀ chosen" if sc["family"] == chosen else ""
+            t.add_row(str(j), f"{sc['family']}{mark}", str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
+                      pct(sc["fit_rms"]), str(sc["status"]))
+    return t
 
 
 @app.command("show")
@@ -167,9 +223,16 @@ def predict_cmd(
     ],
     calibration: CalibrationOpt,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the CSV here instead of stdout.")] = None,
+    interval: Annotated[
+        bool, typer.Option("--interval", help="Also add gamma_pi95, the 95 % prediction interval's half-width.")
+    ] = False,
     json_out: JsonOpt = False,
 ) -> None:
     """Predict step sizes: adds a gamma_pred column (m for joint 3, rad for joints 1, 2).
+
+    With --interval also gamma_pi95, the half-width of a 95 % prediction interval: 1.96
+    times the calibration's relative model error (its leave-one-pose-out error; an
+    assumed one for the paper's exactly determined procedure) times gamma_pred.
 
     A row with start,end gets the average step over that traverse (exact integral);
     a row without them gets the step size at its pose (the moving joint at q1/q2/q3).
@@ -184,6 +247,7 @@ def predict_cmd(
     except TableError as e:
         fail_table(e)
     preds = _predict_columns(cal, table, poses)
+    pi95 = _interval_column(cal, table, preds) if interval else None
     header = table.header
     gamma_at = [i for i, h in enumerate(header) if h == "gamma_pred"]
     out_header = header + (["gamma_pred"] if not gamma_at else [])
@@ -196,6 +260,9 @@ def predict_cmd(
             r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
             r["gamma_pred"] = g
             out.append(r)
+        if pi95 is not None:
+            for r, h in zip(out, pi95.tolist(), strict=True):
+                r["gamma_pi95"] = h
         print_json(out)
         return
 
@@ -206,6 +273,14 @@ def predict_cmd(
 
     def emit(f: TextIO) -> None:
         w = csv.writer(f, lineterminator="\n")
+        if pi95 is not None:  # the general path, one more column
+            w.writerow([*out_header, "gamma_pi95"])
+            k = gamma_at[0] if gamma_at else len(take)
+            w.writerows(
+                [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :]), repr(h)]
+                for cells, g, h in zip(table.cells(), texts(), pi95.tolist(), strict=True)
+            )
+            return
         w.writerow(out_header)
         if table.raw is not None and not gamma_at:
             # plain rows (no quotes, none blank or short): csv would write each back as it stands
@@ -227,6 +302,22 @@ def predict_cmd(
         with user_errors():
             atomic_write(output, emit)  # streamed; a failed write leaves no half file
         console.print(f"wrote {len(table)} rows to {output}")
+
+
+def _interval_column(cal: Calibration, table: PoseTable, preds: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Half-width of each prediction's 95 % interval: 1.96 x the relative model error of its joint and direction."""
+    import numpy as np
+
+    from ..calibration.update import prediction_sd
+
+    sd = np.zeros(len(table))
+    for j in np.unique(table.joint).tolist():
+        for d in ("+", "-"):
+            group = (table.joint == j) & (table.direction == d)
+            if group.any():
+                sd[group] = prediction_sd(cal, int(j), d)[0]
+    out: NDArray[np.float64] = 1.96 * sd * preds
+    return out
 
 
 def _predict_columns(cal: Calibration, table: PoseTable, poses: Path) -> NDArray[np.float64]:
@@ -365,8 +456,15 @@ def plan_cmd(
         fail(str(e.args[0]))
     except (ValueError, NonPhysicalError) as e:
         fail(str(e))
+    from ..calibration.update import prediction_sd
+
+    sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1))
+    half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
-        print_json(plan.as_dict())
+        d = plan.as_dict()
+        d["pi95"] = half
+        d["pi95_assumed"] = assumed
+        print_json(d)
         return
     err = plan.q_end_predicted - plan.q_to
     console.print(
@@ -378,6 +476,12 @@ def plan_cmd(
         f"  predicted end {format_position(plan.q_end_predicted, joint)} "
         f"(off by {format_position(err, joint, 3)}; step {format_step(plan.gamma_start, joint)} at the start, "
         f"{format_step(plan.gamma_end, joint)} at the target)",
+        highlight=False,
+    )
+    console.print(
+        f"  95 % prediction interval of the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
+        f"± {format_position(half, joint, 3)}"
+        + (" (model error assumed: the calibration has none)" if assumed else ""),
         highlight=False,
     )
     if math.isclose(plan.q_from, plan.q_to):

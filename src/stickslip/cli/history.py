@@ -347,6 +347,10 @@ def fit(
     ),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
+    model: str = typer.Option(
+        "paper", "--model", help="paper (the paper's models, least squares) | auto (the model family chosen by "
+        "leave-one-pose-out cross-validation, docs/models.md) | a family's name."
+    ),
 ) -> None:
     """Fit each joint's model to all rows (nonlinear least squares, with SEs).
 
@@ -371,7 +375,10 @@ def fit(
         device = device or devices[0]
         ids = [int(r["id"]) for r in recs]
     with user_errors(CalibrationError):
-        cal = calibrate(ts, method="lsq", day=day, source=str(meas) if meas else where)
+        cal = calibrate(
+            ts, method="lsq" if model == "paper" else "auto", day=day, source=str(meas) if meas else where,
+            model=model,
+        )
     res = residual_summary(cal, ts)
     if out is not None:
         with user_errors():

@@ -54,6 +54,13 @@ def demo(
         "--allow-duplicates",
         help="Record even if this seed and day are already in the database (by default a repeat run is not recorded).",
     ),
+    physics: bool = typer.Option(
+        False,
+        "--physics",
+        help="Run on the physics-based arm (sim://?physics=1: stick-slip dynamics, backlash, warm-up; "
+        "docs/models.md) instead of the closed-form one. It has no true Eq. 3/8 parameters to compare with, "
+        "and its traverses are not recorded in the database.",
+    ),
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
 
@@ -67,15 +74,16 @@ def demo(
     from ..storage import Store, StoreError
 
     if device is not None:
-        seed, day = _sim_seed_day(device, seed, day)
+        seed, day, physics = _sim_seed_day(device, seed, day, physics)
     with user_errors(CalibrationError, TraverseError, StoreError):
-        store = Store.open(db) if use_db else None
+        store = Store.open(db) if use_db and not physics else None
         if store is not None and not allow_duplicates and _already_recorded(store, seed, day or today_label()):
             store.close()
             store = None  # the demo still runs; its traverses are not stored a second time
         try:
             result = run_demo(
-                seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store
+                seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store,
+                physics=physics,
             )
         finally:
             if store is not None:
@@ -113,7 +121,10 @@ def demo(
         if with_se:
             cells.insert(5, "" if p.stderr is None else f"{p.stderr * scale:.2g}")
         table.add_row(*cells)
-    console.print(table)
+    if result.parameters:
+        console.print(table)
+    else:  # the physics arm has no Eq. 3/8 truth
+        console.print("the physics arm has no true Eq. 3/8 parameters to compare with (docs/models.md)")
     if result.validation is not None:
         title = "Validation on other poses: |relative error| of the average step"
         console.print(validation_table(result.validation.rows(), title))
@@ -136,26 +147,28 @@ def _already_recorded(store: Any, seed: int, day: str) -> bool:
     return n > 0
 
 
-def _sim_seed_day(device: str, seed: int, day: str | None) -> tuple[int, str | None]:
-    """Seed and day from a ``sim://`` URL; any other controller is refused with the way to go."""
+def _sim_seed_day(device: str, seed: int, day: str | None, physics: bool = False) -> tuple[int, str | None, bool]:
+    """Seed, day and physics from a ``sim://`` URL; any other controller is refused with the way to go."""
     from urllib.parse import parse_qs, urlsplit
 
     parts = urlsplit(device)
-    if (parts.scheme or "sim") != "sim":
+    if parts.scheme == "sim+physics":
+        physics = True
+    elif (parts.scheme or "sim") != "sim":
         fail(
             "the demo runs on the simulator only (it compares the calibration with the simulator's truth); "
             f"on {device} measure each calibration traverse with 'stickslip traverse --device {device} ...' "
             "and calibrate with 'stickslip calibrate' (README: checklist for the first calibration day)"
         )
     query = parse_qs(parts.query)
-    unknown = sorted(set(query) - {"seed", "day"})
+    unknown = sorted(set(query) - {"seed", "day", "physics"})
     if unknown:
         fail(f"the demo takes seed and day from a sim:// URL, not {', '.join(unknown)}")
     try:
         seed = int(query.get("seed", [seed])[-1])
     except ValueError:
         fail(f"seed must be an integer in {device}")
-    return seed, query.get("day", [day])[-1]
+    return seed, query.get("day", [day])[-1], physics or query.get("physics", ["0"])[-1] == "1"
 
 
 @app.command("traverse")

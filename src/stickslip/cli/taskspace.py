@@ -15,8 +15,9 @@ import typer
 
 from .. import kinematics as kin
 from ..clock import stale_message
-from ..devices.base import DeviceError, open_device
+from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, open_device
 from ..devices.positions import DeviceState, device_key, load_state, save_state
+from ..joints import joint_spec
 from ..units import UnitError, parse_length
 from . import app
 from ._common import (
@@ -194,7 +195,7 @@ def reach(
                 except (DeviceError, ValueError) as e:
                     fail(str(e))
                 try:
-                    if hasattr(dev, "set_pose"):  # the simulator: start where the positions say
+                    if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
                         dev.set_pose(*state.pose)
 
                     def save(st: DeviceState) -> None:
@@ -202,7 +203,7 @@ def reach(
                             save_state(store, st)
 
                     outcome = drive_reach(dev, state, plan, cal, save, burst)
-                    if outcome.error is None and hasattr(dev, "position"):
+                    if outcome.error is None and isinstance(dev, KnowsTruePosition):
                         sim_true = [float(dev.position(j)) for j in (1, 2, 3)]
                 finally:
                     try:
@@ -321,7 +322,7 @@ def _status_lines(s: Any) -> list[str]:
     ]
     for j, name in enumerate(names, start=1):
         q, lim = s.q[j - 1], s.to_limits[j - 1]
-        if j == 3:
+        if joint_spec(j).prismatic:
             shown, left = f"{q * 1e6:10.2f} µm", f"{lim * 1e6:.2f} µm"
         else:
             shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
@@ -427,7 +428,7 @@ def jog(
             error = None
             keys = None
             try:
-                if hasattr(dev, "set_pose"):
+                if isinstance(dev, PoseSettable):
                     dev.set_pose(*state.pose)
                 rates = []
                 for j in (1, 2, 3):

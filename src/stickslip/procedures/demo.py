@@ -374,6 +374,7 @@ def run_demo(
     switch: str = "audio",
     listen_from: float = 0.8,
     repeats: int = 2,
+    physics: bool = False,
 ) -> DemoResult:
     """Run the whole calibration story on a simulated MM3A and return what happened.
 
@@ -407,6 +408,10 @@ def run_demo(
     repeats : int
         After the calibration, measure the paper's ANOVA poses (:data:`REPEAT_PLAN`)
         this many more times in each direction, so the day has three readings there.
+    physics : bool
+        Run on the physics-based arm (:class:`~stickslip.sim.physics.PhysicsMM3A`,
+        ``sim://?physics=1``) instead of the closed-form one; it has no true Eq. 3/8
+        parameters, so the summary compares with none.
     listen_from : float
         Start listening after this fraction of the step count predicted by the
         previous calibration (for the calibration traverses: the nominal parameters
@@ -418,8 +423,15 @@ def run_demo(
     _check_arguments(listen_from, switch, repeats, out)
     t_wall = time.perf_counter()
     day = day or today_label()
-    url = f"sim://?seed={seed}&day={day}"
-    sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
+    url = f"sim://?seed={seed}&day={day}" + ("&physics=1" if physics else "")
+    if physics:
+        from ..sim.physics import PhysicsMM3A
+
+        sim: SimulatedMM3A = PhysicsMM3A(
+            seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url
+        )
+    else:
+        sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
     n_val = 2 * len(VALIDATION_PLAN) if validation else 0
     bar = _Bars(progress, 2 * len(CALIBRATION_PLAN) + n_val + 2 * len(REPEAT_PLAN) * repeats)
     try:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .. import kinematics as kin
+from ..joints import joint_spec
 from ._plotting import ANGLE_TOL, key
 from .panels import MODEL_ONLY, Curve, Panel, StepFigure, pose_label, predictions
 
@@ -37,7 +38,7 @@ def prismatic_data(
     in one :data:`~stickslip.report.panels.MODEL_ONLY` row.
     """
     panels: list[Panel] = []
-    ts3 = [t for t in traverses if t.joint == 3]
+    ts3 = [t for t in traverses if joint_spec(t.joint).prismatic]
     days = sorted({t.day for t in ts3})
     for d in ("+", "-"):
         try:

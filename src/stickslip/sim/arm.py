@@ -597,6 +597,10 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
     ``ValueError`` naming them.
     """
     parts = urlsplit(url)
+    if parts.scheme == "sim+physics" or ("physics", "1") in parse_qsl(parts.query):
+        from .physics import open_url as open_physics  # the physics-based arm (sim/physics.py)
+
+        return open_physics(url)
     if parts.scheme not in ("sim", ""):
         raise ValueError(f"not a sim:// URL: {url!r}")
     if parts.path not in ("", "/") or parts.netloc not in ("", "mm3a", "localhost"):

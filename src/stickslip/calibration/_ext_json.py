@@ -1,0 +1,149 @@
+"""JSON fields of a calibration beyond format version 1: model families, covariances,
+model errors and the family selection (docs/models.md §4). Older files have none of
+them and load unchanged."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..families import FamilyModel, FamilyParams, family_spec
+from ..models import direction_label
+
+if TYPE_CHECKING:
+    from .result import Calibration
+
+__all__ = ["ext_fields", "read_ext_fields"]
+
+
+def _key(j: int, d: str) -> dict[str, object]:
+    return {"joint": j, "direction": d}
+
+
+def ext_fields(cal: Calibration) -> dict[str, object]:
+    """``families``, ``uncertainty`` and ``selection`` entries for :meth:`Calibration.to_dict`."""
+    fams: list[dict[str, object]] = []
+    for (j, d), m in sorted(cal.models.items()):
+        if not isinstance(m, FamilyModel):
+            continue
+        p = m.params
+        se = cal.stderr.get((j, d))
+        fams.append(
+            {
+                **_key(j, d),
+                "family": p.family,
+                "scale": p.scale,
+                "parameters": [
+                    {
+                        "name": name,
+                        "q3": q3,
+                        "value": float(v),
+                        "stderr": None if se is None or not math.isfinite(float(se[i])) else float(se[i]),
+                        "unit": p.unit(name),
+                    }
+                    for i, ((name, q3), v) in enumerate(zip(p.names(), p.values, strict=True))
+                ],
+            }
+        )
+    unc: list[dict[str, object]] = []
+    for key in sorted(set(cal.sigma_model) | set(cal.covariance)):
+        s = cal.sigma_model.get(key)
+        c = cal.covariance.get(key)
+        unc.append(
+            {
+                **_key(*key),
+                "sigma_model": None if s is None or not math.isfinite(s) else float(s),
+                "covariance": None if c is None else np.asarray(c, dtype=float).tolist(),
+            }
+        )
+    out: dict[str, object] = {}
+    if fams:
+        out["families"] = fams
+    if unc:
+        out["uncertainty"] = unc
+    if cal.selection:
+        out["selection"] = [{**_key(*k), **v} for k, v in sorted(cal.selection.items())]
+    return out
+
+
+def _finite(x: object, where: str) -> float:
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
+        raise ValueError(f"{where} must be a finite number, got {x!r}")
+    return float(x)
+
+
+def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
+    """Fill ``cal`` from the ``families``, ``uncertainty`` and ``selection`` entries; ``ValueError`` on bad ones."""
+    fams = data.get("families") or []
+    if not isinstance(fams, list):
+        raise ValueError("families must be a list")
+    for i, rec in enumerate(fams):
+        where = f"families[{i}]"
+        if not isinstance(rec, dict):
+            raise ValueError(f"{where} must be an object")
+        try:
+            j = int(rec["joint"])
+            d = direction_label(rec["direction"])
+            spec = family_spec(j, str(rec["family"]))
+            params = rec["parameters"]
+            if not isinstance(params, list) or len(params) != spec.n_params:
+                raise ValueError(f"{where}: family {spec.name} has {spec.n_params} parameters")
+            by_name = {(str(p["name"]), None if p.get("q3") is None else round(float(p["q3"]), 9)): p for p in params}
+            values = []
+            ses = []
+            for name, q3 in spec.names:
+                p = by_name[(name, None if q3 is None else round(q3, 9))]
+                values.append(_finite(p["value"], f"{where} {name}"))
+                ses.append(p.get("stderr"))
+            if j not in (1, 2, 3):
+                raise ValueError(f"{where}: joint must be 1, 2 or 3, got {j!r}")
+            ses = [None if x is None else _finite(x, f"{where} stderr") for x in ses]
+            if any(x is not None and x < 0 for x in ses):
+                raise ValueError(f"{where}: a standard error is negative")
+            scale = _finite(rec.get("scale", 1.0), f"{where} scale")
+            if not scale > 0:
+                raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
+        except (KeyError, TypeError) as e:
+            raise ValueError(f"{where}: missing or malformed field {e}") from None
+        cal.models[(j, d)] = FamilyModel(j, d, FamilyParams(spec.name, j, tuple(values), scale))
+        cal.stderr[(j, d)] = (
+            None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
+        )
+    unc = data.get("uncertainty") or []
+    if not isinstance(unc, list):
+        raise ValueError("uncertainty must be a list")
+    for i, rec in enumerate(unc):
+        if not isinstance(rec, dict):
+            raise ValueError(f"uncertainty[{i}] must be an object")
+        try:
+            key = (int(rec["joint"]), direction_label(rec["direction"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"uncertainty[{i}]: bad joint or direction ({e})") from None
+        s = rec.get("sigma_model")
+        if s is not None:
+            sv = _finite(s, f"uncertainty[{i}].sigma_model")
+            if not 0.0 <= sv < 10.0:
+                raise ValueError(f"uncertainty[{i}].sigma_model must be in [0, 10), got {sv!r}")
+            cal.sigma_model[key] = sv
+        c = rec.get("covariance")
+        if c is not None:
+            try:
+                arr = np.asarray(c, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"uncertainty[{i}].covariance must be a matrix of numbers") from None
+            m = cal.models.get(key)
+            n = len(m.params.names()) if m is not None else -1
+            if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
+                raise ValueError(f"uncertainty[{i}].covariance must be a finite {n}x{n} matrix")
+            cal.covariance[key] = arr
+    sel = data.get("selection") or []
+    if not isinstance(sel, list):
+        raise ValueError("selection must be a list")
+    for i, rec in enumerate(sel):
+        try:
+            key = (int(rec["joint"]), direction_label(rec["direction"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"selection[{i}]: bad joint or direction ({e})") from None
+        cal.selection[key] = {k: v for k, v in rec.items() if k not in ("joint", "direction")}

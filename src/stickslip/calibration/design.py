@@ -1,0 +1,147 @@
+"""Which traverse next: poses that most reduce the prediction uncertainty (docs/models.md §6).
+
+For one joint, the calibration's model in each direction is linearised in its parameters:
+``g(pose) = d log gamma_avg / d theta`` for a full-range traverse at ``pose``. With the
+information matrix ``M`` of the parameters (the inverse of the calibration's covariance,
+or a weak ridge where the calibration has none) and ``sigma`` the relative model error,
+a traverse at pose ``c`` adds ``g_c g_c^T / sigma^2`` to ``M``. The workspace's average
+prediction variance is ``trace(W M^-1)`` with ``W`` the mean of ``g g^T`` over random
+workspace poses (I-optimality). Poses are chosen greedily: each time the candidate
+whose + and - traverses reduce that trace most (Sherman-Morrison, exact for one added
+traverse), then ``M`` is updated and the next is chosen.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .. import kinematics as kin
+from ..families import FamilyModel, FamilyParams, average_from_features, traverse_features
+from ..models import PrismaticParams, RotaryParams
+from .families import unit_scale
+from .result import Calibration
+from .update import model_sigma
+
+__all__ = ["Suggestion", "suggest_poses", "workspace_poses"]
+
+
+@dataclass(frozen=True)
+class Suggestion:
+    """A pose to traverse next.
+
+    Attributes
+    ----------
+    joint : int
+    pose : Pose
+        The fixed joints and the tilt (rad, rad, m; rad); the joint's own column is 0.
+    rms_sd_before, rms_sd_after : float
+        Root-mean-square relative standard deviation of the mean-step prediction over
+        the workspace, before and after traversing this pose in both directions (1).
+    """
+
+    joint: int
+    pose: kin.Pose
+    rms_sd_before: float
+    rms_sd_after: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "joint": self.joint,
+            **{k: float(v) for k, v in self.pose._asdict().items()},
+            "rms_sd_before": self.rms_sd_before,
+            "rms_sd_after": self.rms_sd_after,
+        }
+
+
+def workspace_poses(joint: int, n: int, seed: int = 0) -> list[kin.Pose]:
+    """``n`` random poses of the workspace for ``joint`` (tilts within ±90° and ±60°), reproducible."""
+    rng = np.random.default_rng([seed, joint])
+    out = []
+    for _ in range(n):
+        q1 = 0.0 if joint == 1 else float(rng.uniform(-0.5, 0.5))
+        q2 = float(rng.uniform(kin.JOINTS[2].lower, kin.JOINTS[2].upper)) if joint != 2 else 0.0
+        q3 = float(rng.uniform(0.0, kin.Q3_MAX)) if joint != 3 else 0.0
+        out.append(kin.Pose(q1, q2, q3, float(rng.uniform(-math.pi / 2, math.pi / 2)),
+                            float(rng.uniform(-math.pi / 3, math.pi / 3))))
+    return out
+
+
+def _as_family(model: object) -> FamilyParams:
+    if isinstance(model, FamilyModel):
+        return model.params
+    p = getattr(model, "params", None)
+    j = int(getattr(model, "joint", 0))
+    if isinstance(p, PrismaticParams):
+        return FamilyParams("paper", 3, (p.a, p.b, p.c))
+    if isinstance(p, RotaryParams):
+        return FamilyParams("paper", j, (p.gamma0[0], p.gamma0[1], p.d[0], p.d[1]))
+    raise TypeError(f"no model family for {type(model).__name__}")
+
+
+def _gradients(fp: FamilyParams, direction: str, poses: list[kin.Pose]) -> NDArray[np.float64]:
+    """``d log gamma_avg / d theta~`` (scaled parameters) of full-range traverses at ``poses``, (n, p)."""
+    spec = fp.spec
+    spec_j = kin.JOINTS[fp.joint]
+    start, end = (spec_j.lower, spec_j.upper) if direction == "+" else (spec_j.upper, spec_j.lower)
+    cols = np.array([list(p) for p in poses], dtype=float)
+    f = traverse_features(fp.joint, start, end, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3], cols[:, 4])
+    us = unit_scale(spec, fp.joint)
+    x = np.array(fp.values) / us
+    base = np.log(average_from_features(spec, x * us, f, fp.scale))
+    out = np.empty((len(poses), len(x)))
+    for i in range(len(x)):
+        h = 1e-5 * max(1.0, abs(x[i]))
+        e = np.zeros_like(x)
+        e[i] = h
+        out[:, i] = (np.log(average_from_features(spec, (x + e) * us, f, fp.scale)) - base) / h
+    return out
+
+
+def suggest_poses(
+    cal: Calibration, joint: int, n: int = 4, candidates: int = 300, workspace: int = 300, seed: int = 0
+) -> list[Suggestion]:
+    """The ``n`` poses whose traverses (both calibrated directions) most reduce the workspace's
+    average prediction variance of ``joint``'s mean step (greedy I-optimal design)."""
+    dirs = sorted(d for j, d in cal.models if j == joint)
+    if not dirs:
+        raise KeyError(f"joint {joint} is not in this calibration")
+    cand = workspace_poses(joint, candidates, seed + 1)
+    work = workspace_poses(joint, workspace, seed + 2)
+    state = {}
+    for d in dirs:
+        fp = _as_family(cal.models[(joint, d)])
+        sig, _ = model_sigma(cal, joint, d)
+        us = unit_scale(fp.spec, joint)
+        cov = cal.covariance.get((joint, d))
+        if cov is not None and cov.shape == (len(us), len(us)):
+            m = np.linalg.pinv(cov / np.outer(us, us)) + 1e-9 * np.eye(len(us))
+        else:
+            m = 1e-6 * np.eye(len(us))  # nothing known: design from scratch
+        gw = _gradients(fp, d, work)
+        state[d] = (m, gw.T @ gw / len(work), _gradients(fp, d, cand), sig)
+
+    def rms() -> float:
+        return math.sqrt(sum(float(np.trace(w @ np.linalg.inv(m))) for m, w, _, _ in state.values()) / len(state))
+
+    out: list[Suggestion] = []
+    chosen: set[int] = set()
+    for _ in range(n):
+        before = rms()
+        gain = np.zeros(len(cand))
+        for m, w, gc, sig in state.values():
+            minv = np.linalg.inv(m)
+            a = gc @ minv  # (c, p)
+            num = np.einsum("cp,pq,cq->c", a, w, a)
+            den = sig**2 + np.einsum("cp,cp->c", a, gc)
+            gain += num / den
+        gain[list(chosen)] = -np.inf
+        k = int(np.argmax(gain))
+        chosen.add(k)
+        for d, (m, w, gc, sig) in list(state.items()):
+            state[d] = (m + np.outer(gc[k], gc[k]) / sig**2, w, gc, sig)
+        out.append(Suggestion(joint, cand[k], before, rms()))
+    return out

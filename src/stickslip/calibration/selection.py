@@ -1,0 +1,369 @@
+"""Choosing a model family by leave-one-pose-out cross-validation (docs/models.md §3).
+
+For each joint, every family of :mod:`stickslip.families` (and its variant with terms
+shared by + and -) that the traverses can identify, with at least two poses per
+parameter of a direction, is fitted to both directions; then each *pose* (the fixed
+joints and the tilt) beyond the paper's calibration poses is left out in turn, the
+family is refitted on the rest and predicts the left-out traverses. The family with the
+smallest mean of the RMS and the largest CV error is chosen, except that a simpler
+family within 5 % of it is preferred (fewer parameters, less to go wrong outside the
+data). A joint and direction with too few poses for any family beyond the constant
+step falls back to it: calibration never stops for lack of data once every joint and
+direction present has one traverse.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
+from ..measurements import Traverse
+from .families import (
+    Columns,
+    FamilyFit,
+    JointFit,
+    fit_family,
+    fit_joint,
+    predict_columns,
+    shared_names,
+    traverse_columns,
+)
+from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
+
+__all__ = ["CVScore", "select_family", "calibrate_families", "pose_groups", "PREFER_SIMPLER"]
+
+PREFER_SIMPLER = 1.05
+"""A simpler family is chosen when its CV error is within this factor of the best."""
+
+
+@dataclass(frozen=True)
+class CVScore:
+    """Cross-validation of one family for one joint and direction.
+
+    Attributes
+    ----------
+    family : str
+    n_params : int
+    status : str
+        ``"ok"``, or why the family was not scored (``"not identifiable"``, ``"too few poses"``).
+    cv_rms, cv_max : float
+        Root-mean-square and largest |relative error| of left-out predictions (nan if not scored).
+    fit_rms : float
+        RMS relative residual of the fit on all traverses.
+    """
+
+    family: str
+    n_params: int
+    status: str
+    cv_rms: float
+    cv_max: float
+    fit_rms: float
+
+    def as_dict(self) -> dict[str, object]:
+        def num(x: float) -> float | None:
+            return None if not np.isfinite(x) else float(x)
+
+        return {
+            "family": self.family,
+            "n_params": self.n_params,
+            "status": self.status,
+            "cv_rms": num(self.cv_rms),
+            "cv_max": num(self.cv_max),
+            "fit_rms": num(self.fit_rms),
+        }
+
+
+def pose_groups(joint: int, ts: Sequence[Traverse]) -> NDArray[np.int64]:
+    """Index of each traverse's pose (the fixed joints and tilt, to 1e-4), for leave-one-pose-out."""
+    keys: dict[tuple[float, ...], int] = {}
+    out = []
+    for t in ts:
+        vals = [t.q1, t.q2, t.q3, t.theta, t.psi]
+        vals[joint - 1] = 0.0
+        key = tuple(round(v, 4) for v in vals)
+        out.append(keys.setdefault(key, len(keys)))
+    return np.array(out, dtype=np.int64)
+
+
+def _cv(spec: FamilySpec, joint: int, ts: Sequence[Traverse], full: FamilyFit) -> tuple[float, float]:
+    cols = traverse_columns(ts)
+    groups = pose_groups(joint, ts)
+    errs = np.full(len(ts), np.nan)
+    for g in np.unique(groups):
+        test = groups == g
+        train = [t for t, m in zip(ts, test, strict=True) if not m]
+        fit = fit_family(spec, joint, train, x0=full.values, cols=cols.subset(~test))
+        if not fit.identifiable:
+            return np.nan, np.nan
+        held = cols.subset(test)
+        pred = predict_columns(spec, joint, fit.values, held)
+        errs[test] = pred / held.gamma - 1.0
+    if not np.all(np.isfinite(errs)):
+        return np.inf, np.inf
+    return float(np.sqrt(np.mean(errs**2))), float(np.max(np.abs(errs)))
+
+
+def select_family(
+    joint: int, ts: Sequence[Traverse], candidates: Sequence[str] | None = None
+) -> tuple[FamilyFit, list[CVScore], str]:
+    """Fit every identifiable family and pick one by leave-one-pose-out CV.
+
+    Returns ``(fit of the chosen family on all traverses, scores, reason)``.
+    """
+    specs = families_for(joint) if candidates is None else [family_spec(joint, c) for c in candidates]
+    n_poses = len(set(pose_groups(joint, ts).tolist()))
+    scores: list[CVScore] = []
+    fits: dict[str, FamilyFit] = {}
+    for spec in specs:
+        p = spec.n_params
+        if n_poses < p + 1 and spec.name != "constant":
+            scores.append(CVScore(spec.name, p, f"too few poses ({n_poses} for {p} parameters)", np.nan, np.nan,
+                                  np.nan))
+            continue
+        fit = fit_family(spec, joint, ts)
+        if not fit.identifiable:
+            scores.append(CVScore(spec.name, p, "not identifiable from these poses", np.nan, np.nan, fit.rms))
+            continue
+        fits[spec.name] = fit
+        if n_poses >= 2:
+            rms, mx = _cv(spec, joint, ts, fit)
+        else:
+            rms, mx = np.nan, np.nan
+        status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
+        scores.append(CVScore(spec.name, p, status, rms, mx, fit.rms))
+    scored = [s for s in scores if s.status == "ok"]
+    if scored:
+        best = min(scored, key=lambda s: s.cv_rms)
+        chosen = min(
+            (s for s in scored if s.cv_rms <= PREFER_SIMPLER * best.cv_rms), key=lambda s: (s.n_params, s.cv_rms)
+        )
+        reason = f"smallest leave-one-pose-out error ({chosen.cv_rms * 100:.2g} % RMS over {n_poses} poses)"
+        if chosen.family != best.family:
+            reason = (
+                f"within {100 * (PREFER_SIMPLER - 1):.0f} % of the best CV error ({best.family}: "
+                f"{best.cv_rms * 100:.2g} %) with fewer parameters ({chosen.cv_rms * 100:.2g} % RMS)"
+            )
+        return fits[chosen.family], scores, reason
+    if fits:  # identifiable but not cross-validatable (a single pose): the simplest
+        name = min(fits, key=lambda k: fits[k].spec.n_params)
+        return fits[name], scores, f"only {n_poses} pose: the simplest identifiable family, not cross-validated"
+    raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
+
+
+def _criterion(s: CVScore) -> float:
+    """What the selection minimises: the mean of the CV RMS and the CV largest error.
+
+    The largest left-out error guards against a family that fits the poses it has and
+    swings between them; the RMS keeps one unlucky pose from deciding alone.
+    """
+    return 0.5 * (s.cv_rms + s.cv_max)
+
+
+def _anchor_groups(
+    joint: int, by_dir: Mapping[str, Sequence[Traverse]], groups: dict[str, NDArray[np.int64]]
+) -> frozenset[int]:
+    """Pose groups at the paper's calibration poses: they anchor every family and are not held out
+    (when at least three other poses are), so CV measures prediction at new poses in the workspace."""
+    from .paper import only_paper_poses
+
+    out = set()
+    for d, ts in by_dir.items():
+        for t, g in zip(ts, groups[d], strict=True):
+            if only_paper_poses([t]) or (joint != 1 and _at_paper_pose(t)):
+                out.add(int(g))
+    return frozenset(out)
+
+
+def _at_paper_pose(t: Traverse) -> bool:
+    from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
+
+    tol = 1e-3
+    if abs(t.q1) > tol:
+        return False
+    if t.joint == 3:
+        return any(abs(t.q2 - a) <= tol and abs(t.theta - b) <= tol and abs(t.psi - c) <= tol
+                   for a, b, c in PRISMATIC_PAPER_POSES.values())
+    return any(abs(t.q3 - a) <= 1e-5 and abs(t.theta - b) <= tol and abs(t.psi - c) <= tol
+               for a, b, c in ROTARY_PAPER_POSES)
+
+
+def _joint_pose_groups(joint: int, by_dir: Mapping[str, Sequence[Traverse]]) -> dict[str, NDArray[np.int64]]:
+    keys: dict[tuple[float, ...], int] = {}
+    out: dict[str, NDArray[np.int64]] = {}
+    for d, ts in sorted(by_dir.items()):
+        idx = []
+        for t in ts:
+            vals = [t.q1, t.q2, t.q3, t.theta, t.psi]
+            vals[joint - 1] = 0.0
+            idx.append(keys.setdefault(tuple(round(v, 4) for v in vals), len(keys)))
+        out[d] = np.array(idx, dtype=np.int64)
+    return out
+
+
+def _cv_joint(
+    spec: FamilySpec,
+    joint: int,
+    cols: dict[str, Columns],
+    groups: dict[str, NDArray[np.int64]],
+    full: JointFit,
+    anchors: frozenset[int] = frozenset(),
+) -> tuple[float, float]:
+    all_groups = np.unique(np.concatenate(list(groups.values())))
+    held_out = [g for g in all_groups if g not in anchors]
+    if len(held_out) < 3:
+        held_out = list(all_groups)
+    errs = {d: np.full(len(cols[d]), np.nan) for d in cols}
+    for g in held_out:
+        train = {d: cols[d].subset(groups[d] != g) for d in cols}
+        if any(len(c) == 0 for c in train.values()):
+            return np.nan, np.nan
+        fit = fit_joint(spec, joint, train, full.shared, x0=full.values)
+        if not fit.identifiable:
+            return np.nan, np.nan
+        for d in cols:
+            test = groups[d] == g
+            if np.any(test):
+                held = cols[d].subset(test)
+                errs[d][test] = predict_columns(spec, joint, fit.values[d], held) / held.gamma - 1.0
+    e = np.concatenate([v[np.isin(groups[d], held_out)] for d, v in errs.items()])
+    if not np.all(np.isfinite(e)):
+        return np.inf, np.inf
+    return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e)))
+
+
+def select_joint(
+    joint: int, by_dir: Mapping[str, Sequence[Traverse]], candidates: Sequence[str] | None = None
+) -> tuple[JointFit, list[CVScore], str]:
+    """Fit every identifiable family (separate and with shared terms) to both directions of
+    ``joint`` and pick one by leave-one-pose-out CV over both directions.
+
+    ``candidates`` names families, ``"name+shared"`` for the shared variant. Returns
+    ``(fit on all traverses, scores, reason)``.
+    """
+    cols = {d: traverse_columns(ts) for d, ts in sorted(by_dir.items()) if ts}
+    groups = _joint_pose_groups(joint, {d: by_dir[d] for d in cols})
+    anchors = _anchor_groups(joint, {d: by_dir[d] for d in cols}, groups)
+    poses = {d: len(set(g.tolist())) for d, g in groups.items()}
+    n_poses = len(set(np.concatenate(list(groups.values())).tolist()))
+    variants: list[tuple[FamilySpec, tuple[str, ...]]] = []
+    if candidates is None:
+        for spec in families_for(joint):
+            variants.append((spec, ()))
+            sh = shared_names(spec)
+            if sh and len(cols) == 2:
+                variants.append((spec, sh))
+    else:
+        for c in candidates:
+            name, _, tail = c.partition("+")
+            spec = family_spec(joint, name)
+            variants.append((spec, shared_names(spec) if tail == "shared" and len(cols) == 2 else ()))
+    scores: list[CVScore] = []
+    fits: dict[str, JointFit] = {}
+    for spec, sh in variants:
+        label = spec.name + ("+shared" if sh else "")
+        own = sum(1 for n, _ in spec.names if n not in sh)
+        n_sh = spec.n_params - own
+        # at least two poses per parameter of a direction (a shared one counts half): fewer, and a
+        # family fits the poses it has and swings between them (the benchmark's worst cases)
+        need = math.ceil(2 * (own + n_sh / max(len(cols), 1))) if candidates is None else own + 1  # asked for: fit it
+        short = [d for d in cols if poses[d] < need] if spec.name != "constant" else []
+        p_total = own * len(cols) + n_sh
+        if short:
+            scores.append(CVScore(label, p_total, f"too few poses in {', '.join(short)} (needs {need})", np.nan, np.nan,
+                                  np.nan))
+            continue
+        fit = fit_joint(spec, joint, cols, sh)
+        if not fit.identifiable:
+            scores.append(CVScore(label, p_total, "not identifiable from these poses", np.nan, np.nan, fit.rms))
+            continue
+        fits[label] = fit
+        rms, mx = _cv_joint(spec, joint, cols, groups, fit, anchors) if n_poses >= 2 else (np.nan, np.nan)
+        status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
+        scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
+    scored = [s for s in scores if s.status == "ok"]
+    if scored:
+        best = min(scored, key=_criterion)
+        chosen = min(
+            (s for s in scored if _criterion(s) <= PREFER_SIMPLER * _criterion(best)),
+            key=lambda s: (s.n_params, _criterion(s)),
+        )
+        reason = (
+            f"smallest leave-one-pose-out error (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} % "
+            f"over {n_poses} poses)"
+        )
+        if chosen.family != best.family:
+            reason = (
+                f"within {100 * (PREFER_SIMPLER - 1):.0f} % of the best CV error ({best.family}) with fewer "
+                f"parameters (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} %)"
+            )
+        return fits[chosen.family], scores, reason
+    if fits:
+        name = min(fits, key=lambda k: fits[k].n_params)
+        return fits[name], scores, f"{n_poses} pose(s): the simplest identifiable family, not cross-validated"
+    raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
+
+
+def calibrate_families(
+    traverses: Sequence[Traverse],
+    day: str | None = None,
+    source: str | None = None,
+    model: str = "auto",
+) -> Calibration:
+    """Calibrate every joint and direction with a family chosen by CV (``model="auto"``) or a named one.
+
+    The calibration records, per joint and direction, the family, the covariance of its
+    parameters, the CV error of every family (``selection``) and the relative model
+    error ``sigma_model`` (the chosen family's CV RMS error, or its fit RMS when it could
+    not be cross-validated) that prediction intervals use.
+    """
+    groups = _group(traverses)
+    if not groups:
+        raise CalibrationError("no traverses to calibrate from")
+    models: dict[tuple[int, str], FamilyModel] = {}
+    stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
+    cov: dict[tuple[int, str], NDArray[np.float64]] = {}
+    sigma: dict[tuple[int, str], float] = {}
+    selection: dict[tuple[int, str], dict[str, object]] = {}
+    notes: list[str] = []
+    for j in sorted({j for j, _ in groups}):
+        by_dir = {d: groups[(j, d)] for (jj, d) in groups if jj == j}
+        candidates = None if model == "auto" else [model]
+        fit, scores, reason = select_joint(j, by_dir, candidates)
+        chosen = next(s for s in scores if s.family == fit.label)
+        sig = chosen.cv_rms if np.isfinite(chosen.cv_rms) else fit.rms
+        for d in sorted(by_dir):
+            params = FamilyParams(fit.spec.name, j, tuple(float(v) for v in fit.values[d]))
+            models[(j, d)] = FamilyModel(j, d, params)
+            c = fit.cov[d]
+            if c is not None:
+                cov[(j, d)] = c
+                stderr[(j, d)] = np.sqrt(np.clip(np.diag(c), 0.0, None))
+            else:
+                stderr[(j, d)] = None
+            sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
+            selection[(j, d)] = {
+                "chosen": fit.label, "shared": list(fit.shared), "reason": reason,
+                "scores": [s.as_dict() for s in scores],
+            }
+        notes.append(f"joint {j}: family {fit.label} — {reason}")
+    for (j, d), m in models.items():
+        try:
+            m.params.check_physical()
+        except ValueError as e:
+            notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
+    consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
+    labels = {j: str(selection[(j, d)]["chosen"]) for (j, d) in selection}
+    method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
+    cal = Calibration(
+        dict(models), stderr, consts, _day_of(traverses, day), method,
+        Provenance.of(traverses, source, len(traverses), notes),
+    )
+    cal.covariance.update(cov)
+    cal.sigma_model.update(sigma)
+    cal.selection.update(selection)
+    return cal
