@@ -95,7 +95,7 @@ def test_cli_prior_round_trip(tmp_path):
     r = runner.invoke(app, ["calibrate", str(new), "--prior", str(prior), "-o", str(out)])
     assert r.exit_code == 0, r.output
     cal = Calibration.load(out)
-    assert cal.method.endswith("+ update") and cal.provenance["updates"]
+    assert cal.method.endswith("+ update") and cal.provenance.extra["updates"]
     r = runner.invoke(app, ["calibrate", str(new), "--prior", str(tmp_path / "missing.json")])
     assert r.exit_code == 2 and "no such calibration file" in r.stderr
 

@@ -170,29 +170,9 @@ def tune_band(
         If ``stop_at_s`` leaves a part too short, no band separates the two parts by
         ``min_contrast_db``, or the tuned detector does not fire exactly once at the stop.
     """
-    x = np.asarray(samples, dtype=np.float64)
-    if x.ndim == 2:
-        x = x.mean(axis=1)
-    if x.ndim != 1:
-        raise TuningError(f"expected mono samples, got an array of shape {np.shape(samples)}")
-    sample_rate = int(sample_rate)
-    if not 8_000 <= sample_rate <= 192_000:
-        raise TuningError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
     if not 0.0 < margin < 1.0:
         raise TuningError(f"margin {margin} must be between 0 and 1 (exclusive)")
-    duration = x.size / sample_rate
-    lo_ok, hi_ok = min_part_s + guard_s, duration - min_part_s - guard_s
-    if not (math.isfinite(stop_at_s) and lo_ok <= stop_at_s <= hi_ok):
-        if hi_ok < lo_ok:
-            raise TuningError(
-                f"the recording is {duration:.3f} s long; tuning needs at least "
-                f"{2 * (min_part_s + guard_s):.2f} s ({min_part_s} s of stepping and of stop)"
-            )
-        raise TuningError(
-            f"stop-at {stop_at_s:g} s must lie within {lo_ok:.3f}..{hi_ok:.3f} s of this "
-            f"{duration:.3f} s recording (at least {min_part_s} s of stepping before, "
-            "and of the stop after)"
-        )
+    x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     frame = int(frame or default_frame(sample_rate))
     hop = int(hop or max(1, frame // 4))
     bands = candidate_bands(sample_rate, frame, f_min_hz, min_band_hz=min_band_hz)
@@ -255,24 +235,24 @@ def tune_band(
         stopped_db=round(float(stop_lo[best]), 2),
         reference_hz=reference,
     )
-    # check: one event, at the stop; measure the lag of the threshold crossing
-    det = StopDetector(tuning)
-    events = det.feed(x)
+    return _verified_band(tuning, x, stop_at_s, guard_s)
+
+
+def _verified_band(tuning: Tuning, x: FloatArray, stop_at_s: float, guard_s: float) -> Tuning:
+    """``tuning`` if its detector fires once, at the stop, with the onset lag and latency it measured there."""
+    events = StopDetector(tuning).feed(x)
     near = [e for e in events if stop_at_s - guard_s <= e.detected_at_s <= stop_at_s + 0.2]
     if len(events) != 1 or len(near) != 1:
         where = ", ".join(f"{e.detected_at_s:.3f} s" for e in events) or "never"
+        band = tuning.band_hz
         raise TuningError(
-            f"band {band[0]:.0f}-{band[1]:.0f} Hz at {threshold:.1f} {tuning.level_unit} fired {where}; "
+            f"band {band[0]:.0f}-{band[1]:.0f} Hz at {tuning.threshold_db:.1f} {tuning.level_unit} fired {where}; "
             f"expected once just after {stop_at_s:g} s. The recording may hold other stops "
             "or loud interference in the stepping part"
         )
     ev = near[0]
     lag = ev.onset_s - stop_at_s  # onset_s is the crossing time while onset_lag_s = 0
-    return replace(
-        tuning,
-        onset_lag_s=round(lag, 6),
-        latency_measured_s=round(ev.detected_at_s - stop_at_s, 6),
-    )
+    return replace(tuning, onset_lag_s=round(lag, 6), latency_measured_s=round(ev.detected_at_s - stop_at_s, 6))
 
 
 # --------------------------------------------------------------------------------------
@@ -471,29 +451,7 @@ def tune(
        recording: it must fire once, at the stop. The first that passes wins (among
        the passing ones, the self-check with injected interference breaks ties).
     """
-    x = np.asarray(samples, dtype=np.float64)
-    if x.ndim == 2:
-        x = x.mean(axis=1)
-    if x.ndim != 1:
-        raise TuningError(f"expected mono samples, got an array of shape {np.shape(samples)}")
-    sample_rate = int(sample_rate)
-    if not 8_000 <= sample_rate <= 192_000:
-        raise TuningError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
-    if not np.all(np.isfinite(x)):
-        raise TuningError("the recording holds non-finite samples (NaN or infinity)")
-    duration = x.size / sample_rate
-    lo_ok, hi_ok = min_part_s + guard_s, duration - min_part_s - guard_s
-    if not (math.isfinite(stop_at_s) and lo_ok <= stop_at_s <= hi_ok):
-        if hi_ok < lo_ok:
-            raise TuningError(
-                f"the recording is {duration:.3f} s long; tuning needs at least "
-                f"{2 * (min_part_s + guard_s):.2f} s ({min_part_s} s of stepping and of stop)"
-            )
-        raise TuningError(
-            f"stop-at {stop_at_s:g} s must lie within {lo_ok:.3f}..{hi_ok:.3f} s of this "
-            f"{duration:.3f} s recording (at least {min_part_s} s of stepping before, "
-            "and of the stop after)"
-        )
+    x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     from .guard import block_problem
 
     problem = block_problem(x[: int(stop_at_s * sample_rate)])
@@ -511,47 +469,12 @@ def tune(
     t_first = first / sample_rate
     f_lo, f_hi = stepping_band(x[first : int((stop_at_s - 0.15) * sample_rate)], sample_rate, frame, hop, f_min_hz)
     edges = subband_edges(f_lo, f_hi, sample_rate, frame, per_octave)
-    nb = len(edges) - 1
     V = subband_levels_db(seg, sample_rate, frame, hop, edges)
     starts = t_first + np.arange(V.shape[0]) * hop / sample_rate
     ends = starts + (frame - 1) / sample_rate
 
-    # 1. a provisional signature from frames well away from the label, and where the sound changes
-    far = 0.15
-    step_far = ends < stop_at_s - far
-    stop_far = starts >= stop_at_s + far
-    if step_far.sum() < 8 or stop_far.sum() < 8:
-        step_far, stop_far = ends < stop_at_s - guard_s, starts >= stop_at_s + guard_s
-    mu_step = np.percentile(V[step_far], 100 * QUANTILE, axis=0)  # what the detector's template tracks
-    sigma = np.maximum(1.4826 * np.median(np.abs(V[step_far] - np.median(V[step_far], axis=0)), axis=0), 1.0)
-    delta0 = np.median(V[stop_far], axis=0) - mu_step
-    strength = float(np.sqrt(np.mean((delta0 / sigma) ** 2)))
-    if strength < 1.0:
-        k = int(np.argmax(np.abs(delta0)))
-        raise TuningError(
-            f"the stepping and stopped parts sound alike: nothing changes near the labelled stop at {stop_at_s:g} s "
-            f"(no sub-band of "
-            f"{edges[0]:.0f}-{edges[-1]:.0f} Hz changes by more than {abs(delta0[k]):.1f} dB, "
-            f"at {edges[k]:.0f}-{edges[k + 1]:.0f} Hz); check --stop-at and that the recording reaches the end stop"
-        )
-    trim_all = nb // 5
-    a0, _ = fit_departure(V - mu_step, delta0, sigma, trim_all)
-    a0s = np.asarray(median_filter(a0, size=window), dtype=np.float64)
-    change = _change_point(a0s, ends, stop_at_s, search_s, hold)
-    if change is None:
-        elsewhere = _change_point(a0s, ends, stop_at_s, float(ends[-1] - ends[0]), hold)
-        where = (
-            f"; the sound changes at {elsewhere - 0.5 * frame / sample_rate:.3f} s"
-            if elsewhere is not None and abs(elsewhere - stop_at_s) > search_s
-            else ""
-        )
-        raise TuningError(
-            f"nothing changes near the labelled stop at {stop_at_s:g} s (searched +-{search_s:g} s){where}: "
-            "check --stop-at (seconds from the start of the recording) and that the joint reached its end stop"
-        )
-    # the change point is found on frames that end after it; its time is the frame's end minus the
-    # part of the frame the stop must fill to lift a to 0.5: about half a frame
-    change -= 0.5 * frame / sample_rate
+    # 1. where the sound changes (from a provisional signature of frames well away from the label)
+    change = _sound_change(V, starts, ends, stop_at_s, guard_s, edges, window, hold, search_s, frame, sample_rate)
     stop_s = stop_at_s
     if abs(change - stop_at_s) > label_tolerance_s:
         warnings.append(
@@ -599,22 +522,143 @@ def tune(
             where = ", ".join(f"{e.detected_at_s:.3f} s" for e in events[:6]) or "never"
             failures.append(f"{cand.name} fired {where}")
     if not passing:
-        best = candidates[0]
-        sub = list(best.bands)
-        a, rho = fit_departure(D[:, sub], delta[sub], sigma[sub], best.trim)
-        dec = _decided(a, rho, best.residual_max, hold, window)
-        bad = stepping & (dec >= min(best.threshold, 0.5))
-        spans = _spans(bad, ends)
-        hint = (
-            f"the stepping part sounds like the stop at {_fmt_spans(spans)}"
-            if spans
-            else "the stop does not stay distinct long enough"
+        raise _no_template(candidates[0], D, delta, sigma, hold, window, stepping, ends, failures)
+    # 4. self-check with interference; the quietest passing candidate wins
+    return _pick(passing, x, sample_rate, frame, stop_s, g, seed, self_check, warnings, stop_at_s, change)
+
+
+def _recording(
+    samples: NDArray[np.floating] | FloatArray, sample_rate: int, stop_at_s: float, min_part_s: float, guard_s: float
+) -> tuple[FloatArray, int]:
+    """A labelled recording as mono float64 and its rate, or :class:`TuningError` saying what is wrong with it."""
+    x = np.asarray(samples, dtype=np.float64)
+    if x.ndim == 2:
+        x = x.mean(axis=1)
+    if x.ndim != 1:
+        raise TuningError(f"expected mono samples, got an array of shape {np.shape(samples)}")
+    sample_rate = int(sample_rate)
+    if not 8_000 <= sample_rate <= 192_000:
+        raise TuningError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
+    if not np.all(np.isfinite(x)):
+        raise TuningError("the recording holds non-finite samples (NaN or infinity)")
+    duration = x.size / sample_rate
+    lo_ok, hi_ok = min_part_s + guard_s, duration - min_part_s - guard_s
+    if not (math.isfinite(stop_at_s) and lo_ok <= stop_at_s <= hi_ok):
+        if hi_ok < lo_ok:
+            raise TuningError(
+                f"the recording is {duration:.3f} s long; tuning needs at least "
+                f"{2 * (min_part_s + guard_s):.2f} s ({min_part_s} s of stepping and of stop)"
+            )
+        raise TuningError(
+            f"stop-at {stop_at_s:g} s must lie within {lo_ok:.3f}..{hi_ok:.3f} s of this "
+            f"{duration:.3f} s recording (at least {min_part_s} s of stepping before, "
+            "and of the stop after)"
+        )
+    return x, sample_rate
+
+
+def _sound_change(
+    V: FloatArray,
+    starts: FloatArray,
+    ends: FloatArray,
+    stop_at_s: float,
+    guard_s: float,
+    edges: list[float],
+    window: int,
+    hold: int,
+    search_s: float,
+    frame: int,
+    sample_rate: int,
+) -> float:
+    """Where the sound actually changes near the label ``stop_at_s`` (s), from a provisional signature.
+
+    Raises :class:`TuningError` when the two parts sound alike, or nothing changes within
+    ``search_s`` of the label (naming where the sound does change, if it does).
+    """
+    far = 0.15
+    step_far = ends < stop_at_s - far
+    stop_far = starts >= stop_at_s + far
+    if step_far.sum() < 8 or stop_far.sum() < 8:
+        step_far, stop_far = ends < stop_at_s - guard_s, starts >= stop_at_s + guard_s
+    mu_step = np.percentile(V[step_far], 100 * QUANTILE, axis=0)  # what the detector's template tracks
+    sigma = np.maximum(1.4826 * np.median(np.abs(V[step_far] - np.median(V[step_far], axis=0)), axis=0), 1.0)
+    delta0 = np.median(V[stop_far], axis=0) - mu_step
+    strength = float(np.sqrt(np.mean((delta0 / sigma) ** 2)))
+    if strength < 1.0:
+        k = int(np.argmax(np.abs(delta0)))
+        raise TuningError(
+            f"the stepping and stopped parts sound alike: nothing changes near the labelled stop at {stop_at_s:g} s "
+            f"(no sub-band of "
+            f"{edges[0]:.0f}-{edges[-1]:.0f} Hz changes by more than {abs(delta0[k]):.1f} dB, "
+            f"at {edges[k]:.0f}-{edges[k + 1]:.0f} Hz); check --stop-at and that the recording reaches the end stop"
+        )
+    trim_all = (len(edges) - 1) // 5
+    a0, _ = fit_departure(V - mu_step, delta0, sigma, trim_all)
+    a0s = np.asarray(median_filter(a0, size=window), dtype=np.float64)
+    change = _change_point(a0s, ends, stop_at_s, search_s, hold)
+    if change is None:
+        elsewhere = _change_point(a0s, ends, stop_at_s, float(ends[-1] - ends[0]), hold)
+        where = (
+            f"; the sound changes at {elsewhere - 0.5 * frame / sample_rate:.3f} s"
+            if elsewhere is not None and abs(elsewhere - stop_at_s) > search_s
+            else ""
         )
         raise TuningError(
-            f"no template both stays quiet while stepping and fires once at the stop ({'; '.join(failures[:3])}); "
-            f"{hint}: cut those spans out of the recording or record again"
+            f"nothing changes near the labelled stop at {stop_at_s:g} s (searched +-{search_s:g} s){where}: "
+            "check --stop-at (seconds from the start of the recording) and that the joint reached its end stop"
         )
-    # 4. self-check with interference; the quietest passing candidate wins
+    # the change point is found on frames that end after it; its time is the frame's end minus the
+    # part of the frame the stop must fill to lift a to 0.5: about half a frame
+    change -= 0.5 * frame / sample_rate
+    return change
+
+
+def _no_template(
+    best: _Candidate,
+    D: FloatArray,
+    delta: FloatArray,
+    sigma: FloatArray,
+    hold: int,
+    window: int,
+    stepping: NDArray[np.bool_],
+    ends: FloatArray,
+    failures: list[str],
+) -> TuningError:
+    """The refusal when no candidate verified: which time spans of the stepping sound like the stop."""
+    sub = list(best.bands)
+    a, rho = fit_departure(D[:, sub], delta[sub], sigma[sub], best.trim)
+    dec = _decided(a, rho, best.residual_max, hold, window)
+    bad = stepping & (dec >= min(best.threshold, 0.5))
+    spans = _spans(bad, ends)
+    hint = (
+        f"the stepping part sounds like the stop at {_fmt_spans(spans)}"
+        if spans
+        else "the stop does not stay distinct long enough"
+    )
+    return TuningError(
+        f"no template both stays quiet while stepping and fires once at the stop ({'; '.join(failures[:3])}); "
+        f"{hint}: cut those spans out of the recording or record again"
+    )
+
+
+def _pick(
+    passing: list[tuple[Tuning, float, float]],
+    x: FloatArray,
+    sample_rate: int,
+    frame: int,
+    stop_s: float,
+    g: float,
+    seed: int,
+    self_check: bool,
+    warnings: list[str],
+    stop_at_s: float,
+    change: float,
+) -> Tuning:
+    """Of the verified candidates, the first whose self-check with interference does not clearly fail.
+
+    Its onset lag and latency are the medians over the clean and the injected runs; the
+    self-check, the warnings and both stop times go into ``Tuning.checks``.
+    """
     results: list[tuple[int, int, Tuning, float, float, dict[str, Any]]] = []
     for tu, lag, lat in passing:
         checks: dict[str, Any] = _self_check(tu, x, sample_rate, stop_s, g, seed) if self_check else {}

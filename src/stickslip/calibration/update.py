@@ -35,10 +35,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..families import FamilyModel
 from ..measurements import Traverse
 from ..models import JointModel, PrismaticParams, RotaryParams
+from ..units import DIMENSIONLESS_PARAMETERS
 from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
 
 __all__ = ["DRIFT_PRIOR", "ScaleUpdate", "update_calibration", "scaled_model", "model_sigma", "prediction_sd"]
@@ -159,6 +161,48 @@ def _average(model: JointModel, ts: Sequence[Traverse]) -> np.ndarray:
     )
 
 
+def _posterior(
+    prior: Calibration,
+    groups: dict[tuple[int, str], list[Traverse]],
+    j: int,
+    dirs: list[str],
+    sig: dict[str, float],
+    drift: float,
+    load_drift: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Posterior mean and covariance of joint ``j``'s log step scales (one per direction) and its shared
+    log load sensitivity, from the new traverses' log ratios to the prior's predictions (Gaussian, linearised).
+    """
+    rows: list[list[float]] = []
+    resid: list[float] = []
+    weights: list[float] = []
+    for k, d in enumerate(dirs):
+        ts = groups.get((j, d), [])
+        if not ts:
+            continue
+        m0 = prior.models[(j, d)]
+        base = _average(m0, ts)
+        h = 1e-4
+        grad = (np.log(_average(load_scaled(m0, 1.0 + h), ts)) - np.log(base)) / h
+        meas = np.array([t.gamma for t in ts])
+        for r, g in zip(np.log(meas / base), grad, strict=True):
+            row = [0.0] * (len(dirs) + 1)
+            row[k] = 1.0
+            row[-1] = float(g)
+            rows.append(row)
+            resid.append(float(r))
+            weights.append(1.0 / sig[d] ** 2)
+    p0 = np.diag([1.0 / drift**2] * len(dirs) + [1.0 / load_drift**2])
+    if rows:
+        H, r_, w = np.array(rows), np.array(resid), np.array(weights)
+        prec = p0 + H.T @ (H * w[:, None])
+        post_cov = np.linalg.inv(prec)
+        mean = post_cov @ (H.T @ (w * r_))
+    else:
+        post_cov, mean = np.linalg.inv(p0), np.zeros(len(dirs) + 1)
+    return mean, post_cov
+
+
 def update_calibration(
     prior: Calibration,
     traverses: Sequence[Traverse],
@@ -195,33 +239,7 @@ def update_calibration(
     for j in sorted({jj for jj, _ in prior.models}):
         dirs = sorted(d for jj, d in prior.models if jj == j)
         sig = {d: model_sigma(prior, j, d) for d in dirs}
-        rows: list[list[float]] = []
-        resid: list[float] = []
-        weights: list[float] = []
-        for k, d in enumerate(dirs):
-            ts = groups.get((j, d), [])
-            if not ts:
-                continue
-            m0 = prior.models[(j, d)]
-            base = _average(m0, ts)
-            h = 1e-4
-            grad = (np.log(_average(load_scaled(m0, 1.0 + h), ts)) - np.log(base)) / h
-            meas = np.array([t.gamma for t in ts])
-            for r, g in zip(np.log(meas / base), grad, strict=True):
-                row = [0.0] * (len(dirs) + 1)
-                row[k] = 1.0
-                row[-1] = float(g)
-                rows.append(row)
-                resid.append(float(r))
-                weights.append(1.0 / sig[d][0] ** 2)
-        p0 = np.diag([1.0 / drift**2] * len(dirs) + [1.0 / load_drift**2])
-        if rows:
-            H, r_, w = np.array(rows), np.array(resid), np.array(weights)
-            prec = p0 + H.T @ (H * w[:, None])
-            post_cov = np.linalg.inv(prec)
-            mean = post_cov @ (H.T @ (w * r_))
-        else:
-            post_cov, mean = np.linalg.inv(p0), np.zeros(len(dirs) + 1)
+        mean, post_cov = _posterior(prior, groups, j, dirs, {d: sig[d][0] for d in dirs}, drift, load_drift)
         lam = float(mean[-1])
         for k, d in enumerate(dirs):
             key = (j, d)
@@ -236,13 +254,13 @@ def update_calibration(
             models[key] = scaled_model(load_scaled(prior.models[key], 1.0 + lam), factor)
             if key in cov and not isinstance(models[key], FamilyModel):
                 names = models[key].params.names()
-                fvec = np.array([1.0 if n in ("b", "b2", "k") else factor for n, _ in names])
+                fvec = np.array([1.0 if n in DIMENSIONLESS_PARAMETERS else factor for n, _ in names])
                 cov[key] = cov[key] * np.outer(fvec, fvec)
             se = stderr.get(key)
             if se is not None and not isinstance(models[key], FamilyModel):
                 names = models[key].params.names()
                 stderr[key] = np.array(
-                    [x if n in ("b", "b2", "k") else x * factor for x, (n, _) in zip(se, names, strict=True)]
+                    [x if n in DIMENSIONLESS_PARAMETERS else x * factor for x, (n, _) in zip(se, names, strict=True)]
                 )
             sigma[key] = math.hypot(s0, sd)
             if n_new:

@@ -139,7 +139,7 @@ def calibrate_cmd(
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     """
-    from ..calibration import CalibrationError, Conditions, calibrate
+    from ..calibration import Calibration, CalibrationError, Conditions, calibrate
     from ..models import NonPhysicalError
 
     traverses = read_table(measurements)
