@@ -43,3 +43,14 @@ def test_an_unwritable_log_file_is_one_line(tmp_path):
     assert r.returncode == 2
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("error: ") and "log file" in lines[0], r.stderr
+
+
+def test_the_command_line_loads_no_numpy_scipy_or_matplotlib_until_a_command_needs_them():
+    """`stickslip --help` and shell completion import only the CLI shell (issue 14's start-up budget)."""
+    import subprocess
+    import sys
+
+    code = "import sys, stickslip.cli; print(sorted(m for m in ('numpy', 'scipy', 'matplotlib') if m in sys.modules))"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]"

@@ -7,10 +7,8 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from numpy.linalg import LinAlgError
 from rich.table import Table
 
-from ..calibration import Calibration
 from . import app
 from ._common import console, fail, print_json, user_errors
 
@@ -41,6 +39,9 @@ def suggest_cmd(
     """
     if not 1 <= n <= 20:
         fail(f"--n {n} is outside 1..20")
+    from numpy.linalg import LinAlgError
+
+    from ..calibration import Calibration
     from ..calibration.design import suggest_poses
 
     with user_errors():

@@ -9,14 +9,11 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import typer
 
-from .. import kinematics as kin
-from ..clock import stale_message
-from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, open_device
-from ..devices.positions import DeviceState, device_key, load_state, save_state
+from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
 from ..joints import joint_spec
 from ..units import UnitError, parse_length
 from . import app
@@ -25,12 +22,27 @@ from ._common import (
     console,
     fail,
     flush_warnings,
+    lazy_import,
     length_option,
+    open_store,
     print_json,
     user_errors,
     warn,
     warn_later,
 )
+
+if TYPE_CHECKING:
+    from .. import kinematics as kin
+    from ..devices.positions import DeviceState, load_state, save_state
+else:  # numpy loads when a command first needs it, not for --help
+    kin = lazy_import("stickslip.kinematics")
+    _positions = lazy_import("stickslip.devices.positions")
+
+    def load_state(*args, **kwargs):
+        return _positions.load_state(*args, **kwargs)
+
+    def save_state(*args, **kwargs):
+        return _positions.save_state(*args, **kwargs)
 
 _DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
 _DEVICE_HELP = (
@@ -75,11 +87,15 @@ def parse_geometry(text: str | None) -> kin.Geometry:
         fail(f"--geometry: {e}")
 
 
-def _open_store(db: Path | None) -> Any:
-    from ..storage import Store, StoreError
-
-    with user_errors(StoreError):
-        return Store.open(db)
+def _max_rates(dev: Controller, max_rate: float) -> list[float]:
+    """Each joint's highest step rate for jogging: the controller's frequency, capped at ``max_rate`` (Hz)."""
+    rates = []
+    for j in (1, 2, 3):
+        try:
+            rates.append(min(max_rate, float(dev.frequency(j))))
+        except (DeviceError, ValueError, AttributeError):
+            rates.append(max_rate)
+    return rates
 
 
 def _apply_pose(state: DeviceState, pose_opts: tuple[float | None, ...]) -> None:
@@ -169,24 +185,24 @@ def reach(
         return plan
 
     if dry_run:
-        with _open_store(db) as store:
+        with open_store(db) as store:
             state = _start_state(store, key, pose_opts)
         plan = plan_from(state)
         _print_plan(plan, json_out, None, None)
         return
 
+    from ..procedures.conditions import usage_warnings
     from ..procedures.move import DeviceBusy, device_lock
     from ..procedures.reach import ReachOutcome, drive_reach
 
-    with _open_store(db) as store, user_errors(DeviceBusy):
+    with open_store(db) as store, user_errors(DeviceBusy):
         with device_lock(store, key):
             state = _start_state(store, key, pose_opts)
             plan = plan_from(state)
             with user_errors():
                 save_state(store, state)  # the recorded pose, even if nothing moves
-            stale = stale_message(cal.day)
-            if stale:
-                warn_later(stale)
+            for w in usage_warnings(cal, None, device, 3):
+                warn_later(w)
             flush_warnings()
             outcome, sim_true = ReachOutcome(), None
             if any(plan.total_steps):
@@ -397,6 +413,7 @@ def jog(
     import time
 
     from ..calibration import Calibration
+    from ..procedures.conditions import usage_warnings
     from ..procedures.jog import JogController, run_jog
     from ..procedures.move import DeviceBusy, device_lock
     from ..reach import borrow_joint1
@@ -409,7 +426,7 @@ def jog(
     with user_errors():
         key = device_key(device)
     pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)
-    with _open_store(db) as store, user_errors(DeviceBusy):
+    with open_store(db) as store, user_errors(DeviceBusy):
         with device_lock(store, key):
             state = _start_state(store, key, pose_opts)
             missing = [j for j in (1, 2, 3) if j not in cal.joints]
@@ -417,9 +434,8 @@ def jog(
                 fail(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
             with user_errors():
                 save_state(store, state)
-            stale = stale_message(cal.day)
-            if stale:
-                warn_later(stale)
+            for w in usage_warnings(cal, None, device, 3):
+                warn_later(w)
             flush_warnings()
             try:
                 dev = open_device(device)
@@ -430,12 +446,7 @@ def jog(
             try:
                 if isinstance(dev, PoseSettable):
                     dev.set_pose(*state.pose)
-                rates = []
-                for j in (1, 2, 3):
-                    try:
-                        rates.append(min(max_rate, float(dev.frequency(j))))
-                    except (DeviceError, ValueError, AttributeError):
-                        rates.append(max_rate)
+                rates = _max_rates(dev, max_rate)
                 ctl = JogController(
                     cal,
                     [state.positions[j] for j in (1, 2, 3)],
