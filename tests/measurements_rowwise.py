@@ -376,7 +376,8 @@ def _parse_pose_table(text: str, source: str) -> tuple[list[str], list[dict[str,
     rows: list[dict[str, str]] = []
     queries: list[PoseQuery] = []
     problems: list[str] = []
-    for lineno, row in enumerate(reader, start=2):
+    for row in reader:
+        lineno = reader.line_num  # the row's line in the file: blank lines count
         if None in row:
             problems.append(f"{source}:{lineno}: more cells than header columns")
             continue

@@ -97,9 +97,11 @@ pose_row = st.lists(st.one_of(cell(NUMBERS), cell(JOINTS), cell(DIRS)), min_size
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(header=pose_header, rows=st.lists(pose_row, max_size=20))
-def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows):
+@given(header=pose_header, rows=st.lists(pose_row, max_size=20), blank=st.booleans())
+def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows, blank):
     text = _csv(header, rows)
+    if blank:  # blank lines between rows: both must still name the line in the file
+        text = text.replace("\n", "\n\n", 3)
     kind_old, res_old = _outcome(lambda t: old.parse_pose_table(t, "p.csv"), text)
     kind_new, res_new = _outcome(lambda t: new.parse_pose_table(t, "p.csv"), text)
     assert kind_new == kind_old, (res_old, res_new)

@@ -94,3 +94,17 @@ def test_pose_table():
     assert [q.direction for q in qs] == ["-", "+"]
     with pytest.raises(TableError, match="p.csv:2: the step size at a pose needs a direction"):
         parse_pose_table("joint,q1,q2,q3,theta,psi\n3,0,0,0,0,0\n", "p.csv")
+
+
+@pytest.mark.parametrize("newline", ["\n", "\r\n"])
+def test_pose_table_errors_name_the_line_in_the_file_blank_lines_included(newline):
+    # a user opens the file at the line the error names: blank lines must count (they did not,
+    # which sent the user two lines too high here)
+    text = newline.join(
+        ["joint,direction,q1,q2,q3,theta,psi", "", "3,+,0,0,0.001,0,0", "", "", "3,+,0,0,abc,0,0", ""]
+    )
+    with pytest.raises(TableError) as e:
+        parse_pose_table(text, "p.csv")
+    assert e.value.problems == ["p.csv:6: q3 must be a number in SI units, got 'abc'"]
+    _, rows, queries = parse_pose_table(text.replace("abc", "0.002"), "p.csv")
+    assert [q.q3 for q in queries] == [0.001, 0.002] and len(rows) == 2

@@ -742,11 +742,11 @@ def _pose_header(record: list[str] | None, source: str) -> list[str]:
 def _pose_records(
     chunks: Iterator[_Chunk], header: list[str]
 ) -> Iterator[tuple[list[int], list[Sequence[str]], list[int], list[str] | None]]:
-    """Per chunk of a pose table: ``(lines, cols, overlong, raw)``, numbered as ``csv.DictReader`` does.
+    """Per chunk of a pose table: ``(lines, cols, overlong, raw)``, numbered by line in the file.
 
     ``cols`` holds the data rows as columns, padded with empty cells to the header's
-    width; ``lines`` their line numbers. Empty records are skipped without being
-    counted (DictReader's rule); records whose cells are blank (of a repeated column
+    width; ``lines`` their line numbers. Empty records (blank lines) are skipped but
+    counted, as in measurement tables, so ``file:line`` names the line; records whose cells are blank (of a repeated column
     name, the last cell) are counted and skipped; ``overlong`` lists the lines of
     records with more cells than the header. ``raw``: the chunk's text lines when
     every one of them is a data row as it stands (for passing rows through), else None.
@@ -763,9 +763,9 @@ def _pose_records(
         overlong: list[int] = []
         rows: list[list[str]] = []
         for cells in chunk.records or []:
-            if not cells:
-                continue
             lineno += 1
+            if not cells:
+                continue  # a blank line: not data, but counted, so file:line points at the line
             if len(cells) > width:
                 overlong.append(lineno)
                 continue
