@@ -9,7 +9,10 @@ Independent views, not the device's own:
 * what was kept: the database read back with ``load_state`` (what ``stickslip where`` shows);
 * a stop: a stand-in for a real controller (``PacedArm``: a burst takes |n|/f of wall time
   and ``stop()`` cuts it short, as the NanoControl does), whose true position must lie in
-  the uncertainty the axis reports.
+  the uncertainty the axis reports;
+* how long a stop takes: a controller that ignores ``stop()`` and keeps its own clock
+  (``StubbornArm``), so the 0.5 s is checked on that clock and by the steps sent after the
+  stop, never by timing the test.
 """
 
 from __future__ import annotations
