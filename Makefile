@@ -1,16 +1,17 @@
 # stickslip: `make demo` runs the whole calibration story on the simulated MM3A,
-# `make test` runs the test suite. Both build .venv/ first if needed.
+# `make test` runs the test suite, `make docs` builds the documentation site into site/.
+# All build .venv/ first if needed.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-calendar bench lint clean
+.PHONY: demo test test-calendar bench lint docs clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[plot,stats,audio,serial,anc300,dev,bluesky]'
+	$(PY) -m pip install --quiet -e '.[plot,stats,audio,serial,anc300,dev,bluesky,docs]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -40,10 +41,15 @@ $(BENCH_STAMP): $(STAMP)
 bench: $(BENCH_STAMP)
 	$(PY) benchmarks/run.py
 
+# mkdocs-material + mkdocstrings (the docs extra, pure Python, installed with the rest so the test suite
+# builds the site too); --strict: a warning fails the build.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
+
 lint: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/lint-imports
 	$(PY) -m mypy
 
 clean:
-	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache
+	rm -rf $(VENV) build site *.egg-info src/*.egg-info .pytest_cache

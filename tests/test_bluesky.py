@@ -9,7 +9,10 @@ Independent views, not the device's own:
 * what was kept: the database read back with ``load_state`` (what ``stickslip where`` shows);
 * a stop: a stand-in for a real controller (``PacedArm``: a burst takes |n|/f of wall time
   and ``stop()`` cuts it short, as the NanoControl does), whose true position must lie in
-  the uncertainty the axis reports.
+  the uncertainty the axis reports;
+* how long a stop takes: a controller that ignores ``stop()`` and keeps its own clock
+  (``StubbornArm``), so the 0.5 s is checked on that clock and by the steps sent after the
+  stop, never by timing the test.
 """
 
 from __future__ import annotations
@@ -221,31 +224,27 @@ class PacedArm:
         self.sim.close()
 
 
-def test_stop_during_a_long_move_returns_at_once_and_leaves_an_honest_position(sim: SimulatedMM3A) -> None:
-    """stop() during a ~5 s move on a paced controller returns at once and leaves an honest position.
+def test_stop_during_a_long_move_cuts_the_burst_and_leaves_an_honest_position(sim: SimulatedMM3A) -> None:
+    """stop() during a ~5 s move on a paced controller (which cuts a burst short) leaves an honest position.
 
-    The issue asks for 0.5 s (measured well under it when the machine is quiet); the test bounds it at half
-    the move, which no stop that waits for the move to finish can meet, so a loaded CI machine cannot flake it.
+    How long a stop takes is checked without a clock below (a controller that ignores stop).
     """
     cal = true_calibration(sim)
     arm = PacedArm(sim)
 
-    async def scenario() -> tuple[float, Exception | None, StickSlipAxis]:
+    async def scenario() -> tuple[Exception | None, StickSlipAxis]:
         axis = StickSlipAxis(arm, 3, cal, name="q3", burst=1000)
         await axis.connect()
         status = axis.set(5e-3)
         await asyncio.sleep(0.3)
-        t0 = time.monotonic()
         await axis.stop()
-        took = time.monotonic() - t0
         try:
             await status
         except Exception as e:  # noqa: BLE001 - the status's error is what is checked
-            return took, e, axis
-        return took, None, axis
+            return e, axis
+        return None, axis
 
-    took, error, axis = asyncio.run(scenario())
-    assert took < 2.5  # half of the 5 s move: stop() did not wait for it
+    error, axis = asyncio.run(scenario())
     assert isinstance(error, RuntimeError) and "was stopped" in str(error)
     assert 0.0 < sim.position(3) < 5e-3  # it moved, and not all the way
     with Store.open() as store:
@@ -254,11 +253,95 @@ def test_stop_during_a_long_move_returns_at_once_and_leaves_an_honest_position(s
     lo, hi = state.uncertain[3]
     ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
     assert lo - ripple <= sim.position(3) <= hi + ripple
-    assert hi - lo <= 1000 * one_step(cal, 3, hi)  # one burst wide
+    assert hi - lo <= 200 * one_step(cal, 3, hi) * 1.01  # one burst wide: 1000 Hz x 0.2 s = 200 steps
     uncertain = asyncio.run(axis.uncertain.get_value())
     assert uncertain is True
     with pytest.raises(MoveError, match="uncertain"):
         asyncio.run(_move(axis, 1e-3))
+
+
+class StubbornArm(PacedArm):
+    """A controller that ignores stop(): every burst it starts, it finishes, taking |n| / f on its own clock.
+
+    Nothing here sleeps: the arm keeps virtual time (``t``, s). At its ``stop_in``-th burst it asks the
+    axis to stop (on the event loop), waits until the axis has told it to stop, then finishes the burst.
+    """
+
+    def __init__(self, sim: SimulatedMM3A, stop_in: int, request: Any):
+        super().__init__(sim)
+        self.stop_in = stop_in
+        self.request = request
+        self.t = 0.0
+        self.bursts: list[tuple[float, float, int]] = []  # (start, end, steps) on the arm's clock
+        self.stop_at: float | None = None  # the arm's clock when the stop was asked for
+
+    def step(self, joint: int, n: int) -> None:
+        start = self.t
+        if len(self.bursts) + 1 == self.stop_in:
+            self.t += 0.4 * abs(n) / self.sim.frequency(joint)  # the stop comes 40 % into this burst
+            self.stop_at = self.t
+            self.request()
+            assert self.halt.wait(5.0), "the axis never told the controller to stop"
+        self.t = start + abs(n) / self.sim.frequency(joint)
+        self.sim.step(joint, n)
+        self.bursts.append((start, self.t, n))
+
+
+@pytest.mark.parametrize("hz, burst, max_burst_s", [(1000.0, 1000, 0.2), (5000.0, 65535, 0.2), (10.0, 10, 0.4)])
+def test_a_stop_ends_the_motion_within_max_burst_s_even_if_the_controller_ignores_it(
+    sim: SimulatedMM3A, hz: float, burst: int, max_burst_s: float
+) -> None:
+    """The issue's 0.5 s, by design and without a wall clock.
+
+    The arm's own clock says when motion ends: a stop can only wait for the burst in flight, and no burst
+    lasts longer than max_burst_s (<= 0.4 s); no burst starts after the stop. What is left of the 0.5 s
+    (>= 0.1 s) is for the controller's answer to stop and one journal write, which STOP_RETURN_S bounds:
+    stop() never waits longer than that, whatever the controller does.
+    """
+    from stickslip.bluesky import STOP_RETURN_S
+
+    sim.set_frequency(3, hz)
+    cal = true_calibration(sim)
+    stops: list[asyncio.Task[None]] = []
+
+    async def scenario() -> tuple[Exception | None, StubbornArm]:
+        loop = asyncio.get_running_loop()
+        holder: list[StickSlipAxis] = []
+
+        def request() -> None:
+            loop.call_soon_threadsafe(lambda: stops.append(loop.create_task(holder[0].stop())))
+
+        arm = StubbornArm(sim, stop_in=3, request=request)
+        axis = StickSlipAxis(arm, 3, cal, name="q3", burst=burst, max_burst_s=max_burst_s)
+        holder.append(axis)
+        await axis.connect()
+        status = axis.set(11e-3)
+        try:
+            await status
+        except Exception as e:  # noqa: BLE001 - the status's error is what is checked
+            await asyncio.gather(*stops)
+            return e, arm
+        return None, arm
+
+    error, arm = asyncio.run(scenario())
+    assert isinstance(error, RuntimeError) and "was stopped" in str(error)
+    assert len(arm.bursts) == 3  # no burst was started after the stop
+    assert arm.stop_at is not None
+    start, end, n = arm.bursts[-1]
+    assert abs(n) == min(burst, int(hz * max_burst_s))  # the burst was bounded in steps ...
+    assert end - start <= max_burst_s + 1e-12  # ... so in duration
+    assert end - arm.stop_at <= max_burst_s < STOP_RETURN_S  # motion ended within the bound after the stop
+    assert STOP_RETURN_S == 0.5
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+    lo, hi = state.uncertain[3]  # the arm finished the burst but did not say so: uncertain over it
+    assert lo - 0.005 * hi <= sim.position(3) <= hi + 0.005 * hi
+
+
+@pytest.mark.parametrize("max_burst_s", [0.0, -0.1, 0.5, math.nan, True, "0.2"])
+def test_max_burst_s_is_refused_outside_0_to_0_4_s(sim: SimulatedMM3A, max_burst_s: Any) -> None:
+    with pytest.raises(ValueError, match="max_burst_s"):
+        StickSlipAxis(sim, 3, None, max_burst_s=max_burst_s)
 
 
 async def _move(axis: StickSlipAxis, target: float) -> None:
@@ -364,11 +447,12 @@ def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_tru
     with pytest.raises(FailedStatus) as e:
         RE(bps.mv(axis, 3e-3))
     text = str(e.value.__cause__)
-    assert "no answer from the controller within 2 s; sent 1000 of" in text
+    # bursts of 500 asked, cut to 200 (1000 Hz x max_burst_s = 0.2 s): two bursts made, the third refused
+    assert "no answer from the controller within 2 s; sent 400 of" in text
     assert "uncertain" in text and "re-reference" in text
     with Store.open() as store:
         state = load_state(store, "sim://")
     lo, hi = state.uncertain[3]
     ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
     assert lo - ripple <= sim.position(3) <= hi + ripple
-    assert sim.steps_simulated == 1000
+    assert sim.steps_simulated == 400

@@ -128,6 +128,8 @@ def stale_message(cal_day: str | None, today: str | None = None, max_age_days: i
     max_age_days : int
         Largest age in days that is still fresh (default 0: only today's calibration).
 
+    Notes
+    -----
     When both labels are ISO dates the warning comes only if the calibration is more
     than ``max_age_days`` older; other labels warn whenever they differ from today's,
     since their order is unknown.

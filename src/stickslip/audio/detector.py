@@ -118,6 +118,8 @@ class Tuning:
         What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
         interference injected, latency); informational.
 
+    Notes
+    -----
     For ``"template"`` tunings ``threshold_db`` is the threshold on the stop-likeness
     (0 stepping, 1 the tuned stop; dimensionless) and ``hysteresis_db`` its hysteresis.
     """

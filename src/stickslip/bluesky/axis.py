@@ -14,7 +14,11 @@ units are in ``describe()``. The MM3A has no sensors, so the readback is the
 
 Blocking controller calls run in a worker thread (one move at a time per controller);
 the event loop stays free for :meth:`StickSlipAxis.stop`, which makes the loop send no
-further burst and tells the controller to stop. After a stop the kept position is
+further burst and tells the controller to stop. A stop is prompt by design, not by the
+controller's good will: on a controller that steps in real time a burst lasts at most
+``max_burst_s`` (0.2 s by default; the burst is shortened to ``frequency * max_burst_s``
+steps), so even a controller that ignores ``stop`` finishes its burst within that, and
+:meth:`~StickSlipAxis.stop` returns within :data:`STOP_RETURN_S` (0.5 s). After a stop the kept position is
 honest: exact (to the model) when the stop fell between bursts, else *uncertain*
 between the last confirmed position and the interrupted burst's end (the ``uncertain``
 signal is true and the next move refuses until the joint is re-referenced).
@@ -53,7 +57,15 @@ from ..procedures.move import DeviceBusy, device_lock, drive
 from ..storage import Store, StoreError
 from ..units import format_position, position_display_unit
 
-__all__ = ["DeviceLink", "MoveError", "StickSlipAxis"]
+__all__ = ["DeviceLink", "MoveError", "StickSlipAxis", "MAX_BURST_S", "STOP_RETURN_S"]
+
+MAX_BURST_S = 0.2
+"""Default longest burst on a controller that steps in real time, s: the longest a stop can
+wait for a burst in flight on a controller that does not cut bursts short."""
+STOP_RETURN_S = 0.5
+"""The longest :meth:`StickSlipAxis.stop` waits, s: for the burst in flight (at most
+``max_burst_s``) and the controller's ``stop``; the margin, 0.3 s at the default, is for
+the controller's answer and one journal write to the database."""
 
 POSE_UNITS = "rad, rad, m, rad, rad"
 """Units of the ``pose`` signal's five elements ``q1, q2, q3, theta, psi``."""
@@ -142,6 +154,7 @@ class _Interruptible:
         self.stop_event = stop
         self.atomic = atomic
         self.sent = 0
+        self.joint = 0  # the joint of the last burst asked for
 
     @property
     def info(self) -> DeviceInfo:
@@ -154,6 +167,7 @@ class _Interruptible:
         return self.dev.frequency(joint)
 
     def step(self, joint: int, n: int) -> None:
+        self.joint = joint
         if self.stop_event.is_set():
             raise _Stopped(partial=False)
         self.dev.step(joint, n)
@@ -171,12 +185,67 @@ class _Interruptible:
         self.dev.close()
 
 
+def bounded_burst(dev: Controller, joint: int, burst: int, max_burst_s: float) -> int:
+    """Steps per burst so that one burst lasts at most ``max_burst_s`` (s) at the joint's frequency.
+
+    A controller on a virtual clock (the simulator) completes a burst at once, so its
+    burst is not shortened. A frequency the controller cannot tell leaves ``burst``.
+    A burst is at least one step, so below ``1 / max_burst_s`` Hz (5 Hz at the default)
+    a burst lasts one step's period, longer than ``max_burst_s``.
+    """
+    if isinstance(dev, VirtualClock):
+        return burst
+    try:
+        hz = float(dev.frequency(joint))
+    except DeviceError:
+        return burst
+    if not (math.isfinite(hz) and hz > 0):
+        return burst
+    return max(1, min(burst, int(hz * max_burst_s)))
+
+
+async def halt(link: DeviceLink, joint: int | None, task: asyncio.Future[Any] | None) -> None:
+    """Tell the controller to stop and wait for the move's worker ``task``, at most :data:`STOP_RETURN_S` in all.
+
+    The caller has already set the stop event (no further burst is sent). The controller's
+    ``stop`` runs in a thread; neither it nor the task is waited for past the deadline
+    (the move's status still settles the kept position when its burst ends).
+    """
+    if task is None:
+        return
+
+    def tell() -> None:
+        try:
+            link.controller().stop(joint)
+        except DeviceError:
+            pass  # the burst loop sends nothing more either way
+
+    told = asyncio.ensure_future(asyncio.to_thread(tell))
+    await asyncio.wait([task, told], timeout=STOP_RETURN_S)
+
+
 @dataclass(frozen=True)
 class _MoveResult:
     steps: int
     sent: int
     stopped: bool
     state: DeviceState
+
+
+def check_burst(burst: object) -> int:
+    """``burst`` as steps per burst; ``ValueError`` unless an integer in 1..65535."""
+    if isinstance(burst, bool) or not isinstance(burst, int) or not 1 <= burst <= 65535:
+        raise ValueError(f"burst must be an integer number of steps in 1..65535, got {burst!r}")
+    return burst
+
+
+def check_max_burst_s(seconds: object) -> float:
+    """``seconds`` as the longest burst, s; ``ValueError`` unless in (0, 0.4] (a stop must return within 0.5 s)."""
+    if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or not 0 < float(seconds) <= 0.4:
+        raise ValueError(
+            f"max_burst_s must be a duration in (0, 0.4] s (a stop returns within {STOP_RETURN_S} s), got {seconds!r}"
+        )
+    return float(seconds)
 
 
 class _AxisConnector(DeviceConnector):
@@ -208,6 +277,10 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         between bursts.
     db : path, optional
         The database keeping positions (default ``$STICKSLIP_DB``, else the user's data folder).
+    max_burst_s : float
+        Longest burst, s (default :data:`MAX_BURST_S`, 0.2 s; in (0, 0.4]): on a controller
+        that steps in real time a burst is cut to ``frequency * max_burst_s`` steps, so a
+        stop returns within :data:`STOP_RETURN_S` even if the controller finishes its burst.
 
     Signals
     -------
@@ -232,12 +305,12 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         *,
         burst: int = 1000,
         db: str | os.PathLike[str] | None = None,
+        max_burst_s: float = MAX_BURST_S,
     ) -> None:
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
-        if isinstance(burst, bool) or not isinstance(burst, int) or not 1 <= burst <= 65535:
-            raise ValueError(f"burst must be an integer number of steps in 1..65535, got {burst!r}")
-        self.burst = burst
+        self.burst = check_burst(burst)
+        self.max_burst_s = check_max_burst_s(max_burst_s)
         self.calibration: Calibration | None = None
         if calibration is not None:
             self.use_calibration(calibration)
@@ -255,6 +328,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         self._stop_event = threading.Event()
         self._stop_success = False
         self._task: asyncio.Future[_MoveResult] | None = None
+        self.observers: list[Callable[[DeviceState], None]] = []
+        """Called on the event loop with every kept state this axis reads or writes (e.g. the tip's readbacks)."""
         super().__init__(name=name, connector=_AxisConnector())
 
     def set_name(self, name: str, *, child_name_separator: str | None = None) -> None:
@@ -286,7 +361,13 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     # ------------------------------------------------------------------ state
 
     def _publish(self, state: DeviceState) -> None:
-        """Put the kept state into the signals (runs on the event loop)."""
+        """Put the kept state into the signals and tell the observers (runs on the event loop)."""
+        self.show(state)
+        for observe in self.observers:
+            observe(state)
+
+    def show(self, state: DeviceState) -> None:
+        """Put the kept state into this axis's signals only (runs on the event loop)."""
         self._set_readback(float(state.positions[self.joint]))
         self._set_uncertain(self.joint in state.uncertain)
         p = state.pose
@@ -362,8 +443,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                 save_state(store, st)
                 publish(st)
 
+            burst = bounded_burst(dev, joint, self.burst, self.max_burst_s)
             try:
-                outcome = drive(proxy, state, joint, steps, self.burst, reckon, save)
+                outcome = drive(proxy, state, joint, steps, burst, reckon, save)
             except _Stopped as s:
                 if not s.partial:  # the next burst was never sent: the confirmed position stands
                     state.set_position(joint, reckon(proxy.sent), "dead-reckoned" if proxy.sent else source)
@@ -463,20 +545,14 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     async def stop(self, success: bool = False) -> None:
         """Stop now: no further burst is sent and the controller is told to stop.
 
-        Returns once the move's worker has finished (at most the burst in flight; 2 s at
-        the longest), so the kept position and the signals are settled. With
+        Returns once the move's worker has finished (the burst in flight: at once if the
+        controller cuts it short, else within ``max_burst_s``), so the kept position and
+        the signals are settled; at the latest after :data:`STOP_RETURN_S` (0.5 s). With
         ``success=False`` the move's status fails; with ``True`` it completes.
         """
         self._stop_success = success
         self._stop_event.set()
-        task = self._task
-        if task is None:
-            return
-        try:
-            await asyncio.to_thread(self.link.controller().stop, self.joint)
-        except DeviceError:
-            pass  # the burst loop sends nothing more either way
-        await asyncio.wait([task], timeout=2.0)
+        await halt(self.link, self.joint, self._task)
 
     def describe_move(self, target: float) -> dict[str, Any]:
         """What a move to ``target`` (m or rad) would do from the kept state: the plan's fields (SI)."""

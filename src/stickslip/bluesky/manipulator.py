@@ -6,8 +6,9 @@ database (:class:`~stickslip.bluesky.axis.DeviceLink`): moves through it run one
 time, as the controller drives one channel at a time. It also carries what the
 calibration-day plan reads: the last traverse (:class:`TraverseReadout`).
 
-Not yet: the tip's ``x, y, z`` as pseudo-axes. They need a task-space planner (joint
-targets for a tip target, with the arm's link geometry), which stickslip does not have.
+The tip's ``x, y, z`` (m) are pseudo-axes ``tip.x``, ``tip.y``, ``tip.z``
+(:class:`~stickslip.bluesky.tip.Tip`): readback by forward kinematics of the kept joints,
+moves planned by the task-space planner as straight tip moves.
 """
 
 from __future__ import annotations
@@ -19,10 +20,12 @@ from pathlib import Path
 from ophyd_async.core import StandardReadable, soft_signal_r_and_setter
 from ophyd_async.core import StandardReadableFormat as Format
 
+from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller
 from ..measurements import Traverse
-from .axis import DeviceLink, StickSlipAxis
+from .axis import MAX_BURST_S, DeviceLink, StickSlipAxis
+from .tip import Tip
 
 __all__ = ["CalibrationReadout", "StickSlipManipulator", "TraverseReadout"]
 
@@ -81,7 +84,10 @@ class CalibrationReadout(StandardReadable):
 
 
 class StickSlipManipulator(StandardReadable):
-    """A three-joint stick-slip arm (MM3A type): axes ``q1``, ``q2`` (rad) and ``q3`` (m).
+    """A three-joint stick-slip arm (MM3A type): axes ``q1``, ``q2`` (rad), ``q3`` (m) and the tip.
+
+    ``tip.x``, ``tip.y``, ``tip.z`` (m, base frame) are pseudo-axes over the three joints
+    (:class:`~stickslip.bluesky.tip.Tip`).
 
     Parameters
     ----------
@@ -95,6 +101,11 @@ class StickSlipManipulator(StandardReadable):
         Steps per burst for every axis.
     db : path, optional
         The database keeping positions (default ``$STICKSLIP_DB``).
+    geometry : Geometry
+        The arm's lengths for the tip (:class:`stickslip.kinematics.Geometry`; default
+        21 mm, no offset: measure yours, docs/taskspace.md).
+    max_burst_s : float
+        Longest burst on a controller stepping in real time, s (bounds how long a stop takes).
     """
 
     def __init__(
@@ -105,14 +116,23 @@ class StickSlipManipulator(StandardReadable):
         *,
         burst: int = 1000,
         db: str | os.PathLike[str] | None = None,
+        geometry: kin.Geometry = kin.DEFAULT_GEOMETRY,
+        max_burst_s: float = MAX_BURST_S,
     ) -> None:
         cal = None if calibration is None else _load(calibration)
         self.link = DeviceLink(device, db)
-        with self.add_children_as_readables():
-            self.q1 = StickSlipAxis(self.link, 1, cal if cal is None or 1 in cal.joints else None, burst=burst)
-            self.q2 = StickSlipAxis(self.link, 2, cal if cal is None or 2 in cal.joints else None, burst=burst)
-            self.q3 = StickSlipAxis(self.link, 3, cal if cal is None or 3 in cal.joints else None, burst=burst)
         self.calibration = cal
+        with self.add_children_as_readables():
+            self.q1, self.q2, self.q3 = (
+                StickSlipAxis(
+                    self.link, j, cal if cal is None or j in cal.joints else None, burst=burst, max_burst_s=max_burst_s
+                )
+                for j in (1, 2, 3)
+            )
+            self.tip = Tip(self.link, lambda: self.calibration, geometry, burst=burst, max_burst_s=max_burst_s)
+        for axis in (self.q1, self.q2, self.q3):
+            axis.observers.append(self.tip.observe)  # a joint's move moves the tip's readbacks
+            self.tip._driver.observers.append(axis.show)  # a tip move moves the joints' readbacks
         self.traverse = TraverseReadout()
         self.calibration_readout = CalibrationReadout()
         super().__init__(name=name)

@@ -155,6 +155,8 @@ def calibration_day(
     md : mapping, optional
         Extra run metadata.
 
+    Notes
+    -----
     Events: one per traverse in ``primary`` (``traverse-steps``, ``traverse-gamma`` in m
     or rad, joint, direction, start, end, pose); one in ``calibration``
     (``calibration-json``, the calibration file's JSON).
