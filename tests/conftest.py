@@ -1,4 +1,4 @@
-"""Test-wide settings: no test touches the user's real database, data folder or config file, and none reads the calendar.
+"""Test-wide settings: no test touches the real database, data folder or config file, and none reads the calendar.
 
 "Today" is pinned (``$STICKSLIP_TODAY``, read by :func:`stickslip.clock.today`), so the
 suite gives the same answers on any date and in any time zone. The pinned day is the

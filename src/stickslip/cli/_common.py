@@ -312,7 +312,8 @@ def calibration_file(option: Path | None, flag: str = "--calibration") -> Path:
     """
     s = calibration_setting(option, flag)
     if s.value is None:
-        fail(f"give {flag} CAL.json, or set calibration in the config file {s.where or config_path()} (docs/config.md)")
+        what = f"{flag} CAL.json" if flag.startswith("-") else flag
+        fail(f"no calibration: give {what}, or set calibration in the config file {config_path()} (docs/config.md)")
     if s.source == "file" and not s.value.exists():
         fail(f"{s.where}: calibration: {s.value} does not exist (give {flag}, or fix the config file)")
     return s.value
