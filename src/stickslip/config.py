@@ -36,6 +36,7 @@ import math
 import os
 import re
 import tomllib
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
@@ -251,7 +252,7 @@ class _Reader:
             raise self.fail(key, f"must be a string ({what}), got {_kind(value)}")
         if not value.strip():
             raise self.fail(key, f"is empty: give {what}, or leave the key out")
-        if any(not c.isprintable() for c in value):
+        if any(unicodedata.category(c) == "Cc" for c in value):
             raise self.fail(key, f"holds a control character: give {what}")
         return value.strip()
 
@@ -393,5 +394,8 @@ def write_template(path: str | os.PathLike[str] | None = None, force: bool = Fal
         raise FileExistsError(f"{p} exists: keep it, or overwrite it with --force")
     if p.exists() and not p.is_file():
         raise IsADirectoryError(f"{p} is not a regular file: not overwritten")
-    p.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:  # a file where a folder should be, no permission
+        raise OSError(f"cannot create the folder {p.parent} ({e.strerror or e})") from None
     return atomic_write_text(p, _TEMPLATE)
