@@ -254,6 +254,7 @@ def test_a_user_name_without_a_password_is_allowed(tmp_path):
         ('[geometry]\noffset = "0mm"\nlenght = "21mm"\n', ":3: unknown key 'geometry.lenght' (did you mean"),
         ('geometry.lenght = "21mm"\n', ":1: unknown key 'geometry.lenght' (did you mean 'geometry.length'?"),
         ("[geometri]\n", ":1: unknown key 'geometri' (did you mean 'geometry'?"),
+        ('[geometry]\nlength = "21mm"\ndevice = "sim://"\n', ":3: device is inside [geometry] here: move it above"),
         ('colour = "blue"\n', ":1: unknown key 'colour' (known: calibration, database, device, geometry, max_age"),
         ('device = "sim://"\ndevice = "x"\n', ": not TOML:"),
         ('device = "sim://\n', ":1:"),

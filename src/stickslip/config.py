@@ -226,6 +226,13 @@ class _Reader:
             raise self.fail("geometry", f"must be a table ([geometry] with offset and length), got {_kind(geometry)}")
         sub = [k.split(".", 1)[1] for k in KEYS if k.startswith("geometry.")]
         for key in geometry:
+            if key in known and key not in sub:  # a top-level key written below the [geometry] header
+                line = _line_of(self.text, ("geometry", key))
+                where = f"{self.path}:{line}" if line else str(self.path)
+                raise ConfigError(
+                    f"{where}: {key} is inside [geometry] here: move it above the [geometry] line "
+                    "(keys after a [table] header belong to that table)"
+                )
             if key not in sub:
                 raise self._unknown(f"geometry.{key}", [f"geometry.{k}" for k in sub])
         return UserConfig(
