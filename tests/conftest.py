@@ -1,4 +1,4 @@
-"""Test-wide settings: no test touches the user's real database or data folder, and none reads the calendar.
+"""Test-wide settings: no test touches the real database, data folder or config file, and none reads the calendar.
 
 "Today" is pinned (``$STICKSLIP_TODAY``, read by :func:`stickslip.clock.today`), so the
 suite gives the same answers on any date and in any time zone. The pinned day is the
@@ -16,6 +16,9 @@ PINNED_TODAY = "2026-11-22"
 def _private_database(tmp_path, monkeypatch):
     monkeypatch.setenv("STICKSLIP_DB", str(tmp_path / "stickslip-test.db"))
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg-data"))
+    # no test reads the user's configuration file (docs/config.md): a path where none is
+    monkeypatch.setenv("STICKSLIP_CONFIG", str(tmp_path / "no-config" / "config.toml"))
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg-config"))
 
 
 @pytest.fixture(autouse=True)

@@ -54,7 +54,7 @@ def test_every_docs_page_with_console_blocks_is_listed_here():
     assert pages == sorted(RUN_PAGES), f"pages with console blocks: {pages}; run them in this module"
 
 
-RUN_PAGES = ["tutorial.md"]
+RUN_PAGES = ["tutorial.md", "config.md"]  # config.md names its own $STICKSLIP_CONFIG
 
 
 @POSIX
@@ -66,6 +66,22 @@ def test_docs_page_runs_as_written(page, tmp_path):
     r = _bash([ln for b in blocks for ln in b], tmp_path, env)
     assert r.returncode == 0, f"{page}:\n{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     assert "Traceback" not in r.stderr
+    if page == "config.md":
+        _check_config_page(tmp_path, env)
+
+
+def _check_config_page(tmp: Path, env: dict[str, str]) -> None:
+    """What docs/config.md says each level did: file, env and option, by what the commands kept."""
+    assert json.loads((tmp / "env.json").read_text())["settings"]["database"]["source"] == "env"
+    options = (tmp / "options.txt").read_text()
+    assert "option --db" in options and "option --device" in options
+    env = {**env, "STICKSLIP_CONFIG": str(tmp / "lab" / "config.toml")}
+    env.pop("STICKSLIP_DB", None)
+    r = _bash([". .venv/bin/activate", "stickslip where --offline --json"], tmp, env)
+    kept = json.loads(r.stdout)
+    assert kept["device"] == "sim://?seed=3"  # the file's device, its positions in the file's database
+    assert abs(kept["joints"][2]["q"] - 30e-6) < 1.5e-6  # the move of 30 um, dead-reckoned (within a step)
+    assert (tmp / "lab" / "lab.db").is_file() and not (tmp / "other.db").exists()
 
 
 @POSIX

@@ -9,6 +9,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.models`   suggest
 * :mod:`.devices`  move, where
 * :mod:`.taskspace` reach, jog
+* :mod:`.config`   config path, config show, config init (the user's configuration file)
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, core, devices, history, measure, models, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, config, core, devices, history, measure, models, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:
@@ -136,6 +137,10 @@ for _info in app.registered_commands:
     if _info.callback is not None and _info.callback.__doc__ and _info.help is None:
         _info.callback.__doc__ = _unwrap(_info.callback.__doc__)
     _info.rich_help_panel = _PANEL_OF.get(_name(_info), "Other")
+for _group in app.registered_groups:  # the commands of a group (config path, show, init)
+    for _sub in _group.typer_instance.registered_commands if _group.typer_instance else []:
+        if _sub.callback is not None and _sub.callback.__doc__ and _sub.help is None:
+            _sub.callback.__doc__ = _unwrap(_sub.callback.__doc__)
 app.registered_commands.sort(key=lambda i: _ORDER.index(_name(i)) if _name(i) in _ORDER else len(_ORDER))
 
 

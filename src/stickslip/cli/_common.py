@@ -12,8 +12,10 @@ import math
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, NoReturn, overload
+from typing import TYPE_CHECKING, Any, Generic, NoReturn, TypeVar, overload
 
 import typer
 from rich.console import Console
@@ -25,13 +27,13 @@ try:  # recent typer vendors click; older ones use the click package
 except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
+from ..config import ConfigError, UserConfig, config_path, load_config
 from ..units import UnitError, parse_angle, parse_length
 
 if TYPE_CHECKING:
-    from pathlib import Path
-
     from rich.table import Table
 
+    from ..kinematics import Geometry
     from ..measurements import TableError, Traverse
     from ..storage import Store
 
@@ -244,15 +246,151 @@ def _bare_number(text: str) -> bool:
 
 
 
+# ---------------------------------------------------------------- the user's configuration file
+# Each default a command takes from the configuration file (docs/config.md) is resolved here,
+# in one order: the command-line option, then the environment variable where one exists,
+# then the file, then the built-in default. ``config show`` prints the same resolution.
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Setting(Generic[T]):
+    """A value a command uses and where it came from.
+
+    ``source`` is ``"option"``, ``"env"``, ``"file"`` or ``"default"``; ``where`` names
+    it: the option (``--db``), the variable (``$STICKSLIP_DB``), the file's path, or ``""``.
+    """
+
+    value: T
+    source: str
+    where: str = ""
+
+
+def user_config() -> UserConfig:
+    """The configuration file's settings (:func:`stickslip.config.load_config`), or one ``error:`` line."""
+    try:
+        return load_config()
+    except ConfigError as e:
+        fail(str(e))
+
+
+DEFAULT_DEVICE_URL = "sim://"
+"""The controller without --device and without ``device`` in the configuration file: the simulated MM3A."""
+
+
+def device_setting(option: str | None, flag: str = "--device") -> Setting[str]:
+    """The controller URL: ``option``, else the file's ``device``, else ``sim://``."""
+    if option is not None:
+        return Setting(option, "option", flag)
+    cfg = user_config()
+    if cfg.device is not None:
+        return Setting(cfg.device, "file", str(cfg.path))
+    return Setting(DEFAULT_DEVICE_URL, "default")
+
+
+def device_url(option: str | None) -> str:
+    """The controller URL a command drives (:func:`device_setting`)."""
+    return device_setting(option).value
+
+
+def calibration_setting(option: Path | None, flag: str = "--calibration") -> Setting[Path | None]:
+    """The calibration file: ``option``, else the file's ``calibration``, else none."""
+    if option is not None:
+        return Setting(option, "option", flag)
+    cfg = user_config()
+    if cfg.calibration is not None:
+        return Setting(cfg.calibration, "file", str(cfg.path))
+    return Setting(None, "default")
+
+
+def calibration_file(option: Path | None, flag: str = "--calibration") -> Path:
+    """The calibration a command needs: ``option``, else the file's ``calibration``; else ``error:``.
+
+    A file the configuration names but that is not there is refused naming the
+    configuration file (so a stale entry is found where it was written).
+    """
+    s = calibration_setting(option, flag)
+    if s.value is None:
+        what = f"{flag} CAL.json" if flag.startswith("-") else flag
+        fail(f"no calibration: give {what}, or set calibration in the config file {config_path()} (docs/config.md)")
+    if s.source == "file" and not s.value.exists():
+        fail(f"{s.where}: calibration: {s.value} does not exist (give {flag}, or fix the config file)")
+    return s.value
+
+
+def database_setting(option: Path | None, flag: str = "--db") -> Setting[Path]:
+    """The database: ``option``, else ``$STICKSLIP_DB``, else the file's ``database``, else the data folder."""
+    import os
+
+    from ..storage import default_db_path
+    from ..storage.schema import ENV_VAR
+
+    if option is not None and str(option) != "":
+        return Setting(option.expanduser(), "option", flag)
+    env = os.environ.get(ENV_VAR)
+    if env:
+        return Setting(Path(env).expanduser(), "env", f"${ENV_VAR}")
+    cfg = user_config()
+    if cfg.database is not None:
+        return Setting(cfg.database, "file", str(cfg.path))
+    return Setting(default_db_path(), "default")
+
+
+def db_path(option: Path | None) -> Path:
+    """The database file a command uses (:func:`database_setting`)."""
+    return database_setting(option).value
+
+
+def max_age_setting(option: int | None, flag: str = "--max-age") -> Setting[int]:
+    """Largest calibration age (days) without a warning: ``option``, ``$STICKSLIP_MAX_AGE_DAYS``, the file, 0."""
+    import os
+
+    from ..clock import ENV_MAX_AGE, max_age_days
+
+    if option is not None:
+        with user_errors():
+            return Setting(max_age_days(option), "option", flag)
+    if os.environ.get(ENV_MAX_AGE, "").strip():
+        with user_errors():
+            return Setting(max_age_days(None), "env", f"${ENV_MAX_AGE}")
+    cfg = user_config()
+    if cfg.max_age_days is not None:
+        return Setting(cfg.max_age_days, "file", str(cfg.path))
+    return Setting(0, "default")
+
+
+def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Geometry]:
+    """The arm's geometry: ``option`` (OFFSET,LENGTH), else the file's ``[geometry]``, else 0mm,21mm.
+
+    A ``[geometry]`` table that gives only one length takes the other from the default.
+    """
+    from ..kinematics import DEFAULT_GEOMETRY, Geometry
+
+    if option is not None:
+        try:
+            return Setting(Geometry.parse(option), "option", flag)
+        except ValueError as e:
+            fail(f"{flag}: {e}")
+    cfg = user_config()
+    given = {k: v for k, v in (("offset", cfg.geometry_offset), ("length", cfg.geometry_length)) if v is not None}
+    if given:
+        try:
+            return Setting(Geometry(**given), "file", str(cfg.path))
+        except ValueError as e:
+            fail(f"{cfg.path}: [geometry]: {e}")
+    return Setting(DEFAULT_GEOMETRY, "default")
+
+
 def open_store(db: Path | None, must_exist: bool = False) -> Store:
-    """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the data folder).
+    """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the config file's, else the data folder).
 
     A command that only reads passes ``must_exist=True`` and refuses a file that does not
     exist yet instead of creating an empty one; storage faults are one ``error:`` line.
     """
-    from ..storage import Store, StoreError, resolve_db_path
+    from ..storage import Store, StoreError
 
-    path = resolve_db_path(db)
+    path = db_path(db)
     if must_exist and not path.exists():
         fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
     with user_errors(StoreError):

@@ -10,7 +10,7 @@ from typing import Any
 import typer
 
 from . import app
-from ._common import console, err_console, fail, print_json, user_errors
+from ._common import console, device_url, err_console, fail, print_json, user_errors
 
 
 def _load_wav(path: Path) -> tuple[Any, int]:
@@ -213,8 +213,11 @@ def record(
     ),
     joint: int = typer.Option(..., "--joint", help="Joint 1, 2 or 3 to drive into its end stop."),
     direction: str = typer.Option("+", "--direction", "-d", help="'+' (towards the upper stop) or '-'."),
-    device: str = typer.Option(
-        "sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."
+    device: str | None = typer.Option(
+        None,
+        "--device",
+        help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: device in the config file, "
+        "else sim://).",
     ),
     audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
     steps: int = typer.Option(None, "--steps", help="Real controller: steps to issue in all (past the stop)."),
@@ -251,7 +254,7 @@ def record(
     except ValueError as e:
         fail(str(e))
     with user_errors(DeviceError, AudioSourceError):
-        ctrl = open_device(device)
+        ctrl = open_device(device_url(device))
         try:
             from ..sim.arm import SimulatedMM3A
 

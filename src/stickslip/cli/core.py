@@ -29,10 +29,12 @@ from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
     angle_option,
+    calibration_file,
     console,
     fail,
     fail_table,
     length_option,
+    max_age_setting,
     print_json,
     read_table,
     user_errors,
@@ -41,17 +43,24 @@ from ._common import (
 )
 
 CalibrationOpt = Annotated[
-    Path, typer.Option("--calibration", "-c", help="Calibration JSON written by 'stickslip calibrate' or 'fit'.")
+    Path | None,
+    typer.Option(
+        "--calibration",
+        "-c",
+        help="Calibration JSON written by 'stickslip calibrate' or 'fit' (default: calibration in the config file).",
+    ),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print machine-readable JSON instead of a table.")]
 
 
-def _load_calibration(path: Path) -> Calibration:
+def _load_calibration(option: Path | None) -> Calibration:
+    """The calibration of ``--calibration``, else the config file's; a stale one queues a warning."""
     from ..calibration import Calibration
 
+    path = calibration_file(option)
     with user_errors():
         cal = Calibration.load(path)
-    msg = stale_message(cal.day)
+    msg = stale_message(cal.day, max_age_days=max_age_setting(None).value)
     if msg:
         warn_later(msg)
     return cal
@@ -195,12 +204,15 @@ def _selection_table(cal: Calibration) -> Table:
 
 @app.command("show")
 def show_cmd(
-    calibration: Annotated[Path, typer.Argument(help="Calibration JSON.")],
+    calibration: Annotated[
+        Path | None, typer.Argument(help="Calibration JSON (default: calibration in the config file).")
+    ] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints)."""
     from ..calibration import Calibration
 
+    calibration = calibration_file(calibration, "CAL.json")
     with user_errors():
         cal = Calibration.load(calibration)
     if json_out:
@@ -221,7 +233,7 @@ def predict_cmd(
             "direction may be left out on rows with start,end; other columns are passed through."
         ),
     ],
-    calibration: CalibrationOpt,
+    calibration: CalibrationOpt = None,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the CSV here instead of stdout.")] = None,
     interval: Annotated[
         bool, typer.Option("--interval", help="Also add gamma_pi95, the 95 % prediction interval's half-width.")
@@ -384,7 +396,7 @@ def _maybe_number(v: str) -> object:
 @app.command("validate")
 def validate_cmd(
     measurements: Annotated[Path, typer.Argument(help="Measurement table (CSV) to compare with.")],
-    calibration: CalibrationOpt,
+    calibration: CalibrationOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Compare the model with measured traverses, against the paper's constant-step model.
@@ -416,10 +428,10 @@ def validate_cmd(
 
 @app.command("plan")
 def plan_cmd(
-    calibration: CalibrationOpt,
     joint: Annotated[int, typer.Option("--joint", "-j", help="Joint to move: 1, 2 (rotary) or 3 (prismatic).")],
     q_from: Annotated[str, typer.Option("--from", help="Start position: rad / m, or with units (-30deg, 2mm).")],
     q_to: Annotated[str, typer.Option("--to", help="Target position: rad / m, or with units (-60deg, 2.03mm).")],
+    calibration: CalibrationOpt = None,
     q1: Annotated[str, typer.Option(help="Joint 1 angle (ignored when moving joint 1).")] = "0",
     q2: Annotated[
         str, typer.Option(help="Joint 2 angle; -90deg holds the arm out (ignored when moving joint 2).")

@@ -1,6 +1,6 @@
 """Device commands: ``move`` (a planned move, in bursts) and ``where`` (dead-reckoned positions).
 
-Positions are kept per device in the database (``--db``, default ``$STICKSLIP_DB`` or
+Positions are kept per device in the database (``--db``, default ``$STICKSLIP_DB``, the config file or
 the user's data directory) under the device URL without its query options, so every
 invocation continues from where the last one left the arm. A ``sim://`` device is
 opened at the kept positions (each invocation starts a fresh simulator).
@@ -15,18 +15,20 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..clock import max_age_days
 from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
 from ..joints import JOINTS, joint_spec
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
 from . import app
 from ._common import (
     angle_option,
+    calibration_file,
     console,
+    device_url,
     fail,
     flush_warnings,
     lazy_import,
     length_option,
+    max_age_setting,
     open_store,
     print_json,
     user_errors,
@@ -48,7 +50,8 @@ else:  # numpy loads when a command first needs it, not for --help
         return _positions.save_state(*args, **kwargs)
 
 _DB_HELP = (
-    "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
+    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, "
+    "else ~/.local/share/stickslip/stickslip.db)."
 )
 _Q1 = "Record q1 (angle: -30deg, 0.1) first."
 _Q2 = "Record q2 (angle: -90deg, -pi/2) first."
@@ -56,8 +59,8 @@ _Q3 = "Record q3 (length: 2mm, 0) first."
 _THETA = "Record the base tilt theta (angle)."
 _PSI = "Record the base tilt psi (angle)."
 _DEVICE_HELP = (
-    "Controller URL: sim:// (default), mm3a:///dev/ttyUSB0, mm3a+socket://host:port, "
-    "anc300://host[:7230]?password=..."
+    "Controller URL: sim://, mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230] "
+    "(its password from $STICKSLIP_ANC300_PASSWORD; default: device in the config file, else sim://)."
 )
 
 
@@ -229,10 +232,11 @@ def move(
     to: str | None = typer.Option(
         None, "--to", help="Move to this position (same units as --by); 'min'/'max' = an end stop."
     ),
-    calibration: Path = typer.Option(
-        ..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."
+    calibration: Path | None = typer.Option(
+        None, "--calibration", "-c",
+        help="Calibration JSON (from `stickslip calibrate`; default: calibration in the config file).",
     ),
-    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help=_Q1),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help=_Q2),
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
@@ -241,7 +245,8 @@ def move(
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Steps per burst."),
     max_age: int | None = typer.Option(
         None, "--max-age", min=0, max=36500,
-        help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, else 0).",
+        help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
+        "else max_age_days in the config file, else 0).",
     ),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
@@ -262,11 +267,12 @@ def move(
         fail("give exactly one of --by and --to")
     from ..calibration import Calibration
 
+    device = device_url(device)
     with user_errors(KeyError):
-        cal = Calibration.load(calibration)
+        cal = Calibration.load(calibration_file(calibration))
     with user_errors():
         key = device_key(device)
-        days = max_age_days(max_age)
+    days = max_age_setting(max_age).value
     spec = JOINTS[joint]
     from ..procedures.move import DeviceBusy, device_lock, drive
 
@@ -364,7 +370,7 @@ def _info_line(info: dict[str, Any]) -> str | None:
 
 @app.command()
 def where(
-    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     set_: list[str] = typer.Option(
         None, "--set", help="Reset a joint at a known point: 3=0, 3=min, 2=max, 1=-30deg."
     ),
@@ -396,6 +402,7 @@ def where(
 
     Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
     """
+    device = device_url(device)
     with user_errors():
         key = device_key(device)
     with open_store(db) as store:

@@ -1,7 +1,7 @@
 """History and analysis commands: history, export, import, anova, fit, report.
 
 The database is the embedded SQLite file of :mod:`stickslip.storage` (``--db PATH``,
-else ``$STICKSLIP_DB``, else the user's data directory).
+else ``$STICKSLIP_DB``, else the config file's, else the user's data directory).
 """
 
 from __future__ import annotations
@@ -22,7 +22,10 @@ from ._common import console, fail, open_store, print_json, read_table, user_err
 if TYPE_CHECKING:
     from ..measurements import Traverse
 
-_DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
+_DB_HELP = (
+    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, "
+    "else ~/.local/share/stickslip/stickslip.db)."
+)
 
 
 def _traverses_from(

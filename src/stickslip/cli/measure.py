@@ -10,7 +10,7 @@ import typer
 from ..clock import today_label
 from ..units import param_scale
 from . import app
-from ._common import console, fail, print_json, user_errors, validation_table, warn_later
+from ._common import console, db_path, device_url, fail, print_json, user_errors, validation_table, warn_later
 
 
 @app.command()
@@ -40,7 +40,7 @@ def demo(
         None,
         "--db",
         help="Record every traverse and the calibration in this SQLite file "
-        "(default: $STICKSLIP_DB, else the user's data folder).",
+        "(default: $STICKSLIP_DB, else database in the config file, else the user's data folder).",
     ),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record into the database (default) or not."),
     device: str = typer.Option(
@@ -76,7 +76,7 @@ def demo(
     if device is not None:
         seed, day, physics = _sim_seed_day(device, seed, day, physics)
     with user_errors(CalibrationError, TraverseError, StoreError):
-        store = Store.open(db) if use_db and not physics else None
+        store = Store.open(db_path(db)) if use_db and not physics else None
         if store is not None and not allow_duplicates and _already_recorded(store, seed, day or today_label()):
             store.close()
             store = None  # the demo still runs; its traverses are not stored a second time
@@ -176,7 +176,12 @@ def traverse_cmd(
     joint: int = typer.Option(..., "--joint", "-j", help="Joint to traverse: 1, 2 (rotary) or 3 (prismatic)."),
     direction: str = typer.Option(..., "--direction", "-d", help="'+' (lower stop to upper) or '-'."),
     tuning: Path = typer.Option(..., "--tuning", help="This joint's limit-switch tuning (stickslip tune, or demo)."),
-    device: str = typer.Option("sim://", "--device", help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host."),
+    device: str | None = typer.Option(
+        None,
+        "--device",
+        help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: device in the config file, "
+        "else sim://).",
+    ),
     audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
     q1: str = typer.Option("0", help="Joint 1 angle (ignored when traversing joint 1)."),
     q2: str = typer.Option("-90deg", help="Joint 2 angle (ignored when traversing joint 2)."),
@@ -185,7 +190,10 @@ def traverse_cmd(
     psi: str = typer.Option("0", help="Base tilt about the new y0."),
     day: str = typer.Option(None, "--day", help="Session label (default: today's ISO date)."),
     append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
-    db: Path = typer.Option(None, "--db", help="SQLite database (default: $STICKSLIP_DB, else your data folder)."),
+    db: Path = typer.Option(
+        None, "--db", help="SQLite database (default: $STICKSLIP_DB, else database in the config file, else your "
+        "data folder)."
+    ),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
     burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
     json_out: bool = typer.Option(False, "--json", help="Print the measured row as JSON (SI units)."),
@@ -214,6 +222,7 @@ def traverse_cmd(
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
+    device = device_url(device)
     try:
         label = direction_label(direction)
         pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
@@ -233,7 +242,7 @@ def traverse_cmd(
             ctrl.close()
         row = result.traverse
         if use_db:
-            with Store.open(db) as st:
+            with Store.open(db_path(db)) as st:
                 record_traverse(st, device, row, how="audio")
         if append is not None:
             append_row(append, row)

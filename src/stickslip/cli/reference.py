@@ -56,6 +56,12 @@ def render() -> str:
         cmd = group.get_command(ctx, name)
         if cmd is not None and not cmd.hidden:
             lines += _section(name, cmd)
+            if hasattr(cmd, "list_commands"):  # a group of commands (config): each one below it
+                sub_ctx = cmd.make_context(name, ["--help"], parent=ctx, resilient_parsing=True)
+                for sub_name in cmd.list_commands(sub_ctx):
+                    sub = cmd.get_command(sub_ctx, sub_name)
+                    if sub is not None and not sub.hidden:
+                        lines += _section(f"{name} {sub_name}", sub)
     return "\n".join(lines).rstrip() + "\n"
 
 

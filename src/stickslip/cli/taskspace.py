@@ -19,11 +19,15 @@ from ..units import UnitError, parse_length
 from . import app
 from ._common import (
     angle_option,
+    calibration_file,
     console,
+    device_url,
     fail,
     flush_warnings,
+    geometry_setting,
     lazy_import,
     length_option,
+    max_age_setting,
     open_store,
     print_json,
     user_errors,
@@ -44,14 +48,19 @@ else:  # numpy loads when a command first needs it, not for --help
     def save_state(*args, **kwargs):
         return _positions.save_state(*args, **kwargs)
 
-_DB_HELP = "SQLite database file (default: $STICKSLIP_DB, else ~/.local/share/stickslip/stickslip.db)."
+_DB_HELP = (
+    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, "
+    "else ~/.local/share/stickslip/stickslip.db)."
+)
 _DEVICE_HELP = (
-    "Controller URL: sim:// (default), mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230]?password=..."
+    "Controller URL: sim://, mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230] "
+    "(its password from $STICKSLIP_ANC300_PASSWORD; default: device in the config file, else sim://)."
 )
 _GEOMETRY_HELP = (
     "OFFSET,LENGTH of the arm: joint-1 axis to joint-2 axis, joint-2 axis to the tip at q3 = 0 "
-    "(default 0mm,21mm; measure yours, see docs/taskspace.md)."
+    "(default: [geometry] in the config file, else 0mm,21mm; measure yours, see docs/taskspace.md)."
 )
+_CAL_HELP = "Calibration JSON (from `stickslip calibrate`; default: calibration in the config file)."
 
 
 _BORROWED = (
@@ -78,13 +87,11 @@ def parse_point(text: str, what: str) -> tuple[float, float, float]:
 
 
 def parse_geometry(text: str | None) -> kin.Geometry:
-    """``--geometry OFFSET,LENGTH`` to a :class:`~stickslip.kinematics.Geometry` (default if ``None``)."""
-    if text is None:
-        return kin.DEFAULT_GEOMETRY
-    try:
-        return kin.Geometry.parse(text)
-    except ValueError as e:
-        fail(f"--geometry: {e}")
+    """``--geometry OFFSET,LENGTH`` to a :class:`~stickslip.kinematics.Geometry`.
+
+    Without the option: the config file's ``[geometry]``, else the default (0mm,21mm).
+    """
+    return geometry_setting(text).value
 
 
 def _max_rates(dev: Controller, max_rate: float) -> list[float]:
@@ -125,10 +132,10 @@ def _um(v: tuple[float, float, float] | list[float]) -> str:
 
 @app.command()
 def reach(
-    calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."),
+    calibration: Path | None = typer.Option(None, "--calibration", "-c", help=_CAL_HELP),
     to: str | None = typer.Option(None, "--to", help="Tip target X,Y,Z in the base frame: 21mm,0,50um."),
     by: str | None = typer.Option(None, "--by", help="Tip displacement DX,DY,DZ: 20um,-10um,5um."),
-    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help="Record q1 (angle) first."),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help="Record q2 (angle) first."),
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help="Record q3 (length) first."),
@@ -165,11 +172,12 @@ def reach(
     point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
     geom = parse_geometry(geometry)
     seg = float(segment)
+    device = device_url(device)
     from ..calibration import Calibration
     from ..reach import borrow_joint1, plan_reach
 
     with user_errors(KeyError):
-        cal, borrowed = borrow_joint1(Calibration.load(calibration))
+        cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
     with user_errors():
         key = device_key(device)
     pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)
@@ -201,7 +209,7 @@ def reach(
             plan = plan_from(state)
             with user_errors():
                 save_state(store, state)  # the recorded pose, even if nothing moves
-            for w in usage_warnings(cal, None, device, 3):
+            for w in usage_warnings(cal, None, device, 3, max_age_setting(None).value):
                 warn_later(w)
             flush_warnings()
             outcome, sim_true = ReachOutcome(), None
@@ -374,8 +382,8 @@ class _Screen:
 
 @app.command()
 def jog(
-    calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration JSON (from `stickslip calibrate`)."),
-    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    calibration: Path | None = typer.Option(None, "--calibration", "-c", help=_CAL_HELP),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help="Record q1 (angle) first."),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help="Record q2 (angle) first."),
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help="Record q3 (length) first."),
@@ -419,8 +427,9 @@ def jog(
     from ..reach import borrow_joint1
 
     geom = parse_geometry(geometry)
+    device = device_url(device)
     with user_errors(KeyError):
-        cal, borrowed = borrow_joint1(Calibration.load(calibration))
+        cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
     if borrowed:
         warn_later(_BORROWED)
     with user_errors():
@@ -434,7 +443,7 @@ def jog(
                 fail(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
             with user_errors():
                 save_state(store, state)
-            for w in usage_warnings(cal, None, device, 3):
+            for w in usage_warnings(cal, None, device, 3, max_age_setting(None).value):
                 warn_later(w)
             flush_warnings()
             try:
