@@ -44,3 +44,21 @@ def test_step_counts():
     for bad in (True, 2.5, "10", None, float("nan")):
         with pytest.raises(ValueError, match="step count must be an integer"):
             base.check_steps(bad)
+
+
+@pytest.mark.parametrize(
+    ("url", "hint"),
+    [("/dev/ttyUSB0", "mm3a:///dev/ttyUSB0"), ("COM3", "mm3a://COM3"), ("", "mm3a:///dev/ttyUSB0")],
+)
+def test_a_url_without_scheme_never_opens_the_simulator(url, hint):
+    # a bare port used to open sim:// silently: a simulated position in the real arm's place
+    with pytest.raises(ValueError, match="has no scheme") as e:
+        base.open_device(url)
+    assert hint in str(e.value)
+    assert base.url_scheme("sim://?seed=3") == "sim" and base.url_scheme("mm3a://COM3") == "mm3a"
+
+
+def test_a_scheme_less_url_with_a_secret_is_refused_without_the_secret():
+    with pytest.raises(ValueError) as e:
+        base.open_device("admin:hunter2@10.0.0.2")
+    assert "hunter2" not in str(e.value)

@@ -746,8 +746,9 @@ def _pose_records(
 
     ``cols`` holds the data rows as columns, padded with empty cells to the header's
     width; ``lines`` their line numbers. Empty records (blank lines) are skipped but
-    counted, as in measurement tables, so ``file:line`` names the line; records whose cells are blank (of a repeated column
-    name, the last cell) are counted and skipped; ``overlong`` lists the lines of
+    counted, as in measurement tables, so ``file:line`` names the line; records
+    whose cells are blank (of a repeated column name, the last cell) are counted and
+    skipped; ``overlong`` lists the lines of
     records with more cells than the header. ``raw``: the chunk's text lines when
     every one of them is a data row as it stands (for passing rows through), else None.
     """

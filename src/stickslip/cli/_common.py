@@ -28,6 +28,7 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..config import ConfigError, UserConfig, config_path, load_config
+from ..devices.base import url_scheme
 from ..units import UnitError, parse_angle, parse_length
 
 if TYPE_CHECKING:
@@ -282,6 +283,10 @@ DEFAULT_DEVICE_URL = "sim://"
 def device_setting(option: str | None, flag: str = "--device") -> Setting[str]:
     """The controller URL: ``option``, else the file's ``device``, else ``sim://``."""
     if option is not None:
+        try:
+            url_scheme(option)
+        except ValueError as e:
+            fail(f"{flag}: {e}")
         return Setting(option, "option", flag)
     cfg = user_config()
     if cfg.device is not None:

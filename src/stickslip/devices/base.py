@@ -64,9 +64,12 @@ def redact_url(url: str) -> str:
 
     >>> redact_url("anc300://admin:hunter2@10.0.0.2:7230?password=123&axes=1,2,3")
     'anc300://admin:***@10.0.0.2:7230?password=***&axes=1,2,3'
+    >>> redact_url("admin:hunter2@10.0.0.2")
+    'admin:***@10.0.0.2'
     """
     text = str(url)
-    text = re.sub(r"(?<=://)([^/@?#]*?):([^/@?#]*)@", r"\1:***@", text)
+    # user:PASSWORD@ after the scheme's "//", or at the start of a URL written without a scheme
+    text = re.sub(r"(://|^)([^/@?#:]*):([^/@?#]*)@", r"\1\2:***@", text)
     return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}{m.group(2)}=***", text)
 
 
@@ -257,10 +260,7 @@ def open_device(url: str = "sim://") -> Controller:
     Raises :class:`DeviceError` for an unknown scheme or a device that cannot be opened,
     ``ValueError`` for a malformed URL or option; messages never contain a secret.
     """
-    try:
-        scheme = urlsplit(url).scheme or "sim"
-    except ValueError as e:
-        raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
+    scheme = url_scheme(url)
     base_scheme = scheme.split("+", 1)[0]
     factory = BACKENDS.get(scheme) or BACKENDS.get(base_scheme)
     if factory is None:
@@ -279,6 +279,30 @@ def open_device(url: str = "sim://") -> Controller:
         return factory(url)
     except (DeviceError, ValueError) as e:
         raise type(e)(redact_url(str(e))) from None
+
+
+def url_scheme(url: str) -> str:
+    """The scheme of a device URL (``"sim"``, ``"mm3a"``, ...); ``ValueError`` when it names none.
+
+    A bare port (``/dev/ttyUSB0``, ``COM3``) or an empty URL is refused rather than read
+    as ``sim://``: the simulator must never answer in a real arm's place. The message
+    says how to write the URL and never contains a secret.
+    """
+    try:
+        scheme = urlsplit(url).scheme
+    except ValueError as e:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
+    if not scheme or "://" not in url:
+        raise ValueError(
+            f"device URL {redact_url(url)!r} has no scheme: write mm3a://{_port_path(url)} for a "
+            "NanoControl on that port, anc300://HOST for an ANC300, or sim:// for the simulator"
+        )
+    return scheme
+
+
+def _port_path(url: str) -> str:
+    """A bare serial port as it goes after ``mm3a://`` (``/dev/ttyUSB0``, ``COM3``), for the hint."""
+    return redact_url(url).strip() or "/dev/ttyUSB0"
 
 
 def device_key(url: str) -> str:
