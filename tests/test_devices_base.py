@@ -35,6 +35,10 @@ def test_device_key_keeps_identity_and_drops_secrets():
     assert base.device_key("mm3a:///dev/ttyUSB0?timeout=5") == "mm3a:///dev/ttyUSB0"
     assert base.device_key("sim://?day=2026-11-22&seed=7") == "sim://?seed=7"
     assert base.device_key("sim://") == "sim://"
+    # one simulated arm, one key: the default seed is 0; the physics arm is another arm
+    assert base.device_key("sim://?seed=0") == base.device_key("sim://?seed=00") == "sim://"
+    assert base.device_key("sim://?physics=1") == base.device_key("sim+physics://?seed=0") == "sim+physics://"
+    assert base.device_key("sim+physics://?seed=4&day=x") == "sim+physics://?seed=4"
 
 
 def test_step_counts():

@@ -316,6 +316,8 @@ def device_key(url: str) -> str:
     'anc300://192.168.1.2:7230'
     >>> device_key("sim://?seed=3&day=2026-11-22")
     'sim://?seed=3'
+    >>> device_key("sim://?seed=0"), device_key("sim://?physics=1&seed=2")
+    ('sim://', 'sim+physics://?seed=2')
     >>> device_key("anc300://admin:secret@[fe80::1]:7230")
     'anc300://[fe80::1]:7230'
 
@@ -325,9 +327,8 @@ def device_key(url: str) -> str:
     try:
         parts = urlsplit(url or "sim://")
         scheme = parts.scheme or "sim"
-        if scheme == "sim":
-            seed = parse_qs(parts.query).get("seed")
-            return "sim://" + (f"?seed={seed[-1]}" if seed else "")
+        if scheme == "sim" or scheme.startswith("sim+"):
+            return _sim_key(scheme, parse_qs(parts.query))
         host = parts.hostname or ""
         if ":" in host:
             host = f"[{host}]"
@@ -335,6 +336,15 @@ def device_key(url: str) -> str:
     except ValueError as e:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
     return f"{scheme}://{host}{port}{parts.path}"
+
+
+def _sim_key(scheme: str, query: dict[str, list[str]]) -> str:
+    """A simulated arm's key: which simulator (closed-form or physics) and its seed (0 unless given)."""
+    physics = scheme == "sim+physics" or "1" in query.get("physics", [])
+    seed = query.get("seed", ["0"])[-1].strip()
+    if seed.isdigit():
+        seed = str(int(seed))  # "007" and "7" are one arm
+    return ("sim+physics://" if physics else "sim://") + ("" if seed == "0" else f"?seed={seed}")
 
 
 def check_setting(what: str, value: object, lo: float, hi: float, unit: str = "", integer: bool = False) -> float:
