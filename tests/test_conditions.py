@@ -118,6 +118,9 @@ def test_usage_warnings_name_device_frequency_and_age(monkeypatch):
     assert w[0].startswith("calibration is from 2026-11-22, today is 2026-11-25 (3 days old)")
     same = _cal(Conditions("sim://?seed=4", 1000.0))
     assert usage_warnings(same, sim, "sim://?seed=4", 3, max_age_days=3) == []
+    # a calibration file that wrote the default seed out is the same arm as plain sim://
+    written_out = _cal(Conditions("sim://?seed=0", 1000.0))
+    assert usage_warnings(written_out, SimulatedMM3A(seed=0, day=DAY), "sim://", 3, max_age_days=3) == []
 
 
 def test_max_age_comes_from_the_option_then_the_environment(monkeypatch):

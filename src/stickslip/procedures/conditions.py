@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import replace
 
 from ..calibration import Calibration, Conditions
 from ..clock import stale_message
@@ -72,7 +73,13 @@ def usage_warnings(
     now = Conditions(device=device_key(url))
     if dev is not None:
         now = conditions_of(dev, url, (joint,))
-    diffs = cal.conditions.differences(now)
+    then = cal.conditions
+    if then.device:  # a calibration written before keys were canonical (sim://?seed=0 is sim://)
+        try:
+            then = replace(then, device=device_key(then.device))
+        except ValueError:
+            pass  # a malformed key compares as written
+    diffs = then.differences(now)
     if diffs:
         out.append(
             "the calibration was made under other conditions (" + "; ".join(diffs) + "): "
