@@ -5,7 +5,6 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import os
-import sys
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -136,17 +135,11 @@ def default_db_path() -> Path:
 
     ``$XDG_DATA_HOME/stickslip/stickslip.db`` (else ``~/.local/share/...``) on Linux and
     other Unix; ``~/Library/Application Support/stickslip/stickslip.db`` on macOS;
-    ``%LOCALAPPDATA%\\stickslip\\stickslip.db`` on Windows.
+    ``%LOCALAPPDATA%\\stickslip\\stickslip.db`` on Windows (``platformdirs.user_data_path``).
     """
-    home = Path.home()
-    if sys.platform == "win32":
-        base = Path(os.environ.get("LOCALAPPDATA") or home / "AppData" / "Local")
-    elif sys.platform == "darwin":
-        base = home / "Library" / "Application Support"
-    else:
-        xdg = os.environ.get("XDG_DATA_HOME")
-        base = Path(xdg) if xdg and os.path.isabs(xdg) else home / ".local" / "share"
-    return base / "stickslip" / "stickslip.db"
+    import platformdirs  # the three platforms' conventions, as the config file's folder (config.py)
+
+    return platformdirs.user_data_path("stickslip", appauthor=False) / "stickslip.db"
 
 
 def resolve_db_path(path: str | os.PathLike[str] | None = None) -> Path:
