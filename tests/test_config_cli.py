@@ -150,6 +150,10 @@ def test_a_move_drives_the_files_device_and_keeps_its_positions_under_it(cfg, tm
     kept = json.loads(ok("where", "--offline", "--json", "-d", "sim://?seed=7").stdout)["joints"][2]["q"]
     assert kept == pytest.approx(out["q_end_predicted"], abs=1e-12)
     assert json.loads(ok("where", "--offline", "--json", "-d", "sim://").stdout)["joints"][2]["q"] == 0.0
+    # the arm the file chose is named on stderr (the text output would not say which arm moved)
+    text = ok("move", "-j", "3", "--by", "1um")
+    assert f"device sim://?seed=7 (from {tmp_path / 'cfg' / 'config.toml'})" in text.stderr
+    assert "device sim://" not in ok("move", "-j", "3", "--by", "1um", "-d", "sim://?seed=7").stderr
 
 
 # ---------------------------------------------------------------- calibration: option > file > none

@@ -28,7 +28,7 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..config import ConfigError, UserConfig, config_path, load_config
-from ..devices.base import url_scheme
+from ..devices.base import redact_url, url_scheme
 from ..units import UnitError, parse_angle, parse_length
 
 if TYPE_CHECKING:
@@ -295,8 +295,17 @@ def device_setting(option: str | None, flag: str = "--device") -> Setting[str]:
 
 
 def device_url(option: str | None) -> str:
-    """The controller URL a command drives (:func:`device_setting`)."""
-    return device_setting(option).value
+    """The controller URL a command drives (:func:`device_setting`).
+
+    When it comes from the configuration file, a line on stderr says so (the URL with any
+    secret hidden), so an arm is never driven without the user seeing which.
+    """
+    setting = device_setting(option)
+    if setting.source == "file":
+        err_console.print(
+            f"device {redact_url(setting.value)} (from {setting.where})", highlight=False, markup=False, soft_wrap=True
+        )
+    return setting.value
 
 
 def calibration_setting(option: Path | None, flag: str = "--calibration") -> Setting[Path | None]:
