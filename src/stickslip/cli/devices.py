@@ -209,7 +209,9 @@ def _move_locked(
     if note:
         warn_later(note)
     with user_errors(KeyError):
-        steps, q_end, reckon = _plan(scaled_calibration(cal, joint, track.scale), joint, q_from, q_to, pose)
+        steps, q_end, reckon = _plan(
+            scaled_calibration(cal, joint, {d: track.scale_of(d) for d in "+-"}), joint, q_from, q_to, pose
+        )
     with user_errors():
         save_state(store, state)  # the recorded pose, even if nothing moves
     outcome, sim_true = MoveOutcome(), None

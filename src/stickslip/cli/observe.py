@@ -91,7 +91,7 @@ def observe(
             was_uncertain = joint in state.uncertain
             raw = state.track.get(joint)
             with user_errors():
-                track = JointTrack.from_json(raw) if raw is not None else JointTrack(0.0)
+                track = JointTrack.from_json(raw) if raw is not None else JointTrack()
             sd_before = track.sd
             scale_before = track.scale
             re_reference = was_uncertain or raw is None
