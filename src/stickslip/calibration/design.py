@@ -152,7 +152,8 @@ def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
 
     Joint 3: the axial load ``L``, the loads across the axis ``X``, ``Y`` and ``|cos q2|``
     ((F1), (F2)). Rotary joints: the torque term ``T``, the radial and axial loads ``R``,
-    ``P`` at five points along the traverse and ``2 q3 / 12 mm - 1`` ((F3)). Every
+    ``P`` at five points along the traverse (each group divided by sqrt(5), so that each
+    quantity weighs as much as one coordinate) and ``2 q3 / 12 mm - 1`` ((F3)). Every
     coordinate is within [-1, 1].
     """
     cols = np.array([list(p) for p in poses], dtype=float).reshape(-1, 5)
@@ -164,7 +165,8 @@ def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
     args = [cols[:, k, None] * np.ones_like(q) for k in range(5)]
     args[joint - 1] = np.broadcast_to(q, (len(cols), 5))
     f = features(joint, *args)
-    return np.concatenate([f.T, f.R, f.P, (2.0 * cols[:, 2:3] / kin.Q3_MAX - 1.0)], axis=1)
+    g = 1.0 / math.sqrt(5.0)
+    return np.concatenate([g * f.T, g * f.R, g * f.P, (2.0 * cols[:, 2:3] / kin.Q3_MAX - 1.0)], axis=1)
 
 
 def spread_poses(
