@@ -128,7 +128,8 @@ def test_track_json_round_trip_and_refusals():
     t.predict(1e-3, 1000, kin.Pose(), 3, 0.05)
     t.observe(1e-3, 1.01e-3, 1e-6)
     back = JointTrack.from_json(t.to_json())
-    assert np.array_equal(back.log_scale, t.log_scale) and np.array_equal(back.P, t.P) and back.calibration == t.calibration
+    assert np.array_equal(back.log_scale, t.log_scale) and np.array_equal(back.P, t.P)
+    assert back.calibration == t.calibration
     for bad in (None, {}, {"log_scale": "x", "P": [[0, 0], [0, 0]]}, {"log_scale": 0, "P": [[-1, 0], [0, 1]]},
                 {"log_scale": [0, 0], "P": [[1, 5, 0], [5, 1, 0], [0, 0, 1]]},
                 {"log_scale": [float("nan"), 0], "P": np.eye(3).tolist()}, {"log_scale": [0, 0], "P": [[0, 0]]}):
@@ -206,7 +207,8 @@ def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
         assert abs(w["q"] - arm.position(3)) <= 3 * w["sd"] + 1e-7, (k, w)
     pose = kin.Pose(0.0, -math.pi / 2, 0.0, 0.0, 0.0)
     true_scale = math.sqrt(
-        float(arm.true_mean_step(3, "+") * arm.true_mean_step(3, "-")) / (cal.gamma(3, "+", pose) * cal.gamma(3, "-", pose))
+        float(arm.true_mean_step(3, "+") * arm.true_mean_step(3, "-"))
+        / (cal.gamma(3, "+", pose) * cal.gamma(3, "-", pose))
     )
     assert w["step_scale"] == pytest.approx(true_scale, rel=0.01)
     # a reading far from the kept position is refused, not used

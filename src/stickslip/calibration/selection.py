@@ -1,15 +1,15 @@
-"""Choosing a model family by leave-one-pose-out cross-validation (docs/models.md §3).
+"""Averaging (or choosing) model families by leave-one-pose-out cross-validation (docs/models.md §3).
 
 For each joint, every family of :mod:`stickslip.families` (and its variant with terms
 shared by + and -) that the traverses can identify, with at least two poses per
 parameter of a direction, is fitted to both directions; then each *pose* (the fixed
 joints and the tilt) beyond the paper's calibration poses is left out in turn, the
-family is refitted on the rest and predicts the left-out traverses. The family with the
-smallest mean of the RMS and the largest CV error is chosen, except that a simpler
-family within 5 % of it is preferred (fewer parameters, less to go wrong outside the
-data). A joint and direction with too few poses for any family beyond the constant
-step falls back to it: calibration never stops for lack of data once every joint and
-direction present has one traverse.
+family is refitted on the rest and predicts the left-out traverses. With ``auto`` the
+families are averaged with pseudo-BMA+ weights from those left-out errors
+(:func:`averaging_weights`); asked for one family, that one is fitted. A joint and
+direction with too few poses for any family beyond the constant step falls back to it:
+calibration never stops for lack of data once every joint and direction present has one
+traverse.
 """
 
 from __future__ import annotations

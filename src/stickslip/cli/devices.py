@@ -290,6 +290,9 @@ def move(
 
     They are sent in bursts; the dead-reckoned position is kept after every burst.
 
+    The steps use the day's step scale learned from measured positions (stickslip
+    observe), and the position's standard deviation grows with the move.
+
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
     if (by is None) == (to is None):
@@ -344,7 +347,8 @@ def move(
     console.print(
         f"joint {joint}: {format_position(q_from, joint)} -> {format_position(q_to, joint)}: "
         f"{steps:+d} steps in {len(bursts)} burst(s); planned end {format_position(q_end, joint)}"
-        + (f" ± {_sd_text(tf['sd'], joint)} (step scale x{tf['step_scale'] or 1.0:.4f})" if tf["sd"] is not None else ""),
+        + (f" ± {_sd_text(tf['sd'], joint)} (step scale x{tf['step_scale'] or 1.0:.4f})"
+           if tf["sd"] is not None else ""),
         highlight=False,
     )
     if sim_true is not None:
@@ -422,8 +426,10 @@ def where(
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, dead-reckoned, or
-    uncertain (a move was interrupted: the bounds are shown; re-reference with --set).
+    Source: default (never set; outstretched pose assumed), set, dead-reckoned,
+    observed (stickslip observe), or uncertain (a move was interrupted: the bounds are
+    shown; re-reference with --set). A joint moved since it was set shows ± its standard
+    deviation and the step scale learned from observations.
 
     Reset a joint at an end stop after a traverse, a crash or a manual move.
 

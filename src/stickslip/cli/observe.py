@@ -41,7 +41,8 @@ def observe(
         help="Standard deviation of the measurement: 1um, 50urad (default: 0 at an end stop, else 1um / 50urad).",
     ),
     force: bool = typer.Option(
-        False, "--force", help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position."
+        False, "--force",
+        help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
     ),
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
