@@ -73,7 +73,7 @@ def main(seeds: tuple[int, ...] = (101, 102, 103)) -> None:
             for (j, d), sel in auto.selection.items():
                 if d == "+":
                     chosen[f"{j}:{sel['chosen']}"] += 1
-            rows["auto, CV-selected (46)"] = auto.predict_many(val)
+            rows["auto, CV-weighted average (46)"] = auto.predict_many(val)
             if prev is not None:
                 rows["yesterday's auto (46), as is"] = prev.predict_many(val)
                 upd, _ = update_calibration(prev, new4)
@@ -100,7 +100,7 @@ def main(seeds: tuple[int, ...] = (101, 102, 103)) -> None:
             else:
                 cells += ["—", "—", "—"]
         print(f"| {label} | " + " | ".join(cells) + " |")
-    print("\nfamilies chosen by --model auto (joint: family: days):",
+    print("\nfamily with the largest weight in --model auto (joint:family: days):",
           ", ".join(f"{k}: {v}" for k, v in sorted(chosen.items())))
 
 
