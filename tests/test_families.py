@@ -242,3 +242,43 @@ def test_mangled_family_files_give_one_reason(seed):
     except ValueError:
         return
     cal.predict_many([t for t in paper_table() if (t.joint, t.direction) in cal.models][:4])
+
+
+def test_averaging_weights_identities():
+    # pseudo-BMA+ (docs/models.md §3): equal errors -> equal weights; a family whose left-out errors are
+    # 10x smaller on every pose takes (nearly) all the weight; weights sum to 1, are deterministic, and a
+    # family that is better on only some poses keeps part of the weight (the Bayesian bootstrap's hedge)
+    from stickslip.calibration.selection import MIN_WEIGHT, averaging_weights
+
+    rng = np.random.default_rng(3)
+    ids = np.repeat(np.arange(10), 2)
+    e = 0.02 * rng.standard_normal(20)
+    w = averaging_weights({"a": e, "b": e.copy()}, ids)
+    assert w["a"] == pytest.approx(0.5, abs=1e-12) and w["b"] == pytest.approx(0.5, abs=1e-12)
+    w = averaging_weights({"good": 0.1 * e, "bad": e}, ids)
+    assert w == {"good": 1.0}  # the other falls under MIN_WEIGHT and is dropped
+    mixed = e.copy()
+    mixed[:6] *= 0.2  # better on 3 of 10 poses, the same elsewhere
+    w2 = averaging_weights({"x": mixed, "y": e}, ids)
+    assert sum(w2.values()) == pytest.approx(1.0, abs=1e-12) and min(w2.values()) >= MIN_WEIGHT
+    assert w2["x"] > w2["y"]
+    assert averaging_weights({"x": mixed, "y": e}, ids) == w2
+
+
+def test_averaged_model_predicts_the_weighted_step():
+    # an averaged FamilyModel's step is sum w_k gamma_k; its traverse average is the harmonic mean of that
+    # sum along the travel (rotary), not the weighted traverse averages
+    a = FamilyParams("paper", 2, (52e-6, 47e-6, -8e-6, -19e-6))
+    b = FamilyParams("radial", 2, (50e-6, 49e-6, -6e-6, -21e-6, 3e-6))
+    m = FamilyModel(2, "+", a, members=((0.7, a), (0.3, b)))
+    ma, mb = FamilyModel(2, "+", a), FamilyModel(2, "+", b)
+    args = (0.1, np.linspace(-3.0, 0.4, 5), 0.004, -0.3, 0.2)
+    np.testing.assert_allclose(m.gamma(*args), 0.7 * ma.gamma(*args) + 0.3 * mb.gamma(*args), rtol=1e-14)
+    lo, hi = kin.JOINTS[2].lower, kin.JOINTS[2].upper
+    q = np.linspace(lo, hi, 200001)
+    g = m.gamma(0.1, q, 0.004, -0.3, 0.2)
+    inv = 1.0 / g
+    exact = (hi - lo) / float(np.sum(0.5 * (inv[1:] + inv[:-1]) * np.diff(q)))
+    assert float(m.average_gamma(lo, hi, 0.1, 0.0, 0.004, -0.3, 0.2)) == pytest.approx(exact, rel=1e-8)
+    scaled = m.map_params(lambda p: p.scaled(1.1))
+    np.testing.assert_allclose(scaled.gamma(*args), 1.1 * m.gamma(*args), rtol=1e-14)
