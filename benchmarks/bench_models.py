@@ -2,8 +2,9 @@
 
 For several seeds and three days each, on :class:`stickslip.sim.physics.PhysicsMM3A`:
 
-* the paper's 14 calibration traverses, 32 more at well-spread random poses (8 poses per
-  joint, both directions) and 32 validation traverses at other random poses;
+* the paper's 14 calibration traverses, 32 more at poses spread over the load space (8 poses
+  per joint, both directions; ``calibration.design.spread_poses``, a maximin design around the
+  paper's poses) and 32 validation traverses at random poses;
 * calibrations: the constant step (the paper's comparator, from the 14), the paper's
   procedure on the 14, every family fitted to the 46 (``--model NAME``), the automatic
   choice (``--model auto``) on the 46, and yesterday's automatic calibration updated with
@@ -25,7 +26,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from physics_scenarios import paper14, random_pose, spread  # noqa: E402
+from physics_scenarios import paper14, random_pose, spread, well_spread  # noqa: E402
 from stickslip.calibration import calibrate  # noqa: E402
 from stickslip.calibration.update import update_calibration  # noqa: E402
 from stickslip.families import families_for  # noqa: E402
@@ -51,7 +52,7 @@ def main(seeds: tuple[int, ...] = (101, 102, 103)) -> None:
         for day in DAYS:
             arm = ph.PhysicsMM3A(seed=seed, day=day)
             p14 = paper14(arm, day)
-            s32 = spread(arm, day, rng)
+            s32 = well_spread(arm, day, rng)
             val = spread(arm, day, rng, 8)
             new4 = [ph.traverse(arm, j, d, random_pose(rng, j), day) for j in (3, 2) for d in "+-"]
             c14 = calibrate(p14)
@@ -72,7 +73,7 @@ def main(seeds: tuple[int, ...] = (101, 102, 103)) -> None:
             for (j, d), sel in auto.selection.items():
                 if d == "+":
                     chosen[f"{j}:{sel['chosen']}"] += 1
-            rows["auto, CV-selected (46)"] = auto.predict_many(val)
+            rows["auto, CV-weighted average (46)"] = auto.predict_many(val)
             if prev is not None:
                 rows["yesterday's auto (46), as is"] = prev.predict_many(val)
                 upd, _ = update_calibration(prev, new4)
@@ -99,7 +100,7 @@ def main(seeds: tuple[int, ...] = (101, 102, 103)) -> None:
             else:
                 cells += ["—", "—", "—"]
         print(f"| {label} | " + " | ".join(cells) + " |")
-    print("\nfamilies chosen by --model auto (joint: family: days):",
+    print("\nfamily with the largest weight in --model auto (joint:family: days):",
           ", ".join(f"{k}: {v}" for k, v in sorted(chosen.items())))
 
 

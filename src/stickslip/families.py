@@ -17,6 +17,11 @@ friction capacity, which the normal load ``X`` changes::
 
     gamma_3 = s * eta(q2) * (a - c Λ - e Λ^2 - f X),  Λ = L / (1 + k X)     (F4)
 
+and the family ``load-mount``, where the load's effect depends on how compliant the
+mount is, which the arm's elevation sets (the same ``|cos q2|`` as the efficiency)::
+
+    gamma_3 = s * eta(q2) * (a - (c + m |cos q2|) L - e L^2)                (F5)
+
 with ``L = -g0 . z2`` (the paper's axial load, ``cos(zeta) cos(theta)`` at q1 = 0),
 ``X = -g0 . x2`` and ``Y = -g0 . z1`` the two components of gravity across the axis
 (``x2 = z1 x z2``; ``L^2 + X^2 + Y^2 = 1``).
@@ -41,6 +46,7 @@ agreement with the closed form of the paper family is ~1e-12, a test checks it).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -125,6 +131,10 @@ FAMILIES: dict[str, FamilySpec] = {
         FamilySpec(
             "smooth-eta", "prismatic", (("a", None), ("b2", None), ("c", None), ("e", None)),
             "eta = 1 - b2 cos^2 q2 (no kink), load quadratic in L",
+        ),
+        FamilySpec(
+            "load-mount", "prismatic", (("a", None), ("b", None), ("c", None), ("e", None), ("m", None)),
+            "quadratic load whose strength changes with the mount's compliance (c + m |cos q2|)",
         ),
         FamilySpec(
             "normal", "prismatic", (("a", None), ("b", None), ("c", None), ("f", None), ("h", None)),
@@ -267,7 +277,8 @@ def evaluate(spec: FamilySpec, values: ArrayLike, f: Features, scale: float = 1.
     if spec.kind == "prismatic":
         eta = 1.0 - scalar("b") * f.abs_cos_q2 - scalar("b2") * f.abs_cos_q2**2
         lam = f.L / (1.0 + scalar("k") * f.X) if "k" in groups else f.L  # (F4): load over friction capacity
-        core = scalar("a") - scalar("c") * lam - scalar("e") * lam**2 - scalar("f") * f.X - scalar("h") * f.Y
+        c_eff = scalar("c") + scalar("m") * f.abs_cos_q2  # (F5): the mount's compliance changes the load's effect
+        core = scalar("a") - c_eff * lam - scalar("e") * lam**2 - scalar("f") * f.X - scalar("h") * f.Y
         out: NDArray[np.float64] = scale * eta * core
         return out
     g0 = of_q3("gamma0")
@@ -306,8 +317,13 @@ def average_from_features(
     spec: FamilySpec, values: ArrayLike, f: Features, scale: float = 1.0
 ) -> NDArray[np.float64]:
     """Average step over traverses from :func:`traverse_features` (m or rad); nan where it would stall."""
-    g = evaluate(spec, values, f, scale)
-    if spec.kind == "prismatic":
+    return average_from_gamma(spec.kind, evaluate(spec, values, f, scale))
+
+
+def average_from_gamma(kind: str, g: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Average step over traverses from the step along them (prismatic: ``(n,)``; rotary: ``(n, 48)`` at the
+    Gauss-Legendre nodes of :func:`traverse_features`), m or rad; nan where it would stall."""
+    if kind == "prismatic":
         return np.where(g > 0.0, g, np.nan)
     with np.errstate(divide="ignore", invalid="ignore"):
         avg = 1.0 / (np.sum(_GL_W / g, axis=-1) * 0.5)
@@ -414,21 +430,52 @@ def _pose_grid_gamma(p: FamilyParams) -> NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class FamilyModel(JointModel):
-    """A :class:`~stickslip.models.JointModel` whose step follows a family of (F1)-(F3)."""
+    """A :class:`~stickslip.models.JointModel` whose step follows a family of (F1)-(F5), or an average of them.
+
+    With ``members`` empty the step is the family ``params``'s. With ``members``, the
+    step is the weighted average ``sum_k w_k gamma_k(pose)`` of those families (model
+    averaging, docs/models.md §3), and ``params`` is the member with the largest weight
+    (what ``parameters()``, standard errors and covariances describe).
+    """
 
     params: FamilyParams  # type: ignore[assignment]  # narrows the paper's Params
     extra: dict[str, object] = field(default_factory=dict, compare=False)
+    members: tuple[tuple[float, FamilyParams], ...] = ()
+    """``(weight, params)`` of an averaged model (weights > 0, summing to 1); empty for one family."""
 
     @property
     def family(self) -> str:
         return self.params.family
 
+    def parts(self) -> tuple[tuple[float, FamilyParams], ...]:
+        """``(weight, params)`` of every family in the model (one with weight 1 unless averaged)."""
+        return self.members if self.members else ((1.0, self.params),)
+
+    def map_params(self, fn: Callable[[FamilyParams], FamilyParams]) -> FamilyModel:
+        """The same model with ``fn`` applied to the parameters of every family in it."""
+        return FamilyModel(
+            self.joint, self.direction, fn(self.params), members=tuple((w, fn(p)) for w, p in self.members)
+        )
+
+    def _mix(self, f: Features) -> NDArray[np.float64]:
+        out = np.zeros(np.shape(f.L))
+        for w, p in self.parts():
+            out = out + w * evaluate(p.spec, p.values, f, p.scale)
+        return out
+
     def gamma(
         self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
     ) -> NDArray[np.float64]:
-        """Mean step size in a pose (m or rad), (F1)-(F3)."""
-        p = self.params
-        return evaluate(p.spec, p.values, features(self.joint, q1, q2, q3, theta, psi), p.scale)
+        """Mean step size in a pose (m or rad), (F1)-(F5) (the weighted average of the members if averaged)."""
+        return self._mix(features(self.joint, q1, q2, q3, theta, psi))
+
+    def check_physical(self) -> None:
+        """Raise :class:`NonPhysicalError` unless the step is > 0 over a grid of every pose."""
+        g = sum(w * _pose_grid_gamma(p) for w, p in self.parts())
+        if not np.all(np.isfinite(g)) or not float(np.min(g)) > 0.0:
+            raise NonPhysicalError(
+                f"family {self.family}: the step would be <= 0 in some pose (smallest {float(np.nanmin(g)):.3g})"
+            )
 
     def rotary_coefficients(
         self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
@@ -465,8 +512,8 @@ class FamilyModel(JointModel):
         psi: ArrayLike,
     ) -> NDArray[np.float64]:
         """Average step over a traverse (m or rad); raises :class:`NonPhysicalError` where it would stall."""
-        p = self.params
-        out = average_over_traverse(p.spec, p.values, self.joint, start, end, q1, q2, q3, theta, psi, p.scale)
+        f = traverse_features(self.joint, start, end, q1, q2, q3, theta, psi)
+        out = average_from_gamma(joint_spec(self.joint).kind, self._mix(f))
         if np.any(np.isnan(out)):
             raise NonPhysicalError("the step size reaches zero along the traverse: the joint would stall there")
         return out

@@ -47,6 +47,19 @@ def ext_fields(cal: Calibration) -> dict[str, object]:
                 ],
             }
         )
+        if m.members:  # a model average: every family with its weight (docs/models.md §3)
+            fams[-1]["members"] = [
+                {
+                    "weight": float(w),
+                    "family": mp.family,
+                    "scale": mp.scale,
+                    "parameters": [
+                        {"name": name, "q3": q3, "value": float(v), "unit": mp.unit(name)}
+                        for (name, q3), v in zip(mp.names(), mp.values, strict=True)
+                    ],
+                }
+                for w, mp in m.members
+            ]
     unc: list[dict[str, object]] = []
     for key in sorted(set(cal.sigma_model) | set(cal.covariance)):
         s = cal.sigma_model.get(key)
@@ -74,6 +87,28 @@ def _finite(x: object, where: str) -> float:
     return float(x)
 
 
+def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyParams, list[float | None]]:
+    """One family's parameters (and standard errors) from a ``families`` entry or one of its members."""
+    spec = family_spec(j, str(rec["family"]))
+    params = rec["parameters"]
+    if not isinstance(params, list) or len(params) != spec.n_params:
+        raise ValueError(f"{where}: family {spec.name} has {spec.n_params} parameters")
+    by_name = {(str(p["name"]), None if p.get("q3") is None else round(float(p["q3"]), 9)): p for p in params}
+    values = []
+    ses_raw = []
+    for name, q3 in spec.names:
+        p = by_name[(name, None if q3 is None else round(q3, 9))]
+        values.append(_finite(p["value"], f"{where} {name}"))
+        ses_raw.append(p.get("stderr"))
+    ses = [None if x is None else _finite(x, f"{where} stderr") for x in ses_raw]
+    if any(x is not None and x < 0 for x in ses):
+        raise ValueError(f"{where}: a standard error is negative")
+    scale = _finite(rec.get("scale", 1.0), f"{where} scale")
+    if not scale > 0:
+        raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
+    return FamilyParams(spec.name, j, tuple(values), scale), ses
+
+
 def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
     """Fill ``cal`` from the ``families``, ``uncertainty`` and ``selection`` entries; ``ValueError`` on bad ones."""
     fams = data.get("families") or []
@@ -86,28 +121,28 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
         try:
             j = int(rec["joint"])
             d = direction_label(rec["direction"])
-            spec = family_spec(j, str(rec["family"]))
-            params = rec["parameters"]
-            if not isinstance(params, list) or len(params) != spec.n_params:
-                raise ValueError(f"{where}: family {spec.name} has {spec.n_params} parameters")
-            by_name = {(str(p["name"]), None if p.get("q3") is None else round(float(p["q3"]), 9)): p for p in params}
-            values = []
-            ses = []
-            for name, q3 in spec.names:
-                p = by_name[(name, None if q3 is None else round(q3, 9))]
-                values.append(_finite(p["value"], f"{where} {name}"))
-                ses.append(p.get("stderr"))
             if j not in (1, 2, 3):
                 raise ValueError(f"{where}: joint must be 1, 2 or 3, got {j!r}")
-            ses = [None if x is None else _finite(x, f"{where} stderr") for x in ses]
-            if any(x is not None and x < 0 for x in ses):
-                raise ValueError(f"{where}: a standard error is negative")
-            scale = _finite(rec.get("scale", 1.0), f"{where} scale")
-            if not scale > 0:
-                raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
+            fp, ses = _read_family(rec, j, where)
+            members_raw = rec.get("members")
+            members: list[tuple[float, FamilyParams]] = []
+            if members_raw is not None:
+                if not isinstance(members_raw, list) or not members_raw:
+                    raise ValueError(f"{where}: members must be a non-empty list")
+                for k, mrec in enumerate(members_raw):
+                    mw = f"{where}.members[{k}]"
+                    if not isinstance(mrec, dict):
+                        raise ValueError(f"{mw} must be an object")
+                    w = _finite(mrec["weight"], f"{mw} weight")
+                    if not 0.0 < w <= 1.0:
+                        raise ValueError(f"{mw}: weight must be in (0, 1], got {w!r}")
+                    members.append((w, _read_family(mrec, j, mw)[0]))
+                total = sum(w for w, _ in members)
+                if abs(total - 1.0) > 1e-6:
+                    raise ValueError(f"{where}: the members' weights must sum to 1, got {total!r}")
         except (KeyError, TypeError) as e:
             raise ValueError(f"{where}: missing or malformed field {e}") from None
-        cal.models[(j, d)] = FamilyModel(j, d, FamilyParams(spec.name, j, tuple(values), scale))
+        cal.models[(j, d)] = FamilyModel(j, d, fp, members=tuple(members))
         cal.stderr[(j, d)] = (
             None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
         )

@@ -20,13 +20,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
-from ..families import FamilyModel, FamilyParams, average_from_features, traverse_features
+from ..families import FamilyModel, FamilyParams, average_from_features, features, traverse_features
 from ..models import PrismaticParams, RotaryParams
 from .families import unit_scale
 from .result import Calibration
 from .update import model_sigma
 
-__all__ = ["Suggestion", "suggest_poses", "workspace_poses"]
+__all__ = ["Suggestion", "suggest_poses", "workspace_poses", "spread_poses", "load_coordinates"]
 
 
 @dataclass(frozen=True)
@@ -144,4 +144,55 @@ def suggest_poses(
         for d, (m, w, gc, sig) in list(state.items()):
             state[d] = (m + np.outer(gc[k], gc[k]) / sig**2, w, gc, sig)
         out.append(Suggestion(joint, cand[k], before, rms()))
+    return out
+
+
+def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
+    """Where traverses at ``poses`` lie in the space of what the step depends on, ``(n, k)`` (1).
+
+    Joint 3: the axial load ``L``, the loads across the axis ``X``, ``Y`` and ``|cos q2|``
+    ((F1), (F2)). Rotary joints: the torque term ``T``, the radial and axial loads ``R``,
+    ``P`` at five points along the traverse (each group divided by sqrt(5), so that each
+    quantity weighs as much as one coordinate) and ``2 q3 / 12 mm - 1`` ((F3)). Every
+    coordinate is within [-1, 1].
+    """
+    cols = np.array([list(p) for p in poses], dtype=float).reshape(-1, 5)
+    if kin.joint_spec(joint).prismatic:
+        f = features(joint, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3], cols[:, 4])
+        return np.stack([f.L, f.X, f.Y, f.abs_cos_q2], axis=1)
+    spec = kin.JOINTS[joint]
+    q = np.linspace(spec.lower, spec.upper, 5)
+    args = [cols[:, k, None] * np.ones_like(q) for k in range(5)]
+    args[joint - 1] = np.broadcast_to(q, (len(cols), 5))
+    f = features(joint, *args)
+    g = 1.0 / math.sqrt(5.0)
+    return np.concatenate([g * f.T, g * f.R, g * f.P, (2.0 * cols[:, 2:3] / kin.Q3_MAX - 1.0)], axis=1)
+
+
+def spread_poses(
+    joint: int, n: int, seed: int = 0, existing: list[kin.Pose] | None = None, candidates: int = 2000
+) -> list[kin.Pose]:
+    """``n`` poses for ``joint`` spread over its load space (greedy maximin design), reproducible.
+
+    From ``candidates`` random workspace poses (:func:`workspace_poses`), each next pose is
+    the one farthest (Euclidean, in :func:`load_coordinates`) from every pose chosen so far
+    and from ``existing`` (e.g. the paper's calibration poses). Random poses leave parts of
+    the load space empty by chance (e.g. no arm pointing down, ``L < 0``), and a model
+    predicts there only by extrapolation; a spread design covers the corners first.
+    """
+    if n < 1:
+        return []
+    cand = workspace_poses(joint, candidates, seed)
+    x = load_coordinates(joint, cand)
+    if existing:
+        d_min = np.min(
+            np.linalg.norm(x[:, None, :] - load_coordinates(joint, existing)[None, :, :], axis=-1), axis=1
+        )
+    else:
+        d_min = np.linalg.norm(x - x.mean(axis=0), axis=1)
+    out: list[kin.Pose] = []
+    for _ in range(n):
+        k = int(np.argmax(d_min))
+        out.append(cand[k])
+        d_min = np.minimum(d_min, np.linalg.norm(x - x[k], axis=1))
     return out

@@ -51,7 +51,7 @@ class FamilyFit:
         return float(np.sqrt(np.mean(self.residuals**2)))
 
 
-PRIOR_SD = {"e": 0.3, "f": 0.2, "h": 0.2, "t2": 0.3, "b2": 0.3, "k": 0.3}
+PRIOR_SD = {"e": 0.3, "f": 0.2, "h": 0.2, "t2": 0.3, "b2": 0.3, "k": 0.3, "m": 0.3}
 """Prior standard deviations of the terms beyond the paper's (relative to the typical step
 for step-valued terms, absolute for b2 and k): a gentle ridge towards the paper's model, so
 that a family with more terms than the poses pin down does not swing wildly between them."""

@@ -1,19 +1,20 @@
-"""Choosing a model family by leave-one-pose-out cross-validation (docs/models.md §3).
+"""Averaging (or choosing) model families by leave-one-pose-out cross-validation (docs/models.md §3).
 
 For each joint, every family of :mod:`stickslip.families` (and its variant with terms
 shared by + and -) that the traverses can identify, with at least two poses per
 parameter of a direction, is fitted to both directions; then each *pose* (the fixed
 joints and the tilt) beyond the paper's calibration poses is left out in turn, the
-family is refitted on the rest and predicts the left-out traverses. The family with the
-smallest mean of the RMS and the largest CV error is chosen, except that a simpler
-family within 5 % of it is preferred (fewer parameters, less to go wrong outside the
-data). A joint and direction with too few poses for any family beyond the constant
-step falls back to it: calibration never stops for lack of data once every joint and
-direction present has one traverse.
+family is refitted on the rest and predicts the left-out traverses. With ``auto`` the
+families are averaged with pseudo-BMA+ weights from those left-out errors
+(:func:`averaging_weights`); asked for one family, that one is fitted. A joint and
+direction with too few poses for any family beyond the constant step falls back to it:
+calibration never stops for lack of data once every joint and direction present has one
+traverse.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -35,7 +36,10 @@ from .families import (
 )
 from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
 
-__all__ = ["CVScore", "select_family", "calibrate_families", "pose_groups", "PREFER_SIMPLER"]
+__all__ = [
+    "CVScore", "select_family", "select_joint", "calibrate_families", "pose_groups", "averaging_weights",
+    "PREFER_SIMPLER", "MIN_WEIGHT",
+]
 
 PREFER_SIMPLER = 1.05
 """A simpler family is chosen when its CV error is within this factor of the best."""
@@ -55,6 +59,8 @@ class CVScore:
         Root-mean-square and largest |relative error| of left-out predictions (nan if not scored).
     fit_rms : float
         RMS relative residual of the fit on all traverses.
+    weight : float
+        The family's weight in the model average (0 if not in it; 1 if chosen alone).
     """
 
     family: str
@@ -63,6 +69,7 @@ class CVScore:
     cv_rms: float
     cv_max: float
     fit_rms: float
+    weight: float = 0.0
 
     def as_dict(self) -> dict[str, object]:
         def num(x: float) -> float | None:
@@ -75,6 +82,7 @@ class CVScore:
             "cv_rms": num(self.cv_rms),
             "cv_max": num(self.cv_max),
             "fit_rms": num(self.fit_rms),
+            "weight": float(self.weight),
         }
 
 
@@ -213,38 +221,104 @@ def _cv_joint(
     full: JointFit,
     anchors: frozenset[int] = frozenset(),
 ) -> tuple[float, float]:
+    rms, mx, _, _ = _cv_joint_errors(spec, joint, cols, groups, full, anchors)
+    return rms, mx
+
+
+def _cv_joint_errors(
+    spec: FamilySpec,
+    joint: int,
+    cols: dict[str, Columns],
+    groups: dict[str, NDArray[np.int64]],
+    full: JointFit,
+    anchors: frozenset[int] = frozenset(),
+) -> tuple[float, float, NDArray[np.float64], NDArray[np.int64]]:
+    """CV RMS and largest error, and the left-out relative errors with their pose group (in a fixed order)."""
     all_groups = np.unique(np.concatenate(list(groups.values())))
     held_out = [g for g in all_groups if g not in anchors]
     if len(held_out) < 3:
         held_out = list(all_groups)
+    none = (np.nan, np.nan, np.empty(0), np.empty(0, dtype=np.int64))
     errs = {d: np.full(len(cols[d]), np.nan) for d in cols}
     for g in held_out:
         train = {d: cols[d].subset(groups[d] != g) for d in cols}
         if any(len(c) == 0 for c in train.values()):
-            return np.nan, np.nan
+            return none
         fit = fit_joint(spec, joint, train, full.shared, x0=full.values)
         if not fit.identifiable:
-            return np.nan, np.nan
+            return none
         for d in cols:
             test = groups[d] == g
             if np.any(test):
                 held = cols[d].subset(test)
                 errs[d][test] = predict_columns(spec, joint, fit.values[d], held) / held.gamma - 1.0
-    e = np.concatenate([v[np.isin(groups[d], held_out)] for d, v in errs.items()])
+    keep = {d: np.isin(groups[d], held_out) for d in sorted(errs)}
+    e = np.concatenate([errs[d][keep[d]] for d in sorted(errs)])
+    ids = np.concatenate([groups[d][keep[d]] for d in sorted(errs)])
     if not np.all(np.isfinite(e)):
-        return np.inf, np.inf
-    return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e)))
+        return np.inf, np.inf, e, ids
+    return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e))), e, ids
+
+
+MIN_WEIGHT = 0.01
+"""Families with a smaller weight are left out of the average (and the rest renormalised)."""
+
+
+def averaging_weights(
+    errors: Mapping[str, NDArray[np.float64]], ids: NDArray[np.int64], draws: int = 1000, seed: int = 0
+) -> dict[str, float]:
+    """Pseudo-BMA+ weights of families from their leave-one-pose-out errors (Yao et al. 2018).
+
+    Each family's left-out relative errors ``e`` get a normal predictive density with
+    its own CV variance ``s² = mean(e²)``; the log densities are summed per pose (the
+    unit left out), ``elpd_k = sum_i lp_ik``. Weights ``∝ exp(elpd_k)`` would trust the
+    CV estimate fully and pick one family almost always; pseudo-BMA+ averages them over
+    Bayesian-bootstrap draws of the poses (Dirichlet(1) weights ``α``,
+    ``w = E_α[softmax(m Σ_i α_i lp_ik)]``), which accounts for how uncertain the CV
+    comparison is with ~10 poses. Deterministic (fixed ``seed``).
+    """
+    labels = sorted(errors)
+    if len(labels) == 1:
+        return {labels[0]: 1.0}
+    groups = np.unique(ids)
+    lp = np.empty((len(labels), len(groups)))
+    for k, lab in enumerate(labels):
+        e = np.asarray(errors[lab], dtype=float)
+        s2 = max(float(np.mean(e**2)), 1e-12)
+        point = -0.5 * math.log(2 * math.pi * s2) - 0.5 * e**2 / s2
+        lp[k] = [float(np.sum(point[ids == g])) for g in groups]
+    rng = np.random.default_rng(seed)
+    alpha = rng.dirichlet(np.ones(len(groups)), draws)  # (draws, poses)
+    z = len(groups) * alpha @ lp.T  # (draws, families)
+    z -= z.max(axis=1, keepdims=True)
+    w = np.exp(z)
+    w /= w.sum(axis=1, keepdims=True)
+    mean = w.mean(axis=0)
+    mean[mean < MIN_WEIGHT] = 0.0
+    mean /= mean.sum()
+    return {lab: float(x) for lab, x in zip(labels, mean, strict=True) if x > 0.0}
 
 
 def select_joint(
-    joint: int, by_dir: Mapping[str, Sequence[Traverse]], candidates: Sequence[str] | None = None
-) -> tuple[JointFit, list[CVScore], str]:
+    joint: int,
+    by_dir: Mapping[str, Sequence[Traverse]],
+    candidates: Sequence[str] | None = None,
+    average: bool | None = None,
+) -> tuple[JointFit, list[CVScore], str, dict[str, tuple[float, JointFit]], float]:
     """Fit every identifiable family (separate and with shared terms) to both directions of
-    ``joint`` and pick one by leave-one-pose-out CV over both directions.
+    ``joint`` and weigh or pick them by leave-one-pose-out CV over both directions.
 
-    ``candidates`` names families, ``"name+shared"`` for the shared variant. Returns
-    ``(fit on all traverses, scores, reason)``.
+    ``candidates`` names families, ``"name+shared"`` for the shared variant. With
+    ``average`` (the default when no candidates are named) the cross-validated families
+    are averaged with :func:`averaging_weights`; otherwise one is picked (the smallest mean
+    of CV RMS and largest error, a simpler one within 5 %). Returns ``(fit of the chosen
+    or most weighted family, scores, reason, {label: (weight, fit)} of the average or empty,
+    CV RMS error of what is returned)``.
     """
+    if average is None:
+        average = candidates is None
+    cv_errors: dict[str, NDArray[np.float64]] = {}
+    cv_ids: NDArray[np.int64] = np.empty(0, dtype=np.int64)
     cols = {d: traverse_columns(ts) for d, ts in sorted(by_dir.items()) if ts}
     groups = _joint_pose_groups(joint, {d: by_dir[d] for d in cols})
     anchors = _anchor_groups(joint, {d: by_dir[d] for d in cols}, groups)
@@ -282,10 +356,30 @@ def select_joint(
             scores.append(CVScore(label, p_total, "not identifiable from these poses", np.nan, np.nan, fit.rms))
             continue
         fits[label] = fit
-        rms, mx = _cv_joint(spec, joint, cols, groups, fit, anchors) if n_poses >= 2 else (np.nan, np.nan)
+        if n_poses >= 2:
+            rms, mx, e, ids = _cv_joint_errors(spec, joint, cols, groups, fit, anchors)
+        else:
+            rms, mx, e, ids = np.nan, np.nan, np.empty(0), np.empty(0, dtype=np.int64)
         status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
+        if status == "ok":
+            cv_errors[label] = e
+            cv_ids = ids
         scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
     scored = [s for s in scores if s.status == "ok"]
+    if scored and average and len(scored) > 1:
+        weights = averaging_weights(cv_errors, cv_ids)
+        mix = sum(w * cv_errors[lab] for lab, w in weights.items())
+        assert isinstance(mix, np.ndarray)
+        scores = [dataclasses.replace(sc, weight=weights.get(sc.family, 0.0)) for sc in scores]
+        top = max(weights, key=lambda k: weights[k])
+        mix_rms, mix_max = float(np.sqrt(np.mean(mix**2))), float(np.max(np.abs(mix)))
+        parts = ", ".join(f"{lab} {w:.2f}" for lab, w in sorted(weights.items(), key=lambda kv: -kv[1]))
+        reason = (
+            f"average of {len(weights)} famil{'y' if len(weights) == 1 else 'ies'} weighted by their "
+            f"leave-one-pose-out predictive density (pseudo-BMA+: {parts}); CV of the average: RMS "
+            f"{mix_rms * 100:.2g} %, max {mix_max * 100:.2g} % over {n_poses} poses"
+        )
+        return fits[top], scores, reason, {lab: (w, fits[lab]) for lab, w in weights.items()}, mix_rms
     if scored:
         best = min(scored, key=_criterion)
         chosen = min(
@@ -301,10 +395,12 @@ def select_joint(
                 f"within {100 * (PREFER_SIMPLER - 1):.0f} % of the best CV error ({best.family}) with fewer "
                 f"parameters (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} %)"
             )
-        return fits[chosen.family], scores, reason
+        scores = [dataclasses.replace(sc, weight=1.0 if sc.family == chosen.family else 0.0) for sc in scores]
+        return fits[chosen.family], scores, reason, {}, chosen.cv_rms
     if fits:
         name = min(fits, key=lambda k: fits[k].n_params)
-        return fits[name], scores, f"{n_poses} pose(s): the simplest identifiable family, not cross-validated"
+        reason = f"{n_poses} pose(s): the simplest identifiable family, not cross-validated"
+        return fits[name], scores, reason, {}, float("nan")
     raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
 
 
@@ -333,12 +429,15 @@ def calibrate_families(
     for j in sorted({j for j, _ in groups}):
         by_dir = {d: groups[(j, d)] for (jj, d) in groups if jj == j}
         candidates = None if model == "auto" else [model]
-        fit, scores, reason = select_joint(j, by_dir, candidates)
-        chosen = next(s for s in scores if s.family == fit.label)
-        sig = chosen.cv_rms if np.isfinite(chosen.cv_rms) else fit.rms
+        fit, scores, reason, mixture, cv_rms = select_joint(j, by_dir, candidates)
+        sig = cv_rms if np.isfinite(cv_rms) else fit.rms
         for d in sorted(by_dir):
             params = FamilyParams(fit.spec.name, j, tuple(float(v) for v in fit.values[d]))
-            models[(j, d)] = FamilyModel(j, d, params)
+            members = tuple(
+                (w, FamilyParams(f.spec.name, j, tuple(float(v) for v in f.values[d])))
+                for _, (w, f) in sorted(mixture.items(), key=lambda kv: -kv[1][0])
+            )
+            models[(j, d)] = FamilyModel(j, d, params, members=members if len(members) > 1 else ())
             c = fit.cov[d]
             if c is not None:
                 cov[(j, d)] = c
@@ -349,15 +448,20 @@ def calibrate_families(
             selection[(j, d)] = {
                 "chosen": fit.label, "shared": list(fit.shared), "reason": reason,
                 "scores": [s.as_dict() for s in scores],
+                "weights": {lab: w for lab, (w, _) in mixture.items()} if len(mixture) > 1 else {fit.label: 1.0},
             }
         notes.append(f"joint {j}: family {fit.label} — {reason}")
     for (j, d), m in models.items():
         try:
-            m.params.check_physical()
+            m.check_physical()
         except ValueError as e:
             notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    labels = {j: str(selection[(j, d)]["chosen"]) for (j, d) in selection}
+    labels = {
+        j: (f"average of {len(models[(j, d)].members)}, mostly " if models[(j, d)].members else "")
+        + str(selection[(j, d)]["chosen"])
+        for (j, d) in selection
+    }
     method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
     cal = Calibration(
         dict(models), stderr, consts, _day_of(traverses, day), method,

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..families import FamilyModel
+from ..families import FamilyModel, FamilyParams
 from ..measurements import Traverse
 from ..models import JointModel, PrismaticParams, RotaryParams
 from ..units import DIMENSIONLESS_PARAMETERS
@@ -116,7 +116,7 @@ def scaled_model(model: JointModel, factor: float) -> JointModel:
     """``model`` with every step multiplied by ``factor`` (shape parameters unchanged)."""
     p = model.params
     if isinstance(model, FamilyModel):
-        return FamilyModel(model.joint, model.direction, model.params.scaled(factor))
+        return model.map_params(lambda fp: fp.scaled(factor))
     if isinstance(p, PrismaticParams):
         return JointModel(model.joint, model.direction, PrismaticParams(p.a * factor, p.b, p.c * factor))
     if isinstance(p, RotaryParams):
@@ -134,16 +134,21 @@ LOAD_PRIOR = 0.10
 """Default prior standard deviation of a day's change of a joint's load sensitivity (relative):
 friction (humidity, wear) changes how much a given load changes the step, in both directions."""
 
-_LOAD_TERMS = {"c", "e", "f", "h", "d", "t2"}
+_LOAD_TERMS = {"c", "e", "f", "h", "d", "t2", "m"}
 
 
 def load_scaled(model: JointModel, factor: float) -> JointModel:
-    """``model`` with every gravity-load term (c, e, f, h; rotary d, t2, e, f) multiplied by ``factor``."""
+    """``model`` with every gravity-load term (c, e, f, h, m; rotary d, t2, e, f) multiplied by ``factor``."""
     p = model.params
     if isinstance(model, FamilyModel):
-        fp = model.params
-        vals = tuple(v * factor if n in _LOAD_TERMS else v for (n, _), v in zip(fp.names(), fp.values, strict=True))
-        return FamilyModel(model.joint, model.direction, type(fp)(fp.family, fp.joint, vals, fp.scale))
+
+        def loaded(fp: FamilyParams) -> FamilyParams:
+            vals = tuple(
+                v * factor if n in _LOAD_TERMS else v for (n, _), v in zip(fp.names(), fp.values, strict=True)
+            )
+            return FamilyParams(fp.family, fp.joint, vals, fp.scale)
+
+        return model.map_params(loaded)
     if isinstance(p, PrismaticParams):
         return JointModel(model.joint, model.direction, PrismaticParams(p.a, p.b, p.c * factor))
     if isinstance(p, RotaryParams):

@@ -8,6 +8,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.history`  history, export, import, anova, fit, report
 * :mod:`.models`   suggest
 * :mod:`.devices`  move, where
+* :mod:`.observe`  observe (a measured position into the dead reckoning)
 * :mod:`.taskspace` reach, jog
 * :mod:`.config`   config path, config show, config init (the user's configuration file)
 """
@@ -97,7 +98,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, config, core, devices, history, measure, models, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, config, core, devices, history, measure, models, observe, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:
@@ -119,7 +120,7 @@ def _unwrap(doc: str) -> str:
 _PANELS = {
     "Measure": ("demo", "traverse", "record", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan", "suggest"),
-    "Drive a manipulator": ("move", "where", "reach", "jog"),
+    "Drive a manipulator": ("move", "observe", "where", "reach", "jog"),
     "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}

@@ -119,9 +119,30 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
                 "display": format_position(state.positions[j], j),
                 "source": "uncertain" if j in state.uncertain else state.sources[j],
                 "uncertain": list(state.uncertain[j]) if j in state.uncertain else None,
+                **_track_fields(state, j),
             }
         )
     return rows
+
+
+def _track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
+    """``sd`` (m or rad) of the position and the learned ``step_scale`` (1) of a joint, ``None`` if untracked."""
+    from ..tracking import JointTrack
+
+    raw = state.track.get(joint)
+    if raw is None:
+        return {"sd": None, "step_scale": None, "step_scale_sd": None}
+    try:
+        t = JointTrack.from_json(raw)
+    except ValueError:
+        return {"sd": None, "step_scale": None, "step_scale_sd": None}
+    return {"sd": t.sd, "step_scale": t.scale, "step_scale_sd": t.scale_sd}
+
+
+def _sd_text(sd: float, joint: int) -> str:
+    """A standard deviation of a position in µm (joint 3) or µrad (joints 1, 2)."""
+    unit = "µrad" if joint_spec(joint).rotary else "µm"
+    return f"{sd * 1e6:.3g} {unit}"
 
 
 def _degree_hint(joint: int, text: str | None) -> str:
@@ -184,8 +205,16 @@ def _move_locked(
         fail(problem)
     q_from, q_to = _target(joint, state, by, to)
     pose = state.pose
+    from ..tracking import joint_sigma_model, scaled_calibration, track_for
+
+    with user_errors():  # the day's step scale learned from observations (stickslip observe)
+        track, note = track_for(state.track.get(joint), cal, joint)
+    if note:
+        warn_later(note)
     with user_errors(KeyError):
-        steps, q_end, reckon = _plan(cal, joint, q_from, q_to, pose)
+        steps, q_end, reckon = _plan(
+            scaled_calibration(cal, joint, {d: track.scale_of(d) for d in "+-"}), joint, q_from, q_to, pose
+        )
     with user_errors():
         save_state(store, state)  # the recorded pose, even if nothing moves
     outcome, sim_true = MoveOutcome(), None
@@ -212,7 +241,12 @@ def _move_locked(
             outcome = drive(dev, state, joint, steps, burst, reckon, save)
             if outcome.error is None:
                 state.set_position(joint, q_end, "dead-reckoned")
+            if outcome.sent and joint not in state.uncertain:  # the position's uncertainty grows with the move
+                track.predict(state.positions[joint] - q_from, outcome.sent, pose, joint, joint_sigma_model(cal, joint))
+                state.track[joint] = track.to_json()
+            if outcome.error is None or state.track.get(joint) is not None:
                 save(state)
+            if outcome.error is None:
                 if isinstance(dev, KnowsTruePosition):
                     sim_true = float(dev.position(joint))
         finally:
@@ -261,6 +295,9 @@ def move(
 
     They are sent in bursts; the dead-reckoned position is kept after every burst.
 
+    The steps use the day's step scale learned from measured positions (stickslip
+    observe), and the position's standard deviation grows with the move.
+
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
     if (by is None) == (to is None):
@@ -305,6 +342,9 @@ def move(
         "q_end_predicted": q_end,
         "unit": spec.unit,
     }
+    tf = _track_fields(state, joint)  # the position's standard deviation and the step scale the move used
+    if tf["sd"] is not None:
+        result.update({"q_sd": tf["sd"], "step_scale": tf["step_scale"], "step_scale_sd": tf["step_scale_sd"]})
     if sim_true is not None:
         result["sim_true_end"] = sim_true
     if json_out:
@@ -312,7 +352,9 @@ def move(
         return
     console.print(
         f"joint {joint}: {format_position(q_from, joint)} -> {format_position(q_to, joint)}: "
-        f"{steps:+d} steps in {len(bursts)} burst(s); planned end {format_position(q_end, joint)}",
+        f"{steps:+d} steps in {len(bursts)} burst(s); planned end {format_position(q_end, joint)}"
+        + (f" ± {_sd_text(tf['sd'], joint)} (step scale x{tf['step_scale'] or 1.0:.4f})"
+           if tf["sd"] is not None else ""),
         highlight=False,
     )
     if sim_true is not None:
@@ -390,8 +432,10 @@ def where(
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, dead-reckoned, or
-    uncertain (a move was interrupted: the bounds are shown; re-reference with --set).
+    Source: default (never set; outstretched pose assumed), set, dead-reckoned,
+    observed (stickslip observe), or uncertain (a move was interrupted: the bounds are
+    shown; re-reference with --set). A joint moved since it was set shows ± its standard
+    deviation and the step scale learned from observations.
 
     Reset a joint at an end stop after a traverse, a crash or a manual move.
 
@@ -448,6 +492,9 @@ def where(
         console.print(f"  {line}", highlight=False)
     for r, j in zip(rows, (1, 2, 3), strict=True):
         extra = ""
+        tf = _track_fields(state, j)
+        if tf["sd"] is not None and j not in state.uncertain:
+            extra = f", ± {_sd_text(tf['sd'], j)}, step scale x{tf['step_scale'] or 1.0:.4f}"
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
             extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"

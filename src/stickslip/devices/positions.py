@@ -13,7 +13,11 @@ sent since. This module keeps that per device URL:
   end (:meth:`DeviceState.intend`); when the controller confirms the burst the new
   position is recorded and the mark cleared. A link drop or a crash in between leaves
   the joint *uncertain* with those bounds, never silently wrong, until it is
-  re-referenced (:meth:`DeviceState.set_position` with source ``"set"``).
+  re-referenced (:meth:`DeviceState.set_position` with source ``"set"``);
+* ``track``: per joint, the Kalman state of its dead reckoning (the day's step scale and
+  the covariance of position and scale, :class:`stickslip.tracking.JointTrack` as JSON),
+  which ``stickslip move`` propagates and ``stickslip observe`` updates with a measured
+  position (source ``"observed"``).
 
 Where it is kept is injected (this layer sits below :mod:`stickslip.storage`): any
 object with ``set_state(device, key, value)`` / ``get_state(device, key, default)``
@@ -44,7 +48,7 @@ __all__ = [
     "device_key",
 ]
 
-SOURCES = ("default", "set", "dead-reckoned")
+SOURCES = ("default", "set", "dead-reckoned", "observed")
 
 
 class StateStore(Protocol):
@@ -116,6 +120,8 @@ class DeviceState:
     theta: float = 0.0
     psi: float = 0.0
     uncertain: dict[int, tuple[float, float]] = field(default_factory=dict)
+    track: dict[int, dict[str, Any]] = field(default_factory=dict)
+    """``{joint: JointTrack JSON}``: step scale and position covariance (stickslip.tracking)."""
 
     @classmethod
     def default(cls, device: str) -> DeviceState:
@@ -141,6 +147,11 @@ class DeviceState:
         self.positions[spec.number] = min(max(q, spec.lower), spec.upper)
         self.sources[spec.number] = source
         self.uncertain.pop(spec.number, None)
+        if source == "set" and spec.number in self.track:  # put there by hand: known exactly, scale kept
+            t = self.track[spec.number]
+            p = t.get("P")
+            if isinstance(p, list) and len(p) == 2 and all(isinstance(r, list) and len(r) == 2 for r in p):
+                t["P"] = [[0.0, 0.0], [0.0, p[1][1]]]
 
     def intend(self, joint: int, q_intended: float) -> None:
         """Journal a burst about to be sent: ``joint`` is in flight to ``q_intended`` (rad or m).
@@ -183,6 +194,7 @@ class DeviceState:
             "theta": self.theta,
             "psi": self.psi,
             "uncertain": {str(j): list(b) for j, b in sorted(self.uncertain.items())},
+            "track": {str(j): t for j, t in sorted(self.track.items())},
         }
 
 
@@ -206,6 +218,10 @@ def load_state(store: StateStore, device: str) -> DeviceState:
         state.psi = float(raw.get("psi", 0.0))
         for j, (lo, hi) in (raw.get("uncertain") or {}).items():
             state.uncertain[int(j)] = (float(lo), float(hi))
+        for j, t in (raw.get("track") or {}).items():
+            if not isinstance(t, dict):
+                raise ValueError(f"track of joint {j} is not an object")
+            state.track[int(j)] = t
     except (TypeError, ValueError, AttributeError) as e:
         raise ValueError(f"the stored positions of {device} are unreadable: {e}") from None
     return state
