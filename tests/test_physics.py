@@ -98,7 +98,29 @@ def test_warmup_makes_cold_steps_larger():
     q = arm.position(3)
     arm.step(3, 1000)
     warm = arm.position(3) - q
-    assert cold / warm == pytest.approx(1.0 + 0.05 * math.exp(-10.0 / 100.0), rel=0.01)
+    # each of the first 1000 steps is made at its own stepping time t_k = k / f: the cold burst's
+    # mean factor is the mean of 1 + 0.05 exp(-t_k / 100 s) (not the factor at its end)
+    f = arm._hz[3]
+    t = [k / f for k in range(1000)]
+    expected = sum(1.0 + 0.05 * math.exp(-tk / 100.0) for tk in t) / len(t)
+    assert cold / warm == pytest.approx(expected, rel=0.002)
+
+
+def test_warmup_does_not_depend_on_how_the_steps_are_split_into_bursts():
+    # a traverse is one long burst, a move many short ones: the same steps must land the same
+    # (warm-up used to be applied once per burst, after the burst's time: a long burst ran warm)
+    one, many = (_smooth_arm(warmup=0.05, warmup_tau=30.0) for _ in range(2))
+    for arm in (one, many):
+        arm.set_pose(q2=-math.pi / 2, q3=0.0005)
+    one.step(3, 6000)
+    for _ in range(60):
+        many.step(3, 100)
+    assert one.position(3) == pytest.approx(many.position(3), rel=1e-9)
+    cold_run = one.position(3) - 0.0005
+    warm = _smooth_arm(warmup=0.0)
+    warm.set_pose(q2=-math.pi / 2, q3=0.0005)
+    warm.step(3, 6000)
+    assert cold_run / (warm.position(3) - 0.0005) > 1.0 + 0.05 * math.exp(-6000 / warm._hz[3] / 30.0)
 
 
 def test_paper_model_does_not_fit_the_physics_arm_exactly():

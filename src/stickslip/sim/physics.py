@@ -459,8 +459,9 @@ class PhysicsMM3A(SimulatedMM3A):
         out: NDArray[np.float64] = np.interp(np.asarray(qq, dtype=float), qs, g)
         return out
 
-    def _warm(self, joint: int) -> float:
-        return 1.0 + self.warmup * math.exp(-self._active_s[joint] / self.warmup_tau)
+    def _warm(self, t_s: np.ndarray) -> np.ndarray:
+        """Warm-up factor of steps made after ``t_s`` seconds of the joint's stepping (1 when warm)."""
+        return 1.0 + self.warmup * np.exp(-t_s / self.warmup_tau)
 
     def _advance(self, joint: int, sign: int, n: int) -> tuple[int, float]:
         """``n`` steps with backlash and warm-up; ``(k_stop, q_end)`` as the closed-form arm."""
@@ -470,15 +471,16 @@ class PhysicsMM3A(SimulatedMM3A):
         if self._last_sign.get(joint, sign) != sign:
             self._slack[joint] = self.physics[(joint, direction_label(sign))].backlash
         self._last_sign[joint] = sign
-        self._active_s[joint] += n / self._hz[joint]
+        t0, hz = self._active_s[joint], self._hz[joint]
+        self._active_s[joint] += n / hz  # every step is driven (against the stop too): it all warms the joint
         if sign * (stop - q) <= 0.0:
             return 0, stop
         qs, g = self._profile(joint, sign)
-        warm = self._warm(joint)
         tol = 1e-12 * spec.span
         done = 0
         while done < n:
             m = min(_CHUNK, n - done)
+            warm = self._warm(t0 + (done + np.arange(m)) / hz)  # step by step: a burst can be minutes long
             eps = np.exp(self._sigma * self._rng.standard_normal(m) - 0.5 * self._sigma**2)
             p = np.full(m, q)
             sizes = np.zeros(m)
