@@ -67,7 +67,7 @@ def _load_calibration(option: Path | None) -> Calibration:
 
 
 def _params_table(cal: Calibration, title: str) -> Table:
-    t = Table(title=title)
+    t = Table(title=title, caption=_average_caption(cal))
     for col in ("joint", "dir", "parameter", "q3", "value", "std. error", "unit"):
         t.add_column(col, justify="right" if col in ("value", "std. error") else "left")
     for r in cal.parameters():
@@ -76,6 +76,26 @@ def _params_table(cal: Calibration, title: str) -> Table:
         se = f"{r.stderr * scale:.3g}" if r.stderr is not None else "—"
         t.add_row(str(r.joint), r.direction, r.name, q3, f"{r.value * scale:.5g}", se, unit or "1")
     return t
+
+
+def _weights(sel: dict[str, object]) -> dict[str, float]:
+    """A selection's family weights in the model average (``{label: weight}``; empty if none recorded)."""
+    w = sel.get("weights")
+    return {str(k): float(v) for k, v in w.items() if isinstance(v, (int, float))} if isinstance(w, dict) else {}
+
+
+def _average_caption(cal: Calibration) -> str | None:
+    """Under the parameter table: which joints predict with an average of families, not the parameters shown."""
+    parts, seen = [], set()
+    for (j, _d), sel in sorted(cal.selection.items()):
+        w = _weights(sel)
+        if j in seen or len(w) < 2:
+            continue
+        seen.add(j)
+        top = max(w, key=w.__getitem__)
+        parts.append(f"joint {j}: the parameters of {top} (weight {w[top]:.2f}); it predicts with the "
+                     f"weighted average of {len(w)} families")
+    return "; ".join(parts) or None
 
 
 @app.command("calibrate")
@@ -114,8 +134,9 @@ def calibrate_cmd(
         typer.Option(
             "--model",
             help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
-            "traverses are exactly the paper's poses, else every model family the data identify, chosen by "
-            "leave-one-pose-out cross-validation. 'paper': the paper's models only (also what 'auto' means "
+            "traverses are exactly the paper's poses, else every model family the data identify, averaged "
+            "with weights from leave-one-pose-out cross-validation (pseudo-BMA+). 'paper': the paper's models "
+            "only (also what 'auto' means "
             "with a --method other than auto).",
         ),
     ] = "auto",
@@ -141,8 +162,10 @@ def calibrate_cmd(
     integral. Any other set of traverses is fitted by least squares, with standard errors.
 
     With more traverses than the paper's poses, every model family the data can
-    identify is fitted and one is chosen by leave-one-pose-out cross-validation; the
-    table says which, why, and the CV error of each. With --prior, an earlier
+    identify is fitted and scored by leave-one-pose-out cross-validation, and the
+    prediction averages them, each weighted by how well it predicted the poses left out
+    (pseudo-BMA+); the table gives each family's CV error and weight, and ◀ marks the
+    one whose parameters are shown. With --prior, an earlier
     calibration is brought up to date with as few as one traverse per joint and direction.
 
     Example: stickslip calibrate day1.csv -o cal.json
@@ -182,23 +205,25 @@ def calibrate_cmd(
 
 def _selection_table(cal: Calibration) -> Table:
     t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
-    for col in ("joint", "family", "params (+ and -)", "CV RMS", "CV max", "fit RMS", "status"):
-        t.add_column(col, justify="right" if col.startswith(("CV", "fit", "params")) else "left")
+    for col in ("joint", "family", "params (+ and -)", "CV RMS", "CV max", "fit RMS", "weight", "status"):
+        t.add_column(col, justify="right" if col.startswith(("CV", "fit", "params", "weight")) else "left")
     seen: set[int] = set()
     for (j, _d), sel in sorted(cal.selection.items()):
         if j in seen:  # one selection per joint (both directions are fitted together)
             continue
         seen.add(j)
         chosen = sel.get("chosen")
+        weights = _weights(sel)
         scores = sel.get("scores") or []
         for sc in scores if isinstance(scores, list) else []:
 
             def pct(x: object) -> str:
                 return f"{float(x) * 100:.2f} %" if isinstance(x, (int, float)) else "—"
 
-            mark = " ◀ chosen" if sc["family"] == chosen else ""
+            mark = " ◀" if sc["family"] == chosen else ""
+            w = weights.get(str(sc["family"]))
             t.add_row(str(j), f"{sc['family']}{mark}", str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
-                      pct(sc["fit_rms"]), str(sc["status"]))
+                      pct(sc["fit_rms"]), f"{w:.2f}" if w else "", str(sc["status"]))
     return t
 
 

@@ -351,8 +351,8 @@ def fit(
     db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
     model: str = typer.Option(
-        "paper", "--model", help="paper (the paper's models, least squares) | auto (the model family chosen by "
-        "leave-one-pose-out cross-validation, docs/models.md) | a family's name."
+        "paper", "--model", help="paper (the paper's models, least squares) | auto (the model families averaged with "
+        "weights from leave-one-pose-out cross-validation, docs/models.md) | a family's name."
     ),
 ) -> None:
     """Fit each joint's model to all rows (nonlinear least squares, with SEs).
