@@ -131,6 +131,8 @@ CONDITIONS = [
         variant(Q, stop_kind="duller"),
         _test(Q, 62, stop_kind="brighter"),
         group="cross",
+        known_failure="a rise in sub-bands the tuning saw fall: only drops are interference-proof; a rise the "
+        "tuning never saw cannot be told from a new sound in the room without the steps' synchrony",
     ),
     Condition(
         "trained brighter, test duller",
@@ -144,12 +146,21 @@ CONDITIONS = [
         variant(Q, stop_kind="quieter"),
         _test(Q, 65, stop_kind="louder"),
         group="cross",
+        known_failure="found with its onset right, but 56 ms late: the louder stop lowers the stepping modes by only "
+        "3 dB, and the drop channel needs its 8-frame average to see that",
     ),
     Condition("brighter stop", variant(P, stop_kind="brighter"), _test(P, 66, stop_kind="brighter"), group="cross"),
     # hostile conditions nobody tuned for (written before the detector was changed for them)
     Condition("stop fades in over 150 ms", P, _test(P, 70, fade_s=0.15), late_s=0.15, group="hostile"),
     Condition("stop fades in over 150 ms, joint Q", Q, _test(Q, 71, fade_s=0.15), late_s=0.15, group="hostile"),
-    Condition("step rate drifts +-10 %", P, _test(P, 72, drift=0.1), group="hostile"),
+    Condition(
+        "step rate drifts +-10 %",
+        P,
+        _test(P, 72, drift=0.1),
+        group="hostile",
+        known_failure="a false alarm at 0.32 s: the warm-up's template is learned at -10 % and the lines moving "
+        "through joint P's narrow 5.2 kHz mode look like the stop's rise",
+    ),
     Condition("step rate drifts +-10 %, joint Q", Q, _test(Q, 73, drift=0.1, stop_at=2.4), group="hostile"),
     Condition("8-bit audio", P, _test(P, 74, bits=8), group="hostile"),
     Condition("8-bit training and test", variant(Q, bits=8), _test(Q, 75, bits=8), group="hostile"),
@@ -157,7 +168,16 @@ CONDITIONS = [
     Condition("22.05 kHz training and test", variant(Q, sr=22_050), _test(Q, 77, sr=22_050), group="hostile"),
     # a recording that starts mid-traverse, already at the stop: the detector fires as soon as its
     # template is learned, with the start of listening as the onset (see docs/audio.md)
-    Condition("starts at the stop", P, _test(P, 78, stop_at=0.0), late_s=0.25, group="hostile"),
+    Condition(
+        "starts at the stop",
+        P,
+        _test(P, 78, stop_at=0.0),
+        late_s=0.25,
+        group="hostile",
+        known_failure="the first frames fit the tuning's stepping plus 1.2 x the stop, but leave a residual of 5.4 "
+        "spreads (joint P's narrow modes sound different at 1080 Hz than at the tuning's 1000 Hz): not the clear "
+        "case the detector demands before firing at once",
+    ),
     Condition("starts at the stop, joint Q", Q, _test(Q, 79, stop_at=0.0), late_s=0.25, group="hostile"),
 ]
 

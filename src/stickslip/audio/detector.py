@@ -114,6 +114,10 @@ class Tuning:
     stepping_levels_db : tuple of float or None
         ``"template"``: stepping's level per sub-band in the tuning recording, dBFS; lets the
         detector tell that it began listening at the stop (see :mod:`.template`).
+    drop_threshold : (float, float) or None
+        ``"template"``: the broad and the local drop below the stepping template at which
+        a frame counts as a stop whatever its signature (spreads, see
+        :class:`~stickslip.audio.template.DropMeter`); None: only the tuned signature counts.
     checks : dict or None
         What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
         interference injected, latency); informational.
@@ -149,6 +153,7 @@ class Tuning:
     warmup_s: float = 0.15
     trim: int = 0
     stepping_levels_db: tuple[float, ...] | None = None
+    drop_threshold: tuple[float, float] | None = None
     checks: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -215,6 +220,11 @@ class Tuning:
             object.__setattr__(self, "stepping_levels_db", lv)
             if len(lv) != nb or not all(math.isfinite(v) for v in lv):
                 raise ValueError(f"stepping_levels_db must hold {nb} finite levels")
+        if self.drop_threshold is not None:
+            dt = tuple(float(v) for v in self.drop_threshold)
+            if len(dt) != 2 or not all(math.isfinite(v) and 0.1 <= v <= 100 for v in dt):
+                raise ValueError(f"drop_threshold {self.drop_threshold} must be two numbers within 0.1..100 spreads")
+            object.__setattr__(self, "drop_threshold", dt)
         if not 0 <= self.trim < nb:
             raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
         for name, lo_, hi_ in (
@@ -250,12 +260,38 @@ class Tuning:
         return f"dB re {self.reference_hz[0]:.0f}-{self.reference_hz[1]:.0f} Hz"
 
     def for_sample_rate(self, sample_rate: int) -> Tuning:
-        """The same tuning for another sample rate (same durations; band must fit)."""
+        """The same tuning for another sample rate (same durations).
+
+        A template whose upper sub-bands do not fit below 0.45 of the new rate keeps the
+        sub-bands that do (the stop is judged on them), provided they hold at least half
+        of the stop's signature (in spreads); otherwise, and for a band tuning whose band
+        does not fit, :class:`ValueError` says so.
+        """
         if sample_rate == self.sample_rate:
             return self
         frame = default_frame(sample_rate) * self.frame // default_frame(self.sample_rate)
         hop = max(1, frame * self.hop // self.frame)
-        return replace(self, sample_rate=int(sample_rate), frame=int(frame), hop=int(hop))
+        kw: dict[str, Any] = {"sample_rate": int(sample_rate), "frame": int(frame), "hop": int(hop)}
+        if self.method == "template" and self.edges_hz is not None and self.edges_hz[-1] > 0.45 * sample_rate:
+            assert self.signature_db is not None and self.spread_db is not None
+            nb = sum(1 for e in self.edges_hz[1:] if e <= 0.45 * sample_rate)
+            sig, spr = np.asarray(self.signature_db), np.asarray(self.spread_db)
+            kept = float(np.sum((sig[:nb] / spr[:nb]) ** 2)) if nb else 0.0
+            if nb < 2 or kept < 0.25 * float(np.sum((sig / spr) ** 2)) or not any(abs(v) > 0 for v in sig[:nb]):
+                raise ValueError(
+                    f"this tuning's stop is heard mostly above {0.45 * sample_rate:.0f} Hz, beyond what a "
+                    f"{sample_rate} Hz recording holds; record at {self.sample_rate} Hz or tune at {sample_rate} Hz"
+                )
+            edges = self.edges_hz[: nb + 1]
+            kw.update(
+                band_hz=(edges[0], edges[-1]),
+                edges_hz=edges,
+                signature_db=self.signature_db[:nb],
+                spread_db=self.spread_db[:nb],
+                stepping_levels_db=None if self.stepping_levels_db is None else self.stepping_levels_db[:nb],
+                trim=min(self.trim, nb - 1),
+            )
+        return replace(self, **kw)
 
     # ------------------------------------------------------------- files
     def to_dict(self) -> dict[str, Any]:
@@ -268,7 +304,7 @@ class Tuning:
         version = 1
         if self.method == "template":
             version = 2
-            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
                 d[k] = list(d[k]) if d[k] is not None else None
         else:
             for k in (
@@ -283,6 +319,7 @@ class Tuning:
                 "trim",
                 "checks",
                 "stepping_levels_db",
+                "drop_threshold",
             ):
                 d.pop(k)
         return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
@@ -315,7 +352,7 @@ class Tuning:
                 if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
                     raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
                 kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
-            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db"):
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
                 if kwargs.get(k) is not None:
                     if not isinstance(kwargs[k], (list, tuple)):
                         raise TuningFileError(f"{k} must be a list of numbers")
@@ -437,6 +474,7 @@ class Tuning:
             trim=self.trim,
             onset_lag_s=self.onset_lag_s,
             stepping_levels_db=self.stepping_levels_db,
+            drop_threshold=self.drop_threshold,
         )
 
 

@@ -41,6 +41,11 @@ MIN_THRESHOLD = 0.4
 #: default hold: how long a stop must last before the detector fires, s
 HOLD_S = 0.021
 
+#: drop thresholds: this many times the worst drop of the stepping part ...
+DROP_MARGIN = 1.6
+#: ... and at least these (broad, local), spreads
+DROP_FLOOR = (0.6, 1.5)
+
 _DEFAULT_MAX_DIPS: int = Tuning(band_hz=(1000.0, 2000.0), threshold_db=0.0).max_dips
 
 __all__ = ["TuningError", "candidate_bands", "tune", "tune_band"]
@@ -511,6 +516,8 @@ def tune(
         if cand.margin <= 0.05:
             break
         tu = _make_tuning(cand, edges, delta, sigma, sample_rate, frame, hop, hold_s, release_s, joint, mu_step)
+        b0, b1 = cand.bands[0], cand.bands[-1] + 1
+        tu = replace(tu, drop_threshold=_drop_threshold(D[:, b0:b1], sigma[b0:b1], stepping, hold, window))
         events = StopDetector(tu).feed(x)
         near = [e for e in events if stop_s - g <= e.detected_at_s <= stop_s + 0.2]
         if len(events) == 1 and len(near) == 1:
@@ -686,6 +693,26 @@ def _pick(
             f"{checks['checked_s']:.0f} s (about {checks['false_alarms_per_hour']:.0f} per hour)"
         )
     return replace(tu, onset_lag_s=round(lag, 6), latency_measured_s=round(lat, 6), checks=checks)
+
+
+def _drop_threshold(
+    D: FloatArray, sigma: FloatArray, stepping: NDArray[np.bool_], hold: int, window: int
+) -> tuple[float, float]:
+    """Broad and local drop thresholds (spreads): well above the worst the stepping part reaches.
+
+    The stepping part's drops (:class:`~stickslip.audio.template.DropMeter`, decided as the
+    detector decides: ``hold`` of ``window`` frames) at their worst, times
+    :data:`DROP_MARGIN`, and at least :data:`DROP_FLOOR`.
+    """
+    from .template import DropMeter
+
+    z = np.clip(D, -40.0, 40.0) / sigma
+    broad, local = DropMeter(z.shape[1])(z)
+    out = []
+    for s, floor in zip((broad, local), DROP_FLOOR, strict=True):
+        worst = float(_decided(s, np.zeros_like(s), 1.0, hold, window)[stepping].max())
+        out.append(round(max(DROP_MARGIN * worst, floor), 3))
+    return out[0], out[1]
 
 
 def _running_template(V: FloatArray, stepping: NDArray[np.bool_], hop_s: float, tau_s: float = 0.5) -> FloatArray:
