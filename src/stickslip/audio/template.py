@@ -247,17 +247,25 @@ class DropMeter:
         """Forget the frames averaged so far."""
         self._tail = np.zeros((0, self.nb))
 
-    def __call__(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Broad and local drop (spreads) of each frame of ``z`` (frames x bands, spreads)."""
+    def __call__(self, z: FloatArray) -> FloatArray:
+        """The departures ``z`` (frames x bands, spreads) averaged over the last :data:`DROP_FRAMES` frames."""
         w = DROP_FRAMES
         zz = np.concatenate((self._tail, z)) if self._tail.size else z
         c = np.concatenate((np.zeros((1, self.nb)), np.cumsum(zz, axis=0)))
         k = np.arange(zz.shape[0] - z.shape[0], zz.shape[0]) + 1  # rows of zz ending each new frame
         lo = np.maximum(k - w, 0)
-        m = (c[k] - c[lo]) / (k - lo)[:, None]
         self._tail = zz[-(w - 1) :].copy()
-        broad = np.maximum(-np.median(m, axis=1), 0.0)
-        local = np.sqrt(np.mean(np.minimum(m, 0.0) ** 2, axis=1))
+        return np.asarray((c[k] - c[lo]) / (k - lo)[:, None], dtype=np.float64)
+
+    @staticmethod
+    def drops(m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Broad and local drop (spreads, >= 0) of averaged departures ``m`` (frames x bands)."""
+        nb = m.shape[1]
+        half = (nb - 1) // 2, nb // 2
+        part = np.partition(m, half, axis=1)
+        broad = np.maximum(-0.5 * (part[:, half[0]] + part[:, half[1]]), 0.0)
+        neg = np.minimum(m, 0.0)
+        local = np.sqrt(np.einsum("ij,ij->i", neg, neg) / nb)
         return broad, local
 
 
@@ -414,10 +422,14 @@ class TemplateState:
         if self._drop is not None and p.drop_threshold is not None:
             # a lasting drop below the template, in any sub-bands: a stop unlike the tuned one; armed
             # once the template has followed the stream for DROP_ARM_S (the warm-up's is rough)
-            broad, local = self._drop(np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale)
-            b = np.maximum(broad / p.drop_threshold[0], local / p.drop_threshold[1])
-            armed = (ends - self.arm_sample) >= 0
-            by_drop = (b >= 1.0) & ~hot & armed
+            m = self._drop(np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale)
+            b = np.zeros(a.size)
+            # either statistic reaches its threshold only where some sub-band dropped that far
+            near = (m.min(axis=1) <= -min(p.drop_threshold)) & ((ends - self.arm_sample) >= 0)
+            if near.any():
+                broad, local = DropMeter.drops(m[near])
+                b[near] = np.maximum(broad / p.drop_threshold[0], local / p.drop_threshold[1])
+            by_drop = (b >= 1.0) & ~hot
             a = np.where(by_drop, p.threshold * b, a)
             lag = np.where(by_drop, DROP_LAG_FRAMES * p.hop / p.sample_rate, 0.0)
             hot |= by_drop

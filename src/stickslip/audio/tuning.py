@@ -707,7 +707,7 @@ def _drop_threshold(
     from .template import DropMeter
 
     z = np.clip(D, -40.0, 40.0) / sigma
-    broad, local = DropMeter(z.shape[1])(z)
+    broad, local = DropMeter.drops(DropMeter(z.shape[1])(z))
     out = []
     for s, floor in zip((broad, local), DROP_FLOOR, strict=True):
         worst = float(_decided(s, np.zeros_like(s), 1.0, hold, window)[stepping].max())
