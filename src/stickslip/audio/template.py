@@ -239,8 +239,9 @@ class DropMeter:
     gives back to the onset.
     """
 
-    def __init__(self, n_bands: int) -> None:
+    def __init__(self, n_bands: int, frames: int | None = None) -> None:
         self.nb = int(n_bands)
+        self.frames = int(frames or DROP_FRAMES)
         self.reset()
 
     def reset(self) -> None:
@@ -248,13 +249,13 @@ class DropMeter:
         self._tail = np.zeros((0, self.nb))
 
     def __call__(self, z: FloatArray) -> FloatArray:
-        """The departures ``z`` (frames x bands, spreads) averaged over the last :data:`DROP_FRAMES` frames."""
-        w = DROP_FRAMES
+        """The departures ``z`` (frames x bands, spreads) averaged over the last ``frames`` frames."""
+        w = self.frames
         zz = np.concatenate((self._tail, z)) if self._tail.size else z
         c = np.concatenate((np.zeros((1, self.nb)), np.cumsum(zz, axis=0)))
         k = np.arange(zz.shape[0] - z.shape[0], zz.shape[0]) + 1  # rows of zz ending each new frame
         lo = np.maximum(k - w, 0)
-        self._tail = zz[-(w - 1) :].copy()
+        self._tail = zz[max(len(zz) - (w - 1), 0) :].copy()
         return np.asarray((c[k] - c[lo]) / (k - lo)[:, None], dtype=np.float64)
 
     @staticmethod
@@ -273,6 +274,12 @@ class DropMeter:
 DROP_FRAMES = 8
 #: the drop channel is armed this long after the warm-up, s (the template then has followed the stream)
 DROP_ARM_S = 0.35
+#: a signature whose drops add up to this many spreads (RMS-summed) is informative about them ...
+NEG_INFORMATIVE = 2.0
+#: ... and a frame then counts as the stop only if, averaged over NEG_FRAMES, it shows this share of those drops
+NEG_MIN = 0.15
+#: frames averaged for that check (a short average: it must not delay the stop)
+NEG_FRAMES = 4
 #: the average's delay, frames: given back to a drop-fired onset
 DROP_LAG_FRAMES = (DROP_FRAMES - 1) / 2
 
@@ -291,7 +298,8 @@ class TemplateState:
         self.delta = np.asarray(p.signature_db, dtype=np.float64)
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
         self._fit = _Fitter(self.delta, self.sigma, p.trim)
-        self._drop = DropMeter(self.delta.size) if p.drop_threshold is not None else None
+        self._drop = DropMeter(self.delta.size)
+        self._neg = DropMeter(self.delta.size, NEG_FRAMES)
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -315,8 +323,8 @@ class TemplateState:
         self._pending: list[Decision] = []
         self._drop_scale = self._fit.inv_sigma
         self.arm_sample = 0
-        if self._drop is not None:
-            self._drop.reset()
+        self._drop.reset()
+        self._neg.reset()
 
     @property
     def warming(self) -> bool:
@@ -350,6 +358,7 @@ class TemplateState:
                 live = 1.4826 * np.median(np.abs(warm - np.median(warm, axis=0)), axis=0)
                 self._drop_scale = 1.0 / np.maximum(self.sigma, live)
                 self._warm = []
+                self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._started_at_stop(end)
             return
         if self._chunk_rho and not self.latched and self.template is not None:
@@ -359,8 +368,8 @@ class TemplateState:
                 self.template = np.percentile(np.concatenate(self._chunk_v), 100 * QUANTILE, axis=0)
                 self._acc_n = 0
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
-                if self._drop is not None:
-                    self._drop.reset()
+                self._drop.reset()
+                self._neg.reset()
         self._chunk_rho, self._chunk_v = [], []
         if self._acc_n and self.template is not None and not self.latched:
             acc = np.concatenate(self._acc_list)
@@ -419,10 +428,19 @@ class TemplateState:
         hot = (a >= p.threshold) & (rho <= p.residual_max)
         lag = np.zeros(a.size)
         quiet = a < 0.3 * p.threshold
-        if self._drop is not None and p.drop_threshold is not None:
+        zs = np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale
+        m = self._drop(zs)
+        mn = self._neg(zs)
+        fire_ok = np.ones(a.size, dtype=bool)
+        if hot.any():
+            # to fire, the sub-bands the stop lowers must be lower: no voice or second instrument can fake a drop
+            gn = np.minimum(self.delta, 0.0) * self._drop_scale
+            gg = float(gn @ gn)
+            if gg >= NEG_INFORMATIVE**2:
+                hot &= (mn @ gn) / gg >= NEG_MIN
+        if p.drop_threshold is not None:
             # a lasting drop below the template, in any sub-bands: a stop unlike the tuned one; armed
             # once the template has followed the stream for DROP_ARM_S (the warm-up's is rough)
-            m = self._drop(np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale)
             b = np.zeros(a.size)
             # either statistic reaches its threshold only where some sub-band dropped that far
             near = (m.min(axis=1) <= -min(p.drop_threshold)) & ((ends - self.arm_sample) >= 0)
@@ -433,6 +451,7 @@ class TemplateState:
             a = np.where(by_drop, p.threshold * b, a)
             lag = np.where(by_drop, DROP_LAG_FRAMES * p.hop / p.sample_rate, 0.0)
             hot |= by_drop
+            fire_ok |= by_drop
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
@@ -447,10 +466,15 @@ class TemplateState:
         if not self.latched and self.mask == 0 and not hot.any():
             self.prev_a = float(a[-1])
             return []
-        return self._decide(a, hot, ends, lag)
+        return self._decide(a, hot, ends, lag, fire_ok)
 
     def _decide(
-        self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64], lag: FloatArray
+        self,
+        a: FloatArray,
+        hot: NDArray[np.bool_],
+        ends: NDArray[np.int64],
+        lag: FloatArray,
+        fire_ok: NDArray[np.bool_],
     ) -> list[Decision]:
         p = self.p
         sr, H = p.sample_rate, p.hop
@@ -459,7 +483,8 @@ class TemplateState:
         rel = p.threshold - p.hysteresis
         out: list[Decision] = []
         prev = self.prev_a
-        for ai, hi, end, li in zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True):
+        rows = zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), fire_ok.tolist(), strict=True)
+        for ai, hi, end, li, ok in rows:
             if self.latched:
                 if ai < rel:
                     self.below += 1

@@ -39,7 +39,7 @@ TRIM_FRACTION = 0.1
 #: lowest threshold on the stop-likeness (0 stepping, 1 the tuned stop)
 MIN_THRESHOLD = 0.4
 #: default hold: how long a stop must last before the detector fires, s
-HOLD_S = 0.021
+HOLD_S = 0.016
 
 #: drop thresholds: this many times the worst drop of the stepping part ...
 DROP_MARGIN = 1.6
