@@ -299,7 +299,6 @@ class TemplateState:
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
         self._fit = _Fitter(self.delta, self.sigma, p.trim)
         self._drop = DropMeter(self.delta.size)
-        self._neg = DropMeter(self.delta.size, NEG_FRAMES)
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -324,7 +323,7 @@ class TemplateState:
         self._drop_scale = self._fit.inv_sigma
         self.arm_sample = 0
         self._drop.reset()
-        self._neg.reset()
+        self._neg_tail = np.zeros(0)
 
     @property
     def warming(self) -> bool:
@@ -369,7 +368,7 @@ class TemplateState:
                 self._acc_n = 0
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._drop.reset()
-                self._neg.reset()
+                self._neg_tail = np.zeros(0)
         self._chunk_rho, self._chunk_v = [], []
         if self._acc_n and self.template is not None and not self.latched:
             acc = np.concatenate(self._acc_list)
@@ -430,14 +429,16 @@ class TemplateState:
         quiet = a < 0.3 * p.threshold
         zs = np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale
         m = self._drop(zs)
-        mn = self._neg(zs)
-        fire_ok = np.ones(a.size, dtype=bool)
-        if hot.any():
-            # to fire, the sub-bands the stop lowers must be lower: no voice or second instrument can fake a drop
-            gn = np.minimum(self.delta, 0.0) * self._drop_scale
-            gg = float(gn @ gn)
-            if gg >= NEG_INFORMATIVE**2:
-                hot &= (mn @ gn) / gg >= NEG_MIN
+        # the sub-bands the stop lowers must be lower: no voice or second instrument can fake a drop
+        gn = np.minimum(self.delta, 0.0) * self._drop_scale
+        gg = float(gn @ gn)
+        if gg >= NEG_INFORMATIVE**2:
+            shown = np.concatenate((self._neg_tail, zs @ gn / gg))  # share of the drops shown, per frame
+            c = np.concatenate(([0.0], np.cumsum(shown)))
+            k = np.arange(shown.size - a.size, shown.size) + 1
+            lo = np.maximum(k - NEG_FRAMES, 0)
+            hot &= (c[k] - c[lo]) / (k - lo) >= NEG_MIN
+            self._neg_tail = shown[max(shown.size - (NEG_FRAMES - 1), 0) :]
         if p.drop_threshold is not None:
             # a lasting drop below the template, in any sub-bands: a stop unlike the tuned one; armed
             # once the template has followed the stream for DROP_ARM_S (the warm-up's is rough)
@@ -451,7 +452,6 @@ class TemplateState:
             a = np.where(by_drop, p.threshold * b, a)
             lag = np.where(by_drop, DROP_LAG_FRAMES * p.hop / p.sample_rate, 0.0)
             hot |= by_drop
-            fire_ok |= by_drop
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
@@ -466,15 +466,10 @@ class TemplateState:
         if not self.latched and self.mask == 0 and not hot.any():
             self.prev_a = float(a[-1])
             return []
-        return self._decide(a, hot, ends, lag, fire_ok)
+        return self._decide(a, hot, ends, lag)
 
     def _decide(
-        self,
-        a: FloatArray,
-        hot: NDArray[np.bool_],
-        ends: NDArray[np.int64],
-        lag: FloatArray,
-        fire_ok: NDArray[np.bool_],
+        self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64], lag: FloatArray
     ) -> list[Decision]:
         p = self.p
         sr, H = p.sample_rate, p.hop
@@ -483,8 +478,7 @@ class TemplateState:
         rel = p.threshold - p.hysteresis
         out: list[Decision] = []
         prev = self.prev_a
-        rows = zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), fire_ok.tolist(), strict=True)
-        for ai, hi, end, li, ok in rows:
+        for ai, hi, end, li in zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True):
             if self.latched:
                 if ai < rel:
                     self.below += 1
