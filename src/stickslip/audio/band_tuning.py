@@ -26,8 +26,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import rank_filter
 
-from .detector import StopDetector, Tuning, _band_bins, default_frame, frame_power_spectra
+from .detector import StopDetector, Tuning, _band_bins, frame_power_spectra
 from .labels import TuningError, _recording
+from .tuningfile import default_frame
 
 FloatArray = NDArray[np.float64]
 

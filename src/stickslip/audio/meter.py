@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .detector import default_frame, frame_power_spectra
+from .detector import frame_power_spectra
+from .tuningfile import default_frame
 
 __all__ = ["BandMeter", "MeterReading"]
 

@@ -16,9 +16,10 @@ from numpy.typing import NDArray
 from scipy.ndimage import percentile_filter
 
 from .band_tuning import _DEFAULT_MAX_DIPS, candidate_bands, tune_band
-from .detector import StopDetector, Tuning, default_frame, frame_power_spectra
+from .detector import StopDetector, Tuning, frame_power_spectra
 from .labels import TuningError, _recording, _sound_change
 from .template import CHUNK, QUANTILE, fit_departure, subband_edges, subband_levels_db
+from .tuningfile import default_frame
 from .verification import _Candidate, _decided, _no_template, _pick
 
 FloatArray = NDArray[np.float64]
