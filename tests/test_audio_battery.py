@@ -145,6 +145,8 @@ CONDITIONS = [
         variant(Q, stop_kind="quieter"),
         _test(Q, 65, stop_kind="louder"),
         group="cross",
+        known_failure="not heard: the louder stop lowers the stepping modes by 3 dB only, while the broad-drop "
+        "threshold must stay above the stepping's own slow fluctuation (6 robust SDs: joint Q gets 1.0 spread)",
     ),
     Condition("brighter stop", variant(P, stop_kind="brighter"), _test(P, 66, stop_kind="brighter"), group="cross"),
     # hostile conditions nobody tuned for (written before the detector was changed for them)

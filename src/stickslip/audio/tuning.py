@@ -32,6 +32,8 @@ HOLD_S = 0.016
 
 #: drop thresholds: this many times the worst drop of the stepping part ...
 DROP_MARGIN = 1.6
+#: ... and at least the stepping part's median plus this many robust standard deviations ...
+DROP_TAIL = 6.0
 #: ... and at least these (broad, local), spreads
 DROP_FLOOR = (0.6, 1.5)
 
@@ -249,20 +251,28 @@ def tune(
 def _drop_threshold(
     D: FloatArray, sigma: FloatArray, stepping: NDArray[np.bool_], hold: int, window: int
 ) -> tuple[float, float]:
-    """Broad and local drop thresholds (spreads): well above the worst the stepping part reaches.
+    """Broad and local drop thresholds (spreads): well above what the stepping part reaches.
 
-    The stepping part's drops (:class:`~stickslip.audio.template.DropMeter`, decided as the
-    detector decides: ``hold`` of ``window`` frames) at their worst, times
-    :data:`DROP_MARGIN`, and at least :data:`DROP_FLOOR`.
+    For each statistic (:class:`~stickslip.audio.template.DropMeter`), the largest of
+    :data:`DROP_MARGIN` times the worst the stepping part reaches (decided as the detector
+    decides: ``hold`` of ``window`` frames), its median plus :data:`DROP_TAIL` robust
+    standard deviations (1.4826 MAD: a traverse is longer than the tuning recording, and
+    steps that are all a little weaker for a while lower every sub-band together), and
+    :data:`DROP_FLOOR`.
     """
     from .template import DropMeter
 
     z = np.clip(D, -40.0, 40.0) / sigma
-    broad, local = DropMeter.drops(DropMeter(z.shape[1])(z))
+    m = DropMeter(z.shape[1])(z)
+    broad, local = DropMeter.drops(m)
+    signed = -np.median(m, axis=1)  # the broad statistic before it is clipped at 0
     out = []
-    for s, floor in zip((broad, local), DROP_FLOOR, strict=True):
+    for s, raw, floor in zip((broad, local), (signed, local), DROP_FLOOR, strict=True):
         worst = float(_decided(s, np.zeros_like(s), 1.0, hold, window)[stepping].max())
-        out.append(round(max(DROP_MARGIN * worst, floor), 3))
+        r = raw[stepping]
+        med = float(np.median(r))
+        tail = med + DROP_TAIL * 1.4826 * float(np.median(np.abs(r - med)))
+        out.append(round(max(DROP_MARGIN * worst, tail, floor), 3))
     return out[0], out[1]
 
 
