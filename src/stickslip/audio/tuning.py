@@ -35,7 +35,7 @@ DROP_MARGIN = 1.6
 #: ... and at least the stepping part's median plus this many robust standard deviations ...
 DROP_TAIL = 6.0
 #: ... and at least these (broad, local), spreads
-DROP_FLOOR = (0.6, 1.5)
+DROP_FLOOR = (1.0, 2.0)
 
 __all__ = ["TuningError", "candidate_bands", "tune", "tune_band"]
 
