@@ -18,7 +18,12 @@ optional (``pip install 'stickslip[bench]'``); a missing one is reported in the 
 Then the real-time table: latency (median, p95) and speed for live blocks of 128-4096
 samples and for a whole recording (blocks of 65536).
 
-Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores).
+Last, false alarms per hour: an hour of stepping without a stop per joint of the
+battery's generator (``tests/battery_sound.py``), with drift, knocks, a fan, a second
+instrument and speech.
+
+Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
+``--long-only`` runs the false-alarm hour alone.
 """
 
 from __future__ import annotations
@@ -269,8 +274,65 @@ def main() -> list[Score]:
         if i == 0:
             print("  ".join("-" * w for w in widths))
     realtime(tunings[2])
+    false_alarms_per_hour()
     return scores
 
 
+#: the long no-stop run: (name, scene fields) cycled through the hour; battery_sound is the third generator
+LONG_CONDITIONS: list[tuple[str, dict[str, object]]] = [
+    ("clean", {}),
+    ("step rate drifting +-10 %", {"drift": 0.1}),
+    ("knocks every 1 s", {"knocks_every_s": 1.0}),
+    ("fan and a door slam", {"fan": True, "door_at": 30.0}),
+    ("second instrument", {"second_rate": 730.0, "second_from": 20.0}),
+    ("formant babble", {"speech": "babble"}),
+    ("espeak-ng speech", {"speech": "espeak"}),
+]
+
+
+def false_alarms_per_hour(hours: float = 1.0, piece_s: float = 120.0) -> None:
+    """One hour of stepping without a stop per joint of the battery's generator: false alarms per hour.
+
+    The hour is cut into pieces of ``piece_s`` (each another seed and step rate between
+    900 and 1260 Hz, cycling through :data:`LONG_CONDITIONS`); each piece is heard by a
+    fresh detector from its first sample, so the warm-up is exercised too.
+    """
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    from battery_sound import Scene, espeak_speech, render  # the battery's independent generator
+
+    n = int(round(hours * 3600 / piece_s))
+    print(f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces):")
+    for joint in ("P", "Q"):
+        x, sr = render(Scene(joint, 1000.0, 2.0, 3.0, seed=1))
+        tu = tune(x, sr, 2.0, seed=0)
+        per: dict[str, list[float]] = {}
+        t0 = time.perf_counter()
+        for i in range(n):
+            name, kw = LONG_CONDITIONS[i % len(LONG_CONDITIONS)]
+            if kw.get("speech") == "espeak" and espeak_speech(sr) is None:
+                continue
+            rate = 900.0 + 360.0 * ((i * 0.618) % 1.0)
+            y, _ = render(Scene(joint, rate, None, piece_s, seed=1000 + i, **kw))  # type: ignore[arg-type]
+            per.setdefault(name, [0.0, 0.0])
+            per[name][0] += len(StopDetector(tu).feed(y))
+            per[name][1] += piece_s
+        total = sum(v[0] for v in per.values())
+        heard = sum(v[1] for v in per.values())
+        print(
+            f"  joint {joint}: {total:.0f} false alarms in {heard / 3600:.2f} h = {total / heard * 3600:.1f} per hour "
+            f"({time.perf_counter() - t0:.0f} s)"
+        )
+        for name, (fa, secs) in per.items():
+            print(f"    {name:28s} {fa:3.0f} in {secs / 60:4.0f} min = {fa / secs * 3600:6.1f} per hour")
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+
+    if sys.argv[1:] == ["--long-only"]:
+        false_alarms_per_hour()
+    else:
+        main()

@@ -5,17 +5,22 @@ Other sound design on purpose:
 * **stepping**: every step is an impulse (amplitude +-20 %, timing jitter 20 us) that
   excites a bank of modal resonators (two-pole IIR filters, constant Q), four modes per
   joint; the controller's step clock runs at ``rate`` Hz;
-* **the stop**, four kinds: ``louder`` (the stop adds a strong mode of its own),
+* **the stop**, five kinds: ``louder`` (the stop adds a strong mode of its own),
   ``quieter`` (the stop soaks up the impulse: -8 dB on every mode), ``duller`` (the
-  modes above 4 kHz vanish, -20 dB) and ``spectral`` (the contact stiffens: the second
-  mode moves down by a fifth, the level stays the same);
+  modes above 4 kHz vanish, -20 dB), ``brighter`` (the modes above 4 kHz ring +12 dB
+  louder) and ``spectral`` (the contact stiffens: the second mode moves down by a
+  fifth, the level stays the same); the stop may fade in over ``fade_s`` (the contact
+  builds up gradually) or be there from the first sample (``stop_at=0``);
+* **the step clock** may drift linearly by ``drift`` (a fraction: 0.1 is from -10 % to
+  +10 % of ``rate`` over the recording);
 * **room**: white noise through a first-order low-pass; optional white noise at a set
   SNR; a fan (low-passed noise, blade-pass lines at 87 Hz and harmonics, a motor whine
   near 3.1 kHz); 60 Hz mains hum with odd harmonics; knocks (a 40-150 Hz table mode and
   a broadband contact burst); a door slam (a 35-70 Hz thump ringing 0.2 s, a rattle of
   frame modes, a latch click); a second instrument stepping at another rate through its
   own modes; speech from ``espeak-ng`` (if installed) or a formant babble built in the
-  frequency domain; clipping; 44.1 kHz; stereo (the second channel delayed and quieter).
+  frequency domain; clipping; 44.1 kHz or 22.05 kHz; 8-bit quantisation; stereo (the
+second channel delayed and quieter).
 
 Levels: the stepping sound is -28 dBFS RMS at 0 dB gain; interference levels are set
 relative to the stepping RMS.
@@ -62,6 +67,9 @@ class Scene:
     hum: bool = False
     clip_x_rms: float | None = None  # clip at this many times the stepping RMS
     stereo: bool = False
+    fade_s: float = 0.0  # the stop fades in over this long, s
+    drift: float = 0.0  # the step rate drifts linearly from (1 - drift) to (1 + drift) times rate
+    bits: int | None = None  # quantise to this many bits (full scale 1)
     silence: bool = False
     constant: float | None = None
 
@@ -75,8 +83,14 @@ def _bank(x: np.ndarray, modes, sr: int) -> np.ndarray:
     return sum((g * _res(x, f, bw, sr) for f, bw, g in modes if f < 0.45 * sr), np.zeros_like(x))
 
 
-def _impulses(n: int, sr: int, rate: float, rng, t0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    t = np.arange(t0, n / sr, 1 / rate)
+def _impulses(n: int, sr: int, rate: float, rng, t0: float = 0.0, drift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    if drift:  # the clock's phase is the integral of a rate that ramps linearly over the recording
+        dur = n / sr
+        tt = np.arange(n + 1) / sr
+        phase = rate * ((1 - drift) * tt + drift * tt**2 / dur)
+        t = np.interp(np.arange(np.ceil(rate * t0), phase[-1]), phase, tt)
+    else:
+        t = np.arange(t0, n / sr, 1 / rate)
     t = t + rng.normal(0, 20e-6, t.size)
     t = t[(t >= 0) & (t < n / sr)]
     return t, rng.uniform(0.8, 1.2, t.size)
@@ -137,26 +151,36 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
     if s.constant is not None:
         return np.full(n, s.constant, np.float32), sr
     modes, stop_mode = MODES[s.joint]
-    times, amps = _impulses(n, sr, s.rate, rng)
-    at_stop = np.zeros(times.size, bool) if s.stop_at is None else times >= s.stop_at
-    step = _bank(_train(n, sr, times[~at_stop], amps[~at_stop]), modes, sr)
-    stop_train = _train(n, sr, times[at_stop], amps[at_stop])
+    times, amps = _impulses(n, sr, s.rate, rng, drift=s.drift)
+    if s.stop_at is None:
+        w = np.zeros(times.size)
+    elif s.fade_s > 0:
+        w = np.clip((times - s.stop_at) / s.fade_s, 0.0, 1.0)
+    else:
+        w = (times >= s.stop_at).astype(float)
+    step = _bank(_train(n, sr, times, amps * (1 - w)), modes, sr)
+    stop_train = _train(n, sr, times, amps * w)
+    if s.stop_at is not None and s.stop_at < 0.2:  # starts at the stop: the stepping level from a stepping rendering
+        step_ref = _bank(_train(n, sr, times, amps), modes, sr)
+    else:
+        step_ref = step[: int(min(s.stop_at or s.dur, s.dur) * sr)]
     if s.stop_kind == "louder":
         stop = _bank(stop_train, modes, sr) * 0.7 + _bank(stop_train, (stop_mode,), sr)
     elif s.stop_kind == "quieter":
         stop = _bank(stop_train, modes, sr) * 10 ** (-8 / 20)
     elif s.stop_kind == "duller":
         stop = _bank(stop_train, [(f, bw, g * (0.1 if f > 4000 else 1.0)) for f, bw, g in modes], sr)
+    elif s.stop_kind == "brighter":
+        stop = _bank(stop_train, [(f, bw, g * (4.0 if f > 4000 else 1.0)) for f, bw, g in modes], sr)
     elif s.stop_kind == "spectral":
         moved = [(f * (0.8 if k == 1 else 1.0), bw, g) for k, (f, bw, g) in enumerate(modes)]
         stop = _bank(stop_train, moved, sr)
-        stop *= np.sqrt(
-            np.mean(step[: int(0.9 * (s.stop_at or 0) * sr)] ** 2) / max(np.mean(stop[stop != 0] ** 2), 1e-30)
-        )
+        full = stop[stop != 0] if s.stop_at >= 0.2 else _bank(_train(n, sr, times, amps), moved, sr)
+        stop *= np.sqrt(np.mean(step_ref[: int(0.9 * step_ref.size)] ** 2) / max(np.mean(full**2), 1e-30))
     else:
         raise ValueError(s.stop_kind)
     x = step + stop
-    ref = np.sqrt(np.mean(step[: int(min(s.stop_at or s.dur, s.dur) * sr)] ** 2))
+    ref = np.sqrt(np.mean(step_ref**2))
     scale = 10 ** (STEP_DB / 20) / ref
     x *= scale
     rms = 10 ** (STEP_DB / 20)
@@ -210,6 +234,9 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
     if s.clip_x_rms is not None:
         c = s.clip_x_rms * rms * 10 ** (s.gain_db / 20)
         x = np.clip(x, -c, c)
+    if s.bits is not None:
+        q = 2.0 ** (s.bits - 1)
+        x = np.clip(np.round(x * q), -q, q - 1) / q
     if s.stereo:
         d = 7
         r = np.concatenate((np.zeros(d), x[:-d])) * 0.6 + rng.standard_normal(n) * 10 ** (-70 / 20)

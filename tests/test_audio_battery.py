@@ -8,7 +8,14 @@ nothing changes, a dead input), when ``tune`` refuses or ``listen`` hears nothin
 latency targets (median <= 30 ms, 95th percentile <= 50 ms) are checked over all the
 conditions that find a stop.
 
-Run ``python tests/test_audio_battery.py`` for the table (44 conditions).
+Conditions come in three groups: ``core`` (the issue's list), ``cross`` (the test's stop
+departs from stepping in another direction than the training's: louder against quieter,
+duller against brighter, level against spectral) and ``hostile`` (written before the
+detector was changed for them: a stop that fades in, a drifting step clock, 8-bit audio,
+22.05 kHz, a recording that starts at the stop). A stop without a sharp onset (a fade,
+or a recording that starts at the stop) passes with an onset up to ``late_s`` late.
+
+Run ``python tests/test_audio_battery.py`` for the table.
 """
 
 from __future__ import annotations
@@ -39,6 +46,8 @@ class Condition:
     warn: bool = False  # tune must warn that the label disagrees with the sound
     known_failure: str | None = None  # why this condition is expected to fail today (strict xfail)
     lead_s: float = 0.0  # seconds of room sound (no stepping) before the test recording
+    late_s: float = 0.0  # the stop has no sharp onset: the onset may be this much late, the latency too
+    group: str = "core"  # "core", "cross" (trained on one kind of stop, tested on another), "hostile"
 
 
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)
@@ -67,8 +76,6 @@ CONDITIONS = [
         "loud speech (espeak-ng, +6 dB) in test",
         Q,
         _test(Q, 24, speech="espeak", speech_db=6.0),
-        known_failure="speech 6 dB louder than the stepping, with energy in joint Q's stop band (3.6 kHz): "
-        "a syllable there looks like the stop to a spectral detector",
     ),
     Condition("formant babble in test", P, _test(P, 25, speech="babble")),
     Condition("formant babble in training", variant(P, speech="babble"), _test(P, 26)),
@@ -79,8 +86,9 @@ CONDITIONS = [
         "second instrument from 0.8 s",
         P,
         _test(P, 30, second_rate=730.0, second_from=0.8),
-        known_failure="the second instrument rings at 5.4 kHz, inside joint P's stop band (5.2 kHz), and masks "
-        "the stop's rise there; telling them apart needs the stop's synchrony with the steps",
+        known_failure="the second instrument rings at 5.4 kHz, inside joint P's stop band (5.2 kHz): the template "
+        "absorbs it and the stop's rise there shrinks below the threshold (a comb at the step rate does not separate "
+        "them in 10.7 ms frames; see docs/audio.md)",
     ),
     Condition("second instrument throughout", Q, _test(Q, 31, second_rate=1230.0)),
     Condition("second instrument in training", variant(P, second_rate=730.0, second_from=1.0), _test(P, 32)),
@@ -114,6 +122,62 @@ CONDITIONS = [
     Condition("0.5 s of room sound before the stepping", P, _test(P, 54), lead_s=0.5),
     Condition("silence in test", P, variant(P, silence=True, seed=52), expect="silent"),
     Condition("constant in test", P, variant(P, constant=0.2, seed=53), expect="silent"),
+    # both directions: the test's stop departs from stepping unlike the training's
+    Condition("trained louder, test quieter", P, _test(P, 60, stop_kind="quieter"), group="cross"),
+    Condition("trained louder, test quieter, joint Q", Q, _test(Q, 61, stop_kind="quieter"), group="cross"),
+    Condition(
+        "trained duller, test brighter",
+        variant(Q, stop_kind="duller"),
+        _test(Q, 62, stop_kind="brighter"),
+        group="cross",
+        known_failure="a rise in sub-bands the tuning saw fall: only drops are interference-proof; a rise the "
+        "tuning never saw cannot be told from a new sound in the room without the steps' synchrony",
+    ),
+    Condition(
+        "trained brighter, test duller",
+        variant(P, stop_kind="brighter"),
+        _test(P, 63, stop_kind="duller"),
+        group="cross",
+    ),
+    Condition("trained louder, spectral-only stop in test", P, _test(P, 64, stop_kind="spectral"), group="cross"),
+    Condition(
+        "trained quieter, test louder",
+        variant(Q, stop_kind="quieter"),
+        _test(Q, 65, stop_kind="louder"),
+        group="cross",
+        known_failure="not heard: the louder stop lowers the stepping modes by 3 dB only, while the broad-drop "
+        "threshold must stay above the stepping's own slow fluctuation (6 robust SDs: joint Q gets 1.0 spread)",
+    ),
+    Condition("brighter stop", variant(P, stop_kind="brighter"), _test(P, 66, stop_kind="brighter"), group="cross"),
+    # hostile conditions nobody tuned for (written before the detector was changed for them)
+    Condition("stop fades in over 150 ms", P, _test(P, 70, fade_s=0.15), late_s=0.15, group="hostile"),
+    Condition("stop fades in over 150 ms, joint Q", Q, _test(Q, 71, fade_s=0.15), late_s=0.15, group="hostile"),
+    Condition(
+        "step rate drifts +-10 %",
+        P,
+        _test(P, 72, drift=0.1),
+        group="hostile",
+        known_failure="a false alarm at 0.32 s: the warm-up's template is learned at -10 % and the lines moving "
+        "through joint P's narrow 5.2 kHz mode look like the stop's rise",
+    ),
+    Condition("step rate drifts +-10 %, joint Q", Q, _test(Q, 73, drift=0.1, stop_at=2.4), group="hostile"),
+    Condition("8-bit audio", P, _test(P, 74, bits=8), group="hostile"),
+    Condition("8-bit training and test", variant(Q, bits=8), _test(Q, 75, bits=8), group="hostile"),
+    Condition("tuned at 48 kHz, test at 22.05 kHz", P, _test(P, 76, sr=22_050), group="hostile"),
+    Condition("22.05 kHz training and test", variant(Q, sr=22_050), _test(Q, 77, sr=22_050), group="hostile"),
+    # a recording that starts mid-traverse, already at the stop: the detector fires as soon as its
+    # template is learned, with the start of listening as the onset (see docs/audio.md)
+    Condition(
+        "starts at the stop",
+        P,
+        _test(P, 78, stop_at=0.0),
+        late_s=0.25,
+        group="hostile",
+        known_failure="the first frames fit the tuning's stepping plus 1.2 x the stop, but leave a residual of 5.4 "
+        "spreads (joint P's narrow modes sound different at 1080 Hz than at the tuning's 1000 Hz): not the clear "
+        "case the detector demands before firing at once",
+    ),
+    Condition("starts at the stop, joint Q", Q, _test(Q, 79, stop_at=0.0), late_s=0.25, group="hostile"),
 ]
 
 
@@ -124,12 +188,14 @@ class Outcome:
     events: tuple[float, ...] = ()  # detected_at_s
     onsets: tuple[float, ...] = ()
     true_stop_s: float | None = None
+    late_s: float = 0.0
 
     @property
     def hits(self) -> list[int]:
         if self.true_stop_s is None:
             return []
-        return [i for i, o in enumerate(self.onsets) if abs(o - self.true_stop_s) <= TOL_S]
+        lo, hi = self.true_stop_s - TOL_S, self.true_stop_s + TOL_S + self.late_s
+        return [i for i, o in enumerate(self.onsets) if lo <= o <= hi]
 
     @property
     def false_alarms(self) -> int:
@@ -163,12 +229,17 @@ def run(c: Condition) -> Outcome:
     if c.lead_s:
         room = 10 ** (-65 / 20) * np.random.default_rng(c.test.seed).standard_normal(int(c.lead_s * sr_t))
         y = np.concatenate((room.astype(np.float32), y))
-    events = detect(y, tu.for_sample_rate(sr_t), block=1024)
+    try:
+        tu_t = tu.for_sample_rate(sr_t)
+    except ValueError as e:  # listen refuses this tuning at this sample rate
+        return Outcome(refused=f"listen: {e}")
+    events = detect(y, tu_t, block=1024)
     return Outcome(
         warnings=tuple((tu.checks or {}).get("warnings", [])),
         events=tuple(e.detected_at_s for e in events),
         onsets=tuple(e.onset_s for e in events),
         true_stop_s=(c.test.stop_at or 0.0) + c.lead_s if not (c.test.silence or c.test.constant is not None) else None,
+        late_s=c.late_s,
     )
 
 
@@ -180,7 +251,9 @@ def passed(c: Condition, o: Outcome) -> bool:
     if c.expect == "silent":
         return not o.events
     label_warned = any("disagrees" in w for w in o.warnings)
-    return len(o.hits) == 1 and o.false_alarms == 0 and label_warned == c.warn and (o.latency_s or 1.0) <= 0.050
+    return (
+        len(o.hits) == 1 and o.false_alarms == 0 and label_warned == c.warn and (o.latency_s or 1.0) <= 0.050 + c.late_s
+    )
 
 
 _CACHE: dict[str, Outcome] = {}
@@ -207,7 +280,7 @@ def test_latency_targets_over_the_battery() -> None:
     lat = [
         o.latency_s
         for c in CONDITIONS
-        if not (_needs_espeak(c) and espeak_speech(48_000) is None)
+        if not (_needs_espeak(c) and espeak_speech(48_000) is None) and c.late_s == 0
         for o in [outcome(c)]
         if o.latency_s is not None
     ]
@@ -225,11 +298,16 @@ def table() -> str:
         ok = "pass" if passed(c, o) else ("xfail" if c.known_failure else "FAIL")
         found = str(len(o.hits)) if o.true_stop_s is not None else "-"
         rows.append(f"{c.name:48s} {ok:8s} {found:>5s} {o.false_alarms:>3d} {lat:>10s} {err:>12s}  {note}")
-    lat_all = [o.latency_s for o in _CACHE.values() if o.latency_s is not None]
+    lat_all = [o.latency_s for o in _CACHE.values() if o.latency_s is not None and o.late_s == 0]
+    errs = [abs(o.onset_error_s) for o in _CACHE.values() if o.onset_error_s is not None and o.late_s == 0]
     rows.append(
         f"latency over {len(lat_all)} stops: median {1e3 * np.median(lat_all):.1f} ms, "
-        f"p95 {1e3 * np.percentile(lat_all, 95):.1f} ms"
+        f"p95 {1e3 * np.percentile(lat_all, 95):.1f} ms; worst onset error {1e3 * max(errs):.1f} ms"
     )
+    for g in ("core", "cross", "hostile"):
+        cs = [c for c in CONDITIONS if c.group == g]
+        ok = sum(passed(c, outcome(c)) for c in cs)
+        rows.append(f"{g}: {ok}/{len(cs)} pass")
     return "\n".join(rows)
 
 

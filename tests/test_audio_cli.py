@@ -295,6 +295,7 @@ def test_record_on_a_controller_labels_from_the_step_count_or_a_key(tmp_path, mo
     assert r.exit_code == 0, r.output
     label = json.loads(r.stdout)["label"]
     assert label["label_from"] == how and ctrl.closed
+    assert "dBFS broadband (learning the stepping band)" in r.stderr  # 0.26 s of input: the band is not known yet
     assert sum(n for _, n in ctrl.steps) == 400 and all(j == 2 and n > 0 for j, n in ctrl.steps)
     x, sr = read_wav(wav)
     assert sr == 48_000 and x.size == 12 * 1024 and np.allclose(x[:1024], 0.01)  # every block, in order

@@ -1,7 +1,9 @@
 """The audio limit switch: hear a joint reach its end stop.
 
 * :mod:`.detector` streaming band-power detector and its :class:`Tuning`
-* :mod:`.tuning`   choose band and threshold from a labelled recording
+* :mod:`.tuning`   learn the stepping template and the stop's signature from a labelled recording
+  (:mod:`.labels`, :mod:`.verification`; :mod:`.band_tuning` for version-1 tunings)
+* :mod:`.template` the spectral-template change detector; :mod:`.meter` the record meter
 * :mod:`.sources`  WAV files in blocks, a live microphone
 """
 

@@ -209,6 +209,7 @@ class TemplateParams:
     trim: int
     onset_lag_s: float
     stepping_levels_db: tuple[float, ...] | None = None
+    drop_threshold: tuple[float, float] | None = None
 
 
 @dataclass
@@ -218,6 +219,69 @@ class Decision:
     end_sample: int
     cross_t_s: float
     a: float
+
+
+class DropMeter:
+    """How far the sound has *dropped* below the stepping template, averaged over :data:`DROP_FRAMES` frames.
+
+    Interference only adds sound, so a lasting drop below the stepping template is
+    evidence no voice, knock or second instrument can fake: a quieter, a duller or a
+    spectral stop (energy leaves a sub-band) is heard whatever the tuning learned.
+    Per frame, from the departures ``z_b = d_b / sigma_b`` (spreads) averaged over the
+    last :data:`DROP_FRAMES` frames, ``m_b``, two statistics (spreads, >= 0):
+
+    * *broad*: ``-median_b m_b``, the bulk of the sub-bands dropped together (a quieter
+      stop, or every stepping mode weaker while the stop rings in one band);
+    * *local*: ``sqrt(mean_b min(m_b, 0)**2)``, a few sub-bands dropped far (a duller or
+      a spectral stop).
+
+    The average costs (``DROP_FRAMES`` - 1) / 2 hops of latency, which :data:`DROP_LAG_FRAMES`
+    gives back to the onset.
+    """
+
+    def __init__(self, n_bands: int, frames: int | None = None) -> None:
+        self.nb = int(n_bands)
+        self.frames = int(frames or DROP_FRAMES)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the frames averaged so far."""
+        self._tail = np.zeros((0, self.nb))
+
+    def __call__(self, z: FloatArray) -> FloatArray:
+        """The departures ``z`` (frames x bands, spreads) averaged over the last ``frames`` frames."""
+        w = self.frames
+        zz = np.concatenate((self._tail, z)) if self._tail.size else z
+        c = np.concatenate((np.zeros((1, self.nb)), np.cumsum(zz, axis=0)))
+        k = np.arange(zz.shape[0] - z.shape[0], zz.shape[0]) + 1  # rows of zz ending each new frame
+        lo = np.maximum(k - w, 0)
+        self._tail = zz[max(len(zz) - (w - 1), 0) :].copy()
+        return np.asarray((c[k] - c[lo]) / (k - lo)[:, None], dtype=np.float64)
+
+    @staticmethod
+    def drops(m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Broad and local drop (spreads, >= 0) of averaged departures ``m`` (frames x bands)."""
+        nb = m.shape[1]
+        half = (nb - 1) // 2, nb // 2
+        part = np.partition(m, half, axis=1)
+        broad = np.maximum(-0.5 * (part[:, half[0]] + part[:, half[1]]), 0.0)
+        neg = np.minimum(m, 0.0)
+        local = np.sqrt(np.einsum("ij,ij->i", neg, neg) / nb)
+        return broad, local
+
+
+#: frames averaged by :class:`DropMeter` (21 ms at 48 kHz, as the hold)
+DROP_FRAMES = 8
+#: the drop channel is armed this long after the warm-up, s (the template then has followed the stream)
+DROP_ARM_S = 0.35
+#: a signature whose drops add up to this many spreads (RMS-summed) is informative about them ...
+NEG_INFORMATIVE = 2.0
+#: ... and a frame then counts as the stop only if, averaged over NEG_FRAMES, it shows this share of those drops
+NEG_MIN = 0.15
+#: frames averaged for that check (a short average: it must not delay the stop)
+NEG_FRAMES = 4
+#: the average's delay, frames: given back to a drop-fired onset
+DROP_LAG_FRAMES = (DROP_FRAMES - 1) / 2
 
 
 class TemplateState:
@@ -234,6 +298,7 @@ class TemplateState:
         self.delta = np.asarray(p.signature_db, dtype=np.float64)
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
         self._fit = _Fitter(self.delta, self.sigma, p.trim)
+        self._drop = DropMeter(self.delta.size)
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -255,6 +320,10 @@ class TemplateState:
         self.last_a = 0.0
         self.last_rho = 0.0
         self._pending: list[Decision] = []
+        self._drop_scale = self._fit.inv_sigma
+        self.arm_sample = 0
+        self._drop.reset()
+        self._neg_tail = np.zeros(0)
 
     @property
     def warming(self) -> bool:
@@ -281,9 +350,14 @@ class TemplateState:
     def _chunk_done(self, end: int) -> None:
         p = self.p
         if self.frame_no <= p.warmup_chunks * CHUNK:
-            self.template = np.percentile(np.concatenate(self._warm), 100 * QUANTILE, axis=0)
+            warm = np.concatenate(self._warm)
+            self.template = np.percentile(warm, 100 * QUANTILE, axis=0)
             if self.frame_no == p.warmup_chunks * CHUNK:
+                # the drop channel judges drops in the larger of the tuning's and this stream's spreads
+                live = 1.4826 * np.median(np.abs(warm - np.median(warm, axis=0)), axis=0)
+                self._drop_scale = 1.0 / np.maximum(self.sigma, live)
                 self._warm = []
+                self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._started_at_stop(end)
             return
         if self._chunk_rho and not self.latched and self.template is not None:
@@ -292,6 +366,9 @@ class TemplateState:
             if rho_all.size >= CHUNK // 2 and float(np.partition(rho_all, mid)[mid]) > STALE_RESIDUAL * p.residual_max:
                 self.template = np.percentile(np.concatenate(self._chunk_v), 100 * QUANTILE, axis=0)
                 self._acc_n = 0
+                self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
+                self._drop.reset()
+                self._neg_tail = np.zeros(0)
         self._chunk_rho, self._chunk_v = [], []
         if self._acc_n and self.template is not None and not self.latched:
             acc = np.concatenate(self._acc_list)
@@ -347,26 +424,53 @@ class TemplateState:
             return []
         d = v - self.template
         a, rho = self._fit(d)
+        hot = (a >= p.threshold) & (rho <= p.residual_max)
+        lag = np.zeros(a.size)
+        quiet = a < 0.3 * p.threshold
+        zs = np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale
+        m = self._drop(zs)
+        # the sub-bands the stop lowers must be lower: no voice or second instrument can fake a drop
+        gn = np.minimum(self.delta, 0.0) * self._drop_scale
+        gg = float(gn @ gn)
+        if gg >= NEG_INFORMATIVE**2:
+            shown = np.concatenate((self._neg_tail, zs @ gn / gg))  # share of the drops shown, per frame
+            c = np.concatenate(([0.0], np.cumsum(shown)))
+            k = np.arange(shown.size - a.size, shown.size) + 1
+            lo = np.maximum(k - NEG_FRAMES, 0)
+            hot &= (c[k] - c[lo]) / (k - lo) >= NEG_MIN
+            self._neg_tail = shown[max(shown.size - (NEG_FRAMES - 1), 0) :]
+        if p.drop_threshold is not None:
+            # a lasting drop below the template, in any sub-bands: a stop unlike the tuned one; armed
+            # once the template has followed the stream for DROP_ARM_S (the warm-up's is rough)
+            b = np.zeros(a.size)
+            # either statistic reaches its threshold only where some sub-band dropped that far
+            near = (m.min(axis=1) <= -min(p.drop_threshold)) & ((ends - self.arm_sample) >= 0)
+            if near.any():
+                broad, local = DropMeter.drops(m[near])
+                b[near] = np.maximum(broad / p.drop_threshold[0], local / p.drop_threshold[1])
+            by_drop = (b >= 1.0) & ~hot
+            a = np.where(by_drop, p.threshold * b, a)
+            lag = np.where(by_drop, DROP_LAG_FRAMES * p.hop / p.sample_rate, 0.0)
+            hot |= by_drop
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
-        # the template follows stepping only: frames that look like stepping, clipped
         # the template follows every frame that is not stop-like (the low quantile taken per chunk
         # ignores knocks and voices); a chunk that fits neither stepping nor the stop at all means
         # the template is stale (listening began in silence, the microphone moved): learn it anew
-        quiet = a < 0.3 * p.threshold
         if quiet.any():
             self._acc_list.append(d[quiet])
             self._acc_n += int(quiet.sum())
         self._chunk_rho.append(rho)
         self._chunk_v.append(v)
-        hot = (a >= p.threshold) & (rho <= p.residual_max)
         if not self.latched and self.mask == 0 and not hot.any():
             self.prev_a = float(a[-1])
             return []
-        return self._decide(a, hot, ends)
+        return self._decide(a, hot, ends, lag)
 
-    def _decide(self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64]) -> list[Decision]:
+    def _decide(
+        self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64], lag: FloatArray
+    ) -> list[Decision]:
         p = self.p
         sr, H = p.sample_rate, p.hop
         full = (1 << (p.hold_frames + p.max_dips)) - 1
@@ -374,7 +478,7 @@ class TemplateState:
         rel = p.threshold - p.hysteresis
         out: list[Decision] = []
         prev = self.prev_a
-        for ai, hi, end in zip(a.tolist(), hot.tolist(), ends.tolist(), strict=True):
+        for ai, hi, end, li in zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True):
             if self.latched:
                 if ai < rel:
                     self.below += 1
@@ -392,9 +496,9 @@ class TemplateState:
                     t_end = self.t0 + end / sr
                     if math.isfinite(prev) and prev < p.threshold and ai > prev:
                         frac = (p.threshold - prev) / (ai - prev)
-                        self.cross_t = float(t_end - (1 - frac) * H / sr)
+                        self.cross_t = float(t_end - (1 - frac) * H / sr) - li
                     else:
-                        self.cross_t = t_end
+                        self.cross_t = t_end - li
                 self.mask = ((self.mask << 1) | int(hi)) & full
                 self.recent = (self.recent + [ai])[-window_n:]
                 if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):

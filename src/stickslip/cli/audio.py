@@ -239,7 +239,9 @@ def record(
     steps at its set frequency while the sound card records; the label is the time of
     step --stop-at-step (you know the joint's travel in steps), or the moment you press
     Enter (--key; your reaction time, ~0.2 s, makes it late: tune corrects a label that
-    disagrees with the sound and says so). A live meter shows the input level (dBFS).
+    disagrees with the sound and says so). A live meter shows the level of the stepping
+    band (dBFS, with the band in Hz; learned from the first 0.5 s while the joint steps),
+    the band the tuning will listen to.
 
     Example: stickslip record j2.wav --joint 2 --device sim://?seed=3 --tune j2-tuning.json
     """
@@ -330,6 +332,7 @@ def _record_real(
 
     import numpy as np
 
+    from ..audio.meter import BandMeter
     from ..audio.sources import Microphone
 
     if steps is None or steps < 1:
@@ -341,6 +344,7 @@ def _record_real(
     hz = float(ctrl.frequency(joint))
     dev: int | str | None = int(audio_input) if audio_input is not None and audio_input.isdigit() else audio_input
     mic = Microphone(sample_rate=48_000, block=1024, device=dev).start()
+    meter = BandMeter(48_000)
     pressed: list[float] = []
     t0 = time.monotonic()
     if key:
@@ -364,7 +368,7 @@ def _record_real(
             issued += n
             for b in _drain(mic, tb + n / hz):
                 blocks.append(b)
-                _meter(b)
+                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
         blocks += list(_drain(mic, time.monotonic() + 0.3))
         ctrl.stop(joint)
     finally:
@@ -392,14 +396,3 @@ def _drain(mic: Any, until: float) -> Iterator[Any]:
                 return
             continue
         yield data.mean(axis=1) if data.ndim == 2 else data.reshape(-1)
-
-
-def _meter(block: Any) -> None:
-    """One line on stderr: the block's level in dBFS as a bar."""
-    import math
-
-    import numpy as np
-
-    level = 10 * math.log10(float(np.mean(np.square(block, dtype=np.float64))) + 1e-20)
-    n = int(max(0.0, min(50.0, (level + 90.0) / 90.0 * 50.0)))
-    err_console.print(f"\r{level:6.1f} dBFS |{'#' * n}{' ' * (50 - n)}|", end="", highlight=False)

@@ -1,0 +1,458 @@
+"""A tuning: how to hear one joint's end stop, and its JSON file (``kind: stickslip.audio.Tuning``).
+
+Version 2 holds the spectral-template detector's settings (:mod:`.template`), version 1
+the band-power detector's (:mod:`.detector`); both load. Units are in the key names.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import records
+from .template import CHUNK, TemplateParams
+
+__all__ = ["Tuning", "TuningFileError", "default_frame"]
+
+_KIND = "stickslip.audio.Tuning"
+
+
+class TuningFileError(ValueError):
+    """A tuning file or dictionary that cannot be used (names the key and the reason)."""
+
+
+def default_frame(sample_rate: int) -> int:
+    """Frame length in samples: the power of two closest to 10.7 ms (512 at 48 kHz)."""
+    return int(2 ** round(math.log2(sample_rate * 512 / 48_000)))
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """How to hear one joint's end stop.
+
+    Parameters
+    ----------
+    band_hz : (float, float)
+        Lower and upper edge of the band whose power is watched, Hz.
+    threshold_db : float
+        Band level at or above which a frame counts as "stop", dBFS.
+    sample_rate : int
+        Sample rate the tuning was made for, Hz.
+    frame : int
+        Frame length, samples (Hann window, rfft).
+    hop : int
+        Hop between frames, samples.
+    hold_s : float
+        How long the level must stay above threshold before the event fires, s.
+    hysteresis_db : float
+        The level must fall this far below threshold to re-arm, dB.
+    release_s : float
+        ... for this long, s.
+    max_dips : int
+        Frames below threshold tolerated within the hold: the event fires when
+        ``hold_frames`` of the last ``hold_frames + max_dips`` frames were above.
+    onset_lag_s : float
+        Time from the true onset of the stop to the interpolated threshold crossing, s
+        (measured by :func:`stickslip.audio.tuning.tune`); used for ``onset_s``.
+    joint : int or None
+        Joint the tuning belongs to (informational).
+    contrast_db, margin_db, stepping_db, stopped_db : float or None
+        What tuning saw: stopped-part low percentile minus stepping-part high percentile,
+        threshold minus stepping high percentile, and those two levels (dBFS).
+    latency_measured_s : float or None
+        detected_at - stop onset on the tuning recording, s.
+    reference_hz : (float, float) or None
+        ``"band"`` method: the band level is taken relative to this band's, Hz.
+    method : str
+        ``"template"``: the spectral-template change detector (:mod:`.template`; what
+        :func:`~stickslip.audio.tuning.tune` makes). ``"band"``: the band-power detector
+        of tuning files version 1 (band level against ``threshold_db``).
+    edges_hz : tuple of float
+        ``"template"``: sub-band edges, Hz (``band_hz`` is their span).
+    signature_db : tuple of float
+        ``"template"``: the stop's departure from stepping per sub-band, dB.
+    spread_db : tuple of float
+        ``"template"``: frame-to-frame spread of stepping per sub-band, dB.
+    residual_max : float
+        ``"template"``: largest residual (in spreads) a frame may have and still count.
+    decay_ratio : float
+        ``"template"``: the firing frame's stop-likeness must be at least this fraction
+        of the largest in the hold window (a decaying transient is not a stop).
+    tau_s : float
+        ``"template"``: time constant of the running stepping template, s.
+    warmup_s : float
+        ``"template"``: stepping heard before the detector can fire, s.
+    trim : int
+        ``"template"``: sub-bands dropped from each frame's fit (those that fit worst).
+    stepping_levels_db : tuple of float or None
+        ``"template"``: stepping's level per sub-band in the tuning recording, dBFS; lets the
+        detector tell that it began listening at the stop (see :mod:`.template`).
+    drop_threshold : (float, float) or None
+        ``"template"``: the broad and the local drop below the stepping template at which
+        a frame counts as a stop whatever its signature (spreads, see
+        :class:`~stickslip.audio.template.DropMeter`); None: only the tuned signature counts.
+    checks : dict or None
+        What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
+        interference injected, latency); informational.
+
+    Notes
+    -----
+    For ``"template"`` tunings ``threshold_db`` is the threshold on the stop-likeness
+    (0 stepping, 1 the tuned stop; dimensionless) and ``hysteresis_db`` its hysteresis.
+    """
+
+    band_hz: tuple[float, float]
+    threshold_db: float
+    sample_rate: int = 48_000
+    frame: int = 512
+    hop: int = 128
+    hold_s: float = 0.016
+    hysteresis_db: float = 6.0
+    release_s: float = 0.25
+    max_dips: int = 2
+    onset_lag_s: float = 0.003
+    joint: int | None = None
+    contrast_db: float | None = None
+    margin_db: float | None = None
+    stepping_db: float | None = None
+    stopped_db: float | None = None
+    latency_measured_s: float | None = None
+    reference_hz: tuple[float, float] | None = None
+    method: str = "band"
+    edges_hz: tuple[float, ...] | None = None
+    signature_db: tuple[float, ...] | None = None
+    spread_db: tuple[float, ...] | None = None
+    residual_max: float = 4.0
+    decay_ratio: float = 0.5
+    tau_s: float = 0.5
+    warmup_s: float = 0.15
+    trim: int = 0
+    stepping_levels_db: tuple[float, ...] | None = None
+    drop_threshold: tuple[float, float] | None = None
+    checks: dict[str, Any] | None = None
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        lo, hi = (float(v) for v in self.band_hz)
+        object.__setattr__(self, "band_hz", (lo, hi))
+        nyq = self.sample_rate / 2
+        if not 8_000 <= self.sample_rate <= 192_000:
+            raise ValueError(f"sample_rate {self.sample_rate} Hz is outside 8000-192000 Hz")
+        if not 0 <= lo < hi <= nyq:
+            raise ValueError(f"band_hz ({lo:g}, {hi:g}) must satisfy 0 <= low < high <= {nyq:g} Hz")
+        if not (self.frame >= 32 and self.frame & (self.frame - 1) == 0):
+            raise ValueError(f"frame {self.frame} must be a power of two >= 32 samples")
+        if not 1 <= self.hop <= self.frame:
+            raise ValueError(f"hop {self.hop} must be between 1 and frame ({self.frame}) samples")
+        if hi - lo < 2 * self.sample_rate / self.frame:
+            raise ValueError(
+                f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
+                f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
+            )
+        if self.method not in ("band", "template"):
+            raise ValueError(f"method {self.method!r} must be 'band' or 'template'")
+        if self.method == "template":
+            self._check_template()
+        if self.reference_hz is not None:
+            r0, r1 = (float(v) for v in self.reference_hz)
+            object.__setattr__(self, "reference_hz", (r0, r1))
+            if not (0 <= r0 < r1 <= nyq and r1 - r0 >= 2 * self.sample_rate / self.frame):
+                raise ValueError(f"reference_hz ({r0:g}, {r1:g}) must be a band of at least two bins below {nyq:g} Hz")
+        if not 0 <= self.max_dips <= 16:
+            raise ValueError(f"max_dips {self.max_dips} is outside the allowed 0..16 frames")
+        if not math.isfinite(self.threshold_db) or not -200 <= self.threshold_db <= 50:
+            raise ValueError(f"threshold_db {self.threshold_db} must be within -200..50 dBFS")
+        for name, lo_, hi_ in (
+            ("hold_s", 0, 1),
+            ("release_s", 0, 10),
+            ("hysteresis_db", 0, 60),
+            ("onset_lag_s", -1, 1),
+        ):
+            v = getattr(self, name)
+            if not lo_ <= v <= hi_:
+                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+
+    def _check_template(self) -> None:
+        if self.edges_hz is None or self.signature_db is None or self.spread_db is None:
+            raise ValueError("a template tuning needs edges_hz, signature_db and spread_db")
+        edges = tuple(float(e) for e in self.edges_hz)
+        sig = tuple(float(e) for e in self.signature_db)
+        spr = tuple(float(e) for e in self.spread_db)
+        object.__setattr__(self, "edges_hz", edges)
+        object.__setattr__(self, "signature_db", sig)
+        object.__setattr__(self, "spread_db", spr)
+        nb = len(edges) - 1
+        if nb < 1 or len(sig) != nb or len(spr) != nb:
+            raise ValueError(f"edges_hz ({len(edges)}), signature_db ({len(sig)}) and spread_db ({len(spr)}) disagree")
+        if any(not b > a for a, b in zip(edges, edges[1:], strict=False)) or edges[-1] > self.sample_rate / 2:
+            raise ValueError(f"edges_hz must increase and stay below {self.sample_rate / 2:g} Hz")
+        if not all(math.isfinite(v) for v in sig) or not any(abs(v) > 0 for v in sig):
+            raise ValueError("signature_db must be finite and not all zero")
+        if not all(math.isfinite(v) and v > 0 for v in spr):
+            raise ValueError("spread_db must be finite and positive")
+        if self.stepping_levels_db is not None:
+            lv = tuple(float(v) for v in self.stepping_levels_db)
+            object.__setattr__(self, "stepping_levels_db", lv)
+            if len(lv) != nb or not all(math.isfinite(v) for v in lv):
+                raise ValueError(f"stepping_levels_db must hold {nb} finite levels")
+        if self.drop_threshold is not None:
+            dt = tuple(float(v) for v in self.drop_threshold)
+            if len(dt) != 2 or not all(math.isfinite(v) and 0.1 <= v <= 100 for v in dt):
+                raise ValueError(f"drop_threshold {self.drop_threshold} must be two numbers within 0.1..100 spreads")
+            object.__setattr__(self, "drop_threshold", dt)
+        if not 0 <= self.trim < nb:
+            raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
+        for name, lo_, hi_ in (
+            ("residual_max", 0.1, 1e3),
+            ("decay_ratio", 0, 1),
+            ("tau_s", 0.01, 100),
+            ("warmup_s", 0, 10),
+        ):
+            v = getattr(self, name)
+            if not lo_ <= v <= hi_:
+                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+
+    # ------------------------------------------------------------- derived
+    @property
+    def hold_frames(self) -> int:
+        """Consecutive above-threshold frames needed to fire (>= 1)."""
+        return max(1, int(math.ceil(self.hold_s * self.sample_rate / self.hop - 1e-9)))
+
+    @property
+    def latency_s(self) -> float:
+        """Typical detected_at - true onset, s (measured when tuned, else estimated)."""
+        if self.latency_measured_s is not None:
+            return float(self.latency_measured_s)
+        return self.onset_lag_s + self.hold_frames * self.hop / self.sample_rate
+
+    @property
+    def level_unit(self) -> str:
+        """``"dBFS"`` for an absolute band level; ``"dB re a-b Hz"`` for one relative to the reference band."""
+        if self.method == "template":
+            return "(stop-likeness: 0 stepping, 1 the tuned stop)"
+        if self.reference_hz is None:
+            return "dBFS"
+        return f"dB re {self.reference_hz[0]:.0f}-{self.reference_hz[1]:.0f} Hz"
+
+    def for_sample_rate(self, sample_rate: int) -> Tuning:
+        """The same tuning for another sample rate (same durations).
+
+        A template whose upper sub-bands do not fit below 0.45 of the new rate keeps the
+        sub-bands that do (the stop is judged on them), provided they hold at least half
+        of the stop's signature (in spreads); otherwise, and for a band tuning whose band
+        does not fit, :class:`ValueError` says so.
+        """
+        if sample_rate == self.sample_rate:
+            return self
+        frame = default_frame(sample_rate) * self.frame // default_frame(self.sample_rate)
+        hop = max(1, frame * self.hop // self.frame)
+        kw: dict[str, Any] = {"sample_rate": int(sample_rate), "frame": int(frame), "hop": int(hop)}
+        if self.method == "template" and self.edges_hz is not None and self.edges_hz[-1] > 0.45 * sample_rate:
+            assert self.signature_db is not None and self.spread_db is not None
+            nb = sum(1 for e in self.edges_hz[1:] if e <= 0.45 * sample_rate)
+            sig, spr = np.asarray(self.signature_db), np.asarray(self.spread_db)
+            kept = float(np.sum((sig[:nb] / spr[:nb]) ** 2)) if nb else 0.0
+            if nb < 2 or kept < 0.25 * float(np.sum((sig / spr) ** 2)) or not any(abs(v) > 0 for v in sig[:nb]):
+                raise ValueError(
+                    f"this tuning's stop is heard mostly above {0.45 * sample_rate:.0f} Hz, beyond what a "
+                    f"{sample_rate} Hz recording holds; record at {self.sample_rate} Hz or tune at {sample_rate} Hz"
+                )
+            edges = self.edges_hz[: nb + 1]
+            kw.update(
+                band_hz=(edges[0], edges[-1]),
+                edges_hz=edges,
+                signature_db=self.signature_db[:nb],
+                spread_db=self.spread_db[:nb],
+                stepping_levels_db=None if self.stepping_levels_db is None else self.stepping_levels_db[:nb],
+                trim=min(self.trim, nb - 1),
+            )
+        return replace(self, **kw)
+
+    # ------------------------------------------------------------- files
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict; units are in the key names (frame and hop are samples)."""
+        d = asdict(self)
+        d.pop("extra")
+        d["band_hz"] = list(self.band_hz)
+        d["reference_hz"] = list(self.reference_hz) if self.reference_hz is not None else None
+        d["latency_s"] = self.latency_s
+        version = 1
+        if self.method == "template":
+            version = 2
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
+                d[k] = list(d[k]) if d[k] is not None else None
+        else:
+            for k in (
+                "method",
+                "edges_hz",
+                "signature_db",
+                "spread_db",
+                "residual_max",
+                "decay_ratio",
+                "tau_s",
+                "warmup_s",
+                "trim",
+                "checks",
+                "stepping_levels_db",
+                "drop_threshold",
+            ):
+                d.pop(k)
+        return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Tuning:
+        """Inverse of :meth:`to_dict`; raises :class:`TuningFileError` naming the problem."""
+        if not isinstance(d, dict):
+            raise TuningFileError("a tuning must be a JSON object")
+        if d.get("kind", _KIND) != _KIND:
+            raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
+        version = d.get("version", 1)
+        if version not in (1, 2):
+            raise TuningFileError(
+                f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
+                "upgrade stickslip or re-tune with 'stickslip tune'"
+            )
+        for key in ("band_hz", "threshold_db"):
+            if key not in d:
+                raise TuningFileError(f"tuning lacks {key!r}")
+        known = {f for f in cls.__dataclass_fields__}
+        kwargs = {k: v for k, v in d.items() if k in known}
+        try:
+            band = kwargs["band_hz"]
+            if not (isinstance(band, (list, tuple)) and len(band) == 2):
+                raise TuningFileError("band_hz must be [low_Hz, high_Hz]")
+            kwargs["band_hz"] = (float(band[0]), float(band[1]))
+            ref = kwargs.get("reference_hz")
+            if ref is not None:
+                if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
+                    raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
+                kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
+            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
+                if kwargs.get(k) is not None:
+                    if not isinstance(kwargs[k], (list, tuple)):
+                        raise TuningFileError(f"{k} must be a list of numbers")
+                    kwargs[k] = tuple(float(v) for v in kwargs[k])
+            if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
+                raise TuningFileError("checks must be an object or null")
+            for k in (
+                "threshold_db",
+                "hold_s",
+                "hysteresis_db",
+                "release_s",
+                "onset_lag_s",
+                "residual_max",
+                "decay_ratio",
+                "tau_s",
+                "warmup_s",
+            ):
+                if k in kwargs:
+                    kwargs[k] = float(kwargs[k])
+            for k in ("sample_rate", "frame", "hop", "max_dips", "trim"):
+                if k in kwargs:
+                    v = kwargs[k]
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
+                        raise TuningFileError(f"{k} must be an integer, got {v!r}")
+                    kwargs[k] = int(v)
+            return cls(**kwargs)
+        except TuningFileError:
+            raise
+        except (TypeError, ValueError) as e:
+            raise TuningFileError(f"bad tuning: {e}") from None
+
+    def save(self, path: str | Path) -> Path:
+        """Write the tuning as JSON; returns the path."""
+        p = Path(path)
+        records.atomic_write_text(p, json.dumps(self.to_dict(), indent=2) + "\n")
+        return p
+
+    @classmethod
+    def load(cls, path: str | Path) -> Tuning:
+        """Read a tuning written by :meth:`save` (raises TuningFileError / OSError)."""
+        p = Path(path)
+        text = records.read_tuning_text(p, TuningFileError)
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise TuningFileError(f"{p}: not JSON ({e.msg} at line {e.lineno})") from None
+        try:
+            return cls.from_dict(d)
+        except TuningFileError as e:
+            raise TuningFileError(f"{p}: {e}") from None
+
+    def report(self) -> str:
+        """A few human lines: band, threshold, contrast and margin."""
+        if self.method == "template":
+            return self._template_report()
+        lines = [
+            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} {self.level_unit}",
+            f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
+            f"hop {self.hop} ({1e3 * self.hop / self.sample_rate:.2f} ms), "
+            f"hold {1e3 * self.hold_s:.1f} ms, hysteresis {self.hysteresis_db:.1f} dB",
+        ]
+        if self.contrast_db is not None:
+            lines.append(
+                f"stepping <= {self.stepping_db:.1f} {self.level_unit}, stopped >= {self.stopped_db:.1f} "
+                f"{self.level_unit}: "
+                f"contrast {self.contrast_db:.1f} dB, margin {self.margin_db:.1f} dB"
+            )
+        lines.append(f"latency {1e3 * self.latency_s:.1f} ms")
+        return "\n".join(lines)
+
+    def _template_report(self) -> str:
+        assert self.edges_hz is not None and self.signature_db is not None
+        sig = np.asarray(self.signature_db)
+        k = int(np.argmax(np.abs(sig)))
+        e = self.edges_hz
+        lines = [
+            f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands; the stop departs most "
+            f"at {e[k]:.0f}-{e[k + 1]:.0f} Hz ({sig[k]:+.1f} dB)",
+            f"stop signature {', '.join(f'{v:+.0f}' for v in sig)} dB",
+            f"fires at stop-likeness {self.threshold_db:.2f} (stepping 0, the stop 1) held "
+            f"{1e3 * self.hold_s:.1f} ms, residual <= {self.residual_max:.1f}; frame "
+            f"{self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), hop {self.hop}",
+        ]
+        if self.contrast_db is not None:
+            lines.append(
+                f"worst stepping frame {self.stepping_db:.2f}, stop's low {self.stopped_db:.2f}: "
+                f"margin {self.margin_db:.2f} (stop-likeness), stop departure {self.contrast_db:.1f} dB"
+            )
+        lines.append(f"latency {1e3 * self.latency_s:.1f} ms, onset lag {1e3 * self.onset_lag_s:.1f} ms")
+        c = self.checks or {}
+        if "false_alarms_per_hour" in c:
+            lines.append(
+                f"self-check with knocks, babble, +-20 dB gain and a second click train: "
+                f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
+                f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
+                f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"
+            )
+        return "\n".join(lines)
+
+    def template_params(self) -> TemplateParams:
+        """The template detector's parameters (``method == "template"`` only)."""
+        assert self.edges_hz is not None and self.signature_db is not None and self.spread_db is not None
+        return TemplateParams(
+            sample_rate=self.sample_rate,
+            frame=self.frame,
+            hop=self.hop,
+            edges_hz=self.edges_hz,
+            signature_db=self.signature_db,
+            spread_db=self.spread_db,
+            threshold=self.threshold_db,
+            residual_max=self.residual_max,
+            hold_frames=self.hold_frames,
+            max_dips=self.max_dips,
+            release_frames=max(1, int(math.ceil(self.release_s * self.sample_rate / self.hop))),
+            hysteresis=self.hysteresis_db,
+            decay_ratio=self.decay_ratio,
+            tau_s=self.tau_s,
+            warmup_chunks=max(1, int(math.ceil(self.warmup_s * self.sample_rate / self.hop / CHUNK - 1e-9))),
+            trim=self.trim,
+            onset_lag_s=self.onset_lag_s,
+            stepping_levels_db=self.stepping_levels_db,
+            drop_threshold=self.drop_threshold,
+        )

@@ -1,0 +1,49 @@
+"""Minutes of stepping without a stop: the detector must stay silent (false alarms per hour: 0).
+
+The battery's third generator (tests/battery_sound.py) renders two minutes per joint of
+stepping at 1080 Hz with everything that lasts: the step clock drifting +-10 %, a knock
+every second, a fan and a door slam. The hour-long version, with speech and a second
+instrument, is in benchmarks/bench_audio.py (``--long-only``).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from battery_sound import Scene, render  # noqa: E402
+from stickslip.audio.detector import StopDetector, Tuning  # noqa: E402
+from stickslip.audio.tuning import tune  # noqa: E402
+
+_TUNED: dict[str, Tuning] = {}
+
+
+def _tuning(joint: str) -> Tuning:
+    if joint not in _TUNED:
+        x, sr = render(Scene(joint, 1000.0, 2.0, 3.0, seed=1))
+        _TUNED[joint] = tune(x, sr, 2.0, seed=0)
+    return _TUNED[joint]
+
+
+@pytest.mark.parametrize("joint", ["P", "Q"])
+def test_two_minutes_of_stepping_with_drift_knocks_fan_and_a_door_raise_no_alarm(joint: str) -> None:
+    y, sr = render(Scene(joint, 1080.0, None, 120.0, seed=90, drift=0.1, knocks_every_s=1.0, fan=True, door_at=40.0))
+    det = StopDetector(_tuning(joint))
+    events = [e for i in range(0, y.size, 4096) for e in det.feed(y[i : i + 4096])]
+    assert events == []
+    assert det.levels_seen == (y.size - det.tuning.frame) // det.tuning.hop + 1  # every frame was heard
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="known limit: babble at -3 dB re the stepping, with formants in joint Q's stop band (3.6 kHz), "
+    "still gives false alarms (8 in 3 min at 1080 Hz; 65 before a frame had to show the drops of the stop "
+    "signature); docs/audio.md",
+)
+def test_two_minutes_of_babble_over_joint_q_raise_no_alarm() -> None:
+    y, sr = render(Scene("Q", 1080.0, None, 120.0, seed=91, speech="babble"))
+    assert StopDetector(_tuning("Q")).feed(y) == []
