@@ -214,3 +214,19 @@ def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
     # a reading far from the kept position is refused, not used
     r = runner.invoke(app, ["observe", "--db", str(db), "--joint", "3", "--at", "max"])
     assert r.exit_code == 2 and "standard deviations" in r.output
+
+
+def test_a_calibration_made_today_starts_without_a_days_drift(monkeypatch):
+    # the step scale of a fresh calibration is known to its model error; a day later a day's drift is added
+    from stickslip.calibration.update import DRIFT_PRIOR
+    from stickslip.tracking import joint_sigma_model
+
+    monkeypatch.setenv("STICKSLIP_TODAY", "2026-11-22")
+    today, older, unlabelled = _true_cal("2026-11-22"), _true_cal("2026-11-21"), _true_cal("day-one")
+    sm = joint_sigma_model(today, 3)
+    assert JointTrack.fresh(today, 3).scale_sd == pytest.approx(sm, rel=1e-12)
+    for cal in (older, unlabelled):  # another day, or a day that is not a date: assume the day changed
+        assert JointTrack.fresh(cal, 3).scale_sd == pytest.approx(math.hypot(DRIFT_PRIOR, sm), rel=1e-12)
+    assert JointTrack.fresh(older, 3, drift=0.02).scale_sd == pytest.approx(math.hypot(0.02, sm), rel=1e-12)
+    with pytest.raises(ValueError):
+        JointTrack.fresh(today, 3, drift=-0.1)

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from . import kinematics as kin
 from .calibration import Calibration
 from .calibration.update import DRIFT_PRIOR, STEP_NOISE, model_sigma, scaled_model
+from .clock import age_days
 from .planning import Planner
 
 __all__ = [
@@ -60,6 +61,9 @@ SCALE_CORRELATION = 0.5
 
 SCALE_WALK = 1e-4
 """Random walk of the log step scale, per sqrt(step) (relative): 1 % over 10 000 steps."""
+
+_MIN_SCALE_VAR = 1e-6
+"""Smallest prior variance of a log step scale (0.1 %²): an observation can always teach it."""
 
 
 def calibration_id(cal: Calibration) -> str:
@@ -122,13 +126,22 @@ class JointTrack:
 
     @classmethod
     def fresh(
-        cls, cal: Calibration, joint: int, q_sd: float = 0.0, drift: float = DRIFT_PRIOR
+        cls, cal: Calibration, joint: int, q_sd: float = 0.0, drift: float | None = None
     ) -> JointTrack:
-        """A new track: scales 1 with ``var(s±) = drift² + σ_model²``, position sd ``q_sd`` (m or rad)."""
-        if not (math.isfinite(q_sd) and q_sd >= 0 and math.isfinite(drift) and drift > 0):
-            raise ValueError("q_sd must be >= 0 and drift > 0 (finite)")
+        """A new track: scales 1 with ``var(s±) = drift² + σ_model²``, position sd ``q_sd`` (m or rad).
+
+        ``drift`` (relative) defaults to 0 for a calibration made today (:func:`stickslip.clock.today`)
+        and to :data:`~stickslip.calibration.update.DRIFT_PRIOR` (a day's change of step
+        scale) for one from another or an unknown day: a fresh calibration's step is known
+        to within its model error, not to a day's drift.
+        """
+        if drift is None:
+            drift = 0.0 if age_days(cal.day) == 0 else DRIFT_PRIOR
+        if not (math.isfinite(q_sd) and q_sd >= 0 and math.isfinite(drift) and drift >= 0):
+            raise ValueError("q_sd and drift must be finite and >= 0")
         sm = joint_sigma_model(cal, joint)
-        return cls(np.zeros(2), _prior(drift**2 + sm**2, q_sd**2), calibration_id(cal))
+        var = max(drift**2 + sm**2, _MIN_SCALE_VAR)
+        return cls(np.zeros(2), _prior(var, q_sd**2), calibration_id(cal))
 
     def scale_of(self, direction: str) -> float:
         """Estimated step scale of ``direction`` (``"+"`` or ``"-"``) relative to the calibration, 1."""

@@ -359,8 +359,8 @@ def move(
     )
     if sim_true is not None:
         err = sim_true - q_end
-        k, unit = step_scale(joint)
-        shown = f"{err * k:+.1f} {unit}"
+        k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the ± above)
+        shown = f"{err * k:+.1f} {unit}" if abs(err * k) < 1000 or joint_spec(joint).rotary else f"{err * 1e6:+.2f} µm"
         console.print(
             f"simulator's true end {format_position(sim_true, joint)} ({shown})", highlight=False
         )
