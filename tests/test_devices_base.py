@@ -66,3 +66,13 @@ def test_a_scheme_less_url_with_a_secret_is_refused_without_the_secret():
     with pytest.raises(ValueError) as e:
         base.open_device("admin:hunter2@10.0.0.2")
     assert "hunter2" not in str(e.value)
+
+
+@pytest.mark.parametrize(
+    ("url", "hint"),
+    [("sim:", "write sim://"), ("sim:?seed=3", "write sim://?seed=3"), ("mm3a:/dev/ttyUSB0", "write mm3a:///dev/ttyUSB0")],
+)
+def test_a_url_missing_its_slashes_is_refused_with_the_url_it_meant(url, hint):
+    with pytest.raises(ValueError, match="lacks the //") as e:
+        base.open_device(url)
+    assert str(e.value).endswith(hint)

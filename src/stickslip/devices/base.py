@@ -292,6 +292,10 @@ def url_scheme(url: str) -> str:
         scheme = urlsplit(url).scheme
     except ValueError as e:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
+    if scheme in BACKENDS and "://" not in url:  # sim: or mm3a:/dev/ttyUSB0: the // is missing
+        rest = url.split(":", 1)[1]
+        rest = rest if rest.startswith("/") else rest.lstrip("/")  # a path keeps its own slash: mm3a:///dev/...
+        raise ValueError(f"device URL {redact_url(url)!r} lacks the // after {scheme}: write {scheme}://{redact_url(rest)}")
     if not scheme or "://" not in url:
         raise ValueError(
             f"device URL {redact_url(url)!r} has no scheme: write mm3a://{_port_path(url)} for a "
