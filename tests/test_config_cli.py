@@ -182,6 +182,10 @@ def test_calibration_every_level(cfg, tmp_path):
 
     shown = json.loads(ok("show", "--json").stdout)  # `show` without its argument shows the file's calibration
     assert shown == json.loads(ok("show", a, "--json").stdout)
+    # `suggest` too: the file's calibration designs the same poses as naming it
+    suggested = json.loads(ok("suggest", "-j", "3", "--n", "1", "--json").stdout)
+    assert suggested == json.loads(ok("suggest", "-j", "3", "--n", "1", "--json", "-c", a).stdout)
+    assert suggested != json.loads(ok("suggest", "-j", "3", "--n", "1", "--json", "-c", b).stdout)
 
 
 def test_a_calibration_the_file_names_but_that_is_gone_names_the_config(cfg, tmp_path):

@@ -10,14 +10,19 @@ import typer
 from rich.table import Table
 
 from . import app
-from ._common import console, fail, print_json, user_errors
+from ._common import calibration_file, console, fail, print_json, user_errors
 
 
 @app.command("suggest")
 def suggest_cmd(
     calibration: Annotated[
-        Path, typer.Option("--calibration", "-c", help="Calibration JSON written by 'stickslip calibrate'.")
-    ],
+        Path | None,
+        typer.Option(
+            "--calibration",
+            "-c",
+            help="Calibration JSON written by 'stickslip calibrate' (default: calibration in the config file).",
+        ),
+    ] = None,
     joint: Annotated[
         list[int] | None, typer.Option("--joint", "-j", help="Joint(s) to plan for (default: all calibrated).")
     ] = None,
@@ -44,8 +49,9 @@ def suggest_cmd(
     from ..calibration import Calibration
     from ..calibration.design import suggest_poses
 
+    path = calibration_file(calibration)
     with user_errors():
-        cal = Calibration.load(calibration)
+        cal = Calibration.load(path)
     joints = sorted(set(joint or cal.joints))
     rows = []
     for j in joints:
