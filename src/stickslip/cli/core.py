@@ -164,8 +164,8 @@ def calibrate_cmd(
     With more traverses than the paper's poses, every model family the data can
     identify is fitted and scored by leave-one-pose-out cross-validation, and the
     prediction averages them, each weighted by how well it predicted the poses left out
-    (pseudo-BMA+); the table gives each family's CV error and weight, and ◀ marks the
-    one whose parameters are shown. With --prior, an earlier
+    (pseudo-BMA+); the table gives each family's parameter count (+ and - together), CV
+    error and weight, and ◀ marks the one whose parameters are shown. With --prior, an earlier
     calibration is brought up to date with as few as one traverse per joint and direction.
 
     Example: stickslip calibrate day1.csv -o cal.json
@@ -204,10 +204,14 @@ def calibrate_cmd(
 
 
 def _selection_table(cal: Calibration) -> Table:
+    """Each scored family's CV errors and weight; the families the data could not score, in the caption."""
     t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
-    for col in ("joint", "family", "params (+ and -)", "CV RMS", "CV max", "fit RMS", "weight", "status"):
-        t.add_column(col, justify="right" if col.startswith(("CV", "fit", "params", "weight")) else "left")
+    for col in ("joint", "family", "params", "CV RMS", "CV max", "fit RMS", "weight"):
+        t.add_column(
+            col, justify="left" if col in ("joint", "family") else "right", no_wrap=col != "family", overflow="fold"
+        )
     seen: set[int] = set()
+    unscored: list[str] = []
     for (j, _d), sel in sorted(cal.selection.items()):
         if j in seen:  # one selection per joint (both directions are fitted together)
             continue
@@ -220,10 +224,15 @@ def _selection_table(cal: Calibration) -> Table:
             def pct(x: object) -> str:
                 return f"{float(x) * 100:.2f} %" if isinstance(x, (int, float)) else "—"
 
-            mark = " ◀" if sc["family"] == chosen else ""
+            if sc["status"] != "ok":
+                unscored.append(f"joint {j} {sc['family']}: {sc['status']}")
+                continue
+            mark = " ◀" if sc["family"] == chosen else ""  # the family whose parameters are shown
             w = weights.get(str(sc["family"]))
-            t.add_row(str(j), f"{sc['family']}{mark}", str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
-                      pct(sc["fit_rms"]), f"{w:.2f}" if w else "", str(sc["status"]))
+            t.add_row(str(j), str(sc["family"]), str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
+                      pct(sc["fit_rms"]), (f"{w:.2f}" if w else "") + mark)
+    if unscored:
+        t.caption = "not scored: " + "; ".join(unscored)
     return t
 
 
