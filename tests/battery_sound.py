@@ -105,11 +105,17 @@ def _train(n: int, sr: int, times: np.ndarray, amps: np.ndarray) -> np.ndarray:
 
 
 _TALKERS = {
-    "espeak": ([], "Please hand me the tweezers. The sample is mounted, the chamber is vented, "
-               "and the coffee is getting cold. Seven, eight, nine, ten."),
+    "espeak": (
+        [],
+        "Please hand me the tweezers. The sample is mounted, the chamber is vented, "
+        "and the coffee is getting cold. Seven, eight, nine, ten.",
+    ),
     # a second talker (added in round 2, never developed against): a female voice, high pitch, faster, other words
-    "espeak2": (["-v", "en+f3", "-p", "85", "-s", "200"], "Did you see the seminar announcement? The speaker "
-                "moved to room four hundred and twelve, and the projector is broken again, so bring a laptop."),
+    "espeak2": (
+        ["-v", "en+f3", "-p", "85", "-s", "200"],
+        "Did you see the seminar announcement? The speaker "
+        "moved to room four hundred and twelve, and the projector is broken again, so bring a laptop.",
+    ),
 }
 
 
@@ -153,7 +159,7 @@ def _babble(n: int, sr: int, rng) -> np.ndarray:
 
 
 def _music(n: int, sr: int, rng) -> np.ndarray:
-    """A radio playing: three-note chords of harmonic tones (12 harmonics, 1/h), 5.5 Hz vibrato, a new chord every 0.25-0.6 s."""
+    """A radio: three-note chords of harmonic tones (12 harmonics, 1/h), 5.5 Hz vibrato, a chord every 0.25-0.6 s."""
     out = np.zeros(n)
     t_all = np.arange(n) / sr
     i = 0
