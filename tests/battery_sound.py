@@ -59,7 +59,7 @@ class Scene:
     snr_db: float | None = None
     knocks_every_s: float | None = None
     door_at: float | None = None
-    speech: str | None = None  # "espeak" or "babble"
+    speech: str | None = None  # "espeak", "espeak2" (a second talker: another voice, pitch and text) or "babble"
     speech_db: float = -3.0
     second_rate: float | None = None
     second_from: float = 0.0
@@ -70,6 +70,8 @@ class Scene:
     fade_s: float = 0.0  # the stop fades in over this long, s
     drift: float = 0.0  # the step rate drifts linearly from (1 - drift) to (1 + drift) times rate
     bits: int | None = None  # quantise to this many bits (full scale 1)
+    music: bool = False  # a radio: chords of harmonic tones with vibrato and note changes (added in round 2)
+    music_db: float = -3.0
     silence: bool = False
     constant: float | None = None
 
@@ -102,17 +104,31 @@ def _train(n: int, sr: int, times: np.ndarray, amps: np.ndarray) -> np.ndarray:
     return x
 
 
+_TALKERS = {
+    "espeak": (
+        [],
+        "Please hand me the tweezers. The sample is mounted, the chamber is vented, "
+        "and the coffee is getting cold. Seven, eight, nine, ten.",
+    ),
+    # a second talker (added in round 2, never developed against): a female voice, high pitch, faster, other words
+    "espeak2": (
+        ["-v", "en+f3", "-p", "85", "-s", "200"],
+        "Did you see the seminar announcement? The speaker "
+        "moved to room four hundred and twelve, and the projector is broken again, so bring a laptop.",
+    ),
+}
+
+
 @lru_cache(maxsize=4)
-def espeak_speech(sr: int) -> np.ndarray | None:
+def espeak_speech(sr: int, talker: str = "espeak") -> np.ndarray | None:
     """A few sentences spoken by espeak-ng, at ``sr``; None when espeak-ng is not installed."""
     exe = shutil.which("espeak-ng")
     if exe is None:
         return None
-    text = (
-        "Please hand me the tweezers. The sample is mounted, the chamber is vented, "
-        "and the coffee is getting cold. Seven, eight, nine, ten."
-    )
-    out = subprocess.run([exe, "--stdout", "-s", "170", text], capture_output=True, check=True, timeout=30).stdout
+    opts, text = _TALKERS[talker]
+    out = subprocess.run(
+        [exe, "--stdout", "-s", "170", *opts, text], capture_output=True, check=True, timeout=30
+    ).stdout
     # a RIFF WAV at 22050 Hz, 16-bit mono: find the data chunk
     i = out.find(b"data")
     pcm = np.frombuffer(out[i + 8 :], dtype="<i2").astype(np.float64) / 32768.0
@@ -139,6 +155,26 @@ def _babble(n: int, sr: int, rng) -> np.ndarray:
         syl = np.fft.irfft(spec, m) * np.hanning(m)
         out[i : i + m] += syl[: n - i] / (np.std(syl) + 1e-12)
         i += m + int(rng.uniform(0.05, 0.3) * sr)
+    return out
+
+
+def _music(n: int, sr: int, rng) -> np.ndarray:
+    """A radio: three-note chords of harmonic tones (12 harmonics, 1/h), 5.5 Hz vibrato, a chord every 0.25-0.6 s."""
+    out = np.zeros(n)
+    t_all = np.arange(n) / sr
+    i = 0
+    while i < n:
+        m = min(int(rng.uniform(0.25, 0.6) * sr), n - i)
+        t = t_all[i : i + m]
+        root = 110.0 * 2 ** (rng.integers(0, 24) / 12)
+        env = np.minimum(1.0, np.minimum(t - t[0], t[-1] - t + 1 / sr) / 0.02)
+        for semis in (0, rng.choice((3, 4)), 7):
+            f0 = root * 2 ** (semis / 12)
+            ph = 2 * np.pi * f0 * (t + 0.015 * np.sin(2 * np.pi * 5.5 * t) / (2 * np.pi * 5.5))  # +-1.5 %
+            for h in range(1, 13):
+                if h * f0 < 0.45 * sr:
+                    out[i : i + m] += env * np.sin(h * ph + rng.uniform(0, 6.3)) / h
+        i += m
     return out
 
 
@@ -222,8 +258,11 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
         tt, aa = _impulses(n, sr, s.second_rate, rng, s.second_from)
         y = _bank(_train(n, sr, tt, aa), SECOND, sr)
         x += y / (np.std(y[int(s.second_from * sr) :]) + 1e-30) * rms * 10 ** (-3 / 20)
+    if s.music:
+        mu = _music(n, sr, rng)
+        x += mu / np.std(mu) * rms * 10 ** (s.music_db / 20)
     if s.speech is not None:
-        sp = espeak_speech(sr) if s.speech == "espeak" else _babble(n, sr, rng)
+        sp = espeak_speech(sr, s.speech) if s.speech.startswith("espeak") else _babble(n, sr, rng)
         if sp is None:
             raise RuntimeError("espeak-ng is not installed")
         sp = np.resize(sp, n) if sp.size < n else sp[:n]

@@ -178,6 +178,11 @@ CONDITIONS = [
         "case the detector demands before firing at once",
     ),
     Condition("starts at the stop, joint Q", Q, _test(Q, 79, stop_at=0.0), late_s=0.25, group="hostile"),
+    # round 2: interference added before the detector was changed against speech (never developed against)
+    Condition("radio music in test", P, _test(P, 80, music=True), group="hostile"),
+    Condition("radio music in test, joint Q", Q, _test(Q, 81, music=True), group="hostile"),
+    Condition("second talker (espeak-ng, high voice) in test", P, _test(P, 82, speech="espeak2"), group="hostile"),
+    Condition("second talker, joint Q, +3 dB", Q, _test(Q, 83, speech="espeak2", speech_db=3.0), group="hostile"),
 ]
 
 
@@ -213,7 +218,7 @@ class Outcome:
 
 
 def _needs_espeak(c: Condition) -> bool:
-    return "espeak" in (c.train.speech, c.test.speech)
+    return any((sp or "").startswith("espeak") for sp in (c.train.speech, c.test.speech))
 
 
 def run(c: Condition) -> Outcome:

@@ -41,8 +41,8 @@ def test_two_minutes_of_stepping_with_drift_knocks_fan_and_a_door_raise_no_alarm
 @pytest.mark.xfail(
     strict=True,
     reason="known limit: babble at -3 dB re the stepping, with formants in joint Q's stop band (3.6 kHz), "
-    "still gives false alarms (8 in 3 min at 1080 Hz; 65 before a frame had to show the drops of the stop "
-    "signature); docs/audio.md",
+    "still gives a false alarm (1 in these 2 min at 1080 Hz, at 57.3 s; 2 before round 2's floor and drop share, "
+    "65 before a frame had to show the drops of the stop signature); docs/audio.md",
 )
 def test_two_minutes_of_babble_over_joint_q_raise_no_alarm() -> None:
     y, sr = render(Scene("Q", 1080.0, None, 120.0, seed=91, speech="babble"))

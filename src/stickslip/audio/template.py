@@ -278,8 +278,18 @@ DROP_ARM_S = 0.35
 NEG_INFORMATIVE = 2.0
 #: ... and a frame then counts as the stop only if, averaged over NEG_FRAMES, it shows this share of those drops
 NEG_MIN = 0.15
+#: ... and at least this share of its own stop-likeness ``a`` (capped at 1): the stop's rises and its drops
+#: come together; a voice or a radio lifts the rising sub-bands while the others show only their wobble
+NEG_RATIO = 0.45
 #: frames averaged for that check (a short average: it must not delay the stop)
 NEG_FRAMES = 4
+#: a sub-band this many spreads above the floor has something added to it: it cannot show a drop, and the
+#: check judges the drops on the other sub-bands; with less than NEG_INFORMATIVE left, the frame is not the stop
+NEG_EXCESS = 2.0
+#: drops are measured from the *floor*: per sub-band the lowest template of the last this many updates
+#: (64 frames each: 1.4 s at 48 kHz). Interference only adds sound, so a template a voice or a radio
+#: lifted is not the stepping's level, and the pause after a word is not a drop
+FLOOR_CHUNKS = 8
 #: the average's delay, frames: given back to a drop-fired onset
 DROP_LAG_FRAMES = (DROP_FRAMES - 1) / 2
 
@@ -323,7 +333,16 @@ class TemplateState:
         self._drop_scale = self._fit.inv_sigma
         self.arm_sample = 0
         self._drop.reset()
-        self._neg_tail = np.zeros(0)
+        self._neg_tail: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+        self._floors: list[FloatArray] = []
+        self.floor: FloatArray | None = None
+
+    def _set_floor(self, reset: bool = False) -> None:
+        """Remember the template just updated; the floor is the lowest of the last :data:`FLOOR_CHUNKS`."""
+        if self.template is None:
+            return
+        self._floors = ([] if reset else self._floors[-(FLOOR_CHUNKS - 1) :]) + [self.template.copy()]
+        self.floor = np.min(np.stack(self._floors), axis=0)
 
     @property
     def warming(self) -> bool:
@@ -352,6 +371,7 @@ class TemplateState:
         if self.frame_no <= p.warmup_chunks * CHUNK:
             warm = np.concatenate(self._warm)
             self.template = np.percentile(warm, 100 * QUANTILE, axis=0)
+            self._set_floor(reset=True)
             if self.frame_no == p.warmup_chunks * CHUNK:
                 # the drop channel judges drops in the larger of the tuning's and this stream's spreads
                 live = 1.4826 * np.median(np.abs(warm - np.median(warm, axis=0)), axis=0)
@@ -365,10 +385,11 @@ class TemplateState:
             mid = rho_all.size // 2
             if rho_all.size >= CHUNK // 2 and float(np.partition(rho_all, mid)[mid]) > STALE_RESIDUAL * p.residual_max:
                 self.template = np.percentile(np.concatenate(self._chunk_v), 100 * QUANTILE, axis=0)
+                self._set_floor(reset=True)
                 self._acc_n = 0
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._drop.reset()
-                self._neg_tail = np.zeros(0)
+                self._neg_tail = (np.zeros(0), np.zeros(0))
         self._chunk_rho, self._chunk_v = [], []
         if self._acc_n and self.template is not None and not self.latched:
             acc = np.concatenate(self._acc_list)
@@ -376,6 +397,7 @@ class TemplateState:
             q = np.partition(acc, k, axis=0)[k]
             alpha = 1.0 - math.exp(-self._acc_n * p.hop / p.sample_rate / p.tau_s)
             self.template = self.template + alpha * q
+            self._set_floor()
         self._acc_list = []
         self._acc_n = 0
 
@@ -411,6 +433,7 @@ class TemplateState:
         )
         if b >= max(p.threshold, 0.6) and clear and fits and float(np.min(self.template)) > -150.0:
             self.template = self.template - b * self.delta
+            self._set_floor(reset=True)
             self.latched = True
             self.below = 0
             self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(b)))  # onset: the start
@@ -427,18 +450,29 @@ class TemplateState:
         hot = (a >= p.threshold) & (rho <= p.residual_max)
         lag = np.zeros(a.size)
         quiet = a < 0.3 * p.threshold
-        zs = np.clip(d, -_CLIP_DB, _CLIP_DB) * self._drop_scale
+        # drops, in spreads, below the floor (the lowest recent template: see FLOOR_CHUNKS)
+        floor = self.template if self.floor is None else self.floor
+        zs = np.clip(v - floor, -_CLIP_DB, _CLIP_DB) * self._drop_scale
         m = self._drop(zs)
         # the sub-bands the stop lowers must be lower: no voice or second instrument can fake a drop
         gn = np.minimum(self.delta, 0.0) * self._drop_scale
         gg = float(gn @ gn)
         if gg >= NEG_INFORMATIVE**2:
-            shown = np.concatenate((self._neg_tail, zs @ gn / gg))  # share of the drops shown, per frame
-            c = np.concatenate(([0.0], np.cumsum(shown)))
-            k = np.arange(shown.size - a.size, shown.size) + 1
+            # per frame, judged on the sub-bands without an excess (a band something was added to cannot show
+            # a drop): the drops shown, as a share of the signature's, averaged over NEG_FRAMES frames
+            clear = zs <= NEG_EXCESS
+            num = np.concatenate((self._neg_tail[0], (zs * clear) @ gn / gg))
+            den = np.concatenate((self._neg_tail[1], clear.astype(np.float64) @ (gn * gn) / gg))
+            cn = np.concatenate(([0.0], np.cumsum(num)))
+            cd = np.concatenate(([0.0], np.cumsum(den)))
+            k = np.arange(num.size - a.size, num.size) + 1
             lo = np.maximum(k - NEG_FRAMES, 0)
-            hot &= (c[k] - c[lo]) / (k - lo) >= NEG_MIN
-            self._neg_tail = shown[max(shown.size - (NEG_FRAMES - 1), 0) :]
+            info = (cd[k] - cd[lo]) / (k - lo)  # share of the signature's drop information left
+            shown_avg = (cn[k] - cn[lo]) / np.maximum(cd[k] - cd[lo], 1e-12)
+            judged = info * gg >= NEG_INFORMATIVE**2
+            hot &= judged & (shown_avg >= np.maximum(NEG_MIN, NEG_RATIO * np.clip(a, 0.0, 1.0)))
+            keep = max(num.size - (NEG_FRAMES - 1), 0)
+            self._neg_tail = (num[keep:], den[keep:])
         if p.drop_threshold is not None:
             # a lasting drop below the template, in any sub-bands: a stop unlike the tuned one; armed
             # once the template has followed the stream for DROP_ARM_S (the warm-up's is rough)
