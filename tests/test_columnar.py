@@ -64,7 +64,9 @@ def _outcome(parse, text: str):
 
 @pytest.fixture(params=[3, new.CHUNK_ROWS], ids=["chunks of 3", "default chunks"])
 def chunk(request, monkeypatch):
-    monkeypatch.setattr(new, "CHUNK_ROWS", request.param)
+    monkeypatch.setattr(new.chunks, "CHUNK_ROWS", request.param)  # where the chunked reader reads it
+    _, chunks = new.chunks._open_table("a,b\n" + "1,2\n" * 7)  # the patch reaches the reader: 7 rows, ceil(7/n) chunks
+    assert len(list(chunks(2, 0))) == -(-7 // request.param)
     return request.param
 
 

@@ -1,0 +1,198 @@
+"""One row of the measurement table: :class:`Traverse`, its columns, and the row-by-row checks (docs/design.md §7)."""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, replace
+
+from .. import kinematics as kin
+from ..models import direction_label
+
+HEADER = ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
+POSE_COLUMNS = ("q1", "q2", "q3", "theta", "psi")
+_TILT_LIMIT = math.pi + 1e-6
+
+
+@dataclass(frozen=True)
+class Traverse:
+    """One measured traverse of one joint (a row of the measurement table).
+
+    Attributes
+    ----------
+    day : str
+        Session label (ISO date preferred).
+    joint : int
+        Moving joint, 1, 2 or 3.
+    direction : str
+        ``"+"`` (q increasing) or ``"-"``.
+    q1, q2, q3 : float
+        Fixed joints (rad, rad, m); the moving joint's value is ignored.
+    theta, psi : float
+        Base tilt, rad.
+    start, end : float
+        Traversed interval of the moving joint (rad or m).
+    steps : int
+        Steps counted, > 0.
+    """
+
+    day: str
+    joint: int
+    direction: str
+    q1: float
+    q2: float
+    q3: float
+    theta: float
+    psi: float
+    start: float
+    end: float
+    steps: int
+
+    @property
+    def gamma(self) -> float:
+        """Average step size ``|end - start| / steps`` (m or rad)."""
+        return abs(self.end - self.start) / self.steps
+
+    @property
+    def sign(self) -> int:
+        return 1 if self.direction == "+" else -1
+
+    def pose(self) -> dict[str, float]:
+        """The fixed pose as a dict of ``q1, q2, q3, theta, psi``."""
+        return {k: getattr(self, k) for k in POSE_COLUMNS}
+
+    def as_row(self) -> dict[str, object]:
+        return asdict(self)
+
+    def with_moving(self, q: float) -> Traverse:
+        """A copy whose moving joint's column holds ``q`` (handy for evaluating the model)."""
+        if self.joint == 1:
+            return replace(self, q1=q)
+        if self.joint == 2:
+            return replace(self, q2=q)
+        return replace(self, q3=q)
+
+
+class TableError(ValueError):
+    """A measurement (or pose) table has problems; ``problems`` holds one line each.
+
+    Each line reads ``file:line: reason`` (line 1 is the header).
+    """
+
+    def __init__(self, problems: Sequence[str]):
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))
+
+
+def check_pose(joint: int, values: dict[str, float]) -> list[str]:
+    """Range problems of a pose for a traverse of ``joint`` (empty if fine).
+
+    The fixed joints must lie within their stops; ``theta`` and ``psi`` within
+    [-pi, pi]. Values use the tolerance of :meth:`JointSpec.contains`.
+    """
+    problems = []
+    for j in (1, 2, 3):
+        if j == joint:
+            continue
+        problem = kin.JOINTS[j].range_problem(f"q{j}", values[f"q{j}"])
+        if problem:
+            problems.append(problem)
+    for name in ("theta", "psi"):
+        v = values[name]
+        if not -_TILT_LIMIT <= v <= _TILT_LIMIT:
+            problems.append(f"{name} = {v:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    return problems
+
+
+def _parse_float(name: str, text: str) -> tuple[float | None, str | None]:
+    try:
+        v = float(text)
+    except ValueError:
+        return None, f"{name} must be a number in SI units, got {text!r}"
+    if not math.isfinite(v):
+        return None, f"{name} must be finite, got {text!r}"
+    return v, None
+
+
+MAX_STEPS = 10**12
+"""Largest step count accepted in a table (a full traverse is ~1e4..1e7 steps; SQLite holds < 2**63)."""
+
+
+def _parse_steps(text: str) -> tuple[int | None, str | None]:
+    t = text.strip()
+    try:
+        v = int(t)
+    except ValueError:
+        try:
+            f = float(t)
+        except ValueError:
+            return None, f"steps must be a positive integer, got {text!r}"
+        if not math.isfinite(f) or f != int(f):
+            return None, f"steps must be a positive integer, got {text!r}"
+        v = int(f)
+    if v <= 0:
+        return None, f"steps must be a positive integer, got {text!r}"
+    if v > MAX_STEPS:
+        return None, f"steps = {text.strip()[:30]} is more than {MAX_STEPS:.0e} steps (over any joint's full range)"
+    return v, None
+
+
+def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
+    """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
+    problems: list[str] = []
+    day = (row.get("day") or "").strip()
+    if not day:
+        problems.append(f"{where}: day is empty (use a session label, e.g. an ISO date)")
+    jtext = (row.get("joint") or "").strip()
+    joint: int | None
+    try:
+        joint = int(jtext)
+        kin.joint_spec(joint)
+    except ValueError:
+        problems.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
+        joint = None
+    dtext = (row.get("direction") or "").strip()
+    try:
+        direction = direction_label(dtext)
+    except ValueError:
+        problems.append(f"{where}: direction must be '+' or '-', got {dtext!r}")
+        direction = None
+    nums: dict[str, float] = {}
+    for name in ("q1", "q2", "q3", "theta", "psi", "start", "end"):
+        v, err = _parse_float(name, (row.get(name) or "").strip())
+        if err:
+            problems.append(f"{where}: {err}")
+        else:
+            nums[name] = v  # type: ignore[assignment]  # no error: _parse_float gave a float
+    steps, err = _parse_steps(row.get("steps") or "")
+    if err:
+        problems.append(f"{where}: {err}")
+    if problems or joint is None or direction is None or steps is None:
+        return None, problems
+    start, end = nums["start"], nums["end"]
+    if end == start:
+        problems.append(f"{where}: start and end are equal ({start:.6g}): a traverse must move")
+    elif (end > start) != (direction == "+"):
+        problems.append(
+            f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
+        )
+    for name in ("start", "end"):
+        problem = kin.JOINTS[joint].range_problem(name, nums[name])
+        if problem:
+            problems.append(f"{where}: {problem}")
+    problems += [f"{where}: {p}" for p in check_pose(joint, nums)]
+    if problems:
+        return None, problems
+    return Traverse(
+        day, joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"], nums["psi"], start, end, steps
+    ), []
+
+
+
+def _csv_problem(source: str, e: csv.Error) -> str:
+    text = str(e)
+    if "field limit" in text:
+        text = f"a cell is longer than {csv.field_size_limit()} characters"
+    return f"{source}: not a readable CSV table ({text})"
+

@@ -1,0 +1,299 @@
+"""The measurement table as a whole: :class:`TraverseTable` (columns), reading, parsing and writing."""
+
+from __future__ import annotations
+
+import csv
+import io
+import operator
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..records import MAX_TABLE_BYTES, atomic_write, read_text_bounded
+from .chunks import _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok
+from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
+
+
+@dataclass(frozen=True, eq=False)
+class TraverseTable:
+    """A measurement table as columns (one numpy array per column of design.md §7).
+
+    The columnar form of a list of :class:`Traverse`: what :func:`parse_measurement_table`
+    returns, so that a table of a million rows is parsed, checked and modelled without a
+    Python object per row. :meth:`traverses` gives the row objects when wanted.
+
+    Attributes
+    ----------
+    day : ndarray of str (object)
+        Session labels.
+    joint : ndarray of int
+        Moving joint, 1, 2 or 3.
+    direction : ndarray of str
+        ``"+"`` or ``"-"``.
+    q1, q2, q3, theta, psi : ndarray of float
+        Fixed joints (rad, rad, m) and base tilt (rad).
+    start, end : ndarray of float
+        Traversed interval (rad or m).
+    steps : ndarray of int
+        Steps counted, > 0.
+    lines : ndarray of int
+        Line of each row in its file (record number; the header is line 1).
+    """
+
+    day: NDArray[np.object_]
+    joint: NDArray[np.int64]
+    direction: NDArray[np.str_]
+    q1: NDArray[np.float64]
+    q2: NDArray[np.float64]
+    q3: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    psi: NDArray[np.float64]
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+    steps: NDArray[np.int64]
+    lines: NDArray[np.int64]
+
+    def __len__(self) -> int:
+        return int(self.joint.size)
+
+    @property
+    def gamma(self) -> NDArray[np.float64]:
+        """Average step sizes ``|end - start| / steps`` (m or rad)."""
+        return np.abs(self.end - self.start) / self.steps
+
+    def traverses(self) -> list[Traverse]:
+        """The rows as :class:`Traverse` objects (Python floats and ints, as :func:`parse_row` makes them)."""
+        cols = [getattr(self, f.name).tolist() for f in fields(Traverse)]
+        return list(map(Traverse, *cols))
+
+    @classmethod
+    def from_traverses(cls, traverses: Sequence[Traverse], lines: Sequence[int] | None = None) -> TraverseTable:
+        """The columns of a sequence of traverses (``lines`` default 2, 3, ...)."""
+        n = len(traverses)
+        cols: dict[str, Any] = {f.name: [getattr(t, f.name) for t in traverses] for f in fields(Traverse)}
+        def f(k: str) -> NDArray[np.float64]:
+            return np.array(cols[k], dtype=float).reshape(n)
+
+        return cls(
+            np.array(cols["day"], dtype=object).reshape(n),
+            np.array(cols["joint"], dtype=np.int64).reshape(n),
+            np.array(cols["direction"], dtype="<U1").reshape(n),
+            f("q1"),
+            f("q2"),
+            f("q3"),
+            f("theta"),
+            f("psi"),
+            f("start"),
+            f("end"),
+            np.array(cols["steps"], dtype=np.int64).reshape(n),
+            np.arange(2, n + 2, dtype=np.int64) if lines is None else np.array(lines, dtype=np.int64).reshape(n),
+        )
+
+    @classmethod
+    def concat(cls, parts: Sequence[TraverseTable]) -> TraverseTable:
+        """One table of several, in order."""
+        names = [f.name for f in fields(cls)]
+        if not parts:
+            return cls.from_traverses([])
+        return cls(*(np.concatenate([getattr(p, k) for p in parts]) for k in names))
+
+    def take(self, index: NDArray[np.intp] | NDArray[np.bool_]) -> TraverseTable:
+        """The rows selected by an index array or a boolean mask."""
+        return TraverseTable(*(getattr(self, f.name)[index] for f in fields(TraverseTable)))
+
+
+def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
+    """Parse measurement-table CSV text. Raises :class:`TableError` listing every bad row."""
+    try:
+        return _parse_measurements(text, source)
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+
+def _parse_measurements(text: str, source: str) -> list[Traverse]:
+    return _parse_measurement_columns(text, source).traverses()
+
+
+def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTable:
+    """Parse measurement-table CSV text into columns. Raises :class:`TableError` listing every bad row.
+
+    The same rules, row numbers and messages as :func:`parse_measurements`; the rows are
+    checked a chunk at a time with numpy, and only rows that fail a check are parsed one
+    by one (by :func:`parse_row`) to say why.
+    """
+    try:
+        return _parse_measurement_columns(text, source)
+    except csv.Error as e:
+        raise TableError([_csv_problem(source, e)]) from None
+
+
+def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
+    header, chunks = _open_table(text)
+    if header is None:
+        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"])
+    header = [h.strip() for h in header]
+    if tuple(header) != HEADER:
+        missing = [h for h in HEADER if h not in header]
+        extra = [h for h in header if h not in HEADER]
+        detail = []
+        if missing:
+            detail.append("missing " + ", ".join(missing))
+        if extra:
+            detail.append("unexpected " + ", ".join(extra))
+        if not detail:
+            detail.append("columns out of order")
+        raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
+    parts: list[TraverseTable] = []
+    problems: list[tuple[int, str]] = []  # (line, reason): sorted by line at the end, stable within a line
+    lineno = 1
+    for chunk in chunks(len(HEADER), 0):
+        if chunk.cols is not None:  # the common case: no blank or short rows
+            lines = list(range(lineno + 1, lineno + 1 + chunk.n))
+            lineno += chunk.n
+            cols = chunk.cols
+        else:
+            rows: list[list[str]] = []
+            lines = []
+            for cells in chunk.records or []:
+                lineno += 1
+                if not cells or all(not c.strip() for c in cells):
+                    continue  # blank line: not data
+                if len(cells) != len(HEADER):
+                    problems.append(
+                        (lineno, f"{source}:{lineno}: expected {len(HEADER)} columns, found {len(cells)}")
+                    )
+                    continue
+                rows.append(cells)
+                lines.append(lineno)
+            cols = list(zip(*rows, strict=True))
+        if lines:
+            part, errs = _measurement_chunk(cols, lines, source)
+            parts.append(part)
+            problems += errs
+    if problems:
+        raise TableError([p for _, p in sorted(problems, key=lambda lp: lp[0])])
+    table = TraverseTable.concat(parts)
+    if not len(table):
+        raise TableError([f"{source}:2: the table has a header but no rows"])
+    return table
+
+
+def _measurement_chunk(
+    cols: Sequence[Sequence[str]], lines: list[int], source: str
+) -> tuple[TraverseTable, list[tuple[int, str]]]:
+    """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`."""
+    days = [c.strip() for c in cols[0]]
+    ok = ~_equal(days, "")
+    joint = _joint_cells(cols[1])
+    ok &= joint > 0
+    plus = _equal(cols[2], "+")
+    ok &= plus | _equal(cols[2], "-")
+    nums: dict[str, NDArray[np.float64]] = {}
+    for i, name in enumerate(("q1", "q2", "q3", "theta", "psi", "start", "end"), start=3):
+        v, good = _floats(cols[i])
+        nums[name] = v
+        ok &= good
+    steps, good = _ints(cols[10], 1, MAX_STEPS)
+    ok &= good
+    start, end = nums["start"], nums["end"]
+    with np.errstate(invalid="ignore"):
+        ok &= (end != start) & ((end > start) == plus)
+        ok &= _moving_within(joint, start) & _moving_within(joint, end)
+        ok &= _pose_ok(joint, nums)
+    problems: list[tuple[int, str]] = []
+    bad = np.flatnonzero(~ok)
+    for i in bad.tolist():
+        t, errs = parse_row({h: c[i] for h, c in zip(HEADER, cols, strict=True)}, f"{source}:{lines[i]}")
+        if errs or t is None:
+            problems += [(lines[i], e) for e in errs]
+            continue
+        # a row the vector check was too strict for (" 3", "+1", "1e3" steps): take parse_row's values
+        ok[i] = True
+        days[i] = t.day
+        joint[i] = t.joint
+        plus[i] = t.direction == "+"
+        for name in ("q1", "q2", "q3", "theta", "psi", "start", "end"):
+            nums[name][i] = getattr(t, name)
+        steps[i] = t.steps
+    table = TraverseTable(
+        np.array(days, dtype=object),
+        joint,
+        np.where(plus, "+", "-"),
+        nums["q1"],
+        nums["q2"],
+        nums["q3"],
+        nums["theta"],
+        nums["psi"],
+        start,
+        end,
+        steps,
+        np.array(lines, dtype=np.int64),
+    )
+    return (table.take(ok) if bad.size else table), problems
+
+
+def _read_table_text(path: str | Path) -> str:
+    """The text of a CSV table (a regular file, at most :data:`records.MAX_TABLE_BYTES`).
+
+    A missing file, a folder, a pipe or device (never opened, so it cannot hang), a file
+    over the size limit or non-UTF-8 text raises :class:`TableError`.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise TableError([f"{p}: no such file"])
+    try:
+        return read_text_bounded(p, "CSV", MAX_TABLE_BYTES)
+    except ValueError as e:
+        raise TableError([str(e)]) from None
+
+
+def read_measurements(path: str | Path) -> list[Traverse]:
+    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
+    return parse_measurements(_read_table_text(path), str(path))
+
+
+def read_measurement_table(path: str | Path) -> TraverseTable:
+    """Read a measurement table from a CSV file into columns (see :func:`parse_measurement_table`)."""
+    return parse_measurement_table(_read_table_text(path), str(path))
+
+
+def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
+    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(HEADER)
+    row = operator.attrgetter(*HEADER)
+    w.writerows(map(row, traverses))
+    return buf.getvalue()
+
+
+def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
+    """Write a measurement table to a CSV file, row by row as ``traverses`` yields them.
+
+    Streamed (an iterator of a million stored traverses is never held as text); the
+    file appears only when complete: a failed write keeps the old file.
+    """
+    row = operator.attrgetter(*HEADER)
+
+    def write(f: TextIO) -> None:
+        w = csv.writer(f, lineterminator="\n")
+        w.writerow(HEADER)
+        w.writerows(map(row, traverses))
+
+    atomic_write(path, write)
+
+
+def as_arrays(traverses: Sequence[Traverse]) -> dict[str, np.ndarray]:
+    """Column arrays of a list of traverses (for vectorised model evaluation)."""
+    cols = {f.name: [getattr(t, f.name) for t in traverses] for f in fields(Traverse)}
+    out: dict[str, np.ndarray] = {}
+    for k, v in cols.items():
+        out[k] = np.asarray(v, dtype=object if k in ("day", "direction") else float)
+    out["joint"] = out["joint"].astype(int)
+    out["steps"] = out["steps"].astype(int)
+    return out
+
+
