@@ -24,3 +24,13 @@ def _private_database(tmp_path, monkeypatch):
 @pytest.fixture(autouse=True)
 def _pinned_today(monkeypatch):
     monkeypatch.setenv("STICKSLIP_TODAY", PINNED_TODAY)
+
+
+@pytest.fixture()
+def RE():
+    """A bluesky RunEngine for the bluesky tests (skips where the ``bluesky`` extra is missing), halted after."""
+    bluesky = pytest.importorskip("bluesky")
+    re = bluesky.RunEngine({}, call_returns_result=True)
+    yield re
+    if re.state != "idle":
+        re.halt()

@@ -23,7 +23,6 @@ import os
 import socket
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -34,12 +33,12 @@ pytest.importorskip("ophyd_async")
 
 import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
-from bluesky import RunEngine  # noqa: E402
 from bluesky.utils import FailedStatus  # noqa: E402
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
+from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, calibration_day  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402
@@ -48,24 +47,6 @@ from stickslip.devices.positions import load_state  # noqa: E402
 from stickslip.planning import Planner  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.storage import Store  # noqa: E402
-
-DAY = "2026-11-22"
-
-
-def true_calibration(sim: SimulatedMM3A) -> Calibration:
-    """The simulator's own models as a calibration (exact by construction)."""
-    models = sim.true_models()
-    return Calibration(
-        models=models, stderr=dict.fromkeys(models), constant_steps=dict.fromkeys(models, 1e-6), day=DAY, method="paper"
-    )
-
-
-@pytest.fixture()
-def RE() -> Iterator[Any]:
-    re = RunEngine({}, call_returns_result=True)
-    yield re
-    if re.state != "idle":
-        re.halt()  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
 
 
 @pytest.fixture()

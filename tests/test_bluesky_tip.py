@@ -16,7 +16,6 @@ length + q3 and 1), with the simulator's position ripple (0.5 % of each joint's 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -27,12 +26,12 @@ pytest.importorskip("ophyd_async")
 
 import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
-from bluesky import RunEngine  # noqa: E402
 from bluesky.utils import FailedStatus  # noqa: E402
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
+from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
 from hidden_arm import tip_of  # noqa: E402
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipManipulator  # noqa: E402
@@ -43,23 +42,7 @@ from stickslip.planning import Planner  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.storage import Store  # noqa: E402
 
-DAY = "2026-11-22"
 GEOMETRY = kin.Geometry(offset=1e-3, length=0.021)
-
-
-def true_calibration(sim: SimulatedMM3A) -> Calibration:
-    models = sim.true_models()
-    return Calibration(
-        models=models, stderr=dict.fromkeys(models), constant_steps=dict.fromkeys(models, 1e-6), day=DAY, method="paper"
-    )
-
-
-@pytest.fixture()
-def RE() -> Iterator[Any]:
-    re = RunEngine({}, call_returns_result=True)
-    yield re
-    if re.state != "idle":
-        re.halt()  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
 
 
 @pytest.fixture()
