@@ -16,6 +16,8 @@ import re
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import integrate
 from typer.testing import CliRunner
 
@@ -236,8 +238,30 @@ def test_fig9_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(cal):
 def test_the_calibrations_own_table_is_in_sample(cal, table):
     s = classify_sample(cal, table)
     assert s.kind == "in-sample" and f"{len(table)} rows" in s.reason
-    assert classify_sample(cal, list(reversed(table))).kind == "overlapping"  # another row order: not the table
     assert classify_sample(cal, table, separate=True).kind == "in-sample"  # even when passed as "separate"
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.randoms(use_true_random=False))
+def test_a_resorted_copy_of_the_table_is_still_in_sample(cal, table, rnd):
+    rows = list(table)
+    rnd.shuffle(rows)
+    assert classify_sample(cal, rows).kind == "in-sample"
+    # through the calibration file, too
+    again = Calibration.from_dict(json.loads(json.dumps(cal.to_dict())))
+    assert again.provenance.rows_sha256 == cal.provenance.rows_sha256 is not None
+    assert classify_sample(again, rows).kind == "in-sample"
+    # one value changed in one row: the calibration's day, other rows
+    i = rnd.randrange(len(rows))
+    rows[i] = dataclasses.replace(rows[i], steps=rows[i].steps + 1)
+    assert classify_sample(cal, rows).kind == "overlapping"
+
+
+def test_a_file_without_the_sorted_digest_knows_its_table_only_in_its_order(cal, table):
+    old = dataclasses.replace(cal, provenance=dataclasses.replace(cal.provenance, rows_sha256=None))
+    assert "rows_sha256" not in old.provenance.to_dict()
+    assert classify_sample(old, table).kind == "in-sample"
+    assert classify_sample(old, list(reversed(table))).kind == "overlapping"  # cannot tell: says so
 
 
 def test_another_day_is_out_of_sample_and_a_mixed_table_is_labelled_per_day(cal, table, two_days):

@@ -28,7 +28,17 @@ from .auto import calibrate
 from .inversion import EQ9_PRINTED, PaperQuadratic, eq9_printed, fit_paper_quadratic, invert_d_exact
 from .lsq import calibrate_lsq
 from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES, calibrate_paper, paper_applicable
-from .result import FORMAT, FORMAT_VERSION, UNITS, Calibration, CalibrationError, Conditions, Parameter, Provenance
+from .result import (
+    FORMAT,
+    FORMAT_VERSION,
+    UNITS,
+    Calibration,
+    CalibrationError,
+    Conditions,
+    Parameter,
+    Provenance,
+    table_digests,
+)
 from .validation import ValidationResult, validate
 
 __all__ = [
@@ -37,6 +47,7 @@ __all__ = [
     "Conditions",
     "Parameter",
     "Provenance",
+    "table_digests",
     "calibrate",
     "calibrate_paper",
     "calibrate_lsq",

@@ -188,6 +188,10 @@ class Provenance:
         The table's file name or the device URL they were measured on.
     sha256 : str or None
         Hash of the traverses as a measurement table (design.md §7), to recognise the data.
+    rows_sha256 : str or None
+        Hash of the same rows in sorted order (:func:`table_digests`): a re-sorted copy of
+        the table is still recognised as the calibration's own. ``None`` in files written
+        before it existed.
     rows, rows_used : int
         Traverses given, and used by the method.
     days : tuple of str
@@ -205,13 +209,16 @@ class Provenance:
     days: tuple[str, ...] = ()
     notes: tuple[str, ...] = ()
     extra: dict[str, object] = field(default_factory=dict)
+    rows_sha256: str | None = None
 
     @classmethod
     def of(cls, traverses: Sequence[Traverse], source: str | None, used: int, notes: Sequence[str]) -> Provenance:
         """The provenance of a calibration from ``traverses`` (``used`` of them) with ``notes``."""
+        table, rows = table_digests(traverses)
         return cls(
             source=source,
-            sha256=hashlib.sha256(measurements_to_csv(traverses).encode()).hexdigest(),
+            sha256=table,
+            rows_sha256=rows,
             rows=len(traverses),
             rows_used=used,
             days=tuple(sorted({t.day for t in traverses})),
@@ -224,6 +231,7 @@ class Provenance:
             **self.extra,
             "source": self.source,
             "sha256": self.sha256,
+            **({"rows_sha256": self.rows_sha256} if self.rows_sha256 else {}),
             "rows": self.rows,
             "rows_used": self.rows_used,
             "days": list(self.days),
@@ -237,7 +245,7 @@ class Provenance:
             return cls()
         if not isinstance(data, dict):
             raise ValueError(f"provenance must be an object, got {type(data).__name__}")
-        known = {"source", "sha256", "rows", "rows_used", "days", "notes"}
+        known = {"source", "sha256", "rows_sha256", "rows", "rows_used", "days", "notes"}
 
         def text(key: str) -> str | None:
             v = data.get(key)
@@ -260,7 +268,21 @@ class Provenance:
         return cls(
             text("source"), text("sha256"), count("rows"), count("rows_used"), texts("days"), texts("notes"),
             {k: v for k, v in data.items() if k not in known},
+            text("rows_sha256"),
         )
+
+
+def table_digests(traverses: Sequence[Traverse]) -> tuple[str, str]:
+    """The two sha256 digests (hex) a calibration's provenance keeps of its table.
+
+    The first hashes the measurement table as :func:`~stickslip.measurements.measurements_to_csv`
+    writes it, rows in the order given; the second hashes the header and the same rows sorted,
+    so that a re-sorted copy of the table (by day, by joint) is still recognised.
+    """
+    text = measurements_to_csv(traverses)
+    header, _, body = text.partition("\n")
+    rows = "\n".join([header, *sorted(body.splitlines())]) + "\n"
+    return hashlib.sha256(text.encode()).hexdigest(), hashlib.sha256(rows.encode()).hexdigest()
 
 
 # ----------------------------------------------------------------------------- the result object

@@ -2,7 +2,7 @@
 
 A calibration records where its traverses came from (``provenance``: the sha256 of
 the measurement table as :func:`stickslip.measurements.measurements_to_csv` writes it,
-the number of rows and the days). The report compares the table it validates on with
+the sha256 of the same rows sorted, the number of rows and the days). The report compares the table it validates on with
 that record and says so in the figure titles and on the page: a model always fits the
 data it was fitted to better than new data, and a reader must be told which one a
 number is.
@@ -10,12 +10,12 @@ number is.
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
-from ..measurements import Traverse, measurements_to_csv
+from ..calibration import Provenance, table_digests
+from ..measurements import Traverse
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..calibration import Calibration
@@ -59,7 +59,13 @@ class Sample:
 
 def table_sha256(traverses: Sequence[Traverse]) -> str:
     """sha256 of the table as the calibration's provenance computes it (hex)."""
-    return hashlib.sha256(measurements_to_csv(traverses).encode()).hexdigest()
+    return table_digests(traverses)[0]
+
+
+def _same_table(traverses: Sequence[Traverse], prov: Provenance) -> bool:
+    """The provenance's table: the same rows in the same order, or (where it keeps the sorted digest) in any."""
+    table, rows = table_digests(traverses)
+    return table == prov.sha256 or (prov.rows_sha256 is not None and rows == prov.rows_sha256)
 
 
 def classify_days(calibration: Calibration, traverses: Sequence[Traverse], separate: bool = False) -> dict[str, Sample]:
@@ -84,11 +90,11 @@ def classify_days(calibration: Calibration, traverses: Sequence[Traverse], separ
     if not sha:
         return {d: Sample("unknown", "the calibration records no provenance (sha256 of its table)") for d in days}
     own = f"the table the calibration was made from (sha256 {sha[:12]}…, {rows} rows)"
-    if table_sha256(traverses) == sha:
+    if _same_table(traverses, prov):
         return {d: Sample("in-sample", f"these traverses are {own}") for d in days}
     cal_set = set(cal_days)
     shared = [t for t in traverses if t.day in cal_set]
-    same_rows = bool(shared) and table_sha256(shared) == sha
+    same_rows = bool(shared) and _same_table(shared, prov)
     out: dict[str, Sample] = {}
     for d in days:
         if d not in cal_set:
