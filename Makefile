@@ -21,7 +21,7 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/lint-imports
 	$(PY) -m mypy
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --maxprocesses 4
 
 # The whole suite with the machine's clock faked (libfaketime, from the dev extra; it reaches
 # subprocesses): 400 days ahead, then 30 s after midnight on New Year's Day at UTC+14.
