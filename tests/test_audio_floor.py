@@ -94,3 +94,31 @@ def test_a_quieter_stop_after_a_voice_is_still_heard() -> None:
     voice = np.array([6.0, 0.0, 6.0, 6.0])
     fired, _ = _run([(8 * CHUNK, np.zeros(4)), (2 * CHUNK, voice), (4 * CHUNK, np.zeros(4)), (100, np.full(4, -8.0))])
     assert len(fired) == 1 and 14 * CHUNK <= fired[0] <= 14 * CHUNK + 12
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.floats(2.0, 8.0), st.integers(0, 2**31 - 1))
+def test_a_voice_while_the_template_is_learned_does_not_switch_the_drop_check_off(wobble_db: float, seed: int) -> None:
+    """The drop check is the tuning's: a noisy warm-up (a voice while listening began) must not disable it.
+
+    The stream's own warm-up spread, wider than the tuning's, scales the drop channel's
+    thresholds; before this was fixed it also scaled the signature's drops below the
+    "informative" bar, and a voice in the stop's own sub-band then fired on its own.
+    """
+    rng = np.random.default_rng(seed)
+    warm = _state().p.warmup_chunks * CHUNK
+    lowered = np.array([1.0, 0.0, 1.0, 1.0])  # the sub-bands the stop lowers wobble while the template is learned
+    v = np.concatenate(
+        [
+            STEPPING + rng.normal(0.0, 0.3, (warm, 4)) + lowered * rng.uniform(-wobble_db, wobble_db, (warm, 1)),
+            STEPPING + rng.normal(0.0, 0.3, (8 * CHUNK, 4)),
+            STEPPING + np.array([0.0, 12.0, 0.0, 0.0]) + rng.normal(0.0, 0.3, (300, 4)),  # the voice's rise alone
+            STEPPING + rng.normal(0.0, 0.3, (4 * CHUNK, 4)),
+            STEPPING + SIGNATURE + rng.normal(0.0, 0.3, (200, 4)),  # and then the stop
+        ]
+    )
+    state = _state()
+    ends = (np.arange(v.shape[0], dtype=np.int64) * 128 + 511).astype(np.int64)
+    fired = [int((d.end_sample - 511) // 128) for d in state.process(v, ends)]
+    stop = warm + 12 * CHUNK + 300
+    assert len(fired) == 1 and stop <= fired[0] <= stop + 10, (fired, stop)

@@ -281,6 +281,8 @@ NEG_MIN = 0.15
 #: ... and at least this share of its own stop-likeness ``a`` (capped at 1): the stop's rises and its drops
 #: come together; a voice or a radio lifts the rising sub-bands while the others show only their wobble
 NEG_RATIO = 0.45
+#: ... with each sub-band's expected drop capped at this many spreads (a noise floor fills deeper holes)
+NEG_CAP = 3.0
 #: frames averaged for that check (a short average: it must not delay the stop)
 NEG_FRAMES = 4
 #: a sub-band this many spreads above the floor has something added to it: it cannot show a drop, and the
@@ -455,13 +457,19 @@ class TemplateState:
         zs = np.clip(v - floor, -_CLIP_DB, _CLIP_DB) * self._drop_scale
         m = self._drop(zs)
         # the sub-bands the stop lowers must be lower: no voice or second instrument can fake a drop
-        gn = np.minimum(self.delta, 0.0) * self._drop_scale
+        # a drop deeper than NEG_CAP spreads counts as NEG_CAP: the room's own noise fills the deepest holes
+        # (a fan 10 dB below the stepping caps a 20 dB drop at 10), so their depth is no evidence
+        gn = np.maximum(np.minimum(self.delta, 0.0) * self._drop_scale, -NEG_CAP)
         gg = float(gn @ gn)
-        if gg >= NEG_INFORMATIVE**2:
+        # whether the stop's drops are worth checking is the tuning's to say (its spreads): a noisy warm-up
+        # (a voice while the template was learned) must not switch the check off
+        gt = np.maximum(np.minimum(self.delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
+        gg_tuned = float(gt @ gt)
+        if gg_tuned >= NEG_INFORMATIVE**2:
             # per frame, judged on the sub-bands without an excess (a band something was added to cannot show
             # a drop): the drops shown, as a share of the signature's, averaged over NEG_FRAMES frames
             clear = zs <= NEG_EXCESS
-            num = np.concatenate((self._neg_tail[0], (zs * clear) @ gn / gg))
+            num = np.concatenate((self._neg_tail[0], (np.maximum(zs, -NEG_CAP) * clear) @ gn / gg))
             den = np.concatenate((self._neg_tail[1], clear.astype(np.float64) @ (gn * gn) / gg))
             cn = np.concatenate(([0.0], np.cumsum(num)))
             cd = np.concatenate(([0.0], np.cumsum(den)))
@@ -469,7 +477,7 @@ class TemplateState:
             lo = np.maximum(k - NEG_FRAMES, 0)
             info = (cd[k] - cd[lo]) / (k - lo)  # share of the signature's drop information left
             shown_avg = (cn[k] - cn[lo]) / np.maximum(cd[k] - cd[lo], 1e-12)
-            judged = info * gg >= NEG_INFORMATIVE**2
+            judged = info * gg_tuned >= NEG_INFORMATIVE**2
             hot &= judged & (shown_avg >= np.maximum(NEG_MIN, NEG_RATIO * np.clip(a, 0.0, 1.0)))
             keep = max(num.size - (NEG_FRAMES - 1), 0)
             self._neg_tail = (num[keep:], den[keep:])

@@ -1,0 +1,98 @@
+"""The limit switch on a fourth, independent generator (``modal_sound``): arms drawn at random.
+
+Each ``joint_seed`` is another arm (seven modes with their own Q, a rough step clock); the
+detector is tuned on one clean recording of it and must then find the stop once, with its
+onset within 25 ms and latency under 50 ms, and nothing else, on recordings with other
+seeds and the room's sounds. Written and run after the detector was developed; the
+conditions that fail are strict xfails with the measured reason.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+
+from modal_sound import Scene, render
+from stickslip.audio.detector import detect
+from stickslip.audio.tuning import tune
+from stickslip.audio.tuningfile import Tuning
+
+ROOMS: dict[str, dict[str, object]] = {
+    "quiet room": {},
+    "second instrument from 0.7 s": {"instrument": True},
+    "a voice from the first sample": {"voice_db": 0.0},
+    "knocks": {"knocks": True},
+    "a door slam": {"door": True},
+    "fan and hum": {"fan": True},
+    "noisy (10 dB SNR)": {"snr_db": 10.0},
+    "steps 15 % faster": {"rate": 1150.0},
+}
+#: measured on the detector as merged (python tests/test_audio_modal.py lists them); onset / detected re the stop
+VOICE = (
+    "a syllable over the stop fills the sub-bands the stop empties (arm 2: the bands above 4 kHz 4-5 spreads up "
+    "at the stop); the stop is heard when it ends"
+)
+ARM3 = (
+    "arm 3's tuning is three sub-bands around 3 kHz where the stop only adds sound (the whole template, with 1 "
+    "false alarm in its 15 s self-check, was passed over); anything adding sound there fires it"
+)
+KNOWN = {
+    (2, "quieter", "fan and hum"): "detected +51 ms (limit 50), onset +3 ms",
+    (2, "duller", "a voice from the first sample"): VOICE + ": onset +61 ms",
+    (2, "spectral", "fan and hum"): "onset +72 ms: the fan fills part of what the stop empties",
+    (2, "louder", "steps 15 % faster"): "onset +96 ms at a step clock 15 % faster than the tuning's",
+    (3, "duller", "a voice from the first sample"): VOICE + ": onset +70 ms",
+    (3, "spectral", "a voice from the first sample"): ARM3 + ": a false alarm 1.66 s before the stop",
+    (3, "spectral", "knocks"): ARM3 + ": a false alarm 1.34 s before the stop",
+    (3, "spectral", "a door slam"): ARM3 + ": a false alarm 1.53 s before the stop",
+    (3, "louder", "second instrument from 0.7 s"): "onset +387 ms: the instrument rings where the stop's contact "
+    "modes do, and the stop only adds sound there",
+    (3, "louder", "a voice from the first sample"): VOICE + ": onset +62 ms",
+    (5, "duller", "a voice from the first sample"): VOICE + ": onset +31 ms",
+    (5, "louder", "quiet room"): "onset +49 ms: the signature's drops are small (1.0-1.7 spreads) and frames show "
+    "them only now and then, so the drop check holds the stop back",
+    (5, "louder", "a voice from the first sample"): VOICE + ": onset +62 ms",
+    (5, "louder", "steps 15 % faster"): "onset +173 ms at a step clock 15 % faster than the tuning's",
+}
+
+
+@cache
+def _tuning(joint_seed: int, kind: str) -> Tuning:
+    return tune(render(Scene(joint_seed, kind, stop_at=3.0, dur=4.5, seed=10)), 48_000, 3.0)
+
+
+CASES = [
+    pytest.param(
+        js, kind, room, id=f"arm {js}, {kind} stop, {room}",
+        marks=[pytest.mark.xfail(strict=True, reason=KNOWN[(js, kind, room)])] if (js, kind, room) in KNOWN else [],
+    )
+    for js in (2, 3, 5)
+    for kind in ("quieter", "duller", "spectral", "louder")
+    for room in ROOMS
+]
+
+
+@pytest.mark.parametrize(("joint_seed", "kind", "room"), CASES)
+def test_one_stop_found_on_time_and_nothing_else(joint_seed: int, kind: str, room: str) -> None:
+    seed = 90 + list(ROOMS).index(room)
+    stop = 2.0 + 0.25 * (seed % 7)
+    x = render(Scene(joint_seed, kind, stop_at=stop, seed=seed, **ROOMS[room]))  # type: ignore[arg-type]
+    events = detect(x.astype(np.float32), _tuning(joint_seed, kind))
+    got = [(round(e.onset_s, 3), round(e.detected_at_s, 3)) for e in events]
+    assert len(events) == 1, f"stop at {stop:.3f} s; events (onset, detected) {got}"
+    assert abs(events[0].onset_s - stop) <= 0.025, got
+    assert 0.0 <= events[0].detected_at_s - stop <= 0.050, got
+
+
+if __name__ == "__main__":  # the table of every condition: python tests/test_audio_modal.py
+    for js in (2, 3, 5):
+        for kind in ("quieter", "duller", "spectral", "louder"):
+            for room in ROOMS:
+                try:
+                    test_one_stop_found_on_time_and_nothing_else(js, kind, room)
+                    verdict = "pass"
+                except AssertionError as e:
+                    verdict = ("xfail " if (js, kind, room) in KNOWN else "FAIL ") + str(e).splitlines()[0][:90]
+                print(f"arm {js} {kind:9s} {room:30s} {verdict}")
