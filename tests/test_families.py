@@ -175,6 +175,9 @@ def test_cli_calibrate_and_fit_with_families(tmp_path):
     r = runner.invoke(app, ["calibrate", str(meas), "-o", str(tmp_path / "c.json")])
     assert r.exit_code == 0, r.output
     assert "leave-one-pose-out" in r.output and "weight" in r.output and "◀" in r.output
+    r = runner.invoke(app, ["show", str(tmp_path / "c.json")])  # the saved file tells the same mix
+    assert r.exit_code == 0, r.output
+    assert "leave-one-pose-out" in r.output and "weight" in r.output and "◀" in r.output
     r = runner.invoke(app, ["fit", str(meas), "--model", "auto", "--json"])
     assert r.exit_code == 0, r.output
     r = runner.invoke(app, ["calibrate", str(meas), "--model", "nonsense"])

@@ -243,7 +243,12 @@ def show_cmd(
     ] = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints)."""
+    """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints).
+
+    A calibration that averages model families (calibrate --model auto) also shows each
+    family's cross-validation error and weight; ◀ marks the family whose parameters are
+    listed. --json gives every family's parameters.
+    """
     from ..calibration import Calibration
 
     calibration = calibration_file(calibration, "CAL.json")
@@ -253,6 +258,8 @@ def show_cmd(
         print_json(cal.to_dict())
         return
     console.print(_params_table(cal, f"{calibration} — day {cal.day}, method {cal.method}"))
+    if cal.selection:  # an averaged model: which families, with what weight (◀: the one whose parameters are shown)
+        console.print(_selection_table(cal))
     for (j, d), v in sorted(cal.constant_steps.items()):
         s, u = step_scale(j)
         console.print(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}", highlight=False)
