@@ -41,7 +41,6 @@ ARM3 = (
 KNOWN = {
     (2, "quieter", "fan and hum"): "detected +51 ms (limit 50), onset +3 ms",
     (2, "duller", "a voice from the first sample"): VOICE + ": onset +61 ms",
-    (2, "spectral", "fan and hum"): "onset +72 ms: the fan fills part of what the stop empties",
     (2, "louder", "steps 15 % faster"): "onset +96 ms at a step clock 15 % faster than the tuning's",
     (3, "duller", "a voice from the first sample"): VOICE + ": onset +70 ms",
     (3, "spectral", "a voice from the first sample"): ARM3 + ": a false alarm 1.66 s before the stop",
@@ -51,8 +50,6 @@ KNOWN = {
     "modes do, and the stop only adds sound there",
     (3, "louder", "a voice from the first sample"): VOICE + ": onset +62 ms",
     (5, "duller", "a voice from the first sample"): VOICE + ": onset +31 ms",
-    (5, "louder", "quiet room"): "onset +49 ms: the signature's drops are small (1.0-1.7 spreads) and frames show "
-    "them only now and then, so the drop check holds the stop back",
     (5, "louder", "a voice from the first sample"): VOICE + ": onset +62 ms",
     (5, "louder", "steps 15 % faster"): "onset +173 ms at a step clock 15 % faster than the tuning's",
 }

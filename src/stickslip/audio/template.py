@@ -283,6 +283,8 @@ NEG_MIN = 0.15
 NEG_RATIO = 0.45
 #: ... with each sub-band's expected drop capped at this many spreads (a noise floor fills deeper holes)
 NEG_CAP = 3.0
+#: ... less this many standard errors of the share shown (a weak drop signature shows its share only noisily)
+SE_SLACK = 0.5
 #: frames averaged for that check (a short average: it must not delay the stop)
 NEG_FRAMES = 4
 #: a sub-band this many spreads above the floor has something added to it: it cannot show a drop, and the
@@ -478,7 +480,11 @@ class TemplateState:
             info = (cd[k] - cd[lo]) / (k - lo)  # share of the signature's drop information left
             shown_avg = (cn[k] - cn[lo]) / np.maximum(cd[k] - cd[lo], 1e-12)
             judged = info * gg_tuned >= NEG_INFORMATIVE**2
-            hot &= judged & (shown_avg >= np.maximum(NEG_MIN, NEG_RATIO * np.clip(a, 0.0, 1.0)))
+            # the share shown is measured with noise: one spread per sub-band and frame gives a standard error of
+            # 1 / sqrt(frames x drops' information); a weak drop signature is not held to the share it cannot show
+            se = 1.0 / np.sqrt(np.maximum((cd[k] - cd[lo]) * gg, 1e-12))
+            need = np.maximum(NEG_MIN, NEG_RATIO * np.clip(a, 0.0, 1.0) - SE_SLACK * se)
+            hot &= judged & (shown_avg >= need)
             keep = max(num.size - (NEG_FRAMES - 1), 0)
             self._neg_tail = (num[keep:], den[keep:])
         if p.drop_threshold is not None:
