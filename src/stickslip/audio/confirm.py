@@ -1,0 +1,309 @@
+"""Confirm an end stop by its persistence under continued stepping.
+
+A real end stop lasts as long as the controller keeps stepping into it; interference
+that looks like the stop for a moment (a held chord, a voice's fricatives in the stop's
+sub-band, babble over a run of weaker steps) does not. :class:`ConfirmedStopDetector`
+wraps a :class:`~stickslip.audio.detector.StopDetector` with the same interface
+(samples in through :meth:`~ConfirmedStopDetector.feed`, :class:`StopEvent` s out) and
+holds each fire as *provisional*: it is emitted only once the stop persisted for
+``confirm_s``, that is once at least ``min_share`` of the frames of the next
+``confirm_s`` after the fire were stop-like (the stop-likeness at or above the tuning's
+threshold, by the fit or by the drop channel). A fire that does not persist is dropped
+and the inner detector un-latched at once, so it hears the next stop; its template was
+frozen since the fire, so the rejected span never enters it.
+
+What it costs: nothing in accuracy - a traverse counts its steps to the event's
+``onset_s`` (the fire's, unchanged), and ``detected_at_s`` stays the fire time, so the
+latency is the detector's - but the traverse steps ``confirm_s`` longer against the stop
+(``confirm_s`` x the step rate extra steps: harmless on a stick-slip joint, whose slider
+just slips) and takes that much longer. The emitted event carries ``confirmed_at_s``
+(the end of the window) and ``confirmed_s`` (the window).
+
+The decision is made at the end of the window, at a frame counted from the stream
+start, and the inner detector is fed exactly up to it, so the events do not depend on
+how the stream is cut into blocks.
+
+Two edges, and what happens:
+
+* **The stream ends while a fire is provisional** (a recording that stops less than
+  ``confirm_s`` after the stop): :meth:`~ConfirmedStopDetector.finish` emits it if the
+  frames heard after the fire so far meet ``min_share`` (none heard: it is emitted, as
+  nothing contradicts it), with ``confirmed_s`` the time actually heard (less than
+  ``confirm_s``: the flag that it was confirmed by the end of the recording).
+* **A real stop begins inside a rejected fire's window** (interference, a pause, then
+  the stop): the un-latched detector fires again at once on the stop it already hears;
+  such a fire takes as its onset the start of the stop-like run it fired in (the
+  interpolated threshold crossing, less the tuning's onset lag), not the moment of the
+  un-latching. Interference that runs straight into a real stop without a pause cannot
+  be told apart: the event then keeps the interference's onset (as without
+  confirmation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .detector import StopDetector, StopEvent, Tuning
+
+__all__ = ["CONFIRM_S", "MIN_SHARE", "ConfirmedStopDetector", "confirming"]
+
+#: how long a stop must persist after the detector fired before it is emitted, s (measured: docs/audio.md)
+CONFIRM_S = 0.5
+#: share of the frames in that window that must be stop-like (measured: docs/audio.md)
+MIN_SHARE = 0.7
+#: ... and no run of frames that are not stop-like may last this long in it, s: the stop went away
+#: (twice the longest seen inside a true stop of the battery: 40 ms, a voice over joint P's stop)
+GAP_S = 0.08
+#: longest window accepted, s (a traverse steps this long into the stop)
+MAX_CONFIRM_S = 5.0
+
+
+def check_confirm_s(confirm_s: float) -> float:
+    """``confirm_s`` as a float, or ``ValueError`` naming the accepted range (0 = no confirmation)."""
+    try:
+        c = float(confirm_s)
+    except (TypeError, ValueError):
+        raise ValueError(f"confirm_s = {confirm_s!r} is not a number of seconds") from None
+    if not (math.isfinite(c) and 0.0 <= c <= MAX_CONFIRM_S):
+        raise ValueError(f"confirm_s = {confirm_s!r} s is outside [0, {MAX_CONFIRM_S:g}] (0: no confirmation)")
+    return c
+
+
+class ConfirmedStopDetector:
+    """A :class:`StopDetector` whose fires are emitted only once the stop persisted.
+
+    Parameters
+    ----------
+    inner : StopDetector
+        The detector whose fires are confirmed (it is reset, and from now on owned by
+        this wrapper).
+    confirm_s : float
+        Confirmation window after a fire, s (> 0).
+    min_share : float
+        Share of the window's frames that must be stop-like, in (0, 1].
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> det = ConfirmedStopDetector(StopDetector(Tuning(band_hz=(5600, 7100), threshold_db=-50)))
+    >>> det.feed(np.zeros(4800, dtype=np.float32)), det.finish()
+    ([], [])
+    """
+
+    #: the no-signal guard applies: this detector listens to samples
+    uses_audio = True
+
+    def __init__(self, inner: StopDetector, confirm_s: float = CONFIRM_S, min_share: float = MIN_SHARE) -> None:
+        c = check_confirm_s(confirm_s)
+        if c <= 0.0:
+            raise ValueError("confirm_s must be > 0 for a ConfirmedStopDetector (use the StopDetector itself for 0)")
+        if not (isinstance(min_share, (int, float)) and 0.0 < float(min_share) <= 1.0):
+            raise ValueError(f"min_share = {min_share!r} is outside (0, 1]")
+        self.inner = inner
+        self.confirm_s = c
+        self.min_share = float(min_share)
+        tu = inner.tuning
+        self._H, self._F, self._sr = int(tu.hop), int(tu.frame), int(tu.sample_rate)
+        #: the window, frames
+        self.window_frames = max(1, int(round(c * self._sr / self._H)))
+        self._refire_frames = int(tu.hold_frames) + int(tu.max_dips) + 1
+        #: a run of this many frames that are not stop-like ends a stop
+        self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
+        self._lag = float(tu.onset_lag_s)
+        self.reset(inner._t0)
+
+    def reset(self, t0_s: float = 0.0) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s``."""
+        self.inner.reset(t0_s)
+        self.inner.evidence = []
+        self._t0 = float(t0_s)
+        self._fed = 0
+        self._margins: list[float] = []
+        self._base = 0  # frame index of _margins[0]
+        self._pending: tuple[StopEvent, int] | None = None
+        self._rejected_at: int | None = None
+        #: the fires dropped since the last reset (they did not persist)
+        self.rejected: list[StopEvent] = []
+
+    # --- the detector's interface -------------------------------------------------------------
+    @property
+    def tuning(self) -> Tuning:
+        """The inner detector's tuning."""
+        return self.inner.tuning
+
+    @property
+    def latency_s(self) -> float:
+        """Typical detected_at - true onset, s: the inner detector's (``detected_at_s`` is the fire time)."""
+        return self.inner.latency_s
+
+    @property
+    def ready(self) -> bool:
+        """False while the inner detector is still learning the stepping sound."""
+        return self.inner.ready
+
+    @property
+    def latched(self) -> bool:
+        """True while a stop is being heard (provisional or confirmed)."""
+        return self.inner.latched
+
+    @property
+    def level(self) -> float:
+        """The latest frame's level (see :attr:`StopDetector.level`)."""
+        return self.inner.level
+
+    @property
+    def levels_seen(self) -> int:
+        """Frames heard since the last reset."""
+        return self.inner.levels_seen
+
+    @property
+    def pending(self) -> StopEvent | None:
+        """The fire being confirmed, or None."""
+        return None if self._pending is None else self._pending[0]
+
+    def feed(self, block: NDArray[Any]) -> list[StopEvent]:
+        """Consume a block of mono samples; return the stops confirmed in it."""
+        x = np.asarray(block)
+        if x.ndim != 1:
+            raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        out: list[StopEvent] = []
+        pos = 0
+        while pos < x.size:
+            take = min(self._room(), x.size - pos)
+            events = self.inner.feed(x[pos : pos + take])
+            pos += take
+            self._fed += take
+            self._absorb()
+            for ev in events:
+                out += self._fired(ev)
+            out += self._decide()
+        return out
+
+    def finish(self) -> list[StopEvent]:
+        """The stream ended: the provisional stop, if what was heard of its window persisted (see the module)."""
+        if self._pending is None:
+            return []
+        ev, fire = self._pending
+        self._pending = None
+        heard = self.inner.frames_seen - 1 - fire
+        if not self._persisted(self._window(fire, heard)):
+            self.rejected.append(ev)
+            return []
+        return [self._confirmed(ev, fire + heard, heard)]
+
+    # --- internals ----------------------------------------------------------------------------
+    def _frame_end_s(self, i: int) -> float:
+        return self._t0 + (i * self._H + self._F - 1) / self._sr
+
+    def _room(self) -> int:
+        """Samples the inner detector may take now: up to the pending window's end, else W frames."""
+        if self._pending is None:
+            return self._H * self.window_frames  # a fire in these frames has its window end beyond them
+        end = self._pending[1] + self.window_frames  # the window's last frame
+        return max(1, end * self._H + self._F - self._fed)
+
+    def _absorb(self) -> None:
+        ev = self.inner.evidence
+        if ev:
+            self._margins.extend(ev)
+            ev.clear()
+        keep = 2 * self.window_frames + 4 * self._refire_frames
+        extra = len(self._margins) - keep
+        if extra > 4 * keep:  # trim now and then, not every block
+            del self._margins[:extra]
+            self._base += extra
+
+    def _margin(self, i: int) -> float:
+        j = i - self._base
+        return self._margins[j] if 0 <= j < len(self._margins) else math.nan
+
+    def _window(self, fire: int, n: int) -> NDArray[np.float64]:
+        lo = fire + 1 - self._base
+        m = np.asarray(self._margins[max(lo, 0) : max(lo + n, 0)], dtype=np.float64)
+        return np.nan_to_num(m, nan=-1.0)
+
+    def _fire_frame(self, ev: StopEvent) -> int:
+        end = int(round((ev.detected_at_s - self._t0) * self._sr))
+        return (end - (self._F - 1)) // self._H
+
+    def _fired(self, ev: StopEvent) -> list[StopEvent]:
+        out: list[StopEvent] = []
+        if self._pending is not None:  # the inner released and fired again inside the window: no persistence
+            self.rejected.append(self._pending[0])
+            self._pending = None
+        fire = self._fire_frame(ev)
+        if self._rejected_at is not None and fire - self._rejected_at <= self._refire_frames:
+            ev = replace(ev, onset_s=min(ev.onset_s, self._run_onset(fire)))
+        self._rejected_at = None
+        self._pending = (ev, fire)
+        return out
+
+    def _run_onset(self, fire: int) -> float:
+        """Onset of the stop-like run that frame ``fire`` ends: its interpolated threshold crossing less the lag.
+
+        The run goes back over stop-like frames and over dips shorter than
+        :attr:`gap_frames` (what the confirmation allows inside a stop).
+        """
+        i = fire
+        lowest = self._base + 1
+        while i > lowest:
+            d = 0  # frames i-1 .. i-d are not stop-like
+            while d <= (self.gap_frames - 1) and i - 1 - d >= self._base and not self._margin(i - 1 - d) >= 0.0:
+                d += 1
+            if d > (self.gap_frames - 1) or i - 1 - d < self._base:
+                break
+            i -= d + 1
+        t_i = self._frame_end_s(i)
+        m_i, m_prev = self._margin(i), self._margin(i - 1)
+        if math.isfinite(m_prev) and m_prev < 0.0 <= m_i and m_i > m_prev:
+            t_i -= (1.0 - (0.0 - m_prev) / (m_i - m_prev)) * self._H / self._sr
+        return t_i - self._lag
+
+    def _decide(self) -> list[StopEvent]:
+        if self._pending is None:
+            return []
+        ev, fire = self._pending
+        last = fire + self.window_frames
+        if self.inner.frames_seen <= last:
+            return []
+        self._pending = None
+        if self._persisted(self._window(fire, self.window_frames)):
+            return [self._confirmed(ev, last, self.window_frames)]
+        self.rejected.append(ev)
+        self.inner.unlatch()
+        self._rejected_at = last
+        return []
+
+    def _persisted(self, m: NDArray[np.float64]) -> bool:
+        """Did the stop persist over the window's margins ``m``? (none heard: nothing contradicts it)"""
+        if m.size == 0:
+            return True
+        ok = m >= 0.0
+        if float(np.mean(ok)) < self.min_share:
+            return False
+        # the longest run of frames that are not stop-like
+        edges = np.flatnonzero(np.diff(np.concatenate(([1], ok.astype(np.int8), [1]))))
+        longest = int(np.max(edges[1::2] - edges[0::2])) if edges.size else 0
+        return longest < self.gap_frames
+
+    def _confirmed(self, ev: StopEvent, last: int, frames: int) -> StopEvent:
+        return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
+
+
+def confirming(detector: Any, confirm_s: float = CONFIRM_S, min_share: float = MIN_SHARE) -> Any:
+    """``detector`` wrapped in a :class:`ConfirmedStopDetector`, where that applies.
+
+    ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
+    detector that already confirms, or one that does not listen to samples (the
+    simulator's oracle, a position read-back): only a :class:`StopDetector` has the
+    per-frame evidence to confirm with.
+    """
+    c = check_confirm_s(confirm_s)
+    if c == 0.0 or not isinstance(detector, StopDetector):
+        return detector
+    return ConfirmedStopDetector(detector, c, min_share)
