@@ -301,9 +301,10 @@ def confirming(detector: Any, confirm_s: float = CONFIRM_S, min_share: float = M
     ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
     detector that already confirms, or one that does not listen to samples (the
     simulator's oracle, a position read-back): only a :class:`StopDetector` has the
-    per-frame evidence to confirm with.
+    per-frame evidence to confirm with. The wrapper listens with a fresh detector of the
+    same tuning; ``detector`` itself is left as it was.
     """
     c = check_confirm_s(confirm_s)
     if c == 0.0 or not isinstance(detector, StopDetector):
         return detector
-    return ConfirmedStopDetector(detector, c, min_share)
+    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, min_share)

@@ -196,6 +196,15 @@ def traverse_cmd(
     ),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
     burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
+    confirm_s: float | None = typer.Option(
+        None,
+        "--confirm-s",
+        help="Take the stop only once it persisted this long while the joint keeps stepping, s (default 0.5: "
+        "interference that mimics the stop for a moment is passed by). Costs this many seconds x the step rate "
+        "extra steps against the stop (harmless: the slider slips) and that much time, not accuracy: the count "
+        "runs to the stop's onset. 0: the first fire is the stop.",
+        show_default=False,
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print the measured row as JSON (SI units)."),
 ) -> None:
     """Measure one traverse: count the steps between a joint's end stops, timed by ear.
@@ -222,6 +231,12 @@ def traverse_cmd(
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
+    from ..audio.confirm import CONFIRM_S, check_confirm_s
+
+    try:
+        confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
+    except ValueError as e:
+        fail(f"--confirm-s: {e}")
     device = device_url(device)
     try:
         label = direction_label(direction)
@@ -236,7 +251,16 @@ def traverse_cmd(
         ctrl = open_device(device)
         try:
             result = traverse_on_device(
-                ctrl, joint, label, pose, day, tun, audio_input=audio_input, burst_steps=burst, progress=not json_out
+                ctrl,
+                joint,
+                label,
+                pose,
+                day,
+                tun,
+                audio_input=audio_input,
+                burst_steps=burst,
+                progress=not json_out,
+                confirm_s=confirm_s,
             )
         finally:
             ctrl.close()
