@@ -6,9 +6,13 @@ sub-band, babble over a run of weaker steps) does not. :class:`ConfirmedStopDete
 wraps a :class:`~stickslip.audio.detector.StopDetector` with the same interface
 (samples in through :meth:`~ConfirmedStopDetector.feed`, :class:`StopEvent` s out) and
 holds each fire as *provisional*: it is emitted only once the stop persisted for
-``confirm_s``, that is once at least ``min_share`` of the frames of the next
-``confirm_s`` after the fire were stop-like (the stop-likeness at or above the tuning's
-threshold, by the fit or by the drop channel). A fire that does not persist is dropped
+``confirm_s``: of the frames of the next ``confirm_s`` after the fire, at least
+``min_share`` were stop-like (the stop-likeness at or above the tuning's threshold, by
+the fit or by the drop channel), no run of the others lasted :data:`GAP_S`, and at least
+``min_hot`` were *hot* (the detector's full verdict: also the fit's residual and the
+drops the stop shows in proportion). A voice over a stop-like sub-band keeps the
+stop-likeness up for seconds but seldom shows the stop's drops with it; a stop shows
+both, as long as the joint steps into it. A fire that does not persist is dropped
 and the inner detector un-latched at once, so it hears the next stop; its template was
 frozen since the fire, so the rejected span never enters it.
 
@@ -27,7 +31,7 @@ Two edges, and what happens:
 
 * **The stream ends while a fire is provisional** (a recording that stops less than
   ``confirm_s`` after the stop): :meth:`~ConfirmedStopDetector.finish` emits it if the
-  frames heard after the fire so far meet ``min_share`` (none heard: it is emitted, as
+  frames heard after the fire so far meet the same rule (none heard: it is emitted, as
   nothing contradicts it), with ``confirmed_s`` the time actually heard (less than
   ``confirm_s``: the flag that it was confirmed by the end of the recording).
 * **A real stop begins inside a rejected fire's window** (interference, a pause, then
@@ -50,7 +54,7 @@ from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
 
-__all__ = ["CONFIRM_S", "MIN_SHARE", "ConfirmedStopDetector", "confirming"]
+__all__ = ["CONFIRM_S", "GAP_S", "MIN_HOT", "MIN_SHARE", "ConfirmedStopDetector", "check_confirm_s", "confirming"]
 
 #: how long a stop must persist after the detector fired before it is emitted, s (measured: docs/audio.md)
 CONFIRM_S = 0.5
@@ -59,6 +63,9 @@ MIN_SHARE = 0.7
 #: ... and no run of frames that are not stop-like may last this long in it, s: the stop went away
 #: (twice the longest seen inside a true stop of the battery: 40 ms, a voice over joint P's stop)
 GAP_S = 0.08
+#: ... and this share of them must be *hot*: the detector's full verdict (the fit's residual, the drops the
+#: stop shows in proportion, or the drop channel), not the stop-likeness alone (measured: docs/audio.md)
+MIN_HOT = 0.25
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 
@@ -86,6 +93,9 @@ class ConfirmedStopDetector:
         Confirmation window after a fire, s (> 0).
     min_share : float
         Share of the window's frames that must be stop-like, in (0, 1].
+    min_hot : float
+        Share of the window's frames that must be *hot* (the detector's full verdict),
+        in [0, 1].
 
     Examples
     --------
@@ -98,15 +108,24 @@ class ConfirmedStopDetector:
     #: the no-signal guard applies: this detector listens to samples
     uses_audio = True
 
-    def __init__(self, inner: StopDetector, confirm_s: float = CONFIRM_S, min_share: float = MIN_SHARE) -> None:
+    def __init__(
+        self,
+        inner: StopDetector,
+        confirm_s: float = CONFIRM_S,
+        min_share: float = MIN_SHARE,
+        min_hot: float = MIN_HOT,
+    ) -> None:
         c = check_confirm_s(confirm_s)
         if c <= 0.0:
             raise ValueError("confirm_s must be > 0 for a ConfirmedStopDetector (use the StopDetector itself for 0)")
         if not (isinstance(min_share, (int, float)) and 0.0 < float(min_share) <= 1.0):
             raise ValueError(f"min_share = {min_share!r} is outside (0, 1]")
+        if not (isinstance(min_hot, (int, float)) and 0.0 <= float(min_hot) <= 1.0):
+            raise ValueError(f"min_hot = {min_hot!r} is outside [0, 1]")
         self.inner = inner
         self.confirm_s = c
         self.min_share = float(min_share)
+        self.min_hot = float(min_hot)
         tu = inner.tuning
         self._H, self._F, self._sr = int(tu.hop), int(tu.frame), int(tu.sample_rate)
         #: the window, frames
@@ -121,10 +140,12 @@ class ConfirmedStopDetector:
         """Forget everything; the next sample fed is at stream time ``t0_s``."""
         self.inner.reset(t0_s)
         self.inner.evidence = []
+        self.inner.hot_evidence = []
         self._t0 = float(t0_s)
         self._fed = 0
         self._margins: list[float] = []
-        self._base = 0  # frame index of _margins[0]
+        self._hot: list[bool] = []
+        self._base = 0  # frame index of _margins[0] and _hot[0]
         self._pending: tuple[StopEvent, int] | None = None
         self._rejected_at: int | None = None
         #: the fires dropped since the last reset (they did not persist)
@@ -191,7 +212,7 @@ class ConfirmedStopDetector:
         ev, fire = self._pending
         self._pending = None
         heard = self.inner.frames_seen - 1 - fire
-        if not self._persisted(self._window(fire, heard)):
+        if not self._persisted(*self._window(fire, heard)):
             self.rejected.append(ev)
             return []
         return [self._confirmed(ev, fire + heard, heard)]
@@ -208,24 +229,29 @@ class ConfirmedStopDetector:
         return max(1, end * self._H + self._F - self._fed)
 
     def _absorb(self) -> None:
-        ev = self.inner.evidence
+        ev, hot = self.inner.evidence, self.inner.hot_evidence
         if ev:
             self._margins.extend(ev)
             ev.clear()
+        if hot:
+            self._hot.extend(hot)
+            hot.clear()
         keep = 2 * self.window_frames + 4 * self._refire_frames
         extra = len(self._margins) - keep
         if extra > 4 * keep:  # trim now and then, not every block
             del self._margins[:extra]
+            del self._hot[:extra]
             self._base += extra
 
     def _margin(self, i: int) -> float:
         j = i - self._base
         return self._margins[j] if 0 <= j < len(self._margins) else math.nan
 
-    def _window(self, fire: int, n: int) -> NDArray[np.float64]:
-        lo = fire + 1 - self._base
-        m = np.asarray(self._margins[max(lo, 0) : max(lo + n, 0)], dtype=np.float64)
-        return np.nan_to_num(m, nan=-1.0)
+    def _window(self, fire: int, n: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Margins and hot flags of the ``n`` frames after frame ``fire``."""
+        lo, hi = max(fire + 1 - self._base, 0), max(fire + 1 - self._base + n, 0)
+        m = np.nan_to_num(np.asarray(self._margins[lo:hi], dtype=np.float64), nan=-1.0)
+        return m, np.asarray(self._hot[lo:hi], dtype=bool)
 
     def _fire_frame(self, ev: StopEvent) -> int:
         end = int(round((ev.detected_at_s - self._t0) * self._sr))
@@ -272,19 +298,19 @@ class ConfirmedStopDetector:
         if self.inner.frames_seen <= last:
             return []
         self._pending = None
-        if self._persisted(self._window(fire, self.window_frames)):
+        if self._persisted(*self._window(fire, self.window_frames)):
             return [self._confirmed(ev, last, self.window_frames)]
         self.rejected.append(ev)
         self.inner.unlatch()
         self._rejected_at = last
         return []
 
-    def _persisted(self, m: NDArray[np.float64]) -> bool:
-        """Did the stop persist over the window's margins ``m``? (none heard: nothing contradicts it)"""
+    def _persisted(self, m: NDArray[np.float64], hot: NDArray[np.bool_]) -> bool:
+        """Did the stop persist over the window's margins ``m`` and hot flags? (none heard: nothing contradicts it)"""
         if m.size == 0:
             return True
         ok = m >= 0.0
-        if float(np.mean(ok)) < self.min_share:
+        if float(np.mean(ok)) < self.min_share or float(np.mean(hot)) < self.min_hot:
             return False
         # the longest run of frames that are not stop-like
         edges = np.flatnonzero(np.diff(np.concatenate(([1], ok.astype(np.int8), [1]))))
@@ -295,7 +321,7 @@ class ConfirmedStopDetector:
         return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
 
 
-def confirming(detector: Any, confirm_s: float = CONFIRM_S, min_share: float = MIN_SHARE) -> Any:
+def confirming(detector: Any, confirm_s: float = CONFIRM_S) -> Any:
     """``detector`` wrapped in a :class:`ConfirmedStopDetector`, where that applies.
 
     ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
@@ -307,4 +333,4 @@ def confirming(detector: Any, confirm_s: float = CONFIRM_S, min_share: float = M
     c = check_confirm_s(confirm_s)
     if c == 0.0 or not isinstance(detector, StopDetector):
         return detector
-    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, min_share)
+    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c)

@@ -190,6 +190,10 @@ class StopDetector:
         #: template is learned), ``level - threshold`` in dB for a band tuning. Frame ``i`` ends at
         #: stream sample ``i * hop + frame - 1``. What :mod:`.confirm` watches after a fire.
         self.evidence: list[float] | None = None
+        #: set to a list to collect every frame's full verdict, alongside :attr:`evidence`: True where
+        #: the frame is *hot* (template: stop-like by the fit with its residual and the drops the stop
+        #: shows in proportion, or by the drop channel; band: the level at or above the threshold)
+        self.hot_evidence: list[bool] | None = None
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -278,12 +282,18 @@ class StopDetector:
             if self._template is not None:
                 v = levels_from_frames(view, self._w, self._scale, self._edge_bins)
                 ends = self._next + np.arange(n_frames, dtype=np.int64) * H + F - 1
-                if self.evidence is not None and self._template.trace is None:
-                    self._template.trace = []
-                decisions = self._template.process(v, ends)
-                if self.evidence is not None and self._template.trace is not None:
-                    self.evidence.extend((np.asarray(self._template.trace) / tu.threshold_db - 1.0).tolist())
-                    self._template.trace.clear()
+                st = self._template
+                if self.evidence is not None and st.trace is None:
+                    st.trace = []
+                if self.hot_evidence is not None and st.hot_trace is None:
+                    st.hot_trace = []
+                decisions = st.process(v, ends)
+                if self.evidence is not None and st.trace is not None:
+                    self.evidence.extend((np.asarray(st.trace) / tu.threshold_db - 1.0).tolist())
+                    st.trace.clear()
+                if self.hot_evidence is not None and st.hot_trace is not None:
+                    self.hot_evidence.extend(st.hot_trace)
+                    st.hot_trace.clear()
                 for dec in decisions:
                     events.append(
                         StopEvent(
@@ -307,6 +317,8 @@ class StopDetector:
             if levels is not None:
                 if self.evidence is not None:
                     self.evidence.extend((levels - tu.threshold_db).tolist())
+                if self.hot_evidence is not None:
+                    self.hot_evidence.extend((levels >= tu.threshold_db).tolist())
                 ends = self._next + np.arange(n_frames) * H + F - 1
                 events = self._run(levels, ends)
             self._next += n_frames * H
