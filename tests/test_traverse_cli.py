@@ -54,6 +54,8 @@ def test_traverse_bad_pose_and_device(tuning3):
     assert r.exit_code == 2 and "unknown angle unit" in r.stderr
     r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--device", "warp://x"])
     assert r.exit_code == 2 and "unknown device URL scheme" in r.stderr
+    r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--confirm-s", "-0.5"])
+    assert r.exit_code == 2 and r.stderr.strip().startswith("error: --confirm-s") and "[0, 5]" in r.stderr
 
 
 def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):

@@ -377,10 +377,21 @@ class StopDetector:
 
 
 def detect(
-    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 1 << 16
+    samples: np.ndarray | Iterable[np.ndarray],
+    tuning: Tuning,
+    t0_s: float = 0.0,
+    block: int = 1 << 16,
+    confirm_s: float = 0.0,
 ) -> list[StopEvent]:
-    """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks)."""
-    det = StopDetector(tuning, t0_s)
+    """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks).
+
+    ``confirm_s`` > 0 reports a stop only once it persisted that long, s
+    (:class:`~stickslip.audio.confirm.ConfirmedStopDetector`; a stop the recording ends on
+    is reported if it persisted so far); 0, the default, reports every fire.
+    """
+    from .confirm import ConfirmedStopDetector, confirming
+
+    det = confirming(StopDetector(tuning, t0_s), confirm_s)
     events: list[StopEvent] = []
     if isinstance(samples, np.ndarray):
         for i in range(0, samples.size, block):
@@ -388,6 +399,8 @@ def detect(
     else:
         for b in samples:
             events += det.feed(b)
+    if isinstance(det, ConfirmedStopDetector):
+        events += det.finish()
     return events
 
 
