@@ -1,6 +1,7 @@
 """The battery: ~40 named conditions from a third, independent generator (tests/battery_sound.py).
 
-Each condition tunes on a training recording and listens to a test recording it has not
+Each condition tunes on a training recording and listens (as ``listen`` does: every fire
+confirmed by its persistence, stickslip.audio.confirm) to a test recording it has not
 heard (another seed, and the condition's interference, gain, rate, rate of sampling or
 channel count). A condition passes when the stop is found once with its onset within
 25 ms and no false alarm, or, where refusing is right (nothing to learn, a label where
