@@ -108,6 +108,13 @@ def test_a_stop_that_begins_inside_a_rejected_window_keeps_its_own_onset(stop_at
     assert len(det.rejected) == 1 and det.rejected[0].onset_s == pytest.approx(SPLICE_AT, abs=0.025)
 
 
+def test_interference_that_runs_into_the_stop_keeps_its_onset() -> None:
+    """The documented limit: the stop 40 ms after the splice ends (less than the 80 ms gap) is one event from 1.0 s."""
+    det = ConfirmedStopDetector(StopDetector(_tuning()))
+    (ev,) = _run(det, _recording(1.12), 1024)
+    assert ev.onset_s == pytest.approx(SPLICE_AT, abs=0.025) and det.rejected == []
+
+
 @settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(confirm_s=st.floats(0.03, 1.2))
 def test_a_lasting_stop_is_confirmed_after_the_window_with_the_detectors_onset(confirm_s: float) -> None:
