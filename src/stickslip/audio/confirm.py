@@ -12,7 +12,9 @@ the fit or by the drop channel), no run of the others lasted :data:`GAP_S`, and 
 ``min_hot`` were *hot* (the detector's full verdict: also the fit's residual and the
 drops the stop shows in proportion). A voice over a stop-like sub-band keeps the
 stop-likeness up for seconds but seldom shows the stop's drops with it; a stop shows
-both, as long as the joint steps into it. A fire that does not persist is dropped
+both, as long as the joint steps into it (what this does not remove: continuous talk
+over a joint whose stop lowers little else, which fires again and again until one
+window persists; docs/audio.md gives the numbers). A fire that does not persist is dropped
 and the inner detector un-latched at once, so it hears the next stop; its template was
 frozen since the fire, so the rejected span never enters it.
 
