@@ -121,3 +121,32 @@ def test_the_oracle_is_not_confirmed_and_bad_windows_are_refused() -> None:
                 day=DAY,
                 confirm_s=bad,
             )
+
+
+def test_a_stop_whose_onset_is_uncertain_is_refused() -> None:
+    """A detector's event flagged onset_uncertain (heard as a fire was passed by) records nothing: measure again."""
+    from dataclasses import replace
+
+    from stickslip.audio.detector import StopEvent
+    from stickslip.procedures.traverse import TraverseError
+    from stickslip.sim.oracle import OracleStopDetector
+
+    class Uncertain(OracleStopDetector):
+        def feed(self, block: np.ndarray) -> list[Any]:
+            return [
+                replace(StopEvent(e.detected_at_s, e.onset_s, 0.0), onset_uncertain=True) for e in super().feed(block)
+            ]
+
+    sim = SimulatedMM3A(seed=2, day=DAY)
+    sim.set_pose(q3=0.0)
+    with pytest.raises(TraverseError, match="uncertain; nothing recorded"):
+        measure_traverse(
+            sim,
+            3,
+            "+",
+            detector=Uncertain(sim, 3, delay_s=0.03),
+            audio_blocks=sim.microphone(silent=True),
+            pose=sim.pose,
+            day=DAY,
+            predrive="none",
+        )

@@ -36,13 +36,13 @@ Two edges, and what happens:
   frames heard after the fire so far meet the same rule (none heard: it is emitted, as
   nothing contradicts it), with ``confirmed_s`` the time actually heard (less than
   ``confirm_s``: the flag that it was confirmed by the end of the recording).
-* **A real stop begins inside a rejected fire's window** (interference, a pause, then
-  the stop): the un-latched detector fires again at once on the stop it already hears;
-  such a fire takes as its onset the start of the stop-like run it fired in (the
-  interpolated threshold crossing, less the tuning's onset lag), not the moment of the
-  un-latching. Interference that runs straight into a real stop without a pause cannot
-  be told apart: the event then keeps the interference's onset (as without
-  confirmation).
+* **A fire heard at once when the detector is un-latched** (a real stop that began
+  inside a rejected fire's window, or a stop whose own first window failed, under loud
+  talk): when the stop began is not known, only that it was before the un-latching.
+  The event is emitted with ``onset_uncertain`` set, and a traverse refuses it (measure
+  again) rather than count to a guess. Interference that runs straight into a real stop,
+  without a pause of :data:`GAP_S`, cannot be told apart: the event then keeps the
+  interference's onset (as without confirmation).
 """
 
 from __future__ import annotations
@@ -63,11 +63,16 @@ CONFIRM_S = 0.5
 #: share of the frames in that window that must be stop-like (measured: docs/audio.md)
 MIN_SHARE = 0.7
 #: ... and no run of frames that are not stop-like may last this long in it, s: the stop went away
-#: (twice the longest seen inside a true stop of the battery: 40 ms, a voice over joint P's stop)
-GAP_S = 0.08
+#: (longest seen inside a true stop: 40 ms in the battery, 88 ms under talk at +3 dB over joint P's stop)
+GAP_S = 0.15
 #: ... and this share of them must be *hot*: the detector's full verdict (the fit's residual, the drops the
 #: stop shows in proportion, or the drop channel), not the stop-likeness alone (measured: docs/audio.md)
 MIN_HOT = 0.25
+#: a fire this soon after a rejected one (the end of its window) gets the longer window :data:`AFTER_REJECT_S`:
+#: the interference goes on, and continuous talk gives fire after fire until one window persists, s
+RECENT_S = 2.0
+#: the window of such a fire, s (measured: docs/audio.md)
+AFTER_REJECT_S = 2.0
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 
@@ -98,6 +103,9 @@ class ConfirmedStopDetector:
     min_hot : float
         Share of the window's frames that must be *hot* (the detector's full verdict),
         in [0, 1].
+    after_reject_s : float or None
+        The window of a fire within :data:`RECENT_S` of a rejected one, s (at least
+        ``confirm_s``; None: ``confirm_s``).
 
     Examples
     --------
@@ -116,6 +124,7 @@ class ConfirmedStopDetector:
         confirm_s: float = CONFIRM_S,
         min_share: float = MIN_SHARE,
         min_hot: float = MIN_HOT,
+        after_reject_s: float | None = AFTER_REJECT_S,
     ) -> None:
         c = check_confirm_s(confirm_s)
         if c <= 0.0:
@@ -132,6 +141,10 @@ class ConfirmedStopDetector:
         self._H, self._F, self._sr = int(tu.hop), int(tu.frame), int(tu.sample_rate)
         #: the window, frames
         self.window_frames = max(1, int(round(c * self._sr / self._H)))
+        #: the window of a fire that comes within RECENT_S of a rejected one, frames (interference goes on)
+        a = c if after_reject_s is None else max(c, check_confirm_s(after_reject_s))
+        self.after_reject_frames = max(self.window_frames, int(round(a * self._sr / self._H)))
+        self._recent_frames = int(round(RECENT_S * self._sr / self._H))
         self._refire_frames = int(tu.hold_frames) + int(tu.max_dips) + 1
         #: a run of this many frames that are not stop-like ends a stop
         self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
@@ -148,7 +161,8 @@ class ConfirmedStopDetector:
         self._margins: list[float] = []
         self._hot: list[bool] = []
         self._base = 0  # frame index of _margins[0] and _hot[0]
-        self._pending: tuple[StopEvent, int] | None = None
+        self._pending: tuple[StopEvent, int, int] | None = None  # the fire, its frame, its window (frames)
+        self._last_reject: int | None = None
         self._rejected_at: int | None = None
         #: the fires dropped since the last reset (they did not persist)
         self.rejected: list[StopEvent] = []
@@ -211,7 +225,7 @@ class ConfirmedStopDetector:
         """The stream ended: the provisional stop, if what was heard of its window persisted (see the module)."""
         if self._pending is None:
             return []
-        ev, fire = self._pending
+        ev, fire, _ = self._pending
         self._pending = None
         heard = self.inner.frames_seen - 1 - fire
         if not self._persisted(*self._window(fire, heard)):
@@ -227,7 +241,7 @@ class ConfirmedStopDetector:
         """Samples the inner detector may take now: up to the pending window's end, else W frames."""
         if self._pending is None:
             return self._H * self.window_frames  # a fire in these frames has its window end beyond them
-        end = self._pending[1] + self.window_frames  # the window's last frame
+        end = self._pending[1] + self._pending[2]  # the window's last frame
         return max(1, end * self._H + self._F - self._fed)
 
     def _absorb(self) -> None:
@@ -238,16 +252,12 @@ class ConfirmedStopDetector:
         if hot:
             self._hot.extend(hot)
             hot.clear()
-        keep = 2 * self.window_frames + 4 * self._refire_frames
+        keep = 2 * self.after_reject_frames + 4 * self._refire_frames
         extra = len(self._margins) - keep
         if extra > 4 * keep:  # trim now and then, not every block
             del self._margins[:extra]
             del self._hot[:extra]
             self._base += extra
-
-    def _margin(self, i: int) -> float:
-        j = i - self._base
-        return self._margins[j] if 0 <= j < len(self._margins) else math.nan
 
     def _window(self, fire: int, n: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
         """Margins and hot flags of the ``n`` frames after frame ``fire``."""
@@ -263,48 +273,30 @@ class ConfirmedStopDetector:
         out: list[StopEvent] = []
         if self._pending is not None:  # the inner released and fired again inside the window: no persistence
             self.rejected.append(self._pending[0])
+            self._last_reject = self._pending[1]
             self._pending = None
         fire = self._fire_frame(ev)
         if self._rejected_at is not None and fire - self._rejected_at <= self._refire_frames:
-            ev = replace(ev, onset_s=min(ev.onset_s, self._run_onset(fire)))
+            # heard at once on un-latching: the stop began somewhere inside the rejected window, or before it
+            ev = replace(ev, onset_uncertain=True)
         self._rejected_at = None
-        self._pending = (ev, fire)
+        recent = self._last_reject is not None and fire - self._last_reject <= self._recent_frames
+        self._pending = (ev, fire, self.after_reject_frames if recent else self.window_frames)
         return out
-
-    def _run_onset(self, fire: int) -> float:
-        """Onset of the stop-like run that frame ``fire`` ends: its interpolated threshold crossing less the lag.
-
-        The run goes back over stop-like frames and over dips shorter than
-        :attr:`gap_frames` (what the confirmation allows inside a stop).
-        """
-        i = fire
-        lowest = self._base + 1
-        while i > lowest:
-            d = 0  # frames i-1 .. i-d are not stop-like
-            while d <= (self.gap_frames - 1) and i - 1 - d >= self._base and not self._margin(i - 1 - d) >= 0.0:
-                d += 1
-            if d > (self.gap_frames - 1) or i - 1 - d < self._base:
-                break
-            i -= d + 1
-        t_i = self._frame_end_s(i)
-        m_i, m_prev = self._margin(i), self._margin(i - 1)
-        if math.isfinite(m_prev) and m_prev < 0.0 <= m_i and m_i > m_prev:
-            t_i -= (1.0 - (0.0 - m_prev) / (m_i - m_prev)) * self._H / self._sr
-        return t_i - self._lag
 
     def _decide(self) -> list[StopEvent]:
         if self._pending is None:
             return []
-        ev, fire = self._pending
-        last = fire + self.window_frames
+        ev, fire, window = self._pending
+        last = fire + window
         if self.inner.frames_seen <= last:
             return []
         self._pending = None
-        if self._persisted(*self._window(fire, self.window_frames)):
-            return [self._confirmed(ev, last, self.window_frames)]
+        if self._persisted(*self._window(fire, window)):
+            return [self._confirmed(ev, last, window)]
         self.rejected.append(ev)
         self.inner.unlatch()
-        self._rejected_at = last
+        self._rejected_at = self._last_reject = last
         return []
 
     def _persisted(self, m: NDArray[np.float64], hot: NDArray[np.bool_]) -> bool:

@@ -69,6 +69,10 @@ class StopEvent:
         How long the stop was heard persisting after it fired before it was emitted, s:
         the confirmation window, or less when the stream ended first; ``None`` from a
         detector that does not confirm.
+    onset_uncertain : bool
+        The stop was already there when the confirming detector began listening again
+        after a fire it rejected: it began before ``onset_s``, by up to that fire's
+        window (:mod:`.confirm`). Do not count to it.
     """
 
     detected_at_s: float
@@ -76,14 +80,16 @@ class StopEvent:
     level_db: float
     confirmed_at_s: float | None = None
     confirmed_s: float | None = None
+    onset_uncertain: bool = False
 
-    def to_dict(self) -> dict[str, float | None]:
+    def to_dict(self) -> dict[str, float | bool | None]:
         return {
             "detected_at_s": self.detected_at_s,
             "onset_s": self.onset_s,
             "level_db": self.level_db,
             "confirmed_at_s": self.confirmed_at_s,
             "confirmed_s": self.confirmed_s,
+            "onset_uncertain": self.onset_uncertain,
         }
 
 

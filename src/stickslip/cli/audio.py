@@ -193,6 +193,8 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
         f"stop: detected at {ev.detected_at_s:.{digits}f} s, onset {ev.onset_s:.{digits}f} s, "
         f"level {ev.level_db:.2f} {unit}"
     )
+    if ev.onset_uncertain:
+        line += "; onset uncertain (heard as a fire that did not persist was passed by: it began earlier)"
     if ev.confirmed_s is not None:
         if ev.confirmed_s < confirm_s - 1e-9:
             line += f"; the recording ended {ev.confirmed_s:.3f} s after it fired (it persisted so far)"

@@ -394,6 +394,12 @@ def measure_traverse(
         )
         return replace(redo, retried=True)
 
+    if getattr(event, "onset_uncertain", False):  # heard as the switch passed interference by: when did it begin?
+        raise TraverseError(
+            f"joint {joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed by a sound "
+            "that did not persist (interference near the stop), so when the stop began is uncertain; nothing "
+            "recorded: keep talk and other sounds away from the arm and measure again"
+        )
     # 3. count the steps made before the stop, latency corrected
     detected = float(event.detected_at_s)
     t_stop = {"onset": float(event.onset_s), "fixed": detected - float(getattr(detector, "latency_s", 0.0))}.get(
