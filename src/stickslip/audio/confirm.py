@@ -276,13 +276,28 @@ class ConfirmedStopDetector:
             self._last_reject = self._pending[1]
             self._pending = None
         fire = self._fire_frame(ev)
-        if self._rejected_at is not None and fire - self._rejected_at <= self._refire_frames:
-            # heard at once on un-latching: the stop began somewhere inside the rejected window, or before it
+        if self._rejected_at is not None and self._continues_from_rejection(fire):
+            # the stop-like sound had not gone away since the rejected window: the stop may have begun inside
+            # it, or before it; when, is not known
             ev = replace(ev, onset_uncertain=True)
         self._rejected_at = None
         recent = self._last_reject is not None and fire - self._last_reject <= self._recent_frames
         self._pending = (ev, fire, self.after_reject_frames if recent else self.window_frames)
         return out
+
+    def _continues_from_rejection(self, fire: int) -> bool:
+        """No gap of :attr:`gap_frames` between the last rejected window's end and frame ``fire``?"""
+        assert self._rejected_at is not None
+        if fire - self._rejected_at <= self._refire_frames:
+            return True  # heard at once on un-latching
+        m, _ = self._window(self._rejected_at - 1, fire - self._rejected_at)  # frames rejected_at .. fire - 1
+        return self._longest_gap(m >= 0.0) < self.gap_frames
+
+    @staticmethod
+    def _longest_gap(ok: NDArray[np.bool_]) -> int:
+        """The longest run of False in ``ok``."""
+        edges = np.flatnonzero(np.diff(np.concatenate(([1], ok.astype(np.int8), [1]))))
+        return int(np.max(edges[1::2] - edges[0::2])) if edges.size else 0
 
     def _decide(self) -> list[StopEvent]:
         if self._pending is None:
@@ -306,10 +321,7 @@ class ConfirmedStopDetector:
         ok = m >= 0.0
         if float(np.mean(ok)) < self.min_share or float(np.mean(hot)) < self.min_hot:
             return False
-        # the longest run of frames that are not stop-like
-        edges = np.flatnonzero(np.diff(np.concatenate(([1], ok.astype(np.int8), [1]))))
-        longest = int(np.max(edges[1::2] - edges[0::2])) if edges.size else 0
-        return longest < self.gap_frames
+        return self._longest_gap(ok) < self.gap_frames
 
     def _confirmed(self, ev: StopEvent, last: int, frames: int) -> StopEvent:
         return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
