@@ -16,14 +16,17 @@ both, as long as the joint steps into it (what this does not remove: continuous 
 over a joint whose stop lowers little else, which fires again and again until one
 window persists; docs/audio.md gives the numbers). A fire that does not persist is dropped
 and the inner detector un-latched at once, so it hears the next stop; its template was
-frozen since the fire, so the rejected span never enters it.
+frozen since the fire, so the rejected span never enters it. A fire that comes within
+:data:`RECENT_S` of a rejected one must persist for :data:`AFTER_REJECT_S`: the
+interference is still going on.
 
 What it costs: nothing in accuracy - a traverse counts its steps to the event's
 ``onset_s`` (the fire's, unchanged), and ``detected_at_s`` stays the fire time, so the
 latency is the detector's - but the traverse steps ``confirm_s`` longer against the stop
-(``confirm_s`` x the step rate extra steps: harmless on a stick-slip joint, whose slider
-just slips) and takes that much longer. The emitted event carries ``confirmed_at_s``
-(the end of the window) and ``confirmed_s`` (the window).
+(``confirm_s`` x the step rate extra steps, :data:`AFTER_REJECT_S` just after a rejected
+fire: harmless on a stick-slip joint, whose slider just slips) and takes that much longer.
+The emitted event carries ``confirmed_at_s`` (the end of the window) and ``confirmed_s``
+(the window).
 
 The decision is made at the end of the window, at a frame counted from the stream
 start, and the inner detector is fed exactly up to it, so the events do not depend on
@@ -56,7 +59,17 @@ from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
 
-__all__ = ["CONFIRM_S", "GAP_S", "MIN_HOT", "MIN_SHARE", "ConfirmedStopDetector", "check_confirm_s", "confirming"]
+__all__ = [
+    "AFTER_REJECT_S",
+    "CONFIRM_S",
+    "GAP_S",
+    "MIN_HOT",
+    "MIN_SHARE",
+    "RECENT_S",
+    "ConfirmedStopDetector",
+    "check_confirm_s",
+    "confirming",
+]
 
 #: how long a stop must persist after the detector fired before it is emitted, s (measured: docs/audio.md)
 CONFIRM_S = 0.5

@@ -213,8 +213,8 @@ def traverse_cmd(
         "--confirm-s",
         help="Take the stop only once it persisted this long while the joint keeps stepping, s (default 0.5: "
         "interference that mimics the stop for a moment is passed by). Costs this many seconds x the step rate "
-        "extra steps against the stop (harmless: the slider slips) and that much time, not accuracy: the count "
-        "runs to the stop's onset. 0: the first fire is the stop.",
+        "extra steps against the stop (2 s just after a fire that did not persist; harmless: the slider slips) and "
+        "that much time, not accuracy: the count runs to the stop's onset. 0: the first fire is the stop.",
         show_default=False,
     ),
     json_out: bool = typer.Option(False, "--json", help="Print the measured row as JSON (SI units)."),
