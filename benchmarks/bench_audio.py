@@ -23,7 +23,9 @@ battery's generator (``tests/battery_sound.py``), with drift, knocks, a fan, a s
 instrument and speech.
 
 Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
-``--long-only`` runs the false-alarm hour alone.
+``--long-only`` runs the false-alarm hour alone (confirmed events, the detector's
+unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for another hour);
+``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector, confirming
 from stickslip.audio.detector import StopDetector, Tuning
 from stickslip.audio.tuning import tune, tune_band
 from stickslip.sim.sound import render_traverse_recording
@@ -293,12 +296,19 @@ LONG_CONDITIONS: list[tuple[str, dict[str, object]]] = [
 ]
 
 
-def false_alarms_per_hour(hours: float = 1.0, piece_s: float = 120.0) -> None:
+def false_alarms_per_hour(
+    hours: float = 1.0, piece_s: float = 120.0, seed0: int = 1000, confirm_s: float = CONFIRM_S
+) -> dict[str, tuple[int, int]]:
     """One hour of stepping without a stop per joint of the battery's generator: false alarms per hour.
 
-    The hour is cut into pieces of ``piece_s`` (each another seed and step rate between
-    900 and 1260 Hz, cycling through :data:`LONG_CONDITIONS`); each piece is heard by a
-    fresh detector from its first sample, so the warm-up is exercised too.
+    The hour is cut into pieces of ``piece_s`` (each another seed from ``seed0`` on and a
+    step rate between 900 and 1260 Hz, cycling through :data:`LONG_CONDITIONS`); each
+    piece is heard by a fresh detector from its first sample, so the warm-up is
+    exercised too. The count is of *confirmed* events (what ``listen`` and a traverse
+    report: the stop persisted for ``confirm_s``, :mod:`stickslip.audio.confirm`, an
+    event still provisional when a piece ends counted if it persisted so far); the
+    detector's unconfirmed fires (``confirm_s`` 0, the old behaviour) are counted beside
+    them on the same sound. Returns per joint (confirmed, unconfirmed).
     """
     import sys
     from pathlib import Path
@@ -307,7 +317,11 @@ def false_alarms_per_hour(hours: float = 1.0, piece_s: float = 120.0) -> None:
     from battery_sound import Scene, espeak_speech, render  # the battery's independent generator
 
     n = int(round(hours * 3600 / piece_s))
-    print(f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces):")
+    print(
+        f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces, seeds from "
+        f"{seed0}): confirmed over {confirm_s:g} s (unconfirmed fires in brackets)"
+    )
+    totals: dict[str, tuple[int, int]] = {}
     for joint in ("P", "Q"):
         x, sr = render(Scene(joint, 1000.0, 2.0, 3.0, seed=1))
         tu = tune(x, sr, 2.0, seed=0)
@@ -318,24 +332,95 @@ def false_alarms_per_hour(hours: float = 1.0, piece_s: float = 120.0) -> None:
             if str(kw.get("speech", "")).startswith("espeak") and espeak_speech(sr) is None:
                 continue
             rate = 900.0 + 360.0 * ((i * 0.618) % 1.0)
-            y, _ = render(Scene(joint, rate, None, piece_s, seed=1000 + i, **kw))  # type: ignore[arg-type]
-            per.setdefault(name, [0.0, 0.0])
-            per[name][0] += len(StopDetector(tu).feed(y))
-            per[name][1] += piece_s
+            y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
+            per.setdefault(name, [0.0, 0.0, 0.0])
+            det = confirming(StopDetector(tu), confirm_s)
+            confirmed = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
+            per[name][0] += len(confirmed)
+            per[name][1] += len(StopDetector(tu).feed(y))
+            per[name][2] += piece_s
         total = sum(v[0] for v in per.values())
-        heard = sum(v[1] for v in per.values())
+        raw = sum(v[1] for v in per.values())
+        heard = sum(v[2] for v in per.values())
+        totals[joint] = (int(total), int(raw))
         print(
             f"  joint {joint}: {total:.0f} false alarms in {heard / 3600:.2f} h = {total / heard * 3600:.1f} per hour "
-            f"({time.perf_counter() - t0:.0f} s)"
+            f"(unconfirmed {raw:.0f} = {raw / heard * 3600:.1f} per hour; {time.perf_counter() - t0:.0f} s)"
         )
-        for name, (fa, secs) in per.items():
-            print(f"    {name:28s} {fa:3.0f} in {secs / 60:4.0f} min = {fa / secs * 3600:6.1f} per hour")
+        for name, (fa, fa_raw, secs) in per.items():
+            print(
+                f"    {name:28s} {fa:3.0f} ({fa_raw:3.0f}) in {secs / 60:4.0f} min = {fa / secs * 3600:6.1f} per hour"
+            )
+    return totals
+
+
+def true_stops_under_talk(seeds: int = 5) -> None:
+    """Stops heard under talk: 20 s of stepping into the stop with talk, babble or a radio, the first event.
+
+    A confirmation must not lose or move a true stop heard under the interference it is
+    for. Per joint of the battery's generator: babble, espeak-ng, a second talker, a radio,
+    and both talkers at +3 dB, ``seeds`` recordings each (step rates 1080-1160 Hz), 2.5 s
+    of the stop after it; the first event is what a traverse would count to (early: a false
+    stop; late by more than 25 ms; ``onset_uncertain``: a traverse refuses it).
+    """
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    from battery_sound import Scene, render
+
+    talk: list[dict[str, object]] = [
+        {"speech": "babble"},
+        {"speech": "espeak"},
+        {"speech": "espeak2"},
+        {"music": True},
+        {"speech": "espeak", "speech_db": 3.0},
+        {"speech": "espeak2", "speech_db": 3.0},
+    ]
+    print(f"\ntrue stops under talk ({len(talk)} conditions x {seeds} seeds per joint, stop at 20 s): first event")
+    for joint in ("P", "Q"):
+        x, sr = render(Scene(joint, 1000.0, 2.0, 3.0, seed=1))
+        tu = tune(x, sr, 2.0, seed=0)
+        counts = {
+            name: dict.fromkeys(("early", "right", "late", "uncertain", "none"), 0)
+            for name in ("unconfirmed", "confirmed")
+        }
+        for k, kw in enumerate(talk):
+            for s_ in range(seeds):
+                y, _ = render(Scene(joint, 1080.0 + 20 * s_, 20.0, 22.5, seed=300 + 10 * k + s_, **kw))  # type: ignore[arg-type]
+                for name, det in (("unconfirmed", StopDetector(tu)), ("confirmed", confirming(StopDetector(tu)))):
+                    ev = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
+                    err = ev[0].onset_s - 20.0 if ev else None
+                    key = (
+                        "none"
+                        if not ev
+                        else "uncertain"
+                        if ev[0].onset_uncertain
+                        else "early"
+                        if err < -TOL_S
+                        else "late"
+                        if err > TOL_S
+                        else "right"
+                    )
+                    counts[name][key] += 1
+        for name, c in counts.items():
+            print(f"  joint {joint} {name:11s} " + ", ".join(f"{k} {v}" for k, v in c.items()))
 
 
 if __name__ == "__main__":
-    import sys
+    import argparse
 
-    if sys.argv[1:] == ["--long-only"]:
-        false_alarms_per_hour()
+    ap = argparse.ArgumentParser(description="Audio limit switch benchmark (see the module docstring).")
+    ap.add_argument("--long-only", action="store_true", help="run the false-alarm hour alone")
+    ap.add_argument("--hours", type=float, default=1.0, help="hours of stepping per joint (--long-only)")
+    ap.add_argument("--piece-s", type=float, default=120.0, help="length of each piece, s (--long-only)")
+    ap.add_argument("--seed", type=int, default=1000, help="seed of the first piece (--long-only)")
+    ap.add_argument("--confirm-s", type=float, default=CONFIRM_S, help="confirmation window, s (0: unconfirmed)")
+    ap.add_argument("--under-talk", action="store_true", help="run the true stops under talk alone")
+    args = ap.parse_args()
+    if args.under_talk:
+        true_stops_under_talk()
+    elif args.long_only:
+        false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s)
     else:
         main()

@@ -1,6 +1,7 @@
 """The battery: ~40 named conditions from a third, independent generator (tests/battery_sound.py).
 
-Each condition tunes on a training recording and listens to a test recording it has not
+Each condition tunes on a training recording and listens (as ``listen`` does: every fire
+confirmed by its persistence, stickslip.audio.confirm) to a test recording it has not
 heard (another seed, and the condition's interference, gain, rate, rate of sampling or
 channel count). A condition passes when the stop is found once with its onset within
 25 ms and no false alarm, or, where refusing is right (nothing to learn, a label where
@@ -30,6 +31,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
+from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
 
@@ -238,7 +240,7 @@ def run(c: Condition) -> Outcome:
         tu_t = tu.for_sample_rate(sr_t)
     except ValueError as e:  # listen refuses this tuning at this sample rate
         return Outcome(refused=f"listen: {e}")
-    events = detect(y, tu_t, block=1024)
+    events = detect(y, tu_t, block=1024, confirm_s=CONFIRM_S)  # as listen reports them
     return Outcome(
         warnings=tuple((tu.checks or {}).get("warnings", [])),
         events=tuple(e.detected_at_s for e in events),

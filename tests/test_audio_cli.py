@@ -107,6 +107,8 @@ def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):
         (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json"], ["threshold_db"]),
         (["listen", "{d}/test.wav", "--tuning", "{d}/nothing.json"], ["cannot read tuning"]),
         (["listen", "--tuning", "{d}/tuning_bad.json"], ["--mic"]),
+        (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json", "--confirm-s", "-1"], ["--confirm-s", "0, 5"]),
+        (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json", "--confirm-s", "nan"], ["--confirm-s"]),
     ],
 )
 def test_bad_input_is_one_line_exit_2(wavs, args, words):
@@ -129,6 +131,29 @@ def test_help_names_units():
     for cmd in ("tune", "listen"):
         r = runner.invoke(app, [cmd, "--help"])
         assert r.exit_code == 0 and "Example" in r.output
+
+
+def test_listen_confirms_and_says_how(wavs, tmp_path):
+    """--json carries confirmed_at_s / confirmed_s; --confirm-s 0 gives the fire alone; a file ending on the stop."""
+    from stickslip.audio.confirm import CONFIRM_S
+
+    tun = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(tun)]).exit_code == 0
+    r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(tun), "--json"])
+    (ev,) = json.loads(r.stdout)
+    assert ev["confirmed_s"] == pytest.approx(CONFIRM_S, abs=0.003)
+    assert ev["confirmed_at_s"] == pytest.approx(ev["detected_at_s"] + ev["confirmed_s"])
+    r0 = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(tun), "--json", "--confirm-s", "0"])
+    (ev0,) = json.loads(r0.stdout)
+    assert ev0["confirmed_at_s"] is None and ev0["confirmed_s"] is None
+    assert (ev0["onset_s"], ev0["detected_at_s"]) == (ev["onset_s"], ev["detected_at_s"])
+    # the recording ends 0.2 s after the stop: reported, and said so
+    y, sr = read_wav(wavs / "test.wav")
+    write_wav(tmp_path / "short.wav", y[: int(1.5 * sr)], sr)
+    r = runner.invoke(app, ["listen", str(tmp_path / "short.wav"), "--tuning", str(tun)])
+    assert r.exit_code == 0 and "detected at 1.3" in r.output and "the recording ended 0.1" in r.output
+    for cmd in ("listen", "traverse"):
+        assert f"default {CONFIRM_S:g}" in " ".join(runner.invoke(app, [cmd, "--help"]).output.split())
 
 
 # ---------------------------------------------------------------- sources

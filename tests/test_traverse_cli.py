@@ -54,6 +54,8 @@ def test_traverse_bad_pose_and_device(tuning3):
     assert r.exit_code == 2 and "unknown angle unit" in r.stderr
     r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--device", "warp://x"])
     assert r.exit_code == 2 and "unknown device URL scheme" in r.stderr
+    r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--confirm-s", "-0.5"])
+    assert r.exit_code == 2 and r.stderr.strip().startswith("error: --confirm-s") and "[0, 5]" in r.stderr
 
 
 def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):
@@ -75,3 +77,14 @@ def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):
         state = load_state(st, "sim://?seed=4")
     assert 3 not in state.uncertain and state.sources[3] == "set"
     assert state.positions[3] == pytest.approx(json.loads(r.stdout)["end"]) and state.positions[3] == 0.0
+
+
+def test_demo_refuses_a_bad_confirmation_window(tmp_path):
+    """demo traverses too: --confirm-s is checked before any work (nothing is written)."""
+    r = runner.invoke(app, ["demo", "--confirm-s", "9", "--out", str(tmp_path / "res"), "--no-db"])
+    assert r.exit_code == 2 and r.stderr.strip().startswith("error: --confirm-s") and "[0, 5]" in r.stderr
+    assert not (tmp_path / "res").exists()
+    from stickslip.procedures.demo import run_demo
+
+    with pytest.raises(ValueError, match="confirm_s"):
+        run_demo(out=None, confirm_s=-0.1)

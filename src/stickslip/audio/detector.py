@@ -58,18 +58,38 @@ class StopEvent:
     onset_s : float
         Estimated time the stop actually began, s.
     level_db : float
-        Band level of the frame that fired, dBFS.
+        Band level of the frame that fired, dBFS (the stop-likeness, dimensionless, for a
+        template tuning).
+
+    confirmed_at_s : float or None
+        Stream time at which the stop was confirmed by its persistence, s (the last
+        sample of the confirmation window, or of the stream if it ended first; see
+        :mod:`.confirm`); ``None`` from a detector that does not confirm.
+    confirmed_s : float or None
+        How long the stop was heard persisting after it fired before it was emitted, s:
+        the confirmation window, or less when the stream ended first; ``None`` from a
+        detector that does not confirm.
+    onset_uncertain : bool
+        The stop was already there when the confirming detector began listening again
+        after a fire it rejected: it began before ``onset_s``, by up to that fire's
+        window (:mod:`.confirm`). Do not count to it.
     """
 
     detected_at_s: float
     onset_s: float
     level_db: float
+    confirmed_at_s: float | None = None
+    confirmed_s: float | None = None
+    onset_uncertain: bool = False
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float | bool | None]:
         return {
             "detected_at_s": self.detected_at_s,
             "onset_s": self.onset_s,
             "level_db": self.level_db,
+            "confirmed_at_s": self.confirmed_at_s,
+            "confirmed_s": self.confirmed_s,
+            "onset_uncertain": self.onset_uncertain,
         }
 
 
@@ -171,6 +191,15 @@ class StopDetector:
         self._hold = tuning.hold_frames
         self._full = (1 << (self._hold + tuning.max_dips)) - 1
         self._release = max(1, int(math.ceil(tuning.release_s * tuning.sample_rate / tuning.hop)))
+        #: set to a list to collect every frame's *margin* over the threshold (>= 0: the frame is
+        #: stop-like): ``a / threshold - 1`` for a template tuning (the stop-likeness, NaN while the
+        #: template is learned), ``level - threshold`` in dB for a band tuning. Frame ``i`` ends at
+        #: stream sample ``i * hop + frame - 1``. What :mod:`.confirm` watches after a fire.
+        self.evidence: list[float] | None = None
+        #: set to a list to collect every frame's full verdict, alongside :attr:`evidence`: True where
+        #: the frame is *hot* (template: stop-like by the fit with its residual and the drops the stop
+        #: shows in proportion, or by the drop channel; band: the level at or above the threshold)
+        self.hot_evidence: list[bool] | None = None
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -187,6 +216,28 @@ class StopDetector:
         self.levels_seen = 0
         if self._template is not None:
             self._template.reset(t0_s)
+
+    def unlatch(self) -> None:
+        """Forget the latest fire and listen for the next stop from the next frame on.
+
+        For a fire that was not confirmed (:mod:`.confirm`): the template, frozen since the
+        fire, resumes following the stepping sound, so the rejected span never enters it.
+        """
+        if self._template is not None:
+            st = self._template
+            st.latched = False
+            st.below = 0
+            st.mask = 0
+            st.recent = []
+        else:
+            self._latched = False
+            self._below = 0
+            self._mask = 0
+
+    @property
+    def frames_seen(self) -> int:
+        """Frames heard since the last :meth:`reset` (frame ``i`` ends at sample ``i * hop + frame - 1``)."""
+        return self.levels_seen
 
     @property
     def latency_s(self) -> float:
@@ -237,7 +288,19 @@ class StopDetector:
             if self._template is not None:
                 v = levels_from_frames(view, self._w, self._scale, self._edge_bins)
                 ends = self._next + np.arange(n_frames, dtype=np.int64) * H + F - 1
-                for dec in self._template.process(v, ends):
+                st = self._template
+                if self.evidence is not None and st.trace is None:
+                    st.trace = []
+                if self.hot_evidence is not None and st.hot_trace is None:
+                    st.hot_trace = []
+                decisions = st.process(v, ends)
+                if self.evidence is not None and st.trace is not None:
+                    self.evidence.extend((np.asarray(st.trace) / tu.threshold_db - 1.0).tolist())
+                    st.trace.clear()
+                if self.hot_evidence is not None and st.hot_trace is not None:
+                    self.hot_evidence.extend(st.hot_trace)
+                    st.hot_trace.clear()
+                for dec in decisions:
                     events.append(
                         StopEvent(
                             detected_at_s=self._t0 + dec.end_sample / tu.sample_rate,
@@ -258,6 +321,10 @@ class StopDetector:
                     p[:, r0:r1].sum(axis=1) * self._scale + _FLOOR
                 )
             if levels is not None:
+                if self.evidence is not None:
+                    self.evidence.extend((levels - tu.threshold_db).tolist())
+                if self.hot_evidence is not None:
+                    self.hot_evidence.extend((levels >= tu.threshold_db).tolist())
                 ends = self._next + np.arange(n_frames) * H + F - 1
                 events = self._run(levels, ends)
             self._next += n_frames * H
@@ -316,10 +383,21 @@ class StopDetector:
 
 
 def detect(
-    samples: np.ndarray | Iterable[np.ndarray], tuning: Tuning, t0_s: float = 0.0, block: int = 1 << 16
+    samples: np.ndarray | Iterable[np.ndarray],
+    tuning: Tuning,
+    t0_s: float = 0.0,
+    block: int = 1 << 16,
+    confirm_s: float = 0.0,
 ) -> list[StopEvent]:
-    """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks)."""
-    det = StopDetector(tuning, t0_s)
+    """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks).
+
+    ``confirm_s`` > 0 reports a stop only once it persisted that long, s
+    (:class:`~stickslip.audio.confirm.ConfirmedStopDetector`; a stop the recording ends on
+    is reported if it persisted so far); 0, the default, reports every fire.
+    """
+    from .confirm import ConfirmedStopDetector, confirming
+
+    det = confirming(StopDetector(tuning, t0_s), confirm_s)
     events: list[StopEvent] = []
     if isinstance(samples, np.ndarray):
         for i in range(0, samples.size, block):
@@ -327,6 +405,8 @@ def detect(
     else:
         for b in samples:
             events += det.feed(b)
+    if isinstance(det, ConfirmedStopDetector):
+        events += det.finish()
     return events
 
 

@@ -309,6 +309,9 @@ class TemplateState:
         self.p = p
         #: set to a list to collect every frame's stop-likeness (NaN while warming up)
         self.trace: list[float] | None = None
+        #: set to a list to collect every frame's hot flag (stop-like by the fit or the drop channel; False
+        #: while warming up); read-only evidence for a confirmation that watches the frames after a fire
+        self.hot_trace: list[bool] | None = None
         self.delta = np.asarray(p.signature_db, dtype=np.float64)
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
         self._fit = _Fitter(self.delta, self.sigma, p.trim)
@@ -448,6 +451,8 @@ class TemplateState:
             self._warm.append(v.copy())
             if self.trace is not None:
                 self.trace.extend([math.nan] * v.shape[0])
+            if self.hot_trace is not None:
+                self.hot_trace.extend([False] * v.shape[0])
             return []
         d = v - self.template
         a, rho = self._fit(d)
@@ -503,6 +508,8 @@ class TemplateState:
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
+        if self.hot_trace is not None:
+            self.hot_trace.extend(hot.tolist())
         # the template follows every frame that is not stop-like (the low quantile taken per chunk
         # ignores knocks and voices); a chunk that fits neither stepping nor the stop at all means
         # the template is stale (listening began in silence, the microphone moved): learn it anew

@@ -103,27 +103,44 @@ def listen(
         "--input",
         help="Audio input device (index or name) for --mic; `python -m sounddevice` lists them.",
     ),
+    confirm_s: float | None = typer.Option(
+        None,
+        "--confirm-s",
+        help=(
+            "Report a stop only once it persisted this long after the detector fired, s (default 0.5: a real stop "
+            "lasts, interference does not); events then appear this much later. 0: every fire (the old behaviour)."
+        ),
+        show_default=False,
+    ),
     json_out: bool = typer.Option(
         False,
         "--json",
         help=(
-            "Print a JSON list of events: detected_at_s, onset_s (s), level_db (dB, as the tuning's threshold); "
-            "with --mic one JSON object per line as they happen."
+            "Print a JSON list of events: detected_at_s, onset_s (s), level_db (dB, as the tuning's threshold), "
+            "confirmed_at_s and confirmed_s (s; null with --confirm-s 0); with --mic one JSON object per line as "
+            "they are confirmed."
         ),
     ),
 ) -> None:
     """Listen for end stops in a recording (or live) with a tuned detector.
 
     Prints each event: when it was detected, the estimated onset of the stop (s from
-    the start) and the band level (dB, in the tuning's unit).
+    the start) and the band level (dB, in the tuning's unit). A fire is reported once
+    the stop persisted for --confirm-s (default 0.5 s); a recording that ends sooner
+    after a fire reports it if it persisted so far, and says how long it was heard.
 
     Examples: stickslip listen joint2.wav --tuning joint2-tuning.json --json
               stickslip listen --mic --tuning joint2-tuning.json
     """
+    from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, check_confirm_s, confirming
     from ..audio.detector import StopDetector, Tuning, TuningFileError
 
     if mic == (recording is not None):
         fail("give either a recording REC.wav or --mic")
+    try:
+        confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
+    except ValueError as e:
+        fail(f"--confirm-s: {e}")
     try:
         tuning = Tuning.load(tuning_path)
     except TuningFileError as e:
@@ -131,7 +148,7 @@ def listen(
     except OSError as e:
         fail(f"cannot read tuning {tuning_path}: {e.strerror or e}")
     if mic:
-        _listen_live(tuning, device, json_out)
+        _listen_live(tuning, device, json_out, confirm_s)
         return
 
     from ..audio.guard import block_problem
@@ -150,13 +167,15 @@ def listen(
         for block, rate in wav_blocks(recording, block=1 << 16):
             if det is None:
                 try:
-                    det = StopDetector(tuning.for_sample_rate(rate))
+                    det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s)
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
             problems.add(block_problem(block))
             events += det.feed(block)
     except AudioSourceError as err:
         fail(str(err))
+    if isinstance(det, ConfirmedStopDetector):
+        events += det.finish()
     if problems and None not in problems:
         err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
     if json_out:
@@ -165,21 +184,33 @@ def listen(
     if not events:
         console.print("no end stop heard")
     for ev in events:
-        console.print(
-            f"stop: detected at {ev.detected_at_s:.4f} s, onset {ev.onset_s:.4f} s, "
-            f"level {ev.level_db:.2f} {tuning.level_unit}",
-            highlight=False,
-            soft_wrap=True,
-        )
+        console.print(_event_line(ev, tuning.level_unit, confirm_s, 4), highlight=False, soft_wrap=True)
 
 
-def _listen_live(tuning: Any, device: str | None, json_out: bool) -> None:
+def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
+    """One event for a person: detection, onset, level, and how it was confirmed."""
+    line = (
+        f"stop: detected at {ev.detected_at_s:.{digits}f} s, onset {ev.onset_s:.{digits}f} s, "
+        f"level {ev.level_db:.2f} {unit}"
+    )
+    if ev.onset_uncertain:
+        line += "; onset uncertain (heard as a fire that did not persist was passed by: it began earlier)"
+    if ev.confirmed_s is not None:
+        if ev.confirmed_s < confirm_s - 1e-9:
+            line += f"; the recording ended {ev.confirmed_s:.3f} s after it fired (it persisted so far)"
+        else:
+            line += f"; persisted {ev.confirmed_s:.3f} s"
+    return line
+
+
+def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: float) -> None:
+    from ..audio.confirm import confirming
     from ..audio.detector import StopDetector
     from ..audio.sources import AudioSourceError, Microphone
 
     dev: int | str | None = int(device) if device is not None and device.isdigit() else device
     mic = Microphone(sample_rate=tuning.sample_rate, block=1024, device=dev)
-    det = StopDetector(tuning)
+    det = confirming(StopDetector(tuning), confirm_s)
     try:
         mic.start()
     except AudioSourceError as err:
@@ -192,12 +223,7 @@ def _listen_live(tuning: Any, device: str | None, json_out: bool) -> None:
                 if json_out:
                     typer.echo(json.dumps(ev.to_dict()))
                 else:
-                    console.print(
-                        f"stop: detected at {ev.detected_at_s:.3f} s, onset {ev.onset_s:.3f} s, "
-                        f"level {ev.level_db:.2f} {tuning.level_unit}",
-                        highlight=False,
-                        soft_wrap=True,
-                    )
+                    console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
     except KeyboardInterrupt:
         pass
     except AudioSourceError as err:

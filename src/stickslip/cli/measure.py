@@ -61,6 +61,13 @@ def demo(
         "docs/models.md) instead of the closed-form one. It has no true Eq. 3/8 parameters to compare with, "
         "and its traverses are not recorded in the database.",
     ),
+    confirm_s: float | None = typer.Option(
+        None,
+        "--confirm-s",
+        help="Audio switch: take a stop only once it persisted this long while the joint keeps stepping, s "
+        "(default 0.5; 0: the first fire). Costs this many seconds of stepping into each stop, not accuracy.",
+        show_default=False,
+    ),
 ) -> None:
     """Run the whole calibration story on the simulated MM3A (no hardware needed).
 
@@ -68,11 +75,16 @@ def demo(
 
     Example: stickslip demo --seed 3 --day 2026-11-22 --out results/
     """  # noqa: E501
+    from ..audio.confirm import CONFIRM_S, check_confirm_s
     from ..calibration import CalibrationError
     from ..procedures.demo import run_demo
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
 
+    try:
+        confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
+    except ValueError as e:
+        fail(f"--confirm-s: {e}")
     if device is not None:
         seed, day, physics = _sim_seed_day(device, seed, day, physics)
     with user_errors(CalibrationError, TraverseError, StoreError):
@@ -83,7 +95,7 @@ def demo(
         try:
             result = run_demo(
                 seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store,
-                physics=physics,
+                physics=physics, confirm_s=confirm_s,
             )
         finally:
             if store is not None:
@@ -196,6 +208,15 @@ def traverse_cmd(
     ),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
     burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
+    confirm_s: float | None = typer.Option(
+        None,
+        "--confirm-s",
+        help="Take the stop only once it persisted this long while the joint keeps stepping, s (default 0.5: "
+        "interference that mimics the stop for a moment is passed by). Costs this many seconds x the step rate "
+        "extra steps against the stop (2 s just after a fire that did not persist; harmless: the slider slips) and "
+        "that much time, not accuracy: the count runs to the stop's onset. 0: the first fire is the stop.",
+        show_default=False,
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print the measured row as JSON (SI units)."),
 ) -> None:
     """Measure one traverse: count the steps between a joint's end stops, timed by ear.
@@ -222,6 +243,12 @@ def traverse_cmd(
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
+    from ..audio.confirm import CONFIRM_S, check_confirm_s
+
+    try:
+        confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
+    except ValueError as e:
+        fail(f"--confirm-s: {e}")
     device = device_url(device)
     try:
         label = direction_label(direction)
@@ -236,7 +263,16 @@ def traverse_cmd(
         ctrl = open_device(device)
         try:
             result = traverse_on_device(
-                ctrl, joint, label, pose, day, tun, audio_input=audio_input, burst_steps=burst, progress=not json_out
+                ctrl,
+                joint,
+                label,
+                pose,
+                day,
+                tun,
+                audio_input=audio_input,
+                burst_steps=burst,
+                progress=not json_out,
+                confirm_s=confirm_s,
             )
         finally:
             ctrl.close()

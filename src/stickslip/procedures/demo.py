@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 from .. import kinematics as kin
 from .. import plotting
+from ..audio.confirm import CONFIRM_S, check_confirm_s
 from ..calibration import Calibration, Parameter, ValidationResult, calibrate, validate
 from ..clock import today_label
 from ..devices.base import device_key
@@ -284,6 +285,7 @@ class _Runner:
     listen_from: float
     store: DemoStore | None = None
     on_traverse: Callable[[TraverseResult], None] | None = None
+    confirm_s: float = CONFIRM_S
 
     def run(
         self, plan: TraversePlan, stage: str, prior: Callable[[int, str], JointModel], ids: list[int]
@@ -318,6 +320,7 @@ class _Runner:
             progress=self.bar.traverse_callback(),
             expected_steps=int(expected),
             listen_after_steps=int(self.listen_from * expected),
+            confirm_s=self.confirm_s,
         )
         if self.store is not None:  # one transaction per traverse: a kill loses at most this one
             ids.append(self.store.add_traverse(r.traverse, device=device_key(self.url), how=self.how))
@@ -375,6 +378,7 @@ def run_demo(
     listen_from: float = 0.8,
     repeats: int = 2,
     physics: bool = False,
+    confirm_s: float = CONFIRM_S,
 ) -> DemoResult:
     """Run the whole calibration story on a simulated MM3A and return what happened.
 
@@ -412,6 +416,9 @@ def run_demo(
         Run on the physics-based arm (:class:`~stickslip.sim.physics.PhysicsMM3A`,
         ``sim://?physics=1``) instead of the closed-form one; it has no true Eq. 3/8
         parameters, so the summary compares with none.
+    confirm_s : float
+        With the audio switch, take a stop only once it persisted this long, s
+        (:func:`~stickslip.procedures.traverse.measure_traverse`; 0: the first fire).
     listen_from : float
         Start listening after this fraction of the step count predicted by the
         previous calibration (for the calibration traverses: the nominal parameters
@@ -421,6 +428,7 @@ def run_demo(
         again listening all along. 0 listens from the start. In [0, 0.95].
     """
     _check_arguments(listen_from, switch, repeats, out)
+    check_confirm_s(confirm_s)
     t_wall = time.perf_counter()
     day = day or today_label()
     url = f"sim://?seed={seed}&day={day}" + ("&physics=1" if physics else "")
@@ -437,7 +445,9 @@ def run_demo(
     try:
         tunings, detectors, mic = _limit_switches(sim, switch, bar)
         how = "simulated, audio switch" if switch == "audio" else "simulated, oracle switch"
-        runner = _Runner(sim, detectors, mic, bar, day, url, how, burst_steps, listen_from, store, on_traverse)
+        runner = _Runner(
+            sim, detectors, mic, bar, day, url, how, burst_steps, listen_from, store, on_traverse, confirm_s
+        )
 
         def nominal(joint: int, direction: str) -> JointModel:
             return JointModel(joint, direction, NOMINAL[(joint, direction)])

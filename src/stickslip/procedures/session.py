@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Protocol
 
 from .. import kinematics as kin
+from ..audio.confirm import CONFIRM_S
 from ..audio.detector import StopDetector, Tuning
 from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock, device_key
 from ..devices.positions import StateStore, load_state, save_state
@@ -40,6 +41,7 @@ def traverse_on_device(
     audio_input: str | int | None = None,
     burst_steps: int = 2000,
     progress: bool = True,
+    confirm_s: float = CONFIRM_S,
 ) -> TraverseResult:
     """Measure one traverse of ``joint`` in ``direction`` on ``ctrl``, timed by the tuned limit switch.
 
@@ -53,6 +55,9 @@ def traverse_on_device(
         The joint's limit-switch tuning.
     audio_input : str or int, optional
         Sound-card input for a controller without a microphone of its own.
+    confirm_s : float
+        How long a stop must persist before it is taken, s (see
+        :func:`~.traverse.measure_traverse`; 0: the detector's first fire).
     """
     if isinstance(ctrl, PoseSettable):
         ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
@@ -60,7 +65,7 @@ def traverse_on_device(
         t0 = float(ctrl.clock_s)
         return measure_traverse(
             ctrl, joint, direction, detector=StopDetector(tuning, t0), audio_blocks=ctrl.microphone(),
-            pose=pose, day=day, burst_steps=burst_steps, progress=progress,
+            pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
         )
     from ..audio.sources import Microphone
 
@@ -68,7 +73,7 @@ def traverse_on_device(
     try:
         return measure_traverse(
             ctrl, joint, direction, detector=StopDetector(tuning, 0.0), audio_blocks=mic.blocks(),
-            pose=pose, day=day, burst_steps=burst_steps, progress=progress,
+            pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
         )
     finally:
         mic.stop()

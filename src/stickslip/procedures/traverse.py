@@ -16,6 +16,14 @@ The traverse procedure (docs/design.md §5), for any :class:`~stickslip.devices.
    of a 12 000-step traverse); with ``latency="onset"`` (default) the event's onset
    estimate is used, with ``latency="fixed"`` ``detected_at - detector.latency_s``.
 
+A fire of the detector is only *provisional* (``confirm_s``, default
+:data:`~stickslip.audio.confirm.CONFIRM_S`): the joint keeps stepping, and the stop is
+taken once it persisted (:mod:`stickslip.audio.confirm`; a real stop lasts as long as the
+controller steps into it, interference does not). The count still runs to the event's
+onset, so this costs no accuracy, only ``confirm_s`` x the step rate extra steps against
+the stop. A fire that does not persist is dropped and the traverse goes on (its steps
+are counted: the joint moved).
+
 Audio arrives through ``audio_blocks``: either a callable returning the blocks
 recorded since its previous call (the simulator's
 :class:`~stickslip.sim.arm.VirtualMicrophone`), or an iterator yielding
@@ -36,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
+from ..audio.confirm import CONFIRM_S, confirming
 from ..audio.guard import NoSignalError, SignalGuard
 from ..devices.base import Controller, VirtualClock
 from ..measurements import Traverse
@@ -87,6 +96,12 @@ class TraverseResult:
         listening from the start (this result is the second measurement).
     bursts : tuple of (float, int)
         Stream time (s) each burst began and its steps, in the measured direction.
+    confirmed_at_s : float or None
+        Stream time the stop was confirmed by its persistence, s (None: not confirmed,
+        ``confirm_s=0`` or a detector that does not listen to samples).
+    unconfirmed : tuple of float
+        Onsets (s, stream time) of the detector's fires in the measured direction that
+        did not persist (interference) and were passed by.
     """
 
     traverse: Traverse
@@ -102,6 +117,8 @@ class TraverseResult:
     listen_after_steps: int = 0
     retried: bool = False
     bursts: tuple[tuple[float, int], ...] = field(default=(), repr=False)
+    confirmed_at_s: float | None = None
+    unconfirmed: tuple[float, ...] = ()
 
     @property
     def gamma(self) -> float:
@@ -117,7 +134,9 @@ class TraverseResult:
             f"gamma = {self.gamma * scale:.2f} {unit} "
             f"({self.elapsed_device_s:.1f} s at {self.frequency_hz:g} Hz; "
             f"{self.steps_after_stop} steps after the stop, "
-            f"{self.latency_steps_corrected} for latency)"
+            f"{self.latency_steps_corrected} for latency"
+            + (f"; {len(self.unconfirmed)} unconfirmed fire(s) passed by" if self.unconfirmed else "")
+            + ")"
         )
 
 
@@ -142,6 +161,8 @@ class _Listener:
         self._callable = callable(audio_blocks) and not isinstance(audio_blocks, Iterator)
         self.source = audio_blocks if self._callable else iter(audio_blocks)
         self.t_s = 0.0
+        #: onsets (s) of the fires the detector dropped as unconfirmed, in the order heard
+        self.unconfirmed: list[float] = []
         self._started = False
         self._last_block_s = 0.0
         # a dead input must never look like a stop; only a detector that declares it does not
@@ -201,7 +222,11 @@ class _Listener:
             except NoSignalError as e:
                 raise TraverseError(str(e)) from None
             self.t_s += block.shape[0] / self.sample_rate
+            dropped = getattr(self.detector, "rejected", None)
+            before = len(dropped) if dropped is not None else 0
             events = self.detector.feed(block)
+            if dropped is not None:
+                self.unconfirmed += [float(e.onset_s) for e in dropped[before:]]
             if events and not alive:  # heard in a dead input: not a stop; start afresh, in step
                 self.detector.reset(self.t_s)
                 continue
@@ -263,6 +288,7 @@ def measure_traverse(
     progress: bool | Callable[[int, float], None] = False,
     settle_s: float = 0.05,
     listen_after_steps: int = 0,
+    confirm_s: float = CONFIRM_S,
 ) -> TraverseResult:
     """Measure a full-range traverse of ``joint``: count the steps between its end stops.
 
@@ -316,6 +342,13 @@ def measure_traverse(
         predicts; not listening that long saves the audio processing. If the stop is
         heard as soon as listening starts (it came earlier), the traverse is measured
         again listening from the start.
+    confirm_s : float
+        Take a fire of the detector as the stop only once it persisted this long, s,
+        while the joint keeps stepping (:mod:`stickslip.audio.confirm`; default
+        :data:`~stickslip.audio.confirm.CONFIRM_S`). Costs ``confirm_s`` x the step rate
+        extra steps against the stop and that much time, not accuracy (the count runs
+        to the onset). 0: the first fire is the stop (the old behaviour). Ignored for a
+        detector that does not listen to samples (the simulator's oracle).
 
     Returns
     -------
@@ -325,6 +358,7 @@ def measure_traverse(
     sign = direction_sign(direction)
     label = direction_label(sign)
     _check_options(latency, predrive, burst_steps, listen_after_steps)
+    detector = confirming(detector, confirm_s)  # a fresh confirming detector: the caller's is left as it was
     limit = int(max_steps) if max_steps is not None else int(2 * spec.span / MIN_STEP_PRIOR[spec.number])
     hz = float(controller.frequency(joint))
     clock = clock or _device_clock(controller)
@@ -340,12 +374,32 @@ def measure_traverse(
         close_bar()
     if event is None:  # heard as soon as listening began: the stop came earlier; listen all along
         redo = measure_traverse(
-            controller, joint, direction, detector=detector, audio_blocks=audio_blocks, pose=pose, day=day,
-            burst_steps=burst_steps, predrive="listen", latency=latency, max_steps=max_steps,
-            expected_steps=expected_steps, clock=clock, progress=progress, settle_s=settle_s, listen_after_steps=0,
+            controller,
+            joint,
+            direction,
+            detector=detector,
+            audio_blocks=audio_blocks,
+            pose=pose,
+            day=day,
+            burst_steps=burst_steps,
+            predrive="listen",
+            latency=latency,
+            max_steps=max_steps,
+            expected_steps=expected_steps,
+            clock=clock,
+            progress=progress,
+            settle_s=settle_s,
+            listen_after_steps=0,
+            confirm_s=confirm_s,
         )
         return replace(redo, retried=True)
 
+    if getattr(event, "onset_uncertain", False):  # heard as the switch passed interference by: when did it begin?
+        raise TraverseError(
+            f"joint {joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed by a sound "
+            "that did not persist (interference near the stop), so when the stop began is uncertain; nothing "
+            "recorded: keep talk and other sounds away from the arm and measure again"
+        )
     # 3. count the steps made before the stop, latency corrected
     detected = float(event.detected_at_s)
     t_stop = {"onset": float(event.onset_s), "fixed": detected - float(getattr(detector, "latency_s", 0.0))}.get(
@@ -370,6 +424,8 @@ def measure_traverse(
         predrive_steps=predrive_steps,
         listen_after_steps=listen_after_steps,
         bursts=tuple(run.bursts),
+        confirmed_at_s=getattr(event, "confirmed_at_s", None),
+        unconfirmed=tuple(t for t in listener.unconfirmed if t >= t_start),
     )
 
 

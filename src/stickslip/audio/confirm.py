@@ -1,0 +1,355 @@
+"""Confirm an end stop by its persistence under continued stepping.
+
+A real end stop lasts as long as the controller keeps stepping into it; interference
+that looks like the stop for a moment (a held chord, a voice's fricatives in the stop's
+sub-band, babble over a run of weaker steps) does not. :class:`ConfirmedStopDetector`
+wraps a :class:`~stickslip.audio.detector.StopDetector` with the same interface
+(samples in through :meth:`~ConfirmedStopDetector.feed`, :class:`StopEvent` s out) and
+holds each fire as *provisional*: it is emitted only once the stop persisted for
+``confirm_s``: of the frames of the next ``confirm_s`` after the fire, at least
+``min_share`` were stop-like (the stop-likeness at or above the tuning's threshold, by
+the fit or by the drop channel), no run of the others lasted :data:`GAP_S`, and at least
+``min_hot`` were *hot* (the detector's full verdict: also the fit's residual and the
+drops the stop shows in proportion). A voice over a stop-like sub-band keeps the
+stop-likeness up for seconds but seldom shows the stop's drops with it; a stop shows
+both, as long as the joint steps into it (what this does not remove: continuous talk
+over a joint whose stop lowers little else, which fires again and again until one
+window persists; docs/audio.md gives the numbers). A fire that does not persist is dropped
+and the inner detector un-latched at once, so it hears the next stop; its template was
+frozen since the fire, so the rejected span never enters it. A fire that comes within
+:data:`RECENT_S` of a rejected one must persist for :data:`AFTER_REJECT_S`: the
+interference is still going on.
+
+What it costs: nothing in accuracy - a traverse counts its steps to the event's
+``onset_s`` (the fire's, unchanged), and ``detected_at_s`` stays the fire time, so the
+latency is the detector's - but the traverse steps ``confirm_s`` longer against the stop
+(``confirm_s`` x the step rate extra steps, :data:`AFTER_REJECT_S` just after a rejected
+fire: harmless on a stick-slip joint, whose slider just slips) and takes that much longer.
+The emitted event carries ``confirmed_at_s`` (the end of the window) and ``confirmed_s``
+(the window).
+
+The decision is made at the end of the window, at a frame counted from the stream
+start, and the inner detector is fed exactly up to it, so the events do not depend on
+how the stream is cut into blocks.
+
+Two edges, and what happens:
+
+* **The stream ends while a fire is provisional** (a recording that stops less than
+  ``confirm_s`` after the stop): :meth:`~ConfirmedStopDetector.finish` emits it if the
+  frames heard after the fire so far meet the same rule (none heard: it is emitted, as
+  nothing contradicts it), with ``confirmed_s`` the time actually heard (less than
+  ``confirm_s``: the flag that it was confirmed by the end of the recording).
+* **A fire heard at once when the detector is un-latched** (a real stop that began
+  inside a rejected fire's window, or a stop whose own first window failed, under loud
+  talk): when the stop began is not known, only that it was before the un-latching.
+  The event is emitted with ``onset_uncertain`` set, and a traverse refuses it (measure
+  again) rather than count to a guess. Interference that runs straight into a real stop,
+  without a pause of :data:`GAP_S`, cannot be told apart: the event then keeps the
+  interference's onset (as without confirmation).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .detector import StopDetector, StopEvent, Tuning
+
+__all__ = [
+    "AFTER_REJECT_S",
+    "CONFIRM_S",
+    "GAP_S",
+    "MIN_HOT",
+    "MIN_SHARE",
+    "RECENT_S",
+    "ConfirmedStopDetector",
+    "check_confirm_s",
+    "confirming",
+]
+
+#: how long a stop must persist after the detector fired before it is emitted, s (measured: docs/audio.md)
+CONFIRM_S = 0.5
+#: share of the frames in that window that must be stop-like (measured: docs/audio.md)
+MIN_SHARE = 0.7
+#: ... and no run of frames that are not stop-like may last this long in it, s: the stop went away
+#: (longest seen inside a true stop: 40 ms in the battery, 88 ms under talk at +3 dB over joint P's stop)
+GAP_S = 0.15
+#: ... and this share of them must be *hot*: the detector's full verdict (the fit's residual, the drops the
+#: stop shows in proportion, or the drop channel), not the stop-likeness alone (measured: docs/audio.md)
+MIN_HOT = 0.25
+#: a fire this soon after a rejected one (the end of its window) gets the longer window :data:`AFTER_REJECT_S`:
+#: the interference goes on, and continuous talk gives fire after fire until one window persists, s
+RECENT_S = 2.0
+#: the window of such a fire, s (measured: docs/audio.md)
+AFTER_REJECT_S = 2.0
+#: longest window accepted, s (a traverse steps this long into the stop)
+MAX_CONFIRM_S = 5.0
+
+
+def check_confirm_s(confirm_s: float) -> float:
+    """``confirm_s`` as a float, or ``ValueError`` naming the accepted range (0 = no confirmation)."""
+    try:
+        c = float(confirm_s)
+    except (TypeError, ValueError):
+        raise ValueError(f"confirm_s = {confirm_s!r} is not a number of seconds") from None
+    if not (math.isfinite(c) and 0.0 <= c <= MAX_CONFIRM_S):
+        raise ValueError(f"confirm_s = {confirm_s!r} s is outside [0, {MAX_CONFIRM_S:g}] (0: no confirmation)")
+    return c
+
+
+class ConfirmedStopDetector:
+    """A :class:`StopDetector` whose fires are emitted only once the stop persisted.
+
+    Parameters
+    ----------
+    inner : StopDetector
+        The detector whose fires are confirmed (it is reset, and from now on owned by
+        this wrapper).
+    confirm_s : float
+        Confirmation window after a fire, s (> 0).
+    min_share : float
+        Share of the window's frames that must be stop-like, in (0, 1].
+    min_hot : float
+        Share of the window's frames that must be *hot* (the detector's full verdict),
+        in [0, 1].
+    after_reject_s : float or None
+        The window of a fire within :data:`RECENT_S` of a rejected one, s (at least
+        ``confirm_s``; None: ``confirm_s``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> det = ConfirmedStopDetector(StopDetector(Tuning(band_hz=(5600, 7100), threshold_db=-50)))
+    >>> det.feed(np.zeros(4800, dtype=np.float32)), det.finish()
+    ([], [])
+    """
+
+    #: the no-signal guard applies: this detector listens to samples
+    uses_audio = True
+
+    def __init__(
+        self,
+        inner: StopDetector,
+        confirm_s: float = CONFIRM_S,
+        min_share: float = MIN_SHARE,
+        min_hot: float = MIN_HOT,
+        after_reject_s: float | None = AFTER_REJECT_S,
+    ) -> None:
+        c = check_confirm_s(confirm_s)
+        if c <= 0.0:
+            raise ValueError("confirm_s must be > 0 for a ConfirmedStopDetector (use the StopDetector itself for 0)")
+        if not (isinstance(min_share, (int, float)) and 0.0 < float(min_share) <= 1.0):
+            raise ValueError(f"min_share = {min_share!r} is outside (0, 1]")
+        if not (isinstance(min_hot, (int, float)) and 0.0 <= float(min_hot) <= 1.0):
+            raise ValueError(f"min_hot = {min_hot!r} is outside [0, 1]")
+        self.inner = inner
+        self.confirm_s = c
+        self.min_share = float(min_share)
+        self.min_hot = float(min_hot)
+        tu = inner.tuning
+        self._H, self._F, self._sr = int(tu.hop), int(tu.frame), int(tu.sample_rate)
+        #: the window, frames
+        self.window_frames = max(1, int(round(c * self._sr / self._H)))
+        #: the window of a fire that comes within RECENT_S of a rejected one, frames (interference goes on)
+        a = c if after_reject_s is None else max(c, check_confirm_s(after_reject_s))
+        self.after_reject_frames = max(self.window_frames, int(round(a * self._sr / self._H)))
+        self._recent_frames = int(round(RECENT_S * self._sr / self._H))
+        self._refire_frames = int(tu.hold_frames) + int(tu.max_dips) + 1
+        #: a run of this many frames that are not stop-like ends a stop
+        self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
+        self._lag = float(tu.onset_lag_s)
+        self.reset(inner._t0)
+
+    def reset(self, t0_s: float = 0.0) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s``."""
+        self.inner.reset(t0_s)
+        self.inner.evidence = []
+        self.inner.hot_evidence = []
+        self._t0 = float(t0_s)
+        self._fed = 0
+        self._margins: list[float] = []
+        self._hot: list[bool] = []
+        self._base = 0  # frame index of _margins[0] and _hot[0]
+        self._pending: tuple[StopEvent, int, int] | None = None  # the fire, its frame, its window (frames)
+        self._last_reject: int | None = None
+        self._rejected_at: int | None = None
+        #: the fires dropped since the last reset (they did not persist)
+        self.rejected: list[StopEvent] = []
+
+    # --- the detector's interface -------------------------------------------------------------
+    @property
+    def tuning(self) -> Tuning:
+        """The inner detector's tuning."""
+        return self.inner.tuning
+
+    @property
+    def latency_s(self) -> float:
+        """Typical detected_at - true onset, s: the inner detector's (``detected_at_s`` is the fire time)."""
+        return self.inner.latency_s
+
+    @property
+    def ready(self) -> bool:
+        """False while the inner detector is still learning the stepping sound."""
+        return self.inner.ready
+
+    @property
+    def latched(self) -> bool:
+        """True while a stop is being heard (provisional or confirmed)."""
+        return self.inner.latched
+
+    @property
+    def level(self) -> float:
+        """The latest frame's level (see :attr:`StopDetector.level`)."""
+        return self.inner.level
+
+    @property
+    def levels_seen(self) -> int:
+        """Frames heard since the last reset."""
+        return self.inner.levels_seen
+
+    @property
+    def pending(self) -> StopEvent | None:
+        """The fire being confirmed, or None."""
+        return None if self._pending is None else self._pending[0]
+
+    def feed(self, block: NDArray[Any]) -> list[StopEvent]:
+        """Consume a block of mono samples; return the stops confirmed in it."""
+        x = np.asarray(block)
+        if x.ndim != 1:
+            raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        out: list[StopEvent] = []
+        pos = 0
+        while pos < x.size:
+            take = min(self._room(), x.size - pos)
+            events = self.inner.feed(x[pos : pos + take])
+            pos += take
+            self._fed += take
+            self._absorb()
+            for ev in events:
+                out += self._fired(ev)
+            out += self._decide()
+        return out
+
+    def finish(self) -> list[StopEvent]:
+        """The stream ended: the provisional stop, if what was heard of its window persisted (see the module)."""
+        if self._pending is None:
+            return []
+        ev, fire, _ = self._pending
+        self._pending = None
+        heard = self.inner.frames_seen - 1 - fire
+        if not self._persisted(*self._window(fire, heard)):
+            self.rejected.append(ev)
+            return []
+        return [self._confirmed(ev, fire + heard, heard)]
+
+    # --- internals ----------------------------------------------------------------------------
+    def _frame_end_s(self, i: int) -> float:
+        return self._t0 + (i * self._H + self._F - 1) / self._sr
+
+    def _room(self) -> int:
+        """Samples the inner detector may take now: up to the pending window's end, else W frames."""
+        if self._pending is None:
+            return self._H * self.window_frames  # a fire in these frames has its window end beyond them
+        end = self._pending[1] + self._pending[2]  # the window's last frame
+        return max(1, end * self._H + self._F - self._fed)
+
+    def _absorb(self) -> None:
+        ev, hot = self.inner.evidence, self.inner.hot_evidence
+        if ev:
+            self._margins.extend(ev)
+            ev.clear()
+        if hot:
+            self._hot.extend(hot)
+            hot.clear()
+        keep = 2 * self.after_reject_frames + 4 * self._refire_frames
+        extra = len(self._margins) - keep
+        if extra > 4 * keep:  # trim now and then, not every block
+            del self._margins[:extra]
+            del self._hot[:extra]
+            self._base += extra
+
+    def _window(self, fire: int, n: int) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """Margins and hot flags of the ``n`` frames after frame ``fire``."""
+        lo, hi = max(fire + 1 - self._base, 0), max(fire + 1 - self._base + n, 0)
+        m = np.nan_to_num(np.asarray(self._margins[lo:hi], dtype=np.float64), nan=-1.0)
+        return m, np.asarray(self._hot[lo:hi], dtype=bool)
+
+    def _fire_frame(self, ev: StopEvent) -> int:
+        end = int(round((ev.detected_at_s - self._t0) * self._sr))
+        return (end - (self._F - 1)) // self._H
+
+    def _fired(self, ev: StopEvent) -> list[StopEvent]:
+        out: list[StopEvent] = []
+        if self._pending is not None:  # the inner released and fired again inside the window: no persistence
+            self.rejected.append(self._pending[0])
+            self._last_reject = self._pending[1]
+            self._pending = None
+        fire = self._fire_frame(ev)
+        if self._rejected_at is not None and self._continues_from_rejection(fire):
+            # the stop-like sound had not gone away since the rejected window: the stop may have begun inside
+            # it, or before it; when, is not known
+            ev = replace(ev, onset_uncertain=True)
+        self._rejected_at = None
+        recent = self._last_reject is not None and fire - self._last_reject <= self._recent_frames
+        self._pending = (ev, fire, self.after_reject_frames if recent else self.window_frames)
+        return out
+
+    def _continues_from_rejection(self, fire: int) -> bool:
+        """No gap of :attr:`gap_frames` between the last rejected window's end and frame ``fire``?"""
+        assert self._rejected_at is not None
+        if fire - self._rejected_at <= self._refire_frames:
+            return True  # heard at once on un-latching
+        m, _ = self._window(self._rejected_at - 1, fire - self._rejected_at)  # frames rejected_at .. fire - 1
+        return self._longest_gap(m >= 0.0) < self.gap_frames
+
+    @staticmethod
+    def _longest_gap(ok: NDArray[np.bool_]) -> int:
+        """The longest run of False in ``ok``."""
+        edges = np.flatnonzero(np.diff(np.concatenate(([1], ok.astype(np.int8), [1]))))
+        return int(np.max(edges[1::2] - edges[0::2])) if edges.size else 0
+
+    def _decide(self) -> list[StopEvent]:
+        if self._pending is None:
+            return []
+        ev, fire, window = self._pending
+        last = fire + window
+        if self.inner.frames_seen <= last:
+            return []
+        self._pending = None
+        if self._persisted(*self._window(fire, window)):
+            return [self._confirmed(ev, last, window)]
+        self.rejected.append(ev)
+        self.inner.unlatch()
+        self._rejected_at = self._last_reject = last
+        return []
+
+    def _persisted(self, m: NDArray[np.float64], hot: NDArray[np.bool_]) -> bool:
+        """Did the stop persist over the window's margins ``m`` and hot flags? (none heard: nothing contradicts it)"""
+        if m.size == 0:
+            return True
+        ok = m >= 0.0
+        if float(np.mean(ok)) < self.min_share or float(np.mean(hot)) < self.min_hot:
+            return False
+        return self._longest_gap(ok) < self.gap_frames
+
+    def _confirmed(self, ev: StopEvent, last: int, frames: int) -> StopEvent:
+        return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
+
+
+def confirming(detector: Any, confirm_s: float = CONFIRM_S) -> Any:
+    """``detector`` wrapped in a :class:`ConfirmedStopDetector`, where that applies.
+
+    ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
+    detector that already confirms, or one that does not listen to samples (the
+    simulator's oracle, a position read-back): only a :class:`StopDetector` has the
+    per-frame evidence to confirm with. The wrapper listens with a fresh detector of the
+    same tuning; ``detector`` itself is left as it was.
+    """
+    c = check_confirm_s(confirm_s)
+    if c == 0.0 or not isinstance(detector, StopDetector):
+        return detector
+    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c)
