@@ -315,6 +315,10 @@ class TemplateState:
         self.delta = np.asarray(p.signature_db, dtype=np.float64)
         self.sigma = np.asarray(p.spread_db, dtype=np.float64)
         self._fit = _Fitter(self.delta, self.sigma, p.trim)
+        # whether the stop's drops are worth checking is the tuning's to say (its spreads, each drop capped at
+        # NEG_CAP): a noisy warm-up (a voice while the template was learned) must not switch the check off
+        gt = np.maximum(np.minimum(self.delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
+        self._drop_info_tuned = float(gt @ gt)
         self._drop = DropMeter(self.delta.size)
         self.reset(t0_s)
 
@@ -468,10 +472,7 @@ class TemplateState:
         # (a fan 10 dB below the stepping caps a 20 dB drop at 10), so their depth is no evidence
         gn = np.maximum(np.minimum(self.delta, 0.0) * self._drop_scale, -NEG_CAP)
         gg = float(gn @ gn)
-        # whether the stop's drops are worth checking is the tuning's to say (its spreads): a noisy warm-up
-        # (a voice while the template was learned) must not switch the check off
-        gt = np.maximum(np.minimum(self.delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
-        gg_tuned = float(gt @ gt)
+        gg_tuned = self._drop_info_tuned
         if gg_tuned >= NEG_INFORMATIVE**2:
             # per frame, judged on the sub-bands without an excess (a band something was added to cannot show
             # a drop): the drops shown, as a share of the signature's, averaged over NEG_FRAMES frames

@@ -2,10 +2,10 @@
 
 A calibration records where its traverses came from (``provenance``: the sha256 of
 the measurement table as :func:`stickslip.measurements.measurements_to_csv` writes it,
-the sha256 of the same rows sorted, the number of rows and the days). The report compares the table it validates on with
-that record and says so in the figure titles and on the page: a model always fits the
-data it was fitted to better than new data, and a reader must be told which one a
-number is.
+the sha256 of the same rows sorted, the number of rows and the days). The report
+compares the table it validates on with that record and says so in the figure titles
+and on the page: a model always fits the data it was fitted to better than new data,
+and a reader must be told which one a number is.
 """
 
 from __future__ import annotations
