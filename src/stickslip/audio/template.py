@@ -56,6 +56,8 @@ CHUNK = 64
 QUANTILE = 0.3
 #: a chunk whose median residual exceeds this many times ``residual_max`` re-learns the template
 STALE_RESIDUAL = 2.0
+#: a relearned template this much louder in every sub-band is a new level, not a sound added, dB
+STALE_ALL_UP_DB = 3.0
 #: residual allowance per unit of fitted departure (see :func:`fit_departure`)
 RESIDUAL_SLOPE = 0.35
 _FLOOR = 1e-20
@@ -395,8 +397,12 @@ class TemplateState:
             rho_all = np.concatenate(self._chunk_rho)
             mid = rho_all.size // 2
             if rho_all.size >= CHUNK // 2 and float(np.partition(rho_all, mid)[mid]) > STALE_RESIDUAL * p.residual_max:
+                old = self.template
                 self.template = np.percentile(np.concatenate(self._chunk_v), 100 * QUANTILE, axis=0)
-                self._set_floor(reset=True)
+                # a new level in every sub-band (listening began in silence, the microphone moved closer): the
+                # floor starts anew; a rise in some sub-bands only is a sound added (a loud voice): the floor keeps
+                # the stepping's level, or the pause after the voice would look like a stop's drops
+                self._set_floor(reset=bool(np.min(self.template - old) > STALE_ALL_UP_DB))
                 self._acc_n = 0
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._drop.reset()
