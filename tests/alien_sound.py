@@ -18,7 +18,7 @@ JOINT_SOUNDS = {  # (stepping resonances, stop resonances), Hz
 }
 
 
-def _ring(n, sr, f, tau, rng):
+def _ring(n: int, sr: int, f: float, tau: float, rng: np.random.Generator) -> np.ndarray:
     t = np.arange(n) / sr
     return np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) * np.exp(-t / tau)
 
@@ -39,10 +39,14 @@ def recording(joint: str, rate: float, stop_at: float | None, dur: float, seed: 
         s, stop = starts[c0 : c0 + 4096], at_stop[c0 : c0 + 4096]
         m = s.size
 
-        def ring(f, tau, m=m):  # sin(wt + ph) e^(-t/tau) = (sin wt cos ph + cos wt sin ph) e^(-t/tau)
+        def ring(f: float, tau: float, m: int = m) -> np.ndarray:
+            # sin(wt + ph) e^(-t/tau) = (sin wt cos ph + cos wt sin ph) e^(-t/tau)
             ph = rng.uniform(0, 2 * np.pi, (m, 1))
             env = np.exp(-tl / tau)
-            return np.cos(ph) * (np.sin(2 * np.pi * f * tl) * env) + np.sin(ph) * (np.cos(2 * np.pi * f * tl) * env)
+            out: np.ndarray = np.cos(ph) * (np.sin(2 * np.pi * f * tl) * env) + np.sin(ph) * (
+                np.cos(2 * np.pi * f * tl) * env
+            )
+            return out
 
         step = 0.05 * ring(f_step[0], 6e-4) + 0.03 * ring(f_step[1], 4e-4)
         step[:, :24] += 0.02 * rng.standard_normal((m, 24))
@@ -63,9 +67,9 @@ def recording(joint: str, rate: float, stop_at: float | None, dur: float, seed: 
     if knocks:
         for tk in rng.uniform(0.5, dur - 0.5, int(dur / 2.5)):
             i, m = int(tk * sr), int(0.08 * sr)
-            k = 0.3 * _ring(m, sr, rng.uniform(80, 220), 0.015, rng)
-            k[:96] += 0.15 * rng.standard_normal(96)
-            x[i : i + m] += k[: n - i]
+            knock = 0.3 * _ring(m, sr, rng.uniform(80, 220), 0.015, rng)
+            knock[:96] += 0.15 * rng.standard_normal(96)
+            x[i : i + m] += knock[: n - i]
     if babble:
         t0 = 0.3
         while t0 < dur - 0.5:

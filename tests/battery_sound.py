@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import shutil
 import subprocess
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -78,14 +79,16 @@ class Scene:
 
 def _res(x: np.ndarray, f: float, bw: float, sr: int) -> np.ndarray:
     r = np.exp(-np.pi * bw / sr)
-    return lfilter([1 - r], [1, -2 * r * np.cos(2 * np.pi * f / sr), r * r], x)
+    return np.asarray(lfilter([1 - r], [1, -2 * r * np.cos(2 * np.pi * f / sr), r * r], x), dtype=float)
 
 
-def _bank(x: np.ndarray, modes, sr: int) -> np.ndarray:
+def _bank(x: np.ndarray, modes: Sequence[tuple[float, float, float]], sr: int) -> np.ndarray:
     return sum((g * _res(x, f, bw, sr) for f, bw, g in modes if f < 0.45 * sr), np.zeros_like(x))
 
 
-def _impulses(n: int, sr: int, rate: float, rng, t0: float = 0.0, drift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+def _impulses(
+    n: int, sr: int, rate: float, rng: np.random.Generator, t0: float = 0.0, drift: float = 0.0
+) -> tuple[np.ndarray, np.ndarray]:
     if drift:  # the clock's phase is the integral of a rate that ramps linearly over the recording
         dur = n / sr
         tt = np.arange(n + 1) / sr
@@ -137,7 +140,7 @@ def espeak_speech(sr: int, talker: str = "espeak") -> np.ndarray | None:
     return np.asarray(resample_poly(pcm, sr // g, rate // g))
 
 
-def _babble(n: int, sr: int, rng) -> np.ndarray:
+def _babble(n: int, sr: int, rng: np.random.Generator) -> np.ndarray:
     """Formant babble built per syllable in the frequency domain (harmonics weighted by formant peaks)."""
     out = np.zeros(n)
     i = 0
@@ -158,7 +161,7 @@ def _babble(n: int, sr: int, rng) -> np.ndarray:
     return out
 
 
-def _music(n: int, sr: int, rng) -> np.ndarray:
+def _music(n: int, sr: int, rng: np.random.Generator) -> np.ndarray:
     """A radio: three-note chords of harmonic tones (12 harmonics, 1/h), 5.5 Hz vibrato, a chord every 0.25-0.6 s."""
     out = np.zeros(n)
     t_all = np.arange(n) / sr
@@ -211,7 +214,7 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
     elif s.stop_kind == "spectral":
         moved = [(f * (0.8 if k == 1 else 1.0), bw, g) for k, (f, bw, g) in enumerate(modes)]
         stop = _bank(stop_train, moved, sr)
-        full = stop[stop != 0] if s.stop_at >= 0.2 else _bank(_train(n, sr, times, amps), moved, sr)
+        full = stop[stop != 0] if (s.stop_at or 0.0) >= 0.2 else _bank(_train(n, sr, times, amps), moved, sr)
         stop *= np.sqrt(np.mean(step_ref[: int(0.9 * step_ref.size)] ** 2) / max(np.mean(full**2), 1e-30))
     else:
         raise ValueError(s.stop_kind)
@@ -239,11 +242,11 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
         tl = np.arange(L) / sr
         for t0 in np.arange(0.4, s.dur - 0.1, s.knocks_every_s) + rng.uniform(-0.05, 0.05):
             i0 = int(t0 * sr)
-            k = np.sin(2 * np.pi * rng.uniform(40, 150) * tl) * np.exp(-tl / 0.06)
+            knock = np.sin(2 * np.pi * rng.uniform(40, 150) * tl) * np.exp(-tl / 0.06)
             burst = rng.standard_normal(L) * np.exp(-tl / 0.003)
-            k = k + 0.6 * (burst - lfilter([0.2], [1, -0.8], burst))
-            k *= rms * 10 ** (rng.uniform(6, 20) / 20) / np.max(np.abs(k))
-            x[i0 : i0 + L] += k[: n - i0]
+            knock = knock + 0.6 * (burst - lfilter([0.2], [1, -0.8], burst))
+            knock *= rms * 10 ** (rng.uniform(6, 20) / 20) / np.max(np.abs(knock))
+            x[i0 : i0 + L] += knock[: n - i0]
     if s.door_at is not None:
         L = int(0.8 * sr)
         tl = np.arange(L) / sr
@@ -277,8 +280,8 @@ def render(s: Scene) -> tuple[np.ndarray, int]:
         q = 2.0 ** (s.bits - 1)
         x = np.clip(np.round(x * q), -q, q - 1) / q
     if s.stereo:
-        d = 7
-        r = np.concatenate((np.zeros(d), x[:-d])) * 0.6 + rng.standard_normal(n) * 10 ** (-70 / 20)
+        delay = 7
+        r = np.concatenate((np.zeros(delay), x[:-delay])) * 0.6 + rng.standard_normal(n) * 10 ** (-70 / 20)
         return np.stack((x, r), axis=1).astype(np.float32), sr
     return x.astype(np.float32), sr
 

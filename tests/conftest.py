@@ -7,13 +7,17 @@ today's, and tests that want an old calibration say so with an earlier label.
 Subprocesses inherit the pin through the environment.
 """
 
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
 import pytest
 
 PINNED_TODAY = "2026-11-22"
 
 
 @pytest.fixture(autouse=True)
-def _private_database(tmp_path, monkeypatch):
+def _private_database(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("STICKSLIP_DB", str(tmp_path / "stickslip-test.db"))
     monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg-data"))
     # no test reads the user's configuration file (docs/config.md): a path where none is
@@ -22,12 +26,12 @@ def _private_database(tmp_path, monkeypatch):
 
 
 @pytest.fixture(autouse=True)
-def _pinned_today(monkeypatch):
+def _pinned_today(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("STICKSLIP_TODAY", PINNED_TODAY)
 
 
 @pytest.fixture()
-def RE():
+def RE() -> Iterator[Any]:
     """A bluesky RunEngine for the bluesky tests (skips where the ``bluesky`` extra is missing), halted after."""
     bluesky = pytest.importorskip("bluesky")
     re = bluesky.RunEngine({}, call_returns_result=True)

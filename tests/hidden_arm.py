@@ -17,7 +17,9 @@ with the project's ``calibrate`` (that is what a user would do with these traver
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -28,21 +30,24 @@ RANGES = {1: (-2 * math.pi / 3, 2 * math.pi / 3), 2: (-7 * math.pi / 6, math.pi 
 def gravity_in_base(theta: float, psi: float) -> np.ndarray:
     """World gravity (0, 0, -1) seen in a base turned by theta about x, then psi about the new y."""
     base = Rotation.from_euler("XY", [theta, psi])  # intrinsic: x, then the new y
-    return base.inv().apply([0.0, 0.0, -1.0])
+    return np.asarray(base.inv().apply([0.0, 0.0, -1.0]), dtype=float)
 
 
 def arm_rotation(q1: float, q2: float) -> Rotation:
     return Rotation.from_rotvec([0.0, 0.0, q1]) * Rotation.from_rotvec([0.0, -q2, 0.0])
 
 
-def tip_of(q, offset: float, length: float) -> np.ndarray:
+def tip_of(q: Sequence[float], offset: float, length: float) -> np.ndarray:
     q1, q2, q3 = q
-    return Rotation.from_rotvec([0.0, 0.0, q1]).apply(
-        np.array([offset, 0.0, 0.0]) + Rotation.from_rotvec([0.0, -q2, 0.0]).apply([0.0, 0.0, length + q3])
+    return np.asarray(
+        Rotation.from_rotvec([0.0, 0.0, q1]).apply(
+            np.array([offset, 0.0, 0.0]) + Rotation.from_rotvec([0.0, -q2, 0.0]).apply([0.0, 0.0, length + q3])
+        ),
+        dtype=float,
     )
 
 
-def loads(q, theta: float, psi: float) -> dict[int, float]:
+def loads(q: Sequence[float], theta: float, psi: float) -> dict[int, float]:
     """Dimensionless loads: gravity along the arm (joint 3, against +), minus the torques about z1 and z0."""
     g = gravity_in_base(theta, psi)
     z2 = arm_rotation(q[0], q[1]).apply([0.0, 0.0, 1.0])
@@ -75,7 +80,7 @@ class HiddenArm:
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng(self.seed)
 
-    def mean_step(self, joint: int, sign: int, q, theta: float, psi: float) -> float:
+    def mean_step(self, joint: int, sign: int, q: Sequence[float], theta: float, psi: float) -> float:
         d = "+" if sign > 0 else "-"
         load = loads(q, theta, psi)[joint]
         lo, hi = RANGES[joint]
@@ -94,7 +99,7 @@ class HiddenArm:
         lo, hi = RANGES[joint]
         q[joint - 1] = min(max(q[joint - 1] + sign * s, lo), hi)
 
-    def traverse_steps(self, joint: int, sign: int, q, theta: float, psi: float) -> int:
+    def traverse_steps(self, joint: int, sign: int, q: Sequence[float], theta: float, psi: float) -> int:
         """Steps from one end stop to the other (the count a limit switch would give).
 
         The other joints and the tilt stay put, so the mean step is tabulated along the
@@ -127,7 +132,9 @@ class HiddenArm:
             pos = float(ends[-1])
 
 
-def execute(arm: HiddenArm, plan_json: dict, offset: float, length: float, theta: float, psi: float):
+def execute(
+    arm: HiddenArm, plan_json: dict[str, Any], offset: float, length: float, theta: float, psi: float
+) -> np.ndarray:
     """Apply a ``reach --json`` plan step by step; returns the tip after every step, ``(n, 3)`` m."""
     q = list(plan_json["start"]["q"])
     tips = [tip_of(q, offset, length)]
@@ -140,8 +147,8 @@ def execute(arm: HiddenArm, plan_json: dict, offset: float, length: float, theta
     return np.array(tips)
 
 
-def distance_from_segment(points: np.ndarray, a, b) -> np.ndarray:
-    a = np.asarray(a, dtype=float)
-    d = np.asarray(b, dtype=float) - a
-    t = np.clip((points - a) @ d / (d @ d), 0.0, 1.0)
-    return np.linalg.norm(points - (a + t[:, None] * d), axis=1)
+def distance_from_segment(points: np.ndarray, a: Sequence[float], b: Sequence[float]) -> np.ndarray:
+    a0 = np.asarray(a, dtype=float)
+    d = np.asarray(b, dtype=float) - a0
+    t = np.clip((points - a0) @ d / (d @ d), 0.0, 1.0)
+    return np.asarray(np.linalg.norm(points - (a0 + t[:, None] * d), axis=1), dtype=float)

@@ -26,9 +26,11 @@ from __future__ import annotations
 import functools
 import math
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.interpolate import RegularGridInterpolator
 
 from hidden_arm import RANGES, arm_rotation, gravity_in_base
@@ -88,11 +90,11 @@ def cell_table() -> RegularGridInterpolator:
                                    fill_value=None)
 
 
-def cell_step(u, n, kappa) -> np.ndarray:
-    u, n, kappa = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (u, n, kappa)))
-    pts = np.stack([np.clip(u, GRID_U[0], GRID_U[-1]), np.clip(n, GRID_N[0], GRID_N[-1]),
-                    np.clip(kappa, GRID_K[0], GRID_K[-1])], axis=-1)
-    return cell_table()(pts.reshape(-1, 3)).reshape(u.shape)
+def cell_step(u: ArrayLike, n: ArrayLike, kappa: ArrayLike) -> np.ndarray:
+    ua, na, ka = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (u, n, kappa)))
+    pts = np.stack([np.clip(ua, GRID_U[0], GRID_U[-1]), np.clip(na, GRID_N[0], GRID_N[-1]),
+                    np.clip(ka, GRID_K[0], GRID_K[-1])], axis=-1)
+    return np.asarray(cell_table()(pts.reshape(-1, 3)).reshape(ua.shape), dtype=float)
 
 
 # ------------------------------------------------------------------ the arm
@@ -134,13 +136,15 @@ class LugreArm:
         self.joints = {k: Joint(j.stroke * (1 + 0.07 * z()), j.load * (1 + 0.04 * z()), j.preload, j.kappa,
                                 j.kappa_lever, j.slack) for k, j in sorted(JOINTS.items())}
 
-    def mean_step(self, joint: int, direction: str, q1, q2, q3, theta: float, psi: float) -> np.ndarray:
+    def mean_step(
+        self, joint: int, direction: str, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: float, psi: float
+    ) -> np.ndarray:
         """Mean step (m or rad) at poses (arrays broadcast)."""
-        q1, q2, q3 = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (q1, q2, q3)))
+        q1a, q2a, q3a = np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (q1, q2, q3)))
         g = gravity_in_base(theta, psi)
-        flat = [arm_rotation(a, b) for a, b in zip(q1.ravel(), q2.ravel(), strict=True)]
-        z2 = np.array([r.apply([0.0, 0.0, 1.0]) for r in flat]).reshape(q1.shape + (3,))
-        z1 = np.stack([np.sin(q1), -np.cos(q1), np.zeros_like(q1)], axis=-1)  # Rz(q1) (0, -1, 0)
+        flat = [arm_rotation(a, b) for a, b in zip(q1a.ravel(), q2a.ravel(), strict=True)]
+        z2 = np.array([r.apply([0.0, 0.0, 1.0]) for r in flat]).reshape(q1a.shape + (3,))
+        z1 = np.stack([np.sin(q1a), -np.cos(q1a), np.zeros_like(q1a)], axis=-1)  # Rz(q1) (0, -1, 0)
         p = self.joints[(joint, direction)]
         sign = 1.0 if direction == "+" else -1.0
         along = -(z2 @ g)
@@ -150,15 +154,15 @@ class LugreArm:
             u = -p.load * along * sign
             elevation = np.arcsin(np.clip(z2[..., 2], -1.0, 1.0))
             eff = 1.0 - p.slack * np.sin(elevation) ** 2
-            return cell_step(u, n, p.kappa) * p.stroke * eff
-        lever = (R0 + q3) / (R0 + 0.012)
+            return np.asarray(cell_step(u, n, p.kappa) * p.stroke * eff, dtype=float)
+        lever = (R0 + q3a) / (R0 + 0.012)
         torque = np.cross(z2, np.broadcast_to(g, z2.shape))
         t = -np.sum(torque * z1, axis=-1)  # gravity torque term about joint 2's axis
         u = -p.load * t * lever * sign
         kappa = p.kappa * (1.0 + p.kappa_lever * lever**2)
         return cell_step(u, n, kappa) * p.stroke
 
-    def traverse(self, joint: int, direction: str, pose, day: str) -> Traverse:
+    def traverse(self, joint: int, direction: str, pose: Sequence[float], day: str) -> Traverse:
         """A full-range traverse at ``pose`` (q1, q2, q3, theta, psi): steps = integral dq / gamma, plus noise."""
         lo, hi = RANGES[joint]
         q = np.linspace(lo, hi, 241)

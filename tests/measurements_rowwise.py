@@ -9,6 +9,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -85,7 +86,8 @@ class Traverse:
 
     def with_moving(self, q: float) -> Traverse:
         """A copy whose moving joint's column holds ``q`` (handy for evaluating the model)."""
-        return replace(self, **{f"q{self.joint}": q})
+        changes: dict[str, Any] = {f"q{self.joint}": q}
+        return replace(self, **changes)
 
 
 class TableError(ValueError):

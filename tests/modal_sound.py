@@ -163,4 +163,4 @@ def render(s: Scene) -> np.ndarray:
         b, a = butter(2, [200 / (sr / 2), 2000 / (sr / 2)], "band")
         fan = lfilter(b, a, rng.standard_normal(n))
         x += fan / np.std(fan) * np.sqrt(p) * 0.7 + 0.3 * np.sqrt(p) * np.sin(2 * np.pi * 120 * tt)
-    return x / np.max(np.abs(x)) * 0.5
+    return np.asarray(x / np.max(np.abs(x)) * 0.5, dtype=float)

@@ -11,8 +11,20 @@ Mount compliance is left out here (``mount`` is compared at a stiff mount only).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
+import numpy as np
+from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
+
+Vec = NDArray[np.float64]
+
+
+def _terminal(event: Callable[[float, Vec], float], direction: float) -> Callable[[float, Vec], float]:
+    """``event`` marked as solve_ivp wants it: integration ends where it crosses zero in ``direction``."""
+    event.terminal = True  # type: ignore[attr-defined]  # solve_ivp reads these two attributes of the event
+    event.direction = direction  # type: ignore[attr-defined]
+    return event
 
 
 def peer_step(u: float, n: float, kappa: float, t_fall: float = 0.01, tau_p: float = 0.01, zeta_p: float = 0.25,
@@ -39,16 +51,16 @@ def peer_step(u: float, n: float, kappa: float, t_fall: float = 0.01, tau_p: flo
     while t < 2.0 - 1e-12:
         t_end = min(b for b in breaks if b > t + 1e-12)
         if stick:
-            def rhs(tt, y):
+            def rhs_stick(tt: float, y: Vec) -> list[float]:
                 a = piezo(tt, y[0], y[1])
                 return [y[1], a, y[1]]
 
-            def ev(tt, y):
+            def ev_slip(tt: float, y: Vec) -> float:
                 a = piezo(tt, y[0], y[1])
                 return n - abs(kappa * a - u)
-            ev.terminal = True
-            ev.direction = -1
-            sol = solve_ivp(rhs, (t, t_end), [e, ed, xs], events=ev, rtol=1e-6, atol=1e-9, max_step=tau_p / 6)
+
+            sol = solve_ivp(rhs_stick, (t, t_end), [e, ed, xs], events=_terminal(ev_slip, -1.0), rtol=1e-6, atol=1e-9,
+                            max_step=tau_p / 6)
             e, ed, xs = sol.y[:, -1]
             vs = ed
             t = sol.t[-1]
@@ -58,18 +70,17 @@ def peer_step(u: float, n: float, kappa: float, t_fall: float = 0.01, tau_p: flo
             vr0 = vs - ed
             sgn0 = math.copysign(1.0, vr0) if vr0 != 0 else -math.copysign(1.0, kappa * piezo(t, e, ed) - u)
 
-            def rhs(tt, y, sgn0=sgn0):
+            def rhs_slip(tt: float, y: Vec, sgn0: float = sgn0) -> list[float]:
                 a = piezo(tt, y[0], y[1])
                 vr = y[3] - y[1]
                 fr = friction(vr) if vr != 0 else -sgn0 * n
                 return [y[1], a, y[3], (fr + u) / kappa]
 
-            def ev(tt, y):
-                return y[3] - y[1]
-            ev.terminal = True
-            ev.direction = -sgn0
-            sol = solve_ivp(rhs, (t, t_end), [e, ed, xs, vs], events=ev, rtol=1e-6, atol=1e-9,
-                            max_step=tau_p / 6, first_step=1e-7)
+            def ev_stick(tt: float, y: Vec) -> float:
+                return float(y[3] - y[1])
+
+            sol = solve_ivp(rhs_slip, (t, t_end), [e, ed, xs, vs], events=_terminal(ev_stick, -sgn0), rtol=1e-6,
+                            atol=1e-9, max_step=tau_p / 6, first_step=1e-7)
             e, ed, xs, vs = sol.y[:, -1]
             t = sol.t[-1]
             if sol.status == 1:

@@ -28,9 +28,9 @@ def full_range(joint: int, direction: str) -> tuple[float, float]:
 
 def traverse_from_model(
     model: JointModel,
-    pose: dict,
+    pose: dict[str, float],
     day: str = PINNED_TODAY,
-    rng=None,
+    rng: np.random.Generator | None = None,
     noise: float = 0.0,
     start_end: tuple[float, float] | None = None,
 ) -> Traverse:
@@ -46,7 +46,11 @@ def traverse_from_model(
 
 
 def paper_table(
-    prismatic=PAPER_PRISMATIC, rotary=PAPER_ROTARY, day=PINNED_TODAY, rng=None, noise=0.0
+    prismatic: dict[str, PrismaticParams] = PAPER_PRISMATIC,
+    rotary: dict[str, RotaryParams] = PAPER_ROTARY,
+    day: str = PINNED_TODAY,
+    rng: np.random.Generator | None = None,
+    noise: float = 0.0,
 ) -> list[Traverse]:
     """The paper's 14 calibration traverses (6 prismatic, 8 of joint 2) generated from a truth."""
     rows = []
@@ -54,14 +58,14 @@ def paper_table(
         m = JointModel(3, d, p)
         for q2, th, ps in PRISMATIC_PAPER_POSES.values():
             rows.append(traverse_from_model(m, {"q2": q2, "theta": th, "psi": ps}, day, rng, noise))
-    for d, p in rotary.items():
-        m = JointModel(2, d, p)
+    for d, r in rotary.items():
+        m = JointModel(2, d, r)
         for q3, th, ps in ROTARY_PAPER_POSES:
             rows.append(traverse_from_model(m, {"q2": 0.0, "q3": q3, "theta": th, "psi": ps}, day, rng, noise))
     return rows
 
 
-def random_poses(rng: np.random.Generator, joint: int, n: int) -> list[dict]:
+def random_poses(rng: np.random.Generator, joint: int, n: int) -> list[dict[str, float]]:
     """Random poses (fixed joints and tilt) within range."""
     out = []
     for _ in range(n):
