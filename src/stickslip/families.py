@@ -442,6 +442,14 @@ class FamilyModel(JointModel):
     extra: dict[str, object] = field(default_factory=dict, compare=False)
     members: tuple[tuple[float, FamilyParams], ...] = ()
     """``(weight, params)`` of an averaged model (weights > 0, summing to 1); empty for one family."""
+    member_labels: tuple[str, ...] = field(default=(), compare=False)
+    """The selection's label of each member, in the order of ``members``: the family's name, with
+    ``+shared`` where a parameter is shared by both directions (``normal`` and ``normal+shared`` are two
+    members with the same ``params.family``); empty where not known (a file written before the labels)."""
+
+    def __post_init__(self) -> None:
+        if self.member_labels and len(self.member_labels) != len(self.members):
+            raise ValueError(f"{len(self.member_labels)} member labels for {len(self.members)} members")
 
     @property
     def family(self) -> str:
@@ -454,7 +462,11 @@ class FamilyModel(JointModel):
     def map_params(self, fn: Callable[[FamilyParams], FamilyParams]) -> FamilyModel:
         """The same model with ``fn`` applied to the parameters of every family in it."""
         return FamilyModel(
-            self.joint, self.direction, fn(self.params), members=tuple((w, fn(p)) for w, p in self.members)
+            self.joint,
+            self.direction,
+            fn(self.params),
+            members=tuple((w, fn(p)) for w, p in self.members),
+            member_labels=self.member_labels,
         )
 
     def _mix(self, f: Features) -> NDArray[np.float64]:

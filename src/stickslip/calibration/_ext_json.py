@@ -48,17 +48,19 @@ def ext_fields(cal: Calibration) -> dict[str, object]:
             }
         )
         if m.members:  # a model average: every family with its weight (docs/models.md §3)
+            labels = m.member_labels or (None,) * len(m.members)
             fams[-1]["members"] = [
                 {
                     "weight": float(w),
                     "family": mp.family,
+                    **({"label": lab} if lab else {}),  # e.g. normal+shared: which variant of the family
                     "scale": mp.scale,
                     "parameters": [
                         {"name": name, "q3": q3, "value": float(v), "unit": mp.unit(name)}
                         for (name, q3), v in zip(mp.names(), mp.values, strict=True)
                     ],
                 }
-                for w, mp in m.members
+                for (w, mp), lab in zip(m.members, labels, strict=True)
             ]
     unc: list[dict[str, object]] = []
     for key in sorted(set(cal.sigma_model) | set(cal.covariance)):
@@ -126,6 +128,7 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
             fp, ses = _read_family(rec, j, where)
             members_raw = rec.get("members")
             members: list[tuple[float, FamilyParams]] = []
+            member_labels: list[str] = []
             if members_raw is not None:
                 if not isinstance(members_raw, list) or not members_raw:
                     raise ValueError(f"{where}: members must be a non-empty list")
@@ -137,12 +140,28 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
                     if not 0.0 < w <= 1.0:
                         raise ValueError(f"{mw}: weight must be in (0, 1], got {w!r}")
                     members.append((w, _read_family(mrec, j, mw)[0]))
+                    lab = mrec.get("label")
+                    if lab is not None:
+                        fam = members[-1][1].family
+                        if lab not in (fam, fam + "+shared"):
+                            raise ValueError(f"{mw}: label {lab!r} is not {fam!r} or {fam + '+shared'!r}")
+                        member_labels.append(lab)
                 total = sum(w for w, _ in members)
                 if abs(total - 1.0) > 1e-6:
                     raise ValueError(f"{where}: the members' weights must sum to 1, got {total!r}")
+                _, heaviest = max(members, key=lambda m: m[0])
+                if (heaviest.family, heaviest.values, heaviest.scale) != (fp.family, fp.values, fp.scale):
+                    # the parameters shown (show, --json) are the heaviest member's; the step is the members'
+                    raise ValueError(
+                        f"{where}: the parameters are not those of the member with the largest weight "
+                        f"({heaviest.family}): the file was edited by hand or is damaged"
+                    )
         except (KeyError, TypeError) as e:
             raise ValueError(f"{where}: missing or malformed field {e}") from None
-        cal.models[(j, d)] = FamilyModel(j, d, fp, members=tuple(members))
+        labels_known = len(member_labels) == len(members)  # files before the labels have none
+        cal.models[(j, d)] = FamilyModel(
+            j, d, fp, members=tuple(members), member_labels=tuple(member_labels) if labels_known else ()
+        )
         cal.stderr[(j, d)] = (
             None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
         )

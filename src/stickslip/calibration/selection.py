@@ -433,11 +433,18 @@ def calibrate_families(
         sig = cv_rms if np.isfinite(cv_rms) else fit.rms
         for d in sorted(by_dir):
             params = FamilyParams(fit.spec.name, j, tuple(float(v) for v in fit.values[d]))
+            ranked = sorted(mixture.items(), key=lambda kv: -kv[1][0])
             members = tuple(
-                (w, FamilyParams(f.spec.name, j, tuple(float(v) for v in f.values[d])))
-                for _, (w, f) in sorted(mixture.items(), key=lambda kv: -kv[1][0])
+                (w, FamilyParams(f.spec.name, j, tuple(float(v) for v in f.values[d]))) for _, (w, f) in ranked
             )
-            models[(j, d)] = FamilyModel(j, d, params, members=members if len(members) > 1 else ())
+            averaged = len(members) > 1
+            models[(j, d)] = FamilyModel(
+                j,
+                d,
+                params,
+                members=members if averaged else (),
+                member_labels=tuple(lab for lab, _ in ranked) if averaged else (),
+            )
             c = fit.cov[d]
             if c is not None:
                 cov[(j, d)] = c
