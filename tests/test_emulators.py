@@ -181,3 +181,36 @@ def test_late_reply_from_a_timed_out_command_is_discarded():
                 dev.step(3, 300)  # the emulator needs 0.3 s; we wait 0.05 + a few us
             time.sleep(1.0)  # the late "o" (and the stop's answer) arrive meanwhile
             assert dev.counters()[3] == 300  # the counters answer, not a stale "o\t"
+
+
+@pytest.mark.parametrize("module", ["stickslip.sim.emulators", "stickslip.sim.console_emulator"])
+def test_an_emulator_served_from_the_command_line_stops_cleanly_on_sigterm(module):
+    # python -m <emulator> --tcp prints its URL, serves until SIGTERM, then prints what it received and exits 0
+    import signal
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen(
+        [sys.executable, "-m", module, "--tcp", "--seed", "3"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        url = proc.stdout.readline().strip()
+        assert "://127.0.0.1:" in url, url  # loopback only
+        dev = open_device(url)
+        dev.close()
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=20)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert "commands received" in out
+
+
+def test_a_pseudo_terminal_on_a_system_without_one_is_a_clear_error(monkeypatch):
+    # Windows has no pty: the emulator says to use TCP instead of failing inside tty/termios
+    monkeypatch.setattr(os, "name", "nt")
+    with pytest.raises(OSError, match="transport='tcp'"):
+        NanoControlEmulator(transport="pty").start()

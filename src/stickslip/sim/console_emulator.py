@@ -34,7 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from .arm import FREQUENCY_RANGE, SimulatedMM3A
-from .emulators import GARBAGE, _Emulator
+from .emulators import GARBAGE, _Emulator, serve_until_interrupted
 
 __all__ = ["ConsoleEmulator", "POWER_ON_HZ"]
 
@@ -253,7 +253,6 @@ def _int(word: str, lo: int, hi: int, what: str) -> int:
 def main(argv: list[str] | None = None) -> int:
     """Serve the console emulator until Ctrl-C: ``python -m stickslip.sim.console_emulator``."""
     import argparse
-    import signal
 
     parser = argparse.ArgumentParser(
         prog="python -m stickslip.sim.console_emulator",
@@ -264,20 +263,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--day", default="emulator", help="simulator day label")
     args = parser.parse_args(argv)
     emu = ConsoleEmulator(SimulatedMM3A(seed=args.seed, day=args.day), "tcp" if args.tcp else "pty")
-
-    def _terminate(*_: object) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, _terminate)
-    with emu:
-        print(emu.url, flush=True)
-        try:
-            while True:
-                time.sleep(3600)
-        except KeyboardInterrupt:
-            pass
-        print(f"{len(emu.received)} commands received; steps {emu.steps}", flush=True)
-    return 0
+    return serve_until_interrupted(emu, lambda: f"{len(emu.received)} commands received; steps {emu.steps}")
 
 
 if __name__ == "__main__":  # pragma: no cover

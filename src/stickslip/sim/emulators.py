@@ -32,7 +32,6 @@ import select
 import socket
 import threading
 import time
-import tty
 from collections.abc import Callable
 
 from ..devices.nanocontrol import AMPLITUDE_RANGE, MAX_COARSE, PAUSE_RANGE_MS, SPEED_HZ
@@ -82,6 +81,10 @@ class _Emulator:
         if self._thread is not None:
             return self
         if self.transport == "pty":
+            if os.name != "posix":
+                raise OSError("a pseudo-terminal needs a POSIX system: use transport='tcp' (--tcp) here")
+            import tty  # POSIX only: imported here so the TCP emulators run on Windows too
+
             self._master, self._slave = os.openpty()
             tty.setraw(self._slave)  # no echo, no line editing, until a driver opens it
             self.port = os.ttyname(self._slave)
@@ -545,6 +548,11 @@ def main(argv: list[str] | None = None) -> int:
         emu = ANC300Emulator(sim, args.password, args.realtime, transport=kind)
     else:
         emu = NanoControlEmulator(sim, "tcp" if args.tcp else "pty", realtime=args.realtime)
+    return serve_until_interrupted(emu, lambda: f"{len(emu.received)} commands received")
+
+
+def serve_until_interrupted(emu: _Emulator, summary: Callable[[], str]) -> int:
+    """Serve ``emu``, print its URL, and run until Ctrl-C or SIGTERM; then print ``summary()``. Returns 0."""
     import signal
 
     def _terminate(*_: object) -> None:
@@ -558,7 +566,7 @@ def main(argv: list[str] | None = None) -> int:
                 time.sleep(3600)
         except KeyboardInterrupt:
             pass
-        print(f"{len(emu.received)} commands received", flush=True)
+        print(summary(), flush=True)
     return 0
 
 
