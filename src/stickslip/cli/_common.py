@@ -333,6 +333,14 @@ def calibration_file(option: Path | None, flag: str = "--calibration") -> Path:
     return s.value
 
 
+#: ``--db``'s help, for every command that reads or records the database (:func:`database_setting`)
+DB_HELP = (
+    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, else stickslip.db in your "
+    "data folder: ~/.local/share/stickslip on Linux, %LOCALAPPDATA%\\stickslip on Windows; "
+    "`stickslip config show` says which)."
+)
+
+
 def database_setting(option: Path | None, flag: str = "--db") -> Setting[Path]:
     """The database: ``option``, else ``$STICKSLIP_DB``, else the file's ``database``, else the data folder."""
     import os

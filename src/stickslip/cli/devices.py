@@ -20,6 +20,7 @@ from ..joints import JOINTS, joint_spec
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
 from . import app
 from ._common import (
+    DB_HELP,
     angle_option,
     calibration_file,
     console,
@@ -49,10 +50,6 @@ else:  # numpy loads when a command first needs it, not for --help
     def save_state(*args, **kwargs):
         return _positions.save_state(*args, **kwargs)
 
-_DB_HELP = (
-    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, "
-    "else ~/.local/share/stickslip/stickslip.db)."
-)
 _Q1 = "Record q1 (angle: -30deg, 0.1) first."
 _Q2 = "Record q2 (angle: -90deg, -pi/2) first."
 _Q3 = "Record q3 (length: 2mm, 0) first."
@@ -282,7 +279,7 @@ def move(
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
         "else max_age_days in the config file, else 0).",
     ),
-    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
 ) -> None:
     """Move a joint by a distance or to a position, with the calibrated step-size model.
@@ -421,7 +418,7 @@ def where(
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     offline: bool = typer.Option(
         False, "--offline", help="Do not open the device: only show the kept positions."
     ),

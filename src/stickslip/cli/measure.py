@@ -10,7 +10,7 @@ import typer
 from ..clock import today_label
 from ..units import param_scale
 from . import app
-from ._common import console, db_path, device_url, fail, print_json, user_errors, validation_table, warn_later
+from ._common import DB_HELP, console, db_path, device_url, fail, print_json, user_errors, validation_table, warn_later
 
 
 @app.command()
@@ -202,10 +202,7 @@ def traverse_cmd(
     psi: str = typer.Option("0", help="Base tilt about the new y0."),
     day: str = typer.Option(None, "--day", help="Session label (default: today's ISO date)."),
     append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
-    db: Path = typer.Option(
-        None, "--db", help="SQLite database (default: $STICKSLIP_DB, else database in the config file, else your "
-        "data folder)."
-    ),
+    db: Path = typer.Option(None, "--db", help=DB_HELP),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
     burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
     confirm_s: float | None = typer.Option(

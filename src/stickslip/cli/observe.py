@@ -18,8 +18,8 @@ from ..devices.base import device_key
 from ..joints import JOINTS
 from ..units import format_position
 from . import app
-from ._common import console, fail, open_store, print_json, user_errors, warn_later
-from .devices import _DB_HELP, _DEVICE_HELP, _parse_joint_value, _sd_text
+from ._common import DB_HELP, console, fail, open_store, print_json, user_errors, warn_later
+from .devices import _DEVICE_HELP, _parse_joint_value, _sd_text
 
 DEFAULT_SIGMA = {3: 1e-6, 2: 50e-6, 1: 50e-6}
 """Standard deviation assumed for a measured position when --sigma is not given (m, rad, rad)."""
@@ -45,7 +45,7 @@ def observe(
         help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
     ),
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
-    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the update as JSON (SI units)."),
 ) -> None:
     """Feed a measured position of a joint into its dead reckoning (Kalman update).

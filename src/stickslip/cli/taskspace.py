@@ -18,6 +18,7 @@ from ..joints import joint_spec
 from ..units import UnitError, parse_length
 from . import app
 from ._common import (
+    DB_HELP,
     angle_option,
     calibration_file,
     console,
@@ -48,10 +49,6 @@ else:  # numpy loads when a command first needs it, not for --help
     def save_state(*args, **kwargs):
         return _positions.save_state(*args, **kwargs)
 
-_DB_HELP = (
-    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, "
-    "else ~/.local/share/stickslip/stickslip.db)."
-)
 _DEVICE_HELP = (
     "Controller URL: sim://, mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230] "
     "(its password from $STICKSLIP_ANC300_PASSWORD; default: device in the config file, else sim://)."
@@ -147,7 +144,7 @@ def reach(
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
-    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
 ) -> None:
     """Move the tip in a straight line to a point or by a displacement (task space).
@@ -400,7 +397,7 @@ def jog(
     hold: float = typer.Option(
         0.5, "--hold", min=0.0, max=10.0, help="Seconds a direction key keeps moving without a repeat (0: until space)."
     ),
-    db: Path | None = typer.Option(None, "--db", help=_DB_HELP),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 
