@@ -266,6 +266,34 @@ def test_listen_warns_on_a_dead_file(wavs, tmp_path):
     assert "carries no signal (silence)" in r.stderr
 
 
+def test_listen_names_samples_that_are_not_numbers_and_still_hears_the_stop(wavs, tmp_path):
+    # a damaged float file (a run of NaN, one infinity) is not silently read as silence: one warning with the
+    # count and the first time; the stop is still heard where it is
+    out = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(out)]).exit_code == 0
+    y, sr = read_wav(wavs / "tune.wav")
+    y = y.copy()
+    y[30_000:30_240] = np.nan
+    y[70_000] = np.inf
+    write_wav(tmp_path / "damaged.wav", y, sr)
+    r = runner.invoke(app, ["listen", str(tmp_path / "damaged.wav"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    (ev,) = json.loads(r.stdout)
+    assert abs(ev["onset_s"] - 2.0) < 0.025
+    assert f"241 samples are not numbers (NaN or infinity), the first at {30_000 / sr:.4f} s" in r.stderr
+
+
+def test_clipping_is_judged_at_the_signal_s_own_rails():
+    from stickslip.audio.guard import block_problem, non_finite
+
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal(4096)
+    assert block_problem(40.0 * x) is None  # a float file past 1.0 is not clipped
+    assert block_problem(np.clip(x, -0.05, 0.05)) == "clipping"  # an analog stage clipping below full scale
+    assert block_problem(np.clip(0.3 * x, -1.0, 1.0)) is None
+    assert non_finite(x) == (0, None) and non_finite(np.r_[x, np.nan, 1.0, -np.inf]) == (2, 4096)
+
+
 class _FakeController:
     """A controller without a simulator's shortcuts: steps take their time at 4000 Hz."""
 

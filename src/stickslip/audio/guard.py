@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["NoSignalError", "SignalGuard", "block_problem", "step_line_db"]
+__all__ = ["NoSignalError", "SignalGuard", "block_problem", "non_finite", "step_line_db"]
 
 
 class NoSignalError(RuntimeError):
@@ -46,9 +46,16 @@ def block_problem(block: ArrayLike, floor: float = 1e-6) -> str | None:
         return "silence"
     if float(np.ptp(x)) < floor:
         return "a constant"
-    if float(np.mean(np.abs(x) >= 0.999)) > 0.5:
-        return "clipping"
+    if float(np.mean(np.abs(x) >= 0.999 * peak)) > 0.5:  # stuck at its rails, wherever they are (a float
+        return "clipping"  # file may go past 1 unclipped; an analog stage may clip below full scale)
     return None
+
+
+def non_finite(block: ArrayLike) -> tuple[int, int | None]:
+    """How many samples of ``block`` are NaN or infinite, and the index of the first (None if none)."""
+    bad = ~np.isfinite(np.asarray(block, dtype=np.float64).ravel())
+    count = int(np.count_nonzero(bad))
+    return count, (int(np.argmax(bad)) if count else None)
 
 
 def step_line_db(x: ArrayLike, sample_rate: float, step_hz: float, tolerance: float = 0.03) -> float:

@@ -151,7 +151,7 @@ def listen(
         _listen_live(tuning, device, json_out, confirm_s)
         return
 
-    from ..audio.guard import block_problem
+    from ..audio.guard import block_problem, non_finite
     from ..audio.sources import AudioSourceError, wav_blocks
 
     if tuning.method == "band":
@@ -162,9 +162,15 @@ def listen(
         )
     events = []
     problems: set[str | None] = set()
+    n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
     try:
         det = None
         for block, rate in wav_blocks(recording, block=1 << 16):
+            bad, first = non_finite(block)
+            if bad:
+                n_bad += bad
+                first_bad_s = first_bad_s if first_bad_s is not None else (heard + int(first or 0)) / rate
+            heard += block.size
             if det is None:
                 try:
                     det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s)
@@ -178,6 +184,13 @@ def listen(
         events += det.finish()
     if problems and None not in problems:
         err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
+    if n_bad:
+        err_console.print(
+            f"warning: {recording}: {n_bad} samples are not numbers (NaN or infinity), the first at "
+            f"{first_bad_s:.4f} s: the file is damaged there; they were heard as 0 (NaN) or full scale (infinity)",
+            highlight=False,
+            soft_wrap=True,
+        )
     if json_out:
         print_json([e.to_dict() for e in events])
         return
