@@ -64,7 +64,10 @@ def babble(n: int, sample_rate: int, rms: float, rng: np.random.Generator, level
         )
         if rng.random() < 0.35:  # a fricative
             fric = _resonance(
-                rng.standard_normal(m), rng.uniform(3500, min(8000, 0.4 * sample_rate)), 2500.0, sample_rate
+                rng.standard_normal(m),
+                rng.uniform(min(3500, 0.3 * sample_rate), min(8000, 0.4 * sample_rate)),
+                2500.0,
+                sample_rate,
             )
             syl = syl + fric * (np.std(syl) / max(float(np.std(fric)), 1e-12)) * 0.5
         syl = np.asarray(syl, dtype=np.float64) * np.sin(np.pi * tt / tt[-1]) ** 2
@@ -83,7 +86,10 @@ def click_train(
     x[idx[idx < n]] = rng.uniform(0.7, 1.0, int(np.sum(idx < n)))
     y = sum(
         _resonance(x, f, bw, sample_rate)
-        for f, bw in ((rng.uniform(1500, 3000), 300.0), (rng.uniform(5000, min(11000, 0.4 * sample_rate)), 600.0))
+        for f, bw in (
+            (rng.uniform(1500, 3000), 300.0),
+            (rng.uniform(min(5000, 0.3 * sample_rate), min(11000, 0.4 * sample_rate)), 600.0),
+        )
     )
     y = np.asarray(y, dtype=np.float64)
     return y * rms * 10 ** (level_db / 20) / max(float(np.sqrt(np.mean(y**2))), 1e-12)
