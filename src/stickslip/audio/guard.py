@@ -11,7 +11,9 @@ Thresholds (samples are floats in [-1, 1], full scale 1):
 * silence: peak amplitude below ``floor`` (default 1e-6, -120 dBFS; a real microphone's
   self-noise is far above it);
 * constant: peak-to-peak below ``floor`` (a DC offset, however large);
-* clipping: more than half the samples at or beyond 0.999 of full scale;
+* clipping: more than half the samples at or beyond 0.999 of the block's peak: pinned at its
+  rails, wherever they are (a float file may go past 1 without clipping; an analog stage may
+  clip below full scale);
 * no stepping (when the commanded step rate ``step_hz`` is given): in every window of
   ``window_s`` for ``no_step_s`` without a break, the envelope of the sound (the
   first-differenced signal squared, so hum and thumps count little) shows no line at the

@@ -20,8 +20,7 @@ Sources here:
   capacitive sensor, an encoder): fed position samples, it reports a stop when the
   position stops changing while the joint is stepping. Same interface as the detector.
 
-Samples are floats scaled to the sensor's full scale (``full_scale``): the no-signal
-guard's clipping check compares them with 1.
+Samples are floats scaled to the sensor's full scale (``full_scale``).
 """
 
 from __future__ import annotations
