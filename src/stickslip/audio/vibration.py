@@ -57,7 +57,7 @@ def read_vibration(
         Samples per second, Hz; needed for a CSV of values without a rate comment.
     full_scale : float, optional
         Value that maps to 1.0 (e.g. the accelerometer's range in m/s^2); default: the
-        file's largest magnitude times 1.25 (so nothing counts as clipped).
+        file's largest magnitude times 1.25 (so every sample lies within full scale).
 
     Raises
     ------
