@@ -123,3 +123,94 @@ def test_position_readback_stops_when_the_position_stalls():
     (ev,) = events
     assert abs(ev.onset_s - 0.6) <= 0.005 and 0.015 <= ev.detected_at_s - 0.6 <= 0.03
     assert ReadbackStopDetector.uses_audio is False
+
+
+# ---------------------------------------------------------------- the command line: CSV files and a live serial sensor
+
+
+def _cli():
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    return CliRunner(), app
+
+
+def test_tune_and_listen_take_a_csv_of_vibration_samples(tmp_path):
+    runner, app = _cli()
+    _csv(tmp_path / "train.csv", accel(1000.0, 2.0, 3.0, seed=5), with_time=False)
+    _csv(tmp_path / "test.csv", accel(1100.0, 1.2, 1.8, seed=6, gain=3.0), with_time=True)
+    out = tmp_path / "acc.json"
+    r = runner.invoke(app, ["tune", str(tmp_path / "train.csv"), "--stop-at", "2.0", "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    r = runner.invoke(app, ["listen", str(tmp_path / "test.csv"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0, r.output
+    import json
+
+    (ev,) = json.loads(r.stdout)
+    assert abs(ev["onset_s"] - 1.2) <= 0.025 and ev["detected_at_s"] - 1.2 <= 0.050
+    # a CSV without a rate needs --sample-rate; a WAV refuses it; a sample that is not a number is named by its row
+    y = accel(1000.0, 1.0, 1.5, seed=7)
+    (tmp_path / "norate.csv").write_text("\n".join(f"{v:.5f}" for v in y))
+    r = runner.invoke(app, ["listen", str(tmp_path / "norate.csv"), "--tuning", str(out)])
+    assert r.exit_code == 2 and "--sample-rate" in r.output
+    r = runner.invoke(app, ["listen", str(tmp_path / "norate.csv"), "--tuning", str(out), "--sample-rate", str(SR)])
+    assert r.exit_code == 0 and r.output.count("stop: detected") == 1, r.output
+    write_wav(tmp_path / "t.wav", y / 50.0, SR)
+    r = runner.invoke(app, ["listen", str(tmp_path / "t.wav"), "--tuning", str(out), "--sample-rate", str(SR)])
+    assert r.exit_code == 2 and "carries its own rate" in r.output
+    (tmp_path / "nan.csv").write_text(f"# sample_rate_hz={SR}\n0.1\n0.2\nnan\n")
+    r = runner.invoke(app, ["listen", str(tmp_path / "nan.csv"), "--tuning", str(out)])
+    assert r.exit_code == 2 and "data row 3 holds nan" in r.output
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "openpty"), reason="a pseudo-terminal stands in for the serial port")
+def test_listen_on_a_serial_vibration_sensor(tmp_path, monkeypatch):
+    # an Arduino-like bridge sends one ASCII sample per line on a serial port; listen --serial hears the stop live,
+    # and says so in one line when the sensor falls silent
+    import os
+    import threading
+    import tty
+
+    import serial
+
+    runner, app = _cli()
+    tu = tune(accel(1000.0, 2.0, 3.0, seed=8) / 50.0, SR, 2.0, self_check=False)
+    out = tmp_path / "acc.json"
+    tu.save(out)
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    port = os.ttyname(slave)
+    y = accel(1000.0, 0.9, 1.5, seed=9)
+    payload = "".join(f"{v:.4f}\r\n" for v in y).encode()
+
+    # pyserial empties the input when it opens the port, as a sensor's samples before the opening are lost too:
+    # the bridge starts sending once the port is open (stream time 0 is the first sample read)
+    opened = threading.Event()
+    real_open = serial.serial_for_url
+
+    def open_then_signal(*args, **kwargs):
+        port_ = real_open(*args, **kwargs)
+        opened.set()
+        return port_
+
+    monkeypatch.setattr(serial, "serial_for_url", open_then_signal)
+
+    def send() -> None:
+        opened.wait(timeout=30)
+        for i in range(0, len(payload), 4096):
+            os.write(master, payload[i : i + 4096])
+
+    writer = threading.Thread(target=send, daemon=True)
+    writer.start()
+    try:
+        r = runner.invoke(app, ["listen", "--serial", port, "--tuning", str(out), "--json"])
+    finally:
+        writer.join(timeout=10)
+        os.close(master)
+        os.close(slave)
+    assert r.exit_code == 2 and "no vibration samples for 2 s" in r.output  # the sensor fell silent: one line
+    import json
+
+    events = [json.loads(ln) for ln in r.stdout.splitlines() if ln.startswith("{")]
+    assert len(events) == 1 and abs(events[0]["onset_s"] - 0.9) <= 0.025

@@ -106,11 +106,12 @@ def read_vibration(
     else:
         x = data[:, 0]
     if rate is None:
-        raise AudioSourceError(f"{p}: no sample rate: add a '# sample_rate_hz=...' line or give the rate")
+        raise AudioSourceError(f"{p}: no sample rate: add a '# sample_rate_hz=...' line, or give it (--sample-rate)")
     if not (math.isfinite(rate) and 1_000 <= rate <= 1_000_000):
         raise AudioSourceError(f"{p}: sample rate {rate:g} Hz is outside 1000-1000000 Hz")
     if not np.all(np.isfinite(x)):
-        raise AudioSourceError(f"{p}: non-finite samples")
+        k = int(np.argmax(~np.isfinite(x)))
+        raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, not a finite number")
     fs = float(full_scale) if full_scale else 1.25 * float(np.max(np.abs(x))) or 1.0
     return (x / fs).astype(np.float32), int(round(rate))
 
@@ -179,6 +180,8 @@ class SerialSamples:
                 v = float(s.split(",")[-1])
             except ValueError:
                 raise AudioSourceError(f"not a sample: {s[:40]!r}") from None
+            if not math.isfinite(v):
+                raise AudioSourceError(f"not a finite sample: {s[:40]!r}")
             buf.append(v / self.full_scale)
             if len(buf) >= self.block:
                 yield np.asarray(buf, dtype=np.float32)

@@ -12,12 +12,28 @@ import typer
 from . import app
 from ._common import console, device_url, err_console, fail, print_json, user_errors
 
+#: file suffixes read as a CSV of vibration samples (stickslip.audio.vibration); anything else is audio
+_CSV_SUFFIXES = (".csv", ".txt")
 
-def _load_wav(path: Path) -> tuple[Any, int]:
+_SAMPLE_RATE_HELP = (
+    "Samples per second, Hz, of a CSV of vibration samples that does not say it (a '# sample_rate_hz=...' line "
+    "or a time_s column), or of a --serial sensor (default: the tuning's). WAV files carry their own."
+)
+
+
+def _is_csv(path: Path) -> bool:
+    return path.suffix.lower() in _CSV_SUFFIXES
+
+
+def _load_recording(path: Path, sample_rate: float | None) -> tuple[Any, int]:
+    """Samples and rate of a WAV (any audio file soundfile reads) or of a CSV of vibration samples."""
     from ..audio.sources import AudioSourceError, read_wav
+    from ..audio.vibration import read_vibration
 
+    if sample_rate is not None and not _is_csv(path):
+        fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
     try:
-        return read_wav(path)
+        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path)
     except AudioSourceError as e:
         fail(str(e))
 
@@ -25,7 +41,10 @@ def _load_wav(path: Path) -> tuple[Any, int]:
 @app.command()
 def tune(
     recording: Path = typer.Argument(
-        ..., help="WAV recording: stepping, then stepping against the end stop.", metavar="REC.wav"
+        ...,
+        help="WAV recording (or a CSV of vibration samples, one per row: value or time_s,value): stepping, then "
+        "stepping against the end stop.",
+        metavar="REC.wav",
     ),
     stop_at: float = typer.Option(..., "--stop-at", help="When the joint reached its stop, seconds from the start."),
     out: Path = typer.Option(
@@ -47,6 +66,7 @@ def tune(
         "--self-check/--no-self-check",
         help="Check the tuning on the recording with knocks, babble, +-20 dB gain and a second click train added.",
     ),
+    sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
 ) -> None:
     """Tune the audio limit switch of one joint from a labelled recording.
@@ -57,9 +77,11 @@ def tune(
     Candidates are scored on their worst stepping frames and verified best first on the
     recording; a label that disagrees with where the sound changes is a warning, one
     where nothing changes is refused. The self-check reports the expected false alarms
-    per hour with interference added, and the latency.
+    per hour with interference added, and the latency. A CSV of accelerometer samples
+    (a vacuum chamber, where no air carries the sound) is tuned the same way.
 
-    Example: stickslip tune joint2.wav --stop-at 4.2 --joint 2 -o joint2-tuning.json
+    Examples: stickslip tune joint2.wav --stop-at 4.2 --joint 2 -o joint2-tuning.json
+              stickslip tune accel.csv --sample-rate 25000 --stop-at 4.2 -o accel-tuning.json
     """
     from ..audio.tuning import TuningError, tune_band
     from ..audio.tuning import tune as tune_
@@ -68,7 +90,7 @@ def tune(
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
-    samples, rate = _load_wav(recording)
+    samples, rate = _load_recording(recording, sample_rate)
     duration = samples.size / rate
     if not 0 < stop_at < duration:
         fail(f"--stop-at {stop_at:g} s is outside the recording (0..{duration:.3f} s)")
@@ -95,7 +117,9 @@ def tune(
 
 @app.command()
 def listen(
-    recording: Path = typer.Argument(None, help="WAV file to listen to (or use --mic).", metavar="[REC.wav]"),
+    recording: Path = typer.Argument(
+        None, help="WAV file (or CSV of vibration samples) to listen to; or use --mic or --serial.", metavar="[REC.wav]"
+    ),
     tuning_path: Path = typer.Option(..., "--tuning", help="Tuning JSON written by 'stickslip tune'."),
     mic: bool = typer.Option(False, "--mic", help="Listen live to the microphone until Ctrl-C."),
     device: str = typer.Option(
@@ -103,6 +127,13 @@ def listen(
         "--input",
         help="Audio input device (index or name) for --mic; `python -m sounddevice` lists them.",
     ),
+    serial_port: str = typer.Option(
+        None,
+        "--serial",
+        help="Listen live to a vibration sensor that sends one ASCII sample per line on this serial port "
+        "(/dev/ttyACM0, COM3; an Arduino or DAQ bridge reading an accelerometer) until Ctrl-C.",
+    ),
+    sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
     confirm_s: float | None = typer.Option(
         None,
         "--confirm-s",
@@ -131,12 +162,15 @@ def listen(
 
     Examples: stickslip listen joint2.wav --tuning joint2-tuning.json --json
               stickslip listen --mic --tuning joint2-tuning.json
+              stickslip listen --serial /dev/ttyACM0 --sample-rate 25000 --tuning accel-tuning.json
     """
     from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, check_confirm_s, confirming
     from ..audio.detector import StopDetector, Tuning, TuningFileError
 
-    if mic == (recording is not None):
-        fail("give either a recording REC.wav or --mic")
+    if (recording is not None) + mic + (serial_port is not None) != 1:
+        fail("give one of: a recording REC.wav, --mic, or --serial PORT")
+    if sample_rate is not None and not (sample_rate > 0 and sample_rate < float("inf")):
+        fail(f"--sample-rate must be a positive number of Hz, got {sample_rate!r}")
     try:
         confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
     except ValueError as e:
@@ -150,6 +184,9 @@ def listen(
     if mic:
         _listen_live(tuning, device, json_out, confirm_s)
         return
+    if serial_port is not None:
+        _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s)
+        return
 
     from ..audio.guard import block_problem, non_finite
     from ..audio.sources import AudioSourceError, wav_blocks
@@ -160,12 +197,19 @@ def listen(
             "spectral-template detector (it rejects knocks and hears quieter or duller stops)",
             highlight=False,
         )
+    if _is_csv(recording):
+        samples, csv_rate = _load_recording(recording, sample_rate)
+        blocks = ((samples[i : i + (1 << 16)], csv_rate) for i in range(0, samples.size, 1 << 16))
+    else:
+        if sample_rate is not None:
+            fail(f"--sample-rate is for a CSV of samples or --serial; {recording} carries its own rate")
+        blocks = wav_blocks(recording, block=1 << 16)
     events = []
     problems: set[str | None] = set()
     n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
     try:
         det = None
-        for block, rate in wav_blocks(recording, block=1 << 16):
+        for block, rate in blocks:
             bad, first = non_finite(block)
             if bad:
                 n_bad += bad
@@ -216,6 +260,43 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
     return line
 
 
+def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
+    if json_out:
+        typer.echo(json.dumps(ev.to_dict()))
+    else:
+        console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
+
+
+def _listen_serial(tuning: Any, port: str, sample_rate: float | None, json_out: bool, confirm_s: float) -> None:
+    """Live vibration samples from a serial port through the same detector as sound."""
+    from ..audio.confirm import confirming
+    from ..audio.detector import StopDetector
+    from ..audio.sources import AudioSourceError
+    from ..audio.vibration import SerialSamples
+
+    rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
+    try:
+        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s)
+    except ValueError as e:
+        fail(f"the tuning does not fit {rate} Hz samples: {e}")
+    try:
+        src = SerialSamples(port, sample_rate=rate)
+    except AudioSourceError as err:
+        fail(str(err))
+    if not json_out:
+        err_console.print(f"listening to {port} at {rate} Hz; Ctrl-C to stop", highlight=False)
+    try:
+        for block in src.blocks():
+            for ev in det.feed(block):
+                _print_live(ev, tuning, json_out, confirm_s)
+    except KeyboardInterrupt:
+        pass
+    except AudioSourceError as err:
+        fail(f"{port}: {err}")
+    finally:
+        src.close()
+
+
 def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: float) -> None:
     from ..audio.confirm import confirming
     from ..audio.detector import StopDetector
@@ -233,10 +314,7 @@ def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: flo
     try:
         for block in mic.blocks():
             for ev in det.feed(block):
-                if json_out:
-                    typer.echo(json.dumps(ev.to_dict()))
-                else:
-                    console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
+                _print_live(ev, tuning, json_out, confirm_s)
     except KeyboardInterrupt:
         pass
     except AudioSourceError as err:
