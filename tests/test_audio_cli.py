@@ -294,6 +294,26 @@ def test_clipping_is_judged_at_the_signal_s_own_rails():
     assert non_finite(x) == (0, None) and non_finite(np.r_[x, np.nan, 1.0, -np.inf]) == (2, 4096)
 
 
+def test_a_recording_that_cannot_be_written_is_one_line_and_keeps_the_old_file(tmp_path, monkeypatch):
+    # record into a folder that is not there: one line, exit 2 (was a soundfile traceback)
+    r = runner.invoke(app, ["record", str(tmp_path / "no" / "such" / "r.wav"), "--joint", "3", "--device", "sim://"])
+    _one_line_error(r, "cannot write", "r.wav")
+    # a write that fails half way (a full disk) leaves an earlier recording as it was
+    import soundfile
+
+    old = tmp_path / "take.wav"
+    write_wav(old, np.full(480, 0.25, np.float32), 48_000)
+    before = old.read_bytes()
+
+    def disk_full(*args, **kwargs):
+        raise RuntimeError("Error writing: No space left on device")
+
+    monkeypatch.setattr(soundfile, "write", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        write_wav(old, np.zeros(48_000, np.float32), 48_000)
+    assert old.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["take.wav"]
+
+
 class _FakeController:
     """A controller without a simulator's shortcuts: steps take their time at 4000 Hz."""
 

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from ..records import atomic_write
+
 __all__ = ["AudioSourceError", "Microphone", "read_wav", "wav_blocks", "wav_info", "write_wav"]
 
 _AUDIO_EXTRA = "install the audio extra: pip install 'stickslip[audio]'"
@@ -81,11 +83,23 @@ def read_wav(path: str | Path) -> tuple[np.ndarray, int]:
 
 
 def write_wav(path: str | Path, samples: np.ndarray, sample_rate: int) -> Path:
-    """Write mono samples as a 32-bit float WAV file."""
+    """Write mono samples as a 32-bit float WAV file.
+
+    The write goes through a temporary file in the same folder: a write that fails (a
+    full disk, a folder that is not there or not writable) leaves an earlier file at
+    ``path`` as it was, and raises ``OSError``.
+    """
     sf = _soundfile()
     p = Path(path)
-    sf.write(str(p), np.asarray(samples, dtype=np.float32), int(sample_rate), subtype="FLOAT")
-    return p
+    data = np.asarray(samples, dtype=np.float32)
+
+    def write(f: Any) -> None:
+        try:
+            sf.write(f, data, int(sample_rate), subtype="FLOAT", format="WAV")
+        except (RuntimeError, ValueError, TypeError) as e:  # libsndfile's errors are RuntimeErrors
+            raise OSError(f"cannot write a WAV file: {e}") from None
+
+    return atomic_write(p, write, mode="wb")
 
 
 class Microphone:

@@ -365,6 +365,7 @@ def record(
     from ..audio.sources import AudioSourceError, write_wav
     from ..devices import DeviceError, open_device
     from ..models import direction_label
+    from ..records import atomic_write_text
 
     if joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
@@ -398,7 +399,7 @@ def record(
             "direction": sign_label,
             "label_from": how,
         }
-        out.with_suffix(".json").write_text(json.dumps(label, indent=2) + "\n", encoding="utf-8")
+        atomic_write_text(out.with_suffix(".json"), json.dumps(label, indent=2) + "\n")
     except OSError as e:
         fail(f"cannot write {out}: {e.strerror or e}")
     result: dict[str, object] = {"label": label}
