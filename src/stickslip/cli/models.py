@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from ..records import atomic_write_text
 from . import app
 from ._common import calibration_file, console, fail, print_json, user_errors
 
@@ -67,7 +68,7 @@ def suggest_cmd(
             for d in sorted(dd for jj, dd in cal.models if jj == s.joint):
                 lines.append(",".join([str(s.joint), d, *(repr(float(v)) for v in s.pose)]))
         with user_errors():
-            output.write_text("\n".join(lines) + "\n", encoding="utf-8")
+            atomic_write_text(output, "\n".join(lines) + "\n")
     if json_out:
         print_json([s.as_dict() for s in rows])
         return

@@ -42,6 +42,7 @@ from ..clock import today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
 from ..models import JointModel
+from ..records import atomic_write_text
 from ..sim.arm import NOMINAL, SimulatedMM3A
 from ..sim.oracle import OracleStopDetector
 from ..units import param_scale
@@ -519,7 +520,7 @@ def save_results(result: DemoResult, out: str | Path) -> dict[str, str]:
         if callable(save):
             save(path)
         else:
-            path.write_text(json.dumps(_tuning_dict(tuning), indent=2) + "\n", encoding="utf-8")
+            atomic_write_text(path, json.dumps(_tuning_dict(tuning), indent=2) + "\n")
         files[f"tuning_joint{joint}"] = str(path)
     files["summary"] = str(folder / "summary.json")
     return files
@@ -535,7 +536,7 @@ def _write_summary(result: DemoResult, folder: Path) -> None:
             return [clean(v) for v in o]
         return o
 
-    (folder / "summary.json").write_text(json.dumps(clean(result.to_dict()), indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(folder / "summary.json", json.dumps(clean(result.to_dict()), indent=2) + "\n")
 
 
 class _Bars:

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from ..records import atomic_write, atomic_write_text
 from . import html as pagehtml
 from .d_relation import DRelation, d_relation_data
 from .prismatic import prismatic_data
@@ -64,8 +65,11 @@ class _Figures:
         axes = np.asarray(data.plot(), dtype=object).reshape(-1)
         fig = axes[0].figure
         path = self.out / name
-        fig.savefig(path, dpi=self.dpi)
-        pyplot().close(fig)
+        kind = path.suffix.lstrip(".").lower() or "png"
+        try:  # through a temporary file: a figure from an earlier report stays whole if this fails
+            atomic_write(path, lambda f: fig.savefig(f, dpi=self.dpi, format=kind), mode="wb")
+        finally:
+            pyplot().close(fig)
         self.written.append((path, caption))
 
 
@@ -121,7 +125,7 @@ def build_report(
         pagehtml.figure_section(figs.written, calibration.report()),
     ]
     index = out / "index.html"
-    index.write_text(pagehtml.page("stickslip report", [s for s in sections if s]), encoding="utf-8")
+    atomic_write_text(index, pagehtml.page("stickslip report", [s for s in sections if s]))
     return Report(out, index, [p for p, _ in figs.written], sample)
 
 
