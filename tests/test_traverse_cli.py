@@ -88,3 +88,33 @@ def test_demo_refuses_a_bad_confirmation_window(tmp_path):
 
     with pytest.raises(ValueError, match="confirm_s"):
         run_demo(out=None, confirm_s=-0.1)
+
+
+def test_appending_never_glues_rows_or_writes_into_another_table(tmp_path, monkeypatch):
+    # a table whose last row lost its line end gets one before the new row; a file that is not a measurement
+    # table is refused before the joint moves; a write that fails leaves the table as it was
+    from stickslip.measurements import Traverse
+    from stickslip.procedures.session import append_row
+
+    row = Traverse("2026-11-20", 3, "+", 0.0, -math.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.012, 12000)
+    table = tmp_path / "t.csv"
+    append_row(table, row)
+    table.write_text(table.read_text().rstrip("\n"))  # hand-edited: no line end after the last row
+    append_row(table, row)
+    assert [t.steps for t in read_measurements(table)] == [12000, 12000]
+    other = tmp_path / "other.csv"
+    other.write_text("name,value\nx,1\n")
+    args = ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tmp_path / "none.json"), "-a", str(other)]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2 and "not a measurement table" in r.output and other.read_text() == "name,value\nx,1\n"
+    before = table.read_bytes()
+    import stickslip.records as records
+
+    def full_disk(fd):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(records.os, "fsync", full_disk)  # the disk fills as the new table is flushed
+    with pytest.raises(OSError, match="No space"):
+        append_row(table, row)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other.csv", "t.csv"]  # no temporary file left
+    assert table.read_bytes() == before

@@ -230,9 +230,9 @@ def traverse_cmd(
     from ..clock import today_label
     from ..devices import DeviceError, open_device
     from ..kinematics import JOINTS, Pose
-    from ..measurements import HEADER
+    from ..measurements import HEADER, measurements_to_csv
     from ..models import direction_label
-    from ..procedures.session import append_row, record_traverse, traverse_on_device
+    from ..procedures.session import append_row, check_append_target, record_traverse, traverse_on_device
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
     from ..units import format_step
@@ -254,6 +254,8 @@ def traverse_cmd(
         fail(str(e))
     day = day or today_label()
     with user_errors(DeviceError, TraverseError, StoreError):
+        if append is not None:
+            check_append_target(append)  # before the joint moves: a traverse takes a while
         tun = Tuning.load(tuning)
         if getattr(tun, "joint", None) not in (None, joint):
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
@@ -278,7 +280,12 @@ def traverse_cmd(
             with Store.open(db_path(db)) as st:
                 record_traverse(st, device, row, how="audio")
         if append is not None:
-            append_row(append, row)
+            try:
+                append_row(append, row)
+            except (OSError, ValueError) as e:
+                stored = "it is stored in the database; " if use_db else ""
+                line = measurements_to_csv([row]).split("\n")[1]
+                fail(f"the traverse was measured but not appended to {append} ({e}); {stored}its row: {line}")
     if json_out:
         print_json({**row.as_row(), "gamma": row.gamma, "header": list(HEADER)})
         return

@@ -19,9 +19,10 @@ from ..audio.detector import StopDetector, Tuning
 from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock, device_key
 from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
+from ..records import atomic_write_text
 from .traverse import TraverseResult, measure_traverse
 
-__all__ = ["TraverseStore", "append_row", "record_traverse", "traverse_on_device"]
+__all__ = ["TraverseStore", "append_row", "check_append_target", "record_traverse", "traverse_on_device"]
 
 
 class TraverseStore(StateStore, Protocol):
@@ -89,9 +90,35 @@ def record_traverse(store: TraverseStore, device_url: str, row: Traverse, how: s
     return tid
 
 
+def check_append_target(path: Path) -> str:
+    """What is in the table ``row`` s will be appended to ("" if new or empty); ``ValueError`` if it is not one.
+
+    A file whose first line is not the measurement table's header (design.md §7) is
+    refused rather than have rows in our column order appended to columns of another.
+    """
+    if not path.exists():
+        return ""
+    old = path.read_text(encoding="utf-8-sig")
+    if not old.strip():
+        return ""
+    header = measurements_to_csv([]).split("\n", 1)[0]
+    first = old.lstrip().split("\n", 1)[0].strip()
+    if [c.strip() for c in first.split(",")] != header.split(","):
+        raise ValueError(
+            f"{path} is not a measurement table to append to: its first line is {first[:80]!r}, "
+            f"not the header {header!r} (give a new file)"
+        )
+    return old
+
+
 def append_row(path: Path, row: Traverse) -> None:
-    """Append ``row`` to a measurement table (design.md §7), writing the header if the file is new or empty."""
-    new = not path.exists() or path.stat().st_size == 0
+    """Append ``row`` to a measurement table (design.md §7), writing the header if the file is new or empty.
+
+    The table is rewritten through a temporary file: a failed write leaves it as it was,
+    never with half a row. A last row without its line end gets one first.
+    """
+    old = check_append_target(path)
     text = measurements_to_csv([row])
-    with path.open("a", encoding="utf-8", newline="") as f:
-        f.write(text if new else text.split("\n", 1)[1])
+    if old:
+        text = old + ("" if old.endswith("\n") else "\n") + text.split("\n", 1)[1]
+    atomic_write_text(path, text)
