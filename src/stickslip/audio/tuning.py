@@ -29,6 +29,7 @@ TRIM_FRACTION = 0.1
 MIN_THRESHOLD = 0.4
 #: default hold: how long a stop must last before the detector fires, s
 HOLD_S = 0.016
+_NPASS = 3
 
 #: drop thresholds: this many times the worst drop of the stepping part ...
 DROP_MARGIN = 1.6
@@ -237,7 +238,7 @@ def tune(
         if len(events) == 1 and len(near) == 1:
             ev = near[0]
             passing.append((tu, ev.onset_s - stop_s, ev.detected_at_s - stop_s))
-            if len(passing) >= 3:
+            if len(passing) >= _NPASS:
                 break
         else:
             where = ", ".join(f"{e.detected_at_s:.3f} s" for e in events[:6]) or "never"
