@@ -96,7 +96,11 @@ def click_train(
 
 
 def shaped_noise(
-    n: int, sample_rate: int, edges_hz: tuple[float, ...] | list[float], mean_square: FloatArray, rng: np.random.Generator
+    n: int,
+    sample_rate: int,
+    edges_hz: tuple[float, ...] | list[float],
+    mean_square: FloatArray,
+    rng: np.random.Generator,
 ) -> FloatArray:
     """Stationary noise whose mean square between ``edges_hz[b]`` and ``edges_hz[b + 1]`` is ``mean_square[b]``.
 

@@ -82,8 +82,9 @@ def _pick(
 
     The ranking stands unless the self-check with interference fails clearly (more than
     one false alarm, or a stop missed) or a sound shaped like the stop's own rise fires
-    the candidate (:func:`_rise_mimicry`) while a later one is not fired by it: a tuning
-    that also checks what the stop lowers cannot be fooled by a sound that only adds.
+    the candidate (:func:`_rise_mimicry`) at more of its levels than a later one: a
+    tuning that also checks what the stop lowers cannot be fooled by a sound that only
+    adds.
     Its onset lag and latency are the medians over the clean and the injected runs; the
     self-check, the warnings and both stop times go into ``Tuning.checks``.
     """
@@ -94,7 +95,7 @@ def _pick(
         mimicked = 0
         if self_check and not failed:
             checks["rise_mimic"] = _rise_mimicry(tu, x, sample_rate, stop_s, g, seed)
-            mimicked = int(sum(checks["rise_mimic"].values()) > 0)
+            mimicked = int(sum(checks["rise_mimic"].values()))
         results.append((failed, mimicked, len(results), tu, lag, lat, checks))
         if not failed and not mimicked:
             break
