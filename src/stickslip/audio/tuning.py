@@ -169,8 +169,14 @@ def tune(
        detector would decide on anywhere in the stepping part (knocks and speech
        included) against the stop part's 5th percentile. The threshold goes half-way.
     5. Candidates are verified best first by running the detector over the
-       recording: it must fire once, at the stop. The first that passes wins (among
-       the passing ones, the self-check with injected interference breaks ties).
+       recording: it must fire once, at the stop. Three that pass are enough, unless
+       none of them checks what the stop lowers (its drops are too small against the
+       stepping's spread): then verification walks on to the first that does.
+    6. Of the passing ones, the first wins unless the self-check with injected
+       interference fails clearly, or a sound that adds what the stop adds (and lowers
+       nothing) fires it at more levels than another
+       (:func:`~stickslip.audio.verification._rise_mimicry`); a chosen template that
+       such a sound fires is named in a warning.
     """
     x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     from .guard import block_problem

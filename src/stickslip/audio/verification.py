@@ -119,10 +119,11 @@ def _pick(
         )
     if mimicked:
         lo, hi = tu.band_hz
+        at = ", ".join(k for k, v in checks["rise_mimic"].items() if v)
         warnings.append(
-            f"the stop only adds sound in {lo:.0f}-{hi:.0f} Hz (what it lowers is too little to check): a sound added "
-            "there as the stop adds it fired the detector in the self-check; a voice, a tap or another instrument "
-            "there can look like the stop (listen confirms a stop by its persistence; keep such sounds away)"
+            f"a sound that adds what the stop adds in {lo:.0f}-{hi:.0f} Hz and lowers nothing fired the detector in "
+            f"the self-check ({at} re the stop's rise): a voice, a tap or another instrument there can look like the "
+            "stop (listen confirms a stop by its persistence; keep such sounds away from the microphone)"
         )
     return replace(tu, onset_lag_s=round(lag, 6), latency_measured_s=round(lat, 6), checks=checks)
 
@@ -145,10 +146,11 @@ def _rise_mimicry(
     part's mean power times ``10**(signature/10) - 1`` where the signature is positive;
     nothing where the stop lowers the sound), in bursts of :data:`MIMIC_BURSTS_S`, at
     each of :data:`MIMIC_LEVELS_DB`. A tuning whose stop signature has drops worth
-    checking (:mod:`.template`) is not fired by it: no added sound lowers a sub-band. One
-    that relies on rises alone is, and so is it, in a room, by a voice, a tap or another
-    instrument in those sub-bands. Returns the fires per level (empty when the stepping
-    part is too short to hold a burst).
+    checking (:mod:`.template`) is seldom fired by it: no added sound lowers a sub-band
+    (a faint one asks for drops in proportion, which drops only just worth checking can
+    meet by the stepping's wobble). One that relies on rises alone is, and so it is, in a
+    room, by a voice, a tap or another instrument in those sub-bands. Returns the fires
+    per level (empty when the stepping part is too short to hold a burst).
     """
     from . import inject
     from .template import subband_levels_db
