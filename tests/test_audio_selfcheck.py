@@ -14,6 +14,7 @@ a whistle (a tone with vibrato), not the self-check's shaped noise.
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -27,6 +28,7 @@ from shaped_sound import Arm, render
 from stickslip.audio.detector import detect
 from stickslip.audio.inject import bursts, shaped_noise
 from stickslip.audio.tuning import tune
+from stickslip.audio.tuningfile import Tuning
 
 SR = 48_000
 
@@ -37,8 +39,13 @@ def _drops_in_spreads(signature_db: tuple[float, ...], spread_db: tuple[float, .
     return float(np.sqrt(np.sum(np.maximum(d, -3.0) ** 2)))
 
 
-def _one_stop_on_time(x: np.ndarray, tuning: object, stop_s: float) -> list[tuple[float, float]]:
-    events = detect(x, tuning)  # type: ignore[arg-type]
+def _checks(tu: Tuning) -> dict[str, Any]:
+    assert tu.checks is not None
+    return tu.checks
+
+
+def _one_stop_on_time(x: np.ndarray, tuning: Tuning, stop_s: float) -> list[tuple[float, float]]:
+    events = detect(x, tuning)
     got = [(round(e.onset_s, 3), round(e.detected_at_s, 3)) for e in events]
     assert len(events) == 1, f"stop at {stop_s} s; events (onset, detected) {got}"
     assert abs(events[0].onset_s - stop_s) <= 0.025, got
@@ -74,14 +81,14 @@ def test_the_self_check_names_a_stop_that_only_adds_sound() -> None:
     """A rise-only stop: every candidate is fired by the shaped sound; the tuning says so, and still tunes."""
     arm = Arm(drop_db=0.0, seed=3)
     tu = tune(render(arm), SR, 2.0)
-    assert tu.checks["rise_mimic"]["+0 dB"] >= 1
-    assert any("lowers nothing" in w for w in tu.checks["warnings"]), tu.checks["warnings"]
+    assert _checks(tu)["rise_mimic"]["+0 dB"] >= 1
+    assert any("lowers nothing" in w for w in _checks(tu)["warnings"]), _checks(tu)["warnings"]
     # it still finds the stop in a quiet room
     _one_stop_on_time(render(replace(arm, seed=21, stop_at=2.3, dur=3.0)), tu, 2.3)
     # the same arm whose stop also damps the high modes: nothing fires, nothing to warn about
     both = tune(render(replace(arm, drop_db=-8.0)), SR, 2.0)
-    assert sum(both.checks["rise_mimic"].values()) == 0
-    assert not any("lowers nothing" in w for w in both.checks["warnings"])
+    assert sum(_checks(both)["rise_mimic"].values()) == 0
+    assert not any("lowers nothing" in w for w in _checks(both)["warnings"])
 
 
 def test_the_fourth_generators_rise_only_arm_is_named() -> None:
@@ -89,15 +96,15 @@ def test_the_fourth_generators_rise_only_arm_is_named() -> None:
     tu = tune(modal_render(ModalScene(3, "spectral", stop_at=3.0, dur=4.5, seed=10)), SR, 3.0)
     assert tu.signature_db is not None and tu.spread_db is not None
     assert _drops_in_spreads(tu.signature_db, tu.spread_db) < 2.0
-    assert sum(tu.checks["rise_mimic"].values()) == 3
-    assert any("lowers nothing" in w for w in tu.checks["warnings"])
+    assert sum(_checks(tu)["rise_mimic"].values()) == 3
+    assert any("lowers nothing" in w for w in _checks(tu)["warnings"])
 
 
 def test_no_mimicry_measured_when_the_stepping_part_cannot_hold_a_burst() -> None:
     """0.3 s of stepping before the stop: no room after the warm-up; the check says nothing rather than guess."""
     arm = Arm(stop_at=0.45, dur=1.4, drop_db=0.0, seed=4)
     tu = tune(render(arm), SR, 0.45)
-    assert tu.checks["rise_mimic"] == {}
+    assert _checks(tu)["rise_mimic"] == {}
 
 
 @settings(max_examples=25, deadline=None)
