@@ -8,6 +8,12 @@ second instrument stepping nearby at another rate (a click train through its own
 resonances) and a microphone gain change. Levels are relative to the recording's own
 stepping sound, so the check means the same at any gain.
 
+:func:`shaped_noise` and :func:`bursts` make a sound *shaped like the stop's own rise*:
+noise whose level in each sub-band is what the stop adds there, in bursts. It is not a
+sound a lab has; it asks whether a tuning relies on rises alone (then a sound that adds
+the same, a voice or a tap or another instrument in those sub-bands, looks like the
+stop) or also on what the stop lowers (which no added sound can show).
+
 Everything here is seeded and deterministic.
 """
 
@@ -17,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-__all__ = ["babble", "click_train", "knocks"]
+__all__ = ["babble", "bursts", "click_train", "knocks", "shaped_noise"]
 
 FloatArray = NDArray[np.float64]
 
@@ -93,3 +99,60 @@ def click_train(
     )
     y = np.asarray(y, dtype=np.float64)
     return y * rms * 10 ** (level_db / 20) / max(float(np.sqrt(np.mean(y**2))), 1e-12)
+
+
+def shaped_noise(
+    n: int,
+    sample_rate: int,
+    edges_hz: tuple[float, ...] | list[float],
+    mean_square: FloatArray,
+    rng: np.random.Generator,
+) -> FloatArray:
+    """Stationary noise whose mean square between ``edges_hz[b]`` and ``edges_hz[b + 1]`` is ``mean_square[b]``.
+
+    Parameters
+    ----------
+    n : int
+        Length, samples.
+    sample_rate : int
+        Sample rate, Hz.
+    edges_hz : sequence of float
+        Sub-band edges, Hz (as the detector's: a bin belongs to the band its frequency
+        is at or above the lower edge of).
+    mean_square : numpy.ndarray
+        Mean square per sub-band (full scale 1.0); zero or less leaves the band empty.
+    rng : numpy.random.Generator
+        Source of the noise.
+
+    Returns
+    -------
+    numpy.ndarray
+        The noise, float64; nothing outside the sub-bands.
+    """
+    w = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1 / sample_rate)
+    idx = np.searchsorted(f, np.asarray(edges_hz, dtype=np.float64), side="left")
+    gain = np.zeros(f.size)
+    for b, ms in enumerate(np.asarray(mean_square, dtype=np.float64).tolist()):
+        i0, i1 = int(idx[b]), int(idx[b + 1])
+        if i1 <= i0 or not ms > 0.0:
+            continue
+        have = 2.0 * float(np.sum(np.abs(w[i0:i1]) ** 2)) / n**2  # one-sided: the band's mean square
+        gain[i0:i1] = np.sqrt(ms / max(have, 1e-300))
+    return np.asarray(np.fft.irfft(w * gain, n), dtype=np.float64)
+
+
+def bursts(n: int, sample_rate: int, spans_s: list[tuple[float, float]], ramp_s: float = 0.005) -> FloatArray:
+    """An envelope (0 to 1) that is 1 over each (start, duration) in ``spans_s``, s, with raised-cosine ramps."""
+    env = np.zeros(n)
+    r = max(1, int(ramp_s * sample_rate))
+    ramp = 0.5 - 0.5 * np.cos(np.pi * np.arange(r) / r)
+    for start, dur in spans_s:
+        i0 = max(0, int(start * sample_rate))
+        i1 = min(n, int((start + dur) * sample_rate))
+        if i1 - i0 < 2 * r:
+            continue
+        env[i0:i1] = 1.0
+        env[i0 : i0 + r] = ramp
+        env[i1 - r : i1] = ramp[::-1]
+    return env

@@ -29,6 +29,8 @@ TRIM_FRACTION = 0.1
 MIN_THRESHOLD = 0.4
 #: default hold: how long a stop must last before the detector fires, s
 HOLD_S = 0.016
+#: candidates verified before the self-check picks one (more only while none checks the stop's drops)
+VERIFIED = 3
 
 #: drop thresholds: this many times the worst drop of the stepping part ...
 DROP_MARGIN = 1.6
@@ -167,8 +169,14 @@ def tune(
        detector would decide on anywhere in the stepping part (knocks and speech
        included) against the stop part's 5th percentile. The threshold goes half-way.
     5. Candidates are verified best first by running the detector over the
-       recording: it must fire once, at the stop. The first that passes wins (among
-       the passing ones, the self-check with injected interference breaks ties).
+       recording: it must fire once, at the stop. Three that pass are enough, unless
+       none of them checks what the stop lowers (its drops are too small against the
+       stepping's spread): then verification walks on to the first that does.
+    6. Of the passing ones, the first wins unless the self-check with injected
+       interference fails clearly, or a sound that adds what the stop adds (and lowers
+       nothing) fires it at more levels than another
+       (:func:`~stickslip.audio.verification._rise_mimicry`); a chosen template that
+       such a sound fires is named in a warning.
     """
     x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     from .guard import block_problem
@@ -237,7 +245,9 @@ def tune(
         if len(events) == 1 and len(near) == 1:
             ev = near[0]
             passing.append((tu, ev.onset_s - stop_s, ev.detected_at_s - stop_s))
-            if len(passing) >= 3:
+            # enough to choose from, unless every one relies on the stop's rises alone: a sound that adds the same
+            # looks like it; walk on to the first that also checks what the stop lowers (the self-check decides)
+            if len(passing) >= VERIFIED and any(_checks_drops(t) for t, _, _ in passing):
                 break
         else:
             where = ", ".join(f"{e.detected_at_s:.3f} s" for e in events[:6]) or "never"
@@ -246,6 +256,19 @@ def tune(
         raise _no_template(candidates[0], D, delta, sigma, hold, window, stepping, ends, failures)
     # 4. self-check with interference; the quietest passing candidate wins
     return _pick(passing, x, sample_rate, frame, stop_s, g, seed, self_check, warnings, stop_at_s, change)
+
+
+def _checks_drops(tu: Tuning) -> bool:
+    """Whether the detector of ``tu`` checks that what the stop lowers is lower (its drops are informative).
+
+    The detector's own rule (:mod:`.template`): the signature's drops, in spreads, each
+    capped at ``NEG_CAP``, add up (RMS-summed) to at least ``NEG_INFORMATIVE``.
+    """
+    from .template import NEG_CAP, NEG_INFORMATIVE
+
+    assert tu.signature_db is not None and tu.spread_db is not None
+    g = np.maximum(np.minimum(np.asarray(tu.signature_db), 0.0) / np.asarray(tu.spread_db), -NEG_CAP)
+    return float(g @ g) >= NEG_INFORMATIVE**2
 
 
 def _drop_threshold(

@@ -78,21 +78,29 @@ def _pick(
     stop_at_s: float,
     change: float,
 ) -> Tuning:
-    """Of the verified candidates, the first whose self-check with interference does not clearly fail.
+    """Of the verified candidates, the first whose self-check neither clearly fails nor is mimicked by added sound.
 
+    The ranking stands unless the self-check with interference fails clearly (more than
+    one false alarm, or a stop missed) or a sound shaped like the stop's own rise fires
+    the candidate (:func:`_rise_mimicry`) at more of its levels than a later one: a
+    tuning that also checks what the stop lowers cannot be fooled by a sound that only
+    adds.
     Its onset lag and latency are the medians over the clean and the injected runs; the
     self-check, the warnings and both stop times go into ``Tuning.checks``.
     """
-    results: list[tuple[int, int, Tuning, float, float, dict[str, Any]]] = []
+    results: list[tuple[int, int, int, Tuning, float, float, dict[str, Any]]] = []
     for tu, lag, lat in passing:
         checks: dict[str, Any] = _self_check(tu, x, sample_rate, stop_s, g, seed) if self_check else {}
-        # the ranking stands unless the self-check fails clearly (more than one false alarm, or a stop missed)
         failed = int(checks.get("false_alarms", 0) > 1 or checks.get("stops_found") != checks.get("stops"))
-        results.append((failed, len(results), tu, lag, lat, checks))
-        if not failed:
+        mimicked = 0
+        if self_check and not failed:
+            checks["rise_mimic"] = _rise_mimicry(tu, x, sample_rate, stop_s, g, seed)
+            mimicked = int(sum(checks["rise_mimic"].values()))
+        results.append((failed, mimicked, len(results), tu, lag, lat, checks))
+        if not failed and not mimicked:
             break
-    results.sort(key=lambda r: (r[0], r[1]))
-    _, _, tu, lag, lat, checks = results[0]
+    results.sort(key=lambda r: (r[0], r[1], r[2]))
+    _, mimicked, _, tu, lag, lat, checks = results[0]
     checks = dict(checks)
     # the onset lag and latency from every run that found the stop (one recording's crossing can
     # be nudged by a syllable or a knock; the median of the clean and the injected runs is not)
@@ -109,7 +117,68 @@ def _pick(
             f"with interference injected the detector gave {checks['false_alarms']} false alarms in "
             f"{checks['checked_s']:.0f} s (about {checks['false_alarms_per_hour']:.0f} per hour)"
         )
+    if mimicked:
+        lo, hi = tu.band_hz
+        at = ", ".join(k for k, v in checks["rise_mimic"].items() if v)
+        warnings.append(
+            f"a sound that adds what the stop adds in {lo:.0f}-{hi:.0f} Hz and lowers nothing fired the detector in "
+            f"the self-check ({at} re the stop's rise): a voice, a tap or another instrument there can look like the "
+            "stop (listen confirms a stop by its persistence; keep such sounds away from the microphone)"
+        )
     return replace(tu, onset_lag_s=round(lag, 6), latency_measured_s=round(lat, 6), checks=checks)
+
+
+#: levels of the rise-shaped sound re the stop's own rise, dB (its power added, scaled)
+MIMIC_LEVELS_DB = (-6.0, 0.0, 6.0)
+#: durations of its bursts, s (a syllable, a word, a sentence), played in this order in the stepping part
+MIMIC_BURSTS_S = (0.06, 0.3, 1.0)
+#: the bursts start this long after the recording does (the detector's warm-up), and this far apart, s
+MIMIC_START_S = 0.45
+MIMIC_GAP_S = 0.4
+
+
+def _rise_mimicry(
+    tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int
+) -> dict[str, int]:
+    """Fires of ``tu`` on the stepping part with a sound added that does what the stop does where it adds sound.
+
+    Per sub-band of the tuning, noise with the power the stop adds there (the stepping
+    part's mean power times ``10**(signature/10) - 1`` where the signature is positive;
+    nothing where the stop lowers the sound), in bursts of :data:`MIMIC_BURSTS_S`, at
+    each of :data:`MIMIC_LEVELS_DB`. A tuning whose stop signature has drops worth
+    checking (:mod:`.template`) is seldom fired by it: no added sound lowers a sub-band
+    (a faint one asks for drops in proportion, which drops only just worth checking can
+    meet by the stepping's wobble). One that relies on rises alone is, and so it is, in a
+    room, by a voice, a tap or another instrument in those sub-bands. Returns the fires
+    per level (empty when the stepping part is too short to hold a burst).
+    """
+    from . import inject
+    from .template import subband_levels_db
+
+    assert tu.edges_hz is not None and tu.signature_db is not None
+    end_s = stop_s - guard_s - 0.05
+    spans: list[tuple[float, float]] = []
+    t = MIMIC_START_S
+    for d in MIMIC_BURSTS_S:
+        d = min(d, end_s - t)
+        if d < 0.05:
+            break
+        spans.append((t, d))
+        t += d + MIMIC_GAP_S
+    if not spans:
+        return {}
+    n_step = int((stop_s - guard_s) * sample_rate)
+    V = subband_levels_db(x[:n_step], sample_rate, tu.frame, tu.hop, tu.edges_hz)
+    power = np.mean(10.0 ** (V / 10.0), axis=0)
+    added = power * (10.0 ** (np.maximum(np.asarray(tu.signature_db, dtype=np.float64), 0.0) / 10.0) - 1.0)
+    n = min(x.size, n_step)
+    rng = np.random.default_rng([seed, 7])
+    noise = inject.shaped_noise(n, sample_rate, tu.edges_hz, added, rng) * inject.bursts(n, sample_rate, spans)
+    out: dict[str, int] = {}
+    for level in MIMIC_LEVELS_DB:
+        y = x[:n] + noise * 10.0 ** (level / 20.0)
+        out[f"{level:+.0f} dB"] = len(StopDetector(tu).feed(y))
+    return out
 
 
 def _self_check(
