@@ -58,6 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
+from .stepclock import synchronous_change_db
 
 __all__ = [
     "AFTER_REJECT_S",
@@ -65,6 +66,7 @@ __all__ = [
     "GAP_S",
     "MIN_HOT",
     "MIN_SHARE",
+    "MIN_SYNC_CHANGE_DB",
     "RECENT_S",
     "ConfirmedStopDetector",
     "check_confirm_s",
@@ -88,6 +90,26 @@ RECENT_S = 2.0
 AFTER_REJECT_S = 2.0
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
+#: the step clock: the step-synchronous power in the stop's sub-bands must change by at least this much between the
+#: stepping before the fire and the window after it, dB, up or down (measured: docs/audio.md, "The step clock")
+MIN_SYNC_CHANGE_DB = 1.0
+#: ... and by at least this many standard deviations of its estimate's noise (interference in those sub-bands
+#: adds no line power, but noise to its estimate)
+MIN_SYNC_Z = 4.0
+#: ... judged only where the stepping before the fire shows its lines that clearly, in standard deviations (a
+#: rough clock smears the lines of its higher harmonics: the comb has nothing to compare)
+MIN_SYNC_REF_Z = 10.0
+#: ... judged on this long a stretch on each side, s
+SYNC_SPAN_S = 0.48
+#: ... the stepping ends this long before the fire (the hold and the onset lag: the stop is not in it), s
+SYNC_GAP_S = 0.06
+#: ... on the sub-bands where the signature rises at least half as much as where it rises most, if that is
+#: at least this much, dB, and more than the signature's deepest drop (a stop heard mainly as added sound:
+#: what interference can fake; a stop heard mainly as a drop is left to the drop checks, which it cannot fake)
+SYNC_MIN_RISE_DB = 6.0
+#: ... and not on less than this much of a stretch, s (a recording that ends sooner, or a fire with less stepping
+#: before it - listening began at the stop: no verdict)
+SYNC_MIN_S = 0.2
 
 
 def check_confirm_s(confirm_s: float) -> float:
@@ -119,6 +141,9 @@ class ConfirmedStopDetector:
     after_reject_s : float or None
         The window of a fire within :data:`RECENT_S` of a rejected one, s (at least
         ``confirm_s``; None: ``confirm_s``).
+    step_clock : bool
+        Also ask that the step-synchronous sound in the stop's sub-bands changed (see the
+        module: the step clock); False: persistence alone, as before round 6.
 
     Examples
     --------
@@ -138,6 +163,7 @@ class ConfirmedStopDetector:
         min_share: float = MIN_SHARE,
         min_hot: float = MIN_HOT,
         after_reject_s: float | None = AFTER_REJECT_S,
+        step_clock: bool = True,
     ) -> None:
         c = check_confirm_s(confirm_s)
         if c <= 0.0:
@@ -162,6 +188,12 @@ class ConfirmedStopDetector:
         #: a run of this many frames that are not stop-like ends a stop
         self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
         self._lag = float(tu.onset_lag_s)
+        #: the sub-bands the step clock is judged on (Hz; empty: no step-clock check)
+        self.sync_bands: list[tuple[float, float]] = _stop_bands(tu) if step_clock else []
+        self._span = int(round(SYNC_SPAN_S * self._sr))
+        self._gap = int(round(SYNC_GAP_S * self._sr))
+        # samples kept: the stepping before a fire and the longest window after it
+        self._keep = self._span + self._gap + self._F + (self.after_reject_frames + 2) * self._H
         self.reset(inner._t0)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -179,6 +211,14 @@ class ConfirmedStopDetector:
         self._rejected_at: int | None = None
         #: the fires dropped since the last reset (they did not persist)
         self.rejected: list[StopEvent] = []
+        self._chunks: list[NDArray[np.float64]] = []  # the latest samples, from absolute sample _chunks0 on
+        self._chunks0 = 0
+        self._chunks_n = 0
+        self._ref: NDArray[np.float64] | None = None  # the stepping before the fire that began the current chain
+        #: per fire the step clock decided on: (fire time s, step rate Hz, change of the step-synchronous power in
+        #: the stop's sub-bands dB, the same in standard deviations of its noise, the stepping's line power before
+        #: the fire in standard deviations of its noise)
+        self.step_clock_log: list[tuple[float, float, float, float, float]] = []
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -226,6 +266,8 @@ class ConfirmedStopDetector:
         while pos < x.size:
             take = min(self._room(), x.size - pos)
             events = self.inner.feed(x[pos : pos + take])
+            if self.sync_bands:
+                self._keep_samples(x[pos : pos + take])
             pos += take
             self._fed += take
             self._absorb()
@@ -241,7 +283,7 @@ class ConfirmedStopDetector:
         ev, fire, _ = self._pending
         self._pending = None
         heard = self.inner.frames_seen - 1 - fire
-        if not self._persisted(*self._window(fire, heard)):
+        if not (self._persisted(*self._window(fire, heard)) and self._in_step(ev, fire, heard)):
             self.rejected.append(ev)
             return []
         return [self._confirmed(ev, fire + heard, heard)]
@@ -295,6 +337,11 @@ class ConfirmedStopDetector:
             ev = replace(ev, onset_uncertain=True)
         self._rejected_at = None
         recent = self._last_reject is not None and fire - self._last_reject <= self._recent_frames
+        if self.sync_bands and (not recent or self._ref is None):
+            # the stepping before this fire is the reference (a fire soon after a rejected one keeps its chain's:
+            # the interference may have been going on since)
+            end = fire * self._H + self._F - self._gap
+            self._ref = self._samples(end - self._span, end)
         self._pending = (ev, fire, self.after_reject_frames if recent else self.window_frames)
         return out
 
@@ -320,12 +367,46 @@ class ConfirmedStopDetector:
         if self.inner.frames_seen <= last:
             return []
         self._pending = None
-        if self._persisted(*self._window(fire, window)):
+        if self._persisted(*self._window(fire, window)) and self._in_step(ev, fire, window):
             return [self._confirmed(ev, last, window)]
         self.rejected.append(ev)
         self.inner.unlatch()
         self._rejected_at = self._last_reject = last
         return []
+
+    def _keep_samples(self, x: NDArray[Any]) -> None:
+        v = np.asarray(x, dtype=np.float64)
+        if v.size and not np.all(np.isfinite(v)):
+            v = np.nan_to_num(v, nan=0.0, posinf=1.0, neginf=-1.0)
+        self._chunks.append(v.copy())
+        self._chunks_n += v.size
+        if self._chunks_n > 2 * self._keep:  # trim now and then, not every block
+            whole = np.concatenate(self._chunks)[-self._keep :]
+            self._chunks0 += self._chunks_n - whole.size
+            self._chunks, self._chunks_n = [whole], whole.size
+
+    def _samples(self, lo: int, hi: int) -> NDArray[np.float64]:
+        """The kept samples with absolute indices lo .. hi - 1 (those still kept)."""
+        whole = np.concatenate(self._chunks) if len(self._chunks) != 1 else self._chunks[0]
+        self._chunks = [whole]
+        a, b = max(lo - self._chunks0, 0), max(min(hi - self._chunks0, whole.size), 0)
+        return whole[a:b] if b > a else np.zeros(0)
+
+    def _in_step(self, ev: StopEvent, fire: int, frames: int) -> bool:
+        """Did the step-synchronous sound in the stop's sub-bands change (see the module)? No verdict: True."""
+        if not self.sync_bands or self._ref is None:
+            return True
+        start = fire * self._H + self._F  # the first sample after the fire's frame
+        after = self._samples(start, start + min(self._span, frames * self._H))
+        n = min(self._ref.size, after.size)
+        if n < SYNC_MIN_S * self._sr:
+            return True
+        rate, change, z, z0 = synchronous_change_db(self._ref[-n:], after[:n], self._sr, self.sync_bands)
+        self.step_clock_log.append((ev.detected_at_s, rate, change, z, z0))
+        if not z0 >= MIN_SYNC_REF_Z:  # the step clock is not heard clearly in those bands: no verdict
+            return True
+        # NaN (no rate heard, no lines): no verdict
+        return not (abs(change) < MIN_SYNC_CHANGE_DB or abs(z) < MIN_SYNC_Z)
 
     def _persisted(self, m: NDArray[np.float64], hot: NDArray[np.bool_]) -> bool:
         """Did the stop persist over the window's margins ``m`` and hot flags? (none heard: nothing contradicts it)"""
@@ -338,6 +419,18 @@ class ConfirmedStopDetector:
 
     def _confirmed(self, ev: StopEvent, last: int, frames: int) -> StopEvent:
         return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
+
+
+def _stop_bands(tu: Tuning) -> list[tuple[float, float]]:
+    """The sub-bands where the stop's signature rises at least half its largest rise, Hz ([] if that is small)."""
+    if tu.method != "template" or tu.edges_hz is None or tu.signature_db is None:
+        return []
+    sig = np.asarray(tu.signature_db, dtype=np.float64)
+    top = float(np.max(sig))
+    if top < max(SYNC_MIN_RISE_DB, -float(np.min(sig))):
+        return []
+    e = tu.edges_hz
+    return [(float(e[k]), float(e[k + 1])) for k in np.flatnonzero(sig >= 0.5 * top)]
 
 
 def confirming(detector: Any, confirm_s: float = CONFIRM_S) -> Any:
