@@ -58,7 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
-from .stepclock import synchronous_change_db
+from .stepclock import SyncChange, synchronous_change_db
 
 __all__ = [
     "AFTER_REJECT_S",
@@ -67,6 +67,9 @@ __all__ = [
     "MIN_HOT",
     "MIN_SHARE",
     "MIN_SYNC_CHANGE_DB",
+    "MIN_SYNC_SHARE",
+    "MIN_SYNC_SHARPNESS",
+    "MIN_SYNC_Z",
     "RECENT_S",
     "ConfirmedStopDetector",
     "check_confirm_s",
@@ -96,9 +99,12 @@ MIN_SYNC_CHANGE_DB = 1.0
 #: ... and by at least this many standard deviations of its estimate's noise (interference in those sub-bands
 #: adds no line power, but noise to its estimate)
 MIN_SYNC_Z = 4.0
-#: ... judged only where the stepping before the fire shows its lines that clearly, in standard deviations (a
-#: rough clock smears the lines of its higher harmonics: the comb has nothing to compare)
-MIN_SYNC_REF_Z = 10.0
+#: ... judged only where the clock's lines in those sub-bands were sharp before the fire: at least this share of
+#: their power in a comb 4 times wider lies in the comb (a rough clock smears the lines of its higher harmonics, and
+#: a stop's sound then falls beside the comb as much as interference does; measured: docs/audio.md)
+MIN_SYNC_SHARPNESS = 0.9
+#: ... and where the lines held at least this share of those sub-bands' power before the fire
+MIN_SYNC_SHARE = 0.05
 #: ... judged on this long a stretch on each side, s
 SYNC_SPAN_S = 0.48
 #: ... the stepping ends this long before the fire (the hold and the onset lag: the stop is not in it), s
@@ -215,10 +221,8 @@ class ConfirmedStopDetector:
         self._chunks0 = 0
         self._chunks_n = 0
         self._ref: NDArray[np.float64] | None = None  # the stepping before the fire that began the current chain
-        #: per fire the step clock decided on: (fire time s, step rate Hz, change of the step-synchronous power in
-        #: the stop's sub-bands dB, the same in standard deviations of its noise, the stepping's line power before
-        #: the fire in standard deviations of its noise)
-        self.step_clock_log: list[tuple[float, float, float, float, float]] = []
+        #: per fire the step clock was measured on: (its ``detected_at_s``, what was measured)
+        self.step_clock_log: list[tuple[float, SyncChange]] = []
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -401,12 +405,12 @@ class ConfirmedStopDetector:
         n = min(self._ref.size, after.size)
         if n < SYNC_MIN_S * self._sr:
             return True
-        rate, change, z, z0 = synchronous_change_db(self._ref[-n:], after[:n], self._sr, self.sync_bands)
-        self.step_clock_log.append((ev.detected_at_s, rate, change, z, z0))
-        if not z0 >= MIN_SYNC_REF_Z:  # the step clock is not heard clearly in those bands: no verdict
-            return True
+        got = synchronous_change_db(self._ref[-n:], after[:n], self._sr, self.sync_bands)
+        self.step_clock_log.append((ev.detected_at_s, got))
+        if not (got.sharpness_before >= MIN_SYNC_SHARPNESS and got.share_before >= MIN_SYNC_SHARE):
+            return True  # the clock's lines are smeared there, or hold next to nothing: no verdict
         # NaN (no rate heard, no lines): no verdict
-        return not (abs(change) < MIN_SYNC_CHANGE_DB or abs(z) < MIN_SYNC_Z)
+        return not (abs(got.change_db) < MIN_SYNC_CHANGE_DB or abs(got.change_z) < MIN_SYNC_Z)
 
     def _persisted(self, m: NDArray[np.float64], hot: NDArray[np.bool_]) -> bool:
         """Did the stop persist over the window's margins ``m`` and hot flags? (none heard: nothing contradicts it)"""

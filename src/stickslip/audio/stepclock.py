@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,7 +37,9 @@ __all__ = [
     "LINE_TOL",
     "RATE_HI_HZ",
     "RATE_LO_HZ",
+    "SHARP_WIDTH",
     "SUB_LINE_DB",
+    "SyncChange",
     "WIDEN",
     "band_envelope_spectrum",
     "line_power",
@@ -51,13 +54,15 @@ RATE_LO_HZ = 250.0
 RATE_HI_HZ = 2500.0
 #: harmonics of the step rate counted as synchronous
 HARMONICS = 3
-#: a line at half the strongest one's frequency is the step rate when it stands this far above its
-#: neighbourhood, dB (the guard asks 8 dB of the step-rate line)
-SUB_LINE_DB = 10.0
+#: lines at a third or a half of the strongest one's frequency (and the next multiple) make that the step rate
+#: when each holds this much more power than the continuum would put there, dB
+SUB_LINE_DB = 8.0
 #: a sub-band is widened to at least this many step rates before its lines are counted (it must hold one)
 WIDEN = 2.0
 #: half-width of a harmonic line in the signal's spectrum, as a fraction of its frequency (at least 3 bins)
 COMB_TOL = 0.004
+#: the comb that tells how sharp the lines are is this many times wider
+SHARP_WIDTH = 4.0
 #: the continuum under a harmonic line is read on its flanks, out to this many half-widths
 FLANK = 4.0
 #: half-width of a line, as a fraction of its frequency (a rough clock spreads the k-th line k times wider)
@@ -91,7 +96,7 @@ def band_envelope_spectrum(
     e = y**2
     e = (e - e.mean()) * np.hanning(e.size)
     p = np.abs(np.fft.rfft(e)) ** 2
-    return np.fft.rfftfreq(e.size, 1 / sr), np.asarray(p, dtype=np.float64)
+    return np.asarray(np.fft.rfftfreq(e.size, 1 / sr), dtype=np.float64), np.asarray(p, dtype=np.float64)
 
 
 def _line_mask(f: FloatArray, centre_hz: float) -> NDArray[np.bool_]:
@@ -100,19 +105,29 @@ def _line_mask(f: FloatArray, centre_hz: float) -> NDArray[np.bool_]:
 
 
 def _prominence_db(f: FloatArray, p: FloatArray, centre_hz: float) -> float:
-    """The largest bin within :data:`LINE_TOL` of ``centre_hz`` over the median of 0.75-1.25 x it outside, dB."""
+    """The power within :data:`LINE_TOL` of ``centre_hz`` over what the continuum around it would put there, dB.
+
+    The continuum: the median bin of 0.75-1.25 x ``centre_hz`` outside, divided by ln 2 (the median of noise's
+    periodogram bins is ln 2 of their mean). Integrated, so a line smeared by a rough clock counts in full; noise
+    alone gives 0 dB give or take 1-2.
+    """
     near = _line_mask(f, centre_hz)
     around = (f >= 0.75 * centre_hz) & (f <= 1.25 * centre_hz) & ~near
     if not near.any() or not around.any():
         return float("-inf")
-    return float(10 * np.log10((np.max(p[near]) + 1e-300) / (np.median(p[around]) + 1e-300)))
+    floor = float(np.median(p[around])) / math.log(2.0) * np.count_nonzero(near)
+    return float(10 * np.log10((float(np.sum(p[near])) + 1e-300) / (floor + 1e-300)))
 
 
 def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi_hz: float = RATE_HI_HZ) -> float:
     """The step rate heard in ``x``, Hz: the envelope spectrum's strongest line in [lo, hi].
 
     Each candidate bin is scored by the log power of its first three harmonics (a line
-    at half the rate, or 1.5 times it, lacks some of them); the winner is refined by the power-weighted mean frequency over its line.
+    at half the rate, or 1.5 times it, lacks some of them); a line at a third or half
+    the winner that stands :data:`SUB_LINE_DB` above the continuum (a third: with the
+    line at two thirds) is taken instead
+    (an envelope can be stronger at two or three times the rate); the winner is refined
+    by the power-weighted mean frequency over its line.
     NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
     """
     v = np.asarray(x, dtype=np.float64).ravel()
@@ -133,9 +148,12 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
         score += np.maximum.reduce([logp[np.clip(idx + j, 0, f.size - 1)] for j in range(-2 * k, 2 * k + 1)])
     i = int(sel[int(np.argmax(score))])
     # the clicks' envelope may be stronger at two or three times the rate than at the rate (modes that beat
-    # there): a clear line at a half or a third of the winner, inside the range, is the rate
+    # there): clear lines at a third and two thirds, or a half and three halves, of the winner: the rate
     for div in (3, 2):
-        if f[i] / div >= lo_hz and _prominence_db(f, p, f[i] / div) >= SUB_LINE_DB:
+        sub = f[i] / div
+        # a third: its line and the one at two thirds both clear (chance does not do that); a half: its line
+        lines = (sub, 2 * sub) if div == 3 else (sub,)
+        if sub >= lo_hz and min(_prominence_db(f, p, c) for c in lines) >= SUB_LINE_DB:
             j = int(np.argmin(np.abs(f - f[i] / div)))
             j0, j1 = max(j - 2, 0), min(j + 3, f.size)
             i = j0 + int(np.argmax(p[j0:j1]))
@@ -216,9 +234,9 @@ def widen_bands(
 
 
 def line_power(
-    x: ArrayLike, sample_rate: float, rate_hz: float, bands_hz: Sequence[tuple[float, float]]
-) -> tuple[float, float]:
-    """Power of ``x`` on the harmonic lines of ``rate_hz`` inside ``bands_hz``, above the continuum, and its noise.
+    x: ArrayLike, sample_rate: float, rate_hz: float, bands_hz: Sequence[tuple[float, float]], width: float = 1.0
+) -> tuple[float, float, float]:
+    """Power of ``x`` on the lines of ``rate_hz``'s harmonics in ``bands_hz`` above the continuum, its noise, all of it.
 
     Per harmonic ``k * rate_hz`` in a band: the Hann-windowed power within
     ``h = max(3 bins, COMB_TOL * k * rate_hz)`` of it, less the continuum under it (the
@@ -229,29 +247,31 @@ def line_power(
     power). The noise: the standard deviation of that sum for a continuum alone,
     ``continuum x sqrt(4 x bins)`` per line (periodogram bins of noise scatter by their
     mean, neighbours under a Hann window are correlated, and the continuum is itself an
-    estimate), added in quadrature.
+    estimate), added in quadrature. ``width`` multiplies ``h`` (a wider comb, for how
+    sharp the lines are).
 
     Returns
     -------
-    (float, float)
-        Line power and its standard deviation, mean-square units of ``x`` (a sine of
-        amplitude A on a line gives A^2 / 2); NaN, NaN for a rate that is not finite or a
-        stretch shorter than 20 step periods.
+    (float, float, float)
+        Line power, its standard deviation and the bands' whole power, mean-square units
+        of ``x`` (a sine of amplitude A on a line gives A^2 / 2); NaNs for a rate that is
+        not finite or a stretch shorter than 20 step periods.
     """
     v = np.asarray(x, dtype=np.float64).ravel()
     sr = float(sample_rate)
     if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
-        return float("nan"), float("nan")
+        return float("nan"), float("nan"), float("nan")
     w = np.hanning(v.size)
     p = 2.0 * np.abs(np.fft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
     f = np.fft.rfftfreq(v.size, 1 / sr)
     df = float(f[1] - f[0])
-    total, var = 0.0, 0.0
+    total, var, whole = 0.0, 0.0, 0.0
     for lo, hi in bands_hz:
         inb = (f >= lo) & (f < hi)
+        whole += float(np.sum(p[inb]))
         for k in range(max(1, int(math.ceil(lo / rate_hz))), int(math.floor(hi / rate_hz)) + 1):
             c = k * rate_hz
-            half = max(3 * df, COMB_TOL * c)
+            half = width * max(3 * df, COMB_TOL * c)
             near = (np.abs(f - c) <= half) & inb
             left = (f < c - half) & (f >= c - FLANK * half)
             right = (f > c + half) & (f <= c + FLANK * half)
@@ -261,12 +281,28 @@ def line_power(
                 n = int(np.count_nonzero(near))
                 total += float(np.sum(p[near])) - floor * n
                 var += 4.0 * n * floor**2
-    return total, math.sqrt(var)
+    return total, math.sqrt(var), whole
+
+
+class SyncChange(NamedTuple):
+    """What :func:`synchronous_change_db` measured (NaN: not measured)."""
+
+    #: the step rate heard before, Hz
+    rate_hz: float
+    #: change of the line power, dB (each side floored at 1 % of the larger: -20 to +20 dB at most)
+    change_db: float
+    #: the same change in standard deviations of its noise (:func:`line_power`), signed
+    change_z: float
+    #: share of the bands' power that lies on the step clock's lines before
+    share_before: float
+    #: how sharp the lines are before: their power in the comb over that in a comb :data:`SHARP_WIDTH` times
+    #: wider (1 for a clean clock; a rough clock spreads its higher harmonics wider than the comb)
+    sharpness_before: float
 
 
 def synchronous_change_db(
     before: ArrayLike, after: ArrayLike, sample_rate: float, bands_hz: Sequence[tuple[float, float]]
-) -> tuple[float, float, float, float]:
+) -> SyncChange:
     """How much the step-synchronous power in the bands changed from ``before`` to ``after``.
 
     ``before`` (the stepping) and ``after`` should be of equal length. The rate is heard
@@ -274,17 +310,8 @@ def synchronous_change_db(
     comes with the interference must not be taken for the joint's); each band is widened
     to :data:`WIDEN` step rates (:func:`widen_bands`). Interference adds no power on the
     lines (it is not synchronous with the clock), only noise to their estimate; a stop
-    that is louder there adds power, one that is quieter takes it away.
-
-    Returns
-    -------
-    (float, float, float, float)
-        The step rate heard before, Hz; the change of the line power, dB (each side's
-        power floored at 1 % of the larger: -20 to +20 dB at most); the change in
-        standard deviations of its noise (:func:`line_power`), signed; and the line
-        power before in standard deviations of its own noise (how clearly the step clock
-        is heard in those bands at all: a rough clock smears its higher lines). NaN (no
-        verdict) when no rate is heard or there is no line power on either side.
+    that is louder there adds power, one that is quieter takes it away. NaN fields (no
+    verdict) when no rate is heard or there is no line power on either side.
     """
     a = np.asarray(before, dtype=np.float64).ravel()
     b = np.asarray(after, dtype=np.float64).ravel()
@@ -292,14 +319,16 @@ def synchronous_change_db(
     nan = float("nan")
     rate = step_rate_hz(a, sr)
     if not np.isfinite(rate):
-        return rate, nan, nan, nan
+        return SyncChange(rate, nan, nan, nan, nan)
     bands = widen_bands(bands_hz, rate, sr)
-    (p0, s0), (p1, s1) = line_power(a, sr, rate, bands), line_power(b, sr, rate, bands)
+    (p0, s0, w0), (p1, s1, _) = line_power(a, sr, rate, bands), line_power(b, sr, rate, bands)
+    share = p0 / w0 if w0 > 0 else nan
+    wide = line_power(a, sr, rate, bands, SHARP_WIDTH)[0]
+    sharp = p0 / wide if wide > 0 else nan
     top = max(p0, p1)
-    z0 = p0 / s0 if s0 > 0 else nan
     if not (np.isfinite(top) and top > 0.0):
-        return rate, nan, nan, z0
+        return SyncChange(rate, nan, nan, share, sharp)
     db = float(10 * np.log10(max(p1, 0.01 * top) / max(p0, 0.01 * top)))
     sd = math.hypot(s0, s1)
     z = (p1 - p0) / sd if sd > 0 else math.copysign(math.inf, p1 - p0) if p1 != p0 else 0.0
-    return rate, db, float(z), float(z0)
+    return SyncChange(rate, db, float(z), float(share), float(sharp))
