@@ -437,16 +437,17 @@ def _stop_bands(tu: Tuning) -> list[tuple[float, float]]:
     return [(float(e[k]), float(e[k + 1])) for k in np.flatnonzero(sig >= 0.5 * top)]
 
 
-def confirming(detector: Any, confirm_s: float = CONFIRM_S) -> Any:
+def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = True) -> Any:
     """``detector`` wrapped in a :class:`ConfirmedStopDetector`, where that applies.
 
     ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
     detector that already confirms, or one that does not listen to samples (the
     simulator's oracle, a position read-back): only a :class:`StopDetector` has the
     per-frame evidence to confirm with. The wrapper listens with a fresh detector of the
-    same tuning; ``detector`` itself is left as it was.
+    same tuning; ``detector`` itself is left as it was. ``step_clock`` False confirms by
+    persistence alone (as before round 6).
     """
     c = check_confirm_s(confirm_s)
     if c == 0.0 or not isinstance(detector, StopDetector):
         return detector
-    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c)
+    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, step_clock=step_clock)
