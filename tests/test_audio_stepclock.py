@@ -180,7 +180,7 @@ def _splice_with_stop() -> np.ndarray:
     return y.astype(np.float32)
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=16, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
     joint=st.sampled_from(["P", "Q"]),
     rate=st.floats(900.0, 1300.0),
@@ -190,12 +190,19 @@ def _splice_with_stop() -> np.ndarray:
 def test_a_true_stop_is_confirmed_and_the_step_clock_says_why(
     joint: str, rate: float, seed: int, talk: str | None
 ) -> None:
+    """The step clock loses and moves no stop that persistence confirms; where it judged, the change was clear."""
     s = variant(P if joint == "P" else Q, seed=seed, stop_at=2.0, dur=3.0, rate=rate, speech=talk)
     y, _ = render(s)
+    plain = _run(ConfirmedStopDetector(StopDetector(_tuning(joint))), y)
     det = ConfirmedStopDetector(StopDetector(_tuning(joint)), step_clock=True)
     events = _run(det, y)
-    assert len(events) == 1 and abs(events[0].onset_s - 2.0) <= 0.025, [(e.onset_s, e.detected_at_s) for e in events]
-    # the stop changed the step-synchronous sound in its sub-bands, clearly (or the clock was not judged)
+    assert [(e.onset_s, e.detected_at_s, e.confirmed_at_s) for e in events] == [
+        (e.onset_s, e.detected_at_s, e.confirmed_at_s) for e in plain
+    ]
+    if talk is None:  # under babble the detector itself may hear the stop late or not at all, with or without the clock
+        assert len(events) == 1 and abs(events[0].onset_s - 2.0) <= 0.025, [
+            (e.onset_s, e.detected_at_s) for e in events
+        ]
     for _, got in det.step_clock_log:
         judged = got.sharpness_before >= MIN_SYNC_SHARPNESS and got.share_before >= MIN_SYNC_SHARE
         assert not judged or (abs(got.change_db) >= MIN_SYNC_CHANGE_DB and abs(got.change_z) >= MIN_SYNC_Z)
