@@ -25,7 +25,8 @@ instrument and speech.
 Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
 ``--long-only`` runs the false-alarm hour alone (confirmed events, the detector's
 unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for another hour);
-``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed.
+``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed;
+``--step-clock`` confirms with the step clock too (round 6, off by default).
 """
 
 from __future__ import annotations
@@ -297,7 +298,11 @@ LONG_CONDITIONS: list[tuple[str, dict[str, object]]] = [
 
 
 def false_alarms_per_hour(
-    hours: float = 1.0, piece_s: float = 120.0, seed0: int = 1000, confirm_s: float = CONFIRM_S
+    hours: float = 1.0,
+    piece_s: float = 120.0,
+    seed0: int = 1000,
+    confirm_s: float = CONFIRM_S,
+    step_clock: bool = False,
 ) -> dict[str, tuple[int, int]]:
     """One hour of stepping without a stop per joint of the battery's generator: false alarms per hour.
 
@@ -308,7 +313,8 @@ def false_alarms_per_hour(
     report: the stop persisted for ``confirm_s``, :mod:`stickslip.audio.confirm`, an
     event still provisional when a piece ends counted if it persisted so far); the
     detector's unconfirmed fires (``confirm_s`` 0, the old behaviour) are counted beside
-    them on the same sound. Returns per joint (confirmed, unconfirmed).
+    them on the same sound; ``step_clock`` also asks the step clock
+    (:class:`~stickslip.audio.confirm.ConfirmedStopDetector`). Returns per joint (confirmed, unconfirmed).
     """
     import sys
     from pathlib import Path
@@ -319,7 +325,8 @@ def false_alarms_per_hour(
     n = int(round(hours * 3600 / piece_s))
     print(
         f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces, seeds from "
-        f"{seed0}): confirmed over {confirm_s:g} s (unconfirmed fires in brackets)"
+        f"{seed0}): confirmed over {confirm_s:g} s{' with the step clock' if step_clock else ''} "
+        "(unconfirmed fires in brackets)"
     )
     totals: dict[str, tuple[int, int]] = {}
     for joint in ("P", "Q"):
@@ -334,7 +341,7 @@ def false_alarms_per_hour(
             rate = 900.0 + 360.0 * ((i * 0.618) % 1.0)
             y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
             per.setdefault(name, [0.0, 0.0, 0.0])
-            det = confirming(StopDetector(tu), confirm_s)
+            det = confirming(StopDetector(tu), confirm_s, step_clock)
             confirmed = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
             per[name][0] += len(confirmed)
             per[name][1] += len(StopDetector(tu).feed(y))
@@ -354,14 +361,15 @@ def false_alarms_per_hour(
     return totals
 
 
-def true_stops_under_talk(seeds: int = 5) -> None:
+def true_stops_under_talk(seeds: int = 5, step_clock: bool = False) -> None:
     """Stops heard under talk: 20 s of stepping into the stop with talk, babble or a radio, the first event.
 
     A confirmation must not lose or move a true stop heard under the interference it is
     for. Per joint of the battery's generator: babble, espeak-ng, a second talker, a radio,
     and both talkers at +3 dB, ``seeds`` recordings each (step rates 1080-1160 Hz), 2.5 s
     of the stop after it; the first event is what a traverse would count to (early: a false
-    stop; late by more than 25 ms; ``onset_uncertain``: a traverse refuses it).
+    stop; late by more than 25 ms; ``onset_uncertain``: a traverse refuses it). ``step_clock``
+    also asks the step clock.
     """
     import sys
     from pathlib import Path
@@ -388,7 +396,11 @@ def true_stops_under_talk(seeds: int = 5) -> None:
         for k, kw in enumerate(talk):
             for s_ in range(seeds):
                 y, _ = render(Scene(joint, 1080.0 + 20 * s_, 20.0, 22.5, seed=300 + 10 * k + s_, **kw))  # type: ignore[arg-type]
-                for name, det in (("unconfirmed", StopDetector(tu)), ("confirmed", confirming(StopDetector(tu)))):
+                dets = (
+                    ("unconfirmed", StopDetector(tu)),
+                    ("confirmed", confirming(StopDetector(tu), step_clock=step_clock)),
+                )
+                for name, det in dets:
                     ev = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
                     err = ev[0].onset_s - 20.0 if ev else None
                     key = (
@@ -417,10 +429,11 @@ if __name__ == "__main__":
     ap.add_argument("--seed", type=int, default=1000, help="seed of the first piece (--long-only)")
     ap.add_argument("--confirm-s", type=float, default=CONFIRM_S, help="confirmation window, s (0: unconfirmed)")
     ap.add_argument("--under-talk", action="store_true", help="run the true stops under talk alone")
+    ap.add_argument("--step-clock", action="store_true", help="confirm with the step clock too (round 6, opt-in)")
     args = ap.parse_args()
     if args.under_talk:
-        true_stops_under_talk()
+        true_stops_under_talk(step_clock=args.step_clock)
     elif args.long_only:
-        false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s)
+        false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock)
     else:
         main()

@@ -5,6 +5,8 @@
   (:mod:`.labels`, :mod:`.verification`; :mod:`.band_tuning` for version-1 tunings)
 * :mod:`.template` the spectral-template change detector; :mod:`.meter` the record meter
 * :mod:`.sources`  WAV files in blocks, a live microphone
+* :mod:`.confirm`  a fire confirmed by its persistence; :mod:`.stepclock` the step rate and the
+  step-synchronous power heard in the sound (the step clock, an opt-in condition of confirmation)
 """
 
 from __future__ import annotations

@@ -1,0 +1,334 @@
+"""The step clock heard in the sound: the step rate, and how step-synchronous a band is.
+
+Every sound a stepping joint makes - stepping and stopped alike - is a train of clicks at
+the controller's step rate: at an end stop the drive keeps stepping, and each step still
+slips and clicks. The *envelope* of such a sound (the band-passed signal, squared) is
+periodic at the step rate: its spectrum has lines at the rate and its multiples. A voice,
+a radio, a fan or a second instrument at another rate is not synchronous with it.
+
+Two measures over a stretch of samples (tens to hundreds of ms):
+
+* :func:`step_rate_hz`, the step rate heard: the strongest line of the envelope spectrum
+  (first-differenced signal squared, as the guard's
+  :func:`~stickslip.audio.guard.step_line_db`) between :data:`RATE_LO_HZ` and
+  :data:`RATE_HI_HZ`, refined by its harmonics, Hz;
+* :func:`synchrony`, the share of a band's envelope fluctuation that lies on the lines at
+  the step rate and its first :data:`HARMONICS` multiples (within :data:`LINE_TOL` of each,
+  at least two bins), against all of it from 20 Hz to just above the last line: 1 for a
+  clean click train through the joint's modes, near 0 for noise or a voice.
+
+Both are plain functions of a stretch of samples: they do not depend on how a stream was
+cut into blocks. Units: Hz for rates, dimensionless shares.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "COMB_TOL",
+    "FLANK",
+    "HARMONICS",
+    "LINE_TOL",
+    "RATE_HI_HZ",
+    "RATE_LO_HZ",
+    "SHARP_WIDTH",
+    "SUB_LINE_DB",
+    "SyncChange",
+    "WIDEN",
+    "band_envelope_spectrum",
+    "line_power",
+    "step_rate_hz",
+    "synchronous_change_db",
+    "synchrony",
+    "widen_bands",
+]
+
+#: step rates looked for, Hz (the controller's range with margin: 700-1400 Hz +- 10 %, and slower arms)
+RATE_LO_HZ = 250.0
+RATE_HI_HZ = 2500.0
+#: harmonics of the step rate counted as synchronous
+HARMONICS = 3
+#: lines at a third or a half of the strongest one's frequency (and the next multiple) make that the step rate
+#: when each holds this much more power than the continuum would put there, dB
+SUB_LINE_DB = 8.0
+#: a sub-band is widened to at least this many step rates before its lines are counted (it must hold one)
+WIDEN = 2.0
+#: half-width of a harmonic line in the signal's spectrum, as a fraction of its frequency (at least 3 bins)
+COMB_TOL = 0.004
+#: the comb that tells how sharp the lines are is this many times wider
+SHARP_WIDTH = 4.0
+#: the continuum under a harmonic line is read on its flanks, out to this many half-widths
+FLANK = 4.0
+#: half-width of a line, as a fraction of its frequency (a rough clock spreads the k-th line k times wider)
+LINE_TOL = 0.02
+
+FloatArray = NDArray[np.float64]
+
+
+def band_envelope_spectrum(
+    x: ArrayLike, sample_rate: float, bands_hz: Sequence[tuple[float, float]] | None = None
+) -> tuple[FloatArray, FloatArray]:
+    """Power spectrum of the envelope of ``x`` restricted to ``bands_hz`` (all of it if None).
+
+    The band signal is ``x`` with every FFT bin outside the bands zeroed (no bands: the
+    first difference of ``x``, as the guard's envelope); its envelope is its square, less
+    its mean, under a Hann window. Returns the frequencies (Hz) and powers (arbitrary
+    unit, the same for every call on stretches of one length).
+    """
+    v = np.asarray(x, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    if bands_hz is None:
+        y = np.diff(v)
+    else:
+        spec = np.fft.rfft(v * np.hanning(v.size))
+        f = np.fft.rfftfreq(v.size, 1 / sr)
+        keep = np.zeros(f.size, dtype=bool)
+        for lo, hi in bands_hz:
+            keep |= (f >= lo) & (f < hi)
+        spec[~keep] = 0.0
+        y = np.fft.irfft(spec, v.size)
+    e = y**2
+    e = (e - e.mean()) * np.hanning(e.size)
+    p = np.abs(np.fft.rfft(e)) ** 2
+    return np.asarray(np.fft.rfftfreq(e.size, 1 / sr), dtype=np.float64), np.asarray(p, dtype=np.float64)
+
+
+def _line_mask(f: FloatArray, centre_hz: float) -> NDArray[np.bool_]:
+    df = float(f[1] - f[0]) if f.size > 1 else 1.0
+    return np.asarray(np.abs(f - centre_hz) <= max(LINE_TOL * centre_hz, 2.0 * df), dtype=bool)
+
+
+def _prominence_db(f: FloatArray, p: FloatArray, centre_hz: float) -> float:
+    """The power within :data:`LINE_TOL` of ``centre_hz`` over what the continuum around it would put there, dB.
+
+    The continuum: the median bin of 0.75-1.25 x ``centre_hz`` outside, divided by ln 2 (the median of noise's
+    periodogram bins is ln 2 of their mean). Integrated, so a line smeared by a rough clock counts in full; noise
+    alone gives 0 dB give or take 1-2.
+    """
+    near = _line_mask(f, centre_hz)
+    around = (f >= 0.75 * centre_hz) & (f <= 1.25 * centre_hz) & ~near
+    if not near.any() or not around.any():
+        return float("-inf")
+    floor = float(np.median(p[around])) / math.log(2.0) * np.count_nonzero(near)
+    return float(10 * np.log10((float(np.sum(p[near])) + 1e-300) / (floor + 1e-300)))
+
+
+def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi_hz: float = RATE_HI_HZ) -> float:
+    """The step rate heard in ``x``, Hz: the envelope spectrum's strongest line in [lo, hi].
+
+    Each candidate bin is scored by the log power of its first three harmonics (a line
+    at half the rate, or 1.5 times it, lacks some of them); a line at a third or half
+    the winner that stands :data:`SUB_LINE_DB` above the continuum (a third: with the
+    line at two thirds) is taken instead
+    (an envelope can be stronger at two or three times the rate); the winner is refined
+    by the power-weighted mean frequency over its line.
+    NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
+    """
+    v = np.asarray(x, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    if v.size < 20 * sr / lo_hz or not np.any(v != v[0]):
+        return float("nan")
+    f, p = band_envelope_spectrum(v, sr)
+    df = float(f[1] - f[0])
+    sel = np.flatnonzero((f >= lo_hz) & (f <= hi_hz))
+    if sel.size == 0:
+        return float("nan")
+    # each candidate scored by the log power of its first three harmonics (each the largest bin within 2 bins):
+    # a line at 1.5 or 2 times the rate, or half of it, lacks some of them
+    logp = np.log(p + 1e-300 + 1e-12 * float(np.max(p)))
+    score = np.zeros(sel.size)
+    for k in (1, 2, 3):
+        idx = np.minimum(k * sel, f.size - 1)
+        score += np.maximum.reduce([logp[np.clip(idx + j, 0, f.size - 1)] for j in range(-2 * k, 2 * k + 1)])
+    i = int(sel[int(np.argmax(score))])
+    # the clicks' envelope may be stronger at two or three times the rate than at the rate (modes that beat
+    # there): clear lines at a third and two thirds, or a half and three halves, of the winner: the rate
+    for div in (3, 2):
+        sub = f[i] / div
+        # a third: its line and the one at two thirds both clear (chance does not do that); a half: its line
+        lines = (sub, 2 * sub) if div == 3 else (sub,)
+        if sub >= lo_hz and min(_prominence_db(f, p, c) for c in lines) >= SUB_LINE_DB:
+            j = int(np.argmin(np.abs(f - f[i] / div)))
+            j0, j1 = max(j - 2, 0), min(j + 3, f.size)
+            i = j0 + int(np.argmax(p[j0:j1]))
+            break
+    w = max(2, int(round(0.01 * f[i] / df)))
+    j0, j1 = max(i - w, 0), min(i + w + 1, f.size)
+    total = float(np.sum(p[j0:j1]))
+    if not total > 0.0:
+        return float("nan")
+    return float(np.sum(f[j0:j1] * p[j0:j1]) / total)
+
+
+def synchrony(
+    x: ArrayLike,
+    sample_rate: float,
+    rate_hz: float,
+    bands_hz: Sequence[tuple[float, float]] | None = None,
+) -> float:
+    """Share of the band envelope's fluctuation on the lines at ``rate_hz`` and its multiples.
+
+    Parameters
+    ----------
+    x : array_like
+        Samples (at least 20 step periods).
+    sample_rate : float
+        Samples per second, Hz.
+    rate_hz : float
+        The step rate, Hz (:func:`step_rate_hz`).
+    bands_hz : sequence of (lo, hi), optional
+        The bands whose envelope is judged, Hz (None: the whole first-differenced signal).
+
+    Returns
+    -------
+    float
+        In [0, 1]: the envelope power within :data:`LINE_TOL` of the first
+        :data:`HARMONICS` multiples of ``rate_hz`` over the power from 20 Hz to
+        ``(HARMONICS + 0.5) * rate_hz``; NaN for a rate that is not finite, a stretch
+        too short, or a silent band.
+    """
+    v = np.asarray(x, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
+        return float("nan")
+    f, p = band_envelope_spectrum(v, sr, bands_hz)
+    span = (f >= 20.0) & (f <= (HARMONICS + 0.5) * rate_hz)
+    total = float(np.sum(p[span]))
+    if not total > 0.0:
+        return float("nan")
+    lines = np.zeros(f.size, dtype=bool)
+    for k in range(1, HARMONICS + 1):
+        lines |= _line_mask(f, k * rate_hz)
+    return float(np.sum(p[span & lines]) / total)
+
+
+def widen_bands(
+    bands_hz: Sequence[tuple[float, float]], rate_hz: float, sample_rate: float
+) -> list[tuple[float, float]]:
+    """``bands_hz`` each widened about its centre to at least :data:`WIDEN` x ``rate_hz``, merged where they meet, Hz.
+
+    A sub-band narrower than the step rate may hold no harmonic of it at all (joint P's
+    5.2 kHz mode between the 1160 Hz lines at 4640 and 5800 Hz): the stop's sound is on
+    the nearest lines, outside the sub-band. Kept within 50 Hz - 0.48 ``sample_rate``.
+    """
+    out = []
+    for lo, hi in bands_hz:
+        if hi - lo < WIDEN * rate_hz:
+            c = 0.5 * (lo + hi)
+            lo, hi = c - WIDEN * rate_hz / 2, c + WIDEN * rate_hz / 2
+        out.append((max(50.0, float(lo)), min(0.48 * float(sample_rate), float(hi))))
+    out.sort()
+    merged: list[tuple[float, float]] = []
+    for lo, hi in out:
+        if merged and lo <= merged[-1][1]:
+            merged[-1] = (merged[-1][0], max(hi, merged[-1][1]))
+        elif hi > lo:
+            merged.append((lo, hi))
+    return merged
+
+
+def line_power(
+    x: ArrayLike, sample_rate: float, rate_hz: float, bands_hz: Sequence[tuple[float, float]], width: float = 1.0
+) -> tuple[float, float, float]:
+    """Power of ``x`` on the lines of ``rate_hz``'s harmonics in ``bands_hz`` above the continuum, its noise, all of it.
+
+    Per harmonic ``k * rate_hz`` in a band: the Hann-windowed power within
+    ``h = max(3 bins, COMB_TOL * k * rate_hz)`` of it, less the continuum under it (the
+    mean of the median bins of its two flanks, h to :data:`FLANK` h away: a straight
+    line through the flanks, so a sloping noise spectrum is not taken for a line) times
+    the bins counted (a median of noise's periodogram bins is ln 2 of their mean: it is
+    divided by ln 2). The sum is not clipped at 0 (clipping would turn noise into line
+    power). The noise: the standard deviation of that sum for a continuum alone,
+    ``continuum x sqrt(4 x bins)`` per line (periodogram bins of noise scatter by their
+    mean, neighbours under a Hann window are correlated, and the continuum is itself an
+    estimate), added in quadrature. ``width`` multiplies ``h`` (a wider comb, for how
+    sharp the lines are).
+
+    Returns
+    -------
+    (float, float, float)
+        Line power, its standard deviation and the bands' whole power, mean-square units
+        of ``x`` (a sine of amplitude A on a line gives A^2 / 2); NaNs for a rate that is
+        not finite or a stretch shorter than 20 step periods.
+    """
+    v = np.asarray(x, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
+        return float("nan"), float("nan"), float("nan")
+    w = np.hanning(v.size)
+    p = 2.0 * np.abs(np.fft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
+    f = np.fft.rfftfreq(v.size, 1 / sr)
+    df = float(f[1] - f[0])
+    total, var, whole = 0.0, 0.0, 0.0
+    for lo, hi in bands_hz:
+        inb = (f >= lo) & (f < hi)
+        whole += float(np.sum(p[inb]))
+        for k in range(max(1, int(math.ceil(lo / rate_hz))), int(math.floor(hi / rate_hz)) + 1):
+            c = k * rate_hz
+            half = width * max(3 * df, COMB_TOL * c)
+            near = (np.abs(f - c) <= half) & inb
+            left = (f < c - half) & (f >= c - FLANK * half)
+            right = (f > c + half) & (f <= c + FLANK * half)
+            if near.any() and left.any() and right.any():
+                # the median of noise's periodogram bins is ln 2 of their mean (they scatter exponentially)
+                floor = 0.5 * (float(np.median(p[left])) + float(np.median(p[right]))) / math.log(2.0)
+                n = int(np.count_nonzero(near))
+                total += float(np.sum(p[near])) - floor * n
+                var += 4.0 * n * floor**2
+    return total, math.sqrt(var), whole
+
+
+class SyncChange(NamedTuple):
+    """What :func:`synchronous_change_db` measured (NaN: not measured)."""
+
+    #: the step rate heard before, Hz
+    rate_hz: float
+    #: change of the line power, dB (each side floored at 1 % of the larger: -20 to +20 dB at most)
+    change_db: float
+    #: the same change in standard deviations of its noise (:func:`line_power`), signed
+    change_z: float
+    #: share of the bands' power that lies on the step clock's lines before
+    share_before: float
+    #: how sharp the lines are before: their power in the comb over that in a comb :data:`SHARP_WIDTH` times
+    #: wider (1 for a clean clock; a rough clock spreads its higher harmonics wider than the comb)
+    sharpness_before: float
+
+
+def synchronous_change_db(
+    before: ArrayLike, after: ArrayLike, sample_rate: float, bands_hz: Sequence[tuple[float, float]]
+) -> SyncChange:
+    """How much the step-synchronous power in the bands changed from ``before`` to ``after``.
+
+    ``before`` (the stepping) and ``after`` should be of equal length. The rate is heard
+    on ``before`` alone and used for both (a stop does not change it; a louder clock that
+    comes with the interference must not be taken for the joint's); each band is widened
+    to :data:`WIDEN` step rates (:func:`widen_bands`). Interference adds no power on the
+    lines (it is not synchronous with the clock), only noise to their estimate; a stop
+    that is louder there adds power, one that is quieter takes it away. NaN fields (no
+    verdict) when no rate is heard or there is no line power on either side.
+    """
+    a = np.asarray(before, dtype=np.float64).ravel()
+    b = np.asarray(after, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    nan = float("nan")
+    rate = step_rate_hz(a, sr)
+    if not np.isfinite(rate):
+        return SyncChange(rate, nan, nan, nan, nan)
+    bands = widen_bands(bands_hz, rate, sr)
+    (p0, s0, w0), (p1, s1, _) = line_power(a, sr, rate, bands), line_power(b, sr, rate, bands)
+    share = p0 / w0 if w0 > 0 else nan
+    wide = line_power(a, sr, rate, bands, SHARP_WIDTH)[0]
+    sharp = p0 / wide if wide > 0 else nan
+    top = max(p0, p1)
+    if not (np.isfinite(top) and top > 0.0):
+        return SyncChange(rate, nan, nan, share, sharp)
+    db = float(10 * np.log10(max(p1, 0.01 * top) / max(p0, 0.01 * top)))
+    sd = math.hypot(s0, s1)
+    z = (p1 - p0) / sd if sd > 0 else math.copysign(math.inf, p1 - p0) if p1 != p0 else 0.0
+    return SyncChange(rate, db, float(z), float(share), float(sharp))
