@@ -249,3 +249,27 @@ def test_the_simulators_stop_is_off_the_comb_which_is_why_the_step_clock_is_opt_
     (_, first), *_ = det.step_clock_log
     assert first.sharpness_before >= MIN_SYNC_SHARPNESS and first.share_before >= 0.9  # a clean clock, judged
     assert abs(first.change_z) < MIN_SYNC_Z
+
+
+def test_listen_step_clock_on_the_command_line(tmp_path: Path) -> None:
+    """``listen --step-clock`` passes the splice by and reports the stop; without it the splice is reported first."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from stickslip.audio.sources import write_wav
+    from stickslip.cli import app
+
+    runner = CliRunner()
+    _tuning("P").save(tmp_path / "p.json")
+    write_wav(tmp_path / "rec.wav", _splice_with_stop(), SR)
+    base = ["listen", str(tmp_path / "rec.wav"), "--tuning", str(tmp_path / "p.json"), "--json"]
+    r = runner.invoke(app, base)
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)[0]["onset_s"] == pytest.approx(1.5, abs=0.05)  # persistence alone: the splice
+    r = runner.invoke(app, [*base, "--step-clock"])
+    assert r.exit_code == 0, r.output
+    (ev,) = json.loads(r.stdout)
+    assert ev["onset_s"] == pytest.approx(4.5, abs=0.025)
+    r = runner.invoke(app, [*base, "--step-clock", "--confirm-s", "0"])
+    assert r.exit_code == 2 and "--confirm-s > 0" in r.output

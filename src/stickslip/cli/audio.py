@@ -143,6 +143,15 @@ def listen(
         ),
         show_default=False,
     ),
+    step_clock: bool = typer.Option(
+        False,
+        "--step-clock/--no-step-clock",
+        help=(
+            "Also ask the step clock before reporting a stop: a real stop's clicks keep the steps' rhythm, talk, a "
+            "radio or another instrument do not (fewer false alarms). Off by default: check first that your arm's "
+            "stop is on the clock (docs/audio.md, 'The step clock'); where it is not, no stop is ever reported."
+        ),
+    ),
     json_out: bool = typer.Option(
         False,
         "--json",
@@ -175,6 +184,8 @@ def listen(
         confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
     except ValueError as e:
         fail(f"--confirm-s: {e}")
+    if step_clock and confirm_s == 0:
+        fail("--step-clock judges a stop while it is confirmed: give --confirm-s > 0")
     try:
         tuning = Tuning.load(tuning_path)
     except TuningFileError as e:
@@ -182,10 +193,10 @@ def listen(
     except OSError as e:
         fail(f"cannot read tuning {tuning_path}: {e.strerror or e}")
     if mic:
-        _listen_live(tuning, device, json_out, confirm_s)
+        _listen_live(tuning, device, json_out, confirm_s, step_clock)
         return
     if serial_port is not None:
-        _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s)
+        _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock)
         return
 
     from ..audio.guard import block_problem, non_finite
@@ -217,7 +228,7 @@ def listen(
             heard += block.size
             if det is None:
                 try:
-                    det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s)
+                    det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock)
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
             problems.add(block_problem(block))
@@ -267,7 +278,9 @@ def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
         console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
 
 
-def _listen_serial(tuning: Any, port: str, sample_rate: float | None, json_out: bool, confirm_s: float) -> None:
+def _listen_serial(
+    tuning: Any, port: str, sample_rate: float | None, json_out: bool, confirm_s: float, step_clock: bool
+) -> None:
     """Live vibration samples from a serial port through the same detector as sound."""
     from ..audio.confirm import confirming
     from ..audio.detector import StopDetector
@@ -276,7 +289,7 @@ def _listen_serial(tuning: Any, port: str, sample_rate: float | None, json_out: 
 
     rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
     try:
-        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s)
+        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock)
     except ValueError as e:
         fail(f"the tuning does not fit {rate} Hz samples: {e}")
     try:
@@ -297,14 +310,14 @@ def _listen_serial(tuning: Any, port: str, sample_rate: float | None, json_out: 
         src.close()
 
 
-def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: float) -> None:
+def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: float, step_clock: bool) -> None:
     from ..audio.confirm import confirming
     from ..audio.detector import StopDetector
     from ..audio.sources import AudioSourceError, Microphone
 
     dev: int | str | None = int(device) if device is not None and device.isdigit() else device
     mic = Microphone(sample_rate=tuning.sample_rate, block=1024, device=dev)
-    det = confirming(StopDetector(tuning), confirm_s)
+    det = confirming(StopDetector(tuning), confirm_s, step_clock=step_clock)
     try:
         mic.start()
     except AudioSourceError as err:
