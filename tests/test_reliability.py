@@ -395,6 +395,22 @@ def test_atomic_write_keeps_the_old_file_on_failure(tmp_path):
     assert p.read_text() == "new"
 
 
+def test_a_failed_atomic_write_names_the_file_asked_for_not_the_temporary_one(tmp_path, monkeypatch):
+    # the error a user sees says which of their files could not be written ('.out.csv.x1y2.tmp' told them nothing)
+    with pytest.raises(OSError) as e:
+        records.atomic_write_text(tmp_path / "no" / "such" / "out.csv", "x")
+    assert e.value.filename == str(tmp_path / "no" / "such" / "out.csv") and ".tmp" not in str(e.value)
+
+    def refuse(src, dst):
+        raise OSError(13, "Permission denied", src)
+
+    monkeypatch.setattr(records.os, "replace", refuse)
+    with pytest.raises(OSError) as e:
+        records.atomic_write_text(tmp_path / "out.csv", "x")
+    assert e.value.filename == str(tmp_path / "out.csv") and "Permission denied" in str(e.value)
+    assert list(tmp_path.iterdir()) == []  # the temporary file is gone
+
+
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="POSIX permissions; root ignores them")
 def test_read_only_folder_keeps_the_old_file(tmp_path):
     d = tmp_path / "ro"

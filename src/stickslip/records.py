@@ -258,7 +258,10 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
     """
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
+    except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
+        raise OSError(e.errno, e.strerror, str(p)) from None
     try:
         kwargs: dict[str, Any] = {} if "b" in mode else {"encoding": "utf-8", "newline": ""}
         with os.fdopen(fd, mode, **kwargs) as f:
@@ -266,11 +269,13 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, p)
-    except BaseException:
+    except BaseException as e:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(e, OSError) and e.filename == tmp:  # name the file asked for, not the temporary one
+            raise OSError(e.errno, e.strerror, str(p)) from None
         raise
     return p
 
