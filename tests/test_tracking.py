@@ -230,3 +230,12 @@ def test_a_calibration_made_today_starts_without_a_days_drift(monkeypatch):
     assert JointTrack.fresh(older, 3, drift=0.02).scale_sd == pytest.approx(math.hypot(0.02, sm), rel=1e-12)
     with pytest.raises(ValueError):
         JointTrack.fresh(today, 3, drift=-0.1)
+
+
+def test_a_positions_spread_is_shown_in_units_a_person_reads():
+    # "± 1.37e+05 µrad" after a few moves of joint 2 told nobody it was 7.85 degrees
+    from stickslip.cli.devices import _sd_text
+
+    assert _sd_text(0.137, 2) == "7.85 deg"
+    assert _sd_text(5.0e-5, 1) == "50 µrad" and _sd_text(9.99e-4, 2) == "999 µrad"
+    assert _sd_text(5.03e-6, 3) == "5.03 µm"

@@ -137,9 +137,11 @@ def _track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
 
 
 def _sd_text(sd: float, joint: int) -> str:
-    """A standard deviation of a position in µm (joint 3) or µrad (joints 1, 2)."""
-    unit = "µrad" if joint_spec(joint).rotary else "µm"
-    return f"{sd * 1e6:.3g} {unit}"
+    """A position's spread for a person: µm (joint 3); µrad (joints 1, 2), in degrees from 1 mrad (1.37e+05 µrad
+    told nobody it was 7.85 deg)."""
+    if not joint_spec(joint).rotary:
+        return f"{sd * 1e6:.3g} µm"
+    return f"{sd * 1e6:.3g} µrad" if abs(sd) < 1e-3 else f"{math.degrees(sd):.3g} deg"
 
 
 def _degree_hint(joint: int, text: str | None) -> str:
@@ -357,7 +359,10 @@ def move(
     if sim_true is not None:
         err = sim_true - q_end
         k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the ± above)
-        shown = f"{err * k:+.1f} {unit}" if abs(err * k) < 1000 or joint_spec(joint).rotary else f"{err * 1e6:+.2f} µm"
+        if abs(err * k) < 1000:
+            shown = f"{err * k:+.1f} {unit}"
+        else:  # a miss of a micrometre or a milliradian or more: in the position's own unit
+            shown = f"{math.degrees(err):+.3f} deg" if joint_spec(joint).rotary else f"{err * 1e6:+.2f} µm"
         console.print(
             f"simulator's true end {format_position(sim_true, joint)} ({shown})", highlight=False
         )
