@@ -383,3 +383,10 @@ def test_fuzz_cli_inputs_give_a_plan_or_one_error_line(tmp_path, cal_path, by, g
     else:
         out = json.loads(r.stdout)
         assert math.dist(out["end"]["tip"], out["target"]) < 2e-6
+
+
+def test_a_miss_is_shown_in_units_a_person_reads():
+    # '391403 nm from the target' was 391 µm
+    from stickslip.cli.taskspace import _miss
+
+    assert _miss(3.58e-7) == "358 nm" and _miss(3.914e-4) == "391 µm" and _miss(2.5e-3) == "2.5 mm"

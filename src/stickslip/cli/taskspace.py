@@ -127,6 +127,11 @@ def _um(v: tuple[float, float, float] | list[float]) -> str:
     return "(" + ", ".join(f"{x * 1e6:.2f}" for x in v) + ") µm"
 
 
+def _miss(d: float) -> str:
+    """A distance from the target: nm below a micrometre, µm above ('391403 nm' is 391.4 µm)."""
+    return f"{d * 1e9:.0f} nm" if d < 1e-6 else f"{d * 1e6:.3g} µm" if d < 1e-3 else f"{d * 1e3:.4g} mm"
+
+
 @app.command()
 def reach(
     calibration: Path | None = typer.Option(None, "--calibration", "-c", help=_CAL_HELP),
@@ -264,14 +269,14 @@ def _print_plan(plan: Any, json_out: bool, device: str | None, sim_true: list[fl
         highlight=False,
     )
     console.print(
-        f"predicted end {_um(plan.tip_end)}, {plan.end_error * 1e9:.0f} nm from the target; joints "
+        f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target; joints "
         f"q1 = {math.degrees(plan.q_end[0]):.4f} deg, q2 = {math.degrees(plan.q_end[1]):.4f} deg, "
         f"q3 = {plan.q_end[2] * 1e6:.2f} µm",
         highlight=False,
     )
     if true_tip is not None:
         err = math.dist(true_tip, plan.target)
-        console.print(f"simulator's true tip {_um(true_tip)}, {err * 1e9:.0f} nm from the target", highlight=False)
+        console.print(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target", highlight=False)
 
 
 # ---------------------------------------------------------------- jog: the terminal part
