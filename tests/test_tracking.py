@@ -239,3 +239,13 @@ def test_a_positions_spread_is_shown_in_units_a_person_reads():
     assert _sd_text(0.137, 2) == "7.85 deg"
     assert _sd_text(5.0e-5, 1) == "50 µrad" and _sd_text(9.99e-4, 2) == "999 µrad"
     assert _sd_text(5.03e-6, 3) == "5.03 µm"
+
+
+def test_observe_a_bare_number_on_a_rotary_joint_hints_at_degrees(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    monkeypatch.setenv("STICKSLIP_DB", str(tmp_path / "s.db"))
+    r = CliRunner().invoke(app, ["observe", "--joint", "2", "--at", "-30", "--sigma", "1deg"])
+    assert r.exit_code == 2 and "did you mean -30deg?" in r.output

@@ -19,7 +19,7 @@ from ..joints import JOINTS
 from ..units import format_position
 from . import app
 from ._common import DB_HELP, console, fail, open_store, print_json, user_errors, warn_later
-from .devices import _DEVICE_HELP, _parse_joint_value, _sd_text
+from .devices import _DEVICE_HELP, _degree_hint, _parse_joint_value, _sd_text
 
 DEFAULT_SIGMA = {3: 1e-6, 2: 50e-6, 1: 50e-6}
 """Standard deviation assumed for a measured position when --sigma is not given (m, rad, rad)."""
@@ -75,6 +75,7 @@ def observe(
             fail(
                 f"--at {at}: {format_position(q_meas, joint)} is outside joint {joint}'s range "
                 f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}]"
+                + _degree_hint(joint, at)
             )
     if sigma is None:
         sd = 0.0 if at_stop else DEFAULT_SIGMA[joint]
