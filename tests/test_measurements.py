@@ -108,3 +108,15 @@ def test_pose_table_errors_name_the_line_in_the_file_blank_lines_included(newlin
     assert e.value.problems == ["p.csv:6: q3 must be a number in SI units, got 'abc'"]
     _, rows, queries = parse_pose_table(text.replace("abc", "0.002"), "p.csv")
     assert [q.q3 for q in queries] == [0.001, 0.002] and len(rows) == 2
+
+
+def test_a_table_saved_with_semicolons_or_tabs_says_so(tmp_path):
+    # a European spreadsheet saves CSV with ';': the header error says what to do instead of listing every column
+    from stickslip.measurements import HEADER, read_measurements
+
+    for sep, words in ((";", "separated by ';'"), ("\t", "separated by a tab")):
+        p = tmp_path / "m.csv"
+        row = ["d", "3", "+", "0", "0", "0", "0", "0", "0", "0.012", "9"]
+        p.write_text(sep.join(HEADER) + "\n" + sep.join(row) + "\n")
+        with pytest.raises(TableError, match=words + ": save the table with commas"):
+            read_measurements(p)

@@ -145,6 +145,9 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
             detail.append("unexpected " + ", ".join(extra))
         if not detail:
             detail.append("columns out of order")
+        if len(header) == 1 and any(sep in header[0] for sep in ";\t"):  # a European spreadsheet's export
+            sep = "';'" if ";" in header[0] else "a tab"
+            detail = [f"the columns are separated by {sep}: save the table with commas (CSV)"]
         raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
     parts: list[TraverseTable] = []
     problems: list[tuple[int, str]] = []  # (line, reason): sorted by line at the end, stable within a line
