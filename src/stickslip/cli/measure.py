@@ -195,6 +195,13 @@ def traverse_cmd(
         "else sim://).",
     ),
     audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
+    serial_port: str = typer.Option(
+        None,
+        "--serial",
+        help="Listen to a vibration sensor on this serial port instead of a sound card (a vacuum chamber, no air "
+        "to carry the sound): one ASCII sample per line at the tuning's sample rate; tune from the same sensor "
+        "(docs/audio.md, 'Other sensors').",
+    ),
     q1: str = typer.Option("0", help="Joint 1 angle (ignored when traversing joint 1)."),
     q2: str = typer.Option("-90deg", help="Joint 2 angle (ignored when traversing joint 2)."),
     q3: str = typer.Option("0", help="Joint 3 extension (ignored when traversing joint 3)."),
@@ -246,6 +253,8 @@ def traverse_cmd(
         confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
     except ValueError as e:
         fail(f"--confirm-s: {e}")
+    if serial_port is not None and audio_input is not None:
+        fail("give --input (a sound card) or --serial (a vibration sensor), not both")
     device = device_url(device)
     try:
         label = direction_label(direction)
@@ -269,6 +278,7 @@ def traverse_cmd(
                 day,
                 tun,
                 audio_input=audio_input,
+                serial_port=serial_port,
                 burst_steps=burst,
                 progress=not json_out,
                 confirm_s=confirm_s,

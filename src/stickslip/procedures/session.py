@@ -43,6 +43,7 @@ def traverse_on_device(
     burst_steps: int = 2000,
     progress: bool = True,
     confirm_s: float = CONFIRM_S,
+    serial_port: str | None = None,
 ) -> TraverseResult:
     """Measure one traverse of ``joint`` in ``direction`` on ``ctrl``, timed by the tuned limit switch.
 
@@ -59,9 +60,25 @@ def traverse_on_device(
     confirm_s : float
         How long a stop must persist before it is taken, s (see
         :func:`~.traverse.measure_traverse`; 0: the detector's first fire).
+    serial_port : str, optional
+        Listen to a vibration sensor that sends one ASCII sample per line on this serial
+        port, at the tuning's sample rate (:class:`~stickslip.audio.vibration.SerialSamples`;
+        a vacuum chamber, where no air carries the sound), instead of a sound card. The
+        tuning must have been made from the same sensor.
     """
     if isinstance(ctrl, PoseSettable):
         ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
+    if serial_port is not None:
+        from ..audio.vibration import SerialSamples
+
+        src = SerialSamples(serial_port, sample_rate=int(tuning.sample_rate))
+        try:
+            return measure_traverse(
+                ctrl, joint, direction, detector=StopDetector(tuning, 0.0), audio_blocks=src.blocks(),
+                pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
+            )
+        finally:
+            src.close()
     if isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):
         t0 = float(ctrl.clock_s)
         return measure_traverse(
