@@ -386,3 +386,51 @@ def test_record_on_a_controller_needs_steps_and_a_label(tmp_path, monkeypatch):
     _one_line_error(r, "--steps")
     r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), "--joint", "2", "--device", "mm3a:///x", "--steps", "9"])
     _one_line_error(r, "--stop-at-step", "--key")
+
+
+class _SensorLine:
+    """A vibration bridge on a serial line: ``n`` samples as ASCII lines, then silence until the port is closed."""
+
+    def __init__(self, n: int) -> None:
+        import threading
+
+        self.lines = [f"{0.001 * (k % 7):.4f}\r\n".encode() for k in range(n)]
+        self.closed = threading.Event()
+
+    def readline(self) -> bytes:
+        if self.lines:
+            return self.lines.pop(0)
+        self.closed.wait(5.0)  # a bridge that has nothing to send yet: readline waits (pyserial's timeout)
+        return b""
+
+    def close(self) -> None:
+        self.closed.set()
+
+
+def test_record_on_a_controller_from_a_serial_vibration_sensor(tmp_path, monkeypatch):
+    import stickslip.audio.vibration as vibration
+    import stickslip.devices as devices
+
+    ctrl = _FakeController()
+    monkeypatch.setattr(devices, "open_device", lambda url: ctrl)
+    real = vibration.SerialSamples
+    lines: list[_SensorLine] = []
+
+    def sensor(port, sample_rate, **kw):
+        assert port == "/dev/ttyACM0" and sample_rate == 25_000
+        lines.append(_SensorLine(3000))
+        return real(sample_rate=sample_rate, block=256, serial=lines[-1])
+
+    monkeypatch.setattr(vibration, "SerialSamples", sensor)
+    wav = tmp_path / "accel.wav"
+    args = ["record", str(wav), "--joint", "3", "--device", "mm3a:///dev/fake", "--steps", "400"]
+    r = runner.invoke(app, [*args, "--stop-at-step", "300", "--serial", "/dev/ttyACM0", "--sample-rate", "25000"])
+    assert r.exit_code == 0, r.output
+    x, sr = read_wav(wav)
+    assert sr == 25_000 and x.size == 256 * (3000 // 256)  # every complete block the sensor sent, in order
+    assert np.allclose(x[:7], [0.0, 0.001, 0.002, 0.003, 0.004, 0.005, 0.006], atol=1e-7)
+    assert lines[0].closed.is_set() and ctrl.closed  # the port is closed after the recording
+    r = runner.invoke(app, [*args, "--stop-at-step", "300", "--serial", "/dev/ttyACM0"])
+    assert r.exit_code == 2 and "--sample-rate" in r.output
+    r = runner.invoke(app, ["record", str(wav), "--joint", "3", "--serial", "/dev/ttyACM0", "--sample-rate", "25000"])
+    assert r.exit_code == 2 and "real controller" in r.output  # sim:// renders its own sound

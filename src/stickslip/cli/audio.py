@@ -350,6 +350,15 @@ def record(
         "else sim://).",
     ),
     audio_input: str = typer.Option(None, "--input", help="Audio input device for a real controller (index or name)."),
+    serial_port: str = typer.Option(
+        None,
+        "--serial",
+        help="Real controller: record a vibration sensor on this serial port instead of a sound card (one ASCII "
+        "sample per line; give its --sample-rate).",
+    ),
+    sample_rate: float = typer.Option(
+        None, "--sample-rate", help="With --serial: the sensor's samples per second, Hz.", show_default=False
+    ),
     steps: int = typer.Option(None, "--steps", help="Real controller: steps to issue in all (past the stop)."),
     stop_at_step: int = typer.Option(
         None, "--stop-at-step", help="Real controller: the step count at which the joint reaches its stop (the label)."
@@ -392,13 +401,22 @@ def record(
             from ..sim.arm import SimulatedMM3A
 
             if isinstance(ctrl, SimulatedMM3A):  # the simulator labels its own stop
+                if serial_port is not None:
+                    fail("--serial records a sensor beside a real controller; the simulator renders its own sound")
                 if not (0.3 <= before <= 60 and 0.3 <= after <= 60):
                     fail("--before and --after must be 0.3-60 s")
                 samples, rate, stop_at = ctrl.labelled_recording(joint, sign_label, before_s=before, after_s=after)
                 how = "the simulator's stop time"
             else:
+                if serial_port is not None and audio_input is not None:
+                    fail("give --input (a sound card) or --serial (a vibration sensor), not both")
+                if (serial_port is None) != (sample_rate is None):
+                    fail("--serial and --sample-rate go together (the sensor's samples carry no clock)")
+                if sample_rate is not None and not 1_000 <= sample_rate <= 1_000_000:
+                    fail(f"--sample-rate must be 1000-1000000 Hz, got {sample_rate:g}")
                 samples, rate, stop_at, how = _record_real(
-                    ctrl, joint, sign_label, steps, stop_at_step, key, audio_input
+                    ctrl, joint, sign_label, steps, stop_at_step, key, audio_input,
+                    serial_port, int(round(sample_rate)) if sample_rate is not None else None,
                 )
         finally:
             ctrl.close()
@@ -456,8 +474,10 @@ def _record_real(
     stop_at_step: int | None,
     key: bool,
     audio_input: str | None,
+    serial_port: str | None = None,
+    serial_rate: int | None = None,
 ) -> tuple[Any, int, float, str]:
-    """Step a real controller into its stop while the sound card records; a level meter on stderr."""
+    """Step a real controller into its stop while the sound card (or a serial sensor) records; a meter on stderr."""
     import threading
     import time
 
@@ -474,8 +494,11 @@ def _record_real(
         fail(f"--stop-at-step must be 1..{steps - 1}")
     hz = float(ctrl.frequency(joint))
     dev: int | str | None = int(audio_input) if audio_input is not None and audio_input.isdigit() else audio_input
-    mic = Microphone(sample_rate=48_000, block=1024, device=dev).start()
-    meter = BandMeter(48_000)
+    rate = serial_rate or 48_000
+    mic: Any = _SerialRecorder(serial_port, rate).start() if serial_port else None
+    if mic is None:
+        mic = Microphone(sample_rate=rate, block=1024, device=dev).start()
+    meter = BandMeter(rate)
     pressed: list[float] = []
     t0 = time.monotonic()
     if key:
@@ -505,13 +528,53 @@ def _record_real(
     finally:
         mic.stop()
         err_console.print()
+    if getattr(mic, "error", None) is not None:
+        fail(f"{serial_port}: {mic.error}")
     samples = np.concatenate(blocks) if blocks else np.zeros(0, np.float32)
     if key:
         if not pressed:
             fail("no key press: the stop was not labelled")
-        return samples, 48_000, pressed[0], "a key press"
+        return samples, rate, pressed[0], "a key press"
     assert stop_at_step is not None
-    return samples, 48_000, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
+    return samples, rate, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
+
+
+class _SerialRecorder:
+    """A serial vibration sensor read in a thread into a queue, as the microphone's callback fills one."""
+
+    def __init__(self, port: str, sample_rate: int) -> None:
+        import queue
+
+        from ..audio.sources import AudioSourceError
+        from ..audio.vibration import SerialSamples
+
+        try:
+            self.src = SerialSamples(port, sample_rate=sample_rate)
+        except AudioSourceError as e:
+            fail(str(e))
+        self._queue: queue.Queue[Any] = queue.Queue()
+        self.error: Exception | None = None
+        self._stopping = False
+
+    def _read(self) -> None:
+        try:
+            for block in self.src.blocks():
+                self._queue.put(block)
+                if self._stopping:
+                    return
+        except Exception as e:  # noqa: BLE001 - reported in the main thread, one line
+            if not self._stopping:
+                self.error = e
+
+    def start(self) -> _SerialRecorder:
+        import threading
+
+        threading.Thread(target=self._read, name="serial-sensor", daemon=True).start()
+        return self
+
+    def stop(self) -> None:
+        self._stopping = True
+        self.src.close()
 
 
 def _drain(mic: Any, until: float) -> Iterator[Any]:
