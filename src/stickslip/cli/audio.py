@@ -298,16 +298,7 @@ def _listen_serial(
         fail(str(err))
     if not json_out:
         err_console.print(f"listening to {port} at {rate} Hz; Ctrl-C to stop", highlight=False)
-    try:
-        for block in src.blocks():
-            for ev in det.feed(block):
-                _print_live(ev, tuning, json_out, confirm_s)
-    except KeyboardInterrupt:
-        pass
-    except AudioSourceError as err:
-        fail(f"{port}: {err}")
-    finally:
-        src.close()
+    _report_live(det, src.blocks(), src.close, tuning, json_out, confirm_s, f"{port}: ")
 
 
 def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: float, step_clock: bool) -> None:
@@ -324,16 +315,25 @@ def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: flo
         fail(str(err))
     if not json_out:
         err_console.print(f"listening at {tuning.sample_rate} Hz; Ctrl-C to stop")
+    _report_live(det, mic.blocks(), mic.stop, tuning, json_out, confirm_s, "")
+
+
+def _report_live(
+    det: Any, blocks: Iterator[Any], close: Any, tuning: Any, json_out: bool, confirm_s: float, where: str
+) -> None:
+    """Feed a live source's blocks to ``det`` and print each event as it comes, until Ctrl-C; then ``close()``."""
+    from ..audio.sources import AudioSourceError
+
     try:
-        for block in mic.blocks():
+        for block in blocks:
             for ev in det.feed(block):
                 _print_live(ev, tuning, json_out, confirm_s)
     except KeyboardInterrupt:
         pass
     except AudioSourceError as err:
-        fail(str(err))
+        fail(f"{where}{err}")
     finally:
-        mic.stop()
+        close()
 
 
 @app.command()

@@ -10,8 +10,9 @@ re-references the joint's kept position there.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S
@@ -68,33 +69,30 @@ def traverse_on_device(
     """
     if isinstance(ctrl, PoseSettable):
         ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
+    t0 = 0.0  # a live source starts now
+    close: Callable[[], None] | None = None  # what to close after, for a source this opened
     if serial_port is not None:
         from ..audio.vibration import SerialSamples
 
         src = SerialSamples(serial_port, sample_rate=int(tuning.sample_rate))
-        try:
-            return measure_traverse(
-                ctrl, joint, direction, detector=StopDetector(tuning, 0.0), audio_blocks=src.blocks(),
-                pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
-            )
-        finally:
-            src.close()
-    if isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):
+        blocks: Any = src.blocks()
+        close = src.close
+    elif isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):  # the simulator hears itself
         t0 = float(ctrl.clock_s)
-        return measure_traverse(
-            ctrl, joint, direction, detector=StopDetector(tuning, t0), audio_blocks=ctrl.microphone(),
-            pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
-        )
-    from ..audio.sources import Microphone
+        blocks = ctrl.microphone()
+    else:
+        from ..audio.sources import Microphone
 
-    mic = Microphone(sample_rate=int(tuning.sample_rate), device=audio_input).start()
+        mic = Microphone(sample_rate=int(tuning.sample_rate), device=audio_input).start()
+        blocks, close = mic.blocks(), mic.stop
     try:
         return measure_traverse(
-            ctrl, joint, direction, detector=StopDetector(tuning, 0.0), audio_blocks=mic.blocks(),
+            ctrl, joint, direction, detector=StopDetector(tuning, t0), audio_blocks=blocks,
             pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
         )
     finally:
-        mic.stop()
+        if close is not None:
+            close()
 
 
 def record_traverse(store: TraverseStore, device_url: str, row: Traverse, how: str = "audio") -> int:
