@@ -42,6 +42,16 @@ __all__ = ["ReadbackStopDetector", "SerialSamples", "read_vibration"]
 _RATE = re.compile(r"sample_rate(?:_hz)?\s*[=:]\s*([0-9.eE+]+)")
 
 
+#: sample rates a vibration stream may have, Hz (the detector's frame needs kHz; a DAQ gives at most MHz)
+SAMPLE_RATE_RANGE = (1_000.0, 1_000_000.0)
+
+
+def sample_rate_ok(rate: float) -> bool:
+    """Whether ``rate`` (Hz) is a sample rate a vibration stream may have (:data:`SAMPLE_RATE_RANGE`)."""
+    lo, hi = SAMPLE_RATE_RANGE
+    return math.isfinite(rate) and lo <= rate <= hi
+
+
 def read_vibration(
     path: str | Path, sample_rate: float | None = None, full_scale: float | None = None
 ) -> tuple[NDArray[np.float32], int]:
@@ -107,7 +117,7 @@ def read_vibration(
         x = data[:, 0]
     if rate is None:
         raise AudioSourceError(f"{p}: no sample rate: add a '# sample_rate_hz=...' line, or give it (--sample-rate)")
-    if not (math.isfinite(rate) and 1_000 <= rate <= 1_000_000):
+    if not sample_rate_ok(rate):
         raise AudioSourceError(f"{p}: sample rate {rate:g} Hz is outside 1000-1000000 Hz")
     if not np.all(np.isfinite(x)):
         k = int(np.argmax(~np.isfinite(x)))

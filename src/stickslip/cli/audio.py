@@ -21,6 +21,15 @@ _SAMPLE_RATE_HELP = (
 )
 
 
+def _check_sample_rate(sample_rate: float | None) -> None:
+    """``fail`` unless ``--sample-rate`` is absent or one a vibration stream may have."""
+    from ..audio.vibration import SAMPLE_RATE_RANGE, sample_rate_ok
+
+    if sample_rate is not None and not sample_rate_ok(sample_rate):
+        lo, hi = SAMPLE_RATE_RANGE
+        fail(f"--sample-rate must be {lo:.0f}-{hi:.0f} Hz, got {sample_rate:g}")
+
+
 def _is_csv(path: Path) -> bool:
     return path.suffix.lower() in _CSV_SUFFIXES
 
@@ -178,8 +187,7 @@ def listen(
 
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
-    if sample_rate is not None and not (sample_rate > 0 and sample_rate < float("inf")):
-        fail(f"--sample-rate must be a positive number of Hz, got {sample_rate!r}")
+    _check_sample_rate(sample_rate)
     try:
         confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
     except ValueError as e:
@@ -412,8 +420,7 @@ def record(
                     fail("give --input (a sound card) or --serial (a vibration sensor), not both")
                 if (serial_port is None) != (sample_rate is None):
                     fail("--serial and --sample-rate go together (the sensor's samples carry no clock)")
-                if sample_rate is not None and not 1_000 <= sample_rate <= 1_000_000:
-                    fail(f"--sample-rate must be 1000-1000000 Hz, got {sample_rate:g}")
+                _check_sample_rate(sample_rate)
                 samples, rate, stop_at, how = _record_real(
                     ctrl, joint, sign_label, steps, stop_at_step, key, audio_input,
                     serial_port, int(round(sample_rate)) if sample_rate is not None else None,
