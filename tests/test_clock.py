@@ -15,6 +15,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from stickslip import clock
@@ -180,3 +182,70 @@ def test_unpinned_today_follows_the_faked_machine_clock(tmp_path):
     r = _run(env, "-c", "from stickslip import clock; print(clock.today_label(), clock.now_utc().isoformat()[:13])")
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["2028-02-29", "2028-02-29T20"]
+
+
+# ---------------------------------------------------------------- session labels
+
+
+@pytest.mark.parametrize(
+    "label, reason",
+    [
+        ("2026-13-45", "month must be in 1..12"),
+        ("2026-02-29", "day is out of range"),  # not a leap year
+        ("2026-11-221", "day is out of range"),
+        ("2026-2-3", "write the date as 2026-02-03"),
+        ("2026-99999999999999999999-1", "not one"),
+        ("", "empty"),
+        ("   ", "empty"),
+        ("day\t1", "control character"),
+        ("2026-11-22\nrm", "control character"),
+        ("x" * 65, "65 characters"),
+    ],
+)
+def test_a_label_that_cannot_be_a_session_day_says_why(label, reason):
+    why = clock.day_label_problem(label)
+    assert why is not None and reason in why
+    with pytest.raises(ValueError, match="session label"):
+        clock.check_day_label(label)
+
+
+@pytest.mark.parametrize(
+    "label", ["2026-11-22", "2028-02-29 am", " 2026-11-22 ", "day1", "morning", "20261122", "x" * 64]
+)
+def test_free_session_labels_and_real_dates_are_kept(label):
+    assert clock.day_label_problem(label) is None
+    assert clock.check_day_label(label) == label.strip()
+
+
+@given(st.dates(min_value=dt.date(1000, 1, 1)), st.sampled_from(["", " am", " pm", "T09:00", "-run2"]))
+def test_every_real_iso_date_is_a_label(date, tail):
+    assert clock.day_label_problem(date.isoformat() + tail) is None
+
+
+def test_a_table_row_with_an_impossible_date_is_refused_naming_its_row(tmp_path):
+    rows = paper_table()[:4]
+    path = tmp_path / "meas.csv"
+    text = measurements_to_csv(rows)
+    lines = text.splitlines()
+    day = lines[3].split(",")[0]
+    lines[3] = lines[3].replace(day, "2026-13-45", 1)
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    r = runner.invoke(app, ["fit", str(path)])
+    assert r.exit_code == 2
+    assert f"{path}:4: day: the session label '2026-13-45' starts like a date but is not one" in r.output
+    assert "Traceback" not in r.output
+
+
+def test_traverse_and_demo_refuse_an_impossible_day_before_anything_moves(tmp_path, monkeypatch):
+    monkeypatch.setenv("STICKSLIP_TODAY", "2026-11-25")
+    db = tmp_path / "s.sqlite"
+    r = runner.invoke(app, ["demo", "--day", "2026-02-30", "--out", str(tmp_path / "out"), "--db", str(db)])
+    assert r.exit_code == 2 and "day is out of range for month" in r.output
+    assert not (tmp_path / "out").exists() and not db.exists()
+    r = runner.invoke(
+        app, ["demo", "--device", "sim://?day=2026-2-30", "--out", str(tmp_path / "out"), "--db", str(db)]
+    )
+    assert r.exit_code == 2 and "day is out of range for month" in r.output
+    assert not (tmp_path / "out").exists() and not db.exists()
+    r = runner.invoke(app, ["traverse", "-j", "3", "-d", "+", "--tuning", "t.json", "--day", "2026-1-5"])
+    assert r.exit_code == 2 and "write the date as 2026-01-05" in r.output

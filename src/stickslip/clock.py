@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+import re
 
 __all__ = [
     "max_age_days",
@@ -29,6 +30,8 @@ __all__ = [
     "today_label",
     "now_utc",
     "parse_day",
+    "day_label_problem",
+    "check_day_label",
     "age_days",
     "stale_message",
 ]
@@ -76,6 +79,47 @@ def parse_day(label: str | None) -> _dt.date | None:
         return _dt.date.fromisoformat(label.strip()[:10])
     except ValueError:
         return None
+
+
+_DATE_SHAPED = re.compile(r"\d{4}-\d+-\d+")
+MAX_LABEL_CHARS = 64
+"""The longest session label accepted (a label is a key in tables and the database, not a note)."""
+
+
+def day_label_problem(label: str) -> str | None:
+    """Why ``label`` cannot be a session label, or ``None`` if it can.
+
+    A label is free text (``2026-11-22``, ``2026-11-22 pm``, ``day1``), but one that
+    starts like a date must be a real ISO date: ``2026-13-45`` or ``2026-2-30`` is a
+    typo, and would silently have no age (so no staleness warning) and sort apart from
+    its session. A label is one line of printable text, at most
+    :data:`MAX_LABEL_CHARS` characters.
+    """
+    text = label.strip()
+    if not text:
+        return "the session label is empty (use an ISO date, e.g. 2026-11-22)"
+    if len(text) > MAX_LABEL_CHARS:
+        return f"the session label is {len(text)} characters long (at most {MAX_LABEL_CHARS})"
+    if not text.isprintable():
+        return f"the session label {text[:MAX_LABEL_CHARS]!r} holds a control character (a tab or a line break)"
+    shaped = _DATE_SHAPED.match(text)
+    if shaped is not None:
+        y, m, d = (int(x) for x in shaped.group(0).split("-"))
+        try:
+            date = _dt.date(y, m, d)
+        except (ValueError, OverflowError) as e:
+            return f"the session label {text!r} starts like a date but is not one ({e})"
+        if shaped.group(0) != date.isoformat():
+            return f"the session label {text!r}: write the date as {date.isoformat()} (YYYY-MM-DD)"
+    return None
+
+
+def check_day_label(label: str) -> str:
+    """``label`` stripped, if it can be a session label (:func:`day_label_problem`); else ``ValueError``."""
+    why = day_label_problem(label)
+    if why is not None:
+        raise ValueError(why)
+    return label.strip()
 
 
 def age_days(day: str | None, today: str | _dt.date | None = None) -> int | None:

@@ -30,7 +30,7 @@ from bluesky.utils import Msg
 from .. import kinematics as kin
 from ..audio.detector import StopDetector, Tuning
 from ..calibration import Calibration, calibrate
-from ..clock import today_label
+from ..clock import check_day_label, today_label
 from ..devices.base import Controller, PoseSettable
 from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse
@@ -162,7 +162,7 @@ def calibration_day(
     (``calibration-json``, the calibration file's JSON).
     """
     link = manipulator.link
-    day = day or today_label()
+    day = check_day_label(day) if day is not None else today_label()
     plan = [(int(j), dict(p)) for j, p in poses]
     for j, _ in plan:
         kin.joint_spec(j)

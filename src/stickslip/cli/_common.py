@@ -237,6 +237,18 @@ def length_option(value: str | None) -> float | None:
     return None if value is None else _parse_unit(parse_length, "a length: metres, or with mm / um / nm", value)
 
 
+def day_option(value: str | None) -> str | None:
+    """A session label option (``--day``): stripped, or ``typer.BadParameter`` saying why it cannot be one."""
+    if value is None:
+        return None
+    from ..clock import day_label_problem
+
+    why = day_label_problem(value)
+    if why is not None:
+        raise typer.BadParameter(why)
+    return value.strip()
+
+
 def _bare_number(text: str) -> bool:
     try:
         float(text.strip())

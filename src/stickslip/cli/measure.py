@@ -10,18 +10,28 @@ import typer
 from ..clock import today_label
 from ..units import param_scale
 from . import app
-from ._common import DB_HELP, console, db_path, device_url, fail, print_json, user_errors, validation_table, warn_later
+from ._common import (
+    DB_HELP,
+    console,
+    day_option,
+    db_path,
+    device_url,
+    fail,
+    print_json,
+    user_errors,
+    validation_table,
+    warn_later,
+)
 
 
 @app.command()
 def demo(
-    seed: int = typer.Option(
-        0, "--seed", help="Simulator seed: drift of the true parameters, step noise, room sound."
-    ),
+    seed: int = typer.Option(0, "--seed", help="Simulator seed: drift of the true parameters, step noise, room sound."),
     day: str | None = typer.Option(
         None,
         "--day",
         help="Session label, e.g. 2026-11-22 (default: today). The truth drifts from day to day.",
+        callback=day_option,
     ),
     out: Path = typer.Option(
         Path("stickslip-results"),
@@ -33,9 +43,7 @@ def demo(
         "--validation/--no-validation",
         help="Also measure the validation sweep of other poses.",
     ),
-    json_out: bool = typer.Option(
-        False, "--json", help="Print the summary as one JSON object (SI units)."
-    ),
+    json_out: bool = typer.Option(False, "--json", help="Print the summary as one JSON object (SI units)."),
     db: Path = typer.Option(
         None,
         "--db",
@@ -94,8 +102,14 @@ def demo(
             store = None  # the demo still runs; its traverses are not stored a second time
         try:
             result = run_demo(
-                seed=seed, day=day, out=out, progress=not json_out, validation=validation, store=store,
-                physics=physics, confirm_s=confirm_s,
+                seed=seed,
+                day=day,
+                out=out,
+                progress=not json_out,
+                validation=validation,
+                store=store,
+                physics=physics,
+                confirm_s=confirm_s,
             )
         finally:
             if store is not None:
@@ -180,7 +194,12 @@ def _sim_seed_day(device: str, seed: int, day: str | None, physics: bool = False
         seed = int(query.get("seed", [seed])[-1])
     except ValueError:
         fail(f"seed must be an integer in {device}")
-    return seed, query.get("day", [day])[-1], physics or query.get("physics", ["0"])[-1] == "1"
+    day = query.get("day", [day])[-1]
+    try:
+        day = day_option(day)
+    except typer.BadParameter as e:
+        fail(f"{e} (day= in {device})")
+    return seed, day, physics or query.get("physics", ["0"])[-1] == "1"
 
 
 @app.command("traverse")
@@ -207,7 +226,7 @@ def traverse_cmd(
     q3: str = typer.Option("0", help="Joint 3 extension (ignored when traversing joint 3)."),
     theta: str = typer.Option("0", help="Base tilt about x0."),
     psi: str = typer.Option("0", help="Base tilt about the new y0."),
-    day: str = typer.Option(None, "--day", help="Session label (default: today's ISO date)."),
+    day: str = typer.Option(None, "--day", help="Session label (default: today's ISO date).", callback=day_option),
     append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
     db: Path = typer.Option(None, "--db", help=DB_HELP),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),

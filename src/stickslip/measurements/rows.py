@@ -8,6 +8,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
 
 from .. import kinematics as kin
+from ..clock import day_label_problem
 from ..models import direction_label
 
 HEADER = ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
@@ -144,6 +145,8 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
     day = (row.get("day") or "").strip()
     if not day:
         problems.append(f"{where}: day is empty (use a session label, e.g. an ISO date)")
+    elif (why := day_label_problem(day)) is not None:
+        problems.append(f"{where}: day: {why}")
     jtext = (row.get("joint") or "").strip()
     joint: int | None
     try:

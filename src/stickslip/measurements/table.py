@@ -13,6 +13,7 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
+from ..clock import day_label_problem
 from ..records import MAX_TABLE_BYTES, atomic_write, read_text_bounded
 from .chunks import _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok
 from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
@@ -190,6 +191,9 @@ def _measurement_chunk(
     """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`."""
     days = [c.strip() for c in cols[0]]
     ok = ~_equal(days, "")
+    bad_labels = {d for d in set(days) if d and day_label_problem(d) is not None}  # a table holds few labels
+    if bad_labels:
+        ok &= ~np.isin(np.array(days, dtype=object), list(bad_labels))
     joint = _joint_cells(cols[1])
     ok &= joint > 0
     plus = _equal(cols[2], "+")

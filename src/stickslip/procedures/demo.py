@@ -38,7 +38,7 @@ from .. import kinematics as kin
 from .. import plotting
 from ..audio.confirm import CONFIRM_S, check_confirm_s
 from ..calibration import Calibration, Parameter, ValidationResult, calibrate, validate
-from ..clock import today_label
+from ..clock import check_day_label, today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
 from ..models import JointModel
@@ -431,7 +431,7 @@ def run_demo(
     _check_arguments(listen_from, switch, repeats, out)
     check_confirm_s(confirm_s)
     t_wall = time.perf_counter()
-    day = day or today_label()
+    day = check_day_label(day) if day is not None else today_label()
     url = f"sim://?seed={seed}&day={day}" + ("&physics=1" if physics else "")
     if physics:
         from ..sim.physics import PhysicsMM3A

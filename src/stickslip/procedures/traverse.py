@@ -46,6 +46,7 @@ from numpy.typing import NDArray
 from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S, confirming
 from ..audio.guard import NoSignalError, SignalGuard
+from ..clock import check_day_label
 from ..devices.base import Controller, VirtualClock
 from ..measurements import Traverse
 from ..models import direction_label, direction_sign
@@ -358,6 +359,7 @@ def measure_traverse(
     sign = direction_sign(direction)
     label = direction_label(sign)
     _check_options(latency, predrive, burst_steps, listen_after_steps)
+    day = check_day_label(day)  # before the joint moves
     detector = confirming(detector, confirm_s)  # a fresh confirming detector: the caller's is left as it was
     limit = int(max_steps) if max_steps is not None else int(2 * spec.span / MIN_STEP_PRIOR[spec.number])
     hz = float(controller.frequency(joint))
