@@ -79,6 +79,22 @@ def test_drop_threshold_round_trips_and_is_checked() -> None:
             Tuning.from_dict({**t.to_dict(), "drop_threshold": bad})
 
 
+@pytest.mark.parametrize(
+    "field, bad, match",
+    [
+        ("signature_db", [-3.0, 1e30, -2.0, -1.0], "signature_db must be within -400..400 dB"),
+        ("signature_db", [-3.0, "12", -2.0, -1.0], r"signature_db\[1\] must be a number, got '12'"),
+        ("spread_db", [1.0, 1e-300, 1.0, 1.0], "spread_db must be within 0.001..400 dB"),
+        ("spread_db", [1.0, None, 1.0, 1.0], r"spread_db\[1\] must be a number, got None"),
+        ("stepping_levels_db", [-40.0, -1e30, -45.0, -50.0], "stepping_levels_db must hold 4 levels within"),
+        ("edges_hz", [1000.0, 2000.0, float("inf"), 8000.0, 12000.0], r"edges_hz\[2\] must be a finite number"),
+    ],
+)
+def test_a_template_tuning_with_impossible_values_is_refused_naming_them(field: str, bad: object, match: str) -> None:
+    with pytest.raises(TuningFileError, match=match):
+        Tuning.from_dict({**_template_tuning().to_dict(), field: bad})
+
+
 def test_a_48k_tuning_at_22k_keeps_the_sub_bands_that_fit() -> None:
     t = _template_tuning().for_sample_rate(22_050)  # 0.45 * 22050 = 9922 Hz: the 8-12 kHz sub-band goes
     assert t.edges_hz == (1000.0, 2000.0, 4000.0, 8000.0)

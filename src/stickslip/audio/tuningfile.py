@@ -31,6 +31,16 @@ def default_frame(sample_rate: int) -> int:
     return int(2 ** round(math.log2(sample_rate * 512 / 48_000)))
 
 
+def _number(name: str, v: Any) -> float:
+    """A JSON number as a float; ``TuningFileError`` for a string, a boolean, null, NaN or infinity."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise TuningFileError(f"{name} must be a number, got {v!r}")
+    x = float(v)
+    if not math.isfinite(x):
+        raise TuningFileError(f"{name} must be a finite number, got {v!r}")
+    return x
+
+
 @dataclass(frozen=True)
 class Tuning:
     """How to hear one joint's end stop.
@@ -176,6 +186,18 @@ class Tuning:
             v = getattr(self, name)
             if not lo_ <= v <= hi_:
                 raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+        if self.joint is not None and (isinstance(self.joint, bool) or self.joint not in (1, 2, 3)):
+            raise ValueError(f"joint {self.joint!r} must be 1, 2 or 3 (or null)")
+        for name, lo_, hi_ in (  # what tuning saw: informational, but shown and (latency) used
+            ("latency_measured_s", 0, 1),
+            ("contrast_db", -400, 400),
+            ("margin_db", -400, 400),
+            ("stepping_db", -400, 400),
+            ("stopped_db", -400, 400),
+        ):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not lo_ <= v <= hi_):
+                raise ValueError(f"{name} {v!r} must be a number within {lo_}..{hi_} (or null)")
 
     def _check_template(self) -> None:
         if self.edges_hz is None or self.signature_db is None or self.spread_db is None:
@@ -191,15 +213,15 @@ class Tuning:
             raise ValueError(f"edges_hz ({len(edges)}), signature_db ({len(sig)}) and spread_db ({len(spr)}) disagree")
         if any(not b > a for a, b in zip(edges, edges[1:], strict=False)) or edges[-1] > self.sample_rate / 2:
             raise ValueError(f"edges_hz must increase and stay below {self.sample_rate / 2:g} Hz")
-        if not all(math.isfinite(v) for v in sig) or not any(abs(v) > 0 for v in sig):
-            raise ValueError("signature_db must be finite and not all zero")
-        if not all(math.isfinite(v) and v > 0 for v in spr):
-            raise ValueError("spread_db must be finite and positive")
+        if not all(abs(v) <= 400 for v in sig) or not any(abs(v) > 0 for v in sig):
+            raise ValueError("signature_db must be within -400..400 dB and not all zero")
+        if not all(1e-3 <= v <= 400 for v in spr):
+            raise ValueError("spread_db must be within 0.001..400 dB")
         if self.stepping_levels_db is not None:
             lv = tuple(float(v) for v in self.stepping_levels_db)
             object.__setattr__(self, "stepping_levels_db", lv)
-            if len(lv) != nb or not all(math.isfinite(v) for v in lv):
-                raise ValueError(f"stepping_levels_db must hold {nb} finite levels")
+            if len(lv) != nb or not all(abs(v) <= 400 for v in lv):
+                raise ValueError(f"stepping_levels_db must hold {nb} levels within -400..400 dBFS")
         if self.drop_threshold is not None:
             dt = tuple(float(v) for v in self.drop_threshold)
             if len(dt) != 2 or not all(math.isfinite(v) and 0.1 <= v <= 100 for v in dt):
@@ -312,7 +334,7 @@ class Tuning:
         if d.get("kind", _KIND) != _KIND:
             raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
         version = d.get("version", 1)
-        if version not in (1, 2):
+        if isinstance(version, bool) or version not in (1, 2):
             raise TuningFileError(
                 f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
                 "upgrade stickslip or re-tune with 'stickslip tune'"
@@ -326,17 +348,17 @@ class Tuning:
             band = kwargs["band_hz"]
             if not (isinstance(band, (list, tuple)) and len(band) == 2):
                 raise TuningFileError("band_hz must be [low_Hz, high_Hz]")
-            kwargs["band_hz"] = (float(band[0]), float(band[1]))
+            kwargs["band_hz"] = (_number("band_hz[0]", band[0]), _number("band_hz[1]", band[1]))
             ref = kwargs.get("reference_hz")
             if ref is not None:
                 if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
                     raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
-                kwargs["reference_hz"] = (float(ref[0]), float(ref[1]))
+                kwargs["reference_hz"] = (_number("reference_hz[0]", ref[0]), _number("reference_hz[1]", ref[1]))
             for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
                 if kwargs.get(k) is not None:
                     if not isinstance(kwargs[k], (list, tuple)):
                         raise TuningFileError(f"{k} must be a list of numbers")
-                    kwargs[k] = tuple(float(v) for v in kwargs[k])
+                    kwargs[k] = tuple(_number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k]))
             if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
                 raise TuningFileError("checks must be an object or null")
             for k in (
@@ -351,8 +373,13 @@ class Tuning:
                 "warmup_s",
             ):
                 if k in kwargs:
-                    kwargs[k] = float(kwargs[k])
-            for k in ("sample_rate", "frame", "hop", "max_dips", "trim"):
+                    kwargs[k] = _number(k, kwargs[k])
+            for k in ("latency_measured_s", "contrast_db", "margin_db", "stepping_db", "stopped_db"):
+                if kwargs.get(k) is not None:
+                    kwargs[k] = _number(k, kwargs[k])
+            for k in ("sample_rate", "frame", "hop", "max_dips", "trim", "joint"):
+                if k == "joint" and kwargs.get(k) is None:
+                    continue
                 if k in kwargs:
                     v = kwargs[k]
                     if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
