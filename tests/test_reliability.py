@@ -85,6 +85,12 @@ def _mutate(d, joint, name, value):
     return d
 
 
+def _field(d, key, field, value):
+    d = json.loads(json.dumps(d))
+    d[key][0][field] = value
+    return d
+
+
 @pytest.mark.parametrize(
     "change, words",
     [
@@ -94,6 +100,14 @@ def _mutate(d, joint, name, value):
         (lambda d: {**d, "provenance": [1, 2]}, ["provenance must be an object"]),
         (lambda d: {**d, "constant_steps": [{"joint": 3, "direction": "+", "value": 0}]}, ["positive"]),
         (lambda d: {**d, "parameters": "x"}, ["parameters must be a list"]),
+        # found by fuzzing: a list as a name raised TypeError (a traceback); True and -1.0 passed as directions
+        (lambda d: _field(d, "parameters", "name", []), ["name must be one of", "got []"]),
+        (lambda d: _field(d, "parameters", "direction", True), ['direction must be "+" or "-"', "got True"]),
+        (lambda d: _field(d, "constant_steps", "direction", -1.0), ['direction must be "+" or "-"', "got -1.0"]),
+        (lambda d: {**d, "day": "2026-13-45"}, ["day: the session label '2026-13-45'", "month must be in 1..12"]),
+        (lambda d: {**d, "version": True}, ["version True is not supported"]),
+        (lambda d: {**d, "provenance": {**d["provenance"], "rows": 10**30}}, ["provenance.rows must be a count"]),
+        (lambda d: {**d, "provenance": {**d["provenance"], "rows": 3, "rows_used": 4}}, ["rows_used (4) is more"]),
     ],
 )
 def test_implausible_calibrations_are_refused_with_the_reason(tmp_path, cal_dict, change, words):

@@ -137,6 +137,9 @@ def _record_joint(rec: object, where: str) -> tuple[dict[str, Any], int]:
     joint = rec.get("joint")
     if joint not in (1, 2, 3) or isinstance(joint, bool):
         raise ValueError(f"{where}.joint must be 1, 2 or 3, got {joint!r}")
+    direction = rec.get("direction")
+    if not isinstance(direction, str) or direction not in ("+", "-"):
+        raise ValueError(f'{where}.direction must be "+" or "-", got {direction!r}')
     return rec, int(joint)
 
 
@@ -145,7 +148,7 @@ def _check_parameter(rec_: object, i: int) -> None:
     rec, joint = _record_joint(rec_, where)
     name = rec.get("name")
     kinds = _PRISMATIC if joint_spec(joint).prismatic else _ROTARY
-    if name not in kinds:
+    if not isinstance(name, str) or name not in kinds:
         raise ValueError(f"{where}.name must be one of {sorted(kinds)} for joint {joint}, got {name!r}")
     where = f"{where} (joint {joint} {name})"
     v = _finite(rec.get("value"), where)
@@ -180,6 +183,17 @@ def check_calibration_dict(data: object) -> None:
             raise ValueError(f"{key} must be a list, got {type(data[key]).__name__}")
     if data.get("provenance") is not None and not isinstance(data["provenance"], dict):
         raise ValueError(f"provenance must be an object, got {type(data['provenance']).__name__}")
+    prov = data.get("provenance") or {}
+    for key in ("rows", "rows_used"):
+        n = prov.get(key)
+        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= 10**9):
+            raise ValueError(f"provenance.{key} must be a count of rows (0..1e9), got {n!r}")
+    if (
+        isinstance(prov.get("rows"), int)
+        and isinstance(prov.get("rows_used"), int)
+        and prov["rows_used"] > prov["rows"]
+    ):
+        raise ValueError(f"provenance.rows_used ({prov['rows_used']}) is more than provenance.rows ({prov['rows']})")
     for key in ("day", "method", "created"):
         if data.get(key) is not None and not isinstance(data[key], str):
             raise ValueError(f"{key} must be a string, got {data[key]!r}")

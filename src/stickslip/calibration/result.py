@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 from .. import kinematics as kin
 from .. import plotting, records
-from ..clock import now_utc
+from ..clock import day_label_problem, now_utc
 from ..families import FamilyParams
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
@@ -266,7 +266,12 @@ class Provenance:
             return tuple(v)
 
         return cls(
-            text("source"), text("sha256"), count("rows"), count("rows_used"), texts("days"), texts("notes"),
+            text("source"),
+            text("sha256"),
+            count("rows"),
+            count("rows_used"),
+            texts("days"),
+            texts("notes"),
             {k: v for k, v in data.items() if k not in known},
             text("rows_sha256"),
         )
@@ -419,7 +424,9 @@ class Calibration:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
         records.check_calibration_dict(data)
-        if data.get("version") not in (FORMAT_VERSION, 2):
+        if isinstance(data.get("day"), str) and (why := day_label_problem(data["day"])) is not None:
+            raise ValueError(f"day: {why}")
+        if isinstance(data.get("version"), bool) or data.get("version") not in (FORMAT_VERSION, 2):
             raise ValueError(
                 f"calibration format version {data.get('version')!r} is not supported (expected {FORMAT_VERSION} or 2)"
             )
@@ -537,14 +544,23 @@ class Calibration:
         rows = []
         for rec in self.parameters():
             scale, unit = param_scale(rec.name, rec.joint)
-            rows.append([
-                rec.joint, rec.direction, rec.name, "" if rec.q3 is None else f"{rec.q3 * 1e3:g}",
-                f"{rec.value * scale:.5g}", "" if rec.stderr is None else f"{rec.stderr * scale:.3g}", unit or "1",
-            ])
+            rows.append(
+                [
+                    rec.joint,
+                    rec.direction,
+                    rec.name,
+                    "" if rec.q3 is None else f"{rec.q3 * 1e3:g}",
+                    f"{rec.value * scale:.5g}",
+                    "" if rec.stderr is None else f"{rec.stderr * scale:.3g}",
+                    unit or "1",
+                ]
+            )
         notes = [line for line in self.report().splitlines() if line.startswith(("made with", "note"))]
         return html_table(
             f"stickslip calibration: day {self.day or '?'}, method {self.method}",
-            ["joint", "dir", "parameter", "q3 knot (mm)", "value", "std. error", "unit"], rows, notes,
+            ["joint", "dir", "parameter", "q3 knot (mm)", "value", "std. error", "unit"],
+            rows,
+            notes,
         )
 
     def plot(
@@ -571,8 +587,11 @@ class Calibration:
                 for q3 in (0.0, kin.Q3_MAX):
                     qj = q2 if joint == 2 else np.linspace(kin.JOINTS[1].lower, kin.JOINTS[1].upper, 400)
                     args = (0.0, qj, q3, 0.0, 0.0) if joint == 2 else (qj, -math.pi / 2, q3, -math.pi / 2, 0.0)
-                    ax.plot(zeta_deg if joint == 2 else np.degrees(qj), m.gamma(*args) * step_scale(joint)[0],
-                            label=f"γ{joint}{d}, q3 = {q3 * 1e3:g} mm")
+                    ax.plot(
+                        zeta_deg if joint == 2 else np.degrees(qj),
+                        m.gamma(*args) * step_scale(joint)[0],
+                        label=f"γ{joint}{d}, q3 = {q3 * 1e3:g} mm",
+                    )
         ax.set_xlabel("ζ = ψ − q2 (deg)" if joint != 1 else "q1 (deg)")
         ax.set_ylabel(f"mean step size ({step_scale(joint)[1]})")
         ax.set_title(f"joint {joint}, calibration of {self.day} ({self.method})")
@@ -587,8 +606,6 @@ def _is_family(cal: Calibration, p: Parameter) -> bool:
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
 
 
 def _constant_step(joint: int, direction: str, model: JointModel) -> float:
