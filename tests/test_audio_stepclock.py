@@ -40,8 +40,11 @@ from stickslip.audio.confirm import (  # noqa: E402
 )
 from stickslip.audio.detector import StopDetector, StopEvent, Tuning  # noqa: E402
 from stickslip.audio.stepclock import (  # noqa: E402
+    chi2_as_z,
     line_change,
     line_power,
+    line_powers,
+    line_z,
     step_rate_hz,
     synchronous_change_db,
     widen_bands,
@@ -127,6 +130,54 @@ def test_a_louder_stop_raises_the_synchronous_power_and_a_quieter_one_lowers_it(
         assert got.rate_hz == pytest.approx(1080.0, rel=0.002)
         assert got.share_before >= MIN_SYNC_SHARE and got.sharpness_before >= MIN_SYNC_SHARPNESS
         assert sign * got.change_db >= 3.0 and sign * got.change_z >= 10.0, (kind, got)
+
+
+def test_chi2_as_z_against_scipy() -> None:
+    """Wilson-Hilferty: within 0.11 of scipy's exact deviate out to 4 standard deviations, below it beyond."""
+    from scipy import stats
+
+    for dof in (3, 5, 9, 15, 30):
+        for z in (-2.0, 0.0, 2.0, 4.0):
+            assert chi2_as_z(float(stats.chi2.isf(stats.norm.sf(z), dof)), dof) == pytest.approx(z, abs=0.11)
+        for z in (5.0, 6.0):
+            got = chi2_as_z(float(stats.chi2.isf(stats.norm.sf(z), dof)), dof)
+            assert z - 0.36 <= got <= z
+    assert math.isnan(chi2_as_z(3.0, 0)) and math.isnan(chi2_as_z(math.inf, 4))
+
+
+def test_the_per_line_changes_of_sines_in_noise_have_unit_spread() -> None:
+    """Independent of any generator: ten sines on the harmonics of a rate, white noise drawn afresh on each side.
+
+    The per-line changes, each in its stated standard deviation (:func:`line_z`), scatter with a mean of 0 and a
+    standard deviation of 1 (382 lines): the variance, noise alone plus the line's own scatter under it, is right.
+    """
+    rng = np.random.default_rng(1)
+    t = np.arange(int(0.48 * SR)) / SR
+    zs: list[float] = []
+    for k in range(40):
+        rate = 1000.0 + 7 * k
+        sig = sum(0.01 * np.sin(2 * np.pi * h * rate * t + h) for h in range(2, 12))
+        a, b = (sig + 0.01 * rng.standard_normal(t.size) for _ in range(2))
+        bands = [(1500.0, 12500.0)]
+        zs += list(line_z(line_powers(a, SR, rate, bands)[0], line_powers(b, SR, rate, bands)[0]))
+    assert len(zs) >= 380  # the last harmonic falls off the band's top for the higher rates
+    assert abs(float(np.mean(zs))) < 0.15 and 0.85 < float(np.std(zs)) < 1.15
+
+
+@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    rate=st.floats(700.0, 1400.0),
+    seed=st.integers(0, 10_000),
+    joint=st.sampled_from(["P", "Q"]),
+    snr_db=st.sampled_from([None, 20.0, 10.0]),
+)
+def test_steady_stepping_never_changes_the_lines(rate: float, seed: int, joint: str, snr_db: float | None) -> None:
+    """Two stretches of the same stepping, 0.8 s apart: never a verdict of "changed" (the null of the statistic)."""
+    y, _ = render(Scene(joint, rate, None, 2.2, seed=seed, snr_db=snr_db))
+    n = int(0.48 * SR)
+    got = line_change(y[SR // 2 : SR // 2 + n], y[int(1.3 * SR) : int(1.3 * SR) + n], SR, [(600.0, 0.45 * SR)])
+    assert got.rate_hz == pytest.approx(rate, rel=0.005)
+    assert step_clock_verdict(got) is not True and got.change_z < MIN_SYNC_Z, got
 
 
 # --- confirmation ----------------------------------------------------------------------------
