@@ -36,6 +36,7 @@ __all__ = [
     "HARMONICS",
     "LINE_TOL",
     "LINE_Z",
+    "MIN_LINES",
     "RATE_HI_HZ",
     "RATE_LO_HZ",
     "SHARP_WIDTH",
@@ -80,6 +81,9 @@ LINE_TOL = 0.02
 TRIM_LINES = 1
 #: ... and reports the largest change in dB among the lines kept that moved by this many standard deviations
 LINE_Z = 3.0
+#: ... and gives no verdict on fewer lines than this (a rate heard at twice the step rate under loud talk leaves 5
+#: in the band: too few to tell a stop's change from a voice's harmonic on one of them; measured: docs/audio.md)
+MIN_LINES = 6
 
 FloatArray = NDArray[np.float64]
 
@@ -457,7 +461,7 @@ def line_change(
     (the lines left; the trimmed sum is smaller than a chi-square of that many, so the
     deviate errs towards "nothing changed"). ``before`` and ``after`` may differ in
     length (each line's estimate is a mean square). NaN fields (no verdict) when no rate
-    is heard or fewer than :data:`TRIM_LINES` + 2 lines are found.
+    is heard or fewer than :data:`MIN_LINES` lines are found.
     """
     a = np.asarray(before, dtype=np.float64).ravel()
     b = np.asarray(after, dtype=np.float64).ravel()
@@ -473,7 +477,7 @@ def line_change(
     share = p0 / w0 if w0 > 0 else nan
     sharp = p0 / wide if wide > 0 else nan
     k = int(l0.power.size)
-    if k != l1.power.size or k < TRIM_LINES + 2:
+    if k != l1.power.size or k < max(MIN_LINES, TRIM_LINES + 2):
         return LineChange(rate, nan, nan, 0, k, share, sharp)
     z = line_z(l0, l1)
     keep = np.argsort(-(z**2), kind="stable")[TRIM_LINES:]
