@@ -42,7 +42,7 @@ the continuum between them (:func:`~stickslip.audio.stepclock.line_change`), ove
 after a rejected one, the stepping before the first of them) against the first
 :data:`SYNC_SPAN_S` of the window, at the rate heard in the stepping. The lines' changes,
 each in standard deviations of its estimate, are summed as squares (the largest dropped: a
-voice's harmonic on one line), so a stop that raises some lines and lowers others does
+voice's harmonic on a line), so a stop that raises some lines and lowers others does
 not cancel; the sum, as a normal deviate, must reach :data:`MIN_SYNC_Z`, and a line kept
 in it must have moved by :data:`MIN_SYNC_CHANGE_DB` or more (a precisely measured change
 of a fraction of a dB is not a stop). No verdict (the fire stands on persistence) when the

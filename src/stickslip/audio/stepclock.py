@@ -76,8 +76,9 @@ SHARP_WIDTH = 4.0
 FLANK = 4.0
 #: half-width of a line, as a fraction of its frequency (a rough clock spreads the k-th line k times wider)
 LINE_TOL = 0.02
-#: :func:`line_change` drops this many lines, those that changed most, before it sums the rest (a voice's harmonic
-#: on one line for a syllable; measured: docs/audio.md)
+#: :func:`line_change` drops this many lines, those that changed most, before it sums the rest (a voice's harmonic on
+#: a line for a syllable; 2 would also drop a second instrument's on two, and with them the whole change of a stop
+#: that moves two lines only: joint Q of the battery at 1362.5 Hz; measured: docs/audio.md)
 TRIM_LINES = 1
 #: ... and reports the largest change in dB among the lines kept that moved by this many standard deviations
 LINE_Z = 3.0
@@ -455,7 +456,7 @@ def line_change(
     sound on many lines, up on some and down on others; a sum over the lines (round 6)
     can cancel, a sum of squares cannot: ``sum (d_k / s_k)^2`` is chi-square with one
     degree of freedom per line when nothing changed. Interference adds no power on the
-    lines on average, but a voice's or a radio's harmonic that sits on one line for a
+    lines on average, but a voice's or a radio's harmonic that sits on a line for a
     syllable or a note does, in one stretch and not the other: the :data:`TRIM_LINES`
     largest terms are dropped before the sum is compared with its degrees of freedom
     (the lines left; the trimmed sum is smaller than a chi-square of that many, so the
