@@ -33,6 +33,7 @@ from battery_sound import MODES, Scene, _bank, _impulses, _res, _train, render, 
 from stickslip.audio.confirm import (  # noqa: E402
     MIN_SYNC_SHARE,
     MIN_SYNC_SHARPNESS,
+    MIN_SYNC_Z,
     ConfirmedStopDetector,
     step_clock_verdict,
 )
@@ -176,6 +177,27 @@ def test_steady_stepping_never_changes_the_lines(rate: float, seed: int, joint: 
     got = line_change(y[SR // 2 : SR // 2 + n], y[int(1.3 * SR) : int(1.3 * SR) + n], SR, [(600.0, 0.45 * SR)])
     assert min(abs(got.rate_hz / rate - 1), abs(got.rate_hz / rate - 2)) < 0.005  # or twice it, in noise
     assert step_clock_verdict(got) is not True, got
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    kind=st.sampled_from(["brighter", "louder", "duller", "quieter"]),
+    rate=st.floats(800.0, 1300.0),
+    seed=st.integers(0, 10_000),
+)
+def test_the_comb_sees_a_stop_in_any_direction(kind: str, rate: float, seed: int) -> None:
+    """The stops of the battery's cross conditions (joint Q), which the level template misses when it was tuned on
+    another kind: 0.24 s of the stop against the 0.48 s of stepping before it changes the lines by a deviate of 8 or
+    more; 0.24 s of stepping 0.3 s earlier, against the stepping before it, by less than 4 (docs/audio.md, "A
+    synchronous departure as a source of fires")."""
+    y, _ = render(variant(Q, seed=seed, stop_at=2.0, dur=2.6, rate=rate, stop_kind=kind))
+    n, g, m = int(0.48 * SR), int(0.06 * SR), int(0.24 * SR)
+    band = [(600.0, 0.42 * SR)]
+    for t, lo, hi in ((2.0, 8.0, math.inf), (1.7, -math.inf, MIN_SYNC_Z)):
+        i = int(t * SR)
+        got = line_change(y[i - g - n : i - g], y[i : i + m], SR, band)
+        assert got.rate_hz == pytest.approx(rate, rel=0.005)
+        assert lo <= got.change_z < hi, (t, got)
 
 
 # --- confirmation ----------------------------------------------------------------------------
