@@ -26,7 +26,7 @@ Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
 ``--long-only`` runs the false-alarm hour alone (confirmed events, the detector's
 unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for another hour);
 ``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed;
-``--step-clock`` confirms with the step clock too (round 6, off by default).
+``--step-clock`` confirms with the step clock too (line by line since round 7; off by default).
 """
 
 from __future__ import annotations
@@ -429,7 +429,7 @@ if __name__ == "__main__":
     ap.add_argument("--seed", type=int, default=1000, help="seed of the first piece (--long-only)")
     ap.add_argument("--confirm-s", type=float, default=CONFIRM_S, help="confirmation window, s (0: unconfirmed)")
     ap.add_argument("--under-talk", action="store_true", help="run the true stops under talk alone")
-    ap.add_argument("--step-clock", action="store_true", help="confirm with the step clock too (round 6, opt-in)")
+    ap.add_argument("--step-clock", action="store_true", help="confirm with the step clock too (rounds 6-7, opt-in)")
     args = ap.parse_args()
     if args.under_talk:
         true_stops_under_talk(step_clock=args.step_clock)
