@@ -266,6 +266,32 @@ def test_listen_warns_on_a_dead_file(wavs, tmp_path):
     assert "carries no signal (silence)" in r.stderr
 
 
+def test_listen_refuses_an_empty_file_and_warns_on_one_shorter_than_the_warm_up(wavs, tmp_path):
+    out = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(out)]).exit_code == 0
+    write_wav(tmp_path / "empty.wav", np.zeros(0, np.float32), 48_000)
+    _one_line_error(
+        runner.invoke(app, ["listen", str(tmp_path / "empty.wav"), "--tuning", str(out)]), "holds no samples"
+    )
+    x, _ = render_traverse_recording(3, 1000.0, 2.0, 3.0, seed=24)
+    write_wav(tmp_path / "short.wav", x[:4800], 48_000)  # 100 ms: shorter than the 150 ms warm-up
+    r = runner.invoke(app, ["listen", str(tmp_path / "short.wav"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0 and json.loads(r.stdout) == []
+    assert "lasts only 100.0 ms (4800 samples): less than the 150 ms of stepping" in r.stderr
+    write_wav(tmp_path / "long.wav", x[:48_000], 48_000)  # 1 s of stepping: no such warning
+    r = runner.invoke(app, ["listen", str(tmp_path / "long.wav"), "--tuning", str(out), "--json"])
+    assert r.exit_code == 0 and "lasts only" not in r.stderr
+
+
+def test_listen_names_the_sample_rate_it_cannot_use(wavs, tmp_path):
+    out = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(out)]).exit_code == 0
+    for rate in (1, 4000, 384_000):
+        write_wav(tmp_path / "odd.wav", np.zeros(rate, np.float32) + 0.01, rate)
+        r = runner.invoke(app, ["listen", str(tmp_path / "odd.wav"), "--tuning", str(out)])
+        _one_line_error(r, f"sample rate {rate} Hz is outside 8000-192000 Hz")
+
+
 def test_listen_names_samples_that_are_not_numbers_and_still_hears_the_stop(wavs, tmp_path):
     # a damaged float file (a run of NaN, one infinity) is not silently read as silence: one warning with the
     # count and the first time; the stop is still heard where it is

@@ -271,6 +271,8 @@ class Tuning:
         """
         if sample_rate == self.sample_rate:
             return self
+        if not 8_000 <= sample_rate <= 192_000:
+            raise ValueError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
         frame = default_frame(sample_rate) * self.frame // default_frame(self.sample_rate)
         hop = max(1, frame * self.hop // self.frame)
         kw: dict[str, Any] = {"sample_rate": int(sample_rate), "frame": int(frame), "hop": int(hop)}

@@ -226,6 +226,7 @@ def listen(
     events = []
     problems: set[str | None] = set()
     n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
+    heard_rate = float(tuning.sample_rate)
     try:
         det = None
         for block, rate in blocks:
@@ -234,6 +235,7 @@ def listen(
                 n_bad += bad
                 first_bad_s = first_bad_s if first_bad_s is not None else (heard + int(first or 0)) / rate
             heard += block.size
+            heard_rate = float(rate)
             if det is None:
                 try:
                     det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock)
@@ -243,8 +245,19 @@ def listen(
             events += det.feed(block)
     except AudioSourceError as err:
         fail(str(err))
+    if det is None or heard == 0:  # an empty or truncated file
+        fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
     if isinstance(det, ConfirmedStopDetector):
         events += det.finish()
+    warmup_s = tuning.warmup_s if tuning.method == "template" else 0.0
+    if heard < (warmup_s + tuning.hold_s) * heard_rate:
+        err_console.print(
+            f"warning: {recording} lasts only {1e3 * heard / heard_rate:.1f} ms ({heard} sample"
+            f"{'s' if heard != 1 else ''}): less than the {1e3 * warmup_s:.0f} ms of stepping the detector learns "
+            "from before it can hear a stop (unless the recording starts at the stop)",
+            highlight=False,
+            soft_wrap=True,
+        )
     if problems and None not in problems:
         err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
     if n_bad:
@@ -422,8 +435,15 @@ def record(
                     fail("--serial and --sample-rate go together (the sensor's samples carry no clock)")
                 _check_sample_rate(sample_rate)
                 samples, rate, stop_at, how = _record_real(
-                    ctrl, joint, sign_label, steps, stop_at_step, key, audio_input,
-                    serial_port, int(round(sample_rate)) if sample_rate is not None else None,
+                    ctrl,
+                    joint,
+                    sign_label,
+                    steps,
+                    stop_at_step,
+                    key,
+                    audio_input,
+                    serial_port,
+                    int(round(sample_rate)) if sample_rate is not None else None,
                 )
         finally:
             ctrl.close()
