@@ -175,9 +175,6 @@ CONDITIONS = [
         _test(P, 78, stop_at=0.0),
         late_s=0.25,
         group="hostile",
-        known_failure="the first frames fit the tuning's stepping plus 1.2 x the stop, but leave a residual of 5.4 "
-        "spreads (joint P's narrow modes sound different at 1080 Hz than at the tuning's 1000 Hz): not the clear "
-        "case the detector demands before firing at once",
     ),
     Condition("starts at the stop, joint Q", Q, _test(Q, 79, stop_at=0.0), late_s=0.25, group="hostile"),
     # round 2: interference added before the detector was changed against speech (never developed against)

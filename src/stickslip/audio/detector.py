@@ -214,6 +214,8 @@ class StopDetector:
         self._prev_db = -np.inf
         self._cross_t = math.nan
         self.levels_seen = 0
+        self._head: list[np.ndarray] = []  # the warm-up's samples, kept until the template state has them
+        self._head_n = 0
         if self._template is not None:
             self._template.reset(t0_s)
 
@@ -272,6 +274,16 @@ class StopDetector:
             x = np.clip(np.nan_to_num(x, nan=0.0, posinf=_LIMIT, neginf=-_LIMIT), -_LIMIT, _LIMIT)
         tu = self.tuning
         F, H = tu.frame, tu.hop
+        st0 = self._template
+        if st0 is not None and st0.head is None and tu.step_rate_hz is not None:
+            # the warm-up's samples, for the judgement whether listening began at the stop (template.py)
+            need = st0.head_samples - self._head_n
+            if need > 0 and x.size:
+                self._head.append(x[:need].copy())
+                self._head_n += min(need, x.size)
+            if self._head_n >= st0.head_samples:
+                st0.head = np.concatenate(self._head)
+                self._head = []
         self._buf = np.concatenate((self._buf, x)) if self._buf.size else x.copy()
         avail_end = self._buf_start + self._buf.size
         n_frames = (avail_end - F - self._next) // H + 1 if avail_end - self._next >= F else 0

@@ -44,6 +44,7 @@ __all__ = [
     "QUANTILE",
     "TemplateParams",
     "TemplateState",
+    "continuum_levels_db",
     "fit_departure",
     "subband_edges",
     "subband_levels_db",
@@ -62,6 +63,17 @@ STALE_ALL_UP_DB = 3.0
 RESIDUAL_SLOPE = 0.35
 _FLOOR = 1e-20
 _CLIP_DB = 40.0
+#: the continuum: frequency bins farther than this many bins from every harmonic of the step rate
+#: (a Hann window's main lobe is +-2 bins wide)
+LINE_GUARD_BINS = 2.0
+#: the continuum is measured in frames this many times the detector's (finer bins: more of them between the
+#: lines, and a steadier level), every detector frame
+CONTINUUM_FRAME = 4
+#: listening that starts at the stop, judged on the continuum (see :meth:`TemplateState._started_at_stop`):
+#: the stop must explain at least this much of the tuning's signature ...
+START_MIN_B = 0.75
+#: ... and leave at most this share of what a gain change alone leaves
+START_MAX_RATIO = 0.4
 
 FloatArray = NDArray[np.float64]
 
@@ -141,6 +153,47 @@ def subband_levels_db(
     return out
 
 
+def continuum_levels_db(
+    samples: NDArray[np.floating] | FloatArray,
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    edges: tuple[float, ...] | list[float],
+    rate_hz: float,
+) -> FloatArray:
+    """Sub-band levels of the *continuum* between the step clock's lines, per frame (frames x bands), dB.
+
+    A click train at ``rate_hz`` puts its power on lines at the rate's multiples; which of a
+    narrow mode's frequencies a line samples depends on the rate, so a sub-band's level
+    moves by many dB when the rate changes (a line enters or leaves the sub-band). Between
+    the lines lies the continuum the steps' irregularity makes (their timing jitter and
+    amplitude), shaped by the same modes at every rate. Per frame and sub-band: the mean
+    power of the bins farther than :data:`LINE_GUARD_BINS` bins from every multiple of
+    ``rate_hz``, in dB (a power per bin: another rate changes it by the same factor in
+    every sub-band, a gain). NaN where a sub-band has no such bin.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    nb = len(edges) - 1
+    if x.size < frame or not rate_hz > 0:
+        return np.full((0, nb), np.nan)
+    f = np.fft.rfftfreq(frame, 1 / sample_rate)
+    bin_hz = sample_rate / frame
+    off = np.abs(f - np.round(f / rate_hz) * rate_hz) > LINE_GUARD_BINS * bin_hz
+    idx = _bins(edges, sample_rate, frame)
+    w, scale = window(frame)
+    view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
+    spec = np.fft.rfft(view * w, axis=1)
+    p = (spec.real**2 + spec.imag**2) * scale
+    out = np.full((view.shape[0], nb), np.nan)
+    for b in range(nb):
+        sel = np.zeros(f.size, dtype=bool)
+        sel[idx[b] : idx[b + 1]] = True
+        sel &= off
+        if sel.any():
+            out[:, b] = 10 * np.log10(p[:, sel].mean(axis=1) + _FLOOR)
+    return out
+
+
 def fit_departure(d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int) -> tuple[FloatArray, FloatArray]:
     """Stop-likeness ``a`` and residual ``rho`` of departures ``d`` (frames x bands, dB).
 
@@ -212,6 +265,10 @@ class TemplateParams:
     onset_lag_s: float
     stepping_levels_db: tuple[float, ...] | None = None
     drop_threshold: tuple[float, float] | None = None
+    step_rate_hz: float | None = None
+    continuum_levels_db: tuple[float, ...] | None = None
+    continuum_signature_db: tuple[float, ...] | None = None
+    continuum_spread_db: tuple[float, ...] | None = None
 
 
 @dataclass
@@ -322,10 +379,14 @@ class TemplateState:
         gt = np.maximum(np.minimum(self.delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
         self._drop_info_tuned = float(gt @ gt)
         self._drop = DropMeter(self.delta.size)
+        #: the warm-up's samples from the stream start (:attr:`head_samples` of them), for the start-at-the-stop
+        #: judgement on the continuum; the stream's owner (:class:`~stickslip.audio.detector.StopDetector`) sets it
+        self.head: FloatArray | None = None
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
-        """Forget the template and every decision."""
+        """Forget the template, the warm-up's samples and every decision."""
+        self.head = None
         self.t0 = float(t0_s)
         self.frame_no = 0
         self.template: FloatArray | None = None
@@ -418,42 +479,111 @@ class TemplateState:
         self._acc_list = []
         self._acc_n = 0
 
+    @property
+    def head_samples(self) -> int:
+        """How many samples from the stream start the warm-up's frames span (what :attr:`head` must hold)."""
+        return (self.p.warmup_chunks * CHUNK - 1) * self.p.hop + self.p.frame
+
     def _started_at_stop(self, end: int) -> None:
         """Was the stop there from the start? Compare the learned template with the tuning's stepping.
 
-        The first frames' template ``T`` minus the tuning's stepping levels is fitted as a
-        gain offset (the same in every sub-band) plus ``b`` times the stop's signature;
-        ``b`` at or above the threshold means the detector began listening at the stop: it
-        fires at once (onset: the start of listening) and takes ``T - b * delta`` as the
-        stepping template. A signature that is a gain change only (a uniformly quieter
-        stop) cannot be told from a gain change this way and is taken as stepping.
+        Two views, either enough:
+
+        * *levels*: the first frames' template ``T`` minus the tuning's stepping levels is
+          fitted as a gain offset (the same in every sub-band) plus ``b`` times the stop's
+          signature; ``b`` at or above the threshold, the stop explaining three quarters of
+          what a gain change leaves, and a small residual: the stop. Good only at the
+          tuning's step rate: at another rate the lines of the click train fall elsewhere on
+          narrow modes, and the levels move by several spreads per sub-band.
+        * *continuum* (tunings that recorded their step rate): the same fit on the power
+          between the step clock's lines (:func:`continuum_levels_db`, the stream's rate
+          heard in :attr:`head` by :func:`~stickslip.audio.stepclock.step_rate_hz`), which
+          the rate does not move: ``b`` at least :data:`START_MIN_B` (and the threshold) and
+          at most :data:`START_MAX_RATIO` of the gain-only residual left.
+
+        The stop: the detector fires at once (onset: the start of listening) and takes
+        ``T - b * delta`` (``b`` of the levels, at least 1) as the stepping template. A
+        signature that is a gain change only (a uniformly quieter stop) cannot be told from
+        a gain change this way and is taken as stepping.
         """
         p = self.p
-        if p.stepping_levels_db is None or self.template is None:
+        if self.template is None or float(np.min(self.template)) <= -150.0:
             return
-        w = 1.0 / self.sigma**2
-        X = np.stack((np.ones_like(self.delta), self.delta), axis=1)
-        y = self.template - np.asarray(p.stepping_levels_db)
+        b_lev = self._start_by_levels()
+        if b_lev is None and not self._start_by_continuum():
+            return
+        shift = 1.0 if b_lev is None else b_lev
+        self.template = self.template - shift * self.delta
+        self._set_floor(reset=True)
+        self.latched = True
+        self.below = 0
+        self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(shift)))  # onset: the start
+
+    @staticmethod
+    def _gain_and_signature(
+        y: FloatArray, delta: FloatArray, sigma: FloatArray
+    ) -> tuple[float, float, float, float] | None:
+        """Fit ``y = c + b * delta`` weighted by ``1/sigma**2``: ``b``, the residual's RMS (spreads) and the
+        sums of squares left by the fit and by a gain alone; None where the signature is (nearly) a gain change."""
+        w = 1.0 / sigma**2
+        X = np.stack((np.ones_like(delta), delta), axis=1)
         A = X.T @ (X * w[:, None])
         if np.linalg.cond(A) > 1e6:
-            return
+            return None
+        shape = delta - float(np.sum(w * delta) / np.sum(w))
+        if float(np.sqrt(np.mean((shape / sigma) ** 2))) < 1.0:
+            return None  # the stop is (nearly) a gain change: undecidable from levels alone
         c, b = np.linalg.solve(A, X.T @ (w * y))
-        shape = self.delta - float(np.sum(w * self.delta) / np.sum(w))
-        if float(np.sqrt(np.mean((shape / self.sigma) ** 2))) < 1.0:
-            return  # the stop is (nearly) a gain change: undecidable from levels alone
+        r_gain = (y - float(np.sum(w * y) / np.sum(w))) / sigma
+        r_both = (y - X @ np.array([c, b])) / sigma
+        ss_both = float(np.sum(r_both**2))
+        return float(b), float(np.sqrt(np.mean(r_both**2))), ss_both, float(np.sum(r_gain**2))
+
+    def _start_by_levels(self) -> float | None:
+        """``b`` when the levels show the stop clearly from the start (see :meth:`_started_at_stop`), else None."""
+        p = self.p
+        if p.stepping_levels_db is None or self.template is None:
+            return None
+        fit = self._gain_and_signature(self.template - np.asarray(p.stepping_levels_db), self.delta, self.sigma)
+        if fit is None:
+            return None
+        b, rms_both, ss_both, ss_gain = fit
         # demand a clear case: the stop explains most of what a gain change leaves, and fits well
-        r_gain = (y - float(np.sum(w * y) / np.sum(w))) / self.sigma
-        r_both = (y - X @ np.array([c, b])) / self.sigma
-        clear = float(np.sum(r_both**2)) <= 0.25 * float(np.sum(r_gain**2))
-        fits = float(np.sqrt(np.mean(r_both**2))) <= 2.0 + RESIDUAL_SLOPE * b * float(
-            np.sqrt(np.mean((self.delta / self.sigma) ** 2))
-        )
-        if b >= max(p.threshold, 0.6) and clear and fits and float(np.min(self.template)) > -150.0:
-            self.template = self.template - b * self.delta
-            self._set_floor(reset=True)
-            self.latched = True
-            self.below = 0
-            self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(b)))  # onset: the start
+        clear = ss_both <= 0.25 * ss_gain
+        fits = rms_both <= 2.0 + RESIDUAL_SLOPE * b * float(np.sqrt(np.mean((self.delta / self.sigma) ** 2)))
+        return b if b >= max(p.threshold, 0.6) and clear and fits else None
+
+    def _start_by_continuum(self) -> bool:
+        """True when the continuum between the step clock's lines shows the stop (see :meth:`_started_at_stop`)."""
+        p = self.p
+        head = self.head
+        if (
+            head is None
+            or p.step_rate_hz is None
+            or p.continuum_levels_db is None
+            or p.continuum_signature_db is None
+            or p.continuum_spread_db is None
+        ):
+            return False
+        from .stepclock import step_rate_hz
+
+        rate = step_rate_hz(head, p.sample_rate)
+        if not math.isfinite(rate):
+            return False
+        C = continuum_levels_db(head, p.sample_rate, CONTINUUM_FRAME * p.frame, p.frame, p.edges_hz, rate)
+        ok = np.isfinite(C).all(axis=0) if C.shape[0] else np.zeros(C.shape[1], dtype=bool)
+        ref = np.asarray(p.continuum_levels_db, dtype=np.float64)
+        sig = np.asarray(p.continuum_signature_db, dtype=np.float64)
+        spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
+        ok &= np.isfinite(ref) & np.isfinite(sig) & np.isfinite(spread)
+        if ok.sum() < 3:
+            return False
+        T = np.percentile(C[:, ok], 100 * QUANTILE, axis=0)
+        fit = self._gain_and_signature(T - ref[ok], sig[ok], spread[ok])
+        if fit is None:
+            return False
+        b, _, ss_both, ss_gain = fit
+        return b >= max(p.threshold, START_MIN_B) and ss_both <= START_MAX_RATIO * ss_gain
 
     def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
         p = self.p
