@@ -64,14 +64,15 @@ RESIDUAL_SLOPE = 0.35
 _FLOOR = 1e-20
 _CLIP_DB = 40.0
 #: the continuum: frequency bins farther than this many bins from every harmonic of the step rate
-#: (a Hann window's main lobe is +-2 bins wide)
-LINE_GUARD_BINS = 2.0
+#: (a 4-term Blackman-Harris window's main lobe is +-4 bins wide; its sidelobes are 92 dB down, so a line
+#: 40 dB over the continuum does not leak into it, as a Hann window's -31 dB sidelobes would)
+LINE_GUARD_BINS = 4.0
 #: the continuum is measured in frames this many times the detector's (finer bins: more of them between the
 #: lines, and a steadier level), every detector frame
 CONTINUUM_FRAME = 4
 #: listening that starts at the stop, judged on the continuum (see :meth:`TemplateState._started_at_stop`):
 #: the stop must explain at least this much of the tuning's signature ...
-START_MIN_B = 0.75
+START_MIN_B = 0.7
 #: ... and leave at most this share of what a gain change alone leaves
 START_MAX_RATIO = 0.4
 
@@ -167,8 +168,8 @@ def continuum_levels_db(
     narrow mode's frequencies a line samples depends on the rate, so a sub-band's level
     moves by many dB when the rate changes (a line enters or leaves the sub-band). Between
     the lines lies the continuum the steps' irregularity makes (their timing jitter and
-    amplitude), shaped by the same modes at every rate. Per frame and sub-band: the mean
-    power of the bins farther than :data:`LINE_GUARD_BINS` bins from every multiple of
+    amplitude), shaped by the same modes at every rate. Per frame (4-term Blackman-Harris
+    window) and sub-band: the mean power of the bins farther than :data:`LINE_GUARD_BINS` bins from every multiple of
     ``rate_hz``, in dB (a power per bin: another rate changes it by the same factor in
     every sub-band, a gain). NaN where a sub-band has no such bin.
     """
@@ -180,7 +181,10 @@ def continuum_levels_db(
     bin_hz = sample_rate / frame
     off = np.abs(f - np.round(f / rate_hz) * rate_hz) > LINE_GUARD_BINS * bin_hz
     idx = _bins(edges, sample_rate, frame)
-    w, scale = window(frame)
+    from scipy.signal import get_window
+
+    w = np.asarray(get_window("blackmanharris", frame, fftbins=True), dtype=np.float64)
+    scale = 2.0 / (frame * float(np.sum(w**2)))
     view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
     spec = np.fft.rfft(view * w, axis=1)
     p = (spec.real**2 + spec.imag**2) * scale
