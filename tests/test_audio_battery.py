@@ -159,8 +159,6 @@ CONDITIONS = [
         P,
         _test(P, 72, drift=0.1),
         group="hostile",
-        known_failure="a false alarm at 0.32 s: the warm-up's template is learned at -10 % and the lines moving "
-        "through joint P's narrow 5.2 kHz mode look like the stop's rise",
     ),
     Condition("step rate drifts +-10 %, joint Q", Q, _test(Q, 73, drift=0.1, stop_at=2.4), group="hostile"),
     Condition("8-bit audio", P, _test(P, 74, bits=8), group="hostile"),

@@ -34,6 +34,7 @@ not depend on how the stream is cut into blocks.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +76,20 @@ CONTINUUM_FRAME = 4
 START_MIN_B = 0.7
 #: ... and leave at most this share of what a gain change alone leaves
 START_MAX_RATIO = 0.4
+#: a fire whose continuum did not change is a stale template (the step rate moved), not a stop: the continuum over
+#: this long after the fire, s, ...
+STALE_AFTER_S = 0.3
+#: ... against the continuum over this long of the stepping before it, s, ...
+STALE_REF_S = 0.3
+#: ... that ends this long before the fire, s (the stop's onset is a hold before the fire)
+STALE_GAP_S = 0.06
+#: ... is unchanged when it moved by less than this in level, dB (a quieter stop: 7-8 dB on the generators), ...
+STALE_MAX_GAIN_DB = 3.0
+#: ... and by less than this in shape (RMS over sub-bands after the level, in the continuum's spreads)
+STALE_MAX_SHAPE = 1.1
+#: ... and the stepping before the fire did not already sound like the stop (a late fire: the stop began before the
+#: reference span), judged as at the start (:data:`START_MIN_B`) at this share of the signature
+STALE_REF_MAX_B = 0.5
 
 FloatArray = NDArray[np.float64]
 
@@ -386,6 +401,13 @@ class TemplateState:
         #: the warm-up's samples from the stream start (:attr:`head_samples` of them), for the start-at-the-stop
         #: judgement on the continuum; the stream's owner (:class:`~stickslip.audio.detector.StopDetector`) sets it
         self.head: FloatArray | None = None
+        #: the stream's samples ``[lo, hi)`` (absolute indices from the stream start), or None where they are gone;
+        #: set by the stream's owner for the stale-template check (see :meth:`_stale_check`)
+        self.samples: Callable[[int, int], FloatArray | None] | None = None
+        #: per stale-template check: (the fire's end sample, level change dB, shape change, judged stale)
+        self.stale_log: list[tuple[int, float, float, bool]] = []
+        self._after_frames = max(CHUNK + 1, int(math.ceil(STALE_AFTER_S * p.sample_rate / p.hop)))
+        self._checks = p.continuum_signature_db is not None and p.continuum_spread_db is not None
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -414,6 +436,8 @@ class TemplateState:
         self._neg_tail: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
         self._floors: list[FloatArray] = []
         self.floor: FloatArray | None = None
+        self._check: tuple[int, int] | None = None  # (frame at which to check, the fire's end sample)
+        self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
 
     def _set_floor(self, reset: bool = False) -> None:
         """Remember the template just updated; the floor is the lowest of the last :data:`FLOOR_CHUNKS`."""
@@ -434,10 +458,14 @@ class TemplateState:
         n = v.shape[0]
         while i < n:
             room = CHUNK - self.frame_no % CHUNK
+            if self._check is not None and self._check[0] > self.frame_no:
+                room = min(room, self._check[0] - self.frame_no)
             j = min(n, i + room)
             out += self._segment(v[i:j], ends[i:j])
             self.frame_no += j - i
             i = j
+            if self._check is not None and self.frame_no >= self._check[0]:
+                self._stale_check(int(ends[j - 1]))
             if self.frame_no % CHUNK == 0:
                 self._chunk_done(int(ends[j - 1]))
                 out += self._pending
@@ -523,6 +551,81 @@ class TemplateState:
         self.below = 0
         self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(shift)))  # onset: the start
 
+    def _stale_check(self, end: int) -> None:
+        """Did the continuum change at the latest fire? If not, the template was stale: learn it anew, un-latch.
+
+        A click train's lines move across narrow modes as the step rate moves, and the
+        sub-band levels with them, faster than the template follows (a rate drifting 10 %
+        over 2 s): the levels depart from the template while the sound's continuum between
+        the lines (:func:`continuum_levels_db`), which the rate does not move, stays as it
+        was. A stop changes it, in level (a quieter stop) or shape. :data:`STALE_AFTER_S`
+        after the fire, the continuum since the fire is compared with the stepping's before
+        it (:data:`STALE_REF_S` ending :data:`STALE_GAP_S` before the fire), each at the
+        step rate heard in it: a level change under :data:`STALE_MAX_GAIN_DB` and a shape
+        change under :data:`STALE_MAX_SHAPE` spreads (the RMS over sub-bands of what is left
+        after the level, in the tuning's continuum spreads) mean no stop. The template is
+        then the low quantile of the levels since the fire, and the detector listens again
+        (a confirming detector sees the stop-likeness gone, and drops the fire). No verdict
+        (the fire stands) while still latched is required, when the samples are gone, when
+        no rate is heard, or with fewer than three sub-bands to judge on.
+        """
+        assert self._check is not None
+        at, fire_end = self._check
+        self._check = None
+        p = self.p
+        if not self.latched or self.samples is None or self.template is None:
+            return
+        sr = p.sample_rate
+        gap, span = int(STALE_GAP_S * sr), int(STALE_REF_S * sr)
+        ref = self.samples(fire_end - gap - span, fire_end - gap)
+        after = self.samples(fire_end, fire_end + int(STALE_AFTER_S * sr))
+        if ref is None or after is None:
+            return
+        from .stepclock import step_rate_hz
+
+        frame = CONTINUUM_FRAME * p.frame
+        levels = []
+        for seg in (ref, after):
+            rate = step_rate_hz(seg, sr) if seg.size >= frame + p.frame else math.nan
+            if not math.isfinite(rate):
+                return
+            C = continuum_levels_db(seg, sr, frame, p.frame, p.edges_hz, rate)
+            levels.append(np.percentile(C, 100 * QUANTILE, axis=0))
+        spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
+        y = levels[1] - levels[0]
+        ok = np.isfinite(y) & np.isfinite(spread) & np.isfinite(np.asarray(p.continuum_signature_db, dtype=np.float64))
+        if ok.sum() < 3:
+            return
+        w = 1.0 / spread[ok] ** 2
+        gain = float(np.sum(w * y[ok]) / np.sum(w))
+        shape = float(np.sqrt(np.mean(((y[ok] - gain) / spread[ok]) ** 2)))
+        stale = abs(gain) < STALE_MAX_GAIN_DB and shape < STALE_MAX_SHAPE
+        if stale and p.continuum_levels_db is not None:
+            # a fire late into a stop compares the stop with itself: was the reference already the stop?
+            ref_level = np.asarray(p.continuum_levels_db, dtype=np.float64)
+            sig = np.asarray(p.continuum_signature_db, dtype=np.float64)
+            ok2 = ok & np.isfinite(ref_level)
+            fit = self._gain_and_signature(levels[0][ok2] - ref_level[ok2], sig[ok2], spread[ok2]) if ok2.sum() >= 3 else None
+            stale = fit is None or fit[0] < STALE_REF_MAX_B
+        self.stale_log.append((fire_end, gain, shape, stale))
+        if not stale:
+            return
+        since = [lv[max(at - self._after_frames - f0, 0) : max(at - f0, 0)] for f0, lv in self._recent_v]
+        since = [lv for lv in since if lv.shape[0]]
+        if not since:
+            return
+        self.template = np.percentile(np.concatenate(since), 100 * QUANTILE, axis=0)
+        self._set_floor(reset=True)
+        self.latched = False
+        self.below = 0
+        self.mask = 0
+        self.recent = []
+        self.prev_a = -math.inf
+        self._acc_list, self._acc_n = [], 0
+        self._drop.reset()
+        self._neg_tail = (np.zeros(0), np.zeros(0))
+        self.arm_sample = end + int(DROP_ARM_S * sr)
+
     @staticmethod
     def _gain_and_signature(
         y: FloatArray, delta: FloatArray, sigma: FloatArray
@@ -598,6 +701,12 @@ class TemplateState:
             if self.hot_trace is not None:
                 self.hot_trace.extend([False] * v.shape[0])
             return []
+        if self._checks:
+            self._recent_v.append((self.frame_no, v))
+            while self._recent_v and self._recent_v[0][0] + self._recent_v[0][1].shape[0] < (
+                self.frame_no - self._after_frames - CHUNK
+            ):
+                self._recent_v.pop(0)
         d = v - self.template
         a, rho = self._fit(d)
         hot = (a >= p.threshold) & (rho <= p.residual_max)
@@ -674,7 +783,7 @@ class TemplateState:
         rel = p.threshold - p.hysteresis
         out: list[Decision] = []
         prev = self.prev_a
-        for ai, hi, end, li in zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True):
+        for k, (ai, hi, end, li) in enumerate(zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True)):
             if self.latched:
                 if ai < rel:
                     self.below += 1
@@ -701,6 +810,8 @@ class TemplateState:
                     self.latched = True
                     self.below = 0
                     out.append(Decision(int(end), self.cross_t, float(ai)))
+                    if self._checks and self.samples is not None:
+                        self._check = (self.frame_no + k + 1 + self._after_frames, int(end))
                 if self.mask == 0:
                     self.recent = []
             prev = ai
