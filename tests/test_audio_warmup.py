@@ -176,18 +176,33 @@ def test_the_detector_keeps_only_the_warm_ups_samples() -> None:
     assert det._head == []
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="not solved (docs/audio.md, round 7b): a step clock drifting 10 % over 2 s moves the lines of a click "
-    "train across narrow modes faster than the template (0.5 s time constant) follows; measured on the battery's "
-    "generator at 700-1400 Hz, 6 seeds each, both directions: false alarms in 67 of 72 recordings on joint P, 42 "
-    "of 72 on joint Q",
+@settings(max_examples=10, deadline=None)
+@given(
+    joint=st.sampled_from(["P", "Q"]),
+    rate=st.floats(700.0, 1400.0),
+    drift=st.sampled_from([0.1, -0.1]),
+    seed=st.integers(1, 10**6),
 )
-@pytest.mark.parametrize("joint", ["P", "Q"])
-def test_a_drifting_step_rate_without_a_stop_gives_no_event(joint: str) -> None:
-    bad = []
-    for rate, seed, drift in ((850.0, 100, 0.1), (1080.0, 101, 0.1), (1200.0, 102, -0.1)):
-        x, _ = render(variant(JOINTS[joint], seed=seed, stop_at=None, dur=2.0, rate=rate, drift=drift))
-        events = detect(x, _tuning(joint), block=1024, confirm_s=0.5)
-        bad += [(rate, drift, round(e.detected_at_s, 3)) for e in events]
-    assert bad == []
+def test_a_drifting_step_rate_without_a_stop_gives_no_event(joint: str, rate: float, drift: float, seed: int) -> None:
+    """The step clock drifts 10 % over 2 s (from -10 % to +10 % of ``rate``, or back), no stop: no stop reported.
+
+    Counted as ``listen`` reports them (confirmed over 0.5 s), except a fire in the recording's last 0.5 s,
+    which ``finish`` reports if what was heard of it persisted (its ``confirmed_s`` says so; a traverse's stream
+    does not end there): the stale-template check needs 0.3 s after a fire.
+    """
+    x, _ = render(variant(JOINTS[joint], seed=seed, stop_at=None, dur=2.0, rate=rate, drift=drift))
+    events = detect(x, _tuning(joint), block=1024, confirm_s=0.5)
+    heard = [e for e in events if (e.confirmed_s or 0.0) >= 0.5 - 1e-9]
+    assert heard == [], [(e.onset_s, e.detected_at_s) for e in heard]
+
+
+def test_the_stale_template_check_does_not_depend_on_the_block_size() -> None:
+    x, _ = render(variant(JOINTS["P"], seed=72, stop_at=1.6, dur=2.2, rate=1080.0, drift=0.1))
+    ref = [(e.onset_s, e.detected_at_s) for e in detect(x, _tuning("P"), block=1 << 16, confirm_s=0.5)]
+    assert len(ref) == 1 and abs(ref[0][0] - 1.6) <= 0.025
+    for block in (128, 777, 4096):
+        assert [(e.onset_s, e.detected_at_s) for e in detect(x, _tuning("P"), block=block, confirm_s=0.5)] == ref
+        det = StopDetector(_tuning("P"))
+        for i in range(0, x.size, block):
+            det.feed(x[i : i + block])
+        assert det._template is not None and any(s for *_, s in det._template.stale_log)  # the false fire, judged

@@ -325,6 +325,7 @@ class StopDetector:
                             detected_at_s=self._t0 + dec.end_sample / tu.sample_rate,
                             onset_s=dec.cross_t_s - tu.onset_lag_s,
                             level_db=dec.a,
+                            onset_uncertain=dec.uncertain,
                         )
                     )
                 levels = None

@@ -87,6 +87,11 @@ STALE_GAP_S = 0.06
 STALE_MAX_GAIN_DB = 3.0
 #: ... and by less than this in shape (RMS over sub-bands after the level, in the continuum's spreads)
 STALE_MAX_SHAPE = 1.1
+#: a fire this soon after a stale-template verdict may be a stop that began inside the judged span: its onset is
+#: uncertain, s
+STALE_UNCERTAIN_S = 0.3
+#: the template learned anew from the levels of this much of the end of the judged span, s (the latest rate) ...
+STALE_RELEARN_S = 0.15
 #: ... and the stepping before the fire did not already sound like the stop (a late fire: the stop began before the
 #: reference span), judged as at the start (:data:`START_MIN_B`) at this share of the signature
 STALE_REF_MAX_B = 0.5
@@ -297,6 +302,9 @@ class Decision:
     end_sample: int
     cross_t_s: float
     a: float
+    #: the stop may have begun before ``cross_t_s``: it fired soon after a fire judged a stale template, and may have
+    #: begun inside that fire's span (see :meth:`TemplateState._stale_check`)
+    uncertain: bool = False
 
 
 class DropMeter:
@@ -437,6 +445,7 @@ class TemplateState:
         self._floors: list[FloatArray] = []
         self.floor: FloatArray | None = None
         self._check: tuple[int, int] | None = None  # (frame at which to check, the fire's end sample)
+        self._uncertain_until = -1  # a fire ending before this sample follows a stale-template verdict closely
         self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
 
     def _set_floor(self, reset: bool = False) -> None:
@@ -605,16 +614,39 @@ class TemplateState:
             ref_level = np.asarray(p.continuum_levels_db, dtype=np.float64)
             sig = np.asarray(p.continuum_signature_db, dtype=np.float64)
             ok2 = ok & np.isfinite(ref_level)
-            fit = self._gain_and_signature(levels[0][ok2] - ref_level[ok2], sig[ok2], spread[ok2]) if ok2.sum() >= 3 else None
+            fit = (
+                self._gain_and_signature(levels[0][ok2] - ref_level[ok2], sig[ok2], spread[ok2])
+                if ok2.sum() >= 3
+                else None
+            )
             stale = fit is None or fit[0] < STALE_REF_MAX_B
         self.stale_log.append((fire_end, gain, shape, stale))
         if not stale:
             return
-        since = [lv[max(at - self._after_frames - f0, 0) : max(at - f0, 0)] for f0, lv in self._recent_v]
+        # learn the template anew from the end of the span, if its continuum is still the stepping's: a stop that began
+        # inside the span changed it there (then the frames before the fire, stale as they are, and the next fire,
+        # at once, is flagged: when the stop began inside the span is not known)
+        n_late = max(1, int(STALE_RELEARN_S * sr / p.hop))
+        late = self.samples(end + p.frame - int(STALE_RELEARN_S * sr), end + 1)
+        lo = at - n_late
+        if late is not None and late.size >= frame + p.frame:
+            rate = step_rate_hz(late, sr)
+            if math.isfinite(rate):
+                C = continuum_levels_db(late, sr, frame, p.frame, p.edges_hz, rate)
+                z = (np.percentile(C, 100 * QUANTILE, axis=0) - levels[0])[ok]
+                g2 = float(np.sum(w * z) / np.sum(w))
+                if not (
+                    abs(g2) < STALE_MAX_GAIN_DB
+                    and float(np.sqrt(np.mean(((z - g2) / spread[ok]) ** 2))) < STALE_MAX_SHAPE
+                ):
+                    lo = at - self._after_frames - CHUNK  # the stop began inside the span: the frames before the fire
+        hi = lo + (n_late if lo >= at - n_late else CHUNK)
+        since = [lv[max(lo - f0, 0) : max(hi - f0, 0)] for f0, lv in self._recent_v]
         since = [lv for lv in since if lv.shape[0]]
         if not since:
             return
         self.template = np.percentile(np.concatenate(since), 100 * QUANTILE, axis=0)
+        self._uncertain_until = end + int(STALE_UNCERTAIN_S * sr)
         self._set_floor(reset=True)
         self.latched = False
         self.below = 0
@@ -809,7 +841,7 @@ class TemplateState:
                 if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):
                     self.latched = True
                     self.below = 0
-                    out.append(Decision(int(end), self.cross_t, float(ai)))
+                    out.append(Decision(int(end), self.cross_t, float(ai), uncertain=end < self._uncertain_until))
                     if self._checks and self.samples is not None:
                         self._check = (self.frame_no + k + 1 + self._after_frames, int(end))
                 if self.mask == 0:

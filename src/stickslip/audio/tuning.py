@@ -19,7 +19,15 @@ from .band_tuning import _DEFAULT_MAX_DIPS, candidate_bands, tune_band
 from .detector import StopDetector, Tuning, frame_power_spectra
 from .labels import TuningError, _recording, _sound_change
 from .stepclock import step_rate_hz
-from .template import CHUNK, CONTINUUM_FRAME, QUANTILE, continuum_levels_db, fit_departure, subband_edges, subband_levels_db
+from .template import (
+    CHUNK,
+    CONTINUUM_FRAME,
+    QUANTILE,
+    continuum_levels_db,
+    fit_departure,
+    subband_edges,
+    subband_levels_db,
+)
 from .tuningfile import default_frame
 from .verification import _Candidate, _decided, _no_template, _pick
 

@@ -241,8 +241,9 @@ class Tuning:
             object.__setattr__(self, "step_rate_hz", r)
         given = [getattr(self, k) is not None for k in _CONTINUUM]
         if any(given) and not (all(given) and self.step_rate_hz is not None):
-            raise ValueError("continuum_levels_db, continuum_signature_db and continuum_spread_db come together, "
-                             "with step_rate_hz")
+            raise ValueError(
+                "continuum_levels_db, continuum_signature_db and continuum_spread_db come together, with step_rate_hz"
+            )
         if not all(given):
             return
         for k in _CONTINUUM:
@@ -306,10 +307,7 @@ class Tuning:
                 spread_db=self.spread_db[:nb],
                 stepping_levels_db=None if self.stepping_levels_db is None else self.stepping_levels_db[:nb],
                 trim=min(self.trim, nb - 1),
-                **{
-                    k: None if getattr(self, k) is None else getattr(self, k)[:nb]
-                    for k in _CONTINUUM
-                },
+                **{k: None if getattr(self, k) is None else getattr(self, k)[:nb] for k in _CONTINUUM},
             )
         return replace(self, **kw)
 
