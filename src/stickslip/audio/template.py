@@ -87,8 +87,8 @@ STALE_GAP_S = 0.06
 STALE_MAX_GAIN_DB = 3.0
 #: ... and by less than this in shape (RMS over sub-bands after the level, in the continuum's spreads)
 STALE_MAX_SHAPE = 1.1
-#: a fire this soon after a stale-template verdict may be a stop that began inside the judged span: its onset is
-#: uncertain, s
+#: a fire this soon after a stale-template verdict may be a stop that began inside the judged span or at its end:
+#: its onset is uncertain, s
 STALE_UNCERTAIN_S = 0.3
 #: the template learned anew from the levels of this much of the end of the judged span, s (the latest rate) ...
 STALE_RELEARN_S = 0.15
@@ -646,6 +646,8 @@ class TemplateState:
         if not since:
             return
         self.template = np.percentile(np.concatenate(since), 100 * QUANTILE, axis=0)
+        # a fire soon after may be a stop that began inside the span, or at its end (a few tens of ms of it hardly move
+        # the end's continuum, but enter the template learned from it and delay the crossing): its onset is uncertain
         self._uncertain_until = end + int(STALE_UNCERTAIN_S * sr)
         self._set_floor(reset=True)
         self.latched = False
