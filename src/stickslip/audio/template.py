@@ -83,7 +83,10 @@ STALE_AFTER_S = 0.3
 STALE_REF_S = 0.3
 #: ... that ends this long before the fire, s (the stop's onset is a hold before the fire)
 STALE_GAP_S = 0.06
-#: ... is unchanged when it moved by less than this in level, dB (a quieter stop: 7-8 dB on the generators), ...
+#: ... judged only where the step rate heard moved by at least this share between the two (a template goes stale
+#: with the rate; where the rate stayed, the fire stands and confirmation judges it) ...
+STALE_MIN_RATE_CHANGE = 0.01
+#: ... and is unchanged when it moved by less than this in level, dB (a quieter stop: 7-8 dB on the generators), ...
 STALE_MAX_GAIN_DB = 3.0
 #: ... and by less than this in shape (RMS over sub-bands after the level, in the continuum's spreads)
 STALE_MAX_SHAPE = 1.1
@@ -412,8 +415,9 @@ class TemplateState:
         #: the stream's samples ``[lo, hi)`` (absolute indices from the stream start), or None where they are gone;
         #: set by the stream's owner for the stale-template check (see :meth:`_stale_check`)
         self.samples: Callable[[int, int], FloatArray | None] | None = None
-        #: per stale-template check: (the fire's end sample, level change dB, shape change, judged stale)
-        self.stale_log: list[tuple[int, float, float, bool]] = []
+        #: per stale-template check: (the fire's end sample, the rate's relative change, the continuum's level change
+        #: dB and shape change (spreads), judged stale)
+        self.stale_log: list[tuple[int, float, float, float, bool]] = []
         self._after_frames = max(CHUNK + 1, int(math.ceil(STALE_AFTER_S * p.sample_rate / p.hop)))
         self._checks = p.continuum_signature_db is not None and p.continuum_spread_db is not None
         self.reset(t0_s)
@@ -593,13 +597,15 @@ class TemplateState:
         from .stepclock import step_rate_hz
 
         frame = CONTINUUM_FRAME * p.frame
-        levels = []
+        levels, rates = [], []
         for seg in (ref, after):
             rate = step_rate_hz(seg, sr) if seg.size >= frame + p.frame else math.nan
             if not math.isfinite(rate):
                 return
             C = continuum_levels_db(seg, sr, frame, p.frame, p.edges_hz, rate)
             levels.append(np.percentile(C, 100 * QUANTILE, axis=0))
+            rates.append(rate)
+        moved = abs(rates[1] / rates[0] - 1.0)
         spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
         y = levels[1] - levels[0]
         ok = np.isfinite(y) & np.isfinite(spread) & np.isfinite(np.asarray(p.continuum_signature_db, dtype=np.float64))
@@ -608,7 +614,7 @@ class TemplateState:
         w = 1.0 / spread[ok] ** 2
         gain = float(np.sum(w * y[ok]) / np.sum(w))
         shape = float(np.sqrt(np.mean(((y[ok] - gain) / spread[ok]) ** 2)))
-        stale = abs(gain) < STALE_MAX_GAIN_DB and shape < STALE_MAX_SHAPE
+        stale = moved >= STALE_MIN_RATE_CHANGE and abs(gain) < STALE_MAX_GAIN_DB and shape < STALE_MAX_SHAPE
         if stale and p.continuum_levels_db is not None:
             # a fire late into a stop compares the stop with itself: was the reference already the stop?
             ref_level = np.asarray(p.continuum_levels_db, dtype=np.float64)
@@ -620,7 +626,7 @@ class TemplateState:
                 else None
             )
             stale = fit is None or fit[0] < STALE_REF_MAX_B
-        self.stale_log.append((fire_end, gain, shape, stale))
+        self.stale_log.append((fire_end, moved, gain, shape, stale))
         if not stale:
             return
         # learn the template anew from the end of the span, if its continuum is still the stepping's: a stop that began
