@@ -86,6 +86,8 @@ STALE_GAP_S = 0.06
 #: ... judged only where the step rate heard moved by at least this share between the two (a template goes stale
 #: with the rate; where the rate stayed, the fire stands and confirmation judges it) ...
 STALE_MIN_RATE_CHANGE = 0.01
+#: ... and by at most this share (a larger jump is an estimate that took a multiple or a fraction of the rate)
+STALE_MAX_RATE_JUMP = 0.1
 #: ... and is unchanged when it moved by less than this in level, dB (a quieter stop: 7-8 dB on the generators), ...
 STALE_MAX_GAIN_DB = 3.0
 #: ... and by less than this in shape (RMS over sub-bands after the level, in the continuum's spreads)
@@ -597,14 +599,25 @@ class TemplateState:
         from .stepclock import step_rate_hz
 
         frame = CONTINUUM_FRAME * p.frame
-        levels, rates = [], []
-        for seg in (ref, after):
-            rate = step_rate_hz(seg, sr) if seg.size >= frame + p.frame else math.nan
-            if not math.isfinite(rate):
+        if min(ref.size, after.size) < frame + p.frame:
+            return
+        rates = [step_rate_hz(seg, sr) for seg in (ref, after)]
+        if not all(math.isfinite(r) for r in rates):
+            return
+        if abs(rates[1] / rates[0] - 1.0) > STALE_MAX_RATE_JUMP:
+            # no drift moves the rate that far in a few tenths of a second: one estimate took a multiple of the rate
+            # (or a fraction); the rate heard over both spans decides, each estimate held near it
+            both = step_rate_hz(np.concatenate((ref, after)), sr)
+            if not math.isfinite(both):
                 return
-            C = continuum_levels_db(seg, sr, frame, p.frame, p.edges_hz, rate)
-            levels.append(np.percentile(C, 100 * QUANTILE, axis=0))
-            rates.append(rate)
+            lo, hi = (1.0 - STALE_MAX_RATE_JUMP) * both, (1.0 + STALE_MAX_RATE_JUMP) * both
+            rates = [step_rate_hz(seg, sr, lo, hi) for seg in (ref, after)]
+            if not all(math.isfinite(r) for r in rates):
+                return
+        levels = [
+            np.percentile(continuum_levels_db(seg, sr, frame, p.frame, p.edges_hz, r), 100 * QUANTILE, axis=0)
+            for seg, r in zip((ref, after), rates, strict=True)
+        ]
         moved = abs(rates[1] / rates[0] - 1.0)
         spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
         y = levels[1] - levels[0]
@@ -636,7 +649,9 @@ class TemplateState:
         late = self.samples(end + p.frame - int(STALE_RELEARN_S * sr), end + 1)
         lo = at - n_late
         if late is not None and late.size >= frame + p.frame:
-            rate = step_rate_hz(late, sr)
+            rate = step_rate_hz(
+                late, sr, (1.0 - STALE_MAX_RATE_JUMP) * rates[1], (1.0 + STALE_MAX_RATE_JUMP) * rates[1]
+            )
             if math.isfinite(rate):
                 C = continuum_levels_db(late, sr, frame, p.frame, p.edges_hz, rate)
                 z = (np.percentile(C, 100 * QUANTILE, axis=0) - levels[0])[ok]
