@@ -79,7 +79,7 @@ START_MAX_RATIO = 0.4
 #: a fire whose continuum did not change is a stale template (the step rate moved), not a stop: the continuum over
 #: this long after the fire, s, ...
 STALE_AFTER_S = 0.3
-#: ... against the continuum over this long of the stepping before it, s, ...
+#: ... against the continuum over this long of the stepping before it (at least half of it), s, ...
 STALE_REF_S = 0.3
 #: ... that ends this long before the fire, s (the stop's onset is a hold before the fire)
 STALE_GAP_S = 0.06
@@ -592,7 +592,9 @@ class TemplateState:
             return
         sr = p.sample_rate
         gap, span = int(STALE_GAP_S * sr), int(STALE_REF_S * sr)
-        ref = self.samples(fire_end - gap - span, fire_end - gap)
+        # a fire soon after the stream began has less stepping before it: what there is, if at least half the span
+        start = max(fire_end - gap - span, 0)
+        ref = self.samples(start, fire_end - gap) if fire_end - gap - start >= span // 2 else None
         after = self.samples(fire_end, fire_end + int(STALE_AFTER_S * sr))
         if ref is None or after is None:
             return
