@@ -26,6 +26,12 @@ included, and the current ``a`` has not decayed below ``decay_ratio`` of the lar
 that window (a transient rings down, a stop does not). It then stays latched until
 ``a`` has stayed below ``threshold - hysteresis`` for ``release_s``.
 
+Two judgements read the *continuum* between the step clock's lines
+(:func:`continuum_levels_db`), which a change of the step rate does not move as it moves
+the sub-band levels (tunings that recorded their step rate): whether listening began at
+the stop (:meth:`TemplateState._started_at_stop`), and whether a fire was the template
+gone stale with a drifting rate (:meth:`TemplateState._stale_check`).
+
 Everything that changes the detector's state happens at frame boundaries counted from
 the stream start (the template is updated every :data:`CHUNK` frames), so the events do
 not depend on how the stream is cut into blocks.
@@ -576,13 +582,18 @@ class TemplateState:
         was. A stop changes it, in level (a quieter stop) or shape. :data:`STALE_AFTER_S`
         after the fire, the continuum since the fire is compared with the stepping's before
         it (:data:`STALE_REF_S` ending :data:`STALE_GAP_S` before the fire), each at the
-        step rate heard in it: a level change under :data:`STALE_MAX_GAIN_DB` and a shape
-        change under :data:`STALE_MAX_SHAPE` spreads (the RMS over sub-bands of what is left
-        after the level, in the tuning's continuum spreads) mean no stop. The template is
-        then the low quantile of the levels since the fire, and the detector listens again
-        (a confirming detector sees the stop-likeness gone, and drops the fire). No verdict
-        (the fire stands) while still latched is required, when the samples are gone, when
-        no rate is heard, or with fewer than three sub-bands to judge on.
+        step rate heard in it. The fire was a stale template where the rate moved by
+        :data:`STALE_MIN_RATE_CHANGE` or more, the level by less than
+        :data:`STALE_MAX_GAIN_DB` and the shape by less than :data:`STALE_MAX_SHAPE` (the
+        RMS over sub-bands of what is left after the level, in the tuning's continuum
+        spreads), and the stepping before it did not already sound like the stop
+        (:data:`STALE_REF_MAX_B`). The template is then the low quantile of the levels of
+        the last :data:`STALE_RELEARN_S` (of the frames before the fire where that no longer
+        sounds like stepping), the detector listens again (a confirming detector sees the
+        stop-likeness gone, and drops the fire), and a fire in the next
+        :data:`STALE_UNCERTAIN_S` is flagged uncertain. No verdict (the fire stands) when the
+        detector is no longer latched, the samples are gone, no rate is heard, or fewer than
+        three sub-bands can be judged.
         """
         assert self._check is not None
         at, fire_end = self._check
