@@ -162,8 +162,6 @@ CONDITIONS = [
         P,
         _test(P, 72, drift=0.1),
         group="hostile",
-        known_failure="a false alarm at 0.32 s: the warm-up's template is learned at -10 % and the lines moving "
-        "through joint P's narrow 5.2 kHz mode look like the stop's rise",
     ),
     Condition("step rate drifts +-10 %, joint Q", Q, _test(Q, 73, drift=0.1, stop_at=2.4), group="hostile"),
     Condition("8-bit audio", P, _test(P, 74, bits=8), group="hostile"),
@@ -178,9 +176,6 @@ CONDITIONS = [
         _test(P, 78, stop_at=0.0),
         late_s=0.25,
         group="hostile",
-        known_failure="the first frames fit the tuning's stepping plus 1.2 x the stop, but leave a residual of 5.4 "
-        "spreads (joint P's narrow modes sound different at 1080 Hz than at the tuning's 1000 Hz): not the clear "
-        "case the detector demands before firing at once",
     ),
     Condition("starts at the stop, joint Q", Q, _test(Q, 79, stop_at=0.0), late_s=0.25, group="hostile"),
     # round 2: interference added before the detector was changed against speech (never developed against)

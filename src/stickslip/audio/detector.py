@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..plotting import has_display
-from .template import TemplateState, levels_from_frames
+from .template import STALE_AFTER_S, STALE_GAP_S, STALE_REF_S, TemplateState, levels_from_frames
 from .tuningfile import Tuning, TuningFileError
 
 __all__ = [
@@ -214,8 +214,15 @@ class StopDetector:
         self._prev_db = -np.inf
         self._cross_t = math.nan
         self.levels_seen = 0
+        self._head: list[np.ndarray] = []  # the warm-up's samples, kept until the template state has them
+        self._head_n = 0
+        self._ring: list[np.ndarray] = []  # the latest samples, from absolute sample _ring0 on (stale-template check)
+        self._ring0 = 0
+        self._ring_n = 0
         if self._template is not None:
             self._template.reset(t0_s)
+            if self._template._checks:
+                self._template.samples = self._samples
 
     def unlatch(self) -> None:
         """Forget the latest fire and listen for the next stop from the next frame on.
@@ -272,6 +279,18 @@ class StopDetector:
             x = np.clip(np.nan_to_num(x, nan=0.0, posinf=_LIMIT, neginf=-_LIMIT), -_LIMIT, _LIMIT)
         tu = self.tuning
         F, H = tu.frame, tu.hop
+        st0 = self._template
+        if st0 is not None and st0.head is None and tu.step_rate_hz is not None:
+            # the warm-up's samples, for the judgement whether listening began at the stop (template.py)
+            need = st0.head_samples - self._head_n
+            if need > 0 and x.size:
+                self._head.append(x[:need].copy())
+                self._head_n += min(need, x.size)
+            if self._head_n >= st0.head_samples:
+                st0.head = np.concatenate(self._head)
+                self._head = []
+        if st0 is not None and st0.samples is not None and x.size:
+            self._keep(x)
         self._buf = np.concatenate((self._buf, x)) if self._buf.size else x.copy()
         avail_end = self._buf_start + self._buf.size
         n_frames = (avail_end - F - self._next) // H + 1 if avail_end - self._next >= F else 0
@@ -306,6 +325,7 @@ class StopDetector:
                             detected_at_s=self._t0 + dec.end_sample / tu.sample_rate,
                             onset_s=dec.cross_t_s - tu.onset_lag_s,
                             level_db=dec.a,
+                            onset_uncertain=dec.uncertain,
                         )
                     )
                 levels = None
@@ -334,6 +354,27 @@ class StopDetector:
             self._buf = self._buf[drop:]
             self._buf_start += drop
         return events
+
+    def _keep(self, x: np.ndarray) -> None:
+        """Keep the latest samples: enough for the stepping before a fire and the span after it."""
+        tu = self.tuning
+        keep = int((STALE_GAP_S + STALE_REF_S + STALE_AFTER_S) * tu.sample_rate) + 4 * tu.frame + 128 * tu.hop
+        self._ring.append(x.copy())
+        self._ring_n += x.size
+        if self._ring_n - self._ring[-1].size > 2 * keep:  # trim now and then, not every block
+            whole = np.concatenate(self._ring[:-1])[-keep:]
+            self._ring0 += self._ring_n - self._ring[-1].size - whole.size
+            self._ring = [whole, self._ring[-1]]
+            self._ring_n = whole.size + self._ring[-1].size
+
+    def _samples(self, lo: int, hi: int) -> np.ndarray | None:
+        """The stream's samples ``[lo, hi)`` (absolute indices), or None where they are not kept."""
+        if lo < self._ring0 or hi > self._ring0 + self._ring_n or lo < 0 or hi <= lo:
+            return None
+        whole = np.concatenate(self._ring) if len(self._ring) > 1 else self._ring[0]
+        if len(self._ring) > 1:
+            self._ring = [whole]
+        return np.asarray(whole[lo - self._ring0 : hi - self._ring0], dtype=np.float64)
 
     def _run(self, levels: np.ndarray, ends: np.ndarray) -> list[StopEvent]:
         tu = self.tuning

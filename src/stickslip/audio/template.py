@@ -26,6 +26,12 @@ included, and the current ``a`` has not decayed below ``decay_ratio`` of the lar
 that window (a transient rings down, a stop does not). It then stays latched until
 ``a`` has stayed below ``threshold - hysteresis`` for ``release_s``.
 
+Two judgements read the *continuum* between the step clock's lines
+(:func:`continuum_levels_db`), which a change of the step rate does not move as it moves
+the sub-band levels (tunings that recorded their step rate): whether listening began at
+the stop (:meth:`TemplateState._started_at_stop`), and whether a fire was the template
+gone stale with a drifting rate (:meth:`TemplateState._stale_check`).
+
 Everything that changes the detector's state happens at frame boundaries counted from
 the stream start (the template is updated every :data:`CHUNK` frames), so the events do
 not depend on how the stream is cut into blocks.
@@ -34,6 +40,7 @@ not depend on how the stream is cut into blocks.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,6 +51,7 @@ __all__ = [
     "QUANTILE",
     "TemplateParams",
     "TemplateState",
+    "continuum_levels_db",
     "fit_departure",
     "subband_edges",
     "subband_levels_db",
@@ -62,6 +70,42 @@ STALE_ALL_UP_DB = 3.0
 RESIDUAL_SLOPE = 0.35
 _FLOOR = 1e-20
 _CLIP_DB = 40.0
+#: the continuum: frequency bins farther than this many bins from every harmonic of the step rate
+#: (a 4-term Blackman-Harris window's main lobe is +-4 bins wide; its sidelobes are 92 dB down, so a line
+#: 40 dB over the continuum does not leak into it, as a Hann window's -31 dB sidelobes would)
+LINE_GUARD_BINS = 4.0
+#: the continuum is measured in frames this many times the detector's (finer bins: more of them between the
+#: lines, and a steadier level), every detector frame
+CONTINUUM_FRAME = 4
+#: listening that starts at the stop, judged on the continuum (see :meth:`TemplateState._started_at_stop`):
+#: the stop must explain at least this much of the tuning's signature ...
+START_MIN_B = 0.7
+#: ... and leave at most this share of what a gain change alone leaves
+START_MAX_RATIO = 0.4
+#: a fire whose continuum did not change is a stale template (the step rate moved), not a stop: the continuum over
+#: this long after the fire, s, ...
+STALE_AFTER_S = 0.3
+#: ... against the continuum over this long of the stepping before it (at least half of it), s, ...
+STALE_REF_S = 0.3
+#: ... that ends this long before the fire, s (the stop's onset is a hold before the fire)
+STALE_GAP_S = 0.06
+#: ... judged only where the step rate heard moved by at least this share between the two (a template goes stale
+#: with the rate; where the rate stayed, the fire stands and confirmation judges it) ...
+STALE_MIN_RATE_CHANGE = 0.01
+#: ... and by at most this share (a larger jump is an estimate that took a multiple or a fraction of the rate)
+STALE_MAX_RATE_JUMP = 0.1
+#: ... and is unchanged when it moved by less than this in level, dB (a quieter stop: 7-8 dB on the generators), ...
+STALE_MAX_GAIN_DB = 3.0
+#: ... and by less than this in shape (RMS over sub-bands after the level, in the continuum's spreads)
+STALE_MAX_SHAPE = 1.1
+#: a fire this soon after a stale-template verdict may be a stop that began inside the judged span or at its end:
+#: its onset is uncertain, s
+STALE_UNCERTAIN_S = 0.3
+#: the template learned anew from the levels of this much of the end of the judged span, s (the latest rate) ...
+STALE_RELEARN_S = 0.15
+#: ... and the stepping before the fire did not already sound like the stop (a late fire: the stop began before the
+#: reference span), judged as at the start (:data:`START_MIN_B`) at this share of the signature
+STALE_REF_MAX_B = 0.5
 
 FloatArray = NDArray[np.float64]
 
@@ -141,6 +185,50 @@ def subband_levels_db(
     return out
 
 
+def continuum_levels_db(
+    samples: NDArray[np.floating] | FloatArray,
+    sample_rate: int,
+    frame: int,
+    hop: int,
+    edges: tuple[float, ...] | list[float],
+    rate_hz: float,
+) -> FloatArray:
+    """Sub-band levels of the *continuum* between the step clock's lines, per frame (frames x bands), dB.
+
+    A click train at ``rate_hz`` puts its power on lines at the rate's multiples; which of a
+    narrow mode's frequencies a line samples depends on the rate, so a sub-band's level
+    moves by many dB when the rate changes (a line enters or leaves the sub-band). Between
+    the lines lies the continuum the steps' irregularity makes (their timing jitter and
+    amplitude), shaped by the same modes at every rate. Per frame (4-term Blackman-Harris
+    window) and sub-band: the mean power of the bins farther than :data:`LINE_GUARD_BINS` bins from every multiple of
+    ``rate_hz``, in dB (a power per bin: another rate changes it by the same factor in
+    every sub-band, a gain). NaN where a sub-band has no such bin.
+    """
+    x = np.asarray(samples, dtype=np.float64)
+    nb = len(edges) - 1
+    if x.size < frame or not rate_hz > 0:
+        return np.full((0, nb), np.nan)
+    f = np.fft.rfftfreq(frame, 1 / sample_rate)
+    bin_hz = sample_rate / frame
+    off = np.abs(f - np.round(f / rate_hz) * rate_hz) > LINE_GUARD_BINS * bin_hz
+    idx = _bins(edges, sample_rate, frame)
+    from scipy.signal import get_window
+
+    w = np.asarray(get_window("blackmanharris", frame, fftbins=True), dtype=np.float64)
+    scale = 2.0 / (frame * float(np.sum(w**2)))
+    view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
+    spec = np.fft.rfft(view * w, axis=1)
+    p = (spec.real**2 + spec.imag**2) * scale
+    out = np.full((view.shape[0], nb), np.nan)
+    for b in range(nb):
+        sel = np.zeros(f.size, dtype=bool)
+        sel[idx[b] : idx[b + 1]] = True
+        sel &= off
+        if sel.any():
+            out[:, b] = 10 * np.log10(p[:, sel].mean(axis=1) + _FLOOR)
+    return out
+
+
 def fit_departure(d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int) -> tuple[FloatArray, FloatArray]:
     """Stop-likeness ``a`` and residual ``rho`` of departures ``d`` (frames x bands, dB).
 
@@ -212,6 +300,10 @@ class TemplateParams:
     onset_lag_s: float
     stepping_levels_db: tuple[float, ...] | None = None
     drop_threshold: tuple[float, float] | None = None
+    step_rate_hz: float | None = None
+    continuum_levels_db: tuple[float, ...] | None = None
+    continuum_signature_db: tuple[float, ...] | None = None
+    continuum_spread_db: tuple[float, ...] | None = None
 
 
 @dataclass
@@ -221,6 +313,9 @@ class Decision:
     end_sample: int
     cross_t_s: float
     a: float
+    #: the stop may have begun before ``cross_t_s``: it fired soon after a fire judged a stale template, and may have
+    #: begun inside that fire's span (see :meth:`TemplateState._stale_check`)
+    uncertain: bool = False
 
 
 class DropMeter:
@@ -322,10 +417,22 @@ class TemplateState:
         gt = np.maximum(np.minimum(self.delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
         self._drop_info_tuned = float(gt @ gt)
         self._drop = DropMeter(self.delta.size)
+        #: the warm-up's samples from the stream start (:attr:`head_samples` of them), for the start-at-the-stop
+        #: judgement on the continuum; the stream's owner (:class:`~stickslip.audio.detector.StopDetector`) sets it
+        self.head: FloatArray | None = None
+        #: the stream's samples ``[lo, hi)`` (absolute indices from the stream start), or None where they are gone;
+        #: set by the stream's owner for the stale-template check (see :meth:`_stale_check`)
+        self.samples: Callable[[int, int], FloatArray | None] | None = None
+        #: per stale-template check: (the fire's end sample, the rate's relative change, the continuum's level change
+        #: dB and shape change (spreads), judged stale)
+        self.stale_log: list[tuple[int, float, float, float, bool]] = []
+        self._after_frames = max(CHUNK + 1, int(math.ceil(STALE_AFTER_S * p.sample_rate / p.hop)))
+        self._checks = p.continuum_signature_db is not None and p.continuum_spread_db is not None
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
-        """Forget the template and every decision."""
+        """Forget the template, the warm-up's samples and every decision."""
+        self.head = None
         self.t0 = float(t0_s)
         self.frame_no = 0
         self.template: FloatArray | None = None
@@ -349,6 +456,9 @@ class TemplateState:
         self._neg_tail: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
         self._floors: list[FloatArray] = []
         self.floor: FloatArray | None = None
+        self._check: tuple[int, int] | None = None  # (frame at which to check, the fire's end sample)
+        self._uncertain_until = -1  # a fire ending before this sample follows a stale-template verdict closely
+        self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
 
     def _set_floor(self, reset: bool = False) -> None:
         """Remember the template just updated; the floor is the lowest of the last :data:`FLOOR_CHUNKS`."""
@@ -369,10 +479,14 @@ class TemplateState:
         n = v.shape[0]
         while i < n:
             room = CHUNK - self.frame_no % CHUNK
+            if self._check is not None and self._check[0] > self.frame_no:
+                room = min(room, self._check[0] - self.frame_no)
             j = min(n, i + room)
             out += self._segment(v[i:j], ends[i:j])
             self.frame_no += j - i
             i = j
+            if self._check is not None and self.frame_no >= self._check[0]:
+                self._stale_check(int(ends[j - 1]))
             if self.frame_no % CHUNK == 0:
                 self._chunk_done(int(ends[j - 1]))
                 out += self._pending
@@ -418,42 +532,233 @@ class TemplateState:
         self._acc_list = []
         self._acc_n = 0
 
+    @property
+    def head_samples(self) -> int:
+        """How many samples from the stream start the warm-up's frames span (what :attr:`head` must hold)."""
+        return (self.p.warmup_chunks * CHUNK - 1) * self.p.hop + self.p.frame
+
     def _started_at_stop(self, end: int) -> None:
         """Was the stop there from the start? Compare the learned template with the tuning's stepping.
 
-        The first frames' template ``T`` minus the tuning's stepping levels is fitted as a
-        gain offset (the same in every sub-band) plus ``b`` times the stop's signature;
-        ``b`` at or above the threshold means the detector began listening at the stop: it
-        fires at once (onset: the start of listening) and takes ``T - b * delta`` as the
-        stepping template. A signature that is a gain change only (a uniformly quieter
-        stop) cannot be told from a gain change this way and is taken as stepping.
+        Two views, either enough:
+
+        * *levels*: the first frames' template ``T`` minus the tuning's stepping levels is
+          fitted as a gain offset (the same in every sub-band) plus ``b`` times the stop's
+          signature; ``b`` at or above the threshold, the stop explaining three quarters of
+          what a gain change leaves, and a small residual: the stop. Good only at the
+          tuning's step rate: at another rate the lines of the click train fall elsewhere on
+          narrow modes, and the levels move by several spreads per sub-band.
+        * *continuum* (tunings that recorded their step rate): the same fit on the power
+          between the step clock's lines (:func:`continuum_levels_db`, the stream's rate
+          heard in :attr:`head` by :func:`~stickslip.audio.stepclock.step_rate_hz`), which
+          the rate does not move: ``b`` at least :data:`START_MIN_B` (and the threshold) and
+          at most :data:`START_MAX_RATIO` of the gain-only residual left.
+
+        The stop: the detector fires at once (onset: the start of listening) and takes
+        ``T - b * delta`` (``b`` of the levels, at least 1) as the stepping template. A
+        signature that is a gain change only (a uniformly quieter stop) cannot be told from
+        a gain change this way and is taken as stepping.
         """
         p = self.p
-        if p.stepping_levels_db is None or self.template is None:
+        if self.template is None or float(np.min(self.template)) <= -150.0:
             return
-        w = 1.0 / self.sigma**2
-        X = np.stack((np.ones_like(self.delta), self.delta), axis=1)
-        y = self.template - np.asarray(p.stepping_levels_db)
+        b_lev = self._start_by_levels()
+        if b_lev is None and not self._start_by_continuum():
+            return
+        shift = 1.0 if b_lev is None else b_lev
+        self.template = self.template - shift * self.delta
+        self._set_floor(reset=True)
+        self.latched = True
+        self.below = 0
+        self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(shift)))  # onset: the start
+
+    def _stale_check(self, end: int) -> None:
+        """Did the continuum change at the latest fire? If not, the template was stale: learn it anew, un-latch.
+
+        A click train's lines move across narrow modes as the step rate moves, and the
+        sub-band levels with them, faster than the template follows (a rate drifting 10 %
+        over 2 s): the levels depart from the template while the sound's continuum between
+        the lines (:func:`continuum_levels_db`), which the rate does not move, stays as it
+        was. A stop changes it, in level (a quieter stop) or shape. :data:`STALE_AFTER_S`
+        after the fire, the continuum since the fire is compared with the stepping's before
+        it (:data:`STALE_REF_S` ending :data:`STALE_GAP_S` before the fire), each at the
+        step rate heard in it. The fire was a stale template where the rate moved by
+        :data:`STALE_MIN_RATE_CHANGE` or more, the level by less than
+        :data:`STALE_MAX_GAIN_DB` and the shape by less than :data:`STALE_MAX_SHAPE` (the
+        RMS over sub-bands of what is left after the level, in the tuning's continuum
+        spreads), and the stepping before it did not already sound like the stop
+        (:data:`STALE_REF_MAX_B`). The template is then the low quantile of the levels of
+        the last :data:`STALE_RELEARN_S` (of the frames before the fire where that no longer
+        sounds like stepping), the detector listens again (a confirming detector sees the
+        stop-likeness gone, and drops the fire), and a fire in the next
+        :data:`STALE_UNCERTAIN_S` is flagged uncertain. No verdict (the fire stands) when the
+        detector is no longer latched, the samples are gone, no rate is heard, or fewer than
+        three sub-bands can be judged.
+        """
+        assert self._check is not None
+        at, fire_end = self._check
+        self._check = None
+        p = self.p
+        if not self.latched or self.samples is None or self.template is None:
+            return
+        sr = p.sample_rate
+        gap, span = int(STALE_GAP_S * sr), int(STALE_REF_S * sr)
+        # a fire soon after the stream began has less stepping before it: what there is, if at least half the span
+        start = max(fire_end - gap - span, 0)
+        ref = self.samples(start, fire_end - gap) if fire_end - gap - start >= span // 2 else None
+        after = self.samples(fire_end, fire_end + int(STALE_AFTER_S * sr))
+        if ref is None or after is None:
+            return
+        from .stepclock import step_rate_hz
+
+        frame = CONTINUUM_FRAME * p.frame
+        if min(ref.size, after.size) < frame + p.frame:
+            return
+        rates = [step_rate_hz(seg, sr) for seg in (ref, after)]
+        if not all(math.isfinite(r) for r in rates):
+            return
+        if abs(rates[1] / rates[0] - 1.0) > STALE_MAX_RATE_JUMP:
+            # no drift moves the rate that far in a few tenths of a second: one estimate took a multiple of the rate
+            # (or a fraction); the rate heard over both spans decides, each estimate held near it
+            both = step_rate_hz(np.concatenate((ref, after)), sr)
+            if not math.isfinite(both):
+                return
+            lo, hi = (1.0 - STALE_MAX_RATE_JUMP) * both, (1.0 + STALE_MAX_RATE_JUMP) * both
+            rates = [step_rate_hz(seg, sr, lo, hi) for seg in (ref, after)]
+            if not all(math.isfinite(r) for r in rates):
+                return
+        levels = [
+            np.percentile(continuum_levels_db(seg, sr, frame, p.frame, p.edges_hz, r), 100 * QUANTILE, axis=0)
+            for seg, r in zip((ref, after), rates, strict=True)
+        ]
+        moved = abs(rates[1] / rates[0] - 1.0)
+        spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
+        y = levels[1] - levels[0]
+        ok = np.isfinite(y) & np.isfinite(spread) & np.isfinite(np.asarray(p.continuum_signature_db, dtype=np.float64))
+        if ok.sum() < 3:
+            return
+        w = 1.0 / spread[ok] ** 2
+        gain = float(np.sum(w * y[ok]) / np.sum(w))
+        shape = float(np.sqrt(np.mean(((y[ok] - gain) / spread[ok]) ** 2)))
+        stale = moved >= STALE_MIN_RATE_CHANGE and abs(gain) < STALE_MAX_GAIN_DB and shape < STALE_MAX_SHAPE
+        if stale and p.continuum_levels_db is not None:
+            # a fire late into a stop compares the stop with itself: was the reference already the stop?
+            ref_level = np.asarray(p.continuum_levels_db, dtype=np.float64)
+            sig = np.asarray(p.continuum_signature_db, dtype=np.float64)
+            ok2 = ok & np.isfinite(ref_level)
+            fit = (
+                self._gain_and_signature(levels[0][ok2] - ref_level[ok2], sig[ok2], spread[ok2])
+                if ok2.sum() >= 3
+                else None
+            )
+            stale = fit is None or fit[0] < STALE_REF_MAX_B
+        self.stale_log.append((fire_end, moved, gain, shape, stale))
+        if not stale:
+            return
+        # learn the template anew from the end of the span, if its continuum is still the stepping's: a stop that began
+        # inside the span changed it there (then the frames before the fire, stale as they are, and the next fire,
+        # at once, is flagged: when the stop began inside the span is not known)
+        n_late = max(1, int(STALE_RELEARN_S * sr / p.hop))
+        late = self.samples(end + p.frame - int(STALE_RELEARN_S * sr), end + 1)
+        lo = at - n_late
+        if late is not None and late.size >= frame + p.frame:
+            rate = step_rate_hz(
+                late, sr, (1.0 - STALE_MAX_RATE_JUMP) * rates[1], (1.0 + STALE_MAX_RATE_JUMP) * rates[1]
+            )
+            if math.isfinite(rate):
+                C = continuum_levels_db(late, sr, frame, p.frame, p.edges_hz, rate)
+                z = (np.percentile(C, 100 * QUANTILE, axis=0) - levels[0])[ok]
+                g2 = float(np.sum(w * z) / np.sum(w))
+                if not (
+                    abs(g2) < STALE_MAX_GAIN_DB
+                    and float(np.sqrt(np.mean(((z - g2) / spread[ok]) ** 2))) < STALE_MAX_SHAPE
+                ):
+                    lo = at - self._after_frames - CHUNK  # the stop began inside the span: the frames before the fire
+        hi = lo + (n_late if lo >= at - n_late else CHUNK)
+        since = [lv[max(lo - f0, 0) : max(hi - f0, 0)] for f0, lv in self._recent_v]
+        since = [lv for lv in since if lv.shape[0]]
+        if not since:
+            return
+        self.template = np.percentile(np.concatenate(since), 100 * QUANTILE, axis=0)
+        # a fire soon after may be a stop that began inside the span, or at its end (a few tens of ms of it hardly move
+        # the end's continuum, but enter the template learned from it and delay the crossing): its onset is uncertain
+        self._uncertain_until = end + int(STALE_UNCERTAIN_S * sr)
+        self._set_floor(reset=True)
+        self.latched = False
+        self.below = 0
+        self.mask = 0
+        self.recent = []
+        self.prev_a = -math.inf
+        self._acc_list, self._acc_n = [], 0
+        self._drop.reset()
+        self._neg_tail = (np.zeros(0), np.zeros(0))
+        self.arm_sample = end + int(DROP_ARM_S * sr)
+
+    @staticmethod
+    def _gain_and_signature(
+        y: FloatArray, delta: FloatArray, sigma: FloatArray
+    ) -> tuple[float, float, float, float] | None:
+        """Fit ``y = c + b * delta`` weighted by ``1/sigma**2``: ``b``, the residual's RMS (spreads) and the
+        sums of squares left by the fit and by a gain alone; None where the signature is (nearly) a gain change."""
+        w = 1.0 / sigma**2
+        X = np.stack((np.ones_like(delta), delta), axis=1)
         A = X.T @ (X * w[:, None])
         if np.linalg.cond(A) > 1e6:
-            return
+            return None
+        shape = delta - float(np.sum(w * delta) / np.sum(w))
+        if float(np.sqrt(np.mean((shape / sigma) ** 2))) < 1.0:
+            return None  # the stop is (nearly) a gain change: undecidable from levels alone
         c, b = np.linalg.solve(A, X.T @ (w * y))
-        shape = self.delta - float(np.sum(w * self.delta) / np.sum(w))
-        if float(np.sqrt(np.mean((shape / self.sigma) ** 2))) < 1.0:
-            return  # the stop is (nearly) a gain change: undecidable from levels alone
+        r_gain = (y - float(np.sum(w * y) / np.sum(w))) / sigma
+        r_both = (y - X @ np.array([c, b])) / sigma
+        ss_both = float(np.sum(r_both**2))
+        return float(b), float(np.sqrt(np.mean(r_both**2))), ss_both, float(np.sum(r_gain**2))
+
+    def _start_by_levels(self) -> float | None:
+        """``b`` when the levels show the stop clearly from the start (see :meth:`_started_at_stop`), else None."""
+        p = self.p
+        if p.stepping_levels_db is None or self.template is None:
+            return None
+        fit = self._gain_and_signature(self.template - np.asarray(p.stepping_levels_db), self.delta, self.sigma)
+        if fit is None:
+            return None
+        b, rms_both, ss_both, ss_gain = fit
         # demand a clear case: the stop explains most of what a gain change leaves, and fits well
-        r_gain = (y - float(np.sum(w * y) / np.sum(w))) / self.sigma
-        r_both = (y - X @ np.array([c, b])) / self.sigma
-        clear = float(np.sum(r_both**2)) <= 0.25 * float(np.sum(r_gain**2))
-        fits = float(np.sqrt(np.mean(r_both**2))) <= 2.0 + RESIDUAL_SLOPE * b * float(
-            np.sqrt(np.mean((self.delta / self.sigma) ** 2))
-        )
-        if b >= max(p.threshold, 0.6) and clear and fits and float(np.min(self.template)) > -150.0:
-            self.template = self.template - b * self.delta
-            self._set_floor(reset=True)
-            self.latched = True
-            self.below = 0
-            self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(b)))  # onset: the start
+        clear = ss_both <= 0.25 * ss_gain
+        fits = rms_both <= 2.0 + RESIDUAL_SLOPE * b * float(np.sqrt(np.mean((self.delta / self.sigma) ** 2)))
+        return b if b >= max(p.threshold, 0.6) and clear and fits else None
+
+    def _start_by_continuum(self) -> bool:
+        """True when the continuum between the step clock's lines shows the stop (see :meth:`_started_at_stop`)."""
+        p = self.p
+        head = self.head
+        if (
+            head is None
+            or p.step_rate_hz is None
+            or p.continuum_levels_db is None
+            or p.continuum_signature_db is None
+            or p.continuum_spread_db is None
+        ):
+            return False
+        from .stepclock import step_rate_hz
+
+        rate = step_rate_hz(head, p.sample_rate)
+        if not math.isfinite(rate):
+            return False
+        C = continuum_levels_db(head, p.sample_rate, CONTINUUM_FRAME * p.frame, p.frame, p.edges_hz, rate)
+        ok = np.isfinite(C).all(axis=0) if C.shape[0] else np.zeros(C.shape[1], dtype=bool)
+        ref = np.asarray(p.continuum_levels_db, dtype=np.float64)
+        sig = np.asarray(p.continuum_signature_db, dtype=np.float64)
+        spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
+        ok &= np.isfinite(ref) & np.isfinite(sig) & np.isfinite(spread)
+        if ok.sum() < 3:
+            return False
+        T = np.percentile(C[:, ok], 100 * QUANTILE, axis=0)
+        fit = self._gain_and_signature(T - ref[ok], sig[ok], spread[ok])
+        if fit is None:
+            return False
+        b, _, ss_both, ss_gain = fit
+        return b >= max(p.threshold, START_MIN_B) and ss_both <= START_MAX_RATIO * ss_gain
 
     def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
         p = self.p
@@ -464,6 +769,12 @@ class TemplateState:
             if self.hot_trace is not None:
                 self.hot_trace.extend([False] * v.shape[0])
             return []
+        if self._checks:
+            self._recent_v.append((self.frame_no, v))
+            while self._recent_v and self._recent_v[0][0] + self._recent_v[0][1].shape[0] < (
+                self.frame_no - self._after_frames - CHUNK
+            ):
+                self._recent_v.pop(0)
         d = v - self.template
         a, rho = self._fit(d)
         hot = (a >= p.threshold) & (rho <= p.residual_max)
@@ -540,7 +851,7 @@ class TemplateState:
         rel = p.threshold - p.hysteresis
         out: list[Decision] = []
         prev = self.prev_a
-        for ai, hi, end, li in zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True):
+        for k, (ai, hi, end, li) in enumerate(zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True)):
             if self.latched:
                 if ai < rel:
                     self.below += 1
@@ -566,7 +877,9 @@ class TemplateState:
                 if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):
                     self.latched = True
                     self.below = 0
-                    out.append(Decision(int(end), self.cross_t, float(ai)))
+                    out.append(Decision(int(end), self.cross_t, float(ai), uncertain=end < self._uncertain_until))
+                    if self._checks and self.samples is not None:
+                        self._check = (self.frame_no + k + 1 + self._after_frames, int(end))
                 if self.mask == 0:
                     self.recent = []
             prev = ai

@@ -18,7 +18,16 @@ from scipy.ndimage import percentile_filter
 from .band_tuning import _DEFAULT_MAX_DIPS, candidate_bands, tune_band
 from .detector import StopDetector, Tuning, frame_power_spectra
 from .labels import TuningError, _recording, _sound_change
-from .template import CHUNK, QUANTILE, fit_departure, subband_edges, subband_levels_db
+from .stepclock import step_rate_hz
+from .template import (
+    CHUNK,
+    CONTINUUM_FRAME,
+    QUANTILE,
+    continuum_levels_db,
+    fit_departure,
+    subband_edges,
+    subband_levels_db,
+)
 from .tuningfile import default_frame
 from .verification import _Candidate, _decided, _no_template, _pick
 
@@ -255,7 +264,47 @@ def tune(
     if not passing:
         raise _no_template(candidates[0], D, delta, sigma, hold, window, stepping, ends, failures)
     # 4. self-check with interference; the quietest passing candidate wins
-    return _pick(passing, x, sample_rate, frame, stop_s, g, seed, self_check, warnings, stop_at_s, change)
+    tu = _pick(passing, x, sample_rate, frame, stop_s, g, seed, self_check, warnings, stop_at_s, change)
+    # 5. the step rate, and the continuum between its lines: how a stream at another rate tells it began at the stop
+    return _with_continuum(tu, x[first : int((stop_s - g) * sample_rate)], x[int((stop_s + g) * sample_rate) : last])
+
+
+def _with_continuum(tu: Tuning, stepping: FloatArray, stopped: FloatArray) -> Tuning:
+    """``tu`` with the step rate heard while stepping and the continuum's levels, signature and spread.
+
+    The continuum (:func:`~stickslip.audio.template.continuum_levels_db`) is the power
+    between the step clock's lines: per sub-band, its low quantile over the
+    stepping part (as the detector's template), the same quantile of the stopped part less
+    it, and the stepping frames' robust spread (at least 1 dB). Unchanged when no
+    step rate is heard.
+    """
+    assert tu.edges_hz is not None
+    rate = step_rate_hz(stepping, tu.sample_rate)
+    if not math.isfinite(rate) or stepping.size < tu.frame or stopped.size < tu.frame:
+        return tu
+    Cs = continuum_levels_db(stepping, tu.sample_rate, CONTINUUM_FRAME * tu.frame, tu.frame, tu.edges_hz, rate)
+    Cp = continuum_levels_db(stopped, tu.sample_rate, CONTINUUM_FRAME * tu.frame, tu.frame, tu.edges_hz, rate)
+    with np.errstate(all="ignore"):
+        ok = np.isfinite(Cs).all(axis=0) & np.isfinite(Cp).all(axis=0)
+        level = np.full(Cs.shape[1], np.nan)
+        sig = np.full(Cs.shape[1], np.nan)
+        spread = np.full(Cs.shape[1], np.nan)
+        if ok.any():
+            level[ok] = np.percentile(Cs[:, ok], 100 * QUANTILE, axis=0)
+            sig[ok] = np.percentile(Cp[:, ok], 100 * QUANTILE, axis=0) - level[ok]
+            mad = np.median(np.abs(Cs[:, ok] - np.median(Cs[:, ok], axis=0)), axis=0)
+            spread[ok] = np.maximum(1.4826 * mad, 1.0)
+
+    def r(v: FloatArray) -> tuple[float, ...]:
+        return tuple(round(float(e), 3) if math.isfinite(e) else math.nan for e in v)
+
+    return replace(
+        tu,
+        step_rate_hz=round(float(rate), 3),
+        continuum_levels_db=r(level),
+        continuum_signature_db=r(sig),
+        continuum_spread_db=r(spread),
+    )
 
 
 def _checks_drops(tu: Tuning) -> bool:

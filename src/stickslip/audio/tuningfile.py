@@ -20,6 +20,7 @@ from .template import CHUNK, TemplateParams
 __all__ = ["Tuning", "TuningFileError", "default_frame"]
 
 _KIND = "stickslip.audio.Tuning"
+_CONTINUUM = ("continuum_levels_db", "continuum_signature_db", "continuum_spread_db")
 
 
 class TuningFileError(ValueError):
@@ -106,6 +107,16 @@ class Tuning:
         ``"template"``: the broad and the local drop below the stepping template at which
         a frame counts as a stop whatever its signature (spreads, see
         :class:`~stickslip.audio.template.DropMeter`); None: only the tuned signature counts.
+    step_rate_hz : float or None
+        ``"template"``: the step rate heard in the tuning recording, Hz (None in files made
+        before it was recorded: the detector then behaves as before).
+    continuum_levels_db, continuum_signature_db, continuum_spread_db : tuple of float or None
+        ``"template"``, with ``step_rate_hz``: per sub-band, the stepping's level of the
+        continuum between the step clock's lines (dB, a power per frequency bin), the stop's
+        departure from it (dB) and its frame-to-frame spread (dB); NaN (``null`` in the
+        file) where a sub-band has no bin off the lines at the tuning's rate
+        (:func:`~stickslip.audio.template.continuum_levels_db`). They let the detector tell
+        that it began listening at the stop when the stream steps at another rate.
     checks : dict or None
         What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
         interference injected, latency); informational.
@@ -144,6 +155,10 @@ class Tuning:
     trim: int = 0
     stepping_levels_db: tuple[float, ...] | None = None
     drop_threshold: tuple[float, float] | None = None
+    step_rate_hz: float | None = None
+    continuum_levels_db: tuple[float, ...] | None = None
+    continuum_signature_db: tuple[float, ...] | None = None
+    continuum_spread_db: tuple[float, ...] | None = None
     checks: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -227,6 +242,7 @@ class Tuning:
             if len(dt) != 2 or not all(math.isfinite(v) and 0.1 <= v <= 100 for v in dt):
                 raise ValueError(f"drop_threshold {self.drop_threshold} must be two numbers within 0.1..100 spreads")
             object.__setattr__(self, "drop_threshold", dt)
+        self._check_continuum(nb)
         if not 0 <= self.trim < nb:
             raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
         for name, lo_, hi_ in (
@@ -238,6 +254,29 @@ class Tuning:
             v = getattr(self, name)
             if not lo_ <= v <= hi_:
                 raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+
+    def _check_continuum(self, nb: int) -> None:
+        if self.step_rate_hz is not None:
+            r = float(self.step_rate_hz)
+            if not (math.isfinite(r) and 10.0 <= r <= self.sample_rate / 4):
+                raise ValueError(f"step_rate_hz {self.step_rate_hz} must be within 10..{self.sample_rate / 4:g} Hz")
+            object.__setattr__(self, "step_rate_hz", r)
+        given = [getattr(self, k) is not None for k in _CONTINUUM]
+        if any(given) and not (all(given) and self.step_rate_hz is not None):
+            raise ValueError(
+                "continuum_levels_db, continuum_signature_db and continuum_spread_db come together, with step_rate_hz"
+            )
+        if not all(given):
+            return
+        for k in _CONTINUUM:
+            v = tuple(math.nan if e is None else float(e) for e in getattr(self, k))
+            object.__setattr__(self, k, v)
+            if len(v) != nb or any(not abs(e) <= 400 for e in v if not math.isnan(e)):
+                raise ValueError(
+                    f"{k} must hold {nb} numbers within -400..400 dB (null where a sub-band has no continuum)"
+                )
+        if any(not 1e-3 <= v for v in self.continuum_spread_db or () if not math.isnan(v)):
+            raise ValueError("continuum_spread_db must be at least 0.001 dB")
 
     # ------------------------------------------------------------- derived
     @property
@@ -294,6 +333,7 @@ class Tuning:
                 spread_db=self.spread_db[:nb],
                 stepping_levels_db=None if self.stepping_levels_db is None else self.stepping_levels_db[:nb],
                 trim=min(self.trim, nb - 1),
+                **{k: None if getattr(self, k) is None else getattr(self, k)[:nb] for k in _CONTINUUM},
             )
         return replace(self, **kw)
 
@@ -310,6 +350,11 @@ class Tuning:
             version = 2
             for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
                 d[k] = list(d[k]) if d[k] is not None else None
+            for k in _CONTINUUM:
+                d[k] = None if d[k] is None else [None if math.isnan(v) else v for v in d[k]]
+            for k in ("step_rate_hz", *_CONTINUUM):  # absent, as in files made before they were recorded
+                if d[k] is None:
+                    d.pop(k)
         else:
             for k in (
                 "method",
@@ -324,6 +369,8 @@ class Tuning:
                 "checks",
                 "stepping_levels_db",
                 "drop_threshold",
+                "step_rate_hz",
+                *_CONTINUUM,
             ):
                 d.pop(k)
         return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
@@ -361,6 +408,15 @@ class Tuning:
                     if not isinstance(kwargs[k], (list, tuple)):
                         raise TuningFileError(f"{k} must be a list of numbers")
                     kwargs[k] = tuple(_number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k]))
+            for k in _CONTINUUM:
+                if kwargs.get(k) is not None:
+                    if not isinstance(kwargs[k], (list, tuple)):
+                        raise TuningFileError(f"{k} must be a list of numbers or nulls")
+                    kwargs[k] = tuple(
+                        math.nan if v is None else _number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k])
+                    )
+            if kwargs.get("step_rate_hz") is not None:
+                kwargs["step_rate_hz"] = _number("step_rate_hz", kwargs["step_rate_hz"])
             if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
                 raise TuningFileError("checks must be an object or null")
             for k in (
@@ -484,4 +540,8 @@ class Tuning:
             onset_lag_s=self.onset_lag_s,
             stepping_levels_db=self.stepping_levels_db,
             drop_threshold=self.drop_threshold,
+            step_rate_hz=self.step_rate_hz,
+            continuum_levels_db=self.continuum_levels_db,
+            continuum_signature_db=self.continuum_signature_db,
+            continuum_spread_db=self.continuum_spread_db,
         )
