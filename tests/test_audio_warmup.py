@@ -135,7 +135,7 @@ def test_the_continuum_round_trips_through_the_file_with_nulls() -> None:
     assert back.step_rate_hz == tu2.step_rate_hz
     with pytest.raises(ValueError, match="come together"):
         replace(tu, continuum_spread_db=None)
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(ValueError, match="at least 0.001 dB"):
         replace(tu, continuum_spread_db=(0.0,) + tuple(tu.continuum_spread_db or ())[1:])
 
 
