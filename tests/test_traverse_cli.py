@@ -27,8 +27,28 @@ def tuning3(tmp_path_factory):
 
 def test_traverse_on_the_simulator_measures_the_true_step(tuning3, tmp_path):
     table, db = tmp_path / "day.csv", tmp_path / "s.db"
-    args = ["traverse", "--joint", "3", "-d", "-", "--tuning", str(tuning3), "--device", URL, "--q2", "0",
-            "--theta", "-90deg", "--day", "2026-11-20", "-a", str(table), "--db", str(db), "--json"]
+    args = [
+        "traverse",
+        "--joint",
+        "3",
+        "-d",
+        "-",
+        "--tuning",
+        str(tuning3),
+        "--device",
+        URL,
+        "--q2",
+        "0",
+        "--theta",
+        "-90deg",
+        "--day",
+        "2026-11-20",
+        "-a",
+        str(table),
+        "--db",
+        str(db),
+        "--json",
+    ]
     r = runner.invoke(app, args)
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
@@ -118,3 +138,16 @@ def test_appending_never_glues_rows_or_writes_into_another_table(tmp_path, monke
         append_row(table, row)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other.csv", "t.csv"]  # no temporary file left
     assert table.read_bytes() == before
+
+
+def test_a_tuning_made_at_another_step_rate_is_warned_about_before_the_joint_moves(tuning3, tmp_path):
+    tuned = json.loads(tuning3.read_text())
+    assert tuned["step_rate_hz"] == pytest.approx(1000.0, rel=0.01)  # heard in the simulator's recording
+    args = ["traverse", "--joint", "3", "-d", "-", "--device", URL, "--q2", "0", "--no-db", "--json"]
+    r = runner.invoke(app, [*args, "--tuning", str(tuning3)])
+    assert r.exit_code == 0 and "this tuning was made at" not in r.stderr
+    other = tmp_path / "t1300.json"
+    other.write_text(json.dumps({**tuned, "step_rate_hz": 1300.0}))
+    r = runner.invoke(app, [*args, "--tuning", str(other)])
+    assert r.exit_code == 0, r.output
+    assert "warning: joint 3 steps at 1000 Hz, -23 % from the 1300 Hz this tuning was made at" in r.stderr

@@ -17,7 +17,7 @@ import numpy as np
 from .. import records
 from .template import CHUNK, TemplateParams
 
-__all__ = ["Tuning", "TuningFileError", "default_frame"]
+__all__ = ["STEP_RATE_TOLERANCE", "Tuning", "TuningFileError", "default_frame"]
 
 _KIND = "stickslip.audio.Tuning"
 _CONTINUUM = ("continuum_levels_db", "continuum_signature_db", "continuum_spread_db")
@@ -30,6 +30,15 @@ class TuningFileError(ValueError):
 def default_frame(sample_rate: int) -> int:
     """Frame length in samples: the power of two closest to 10.7 ms (512 at 48 kHz)."""
     return int(2 ** round(math.log2(sample_rate * 512 / 48_000)))
+
+
+STEP_RATE_TOLERANCE = 0.10
+"""How far (a fraction) the step rate may be from the rate a tuning was made at before a
+warning: a click train's harmonics fall on a joint's narrow modes differently at another
+rate. Measured on the battery's generator (``tests/battery_sound.py``, docs/audio.md,
+"Tuned at one step rate"): within +-10 % of the 1000 Hz tuning every stop was heard once
+and on time (joint P, 68 recordings at 900-1100 Hz); at 700-1400 Hz, 9 of 87 (joint P)
+and 1 of 87 (joint Q) were missed or heard 37-544 ms late."""
 
 
 def _number(name: str, v: Any) -> float:
@@ -277,6 +286,23 @@ class Tuning:
                 )
         if any(not 1e-3 <= v for v in self.continuum_spread_db or () if not math.isnan(v)):
             raise ValueError("continuum_spread_db must be at least 0.001 dB")
+
+    def step_rate_problem(self, step_hz: float, what: str = "the joint steps") -> str | None:
+        """A warning if ``step_hz`` (Hz) is more than :data:`STEP_RATE_TOLERANCE` from the tuning's rate.
+
+        ``None`` when the rates agree, or when either is unknown (a tuning made before
+        the rate was recorded, a rate not heard).
+        """
+        if self.step_rate_hz is None or not (math.isfinite(step_hz) and step_hz > 0):
+            return None
+        off = step_hz / self.step_rate_hz - 1.0
+        if abs(off) <= STEP_RATE_TOLERANCE + 1e-9:  # 1100 / 1000 - 1 is 0.1000000000000001
+            return None
+        return (
+            f"{what} at {step_hz:.0f} Hz, {100 * off:+.0f} % from the {self.step_rate_hz:.0f} Hz this tuning was "
+            f"made at: a stop can be missed or heard late (a count too high); tune at this rate "
+            f"(stickslip record, then stickslip tune)"
+        )
 
     # ------------------------------------------------------------- derived
     @property

@@ -207,6 +207,8 @@ def listen(
         _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock)
         return
 
+    import numpy as np
+
     from ..audio.guard import block_problem, non_finite
     from ..audio.sources import AudioSourceError, wav_blocks
 
@@ -227,6 +229,7 @@ def listen(
     problems: set[str | None] = set()
     n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
     heard_rate = float(tuning.sample_rate)
+    opening: list[np.ndarray] = []  # the first second: the step rate heard, against the tuning's
     try:
         det = None
         for block, rate in blocks:
@@ -234,6 +237,8 @@ def listen(
             if bad:
                 n_bad += bad
                 first_bad_s = first_bad_s if first_bad_s is not None else (heard + int(first or 0)) / rate
+            if heard < rate:
+                opening.append(block[: int(rate) - heard])
             heard += block.size
             heard_rate = float(rate)
             if det is None:
@@ -258,6 +263,13 @@ def listen(
             highlight=False,
             soft_wrap=True,
         )
+    if opening and tuning.step_rate_hz is not None:
+        from ..audio.stepclock import step_rate_hz
+
+        first = np.nan_to_num(np.concatenate(opening))
+        why = tuning.step_rate_problem(step_rate_hz(first, heard_rate), f"{recording}: the joint steps")
+        if why is not None:
+            err_console.print(f"warning: {why}", highlight=False, soft_wrap=True)
     if problems and None not in problems:
         err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
     if n_bad:

@@ -20,6 +20,7 @@ from ._common import (
     print_json,
     user_errors,
     validation_table,
+    warn,
     warn_later,
 )
 
@@ -288,6 +289,9 @@ def traverse_cmd(
         if getattr(tun, "joint", None) not in (None, joint):
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
         ctrl = open_device(device)
+        rate_problem = tun.step_rate_problem(float(ctrl.frequency(joint)), f"joint {joint} steps")
+        if rate_problem is not None:  # before the joint moves
+            warn(rate_problem)
         try:
             result = traverse_on_device(
                 ctrl,
