@@ -4,6 +4,7 @@ columnar parser must agree with exactly: the same rows, values, line numbers and
 from __future__ import annotations
 
 import csv
+import datetime
 import io
 import math
 from collections.abc import Iterable, Sequence
@@ -154,12 +155,42 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
     return v, None
 
 
+def _label_problem(text: str) -> str | None:
+    """The session-label rule written again without a regular expression (the peer of clock.day_label_problem)."""
+    if len(text) > 64:
+        return f"the session label is {len(text)} characters long (at most 64)"
+    if any(not ch.isprintable() for ch in text):
+        return f"the session label {text[:64]!r} holds a control character (a tab or a line break)"
+    head = text[:4]
+    parts = text[5:].split("-", 1) if len(text) > 5 and head.isascii() and head.isdigit() and text[4] == "-" else []
+    if len(parts) != 2:
+        return None
+    month = parts[0]
+    day_digits = ""
+    for ch in parts[1]:
+        if not (ch.isascii() and ch.isdigit()):
+            break
+        day_digits += ch
+    if not (month and month.isascii() and month.isdigit() and day_digits):
+        return None
+    shaped = f"{head}-{month}-{day_digits}"
+    try:
+        iso = datetime.date(int(head), int(month), int(day_digits)).isoformat()
+    except (ValueError, OverflowError) as e:
+        return f"the session label {text!r} starts like a date but is not one ({e})"
+    if shaped != iso:
+        return f"the session label {text!r}: write the date as {iso} (YYYY-MM-DD)"
+    return None
+
+
 def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
     """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
     problems: list[str] = []
     day = (row.get("day") or "").strip()
     if not day:
         problems.append(f"{where}: day is empty (use a session label, e.g. an ISO date)")
+    elif (why := _label_problem(day)) is not None:
+        problems.append(f"{where}: day: {why}")
     jtext = (row.get("joint") or "").strip()
     joint: int | None
     try:

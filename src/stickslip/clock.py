@@ -81,7 +81,7 @@ def parse_day(label: str | None) -> _dt.date | None:
         return None
 
 
-_DATE_SHAPED = re.compile(r"\d{4}-\d+-\d+")
+_DATE_SHAPED = re.compile(r"\d{4}-\d+-\d+", re.ASCII)
 MAX_LABEL_CHARS = 64
 """The longest session label accepted (a label is a key in tables and the database, not a note)."""
 
