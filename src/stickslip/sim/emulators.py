@@ -560,8 +560,8 @@ def serve_until_interrupted(emu: _Emulator, summary: Callable[[], str]) -> int:
 
     signal.signal(signal.SIGTERM, _terminate)
     with emu:
-        print(emu.url, flush=True)
-        try:
+        try:  # the URL inside: a SIGTERM sent as soon as it was read may arrive while print returns (a flaky test)
+            print(emu.url, flush=True)
             while True:
                 time.sleep(3600)
         except KeyboardInterrupt:
