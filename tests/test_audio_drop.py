@@ -85,9 +85,9 @@ def test_drop_threshold_round_trips_and_is_checked() -> None:
     "field, bad, match",
     [
         ("signature_db", [-3.0, 1e30, -2.0, -1.0], "signature_db must be within -400..400 dB"),
-        ("signature_db", [-3.0, "12", -2.0, -1.0], r"signature_db\[1\] must be a number, got '12'"),
+        ("signature_db", [-3.0, "12", -2.0, -1.0], r"signature_db\[1\] must be a finite number, got '12'"),
         ("spread_db", [1.0, 1e-300, 1.0, 1.0], "spread_db must be within 0.001..400 dB"),
-        ("spread_db", [1.0, None, 1.0, 1.0], r"spread_db\[1\] must be a number, got None"),
+        ("spread_db", [1.0, None, 1.0, 1.0], r"spread_db\[1\] must be a finite number, got None"),
         ("stepping_levels_db", [-40.0, -1e30, -45.0, -50.0], "stepping_levels_db must hold 4 levels within"),
         ("edges_hz", [1000.0, 2000.0, float("inf"), 8000.0, 12000.0], r"edges_hz\[2\] must be a finite number"),
     ],

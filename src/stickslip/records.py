@@ -111,13 +111,11 @@ _PRISMATIC = {"a": "step", "c": "term", "b": "ratio"}
 _ROTARY = {"gamma0": "step", "d": "term"}
 
 
-def _finite(value: object, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{where} must be a number, got {value!r}")
-    v = float(value)
-    if not math.isfinite(v):
-        raise ValueError(f"{where} must be finite, got {value!r}")
-    return v
+def finite_number(value: object, where: str) -> float:
+    """A JSON number as a float, or ``ValueError`` naming ``where``: a string, a boolean, null, NaN or infinity."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        raise ValueError(f"{where} must be a finite number, got {value!r}")
+    return float(value)
 
 
 def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
@@ -151,18 +149,18 @@ def _check_parameter(rec_: object, i: int) -> None:
     if not isinstance(name, str) or name not in kinds:
         raise ValueError(f"{where}.name must be one of {sorted(kinds)} for joint {joint}, got {name!r}")
     where = f"{where} (joint {joint} {name})"
-    v = _finite(rec.get("value"), where)
+    v = finite_number(rec.get("value"), where)
     if kinds[name] == "ratio":
         if not 0.0 <= v < 1.0:
             raise ValueError(f"{where} must satisfy 0 <= b < 1 (eta = 1 - b|cos q2| > 0), got {v!r}")
     else:
         _check_scale(v, joint_spec(joint).unit, where, signed=kinds[name] == "term")
     if rec.get("stderr") is not None:
-        se = _finite(rec.get("stderr"), f"{where} stderr")
+        se = finite_number(rec.get("stderr"), f"{where} stderr")
         if se < 0:
             raise ValueError(f"{where} stderr must be >= 0, got {se!r}")
     if joint_spec(joint).rotary:
-        q3 = _finite(rec.get("q3"), f"{where} q3")
+        q3 = finite_number(rec.get("q3"), f"{where} q3")
         if not -1e-3 <= q3 <= 0.1:
             raise ValueError(f"{where} q3 = {q3!r} m is outside 0..0.1 m")
 
@@ -202,7 +200,7 @@ def check_calibration_dict(data: object) -> None:
     for i, rec in enumerate(data.get("constant_steps") or []):
         where = f"constant_steps[{i}]"
         step, joint = _record_joint(rec, where)
-        v = _finite(step.get("value"), f"{where} (joint {joint})")
+        v = finite_number(step.get("value"), f"{where} (joint {joint})")
         _check_scale(v, joint_spec(joint).unit, f"{where} (joint {joint})", signed=False)
 
 
@@ -226,14 +224,14 @@ def check_tuning_dict(data: object) -> None:
                 raise ValueError(f"{k} must be in 1..10000000, got {v!r}")
     for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s", "latency_s"):
         if data.get(k) is not None:
-            _finite(data[k], k)
+            finite_number(data[k], k)
     for k in ("band_hz", "reference_hz"):
         band = data.get(k)
         if band is None:
             continue
         if not (isinstance(band, list) and len(band) == 2):
             raise ValueError(f"{k} must be [low_Hz, high_Hz], got {band!r}")
-        lo, hi = (_finite(x, k) for x in band)
+        lo, hi = (finite_number(x, k) for x in band)
         nyquist = float(rate) / 2 if isinstance(rate, (int, float)) and not isinstance(rate, bool) else math.inf
         if not 0 <= lo < hi <= nyquist:
             raise ValueError(f"{k} must satisfy 0 <= low < high <= {nyquist:g} Hz (Nyquist), got {band!r}")

@@ -42,13 +42,11 @@ and 1 of 87 (joint Q) were missed or heard 37-544 ms late."""
 
 
 def _number(name: str, v: Any) -> float:
-    """A JSON number as a float; ``TuningFileError`` for a string, a boolean, null, NaN or infinity."""
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise TuningFileError(f"{name} must be a number, got {v!r}")
-    x = float(v)
-    if not math.isfinite(x):
-        raise TuningFileError(f"{name} must be a finite number, got {v!r}")
-    return x
+    """:func:`stickslip.records.finite_number`, raising :class:`TuningFileError`."""
+    try:
+        return records.finite_number(v, name)
+    except ValueError as e:
+        raise TuningFileError(str(e)) from None
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,7 @@ import numpy as np
 
 from ..families import FamilyModel, FamilyParams, family_spec
 from ..models import direction_label
+from ..records import finite_number
 
 if TYPE_CHECKING:
     from .result import Calibration
@@ -83,12 +84,6 @@ def ext_fields(cal: Calibration) -> dict[str, object]:
     return out
 
 
-def _finite(x: object, where: str) -> float:
-    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(float(x)):
-        raise ValueError(f"{where} must be a finite number, got {x!r}")
-    return float(x)
-
-
 def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyParams, list[float | None]]:
     """One family's parameters (and standard errors) from a ``families`` entry or one of its members."""
     spec = family_spec(j, str(rec["family"]))
@@ -100,12 +95,12 @@ def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyPara
     ses_raw = []
     for name, q3 in spec.names:
         p = by_name[(name, None if q3 is None else round(q3, 9))]
-        values.append(_finite(p["value"], f"{where} {name}"))
+        values.append(finite_number(p["value"], f"{where} {name}"))
         ses_raw.append(p.get("stderr"))
-    ses = [None if x is None else _finite(x, f"{where} stderr") for x in ses_raw]
+    ses = [None if x is None else finite_number(x, f"{where} stderr") for x in ses_raw]
     if any(x is not None and x < 0 for x in ses):
         raise ValueError(f"{where}: a standard error is negative")
-    scale = _finite(rec.get("scale", 1.0), f"{where} scale")
+    scale = finite_number(rec.get("scale", 1.0), f"{where} scale")
     if not scale > 0:
         raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
     return FamilyParams(spec.name, j, tuple(values), scale), ses
@@ -136,7 +131,7 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
                     mw = f"{where}.members[{k}]"
                     if not isinstance(mrec, dict):
                         raise ValueError(f"{mw} must be an object")
-                    w = _finite(mrec["weight"], f"{mw} weight")
+                    w = finite_number(mrec["weight"], f"{mw} weight")
                     if not 0.0 < w <= 1.0:
                         raise ValueError(f"{mw}: weight must be in (0, 1], got {w!r}")
                     members.append((w, _read_family(mrec, j, mw)[0]))
@@ -177,7 +172,7 @@ def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
             raise ValueError(f"uncertainty[{i}]: bad joint or direction ({e})") from None
         s = rec.get("sigma_model")
         if s is not None:
-            sv = _finite(s, f"uncertainty[{i}].sigma_model")
+            sv = finite_number(s, f"uncertainty[{i}].sigma_model")
             if not 0.0 <= sv < 10.0:
                 raise ValueError(f"uncertainty[{i}].sigma_model must be in [0, 10), got {sv!r}")
             cal.sigma_model[key] = sv
