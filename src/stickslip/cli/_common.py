@@ -241,12 +241,12 @@ def day_option(value: str | None) -> str | None:
     """A session label option (``--day``): stripped, or ``typer.BadParameter`` saying why it cannot be one."""
     if value is None:
         return None
-    from ..clock import day_label_problem
+    from ..clock import check_day_label
 
-    why = day_label_problem(value)
-    if why is not None:
-        raise typer.BadParameter(why)
-    return value.strip()
+    try:
+        return check_day_label(value)
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
 
 
 def _bare_number(text: str) -> bool:
