@@ -151,3 +151,26 @@ def test_a_tuning_made_at_another_step_rate_is_warned_about_before_the_joint_mov
     r = runner.invoke(app, [*args, "--tuning", str(other)])
     assert r.exit_code == 0, r.output
     assert "warning: joint 3 steps at 1000 Hz, -23 % from the 1300 Hz this tuning was made at" in r.stderr
+
+
+def test_the_library_traverse_warns_through_python_warnings_or_a_callback_before_the_joint_moves(tuning3):
+    import dataclasses
+
+    from stickslip.audio.detector import Tuning
+    from stickslip.kinematics import Pose
+    from stickslip.procedures.session import StepRateWarning, traverse_on_device
+
+    other = dataclasses.replace(Tuning.load(tuning3), step_rate_hz=1300.0)
+    pose = Pose(0.0, 0.0, 0.0, -math.pi / 2, 0.0)
+    sim = SimulatedMM3A(seed=4, day="2026-11-20")
+    heard: list[tuple[str, float]] = []
+    r = traverse_on_device(
+        sim, 3, "-", pose, "2026-11-20", other, progress=False, on_warning=lambda m: heard.append((m, sim.clock_s))
+    )
+    assert [m for m, _ in heard] == [
+        "joint 3 steps at 1000 Hz, -23 % from the 1300 Hz this tuning was made at: a stop can be missed or heard "
+        "late (a count too high); tune at this rate (stickslip record, then stickslip tune)"
+    ]
+    assert heard[0][1] == 0.0 and r.steps > 0  # said before the simulated clock moved
+    with pytest.warns(StepRateWarning, match="-23 % from the 1300 Hz"):
+        traverse_on_device(SimulatedMM3A(seed=4, day="2026-11-20"), 3, "-", pose, "2026-11-20", other, progress=False)

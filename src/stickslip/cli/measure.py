@@ -289,9 +289,6 @@ def traverse_cmd(
         if getattr(tun, "joint", None) not in (None, joint):
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
         ctrl = open_device(device)
-        rate_problem = tun.step_rate_problem(float(ctrl.frequency(joint)), f"joint {joint} steps")
-        if rate_problem is not None:  # before the joint moves
-            warn(rate_problem)
         try:
             result = traverse_on_device(
                 ctrl,
@@ -305,6 +302,7 @@ def traverse_cmd(
                 burst_steps=burst,
                 progress=not json_out,
                 confirm_s=confirm_s,
+                on_warning=warn,  # before the joint moves
             )
         finally:
             ctrl.close()

@@ -10,6 +10,7 @@ re-references the joint's kept position there.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol
@@ -23,7 +24,22 @@ from ..measurements import Traverse, measurements_to_csv
 from ..records import atomic_write_text
 from .traverse import TraverseResult, measure_traverse
 
-__all__ = ["TraverseStore", "append_row", "check_append_target", "record_traverse", "traverse_on_device"]
+__all__ = [
+    "StepRateWarning",
+    "TraverseStore",
+    "append_row",
+    "check_append_target",
+    "record_traverse",
+    "traverse_on_device",
+]
+
+
+class StepRateWarning(UserWarning):
+    """The joint steps more than 10 % away from the rate its tuning was made at (a stop may be heard late)."""
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, StepRateWarning, stacklevel=3)
 
 
 class TraverseStore(StateStore, Protocol):
@@ -45,6 +61,7 @@ def traverse_on_device(
     progress: bool = True,
     confirm_s: float = CONFIRM_S,
     serial_port: str | None = None,
+    on_warning: Callable[[str], None] = _warn,
 ) -> TraverseResult:
     """Measure one traverse of ``joint`` in ``direction`` on ``ctrl``, timed by the tuned limit switch.
 
@@ -66,7 +83,15 @@ def traverse_on_device(
         port, at the tuning's sample rate (:class:`~stickslip.audio.vibration.SerialSamples`;
         a vacuum chamber, where no air carries the sound), instead of a sound card. The
         tuning must have been made from the same sensor.
+    on_warning : callable
+        Gets a warning, before the joint moves, when the controller steps more than
+        :data:`~stickslip.audio.tuningfile.STEP_RATE_TOLERANCE` away from the rate the
+        tuning was made at (:meth:`~stickslip.audio.tuningfile.Tuning.step_rate_problem`).
+        Default: a :class:`StepRateWarning` (Python's ``warnings``).
     """
+    rate_problem = tuning.step_rate_problem(float(ctrl.frequency(joint)), f"joint {joint} steps")
+    if rate_problem is not None:
+        on_warning(rate_problem)
     if isinstance(ctrl, PoseSettable):
         ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
     t0 = 0.0  # a live source starts now
