@@ -111,10 +111,12 @@ def test_a_tuning_whose_stop_is_heard_above_the_new_nyquist_is_refused() -> None
         t.for_sample_rate(22_050)
 
 
-def test_the_step_rate_check_needs_the_tuning_s_rate_and_allows_ten_per_cent() -> None:
+def test_the_step_rate_check_needs_the_tuning_s_rate_and_allows_five_per_cent() -> None:
     assert _template_tuning().step_rate_problem(1500.0) is None  # a file from before the rate was recorded
     t = replace(_template_tuning(), step_rate_hz=1000.0)
-    assert t.step_rate_problem(1100.0) is None and t.step_rate_problem(900.0) is None
+    assert t.step_rate_problem(1050.0) is None and t.step_rate_problem(950.0) is None
     assert t.step_rate_problem(float("nan")) is None  # no rate heard: nothing to compare
-    why = t.step_rate_problem(1101.0)
-    assert why is not None and "+10 % from the 1000 Hz" in why
+    why = t.step_rate_problem(1051.0)
+    assert why is not None and "+5 % from the 1000 Hz" in why
+    why = t.step_rate_problem(949.0)
+    assert why is not None and "-5 % from the 1000 Hz" in why

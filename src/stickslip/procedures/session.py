@@ -35,7 +35,7 @@ __all__ = [
 
 
 class StepRateWarning(UserWarning):
-    """The joint steps more than 10 % away from the rate its tuning was made at (a stop may be heard late)."""
+    """The joint steps more than 5 % away from the rate its tuning was made at (a stop may be heard late)."""
 
 
 def _warn(message: str) -> None:
