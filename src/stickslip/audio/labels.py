@@ -107,7 +107,9 @@ def _sound_change(
             f"the stepping and stopped parts sound alike: nothing changes near the labelled stop at {stop_at_s:g} s "
             f"(no sub-band of "
             f"{edges[0]:.0f}-{edges[-1]:.0f} Hz changes by more than {abs(delta0[k]):.1f} dB, "
-            f"at {edges[k]:.0f}-{edges[k + 1]:.0f} Hz); check --stop-at and that the recording reaches the end stop"
+            f"at {edges[k]:.0f}-{edges[k + 1]:.0f} Hz); check --stop-at and that the recording reaches the end stop, "
+            "and switch off automatic gain control (AGC) in the sound card's or the system's settings: it levels out "
+            "a stop that is only quieter"
         )
     trim_all = (len(edges) - 1) // 5
     a0, _ = fit_departure(V - mu_step, delta0, sigma, trim_all)
