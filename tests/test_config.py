@@ -235,11 +235,17 @@ def test_a_password_in_the_device_url_is_refused_without_echoing_it(tmp_path, ur
     form=st.sampled_from(["user:{s}@", "?password={s}", "?Secret={s}", "?a=1&pass={s}"]),
 )
 def test_any_secret_in_any_form_is_refused_and_never_in_the_message(tmp_path, secret, form):
-    text = form.format(s=secret)
-    url = f"anc300://{text}10.1.2.3" if text.endswith("@") else f"anc300://10.1.2.3{text}"
-    p = write(tmp_path, write_toml({"device": url}))
-    msg = refused(p)
-    assert secret not in msg.replace(str(p), "")
+    def message(s: str) -> str:
+        text = form.format(s=s)
+        url = f"anc300://{text}10.1.2.3" if text.endswith("@") else f"anc300://10.1.2.3{text}"
+        p = write(tmp_path, write_toml({"device": url}))
+        return refused(p).replace(str(p), "")
+
+    msg = message(secret)
+    # the message does not depend on the secret at all (a secret such as 'file' may be a word of the message itself:
+    # a fresh hypothesis draw found that 'not in' alone is not the property)
+    assert msg == message("Zz9Qq8Xx7")
+    assert secret not in msg or secret in message("Zz9Qq8Xx7")
 
 
 def test_a_user_name_without_a_password_is_allowed(tmp_path):
