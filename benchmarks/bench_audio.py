@@ -340,23 +340,27 @@ def false_alarms_per_hour(
                 continue
             rate = 900.0 + 360.0 * ((i * 0.618) % 1.0)
             y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
-            per.setdefault(name, [0.0, 0.0, 0.0])
+            per.setdefault(name, [0.0, 0.0, 0.0, 0.0])
             det = confirming(StopDetector(tu), confirm_s, step_clock)
             confirmed = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
             per[name][0] += len(confirmed)
             per[name][1] += len(StopDetector(tu).feed(y))
             per[name][2] += piece_s
+            per[name][3] += bool(confirmed)  # a traverse ends at its first event: the pieces a traverse fails in
         total = sum(v[0] for v in per.values())
         raw = sum(v[1] for v in per.values())
         heard = sum(v[2] for v in per.values())
+        pieces = sum(v[3] for v in per.values())
         totals[joint] = (int(total), int(raw))
         print(
             f"  joint {joint}: {total:.0f} false alarms in {heard / 3600:.2f} h = {total / heard * 3600:.1f} per hour "
-            f"(unconfirmed {raw:.0f} = {raw / heard * 3600:.1f} per hour; {time.perf_counter() - t0:.0f} s)"
+            f"(unconfirmed {raw:.0f} = {raw / heard * 3600:.1f} per hour; {time.perf_counter() - t0:.0f} s); "
+            f"{pieces:.0f} of {n} pieces had one or more (a traverse stops at the first)"
         )
-        for name, (fa, fa_raw, secs) in per.items():
+        for name, (fa, fa_raw, secs, hit) in per.items():
             print(
                 f"    {name:28s} {fa:3.0f} ({fa_raw:3.0f}) in {secs / 60:4.0f} min = {fa / secs * 3600:6.1f} per hour"
+                f", in {hit:.0f} pieces"
             )
     return totals
 

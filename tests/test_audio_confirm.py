@@ -73,7 +73,10 @@ def test_the_splice_fools_the_detector_and_confirmation_passes_it_by() -> None:
     det = ConfirmedStopDetector(StopDetector(_tuning()))
     (ev,) = _run(det, y, 1024)
     assert ev.onset_s == pytest.approx(4.0, abs=0.025) and not ev.onset_uncertain
-    assert (ev.onset_s, ev.detected_at_s, ev.level_db) == (plain[1].onset_s, plain[1].detected_at_s, plain[1].level_db)
+    assert (ev.onset_s, ev.detected_at_s) == (plain[1].onset_s, plain[1].detected_at_s)
+    # the plain detector re-armed after the splice by itself and learned its template anew; the confirming one was
+    # un-latched when the splice was rejected and its template went on following: the same stop, nearly the same a
+    assert ev.level_db == pytest.approx(plain[1].level_db, abs=0.01)
     hop = _tuning().hop / SR
     assert ev.confirmed_s is not None and ev.confirmed_s == pytest.approx(CONFIRM_S, abs=hop)
     assert ev.confirmed_at_s == pytest.approx(ev.detected_at_s + ev.confirmed_s, abs=1e-9)

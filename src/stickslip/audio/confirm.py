@@ -371,6 +371,7 @@ class ConfirmedStopDetector:
             end = fire * self._H + self._F - self._gap
             self._ref = self._samples(end - self._span, end)
         self._pending = (ev, fire, self.after_reject_frames if recent else self.window_frames)
+        self.inner.hold(True)  # the window decides whether this was a stop: the inner does not re-arm meanwhile
         return out
 
     def _continues_from_rejection(self, fire: int) -> bool:
@@ -395,6 +396,7 @@ class ConfirmedStopDetector:
         if self.inner.frames_seen <= last:
             return []
         self._pending = None
+        self.inner.hold(False)
         if self._persisted(*self._window(fire, window)) and self._in_step(ev, fire, window):
             return [self._confirmed(ev, last, window)]
         self.rejected.append(ev)

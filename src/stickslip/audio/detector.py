@@ -224,6 +224,12 @@ class StopDetector:
             if self._template._checks:
                 self._template.samples = self._samples
 
+    def hold(self, on: bool) -> None:
+        """While ``on``, a latched template detector does not re-arm by itself (:mod:`.confirm` holds it while it
+        decides whether the latest fire was a stop; :meth:`unlatch` re-arms it). A band tuning's detector ignores it."""
+        if self._template is not None:
+            self._template.held = bool(on)
+
     def unlatch(self) -> None:
         """Forget the latest fire and listen for the next stop from the next frame on.
 
@@ -231,11 +237,7 @@ class StopDetector:
         fire, resumes following the stepping sound, so the rejected span never enters it.
         """
         if self._template is not None:
-            st = self._template
-            st.latched = False
-            st.below = 0
-            st.mask = 0
-            st.recent = []
+            self._template.unlatch()
         else:
             self._latched = False
             self._below = 0

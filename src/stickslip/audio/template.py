@@ -23,8 +23,12 @@ move ``a``. Two numbers come out per frame:
 A frame is *hot* when ``a >= threshold`` and ``rho <= residual_max``. The detector
 fires when ``hold`` of the last ``hold + max_dips`` frames were hot, the current one
 included, and the current ``a`` has not decayed below ``decay_ratio`` of the largest in
-that window (a transient rings down, a stop does not). It then stays latched until
-``a`` has stayed below ``threshold - hysteresis`` for ``release_s``.
+that window (a transient rings down, a stop does not). It then stays latched until ``a``
+has stayed below ``threshold - hysteresis`` for ``release_s`` (the template goes on
+following), or, once latched for :data:`RELEASE_AFTER_S` and not held by a confirmation,
+until over the last ``release_s`` at least :data:`RELEASE_SHARE` of the frames sounded
+like stepping again rather than like the stop that fired (:class:`Release`,
+:meth:`TemplateState._stepping_again`); then it learns its template anew from them.
 
 Two judgements read the *continuum* between the step clock's lines
 (:func:`continuum_levels_db`), which a change of the step rate does not move as it moves
@@ -49,6 +53,11 @@ from numpy.typing import NDArray
 __all__ = [
     "CHUNK",
     "QUANTILE",
+    "RELEASE_AFTER_S",
+    "RELEASE_C",
+    "RELEASE_SHARE",
+    "RELEASE_SILENT_DB",
+    "Release",
     "TemplateParams",
     "TemplateState",
     "continuum_levels_db",
@@ -107,7 +116,68 @@ STALE_RELEARN_S = 0.15
 #: reference span), judged as at the start (:data:`START_MIN_B`) at this share of the signature
 STALE_REF_MAX_B = 0.5
 
+#: a latched detector re-arms when, over the last ``release_s``, at least this share of the frames sounded like
+#: stepping again (:meth:`TemplateState._stepping_again`). Not "every frame below half the threshold": stepping's
+#: ``a`` wobbles (on joint P of the battery a stepping frame passes half the threshold about once in 20), so that
+#: almost never came and the next stop in the same stream was not heard
+RELEASE_SHARE = 0.8
+#: ... counted only once the detector has been latched this long, s: a stop lasts as long as the joint steps into it
+#: (a traverse steps on for ``confirm_s``, 0.5 s); a fire on a voice that ends sooner is the confirmation's to reject
+#: (:mod:`.confirm`), and re-arming inside its window let the voice fire again and again (joint P under babble:
+#: 1 -> 14 confirmed false alarms in 6 min)
+RELEASE_AFTER_S = 0.5
+#: the stop's own sound is the median of this many frames after the fire
+STOP_ROWS = 8
+#: a frame sounds like stepping again when its departure from the template, projected on the stop's own departure,
+#: is under this share of it ...
+RELEASE_C = 0.5
+#: ... and its median sub-band is no more than this far under the template, dB (silence after a stop is not stepping)
+RELEASE_SILENT_DB = 10.0
+
 FloatArray = NDArray[np.float64]
+
+
+class Release:
+    """When a latched detector re-arms: a sliding window of ``frames`` frames (``release_s``).
+
+    Each frame is pushed with its levels and whether it sounded like stepping again;
+    :meth:`push` says True once the window is full and at least :data:`RELEASE_SHARE` of
+    it did. :meth:`stepping_rows` gives those frames' levels (the template is learned
+    anew from them).
+    """
+
+    def __init__(self, frames: int) -> None:
+        self.frames = max(1, int(frames))
+        self.reset()
+
+    def reset(self) -> None:
+        self._flags: list[bool] = []
+        self._rows: list[FloatArray | None] = []
+        self._start = 0
+        self.count = 0
+
+    def push(self, stepping: bool, row: FloatArray | None = None) -> bool:
+        self._flags.append(stepping)
+        self._rows.append(row)
+        self.count += stepping
+        if len(self._flags) - self._start > self.frames:
+            self.count -= self._flags[self._start]
+            self._rows[self._start] = None
+            self._start += 1
+            if self._start > 4 * self.frames:  # keep the lists short
+                del self._flags[: self._start]
+                del self._rows[: self._start]
+                self._start = 0
+        n = len(self._flags) - self._start
+        return n >= self.frames and self.count >= RELEASE_SHARE * n
+
+    def stepping_rows(self) -> list[FloatArray]:
+        """The levels of the window's frames that sounded like stepping (those pushed with a row)."""
+        return [
+            r
+            for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True)
+            if f and r is not None
+        ]
 
 
 def subband_edges(lo_hz: float, hi_hz: float, sample_rate: int, frame: int, per_octave: float = 3.0) -> list[float]:
@@ -445,6 +515,12 @@ class TemplateState:
         self.recent: list[float] = []
         self.latched = False
         self.below = 0
+        self.release = Release(self.p.release_frames)
+        self._stop_rows: list[FloatArray] = []  # the first frames after a fire (departures from the template)
+        self._latched_frames = 0  # frames heard since the latest fire
+        self.held = False  # set by a confirming wrapper while it judges the latest fire: no re-arming by itself
+        self._min_latch = int(math.ceil(RELEASE_AFTER_S * self.p.sample_rate / self.p.hop))
+        self._stop_e: FloatArray | None = None  # the stop's own departure: their median
         self.prev_a = -math.inf
         self.cross_t = math.nan
         self.last_a = 0.0
@@ -459,6 +535,65 @@ class TemplateState:
         self._check: tuple[int, int] | None = None  # (frame at which to check, the fire's end sample)
         self._uncertain_until = -1  # a fire ending before this sample follows a stale-template verdict closely
         self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
+
+    def unlatch(self) -> None:
+        """Forget the latest fire (one that was not confirmed): listen again from the next frame, same template."""
+        self.latched = False
+        self.held = False
+        self.below = 0
+        self.release.reset()
+        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
+        self.mask = 0
+        self.recent = []
+
+    def _release_scan(self, v: FloatArray) -> int | None:
+        """While latched: push the frames ``v`` (levels, dB) into the release window; the index of the re-arming frame.
+
+        The template is frozen while latched, so each frame's departure is known before the
+        frames are judged: the piece is cut at the frame that re-arms, and the frames after
+        it are heard with the template learned anew (:meth:`_relearn_after_stop`).
+        """
+        assert self.template is not None
+        d = v - self.template
+        for k in range(v.shape[0]):
+            if self._latch_frame(d[k], v[k]):
+                return k
+        return None
+
+    def _latch_frame(self, d: FloatArray, v: FloatArray) -> bool:
+        """One latched frame (its departure ``d`` and levels ``v``, dB): whether the detector re-arms at it."""
+        self._latched_frames += 1
+        stepping = self._stepping_again(d)
+        return self._latched_frames > self._min_latch and self.release.push(stepping, v) and not self.held
+
+    def _relearn_after_stop(self) -> None:
+        """A stop ended: re-arm, and learn the template anew from the release window's stepping frames.
+
+        The template was frozen while the detector was latched, and what follows a stop is
+        a new stretch of stepping (the joint reversed, or a new traverse at another rate):
+        its level is the release window's frames that sounded like stepping (at least
+        :data:`RELEASE_SHARE` of them). The floor starts anew from it: a floor kept from
+        before the stop is the old stepping's, and hid the next stop's drops (the fourth
+        generator's arm 3: the next stop heard 27-109 ms late); a template kept from before
+        the stop fired on stepping 4 % faster after it.
+        """
+        p = self.p
+        rows = self.release.stepping_rows()
+        self.latched = False
+        self.below = 0
+        self.mask = 0
+        self.recent = []
+        self.release.reset()
+        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
+        if len(rows) < p.release_frames // 2:
+            return
+        self.template = np.percentile(np.stack(rows), 100 * QUANTILE, axis=0)
+        self._set_floor(reset=True)
+        # what was gathered this chunk was measured against the old template
+        self._acc_list, self._acc_n = [], 0
+        self._chunk_rho, self._chunk_v = [], []
+        self._drop.reset()
+        self._neg_tail = (np.zeros(0), np.zeros(0))
 
     def _set_floor(self, reset: bool = False) -> None:
         """Remember the template just updated; the floor is the lowest of the last :data:`FLOOR_CHUNKS`."""
@@ -482,9 +617,16 @@ class TemplateState:
             if self._check is not None and self._check[0] > self.frame_no:
                 room = min(room, self._check[0] - self.frame_no)
             j = min(n, i + room)
+            cut = None
+            if self.latched and not self.warming and self.template is not None:
+                cut = self._release_scan(v[i:j])
+                if cut is not None:
+                    j = i + cut + 1
             out += self._segment(v[i:j], ends[i:j])
             self.frame_no += j - i
             i = j
+            if cut is not None:
+                self._relearn_after_stop()
             if self._check is not None and self.frame_no >= self._check[0]:
                 self._stale_check(int(ends[j - 1]))
             if self.frame_no % CHUNK == 0:
@@ -570,6 +712,8 @@ class TemplateState:
         self._set_floor(reset=True)
         self.latched = True
         self.below = 0
+        self.release.reset()
+        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
         self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(shift)))  # onset: the start
 
     def _stale_check(self, end: int) -> None:
@@ -686,6 +830,8 @@ class TemplateState:
         self._set_floor(reset=True)
         self.latched = False
         self.below = 0
+        self.release.reset()
+        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
         self.mask = 0
         self.recent = []
         self.prev_a = -math.inf
@@ -839,28 +985,67 @@ class TemplateState:
         if not self.latched and self.mask == 0 and not hot.any():
             self.prev_a = float(a[-1])
             return []
-        return self._decide(a, hot, ends, lag)
+        return self._decide(a, hot, ends, lag, d, v)
+
+    def _stepping_again(self, d: FloatArray) -> bool:
+        """Whether a latched frame (its departure ``d`` from the frozen template, dB) sounds like stepping again.
+
+        Judged against the stop's *own* sound, the median of the first :data:`STOP_ROWS`
+        frames after the fire, not against the threshold: after a stop the joint may step
+        at another rate or the other way, which the frozen template does not know (4 % of
+        rate shows as drops and rises of a few spreads), while the stop's departure is the
+        change that fired. The frame's departure, projected on the stop's (weighted by the
+        stepping's spreads), must be under :data:`RELEASE_C` of it, and the frame not
+        :data:`RELEASE_SILENT_DB` under the template (silence after the stop is no stepping).
+        """
+        if self._stop_e is None:
+            self._stop_rows.append(d)
+            if len(self._stop_rows) < STOP_ROWS:
+                return False
+            self._stop_e = np.median(np.stack(self._stop_rows), axis=0)
+            self._stop_rows = []
+        e = self._stop_e
+        w = self._fit.inv_sigma**2
+        ee = float((e * w) @ e)
+        if ee < 1.0:  # the stop departed by less than a spread in all: judge it by the tuned signature
+            e, ee = self.delta, float((self.delta * w) @ self.delta)
+        c = float((d * w) @ e) / max(ee, 1e-12)
+        return c < RELEASE_C and float(np.median(d)) > -RELEASE_SILENT_DB
 
     def _decide(
-        self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64], lag: FloatArray
+        self,
+        a: FloatArray,
+        hot: NDArray[np.bool_],
+        ends: NDArray[np.int64],
+        lag: FloatArray,
+        d: FloatArray,
+        v: FloatArray,
     ) -> list[Decision]:
         p = self.p
         sr, H = p.sample_rate, p.hop
         full = (1 << (p.hold_frames + p.max_dips)) - 1
         window_n = p.hold_frames + p.max_dips
-        rel = p.threshold - p.hysteresis
         out: list[Decision] = []
+        rel = p.threshold - p.hysteresis
         prev = self.prev_a
+        fired_here = False
         for k, (ai, hi, end, li) in enumerate(zip(a.tolist(), hot.tolist(), ends.tolist(), lag.tolist(), strict=True)):
             if self.latched:
+                # the quiet release: a stayed below the re-arm level for release_s; the template then goes on
+                # following (what a confirming wrapper relies on while it judges a fire on interference)
                 if ai < rel:
                     self.below += 1
                     if self.below >= p.release_frames:
                         self.latched = False
                         self.mask = 0
                         self.recent = []
+                        self.release.reset()
+                        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
                 else:
                     self.below = 0
+                if fired_here and self.latched:  # a frame after a fire in this piece (a piece that began latched
+                    # was scanned by process): it cannot end the stop, the window is longer than a piece, but counts
+                    self._latch_frame(d[k], v[k])
             else:
                 if hi and (
                     self.mask == 0 or (not self.mask & 1 and self.mask.bit_count() < max(1, p.hold_frames // 2))
@@ -876,7 +1061,10 @@ class TemplateState:
                 self.recent = (self.recent + [ai])[-window_n:]
                 if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):
                     self.latched = True
+                    fired_here = True
                     self.below = 0
+                    self.release.reset()
+                    self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
                     out.append(Decision(int(end), self.cross_t, float(ai), uncertain=end < self._uncertain_until))
                     if self._checks and self.samples is not None:
                         self._check = (self.frame_no + k + 1 + self._after_frames, int(end))

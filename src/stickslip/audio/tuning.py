@@ -16,7 +16,7 @@ from numpy.typing import NDArray
 from scipy.ndimage import percentile_filter
 
 from .band_tuning import _DEFAULT_MAX_DIPS, candidate_bands, tune_band
-from .detector import StopDetector, Tuning, frame_power_spectra
+from .detector import Tuning, frame_power_spectra
 from .labels import TuningError, _recording, _sound_change
 from .stepclock import step_rate_hz
 from .template import (
@@ -29,7 +29,7 @@ from .template import (
     subband_levels_db,
 )
 from .tuningfile import default_frame
-from .verification import _Candidate, _decided, _no_template, _pick
+from .verification import _Candidate, _decided, _no_template, _one_stop, _pick
 
 FloatArray = NDArray[np.float64]
 #: share of the sub-bands a frame's fit may drop (those with the most unexplained excess)
@@ -249,7 +249,7 @@ def tune(
         tu = _make_tuning(cand, edges, delta, sigma, sample_rate, frame, hop, hold_s, release_s, joint, mu_step)
         b0, b1 = cand.bands[0], cand.bands[-1] + 1
         tu = replace(tu, drop_threshold=_drop_threshold(D[:, b0:b1], sigma[b0:b1], stepping, hold, window))
-        events = StopDetector(tu).feed(x)
+        events = _one_stop(tu).feed(x)
         near = [e for e in events if stop_s - g <= e.detected_at_s <= stop_s + 0.2]
         if len(events) == 1 and len(near) == 1:
             ev = near[0]
