@@ -93,6 +93,10 @@ __all__ = [
     "MIN_SYNC_SHARE",
     "MIN_SYNC_SHARPNESS",
     "MIN_SYNC_Z",
+    "ONSET_BACK_DIPS",
+    "ONSET_BACK_LEVEL",
+    "ONSET_FIRE_LEVEL",
+    "ONSET_TOL_S",
     "RECENT_S",
     "ConfirmedStopDetector",
     "check_confirm_s",
@@ -115,6 +119,17 @@ MIN_HOT = 0.25
 RECENT_S = 2.0
 #: the window of such a fire, s (measured: docs/audio.md)
 AFTER_REJECT_S = 2.0
+#: the onset check (round 8b): an onset this far from where the evidence says the stop may have begun is wrong by more
+#: than a traverse tolerates, s
+ONSET_TOL_S = 0.025
+#: ... a stop-like run that ends in the fire but began more than ONSET_TOL_S before its onset, at a stop-likeness at
+#: least this share of the window's (the stop's), was the stop, heard late: interference hid its full verdict
+ONSET_BACK_LEVEL = 0.8
+#: ... dips of at most this many frames that are not stop-like do not end that run
+ONSET_BACK_DIPS = 3
+#: ... a fire whose stop-likeness (over its hold) was under this share of the stop-likeness in the second half of the
+#: window was not the sound that persisted (a template lagging a drifting rate, a knock just before the stop)
+ONSET_FIRE_LEVEL = 1.0 / 3.0
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 #: the step clock: the step clock's lines in the stepping band must have changed between the stepping before the
@@ -218,6 +233,8 @@ class ConfirmedStopDetector:
         #: a run of this many frames that are not stop-like ends a stop
         self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
         self._lag = float(tu.onset_lag_s)
+        self._hold_frames = int(tu.hold_frames) + int(tu.max_dips)
+        self._levels = tu.method == "template"  # margins + 1 are a / threshold (a band tuning's are dB)
         #: the band the step clock is judged on (Hz; empty: no step-clock check)
         self.sync_bands: list[tuple[float, float]] = _stepping_band(tu) if step_clock else []
         self._span = int(round(SYNC_SPAN_S * self._sr))
@@ -247,6 +264,8 @@ class ConfirmedStopDetector:
         self._ref: NDArray[np.float64] | None = None  # the stepping before the fire that began the current chain
         #: per fire the step clock was measured on: (its ``detected_at_s``, what was measured)
         self.step_clock_log: list[tuple[float, LineChange]] = []
+        #: per confirmed stop whose onset the evidence doubts: (its ``detected_at_s``, why; see :meth:`_onset_doubt`)
+        self.onset_log: list[tuple[float, str]] = []
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -314,7 +333,7 @@ class ConfirmedStopDetector:
         if not (self._persisted(*self._window(fire, heard)) and self._in_step(ev, fire, heard)):
             self.rejected.append(ev)
             return []
-        return [self._confirmed(ev, fire + heard, heard)]
+        return [self._confirmed(ev, fire, heard)]
 
     # --- internals ----------------------------------------------------------------------------
     def _frame_end_s(self, i: int) -> float:
@@ -396,7 +415,7 @@ class ConfirmedStopDetector:
             return []
         self._pending = None
         if self._persisted(*self._window(fire, window)) and self._in_step(ev, fire, window):
-            return [self._confirmed(ev, last, window)]
+            return [self._confirmed(ev, fire, window)]
         self.rejected.append(ev)
         self.inner.unlatch()
         self._rejected_at = self._last_reject = last
@@ -442,8 +461,80 @@ class ConfirmedStopDetector:
             return False
         return self._longest_gap(ok) < self.gap_frames
 
-    def _confirmed(self, ev: StopEvent, last: int, frames: int) -> StopEvent:
-        return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
+    def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
+        """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
+        why = None if ev.onset_uncertain else self._onset_doubt(ev, fire, frames)
+        if why is not None:
+            self.onset_log.append((ev.detected_at_s, why))
+            ev = replace(ev, onset_uncertain=True)
+        return replace(ev, confirmed_at_s=self._frame_end_s(fire + frames), confirmed_s=frames * self._H / self._sr)
+
+    def _onset_doubt(self, ev: StopEvent, fire: int, frames: int) -> str | None:
+        """Why the stop that persisted may not have begun at the fire's onset (None: nothing says so).
+
+        The window persisted: a stop is there. Whether it began at ``onset_s`` is a second
+        question, asked of the same per-frame evidence around the fire (round 8b,
+        docs/audio.md "When did the stop begin?"):
+
+        * *a gap after the fire*: in the first half of the window, the frames were not
+          stop-like for as long as the hold that fired (``hold_frames + max_dips``): the
+          sound that fired went away, and the stop that persisted may have begun after it
+          (a knock or a drift's false fire just before the stop);
+        * *a fire weaker than the stop*: the stop-likeness over the fire's hold was under
+          :data:`ONSET_FIRE_LEVEL` of that over the window's second half (template
+          tunings): what fired was not the sound that persisted;
+        * *a stop heard late*: the run of stop-like frames (dips of up to
+          :data:`ONSET_BACK_DIPS` frames) that ends in the fire began more than
+          :data:`ONSET_TOL_S` before the onset, at a stop-likeness of at least
+          :data:`ONSET_BACK_LEVEL` of the window's (template tunings): the stop was
+          there, and interference (a voice filling the sub-bands it empties) held its full
+          verdict back.
+        """
+        m, _ = self._window(fire, frames)
+        if m.size == 0:
+            return None
+        half = m[: max(1, min(m.size, self.window_frames // 2))]
+        if self._longest_gap(half >= 0.0) >= self._hold_frames:
+            return "a gap after the fire"
+        if not self._levels:
+            return None
+        win = m[: self.window_frames] + 1.0
+        late = win[win.size // 2 :]
+        if late.size >= 2:
+            at_fire, _ = self._window(fire - self._hold_frames, self._hold_frames + 3)
+            stop_level = float(np.median(late))
+            if at_fire.size and stop_level > 0.0 and float(np.median(at_fire + 1.0)) < ONSET_FIRE_LEVEL * stop_level:
+                return "a fire weaker than the stop"
+        # walk back from the fire over the stop-like run
+        lo = self._base
+        k = fire
+        while k > lo:
+            if self._margin(k - 1) >= 0.0:
+                k -= 1
+                continue
+            j = k - 1
+            while j >= lo and self._margin(j) < 0.0 and k - j <= ONSET_BACK_DIPS:
+                j -= 1
+            if j >= lo and self._margin(j) >= 0.0 and k - 1 - j <= ONSET_BACK_DIPS:
+                k = j
+                continue
+            break
+        began = self._frame_end_s(k) - self._lag
+        if ev.onset_s - began <= ONSET_TOL_S:
+            return None
+        on = max(k + 1, min(fire, int((ev.onset_s + self._lag - self._t0) * self._sr - self._F + 1) // self._H + 1))
+        before, _ = self._window(k - 1, on - k)
+        if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
+            return "a stop heard late"
+        return None
+
+    def _margin(self, i: int) -> float:
+        """The margin of frame ``i`` (-1 where it is not kept or NaN)."""
+        j = i - self._base
+        if not 0 <= j < len(self._margins):
+            return -1.0
+        v = self._margins[j]
+        return v if math.isfinite(v) else -1.0
 
 
 def _stepping_band(tu: Tuning) -> list[tuple[float, float]]:
