@@ -95,6 +95,8 @@ __all__ = [
     "MIN_SYNC_Z",
     "ONSET_BACK_DIPS",
     "ONSET_BACK_LEVEL",
+    "ONSET_CLEAN_S",
+    "ONSET_COVERED_A",
     "ONSET_FIRE_LEVEL",
     "ONSET_TOL_S",
     "RECENT_S",
@@ -130,6 +132,12 @@ ONSET_BACK_DIPS = 3
 #: ... a fire whose stop-likeness (over its hold) was under this share of the stop-likeness in the second half of the
 #: window was not the sound that persisted (a template lagging a drifting rate, a knock just before the stop)
 ONSET_FIRE_LEVEL = 1.0 / 3.0
+#: ... a rejected window whose frames that were not stop-like had a median stop-likeness at or below this (the opposite
+#: of a full stop: sound added where the stop lowers it) was *covered*, not back to stepping: the stop may have been
+#: there under it, and a stop confirmed later is uncertain until clean stepping is heard (ONSET_CLEAN_S)
+ONSET_COVERED_A = -0.5
+#: ... clean stepping: this long a run of frames neither stop-like nor covered (stop-likeness above ONSET_COVERED_A), s
+ONSET_CLEAN_S = 0.15
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 #: the step clock: the step clock's lines in the stepping band must have changed between the stepping before the
@@ -256,6 +264,8 @@ class ConfirmedStopDetector:
         self._pending: tuple[StopEvent, int, int] | None = None  # the fire, its frame, its window (frames)
         self._last_reject: int | None = None
         self._rejected_at: int | None = None
+        self._covered_at: int | None = None  # the end of the latest rejected window that was covered (_onset_doubt)
+        self._rejected_fire: int | None = None  # the frame of the latest rejected fire since the last confirmed one
         #: the fires dropped since the last reset (they did not persist)
         self.rejected: list[StopEvent] = []
         self._chunks: list[NDArray[np.float64]] = []  # the latest samples, from absolute sample _chunks0 on
@@ -373,11 +383,13 @@ class ConfirmedStopDetector:
 
     def _fired(self, ev: StopEvent) -> list[StopEvent]:
         out: list[StopEvent] = []
+        fire = self._fire_frame(ev)
         if self._pending is not None:  # the inner released and fired again inside the window: no persistence
             self.rejected.append(self._pending[0])
-            self._last_reject = self._pending[1]
+            self._last_reject = self._rejected_fire = self._pending[1]
+            if self._covered(self._window(self._pending[1], fire - self._pending[1])[0]):
+                self._covered_at = self._pending[1]  # what broke it covered the stop: this fire may be the same stop
             self._pending = None
-        fire = self._fire_frame(ev)
         if self._rejected_at is not None and self._continues_from_rejection(fire):
             # the stop-like sound had not gone away since the rejected window: the stop may have begun inside
             # it, or before it; when, is not known
@@ -419,6 +431,9 @@ class ConfirmedStopDetector:
         self.rejected.append(ev)
         self.inner.unlatch()
         self._rejected_at = self._last_reject = last
+        self._rejected_fire = fire
+        if self._covered(self._window(fire, window)[0]):
+            self._covered_at = last
         return []
 
     def _keep_samples(self, x: NDArray[Any]) -> None:
@@ -464,6 +479,7 @@ class ConfirmedStopDetector:
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
         why = None if ev.onset_uncertain else self._onset_doubt(ev, fire, frames)
+        self._covered_at = self._rejected_fire = None
         if why is not None:
             self.onset_log.append((ev.detected_at_s, why))
             ev = replace(ev, onset_uncertain=True)
@@ -490,6 +506,17 @@ class ConfirmedStopDetector:
           there, and interference (a voice filling the sub-bands it empties) held its full
           verdict back.
         """
+        if self._covered_at is not None and self._covered_at - self._base >= 0:
+            between, _ = self._window(self._covered_at, fire - self._hold_frames - self._covered_at)
+            clean = (between < 0.0) & (between > self._covered_margin)
+            clean_frames = max(1, int(round(ONSET_CLEAN_S * self._sr / self._H)))
+            if between.size < clean_frames or self._longest_gap(~clean) < clean_frames:
+                return "a stop covered before"
+        st = self.inner._template
+        if self._rejected_fire is not None and st is not None:
+            lo_s = self._rejected_fire * self._H + self._F - 1
+            if any(lo_s < end <= fire * self._H + self._F - 1 for end in st.relearned):
+                return "a template learned anew since a rejected fire"
         m, _ = self._window(fire, frames)
         if m.size == 0:
             return None
@@ -501,9 +528,11 @@ class ConfirmedStopDetector:
         win = m[: self.window_frames] + 1.0
         late = win[win.size // 2 :]
         if late.size >= 2:
-            at_fire, _ = self._window(fire - self._hold_frames, self._hold_frames + 3)
-            stop_level = float(np.median(late))
-            if at_fire.size and stop_level > 0.0 and float(np.median(at_fire + 1.0)) < ONSET_FIRE_LEVEL * stop_level:
+            lo = max(fire + 1 - self._hold_frames - self._base, 0)
+            at_fire = np.asarray(self._margins[lo : max(fire + 4 - self._base, 0)], dtype=np.float64)
+            at_fire = at_fire[np.isfinite(at_fire)]  # a fire at the warm-up's end (listening began at the stop): none
+            weak = ONSET_FIRE_LEVEL * float(np.median(late))
+            if at_fire.size * 2 >= self._hold_frames and float(np.median(at_fire + 1.0)) < weak:
                 return "a fire weaker than the stop"
         # walk back from the fire over the stop-like run
         lo = self._base
@@ -527,6 +556,18 @@ class ConfirmedStopDetector:
         if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
             return "a stop heard late"
         return None
+
+    @property
+    def _covered_margin(self) -> float:
+        """The margin of a stop-likeness of :data:`ONSET_COVERED_A` (template tunings; -inf for a band tuning)."""
+        if not self._levels:
+            return -math.inf
+        return ONSET_COVERED_A / float(self.inner.tuning.threshold_db) - 1.0
+
+    def _covered(self, m: NDArray[np.float64]) -> bool:
+        """Were the frames of a rejected window that were not stop-like covered (see :data:`ONSET_COVERED_A`)?"""
+        low = m[m < 0.0]
+        return bool(low.size) and float(np.median(low)) <= self._covered_margin
 
     def _margin(self, i: int) -> float:
         """The margin of frame ``i`` (-1 where it is not kept or NaN)."""
