@@ -208,3 +208,20 @@ def test_no_unflagged_onset_error_beyond_25_ms_on_the_fifth_generator(
     assert at_once or not _silently_wrong(ev, stop_at), (
         ev, getattr(det, "onset_log", None), [e.onset_s for e in det.rejected],
     )  # fmt: skip
+
+
+@pytest.mark.parametrize("block", [128, 777, 4096, 65536])
+def test_the_onset_check_does_not_depend_on_the_block_size(block: int) -> None:
+    """The doubts of two pinned cases, fed in blocks of 128 to 65536 samples: the same events, the same reasons."""
+    y, _ = bs.render(bs.variant(bs.Scene("Q", 1000.0, 2.0, 3.0, seed=2), seed=826159, stop_at=1.4, dur=2.0,
+                                rate=981.7488086727872, drift=-0.1))  # fmt: skip
+    scene = _covered_scene(0.3019118609697671, -7.616563592313124)
+    for tu, x in ((_battery_tuning("Q", 2), y), (_arrival_tuning(2, "damped"), ar.render(scene))):
+        ref = ConfirmedStopDetector(StopDetector(tu))
+        want = ref.feed(x) + ref.finish()
+        det = ConfirmedStopDetector(StopDetector(tu))
+        got = [e for i in range(0, x.size, block) for e in det.feed(x[i : i + block])] + det.finish()
+        assert [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in got] == [
+            (e.onset_s, e.detected_at_s, e.onset_uncertain) for e in want
+        ]
+        assert det.onset_log == ref.onset_log and len(det.onset_log) == 1

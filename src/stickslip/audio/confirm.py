@@ -69,6 +69,16 @@ Two edges, and what happens:
   again) rather than count to a guess. Interference that runs straight into a real stop,
   without a pause of :data:`GAP_S`, cannot be told apart: the event then keeps the
   interference's onset (as without confirmation).
+
+**When did the confirmed stop begin? (round 8b)** A window that persisted says a stop is
+there, not that it began at the fire's onset. :meth:`ConfirmedStopDetector._onset_doubt`
+asks the same per-frame evidence, and flags the event ``onset_uncertain`` (a traverse
+refuses it) where the fire was not the stop's beginning: a gap after the fire as long as
+its hold, a fire under :data:`ONSET_FIRE_LEVEL` of the stop's stop-likeness, a stop-like
+run at the stop's level that began more than :data:`ONSET_TOL_S` before the onset (a stop
+heard late), or a stop heard again after a rejected fire whose window was covered
+(:data:`ONSET_COVERED_A`) or over which the template was learned anew. Measured in
+docs/audio.md ("When did the stop begin?"); ``onset_log`` says why, per flagged event.
 """
 
 from __future__ import annotations
@@ -132,9 +142,9 @@ ONSET_BACK_DIPS = 3
 #: ... a fire whose stop-likeness (over its hold) was under this share of the stop-likeness in the second half of the
 #: window was not the sound that persisted (a template lagging a drifting rate, a knock just before the stop)
 ONSET_FIRE_LEVEL = 1.0 / 3.0
-#: ... a rejected window whose frames that were not stop-like had a median stop-likeness at or below this (the opposite
-#: of a full stop: sound added where the stop lowers it) was *covered*, not back to stepping: the stop may have been
-#: there under it, and a stop confirmed later is uncertain until clean stepping is heard (ONSET_CLEAN_S)
+#: ... a rejected window whose frames that were not stop-like had a median stop-likeness at or below this (half the
+#: stop's signature the other way: sound added where the stop lowers it) was *covered*, not back to stepping (about 0):
+#: the stop may have been there under it, and a stop confirmed later is uncertain until clean stepping is heard
 ONSET_COVERED_A = -0.5
 #: ... clean stepping: this long a run of frames neither stop-like nor covered (stop-likeness above ONSET_COVERED_A), s
 ONSET_CLEAN_S = 0.15
@@ -241,6 +251,8 @@ class ConfirmedStopDetector:
         #: a run of this many frames that are not stop-like ends a stop
         self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
         self._lag = float(tu.onset_lag_s)
+        #: how far back from a fire the onset check looks, frames (always kept by _absorb, whatever the block size)
+        self._look = self.after_reject_frames + 4 * self._refire_frames - 2
         self._hold_frames = int(tu.hold_frames) + int(tu.max_dips)
         self._levels = tu.method == "template"  # margins + 1 are a / threshold (a band tuning's are dB)
         #: the band the step clock is judged on (Hz; empty: no step-clock check)
@@ -504,16 +516,28 @@ class ConfirmedStopDetector:
           :data:`ONSET_TOL_S` before the onset, at a stop-likeness of at least
           :data:`ONSET_BACK_LEVEL` of the window's (template tunings): the stop was
           there, and interference (a voice filling the sub-bands it empties) held its full
-          verdict back.
+          verdict back;
+        * *a stop covered before*: a fire was rejected since the last confirmed stop, its
+          window *covered* (:data:`ONSET_COVERED_A`), and no :data:`ONSET_CLEAN_S` of
+          clean stepping was heard between it and this fire: the rejected fire may have
+          been this stop (a hiss over it broke its persistence);
+        * *a template learned anew since a rejected fire* (the template fitted nothing for
+          an update period: ``TemplateState.relearned`` in :mod:`.template`): it may have
+          learned the stop, and the stop is then heard only when the interference over it
+          ends.
+
+        The evidence is looked at back to ``after_reject_frames + 4 x (hold + dips + 1)``
+        frames before the fire (about 2.1 s at 48 kHz), which :meth:`_absorb` always keeps:
+        the verdict does not depend on how the stream is cut into blocks.
         """
-        if self._covered_at is not None and self._covered_at - self._base >= 0:
+        if self._covered_at is not None and fire - self._covered_at <= self._look:
             between, _ = self._window(self._covered_at, fire - self._hold_frames - self._covered_at)
             clean = (between < 0.0) & (between > self._covered_margin)
             clean_frames = max(1, int(round(ONSET_CLEAN_S * self._sr / self._H)))
             if between.size < clean_frames or self._longest_gap(~clean) < clean_frames:
                 return "a stop covered before"
         st = self.inner._template
-        if self._rejected_fire is not None and st is not None:
+        if self._rejected_fire is not None and st is not None and fire - self._rejected_fire <= self._look:
             lo_s = self._rejected_fire * self._H + self._F - 1
             if any(lo_s < end <= fire * self._H + self._F - 1 for end in st.relearned):
                 return "a template learned anew since a rejected fire"
@@ -535,7 +559,7 @@ class ConfirmedStopDetector:
             if at_fire.size * 2 >= self._hold_frames and float(np.median(at_fire + 1.0)) < weak:
                 return "a fire weaker than the stop"
         # walk back from the fire over the stop-like run
-        lo = self._base
+        lo = max(self._base, fire - self._look)
         k = fire
         while k > lo:
             if self._margin(k - 1) >= 0.0:
