@@ -26,13 +26,16 @@ Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
 ``--long-only`` runs the false-alarm hour alone (confirmed events, the detector's
 unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for another hour);
 ``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed;
-``--step-clock`` confirms with the step clock too (line by line since round 7; off by default).
+``--step-clock`` confirms with the step clock too (line by line since round 7; off by default);
+``--onset`` counts the confirmed first event's onset, right / early / late / flagged / missed, over the
+battery's drifting clock and knocks, the fourth generator's arms and the fifth generator's draws (round 8b:
+an early or late onset without ``onset_uncertain`` is a silently wrong count).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -423,6 +426,116 @@ def true_stops_under_talk(seeds: int = 5, step_clock: bool = False) -> None:
             print(f"  joint {joint} {name:11s} " + ", ".join(f"{k} {v}" for k, v in c.items()))
 
 
+def onset_errors(draws: int = 60, clear_draws: int = 200) -> dict[str, dict[str, int]]:
+    """The confirmed first event's onset over many draws: right, early, late (unflagged), flagged, missed.
+
+    A traverse counts to the first event's ``onset_s``: early or late by more than
+    :data:`TOL_S` without ``onset_uncertain`` is a silently wrong count, ``onset_uncertain``
+    a refusal ("measure again"), no event a missed stop. Sets: the battery's clock drifting
+    +-10 % over 2 s with the stop at 1.4 s (``draws`` per joint) and knocks every
+    0.15-0.6 s (``draws`` / 3 per joint); the fourth generator's table (arms 2, 3, 5, four
+    stops, eight rooms); the fifth generator's random draws (``tests/arrival_sound.py``,
+    ``draws``: any burst around the stop) and ``clear_draws`` draws whose burst ends 0.05 s
+    before the stop or starts 0.05 s after it (the property test's domain). Returns the
+    counts per set.
+    """
+    import sys
+    from functools import cache
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    import arrival_sound as ar
+    import battery_sound as bs
+    import modal_sound as ms
+
+    @cache
+    def t_battery(joint: str) -> Tuning:
+        x, sr = bs.render(bs.Scene(joint, 1000.0, 2.0, 3.0, seed=1 if joint == "P" else 2))
+        return tune(x, sr, 2.0, seed=0)
+
+    @cache
+    def t_modal(js: int, kind: str) -> Tuning:
+        return tune(ms.render(ms.Scene(js, kind, stop_at=3.0, dur=4.5, seed=10)), 48_000, 3.0)
+
+    @cache
+    def t_arrival(seed: int, kind: str) -> Tuning | None:
+        try:
+            return tune(ar.render(ar.tuning_scene(ar.Arm(seed, kind))), 48_000, 2.0)
+        except ValueError:  # tune refuses the arm (its stop changes too little, or fires before its label)
+            return None
+
+    def drift() -> Iterator[tuple[Tuning | None, np.ndarray, float]]:
+        rng = np.random.default_rng(7)
+        for joint in ("P", "Q"):
+            for i in range(draws // 2):
+                rate, seed = float(rng.uniform(700, 1400)), int(rng.integers(1, 10**6))
+                base = bs.Scene(joint, 1000.0, 2.0, 3.0, seed=1)
+                scene = bs.variant(base, seed=seed, stop_at=1.4, dur=2.0, rate=rate, drift=0.1 if i % 2 else -0.1)
+                yield t_battery(joint), bs.render(scene)[0], 1.4
+
+    def knocks() -> Iterator[tuple[Tuning | None, np.ndarray, float]]:
+        rng = np.random.default_rng(8)
+        for joint in ("P", "Q"):
+            for _ in range(max(1, draws // 3)):
+                rate, seed, every = float(rng.uniform(800, 1300)), int(rng.integers(1, 10**6)), rng.uniform(0.15, 0.6)
+                yield (
+                    t_battery(joint),
+                    bs.render(bs.Scene(joint, rate, 2.0, 3.0, seed=seed, knocks_every_s=every))[0],
+                    2.0,
+                )
+
+    rooms: list[dict[str, object]] = [
+        {}, {"instrument": True}, {"voice_db": 0.0}, {"knocks": True}, {"door": True}, {"fan": True},
+        {"snr_db": 10.0}, {"rate": 1150.0},
+    ]  # fmt: skip
+
+    def modal() -> Iterator[tuple[Tuning | None, np.ndarray, float]]:
+        for js in (2, 3, 5):
+            for kind in ms.KINDS:
+                for i, kw in enumerate(rooms):
+                    seed = 90 + i
+                    stop = 2.0 + 0.25 * (seed % 7)
+                    x = ms.render(ms.Scene(js, kind, stop_at=stop, seed=seed, **kw))  # type: ignore[arg-type]
+                    yield t_modal(js, kind), x.astype(np.float32), stop
+
+    def arrival(n: int, seed0: int, clear: bool) -> Iterator[tuple[Tuning | None, np.ndarray, float]]:
+        rng = np.random.default_rng(seed0)
+        for _ in range(n):
+            s = ar.draw(rng)
+            arm = ar.Arm(int(rng.integers(1, 7)), s.arm.stop_kind)
+            before = bool(rng.integers(2))
+            start = (-0.05 - s.burst_s if before else 0.05) if clear else s.burst_from
+            s = ar.Scene(**{**s.__dict__, "arm": arm, "burst_from": start})
+            yield t_arrival(arm.seed, arm.stop_kind), ar.render(s), float(s.stop_at or 0.0)
+
+    sets = {
+        "battery, clock drifting +-10 %": drift(),
+        "battery, knocks": knocks(),
+        "fourth generator's table": modal(),
+        "fifth generator, any burst": arrival(draws, 11, False),
+        "fifth generator, burst clear of the stop": arrival(clear_draws, 100, True),
+    }
+    print(f"\nthe confirmed first event's onset (within {TOL_S * 1000:.0f} ms: right; early/late: unflagged)")
+    out: dict[str, dict[str, int]] = {}
+    for name, gen in sets.items():
+        c = dict.fromkeys(("right", "early", "late", "flagged", "missed", "refused by tune"), 0)
+        for tu, y, stop in gen:
+            if tu is None:
+                c["refused by tune"] += 1
+                continue
+            det = ConfirmedStopDetector(StopDetector(tu))
+            ev = det.feed(y) + det.finish()
+            err = ev[0].onset_s - stop if ev else 0.0
+            key = (
+                "missed" if not ev else "flagged" if ev[0].onset_uncertain
+                else "early" if err < -TOL_S else "late" if err > TOL_S else "right"
+            )  # fmt: skip
+            c[key] += 1
+        out[name] = c
+        print(f"  {name:42s} " + ", ".join(f"{k} {v}" for k, v in c.items() if v or k != "refused by tune"))
+    return out
+
+
 if __name__ == "__main__":
     import argparse
 
@@ -434,8 +547,11 @@ if __name__ == "__main__":
     ap.add_argument("--confirm-s", type=float, default=CONFIRM_S, help="confirmation window, s (0: unconfirmed)")
     ap.add_argument("--under-talk", action="store_true", help="run the true stops under talk alone")
     ap.add_argument("--step-clock", action="store_true", help="confirm with the step clock too (rounds 6-7, opt-in)")
+    ap.add_argument("--onset", action="store_true", help="count the confirmed first event's onset errors alone")
     args = ap.parse_args()
-    if args.under_talk:
+    if args.onset:
+        onset_errors()
+    elif args.under_talk:
         true_stops_under_talk(step_clock=args.step_clock)
     elif args.long_only:
         false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock)

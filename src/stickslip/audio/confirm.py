@@ -69,6 +69,16 @@ Two edges, and what happens:
   again) rather than count to a guess. Interference that runs straight into a real stop,
   without a pause of :data:`GAP_S`, cannot be told apart: the event then keeps the
   interference's onset (as without confirmation).
+
+**When did the confirmed stop begin? (round 8b)** A window that persisted says a stop is
+there, not that it began at the fire's onset. :meth:`ConfirmedStopDetector._onset_doubt`
+asks the same per-frame evidence, and flags the event ``onset_uncertain`` (a traverse
+refuses it) where the fire was not the stop's beginning: a gap after the fire as long as
+its hold, a fire under :data:`ONSET_FIRE_LEVEL` of the stop's stop-likeness, a stop-like
+run at the stop's level that began more than :data:`ONSET_TOL_S` before the onset (a stop
+heard late), or a stop heard again after a rejected fire whose window was covered
+(:data:`ONSET_COVERED_A`) or over which the template was learned anew. Measured in
+docs/audio.md ("When did the stop begin?"); ``onset_log`` says why, per flagged event.
 """
 
 from __future__ import annotations
@@ -93,6 +103,12 @@ __all__ = [
     "MIN_SYNC_SHARE",
     "MIN_SYNC_SHARPNESS",
     "MIN_SYNC_Z",
+    "ONSET_BACK_DIPS",
+    "ONSET_BACK_LEVEL",
+    "ONSET_CLEAN_S",
+    "ONSET_COVERED_A",
+    "ONSET_FIRE_LEVEL",
+    "ONSET_TOL_S",
     "RECENT_S",
     "ConfirmedStopDetector",
     "check_confirm_s",
@@ -115,6 +131,23 @@ MIN_HOT = 0.25
 RECENT_S = 2.0
 #: the window of such a fire, s (measured: docs/audio.md)
 AFTER_REJECT_S = 2.0
+#: the onset check (round 8b): an onset this far from where the evidence says the stop may have begun is wrong by more
+#: than a traverse tolerates, s
+ONSET_TOL_S = 0.025
+#: ... a stop-like run that ends in the fire but began more than ONSET_TOL_S before its onset, at a stop-likeness at
+#: least this share of the window's (the stop's), was the stop, heard late: interference hid its full verdict
+ONSET_BACK_LEVEL = 0.8
+#: ... dips of at most this many frames that are not stop-like do not end that run
+ONSET_BACK_DIPS = 3
+#: ... a fire whose stop-likeness (over its hold) was under this share of the stop-likeness in the second half of the
+#: window was not the sound that persisted (a template lagging a drifting rate, a knock just before the stop)
+ONSET_FIRE_LEVEL = 1.0 / 3.0
+#: ... a rejected window whose frames that were not stop-like had a median stop-likeness at or below this (half the
+#: stop's signature the other way: sound added where the stop lowers it) was *covered*, not back to stepping (about 0):
+#: the stop may have been there under it, and a stop confirmed later is uncertain until clean stepping is heard
+ONSET_COVERED_A = -0.5
+#: ... clean stepping: this long a run of frames neither stop-like nor covered (stop-likeness above ONSET_COVERED_A), s
+ONSET_CLEAN_S = 0.15
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 #: the step clock: the step clock's lines in the stepping band must have changed between the stepping before the
@@ -218,6 +251,10 @@ class ConfirmedStopDetector:
         #: a run of this many frames that are not stop-like ends a stop
         self.gap_frames = max(int(tu.hold_frames) + int(tu.max_dips), int(round(GAP_S * self._sr / self._H)))
         self._lag = float(tu.onset_lag_s)
+        #: how far back from a fire the onset check looks, frames (always kept by _absorb, whatever the block size)
+        self._look = self.after_reject_frames + 4 * self._refire_frames - 2
+        self._hold_frames = int(tu.hold_frames) + int(tu.max_dips)
+        self._levels = tu.method == "template"  # margins + 1 are a / threshold (a band tuning's are dB)
         #: the band the step clock is judged on (Hz; empty: no step-clock check)
         self.sync_bands: list[tuple[float, float]] = _stepping_band(tu) if step_clock else []
         self._span = int(round(SYNC_SPAN_S * self._sr))
@@ -239,6 +276,8 @@ class ConfirmedStopDetector:
         self._pending: tuple[StopEvent, int, int] | None = None  # the fire, its frame, its window (frames)
         self._last_reject: int | None = None
         self._rejected_at: int | None = None
+        self._covered_at: int | None = None  # the end of the latest rejected window that was covered (_onset_doubt)
+        self._rejected_fire: int | None = None  # the frame of the latest rejected fire since the last confirmed one
         #: the fires dropped since the last reset (they did not persist)
         self.rejected: list[StopEvent] = []
         self._chunks: list[NDArray[np.float64]] = []  # the latest samples, from absolute sample _chunks0 on
@@ -247,6 +286,8 @@ class ConfirmedStopDetector:
         self._ref: NDArray[np.float64] | None = None  # the stepping before the fire that began the current chain
         #: per fire the step clock was measured on: (its ``detected_at_s``, what was measured)
         self.step_clock_log: list[tuple[float, LineChange]] = []
+        #: per confirmed stop whose onset the evidence doubts: (its ``detected_at_s``, why; see :meth:`_onset_doubt`)
+        self.onset_log: list[tuple[float, str]] = []
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -314,7 +355,7 @@ class ConfirmedStopDetector:
         if not (self._persisted(*self._window(fire, heard)) and self._in_step(ev, fire, heard)):
             self.rejected.append(ev)
             return []
-        return [self._confirmed(ev, fire + heard, heard)]
+        return [self._confirmed(ev, fire, heard)]
 
     # --- internals ----------------------------------------------------------------------------
     def _frame_end_s(self, i: int) -> float:
@@ -354,11 +395,13 @@ class ConfirmedStopDetector:
 
     def _fired(self, ev: StopEvent) -> list[StopEvent]:
         out: list[StopEvent] = []
+        fire = self._fire_frame(ev)
         if self._pending is not None:  # the inner released and fired again inside the window: no persistence
             self.rejected.append(self._pending[0])
-            self._last_reject = self._pending[1]
+            self._last_reject = self._rejected_fire = self._pending[1]
+            if self._covered(self._window(self._pending[1], fire - self._pending[1])[0]):
+                self._covered_at = self._pending[1]  # what broke it covered the stop: this fire may be the same stop
             self._pending = None
-        fire = self._fire_frame(ev)
         if self._rejected_at is not None and self._continues_from_rejection(fire):
             # the stop-like sound had not gone away since the rejected window: the stop may have begun inside
             # it, or before it; when, is not known
@@ -398,10 +441,13 @@ class ConfirmedStopDetector:
         self._pending = None
         self.inner.hold(False)
         if self._persisted(*self._window(fire, window)) and self._in_step(ev, fire, window):
-            return [self._confirmed(ev, last, window)]
+            return [self._confirmed(ev, fire, window)]
         self.rejected.append(ev)
         self.inner.unlatch()
         self._rejected_at = self._last_reject = last
+        self._rejected_fire = fire
+        if self._covered(self._window(fire, window)[0]):
+            self._covered_at = last
         return []
 
     def _keep_samples(self, x: NDArray[Any]) -> None:
@@ -444,8 +490,118 @@ class ConfirmedStopDetector:
             return False
         return self._longest_gap(ok) < self.gap_frames
 
-    def _confirmed(self, ev: StopEvent, last: int, frames: int) -> StopEvent:
-        return replace(ev, confirmed_at_s=self._frame_end_s(last), confirmed_s=frames * self._H / self._sr)
+    def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
+        """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
+        why = None if ev.onset_uncertain else self._onset_doubt(ev, fire, frames)
+        self._covered_at = self._rejected_fire = None
+        if why is not None:
+            self.onset_log.append((ev.detected_at_s, why))
+            ev = replace(ev, onset_uncertain=True)
+        return replace(ev, confirmed_at_s=self._frame_end_s(fire + frames), confirmed_s=frames * self._H / self._sr)
+
+    def _onset_doubt(self, ev: StopEvent, fire: int, frames: int) -> str | None:
+        """Why the stop that persisted may not have begun at the fire's onset (None: nothing says so).
+
+        The window persisted: a stop is there. Whether it began at ``onset_s`` is a second
+        question, asked of the same per-frame evidence around the fire (round 8b,
+        docs/audio.md "When did the stop begin?"):
+
+        * *a gap after the fire*: in the first half of the window, the frames were not
+          stop-like for as long as the hold that fired (``hold_frames + max_dips``): the
+          sound that fired went away, and the stop that persisted may have begun after it
+          (a knock or a drift's false fire just before the stop);
+        * *a fire weaker than the stop*: the stop-likeness over the fire's hold was under
+          :data:`ONSET_FIRE_LEVEL` of that over the window's second half (template
+          tunings): what fired was not the sound that persisted;
+        * *a stop heard late*: the run of stop-like frames (dips of up to
+          :data:`ONSET_BACK_DIPS` frames) that ends in the fire began more than
+          :data:`ONSET_TOL_S` before the onset, at a stop-likeness of at least
+          :data:`ONSET_BACK_LEVEL` of the window's (template tunings): the stop was
+          there, and interference (a voice filling the sub-bands it empties) held its full
+          verdict back;
+        * *a stop covered before*: a fire was rejected since the last confirmed stop, its
+          window *covered* (:data:`ONSET_COVERED_A`), and no :data:`ONSET_CLEAN_S` of
+          clean stepping was heard between it and this fire: the rejected fire may have
+          been this stop (a hiss over it broke its persistence);
+        * *a template learned anew since a rejected fire* (the template fitted nothing for
+          an update period: ``TemplateState.relearned`` in :mod:`.template`): it may have
+          learned the stop, and the stop is then heard only when the interference over it
+          ends.
+
+        The evidence is looked at back to ``after_reject_frames + 4 x (hold + dips + 1)``
+        frames before the fire (about 2.1 s at 48 kHz), which :meth:`_absorb` always keeps:
+        the verdict does not depend on how the stream is cut into blocks.
+        """
+        if self._covered_at is not None and fire - self._covered_at <= self._look:
+            between, _ = self._window(self._covered_at, fire - self._hold_frames - self._covered_at)
+            clean = (between < 0.0) & (between > self._covered_margin)
+            clean_frames = max(1, int(round(ONSET_CLEAN_S * self._sr / self._H)))
+            if between.size < clean_frames or self._longest_gap(~clean) < clean_frames:
+                return "a stop covered before"
+        st = self.inner._template
+        if self._rejected_fire is not None and st is not None and fire - self._rejected_fire <= self._look:
+            lo_s = self._rejected_fire * self._H + self._F - 1
+            if any(lo_s < end <= fire * self._H + self._F - 1 for end in st.relearned):
+                return "a template learned anew since a rejected fire"
+        m, _ = self._window(fire, frames)
+        if m.size == 0:
+            return None
+        half = m[: max(1, min(m.size, self.window_frames // 2))]
+        if self._longest_gap(half >= 0.0) >= self._hold_frames:
+            return "a gap after the fire"
+        if not self._levels:
+            return None
+        win = m[: self.window_frames] + 1.0
+        late = win[win.size // 2 :]
+        if late.size >= 2:
+            lo = max(fire + 1 - self._hold_frames - self._base, 0)
+            at_fire = np.asarray(self._margins[lo : max(fire + 4 - self._base, 0)], dtype=np.float64)
+            at_fire = at_fire[np.isfinite(at_fire)]  # a fire at the warm-up's end (listening began at the stop): none
+            weak = ONSET_FIRE_LEVEL * float(np.median(late))
+            if at_fire.size * 2 >= self._hold_frames and float(np.median(at_fire + 1.0)) < weak:
+                return "a fire weaker than the stop"
+        # walk back from the fire over the stop-like run
+        lo = max(self._base, fire - self._look)
+        k = fire
+        while k > lo:
+            if self._margin(k - 1) >= 0.0:
+                k -= 1
+                continue
+            j = k - 1
+            while j >= lo and self._margin(j) < 0.0 and k - j <= ONSET_BACK_DIPS:
+                j -= 1
+            if j >= lo and self._margin(j) >= 0.0 and k - 1 - j <= ONSET_BACK_DIPS:
+                k = j
+                continue
+            break
+        began = self._frame_end_s(k) - self._lag
+        if ev.onset_s - began <= ONSET_TOL_S:
+            return None
+        on = max(k + 1, min(fire, int((ev.onset_s + self._lag - self._t0) * self._sr - self._F + 1) // self._H + 1))
+        before, _ = self._window(k - 1, on - k)
+        if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
+            return "a stop heard late"
+        return None
+
+    @property
+    def _covered_margin(self) -> float:
+        """The margin of a stop-likeness of :data:`ONSET_COVERED_A` (template tunings; -inf for a band tuning)."""
+        if not self._levels:
+            return -math.inf
+        return ONSET_COVERED_A / float(self.inner.tuning.threshold_db) - 1.0
+
+    def _covered(self, m: NDArray[np.float64]) -> bool:
+        """Were the frames of a rejected window that were not stop-like covered (see :data:`ONSET_COVERED_A`)?"""
+        low = m[m < 0.0]
+        return bool(low.size) and float(np.median(low)) <= self._covered_margin
+
+    def _margin(self, i: int) -> float:
+        """The margin of frame ``i`` (-1 where it is not kept or NaN)."""
+        j = i - self._base
+        if not 0 <= j < len(self._margins):
+            return -1.0
+        v = self._margins[j]
+        return v if math.isfinite(v) else -1.0
 
 
 def _stepping_band(tu: Tuning) -> list[tuple[float, float]]:

@@ -534,6 +534,8 @@ class TemplateState:
         self.floor: FloatArray | None = None
         self._check: tuple[int, int] | None = None  # (frame at which to check, the fire's end sample)
         self._uncertain_until = -1  # a fire ending before this sample follows a stale-template verdict closely
+        #: the stream samples (ends of the chunk) at which a template that fitted nothing was learned anew
+        self.relearned: list[int] = []
         self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
 
     def unlatch(self) -> None:
@@ -659,6 +661,8 @@ class TemplateState:
                 # floor starts anew; a rise in some sub-bands only is a sound added (a loud voice): the floor keeps
                 # the stepping's level, or the pause after the voice would look like a stop's drops
                 self._set_floor(reset=bool(np.min(self.template - old) > STALE_ALL_UP_DB))
+                self.relearned = [*self.relearned[-15:], end]  # for the confirming detector (confirm.py: a stop the
+                # template learned); the latest few are all it asks about
                 self._acc_n = 0
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._drop.reset()

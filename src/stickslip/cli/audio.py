@@ -295,7 +295,7 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
         f"level {ev.level_db:.2f} {unit}"
     )
     if ev.onset_uncertain:
-        line += "; onset uncertain (heard as a fire that did not persist was passed by: it began earlier)"
+        line += "; onset uncertain (when the stop began is not known: a traverse refuses it; measure again)"
     if ev.confirmed_s is not None:
         if ev.confirmed_s < confirm_s - 1e-9:
             line += f"; the recording ended {ev.confirmed_s:.3f} s after it fired (it persisted so far)"

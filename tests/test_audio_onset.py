@@ -1,0 +1,227 @@
+"""A confirmed stop is never counted at a wrong time without a flag (round 8b).
+
+A traverse counts its steps to the confirmed event's ``onset_s``; an event flagged
+``onset_uncertain`` is refused ("measure again"), which is safe. An onset early or late by
+more than 25 ms *without* the flag is a silently wrong count. The cases here were found
+on today's generators (the battery's drift and talk, the fourth generator's arms) and on a
+fifth one written for it (``arrival_sound``: the stop arrives over a few steps as the joint
+loads it, in a reverberant room, under a jittered clock whose rate wanders, with a burst of
+interference around the stop). Each pinned case counted silently wrong before
+:meth:`ConfirmedStopDetector._onset_doubt`; each is now flagged.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+import arrival_sound as ar
+import battery_sound as bs
+import modal_sound as ms
+from stickslip.audio.confirm import ConfirmedStopDetector
+from stickslip.audio.detector import StopDetector, StopEvent
+from stickslip.audio.tuning import tune
+from stickslip.audio.tuningfile import Tuning
+
+TOL_S = 0.025
+SR = 48_000
+
+
+def _first(tu: Tuning, y: np.ndarray) -> tuple[StopEvent | None, ConfirmedStopDetector]:
+    det = ConfirmedStopDetector(StopDetector(tu))
+    events = det.feed(np.asarray(y, dtype=np.float32)) + det.finish()
+    return (events[0] if events else None), det
+
+
+def _silently_wrong(ev: StopEvent | None, stop_at: float) -> bool:
+    return ev is not None and not ev.onset_uncertain and abs(ev.onset_s - stop_at) > TOL_S
+
+
+@cache
+def _battery_tuning(joint: str, seed: int) -> Tuning:
+    x, sr = bs.render(bs.Scene(joint, 1000.0, 2.0, 3.0, seed=seed))
+    return tune(x, sr, 2.0, seed=0)
+
+
+@cache
+def _modal_tuning(joint_seed: int, kind: str) -> Tuning:
+    return tune(ms.render(ms.Scene(joint_seed, kind, stop_at=3.0, dur=4.5, seed=10)), SR, 3.0)
+
+
+@cache
+def _arrival_tuning(seed: int, kind: str) -> Tuning:
+    return tune(ar.render(ar.tuning_scene(ar.Arm(seed, kind))), SR, 2.0)
+
+
+# (joint, rate, drift, seed, why it is flagged, what round 7b's code did); the step clock drifts 10 % over 2 s, the stop
+# at 1.4 s
+DRIFT = [
+    ("P", 834.6815007897175, -0.1, 969018, "a gap after the fire", "a false fire, a 93 ms gap, the stop: -127 ms"),
+    ("Q", 981.7488086727872, -0.1, 826159, "a fire weaker than the stop", "a weak false fire into the stop: -97 ms"),
+    ("P", 1135.5254606088138, -0.1, 341026, "a stop heard late", "stop-like from 0 s, hot 0.43 s later: +429 ms"),
+    ("Q", 867.6947732806664, 0.1, 440314, "a stop heard late", "at full level from 0 s, hot at +83 ms: +59 ms"),
+]
+
+
+@pytest.mark.parametrize(("joint", "rate", "drift", "seed", "why", "before"), DRIFT, ids=[d[5][:40] for d in DRIFT])
+def test_a_drifting_rate_into_the_stop_is_flagged_not_counted_wrong(
+    joint: str, rate: float, drift: float, seed: int, why: str, before: str
+) -> None:
+    scene = bs.Scene(joint, 1000.0, 2.0, 3.0, seed=1 if joint == "P" else 2)
+    y, _ = bs.render(bs.variant(scene, seed=seed, stop_at=1.4, dur=2.0, rate=rate, drift=drift))
+    ev, det = _first(_battery_tuning(joint, 1 if joint == "P" else 2), y)
+    assert ev is not None and ev.onset_uncertain, (before, ev)
+    assert det.onset_log == [(ev.detected_at_s, why)]
+
+
+def test_a_voice_over_arm_3s_louder_stop_that_held_it_back_is_flagged() -> None:
+    """The stop at its level from 0 s, a syllable hiding its drops: hot only at +86 ms; before, +41 ms unflagged."""
+    stop = 2.0 + 0.25 * (92 % 7)  # the modal table's "a voice from the first sample" room: seed 92
+    x = ms.render(ms.Scene(3, "louder", stop_at=stop, seed=92, voice_db=0.0))
+    ev, det = _first(_modal_tuning(3, "louder"), x)
+    assert ev is not None and ev.onset_uncertain and ev.onset_s - stop > TOL_S  # the onset itself is unchanged
+    assert [w for _, w in det.onset_log] == ["a stop heard late"]
+
+
+def test_knocks_just_before_arm_3s_spectral_stop_are_flagged() -> None:
+    """A knock fires 0.14 s before the stop, a 117 ms gap follows, then the stop persists: before, -139 ms unflagged."""
+    stop = 2.0 + 0.25 * (93 % 7)  # the modal table's "knocks" room: seed 93
+    x = ms.render(ms.Scene(3, "spectral", stop_at=stop, seed=93, knocks=True))
+    ev, det = _first(_modal_tuning(3, "spectral"), x)
+    assert ev is not None and ev.onset_uncertain and ev.onset_s < stop - TOL_S
+    assert [w for _, w in det.onset_log] == ["a gap after the fire"]
+
+
+@pytest.mark.parametrize(("joint", "seed"), [("P", 1), ("Q", 2)])
+def test_a_clean_stop_keeps_its_onset_unflagged(joint: str, seed: int) -> None:
+    """What must not be lost: a stop in a quiet room is counted, at its onset, without a flag."""
+    y, _ = bs.render(bs.Scene(joint, 1080.0, 2.0, 3.0, seed=40 + seed))
+    ev, det = _first(_battery_tuning(joint, seed), y)
+    assert ev is not None and not ev.onset_uncertain and abs(ev.onset_s - 2.0) <= TOL_S
+    assert det.onset_log == []
+
+
+@pytest.mark.parametrize(("joint", "seed"), [("P", 1), ("Q", 2)])
+def test_a_recording_that_starts_at_the_stop_is_not_flagged(joint: str, seed: int) -> None:
+    """Heard at once at the warm-up's end (no stop-likeness before it): the onset is the start, unflagged."""
+    y, _ = bs.render(bs.Scene(joint, 1080.0, 0.0, 1.0, seed=50 + seed))
+    ev, det = _first(_battery_tuning(joint, seed), y)
+    assert ev is not None and not ev.onset_uncertain and abs(ev.onset_s) <= TOL_S
+    assert det.onset_log == []
+
+
+# the arms the fifth generator's tuning accepts, with a stop that is heard (arms 1 and 4 with the shifted stop are
+# refused by tune; the shifted stop, every mode 4-12 % up, is missed in 63 of 100 draws; arm 4's stiff stop sits just
+# over the threshold, and frames before it that flicker over the threshold set its crossing up to 40 ms early:
+# docs/audio.md, "When did the stop begin?")
+ARMS = [(s, k) for s in (1, 2, 3, 5, 6) for k in ("stiff", "damped")]
+
+
+def _covered_scene(burst_s: float, burst_db: float, **kw: object) -> ar.Scene:
+    """Arm 2's damped stop, heard on time; 50 ms later a hiss covers it (a jet of air, a fricative)."""
+    base = {
+        "arm": ar.Arm(2, "damped"), "rate": 894.9291534446011, "stop_at": 1.9927504461722312, "dur": 3.5,
+        "arrive_steps": 4, "jitter": 0.023199629140428814, "wander": 0.0024900136293833607,
+        "t60_s": 0.37886893638161345, "reverb_db": -13.90276512229496, "snr_db": 26.56773393848928,
+        "burst": "hiss", "burst_from": 0.05, "burst_s": burst_s, "burst_db": burst_db, "seed": 849951,
+    }  # fmt: skip
+    return ar.Scene(**{**base, **kw})  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("scene", "why", "before"),
+    [
+        (
+            _covered_scene(0.3019118609697671, -7.616563592313124),
+            "a stop covered before",
+            "the stop again after the hiss: +359 ms",
+        ),
+        (
+            _covered_scene(
+                1.0,
+                0.0,
+                rate=800.0,
+                stop_at=2.0,
+                arrive_steps=1,
+                jitter=0.015625,
+                wander=0.0,
+                t60_s=0.25,
+                reverb_db=-6.0,
+                snr_db=35.0,
+                seed=1,
+            ),
+            "a template learned anew since a rejected fire",
+            "rejected, the template learned over the stop and the hiss, the stop after it: +1043 ms",
+        ),  # fmt: skip
+    ],
+    ids=["re-fired inside the window", "heard again after the window"],
+)
+def test_a_stop_covered_after_its_fire_is_flagged_when_heard_again(scene: ar.Scene, why: str, before: str) -> None:
+    """The fire on the stop is dropped (the hiss breaks its persistence); the stop heard again later is flagged."""
+    assert scene.stop_at is not None
+    ev, det = _first(_arrival_tuning(scene.arm.seed, scene.arm.stop_kind), ar.render(scene))
+    assert [round(e.onset_s - scene.stop_at, 2) for e in det.rejected] in ([0.01], [0.02])  # heard on time, dropped
+    assert ev is not None and ev.onset_uncertain and ev.onset_s - scene.stop_at > TOL_S, before
+    assert [w for _, w in det.onset_log] == [why]
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    arm=st.sampled_from(ARMS),
+    rate=st.floats(800.0, 1300.0),
+    stop_at=st.floats(1.5, 2.5),
+    arrive_steps=st.integers(1, 11),
+    jitter=st.floats(0.002, 0.03),
+    t60_s=st.floats(0.05, 0.3),
+    reverb_db=st.floats(-18.0, -9.0),
+    snr_db=st.floats(25.0, 40.0),
+    seed=st.integers(1, 10**6),
+)
+def test_no_unflagged_onset_error_beyond_25_ms_on_the_fifth_generator(
+    arm: tuple[int, str],
+    rate: float,
+    stop_at: float,
+    arrive_steps: int,
+    jitter: float,
+    t60_s: float,
+    reverb_db: float,
+    snr_db: float,
+    seed: int,
+) -> None:
+    """Any arm, rate, arrival over 1-11 steps, jittered clock, reverberant room: right, flagged, or heard at once.
+
+    Measured over 100 draws of this domain: 84 right, 14 flagged, 2 missed, none silently wrong
+    (``bench_audio.py --onset``). Outside it (a clock whose rate wanders, a burst of
+    interference around the stop) silent errors remain, counted there and in docs/audio.md
+    ("When did the stop begin?").
+    """
+    s = ar.Scene(
+        arm=ar.Arm(*arm), rate=rate, stop_at=stop_at, dur=3.5, arrive_steps=arrive_steps, jitter=jitter,
+        wander=0.0, t60_s=t60_s, reverb_db=reverb_db, snr_db=snr_db, burst="none", seed=seed,
+    )  # fmt: skip
+    ev, det = _first(_arrival_tuning(*arm), ar.render(s))
+    at_once = ev is not None and ev.onset_s < 0.02  # listening began at a stop: a traverse measures again
+    assert at_once or not _silently_wrong(ev, stop_at), (
+        ev, getattr(det, "onset_log", None), [e.onset_s for e in det.rejected],
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("block", [128, 777, 4096, 65536])
+def test_the_onset_check_does_not_depend_on_the_block_size(block: int) -> None:
+    """The doubts of two pinned cases, fed in blocks of 128 to 65536 samples: the same events, the same reasons."""
+    y, _ = bs.render(bs.variant(bs.Scene("Q", 1000.0, 2.0, 3.0, seed=2), seed=826159, stop_at=1.4, dur=2.0,
+                                rate=981.7488086727872, drift=-0.1))  # fmt: skip
+    scene = _covered_scene(0.3019118609697671, -7.616563592313124)
+    for tu, x in ((_battery_tuning("Q", 2), y), (_arrival_tuning(2, "damped"), ar.render(scene))):
+        ref = ConfirmedStopDetector(StopDetector(tu))
+        want = ref.feed(x) + ref.finish()
+        det = ConfirmedStopDetector(StopDetector(tu))
+        got = [e for i in range(0, x.size, block) for e in det.feed(x[i : i + block])] + det.finish()
+        assert [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in got] == [
+            (e.onset_s, e.detected_at_s, e.onset_uncertain) for e in want
+        ]
+        assert det.onset_log == ref.onset_log and len(det.onset_log) == 1
