@@ -121,6 +121,9 @@ def _pick(
     # frames end after the samples they hold: the crossing cannot come before the onset, nor later than a
     # frame after it (a negative lag means something in the recording rose before the stop did)
     lag = float(np.clip(lag, 0.0, frame / sample_rate))
+    # ... and a stop heard before its label (a stop that arrives over a few steps, the label at the last) was heard at
+    # once: a latency is not negative (it was, and the tuning file refused it: a traceback from tune)
+    lat = float(np.clip(lat, 0.0, 1.0))
     checks["warnings"] = warnings
     checks["stop_at_label_s"] = float(stop_at_s)
     checks["stop_at_sound_s"] = round(float(change), 4)
