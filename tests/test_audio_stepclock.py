@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.signal import butter, lfilter
 
@@ -187,6 +187,7 @@ def test_steady_stepping_never_changes_the_lines(rate: float, seed: int, joint: 
     rate=st.floats(800.0, 1300.0),
     seed=st.integers(0, 10_000),
 )
+@example(kind="brighter", rate=1000.0, seed=516)  # the rate heard at half: a chance line at 500 Hz (CI's fresh draw)
 def test_the_comb_sees_a_stop_in_any_direction(kind: str, rate: float, seed: int) -> None:
     """The stops of the battery's cross conditions (joint Q), which the level template misses when it was tuned on
     another kind: 0.24 s of the stop against the 0.48 s of stepping before it changes the lines by a deviate of 8 or

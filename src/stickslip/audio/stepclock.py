@@ -33,6 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "COMB_TOL",
     "FLANK",
+    "HALF_LINE_DB",
     "HARMONICS",
     "LINE_TOL",
     "LINE_Z",
@@ -66,6 +67,8 @@ HARMONICS = 3
 #: lines at a third or a half of the strongest one's frequency (and the next multiple) make that the step rate
 #: when each holds this much more power than the continuum would put there, dB
 SUB_LINE_DB = 8.0
+#: ... a line at half of it alone must hold this much more, dB
+HALF_LINE_DB = 15.0
 #: a sub-band is widened to at least this many step rates before its lines are counted (it must hold one)
 WIDEN = 2.0
 #: half-width of a harmonic line in the signal's spectrum, as a fraction of its frequency (at least 3 bins)
@@ -143,7 +146,7 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
     Each candidate bin is scored by the log power of its first three harmonics (a line
     at half the rate, or 1.5 times it, lacks some of them); a line at a third or half
     the winner that stands :data:`SUB_LINE_DB` above the continuum (a third: with the
-    line at two thirds) is taken instead
+    line at two thirds; a half: by :data:`HALF_LINE_DB`) is taken instead
     (an envelope can be stronger at two or three times the rate); the winner is refined
     by the power-weighted mean frequency over its line.
     NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
@@ -169,9 +172,12 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
     # there): clear lines at a third and two thirds, or a half and three halves, of the winner: the rate
     for div in (3, 2):
         sub = f[i] / div
-        # a third: its line and the one at two thirds both clear (chance does not do that); a half: its line
+        # a third: its line and the one at two thirds both clear (chance does not do that); a half: its line, by
+        # HALF_LINE_DB (one line cleared 8 dB by chance: a fresh hypothesis draw, joint Q's brighter stop at 1000 Hz,
+        # heard at 500 Hz; a true half stands 24-27 dB clear on the battery's joint P at 700-750 Hz)
         lines = (sub, 2 * sub) if div == 3 else (sub,)
-        if sub >= lo_hz and min(_prominence_db(f, p, c) for c in lines) >= SUB_LINE_DB:
+        need = SUB_LINE_DB if div == 3 else HALF_LINE_DB
+        if sub >= lo_hz and min(_prominence_db(f, p, c) for c in lines) >= need:
             j = int(np.argmin(np.abs(f - f[i] / div)))
             j0, j1 = max(j - 2, 0), min(j + 3, f.size)
             i = j0 + int(np.argmax(p[j0:j1]))
