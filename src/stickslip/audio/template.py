@@ -539,7 +539,8 @@ class TemplateState:
         self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
 
     def unlatch(self) -> None:
-        """Forget the latest fire (one that was not confirmed): listen again from the next frame, same template."""
+        """Re-arm: forget the latest fire and listen again from the next frame (a confirmation rejected it, or the
+        stop is over); the template is kept."""
         self.latched = False
         self.held = False
         self.below = 0
@@ -581,12 +582,7 @@ class TemplateState:
         """
         p = self.p
         rows = self.release.stepping_rows()
-        self.latched = False
-        self.below = 0
-        self.mask = 0
-        self.recent = []
-        self.release.reset()
-        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
+        self.unlatch()
         if len(rows) < p.release_frames // 2:
             return
         self.template = np.percentile(np.stack(rows), 100 * QUANTILE, axis=0)
@@ -832,12 +828,7 @@ class TemplateState:
         # the end's continuum, but enter the template learned from it and delay the crossing): its onset is uncertain
         self._uncertain_until = end + int(STALE_UNCERTAIN_S * sr)
         self._set_floor(reset=True)
-        self.latched = False
-        self.below = 0
-        self.release.reset()
-        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
-        self.mask = 0
-        self.recent = []
+        self.unlatch()
         self.prev_a = -math.inf
         self._acc_list, self._acc_n = [], 0
         self._drop.reset()
@@ -1040,11 +1031,7 @@ class TemplateState:
                 if ai < rel:
                     self.below += 1
                     if self.below >= p.release_frames:
-                        self.latched = False
-                        self.mask = 0
-                        self.recent = []
-                        self.release.reset()
-                        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
+                        self.unlatch()
                 else:
                     self.below = 0
                 if fired_here and self.latched:  # a frame after a fire in this piece (a piece that began latched
