@@ -520,7 +520,7 @@ class TemplateState:
         self._latched_frames = 0  # frames heard since the latest fire
         self.held = False  # set by a confirming wrapper while it judges the latest fire: no re-arming by itself
         self._min_latch = int(math.ceil(RELEASE_AFTER_S * self.p.sample_rate / self.p.hop))
-        self._stop_e: FloatArray | None = None  # the stop's own departure: their median
+        self._stop_e: FloatArray | None = None  # the stop's own departure (their median), weighted and scaled
         self.prev_a = -math.inf
         self.cross_t = math.nan
         self.last_a = 0.0
@@ -548,6 +548,13 @@ class TemplateState:
         self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
         self.mask = 0
         self.recent = []
+
+    def _latch(self) -> None:
+        """A stop fired (or listening began at it): latched, its release window and its own sound to learn anew."""
+        self.latched = True
+        self.below = 0
+        self.release.reset()
+        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
 
     def _release_scan(self, v: FloatArray) -> int | None:
         """While latched: push the frames ``v`` (levels, dB) into the release window; the index of the re-arming frame.
@@ -710,10 +717,7 @@ class TemplateState:
         shift = 1.0 if b_lev is None else b_lev
         self.template = self.template - shift * self.delta
         self._set_floor(reset=True)
-        self.latched = True
-        self.below = 0
-        self.release.reset()
-        self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
+        self._latch()
         self._pending.append(Decision(int(end), self.t0 + p.onset_lag_s, float(shift)))  # onset: the start
 
     def _stale_check(self, end: int) -> None:
@@ -997,15 +1001,14 @@ class TemplateState:
             self._stop_rows.append(d)
             if len(self._stop_rows) < STOP_ROWS:
                 return False
-            self._stop_e = np.median(np.stack(self._stop_rows), axis=0)
+            e = np.median(np.stack(self._stop_rows), axis=0)
             self._stop_rows = []
-        e = self._stop_e
-        w = self._fit.inv_sigma**2
-        ee = float((e * w) @ e)
-        if ee < 1.0:  # the stop departed by less than a spread in all: judge it by the tuned signature
-            e, ee = self.delta, float((self.delta * w) @ self.delta)
-        c = float((d * w) @ e) / max(ee, 1e-12)
-        return c < RELEASE_C and float(np.median(d)) > -RELEASE_SILENT_DB
+            w = self._fit.inv_sigma**2
+            if float((e * w) @ e) < 1.0:  # the stop departed by less than a spread in all: judge by the tuned signature
+                e = self.delta
+            # weighted, and scaled so that the projection of the stop's own departure is 1
+            self._stop_e = e * w / max(float((e * w) @ e), 1e-12)
+        return float(d @ self._stop_e) < RELEASE_C and float(np.median(d)) > -RELEASE_SILENT_DB
 
     def _decide(
         self,
@@ -1051,11 +1054,8 @@ class TemplateState:
                 self.mask = ((self.mask << 1) | int(hi)) & full
                 self.recent = (self.recent + [ai])[-window_n:]
                 if hi and self.mask.bit_count() >= p.hold_frames and ai >= p.decay_ratio * max(self.recent):
-                    self.latched = True
+                    self._latch()
                     fired_here = True
-                    self.below = 0
-                    self.release.reset()
-                    self._stop_rows, self._stop_e, self._latched_frames = [], None, 0
                     out.append(Decision(int(end), self.cross_t, float(ai), uncertain=end < self._uncertain_until))
                     if self._checks and self.samples is not None:
                         self._check = (self.frame_no + k + 1 + self._after_frames, int(end))
