@@ -68,7 +68,7 @@ HARMONICS = 3
 #: when each holds this much more power than the continuum would put there, dB
 SUB_LINE_DB = 8.0
 #: ... a line at half of it alone must hold this much more, dB
-HALF_LINE_DB = 15.0
+HALF_LINE_DB = 10.0
 #: a sub-band is widened to at least this many step rates before its lines are counted (it must hold one)
 WIDEN = 2.0
 #: half-width of a harmonic line in the signal's spectrum, as a fraction of its frequency (at least 3 bins)
@@ -174,7 +174,8 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
         sub = f[i] / div
         # a third: its line and the one at two thirds both clear (chance does not do that); a half: its line, by
         # HALF_LINE_DB (one line cleared 8 dB by chance: a fresh hypothesis draw, joint Q's brighter stop at 1000 Hz,
-        # heard at 500 Hz; a true half stands 24-27 dB clear on the battery's joint P at 700-750 Hz)
+        # heard at 500 Hz; a true half stands 24-27 dB clear on the battery's joint P at 700-750 Hz, but only
+        # 11.7-13.6 dB through the fourth generator's rough clock, arm 3 at 882 Hz: 15 dB lost it)
         lines = (sub, 2 * sub) if div == 3 else (sub,)
         need = SUB_LINE_DB if div == 3 else HALF_LINE_DB
         if sub >= lo_hz and min(_prominence_db(f, p, c) for c in lines) >= need:
