@@ -24,7 +24,8 @@ instrument and speech.
 
 Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
 ``--long-only`` runs the false-alarm hour alone (confirmed events, the detector's
-unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for another hour);
+unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for another hour;
+``--in-spec`` for step rates within the tuning's ±5 % warning, 950-1050 Hz, not 900-1260 Hz);
 ``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed;
 ``--step-clock`` confirms with the step clock too (line by line since round 7; off by default);
 ``--onset`` counts the confirmed first event's onset, right / early / late / flagged / missed, over the
@@ -43,6 +44,7 @@ import numpy as np
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector, confirming
 from stickslip.audio.detector import StopDetector, Tuning
 from stickslip.audio.tuning import tune, tune_band
+from stickslip.audio.tuningfile import STEP_RATE_TOLERANCE
 from stickslip.sim.sound import render_traverse_recording
 
 TOL_S = 0.025
@@ -306,11 +308,13 @@ def false_alarms_per_hour(
     seed0: int = 1000,
     confirm_s: float = CONFIRM_S,
     step_clock: bool = False,
+    in_spec: bool = False,
 ) -> dict[str, tuple[int, int]]:
     """One hour of stepping without a stop per joint of the battery's generator: false alarms per hour.
 
     The hour is cut into pieces of ``piece_s`` (each another seed from ``seed0`` on and a
-    step rate between 900 and 1260 Hz, cycling through :data:`LONG_CONDITIONS`); each
+    step rate between 900 and 1260 Hz, or with ``in_spec`` between 950 and 1050 Hz, within
+    the tuning's step-rate warning; cycling through :data:`LONG_CONDITIONS`); each
     piece is heard by a fresh detector from its first sample, so the warm-up is
     exercised too. The count is of *confirmed* events (what ``listen`` and a traverse
     report: the stop persisted for ``confirm_s``, :mod:`stickslip.audio.confirm`, an
@@ -328,7 +332,8 @@ def false_alarms_per_hour(
     n = int(round(hours * 3600 / piece_s))
     print(
         f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces, seeds from "
-        f"{seed0}): confirmed over {confirm_s:g} s{' with the step clock' if step_clock else ''} "
+        f"{seed0}, step rates {'950-1050' if in_spec else '900-1260'} Hz, tuned at 1000 Hz): confirmed over "
+        f"{confirm_s:g} s{' with the step clock' if step_clock else ''} "
         "(unconfirmed fires in brackets)"
     )
     totals: dict[str, tuple[int, int]] = {}
@@ -336,12 +341,13 @@ def false_alarms_per_hour(
         x, sr = render(Scene(joint, 1000.0, 2.0, 3.0, seed=1))
         tu = tune(x, sr, 2.0, seed=0)
         per: dict[str, list[float]] = {}
+        spec = {True: [0, 0], False: [0, 0]}  # pieces within / beyond the step-rate warning: [pieces, with a stop]
         t0 = time.perf_counter()
         for i in range(n):
             name, kw = LONG_CONDITIONS[i % len(LONG_CONDITIONS)]
             if str(kw.get("speech", "")).startswith("espeak") and espeak_speech(sr) is None:
                 continue
-            rate = 900.0 + 360.0 * ((i * 0.618) % 1.0)
+            rate = (950.0 + 100.0 * ((i * 0.618) % 1.0)) if in_spec else (900.0 + 360.0 * ((i * 0.618) % 1.0))
             y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
             per.setdefault(name, [0.0, 0.0, 0.0, 0.0])
             det = confirming(StopDetector(tu), confirm_s, step_clock)
@@ -350,6 +356,9 @@ def false_alarms_per_hour(
             per[name][1] += len(StopDetector(tu).feed(y))
             per[name][2] += piece_s
             per[name][3] += bool(confirmed)  # a traverse ends at its first event: the pieces a traverse fails in
+            near = tu.step_rate_problem(rate) is None  # within the tuning's step-rate warning (STEP_RATE_TOLERANCE)
+            spec[near][0] += 1
+            spec[near][1] += bool(confirmed)
         total = sum(v[0] for v in per.values())
         raw = sum(v[1] for v in per.values())
         heard = sum(v[2] for v in per.values())
@@ -359,6 +368,11 @@ def false_alarms_per_hour(
             f"  joint {joint}: {total:.0f} false alarms in {heard / 3600:.2f} h = {total / heard * 3600:.1f} per hour "
             f"(unconfirmed {raw:.0f} = {raw / heard * 3600:.1f} per hour; {time.perf_counter() - t0:.0f} s); "
             f"{pieces:.0f} of {n} pieces had one or more (a traverse stops at the first)"
+        )
+        print(
+            f"    pieces at a step rate within {100 * STEP_RATE_TOLERANCE:.0f} % of the tuning's: {spec[True][1]} of "
+            f"{spec[True][0]} had one or more; beyond it (traverse and listen warn): "
+            f"{spec[False][1]} of {spec[False][0]}"
         )
         for name, (fa, fa_raw, secs, hit) in per.items():
             print(
@@ -547,6 +561,7 @@ if __name__ == "__main__":
     ap.add_argument("--confirm-s", type=float, default=CONFIRM_S, help="confirmation window, s (0: unconfirmed)")
     ap.add_argument("--under-talk", action="store_true", help="run the true stops under talk alone")
     ap.add_argument("--step-clock", action="store_true", help="confirm with the step clock too (rounds 6-7, opt-in)")
+    ap.add_argument("--in-spec", action="store_true", help="step rates within the tuning's 5 %% warning (--long-only)")
     ap.add_argument("--onset", action="store_true", help="count the confirmed first event's onset errors alone")
     args = ap.parse_args()
     if args.onset:
@@ -554,6 +569,6 @@ if __name__ == "__main__":
     elif args.under_talk:
         true_stops_under_talk(step_clock=args.step_clock)
     elif args.long_only:
-        false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock)
+        false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock, args.in_spec)
     else:
         main()

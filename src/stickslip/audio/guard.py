@@ -13,7 +13,8 @@ Thresholds (samples are floats in [-1, 1], full scale 1):
 * constant: peak-to-peak below ``floor`` (a DC offset, however large);
 * clipping: more than half the samples at or beyond 0.999 of the block's peak: pinned at its
   rails, wherever they are (a float file may go past 1 without clipping; an analog stage may
-  clip below full scale);
+  clip below full scale); rails below :data:`QUIET_RAILS` (-60 dBFS) are silence in which
+  only the converter's last bits toggle (a 16-bit file's least step is 3e-5, -90 dBFS);
 * no stepping (when the commanded step rate ``step_hz`` is given): in every window of
   ``window_s`` for ``no_step_s`` without a break, the envelope of the sound (the
   first-differenced signal squared, so hum and thumps count little) shows no line at the
@@ -29,11 +30,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-__all__ = ["NoSignalError", "SignalGuard", "block_problem", "non_finite", "step_line_db"]
+__all__ = ["QUIET_RAILS", "NoSignalError", "SignalGuard", "block_problem", "non_finite", "step_line_db"]
 
 
 class NoSignalError(RuntimeError):
     """The audio input is dead (silence, a constant or clipping throughout)."""
+
+
+#: a signal pinned at rails below this (-60 dBFS) is silence with the converter's last bits toggling, not clipping
+QUIET_RAILS = 1e-3
 
 
 def block_problem(block: ArrayLike, floor: float = 1e-6) -> str | None:
@@ -49,7 +54,9 @@ def block_problem(block: ArrayLike, floor: float = 1e-6) -> str | None:
     if float(np.ptp(x)) < floor:
         return "a constant"
     if float(np.mean(np.abs(x) >= 0.999 * peak)) > 0.5:  # stuck at its rails, wherever they are (a float
-        return "clipping"  # file may go past 1 unclipped; an analog stage may clip below full scale)
+        # file may go past 1 unclipped; an analog stage may clip below full scale) - but rails this low are the
+        # converter's last bits toggling over silence (a 16-bit file's least step is 3e-5), not a clipped sound
+        return "silence: only the converter's last bits toggle" if peak < QUIET_RAILS else "clipping"
     return None
 
 

@@ -8,6 +8,7 @@ install when it is missing.
 
 from __future__ import annotations
 
+import math
 import queue
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,7 +18,18 @@ import numpy as np
 
 from ..records import atomic_write
 
-__all__ = ["AudioSourceError", "Microphone", "read_wav", "wav_blocks", "wav_info", "write_wav"]
+__all__ = [
+    "CANCEL_DB",
+    "DROWNED_DB",
+    "WEAK_LINE_DB",
+    "AudioSourceError",
+    "Microphone",
+    "channel_problem",
+    "read_wav",
+    "wav_blocks",
+    "wav_info",
+    "write_wav",
+]
 
 _AUDIO_EXTRA = "install the audio extra: pip install 'stickslip[audio]'"
 
@@ -55,11 +67,18 @@ def wav_info(path: str | Path) -> tuple[int, int, float]:
     return int(info.samplerate), int(info.channels), float(info.frames) / info.samplerate
 
 
-def wav_blocks(path: str | Path, block: int = 1024) -> Iterator[tuple[np.ndarray, int]]:
+def _check_channel(p: Path, channel: int | None, channels: int) -> None:
+    if channel is not None and not 0 <= int(channel) < channels:
+        have = "1 channel" if channels == 1 else f"{channels} channels (1 to {channels})"
+        raise AudioSourceError(f"{p} has {have}: there is no channel {int(channel) + 1}")
+
+
+def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) -> Iterator[tuple[np.ndarray, int]]:
     """Read an audio file in blocks: yields ``(mono float32 samples, sample rate Hz)``.
 
-    Multi-channel files are mixed down to mono (mean of the channels). The last block
-    may be shorter.
+    Multi-channel files are mixed down to mono (mean of the channels), or ``channel``
+    (0-based: 0 is the first, left) is read alone (see :func:`channel_problem` for when
+    the mean loses the stepping sound). The last block may be shorter.
     """
     if int(block) < 1:
         raise ValueError(f"block must be >= 1 sample, got {block}")
@@ -71,15 +90,95 @@ def wav_blocks(path: str | Path, block: int = 1024) -> Iterator[tuple[np.ndarray
         raise _open_error(p, e) from None
     with f:
         rate = int(f.samplerate)
+        _check_channel(p, channel, int(f.channels))
         for data in f.blocks(blocksize=int(block), dtype="float32", always_2d=True):
-            yield data.mean(axis=1, dtype=np.float32) if data.shape[1] > 1 else data[:, 0], rate
+            if channel is not None:
+                yield data[:, int(channel)].copy(), rate
+            else:
+                yield data.mean(axis=1, dtype=np.float32) if data.shape[1] > 1 else data[:, 0], rate
 
 
-def read_wav(path: str | Path) -> tuple[np.ndarray, int]:
-    """A whole audio file as ``(mono float32 samples, sample rate Hz)``."""
+def read_wav(path: str | Path, channel: int | None = None) -> tuple[np.ndarray, int]:
+    """A whole audio file as ``(mono float32 samples, sample rate Hz)`` (``channel``: see :func:`wav_blocks`)."""
     rate = wav_info(path)[0]
-    blocks = [b for b, _ in wav_blocks(path, block=1 << 16)]
+    blocks = [b for b, _ in wav_blocks(path, block=1 << 16, channel=channel)]
     return (np.concatenate(blocks) if blocks else np.zeros(0, np.float32)), rate
+
+
+#: the mean of a file's channels this far (dB) below its loudest channel: they cancel (opposite polarity)
+CANCEL_DB = -12.0
+#: a step-rate line this many dB clearer in one channel than in the mean ...
+DROWNED_DB = 6.0
+#: ... where the mean's stands less than this clear, dB: another channel drowns the stepping (two microphones a
+#: fraction of a millisecond apart comb-filter each other: the mean's line drops by 11 dB from 40, and is still clear)
+WEAK_LINE_DB = 15.0
+
+
+def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
+    """Why the mean of a multi-channel file's channels would lose the stepping sound, or ``None``.
+
+    Judged on the first ``seconds`` of the file, two ways:
+
+    * *cancellation*: the mean's RMS is :data:`CANCEL_DB` or more below the loudest
+      channel's: the channels carry the same sound in opposite polarity (a balanced
+      microphone wired to both inputs of a stereo card) and their mean is near silence;
+    * *drowned*: in some channel the step-rate line of the envelope
+      (:func:`~stickslip.audio.guard.step_line_db`, at the rate heard there:
+      :func:`~stickslip.audio.stepclock.step_rate_hz`) stands at least 8 dB clear, and
+      :data:`DROWNED_DB` or more clearer than in the mean, whose line stands less than
+      :data:`WEAK_LINE_DB` clear: another channel (an open input picking up hum or noise)
+      drowns it.
+
+    The message names the channel to read instead (1-based, as ``--channel`` takes it).
+    ``None`` for a mono file, a file too short to judge, or a mean that keeps the stepping.
+    """
+    from .guard import step_line_db
+    from .stepclock import step_rate_hz
+
+    sf = _soundfile()
+    p = Path(path)
+    try:
+        with sf.SoundFile(str(p)) as f:
+            rate, n = int(f.samplerate), int(f.channels)
+            if n < 2:
+                return None
+            data = f.read(frames=int(seconds * rate), dtype="float64", always_2d=True)
+    except Exception as e:
+        raise _open_error(p, e) from None
+    data = np.nan_to_num(data, nan=0.0, posinf=1.0, neginf=-1.0)
+    mix = data.mean(axis=1)
+    rms = np.sqrt(np.mean(data**2, axis=0)) if data.size else np.zeros(n)
+    # a noise floor 80 dB under each channel: a synthetic pure tone's envelope has no noise between its lines, and
+    # any bin there would stand "clear" of a median that is only rounding error
+    dither = 1e-4 * np.random.default_rng(0).standard_normal(data.shape)
+    data = data + dither * rms
+    mix = mix + dither[:, 0] * float(np.sqrt(np.mean(mix**2))) if mix.size else mix
+    loud = int(np.argmax(rms))
+    if rms[loud] <= 0.0:
+        return None
+    mix_db = 20.0 * np.log10(max(float(np.sqrt(np.mean(mix**2))), 1e-300) / float(rms[loud]))
+    if mix_db <= CANCEL_DB:
+        return (
+            f"{p}: the mean of its {n} channels is {max(mix_db, -200.0):.0f} dB below channel {loud + 1}: they carry "
+            f"the sound in opposite polarity and cancel; read one channel with --channel {loud + 1}"
+        )
+    lines = []
+    for c in range(n):
+        r = step_rate_hz(data[:, c], rate)
+        line = step_line_db(data[:, c], rate, r) if math.isfinite(r) else -math.inf
+        lines.append((line if math.isfinite(line) else -math.inf, r))
+    best = max(range(n), key=lambda c: lines[c][0])
+    line, r = lines[best]
+    if line < 8.0:
+        return None
+    in_mix = step_line_db(mix, rate, r)
+    if math.isfinite(in_mix) and in_mix < WEAK_LINE_DB and line - in_mix >= DROWNED_DB:
+        return (
+            f"{p}: the step rate's line ({r:.0f} Hz) stands {line:.0f} dB clear in channel {best + 1} but "
+            f"{in_mix:.0f} dB in the mean of the {n} channels: another channel drowns the stepping sound; read "
+            f"channel {best + 1} alone with --channel {best + 1}"
+        )
+    return None
 
 
 def write_wav(path: str | Path, samples: np.ndarray, sample_rate: int) -> Path:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -34,7 +35,34 @@ def _is_csv(path: Path) -> bool:
     return path.suffix.lower() in _CSV_SUFFIXES
 
 
-def _load_recording(path: Path, sample_rate: float | None) -> tuple[Any, int]:
+_CHANNEL_HELP = (
+    "Read this channel of a multi-channel audio file alone (1: the first, left). Default: the mean of the "
+    "channels, with a warning when that mean cancels (opposite polarity) or drowns the stepping sound."
+)
+
+
+def _channels(path: Path, channel: int | None) -> int | None:
+    """The 0-based channel to read from ``path`` (None: the mean); warns when the mean loses the stepping."""
+    from ..audio.sources import AudioSourceError, channel_problem
+
+    if channel is not None:
+        if _is_csv(path):
+            fail(f"--channel is for a multi-channel audio file; {path} is a CSV of samples")
+        if channel < 1:
+            fail(f"--channel counts from 1 (the first channel), got {channel}")
+        return channel - 1
+    if _is_csv(path):
+        return None
+    try:
+        why = channel_problem(path)
+    except AudioSourceError as e:
+        fail(str(e))
+    if why is not None:
+        err_console.print(f"warning: {why}", highlight=False, soft_wrap=True)
+    return None
+
+
+def _load_recording(path: Path, sample_rate: float | None, channel: int | None = None) -> tuple[Any, int]:
     """Samples and rate of a WAV (any audio file soundfile reads) or of a CSV of vibration samples."""
     from ..audio.sources import AudioSourceError, read_wav
     from ..audio.vibration import read_vibration
@@ -42,7 +70,7 @@ def _load_recording(path: Path, sample_rate: float | None) -> tuple[Any, int]:
     if sample_rate is not None and not _is_csv(path):
         fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
     try:
-        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path)
+        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path, _channels(path, channel))
     except AudioSourceError as e:
         fail(str(e))
 
@@ -76,6 +104,7 @@ def tune(
         help="Check the tuning on the recording with knocks, babble, +-20 dB gain and a second click train added.",
     ),
     sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
+    channel: int = typer.Option(None, "--channel", help=_CHANNEL_HELP, show_default=False),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
 ) -> None:
     """Tune the audio limit switch of one joint from a labelled recording.
@@ -99,7 +128,7 @@ def tune(
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
-    samples, rate = _load_recording(recording, sample_rate)
+    samples, rate = _load_recording(recording, sample_rate, channel)
     duration = samples.size / rate
     if not 0 < stop_at < duration:
         fail(f"--stop-at {stop_at:g} s is outside the recording (0..{duration:.3f} s)")
@@ -143,6 +172,7 @@ def listen(
         "(/dev/ttyACM0, COM3; an Arduino or DAQ bridge reading an accelerometer) until Ctrl-C.",
     ),
     sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
+    channel: int = typer.Option(None, "--channel", help=_CHANNEL_HELP, show_default=False),
     confirm_s: float | None = typer.Option(
         None,
         "--confirm-s",
@@ -200,6 +230,10 @@ def listen(
         fail(str(e))
     except OSError as e:
         fail(f"cannot read tuning {tuning_path}: {e.strerror or e}")
+    if channel is not None and recording is None:
+        fail("--channel reads one channel of a recording (a live input is read as one channel)")
+    if channel is not None and _is_csv(recording):
+        fail(f"--channel is for a multi-channel audio file; {recording} is a CSV of samples")
     if mic:
         _listen_live(tuning, device, json_out, confirm_s, step_clock)
         return
@@ -224,7 +258,7 @@ def listen(
     else:
         if sample_rate is not None:
             fail(f"--sample-rate is for a CSV of samples or --serial; {recording} carries its own rate")
-        blocks = wav_blocks(recording, block=1 << 16)
+        blocks = wav_blocks(recording, block=1 << 16, channel=_channels(recording, channel))
     events = []
     problems: set[str | None] = set()
     n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
@@ -267,11 +301,17 @@ def listen(
         from ..audio.stepclock import step_rate_hz
 
         first = np.nan_to_num(np.concatenate(opening))
-        why = tuning.step_rate_problem(step_rate_hz(first, heard_rate), f"{recording}: the joint steps")
+        dead = block_problem(first) is not None  # no rate to hear in silence (the warning below says so)
+        heard_hz = math.nan if dead else step_rate_hz(first, heard_rate)
+        why = tuning.step_rate_problem(heard_hz, f"{recording}: the joint steps")
         if why is not None:
             err_console.print(f"warning: {why}", highlight=False, soft_wrap=True)
     if problems and None not in problems:
-        err_console.print(f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})")
+        err_console.print(
+            f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})",
+            highlight=False,
+            soft_wrap=True,
+        )
     if n_bad:
         err_console.print(
             f"warning: {recording}: {n_bad} samples are not numbers (NaN or infinity), the first at "
