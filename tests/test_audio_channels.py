@@ -173,3 +173,15 @@ def test_two_microphones_of_the_same_polarity_are_never_warned_about(
     path = tmp_path / f"two_{seed}.wav"
     sf.write(path, np.stack([y, other], 1), sr, subtype="FLOAT")
     assert channel_problem(path) is None
+
+
+def test_a_few_damaged_samples_in_a_wide_file_are_damage_not_a_dead_input(files: Path) -> None:
+    """Eight channels of noise with 100 NaNs in one: the damage is reported, the input is not called dead."""
+    x = 0.01 * np.random.default_rng(0).standard_normal((48_000, 8))
+    x[100:200, 3] = np.nan
+    sf.write(files / "eight.wav", x, 48_000, subtype="FLOAT")
+    r = runner.invoke(app, ["listen", str(files / "eight.wav"), "--tuning", str(files / "t.json"), "--json"])
+    assert r.exit_code == 0 and json.loads(r.stdout) == [], r.output
+    assert "100 samples are not numbers" in r.stderr and "carries no signal" not in r.stderr, r.stderr
+    r = runner.invoke(app, ["listen", str(files / "eight.wav"), "--tuning", str(files / "t.json"), "--channel", "9"])
+    assert r.exit_code == 2 and "has 8 channels (1 to 8): there is no channel 9" in r.stderr, r.output

@@ -280,7 +280,7 @@ def listen(
                     det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock)
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
-            problems.add(block_problem(block))
+            problems.add(block_problem(np.nan_to_num(block) if bad else block))  # damage is reported apart
             events += det.feed(block)
     except AudioSourceError as err:
         fail(str(err))
