@@ -105,9 +105,12 @@ __all__ = [
     "MIN_SYNC_Z",
     "ONSET_BACK_DIPS",
     "ONSET_BACK_LEVEL",
+    "ONSET_BASE_GAP_S",
+    "ONSET_BASE_S",
     "ONSET_CLEAN_S",
     "ONSET_COVERED_A",
     "ONSET_FIRE_LEVEL",
+    "ONSET_RISE_SHARE",
     "ONSET_TOL_S",
     "RECENT_S",
     "ConfirmedStopDetector",
@@ -148,6 +151,14 @@ ONSET_FIRE_LEVEL = 1.0 / 3.0
 ONSET_COVERED_A = -0.5
 #: ... clean stepping: this long a run of frames neither stop-like nor covered (stop-likeness above ONSET_COVERED_A), s
 ONSET_CLEAN_S = 0.15
+#: ... a slow rise: the stop-likeness climbed from the stepping's level to the threshold over more than ONSET_TOL_S less
+#: a frame (the crossing then comes late, and the frame before the rise already held some of the stop): the stepping's
+#: level is its median over this long, s, ...
+ONSET_BASE_S = 0.2
+#: ... ending this long before the crossing, s
+ONSET_BASE_GAP_S = 0.05
+#: ... and the rise runs back over the frames at least this share of the way from the stepping's level to the stop's
+ONSET_RISE_SHARE = 0.25
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 #: the step clock: the step clock's lines in the stepping band must have changed between the stepping before the
@@ -288,6 +299,8 @@ class ConfirmedStopDetector:
         self.step_clock_log: list[tuple[float, LineChange]] = []
         #: per confirmed stop whose onset the evidence doubts: (its ``detected_at_s``, why; see :meth:`_onset_doubt`)
         self.onset_log: list[tuple[float, str]] = []
+        #: per confirmed stop whose rise was judged: (its ``detected_at_s``, the rise, s; NaN: not judged)
+        self.rise_log: list[tuple[float, float]] = []
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -575,13 +588,61 @@ class ConfirmedStopDetector:
                 continue
             break
         began = self._frame_end_s(k) - self._lag
-        if ev.onset_s - began <= ONSET_TOL_S:
-            return None
         on = max(k + 1, min(fire, int((ev.onset_s + self._lag - self._t0) * self._sr - self._F + 1) // self._H + 1))
-        before, _ = self._window(k - 1, on - k)
-        if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
-            return "a stop heard late"
+        if ev.onset_s - began > ONSET_TOL_S:
+            before, _ = self._window(k - 1, on - k)
+            if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
+                return "a stop heard late"
+        rise = self._rise_s(ev, fire, float(np.median(late)) if late.size else math.nan)
+        self.rise_log.append((ev.detected_at_s, rise))
+        if rise > ONSET_TOL_S - self._F / self._sr:
+            return f"a slow rise ({1e3 * rise:.0f} ms from the stepping's level to the threshold)"
         return None
+
+    def _rise_s(self, ev: StopEvent, fire: int, stop_level: float) -> float:
+        """How long the stop-likeness took to climb from the stepping's level to the threshold at the onset, s.
+
+        The crossing that set ``onset_s`` is in frame ``c``; the stepping's level is the
+        median stop-likeness (in thresholds) over :data:`ONSET_BASE_S` ending
+        :data:`ONSET_BASE_GAP_S` before it, the stop's ``stop_level``. Walking back from
+        ``c`` over frames at or above :data:`ONSET_RISE_SHARE` of the way from the one to
+        the other (dips of up to :data:`ONSET_BACK_DIPS` frames below it do not end the
+        walk), the rise began at the first frame of the run; the time from the end of the
+        frame before it to the crossing (``onset_s`` + the tuning's lag). NaN where the
+        levels are not known (no stepping heard before the onset, a band tuning).
+        """
+        if not (self._levels and math.isfinite(stop_level)):
+            return math.nan
+        cross = ev.onset_s + self._lag
+        c = int(math.floor(((cross - self._t0) * self._sr - self._F + 1) / self._H)) + 1  # first frame ending after it
+        c = min(c, fire)
+        base_n = max(1, int(round(ONSET_BASE_S * self._sr / self._H)))
+        gap_n = int(round(ONSET_BASE_GAP_S * self._sr / self._H))
+        lo_b = c - gap_n - base_n
+        if lo_b < max(fire - self._look, self._base):  # only what _absorb always keeps: no dependence on block sizes
+            return math.nan
+        base = np.asarray(self._margins[lo_b - self._base : c - gap_n - self._base], dtype=np.float64)
+        base = base[np.isfinite(base)]
+        if base.size * 2 < base_n:
+            return math.nan  # listening began about now: no stepping to rise from
+        b0 = float(np.median(base + 1.0))
+        if not stop_level > b0:
+            return math.nan
+        level = b0 + ONSET_RISE_SHARE * (stop_level - b0) - 1.0  # as a margin
+        lo = lo_b
+        k = c
+        while k > lo:
+            if self._margin(k - 1) >= level:
+                k -= 1
+                continue
+            j = k - 1
+            while j >= lo and self._margin(j) < level and k - j <= ONSET_BACK_DIPS:
+                j -= 1
+            if j >= lo and self._margin(j) >= level and k - 1 - j <= ONSET_BACK_DIPS:
+                k = j
+                continue
+            break
+        return max(0.0, cross - self._frame_end_s(k - 1))
 
     @property
     def _covered_margin(self) -> float:
