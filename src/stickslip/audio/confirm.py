@@ -79,6 +79,15 @@ run at the stop's level that began more than :data:`ONSET_TOL_S` before the onse
 heard late), or a stop heard again after a rejected fire whose window was covered
 (:data:`ONSET_COVERED_A`) or over which the template was learned anew. Measured in
 docs/audio.md ("When did the stop begin?"); ``onset_log`` says why, per flagged event.
+
+**The climb to the onset (round 9a).** :meth:`ConfirmedStopDetector._rise` follows the
+stop-likeness back from the crossing that set the onset to where it left the stepping's
+level: a climb slower than :data:`ONSET_SLOW_S` (a reverberant room, a stop that barely
+clears the threshold) is flagged; over a stepping near the threshold (a rate far from the
+tuning's) a first crossing more than :data:`ONSET_TOL_S` before the onset is flagged; and
+over clean stepping, where the stop was hot and held but the hold began again (its drops
+flickered as the room's tail decayed), the onset is taken back to that first hot frame
+(``retime_log``). ``detected_at_s`` stays the fire's.
 """
 
 from __future__ import annotations
