@@ -685,10 +685,6 @@ class ConfirmedStopDetector:
                 continue
             break
         f0 = next((i for i in range(k, c + 1) if self._margin(i) >= 0.0), c)
-        climb = self._frame_end_s(f0) - self._frame_end_s(k - 1)
-        self.rise_log.append((ev.detected_at_s, climb))
-        if climb > ONSET_SLOW_S:
-            return f"a slow rise ({1e3 * climb:.0f} ms from the stepping's level to the threshold)"
         if b0 > ONSET_QUIET:
             # a stepping near the threshold (the step rate far from the tuning's, a template gone stale) crosses it by
             # chance: only where the first crossing of the climb says the onset came late is it a doubt
@@ -705,14 +701,18 @@ class ConfirmedStopDetector:
             ),
             c,
         )
-        if f1 >= c:
-            return None
-        onset = self._crossing_s(f1)
-        if onset >= ev.onset_s:
-            return None
+        onset = self._crossing_s(f1) if f1 < c else ev.onset_s
         if ev.onset_s - onset > ONSET_BACK_MAX_S:
             return "a stop heard late"
-        self._retimed = onset
+        # the climb: from the end of the frame before it to its first frame over the threshold, or to the crossing the
+        # onset is taken from, whichever is later (a stop that barely clears the threshold crosses it late, or early and
+        # again later)
+        climb = max(self._frame_end_s(f0), min(onset, ev.onset_s) + self._lag) - self._frame_end_s(k - 1)
+        self.rise_log.append((ev.detected_at_s, climb))
+        if climb > ONSET_SLOW_S:
+            return f"a slow rise ({1e3 * climb:.0f} ms from the stepping's level to the threshold)"
+        if onset < ev.onset_s:
+            self._retimed = onset
         return None
 
     def _crossing_s(self, f: int) -> float:
