@@ -636,10 +636,6 @@ class ConfirmedStopDetector:
         the other (dips of up to :data:`ONSET_BACK_DIPS` frames do not end the walk), the
         climb began at frame ``k``; it first reached the threshold at frame ``f0``.
 
-        * *a slow rise*: from the end of the frame before ``k`` to the end of ``f0`` took
-          more than :data:`ONSET_SLOW_S` (a reverberant room's tail filling
-          the sub-bands the stop empties, a stop that barely clears the threshold): the
-          crossing comes late by an unknown share of the climb;
         * *a stepping near the threshold*: ``b0`` over :data:`ONSET_QUIET` thresholds (the
           step rate far from the tuning's, a template gone stale: the stepping crosses the
           threshold by chance), and the crossing at ``f0`` more than :data:`ONSET_TOL_S`
@@ -649,7 +645,13 @@ class ConfirmedStopDetector:
           running), is before ``c`` (the stop was hot, then wavered, or its drops showed
           only in flickers, and the hold began again): the onset is the crossing at
           ``f1``, if that is no more than :data:`ONSET_BACK_MAX_S` back (else *a stop
-          heard late*).
+          heard late*);
+        * *a slow rise* (clean stepping): from the end of the frame before ``k`` to the end
+          of ``f0``, or to the crossing the onset is then taken from, whichever is later,
+          took more than :data:`ONSET_SLOW_S` (a reverberant room's tail filling the
+          sub-bands the stop empties, a stop that barely clears the threshold, a slow
+          arrival): the crossing comes late by an unknown share of the climb. The climb is
+          kept in :attr:`rise_log`.
 
         Nothing is judged (None) where the levels are not known: no stepping heard before
         the onset, or a stop no higher than the stepping.
