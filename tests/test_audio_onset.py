@@ -256,8 +256,9 @@ def test_no_room_and_rate_of_the_domain_counts_silently_wrong(
 ) -> None:
     """Fresh draws of the fifth generator (any arm, arrival, clock) over the room's whole range, the strongest
     reverberation included, at rates within the warning (5 %): on time, flagged, heard at once or missed; never
-    silently wrong. (Beyond the warning it is not so: 3 of 1000 throwaway draws at 800-1200 Hz, docs/audio.md.) (Heard at once, round 9a's seed 3: arm 6's damped stop at 1049 Hz in the strongest room was judged
-    to be there from the start, ``template._started_at_stop``, 1.9 s before it: as in the fixed sample above.)
+    silently wrong. Beyond the warning it is not so: 4 of 1000 throwaway draws at 800-1200 Hz (docs/audio.md).
+    Heard at once (round 9a's seed 3): arm 6's damped stop at 1049 Hz in the strongest room was judged to be there
+    from the start (``template._started_at_stop``), 1.9 s before it, as in the fixed sample above.
     """
     arm, s = _draw(np.random.default_rng(seed))
     s = ar.Scene(**{**s.__dict__, "t60_s": t60_s, "reverb_db": reverb_db, "rate": rate})
