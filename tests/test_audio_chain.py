@@ -105,31 +105,22 @@ def test_a_near_microphone_through_its_chain_hears_every_stop_once_and_on_time(a
     assert all(g.lstrip("+-").isdigit() and abs(int(g)) <= 1e3 * TOL_S for g in got), got
 
 
-FAR_LATE = (
-    "a duller stop mostly lowers sound: its drops come only as the room's tail of the stepping decays, so the "
-    "stop-likeness climbs over tens of ms with no earlier stop-like run to show the onset was missed (+28 to +41 ms); "
-    "battery Q's late onset (+40 ms) is flagged since round 8b's 'stop heard late' check"
-)
-
-
-@pytest.mark.parametrize(
-    "arm",
-    [
-        pytest.param(a, marks=pytest.mark.xfail(strict=True, reason=FAR_LATE)) if a == "modal 2 duller" else a
-        for a in ARMS
-    ],
-)
+@pytest.mark.parametrize("arm", ARMS)
 def test_a_far_microphone_is_never_silently_wrong(arm: str) -> None:
     """At +3 dB of direct sound the stop's drops come tens of ms after its rise (the room's tail).
 
     A first event must then be on time or flagged; a late, unflagged onset is a count too
-    high with nothing to show it.
+    high with nothing to show it. Arm 2's duller stop: +28 to +41 ms unflagged until round 9a;
+    now two taken back to the first hot frame of the stop-likeness's climb (+18 ms, +18 ms) and
+    one flagged (a slow rise: 21 ms from the stepping's level to the threshold). Battery Q's
+    late onset (+40 ms) is flagged since round 8b (a stop heard late).
     """
     try:
         got = _first_events(arm, "far")
     except TuningError as e:  # a clear refusal is an honest answer
         pytest.skip(f"tune refused: {e}")
-    wrong = [g for g in got if g not in ("U", "miss") and not (g.lstrip("+-").isdigit() and abs(int(g)) <= 25)]
+    onsets = [g.split()[0] for g in got]  # the onset error; "(heard +n)" after it is the latency, judged elsewhere
+    wrong = [g for g in onsets if g not in ("U", "miss") and not (g.lstrip("+-").isdigit() and abs(int(g)) <= 25)]
     assert not wrong, got
 
 

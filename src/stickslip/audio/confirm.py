@@ -79,6 +79,15 @@ run at the stop's level that began more than :data:`ONSET_TOL_S` before the onse
 heard late), or a stop heard again after a rejected fire whose window was covered
 (:data:`ONSET_COVERED_A`) or over which the template was learned anew. Measured in
 docs/audio.md ("When did the stop begin?"); ``onset_log`` says why, per flagged event.
+
+**The climb to the onset (round 9a).** :meth:`ConfirmedStopDetector._rise` follows the
+stop-likeness back from the crossing that set the onset to where it left the stepping's
+level: a climb slower than :data:`ONSET_SLOW_S` (a reverberant room, a stop that barely
+clears the threshold) is flagged; over a stepping near the threshold (a rate far from the
+tuning's) a first crossing more than :data:`ONSET_TOL_S` before the onset is flagged; and
+over clean stepping, where the stop was hot and held but the hold began again (its drops
+flickered as the room's tail decayed), the onset is taken back to that first hot frame
+(``retime_log``). ``detected_at_s`` stays the fire's.
 """
 
 from __future__ import annotations
@@ -105,9 +114,16 @@ __all__ = [
     "MIN_SYNC_Z",
     "ONSET_BACK_DIPS",
     "ONSET_BACK_LEVEL",
+    "ONSET_BACK_MAX_S",
+    "ONSET_BASE_GAP_S",
+    "ONSET_BASE_S",
     "ONSET_CLEAN_S",
     "ONSET_COVERED_A",
     "ONSET_FIRE_LEVEL",
+    "ONSET_HELD_DIPS",
+    "ONSET_QUIET",
+    "ONSET_RISE_SHARE",
+    "ONSET_SLOW_S",
     "ONSET_TOL_S",
     "RECENT_S",
     "ConfirmedStopDetector",
@@ -148,6 +164,24 @@ ONSET_FIRE_LEVEL = 1.0 / 3.0
 ONSET_COVERED_A = -0.5
 #: ... clean stepping: this long a run of frames neither stop-like nor covered (stop-likeness above ONSET_COVERED_A), s
 ONSET_CLEAN_S = 0.15
+#: ... a slow rise: the stop-likeness climbed from the stepping's level to the threshold over more than this, s (the
+#: crossing then comes late by most of the climb: arm 2's duller stop at the far microphone, a climb of 24 ms, +28 ms;
+#: right stops climb over up to 19 ms in the fifth generator's rooms): the stepping's level is its median over this
+#: long, s, ...
+ONSET_BASE_S = 0.2
+#: ... the climb that is slow, s
+ONSET_SLOW_S = 0.02
+#: ... ending this long before the crossing, s
+ONSET_BASE_GAP_S = 0.05
+#: ... and the rise runs back over the frames at least this share of the way from the stepping's level to the stop's
+ONSET_RISE_SHARE = 0.25
+#: ... an onset is taken back to the climb's first crossing only where the stepping's level was at most this many
+#: thresholds (the detector's own "quiet": a stepping near the threshold crosses it by chance)
+ONSET_QUIET = 0.3
+#: ... and by no more than this, s (further back, the stop-like run is no longer the stop's climb: flagged)
+ONSET_BACK_MAX_S = 0.1
+#: ... to a hot frame after which the climb held: no run of more than this many frames under its level
+ONSET_HELD_DIPS = 1
 #: longest window accepted, s (a traverse steps this long into the stop)
 MAX_CONFIRM_S = 5.0
 #: the step clock: the step clock's lines in the stepping band must have changed between the stepping before the
@@ -288,6 +322,12 @@ class ConfirmedStopDetector:
         self.step_clock_log: list[tuple[float, LineChange]] = []
         #: per confirmed stop whose onset the evidence doubts: (its ``detected_at_s``, why; see :meth:`_onset_doubt`)
         self.onset_log: list[tuple[float, str]] = []
+        #: per confirmed stop whose rise was judged: (its ``detected_at_s``, the climb, s; see :meth:`_rise`)
+        self.rise_log: list[tuple[float, float]] = []
+        #: per confirmed stop whose onset was taken back to its first crossing: (``detected_at_s``, the fire's onset,
+        #: the onset emitted), s (see :meth:`_rise`)
+        self.retime_log: list[tuple[float, float, float]] = []
+        self._retimed: float | None = None  # the onset _onset_doubt took back, for _confirmed
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -492,8 +532,12 @@ class ConfirmedStopDetector:
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
+        self._retimed = None
         why = None if ev.onset_uncertain else self._onset_doubt(ev, fire, frames)
         self._covered_at = self._rejected_fire = None
+        if why is None and self._retimed is not None:
+            self.retime_log.append((ev.detected_at_s, ev.onset_s, self._retimed))
+            ev = replace(ev, onset_s=self._retimed)
         if why is not None:
             self.onset_log.append((ev.detected_at_s, why))
             ev = replace(ev, onset_uncertain=True)
@@ -575,13 +619,109 @@ class ConfirmedStopDetector:
                 continue
             break
         began = self._frame_end_s(k) - self._lag
-        if ev.onset_s - began <= ONSET_TOL_S:
-            return None
         on = max(k + 1, min(fire, int((ev.onset_s + self._lag - self._t0) * self._sr - self._F + 1) // self._H + 1))
-        before, _ = self._window(k - 1, on - k)
-        if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
+        if ev.onset_s - began > ONSET_TOL_S:
+            before, _ = self._window(k - 1, on - k)
+            if before.size and float(np.median(before + 1.0)) >= ONSET_BACK_LEVEL * float(np.median(win)):
+                return "a stop heard late"
+        return self._rise(ev, fire, float(np.median(late)) if late.size else math.nan)
+
+    def _rise(self, ev: StopEvent, fire: int, stop_level: float) -> str | None:
+        """The stop-likeness's climb to the onset (round 9a): a doubt, or the onset taken back (:attr:`_retimed`).
+
+        The crossing that set ``onset_s`` is in frame ``c``. The stepping's level ``b0`` is
+        the median stop-likeness (in thresholds) over :data:`ONSET_BASE_S` ending
+        :data:`ONSET_BASE_GAP_S` before it, the stop's ``stop_level``. Walking back from
+        ``c`` over the frames at least :data:`ONSET_RISE_SHARE` of the way from the one to
+        the other (dips of up to :data:`ONSET_BACK_DIPS` frames do not end the walk), the
+        climb began at frame ``k``; it first reached the threshold at frame ``f0``.
+
+        * *a stepping near the threshold*: ``b0`` over :data:`ONSET_QUIET` thresholds (the
+          step rate far from the tuning's, a template gone stale: the stepping crosses the
+          threshold by chance), and the crossing at ``f0`` more than :data:`ONSET_TOL_S`
+          before the onset;
+        * *taken back* (a clean stepping): ``f1``, the first hot frame after which the
+          climb held (never under its level for more than :data:`ONSET_HELD_DIPS` frames
+          running), is before ``c`` (the stop was hot, then wavered, or its drops showed
+          only in flickers, and the hold began again): the onset is the crossing at
+          ``f1``, if that is no more than :data:`ONSET_BACK_MAX_S` back (else *a stop
+          heard late*);
+        * *a slow rise* (clean stepping): from the end of the frame before ``k`` to the end
+          of ``f0``, or to the crossing the onset is then taken from, whichever is later,
+          took more than :data:`ONSET_SLOW_S` (a reverberant room's tail filling the
+          sub-bands the stop empties, a stop that barely clears the threshold, a slow
+          arrival): the crossing comes late by an unknown share of the climb. The climb is
+          kept in :attr:`rise_log`.
+
+        Nothing is judged (None) where the levels are not known: no stepping heard before
+        the onset, or a stop no higher than the stepping.
+        """
+        if not math.isfinite(stop_level):
+            return None
+        cross = ev.onset_s + self._lag
+        c = int(math.floor(((cross - self._t0) * self._sr - self._F + 1) / self._H)) + 1  # first frame ending after it
+        c = min(c, fire)
+        base_n = max(1, int(round(ONSET_BASE_S * self._sr / self._H)))
+        lo = c - int(round(ONSET_BASE_GAP_S * self._sr / self._H)) - base_n
+        if lo < max(fire - self._look, self._base):  # only what _absorb always keeps: no dependence on block sizes
+            return None
+        base = np.asarray(self._margins[lo - self._base : lo + base_n - self._base], dtype=np.float64)
+        base = base[np.isfinite(base)]
+        if base.size * 2 < base_n:
+            return None  # listening began about now: no stepping to rise from
+        b0 = float(np.median(base + 1.0))
+        if not stop_level > b0:
+            return None
+        # as a margin; a stepping under the template (a below 0) is no lower a start: its frames would all continue it
+        level = max(b0, 0.0) + ONSET_RISE_SHARE * (stop_level - max(b0, 0.0)) - 1.0
+        k = c
+        while k > lo:
+            if self._margin(k - 1) >= level:
+                k -= 1
+                continue
+            j = k - 1
+            while j >= lo and self._margin(j) < level and k - j <= ONSET_BACK_DIPS:
+                j -= 1
+            if j >= lo and self._margin(j) >= level and k - 1 - j <= ONSET_BACK_DIPS:
+                k = j
+                continue
+            break
+        f0 = next((i for i in range(k, c + 1) if self._margin(i) >= 0.0), c)
+        if b0 > ONSET_QUIET:
+            # a stepping near the threshold (the step rate far from the tuning's, a template gone stale) crosses it by
+            # chance: only where the first crossing of the climb says the onset came late is it a doubt
+            late_by = ev.onset_s - self._crossing_s(f0)
+            return "a stepping near the threshold" if late_by > ONSET_TOL_S else None
+        # the first hot frame (the full verdict: not a burst's rise) from which the climb held to c, never under its
+        # level for more than ONSET_HELD_DIPS frames running (a hot frame of stepping before a slow arrival does not)
+        below = np.array([self._margin(i) < level for i in range(k, c + 1)], dtype=bool)
+        f1 = next(
+            (
+                i
+                for i in range(k, c)
+                if self._hot[i - self._base] and self._longest_gap(~below[i - k :]) <= ONSET_HELD_DIPS
+            ),
+            c,
+        )
+        onset = self._crossing_s(f1) if f1 < c else ev.onset_s
+        if ev.onset_s - onset > ONSET_BACK_MAX_S:
             return "a stop heard late"
+        # the climb: from the end of the frame before it to its first frame over the threshold, or to the crossing the
+        # onset is taken from, whichever is later (a stop that barely clears the threshold crosses it late, or early and
+        # again later)
+        climb = max(self._frame_end_s(f0), min(onset, ev.onset_s) + self._lag) - self._frame_end_s(k - 1)
+        self.rise_log.append((ev.detected_at_s, climb))
+        if climb > ONSET_SLOW_S:
+            return f"a slow rise ({1e3 * climb:.0f} ms from the stepping's level to the threshold)"
+        if onset < ev.onset_s:
+            self._retimed = onset
         return None
+
+    def _crossing_s(self, f: int) -> float:
+        """The onset of a crossing of the threshold in frame ``f``: interpolated from the frame before, less the lag."""
+        m0, m1 = self._margin(f - 1), self._margin(f)
+        frac = (0.0 - m0) / (m1 - m0) if m0 < 0.0 < m1 else 1.0
+        return self._frame_end_s(f) - (1.0 - frac) * self._H / self._sr - self._lag
 
     @property
     def _covered_margin(self) -> float:
