@@ -54,7 +54,7 @@ def _outcome(tu: Tuning, y: np.ndarray, stop_at: float) -> tuple[str, list[float
 def _resolutions(tu: Tuning) -> list[dict[str, Any]]:
     """What tune tried, in order (``checks["resolutions"]``)."""
     assert tu.checks is not None
-    out: list[dict[str, Any]] = _resolutions(tu)
+    out: list[dict[str, Any]] = tu.checks["resolutions"]
     return out
 
 
