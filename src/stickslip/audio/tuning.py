@@ -55,7 +55,9 @@ FINER_BELOW = 0.8
 #: took 6 per octave for 0.37 against 0.25 and then missed its stop at an 8 % faster rate) ...
 FINER_GAIN = 0.2
 #: ... and at least this margin (the fifth generator's arm 4, shifted stop, verifies at 12 per octave with 0.21 on three
-#: sub-bands and then fired seconds early in 4 of 12 recordings: a refusal is safer)
+#: sub-bands and then fired seconds early in 4 of 12 recordings: a refusal is safer); it must also span at least as
+#: many sub-bands (finer detail over the stop's band, not a narrower band: the fifth generator's arm 2, damped stop,
+#: separated by 0.55 on 2 sub-bands at 6 per octave against 0.11 on 3, and a hiss before its stop then fired it)
 FINER_MIN_MARGIN = 0.3
 #: when every resolution is refused, the template spans where the stepping sound is within this much of its peak, dB,
 #: not :func:`stepping_band`'s 25 dB: a stop that moves a mode at the band's edge out of it departs beyond it (the
@@ -213,7 +215,8 @@ def tune(
        that is refused, or its margin is under :data:`FINER_BELOW`, they run again at
        each of :data:`FINER_PER_OCTAVE`; a finer template replaces the coarser one only
        when its self-check does not fail, it separates the stop by at least
-       :data:`FINER_MIN_MARGIN` and by :data:`FINER_GAIN` more than the coarser one.
+       :data:`FINER_MIN_MARGIN` and by :data:`FINER_GAIN` more than the coarser one, on
+       at least as many sub-bands.
        A stop that moves its modes a few per cent (a contact that pins the arm) moves
        power between neighbouring sub-bands 1/12 octave wide, inside one 1/3 octave
        wide (docs/audio.md, "A stop that only shifts the spectrum"). Every resolution
@@ -279,7 +282,11 @@ def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
         if best is None:
             if po == DEFAULT_PER_OCTAVE or (not failed and (tu.margin_db or 0.0) >= FINER_MIN_MARGIN):
                 best = tu
-        elif not failed and (tu.margin_db or 0.0) >= max(FINER_MIN_MARGIN, (best.margin_db or 0.0) + FINER_GAIN):
+        elif (
+            not failed
+            and (tu.margin_db or 0.0) >= max(FINER_MIN_MARGIN, (best.margin_db or 0.0) + FINER_GAIN)
+            and nb >= len(best.signature_db or ())
+        ):
             best = tu
     if best is None and WIDE_RANGE_DB is not None:
         # every resolution refused: a stop that moves the modes at the band's edge out of it is heard beyond it
