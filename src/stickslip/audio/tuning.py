@@ -275,9 +275,7 @@ def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
             first_error = first_error or e
             tried.append({"per_octave": po, "refused": str(e)[:200]})
             continue
-        c = tu.checks or {}
-        failed = bool(c.get("false_alarms", 0) > 1 or c.get("stops_found") != c.get("stops"))
-        nb = len(tu.signature_db or ())
+        failed, nb = _self_check_failed(tu), len(tu.signature_db or ())
         tried.append({"per_octave": po, "sub_bands": nb, "margin": tu.margin_db, "self_check_failed": failed})
         if best is None:
             if po == DEFAULT_PER_OCTAVE or (not failed and (tu.margin_db or 0.0) >= FINER_MIN_MARGIN):
@@ -296,8 +294,7 @@ def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
         except TuningError as e:
             tried.append({"per_octave": DEFAULT_PER_OCTAVE, "range_db": WIDE_RANGE_DB, "refused": str(e)[:200]})
         else:
-            c = tu.checks or {}
-            failed = bool(c.get("false_alarms", 0) > 1 or c.get("stops_found") != c.get("stops"))
+            failed = _self_check_failed(tu)
             tried.append(
                 {"per_octave": DEFAULT_PER_OCTAVE, "range_db": WIDE_RANGE_DB, "sub_bands": len(tu.signature_db or ()),
                  "margin": tu.margin_db, "self_check_failed": failed}
@@ -310,6 +307,13 @@ def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
     checks = dict(best.checks or {})
     checks["resolutions"] = tried
     return replace(best, checks=checks)
+
+
+def _self_check_failed(tu: Tuning) -> bool:
+    """The self-check failed clearly, as :func:`~stickslip.audio.verification._pick` judges it: more than one false
+    alarm with interference injected, or a stop missed (False when no self-check ran)."""
+    c = tu.checks or {}
+    return bool(c.get("false_alarms", 0) > 1 or c.get("stops_found") != c.get("stops"))
 
 
 def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> Tuning:
