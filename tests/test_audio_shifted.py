@@ -120,15 +120,15 @@ def test_arm_4s_shifted_stop_is_tuned_and_heard() -> None:
 @pytest.mark.parametrize(("arm", "chosen", "right_at_3"), [(3, 12.0, 11), (5, 6.0, 11)])
 def test_a_weakly_separated_shifted_stop_takes_finer_sub_bands(arm: int, chosen: float, right_at_3: int) -> None:
     """Arms 3 and 5: at 3 per octave the stop separates by 0.54 and 0.64 (stop-likeness); at 12 and 6 per octave by
-    0.78 and 0.84, and that template is kept. Heard in every one of 12 recordings, none silently wrong (at 3 per
-    octave: 11 of 12 each, arm 5's twelfth missed)."""
+    0.78 and 0.84, and that template is kept. Measured on 12 recordings each: arm 3 11 on time and one flagged (as at 3
+    per octave), arm 5 all 12 on time (at 3 per octave 11, one missed); none silently wrong."""
     tu = _arrival_tuning(arm)
     assert tu.per_octave == chosen
     margins = {r["per_octave"]: r["margin"] for r in _resolutions(tu)}
     assert margins[chosen] >= margins[DEFAULT_PER_OCTAVE] + 0.2
     c = _count(tu, _arrival_draws(arm), ar.render)
     assert c["early"] == c["late"] == 0, c
-    assert c["right"] >= right_at_3, c  # measured 11 (arm 3: one flagged) and 12
+    assert c["right"] >= right_at_3, c  # measured 11 and 12
 
 
 def test_a_strong_template_keeps_three_sub_bands_per_octave() -> None:
