@@ -9,7 +9,8 @@ of tuning files version 1 (:func:`tune_band`, kept for comparison and old workfl
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +41,28 @@ MIN_THRESHOLD = 0.4
 HOLD_S = 0.016
 #: candidates verified before the self-check picks one (more only while none checks the stop's drops)
 VERIFIED = 3
+
+#: sub-bands per octave of the template when no resolution is asked for
+DEFAULT_PER_OCTAVE = 3.0
+#: finer resolutions tried when the default is refused or its margin is under :data:`FINER_BELOW` (a stop that moves
+#: its modes 4-12 % moves power between 1/12-octave sub-bands, within one 1/3-octave sub-band: docs/audio.md,
+#: "A stop that only shifts the spectrum")
+FINER_PER_OCTAVE = (6.0, 12.0)
+#: a default template that separates the stop by at least this (stop-likeness) is kept without trying finer ones
+FINER_BELOW = 0.8
+#: a finer template replaces a coarser one only with a margin this much larger (near-ties keep fewer, wider sub-bands:
+#: steadier levels, and the template every round before this one measured; at 0.1 the battery's "speech in training"
+#: took 6 per octave for 0.37 against 0.25 and then missed its stop at an 8 % faster rate) ...
+FINER_GAIN = 0.2
+#: ... and at least this margin (the fifth generator's arm 4, shifted stop, verifies at 12 per octave with 0.21 on three
+#: sub-bands and then fired seconds early in 4 of 12 recordings: a refusal is safer); it must also span at least as
+#: many sub-bands (finer detail over the stop's band, not a narrower band: the fifth generator's arm 2, damped stop,
+#: separated by 0.55 on 2 sub-bands at 6 per octave against 0.11 on 3, and a hiss before its stop then fired it)
+FINER_MIN_MARGIN = 0.3
+#: when every resolution is refused, the template spans where the stepping sound is within this much of its peak, dB,
+#: not :func:`stepping_band`'s 25 dB: a stop that moves a mode at the band's edge out of it departs beyond it (the
+#: fifth generator's arm 4: its 4.19 kHz mode moves to 4.50 kHz, past the 4.22 kHz edge); None: never
+WIDE_RANGE_DB: float | None = 45.0
 
 #: drop thresholds: this many times the worst drop of the stepping part ...
 DROP_MARGIN = 1.6
@@ -98,7 +121,7 @@ def tune(
     f_min_hz: float = 300.0,
     max_stepping_s: float = 20.0,
     max_stopped_s: float = 10.0,
-    per_octave: float = 3.0,
+    per_octave: float | None = None,
     label_tolerance_s: float = 0.02,
     search_s: float = 0.5,
     self_check: bool = True,
@@ -133,8 +156,10 @@ def tune(
         Lowest frequency of the template, Hz (below it: hum, footsteps, doors).
     max_stepping_s, max_stopped_s : float
         Analyse at most this much before and after the stop, s.
-    per_octave : float
-        Sub-bands per octave of the template.
+    per_octave : float, optional
+        Sub-bands per octave of the template. None (the default) chooses: 3, and the
+        finer :data:`FINER_PER_OCTAVE` when 3 is refused or separates the stop weakly
+        (see Notes, 7); the choice is stored in ``Tuning.per_octave``.
     label_tolerance_s : float
         Warn when the sound changes further than this from ``stop_at_s``, s.
     search_s : float
@@ -186,6 +211,16 @@ def tune(
        nothing) fires it at more levels than another
        (:func:`~stickslip.audio.verification._rise_mimicry`); a chosen template that
        such a sound fires is named in a warning.
+    7. Resolution (``per_octave=None``): steps 1-6 run at 3 sub-bands per octave. When
+       that is refused, or its margin is under :data:`FINER_BELOW`, they run again at
+       each of :data:`FINER_PER_OCTAVE`; a finer template replaces the coarser one only
+       when its self-check does not fail, it separates the stop by at least
+       :data:`FINER_MIN_MARGIN` and by :data:`FINER_GAIN` more than the coarser one, on
+       at least as many sub-bands.
+       A stop that moves its modes a few per cent (a contact that pins the arm) moves
+       power between neighbouring sub-bands 1/12 octave wide, inside one 1/3 octave
+       wide (docs/audio.md, "A stop that only shifts the spectrum"). Every resolution
+       tried is listed in ``checks["resolutions"]``.
     """
     x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     from .guard import block_problem
@@ -195,6 +230,98 @@ def tune(
         raise TuningError(f"the stepping part of the recording is {problem}: nothing to learn from")
     frame = int(frame or default_frame(sample_rate))
     hop = int(hop or max(1, frame // 4))
+    args = _Args(
+        sample_rate, stop_at_s, joint, frame, hop, hold_s, release_s, guard_s, f_min_hz, max_stepping_s,
+        max_stopped_s, label_tolerance_s, search_s, self_check, seed,
+    )  # fmt: skip
+    if per_octave is not None:
+        return replace(_tune_at(x, args, float(per_octave)), per_octave=float(per_octave))
+    return _tune_resolutions(x, args)
+
+
+@dataclass(frozen=True)
+class _Args:
+    """:func:`tune`'s settings, as one resolution's tuning uses them."""
+
+    sample_rate: int
+    stop_at_s: float
+    joint: int | None
+    frame: int
+    hop: int
+    hold_s: float
+    release_s: float
+    guard_s: float
+    f_min_hz: float
+    max_stepping_s: float
+    max_stopped_s: float
+    label_tolerance_s: float
+    search_s: float
+    self_check: bool
+    seed: int
+    range_db: float = 25.0
+
+
+def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
+    """Tune at :data:`DEFAULT_PER_OCTAVE`, and at :data:`FINER_PER_OCTAVE` where that is refused or weak (Notes, 7)."""
+    tried: list[dict[str, Any]] = []
+    best: Tuning | None = None
+    first_error: TuningError | None = None
+    for po in (DEFAULT_PER_OCTAVE, *FINER_PER_OCTAVE):
+        if best is not None and po != DEFAULT_PER_OCTAVE and (best.margin_db or 0.0) >= FINER_BELOW:
+            break
+        try:
+            tu = replace(_tune_at(x, args, po), per_octave=po)
+        except TuningError as e:
+            first_error = first_error or e
+            tried.append({"per_octave": po, "refused": str(e)[:200]})
+            continue
+        failed, nb = _self_check_failed(tu), len(tu.signature_db or ())
+        tried.append({"per_octave": po, "sub_bands": nb, "margin": tu.margin_db, "self_check_failed": failed})
+        if best is None:
+            if po == DEFAULT_PER_OCTAVE or (not failed and (tu.margin_db or 0.0) >= FINER_MIN_MARGIN):
+                best = tu
+        elif (
+            not failed
+            and (tu.margin_db or 0.0) >= max(FINER_MIN_MARGIN, (best.margin_db or 0.0) + FINER_GAIN)
+            and nb >= len(best.signature_db or ())
+        ):
+            best = tu
+    if best is None and WIDE_RANGE_DB is not None:
+        # every resolution refused: a stop that moves the modes at the band's edge out of it is heard beyond it
+        wide = replace(args, range_db=WIDE_RANGE_DB)
+        try:
+            tu = replace(_tune_at(x, wide, DEFAULT_PER_OCTAVE), per_octave=DEFAULT_PER_OCTAVE)
+        except TuningError as e:
+            tried.append({"per_octave": DEFAULT_PER_OCTAVE, "range_db": WIDE_RANGE_DB, "refused": str(e)[:200]})
+        else:
+            failed = _self_check_failed(tu)
+            tried.append(
+                {"per_octave": DEFAULT_PER_OCTAVE, "range_db": WIDE_RANGE_DB, "sub_bands": len(tu.signature_db or ()),
+                 "margin": tu.margin_db, "self_check_failed": failed}
+            )  # fmt: skip
+            if not failed and (tu.margin_db or 0.0) >= FINER_MIN_MARGIN:
+                best = tu
+    if best is None:
+        assert first_error is not None
+        raise first_error
+    checks = dict(best.checks or {})
+    checks["resolutions"] = tried
+    return replace(best, checks=checks)
+
+
+def _self_check_failed(tu: Tuning) -> bool:
+    """The self-check failed clearly, as :func:`~stickslip.audio.verification._pick` judges it: more than one false
+    alarm with interference injected, or a stop missed (False when no self-check ran)."""
+    c = tu.checks or {}
+    return bool(c.get("false_alarms", 0) > 1 or c.get("stops_found") != c.get("stops"))
+
+
+def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> Tuning:
+    """Steps 1-6 of :func:`tune` at ``per_octave`` sub-bands per octave."""
+    sample_rate, stop_at_s, frame, hop = args.sample_rate, args.stop_at_s, args.frame, args.hop
+    guard_s, hold_s, release_s, joint, seed = args.guard_s, args.hold_s, args.release_s, args.joint, args.seed
+    max_stepping_s, max_stopped_s, f_min_hz = args.max_stepping_s, args.max_stopped_s, args.f_min_hz
+    label_tolerance_s, search_s, self_check = args.label_tolerance_s, args.search_s, args.self_check
     hold = max(1, int(math.ceil(hold_s * sample_rate / hop - 1e-9)))
     window = hold + _DEFAULT_MAX_DIPS
     warnings: list[str] = []
@@ -203,7 +330,9 @@ def tune(
     last = min(x.size, int((stop_at_s + max_stopped_s) * sample_rate))
     seg = x[first:last]
     t_first = first / sample_rate
-    f_lo, f_hi = stepping_band(x[first : int((stop_at_s - 0.15) * sample_rate)], sample_rate, frame, hop, f_min_hz)
+    f_lo, f_hi = stepping_band(
+        x[first : int((stop_at_s - 0.15) * sample_rate)], sample_rate, frame, hop, f_min_hz, range_db=args.range_db
+    )
     edges = subband_edges(f_lo, f_hi, sample_rate, frame, per_octave)
     V = subband_levels_db(seg, sample_rate, frame, hop, edges)
     starts = t_first + np.arange(V.shape[0]) * hop / sample_rate

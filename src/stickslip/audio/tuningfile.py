@@ -125,6 +125,10 @@ class Tuning:
         file) where a sub-band has no bin off the lines at the tuning's rate
         (:func:`~stickslip.audio.template.continuum_levels_db`). They let the detector tell
         that it began listening at the stop when the stream steps at another rate.
+    per_octave : float or None
+        ``"template"``: sub-bands per octave that :func:`~stickslip.audio.tuning.tune` chose
+        for ``edges_hz`` (3, or finer for a stop that only shifts the spectrum); None in
+        files made before it was recorded. Informational: ``edges_hz`` are the sub-bands.
     checks : dict or None
         What :func:`~stickslip.audio.tuning.tune` verified (false alarms per hour with
         interference injected, latency); informational.
@@ -167,6 +171,7 @@ class Tuning:
     continuum_levels_db: tuple[float, ...] | None = None
     continuum_signature_db: tuple[float, ...] | None = None
     continuum_spread_db: tuple[float, ...] | None = None
+    per_octave: float | None = None
     checks: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -262,6 +267,11 @@ class Tuning:
             v = getattr(self, name)
             if not lo_ <= v <= hi_:
                 raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+        if self.per_octave is not None:
+            po = self.per_octave
+            if isinstance(po, bool) or not isinstance(po, (int, float)) or not 0.5 <= po <= 48:
+                raise ValueError(f"per_octave {po!r} must be a number within 0.5..48 sub-bands per octave (or null)")
+            object.__setattr__(self, "per_octave", float(po))
 
     def _check_continuum(self, nb: int) -> None:
         if self.step_rate_hz is not None:
@@ -377,7 +387,7 @@ class Tuning:
                 d[k] = list(d[k]) if d[k] is not None else None
             for k in _CONTINUUM:
                 d[k] = None if d[k] is None else [None if math.isnan(v) else v for v in d[k]]
-            for k in ("step_rate_hz", *_CONTINUUM):  # absent, as in files made before they were recorded
+            for k in ("step_rate_hz", "per_octave", *_CONTINUUM):  # absent, as in files made before they were recorded
                 if d[k] is None:
                     d.pop(k)
         else:
@@ -395,6 +405,7 @@ class Tuning:
                 "stepping_levels_db",
                 "drop_threshold",
                 "step_rate_hz",
+                "per_octave",
                 *_CONTINUUM,
             ):
                 d.pop(k)
@@ -440,8 +451,9 @@ class Tuning:
                     kwargs[k] = tuple(
                         math.nan if v is None else _number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k])
                     )
-            if kwargs.get("step_rate_hz") is not None:
-                kwargs["step_rate_hz"] = _number("step_rate_hz", kwargs["step_rate_hz"])
+            for k in ("step_rate_hz", "per_octave"):
+                if kwargs.get(k) is not None:
+                    kwargs[k] = _number(k, kwargs[k])
             if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
                 raise TuningFileError("checks must be an object or null")
             for k in (
@@ -518,8 +530,9 @@ class Tuning:
         sig = np.asarray(self.signature_db)
         k = int(np.argmax(np.abs(sig)))
         e = self.edges_hz
+        per = f" ({self.per_octave:g} per octave)" if self.per_octave is not None else ""
         lines = [
-            f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands; the stop departs most "
+            f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands{per}; the stop departs most "
             f"at {e[k]:.0f}-{e[k + 1]:.0f} Hz ({sig[k]:+.1f} dB)",
             f"stop signature {', '.join(f'{v:+.0f}' for v in sig)} dB",
             f"fires at stop-likeness {self.threshold_db:.2f} (stepping 0, the stop 1) held "
