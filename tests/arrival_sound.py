@@ -87,7 +87,7 @@ def _ring(sr: int, f: np.ndarray, q: np.ndarray, w: np.ndarray, pulse_s: float, 
     m = max(2, int(round(pulse_s * sr)))
     pulse = np.sin(np.pi * (np.arange(m) + 0.5) / m)
     out = np.convolve(h, pulse)[: t.size]
-    return out / np.sqrt(np.sum(out**2))
+    return np.asarray(out / np.sqrt(np.sum(out**2)), dtype=np.float64)
 
 
 def arm_kernels(arm: Arm, sr: int = SR) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -159,7 +159,7 @@ def _burst(s: Scene, n: int, rng: np.random.Generator) -> np.ndarray:
         ramp = np.sin(0.5 * np.pi * np.arange(edge) / edge) ** 2
         b[:edge] *= ramp
         b[m - edge :] *= ramp[::-1]
-    return b / (np.sqrt(np.mean(b**2)) + 1e-30)
+    return np.asarray(b / (np.sqrt(np.mean(b**2)) + 1e-30), dtype=np.float64)
 
 
 def render(s: Scene) -> np.ndarray:

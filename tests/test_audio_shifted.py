@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 import arrival_sound as ar
@@ -241,16 +241,18 @@ def _beam_draws(beam: int, n: int) -> list[bm.Scene]:
     snr_db=st.floats(30.0, 40.0),
     seed=st.integers(1, 10**6),
 )
+@example(beam=17762, stop_at=2.0, jitter=0.0078125, snr_db=30.0, seed=1)  # flagged, +16 ms (a fresh draw)
 def test_any_beam_at_its_tuning_rate_is_heard_on_time(
     beam: int, stop_at: float, jitter: float, snr_db: float, seed: int
 ) -> None:
     """Any beam, tuned on its clean recording and heard at the tuning's rate (1000 Hz, jitter 0.2-1 %, SNR 30-40 dB):
-    the stop is heard on time, unflagged (measured: 30 of 30 random beams, margins 0.69-0.95, all at 3 per octave).
-    Another rate is another matter: see the named beams below."""
+    the stop is heard, on time or flagged, never missed or silently wrong (measured: 30 of 30 random beams on time,
+    margins 0.69-0.95, all at 3 per octave; with round 9a's climb check 29 on time and one flagged as a slow rise,
+    +16 ms: beam 254877, and beam 17762, a fresh draw). Another rate is another matter: see the named beams below."""
     tu = tune(bm.render(bm.tuning_scene(bm.Beam(beam))), SR, 2.0)
     s = bm.Scene(beam=bm.Beam(beam), stop_at=stop_at, jitter=jitter, snr_db=snr_db, seed=seed)
     kind, onsets = _outcome(tu, bm.render(s), stop_at)
-    assert kind == "right", (beam, kind, onsets, tu.checks)
+    assert kind in ("right", "flagged"), (beam, kind, onsets, tu.checks)
 
 
 @pytest.mark.parametrize("beam", [2, 4, 5, 6, 7, 10])
@@ -279,11 +281,10 @@ def test_beams_3_8_and_9_are_missed_sometimes_never_wrong(beam: int, measured: s
     assert c["right"] >= 5 and c["right"] + c["missed"] + c["flagged"] == 10, (measured, c)
 
 
-@pytest.mark.xfail(strict=True, reason="beam 1's third recording: its stop heard +32 ms late, unflagged (confirm.py)")
 def test_beam_1s_late_onset_is_flagged() -> None:
-    """Found by the sixth generator and left to the onset checks (``confirm.py``, another helper's): rate 1000 Hz
-    +1.4 %, jitter 2.6 %; the onset is 32 ms after the pinning, unflagged (the same before this round)."""
+    """Found by the sixth generator (rate 1000 Hz +1.4 %, jitter 2.6 %): the onset is 32 ms after the pinning, and was
+    unflagged before round 9a; its climb to the threshold is slow, and the event is now flagged ``onset_uncertain``."""
     s = _beam_draws(1, 3)[2]
     assert s.stop_at is not None
     kind, onsets = _outcome(_beam_tuning(1), bm.render(s), s.stop_at)
-    assert kind != "late", onsets
+    assert kind == "flagged" and 0.025 < onsets[0] < 0.04, (kind, onsets)
