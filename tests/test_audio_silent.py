@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
@@ -69,7 +70,8 @@ def test_stepping_in_the_strongest_room_is_not_taken_for_a_stop_at_the_start() -
 def test_arm_6s_shifted_stop_is_not_heard_at_the_start_of_stepping_at_1038_hz() -> None:
     """Round 9b's scan: arm 6's shifted stop, draw 5 (1038 Hz, 3.8 % over the tuning): "-2122 ms, confirmed, unflagged".
     It was the start rule: 3.8 % faster stepping moves the click train's lines up as the stop moves the modes up, and
-    the levels fitted the stop (b 0.95); the continuum did not (b -0.09). Now: not heard at all (a traverse times out)."""
+    the levels fitted the stop (b 0.95); the continuum did not (b -0.09). Now: not heard at all (a traverse times
+    out)."""
     s = sh._arrival_draws(6)[5]
     assert s.stop_at is not None and round(s.rate) == 1038
     tu = sh._arrival_tuning(6)
@@ -114,8 +116,24 @@ def test_a_recording_that_starts_at_the_stop_is_still_heard_at_once() -> None:
     rate=st.floats(950.0, 1050.0),
 )
 def test_stepping_in_a_strong_room_never_fires_at_once(seed: int, t60_s: float, reverb_db: float, rate: float) -> None:
-    """Any arm of the onset property (:data:`test_audio_onset.ARMS`) stepping, no stop, in the domain's strongest rooms,
-    at rates within the warning: nothing at the start of listening (a throwaway scan before: 6 of 150 fired)."""
+    """Any arm of the onset property (:data:`test_audio_onset.ARMS`) stepping in the domain's strongest rooms, at rates
+    within the warning, its stop 1.5-2.5 s later: nothing at the start of listening (a throwaway scan before: 6 of 150
+    fired). The whole recording is rendered (its level and noise are set over all of it), the first 0.6 s heard."""
     arm, s = _strong_room(seed, rate, t60_s, reverb_db)
-    s = ar.Scene(**{**s.__dict__, "stop_at": None, "dur": 0.8})
+    assert s.stop_at is not None and s.stop_at >= 1.5
     assert _heard_at_once(on._arrival_tuning(*arm), ar.render(s)) == [], (arm, s)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured (round 10a, a throwaway scan of 1000 draws at 800-1200 Hz): arm 2's damped stop at 1004 Hz in "
+    "the strongest room (T60 0.26 s, -9.5 dB) crosses +25.3 ms late after a climb of 13 ms, under the 20 ms slow-rise "
+    "limit (confirm.ONSET_SLOW_S): the room's tail delays the crossing; unflagged, 0.3 ms beyond the tolerance",
+)
+def test_arm_2s_damped_stop_in_the_strongest_room_at_1004_hz_is_never_silently_wrong() -> None:
+    arm, s = on._draw(np.random.default_rng(1764737161))
+    s = ar.Scene(**{**s.__dict__, "t60_s": 0.25845635152551505, "reverb_db": -9.544863829396984,
+                    "rate": 1003.64385139928})  # fmt: skip
+    assert arm == (2, "damped") and s.stop_at is not None
+    ev, det = on._first(on._arrival_tuning(*arm), ar.render(s))
+    assert ev is not None and not on._silently_wrong(ev, s.stop_at), (ev, det.rise_log)
