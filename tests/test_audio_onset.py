@@ -246,6 +246,8 @@ def test_a_rate_far_from_the_tuning_s_is_never_silently_wrong() -> None:
 
 @settings(max_examples=8, deadline=None)
 @example(seed=52023, t60_s=0.25, reverb_db=-10.0, rate=1090.65625)  # arm 2 damped, 11 steps: +47 ms, slow (31 ms)
+@example(seed=1467997160, t60_s=0.23945723714450617, reverb_db=-9.743132532772897, rate=1003.6595036195483)  # at once
+@example(seed=3857886077, t60_s=0.2620503618529803, reverb_db=-9.850951976629288, rate=1048.2483871989868)  # at once
 @given(
     seed=st.integers(0, 2**32 - 1),
     t60_s=st.floats(0.05, 0.3),
@@ -258,15 +260,15 @@ def test_no_room_and_rate_of_the_domain_counts_silently_wrong(
     """Fresh draws of the fifth generator (any arm, arrival, clock) over the room's whole range, the strongest
     reverberation included, at rates within the warning (5 %): on time, flagged, heard at once or missed; never
     silently wrong. Beyond the warning it is not so: 4 of 1000 throwaway draws at 800-1200 Hz (docs/audio.md).
-    Heard at once (round 9a's seed 3): arm 6's damped stop at 1049 Hz in the strongest room was judged to be there
-    from the start (``template._started_at_stop``), 1.9 s before it, as in the fixed sample above.
+    Heard at once (round 9a's seeds 3 and 8): arm 6's damped stop at 1049 Hz in the strongest room was judged to be
+    there from the start (``template._started_at_stop``), 1.9 s before it; this property let it pass as "heard at
+    once" until round 10a, which made the levels' verdict on the start need the continuum's agreement: a stop heard
+    at once here (1.5-2.5 s before the stop) is a false stop and fails (``tests/test_audio_silent.py``).
     """
     arm, s = _draw(np.random.default_rng(seed))
     s = ar.Scene(**{**s.__dict__, "t60_s": t60_s, "reverb_db": reverb_db, "rate": rate})
     assert s.stop_at is not None
     ev, det = _first(_arrival_tuning(*arm), ar.render(s))
-    if ev is not None and ev.onset_s < 0.02:
-        return  # heard at once: "the stop was there as soon as we listened", which a traverse does not count to
     assert not _silently_wrong(ev, s.stop_at), (arm, s, ev, det.onset_log, det.rise_log)
 
 

@@ -91,6 +91,10 @@ CONTINUUM_FRAME = 4
 START_MIN_B = 0.7
 #: ... and leave at most this share of what a gain change alone leaves
 START_MAX_RATIO = 0.4
+#: the levels' verdict "the stop" counts, where the tuning holds the continuum, only where the continuum's fit also
+#: gives the stop at least this share of its signature (round 10a: a reverberant room or a step rate 1-4 % off colours
+#: the stepping's levels like a damped or shifted stop, b 0.95-2.1, while its continuum says b -0.1-0.02)
+START_LEVELS_CONTINUUM_B = 0.5
 #: a fire whose continuum did not change is a stale template (the step rate moved), not a stop: the continuum over
 #: this long after the fire, s, ...
 STALE_AFTER_S = 0.3
@@ -703,6 +707,14 @@ class TemplateState:
           the rate does not move: ``b`` at least :data:`START_MIN_B` (and the threshold) and
           at most :data:`START_MAX_RATIO` of the gain-only residual left.
 
+        Where the tuning holds the continuum, the levels alone are not enough (round 10a): the
+        continuum's fit must give the stop at least :data:`START_LEVELS_CONTINUUM_B` of its
+        signature too. A reverberant room's tail, or a step rate a few per cent off the
+        tuning's, colours the stepping's levels the way a damped or shifted stop does (the
+        fifth generator's strongest room: the levels' ``b`` 0.95-2.1 on stepping 1.9-2.3 s
+        before the stop, the continuum's -0.1-0.02, or a continuum signature that is a gain
+        change only, which cannot tell).
+
         The stop: the detector fires at once (onset: the start of listening) and takes
         ``T - b * delta`` (``b`` of the levels, at least 1) as the stepping template. A
         signature that is a gain change only (a uniformly quieter stop) cannot be told from
@@ -712,7 +724,10 @@ class TemplateState:
         if self.template is None or float(np.min(self.template)) <= -150.0:
             return
         b_lev = self._start_by_levels()
-        if b_lev is None and not self._start_by_continuum():
+        b_con = self._start_by_continuum()
+        if b_con is None:
+            return  # the continuum contradicts the levels, or neither shows the stop
+        if b_lev is None and not b_con:
             return
         shift = 1.0 if b_lev is None else b_lev
         self.template = self.template - shift * self.delta
@@ -873,23 +888,31 @@ class TemplateState:
         fits = rms_both <= 2.0 + RESIDUAL_SLOPE * b * float(np.sqrt(np.mean((self.delta / self.sigma) ** 2)))
         return b if b >= max(p.threshold, 0.6) and clear and fits else None
 
-    def _start_by_continuum(self) -> bool:
-        """True when the continuum between the step clock's lines shows the stop (see :meth:`_started_at_stop`)."""
+    def _start_by_continuum(self) -> bool | None:
+        """The continuum's verdict on the start (see :meth:`_started_at_stop`).
+
+        True: it shows the stop by itself. False: not by itself, but the levels' verdict may
+        stand (the tuning holds no continuum; or the continuum gives the stop at least
+        :data:`START_LEVELS_CONTINUUM_B` of its signature). None: the levels' verdict may not
+        stand either (the continuum gives the stop less, cannot be measured, or cannot tell
+        the stop from a gain change).
+        """
         p = self.p
         head = self.head
         if (
-            head is None
-            or p.step_rate_hz is None
+            p.step_rate_hz is None
             or p.continuum_levels_db is None
             or p.continuum_signature_db is None
             or p.continuum_spread_db is None
         ):
-            return False
+            return False  # an older tuning: the levels judge alone, as before
+        if head is None:
+            return None
         from .stepclock import step_rate_hz
 
         rate = step_rate_hz(head, p.sample_rate)
         if not math.isfinite(rate):
-            return False
+            return None
         C = continuum_levels_db(head, p.sample_rate, CONTINUUM_FRAME * p.frame, p.frame, p.edges_hz, rate)
         ok = np.isfinite(C).all(axis=0) if C.shape[0] else np.zeros(C.shape[1], dtype=bool)
         ref = np.asarray(p.continuum_levels_db, dtype=np.float64)
@@ -897,13 +920,15 @@ class TemplateState:
         spread = np.asarray(p.continuum_spread_db, dtype=np.float64)
         ok &= np.isfinite(ref) & np.isfinite(sig) & np.isfinite(spread)
         if ok.sum() < 3:
-            return False
+            return None
         T = np.percentile(C[:, ok], 100 * QUANTILE, axis=0)
         fit = self._gain_and_signature(T - ref[ok], sig[ok], spread[ok])
         if fit is None:
-            return False
+            return None
         b, _, ss_both, ss_gain = fit
-        return b >= max(p.threshold, START_MIN_B) and ss_both <= START_MAX_RATIO * ss_gain
+        if b >= max(p.threshold, START_MIN_B) and ss_both <= START_MAX_RATIO * ss_gain:
+            return True
+        return False if b >= START_LEVELS_CONTINUUM_B else None
 
     def _segment(self, v: FloatArray, ends: NDArray[np.int64]) -> list[Decision]:
         p = self.p
