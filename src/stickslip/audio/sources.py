@@ -124,7 +124,8 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
       microphone wired to both inputs of a stereo card) and their mean is near silence;
     * *drowned*: in some channel the step-rate line of the envelope
       (:func:`~stickslip.audio.guard.step_line_db`, at the rate heard there:
-      :func:`~stickslip.audio.stepclock.step_rate_hz`) stands at least 8 dB clear, and
+      :func:`~stickslip.audio.stepclock.step_rate_hz`) stands at least the no-signal
+      guard's 8 dB clear (``SignalGuard.min_line_db``), and
       :data:`DROWNED_DB` or more clearer than in the mean, whose line stands less than
       :data:`WEAK_LINE_DB` clear: another channel (an open input picking up hum or noise)
       drowns it.
@@ -132,7 +133,7 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
     The message names the channel to read instead (1-based, as ``--channel`` takes it).
     ``None`` for a mono file, a file too short to judge, or a mean that keeps the stepping.
     """
-    from .guard import step_line_db
+    from .guard import SignalGuard, step_line_db
     from .stepclock import step_rate_hz
 
     sf = _soundfile()
@@ -146,22 +147,25 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
     except Exception as e:
         raise _open_error(p, e) from None
     data = np.nan_to_num(data, nan=0.0, posinf=1.0, neginf=-1.0)
+    if data.shape[0] == 0:
+        return None
     mix = data.mean(axis=1)
-    rms = np.sqrt(np.mean(data**2, axis=0)) if data.size else np.zeros(n)
-    # a noise floor 80 dB under each channel: a synthetic pure tone's envelope has no noise between its lines, and
-    # any bin there would stand "clear" of a median that is only rounding error
-    dither = 1e-4 * np.random.default_rng(0).standard_normal(data.shape)
-    data = data + dither * rms
-    mix = mix + dither[:, 0] * float(np.sqrt(np.mean(mix**2))) if mix.size else mix
+    rms = np.sqrt(np.mean(data**2, axis=0))
+    mix_rms = float(np.sqrt(np.mean(mix**2)))
     loud = int(np.argmax(rms))
     if rms[loud] <= 0.0:
         return None
-    mix_db = 20.0 * np.log10(max(float(np.sqrt(np.mean(mix**2))), 1e-300) / float(rms[loud]))
+    mix_db = 20.0 * np.log10(max(mix_rms, 1e-300) / float(rms[loud]))
     if mix_db <= CANCEL_DB:
         return (
             f"{p}: the mean of its {n} channels is {max(mix_db, -200.0):.0f} dB below channel {loud + 1}: they carry "
             f"the sound in opposite polarity and cancel; read one channel with --channel {loud + 1}"
         )
+    # a noise floor 80 dB under each channel: a synthetic pure tone's envelope has no noise between its lines, and
+    # any bin there would stand "clear" of a median that is only rounding error
+    dither = 1e-4 * np.random.default_rng(0).standard_normal(data.shape)
+    data = data + dither * rms
+    mix = mix + dither[:, 0] * mix_rms
     lines = []
     for c in range(n):
         r = step_rate_hz(data[:, c], rate)
@@ -169,7 +173,7 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
         lines.append((line if math.isfinite(line) else -math.inf, r))
     best = max(range(n), key=lambda c: lines[c][0])
     line, r = lines[best]
-    if line < 8.0:
+    if line < SignalGuard.min_line_db:  # no channel shows stepping as the guard asks for it
         return None
     in_mix = step_line_db(mix, rate, r)
     if math.isfinite(in_mix) and in_mix < WEAK_LINE_DB and line - in_mix >= DROWNED_DB:

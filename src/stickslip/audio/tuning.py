@@ -30,7 +30,7 @@ from .template import (
     subband_levels_db,
 )
 from .tuningfile import default_frame
-from .verification import _Candidate, _decided, _no_template, _one_stop, _pick
+from .verification import _Candidate, _decided, _no_template, _one_stop, _pick, self_check_failed
 
 FloatArray = NDArray[np.float64]
 #: share of the sub-bands a frame's fit may drop (those with the most unexplained excess)
@@ -310,10 +310,8 @@ def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
 
 
 def _self_check_failed(tu: Tuning) -> bool:
-    """The self-check failed clearly, as :func:`~stickslip.audio.verification._pick` judges it: more than one false
-    alarm with interference injected, or a stop missed (False when no self-check ran)."""
-    c = tu.checks or {}
-    return bool(c.get("false_alarms", 0) > 1 or c.get("stops_found") != c.get("stops"))
+    """The tuning's self-check failed clearly, as :func:`~stickslip.audio.verification._pick` judges it."""
+    return self_check_failed(tu.checks or {})
 
 
 def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> Tuning:

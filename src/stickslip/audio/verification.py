@@ -77,6 +77,12 @@ def _no_template(
     )
 
 
+def self_check_failed(checks: dict[str, Any]) -> bool:
+    """The self-check (``Tuning.checks``) failed clearly: more than one false alarm with interference injected, or a
+    stop missed (False when no self-check ran)."""
+    return bool(checks.get("false_alarms", 0) > 1 or checks.get("stops_found") != checks.get("stops"))
+
+
 def _pick(
     passing: list[tuple[Tuning, float, float]],
     x: FloatArray,
@@ -103,7 +109,7 @@ def _pick(
     results: list[tuple[int, int, int, Tuning, float, float, dict[str, Any]]] = []
     for tu, lag, lat in passing:
         checks: dict[str, Any] = _self_check(tu, x, sample_rate, stop_s, g, seed) if self_check else {}
-        failed = int(checks.get("false_alarms", 0) > 1 or checks.get("stops_found") != checks.get("stops"))
+        failed = int(self_check_failed(checks))
         mimicked = 0
         if self_check and not failed:
             checks["rise_mimic"] = _rise_mimicry(tu, x, sample_rate, stop_s, g, seed)
