@@ -148,6 +148,9 @@ def test_channel_is_refused_for_a_csv_and_for_live_input(files: Path) -> None:
     (files / "v.csv").write_text("\n".join(str(v) for v in np.zeros(100)))
     r = runner.invoke(app, ["listen", str(files / "v.csv"), "--tuning", str(files / "t.json"), "--channel", "1"])
     assert r.exit_code == 2 and "is a CSV of samples" in r.stderr, r.output
+    r = runner.invoke(app, ["tune", str(files / "v.csv"), "--stop-at", "0.001", "-o", str(files / "x.json"),
+                            "--sample-rate", "48000", "--channel", "1"])  # fmt: skip
+    assert r.exit_code == 2 and "is a CSV of samples" in r.stderr, r.output
     r = runner.invoke(app, ["listen", "--mic", "--tuning", str(files / "t.json"), "--channel", "1"])
     assert r.exit_code == 2 and "a live input is read as one channel" in r.stderr, r.output
 

@@ -69,8 +69,9 @@ def _load_recording(path: Path, sample_rate: float | None, channel: int | None =
 
     if sample_rate is not None and not _is_csv(path):
         fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
+    ch = _channels(path, channel)  # refuses --channel for a CSV
     try:
-        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path, _channels(path, channel))
+        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path, ch)
     except AudioSourceError as e:
         fail(str(e))
 
@@ -232,8 +233,6 @@ def listen(
         fail(f"cannot read tuning {tuning_path}: {e.strerror or e}")
     if channel is not None and recording is None:
         fail("--channel reads one channel of a recording (a live input is read as one channel)")
-    if channel is not None and _is_csv(recording):
-        fail(f"--channel is for a multi-channel audio file; {recording} is a CSV of samples")
     if mic:
         _listen_live(tuning, device, json_out, confirm_s, step_clock)
         return
@@ -253,7 +252,7 @@ def listen(
             highlight=False,
         )
     if _is_csv(recording):
-        samples, csv_rate = _load_recording(recording, sample_rate)
+        samples, csv_rate = _load_recording(recording, sample_rate, channel)
         blocks = ((samples[i : i + (1 << 16)], csv_rate) for i in range(0, samples.size, 1 << 16))
     else:
         if sample_rate is not None:
