@@ -606,18 +606,7 @@ class ConfirmedStopDetector:
                 return "a fire weaker than the stop"
         # walk back from the fire over the stop-like run
         lo = max(self._base, fire - self._look)
-        k = fire
-        while k > lo:
-            if self._margin(k - 1) >= 0.0:
-                k -= 1
-                continue
-            j = k - 1
-            while j >= lo and self._margin(j) < 0.0 and k - j <= ONSET_BACK_DIPS:
-                j -= 1
-            if j >= lo and self._margin(j) >= 0.0 and k - 1 - j <= ONSET_BACK_DIPS:
-                k = j
-                continue
-            break
+        k = self._run_start(fire, lo, 0.0)
         began = self._frame_end_s(k) - self._lag
         on = max(k + 1, min(fire, int((ev.onset_s + self._lag - self._t0) * self._sr - self._F + 1) // self._H + 1))
         if ev.onset_s - began > ONSET_TOL_S:
@@ -674,18 +663,7 @@ class ConfirmedStopDetector:
             return None
         # as a margin; a stepping under the template (a below 0) is no lower a start: its frames would all continue it
         level = max(b0, 0.0) + ONSET_RISE_SHARE * (stop_level - max(b0, 0.0)) - 1.0
-        k = c
-        while k > lo:
-            if self._margin(k - 1) >= level:
-                k -= 1
-                continue
-            j = k - 1
-            while j >= lo and self._margin(j) < level and k - j <= ONSET_BACK_DIPS:
-                j -= 1
-            if j >= lo and self._margin(j) >= level and k - 1 - j <= ONSET_BACK_DIPS:
-                k = j
-                continue
-            break
+        k = self._run_start(c, lo, level)
         f0 = next((i for i in range(k, c + 1) if self._margin(i) >= 0.0), c)
         if b0 > ONSET_QUIET:
             # a stepping near the threshold (the step rate far from the tuning's, a template gone stale) crosses it by
@@ -716,6 +694,22 @@ class ConfirmedStopDetector:
         if onset < ev.onset_s:
             self._retimed = onset
         return None
+
+    def _run_start(self, k: int, lo: int, level: float) -> int:
+        """The first frame of the run that ends in frame ``k``, walking back no further than ``lo``: frames whose margin
+        is at least ``level``, dips under it of up to :data:`ONSET_BACK_DIPS` frames not ending the run."""
+        while k > lo:
+            if self._margin(k - 1) >= level:
+                k -= 1
+                continue
+            j = k - 1
+            while j >= lo and self._margin(j) < level and k - j <= ONSET_BACK_DIPS:
+                j -= 1
+            if j >= lo and self._margin(j) >= level and k - 1 - j <= ONSET_BACK_DIPS:
+                k = j
+                continue
+            break
+        return k
 
     def _crossing_s(self, f: int) -> float:
         """The onset of a crossing of the threshold in frame ``f``: interpolated from the frame before, less the lag."""
