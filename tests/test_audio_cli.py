@@ -98,7 +98,7 @@ def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):
             ["tune", "{d}/tuning_bad.json", "--stop-at", "1", "-o", "{d}/x.json"],
             ["not a readable audio file"],
         ),
-        (["tune", "{d}/tune.wav", "--stop-at", "7", "-o", "{d}/x.json"], ["outside the recording"]),
+        (["tune", "{d}/tune.wav", "--stop-at", "7", "-o", "{d}/x.json"], ["not inside the recording", "lasts"]),
         (["tune", "{d}/tune.wav", "--stop-at", "0.2", "-o", "{d}/x.json"], ["must lie within"]),
         (
             ["tune", "{d}/tune.wav", "--stop-at", "2", "-o", "{d}/x.json", "--joint", "5"],
@@ -307,6 +307,34 @@ def test_listen_names_samples_that_are_not_numbers_and_still_hears_the_stop(wavs
     (ev,) = json.loads(r.stdout)
     assert abs(ev["onset_s"] - 2.0) < 0.025
     assert f"241 samples are not numbers (NaN or infinity), the first at {30_000 / sr:.4f} s" in r.stderr
+
+
+def test_one_infinity_in_the_opening_is_not_read_as_the_step_rate(wavs, tmp_path):
+    # the step rate is read from the opening; one infinity there, read as the largest float, was the only 'click'
+    # the rate reader heard: listen warned the joint stepped 75 % off the tuning's rate (found by hand, session 27)
+    out = tmp_path / "t.json"
+    assert runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(out)]).exit_code == 0
+    y, sr = read_wav(wavs / "tune.wav")
+    y = y.copy()
+    y[int(0.1 * sr)] = np.inf
+    write_wav(tmp_path / "damaged.wav", y, sr)
+    r = runner.invoke(app, ["listen", str(tmp_path / "damaged.wav"), "--tuning", str(out)])
+    assert r.exit_code == 0, r.output
+    assert "1 sample is not a number (NaN or infinity), the first at 0.1000 s" in r.stderr, r.stderr
+    assert "the joint steps at" not in r.stderr, r.stderr
+
+
+def test_tune_names_damaged_samples_and_an_empty_file(wavs, tmp_path):
+    y, sr = read_wav(wavs / "tune.wav")
+    y = y.copy()
+    y[1000:1003] = [np.nan, np.inf, -np.inf]
+    write_wav(tmp_path / "damaged.wav", y, sr)
+    r = runner.invoke(app, ["tune", str(tmp_path / "damaged.wav"), "--stop-at", "2", "-o", str(tmp_path / "x.json")])
+    _one_line_error(r, "3 samples that are not numbers", f"the first at {1000 / sr:.4f} s")
+    write_wav(tmp_path / "empty.wav", np.zeros(0, np.float32), sr)
+    r = runner.invoke(app, ["tune", str(tmp_path / "empty.wav"), "--stop-at", "2", "-o", str(tmp_path / "x.json")])
+    _one_line_error(r, "holds no samples")
+    assert not (tmp_path / "x.json").exists()
 
 
 def test_clipping_is_judged_at_the_signal_s_own_rails():

@@ -31,8 +31,13 @@ def _recording(
     sample_rate = int(sample_rate)
     if not 8_000 <= sample_rate <= 192_000:
         raise TuningError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
-    if not np.all(np.isfinite(x)):
-        raise TuningError("the recording holds non-finite samples (NaN or infinity)")
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        raise TuningError(
+            f"the recording holds {bad.size} sample{'s' if bad.size != 1 else ''} that are not numbers (NaN or "
+            f"infinity), the first at {bad[0] / sample_rate:.4f} s: the file is damaged there; tune on an undamaged "
+            "recording"
+        )
     duration = x.size / sample_rate
     lo_ok, hi_ok = min_part_s + guard_s, duration - min_part_s - guard_s
     if not (math.isfinite(stop_at_s) and lo_ok <= stop_at_s <= hi_ok):

@@ -109,8 +109,10 @@ def read_wav(path: str | Path, channel: int | None = None) -> tuple[np.ndarray, 
 CANCEL_DB = -12.0
 #: a step-rate line this many dB clearer in one channel than in the mean ...
 DROWNED_DB = 6.0
-#: ... where the mean's stands less than this clear, dB: another channel drowns the stepping (two microphones a
-#: fraction of a millisecond apart comb-filter each other: the mean's line drops by 11 dB from 40, and is still clear)
+#: ... where the mean's stands less than this clear, dB: the mean blurs the steps (another channel's noise drowns
+#: them; or two microphones about half a step period apart in their envelopes: each click heard twice, 0.44 ms
+#: apart, the mean's line at 1000 Hz falls from 40 to 9-14 dB and its envelope reads 2000 Hz; at other delays it
+#: falls by 11 dB or less, still clear)
 WEAK_LINE_DB = 15.0
 
 
@@ -128,7 +130,8 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
       guard's 8 dB clear (``SignalGuard.min_line_db``), and
       :data:`DROWNED_DB` or more clearer than in the mean, whose line stands less than
       :data:`WEAK_LINE_DB` clear: another channel (an open input picking up hum or noise)
-      drowns it.
+      drowns it, or the channels hear each click at times far enough apart that their
+      mean's envelope no longer beats at the step rate (two microphones some 15 cm apart).
 
     The message names the channel to read instead (1-based, as ``--channel`` takes it).
     ``None`` for a mono file, a file too short to judge, or a mean that keeps the stepping.
@@ -179,7 +182,8 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
     if math.isfinite(in_mix) and in_mix < WEAK_LINE_DB and line - in_mix >= DROWNED_DB:
         return (
             f"{p}: the step rate's line ({r:.0f} Hz) stands {line:.0f} dB clear in channel {best + 1} but "
-            f"{in_mix:.0f} dB in the mean of the {n} channels: another channel drowns the stepping sound; read "
+            f"{in_mix:.0f} dB in the mean of the {n} channels: the mean blurs the steps (noise on another channel, or "
+            f"microphones that hear each step at other times); read "
             f"channel {best + 1} alone with --channel {best + 1}"
         )
     return None

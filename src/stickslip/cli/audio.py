@@ -131,8 +131,13 @@ def tune(
         fail(f"--method must be 'template' or 'band', got {method!r}")
     samples, rate = _load_recording(recording, sample_rate, channel)
     duration = samples.size / rate
+    if samples.size == 0:
+        fail(f"{recording} holds no samples (an empty or truncated recording): nothing to tune on")
     if not 0 < stop_at < duration:
-        fail(f"--stop-at {stop_at:g} s is outside the recording (0..{duration:.3f} s)")
+        fail(
+            f"--stop-at {stop_at:g} s is not inside the recording, which lasts {duration:.3f} s: the stop comes "
+            "after some stepping and before the end, with the stop's sound after it"
+        )
     try:
         if method == "band":
             tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
@@ -289,8 +294,9 @@ def listen(
         events += det.finish()
     warmup_s = tuning.warmup_s if tuning.method == "template" else 0.0
     if heard < (warmup_s + tuning.hold_s) * heard_rate:
+        lasts_ms = 1e3 * heard / heard_rate
         err_console.print(
-            f"warning: {recording} lasts only {1e3 * heard / heard_rate:.1f} ms ({heard} sample"
+            f"warning: {recording} lasts only {lasts_ms:.{1 if lasts_ms >= 0.1 else 4}f} ms ({heard} sample"
             f"{'s' if heard != 1 else ''}): less than the {1e3 * warmup_s:.0f} ms of stepping the detector learns "
             "from before it can hear a stop (unless the recording starts at the stop)",
             highlight=False,
@@ -299,7 +305,8 @@ def listen(
     if opening and tuning.step_rate_hz is not None:
         from ..audio.stepclock import step_rate_hz
 
-        first = np.nan_to_num(np.concatenate(opening))
+        # damaged samples count as silence here: one infinity read as full scale would be the only 'click' heard
+        first = np.nan_to_num(np.concatenate(opening), nan=0.0, posinf=0.0, neginf=0.0)
         dead = block_problem(first) is not None  # no rate to hear in silence (the warning below says so)
         heard_hz = math.nan if dead else step_rate_hz(first, heard_rate)
         why = tuning.step_rate_problem(heard_hz, f"{recording}: the joint steps")
@@ -313,7 +320,8 @@ def listen(
         )
     if n_bad:
         err_console.print(
-            f"warning: {recording}: {n_bad} samples are not numbers (NaN or infinity), the first at "
+            f"warning: {recording}: {n_bad} "
+            f"{'samples are not numbers' if n_bad != 1 else 'sample is not a number'} (NaN or infinity), the first at "
             f"{first_bad_s:.4f} s: the file is damaged there; they were heard as 0 (NaN) or full scale (infinity)",
             highlight=False,
             soft_wrap=True,
