@@ -95,6 +95,11 @@ START_MAX_RATIO = 0.4
 #: gives the stop at least this share of its signature (round 10a: a reverberant room or a step rate 1-4 % off colours
 #: the stepping's levels like a damped or shifted stop, b 0.95-2.1, while its continuum says b -0.1-0.02)
 START_LEVELS_CONTINUUM_B = 0.5
+#: the continuum's verdict "the stop" does not count by itself where the levels give the stop less than this share of
+#: its signature (session 27: under a strictly periodic drive tone, slips that jitter less than the tuning's - 3-6
+#: against 15 us - lower the continuum where they dominate, the shape a stop that silences the slips has: the
+#: continuum called stepping a stop at 950, 1000 and 1050 Hz while the levels gave b -0.08 to 0.05)
+START_CONTINUUM_LEVELS_B = 0.25
 #: a fire whose continuum did not change is a stale template (the step rate moved), not a stop: the continuum over
 #: this long after the fire, s, ...
 STALE_AFTER_S = 0.3
@@ -707,6 +712,12 @@ class TemplateState:
           the rate does not move: ``b`` at least :data:`START_MIN_B` (and the threshold) and
           at most :data:`START_MAX_RATIO` of the gain-only residual left.
 
+        Nor is the continuum alone where the levels give the stop less than
+        :data:`START_CONTINUUM_LEVELS_B` of its signature (:meth:`_levels_deny_stop`): the
+        continuum between the lines is the slips' jitter and scatter, which can change from
+        day to day; under a strictly periodic drive tone less jitter lowers the continuum
+        where the slips dominate, the shape a stop that silences the slips has.
+
         Where the tuning holds the continuum, the levels alone are not enough (round 10a): the
         continuum's fit must give the stop at least :data:`START_LEVELS_CONTINUUM_B` of its
         signature too. A reverberant room's tail, or a step rate a few per cent off the
@@ -729,6 +740,8 @@ class TemplateState:
             return  # the continuum contradicts the levels, or neither shows the stop
         if b_lev is None and not b_con:
             return
+        if b_lev is None and self._levels_deny_stop():
+            return  # the lines say stepping: the continuum moved with the slips' jitter, not a stop
         shift = 1.0 if b_lev is None else b_lev
         self.template = self.template - shift * self.delta
         self._set_floor(reset=True)
@@ -887,6 +900,19 @@ class TemplateState:
         clear = ss_both <= 0.25 * ss_gain
         fits = rms_both <= 2.0 + RESIDUAL_SLOPE * b * float(np.sqrt(np.mean((self.delta / self.sigma) ** 2)))
         return b if b >= max(p.threshold, 0.6) and clear and fits else None
+
+    def _levels_deny_stop(self) -> bool:
+        """Do the first frames' levels give the stop less than :data:`START_CONTINUUM_LEVELS_B` of its signature?
+
+        The same gain-plus-signature fit as :meth:`_start_by_levels`, without its demands on
+        the fit's quality (at another step rate the levels move by several spreads). False
+        where the signature is (nearly) a gain change: the levels cannot tell.
+        """
+        p = self.p
+        if p.stepping_levels_db is None or self.template is None:
+            return False
+        fit = self._gain_and_signature(self.template - np.asarray(p.stepping_levels_db), self.delta, self.sigma)
+        return fit is not None and fit[0] < START_CONTINUUM_LEVELS_B
 
     def _start_by_continuum(self) -> bool | None:
         """The continuum's verdict on the start (see :meth:`_started_at_stop`).
