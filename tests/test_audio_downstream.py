@@ -15,7 +15,7 @@ neither is the confirmation's to change:
 * **a fire on stepping before the stop**: a template that departs in one sub-band (the fifth
   generator's arm 1, shifted stop) fires on stepping at another rate; the window (2 s after a
   rejected fire) spans the stop, and the event is flagged ``onset_uncertain``. The flag is right:
-  every one of those onsets is 53-852 ms off.
+  every one of those onsets is 53-851 ms off.
 
 The checks here are made from another view than the detector's own: the stop-likeness and the
 drops are computed offline from the public level and fit functions against a fixed template
@@ -140,7 +140,7 @@ def test_a_fire_on_stepping_that_runs_into_the_stop_is_flagged_and_the_flag_is_r
     """The fifth generator's arm 1, shifted stop: its template departs in one sub-band, and stepping at another rate
     fires it before the stop (the first fire 0.4-1.8 s early, rejected; the next, within 2 s of it, has a 2 s window
     that the stop then fills). The event is flagged, a traverse measures again: and rightly, as the onset it carries
-    is 53-852 ms from the stop's (counted to it, the count would be silently wrong)."""
+    is 53-851 ms from the stop's (counted to it, the count would be silently wrong)."""
     tu = _tuning("fifth", 1, "shifted")
     y, stop = _recording("fifth", 1, "shifted", rate)
     ev = _events(tu, y)
