@@ -156,7 +156,7 @@ def test_a_fire_on_stepping_that_runs_into_the_stop_is_flagged_and_the_flag_is_r
 
 
 # (generator, arm, stop kind, test rate Hz, the onset's error ms): flagged "a slow rise" of 21-53 ms on main, the climb
-# measured from a stepping that flickers to 0.6-1.4 thresholds at this rate
+# measured from a stepping that flickers to 0.5-1.4 thresholds at this rate
 FLICKER = [
     ("fourth", 6, "spectral", 1050.0, 0.0),
     ("fifth", 7, "stiff", 900.0, 3.2),
@@ -170,7 +170,7 @@ def test_a_stepping_that_flickers_at_another_rate_is_not_taken_for_the_stop_s_cl
 ) -> None:
     """The onset check's cost (round 11b): the slow-rise check walked back from the crossing over every frame a quarter
     of the way from the stepping's level to the stop's; at another rate the stepping flickers past that (its 95th
-    percentile 0.6-1.4 thresholds on the detector's own template, 0.40-0.77 offline), and the walk measured the
+    percentile 0.46-1.38 thresholds on the detector's own template, 0.40-0.77 offline), and the walk measured the
     flicker as the climb. The climb is now measured from where the stop-likeness left the stepping's own range: these
     stops, on time, are no longer flagged (a traverse is not measured again for nothing)."""
     tu = _tuning(gen, arm, kind)

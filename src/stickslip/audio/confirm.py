@@ -184,7 +184,7 @@ ONSET_QUIET = 0.3
 ONSET_BACK_MAX_S = 0.1
 #: ... a slow rise's climb is measured only over frames above this percentile of the stepping's stop-likeness (over
 #: ONSET_BASE_S), where that is higher than ONSET_RISE_SHARE of the way: a frame within the stepping's own range is no
-#: sign the stop began (round 11b: a stepping at another rate than the tuning's flickers to 0.6-1.4 thresholds) ...
+#: sign the stop began (round 11b: a stepping at another rate than the tuning's flickers to 0.5-1.4 thresholds) ...
 ONSET_STEPPING_PCT = 95.0
 #: ... but never above this share of the way from the stepping's level (its median) to the stop's
 ONSET_STEPPING_CAP = 0.5
@@ -701,7 +701,7 @@ class ConfirmedStopDetector:
         # onset is taken from, whichever is later (a stop that barely clears the threshold crosses it late, or early and
         # again later)
         # ... and it begins where the stop-likeness left the stepping's own range (round 11b: at another step rate than
-        # the tuning's the stepping flickers to 0.6-1.4 thresholds, and a walk back over it measured its flicker as the
+        # the tuning's the stepping flickers to 0.5-1.4 thresholds, and a walk back over it measured its flicker as the
         # stop's climb); the walk above, which finds the frame the onset is taken back to, is not changed
         hi = float(np.percentile(base + 1.0, ONSET_STEPPING_PCT))
         k = self._run_start(c, lo, max(level, min(hi, ONSET_STEPPING_CAP * (b0 + stop_level)) - 1.0))
