@@ -124,6 +124,8 @@ __all__ = [
     "ONSET_QUIET",
     "ONSET_RISE_SHARE",
     "ONSET_SLOW_S",
+    "ONSET_STEPPING_CAP",
+    "ONSET_STEPPING_PCT",
     "ONSET_TOL_S",
     "RECENT_S",
     "ConfirmedStopDetector",
@@ -180,6 +182,12 @@ ONSET_RISE_SHARE = 0.25
 ONSET_QUIET = 0.3
 #: ... and by no more than this, s (further back, the stop-like run is no longer the stop's climb: flagged)
 ONSET_BACK_MAX_S = 0.1
+#: ... a slow rise's climb is measured only over frames above this percentile of the stepping's stop-likeness (over
+#: ONSET_BASE_S), where that is higher than ONSET_RISE_SHARE of the way: a frame within the stepping's own range is no
+#: sign the stop began (round 11b: a stepping at another rate than the tuning's flickers to 0.5-1.4 thresholds) ...
+ONSET_STEPPING_PCT = 95.0
+#: ... but never above this share of the way from the stepping's level (its median) to the stop's
+ONSET_STEPPING_CAP = 0.5
 #: ... to a hot frame after which the climb held: no run of more than this many frames under its level
 ONSET_HELD_DIPS = 1
 #: longest window accepted, s (a traverse steps this long into the stop)
@@ -640,7 +648,12 @@ class ConfirmedStopDetector:
           took more than :data:`ONSET_SLOW_S` (a reverberant room's tail filling the
           sub-bands the stop empties, a stop that barely clears the threshold, a slow
           arrival): the crossing comes late by an unknown share of the climb. The climb is
-          kept in :attr:`rise_log`.
+          measured from where the stop-likeness left the stepping's own range: the walk
+          above, over frames also above the stepping's :data:`ONSET_STEPPING_PCT`
+          percentile (over the same span; at most :data:`ONSET_STEPPING_CAP` of the way to
+          the stop's level). A stepping at another rate than the tuning's flickers up to the
+          threshold and over it, and its flicker is not the stop's climb (round 11b). The
+          climb is kept in :attr:`rise_log`.
 
         Nothing is judged (None) where the levels are not known: no stepping heard before
         the onset, or a stop no higher than the stepping.
@@ -687,6 +700,12 @@ class ConfirmedStopDetector:
         # the climb: from the end of the frame before it to its first frame over the threshold, or to the crossing the
         # onset is taken from, whichever is later (a stop that barely clears the threshold crosses it late, or early and
         # again later)
+        # ... and it begins where the stop-likeness left the stepping's own range (round 11b: at another step rate than
+        # the tuning's the stepping flickers to 0.5-1.4 thresholds, and a walk back over it measured its flicker as the
+        # stop's climb); the walk above, which finds the frame the onset is taken back to, is not changed
+        hi = float(np.percentile(base + 1.0, ONSET_STEPPING_PCT))
+        k = self._run_start(c, lo, max(level, min(hi, ONSET_STEPPING_CAP * (b0 + stop_level)) - 1.0))
+        f0 = next((i for i in range(k, c + 1) if self._margin(i) >= 0.0), c)
         climb = max(self._frame_end_s(f0), min(onset, ev.onset_s) + self._lag) - self._frame_end_s(k - 1)
         self.rise_log.append((ev.detected_at_s, climb))
         if climb > ONSET_SLOW_S:
