@@ -180,9 +180,7 @@ class Release:
     def stepping_rows(self) -> list[FloatArray]:
         """The levels of the window's frames that sounded like stepping (those pushed with a row)."""
         return [
-            r
-            for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True)
-            if f and r is not None
+            r for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True) if f and r is not None
         ]
 
 

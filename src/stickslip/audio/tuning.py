@@ -401,12 +401,12 @@ def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> Tuning:
     # 5. the step rate, and the continuum between its lines: how a stream at another rate tells it began at the stop
     tu = _with_continuum(tu, x[first : int((stop_s - g) * sample_rate)], x[int((stop_s + g) * sample_rate) : last])
     # 6. the fine continuum spectra: the stop's signature predicted at another step rate (rate_signature.py)
-    skip = int(FINE_SKIP_S * sample_rate)
-    step_lo = first + skip if int((stop_s - g) * sample_rate) - (first + skip) >= 2 * fine_segment(sample_rate) else first
+    step_hi, skip = int((stop_s - g) * sample_rate), int(FINE_SKIP_S * sample_rate)
+    step_lo = first + skip if step_hi - (first + skip) >= 2 * fine_segment(sample_rate) else first
     stop_lo = int((stop_s + FINE_SKIP_STOP_S) * sample_rate)
     if last - stop_lo < fine_segment(sample_rate):
         stop_lo = int((stop_s + g) * sample_rate)
-    return _with_fine(tu, x[step_lo : int((stop_s - g) * sample_rate)], x[stop_lo:last])
+    return _with_fine(tu, x[step_lo:step_hi], x[stop_lo:last])
 
 
 def _with_fine(tu: Tuning, stepping: FloatArray, stopped: FloatArray) -> Tuning:
