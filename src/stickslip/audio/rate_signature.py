@@ -115,7 +115,7 @@ def fine_range_hz(edges_hz: tuple[float, ...] | list[float], sample_rate: int, f
 
 
 class SignaturePredictor:
-    """The signature at a heard step rate (see the module docstring), the response tables built once.
+    """The signature at a heard step rate (see the module docstring).
 
     Parameters
     ----------
@@ -152,7 +152,8 @@ class SignaturePredictor:
         self.f = np.asarray(float(fine_start_hz) + float(fine_bin_hz) * np.arange(cs.size), dtype=np.float64)
         self.c_step = 10 ** (cs / 10)
         self.c_stop = 10 ** (cp / 10)
-        self.R = _line_response(sample_rate, frame, edges_hz, self.f)
+        self.sample_rate, self.frame = int(sample_rate), int(frame)
+        self.edges = tuple(float(e) for e in edges_hz)
         self._l0 = self._levels(self.rate0)
 
     def _levels(self, rate: float) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -160,12 +161,11 @@ class SignaturePredictor:
         f = self.f
         k0 = max(1, int(math.ceil(f[0] / rate)))
         k1 = int(math.floor(f[-1] / rate))
-        nb = self.R.shape[0]
         if k1 < k0:
-            z = np.zeros(nb)
+            z = np.zeros(len(self.edges) - 1)
             return z, z.copy(), z.copy()
-        lines = np.arange(k0, k1 + 1) * rate
-        R = np.stack([np.interp(lines, f, self.R[b]) for b in range(nb)])
+        lines = np.asarray(np.arange(k0, k1 + 1) * rate, dtype=np.float64)
+        R = _line_response(self.sample_rate, self.frame, self.edges, lines)  # a few tens of lines: computed, not looked up
         return R @ np.interp(lines, f, self.c_step), R @ np.interp(lines, f, self.c_stop), R.sum(axis=1)
 
     def correction_db(self, rate_hz: float) -> FloatArray:

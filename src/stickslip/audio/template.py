@@ -1040,9 +1040,12 @@ class TemplateState:
         d = v - self.template
         a, rho = self._fit(d)
         if self._fit_rate is not None:
-            # the signature predicted at the heard rate too: the larger stop-likeness, with its residual
+            # the signature predicted at the heard rate too: the larger stop-likeness, with its residual, where the
+            # prediction explains the frame (its residual within residual_max); a frame it does not explain is no
+            # evidence of the stop, and would hold up the stop-likeness a confirmation watches after a fire that the
+            # tuned fit made (round 11a: a fifth-generator arm confirmed 41 ms early that way)
             a2, rho2 = self._fit_rate(d)
-            use = a2 > a
+            use = (a2 > a) & (rho2 <= p.residual_max)
             a, rho = np.where(use, a2, a), np.where(use, rho2, rho)
         hot = (a >= p.threshold) & (rho <= p.residual_max)
         lag = np.zeros(a.size)

@@ -543,7 +543,13 @@ class Tuning:
     def save(self, path: str | Path) -> Path:
         """Write the tuning as JSON; returns the path."""
         p = Path(path)
-        records.atomic_write_text(p, json.dumps(self.to_dict(), indent=2) + "\n")
+        d = self.to_dict()
+        # the fine spectra (thousands of levels each) on one line apiece, not one line per level
+        long = {k: d[k] for k in ("fine_stepping_db", "fine_stopped_db") if isinstance(d.get(k), list)}
+        text = json.dumps({**d, **{k: f"@{k}@" for k in long}}, indent=2)
+        for k, v in long.items():
+            text = text.replace(f'"@{k}@"', json.dumps(v))
+        records.atomic_write_text(p, text + "\n")
         return p
 
     @classmethod
