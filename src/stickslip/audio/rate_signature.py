@@ -40,6 +40,8 @@ __all__ = [
     "RATE_MIN_CHANGE",
     "RATE_WINDOW",
     "SignaturePredictor",
+    "fine_range_hz",
+    "fine_segment",
     "fine_spectrum_db",
 ]
 
@@ -165,7 +167,8 @@ class SignaturePredictor:
             z = np.zeros(len(self.edges) - 1)
             return z, z.copy(), z.copy()
         lines = np.asarray(np.arange(k0, k1 + 1) * rate, dtype=np.float64)
-        R = _line_response(self.sample_rate, self.frame, self.edges, lines)  # a few tens of lines: computed, not looked up
+        # a few tens of lines: their response computed, not looked up in a table
+        R = _line_response(self.sample_rate, self.frame, self.edges, lines)
         return R @ np.interp(lines, f, self.c_step), R @ np.interp(lines, f, self.c_stop), R.sum(axis=1)
 
     def correction_db(self, rate_hz: float) -> FloatArray:
