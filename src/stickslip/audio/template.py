@@ -30,6 +30,12 @@ until over the last ``release_s`` at least :data:`RELEASE_SHARE` of the frames s
 like stepping again rather than like the stop that fired (:class:`Release`,
 :meth:`TemplateState._stepping_again`); then it learns its template anew from them.
 
+A tuning that holds the training recording's fine continuum spectra (round 11a) lets the
+detector predict the stop's signature at the step rate it hears, at the warm-up and
+whenever it learns its template anew (:mod:`.rate_signature`): within 1-12 % of the
+tuning's rate each frame is fitted on that signature too, and the larger ``a`` counts
+(with its residual) where the prediction explains the frame (:meth:`TemplateState._hear_rate`).
+
 Two judgements read the *continuum* between the step clock's lines
 (:func:`continuum_levels_db`), which a change of the step rate does not move as it moves
 the sub-band levels (tunings that recorded their step rate): whether listening began at
