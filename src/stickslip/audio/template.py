@@ -186,7 +186,9 @@ class Release:
     def stepping_rows(self) -> list[FloatArray]:
         """The levels of the window's frames that sounded like stepping (those pushed with a row)."""
         return [
-            r for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True) if f and r is not None
+            r
+            for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True)
+            if f and r is not None
         ]
 
 
@@ -761,7 +763,7 @@ class TemplateState:
         self.rate_log.append((int(end), float(rate), used))
 
     def predictor(self) -> SignaturePredictor:
-        """The tuning's signature predictor (its response tables built at the first call); needs :attr:`predicts`."""
+        """The tuning's signature predictor (built at the first rate that needs it); needs :attr:`predicts`."""
         if self._predictor is None:
             p = self.p
             assert (

@@ -227,6 +227,11 @@ def tune(
        power between neighbouring sub-bands 1/12 octave wide, inside one 1/3 octave
        wide (docs/audio.md, "A stop that only shifts the spectrum"). Every resolution
        tried is listed in ``checks["resolutions"]``.
+    8. The chosen tuning stores the step rate heard, the continuum between its lines
+       per sub-band, and the fine continuum spectra of stepping and of the stop
+       (``fine_*``, :func:`~stickslip.audio.rate_signature.fine_spectrum_db`): the
+       detector predicts the stop's signature from them at another step rate
+       (docs/audio.md, "Round 11a").
     """
     x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     from .guard import block_problem
