@@ -41,8 +41,9 @@ SR = 48_000
 FINE = ("fine_start_hz", "fine_bin_hz", "fine_stepping_db", "fine_stopped_db")
 
 
-def _old(tu: Tuning) -> Tuning:
-    """The same tuning as a file made before the fine spectra were stored."""
+def tuned_alone(tu: Tuning) -> Tuning:
+    """The same tuning as a file made before the fine spectra were stored: the tuned signature alone (tests that pin
+    a mechanism on recordings the second fit now hears differently use it)."""
     return replace(tu, fine_start_hz=None, fine_bin_hz=None, fine_stepping_db=None, fine_stopped_db=None)
 
 
@@ -88,7 +89,7 @@ def test_a_stop_the_tuned_signature_misses_at_another_rate_is_heard(
     tu = _tuning(gen, arm, kind)
     assert tu.fine_stepping_db is not None and tu.step_rate_hz is not None
     y, stop = _recording(gen, arm, kind, rate)
-    before, _ = _events(_old(tu), y)
+    before, _ = _events(tuned_alone(tu), y)
     assert before == [], [(e.onset_s, e.onset_uncertain) for e in before]  # the tuned signature alone: missed
     after, sd = _events(tu, y)
     assert after, "missed"
@@ -170,7 +171,6 @@ def test_the_tuning_file_round_trip(tmp_path: Path) -> None:
         ({"fine_stopped_db": [0.0, 1.0, 2.0]}, "as many"),
         ({"fine_stepping_db": [0.0, 1e9]}, "fine_stepping_db"),
         ({"fine_start_hz": float("nan")}, "fine_start_hz"),
-        ({"step_rate_hz": None, **dict.fromkeys(("continuum_levels_db", "continuum_signature_db"))}, "come together"),
     ],
 )
 def test_a_bad_fine_spectrum_is_refused_by_name(change: dict[str, object], message: str) -> None:
@@ -193,7 +193,7 @@ def test_an_old_tuning_file_loads_and_detects_exactly_as_before(tmp_path: Path) 
     path = tmp_path / "old.json"
     path.write_text(json.dumps(d))
     old = Tuning.load(path)
-    assert old == _old(_tuning("arrival", 2, "damped"))
+    assert old == tuned_alone(_tuning("arrival", 2, "damped"))
     pinned = {
         950.0: ([(2.0124752585088492, 2.0639791666666665, False)], -643.7458342403232),
         1050.0: ([], -809.5755728326991),

@@ -129,10 +129,10 @@ class Tuning:
         (:func:`~stickslip.audio.template.continuum_levels_db`). They let the detector tell
         that it began listening at the stop when the stream steps at another rate.
     fine_start_hz, fine_bin_hz : float or None
-        ``"template"``, with ``step_rate_hz``: the first bin's frequency and the bin width
+        ``"template"``: the first bin's frequency and the bin width
         of the two fine spectra below, Hz.
     fine_stepping_db, fine_stopped_db : tuple of float or None
-        ``"template"``, with ``step_rate_hz``: the tuning recording's fine continuum
+        ``"template"``, used with ``step_rate_hz``: the tuning recording's fine continuum
         spectra (Welch, ~5.9 Hz bins, the step clock's lines interpolated across; dB re
         full scale per Hz) of stepping and of the stop, over the sub-bands and a few bins
         beyond (:func:`~stickslip.audio.rate_signature.fine_spectrum_db`). They let the
@@ -317,8 +317,8 @@ class Tuning:
 
     def _check_fine(self) -> None:
         given = [getattr(self, k) is not None for k in _FINE]
-        if any(given) and not (all(given) and self.step_rate_hz is not None):
-            raise ValueError(f"{', '.join(_FINE)} come together, with step_rate_hz")
+        if any(given) and not all(given):  # without step_rate_hz they are kept, and not used
+            raise ValueError(f"{', '.join(_FINE)} come together")
         if not all(given):
             return
         start, bin_hz = float(self.fine_start_hz or 0.0), float(self.fine_bin_hz or 0.0)
