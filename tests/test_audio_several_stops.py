@@ -131,12 +131,13 @@ def test_a_session_whose_rate_changes_between_traverses_hears_every_stop_on_time
     +4 ms but its drops only in flickers (the floor is the slower stepping's: its lines sit elsewhere), so the hold
     broke and the fire came at +55 ms: +31 ms, unflagged in session 25. On this branch's base (a6d72f4) already
     flagged "a stop heard late" (the stop-likeness was at the stop's level from +4 ms): the xfail was strict only
-    because it asked for on time; the others are on time.
+    because it asked for on time; the others are on time. Since round 11a's second fit (the first traverse is 3.5 %
+    slower than the tuning) the first is flagged too: measured again, never a wrong count.
     """
     y, stops = _session("modal 3 louder", [0.5, 0.0], [965.0, 1000.0, 965.0], seed=4997)
     got = _events("modal 3 louder", y)
     assert _never_silently_wrong(got, stops), (stops, got)
-    assert [u for _, u in got] == [False, True, False], got  # the first and the last on time
+    assert [u for _, u in got] == [True, True, False], got  # the last on time
 
 
 @settings(max_examples=6, deadline=None)

@@ -221,7 +221,7 @@ class StopDetector:
         self._ring_n = 0
         if self._template is not None:
             self._template.reset(t0_s)
-            if self._template._checks:
+            if self._template._checks or self._template.predicts:
                 self._template.samples = self._samples
 
     def hold(self, on: bool) -> None:

@@ -30,6 +30,12 @@ until over the last ``release_s`` at least :data:`RELEASE_SHARE` of the frames s
 like stepping again rather than like the stop that fired (:class:`Release`,
 :meth:`TemplateState._stepping_again`); then it learns its template anew from them.
 
+A tuning that holds the training recording's fine continuum spectra (round 11a) lets the
+detector predict the stop's signature at the step rate it hears, at the warm-up and
+whenever it learns its template anew (:mod:`.rate_signature`): within 1-12 % of the
+tuning's rate each frame is fitted on that signature too, and the larger ``a`` counts
+(with its residual) where the prediction explains the frame (:meth:`TemplateState._hear_rate`).
+
 Two judgements read the *continuum* between the step clock's lines
 (:func:`continuum_levels_db`), which a change of the step rate does not move as it moves
 the sub-band levels (tunings that recorded their step rate): whether listening began at
@@ -49,6 +55,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+
+from .rate_signature import MIN_SIGNATURE_RMS, RATE_MIN_CHANGE, RATE_WINDOW, SignaturePredictor
 
 __all__ = [
     "CHUNK",
@@ -383,6 +391,10 @@ class TemplateParams:
     continuum_levels_db: tuple[float, ...] | None = None
     continuum_signature_db: tuple[float, ...] | None = None
     continuum_spread_db: tuple[float, ...] | None = None
+    fine_start_hz: float | None = None
+    fine_bin_hz: float | None = None
+    fine_stepping_db: tuple[float, ...] | None = None
+    fine_stopped_db: tuple[float, ...] | None = None
 
 
 @dataclass
@@ -507,6 +519,16 @@ class TemplateState:
         self.stale_log: list[tuple[int, float, float, float, bool]] = []
         self._after_frames = max(CHUNK + 1, int(math.ceil(STALE_AFTER_S * p.sample_rate / p.hop)))
         self._checks = p.continuum_signature_db is not None and p.continuum_spread_db is not None
+        #: the tuning holds the fine spectra: the stop's signature is predicted at the step rate heard whenever the
+        #: template is learned (:meth:`_hear_rate`) and fitted beside the tuned one
+        self.predicts = (
+            p.step_rate_hz is not None
+            and p.fine_start_hz is not None
+            and p.fine_bin_hz is not None
+            and p.fine_stepping_db is not None
+            and p.fine_stopped_db is not None
+        )
+        self._predictor: SignaturePredictor | None = None  # built at the first rate that needs it
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -546,6 +568,12 @@ class TemplateState:
         #: the stream samples (ends of the chunk) at which a template that fitted nothing was learned anew
         self.relearned: list[int] = []
         self._recent_v: list[tuple[int, FloatArray]] = []  # (first frame index, levels) of the latest frames
+        self._head_rate: float | None = None  # the step rate heard in the warm-up's samples (once), Hz
+        #: the fit on the signature predicted at the heard step rate, beside the tuned one (None: the tuned alone)
+        self._fit_rate: _Fitter | None = None
+        #: per hearing of the step rate (:meth:`_hear_rate`): (the stream sample it was heard up to, the rate heard, Hz
+        #: (NaN: none), whether the predicted signature is fitted from there on)
+        self.rate_log: list[tuple[int, float, bool]] = []
 
     def unlatch(self) -> None:
         """Re-arm: forget the latest fire and listen again from the next frame (a confirmation rejected it, or the
@@ -585,7 +613,7 @@ class TemplateState:
         stepping = self._stepping_again(d)
         return self._latched_frames > self._min_latch and self.release.push(stepping, v) and not self.held
 
-    def _relearn_after_stop(self) -> None:
+    def _relearn_after_stop(self, end: int) -> None:
         """A stop ended: re-arm, and learn the template anew from the release window's stepping frames.
 
         The template was frozen while the detector was latched, and what follows a stop is
@@ -608,6 +636,8 @@ class TemplateState:
         self._chunk_rho, self._chunk_v = [], []
         self._drop.reset()
         self._neg_tail = (np.zeros(0), np.zeros(0))
+        # a new stretch of stepping, perhaps at another rate: hear it over the release window
+        self._hear_rate_over(end, p.release_frames * p.hop + p.frame)
 
     def _set_floor(self, reset: bool = False) -> None:
         """Remember the template just updated; the floor is the lowest of the last :data:`FLOOR_CHUNKS`."""
@@ -640,7 +670,7 @@ class TemplateState:
             self.frame_no += j - i
             i = j
             if cut is not None:
-                self._relearn_after_stop()
+                self._relearn_after_stop(int(ends[j - 1]))
             if self._check is not None and self.frame_no >= self._check[0]:
                 self._stale_check(int(ends[j - 1]))
             if self.frame_no % CHUNK == 0:
@@ -661,6 +691,8 @@ class TemplateState:
                 self._drop_scale = 1.0 / np.maximum(self.sigma, live)
                 self._warm = []
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
+                if self.predicts:
+                    self._hear_rate(self._heard_head_rate(), end)
                 self._started_at_stop(end)
             return
         if self._chunk_rho and not self.latched and self.template is not None:
@@ -675,6 +707,7 @@ class TemplateState:
                 self._set_floor(reset=bool(np.min(self.template - old) > STALE_ALL_UP_DB))
                 self.relearned = [*self.relearned[-15:], end]  # for the confirming detector (confirm.py: a stop the
                 # template learned); the latest few are all it asks about
+                self._hear_rate_over(end, CHUNK * p.hop + p.frame)
                 self._acc_n = 0
                 self.arm_sample = end + int(DROP_ARM_S * p.sample_rate)
                 self._drop.reset()
@@ -689,6 +722,74 @@ class TemplateState:
             self._set_floor()
         self._acc_list = []
         self._acc_n = 0
+
+    def _heard_head_rate(self) -> float:
+        """The step rate heard in the warm-up's samples :attr:`head`, Hz (NaN: none), heard once."""
+        if self._head_rate is None:
+            from .stepclock import step_rate_hz
+
+            self._head_rate = math.nan if self.head is None else step_rate_hz(self.head, self.p.sample_rate)
+        return self._head_rate
+
+    def _hear_rate_over(self, end: int, n: int) -> None:
+        """:meth:`_hear_rate` over the stream's last ``n`` samples up to sample ``end`` (where they are kept)."""
+        if not self.predicts:
+            return
+        x = None if self.samples is None else self.samples(end + 1 - n, end + 1)
+        if x is None:
+            self._hear_rate(math.nan, end)
+            return
+        from .stepclock import step_rate_hz
+
+        self._hear_rate(step_rate_hz(x, self.p.sample_rate), end)
+
+    def _hear_rate(self, rate: float, end: int) -> None:
+        """The template was learned (at ``end``) from stepping heard at ``rate``, Hz: which signatures to fit.
+
+        Where the rate is within :data:`~stickslip.audio.rate_signature.RATE_WINDOW` of the
+        tuning's and differs from it by more than
+        :data:`~stickslip.audio.rate_signature.RATE_MIN_CHANGE`, each frame is fitted on
+        the tuned signature and on the one predicted at ``rate``
+        (:class:`~stickslip.audio.rate_signature.SignaturePredictor`), and the larger
+        stop-likeness is taken with its residual; otherwise (no rate heard, the tuning's
+        rate, a rate far off: a multiple heard) on the tuned one alone, as before. The
+        drops' check, the release's projection and the start-at-the-stop judgement keep
+        the tuned signature.
+        """
+        p = self.p
+        self._fit_rate = None
+        used = False
+        r0 = p.step_rate_hz
+        if r0 is not None and math.isfinite(rate) and RATE_MIN_CHANGE < abs(rate / r0 - 1.0) <= RATE_WINDOW:
+            pred = self.predictor().predict(rate)
+            if float(np.sqrt(np.mean((pred / self.sigma) ** 2))) >= MIN_SIGNATURE_RMS:
+                self._fit_rate = _Fitter(pred, self.sigma, p.trim)
+                used = True
+        self.rate_log.append((int(end), float(rate), used))
+
+    def predictor(self) -> SignaturePredictor:
+        """The tuning's signature predictor (built at the first rate that needs it); needs :attr:`predicts`."""
+        if self._predictor is None:
+            p = self.p
+            assert (
+                p.step_rate_hz is not None
+                and p.fine_start_hz is not None
+                and p.fine_bin_hz is not None
+                and p.fine_stepping_db is not None
+                and p.fine_stopped_db is not None
+            )
+            self._predictor = SignaturePredictor(
+                p.sample_rate,
+                p.frame,
+                p.edges_hz,
+                self.delta,
+                p.step_rate_hz,
+                p.fine_start_hz,
+                p.fine_bin_hz,
+                p.fine_stepping_db,
+                p.fine_stopped_db,
+            )
+        return self._predictor
 
     @property
     def head_samples(self) -> int:
@@ -866,6 +967,7 @@ class TemplateState:
         self._drop.reset()
         self._neg_tail = (np.zeros(0), np.zeros(0))
         self.arm_sample = end + int(DROP_ARM_S * sr)
+        self._hear_rate_over(end, int(STALE_RELEARN_S * sr) + p.frame)
 
     @staticmethod
     def _gain_and_signature(
@@ -934,9 +1036,7 @@ class TemplateState:
             return False  # an older tuning: the levels judge alone, as before
         if head is None:
             return None
-        from .stepclock import step_rate_hz
-
-        rate = step_rate_hz(head, p.sample_rate)
+        rate = self._heard_head_rate()
         if not math.isfinite(rate):
             return None
         C = continuum_levels_db(head, p.sample_rate, CONTINUUM_FRAME * p.frame, p.frame, p.edges_hz, rate)
@@ -973,6 +1073,14 @@ class TemplateState:
                 self._recent_v.pop(0)
         d = v - self.template
         a, rho = self._fit(d)
+        if self._fit_rate is not None:
+            # the signature predicted at the heard rate too: the larger stop-likeness, with its residual, where the
+            # prediction explains the frame (its residual within residual_max); a frame it does not explain is no
+            # evidence of the stop, and would hold up the stop-likeness a confirmation watches after a fire that the
+            # tuned fit made (round 11a: a fifth-generator arm confirmed 41 ms early that way)
+            a2, rho2 = self._fit_rate(d)
+            use = (a2 > a) & (rho2 <= p.residual_max)
+            a, rho = np.where(use, a2, a), np.where(use, rho2, rho)
         hot = (a >= p.threshold) & (rho <= p.residual_max)
         lag = np.zeros(a.size)
         quiet = a < 0.3 * p.threshold

@@ -19,6 +19,7 @@ from scipy.ndimage import percentile_filter
 from .band_tuning import _DEFAULT_MAX_DIPS, candidate_bands, tune_band
 from .detector import Tuning, frame_power_spectra
 from .labels import TuningError, _recording, _sound_change
+from .rate_signature import fine_range_hz, fine_segment, fine_spectrum_db
 from .stepclock import step_rate_hz
 from .template import (
     CHUNK,
@@ -63,6 +64,11 @@ FINER_MIN_MARGIN = 0.3
 #: not :func:`stepping_band`'s 25 dB: a stop that moves a mode at the band's edge out of it departs beyond it (the
 #: fifth generator's arm 4: its 4.19 kHz mode moves to 4.50 kHz, past the 4.22 kHz edge); None: never
 WIDE_RANGE_DB: float | None = 45.0
+
+#: the fine spectrum of stepping skips the recording's first this long, s (where the stepping part is long enough:
+#: a traverse's first steps may ring in differently), and that of the stop its first this long after the stop, s
+FINE_SKIP_S = 0.3
+FINE_SKIP_STOP_S = 0.1
 
 #: drop thresholds: this many times the worst drop of the stepping part ...
 DROP_MARGIN = 1.6
@@ -221,6 +227,11 @@ def tune(
        power between neighbouring sub-bands 1/12 octave wide, inside one 1/3 octave
        wide (docs/audio.md, "A stop that only shifts the spectrum"). Every resolution
        tried is listed in ``checks["resolutions"]``.
+    8. The chosen tuning stores the step rate heard, the continuum between its lines
+       per sub-band, and the fine continuum spectra of stepping and of the stop
+       (``fine_*``, :func:`~stickslip.audio.rate_signature.fine_spectrum_db`): the
+       detector predicts the stop's signature from them at another step rate
+       (docs/audio.md, "Round 11a").
     """
     x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     from .guard import block_problem
@@ -393,7 +404,38 @@ def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> Tuning:
     # 4. self-check with interference; the quietest passing candidate wins
     tu = _pick(passing, x, sample_rate, frame, stop_s, g, seed, self_check, warnings, stop_at_s, change)
     # 5. the step rate, and the continuum between its lines: how a stream at another rate tells it began at the stop
-    return _with_continuum(tu, x[first : int((stop_s - g) * sample_rate)], x[int((stop_s + g) * sample_rate) : last])
+    tu = _with_continuum(tu, x[first : int((stop_s - g) * sample_rate)], x[int((stop_s + g) * sample_rate) : last])
+    # 6. the fine continuum spectra: the stop's signature predicted at another step rate (rate_signature.py)
+    step_hi, skip = int((stop_s - g) * sample_rate), int(FINE_SKIP_S * sample_rate)
+    step_lo = first + skip if step_hi - (first + skip) >= 2 * fine_segment(sample_rate) else first
+    stop_lo = int((stop_s + FINE_SKIP_STOP_S) * sample_rate)
+    if last - stop_lo < fine_segment(sample_rate):
+        stop_lo = int((stop_s + g) * sample_rate)
+    return _with_fine(tu, x[step_lo:step_hi], x[stop_lo:last])
+
+
+def _with_fine(tu: Tuning, stepping: FloatArray, stopped: FloatArray) -> Tuning:
+    """``tu`` with the fine continuum spectra of stepping and of the stop (:func:`~.rate_signature.fine_spectrum_db`).
+
+    Over the sub-bands and :data:`~.rate_signature.FINE_MARGIN_BINS` detector bins
+    beyond, at the step rate ``tu`` heard; levels rounded to 0.01 dB. Unchanged when no
+    rate was heard or a part is shorter than one Welch segment.
+    """
+    assert tu.edges_hz is not None
+    if tu.step_rate_hz is None:
+        return tu
+    lo, hi = fine_range_hz(tu.edges_hz, tu.sample_rate, tu.frame)
+    step = fine_spectrum_db(stepping, tu.sample_rate, tu.step_rate_hz, lo, hi)
+    stop = fine_spectrum_db(stopped, tu.sample_rate, tu.step_rate_hz, lo, hi)
+    if step is None or stop is None:
+        return tu
+    return replace(
+        tu,
+        fine_start_hz=round(step[0], 6),
+        fine_bin_hz=round(step[1], 9),
+        fine_stepping_db=tuple(round(float(v), 2) for v in step[2]),
+        fine_stopped_db=tuple(round(float(v), 2) for v in stop[2]),
+    )
 
 
 def _with_continuum(tu: Tuning, stepping: FloatArray, stopped: FloatArray) -> Tuning:

@@ -21,6 +21,9 @@ __all__ = ["STEP_RATE_TOLERANCE", "Tuning", "TuningFileError", "default_frame"]
 
 _KIND = "stickslip.audio.Tuning"
 _CONTINUUM = ("continuum_levels_db", "continuum_signature_db", "continuum_spread_db")
+_FINE = ("fine_start_hz", "fine_bin_hz", "fine_stepping_db", "fine_stopped_db")
+#: at most this many values in each fine spectrum (20 kHz of 5.9 Hz bins is 3400)
+_FINE_MAX = 20_000
 
 
 class TuningFileError(ValueError):
@@ -125,6 +128,17 @@ class Tuning:
         file) where a sub-band has no bin off the lines at the tuning's rate
         (:func:`~stickslip.audio.template.continuum_levels_db`). They let the detector tell
         that it began listening at the stop when the stream steps at another rate.
+    fine_start_hz, fine_bin_hz : float or None
+        ``"template"``: the first bin's frequency and the bin width
+        of the two fine spectra below, Hz.
+    fine_stepping_db, fine_stopped_db : tuple of float or None
+        ``"template"``, used with ``step_rate_hz``: the tuning recording's fine continuum
+        spectra (Welch, ~5.9 Hz bins, the step clock's lines interpolated across; dB re
+        full scale per Hz) of stepping and of the stop, over the sub-bands and a few bins
+        beyond (:func:`~stickslip.audio.rate_signature.fine_spectrum_db`). They let the
+        detector predict the stop's signature at another step rate
+        (:class:`~stickslip.audio.rate_signature.SignaturePredictor`); None in files made
+        before they were recorded (the detector then fits the tuned signature alone).
     per_octave : float or None
         ``"template"``: sub-bands per octave that :func:`~stickslip.audio.tuning.tune` chose
         for ``edges_hz`` (3, or finer for a stop that only shifts the spectrum); None in
@@ -172,6 +186,10 @@ class Tuning:
     continuum_signature_db: tuple[float, ...] | None = None
     continuum_spread_db: tuple[float, ...] | None = None
     per_octave: float | None = None
+    fine_start_hz: float | None = None
+    fine_bin_hz: float | None = None
+    fine_stepping_db: tuple[float, ...] | None = None
+    fine_stopped_db: tuple[float, ...] | None = None
     checks: dict[str, Any] | None = None
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -256,6 +274,7 @@ class Tuning:
                 raise ValueError(f"drop_threshold {self.drop_threshold} must be two numbers within 0.1..100 spreads")
             object.__setattr__(self, "drop_threshold", dt)
         self._check_continuum(nb)
+        self._check_fine()
         if not 0 <= self.trim < nb:
             raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
         for name, lo_, hi_ in (
@@ -295,6 +314,29 @@ class Tuning:
                 )
         if any(not 1e-3 <= v for v in self.continuum_spread_db or () if not math.isnan(v)):
             raise ValueError("continuum_spread_db must be at least 0.001 dB")
+
+    def _check_fine(self) -> None:
+        given = [getattr(self, k) is not None for k in _FINE]
+        if any(given) and not all(given):  # without step_rate_hz they are kept, and not used
+            raise ValueError(f"{', '.join(_FINE)} come together")
+        if not all(given):
+            return
+        start, bin_hz = float(self.fine_start_hz or 0.0), float(self.fine_bin_hz or 0.0)
+        if not (math.isfinite(start) and 0.0 <= start < self.sample_rate / 2):
+            raise ValueError(f"fine_start_hz {self.fine_start_hz} must be within 0..{self.sample_rate / 2:g} Hz")
+        if not (math.isfinite(bin_hz) and 0.1 <= bin_hz <= 100.0):
+            raise ValueError(f"fine_bin_hz {self.fine_bin_hz} must be within 0.1..100 Hz")
+        object.__setattr__(self, "fine_start_hz", start)
+        object.__setattr__(self, "fine_bin_hz", bin_hz)
+        n = None
+        for k in ("fine_stepping_db", "fine_stopped_db"):
+            v = tuple(float(e) for e in getattr(self, k))
+            object.__setattr__(self, k, v)
+            if not 2 <= len(v) <= _FINE_MAX or not all(abs(e) <= 400 for e in v):
+                raise ValueError(f"{k} must hold 2..{_FINE_MAX} levels within -400..400 dB")
+            if n is not None and len(v) != n:
+                raise ValueError("fine_stepping_db and fine_stopped_db must hold as many levels")
+            n = len(v)
 
     def step_rate_problem(self, step_hz: float, what: str = "the joint steps") -> str | None:
         """A warning if ``step_hz`` (Hz) is more than :data:`STEP_RATE_TOLERANCE` from the tuning's rate.
@@ -387,7 +429,10 @@ class Tuning:
                 d[k] = list(d[k]) if d[k] is not None else None
             for k in _CONTINUUM:
                 d[k] = None if d[k] is None else [None if math.isnan(v) else v for v in d[k]]
-            for k in ("step_rate_hz", "per_octave", *_CONTINUUM):  # absent, as in files made before they were recorded
+            for k in ("fine_stepping_db", "fine_stopped_db"):
+                d[k] = None if d[k] is None else list(d[k])
+            # absent, as in files made before they were recorded
+            for k in ("step_rate_hz", "per_octave", *_CONTINUUM, *_FINE):
                 if d[k] is None:
                     d.pop(k)
         else:
@@ -407,6 +452,7 @@ class Tuning:
                 "step_rate_hz",
                 "per_octave",
                 *_CONTINUUM,
+                *_FINE,
             ):
                 d.pop(k)
         return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
@@ -439,7 +485,15 @@ class Tuning:
                 if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
                     raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
                 kwargs["reference_hz"] = (_number("reference_hz[0]", ref[0]), _number("reference_hz[1]", ref[1]))
-            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
+            for k in (
+                "edges_hz",
+                "signature_db",
+                "spread_db",
+                "stepping_levels_db",
+                "drop_threshold",
+                "fine_stepping_db",
+                "fine_stopped_db",
+            ):
                 if kwargs.get(k) is not None:
                     if not isinstance(kwargs[k], (list, tuple)):
                         raise TuningFileError(f"{k} must be a list of numbers")
@@ -451,7 +505,7 @@ class Tuning:
                     kwargs[k] = tuple(
                         math.nan if v is None else _number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k])
                     )
-            for k in ("step_rate_hz", "per_octave"):
+            for k in ("step_rate_hz", "per_octave", "fine_start_hz", "fine_bin_hz"):
                 if kwargs.get(k) is not None:
                     kwargs[k] = _number(k, kwargs[k])
             if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
@@ -489,7 +543,13 @@ class Tuning:
     def save(self, path: str | Path) -> Path:
         """Write the tuning as JSON; returns the path."""
         p = Path(path)
-        records.atomic_write_text(p, json.dumps(self.to_dict(), indent=2) + "\n")
+        d = self.to_dict()
+        # the fine spectra (thousands of levels each) on one line apiece, not one line per level
+        long = {k: d[k] for k in ("fine_stepping_db", "fine_stopped_db") if isinstance(d.get(k), list)}
+        text = json.dumps({**d, **{k: f"@{k}@" for k in long}}, indent=2)
+        for k, v in long.items():
+            text = text.replace(f'"@{k}@"', json.dumps(v))
+        records.atomic_write_text(p, text + "\n")
         return p
 
     @classmethod
@@ -582,4 +642,8 @@ class Tuning:
             continuum_levels_db=self.continuum_levels_db,
             continuum_signature_db=self.continuum_signature_db,
             continuum_spread_db=self.continuum_spread_db,
+            fine_start_hz=self.fine_start_hz,
+            fine_bin_hz=self.fine_bin_hz,
+            fine_stepping_db=self.fine_stepping_db,
+            fine_stopped_db=self.fine_stopped_db,
         )
