@@ -11,6 +11,7 @@ import logging
 import math
 import os
 import sqlite3
+import stat
 import subprocess
 import sys
 import textwrap
@@ -423,6 +424,23 @@ def test_a_failed_atomic_write_names_the_file_asked_for_not_the_temporary_one(tm
         records.atomic_write_text(tmp_path / "out.csv", "x")
     assert e.value.filename == str(tmp_path / "out.csv") and "Permission denied" in str(e.value)
     assert list(tmp_path.iterdir()) == []  # the temporary file is gone
+
+
+@pytest.mark.skipif(os.name != "posix", reason="POSIX permission bits (Windows has only a read-only flag)")
+def test_an_atomic_write_gives_the_permissions_a_plain_write_would(tmp_path):
+    # the temporary file mkstemp makes is 0600: every result (measurements, calibration, tunings) came out readable by
+    # its owner alone, in a lab's shared results folder (found in session 27); the umask is pinned for the test
+    old = os.umask(0o027)
+    try:
+        records.atomic_write_text(tmp_path / "new.csv", "x")
+        assert stat.S_IMODE((tmp_path / "new.csv").stat().st_mode) == 0o640
+        (tmp_path / "kept.csv").write_text("old")
+        (tmp_path / "kept.csv").chmod(0o604)
+        records.atomic_write_text(tmp_path / "kept.csv", "new")
+        assert stat.S_IMODE((tmp_path / "kept.csv").stat().st_mode) == 0o604
+        assert (tmp_path / "kept.csv").read_text() == "new"
+    finally:
+        os.umask(old)
 
 
 @pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="POSIX permissions; root ignores them")

@@ -261,8 +261,22 @@ def read_tuning_text(path: str | os.PathLike[str], error: type[ValueError] = Val
 # -- safe writes -------------------------------------------------------------------------------
 
 
+def _file_mode(p: Path) -> int:
+    """The permission bits a write to ``p`` should leave: the file's own if it is there, else 0666 less the umask."""
+    try:
+        return stat.S_IMODE(p.stat().st_mode)
+    except OSError:
+        mask = os.umask(0)  # reading the umask means setting it: put it straight back
+        os.umask(mask)
+        return 0o666 & ~mask
+
+
 def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mode: str = "w") -> Path:
     """Write ``path`` through a temporary file in its folder, then ``os.replace`` it.
+
+    The file gets the permissions a plain ``open(path, "w")`` would give it (an existing
+    file keeps its own; a new one 0666 less the umask), not the temporary file's 0600:
+    colleagues who read a lab's shared results folder still can.
 
     ``write(f)`` receives the open temporary file. If anything fails (a full disk, a
     read-only folder, an exception in ``write``) the temporary file is removed, the old
@@ -270,6 +284,7 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
     """
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
+    mode_bits = _file_mode(p)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
     except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
@@ -280,6 +295,7 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
             write(f)
             f.flush()
             os.fsync(f.fileno())
+        os.chmod(tmp, mode_bits)  # mkstemp made it private (0600): the permissions a plain write would give
         os.replace(tmp, p)
     except BaseException as e:
         try:
