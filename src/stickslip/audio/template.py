@@ -989,31 +989,33 @@ class TemplateState:
         ss_both = float(np.sum(r_both**2))
         return float(b), float(np.sqrt(np.mean(r_both**2))), ss_both, float(np.sum(r_gain**2))
 
-    def _start_by_levels(self) -> float | None:
-        """``b`` when the levels show the stop clearly from the start (see :meth:`_started_at_stop`), else None."""
+    def _levels_fit(self) -> tuple[float, float, float, float] | None:
+        """The first frames' levels less the tuning's stepping, fitted as a gain plus ``b`` times the signature
+        (:meth:`_gain_and_signature`); None where the tuning has no stepping levels or the signature is a gain."""
         p = self.p
         if p.stepping_levels_db is None or self.template is None:
             return None
-        fit = self._gain_and_signature(self.template - np.asarray(p.stepping_levels_db), self.delta, self.sigma)
+        return self._gain_and_signature(self.template - np.asarray(p.stepping_levels_db), self.delta, self.sigma)
+
+    def _start_by_levels(self) -> float | None:
+        """``b`` when the levels show the stop clearly from the start (see :meth:`_started_at_stop`), else None."""
+        fit = self._levels_fit()
         if fit is None:
             return None
         b, rms_both, ss_both, ss_gain = fit
         # demand a clear case: the stop explains most of what a gain change leaves, and fits well
         clear = ss_both <= 0.25 * ss_gain
         fits = rms_both <= 2.0 + RESIDUAL_SLOPE * b * float(np.sqrt(np.mean((self.delta / self.sigma) ** 2)))
-        return b if b >= max(p.threshold, 0.6) and clear and fits else None
+        return b if b >= max(self.p.threshold, 0.6) and clear and fits else None
 
     def _levels_deny_stop(self) -> bool:
         """Do the first frames' levels give the stop less than :data:`START_CONTINUUM_LEVELS_B` of its signature?
 
-        The same gain-plus-signature fit as :meth:`_start_by_levels`, without its demands on
+        The same fit as :meth:`_start_by_levels` (:meth:`_levels_fit`), without its demands on
         the fit's quality (at another step rate the levels move by several spreads). False
         where the signature is (nearly) a gain change: the levels cannot tell.
         """
-        p = self.p
-        if p.stepping_levels_db is None or self.template is None:
-            return False
-        fit = self._gain_and_signature(self.template - np.asarray(p.stepping_levels_db), self.delta, self.sigma)
+        fit = self._levels_fit()
         return fit is not None and fit[0] < START_CONTINUUM_LEVELS_B
 
     def _start_by_continuum(self) -> bool | None:
