@@ -275,6 +275,18 @@ def test_no_room_and_rate_of_the_domain_counts_silently_wrong(
     assert not _silently_wrong(ev, s.stop_at), (arm, s, ev, det.onset_log, det.rise_log)
 
 
+def whole_and_in_blocks(tu: Tuning, x: np.ndarray, block: int) -> tuple[ConfirmedStopDetector, ConfirmedStopDetector]:
+    """The confirming detector fed ``x`` whole and in ``block``-sample blocks; asserts the same events; both."""
+    ref = ConfirmedStopDetector(StopDetector(tu))
+    want = ref.feed(x) + ref.finish()
+    det = ConfirmedStopDetector(StopDetector(tu))
+    got = [e for i in range(0, x.size, block) for e in det.feed(x[i : i + block])] + det.finish()
+    assert [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in got] == [
+        (e.onset_s, e.detected_at_s, e.onset_uncertain) for e in want
+    ]
+    return ref, det
+
+
 @pytest.mark.parametrize("block", [128, 777, 4096, 65536])
 def test_the_onset_check_does_not_depend_on_the_block_size(block: int) -> None:
     """Four pinned cases (one taken back), in blocks of 128 to 65536 samples: the same events, doubts, onsets. On the
@@ -289,14 +301,7 @@ def test_the_onset_check_does_not_depend_on_the_block_size(block: int) -> None:
         (_arrival_tuning(2, "damped"), ar.render(_strongest_room())),  # taken back
         (_arrival_tuning(1, "stiff"), ar.render(_far_rate())),
     ):
-        tu = tuned_alone(tu)
-        ref = ConfirmedStopDetector(StopDetector(tu))
-        want = ref.feed(x) + ref.finish()
-        det = ConfirmedStopDetector(StopDetector(tu))
-        got = [e for i in range(0, x.size, block) for e in det.feed(x[i : i + block])] + det.finish()
-        assert [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in got] == [
-            (e.onset_s, e.detected_at_s, e.onset_uncertain) for e in want
-        ]
+        ref, det = whole_and_in_blocks(tuned_alone(tu), x, block)
         assert det.onset_log == ref.onset_log and det.rise_log == ref.rise_log and det.retime_log == ref.retime_log
         assert len(det.onset_log) + len(det.retime_log) == 1
 

@@ -15,8 +15,6 @@ import arrival_sound as ar
 import beam_sound as bm
 import test_audio_onset as on
 import test_audio_shifted as sh
-from stickslip.audio.confirm import ConfirmedStopDetector
-from stickslip.audio.detector import StopDetector
 
 TOL_S = 0.025
 
@@ -55,13 +53,6 @@ def test_the_second_fit_does_not_depend_on_the_block_size(block: int) -> None:
         (on._arrival_tuning(2, "damped"), ar.render(on._strongest_room())),
         (sh._beam_tuning(1), bm.render(sh._beam_draws(1, 3)[2])),
     ):
-        x = np.asarray(x, dtype=np.float32)
-        ref = ConfirmedStopDetector(StopDetector(tu))
-        want = ref.feed(x) + ref.finish()
-        det = ConfirmedStopDetector(StopDetector(tu))
-        got = [e for i in range(0, x.size, block) for e in det.feed(x[i : i + block])] + det.finish()
-        assert [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in got] == [
-            (e.onset_s, e.detected_at_s, e.onset_uncertain) for e in want
-        ]
+        ref, det = on.whole_and_in_blocks(tu, np.asarray(x, dtype=np.float32), block)
         assert ref.inner._template is not None and det.inner._template is not None
         assert det.inner._template.rate_log == ref.inner._template.rate_log and ref.inner._template.rate_log[0][2]
