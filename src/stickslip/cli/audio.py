@@ -322,7 +322,7 @@ def listen(
         err_console.print(
             f"warning: {recording}: {n_bad} "
             f"{'samples are not numbers' if n_bad != 1 else 'sample is not a number'} (NaN or infinity), the first at "
-            f"{first_bad_s:.4f} s: the file is damaged there; they were heard as 0 (NaN) or full scale (infinity)",
+            f"{first_bad_s:.4f} s: the file is damaged there (heard as 0 for NaN, full scale for infinity)",
             highlight=False,
             soft_wrap=True,
         )
