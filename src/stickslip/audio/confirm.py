@@ -55,6 +55,14 @@ false alarms of both hour benches and under talk. It stays off by default: a rou
 just sharp enough to be judged (the random arms' arm 3: 0.88-0.89, against 0.9) carries
 stops whose lines hardly change, and a veto there would lose them.
 
+**A pause is not an end stop (session 28).** A fire that persisted is dropped when the
+stepping itself stopped (:mod:`stickslip.audio.stopped`): the window's sound in the
+detector's band fell 20 dB or more below the stepping's before the fire (and 12 dB beyond
+the tuned stop's own change) with no stepping heard in it (the step rate's envelope lines).
+The detector is then restarted at the window's end, as for a new recording, so that the
+stepping that resumes is learned afresh; ``stopped_log`` says where and why. A traverse
+whose controller halted is then ended by the no-signal guard, recording nothing.
+
 Two edges, and what happens:
 
 * **The stream ends while a fire is provisional** (a recording that stops less than
@@ -100,7 +108,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
-from .stepclock import LineChange, line_change
+from .stepclock import LineChange, line_change, step_rate_hz
+from .stopped import Stopped, band_filter, band_power, stepping_stopped, tuned_change_db
 
 __all__ = [
     "AFTER_REJECT_S",
@@ -303,6 +312,10 @@ class ConfirmedStopDetector:
         self._gap = int(round(SYNC_GAP_S * self._sr))
         # samples kept: the stepping before a fire and the longest window after it
         self._keep = self._span + self._gap + self._F + (self.after_reject_frames + 2) * self._H
+        # a pause is not an end stop (stickslip.audio.stopped): the detector's band and the tuned stop's change there
+        edges = tu.edges_hz if tu.method == "template" and tu.edges_hz else tu.band_hz
+        self._stop_sos = band_filter((float(edges[0]), float(edges[-1])), self._sr)
+        self._tuned_db = tuned_change_db(tu.stepping_levels_db, tu.signature_db)
         self.reset(inner._t0)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -326,6 +339,11 @@ class ConfirmedStopDetector:
         self._chunks0 = 0
         self._chunks_n = 0
         self._ref: NDArray[np.float64] | None = None  # the stepping before the fire that began the current chain
+        self._before_power = math.nan  # in-band power of that stepping (full scale 1), and its step rate, Hz
+        self._before_hz = math.nan
+        #: per fire that persisted but was the stepping stopping, not an end stop: (its ``detected_at_s``, why)
+        self.stopped_log: list[tuple[float, Stopped]] = []
+        self._pause_at: float | None = None  # stream time at which a pause was heard: restart there
         #: per fire the step clock was measured on: (its ``detected_at_s``, what was measured)
         self.step_clock_log: list[tuple[float, LineChange]] = []
         #: per confirmed stop whose onset the evidence doubts: (its ``detected_at_s``, why; see :meth:`_onset_doubt`)
@@ -383,8 +401,7 @@ class ConfirmedStopDetector:
         while pos < x.size:
             take = min(self._room(), x.size - pos)
             events = self.inner.feed(x[pos : pos + take])
-            if self.sync_bands:
-                self._keep_samples(x[pos : pos + take])
+            self._keep_samples(x[pos : pos + take])
             pos += take
             self._fed += take
             self._absorb()
@@ -400,8 +417,13 @@ class ConfirmedStopDetector:
         ev, fire, _ = self._pending
         self._pending = None
         heard = self.inner.frames_seen - 1 - fire
-        if not (self._persisted(*self._window(fire, heard)) and self._in_step(ev, fire, heard)):
+        if not (
+            self._persisted(*self._window(fire, heard))
+            and self._in_step(ev, fire, heard)
+            and not self._stepping_stopped(ev, fire, heard)
+        ):
             self.rejected.append(ev)
+            self._pause_at = None
             return []
         return [self._confirmed(ev, fire, heard)]
 
@@ -456,6 +478,8 @@ class ConfirmedStopDetector:
             ev = replace(ev, onset_uncertain=True)
         self._rejected_at = None
         recent = self._last_reject is not None and fire - self._last_reject <= self._recent_frames
+        if not recent or not math.isfinite(self._before_power):
+            self._hear_before(fire)
         if self.sync_bands and (not recent or self._ref is None):
             # the stepping before this fire is the reference (a fire soon after a rejected one keeps its chain's:
             # the interference may have been going on since)
@@ -488,9 +512,16 @@ class ConfirmedStopDetector:
             return []
         self._pending = None
         self.inner.hold(False)
-        if self._persisted(*self._window(fire, window)) and self._in_step(ev, fire, window):
+        if (
+            self._persisted(*self._window(fire, window))
+            and self._in_step(ev, fire, window)
+            and not self._stepping_stopped(ev, fire, window)
+        ):
             return [self._confirmed(ev, fire, window)]
         self.rejected.append(ev)
+        if self._pause_at is not None:
+            self._restart_after_pause()
+            return []
         self.inner.unlatch()
         self._rejected_at = self._last_reject = last
         self._rejected_fire = fire
@@ -528,6 +559,37 @@ class ConfirmedStopDetector:
         got = line_change(self._ref[-n:], after[:n], self._sr, self.sync_bands)
         self.step_clock_log.append((ev.detected_at_s, got))
         return step_clock_verdict(got) is not False
+
+    def _hear_before(self, fire: int) -> None:
+        """Measure the stepping before the fire at frame ``fire``: its in-band power and step rate."""
+        end = fire * self._H + self._F - self._gap
+        before = self._samples(end - self._span, end)
+        if before.size < SYNC_MIN_S * self._sr:
+            self._before_power = self._before_hz = math.nan
+            return
+        self._before_power = band_power(before, self._stop_sos)
+        hz = step_rate_hz(before, self._sr)
+        tuned = self.inner.tuning.step_rate_hz
+        self._before_hz = hz if math.isfinite(hz) else (float(tuned) if tuned else math.nan)
+
+    def _stepping_stopped(self, ev: StopEvent, fire: int, frames: int) -> bool:
+        """Was the fire the stepping stopping (a pause), not an end stop (see stickslip.audio.stopped)?"""
+        start = fire * self._H + self._F
+        after = self._samples(start, start + frames * self._H)
+        got = stepping_stopped(self._before_power, after, self._stop_sos, self._sr, self._before_hz, self._tuned_db)
+        if got is None:
+            return False
+        self.stopped_log.append((ev.detected_at_s, got))
+        self._pause_at = self._t0 + self._fed / self._sr
+        return True
+
+    def _restart_after_pause(self) -> None:
+        """The stepping stopped: hear what follows afresh, as a new recording (the logs are kept)."""
+        t, self._pause_at = self._pause_at, None
+        assert t is not None
+        rejected, stopped = self.rejected, self.stopped_log
+        self.reset(t)
+        self.rejected, self.stopped_log = rejected, stopped
 
     def _persisted(self, m: NDArray[np.float64], hot: NDArray[np.bool_]) -> bool:
         """Did the stop persist over the window's margins ``m`` and hot flags? (none heard: nothing contradicts it)"""

@@ -292,6 +292,8 @@ def listen(
         fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
     if isinstance(det, ConfirmedStopDetector):
         events += det.finish()
+        for t_s, why in det.stopped_log:
+            _note_stopped(t_s, why)
     warmup_s = tuning.warmup_s if tuning.method == "template" else 0.0
     if heard < (warmup_s + tuning.hold_s) * heard_rate:
         lasts_ms = 1e3 * heard / heard_rate
@@ -398,16 +400,31 @@ def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: flo
     _report_live(det, mic.blocks(), mic.stop, tuning, json_out, confirm_s, "")
 
 
+def _note_stopped(t_s: float, why: Any) -> None:
+    """One line on stderr: the stepping stopped at ``t_s`` (s), which is not an end stop (stickslip.audio.stopped)."""
+    err_console.print(
+        f"note: the stepping stopped at {t_s:.2f} s (the sound fell {-why.drop_db:.0f} dB, to the room's, and no "
+        "stepping was heard in it): a pause, not an end stop, so no stop is reported there",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
 def _report_live(
     det: Any, blocks: Iterator[Any], close: Any, tuning: Any, json_out: bool, confirm_s: float, where: str
 ) -> None:
     """Feed a live source's blocks to ``det`` and print each event as it comes, until Ctrl-C; then ``close()``."""
     from ..audio.sources import AudioSourceError
 
+    noted = 0
     try:
         for block in blocks:
             for ev in det.feed(block):
                 _print_live(ev, tuning, json_out, confirm_s)
+            stopped = getattr(det, "stopped_log", ())
+            for t_s, why in stopped[noted:]:
+                _note_stopped(t_s, why)
+            noted = len(stopped)
     except KeyboardInterrupt:
         pass
     except AudioSourceError as err:

@@ -1,0 +1,185 @@
+"""Did the joint stop stepping? A pause is not an end stop.
+
+At an end stop the controller goes on stepping: the slider slips against the stop and the
+joint still sounds, louder, quieter, duller or only otherwise than before, but never silent.
+When the *stepping* stops - a pause between the operator's moves in a recording, a
+controller that halted or faulted mid-burst, a cable pulled - the sound falls to the room's,
+and the level detector, which compares the sound with the stepping's, calls that a stop:
+every sub-band drops, far more than any stop's signature. Taken as the stop, the count would
+run to the moment the stepping ceased: silently wrong.
+
+:func:`stepping_stopped` tells the two apart on what follows a fire (the confirmation
+window) against the stepping before it:
+
+* the sound in the detector's band fell by :data:`STOPPED_DROP_DB` or more, and by
+  :data:`STOPPED_MARGIN_DB` more than the tuned stop changes it (a tuning whose stop is
+  itself much quieter is given that much room), **and**
+* no stepping is heard in it: the envelope's lines at the step rate heard before the fire
+  and its first multiples stand less than :data:`STEPPING_LINES_DB` above their
+  neighbourhoods, averaged (:func:`step_lines_db`; a stop whose slips are
+  muted while the piezo's drive still sings keeps its lines).
+
+Both, because each alone also fits some stops: the random arms' duller stops lose up to
+19 dB of their first-differenced power (the battery's, fourth to seventh generators' stops
+lose 10 dB or less of their in-band power), and a stop that rattles a little off the step
+clock (the project's simulator) leaves an envelope line of 3-8 dB in 0.25 s (docs/audio.md,
+"A pause is not an end stop").
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import butter, sosfilt
+
+__all__ = [
+    "STOPPED_DROP_DB",
+    "STEPPING_LINES_DB",
+    "STOPPED_MARGIN_DB",
+    "Stopped",
+    "band_filter",
+    "band_power",
+    "step_lines_db",
+    "stepping_stopped",
+    "tuned_change_db",
+]
+
+#: the window's in-band power must have fallen at least this far below the stepping's, dB
+STOPPED_DROP_DB = 20.0
+#: ... and this much further than the tuned stop's own in-band change, dB
+STOPPED_MARGIN_DB = 12.0
+#: harmonics of the step rate whose envelope lines are averaged, and how close to k x the rate each is looked for
+STEP_LINES = 4
+STEP_LINE_TOLERANCE = 0.005
+#: ... which, averaged, must stand at least this far above their neighbourhoods for something to be stepping, dB
+STEPPING_LINES_DB = 10.0
+
+
+@dataclass(frozen=True)
+class Stopped:
+    """Why a fire was the stepping stopping, not an end stop.
+
+    Attributes
+    ----------
+    drop_db : float
+        In-band power of the window against the stepping before the fire, dB (negative: quieter).
+    line_db : float
+        The step-rate line of the window's envelope above its neighbourhood, dB (-inf: no rate known).
+    step_hz : float
+        The step rate the line was looked for at, Hz (nan: none known).
+    """
+
+    drop_db: float
+    line_db: float
+    step_hz: float
+
+
+def band_filter(band_hz: tuple[float, float], sample_rate: float) -> NDArray[np.float64]:
+    """Second-order sections of a 4th-order Butterworth band-pass over ``band_hz`` (Hz) at ``sample_rate`` (Hz)."""
+    lo, hi = float(band_hz[0]), float(band_hz[1])
+    nyq = 0.5 * float(sample_rate)
+    lo = min(max(lo, 1.0), 0.9 * nyq)
+    hi = min(max(hi, 1.01 * lo), 0.98 * nyq)
+    return np.asarray(butter(4, [lo, hi], btype="bandpass", fs=float(sample_rate), output="sos"), dtype=np.float64)
+
+
+def band_power(x: NDArray[np.float64], sos: NDArray[np.float64]) -> float:
+    """Mean power of ``x`` through the band-pass ``sos`` (full scale 1), the filter's first 5 ms left out."""
+    if x.size == 0:
+        return float("nan")
+    y = sosfilt(sos, x)
+    return float(np.mean(y[min(y.size // 4, 240) :] ** 2))
+
+
+def step_lines_db(
+    x: NDArray[np.float64],
+    sample_rate: float,
+    step_hz: float,
+    harmonics: int = STEP_LINES,
+    tolerance: float = STEP_LINE_TOLERANCE,
+) -> float:
+    """The envelope's lines at the step rate's first ``harmonics`` multiples above their neighbourhoods, dB, averaged.
+
+    The envelope is the first-differenced signal squared (a click train's, and a periodic
+    drive tone's, has lines at the step rate and its multiples). Each line is the largest
+    bin within ``tolerance`` of k x ``step_hz`` against the median of the bins from
+    k - 0.5 to k + 0.5 times ``step_hz`` outside it. The rate is the one heard just before,
+    so the window can be narrow. On white noise the guard's single line at +-3 %
+    (:func:`~stickslip.audio.guard.step_line_db`) reads 7.0 dB (median) and 8 dB or more in
+    a quarter of 0.5 s windows; four lines at +-0.5 % averaged read 5.4 dB, 7.1 dB at the
+    95th percentile and 8.8 dB at most in 600 windows (``tests/test_audio_stopped.py``).
+    Needs 20 step periods (else ``inf``: no verdict, something may be stepping).
+    """
+    sr = float(sample_rate)
+    if not (step_hz > 0 and x.size >= 20 * sr / step_hz and step_hz < sr / 4):
+        return float("inf")
+    e = np.diff(x) ** 2
+    e = (e - e.mean()) * np.hanning(e.size)
+    p = np.abs(np.fft.rfft(e)) ** 2
+    f = np.fft.rfftfreq(e.size, 1 / sr)
+    got = []
+    for k in range(1, harmonics + 1):
+        c = k * step_hz
+        if c >= sr / 2 - 0.5 * step_hz:
+            break
+        near = np.abs(f - c) <= max(tolerance * c, 1.01 * (f[1] - f[0]))
+        around = (np.abs(f - c) <= 0.5 * step_hz) & ~near
+        if near.any() and around.any():
+            got.append(10 * np.log10((p[near].max() + 1e-300) / (np.median(p[around]) + 1e-300)))
+    return float(np.mean(got)) if got else float("inf")
+
+
+def tuned_change_db(stepping_levels_db: tuple[float, ...] | None, signature_db: tuple[float, ...] | None) -> float:
+    """The tuned stop's change of the in-band power, dB: the sub-bands' stepping levels shifted by the signature.
+
+    0 when the tuning does not say (a band tuning): then only :data:`STOPPED_DROP_DB` applies.
+    """
+    if not stepping_levels_db or not signature_db or len(stepping_levels_db) != len(signature_db):
+        return 0.0
+    lv = np.asarray(stepping_levels_db, dtype=np.float64)
+    sig = np.asarray(signature_db, dtype=np.float64)
+    if not (np.all(np.isfinite(lv)) and np.all(np.isfinite(sig))):
+        return 0.0
+    p = 10.0 ** ((lv - lv.max()) / 10.0)
+    return float(10.0 * np.log10(np.sum(p * 10.0 ** (sig / 10.0)) / np.sum(p)))
+
+
+def stepping_stopped(
+    before_power: float,
+    after: NDArray[np.float64],
+    sos: NDArray[np.float64],
+    sample_rate: float,
+    step_hz: float,
+    tuned_db: float = 0.0,
+) -> Stopped | None:
+    """Was the fire the stepping stopping? A :class:`Stopped` if so, else ``None`` (an end stop may be there).
+
+    Parameters
+    ----------
+    before_power : float
+        In-band power of the stepping before the fire (:func:`band_power`, full scale 1).
+    after : numpy.ndarray
+        The samples after the fire (its confirmation window), full scale 1.
+    sos : numpy.ndarray
+        The detector's band-pass (:func:`band_filter`).
+    sample_rate : float
+        Samples per second, Hz.
+    step_hz : float
+        The step rate heard before the fire, Hz (nan or 0: not known; then the level alone decides).
+    tuned_db : float
+        The tuned stop's in-band change, dB (:func:`tuned_change_db`).
+    """
+    if not (math.isfinite(before_power) and before_power > 0.0) or after.size < int(0.1 * sample_rate):
+        return None  # too little to tell: nothing contradicts a stop
+    pa = band_power(after, sos)
+    drop = 10.0 * math.log10(max(pa, 1e-300) / before_power)
+    if drop > min(-STOPPED_DROP_DB, tuned_db - STOPPED_MARGIN_DB):
+        return None
+    known = math.isfinite(step_hz) and step_hz > 0.0
+    line = step_lines_db(after, sample_rate, step_hz) if known else -math.inf
+    if line >= STEPPING_LINES_DB:
+        return None  # something still steps at the rate: a stop that silenced the slips, not the drive
+    return Stopped(drop_db=drop, line_db=line, step_hz=step_hz if known else math.nan)
