@@ -397,7 +397,22 @@ def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: flo
         fail(str(err))
     if not json_out:
         err_console.print(f"listening at {tuning.sample_rate} Hz; Ctrl-C to stop")
-    _report_live(det, mic.blocks(), mic.stop, tuning, json_out, confirm_s, "")
+    _report_live(det, _warn_overflows(mic), mic.stop, tuning, json_out, confirm_s, "")
+
+
+def _warn_overflows(mic: Any) -> Iterator[Any]:
+    """The microphone's blocks, with a warning on stderr each time the sound card drops audio."""
+    seen = 0
+    for block in mic.blocks():
+        if mic.overflows > seen:
+            seen = mic.overflows
+            err_console.print(
+                f"warning: the sound card dropped audio (input overflow, {seen} so far): the times of what follows "
+                "are early by what was lost; close other programs that use the sound card",
+                highlight=False,
+                soft_wrap=True,
+            )
+        yield block
 
 
 def _note_stopped(t_s: float, why: Any) -> None:
@@ -633,6 +648,13 @@ def _record_real(
         err_console.print()
     if getattr(mic, "error", None) is not None:
         fail(f"{serial_port}: {mic.error}")
+    dropped = int(getattr(mic, "overflows", 0) or 0)
+    if dropped:
+        fail(
+            f"the sound card dropped audio {dropped} time{'s' if dropped != 1 else ''} while recording (input "
+            "overflow): the stop's label would not line up with the sound; nothing written: close other programs "
+            "that use the sound card and record again"
+        )
     samples = np.concatenate(blocks) if blocks else np.zeros(0, np.float32)
     if key:
         if not pressed:

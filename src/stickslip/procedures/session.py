@@ -22,7 +22,7 @@ from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock
 from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
 from ..records import atomic_write_text
-from .traverse import TraverseResult, measure_traverse
+from .traverse import TraverseError, TraverseResult, measure_traverse
 
 __all__ = [
     "StepRateWarning",
@@ -96,6 +96,7 @@ def traverse_on_device(
         ctrl.set_pose(**{k: v for k, v in pose._asdict().items() if k != f"q{joint}"})
     t0 = 0.0  # a live source starts now
     close: Callable[[], None] | None = None  # what to close after, for a source this opened
+    mic: Any = None  # a sound card: it may drop audio
     if serial_port is not None:
         from ..audio.vibration import SerialSamples
 
@@ -111,13 +112,23 @@ def traverse_on_device(
         mic = Microphone(sample_rate=int(tuning.sample_rate), device=audio_input).start()
         blocks, close = mic.blocks(), mic.stop
     try:
-        return measure_traverse(
+        result = measure_traverse(
             ctrl, joint, direction, detector=StopDetector(tuning, t0), audio_blocks=blocks,
             pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
         )
     finally:
         if close is not None:
             close()
+    dropped = int(getattr(mic, "overflows", 0) or 0)
+    if dropped:
+        # the stream's time is its samples counted: what the card dropped makes the stop's time, and so the count,
+        # early by that much, and nothing says how much was lost
+        raise TraverseError(
+            f"joint {joint}: the sound card dropped audio {dropped} time{'s' if dropped != 1 else ''} during the "
+            "traverse (input overflow), so the stop's time and the step count would be off by what was lost; "
+            "nothing recorded: close other programs that use the sound card and measure again"
+        )
+    return result
 
 
 def record_traverse(store: TraverseStore, device_url: str, row: Traverse, how: str = "audio") -> int:
