@@ -530,10 +530,8 @@ class ConfirmedStopDetector:
         return []
 
     def _keep_samples(self, x: NDArray[Any]) -> None:
-        v = np.asarray(x, dtype=np.float64)
-        if v.size and not np.all(np.isfinite(v)):
-            v = np.nan_to_num(v, nan=0.0, posinf=1.0, neginf=-1.0)
-        self._chunks.append(v.copy())
+        v = np.array(x, dtype=np.float64)  # a copy; damaged samples are mended when read (_samples)
+        self._chunks.append(v)
         self._chunks_n += v.size
         if self._chunks_n > 2 * self._keep:  # trim now and then, not every block
             whole = np.concatenate(self._chunks)[-self._keep :]
@@ -545,7 +543,10 @@ class ConfirmedStopDetector:
         whole = np.concatenate(self._chunks) if len(self._chunks) != 1 else self._chunks[0]
         self._chunks = [whole]
         a, b = max(lo - self._chunks0, 0), max(min(hi - self._chunks0, whole.size), 0)
-        return whole[a:b] if b > a else np.zeros(0)
+        if b <= a:
+            return np.zeros(0)
+        v = whole[a:b]
+        return v if np.all(np.isfinite(v)) else np.nan_to_num(v, nan=0.0, posinf=1.0, neginf=-1.0)
 
     def _in_step(self, ev: StopEvent, fire: int, frames: int) -> bool:
         """Did the joint's step-synchronous sound change, line by line (see the module)? No verdict: True."""
