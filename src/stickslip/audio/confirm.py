@@ -109,7 +109,7 @@ from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
 from .stepclock import LineChange, line_change, step_rate_hz
-from .stopped import Stopped, band_filter, band_power, stepping_stopped, tuned_change_db
+from .stopped import BEFORE_QUANTILE, Stopped, band_filter, band_power, stepping_stopped, tuned_change_db
 
 __all__ = [
     "AFTER_REJECT_S",
@@ -568,7 +568,7 @@ class ConfirmedStopDetector:
         if before.size < SYNC_MIN_S * self._sr:
             self._before_power = self._before_hz = math.nan
             return
-        self._before_power = band_power(before, self._stop_sos)
+        self._before_power = band_power(before, self._stop_sos, self._sr, BEFORE_QUANTILE)
         hz = step_rate_hz(before, self._sr)
         tuned = self.inner.tuning.step_rate_hz
         self._before_hz = hz if math.isfinite(hz) else (float(tuned) if tuned else math.nan)

@@ -41,6 +41,8 @@ __all__ = [
     "STOPPED_MARGIN_DB",
     "Stopped",
     "band_filter",
+    "AFTER_QUANTILE",
+    "BEFORE_QUANTILE",
     "band_power",
     "step_lines_db",
     "stepping_stopped",
@@ -86,12 +88,26 @@ def band_filter(band_hz: tuple[float, float], sample_rate: float) -> NDArray[np.
     return np.asarray(butter(4, [lo, hi], btype="bandpass", fs=float(sample_rate), output="sos"), dtype=np.float64)
 
 
-def band_power(x: NDArray[np.float64], sos: NDArray[np.float64]) -> float:
-    """Mean power of ``x`` through the band-pass ``sos`` (full scale 1), the filter's first 5 ms left out."""
-    if x.size == 0:
+#: the stepping's level before a fire is the 30th percentile of its 10 ms powers (a knock, a chirp or a voice only adds
+#: sound, as the detector's template is a low quantile); the window's, their median
+BEFORE_QUANTILE = 0.3
+AFTER_QUANTILE = 0.5
+#: the pieces whose powers are ranked, s
+PIECE_S = 0.01
+
+
+def band_power(x: NDArray[np.float64], sos: NDArray[np.float64], sample_rate: float, quantile: float) -> float:
+    """The ``quantile`` of the 10 ms powers of ``x`` through the band-pass ``sos`` (full scale 1; nan if too short).
+
+    The filter's first 5 ms are left out (its transient).
+    """
+    n = max(1, int(round(PIECE_S * sample_rate)))
+    if x.size < 2 * n:
         return float("nan")
-    y = sosfilt(sos, x)
-    return float(np.mean(y[min(y.size // 4, 240) :] ** 2))
+    y = sosfilt(sos, x)[n // 2 :]
+    m = y.size // n
+    p = np.mean(y[: m * n].reshape(m, n) ** 2, axis=1)
+    return float(np.quantile(p, quantile))
 
 
 def step_lines_db(
@@ -160,7 +176,8 @@ def stepping_stopped(
     Parameters
     ----------
     before_power : float
-        In-band power of the stepping before the fire (:func:`band_power`, full scale 1).
+        In-band power of the stepping before the fire (:func:`band_power` at :data:`BEFORE_QUANTILE`, full
+        scale 1).
     after : numpy.ndarray
         The samples after the fire (its confirmation window), full scale 1.
     sos : numpy.ndarray
@@ -174,7 +191,7 @@ def stepping_stopped(
     """
     if not (math.isfinite(before_power) and before_power > 0.0) or after.size < int(0.1 * sample_rate):
         return None  # too little to tell: nothing contradicts a stop
-    pa = band_power(after, sos)
+    pa = band_power(after, sos, sample_rate, AFTER_QUANTILE)
     drop = 10.0 * math.log10(max(pa, 1e-300) / before_power)
     if drop > min(-STOPPED_DROP_DB, tuned_db - STOPPED_MARGIN_DB):
         return None
