@@ -492,6 +492,28 @@ PRED_DROPS_RHO: float | None = 0.5
 DROP_LAG_FRAMES = (DROP_FRAMES - 1) / 2
 
 
+def _drops_terms(
+    zs: FloatArray, clear: NDArray[np.bool_], gn: FloatArray, gg: float, tail: tuple[FloatArray, FloatArray]
+) -> tuple[FloatArray, FloatArray]:
+    """The drops' check's per-frame terms after ``tail``: (drops shown, information left), as shares of ``gg``."""
+    num = np.concatenate((tail[0], (np.maximum(zs, -NEG_CAP) * clear) @ gn / gg))
+    den = np.concatenate((tail[1], clear.astype(np.float64) @ (gn * gn) / gg))
+    return num, den
+
+
+def _drops_tail(
+    zs: FloatArray, clear: NDArray[np.bool_], gn: FloatArray, tail: tuple[FloatArray, FloatArray]
+) -> tuple[FloatArray, FloatArray]:
+    """The tail :func:`_drops_shown` would leave, without the verdicts (a piece where none can matter)."""
+    k = NEG_FRAMES - 1
+    gg = float(gn @ gn)
+    if gg <= 0.0:
+        return tail
+    num, den = _drops_terms(zs[-k:], clear[-k:], gn, gg, tail)
+    keep = max(num.size - k, 0)
+    return num[keep:], den[keep:]
+
+
 def _drops_shown(
     zs: FloatArray,
     clear: NDArray[np.bool_],
@@ -512,8 +534,7 @@ def _drops_shown(
     gg = float(gn @ gn)
     if gg <= 0.0:
         return np.zeros(a.size, dtype=bool), tail
-    num = np.concatenate((tail[0], (np.maximum(zs, -NEG_CAP) * clear) @ gn / gg))
-    den = np.concatenate((tail[1], clear.astype(np.float64) @ (gn * gn) / gg))
+    num, den = _drops_terms(zs, clear, gn, gg, tail)
     cn = np.concatenate(([0.0], np.cumsum(num)))
     cd = np.concatenate(([0.0], np.cumsum(den)))
     k = np.arange(num.size - a.size, num.size) + 1
@@ -1153,16 +1174,23 @@ class TemplateState:
             # per frame, judged on the sub-bands without an excess (a band something was added to cannot show
             # a drop): the drops shown, as a share of the signature's, averaged over NEG_FRAMES frames
             clear = zs <= NEG_EXCESS
-            shown, self._neg_tail = _drops_shown(zs, clear, gn, gg_tuned, a, self._neg_tail)
+            # the verdicts matter only where the fit is hot; elsewhere only the last frames are kept for the average
+            if hot.any():
+                shown, self._neg_tail = _drops_shown(zs, clear, gn, gg_tuned, a, self._neg_tail)
+            else:
+                shown, self._neg_tail = hot, _drops_tail(zs, clear, gn, self._neg_tail)
             if self._pred_delta is not None and PRED_DROPS_RHO is not None:
                 # at another rate the sub-bands the tuned signature lowers may hold or rise (round 11b): a frame the
                 # predicted fit took and explains well may show the predicted signature's drops instead (round 12b);
                 # the tuned verdict stands everywhere else, so this check never withholds what it passed before
                 gp = np.maximum(np.minimum(self._pred_delta, 0.0) * self._drop_scale, -NEG_CAP)
-                gpi = np.maximum(np.minimum(self._pred_delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
-                shown_p, self._neg_tail_p = _drops_shown(zs, clear, gp, float(gpi @ gpi), a, self._neg_tail_p)
-                if pred_drops is not None:
-                    shown = shown | (pred_drops & shown_p)
+                ask = hot & ~shown & (False if pred_drops is None else pred_drops)
+                if ask.any():
+                    gpi = np.maximum(np.minimum(self._pred_delta, 0.0) * self._fit.inv_sigma, -NEG_CAP)
+                    shown_p, self._neg_tail_p = _drops_shown(zs, clear, gp, float(gpi @ gpi), a, self._neg_tail_p)
+                    shown = shown | (ask & shown_p)
+                else:
+                    self._neg_tail_p = _drops_tail(zs, clear, gp, self._neg_tail_p)
             hot &= shown
         if p.drop_threshold is not None:
             # a lasting drop below the template, in any sub-bands: a stop unlike the tuned one; armed
