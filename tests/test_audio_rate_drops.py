@@ -68,6 +68,8 @@ CASES = [
     ("fifth", 4, "shifted", 1025.0, "flagged", "right"),
     ("fifth", 8, "shifted", 1100.0, "missed", "flagged"),
     ("sixth", 2, "", 1100.0, "missed", "flagged"),
+    ("battery", 1, "brighter", 900.0, "missed", "right"),
+    ("battery", 1, "brighter", 950.0, "missed", "flagged"),
 ]
 
 

@@ -482,11 +482,12 @@ NEG_EXCESS = 2.0
 #: (64 frames each: 1.4 s at 48 kHz). Interference only adds sound, so a template a voice or a radio
 #: lifted is not the stepping's level, and the pause after a word is not a drop
 FLOOR_CHUNKS = 8
-#: a frame the signature predicted at the heard rate took (:meth:`TemplateState._hear_rate`) with its residual within
-#: this share of ``residual_max`` passes the drops' check if the predicted signature's drops show in proportion, where
-#: the tuned signature's do not (round 12b): at another rate the sub-bands the tuned signature lowers may hold or rise
-#: (the lines sample the modes elsewhere). Half the limit: a frame the prediction explains well, not one it only
-#: tolerates (measured: 0.5 and 1.0 gave the same outcomes on 407 of 408 recordings). None: the tuned drops alone
+#: a frame the signature predicted at the heard rate (:meth:`TemplateState._hear_rate`) fits as the stop (its ``a`` at
+#: the threshold) with its residual within this share of ``residual_max`` passes the drops' check if the predicted
+#: signature's drops show in proportion, where the tuned signature's do not (round 12b): at another rate the sub-bands
+#: the tuned signature lowers may hold or rise (the lines sample the modes elsewhere). Half the limit: a frame the
+#: prediction explains well, not one it only tolerates (measured: 0.5 and 1.0 gave the same outcomes on 407 of 408
+#: recordings). None: the tuned drops alone
 PRED_DROPS_RHO: float | None = 0.5
 #: the average's delay, frames: given back to a drop-fired onset
 DROP_LAG_FRAMES = (DROP_FRAMES - 1) / 2
@@ -820,9 +821,9 @@ class TemplateState:
         (:class:`~stickslip.audio.rate_signature.SignaturePredictor`), and the larger
         stop-likeness is taken with its residual; otherwise (no rate heard, the tuning's
         rate, a rate far off: a multiple heard) on the tuned one alone, as before. The
-        drops' check also passes a frame the predicted fit took with its residual within
-        :data:`PRED_DROPS_RHO` of ``residual_max`` whose predicted drops show in proportion
-        (round 12b); the release's projection and the start-at-the-stop judgement keep
+        drops' check also passes a frame the predicted fit hears as the stop with its
+        residual within :data:`PRED_DROPS_RHO` of ``residual_max`` whose predicted drops
+        show in proportion (round 12b); the release's projection and the start-at-the-stop judgement keep
         the tuned signature.
         """
         p = self.p
@@ -1157,7 +1158,8 @@ class TemplateState:
             use = (a2 > a) & (rho2 <= p.residual_max)
             a, rho = np.where(use, a2, a), np.where(use, rho2, rho)
             if PRED_DROPS_RHO is not None:
-                pred_drops = use & (rho2 <= PRED_DROPS_RHO * p.residual_max)
+                # the predicted fit hears the stop and explains the frame well (whichever fit's a is the larger)
+                pred_drops = (a2 >= p.threshold) & (rho2 <= PRED_DROPS_RHO * p.residual_max)
         hot = (a >= p.threshold) & (rho <= p.residual_max)
         lag = np.zeros(a.size)
         quiet = a < 0.3 * p.threshold
