@@ -193,7 +193,9 @@ class Release:
     def stepping_rows(self) -> list[FloatArray]:
         """The levels of the window's frames that sounded like stepping (those pushed with a row)."""
         return [
-            r for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True) if f and r is not None
+            r
+            for f, r in zip(self._flags[self._start :], self._rows[self._start :], strict=True)
+            if f and r is not None
         ]
 
 
@@ -823,8 +825,8 @@ class TemplateState:
         rate, a rate far off: a multiple heard) on the tuned one alone, as before. The
         drops' check also passes a frame the predicted fit hears as the stop with its
         residual within :data:`PRED_DROPS_RHO` of ``residual_max`` whose predicted drops
-        show in proportion (round 12b); the release's projection and the start-at-the-stop judgement keep
-        the tuned signature.
+        show in proportion (round 12b); the release's projection and the start-at-the-stop
+        judgement keep the tuned signature.
         """
         p = self.p
         self._fit_rate = None
