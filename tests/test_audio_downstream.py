@@ -35,6 +35,7 @@ import arrival_sound as ar
 import battery_sound as bs
 import beam_sound as bm
 import modal_sound as md
+from stickslip.audio import template
 from stickslip.audio.confirm import ONSET_QUIET, ONSET_SLOW_S, ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector, StopEvent
 from stickslip.audio.template import NEG_CAP, NEG_RATIO, QUANTILE, fit_departure, subband_levels_db
@@ -110,7 +111,7 @@ WITHHELD = [
 
 @pytest.mark.parametrize(("gen", "arm", "kind", "rate"), WITHHELD)
 def test_the_fit_hears_the_stop_whose_drops_do_not_show_at_another_rate(
-    gen: str, arm: int, kind: str, rate: float
+    gen: str, arm: int, kind: str, rate: float, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The stage that loses these stops: the fit hears the stop (a at or over the threshold in nearly every frame,
     1.6 thresholds or more), but the sub-bands the tuned signature lowers are not lower at this rate: the share of the
@@ -124,7 +125,10 @@ def test_the_fit_hears_the_stop_whose_drops_do_not_show_at_another_rate(
     y0, stop0 = _recording(gen, arm, kind, 1000.0)
     share0, _, shown0 = _at_the_stop(tu, y0, stop0)
     assert share0 >= 0.9 and shown0 >= 0.9, (share0, shown0)
-    assert _events(tu, y) == []  # missed: a traverse times out
+    # missed on the tuned signature's drops (a traverse times out); since round 12b the predicted signature's drops
+    # hear the battery's two (tests/test_audio_rate_drops.py)
+    monkeypatch.setattr(template, "PRED_DROPS_RHO", None)
+    assert _events(tu, y) == []
     ev0 = _events(tu, y0)
     assert ev0 and not ev0[0].onset_uncertain and abs(ev0[0].onset_s - stop0) <= TOL_S
 
