@@ -100,6 +100,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
+from .late import LatePath
 from .stepclock import LineChange, line_change
 
 __all__ = [
@@ -249,6 +250,10 @@ class ConfirmedStopDetector:
         in the stepping band (see the module: the step clock). Off by default: on a rough
         clock just sharp enough to be judged a stop may hardly change the lines
         (docs/audio.md).
+    late : bool
+        Also run the late path (:mod:`.late`, round 12a): a stop the fast path never heard,
+        found on the step clock's lines 0.5-0.75 s after it, its onset estimated back
+        (``StopEvent.found_late``). Off by default (docs/audio.md, "Round 12a").
 
     Examples
     --------
@@ -269,6 +274,7 @@ class ConfirmedStopDetector:
         min_hot: float = MIN_HOT,
         after_reject_s: float | None = AFTER_REJECT_S,
         step_clock: bool = False,
+        late: bool = False,
     ) -> None:
         c = check_confirm_s(confirm_s)
         if c <= 0.0:
@@ -303,6 +309,9 @@ class ConfirmedStopDetector:
         self._gap = int(round(SYNC_GAP_S * self._sr))
         # samples kept: the stepping before a fire and the longest window after it
         self._keep = self._span + self._gap + self._F + (self.after_reject_frames + 2) * self._H
+        band = _stepping_band(tu)
+        #: the late path (round 12a, :mod:`.late`): stops the fast path never heard, found on the step clock's lines
+        self.late: LatePath | None = LatePath(self._sr, band, inner._t0) if late and band else None
         self.reset(inner._t0)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -336,6 +345,10 @@ class ConfirmedStopDetector:
         #: the onset emitted), s (see :meth:`_rise`)
         self.retime_log: list[tuple[float, float, float]] = []
         self._retimed: float | None = None  # the onset _onset_doubt took back, for _confirmed
+        #: the fast path's fires swallowed while the late path was latched on a stop it found (not counted twice)
+        self.late_swallowed: list[StopEvent] = []
+        if self.late is not None:
+            self.late.reset(t0_s)
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -380,21 +393,60 @@ class ConfirmedStopDetector:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
         out: list[StopEvent] = []
         pos = 0
+        late = self.late
         while pos < x.size:
             take = min(self._room(), x.size - pos)
+            if late is not None:  # the late path judges at the end of each of its chunks: the feed stops there
+                take = min(take, late.next_stop(self._fed) - self._fed)
             events = self.inner.feed(x[pos : pos + take])
             if self.sync_bands:
                 self._keep_samples(x[pos : pos + take])
+            if late is not None:
+                v = np.asarray(x[pos : pos + take], dtype=np.float64)
+                late.push(v if np.all(np.isfinite(v)) else np.nan_to_num(v, nan=0.0, posinf=1.0, neginf=-1.0))
             pos += take
             self._fed += take
             self._absorb()
             for ev in events:
                 out += self._fired(ev)
             out += self._decide()
+            if late is not None and self._fed % late.chunk == 0:
+                out += self._late_step(late)
         return out
 
+    def _late_step(self, late: LatePath) -> list[StopEvent]:
+        """The late path's chunk ended: a stop the fast path never heard, or nothing (see :mod:`.late`)."""
+        held = self._pending is not None
+        return self._late_event(late.step(self._fed, held, self.inner.latched and not held, self.inner.ready))
+
+    def _late_event(self, got: tuple[float, float, bool] | None) -> list[StopEvent]:
+        if got is None:
+            return []
+        at_s, onset_s, uncertain = got
+        if not math.isfinite(onset_s):
+            onset_s, uncertain = at_s, True
+        return [
+            StopEvent(
+                detected_at_s=at_s,
+                onset_s=onset_s,
+                # the stop-likeness of the latest frame heard (template tunings: margins + 1 are a / threshold)
+                level_db=(self._margin(self.inner.frames_seen - 1) + 1.0) * float(self.inner.tuning.threshold_db),
+                confirmed_at_s=max(at_s, self._t0 + self._fed / self._sr),
+                confirmed_s=at_s - onset_s if not uncertain else None,
+                onset_uncertain=uncertain,
+                found_late=True,
+            )
+        ]
+
     def finish(self) -> list[StopEvent]:
-        """The stream ended: the provisional stop, if what was heard of its window persisted (see the module)."""
+        """The stream ended: the provisional stop, if what was heard of its window persisted (see the module);
+        else a stop the late path found and held back while the fast path was deciding."""
+        out = self._finish_fast()
+        if self.late is not None and not out:
+            out = self._late_event(self.late.finish())
+        return out
+
+    def _finish_fast(self) -> list[StopEvent]:
         if self._pending is None:
             return []
         ev, fire, _ = self._pending
@@ -444,6 +496,10 @@ class ConfirmedStopDetector:
     def _fired(self, ev: StopEvent) -> list[StopEvent]:
         out: list[StopEvent] = []
         fire = self._fire_frame(ev)
+        if self.late is not None:
+            if self.late.latched:  # the late path found this stop already: not counted twice
+                self.late_swallowed.append(ev)
+                return out
         if self._pending is not None:  # the inner released and fired again inside the window: no persistence
             self.rejected.append(self._pending[0])
             self._last_reject = self._rejected_fire = self._pending[1]
@@ -541,6 +597,8 @@ class ConfirmedStopDetector:
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
         self._retimed = None
+        if self.late is not None:  # the fast path gave this stop: the late path judges nothing before it
+            self.late.note_busy((fire + frames) * self._H + self._F)
         why = None if ev.onset_uncertain else self._onset_doubt(ev, fire, frames)
         self._covered_at = self._rejected_fire = None
         if why is None and self._retimed is not None:
@@ -777,7 +835,7 @@ def step_clock_verdict(got: LineChange) -> bool | None:
     return got.change_z >= MIN_SYNC_Z and abs(got.change_db) >= MIN_SYNC_CHANGE_DB
 
 
-def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = False) -> Any:
+def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = False, late: bool = False) -> Any:
     """``detector`` wrapped in a :class:`ConfirmedStopDetector`, where that applies.
 
     ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
@@ -785,9 +843,10 @@ def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = F
     simulator's oracle, a position read-back): only a :class:`StopDetector` has the
     per-frame evidence to confirm with. The wrapper listens with a fresh detector of the
     same tuning; ``detector`` itself is left as it was. ``step_clock`` True also asks the
-    step clock (:class:`ConfirmedStopDetector`; off by default).
+    step clock (:class:`ConfirmedStopDetector`; off by default); ``late`` True also runs the
+    late path (:mod:`.late`: stops the fast path never heard; off by default).
     """
     c = check_confirm_s(confirm_s)
     if c == 0.0 or not isinstance(detector, StopDetector):
         return detector
-    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, step_clock=step_clock)
+    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, step_clock=step_clock, late=late)
