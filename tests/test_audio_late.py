@@ -31,7 +31,7 @@ import line_sound as ls  # noqa: E402
 from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
 from stickslip.audio.confirm import ConfirmedStopDetector, confirming  # noqa: E402
 from stickslip.audio.detector import StopDetector, StopEvent, Tuning, detect  # noqa: E402
-from stickslip.audio.late import LatePath, onset_change_point  # noqa: E402
+from stickslip.audio.late import LatePath, _rate_moved, onset_change_point  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
 TOL_S = 0.025
@@ -143,6 +143,26 @@ def test_no_late_event_on_long_stepping_under_talk(joint: str, kw: dict[str, obj
     det = ConfirmedStopDetector(StopDetector(tu), late=True)
     ev = det.feed(y) + det.finish()
     assert not [e for e in ev if e.found_late], det.late.log if det.late else None
+
+
+@pytest.mark.parametrize(("joint", "dur"), [("P", 60.0), ("Q", 80.0)])
+def test_no_late_event_on_a_drifting_step_clock(joint: str, dur: float) -> None:
+    """A clock drifting 0.25-0.33 %/s walks its upper lines off the comb: a change, but the rate moved, and a stop
+    does not move it (the hour bench's 60 s pieces fired here before the rule)."""
+    tu = _tuned(P if joint == "P" else Q)
+    y = render(Scene(joint, 1050.0, None, dur, seed=33, drift=0.1))[0]
+    det = ConfirmedStopDetector(StopDetector(tu), late=True)
+    ev = det.feed(y) + det.finish()
+    assert not [e for e in ev if e.found_late]
+    assert det.late is not None and any("the step rate moved" in j.verdict for j in det.late.log)
+
+
+def test_the_rate_moved_against_the_nearest_simple_ratio() -> None:
+    assert _rate_moved(1000.0, 1000.9) == pytest.approx(0.0009)
+    assert _rate_moved(1000.0, 2001.0) == pytest.approx(0.0005)  # heard at twice the rate: the same clock
+    assert _rate_moved(1080.0, 360.0) == pytest.approx(0.0, abs=1e-12)
+    assert _rate_moved(1000.0, 1250.0) == pytest.approx(0.1667, abs=1e-3)  # 5/4 is no simple ratio here: 1.5 x 0.833
+    assert _rate_moved(float("nan"), 1000.0) == float("inf")
 
 
 def test_off_by_default_and_only_with_confirmation() -> None:

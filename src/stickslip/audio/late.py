@@ -65,6 +65,7 @@ __all__ = [
     "ONSET_HOP_S",
     "ONSET_TOL_S",
     "RATE_EVERY",
+    "RATE_MOVED",
     "STEADY_Z",
     "RELEASE_Z",
     "TRIM",
@@ -93,6 +94,10 @@ MIN_SHARE = 0.05
 MIN_LINE_SNR = 10.0
 #: ... and the two chunks of stepping compared must agree with each other within this deviate (the stepping is steady)
 STEADY_Z = 4.0
+#: ... and the step rate heard on the two chunks after must be the one heard on the stepping, to this fraction (a stop
+#: does not change the rate; the battery's stops move it by 0.09 % at most; a clock drifting 0.2 %/s, whose lines walk
+#: off the comb, by 0.2 % and more: docs/audio.md, "Round 12a")
+RATE_MOVED = 0.0015
 #: a stop found waits at most this many chunks for the fast path to decide on a fire it holds (its longest window, 2 s)
 MAX_WAIT = 10
 #: a latched late path is released once two chunks running lie within this deviate of the stepping before the stop
@@ -128,6 +133,16 @@ class LateJudgement:
     onset_spread_s: float
     #: "fired", or why not
     verdict: str
+
+
+def _rate_moved(before_hz: float, after_hz: float) -> float:
+    """How far the step rate moved, as a fraction: the ratio of the two against the nearest of 1, 2, 3, 1/2, 1/3, 3/2,
+    2/3 (the rate is heard at a multiple or a fraction of itself where the envelope's lines are stronger there); inf
+    where either is not heard."""
+    if not (math.isfinite(before_hz) and math.isfinite(after_hz) and before_hz > 0 and after_hz > 0):
+        return math.inf
+    r = after_hz / before_hz
+    return min(abs(r / q - 1.0) for q in (1.0, 2.0, 3.0, 0.5, 1.0 / 3.0, 1.5, 2.0 / 3.0))
 
 
 def _trimmed(z: FloatArray, trim: int) -> tuple[float, NDArray[np.int64]]:
@@ -351,6 +366,34 @@ class LatePath:
         fed_end = (j + 1) * self.chunk
         j0, before, z0, dev0, keep0 = self._pending
         self._pending = None
+        at_s = self.t0 + fed_end / self.sr
+        # the step rate, heard afresh on the stepping and on the two chunks after: a stop does not change it (a
+        # rate heard at a simple multiple or fraction of the other is the same clock); a rate that moved walks the
+        # lines off the comb, which is no stop
+        c = self.chunk
+        rb = step_rate_hz(self._samples((j0 - 3) * c - 1, (j0 - 1) * c), self.sr)
+        ra = step_rate_hz(self._samples(j0 * c - 1, (j0 + 2) * c), self.sr)
+        moved = _rate_moved(rb, ra)
+        if moved > RATE_MOVED:
+            self.log.append(
+                LateJudgement(
+                    at_s, rb, dev0, math.nan, math.nan, math.nan, math.nan, math.nan, math.inf,
+                    f"the step rate moved ({100 * moved:.2f} %)",
+                )
+            )  # fmt: skip
+            return None
+        if abs(rb / self._rate - 1.0) > 0.25 * RATE_MOVED:  # the lines were taken at a rate heard a while ago: again
+            self._rate, self._rate_chunk, self._lines = rb, j0 + 1, {}
+            l3, l2, after0 = self._chunk_lines(j0 - 3), self._chunk_lines(j0 - 2), self._chunk_lines(j0)
+            if l3 is None or l2 is None or after0 is None or not (l3.power.size == l2.power.size == after0.power.size):
+                return None
+            if after0.power.size < max(MIN_LINES, TRIM + 2):
+                return None
+            before = _mean_lines(l3, l2)
+            z0 = line_z(before, after0)
+            dev0, keep0 = _trimmed(z0, TRIM)
+            if not (dev0 >= MIN_Z and _trimmed(line_z(l3, l2), TRIM)[0] < STEADY_Z):
+                return None
         l1 = self._chunk_lines(j0 + 1)
         after0 = self._lines.get(j0)
         if l1 is None or after0 is None or l1.power.size != before.power.size:
@@ -367,7 +410,6 @@ class LatePath:
             p0 = float(np.sum(lb.power))
             sharp = p0 / wide if wide > 0 else math.nan
             share = p0 / whole if whole > 0 else math.nan
-        at_s = self.t0 + fed_end / self.sr
         onset_s, spread = math.nan, math.inf
         if not (sharp >= MIN_SHARPNESS and share >= MIN_SHARE and self._stands_out(before)):
             verdict = "not sharp enough to judge"
