@@ -88,6 +88,15 @@ tuning's) a first crossing more than :data:`ONSET_TOL_S` before the onset is fla
 over clean stepping, where the stop was hot and held but the hold began again (its drops
 flickered as the room's tail decayed), the onset is taken back to that first hot frame
 (``retime_log``). ``detected_at_s`` stays the fire's.
+
+**The late path (opt-in: ``late=True``; round 12a, :mod:`.late`).** A second source of
+events beside the fires: a stop the fast path never heard, found on the step clock's lines
+0.5-0.75 s after it, its onset estimated back (``found_late``; ``onset_uncertain`` where the
+change point does not pin it within 25 ms). It judges nothing while the fast path is latched
+on a stop it confirmed; a stop it finds while the fast path holds a fire waits for that
+decision; after it fires, the fast path's fires on the same stop are swallowed
+(``late_swallowed``). Its chunk ends are sample counts from the stream start, where the feed
+stops to judge: the events do not depend on the block size.
 """
 
 from __future__ import annotations
