@@ -214,3 +214,31 @@ def test_a_late_onset_is_never_silently_wrong(
     ev = _events(y, tu, 4096)
     if ev:
         assert ev[0].onset_uncertain or abs(ev[0].onset_s - stop_at) <= TOL_S, ev[0]
+
+
+def test_listen_late_reports_the_stop_found_late(tmp_path: Path) -> None:
+    """``stickslip listen --late``: the JSON event says found_late, the line says so; without --late, no stop."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from stickslip.audio.sources import write_wav
+    from stickslip.cli import app
+
+    train, test = TARGETS["trained quieter, test louder"]
+    x, sr = render(train)
+    write_wav(tmp_path / "tune.wav", x, sr)
+    write_wav(tmp_path / "test.wav", render(test)[0], sr)
+    runner = CliRunner()
+    t = str(tmp_path / "t.json")
+    assert runner.invoke(app, ["tune", str(tmp_path / "tune.wav"), "--stop-at", "2.0", "-o", t]).exit_code == 0
+    r = runner.invoke(app, ["listen", str(tmp_path / "test.wav"), "--tuning", t, "--json", "--late"])
+    assert r.exit_code == 0, r.output
+    (ev,) = json.loads(r.stdout)
+    assert ev["found_late"] is True and ev["onset_uncertain"] is False and abs(ev["onset_s"] - 1.6) <= TOL_S
+    r = runner.invoke(app, ["listen", str(tmp_path / "test.wav"), "--tuning", t, "--late"])
+    assert r.exit_code == 0 and "found late on the step clock" in r.stdout
+    r = runner.invoke(app, ["listen", str(tmp_path / "test.wav"), "--tuning", t])
+    assert r.exit_code == 0 and "no end stop heard" in r.stdout
+    r = runner.invoke(app, ["listen", str(tmp_path / "test.wav"), "--tuning", t, "--late", "--confirm-s", "0"])
+    assert r.exit_code == 2 and "--late" in r.output
