@@ -405,8 +405,14 @@ class ConfirmedStopDetector:
         late = self.late
         while pos < x.size:
             take = min(self._room(), x.size - pos)
-            if late is not None:  # the late path judges at the end of each of its chunks: the feed stops there
+            # the late path judges at the end of each of its chunks, from the fast path's state there. Idle (no fire
+            # held, not latched, warmed up), the fast path can change that state within a piece of _room() samples
+            # only by firing, and a fire's window ends beyond the piece: the piece is fed whole and the chunk ends in
+            # it judged afterwards, each after the fires that came before it. Otherwise the feed stops at the next one.
+            idle = late is not None and self._pending is None and not self.inner.latched and self.inner.ready
+            if late is not None and not idle:
                 take = min(take, late.next_stop(self._fed) - self._fed)
+            fed0 = self._fed
             events = self.inner.feed(x[pos : pos + take])
             if self.sync_bands:
                 self._keep_samples(x[pos : pos + take])
@@ -416,19 +422,31 @@ class ConfirmedStopDetector:
             pos += take
             self._fed += take
             self._absorb()
+            if late is not None:
+                ends = range(late.next_stop(fed0), self._fed + 1, late.chunk)
+                fires = sorted(events, key=self._fire_frame)
+                for b in ends:
+                    while fires and self._fire_frame(fires[0]) * self._H + self._F <= b:
+                        out += self._fired(fires.pop(0))
+                    out += self._late_step(late, b)
+                events = fires
             for ev in events:
                 out += self._fired(ev)
             out += self._decide()
-            if late is not None and self._fed % late.chunk == 0:
-                out += self._late_step(late)
         return out
 
-    def _late_step(self, late: LatePath) -> list[StopEvent]:
-        """The late path's chunk ended: a stop the fast path never heard, or nothing (see :mod:`.late`)."""
-        held = self._pending is not None
-        return self._late_event(late.step(self._fed, held, self.inner.latched and not held, self.inner.ready))
+    def _late_step(self, late: LatePath, at: int) -> list[StopEvent]:
+        """The late path's chunk ended at sample ``at``: a stop the fast path never heard, or nothing (:mod:`.late`).
 
-    def _late_event(self, got: tuple[float, float, bool] | None) -> list[StopEvent]:
+        Where ``at`` is inside the piece just fed (an idle fast path), the fast path was idle there unless it had
+        fired since: held, not stopped, ready."""
+        held = self._pending is not None
+        if at != self._fed:
+            return self._late_event(late.step(at, held, False, True), at)
+        return self._late_event(late.step(at, held, self.inner.latched and not held, self.inner.ready), at)
+
+    def _late_event(self, got: tuple[float, float, bool] | None, when: int) -> list[StopEvent]:
+        """The late path's stop as an event, emitted at sample count ``when`` (None: no event)."""
         if got is None:
             return []
         at_s, onset_s, uncertain = got
@@ -438,9 +456,10 @@ class ConfirmedStopDetector:
             StopEvent(
                 detected_at_s=at_s,
                 onset_s=onset_s,
-                # the stop-likeness of the latest frame heard (template tunings: margins + 1 are a / threshold)
-                level_db=(self._margin(self.inner.frames_seen - 1) + 1.0) * float(self.inner.tuning.threshold_db),
-                confirmed_at_s=max(at_s, self._t0 + self._fed / self._sr),
+                # the stop-likeness of the latest frame by then (template tunings: margins + 1 are a / threshold)
+                level_db=(self._margin(min((when - self._F) // self._H, self.inner.frames_seen - 1)) + 1.0)
+                * float(self.inner.tuning.threshold_db),
+                confirmed_at_s=max(at_s, self._t0 + when / self._sr),
                 confirmed_s=at_s - onset_s if not uncertain else None,
                 onset_uncertain=uncertain,
                 found_late=True,
@@ -452,7 +471,7 @@ class ConfirmedStopDetector:
         else a stop the late path found and held back while the fast path was deciding."""
         out = self._finish_fast()
         if self.late is not None and not out:
-            out = self._late_event(self.late.finish())
+            out = self._late_event(self.late.finish(), self._fed)
         return out
 
     def _finish_fast(self) -> list[StopEvent]:

@@ -312,7 +312,8 @@ class LatePath:
         decision: a confirmed fire gives the stop, a rejected one leaves it to the late path);
         ``stopped``: the fast path is latched on a stop it confirmed (nothing is judged);
         ``ready``: the fast path has learned the stepping (before it has, nothing is judged: the
-        stretch compared must be stepping the fast path heard, not the room before it).
+        stretch compared must be stepping the fast path heard, not the room before it). Samples
+        pushed after ``fed`` are not used.
         """
         j = fed // self.chunk - 1
         if fed != (j + 1) * self.chunk or j < 0:
