@@ -28,6 +28,7 @@ unconfirmed fires beside them; ``--seed``, ``--hours``, ``--piece-s`` for anothe
 ``--in-spec`` for step rates within the tuning's ±5 % warning, 950-1050 Hz, not 900-1260 Hz);
 ``--under-talk`` hears true stops under talk, babble and a radio, unconfirmed and confirmed;
 ``--step-clock`` confirms with the step clock too (line by line since round 7; off by default);
+``--late`` runs the late path too (round 12a, opt-in: stops the fast path never heard, found on the step clock);
 ``--onset`` counts the confirmed first event's onset, right / early / late / flagged / missed, over the
 battery's drifting clock and knocks, the fourth generator's arms and the fifth generator's draws (round 8b:
 an early or late onset without ``onset_uncertain`` is a silently wrong count).
@@ -309,6 +310,7 @@ def false_alarms_per_hour(
     confirm_s: float = CONFIRM_S,
     step_clock: bool = False,
     in_spec: bool = False,
+    late: bool = False,
 ) -> dict[str, tuple[int, int]]:
     """One hour of stepping without a stop per joint of the battery's generator: false alarms per hour.
 
@@ -333,7 +335,7 @@ def false_alarms_per_hour(
     print(
         f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces, seeds from "
         f"{seed0}, step rates {'950-1050' if in_spec else '900-1260'} Hz, tuned at 1000 Hz): confirmed over "
-        f"{confirm_s:g} s{' with the step clock' if step_clock else ''} "
+        f"{confirm_s:g} s{' with the step clock' if step_clock else ''}{' with the late path' if late else ''} "
         "(unconfirmed fires in brackets)"
     )
     totals: dict[str, tuple[int, int]] = {}
@@ -350,8 +352,11 @@ def false_alarms_per_hour(
             rate = (950.0 + 100.0 * ((i * 0.618) % 1.0)) if in_spec else (900.0 + 360.0 * ((i * 0.618) % 1.0))
             y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
             per.setdefault(name, [0.0, 0.0, 0.0, 0.0])
-            det = confirming(StopDetector(tu), confirm_s, step_clock)
+            det = confirming(StopDetector(tu), confirm_s, step_clock, late=late)
             confirmed = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
+            for e in confirmed:
+                if e.found_late:
+                    print(f"      late event: {name}, seed {seed0 + i}, rate {rate:.0f} Hz, at {e.detected_at_s:.2f} s")
             per[name][0] += len(confirmed)
             per[name][1] += len(StopDetector(tu).feed(y))
             per[name][2] += piece_s
@@ -382,7 +387,7 @@ def false_alarms_per_hour(
     return totals
 
 
-def true_stops_under_talk(seeds: int = 5, step_clock: bool = False) -> None:
+def true_stops_under_talk(seeds: int = 5, step_clock: bool = False, late: bool = False) -> None:
     """Stops heard under talk: 20 s of stepping into the stop with talk, babble or a radio, the first event.
 
     A confirmation must not lose or move a true stop heard under the interference it is
@@ -419,7 +424,7 @@ def true_stops_under_talk(seeds: int = 5, step_clock: bool = False) -> None:
                 y, _ = render(Scene(joint, 1080.0 + 20 * s_, 20.0, 22.5, seed=300 + 10 * k + s_, **kw))  # type: ignore[arg-type]
                 dets = (
                     ("unconfirmed", StopDetector(tu)),
-                    ("confirmed", confirming(StopDetector(tu), step_clock=step_clock)),
+                    ("confirmed", confirming(StopDetector(tu), step_clock=step_clock, late=late)),
                 )
                 for name, det in dets:
                     ev = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
@@ -440,7 +445,7 @@ def true_stops_under_talk(seeds: int = 5, step_clock: bool = False) -> None:
             print(f"  joint {joint} {name:11s} " + ", ".join(f"{k} {v}" for k, v in c.items()))
 
 
-def onset_errors(draws: int = 60, clear_draws: int = 200) -> dict[str, dict[str, int]]:
+def onset_errors(draws: int = 60, clear_draws: int = 200, late: bool = False) -> dict[str, dict[str, int]]:
     """The confirmed first event's onset over many draws: right, early, late (unflagged), flagged, missed.
 
     A traverse counts to the first event's ``onset_s``: early or late by more than
@@ -537,8 +542,10 @@ def onset_errors(draws: int = 60, clear_draws: int = 200) -> dict[str, dict[str,
             if tu is None:
                 c["refused by tune"] += 1
                 continue
-            det = ConfirmedStopDetector(StopDetector(tu))
+            det = ConfirmedStopDetector(StopDetector(tu), late=late)
             ev = det.feed(y) + det.finish()
+            if ev and ev[0].found_late:
+                c["found late"] = c.get("found late", 0) + 1
             err = ev[0].onset_s - stop if ev else 0.0
             key = (
                 "missed" if not ev else "flagged" if ev[0].onset_uncertain
@@ -563,12 +570,15 @@ if __name__ == "__main__":
     ap.add_argument("--step-clock", action="store_true", help="confirm with the step clock too (rounds 6-7, opt-in)")
     ap.add_argument("--in-spec", action="store_true", help="step rates within the tuning's 5 %% warning (--long-only)")
     ap.add_argument("--onset", action="store_true", help="count the confirmed first event's onset errors alone")
+    ap.add_argument("--late", action="store_true", help="run the late path too (round 12a, opt-in)")
     args = ap.parse_args()
     if args.onset:
-        onset_errors()
+        onset_errors(late=args.late)
     elif args.under_talk:
-        true_stops_under_talk(step_clock=args.step_clock)
+        true_stops_under_talk(step_clock=args.step_clock, late=args.late)
     elif args.long_only:
-        false_alarms_per_hour(args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock, args.in_spec)
+        false_alarms_per_hour(
+            args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock, args.in_spec, late=args.late
+        )
     else:
         main()

@@ -16,6 +16,11 @@ detector was changed for them: a stop that fades in, a drifting step clock, 8-bi
 22.05 kHz, a recording that starts at the stop). A stop without a sharp onset (a fade,
 or a recording that starts at the stop) passes with an onset up to ``late_s`` late.
 
+Each test recording is heard with the late path on (``listen --late``, round 12a): a stop the
+fast path misses and the late path finds 0.5-0.75 s later, with its onset right, is printed
+``late`` and still fails (the latency criterion is not loosened; the latency targets are
+the fast path's). With the late path off those conditions give no event at all.
+
 Run ``python tests/test_audio_battery.py`` for the table.
 """
 
@@ -92,7 +97,8 @@ CONDITIONS = [
         "absorbs it and the stop's rise there shrinks below the threshold; the step clock sees the stop over 0.24 s "
         "(deviate 13.2, past the 50 ms latency budget), and a synchronous average over the last 40 ms sees it rise "
         "14.5 dB, less than a voice's harmonic on a step line gives without a stop (up to 27 dB in 1 h): "
-        "docs/audio.md, 'a synchronous average over the last 30-50 ms'",
+        "docs/audio.md, 'a synchronous average over the last 30-50 ms'; the late path (round 12a) finds it 0.56 s "
+        "after the stop, its onset 3 ms early: it fails the latency alone",
     ),
     Condition("second instrument throughout", Q, _test(Q, 31, second_rate=1230.0)),
     Condition("second instrument in training", variant(P, second_rate=730.0, second_from=1.0), _test(P, 32)),
@@ -138,7 +144,8 @@ CONDITIONS = [
         "tuning never saw cannot be told from a new sound in the room without the steps' synchrony, which needs "
         "0.24 s of the stop (deviate 18.9), past the 50 ms latency budget; over the last 40 ms the synchronous level "
         "rises 26.1 dB, and a voice's harmonic on a step line gives up to 27 dB in 1 h of stepping (docs/audio.md, "
-        "'a synchronous average over the last 30-50 ms')",
+        "'a synchronous average over the last 30-50 ms'); the late path (round 12a) finds it 0.56 s after the stop, "
+        "its onset 3 ms late: it fails the latency alone",
     ),
     Condition(
         "trained brighter, test duller",
@@ -157,7 +164,8 @@ CONDITIONS = [
         "step clock's lines see it in 0.24 s (deviate 19.2), past the 50 ms latency budget; over the last 40 ms its "
         "synchronous level rises 29.2 dB in one sub-band, adding -11 dB of the stepping's line power, and a voice's "
         "harmonic on a step line adds up to +1.2 dB in 1 h of stepping (docs/audio.md, 'a synchronous average over "
-        "the last 30-50 ms')",
+        "the last 30-50 ms'); the late path (round 12a) finds it 0.56 s after the stop, its onset 3 ms late: it "
+        "fails the latency alone",
     ),
     Condition("brighter stop", variant(P, stop_kind="brighter"), _test(P, 66, stop_kind="brighter"), group="cross"),
     # hostile conditions nobody tuned for (written before the detector was changed for them)
@@ -198,6 +206,7 @@ class Outcome:
     warnings: tuple[str, ...] = ()
     events: tuple[float, ...] = ()  # detected_at_s
     onsets: tuple[float, ...] = ()
+    late: tuple[bool, ...] = ()  # found late by the late path (round 12a), per event
     true_stop_s: float | None = None
     late_s: float = 0.0
 
@@ -216,6 +225,13 @@ class Outcome:
     def latency_s(self) -> float | None:
         h = self.hits
         return None if not h or self.true_stop_s is None else self.events[h[0]] - self.true_stop_s
+
+    @property
+    def fast_latency_s(self) -> float | None:
+        """The latency of a stop the fast path heard (None for one found late: the latency targets are the fast
+        path's, and a late find fails its condition on latency)."""
+        h = self.hits
+        return None if h and self.late and self.late[h[0]] else self.latency_s
 
     @property
     def onset_error_s(self) -> float | None:
@@ -244,14 +260,20 @@ def run(c: Condition) -> Outcome:
         tu_t = tu.for_sample_rate(sr_t)
     except ValueError as e:  # listen refuses this tuning at this sample rate
         return Outcome(refused=f"listen: {e}")
-    events = detect(y, tu_t, block=1024, confirm_s=CONFIRM_S)  # as listen reports them
+    events = detect(y, tu_t, block=1024, confirm_s=CONFIRM_S, late=True)  # as listen --late reports them
     return Outcome(
         warnings=tuple((tu.checks or {}).get("warnings", [])),
         events=tuple(e.detected_at_s for e in events),
         onsets=tuple(e.onset_s for e in events),
+        late=tuple(e.found_late for e in events),
         true_stop_s=(c.test.stop_at or 0.0) + c.lead_s if not (c.test.silence or c.test.constant is not None) else None,
         late_s=c.late_s,
     )
+
+
+def found_late(c: Condition, o: Outcome) -> bool:
+    """The stop found once, by the late path alone, with its onset right and no false alarm (the latency fails)."""
+    return c.expect == "found" and len(o.hits) == 1 and o.false_alarms == 0 and o.late[o.hits[0]]
 
 
 def passed(c: Condition, o: Outcome) -> bool:
@@ -289,11 +311,11 @@ def test_condition(cond: Condition) -> None:
 
 def test_latency_targets_over_the_battery() -> None:
     lat = [
-        o.latency_s
+        o.fast_latency_s
         for c in CONDITIONS
         if not (_needs_espeak(c) and espeak_speech(48_000) is None) and c.late_s == 0
         for o in [outcome(c)]
-        if o.latency_s is not None
+        if o.fast_latency_s is not None
     ]
     assert len(lat) >= 30
     assert np.median(lat) <= 0.030 and np.percentile(lat, 95) <= 0.050, lat
@@ -307,9 +329,12 @@ def table() -> str:
         err = f"{1e3 * o.onset_error_s:+.1f}" if o.onset_error_s is not None else "-"
         note = ("refused: " + o.refused[:60]) if o.refused else "; ".join(w[:60] for w in o.warnings)
         ok = "pass" if passed(c, o) else ("xfail" if c.known_failure else "FAIL")
+        if not passed(c, o) and found_late(c, o):
+            ok = "late"  # found late, onset right: fails the 50 ms latency alone
+            note = "found late (the late path), onset right; " + note
         found = str(len(o.hits)) if o.true_stop_s is not None else "-"
         rows.append(f"{c.name:48s} {ok:8s} {found:>5s} {o.false_alarms:>3d} {lat:>10s} {err:>12s}  {note}")
-    lat_all = [o.latency_s for o in _CACHE.values() if o.latency_s is not None and o.late_s == 0]
+    lat_all = [o.fast_latency_s for o in _CACHE.values() if o.fast_latency_s is not None and o.late_s == 0]
     errs = [abs(o.onset_error_s) for o in _CACHE.values() if o.onset_error_s is not None and o.late_s == 0]
     rows.append(
         f"latency over {len(lat_all)} stops: median {1e3 * np.median(lat_all):.1f} ms, "
@@ -318,7 +343,9 @@ def table() -> str:
     for g in ("core", "cross", "hostile"):
         cs = [c for c in CONDITIONS if c.group == g]
         ok = sum(passed(c, outcome(c)) for c in cs)
-        rows.append(f"{g}: {ok}/{len(cs)} pass")
+        late = sum(not passed(c, outcome(c)) and found_late(c, outcome(c)) for c in cs)
+        more = f"; {late} more found late, onset right (they fail the latency)" if late else ""
+        rows.append(f"{g}: {ok}/{len(cs)} pass{more}")
     return "\n".join(rows)
 
 

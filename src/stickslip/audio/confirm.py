@@ -96,6 +96,15 @@ tuning's) a first crossing more than :data:`ONSET_TOL_S` before the onset is fla
 over clean stepping, where the stop was hot and held but the hold began again (its drops
 flickered as the room's tail decayed), the onset is taken back to that first hot frame
 (``retime_log``). ``detected_at_s`` stays the fire's.
+
+**The late path (opt-in: ``late=True``; round 12a, :mod:`.late`).** A second source of
+events beside the fires: a stop the fast path never heard, found on the step clock's lines
+0.5-0.75 s after it, its onset estimated back (``found_late``; ``onset_uncertain`` where the
+change point does not pin it within 25 ms). It judges nothing while the fast path is latched
+on a stop it confirmed; a stop it finds while the fast path holds a fire waits for that
+decision; after it fires, the fast path's fires on the same stop are swallowed
+(``late_swallowed``). Its chunk ends are sample counts from the stream start, where the feed
+stops to judge: the events do not depend on the block size.
 """
 
 from __future__ import annotations
@@ -108,6 +117,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .detector import StopDetector, StopEvent, Tuning
+from .late import LatePath
 from .stepclock import LineChange, line_change, step_rate_hz
 from .stopped import BEFORE_QUANTILE, Stopped, band_filter, band_power, stepping_stopped, tuned_change_db
 
@@ -258,6 +268,10 @@ class ConfirmedStopDetector:
         in the stepping band (see the module: the step clock). Off by default: on a rough
         clock just sharp enough to be judged a stop may hardly change the lines
         (docs/audio.md).
+    late : bool
+        Also run the late path (:mod:`.late`, round 12a): a stop the fast path never heard,
+        found on the step clock's lines 0.5-0.75 s after it, its onset estimated back
+        (``StopEvent.found_late``). Off by default (docs/audio.md, "Round 12a").
 
     Examples
     --------
@@ -278,6 +292,7 @@ class ConfirmedStopDetector:
         min_hot: float = MIN_HOT,
         after_reject_s: float | None = AFTER_REJECT_S,
         step_clock: bool = False,
+        late: bool = False,
     ) -> None:
         c = check_confirm_s(confirm_s)
         if c <= 0.0:
@@ -316,6 +331,9 @@ class ConfirmedStopDetector:
         edges = tu.edges_hz if tu.method == "template" and tu.edges_hz else tu.band_hz
         self._stop_sos = band_filter((float(edges[0]), float(edges[-1])), self._sr)
         self._tuned_db = tuned_change_db(tu.stepping_levels_db, tu.signature_db)
+        band = _stepping_band(tu)
+        #: the late path (round 12a, :mod:`.late`): stops the fast path never heard, found on the step clock's lines
+        self.late: LatePath | None = LatePath(self._sr, band, inner._t0) if late and band else None
         self.reset(inner._t0)
 
     def reset(self, t0_s: float = 0.0) -> None:
@@ -354,6 +372,10 @@ class ConfirmedStopDetector:
         #: the onset emitted), s (see :meth:`_rise`)
         self.retime_log: list[tuple[float, float, float]] = []
         self._retimed: float | None = None  # the onset _onset_doubt took back, for _confirmed
+        #: the fast path's fires swallowed while the late path was latched on a stop it found (not counted twice)
+        self.late_swallowed: list[StopEvent] = []
+        if self.late is not None:
+            self.late.reset(t0_s)
 
     # --- the detector's interface -------------------------------------------------------------
     @property
@@ -398,20 +420,78 @@ class ConfirmedStopDetector:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
         out: list[StopEvent] = []
         pos = 0
+        late = self.late
         while pos < x.size:
             take = min(self._room(), x.size - pos)
+            # the late path judges at the end of each of its chunks, from the fast path's state there. Idle (no fire
+            # held, not latched, warmed up), the fast path can change that state within a piece of _room() samples
+            # only by firing, and a fire's window ends beyond the piece: the piece is fed whole and the chunk ends in
+            # it judged afterwards, each after the fires that came before it. Otherwise the feed stops at the next one.
+            idle = late is not None and self._pending is None and not self.inner.latched and self.inner.ready
+            if late is not None and not idle:
+                take = min(take, late.next_stop(self._fed) - self._fed)
+            fed0 = self._fed
             events = self.inner.feed(x[pos : pos + take])
             self._keep_samples(x[pos : pos + take])
+            if late is not None:
+                v = np.asarray(x[pos : pos + take], dtype=np.float64)
+                late.push(v if np.all(np.isfinite(v)) else np.nan_to_num(v, nan=0.0, posinf=1.0, neginf=-1.0))
             pos += take
             self._fed += take
             self._absorb()
+            if late is not None:
+                ends = range(late.next_stop(fed0), self._fed + 1, late.chunk)
+                fires = sorted(events, key=self._fire_frame)
+                for b in ends:
+                    while fires and self._fire_frame(fires[0]) * self._H + self._F <= b:
+                        out += self._fired(fires.pop(0))
+                    out += self._late_step(late, b)
+                events = fires
             for ev in events:
                 out += self._fired(ev)
             out += self._decide()
         return out
 
+    def _late_step(self, late: LatePath, at: int) -> list[StopEvent]:
+        """The late path's chunk ended at sample ``at``: a stop the fast path never heard, or nothing (:mod:`.late`).
+
+        Where ``at`` is inside the piece just fed (an idle fast path), the fast path was idle there unless it had
+        fired since: held, not stopped, ready."""
+        held = self._pending is not None
+        if at != self._fed:
+            return self._late_event(late.step(at, held, False, True), at)
+        return self._late_event(late.step(at, held, self.inner.latched and not held, self.inner.ready), at)
+
+    def _late_event(self, got: tuple[float, float, bool] | None, when: int) -> list[StopEvent]:
+        """The late path's stop as an event, emitted at sample count ``when`` (None: no event)."""
+        if got is None:
+            return []
+        at_s, onset_s, uncertain = got
+        if not math.isfinite(onset_s):
+            onset_s, uncertain = at_s, True
+        return [
+            StopEvent(
+                detected_at_s=at_s,
+                onset_s=onset_s,
+                # the stop-likeness of the latest frame by then (template tunings: margins + 1 are a / threshold)
+                level_db=(self._margin(min((when - self._F) // self._H, self.inner.frames_seen - 1)) + 1.0)
+                * float(self.inner.tuning.threshold_db),
+                confirmed_at_s=max(at_s, self._t0 + when / self._sr),
+                confirmed_s=at_s - onset_s if not uncertain else None,
+                onset_uncertain=uncertain,
+                found_late=True,
+            )
+        ]
+
     def finish(self) -> list[StopEvent]:
-        """The stream ended: the provisional stop, if what was heard of its window persisted (see the module)."""
+        """The stream ended: the provisional stop, if what was heard of its window persisted (see the module);
+        else a stop the late path found and held back while the fast path was deciding."""
+        out = self._finish_fast()
+        if self.late is not None and not out:
+            out = self._late_event(self.late.finish(), self._fed)
+        return out
+
+    def _finish_fast(self) -> list[StopEvent]:
         if self._pending is None:
             return []
         ev, fire, _ = self._pending
@@ -466,6 +546,10 @@ class ConfirmedStopDetector:
     def _fired(self, ev: StopEvent) -> list[StopEvent]:
         out: list[StopEvent] = []
         fire = self._fire_frame(ev)
+        if self.late is not None:
+            if self.late.latched:  # the late path found this stop already: not counted twice
+                self.late_swallowed.append(ev)
+                return out
         if self._pending is not None:  # the inner released and fired again inside the window: no persistence
             self.rejected.append(self._pending[0])
             self._last_reject = self._rejected_fire = self._pending[1]
@@ -604,6 +688,8 @@ class ConfirmedStopDetector:
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
         self._retimed = None
+        if self.late is not None:  # the fast path gave this stop: the late path judges nothing before it
+            self.late.note_busy((fire + frames) * self._H + self._F)
         why = None if ev.onset_uncertain else self._onset_doubt(ev, fire, frames)
         self._covered_at = self._rejected_fire = None
         if why is None and self._retimed is not None:
@@ -840,7 +926,7 @@ def step_clock_verdict(got: LineChange) -> bool | None:
     return got.change_z >= MIN_SYNC_Z and abs(got.change_db) >= MIN_SYNC_CHANGE_DB
 
 
-def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = False) -> Any:
+def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = False, late: bool = False) -> Any:
     """``detector`` wrapped in a :class:`ConfirmedStopDetector`, where that applies.
 
     ``confirm_s`` 0 gives the detector back unchanged (the old behaviour); so does a
@@ -848,9 +934,10 @@ def confirming(detector: Any, confirm_s: float = CONFIRM_S, step_clock: bool = F
     simulator's oracle, a position read-back): only a :class:`StopDetector` has the
     per-frame evidence to confirm with. The wrapper listens with a fresh detector of the
     same tuning; ``detector`` itself is left as it was. ``step_clock`` True also asks the
-    step clock (:class:`ConfirmedStopDetector`; off by default).
+    step clock (:class:`ConfirmedStopDetector`; off by default); ``late`` True also runs the
+    late path (:mod:`.late`: stops the fast path never heard; off by default).
     """
     c = check_confirm_s(confirm_s)
     if c == 0.0 or not isinstance(detector, StopDetector):
         return detector
-    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, step_clock=step_clock)
+    return ConfirmedStopDetector(StopDetector(detector.tuning, detector._t0), c, step_clock=step_clock, late=late)

@@ -73,6 +73,10 @@ class StopEvent:
         The stop was already there when the confirming detector began listening again
         after a fire it rejected: it began before ``onset_s``, by up to that fire's
         window (:mod:`.confirm`). Do not count to it.
+    found_late : bool
+        The fast path never heard this stop: the late path found it on the step clock's
+        lines 0.5-0.75 s after it and estimated its onset back (:mod:`.late`, opt-in).
+        ``detected_at_s`` is when it was found, not the fast path's 30-50 ms.
     """
 
     detected_at_s: float
@@ -81,6 +85,7 @@ class StopEvent:
     confirmed_at_s: float | None = None
     confirmed_s: float | None = None
     onset_uncertain: bool = False
+    found_late: bool = False
 
     def to_dict(self) -> dict[str, float | bool | None]:
         return {
@@ -90,6 +95,7 @@ class StopEvent:
             "confirmed_at_s": self.confirmed_at_s,
             "confirmed_s": self.confirmed_s,
             "onset_uncertain": self.onset_uncertain,
+            "found_late": self.found_late,
         }
 
 
@@ -431,16 +437,19 @@ def detect(
     t0_s: float = 0.0,
     block: int = 1 << 16,
     confirm_s: float = 0.0,
+    late: bool = False,
 ) -> list[StopEvent]:
     """Run a fresh :class:`StopDetector` over a whole recording (or an iterable of blocks).
 
     ``confirm_s`` > 0 reports a stop only once it persisted that long, s
     (:class:`~stickslip.audio.confirm.ConfirmedStopDetector`; a stop the recording ends on
-    is reported if it persisted so far); 0, the default, reports every fire.
+    is reported if it persisted so far); 0, the default, reports every fire. ``late`` also
+    reports stops the fast path never heard, found late on the step clock (:mod:`.late`;
+    with ``confirm_s`` > 0 only).
     """
     from .confirm import ConfirmedStopDetector, confirming
 
-    det = confirming(StopDetector(tuning, t0_s), confirm_s)
+    det = confirming(StopDetector(tuning, t0_s), confirm_s, late=late)
     events: list[StopEvent] = []
     if isinstance(samples, np.ndarray):
         for i in range(0, samples.size, block):

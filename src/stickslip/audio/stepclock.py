@@ -23,6 +23,7 @@ cut into blocks. Units: Hz for rates, dimensionless shares.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import NamedTuple
@@ -92,6 +93,21 @@ MIN_LINES = 6
 FloatArray = NDArray[np.float64]
 
 
+@functools.lru_cache(maxsize=16)
+def _hann(n: int) -> FloatArray:
+    """``np.hanning(n)``, kept (the late path asks for the same few lengths again and again); read-only."""
+    w = np.hanning(n)
+    w.flags.writeable = False
+    return w
+
+
+def _median(v: FloatArray) -> float:
+    """``np.median`` of a small 1-D array, without its overhead (the same value: the middle one, or the mean of two)."""
+    a = np.sort(v)
+    n = a.size
+    return float(a[n // 2]) if n % 2 else float((a[n // 2 - 1] + a[n // 2]) / 2)
+
+
 def band_envelope_spectrum(
     x: ArrayLike, sample_rate: float, bands_hz: Sequence[tuple[float, float]] | None = None
 ) -> tuple[FloatArray, FloatArray]:
@@ -107,7 +123,7 @@ def band_envelope_spectrum(
     if bands_hz is None:
         y = np.diff(v)
     else:
-        spec = np.fft.rfft(v * np.hanning(v.size))
+        spec = np.fft.rfft(v * _hann(v.size))
         f = np.fft.rfftfreq(v.size, 1 / sr)
         keep = np.zeros(f.size, dtype=bool)
         for lo, hi in bands_hz:
@@ -115,7 +131,7 @@ def band_envelope_spectrum(
         spec[~keep] = 0.0
         y = np.fft.irfft(spec, v.size)
     e = y**2
-    e = (e - e.mean()) * np.hanning(e.size)
+    e = (e - e.mean()) * _hann(e.size)
     p = np.abs(np.fft.rfft(e)) ** 2
     return np.asarray(np.fft.rfftfreq(e.size, 1 / sr), dtype=np.float64), np.asarray(p, dtype=np.float64)
 
@@ -300,14 +316,40 @@ def line_powers(
     if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
         e = np.zeros(0)
         return Lines(e, e, e, e, np.zeros(0, dtype=np.int64)), float("nan")
-    w = np.hanning(v.size)
+    w = _hann(v.size)
     p = 2.0 * np.abs(np.fft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
-    f = np.fft.rfftfreq(v.size, 1 / sr)
-    df = float(f[1] - f[0])
+    bands = tuple((float(lo), float(hi)) for lo, hi in bands_hz)
+    in_bands, lines = _line_grid(v.size, sr, float(rate_hz), bands, float(width))
     whole = 0.0
-    for lo, hi in bands_hz:
-        inb = (f >= lo) & (f < hi)
+    for inb in in_bands:
         whole += float(np.sum(p[inb]))
+    for c, near, left, right in lines:
+        # the median of noise's periodogram bins is ln 2 of their mean (they scatter exponentially)
+        floor = 0.5 * (_median(p[left]) + _median(p[right])) / math.log(2.0)
+        n = int(near.size)
+        freq.append(c)
+        power.append(float(np.sum(p[near])) - floor * n)
+        var.append(4.0 * n * floor**2)
+        floors.append(floor)
+        bins.append(n)
+    return Lines(_f64(freq), _f64(power), _f64(var), _f64(floors), np.asarray(bins, dtype=np.int64)), whole
+
+
+_Grid = tuple[list[NDArray[np.intp]], list[tuple[float, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]]]
+
+
+@functools.lru_cache(maxsize=64)
+def _line_grid(n: int, sr: float, rate_hz: float, bands: tuple[tuple[float, float], ...], width: float) -> _Grid:
+    """The bins of :func:`line_powers` for a stretch of ``n`` samples: per band, its bins; per line (found in a band and
+    with both flanks), its frequency and the bins of the line and of its two flanks. Kept: the late path asks for the
+    same stretch length and rate again and again."""
+    f = np.fft.rfftfreq(n, 1 / sr)
+    df = float(f[1] - f[0])
+    in_bands: list[NDArray[np.intp]] = []
+    lines: list[tuple[float, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]] = []
+    for lo, hi in bands:
+        inb = (f >= lo) & (f < hi)
+        in_bands.append(np.flatnonzero(inb))
         for k in range(max(1, int(math.ceil(lo / rate_hz))), int(math.floor(hi / rate_hz)) + 1):
             c = k * rate_hz
             half = width * max(3 * df, COMB_TOL * c)
@@ -315,15 +357,8 @@ def line_powers(
             left = (f < c - half) & (f >= c - FLANK * half)
             right = (f > c + half) & (f <= c + FLANK * half)
             if near.any() and left.any() and right.any():
-                # the median of noise's periodogram bins is ln 2 of their mean (they scatter exponentially)
-                floor = 0.5 * (float(np.median(p[left])) + float(np.median(p[right]))) / math.log(2.0)
-                n = int(np.count_nonzero(near))
-                freq.append(c)
-                power.append(float(np.sum(p[near])) - floor * n)
-                var.append(4.0 * n * floor**2)
-                floors.append(floor)
-                bins.append(n)
-    return Lines(_f64(freq), _f64(power), _f64(var), _f64(floors), np.asarray(bins, dtype=np.int64)), whole
+                lines.append((c, np.flatnonzero(near), np.flatnonzero(left), np.flatnonzero(right)))
+    return in_bands, lines
 
 
 def _f64(values: list[float]) -> FloatArray:
@@ -451,7 +486,12 @@ def line_z(before: Lines, after: Lines) -> FloatArray:
 
 
 def line_change(
-    before: ArrayLike, after: ArrayLike, sample_rate: float, bands_hz: Sequence[tuple[float, float]]
+    before: ArrayLike,
+    after: ArrayLike,
+    sample_rate: float,
+    bands_hz: Sequence[tuple[float, float]],
+    trim: int = TRIM_LINES,
+    rate_hz: float | None = None,
 ) -> LineChange:
     """How much the step clock's lines in ``bands_hz`` changed from ``before`` to ``after``, line by line.
 
@@ -469,14 +509,18 @@ def line_change(
     (the lines left; the trimmed sum is smaller than a chi-square of that many, so the
     deviate errs towards "nothing changed"). ``before`` and ``after`` may differ in
     length (each line's estimate is a mean square). NaN fields (no verdict) when no rate
-    is heard or fewer than :data:`MIN_LINES` lines are found.
+    is heard or fewer than :data:`MIN_LINES` lines are found. ``trim`` lines are dropped
+    (:data:`TRIM_LINES` by default; the late path of :mod:`.late` drops 2); ``rate_hz``, if
+    given, is used instead of the rate heard on ``before`` (Hz).
     """
+    if not (isinstance(trim, int) and trim >= 0):
+        raise ValueError(f"trim = {trim!r} must be a whole number of lines, 0 or more")
     a = np.asarray(before, dtype=np.float64).ravel()
     b = np.asarray(after, dtype=np.float64).ravel()
     sr = float(sample_rate)
     nan = float("nan")
-    rate = step_rate_hz(a, sr)
-    if not np.isfinite(rate):
+    rate = step_rate_hz(a, sr) if rate_hz is None else float(rate_hz)
+    if not (np.isfinite(rate) and rate > 0.0):
         return LineChange(rate, nan, nan, 0, 0, nan, nan)
     l0, w0 = line_powers(a, sr, rate, bands_hz)
     l1, _ = line_powers(b, sr, rate, bands_hz)
@@ -485,11 +529,11 @@ def line_change(
     share = p0 / w0 if w0 > 0 else nan
     sharp = p0 / wide if wide > 0 else nan
     k = int(l0.power.size)
-    if k != l1.power.size or k < max(MIN_LINES, TRIM_LINES + 2):
+    if k != l1.power.size or k < max(MIN_LINES, trim + 2):
         return LineChange(rate, nan, nan, 0, k, share, sharp)
     z = line_z(l0, l1)
-    keep = np.argsort(-(z**2), kind="stable")[TRIM_LINES:]
-    dof = k - TRIM_LINES
+    keep = np.argsort(-(z**2), kind="stable")[trim:]
+    dof = k - trim
     top = np.maximum(np.maximum(l0.power, l1.power), 0.0)
     db = 10 * np.log10(np.maximum(l1.power, 0.01 * top + 1e-300) / np.maximum(l0.power, 0.01 * top + 1e-300))
     moved = keep[np.abs(z[keep]) >= LINE_Z]

@@ -197,13 +197,22 @@ def listen(
             "stop is on the clock (docs/audio.md, 'The step clock'); where it is not, no stop is ever reported."
         ),
     ),
+    late: bool = typer.Option(
+        False,
+        "--late/--no-late",
+        help=(
+            "Also report stops the detector never heard, found late on the step clock's lines (0.5-0.75 s after the "
+            "stop, the onset estimated back; found_late in --json): a stop whose sound the tuning never saw (trained "
+            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'Round 12a')."
+        ),
+    ),
     json_out: bool = typer.Option(
         False,
         "--json",
         help=(
             "Print a JSON list of events: detected_at_s, onset_s (s), level_db (dB, as the tuning's threshold), "
-            "confirmed_at_s and confirmed_s (s; null with --confirm-s 0); with --mic one JSON object per line as "
-            "they are confirmed."
+            "confirmed_at_s and confirmed_s (s; null with --confirm-s 0), onset_uncertain, found_late; with --mic "
+            "one JSON object per line as they are confirmed."
         ),
     ),
 ) -> None:
@@ -230,6 +239,8 @@ def listen(
         fail(f"--confirm-s: {e}")
     if step_clock and confirm_s == 0:
         fail("--step-clock judges a stop while it is confirmed: give --confirm-s > 0")
+    if late and confirm_s == 0:
+        fail("--late runs beside the confirmed detector: give --confirm-s > 0")
     try:
         tuning = Tuning.load(tuning_path)
     except TuningFileError as e:
@@ -239,10 +250,10 @@ def listen(
     if channel is not None and recording is None:
         fail("--channel reads one channel of a recording (a live input is read as one channel)")
     if mic:
-        _listen_live(tuning, device, json_out, confirm_s, step_clock)
+        _listen_live(tuning, device, json_out, confirm_s, step_clock, late)
         return
     if serial_port is not None:
-        _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock)
+        _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock, late)
         return
 
     import numpy as np
@@ -281,7 +292,9 @@ def listen(
             heard_rate = float(rate)
             if det is None:
                 try:
-                    det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock)
+                    det = confirming(
+                        StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late
+                    )
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
             problems.add(block_problem(np.nan_to_num(block) if bad else block))  # damage is reported apart
@@ -345,7 +358,9 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
     )
     if ev.onset_uncertain:
         line += "; onset uncertain (when the stop began is not known: a traverse refuses it; measure again)"
-    if ev.confirmed_s is not None:
+    if getattr(ev, "found_late", False):
+        line += "; found late on the step clock (the detector did not hear it; its onset estimated back)"
+    elif ev.confirmed_s is not None:
         if ev.confirmed_s < confirm_s - 1e-9:
             line += f"; the recording ended {ev.confirmed_s:.3f} s after it fired (it persisted so far)"
         else:
@@ -361,7 +376,13 @@ def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
 
 
 def _listen_serial(
-    tuning: Any, port: str, sample_rate: float | None, json_out: bool, confirm_s: float, step_clock: bool
+    tuning: Any,
+    port: str,
+    sample_rate: float | None,
+    json_out: bool,
+    confirm_s: float,
+    step_clock: bool,
+    late: bool = False,
 ) -> None:
     """Live vibration samples from a serial port through the same detector as sound."""
     from ..audio.confirm import confirming
@@ -371,7 +392,7 @@ def _listen_serial(
 
     rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
     try:
-        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock)
+        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late)
     except ValueError as e:
         fail(f"the tuning does not fit {rate} Hz samples: {e}")
     try:
@@ -383,14 +404,16 @@ def _listen_serial(
     _report_live(det, src.blocks(), src.close, tuning, json_out, confirm_s, f"{port}: ")
 
 
-def _listen_live(tuning: Any, device: str | None, json_out: bool, confirm_s: float, step_clock: bool) -> None:
+def _listen_live(
+    tuning: Any, device: str | None, json_out: bool, confirm_s: float, step_clock: bool, late: bool = False
+) -> None:
     from ..audio.confirm import confirming
     from ..audio.detector import StopDetector
     from ..audio.sources import AudioSourceError, Microphone
 
     dev: int | str | None = int(device) if device is not None and device.isdigit() else device
     mic = Microphone(sample_rate=tuning.sample_rate, block=1024, device=dev)
-    det = confirming(StopDetector(tuning), confirm_s, step_clock=step_clock)
+    det = confirming(StopDetector(tuning), confirm_s, step_clock=step_clock, late=late)
     try:
         mic.start()
     except AudioSourceError as err:
