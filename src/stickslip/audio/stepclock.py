@@ -162,7 +162,8 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
     Each candidate bin is scored by the log power of its first three harmonics (a line
     at half the rate, or 1.5 times it, lacks some of them); a line at a third or half
     the winner that stands :data:`SUB_LINE_DB` above the continuum (a third: with the
-    line at two thirds; a half: by :data:`HALF_LINE_DB`) is taken instead
+    line at two thirds; a half: by :data:`HALF_LINE_DB`, or with the line at three
+    halves) is taken instead
     (an envelope can be stronger at two or three times the rate); the winner is refined
     by the power-weighted mean frequency over its line.
     NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
@@ -192,9 +193,14 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
         # HALF_LINE_DB (one line cleared 8 dB by chance: a fresh hypothesis draw, joint Q's brighter stop at 1000 Hz,
         # heard at 500 Hz; a true half stands 24-27 dB clear on the battery's joint P at 700-750 Hz, but only
         # 11.7-13.6 dB through the fourth generator's rough clock, arm 3 at 882 Hz: 15 dB lost it)
-        lines = (sub, 2 * sub) if div == 3 else (sub,)
-        need = SUB_LINE_DB if div == 3 else HALF_LINE_DB
-        if sub >= lo_hz and min(_prominence_db(f, p, c) for c in lines) >= need:
+        # (a fresh draw, arm 3 at 1115 Hz, seed 2000: its half 9.8 dB clear, the line at three halves 18.2 dB): or a
+        # half and three halves both SUB_LINE_DB clear, as a third's two lines must be
+        if div == 3:
+            heard = sub >= lo_hz and min(_prominence_db(f, p, c) for c in (sub, 2 * sub)) >= SUB_LINE_DB
+        else:
+            half = _prominence_db(f, p, sub) if sub >= lo_hz else -math.inf
+            heard = half >= HALF_LINE_DB or min(half, _prominence_db(f, p, 3 * sub)) >= SUB_LINE_DB
+        if heard:
             j = int(np.argmin(np.abs(f - f[i] / div)))
             j0, j1 = max(j - 2, 0), min(j + 3, f.size)
             i = j0 + int(np.argmax(p[j0:j1]))
