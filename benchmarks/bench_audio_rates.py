@@ -25,7 +25,8 @@ Run: ``.venv/bin/python benchmarks/bench_audio_rates.py`` (about 10 minutes on 2
 Measured on main at session 27's end (``daa96af``), with ``--drive 160``: right 366, flagged 16,
 missed 25, silently wrong 1 (the fifth generator's arm 3, shifted stop, early at 1100 Hz), no fire on
 stepping alone; the drive draws (seed 1): right 134, flagged 7, missed 16, refused 3, none silently
-wrong. ``make bench`` runs every set and 60 drive draws.
+wrong. With round 12b (session 28; the predicted drops): right 370, flagged 17, missed 20, early 1;
+the drive draws unchanged. ``make bench`` runs every set and 60 drive draws.
 """
 
 from __future__ import annotations
