@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .stepclock import band_envelope_spectrum
+
 __all__ = ["QUIET_RAILS", "NoSignalError", "SignalGuard", "block_problem", "non_finite", "step_line_db"]
 
 
@@ -80,10 +82,7 @@ def step_line_db(x: ArrayLike, sample_rate: float, step_hz: float, tolerance: fl
     sr = float(sample_rate)
     if not (step_hz > 0 and v.size >= 20 * sr / step_hz and step_hz < sr / 4):
         return float("inf")
-    e = np.diff(v) ** 2
-    e = (e - e.mean()) * np.hanning(e.size)
-    p = np.abs(np.fft.rfft(e)) ** 2
-    f = np.fft.rfftfreq(e.size, 1 / sr)
+    f, p = band_envelope_spectrum(v, sr)
     near = np.abs(f - step_hz) <= tolerance * step_hz
     around = (f >= 0.5 * step_hz) & (f <= 1.5 * step_hz) & ~near
     if not near.any() or not around.any():

@@ -35,6 +35,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import butter, sosfilt
 
+from .stepclock import band_envelope_spectrum
+
 __all__ = [
     "STOPPED_DROP_DB",
     "STEPPING_LINES_DB",
@@ -132,10 +134,7 @@ def step_lines_db(
     sr = float(sample_rate)
     if not (step_hz > 0 and x.size >= 20 * sr / step_hz and step_hz < sr / 4):
         return float("inf")
-    e = np.diff(x) ** 2
-    e = (e - e.mean()) * np.hanning(e.size)
-    p = np.abs(np.fft.rfft(e)) ** 2
-    f = np.fft.rfftfreq(e.size, 1 / sr)
+    f, p = band_envelope_spectrum(x, sr)  # the guard's envelope: the first-differenced signal squared
     got = []
     for k in range(1, harmonics + 1):
         c = k * step_hz
