@@ -432,9 +432,8 @@ class ConfirmedStopDetector:
                 take = min(take, late.next_stop(self._fed) - self._fed)
             fed0 = self._fed
             events = self.inner.feed(x[pos : pos + take])
-            self._keep_samples(x[pos : pos + take])
-            if late is not None:
-                v = np.asarray(x[pos : pos + take], dtype=np.float64)
+            v = self._keep_samples(x[pos : pos + take])
+            if late is not None:  # the late path copies what it keeps
                 late.push(v if np.all(np.isfinite(v)) else np.nan_to_num(v, nan=0.0, posinf=1.0, neginf=-1.0))
             pos += take
             self._fed += take
@@ -613,14 +612,16 @@ class ConfirmedStopDetector:
             self._covered_at = last
         return []
 
-    def _keep_samples(self, x: NDArray[Any]) -> None:
-        v = np.array(x, dtype=np.float64)  # a copy; damaged samples are mended when read (_samples)
+    def _keep_samples(self, x: NDArray[Any]) -> NDArray[np.float64]:
+        """Keep a copy of ``x`` (damaged samples are mended when read, :meth:`_samples`); the copy."""
+        v = np.array(x, dtype=np.float64)
         self._chunks.append(v)
         self._chunks_n += v.size
         if self._chunks_n > 2 * self._keep:  # trim now and then, not every block
             whole = np.concatenate(self._chunks)[-self._keep :]
             self._chunks0 += self._chunks_n - whole.size
             self._chunks, self._chunks_n = [whole], whole.size
+        return v
 
     def _samples(self, lo: int, hi: int) -> NDArray[np.float64]:
         """The kept samples with absolute indices lo .. hi - 1 (those still kept)."""
