@@ -85,6 +85,12 @@ def test_the_step_rate_is_heard_on_the_battery_generator(rate: float, seed: int,
 @given(rate=st.floats(700.0, 1400.0), seed=st.integers(0, 10_000), arm=st.sampled_from([2, 3, 5]))
 @example(rate=882.0, seed=1, arm=3)  # its line at the rate stands only 12-13.6 dB clear: HALF_LINE_DB must allow that
 @example(rate=1115.0, seed=2000, arm=3)  # a fresh draw: its half 9.8 dB clear, heard at 2229.8 Hz until three halves
+@example(rate=1192.0, seed=158, arm=3).xfail(
+    raises=AssertionError,
+    reason="a fresh draw (session 29): the envelope has no line at the rate (-2.2 dB against the continuum; at half "
+    "the rate -1.5 dB), only at two and three times it (11.2, 12.9 dB): heard at 2390 Hz. No rule that hears a missing "
+    "fundamental would leave sub-harmonics alone; a traverse knows its commanded rate (listen warns beyond 5 %)",
+)
 def test_the_step_rate_is_heard_through_a_rough_clock(rate: float, seed: int, arm: int) -> None:
     """The fourth generator's clock jitters by 2 % of every period (a random walk): the rate is still its mean."""
     y = modal_sound.render(modal_sound.Scene(arm, "louder", stop_at=None, dur=0.5, rate=rate, seed=seed))
