@@ -2,9 +2,10 @@
 
 What is pinned:
 
-* the battery's three strict xfails (a second instrument from 0.8 s; trained duller, test
-  brighter; trained quieter, test louder) are missed by the fast path and found late, with
-  the onset within 25 ms (no event at all before round 12a);
+* the battery's strict xfails (trained duller, test brighter; trained quieter, test louder;
+  until session 29 also a second instrument from 0.8 s, which the fast path now hears) are
+  missed by the fast path and found late, with the onset within 25 ms (no event at all
+  before round 12a);
 * an eighth generator written for this from another view (``tests/line_sound.py``: the
   stepping as its harmonic lines; a stop that reshuffles the lines' levels and phases and
   keeps every group of three lines' power) - nothing tuned to it: the fast path misses such
@@ -44,9 +45,8 @@ def _test(s: Scene, seed: int, **kw: object) -> Scene:
     return variant(s, seed=seed, stop_at=1.6, dur=2.2, rate=1080.0, **kw)
 
 
-# the battery's three strict xfails (tests/test_audio_battery.py), as the battery renders them
+# the battery's strict xfails (tests/test_audio_battery.py), as the battery renders them
 TARGETS = {
-    "second instrument from 0.8 s": (P, _test(P, 30, second_rate=730.0, second_from=0.8)),
     "trained duller, test brighter": (variant(Q, stop_kind="duller"), _test(Q, 62, stop_kind="brighter")),
     "trained quieter, test louder": (variant(Q, stop_kind="quieter"), _test(Q, 65, stop_kind="louder")),
 }
@@ -103,11 +103,16 @@ def test_a_stop_that_only_reshuffles_the_lines_is_found_late(arm: int, seed: int
     assert abs(ev.onset_s - 1.8) <= TOL_S
 
 
-def test_a_stop_the_fast_path_hears_is_not_counted_twice() -> None:
+@pytest.mark.parametrize("kw", [{}, {"second_rate": 730.0, "second_from": 0.8}], ids=["clean", "second instrument"])
+def test_a_stop_the_fast_path_hears_is_not_counted_twice(kw: dict[str, float]) -> None:
+    """The second instrument from 0.8 s was found by the late path alone until session 29 (masked signature)."""
     tu = _tuned(P)
-    y = render(_test(P, 11))[0]
+    y = render(_test(P, 11 if not kw else 30, **kw))[0]
     ev = _events(y, tu, 1024)
     assert len(ev) == 1 and not ev[0].found_late and abs(ev[0].onset_s - 1.6) <= TOL_S
+    assert ev[0].detected_at_s - 1.6 <= 0.050
+    if kw:
+        return
     # stepping on into the stop for 3 s more: still one event (the fast path stays latched; the late path judges none)
     y = render(variant(P, seed=11, stop_at=1.6, dur=4.6, rate=1080.0))[0]
     ev = _events(y, tu, 1024)

@@ -38,6 +38,10 @@ tuning's rate each frame is fitted on that signature too, and the larger ``a`` c
 where it explains the frame well, the predicted signature's drops may pass the drops' check
 the tuned ones fail (round 12b, :data:`PRED_DROPS_RHO`).
 
+Where sound was added to the stepping since the floor's window began (the template stands
+:data:`MASK_ADDED` spreads over the floor, and no sub-band fell as far), the signatures are
+fitted as the stop can show over it (:func:`masked_signature`, session 29).
+
 Two judgements read the *continuum* between the step clock's lines
 (:func:`continuum_levels_db`), which a change of the step rate does not move as it moves
 the sub-band levels (tunings that recorded their step rate): whether listening began at
@@ -72,6 +76,7 @@ __all__ = [
     "TemplateState",
     "continuum_levels_db",
     "fit_departure",
+    "masked_signature",
     "subband_edges",
     "subband_levels_db",
 ]
@@ -332,6 +337,36 @@ def fit_departure(d: FloatArray, delta: FloatArray, sigma: FloatArray, trim: int
     return _Fitter(delta, sigma, trim)(d)
 
 
+def masked_signature(delta: FloatArray, added_db: FloatArray) -> FloatArray:
+    """The stop's signature as it can show over a template that holds sound added to the stepping, dB per sub-band.
+
+    The stop changes the stepping's own sound only. In a sub-band where something else (a
+    second instrument, a fan, a radio) lifted the template ``added_db`` dB above the
+    stepping's level, the stepping is the share ``w = 10**(-added_db / 10)`` of the
+    template's power, and a stop that multiplies the stepping's power by
+    ``g = 10**(delta / 10)`` moves the template's level by
+
+        delta_shown = 10 * log10(1 + w * (g - 1))          dB
+
+    ``delta`` where nothing was added, towards 0 as the added sound dominates: a rise of
+    15 dB under an instrument 8 dB over the stepping shows as 7.7 dB, a drop of 5 dB under
+    sound 6 dB over it as -0.8 dB. Fitting the tuned ``delta`` there asks the frame for a
+    change the stepping cannot make, and a stop is heard late or not at all (the battery's
+    joint P under a second instrument ringing where the stop's largest drop is: heard by the
+    late path alone, 0.56 s after the stop).
+
+    Parameters
+    ----------
+    delta : array (B,)
+        The tuned (or rate-predicted) signature, dB per sub-band.
+    added_db : array (B,)
+        The sound added per sub-band, dB above the stepping's level (0 where none), >= 0.
+    """
+    w = 10.0 ** (-np.asarray(added_db, dtype=np.float64) / 10.0)
+    g = 10.0 ** (np.asarray(delta, dtype=np.float64) / 10.0)
+    return np.asarray(10.0 * np.log10(1.0 + w * (g - 1.0)), dtype=np.float64)
+
+
 class _Fitter:
     """:func:`fit_departure` with the signature's constants computed once."""
 
@@ -484,6 +519,12 @@ NEG_EXCESS = 2.0
 #: (64 frames each: 1.4 s at 48 kHz). Interference only adds sound, so a template a voice or a radio
 #: lifted is not the stepping's level, and the pause after a word is not a drop
 FLOOR_CHUNKS = 8
+#: the stop's signature is fitted as it can show over sound added to the stepping (:func:`masked_signature`) in
+#: sub-bands where the template stands this many spreads above the floor, provided that no sub-band's template fell as
+#: far below its highest over the floor's updates: added sound only lifts, while a step rate that drifts moves the
+#: lines of the stepping's own sound off some modes and onto others (the battery's clock drifting +-10 % lifted one
+#: sub-band 12 dB over the floor and lowered others). None: the tuned signature alone, as before session 29
+MASK_ADDED: float | None = NEG_EXCESS
 #: a frame the signature predicted at the heard rate (:meth:`TemplateState._hear_rate`) fits as the stop (its ``a`` at
 #: the threshold) with its residual within this share of ``residual_max`` passes the drops' check if the predicted
 #: signature's drops show in proportion, where the tuned signature's do not (round 12b): at another rate the sub-bands
@@ -631,6 +672,12 @@ class TemplateState:
         self._neg_tail_p: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
         self._floors: list[FloatArray] = []
         self.floor: FloatArray | None = None
+        #: the fits in use: on the tuned signature and the rate-predicted one, masked where sound was added to the
+        #: template (:meth:`_mask`); ``_fit`` and ``_fit_rate`` where nothing was
+        self._fit_now: _Fitter = self._fit
+        self._fit_rate_now: _Fitter | None = None
+        #: the sound added per sub-band to the latest template, dB (None: nothing added)
+        self.added_db: FloatArray | None = None
         self._check: tuple[int, int] | None = None  # (frame at which to check, the fire's end sample)
         self._uncertain_until = -1  # a fire ending before this sample follows a stale-template verdict closely
         #: the stream samples (ends of the chunk) at which a template that fitted nothing was learned anew
@@ -713,7 +760,27 @@ class TemplateState:
         if self.template is None:
             return
         self._floors = ([] if reset else self._floors[-(FLOOR_CHUNKS - 1) :]) + [self.template.copy()]
-        self.floor = np.min(np.stack(self._floors), axis=0)
+        kept = np.stack(self._floors)
+        self.floor = np.min(kept, axis=0)
+        self.added_db = None
+        if MASK_ADDED is not None:
+            scale = self._drop_scale
+            added = self.template - self.floor
+            fell = (np.max(kept, axis=0) - self.template) * scale
+            if float(fell.max()) < MASK_ADDED and bool(np.any(added * scale >= MASK_ADDED)):
+                self.added_db = np.where(added * scale >= MASK_ADDED, added, 0.0)
+        self._mask()
+
+    def _mask(self) -> None:
+        """The fits for the latest template: the signatures masked by the sound added to it (:attr:`added_db`)."""
+        p = self.p
+        if self.added_db is None:
+            self._fit_now, self._fit_rate_now = self._fit, self._fit_rate
+            return
+        self._fit_now = _Fitter(masked_signature(self.delta, self.added_db), self.sigma, p.trim)
+        self._fit_rate_now = None
+        if self._pred_delta is not None:
+            self._fit_rate_now = _Fitter(masked_signature(self._pred_delta, self.added_db), self.sigma, p.trim)
 
     @property
     def warming(self) -> bool:
@@ -840,6 +907,7 @@ class TemplateState:
                 self._fit_rate = _Fitter(pred, self.sigma, p.trim)
                 self._pred_delta = pred
                 used = True
+        self._mask()
         self.rate_log.append((int(end), float(rate), used))
 
     def predictor(self) -> SignaturePredictor:
@@ -1149,14 +1217,14 @@ class TemplateState:
             ):
                 self._recent_v.pop(0)
         d = v - self.template
-        a, rho = self._fit(d)
+        a, rho = self._fit_now(d)
         pred_drops: NDArray[np.bool_] | None = None
-        if self._fit_rate is not None:
+        if self._fit_rate_now is not None:
             # the signature predicted at the heard rate too: the larger stop-likeness, with its residual, where the
             # prediction explains the frame (its residual within residual_max); a frame it does not explain is no
             # evidence of the stop, and would hold up the stop-likeness a confirmation watches after a fire that the
             # tuned fit made (round 11a: a fifth-generator arm confirmed 41 ms early that way)
-            a2, rho2 = self._fit_rate(d)
+            a2, rho2 = self._fit_rate_now(d)
             use = (a2 > a) & (rho2 <= p.residual_max)
             a, rho = np.where(use, a2, a), np.where(use, rho2, rho)
             if PRED_DROPS_RHO is not None:
