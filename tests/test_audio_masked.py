@@ -24,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from battery_sound import Scene, render, variant  # noqa: E402
 from stickslip.audio import template as T  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
-from stickslip.audio.detector import StopDetector, detect  # noqa: E402
+from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.template import masked_signature  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
@@ -69,7 +69,7 @@ def test_added_sound_only_shrinks_the_change_towards_zero(delta: float, added: f
     assert abs(further) <= abs(shown) + 1e-9  # the more added, the less it shows
 
 
-def _second_instrument() -> tuple[object, np.ndarray, int]:
+def _second_instrument() -> tuple[Tuning, np.ndarray, int]:
     P = Scene("P", 1000.0, 2.0, 3.0, seed=1)
     x, sr = render(P)
     tu = tune(x, sr, 2.0, seed=0)
@@ -87,7 +87,7 @@ def test_the_template_knows_what_the_second_instrument_added() -> None:
     own 4.8-6 kHz sub-band 4.2 dB, under 2 of this stream's spreads there (2.2 dB): no mask.
     """
     tu, y, _ = _second_instrument()
-    det = StopDetector(tu)  # type: ignore[arg-type]
+    det = StopDetector(tu)
     st_ = det._template
     assert st_ is not None
     det.feed(y[: int(0.75 * 48_000)])
@@ -108,13 +108,13 @@ def test_the_template_knows_what_the_second_instrument_added() -> None:
 
 def test_a_stop_under_an_instrument_begun_0_8_s_before_it_is_heard_on_time(monkeypatch: pytest.MonkeyPatch) -> None:
     tu, y, _ = _second_instrument()
-    events = detect(y, tu, block=1024, confirm_s=CONFIRM_S)  # type: ignore[arg-type]
+    events = detect(y, tu, block=1024, confirm_s=CONFIRM_S)
     assert len(events) == 1
     assert abs(events[0].onset_s - 1.6) <= 0.025 and events[0].detected_at_s - 1.6 <= 0.050
     assert not events[0].onset_uncertain
     # the tuned signature alone (as before session 29) does not hear it within the latency budget
     monkeypatch.setattr(T, "MASK_ADDED", None)
-    before = detect(y, tu, block=1024, confirm_s=CONFIRM_S)  # type: ignore[arg-type]
+    before = detect(y, tu, block=1024, confirm_s=CONFIRM_S)
     assert not [e for e in before if abs(e.onset_s - 1.6) <= 0.025 and e.detected_at_s - 1.6 <= 0.050]
 
 
