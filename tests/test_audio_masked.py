@@ -18,12 +18,14 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from scipy.signal import butter, sosfilt
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+import modal_sound as ms  # noqa: E402
 from battery_sound import Scene, render, variant  # noqa: E402
 from stickslip.audio import template as T  # noqa: E402
-from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
+from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.template import masked_signature  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
@@ -142,3 +144,50 @@ def test_a_drifting_step_clock_is_not_taken_for_added_sound() -> None:
     assert masked_at and max(masked_at) < 1.15
     events = detect(y, tu, block=1024, confirm_s=CONFIRM_S)
     assert events and abs(events[0].onset_s - 1.4) <= 0.025 and not events[0].onset_uncertain
+
+
+def _whine(n: int, sr: int, fc: float, start_s: float, rng: np.random.Generator, rms: float) -> np.ndarray:
+    """A pump's whine: noise in +-6 % around ``fc``, its level swaying 30 % at 0.7 Hz, from ``start_s`` (5 ms ramp).
+
+    Continuous narrowband noise, where the battery's second instrument is a click train:
+    another view of "a sound that begins shortly before the stop in its sub-bands".
+    """
+    sos = butter(2, [fc / 1.06 / (sr / 2), fc * 1.06 / (sr / 2)], "band", output="sos")
+    w = sosfilt(sos, rng.standard_normal(n))
+    t = np.arange(n) / sr
+    w *= (1 + 0.3 * np.sin(2 * np.pi * 0.7 * t + rng.uniform(0, 6))) * np.clip((t - start_s) / 0.05, 0, 1)
+    return np.asarray(w / np.std(w[int(start_s * sr) :]) * rms)
+
+
+@pytest.mark.parametrize("arm", [1, 3, 5, 7, 9, 11])
+def test_a_whine_begun_before_the_stop_in_its_band_never_makes_a_count_silently_wrong(arm: int) -> None:
+    """The fourth generator's random arms (not tuned to), louder stops; a whine as loud as the stepping on the stop's
+    strongest rising sub-band from 0.8 s before the stop. Measured (session 29, arms 1-12, seeds 1-3, whine -12 to
+    +6 dB: 288 recordings): none silently wrong, before or after the masked fit; here arms 1, 3, 9 and 11 on time and
+    unflagged, 5 and 7 flagged (a refusal: measure again). The whine is masked on arms 1, 3 and 5 only: on the others it
+    lifts the stop's sub-band by less than 2 spreads."""
+    sr = ms.SR
+    tu = tune(ms.render(ms.Scene(arm, "louder", stop_at=3.0, dur=4.5, seed=10)), sr, 3.0)
+    assert tu.signature_db is not None and tu.edges_hz is not None
+    b = int(np.argmax(tu.signature_db))
+    fc = float(np.sqrt(tu.edges_hz[b] * tu.edges_hz[b + 1]))
+    stop = 2.1
+    x = ms.render(ms.Scene(arm, "louder", stop_at=stop, dur=stop + 0.8, seed=1))
+    rms = float(np.sqrt(np.mean(x[: int(stop * sr)] ** 2)))
+    y = (x + _whine(x.size, sr, fc, stop - 0.8, np.random.default_rng(1000 * arm + 1), rms)).astype(np.float32)
+    sd = StopDetector(tu)
+    det = ConfirmedStopDetector(sd)
+    ev = det.feed(y[: int((stop - 0.02) * sr)])
+    assert sd._template is not None
+    added = sd._template.added_db
+    if arm in (1, 3, 5):  # the whine lifts the stop's sub-band 4.5-13 spreads over the floor: taken for added sound
+        assert added is not None and added[b] > 0.0
+    else:  # under 2 spreads on these arms: nothing masked, the tuned fit as before
+        assert added is None
+    ev += det.feed(y[int((stop - 0.02) * sr) :]) + det.finish()
+    assert ev, "the stop was missed"
+    first = ev[0]
+    on_time = abs(first.onset_s - stop) <= 0.025
+    assert on_time or first.onset_uncertain, (first.onset_s, first.detected_at_s)  # never silently wrong
+    if arm in (1, 3, 9, 11):
+        assert on_time and not first.onset_uncertain and first.detected_at_s - stop <= 0.050
