@@ -766,9 +766,10 @@ class TemplateState:
         if MASK_ADDED is not None:
             scale = self._drop_scale
             added = self.template - self.floor
+            lifted = added * scale >= MASK_ADDED
             fell = (np.max(kept, axis=0) - self.template) * scale
-            if float(fell.max()) < MASK_ADDED and bool(np.any(added * scale >= MASK_ADDED)):
-                self.added_db = np.where(added * scale >= MASK_ADDED, added, 0.0)
+            if float(fell.max()) < MASK_ADDED and bool(lifted.any()):
+                self.added_db = np.where(lifted, added, 0.0)
         self._mask()
 
     def _mask(self) -> None:
