@@ -160,13 +160,16 @@ def _jog_keys(*groups: list[str]) -> Iterator[None]:
     """``jog`` reads :class:`ScriptedKeys` and draws nothing while the block runs."""
     from stickslip.cli import taskspace
 
-    saved = (taskspace._Keys, taskspace._Screen)  # type: ignore[attr-defined]  # the terminal part of jog
     ScriptedKeys.script = [list(g) for g in groups]
-    taskspace._Keys, taskspace._Screen = ScriptedKeys, _QuietScreen  # type: ignore[attr-defined]  # same
+    fakes: dict[str, object] = {"_Keys": ScriptedKeys, "_Screen": _QuietScreen}  # jog's terminal part
+    saved = {name: getattr(taskspace, name) for name in fakes}
+    for name, fake in fakes.items():
+        setattr(taskspace, name, fake)
     try:
         yield
     finally:
-        taskspace._Keys, taskspace._Screen = saved  # type: ignore[attr-defined]  # same
+        for name, old in saved.items():
+            setattr(taskspace, name, old)
 
 
 def sim_part(s: Session, cal: str) -> None:
@@ -245,9 +248,8 @@ def tune_for_listen(folder: Path) -> None:
     """The tuning ``listen`` uses (made once, outside the recorded steps)."""
     from typer.testing import CliRunner
 
-    r = CliRunner().invoke(
-        _app(), ["tune", str(folder / "tune.wav"), "--stop-at", "2.0", "--joint", "3", "-o", str(folder / "tuning.json")]
-    )
+    argv = ["tune", str(folder / "tune.wav"), "--stop-at", "2.0", "--joint", "3", "-o", str(folder / "tuning.json")]
+    r = CliRunner().invoke(_app(), argv)
     if r.exit_code != 0:
         raise RuntimeError(r.output)
 
