@@ -28,6 +28,7 @@ __all__ = [
     "step_display_unit",
     "position_display_unit",
     "format_quantity",
+    "format_spread",
 ]
 
 LENGTH_UNITS: dict[str, float] = {
@@ -175,3 +176,14 @@ def format_step(value: float, joint: int, digits: int = 4) -> str:
 def format_position(value: float, joint: int, digits: int = 6) -> str:
     """Format a joint position (µm for the prismatic joint, degrees for rotary ones)."""
     return format_quantity(value, position_display_unit(joint), digits)
+
+
+def format_spread(sd: float, joint: int) -> str:
+    """A position's spread (a standard deviation, an interval's half-width) of ``joint`` for a person.
+
+    µm for the prismatic joint; µrad for the rotary joints, in degrees from 1 mrad
+    (``1.37e+05 µrad`` would tell nobody it is 7.85 deg).
+    """
+    if not joint_spec(joint).rotary:
+        return f"{sd * 1e6:.3g} µm"
+    return f"{sd * 1e6:.3g} µrad" if abs(sd) < 1e-3 else f"{math.degrees(sd):.3g} deg"

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import json
-import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -227,8 +226,8 @@ def listen(
               stickslip listen --mic --tuning joint2-tuning.json
               stickslip listen --serial /dev/ttyACM0 --sample-rate 25000 --tuning accel-tuning.json
     """
-    from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, check_confirm_s, confirming
-    from ..audio.detector import StopDetector, Tuning, TuningFileError
+    from ..audio.confirm import CONFIRM_S, check_confirm_s
+    from ..audio.detector import Tuning, TuningFileError
 
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
@@ -255,11 +254,23 @@ def listen(
     if serial_port is not None:
         _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock, late)
         return
+    _listen_file(recording, tuning, tuning_path, sample_rate, channel, json_out, confirm_s, step_clock, late)
 
-    import numpy as np
 
-    from ..audio.guard import block_problem, non_finite
+def _listen_file(
+    recording: Path,
+    tuning: Any,
+    tuning_path: Path,
+    sample_rate: float | None,
+    channel: int | None,
+    json_out: bool,
+    confirm_s: float,
+    step_clock: bool,
+    late: bool,
+) -> None:
+    """``listen`` on a recording: read it in blocks through the procedure, print the notes, warnings and stops."""
     from ..audio.sources import AudioSourceError, wav_blocks
+    from ..procedures.listen import ListenSettings, TuningMismatch, listen_blocks
 
     if tuning.method == "band":
         err_console.print(
@@ -267,6 +278,7 @@ def listen(
             "spectral-template detector (it rejects knocks and hears quieter or duller stops)",
             highlight=False,
         )
+    blocks: Iterable[tuple[Any, float]]
     if _is_csv(recording):
         samples, csv_rate = _load_recording(recording, sample_rate, channel)
         blocks = ((samples[i : i + (1 << 16)], csv_rate) for i in range(0, samples.size, 1 << 16))
@@ -274,79 +286,24 @@ def listen(
         if sample_rate is not None:
             fail(f"--sample-rate is for a CSV of samples or --serial; {recording} carries its own rate")
         blocks = wav_blocks(recording, block=1 << 16, channel=_channels(recording, channel))
-    events = []
-    problems: set[str | None] = set()
-    n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
-    heard_rate = float(tuning.sample_rate)
-    opening: list[np.ndarray] = []  # the first second: the step rate heard, against the tuning's
     try:
-        det = None
-        for block, rate in blocks:
-            bad, first = non_finite(block)
-            if bad:
-                n_bad += bad
-                first_bad_s = first_bad_s if first_bad_s is not None else (heard + int(first or 0)) / rate
-            if heard < rate:
-                opening.append(block[: int(rate) - heard])
-            heard += block.size
-            heard_rate = float(rate)
-            if det is None:
-                try:
-                    det = confirming(
-                        StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late
-                    )
-                except ValueError as e:
-                    fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
-            problems.add(block_problem(np.nan_to_num(block) if bad else block))  # damage is reported apart
-            events += det.feed(block)
+        report = listen_blocks(blocks, tuning, ListenSettings(confirm_s, step_clock, late))
+    except TuningMismatch as e:
+        fail(f"tuning {tuning_path} does not fit {recording} at {e.rate} Hz: {e}")
     except AudioSourceError as err:
         fail(str(err))
-    if det is None or heard == 0:  # an empty or truncated file
+    if report.samples == 0:  # an empty or truncated file
         fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
-    if isinstance(det, ConfirmedStopDetector):
-        events += det.finish()
-        for t_s, why in det.stopped_log:
-            _note_stopped(t_s, why)
-    warmup_s = tuning.warmup_s if tuning.method == "template" else 0.0
-    if heard < (warmup_s + tuning.hold_s) * heard_rate:
-        lasts_ms = 1e3 * heard / heard_rate
-        err_console.print(
-            f"warning: {recording} lasts only {lasts_ms:.{1 if lasts_ms >= 0.1 else 4}f} ms ({heard} sample"
-            f"{'s' if heard != 1 else ''}): less than the {1e3 * warmup_s:.0f} ms of stepping the detector learns "
-            "from before it can hear a stop (unless the recording starts at the stop)",
-            highlight=False,
-            soft_wrap=True,
-        )
-    if opening and tuning.step_rate_hz is not None:
-        from ..audio.stepclock import step_rate_hz
-
-        # damaged samples count as silence here: one infinity read as full scale would be the only 'click' heard
-        first = np.nan_to_num(np.concatenate(opening), nan=0.0, posinf=0.0, neginf=0.0)
-        dead = block_problem(first) is not None  # no rate to hear in silence (the warning below says so)
-        heard_hz = math.nan if dead else step_rate_hz(first, heard_rate)
-        why = tuning.step_rate_problem(heard_hz, f"{recording}: the joint steps")
-        if why is not None:
-            err_console.print(f"warning: {why}", highlight=False, soft_wrap=True)
-    if problems and None not in problems:
-        err_console.print(
-            f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})",
-            highlight=False,
-            soft_wrap=True,
-        )
-    if n_bad:
-        err_console.print(
-            f"warning: {recording}: {n_bad} "
-            f"{'samples are not numbers' if n_bad != 1 else 'sample is not a number'} (NaN or infinity), the first at "
-            f"{first_bad_s:.4f} s: the file is damaged there (heard as 0 for NaN, full scale for infinity)",
-            highlight=False,
-            soft_wrap=True,
-        )
+    for t_s, why in report.stopped:
+        _note_stopped(t_s, why)
+    for line in report.warnings(str(recording), tuning):
+        err_console.print(f"warning: {line}", highlight=False, soft_wrap=True)
     if json_out:
-        print_json([e.to_dict() for e in events])
+        print_json([e.to_dict() for e in report.events])
         return
-    if not events:
+    if not report.events:
         console.print("no end stop heard")
-    for ev in events:
+    for ev in report.events:
         console.print(_event_line(ev, tuning.level_unit, confirm_s, 4), highlight=False, soft_wrap=True)
 
 
@@ -385,15 +342,14 @@ def _listen_serial(
     late: bool = False,
 ) -> None:
     """Live vibration samples from a serial port through the same detector as sound."""
-    from ..audio.confirm import confirming
-    from ..audio.detector import StopDetector
     from ..audio.sources import AudioSourceError
     from ..audio.vibration import SerialSamples
+    from ..procedures.listen import ListenSettings, TuningMismatch, detector_for
 
     rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
     try:
-        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late)
-    except ValueError as e:
+        det = detector_for(tuning, rate, ListenSettings(confirm_s, step_clock, late))
+    except TuningMismatch as e:
         fail(f"the tuning does not fit {rate} Hz samples: {e}")
     try:
         src = SerialSamples(port, sample_rate=rate)
@@ -453,18 +409,10 @@ def _report_live(
 ) -> None:
     """Feed a live source's blocks to ``det`` and print each event as it comes, until Ctrl-C; then ``close()``."""
     from ..audio.sources import AudioSourceError
+    from ..procedures.listen import listen_live
 
-    noted = 0
     try:
-        for block in blocks:
-            for ev in det.feed(block):
-                _print_live(ev, tuning, json_out, confirm_s)
-            stopped = getattr(det, "stopped_log", ())
-            for t_s, why in stopped[noted:]:
-                _note_stopped(t_s, why)
-            noted = len(stopped)
-    except KeyboardInterrupt:
-        pass
+        listen_live(det, blocks, lambda ev: _print_live(ev, tuning, json_out, confirm_s), _note_stopped)
     except AudioSourceError as err:
         fail(f"{where}{err}")
     finally:
