@@ -206,16 +206,17 @@ def emulator_part(s: Session, cal: str) -> None:
     with NanoControlEmulator(SimulatedMM3A(seed=4, day=DAY)) as emu:
         s.run("where", "-d", emu.url)
         url = emu.url + "?dialect=legacy"  # the same device (the key has no query), opened without detection
-        s.run("where", "-d", url, "--set", "3=min", "--q2", "-90deg", "--theta", "0deg")
-        s.run("move", "-d", url, "-c", cal, "--joint", "3", "--by", "100um")
-        s.run("move", "-d", url, "-c", cal, "--joint", "3", "--by", "-40um", "--json")
+        s.run("where", "-d", url, "--set", "3=min", "--q1", "0deg", "--q2", "-90deg", "--theta", "0deg")
+        s.run("move", "-d", url, "-c", cal, "--trust-calibration", "--joint", "3", "--by", "100um")
+        s.run("move", "-d", url, "-c", cal, "--trust-calibration", "--joint", "3", "--by", "-40um", "--json")
         s.run("observe", "-d", url, "--joint", "3", "--at", "60um", "--sigma", "2um")
-        s.run("reach", "-d", url, "-c", cal, "--by", "0um,5um,0um")
+        s.run("reach", "-d", url, "-c", cal, "--trust-calibration", "--by", "0um,5um,0um")
         s.run("where", "-d", url, "--offline")
         emu.inject("error", after=1)  # the second burst of the next move is refused: the joint is uncertain
-        s.run("move", "-d", url + "&timeout=0.3", "-c", cal, "--joint", "3", "--by", "60um", "--burst", "30")
+        s.run("move", "-d", url + "&timeout=0.3", "-c", cal, "--trust-calibration", "--joint", "3", "--by", "60um",
+              "--burst", "30")  # fmt: skip
         s.run("where", "-d", url, "--offline")
-        s.run("move", "-d", url, "-c", cal, "--joint", "3", "--by", "10um")
+        s.run("move", "-d", url, "-c", cal, "--trust-calibration", "--joint", "3", "--by", "10um")
         emu.inject(None)
         s.run("observe", "-d", url, "--joint", "3", "--at", "min")
         s.run("where", "-d", url, "--offline", "--json")
@@ -229,8 +230,8 @@ def console_part(s: Session, cal: str) -> None:
         url = con.url + "?hz=20000"
         s.run("where", "-d", url)
         s.run("where", "-d", url, "--set", "3=min", "--set", "2=-90deg", "--set", "1=0deg")
-        s.run("move", "-d", url, "-c", cal, "--joint", "3", "--by", "50um")
-        s.run("move", "-d", url, "-c", cal, "--joint", "2", "--by", "-0.1deg")
+        s.run("move", "-d", url, "-c", cal, "--trust-calibration", "--joint", "3", "--by", "50um")
+        s.run("move", "-d", url, "-c", cal, "--trust-calibration", "--joint", "2", "--by", "-0.1deg")
         s.run("where", "-d", url, "--offline", "--json")
 
 

@@ -64,6 +64,7 @@ from ..procedures.move import (
     drive,
     failure_text,
     plan_tracked,
+    reference_problem,
     settle,
 )
 from ..storage import Store, StoreError
@@ -293,6 +294,10 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         Longest burst, s (default :data:`MAX_BURST_S`, 0.2 s; in (0, 0.4]): on a controller
         that steps in real time a burst is cut to ``frequency * max_burst_s`` steps, so a
         stop returns within :data:`STOP_RETURN_S` even if the controller finishes its burst.
+    from_unreferenced : bool
+        Plan from a position never referenced (assumed) or uncertain, as ``stickslip move
+        --from-unreferenced``; without it such a joint is refused on a real controller
+        (:func:`~stickslip.procedures.move.reference_problem`).
 
     Signals
     -------
@@ -318,7 +323,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         burst: int = 1000,
         db: str | os.PathLike[str] | None = None,
         max_burst_s: float = MAX_BURST_S,
+        from_unreferenced: bool = False,
     ) -> None:
+        self.from_unreferenced = bool(from_unreferenced)
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         self.burst = check_burst(burst)
@@ -435,8 +442,15 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         cal = self._calibration()
         with self.link.store() as store, device_lock(store, self.link.key):
             state = load_state(store, self.link.key)
+            unreferenced = self.from_unreferenced
             try:
-                plan = plan_tracked(cal, state, joint, target)
+                problem = reference_problem(state, joint, self.link.url, cal)
+                if problem and not unreferenced:
+                    raise MoveRefused(problem)
+                plan = plan_tracked(
+                    cal, state, joint, target, from_unreferenced=unreferenced,
+                    assumed=problem is not None and joint not in state.uncertain,
+                )
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
             publish(state)
@@ -452,11 +466,12 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
 
             burst = bounded_burst(dev, joint, self.burst, self.max_burst_s)
             try:
-                outcome = drive(proxy, state, joint, plan.steps, burst, plan.position_after, save)
+                moved_as = "assumed" if plan.assumed else "dead-reckoned"
+                outcome = drive(proxy, state, joint, plan.steps, burst, plan.position_after, save, moved_as)
             except _Stopped as s:
                 if not s.partial:  # the next burst was never sent: the confirmed position stands
                     kept = plan.position_after(proxy.sent)
-                    state.set_position(joint, kept, "dead-reckoned" if proxy.sent else source)
+                    state.set_position(joint, kept, moved_as if proxy.sent else source)
                 settle(state, plan, MoveOutcome(proxy.sent, error="stopped"))
                 save(state)
                 return _MoveResult(plan.steps, proxy.sent, True, state)

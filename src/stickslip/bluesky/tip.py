@@ -127,11 +127,11 @@ class _TipDriver:
 
         Planned as ``stickslip reach`` plans (:func:`stickslip.procedures.reach.plan_from_state`).
         """
+        cal, borrowed = self._calibration()
         try:
-            check_referenced(state)
+            check_referenced(state, self.link.url, cal)
         except MoveRefused as e:
             raise MoveError(str(e)) from None
-        cal, borrowed = self._calibration()
         request = ReachRequest(self.link.url, to=goal, geometry=self.geometry, segment=self.segment)
 
         def warn(message: str) -> None:

@@ -85,9 +85,10 @@ def tune(
     ),
     stop_at: float = typer.Option(..., "--stop-at", help="When the joint reached its stop, seconds from the start."),
     out: Path = typer.Option(
-        ..., "-o", "--out", help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB)."
+        ..., "--output", "-o", "--out",
+        help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB).",
     ),
-    joint: int = typer.Option(None, "--joint", help="Joint 1, 2 or 3 the recording belongs to."),
+    joint: int = typer.Option(None, "--joint", "-j", help="Joint 1, 2 or 3 the recording belongs to."),
     min_band: float = typer.Option(
         1400.0,
         "--min-band",
@@ -424,11 +425,14 @@ def record(
     out: Path = typer.Argument(
         ..., help="WAV file to write (a JSON label file is written beside it).", metavar="OUT.wav"
     ),
-    joint: int = typer.Option(..., "--joint", help="Joint 1, 2 or 3 to drive into its end stop."),
-    direction: str = typer.Option("+", "--direction", "-d", help="'+' (towards the upper stop) or '-'."),
+    joint: int = typer.Option(..., "--joint", "-j", help="Joint 1, 2 or 3 to drive into its end stop."),
+    direction: str = typer.Option(
+        "+", "--direction", metavar="<+|->", help="'+' (towards the upper stop) or '-'. (-d is the device.)"
+    ),
     device: str | None = typer.Option(
         None,
         "--device",
+        "-d",
         help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: device in the config file, "
         "else sim://).",
     ),

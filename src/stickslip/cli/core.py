@@ -9,7 +9,7 @@ import math
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, TextIO
+from typing import TYPE_CHECKING, Annotated, Any, TextIO
 
 import typer
 from rich.table import Table
@@ -28,9 +28,11 @@ from ..records import atomic_write
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
+    DB_HELP,
     angle_option,
     calibration_file,
     console,
+    db_path,
     fail,
     fail_table,
     length_option,
@@ -120,8 +122,14 @@ def calibrate_cmd(
     ] = None,
     device: Annotated[
         str | None,
-        typer.Option(help="Device URL the traverses were measured on (recorded without options or secrets)."),
+        typer.Option(
+            "--device", "-d",
+            help="Device URL the traverses were measured on (recorded without options or secrets; default: the "
+            "one device the database holds them all under, if any). A calibration without its device, or from "
+            "the simulator, is refused on a real controller unless --trust-calibration.",
+        ),
     ] = None,
+    db: Annotated[Path | None, typer.Option("--db", help=DB_HELP)] = None,
     frequency: Annotated[
         float | None, typer.Option(help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).")
     ] = None,
@@ -175,6 +183,8 @@ def calibrate_cmd(
     from ..models import NonPhysicalError
 
     traverses = read_table(measurements)
+    if device is None:
+        device = _stored_device(traverses, db)
     try:
         conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
         if prior is not None:
@@ -201,6 +211,20 @@ def calibrate_cmd(
         console.print(f"[dim]note:[/] {n}", highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
+
+
+def _stored_device(traverses: list[Any], db: Path | None) -> str | None:
+    """The device the database holds every one of ``traverses`` under (``None``: no database, none, or several)."""
+    from ..storage import Store, StoreError
+
+    path = db_path(db)
+    if not path.is_file():
+        return None  # a calibration never creates a database
+    try:
+        with Store.open(path) as store:
+            return store.device_holding(traverses)
+    except (StoreError, ValueError):
+        return None  # the device stays unknown; the database's own problem is for the commands that use it
 
 
 def _selection_table(cal: Calibration) -> Table:

@@ -11,6 +11,7 @@ these commands parse, call them and print.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,7 +19,15 @@ import typer
 
 from ..devices.base import DeviceError, device_key
 from ..joints import JOINTS, joint_spec
-from ..units import UnitError, format_position, format_spread, parse_angle, parse_length, step_scale
+from ..units import (
+    UnitError,
+    bare_number_problem,
+    format_position,
+    format_spread,
+    parse_angle,
+    parse_length,
+    step_scale,
+)
 from . import app
 from ._common import (
     DB_HELP,
@@ -52,8 +61,15 @@ _DEVICE_HELP = (
 
 
 def _parse_joint_value(joint: int, text: str, what: str) -> float:
-    """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
-    rotary = joint_spec(joint).rotary
+    """A position or displacement of ``joint`` with its unit: a length for joint 3, an angle for 1 and 2.
+
+    A bare number (other than 0) is refused with a did-you-mean for that joint.
+    """
+    spec = joint_spec(joint)
+    rotary = spec.rotary
+    bare = bare_number_problem(text, "angle" if rotary else "length", spec.span)
+    if bare is not None:
+        fail(f"{what}: {bare}")
     try:
         v = parse_angle(text) if rotary else parse_length(text)
     except (UnitError, ArithmeticError, ValueError, TypeError) as e:
@@ -62,17 +78,6 @@ def _parse_joint_value(joint: int, text: str, what: str) -> float:
     if not math.isfinite(v):
         fail(f"{what}: {text!r} is not a finite value")
     return v
-
-
-def _degree_hint(joint: int, text: str | None) -> str:
-    """For a bare number on a rotary joint: ``"; a bare number is radians: did you mean 5deg?"``."""
-    if not joint_spec(joint).rotary or text is None:
-        return ""
-    try:
-        float(text.strip())
-    except ValueError:
-        return ""
-    return f"; a bare number is radians: did you mean {text.strip()}deg?"
 
 
 def _position_or_stop(joint: int, text: str, what: str) -> float:
@@ -86,28 +91,48 @@ def _position_or_stop(joint: int, text: str, what: str) -> float:
     return _parse_joint_value(joint, text, what)
 
 
+_STEPS = re.compile(r"^\s*([-+]?\d+)\s*steps?\s*$")
+
+
 @app.command()
 def move(
     joint: int = typer.Option(..., "--joint", "-j", min=1, max=3, help="Joint to move: 1, 2 or 3."),
     by: str | None = typer.Option(
-        None, "--by", help="Move by: 30um, -0.5mm (joint 3); 2deg, -500urad (joints 1, 2)."
+        None, "--by", metavar="<length|angle|steps>",
+        help="Move by: 30um, -0.5mm (joint 3); 2deg, -500urad (joints 1, 2); 100steps (raw steps, as --steps).",
     ),
     to: str | None = typer.Option(
-        None, "--to", help="Move to this position (same units as --by); 'min'/'max' = an end stop."
+        None, "--to", metavar="<length|angle>",
+        help="Move to this position (units as --by); 'min'/'max' = an end stop.",
+    ),
+    steps: int | None = typer.Option(
+        None, "--steps", metavar="<steps>",
+        help="Send this many raw steps (signed): no calibration, no plan. The joint is then uncertain "
+        "until referenced: drive it into a stop, then `stickslip where --set J=min`.",
     ),
     calibration: Path | None = typer.Option(
         None, "--calibration", "-c",
         help="Calibration JSON (from `stickslip calibrate`; default: calibration in the config file).",
     ),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
+    from_unreferenced: bool = typer.Option(
+        False, "--from-unreferenced",
+        help="Plan from a position never referenced (assumed) or uncertain (its last confirmed value). "
+        "Without it such a joint is refused on a real controller, with the commands that reference it.",
+    ),
+    trust_calibration: bool = typer.Option(
+        False, "--trust-calibration",
+        help="Use a calibration that does not record its device, or was made on the simulator, on a real "
+        "controller (refused without it: its step sizes may be another arm's).",
+    ),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help=_Q1),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help=_Q2),
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Steps per burst."),
+    burst: int = typer.Option(1000, "--burst", min=1, max=65535, metavar="<steps>", help="Steps per burst."),
     max_age: int | None = typer.Option(
-        None, "--max-age", min=0, max=36500,
+        None, "--max-age", min=0, max=36500, metavar="<days>",
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
         "else max_age_days in the config file, else 0).",
     ),
@@ -116,41 +141,43 @@ def move(
 ) -> None:
     """Move a joint by a distance or to a position, with the calibrated step-size model.
 
-    The pose is the one kept for the device (see `stickslip where`).
+    The pose is the one kept for the device (see `stickslip where`); --q1 --q2 --q3
+    --theta --psi record a new pose first. Steps come from the calibration's model in
+    that pose (exact for rotary joints), scaled by the day's step scale learned from
+    measured positions (stickslip observe). They are sent in bursts; the dead-reckoned
+    position and its standard deviation are kept after every burst.
 
-    --q1 --q2 --q3 --theta --psi record a new pose first.
+    A joint never referenced (its position assumed) or left uncertain is refused on a
+    real controller: reference it first (raw --steps into its lower stop, then
+    `stickslip where --set J=min`), or pass --from-unreferenced.
 
-    Steps come from the calibration's model in that pose (exact for rotary joints).
-
-    They are sent in bursts; the dead-reckoned position is kept after every burst.
-
-    The steps use the day's step scale learned from measured positions (stickslip
-    observe), and the position's standard deviation grows with the move.
+    Every amount takes its unit (30um, 2deg, 100steps); a bare number other than 0 is
+    refused.
 
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
-    if (by is None) == (to is None):
-        fail("give exactly one of --by and --to")
-    from ..calibration import Calibration
-    from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate, TargetOutOfRange
-    from ..procedures.move import move as move_joint
-
+    raw = _raw_steps(by, to, steps)
     device = device_url(device)
-    with user_errors(KeyError):
-        cal = Calibration.load(calibration_file(calibration))
     with user_errors():
         device_key(device)  # a URL that names no device is refused before the database is opened
+    if raw is not None:
+        _step_raw(device, joint, raw, burst, db, json_out)
+        return
+    from ..calibration import Calibration
+    from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate
+    from ..procedures.move import move as move_joint
+
+    with user_errors(KeyError):
+        cal = Calibration.load(calibration_file(calibration))
     request = MoveRequest(
         device, joint,
         by=None if by is None else _parse_joint_value(joint, by, "--by"),
         to=None if to is None else _position_or_stop(joint, to, "--to"),
         burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
+        from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
-        try:
-            result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
-        except TargetOutOfRange as e:
-            fail(f"{e}{_degree_hint(joint, to if to is not None else by)}")
+        result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
     failure = result.failure()
     if failure is not None:
         fail(failure)
@@ -158,6 +185,47 @@ def move(
         print_json(result.as_dict())
         return
     _print_move(result)
+
+
+def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
+    """The raw steps asked for (``--steps N`` or ``--by Nsteps``), ``None`` for a planned move; one of the three."""
+    if (by is not None) + (to is not None) + (steps is not None) != 1:
+        fail("give exactly one of --by, --to and --steps")
+    if to is not None and _STEPS.match(to):
+        fail(f"--to {to}: a target is a position (30um, 2deg, min); raw steps go with --by Nsteps or --steps N")
+    m = _STEPS.match(by) if by is not None else None
+    n = int(m.group(1)) if m else steps
+    if n == 0:
+        fail("--steps: 0 steps moves nothing")
+    return n
+
+
+def _step_raw(device: str, joint: int, steps: int, burst: int, db: Path | None, json_out: bool) -> None:
+    """``move --steps N``: raw steps through the procedure, then what is known about the joint now."""
+    from ..procedures.move import DeviceBusy, step_joint
+
+    with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+        result = step_joint(store, device, joint, steps, burst=burst, ready=flush_warnings)
+    lo, hi = result.state.bounds(joint)
+    if result.outcome.error is not None:
+        fail(
+            f"{result.outcome.error}; sent {result.outcome.sent} of {steps:+d} raw steps; joint {joint} is "
+            f"uncertain, {format_position(lo, joint)} to {format_position(hi, joint)}"
+        )
+    if json_out:
+        print_json(result.as_dict())
+        return
+    console.print(
+        f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)", highlight=False
+    )
+    console.print(
+        f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}",
+        highlight=False,
+    )
+    console.print(
+        f"at a stop, reference it: stickslip where --set {joint}={'min' if steps < 0 else 'max'}",
+        highlight=False,
+    )
 
 
 def _print_move(result: MoveResult) -> None:
@@ -260,8 +328,7 @@ def where(
                 unlock=unlock,
             )
         except ReferenceRefused as e:
-            item = items[e.index]
-            fail(f"--set {item}: {e}{_degree_hint(references[e.index][0], item.partition('=')[2])}")
+            fail(f"--set {items[e.index]}: {e}")
     if json_out:
         print_json(result.as_dict())
         return

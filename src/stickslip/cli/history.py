@@ -233,19 +233,6 @@ def delete(
 # ---------------------------------------------------------------- anova
 
 
-def _without_duplicates(ts: list[Traverse]) -> tuple[list[Traverse], int]:
-    """``ts`` with exact copies removed (same day, joint, direction, pose, range, steps), and how many."""
-    seen: set[tuple[object, ...]] = set()
-    kept = []
-    for t in ts:
-        key = tuple(getattr(t, f) for f in ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi",
-                                             "start", "end", "steps"))
-        if key not in seen:
-            seen.add(key)
-            kept.append(t)
-    return kept, len(ts) - len(kept)
-
-
 @app.command()
 def anova(
     meas: Path | None = typer.Argument(None, help="Measurement table (CSV); default: the database."),
@@ -262,6 +249,8 @@ def anova(
     in poses repeated on several days. For each joint and day: + against -. With
     --two-way, the day x direction table with interaction. Poses match when
     fixed joints, tilt and traversed interval agree within 1e-3 rad / 10 um.
+    Every row of the table (every stored traverse) counts: two repeats that took
+    the same number of steps are two measurements, not a copy.
 
     Example: [bold]stickslip anova meas.csv --json[/]
     """
@@ -269,13 +258,7 @@ def anova(
 
     if not 0.0 < alpha < 1.0:
         fail(f"--alpha must be in (0, 1), got {alpha}")
-    ts, where = _traverses_from(meas, db, device, None)
-    ts, dups = _without_duplicates(ts)
-    if dups:
-        warn_later(
-            f"{dups} traverse(s) are exact copies of others (a table imported twice, a demo run twice?); "
-            "each is counted once"
-        )
+    ts, where = _traverses_from(meas, db, device, None)  # each row a traverse: equal numbers are repeats, kept
     with user_errors(ImportError):
         res = run_anova(ts, alpha=alpha, two_way=two_way)
     degenerate = [t for t in res.tests if not math.isfinite(t.F)]

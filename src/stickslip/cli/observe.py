@@ -18,8 +18,8 @@ from ..devices.base import device_key
 from ..joints import JOINTS
 from ..units import format_position, format_spread
 from . import app
-from ._common import DB_HELP, console, fail, open_store, print_json, user_errors, warn_later
-from .devices import _DEVICE_HELP, _degree_hint, _parse_joint_value
+from ._common import DB_HELP, console, device_url, fail, open_store, print_json, user_errors, warn_later
+from .devices import _DEVICE_HELP, _parse_joint_value
 
 MAX_INNOVATION = 5.0
 """As :data:`stickslip.procedures.observe.MAX_INNOVATION` (here for --help, without loading numpy)."""
@@ -40,7 +40,7 @@ def observe(
         False, "--force",
         help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
     ),
-    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the update as JSON (SI units)."),
 ) -> None:
@@ -71,13 +71,13 @@ def observe(
             fail(
                 f"--at {at}: {format_position(q_meas, joint)} is outside joint {joint}'s range "
                 f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}]"
-                + _degree_hint(joint, at)
             )
     sd = None
     if sigma is not None:
         sd = _parse_joint_value(joint, sigma, "--sigma")
         if not (math.isfinite(sd) and sd >= 0):
             fail(f"--sigma {sigma}: a standard deviation must be >= 0")
+    device = device_url(device)
     with user_errors():
         device_key(device)
     with open_store(db) as store, user_errors(DeviceBusy):

@@ -15,7 +15,7 @@ import typer
 
 from ..devices.base import DeviceError, device_key
 from ..joints import joint_spec
-from ..units import UnitError, parse_length
+from ..units import UnitError, bare_number_problem, parse_length
 from . import app
 from ._common import (
     DB_HELP,
@@ -51,12 +51,15 @@ _CAL_HELP = "Calibration JSON (from `stickslip calibrate`; default: calibration 
 
 
 def parse_point(text: str, what: str) -> tuple[float, float, float]:
-    """``"X,Y,Z"`` lengths with units (``20um,-10um,5um``; bare numbers are metres) to metres."""
+    """``"X,Y,Z"`` lengths with their units (``20um,-10um,5um``; 0 needs none) to metres."""
     parts = text.split(",")
     if len(parts) != 3:
         fail(f"{what} {text!r}: write three lengths X,Y,Z, e.g. 20um,-10um,5um")
     out = []
     for axis, part in zip("XYZ", parts, strict=True):
+        bare = bare_number_problem(part, "length")
+        if bare is not None:
+            fail(f"{what} {axis}: {bare}")
         try:
             v = parse_length(part)
         except (UnitError, ArithmeticError, ValueError) as e:
@@ -101,6 +104,16 @@ def reach(
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
+    from_unreferenced: bool = typer.Option(
+        False, "--from-unreferenced",
+        help="Plan from joints never referenced (positions assumed); without it they are refused on a real "
+        "controller, with the commands that reference them.",
+    ),
+    trust_calibration: bool = typer.Option(
+        False, "--trust-calibration",
+        help="Use a calibration that does not record its device, or was made on the simulator, on a real "
+        "controller (refused without it: its step sizes may be another arm's).",
+    ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
 ) -> None:
@@ -140,6 +153,7 @@ def reach(
         device, to=point if to is not None else None, by=point if to is None else None, geometry=geom,
         segment=float(segment), burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi),
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
+        from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings)
@@ -298,6 +312,16 @@ def jog(
     hold: float = typer.Option(
         0.5, "--hold", min=0.0, max=10.0, help="Seconds a direction key keeps moving without a repeat (0: until space)."
     ),
+    from_unreferenced: bool = typer.Option(
+        False, "--from-unreferenced",
+        help="Plan from joints never referenced (positions assumed); without it they are refused on a real "
+        "controller, with the commands that reference them.",
+    ),
+    trust_calibration: bool = typer.Option(
+        False, "--trust-calibration",
+        help="Use a calibration that does not record its device, or was made on the simulator, on a real "
+        "controller (refused without it: its step sizes may be another arm's).",
+    ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
@@ -333,7 +357,7 @@ def jog(
         device_key(device)
     request = JogRequest(
         device, geom, float(image_angle), speed, max_rate, hold, PoseUpdate(q1, q2, q3, theta, psi),
-        max_age_setting(None).value,
+        max_age_setting(None).value, from_unreferenced, trust_calibration,
     )
     with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
         result = jog_session(

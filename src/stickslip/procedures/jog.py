@@ -56,8 +56,8 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
-from .conditions import usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive
+from .conditions import calibration_device_problem, usage_warnings
+from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions
 from .reach import referenced_state
 
 __all__ = [
@@ -483,7 +483,8 @@ def run_jog(
                 def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
                     return stepper.position_after(q_from, m)
 
-                out = drive(dev, state, j, n, max(abs(n), 1), reckon, save)
+                source = "dead-reckoned" if exact_positions(dev, state, j) else "assumed"
+                out = drive(dev, state, j, n, max(abs(n), 1), reckon, save, source)
                 controller.sent_steps(j, out.sent)
                 if out.error is not None:
                     controller.stop()
@@ -535,6 +536,11 @@ class JogRequest:
         Positions and tilt to record first.
     max_age_days : int
         A calibration older than this is warned about.
+    from_unreferenced : bool
+        Steer from joints never referenced (their positions assumed); without it they are
+        refused on a real controller. Uncertain joints are always refused.
+    trust_calibration : bool
+        Use a calibration without its device, or the simulator's, on a real controller.
     """
 
     device: str
@@ -545,6 +551,8 @@ class JogRequest:
     hold: float = 0.5
     pose: PoseUpdate = PoseUpdate()
     max_age_days: int = 0
+    from_unreferenced: bool = False
+    trust_calibration: bool = False
 
 
 @dataclass(frozen=True)
@@ -587,8 +595,11 @@ def jog(
     however the session ends; ``show(status)`` draws. Ctrl-C ends the session like ``q``.
     """
     key = device_key(request.device)
+    made_on = calibration_device_problem(calibration, request.device)
+    if made_on and not request.trust_calibration:
+        raise MoveRefused(made_on)
     with device_lock(store, key):
-        state = referenced_state(store, request.device, request.pose)
+        state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
         missing = [j for j in (1, 2, 3) if j not in calibration.joints]
         if missing:
             raise MoveRefused(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
@@ -597,7 +608,7 @@ def jog(
             warn(w)
         ready()
         dev = (opener or open_device)(request.device)
-        source: KeySource | None = None
+        keys_in: KeySource | None = None
         try:
             if isinstance(dev, PoseSettable):
                 dev.set_pose(*state.pose)
@@ -609,14 +620,14 @@ def jog(
             def save(st: DeviceState) -> None:
                 save_state(store, st)
 
-            source = keys()
+            keys_in = keys()
             try:
-                error = run_jog(dev, state, ctl, source.read, show, save, clock)
+                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock)
             except KeyboardInterrupt:
                 error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
         finally:
-            if source is not None:
-                source.close()
+            if keys_in is not None:
+                keys_in.close()
             try:
                 dev.close()
             except DeviceError:

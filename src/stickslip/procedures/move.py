@@ -24,6 +24,7 @@ that name. The lock is portable (SQLite transactions, no ``fcntl``).
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 from collections.abc import Callable, Iterator
@@ -42,15 +43,18 @@ from ..devices.base import (
     StepsUncertain,
     device_key,
     open_device,
+    redact_url,
+    url_scheme,
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.planning import Planner
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
 from ..units import format_position, position_display_unit
-from .conditions import usage_warnings
+from .conditions import calibration_device_problem, usage_warnings
 
 __all__ = [
     "DeviceBusy",
+    "Interrupted",
     "LockStore",
     "MoveOutcome",
     "MoveRefused",
@@ -62,12 +66,19 @@ __all__ = [
     "TrackedPlan",
     "device_lock",
     "drive",
+    "exact_positions",
     "failure_text",
+    "kept_after_interrupt",
     "move",
     "plan_tracked",
+    "reference_commands",
+    "reference_problem",
+    "step_joint",
+    "steps_to_stop",
     "settle",
     "target_of",
     "track_fields",
+    "where_line",
 ]
 
 
@@ -81,6 +92,40 @@ class MoveRefused(ValueError):
 
 class TargetOutOfRange(MoveRefused):
     """The target lies outside the joint's range (the message names both, in display units)."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a workflow that drives a device: ``what`` it was, and the ``state`` kept after it.
+
+    A :class:`KeyboardInterrupt`, so code that knows nothing of it still sees Ctrl-C. The
+    journal was saved before every burst: ``state`` (read back from the store) says where
+    each joint stands, exactly or uncertain with bounds (:func:`where_line`).
+    """
+
+    def __init__(self, what: str, state: DeviceState | None):
+        super().__init__(what)
+        self.what = what
+        self.state = state
+
+
+def where_line(state: DeviceState) -> str:
+    """Where each joint of ``state`` stands, for one line: ``joint 3 12 µm (set)``, or uncertain with bounds."""
+    parts = []
+    for j in (1, 2, 3):
+        if j in state.uncertain:
+            lo, hi = state.uncertain[j]
+            parts.append(f"joint {j} uncertain, {format_position(lo, j)} to {format_position(hi, j)}")
+        else:
+            parts.append(f"joint {j} {format_position(state.positions[j], j)} ({state.sources[j]})")
+    return "; ".join(parts)
+
+
+def kept_after_interrupt(store: StateStore, key: str, state: DeviceState) -> DeviceState:
+    """The state as stored after Ctrl-C (what the next command will read), else the one in memory."""
+    try:
+        return load_state(store, key)
+    except (OSError, ValueError):
+        return state
 
 
 class LockStore(Protocol):
@@ -130,11 +175,13 @@ def drive(
     burst: int,
     reckon: Callable[[int], float],
     save: Callable[[DeviceState], None],
+    source: str = "dead-reckoned",
 ) -> MoveOutcome:
     """Send ``steps`` (signed) to ``joint`` in bursts of at most ``burst``, journalling each.
 
     ``reckon(n)`` is the dead-reckoned position (rad or m) after ``n`` signed steps from
-    the start; ``save(state)`` stores the state (one transaction). A :class:`DeviceError`
+    the start, kept with ``source`` (``"assumed"`` for a start never referenced);
+    ``save(state)`` stores the state (one transaction). A :class:`DeviceError`
     stops the loop and is returned in the outcome with the joint left *uncertain* over
     the failed burst; any other exception (Ctrl-C) propagates with the journal saved.
     A :class:`~stickslip.devices.base.StepsUncertain` narrows that: its ``made`` steps
@@ -156,7 +203,7 @@ def drive(
             if e.made:
                 out.sent += e.made
                 out.bursts.append(e.made)
-                state.set_position(joint, reckon(out.sent), "dead-reckoned")
+                state.set_position(joint, reckon(out.sent), source)
             else:  # nothing certainly made: back to the confirmed position, then widen below
                 state.set_position(joint, state.positions[joint], state.sources[joint])
             if e.at_most is None:
@@ -171,7 +218,7 @@ def drive(
             return out
         out.sent += n
         out.bursts.append(n)
-        state.set_position(joint, reckon(out.sent), "dead-reckoned")
+        state.set_position(joint, reckon(out.sent), source)
         save(state)  # done: the controller confirmed the burst
     return out
 
@@ -242,6 +289,12 @@ class TrackedPlan:
         Why the track started again (a scale learned with another calibration), if it did.
     sigma_model : float
         The joint's relative model error (1), the track's process noise for a new pose.
+    assumed : bool
+        Planned from a position never referenced (``--from-unreferenced``): the end is kept
+        as ``"assumed"``, not known.
+    from_uncertain : tuple of 2 floats or None
+        The bounds (rad or m) of an uncertain start planned from its last confirmed
+        position (``--from-unreferenced``); the end stays uncertain, the bounds moved along.
     """
 
     joint: int
@@ -254,21 +307,44 @@ class TrackedPlan:
     track: JointTrack
     note: str | None
     sigma_model: float
+    assumed: bool = False
+    from_uncertain: tuple[float, float] | None = None
 
-    def position_after(self, n_signed: int) -> float:
-        """The dead-reckoned position (rad or m) after ``n_signed`` steps from the start."""
-        return float(Planner(self.calibration, self.joint, self.pose).position_after(self.q_from, n_signed))
+    def position_after(self, n_signed: int, q_start: float | None = None) -> float:
+        """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start)."""
+        q0 = self.q_from if q_start is None else q_start
+        return float(Planner(self.calibration, self.joint, self.pose).position_after(q0, n_signed))
+
+    def bounds_after(self, n_signed: int) -> tuple[float, float] | None:
+        """Where an uncertain start's bounds are after ``n_signed`` steps (rad or m); ``None`` for a known start."""
+        if self.from_uncertain is None:
+            return None
+        lo, hi = (self.position_after(n_signed, q) for q in self.from_uncertain)
+        return (min(lo, hi), max(lo, hi))
 
 
-def plan_tracked(calibration: Calibration, state: DeviceState, joint: int, q_to: float) -> TrackedPlan:
+def plan_tracked(
+    calibration: Calibration,
+    state: DeviceState,
+    joint: int,
+    q_to: float,
+    *,
+    from_unreferenced: bool = False,
+    assumed: bool | None = None,
+) -> TrackedPlan:
     """Plan a move of ``joint`` to ``q_to`` (rad or m) from ``state`` with its tracked step scale.
 
-    :class:`MoveRefused` if the joint's position is uncertain (an interrupted move);
-    ``KeyError`` if the calibration lacks the joint or direction; ``ValueError`` if the
-    kept track is unreadable.
+    :class:`MoveRefused` if the joint's position is uncertain (an interrupted move),
+    unless ``from_unreferenced``: then the move is planned from its last confirmed
+    position and its bounds move along (:attr:`TrackedPlan.from_uncertain`). ``KeyError``
+    if the calibration lacks the joint or direction; ``ValueError`` if the kept track is
+    unreadable. Whether a joint never referenced may be planned from is the caller's
+    check (:func:`reference_problem`); ``assumed`` says whether its end is then kept as
+    assumed (default: its source is ``default`` or ``assumed``; the simulator's positions
+    are exact, so a caller that knows it drives one passes ``False``).
     """
     problem = state.uncertainty_problem(joint)
-    if problem:
+    if problem and not from_unreferenced:
         raise MoveRefused(problem)
     track, note = track_for(state.track.get(joint), calibration, joint)
     scaled = scaled_calibration(calibration, joint, {d: track.scale_of(d) for d in "+-"})
@@ -277,18 +353,104 @@ def plan_tracked(calibration: Calibration, state: DeviceState, joint: int, q_to:
     return TrackedPlan(
         joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
         joint_sigma_model(calibration, joint),
+        assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
+        from_uncertain=state.uncertain.get(joint),
     )
 
 
 def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:
-    """Keep what a driven ``plan`` did: the planned end if it completed, the grown uncertainty if it sent steps."""
+    """Keep what a driven ``plan`` did: the planned end if it completed, the grown uncertainty if it sent steps.
+
+    A start never referenced ends ``"assumed"``; an uncertain start stays uncertain, its
+    bounds moved by the steps sent (and widened over a burst that failed).
+    """
     joint = plan.joint
+    moved = plan.bounds_after(outcome.sent)
     if outcome.error is None:
-        state.set_position(joint, plan.q_end, "dead-reckoned")
-    if outcome.sent and joint not in state.uncertain:  # the position's uncertainty grows with the move
+        state.set_position(joint, plan.q_end, "assumed" if plan.assumed else "dead-reckoned")
+    if moved is not None:
+        lo, hi = moved
+        if joint in state.uncertain:  # a failed burst: it may be anywhere it could have gone
+            lo, hi = min(lo, state.uncertain[joint][0]), max(hi, state.uncertain[joint][1])
+        state.mark_uncertain(joint, lo, hi, "moved from an uncertain position")
+        return
+    if outcome.sent and joint not in state.uncertain and not plan.assumed:  # the uncertainty grows with the move
         delta = state.positions[joint] - plan.q_from
         plan.track.predict(delta, outcome.sent, plan.pose, joint, plan.sigma_model)
         state.track[joint] = plan.track.to_json()
+
+
+NOMINAL_STEP = {"prismatic": 0.8e-6, "rotary": 40e-6}
+"""A small step of each kind of joint (m, rad): what :func:`steps_to_stop` assumes without a calibration."""
+
+
+def steps_to_stop(joint: int, calibration: Calibration | None = None) -> int:
+    """Steps that surely drive ``joint`` from anywhere into an end stop: 1.2 x its range over its smallest step.
+
+    The smallest step is the calibration's constant step of either direction, else
+    :data:`NOMINAL_STEP`; rounded up to a thousand. At the stop the slider slips: the
+    steps beyond it do no harm (a traverse steps into its stop the same way).
+    """
+    spec = kin.joint_spec(joint)
+    steps = [v for (j, _), v in (calibration.constant_steps.items() if calibration else ()) if j == joint and v > 0]
+    small = min(steps) if steps else NOMINAL_STEP["rotary" if spec.rotary else "prismatic"]
+    return int(math.ceil(1.2 * spec.span / small / 1000.0)) * 1000
+
+
+def exact_positions(dev: Controller, state: DeviceState, joint: int) -> bool:
+    """Whether a move of ``joint`` on ``dev`` starts from a known position: referenced, or on the simulator.
+
+    A simulator is placed at the kept positions (:class:`~stickslip.devices.base.PoseSettable`),
+    so they are exact there; on a real controller a position never referenced is assumed.
+    """
+    return isinstance(dev, PoseSettable) or state.sources[joint] not in ("default", "assumed")
+
+
+def is_simulator(url: str) -> bool:
+    """Whether ``url`` opens the simulator, which is placed at the kept positions (so they are exact)."""
+    return url_scheme(url) in ("sim", "sim+physics")
+
+
+def reference_commands(device: str, joint: int, calibration: Calibration | None = None) -> str:
+    """The two commands that reference ``joint``: raw steps into its lower stop, then ``where --set J=min``."""
+    url = redact_url(device)
+    n = steps_to_stop(joint, calibration)
+    return (
+        f"`stickslip move -d {url} --joint {joint} --steps -{n}` (into its lower stop: more steps than its range; "
+        f"the slider slips at the stop), then `stickslip where -d {url} --set {joint}=min`"
+    )
+
+
+def reference_problem(
+    state: DeviceState, joint: int, device: str, calibration: Calibration | None = None, from_uncertain: bool = True
+) -> str | None:
+    """Why a planned move of ``joint`` needs ``--from-unreferenced`` (``None`` if it does not).
+
+    A joint whose position is uncertain, or was never referenced (its position assumed),
+    is not planned from on a real controller; the reason names the commands that
+    reference it. The simulator is placed at the kept positions, so they are never made
+    up there (an uncertain joint is refused there too, by :func:`plan_tracked`).
+    ``from_uncertain``: whether the option may plan from an uncertain position (a
+    single-joint move) or not (a tip move: it needs all three joints known).
+    """
+    if is_simulator(device) or state.referenced(joint):
+        return None
+    how = reference_commands(device, joint, calibration)
+    if joint in state.uncertain:
+        lo, hi = state.uncertain[joint]
+        why = state.why.get(joint, "a move was interrupted")
+        option = (
+            f"; or pass --from-unreferenced to plan from {format_position(state.positions[joint], joint)} "
+            "(it stays uncertain)" if from_uncertain else ""
+        )
+        return (
+            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, joint)} and "
+            f"{format_position(hi, joint)}; reference it: {how}{option}"
+        )
+    return (
+        f"joint {joint} was never referenced: its position {format_position(state.positions[joint], joint)} is "
+        f"assumed, not known; reference it: {how}; or pass --from-unreferenced to plan from the assumed position"
+    )
 
 
 def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: int) -> str:
@@ -337,6 +499,13 @@ class MoveRequest:
         Positions and tilt to record first.
     max_age_days : int
         A calibration older than this is warned about (:func:`~.conditions.usage_warnings`).
+    from_unreferenced : bool
+        Plan from a position never referenced (assumed) or uncertain (the last confirmed);
+        without it such a joint is refused on a real controller (:func:`reference_problem`).
+    trust_calibration : bool
+        Use a calibration that does not record its device, or was made on the simulator,
+        on a real controller (refused without it:
+        :func:`~.conditions.calibration_device_problem`).
     """
 
     device: str
@@ -346,6 +515,8 @@ class MoveRequest:
     burst: int = 1000
     pose: PoseUpdate = PoseUpdate()
     max_age_days: int = 0
+    from_unreferenced: bool = False
+    trust_calibration: bool = False
 
 
 @dataclass(frozen=True)
@@ -419,23 +590,34 @@ def move(
     """
     key = device_key(request.device)
     joint = request.joint
+    made_on = calibration_device_problem(calibration, request.device)
+    if made_on and not request.trust_calibration:
+        raise MoveRefused(made_on)
     with device_lock(store, key):
         state = load_state(store, key)
-        request.pose.apply(state)
-        problem = state.uncertainty_problem(joint)
-        if problem:
-            raise MoveRefused(problem)
-        _, q_to = target_of(state, joint, request.by, request.to)
-        plan = plan_tracked(calibration, state, joint, q_to)
-        if plan.note:
-            warn(plan.note)
-        save_state(store, state)  # the recorded pose, even if nothing moves
-        if not plan.steps:
-            for w in usage_warnings(calibration, None, request.device, joint, request.max_age_days):
-                warn(w)
-            ready()
-            return MoveResult(key, plan, MoveOutcome(), state)
-        outcome, true_end = _drive_opened(store, request, calibration, state, plan, warn, ready, opener or open_device)
+        try:
+            request.pose.apply(state)
+            problem = reference_problem(state, joint, request.device, calibration)
+            if problem and not request.from_unreferenced:
+                raise MoveRefused(problem)
+            _, q_to = target_of(state, joint, request.by, request.to)
+            plan = plan_tracked(
+                calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
+                assumed=problem is not None and joint not in state.uncertain,
+            )
+            if plan.note:
+                warn(plan.note)
+            save_state(store, state)  # the recorded pose, even if nothing moves
+            if not plan.steps:
+                for w in usage_warnings(calibration, None, request.device, joint, request.max_age_days):
+                    warn(w)
+                ready()
+                return MoveResult(key, plan, MoveOutcome(), state)
+            outcome, true_end = _drive_opened(
+                store, request, calibration, state, plan, warn, ready, opener or open_device
+            )
+        except KeyboardInterrupt:
+            raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
     return MoveResult(key, plan, outcome, state, true_end)
 
 
@@ -458,9 +640,14 @@ def _drive_opened(
         if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
             dev.set_pose(*plan.pose)
         def save(st: DeviceState) -> None:
+            if plan.from_uncertain is not None:  # in flight from an uncertain start: anywhere it could reach
+                lo, hi = plan.from_uncertain
+                to = plan.bounds_after(plan.steps) or (lo, hi)
+                st.mark_uncertain(plan.joint, min(lo, to[0]), max(hi, to[1]), "a move from an uncertain position")
             save_state(store, st)
 
-        outcome = drive(dev, state, plan.joint, plan.steps, request.burst, plan.position_after, save)
+        source = "assumed" if plan.assumed else "dead-reckoned"
+        outcome = drive(dev, state, plan.joint, plan.steps, request.burst, plan.position_after, save, source)
         settle(state, plan, outcome)
         if outcome.error is None or state.track.get(plan.joint) is not None:
             save_state(store, state)
@@ -473,3 +660,87 @@ def _drive_opened(
             dev.close()
         except DeviceError:
             pass
+
+
+# ---------------------------------------------------------------- raw steps, no calibration
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What :func:`step_joint` did: the steps sent (signed, per burst), the kept state, a device error if any."""
+
+    device: str
+    joint: int
+    steps: int
+    outcome: MoveOutcome
+    state: DeviceState
+
+    def as_dict(self) -> dict[str, object]:
+        """The JSON shape of ``stickslip move --steps N --json`` (SI units)."""
+        lo, hi = self.state.bounds(self.joint)
+        return {
+            "device": self.device, "joint": self.joint, "steps_signed": self.steps, "sent": self.outcome.sent,
+            "bursts": list(self.outcome.bursts), "uncertain": [lo, hi], "unit": kin.joint_spec(self.joint).unit,
+            "error": self.outcome.error,
+        }
+
+
+def step_joint(
+    store: MoveStore,
+    device: str,
+    joint: int,
+    steps: int,
+    *,
+    burst: int = 1000,
+    ready: Callable[[], None] = _nothing,
+    opener: Callable[[str], Controller] | None = None,
+) -> StepResult:
+    """Send ``steps`` raw signed steps to ``joint``: no calibration, no plan (a first check, a drive into a stop).
+
+    Without a model the steps move the joint by an unknown amount, so the joint is kept
+    *uncertain*: from where it may have been (its bounds, :meth:`DeviceState.bounds`) to
+    its end stop in the direction stepped, journalled before the first burst. Reference it
+    afterwards (``stickslip where --set J=min`` at the lower stop).
+    """
+    if steps == 0:
+        raise ValueError("--steps must not be 0")
+    key = device_key(device)
+    spec = kin.joint_spec(joint)
+    with device_lock(store, key):
+        state = load_state(store, key)
+        try:
+            lo, hi = state.bounds(joint)
+            after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)
+            state.mark_uncertain(joint, *after, f"{steps:+d} raw steps were sent")
+            save_state(store, state)  # write-ahead: uncertain before anything is sent
+            ready()
+            dev = (opener or open_device)(device)
+            try:
+                if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+                    dev.set_pose(*state.pose)
+                out = _send_raw(dev, joint, steps, burst)
+            finally:
+                try:
+                    dev.close()
+                except DeviceError:
+                    pass
+        except KeyboardInterrupt:
+            what = f"{steps:+d} raw steps of joint {joint}"
+            raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
+    return StepResult(key, joint, steps, out, state)
+
+
+def _send_raw(dev: Controller, joint: int, steps: int, burst: int) -> MoveOutcome:
+    """Send ``steps`` (signed) in bursts of at most ``burst``; a device error ends the loop and is kept."""
+    out = MoveOutcome()
+    sign = 1 if steps > 0 else -1
+    while out.sent != steps:
+        n = sign * min(burst, abs(steps - out.sent))
+        try:
+            dev.step(joint, n)
+        except DeviceError as e:
+            out.error = str(e)
+            break
+        out.sent += n
+        out.bursts.append(n)
+    return out

@@ -125,7 +125,19 @@ def _gate(obs: Observation, q_before: float, sd_before: float) -> float:
     """The innovation in standard deviations; :class:`InnovationTooLarge` beyond the gate unless forced."""
     joint, sd = obs.joint, obs.sigma
     s_pred = math.sqrt(sd_before**2 + sd**2)
-    sigmas = abs(obs.q - q_before) / s_pred if s_pred > 0 else math.inf
+    diff = abs(obs.q - q_before)
+    if s_pred == 0.0:  # both exact: the same position agrees, another cannot be weighed
+        if diff <= 1e-9 * JOINTS[joint].span:
+            return 0.0
+        if not obs.force:
+            raise InnovationTooLarge(
+                f"the measured position {format_position(obs.q, joint)} is not the kept "
+                f"{format_position(q_before, joint)}, and both are exact (an end stop, or a position set): "
+                f"check the reading (units, which joint); if the joint was moved by hand, re-reference it "
+                f"(stickslip where --set {joint}=VALUE) or pass --force to use it"
+            )
+        return math.inf
+    sigmas = diff / s_pred
     if sigmas > MAX_INNOVATION and not obs.force:
         raise InnovationTooLarge(
             f"the measured position {format_position(obs.q, joint)} is {sigmas:.3g} standard "

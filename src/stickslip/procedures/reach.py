@@ -26,8 +26,18 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.reach import JointStepper, ReachPlan, plan_reach
-from .conditions import usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive
+from .conditions import calibration_device_problem, usage_warnings
+from .move import (
+    Interrupted,
+    MoveRefused,
+    MoveStore,
+    PoseUpdate,
+    device_lock,
+    drive,
+    exact_positions,
+    kept_after_interrupt,
+    reference_problem,
+)
 
 __all__ = [
     "BORROWED_JOINT1",
@@ -104,7 +114,8 @@ def drive_reach(
             def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
                 return stepper.position_after(q_from, m)
 
-            moved = drive(dev, state, j, n, burst, reckon, save)
+            source = "dead-reckoned" if exact_positions(dev, state, j) else "assumed"
+            moved = drive(dev, state, j, n, burst, reckon, save, source)
             out.sent[j - 1] += moved.sent
             if moved.error is not None:
                 out.error, out.joint = moved.error, j
@@ -140,6 +151,11 @@ class ReachRequest:
         A calibration older than this is warned about.
     dry_run : bool
         Plan only: no lock, nothing sent, nothing kept.
+    from_unreferenced : bool
+        Plan from joints never referenced (their positions assumed); without it they are
+        refused on a real controller. Uncertain joints are always refused.
+    trust_calibration : bool
+        Use a calibration without its device, or the simulator's, on a real controller.
     """
 
     device: str
@@ -151,6 +167,8 @@ class ReachRequest:
     pose: PoseUpdate = PoseUpdate()
     max_age_days: int = 0
     dry_run: bool = False
+    from_unreferenced: bool = False
+    trust_calibration: bool = False
 
 
 @dataclass(frozen=True)
@@ -191,19 +209,35 @@ class ReachResult:
         return out
 
 
-def check_referenced(state: DeviceState) -> None:
-    """:class:`MoveRefused` if a joint of ``state`` is uncertain (an interrupted move): a tip move needs all three."""
-    for j in (1, 2, 3):
+def check_referenced(
+    state: DeviceState, device: str = "sim://", calibration: Calibration | None = None, from_unreferenced: bool = False
+) -> None:
+    """:class:`MoveRefused` unless every joint of ``state`` may be planned from: a tip move needs all three known.
+
+    An uncertain joint (an interrupted move) is always refused; one never referenced
+    (its position assumed) on a real controller unless ``from_unreferenced``
+    (:func:`~.move.reference_problem` names the commands that reference it).
+    """
+    for j in sorted((1, 2, 3), key=lambda j: j not in state.uncertain):  # an uncertain joint is said first
+        problem = reference_problem(state, j, device, calibration, from_uncertain=False)
+        if problem and (j in state.uncertain or not from_unreferenced):
+            raise MoveRefused(problem)
         problem = state.uncertainty_problem(j)
         if problem:
             raise MoveRefused(problem)
 
 
-def referenced_state(store: StateStore, device: str, pose: PoseUpdate) -> DeviceState:
-    """The kept state of ``device`` with ``pose`` recorded; :class:`MoveRefused` if a joint is uncertain."""
+def referenced_state(
+    store: StateStore,
+    device: str,
+    pose: PoseUpdate,
+    calibration: Calibration | None = None,
+    from_unreferenced: bool = False,
+) -> DeviceState:
+    """The kept state of ``device`` with ``pose`` recorded; :class:`MoveRefused` unless it may be planned from."""
     state = load_state(store, device_key(device))
     pose.apply(state)
-    check_referenced(state)
+    check_referenced(state, device, calibration, from_unreferenced)
     return state
 
 
@@ -245,12 +279,16 @@ def reach(
     error during the move is in the result (:meth:`ReachResult.failure`).
     """
     key = device_key(request.device)
+    refs = (calibration, request.from_unreferenced)
     if request.dry_run:
-        state = referenced_state(store, request.device, request.pose)
+        state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
         return ReachResult(key, plan, ReachOutcome(), state, moved=False)
+    made_on = calibration_device_problem(calibration, request.device)
+    if made_on and not request.trust_calibration:
+        raise MoveRefused(made_on)
     with device_lock(store, key):
-        state = referenced_state(store, request.device, request.pose)
+        state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
         save_state(store, state)  # the recorded pose, even if nothing moves
         for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
@@ -258,7 +296,10 @@ def reach(
         ready()
         if not any(plan.total_steps):
             return ReachResult(key, plan, ReachOutcome(), state, moved=True)
-        outcome, true_q = _drive_opened(store, request, calibration, state, plan, opener or open_device)
+        try:
+            outcome, true_q = _drive_opened(store, request, calibration, state, plan, opener or open_device)
+        except KeyboardInterrupt:
+            raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
     return ReachResult(key, plan, outcome, state, moved=True, sim_true=true_q)
 
 

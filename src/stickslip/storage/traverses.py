@@ -89,6 +89,20 @@ class TraverseStore(_Base):
             stored.update(r[0] for r in rows)
         return [k for k, key in enumerate(keys) if key in stored]
 
+    def device_holding(self, traverses: Iterable[Traverse]) -> str | None:
+        """The one device whose stored traverses include every one of ``traverses`` (by content), else ``None``.
+
+        How a calibration made from a table learns which arm its traverses came from: the
+        rows were stored when they were measured (``stickslip traverse``, ``demo``, ``import
+        --device``). ``None`` when no device, or more than one, holds them all.
+        """
+        rows = list(traverses)
+        if not rows:
+            return None
+        urls = [str(r[0]) for r in self._con.execute("SELECT url FROM devices ORDER BY id")]
+        holders = [url for url in urls if len(self.duplicates(rows, url)) == len(rows)]
+        return holders[0] if len(holders) == 1 else None
+
     def add_traverse(
         self,
         traverse: Traverse,
