@@ -270,7 +270,8 @@ class SmarActBase:
             If a burst is refused, unanswered, answered with garbage, outlasts its time,
             ends with the controller reporting a failure, or is stopped by :meth:`stop`:
             ``made`` steps of earlier bursts are certain, at most ``at_most`` were made
-            (a burst never makes more than it asked for). The channel is sent a stop.
+            (a burst never makes more than it asked for). The channel is sent a stop
+            unless the burst was refused or the controller had stopped it already.
         ValueError
             For an unknown joint or a step count that is not a whole number.
         """
