@@ -1,4 +1,4 @@
-"""The limit switch on recordings from a second, independent generator (tests/alien_sound.py).
+"""The limit switch on recordings from a second, independent generator (tests/support/alien_sound.py).
 
 Issue 3's targets, on sounds the detector's design never saw: tuned on one recording per
 joint (1000 Hz, 0 dB, knocks, no babble), judged on others at 800-1300 Hz, mic gain
@@ -9,8 +9,8 @@ test_audio_tuning add more).
 
 import numpy as np
 import pytest
-
 from alien_sound import JOINT_SOUNDS, recording
+
 from stickslip.audio.detector import detect
 from stickslip.audio.tuning import tune
 

@@ -16,20 +16,16 @@ which held the latch (hypothesis).
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from functools import cache
-from pathlib import Path
 
+import battery_sound as bs  # noqa: E402
+import modal_sound as ms  # noqa: E402
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import battery_sound as bs  # noqa: E402
-import modal_sound as ms  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import StopDetector, detect  # noqa: E402
 from stickslip.audio.template import RELEASE_SHARE, Release  # noqa: E402

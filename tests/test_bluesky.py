@@ -44,7 +44,7 @@ from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, ca
 from stickslip.calibration import Calibration  # noqa: E402
 from stickslip.devices.base import DeviceError, DeviceInfo  # noqa: E402
 from stickslip.devices.positions import load_state  # noqa: E402
-from stickslip.planning import Planner  # noqa: E402
+from stickslip.motion.planning import Planner  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.storage import Store  # noqa: E402
 

@@ -15,10 +15,10 @@ import pytest
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, validate
 from stickslip.measurements import TableError, Traverse, parse_measurements
+from stickslip.measurements.dataframes import TraverseTable, from_pandas, to_pandas
 from stickslip.models import PrismaticParams
-from stickslip.planning import plan_move
+from stickslip.motion.planning import plan_move
 from stickslip.sim.arm import SimulatedMM3A
-from stickslip.tables import TraverseTable, from_pandas, to_pandas
 
 DAY = "2026-11-22"
 

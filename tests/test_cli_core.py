@@ -13,7 +13,7 @@ from stickslip.calibration import Calibration, calibrate
 from stickslip.cli import app
 from stickslip.kinematics import Pose
 from stickslip.measurements import measurements_to_csv
-from stickslip.planning import plan_move
+from stickslip.motion.planning import plan_move
 from synth import paper_table
 
 runner = CliRunner()

@@ -1,4 +1,4 @@
-"""Model families (stickslip.families), their fitting and the cross-validated selection."""
+"""Model families (stickslip.models.families), their fitting and the cross-validated selection."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ import pytest
 from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, calibrate
-from stickslip.families import FAMILIES, FamilyModel, FamilyParams, family_spec
 from stickslip.measurements import Traverse
 from stickslip.models import JointModel, NonPhysicalError, PrismaticParams, RotaryParams
-from stickslip.planning import Planner
+from stickslip.models.families import FAMILIES, FamilyModel, FamilyParams, family_spec
+from stickslip.motion.planning import Planner
 from stickslip.sim import physics as ph
 from synth import paper_table
 

@@ -5,7 +5,7 @@ References: at the outstretched pose the Jacobian's columns are the base axes
 (+x along the arm: joint 3; +y: joint 1 at lever rho; +z: joint 2 at lever r), so each
 direction key must step exactly one joint at ``v / (lever * gamma)`` steps/s, with
 gamma from ``Calibration.gamma`` (the model's point value, not the planner's
-integrals); single-step moves are checked against ``stickslip.planning.plan_move``.
+integrals); single-step moves are checked against ``stickslip.motion.planning.plan_move``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from typer.testing import CliRunner
 from stickslip import kinematics as kin
 from stickslip.cli import app
 from stickslip.devices.positions import DeviceState
-from stickslip.planning import plan_move
+from stickslip.motion.planning import plan_move
 from stickslip.procedures.jog import SPEEDS, JogController, parse_keys, run_jog
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.emulators import NanoControlEmulator

@@ -1,4 +1,4 @@
-"""The issue's check: `stickslip move` against an independent console (tests/console_peer.py).
+"""The issue's check: `stickslip move` against an independent console (tests/support/console_peer.py).
 
 With no dialect option the CLI must detect the console, make exactly the steps
 `stickslip plan` gives (counted by the peer from the wall-clock timing of go and stop at
@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from synth import paper_table
 
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
 if sys.platform != "win32":

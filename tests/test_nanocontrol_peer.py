@@ -1,4 +1,4 @@
-"""`stickslip move` against an independent NanoControl on a pseudo-terminal (tests/nanocontrol_peer.py).
+"""`stickslip move` against an independent NanoControl on a pseudo-terminal (tests/support/nanocontrol_peer.py).
 
 Good moves send exactly the planned steps with nothing on stderr; each injected fault ends
 within the configured timeout plus the burst's own duration with one line naming the port,
@@ -14,9 +14,9 @@ import time
 from pathlib import Path
 
 import pytest
+from synth import paper_table
 
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
 if sys.platform != "win32":

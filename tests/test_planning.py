@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from stickslip.calibration import calibrate
 from stickslip.kinematics import JOINTS, Pose
 from stickslip.models import simulate_traverse_steps
-from stickslip.planning import Planner, _scalar_coefficients, dead_reckon, plan_move
+from stickslip.motion.planning import Planner, _scalar_coefficients, dead_reckon, plan_move
 from synth import paper_table
 
 CAL = calibrate(paper_table())

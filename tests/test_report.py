@@ -16,6 +16,7 @@ import re
 
 import numpy as np
 import pytest
+from analysis_tables import simulated_table  # tests/support
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate
@@ -38,7 +39,6 @@ from stickslip.report import (
     validation_data,
 )
 from stickslip.report._units import param_scale, position_scale, step_scale
-from test_analysis import simulated_table  # tests/ is on sys.path
 
 pytest.importorskip("matplotlib")
 runner = CliRunner()

@@ -13,13 +13,13 @@ import math
 from collections import Counter
 
 import pytest
+from analysis_tables import simulated_table  # tests/support
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from stickslip.calibration import Calibration, calibrate
 from stickslip.measurements import Traverse
 from stickslip.report import StepFigure, classify_days, prismatic_data, rotary_interval_data
-from test_analysis import simulated_table  # tests/ is on sys.path
 
 pytest.importorskip("matplotlib")
 DAYS = ("2026-11-20", "2026-11-21", "2026-11-23")

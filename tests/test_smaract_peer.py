@@ -1,4 +1,4 @@
-"""`stickslip where` and `stickslip move` against independent SmarAct controllers (tests/smaract_peer.py).
+"""`stickslip where` and `stickslip move` against independent SmarAct controllers (tests/support/smaract_peer.py).
 
 The peer was written from docs/devices/smaract.md alone and counts each channel's steps
 from the wall-clock timing of its bursts. A good move must make exactly the steps
@@ -15,12 +15,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from smaract_peer import SmarActPeer
+from synth import paper_table
 from typer.testing import CliRunner
 
-from smaract_peer import SmarActPeer
 from stickslip.cli import app
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 runner = CliRunner()
 

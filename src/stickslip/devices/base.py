@@ -244,8 +244,8 @@ Factory = Callable[[str], Controller]
 
 BACKENDS: dict[str, str | Factory] = {
     # scheme -> factory, or "module:function" imported on first use
-    "sim": "stickslip.sim.arm:open_url",
-    "sim+physics": "stickslip.sim.physics:open_url",
+    "sim": "stickslip.sim.urls:open_url",
+    "sim+physics": "stickslip.sim.urls:open_url",
     "mm3a": "stickslip.devices.nanocontrol:open_url",
     "anc300": "stickslip.devices.anc300:open_url",
     "smaract-mcs": "stickslip.devices.smaract:open_mcs",
