@@ -134,14 +134,16 @@ class SmarActMCS(SmarActBase):
     MAX_STEPS = MAX_STEPS
 
     # -- the wire -------------------------------------------------------------------------
-    def command(self, text: str, timeout: float | None = None) -> tuple[str, str]:
+    def command(self, text: str, timeout: float | None = None, channel: int | None = None) -> tuple[str, str]:
         """Send ``:text`` + LF; return the answer as ``(name, rest)``, e.g. ``("S", "0,1")``.
 
         Raises
         ------
         Refused
-            On an ``:E<channel>,<code>`` answer with a code other than 0, naming the code.
+            On an ``:E<channel>,<code>`` answer with a code other than 0, naming the code
+            (if ``channel`` is given: only from that channel or the system, ``-1``).
         DeviceError
+            On an error answer from another channel than ``channel`` (not this command's).
             On no complete answer within ``timeout`` (default :attr:`timeout`) or garbage;
             the message names the command and the port.
         """
@@ -163,9 +165,11 @@ class SmarActMCS(SmarActBase):
                 raise DeviceError(f"{self._where()}: garbage reply {raw!r} to {text!r}")
             name, rest = m.group(1), m.group(2)
             if name == "E":
-                channel, code = self._ints(rest, 2, text, raw)
+                source, code = self._ints(rest, 2, text, raw)
                 if code != 0:
-                    where = "the system" if channel == -1 else f"channel {channel}"
+                    if channel is not None and source not in (channel, -1):
+                        raise DeviceError(f"{self._where()}: unexpected reply {line.strip()!r} to {text!r}")
+                    where = "the system" if source == -1 else f"channel {source}"
                     raise Refused(
                         f"{self._where()} refused {text!r}: error {code} "
                         f"({ERRORS.get(code, 'unknown error')}) on {where}"
@@ -179,7 +183,7 @@ class SmarActMCS(SmarActBase):
 
     def _ack(self, text: str, channel: int) -> None:
         """Send a command that must be acknowledged by ``:E<channel>,0`` (or ``:E-1,0``)."""
-        name, rest = self.command(text)
+        name, rest = self.command(text, channel=channel)
         if name != "E" or self._ints(rest, 2, text, rest.encode())[0] not in (channel, -1):
             raise DeviceError(f"{self._where()}: unexpected reply ':{name}{rest}' to {text!r}")
 
@@ -208,7 +212,7 @@ class SmarActMCS(SmarActBase):
 
     def _still_stepping(self, channel: int) -> tuple[bool, str | None]:
         text = f"GS{channel}"
-        name, rest = self.command(text)
+        name, rest = self.command(text, channel=channel)
         if name != "S":
             raise DeviceError(f"{self._where()}: unexpected reply ':{name}{rest}' to {text!r}")
         ch, status = self._ints(rest, 2, text, rest.encode())
