@@ -168,7 +168,7 @@ class SmarActMCS(SmarActBase):
                 source, code = self._ints(rest, 2, text, raw)
                 if code != 0:
                     if channel is not None and source not in (channel, -1):
-                        raise DeviceError(f"{self._where()}: unexpected reply {line.strip()!r} to {text!r}")
+                        raise DeviceError(f"{self._where()}: unexpected reply {raw!r} to {text!r}")
                     where = "the system" if source == -1 else f"channel {source}"
                     raise Refused(
                         f"{self._where()} refused {text!r}: error {code} "
