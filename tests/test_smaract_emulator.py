@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 
 import pytest
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip import kinematics as kin
@@ -32,7 +33,6 @@ from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.microphone import VirtualMicrophone
 from stickslip.sim.oracle import OracleStopDetector
 from stickslip.sim.smaract_emulator import MCS2Emulator, MCSEmulator
-from synth import paper_table
 
 POSE = kin.Pose(q1=0.0, q2=-math.pi / 2, q3=1e-3, theta=0.0, psi=0.0)
 pty_only = pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
