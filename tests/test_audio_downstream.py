@@ -26,15 +26,15 @@ from __future__ import annotations
 
 from functools import cache
 
+import arrival_sound as ar
+import battery_sound as bs
+import beam_sound as bm
+import modal_sound as md
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import battery_sound as bs
-import beam_sound as bm
-import modal_sound as md
 from stickslip.audio import template
 from stickslip.audio.confirm import ONSET_QUIET, ONSET_SLOW_S, ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector, StopEvent

@@ -13,8 +13,8 @@ from functools import cache
 
 import numpy as np
 import pytest
-
 from modal_sound import Scene, render
+
 from stickslip.audio.detector import detect
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning

@@ -22,14 +22,14 @@ from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
+import arrival_sound as ar
+import beam_sound as bm
+import modal_sound as md
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import beam_sound as bm
-import modal_sound as md
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector, StopEvent
 from stickslip.audio.rate_signature import RATE_MIN_CHANGE, RATE_WINDOW, SignaturePredictor, fine_spectrum_db

@@ -8,11 +8,11 @@ the mechanism. And the second fit's events do not depend on how the stream is cu
 
 from __future__ import annotations
 
+import arrival_sound as ar
+import beam_sound as bm
 import numpy as np
 import pytest
 
-import arrival_sound as ar
-import beam_sound as bm
 import test_audio_onset as on
 import test_audio_shifted as sh
 

@@ -14,12 +14,12 @@
 
 from __future__ import annotations
 
+import arrival_sound as ar
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
 import test_audio_onset as on
 import test_audio_shifted as sh
 from stickslip.audio.detector import StopDetector, StopEvent

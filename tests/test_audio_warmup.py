@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from battery_sound import Scene, espeak_speech, render, variant
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
 
-from battery_sound import Scene, espeak_speech, render, variant
 from stickslip.audio.detector import StopDetector, StopEvent, detect
 from stickslip.audio.template import CONTINUUM_FRAME, continuum_levels_db
 from stickslip.audio.tuning import tune

@@ -35,11 +35,11 @@ pytest.importorskip("ophyd_async")
 import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
 from bluesky.utils import FailedStatus  # noqa: E402
+from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
-from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, calibration_day  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402

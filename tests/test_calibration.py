@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from synth import PAPER_PRISMATIC, PAPER_ROTARY, paper_table, random_poses, traverse_from_model
 
 from stickslip import calibration as C
 from stickslip.calibration.inversion import _simulate_full_range_averages
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
 from stickslip.models import JointModel, PrismaticParams, steps_between
-from synth import PAPER_PRISMATIC, PAPER_ROTARY, paper_table, random_poses, traverse_from_model
 
 LO, HI = JOINTS[2].lower, JOINTS[2].upper
 SPAN = HI - LO

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip import clock
 from stickslip.cli import app
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 runner = CliRunner()
 FAR = dt.date(2099, 12, 31)  # a pinned day far in the future, at a year's end

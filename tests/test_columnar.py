@@ -13,12 +13,12 @@ import io
 import math
 from dataclasses import astuple
 
+import measurements_rowwise as old
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import measurements_rowwise as old
 from stickslip import measurements as new
 
 NUMBERS = [
@@ -186,8 +186,9 @@ def _old_predict(text: str, cal) -> str:
 
 @pytest.fixture(scope="module")
 def paper_cal(tmp_path_factory):
-    from stickslip.calibration import calibrate
     from synth import paper_table
+
+    from stickslip.calibration import calibrate
 
     cal = calibrate(paper_table())
     path = tmp_path_factory.mktemp("cal") / "cal.json"

@@ -125,9 +125,10 @@ def test_readme_audio_example_runs_on_a_recording(tmp_path):
 @POSIX
 def test_readme_hardware_moves_run_against_the_emulator(tmp_path):
     """`where`/`move` on mm3a:///dev/ttyUSB0 as written, the emulator's pseudo-terminal standing in for the port."""
+    from synth import paper_table
+
     from stickslip.measurements import measurements_to_csv
     from stickslip.sim.emulators import NanoControlEmulator
-    from synth import paper_table
 
     env = _venv_folder(tmp_path)
     env["STICKSLIP_DB"] = str(tmp_path / "hw.db")

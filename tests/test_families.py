@@ -7,8 +7,9 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
+from synth import paper_table
+
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, calibrate
 from stickslip.measurements import Traverse
@@ -16,7 +17,6 @@ from stickslip.models import JointModel, NonPhysicalError, PrismaticParams, Rota
 from stickslip.models.families import FAMILIES, FamilyModel, FamilyParams, family_spec
 from stickslip.motion.planning import Planner
 from stickslip.sim import physics as ph
-from synth import paper_table
 
 
 def test_paper_family_is_the_papers_equations():

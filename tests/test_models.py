@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
 from stickslip import models as m
 from stickslip.kinematics import JOINTS
-from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
 
 def test_eq3_at_the_calibration_poses():

@@ -8,9 +8,9 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_peer import peer_step
 from physics_scenarios import paper14, spread
+
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
 from stickslip.devices.base import open_device

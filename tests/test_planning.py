@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from synth import paper_table
 
 from stickslip.calibration import calibrate
 from stickslip.kinematics import JOINTS, Pose
 from stickslip.models import simulate_traverse_steps
 from stickslip.motion.planning import Planner, _scalar_coefficients, dead_reckon, plan_move
-from synth import paper_table
 
 CAL = calibrate(paper_table())
 

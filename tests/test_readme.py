@@ -7,10 +7,10 @@ import sys
 from pathlib import Path
 
 import pytest
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
 runner = CliRunner()

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_scenarios import paper14
+
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
 from stickslip.motion.planning import dead_reckon

@@ -6,16 +6,16 @@ import math
 
 import numpy as np
 import pytest
+from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
+from synth import paper_table
 from typer.testing import CliRunner
 
-from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, CalibrationError, calibrate
 from stickslip.calibration.update import model_sigma, prediction_sd, update_calibration
 from stickslip.cli import app
 from stickslip.measurements import Traverse, measurements_to_csv
 from stickslip.sim import physics as ph
-from synth import paper_table
 
 
 def _scaled_table(factor: float) -> list[Traverse]:
