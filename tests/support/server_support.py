@@ -74,7 +74,7 @@ def served(app: Any, port: int | None = None) -> Iterator[str]:
 
 
 def until(predicate: Callable[[], object], timeout: float = 20.0, what: str = "the condition") -> None:
-    """Wait until ``predicate()`` is true (polled every 10 ms); ``AssertionError`` naming ``what`` after ``timeout`` s."""
+    """Wait until ``predicate()`` is true (polled every 10 ms); ``AssertionError`` naming ``what`` after ``timeout``."""
     end = time.monotonic() + timeout
     while not predicate():
         if time.monotonic() > end:
