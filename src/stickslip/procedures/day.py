@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 from urllib.parse import urlsplit
@@ -135,7 +135,9 @@ class DayRequest:
     audio_input : str or int or None
         Sound-card input for a controller without a microphone of its own.
     start_at : int
-        Index into :data:`DAY_PLAN` to begin at (resuming a day; 0 from the start).
+        Index into the plan to begin at (resuming a day; 0 from the start).
+    plan : tuple of DayTraverse
+        The traverses, in the order measured (default :data:`DAY_PLAN`, the paper's).
     """
 
     device: str
@@ -145,6 +147,7 @@ class DayRequest:
     confirm_s: float = CONFIRM_S
     audio_input: str | int | None = None
     start_at: int = 0
+    plan: tuple[DayTraverse, ...] = DAY_PLAN
 
 
 @dataclass(frozen=True)
@@ -247,6 +250,32 @@ class _Ids:
         self.store.release_lock(device, pid)
 
 
+class _Tapped:
+    """A microphone whose blocks also go to ``tap`` (the meter); everything else is the microphone's own.
+
+    The traverse reads a virtual microphone's clock (``t_s``, ``skip_to``) to keep the
+    audio in step with the device; those pass through untouched.
+    """
+
+    def __init__(self, mic: Any, tap: Callable[[Any], None]):
+        self._mic = mic
+        self._tap = tap
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._mic, name)
+
+    def __call__(self) -> list[Any]:
+        blocks: list[Any] = list(self._mic())
+        for b in blocks:
+            self._tap(b)
+        return blocks
+
+    def __iter__(self) -> Iterator[Any]:
+        for b in self._mic:
+            self._tap(b)
+            yield b
+
+
 class _Metered:
     """The controller with its virtual microphone tapped by a :class:`BandMeter` (the end-stop meter).
 
@@ -264,16 +293,11 @@ class _Metered:
         if name != "microphone":
             return attr
 
-        def microphone(*args: Any, **kwargs: Any) -> Callable[[], list[Any]]:
-            mic = attr(*args, **kwargs)
+        def tap(block: Any) -> None:
+            self._on_level(self._meter.feed(block).level_db)
 
-            def read() -> list[Any]:
-                blocks: list[Any] = list(mic())
-                for b in blocks:
-                    self._on_level(self._meter.feed(b).level_db)
-                return blocks
-
-            return read
+        def microphone(*args: Any, **kwargs: Any) -> _Tapped:
+            return _Tapped(attr(*args, **kwargs), tap)
 
         return microphone
 
@@ -298,11 +322,12 @@ def calibration_day(
     request (a joint without a tuning, ``start_at`` out of range), before anything moves.
     """
     day = check_day_label(request.day)
-    missing = sorted({t.joint for t in DAY_PLAN} - set(request.tunings))
+    plan = request.plan
+    missing = sorted({t.joint for t in plan[request.start_at:]} - set(request.tunings))
     if missing:
         raise ValueError(f"the calibration day needs a limit-switch tuning of joint(s) {missing} (stickslip tune)")
-    if not 0 <= request.start_at < len(DAY_PLAN):
-        raise ValueError(f"start_at = {request.start_at} is outside 0..{len(DAY_PLAN) - 1}")
+    if not 0 <= request.start_at < len(plan):
+        raise ValueError(f"start_at = {request.start_at} is outside 0..{len(plan) - 1}")
     if len(done) != request.start_at:
         raise ValueError(f"resuming at traverse {request.start_at + 1} needs the {request.start_at} rows before it")
     open_dev = opener or open_device
@@ -310,9 +335,9 @@ def calibration_day(
     ids = _Ids(store)
     ids.ids.extend(i for _, i in done)
     results: list[TraverseResult] = []
-    total = len(DAY_PLAN)
+    total = len(plan)
     for index in range(request.start_at, total):
-        t = DAY_PLAN[index]
+        t = plan[index]
         progress(DayProgress(index, total, "pose", t))
         set_pose(index, t)
         tuning = request.tunings[t.joint]
@@ -347,7 +372,7 @@ def calibration_day(
             index, total, "measured", t, result.commanded_steps, result.elapsed_device_s, level[0], tuning.band_hz,
             gamma=result.gamma, row=result.traverse, traverse_id=ids.ids[-1],
         ))
-    progress(DayProgress(total - 1, total, "calibrating", DAY_PLAN[-1]))
+    progress(DayProgress(total - 1, total, "calibrating", plan[-1]))
     key = device_key(request.device)
     cal = calibrate(rows, day=day, source=key)
     dev = open_dev(request.device)
