@@ -10,6 +10,7 @@ prismatic ``a`` (Eq. 4: read straight from the two measured traverses) within 1 
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import pytest
@@ -30,9 +31,11 @@ def test_the_plan_is_the_papers_fourteen_traverses() -> None:
     assert [(t.joint, t.direction) for t in DAY_PLAN[:6]] == [(3, "+"), (3, "-")] * 3
     assert {t.joint for t in DAY_PLAN[6:]} == {2}
     first = DAY_PLAN[0]
-    assert first.pose.q3 == 0.0 and first.pose.q2 == pytest.approx(-kin.Q3_MAX * 0 - 3.141592653589793 / 2)
+    assert first.pose.q3 == 0.0 and first.pose.q2 == pytest.approx(-math.pi / 2)
     assert DAY_PLAN[1].pose.q3 == kin.Q3_MAX  # a - traverse starts at the upper stop
-    assert first.describe() == "joint 3 + (lower stop to upper) with q1 = 0 deg, q2 = -90 deg, theta = 0 deg, psi = 0 deg"
+    assert first.describe() == (
+        "joint 3 + (lower stop to upper) with q1 = 0 deg, q2 = -90 deg, theta = 0 deg, psi = 0 deg"
+    )
 
 
 def _exact_row(sim: SimulatedMM3A, joint: int, direction: str, fixed: dict[str, float]) -> Traverse:

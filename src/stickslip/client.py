@@ -176,20 +176,22 @@ class Rig:
 
         Holds the direction with a keep-alive every 50 ms (the server's dead man's switch
         stops the tip within 0.3 s of the last), so a script that dies stops the arm.
-        ``speed``: preset 1-7 (0.1 to 100 µm/s).
+        ``speed``: preset 1-7 (0.1 to 100 µm/s). Returns the jog session's record once it has
+        ended (what was sent per joint).
         """
         end = time.monotonic() + float(seconds)
         body: dict[str, Any] = {"direction": direction}
         if speed is not None:
             body["speed"] = speed
+        released: dict[str, Any] = {}
         try:
-            out: dict[str, Any] = self._call("POST", "/api/jog", body)
+            self._call("POST", "/api/jog", body)
             while time.monotonic() < end:
                 time.sleep(min(0.05, max(0.0, end - time.monotonic())))
                 self._call("POST", "/api/jog", body)
         finally:
-            self._call("POST", "/api/jog/release")
-        return out
+            released = self._call("POST", "/api/jog/release", end="true")
+        return self.wait(int(released["motion"])) if "motion" in released else released
 
     def observe(
         self, joint: int, q: Amount, sd: Amount | None = None, at_stop: bool = False, force: bool = False

@@ -487,9 +487,9 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
         return JSONResponse(room.jog_hold(body.direction, body.speed))
 
     @app.post("/api/jog/release", tags=["motion"])
-    def jog_release() -> JSONResponse:
-        """Let go of the jog direction: the tip stops at once."""
-        return JSONResponse(room.jog_release())
+    def jog_release(end: bool = False) -> JSONResponse:
+        """Let go of the jog direction: the tip stops at once; ``end`` ends the session too (else 2 s later)."""
+        return JSONResponse(room.jog_release(end))
 
     @app.post("/api/stop", tags=["motion"])
     async def stop() -> JSONResponse:

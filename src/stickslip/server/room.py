@@ -712,13 +712,17 @@ class ControlRoom:
             raise
         return {"jog": "started", "direction": direction, "motion": m.id}
 
-    def jog_release(self) -> dict[str, Any]:
-        """Let go of the jog key: the tip stops at once (the session ends by itself soon after)."""
+    def jog_release(self, end: bool = False) -> dict[str, Any]:
+        """Let go of the jog key: the tip stops at once; the session ends soon after by itself, or now if ``end``."""
         with self._lock:
             pad = self._pad
+            m = self._motion
         if pad is not None:
-            pad.release()
-        return {"jog": "released" if pad is not None else "idle"}
+            pad.end() if end else pad.release()
+        out: dict[str, Any] = {"jog": "released" if pad is not None else "idle"}
+        if pad is not None and m is not None and m.kind == "jog":
+            out["motion"] = m.id
+        return out
 
     def observe(self, joint: int, q: float, sd: float | None, at_stop: bool, force: bool) -> dict[str, Any]:
         """A measured position into the joint's track (:func:`~stickslip.procedures.observe.observe`)."""
