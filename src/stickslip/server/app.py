@@ -644,10 +644,10 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
             nonlocal holding
             while True:
                 text = await ws.receive_text()
+                if '"jog"' in text:
+                    holding = True  # before it is carried out: a socket that closes now lets go
                 reply = await asyncio.to_thread(_command, room, text)
-                if reply.get("jog") in ("held", "started"):
-                    holding = True
-                elif reply.get("jog") in ("released", "idle") or "stopped" in reply:
+                if reply.get("jog") in ("released", "idle") or "stopped" in reply:
                     holding = False
                 if "error" in reply or reply.get("reply"):
                     await ws.send_text(json.dumps(reply))
@@ -659,8 +659,9 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
             live.clients.discard(client)
             for t in tasks:
                 t.cancel()
-            if holding:
-                room.jog_release()  # the client went away with a key held: stop now
+            if holding:  # the client went away with a key held: stop now (a session still starting is let go too)
+                room.jog_release()
+                room.event("warning", "a page went away with a jog key held: stopped")
             with contextlib.suppress(Exception):
                 await ws.close()
 

@@ -64,6 +64,7 @@ class PadKeys:
         self._held: str | None = None
         self._last = clock()  # the last keep-alive or release
         self._ended = False
+        self._reading = False
         self.deadman = 0
         """How many times a held direction was let go for want of a keep-alive."""
 
@@ -110,6 +111,9 @@ class PadKeys:
                 self._cond.wait(max(0.0, min(timeout, self.hold_s)))
             keys, self._keys = self._keys, []
             now = self._clock()
+            if not self._reading:  # the session starts reading now: nothing moved before, the hold counts from here
+                self._reading = True
+                self._last = now
             if self._held is not None and now - self._last > self.hold_s:
                 self._held = None
                 self._last = now  # let go now: the session's idle time counts from here
