@@ -359,6 +359,8 @@ class ControlRoom:
         """The live view: joints ± sd, the tip ± sd, the simulator's truth, the motion, jog, day, audio level."""
         state = self.state()
         rows = state_rows(state)
+        with self._lock:
+            running = self._motion is not None and self._motion.active
         geom = self.options.geometry
         q = [state.positions[j] for j in (1, 2, 3)]
         sd = []
@@ -370,6 +372,8 @@ class ControlRoom:
                 lo, hi = state.uncertain[j]
                 s = (hi - lo) / math.sqrt(12.0)  # spread of a position known only to lie in [lo, hi]
                 r["uncertain_display"] = f"{format_position(lo, j)} to {format_position(hi, j)}"
+                if running:  # a burst in flight (journalled before it is sent): moving, not lost
+                    r["source"] = "moving"
             sd.append(float(s) if isinstance(s, (int, float)) else 0.0)
             r["sd_display"] = format_spread(float(s), j) if isinstance(s, (int, float)) else None
         tip = [float(v) for v in kin.tip(q, geom)]

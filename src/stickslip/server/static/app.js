@@ -145,7 +145,8 @@ function renderJoints(st) {
       band.style.display = "none";
     }
     const src = d.querySelector(".source");
-    src.textContent = r.source === "uncertain" ? "uncertain: " + (r.uncertain_display || "") : r.source;
+    src.textContent = r.source === "uncertain" ? "uncertain: " + (r.uncertain_display || "") :
+      r.source === "moving" ? "moving: between " + (r.uncertain_display || "") : r.source;
     src.className = "source" + (r.source === "uncertain" ? " uncertain" : "");
   });
 }
