@@ -106,3 +106,16 @@ def test_a_day_over_the_api_stops_and_resumes(rig: Rig, room: ControlRoom, tmp_p
     with pytest.raises(MotionFailed):
         rig.wait(again["id"])
     assert rig.day()["day"]["result"] is None
+
+
+def test_the_example_of_docs_serve_runs(url: str, room: ControlRoom) -> None:
+    import re
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "serve.md").read_text(encoding="utf-8")
+    block = re.search(r"## From Python\n\n```python\n(.*?)```", page, re.S)
+    assert block is not None
+    code = block.group(1).replace('Rig("http://127.0.0.1:8765")', f'Rig("{url}", token="{TOKEN}")')
+    until(lambda: room.current() is None, 20, "the room to be idle")
+    exec(compile(code, "docs/serve.md", "exec"), {"print": lambda *a: None})
+    with Rig(url, token=TOKEN) as rig:
+        assert "above the cell" in [p["name"] for p in rig.positions()]
