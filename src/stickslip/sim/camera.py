@@ -6,7 +6,8 @@ pose) through the tip's forward kinematics (:func:`stickslip.kinematics.tip`) an
 :class:`~stickslip.vision.view.View`:
 
 * the needle: a cone of half-angle ``taper`` ending in a rounded apex of radius
-  ``tip_radius``, along the arm's axis (joint 3's), projected into the image;
+  ``tip_radius``, along the arm's axis (joint 3's), projected into the image; the tip is
+  the needle's extreme end (the kinematic tip);
 * two looks: ``optical`` (bright field: a bright, vignetted background, the needle dark
   where it absorbs the light) and ``sem`` (secondary electrons: a darker background, the
   needle bright, brightest at its edges where the surface turns away from the beam, a
@@ -235,22 +236,47 @@ class SimCamera:
         lam = np.clip(clean, 0.0, None) * s.photons
         counts = self._rng.poisson(lam).astype(float)
         if s.look == "sem":  # the beam's line-by-line jitter
-            counts += self._rng.normal(0.0, 0.02 * s.photons, (s.height, 1))
+            counts += self._rng.normal(0.0, 0.005 * s.photons, (s.height, 1))
         return np.asarray(np.clip(counts / s.photons, 0.0, 1.0), dtype=float)
 
     def _needle(self, tip: NDArray[np.float64], direction: NDArray[np.float64],
                 foreshortening: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Coverage of the needle (0..1, anti-aliased) and its edge brightness (SEM), unblurred."""
+        """Coverage of the needle (0..1) and its edge brightness (SEM), unblurred.
+
+        A pixel integrates the needle over its area: by the clipped signed distance where
+        the needle is wide, and 4 × 4 samples per pixel within 24 px of the tip, where
+        it is thinner than a pixel.
+        """
+        cover, edge = self._needle_at(self._xx, self._yy, tip, direction, foreshortening)
+        s = self.settings
+        k, box = 4, 24
+        x0, x1 = max(0, int(tip[0]) - box), min(s.width, int(tip[0]) + box + 1)
+        y0, y1 = max(0, int(tip[1]) - box), min(s.height, int(tip[1]) + box + 1)
+        if x1 > x0 and y1 > y0:
+            sub = (np.arange(k) + 0.5) / k - 0.5
+            xs = (np.arange(x0, x1)[:, None] + sub[None, :]).ravel()
+            ys = (np.arange(y0, y1)[:, None] + sub[None, :]).ravel()
+            XX, YY = np.meshgrid(xs, ys)
+            c, e = self._needle_at(XX, YY, tip, direction, foreshortening, aa=False)
+            h, w = y1 - y0, x1 - x0
+            cover[y0:y1, x0:x1] = c.reshape(h, k, w, k).mean(axis=(1, 3))
+            edge[y0:y1, x0:x1] = e.reshape(h, k, w, k).mean(axis=(1, 3))
+        return cover, edge
+
+    def _needle_at(self, xx: NDArray[np.float64], yy: NDArray[np.float64], tip: NDArray[np.float64],
+                   direction: NDArray[np.float64], foreshortening: float,
+                   aa: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Coverage and edge brightness at points ``(xx, yy)`` (px): anti-aliased by distance, or inside/outside."""
         s = self.settings
         n = float(np.hypot(*direction))
         r0 = s.tip_radius_m / s.pixel_size_m
         if n < 1e-9:  # looking along the needle: a disc
-            d = np.hypot(self._xx - tip[0], self._yy - tip[1])
-            cover = np.clip(r0 + 0.5 - d, 0.0, 1.0)
+            d = np.hypot(xx - tip[0], yy - tip[1])
+            cover = np.clip(r0 + 0.5 - d, 0.0, 1.0) if aa else (d <= r0).astype(float)
             return cover, np.zeros_like(cover)
         a = direction / n
-        rx, ry = self._xx - tip[0], self._yy - tip[1]
-        along = rx * a[0] + ry * a[1]  # pixels behind the apex, along the shaft
+        rx, ry = xx - tip[0], yy - tip[1]
+        along = rx * a[0] + ry * a[1] - r0  # pixels behind the apex cap's centre (the tip is its extreme end)
         across = np.abs(-rx * a[1] + ry * a[0])
         slope = math.tan(s.taper) / max(foreshortening, 1e-3)  # a foreshortened cone looks blunter
         radius = r0 + np.clip(along, 0.0, None) * slope
@@ -259,7 +285,7 @@ class SimCamera:
         side = across - radius
         cap = np.hypot(np.minimum(along, 0.0), across) - r0
         sd = np.where(along < 0.0, cap, side)
-        cover = np.clip(0.5 - sd, 0.0, 1.0)
+        cover = np.clip(0.5 - sd, 0.0, 1.0) if aa else (sd <= 0.0).astype(float)
         inside = np.clip(across / np.maximum(radius, 1e-6), 0.0, 1.0)
         edge = cover * inside**6  # secondary-electron yield rises where the surface turns from the beam
         return cover, edge
