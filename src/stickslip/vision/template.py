@@ -52,6 +52,9 @@ class TrackerParams:
     blur_bank : tuple of float
         Extra Gaussian blur of the template's copies, px (sigma): matched against a tip
         out of focus.
+    sharpen_bank : tuple of float
+        Extra Gaussian blur of the *frame*, px (sigma), matched against the sharp
+        template: a tip in better focus than in the first frame.
     search_radius : int
         How far from the last fix the tip is looked for before the whole frame is, px.
     coarse_factor : int
@@ -115,6 +118,7 @@ class TrackerParams:
     contrast: float = 3.0
     edge_px: int = 2
     blur_bank: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 4.5, 6.0)
+    sharpen_bank: tuple[float, ...] = (1.5, 3.0)
     search_radius: int = 32
     coarse_factor: int = 4
     candidates: int = 4
@@ -179,12 +183,14 @@ class TipTemplate:
     weights : ndarray
         Weight of each window pixel (0..1): needle, its edges, near the tip.
     level_weights : list of ndarray
-        The weights of each blur copy: the mask grown by twice the copy's extra blur more.
+        The weights of each blur copy, then of each frame blur (``sharpen_bank``): the
+        mask grown by twice the extra blur more.
     shaft : tuple of float
         Unit vector from the tip back along the needle, window axes.
-    core, ring : tuple of ndarray
-        Offsets from the tip (x, y; px) of the needle's core near the tip, and of the
-        background around it (away from the needle).
+    core, ring, front : tuple of ndarray
+        Offsets from the tip (x, y; px) of the needle's core near the tip, of the
+        background around it (away from the needle), and of the background in front of
+        the tip (within 60 deg of straight ahead, 2 to 14 px away, clear of the needle).
     apex : tuple of float
         The tip in window coordinates, px ``(x, y)``.
     noise : float
@@ -204,6 +210,7 @@ class TipTemplate:
     shaft: tuple[float, float] = (1.0, 0.0)
     core: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     ring: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+    front: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
 
     @classmethod
     def learn(cls, image: FloatArray, tip: tuple[float, float], params: TrackerParams = TrackerParams()) -> TipTemplate:
@@ -248,7 +255,7 @@ class TipTemplate:
             raise TemplateError(f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out")
         radial = np.exp(-0.5 * ((xx - apex[0]) ** 2 + (yy - apex[1]) ** 2) / (h / 2.0) ** 2)
         level_weights = []
-        for b in params.blur_bank:
+        for b in (*params.blur_bank, *params.sharpen_bank):
             # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further
             grown = ndimage.binary_dilation(mask, iterations=params.edge_px + int(round(2.0 * b)))
             soft = ndimage.gaussian_filter(grown.astype(float), 0.7)
@@ -268,6 +275,11 @@ class TipTemplate:
         ring_sel = ~wide & (dist >= 6.0) & inside
         core = (ox[core_sel].astype(float), oy[core_sel].astype(float))
         ring = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
+        # in front of the tip: within 60 deg of straight ahead, 2..14 px away, and background in this frame
+        ahead = (ox * shaft[0] + oy * shaft[1]) < -0.5 * dist
+        grown2 = ndimage.binary_dilation(mask, iterations=params.edge_px + 1)
+        front_sel = ahead & (dist >= 2.0) & (dist <= 14.0) & ~grown2 & inside
+        front = (ox[front_sel].astype(float), oy[front_sel].astype(float))
         s0 = params.template_blur
         bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in params.blur_bank]
         # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
@@ -281,7 +293,7 @@ class TipTemplate:
                 f"the needle at ({x:g}, {y:g}) stands out by {contrast / max(noise, 1e-12):.2g} times the pixel noise "
                 f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track"
             )
-        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring)
+        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring, front)
 
     @property
     def half(self) -> int:

@@ -139,8 +139,16 @@ class TipTracker:
         self.template = TipTemplate.learn(image, tip, params)
         self.shape = (int(image.shape[0]), int(image.shape[1]))
         t = self.template
-        self._steep = [steepest(b, t.apex, w) for b, w in zip(t.bank, t.level_weights, strict=True)]
-        sel = self._steep[-1]  # the blur copies are compared on the widest mask
+        # levels: (template copy, the frame's extra blur px, the signed blur px): the blurred copies for a tip out of
+        # focus, then the sharp template against a blurred frame for a tip sharper than in the first frame
+        nb = len(params.blur_bank)
+        self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [
+            (0, f, -f) for f in params.sharpen_bank
+        ]
+        self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
+        self._steep = [steepest(t.bank[k], t.apex, w) for (k, _, _), w in zip(self._spec, t.level_weights, strict=True)]
+        widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
+        sel = self._steep[widest]  # the levels are compared on the widest mask
         self._select = sel
         self._bank_sel = [b[sel.keep] for b in t.bank]
         coarse = params.coarse_factor
@@ -156,6 +164,7 @@ class TipTracker:
         # variance of the first frame's noise left in each blur copy (white noise smoothed by a Gaussian of sigma s
         # keeps 1 / (4 pi s²) of its variance)
         self._bank_noise2 = [t.noise**2 / (4.0 * math.pi * (s0 * s0 + b * b)) for b in params.blur_bank]
+        self._spec_noise2 = [self._bank_noise2[k] for k, _, _ in self._spec]
         # what noise alone costs a perfect match, until fixes say better: the frame's and the template's noise
         # over the needle's contrast (both smoothed by s0)
         n2 = 2.0 * t.noise**2 / (4.0 * math.pi * s0 * s0)
@@ -184,27 +193,44 @@ class TipTracker:
             out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
         return out, x0, y0
 
-    def _levels(self, Iw: FloatArray, inside: NDArray[np.bool_]) -> list[float]:
-        """Weighted correlation of each blur copy with the frame sampled at the widest mask's pixels."""
-        w = self._select.w * inside
-        sw = float(w.sum())
-        if sw <= 1e-9:
-            return [-1.0] * len(self._bank_sel)
-        mi = float((w * Iw).sum() / sw)
-        di = Iw - mi
-        vi = float((w * di * di).sum())
+    def _levels(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, theta: float) -> list[float]:
+        """Weighted correlation of each level with the frame, at the widest mask's pixels, for a tip at ``(x, y)``.
+
+        Each correlation is divided by what the template's and the frame's own noise cost it
+        (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
+        """
         out = []
-        for b, noise2 in zip(self._bank_sel, self._bank_noise2, strict=True):
+        w_all = self._select.w
+        for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
+            Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
+            w = w_all * inside
+            sw = float(w.sum())
+            if sw <= 1e-9:
+                out.append(-1.0)
+                continue
+            b = self._bank_sel[k]
+            mi = float((w * Iw).sum() / sw)
+            di = Iw - mi
+            vi = float((w * di * di).sum())
             mt = float((w * b).sum() / sw)
             dt = b - mt
             vt = float((w * dt * dt).sum())
             den = math.sqrt(vi * vt)
             ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
-            # the template's own noise lowers its correlation by sqrt(1 - noise² / variance): less for the
-            # more blurred copies, which would otherwise win on noise alone
-            keep = 1.0 - noise2 * sw / vt if vt > 0 else 1.0
-            out.append(ncc / math.sqrt(max(keep, 0.25)))
+            n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
+            keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
+            keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
+            out.append(ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25)))
         return out
+
+    def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
+        """The frame's patch around ``(x, y)`` smoothed like the template plus ``f`` px (made once per frame)."""
+        pt = patches.get(f)
+        if pt is None:
+            s = math.hypot(self.params.template_blur, f)
+            pt = patch(image, x, y, self.template.half * math.sqrt(2.0) + 12.0, s)
+            patches[f] = pt
+        return pt
 
     def _pick_level(self, scores: list[float], current: int) -> int:
         """The blur copy that matches best; the current one unless another beats it by ``level_hysteresis``."""
@@ -214,24 +240,24 @@ class TipTracker:
         return best
 
     def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int) -> _Candidate:
-        """Refine a tip position found by correlation, and settle the blur copy that matches it."""
-        t = self.template
+        """Refine a tip position found by correlation, and settle the level of blur that matches it."""
         corr = self.params.sigma_factor
-        pt = patch(image, x, y, t.half * math.sqrt(2.0) + 12.0, self.params.template_blur)
+        patches: dict[float, Patch] = {}
         lvl = level
-        ref = refine(pt, self._steep[lvl], (x, y), theta, correlation=corr)
+        ref = refine(self._patch(patches, image, x, y, self._spec[lvl][1]), self._steep[lvl], (x, y), theta,
+                     correlation=corr)
         for _ in range(2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
                 break
-            Iw, inside = warped(pt, self._select, ref.x, ref.y, ref.theta)
-            lvl2 = self._pick_level(self._levels(Iw, inside), lvl)
+            lvl2 = self._pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl)
             if lvl2 == lvl:
                 break
-            ref2 = refine(pt, self._steep[lvl2], (ref.x, ref.y), ref.theta, correlation=corr)
-            if not ref2.score >= ref.score:
+            pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
+            ref2 = refine(pt2, self._steep[lvl2], (ref.x, ref.y), ref.theta, correlation=corr)
+            if not ref2.score >= ref.score - self.params.level_hysteresis:
                 break
             ref, lvl = ref2, lvl2
-        return _Candidate(ref, lvl, ref.score, pt)
+        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
 
     # ------------------------------------------------------------------ search
 
@@ -240,7 +266,8 @@ class TipTracker:
         p = self.params
         region, x0, y0 = self._region(image, self._last[0], self._last[1], p.search_radius)
         t = self.template
-        ncc = masked_ncc(region, t.bank[self._level], t.level_weights[self._level], self._fft, ("local", self._level))
+        k = self._spec[self._level][0]
+        ncc = masked_ncc(region, t.bank[k], t.level_weights[k], self._fft, ("local", k))
         i, j = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
         if ncc[i, j] < 0.5 * p.min_score:
             return None
@@ -287,10 +314,10 @@ class TipTracker:
         p = self.params
         r = cand.ref
         H, W = image.shape
-        blur = p.blur_bank[cand.level]
+        blur = self._spec[cand.level][2]
         min_score = p.reacquire_score if reacquire else p.min_score
         edge = min(r.x, r.y, W - 1 - r.x, H - 1 - r.y)
-        margin = p.edge_margin + 2.0 * blur
+        margin = p.edge_margin + 2.0 * max(blur, 0.0)
         if not (math.isfinite(r.x) and math.isfinite(r.y)):
             return Lost("lost", "the fit did not converge")
         if edge < margin:
@@ -301,10 +328,10 @@ class TipTracker:
         sigma = max(p.sigma_floor, p.sigma_factor * r.sigma)
         if r.outliers > p.occluded_fraction:
             return Lost("occluded", f"{100 * r.outliers:.0f} % of the tip's template disagrees with the frame")
-        front = self._front(cand, blur)
+        front = self._front(cand, max(blur, 0.0))
         if front > p.front_fraction:
             return Lost("occluded", f"{100 * front:.0f} % of the ground in front of the tip looks like the needle")
-        if cand.level == len(p.blur_bank) - 1 or blur > p.max_blur:
+        if cand.level == self._top or blur > p.max_blur:
             return Lost("out of focus", f"blurred by {blur:g} px or more against the first frame")
         if r.score < min_score:
             return Lost("lost", f"correlation {r.score:.2f} < {min_score:.2f}")
@@ -319,8 +346,9 @@ class TipTracker:
         max_sigma = p.reacquire_sigma if reacquire else p.max_sigma
         if sigma > max_sigma:
             return Lost("lost", f"position undetermined (sigma {sigma:.2f} px > {max_sigma:g} px)")
-        if reacquire and cand.level > self._level + 1:
-            return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {p.blur_bank[self._level]:g} px)")
+        last_blur = self._spec[self._level][2]
+        if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
+            return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
 
     def _front(self, cand: _Candidate, blur: float) -> float:
@@ -339,16 +367,13 @@ class TipTracker:
         ground = float(np.median(at(*t.ring)))
         if abs(needle - ground) < 1e-12:
             return 1.0
-        r_in = 2.0 + 2.0 * blur
-        r_out = r_in + 6.0
-        ang = np.linspace(0.0, 2.0 * math.pi, 48, endpoint=False)
-        radii = np.linspace(r_in, r_out, 4)
-        ox = (radii[:, None] * np.cos(ang)[None, :]).ravel()
-        oy = (radii[:, None] * np.sin(ang)[None, :]).ravel()
-        ahead = ox * t.shaft[0] + oy * t.shaft[1] < -0.5 * np.hypot(ox, oy)  # within 60 deg of straight ahead
-        v = at(ox[ahead], oy[ahead])
+        fx, fy = t.front
+        far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+        if int(far.sum()) < 6:
+            return 0.0
+        v = at(fx[far], fy[far])
         like = (v - ground) / (needle - ground) > 0.5
-        return float(np.mean(like)) if like.size else 0.0
+        return float(np.mean(like))
 
     def update(self, frame: FloatArray | Frame) -> Result:
         """The tip in the next frame: a :class:`Fix` or a :class:`Lost` with its reason."""
