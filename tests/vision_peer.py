@@ -115,7 +115,7 @@ def _voronoi(h: int, w: int, rng: np.random.Generator) -> NDArray[np.float64]:
     _, idx = cKDTree(pts).query(np.stack([yy.ravel(), xx.ravel()], 1))
     cells = levels[idx].reshape(h, w)
     boundaries = ndimage.gaussian_gradient_magnitude(cells, 0.7)
-    return cells * 0.5 - np.clip(boundaries, 0, 1) * 0.8
+    return np.asarray(cells * 0.5 - np.clip(boundaries, 0, 1) * 0.8, dtype=float)
 
 
 def _fibres(h: int, w: int, rng: np.random.Generator) -> NDArray[np.float64]:
@@ -138,10 +138,12 @@ def _spots(h: int, w: int, rng: np.random.Generator) -> NDArray[np.float64]:
     img = ndimage.gaussian_filter(img, rng.uniform(1.0, 3.0))
     yy, xx = np.mgrid[0:h, 0:w]
     gx, gy = rng.uniform(-1, 1, 2)
-    return np.clip(img, -1.5, 1.5) + 0.6 * (gx * xx / w + gy * yy / h)
+    return np.asarray(np.clip(img, -1.5, 1.5) + 0.6 * (gx * xx / w + gy * yy / h), dtype=float)
 
 
-def _background(kind: str, h: int, w: int, rng: np.random.Generator, real: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+def _background(
+    kind: str, h: int, w: int, rng: np.random.Generator, real: list[NDArray[np.float64]]
+) -> NDArray[np.float64]:
     """A background texture, zero mean, about unit contrast, ``(h, w)``."""
     if kind == "grains":
         img = _voronoi(h, w, rng)
@@ -239,7 +241,7 @@ def _render(
     lam = np.clip(clean * illum * column_gain[None, :], 0.0, None) * photons
     counts = rng.poisson(lam) + rng.normal(0.0, 2.0, (h, w))
     data = np.clip(np.round(counts / photons * 3000.0), 0, 4095)
-    return (data * 16).astype(np.uint16)
+    return np.asarray(data * 16, dtype=np.uint16)
 
 
 # ---------------------------------------------------------------------------- sequences

@@ -3,7 +3,7 @@ joint and direction (``method="auto"``) and merges the parts."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
 from .lsq import calibrate_lsq
@@ -204,7 +204,7 @@ def _row(r: StepSize) -> tuple[object, ...]:
     return (r.day, r.joint, r.direction, r.q1, r.q2, r.q3, r.theta, r.psi, r.gamma, r.sigma, r.steps, r.method)
 
 
-def _with_extra(prov: Provenance, extra: dict[str, object]) -> Provenance:
+def _with_extra(prov: Provenance, extra: Mapping[str, object]) -> Provenance:
     import dataclasses
 
     return dataclasses.replace(prov, extra={**prov.extra, **extra})

@@ -31,7 +31,7 @@ from typing import TextIO
 from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
-from ..records import STEP_RANGE, MAX_TABLE_BYTES, atomic_write, read_text_bounded
+from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, read_text_bounded
 from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_pose
 
 __all__ = [

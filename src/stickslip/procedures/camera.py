@@ -202,7 +202,9 @@ def calibrate_camera(
     notes: list[str] = []
     if tip is None:
         tip = acquire_tip(device, camera, auto_joint, auto_steps)
-        notes.append(f"tip found at ({tip[0]:.1f}, {tip[1]:.1f}) px by stepping joint {auto_joint} {auto_steps} and back")
+        notes.append(
+            f"tip found at ({tip[0]:.1f}, {tip[1]:.1f}) px by stepping joint {auto_joint} {auto_steps} and back"
+        )
     if pixel_size_m is None:
         notes.append("the camera's pixel size is unknown: image Jacobians only, no step sizes (give pixel= in its URL)")
     start_tip = (float(tip[0]), float(tip[1]))
@@ -217,7 +219,8 @@ def calibrate_camera(
             m = visibility(j, pose, view, geometry)
             if m < MIN_VISIBILITY:
                 results.append(JointResult(j, refused=(
-                    f"joint {j} moves the tip mostly along the camera's optical axis at this pose (only {100 * m:.0f} % "
+                    f"joint {j} moves the tip mostly along the camera's optical axis at this pose "
+                    f"(only {100 * m:.0f} % "
                     "of its motion is in the image): not moved; tilt the camera or measure it in another pose"
                 )))
                 continue
@@ -270,14 +273,14 @@ def calibrate_camera(
         lost_tip = False
         if moved:  # bring the joint back to where it began, in step count, a move at a time, following the tip
             per = max(1, max(plan) if plan else probe)
-            r = None
+            last: Fix | Lost | None = None
             while moved:
                 back = -moved if abs(moved) <= per else (-per if moved > 0 else per)
                 device.step(j, back)
                 moved += back
-                r = _track(tracker, camera)
-            if isinstance(r, Fix):
-                current = (r.x, r.y)
+                last = _track(tracker, camera)
+            if isinstance(last, Fix):
+                current = (last.x, last.y)
             else:
                 lost_tip = True
         if refused is None and pixel_size_m is not None:
@@ -285,7 +288,8 @@ def calibrate_camera(
                 q0 = (pose.q1, pose.q2, pose.q3)[j - 1]
                 plus = step_size(fits[0], _at(pose, j, q0), pixel_size_m, view, geometry)
                 q_far = q0 + plus.gamma * plus.steps
-                plus = step_size(fits[0], _at(pose, j, q0 + 0.5 * plus.gamma * plus.steps), pixel_size_m, view, geometry)
+                q_mid = q0 + 0.5 * plus.gamma * plus.steps
+                plus = step_size(fits[0], _at(pose, j, q_mid), pixel_size_m, view, geometry)
                 minus = step_size(fits[1], _at(pose, j, q_far), pixel_size_m, view, geometry)
                 minus = step_size(fits[1], _at(pose, j, q_far - 0.5 * minus.gamma * minus.steps), pixel_size_m,
                                   view, geometry)

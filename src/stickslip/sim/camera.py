@@ -18,9 +18,10 @@ pose) through the tip's forward kinematics (:func:`stickslip.kinematics.tip`) an
   (``drift``, px/s on the arm's virtual clock, plus a small random walk);
 * shot noise: Poisson counts with ``photons`` at full brightness.
 
-The field is placed when the camera opens: centred so that the tip is seen at
-``(0.6 w, 0.5 h)`` and in focus (a user centres and focuses the microscope on the tip),
-or at ``centre=X,Y,Z`` (base frame, with units). The truth is at hand for tests:
+The field is fixed to the rig: the tip of the outstretched arm is seen at
+``(0.6 w, 0.5 h)`` and in focus; ``centre=tip`` centres and focuses it on the tip as it is
+when the camera opens (a user who finds the tip first), ``centre=X,Y,Z`` on a point of
+the base frame (with units). The truth is at hand for tests:
 :meth:`SimCamera.true_tip` (pixel, depth).
 """
 
@@ -105,9 +106,10 @@ class SimCamera:
         The look, size, pixel size, view, noise, focus and drift.
     geometry : Geometry
         The arm's tip geometry (offset, length), m.
-    centre_base : array_like, optional
+    centre_base : array_like or "tip", optional
         The point (base frame, m) seen in focus at pixel ``(0.6 w, 0.5 h)``; default:
-        the tip when the camera opens.
+        the tip in the outstretched pose (``q = (0, -pi/2, 0)``), so every camera opened
+        on the arm sees the same field; ``"tip"``: the tip when the camera opens.
     url : str
         For :attr:`info`.
     """
@@ -132,7 +134,11 @@ class SimCamera:
         self._url = url
         s = settings
         self.centre_px = (0.6 * s.width, 0.5 * s.height)
-        self.centre_base = np.asarray(self._tip_base() if centre_base is None else centre_base, dtype=float).reshape(3)
+        if centre_base is None:  # where the tip is in the outstretched pose: the same field every time
+            centre_base = kin.tip((0.0, -math.pi / 2, 0.0), geometry)
+        elif isinstance(centre_base, str) and centre_base == "tip":  # centred on the tip as it is now
+            centre_base = self._tip_base()
+        self.centre_base = np.asarray(centre_base, dtype=float).reshape(3)
         rng = np.random.default_rng([s.seed, 7])
         self._rng = np.random.default_rng([s.seed, 8])
         self._margin = 48
@@ -321,8 +327,8 @@ def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCam
     (``WxH`` pixels), ``photons`` (at full brightness), ``dof`` (defocus adding one pixel
     of blur, e.g. 4um), ``blur`` (in-focus blur, pixels), ``tip`` (apex radius, e.g.
     0.4um), ``taper`` (cone half-angle, e.g. 8deg), ``drift`` (px/s), ``debris`` (count),
-    ``tilt``, ``azimuth``, ``roll`` (the view, angles), ``centre`` (``X,Y,Z`` in the base
-    frame, lengths), ``geometry`` (``OFFSET,LENGTH`` of the arm). ``device`` is the arm.
+    ``tilt``, ``azimuth``, ``roll`` (the view, angles), ``centre`` (``tip``, or ``X,Y,Z`` in
+    the base frame, lengths), ``geometry`` (``OFFSET,LENGTH`` of the arm). ``device`` is the arm.
     """
     if device is None:
         raise CameraError("simcam:// looks at a simulated arm: give the device too (-d sim://)")
@@ -355,8 +361,10 @@ def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCam
             kw["taper"] = _angle(opts["taper"], "taper", math.radians(0.5), math.radians(45.0))
         view = View(*(_angle(opts.get(k, "0"), k, -2 * math.pi, 2 * math.pi) for k in ("tilt", "azimuth", "roll")))
         kw["view"] = view
-        centre = None
-        if "centre" in opts:
+        centre: Any = None
+        if opts.get("centre", "").strip().lower() == "tip":
+            centre = "tip"
+        elif "centre" in opts:
             parts = opts["centre"].split(",")
             if len(parts) != 3:
                 raise ValueError("centre: write X,Y,Z with units, e.g. centre=21mm,0,0")

@@ -182,7 +182,9 @@ class _CaptureCamera:
         if self._shape is None:
             self._shape = shape
         elif shape != self._shape:
-            raise ImageError(f"{source}: {shape[1]} x {shape[0]} pixels after frames of {self._shape[1]} x {self._shape[0]}")
+            raise ImageError(
+                f"{source}: {shape[1]} x {shape[0]} pixels after frames of {self._shape[1]} x {self._shape[0]}"
+            )
         t = self._time()
         self._k += 1
         return Frame(image, t, self.pixel_size_m, source)

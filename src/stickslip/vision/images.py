@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 
 from .frame import MAX_PIXELS, ImageError, as_image
 
-__all__ = ["MAX_FILE_BYTES", "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "read_image", "missing_extra"]
+__all__ = ["MAX_FILE_BYTES", "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "read_image", "write_png", "missing_extra"]
 
 MAX_FILE_BYTES = 1024 * 1024 * 1024
 """Largest image file read, bytes (1 GiB)."""
@@ -138,7 +138,9 @@ def _read_with_pillow(p: Path) -> NDArray[np.float64]:
             with Image.open(p) as im:
                 w, h = im.size
                 if w * h > MAX_PIXELS:
-                    raise ImageError(f"{p}: {w} x {h} pixels is more than the {MAX_PIXELS // 2**20} Mpx a frame may have")
+                    raise ImageError(
+                        f"{p}: {w} x {h} pixels is more than the {MAX_PIXELS // 2**20} Mpx a frame may have"
+                    )
                 n = int(getattr(im, "n_frames", 1) or 1)
                 if n > 1:
                     raise ImageError(f"{p}: a stack of {n} images (pages or an animation): give one image per file")
@@ -192,3 +194,19 @@ def _reason(e: BaseException) -> str:
     if isinstance(e, struct.error):
         text = f"damaged header: {text}"
     return text[:160]
+
+
+def write_png(path: str | os.PathLike[str], image: NDArray[np.float64]) -> None:
+    """Save a grey image (values in [0, 1]; outside clipped) as a 16-bit PNG, atomically (Pillow)."""
+    try:
+        from PIL import Image
+    except ImportError:
+        raise missing_extra("Pillow", f"{path}: writing a PNG") from None
+    from ..records import atomic_write
+
+    a = np.asarray(image, dtype=float)
+    if a.ndim != 2 or not np.all(np.isfinite(a)):
+        raise ImageError(f"{path}: only a finite 2-D grey image can be saved")
+    data = np.round(np.clip(a, 0.0, 1.0) * 65535.0).astype(np.uint16)
+    im = Image.fromarray(data)
+    atomic_write(path, lambda f: im.save(f, format="PNG"), mode="wb")

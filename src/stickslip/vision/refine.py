@@ -74,11 +74,13 @@ class Steepest:
 
 def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray) -> Steepest:
     """The fixed parts of ``template`` (weighed by ``weights``) for a turn about ``apex`` (x, y, window px)."""
-    gy, gx = np.gradient(template)
+    grads: list[FloatArray] = list(np.gradient(template))
+    gy, gx = grads[0], grads[1]
     n = template.shape[0]
     yy, xx = np.mgrid[0:n, 0:n].astype(float)
     rx, ry = xx - apex[0], yy - apex[1]
-    keep = weights > 1e-3 * float(weights.max()) if weights.size and weights.max() > 0 else weights > 0
+    top = float(np.max(weights)) if weights.size else 0.0
+    keep: NDArray[np.bool_] = weights > 1e-3 * top if top > 0 else weights > 0
     T = template[keep]
     rxm, rym = rx[keep], ry[keep]
     sd = np.stack([gx[keep], gy[keep], -gx[keep] * rym + gy[keep] * rxm])
@@ -180,7 +182,8 @@ def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArr
     H, W = p.shape
     _, ch, cw = p.data.shape
     lx, ly = xs - p.x0, ys - p.y0
-    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1) & (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
+    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+    inside &= (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
     lx = np.clip(lx, 0.0, cw - 1.000001)
     ly = np.clip(ly, 0.0, ch - 1.000001)
     ix = lx.astype(np.intp)

@@ -214,7 +214,10 @@ class TipTemplate:
 
     @classmethod
     def learn(cls, image: FloatArray, tip: tuple[float, float], params: TrackerParams = TrackerParams()) -> TipTemplate:
-        """The template of the tip at pixel ``tip`` (x, y) of ``image``; :class:`TemplateError` if nothing stands there."""
+        """The template of the tip at pixel ``tip`` (x, y) of ``image``.
+
+        Raises :class:`TemplateError` if nothing trackable stands there.
+        """
         H, W = image.shape
         x, y = float(tip[0]), float(tip[1])
         if not (math.isfinite(x) and math.isfinite(y)):
@@ -223,7 +226,9 @@ class TipTemplate:
             raise TemplateError(f"the tip ({x:g}, {y:g}) is outside the {W} x {H} frame (x right, y down, from 0)")
         margin = 4
         if min(x, y, W - 1 - x, H - 1 - y) < margin:
-            raise TemplateError(f"the tip ({x:g}, {y:g}) is within {margin} px of the frame's edge: too close to learn it")
+            raise TemplateError(
+                f"the tip ({x:g}, {y:g}) is within {margin} px of the frame's edge: too close to learn it"
+            )
         h = params.half_window
         cx, cy = int(round(x)), int(round(y))
         win, inside = _window(image, cx, cy, h)
@@ -270,11 +275,11 @@ class TipTemplate:
         norm = math.hypot(vx, vy)
         shaft = (vx / norm, vy / norm) if norm > 1e-9 else (1.0, 0.0)
         eroded = ndimage.binary_erosion(mask, iterations=1)
-        core_sel = (eroded if eroded.sum() >= 4 else mask) & (dist >= 2.0) & (dist <= 10.0)
+        core_pick = (eroded if eroded.sum() >= 4 else mask) & (dist >= 2.0) & (dist <= 10.0)
         wide = ndimage.binary_dilation(mask, iterations=params.edge_px + 2 * int(round(params.blur_bank[-1])))
         ring_sel = ~wide & (dist >= 6.0) & inside
-        core = (ox[core_sel].astype(float), oy[core_sel].astype(float))
-        ring = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
+        core = (ox[core_pick].astype(float), oy[core_pick].astype(float))
+        ring_off = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
         # in front of the tip: within 60 deg of straight ahead, 2..14 px away, and background in this frame
         ahead = (ox * shaft[0] + oy * shaft[1]) < -0.5 * dist
         grown2 = ndimage.binary_dilation(mask, iterations=params.edge_px + 1)
@@ -293,7 +298,7 @@ class TipTemplate:
                 f"the needle at ({x:g}, {y:g}) stands out by {contrast / max(noise, 1e-12):.2g} times the pixel noise "
                 f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track"
             )
-        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring, front)
+        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front)
 
     @property
     def half(self) -> int:

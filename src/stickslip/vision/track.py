@@ -290,7 +290,7 @@ class TipTracker:
             for i, j in zip(ii.tolist(), jj.tolist(), strict=True):
                 best.append((float(ncc[i, j]), i, j, k))
         best.sort(reverse=True)
-        out = []
+        out: list[_Candidate] = []
         seen: list[tuple[float, float]] = []
         t = self.template
         for _s, i, j, _k in best:
@@ -304,8 +304,8 @@ class TipTracker:
             # a full-resolution look around the coarse peak, then the fit
             region, rx0, ry0 = self._region(image, x, y, 2 * f)
             ncc = masked_ncc(region, t.bank[0], t.weights, self._fft, ("local", 0))
-            ii, jj = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
-            out.append(self._try(image, rx0 + jj + t.apex[0], ry0 + ii + t.apex[1], 0.0, _k))
+            i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
+            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k))
         return out
 
     # ------------------------------------------------------------------ decision
@@ -359,7 +359,8 @@ class TipTracker:
 
         def at(ox: FloatArray, oy: FloatArray) -> FloatArray:
             v, _ = _sample(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
-            return v[0]
+            out: FloatArray = v[0]
+            return out
 
         if t.core[0].size < 3 or t.ring[0].size < 8:
             return 0.0
@@ -380,9 +381,9 @@ class TipTracker:
         image = frame.image if isinstance(frame, Frame) else np.asarray(frame, dtype=float)
         if image.shape != self.shape:
             raise ValueError(
-                f"a frame of {image.shape[1]} x {image.shape[0]} px after frames of {self.shape[1]} x {self.shape[0]} px"
+                f"a frame of {image.shape[1]} x {image.shape[0]} px after frames of "
+                f"{self.shape[1]} x {self.shape[0]} px"
             )
-        p = self.params
         first_refusal: Lost | None = None
         if self._last is not None:
             cand = self._local(image)
