@@ -247,9 +247,11 @@ def calibrate_camera(
                 if progress is not None:
                     progress(min(done, total), total)
                 r = _track(tracker, camera)
+                if isinstance(r, Lost) and not plan:  # the probe's frame refused: another look, without moving
+                    r = _track(tracker, camera)
                 if isinstance(r, Lost):
                     misses += 1
-                    if misses >= 2 or k == 1:  # one frame may be refused; the tip must come back in the next
+                    if misses >= 2 or not plan:  # one frame may be refused; the tip must come back in the next
                         refused = f"joint {j}{d}: the tip was lost after {n} steps ({r.reason}: {r.detail})"
                         break
                     continue

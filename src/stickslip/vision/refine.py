@@ -14,7 +14,7 @@ least squares, and updates the motion by inverse composition (Baker and Matthews
 with the mean of the template's and the frame's gradients (the efficient second-order
 minimisation of Benhimane and Malis 2004: it converges in a few iterations where the
 template's gradients alone, sharper than a blurred frame's, would creep).
-After two plain iterations the residuals are weighed by Tukey's biweight (what
+From the second iteration to :data:`ROBUST_ITERATIONS` the residuals are weighed by Tukey's biweight (what
 disagrees by more than 4.685 robust spreads weighs nothing: a particle over the needle,
 the background that moved with the tip).
 
@@ -37,6 +37,10 @@ FloatArray = NDArray[np.float64]
 
 TUKEY = 4.685
 """Tukey's biweight constant (95 % efficiency for Gaussian residuals), robust spreads."""
+
+ROBUST_ITERATIONS = 6
+"""The robust weights are recomputed up to this iteration, then kept (a pixel near the cut would flip in and out
+and keep the fit from settling)."""
 
 
 @dataclass(frozen=True)
@@ -277,6 +281,9 @@ def refine(
     tx, ty = float(start[0]), float(start[1])
     g, c = 1.0, 0.0
     beta_prev = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    kappa: float | None = None
+    prev_dp: FloatArray | None = None
+    model: NDArray[np.intp] | None = None
     last_jac = sd
     robust_w = np.ones_like(T)
     converged = False
@@ -302,16 +309,19 @@ def refine(
         # would soak up half of every edge's shift at each step, and the motion would creep
         D = np.concatenate([basis, (g * jac).T], axis=1)
         r0 = Iw - basis @ beta_prev
-        kappa = 0.0
-        if theta_sd is not None:  # the needle turns little: a prior on the turn
+        if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
         sol = None
-        for cols in (_ALL, _NO_GAIN_PLANE):  # a contrast plane too steep for this window: a plain contrast
-            sol = _joint(D, omega, Iw, cols, kappa, theta - theta_prior)
+        # a contrast plane too steep for this window: a plain contrast, and that for good (a model that changed
+        # back and forth between iterations would never settle)
+        choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
+        for cols in choices:  # once plain, plain to the end
+            sol = _joint(D, omega, Iw, cols, kappa or 0.0, theta - theta_prior)
             if sol is None:
                 break
             gain = sol[0] + sol[1] * basis[:, 4] + sol[2] * basis[:, 5]
             if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
+                model = cols
                 break
             sol = None
         if sol is None:  # contrast reversed, or no solution: not this template
@@ -322,13 +332,17 @@ def refine(
         g, c = g_new, float(beta[3])
         beta_prev = beta
         e = (Iw - beta[3] - beta[4] * basis[:, 4] - beta[5] * basis[:, 5]) / gain - T
-        if robust and it >= 2:
+        if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             if scale is None:  # the robust spread, once: a spread that moved with the weights would never settle
                 m = omega > 0
                 scale = max(1.4826 * float(np.median(np.abs(e[m]))) if m.any() else 0.0, 1e-12)
             u = e / (TUKEY * scale)
             robust_w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
-        dx, dy, dth = (float(v) for v in sol[6:])
+        dp = sol[6:].copy()
+        if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
+            dp *= 0.5  # the step turned back on the last one: overshooting, halve it
+        prev_dp = dp
+        dx, dy, dth = (float(v) for v in dp)
         theta_new = theta - dth
         ct2, s2 = math.cos(theta_new), math.sin(theta_new)
         tx -= ct2 * dx - s2 * dy

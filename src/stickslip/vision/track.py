@@ -254,7 +254,7 @@ class TipTracker:
                 break
             pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
             ref2 = refine(pt2, self._steep[lvl2], (ref.x, ref.y), ref.theta, correlation=corr)
-            if not ref2.score >= ref.score - self.params.level_hysteresis:
+            if not ref2.score >= ref.score - self.params.level_hysteresis or (ref.converged and not ref2.converged):
                 break
             ref, lvl = ref2, lvl2
         return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
