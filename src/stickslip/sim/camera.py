@@ -88,7 +88,7 @@ class SimCamSettings:
     photons: float = 300.0
     dof_m: float = 4e-6
     blur_px: float = 0.7
-    tip_radius_m: float = 0.4e-6
+    tip_radius_m: float = 1.0e-6
     taper: float = math.radians(8.0)
     drift_px_s: float = 0.02
     debris: int = 40
