@@ -84,7 +84,8 @@ def test_float_tiff_with_nan_is_refused_and_lzw_tiff_is_read(tmp_path):
     with pytest.raises(ImageError, match=r"nan.tif: 1 pixel\(s\).*x=5, y=4"):
         read_image(tmp_path / "nan.tif")
     grey = np.round(_ramp() * 65535).astype(np.uint16)
-    PIL.fromarray(grey).save(tmp_path / "lzw.tif", compression="tiff_lzw")  # tifffile needs imagecodecs: Pillow reads it
+    # tifffile needs imagecodecs for LZW: Pillow reads it
+    PIL.fromarray(grey).save(tmp_path / "lzw.tif", compression="tiff_lzw")
     np.testing.assert_allclose(read_image(tmp_path / "lzw.tif"), grey / 65535.0, atol=1e-12)
 
 
@@ -184,7 +185,8 @@ FUZZ = settings(max_examples=120, derandomize=True, deadline=None, database=None
 
 @FUZZ
 @given(head=st.sampled_from(_HEADS), body=st.binary(max_size=600), suffix=st.sampled_from([".png", ".tif", ".jpg"]))
-@example(head=b"II*\x00", body=b"\x08\x00\x00\x00\x01\x00\x00\x01\x03\x00\x01\x00\x00\x00\xff\xff\x00\x00", suffix=".tif")
+@example(head=b"II*\x00", suffix=".tif",
+         body=b"\x08\x00\x00\x00\x01\x00\x00\x01\x03\x00\x01\x00\x00\x00\xff\xff\x00\x00")
 def test_fuzzed_files_give_an_image_or_one_image_error(tmp_path, head, body, suffix):
     """Random bytes behind an image format's signature: a grey finite image, or ImageError; nothing else."""
     p = tmp_path / f"fuzz{suffix}"

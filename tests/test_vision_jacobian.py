@@ -105,7 +105,8 @@ def test_joint_observation_round_trip_and_refusals():
     cal = CameraCalibration.from_fits([fit_p, fit_m], OUT, (300.0, 256.0), 0.5e-6, TOP_VIEW)
     assert cal.px_per_unit[3] == pytest.approx((2e6, 0.0))  # 1 / (0.5 µm per px) along x
     obs = joint_observation(cal, 3, 340.0, 256.2, 0.3)
-    assert obs.q == pytest.approx(20e-6) and obs.sigma == pytest.approx(0.15e-6) and obs.off_line_px == pytest.approx(0.2)
+    assert obs.q == pytest.approx(20e-6) and obs.sigma == pytest.approx(0.15e-6)
+    assert obs.off_line_px == pytest.approx(0.2)
     with pytest.raises(JacobianError, match="off joint 3's line"):
         joint_observation(cal, 3, 340.0, 270.0, 0.3)
     with pytest.raises(JacobianError, match="beyond twice its range"):

@@ -33,7 +33,7 @@ from ..vision.jacobian import (
     step_size,
     visibility,
 )
-from ..vision.track import Fix, Lost, TipTracker, TrackerParams
+from ..vision.track import Fix, Lost, TemplateError, TipTracker, TrackerParams
 from ..vision.view import TOP_VIEW, View
 
 __all__ = [
@@ -224,7 +224,11 @@ def calibrate_camera(
                     "of its motion is in the image): not moved; tilt the camera or measure it in another pose"
                 )))
                 continue
-        tracker = TipTracker(camera.grab(), current, params)
+        try:
+            tracker = TipTracker(camera.grab(), current, params)
+        except TemplateError as e:
+            results.append(JointResult(j, refused=f"joint {j}: not measured, the tip could not be learned ({e})"))
+            continue
         fits: list[DirectionFit] = []
         sizes: list[StepSizeEstimate] = []
         refused: str | None = None

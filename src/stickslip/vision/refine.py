@@ -194,14 +194,15 @@ def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArr
     iy = ly.astype(np.intp)
     fx = lx - ix
     fy = ly - iy
-    d = p.data
-    v00 = d[:, iy, ix]
-    v01 = d[:, iy, ix + 1]
-    v10 = d[:, iy + 1, ix]
-    v11 = d[:, iy + 1, ix + 1]
+    flat = p.data.reshape(3, -1)
+    i00 = iy * cw + ix
+    v00 = np.take(flat, i00, axis=1)
+    v01 = np.take(flat, i00 + 1, axis=1)
+    v10 = np.take(flat, i00 + cw, axis=1)
+    v11 = np.take(flat, i00 + cw + 1, axis=1)
     top = v00 + (v01 - v00) * fx
     bottom = v10 + (v11 - v10) * fx
-    return np.asarray(top + (bottom - top) * fy, dtype=float), inside
+    return top + (bottom - top) * fy, inside
 
 
 def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:

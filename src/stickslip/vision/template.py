@@ -121,7 +121,7 @@ class TrackerParams:
     sharpen_bank: tuple[float, ...] = (1.5, 3.0)
     search_radius: int = 32
     coarse_factor: int = 4
-    candidates: int = 4
+    candidates: int = 3
     min_score: float = 0.6
     reacquire_score: float = 0.8
     max_sigma: float = 1.0
@@ -248,11 +248,11 @@ class TipTemplate:
         needle = dev > params.contrast
         labels, n = ndimage.label(needle)
         yy, xx = np.mgrid[0 : 2 * h + 1, 0 : 2 * h + 1]
-        near = np.hypot(xx - apex[0], yy - apex[1]) <= 4.0
+        near = np.hypot(xx - apex[0], yy - apex[1]) <= 8.0
         touching = set(np.unique(labels[near & needle]).tolist()) - {0}
         if not touching:
             raise TemplateError(
-                f"nothing stands out from the background at the tip ({x:g}, {y:g}): no needle within 4 px "
+                f"nothing stands out from the background at the tip ({x:g}, {y:g}): no needle within 8 px "
                 f"(it must stand {params.contrast:g} background spreads from the background level)"
             )
         mask = np.isin(labels, list(touching))

@@ -246,7 +246,10 @@ class TipTracker:
         lvl = level
         ref = refine(self._patch(patches, image, x, y, self._spec[lvl][1]), self._steep[lvl], (x, y), theta,
                      correlation=corr)
-        for _ in range(2):
+        usual = self._usual_mismatch()
+        # the blur copies are compared only when the fit matches worse than the recent fixes did (focus changed)
+        settled = usual is not None and ref.converged and 1.0 - ref.score <= 1.5 * usual + 0.005
+        for _ in range(0 if settled else 2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
                 break
             lvl2 = self._pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl)
@@ -406,6 +409,12 @@ class TipTracker:
         if first_refusal is not None:
             return first_refusal
         return Lost("lost", "not found near the last fix nor anywhere in the frame")
+
+    def _usual_mismatch(self) -> float | None:
+        """The median ``1 - score`` of the recent fixes (``None`` before three)."""
+        if len(self._mismatch) < 3:
+            return None
+        return float(np.median(self._mismatch[-self.params.recent :]))
 
     def _mismatch_limit(self, ratio: float) -> float:
         """Largest ``1 - score`` a fix may have: ``ratio`` times the recent fixes' median mismatch, plus the floor.
