@@ -1,6 +1,6 @@
 """Seeing the tip: tracking on frames the tracker was not designed on, and step sizes measured by camera.
 
-1. **Tracking** (issue 30): 500 frames of the second renderer (``tests/vision_peer.py``:
+1. **Tracking** (issue 30): 500 frames of the second renderer (``tests/support/vision_peer.py``:
    hyperboloid needles, pillbox defocus, side-detector SEM contrast, Fresnel fringes,
    real micrographs from scikit-image as backgrounds), 512 x 512, ten sequences of 50
    frames with tip widths 3..20 px, blur up to sigma 3 px, shot noise down to 40 photons
@@ -27,7 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
+
+from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.devices.base import DeviceInfo  # noqa: E402
 from stickslip.procedures.camera import calibrate_camera  # noqa: E402
@@ -35,7 +37,6 @@ from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
 from stickslip.vision.track import Fix, TipTracker  # noqa: E402
-from vision_peer import peer_benchmark  # noqa: E402
 
 
 def tracking(n_frames: int) -> dict[str, float]:

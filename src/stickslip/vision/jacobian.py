@@ -19,7 +19,7 @@ A joint that moves the tip mostly along the optical axis (``m`` small) shows onl
 focus and is refused. :class:`CameraCalibration` keeps what the fit learned at one pose;
 :func:`joint_observation` turns a later fix of the tip into a measured joint position with
 its standard deviation: the seam through which a closed loop feeds the tracker's fixes to
-the dead reckoning's Kalman filter (:class:`stickslip.tracking.JointTrack`).
+the dead reckoning's Kalman filter (:class:`stickslip.motion.tracking.JointTrack`).
 """
 
 from __future__ import annotations
