@@ -78,6 +78,7 @@ def test_nothing_moved_is_said():
         find_moving_tip([frames[0]], [np.zeros((32, 32))])
 
 
+@pytest.mark.slow
 def test_camera_calibration_recovers_the_true_step_within_1_percent():
     """Joint 3 at the outstretched pose, 0.5 µm a pixel, at most 200 steps each way: the realized mean step."""
     sim = SimulatedMM3A(seed=7)
@@ -105,6 +106,7 @@ def test_camera_calibration_recovers_the_true_step_within_1_percent():
     assert obs.sigma == pytest.approx(0.2 * 0.5e-6) and abs(obs.q - sim.position(3)) < 3 * obs.sigma
 
 
+@pytest.mark.slow
 def test_a_joint_at_its_end_stop_is_refused_as_not_linear():
     sim = SimulatedMM3A(seed=8)
     sim.set_pose(q3=0.012 - 40e-6)  # 40 µm from the outer stop

@@ -93,6 +93,7 @@ def test_a_missing_camera_exits_2_and_stores_nothing(tmp_path):
     assert not (tmp_path / "g.png").exists()
 
 
+@pytest.mark.slow
 def test_calibrate_measures_joint_3_and_calibrate_takes_its_rows(tmp_path):
     out = tmp_path / "steps.csv"
     r = _ok(["camera", "calibrate", "-d", "sim://", "--camera", CAM, "--joints", "3", "--max-steps", "100",
