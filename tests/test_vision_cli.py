@@ -107,8 +107,9 @@ def test_calibrate_measures_joint_3_and_calibrate_takes_its_rows(tmp_path):
     # where keeps the positions the camera saw
     where = json.loads(_ok(["where", "-d", "sim://", "--offline", "--json"]).stdout)
     assert where["joints"][2]["source"] == "dead-reckoned"
-    from stickslip.measurements import measurements_to_csv
     from synth import paper_table
+
+    from stickslip.measurements import measurements_to_csv
 
     (tmp_path / "m.csv").write_text(measurements_to_csv(paper_table()))
     cal = json.loads(_ok(["calibrate", str(tmp_path / "m.csv"), "--step-sizes", str(out), "--json"]).stdout)

@@ -10,12 +10,12 @@ import math
 
 import numpy as np
 import pytest
+from vision_peer import peer_sequence
 
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.camera import SimCamera, SimCamSettings
 from stickslip.vision.frame import as_image
 from stickslip.vision.track import REASONS, Fix, Lost, TemplateError, TipTracker, track
-from vision_peer import peer_sequence
 
 
 def _simcam(look: str, seed: int, photons: float = 150.0, size: int = 256) -> tuple[SimulatedMM3A, SimCamera]:
@@ -124,8 +124,11 @@ def test_peer_frames_what_the_tracker_reaches(peer_results):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="not met yet on the peer renderer (bench_vision, 500 frames: median 0.55 px, "
-                                       "p95 1.38 px, a fix 31 px off, 13 % of visible tips refused); docs/vision-log.md")
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met yet on the peer renderer (bench_vision, 500 frames: median 0.55 px, p95 1.38 px, a fix 31 px off, "
+    "13 % of visible tips refused); docs/vision-log.md",
+)
 def test_peer_frames_meet_the_issues_numbers(peer_results):
     e = peer_results["errors"]
     assert np.median(e) <= 0.3 and np.percentile(e, 95) <= 1.0
