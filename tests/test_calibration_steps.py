@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
+from synth import PAPER_PRISMATIC, PINNED_TODAY, paper_table, random_poses, traverse_from_model
 
 from stickslip.calibration import calibrate, calibrate_lsq
 from stickslip.calibration.auto import ASSUMED_MODEL_ERROR, step_size_weight
 from stickslip.calibration.update import update_calibration
 from stickslip.measurements import StepSize, TableError, parse_step_sizes, step_sizes_to_csv
 from stickslip.models import JointModel
-from synth import PAPER_PRISMATIC, PINNED_TODAY, paper_table, random_poses, traverse_from_model
 
 OUT = -math.pi / 2
 
