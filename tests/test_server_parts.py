@@ -205,3 +205,31 @@ def test_a_sim_url_runs_in_real_time_unless_it_says_otherwise() -> None:
     assert with_realtime("sim+physics://?seed=2") == "sim+physics://?seed=2&realtime=1"
     assert with_realtime("sim://?realtime=0&seed=1") == "sim://?realtime=0&seed=1"
     assert with_realtime("anc300://10.0.0.2") == "anc300://10.0.0.2"
+
+
+def test_the_camera_panel_tracks_the_simulated_microscopes_tip(tmp_path: Path) -> None:
+    pytest.importorskip("fastapi", reason="the serve extra (fastapi) is not installed")
+    from server_support import room_on
+
+    from stickslip.server.run import ServeError, open_camera_feed
+    from stickslip.sim.camera import SimCamera
+
+    room = room_on(tmp_path, "sim://?realtime=1&speed=50")
+    try:
+        probe = open_camera_feed("simcam://?seed=1&size=160x120", room.owned)
+        assert isinstance(probe.camera, SimCamera)  # type: ignore[attr-defined]
+        (x0, y0), _ = probe.camera.true_tip()  # type: ignore[attr-defined]
+        feed = open_camera_feed("simcam://?seed=1&size=160x120", room.owned, (float(x0), float(y0)))
+        data, media, size = feed.frame()
+        assert media == "image/png" and data[:4] == b"\x89PNG" and size == (160, 120)
+        room.reach(None, (0.0, 3e-6, 0.0)).finished.wait(20)
+        feed.frame()
+        tip = feed.tip()
+        (x1, y1), _ = feed.camera.true_tip()  # type: ignore[attr-defined]
+        assert tip is not None and math.hypot(tip[0] - x1, tip[1] - y1) < 1.5  # tracked to the true tip
+        assert math.hypot(x1 - x0, y1 - y0) > 2  # and the tip did move in the image
+        assert feed.to_pixels([[0.0, 0.0, 0.0]]) is None  # no projection without a camera calibration
+        with pytest.raises(ServeError, match="--camera"):
+            open_camera_feed("nocam://x", room.owned)
+    finally:
+        room.close()

@@ -12,6 +12,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.taskspace` reach, jog
 * :mod:`.serve`    serve (the control room: a web page and an API)
 * :mod:`.config`   config path, config show, config init (the user's configuration file)
+* :mod:`.camera`   camera locate, camera calibrate, camera grab (see the tip)
 """
 
 from __future__ import annotations
@@ -99,7 +100,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, config, core, devices, history, measure, models, observe, serve, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, camera, config, core, devices, history, measure, models, observe, serve, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:

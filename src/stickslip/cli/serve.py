@@ -8,6 +8,7 @@ extra, imported only here.
 from __future__ import annotations
 
 import importlib.util
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import parse_qsl, urlsplit
@@ -76,7 +77,13 @@ def serve(
         "10 times faster). A rig file (--rig FILE, several manipulators) comes with issue 32.",
     ),
     camera: str | None = typer.Option(
-        None, "--camera", help="Camera URL for the camera panel (needs stickslip.vision: simcam://, opencv://0)."
+        None, "--camera", help="Camera URL for the camera panel: simcam://, opencv://0, files://frames/*.png "
+        "(docs/vision.md)."
+    ),
+    camera_tip: str | None = typer.Option(
+        None, "--camera-tip", metavar="X,Y",
+        help="Where the tip is in the camera's first frame, px (x right, y down): the page then marks the "
+        "tracked tip (stickslip camera locate finds it).",
     ),
     host: str = typer.Option(
         "127.0.0.1", "--host",
@@ -137,5 +144,16 @@ def serve(
     def echo(line: str) -> None:
         err_console.print(line, highlight=False, markup=False, soft_wrap=True)
 
+    tip = None
+    if camera_tip is not None:
+        if camera is None:
+            fail("--camera-tip needs --camera")
+        try:
+            x_text, y_text = camera_tip.split(",")
+            tip = (float(x_text), float(y_text))
+        except ValueError:
+            fail(f"--camera-tip {camera_tip}: write X,Y in pixels, e.g. --camera-tip 310,242")
+        if not all(math.isfinite(v) for v in tip):
+            fail(f"--camera-tip {camera_tip}: the pixel position must be finite")
     with user_errors(ServeError, DeviceBusy, DeviceError, StoreError):
-        run_server(options, host, port, camera_url=camera, token_path=token_file, echo=echo)
+        run_server(options, host, port, camera_url=camera, camera_tip=tip, token_path=token_file, echo=echo)

@@ -58,21 +58,35 @@ def port_problem(host: str, port: int) -> str | None:
     return None
 
 
-def open_camera_feed(url: str, device: Any) -> CameraFeed:
-    """The camera panel's feed of the camera ``url`` names, through :mod:`stickslip.vision` (else ``ServeError``)."""
-    import importlib
+def open_camera_feed(url: str, device: Any, tip: tuple[float, float] | None = None) -> CameraFeed:
+    """The camera panel's feed of the camera ``url`` names (:func:`stickslip.vision.open_camera`).
+
+    With ``tip`` (px, where the tip is in the first frame) the tip is tracked
+    (:class:`stickslip.vision.track.TipTracker`) and marked on the page; without it the
+    frames are shown alone. ``ServeError`` for a camera that cannot be opened or a tip
+    that cannot be tracked.
+    """
+    from ..vision import CameraError, open_camera
+    from ..vision.template import TemplateError
+    from ..vision.track import Fix, TipTracker
 
     try:
-        vision: Any = importlib.import_module("stickslip.vision")
-    except ImportError:
-        raise ServeError(
-            "--camera needs stickslip.vision (the camera and tip tracking), which this installation does not have"
-        ) from None
-    try:
-        cam = vision.open_camera(url, device)
-    except (vision.CameraError, ValueError) as e:
+        cam = open_camera(url, device)
+    except (CameraError, ValueError) as e:
         raise ServeError(f"--camera {redact_url(url)}: {e}") from None
-    return FrameFeed(cam)
+    if tip is None:
+        return FrameFeed(cam)
+    try:
+        tracker = TipTracker(cam.grab(), tip)
+    except (CameraError, TemplateError, ValueError) as e:
+        cam.close()
+        raise ServeError(f"--camera-tip {tip[0]:g},{tip[1]:g}: {e}") from None
+
+    def tip_of(frame: Any) -> tuple[float, float, float | None] | None:
+        found = tracker.update(frame)
+        return (found.x, found.y, found.sigma) if isinstance(found, Fix) else None
+
+    return FrameFeed(cam, tip_of=tip_of)
 
 
 def serve(
@@ -81,6 +95,7 @@ def serve(
     port: int = 8765,
     *,
     camera_url: str | None = None,
+    camera_tip: tuple[float, float] | None = None,
     token_path: Path | None = None,
     echo: Callable[[str], None] = print,
 ) -> None:
@@ -95,7 +110,7 @@ def serve(
     camera: CameraFeed | None = None
     try:
         if camera_url is not None:
-            camera = open_camera_feed(camera_url, room.owned)
+            camera = open_camera_feed(camera_url, room.owned, camera_tip)
         app = create_app(room, access, camera)
         shown = f"[{host}]" if ":" in host else host
         echo(f"serving {redact_url(options.device)} ({room.info.model})")
