@@ -10,7 +10,7 @@ from typing import Any
 import typer
 
 from . import app
-from ._common import console, device_url, err_console, fail, print_json, user_errors
+from ._common import console, device_url, err_console, fail, print_json, say, user_errors
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.vibration); anything else is audio
 _CSV_SUFFIXES = (".csv", ".txt")
@@ -305,7 +305,7 @@ def _listen_file(
     if not report.events:
         console.print("no end stop heard")
     for ev in report.events:
-        console.print(_event_line(ev, tuning.level_unit, confirm_s, 4), highlight=False, soft_wrap=True)
+        say(_event_line(ev, tuning.level_unit, confirm_s, 4))
 
 
 def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
@@ -330,7 +330,7 @@ def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
     if json_out:
         typer.echo(json.dumps(ev.to_dict()))
     else:
-        console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
+        say(_event_line(ev, tuning.level_unit, confirm_s, 3))
 
 
 def _listen_serial(

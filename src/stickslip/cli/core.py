@@ -37,8 +37,10 @@ from ._common import (
     fail_table,
     length_option,
     max_age_setting,
+    open_store,
     print_json,
     read_table,
+    say,
     user_errors,
     validation_table,
     warn_later,
@@ -263,30 +265,62 @@ def _selection_table(cal: Calibration) -> Table:
 @app.command("show")
 def show_cmd(
     calibration: Annotated[
-        Path | None, typer.Argument(help="Calibration JSON (default: calibration in the config file).")
+        str | None,
+        typer.Argument(
+            help="Calibration JSON, or the number of a stored calibration (`stickslip history` lists them: #1 "
+            "is 1) (default: calibration in the config file).",
+            metavar="[CAL.json|N]",
+            show_default=False,
+        ),
     ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option("--output", "-o", help="Also write the calibration to this JSON file (use it with -c)."),
+    ] = None,
+    db: Annotated[Path | None, typer.Option("--db", help=DB_HELP)] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints).
 
     A calibration that averages model families (calibrate --model auto) also shows each
     family's cross-validation error and weight; ◀ marks the family whose parameters are
-    listed. --json gives every family's parameters.
-    """
-    from ..calibration import Calibration
+    listed. --json gives every family's parameters. A number (or #N) that is not a file
+    names a calibration kept in the database; -o writes it out for -c.
 
-    calibration = calibration_file(calibration, "CAL.json")
-    with user_errors():
-        cal = Calibration.load(calibration)
+    Example: stickslip show 1 -o cal.json
+    """
+    cal, name = _calibration_to_show(calibration, db)
+    if output is not None:
+        with user_errors():
+            cal.save(output)
     if json_out:
         print_json(cal.to_dict())
         return
-    console.print(_params_table(cal, f"{calibration} — day {cal.day}, method {cal.method}"))
+    console.print(_params_table(cal, f"{name} — day {cal.day}, method {cal.method}"))
     if cal.selection:  # an averaged model: which families, with what weight (◀: the one whose parameters are shown)
         console.print(_selection_table(cal))
     for (j, d), v in sorted(cal.constant_steps.items()):
         s, u = step_scale(j)
-        console.print(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}", highlight=False)
+        say(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}")
+    if output is not None:
+        say(f"saved to {output}")
+
+
+def _calibration_to_show(text: str | None, db: Path | None) -> tuple[Calibration, str]:
+    """The calibration ``show`` names: a file, or ``N`` / ``#N`` kept in the database; and what to call it."""
+    from ..calibration import Calibration
+    from ..storage import StoreError
+
+    number = (text or "").strip().lstrip("#")
+    if text is not None and number.isdigit() and not Path(text).exists():
+        with open_store(db, must_exist=True) as store, user_errors(StoreError):
+            try:
+                return store.calibration(int(number)), f"calibration #{number} of {store.path}"
+            except KeyError as e:
+                fail(f"{e.args[0]} in {store.path} (stickslip history lists them)")
+    path = calibration_file(None if text is None else Path(text), "CAL.json")
+    with user_errors():
+        return Calibration.load(path), str(path)
 
 
 @app.command("predict")
@@ -544,22 +578,21 @@ def plan_cmd(
         print_json(d)
         return
     err = plan.q_end_predicted - plan.q_to
-    console.print(
+    say(
         f"joint {joint}: {plan.steps} steps in direction {plan.direction} "
-        f"from {format_position(plan.q_from, joint)} to {format_position(plan.q_to, joint)}",
-        highlight=False,
+        f"from {format_position(plan.q_from, joint)} to {format_position(plan.q_to, joint)}"
     )
-    console.print(
+    say(
         f"  predicted end {format_position(plan.q_end_predicted, joint)} "
         f"(off by {format_position(err, joint, 3)}; step {format_step(plan.gamma_start, joint)} at the start, "
         f"{format_step(plan.gamma_end, joint)} at the target)",
-        highlight=False,
+        indent="    ",
     )
-    console.print(
-        f"  95 % prediction interval of the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
-        f"± {format_position(half, joint, 3)}"
+    say(
+        f"  the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
+        f"± {format_position(half, joint, 3)} (95 % prediction interval)"
         + (" (model error assumed: the calibration has none)" if assumed else ""),
-        highlight=False,
+        indent="    ",
     )
     if math.isclose(plan.q_from, plan.q_to):
-        console.print("  nothing to do: start and target are the same")
+        say("  nothing to do: start and target are the same")
