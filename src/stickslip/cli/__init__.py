@@ -5,7 +5,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.core`     calibrate, predict, validate, plan, show
 * :mod:`.measure`  demo
 * :mod:`.audio`    tune, listen
-* :mod:`.history`  history, export, import, anova, fit, report
+* :mod:`.history`  history, export, import, backup, anova, fit, report
 * :mod:`.models`   suggest
 * :mod:`.devices`  move, where
 * :mod:`.observe`  observe (a measured position into the dead reckoning)
@@ -122,7 +122,7 @@ _PANELS = {
     "Measure": ("demo", "traverse", "record", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan", "suggest"),
     "Drive a manipulator": ("move", "observe", "where", "reach", "jog"),
-    "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
+    "Keep and study": ("history", "import", "export", "backup", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}
 _ORDER = [name for names in _PANELS.values() for name in names]

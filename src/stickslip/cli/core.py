@@ -178,6 +178,12 @@ def calibrate_cmd(
     error and weight, and ◀ marks the one whose parameters are shown. With --prior, an earlier
     calibration is brought up to date with as few as one traverse per joint and direction.
 
+    When the database holds every row of the table under one device (measured with
+    traverse or demo, or imported with --device), the calibration records that device and
+    is kept in the database beside them (history lists it; show N gets it back). One
+    without a device, or from the simulator, is refused on a real controller unless
+    --trust-calibration.
+
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     """
@@ -185,8 +191,9 @@ def calibrate_cmd(
     from ..models import NonPhysicalError
 
     traverses = read_table(measurements)
-    if device is None:
-        device = _stored_device(traverses, db)
+    stored = _stored_device(traverses, db) if device is None else None
+    if stored is not None:
+        device = stored[0]
     try:
         conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
         if prior is not None:
@@ -203,6 +210,7 @@ def calibrate_cmd(
     if output is not None:
         with user_errors():
             cal.save(output)
+    kept = _keep(cal, stored, db)
     if json_out:
         print_json(cal.to_dict())
         return
@@ -212,11 +220,13 @@ def calibrate_cmd(
     for n in cal.provenance.notes:
         console.print(f"[dim]note:[/] {n}", highlight=False)
     if output is not None:
-        console.print(f"saved to {output}")
+        say(f"saved to {output}")
+    if kept is not None:
+        say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
 
 
-def _stored_device(traverses: list[Any], db: Path | None) -> str | None:
-    """The device the database holds every one of ``traverses`` under (``None``: no database, none, or several)."""
+def _stored_device(traverses: list[Any], db: Path | None) -> tuple[str, list[int]] | None:
+    """The device the database holds every one of ``traverses`` under, and their ids (``None``: not so)."""
     from ..storage import Store, StoreError
 
     path = db_path(db)
@@ -227,6 +237,16 @@ def _stored_device(traverses: list[Any], db: Path | None) -> str | None:
             return store.device_holding(traverses)
     except (StoreError, ValueError):
         return None  # the device stays unknown; the database's own problem is for the commands that use it
+
+
+def _keep(cal: Calibration, stored: tuple[str, list[int]] | None, db: Path | None) -> int | None:
+    """Keep ``cal`` in the database beside the traverses it was made from (its id), if the database holds them."""
+    if stored is None:
+        return None
+    from ..storage import Store, StoreError
+
+    with user_errors(StoreError), Store.open(db_path(db)) as store:
+        return store.add_calibration(cal, stored[0], stored[1])
 
 
 def _selection_table(cal: Calibration) -> Table:

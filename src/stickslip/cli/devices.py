@@ -91,6 +91,9 @@ def _position_or_stop(joint: int, text: str, what: str) -> float:
     return _parse_joint_value(joint, text, what)
 
 
+RAW_BURST = 20000
+"""Steps per burst of raw steps (``--steps``): fewer round trips; a device error still ends it within one burst."""
+
 _STEPS = re.compile(r"^\s*([-+]?\d+)\s*steps?\s*$")
 
 
@@ -130,7 +133,11 @@ def move(
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    burst: int = typer.Option(1000, "--burst", min=1, max=65535, metavar="<steps>", help="Steps per burst."),
+    burst: int | None = typer.Option(
+        None, "--burst", min=1, max=65535, metavar="<steps>",
+        help="Most steps per burst (the position is kept after each). Default 1000; raw --steps 20000 (the "
+        "joint is uncertain until referenced anyway).",
+    ),
     max_age: int | None = typer.Option(
         None, "--max-age", min=0, max=36500, metavar="<days>",
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
@@ -161,7 +168,7 @@ def move(
     with user_errors():
         device_key(device)  # a URL that names no device is refused before the database is opened
     if raw is not None:
-        _step_raw(device, joint, raw, burst, db, json_out)
+        _step_raw(device, joint, raw, burst or RAW_BURST, db, json_out)
         return
     from ..calibration import Calibration
     from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate
@@ -173,7 +180,7 @@ def move(
         device, joint,
         by=None if by is None else _parse_joint_value(joint, by, "--by"),
         to=None if to is None else _position_or_stop(joint, to, "--to"),
-        burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
+        burst=burst or 1000, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):

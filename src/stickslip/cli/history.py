@@ -233,6 +233,27 @@ def delete(
     )
 
 
+@app.command()
+def backup(
+    out: Path = typer.Argument(..., help="The new file to copy the database into.", metavar="OUT.db"),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+) -> None:
+    """Copy the whole database (traverses, calibrations, kept positions) into a new file.
+
+    A consistent copy even while another stickslip command is running (a plain copy of
+    the file can miss what SQLite still holds in its write-ahead log). Keep it, or give
+    it to a colleague: every command reads it with --db OUT.db.
+
+    Example: stickslip backup stickslip-2026-11-22.db
+    """
+    from ..storage import StoreError
+
+    with open_store(db, must_exist=True) as st, user_errors(StoreError):
+        written = st.backup(out)
+        n = st.count_traverses()
+    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}")
+
+
 # ---------------------------------------------------------------- anova
 
 
