@@ -43,6 +43,8 @@ from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 TOL_S = 0.025
 

@@ -19,6 +19,8 @@ from stickslip.audio.detector import detect
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 ROOMS: dict[str, dict[str, object]] = {
     "quiet room": {},
     "second instrument from 0.7 s": {"instrument": True},

@@ -28,6 +28,8 @@ from stickslip.audio.tuning import TuningError, tune
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 TOL_S = 0.025
 SR = 48_000
 

@@ -37,6 +37,8 @@ from stickslip.audio.template import subband_edges, subband_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 FINE = ("fine_start_hz", "fine_bin_hz", "fine_stepping_db", "fine_stopped_db")
 

@@ -31,6 +31,8 @@ from stickslip.audio.inject import bursts, shaped_noise
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 
 

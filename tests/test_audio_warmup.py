@@ -31,6 +31,8 @@ from stickslip.audio.template import CONTINUUM_FRAME, continuum_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 JOINTS = {"P": Scene("P", 1000.0, 2.0, 3.0, seed=1), "Q": Scene("Q", 1000.0, 2.0, 3.0, seed=2)}
 

@@ -353,6 +353,7 @@ def test_stop_between_bursts_keeps_an_exact_position(sim: SimulatedMM3A) -> None
     assert abs(sim.position(3) - q) <= one_step(cal, 3, q) + 0.005 * q
 
 
+@pytest.mark.slow
 def test_calibration_day_on_the_simulator(RE: Any) -> None:
     sim = SimulatedMM3A(seed=4, day=DAY)
     truth = sim.true_models()

@@ -140,6 +140,7 @@ def test_nonphysical_table_is_refused(files):
     _bad(runner.invoke(app, ["calibrate", str(p)]), "non-physical")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cmd", ["calibrate", "predict", "validate", "plan", "show", "demo", "tune", "listen",
                                  "anova", "fit", "report", "history", "export", "import", "move", "where", "traverse"])
 def test_every_command_has_help(cmd):

@@ -71,6 +71,7 @@ def chunk(request, monkeypatch):
     return request.param
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(rows=rows_strategy, layout=st.sampled_from(["plain", "crlf", "blank lines"]))
 def test_measurement_table_agrees_with_the_row_by_row_parser(chunk, rows, layout):
@@ -99,6 +100,7 @@ pose_header = st.lists(
 pose_row = st.lists(st.one_of(cell(NUMBERS), cell(JOINTS), cell(DIRS)), min_size=0, max_size=13)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(header=pose_header, rows=st.lists(pose_row, max_size=20), blank=st.booleans())
 def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows, blank):
@@ -118,6 +120,7 @@ def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows, blank
     assert [astuple(q) for q in q_new] == [astuple(q) for q in q_old]
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     rows=st.lists(
@@ -196,6 +199,7 @@ def paper_cal(tmp_path_factory):
     return cal, path
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     rows=st.lists(

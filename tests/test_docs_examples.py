@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 POSIX = pytest.mark.skipif(sys.platform == "win32", reason="the examples are POSIX shell sessions (bash)")

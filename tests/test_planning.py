@@ -26,6 +26,7 @@ poses = st.builds(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(pose=poses, a=st.floats(0.0, 1.0), b=st.floats(0.0, 1.0), joint=st.sampled_from([2, 3]))
 def test_plan_then_dead_reckon_returns_within_one_step(pose, a, b, joint):

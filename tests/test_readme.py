@@ -12,6 +12,8 @@ from typer.testing import CliRunner
 
 from stickslip.measurements import measurements_to_csv
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
 runner = CliRunner()
 

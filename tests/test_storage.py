@@ -164,6 +164,7 @@ def _writer(path: str, who: int, n: int) -> None:
             st.add_traverse(_t(day=f"w{who}", steps=1000 * (who + 1) + k), device=f"sim://{who}")
 
 
+@pytest.mark.slow
 def test_concurrent_writers_lose_no_rows(tmp_path):
     """4 processes x 25 traverses each, all opening a fresh file at once: 100 rows, none lost."""
     path = str(tmp_path / "c.db")
