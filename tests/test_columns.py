@@ -93,6 +93,7 @@ def _session(folder: Path, width: int, monkeypatch: pytest.MonkeyPatch) -> list[
     return out
 
 
+@pytest.mark.slow  # the session twice, at 80 and at 400 columns
 def test_typical_output_fits_80_columns_without_breaking_a_word(tmp_path, monkeypatch):
     import dataclasses
 

@@ -33,7 +33,10 @@ from stickslip.sim.arm import SimulatedMM3A
 GUIDE = Path(__file__).resolve().parents[1] / "docs" / "howto" / "day-one.md"
 PORT = "mm3a:///dev/ttyUSB0"
 
-pytestmark = pytest.mark.skipif(not hasattr(os, "openpty"), reason="the emulator serves a pseudo-terminal (POSIX)")
+pytestmark = [
+    pytest.mark.skipif(not hasattr(os, "openpty"), reason="the emulator serves a pseudo-terminal (POSIX)"),
+    pytest.mark.slow,  # about 30 s: joints 1 and 2 take 126 000 raw steps each into their stops, at 20 kHz
+]
 
 
 def guide_commands() -> list[tuple[list[str], str]]:

@@ -275,6 +275,7 @@ def test_ctrl_c_during_a_traverse_leaves_no_made_up_position(tmp_path, monkeypat
 
 @pytest.mark.skipif(not hasattr(signal, "SIGINT") or sys.platform == "win32", reason="POSIX signals")
 @pty_only
+@pytest.mark.slow  # a subprocess and a real-time controller
 def test_a_real_ctrl_c_in_a_terminal_session(tmp_path, cal_path):
     """The same as the user sees it: SIGINT to a running `stickslip move`."""
     from stickslip.sim.emulators import NanoControlEmulator
@@ -343,3 +344,65 @@ def test_anova_counts_repeats_that_took_the_same_steps(tmp_path):
     assert "copies" not in r.stderr
     (days,) = [row for row in json.loads(r.stdout) if row["test"] == "day"]
     assert days["n"] == 6  # every row of the table: two that took the same steps are two measurements
+
+
+# -- 9: the documentation says what the commands do ------------------------------------------------
+
+
+def test_every_documented_exit_code_is_what_a_command_returns(tmp_path, cal_path, monkeypatch):
+    from synth import paper_table
+
+    from stickslip.cli._common import EXIT_CODES
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.procedures import where as where_procedure
+
+    docs = Path(__file__).resolve().parents[1] / "docs" / "threat-model.md"
+    table = dict(re.findall(r"^\| (\d+) \| (.+?) \|$", docs.read_text(encoding="utf-8"), re.M))
+    assert {int(c) for c in table} == set(EXIT_CODES) == {0, 1, 2, 130}
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    assert "exit code 2 (130 if interrupted with Ctrl-C" in " ".join(readme.split())
+    db = tmp_path / "s.db"
+    assert run("where", "--db", db, "--offline").exit_code == 0
+    meas = tmp_path / "m.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert run("import", meas, "--db", db).exit_code == 0
+    r = runner.invoke(app, ["delete", "--day", DAY, "--db", str(db)], input="n\n")  # declined at the question
+    assert r.exit_code == 1 and "nothing deleted" in r.stderr
+    one_error(run("move", "-c", cal_path, "--db", db, "-j", 2, "--by", "1"), "did you mean 1deg?")
+
+    def ctrl_c(*_a: Any, **_k: Any) -> Any:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(where_procedure, "load_state", ctrl_c)
+    r = run("where", "--db", db, "--offline")
+    assert r.exit_code == 130 and r.stderr.strip() == "error: interrupted: stickslip where (Ctrl-C)"
+
+
+def test_the_documented_output_columns_are_there(tmp_path, monkeypatch):
+    """README: predict adds gamma_pred, and gamma_pi95 with --interval; history lists calibrations, show N gets one."""
+    from synth import paper_table
+
+    from stickslip.measurements import measurements_to_csv
+
+    db = tmp_path / "s.db"
+    meas = tmp_path / "m.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert run("import", meas, "-d", "mm3a:///dev/ttyUSB0", "--db", db).exit_code == 0
+    r = run("calibrate", meas, "-o", tmp_path / "cal.json", "--db", db)
+    assert r.exit_code == 0 and "kept in the database as calibration #1" in r.stdout
+    poses = tmp_path / "poses.csv"
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi\n3,+,0,-1.0472,0,0.2,0\n")
+    plain = run("predict", "-c", tmp_path / "cal.json", poses).stdout.splitlines()[0].split(",")
+    interval = run("predict", "-c", tmp_path / "cal.json", poses, "--interval").stdout.splitlines()[0].split(",")
+    assert plain[-1] == "gamma_pred" and "gamma_pi95" not in plain
+    assert interval[-2:] == ["gamma_pred", "gamma_pi95"]
+    assert "#1 paper" in run("history", "--db", db).stdout
+    r = run("show", "1", "--db", db, "-o", tmp_path / "back.json", "--json")
+    assert r.exit_code == 0 and json.loads(r.stdout)["conditions"]["device"] == "mm3a:///dev/ttyUSB0"
+    assert json.loads((tmp_path / "back.json").read_text())["day"] == json.loads(r.stdout)["day"]
+    one_error(run("show", "7", "--db", db), "no calibration with id 7")
+    cfg = tmp_path / "config.toml"
+    cfg.write_text(f'calibration = "{tmp_path / "gone.json"}"\n')
+    monkeypatch.setenv("STICKSLIP_CONFIG", str(cfg))
+    r = run("config", "show")  # docs/config.md: a configured file that cannot be used exits 2
+    assert r.exit_code == 2 and "gone.json does not exist" in r.stderr and "calibration:" in r.stdout

@@ -298,12 +298,15 @@ def where(
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, dead-reckoned,
-    observed (stickslip observe), or uncertain (a move was interrupted: the bounds are
-    shown; re-reference with --set). A joint moved since it was set shows ± its standard
-    deviation and the step scale learned from observations.
+    Source: default (never referenced: the outstretched pose assumed), set, dead-reckoned,
+    observed (stickslip observe), assumed (moved from a position never referenced), or
+    uncertain (a move, raw steps or a traverse left it between the bounds shown, and
+    why). A joint moved since it was set shows its standard deviation (σ) and the step
+    scale learned from observations.
 
-    Reset a joint at an end stop after a traverse, a crash or a manual move.
+    --set J=min (or max, or a position with its unit) references a joint at an end stop:
+    after a traverse, a crash or a manual move, and on day one (raw steps into the stop
+    first: stickslip move --steps). It clears an uncertainty and the position's σ.
 
     Without --set or a pose option the device is opened to say whether it answers
     (--offline skips that); a device that does not answer exits 2. A NanoControl
