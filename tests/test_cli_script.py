@@ -21,7 +21,13 @@ needs_pty = pytest.mark.skipif(not hasattr(os, "openpty"), reason="the emulators
 
 
 @pytest.mark.parametrize(
-    "part", ["sim", pytest.param("emulator", marks=needs_pty), pytest.param("console", marks=needs_pty), "listen"]
+    "part",
+    [
+        "sim",
+        pytest.param("emulator", marks=[needs_pty, pytest.mark.slow]),  # timeouts and a fault injected: seconds
+        pytest.param("console", marks=needs_pty),
+        pytest.param("listen", marks=pytest.mark.slow),  # renders and tunes three recordings
+    ],
 )
 def test_the_scripted_session_prints_and_stores_what_was_recorded(part, tmp_path, monkeypatch):
     monkeypatch.setenv("STICKSLIP_TODAY", DAY)

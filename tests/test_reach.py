@@ -175,7 +175,7 @@ def test_zero_move_and_bad_arguments():
 
 def test_out_of_reach_names_the_limit_and_where():
     pose = kin.Pose(0.0, -math.pi / 2, 0.0115, 0.0, 0.0)
-    with pytest.raises(kin.OutOfReach, match=r"leaves the arm.s reach 5[01]% of the way.*joint 3.*upper limit 12 mm"):
+    with pytest.raises(kin.OutOfReach, match=r"reach 5[01]% of the way.*joint 3.*upper limit 12000 µm"):
         plan_reach(CAL, pose, by=(1e-3, 0.0, 0.0))
     with pytest.raises(kin.OutOfReach, match=r"joint 1 would be at .* beyond its upper limit 120 deg"):
         plan_reach(CAL, kin.Pose(math.radians(119.9), -math.pi / 2, 0.005), by=(-200e-6, 200e-6, 0.0))

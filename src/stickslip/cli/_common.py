@@ -138,7 +138,22 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
 
 
 def _print_error(message: object) -> None:
-    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    _print_labelled("error:", "bold red", one_line(message))
+
+
+def _print_labelled(label: str, style: str, text: str) -> None:
+    """``label text`` on stderr: one line for a pipe or a log (grep finds it whole); on a terminal wrapped
+    at its width at spaces only, later lines indented (a URL or a path is never broken)."""
+    if not err_console.is_terminal:
+        err_console.print(f"[{style}]{label}[/] {escape(text)}", highlight=False, soft_wrap=True)
+        return
+    from ._help import wrap
+
+    lines = wrap(f"{label} {text}", err_console.width, "  ", first="")
+    first = lines[0][len(label):]
+    err_console.print(f"[{style}]{label}[/]{escape(first)}", highlight=False, soft_wrap=True)
+    for line in lines[1:]:
+        err_console.print(escape(line), highlight=False, soft_wrap=True)
 
 
 def one_line(message: object) -> str:
@@ -148,9 +163,22 @@ def one_line(message: object) -> str:
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
 
+def say(text: str, indent: str = "  ") -> None:
+    """Print a result line on stdout, wrapped at the console's width at spaces only, later lines indented.
+
+    A URL, a path or a number with its unit is never broken (rich's own wrapping folds a
+    long word), and what belongs together reads as one item.
+    """
+    from ._help import wrap
+
+    lead = text[: len(text) - len(text.lstrip())]
+    for line in wrap(text.strip(), console.width, lead + indent, first=lead):
+        console.print(escape(line), highlight=False, soft_wrap=True)
+
+
 def warn(message: str) -> None:
-    """Print ``warning: message`` to stderr."""
-    err_console.print(f"[bold yellow]warning:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    """Print ``warning: message`` to stderr (wrapped at spaces on a terminal: :func:`_print_labelled`)."""
+    _print_labelled("warning:", "bold yellow", one_line(message))
 
 
 _pending_warnings: list[str] = []

@@ -10,7 +10,7 @@ from typing import Any
 import typer
 
 from . import app
-from ._common import console, device_url, err_console, fail, print_json, user_errors
+from ._common import console, device_url, err_console, fail, print_json, say, user_errors
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.vibration); anything else is audio
 _CSV_SUFFIXES = (".csv", ".txt")
@@ -305,7 +305,7 @@ def _listen_file(
     if not report.events:
         console.print("no end stop heard")
     for ev in report.events:
-        console.print(_event_line(ev, tuning.level_unit, confirm_s, 4), highlight=False, soft_wrap=True)
+        say(_event_line(ev, tuning.level_unit, confirm_s, 4))
 
 
 def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
@@ -330,7 +330,7 @@ def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
     if json_out:
         typer.echo(json.dumps(ev.to_dict()))
     else:
-        console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
+        say(_event_line(ev, tuning.level_unit, confirm_s, 3))
 
 
 def _listen_serial(
@@ -471,10 +471,9 @@ def record(
 
     Example: stickslip record j2.wav --joint 2 --device sim://?seed=3 --tune j2-tuning.json
     """
-    from ..audio.sources import AudioSourceError, write_wav
+    from ..audio.sources import AudioSourceError
     from ..devices import DeviceError, open_device
     from ..models import direction_label
-    from ..records import atomic_write_text
 
     if joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
@@ -513,6 +512,17 @@ def record(
                 )
         finally:
             ctrl.close()
+    _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out)
+
+
+def _finish_recording(
+    out: Path, samples: Any, rate: int, stop_at: float, how: str, joint: int, sign_label: str,
+    tune_out: Path | None, json_out: bool,
+) -> None:
+    """Write the recording and its label (and the tuning, with --tune), then say what was written."""
+    from ..audio.sources import write_wav
+    from ..records import atomic_write_text
+
     try:
         write_wav(out, samples, rate)
         label = {

@@ -33,7 +33,6 @@ from ._common import (
     DB_HELP,
     angle_option,
     calibration_file,
-    console,
     device_url,
     fail,
     flush_warnings,
@@ -41,6 +40,7 @@ from ._common import (
     max_age_setting,
     open_store,
     print_json,
+    say,
     user_errors,
     warn_later,
 )
@@ -49,7 +49,7 @@ if TYPE_CHECKING:
     from ..procedures.move import MoveResult
     from ..procedures.where import WhereResult
 
-_Q1 = "Record q1 (angle: -30deg, 0.1) first."
+_Q1 = "Record q1 (angle: -30deg, -pi/6) first."
 _Q2 = "Record q2 (angle: -90deg, -pi/2) first."
 _Q3 = "Record q3 (length: 2mm, 0) first."
 _THETA = "Record the base tilt theta (angle)."
@@ -91,6 +91,9 @@ def _position_or_stop(joint: int, text: str, what: str) -> float:
     return _parse_joint_value(joint, text, what)
 
 
+RAW_BURST = 20000
+"""Steps per burst of raw steps (``--steps``): fewer round trips; a device error still ends it within one burst."""
+
 _STEPS = re.compile(r"^\s*([-+]?\d+)\s*steps?\s*$")
 
 
@@ -130,7 +133,11 @@ def move(
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    burst: int = typer.Option(1000, "--burst", min=1, max=65535, metavar="<steps>", help="Steps per burst."),
+    burst: int | None = typer.Option(
+        None, "--burst", min=1, max=65535, metavar="<steps>",
+        help="Most steps per burst (the position is kept after each). Default 1000; raw --steps 20000 (the "
+        "joint is uncertain until referenced anyway).",
+    ),
     max_age: int | None = typer.Option(
         None, "--max-age", min=0, max=36500, metavar="<days>",
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
@@ -161,7 +168,7 @@ def move(
     with user_errors():
         device_key(device)  # a URL that names no device is refused before the database is opened
     if raw is not None:
-        _step_raw(device, joint, raw, burst, db, json_out)
+        _step_raw(device, joint, raw, burst or RAW_BURST, db, json_out)
         return
     from ..calibration import Calibration
     from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate
@@ -173,7 +180,7 @@ def move(
         device, joint,
         by=None if by is None else _parse_joint_value(joint, by, "--by"),
         to=None if to is None else _position_or_stop(joint, to, "--to"),
-        burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
+        burst=burst or 1000, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
@@ -215,43 +222,36 @@ def _step_raw(device: str, joint: int, steps: int, burst: int, db: Path | None, 
     if json_out:
         print_json(result.as_dict())
         return
-    console.print(
-        f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)", highlight=False
-    )
-    console.print(
-        f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}",
-        highlight=False,
-    )
-    console.print(
-        f"at a stop, reference it: stickslip where --set {joint}={'min' if steps < 0 else 'max'}",
-        highlight=False,
-    )
+    say(f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)")
+    say(f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}")
+    say(f"at the stop, reference it: stickslip where --set {joint}={'min' if steps < 0 else 'max'}")
 
 
 def _print_move(result: MoveResult) -> None:
-    """``move``'s lines for a person: the move, its planned end ± σ, the simulator's true end."""
+    """``move``'s lines for a person: the move, its planned end with its σ, the simulator's true end."""
     from ..procedures.move import track_fields
 
     p = result.plan
     joint = p.joint
     tf = track_fields(result.state, joint)
-    console.print(
-        f"joint {joint}: {format_position(p.q_from, joint)} -> {format_position(p.q_to, joint)}: "
-        f"{p.steps:+d} steps in {len(result.outcome.bursts)} burst(s); planned end {format_position(p.q_end, joint)}"
-        + (f" ± {format_spread(tf['sd'], joint)} (step scale x{tf['step_scale'] or 1.0:.4f})"
-           if tf["sd"] is not None else ""),
-        highlight=False,
+    say(
+        f"joint {joint}: {format_position(p.q_from, joint)} -> {format_position(p.q_to, joint)}, "
+        f"{p.steps:+d} steps in {len(result.outcome.bursts)} burst(s)"
     )
+    spread = (
+        f" (σ {format_spread(tf['sd'], joint)}, step scale x{tf['step_scale'] or 1.0:.4f})"
+        if tf["sd"] is not None else ""
+    )
+    kept = "assumed end" if result.state.sources.get(joint) == "assumed" else "planned end"
+    say(f"{kept} {format_position(p.q_end, joint)}{spread}")
     if result.sim_true_end is not None:
         err = result.sim_true_end - p.q_end
-        k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the ± above)
+        k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the σ above)
         if abs(err * k) < 1000:
             shown = f"{err * k:+.1f} {unit}"
         else:  # a miss of a micrometre or a milliradian or more: in the position's own unit
             shown = f"{math.degrees(err):+.3f} deg" if joint_spec(joint).rotary else f"{err * 1e6:+.2f} µm"
-        console.print(
-            f"simulator's true end {format_position(result.sim_true_end, joint)} ({shown})", highlight=False
-        )
+        say(f"simulator's true end {format_position(result.sim_true_end, joint)} ({shown})")
 
 
 def _info_line(info: dict[str, Any]) -> str | None:
@@ -298,12 +298,15 @@ def where(
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, dead-reckoned,
-    observed (stickslip observe), or uncertain (a move was interrupted: the bounds are
-    shown; re-reference with --set). A joint moved since it was set shows ± its standard
-    deviation and the step scale learned from observations.
+    Source: default (never referenced: the outstretched pose assumed), set, dead-reckoned,
+    observed (stickslip observe), assumed (moved from a position never referenced), or
+    uncertain (a move, raw steps or a traverse left it between the bounds shown, and
+    why). A joint moved since it was set shows its standard deviation (σ) and the step
+    scale learned from observations.
 
-    Reset a joint at an end stop after a traverse, a crash or a manual move.
+    --set J=min (or max, or a position with its unit) references a joint at an end stop:
+    after a traverse, a crash or a manual move, and on day one (raw steps into the stop
+    first: stickslip move --steps). It clears an uncertainty and the position's σ.
 
     Without --set or a pose option the device is opened to say whether it answers
     (--offline skips that); a device that does not answer exits 2. A NanoControl
@@ -351,23 +354,19 @@ def _print_where(result: WhereResult) -> None:
 
     state, info = result.state, result.info
     answers = info["model"] if info else None
-    console.print(f"[bold]{result.device}[/]" + (f" (answers: {answers})" if answers else ""), highlight=False)
+    say(f"{result.device}" + (f" (answers: {answers})" if answers else ""))
     line = _info_line(info) if info else None
     if line:
-        console.print(f"  {line}", highlight=False)
+        say(f"  {line}")
     for r, j in zip(state_rows(state), (1, 2, 3), strict=True):
         extra = ""
         tf = track_fields(state, j)
         if tf["sd"] is not None and j not in state.uncertain:
-            extra = f", ± {format_spread(tf['sd'], j)}, step scale x{tf['step_scale'] or 1.0:.4f}"
+            extra = f", σ {format_spread(tf['sd'], j)}, step scale x{tf['step_scale'] or 1.0:.4f}"
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
             extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
-        console.print(
-            f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", highlight=False
-        )
-    console.print(
-        f"  tilt: theta = {math.degrees(state.theta):.4g} deg, "
-        f"psi = {math.degrees(state.psi):.4g} deg",
-        highlight=False,
-    )
+        say(f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", indent="    ")
+        if j in state.uncertain and j in state.why:
+            say(f"  {'':>25}{state.why[j]}")
+    say(f"  tilt: theta = {math.degrees(state.theta):.4g} deg, psi = {math.degrees(state.psi):.4g} deg")

@@ -17,7 +17,7 @@ from rich.table import Table
 
 from ..devices.base import redact_url
 from . import app
-from ._common import DB_HELP, console, fail, open_store, print_json, read_table, user_errors, warn, warn_later
+from ._common import DB_HELP, console, fail, open_store, print_json, read_table, say, user_errors, warn, warn_later
 
 if TYPE_CHECKING:
     from ..measurements import Traverse
@@ -67,24 +67,27 @@ def history(
     if not entries:
         console.print(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""))
         return
-    table = Table(title=f"stickslip history ({path})")
-    table.add_column("device", overflow="fold")
-    table.add_column("day", no_wrap=True)
-    table.add_column("n", justify="right")
-    table.add_column("by joint")
-    table.add_column("measured (UTC)")
-    table.add_column("calibrations", no_wrap=True)
-    for e in entries:
-        span = ""
-        if e["first_measured_at"]:
-            span = f"{e['first_measured_at'][11:16]}-{e['last_measured_at'][11:16]}"
-            if e["first_measured_at"][:10] != e["day"]:
-                span = f"{e['first_measured_at'][:10]} {span}"
-        cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
-        by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
-        n = str(e["traverses"]) + (f" (+{e['excluded']} excluded)" if e.get("excluded") else "")
-        table.add_row(e["device"], e["day"], n, by, span, cals)
-    console.print(table)
+    say(f"stickslip history of {path}")
+    for dev in dict.fromkeys(e["device"] for e in entries):  # one table per device: a URL is never folded
+        say(f"device {dev}")
+        table = Table(pad_edge=False)
+        table.add_column("day", no_wrap=True)
+        table.add_column("n", justify="right")
+        table.add_column("by joint")
+        table.add_column("measured (UTC)")
+        table.add_column("calibrations")
+        for e in (e for e in entries if e["device"] == dev):
+            span = ""
+            if e["first_measured_at"]:
+                span = f"{e['first_measured_at'][11:16]}-{e['last_measured_at'][11:16]}"
+                if e["first_measured_at"][:10] != e["day"]:
+                    span = f"{e['first_measured_at'][:10]} {span}"
+            cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
+            by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
+            n = str(e["traverses"]) + (f" (+{e['excluded']} excluded)" if e.get("excluded") else "")
+            table.add_row(e["day"], n, by, span, cals)
+        console.print(table)
+    say("a calibration #N: stickslip show N (or show N -o cal.json to use it with -c)")
 
 
 @app.command()
@@ -228,6 +231,27 @@ def delete(
         + (f"; {done['calibration_links']} calibration link(s) removed" if done["calibration_links"] else ""),
         highlight=False,
     )
+
+
+@app.command()
+def backup(
+    out: Path = typer.Argument(..., help="The new file to copy the database into.", metavar="OUT.db"),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+) -> None:
+    """Copy the whole database (traverses, calibrations, kept positions) into a new file.
+
+    A consistent copy even while another stickslip command is running (a plain copy of
+    the file can miss what SQLite still holds in its write-ahead log). Keep it, or give
+    it to a colleague: every command reads it with --db OUT.db.
+
+    Example: stickslip backup stickslip-2026-11-22.db
+    """
+    from ..storage import StoreError
+
+    with open_store(db, must_exist=True) as st, user_errors(StoreError):
+        written = st.backup(out)
+        n = st.count_traverses()
+    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}")
 
 
 # ---------------------------------------------------------------- anova

@@ -18,6 +18,7 @@ from ._common import (
     device_url,
     fail,
     print_json,
+    say,
     user_errors,
     validation_table,
     warn,
@@ -121,7 +122,11 @@ def demo(
     if json_out:
         print_json(result.to_dict())
         return
+    _print_demo(result)
 
+
+def _print_demo(result: Any) -> None:
+    """The demo's summary for a person: the run, the parameters beside the truth, the validation, the files."""
     from rich.table import Table
 
     console.print(
@@ -159,7 +164,7 @@ def demo(
         title = "Validation on other poses: |relative error| of the average step"
         console.print(validation_table(result.validation.rows(), title))
     for what, path in result.files.items():
-        console.print(f"saved {what}: {path}", highlight=False)
+        say(f"saved {what}: {path}")
 
 
 def _already_recorded(store: Any, seed: int, day: str) -> bool:

@@ -18,7 +18,7 @@ from ..devices.base import device_key
 from ..joints import JOINTS
 from ..units import format_position, format_spread
 from . import app
-from ._common import DB_HELP, console, device_url, fail, open_store, print_json, user_errors, warn_later
+from ._common import DB_HELP, device_url, fail, open_store, print_json, say, user_errors, warn_later
 from .devices import _DEVICE_HELP, _parse_joint_value
 
 MAX_INNOVATION = 5.0
@@ -90,17 +90,16 @@ def observe(
         print_json(r.as_dict())
         return
     before = ("uncertain (interrupted move)" if r.was_uncertain else "not tracked") if r.re_referenced else (
-        f"{format_position(r.q_before, joint)} ± {format_spread(r.q_sd_before or 0.0, joint)}"
+        f"{format_position(r.q_before, joint)} (σ {format_spread(r.q_sd_before or 0.0, joint)})"
     )
-    console.print(
-        f"joint {joint}: kept {before}; measured {format_position(r.q_measured, joint)} ± "
-        f"{format_spread(r.sigma, joint)} -> {format_position(r.q, joint)} ± {format_spread(r.q_sd, joint)}",
-        highlight=False,
+    say(
+        f"joint {joint}: kept {before}, measured {format_position(r.q_measured, joint)} "
+        f"(σ {format_spread(r.sigma, joint)})"
     )
+    say(f"now {format_position(r.q, joint)} (σ {format_spread(r.q_sd, joint)})")
     if r.re_referenced:
         return
-    console.print(
-        f"step scale x{r.step_scale_before:.4f} -> x{r.step_scale:.4f} (± {100 * r.step_scale_sd:.2g} %)"
-        + ("; the next move plans with it" if r.step_scale != r.step_scale_before else ""),
-        highlight=False,
+    say(
+        f"step scale x{r.step_scale_before:.4f} -> x{r.step_scale:.4f} (σ {100 * r.step_scale_sd:.2g} %)"
+        + ("; the next move plans with it" if r.step_scale != r.step_scale_before else "")
     )

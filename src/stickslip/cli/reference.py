@@ -48,8 +48,9 @@ def render() -> str:
         "# Command-line reference",
         "",
         "Generated from the code by `python -m stickslip.cli.reference`; do not edit by hand.",
-        "Lengths and angles take units on the command line (`12mm`, `850nm`, `-90deg`, `40urad`,",
-        "`-pi/2`); files are SI. Every command exits 2 with a one-line `error:` on bad input.",
+        "Every length and angle on the command line takes its unit (`12mm`, `850nm`, `-90deg`, `40urad`,",
+        "`-pi/2`; a bare number other than 0 is refused); files are SI. Every command exits 2 with a",
+        "one-line `error:` on bad input, and 130 with one `error: interrupted` line on Ctrl-C.",
         "",
     ]
     for name in group.list_commands(ctx):

@@ -15,13 +15,12 @@ import typer
 
 from ..devices.base import DeviceError, device_key
 from ..joints import joint_spec
-from ..units import UnitError, bare_number_problem, parse_length
+from ..units import UnitError, bare_number_problem, format_position, parse_length
 from . import app
 from ._common import (
     DB_HELP,
     angle_option,
     calibration_file,
-    console,
     device_url,
     fail,
     flush_warnings,
@@ -30,6 +29,7 @@ from ._common import (
     max_age_setting,
     open_store,
     print_json,
+    say,
     user_errors,
     warn,
     warn_later,
@@ -90,8 +90,12 @@ def _miss(d: float) -> str:
 @app.command()
 def reach(
     calibration: Path | None = typer.Option(None, "--calibration", "-c", help=_CAL_HELP),
-    to: str | None = typer.Option(None, "--to", help="Tip target X,Y,Z in the base frame: 21mm,0,50um."),
-    by: str | None = typer.Option(None, "--by", help="Tip displacement DX,DY,DZ: 20um,-10um,5um."),
+    to: str | None = typer.Option(
+        None, "--to", metavar="<x,y,z>", help="Tip target X,Y,Z in the base frame (lengths): 21mm,0,50um."
+    ),
+    by: str | None = typer.Option(
+        None, "--by", metavar="<x,y,z>", help="Tip displacement DX,DY,DZ (lengths): 20um,-10um,5um."
+    ),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help="Record q1 (angle) first."),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help="Record q2 (angle) first."),
@@ -172,21 +176,21 @@ def _print_plan(result: ReachResult, json_out: bool) -> None:
         return
     n1, n2, n3 = plan.total_steps
     verb = "moved" if result.moved else "plan"
-    console.print(
-        f"{verb}: tip {_um(plan.tip_start)} -> {_um(plan.target)} ({plan.length * 1e6:.2f} µm) in "
-        f"{len(plan.segments)} segment(s); steps |joint 1| {n1}, |joint 2| {n2}, |joint 3| {n3}",
-        highlight=False,
+    say(f"{verb}: tip {_um(plan.tip_start)} -> {_um(plan.target)}")
+    say(
+        f"  {plan.length * 1e6:.2f} µm in {len(plan.segments)} segment(s); steps |joint 1| {n1}, |joint 2| {n2}, "
+        f"|joint 3| {n3}"
     )
-    console.print(
-        f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target; joints "
-        f"q1 = {math.degrees(plan.q_end[0]):.4f} deg, q2 = {math.degrees(plan.q_end[1]):.4f} deg, "
-        f"q3 = {plan.q_end[2] * 1e6:.2f} µm",
-        highlight=False,
+    say(f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target")
+    q = plan.q_end
+    say(
+        f"  joints q1 = {format_position(q[0], 1)}, q2 = {format_position(q[1], 2)}, "
+        f"q3 = {format_position(q[2], 3)}"
     )
     if result.sim_true is not None:
         true_tip = [float(v) for v in kin.tip(result.sim_true, plan.geometry)]
         err = math.dist(true_tip, plan.target)
-        console.print(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target", highlight=False)
+        say(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target")
 
 
 # ---------------------------------------------------------------- jog: the terminal part
@@ -366,10 +370,8 @@ def jog(
     if result.error is not None:
         fail(f"{result.error}; the session ended; positions are kept (see `stickslip where`)")
     s = result.status
-    console.print(
-        f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}; positions kept for {result.device}",
-        highlight=False,
-    )
+    say(f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}")
+    say(f"positions kept for {result.device}")
     if result.state.uncertain:  # Ctrl-C in the middle of a burst
         joints = ", ".join(str(j) for j in sorted(result.state.uncertain))
         warn(

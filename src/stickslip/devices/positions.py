@@ -142,9 +142,12 @@ class DeviceState:
         """Record ``q`` (rad or m) for ``joint``; ``ValueError`` outside its end stops."""
         spec = kin.joint_spec(joint)
         q = float(q)
-        problem = spec.range_problem(f"q{spec.number}", q)
-        if problem:
-            raise ValueError(problem)
+        if spec.range_problem(f"q{spec.number}", q):
+            shown = format_position(q, spec.number) if math.isfinite(q) else repr(q)
+            raise ValueError(
+                f"q{spec.number} = {shown} is outside joint {spec.number}'s range "
+                f"[{format_position(spec.lower, spec.number)}, {format_position(spec.upper, spec.number)}]"
+            )
         if source not in SOURCES:
             raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
         self.positions[spec.number] = min(max(q, spec.lower), spec.upper)

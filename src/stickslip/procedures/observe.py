@@ -141,7 +141,7 @@ def _gate(obs: Observation, q_before: float, sd_before: float) -> float:
     if sigmas > MAX_INNOVATION and not obs.force:
         raise InnovationTooLarge(
             f"the measured position {format_position(obs.q, joint)} is {sigmas:.3g} standard "
-            f"deviations from the kept {format_position(q_before, joint)} ± {format_spread(sd_before, joint)}: "
+            f"deviations from the kept {format_position(q_before, joint)} (σ {format_spread(sd_before, joint)}): "
             "check the reading (units, which joint); if the joint slipped or was moved by hand, "
             f"re-reference it (stickslip where --set {joint}=VALUE) or pass --force to use it"
         )
