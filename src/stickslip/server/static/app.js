@@ -57,8 +57,12 @@ function connect() {
       render(state);
       addEvents(m.events || []);
     } else if (m.error) {
-      note(m.error, true);
-      if (jogDir) jogStop();
+      if (jogDir) {  // a jog the server refused (no calibration, a plan running): say so by the pad
+        $("jog-note").textContent = m.error;
+        releaseJogLocally();
+      } else {
+        note(m.error, true);
+      }
     }
   };
   ws.onclose = (ev) => {
@@ -109,8 +113,9 @@ function render(st) {
   renderMotion(m);
   const planBusy = running && m.kind !== "jog";
   for (const b of document.querySelectorAll("#pad button")) b.disabled = planBusy;
-  $("jog-note").textContent = planBusy ? "jog is disabled while " + m.what + " runs" :
-    (st.jog && st.jog.message ? st.jog.message : "");
+  if (planBusy) $("jog-note").textContent = "jog is disabled while " + m.what + " runs";
+  else if (st.jog && st.jog.message) $("jog-note").textContent = st.jog.message;
+  else if (running) $("jog-note").textContent = "";
   if (planBusy && jogDir) releaseJogLocally();
   renderDay(st.day, st.audio);
   if (st.camera) startCamera();
