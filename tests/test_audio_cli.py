@@ -338,7 +338,7 @@ def test_tune_names_damaged_samples_and_an_empty_file(wavs, tmp_path):
 
 
 def test_clipping_is_judged_at_the_signal_s_own_rails():
-    from stickslip.audio.guard import block_problem, non_finite
+    from stickslip.audio.sources.guard import block_problem, non_finite
 
     rng = np.random.default_rng(4)
     x = rng.standard_normal(4096)
@@ -462,7 +462,7 @@ class _SensorLine:
 
 
 def test_record_on_a_controller_from_a_serial_vibration_sensor(tmp_path, monkeypatch):
-    import stickslip.audio.vibration as vibration
+    import stickslip.audio.sources.vibration as vibration
     import stickslip.devices as devices
 
     ctrl = _FakeController()

@@ -32,7 +32,7 @@ from hypothesis import strategies as st
 
 import drive_sound as dv
 from stickslip.audio.confirm import ConfirmedStopDetector
-from stickslip.audio.detector import StopDetector
+from stickslip.audio.detector import detector_for
 from stickslip.audio.tuning import TuningError, tune
 from stickslip.audio.tuningfile import Tuning
 
@@ -41,7 +41,7 @@ TOL_S = 0.025
 
 
 def _events(tu: Tuning, y: np.ndarray) -> list[tuple[float, bool]]:
-    det = ConfirmedStopDetector(StopDetector(tu))
+    det = ConfirmedStopDetector(detector_for(tu))
     return [(e.onset_s, e.onset_uncertain) for e in det.feed(np.asarray(y, dtype=np.float32)) + det.finish()]
 
 

@@ -17,12 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .detector import frame_power_spectra
+from .features.spectra import SPECTRA, frame_power_spectra
+from .sources.guard import block_problem
+from .tuning import stepping_band
 from .tuningfile import default_frame
 
 __all__ = ["BandMeter", "MeterReading"]
 
-_FLOOR = 1e-20
+_FLOOR = SPECTRA.power_floor
 
 
 @dataclass(frozen=True)
@@ -89,9 +91,6 @@ class BandMeter:
         return MeterReading(10 * math.log10(float(p[inside].sum()) + _FLOOR), self.band_hz)
 
     def _learn(self) -> None:
-        from .guard import block_problem
-        from .tuning import stepping_band
-
         x = np.concatenate(self._seen)
         self._seen = []
         if block_problem(x) is not None:  # nothing to learn from yet: keep showing broadband, try again

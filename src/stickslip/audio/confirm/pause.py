@@ -11,13 +11,13 @@ run to the moment the stepping ceased: silently wrong.
 :func:`stepping_stopped` tells the two apart on what follows a fire (the confirmation
 window) against the stepping before it:
 
-* the sound in the detector's band fell by :data:`STOPPED_DROP_DB` or more, and by
-  :data:`STOPPED_MARGIN_DB` more than the tuned stop changes it (a tuning whose stop is
-  itself much quieter is given that much room), **and**
+* the sound in the detector's band fell by ``drop_db`` or more, and by ``margin_db`` more
+  than the tuned stop changes it (a tuning whose stop is itself much quieter is given that
+  much room), **and**
 * no stepping is heard in it: the envelope's lines at the step rate heard before the fire
-  and its first multiples stand less than :data:`STEPPING_LINES_DB` above their
-  neighbourhoods, averaged (:func:`step_lines_db`; a stop whose slips are
-  muted while the piezo's drive still sings keeps its lines).
+  and its first multiples stand less than ``lines_db`` above their neighbourhoods,
+  averaged (:func:`step_lines_db`; a stop whose slips are muted while the piezo's drive
+  still sings keeps its lines).
 
 Both, because each alone also fits some stops: the random arms' duller stops lose up to
 19 dB of their first-differenced power (the battery's, fourth to seventh generators' stops
@@ -35,31 +35,43 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import butter, sosfilt
 
-from .stepclock import band_envelope_spectrum
+from ..features.stepclock import band_envelope_spectrum, step_rate_hz
+from ..paramfield import param
+from ..tuningfile import Tuning
 
 __all__ = [
-    "STOPPED_DROP_DB",
-    "STEPPING_LINES_DB",
-    "STOPPED_MARGIN_DB",
+    "PAUSE",
+    "PauseCheck",
+    "PauseParams",
     "Stopped",
     "band_filter",
-    "AFTER_QUANTILE",
-    "BEFORE_QUANTILE",
     "band_power",
     "step_lines_db",
     "stepping_stopped",
     "tuned_change_db",
 ]
 
-#: the window's in-band power must have fallen at least this far below the stepping's, dB
-STOPPED_DROP_DB = 20.0
-#: ... and this much further than the tuned stop's own in-band change, dB
-STOPPED_MARGIN_DB = 12.0
-#: harmonics of the step rate whose envelope lines are averaged, and how close to k x the rate each is looked for
-STEP_LINES = 4
-STEP_LINE_TOLERANCE = 0.005
-#: ... which, averaged, must stand at least this far above their neighbourhoods for something to be stepping, dB
-STEPPING_LINES_DB = 10.0
+
+@dataclass(frozen=True)
+class PauseParams:
+    """When a fire that persisted was the stepping stopping (a pause), not an end stop."""
+
+    drop_db: float = param(20.0, "dB", "the window's in-band power fell at least this far below the stepping's ...")
+    margin_db: float = param(12.0, "dB", "... and this much further than the tuned stop's own in-band change ...")
+    step_lines: int = param(4, "harmonics", "... and the envelope's lines at the first this many multiples of the rate")
+    line_tolerance: float = param(0.005, "of the line", "(each looked for this near k x the rate heard before) ...")
+    lines_db: float = param(
+        10.0, "dB", "... stand less than this above their neighbourhoods, averaged: nothing steps (noise: 8.8 at most)"
+    )
+    before_quantile: float = param(
+        0.3, "", "the stepping's level is this quantile of its 10 ms powers: a knock or a chirp only adds"
+    )
+    after_quantile: float = param(0.5, "", "the window's level is the median of its 10 ms powers")
+    piece_s: float = param(0.01, "s", "the pieces whose powers are ranked")
+    min_after_s: float = param(0.1, "s", "a window shorter than this is not judged: nothing contradicts a stop")
+
+
+PAUSE = PauseParams()
 
 
 @dataclass(frozen=True)
@@ -90,34 +102,28 @@ def band_filter(band_hz: tuple[float, float], sample_rate: float) -> NDArray[np.
     return np.asarray(butter(4, [lo, hi], btype="bandpass", fs=float(sample_rate), output="sos"), dtype=np.float64)
 
 
-#: the stepping's level before a fire is the 30th percentile of its 10 ms powers (a knock, a chirp or a voice only adds
-#: sound, as the detector's template is a low quantile); the window's, their median
-BEFORE_QUANTILE = 0.3
-AFTER_QUANTILE = 0.5
-#: the pieces whose powers are ranked, s
-PIECE_S = 0.01
+def band_power(
+    x: NDArray[np.float64], sos: NDArray[np.float64], sample_rate: float, quantile: float, p: PauseParams = PAUSE
+) -> float:
+    """The ``quantile`` of the ``piece_s`` powers of ``x`` through the band-pass ``sos`` (full scale 1; nan if short).
 
-
-def band_power(x: NDArray[np.float64], sos: NDArray[np.float64], sample_rate: float, quantile: float) -> float:
-    """The ``quantile`` of the 10 ms powers of ``x`` through the band-pass ``sos`` (full scale 1; nan if too short).
-
-    The filter's first 5 ms are left out (its transient).
+    The filter's first half piece is left out (its transient).
     """
-    n = max(1, int(round(PIECE_S * sample_rate)))
+    n = max(1, int(round(p.piece_s * sample_rate)))
     if x.size < 2 * n:
         return float("nan")
     y = sosfilt(sos, x)[n // 2 :]
     m = y.size // n
-    p = np.mean(y[: m * n].reshape(m, n) ** 2, axis=1)
-    return float(np.quantile(p, quantile))
+    powers = np.mean(y[: m * n].reshape(m, n) ** 2, axis=1)
+    return float(np.quantile(powers, quantile))
 
 
 def step_lines_db(
     x: NDArray[np.float64],
     sample_rate: float,
     step_hz: float,
-    harmonics: int = STEP_LINES,
-    tolerance: float = STEP_LINE_TOLERANCE,
+    harmonics: int = PAUSE.step_lines,
+    tolerance: float = PAUSE.line_tolerance,
 ) -> float:
     """The envelope's lines at the step rate's first ``harmonics`` multiples above their neighbourhoods, dB, averaged.
 
@@ -126,7 +132,7 @@ def step_lines_db(
     bin within ``tolerance`` of k x ``step_hz`` against the median of the bins from
     k - 0.5 to k + 0.5 times ``step_hz`` outside it. The rate is the one heard just before,
     so the window can be narrow. On white noise the guard's single line at +-3 %
-    (:func:`~stickslip.audio.guard.step_line_db`) reads 7.0 dB (median) and 8 dB or more in
+    (:func:`~stickslip.audio.sources.guard.step_line_db`) reads 7.0 dB (median) and 8 dB or more in
     a quarter of 0.5 s windows; four lines at +-0.5 % averaged read 5.4 dB, 7.1 dB at the
     95th percentile and 8.8 dB at most in 600 windows (``tests/test_audio_stopped.py``).
     Needs 20 step periods (else ``inf``: no verdict, something may be stepping).
@@ -150,7 +156,7 @@ def step_lines_db(
 def tuned_change_db(stepping_levels_db: tuple[float, ...] | None, signature_db: tuple[float, ...] | None) -> float:
     """The tuned stop's change of the in-band power, dB: the sub-bands' stepping levels shifted by the signature.
 
-    0 when the tuning does not say (a band tuning): then only :data:`STOPPED_DROP_DB` applies.
+    0 when the tuning does not say (a band tuning): then only ``drop_db`` applies.
     """
     if not stepping_levels_db or not signature_db or len(stepping_levels_db) != len(signature_db):
         return 0.0
@@ -169,13 +175,14 @@ def stepping_stopped(
     sample_rate: float,
     step_hz: float,
     tuned_db: float = 0.0,
+    p: PauseParams = PAUSE,
 ) -> Stopped | None:
     """Was the fire the stepping stopping? A :class:`Stopped` if so, else ``None`` (an end stop may be there).
 
     Parameters
     ----------
     before_power : float
-        In-band power of the stepping before the fire (:func:`band_power` at :data:`BEFORE_QUANTILE`, full
+        In-band power of the stepping before the fire (:func:`band_power` at ``before_quantile``, full
         scale 1).
     after : numpy.ndarray
         The samples after the fire (its confirmation window), full scale 1.
@@ -188,14 +195,56 @@ def stepping_stopped(
     tuned_db : float
         The tuned stop's in-band change, dB (:func:`tuned_change_db`).
     """
-    if not (math.isfinite(before_power) and before_power > 0.0) or after.size < int(0.1 * sample_rate):
+    if not (math.isfinite(before_power) and before_power > 0.0) or after.size < int(p.min_after_s * sample_rate):
         return None  # too little to tell: nothing contradicts a stop
-    pa = band_power(after, sos, sample_rate, AFTER_QUANTILE)
+    pa = band_power(after, sos, sample_rate, p.after_quantile, p)
     drop = 10.0 * math.log10(max(pa, 1e-300) / before_power)
-    if drop > min(-STOPPED_DROP_DB, tuned_db - STOPPED_MARGIN_DB):
+    if drop > min(-p.drop_db, tuned_db - p.margin_db):
         return None
     known = math.isfinite(step_hz) and step_hz > 0.0
-    line = step_lines_db(after, sample_rate, step_hz) if known else -math.inf
-    if line >= STEPPING_LINES_DB:
+    line = step_lines_db(after, sample_rate, step_hz, p.step_lines, p.line_tolerance) if known else -math.inf
+    if line >= p.lines_db:
         return None  # something still steps at the rate: a stop that silenced the slips, not the drive
     return Stopped(drop_db=drop, line_db=line, step_hz=step_hz if known else math.nan)
+
+
+class PauseCheck:
+    """The pause judgement over a stream: the stepping before a fire, then the fire's window.
+
+    Parameters
+    ----------
+    tuning : Tuning
+        The detector's tuning: its band (the template's span) and the tuned stop's change there.
+    p : PauseParams
+    """
+
+    def __init__(self, tuning: Tuning, p: PauseParams = PAUSE) -> None:
+        self.tuning, self.p = tuning, p
+        self.sample_rate = int(tuning.sample_rate)
+        edges = tuning.edges_hz if tuning.method == "template" and tuning.edges_hz else tuning.band_hz
+        self.sos = band_filter((float(edges[0]), float(edges[-1])), self.sample_rate)
+        self.tuned_db = tuned_change_db(tuning.stepping_levels_db, tuning.signature_db)
+        self.reset()
+
+    def reset(self) -> None:
+        #: in-band power of the stepping before the fire that began the current chain (full scale 1)
+        self.before_power = math.nan
+        #: its step rate, Hz
+        self.before_hz = math.nan
+
+    def hear_before(self, before: NDArray[np.float64], min_samples: float) -> None:
+        """The stepping before a fire (``before``; fewer than ``min_samples`` samples: not known)."""
+        if before.size < min_samples:
+            self.before_power = self.before_hz = math.nan
+            return
+        sr = self.sample_rate
+        self.before_power = band_power(before, self.sos, sr, self.p.before_quantile, self.p)
+        hz = step_rate_hz(before, sr)
+        tuned = self.tuning.step_rate_hz
+        self.before_hz = hz if math.isfinite(hz) else (float(tuned) if tuned else math.nan)
+
+    def stopped(self, after: NDArray[np.float64]) -> Stopped | None:
+        """Was the fire whose window is ``after`` the stepping stopping? (:func:`stepping_stopped`)"""
+        return stepping_stopped(
+            self.before_power, after, self.sos, self.sample_rate, self.before_hz, self.tuned_db, self.p
+        )
