@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))  # the batteries (test_audio_*.py)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "support"))  # the generators
 
 import alien_sound as al  # noqa: E402
 import arrival_sound as ar  # noqa: E402

@@ -26,15 +26,15 @@ from __future__ import annotations
 
 from functools import cache
 
+import arrival_sound as ar
+import battery_sound as bs
+import beam_sound as bm
+import modal_sound as md
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import battery_sound as bs
-import beam_sound as bm
-import modal_sound as md
 from stickslip.audio.change import ChangeParams, TemplateDetector
 from stickslip.audio.change.drops import DROPS, DropParams
 from stickslip.audio.change.fit import fit_departure
@@ -46,6 +46,8 @@ from stickslip.audio.features.spectra import subband_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 TOL_S = 0.025

@@ -7,21 +7,17 @@ stop, a stop under a second instrument (the masked signature), a drifting clock 
 twice before the stop (rejections, then a flagged onset) and a session whose stepping pauses
 before the first stop (the pause, the restart, two stops). The numbers are the detector's
 own, recorded from the code before it was split into stages; the battery's generator
-(``tests/battery_sound.py``) makes the sound.
+(``tests/support/battery_sound.py``) makes the sound.
 """
 
 from __future__ import annotations
 
-import sys
 from functools import cache
-from pathlib import Path
 
+import battery_sound as bs  # noqa: E402
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import battery_sound as bs  # noqa: E402
 from stickslip.audio.confirm import ConfirmedStopDetector, confirming  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402

@@ -22,6 +22,8 @@ from stickslip.audio.sources import AudioSourceError, write_wav
 from stickslip.audio.sources.vibration import SerialSamples, read_vibration
 from stickslip.audio.tuning import tune
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 25_000
 
 
