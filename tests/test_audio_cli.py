@@ -495,7 +495,7 @@ def test_record_on_a_controller_from_a_serial_vibration_sensor(tmp_path, monkeyp
 def test_listen_warns_when_the_recording_steps_at_another_rate_than_the_tuning(tmp_path):
     # the battery's generator (not the project's simulator): joint P tuned at 1000 Hz; at 800 and 1375 Hz its
     # narrow 5.2 kHz mode sits between other harmonics, and stops were heard late or not at all; within 5 % no
-    # warning (docs/audio.md, "Tuned at one step rate")
+    # warning (docs/audio-log.md, "Tuned at one step rate")
     from battery_sound import Scene, render, variant
 
     base = Scene("P", 1000.0, 2.0, 3.0, seed=1)

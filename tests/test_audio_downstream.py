@@ -3,7 +3,7 @@
 Round 10b found that of the recordings at 900-1100 Hz (tuned at 1000 Hz) that the confirmed
 detector did not get right, many show the stop-likeness ``a`` of the line fit above the
 threshold at the stop: the fit hears the stop, something downstream loses it. Round 11b traced
-each to the stage that loses it (docs/audio.md, "Round 11b"). Two stages lose most of them, and
+each to the stage that loses it (docs/audio-log.md, "Round 11b"). Two stages lose most of them, and
 neither is the confirmation's to change:
 
 * **the drops in proportion** (``TemplateState``'s check that the sub-bands the stop lowers are

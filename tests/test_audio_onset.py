@@ -121,7 +121,7 @@ def test_a_recording_that_starts_at_the_stop_is_not_flagged(joint: str, seed: in
 # missed in 63 of 100 draws before round 9b's finer sub-bands, and is still often missed at other step rates:
 # tests/test_audio_shifted.py; arm 4's stiff stop sits just
 # over the threshold, and frames before it that flicker over the threshold set its crossing up to 40 ms early:
-# docs/audio.md, "When did the stop begin?")
+# docs/audio-log.md, "When did the stop begin?")
 ARMS = [(s, k) for s in (1, 2, 3, 5, 6) for k in ("stiff", "damped")]
 
 

@@ -6,7 +6,7 @@ elsewhere), and the drops-in-proportion check (``stickslip.audio.change.drops.dr
 the fit heard (round 11b). Since round 12b a frame the predicted signature's fit took, with
 its residual within ``PRED_DROPS_RHO`` of ``residual_max``, also passes the check if the
 *predicted* signature's drops show in proportion (the tuned drops' verdict otherwise, and
-always where no prediction is fitted). ``docs/audio.md``, "Round 12b".
+always where no prediction is fitted). ``docs/audio-log.md``, "Round 12b".
 
 The recordings come from generators the detector was not tuned to (the fifth, ``arrival_sound``;
 the sixth, ``beam_sound``; the battery's, ``battery_sound``), each tuned by ``tune`` on its
@@ -54,7 +54,7 @@ def _outcome(events: list[StopEvent], stop: float) -> str:
 
 
 # (generator, arm, stop kind, test rate Hz): main's outcome -> this round's (measured over round 10b's 408 recordings:
-# these are all the outcomes that moved, docs/audio.md "Round 12b")
+# these are all the outcomes that moved, docs/audio-log.md "Round 12b")
 CASES = [
     ("sixth", 10, "", 1100.0, "missed", "right"),
     ("fifth", 4, "damped", 950.0, "flagged", "right"),
@@ -154,7 +154,8 @@ def test_the_predicted_drops_never_make_a_stop_silently_wrong(pick: int, rel: fl
     and stepping alone never fires.
 
     The exception is measured, not hoped for: the sixth generator's beam 1 at 1027.3 Hz, seed 242, is confirmed 32 ms
-    late unflagged on main and here alike (its slow climb: docs/audio.md, "Round 12b"); this round does not change it.
+    late unflagged on main and here alike (its slow climb: docs/audio-log.md, "Round 12b"); the predicted drops do not
+    change it.
     """
     gens = [("battery", 1 + pick % 2, ("louder", "quieter", "duller", "brighter", "spectral")[pick // 2 % 5])]
     gens.append(("fifth", 1 + pick % 8, ("stiff", "damped", "shifted")[pick // 8 % 3]))

@@ -278,7 +278,7 @@ def test_a_pinned_beam_is_heard(beam: int) -> None:
     ],
 )
 def test_beams_3_8_and_9_are_missed_sometimes_never_wrong(beam: int, measured: str) -> None:
-    """What is still missed (docs/audio.md, "A stop that only shifts the spectrum"): safe (a traverse times out),
+    """What is still missed (docs/audio-log.md, "A stop that only shifts the spectrum"): safe (a traverse times out),
     never silently wrong."""
     c = _count(_beam_tuning(beam), _beam_draws(beam, 10), bm.render)
     assert c["early"] == c["late"] == 0, (measured, c)

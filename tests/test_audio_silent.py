@@ -1,4 +1,4 @@
-"""The silent errors left by rounds 9a and 9b, each pinned (round 10a, docs/audio.md "Round 10a").
+"""The silent errors left by rounds 9a and 9b, each pinned (round 10a, docs/audio-log.md "Round 10a").
 
 * **A false "listening began at the stop"** (``TemplateState._started_at_stop``): in the
   fifth generator's strongest rooms (reverberation -10 to -9 dB, T60 0.22-0.3 s) at

@@ -206,7 +206,7 @@ def _comb(kind: str, rate: float, seed: int, t: float) -> LineChange:
 def test_the_comb_sees_a_stop_in_any_direction(kind: str, rate: float, seed: int) -> None:
     """The stops of the battery's cross conditions (joint Q), which the level template misses when it was tuned on
     another kind: 0.24 s of the stop against the 0.48 s of stepping before it changes the lines by a deviate of 8 or
-    more, a verdict of "changed" (docs/audio.md, "A synchronous departure as a source of fires")."""
+    more, a verdict of "changed" (docs/audio-log.md, "A synchronous departure as a source of fires")."""
     got = _comb(kind, rate, seed, 2.0)
     assert got.change_z >= 8.0 and step_clock_verdict(got) is True, got
 

@@ -67,7 +67,7 @@ def markdown() -> str:
         "Every stage of the detector ([the reference](audio.md)) keeps its constants in one frozen",
         "dataclass; each field says its unit and why it has its value. A detector built with other",
         "values (`ChangeParams`, `ConfirmParams`) is for experiments: the values here are the ones",
-        "the detector was measured with.",
+        "measured in [the log](audio-log.md).",
         "",
     ]
     for stage, classes in STAGES:

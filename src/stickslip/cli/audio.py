@@ -194,7 +194,8 @@ def listen(
         help=(
             "Also ask the step clock before reporting a stop: a real stop's clicks keep the steps' rhythm, talk, a "
             "radio or another instrument do not (fewer false alarms). Off by default: check first that your arm's "
-            "stop is on the clock (docs/audio.md, 'The step clock'); where it is not, no stop is ever reported."
+            "stop is on the clock (docs/audio.md, 'The step clock and the late path'); where it is not, no stop is "
+            "ever reported."
         ),
     ),
     late: bool = typer.Option(
@@ -203,7 +204,7 @@ def listen(
         help=(
             "Also report stops the detector never heard, found late on the step clock's lines (0.5-0.75 s after the "
             "stop, the onset estimated back; found_late in --json): a stop whose sound the tuning never saw (trained "
-            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'The late path')."
+            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'The step clock and the late path')."
         ),
     ),
     json_out: bool = typer.Option(

@@ -22,7 +22,7 @@ window) against the stepping before it:
 Both, because each alone also fits some stops: the random arms' duller stops lose up to
 19 dB of their first-differenced power (the battery's, fourth to seventh generators' stops
 lose 10 dB or less of their in-band power), and a stop that rattles a little off the step
-clock (the project's simulator) leaves an envelope line of 3-8 dB in 0.25 s (docs/audio.md,
+clock (the project's simulator) leaves an envelope line of 3-8 dB in 0.25 s (docs/audio-log.md,
 "A pause is not an end stop").
 """
 
