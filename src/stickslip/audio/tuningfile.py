@@ -35,6 +35,16 @@ class TuningFileParams:
         "farther, listen and traverse warn: 17 of 288 stops missed or late at 6-8 % off, none within 4 %",
     )
     fine_max: int = param(20_000, "levels", "at most this many levels in each fine spectrum (20 kHz is 3400)")
+    sample_rate_range: tuple[int, int] = param(
+        (2_000, 192_000),
+        "Hz",
+        "an accelerometer bridge sends 3.2-5 kHz (stepping under 1 kHz); a sound card up to 192 kHz",
+    )
+
+    def rate_problem(self, sample_rate: float) -> str | None:
+        """Why ``sample_rate`` (Hz) cannot be tuned or heard at, or None."""
+        lo, hi = self.sample_rate_range
+        return None if lo <= sample_rate <= hi else f"sample rate {sample_rate:g} Hz is outside {lo}-{hi} Hz"
 
 
 TUNING_FILE = TuningFileParams()
@@ -251,8 +261,8 @@ class Tuning:
         """
         if sample_rate == self.sample_rate:
             return self
-        if not 8_000 <= sample_rate <= 192_000:
-            raise ValueError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
+        if (problem := TUNING_FILE.rate_problem(sample_rate)) is not None:
+            raise ValueError(problem)
         frame = default_frame(sample_rate) * self.frame // default_frame(self.sample_rate)
         hop = max(1, frame * self.hop // self.frame)
         kw: dict[str, Any] = {"sample_rate": int(sample_rate), "frame": int(frame), "hop": int(hop)}
@@ -324,8 +334,8 @@ def _check(t: Tuning) -> None:
     lo, hi = (float(v) for v in t.band_hz)
     object.__setattr__(t, "band_hz", (lo, hi))
     nyq = t.sample_rate / 2
-    if not 8_000 <= t.sample_rate <= 192_000:
-        raise ValueError(f"sample_rate {t.sample_rate} Hz is outside 8000-192000 Hz")
+    if (problem := TUNING_FILE.rate_problem(t.sample_rate)) is not None:
+        raise ValueError(problem.replace("sample rate", "sample_rate", 1))
     if not 0 <= lo < hi <= nyq:
         raise ValueError(f"band_hz ({lo:g}, {hi:g}) must satisfy 0 <= low < high <= {nyq:g} Hz")
     if not (t.frame >= 32 and t.frame & (t.frame - 1) == 0):

@@ -69,6 +69,9 @@ class PauseParams:
     after_quantile: float = param(0.5, "", "the window's level is the median of its 10 ms powers")
     piece_s: float = param(0.01, "s", "the pieces whose powers are ranked")
     min_after_s: float = param(0.1, "s", "a window shorter than this is not judged: nothing contradicts a stop")
+    back_db: float = param(
+        10.0, "dB", "a piece within this of the stepping's level ends a pause: its lines are judged before it"
+    )
 
 
 PAUSE = PauseParams()
@@ -202,10 +205,37 @@ def stepping_stopped(
     if drop > min(-p.drop_db, tuned_db - p.margin_db):
         return None
     known = math.isfinite(step_hz) and step_hz > 0.0
-    line = step_lines_db(after, sample_rate, step_hz, p.step_lines, p.line_tolerance) if known else -math.inf
+    quiet = _until_back(after, sos, sample_rate, before_power, p)
+    line = step_lines_db(quiet, sample_rate, step_hz, p.step_lines, p.line_tolerance) if known else -math.inf
     if line >= p.lines_db:
         return None  # something still steps at the rate: a stop that silenced the slips, not the drive
     return Stopped(drop_db=drop, line_db=line, step_hz=step_hz if known else math.nan)
+
+
+def _until_back(
+    after: NDArray[np.float64], sos: NDArray[np.float64], sample_rate: float, before_power: float, p: PauseParams
+) -> NDArray[np.float64]:
+    """The window up to where the stepping came back (a piece within ``back_db`` of its level), or all of it.
+
+    A pause shorter than the window ends inside it: the stepping that resumes holds the step
+    rate's lines, and judged over the whole window they said "something still steps" (a
+    0.4 s pause on an accelerometer was reported as the stop). An end stop does not end: its
+    window never fell, or never came back.
+    """
+    n = max(1, int(round(p.piece_s * sample_rate)))
+    if after.size < 2 * n:
+        return after
+    y = sosfilt(sos, after)[n // 2 :]
+    m = y.size // n
+    level = 10.0 * np.log10(np.maximum(np.mean(y[: m * n].reshape(m, n) ** 2, axis=1), 1e-300) / before_power)
+    low = np.flatnonzero(level <= -p.drop_db)
+    if low.size == 0:
+        return after
+    back = np.flatnonzero(level[low[0] :] >= -p.back_db)
+    if back.size == 0:
+        return after
+    end = n // 2 + (low[0] + back[0]) * n  # the first sample of the piece where the stepping is back
+    return after[:end] if end >= int(p.min_after_s * sample_rate) else after
 
 
 class PauseCheck:

@@ -159,6 +159,12 @@ def step_rate_hz(
 ) -> float:
     """The step rate heard in ``x``, Hz: the envelope spectrum's strongest line in [lo, hi] (default: the params').
 
+    The default ``hi`` is also under a quarter of the sample rate: the envelope (the signal
+    squared) holds twice the signal's frequencies, and what lies beyond the Nyquist frequency
+    folds back as lines that are no step rate (an accelerometer at 5 kHz stepping at 700 Hz
+    showed its strongest line at 5000 - 4 x 700 = 2200 Hz). A sound card at 10 kHz and more
+    keeps the default range.
+
     Each candidate bin is scored by the log power of its first three harmonics (a line at
     half the rate, or 1.5 times it, lacks some of them); a line at a third or a half of the
     winner heard clearly is taken instead (:func:`_fraction`: an envelope can be stronger at
@@ -166,9 +172,9 @@ def step_rate_hz(
     frequency over its line. NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
     """
     lo_hz = params.rate_lo_hz if lo_hz is None else lo_hz
-    hi_hz = params.rate_hi_hz if hi_hz is None else hi_hz
-    v = np.asarray(x, dtype=np.float64).ravel()
     sr = float(sample_rate)
+    hi_hz = min(params.rate_hi_hz, sr / 4) if hi_hz is None else hi_hz
+    v = np.asarray(x, dtype=np.float64).ravel()
     if v.size < 20 * sr / lo_hz or not np.any(v != v[0]):
         return float("nan")
     f, p = band_envelope_spectrum(v, sr)

@@ -10,6 +10,7 @@ from scipy.ndimage import median_filter
 
 from ..change.fit import fit_departure
 from ..change.template import TEMPLATE
+from ..tuningfile import TUNING_FILE
 
 FloatArray = NDArray[np.float64]
 
@@ -30,8 +31,8 @@ def recording(
     if x.ndim != 1:
         raise TuningError(f"expected mono samples, got an array of shape {np.shape(samples)}")
     sample_rate = int(sample_rate)
-    if not 8_000 <= sample_rate <= 192_000:
-        raise TuningError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
+    if (problem := TUNING_FILE.rate_problem(sample_rate)) is not None:
+        raise TuningError(problem)
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
         raise TuningError(
