@@ -23,6 +23,8 @@ from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 from stickslip.cli import app
 
+pytestmark = pytest.mark.slow  # tunes a recording: make test-fast leaves this file out
+
 TOL_S = 0.025
 
 

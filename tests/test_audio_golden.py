@@ -57,6 +57,7 @@ def _test(s: bs.Scene, seed: int, **kw: object) -> np.ndarray:
     return np.asarray(y, dtype=np.float32)
 
 
+@pytest.mark.slow  # three tunings: several seconds
 def test_the_tunings_are_the_ones_recorded() -> None:
     p, q = _tuning("P"), _tuning("Q")
     assert (p.threshold_db, p.onset_lag_s, p.step_rate_hz) == (0.4178, 0.01065, 999.994)
