@@ -11,6 +11,7 @@ stepping a few seconds before the stop was reported as the stop.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import mount_sound as mt
 import numpy as np
@@ -18,6 +19,7 @@ import pytest
 from typer.testing import CliRunner
 
 from stickslip.audio.detector import detect
+from stickslip.audio.events import StopEvent
 from stickslip.audio.sources.vibration import read_vibration
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
@@ -91,3 +93,41 @@ def test_listen_json_on_the_bridges_csv(tuning: Tuning, tmp_path: object) -> Non
     assert r.exit_code == 0, r.output
     events = json.loads(r.stdout)
     assert len(events) == 1 and abs(events[0]["onset_s"] - 3.0) <= TOL_S
+
+
+def _first_is_right_or_flagged(events: list[StopEvent], stop: float) -> bool:
+    """A traverse counts to the first event: it must be on time, or flagged (a refusal), never silently off."""
+    return bool(events) and (abs(events[0].onset_s - stop) <= TOL_S or events[0].onset_uncertain)
+
+
+@pytest.mark.parametrize("seed", [30, 31, 32, 33, 34])
+def test_another_instrument_stepping_in_bursts_nearby_in_the_test_only(tuning: Tuning, seed: int) -> None:
+    # a second slider on the same table, 910 Hz in 0.3 s bursts, 6 dB under the arm's stepping
+    y = mt.render(mt.Scene(rate=700.0, stop_at=4.0, dur=5.0, seed=seed, other_rate=910.0, other_db=-6.0))
+    events = detect(y.astype(np.float32), tuning, block=1024, confirm_s=0.5)
+    assert _first_is_right_or_flagged(events, 4.0), [(e.onset_s, e.onset_uncertain) for e in events]
+
+
+@pytest.fixture(scope="module")
+def tuning_with_other() -> Tuning:
+    return tune(mt.render(replace(_train(), other_rate=910.0)), mt.FS_OUT, 5.0)
+
+
+@pytest.mark.parametrize("seed", [30, 32, 34])
+def test_another_instrument_stepping_in_bursts_in_training_and_test(tuning_with_other: Tuning, seed: int) -> None:
+    tu = tuning_with_other
+    y = mt.render(mt.Scene(rate=700.0, stop_at=4.0, dur=5.0, seed=seed, other_rate=910.0, other_db=0.0))
+    events = detect(y.astype(np.float32), tu, block=1024, confirm_s=0.5)
+    assert len(events) == 1 and abs(events[0].onset_s - 4.0) <= TOL_S, [(e.onset_s, e.onset_uncertain) for e in events]
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: the other instrument as loud as the arm's stepping, heard in the test only: on seed 34 the "
+    "first event is unflagged at 3.929 s, 71 ms before the stop at 4.0 (seeds 30, 32, 33 are flagged, 31 right); "
+    "tuned with it in training all five are right",
+)
+def test_another_instrument_as_loud_as_the_stepping_in_the_test_only(tuning: Tuning) -> None:
+    y = mt.render(mt.Scene(rate=700.0, stop_at=4.0, dur=5.0, seed=34, other_rate=910.0, other_db=0.0))
+    events = detect(y.astype(np.float32), tuning, block=1024, confirm_s=0.5)
+    assert _first_is_right_or_flagged(events, 4.0), [(e.onset_s, e.onset_uncertain) for e in events]

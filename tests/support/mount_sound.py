@@ -18,7 +18,10 @@ other generators leave out, and never used to tune the detector:
 * **the sensor and the bridge**: a MEMS accelerometer (white noise, an AC-coupling high-pass at
   5 Hz), read at 50 kHz, low-passed by an 8th-order Butterworth at 2 kHz and decimated to 5 kHz,
   quantised to 12 bits of a ±2 g range;
-* **a pause**: the controller halts for ``pause_s`` at ``pause_at`` (the sensor's noise only).
+* **a pause**: the controller halts for ``pause_s`` at ``pause_at`` (the sensor's noise only);
+* **another instrument nearby**: a second stick-slip slider on its own mount (drawn from
+  ``seed + 100``) on the same table, stepping at ``other_rate`` in bursts of ``other_burst_s``
+  every ``other_every_s``, heard ``other_db`` under the arm's stepping (the table carries it).
 
 Levels: m/s^2; about 0.5 m/s^2 RMS while stepping. Units: s, Hz.
 """
@@ -57,6 +60,10 @@ class Scene:
     pause_s: float = 0.4
     noise: float = 0.01  # the sensor's noise, m/s^2 RMS at 5 kHz
     seed: int = 0
+    other_rate: float | None = None  # another instrument stepping nearby, Hz (None: none)
+    other_db: float = -6.0  # its level in its bursts, dB re the arm's stepping
+    other_burst_s: float = 0.3
+    other_every_s: float = 1.1
 
 
 def _modes(m: Mount) -> tuple[float, float, float, float]:
@@ -112,6 +119,24 @@ def _forces(s: Scene, n: int, rng: np.random.Generator) -> tuple[FloatArray, Flo
     return before, at
 
 
+def _other(s: Scene, n: int, rng: np.random.Generator) -> FloatArray:
+    """Another instrument on the table: its slips in bursts, through its own mount, at ``other_db``."""
+    assert s.other_rate is not None
+    starts = np.arange(rng.uniform(0.0, s.other_every_s), s.dur, s.other_every_s)
+    bursts = [np.arange(t, min(t + s.other_burst_s, s.dur - 0.01), 1.0 / s.other_rate) for t in starts]
+    other = Scene(mount=Mount(s.mount.seed + 100), rate=s.other_rate, stop_at=None, dur=s.dur)
+    force = np.zeros(n)
+    slip = max(2, int(round(25e-6 * FS_IN)))
+    pulse = np.sin(np.pi * np.arange(slip) / slip)
+    for t0 in np.concatenate(bursts) if bursts else []:
+        i = int(t0 * FS_IN)
+        force[i : i + slip] += pulse[: n - i] * rng.uniform(0.85, 1.15)
+    z = _mount_response(force, *_modes(other.mount))
+    on = np.abs(force) > 0
+    rms = float(np.sqrt(np.mean(z[np.convolve(on, np.ones(int(0.01 * FS_IN)), "same") > 0] ** 2))) if on.any() else 1.0
+    return z * 0.5 * 10 ** (s.other_db / 20) / max(rms, 1e-12)
+
+
 def render(s: Scene) -> FloatArray:
     """The bridge's samples at 5 kHz, m/s^2."""
     rng = np.random.default_rng(s.seed)
@@ -122,6 +147,8 @@ def render(s: Scene) -> FloatArray:
     if s.stop_at is not None:
         y = y + _mount_response(at, f1, f2 * (1 + s.mount.stiffen), z1, 2 * z2)
     y *= 0.5 / max(float(np.std(y[: int(min(s.stop_at or s.dur, s.dur) * FS_IN)])), 1e-12)
+    if s.other_rate is not None:
+        y = y + _other(s, n, rng)
     y = sosfilt(butter(1, 5.0, btype="highpass", fs=FS_IN, output="sos"), y)
     y = sosfiltfilt(butter(8, 2000.0, fs=FS_IN, output="sos"), y)[:: FS_IN // FS_OUT]
     y = y + s.noise * rng.standard_normal(y.size)
