@@ -14,7 +14,7 @@ detector. What it found:
   stop that silences them has; the continuum alone called stepping a stop at 950, 1000 and
   1050 Hz, the confirmed count silently 1.5 s short, while the line levels gave the stop
   b -0.08 to 0.05. The continuum's verdict now needs the levels not to deny it
-  (``template.START_CONTINUUM_LEVELS_B``).
+  (``StartParams.continuum_levels_b``).
 
 Outcomes as a traverse counts them: the confirmed first event's onset within 25 ms is
 *right*; flagged ``onset_uncertain`` a refusal (measure again); more than 25 ms off without

@@ -133,7 +133,7 @@ def test_stepping_in_a_strong_room_never_fires_at_once(seed: int, t60_s: float, 
     strict=True,
     reason="measured (round 10a, a throwaway scan of 1000 draws at 800-1200 Hz): arm 2's damped stop at 1004 Hz in "
     "the strongest room (T60 0.26 s, -9.5 dB) crosses +25.3 ms late after a climb of 13 ms, under the 20 ms slow-rise "
-    "limit (confirm.ONSET_SLOW_S): the room's tail delays the crossing; unflagged, 0.3 ms beyond the tolerance",
+    "limit (OnsetParams.slow_s): the room's tail delays the crossing; unflagged, 0.3 ms beyond the tolerance",
 )
 def test_arm_2s_damped_stop_in_the_strongest_room_at_1004_hz_is_never_silently_wrong() -> None:
     arm, s = on._draw(np.random.default_rng(1764737161))
