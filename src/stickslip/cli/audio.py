@@ -613,25 +613,8 @@ def _record_real(
 
         threading.Thread(target=wait_for_enter, daemon=True).start()
         err_console.print("press Enter when you hear the stop")
-    blocks: list[Any] = []
-    sign = 1 if direction == "+" else -1
-    try:
-        t_first = time.monotonic() - t0
-        burst = max(1, int(hz * 0.1))
-        issued = 0
-        while issued < steps:
-            n = min(burst, steps - issued)
-            tb = time.monotonic()
-            ctrl.step(joint, sign * n)
-            issued += n
-            for b in _drain(mic, tb + n / hz):
-                blocks.append(b)
-                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
-        blocks += list(_drain(mic, time.monotonic() + 0.3))
-        ctrl.stop(joint)
-    finally:
-        mic.stop()
-        err_console.print()
+    t_first = time.monotonic() - t0
+    blocks = _step_while_recording(ctrl, joint, 1 if direction == "+" else -1, steps, hz, mic, meter)
     if getattr(mic, "error", None) is not None:
         fail(f"{serial_port}: {mic.error}")
     dropped = int(getattr(mic, "overflows", 0) or 0)
@@ -648,6 +631,30 @@ def _record_real(
         return samples, rate, pressed[0], "a key press"
     assert stop_at_step is not None
     return samples, rate, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
+
+
+def _step_while_recording(ctrl: Any, joint: int, sign: int, steps: int, hz: float, mic: Any, meter: Any) -> list[Any]:
+    """Issue ``steps`` in bursts of 0.1 s while ``mic`` records (the meter on stderr); the blocks recorded."""
+    import time
+
+    blocks: list[Any] = []
+    try:
+        burst = max(1, int(hz * 0.1))
+        issued = 0
+        while issued < steps:
+            n = min(burst, steps - issued)
+            tb = time.monotonic()
+            ctrl.step(joint, sign * n)
+            issued += n
+            for b in _drain(mic, tb + n / hz):
+                blocks.append(b)
+                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
+        blocks += list(_drain(mic, time.monotonic() + 0.3))
+        ctrl.stop(joint)
+    finally:
+        mic.stop()
+        err_console.print()
+    return blocks
 
 
 class _SerialRecorder:
