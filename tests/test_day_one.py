@@ -94,7 +94,7 @@ def test_the_day_one_guide_runs_on_the_console_emulator_without_a_move_from_a_ma
     with RecordingConsoleEmulator(sim) as emu:
         url = emu.url + "?hz=20000"
         ear = ConsoleEar(emu, 3, sample_rate=48_000)
-        monkeypatch.setattr(session, "StopDetector", lambda tuning, t0=0.0: (ear.reset(t0), ear)[1])
+        monkeypatch.setattr(session, "detector_for", lambda tuning, t0=0.0, params=None: (ear.reset(t0), ear)[1])
         monkeypatch.setattr(sources, "Microphone", PacedSilence)
         results = []
         for argv, comment in commands:

@@ -29,8 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from stickslip import kinematics as kin
+from stickslip.audio.events import StopEvent
 from stickslip.sim.console_emulator import ConsoleEmulator, steps_by
-from stickslip.sim.oracle import OracleEvent
 
 __all__ = ["ConsoleEar", "Drive", "PacedSilence", "RecordingConsoleEmulator"]
 
@@ -144,7 +144,7 @@ class ConsoleEar:
             if begin < end:
                 yield begin - self.offset, end - self.offset
 
-    def feed(self, block: NDArray[np.float64]) -> list[OracleEvent]:
+    def feed(self, block: NDArray[np.float64]) -> list[StopEvent]:
         """The stream advances by ``block``; the stop heard within it, if any."""
         t_end = self.t_s + len(block) / self.sample_rate
         self.t_s = t_end
@@ -154,7 +154,7 @@ class ConsoleEar:
         for begin, end in self._runs():
             onset = max(begin, self._heard_upto)
             if onset < end and onset + self.delay_s <= t_end:
-                out.append(OracleEvent(t_end, onset))
+                out.append(StopEvent(t_end, onset, 0.0))
                 self._heard_upto = max(end, t_end)
         return out
 

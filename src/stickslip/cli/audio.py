@@ -12,7 +12,7 @@ import typer
 from . import app
 from ._common import console, device_url, err_console, fail, print_json, say, user_errors
 
-#: file suffixes read as a CSV of vibration samples (stickslip.audio.vibration); anything else is audio
+#: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
 _CSV_SUFFIXES = (".csv", ".txt")
 
 _SAMPLE_RATE_HELP = (
@@ -23,10 +23,10 @@ _SAMPLE_RATE_HELP = (
 
 def _check_sample_rate(sample_rate: float | None) -> None:
     """``fail`` unless ``--sample-rate`` is absent or one a vibration stream may have."""
-    from ..audio.vibration import SAMPLE_RATE_RANGE, sample_rate_ok
+    from ..audio.sources.vibration import VIBRATION, sample_rate_ok
 
     if sample_rate is not None and not sample_rate_ok(sample_rate):
-        lo, hi = SAMPLE_RATE_RANGE
+        lo, hi = VIBRATION.sample_rate_range
         fail(f"--sample-rate must be {lo:.0f}-{hi:.0f} Hz, got {sample_rate:g}")
 
 
@@ -64,7 +64,7 @@ def _channels(path: Path, channel: int | None) -> int | None:
 def _load_recording(path: Path, sample_rate: float | None, channel: int | None = None) -> tuple[Any, int]:
     """Samples and rate of a WAV (any audio file soundfile reads) or of a CSV of vibration samples."""
     from ..audio.sources import AudioSourceError, read_wav
-    from ..audio.vibration import read_vibration
+    from ..audio.sources.vibration import read_vibration
 
     if sample_rate is not None and not _is_csv(path):
         fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
@@ -194,7 +194,8 @@ def listen(
         help=(
             "Also ask the step clock before reporting a stop: a real stop's clicks keep the steps' rhythm, talk, a "
             "radio or another instrument do not (fewer false alarms). Off by default: check first that your arm's "
-            "stop is on the clock (docs/audio.md, 'The step clock'); where it is not, no stop is ever reported."
+            "stop is on the clock (docs/audio.md, 'The step clock and the late path'); where it is not, no stop is "
+            "ever reported."
         ),
     ),
     late: bool = typer.Option(
@@ -203,7 +204,7 @@ def listen(
         help=(
             "Also report stops the detector never heard, found late on the step clock's lines (0.5-0.75 s after the "
             "stop, the onset estimated back; found_late in --json): a stop whose sound the tuning never saw (trained "
-            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'Round 12a')."
+            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'The step clock and the late path')."
         ),
     ),
     json_out: bool = typer.Option(
@@ -344,7 +345,7 @@ def _listen_serial(
 ) -> None:
     """Live vibration samples from a serial port through the same detector as sound."""
     from ..audio.sources import AudioSourceError
-    from ..audio.vibration import SerialSamples
+    from ..audio.sources.vibration import SerialSamples
     from ..procedures.listen import ListenSettings, TuningMismatch, detector_for
 
     rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
@@ -365,12 +366,12 @@ def _listen_live(
     tuning: Any, device: str | None, json_out: bool, confirm_s: float, step_clock: bool, late: bool = False
 ) -> None:
     from ..audio.confirm import confirming
-    from ..audio.detector import StopDetector
+    from ..audio.detector import detector_for
     from ..audio.sources import AudioSourceError, Microphone
 
     dev: int | str | None = int(device) if device is not None and device.isdigit() else device
     mic = Microphone(sample_rate=tuning.sample_rate, block=1024, device=dev)
-    det = confirming(StopDetector(tuning), confirm_s, step_clock=step_clock, late=late)
+    det = confirming(detector_for(tuning), confirm_s, step_clock=step_clock, late=late)
     try:
         mic.start()
     except AudioSourceError as err:
@@ -396,7 +397,7 @@ def _warn_overflows(mic: Any) -> Iterator[Any]:
 
 
 def _note_stopped(t_s: float, why: Any) -> None:
-    """One line on stderr: the stepping stopped at ``t_s`` (s), which is not an end stop (stickslip.audio.stopped)."""
+    """One line on stderr: the stepping stopped at ``t_s`` (s), which is not an end stop (audio.confirm.pause)."""
     err_console.print(
         f"note: the stepping stopped at {t_s:.2f} s (the sound fell {-why.drop_db:.0f} dB, to the room's, and no "
         "stepping was heard in it): a pause, not an end stop, so no stop is reported there",
@@ -612,25 +613,8 @@ def _record_real(
 
         threading.Thread(target=wait_for_enter, daemon=True).start()
         err_console.print("press Enter when you hear the stop")
-    blocks: list[Any] = []
-    sign = 1 if direction == "+" else -1
-    try:
-        t_first = time.monotonic() - t0
-        burst = max(1, int(hz * 0.1))
-        issued = 0
-        while issued < steps:
-            n = min(burst, steps - issued)
-            tb = time.monotonic()
-            ctrl.step(joint, sign * n)
-            issued += n
-            for b in _drain(mic, tb + n / hz):
-                blocks.append(b)
-                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
-        blocks += list(_drain(mic, time.monotonic() + 0.3))
-        ctrl.stop(joint)
-    finally:
-        mic.stop()
-        err_console.print()
+    t_first = time.monotonic() - t0
+    blocks = _step_while_recording(ctrl, joint, 1 if direction == "+" else -1, steps, hz, mic, meter)
     if getattr(mic, "error", None) is not None:
         fail(f"{serial_port}: {mic.error}")
     dropped = int(getattr(mic, "overflows", 0) or 0)
@@ -649,6 +633,30 @@ def _record_real(
     return samples, rate, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
 
 
+def _step_while_recording(ctrl: Any, joint: int, sign: int, steps: int, hz: float, mic: Any, meter: Any) -> list[Any]:
+    """Issue ``steps`` in bursts of 0.1 s while ``mic`` records (the meter on stderr); the blocks recorded."""
+    import time
+
+    blocks: list[Any] = []
+    try:
+        burst = max(1, int(hz * 0.1))
+        issued = 0
+        while issued < steps:
+            n = min(burst, steps - issued)
+            tb = time.monotonic()
+            ctrl.step(joint, sign * n)
+            issued += n
+            for b in _drain(mic, tb + n / hz):
+                blocks.append(b)
+                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
+        blocks += list(_drain(mic, time.monotonic() + 0.3))
+        ctrl.stop(joint)
+    finally:
+        mic.stop()
+        err_console.print()
+    return blocks
+
+
 class _SerialRecorder:
     """A serial vibration sensor read in a thread into a queue, as the microphone's callback fills one."""
 
@@ -656,7 +664,7 @@ class _SerialRecorder:
         import queue
 
         from ..audio.sources import AudioSourceError
-        from ..audio.vibration import SerialSamples
+        from ..audio.sources.vibration import SerialSamples
 
         try:
             self.src = SerialSamples(port, sample_rate=sample_rate)

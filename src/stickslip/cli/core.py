@@ -410,15 +410,7 @@ def predict_cmd(
     last = {h: i for i, h in enumerate(header)}
     take = [last[h] for h in header]
     if json_out:
-        out = []
-        for cells, g in zip(table.cells(), preds.tolist(), strict=True):
-            r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
-            r["gamma_pred"] = g
-            out.append(r)
-        if pi95 is not None:
-            for r, h in zip(out, pi95.tolist(), strict=True):
-                r["gamma_pi95"] = h
-        print_json(out)
+        _print_predictions(table, preds, pi95, last)
         return
 
     def texts() -> Iterator[str]:
@@ -457,6 +449,21 @@ def predict_cmd(
         with user_errors():
             atomic_write(output, emit)  # streamed; a failed write leaves no half file
         console.print(f"wrote {len(table)} rows to {output}")
+
+
+def _print_predictions(
+    table: PoseTable, preds: NDArray[np.float64], pi95: NDArray[np.float64] | None, last: dict[str, int]
+) -> None:
+    """``predict --json``: every row as an object, with gamma_pred (and gamma_pi95)."""
+    out = []
+    for cells, g in zip(table.cells(), preds.tolist(), strict=True):
+        r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
+        r["gamma_pred"] = g
+        out.append(r)
+    if pi95 is not None:
+        for r, h in zip(out, pi95.tolist(), strict=True):
+            r["gamma_pi95"] = h
+    print_json(out)
 
 
 def _interval_column(cal: Calibration, table: PoseTable, preds: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -19,8 +19,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, confirming
-from ..audio.detector import StopDetector, StopEvent, Tuning
-from ..audio.guard import block_problem, non_finite
+from ..audio.detector import StopEvent, Tuning
+from ..audio.detector import detector_for as stop_detector_for
+from ..audio.sources.guard import block_problem, non_finite
 
 __all__ = ["ListenReport", "ListenSettings", "TuningMismatch", "detector_for", "listen_blocks", "listen_live"]
 
@@ -45,7 +46,7 @@ class TuningMismatch(ValueError):
 def detector_for(tuning: Tuning, rate: float, settings: ListenSettings) -> Any:
     """The detector ``settings`` ask for at ``rate`` (Hz); :class:`TuningMismatch` if the tuning does not fit it."""
     try:
-        base = StopDetector(tuning.for_sample_rate(int(rate)))
+        base = stop_detector_for(tuning.for_sample_rate(int(rate)))
         return confirming(base, settings.confirm_s, step_clock=settings.step_clock, late=settings.late)
     except ValueError as e:
         raise TuningMismatch(rate, str(e)) from None
@@ -118,7 +119,7 @@ class ListenReport:
 
 def _heard_step_hz(opening: list[NDArray[Any]], rate: float) -> float:
     """The step rate heard in the first second (NaN if it carries no signal), Hz."""
-    from ..audio.stepclock import step_rate_hz
+    from ..audio.features.stepclock import step_rate_hz
 
     # damaged samples count as silence here: one infinity read as full scale would be the only 'click' heard
     first = np.nan_to_num(np.concatenate(opening), nan=0.0, posinf=0.0, neginf=0.0)
@@ -155,7 +156,7 @@ def listen_blocks(
     stopped: list[tuple[float, Any]] = []
     if isinstance(det, ConfirmedStopDetector):
         events += det.finish()
-        stopped = list(det.stopped_log)
+        stopped = list(det.log.stopped)
     step_hz = None
     if opening and tuning.step_rate_hz is not None:
         step_hz = _heard_step_hz(opening, rate_heard)
@@ -182,7 +183,8 @@ def listen_live(
         for block in blocks:
             for ev in detector.feed(block):
                 on_event(ev)
-            stopped = getattr(detector, "stopped_log", ())
+            log = getattr(detector, "log", None)
+            stopped = log.stopped if log is not None else ()
             for t_s, why in stopped[noted:]:
                 on_stopped(t_s, why)
             noted = len(stopped)
