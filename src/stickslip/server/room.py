@@ -375,7 +375,8 @@ class ControlRoom:
                 if running:  # a burst in flight (journalled before it is sent): moving, not lost
                     r["source"] = "moving"
             sd.append(float(s) if isinstance(s, (int, float)) else 0.0)
-            r["sd_display"] = format_spread(float(s), j) if isinstance(s, (int, float)) else None
+            shown = j not in state.uncertain  # an uncertain joint shows its bounds instead
+            r["sd_display"] = format_spread(float(s), j) if shown and isinstance(s, (int, float)) else None
         tip = [float(v) for v in kin.tip(q, geom)]
         tip_sd = [float(v) for v in kin.tip_sd(q, sd, geom)]
         truth = None

@@ -113,9 +113,10 @@ function render(st) {
   renderMotion(m);
   const planBusy = running && m.kind !== "jog";
   for (const b of document.querySelectorAll("#pad button")) b.disabled = planBusy;
-  if (planBusy) $("jog-note").textContent = "jog is disabled while " + m.what + " runs";
-  else if (st.jog && st.jog.message) $("jog-note").textContent = st.jog.message;
-  else if (running) $("jog-note").textContent = "";
+  const jogNote = $("jog-note");
+  if (planBusy) jogNote.textContent = "jog is disabled while " + m.what + " runs";
+  else if (st.jog && st.jog.message) jogNote.textContent = st.jog.message;
+  else if (running || jogNote.textContent.startsWith("jog is disabled")) jogNote.textContent = "";
   if (planBusy && jogDir) releaseJogLocally();
   renderDay(st.day, st.audio);
   if (st.camera) startCamera();
@@ -236,7 +237,9 @@ function drawPlot() {
   const r = Math.max(3, Math.hypot(sd[ax], sd[ay]) * scale);
   ctx.strokeStyle = "#b3261e";
   ctx.fillStyle = "rgba(179, 38, 30, 0.15)";
-  ctx.beginPath(); ctx.arc(X(t), Y(t), r, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+  if (r < Math.min(w, h) / 2) {  // a spread larger than the plot is said in the joints' panel, not painted over it
+    ctx.beginPath(); ctx.arc(X(t), Y(t), r, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+  }
   ctx.fillStyle = "#b3261e";
   ctx.beginPath(); ctx.arc(X(t), Y(t), 3, 0, 2 * Math.PI); ctx.fill();
   // a scale bar and the axes' names
@@ -472,10 +475,14 @@ function renderDay(day, audio) {
   const res = $("day-result");
   if (day.result && !res.dataset.shown) {
     res.dataset.shown = "1";
+    const withErrors = day.result.parameters.some((q) => q.stderr !== null);
     const rows = day.result.parameters.map((q) => "<tr><td>" + escapeHtml(q.label) + "</td><td>" +
-      fmtParam(q.value, q.unit) + "</td><td>" + (q.stderr === null ? "" : "± " + fmtParam(q.stderr, q.unit)) + "</td></tr>");
-    res.innerHTML = "<h3>Result</h3><table class='params'><tr><th>parameter</th><th>value</th><th>standard error</th></tr>" +
-      rows.join("") + "</table>";
+      fmtParam(q.value, q.unit) + "</td>" +
+      (withErrors ? "<td>" + (q.stderr === null ? "" : "± " + fmtParam(q.stderr, q.unit)) + "</td>" : "") + "</tr>");
+    res.innerHTML = "<h3>Result</h3><table class='params'><tr><th>parameter</th><th>value</th>" +
+      (withErrors ? "<th>standard error</th>" : "") + "</tr>" + rows.join("") + "</table>" +
+      "<p class='small-text'>" + escapeHtml(day.result.method) + "; stored as calibration #" +
+      day.result.calibration_id + " and in use for every move from now on.</p>";
   }
   if (!day.result) delete res.dataset.shown;
 }
