@@ -22,9 +22,8 @@ from stickslip.cli import app
 from stickslip.cli._common import EXIT_CODES
 
 runner = CliRunner()
-FUZZ = settings(
+FUZZ = settings(  # derandomized by the profile in `make test`; `make test-explore` draws fresh examples
     max_examples=60,
-    derandomize=True,
     deadline=None,
     database=None,
     suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
