@@ -18,8 +18,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any, Generic, NoReturn, TypeVar, overload
 
 import typer
-from rich.console import Console
-from rich.markup import escape
+from rich.text import Text
 from typer.core import TyperGroup
 
 try:  # recent typer vendors click; older ones use the click package
@@ -28,8 +27,9 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..config import ConfigError, UserConfig, config_path, load_config
-from ..devices.base import redact_url, url_scheme
+from ..devices.base import redact_text, redact_url, url_scheme
 from ..units import UnitError, parse_angle, parse_length
+from ._output import OutputError, console, data_stream, err_console, finish, silence, styled, visible
 
 if TYPE_CHECKING:
     from rich.table import Table
@@ -58,16 +58,17 @@ def lazy_import(name: str) -> ModuleType:
     return module
 
 
-console = Console()
-err_console = Console(stderr=True)
+__all__ = ["console", "err_console"]  # the consoles of ._output, re-exported: the commands print through them
 
 EXIT_OK = 0
 EXIT_ABORTED = 1
 EXIT_BAD_INPUT = 2
 EXIT_CODES = {
     EXIT_OK: "success",
-    EXIT_ABORTED: "interrupted (Ctrl-C) or declined at a confirmation",
-    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault: one `error:` line says which",
+    EXIT_ABORTED: "interrupted (Ctrl-C), declined at a confirmation, or the reader of the output went away "
+    "(a closed pipe: `| head`; nothing more is printed)",
+    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault, or output that could not be written "
+    "(a full device): one `error:` line says which",
 }
 """The documented exit codes of every command."""
 
@@ -77,11 +78,36 @@ class OneLineErrors(TyperGroup):
 
     Click prints usage errors (a missing option, ``--joint 4``, a count out of range)
     as a multi-line panel; here they become the same one line as every other error.
+    The group also ends every command's output (:func:`._output.finish`) and turns a
+    write that failed (:class:`._output.OutputError`) into a quiet exit 1 for a closed
+    pipe or one ``error:`` line and exit 2 for anything else.
     """
 
     def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         try:
-            rv = super().main(*args, **{**kwargs, "standalone_mode": False})
+            return self._main(*args, standalone_mode=standalone_mode, **kwargs)
+        except OutputError as e:
+            if not standalone_mode:
+                raise
+            silence("stdout")  # what is left in the buffer goes nowhere: no "Exception ignored" at exit
+            if e.stream == "standard error":  # nowhere to say it
+                silence("stderr")
+                sys.exit(EXIT_ABORTED if e.closed else EXIT_BAD_INPUT)
+            if e.closed:  # the reader went away (| head): a quiet end
+                sys.exit(EXIT_ABORTED)
+            try:
+                _print_error(f"{e}; the output is incomplete")
+                finish()
+            except OutputError:
+                silence("stderr")
+            sys.exit(EXIT_BAD_INPUT)
+
+    def _main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        try:
+            try:
+                rv = super().main(*args, **{**kwargs, "standalone_mode": False})
+            finally:
+                finish()
         except UsageError as e:
             hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
             message = " ".join(e.format_message().split())
@@ -97,7 +123,7 @@ class OneLineErrors(TyperGroup):
         except (typer.Abort, KeyboardInterrupt):
             if not standalone_mode:
                 raise
-            err_console.print("[bold red]error:[/] interrupted", highlight=False)
+            err_console.print(Text.assemble(styled("error:", "bold red"), " interrupted"))
             sys.exit(EXIT_ABORTED)
         if not standalone_mode:
             return rv
@@ -111,19 +137,18 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
 
 
 def _print_error(message: object) -> None:
-    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    err_console.print(Text.assemble(styled("error:", "bold red"), " ", one_line(message)), soft_wrap=True)
 
 
 def one_line(message: object) -> str:
-    """``message`` as one printable line: line breaks become ``; ``, control characters escapes."""
+    """``message`` as one printable line: line breaks become ``; ``, control characters escapes, secrets ``***``."""
     parts = [p.strip() for p in str(message).splitlines() if p.strip()]
-    text = "; ".join(parts)
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return visible(redact_text("; ".join(parts)))
 
 
 def warn(message: str) -> None:
     """Print ``warning: message`` to stderr."""
-    err_console.print(f"[bold yellow]warning:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    err_console.print(Text.assemble(styled("warning:", "bold yellow"), " ", one_line(message)), soft_wrap=True)
 
 
 _pending_warnings: list[str] = []
@@ -164,8 +189,8 @@ def user_errors(*types: type[BaseException]) -> Iterator[None]:
 
 
 def print_json(obj: object) -> None:
-    """Print ``obj`` as JSON on stdout (NaN/inf become null)."""
-    sys.stdout.write(json.dumps(_clean(obj), indent=2) + "\n")
+    """Print ``obj`` as JSON on stdout (NaN/inf become null; ASCII, so any stream can take it)."""
+    data_stream().write(json.dumps(_clean(obj), indent=2) + "\n")
 
 
 def _clean(obj: object) -> object:

@@ -6,7 +6,6 @@ import csv
 import dataclasses
 import itertools
 import math
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TextIO
@@ -41,6 +40,7 @@ from ._common import (
     validation_table,
     warn_later,
 )
+from ._output import data_stream, styled
 
 CalibrationOpt = Annotated[
     Path | None,
@@ -198,7 +198,7 @@ def calibrate_cmd(
     if cal.selection:
         console.print(_selection_table(cal))
     for n in cal.provenance.notes:
-        console.print(f"[dim]note:[/] {n}", highlight=False)
+        console.print(styled("note:", "dim"), n, highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
 
@@ -350,7 +350,7 @@ def predict_cmd(
             w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts(), strict=True))
 
     if output is None:
-        emit(sys.stdout)
+        emit(data_stream())
     else:
         with user_errors():
             atomic_write(output, emit)  # streamed; a failed write leaves no half file

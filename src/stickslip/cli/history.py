@@ -12,12 +12,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
-from rich.markup import escape
 from rich.table import Table
 
 from ..devices.base import redact_url
 from . import app
 from ._common import DB_HELP, console, fail, open_store, print_json, read_table, user_errors, warn, warn_later
+from ._output import styled
 
 if TYPE_CHECKING:
     from ..measurements import Traverse
@@ -319,16 +319,19 @@ def anova(
                 str(t.n),
                 f"{t.F:.4g}" if math.isfinite(t.F) else "-",
                 f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
-                f"[bold red]{verdict}[/]" if verdict == "SIGNIFICANT" else verdict,
+                styled(verdict, "bold red") if verdict == "SIGNIFICANT" else verdict,
             )
         console.print(table)
     if show_skipped:
         for s in res.skipped:
-            console.print(f"[dim]skipped: {escape(s)}[/]")
+            console.print(styled(f"skipped: {s}", "dim"))
     elif res.skipped:
         console.print(
-            f"[dim]{len(res.skipped)} pose groups could not be tested (one traverse per day or direction); "
-            "--show-skipped lists them[/]"
+            styled(
+                f"{len(res.skipped)} pose groups could not be tested (one traverse per day or direction); "
+                "--show-skipped lists them",
+                "dim",
+            )
         )
 
 

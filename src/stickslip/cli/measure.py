@@ -23,6 +23,7 @@ from ._common import (
     warn,
     warn_later,
 )
+from ._output import styled
 
 
 @app.command()
@@ -122,9 +123,11 @@ def demo(
     from rich.table import Table
 
     console.print(
-        f"[bold]stickslip demo[/]: simulated MM3A, seed {result.seed}, day {result.day}: "
+        styled("stickslip demo", "bold"),
+        f": simulated MM3A, seed {result.seed}, day {result.day}: "
         f"{len(result.traverses)} calibration traverses ({result.device_s:.0f} s on the device "
-        f"in {result.elapsed_s:.1f} s), method {result.calibration.method}"
+        f"in {result.elapsed_s:.1f} s), method {result.calibration.method}",
+        sep="",
     )
     table = Table(title="Calibrated parameters beside the simulator's truth")
     with_se = any(c.parameter.stderr is not None for c in result.parameters)

@@ -44,6 +44,7 @@ __all__ = [
     "check_steps",
     "url_options",
     "redact_url",
+    "redact_text",
     "RedactSecrets",
     "SECRET_OPTIONS",
 ]
@@ -71,6 +72,29 @@ def redact_url(url: str) -> str:
     # user:PASSWORD@ after the scheme's "//", or at the start of a URL written without a scheme
     text = re.sub(r"(://|^)([^/@?#:]*):([^/@?#]*)@", r"\1\2:***@", text)
     return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}{m.group(2)}=***", text)
+
+
+_URL_IN_TEXT = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*:(?://|[^\s'\"<>]*@)[^\s'\"<>]*")
+_SECRET_IN_TEXT = re.compile(r"(?i)(?<![A-Za-z0-9_])(" + "|".join(sorted(SECRET_OPTIONS)) + r")=([^\s&;#'\"]*)")
+
+
+def redact_text(text: str) -> str:
+    """``text`` (a message, a log line, a stored note) with each device URL in it redacted.
+
+    Every ``scheme://...`` in the text goes through :func:`redact_url`, and so does a
+    ``password=...`` (or ``token=``, ...) outside a URL: the one redaction, wherever a URL
+    was pasted into a message. Never raises.
+
+    >>> redact_text("on anc300://HOST:7230?password=hunter2 measure with '--device anc300://u:pw@h'")
+    "on anc300://HOST:7230?password=*** measure with '--device anc300://u:***@h'"
+    >>> redact_text("token=abc and 5 um")
+    'token=*** and 5 um'
+    """
+    text = str(text)
+    if "=" not in text and "@" not in text:
+        return text
+    text = _URL_IN_TEXT.sub(lambda m: redact_url(m.group(0)), text)
+    return _SECRET_IN_TEXT.sub(lambda m: f"{m.group(1)}=***", text)
 
 
 class RedactSecrets(logging.Filter):
