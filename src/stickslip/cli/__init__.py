@@ -21,7 +21,7 @@ from pathlib import Path
 import typer
 from typer.models import CommandInfo
 
-from ._common import OneLineErrors, drop_warnings, flush_warnings
+from ._common import OneLineErrors, drop_warnings, flush_warnings, guard_options
 
 app = typer.Typer(
     name="stickslip",
@@ -135,11 +135,15 @@ def _name(info: CommandInfo) -> str:
 
 
 for _info in app.registered_commands:
+    if _info.callback is not None:
+        guard_options(_info.callback)  # finite floats, non-blank --day: the checks every command shares
     if _info.callback is not None and _info.callback.__doc__ and _info.help is None:
         _info.callback.__doc__ = _unwrap(_info.callback.__doc__)
     _info.rich_help_panel = _PANEL_OF.get(_name(_info), "Other")
 for _group in app.registered_groups:  # the commands of a group (config path, show, init)
     for _sub in _group.typer_instance.registered_commands if _group.typer_instance else []:
+        if _sub.callback is not None:
+            guard_options(_sub.callback)
         if _sub.callback is not None and _sub.callback.__doc__ and _sub.help is None:
             _sub.callback.__doc__ = _unwrap(_sub.callback.__doc__)
 app.registered_commands.sort(key=lambda i: _ORDER.index(_name(i)) if _name(i) in _ORDER else len(_ORDER))

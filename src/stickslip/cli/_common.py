@@ -274,6 +274,46 @@ def day_option(value: str | None) -> str | None:
         raise typer.BadParameter(str(e)) from None
 
 
+def _finite_option(value: float | None) -> float | None:
+    """A float option's value, or ``typer.BadParameter`` for ``inf`` (``1e999``) or ``nan``."""
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"not a finite number (got {value!r})")
+    return value
+
+
+def guard_options(callback: Callable[..., Any]) -> None:
+    """Give the options of one command the checks every command shares (one place for the whole CLI).
+
+    * a ``float`` option (without a parser of its own) refuses ``inf``, ``1e999`` and
+      ``nan``, naming the option (click's float type takes them);
+    * a ``--day`` option (a session label, or a filter by one) is checked by
+      :func:`day_option`: a blank or whitespace label is refused, naming ``--day``.
+
+    The check is set as the option's typer callback where it has none (an option with a
+    callback of its own checks itself). Called on every command when the CLI is built.
+    """
+    import inspect
+    import typing
+
+    from typer.models import ParameterInfo
+
+    for p in inspect.signature(callback, eval_str=True).parameters.values():
+        annotation, info = p.annotation, p.default
+        if typing.get_origin(annotation) is typing.Annotated:
+            annotation, *meta = typing.get_args(annotation)
+            info = next((m for m in meta if isinstance(m, ParameterInfo)), info)
+            # a string annotation (from __future__ import annotations) is evaluated afresh, with a new
+            # OptionInfo, each time it is read: keep the evaluated one, whose OptionInfo is set below
+            callback.__annotations__[p.name] = p.annotation
+        if not isinstance(info, ParameterInfo) or info.callback is not None or getattr(info, "parser", None):
+            continue
+        kinds = {a for a in (typing.get_args(annotation) or (annotation,)) if a is not type(None)}
+        if kinds == {float}:
+            info.callback = _finite_option
+        elif kinds == {str} and p.name == "day":
+            info.callback = day_option
+
+
 def _bare_number(text: str) -> bool:
     try:
         float(text.strip())
