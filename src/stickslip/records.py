@@ -9,8 +9,10 @@ checks a calibration document's physical ranges (``0 <= b < 1``, finite step siz
 the right scale for each joint) before it is turned into a model, so a file written in
 nanometres where metres are expected is refused with the reason instead of planned with.
 
-:func:`atomic_write_text` writes an output file through a temporary file in the same
-folder and ``os.replace``: a failed write leaves the old file as it was.
+:func:`atomic_write` writes an output file through a temporary file in the same
+folder, flushed and synced, then ``os.replace``: a failed write leaves the old file as it
+was and says so (:class:`WriteError`); a folder, FIFO or device is never written into
+(:func:`writable_target`), nor read from (:func:`regular_file`).
 
 This module imports only the standard library (it sits below every other layer).
 """
@@ -42,12 +44,27 @@ STEP_RANGE = {"m": (1e-10, 1e-4), "rad": (1e-10, 1e-2)}
 """``unit -> (smallest, largest)`` magnitude accepted for a step size or a step-size term."""
 
 
-def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> str:
-    """The text of a regular file of at most ``max_bytes`` bytes (UTF-8).
+def special_kind(mode: int) -> str | None:
+    """What a file of ``st_mode`` ``mode`` is (``"a folder"``, ``"a FIFO ..."``), or ``None`` for a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (a named pipe)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
 
-    Raises ``ValueError`` ``"<path>: <reason>"`` for a missing file, a folder, a FIFO or
-    device (never opened, so a pipe cannot hang the reader), a file over the limit, or
-    text that is not UTF-8. ``what`` names the kind of file in the message.
+
+def regular_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` if it is a regular file (a symbolic link to one counts); else ``ValueError`` naming it and what it is.
+
+    Checked with ``stat`` before anything opens it: a folder, a FIFO (whose opening
+    blocks until someone writes), a device (``/dev/zero`` never ends) or a socket is
+    refused, never opened. ``what`` names the kind of file in the message.
     """
     p = Path(path)
     try:
@@ -56,10 +73,44 @@ def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = 
         raise ValueError(f"cannot read {what} {p}: no such {what} file") from None
     except OSError as e:
         raise ValueError(f"{p}: cannot read the {what} file ({e.strerror or e})") from None
-    if stat.S_ISDIR(st.st_mode):
+    kind = special_kind(st.st_mode)
+    if kind == "a folder":
         raise ValueError(f"{p}: is a folder, not a {what} file")
-    if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{p}: not a regular file (a pipe or device?); give a {what} file")
+    if kind is not None:
+        raise ValueError(f"{p}: is {kind}, not a regular file; give a {what} file")
+    return p
+
+
+def writable_target(path: str | os.PathLike[str], what: str = "output") -> Path:
+    """The file a write to ``path`` should replace: ``path``, or the file a symbolic link at it points to.
+
+    Raises ``ValueError`` naming ``path`` when what is there is not a regular file (a
+    folder, a FIFO, a device such as ``/dev/full`` or ``/dev/null``, a socket): such a
+    thing is never opened, written through or replaced by a file. A path where nothing
+    is yet is fine.
+    """
+    p = Path(path)
+    target = Path(os.path.realpath(p)) if p.is_symlink() else p
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        return target
+    except OSError as e:
+        raise ValueError(f"{p}: cannot write the {what} file ({e.strerror or e})") from None
+    kind = special_kind(st.st_mode)
+    if kind is not None:
+        raise ValueError(f"{p}: is {kind}, not a file; give the path of a file to write the {what} to")
+    return target
+
+
+def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> str:
+    """The text of a regular file of at most ``max_bytes`` bytes (UTF-8).
+
+    Raises ``ValueError`` ``"<path>: <reason>"`` for a missing file, a folder, a FIFO or
+    device (never opened, so a pipe cannot hang the reader: :func:`regular_file`), a file
+    over the limit, or text that is not UTF-8. ``what`` names the kind of file in the message.
+    """
+    p = regular_file(path, what)
     try:
         with open(p, "rb") as f:
             data = f.read(max_bytes + 1)
@@ -271,24 +322,53 @@ def _file_mode(p: Path) -> int:
         return 0o666 & ~mask
 
 
+class WriteError(OSError):
+    """A file could not be written; the message names it, says why, and that the old file is kept.
+
+    An ``OSError`` (with the errno, reason and the path asked for), whose text is one
+    line for a person: ``cannot write out.csv: No space left on device; the old file is
+    kept as it was`` (or ``; nothing was written`` where there was none).
+    """
+
+    def __init__(self, path: Path, error: OSError, kept: bool) -> None:
+        super().__init__(error.errno, error.strerror or str(error), str(path))
+        reason = error.strerror or str(error)
+        after = "the old file is kept as it was" if kept else "nothing was written"
+        self.message = f"cannot write {path}: {reason}; {after}"
+
+    def __str__(self) -> str:
+        return self.message
+
+
 def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mode: str = "w") -> Path:
     """Write ``path`` through a temporary file in its folder, then ``os.replace`` it.
+
+    The checked write every output file of the toolkit goes through:
+
+    * what is at ``path`` must be a regular file or nothing (:func:`writable_target`): a
+      folder, a FIFO or a device (``/dev/full``) is refused, never replaced by a file; a
+      symbolic link is written through (the file it points to is replaced, the link stays);
+    * ``write(f)`` receives the open temporary file; it is flushed and ``fsync``-ed before
+      the rename, and the folder is ``fsync``-ed after it (POSIX), so the new file is on
+      the disk when this returns;
+    * if anything fails (a full disk, a quota, an I/O error, a read-only folder, an
+      exception in ``write``) the temporary file is removed and the old ``path`` is left
+      exactly as it was; an ``OSError`` is raised as :class:`WriteError` (one line naming
+      the file, the reason and that the old file is kept), the writer's own exception as it is.
 
     The file gets the permissions a plain ``open(path, "w")`` would give it (an existing
     file keeps its own; a new one 0666 less the umask), not the temporary file's 0600:
     colleagues who read a lab's shared results folder still can.
-
-    ``write(f)`` receives the open temporary file. If anything fails (a full disk, a
-    read-only folder, an exception in ``write``) the temporary file is removed, the old
-    ``path`` is left exactly as it was, and ``OSError``/the writer's exception propagates.
     """
-    p = Path(path)
+    asked = Path(path)
+    p = writable_target(asked)
     folder = p.parent if str(p.parent) else Path(".")
     mode_bits = _file_mode(p)
+    kept = p.exists()
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
     except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
-        raise OSError(e.errno, e.strerror, str(p)) from None
+        raise WriteError(asked, e, kept) from None
     try:
         kwargs: dict[str, Any] = {} if "b" in mode else {"encoding": "utf-8", "newline": ""}
         with os.fdopen(fd, mode, **kwargs) as f:
@@ -302,10 +382,27 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
             os.unlink(tmp)
         except OSError:
             pass
-        if isinstance(e, OSError) and e.filename == tmp:  # name the file asked for, not the temporary one
-            raise OSError(e.errno, e.strerror, str(p)) from None
+        if isinstance(e, OSError) and not isinstance(e, WriteError):
+            raise WriteError(asked, e, kept) from None
         raise
+    _sync_folder(folder)
     return p
+
+
+def _sync_folder(folder: Path) -> None:
+    """``fsync`` a folder after a rename in it, so the new name survives a power cut (POSIX; elsewhere nothing)."""
+    if os.name != "posix":
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems cannot sync a folder; the file itself is synced
+    finally:
+        os.close(fd)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:

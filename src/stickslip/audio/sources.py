@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..records import atomic_write
+from ..records import atomic_write, regular_file
 
 __all__ = [
     "CANCEL_DB",
@@ -48,6 +48,17 @@ def _soundfile() -> Any:
     return soundfile
 
 
+def _regular(path: str | Path) -> Path:
+    """``path`` if it is a regular file: a FIFO or device is never opened (records.regular_file), else the reason."""
+    p = Path(path)
+    if not p.exists():
+        return p  # said where it is opened, as before
+    try:
+        return regular_file(p, "recording")
+    except ValueError as e:
+        raise AudioSourceError(str(e)) from None
+
+
 def _open_error(path: Path, e: Exception) -> AudioSourceError:
     if not path.exists():
         return AudioSourceError(f"{path}: no such file")
@@ -59,7 +70,7 @@ def _open_error(path: Path, e: Exception) -> AudioSourceError:
 def wav_info(path: str | Path) -> tuple[int, int, float]:
     """(sample rate Hz, channels, duration s) of an audio file."""
     sf = _soundfile()
-    p = Path(path)
+    p = _regular(path)
     try:
         info = sf.info(str(p))
     except Exception as e:  # soundfile raises LibsndfileError / RuntimeError / TypeError
@@ -83,7 +94,7 @@ def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) 
     if int(block) < 1:
         raise ValueError(f"block must be >= 1 sample, got {block}")
     sf = _soundfile()
-    p = Path(path)
+    p = _regular(path)
     try:
         f = sf.SoundFile(str(p))
     except Exception as e:
@@ -140,7 +151,7 @@ def channel_problem(path: str | Path, seconds: float = 2.0) -> str | None:
     from .stepclock import step_rate_hz
 
     sf = _soundfile()
-    p = Path(path)
+    p = _regular(path)
     try:
         with sf.SoundFile(str(p)) as f:
             rate, n = int(f.samplerate), int(f.channels)

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..records import regular_file
 from .detector import StopEvent
 from .sources import AudioSourceError, read_wav
 
@@ -78,7 +79,11 @@ def read_vibration(
     if p.suffix.lower() == ".wav":
         return read_wav(p)
     try:
+        if p.exists():
+            regular_file(p, "CSV of samples")  # a folder, FIFO or device is never opened
         text = p.read_text(encoding="utf-8")
+    except ValueError as e:
+        raise AudioSourceError(str(e)) from None
     except FileNotFoundError:
         raise AudioSourceError(f"{p}: no such file") from None
     except (OSError, UnicodeDecodeError) as e:

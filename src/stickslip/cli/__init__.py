@@ -21,7 +21,7 @@ from pathlib import Path
 import typer
 from typer.models import CommandInfo
 
-from ._common import OneLineErrors, drop_warnings, flush_warnings, guard_options
+from ._common import OneLineErrors, describe, drop_warnings, flush_warnings, guard_options
 
 app = typer.Typer(
     name="stickslip",
@@ -57,25 +57,38 @@ def _logging(verbose: int, log_file: Path | None) -> None:
     """-v: INFO to stderr, -vv: DEBUG (every message to and from a controller); --log-file: DEBUG to a file."""
     import logging
 
+    from ..devices.base import RedactText
+
     log = logging.getLogger("stickslip")
     for old in [h for h in log.handlers if getattr(h, "_stickslip_cli", False)]:
         log.removeHandler(old)
         old.close()
+    from ._output import visible
+
+    class Visible(logging.Formatter):  # a log line on the terminal follows the output rules (docs/cli.md)
+        def format(self, record: logging.LogRecord) -> str:
+            return visible(super().format(record))
+
     fmt = logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
     handlers: list[logging.Handler] = []
     if verbose:
         h: logging.Handler = logging.StreamHandler()
         h.setLevel(logging.INFO if verbose == 1 else logging.DEBUG)
+        h.setFormatter(Visible(fmt._fmt))
         handlers.append(h)
     if log_file is not None:
+        from ..records import writable_target
+
         try:
-            h = logging.FileHandler(log_file, encoding="utf-8")
-        except OSError as e:
-            raise typer.BadParameter(f"cannot write the log file: {e}", param_hint="--log-file") from None
+            h = logging.FileHandler(writable_target(log_file, "log"), encoding="utf-8")  # never a FIFO: it would hang
+        except (OSError, ValueError) as e:
+            raise typer.BadParameter(f"cannot write the log file: {describe(e)}", param_hint="--log-file") from None
         h.setLevel(logging.DEBUG)
         handlers.append(h)
     for h in handlers:
-        h.setFormatter(fmt)
+        if h.formatter is None:
+            h.setFormatter(fmt)
+        h.addFilter(RedactText())  # every log line through the one redaction
         h._stickslip_cli = True  # type: ignore[attr-defined]  # to find ours again on the next call
         log.addHandler(h)
     log.setLevel(logging.DEBUG if handlers else logging.NOTSET)

@@ -178,14 +178,21 @@ def drop_warnings() -> None:
 
 @contextmanager
 def user_errors(*types: type[BaseException]) -> Iterator[None]:
-    """Turn the given exception types (and ValueError, OSError) into ``fail(str(e))``."""
+    """Turn the given exception types (and ValueError, OSError) into ``fail`` with :func:`describe`."""
     catch = types + (ValueError, OSError)
     try:
         yield
     except typer.Exit:
         raise
     except catch as e:  # noqa: B902
-        fail(str(e))
+        fail(describe(e))
+
+
+def describe(e: BaseException) -> str:
+    """An exception as a person reads it: an ``OSError`` as ``path: reason`` (not ``[Errno 28] ...: 'path'``)."""
+    if isinstance(e, OSError) and type(e).__str__ is OSError.__str__ and e.strerror:
+        return f"{e.filename}: {e.strerror}" if e.filename else str(e.strerror)
+    return str(e)
 
 
 def print_json(obj: object) -> None:
@@ -481,11 +488,16 @@ def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Ge
     return Setting(DEFAULT_GEOMETRY, "default")
 
 
-def open_store(db: Path | None, must_exist: bool = False) -> Store:
+@contextmanager
+def open_store(db: Path | None, must_exist: bool = False) -> Iterator[Store]:
     """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the config file's, else the data folder).
 
-    A command that only reads passes ``must_exist=True`` and refuses a file that does not
-    exist yet instead of creating an empty one; storage faults are one ``error:`` line.
+    A context manager (``with open_store(db) as st:``), the one way commands open the
+    database. A command that only reads passes ``must_exist=True`` and refuses a file
+    that does not exist yet instead of creating an empty one. Every storage fault, when
+    opening (another application's file, a FIFO, a newer schema) or inside the block (a
+    damaged page, a stored value of the wrong type, a full disk), is one ``error:`` line
+    naming the file; the store is closed either way.
     """
     from ..storage import Store, StoreError
 
@@ -493,8 +505,12 @@ def open_store(db: Path | None, must_exist: bool = False) -> Store:
     if must_exist and not path.exists():
         fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
     with user_errors(StoreError):
-        return Store.open(path)
-    raise AssertionError("unreachable")  # pragma: no cover - user_errors exits on a StoreError
+        store = Store.open(path)
+    try:
+        with store:
+            yield store
+    except StoreError as e:
+        fail(describe(e))
 
 
 def fail_table(e: TableError) -> NoReturn:

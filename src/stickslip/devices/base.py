@@ -46,6 +46,7 @@ __all__ = [
     "redact_url",
     "redact_text",
     "RedactSecrets",
+    "RedactText",
     "SECRET_OPTIONS",
 ]
 
@@ -113,6 +114,18 @@ class RedactSecrets(logging.Filter):
         for s in self.secrets:
             msg = msg.replace(s, "***")
         record.msg, record.args = msg, None
+        return True
+
+
+class RedactText(logging.Filter):
+    """A logging filter that passes every record's message through :func:`redact_text` (URLs, ``password=...``).
+
+    Attached to every handler the command line installs (``-v``, ``--log-file``), so no
+    log line shows a secret that reached a message in a URL.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.msg, record.args = redact_text(record.getMessage()), None
         return True
 
 
