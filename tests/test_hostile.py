@@ -646,7 +646,6 @@ def objects_in(obj, path=()):
             yield from objects_in(v, (*path, i))
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 (json): fails before its fix")
 @HOSTILE
 @given(kind=st.sampled_from(["calibration", "tuning", "state"]), mutation=st.sampled_from(["twice", "newer"]),
        data=st.data())

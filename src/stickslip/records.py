@@ -156,6 +156,80 @@ def read_json_text(path: str | os.PathLike[str], what: str, max_bytes: int = MAX
     return check_json_text(read_text_bounded(path, what, max_bytes), str(path))
 
 
+# what json's parser says, as a person would (its own words name its grammar, not the file)
+_JSON_PROBLEMS = (
+    ("Expecting property name", "a key must be a string in double quotes (no trailing comma before '}')"),
+    ("Expecting value", "a value is missing or is not JSON (text in double quotes, no trailing comma)"),
+    ("Expecting ',' delimiter", "a ',' is missing between two items"),
+    ("Expecting ':' delimiter", "a ':' is missing after a key"),
+    ("Extra data", "more text after the end of the document"),
+    ("Unterminated string", "a string is not closed with a double quote"),
+    ("Invalid control character", "a control character (a tab, a line break) inside a string"),
+    ("Invalid \\escape", "a backslash escape JSON does not know inside a string"),
+)
+
+
+def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any]]:
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, v in items:
+            if k in out:
+                raise ValueError(f"{where}: the key {k!r} is given twice in one object (which one is meant?)")
+            out[k] = v
+        return out
+
+    return pairs
+
+
+def loads_json(text: str, where: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """The JSON document in ``text``, read strictly; ``ValueError`` ``"<where>: <reason>"`` otherwise.
+
+    The one JSON reader of the toolkit (calibrations, tunings, device state, stored
+    documents): nesting deeper than ``max_depth`` and ``NaN``/``Infinity`` are refused
+    (:func:`check_json_text`), so is a key given twice in one object (``json`` would keep
+    the last silently), and a syntax error is said in words with its line and column.
+
+    >>> loads_json('{"a": 1}', "x.json")
+    {'a': 1}
+    >>> loads_json('{"version": 1, "version": 9}', "x.json")
+    Traceback (most recent call last):
+    ...
+    ValueError: x.json: the key 'version' is given twice in one object (which one is meant?)
+    >>> loads_json('[1 2]', "x.json")
+    Traceback (most recent call last):
+    ...
+    ValueError: x.json: not valid JSON at line 1, column 4: a ',' is missing between two items
+    """
+    check_json_text(text, where, max_depth)
+    try:
+        return json.loads(text, object_pairs_hook=_no_key_twice(where))
+    except json.JSONDecodeError as e:
+        reason = next((ours for theirs, ours in _JSON_PROBLEMS if e.msg.startswith(theirs)), "a syntax error")
+        raise ValueError(f"{where}: not valid JSON at line {e.lineno}, column {e.colno}: {reason}") from None
+    except RecursionError:  # pragma: no cover - check_json_text bounds the depth first
+        raise ValueError(f"{where}: JSON nested too deeply") from None
+
+
+def read_json(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
+    """The JSON document in the file ``path`` (:func:`read_text_bounded` + :func:`loads_json`)."""
+    return loads_json(read_text_bounded(path, what, max_bytes), str(path))
+
+
+def check_version(data: object, where: str, what: str, newest: int) -> None:
+    """Refuse a document whose ``"version"`` is newer than ``newest`` (this release reads up to it), naming it.
+
+    A document without a version, or with one this release knows, passes; the caller
+    checks what else its versions mean.
+    """
+    if not isinstance(data, dict) or "version" not in data:
+        return
+    v = data["version"]
+    if isinstance(v, int) and not isinstance(v, bool) and v > newest:
+        raise ValueError(
+            f"{where}: {what} version {v} is newer than this stickslip reads ({newest}): upgrade stickslip"
+        )
+
+
 # -- calibration documents ---------------------------------------------------------------------
 
 _PRISMATIC = {"a": "step", "c": "term", "b": "ratio"}
@@ -289,17 +363,14 @@ def check_tuning_dict(data: object) -> None:
 
 
 def read_tuning_text(path: str | os.PathLike[str], error: type[ValueError] = ValueError) -> str:
-    """The text of a tuning file, bounded, depth-checked and, if it parses, range-checked.
+    """The text of a tuning file, bounded, read strictly (:func:`loads_json`) and range-checked.
 
-    Text that is not JSON is returned as is, for the caller's parser to report. Problems
-    raise ``error`` (a ``ValueError`` subclass the caller already handles).
+    Problems (not JSON, a key given twice, a range) raise ``error`` (a ``ValueError``
+    subclass the caller already handles), naming the file.
     """
     try:
         text = read_json_text(path, "tuning")
-        try:
-            data = json.loads(text)
-        except ValueError:
-            return text
+        data = loads_json(text, str(path))
         try:
             check_tuning_dict(data)
         except ValueError as e:
