@@ -380,6 +380,49 @@ def read_tuning_text(path: str | os.PathLike[str], error: type[ValueError] = Val
     return text
 
 
+# -- spreadsheet cells ---------------------------------------------------------------------------
+
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+"""What a spreadsheet reads as the start of a formula in a CSV cell (OWASP's CSV injection list)."""
+_PLAIN_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z")
+
+
+def needs_guard(cell: str) -> bool:
+    """Whether :func:`guard_cell` changes ``cell`` (it would start a formula, after any leading quotes)."""
+    rest = cell.lstrip("'")
+    if not rest.startswith(FORMULA_START) or rest in ("+", "-"):
+        return False
+    return _PLAIN_NUMBER.match(rest) is None
+
+
+def guard_cell(cell: str) -> str:
+    """A CSV cell as it is written: one a spreadsheet would run as a formula gets a leading ``'``.
+
+    The rule (OWASP's, for CSV injection), kept exact so that numbers stay numbers:
+
+    * a cell that begins with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return is
+      prefixed with ``'`` (a spreadsheet then shows it as text);
+    * except a plain decimal number (``-1.5707963``, ``+3``, ``-2.5e-06``: what the
+      tables hold in SI units, and what a spreadsheet reads as a number, never a
+      formula) and a lone ``+`` or ``-`` (the direction column: nothing to compute);
+    * a cell that begins with quotes before such a start gets one more quote, so that
+      :func:`unguard_cell` gives every cell back exactly: guarding is reversible.
+
+    >>> [guard_cell(c) for c in ("=HYPERLINK(x)", "-1.5e-06", "+", "@SUM(A1)", "'=x", "day1", "-1+1")]
+    ["'=HYPERLINK(x)", '-1.5e-06', '+', "'@SUM(A1)", "''=x", 'day1', "'-1+1"]
+    """
+    return "'" + cell if needs_guard(cell) else cell
+
+
+def unguard_cell(cell: str) -> str:
+    """A cell as :func:`guard_cell` was given it (our own readers take the guard off).
+
+    >>> [unguard_cell(c) for c in ("'=HYPERLINK(x)", "''=x", "'abc", "-1.5")]
+    ['=HYPERLINK(x)', "'=x", "'abc", '-1.5']
+    """
+    return cell[1:] if cell.startswith("'") and needs_guard(cell[1:]) else cell
+
+
 # -- safe writes -------------------------------------------------------------------------------
 
 

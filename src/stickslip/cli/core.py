@@ -6,7 +6,7 @@ import csv
 import dataclasses
 import itertools
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TextIO
 
@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --h
 from ..clock import stale_message
 from ..devices.base import device_key
 from ..joints import joint_spec
-from ..records import atomic_write
+from ..records import atomic_write, guard_cell, needs_guard, unguard_cell
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
@@ -293,6 +293,7 @@ def predict_cmd(
     Example: stickslip predict -c cal.json poses.csv -o predicted.csv
     """
     from ..measurements import TableError, read_pose_columns
+    from ..measurements.poses import POSE_COLUMNS
 
     cal = _load_calibration(calibration)
     try:
@@ -310,7 +311,7 @@ def predict_cmd(
     if json_out:
         out = []
         for cells, g in zip(table.cells(), preds.tolist(), strict=True):
-            r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
+            r: dict[str, object] = {h: _maybe_number(unguard_cell(cells[i])) for h, i in last.items()}
             r["gamma_pred"] = g
             out.append(r)
         if pi95 is not None:
@@ -324,18 +325,29 @@ def predict_cmd(
         for i in range(0, len(preds), 65536):
             yield from repr(preds[i : i + 65536].tolist())[1:-1].split(", ")
 
+    # a cell a spreadsheet would run as a formula is written guarded (records.guard_cell). The pose columns
+    # hold checked numbers and signs; a table whose own columns and names need no guard passes through as it is
+    own = [i for i, h in enumerate(header) if h not in POSE_COLUMNS]
+    safe = not any(map(needs_guard, header)) and not (
+        own and any(needs_guard(cs[i]) for cs in table.cells() for i in own)
+    )
+
+    def cells_of() -> Iterator[Sequence[str]]:
+        return table.cells() if safe else ([guard_cell(unguard_cell(c)) for c in cs] for cs in table.cells())
+
     def emit(f: TextIO) -> None:
         w = csv.writer(f, lineterminator="\n")
+        head = out_header if safe else [guard_cell(unguard_cell(h)) for h in out_header]
         if pi95 is not None:  # the general path, one more column
-            w.writerow([*out_header, "gamma_pi95"])
+            w.writerow([*head, "gamma_pi95"])
             k = gamma_at[0] if gamma_at else len(take)
             w.writerows(
                 [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :]), repr(h)]
-                for cells, g, h in zip(table.cells(), texts(), pi95.tolist(), strict=True)
+                for cells, g, h in zip(cells_of(), texts(), pi95.tolist(), strict=True)
             )
             return
-        w.writerow(out_header)
-        if table.raw is not None and not gamma_at:
+        w.writerow(head)
+        if table.raw is not None and not gamma_at and safe:
             # plain rows (no quotes, none blank or short): csv would write each back as it stands
             rows = map("{},{}\n".format, table.raw, texts())
             while part := "".join(itertools.islice(rows, 65536)):
@@ -344,10 +356,10 @@ def predict_cmd(
             k = gamma_at[0]
             w.writerows(
                 [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :])]
-                for cells, g in zip(table.cells(), texts(), strict=True)
+                for cells, g in zip(cells_of(), texts(), strict=True)
             )
         else:
-            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts(), strict=True))
+            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(cells_of(), texts(), strict=True))
 
     if output is None:
         emit(data_stream())
