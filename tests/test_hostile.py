@@ -951,7 +951,6 @@ unopenable = st.one_of(
 )  # fmt: skip
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 (urls): fails before its fix")
 @HOSTILE
 @given(url=unopenable, cmd=st.sampled_from(["import", "calibrate", "fit"]))
 @example(url="anc300://[::1", cmd="import")

@@ -27,7 +27,7 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..config import ConfigError, UserConfig, config_path, load_config
-from ..devices.base import redact_text, redact_url, url_scheme
+from ..devices.base import check_device_url, redact_text, redact_url
 from ..units import UnitError, parse_angle, parse_length
 from ._output import OutputError, console, data_stream, err_console, finish, silence, styled, visible
 
@@ -294,7 +294,10 @@ def guard_options(callback: Callable[..., Any]) -> None:
     * a ``float`` option (without a parser of its own) refuses ``inf``, ``1e999`` and
       ``nan``, naming the option (click's float type takes them);
     * a ``--day`` option (a session label, or a filter by one) is checked by
-      :func:`day_option`: a blank or whitespace label is refused, naming ``--day``.
+      :func:`day_option`: a blank or whitespace label is refused, naming ``--day``;
+    * a ``--device`` option is checked by :func:`device_option`: a URL that could never
+      be opened (no scheme, an unknown one, a bad port, a host name DNS cannot carry) is
+      refused before any command uses it, records it or stores anything with it.
 
     The check is set as the option's typer callback where it has none (an option with a
     callback of its own checks itself). Called on every command when the CLI is built.
@@ -319,6 +322,20 @@ def guard_options(callback: Callable[..., Any]) -> None:
             info.callback = _finite_option
         elif kinds == {str} and p.name == "day":
             info.callback = day_option
+        elif kinds == {str} and p.name == "device":
+            info.callback = device_option
+
+
+def device_option(value: str | None) -> str | None:
+    """A ``--device`` option: the URL if a device could be opened with it, else ``typer.BadParameter`` saying why."""
+    if value is None:
+        return None
+    from ..devices.base import check_device_url
+
+    try:
+        return check_device_url(value)
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
 
 
 def _bare_number(text: str) -> bool:
@@ -368,7 +385,7 @@ def device_setting(option: str | None, flag: str = "--device") -> Setting[str]:
     """The controller URL: ``option``, else the file's ``device``, else ``sim://``."""
     if option is not None:
         try:
-            url_scheme(option)
+            check_device_url(option)
         except ValueError as e:
             fail(f"{flag}: {e}")
         return Setting(option, "option", flag)

@@ -41,6 +41,7 @@ __all__ = [
     "open_device",
     "device_key",
     "check_setting",
+    "check_device_url",
     "check_steps",
     "url_options",
     "redact_url",
@@ -282,6 +283,7 @@ BACKENDS: dict[str, str | Factory] = {
     "sim": "stickslip.sim.arm:open_url",
     "sim+physics": "stickslip.sim.physics:open_url",
     "mm3a": "stickslip.devices.nanocontrol:open_url",
+    "mm3a+socket": "stickslip.devices.nanocontrol:open_url",
     "anc300": "stickslip.devices.anc300:open_url",
 }
 
@@ -291,11 +293,57 @@ def register_backend(scheme: str, factory: str | Factory) -> None:
     BACKENDS[scheme] = factory
 
 
+def check_device_url(url: str) -> str:
+    """``url`` if it names a device that could be opened; ``ValueError`` (without a secret) if it never can.
+
+    Checked without opening anything: a scheme with ``//`` (:func:`url_scheme`) that a
+    backend is registered for, a URL that parses, a port in 1..65535, a host name DNS
+    could carry (labels of 1 to 63 characters, at most 253 in all), and a host or a
+    port for anything but the simulator. A URL that
+    passes may still fail to open (nothing answers there); one that fails never would,
+    and is neither opened nor stored.
+
+    >>> check_device_url("anc300://10.0.0.2:7230?axes=1,2,3")
+    'anc300://10.0.0.2:7230?axes=1,2,3'
+    >>> check_device_url("anc300://h:99999")
+    Traceback (most recent call last):
+    ...
+    ValueError: malformed device URL 'anc300://h:99999': the port must be a number in 1..65535
+    """
+    scheme = url_scheme(url)
+    if BACKENDS.get(scheme) is None:  # a variant (mm3a+socket) is registered as such: anc300+x is no URL
+        known = ", ".join(f"{s}://" for s in sorted(BACKENDS))
+        raise ValueError(f"unknown device URL scheme {scheme!r} in {redact_url(url)!r} (known: {known})")
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+        host = parts.hostname
+    except ValueError:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535") from None
+    if port == 0:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
+    if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
+        raise ValueError(
+            f"device URL {redact_url(url)!r} names no host and no port: write {scheme}://HOST or "
+            f"{scheme}:///dev/ttyUSB0 (a serial port)"
+        )
+    if host and not (host.startswith("[") or ":" in host):  # a name (or IPv4 address), not an IPv6 address
+        labels = host.rstrip(".").split(".")
+        if len(host) > 253 or any(not 1 <= len(label) <= 63 for label in labels):
+            raise ValueError(
+                f"the host name in {redact_url(url)[:80]!r} cannot exist: a host name has labels of 1 to 63 "
+                f"characters between its dots, at most 253 in all (this one: {len(host)}, its longest label "
+                f"{max(map(len, labels))})"
+            )
+    return url
+
+
 def open_device(url: str = "sim://") -> Controller:
     """Open the controller a URL names.
 
     Raises :class:`DeviceError` for an unknown scheme or a device that cannot be opened,
-    ``ValueError`` for a malformed URL or option; messages never contain a secret.
+    ``ValueError`` for a malformed URL or option (:func:`check_device_url`); messages
+    never contain a secret.
     """
     scheme = url_scheme(url)
     base_scheme = scheme.split("+", 1)[0]
@@ -305,6 +353,7 @@ def open_device(url: str = "sim://") -> Controller:
         raise DeviceError(
             f"unknown device URL scheme {scheme!r} in {redact_url(url)!r} (known: {known})"
         )
+    check_device_url(url)
     if isinstance(factory, str):
         mod_name, func_name = factory.split(":")
         try:
