@@ -845,7 +845,6 @@ def test_special_files_are_refused_before_they_are_opened(tmp_path, kit, role, k
 # ------------------------------------------------------------------ 10: a device that goes silent mid-move
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 (timeout): fails before its fix")
 @FEW
 @given(timeout=st.sampled_from([0.05, 0.1, 0.2, 0.3]), after=st.integers(0, 2), burst=st.integers(5, 40))
 @example(timeout=0.2, after=1, burst=10)
