@@ -1052,7 +1052,6 @@ jog_status = st.builds(
 )
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 (jog): fails before its fix")
 @FEW
 @given(statuses=st.lists(jog_status, min_size=2, max_size=4), width=st.sampled_from([80, 100, 120]))
 def test_jogs_display_fits_and_redraws_in_place(monkeypatch, statuses, width):
@@ -1070,7 +1069,7 @@ def test_jogs_display_fits_and_redraws_in_place(monkeypatch, statuses, width):
         term.feed(out.getvalue())
         out.seek(0)
         out.truncate()
-        heights.append(sum(1 for row in term.rows if row.strip()))
+        heights.append(max(i for i, row in enumerate(term.rows) if row.strip()) + 1)  # rows down to the last used
     getattr(screen, "close", lambda: None)()
     term.feed(out.getvalue())
     assert term.scrolled == 0, "the display scrolled: it printed new lines instead of redrawing"
