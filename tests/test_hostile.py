@@ -1082,13 +1082,14 @@ def test_jogs_display_fits_and_redraws_in_place(monkeypatch, statuses, width):
 # ------------------------------------------------------------------------ 14: messages that help
 
 
-@pytest.mark.xfail(strict=True, reason="issue 34 (messages): fails before its fix")
 @HOSTILE
 @given(
     case=st.sampled_from(
         [
             (["where", "--offline", "--db", "{db}", "--q2", "pi/0"], ["--q2", "pi/0", "zero"]),
-            (["plan", "-c", "{cal}", "-j", "3", "--from", "0", "--to", "1um", "--q1", "1/0deg"], ["--q1", "zero"]),
+            (["plan", "-c", "{cal}", "-j", "3", "--from", "0", "--to", "1um", "--q1", "-pi/0"], ["--q1", "zero"]),
+            (["plan", "-c", "{cal}", "-j", "3", "--from", "0", "--to", "1e999"], ["--to", "finite"]),
+            (["traverse", "-j", "3", "-d", "+", "--tuning", "{tuning}", "--no-db", "--psi", "x"], ["--psi", "x"]),
             (["move", "-c", "{cal}", "-j", "2", "--by", "pi/0", "--db", "{db}"], ["--by", "zero"]),
             (["where", "-d", "anc300://" + "a" * 64 + ".lab:7230", "--db", "{db}"], ["--device", "host name"]),
             (["where", "-d", "anc300://" + ".".join(["abcdefgh"] * 30), "--db", "{db}"], ["--device", "host name"]),

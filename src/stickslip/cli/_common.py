@@ -34,7 +34,7 @@ from ._output import OutputError, console, data_stream, err_console, finish, sil
 if TYPE_CHECKING:
     from rich.table import Table
 
-    from ..kinematics import Geometry
+    from ..kinematics import Geometry, Pose
     from ..measurements import TableError, Traverse
     from ..storage import Store
 
@@ -267,6 +267,22 @@ def length_option(value: None) -> None: ...
 def length_option(value: str | None) -> float | None:
     """A length option in m (``2mm``, ``30um``, ``850nm``); ``None`` if not given (typer parser or callback)."""
     return None if value is None else _parse_unit(parse_length, "a length: metres, or with mm / um / nm", value)
+
+
+def pose_options(q1: str, q2: str, q3: str, theta: str, psi: str) -> Pose:
+    """The pose of ``--q1 --q2 --q3 --theta --psi`` given as text (units allowed); an ``error:`` naming the option."""
+    from ..kinematics import Pose
+
+    values = []
+    for flag, text, parse in (
+        ("--q1", q1, angle_option), ("--q2", q2, angle_option), ("--q3", q3, length_option),
+        ("--theta", theta, angle_option), ("--psi", psi, angle_option),
+    ):  # fmt: skip
+        try:
+            values.append(parse(text))
+        except typer.BadParameter as e:
+            fail(f"{flag}: {e.message}")
+    return Pose(*values)
 
 
 def day_option(value: str | None) -> str | None:

@@ -34,6 +34,7 @@ from ._common import (
     fail_table,
     length_option,
     max_age_setting,
+    pose_options,
     print_json,
     read_table,
     user_errors,
@@ -501,7 +502,7 @@ def plan_cmd(
 
     Example: stickslip plan -c cal.json --joint 3 --from 2mm --to 2.03mm --q2 -60deg
     """
-    from ..kinematics import JOINTS, Pose
+    from ..kinematics import JOINTS
     from ..models import NonPhysicalError
 
     if joint not in JOINTS:
@@ -510,10 +511,14 @@ def plan_cmd(
 
     pos = angle_option if joint_spec(joint).rotary else length_option
     try:
-        qa, qb = pos(q_from), pos(q_to)
-        pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
+        qa = pos(q_from)
     except typer.BadParameter as e:
-        fail(str(e))
+        fail(f"--from: {e.message}")
+    try:
+        qb = pos(q_to)
+    except typer.BadParameter as e:
+        fail(f"--to: {e.message}")
+    pose = pose_options(q1, q2, q3, theta, psi)
     cal = _load_calibration(calibration)
     try:
         plan = plan_move(cal, joint, qa, qb, pose)
