@@ -443,6 +443,41 @@ def test_a_standard_output_that_fails_is_an_error_or_a_quiet_end(tmp_path, kit, 
     assert not any(raw in lines[0] for raw in RAW), lines[0]
 
 
+def _cli(*args: object) -> list[str]:
+    return [sys.executable, "-c", "from stickslip.cli import main; main()", *map(str, args)]
+
+
+@pytest.mark.skipif(os.name != "posix", reason="a pipe's reader that goes away (EPIPE) as POSIX has it")
+def test_piped_into_head_the_command_ends_quietly(tmp_path, kit):
+    """A real pipe whose reader leaves after one line: exit 1, nothing on stderr (no 'Exception ignored')."""
+    import subprocess
+
+    poses = tmp_path / "many.csv"
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi\n" + "3,+,0,-1.5707963,0,0,0\n" * 50_000)
+    p = subprocess.Popen(_cli("predict", "-c", kit["cal"], poses), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert p.stdout is not None and p.stderr is not None
+    first = p.stdout.readline()
+    p.stdout.close()  # as head -1 does
+    err = p.stderr.read()
+    assert p.wait(timeout=120) == 1 and err == b"", err
+    assert first.startswith(b"joint,direction")
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full (Linux)")
+@pytest.mark.parametrize("json_out", [False, True])
+def test_a_full_standard_output_is_one_error_line(kit, json_out):
+    import subprocess
+
+    with open("/dev/full", "w") as full:
+        r = subprocess.run(
+            _cli("show", kit["cal"], *(["--json"] if json_out else [])), stdout=full, stderr=subprocess.PIPE,
+            text=True, timeout=120,
+        )
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert lines[0] == "error: cannot write to the standard output: No space left on device; the output is incomplete"
+
+
 # ----------------------------------------------------------------- 5: an output file that cannot be written
 
 
@@ -1111,3 +1146,37 @@ def test_messages_name_what_was_wrong_and_where(tmp_path, kit, case):
     fill = {k: str(v) for k, v in files.items()}
     r = invoke([a.format(**fill) for a in args])
     error_line(r, *[w.format(**fill) for w in words])
+
+
+# ------------------------------------------------------------------------ the rules themselves
+
+
+def test_the_output_and_file_rules_hold_their_examples():
+    import doctest
+
+    from stickslip import records
+    from stickslip.cli import _output
+
+    assert doctest.testmod(records).failed == 0 and doctest.testmod(_output).failed == 0
+
+
+@settings(HOSTILE, max_examples=200)
+@given(cell=st.text(alphabet="=+-@'\t\r0123456789.eE aZ(", max_size=8) | formula_labels)
+def test_guarding_a_cell_is_reversible_and_leaves_no_formula(cell):
+    from stickslip.records import guard_cell, unguard_cell
+
+    out = guard_cell(cell)
+    assert unguard_cell(out) == cell
+    assert not out.startswith(TRIGGERS) or is_number(out) or out in ("+", "-")
+    assert out == cell or out == "'" + cell  # at most one quote added, nothing else changed
+
+
+@settings(HOSTILE, max_examples=200)
+@given(text=st.text(max_size=30), encoding=st.sampled_from(["utf-8", "ascii", "latin-1", "cp437"]))
+def test_visible_text_is_safe_for_the_terminal_and_the_stream(text, encoding):
+    from stickslip.cli._output import visible
+
+    out = visible(text, encoding)
+    assert FORBIDDEN.search(out) is None
+    out.encode(encoding)  # never a UnicodeEncodeError
+    assert visible(out, encoding) == out  # shown once, as it stays

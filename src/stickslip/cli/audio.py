@@ -12,7 +12,7 @@ import typer
 
 from . import app
 from ._common import console, device_url, err_console, fail, print_json, user_errors
-from ._output import CARRIAGE_RETURN, styled
+from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.vibration); anything else is audio
 _CSV_SUFFIXES = (".csv", ".txt")
@@ -371,7 +371,9 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
 
 def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
     if json_out:
-        typer.echo(json.dumps(ev.to_dict()))
+        out = data_stream()  # one JSON object per line, as it is confirmed: written and flushed now
+        out.write(json.dumps(ev.to_dict()) + "\n")
+        out.flush()
     else:
         console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
 

@@ -17,7 +17,7 @@ from rich.table import Table
 from ..devices.base import redact_url
 from . import app
 from ._common import DB_HELP, console, fail, open_store, print_json, read_table, user_errors, warn, warn_later
-from ._output import styled
+from ._output import styled, visible
 
 if TYPE_CHECKING:
     from ..measurements import Traverse
@@ -215,7 +215,7 @@ def delete(
             if not ids:
                 fail(f"no stored traverses for day {day}" + (f" of {redact_url(device)}" if device else ""))
         what = f"{len(set(ids))} traverse(s)" + (f" of day {day}" if day else "")
-        if not yes and not typer.confirm(f"delete {what} from {st.path}?", default=False, err=True):
+        if not yes and not typer.confirm(visible(f"delete {what} from {st.path}?"), default=False, err=True):
             fail("nothing deleted (not confirmed; --yes skips the question)", code=1)
         with user_errors():
             done = st.delete_traverses(ids)

@@ -6,7 +6,7 @@ import json
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
 from ..records import loads_json
 from .base import _Base, _rowid
@@ -31,7 +31,7 @@ class CalibrationStore(_Base):
 
         Raises ``ValueError`` naming the ids that do not exist.
         """
-        doc = json.dumps(cal.to_dict(), sort_keys=True)
+        doc = redact_text(json.dumps(cal.to_dict(), sort_keys=True))  # a URL or note in it: no secret stored
         day = getattr(cal, "day", None)
         method = getattr(cal, "method", None)
         ids = [int(i) for i in (traverse_ids or [])]

@@ -6,7 +6,7 @@ import json
 import os
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
 from ..records import loads_json
 from .base import _Base
 from .schema import StoreError, _now
@@ -33,6 +33,7 @@ class StateStore(_Base):
                 text = json.dumps(value_json)
         else:
             text = json.dumps(value_json)
+        text = redact_text(text)  # no secret is stored
         with self._write() as con:
             dev = self._device_id(con, device)
             con.execute(
