@@ -168,7 +168,8 @@ class _Stream(io.TextIOBase):
     """``sys.stdout`` or ``sys.stderr`` as they are at each write (tests swap them), with checked writes.
 
     ``text=True`` (the consoles): a string the stream cannot encode is written with
-    :func:`visible` in its encoding. ``text=False`` (data): it raises :class:`OutputError`.
+    :func:`visible` in its encoding. ``text=False`` (data): it raises :class:`OutputError`;
+    data written to a terminal (not a pipe or file) has its control characters escaped.
     Any ``OSError`` (a closed pipe, a full device) raises :class:`OutputError`.
     """
 
@@ -188,6 +189,8 @@ class _Stream(io.TextIOBase):
     def write(self, s: str) -> int:
         if len(s) > _CHUNK:  # an unbuffered stream (PYTHONUNBUFFERED) drops what one short write to a pipe left
             return sum(self.write(s[i : i + _CHUNK]) for i in range(0, len(s), _CHUNK))
+        if not self._text and self.isatty():  # data on a terminal is read by a person: no raw controls either
+            s = visible(s)
         try:
             try:
                 return int(self._raw.write(s) or 0)
