@@ -19,7 +19,7 @@ Then the real-time table: latency (median, p95) and speed for live blocks of 128
 samples and for a whole recording (blocks of 65536).
 
 Last, false alarms per hour: an hour of stepping without a stop per joint of the
-battery's generator (``tests/battery_sound.py``), with drift, knocks, a fan, a second
+battery's generator (``tests/support/battery_sound.py``), with drift, knocks, a fan, a second
 instrument and speech.
 
 Run: ``.venv/bin/python benchmarks/bench_audio.py`` (a few minutes on 2 cores);
@@ -328,7 +328,7 @@ def false_alarms_per_hour(
     import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "support"))
     from battery_sound import Scene, espeak_speech, render  # the battery's independent generator
 
     n = int(round(hours * 3600 / piece_s))
@@ -400,7 +400,7 @@ def true_stops_under_talk(seeds: int = 5, step_clock: bool = False, late: bool =
     import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "support"))
     from battery_sound import Scene, render
 
     talk: list[dict[str, object]] = [
@@ -453,7 +453,7 @@ def onset_errors(draws: int = 60, clear_draws: int = 200, late: bool = False) ->
     a refusal ("measure again"), no event a missed stop. Sets: the battery's clock drifting
     +-10 % over 2 s with the stop at 1.4 s (``draws`` per joint) and knocks every
     0.15-0.6 s (``draws`` / 3 per joint); the fourth generator's table (arms 2, 3, 5, four
-    stops, eight rooms); the fifth generator's random draws (``tests/arrival_sound.py``,
+    stops, eight rooms); the fifth generator's random draws (``tests/support/arrival_sound.py``,
     ``draws``: any burst around the stop) and ``clear_draws`` draws whose burst ends 0.05 s
     before the stop or starts 0.05 s after it (the property test's domain). Returns the
     counts per set.
@@ -462,7 +462,7 @@ def onset_errors(draws: int = 60, clear_draws: int = 200, late: bool = False) ->
     from functools import cache
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "support"))
     import arrival_sound as ar
     import battery_sound as bs
     import modal_sound as ms

@@ -1,8 +1,8 @@
 """Away from the tuning's step rate: the confirmed detector on four independent generators.
 
-Every arm of the battery's generator (``tests/battery_sound.py``: joints P and Q, five kinds of
-stop), the fourth (``tests/modal_sound.py``: arms 1-6, four kinds), the fifth
-(``tests/arrival_sound.py``: arms 1-8, three kinds) and the sixth (``tests/beam_sound.py``: beams
+Every arm of the battery's generator (``tests/support/battery_sound.py``: joints P and Q, five kinds of
+stop), the fourth (``tests/support/modal_sound.py``: arms 1-6, four kinds), the fifth
+(``tests/support/arrival_sound.py``: arms 1-8, three kinds) and the sixth (``tests/support/beam_sound.py``: beams
 1-10) is tuned by ``tune`` on its own 1000 Hz tuning recording and then heard, as ``listen`` hears it
 (every fire confirmed by its persistence), at 900, 950, 975, 1025, 1050 and 1100 Hz: one recording
 per rate, its seed the rate. 68 tunings x 6 rates = 408 recordings. The first confirmed event is
@@ -16,7 +16,7 @@ counted as ``bench_audio.py --onset`` counts it:
 Each recording's stepping before the stop (cut 0.1 s before it) is also heard alone: an event there
 is a false stop (**fired**).
 
-With ``--drive N`` it also draws N random arms of the seventh generator (``tests/drive_sound.py``:
+With ``--drive N`` it also draws N random arms of the seventh generator (``tests/support/drive_sound.py``:
 the piezo's drive tone through the mount, unchanged at the stop) at 950-1050 Hz, the space of
 ``tests/test_audio_drive.py``'s property (``--seed`` picks the draws).
 
@@ -39,13 +39,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "support"))
 
 import arrival_sound as ar  # noqa: E402
 import battery_sound as bs  # noqa: E402
 import beam_sound as bm  # noqa: E402
 import drive_sound as dv  # noqa: E402
 import modal_sound as md  # noqa: E402
+
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.detector import StopDetector, Tuning  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402

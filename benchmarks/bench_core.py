@@ -15,13 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
+
+from synth import paper_table  # noqa: E402
 
 from stickslip.calibration import calibrate, fit_paper_quadratic, invert_d_exact  # noqa: E402
 from stickslip.kinematics import JOINTS, Pose  # noqa: E402
 from stickslip.models import simulate_traverse_steps, steps_between, steps_between_quad  # noqa: E402
-from stickslip.planning import Planner, plan_move  # noqa: E402
-from synth import paper_table  # noqa: E402
+from stickslip.motion.planning import Planner, plan_move  # noqa: E402
 
 
 def per_call(fn, n: int) -> float:

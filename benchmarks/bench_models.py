@@ -24,13 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
 from physics_scenarios import paper14, random_pose, spread, well_spread  # noqa: E402
+
 from stickslip.calibration import calibrate  # noqa: E402
 from stickslip.calibration.update import update_calibration  # noqa: E402
-from stickslip.families import families_for  # noqa: E402
 from stickslip.measurements import Traverse  # noqa: E402
+from stickslip.models.families import families_for  # noqa: E402
 from stickslip.sim import physics as ph  # noqa: E402
 
 DAYS = ("2026-09-01", "2026-09-02", "2026-09-03")

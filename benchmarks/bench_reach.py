@@ -26,8 +26,8 @@ import numpy as np
 
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, calibrate
+from stickslip.motion.reach import ReachPlan, line_distance, plan_reach
 from stickslip.procedures.traverse import measure_traverse
-from stickslip.reach import ReachPlan, line_distance, plan_reach
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.oracle import OracleStopDetector
 

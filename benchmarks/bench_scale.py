@@ -63,7 +63,7 @@ def measurement_table(path: Path, n: int, seed: int = 0, distinct_poses: bool = 
     significant digits as a logger would. With ``distinct_poses`` every row has a pose
     of its own (the worst case for pose grouping).
     """
-    sys.path.insert(0, str(HERE.parent / "tests"))
+    sys.path.insert(0, str(HERE.parent / "tests" / "support"))
     from synth import paper_table
 
     rng = np.random.default_rng(seed)
@@ -148,11 +148,11 @@ def run_child(argv: Sequence[str], env: dict[str, str]) -> dict[str, float]:
 
 def numpy_predict(path: Path) -> float:
     """Plain numpy on pandas' C CSV reader: load the columns, evaluate the closed forms, no checks, no output."""
-    sys.path.insert(0, str(HERE.parent / "tests"))
+    sys.path.insert(0, str(HERE.parent / "tests" / "support"))
     import pandas as pd
+    from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
     from stickslip.models import gamma_prismatic, steps_between
-    from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
     t = time.perf_counter()
     f = pd.read_csv(path, usecols=["joint", "q2", "q3", "theta", "start", "end"], dtype=float)
@@ -211,12 +211,13 @@ def anova_baselines(path: Path) -> dict[str, float]:
 
 
 def planner_rows(moves: int) -> list[tuple[str, float]]:
-    sys.path.insert(0, str(HERE.parent / "tests"))
+    sys.path.insert(0, str(HERE.parent / "tests" / "support"))
+    from synth import paper_table
+
     from stickslip.calibration import calibrate
     from stickslip.kinematics import Pose
     from stickslip.models import simulate_traverse_steps, steps_between_quad
-    from stickslip.planning import Planner, plan_move
-    from synth import paper_table
+    from stickslip.motion.planning import Planner, plan_move
 
     cal = calibrate(paper_table())
     pose = Pose(q3=0.006, theta=-0.3)

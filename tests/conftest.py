@@ -19,12 +19,12 @@ from typing import Any
 
 import pytest
 from hypothesis import settings
+from pinned import PINNED_TODAY  # tests/support: also read by the generators and benchmarks
 
 settings.register_profile("repeatable", derandomize=True, print_blob=True)
 settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("STICKSLIP_HYPOTHESIS", "repeatable"))
 
-PINNED_TODAY = "2026-11-22"
 
 
 @pytest.fixture(autouse=True)

@@ -1,4 +1,4 @@
-"""The limit switch on recordings from a second, independent generator (tests/alien_sound.py).
+"""The limit switch on recordings from a second, independent generator (tests/support/alien_sound.py).
 
 Issue 3's targets, on sounds the detector's design never saw: tuned on one recording per
 joint (1000 Hz, 0 dB, knocks, no babble), judged on others at 800-1300 Hz, mic gain
@@ -9,10 +9,12 @@ test_audio_tuning add more).
 
 import numpy as np
 import pytest
-
 from alien_sound import JOINT_SOUNDS, recording
+
 from stickslip.audio.detector import detect
 from stickslip.audio.tuning import tune
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 CASES = [(800, 7.7, -3.0), (1300, 6.1, 3.0), (1050, 5.55, 0.0)]

@@ -1,4 +1,4 @@
-"""The battery: ~40 named conditions from a third, independent generator (tests/battery_sound.py).
+"""The battery: ~40 named conditions from a third, independent generator (tests/support/battery_sound.py).
 
 Each condition tunes on a training recording and listens (as ``listen`` does: every fire
 confirmed by its persistence, stickslip.audio.confirm) to a test recording it has not
@@ -26,19 +26,17 @@ Run ``python tests/test_audio_battery.py`` for the table.
 
 from __future__ import annotations
 
-import sys
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
 from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
+
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 TOL_S = 0.025
 

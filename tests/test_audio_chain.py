@@ -13,23 +13,21 @@ onset error in ms, ``U`` when flagged ``onset_uncertain``, ``miss`` when nothing
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from functools import cache
-from pathlib import Path
-
-import numpy as np
-import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
 
 import battery_sound as bs  # noqa: E402
 import modal_sound as ms  # noqa: E402
+import numpy as np
+import pytest
 import recording_chain as rc  # noqa: E402
+
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 TOL_S = 0.025

@@ -4,25 +4,23 @@ A stereo sound card with the microphone on one input gives files whose channels 
 agree: a balanced microphone wired to both inputs carries the sound in opposite polarity
 (the mean cancels to the converter's last bits), and an open second input can carry hum or
 noise louder than the stepping (the mean drowns it). The recordings come from the
-battery's independent generator (``tests/battery_sound.py``) and ``tests/modal_sound.py``,
+battery's independent generator (``tests/support/battery_sound.py``) and ``tests/support/modal_sound.py``,
 not from the project's simulator; the other channels are built here.
 """
 
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 import soundfile as sf
+from battery_sound import Scene, render, variant  # noqa: E402
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from battery_sound import Scene, render, variant  # noqa: E402
 from stickslip.audio.guard import QUIET_RAILS, block_problem, step_line_db  # noqa: E402
 from stickslip.audio.sources import AudioSourceError, channel_problem, read_wav, wav_blocks  # noqa: E402
 from stickslip.audio.stepclock import step_rate_hz  # noqa: E402
@@ -156,6 +154,7 @@ def test_channel_is_refused_for_a_csv_and_for_live_input(files: Path) -> None:
     assert r.exit_code == 2 and "a live input is read as one channel" in r.stderr, r.output
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     g=st.floats(0.3, 1.0),

@@ -2,25 +2,21 @@
 
 The interference here is the strongest there is: 80 ms of the joint's *own stop sound*
 spliced into the stepping (what a detector must take for the stop, and does), rendered
-by tests/battery_sound.py (not the simulator the tuning code grew up with). A real stop
+by tests/support/battery_sound.py (not the simulator the tuning code grew up with). A real stop
 lasts as long as the joint steps into it; the splice does not.
 """
 
 from __future__ import annotations
 
 import math
-import sys
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 import pytest
+from battery_sound import Scene, render, variant  # noqa: E402
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-from battery_sound import Scene, render, variant  # noqa: E402
 from stickslip.audio.confirm import (  # noqa: E402
     AFTER_REJECT_S,
     CONFIRM_S,
@@ -30,6 +26,8 @@ from stickslip.audio.confirm import (  # noqa: E402
 )
 from stickslip.audio.detector import StopDetector, StopEvent, Tuning  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)

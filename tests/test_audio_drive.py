@@ -1,4 +1,4 @@
-"""The piezo's drive sings through the stop: a seventh generator (``tests/drive_sound.py``, session 27).
+"""The piezo's drive sings through the stop: a seventh generator (``tests/support/drive_sound.py``, session 27).
 
 A stick-slip controller's sawtooth makes the piezo and its mount sing at the step rate and
 its harmonics, strictly periodic, whether or not the slider moves; only the slider's slips
@@ -25,16 +25,18 @@ from __future__ import annotations
 
 from functools import cache
 
+import drive_sound as dv
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import drive_sound as dv
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector
 from stickslip.audio.tuning import TuningError, tune
 from stickslip.audio.tuningfile import Tuning
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = dv.SR
 TOL_S = 0.025

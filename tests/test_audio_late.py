@@ -6,7 +6,7 @@ What is pinned:
   until session 29 also a second instrument from 0.8 s, which the fast path now hears) are
   missed by the fast path and found late, with the onset within 25 ms (no event at all
   before round 12a);
-* an eighth generator written for this from another view (``tests/line_sound.py``: the
+* an eighth generator written for this from another view (``tests/support/line_sound.py``: the
   stepping as its harmonic lines; a stop that reshuffles the lines' levels and phases and
   keeps every group of three lines' power) - nothing tuned to it: the fast path misses such
   stops, the late path finds them, and an onset is never silently wrong (hypothesis);
@@ -17,23 +17,22 @@ What is pinned:
 
 from __future__ import annotations
 
-import sys
 from functools import cache
 from pathlib import Path
 
+import line_sound as ls  # noqa: E402
 import numpy as np
 import pytest
+from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import line_sound as ls  # noqa: E402
-from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
 from stickslip.audio.confirm import ConfirmedStopDetector, confirming  # noqa: E402
 from stickslip.audio.detector import StopDetector, StopEvent, Tuning, detect  # noqa: E402
 from stickslip.audio.late import LatePath, _rate_moved, onset_change_point  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 TOL_S = 0.025
 

@@ -1,6 +1,6 @@
 """Minutes of stepping without a stop: the detector must stay silent (false alarms per hour: 0).
 
-The battery's third generator (tests/battery_sound.py) renders two minutes per joint of
+The battery's third generator (tests/support/battery_sound.py) renders two minutes per joint of
 stepping at 1080 Hz with everything that lasts: the step clock drifting +-10 %, a knock
 every second, a fan and a door slam. The hour-long version, with speech and a second
 instrument, is in benchmarks/bench_audio.py (``--long-only``).
@@ -8,17 +8,14 @@ instrument, is in benchmarks/bench_audio.py (``--long-only``).
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
 from battery_sound import Scene, render  # noqa: E402
+
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 _TUNED: dict[str, Tuning] = {}
 

@@ -11,24 +11,21 @@ heard 0.56 s late (by the late path alone); fitted masked, 21 ms after the stop.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
+import modal_sound as ms  # noqa: E402
 import numpy as np
 import pytest
+from battery_sound import Scene, render, variant  # noqa: E402
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.signal import butter, sosfilt
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import modal_sound as ms  # noqa: E402
-from battery_sound import Scene, render, variant  # noqa: E402
 from stickslip.audio import template as T  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.template import masked_signature  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 
 def test_nothing_added_leaves_the_signature_as_tuned() -> None:

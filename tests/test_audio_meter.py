@@ -2,15 +2,10 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).parent))
-
 from battery_sound import Scene, render  # noqa: E402
+
 from stickslip.audio.meter import BandMeter, MeterReading  # noqa: E402
 
 SR = 48_000

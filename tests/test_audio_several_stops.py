@@ -16,25 +16,23 @@ which held the latch (hypothesis).
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable
 from functools import cache
-from pathlib import Path
 
+import battery_sound as bs  # noqa: E402
+import modal_sound as ms  # noqa: E402
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import battery_sound as bs  # noqa: E402
-import modal_sound as ms  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import StopDetector, detect  # noqa: E402
 from stickslip.audio.template import RELEASE_SHARE, Release  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 TOL_S = 0.025

@@ -6,9 +6,9 @@ shift is 1/17 octave, so 1/3-octave sub-bands see it only where a mode sits at a
 weakly, and a wider band where every resolution is refused
 (:func:`stickslip.audio.tuning.tune`, Notes 7). Checked on two generators:
 
-* the fifth (``tests/arrival_sound.py``, ``shifted``: five modes all 4-12 % up), whose
+* the fifth (``tests/support/arrival_sound.py``, ``shifted``: five modes all 4-12 % up), whose
   arms 3, 4 and 5 the change moves (arm 4 was refused, arms 3 and 5 tuned at 3 per octave);
-* a sixth, written for this round and never tuned to (``tests/beam_sound.py``: a slender
+* a sixth, written for this round and never tuned to (``tests/support/beam_sound.py``: a slender
   clamped-free beam whose tip the stop pins; modes of order 10-50 move up by about
   ``1.5 / n``, 3-13 %, their shapes with them; each slip an impulse).
 
@@ -22,18 +22,20 @@ from __future__ import annotations
 from functools import cache
 from typing import Any
 
+import arrival_sound as ar
+import beam_sound as bm
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import beam_sound as bm
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector
 from stickslip.audio.tuning import DEFAULT_PER_OCTAVE, FINER_PER_OCTAVE, TuningError, tune
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 from test_audio_rate_signature import tuned_alone
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 TOL_S = 0.025

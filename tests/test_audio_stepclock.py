@@ -2,8 +2,8 @@
 
 Every sound a stepping joint makes is a train of clicks at the step rate, at the stop too;
 interference is not synchronous with it. The generators here are the battery's
-(tests/battery_sound.py: a clean clock, 20 us jitter) and the random arms'
-(tests/modal_sound.py: 2 % period jitter), not the project's own simulator. The splice
+(tests/support/battery_sound.py: a clean clock, 20 us jitter) and the random arms'
+(tests/support/modal_sound.py: 2 % period jitter), not the project's own simulator. The splice
 that confirmation by persistence alone takes for a stop is built from another view of the
 stop: sound added in the stop's own 5.2 kHz mode that is *not* in step with the clock
 (noise through the mode, or a second click train at 730 Hz through it), over a run of
@@ -16,20 +16,17 @@ rejects that splice (persistence needs the weaker steps to confirm it at all).
 from __future__ import annotations
 
 import math
-import sys
 from functools import lru_cache
 from pathlib import Path
 
+import modal_sound  # noqa: E402
 import numpy as np
 import pytest
+from battery_sound import MODES, Scene, _bank, _impulses, _res, _train, render, variant  # noqa: E402
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.signal import butter, lfilter
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import modal_sound  # noqa: E402
-from battery_sound import MODES, Scene, _bank, _impulses, _res, _train, render, variant  # noqa: E402
 from stickslip.audio.confirm import (  # noqa: E402
     MIN_SYNC_CHANGE_DB,
     MIN_SYNC_SHARE,
@@ -51,6 +48,8 @@ from stickslip.audio.stepclock import (  # noqa: E402
     widen_bands,
 )
 from stickslip.audio.tuning import tune  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)

@@ -7,8 +7,8 @@ fired on it: ``listen`` reported the pause as an unflagged stop, and a traverse 
 controller halted mid-way counted its steps to that moment (``stickslip.audio.stopped``).
 
 The pauses are spliced here from room noise, not rendered by any generator; the stops
-come from the battery's generator (``tests/battery_sound.py``), the fifth
-(``tests/arrival_sound.py``) and the seventh (``tests/drive_sound.py``: a stop that mutes
+come from the battery's generator (``tests/support/battery_sound.py``), the fifth
+(``tests/support/arrival_sound.py``) and the seventh (``tests/support/drive_sound.py``: a stop that mutes
 the slips while the piezo's drive tone sings on, which falls by more than 20 dB and must
 still be heard as a stop).
 """
@@ -16,10 +16,13 @@ still be heard as a stop).
 from __future__ import annotations
 
 import json
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+import arrival_sound as ar  # noqa: E402
+import battery_sound as bs  # noqa: E402
+import beam_sound as bm  # noqa: E402
+import drive_sound as dv  # noqa: E402
 import numpy as np
 import pytest
 import soundfile as sf
@@ -27,12 +30,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import arrival_sound as ar  # noqa: E402
-import battery_sound as bs  # noqa: E402
-import beam_sound as bm  # noqa: E402
-import drive_sound as dv  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.stopped import (  # noqa: E402
@@ -46,6 +43,8 @@ from stickslip.cli import app  # noqa: E402
 from stickslip.procedures.traverse import TraverseError, TraverseResult, measure_traverse  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from test_audio_onset import whole_and_in_blocks  # noqa: E402
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 TOL_S = 0.025

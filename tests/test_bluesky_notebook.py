@@ -15,10 +15,10 @@ import pytest
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, validate
 from stickslip.measurements import TableError, Traverse, parse_measurements
+from stickslip.measurements.dataframes import TraverseTable, from_pandas, to_pandas
 from stickslip.models import PrismaticParams
-from stickslip.planning import plan_move
+from stickslip.motion.planning import plan_move
 from stickslip.sim.arm import SimulatedMM3A
-from stickslip.tables import TraverseTable, from_pandas, to_pandas
 
 DAY = "2026-11-22"
 
@@ -114,6 +114,7 @@ def test_plots_return_axes_and_show_nothing() -> None:
         assert all(plt.figure(n) is not ax.figure for n in plt.get_fignums())
 
 
+@pytest.mark.slow
 def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """docs/bluesky.md's example runs as written (docs/style.md: examples run)."""
     pytest.importorskip("bluesky")

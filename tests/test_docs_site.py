@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -45,7 +47,7 @@ def test_the_site_builds_without_warnings(site: tuple[Path, str]) -> None:
     [
         ("api/calibration", ["stickslip.calibration.calibrate", "Calibration", "validate"]),
         ("api/models", ["JointModel", "PrismaticParams", "RotaryParams"]),
-        ("api/planning", ["Planner", "plan_reach", "ReachPlan"]),
+        ("api/motion", ["Planner", "plan_reach", "ReachPlan", "JointTrack"]),
         ("api/bluesky", ["StickSlipAxis", "StickSlipManipulator", "TipAxis", "calibration_day", "STOP_RETURN_S"]),
         ("api/devices", ["Controller", "KnowsTruePosition", "NanoControl"]),
         ("howto/anc300", ["STICKSLIP_ANC300_PASSWORD", "stepu"]),

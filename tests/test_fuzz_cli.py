@@ -22,6 +22,8 @@ from typer.testing import CliRunner
 from stickslip.cli import app
 from stickslip.cli._common import EXIT_CODES
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 runner = CliRunner()
 FUZZ = settings(  # derandomized by the profile in `make test`; `make test-explore` draws fresh examples
     max_examples=60,

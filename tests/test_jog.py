@@ -5,7 +5,7 @@ References: at the outstretched pose the Jacobian's columns are the base axes
 (+x along the arm: joint 3; +y: joint 1 at lever rho; +z: joint 2 at lever r), so each
 direction key must step exactly one joint at ``v / (lever * gamma)`` steps/s, with
 gamma from ``Calibration.gamma`` (the model's point value, not the planner's
-integrals); single-step moves are checked against ``stickslip.planning.plan_move``.
+integrals); single-step moves are checked against ``stickslip.motion.planning.plan_move``.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from typer.testing import CliRunner
 from stickslip import kinematics as kin
 from stickslip.cli import app
 from stickslip.devices.positions import DeviceState
-from stickslip.planning import plan_move
+from stickslip.motion.planning import plan_move
 from stickslip.procedures.jog import SPEEDS, JogController, parse_keys, run_jog
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.emulators import NanoControlEmulator
@@ -244,6 +244,7 @@ def _quiet(emu, settle: float = 0.5, timeout: float = 30.0) -> None:
     raise AssertionError("the emulator did not settle")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals (POSIX)")
 def test_jog_in_a_terminal_steps_the_emulated_nanocontrol(tmp_path):
     cal_path = tmp_path / "cal.json"
@@ -289,6 +290,7 @@ def test_jog_in_a_terminal_steps_the_emulated_nanocontrol(tmp_path):
     assert b"jog ended" in term.output
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals (POSIX)")
 def test_jog_refuses_without_a_terminal(tmp_path):
     cal_path = tmp_path / "cal.json"

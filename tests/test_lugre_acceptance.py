@@ -1,4 +1,4 @@
-"""The issue's acceptance on a second, independent physics arm (tests/lugre_arm.py: LuGre friction).
+"""The issue's acceptance on a second, independent physics arm (tests/support/lugre_arm.py: LuGre friction).
 
 The arm was written after the selection method and the benchmark settings, and nothing
 was tuned on it. Per day: the paper's 14 calibration traverses, 32 more at poses spread
@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from lugre_arm import LugreArm
 from physics_scenarios import max_errors, paper_poses, random_pose
+
 from stickslip.calibration import calibrate
 from stickslip.calibration.design import spread_poses
 from stickslip.calibration.update import update_calibration
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 DAYS = ("2026-10-05", "2026-10-06", "2026-10-07")
 

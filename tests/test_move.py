@@ -1,6 +1,6 @@
 """`stickslip move` / `stickslip where`: planned steps sent in bursts, positions kept per device.
 
-Reference values: stickslip.planning.plan_move / dead_reckon for the same calibration
+Reference values: stickslip.motion.planning.plan_move / dead_reckon for the same calibration
 and pose (what `stickslip plan` prints); the calibration here is the simulator's own
 true model, so on sim:// the true end must match the planned end within the per-step
 noise (3 % per step, independent: ~3 %/sqrt(N) over N steps) and the ripple (0.4 %).
@@ -22,7 +22,7 @@ from stickslip.cli import app
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.emulators import NanoControlEmulator
 
-planning = pytest.importorskip("stickslip.planning")
+planning = pytest.importorskip("stickslip.motion.planning")
 calibration = pytest.importorskip("stickslip.calibration")
 
 runner = CliRunner()

@@ -1,4 +1,4 @@
-"""The issue's check: `stickslip move` against an independent console (tests/console_peer.py).
+"""The issue's check: `stickslip move` against an independent console (tests/support/console_peer.py).
 
 With no dialect option the CLI must detect the console, make exactly the steps
 `stickslip plan` gives (counted by the peer from the wall-clock timing of go and stop at
@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from synth import paper_table
 
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
 if sys.platform != "win32":
@@ -50,6 +50,7 @@ def _plan(cal: Path, frm: str, to: str) -> dict[str, Any]:
     return plan
 
 
+@pytest.mark.slow
 def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal: Path, tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     plan = _plan(cal, "2mm", "3mm")
@@ -80,6 +81,7 @@ def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal: Path, 
     assert where["info"]["active_profile"] == 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, words", [
     ("error", "refused 'go 0 0 "),
     ("silent", "did not answer 'go 0 0 "),

@@ -1,4 +1,4 @@
-"""`stickslip move` against an independent NanoControl on a pseudo-terminal (tests/nanocontrol_peer.py).
+"""`stickslip move` against an independent NanoControl on a pseudo-terminal (tests/support/nanocontrol_peer.py).
 
 Good moves send exactly the planned steps with nothing on stderr; each injected fault ends
 within the configured timeout plus the burst's own duration with one line naming the port,
@@ -14,9 +14,9 @@ import time
 from pathlib import Path
 
 import pytest
+from synth import paper_table
 
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
 if sys.platform != "win32":
@@ -45,6 +45,7 @@ def _planned(cal: Path, frm: str, to: str) -> int:
     return int(json.loads(r.stdout)["steps"])
 
 
+@pytest.mark.slow
 def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal: Path, tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     with NanoControlPeer() as peer:
@@ -59,6 +60,7 @@ def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal: 
         assert all(c.startswith(("version", "coarse C +")) for c in peer.log), peer.log
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault,words", [
     ("error", "refused 'coarse C +"),
     ("silent", "did not answer 'coarse C +"),

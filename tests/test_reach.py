@@ -1,8 +1,8 @@
-"""Straight tip moves: the planner (stickslip.reach) and `stickslip reach`, dry run and driving.
+"""Straight tip moves: the planner (stickslip.motion.reach) and `stickslip reach`, dry run and driving.
 
 References: the tip and step sizes are recomputed here step by step (the model's mean
 step at each step's own position, ``Calibration.gamma``, not the planner's closed-form
-integrals), the tip by composing rotations (tests/hidden_arm.py); the half-step bound
+integrals), the tip by composing rotations (tests/support/hidden_arm.py); the half-step bound
 on the predicted end follows from rounding each joint to the nearest whole step and
 the orthogonal Jacobian columns (|dp| <= 0.5 sqrt(sum (|J_j| gamma_j)^2)).
 """
@@ -16,15 +16,15 @@ import re
 
 import numpy as np
 import pytest
+from hidden_arm import distance_from_segment, tip_of
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from hidden_arm import distance_from_segment, tip_of
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration
 from stickslip.cli import app
-from stickslip.reach import LINE_FRACTION, ReachPlan, borrow_joint1, plan_reach
+from stickslip.motion.reach import LINE_FRACTION, ReachPlan, borrow_joint1, plan_reach
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.emulators import NanoControlEmulator
 
@@ -139,7 +139,7 @@ def test_joint_order_within_a_segment_is_1_2_3():
     pose = kin.Pose(0.3, -1.0, 0.005, -math.pi / 3, 0.2)
     plan = plan_reach(CAL, pose, by=(-80e-6, 60e-6, 30e-6))
     q = list(plan.q_start)
-    from stickslip.planning import dead_reckon
+    from stickslip.motion.planning import dead_reckon
 
     for s in plan.segments:
         for j in (1, 2, 3):
@@ -272,6 +272,7 @@ def test_cli_to_and_geometry(tmp_path, cal_path):
     assert np.max(np.linalg.norm(steps, axis=1)) < 5e-6 + 2e-6  # 5 µm segments, within a step
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -303,6 +304,7 @@ def test_cli_out_of_reach_sends_no_step_to_the_controller(tmp_path, cal_path):
     assert not any(m.startswith("coarse") for m in sent), sent
 
 
+@pytest.mark.slow
 def test_cli_drives_the_simulator_and_keeps_the_positions(tmp_path, cal_path):
     db = tmp_path / "s.db"
     dev = f"sim://?seed=4&day={DAY}"
@@ -365,6 +367,7 @@ _TEXT = st.one_of(
 )  # fmt: skip
 
 
+@pytest.mark.slow
 @settings(max_examples=60, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])  # fmt: skip
 @given(_TEXT, _TEXT, _TEXT)

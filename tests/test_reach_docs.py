@@ -23,7 +23,7 @@ def test_python_example_runs_and_lands_near_the_target(tmp_path, monkeypatch, ca
 
 def test_documented_json_keys_are_the_plans():
     from stickslip import kinematics as kin
-    from stickslip.reach import plan_reach
+    from stickslip.motion.reach import plan_reach
     from test_reach import CAL
 
     d = plan_reach(CAL, kin.Pose(0.0, -1.0, 0.003), by=(10e-6, 0.0, 0.0)).as_dict()

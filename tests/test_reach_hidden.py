@@ -1,7 +1,7 @@
 """The issue's check, on a hidden arm: calibrate from its traverses, plan with `reach --dry-run --json`,
 execute the plans step by step with the arm's *true* steps.
 
-The hidden arm (tests/hidden_arm.py) is not the project's model: other parameters, a
+The hidden arm (tests/support/hidden_arm.py) is not the project's model: other parameters, a
 load term the paper's equations lack, a ripple along each joint's travel and 3 %
 lognormal noise per step; its frames and loads are computed independently. It is
 calibrated the way a user would: full-range traverses (counted step by step between
@@ -20,14 +20,14 @@ import math
 
 import numpy as np
 import pytest
+from hidden_arm import RANGES, HiddenArm, distance_from_segment, execute
 from typer.testing import CliRunner
 
-from hidden_arm import RANGES, HiddenArm, distance_from_segment, execute
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
 from stickslip.cli import app
 from stickslip.measurements import Traverse
-from stickslip.reach import plan_reach
+from stickslip.motion.reach import plan_reach
 
 P = math.pi
 DAY = "2026-11-22"
@@ -89,6 +89,7 @@ def _score(arm, plan_json, pose):
     return end, dev
 
 
+@pytest.mark.slow
 def test_hidden_arm_reach_within_5_percent_and_constant_far_worse(hidden):
     arm, cal, _ = hidden
     model, const = [], []
@@ -112,6 +113,7 @@ def test_hidden_arm_reach_within_5_percent_and_constant_far_worse(hidden):
     assert const_a[:, 0].max() > 0.2
 
 
+@pytest.mark.slow
 def test_hidden_arm_through_the_cli_dry_run(hidden, tmp_path):
     """The plans the checker reads: `reach --dry-run --json`, executed with the true steps."""
     arm, _, cal_path = hidden

@@ -1,6 +1,6 @@
 """Issue 11: one error path, validated files, secrets, positions that cannot silently lie, safe writes.
 
-The journal and the lock are tested against tests/faults.py (an independent fault
+The journal and the lock are tested against tests/support/faults.py (an independent fault
 injector), the lock with real subprocesses.
 """
 
@@ -17,6 +17,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import faults  # noqa: E402
 import pytest
 from typer.testing import CliRunner
 
@@ -26,11 +27,8 @@ from stickslip.cli import app
 from stickslip.devices.base import device_key, redact_url
 from stickslip.sim.arm import SimulatedMM3A
 
-sys.path.insert(0, str(Path(__file__).parent))
-import faults  # noqa: E402
-
 calibration = pytest.importorskip("stickslip.calibration")
-planning = pytest.importorskip("stickslip.planning")
+planning = pytest.importorskip("stickslip.motion.planning")
 
 runner = CliRunner()
 DAY = "2026-11-22"
@@ -190,9 +188,10 @@ def _all_db_bytes(db: Path) -> bytes:
 def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch, cal_path):
     """import / fit --record / move / where / history --json with a password: absent everywhere."""
     pytest.importorskip("pymeasure")
+    from synth import paper_table
+
     from stickslip.measurements import measurements_to_csv
     from stickslip.sim.emulators import ANC300Emulator
-    from synth import paper_table
 
     caplog.set_level(logging.DEBUG)
     db = tmp_path / "s.db"
@@ -257,6 +256,7 @@ def _where(db, url):
     return json.loads(r.stdout)
 
 
+@pytest.mark.slow
 def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faulty):
     db, log = tmp_path / "s.db", tmp_path / "moved.txt"
     url = f"faulty://arm?drop_after=3&partial=0.5&log={log}"
@@ -329,11 +329,12 @@ _WORKER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path):
     db, log = tmp_path / "s.db", tmp_path / "moved.txt"
     url = f"faulty://arm?delay=0.05&log={log}"
     script = tmp_path / "worker.py"
-    script.write_text(_WORKER.format(tests=str(Path(__file__).parent)))
+    script.write_text(_WORKER.format(tests=str(Path(__file__).parent / "support")))
     env = {**os.environ, "STICKSLIP_DB": str(db)}
     subprocess.run(
         [sys.executable, str(script), "where", "-d", url, "--set", "3=min", "--offline"],
@@ -469,12 +470,14 @@ _FSIZE = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "setrlimit") and sys.platform == "win32", reason="RLIMIT_FSIZE is POSIX")
 def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
     pytest.importorskip("resource")
+    from synth import paper_table
+
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
-    from synth import paper_table
 
     db = tmp_path / "s.db"
     small, big = tmp_path / "small.csv", tmp_path / "big.csv"
@@ -542,8 +545,9 @@ def test_bare_numbers_outside_the_range_suggest_degrees(tmp_path, cal_path, args
 def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path):
     import dataclasses
 
-    from stickslip.measurements import measurements_to_csv
     from synth import paper_table
+
+    from stickslip.measurements import measurements_to_csv
 
     db = tmp_path / "s.db"
     t = paper_table()[0]
@@ -574,6 +578,7 @@ GOOD_ROW = {"day": DAY, "joint": "3", "direction": "+", "q1": "0", "q2": "-1.570
             "theta": "0", "psi": "0", "start": "0", "end": "0.012", "steps": "12000"}  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("column", list(GOOD_ROW))
 @pytest.mark.parametrize("value", ["9223372036854775808", "1e999", "nan", "pi/0", "x" * 200_000, "-1", ""])
 def test_one_hostile_cell_in_a_good_table(tmp_path, column, value):
@@ -602,9 +607,10 @@ def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
 
 
 def test_delete_traverses_and_sessions_with_confirmation(tmp_path):
+    from synth import paper_table
+
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
-    from synth import paper_table
 
     db = tmp_path / "s.db"
     ts = paper_table()
@@ -634,9 +640,10 @@ def dataclasses_replace(t, **kw):
 
 
 def test_exclude_keeps_rows_out_of_analyses_and_undo_brings_them_back(tmp_path):
+    from synth import paper_table
+
     from stickslip.measurements import measurements_to_csv
     from stickslip.storage import Store
-    from synth import paper_table
 
     db = tmp_path / "s.db"
     ts = paper_table()

@@ -1,4 +1,4 @@
-"""The Kalman filter over position and step scale (stickslip.tracking), on the physics arm."""
+"""The Kalman filter over position and step scale (stickslip.motion.tracking), on the physics arm."""
 
 from __future__ import annotations
 
@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_scenarios import paper14
+
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
-from stickslip.planning import dead_reckon
+from stickslip.motion.planning import dead_reckon
+from stickslip.motion.tracking import PositionTracker
 from stickslip.sim import physics as ph
-from stickslip.tracking import PositionTracker
 
 
 def test_sparse_feedback_learns_the_scale_and_beats_dead_reckoning():
@@ -56,8 +56,8 @@ def test_end_stop_pins_the_position():
 # ----------------------------------------------------------------------------- JointTrack, move and observe
 
 from stickslip.calibration import Calibration  # noqa: E402
+from stickslip.motion.tracking import JointTrack, scaled_calibration, track_for  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
-from stickslip.tracking import JointTrack, scaled_calibration, track_for  # noqa: E402
 
 
 def _true_cal(day: str, seed: int = 8) -> Calibration:
@@ -86,9 +86,10 @@ def _run(cal, arm, moves, every, rng, pose):
     return np.array(errs), np.array(sds)
 
 
-from stickslip.planning import Planner  # noqa: E402
+from stickslip.motion.planning import Planner  # noqa: E402
 
 
+@pytest.mark.slow
 def test_observations_keep_the_error_bounded_and_the_sd_honest():
     # the simulator's true models of one day as the calibration, the arm on other days (its step scale
     # drifts by several %): 40 runs of 24 moves of 0.2-1.5 mm. With a reading every 4th move the error
@@ -172,6 +173,7 @@ class _RealLike:
         return self.arm.position(joint)
 
 
+@pytest.mark.slow
 def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
     import json
 
@@ -219,7 +221,7 @@ def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
 def test_a_calibration_made_today_starts_without_a_days_drift(monkeypatch):
     # the step scale of a fresh calibration is known to its model error; a day later a day's drift is added
     from stickslip.calibration.update import DRIFT_PRIOR
-    from stickslip.tracking import joint_sigma_model
+    from stickslip.motion.tracking import joint_sigma_model
 
     monkeypatch.setenv("STICKSLIP_TODAY", "2026-11-22")
     today, older, unlabelled = _true_cal("2026-11-22"), _true_cal("2026-11-21"), _true_cal("day-one")

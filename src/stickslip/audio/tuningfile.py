@@ -39,10 +39,10 @@ STEP_RATE_TOLERANCE = 0.05
 """How far (a fraction) the step rate may be from the rate a tuning was made at before a
 warning: a click train's harmonics fall on a joint's narrow modes differently at another
 rate. Measured (docs/audio.md, "Tuned at one step rate"): on the fourth generator's arms
-(``tests/modal_sound.py``, 6 arms x 4 kinds of stop, tuned at 1000 Hz) every stop was heard
+(``tests/support/modal_sound.py``, 6 arms x 4 kinds of stop, tuned at 1000 Hz) every stop was heard
 once and on time at 960-1040 Hz (504 recordings), while at 920-940 and 1060-1080 Hz 17 of
 288 were missed or late, all but one of them stops that ring narrow contact modes; the
-battery's generator (``tests/battery_sound.py``) held to +-10 %."""
+battery's generator (``tests/support/battery_sound.py``) held to +-10 %."""
 
 
 def _number(name: str, v: Any) -> float:

@@ -3,7 +3,7 @@
 :class:`StickSlipAxis` moves a joint the way ``stickslip move`` does, from the library
 pieces the CLI uses: the position kept for the device in the database
 (:func:`~stickslip.devices.positions.load_state`), the calibration's step-size model in
-that pose (:class:`~stickslip.planning.Planner`), the burst loop with its write-ahead
+that pose (:class:`~stickslip.motion.planning.Planner`), the burst loop with its write-ahead
 journal (:func:`~stickslip.procedures.move.drive`) and the one-process-per-device lock
 (:func:`~stickslip.procedures.move.device_lock`). A move made here is seen by
 ``stickslip where`` and the other way round.
@@ -52,7 +52,7 @@ from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, VirtualClock, device_key, open_device
 from ..devices.positions import DeviceState, load_state, save_state
-from ..planning import Planner
+from ..motion.planning import Planner
 from ..procedures.move import DeviceBusy, device_lock, drive
 from ..storage import Store, StoreError
 from ..units import format_position, position_display_unit

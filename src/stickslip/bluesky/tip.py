@@ -4,7 +4,7 @@
 position in the base frame before the base tilt (docs/design.md §9, docs/taskspace.md),
 metres. The readback is the forward kinematics (:func:`stickslip.kinematics.tip`) of
 the three joints' kept (dead-reckoned) positions; a move is a straight tip move planned
-by the task-space planner (:func:`stickslip.reach.plan_reach`) from the kept pose and
+by the task-space planner (:func:`stickslip.motion.reach.plan_reach`) from the kept pose and
 driven joint by joint, burst by burst, with the write-ahead journal
 (:func:`stickslip.procedures.reach.drive_reach`), exactly as ``stickslip reach`` does.
 
@@ -42,9 +42,9 @@ from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import DeviceError, VirtualClock
 from ..devices.positions import DeviceState, load_state, save_state
+from ..motion.reach import ReachPlan, borrow_joint1, plan_reach
 from ..procedures.move import DeviceBusy, device_lock
 from ..procedures.reach import drive_reach
-from ..reach import ReachPlan, borrow_joint1, plan_reach
 from ..storage import StoreError
 from .axis import DeviceLink, MoveError, _Interruptible, _Stopped, bounded_burst, check_burst, check_max_burst_s, halt
 

@@ -5,25 +5,33 @@ them and load unchanged."""
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
-from ..families import FamilyModel, FamilyParams, family_spec
-from ..models import direction_label
+from ..models import JointModel, direction_label
+from ..models.families import FamilyModel, FamilyParams, family_spec
 from ..records import finite_number
 
-if TYPE_CHECKING:
-    from .result import Calibration
+__all__ = ["ExtFields", "ext_fields", "read_ext_fields"]
 
-__all__ = ["ext_fields", "read_ext_fields"]
+
+class ExtFields(Protocol):
+    """What these fields are read from and written into: a :class:`~.result.Calibration`."""
+
+    models: dict[tuple[int, str], JointModel]
+    stderr: dict[tuple[int, str], NDArray[np.float64] | None]
+    covariance: dict[tuple[int, str], NDArray[np.float64]]
+    sigma_model: dict[tuple[int, str], float]
+    selection: dict[tuple[int, str], dict[str, object]]
 
 
 def _key(j: int, d: str) -> dict[str, object]:
     return {"joint": j, "direction": d}
 
 
-def ext_fields(cal: Calibration) -> dict[str, object]:
+def ext_fields(cal: ExtFields) -> dict[str, object]:
     """``families``, ``uncertainty`` and ``selection`` entries for :meth:`Calibration.to_dict`."""
     fams: list[dict[str, object]] = []
     for (j, d), m in sorted(cal.models.items()):
@@ -106,7 +114,7 @@ def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyPara
     return FamilyParams(spec.name, j, tuple(values), scale), ses
 
 
-def read_ext_fields(cal: Calibration, data: dict[str, object]) -> None:
+def read_ext_fields(cal: ExtFields, data: dict[str, object]) -> None:
     """Fill ``cal`` from the ``families``, ``uncertainty`` and ``selection`` entries; ``ValueError`` on bad ones."""
     fams = data.get("families") or []
     if not isinstance(fams, list):

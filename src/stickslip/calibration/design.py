@@ -20,9 +20,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
-from ..families import FamilyModel, FamilyParams, average_from_features, features, traverse_features
 from ..models import PrismaticParams, RotaryParams
-from .families import unit_scale
+from ..models.families import FamilyModel, FamilyParams, average_from_features, features, traverse_features
+from .family_fit import unit_scale
 from .result import Calibration
 from .update import model_sigma
 

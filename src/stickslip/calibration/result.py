@@ -21,7 +21,6 @@ if TYPE_CHECKING:
 from .. import kinematics as kin
 from .. import plotting, records
 from ..clock import day_label_problem, now_utc
-from ..families import FamilyParams
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
     DIRECTIONS,
@@ -32,6 +31,7 @@ from ..models import (
     RotaryParams,
     direction_label,
 )
+from ..models.families import FamilyParams
 from ..units import param_scale, step_scale
 
 FORMAT = "stickslip.calibration"

@@ -1,6 +1,6 @@
 """Averaging (or choosing) model families by leave-one-pose-out cross-validation (docs/models.md §3).
 
-For each joint, every family of :mod:`stickslip.families` (and its variant with terms
+For each joint, every family of :mod:`stickslip.models.families` (and its variant with terms
 shared by + and -) that the traverses can identify, with at least two poses per
 parameter of a direction, is fitted to both directions; then each *pose* (the fixed
 joints and the tilt) beyond the paper's calibration poses is left out in turn, the
@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
 from ..measurements import Traverse
-from .families import (
+from ..models.families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
+from .family_fit import (
     Columns,
     FamilyFit,
     JointFit,

@@ -37,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..families import FamilyModel, FamilyParams
 from ..measurements import Traverse
 from ..models import JointModel, PrismaticParams, RotaryParams
+from ..models.families import FamilyModel, FamilyParams
 from ..units import DIMENSIONLESS_PARAMETERS
 from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
 

@@ -507,7 +507,7 @@ def plan_cmd(
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
-    from ..planning import plan_move
+    from ..motion.planning import plan_move
 
     pos = angle_option if joint_spec(joint).rotary else length_option
     try:

@@ -93,8 +93,8 @@ def _apply_pose_options(
 def _plan(
     cal: Calibration, joint: int, q_from: float, q_to: float, pose: kin.Pose
 ) -> tuple[int, float, Callable[[int], float]]:
-    """``(steps (signed int), q_end_predicted, dead_reckon(n) -> q)`` from stickslip.planning."""
-    from ..planning import dead_reckon, plan_move
+    """``(steps (signed int), q_end_predicted, dead_reckon(n) -> q)`` from stickslip.motion.planning."""
+    from ..motion.planning import dead_reckon, plan_move
 
     plan = plan_move(cal, joint, q_from, q_to, pose)
     steps = int(plan.signed_steps)
@@ -125,7 +125,7 @@ def _state_rows(state: DeviceState) -> list[dict[str, object]]:
 
 def _track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
     """``sd`` (m or rad) of the position and the learned ``step_scale`` (1) of a joint, ``None`` if untracked."""
-    from ..tracking import JointTrack
+    from ..motion.tracking import JointTrack
 
     raw = state.track.get(joint)
     if raw is None:
@@ -205,7 +205,7 @@ def _move_locked(
         fail(problem)
     q_from, q_to = _target(joint, state, by, to)
     pose = state.pose
-    from ..tracking import joint_sigma_model, scaled_calibration, track_for
+    from ..motion.tracking import joint_sigma_model, scaled_calibration, track_for
 
     with user_errors():  # the day's step scale learned from observations (stickslip observe)
         track, note = track_for(state.track.get(joint), cal, joint)

@@ -1,7 +1,7 @@
 """``stickslip observe``: feed a measured position into a device's dead reckoning (a Kalman update).
 
 The kept state of each joint (``stickslip where``) carries the Kalman state of its dead
-reckoning (:class:`stickslip.tracking.JointTrack`): ``stickslip move`` widens the
+reckoning (:class:`stickslip.motion.tracking.JointTrack`): ``stickslip move`` widens the
 position's uncertainty with every move; a measured position (a microscope image, an end
 stop reached) narrows it and, through the correlation the moves built up, corrects the
 day's step scale, which the next ``move`` plans with (docs/models.md §7).
@@ -61,8 +61,8 @@ def observe(
     Example: stickslip observe -d mm3a:///dev/ttyUSB0 --joint 3 --at 1.234mm --sigma 2um
     """
     from ..devices.positions import load_state, save_state
+    from ..motion.tracking import JointTrack
     from ..procedures.move import DeviceBusy, device_lock
-    from ..tracking import JointTrack
 
     spec = JOINTS[joint]
     word = at.strip().lower()

@@ -176,7 +176,7 @@ def reach(
     seg = float(segment)
     device = device_url(device)
     from ..calibration import Calibration
-    from ..reach import borrow_joint1, plan_reach
+    from ..motion.reach import borrow_joint1, plan_reach
 
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -447,10 +447,10 @@ def jog(
     import time
 
     from ..calibration import Calibration
+    from ..motion.reach import borrow_joint1
     from ..procedures.conditions import usage_warnings
     from ..procedures.jog import JogController, run_jog
     from ..procedures.move import DeviceBusy, device_lock
-    from ..reach import borrow_joint1
 
     geom = parse_geometry(geometry)
     device = device_url(device)

@@ -15,7 +15,7 @@ sent since. This module keeps that per device URL:
   the joint *uncertain* with those bounds, never silently wrong, until it is
   re-referenced (:meth:`DeviceState.set_position` with source ``"set"``);
 * ``track``: per joint, the Kalman state of its dead reckoning (the day's step scale and
-  the covariance of position and scale, :class:`stickslip.tracking.JointTrack` as JSON),
+  the covariance of position and scale, :class:`stickslip.motion.tracking.JointTrack` as JSON),
   which ``stickslip move`` propagates and ``stickslip observe`` updates with a measured
   position (source ``"observed"``).
 
@@ -109,7 +109,7 @@ class DeviceState:
     psi: float = 0.0
     uncertain: dict[int, tuple[float, float]] = field(default_factory=dict)
     track: dict[int, dict[str, Any]] = field(default_factory=dict)
-    """``{joint: JointTrack JSON}``: step scale and position covariance (stickslip.tracking)."""
+    """``{joint: JointTrack JSON}``: step scale and position covariance (stickslip.motion.tracking)."""
 
     @classmethod
     def default(cls, device: str) -> DeviceState:

@@ -51,7 +51,7 @@ from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError
 from ..devices.positions import DeviceState
-from ..reach import JointStepper, plan_reach
+from ..motion.reach import JointStepper, plan_reach
 from .move import drive
 
 __all__ = [

@@ -1,4 +1,4 @@
-"""Driving a straight tip move: the segments of a :class:`~stickslip.reach.ReachPlan`, joint by joint.
+"""Driving a straight tip move: the segments of a :class:`~stickslip.motion.reach.ReachPlan`, joint by joint.
 
 Each joint's steps in a segment go through :func:`stickslip.procedures.move.drive`
 (the write-ahead journal: *in flight* before a burst, the dead-reckoned end after it),
@@ -7,7 +7,7 @@ after every burst, and a link drop, crash or Ctrl-C leaves the joint being stepp
 *uncertain* with bounds, never silently wrong. The caller holds the device lock
 (:func:`stickslip.procedures.move.device_lock`).
 
-The dead reckoning inside a segment is the planner's own (:class:`stickslip.reach.JointStepper`
+The dead reckoning inside a segment is the planner's own (:class:`stickslip.motion.reach.JointStepper`
 in the pose of that moment), so the kept positions after each segment are the plan's
 predicted ``q``.
 """
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from ..calibration import Calibration
 from ..devices.base import Controller
 from ..devices.positions import DeviceState
-from ..reach import JointStepper, ReachPlan
+from ..motion.reach import JointStepper, ReachPlan
 from .move import drive
 
 __all__ = ["ReachOutcome", "drive_reach"]

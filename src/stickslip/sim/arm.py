@@ -588,7 +588,10 @@ _URL_KEYS = {
 
 
 def open_url(url: str = "sim://") -> SimulatedMM3A:
-    """Open a simulated MM3A from a ``sim://`` URL.
+    """Open the closed-form simulated MM3A from a ``sim://`` URL.
+
+    ``sim://`` URLs reach this through :func:`stickslip.sim.urls.open_url`, which sends
+    ``?physics=1`` to the physics-based arm instead.
 
     Query options: ``seed`` (int), ``day`` (label), ``noise`` (relative per-step
     noise, e.g. 0.03), ``drift`` (relative day-to-day drift), ``rate`` (microphone
@@ -597,10 +600,6 @@ def open_url(url: str = "sim://") -> SimulatedMM3A:
     ``ValueError`` naming them.
     """
     parts = urlsplit(url)
-    if parts.scheme == "sim+physics" or ("physics", "1") in parse_qsl(parts.query):
-        from .physics import open_url as open_physics  # the physics-based arm (sim/physics.py)
-
-        return open_physics(url)
     if parts.scheme not in ("sim", ""):
         raise ValueError(f"not a sim:// URL: {url!r}")
     if parts.path not in ("", "/") or parts.netloc not in ("", "mm3a", "localhost"):

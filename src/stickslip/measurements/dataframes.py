@@ -18,9 +18,10 @@ import math
 from collections.abc import Iterable
 from typing import Any
 
-from .measurements import HEADER, Traverse, parse_measurements
-from .notebook import html_table
-from .units import position_scale, step_scale
+from ..notebook import html_table
+from ..units import position_scale, step_scale
+from .rows import HEADER, Traverse
+from .table import parse_measurements
 
 __all__ = ["TraverseTable", "UNITS", "from_pandas", "to_pandas"]
 

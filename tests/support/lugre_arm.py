@@ -10,7 +10,7 @@ a mount compliance ``|cos q2|^1.5``. This arm shares none of that code or those 
   displacement and frictional lag come out of the bristle dynamics). The bristle ODE is
   integrated implicitly in ``z`` (stable for stiff bristles);
 * **drive**: the piezo follows a sawtooth smoothed by a first-order lag (no resonance);
-* **pose**: gravity by composing scipy ``Rotation``s (``tests/hidden_arm.py``), the loads
+* **pose**: gravity by composing scipy ``Rotation``s (``tests/support/hidden_arm.py``), the loads
   by projection and cross products; the prismatic joint's efficiency from a *slack* that
   grows as ``sin^2`` of the arm's elevation (not ``|cos q2|``); the normal load from the
   gravity across the axis through a quadratic (not linear) preload law;
@@ -30,10 +30,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from hidden_arm import RANGES, arm_rotation, gravity_in_base
 from numpy.typing import ArrayLike
 from scipy.interpolate import RegularGridInterpolator
 
-from hidden_arm import RANGES, arm_rotation, gravity_in_base
 from stickslip.measurements import Traverse
 
 # ------------------------------------------------------------------ the LuGre cell

@@ -12,7 +12,7 @@ segments along the straight line. For each segment:
 3. the exact (real) step count of joint 1, then 2, then 3 (the order they are
    stepped in) comes from the calibrated step-size model in the current pose (gravity
    and direction included; rotary joints integrated exactly, as
-   :mod:`stickslip.planning` does), and the predicted position after whole steps is
+   :mod:`stickslip.motion.planning` does), and the predicted position after whole steps is
    dead-reckoned. Each count is rounded down or up: of those (at most 8) choices the
    one that keeps the tip closest to the line is taken (on the last segment, the one
    that ends closest to the target), so every joint stays within a step of its ideal
@@ -40,9 +40,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import kinematics as kin
-from .calibration import Calibration
-from .models import JointModel, NonPhysicalError
+from .. import kinematics as kin
+from ..calibration import Calibration
+from ..models import JointModel, NonPhysicalError
 from .planning import Planner
 
 __all__ = [

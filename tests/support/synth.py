@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from pinned import PINNED_TODAY
 
-from conftest import PINNED_TODAY
 from stickslip.calibration import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse

@@ -39,10 +39,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from . import kinematics as kin
-from .calibration import Calibration
-from .calibration.update import DRIFT_PRIOR, STEP_NOISE, model_sigma, scaled_model
-from .clock import age_days
+from .. import kinematics as kin
+from ..calibration import Calibration
+from ..calibration.update import DRIFT_PRIOR, STEP_NOISE, model_sigma, scaled_model
+from ..clock import age_days
 from .planning import Planner
 
 __all__ = [

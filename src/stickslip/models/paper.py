@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import kinematics as kin
+from .. import kinematics as kin
 
 FloatArray = NDArray[np.float64]
 
@@ -48,6 +48,7 @@ __all__ = [
     "PrismaticParams",
     "RotaryParams",
     "JointModel",
+    "Params",
     "NonPhysicalError",
     "antiderivative_inverse_step",
     "StepProfile",

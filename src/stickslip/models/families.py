@@ -52,10 +52,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from . import kinematics as kin
-from .joints import joint_spec
-from .models import JointModel, NonPhysicalError, StepProfile
-from .units import DIMENSIONLESS_PARAMETERS
+from .. import kinematics as kin
+from ..joints import joint_spec
+from ..units import DIMENSIONLESS_PARAMETERS
+from .paper import JointModel, NonPhysicalError, StepProfile
 
 __all__ = [
     "FamilySpec",

@@ -18,11 +18,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from . import kinematics as kin
-from .calibration import Calibration
-from .families import FamilyModel, TabulatedProfile
-from .measurements import check_pose
-from .models import JointModel, PrismaticParams, StepProfile, direction_label
+from .. import kinematics as kin
+from ..calibration import Calibration
+from ..measurements import check_pose
+from ..models import JointModel, PrismaticParams, StepProfile, direction_label
+from ..models.families import FamilyModel, TabulatedProfile
 
 __all__ = ["MovePlan", "Planner", "plan_move", "dead_reckon"]
 
@@ -64,7 +64,7 @@ class MovePlan:
         return self.steps if self.direction == "+" else -self.steps
 
     def __repr__(self) -> str:
-        from .units import format_position, format_step
+        from ..units import format_position, format_step
 
         j = self.joint
         return (
@@ -75,8 +75,8 @@ class MovePlan:
 
     def _repr_html_(self) -> str:
         """The plan as a one-row table (positions in µm or deg, steps in nm or µrad), for Jupyter."""
-        from .notebook import html_table
-        from .units import position_scale, step_scale
+        from ..notebook import html_table
+        from ..units import position_scale, step_scale
 
         k, pu = position_scale(self.joint)
         s, su = step_scale(self.joint)
@@ -201,7 +201,7 @@ class Planner:
 
     def gamma(self, q: float, direction: str | int) -> float:
         """Predicted step size at ``q`` in ``direction`` (rad or m)."""
-        from .models import direction_sign
+        from ..models import direction_sign
 
         return self._dir(direction_sign(direction)).gamma(q)
 

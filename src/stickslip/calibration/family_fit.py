@@ -1,4 +1,4 @@
-"""Fitting one model family (:mod:`stickslip.families`) to traverses by least squares.
+"""Fitting one model family (:mod:`stickslip.models.families`) to traverses by least squares.
 
 Residuals are relative, ``gamma_pred / gamma_meas - 1`` per traverse, with the
 traverse average predicted exactly (prismatic) or by Gauss-Legendre quadrature
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..families import BOUNDS, RATIO_NAMES, FamilySpec, Features, average_from_features, traverse_features
 from ..measurements import Traverse
+from ..models.families import BOUNDS, RATIO_NAMES, FamilySpec, Features, average_from_features, traverse_features
 
 __all__ = ["FamilyFit", "fit_family", "traverse_columns", "unit_scale"]
 
