@@ -36,13 +36,11 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
+from synth import paper_table  # tests/support, on pytest's pythonpath
 from typer.testing import CliRunner
 
 from stickslip.cli import app
 from stickslip.cli._common import EXIT_CODES
-
-sys.path.insert(0, str(Path(__file__).parent))
-from synth import paper_table  # noqa: E402
 
 # derandomized in `make test` by the profile (tests/conftest.py); fresh draws with `make test-explore`
 HOSTILE = settings(
@@ -447,6 +445,7 @@ def _cli(*args: object) -> list[str]:
     return [sys.executable, "-c", "from stickslip.cli import main; main()", *map(str, args)]
 
 
+@pytest.mark.slow  # a subprocess
 @pytest.mark.skipif(os.name != "posix", reason="a pipe's reader that goes away (EPIPE) as POSIX has it")
 def test_piped_into_head_the_command_ends_quietly(tmp_path, kit):
     """A real pipe whose reader leaves after one line: exit 1, nothing on stderr (no 'Exception ignored')."""
@@ -463,6 +462,7 @@ def test_piped_into_head_the_command_ends_quietly(tmp_path, kit):
     assert first.startswith(b"joint,direction")
 
 
+@pytest.mark.slow  # a subprocess
 @pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full (Linux)")
 @pytest.mark.parametrize("json_out", [False, True])
 def test_a_full_standard_output_is_one_error_line(kit, json_out):

@@ -288,6 +288,7 @@ BACKENDS: dict[str, str | Factory] = {
     "mm3a+socket": "stickslip.devices.nanocontrol:open_url",
     "anc300": "stickslip.devices.anc300:open_url",
     "smaract-mcs": "stickslip.devices.smaract:open_mcs",
+    "smaract-mcs+socket": "stickslip.devices.smaract:open_mcs",
     "smaract-mcs2": "stickslip.devices.smaract:open_mcs2",
 }
 
