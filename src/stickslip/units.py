@@ -87,8 +87,6 @@ def parse_quantity(text: str | float, kind: str | None = None) -> float:
         raise UnitError(f"cannot read {text!r} as a number with an optional unit")
     if m.group("num") is not None:
         value = float(m.group("num"))
-        if not math.isfinite(value):
-            raise UnitError(f"{str(text).strip()!r} is not a finite number")
     else:
         mul = m.group("pimul")
         value = (float(mul) if mul not in (None, "", "+", "-") else 1.0) * math.pi

@@ -21,7 +21,7 @@ from pathlib import Path
 import typer
 from typer.models import CommandInfo
 
-from ._common import OneLineErrors, describe, drop_warnings, flush_warnings, guard_options
+from ._common import DEVICE_FILTERS, OneLineErrors, describe, drop_warnings, flush_warnings, guard_options
 
 app = typer.Typer(
     name="stickslip",
@@ -149,7 +149,8 @@ def _name(info: CommandInfo) -> str:
 
 for _info in app.registered_commands:
     if _info.callback is not None:
-        guard_options(_info.callback)  # finite floats, non-blank --day: the checks every command shares
+        # finite floats, non-blank --day, a --device that can be opened: the checks every command shares
+        guard_options(_info.callback, device_is_filter=_name(_info) in DEVICE_FILTERS)
     if _info.callback is not None and _info.callback.__doc__ and _info.help is None:
         _info.callback.__doc__ = _unwrap(_info.callback.__doc__)
     _info.rich_help_panel = _PANEL_OF.get(_name(_info), "Other")

@@ -304,7 +304,11 @@ def _finite_option(value: float | None) -> float | None:
     return value
 
 
-def guard_options(callback: Callable[..., Any]) -> None:
+DEVICE_FILTERS = frozenset({"history", "export", "anova", "report", "delete"})
+"""Commands whose ``--device`` only picks stored rows: any text may match a device stored by an older release."""
+
+
+def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) -> None:
     """Give the options of one command the checks every command shares (one place for the whole CLI).
 
     * a ``float`` option (without a parser of its own) refuses ``inf``, ``1e999`` and
@@ -313,7 +317,8 @@ def guard_options(callback: Callable[..., Any]) -> None:
       :func:`day_option`: a blank or whitespace label is refused, naming ``--day``;
     * a ``--device`` option is checked by :func:`device_option`: a URL that could never
       be opened (no scheme, an unknown one, a bad port, a host name DNS cannot carry) is
-      refused before any command uses it, records it or stores anything with it.
+      refused before any command uses it, records it or stores anything with it (not
+      where it only filters stored rows, ``device_is_filter``: :data:`DEVICE_FILTERS`).
 
     The check is set as the option's typer callback where it has none (an option with a
     callback of its own checks itself). Called on every command when the CLI is built.
@@ -338,7 +343,7 @@ def guard_options(callback: Callable[..., Any]) -> None:
             info.callback = _finite_option
         elif kinds == {str} and p.name == "day":
             info.callback = day_option
-        elif kinds == {str} and p.name == "device":
+        elif kinds == {str} and p.name == "device" and not device_is_filter:
             info.callback = device_option
 
 

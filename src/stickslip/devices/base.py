@@ -329,8 +329,8 @@ def check_device_url(url: str) -> str:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
     if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
         raise ValueError(
-            f"device URL {redact_url(url)!r} names no host and no port: write {scheme}://HOST or "
-            f"{scheme}:///dev/ttyUSB0 (a serial port)"
+            f"device URL {redact_url(url)!r} names no host and no port: give the serial port "
+            f"({scheme}:///dev/ttyUSB0) or, where the controller has one, its network address"
         )
     if host and not (host.startswith("[") or ":" in host):  # a name (or IPv4 address), not an IPv6 address
         labels = host.rstrip(".").split(".")
