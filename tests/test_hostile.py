@@ -288,6 +288,7 @@ blank = st.text(alphabet=" \t\u00a0\u2003\u3000", max_size=4)
 
 @HOSTILE
 @given(label=blank, where=st.sampled_from(["calibrate --day", "fit --day", "traverse --day", "table", "demo --day"]))
+@example(label="\t", where="table")  # a fresh draw: written guarded ("'\t"), stripped before unguarded, it read as "'"
 def test_a_blank_session_label_is_refused(tmp_path, kit, label, where):
     d = fresh(tmp_path)
     if where == "table":

@@ -189,10 +189,9 @@ def _measurement_chunk(
     cols: Sequence[Sequence[str]], lines: list[int], source: str
 ) -> tuple[TraverseTable, list[tuple[int, str]]]:
     """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`."""
-    days = [c.strip() for c in cols[0]]
-    quoted = {d: unguard_cell(d) for d in set(days) if d.startswith("'")}  # guarded labels: records.guard_cell
-    if quoted:
-        days = [quoted.get(d, d) for d in days]
+    # a guarded label (records.guard_cell) loses its guard before it is stripped: "'\t" is a tab, a blank label
+    quoted = {d: unguard_cell(d).strip() for d in set(cols[0]) if d.startswith("'")}
+    days = [quoted[c] if c in quoted else c.strip() for c in cols[0]] if quoted else [c.strip() for c in cols[0]]
     ok = ~_equal(days, "")
     bad_labels = {d for d in set(days) if d and day_label_problem(d) is not None}  # a table holds few labels
     if bad_labels:
