@@ -348,6 +348,15 @@ def test_the_output_degrades_to_what_the_stream_can_encode(tmp_path, kit, cmd, e
                 assert any(f in r.stdout for f in fallbacks), (char, r.stdout)
 
 
+def test_data_the_stream_cannot_encode_is_refused_not_changed(tmp_path, kit):
+    """CSV on standard output is data: a cell the encoding lacks ends the command (exit 2) instead of being altered."""
+    poses = tmp_path / "p.csv"
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi,note\n3,+,0,-1.5707963,0,0,0,5 µm\n", encoding="utf-8")
+    error_line(invoke(["predict", "-c", kit["cal"], poses], charset="ascii"), "U+00B5 (micro sign)", "-o")
+    r = invoke(["predict", "-c", kit["cal"], poses, "--json"], charset="ascii")  # JSON is ASCII: always written
+    assert r.exit_code == 0 and json.loads(r.stdout)[0]["note"] == "5 µm"
+
+
 # ------------------------------------------------------------ 4: a standard output that fails while written
 
 

@@ -196,12 +196,13 @@ class _Stream(io.TextIOBase):
                 return int(self._raw.write(s) or 0)
             except UnicodeEncodeError as e:
                 if not self._text:
-                    bad = e.object[e.start : e.end]
+                    c = e.object[e.start]
+                    what = f"U+{ord(c):04X} ({unicodedata.name(c, 'a character').lower()})"
                     raise OutputError(
                         _NAMES[self._name],
                         ValueError(
-                            f"its encoding {self.encoding} has no {bad!r}; write to a file with -o/--output "
-                            "(UTF-8), or set PYTHONIOENCODING=utf-8"
+                            f"its encoding {self.encoding} cannot write {what} in the data; write to a file with "
+                            "-o/--output (UTF-8), or set PYTHONIOENCODING=utf-8"
                         ),
                     ) from None
                 return int(self._raw.write(visible(s, self.encoding)) or 0)
@@ -231,6 +232,9 @@ class _Stream(io.TextIOBase):
 
     def writable(self) -> bool:
         return True
+
+    def close(self) -> None:
+        """Nothing: the standard streams are not ours to close (and a finalizer must not flush them)."""
 
 
 _DATA = _Stream("stdout", text=False)
