@@ -16,10 +16,11 @@ import numpy as np
 import pytest
 from scipy.signal import lfilter
 
-from stickslip.audio.detector import StopDetector, detect
+from stickslip.audio.detector import detect, detector_for
+from stickslip.audio.readback import ReadbackStopDetector
 from stickslip.audio.sources import AudioSourceError, write_wav
+from stickslip.audio.sources.vibration import SerialSamples, read_vibration
 from stickslip.audio.tuning import tune
-from stickslip.audio.vibration import ReadbackStopDetector, SerialSamples, read_vibration
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
@@ -105,7 +106,7 @@ def test_a_live_serial_stream_feeds_the_detector_in_blocks():
     tu = tune(x / 50.0, SR, 2.0, self_check=False)
     y = accel(1000.0, 0.9, 1.4, seed=4)
     src = SerialSamples(sample_rate=SR, block=256, full_scale=50.0, serial=_FakeSerial(y))
-    det = StopDetector(tu)
+    det = detector_for(tu)
     events = []
     with pytest.raises(AudioSourceError, match="no vibration samples"):
         for block in src:
