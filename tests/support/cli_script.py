@@ -86,6 +86,9 @@ class _QuietScreen:
     def show(self, status: Any) -> None:
         pass
 
+    def close(self) -> None:
+        pass
+
 
 def _rows(db: Path) -> list[list[Any]]:
     """The ``device_state`` rows (device URL, key, value), the lock's holder left out."""

@@ -32,6 +32,7 @@ from ._common import (
     say,
     user_config,
 )
+from ._output import data_stream
 
 config_app = typer.Typer(
     name="config",
@@ -70,7 +71,7 @@ def path_cmd(
             }
         )
         return
-    typer.echo(str(p))
+    data_stream().write(f"{p}\n")  # for a shell: the path as it is
 
 
 @config_app.command("init")
