@@ -354,3 +354,69 @@ def grab_cmd(
     console.print(f"{w} x {h} px{px} at t = {frame.time_s:.3f} s -> {output}", highlight=False)
     if truth is not None:
         console.print(f"simulator's true tip: {truth[0]:.2f}, {truth[1]:.2f} px", highlight=False)
+
+
+# ---------------------------------------------------------------- the closed loop (move, reach --camera)
+
+CAMERA_LOOP_HELP = (
+    "Close the loop with this camera (it must know its pixel size: simcam://?pixel=1um with -d sim://, "
+    "opencv://0?pixel=0.5um): the tip is tracked after each short leg, the position and the day's step scale "
+    "corrected, until the tip is within 1 px or 0.5 µm (the larger) of the target. See docs/vision.md."
+)
+CAMERA_TIP_HELP = (
+    "With --camera: the tip's pixel now, X,Y (default: found by stepping joint 3 back and forth). " + PIXELS
+)
+
+
+def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: Path | None,
+             json_out: bool, borrowed: bool = False) -> None:
+    """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short."""
+    from ..procedures.closed_loop import CameraLoop, move_seen, reach_seen
+    from ..procedures.move import DeviceBusy
+    from ..vision.acquire import AcquireError
+    from ..vision.camera import CameraError
+    from ..vision.frame import ImageError
+    from ..vision.jacobian import JacobianError
+    from ..vision.template import TemplateError
+    from ._common import flush_warnings, warn_later
+
+    at = _pixel(tip, "--camera-tip") if tip is not None else None
+    with user_errors():
+        loop = CameraLoop(camera, tip=at)
+    errors = (DeviceBusy, KeyError, DeviceError, CameraError, AcquireError, ImageError, JacobianError, TemplateError)
+    with open_store(db) as store, user_errors(*errors):
+        if kind == "move":
+            result = move_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
+        else:
+            if borrowed:
+                from ..procedures.reach import BORROWED_JOINT1
+
+                warn_later(BORROWED_JOINT1)
+            result = reach_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
+    if json_out:
+        print_json({"camera": result.as_dict()})
+    else:
+        _print_seen(result)
+    if not result.reached:
+        fail(f"the closed loop stopped: {result.reason}")
+
+
+def _print_seen(result: Any) -> None:
+    from ..kinematics import tip as tip_of
+    from ..units import format_position
+
+    say_ = console.print
+    tol = result.tolerance * 1e6
+    state = "reached" if result.reached else "stopped"
+    say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
+         highlight=False)
+    say_(f"  {len(result.looks)} leg(s) looked at, {result.corrections} correction(s)", highlight=False)
+    for j in (1, 2, 3):
+        src = result.state.sources[j]
+        say_(f"  joint {j} {format_position(result.state.positions[j], j)} ({src})", highlight=False)
+    scales = result.looks[-1].step_scale if result.looks else {}
+    if scales:
+        say_("  step scale " + ", ".join(f"joint {j} x{s:.4f}" for j, s in sorted(scales.items())), highlight=False)
+    if result.sim_true is not None:
+        err = math.dist(tip_of(result.sim_true, result.geometry), result.target)
+        say_(f"  simulator's true tip {err * 1e6:.2f} µm from the target", highlight=False)

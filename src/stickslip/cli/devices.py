@@ -44,6 +44,7 @@ from ._common import (
     user_errors,
     warn_later,
 )
+from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
 
 if TYPE_CHECKING:
     from ..procedures.move import MoveResult
@@ -145,6 +146,8 @@ def move(
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
+    camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
+    camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
 ) -> None:
     """Move a joint by a distance or to a position, with the calibrated step-size model.
 
@@ -183,6 +186,9 @@ def move(
         burst=burst or 1000, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
+    if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
+        run_seen("move", request, cal, camera, camera_tip, db, json_out)
+        return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
     failure = result.failure()

@@ -34,6 +34,7 @@ from ._common import (
     warn,
     warn_later,
 )
+from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
@@ -120,6 +121,8 @@ def reach(
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
+    camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
+    camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
 ) -> None:
     """Move the tip in a straight line to a point or by a displacement (task space).
 
@@ -159,6 +162,9 @@ def reach(
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
+    if camera is not None and not dry_run:  # the closed loop: stickslip.procedures.closed_loop
+        run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed)
+        return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings)
     failure = result.failure()
