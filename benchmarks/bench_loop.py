@@ -94,9 +94,7 @@ def _tip(camera: str) -> tuple[float, float]:
         cam.close()
     finally:
         dev.close()
-    xy = found[0] if isinstance(found[1], float) and len(found[0]) == 2 else found  # simcam: (pixel, depth)
-    if isinstance(found[0], float):
-        xy = found
+    xy = found if isinstance(found[0], float) else found[0]  # simcam's is (pixel, depth)
     return (float(xy[0]), float(xy[1]))
 
 
