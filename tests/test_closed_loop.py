@@ -228,3 +228,53 @@ def test_the_loop_settings_and_sources():
         with pytest.raises(ValueError):
             CameraLoop("simcam://", **bad)  # type: ignore[arg-type]
     assert "seen" in SOURCES and "seen" in REFERENCED
+
+
+# ---------------------------------------------------------------- jogging with the camera
+
+
+class _Script:
+    """Scripted keys for a jog session: one list of keys per tick."""
+
+    def __init__(self, ticks: list[list[str]]):
+        self.ticks = list(ticks)
+
+    def read(self, timeout: float) -> list[str]:
+        return self.ticks.pop(0) if self.ticks else ["q"]
+
+    def close(self) -> None:
+        pass
+
+
+def _jog(cal_path: str, camera: str | None, tmp_path):
+    from stickslip.calibration import Calibration
+    from stickslip.devices.base import open_device
+    from stickslip.procedures.jog import JogRequest, jog
+    from stickslip.storage import Store
+
+    cal = Calibration.load(cal_path)
+    loop = CameraLoop(camera, tip=(307.2, 256.0)) if camera else None
+    clock = iter(np.arange(0.0, 1000.0, 0.05))
+    shown = []
+    script = _Script([["6", "s"]] + [[]] * 40 + [["space"]] + [[]] * 3 + [["q"]])  # -y at 30 µm/s for 2 s
+    sim = open_device(DEV)
+    with Store.open(tmp_path / f"jog-{bool(camera)}.db") as store:
+        result = jog(store, JogRequest(DEV, speed=6, hold=0.0, camera=loop), cal, keys=lambda: script,
+                     show=shown.append, clock=lambda: float(next(clock)), opener=lambda _url: sim)
+        track = result.state.track.get(1)  # a jog without the camera keeps no track
+    return result, shown, float(sim.position(1)), math.sqrt(track["P"][0][0]) if track else math.nan
+
+
+@pytest.mark.slow
+def test_jog_with_the_camera_shows_and_keeps_the_seen_positions(cal_off, tmp_path):
+    result, shown, true_q1, sd = _jog(cal_off, "simcam://?pixel=1um", tmp_path)
+    assert result.error is None
+    assert shown[-1].sources == ("seen", "default", "default")  # joint 1 moved the tip across the image
+    q1 = result.state.positions[1]
+    assert result.state.sources[1] == "seen" and q1 < -1e-3  # -y: joint 1 turned by about -60 µm / 21 mm
+    assert abs(q1 - true_q1) <= 3 * sd and abs(q1 - true_q1) * G.length < 1e-6  # within 1 µm at the tip
+    # without the camera the jog's dead reckoning is the calibration's: about 20 % short
+    blind, shown, true_blind, _ = _jog(cal_off, None, tmp_path)
+    assert shown[-1].sources == ("", "", "")
+    assert blind.state.sources[1] == "dead-reckoned"
+    assert 0.1 < abs(blind.state.positions[1] - true_blind) / abs(true_blind) < 0.25

@@ -368,23 +368,39 @@ CAMERA_TIP_HELP = (
 )
 
 
-def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: Path | None,
-             json_out: bool, borrowed: bool = False) -> None:
-    """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short."""
-    from ..procedures.closed_loop import CameraLoop, move_seen, reach_seen
-    from ..procedures.move import DeviceBusy
+def camera_errors() -> tuple[type[BaseException], ...]:
+    """What opening a camera and learning the tip may raise: one ``error:`` line each (imported when used)."""
     from ..vision.acquire import AcquireError
     from ..vision.camera import CameraError
     from ..vision.frame import ImageError
     from ..vision.jacobian import JacobianError
     from ..vision.template import TemplateError
-    from ._common import flush_warnings, warn_later
+
+    return (CameraError, AcquireError, ImageError, JacobianError, TemplateError)
+
+
+def camera_loop(camera: str | None, tip: str | None) -> Any:
+    """The :class:`~stickslip.procedures.closed_loop.CameraLoop` of ``--camera`` and ``--camera-tip`` (or ``None``)."""
+    if camera is None:
+        if tip is not None:
+            fail("--camera-tip goes with --camera")
+        return None
+    from ..procedures.closed_loop import CameraLoop
 
     at = _pixel(tip, "--camera-tip") if tip is not None else None
     with user_errors():
-        loop = CameraLoop(camera, tip=at)
-    errors = (DeviceBusy, KeyError, DeviceError, CameraError, AcquireError, ImageError, JacobianError, TemplateError)
-    with open_store(db) as store, user_errors(*errors):
+        return CameraLoop(camera, tip=at)
+
+
+def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: Path | None,
+             json_out: bool, borrowed: bool = False) -> None:
+    """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short."""
+    from ..procedures.closed_loop import move_seen, reach_seen
+    from ..procedures.move import DeviceBusy
+    from ._common import flush_warnings, warn_later
+
+    loop = camera_loop(camera, tip)
+    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError, *camera_errors()):
         if kind == "move":
             result = move_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
         else:

@@ -34,7 +34,7 @@ from ._common import (
     warn,
     warn_later,
 )
-from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
+from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, camera_errors, camera_loop, run_seen
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
@@ -269,7 +269,8 @@ def _status_lines(s: Any) -> list[str]:
             shown, left = f"{q * 1e6:10.2f} µm ", f"{lim * 1e6:.2f} µm"
         else:
             shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
-        lines.append(f"joint {j}: {shown}  to its nearer limit {left}  sent {s.sent[j - 1]:+d}")
+        seen = f" {s.sources[j - 1]}" if s.sources[j - 1] else ""
+        lines.append(f"joint {j}: {shown}  to its nearer limit {left}  sent {s.sent[j - 1]:+d}{seen}")
     mode = f"single-step {s.speed * 1e6:g} µm/press" if s.single_step else f"speed {s.speed * 1e6:g} µm/s"
     frame = f"image frame ({math.degrees(s.image_angle):+.0f} deg)" if s.image_frame else "base frame"
     rates = " ".join(f"{r:+.0f}" for r in s.rates)
@@ -357,6 +358,11 @@ def jog(
         "controller (refused without it: its step sizes may be another arm's).",
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    camera: str | None = typer.Option(
+        None, "--camera", help="A camera that looks at the tip (pixel= in its URL): the joints it sees are shown "
+        "and kept as seen, their step scales corrected as the tip moves.",
+    ),
+    camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 
@@ -365,6 +371,9 @@ def jog(
     [ and ] turn it by 15 deg). Keys 1-7 pick the speed (0.1 to 100 µm/s); m toggles
     single-step mode, where each press moves the tip by the preset's distance
     (0.1 to 100 µm); space stops at once; q quits.
+
+    With --camera the tip is looked at each time it has moved 8 px or stopped: the
+    joints the camera sees are shown and kept as seen (docs/vision.md).
 
     The tip velocity becomes joint velocities through the inverse Jacobian and step
     rates through the calibrated step sizes in the current pose, capped at --max-rate
@@ -391,11 +400,11 @@ def jog(
         device_key(device)
     request = JogRequest(
         device, geom, float(image_angle), speed, max_rate, hold, PoseUpdate(q1, q2, q3, theta, psi),
-        max_age_setting(None).value, from_unreferenced, trust_calibration,
+        max_age_setting(None).value, from_unreferenced, trust_calibration, camera_loop(camera, camera_tip),
     )
     screen = _Screen()
     try:
-        with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+        with open_store(db) as store, user_errors(DeviceBusy, DeviceError, *(camera_errors() if camera else ())):
             result = jog_session(
                 store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings
             )

@@ -74,6 +74,7 @@ from .reach import ReachRequest, drive_reach, referenced_state
 
 __all__ = [
     "CameraLoop",
+    "JogEyes",
     "Look",
     "LoopResult",
     "move_seen",
@@ -641,3 +642,67 @@ def reach_seen(
             _close(dev, cam)
     return LoopResult(key, reached, reason, tuple(run.looks), target_v, tolerance_m(loop, run.pixel_size_m), state,
                       true_q, geometry)
+
+
+# ---------------------------------------------------------------- jogging with the camera
+
+
+class JogEyes:
+    """The camera of a jog session: looks at the tip once it has moved a leg's worth, or stopped.
+
+    :func:`stickslip.procedures.jog.run_jog` calls :meth:`after` after every tick with the
+    steps the tick sent; the kept positions of the joints seen become ``seen`` (as in
+    :func:`move_seen`), and :meth:`calibration` gives the jog law the corrected step
+    scales. A lost tip is a message, not the end of the session: the joints stay
+    dead-reckoned until the tip is seen again.
+    """
+
+    def __init__(self, run: _Run):
+        self.run = run
+        self.before = run.q()
+        self.pending = [0, 0, 0]
+
+    @classmethod
+    def open(
+        cls, store: StateStore, dev: Controller, state: DeviceState, calibration: Calibration, loop: CameraLoop,
+        geometry: kin.Geometry = kin.DEFAULT_GEOMETRY, camera_opener: CameraOpener = open_camera,
+    ) -> JogEyes:
+        """Open ``loop.camera`` on ``dev`` and learn the tip (the arm at ``state``'s pose)."""
+        joints = tuple(j for j in (1, 2, 3) if any(k[0] == j for k in calibration.models))
+        return cls(_start(store, dev, state, calibration, loop, geometry, camera_opener, joints))
+
+    def calibration(self) -> Calibration:
+        """The calibration with each joint's step scale as the camera has corrected it."""
+        return self.run.scaled()
+
+    def sources(self) -> tuple[str, str, str]:
+        """Each joint's kept source (``seen``, ``dead-reckoned``, ...)."""
+        s = self.run.state.sources
+        return (s[1], s[2], s[3])
+
+    def after(self, steps: tuple[int, int, int]) -> tuple[Vec3 | None, str | None]:
+        """After a tick that sent ``steps``: the kept joints if the camera looked (else ``None``), and why not seen."""
+        for k in range(3):
+            self.pending[k] += steps[k]
+        if not any(self.pending):
+            return None, None
+        run = self.run
+        moved = np.subtract(kin.tip(run.q(), run.geometry), kin.tip(self.before, run.geometry))
+        pose = run.state.pose
+        px = float(np.linalg.norm(base_to_image(run.loop.view, run.pixel_size_m, pose.theta, pose.psi) @ moved))
+        if any(steps) and px < 0.5 * run.loop.max_leg_px:
+            return None, None  # still moving, less than half a leg since the last look
+        sent = (self.pending[0], self.pending[1], self.pending[2])
+        run.predict(self.before, sent)
+        here = kin.tip(run.q(), run.geometry)
+        why = run.look(sent, (float(here[0]), float(here[1]), float(here[2])), False)
+        self.pending = [0, 0, 0]
+        self.before = run.q()
+        return run.q(), why
+
+    def close(self) -> None:
+        """Keep the positions' full variance and release the camera."""
+        try:
+            self.run.finish()
+        finally:
+            self.run.cam.close()

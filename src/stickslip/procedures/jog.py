@@ -47,7 +47,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -58,6 +58,9 @@ from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
 from .conditions import calibration_device_problem, usage_warnings
 from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions
+
+if TYPE_CHECKING:
+    from .closed_loop import CameraLoop, JogEyes
 from .reach import referenced_state
 
 __all__ = [
@@ -194,6 +197,8 @@ class JogStatus:
     image_angle: float
     sent: list[int]
     message: str
+    sources: tuple[str, str, str] = ("", "", "")
+    """Each joint's kept source when a camera looks (``seen``, ``dead-reckoned``), else empty."""
 
 
 @dataclass
@@ -238,6 +243,7 @@ class JogController:
     quit: bool = False
     message: str = ""
     sent: list[int] = field(default_factory=lambda: [0, 0, 0])
+    sources: tuple[str, str, str] = ("", "", "")
     _acc: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     _last_key_t: float = 0.0
     _rates: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -441,6 +447,7 @@ class JogController:
             self.image_angle,
             list(self.sent),
             self.message,
+            self.sources,
         )
 
 
@@ -453,13 +460,16 @@ def run_jog(
     save: Callable[[DeviceState], None],
     clock: Callable[[], float],
     tick: float = 0.05,
+    eyes: JogEyes | None = None,
 ) -> str | None:
     """The jog loop: keys, the law, steps through the move journal, the status; until ``q``.
 
     ``read_keys(timeout)`` waits up to ``timeout`` seconds and returns key names;
     ``show(status)`` draws; ``save(state)`` stores the positions; ``clock()`` is a
     monotonic time in seconds. Returns the device error that ended the session, if any.
-    The device is told to stop when the loop ends, however it ends.
+    The device is told to stop when the loop ends, however it ends. With ``eyes`` (a
+    camera, :class:`~stickslip.procedures.closed_loop.JogEyes`) the tip is looked at as
+    it moves and the positions shown are the seen ones.
     """
     t_prev = clock()
     show(controller.status())
@@ -491,6 +501,9 @@ def run_jog(
                     controller.message = out.error
                     show(controller.status())
                     return out.error
+            if eyes is not None:
+                _look(eyes, controller, steps)
+                t_prev = clock()  # the time spent looking is not moving time: no catch-up burst
             show(controller.status())
     finally:
         try:
@@ -498,6 +511,17 @@ def run_jog(
         except DeviceError:
             pass
     return None
+
+
+def _look(eyes: JogEyes, controller: JogController, steps: tuple[int, int, int]) -> None:
+    """Let the camera look after a tick: the seen positions and corrected step scales go to the jog law."""
+    q, why = eyes.after(steps)
+    if q is not None:
+        controller.q = list(q)
+        controller.calibration = eyes.calibration()
+        if why:
+            controller.message = why
+    controller.sources = eyes.sources()
 
 
 # ---------------------------------------------------------------- the whole session
@@ -541,6 +565,9 @@ class JogRequest:
         refused on a real controller. Uncertain joints are always refused.
     trust_calibration : bool
         Use a calibration without its device, or the simulator's, on a real controller.
+    camera : CameraLoop or None
+        A camera that looks at the tip: the positions shown and kept are the seen ones
+        (:class:`~stickslip.procedures.closed_loop.JogEyes`).
     """
 
     device: str
@@ -553,6 +580,7 @@ class JogRequest:
     max_age_days: int = 0
     from_unreferenced: bool = False
     trust_calibration: bool = False
+    camera: CameraLoop | None = None
 
 
 @dataclass(frozen=True)
@@ -609,6 +637,7 @@ def jog(
         ready()
         dev = (opener or open_device)(request.device)
         keys_in: KeySource | None = None
+        eyes: JogEyes | None = None
         try:
             if isinstance(dev, PoseSettable):
                 dev.set_pose(*state.pose)
@@ -620,12 +649,16 @@ def jog(
             def save(st: DeviceState) -> None:
                 save_state(store, st)
 
+            if request.camera is not None:
+                eyes = _open_eyes(store, dev, state, calibration, request, ctl)
             keys_in = keys()
             try:
-                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock)
+                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock, eyes=eyes)
             except KeyboardInterrupt:
                 error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
         finally:
+            if eyes is not None:
+                eyes.close()
             if keys_in is not None:
                 keys_in.close()
             try:
@@ -633,3 +666,17 @@ def jog(
             except DeviceError:
                 pass
     return JogResult(key, ctl.status(), state, error)
+
+
+def _open_eyes(
+    store: MoveStore, dev: Controller, state: DeviceState, calibration: Calibration, request: JogRequest,
+    ctl: JogController,
+) -> JogEyes:
+    """The session's camera (:class:`~stickslip.procedures.closed_loop.JogEyes`), the jog law on its step scales."""
+    from .closed_loop import JogEyes
+
+    assert request.camera is not None
+    eyes = JogEyes.open(store, dev, state, calibration, request.camera, request.geometry)
+    ctl.calibration = eyes.calibration()
+    ctl.sources = eyes.sources()
+    return eyes
