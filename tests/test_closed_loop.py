@@ -81,7 +81,7 @@ def _where() -> dict[int, dict]:
 def test_reach_200um_closes_within_tolerance_where_the_open_loop_misses_by_20_percent(cal_off, tmp_path,
                                                                                      monkeypatch):
     monkeypatch.chdir(tmp_path)
-    cam = "simcam://?pixel=1um"
+    cam = "simcam://?pixel=1um&size=256x512"  # the tip moves 200 px down the field
     tip = _tip(cam)
     r = _run(["reach", "-d", DEV, "-c", cal_off, "--by", "0,-200um,0", "--camera", cam, "--camera-tip", tip,
               "--json"])
@@ -278,3 +278,42 @@ def test_jog_with_the_camera_shows_and_keeps_the_seen_positions(cal_off, tmp_pat
     assert shown[-1].sources == ("", "", "")
     assert blind.state.sources[1] == "dead-reckoned"
     assert 0.1 < abs(blind.state.positions[1] - true_blind) / abs(true_blind) < 0.25
+
+
+# ---------------------------------------------------------------- the Bluesky axis with the camera
+
+
+@pytest.mark.slow
+def test_a_bluesky_axis_with_a_camera_moves_in_the_closed_loop(RE, cal_off):
+    pytest.importorskip("ophyd_async")
+    import bluesky.plan_stubs as bps
+    from bluesky.utils import FailedStatus
+    from ophyd_async.core import init_devices
+
+    from stickslip.bluesky import MoveError, StickSlipAxis
+    from stickslip.calibration import Calibration
+    from stickslip.sim.arm import SimulatedMM3A
+
+    sim = SimulatedMM3A(seed=4, day=DAY)
+    cal = Calibration.load(cal_off)
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, cal, name="q3", camera=CameraLoop("peercam://?pixel=1um", tip=(153.6, 128.0)))
+    RE(bps.mv(axis, 60e-6))
+    assert abs(sim.position(3) - 60e-6) <= 1e-6  # the true joint, within the tolerance (1 px of 1 µm)
+    w = _where_of(sim.info.url)[3]
+    assert w["source"] == "seen" and w["step_scale"] == pytest.approx(OFF, abs=0.1)
+    # a tip under a particle fails the status with the loop's reason; the position stays dead-reckoned
+    with init_devices():
+        blind = StickSlipAxis(sim, 3, cal, name="q3b",
+                              camera=CameraLoop("peercam://?pixel=1um&size=512x256&occluder=400,128,12",
+                                                tip=(307.2 + 60.0, 128.0)))
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(blind, 120e-6))
+    assert isinstance(e.value.__cause__, MoveError) and "the tip was lost (occluded" in str(e.value.__cause__)
+    assert _where_of(sim.info.url)[3]["source"] == "dead-reckoned"
+
+
+def _where_of(url: str) -> dict[int, dict]:
+    r = _run(["where", "-d", url, "--json"])
+    assert r.exit_code == 0, r.output
+    return {int(j["joint"]): j for j in json.loads(r.stdout)["joints"]}
