@@ -84,6 +84,9 @@ __all__ = [
 
 Vec3 = tuple[float, float, float]
 
+AUTO_STEPS = 20
+"""Steps out (and back) of the joint stepped to find the tip when none is given."""
+
 LOOK_AGAIN = 2
 """Frames grabbed again, without moving, after a refused one before the tip counts as lost."""
 
@@ -450,7 +453,7 @@ def _open(
     try:
         if cam.info.pixel_size_m is None:
             raise ValueError(f"the camera {loop.camera} does not know its pixel size: give pixel= in its URL")
-        tip = loop.tip if loop.tip is not None else acquire_tip(dev, cam, loop.auto_joint)
+        tip = loop.tip if loop.tip is not None else acquire_tip(dev, cam, loop.auto_joint, AUTO_STEPS)
         tracker = TipTracker(cam.grab(), tip)
         first = tracker.update(cam.grab())
         if not isinstance(first, Fix):
@@ -461,11 +464,38 @@ def _open(
     return cam, tracker, (first.x, first.y), first.sigma
 
 
+def _out_and_back(state: DeviceState, calibration: Calibration, joint: int) -> Callable[[], None]:
+    """Journal :data:`AUTO_STEPS` steps of ``joint`` out and back (uncertain over the way out) and return what keeps
+    their end: the model's position after them (the two directions' steps differ), the track propagated."""
+    q0, pose, source = state.positions[joint], state.pose, state.sources[joint]
+    planner = Planner(calibration, joint, pose)
+    q_out = float(planner.position_after(q0, AUTO_STEPS))
+    out = Planner(calibration, joint, pose._replace(**{f"q{joint}": q_out}))
+    q_back = float(out.position_after(q_out, -AUTO_STEPS))
+    state.intend(joint, q0 + 1.5 * (q_out - q0), f"joint {joint} was stepped out and back to find the tip")
+
+    def keep() -> None:
+        state.set_position(joint, q_back, "dead-reckoned" if source != "assumed" else source)
+        track, _ = track_for(state.track.get(joint), calibration, joint)
+        sigma_model = joint_sigma_model(calibration, joint)
+        track.predict(q_out - q0, AUTO_STEPS, pose, joint, sigma_model)
+        track.predict(q_back - q_out, -AUTO_STEPS, pose, joint, sigma_model)
+        state.track[joint] = track.to_json()
+
+    return keep
+
+
 def _start(
     store: StateStore, dev: Controller, state: DeviceState, calibration: Calibration, loop: CameraLoop,
     geometry: kin.Geometry, camera_opener: CameraOpener, joints: Sequence[int],
 ) -> _Run:
+    if loop.tip is None:  # found by stepping a joint out and back: journalled, then kept as the model says
+        back = _out_and_back(state, calibration, loop.auto_joint)
+        save_state(store, state)
     cam, tracker, u0, sigma0 = _open(dev, state, loop, camera_opener)
+    if loop.tip is None:
+        back()
+        save_state(store, state)
     tracks: dict[int, JointTrack] = {}
     sd0: dict[int, float] = {}
     for j in joints:
@@ -530,10 +560,7 @@ def move_seen(
         if problem:
             raise MoveRefused(problem + " (a closed-loop move starts from a known position)")
         _, q_to = target_of(state, joint, request.by, request.to)
-        q_target = list((state.positions[1], state.positions[2], state.positions[3]))
-        q_target[joint - 1] = q_to
-        target = kin.tip(q_target, loop_geometry := kin.DEFAULT_GEOMETRY)
-        target_v: Vec3 = (float(target[0]), float(target[1]), float(target[2]))
+        loop_geometry = kin.DEFAULT_GEOMETRY
         dev = (opener or open_device)(request.device)
         cam: Camera | None = None
         try:
@@ -541,6 +568,10 @@ def move_seen(
                 warn(w)
             run = _start(store, dev, state, calibration, loop, loop_geometry, camera_opener, (joint,))
             cam = run.cam
+            q_target = list(run.q())  # after the tip was found (a joint stepped out and back, if it was)
+            q_target[joint - 1] = q_to
+            target = kin.tip(q_target, loop_geometry)
+            target_v: Vec3 = (float(target[0]), float(target[1]), float(target[2]))
             ready()
 
             def leg(run: _Run, correction: bool) -> tuple[tuple[int, int, int], str | None, bool]:
