@@ -46,6 +46,7 @@ from ..motion.planning import Planner
 from ..motion.reach import plan_reach
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
 from ..units import format_position
+from ..vision.acquire import AcquireError
 from ..vision.camera import Camera, CameraError, open_camera
 from ..vision.jacobian import (
     MIN_VISIBILITY,
@@ -445,15 +446,28 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
 
 def _open(
     dev: Controller, state: DeviceState, loop: CameraLoop, camera_opener: CameraOpener,
+    journal: Callable[[], Callable[[], None]],
 ) -> tuple[Camera, TipTracker, tuple[float, float], float]:
-    """Open the camera, find the tip, learn it: the camera, the tracker, the start pixel and its sigma."""
+    """Open the camera, find the tip, learn it: the camera, the tracker, the start pixel and its sigma.
+
+    Without a tip given, ``journal()`` is called just before a joint is stepped out and back
+    to find it, and what it returns once the steps are made.
+    """
     if isinstance(dev, PoseSettable):
         dev.set_pose(*state.pose)
     cam = camera_opener(loop.camera, dev)
     try:
         if cam.info.pixel_size_m is None:
             raise ValueError(f"the camera {loop.camera} does not know its pixel size: give pixel= in its URL")
-        tip = loop.tip if loop.tip is not None else acquire_tip(dev, cam, loop.auto_joint, AUTO_STEPS)
+        tip = loop.tip
+        if tip is None:
+            kept = journal()
+            try:
+                tip = acquire_tip(dev, cam, loop.auto_joint, AUTO_STEPS)
+            except AcquireError:  # the steps were made, the tip not found: they are kept all the same
+                kept()
+                raise
+            kept()
         tracker = TipTracker(cam.grab(), tip)
         first = tracker.update(cam.grab())
         if not isinstance(first, Fix):
@@ -489,13 +503,17 @@ def _start(
     store: StateStore, dev: Controller, state: DeviceState, calibration: Calibration, loop: CameraLoop,
     geometry: kin.Geometry, camera_opener: CameraOpener, joints: Sequence[int],
 ) -> _Run:
-    if loop.tip is None:  # found by stepping a joint out and back: journalled, then kept as the model says
-        back = _out_and_back(state, calibration, loop.auto_joint)
+    def journal() -> Callable[[], None]:  # the tip found by stepping a joint out and back: journalled first
+        keep = _out_and_back(state, calibration, loop.auto_joint)
         save_state(store, state)
-    cam, tracker, u0, sigma0 = _open(dev, state, loop, camera_opener)
-    if loop.tip is None:
-        back()
-        save_state(store, state)
+
+        def kept() -> None:  # then kept as the model says
+            keep()
+            save_state(store, state)
+
+        return kept
+
+    cam, tracker, u0, sigma0 = _open(dev, state, loop, camera_opener, journal)
     tracks: dict[int, JointTrack] = {}
     sd0: dict[int, float] = {}
     for j in joints:
