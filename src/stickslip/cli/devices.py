@@ -307,8 +307,9 @@ def where(
     Source: default (never referenced: the outstretched pose assumed), set, dead-reckoned,
     observed (stickslip observe), seen (tracked by the camera: move, reach, jog with
     --camera), assumed (moved from a position never referenced), or uncertain (a move,
-    raw steps or a traverse left it between the bounds shown, and why). A joint moved since it was set shows its standard deviation (σ) and the step
-    scale learned from observations.
+    raw steps or a traverse left it between the bounds shown, and why). A joint moved
+    since it was set shows its standard deviation (σ) and the step scale learned from
+    observations.
 
     --set J=min (or max, or a position with its unit) references a joint at an end stop:
     after a traverse, a crash or a manual move, and on day one (raw steps into the stop
