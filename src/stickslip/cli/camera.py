@@ -424,8 +424,11 @@ def _print_seen(result: Any) -> None:
     say_ = console.print
     tol = result.tolerance * 1e6
     state = "reached" if result.reached else "stopped"
-    say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
-         highlight=False)
+    if result.looks:
+        say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
+             highlight=False)
+    else:
+        say_(f"{state} before the first look (tolerance {tol:.2g} µm)", highlight=False)
     say_(f"  {len(result.looks)} leg(s) looked at, {result.corrections} correction(s)", highlight=False)
     for j in (1, 2, 3):
         src = result.state.sources[j]
