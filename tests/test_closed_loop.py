@@ -167,6 +167,20 @@ def test_bad_camera_input_is_one_line(cal_off, args, words):
     assert len(lines) == 1 and lines[0].startswith("error:") and words in r.output, r.output
 
 
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        (["move", "--joint", "3", "--steps", "10", "--camera", "simcam://"], "not of raw steps"),
+        (["reach", "--by", "10um,0,0", "--dry-run", "--camera", "simcam://"], "--dry-run"),
+        (["reach", "--by", "10um,0,0", "--camera-tip", "1,2"], "--camera-tip goes with --camera"),
+    ],
+)
+def test_a_camera_where_it_cannot_close_a_loop_is_refused(cal_off, args, words):
+    r = _run([args[0], "-d", DEV, "-c", cal_off, *args[1:]])
+    assert r.exit_code == 2 and r.output.startswith("error:") and words in r.output, r.output
+    assert _where()[3]["source"] == "default"  # nothing moved
+
+
 def test_an_unknown_camera_is_one_line_and_nothing_moves(cal_off):
     r = _run(["move", "-d", DEV, "-c", cal_off, "--joint", "3", "--by", "10um", "--camera", "nocam://0"])
     assert r.exit_code == 2 and r.output.startswith("error:") and len(r.output.strip().splitlines()) == 1, r.output

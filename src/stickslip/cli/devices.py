@@ -171,6 +171,8 @@ def move(
     with user_errors():
         device_key(device)  # a URL that names no device is refused before the database is opened
     if raw is not None:
+        if camera is not None or camera_tip is not None:
+            fail("--camera closes the loop of a planned move (--by LENGTH or --to), not of raw steps")
         _step_raw(device, joint, raw, burst or RAW_BURST, db, json_out)
         return
     from ..calibration import Calibration
@@ -186,6 +188,8 @@ def move(
         burst=burst or 1000, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
+    if camera_tip is not None and camera is None:
+        fail("--camera-tip goes with --camera")
     if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
         run_seen("move", request, cal, camera, camera_tip, db, json_out)
         return

@@ -162,7 +162,11 @@ def reach(
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
-    if camera is not None and not dry_run:  # the closed loop: stickslip.procedures.closed_loop
+    if camera_tip is not None and camera is None:
+        fail("--camera-tip goes with --camera")
+    if camera is not None and dry_run:
+        fail("--dry-run plans without moving: the camera closes the loop of a move (drop one of them)")
+    if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
         run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
