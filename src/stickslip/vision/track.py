@@ -145,6 +145,7 @@ class TipTracker:
         self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [
             (0, f, -f) for f in params.sharpen_bank
         ]
+        self._rv = np.array([math.copysign(bb * bb, bb) for _, _, bb in self._spec])  # blur variance, px², signed
         self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
         self._steep = [steepest(t.bank[k], t.apex, w) for (k, _, _), w in zip(self._spec, t.level_weights, strict=True)]
         widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
@@ -158,6 +159,7 @@ class TipTracker:
         self._theta = 0.0
         self._level = 0
         self._fresh = True  # the last frame gave a fix
+        self._since = 1  # frames since the last fix (1: the last frame gave one)
         self._fft: dict[object, object] = {}  # the template's transforms, by region size
         self._mismatch: list[float] = []  # 1 - score of the recent fixes
         s0 = params.template_blur
@@ -350,6 +352,9 @@ class TipTracker:
         if sigma > max_sigma:
             return Lost("lost", f"position undetermined (sigma {sigma:.2f} px > {max_sigma:g} px)")
         last_blur = self._spec[self._level][2]
+        if abs(blur - last_blur) > p.max_blur_step * math.sqrt(self._since):
+            return Lost("lost", f"the focus would have changed by {blur - last_blur:+g} px in {self._since} "
+                                f"frame(s) (at most {p.max_blur_step:g} px a frame)")
         if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
@@ -406,6 +411,7 @@ class TipTracker:
         if isinstance(best, Fix):
             return self._accept(best, best_cand)
         self._fresh = False
+        self._since += 1
         if first_refusal is not None:
             return first_refusal
         return Lost("lost", "not found near the last fix nor anywhere in the frame")
@@ -433,6 +439,7 @@ class TipTracker:
         self._theta = cand.ref.theta
         self._level = cand.level
         self._fresh = True
+        self._since = 1
         return fix
 
 
