@@ -280,12 +280,14 @@ class TipTracker:
         y = y0 + i + t.apex[1]
         return self._try(image, x, y, self._theta, self._level)
 
-    def _global(self, image: FloatArray) -> list[_Candidate]:
+    def _global(self, image: FloatArray) -> list[_Candidate | None]:
         p = self.params
         f = p.coarse_factor
         small = self._downsample(image, f)
         best: list[tuple[float, int, int, int]] = []
-        for k in range(len(self._coarse)):
+        # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
+        # it was learnt)
+        for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
             tpl = self._coarse[k]
             if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
                 continue
@@ -308,8 +310,11 @@ class TipTracker:
             seen.append((x, y))
             # a full-resolution look around the coarse peak, then the fit
             region, rx0, ry0 = self._region(image, x, y, 2 * f)
-            ncc = masked_ncc(region, t.bank[0], t.weights, self._fft, ("local", 0))
+            ncc = masked_ncc(region, t.bank[_k], t.level_weights[_k], self._fft, ("local", _k))
             i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
+            if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
+                out.append(None)
+                continue
             out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k))
         return out
 
@@ -403,6 +408,8 @@ class TipTracker:
         # not found near the last fix (or refused there, or refused last time): the whole frame
         best: Result | None = None
         for cand in self._global(image):
+            if cand is None:
+                continue
             res = self._judge(cand, image, reacquire=True)
             if isinstance(res, Fix):
                 if best is None or not isinstance(best, Fix) or res.score > best.score:
