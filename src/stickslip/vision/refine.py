@@ -64,6 +64,8 @@ class Steepest:
     lap : ndarray, shape (m,)
         The template's Laplacian (per px²): the blur term's column (a Gaussian blur of
         variance ``v`` changes the template by ``v/2`` times its Laplacian, the heat equation).
+    sd_lap : ndarray, shape (3, m)
+        The Laplacian's steepest-descent images (the blur term's part of the model's gradient).
     keep : ndarray of bool, shape (n, n)
         Which window pixels these are.
     """
@@ -78,6 +80,7 @@ class Steepest:
     basis: FloatArray
     keep: NDArray[np.bool_]
     lap: FloatArray
+    sd_lap: FloatArray
 
 
 def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray) -> Steepest:
@@ -95,8 +98,10 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     bx, by = rxm / n, rym / n
     basis = np.stack([T, T * bx, T * by, np.ones_like(T), bx, by], axis=1)
     # the Laplacian of the template smoothed by 1 px more: of the template itself it would be mostly its noise
-    lap = ndimage.gaussian_laplace(template, 1.0, mode="nearest")[keep]
-    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap)
+    lap_full = ndimage.gaussian_laplace(template, 1.0, mode="nearest")
+    ly, lx = np.gradient(lap_full)
+    sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
+    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap)
 
 
 @dataclass(frozen=True)
@@ -318,7 +323,8 @@ def refine(
         ct, st_ = math.cos(theta), math.sin(theta)
         fgx = (v3[1] * ct + v3[2] * st_) / g
         fgy = (-v3[1] * st_ + v3[2] * ct) / g
-        jac = 0.5 * (sd + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx]))
+        # the model's gradient is the template's plus the blur term's
+        jac = 0.5 * (sd + blur_c * st.sd_lap + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx]))
         # one linear least squares for the brightness planes and the motion together: apart, the planes
         # would soak up half of every edge's shift at each step, and the motion would creep
         D = np.concatenate([basis, g * st.lap[:, None], (g * jac).T], axis=1)

@@ -145,7 +145,6 @@ class TipTracker:
         self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [
             (0, f, -f) for f in params.sharpen_bank
         ]
-        self._rv = np.array([math.copysign(bb * bb, bb) for _, _, bb in self._spec])  # blur variance, px², signed
         self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
         self._steep = [steepest(t.bank[k], t.apex, w) for (k, _, _), w in zip(self._spec, t.level_weights, strict=True)]
         widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
@@ -297,7 +296,7 @@ class TipTracker:
             for i, j in zip(ii.tolist(), jj.tolist(), strict=True):
                 best.append((float(ncc[i, j]), i, j, k))
         best.sort(reverse=True)
-        out: list[_Candidate] = []
+        out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
         t = self.template
         for _s, i, j, _k in best:
