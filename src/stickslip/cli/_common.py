@@ -18,8 +18,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any, Generic, NoReturn, TypeVar, overload
 
 import typer
-from rich.console import Console
-from rich.markup import escape
+from rich.text import Text
 from typer.core import TyperGroup
 
 try:  # recent typer vendors click; older ones use the click package
@@ -28,13 +27,14 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..config import ConfigError, UserConfig, config_path, load_config
-from ..devices.base import redact_url, url_scheme
-from ..units import UnitError, parse_angle, parse_length
+from ..devices.base import check_device_url, redact_text, redact_url
+from ..units import UnitError, bare_number_problem, parse_angle, parse_length
+from ._output import OutputError, console, data_stream, err_console, finish, silence, styled, visible
 
 if TYPE_CHECKING:
     from rich.table import Table
 
-    from ..kinematics import Geometry
+    from ..kinematics import Geometry, Pose
     from ..measurements import StepSize, TableError, Traverse
     from ..storage import Store
 
@@ -58,18 +58,22 @@ def lazy_import(name: str) -> ModuleType:
     return module
 
 
-console = Console()
-err_console = Console(stderr=True)
+__all__ = ["console", "err_console"]  # the consoles of ._output, re-exported: the commands print through them
 
 EXIT_OK = 0
 EXIT_ABORTED = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
 EXIT_CODES = {
     EXIT_OK: "success",
-    EXIT_ABORTED: "interrupted (Ctrl-C) or declined at a confirmation",
-    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault: one `error:` line says which",
+    EXIT_ABORTED: "declined at a confirmation, or the reader of the output went away "
+    "(a closed pipe: `| head`; nothing more is printed)",
+    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault, or output that could not be written "
+    "(a full device): one `error:` line says which",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C): one `error: interrupted` line says what was interrupted and where "
+    "each joint now stands (exact, or uncertain with bounds)",
 }
-"""The documented exit codes of every command."""
+"""The documented exit codes of every command (130 = 128 + SIGINT, the shells' convention for Ctrl-C)."""
 
 
 class OneLineErrors(TyperGroup):
@@ -77,11 +81,36 @@ class OneLineErrors(TyperGroup):
 
     Click prints usage errors (a missing option, ``--joint 4``, a count out of range)
     as a multi-line panel; here they become the same one line as every other error.
+    The group also ends every command's output (:func:`._output.finish`) and turns a
+    write that failed (:class:`._output.OutputError`) into a quiet exit 1 for a closed
+    pipe or one ``error:`` line and exit 2 for anything else.
     """
 
     def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         try:
-            rv = super().main(*args, **{**kwargs, "standalone_mode": False})
+            return self._main(*args, standalone_mode=standalone_mode, **kwargs)
+        except OutputError as e:
+            if not standalone_mode:
+                raise
+            silence("stdout")  # what is left in the buffer goes nowhere: no "Exception ignored" at exit
+            if e.stream == "standard error":  # nowhere to say it
+                silence("stderr")
+                sys.exit(EXIT_ABORTED if e.closed else EXIT_BAD_INPUT)
+            if e.closed:  # the reader went away (| head): a quiet end
+                sys.exit(EXIT_ABORTED)
+            try:
+                _print_error(f"{e}; the output is incomplete")
+                finish()
+            except OutputError:
+                silence("stderr")
+            sys.exit(EXIT_BAD_INPUT)
+
+    def _main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        try:
+            try:
+                rv = super().main(*args, **{**kwargs, "standalone_mode": False})
+            finally:
+                finish()
         except UsageError as e:
             hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
             message = " ".join(e.format_message().split())
@@ -97,11 +126,35 @@ class OneLineErrors(TyperGroup):
         except (typer.Abort, KeyboardInterrupt):
             if not standalone_mode:
                 raise
-            err_console.print("[bold red]error:[/] interrupted", highlight=False)
-            sys.exit(EXIT_ABORTED)
+            err_console.print(Text.assemble(styled("error:", "bold red"), " interrupted (Ctrl-C)"))
+            sys.exit(EXIT_INTERRUPTED)
         if not standalone_mode:
             return rv
         sys.exit(rv if isinstance(rv, int) else EXIT_OK)
+
+    def invoke(self, ctx: Any) -> Any:
+        """Run the command; Ctrl-C anywhere in it ends in one line and exit 130 (:func:`interrupted_line`)."""
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as e:
+            _print_error(interrupted_line(e, ctx.invoked_subcommand or ""))
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+
+
+def interrupted_line(e: BaseException, command: str) -> str:
+    """What Ctrl-C interrupted, and where each joint now stands if a device was being driven.
+
+    A workflow that drives a device raises :class:`stickslip.procedures.move.Interrupted`
+    with the kept state (its journal was saved before every burst); anywhere else nothing
+    was being sent.
+    """
+    what = getattr(e, "what", None)
+    state = getattr(e, "state", None)
+    if what is None:
+        return f"interrupted: stickslip {command}".rstrip() + " (Ctrl-C)"
+    from ..procedures.move import where_line
+
+    return f"interrupted: {what} (Ctrl-C); " + (where_line(state) if state is not None else "positions unknown")
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
@@ -111,19 +164,45 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
 
 
 def _print_error(message: object) -> None:
-    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    _print_labelled("error:", "bold red", one_line(message))
+
+
+def _print_labelled(label: str, style: str, text: str) -> None:
+    """``label text`` on stderr: one line for a pipe or a log (grep finds it whole); on a terminal wrapped
+    at its width at spaces only, later lines indented (a URL or a path is never broken)."""
+    if not err_console.is_terminal:
+        err_console.print(Text.assemble(styled(label, style), " ", text), soft_wrap=True)
+        return
+    from ._help import wrap
+
+    lines = wrap(f"{label} {text}", err_console.width, "  ", first="")
+    err_console.print(Text.assemble(styled(label, style), lines[0][len(label) :]), soft_wrap=True)
+    for line in lines[1:]:
+        err_console.print(line, soft_wrap=True)
 
 
 def one_line(message: object) -> str:
-    """``message`` as one printable line: line breaks become ``; ``, control characters escapes."""
+    """``message`` as one printable line: line breaks become ``; ``, control characters escapes, secrets ``***``."""
     parts = [p.strip() for p in str(message).splitlines() if p.strip()]
-    text = "; ".join(parts)
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return visible(redact_text("; ".join(parts)))
+
+
+def say(text: str, indent: str = "  ") -> None:
+    """Print a result line on stdout, wrapped at the console's width at spaces only, later lines indented.
+
+    A URL, a path or a number with its unit is never broken (rich's own wrapping folds a
+    long word), and what belongs together reads as one item.
+    """
+    from ._help import wrap
+
+    lead = text[: len(text) - len(text.lstrip())]
+    for line in wrap(text.strip(), console.width, lead + indent, first=lead):
+        console.print(line, soft_wrap=True)
 
 
 def warn(message: str) -> None:
-    """Print ``warning: message`` to stderr."""
-    err_console.print(f"[bold yellow]warning:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    """Print ``warning: message`` to stderr (wrapped at spaces on a terminal: :func:`_print_labelled`)."""
+    _print_labelled("warning:", "bold yellow", one_line(message))
 
 
 _pending_warnings: list[str] = []
@@ -153,19 +232,26 @@ def drop_warnings() -> None:
 
 @contextmanager
 def user_errors(*types: type[BaseException]) -> Iterator[None]:
-    """Turn the given exception types (and ValueError, OSError) into ``fail(str(e))``."""
+    """Turn the given exception types (and ValueError, OSError) into ``fail`` with :func:`describe`."""
     catch = types + (ValueError, OSError)
     try:
         yield
     except typer.Exit:
         raise
     except catch as e:  # noqa: B902
-        fail(str(e))
+        fail(describe(e))
+
+
+def describe(e: BaseException) -> str:
+    """An exception as a person reads it: an ``OSError`` as ``path: reason`` (not ``[Errno 28] ...: 'path'``)."""
+    if isinstance(e, OSError) and type(e).__str__ is OSError.__str__ and e.strerror:
+        return f"{e.filename}: {e.strerror}" if e.filename else str(e.strerror)
+    return str(e)
 
 
 def print_json(obj: object) -> None:
-    """Print ``obj`` as JSON on stdout (NaN/inf become null)."""
-    sys.stdout.write(json.dumps(_clean(obj), indent=2) + "\n")
+    """Print ``obj`` as JSON on stdout (NaN/inf become null; ASCII, so any stream can take it)."""
+    data_stream().write(json.dumps(_clean(obj), indent=2) + "\n")
 
 
 def _clean(obj: object) -> object:
@@ -202,7 +288,14 @@ def validation_table(rows: list[dict[str, Any]], title: str) -> Table:
 
 
 def _parse_unit(parse: Callable[[str], float], what: str, value: str) -> float:
-    """SI value of an option given with units; ``typer.BadParameter`` (one ``error:`` line) with the reason."""
+    """SI value of an option given with units; ``typer.BadParameter`` (one ``error:`` line) with the reason.
+
+    A bare number other than 0 is refused with a did-you-mean (:func:`~stickslip.units.bare_number_problem`):
+    on the command line every length and angle carries its unit.
+    """
+    bare = bare_number_problem(value, "angle" if parse is parse_angle else "length")
+    if bare is not None:
+        raise typer.BadParameter(bare)
     try:
         v = parse(value)
     except UnitError as e:
@@ -211,11 +304,6 @@ def _parse_unit(parse: Callable[[str], float], what: str, value: str) -> float:
         raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
     if not math.isfinite(v):
         raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
-    if parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
-        raise typer.BadParameter(
-            f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
-            f"did you mean {value.strip()}deg?"
-        )
     return v
 
 
@@ -225,7 +313,7 @@ def angle_option(value: str) -> float: ...
 def angle_option(value: None) -> None: ...
 def angle_option(value: str | None) -> float | None:
     """An angle option in rad (``-90deg``, ``-pi/2``, ``500urad``); ``None`` if not given (typer parser or callback)."""
-    return None if value is None else _parse_unit(parse_angle, "an angle: radians, or with deg / mrad / urad", value)
+    return None if value is None else _parse_unit(parse_angle, "an angle: deg, rad, mrad, urad, or -pi/2", value)
 
 
 @overload
@@ -234,7 +322,23 @@ def length_option(value: str) -> float: ...
 def length_option(value: None) -> None: ...
 def length_option(value: str | None) -> float | None:
     """A length option in m (``2mm``, ``30um``, ``850nm``); ``None`` if not given (typer parser or callback)."""
-    return None if value is None else _parse_unit(parse_length, "a length: metres, or with mm / um / nm", value)
+    return None if value is None else _parse_unit(parse_length, "a length: m, mm, um or nm", value)
+
+
+def pose_options(q1: str, q2: str, q3: str, theta: str, psi: str) -> Pose:
+    """The pose of ``--q1 --q2 --q3 --theta --psi`` given as text (units allowed); an ``error:`` naming the option."""
+    from ..kinematics import Pose
+
+    values = []
+    for flag, text, parse in (
+        ("--q1", q1, angle_option), ("--q2", q2, angle_option), ("--q3", q3, length_option),
+        ("--theta", theta, angle_option), ("--psi", psi, angle_option),
+    ):  # fmt: skip
+        try:
+            values.append(parse(text))
+        except typer.BadParameter as e:
+            fail(f"{flag}: {e.message}")
+    return Pose(*values)
 
 
 def day_option(value: str | None) -> str | None:
@@ -249,14 +353,66 @@ def day_option(value: str | None) -> str | None:
         raise typer.BadParameter(str(e)) from None
 
 
-def _bare_number(text: str) -> bool:
+def _finite_option(value: float | None) -> float | None:
+    """A float option's value, or ``typer.BadParameter`` for ``inf`` (``1e999``) or ``nan``."""
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"not a finite number (got {value!r})")
+    return value
+
+
+DEVICE_FILTERS = frozenset({"history", "export", "anova", "report", "delete"})
+"""Commands whose ``--device`` only picks stored rows: any text may match a device stored by an older release."""
+
+
+def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) -> None:
+    """Give the options of one command the checks every command shares (one place for the whole CLI).
+
+    * a ``float`` option (without a parser of its own) refuses ``inf``, ``1e999`` and
+      ``nan``, naming the option (click's float type takes them);
+    * a ``--day`` option (a session label, or a filter by one) is checked by
+      :func:`day_option`: a blank or whitespace label is refused, naming ``--day``;
+    * a ``--device`` option is checked by :func:`device_option`: a URL that could never
+      be opened (no scheme, an unknown one, a bad port, a host name DNS cannot carry) is
+      refused before any command uses it, records it or stores anything with it (not
+      where it only filters stored rows, ``device_is_filter``: :data:`DEVICE_FILTERS`).
+
+    The check is set as the option's typer callback where it has none (an option with a
+    callback of its own checks itself). Called on every command when the CLI is built.
+    """
+    import inspect
+    import typing
+
+    from typer.models import ParameterInfo
+
+    for p in inspect.signature(callback, eval_str=True).parameters.values():
+        annotation, info = p.annotation, p.default
+        if typing.get_origin(annotation) is typing.Annotated:
+            annotation, *meta = typing.get_args(annotation)
+            info = next((m for m in meta if isinstance(m, ParameterInfo)), info)
+            # a string annotation (from __future__ import annotations) is evaluated afresh, with a new
+            # OptionInfo, each time it is read: keep the evaluated one, whose OptionInfo is set below
+            callback.__annotations__[p.name] = p.annotation
+        if not isinstance(info, ParameterInfo) or info.callback is not None or getattr(info, "parser", None):
+            continue
+        kinds = {a for a in (typing.get_args(annotation) or (annotation,)) if a is not type(None)}
+        if kinds == {float}:
+            info.callback = _finite_option
+        elif kinds == {str} and p.name == "day":
+            info.callback = day_option
+        elif kinds == {str} and p.name == "device" and not device_is_filter:
+            info.callback = device_option
+
+
+def device_option(value: str | None) -> str | None:
+    """A ``--device`` option: the URL if a device could be opened with it, else ``typer.BadParameter`` saying why."""
+    if value is None:
+        return None
+    from ..devices.base import check_device_url
+
     try:
-        float(text.strip())
-    except ValueError:
-        return False
-    return True
-
-
+        return check_device_url(value)
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
 
 
 # ---------------------------------------------------------------- the user's configuration file
@@ -296,7 +452,7 @@ def device_setting(option: str | None, flag: str = "--device") -> Setting[str]:
     """The controller URL: ``option``, else the file's ``device``, else ``sim://``."""
     if option is not None:
         try:
-            url_scheme(option)
+            check_device_url(option)
         except ValueError as e:
             fail(f"{flag}: {e}")
         return Setting(option, "option", flag)
@@ -402,6 +558,10 @@ def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Ge
     from ..kinematics import DEFAULT_GEOMETRY, Geometry
 
     if option is not None:
+        for part in option.split(","):
+            bare = bare_number_problem(part, "length")
+            if bare is not None:
+                fail(f"{flag}: {bare}")
         try:
             return Setting(Geometry.parse(option), "option", flag)
         except ValueError as e:
@@ -416,11 +576,16 @@ def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Ge
     return Setting(DEFAULT_GEOMETRY, "default")
 
 
-def open_store(db: Path | None, must_exist: bool = False) -> Store:
+@contextmanager
+def open_store(db: Path | None, must_exist: bool = False) -> Iterator[Store]:
     """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the config file's, else the data folder).
 
-    A command that only reads passes ``must_exist=True`` and refuses a file that does not
-    exist yet instead of creating an empty one; storage faults are one ``error:`` line.
+    A context manager (``with open_store(db) as st:``), the one way commands open the
+    database. A command that only reads passes ``must_exist=True`` and refuses a file
+    that does not exist yet instead of creating an empty one. Every storage fault, when
+    opening (another application's file, a FIFO, a newer schema) or inside the block (a
+    damaged page, a stored value of the wrong type, a full disk), is one ``error:`` line
+    naming the file; the store is closed either way.
     """
     from ..storage import Store, StoreError
 
@@ -428,8 +593,12 @@ def open_store(db: Path | None, must_exist: bool = False) -> Store:
     if must_exist and not path.exists():
         fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
     with user_errors(StoreError):
-        return Store.open(path)
-    raise AssertionError("unreachable")  # pragma: no cover - user_errors exits on a StoreError
+        store = Store.open(path)
+    try:
+        with store:
+            yield store
+    except StoreError as e:
+        fail(describe(e))
 
 
 def fail_table(e: TableError) -> NoReturn:

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..units import UnitError, parse_length
+from ..units import UnitError, format_position, parse_length
 from .frames import JOINTS
 
 __all__ = [
@@ -46,6 +46,7 @@ __all__ = [
     "SingularPose",
     "tip",
     "jacobian",
+    "tip_sd",
     "distance_from_axis",
     "inverse",
     "joint_rates",
@@ -157,6 +158,17 @@ def jacobian(q: ArrayLike, geometry: Geometry = DEFAULT_GEOMETRY) -> NDArray[np.
     return np.stack((j1, j2, j3), axis=-1)
 
 
+def tip_sd(q: ArrayLike, q_sd: ArrayLike, geometry: Geometry = DEFAULT_GEOMETRY) -> NDArray[np.float64]:
+    """Standard deviation of each tip coordinate, m, from independent joint standard deviations (rad, rad, m).
+
+    First-order propagation: ``Cov(p) = J diag(sd**2) J^T`` and the square roots of its
+    diagonal, ``sd_k = sqrt(sum_i (J_ki sd_i)**2)``; ``q`` and ``q_sd`` have shape ``(3,)``.
+    """
+    J = jacobian(_q(q), geometry)
+    sd = np.asarray(q_sd, dtype=float).reshape(3)
+    return np.asarray(np.sqrt(np.sum((J * sd) ** 2, axis=-1)), dtype=float)
+
+
 def distance_from_axis(q: ArrayLike, geometry: Geometry = DEFAULT_GEOMETRY) -> NDArray[np.float64]:
     """``rho``: the tip's distance from joint 1's axis, m (the singularity is ``rho = 0``)."""
     a = _q(q)
@@ -205,11 +217,7 @@ def limit_problem(q: ArrayLike) -> str | None:
             continue
         side = "lower" if v < spec.lower else "upper"
         bound = spec.lower if side == "lower" else spec.upper
-        if spec.rotary:
-            shown, b, unit = math.degrees(v), math.degrees(bound), "deg"
-        else:
-            shown, b, unit = v * 1e3, bound * 1e3, "mm"
-        return f"joint {j} would be at {shown:.6g} {unit}, beyond its {side} limit {b:.6g} {unit}"
+        return f"joint {j} would be at {format_position(v, j)}, beyond its {side} limit {format_position(bound, j)}"
     return None
 
 

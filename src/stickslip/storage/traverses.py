@@ -7,7 +7,7 @@ import sqlite3
 from collections.abc import Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
 from .base import _Base, _require_traverses, _rowid
 from .schema import _COLUMNS, DEFAULT_DEVICE, StoreError, _content_keys, _iso, content_key
@@ -89,6 +89,29 @@ class TraverseStore(_Base):
             stored.update(r[0] for r in rows)
         return [k for k, key in enumerate(keys) if key in stored]
 
+    def device_holding(self, traverses: Iterable[Traverse]) -> tuple[str, list[int]] | None:
+        """The one device whose stored traverses include every one of ``traverses`` (by content), and their ids.
+
+        How a calibration made from a table learns which arm its traverses came from: the
+        rows were stored when they were measured (``stickslip traverse``, ``demo``, ``import
+        --device``). ``None`` when no device, or more than one, holds them all.
+        """
+        rows = list(traverses)
+        if not rows:
+            return None
+        urls = [str(r[0]) for r in self._con.execute("SELECT url FROM devices ORDER BY id")]
+        holders = [url for url in urls if len(self.duplicates(rows, url)) == len(rows)]
+        if len(holders) != 1:
+            return None
+        keys = sorted(set(_content_keys(rows, holders[0])))
+        ids: list[int] = []
+        for i in range(0, len(keys), 500):
+            part = keys[i : i + 500]
+            ids += [int(r[0]) for r in self._con.execute(
+                f"SELECT MIN(id) FROM traverses WHERE content IN ({','.join('?' * len(part))}) GROUP BY content", part
+            )]
+        return holders[0], sorted(ids)
+
     def add_traverse(
         self,
         traverse: Traverse,
@@ -113,6 +136,7 @@ class TraverseStore(_Base):
             Provenance (e.g. the file it was imported from).
         """
         self._check(traverse)
+        how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
             return self._insert_traverse(con, traverse, dev, how, _iso(measured_at), source)
@@ -134,6 +158,7 @@ class TraverseStore(_Base):
         for t in ts:
             self._check(t)
         when = _iso(measured_at)
+        how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
             url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
@@ -232,6 +257,7 @@ class TraverseStore(_Base):
         ids = sorted({int(i) for i in ids})
         if reason is not None and not reason.strip():
             raise ValueError("give a reason for excluding (e.g. 'cable snagged')")
+        reason = _note(reason)
         marks = ",".join("?" * len(ids))
         with self._write() as con:
             _require_traverses(con, ids, marks)
@@ -259,3 +285,7 @@ class TraverseStore(_Base):
             )
         return {"traverses": int(n), "calibration_links": int(links)}
 
+
+def _note(text: str | None) -> str | None:
+    """Free text kept with a row (how, source, a reason), through the one redaction: no secret is stored."""
+    return None if text is None else redact_text(str(text))
