@@ -240,8 +240,12 @@ class TipTracker:
             return current
         return best
 
-    def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int) -> _Candidate:
-        """Refine a tip position found by correlation, and settle the level of blur that matches it."""
+    def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int,
+             worth: float = -1.0) -> _Candidate:
+        """Refine a tip position found by correlation, and settle the level of blur that matches it.
+
+        The blur copies are compared only when the first fit correlates by ``worth`` or more.
+        """
         corr = self.params.sigma_factor
         patches: dict[float, Patch] = {}
         lvl = level
@@ -250,6 +254,7 @@ class TipTracker:
         usual = self._usual_mismatch()
         # the blur copies are compared only when the fit matches worse than the recent fixes did (focus changed)
         settled = usual is not None and ref.converged and 1.0 - ref.score <= 1.5 * usual + 0.005
+        settled = settled or ref.score < worth
         for _ in range(0 if settled else 2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
                 break
@@ -314,7 +319,9 @@ class TipTracker:
             if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
                 out.append(None)
                 continue
-            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k))
+            # a tip found again must correlate by reacquire_score: a fit far below is not worth the copies' comparison
+            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k,
+                                 p.reacquire_score - 0.1))
         return out
 
     # ------------------------------------------------------------------ decision
