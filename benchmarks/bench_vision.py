@@ -8,14 +8,16 @@
    field, occluded or far out of focus. Printed beside the issue's numbers: the median
    and 95th percentile error on visible frames, the largest error of any fix, the share
    of visible tips refused, the tips out of the field fixed, and frames per second of
-   the tracker alone on one core (the rendering not counted).
+   the tracker alone on one core (the rendering not counted), by the wall clock and by
+   the process's CPU time (on a shared machine the CPU time is the tracker's own cost).
 2. **Camera calibration**: ``stickslip.procedures.camera.calibrate_camera`` on
    ``sim://`` with ``simcam://`` at 0.5 um a pixel, joints 3 and 1 at the outstretched
    pose, at most 200 steps each way, five simulated arms in each look: the step size
    measured against the realized mean step (the simulator's true positions before and
    after every burst).
 
-Run: ``.venv/bin/python benchmarks/bench_vision.py [FRAMES]`` (default 500; a few minutes).
+Run: ``.venv/bin/python benchmarks/bench_vision.py [FRAMES] [--tracking-only]`` (default 500;
+a few minutes; ``--tracking-only`` skips the calibration).
 """
 
 from __future__ import annotations
