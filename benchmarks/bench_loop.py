@@ -115,12 +115,16 @@ def run(camera: str, off: float, kind: str, by: tuple[float, float, float] | flo
     loop = CameraLoop(camera, tip=_tip(camera))
     with Store.open(folder / f"seen-{abs(hash((camera, off, kind, str(by))))}.db") as st:
         t = time.perf_counter()
-        if kind == "reach":
-            assert isinstance(by, tuple)
-            res = reach_seen(st, ReachRequest(DEV, by=by), cal, loop)
-        else:
-            assert isinstance(by, float)
-            res = move_seen(st, MoveRequest(DEV, 3, by=by), cal, loop)
+        try:
+            if kind == "reach":
+                assert isinstance(by, tuple)
+                res = reach_seen(st, ReachRequest(DEV, by=by), cal, loop)
+            else:
+                assert isinstance(by, float)
+                res = move_seen(st, MoveRequest(DEV, 3, by=by), cal, loop)
+        except ValueError as e:  # refused before anything moved (the tip not seen at the start)
+            STOPS.append(f"{camera}, {kind}: refused before moving: {e}")
+            return [camera[:30], f"{off:.1f}", kind, f"{miss * 1e6:5.1f}", f"no ({len(STOPS)})", "-", "0", "-", "-"]
         dt = time.perf_counter() - t
     true_miss = res.sim_true_error if res.sim_true_error is not None else math.nan
     what = f"{kind} {length * 1e6:.0f}"
