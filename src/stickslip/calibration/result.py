@@ -293,6 +293,31 @@ def table_digests(traverses: Sequence[Traverse]) -> tuple[str, str]:
 # ----------------------------------------------------------------------------- the result object
 
 
+@dataclass(frozen=True)
+class Predictive:
+    """How uncertain one joint and direction's predictions are, pose by pose (docs/models.md §4).
+
+    The relative standard deviation of a predicted mean step at a pose is
+    ``sqrt(floor^2 + (slope d)^2)``, ``d`` the pose's distance to the nearest of ``poses`` in
+    the space of the loads the step depends on (:func:`~.groups.load_coordinates_of`): the
+    model's residual at a calibrated pose, growing with the distance as the
+    cross-validation's held-out poses did (:func:`~.selection.error_model`).
+
+    Attributes
+    ----------
+    floor : float
+        Relative error at a calibrated pose, 1.
+    slope : float
+        Growth of the relative error per unit of load-space distance, 1.
+    poses : ndarray, shape (n, 5)
+        The calibrated poses (q1, q2, q3, theta, psi; SI), or a farthest-point sample of them.
+    """
+
+    floor: float
+    slope: float
+    poses: NDArray[np.float64]
+
+
 @dataclass
 class Calibration:
     """A calibration: per joint and direction, a step-size model with its parameters.
@@ -332,6 +357,9 @@ class Calibration:
     """``(joint, direction) ->`` relative model error (1 sigma) for prediction intervals, where known."""
     selection: dict[tuple[int, str], dict[str, object]] = field(default_factory=dict)
     """``(joint, direction) ->`` the family chosen, why, and the CV error of every family."""
+    predictive: dict[tuple[int, str], Predictive] = field(default_factory=dict)
+    """``(joint, direction) ->`` what a prediction's interval is made of in each pose (docs/models.md §4),
+    where known (a family calibration); elsewhere the interval is the constant ``sigma_model``."""
 
     # -- access
     @property
@@ -636,6 +664,15 @@ def _check_physical(models: dict[tuple[int, str], JointModel]) -> None:
             m.params.check_physical()
         except NonPhysicalError as e:
             raise CalibrationError(f"joint {j}{d}: non-physical calibration refused: {e}") from None
+
+
+def _provenance(
+    base: Provenance | None, traverses: Sequence[Traverse], source: str | None, used: int, notes: Sequence[str]
+) -> Provenance:
+    """``base`` (the table's provenance, hashed once by the caller) with ``used`` and ``notes``, or a new one."""
+    if base is None:
+        return Provenance.of(traverses, source, used, notes)
+    return dataclasses.replace(base, rows_used=used, notes=tuple(notes))
 
 
 def _group(traverses: Iterable[Traverse]) -> dict[tuple[int, str], list[Traverse]]:
