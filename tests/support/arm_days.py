@@ -73,4 +73,5 @@ def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, valid
 
 def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:
     """``pred / measured - 1`` per traverse."""
-    return np.asarray(pred, dtype=float) / np.array([t.gamma for t in ts]) - 1.0
+    out: np.ndarray = np.asarray(pred, dtype=float) / np.array([t.gamma for t in ts]) - 1.0
+    return out

@@ -18,6 +18,7 @@ an updated calibration) has one relative model error per joint and direction,
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -85,7 +86,7 @@ def prediction_sd(
     joint: int,
     direction: str,
     n_steps: float | None = None,
-    pose: tuple[float, float, float, float, float] | None = None,
+    pose: Sequence[float] | None = None,
     span: tuple[float, float] | None = None,
 ) -> tuple[float, bool]:
     """Relative standard deviation of a prediction, and whether it rests on an assumed model error.
@@ -98,7 +99,8 @@ def prediction_sd(
     sig, assumed = model_sigma(cal, joint, direction)
     if pose is not None and (int(joint), direction) in cal.predictive:
         se = (None, None) if span is None else span
-        sig = float(relative_sd(cal, joint, direction, *pose, start=se[0], end=se[1]).reshape(-1)[0])
+        q1, q2, q3, theta, psi = (float(v) for v in pose)
+        sig = float(relative_sd(cal, joint, direction, q1, q2, q3, theta, psi, start=se[0], end=se[1]).reshape(-1)[0])
     if n_steps is not None and n_steps > 0:
         sig = math.hypot(sig, STEP_NOISE / math.sqrt(n_steps))
     return sig, assumed

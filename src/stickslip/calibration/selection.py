@@ -37,11 +37,12 @@ from numpy.typing import NDArray
 
 from ..measurements import Traverse
 from ..models.families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
+from .errormodel import Predictive
 from .family_fit import FamilyProblem, JointFit, full_rank, shared_names
 from .folds import cv_folds, workspace_coordinates, workspace_pose_array
 from .groups import JointData, TraverseGroups, group_traverses, nearest
 from .intervals import relative_sd
-from .result import Calibration, CalibrationError, Predictive, Provenance, _constant_step, _day_of
+from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of
 
 __all__ = [
     "CVScore",

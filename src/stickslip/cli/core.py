@@ -284,8 +284,9 @@ def predict_cmd(
     """Predict step sizes: adds a gamma_pred column (m for joint 3, rad for joints 1, 2).
 
     With --interval also gamma_pi95, the half-width of a 95 % prediction interval: 1.96
-    times the calibration's relative model error (its leave-one-pose-out error; an
-    assumed one for the paper's exactly determined procedure) times gamma_pred.
+    times the relative error the calibration expects in that pose (it grows with the pose's
+    distance from the calibrated poses; an assumed one for the paper's exactly determined
+    procedure) times gamma_pred.
 
     A row with start,end gets the average step over that traverse (exact integral);
     a row without them gets the step size at its pose (the moving joint at q1/q2/q3).
@@ -358,17 +359,19 @@ def predict_cmd(
 
 
 def _interval_column(cal: Calibration, table: PoseTable, preds: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Half-width of each prediction's 95 % interval: 1.96 x the relative model error of its joint and direction."""
+    """Half-width of each prediction's 95 % interval: 1.96 x its relative standard deviation in its pose
+    (docs/models.md §4)."""
     import numpy as np
 
-    from ..calibration.update import prediction_sd
+    from ..calibration.intervals import relative_sd
 
     sd = np.zeros(len(table))
     for j in np.unique(table.joint).tolist():
         for d in ("+", "-"):
             group = (table.joint == j) & (table.direction == d)
             if group.any():
-                sd[group] = prediction_sd(cal, int(j), d)[0]
+                sd[group] = relative_sd(cal, int(j), d, table.q1[group], table.q2[group], table.q3[group],
+                                        table.theta[group], table.psi[group])
     out: NDArray[np.float64] = 1.96 * sd * preds
     return out
 
@@ -509,9 +512,10 @@ def plan_cmd(
         fail(str(e.args[0]))
     except (ValueError, NonPhysicalError) as e:
         fail(str(e))
-    from ..calibration.update import prediction_sd
+    from ..calibration.intervals import prediction_sd
 
-    sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1))
+    sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1), pose=tuple(pose),
+                                span=(plan.q_from, plan.q_end_predicted))
     half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
         d = plan.as_dict()

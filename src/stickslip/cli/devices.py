@@ -241,7 +241,8 @@ def _move_locked(
             if outcome.error is None:
                 state.set_position(joint, q_end, "dead-reckoned")
             if outcome.sent and joint not in state.uncertain:  # the position's uncertainty grows with the move
-                track.predict(state.positions[joint] - q_from, outcome.sent, pose, joint, joint_sigma_model(cal, joint))
+                sm = joint_sigma_model(cal, joint, pose)  # the model's error in this pose (docs/models.md §4)
+                track.predict(state.positions[joint] - q_from, outcome.sent, pose, joint, sm)
                 state.track[joint] = track.to_json()
             if outcome.error is None or state.track.get(joint) is not None:
                 save(state)
