@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import itertools
 import math
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TextIO
 
@@ -15,11 +12,7 @@ import typer
 from rich.table import Table
 
 if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --help starts fast
-    import numpy as np
-    from numpy.typing import NDArray
-
     from ..calibration import Calibration
-    from ..measurements import PoseTable
 
 from ..clock import stale_message
 from ..devices.base import device_key
@@ -293,148 +286,29 @@ def predict_cmd(
 
     Example: stickslip predict -c cal.json poses.csv -o predicted.csv
     """
-    from ..measurements import TableError, read_pose_columns
+    from ..measurements import TableError
+    from ..procedures.predict import PredictionError, check_pose_file, predict_pose_file, write_csv, write_json
 
     cal = _load_calibration(calibration)
+    rows = [0]
+
+    def emit(f: TextIO) -> None:  # the table streams through, a chunk at a time (any length, bounded memory)
+        header, chunks = predict_pose_file(cal, poses, interval)
+        rows[0] = write_json(header, chunks, f) if json_out else write_csv(header, chunks, f, interval)
+
     try:
-        table = read_pose_columns(poses)
+        if output is None:
+            check_pose_file(poses)  # a table that fails further on must not leave half of it on the screen
+            emit(sys.stdout)
+        else:
+            with user_errors():
+                atomic_write(output, emit)  # a failed write or a bad row leaves no half file
     except TableError as e:
         fail_table(e)
-    preds = _predict_columns(cal, table, poses)
-    pi95 = _interval_column(cal, table, preds) if interval else None
-    header = table.header
-    gamma_at = [i for i, h in enumerate(header) if h == "gamma_pred"]
-    out_header = header + (["gamma_pred"] if not gamma_at else [])
-    # a cell of a repeated (empty) column name holds the last such cell, as a dict of the row would
-    last = {h: i for i, h in enumerate(header)}
-    take = [last[h] for h in header]
-    if json_out:
-        out = []
-        for cells, g in zip(table.cells(), preds.tolist(), strict=True):
-            r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
-            r["gamma_pred"] = g
-            out.append(r)
-        if pi95 is not None:
-            for r, h in zip(out, pi95.tolist(), strict=True):
-                r["gamma_pi95"] = h
-        print_json(out)
-        return
-
-    def texts() -> Iterator[str]:
-        """repr of each prediction, a chunk at a time (one repr of a list runs in C)."""
-        for i in range(0, len(preds), 65536):
-            yield from repr(preds[i : i + 65536].tolist())[1:-1].split(", ")
-
-    def emit(f: TextIO) -> None:
-        w = csv.writer(f, lineterminator="\n")
-        if pi95 is not None:  # the general path, one more column
-            w.writerow([*out_header, "gamma_pi95"])
-            k = gamma_at[0] if gamma_at else len(take)
-            w.writerows(
-                [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :]), repr(h)]
-                for cells, g, h in zip(table.cells(), texts(), pi95.tolist(), strict=True)
-            )
-            return
-        w.writerow(out_header)
-        if table.raw is not None and not gamma_at:
-            # plain rows (no quotes, none blank or short): csv would write each back as it stands
-            rows = map("{},{}\n".format, table.raw, texts())
-            while part := "".join(itertools.islice(rows, 65536)):
-                f.write(part)
-        elif gamma_at:
-            k = gamma_at[0]
-            w.writerows(
-                [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :])]
-                for cells, g in zip(table.cells(), texts(), strict=True)
-            )
-        else:
-            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts(), strict=True))
-
-    if output is None:
-        emit(sys.stdout)
-    else:
-        with user_errors():
-            atomic_write(output, emit)  # streamed; a failed write leaves no half file
-        console.print(f"wrote {len(table)} rows to {output}")
-
-
-def _interval_column(cal: Calibration, table: PoseTable, preds: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Half-width of each prediction's 95 % interval: 1.96 x its relative standard deviation in its pose
-    (docs/models.md §4)."""
-    import numpy as np
-
-    from ..calibration.intervals import relative_sd
-
-    sd = np.zeros(len(table))
-    for j in np.unique(table.joint).tolist():
-        for d in ("+", "-"):
-            group = (table.joint == j) & (table.direction == d)
-            if group.any():
-                sd[group] = relative_sd(cal, int(j), d, table.q1[group], table.q2[group], table.q3[group],
-                                        table.theta[group], table.psi[group])
-    out: NDArray[np.float64] = 1.96 * sd * preds
-    return out
-
-
-def _predict_columns(cal: Calibration, table: PoseTable, poses: Path) -> NDArray[np.float64]:
-    """gamma_pred of every row, vectorised per joint, direction and kind (pose or traverse).
-
-    A row the calibration cannot answer fails the command with the first such row's
-    number (counted from 1 over the table's rows) and the reason.
-    """
-    import numpy as np
-
-    from ..models import NonPhysicalError
-
-    out = np.empty(len(table))
-    trav = table.is_traverse
-    first_error: tuple[int, str] | None = None
-    cols = (table.q1, table.q2, table.q3, table.theta, table.psi)
-    for j in np.unique(table.joint).tolist():
-        for d in ("+", "-"):
-            group = (table.joint == j) & (table.direction == d)
-            if not group.any():
-                continue
-            try:
-                m = cal.model(j, d)
-            except KeyError as e:
-                first = int(np.flatnonzero(group)[0])
-                first_error = min(first_error or (first, ""), (first, str(e.args[0])))
-                continue
-            for kind in (True, False):
-                idx = np.flatnonzero(group & (trav == kind))
-                if not idx.size:
-                    continue
-                c = [v[idx] for v in cols]
-                try:
-                    if kind:
-                        out[idx] = m.average_gamma(table.start[idx], table.end[idx], *c)
-                    else:
-                        out[idx] = m.gamma(*c)
-                except NonPhysicalError:
-                    for i in idx.tolist():  # the first row that fails, as a row-by-row loop would find it
-                        try:
-                            v = [float(x[i]) for x in cols]
-                            if kind:
-                                m.average_gamma(float(table.start[i]), float(table.end[i]), *v)
-                            else:
-                                m.gamma(*v)
-                        except NonPhysicalError as e:
-                            first_error = min(first_error or (i, ""), (i, str(e)))
-                            break
-    if first_error is not None:
-        fail(f"{poses}: row {first_error[0] + 1}: {first_error[1]}")
-    return out
-
-
-def _maybe_number(v: str) -> object:
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        return v
-    if x.is_integer() and v.strip().lstrip("+-").isdigit():
-        return int(x)
-    return x
+    except PredictionError as e:
+        fail(str(e))
+    if output is not None:
+        console.print(f"wrote {rows[0]} rows to {output}")
 
 
 @app.command("validate")

@@ -20,12 +20,14 @@ pose tables ``stickslip predict`` reads). Everything is imported from here.
 from .chunks import CHUNK_ROWS
 from .poses import (
     POSE_TABLE_REQUIRED,
+    PoseChunk,
     PoseQuery,
     PoseTable,
     parse_pose_columns,
     parse_pose_table,
     read_pose_columns,
     read_pose_table,
+    stream_pose_table,
 )
 from .rows import HEADER, MAX_STEPS, POSE_COLUMNS, TableError, Traverse, check_pose, parse_row
 from .table import (
@@ -63,4 +65,6 @@ __all__ = [
     "PoseQuery",
     "parse_pose_table",
     "read_pose_table",
+    "PoseChunk",
+    "stream_pose_table",
 ]
