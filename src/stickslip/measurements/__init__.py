@@ -38,6 +38,7 @@ from .table import (
     parse_measurements,
     read_measurement_table,
     read_measurements,
+    stream_measurement_table,
     write_measurements,
 )
 
@@ -65,6 +66,7 @@ __all__ = [
     "PoseQuery",
     "parse_pose_table",
     "read_pose_table",
+    "stream_measurement_table",
     "PoseChunk",
     "stream_pose_table",
 ]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import operator
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, TextIO
@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..clock import day_label_problem
-from ..records import MAX_TABLE_BYTES, atomic_write, read_text_bounded
-from .chunks import _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok
+from ..records import MAX_TABLE_BYTES, atomic_write, read_text_bounded, text_lines
+from .chunks import _Chunk, _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
 from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
 
 
@@ -133,6 +133,14 @@ def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTabl
 
 def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
     header, chunks = _open_table(text)
+    parts = list(_measurement_parts(header, chunks, source))
+    table = TraverseTable.concat(parts)
+    if not len(table):
+        raise TableError([f"{source}:2: the table has a header but no rows"])
+    return table
+
+
+def _check_header(header: list[str] | None, source: str) -> None:
     if header is None:
         raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"])
     header = [h.strip() for h in header]
@@ -150,7 +158,14 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
             sep = "';'" if ";" in header[0] else "a tab"
             detail = [f"the columns are separated by {sep}: save the table with commas (CSV)"]
         raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
-    parts: list[TraverseTable] = []
+
+
+def _measurement_parts(
+    header: list[str] | None, chunks: Callable[[int, int], Iterator[_Chunk]], source: str
+) -> Iterator[TraverseTable]:
+    """The table's rows a chunk at a time, checked; after the last, :class:`TableError` with every bad row
+    if there was one (no chunk is yielded after the first problem)."""
+    _check_header(header, source)
     problems: list[tuple[int, str]] = []  # (line, reason): sorted by line at the end, stable within a line
     lineno = 1
     for chunk in chunks(len(HEADER), 0):
@@ -175,14 +190,45 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
             cols = list(zip(*rows, strict=True))
         if lines:
             part, errs = _measurement_chunk(cols, lines, source)
-            parts.append(part)
             problems += errs
+            if not problems:
+                yield part
     if problems:
         raise TableError([p for _, p in sorted(problems, key=lambda lp: lp[0])])
-    table = TraverseTable.concat(parts)
-    if not len(table):
+
+
+def stream_measurement_table(path: str | Path) -> Iterator[TraverseTable]:
+    """A measurement table read a chunk at a time, as columns (any length, memory bounded by a chunk).
+
+    The same rules, line numbers and messages as :func:`read_measurement_table`: a bad file or
+    header raises :class:`TableError` at once, bad rows when the table has been read to its
+    end (every one listed; no chunk is yielded after the first), and a table with a header
+    but no rows then too.
+    """
+    source = str(path)
+    try:
+        header, chunks = stream_table(text_lines(path, "CSV"))
+    except (ValueError, csv.Error) as e:
+        raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
+    _check_header(header, source)
+    return _streamed(_measurement_parts(header, chunks, source), source)
+
+
+def _streamed(parts: Iterator[TraverseTable], source: str) -> Iterator[TraverseTable]:
+    rows = 0
+    while True:
+        try:
+            part = next(parts, None)
+        except (ValueError, csv.Error) as e:
+            if isinstance(e, TableError):
+                raise
+            raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
+        if part is None:
+            break
+        rows += len(part)
+        yield part
+    if not rows:
         raise TableError([f"{source}:2: the table has a header but no rows"])
-    return table
 
 
 def _measurement_chunk(

@@ -36,6 +36,10 @@ from ..models import NonPhysicalError
 __all__ = ["PredictionError", "PredictedChunk", "predict_pose_file", "check_pose_file", "write_csv", "write_json"]
 
 
+BLOCK = 8192
+"""Rows evaluated at a time within a chunk (a rotary traverse's average takes 48 nodes of every load)."""
+
+
 class PredictionError(ValueError):
     """A row the calibration cannot answer: ``"<file>: row N: <reason>"`` (rows counted from 1)."""
 
@@ -138,12 +142,11 @@ def _predict(cal: Calibration, table: PoseTable, source: str, offset: int) -> ND
                 idx = np.flatnonzero(group & (trav == kind))
                 if not idx.size:
                     continue
-                c = [v[idx] for v in cols]
                 try:
-                    if kind:
-                        out[idx] = m.average_gamma(table.start[idx], table.end[idx], *c)
-                    else:
-                        out[idx] = m.gamma(*c)
+                    for b in range(0, idx.size, BLOCK):  # a rotary average holds 48 nodes a row: by blocks
+                        ib = idx[b : b + BLOCK]
+                        c = [v[ib] for v in cols]
+                        out[ib] = m.average_gamma(table.start[ib], table.end[ib], *c) if kind else m.gamma(*c)
                 except NonPhysicalError:
                     for i in idx.tolist():  # the first row that fails, as a row-by-row loop would find it
                         try:
@@ -166,9 +169,10 @@ def _interval(cal: Calibration, table: PoseTable, gamma: NDArray[np.float64]) ->
     for j in np.unique(table.joint).tolist():
         for d in ("+", "-"):
             group = (table.joint == j) & (table.direction == d)
-            if group.any():
-                sd[group] = relative_sd(cal, int(j), d, table.q1[group], table.q2[group], table.q3[group],
-                                        table.theta[group], table.psi[group])
+            for b in range(0, int(group.sum()), BLOCK):
+                ib = np.flatnonzero(group)[b : b + BLOCK]
+                sd[ib] = relative_sd(cal, int(j), d, table.q1[ib], table.q2[ib], table.q3[ib], table.theta[ib],
+                                     table.psi[ib])
     out: NDArray[np.float64] = 1.96 * sd * gamma
     return out
 
