@@ -44,7 +44,7 @@ def calibrate(
         ``"auto"``): the paper's models, calibrated by ``method``;
         ``"auto"``: the paper's procedure for every joint and direction whose traverses
         are all at the paper's calibration poses, and for the others every model family
-        the data can identify, chosen by leave-one-pose-out cross-validation
+        the data can identify, averaged by cross-validation on held-out poses
         (:func:`~stickslip.calibration.selection.calibrate_families`); or a family's name
         (docs/models.md §2) to fit that family everywhere. With ``method`` other than
         ``"auto"``, ``"auto"`` means ``"paper"`` (the method names how to calibrate the

@@ -69,13 +69,13 @@ class JointData:
         return int(np.unique(self.pose[direction]).size)
 
     def sample(self, rows: int, seed: int = 0) -> JointData:
-        """The traverses of a seeded random sample of the poses, about ``rows`` of them (every traverse of
-        each pose taken)."""
+        """The traverses of a seeded random sample of the poses, at most ``rows`` of them (every traverse
+        of each pose taken; at least one pose)."""
         counts = np.zeros(self.n_poses, dtype=np.int64)
         for d in self.dirs:
             counts += np.bincount(self.pose[d], minlength=self.n_poses)
         order = np.random.default_rng(seed).permutation(self.n_poses)
-        take = order[: int(np.searchsorted(np.cumsum(counts[order]), rows)) + 1]
+        take = order[: max(1, int(np.searchsorted(np.cumsum(counts[order]), rows, side="right")))]
         chosen = np.zeros(self.n_poses, dtype=bool)
         chosen[take] = True
         renumber = np.cumsum(chosen) - 1

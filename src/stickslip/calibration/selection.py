@@ -563,6 +563,7 @@ def calibrate_families(
                 else {fit.label: 1.0},
                 "fallback": sel.fallback,
                 "folds": sel.n_folds,
+                "cv_rms": sel.cv_rms if math.isfinite(sel.cv_rms) else None,
             }
         notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
     for (j, d), m in models.items():

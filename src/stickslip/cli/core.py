@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import sys
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TextIO
 
@@ -128,7 +131,8 @@ def calibrate_cmd(
             "--model",
             help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
             "traverses are exactly the paper's poses, else every model family the data identify, averaged "
-            "with weights from leave-one-pose-out cross-validation (pseudo-BMA+). 'paper': the paper's models "
+            "with weights from cross-validation on held-out poses (pseudo-BMA+, leaning to the paper's form), "
+            "or the paper's form where the average predicted held-out poses worse. 'paper': the paper's models "
             "only (also what 'auto' means "
             "with a --method other than auto).",
         ),
@@ -155,11 +159,15 @@ def calibrate_cmd(
     integral. Any other set of traverses is fitted by least squares, with standard errors.
 
     With more traverses than the paper's poses, every model family the data can
-    identify is fitted and scored by leave-one-pose-out cross-validation, and the
-    prediction averages them, each weighted by how well it predicted the poses left out
-    (pseudo-BMA+); the table gives each family's parameter count (+ and - together), CV
-    error and weight, and ◀ marks the one whose parameters are shown. With --prior, an earlier
-    calibration is brought up to date with as few as one traverse per joint and direction.
+    identify is fitted and cross-validated on held-out poses (folds as far from the rest
+    as new poses of the workspace are from the calibration's), and the prediction averages
+    them, each weighted by how well it predicted the poses held out (pseudo-BMA+, half the
+    prior on the paper's form); where that average predicts held-out poses worse than the
+    paper's form, the paper's form is used and the note says so. The table gives each
+    family's parameter count (+ and - together), CV error and weight, and ◀ marks the one
+    whose parameters are shown; below it, the error to expect at new poses (what
+    predict --interval and plan use). With --prior, an earlier calibration is brought up to
+    date with as few as one traverse per joint and direction.
 
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
@@ -177,7 +185,9 @@ def calibrate_cmd(
                 old = Calibration.load(prior)
             cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=str(measurements))
         else:
-            cal = calibrate(traverses, method=method, day=day, source=str(measurements), model=model)
+            with _progress_bar("calibrating") as progress:  # shown once it has taken a second
+                cal = calibrate(traverses, method=method, day=day, source=str(measurements), model=model,
+                                progress=progress)
     except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
         fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
@@ -196,9 +206,40 @@ def calibrate_cmd(
         console.print(f"saved to {output}")
 
 
+@contextlib.contextmanager
+def _progress_bar(what: str, after_s: float = 1.0) -> Iterator[Callable[[float, str], None]]:
+    """A ``progress(fraction, text)`` callback that shows a bar on stderr once ``after_s`` have passed
+    (a calibration of a few hundred traverses ends before it would flicker), removed when done."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    start = time.monotonic()
+    bar: Progress | None = None
+    task = None
+
+    def update(fraction: float, text: str) -> None:
+        nonlocal bar, task
+        if bar is None and time.monotonic() - start < after_s:
+            return
+        if bar is None:
+            bar = Progress(TextColumn(what), BarColumn(), TextColumn("{task.percentage:>3.0f} %"),
+                           TextColumn("{task.description}"), TimeElapsedColumn(),
+                           console=Console(stderr=True), transient=True)
+            bar.start()
+            task = bar.add_task(text, total=1.0)
+        assert task is not None
+        bar.update(task, completed=min(max(fraction, 0.0), 1.0), description=text)
+
+    try:
+        yield update
+    finally:
+        if bar is not None:
+            bar.stop()
+
+
 def _selection_table(cal: Calibration) -> Table:
     """Each scored family's CV errors and weight; the families the data could not score, in the caption."""
-    t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
+    t = Table(title="model families: cross-validation on held-out poses (relative error of the average step)")
     for col in ("joint", "family", "params", "CV RMS", "CV max", "fit RMS", "weight"):
         t.add_column(
             col, justify="left" if col in ("joint", "family") else "right", no_wrap=col != "family", overflow="fold"
@@ -224,8 +265,14 @@ def _selection_table(cal: Calibration) -> Table:
             w = weights.get(str(sc["family"]))
             t.add_row(str(j), str(sc["family"]), str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
                       pct(sc["fit_rms"]), (f"{w:.2f}" if w else "") + mark)
+    captions = []
+    expected = [f"{j}{d} {cal.sigma_model[(j, d)] * 100:.1f} %" for (j, d) in sorted(cal.predictive)
+                if (j, d) in cal.sigma_model]
+    if expected:
+        captions.append("expected RMS error at new poses of the workspace: " + ", ".join(expected))
     if unscored:
-        t.caption = "not scored: " + "; ".join(unscored)
+        captions.append("not scored: " + "; ".join(unscored))
+    t.caption = "\n".join(captions) or None
     return t
 
 
