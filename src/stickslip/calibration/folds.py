@@ -180,7 +180,7 @@ def cv_folds(coords: NDArray[np.float64], workspace: NDArray[np.float64], seed: 
     sq = np.sum(xs**2, axis=1)
     dist = np.sqrt(np.maximum(sq[:, None] - 2.0 * xs @ xs.T + sq[None, :], 0.0))
     best: tuple[float, int, NDArray[np.int64]] | None = None
-    for q in _candidates(m):
+    for q in reversed(_candidates(m)):  # from one pose per cluster down: a tie keeps the finer folds
         labels = _merge(kmeans(xs, q, seed), max_folds)
         if labels.max() < 1:
             continue
