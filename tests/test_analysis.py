@@ -185,6 +185,7 @@ def _truth_vector(joint, d):
     return (TRUE_PRISMATIC[d] if joint == 3 else TRUE_ROTARY[d]).as_vector()
 
 
+@pytest.mark.slow
 def test_fit_recovers_known_parameters_within_their_standard_errors():
     """Coverage over 60 seeds x 14 parameters: |fit - truth| <= 2 SE in >= 90 % (expected ~94 %
     for a t distribution with n - p = 17-18 degrees of freedom), and <= 1 SE near 68 %."""

@@ -161,6 +161,7 @@ def test_emulator_wrong_password():
             open_device(url)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, match", [("silent", "no complete reply"), ("garbage", "garbage")])
 def test_emulator_faults_raise_stop_and_do_not_hang(fault, match):
     sim = _sim()

@@ -37,6 +37,7 @@ def _traverse(rng: np.random.Generator, centres: np.ndarray, jitter: float) -> T
     )
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 120), k=st.integers(1, 6), jitter=st.sampled_from([0.0, 1.0]))
 def test_grid_grouping_equals_the_greedy_scan(seed, n, k, jitter):
@@ -62,6 +63,7 @@ def test_odd_tolerances_fall_back_to_the_scan(tols):
     assert [[id(t) for t in g.traverses] for g in fast] == [[id(t) for t in g.traverses] for g in slow]
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), days=st.integers(2, 6), extra=st.integers(1, 12))
 def test_closed_form_two_way_equals_statsmodels(seed, days, extra):

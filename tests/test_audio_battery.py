@@ -36,6 +36,8 @@ from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 TOL_S = 0.025
 
 

@@ -27,6 +27,8 @@ from stickslip.audio.detector import detect  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 TOL_S = 0.025
 Chain = Callable[[np.ndarray, int], np.ndarray]  # samples, seed -> samples

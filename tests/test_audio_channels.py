@@ -154,6 +154,7 @@ def test_channel_is_refused_for_a_csv_and_for_live_input(files: Path) -> None:
     assert r.exit_code == 2 and "a live input is read as one channel" in r.stderr, r.output
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     g=st.floats(0.3, 1.0),

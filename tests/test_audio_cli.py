@@ -20,6 +20,8 @@ from stickslip.audio.sources import (
 from stickslip.cli import app
 from stickslip.sim.sound import render_traverse_recording
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 runner = CliRunner()
 
 

@@ -27,6 +27,8 @@ from stickslip.audio.confirm import (  # noqa: E402
 from stickslip.audio.detector import StopDetector, StopEvent, Tuning  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)
 SPLICE_AT, SPLICE_S = 1.0, 0.08

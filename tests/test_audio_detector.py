@@ -17,6 +17,8 @@ from stickslip.audio.detector import (
     detect,
 )
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 BAND = (5000.0, 7000.0)
 

@@ -26,15 +26,15 @@ from __future__ import annotations
 
 from functools import cache
 
+import arrival_sound as ar
+import battery_sound as bs
+import beam_sound as bm
+import modal_sound as md
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import battery_sound as bs
-import beam_sound as bm
-import modal_sound as md
 from stickslip.audio import template
 from stickslip.audio.confirm import ONSET_QUIET, ONSET_SLOW_S, ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector, StopEvent
@@ -42,6 +42,8 @@ from stickslip.audio.template import NEG_CAP, NEG_RATIO, QUANTILE, fit_departure
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 TOL_S = 0.025

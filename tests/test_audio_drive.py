@@ -36,6 +36,8 @@ from stickslip.audio.detector import StopDetector
 from stickslip.audio.tuning import TuningError, tune
 from stickslip.audio.tuningfile import Tuning
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = dv.SR
 TOL_S = 0.025
 

@@ -32,6 +32,8 @@ from stickslip.audio.detector import StopDetector, StopEvent, Tuning, detect  # 
 from stickslip.audio.late import LatePath, _rate_moved, onset_change_point  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 TOL_S = 0.025
 
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)

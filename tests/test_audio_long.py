@@ -15,6 +15,8 @@ from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 _TUNED: dict[str, Tuning] = {}
 
 

@@ -25,6 +25,8 @@ from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
 from stickslip.audio.template import masked_signature  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 
 def test_nothing_added_leaves_the_signature_as_tuned() -> None:
     delta = np.array([-20.0, -5.1, -0.5, 0.0, 0.2, 15.0, 28.0])

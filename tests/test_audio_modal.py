@@ -13,11 +13,13 @@ from functools import cache
 
 import numpy as np
 import pytest
-
 from modal_sound import Scene, render
+
 from stickslip.audio.detector import detect
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 ROOMS: dict[str, dict[str, object]] = {
     "quiet room": {},

@@ -14,19 +14,21 @@ from __future__ import annotations
 
 from functools import cache
 
+import arrival_sound as ar
+import battery_sound as bs
+import modal_sound as ms
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import battery_sound as bs
-import modal_sound as ms
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector, StopEvent
 from stickslip.audio.tuning import TuningError, tune
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 TOL_S = 0.025
 SR = 48_000

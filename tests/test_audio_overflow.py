@@ -119,6 +119,7 @@ def tuning() -> Any:
     return tune(samples, rate, stop_at, joint=3)
 
 
+@pytest.mark.slow
 def test_a_traverse_through_a_sound_card_that_dropped_audio_records_nothing(
     tuning: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:

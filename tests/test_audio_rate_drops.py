@@ -30,6 +30,8 @@ from stickslip.audio.detector import StopDetector, StopEvent
 from stickslip.audio.tuningfile import Tuning
 from test_audio_downstream import _recording, _tuning
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 TOL_S = 0.025
 

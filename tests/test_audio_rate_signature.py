@@ -22,20 +22,22 @@ from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
+import arrival_sound as ar
+import beam_sound as bm
+import modal_sound as md
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
-import beam_sound as bm
-import modal_sound as md
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopDetector, StopEvent
 from stickslip.audio.rate_signature import RATE_MIN_CHANGE, RATE_WINDOW, SignaturePredictor, fine_spectrum_db
 from stickslip.audio.template import subband_edges, subband_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning, TuningFileError
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 FINE = ("fine_start_hz", "fine_bin_hz", "fine_stepping_db", "fine_stopped_db")

@@ -8,11 +8,11 @@ the mechanism. And the second fit's events do not depend on how the stream is cu
 
 from __future__ import annotations
 
+import arrival_sound as ar
+import beam_sound as bm
 import numpy as np
 import pytest
 
-import arrival_sound as ar
-import beam_sound as bm
 import test_audio_onset as on
 import test_audio_shifted as sh
 
@@ -29,6 +29,7 @@ def test_the_strongest_reverberation_is_on_time_without_being_taken_back() -> No
     assert det.inner._template is not None and det.inner._template.rate_log[0][2]  # the prediction was fitted
 
 
+@pytest.mark.slow
 def test_arm_8s_shifted_stop_is_on_time_without_being_taken_back() -> None:
     s = sh._arrival_draws(8)[10]
     assert s.stop_at is not None
@@ -45,6 +46,7 @@ def test_beam_1s_slow_climb_is_heard_on_time() -> None:
     assert kind == "right" and abs(onsets[0]) < 0.015, (kind, onsets)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("block", [128, 777, 4096])
 def test_the_second_fit_does_not_depend_on_the_block_size(block: int) -> None:
     """The rate heard at the warm-up and after a relearned template, in blocks of 128 to 4096 samples: the same

@@ -20,16 +20,18 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.signal import welch
-
 from modal_sound import Scene as ModalScene
 from modal_sound import render as modal_render
+from scipy.signal import welch
 from shaped_sound import Arm, render
+
 from stickslip.audio.confirm import CONFIRM_S
 from stickslip.audio.detector import detect
 from stickslip.audio.inject import bursts, shaped_noise
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 

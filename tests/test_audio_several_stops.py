@@ -32,6 +32,8 @@ from stickslip.audio.template import RELEASE_SHARE, Release  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 TOL_S = 0.025
 STOP_S = 1.5  # each traverse's stop, s from its start; each traverse is 2.5 s long

@@ -35,6 +35,8 @@ from stickslip.audio.tuning import DEFAULT_PER_OCTAVE, FINER_PER_OCTAVE, TuningE
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 from test_audio_rate_signature import tuned_alone
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 TOL_S = 0.025
 

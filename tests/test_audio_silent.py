@@ -14,12 +14,12 @@
 
 from __future__ import annotations
 
+import arrival_sound as ar
 import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-import arrival_sound as ar
 import test_audio_onset as on
 import test_audio_shifted as sh
 from stickslip.audio.detector import StopDetector, StopEvent
@@ -51,6 +51,7 @@ STRONG_ROOMS = [
 ]
 
 
+@pytest.mark.slow
 def test_stepping_in_the_strongest_room_is_not_taken_for_a_stop_at_the_start() -> None:
     """Five draws of the onset property's domain in its strongest room (a throwaway scan found 6 in 150): each fired
     at once on stepping; now none does, and the confirmed first event is on time or missed (the stop then falls in
@@ -82,6 +83,7 @@ def test_arm_6s_shifted_stop_is_not_heard_at_the_start_of_stepping_at_1038_hz() 
     assert not on._silently_wrong(ev, s.stop_at), (ev, det.onset_log)
 
 
+@pytest.mark.slow
 def test_arm_8s_shifted_stop_that_was_37_ms_late_is_taken_back_on_time() -> None:
     """Round 9b's scan, arm 8's draw 10 (1034 Hz, 8 steps of arrival): fired with its onset +37 ms, unflagged, on code
     without round 9a's climb check; the climb (5 ms) held from an earlier hot frame, so the onset is taken back. On the
@@ -109,6 +111,7 @@ def test_a_recording_that_starts_at_the_stop_is_still_heard_at_once() -> None:
     assert len(_heard_at_once(on._arrival_tuning(2, "stiff"), ar.render(s))) == 1
 
 
+@pytest.mark.slow
 @settings(max_examples=12, deadline=None)
 @example(seed=3947455562, t60_s=0.2396441813794542, reverb_db=-9.231483001103745, rate=1010.5837371303755)
 @given(

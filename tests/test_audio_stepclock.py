@@ -49,6 +49,8 @@ from stickslip.audio.stepclock import (  # noqa: E402
 )
 from stickslip.audio.tuning import tune  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 P = Scene("P", 1000.0, 2.0, 3.0, seed=1)
 Q = Scene("Q", 1000.0, 2.0, 3.0, seed=2)

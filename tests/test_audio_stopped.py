@@ -44,6 +44,8 @@ from stickslip.procedures.traverse import TraverseError, TraverseResult, measure
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from test_audio_onset import whole_and_in_blocks  # noqa: E402
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 48_000
 TOL_S = 0.025
 

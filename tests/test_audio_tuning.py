@@ -18,6 +18,8 @@ from stickslip.audio.detector import detect
 from stickslip.audio.tuning import TuningError, candidate_bands, tune, tune_band
 from stickslip.sim.sound import render_traverse_recording
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 TUNE_STOP_S = 2.0
 
 

@@ -21,6 +21,8 @@ from stickslip.audio.sources import AudioSourceError, write_wav
 from stickslip.audio.tuning import tune
 from stickslip.audio.vibration import ReadbackStopDetector, SerialSamples, read_vibration
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 SR = 25_000
 
 

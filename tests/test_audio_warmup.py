@@ -21,15 +21,17 @@ from typing import Any
 
 import numpy as np
 import pytest
+from battery_sound import Scene, espeak_speech, render, variant
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
 
-from battery_sound import Scene, espeak_speech, render, variant
 from stickslip.audio.detector import StopDetector, StopEvent, detect
 from stickslip.audio.template import CONTINUUM_FRAME, continuum_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 SR = 48_000
 JOINTS = {"P": Scene("P", 1000.0, 2.0, 3.0, seed=1), "Q": Scene("Q", 1000.0, 2.0, 3.0, seed=2)}

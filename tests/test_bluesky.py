@@ -34,11 +34,11 @@ pytest.importorskip("ophyd_async")
 import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
 from bluesky.utils import FailedStatus  # noqa: E402
+from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
-from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, calibration_day  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402
@@ -352,6 +352,7 @@ def test_stop_between_bursts_keeps_an_exact_position(sim: SimulatedMM3A) -> None
     assert abs(sim.position(3) - q) <= one_step(cal, 3, q) + 0.005 * q
 
 
+@pytest.mark.slow
 def test_calibration_day_on_the_simulator(RE: Any) -> None:
     sim = SimulatedMM3A(seed=4, day=DAY)
     truth = sim.true_models()

@@ -114,6 +114,7 @@ def test_plots_return_axes_and_show_nothing() -> None:
         assert all(plt.figure(n) is not ax.figure for n in plt.get_fignums())
 
 
+@pytest.mark.slow
 def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """docs/bluesky.md's example runs as written (docs/style.md: examples run)."""
     pytest.importorskip("bluesky")

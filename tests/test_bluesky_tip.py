@@ -27,12 +27,12 @@ pytest.importorskip("ophyd_async")
 import bluesky.plan_stubs as bps  # noqa: E402
 import bluesky.plans as bp  # noqa: E402
 from bluesky.utils import FailedStatus  # noqa: E402
+from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
+from hidden_arm import tip_of  # noqa: E402
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from ophyd_async.core import init_devices  # noqa: E402
 
-from bluesky_support import DAY, true_calibration  # noqa: E402  (RE, the RunEngine fixture, is in conftest.py)
-from hidden_arm import tip_of  # noqa: E402
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipManipulator  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402
@@ -79,6 +79,7 @@ def ripple(start: tuple[float, float, float], end: tuple[float, float, float]) -
     return 0.005 * (rho * abs(end[0] - start[0]) + rho * abs(end[1] - start[1]) + abs(end[2] - start[2]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("coordinate, delta", [("y", 1.5e-3), ("z", -2e-3), ("x", 3e-3)])
 def test_mv_of_one_coordinate_reaches_it_and_keeps_the_others(
     RE: Any, sim: SimulatedMM3A, coordinate: str, delta: float
@@ -108,6 +109,7 @@ def test_mv_of_one_coordinate_reaches_it_and_keeps_the_others(
         assert w["setpoint"] == pytest.approx(v, abs=1e-12) and abs(w["readback"] - v) <= step
 
 
+@pytest.mark.slow
 def test_scan_of_the_tip_emits_five_events_rising_through_the_targets(RE: Any, sim: SimulatedMM3A) -> None:
     cal = true_calibration(sim)
     with init_devices():
@@ -172,6 +174,7 @@ def test_a_tip_target_past_joint_1s_stop_is_refused_naming_it(RE: Any, sim: Simu
     assert sim.steps_simulated == before
 
 
+@pytest.mark.slow
 def test_tip_readback_follows_joint_moves(RE: Any, sim: SimulatedMM3A) -> None:
     cal = true_calibration(sim)
     with init_devices():

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from synth import PAPER_PRISMATIC, PAPER_ROTARY, paper_table, random_poses, traverse_from_model
 
 from stickslip import calibration as C
 from stickslip.calibration.inversion import _simulate_full_range_averages
 from stickslip.kinematics import JOINTS
 from stickslip.measurements import Traverse
 from stickslip.models import JointModel, PrismaticParams, steps_between
-from synth import PAPER_PRISMATIC, PAPER_ROTARY, paper_table, random_poses, traverse_from_model
 
 LO, HI = JOINTS[2].lower, JOINTS[2].upper
 SPAN = HI - LO
@@ -65,6 +65,7 @@ def test_fig10_d_values_recovered_from_exact_averages(g0, d):
     assert C.invert_d_exact(avg, g0, HI, LO, 0.0, -1.0) == pytest.approx(d, abs=1e-12)
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(g0=st.floats(20e-6, 100e-6), d=st.floats(-40e-6, 60e-6), down=st.booleans())
 def test_exact_inversion_to_1e3_urad_across_the_issue_range(g0, d, down):
@@ -227,6 +228,7 @@ def test_seed_quadratic_method_differs_from_exact_by_urad():
     assert 0.05e-6 < max(diffs) < 5e-6
 
 
+@pytest.mark.slow
 def test_plot_draws_the_model_curves():
     import matplotlib
 

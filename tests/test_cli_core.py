@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip.calibration import Calibration, calibrate
@@ -14,7 +15,6 @@ from stickslip.cli import app
 from stickslip.kinematics import Pose
 from stickslip.measurements import measurements_to_csv
 from stickslip.motion.planning import plan_move
-from synth import paper_table
 
 runner = CliRunner()
 
@@ -140,6 +140,7 @@ def test_nonphysical_table_is_refused(files):
     _bad(runner.invoke(app, ["calibrate", str(p)]), "non-physical")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cmd", ["calibrate", "predict", "validate", "plan", "show", "demo", "tune", "listen",
                                  "anova", "fit", "report", "history", "export", "import", "move", "where", "traverse"])
 def test_every_command_has_help(cmd):

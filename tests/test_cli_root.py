@@ -21,6 +21,7 @@ def test_version():
     assert r.returncode == 0 and r.stdout.strip() == f"stickslip {__version__}"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform == "win32", reason="the NanoControl peer runs on a POSIX pseudo-terminal")
 def test_vv_shows_device_traffic_and_log_file_keeps_it(tmp_path):
     from nanocontrol_peer import NanoControlPeer
@@ -36,6 +37,7 @@ def test_vv_shows_device_traffic_and_log_file_keeps_it(tmp_path):
     assert "-> version;" in log.read_text(encoding="utf-8")
 
 
+@pytest.mark.slow
 def test_an_unwritable_log_file_is_one_line(tmp_path):
     r = _cli("--log-file", str(tmp_path / "no" / "such" / "dir.log"), "--version")
     assert r.returncode == 0  # --version is eager: it answers before anything else

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip import clock
 from stickslip.cli import app
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
 
 runner = CliRunner()
 FAR = dt.date(2099, 12, 31)  # a pinned day far in the future, at a year's end
@@ -139,6 +139,7 @@ def test_history_export_and_anova_keep_day_labels_across_a_year_end(far_future):
     assert {t["day"] for t in tests if t["test"] == "direction"} == set(days)
 
 
+@pytest.mark.slow
 def test_report_says_when_the_calibration_predates_the_data(far_future):
     pytest.importorskip("matplotlib")
     cal = _calibration(far_future, _day(-2))
@@ -164,6 +165,7 @@ def _run(env, *code_or_args: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, *code_or_args], env=env, capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.slow
 def test_just_after_midnight_in_utc_plus_14_today_is_the_local_date(tmp_path):
     # 00:00:30 on 1 January 2028 at UTC+14 is still 31 December 2027 at UTC.
     env = _faked_env("@2028-01-01 00:00:30", "Etc/GMT-14")

@@ -13,12 +13,12 @@ import io
 import math
 from dataclasses import astuple
 
+import measurements_rowwise as old
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-import measurements_rowwise as old
 from stickslip import measurements as new
 
 NUMBERS = [
@@ -71,6 +71,7 @@ def chunk(request, monkeypatch):
     return request.param
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(rows=rows_strategy, layout=st.sampled_from(["plain", "crlf", "blank lines"]))
 def test_measurement_table_agrees_with_the_row_by_row_parser(chunk, rows, layout):
@@ -99,6 +100,7 @@ pose_header = st.lists(
 pose_row = st.lists(st.one_of(cell(NUMBERS), cell(JOINTS), cell(DIRS)), min_size=0, max_size=13)
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(header=pose_header, rows=st.lists(pose_row, max_size=20), blank=st.booleans())
 def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows, blank):
@@ -118,6 +120,7 @@ def test_pose_table_agrees_with_the_row_by_row_parser(chunk, header, rows, blank
     assert [astuple(q) for q in q_new] == [astuple(q) for q in q_old]
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     rows=st.lists(
@@ -186,8 +189,9 @@ def _old_predict(text: str, cal) -> str:
 
 @pytest.fixture(scope="module")
 def paper_cal(tmp_path_factory):
-    from stickslip.calibration import calibrate
     from synth import paper_table
+
+    from stickslip.calibration import calibrate
 
     cal = calibrate(paper_table())
     path = tmp_path_factory.mktemp("cal") / "cal.json"
@@ -195,6 +199,7 @@ def paper_cal(tmp_path_factory):
     return cal, path
 
 
+@pytest.mark.slow
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(
     rows=st.lists(

@@ -13,6 +13,7 @@ import json
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip.calibration import Calibration, Conditions
@@ -21,7 +22,6 @@ from stickslip.clock import max_age_days
 from stickslip.measurements import measurements_to_csv
 from stickslip.procedures.conditions import conditions_of, usage_warnings
 from stickslip.sim.arm import SimulatedMM3A
-from synth import paper_table
 
 runner = CliRunner()
 DAY = "2026-11-22"

@@ -229,6 +229,7 @@ def test_a_password_in_the_device_url_is_refused_without_echoing_it(tmp_path, ur
     assert f"{p}:2: device:" in msg and "STICKSLIP_ANC300_PASSWORD" in msg
 
 
+@pytest.mark.slow
 @HYP
 @given(
     secret=st.text(st.characters(whitelist_categories=("L", "N")), min_size=4, max_size=16),

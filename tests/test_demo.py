@@ -18,6 +18,8 @@ from stickslip.cli import app
 from stickslip.measurements import read_measurements
 from stickslip.procedures.demo import CALIBRATION_PLAN, REPEAT_PLAN, VALIDATION_PLAN, run_demo
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 runner = CliRunner()
 
 

@@ -12,6 +12,8 @@ import pytest
 
 from stickslip.storage import Store
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 def test_kill_mid_demo_keeps_completed_traverses(tmp_path):

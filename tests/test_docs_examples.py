@@ -21,6 +21,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
 POSIX = pytest.mark.skipif(sys.platform == "win32", reason="the examples are POSIX shell sessions (bash)")
@@ -125,9 +127,10 @@ def test_readme_audio_example_runs_on_a_recording(tmp_path):
 @POSIX
 def test_readme_hardware_moves_run_against_the_emulator(tmp_path):
     """`where`/`move` on mm3a:///dev/ttyUSB0 as written, the emulator's pseudo-terminal standing in for the port."""
+    from synth import paper_table
+
     from stickslip.measurements import measurements_to_csv
     from stickslip.sim.emulators import NanoControlEmulator
-    from synth import paper_table
 
     env = _venv_folder(tmp_path)
     env["STICKSLIP_DB"] = str(tmp_path / "hw.db")

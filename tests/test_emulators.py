@@ -116,6 +116,7 @@ def test_device_error_reply_is_reported():
             assert emu.received[-1] == "stop"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, match", [("silent", "did not answer"), ("garbage", "garbage")])
 def test_fault_mid_traverse_keeps_earlier_traverses_stops_and_does_not_hang(fault, match):
     sim = _sim()
@@ -183,6 +184,7 @@ def test_late_reply_from_a_timed_out_command_is_discarded():
             assert dev.counters()[3] == 300  # the counters answer, not a stale "o\t"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module", ["stickslip.sim.emulators", "stickslip.sim.console_emulator"])
 def test_an_emulator_served_from_the_command_line_stops_cleanly_on_sigterm(module):
     # python -m <emulator> --tcp prints its URL, serves until SIGTERM, then prints what it received and exits 0

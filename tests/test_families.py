@@ -7,8 +7,9 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
+from synth import paper_table
+
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, calibrate
 from stickslip.measurements import Traverse
@@ -16,7 +17,6 @@ from stickslip.models import JointModel, NonPhysicalError, PrismaticParams, Rota
 from stickslip.models.families import FAMILIES, FamilyModel, FamilyParams, family_spec
 from stickslip.motion.planning import Planner
 from stickslip.sim import physics as ph
-from synth import paper_table
 
 
 def test_paper_family_is_the_papers_equations():
@@ -72,6 +72,7 @@ def _second_arm_traverses(rng, n_poses, truth):
     return out
 
 
+@pytest.mark.slow
 def test_selection_finds_a_nonlinear_load_on_a_second_arm():
     # independent of the physics arm: the closed form with a strong L^2 term; the paper's form cannot fit it
     truth = {"+": (950e-9, 0.25, 300e-9, 250e-9), "-": (900e-9, 0.22, -400e-9, 200e-9)}
@@ -97,6 +98,7 @@ def test_selection_finds_a_nonlinear_load_on_a_second_arm():
     assert scores["paper"]["cv_rms"] > scores["load2"]["cv_rms"]
 
 
+@pytest.mark.slow
 def test_averaged_members_are_labelled_like_the_selection(tmp_path):
     # a family and its +shared variant are two members with the same family name: the file keeps each member's
     # label (the selection's), so members and weights can be matched; a file without labels still loads
@@ -137,6 +139,7 @@ def test_averaged_members_are_labelled_like_the_selection(tmp_path):
         Calibration.load(path)
 
 
+@pytest.mark.slow
 def test_family_calibration_round_trips_through_json(tmp_path):
     arm = ph.PhysicsMM3A(seed=41, day="2026-04-01")
     rng = np.random.default_rng(41)
@@ -169,6 +172,7 @@ def test_bad_family_file_is_refused(tmp_path):
         Calibration.from_dict(data)
 
 
+@pytest.mark.slow
 def test_calibrate_never_stops_and_meets_the_issue_numbers():
     # the issue's acceptance on days and a seed not used while developing: 46 traverses (the 32 spread
     # over the load space) -> <= 7.5 % / 3.5 % at random validation poses
@@ -203,6 +207,7 @@ def test_joint_one_with_few_traverses_falls_back():
     assert cal.models[(1, "+")].params.family == "constant"
 
 
+@pytest.mark.slow
 def test_cli_calibrate_and_fit_with_families(tmp_path):
     from typer.testing import CliRunner
 
@@ -253,6 +258,7 @@ def _family_doc() -> dict:
 _DOC = None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(150))
 def test_mangled_family_files_give_one_reason(seed):
     # fuzz: replace one field anywhere in the families / uncertainty entries with a hostile value;

@@ -21,6 +21,8 @@ from typer.testing import CliRunner
 from stickslip.cli import app
 from stickslip.cli._common import EXIT_CODES
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 runner = CliRunner()
 FUZZ = settings(
     max_examples=60,

@@ -75,6 +75,7 @@ class PaperProcedure:
         return self._avg(t, g00 + (g01 - g00) * w, d0 + (d1 - d0) * w)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, day", [(11, "2026-10-02"), (23, "2026-12-24")])
 def test_calibrate_and_predict_agree_with_the_papers_procedure(tmp_path, seed, day):
     run_demo(seed=seed, day=day, out=tmp_path, switch="oracle", repeats=0)  # the simulator's physics, 3 % step noise

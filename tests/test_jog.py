@@ -244,6 +244,7 @@ def _quiet(emu, settle: float = 0.5, timeout: float = 30.0) -> None:
     raise AssertionError("the emulator did not settle")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals (POSIX)")
 def test_jog_in_a_terminal_steps_the_emulated_nanocontrol(tmp_path):
     cal_path = tmp_path / "cal.json"
@@ -289,6 +290,7 @@ def test_jog_in_a_terminal_steps_the_emulated_nanocontrol(tmp_path):
     assert b"jog ended" in term.output
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals (POSIX)")
 def test_jog_refuses_without_a_terminal(tmp_path):
     cal_path = tmp_path / "cal.json"

@@ -19,6 +19,8 @@ from stickslip.calibration import calibrate
 from stickslip.calibration.design import spread_poses
 from stickslip.calibration.update import update_calibration
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 DAYS = ("2026-10-05", "2026-10-06", "2026-10-07")
 
 

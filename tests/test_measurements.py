@@ -3,6 +3,7 @@
 import math
 
 import pytest
+from synth import paper_table
 
 from stickslip.measurements import (
     HEADER,
@@ -12,7 +13,6 @@ from stickslip.measurements import (
     parse_pose_table,
     read_measurements,
 )
-from synth import paper_table
 
 GOOD = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n2026-11-22,3,+,0,-1.5707963,0,0,0,0,0.012,12345\n"
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
 from stickslip import models as m
 from stickslip.kinematics import JOINTS
-from synth import PAPER_PRISMATIC, PAPER_ROTARY
 
 
 def test_eq3_at_the_calibration_poses():
@@ -35,6 +35,7 @@ def test_downward_steps_bigger_than_upward():
 coef = st.tuples(st.floats(0.2, 3.0), st.floats(0.0, 0.98), st.floats(-10, 10))
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(c=coef, a=st.floats(-8, 8), span=st.floats(-7, 7))
 def test_closed_form_equals_quadrature(c, a, span):
@@ -47,6 +48,7 @@ def test_closed_form_equals_quadrature(c, a, span):
     assert exact == pytest.approx(quad, rel=1e-11)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(A=st.floats(0.3, 2.0), ratio=st.floats(1.05, 4.0), phase=st.floats(-4, 4), a=st.floats(-6, 6),
        span=st.floats(0.01, 5))

@@ -50,6 +50,7 @@ def _plan(cal: Path, frm: str, to: str) -> dict[str, Any]:
     return plan
 
 
+@pytest.mark.slow
 def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal: Path, tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     plan = _plan(cal, "2mm", "3mm")
@@ -80,6 +81,7 @@ def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal: Path, 
     assert where["info"]["active_profile"] == 3
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, words", [
     ("error", "refused 'go 0 0 "),
     ("silent", "did not answer 'go 0 0 "),

@@ -45,6 +45,7 @@ def _planned(cal: Path, frm: str, to: str) -> int:
     return int(json.loads(r.stdout)["steps"])
 
 
+@pytest.mark.slow
 def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal: Path, tmp_path: Path) -> None:
     db = str(tmp_path / "s.db")
     with NanoControlPeer() as peer:
@@ -59,6 +60,7 @@ def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal: 
         assert all(c.startswith(("version", "coarse C +")) for c in peer.log), peer.log
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault,words", [
     ("error", "refused 'coarse C +"),
     ("silent", "did not answer 'coarse C +"),

@@ -18,6 +18,8 @@ from typing import Any
 
 import pytest
 
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+
 NOTEBOOKS = Path(__file__).resolve().parents[1] / "docs" / "notebooks"
 CELL_TIMEOUT_S = 300  # a hang is a failure, not a stuck suite; the notebooks take ~10 s each
 

@@ -8,15 +8,16 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_peer import peer_step
 from physics_scenarios import paper14, spread
+
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
 from stickslip.devices.base import open_device
 from stickslip.sim import physics as ph
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("u", [-0.2, 0.0, 0.2])
 def test_cell_agrees_with_event_driven_peer(u):
     # different numerics (fixed-step Euler with in-step switch location vs adaptive RK with exact
@@ -26,6 +27,7 @@ def test_cell_agrees_with_event_driven_peer(u):
     assert lib == pytest.approx(peer, rel=0.05)
 
 
+@pytest.mark.slow
 def test_cell_limits():
     # a slider much lighter than the friction can hold never slips: the sawtooth returns it (step ~ 0)
     assert abs(float(ph.simulate_cell(0.0, 1.0, 0.0, 1e-6))) < 0.02
@@ -123,6 +125,7 @@ def test_warmup_does_not_depend_on_how_the_steps_are_split_into_bursts():
     assert cold_run / (warm.position(3) - 0.0005) > 1.0 + 0.05 * math.exp(-6000 / warm._hz[3] / 30.0)
 
 
+@pytest.mark.slow
 def test_paper_model_does_not_fit_the_physics_arm_exactly():
     # the paper's 14-pose calibration has errors of several % at other poses: the truth is not Eq. 3/8
     arm = ph.PhysicsMM3A(seed=31, day="2026-02-01", step_noise=0.0, warmup=0.0)

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from synth import paper_table
 
 from stickslip.calibration import calibrate
 from stickslip.kinematics import JOINTS, Pose
 from stickslip.models import simulate_traverse_steps
 from stickslip.motion.planning import Planner, _scalar_coefficients, dead_reckon, plan_move
-from synth import paper_table
 
 CAL = calibrate(paper_table())
 
@@ -26,6 +26,7 @@ poses = st.builds(
 )
 
 
+@pytest.mark.slow
 @settings(max_examples=150, deadline=None)
 @given(pose=poses, a=st.floats(0.0, 1.0), b=st.floats(0.0, 1.0), joint=st.sampled_from([2, 3]))
 def test_plan_then_dead_reckon_returns_within_one_step(pose, a, b, joint):

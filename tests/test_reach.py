@@ -272,6 +272,7 @@ def test_cli_to_and_geometry(tmp_path, cal_path):
     assert np.max(np.linalg.norm(steps, axis=1)) < 5e-6 + 2e-6  # 5 µm segments, within a step
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "args, message",
     [
@@ -303,6 +304,7 @@ def test_cli_out_of_reach_sends_no_step_to_the_controller(tmp_path, cal_path):
     assert not any(m.startswith("coarse") for m in sent), sent
 
 
+@pytest.mark.slow
 def test_cli_drives_the_simulator_and_keeps_the_positions(tmp_path, cal_path):
     db = tmp_path / "s.db"
     dev = f"sim://?seed=4&day={DAY}"
@@ -365,6 +367,7 @@ _TEXT = st.one_of(
 )  # fmt: skip
 
 
+@pytest.mark.slow
 @settings(max_examples=60, derandomize=True, deadline=None, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])  # fmt: skip
 @given(_TEXT, _TEXT, _TEXT)

@@ -89,6 +89,7 @@ def _score(arm, plan_json, pose):
     return end, dev
 
 
+@pytest.mark.slow
 def test_hidden_arm_reach_within_5_percent_and_constant_far_worse(hidden):
     arm, cal, _ = hidden
     model, const = [], []
@@ -112,6 +113,7 @@ def test_hidden_arm_reach_within_5_percent_and_constant_far_worse(hidden):
     assert const_a[:, 0].max() > 0.2
 
 
+@pytest.mark.slow
 def test_hidden_arm_through_the_cli_dry_run(hidden, tmp_path):
     """The plans the checker reads: `reach --dry-run --json`, executed with the true steps."""
     arm, _, cal_path = hidden

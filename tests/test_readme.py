@@ -7,10 +7,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from synth import paper_table
 from typer.testing import CliRunner
 
 from stickslip.measurements import measurements_to_csv
-from synth import paper_table
+
+pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
 README = (Path(__file__).resolve().parents[1] / "README.md").read_text()
 runner = CliRunner()

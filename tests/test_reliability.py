@@ -256,6 +256,7 @@ def _where(db, url):
     return json.loads(r.stdout)
 
 
+@pytest.mark.slow
 def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faulty):
     db, log = tmp_path / "s.db", tmp_path / "moved.txt"
     url = f"faulty://arm?drop_after=3&partial=0.5&log={log}"
@@ -328,6 +329,7 @@ _WORKER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path):
     db, log = tmp_path / "s.db", tmp_path / "moved.txt"
     url = f"faulty://arm?delay=0.05&log={log}"
@@ -468,6 +470,7 @@ _FSIZE = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not hasattr(os, "setrlimit") and sys.platform == "win32", reason="RLIMIT_FSIZE is POSIX")
 def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
     pytest.importorskip("resource")
@@ -575,6 +578,7 @@ GOOD_ROW = {"day": DAY, "joint": "3", "direction": "+", "q1": "0", "q2": "-1.570
             "theta": "0", "psi": "0", "start": "0", "end": "0.012", "steps": "12000"}  # fmt: skip
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("column", list(GOOD_ROW))
 @pytest.mark.parametrize("value", ["9223372036854775808", "1e999", "nan", "pi/0", "x" * 200_000, "-1", ""])
 def test_one_hostile_cell_in_a_good_table(tmp_path, column, value):

@@ -301,6 +301,7 @@ def test_validation_figure_per_day_with_labels(cal, two_days):
 # ---------------------------------------------------------------- the report
 
 
+@pytest.mark.slow
 def test_build_report_writes_labelled_figures_and_a_self_contained_page(cal, table, two_days, tmp_path):
     import matplotlib.pyplot as plt
 
@@ -342,6 +343,7 @@ def test_display_units_follow_the_joint_kind():
 # ---------------------------------------------------------------- the command
 
 
+@pytest.mark.slow
 def test_cli_report_says_in_sample_for_the_fitted_table_and_out_of_sample_for_another(tmp_path, table, two_days):
     meas, calp, other = tmp_path / "meas.csv", tmp_path / "cal.json", tmp_path / "other.csv"
     prism = [t for t in table if t.joint == 3]

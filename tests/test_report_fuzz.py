@@ -94,6 +94,7 @@ def test_fig6_draws_every_rotary_row_once_in_its_days_panel(cal, rows):
             assert (c.x_halfwidth > 0).all() and (c.x_halfwidth <= 2 * math.pi / 3 + 1e-12).all()
 
 
+@pytest.mark.slow
 @settings(max_examples=30, deadline=None)
 @given(st.lists(st.sampled_from(DAYS), min_size=1, max_size=40), st.booleans())
 def test_only_the_calibrations_own_rows_are_in_sample(days, separate):

@@ -7,6 +7,7 @@ import csv
 import json
 
 import pytest
+from synth import paper_table
 
 from stickslip.calibration import Calibration, Parameter, Provenance, calibrate
 from stickslip.devices.base import HasMicrophone, KnowsTruePosition, PoseSettable, VirtualClock
@@ -14,7 +15,6 @@ from stickslip.devices.transport import FakeTransport
 from stickslip.measurements import HEADER, read_measurements
 from stickslip.procedures.session import append_row
 from stickslip.sim.arm import SimulatedMM3A
-from synth import paper_table
 
 
 def test_parameters_are_typed_records_and_serialise_as_before():

@@ -70,6 +70,7 @@ def test_noiseless_full_traverse_matches_exact_model_count(joint, pose, sign):
     assert n == pytest.approx(exact, rel=1e-4, abs=2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("joint,pose", [POSES[0], POSES[3], POSES[5], POSES[6]])
 @pytest.mark.parametrize("sign", [1, -1])
 def test_vectorised_burst_equals_step_by_step_loop(joint, pose, sign):
@@ -299,6 +300,7 @@ def test_open_url_and_registry():
         open_device("foo://x")
 
 
+@pytest.mark.slow
 def test_long_sessions_forget_what_every_microphone_has_heard():
     """Burst records are dropped once all live microphones have rendered past them."""
     sim = SimulatedMM3A(seed=0, day=DAY, sample_rate=8000)

@@ -164,6 +164,7 @@ def _writer(path: str, who: int, n: int) -> None:
             st.add_traverse(_t(day=f"w{who}", steps=1000 * (who + 1) + k), device=f"sim://{who}")
 
 
+@pytest.mark.slow
 def test_concurrent_writers_lose_no_rows(tmp_path):
     """4 processes x 25 traverses each, all opening a fresh file at once: 100 rows, none lost."""
     path = str(tmp_path / "c.db")
@@ -354,11 +355,11 @@ def test_cli_fit_record_from_the_database_links_the_traverses(tmp_path):
 
 
 def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
+    from synth import paper_table
     from typer.testing import CliRunner
 
     from stickslip.cli import app
     from stickslip.measurements import measurements_to_csv
-    from synth import paper_table
 
     runner = CliRunner()
     db = tmp_path / "d.db"
@@ -383,9 +384,10 @@ def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
 def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
     import sqlite3
 
+    from synth import paper_table
+
     from stickslip.storage import MIGRATIONS, content_key
     from stickslip.storage.schema import _split_sql
-    from synth import paper_table
 
     path = tmp_path / "old.db"
     con = sqlite3.connect(path)

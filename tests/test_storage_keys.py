@@ -42,8 +42,9 @@ def test_bulk_keys_equal_the_definition(rows, device):
 
 def test_bulk_insert_returns_the_ids_of_the_rows_in_order(tmp_path):
     """add_traverses inserts with one executemany: the ids it returns are the new rows, in the order given."""
-    from stickslip.storage import Store
     from synth import paper_table
+
+    from stickslip.storage import Store
 
     ts = paper_table()
     with Store.open(tmp_path / "s.db") as st:

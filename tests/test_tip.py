@@ -69,6 +69,7 @@ def test_tip_vectorised():
     assert jacobian(qs).shape == (2, 3, 3)
 
 
+@pytest.mark.slow
 @settings(max_examples=200, deadline=None)
 @given(joint_q, geometries)
 def test_jacobian_against_finite_differences(q, g):

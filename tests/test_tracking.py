@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-
 from physics_scenarios import paper14
+
 from stickslip import kinematics as kin
 from stickslip.calibration import calibrate
 from stickslip.motion.planning import dead_reckon
@@ -89,6 +89,7 @@ def _run(cal, arm, moves, every, rng, pose):
 from stickslip.motion.planning import Planner  # noqa: E402
 
 
+@pytest.mark.slow
 def test_observations_keep_the_error_bounded_and_the_sd_honest():
     # the simulator's true models of one day as the calibration, the arm on other days (its step scale
     # drifts by several %): 40 runs of 24 moves of 0.2-1.5 mm. With a reading every 4th move the error
@@ -172,6 +173,7 @@ class _RealLike:
         return self.arm.position(joint)
 
 
+@pytest.mark.slow
 def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
     import json
 

@@ -89,6 +89,7 @@ def test_audio_latency_correction_on_the_simulated_microphone():
         assert r.traverse.joint == 3 and r.traverse.direction == direction
 
 
+@pytest.mark.slow
 def test_prismatic_round_trip_recovers_the_true_parameters():
     """Simulated arm -> 6 audio-timed traverses (Eqs. 4-6 poses) -> calibrate -> truth.
 

@@ -25,6 +25,7 @@ def tuning3(tmp_path_factory):
     return path
 
 
+@pytest.mark.slow
 def test_traverse_on_the_simulator_measures_the_true_step(tuning3, tmp_path):
     table, db = tmp_path / "day.csv", tmp_path / "s.db"
     args = [
@@ -78,6 +79,7 @@ def test_traverse_bad_pose_and_device(tuning3):
     assert r.exit_code == 2 and r.stderr.strip().startswith("error: --confirm-s") and "[0, 5]" in r.stderr
 
 
+@pytest.mark.slow
 def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):
     """After an interrupted move the joint is uncertain; a traverse ends at a stop and sets it."""
     from stickslip.devices.positions import load_state, save_state
@@ -140,6 +142,7 @@ def test_appending_never_glues_rows_or_writes_into_another_table(tmp_path, monke
     assert table.read_bytes() == before
 
 
+@pytest.mark.slow
 def test_a_tuning_made_at_another_step_rate_is_warned_about_before_the_joint_moves(tuning3, tmp_path):
     tuned = json.loads(tuning3.read_text())
     assert tuned["step_rate_hz"] == pytest.approx(1000.0, rel=0.01)  # heard in the simulator's recording
@@ -153,6 +156,7 @@ def test_a_tuning_made_at_another_step_rate_is_warned_about_before_the_joint_mov
     assert "warning: joint 3 steps at 1000 Hz, -23 % from the 1300 Hz this tuning was made at" in r.stderr
 
 
+@pytest.mark.slow
 def test_the_library_traverse_warns_through_python_warnings_or_a_callback_before_the_joint_moves(tuning3):
     import dataclasses
 

@@ -73,6 +73,7 @@ def _traverse(
     return r, _count_before(min(stops), list(r.bursts), r.frequency_hz) if stops else None, t_splice
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [5, 8])
 def test_a_moment_of_stop_sound_mid_travel_is_passed_by(seed: int) -> None:
     sim, tuning, sound = _setup(seed)

@@ -79,6 +79,7 @@ class _Bridge:
         pass
 
 
+@pytest.mark.slow
 def test_a_traverse_timed_by_a_serial_vibration_sensor_counts_the_true_steps(monkeypatch: pytest.MonkeyPatch) -> None:
     arm = SimulatedMM3A(seed=12, day=DAY)
     samples, rate, stop_at = SimulatedMM3A(seed=12, day=DAY).labelled_recording(3, "+")

@@ -6,16 +6,16 @@ import math
 
 import numpy as np
 import pytest
+from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
+from synth import paper_table
 from typer.testing import CliRunner
 
-from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
 from stickslip import kinematics as kin
 from stickslip.calibration import Calibration, CalibrationError, calibrate
 from stickslip.calibration.update import model_sigma, prediction_sd, update_calibration
 from stickslip.cli import app
 from stickslip.measurements import Traverse, measurements_to_csv
 from stickslip.sim import physics as ph
-from synth import paper_table
 
 
 def _scaled_table(factor: float) -> list[Traverse]:
@@ -65,6 +65,7 @@ def test_prediction_interval_grows_for_short_moves():
     assert long == pytest.approx(math.hypot(0.075, 0.03 / 100), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_prior_plus_four_on_the_physics_arm():
     # yesterday's 46-traverse calibration (32 poses spread over the load space) with 4 of today's traverses
     # (one per joint and direction) at random poses, on a seed and days not used while developing: the
@@ -99,6 +100,7 @@ def test_cli_prior_round_trip(tmp_path):
     assert r.exit_code == 2 and "no such calibration file" in r.stderr
 
 
+@pytest.mark.slow
 def test_suggest_picks_informative_poses(tmp_path):
     # greedy I-optimal design: the suggested pose is the candidate that most reduces the workspace's
     # prediction variance, so it beats every other candidate, e.g. the paper's unloaded pose

@@ -8,6 +8,8 @@ from a URL by :func:`open_device`; the scheme picks the backend::
     sim://?seed=3&day=2026-11-22
     mm3a:///dev/ttyUSB0         Kleindiek NanoControl over a serial port
     anc300://host[:7230]        Attocube ANC300
+    smaract-mcs:///dev/ttyUSB0  SmarAct MCS (step mode) on a serial port
+    smaract-mcs2://host         SmarAct MCS2 (step mode)
 
 Backends register a factory with :func:`register_backend`; the registry imports
 backend modules lazily so optional extras (pyserial, pymeasure) are needed only by
@@ -246,6 +248,8 @@ BACKENDS: dict[str, str | Factory] = {
     "sim+physics": "stickslip.sim.urls:open_url",
     "mm3a": "stickslip.devices.nanocontrol:open_url",
     "anc300": "stickslip.devices.anc300:open_url",
+    "smaract-mcs": "stickslip.devices.smaract:open_mcs",
+    "smaract-mcs2": "stickslip.devices.smaract:open_mcs2",
 }
 
 

@@ -260,6 +260,9 @@ class SocketTransport(Transport):
             self._sock = socket.create_connection((host, int(port)), timeout=timeout)
         except OSError as e:
             raise DeviceError(f"cannot connect to {host}:{port}: {e}") from e
+        # each command goes out at once: without this, a command written right after one that is not
+        # answered (an MCS2 setting) waits for the peer's delayed acknowledgement, tens of ms
+        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock.setblocking(False)
 
     def _send(self, data: bytes) -> None:
