@@ -118,7 +118,9 @@ def nearest(
     """Distance from each of ``points`` to the nearest of ``sites`` (Euclidean, rows), and its index.
 
     Brute force by blocks of ``chunk`` points (memory ``chunk x len(sites)``), so a million
-    points against a few hundred sites stays in bounded memory.
+    points against a few hundred sites stays in bounded memory. The nearest site is found with
+    one matrix product per block; its distance is then computed from the difference itself, so
+    a point's distance does not depend on the block it was in (to the last bit).
     """
     p = np.asarray(points, dtype=float)
     s = np.asarray(sites, dtype=float)
@@ -130,7 +132,7 @@ def nearest(
         d2 = np.sum(block**2, axis=1)[:, None] - 2.0 * block @ s.T + s2[None, :]
         k = np.argmin(d2, axis=1)
         index[i : i + chunk] = k
-        dist[i : i + chunk] = np.sqrt(np.maximum(d2[np.arange(len(block)), k], 0.0))
+        dist[i : i + chunk] = np.sqrt(np.sum((block - s[k]) ** 2, axis=1))
     return dist, index
 
 
