@@ -1,28 +1,28 @@
-"""Averaging model families by cross-validation over regions of the load space (docs/models.md §3).
+"""Averaging model families by cross-validation on held-out poses (docs/models.md §3).
 
 For each joint, every family of :mod:`stickslip.models.families` (and its variant with terms
 shared by + and -) that the traverses can identify, with at least two poses per parameter
-of a direction, is fitted to both directions. The poses are then clustered into *regions*
-of the load space (:func:`region_folds`: k-means on where each pose lies in the space of
-the loads the step depends on) and each region is left out in turn: every family is
-refitted without it (from its fit on all traverses, a few Levenberg-Marquardt iterations)
-and predicts the region's traverses. A region left out is a piece of the workspace no
-traverse has seen, as a new pose is; a single pose left out always has a neighbour that
-was fitted, so leave-one-pose-out promised errors that random poses then exceeded.
+of a direction, is fitted to both directions. The poses are split into folds whose
+held-out poses are as far from the poses their refit keeps as new poses of the workspace
+are from the calibration's (:func:`~.folds.cv_folds`, nearest-neighbour distance
+matching), and each fold is left out in turn: every family is refitted without it (from its
+fit on all traverses) and predicts the fold's traverses.
 
 With ``auto`` the families are averaged with pseudo-BMA+ weights from those held-out errors
 (:func:`averaging_weights`), with a prior that puts half the weight on the paper's form
-(:data:`PAPER_PRIOR`): where the regions cannot tell the families apart, the average
-stays near the paper's model. The average's own held-out error is measured honestly (the
-weights used for a region are computed without it), and if it is larger than the paper's
-form's, in RMS or at its largest, the calibration falls back to the paper's form and says
-so. The relative model error ``sigma_model`` (prediction intervals, the tracking filter's
-prior) is the RMS of the held-out errors of the model returned.
+(:data:`PAPER_PRIOR`): where the held-out poses cannot tell the families apart, the
+average stays near the paper's model. The average's own held-out error is measured
+honestly (the weights used for a fold are computed without it), and if it is larger than
+the paper's form's, in RMS or at its largest, the calibration falls back to the paper's
+form and says so. The error model of the intervals (:func:`error_model`) comes from the
+residuals of the model returned and its held-out errors against their distance from the
+poses kept; ``sigma_model`` is that error's RMS over new poses of the workspace.
 
 Asked for one family, that one is fitted and cross-validated the same way. A joint and
 direction with too few poses for any family beyond the constant step falls back to it:
 calibration never stops for lack of data once every joint and direction present has one
-traverse.
+traverse. On a long table the choice is made on a sample of the poses and the families
+chosen are refitted to every traverse (:data:`SELECTION_ROWS`).
 """
 
 from __future__ import annotations
