@@ -1,5 +1,6 @@
 """The README's tour and Python example run as written (docs/style.md: examples run)."""
 
+import json
 import os
 import re
 import subprocess
@@ -60,6 +61,31 @@ def test_tour_runs_literally_in_a_shell(tour_dir):
     predicted = (out / "predicted.csv").read_text().splitlines()
     assert predicted[0].endswith("gamma_pred") and len(predicted) == 2
     assert len((out / "today.csv").read_text().splitlines()) == 2  # header + the traverse measured by ear
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="the tour is a POSIX shell session (bash)")
+def test_camera_block_runs_after_the_tour(tour_dir):
+    """The README's camera block, as written, in the tour's folder (after the tour, or on the paper's table)."""
+    venv = Path(sys.prefix)
+    if not (venv / "bin" / "stickslip").exists():
+        pytest.skip("not running inside the project's virtual environment (make test builds it)")
+    pytest.importorskip("PIL")
+    results = tour_dir / "stickslip-results"
+    if not (results / "measurements.csv").exists():  # run alone: the paper's 14 traverses stand in
+        results.mkdir(exist_ok=True)
+        (results / "measurements.csv").write_text(measurements_to_csv(paper_table()))
+    lines = [ln[2:] for ln in _block("### Seeing the tip", "console").splitlines() if ln.startswith("$ ")]
+    assert any("camera calibrate" in ln for ln in lines) and any("--step-sizes" in ln for ln in lines)
+    script = "set -euo pipefail\n" + "\n".join(lines) + "\n"
+    env = {k: v for k, v in os.environ.items() if k not in ("VIRTUAL_ENV",)}
+    env["PATH"] = f"{venv / 'bin'}:/usr/bin:/bin"
+    env["STICKSLIP_DB"] = str(tour_dir / "camera.db")
+    r = subprocess.run(["bash", "-c", script], cwd=results, env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, f"{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    located = json.loads(r.stdout[r.stdout.index("[") : r.stdout.index("]") + 1])
+    assert located[0]["x"] == 307.2 and abs(located[1]["x"] - 323.2) < 0.5  # 8 µm at 0.5 µm a pixel
+    assert (results / "camera-steps.csv").read_text().count(",camera") == 2
+    assert "step sizes" in json.loads((results / "cal-camera.json").read_text())["method"]
 
 
 def test_python_example_runs(tour_dir, monkeypatch):

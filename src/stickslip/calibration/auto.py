@@ -4,9 +4,9 @@ joint and direction (``method="auto"``) and merges the parts."""
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
-from ..measurements import Traverse
+from ..measurements import StepSize, Traverse
 from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
@@ -24,6 +24,7 @@ def calibrate(
     source: str | None = None,
     model: str = "paper",
     progress: Progress | None = None,
+    step_sizes: Sequence[StepSize] = (),
 ) -> Calibration:
     """Calibrate every joint and direction present in ``traverses``.
 
@@ -52,7 +53,16 @@ def calibrate(
     progress : callable, optional
         ``progress(fraction, what)``, called as the model families are fitted and
         cross-validated (the part that takes seconds on a long table).
+    step_sizes : sequence of StepSize
+        Step sizes measured at poses (by a camera, ``stickslip camera calibrate``). Each
+        joint and direction that has some is fitted by weighted least squares on the
+        paper's model, its traverses and its step sizes together
+        (:func:`calibrate_with_step_sizes`); the others as without them. None (the
+        default): exactly the calibration without step sizes.
     """
+    if step_sizes:
+        return calibrate_with_step_sizes(group_traverses(traverses).traverses, step_sizes, method, day, source, model,
+                                         progress)
     groups = group_traverses(traverses)  # once: every stage below takes these groups
     traverses = groups.traverses
     method = _OLD_METHOD_NAMES.get(method, method)
@@ -143,3 +153,77 @@ def _calibrate_models(
     merged.sigma_model.update(fam.sigma_model)
     merged.selection.update(fam.selection)
     return merged
+
+
+ASSUMED_MODEL_ERROR = {3: 0.075, 2: 0.02, 1: 0.02}
+"""Relative model error (1 sigma) a traverse row is taken to carry beside a step size measured at a pose
+(the values of :data:`stickslip.calibration.update.DEFAULT_SIGMA`: half the largest errors the paper reports)."""
+
+
+def step_size_weight(row: StepSize) -> float:
+    """A step size's weight beside traverses (weight 1): ``sigma_m / sqrt(sigma_m² + (sigma / gamma)²)``.
+
+    Both carry the model's error ``sigma_m`` (:data:`ASSUMED_MODEL_ERROR`: the model cannot
+    follow every pose); a step size carries its own measurement's too.
+    """
+    sm = ASSUMED_MODEL_ERROR.get(row.joint, 0.05)
+    rel = row.sigma / row.gamma
+    return float(sm / (sm * sm + rel * rel) ** 0.5)
+
+
+def calibrate_with_step_sizes(
+    traverses: Sequence[Traverse],
+    step_sizes: Sequence[StepSize],
+    method: str = "auto",
+    day: str | None = None,
+    source: str | None = None,
+    model: str = "paper",
+    progress: Progress | None = None,
+) -> Calibration:
+    """Calibrate from traverses and step sizes measured at poses.
+
+    Each joint and direction with step sizes is fitted by least squares on the paper's
+    model (:func:`calibrate_lsq`): its traverses with weight 1, each step size as a short
+    traverse with weight :func:`step_size_weight`. The other joints and directions are
+    calibrated from their traverses alone by :func:`calibrate` (``method``, ``model``).
+    """
+    keys = {(r.joint, r.direction) for r in step_sizes}
+    mine = [t for t in traverses if (t.joint, t.direction) in keys]
+    rest = [t for t in traverses if (t.joint, t.direction) not in keys]
+    rows = mine + [r.as_traverse() for r in step_sizes]
+    weights = [1.0] * len(mine) + [step_size_weight(r) for r in step_sizes]
+    cam = calibrate_lsq(rows, day, source, weights=weights)
+    labels = " ".join(f"{j}{d}" for j, d in sorted(keys))
+    cam.method = f"lsq with step sizes ({labels})"
+    note = (f"{len(step_sizes)} step size(s) measured at poses ({', '.join(sorted({r.method for r in step_sizes}))}) "
+            f"beside {len(mine)} traverse(s) for {labels}, weighted by their uncertainty")
+    extra = {"step_sizes": [dict(zip(("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "gamma", "sigma",
+                                      "steps", "method"), _row(r), strict=True)) for r in step_sizes]}
+    if not rest:
+        prov = Provenance.of(list(traverses), source, len(traverses), [note, *cam.provenance.notes])
+        cam.provenance = _with_extra(prov, extra)
+        cam.day = _day_of([*traverses, *(r.as_traverse() for r in step_sizes)], day)
+        return cam
+    other = calibrate(rest, method, day, source, model, progress)
+    notes = [note, *other.provenance.notes, *cam.provenance.notes]
+    merged = Calibration(
+        {**other.models, **cam.models},
+        {**other.stderr, **cam.stderr},
+        {**other.constant_steps, **cam.constant_steps},
+        _day_of(list(traverses), day),
+        f"{other.method}, {cam.method}",
+        _with_extra(Provenance.of(list(traverses), source, len(traverses), notes), extra),
+    )
+    merged.covariance.update(other.covariance)
+    merged.sigma_model.update(other.sigma_model)
+    merged.selection.update(other.selection)
+    merged.predictive.update(other.predictive)
+    return merged
+
+
+def _row(r: StepSize) -> tuple[object, ...]:
+    return (r.day, r.joint, r.direction, r.q1, r.q2, r.q3, r.theta, r.psi, r.gamma, r.sigma, r.steps, r.method)
+
+
+def _with_extra(prov: Provenance, extra: Mapping[str, object]) -> Provenance:
+    return dataclasses.replace(prov, extra={**prov.extra, **extra})

@@ -127,6 +127,7 @@ def calibrate_lsq(
     source: str | None = None,
     knots: tuple[float, float] = (0.0, kin.Q3_MAX),
     provenance: Provenance | None = None,
+    weights: Sequence[float] | None = None,
 ) -> Calibration:
     """Nonlinear least squares on any set of traverses, per joint and direction.
 
@@ -134,6 +135,11 @@ def calibrate_lsq(
     averages (predicted exactly, with the closed-form integral for rotary joints).
     Standard errors come from ``s^2 (J^T J)^-1`` with ``s^2 = RSS / (n - p)``; they are
     ``None`` when the traverses exactly determine the parameters (``n = p``).
+
+    ``weights`` (one per traverse, > 0; default all 1) multiply each relative residual:
+    a step size measured at a pose (:class:`~stickslip.measurements.StepSize`, given as a
+    short traverse) weighs by its uncertainty beside the traverses
+    (:func:`~stickslip.calibration.auto.calibrate`). Equal weights change nothing.
 
     Raises
     ------
@@ -148,11 +154,23 @@ def calibrate_lsq(
     traverses = grouped.traverses
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
+    group_w: dict[tuple[int, str], FloatArray] = {}
+    if weights is not None:
+        if len(weights) != len(traverses):
+            raise ValueError(f"{len(weights)} weights for {len(traverses)} traverses")
+        by_key: dict[tuple[int, str], list[float]] = {}
+        for t, w in zip(traverses, weights, strict=True):
+            if not (np.isfinite(w) and w > 0):
+                raise ValueError(f"a traverse's weight must be finite and > 0, got {w!r}")
+            by_key.setdefault((t.joint, t.direction), []).append(float(w))
+        group_w = {k: np.asarray(v) for k, v in by_key.items()}
     models: dict[tuple[int, str], JointModel] = {}
     stderr: dict[tuple[int, str], FloatArray | None] = {}
     notes: list[str] = []
     for (j, d), ts in sorted(groups.items()):
         resid, scale = _residual_fn(j, ts, knots)
+        if (j, d) in group_w:
+            resid = _weighted(resid, group_w[(j, d)])
         x0 = _initial_guess(j, ts)
         if j == 3:
             names = PrismaticParams(0, 0, 0).names()
@@ -193,6 +211,16 @@ def calibrate_lsq(
         models, stderr, consts, _day_of(traverses, day), "lsq",
         _provenance(provenance, traverses, source, len(traverses), notes),
     )
+
+
+def _weighted(f: Callable[[FloatArray], FloatArray], w: FloatArray) -> Callable[[FloatArray], FloatArray]:
+    """``f``'s residuals, each multiplied by its weight."""
+
+    def g(x: FloatArray) -> FloatArray:
+        out: FloatArray = f(x) * w
+        return out
+
+    return g
 
 
 def _numjac(f: Callable[[FloatArray], FloatArray], x: FloatArray) -> FloatArray:

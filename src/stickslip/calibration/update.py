@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..measurements import Traverse
+from ..measurements import StepSize, Traverse
 from ..models import JointModel, PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams
 from ..units import DIMENSIONLESS_PARAMETERS
@@ -146,6 +146,7 @@ def _posterior(
     sig: dict[str, float],
     drift: float,
     load_drift: float,
+    extra_var: dict[tuple[int, str], list[float]] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Posterior mean and covariance of joint ``j``'s log step scales (one per direction) and its shared
     log load sensitivity, from the new traverses' log ratios to the prior's predictions (Gaussian, linearised).
@@ -162,13 +163,14 @@ def _posterior(
         h = 1e-4
         grad = (np.log(_average(load_scaled(m0, 1.0 + h), ts)) - np.log(base)) / h
         meas = np.array([t.gamma for t in ts])
-        for r, g in zip(np.log(meas / base), grad, strict=True):
+        extra = (extra_var or {}).get((j, d), [0.0] * len(ts))
+        for r, g, ev in zip(np.log(meas / base), grad, extra, strict=True):
             row = [0.0] * (len(dirs) + 1)
             row[k] = 1.0
             row[-1] = float(g)
             rows.append(row)
             resid.append(float(r))
-            weights.append(1.0 / sig[d] ** 2)
+            weights.append(1.0 / (sig[d] ** 2 + ev))
     p0 = np.diag([1.0 / drift**2] * len(dirs) + [1.0 / load_drift**2])
     if rows:
         H, r_, w = np.array(rows), np.array(resid), np.array(weights)
@@ -187,15 +189,26 @@ def update_calibration(
     day: str | None = None,
     source: str | None = None,
     load_drift: float = LOAD_PRIOR,
+    step_sizes: Sequence[StepSize] = (),
 ) -> tuple[Calibration, list[ScaleUpdate]]:
     """Update ``prior`` with new ``traverses`` (as few as one per joint and direction).
 
     Returns the updated calibration (method ``"<prior method> + update"``) and the
     update of each joint and direction. Raises :class:`CalibrationError` when a traverse
     is of a joint and direction the prior does not have (there is nothing to update).
+
+    ``step_sizes`` (step sizes measured at poses, by a camera) count as traverses over
+    their few steps, each with the variance ``sigma_model² + (sigma / gamma)²``: the
+    model's error at that pose and the measurement's own.
     """
     if not drift > 0 or not math.isfinite(drift):
         raise ValueError(f"drift = {drift!r} must be a positive relative standard deviation")
+    extra_var: dict[tuple[int, str], list[float]] = {}
+    if step_sizes:
+        extra_var = {k: [0.0] * len(v) for k, v in _group(traverses).items()}
+        for r in step_sizes:
+            extra_var.setdefault((r.joint, r.direction), []).append(r.relative_sigma**2)
+        traverses = [*traverses, *(r.as_traverse() for r in step_sizes)]
     groups = _group(traverses)
     if not groups:
         raise CalibrationError("no new traverses to update the calibration with")
@@ -216,7 +229,9 @@ def update_calibration(
     for j in sorted({jj for jj, _ in prior.models}):
         dirs = sorted(d for jj, d in prior.models if jj == j)
         sig = {d: model_sigma(prior, j, d) for d in dirs}
-        mean, post_cov = _posterior(prior, groups, j, dirs, {d: sig[d][0] for d in dirs}, drift, load_drift)
+        mean, post_cov = _posterior(
+            prior, groups, j, dirs, {d: sig[d][0] for d in dirs}, drift, load_drift, extra_var or None
+        )
         lam = float(mean[-1])
         for k, d in enumerate(dirs):
             key = (j, d)

@@ -11,6 +11,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.observe`  observe (a measured position into the dead reckoning)
 * :mod:`.taskspace` reach, jog
 * :mod:`.config`   config path, config show, config init (the user's configuration file)
+* :mod:`.camera`   camera locate, camera calibrate, camera grab (see the tip)
 """
 
 from __future__ import annotations
@@ -98,7 +99,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, config, core, devices, history, measure, models, observe, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, camera, config, core, devices, history, measure, models, observe, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:

@@ -35,7 +35,7 @@ if TYPE_CHECKING:
     from rich.table import Table
 
     from ..kinematics import Geometry
-    from ..measurements import TableError, Traverse
+    from ..measurements import StepSize, TableError, Traverse
     from ..storage import Store
 
 
@@ -443,5 +443,15 @@ def read_table(path: Path) -> list[Traverse]:
 
     try:
         return read_measurements(path)
+    except TableError as e:
+        fail_table(e)
+
+
+def read_step_table(path: Path) -> list[StepSize]:
+    """The step sizes of a step-size table (``camera calibrate -o``), or every bad row's reason and exit 2."""
+    from ..measurements import TableError, read_step_sizes
+
+    try:
+        return read_step_sizes(path)
     except TableError as e:
         fail_table(e)

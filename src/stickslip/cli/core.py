@@ -32,6 +32,7 @@ from ._common import (
     length_option,
     max_age_setting,
     print_json,
+    read_step_table,
     read_table,
     user_errors,
     validation_table,
@@ -97,12 +98,21 @@ def _average_caption(cal: Calibration) -> str | None:
 @app.command("calibrate")
 def calibrate_cmd(
     measurements: Annotated[
-        Path,
+        Path | None,
         typer.Argument(
-            help="Measurement table (CSV, header day,joint,direction,q1,q2,q3,theta,psi,start,end,steps; SI units)."
+            help="Measurement table (CSV, header day,joint,direction,q1,q2,q3,theta,psi,start,end,steps; SI units). "
+            "May be left out with --step-sizes and --prior."
         ),
-    ],
+    ] = None,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Write the calibration JSON here.")] = None,
+    step_sizes: Annotated[
+        Path | None,
+        typer.Option(
+            "--step-sizes",
+            help="Step sizes measured at poses (CSV from 'stickslip camera calibrate -o'): fitted beside the "
+            "traverses, each weighted by its uncertainty.",
+        ),
+    ] = None,
     method: Annotated[
         str,
         typer.Option(
@@ -169,13 +179,24 @@ def calibrate_cmd(
     predict --interval and plan use). With --prior, an earlier calibration is brought up to
     date with as few as one traverse per joint and direction.
 
+    With --step-sizes, step sizes a camera measured at poses (stickslip camera calibrate)
+    join the traverses: each joint and direction that has some is fitted by least squares
+    on the paper's model, each step size weighted by its uncertainty; with --prior they
+    bring the calibration up to date at the poses where you work.
+
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
+    Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
     """
     from ..calibration import Calibration, CalibrationError, Conditions, calibrate
+    from ..measurements import StepSize
     from ..models import NonPhysicalError
 
-    traverses = read_table(measurements)
+    if measurements is None and (step_sizes is None or prior is None):
+        fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
+    traverses = read_table(measurements) if measurements is not None else []
+    steps: list[StepSize] = read_step_table(step_sizes) if step_sizes is not None else []
+    source = str(measurements) if measurements is not None else str(step_sizes)
     try:
         conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
         if prior is not None:
@@ -183,10 +204,10 @@ def calibrate_cmd(
 
             with user_errors():
                 old = Calibration.load(prior)
-            cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=str(measurements))
+            cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
         else:
             with _progress_bar("calibrating") as progress:  # shown once it has taken a second
-                cal = calibrate(traverses, method=method, day=day, source=str(measurements), model=model,
+                cal = calibrate(traverses, method=method, day=day, source=source, model=model, step_sizes=steps,
                                 progress=progress)
     except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
         fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
@@ -197,7 +218,10 @@ def calibrate_cmd(
     if json_out:
         print_json(cal.to_dict())
         return
-    console.print(_params_table(cal, f"calibration — day {cal.day}, method {cal.method}, {len(traverses)} traverses"))
+    with_steps = f" and {len(steps)} step sizes" if steps else ""
+    console.print(
+        _params_table(cal, f"calibration — day {cal.day}, method {cal.method}, {len(traverses)} traverses{with_steps}")
+    )
     if cal.selection:
         console.print(_selection_table(cal))
     for n in cal.provenance.notes:

@@ -14,7 +14,8 @@ every problem as ``file:line: reason`` and raises :class:`TableError`.
 The package, by concept: :mod:`.rows` (a row: :class:`Traverse` and its checks),
 :mod:`.chunks` (reading CSV a chunk at a time, as columns), :mod:`.table` (the
 measurement table: :class:`TraverseTable`, read, parse, write) and :mod:`.poses` (the
-pose tables ``stickslip predict`` reads). Everything is imported from here.
+pose tables ``stickslip predict`` reads) and :mod:`.steps` (step sizes measured at a pose, by a
+camera: :class:`StepSize`). Everything is imported from here.
 """
 
 from .chunks import CHUNK_ROWS
@@ -30,6 +31,7 @@ from .poses import (
     stream_pose_table,
 )
 from .rows import HEADER, MAX_STEPS, POSE_COLUMNS, TableError, Traverse, check_pose, parse_row
+from .steps import STEP_HEADER, StepSize, parse_step_sizes, read_step_sizes, step_sizes_to_csv, write_step_sizes
 from .table import (
     TraverseTable,
     as_arrays,
@@ -69,4 +71,10 @@ __all__ = [
     "stream_measurement_table",
     "PoseChunk",
     "stream_pose_table",
+    "STEP_HEADER",
+    "StepSize",
+    "parse_step_sizes",
+    "read_step_sizes",
+    "step_sizes_to_csv",
+    "write_step_sizes",
 ]

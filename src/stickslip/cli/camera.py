@@ -1,0 +1,355 @@
+"""``stickslip camera``: see the tip: locate it in recorded frames, calibrate the camera against the arm, grab a frame.
+
+The workflows live in the library (:func:`stickslip.vision.locate.locate`,
+:func:`stickslip.procedures.camera.calibrate_camera`); these commands parse, call one and
+print. Pixel convention: x to the right, y down, the centre of the top-left pixel at (0, 0).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import typer
+
+from ..devices.base import DeviceError, PoseSettable, device_key, open_device
+from . import app
+from ._common import DB_HELP, OneLineErrors, console, device_url, err_console, fail, open_store, print_json, user_errors
+
+if TYPE_CHECKING:
+    from ..procedures.camera import CameraCalibrationResult
+    from ..vision.locate import Located
+
+PIXELS = "Pixels: x to the right, y down, the centre of the top-left pixel at (0, 0)."
+
+camera_app = typer.Typer(
+    name="camera",
+    cls=OneLineErrors,
+    no_args_is_help=True,
+    rich_markup_mode="rich",
+    help=(
+        "See the tip: track it in microscope frames, measure step sizes with the camera.\n\n"
+        "Cameras are URLs like devices: simcam:// (a simulated microscope over sim://), files://frames/*.png, "
+        "video://run.avi, opencv://0; each takes pixel=0.5um. " + PIXELS + " See docs/vision.md."
+    ),
+)
+app.add_typer(camera_app, name="camera", rich_help_panel="Drive a manipulator")
+
+_CAMERA_HELP = (
+    "Camera URL: simcam://?look=sem (the simulated microscope; needs -d sim://), files://FOLDER, video://FILE, "
+    "opencv://0; pixel=0.5um gives the pixel size."
+)
+_DEVICE_HELP = "Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: the config file's, else sim://)."
+
+
+def _pixel(text: str, what: str) -> tuple[float, float]:
+    """``"X,Y"`` as two finite pixel coordinates."""
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        x, y = float(parts[0]), float(parts[1])
+    except ValueError:
+        fail(f"{what} {text!r}: write X,Y in pixels, e.g. 240.5,131 ({PIXELS})")
+    if not (math.isfinite(x) and math.isfinite(y)):
+        fail(f"{what} {text!r}: the pixel must be finite")
+    return x, y
+
+
+@camera_app.command("locate")
+def locate_cmd(
+    frames: list[str] = typer.Argument(
+        ..., help="Frames: image files (PNG, TIFF; 8 or 16 bit; grey or colour), folders, globs, or one video file."
+    ),
+    tip: str = typer.Option(..., "--tip", help="The tip in the first frame, X,Y in pixels. " + PIXELS),
+    json_out: bool = typer.Option(False, "--json", help="Print a JSON list: one object per frame, in order."),
+) -> None:
+    """Find the tip in every frame, from where it is in the first.
+
+    Each frame gets a sub-pixel position and a score (0..1, the correlation with the tip
+    as first seen), or a refusal with its reason: out of the field, occluded, out of
+    focus, or lost. A refused tip is looked for again in the next frames. A position is
+    never a guess: a frame the tracker cannot vouch for is refused.
+
+    Pixels: x to the right, y down, the centre of the top-left pixel at (0, 0).
+
+    With --json: [{"frame": ..., "x": ..., "y": ..., "score": ...}, {"frame": ..., "lost": "reason"}, ...].
+
+    Every frame is read and checked first: a bad file (corrupt, truncated, a stack, NaN
+    pixels, another size than the first) exits 2 with its name and nothing printed.
+
+    Example: stickslip camera locate frames/*.png --tip 307,256 --json
+    """
+    from rich.progress import BarColumn, Progress, TextColumn
+
+    from ..vision.camera import CameraError
+    from ..vision.frame import ImageError
+    from ..vision.locate import locate
+    from ..vision.template import TemplateError
+
+    at = _pixel(tip, "--tip")
+    with Progress(TextColumn("locating"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  console=err_console, transient=True) as bar:
+        task = bar.add_task("locate", total=None)
+
+        def progress(done: int, total: int) -> None:
+            bar.update(task, completed=done, total=total or None)
+
+        try:
+            found = locate(frames, at, progress=progress)
+        except (ImageError, CameraError, TemplateError) as e:
+            fail(str(e))
+    if json_out:
+        print_json([f.as_dict() for f in found])
+        return
+    _print_located(found)
+
+
+def _print_located(found: list[Located]) -> None:
+    from rich.table import Table
+
+    t = Table(title=f"tip in {len(found)} frames (px; x right, y down)")
+    for col in ("frame", "x", "y", "score", "refused"):
+        t.add_column(col, justify="right" if col in ("x", "y", "score") else "left")
+    for f in found:
+        if f.fix is not None:
+            t.add_row(f.frame, f"{f.fix.x:.2f}", f"{f.fix.y:.2f}", f"{f.fix.score:.3f}", "")
+        else:
+            t.add_row(f.frame, "", "", "", f"{f.lost}")
+    console.print(t)
+    lost = sum(1 for f in found if f.fix is None)
+    if lost:
+        console.print(f"{lost} of {len(found)} frames refused (--json gives each reason)", highlight=False)
+
+
+def _view(tilt: str | None, azimuth: str | None, roll: str | None) -> Any:
+    from ..units import UnitError, parse_angle
+    from ..vision.view import View
+
+    vals = []
+    for name, text in (("--view-tilt", tilt), ("--view-azimuth", azimuth), ("--view-roll", roll)):
+        if text is None:
+            vals.append(0.0)
+            continue
+        try:
+            vals.append(parse_angle(text))
+        except (UnitError, ValueError, ArithmeticError) as e:
+            fail(f"{name} {text!r}: {e} (an angle: 30deg, 0.5)")
+    try:
+        return View(*vals)
+    except ValueError as e:
+        fail(str(e))
+
+
+@camera_app.command("calibrate")
+def calibrate_cmd(
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
+    camera: str = typer.Option(..., "--camera", help=_CAMERA_HELP),
+    tip: str | None = typer.Option(
+        None, "--tip", help="The tip now, X,Y in pixels (default: found by stepping a joint back and forth). " + PIXELS
+    ),
+    auto_joint: int = typer.Option(1, "--auto-joint", min=1, max=3, help="Joint stepped to find the tip (no --tip)."),
+    auto_steps: int = typer.Option(20, "--auto-steps", min=1, max=10000, help="Steps it makes (and back)."),
+    joints: str = typer.Option("3,1,2", "--joints", help="Joints to measure, in order: 3,1,2."),
+    max_steps: int = typer.Option(
+        200, "--max-steps", min=20, max=100000,
+        help="Most steps each way (fewer if the tip would leave a third of the field).",
+    ),
+    view_tilt: str | None = typer.Option(
+        None, "--view-tilt", help="Optical axis from the vertical: 0 (looking down), 52deg."
+    ),
+    view_azimuth: str | None = typer.Option(None, "--view-azimuth", help="Direction the optical axis leans to."),
+    view_roll: str | None = typer.Option(None, "--view-roll", help="The image's turn about the optical axis."),
+    output: Path | None = typer.Option(
+        None, "--output", "-o", help="Write the step sizes (CSV, for stickslip calibrate --step-sizes)."
+    ),
+    day: str | None = typer.Option(None, "--day", help="Session label of the rows (default: today)."),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print the fits, step sizes and refusals as JSON (SI, px)."),
+) -> None:
+    """Calibrate the camera against the manipulator: each joint's image motion and step size at this pose.
+
+    Each joint is stepped out and back in short moves (a probe, then moves of at most 16
+    px, up to --max-steps each way) while the tip is tracked; the image Jacobian (px per
+    step, each direction) is fitted with its residuals, and with the camera's pixel size
+    (pixel= in its URL) and the arm's kinematics gives the step size at this pose. A joint
+    is refused, with the reason, when the tip is lost, when its motion is not linear in
+    its steps (an end stop, a slip), or when it moves the tip along the optical axis (from
+    straight above: joint 2 in the outstretched pose).
+
+    The rows (-o) are step sizes measured at a pose (method camera): stickslip calibrate
+    --step-sizes fits them beside traverses, weighted by their uncertainty.
+
+    Example: stickslip camera calibrate -d sim:// --camera "simcam://?pixel=0.5um" -o steps.csv
+    """
+    from rich.progress import BarColumn, Progress, TextColumn
+
+    from ..clock import today_label
+    from ..devices.positions import load_state, save_state
+    from ..kinematics import JOINTS
+    from ..measurements import write_step_sizes
+    from ..procedures.camera import calibrate_camera
+    from ..procedures.move import DeviceBusy, device_lock
+    from ..vision.acquire import AcquireError
+    from ..vision.camera import CameraError, open_camera
+    from ..vision.frame import ImageError
+    from ..vision.jacobian import JacobianError
+    from ..vision.template import TemplateError
+
+    url = device_url(device)
+    at = _pixel(tip, "--tip") if tip is not None else None
+    try:
+        order = [int(j) for j in joints.split(",")]
+        if not order or any(j not in (1, 2, 3) for j in order) or len(set(order)) != len(order):
+            raise ValueError
+    except ValueError:
+        fail(f"--joints {joints!r}: write the joints to measure, e.g. 3,1 (each of 1, 2, 3 once)")
+    view = _view(view_tilt, view_azimuth, view_roll)
+    label = day if day is not None else today_label()
+    with user_errors():
+        key = device_key(url)
+    with open_store(db) as store, user_errors(DeviceBusy):
+        with device_lock(store, key):
+            with user_errors():
+                state = load_state(store, key)
+            try:
+                dev = open_device(url)
+            except (DeviceError, ValueError) as e:
+                fail(str(e))
+            try:
+                if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+                    dev.set_pose(*state.pose)
+                try:
+                    cam = open_camera(camera, dev)
+                except (CameraError, ValueError) as e:
+                    fail(str(e))
+                try:
+                    columns = (
+                        TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}")
+                    )
+                    with Progress(*columns, console=err_console, transient=True) as bar:
+                        task = bar.add_task("camera", total=None)
+
+                        def progress(done: int, total: int) -> None:
+                            bar.update(task, completed=done, total=total)
+
+                        result = calibrate_camera(
+                            dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
+                            auto_steps=auto_steps, max_steps=max_steps, progress=progress,
+                        )
+                except (AcquireError, TemplateError, JacobianError, ImageError, CameraError, DeviceError,
+                        ValueError) as e:
+                    fail(str(e))
+                finally:
+                    cam.close()
+            finally:
+                try:
+                    dev.close()
+                except DeviceError:
+                    pass
+            for jr in result.joints:  # where the measured joints ended, by the steps the camera saw
+                if jr.net_q:
+                    q = min(max(state.positions[jr.joint] + jr.net_q, JOINTS[jr.joint].lower), JOINTS[jr.joint].upper)
+                    with user_errors():
+                        state.set_position(jr.joint, q, "dead-reckoned")
+            with user_errors():
+                save_state(store, state)
+    if not result.rows:
+        reasons = "; ".join(r.refused or f"joint {r.joint}: no step size" for r in result.joints)
+        fail(f"no step size measured: {reasons}")
+    if output is not None:
+        with user_errors():
+            write_step_sizes(output, list(result.rows))
+    if json_out:
+        print_json({**result.as_dict(), "device": key, "output": str(output) if output else None})
+        return
+    _print_calibration(result, output)
+
+
+def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> None:
+    from rich.table import Table
+
+    from ..units import format_step
+
+    t = Table(title=f"camera calibration at the kept pose (tip at {result.tip[0]:.1f}, {result.tip[1]:.1f} px)")
+    for col in ("joint", "dir", "px/step", "step size", "± (1 sd)", "steps", "in image"):
+        t.add_column(col, justify="left" if col in ("joint", "dir") else "right")
+    for jr in result.joints:
+        for f, s in zip(jr.fits, jr.step_sizes, strict=False):
+            t.add_row(str(jr.joint), s.direction, f"{math.hypot(*f.jacobian):.3f}", format_step(s.gamma, jr.joint),
+                      f"{100 * s.sigma / s.gamma:.2f} %", str(s.steps), f"{100 * s.visibility:.0f} %")
+    console.print(t)
+    for n in result.notes:
+        console.print(f"[dim]note:[/] {n}", highlight=False)
+    for jr in result.joints:
+        if jr.refused:
+            console.print(f"[yellow]refused:[/] {jr.refused}", highlight=False)
+    if output is not None:
+        console.print(f"{len(result.rows)} step sizes written to {output} (stickslip calibrate --step-sizes)",
+                      highlight=False)
+
+
+@camera_app.command("grab")
+def grab_cmd(
+    camera: str = typer.Option(..., "--camera", help=_CAMERA_HELP),
+    output: Path = typer.Option(..., "--output", "-o", help="Write the frame here (PNG, 16-bit grey)."),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP + " Only simcam:// needs it."),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    json_out: bool = typer.Option(False, "--json", help="Print the frame's size, time and pixel size as JSON."),
+) -> None:
+    """Take one frame from a camera and save it as a 16-bit grey PNG.
+
+    For simcam:// the arm is the device's kept pose (stickslip where), and the simulator's
+    true tip is printed too (sim_true_tip, px), as move prints the simulator's true end.
+
+    Example: stickslip camera grab -d sim:// --camera "simcam://?pixel=0.5um" -o frame.png
+    """
+    from ..vision.camera import CameraError, camera_scheme, open_camera
+    from ..vision.frame import ImageError
+    from ..vision.images import write_png
+
+    with user_errors():
+        scheme = camera_scheme(camera)
+    dev = None
+    truth: list[float] | None = None
+    try:
+        if scheme == "simcam":
+            from ..devices.positions import load_state
+
+            url = device_url(device)
+            with user_errors():
+                key = device_key(url)
+            with open_store(db) as store:
+                with user_errors():
+                    state = load_state(store, key)
+            try:
+                dev = open_device(url)
+            except (DeviceError, ValueError) as e:
+                fail(str(e))
+            if isinstance(dev, PoseSettable):
+                dev.set_pose(*state.pose)
+        try:
+            cam = open_camera(camera, dev)
+            frame = cam.grab()
+            true_tip = getattr(cam, "true_tip", None)
+            if callable(true_tip):
+                truth = [float(v) for v in true_tip()[0]]
+            cam.close()
+        except (CameraError, ImageError, ValueError) as e:
+            fail(str(e))
+    finally:
+        if dev is not None:
+            dev.close()
+    with user_errors():
+        write_png(output, frame.image)
+    h, w = frame.shape
+    info = {"output": str(output), "width": w, "height": h, "time_s": frame.time_s,
+            "pixel_size_m": frame.pixel_size_m, "sim_true_tip": truth}
+    if json_out:
+        print_json(info)
+        return
+    px = f", pixel {frame.pixel_size_m * 1e6:g} µm" if frame.pixel_size_m else ""
+    console.print(f"{w} x {h} px{px} at t = {frame.time_s:.3f} s -> {output}", highlight=False)
+    if truth is not None:
+        console.print(f"simulator's true tip: {truth[0]:.2f}, {truth[1]:.2f} px", highlight=False)

@@ -1,0 +1,410 @@
+"""The simulated microscope (``simcam://``): what a camera over the simulated arm sees.
+
+It renders the tip of the arm it looks at from the arm's **true** joint positions
+(:class:`~stickslip.devices.base.KnowsTruePosition`; the base tilt from the simulator's
+pose) through the tip's forward kinematics (:func:`stickslip.kinematics.tip`) and a
+:class:`~stickslip.vision.view.View`:
+
+* the needle: a cone of half-angle ``taper`` ending in a rounded apex of radius
+  ``tip_radius``, along the arm's axis (joint 3's), projected into the image; the tip is
+  the needle's extreme end (the kinematic tip);
+* two looks: ``optical`` (bright field: a bright, vignetted background, the needle dark
+  where it absorbs the light) and ``sem`` (secondary electrons: a darker background, the
+  needle bright, brightest at its edges where the surface turns away from the beam, a
+  brightness gradient across the field and line-by-line scan noise);
+* focus: the needle's image is blurred by a Gaussian whose width grows with its distance
+  from the focal plane (``dof``: the defocus that adds one pixel of blur);
+* a textured substrate with debris, in the focal plane, drifting slowly across the field
+  (``drift``, px/s on the arm's virtual clock, plus a small random walk);
+* shot noise: Poisson counts with ``photons`` at full brightness.
+
+The field is fixed to the rig: the tip of the outstretched arm is seen at
+``(0.6 w, 0.5 h)`` and in focus; ``centre=tip`` centres and focuses it on the tip as it is
+when the camera opens (a user who finds the tip first), ``centre=X,Y,Z`` on a point of
+the base frame (with units). The truth is at hand for tests:
+:meth:`SimCamera.true_tip` (pixel, depth).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from .. import kinematics as kin
+from ..devices.base import Controller, KnowsTruePosition, VirtualClock, redact_url
+from ..units import UnitError, parse_angle, parse_length
+from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_option
+from ..vision.frame import Frame
+from ..vision.view import View, project
+
+__all__ = ["SimCamera", "SimCamSettings", "open_url", "LOOKS"]
+
+LOOKS = ("optical", "sem")
+"""The simulated microscope's looks."""
+
+
+@dataclass(frozen=True)
+class SimCamSettings:
+    """What the simulated microscope is like.
+
+    Attributes
+    ----------
+    look : str
+        ``"optical"`` (bright field) or ``"sem"``.
+    width, height : int
+        Frame size, pixels.
+    pixel_size_m : float
+        Pixel size in the object plane, m.
+    view : View
+        Orientation of the camera in the world.
+    photons : float
+        Mean photon (electron) count of a pixel at full brightness: shot noise.
+    dof_m : float
+        Defocus that adds one pixel of blur (Gaussian sigma), m.
+    blur_px : float
+        Blur of the needle in focus (sigma), pixels.
+    tip_radius_m : float
+        Radius of the needle's rounded apex, m.
+    taper : float
+        Half-angle of the needle's cone, rad.
+    drift_px_s : float
+        Speed of the slow drift of the whole image, pixels per second (of the arm's clock).
+    debris : int
+        Number of dust particles on the substrate.
+    seed : int
+        Seeds the substrate, the debris, the drift's direction and the noise.
+    """
+
+    look: str = "optical"
+    width: int = 512
+    height: int = 512
+    pixel_size_m: float = 0.5e-6
+    view: View = View()
+    photons: float = 300.0
+    dof_m: float = 4e-6
+    blur_px: float = 0.7
+    tip_radius_m: float = 1.0e-6
+    taper: float = math.radians(8.0)
+    drift_px_s: float = 0.02
+    debris: int = 40
+    seed: int = 0
+
+
+class SimCamera:
+    """A simulated microscope looking at a simulated arm (a :class:`~stickslip.vision.camera.Camera`).
+
+    Parameters
+    ----------
+    device : Controller
+        The arm; it must know its true joint positions (the simulator does).
+    settings : SimCamSettings
+        The look, size, pixel size, view, noise, focus and drift.
+    geometry : Geometry
+        The arm's tip geometry (offset, length), m.
+    centre_base : array_like or "tip", optional
+        The point (base frame, m) seen in focus at pixel ``(0.6 w, 0.5 h)``; default:
+        the tip in the outstretched pose (``q = (0, -pi/2, 0)``), so every camera opened
+        on the arm sees the same field; ``"tip"``: the tip when the camera opens.
+    url : str
+        For :attr:`info`.
+    """
+
+    def __init__(
+        self,
+        device: Controller,
+        settings: SimCamSettings = SimCamSettings(),
+        geometry: kin.Geometry = kin.DEFAULT_GEOMETRY,
+        centre_base: Any = None,
+        url: str = "simcam://",
+    ) -> None:
+        if not isinstance(device, KnowsTruePosition):
+            raise CameraError(
+                "simcam:// looks at a simulated arm and needs one that knows its true position: use it with -d sim://"
+            )
+        if settings.look not in LOOKS:
+            raise ValueError(f"look={settings.look!r}: the simulated microscope has the looks {', '.join(LOOKS)}")
+        self.device = device
+        self.settings = settings
+        self.geometry = geometry
+        self._url = url
+        s = settings
+        self.centre_px = (0.6 * s.width, 0.5 * s.height)
+        if centre_base is None:  # where the tip is in the outstretched pose: the same field every time
+            centre_base = kin.tip((0.0, -math.pi / 2, 0.0), geometry)
+        elif isinstance(centre_base, str) and centre_base == "tip":  # centred on the tip as it is now
+            centre_base = self._tip_base()
+        self.centre_base = np.asarray(centre_base, dtype=float).reshape(3)
+        rng = np.random.default_rng([s.seed, 7])
+        self._rng = np.random.default_rng([s.seed, 8])
+        self._margin = 48
+        self._substrate = _substrate(s.height + 2 * self._margin, s.width + 2 * self._margin, s.look, s.debris, rng)
+        self._drift_dir = rng.uniform(0.0, 2.0 * math.pi)
+        self._walk = np.zeros(2)
+        self._t_last: float | None = None
+        self._t_own = 0.0
+        yy, xx = np.mgrid[0 : s.height, 0 : s.width]
+        self._xx = xx.astype(float)
+        self._yy = yy.astype(float)
+        r2 = ((xx - s.width / 2) ** 2 + (yy - s.height / 2) ** 2) / ((s.width / 2) ** 2 + (s.height / 2) ** 2)
+        if s.look == "optical":
+            self._illumination = 1.0 - 0.35 * r2  # vignetting
+        else:
+            self._illumination = 0.85 + 0.3 * (xx / s.width)  # the detector sees one side better
+
+    # ---------------------------------------------------------------- the truth
+
+    def _pose(self) -> kin.Pose:
+        pose = getattr(self.device, "pose", None)
+        dev: Any = self.device
+        q = [float(dev.position(j)) for j in (1, 2, 3)]
+        if isinstance(pose, kin.Pose):
+            return kin.Pose(q[0], q[1], q[2], pose.theta, pose.psi)
+        return kin.Pose(q[0], q[1], q[2])
+
+    def _tip_base(self) -> NDArray[np.float64]:
+        p = self._pose()
+        return np.asarray(kin.tip((p.q1, p.q2, p.q3), self.geometry), dtype=float)
+
+    def _time(self) -> float:
+        if isinstance(self.device, VirtualClock):
+            return float(self.device.clock_s)
+        self._t_own += 0.05
+        return self._t_own
+
+    def drift_px(self, t: float) -> NDArray[np.float64]:
+        """The image drift at time ``t`` (s of the arm's clock) without its random walk, pixels ``(x, y)``."""
+        v = self.settings.drift_px_s
+        return np.array([math.cos(self._drift_dir), math.sin(self._drift_dir)]) * v * t
+
+    def true_tip(self) -> tuple[NDArray[np.float64], float]:
+        """``((x, y), depth)``: where the tip is seen now, pixels (drift included), and m behind the focal plane."""
+        pose = self._pose()
+        u, depth = project(self._tip_base(), self.settings.view, self.settings.pixel_size_m, self.centre_base,
+                           self.centre_px, pose.theta, pose.psi)
+        return u + self.drift_px(self._time()) + self._walk, float(depth)
+
+    # ---------------------------------------------------------------- Camera protocol
+
+    @property
+    def info(self) -> CameraInfo:
+        """``"simulated microscope (optical|sem)"``, pixel size, frame size and the settings."""
+        s = self.settings
+        return CameraInfo(
+            redact_url(self._url), f"simulated microscope ({s.look})", s.pixel_size_m,
+            {"shape": (s.height, s.width), "look": s.look, "view": s.view.as_dict(), "photons": s.photons,
+             "seed": s.seed},
+        )
+
+    def grab(self) -> Frame:
+        """Render what the camera sees now (the arm's true pose, time and drift)."""
+        t = self._time()
+        if self._t_last is not None and t > self._t_last:
+            self._walk += self._rng.normal(0.0, 0.02 * math.sqrt(t - self._t_last), 2)
+        self._t_last = t
+        image = self.render(t)
+        return Frame(image, t, self.settings.pixel_size_m, f"{redact_url(self._url)} t={t:.3f}s")
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+    # ---------------------------------------------------------------- rendering
+
+    def render(self, t: float) -> NDArray[np.float64]:
+        """The noisy frame at time ``t`` (s), grey values in [0, 1]."""
+        s = self.settings
+        pose = self._pose()
+        shift = self.drift_px(t) + self._walk
+        tip_px, depth = project(self._tip_base(), s.view, s.pixel_size_m, self.centre_base, self.centre_px,
+                                pose.theta, pose.psi)
+        tip_px = tip_px + shift
+        axis = kin.arm_axis(pose.q1, pose.q2)  # the needle points along joint 3's axis, base frame
+        back, _ = project(self._tip_base() - 50e-6 * np.asarray(axis), s.view, s.pixel_size_m, self.centre_base,
+                          self.centre_px, pose.theta, pose.psi)
+        direction = (back + shift) - tip_px  # from the apex back along the shaft, pixels per 50 µm
+        foreshortening = float(np.hypot(*direction)) / (50e-6 / s.pixel_size_m)
+        m = self._margin
+        bg = ndimage.shift(self._substrate, (float(shift[1]), float(shift[0])), order=1, mode="nearest")
+        bg = bg[m : m + s.height, m : m + s.width]
+        cover, edge = self._needle(tip_px, direction, foreshortening)
+        sigma = math.hypot(s.blur_px, abs(depth) / s.dof_m)
+        if sigma > 0.3:
+            cover = ndimage.gaussian_filter(cover, sigma, truncate=3.0)
+            edge = ndimage.gaussian_filter(edge, sigma, truncate=3.0)
+        if s.look == "optical":
+            clean = self._illumination * bg * (1.0 - 0.82 * cover)
+        else:
+            clean = self._illumination * (bg * (1.0 - cover) + 0.45 * cover + 0.5 * edge)
+        lam = np.clip(clean, 0.0, None) * s.photons
+        counts = self._rng.poisson(lam).astype(float)
+        if s.look == "sem":  # the beam's line-by-line jitter
+            counts += self._rng.normal(0.0, 0.005 * s.photons, (s.height, 1))
+        return np.asarray(np.clip(counts / s.photons, 0.0, 1.0), dtype=float)
+
+    def _needle(self, tip: NDArray[np.float64], direction: NDArray[np.float64],
+                foreshortening: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Coverage of the needle (0..1) and its edge brightness (SEM), unblurred.
+
+        A pixel integrates the needle over its area: by the clipped signed distance where
+        the needle is wide, and 4 × 4 samples per pixel within 24 px of the tip, where
+        it is thinner than a pixel.
+        """
+        cover, edge = self._needle_at(self._xx, self._yy, tip, direction, foreshortening)
+        s = self.settings
+        k, box = 4, 24
+        x0, x1 = max(0, int(tip[0]) - box), min(s.width, int(tip[0]) + box + 1)
+        y0, y1 = max(0, int(tip[1]) - box), min(s.height, int(tip[1]) + box + 1)
+        if x1 > x0 and y1 > y0:
+            sub = (np.arange(k) + 0.5) / k - 0.5
+            xs = (np.arange(x0, x1)[:, None] + sub[None, :]).ravel()
+            ys = (np.arange(y0, y1)[:, None] + sub[None, :]).ravel()
+            XX, YY = np.meshgrid(xs, ys)
+            c, e = self._needle_at(XX, YY, tip, direction, foreshortening, aa=False)
+            h, w = y1 - y0, x1 - x0
+            cover[y0:y1, x0:x1] = c.reshape(h, k, w, k).mean(axis=(1, 3))
+            edge[y0:y1, x0:x1] = e.reshape(h, k, w, k).mean(axis=(1, 3))
+        return cover, edge
+
+    def _needle_at(self, xx: NDArray[np.float64], yy: NDArray[np.float64], tip: NDArray[np.float64],
+                   direction: NDArray[np.float64], foreshortening: float,
+                   aa: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Coverage and edge brightness at points ``(xx, yy)`` (px): anti-aliased by distance, or inside/outside."""
+        s = self.settings
+        n = float(np.hypot(*direction))
+        r0 = s.tip_radius_m / s.pixel_size_m
+        if n < 1e-9:  # looking along the needle: a disc
+            d = np.hypot(xx - tip[0], yy - tip[1])
+            cover = np.clip(r0 + 0.5 - d, 0.0, 1.0) if aa else (d <= r0).astype(float)
+            return cover, np.zeros_like(cover)
+        a = direction / n
+        rx, ry = xx - tip[0], yy - tip[1]
+        along = rx * a[0] + ry * a[1] - r0  # pixels behind the apex cap's centre (the tip is its extreme end)
+        across = np.abs(-rx * a[1] + ry * a[0])
+        slope = math.tan(s.taper) / max(foreshortening, 1e-3)  # a foreshortened cone looks blunter
+        radius = r0 + np.clip(along, 0.0, None) * slope
+        radius = np.minimum(radius, 40e-6 / s.pixel_size_m)  # the needle's shank
+        # signed distance (pixels) to the cone's side, and to the apex's cap behind the tip
+        side = across - radius
+        cap = np.hypot(np.minimum(along, 0.0), across) - r0
+        sd = np.where(along < 0.0, cap, side)
+        cover = np.clip(0.5 - sd, 0.0, 1.0) if aa else (sd <= 0.0).astype(float)
+        inside = np.clip(across / np.maximum(radius, 1e-6), 0.0, 1.0)
+        edge = cover * inside**6  # secondary-electron yield rises where the surface turns from the beam
+        return cover, edge
+
+
+def _substrate(h: int, w: int, look: str, debris: int, rng: np.random.Generator) -> NDArray[np.float64]:
+    """A smooth textured substrate with dust particles, in the focal plane (before illumination)."""
+    noise = rng.standard_normal((h, w))
+    texture = ndimage.gaussian_filter(noise, 6.0) * 6.0 + ndimage.gaussian_filter(noise, 1.5) * 0.6
+    texture = texture / (np.std(texture) + 1e-12)
+    yy, xx = np.mgrid[0:h, 0:w]
+    dust = np.zeros((h, w))
+    for _ in range(debris):
+        cx, cy = rng.uniform(0, w), rng.uniform(0, h)
+        r = rng.uniform(1.0, 6.0)
+        dust = np.maximum(dust, np.clip(r + 0.5 - np.hypot(xx - cx, yy - cy), 0.0, 1.0) * rng.uniform(0.3, 0.8))
+    dust = ndimage.gaussian_filter(dust, 0.8)
+    if look == "optical":
+        return np.asarray(0.85 + 0.04 * texture - 0.5 * dust, dtype=float)
+    return np.asarray(0.25 + 0.05 * texture + 0.35 * dust, dtype=float)
+
+
+_OPTIONS = frozenset(
+    {"look", "seed", "pixel", "size", "photons", "dof", "blur", "tip", "taper", "drift", "debris",
+     "tilt", "azimuth", "roll", "centre", "geometry"}
+)
+
+
+def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCamera:
+    """Open the simulated microscope from ``simcam://?look=sem&seed=1&pixel=0.5um&...``.
+
+    Options: ``look`` (optical, sem), ``seed``, ``pixel`` (pixel size, e.g. 0.5um), ``size``
+    (``WxH`` pixels), ``photons`` (at full brightness), ``dof`` (defocus adding one pixel
+    of blur, e.g. 4um), ``blur`` (in-focus blur, pixels), ``tip`` (apex radius, e.g.
+    0.4um), ``taper`` (cone half-angle, e.g. 8deg), ``drift`` (px/s), ``debris`` (count),
+    ``tilt``, ``azimuth``, ``roll`` (the view, angles), ``centre`` (``tip``, or ``X,Y,Z`` in
+    the base frame, lengths), ``geometry`` (``OFFSET,LENGTH`` of the arm). ``device`` is the arm.
+    """
+    if device is None:
+        raise CameraError("simcam:// looks at a simulated arm: give the device too (-d sim://)")
+    location, opts = camera_options(url, _OPTIONS)
+    if location.strip("/"):
+        raise ValueError(f"a simcam:// URL takes only options (e.g. simcam://?look=sem), got {redact_url(url)!r}")
+    kw: dict[str, Any] = {}
+    try:
+        if "look" in opts:
+            kw["look"] = opts["look"].strip().lower()
+        if "seed" in opts:
+            kw["seed"] = _int(opts["seed"], "seed", 0, 2**31)
+        px = pixel_option(opts, url)
+        if px is not None:
+            kw["pixel_size_m"] = px
+        if "size" in opts:
+            w_text, _, h_text = opts["size"].lower().partition("x")
+            kw["width"] = _int(w_text, "size", 32, 4096)
+            kw["height"] = _int(h_text or w_text, "size", 32, 4096)
+        for key, name, lo, hi in (("photons", "photons", 1.0, 1e6), ("blur", "blur_px", 0.0, 20.0),
+                                  ("drift", "drift_px_s", 0.0, 100.0)):
+            if key in opts:
+                kw[name] = _float(opts[key], key, lo, hi)
+        if "debris" in opts:
+            kw["debris"] = _int(opts["debris"], "debris", 0, 10_000)
+        for key, name, lo, hi in (("dof", "dof_m", 1e-8, 1e-2), ("tip", "tip_radius_m", 0.0, 1e-4)):
+            if key in opts:
+                kw[name] = _length(opts[key], key, lo, hi)
+        if "taper" in opts:
+            kw["taper"] = _angle(opts["taper"], "taper", math.radians(0.5), math.radians(45.0))
+        view = View(*(_angle(opts.get(k, "0"), k, -2 * math.pi, 2 * math.pi) for k in ("tilt", "azimuth", "roll")))
+        kw["view"] = view
+        centre: Any = None
+        if opts.get("centre", "").strip().lower() == "tip":
+            centre = "tip"
+        elif "centre" in opts:
+            parts = opts["centre"].split(",")
+            if len(parts) != 3:
+                raise ValueError("centre: write X,Y,Z with units, e.g. centre=21mm,0,0")
+            centre = np.array([_length(p, "centre", -1.0, 1.0) for p in parts])
+        geometry = kin.Geometry.parse(opts["geometry"]) if "geometry" in opts else kin.DEFAULT_GEOMETRY
+        settings = SimCamSettings(**kw)
+    except (UnitError, ValueError) as e:
+        raise ValueError(f"simcam:// {e}") from None
+    return SimCamera(device, settings, geometry, centre, url)
+
+
+def _int(text: str, key: str, lo: int, hi: int) -> int:
+    try:
+        v = int(text.strip())
+    except ValueError:
+        raise ValueError(f"{key}={text!r} is not a whole number") from None
+    if not lo <= v <= hi:
+        raise ValueError(f"{key}={v} must be in {lo}..{hi}")
+    return v
+
+
+def _float(text: str, key: str, lo: float, hi: float) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise ValueError(f"{key}={text!r} is not a number") from None
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise ValueError(f"{key}={text!r} must be in [{lo:g}, {hi:g}]")
+    return v
+
+
+def _length(text: str, key: str, lo: float, hi: float) -> float:
+    v = parse_length(text)
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise ValueError(f"{key}={text!r} must be a length in [{lo:g}, {hi:g}] m")
+    return v
+
+
+def _angle(text: str, key: str, lo: float, hi: float) -> float:
+    v = parse_angle(text)
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise ValueError(f"{key}={text!r} must be an angle in [{math.degrees(lo):g}, {math.degrees(hi):g}] deg")
+    return v

@@ -1,0 +1,114 @@
+"""``stickslip camera locate``'s workflow: the tip in each frame of a recording, from its pixel in the first.
+
+:func:`locate` reads every frame (so a bad file is refused before anything is reported),
+tracks the tip through them (:class:`~.track.TipTracker`) and returns one
+:class:`Located` per frame, in order: a fix with its score, or a refusal with its reason.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from .camera import CameraEnded
+from .files import open_frames
+from .frame import Frame, ImageError
+from .track import Fix, Lost, TipTracker, TrackerParams
+
+__all__ = ["Located", "locate", "locate_frames"]
+
+
+@dataclass(frozen=True)
+class Located:
+    """The answer for one frame.
+
+    Attributes
+    ----------
+    frame : str
+        The frame's file (or ``video frame k``).
+    fix : Fix or None
+        The tip, px, with its score (the first frame: the tip given, score 1).
+    lost : str or None
+        Why there is no fix (one of :data:`~.track.REASONS`).
+    detail : str
+        What the tracker saw.
+    """
+
+    frame: str
+    fix: Fix | None = None
+    lost: str | None = None
+    detail: str = ""
+
+    def as_dict(self) -> dict[str, object]:
+        """``{"frame", "x", "y", "score"}`` for a fix (px, 0..1), ``{"frame", "lost"}`` for a refusal."""
+        if self.fix is not None:
+            return {"frame": self.frame, "x": self.fix.x, "y": self.fix.y, "score": self.fix.score}
+        return {"frame": self.frame, "lost": self.lost}
+
+
+def locate_frames(
+    frames: Sequence[Frame], tip: tuple[float, float], params: TrackerParams = TrackerParams(),
+    progress: Callable[[int], None] | None = None,
+) -> list[Located]:
+    """The tip in each of ``frames`` (all of one size) from its pixel ``tip`` (x, y) in the first.
+
+    Raises :class:`~.template.TemplateError` when nothing trackable stands at ``tip``.
+    """
+    if not frames:
+        raise ImageError("no frames")
+    tracker = TipTracker(frames[0], tip, params)
+    out = [Located(frames[0].source, Fix(float(tip[0]), float(tip[1]), 1.0, 0.0))]
+    for k, f in enumerate(frames[1:], start=1):
+        r = tracker.update(f)
+        if isinstance(r, Lost):
+            out.append(Located(f.source, None, r.reason, r.detail))
+        else:
+            out.append(Located(f.source, r))
+        if progress is not None:
+            progress(k)
+    return out
+
+
+def locate(
+    names: Sequence[str | os.PathLike[str]], tip: tuple[float, float], params: TrackerParams = TrackerParams(),
+    progress: Callable[[int, int], None] | None = None,
+) -> list[Located]:
+    """The tip in each frame that ``names`` mean (image files, folders, globs, or one video).
+
+    Every frame is read and checked before the first is tracked (a first pass that keeps
+    nothing, so a long recording is never held in memory): a corrupt, truncated or
+    missing file, an empty folder, frames of mixed sizes, a stack or NaN pixels raise
+    :class:`~.frame.ImageError` (a video that cannot be opened :class:`~.camera.CameraError`)
+    with nothing tracked. ``progress(done, total)`` is called as frames are checked and
+    tracked (``total`` is 0 while the number of frames is not known).
+    """
+    n = 0
+    camera = open_frames(names)
+    try:
+        while True:
+            try:
+                camera.grab()
+            except CameraEnded:
+                break
+            n += 1
+            if progress is not None:
+                progress(n, 0)
+    finally:
+        camera.close()
+    if n == 0:
+        raise ImageError("the recording has no frames")
+    camera = open_frames(names)
+    try:
+        first = camera.grab()
+        tracker = TipTracker(first, tip, params)
+        out = [Located(first.source, Fix(float(tip[0]), float(tip[1]), 1.0, 0.0))]
+        for k in range(1, n):
+            f = camera.grab()
+            r = tracker.update(f)
+            out.append(Located(f.source, None, r.reason, r.detail) if isinstance(r, Lost) else Located(f.source, r))
+            if progress is not None:
+                progress(n + k, 2 * n)
+    finally:
+        camera.close()
+    return out

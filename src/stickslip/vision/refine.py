@@ -1,0 +1,388 @@
+"""Sub-pixel refinement of a tip's position: the template fitted to the frame by Gauss-Newton.
+
+The template window ``T`` (one of the blur bank's copies) is fitted to the frame ``I``
+under a rigid motion about the tip and a change of brightness and contrast:
+
+    I(R(θ)(x - a) + t) ≈ g(x) T(x) + c(x)        for every window pixel x of weight w(x) > 0
+
+with ``a`` the tip in the window, ``t`` the tip in the frame (px), ``θ`` the turn (rad)
+and ``g``, ``c`` the contrast and brightness, each a plane across the window (uneven
+illumination: vignetting, a detector that sees one side better, a background whose
+level changes across the window). Each iteration samples the (smoothed) frame
+and its gradients at the warped window (bilinear), fits ``g`` and ``c`` by weighted
+least squares, and updates the motion by inverse composition (Baker and Matthews 2004)
+with the mean of the template's and the frame's gradients (the efficient second-order
+minimisation of Benhimane and Malis 2004: it converges in a few iterations where the
+template's gradients alone, sharper than a blurred frame's, would creep).
+From the second iteration to :data:`ROBUST_ITERATIONS` the residuals are weighed by Tukey's biweight (what
+disagrees by more than 4.685 robust spreads weighs nothing: a particle over the needle,
+the background that moved with the tip).
+
+The fix's covariance is ``s² (Jᵀ W J)⁻¹`` over the motion's parameters (``s²`` the
+weighted residual variance), in frame pixels after the turn.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+__all__ = ["Refinement", "refine", "Steepest", "steepest", "Patch", "patch", "warped"]
+
+FloatArray = NDArray[np.float64]
+
+TUKEY = 4.685
+"""Tukey's biweight constant (95 % efficiency for Gaussian residuals), robust spreads."""
+
+ROBUST_ITERATIONS = 6
+"""The robust weights are recomputed up to this iteration, then kept (a pixel near the cut would flip in and out
+and keep the fit from settling)."""
+
+
+@dataclass(frozen=True)
+class Steepest:
+    """A template's fixed parts for the inverse compositional fit, on its weighted pixels only.
+
+    Attributes
+    ----------
+    template : ndarray
+        The template window (for :func:`warped`), ``(n, n)``.
+    apex : tuple of float
+        The tip in the window, px.
+    t, w, rx, ry : ndarray
+        The template's value, weight and offset from the tip (px) at each pixel of weight
+        above 0.1 % of the largest.
+    sd : ndarray, shape (3, m)
+        Steepest-descent images: d/dtx, d/dty, d/dtheta.
+    basis : ndarray, shape (m, 6)
+        The photometric model's columns: ``T``, ``T x``, ``T y``, ``1``, ``x``, ``y`` (x, y
+        across the window, about ±0.5).
+    keep : ndarray of bool, shape (n, n)
+        Which window pixels these are.
+    """
+
+    template: FloatArray
+    apex: tuple[float, float]
+    t: FloatArray
+    w: FloatArray
+    rx: FloatArray
+    ry: FloatArray
+    sd: FloatArray
+    basis: FloatArray
+    keep: NDArray[np.bool_]
+
+
+def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray) -> Steepest:
+    """The fixed parts of ``template`` (weighed by ``weights``) for a turn about ``apex`` (x, y, window px)."""
+    grads: list[FloatArray] = list(np.gradient(template))
+    gy, gx = grads[0], grads[1]
+    n = template.shape[0]
+    yy, xx = np.mgrid[0:n, 0:n].astype(float)
+    rx, ry = xx - apex[0], yy - apex[1]
+    top = float(np.max(weights)) if weights.size else 0.0
+    keep: NDArray[np.bool_] = weights > 1e-3 * top if top > 0 else weights > 0
+    T = template[keep]
+    rxm, rym = rx[keep], ry[keep]
+    sd = np.stack([gx[keep], gy[keep], -gx[keep] * rym + gy[keep] * rxm])
+    bx, by = rxm / n, rym / n
+    basis = np.stack([T, T * bx, T * by, np.ones_like(T), bx, by], axis=1)
+    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep)
+
+
+@dataclass(frozen=True)
+class Refinement:
+    """The fitted motion of the tip.
+
+    Attributes
+    ----------
+    x, y : float
+        The tip in the frame, px.
+    theta : float
+        The window's turn, rad.
+    gain, offset : float
+        Contrast and brightness of the frame against the template (grey units).
+    cov : ndarray, shape (2, 2)
+        Covariance of ``(x, y)``, px².
+    score : float
+        Weighted correlation of the warped frame with the template over the template's
+        weights (not the robust ones), 1.
+    outliers : float
+        Share of the template's weight that the robust fit set aside, 1.
+    coverage : float
+        Share of the template's weight that fell inside the frame, 1.
+    iterations : int
+    converged : bool
+    """
+
+    x: float
+    y: float
+    theta: float
+    gain: float
+    offset: float
+    cov: FloatArray
+    score: float
+    outliers: float
+    coverage: float
+    iterations: int
+    converged: bool
+
+    @property
+    def sigma(self) -> float:
+        """The largest standard deviation of the position, px (along the worst direction)."""
+        ev = np.linalg.eigvalsh(self.cov)
+        return float(math.sqrt(max(float(ev[-1]), 0.0))) if np.all(np.isfinite(ev)) else math.inf
+
+
+@dataclass(frozen=True)
+class Patch:
+    """A crop of a frame with its gradients, for sampling at every iteration.
+
+    Attributes
+    ----------
+    data : ndarray, shape (3, h, w)
+        The (smoothed) crop and its x and y derivatives (grey units per px).
+    x0, y0 : int
+        The crop's top-left pixel in the frame.
+    shape : tuple of int
+        The frame's ``(height, width)``.
+    """
+
+    data: FloatArray
+    x0: int
+    y0: int
+    shape: tuple[int, int]
+
+
+def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float = 0.0) -> Patch:
+    """The patch of ``image`` holding every pixel within ``radius`` (px) of ``(cx, cy)``.
+
+    ``smooth`` (px) blurs the crop first (Gaussian sigma), as the template was: what a
+    camera under-samples (aliasing) then weighs little in the fit, and bilinear
+    interpolation of the smoothed crop is exact to a hundredth of a pixel.
+    """
+    H, W = image.shape
+    x0 = max(0, int(math.floor(cx - radius)) - 3)
+    y0 = max(0, int(math.floor(cy - radius)) - 3)
+    x1 = min(W, int(math.ceil(cx + radius)) + 4)
+    y1 = min(H, int(math.ceil(cy + radius)) + 4)
+    if x1 - x0 < 4 or y1 - y0 < 4:
+        return Patch(np.zeros((3, 4, 4)), x0, y0, (H, W))
+    crop = image[y0:y1, x0:x1]
+    if smooth > 0:
+        crop = ndimage.gaussian_filter(crop, smooth, mode="nearest")
+    gy, gx = np.gradient(crop)
+    return Patch(np.stack([crop, gx, gy]), x0, y0, (H, W))
+
+
+def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Bilinear samples of the patch (value, d/dx, d/dy: shape (3, m)) at frame points ``(xs, ys)`` (px).
+
+    Also which points lie in the frame and the patch (the others sample the patch's edge).
+    """
+    H, W = p.shape
+    _, ch, cw = p.data.shape
+    lx, ly = xs - p.x0, ys - p.y0
+    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+    inside &= (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
+    lx = np.clip(lx, 0.0, cw - 1.000001)
+    ly = np.clip(ly, 0.0, ch - 1.000001)
+    ix = lx.astype(np.intp)
+    iy = ly.astype(np.intp)
+    fx = lx - ix
+    fy = ly - iy
+    flat = p.data.reshape(3, -1)
+    i00 = iy * cw + ix
+    v00 = np.take(flat, i00, axis=1)
+    v01 = np.take(flat, i00 + 1, axis=1)
+    v10 = np.take(flat, i00 + cw, axis=1)
+    v11 = np.take(flat, i00 + cw + 1, axis=1)
+    top = v00 + (v01 - v00) * fx
+    bottom = v10 + (v11 - v10) * fx
+    return top + (bottom - top) * fy, inside
+
+
+def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The frame sampled at the template's weighted pixels, the tip at ``(x, y)`` (px) turned by ``theta`` (rad).
+
+    Returns the values, shape ``(m,)``, and which samples lie inside the frame.
+    """
+    v, inside = _warped3(p, st, x, y, theta)
+    return v[0], inside
+
+
+def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+    ct, s_ = math.cos(theta), math.sin(theta)
+    return _sample(p, ct * st.rx - s_ * st.ry + x, s_ * st.rx + ct * st.ry + y)
+
+
+def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
+    """Weighted least squares ``A beta ≈ y``; ``None`` if singular."""
+    Aw = A * w[:, None]
+    M = Aw.T @ A
+    try:
+        return np.asarray(np.linalg.solve(M + 1e-12 * np.trace(M) * np.eye(A.shape[1]), Aw.T @ y), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
+
+
+_ALL = np.arange(9)
+_NO_GAIN_PLANE = np.array([0, 3, 4, 5, 6, 7, 8])
+
+
+def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], kappa: float,
+           turn: float) -> FloatArray | None:
+    """Weighted least squares of ``y`` on the columns ``cols`` of ``D`` (9 columns: 6 brightness, 3 motion).
+
+    ``kappa`` weighs a prior that pulls the turn's step towards ``turn`` (the current turn's
+    distance from its prior). The columns left out are 0 in the result.
+    """
+    Dc = D[:, cols]
+    Dw = Dc * w[:, None]
+    M = Dw.T @ Dc
+    rhs = Dw.T @ y
+    if kappa > 0:
+        M[-1, -1] += kappa
+        rhs[-1] += kappa * turn
+    try:
+        sol = np.linalg.solve(M + 1e-12 * np.trace(M) * np.eye(len(cols)), rhs)
+    except np.linalg.LinAlgError:
+        return None
+    out = np.zeros(9)
+    out[cols] = sol
+    return out
+
+
+def refine(
+    image: Patch,
+    st: Steepest,
+    start: tuple[float, float],
+    theta: float = 0.0,
+    max_iter: int = 20,
+    tol: float = 0.01,
+    robust: bool = True,
+    theta_sd: float | None = 0.05,
+    theta_prior: float = 0.0,
+    correlation: float = 1.0,
+) -> Refinement:
+    """Fit the template to the frame patch ``image`` from the tip at ``start`` (frame px) and turn ``theta`` (rad).
+
+    ``theta_sd`` (rad) is the prior standard deviation of the turn about ``theta_prior``
+    (the first frame's orientation): a thin needle's short window says little about its
+    turn, and an unchecked turn would move the tip; ``None`` fits the turn freely.
+    ``correlation`` is how much the residuals' correlation overstates what the pixels
+    say (:attr:`~.template.TrackerParams.sigma_factor`): the prior weighs against the
+    pixels' true information. Converged: the last step moved the tip by less than ``tol``
+    px (a turn counted at 20 px from the tip).
+    """
+    T, w0, sd, basis = st.t, st.w, st.sd, st.basis
+    tx, ty = float(start[0]), float(start[1])
+    g, c = 1.0, 0.0
+    beta_prev = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+    kappa: float | None = None
+    prev_dp: FloatArray | None = None
+    model: NDArray[np.intp] | None = None
+    last_jac = sd
+    robust_w = np.ones_like(T)
+    converged = False
+    step = math.inf
+    scale: float | None = None
+    it = 0
+    e = np.zeros_like(T)
+    omega = w0
+    inside = np.ones(T.shape, dtype=bool)
+    for it in range(1, max_iter + 1):
+        v3, inside = _warped3(image, st, tx, ty, theta)
+        Iw = v3[0]
+        omega = w0 * inside * robust_w
+        if float(omega.sum()) <= 1e-9:
+            break
+        # efficient second-order minimisation (Benhimane and Malis 2004): the mean of the template's and the
+        # warped frame's gradients (the frame's turned into the template's axes, divided by its contrast)
+        ct, st_ = math.cos(theta), math.sin(theta)
+        fgx = (v3[1] * ct + v3[2] * st_) / g
+        fgy = (-v3[1] * st_ + v3[2] * ct) / g
+        jac = 0.5 * (sd + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx]))
+        # one linear least squares for the brightness planes and the motion together: apart, the planes
+        # would soak up half of every edge's shift at each step, and the motion would creep
+        D = np.concatenate([basis, (g * jac).T], axis=1)
+        r0 = Iw - basis @ beta_prev
+        if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
+            kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
+        sol = None
+        # a contrast plane too steep for this window: a plain contrast, and that for good (a model that changed
+        # back and forth between iterations would never settle)
+        choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
+        for cols in choices:  # once plain, plain to the end
+            sol = _joint(D, omega, Iw, cols, kappa or 0.0, theta - theta_prior)
+            if sol is None:
+                break
+            gain = sol[0] + sol[1] * basis[:, 4] + sol[2] * basis[:, 5]
+            if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
+                model = cols
+                break
+            sol = None
+        if sol is None:  # contrast reversed, or no solution: not this template
+            converged = False
+            break
+        beta = sol[:6]
+        g_new = float(beta[0])
+        g, c = g_new, float(beta[3])
+        beta_prev = beta
+        e = (Iw - beta[3] - beta[4] * basis[:, 4] - beta[5] * basis[:, 5]) / gain - T
+        if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
+            if scale is None:  # the robust spread, once: a spread that moved with the weights would never settle
+                m = omega > 0
+                scale = max(1.4826 * float(np.median(np.abs(e[m]))) if m.any() else 0.0, 1e-12)
+            u = e / (TUKEY * scale)
+            robust_w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
+        dp = sol[6:].copy()
+        if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
+            dp *= 0.5  # the step turned back on the last one: overshooting, halve it
+        prev_dp = dp
+        dx, dy, dth = (float(v) for v in dp)
+        theta_new = theta - dth
+        ct2, s2 = math.cos(theta_new), math.sin(theta_new)
+        tx -= ct2 * dx - s2 * dy
+        ty -= s2 * dx + ct2 * dy
+        theta = theta_new
+        step = math.hypot(dx, dy) + abs(dth) * 20.0
+        last_jac = jac
+        if step < tol:
+            converged = True
+            break
+        if not (math.isfinite(tx) and math.isfinite(ty)) or abs(theta) > 1.0:
+            break
+    if not converged and step < 5 * tol:  # still creeping by less than a twentieth of a pixel: settled
+        converged = True
+    # covariance of the translation, from the last iteration's weights and residuals (the brightness planes
+    # estimated alongside: their uncertainty widens the motion's)
+    omega = w0 * inside * robust_w
+    n_eff = float(omega.sum())
+    D = np.concatenate([basis, (g * last_jac).T], axis=1)
+    M = (D * omega[:, None]).T @ D
+    s2 = float((omega * (g * e) ** 2).sum()) / max(n_eff - 9.0, 1.0)
+    try:
+        cov_win = (np.linalg.inv(M) * s2)[6:8, 6:8]
+    except np.linalg.LinAlgError:
+        cov_win = np.full((2, 2), np.inf)
+    R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    cov = R @ cov_win @ R.T if np.all(np.isfinite(cov_win)) else cov_win
+    # the score: correlation over the template's own weights, inside the frame
+    wi = w0 * inside
+    swi = float(wi.sum())
+    wsum = float(w0.sum())
+    score = 0.0
+    outliers = 1.0
+    if swi > 1e-9 and math.isfinite(tx) and math.isfinite(ty):
+        Iw, _ = warped(image, st, tx, ty, theta)
+        mt = float((wi * T).sum() / swi)
+        mi = float((wi * Iw).sum() / swi)
+        num = float((wi * (T - mt) * (Iw - mi)).sum())
+        den = math.sqrt(float((wi * (T - mt) ** 2).sum()) * float((wi * (Iw - mi) ** 2).sum()))
+        score = num / den if den > 0 else 0.0
+        outliers = float((wi * (robust_w == 0)).sum() / swi)
+    return Refinement(tx, ty, theta, g, c, cov, score, outliers, swi / wsum if wsum > 0 else 0.0, it, converged)

@@ -1,0 +1,356 @@
+"""What the tracker learns of the tip from the first frame: a template, its weights, a blur bank.
+
+From one frame and the tip's pixel the tracker cuts a square window centred on the tip
+and weighs each of its pixels by how much it belongs to the needle (docs/vision.md,
+"Decision rules"):
+
+* the window's **background level** is the median of its outer ring, its **spread** the
+  ring's median absolute deviation (texture and noise together);
+* a pixel of the smoothed window that stands more than :attr:`TrackerParams.contrast`
+  spreads from the background is needle; the needle is the connected region touching the
+  tip (within a few pixels), grown by :attr:`TrackerParams.edge_px` so its edges count;
+* weights fall off with the distance from the tip (Gaussian of ``window / 2``): the shaft
+  far behind the tip says least about where the tip is and most about a turn.
+
+The template is kept with extra blur (a bank of Gaussian blurs, :attr:`TrackerParams.blur_bank`):
+a tip that drifts out of focus is matched against the template blurred alike.
+:func:`masked_ncc` is the weighted normalised cross-correlation of the template over a
+region of a frame, by FFT.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import fft, ndimage
+
+__all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "noise_sigma"]
+
+FloatArray = NDArray[np.float64]
+
+
+class TemplateError(ValueError):
+    """Nothing that can be tracked stands at the tip given (the message says why)."""
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """The tip tracker's constants, each with its unit and reason (docs/vision.md).
+
+    Attributes
+    ----------
+    half_window : int
+        Half the side of the template window, px: the tip and ~20 px of its shaft.
+    contrast : float
+        A pixel is needle when it stands this many background spreads from the
+        background level (smoothed over 1 px), 1.
+    edge_px : int
+        Needle mask grown by this many pixels, px: the edges carry the position.
+    blur_bank : tuple of float
+        Extra Gaussian blur of the template's copies, px (sigma): matched against a tip
+        out of focus.
+    sharpen_bank : tuple of float
+        Extra Gaussian blur of the *frame*, px (sigma), matched against the sharp
+        template: a tip in better focus than in the first frame.
+    search_radius : int
+        How far from the last fix the tip is looked for before the whole frame is, px.
+    coarse_factor : int
+        Down-sampling of the whole-frame search, 1.
+    candidates : int
+        Peaks of the whole-frame search refined before giving up, 1.
+    min_score : float
+        Least weighted correlation of a fix with the template, 1 (below: lost).
+    reacquire_score : float
+        Least correlation to take a tip found again by the whole-frame search, 1.
+    max_sigma : float
+        Largest standard deviation of a fix, px (above: the tip's position is not
+        determined, e.g. only the shaft is seen); a fix 3 px off is then a 3-sigma event.
+    edge_margin : float
+        A fix nearer the field's edge than this plus twice its blur is refused as out of
+        the field, px: a tip just beyond the edge looks like one on it.
+    occluded_fraction : float
+        Largest share of the template's weight that may disagree with the frame, 1
+        (above: something covers the tip).
+    max_blur : float
+        Largest extra blur of a fix, px (sigma); a tip further out of focus is refused.
+    sigma_floor : float
+        Smallest standard deviation reported for a fix, px.
+    sigma_factor : float
+        Multiplies the fit's standard deviation, 1: the fit counts every pixel as an
+        independent measurement, but after smoothing by ``template_blur`` (sigma ``s``)
+        about ``4 pi s²`` neighbouring pixels share their noise, so the fit alone is
+        optimistic by ``2 sqrt(pi) s`` (3.5 at 1 px).
+    template_blur : float
+        The first frame's window, and every frame where it is fitted, are smoothed by
+        this Gaussian (sigma, px): the template's own noise would otherwise favour the
+        blurred copies, and what the camera under-samples (aliasing at a sharp edge)
+        would pull the fit towards the pixel grid.
+    level_hysteresis : float
+        Another blur copy replaces the current one only when it correlates better by
+        this much, 1.
+    mismatch_ratio, mismatch_floor : float
+        A fix's mismatch ``1 - score`` may be at most ``mismatch_ratio`` times the
+        median mismatch of the last :attr:`recent` fixes plus ``mismatch_floor``, 1:
+        the noise, blur and background of a sequence set what a good match scores, and
+        a tip under a particle, or something else taken for it, scores worse.
+    recent : int
+        Fixes that set the expected mismatch, 1.
+    max_turn : float
+        Largest turn of the needle against the first frame, rad: a fit that needs more
+        has matched something else (a microscope's needle turns by a few degrees).
+    reacquire_ratio, reacquire_sigma : float
+        A tip found again by the whole-frame search must match as well as the recent
+        fixes (its mismatch at most ``reacquire_ratio`` times their median, plus the
+        floor), with a standard deviation of at most ``reacquire_sigma`` px and no more
+        than one blur copy beyond the last fix's: a search over the whole frame meets
+        many things that resemble a blurred tip a little, and a false fix there would
+        be far off.
+    front_fraction : float
+        Largest share of the half-ring in front of the tip that may look like the needle,
+        1: where the needle seems to end at something as dark (or bright) as itself, the
+        end seen is that thing's edge, not the tip (occluded).
+    """
+
+    half_window: int = 20
+    contrast: float = 3.0
+    edge_px: int = 2
+    blur_bank: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 4.5, 6.0)
+    sharpen_bank: tuple[float, ...] = (1.5, 3.0)
+    search_radius: int = 32
+    coarse_factor: int = 4
+    candidates: int = 3
+    min_score: float = 0.6
+    reacquire_score: float = 0.8
+    max_sigma: float = 1.0
+    edge_margin: float = 3.0
+    occluded_fraction: float = 0.3
+    max_blur: float = 5.0
+    sigma_floor: float = 0.03
+    sigma_factor: float = 3.5
+    template_blur: float = 1.0
+    mismatch_ratio: float = 4.0
+    mismatch_floor: float = 0.03
+    recent: int = 10
+    max_turn: float = 0.2
+    front_fraction: float = 0.3
+    reacquire_ratio: float = 1.5
+    reacquire_sigma: float = 0.6
+    level_hysteresis: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not 6 <= self.half_window <= 128:
+            raise ValueError(f"half_window = {self.half_window} px must be in 6..128")
+        if self.search_radius < 4 or self.coarse_factor < 1 or self.candidates < 1:
+            raise ValueError("search_radius >= 4 px, coarse_factor >= 1 and candidates >= 1")
+        if not (0 < self.min_score <= self.reacquire_score <= 1):
+            raise ValueError("0 < min_score <= reacquire_score <= 1")
+        if not self.blur_bank or self.blur_bank[0] != 0.0 or list(self.blur_bank) != sorted(self.blur_bank):
+            raise ValueError("blur_bank must start at 0 px and increase")
+
+
+def noise_sigma(image: FloatArray) -> float:
+    """Standard deviation of a frame's pixel noise (robust: the MAD of a pixel against its neighbours)."""
+    d = image[1:-1, 1:-1] - 0.25 * (image[:-2, 1:-1] + image[2:, 1:-1] + image[1:-1, :-2] + image[1:-1, 2:])
+    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(1.25))
+
+
+def _window(image: FloatArray, cx: int, cy: int, h: int) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The ``(2h+1)²`` window centred on pixel ``(cx, cy)`` and which of its pixels lie in the frame."""
+    H, W = image.shape
+    n = 2 * h + 1
+    out = np.zeros((n, n))
+    inside = np.zeros((n, n), dtype=bool)
+    y0, x0 = cy - h, cx - h
+    ys, xs = max(0, y0), max(0, x0)
+    ye, xe = min(H, y0 + n), min(W, x0 + n)
+    if ye > ys and xe > xs:
+        out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
+        inside[ys - y0 : ye - y0, xs - x0 : xe - x0] = True
+    return out, inside
+
+
+@dataclass
+class TipTemplate:
+    """The tip as learned from one frame (see the module docstring).
+
+    Attributes
+    ----------
+    bank : list of ndarray
+        The template window, then its copies with the extra blurs of ``params.blur_bank``.
+    weights : ndarray
+        Weight of each window pixel (0..1): needle, its edges, near the tip.
+    level_weights : list of ndarray
+        The weights of each blur copy, then of each frame blur (``sharpen_bank``): the
+        mask grown by twice the extra blur more.
+    shaft : tuple of float
+        Unit vector from the tip back along the needle, window axes.
+    core, ring, front : tuple of ndarray
+        Offsets from the tip (x, y; px) of the needle's core near the tip, of the
+        background around it (away from the needle), and of the background in front of
+        the tip (within 60 deg of straight ahead, 2 to 14 px away, clear of the needle).
+    apex : tuple of float
+        The tip in window coordinates, px ``(x, y)``.
+    noise : float
+        Pixel noise of the first frame (grey units).
+    contrast : float
+        Weighted standard deviation of the template over its weights (grey units): what
+        the needle stands out by.
+    """
+
+    bank: list[FloatArray]
+    weights: FloatArray
+    apex: tuple[float, float]
+    noise: float
+    contrast: float
+    params: TrackerParams = field(default_factory=TrackerParams)
+    level_weights: list[FloatArray] = field(default_factory=list)
+    shaft: tuple[float, float] = (1.0, 0.0)
+    core: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+    ring: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+    front: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+
+    @classmethod
+    def learn(cls, image: FloatArray, tip: tuple[float, float], params: TrackerParams = TrackerParams()) -> TipTemplate:
+        """The template of the tip at pixel ``tip`` (x, y) of ``image``.
+
+        Raises :class:`TemplateError` if nothing trackable stands there.
+        """
+        H, W = image.shape
+        x, y = float(tip[0]), float(tip[1])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise TemplateError(f"the tip ({x}, {y}) is not a finite pixel")
+        if not (-0.5 <= x < W - 0.5 and -0.5 <= y < H - 0.5):
+            raise TemplateError(f"the tip ({x:g}, {y:g}) is outside the {W} x {H} frame (x right, y down, from 0)")
+        margin = 4
+        if min(x, y, W - 1 - x, H - 1 - y) < margin:
+            raise TemplateError(
+                f"the tip ({x:g}, {y:g}) is within {margin} px of the frame's edge: too close to learn it"
+            )
+        h = params.half_window
+        cx, cy = int(round(x)), int(round(y))
+        win, inside = _window(image, cx, cy, h)
+        if not inside.all():  # near the edge: fill with the ring's level, weight 0
+            fill = float(np.median(win[inside]))
+            win = np.where(inside, win, fill)
+        apex = (x - cx + h, y - cy + h)
+        ring = np.ones_like(inside)
+        ring[4:-4, 4:-4] = False
+        ring &= inside
+        smooth = ndimage.gaussian_filter(win, 1.0)
+        level = float(np.median(smooth[ring]))
+        spread = float(1.4826 * np.median(np.abs(smooth[ring] - level)))
+        noise = noise_sigma(image)
+        spread = max(spread, 0.3 * noise, 1e-12)
+        dev = np.abs(smooth - level) / spread
+        needle = dev > params.contrast
+        labels, n = ndimage.label(needle)
+        yy, xx = np.mgrid[0 : 2 * h + 1, 0 : 2 * h + 1]
+        near = np.hypot(xx - apex[0], yy - apex[1]) <= 8.0
+        touching = set(np.unique(labels[near & needle]).tolist()) - {0}
+        if not touching:
+            raise TemplateError(
+                f"nothing stands out from the background at the tip ({x:g}, {y:g}): no needle within 8 px "
+                f"(it must stand {params.contrast:g} background spreads from the background level)"
+            )
+        mask = np.isin(labels, list(touching))
+        if mask.sum() < 12:
+            raise TemplateError(f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out")
+        radial = np.exp(-0.5 * ((xx - apex[0]) ** 2 + (yy - apex[1]) ** 2) / (h / 2.0) ** 2)
+        level_weights = []
+        for b in (*params.blur_bank, *params.sharpen_bank):
+            # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further
+            grown = ndimage.binary_dilation(mask, iterations=params.edge_px + int(round(2.0 * b)))
+            soft = ndimage.gaussian_filter(grown.astype(float), 0.7)
+            level_weights.append(np.clip(soft, 0.0, 1.0) * radial * inside)
+        weights = level_weights[0]
+        # the shaft's direction (from the tip back along the needle), the needle's core near the tip and
+        # the background around it: what the occlusion check compares the region in front of the tip with
+        ox, oy = xx - apex[0], yy - apex[1]
+        dist = np.hypot(ox, oy)
+        near_mask = mask & (dist <= h)
+        vx, vy = float(ox[near_mask].mean()), float(oy[near_mask].mean())
+        norm = math.hypot(vx, vy)
+        shaft = (vx / norm, vy / norm) if norm > 1e-9 else (1.0, 0.0)
+        eroded = ndimage.binary_erosion(mask, iterations=1)
+        core_pick = (eroded if eroded.sum() >= 4 else mask) & (dist >= 2.0) & (dist <= 10.0)
+        wide = ndimage.binary_dilation(mask, iterations=params.edge_px + 2 * int(round(params.blur_bank[-1])))
+        ring_sel = ~wide & (dist >= 6.0) & inside
+        core = (ox[core_pick].astype(float), oy[core_pick].astype(float))
+        ring_off = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
+        # in front of the tip: within 60 deg of straight ahead, 2..14 px away, and background in this frame
+        ahead = (ox * shaft[0] + oy * shaft[1]) < -0.5 * dist
+        grown2 = ndimage.binary_dilation(mask, iterations=params.edge_px + 1)
+        front_sel = ahead & (dist >= 2.0) & (dist <= 14.0) & ~grown2 & inside
+        front = (ox[front_sel].astype(float), oy[front_sel].astype(float))
+        s0 = params.template_blur
+        bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in params.blur_bank]
+        # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
+        # blurred by blur_bank[k] more than the first
+        sw = float(weights.sum())
+        mean = float((weights * win).sum() / sw)
+        contrast = math.sqrt(float((weights * (win - mean) ** 2).sum() / sw))
+        snr = contrast / max(noise, 1e-12) * math.sqrt(sw)
+        if snr < 10.0:
+            raise TemplateError(
+                f"the needle at ({x:g}, {y:g}) stands out by {contrast / max(noise, 1e-12):.2g} times the pixel noise "
+                f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track"
+            )
+        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front)
+
+    @property
+    def half(self) -> int:
+        return self.params.half_window
+
+
+@dataclass
+class _KernelFFT:
+    shape: tuple[int, int]
+    w: NDArray[np.complex128]
+    wt: NDArray[np.complex128]
+    sw: float
+    st2: float
+
+
+def _kernel_fft(t: FloatArray, w: FloatArray, shape: tuple[int, int]) -> _KernelFFT:
+    sw = float(w.sum())
+    tc = t - float((w * t).sum() / sw)
+    wt = w * tc
+    fw = fft.rfft2(w[::-1, ::-1], shape, workers=1)
+    fwt = fft.rfft2(wt[::-1, ::-1], shape, workers=1)
+    return _KernelFFT(shape, fw, fwt, sw, float((w * tc * tc).sum()))
+
+
+def masked_ncc(
+    region: FloatArray, template: FloatArray, weights: FloatArray, cache: dict[object, object] | None = None,
+    key: object = None,
+) -> FloatArray:
+    """Weighted normalised cross-correlation of ``template`` at every offset inside ``region``.
+
+    ``out[i, j]`` compares the template with ``region[i:i+n, j:j+n]`` (``n`` the template's
+    side), each pixel weighted by ``weights``: ``sum w (T - T_w)(I - I_w) / sqrt(sum w (T -
+    T_w)² · sum w (I - I_w)²)`` with ``T_w``, ``I_w`` the weighted means; in [-1, 1], 0 where
+    the region is flat. By FFT (region and its square once each). ``cache`` (a dict the
+    caller keeps for this template) holds the template's transforms under ``key``.
+    """
+    n = template.shape[0]
+    rh, rw = region.shape
+    shape = (rh, rw)
+    ck = (key, rh, rw)
+    k = cache.get(ck) if cache is not None else None
+    if not isinstance(k, _KernelFFT):
+        k = _kernel_fft(template, weights, shape)
+        if cache is not None:
+            cache[ck] = k
+    fi = fft.rfft2(region, workers=1)
+    fi2 = fft.rfft2(region * region, workers=1)
+    a = fft.irfft2(fi * k.w, shape, workers=1)[n - 1 :, n - 1 :]
+    b = fft.irfft2(fi2 * k.w, shape, workers=1)[n - 1 :, n - 1 :]
+    c = fft.irfft2(fi * k.wt, shape, workers=1)[n - 1 :, n - 1 :]
+    var = np.clip(b - a * a / k.sw, 0.0, None)
+    denom = np.sqrt(var * k.st2)
+    scale = float(np.max(denom)) if denom.size else 0.0
+    out = np.where(denom > 1e-9 * max(scale, 1e-300), c / np.where(denom > 0, denom, 1.0), 0.0)
+    return np.asarray(np.clip(out, -1.0, 1.0), dtype=float)

@@ -1,0 +1,450 @@
+"""Tip tracking: a sub-pixel fix with its confidence in every frame, or a refusal with its reason.
+
+:class:`TipTracker` learns the tip from the first frame and the tip's pixel
+(:class:`~.template.TipTemplate`), then for each later frame:
+
+1. **looks near the last fix**: the weighted normalised correlation of the template over a
+   square of :attr:`~.template.TrackerParams.search_radius` around it (by FFT), at the blur
+   copy that matched last; the best peak, then the blur copy that matches it best;
+2. **refines** it to a fraction of a pixel (:func:`~.refine.refine`: rigid motion about the
+   tip, contrast and brightness, robust to what disagrees), with the fix's covariance;
+3. **decides** (docs/vision.md, "Decision rules"): the fix is refused
+
+   * *out of the field* when it lies within :attr:`~.template.TrackerParams.edge_margin`
+     (plus twice its blur) of the field's edge, or beyond: a tip just past the edge looks
+     like a tip on it;
+   * *out of focus* when only the most blurred copies match, or the blur is beyond
+     :attr:`~.template.TrackerParams.max_blur`;
+   * *occluded* when more than :attr:`~.template.TrackerParams.occluded_fraction` of the
+     template's weight disagrees with the frame;
+   * *lost* when the correlation is below :attr:`~.template.TrackerParams.min_score` or the
+     fix's standard deviation above :attr:`~.template.TrackerParams.max_sigma` (its position
+     is not determined: only the shaft is seen);
+
+4. when the tip is not found near the last fix (or was refused in the frame before), it is
+   **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
+   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`.
+
+A fix is never a guess: a frame the rules cannot vouch for is refused.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from .frame import Frame
+from .refine import Patch, Refinement, _sample, patch, refine, steepest, warped
+from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc
+
+__all__ = [
+    "Fix",
+    "Lost",
+    "TipTracker",
+    "TrackerParams",
+    "TemplateError",
+    "REASONS",
+    "track",
+]
+
+FloatArray = NDArray[np.float64]
+
+REASONS = ("out of the field", "occluded", "out of focus", "lost")
+"""Why a frame gives no fix."""
+
+
+@dataclass(frozen=True)
+class Fix:
+    """The tip found in a frame.
+
+    Attributes
+    ----------
+    x, y : float
+        The tip, px (x right, y down, the centre of the top-left pixel at (0, 0)).
+    score : float
+        Confidence: the weighted correlation of the frame with the tip's template, 0..1.
+    sigma : float
+        Standard deviation of the position along its worst direction, px.
+    blur : float
+        Extra blur of the tip against the first frame (Gaussian sigma), px.
+    angle : float
+        The needle's turn since the first frame, rad.
+    """
+
+    x: float
+    y: float
+    score: float
+    sigma: float
+    blur: float = 0.0
+    angle: float = 0.0
+
+    def as_dict(self) -> dict[str, float]:
+        """``{"x", "y", "score", "sigma"}`` (px, 1, px)."""
+        return {"x": self.x, "y": self.y, "score": self.score, "sigma": self.sigma}
+
+
+@dataclass(frozen=True)
+class Lost:
+    """A frame without a fix, and why.
+
+    Attributes
+    ----------
+    reason : str
+        One of :data:`REASONS`.
+    detail : str
+        What the tracker saw (the correlation, the distance from the edge, ...).
+    """
+
+    reason: str
+    detail: str = ""
+
+
+Result = Fix | Lost
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    ref: Refinement
+    level: int
+    ncc: float
+    patch: Patch
+
+
+class TipTracker:
+    """Tracks one tip through a sequence of frames (see the module docstring).
+
+    Parameters
+    ----------
+    first : ndarray or Frame
+        The first frame.
+    tip : tuple of float
+        The tip in it, px ``(x, y)``.
+    params : TrackerParams
+        The tracker's constants.
+
+    Raises
+    ------
+    TemplateError
+        When nothing that can be tracked stands at ``tip``.
+    """
+
+    def __init__(self, first: FloatArray | Frame, tip: tuple[float, float], params: TrackerParams = TrackerParams()):
+        image = first.image if isinstance(first, Frame) else np.asarray(first, dtype=float)
+        self.params = params
+        self.template = TipTemplate.learn(image, tip, params)
+        self.shape = (int(image.shape[0]), int(image.shape[1]))
+        t = self.template
+        # levels: (template copy, the frame's extra blur px, the signed blur px): the blurred copies for a tip out of
+        # focus, then the sharp template against a blurred frame for a tip sharper than in the first frame
+        nb = len(params.blur_bank)
+        self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [
+            (0, f, -f) for f in params.sharpen_bank
+        ]
+        self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
+        self._steep = [steepest(t.bank[k], t.apex, w) for (k, _, _), w in zip(self._spec, t.level_weights, strict=True)]
+        widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
+        sel = self._steep[widest]  # the levels are compared on the widest mask
+        self._select = sel
+        self._bank_sel = [b[sel.keep] for b in t.bank]
+        coarse = params.coarse_factor
+        self._coarse = [self._downsample(b, coarse) for b in t.bank]
+        self._coarse_w = self._downsample(t.weights, coarse)
+        self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
+        self._theta = 0.0
+        self._level = 0
+        self._fresh = True  # the last frame gave a fix
+        self._fft: dict[object, object] = {}  # the template's transforms, by region size
+        self._mismatch: list[float] = []  # 1 - score of the recent fixes
+        s0 = params.template_blur
+        # variance of the first frame's noise left in each blur copy (white noise smoothed by a Gaussian of sigma s
+        # keeps 1 / (4 pi s²) of its variance)
+        self._bank_noise2 = [t.noise**2 / (4.0 * math.pi * (s0 * s0 + b * b)) for b in params.blur_bank]
+        self._spec_noise2 = [self._bank_noise2[k] for k, _, _ in self._spec]
+        # what noise alone costs a perfect match, until fixes say better: the frame's and the template's noise
+        # over the needle's contrast (both smoothed by s0)
+        n2 = 2.0 * t.noise**2 / (4.0 * math.pi * s0 * s0)
+        self._first_mismatch = min(0.5, 1.0 - 1.0 / math.sqrt(1.0 + n2 / max(t.contrast**2, 1e-300)))
+
+    # ------------------------------------------------------------------ helpers
+
+    @staticmethod
+    def _downsample(a: FloatArray, f: int) -> FloatArray:
+        if f <= 1:
+            return a
+        h, w = (a.shape[0] // f) * f, (a.shape[1] // f) * f
+        return np.asarray(a[:h, :w].reshape(h // f, f, w // f, f).mean(axis=(1, 3)), dtype=float)
+
+    def _region(self, image: FloatArray, cx: float, cy: float, radius: int) -> tuple[FloatArray, int, int]:
+        """A region of the frame holding every template position within ``radius`` of ``(cx, cy)``."""
+        h = self.template.half
+        H, W = image.shape
+        x0 = int(round(cx)) - radius - h
+        y0 = int(round(cy)) - radius - h
+        n = 2 * (radius + h) + 1
+        out = np.full((n, n), float(np.median(image[::8, ::8])))
+        ys, xs = max(0, y0), max(0, x0)
+        ye, xe = min(H, y0 + n), min(W, x0 + n)
+        if ye > ys and xe > xs:
+            out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
+        return out, x0, y0
+
+    def _levels(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, theta: float) -> list[float]:
+        """Weighted correlation of each level with the frame, at the widest mask's pixels, for a tip at ``(x, y)``.
+
+        Each correlation is divided by what the template's and the frame's own noise cost it
+        (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
+        """
+        out = []
+        w_all = self._select.w
+        for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
+            Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
+            w = w_all * inside
+            sw = float(w.sum())
+            if sw <= 1e-9:
+                out.append(-1.0)
+                continue
+            b = self._bank_sel[k]
+            mi = float((w * Iw).sum() / sw)
+            di = Iw - mi
+            vi = float((w * di * di).sum())
+            mt = float((w * b).sum() / sw)
+            dt = b - mt
+            vt = float((w * dt * dt).sum())
+            den = math.sqrt(vi * vt)
+            ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
+            n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
+            keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
+            keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
+            out.append(ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25)))
+        return out
+
+    def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
+        """The frame's patch around ``(x, y)`` smoothed like the template plus ``f`` px (made once per frame)."""
+        pt = patches.get(f)
+        if pt is None:
+            s = math.hypot(self.params.template_blur, f)
+            pt = patch(image, x, y, self.template.half * math.sqrt(2.0) + 12.0, s)
+            patches[f] = pt
+        return pt
+
+    def _pick_level(self, scores: list[float], current: int) -> int:
+        """The blur copy that matches best; the current one unless another beats it by ``level_hysteresis``."""
+        best = int(np.argmax(scores))
+        if best != current and scores[best] < scores[current] + self.params.level_hysteresis:
+            return current
+        return best
+
+    def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int) -> _Candidate:
+        """Refine a tip position found by correlation, and settle the level of blur that matches it."""
+        corr = self.params.sigma_factor
+        patches: dict[float, Patch] = {}
+        lvl = level
+        ref = refine(self._patch(patches, image, x, y, self._spec[lvl][1]), self._steep[lvl], (x, y), theta,
+                     correlation=corr)
+        usual = self._usual_mismatch()
+        # the blur copies are compared only when the fit matches worse than the recent fixes did (focus changed)
+        settled = usual is not None and ref.converged and 1.0 - ref.score <= 1.5 * usual + 0.005
+        for _ in range(0 if settled else 2):
+            if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
+                break
+            lvl2 = self._pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl)
+            if lvl2 == lvl:
+                break
+            pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
+            ref2 = refine(pt2, self._steep[lvl2], (ref.x, ref.y), ref.theta, correlation=corr)
+            if not ref2.score >= ref.score - self.params.level_hysteresis or (ref.converged and not ref2.converged):
+                break
+            ref, lvl = ref2, lvl2
+        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
+
+    # ------------------------------------------------------------------ search
+
+    def _local(self, image: FloatArray) -> _Candidate | None:
+        assert self._last is not None
+        p = self.params
+        region, x0, y0 = self._region(image, self._last[0], self._last[1], p.search_radius)
+        t = self.template
+        k = self._spec[self._level][0]
+        ncc = masked_ncc(region, t.bank[k], t.level_weights[k], self._fft, ("local", k))
+        i, j = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
+        if ncc[i, j] < 0.5 * p.min_score:
+            return None
+        x = x0 + j + t.apex[0]
+        y = y0 + i + t.apex[1]
+        return self._try(image, x, y, self._theta, self._level)
+
+    def _global(self, image: FloatArray) -> list[_Candidate]:
+        p = self.params
+        f = p.coarse_factor
+        small = self._downsample(image, f)
+        best: list[tuple[float, int, int, int]] = []
+        for k in range(len(self._coarse)):
+            tpl = self._coarse[k]
+            if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
+                continue
+            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k))
+            peaks = ncc == ndimage.maximum_filter(ncc, size=5)
+            ii, jj = np.nonzero(peaks & (ncc > 0.3))
+            for i, j in zip(ii.tolist(), jj.tolist(), strict=True):
+                best.append((float(ncc[i, j]), i, j, k))
+        best.sort(reverse=True)
+        out: list[_Candidate] = []
+        seen: list[tuple[float, float]] = []
+        t = self.template
+        for _s, i, j, _k in best:
+            if len(out) >= p.candidates:
+                break
+            x = j * f + t.apex[0]
+            y = i * f + t.apex[1]
+            if any(math.hypot(x - a, y - b) < 2 * f for a, b in seen):
+                continue
+            seen.append((x, y))
+            # a full-resolution look around the coarse peak, then the fit
+            region, rx0, ry0 = self._region(image, x, y, 2 * f)
+            ncc = masked_ncc(region, t.bank[0], t.weights, self._fft, ("local", 0))
+            i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
+            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k))
+        return out
+
+    # ------------------------------------------------------------------ decision
+
+    def _judge(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
+        p = self.params
+        r = cand.ref
+        H, W = image.shape
+        blur = self._spec[cand.level][2]
+        min_score = p.reacquire_score if reacquire else p.min_score
+        edge = min(r.x, r.y, W - 1 - r.x, H - 1 - r.y)
+        margin = p.edge_margin + 2.0 * max(blur, 0.0)
+        if not (math.isfinite(r.x) and math.isfinite(r.y)):
+            return Lost("lost", "the fit did not converge")
+        if edge < margin:
+            where = "beyond the edge" if edge < 0 else f"{edge:.1f} px from the edge"
+            return Lost("out of the field", f"the tip would be {where} (needs {margin:.1f} px)")
+        if r.coverage < 0.9:
+            return Lost("out of the field", f"{100 * (1 - r.coverage):.0f} % of the tip's window is outside the field")
+        sigma = max(p.sigma_floor, p.sigma_factor * r.sigma)
+        if r.outliers > p.occluded_fraction:
+            return Lost("occluded", f"{100 * r.outliers:.0f} % of the tip's template disagrees with the frame")
+        front = self._front(cand, max(blur, 0.0))
+        if front > p.front_fraction:
+            return Lost("occluded", f"{100 * front:.0f} % of the ground in front of the tip looks like the needle")
+        if cand.level == self._top or blur > p.max_blur:
+            return Lost("out of focus", f"blurred by {blur:g} px or more against the first frame")
+        if r.score < min_score:
+            return Lost("lost", f"correlation {r.score:.2f} < {min_score:.2f}")
+        limit = self._mismatch_limit(p.reacquire_ratio if reacquire else p.mismatch_ratio)
+        if 1.0 - r.score > limit:
+            return Lost("lost", f"correlation {r.score:.3f}: worse than this sequence's fixes (needs {1 - limit:.3f})")
+        if abs(r.theta) > p.max_turn:
+            return Lost("lost", f"the match needs a turn of {math.degrees(r.theta):.1f} deg (at most "
+                                f"{math.degrees(p.max_turn):.0f} deg)")
+        if not r.converged:
+            return Lost("lost", "the fit did not settle")
+        max_sigma = p.reacquire_sigma if reacquire else p.max_sigma
+        if sigma > max_sigma:
+            return Lost("lost", f"position undetermined (sigma {sigma:.2f} px > {max_sigma:g} px)")
+        last_blur = self._spec[self._level][2]
+        if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
+            return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
+        return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
+
+    def _front(self, cand: _Candidate, blur: float) -> float:
+        """Share of the half-ring in front of the tip whose grey level is nearer the needle's than the background's."""
+        t = self.template
+        r = cand.ref
+        ct, st_ = math.cos(r.theta), math.sin(r.theta)
+
+        def at(ox: FloatArray, oy: FloatArray) -> FloatArray:
+            v, _ = _sample(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+            out: FloatArray = v[0]
+            return out
+
+        if t.core[0].size < 3 or t.ring[0].size < 8:
+            return 0.0
+        needle = float(np.median(at(*t.core)))
+        ground = float(np.median(at(*t.ring)))
+        if abs(needle - ground) < 1e-12:
+            return 1.0
+        fx, fy = t.front
+        far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+        if int(far.sum()) < 6:
+            return 0.0
+        v = at(fx[far], fy[far])
+        like = (v - ground) / (needle - ground) > 0.5
+        return float(np.mean(like))
+
+    def update(self, frame: FloatArray | Frame) -> Result:
+        """The tip in the next frame: a :class:`Fix` or a :class:`Lost` with its reason."""
+        image = frame.image if isinstance(frame, Frame) else np.asarray(frame, dtype=float)
+        if image.shape != self.shape:
+            raise ValueError(
+                f"a frame of {image.shape[1]} x {image.shape[0]} px after frames of "
+                f"{self.shape[1]} x {self.shape[0]} px"
+            )
+        first_refusal: Lost | None = None
+        if self._last is not None:
+            cand = self._local(image)
+            if cand is not None:
+                res = self._judge(cand, image)
+                if isinstance(res, Fix):
+                    return self._accept(res, cand)
+                first_refusal = res
+        # not found near the last fix (or refused there, or refused last time): the whole frame
+        best: Result | None = None
+        for cand in self._global(image):
+            res = self._judge(cand, image, reacquire=True)
+            if isinstance(res, Fix):
+                if best is None or not isinstance(best, Fix) or res.score > best.score:
+                    best = res
+                    best_cand = cand
+        if isinstance(best, Fix):
+            return self._accept(best, best_cand)
+        self._fresh = False
+        if first_refusal is not None:
+            return first_refusal
+        return Lost("lost", "not found near the last fix nor anywhere in the frame")
+
+    def _usual_mismatch(self) -> float | None:
+        """The median ``1 - score`` of the recent fixes (``None`` before three)."""
+        if len(self._mismatch) < 3:
+            return None
+        return float(np.median(self._mismatch[-self.params.recent :]))
+
+    def _mismatch_limit(self, ratio: float) -> float:
+        """Largest ``1 - score`` a fix may have: ``ratio`` times the recent fixes' median mismatch, plus the floor.
+
+        Until three fixes are in, the first frame's own mismatch stands in: its noise against the template.
+        """
+        p = self.params
+        if len(self._mismatch) < 3:  # near the tip the user gave: the noise's share, with room for the rest
+            return ratio * self._first_mismatch + 0.1
+        return ratio * float(np.median(self._mismatch[-p.recent :])) + p.mismatch_floor
+
+    def _accept(self, fix: Fix, cand: _Candidate) -> Fix:
+        self._mismatch.append(1.0 - fix.score)
+        del self._mismatch[: -self.params.recent]
+        self._last = (fix.x, fix.y)
+        self._theta = cand.ref.theta
+        self._level = cand.level
+        self._fresh = True
+        return fix
+
+
+def track(frames: Iterable[FloatArray | Frame], tip: tuple[float, float],
+          params: TrackerParams = TrackerParams()) -> Iterator[Result]:
+    """The tip in each frame: the first frame's is the tip given (score 1), the others tracked."""
+    it = iter(frames)
+    try:
+        first = next(it)
+    except StopIteration:
+        return
+    tracker = TipTracker(first, tip, params)
+    yield Fix(float(tip[0]), float(tip[1]), 1.0, 0.0)
+    for f in it:
+        yield tracker.update(f)

@@ -1,0 +1,122 @@
+"""``stickslip camera``: the locate contract, calibration on sim:// with simcam://, bad inputs (exit 2, one line)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from stickslip.cli import app
+from stickslip.measurements import read_step_sizes
+
+PIL = pytest.importorskip("PIL.Image")
+tifffile = pytest.importorskip("tifffile")
+runner = CliRunner()
+CAM = "simcam://?pixel=0.5um&photons=200"
+
+
+def _ok(args: list[str]):
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    return r
+
+
+def _bad(args: list[str], words: str) -> None:
+    r = runner.invoke(app, args)
+    assert r.exit_code == 2, r.output
+    assert r.exception is None or isinstance(r.exception, SystemExit)
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and words in r.output, r.output
+
+
+@pytest.fixture()
+def frames(tmp_path):
+    """Three frames of the simulated microscope with the arm moved between them, and the true tips."""
+    tips = []
+    for k, (q3, q1) in enumerate(((0.0, 0.0), (5e-6, 5e-4), (12e-6, -3e-4))):
+        _ok(["where", "-d", "sim://", "--set", f"3={q3}", "--set", f"1={q1}"])
+        r = _ok(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / f"f{k}.png"), "--json"])
+        tips.append(json.loads(r.stdout)["sim_true_tip"])
+    return tmp_path, tips
+
+
+def test_locate_json_is_one_object_per_frame_in_order(frames):
+    folder, tips = frames
+    r = _ok(["camera", "locate", str(folder / "f*.png"), "--tip", f"{tips[0][0]},{tips[0][1]}", "--json"])
+    out = json.loads(r.stdout)
+    assert [o["frame"] for o in out] == [str(folder / f"f{k}.png") for k in range(3)]
+    assert all(set(o) == {"frame", "x", "y", "score"} for o in out)
+    assert out[0]["score"] == 1.0
+    for o, t in zip(out[1:], tips[1:], strict=True):
+        assert math.hypot(o["x"] - t[0], o["y"] - t[1]) < 0.5 and 0 < o["score"] <= 1
+
+
+def test_locate_says_lost_with_the_reason(frames):
+    folder, tips = frames
+    blank = np.full((512, 512), 30000, np.uint16)
+    PIL.fromarray(blank).save(folder / "f3.png")
+    r = _ok(["camera", "locate", str(folder), "--tip", f"{tips[0][0]},{tips[0][1]}", "--json"])
+    last = json.loads(r.stdout)[-1]
+    assert set(last) == {"frame", "lost"} and last["lost"] in ("out of the field", "occluded", "out of focus", "lost")
+    table = _ok(["camera", "locate", str(folder), "--tip", f"{tips[0][0]},{tips[0][1]}"]).stdout
+    assert "1 of 4 frames refused" in table
+
+
+def test_bad_frames_exit_2_with_one_line_and_print_nothing(tmp_path):
+    PIL.fromarray(np.zeros((40, 50), np.uint8)).save(tmp_path / "a.png")
+    PIL.fromarray(np.zeros((40, 60), np.uint8)).save(tmp_path / "b.png")
+    _bad(["camera", "locate", str(tmp_path / "a.png"), str(tmp_path / "b.png"), "--tip", "10,10"], "must have one size")
+    (tmp_path / "c.png").write_bytes((tmp_path / "a.png").read_bytes()[:40])
+    _bad(["camera", "locate", str(tmp_path / "c.png"), "--tip", "10,10"], "not a readable image")
+    (tmp_path / "empty").mkdir()
+    _bad(["camera", "locate", str(tmp_path / "empty"), "--tip", "10,10"], "the folder has no image files")
+    tifffile.imwrite(tmp_path / "s.tif", np.zeros((4, 40, 50), np.uint16), photometric="minisblack")
+    _bad(["camera", "locate", str(tmp_path / "s.tif"), "--tip", "10,10"], "stack of 4 images")
+    f = np.zeros((40, 50), np.float32)
+    f[3, 4] = np.nan
+    tifffile.imwrite(tmp_path / "n.tif", f)
+    _bad(["camera", "locate", str(tmp_path / "n.tif"), "--tip", "10,10"], "x=4, y=3")
+    _bad(["camera", "locate", str(tmp_path / "nope.png"), "--tip", "10,10"], "no such file")
+    _bad(["camera", "locate", str(tmp_path / "a.png"), "--tip", "10"], "write X,Y in pixels")
+    _bad(["camera", "locate", str(tmp_path / "a.png"), "--tip", "20,20"], "nothing stands out")
+
+
+def test_a_missing_camera_exits_2_and_stores_nothing(tmp_path):
+    _bad(["camera", "calibrate", "-d", "sim://", "--camera", "usb://0"], "unknown camera URL scheme")
+    _bad(["camera", "calibrate", "-d", "sim://", "--camera", f"files://{tmp_path}/none*.png", "-o",
+          str(tmp_path / "s.csv")], "no file matches")
+    assert not (tmp_path / "s.csv").exists()
+    _bad(["camera", "grab", "--camera", "simcam://?look=xray", "-o", str(tmp_path / "g.png")], "the looks")
+    assert not (tmp_path / "g.png").exists()
+
+
+@pytest.mark.slow
+def test_calibrate_measures_joint_3_and_calibrate_takes_its_rows(tmp_path):
+    out = tmp_path / "steps.csv"
+    r = _ok(["camera", "calibrate", "-d", "sim://", "--camera", CAM, "--joints", "3", "--max-steps", "100",
+             "--day", "2026-11-22", "-o", str(out), "--json"])
+    res = json.loads(r.stdout)
+    (j3,) = res["joints"]
+    assert j3["refused"] is None and [s["direction"] for s in j3["step_sizes"]] == ["+", "-"]
+    rows = read_step_sizes(out)
+    assert [(r.joint, r.method) for r in rows] == [(3, "camera"), (3, "camera")]
+    assert all(0.7e-6 < r.gamma < 1.3e-6 and r.sigma < 0.02 * r.gamma for r in rows)
+    # where keeps the positions the camera saw
+    where = json.loads(_ok(["where", "-d", "sim://", "--offline", "--json"]).stdout)
+    assert where["joints"][2]["source"] == "dead-reckoned"
+    from synth import paper_table
+
+    from stickslip.measurements import measurements_to_csv
+
+    (tmp_path / "m.csv").write_text(measurements_to_csv(paper_table()))
+    cal = json.loads(_ok(["calibrate", str(tmp_path / "m.csv"), "--step-sizes", str(out), "--json"]).stdout)
+    assert "lsq with step sizes (3+ 3-)" in cal["method"]
+    _bad(["calibrate", "--step-sizes", str(out)], "may be left out only with --step-sizes and --prior")
+
+
+def test_joint_2_from_above_is_refused_with_the_reason(tmp_path):
+    _bad(["camera", "calibrate", "-d", "sim://", "--camera", CAM, "--joints", "2", "--tip", "307.2,256"],
+         "along the camera's optical axis")

@@ -1,0 +1,136 @@
+"""Tip tracking: on the simulated microscope it was designed on, and on the second renderer it was not.
+
+Correctness on small samples (seconds); the full numbers (500 frames, 512 x 512) and the
+speed are measured by ``benchmarks/bench_vision.py``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from vision_peer import peer_sequence
+
+from stickslip.sim.arm import SimulatedMM3A
+from stickslip.sim.camera import SimCamera, SimCamSettings
+from stickslip.vision.frame import as_image
+from stickslip.vision.track import REASONS, Fix, Lost, TemplateError, TipTracker, track
+
+
+def _simcam(look: str, seed: int, photons: float = 150.0, size: int = 256) -> tuple[SimulatedMM3A, SimCamera]:
+    sim = SimulatedMM3A(seed=seed)
+    cam = SimCamera(sim, SimCamSettings(look=look, width=size, height=size, photons=photons, seed=seed,
+                                        pixel_size_m=0.4e-6, tip_radius_m=1.2e-6))
+    return sim, cam
+
+
+@pytest.mark.parametrize("look", ["optical", "sem"])
+def test_simcam_moves_are_followed_to_a_fraction_of_a_pixel(look):
+    sim, cam = _simcam(look, 3)
+    tip, _ = cam.true_tip()
+    tracker = TipTracker(cam.grab(), tuple(tip))
+    rng = np.random.default_rng(3)
+    errors = []
+    for _ in range(14):
+        sim.step(int(rng.choice([1, 3])), int(rng.integers(-6, 7)))
+        truth, _ = cam.true_tip()
+        r = tracker.update(cam.grab())
+        assert isinstance(r, Fix), r
+        errors.append(math.hypot(r.x - truth[0], r.y - truth[1]))
+        assert 0.0 < r.score <= 1.0 and 0.0 < r.sigma <= 1.0
+    assert np.median(errors) <= 0.4 and max(errors) <= 1.5, np.round(errors, 2)
+
+
+def test_a_tip_out_of_the_field_is_refused_and_found_again():
+    sim, cam = _simcam("optical", 4)
+    tip, _ = cam.true_tip()
+    tracker = TipTracker(cam.grab(), tuple(tip))
+    sim.step(3, 90)  # ~225 px out: beyond the 256 px field
+    assert cam.true_tip()[0][0] > 256
+    r = tracker.update(cam.grab())
+    assert isinstance(r, Lost) and r.reason in REASONS
+    sim.step(3, -90)
+    truth, _ = cam.true_tip()
+    back = tracker.update(cam.grab())
+    assert isinstance(back, Fix) and math.hypot(back.x - truth[0], back.y - truth[1]) < 1.0
+
+
+def test_a_tip_under_a_particle_is_refused_or_within_3_px():
+    sim, cam = _simcam("optical", 5)
+    tip, _ = cam.true_tip()
+    tracker = TipTracker(cam.grab(), tuple(tip))
+    sim.step(3, 4)
+    truth, _ = cam.true_tip()
+    img = cam.grab().image.copy()
+    yy, xx = np.mgrid[0 : img.shape[0], 0 : img.shape[1]]
+    disc = np.hypot(xx - truth[0] - 2, yy - truth[1]) <= 9
+    img[disc] = 0.08  # an opaque particle over the tip
+    r = tracker.update(img)
+    assert isinstance(r, Lost) or math.hypot(r.x - truth[0], r.y - truth[1]) <= 3.0
+
+
+def test_nothing_at_the_tip_given_is_refused():
+    flat = np.random.default_rng(0).normal(0.5, 0.01, (64, 64))
+    with pytest.raises(TemplateError, match="nothing stands out"):
+        TipTracker(flat, (30.0, 30.0))
+    with pytest.raises(TemplateError, match="outside the 64 x 64 frame"):
+        TipTracker(flat, (70.0, 3.0))
+    with pytest.raises(TemplateError, match="within 4 px of the frame's edge"):
+        TipTracker(flat, (2.0, 30.0))
+
+
+def test_track_yields_the_tip_given_first():
+    sim, cam = _simcam("sem", 6)
+    tip, _ = cam.true_tip()
+    out = list(track([cam.grab(), cam.grab()], tuple(tip)))
+    assert out[0] == Fix(float(tip[0]), float(tip[1]), 1.0, 0.0) and isinstance(out[1], Fix)
+
+
+# ------------------------------------------------------------------------- the second renderer
+
+
+@pytest.fixture(scope="module")
+def peer_results() -> dict[str, object]:
+    """Three sequences of the peer renderer (tip widths 3, 10, 17 px; 12 frames of 256 px each)."""
+    errors, any_err, refused, visible, out_fixed, out_total = [], [], 0, 0, 0, 0
+    for i, w in enumerate((3.0, 10.0, 17.0)):
+        seq = peer_sequence(500 + i, 12, 256, 256, w)
+        images = [as_image(f.image) for f in seq.frames]
+        tracker = TipTracker(images[0], seq.frames[0].tip)
+        for f, img in zip(seq.frames[1:], images[1:], strict=True):
+            r = tracker.update(img)
+            visible += f.kind == "visible"
+            out_total += f.kind == "out"
+            if isinstance(r, Fix):
+                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
+                any_err.append(e)
+                if f.kind == "visible":
+                    errors.append(e)
+                out_fixed += f.kind == "out"
+            elif f.kind == "visible":
+                refused += 1
+    return {"errors": np.array(errors), "any": np.array(any_err), "refused": refused, "visible": visible,
+            "out_fixed": out_fixed, "out_total": out_total}
+
+
+@pytest.mark.slow
+def test_peer_frames_what_the_tracker_reaches(peer_results):
+    """Guards at what the tracker reaches on frames it was not designed on (measured: see docs/vision.md)."""
+    e = peer_results["errors"]
+    assert peer_results["out_total"] > 0 and peer_results["out_fixed"] == 0  # every tip out of the field refused
+    assert np.median(e) <= 0.8 and np.percentile(e, 95) <= 2.5
+    assert peer_results["refused"] <= 0.15 * peer_results["visible"]
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="not met yet on the peer renderer (bench_vision, 500 frames: median 0.55 px, p95 1.38 px, a fix 31 px off, "
+    "13 % of visible tips refused); docs/vision-log.md",
+)
+def test_peer_frames_meet_the_issues_numbers(peer_results):
+    e = peer_results["errors"]
+    assert np.median(e) <= 0.3 and np.percentile(e, 95) <= 1.0
+    assert np.max(peer_results["any"]) <= 3.0
+    assert peer_results["refused"] <= 0.02 * peer_results["visible"]
