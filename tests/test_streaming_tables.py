@@ -90,3 +90,13 @@ def test_import_streams_and_stores_all_or_nothing(tmp_path, monkeypatch):
         assert st.count_traverses() == 120  # nothing of the bad table
     r = runner.invoke(app, ["import", str(good), "--db", str(db)])
     assert r.exit_code == 2 and "imported before" in r.stderr
+
+
+def test_calibrate_reads_its_table_whole_so_its_cap_is_an_option_with_the_reason(tmp_path):
+    table = tmp_path / "h.csv"
+    table.write_text(history_csv(30_000))  # about 2.2 MB
+    r = runner.invoke(app, ["calibrate", str(table), "--max-table-mb", "1"])
+    assert r.exit_code == 2
+    assert "held in memory" in r.stderr and "--max-table-mb raises the limit" in r.stderr
+    r = runner.invoke(app, ["calibrate", str(table), "--max-table-mb", "-3"])
+    assert r.exit_code == 2 and "--max-table-mb must be a positive number" in r.stderr

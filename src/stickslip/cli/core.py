@@ -16,6 +16,7 @@ from rich.table import Table
 
 if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --help starts fast
     from ..calibration import Calibration
+    from ..measurements import Traverse
 
 from ..clock import stale_message
 from ..devices.base import device_key
@@ -158,6 +159,14 @@ def calibrate_cmd(
     drift: Annotated[
         float, typer.Option(help="With --prior: prior standard deviation of a day's change of step scale (relative).")
     ] = 0.15,
+    max_table_mb: Annotated[
+        float,
+        typer.Option(
+            "--max-table-mb",
+            help="Largest measurement table read, MB: calibrate holds every row in memory (about ten times "
+            "the file), so a table beyond this is refused rather than filling the memory.",
+        ),
+    ] = 64.0,
     json_out: JsonOpt = False,
 ) -> None:
     """Calibrate the step-size models from measured traverses.
@@ -194,7 +203,9 @@ def calibrate_cmd(
 
     if measurements is None and (step_sizes is None or prior is None):
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
-    traverses = read_table(measurements) if measurements is not None else []
+    if not (math.isfinite(max_table_mb) and max_table_mb > 0):
+        fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
+    traverses = _whole_table(measurements, int(max_table_mb * 1024 * 1024)) if measurements is not None else []
     steps: list[StepSize] = read_step_table(step_sizes) if step_sizes is not None else []
     source = str(measurements) if measurements is not None else str(step_sizes)
     try:
@@ -228,6 +239,18 @@ def calibrate_cmd(
         console.print(f"[dim]note:[/] {n}", highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
+
+
+def _whole_table(path: Path, max_bytes: int) -> list[Traverse]:
+    """A measurement table read whole (calibrate holds every row), or every problem and exit 2; over the size
+    limit, the message says how to raise it."""
+    from ..measurements import TableError, read_measurements
+
+    try:
+        return read_measurements(path, max_bytes)
+    except TableError as e:
+        fail("\n".join(p + ("; --max-table-mb raises the limit" if "limit for a CSV" in p else "")
+                       for p in e.problems))
 
 
 @contextlib.contextmanager

@@ -288,24 +288,34 @@ def _measurement_chunk(
     return (table.take(ok) if bad.size else table), problems
 
 
-def _read_table_text(path: str | Path) -> str:
-    """The text of a CSV table (a regular file, at most :data:`records.MAX_TABLE_BYTES`).
+def _read_table_text(path: str | Path, max_bytes: int | None = None) -> str:
+    """The text of a CSV table (a regular file, at most ``max_bytes``, default :data:`records.MAX_TABLE_BYTES`).
 
     A missing file, a folder, a pipe or device (never opened, so it cannot hang), a file
-    over the size limit or non-UTF-8 text raises :class:`TableError`.
+    over the size limit or non-UTF-8 text raises :class:`TableError`. The limit is there
+    because a table read whole is held in memory (text, columns and a row object each, about
+    ten times the file); :func:`stream_measurement_table` and ``predict`` stream instead.
     """
     p = Path(path)
     if not p.exists():
         raise TableError([f"{p}: no such file"])
+    limit = MAX_TABLE_BYTES if max_bytes is None else int(max_bytes)
     try:
-        return read_text_bounded(p, "CSV", MAX_TABLE_BYTES)
+        return read_text_bounded(p, "CSV", limit)
     except ValueError as e:
-        raise TableError([str(e)]) from None
+        text = str(e)
+        if "limit" in text:
+            text += " (a table read whole is held in memory, about ten times the file)"
+        raise TableError([text]) from None
 
 
-def read_measurements(path: str | Path) -> list[Traverse]:
-    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
-    return parse_measurements(_read_table_text(path), str(path))
+def read_measurements(path: str | Path, max_bytes: int | None = None) -> list[Traverse]:
+    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row.
+
+    ``max_bytes`` (default :data:`records.MAX_TABLE_BYTES`, 64 MiB) bounds the file: it is
+    read whole and held in memory.
+    """
+    return parse_measurements(_read_table_text(path, max_bytes), str(path))
 
 
 def read_measurement_table(path: str | Path) -> TraverseTable:
