@@ -9,7 +9,7 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
 * calibrations: the constant step (the paper's comparator, from the 14), the paper's
   procedure on the 14, the paper's form fitted to the 46 by least squares, ``--model auto``
   on the 46, and yesterday's ``auto`` updated with 4 of today's traverses (one per joint and
-  direction, random poses; ``--prior``);
+  direction, random poses, measured after the validation on the same arm; ``--prior``);
 * the largest |relative error| of the predicted average step at the validation traverses,
   per joint (3 prismatic, 2 rotary) and day: the median and the worst day, the mean over
   all; how many days ``auto`` erred more than the paper's procedure on the same day;
@@ -32,8 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
-from arm_days import ARMS, make_day  # noqa: E402
-from physics_scenarios import random_pose  # noqa: E402
+from arm_days import make_day  # noqa: E402
 
 from stickslip.calibration import calibrate  # noqa: E402
 from stickslip.calibration.intervals import relative_sd  # noqa: E402
@@ -78,8 +77,7 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
         prev = None
         for day in DAYS:
             d = make_day(arm, seed, day, rng)
-            today = ARMS[arm](seed, day)
-            new4 = [today.traverse(j, s, random_pose(rng, j), day) for j in (3, 2) for s in "+-"]
+            new4 = d.new4
             c14 = calibrate(d.paper14)
             auto = calibrate(d.calibration46, model="auto")
             val = d.validation

@@ -149,17 +149,25 @@ def _fake_fit(label: str, n: int = 6) -> JointFit:
     return JointFit(spec, 3, (), {"+": z}, {"+": None}, {"+": np.full(n, 0.01)}, True, z, 1e-4)
 
 
+def _evidence(cv_errors):
+    from types import SimpleNamespace
+
+    ev = sel_mod._Evidence.__new__(sel_mod._Evidence)
+    ev.data = SimpleNamespace(joint=3, n_poses=6, dirs=("+",), n_rows=lambda: 6)
+    ev.n_folds, ev.ids, ev.row_dist = 6, np.arange(6), np.ones(6)
+    ev.fits = {"paper": _fake_fit("paper"), "load2": _fake_fit("load2")}
+    ev.scores = [sel_mod.CVScore(lab, 3, "ok", 0.0, 0.0, 0.0) for lab in ev.fits]
+    ev.cv_errors = cv_errors
+    return ev
+
+
 def test_the_average_falls_back_to_the_papers_form_when_it_predicts_held_out_poses_worse():
-    ids = np.arange(6)
     paper = np.array([0.02, -0.01, 0.015, -0.02, 0.01, 0.012])
-    good_in_most = np.array([0.001, -0.001, 0.002, -0.001, 0.001, 0.09])  # one region badly wrong
-    fits = {"paper": _fake_fit("paper"), "load2": _fake_fit("load2")}
-    scores = [sel_mod.CVScore(lab, 3, "ok", 0.0, 0.0, 0.0) for lab in fits]
-    out = sel_mod._decide(3, np.ones(6), scores, fits, {"paper": paper, "load2": good_in_most}, ids, 6, 6, True)
+    good_in_most = np.array([0.001, -0.001, 0.002, -0.001, 0.001, 0.09])  # one fold badly wrong
+    out = sel_mod._decide(_evidence({"paper": paper, "load2": good_in_most}), True)
     assert out.fallback and out.fit.spec.name == "paper" and "paper's form" in out.reason
     # the same families where the other is better everywhere: no fallback
-    better = 0.3 * paper
-    out = sel_mod._decide(3, np.ones(6), scores, fits, {"paper": paper, "load2": better}, ids, 6, 6, True)
+    out = sel_mod._decide(_evidence({"paper": paper, "load2": 0.3 * paper}), True)
     assert not out.fallback and out.fit.spec.name == "load2"
 
 

@@ -54,6 +54,8 @@ class Day:
     paper14: list[Traverse]
     spread32: list[Traverse]
     validation: list[Traverse]
+    new4: list[Traverse]
+    """One traverse per joint and direction at random poses, measured last (to update yesterday's calibration)."""
 
     @property
     def calibration46(self) -> list[Traverse]:
@@ -61,14 +63,16 @@ class Day:
 
 
 def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8) -> Day:
-    """The day's tables (``validation_poses`` random poses per joint, both directions)."""
+    """The day's tables (``validation_poses`` random poses per joint, both directions), measured in this order
+    on one arm (a joint that warms up is warm by the validation)."""
     arm = ARMS[arm_name](seed, day)
     p14 = [arm.traverse(j, d, p, day) for j in (3, 2) for p in paper_poses(j) for d in "+-"]
     s32 = [arm.traverse(j, d, p, day) for j in (3, 2)
            for p in spread_poses(j, 8, int(rng.integers(2**31)), existing=paper_poses(j)) for d in "+-"]
     val = [arm.traverse(j, d, p, day) for j in (3, 2)
            for p in [random_pose(rng, j) for _ in range(validation_poses)] for d in "+-"]
-    return Day(arm_name, seed, day, p14, s32, val)
+    new4 = [arm.traverse(j, d, random_pose(rng, j), day) for j in (3, 2) for d in "+-"]
+    return Day(arm_name, seed, day, p14, s32, val, new4)
 
 
 def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:

@@ -30,7 +30,6 @@ from .groups import JointData
 __all__ = [
     "JointFit",
     "FamilyProblem",
-    "fit_joint",
     "unit_scale",
     "shared_names",
     "SHAREABLE",
@@ -309,19 +308,6 @@ def _known(known: Mapping[tuple[str, str, float | None], float], d: str, name: s
         return None
     ks, vs = zip(*pts, strict=True)
     return float(np.interp(knot, ks, vs))
-
-
-def fit_joint(
-    spec: FamilySpec,
-    data: JointData,
-    shared: tuple[str, ...] = (),
-    known: Mapping[tuple[str, str, float | None], float] | None = None,
-) -> JointFit:
-    """Fit ``spec`` to both directions of ``data``'s joint at once (``shared``: terms with one value
-    for both), starting from ``known`` values where given. Never raises for a bad fit
-    (``identifiable=False``)."""
-    prob = FamilyProblem(spec, data, shared)
-    return prob.fit(prob.initial(known))
 
 
 def full_rank(jac: FloatArray) -> bool:

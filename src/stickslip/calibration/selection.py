@@ -328,75 +328,110 @@ def select_joint(
     progress: Progress | None = None,
 ) -> JointSelection:
     """Fit every identifiable family (separate and with shared terms) to both directions of one joint,
-    cross-validate each over regions of the load space, and average them (or fit the one asked for).
+    cross-validate each on held-out poses, and average them (or fit the one asked for).
 
     ``candidates`` names families, ``"name+shared"`` for the shared variant. With ``average``
     (the default when no candidates are named) the families are averaged with
     :func:`averaging_weights` and the paper's form as the prior's favourite; the average
-    is replaced by the paper's form when it predicts held-out regions worse.
+    is replaced by the paper's form when it predicts held-out poses worse.
     """
-    joint = data.joint
     if average is None:
         average = candidates is None
     if data.n_rows() > SELECTION_ROWS:
         return _select_on_sample(data, candidates, average, progress)
-    n_poses = data.n_poses
-    poses = {d: data.poses_of(d) for d in data.dirs}
-    variants: list[tuple[FamilySpec, tuple[str, ...]]] = []
-    if candidates is None:
-        for spec in families_for(joint):
-            variants.append((spec, ()))
-            sh = shared_names(spec)
-            if sh and len(data.dirs) == 2:
-                variants.append((spec, sh))
-    else:
-        for c in candidates:
-            name, _, tail = c.partition("+")
-            spec = family_spec(joint, name)
-            variants.append((spec, shared_names(spec) if tail == "shared" and len(data.dirs) == 2 else ()))
-    design = cv_folds(data.coords, workspace_coordinates(joint))
-    folds, n_folds = design.folds, design.n_folds
-    ids = np.concatenate([folds[data.pose[d]] for d in data.dirs]) if n_folds else np.empty(0, dtype=np.int64)
-    scores: list[CVScore] = []
-    fits: dict[str, JointFit] = {}
-    cv_errors: dict[str, NDArray[np.float64]] = {}
+    variants = _variants(data.joint, len(data.dirs), candidates)
+    design = cv_folds(data.coords, workspace_coordinates(data.joint))
+    ev = _Evidence(data, design.folds, design.n_folds)
     known: dict[tuple[str, str, float | None], float] = {}
     for step, (spec, sh) in enumerate(variants):
         if progress is not None:
-            progress(step / len(variants), f"joint {joint}: {spec.name}{'+shared' if sh else ''}")
+            progress(step / len(variants), f"joint {data.joint}: {spec.name}{'+shared' if sh else ''}")
+        fit = ev.score(spec, sh, candidates is None, known)
+        if fit is not None and spec.name == "paper" and not sh:  # where the other families start
+            known = {(d, n, None if k is None else round(k, 9)): float(v)
+                     for d in data.dirs for (n, k), v in zip(spec.names, fit.values[d], strict=True)}
+    if progress is not None:
+        progress(1.0, f"joint {data.joint}: weighing")
+    return _decide(ev, average)
+
+
+def _variants(joint: int, n_dirs: int, candidates: Sequence[str] | None) -> list[tuple[FamilySpec, tuple[str, ...]]]:
+    """The families to fit (every one of ``joint``, or those named) and the terms each shares."""
+    out: list[tuple[FamilySpec, tuple[str, ...]]] = []
+    if candidates is None:
+        for spec in families_for(joint):
+            out.append((spec, ()))
+            sh = shared_names(spec)
+            if sh and n_dirs == 2:
+                out.append((spec, sh))
+        return out
+    for c in candidates:
+        name, _, tail = c.partition("+")
+        spec = family_spec(joint, name)
+        out.append((spec, shared_names(spec) if tail == "shared" and n_dirs == 2 else ()))
+    return out
+
+
+class _Evidence:
+    """What the cross-validation of one joint's families found: each family's score, fit and held-out errors."""
+
+    def __init__(self, data: JointData, folds: NDArray[np.int64], n_folds: int) -> None:
+        self.data, self.folds, self.n_folds = data, folds, n_folds
+        self.poses = {d: data.poses_of(d) for d in data.dirs}
+        cv = n_folds >= 2
+        self.ids = np.concatenate([folds[data.pose[d]] for d in data.dirs]) if cv else np.empty(0, dtype=np.int64)
+        dist = held_out_distances(data.coords, folds) if cv else np.empty(0)
+        self.row_dist = np.concatenate([dist[data.pose[d]] for d in data.dirs]) if cv else np.empty(0)
+        self.scores: list[CVScore] = []
+        self.fits: dict[str, JointFit] = {}
+        self.cv_errors: dict[str, NDArray[np.float64]] = {}
+
+    def score(self, spec: FamilySpec, sh: tuple[str, ...], strict: bool,
+              known: dict[tuple[str, str, float | None], float]) -> JointFit | None:
+        """Fit and cross-validate one family; its fit if it is identifiable. ``strict``: at least two poses
+        per parameter of a direction (a shared one counts half): fewer, and a family fits the poses it has
+        and swings between them (a family asked for by name needs one more pose than parameters)."""
+        dirs = self.data.dirs
         label = spec.name + ("+shared" if sh else "")
         own = sum(1 for n, _ in spec.names if n not in sh)
         n_sh = spec.n_params - own
-        # at least two poses per parameter of a direction (a shared one counts half): fewer, and a
-        # family fits the poses it has and swings between them
-        need = math.ceil(2 * (own + n_sh / max(len(data.dirs), 1))) if candidates is None else own + 1
-        short = [d for d in data.dirs if poses[d] < need] if spec.name != "constant" else []
-        p_total = own * len(data.dirs) + n_sh
+        need = math.ceil(2 * (own + n_sh / max(len(dirs), 1))) if strict else own + 1
+        short = [d for d in dirs if self.poses[d] < need] if spec.name != "constant" else []
+        p_total = own * len(dirs) + n_sh
         if short:
-            scores.append(CVScore(label, p_total, f"too few poses in {', '.join(short)} (needs {need})", math.nan,
-                                  math.nan, math.nan))
-            continue
-        prob = FamilyProblem(spec, data, sh)
+            why = f"too few poses in {', '.join(short)} (needs {need})"
+            self.scores.append(CVScore(label, p_total, why, math.nan, math.nan, math.nan))
+            return None
+        prob = FamilyProblem(spec, self.data, sh)
         fit = prob.fit(prob.initial(known))
         if not fit.identifiable:
-            scores.append(CVScore(label, p_total, "not identifiable from these poses", math.nan, math.nan, fit.rms))
-            continue
-        fits[label] = fit
-        if spec.name == "paper" and not sh:
-            known = {(d, n, None if k is None else round(k, 9)): float(v)
-                     for d in data.dirs for (n, k), v in zip(spec.names, fit.values[d], strict=True)}
-        e = _cross_validate(prob, fit, folds, n_folds) if n_folds >= 2 else np.empty(0)
+            self.scores.append(CVScore(label, p_total, "not identifiable from these poses", math.nan, math.nan,
+                                       fit.rms))
+            return None
+        self.fits[label] = fit
+        e = _cross_validate(prob, fit, self.folds, self.n_folds) if self.n_folds >= 2 else np.empty(0)
         rms, mx = _stats(e)
         status = "ok" if np.isfinite(rms) else (
-            "not identifiable without one of the regions" if n_folds >= 2 else "not cross-validated")
+            "not identifiable without one of the folds" if self.n_folds >= 2 else "not cross-validated")
         if status == "ok":
-            cv_errors[label] = e
-        scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
-    if progress is not None:
-        progress(1.0, f"joint {joint}: weighing")
-    dist = held_out_distances(data.coords, folds) if n_folds >= 2 else np.empty(0)
-    row_dist = np.concatenate([dist[data.pose[d]] for d in data.dirs]) if n_folds >= 2 else np.empty(0)
-    return _decide(joint, row_dist, scores, fits, cv_errors, ids, n_folds, n_poses, average)
+            self.cv_errors[label] = e
+        self.scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
+        return fit
+
+    def residuals(self, mix: Mapping[str, float]) -> NDArray[np.float64]:
+        """The relative residuals of the weighted mixture ``mix`` of fits (traverses in direction order)."""
+        return sum((w * np.concatenate(list(self.fits[lab].residuals.values())) for lab, w in mix.items()),
+                   np.zeros(self.data.n_rows()))
+
+    def chosen(self, mix: dict[str, float], e: NDArray[np.float64], reason: str,
+               fallback: bool = False) -> JointSelection:
+        """The selection of the mixture ``mix`` (one family: weight 1) whose held-out errors are ``e``."""
+        floor, slope = error_model(e, self.row_dist, self.residuals(mix))
+        top = max(mix, key=lambda k: mix[k])
+        members = {lab: (w, self.fits[lab]) for lab, w in mix.items()} if len(mix) > 1 else {}
+        scores = [dataclasses.replace(sc, weight=mix.get(sc.family, 0.0)) for sc in self.scores]
+        return JointSelection(self.fits[top], scores, reason, members, e, fallback, self.n_folds, floor, slope,
+                              self.row_dist)
 
 
 def _select_on_sample(
@@ -429,67 +464,53 @@ def _select_on_sample(
     )
 
 
-def _decide(
-    joint: int,
-    row_dist: NDArray[np.float64],
-    scores: list[CVScore],
-    fits: dict[str, JointFit],
-    cv_errors: dict[str, NDArray[np.float64]],
-    ids: NDArray[np.int64],
-    n_folds: int,
-    n_poses: int,
-    average: bool,
-) -> JointSelection:
-    where = f"{n_folds} folds of {n_poses} poses"
+def _decide(ev: _Evidence, average: bool) -> JointSelection:
+    """The average (or the paper's form where it predicted held-out poses worse), the best family, or
+    without cross-validation the simplest one that fits."""
+    where = f"{ev.n_folds} folds of {ev.data.n_poses} poses"
+    cv = ev.cv_errors
+    if len(cv) > 1 and average:
+        return _average(ev, where)
+    if cv:
+        lab = min(cv, key=lambda k: (_stats(cv[k])[0], ev.fits[k].n_params))
+        rms, mx = _stats(cv[lab])
+        return ev.chosen({lab: 1.0}, cv[lab],
+                         f"{lab}: held-out poses predicted with RMS {rms * 100:.2g} %, max {mx * 100:.2g} % ({where})")
+    if ev.fits:
+        name = min(ev.fits, key=lambda k: ev.fits[k].n_params)
+        reason = f"{ev.data.n_poses} pose(s): the simplest identifiable family, not cross-validated"
+        scores = [dataclasses.replace(sc, weight=1.0 if sc.family == name else 0.0) for sc in ev.scores]
+        return JointSelection(ev.fits[name], scores, reason, {}, np.empty(0), False, 0)
+    raise CalibrationError(f"joint {ev.data.joint}: no model family can be fitted to these traverses")
 
-    def weighted(label_weights: dict[str, float]) -> list[CVScore]:
-        return [dataclasses.replace(sc, weight=label_weights.get(sc.family, 0.0)) for sc in scores]
 
-    def residuals(mix: Mapping[str, float]) -> NDArray[np.float64]:
-        return sum((w * np.concatenate(list(fits[lab].residuals.values())) for lab, w in mix.items()),
-                   np.zeros(sum(r.size for r in next(iter(fits.values())).residuals.values())))
-
-    def chosen(mix: dict[str, float], e: NDArray[np.float64], reason: str, fallback: bool = False) -> JointSelection:
-        floor, slope = error_model(e, row_dist, residuals(mix))
-        top = max(mix, key=lambda k: mix[k])
-        members = {lab: (w, fits[lab]) for lab, w in mix.items()} if len(mix) > 1 else {}
-        return JointSelection(fits[top], weighted(mix), reason, members, e, fallback, n_folds, floor, slope, row_dist)
-
-    if len(cv_errors) > 1 and average:
-        prior = _paper_prior(list(cv_errors))
-        mix = averaging_weights(cv_errors, ids, prior=prior)
-        honest = _honest_mixture(cv_errors, ids, prior)
-        m_rms, m_max = _stats(honest)
-        paper = min((lab for lab in cv_errors if lab.partition("+")[0] == "paper"),
-                    key=lambda lab: _stats(cv_errors[lab])[0], default=None)
-        if paper is not None and set(mix) != {paper}:
-            p_rms, p_max = _stats(cv_errors[paper])
-            if m_rms > p_rms or m_max > p_max:
-                return chosen({paper: 1.0}, cv_errors[paper], (
-                    f"the paper's form: the average of the families predicted held-out poses worse "
-                    f"(RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} %) than the paper's form alone "
-                    f"(RMS {p_rms * 100:.2g} %, max {p_max * 100:.2g} %; {where})"
-                ), fallback=True)
-        if len(mix) == 1:
-            top = next(iter(mix))
-            return chosen(mix, honest, f"{top}: the held-out poses weigh it alone (pseudo-BMA+); CV of the "
-                          f"procedure: RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})")
-        parts = ", ".join(f"{lab} {w:.2f}" for lab, w in sorted(mix.items(), key=lambda kv: -kv[1]))
-        return chosen(mix, honest, (
-            f"average of {len(mix)} families weighted by how they predicted held-out poses "
-            f"(pseudo-BMA+, half the prior on the paper's form: {parts}); CV of the average: "
-            f"RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})"
-        ))
-    if cv_errors:
-        lab = min(cv_errors, key=lambda k: (_stats(cv_errors[k])[0], fits[k].n_params))
-        rms, mx = _stats(cv_errors[lab])
-        return chosen({lab: 1.0}, cv_errors[lab],
-                      f"{lab}: held-out poses predicted with RMS {rms * 100:.2g} %, max {mx * 100:.2g} % ({where})")
-    if fits:
-        name = min(fits, key=lambda k: fits[k].n_params)
-        reason = f"{n_poses} pose(s): the simplest identifiable family, not cross-validated"
-        return JointSelection(fits[name], weighted({name: 1.0}), reason, {}, np.empty(0), False, 0)
-    raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
+def _average(ev: _Evidence, where: str) -> JointSelection:
+    """The families averaged, unless the average predicted held-out poses worse than the paper's form."""
+    cv = ev.cv_errors
+    prior = _paper_prior(list(cv))
+    mix = averaging_weights(cv, ev.ids, prior=prior)
+    honest = _honest_mixture(cv, ev.ids, prior)
+    m_rms, m_max = _stats(honest)
+    paper = min((lab for lab in cv if lab.partition("+")[0] == "paper"), key=lambda lab: _stats(cv[lab])[0],
+                default=None)
+    if paper is not None and set(mix) != {paper}:
+        p_rms, p_max = _stats(cv[paper])
+        if m_rms > p_rms or m_max > p_max:
+            return ev.chosen({paper: 1.0}, cv[paper], (
+                f"the paper's form: the average of the families predicted held-out poses worse "
+                f"(RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} %) than the paper's form alone "
+                f"(RMS {p_rms * 100:.2g} %, max {p_max * 100:.2g} %; {where})"
+            ), fallback=True)
+    if len(mix) == 1:
+        top = next(iter(mix))
+        return ev.chosen(mix, honest, f"{top}: the held-out poses weigh it alone (pseudo-BMA+); CV of the "
+                         f"procedure: RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})")
+    parts = ", ".join(f"{lab} {w:.2f}" for lab, w in sorted(mix.items(), key=lambda kv: -kv[1]))
+    return ev.chosen(mix, honest, (
+        f"average of {len(mix)} families weighted by how they predicted held-out poses "
+        f"(pseudo-BMA+, half the prior on the paper's form: {parts}); CV of the average: "
+        f"RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})"
+    ))
 
 
 # ----------------------------------------------------------------------------- calibration
@@ -507,31 +528,63 @@ def calibrate_families(
 
     The calibration records, per joint and direction, the family (or average), the
     covariance of its (heaviest) family's parameters, the CV error of every family
-    (``selection``) and the relative model error ``sigma_model`` (the RMS of the held-out
-    errors of the model returned, or its fit RMS when it could not be cross-validated) that
-    prediction intervals and the tracking filter's prior use.
+    (``selection``), the error model of its intervals (``predictive``) and the relative
+    model error ``sigma_model`` (that model's RMS over new poses of the workspace, or the
+    fit's RMS when it could not be cross-validated).
     """
     groups = group_traverses(traverses)
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
-    models: dict[tuple[int, str], FamilyModel] = {}
-    stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
-    cov: dict[tuple[int, str], NDArray[np.float64]] = {}
-    sigma: dict[tuple[int, str], float] = {}
-    selection: dict[tuple[int, str], dict[str, object]] = {}
-    predictive: dict[tuple[int, str], Predictive] = {}
-    notes: list[str] = []
+    parts = _Parts()
     joints = groups.joints
     for n, j in enumerate(joints):
-        data = groups.joint_data(j)
-        candidates = None if model == "auto" else [model]
 
         def part(frac: float, what: str, n: int = n) -> None:
             if progress is not None:
                 progress((n + frac) / len(joints), what)
 
-        sel = select_joint(data, candidates, progress=part)
-        fit = sel.fit
+        data = groups.joint_data(j)
+        parts.add(data, select_joint(data, None if model == "auto" else [model], progress=part))
+    for (j, d), m in parts.models.items():
+        try:
+            m.check_physical()
+        except ValueError as e:
+            parts.notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
+    consts = {k: _constant_step(k[0], k[1], m) for k, m in parts.models.items()}
+    labels = {
+        j: (f"average of {len(parts.models[(j, d)].members)}, mostly " if parts.models[(j, d)].members else "")
+        + str(parts.selection[(j, d)]["chosen"])
+        for (j, d) in parts.selection
+    }
+    method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
+    prov = provenance if provenance is not None else Provenance.of(groups.traverses, source, len(groups), ())
+    prov = dataclasses.replace(prov, notes=(*prov.notes, *parts.notes))
+    cal = Calibration(dict(parts.models), parts.stderr, consts, _day_of(groups.traverses, day), method, prov)
+    cal.covariance.update(parts.cov)
+    cal.sigma_model.update(parts.sigma)
+    cal.selection.update(parts.selection)
+    cal.predictive.update(parts.predictive)
+    for key in parts.predictive:  # the model error at new poses: the interval's RMS over the workspace
+        cal.sigma_model[key] = workspace_sigma(cal, *key)
+        parts.selection[key]["sigma_workspace"] = cal.sigma_model[key]
+    return cal
+
+
+class _Parts:
+    """A family calibration's pieces, joint by joint and direction by direction."""
+
+    def __init__(self) -> None:
+        self.models: dict[tuple[int, str], FamilyModel] = {}
+        self.stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
+        self.cov: dict[tuple[int, str], NDArray[np.float64]] = {}
+        self.sigma: dict[tuple[int, str], float] = {}
+        self.selection: dict[tuple[int, str], dict[str, object]] = {}
+        self.predictive: dict[tuple[int, str], Predictive] = {}
+        self.notes: list[str] = []
+
+    def add(self, data: JointData, sel: JointSelection) -> None:
+        """The models, uncertainties and selection record of one joint's directions."""
+        j, fit = data.joint, sel.fit
         sig = sel.cv_rms if np.isfinite(sel.cv_rms) else fit.rms
         ranked = sorted(sel.mixture.items(), key=lambda kv: -kv[1][0])
         cross_validated = sel.n_folds >= 2 and math.isfinite(sel.floor) and math.isfinite(sel.slope)
@@ -542,21 +595,16 @@ def calibrate_families(
                 (w, FamilyParams(f.spec.name, j, tuple(float(v) for v in f.values[d]))) for _, (w, f) in ranked
             )
             averaged = len(members) > 1
-            models[(j, d)] = FamilyModel(
-                j, d, params,
-                members=members if averaged else (),
-                member_labels=tuple(lab for lab, _ in ranked) if averaged else (),
-            )
+            self.models[(j, d)] = FamilyModel(j, d, params, members=members if averaged else (),
+                                              member_labels=tuple(lab for lab, _ in ranked) if averaged else ())
             if cross_validated:
-                predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept)
+                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept)
             c = fit.cov[d]
             if c is not None:
-                cov[(j, d)] = c
-                stderr[(j, d)] = np.sqrt(np.clip(np.diag(c), 0.0, None))
-            else:
-                stderr[(j, d)] = None
-            sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
-            selection[(j, d)] = {
+                self.cov[(j, d)] = c
+            self.stderr[(j, d)] = None if c is None else np.sqrt(np.clip(np.diag(c), 0.0, None))
+            self.sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
+            self.selection[(j, d)] = {
                 "chosen": fit.label, "shared": list(fit.shared), "reason": sel.reason,
                 "scores": [s.as_dict() for s in sel.scores],
                 "weights": {lab: w for lab, (w, _) in sel.mixture.items()} if len(sel.mixture) > 1
@@ -565,30 +613,7 @@ def calibrate_families(
                 "folds": sel.n_folds,
                 "cv_rms": sel.cv_rms if math.isfinite(sel.cv_rms) else None,
             }
-        notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
-    for (j, d), m in models.items():
-        try:
-            m.check_physical()
-        except ValueError as e:
-            notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
-    consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    labels = {
-        j: (f"average of {len(models[(j, d)].members)}, mostly " if models[(j, d)].members else "")
-        + str(selection[(j, d)]["chosen"])
-        for (j, d) in selection
-    }
-    method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
-    prov = provenance if provenance is not None else Provenance.of(groups.traverses, source, len(groups), ())
-    prov = dataclasses.replace(prov, notes=(*prov.notes, *notes))
-    cal = Calibration(dict(models), stderr, consts, _day_of(groups.traverses, day), method, prov)
-    cal.covariance.update(cov)
-    cal.sigma_model.update(sigma)
-    cal.selection.update(selection)
-    cal.predictive.update(predictive)
-    for key in predictive:  # the model error at new poses: the interval's RMS over the workspace
-        cal.sigma_model[key] = workspace_sigma(cal, *key)
-        selection[key]["sigma_workspace"] = cal.sigma_model[key]
-    return cal
+        self.notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
 
 
 MAX_STORED_POSES = 400

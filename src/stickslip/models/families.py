@@ -440,46 +440,61 @@ def average_and_jacobian(
     parameter of (F3).
     """
     v = np.asarray(values, dtype=float)
-    names = spec.names
     if basis.kind == "prismatic":
-        f = basis.feats
-        assert f is not None
-        idx = {name: i for i, (name, _) in enumerate(names)}
+        return _prismatic_average_and_jacobian(spec, v, basis)
+    return _rotary_average_and_jacobian(spec, v, basis)
 
-        def val(name: str) -> float:
-            return float(v[idx[name]]) if name in idx else 0.0
 
-        ac = f.abs_cos_q2
-        eta = 1.0 - val("b") * ac - val("b2") * ac**2
-        den = 1.0 + val("k") * f.X if "k" in idx else np.ones_like(f.L)
-        lam = f.L / den
-        c_eff = val("c") + val("m") * ac
-        core = val("a") - c_eff * lam - val("e") * lam**2 - val("f") * f.X - val("h") * f.Y
-        g = eta * core
-        jac = np.empty((g.size, len(names)))
-        for i, (name, _) in enumerate(names):
-            if name == "a":
-                jac[:, i] = eta
-            elif name == "b":
-                jac[:, i] = -ac * core
-            elif name == "b2":
-                jac[:, i] = -(ac**2) * core
-            elif name == "c":
-                jac[:, i] = -eta * lam
-            elif name == "m":
-                jac[:, i] = -eta * ac * lam
-            elif name == "e":
-                jac[:, i] = -eta * lam**2
-            elif name == "f":
-                jac[:, i] = -eta * f.X
-            elif name == "h":
-                jac[:, i] = -eta * f.Y
-            elif name == "k":
-                jac[:, i] = eta * (c_eff + 2.0 * val("e") * lam) * lam * f.X / den
-            else:  # pragma: no cover - every prismatic name is above
-                raise KeyError(name)
-        ok = g > 0.0
-        return np.where(ok, g, np.nan), jac
+def _prismatic_average_and_jacobian(
+    spec: FamilySpec, v: NDArray[np.float64], basis: FitBasis
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(F1), (F2), (F4), (F5) at the poses and their derivatives (the step is the traverse's average)."""
+    names = spec.names
+    f = basis.feats
+    assert f is not None
+    idx = {name: i for i, (name, _) in enumerate(names)}
+
+    def val(name: str) -> float:
+        return float(v[idx[name]]) if name in idx else 0.0
+
+    ac = f.abs_cos_q2
+    eta = 1.0 - val("b") * ac - val("b2") * ac**2
+    den = 1.0 + val("k") * f.X if "k" in idx else np.ones_like(f.L)
+    lam = f.L / den
+    c_eff = val("c") + val("m") * ac
+    core = val("a") - c_eff * lam - val("e") * lam**2 - val("f") * f.X - val("h") * f.Y
+    g = eta * core
+    jac = np.empty((g.size, len(names)))
+    for i, (name, _) in enumerate(names):
+        if name == "a":
+            jac[:, i] = eta
+        elif name == "b":
+            jac[:, i] = -ac * core
+        elif name == "b2":
+            jac[:, i] = -(ac**2) * core
+        elif name == "c":
+            jac[:, i] = -eta * lam
+        elif name == "m":
+            jac[:, i] = -eta * ac * lam
+        elif name == "e":
+            jac[:, i] = -eta * lam**2
+        elif name == "f":
+            jac[:, i] = -eta * f.X
+        elif name == "h":
+            jac[:, i] = -eta * f.Y
+        elif name == "k":
+            jac[:, i] = eta * (c_eff + 2.0 * val("e") * lam) * lam * f.X / den
+        else:  # pragma: no cover - every prismatic name is above
+            raise KeyError(name)
+    ok = g > 0.0
+    return np.where(ok, g, np.nan), jac
+
+
+def _rotary_average_and_jacobian(
+    spec: FamilySpec, v: NDArray[np.float64], basis: FitBasis
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(F3)'s harmonic mean along each traverse and its derivatives (``g`` is linear in every parameter)."""
+    names = spec.names
     q3, T, R, P = _req(basis.q3), _req(basis.T), _req(basis.R), _req(basis.P)
     groups: dict[str, list[tuple[int, float | None]]] = {}
     for i, (name, knot) in enumerate(names):
