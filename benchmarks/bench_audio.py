@@ -43,9 +43,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector, confirming
-from stickslip.audio.detector import StopDetector, Tuning
+from stickslip.audio.detector import Tuning, detector_for
 from stickslip.audio.tuning import tune, tune_band
-from stickslip.audio.tuningfile import STEP_RATE_TOLERANCE
+from stickslip.audio.tuningfile import TUNING_FILE
 from stickslip.sim.sound import render_traverse_recording
 
 TOL_S = 0.025
@@ -142,7 +142,7 @@ def make_recordings() -> tuple[dict[int, Tuning], list[Recording]]:
 
 
 def run_ours(tuning: Tuning, rec: Recording) -> list[tuple[float, float]]:
-    det = StopDetector(tuning)
+    det = detector_for(tuning)
     out = []
     x = rec.samples
     for i in range(0, x.size, BLOCK):
@@ -175,10 +175,10 @@ def realtime(tuning: Tuning) -> None:
     for block in (128, 512, 1024, 4096, 1 << 16):
         lat = []
         for y, stop_at in recs:
-            det = StopDetector(tuning)
+            det = detector_for(tuning)
             ev = [e for i in range(0, y.size, block) for e in det.feed(y[i : i + block])]
             lat += [e.detected_at_s - stop_at for e in ev[:1]]
-        det = StopDetector(tuning)
+        det = detector_for(tuning)
         t = time.perf_counter()
         for i in range(0, long_y.size, block):
             det.feed(long_y[i : i + block])
@@ -352,16 +352,16 @@ def false_alarms_per_hour(
             rate = (950.0 + 100.0 * ((i * 0.618) % 1.0)) if in_spec else (900.0 + 360.0 * ((i * 0.618) % 1.0))
             y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
             per.setdefault(name, [0.0, 0.0, 0.0, 0.0])
-            det = confirming(StopDetector(tu), confirm_s, step_clock, late=late)
+            det = confirming(detector_for(tu), confirm_s, step_clock, late=late)
             confirmed = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
             for e in confirmed:
                 if e.found_late:
                     print(f"      late event: {name}, seed {seed0 + i}, rate {rate:.0f} Hz, at {e.detected_at_s:.2f} s")
             per[name][0] += len(confirmed)
-            per[name][1] += len(StopDetector(tu).feed(y))
+            per[name][1] += len(detector_for(tu).feed(y))
             per[name][2] += piece_s
             per[name][3] += bool(confirmed)  # a traverse ends at its first event: the pieces a traverse fails in
-            near = tu.step_rate_problem(rate) is None  # within the tuning's step-rate warning (STEP_RATE_TOLERANCE)
+            near = tu.step_rate_problem(rate) is None  # within the tuning's step-rate warning (step_rate_tolerance)
             spec[near][0] += 1
             spec[near][1] += bool(confirmed)
         total = sum(v[0] for v in per.values())
@@ -375,7 +375,8 @@ def false_alarms_per_hour(
             f"{pieces:.0f} of {n} pieces had one or more (a traverse stops at the first)"
         )
         print(
-            f"    pieces at a step rate within {100 * STEP_RATE_TOLERANCE:.0f} % of the tuning's: {spec[True][1]} of "
+            f"    pieces at a step rate within {100 * TUNING_FILE.step_rate_tolerance:.0f} % of the tuning's: "
+            f"{spec[True][1]} of "
             f"{spec[True][0]} had one or more; beyond it (traverse and listen warn): "
             f"{spec[False][1]} of {spec[False][0]}"
         )
@@ -423,8 +424,8 @@ def true_stops_under_talk(seeds: int = 5, step_clock: bool = False, late: bool =
             for s_ in range(seeds):
                 y, _ = render(Scene(joint, 1080.0 + 20 * s_, 20.0, 22.5, seed=300 + 10 * k + s_, **kw))  # type: ignore[arg-type]
                 dets = (
-                    ("unconfirmed", StopDetector(tu)),
-                    ("confirmed", confirming(StopDetector(tu), step_clock=step_clock, late=late)),
+                    ("unconfirmed", detector_for(tu)),
+                    ("confirmed", confirming(detector_for(tu), step_clock=step_clock, late=late)),
                 )
                 for name, det in dets:
                     ev = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
@@ -542,7 +543,7 @@ def onset_errors(draws: int = 60, clear_draws: int = 200, late: bool = False) ->
             if tu is None:
                 c["refused by tune"] += 1
                 continue
-            det = ConfirmedStopDetector(StopDetector(tu), late=late)
+            det = ConfirmedStopDetector(detector_for(tu), late=late)
             ev = det.feed(y) + det.finish()
             if ev and ev[0].found_late:
                 c["found late"] = c.get("found late", 0) + 1

@@ -48,7 +48,7 @@ import drive_sound as dv  # noqa: E402
 import modal_sound as md  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
-from stickslip.audio.detector import StopDetector, Tuning  # noqa: E402
+from stickslip.audio.detector import Tuning, detector_for  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
 
 SR = 48_000
@@ -104,7 +104,7 @@ def cases(which: str) -> Iterator[Case]:
 
 def outcome(tu: Tuning, y: np.ndarray, stop_s: float | None) -> str:
     """The first confirmed event, counted: right / flagged / early / late / missed, or fired (stop_s None)."""
-    det = ConfirmedStopDetector(StopDetector(tu))
+    det = ConfirmedStopDetector(detector_for(tu))
     events = det.feed(np.asarray(y, dtype=np.float32)) + det.finish()
     if not events:
         return "missed"

@@ -52,11 +52,11 @@ def _traverse(joint: int, switch: str, listen_fraction: float) -> tuple[float, f
     sim = SimulatedMM3A(seed=1, day=DAY)
     sim.set_pose(q2=-math.pi / 2, q3=0.0, theta=0.0, psi=0.0)
     if switch == "audio":
-        from stickslip.audio.detector import StopDetector
+        from stickslip.audio.detector import detector_for
         from stickslip.audio.tuning import tune
 
         samples, rate, stop_at = sim.labelled_recording(joint, "+")
-        detector = StopDetector(tune(samples, rate, stop_at, joint=joint))
+        detector = detector_for(tune(samples, rate, stop_at, joint=joint))
         mic = sim.microphone()
     else:
         detector = OracleStopDetector(sim, joint, delay_s=0.02)

@@ -133,7 +133,7 @@ CONDITIONS = [
         known_failure="a rise in sub-bands the tuning saw fall: only drops are interference-proof; a rise the "
         "tuning never saw cannot be told from a new sound in the room without the steps' synchrony, which needs "
         "0.24 s of the stop (deviate 18.9), past the 50 ms latency budget; over the last 40 ms the synchronous level "
-        "rises 26.1 dB, and a voice's harmonic on a step line gives up to 27 dB in 1 h of stepping (docs/audio.md, "
+        "rises 26.1 dB, and a voice's harmonic on a step line gives up to 27 dB in 1 h of stepping (docs/audio-log.md, "
         "'a synchronous average over the last 30-50 ms'); the late path (round 12a) finds it 0.56 s after the stop, "
         "its onset 3 ms late: it fails the latency alone",
     ),
@@ -153,7 +153,7 @@ CONDITIONS = [
         "threshold must stay above the stepping's own slow fluctuation (6 robust SDs: joint Q gets 1.0 spread); the "
         "step clock's lines see it in 0.24 s (deviate 19.2), past the 50 ms latency budget; over the last 40 ms its "
         "synchronous level rises 29.2 dB in one sub-band, adding -11 dB of the stepping's line power, and a voice's "
-        "harmonic on a step line adds up to +1.2 dB in 1 h of stepping (docs/audio.md, 'a synchronous average over "
+        "harmonic on a step line adds up to +1.2 dB in 1 h of stepping (docs/audio-log.md, 'a synchronous average over "
         "the last 30-50 ms'); the late path (round 12a) finds it 0.56 s after the stop, its onset 3 ms late: it "
         "fails the latency alone",
     ),

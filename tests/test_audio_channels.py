@@ -21,9 +21,9 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from stickslip.audio.guard import QUIET_RAILS, block_problem, step_line_db  # noqa: E402
+from stickslip.audio.features.stepclock import step_rate_hz  # noqa: E402
 from stickslip.audio.sources import AudioSourceError, channel_problem, read_wav, wav_blocks  # noqa: E402
-from stickslip.audio.stepclock import step_rate_hz  # noqa: E402
+from stickslip.audio.sources.guard import GUARD, block_problem, step_line_db  # noqa: E402
 from stickslip.cli import app  # noqa: E402
 
 runner = CliRunner()
@@ -57,9 +57,10 @@ def test_sixteen_bit_silence_toggling_its_last_bit_is_silence_not_clipping() -> 
     toggling = lsb * np.where(np.random.default_rng(1).random(4096) < 0.5, 1.0, -1.0)
     assert block_problem(toggling) == "silence: only the converter's last bits toggle"
     assert block_problem(np.clip(np.random.default_rng(2).standard_normal(4096), -0.05, 0.05)) == "clipping"
-    # the boundary: rails just above QUIET_RAILS are a clipped sound, just below the converter's last bits
-    assert block_problem(1.01 * QUIET_RAILS * np.sign(toggling)) == "clipping"
-    assert block_problem(0.99 * QUIET_RAILS * np.sign(toggling)) == "silence: only the converter's last bits toggle"
+    # the boundary: rails just above GUARD.quiet_rails are a clipped sound, just below the converter's last bits
+    assert block_problem(1.01 * GUARD.quiet_rails * np.sign(toggling)) == "clipping"
+    quiet = block_problem(0.99 * GUARD.quiet_rails * np.sign(toggling))
+    assert quiet == "silence: only the converter's last bits toggle"
 
 
 def test_channels_in_opposite_polarity_are_named_with_the_channel_to_read(files: Path) -> None:

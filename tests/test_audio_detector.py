@@ -10,11 +10,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stickslip.audio.detector import (
-    StopDetector,
     Tuning,
     TuningFileError,
     band_levels_db,
     detect,
+    detector_for,
 )
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
@@ -108,7 +108,7 @@ def test_stream_time_offset():
 def test_block_sizes_do_not_change_the_events(sizes):
     x = _quiet_then((0.3, 0.0), (0.2, 0.1), (0.4, 0.0), (0.2, 0.1), (0.1, 0.0))
     reference = detect(x, TUNING, block=x.size)
-    det, events, i, k = StopDetector(TUNING), [], 0, 0
+    det, events, i, k = detector_for(TUNING), [], 0, 0
     while i < x.size:
         n = sizes[k % len(sizes)]
         events += det.feed(x[i : i + n])
@@ -118,7 +118,7 @@ def test_block_sizes_do_not_change_the_events(sizes):
 
 def test_reset_forgets_state():
     x = _quiet_then((0.3, 0.0), (0.3, 0.1))
-    det = StopDetector(TUNING)
+    det = detector_for(TUNING)
     assert len(det.feed(x)) == 1 and det.latched
     det.reset(10.0)
     assert not det.latched
@@ -130,7 +130,7 @@ def test_latency_estimate_without_measurement():
     """Untuned: onset lag + hold (6 hops of 128 samples at 48 kHz = 16 ms)."""
     t = Tuning(band_hz=BAND, threshold_db=-40.0, onset_lag_s=0.003)
     assert t.hold_frames == 6
-    assert StopDetector(t).latency_s == pytest.approx(0.003 + 6 * 128 / SR)
+    assert detector_for(t).latency_s == pytest.approx(0.003 + 6 * 128 / SR)
 
 
 def test_tuning_round_trip(tmp_path):
@@ -198,7 +198,7 @@ def test_for_sample_rate_keeps_durations():
 
 def test_feed_rejects_stereo():
     with pytest.raises(ValueError, match="mono"):
-        StopDetector(TUNING).feed(np.zeros((100, 2)))
+        detector_for(TUNING).feed(np.zeros((100, 2)))
 
 
 def test_plot_levels_draws_threshold_and_event():
@@ -233,7 +233,7 @@ def _template_case():
 def test_template_detector_events_do_not_depend_on_block_sizes(sizes):
     tuning, x = _template_case()
     reference = detect(x, tuning)
-    det, events, i, k = StopDetector(tuning), [], 0, 0
+    det, events, i, k = detector_for(tuning), [], 0, 0
     while i < x.size:
         n = sizes[k % len(sizes)]
         events += det.feed(x[i : i + n])

@@ -14,7 +14,7 @@ detector. What it found:
   stop that silences them has; the continuum alone called stepping a stop at 950, 1000 and
   1050 Hz, the confirmed count silently 1.5 s short, while the line levels gave the stop
   b -0.08 to 0.05. The continuum's verdict now needs the levels not to deny it
-  (``template.START_CONTINUUM_LEVELS_B``).
+  (``StartParams.continuum_levels_b``).
 
 Outcomes as a traverse counts them: the confirmed first event's onset within 25 ms is
 *right*; flagged ``onset_uncertain`` a refusal (measure again); more than 25 ms off without
@@ -32,7 +32,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from stickslip.audio.confirm import ConfirmedStopDetector
-from stickslip.audio.detector import StopDetector
+from stickslip.audio.detector import detector_for
 from stickslip.audio.tuning import TuningError, tune
 from stickslip.audio.tuningfile import Tuning
 
@@ -43,7 +43,7 @@ TOL_S = 0.025
 
 
 def _events(tu: Tuning, y: np.ndarray) -> list[tuple[float, bool]]:
-    det = ConfirmedStopDetector(StopDetector(tu))
+    det = ConfirmedStopDetector(detector_for(tu))
     return [(e.onset_s, e.onset_uncertain) for e in det.feed(np.asarray(y, dtype=np.float32)) + det.finish()]
 
 

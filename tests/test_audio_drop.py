@@ -9,8 +9,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stickslip.audio.change.drops import DropMeter, DropParams
 from stickslip.audio.detector import Tuning, TuningFileError
-from stickslip.audio.template import DROP_FRAMES, DropMeter
+
+DROP_FRAMES = DropParams().frames
 
 
 def test_the_average_follows_a_step_after_drop_frames() -> None:

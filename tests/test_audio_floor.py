@@ -1,4 +1,4 @@
-"""Round 2 of issue 10: what interference cannot fake, fed to the detector as sub-band levels by hand.
+"""What interference cannot fake, fed to the change detector as sub-band levels by hand.
 
 A second view of the detector, below the sound: the levels of four sub-bands are written
 frame by frame (stepping: the tuning's levels plus a 0.3 dB wobble), so each case states
@@ -13,14 +13,18 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stickslip.audio.change import ChangeState
+from stickslip.audio.change.template import TEMPLATE
+from stickslip.audio.change.tuned import TunedTemplate
 from stickslip.audio.detector import Tuning
-from stickslip.audio.template import CHUNK, FLOOR_CHUNKS, TemplateState
+
+CHUNK, FLOOR_CHUNKS = TEMPLATE.chunk, TEMPLATE.floor_chunks
 
 STEPPING = np.array([-40.0, -42.0, -45.0, -50.0])
 SIGNATURE = np.array([-3.0, 12.0, -2.0, -1.0])
 
 
-def _state() -> TemplateState:
+def _state() -> ChangeState:
     edges = (1000.0, 2000.0, 4000.0, 8000.0, 12000.0)
     tu = Tuning(
         band_hz=(edges[0], edges[-1]),
@@ -33,10 +37,10 @@ def _state() -> TemplateState:
         trim=1,
         drop_threshold=(0.6, 1.5),
     )
-    return TemplateState(tu.template_params())
+    return ChangeState(TunedTemplate.from_tuning(tu, CHUNK))
 
 
-def _run(parts: list[tuple[int, np.ndarray]], seed: int = 0) -> tuple[list[int], TemplateState]:
+def _run(parts: list[tuple[int, np.ndarray]], seed: int = 0) -> tuple[list[int], ChangeState]:
     """Feed (frames, offset dB per sub-band) parts in order; the frames (0-based) at which the detector fired."""
     rng = np.random.default_rng(seed)
     v = np.concatenate([STEPPING + off + rng.normal(0.0, 0.3, (n, 4)) for n, off in parts])
@@ -85,8 +89,8 @@ def test_the_pause_after_a_word_is_not_a_drop(chunks: int, lift_db: float, seed:
     voice = np.array([lift_db, 0.0, lift_db, lift_db])
     fired, st_ = _run([(8 * CHUNK, np.zeros(4)), (chunks * CHUNK, voice), (4 * CHUNK, np.zeros(4))], seed)
     assert fired == []
-    assert st_.floor is not None and st_.template is not None
-    np.testing.assert_array_less(st_.floor, st_.template + 1e-9)  # the floor is never above the template
+    assert st_.tpl.floor is not None and st_.tpl.template is not None
+    np.testing.assert_array_less(st_.tpl.floor, st_.tpl.template + 1e-9)  # the floor is never above the template
 
 
 def test_a_quieter_stop_after_a_voice_is_still_heard() -> None:
@@ -106,7 +110,7 @@ def test_a_voice_while_the_template_is_learned_does_not_switch_the_drop_check_of
     "informative" bar, and a voice in the stop's own sub-band then fired on its own.
     """
     rng = np.random.default_rng(seed)
-    warm = _state().p.warmup_chunks * CHUNK
+    warm = _state().warm_frames
     lowered = np.array([1.0, 0.0, 1.0, 1.0])  # the sub-bands the stop lowers wobble while the template is learned
     v = np.concatenate(
         [
@@ -133,5 +137,5 @@ def test_a_voice_loud_enough_to_relearn_the_template_leaves_the_floor_at_the_ste
     for seed in (3, 12, 23):
         fired, st_ = _run([(8 * CHUNK, np.zeros(4)), (2 * CHUNK, voice), (4 * CHUNK, np.zeros(4))], seed)
         assert fired == []
-        assert st_.floor is not None
-        np.testing.assert_allclose(st_.floor, STEPPING, atol=1.0)
+        assert st_.tpl.floor is not None
+        np.testing.assert_allclose(st_.tpl.floor, STEPPING, atol=1.0)

@@ -1,4 +1,4 @@
-"""The self-check's interference (stickslip.audio.inject) at any sample rate a sound card offers."""
+"""The self-check's interference (stickslip.audio.tuning.inject) at any sample rate a sound card offers."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stickslip.audio.inject import babble, click_train, knocks
 from stickslip.audio.tuning import tune
+from stickslip.audio.tuning.inject import babble, click_train, knocks
 from stickslip.sim.sound import render_traverse_recording
 
 RATES = [4000, 8000, 11_025, 16_000, 22_050, 44_100, 48_000, 96_000, 192_000]

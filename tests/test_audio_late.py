@@ -1,4 +1,4 @@
-"""The late path (round 12a, stickslip.audio.late): stops the fast path never hears, found on the step clock.
+"""The late path (round 12a, stickslip.audio.confirm.late): stops the fast path never hears, found on the step clock.
 
 What is pinned:
 
@@ -27,9 +27,10 @@ from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from stickslip.audio.change import TemplateDetector  # noqa: E402
 from stickslip.audio.confirm import ConfirmedStopDetector, confirming  # noqa: E402
-from stickslip.audio.detector import StopDetector, StopEvent, Tuning, detect  # noqa: E402
-from stickslip.audio.late import LatePath, _rate_moved, onset_change_point  # noqa: E402
+from stickslip.audio.confirm.late import LatePath, onset_change_point, rate_moved  # noqa: E402
+from stickslip.audio.detector import StopEvent, Tuning, detect, detector_for  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
@@ -126,7 +127,7 @@ def test_a_late_stop_swallows_the_fast_paths_later_fire_on_it() -> None:
     train, test = TARGETS["trained quieter, test louder"]
     tu = _tuned(train)
     y = render(variant(test, dur=5.0))[0]
-    det = ConfirmedStopDetector(StopDetector(tu), late=True)
+    det = ConfirmedStopDetector(detector_for(tu), late=True)
     ev = det.feed(y) + det.finish()
     assert len(ev) == 1 and ev[0].found_late
     assert det.late is not None and det.late.latched  # the stop goes on: the late path holds
@@ -147,7 +148,7 @@ def test_no_late_event_on_long_stepping_under_talk(joint: str, kw: dict[str, obj
         pytest.skip("espeak-ng is not installed (apt-get install espeak-ng); the babble cases stand in")
     tu = _tuned(P if joint == "P" else Q)
     y = render(Scene(joint, 1040.0, None, 40.0, seed=777, **kw))[0]  # type: ignore[arg-type]
-    det = ConfirmedStopDetector(StopDetector(tu), late=True)
+    det = ConfirmedStopDetector(detector_for(tu), late=True)
     ev = det.feed(y) + det.finish()
     assert not [e for e in ev if e.found_late], det.late.log if det.late else None
 
@@ -158,25 +159,25 @@ def test_no_late_event_on_a_drifting_step_clock(joint: str, dur: float) -> None:
     does not move it (the hour bench's 60 s pieces fired here before the rule)."""
     tu = _tuned(P if joint == "P" else Q)
     y = render(Scene(joint, 1050.0, None, dur, seed=33, drift=0.1))[0]
-    det = ConfirmedStopDetector(StopDetector(tu), late=True)
+    det = ConfirmedStopDetector(detector_for(tu), late=True)
     ev = det.feed(y) + det.finish()
     assert not [e for e in ev if e.found_late]
     assert det.late is not None and any("the step rate moved" in j.verdict for j in det.late.log)
 
 
 def test_the_rate_moved_against_the_nearest_simple_ratio() -> None:
-    assert _rate_moved(1000.0, 1000.9) == pytest.approx(0.0009)
-    assert _rate_moved(1000.0, 2001.0) == pytest.approx(0.0005)  # heard at twice the rate: the same clock
-    assert _rate_moved(1080.0, 360.0) == pytest.approx(0.0, abs=1e-12)
-    assert _rate_moved(1000.0, 1250.0) == pytest.approx(0.1667, abs=1e-3)  # 5/4 is no simple ratio here: 1.5 x 0.833
-    assert _rate_moved(float("nan"), 1000.0) == float("inf")
+    assert rate_moved(1000.0, 1000.9) == pytest.approx(0.0009)
+    assert rate_moved(1000.0, 2001.0) == pytest.approx(0.0005)  # heard at twice the rate: the same clock
+    assert rate_moved(1080.0, 360.0) == pytest.approx(0.0, abs=1e-12)
+    assert rate_moved(1000.0, 1250.0) == pytest.approx(0.1667, abs=1e-3)  # 5/4 is no simple ratio here: 1.5 x 0.833
+    assert rate_moved(float("nan"), 1000.0) == float("inf")
 
 
 def test_off_by_default_and_only_with_confirmation() -> None:
     tu = _tuned(P)
-    det = confirming(StopDetector(tu))
+    det = confirming(detector_for(tu))
     assert isinstance(det, ConfirmedStopDetector) and det.late is None
-    assert confirming(StopDetector(tu), 0.0, late=True).__class__ is StopDetector
+    assert confirming(detector_for(tu), 0.0, late=True).__class__ is TemplateDetector
 
 
 def test_onset_change_point_finds_a_step_in_the_lines() -> None:

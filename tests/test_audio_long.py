@@ -12,7 +12,7 @@ import pytest
 from battery_sound import Scene, render  # noqa: E402
 
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
-from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
+from stickslip.audio.detector import Tuning, detect, detector_for  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
@@ -30,10 +30,10 @@ def _tuning(joint: str) -> Tuning:
 @pytest.mark.parametrize("joint", ["P", "Q"])
 def test_two_minutes_of_stepping_with_drift_knocks_fan_and_a_door_raise_no_alarm(joint: str) -> None:
     y, sr = render(Scene(joint, 1080.0, None, 120.0, seed=90, drift=0.1, knocks_every_s=1.0, fan=True, door_at=40.0))
-    det = StopDetector(_tuning(joint))
+    det = detector_for(_tuning(joint))
     events = [e for i in range(0, y.size, 4096) for e in det.feed(y[i : i + 4096])]
     assert events == []
-    assert det.levels_seen == (y.size - det.tuning.frame) // det.tuning.hop + 1  # every frame was heard
+    assert det.frames_seen == (y.size - det.tuning.frame) // det.tuning.hop + 1  # every frame was heard
 
 
 def test_two_minutes_of_babble_over_joint_q_raise_no_alarm() -> None:
@@ -44,5 +44,5 @@ def test_two_minutes_of_babble_over_joint_q_raise_no_alarm() -> None:
     must show were capped at 3 spreads per sub-band; docs/audio.md.
     """
     y, sr = render(Scene("Q", 1080.0, None, 120.0, seed=91, speech="babble"))
-    assert StopDetector(_tuning("Q")).feed(y) == []
+    assert detector_for(_tuning("Q")).feed(y) == []
     assert detect(y, _tuning("Q"), block=4096, confirm_s=CONFIRM_S) == []

@@ -4,7 +4,7 @@ The stop changes the stepping's own sound only. Where a second instrument, a fan
 radio lifted the template above the stepping's level (the floor), the stop moves the
 template's level by less than its tuned signature: ``10 log10(1 + w (g - 1))`` dB, with
 ``w`` the stepping's share of the template's power and ``g`` the stop's gain on it
-(:func:`stickslip.audio.template.masked_signature`). Fitted with the tuned signature, the
+(:func:`stickslip.audio.change.fit.masked_signature`). Fitted with the tuned signature, the
 battery's joint P under a second instrument ringing where the stop's largest drop is was
 heard 0.56 s late (by the late path alone); fitted masked, 21 ms after the stop.
 """
@@ -19,10 +19,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.signal import butter, sosfilt
 
-from stickslip.audio import template as T  # noqa: E402
+from stickslip.audio.change import ChangeParams  # noqa: E402
+from stickslip.audio.change.fit import masked_signature  # noqa: E402
+from stickslip.audio.change.template import TemplateParams  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
-from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
-from stickslip.audio.template import masked_signature  # noqa: E402
+from stickslip.audio.detector import Tuning, detect, detector_for  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
@@ -86,34 +87,34 @@ def test_the_template_knows_what_the_second_instrument_added() -> None:
     own 4.8-6 kHz sub-band 4.2 dB, under 2 of this stream's spreads there (2.2 dB): no mask.
     """
     tu, y, _ = _second_instrument()
-    det = StopDetector(tu)
-    st_ = det._template
+    det = detector_for(tu)
+    st_ = det.state
     assert st_ is not None
     det.feed(y[: int(0.75 * 48_000)])
-    assert st_.added_db is None  # stepping alone so far
+    assert st_.tpl.added_db is None  # stepping alone so far
     det.feed(y[int(0.75 * 48_000) : int(1.58 * 48_000)])
-    assert st_.added_db is not None
-    lifted = np.flatnonzero(st_.added_db > 0)
+    assert st_.tpl.added_db is not None
+    lifted = np.flatnonzero(st_.tpl.added_db > 0)
     assert {4, 5} <= set(lifted.tolist())  # 1.9-2.4 and 2.4-3 kHz
-    assert st_.added_db[5] > 6.0 and st_.added_db[4] > 3.0
+    assert st_.tpl.added_db[5] > 6.0 and st_.tpl.added_db[4] > 3.0
     biggest_drop = int(np.argmin(st_.delta))
     assert biggest_drop == 4 and st_.delta[4] == pytest.approx(-5.1, abs=0.5)
-    assert st_._pred_delta is not None  # the rate heard (1080 Hz) is 8 % off the tuning's: predicted too
-    shown = masked_signature(st_._pred_delta, st_.added_db)
-    assert st_._pred_delta[4] < -7.0 and -3.0 < shown[4] < -1.0
-    untouched = st_.added_db == 0
-    assert shown[untouched] == pytest.approx(st_._pred_delta[untouched])
+    assert st_.fits.pred_delta is not None  # the rate heard (1080 Hz) is 8 % off the tuning's: predicted too
+    shown = masked_signature(st_.fits.pred_delta, st_.tpl.added_db)
+    assert st_.fits.pred_delta[4] < -7.0 and -3.0 < shown[4] < -1.0
+    untouched = st_.tpl.added_db == 0
+    assert shown[untouched] == pytest.approx(st_.fits.pred_delta[untouched])
 
 
-def test_a_stop_under_an_instrument_begun_0_8_s_before_it_is_heard_on_time(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_stop_under_an_instrument_begun_0_8_s_before_it_is_heard_on_time() -> None:
     tu, y, _ = _second_instrument()
     events = detect(y, tu, block=1024, confirm_s=CONFIRM_S)
     assert len(events) == 1
     assert abs(events[0].onset_s - 1.6) <= 0.025 and events[0].detected_at_s - 1.6 <= 0.050
     assert not events[0].onset_uncertain
-    # the tuned signature alone (as before session 29) does not hear it within the latency budget
-    monkeypatch.setattr(T, "MASK_ADDED", None)
-    before = detect(y, tu, block=1024, confirm_s=CONFIRM_S)
+    # the tuned signature alone (nothing masked) does not hear it within the latency budget
+    unmasked = ChangeParams(template=TemplateParams(mask_added=None))
+    before = detect(y, tu, block=1024, confirm_s=CONFIRM_S, change=unmasked)
     assert not [e for e in before if abs(e.onset_s - 1.6) <= 0.025 and e.detected_at_s - 1.6 <= 0.050]
 
 
@@ -127,17 +128,17 @@ def test_a_drifting_step_clock_is_not_taken_for_added_sound() -> None:
     x, sr = render(P)
     tu = tune(x, sr, 2.0, seed=0)
     y = render(variant(P, seed=816465, stop_at=1.4, dur=2.0, rate=1027.5544669906046, drift=-0.1))[0]
-    det = StopDetector(tu)
-    st_ = det._template
+    det = detector_for(tu)
+    st_ = det.state
     assert st_ is not None
     masked_at = []
     for i in range(0, int(1.38 * sr), 1024):
         det.feed(y[i : i + 1024])
-        if st_.added_db is not None:
+        if st_.tpl.added_db is not None:
             masked_at.append((i + 1024) / sr)
         if (i + 1024) / sr >= 1.15:
-            assert st_.template is not None and st_.floor is not None
-            assert st_.added_db is None and np.max(st_.template - st_.floor) > 6.0
+            assert st_.tpl.template is not None and st_.tpl.floor is not None
+            assert st_.tpl.added_db is None and np.max(st_.tpl.template - st_.tpl.floor) > 6.0
     assert masked_at and max(masked_at) < 1.15
     events = detect(y, tu, block=1024, confirm_s=CONFIRM_S)
     assert events and abs(events[0].onset_s - 1.4) <= 0.025 and not events[0].onset_uncertain
@@ -172,11 +173,11 @@ def test_a_whine_begun_before_the_stop_in_its_band_never_makes_a_count_silently_
     x = ms.render(ms.Scene(arm, "louder", stop_at=stop, dur=stop + 0.8, seed=1))
     rms = float(np.sqrt(np.mean(x[: int(stop * sr)] ** 2)))
     y = (x + _whine(x.size, sr, fc, stop - 0.8, np.random.default_rng(1000 * arm + 1), rms)).astype(np.float32)
-    sd = StopDetector(tu)
+    sd = detector_for(tu)
     det = ConfirmedStopDetector(sd)
     ev = det.feed(y[: int((stop - 0.02) * sr)])
-    assert sd._template is not None
-    added = sd._template.added_db
+    assert sd.state is not None
+    added = sd.state.tpl.added_db
     if arm in (1, 3, 5):  # the whine lifts the stop's sub-band 4.5-13 spreads over the floor: taken for added sound
         assert added is not None and added[b] > 0.0
     else:  # under 2 spreads on these arms: nothing masked, the tuned fit as before

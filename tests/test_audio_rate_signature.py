@@ -4,7 +4,7 @@ A tuning learns the stop's line-level signature at one step rate; at another the
 clock's lines sample the arm's narrow modes elsewhere and the signature moves
 (docs/audio.md, "Another step rate than the tuning's"). ``tune`` now stores the training
 recording's fine continuum spectra, and the detector predicts the signature at the rate
-it hears (``stickslip.audio.rate_signature``) and fits each frame on both.
+it hears (``stickslip.audio.features.fine``) and fits each frame on both.
 
 The recordings come from generators the detector was not tuned to: the fifth
 (``arrival_sound``: an arm whose contact point wanders), the sixth (``beam_sound``: a
@@ -30,10 +30,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stickslip.audio.change import TemplateDetector
+from stickslip.audio.change.rate import RATE
 from stickslip.audio.confirm import ConfirmedStopDetector
-from stickslip.audio.detector import StopDetector, StopEvent
-from stickslip.audio.rate_signature import RATE_MIN_CHANGE, RATE_WINDOW, SignaturePredictor, fine_spectrum_db
-from stickslip.audio.template import subband_edges, subband_levels_db
+from stickslip.audio.detector import StopEvent, detector_for
+from stickslip.audio.features.fine import SignaturePredictor, fine_spectrum_db
+from stickslip.audio.features.spectra import subband_edges, subband_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 
@@ -66,8 +68,8 @@ def _recording(gen: str, arm: int, kind: str, rate: float) -> tuple[np.ndarray, 
     return np.asarray(md.render(md.Scene(arm, kind, stop_at=2.0, dur=3.0, rate=rate, seed=int(rate)))), 2.0
 
 
-def _events(tu: Tuning, y: np.ndarray) -> tuple[list[StopEvent], StopDetector]:
-    sd = StopDetector(tu)
+def _events(tu: Tuning, y: np.ndarray) -> tuple[list[StopEvent], TemplateDetector]:
+    sd = detector_for(tu)
     det = ConfirmedStopDetector(sd)
     return det.feed(np.asarray(y, dtype=np.float32)) + det.finish(), sd
 
@@ -95,8 +97,8 @@ def test_a_stop_the_tuned_signature_misses_at_another_rate_is_heard(
     assert before == [], [(e.onset_s, e.onset_uncertain) for e in before]  # the tuned signature alone: missed
     after, sd = _events(tu, y)
     assert after, "missed"
-    assert sd._template is not None
-    (end, heard, used), *_ = sd._template.rate_log
+    assert sd.state is not None
+    (end, heard, used), *_ = sd.state.fits.rate_log
     assert used and abs(heard / rate - 1.0) < 0.01  # heard in the warm-up, within 1 % of the true rate
     if expected == "right":
         assert not after[0].onset_uncertain and abs(after[0].onset_s - stop) <= 0.025, after[0]
@@ -115,31 +117,31 @@ def test_stepping_alone_does_not_fire_with_the_second_fit() -> None:
 
 def test_at_the_tunings_own_rate_the_prediction_is_the_tuned_signature() -> None:
     tu = _tuning("arrival", 2, "damped")
-    sd = StopDetector(tu)
-    assert sd._template is not None and tu.step_rate_hz is not None
-    pred = sd._template.predictor()
+    sd = detector_for(tu)
+    assert sd.state is not None and tu.step_rate_hz is not None
+    pred = sd.state.predictor()
     delta = np.asarray(tu.signature_db)
     assert np.array_equal(pred.predict(tu.step_rate_hz), delta)
     # a rate a millionth off moves the highest line by a hundredth of a hertz: the prediction moves by far less than
     # the signature's rounding in the file (0.001 dB)
     for rel in (-1e-6, 1e-6):
         assert np.max(np.abs(pred.predict(tu.step_rate_hz * (1 + rel)) - delta)) < 1e-3
-    # and at the tuning's rate (within RATE_MIN_CHANGE) the detector fits the tuned signature alone
+    # and at the tuning's rate (within RATE.min_change) the detector fits the tuned signature alone
     y, _ = _recording("arrival", 2, "damped", 1000.0)
     _, sd = _events(tu, y)
-    assert sd._template is not None
-    (_, heard, used), *_ = sd._template.rate_log
-    assert abs(heard / tu.step_rate_hz - 1) <= RATE_MIN_CHANGE and not used
+    assert sd.state is not None
+    (_, heard, used), *_ = sd.state.fits.rate_log
+    assert abs(heard / tu.step_rate_hz - 1) <= RATE.min_change and not used
 
 
 def test_a_rate_outside_the_window_fits_the_tuned_signature_alone() -> None:
     """A multiple of the rate heard (or a joint at another rate altogether) is no rate to predict at."""
     tu = _tuning("arrival", 2, "damped")
-    for rate in (1000.0 * (1 + RATE_WINDOW) * 1.05, 1000.0 * (1 - RATE_WINDOW) * 0.95):
+    for rate in (1000.0 * (1 + RATE.window) * 1.05, 1000.0 * (1 - RATE.window) * 0.95):
         y, _ = _recording("arrival", 2, "damped", rate)
         _, sd = _events(tu, y[: int(0.5 * SR)])
-        assert sd._template is not None
-        (_, heard, used), *_ = sd._template.rate_log
+        assert sd.state is not None
+        (_, heard, used), *_ = sd.state.fits.rate_log
         assert abs(heard / rate - 1.0) < 0.01 and not used, (rate, heard)
 
 
@@ -203,12 +205,12 @@ def test_an_old_tuning_file_loads_and_detects_exactly_as_before(tmp_path: Path) 
     for rate, (events, evidence_sum) in pinned.items():
         y, _ = _recording("arrival", 2, "damped", rate)
         got, sd = _events(old, y)
-        assert sd._template is not None and not sd._template.predicts and sd._template.rate_log == []
+        assert sd.state is not None and not sd.state.fits.predicts and sd.state.fits.rate_log == []
         assert len(got) == len(events)
         for e, (onset, detected, uncertain) in zip(got, events, strict=True):
             assert e.onset_s == pytest.approx(onset, abs=1e-9) and e.detected_at_s == pytest.approx(detected, abs=1e-9)
             assert e.onset_uncertain == uncertain
-        plain = StopDetector(old)
+        plain = detector_for(old)
         plain.evidence = []
         plain.feed(np.asarray(y, dtype=np.float32))
         margins = np.asarray(plain.evidence)
@@ -233,7 +235,7 @@ def _lines_levels_db(c_db: np.ndarray, f0: float, df: float, rate: float, edges:
 @given(
     seed=st.integers(0, 2**32 - 1),
     rate0=st.floats(600.0, 1400.0),
-    rel=st.floats(-RATE_WINDOW, RATE_WINDOW),
+    rel=st.floats(-RATE.window, RATE.window),
     gain_db=st.floats(-30.0, 30.0),
 )
 def test_the_prediction_is_the_change_of_the_lines_levels(seed: int, rate0: float, rel: float, gain_db: float) -> None:

@@ -1,5 +1,5 @@
 """Recordings that earlier rounds pinned a mechanism on, heard with round 11a's second fit (the signature predicted at
-the heard step rate, ``stickslip.audio.rate_signature``).
+the heard step rate, ``stickslip.audio.features.fine``).
 
 The tests that pin those mechanisms (round 9a's onset taken back, a slow climb flagged) run on the tuned signature
 alone (``tuned_alone``); here the same recordings with the tuning as ``tune`` makes it now: on time, unflagged, without
@@ -25,8 +25,8 @@ def test_the_strongest_reverberation_is_on_time_without_being_taken_back() -> No
     tu = on._arrival_tuning(2, "damped")
     ev, det = on._first(tu, ar.render(on._strongest_room()))
     assert ev is not None and not ev.onset_uncertain and abs(ev.onset_s - 2.375) <= TOL_S, ev
-    assert det.retime_log == [] and det.onset_log == []
-    assert det.inner._template is not None and det.inner._template.rate_log[0][2]  # the prediction was fitted
+    assert det.log.retime == [] and det.log.onset == []
+    assert det.inner.state is not None and det.inner.state.fits.rate_log[0][2]  # the prediction was fitted
 
 
 @pytest.mark.slow
@@ -35,7 +35,7 @@ def test_arm_8s_shifted_stop_is_on_time_without_being_taken_back() -> None:
     assert s.stop_at is not None
     ev, det = on._first(sh._arrival_tuning(8), ar.render(s))
     assert ev is not None and not ev.onset_uncertain and abs(ev.onset_s - s.stop_at) <= TOL_S, ev
-    assert det.retime_log == []
+    assert det.log.retime == []
 
 
 def test_beam_1s_slow_climb_is_heard_on_time() -> None:
@@ -56,5 +56,5 @@ def test_the_second_fit_does_not_depend_on_the_block_size(block: int) -> None:
         (sh._beam_tuning(1), bm.render(sh._beam_draws(1, 3)[2])),
     ):
         ref, det = on.whole_and_in_blocks(tu, np.asarray(x, dtype=np.float32), block)
-        assert ref.inner._template is not None and det.inner._template is not None
-        assert det.inner._template.rate_log == ref.inner._template.rate_log and ref.inner._template.rate_log[0][2]
+        assert ref.inner.state is not None and det.inner.state is not None
+        assert det.inner.state.fits.rate_log == ref.inner.state.fits.rate_log and ref.inner.state.fits.rate_log[0][2]

@@ -27,8 +27,8 @@ from shaped_sound import Arm, render
 
 from stickslip.audio.confirm import CONFIRM_S
 from stickslip.audio.detector import detect
-from stickslip.audio.inject import bursts, shaped_noise
 from stickslip.audio.tuning import tune
+from stickslip.audio.tuning.inject import bursts, shaped_noise
 from stickslip.audio.tuningfile import Tuning
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

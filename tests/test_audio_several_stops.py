@@ -26,9 +26,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
+from stickslip.audio.change.release import RELEASE, Release  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
-from stickslip.audio.detector import StopDetector, detect  # noqa: E402
-from stickslip.audio.template import RELEASE_SHARE, Release  # noqa: E402
+from stickslip.audio.detector import detect, detector_for  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
@@ -157,10 +157,10 @@ def test_sessions_whose_rate_changes_between_traverses_are_never_silently_wrong(
 def test_a_session_s_events_do_not_depend_on_block_sizes() -> None:
     y, _ = _session("battery P", [0.05, 0.3], [1000.0, 1010.0, 990.0], seed=820)
     tu = _arm("battery P")[0]
-    ref = [(e.detected_at_s, round(e.onset_s, 9)) for e in StopDetector(tu).feed(y)]
+    ref = [(e.detected_at_s, round(e.onset_s, 9)) for e in detector_for(tu).feed(y)]
     assert len(ref) == 3
     for block in (128, 777, 4096):
-        det = StopDetector(tu)
+        det = detector_for(tu)
         ev = [e for i in range(0, y.size, block) for e in det.feed(y[i : i + block])]
         assert [(e.detected_at_s, round(e.onset_s, 9)) for e in ev] == ref
 
@@ -169,7 +169,7 @@ def test_release_needs_a_full_window_mostly_of_stepping() -> None:
     r = Release(20)
     assert not any(r.push(True) for _ in range(19))  # the window is not full yet
     assert r.push(True)
-    n_not = round(20 * (1 - RELEASE_SHARE))  # this many frames still like the stop release ...
+    n_not = round(20 * (1 - RELEASE.share))  # this many frames still like the stop release ...
     r.reset()
     assert [r.push(k >= n_not) for k in range(20)][-1]
     r.reset()  # ... one more does not
@@ -184,4 +184,4 @@ def test_release_agrees_with_counting_the_window_afresh(flags: list[bool], frame
     r = Release(frames)
     for i, stepping in enumerate(flags):
         w = flags[max(0, i + 1 - frames) : i + 1]
-        assert r.push(stepping) == (len(w) >= frames and sum(w) >= RELEASE_SHARE * len(w))
+        assert r.push(stepping) == (len(w) >= frames and sum(w) >= RELEASE.share * len(w))

@@ -30,8 +30,8 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from stickslip.audio.confirm import ConfirmedStopDetector
-from stickslip.audio.detector import StopDetector
-from stickslip.audio.tuning import DEFAULT_PER_OCTAVE, FINER_PER_OCTAVE, TuningError, tune
+from stickslip.audio.detector import detector_for
+from stickslip.audio.tuning import TuneParams, TuningError, tune
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 from test_audio_rate_signature import tuned_alone
 
@@ -43,7 +43,7 @@ TOL_S = 0.025
 
 def _outcome(tu: Tuning, y: np.ndarray, stop_at: float) -> tuple[str, list[float]]:
     """right / flagged / early / late / missed, and every event's onset less the stop, s."""
-    det = ConfirmedStopDetector(StopDetector(tu))
+    det = ConfirmedStopDetector(detector_for(tu))
     events = det.feed(np.asarray(y, dtype=np.float32)) + det.finish()
     onsets = [e.onset_s - stop_at for e in events]
     if not events:
@@ -109,11 +109,11 @@ def test_arm_4s_shifted_stop_is_tuned_and_heard() -> None:
     silently wrong. Measured on these 12: 7 right, 1 flagged, 4 missed."""
     tu = _arrival_tuning(4)
     res = _resolutions(tu)
-    assert [r["per_octave"] for r in res[:3]] == [DEFAULT_PER_OCTAVE, *FINER_PER_OCTAVE]
+    assert [r["per_octave"] for r in res[:3]] == [TuneParams().default_per_octave, *TuneParams().finer_per_octave]
     assert "refused" in res[0] and "refused" in res[1]  # 3 and 6 per octave: the stop changes too little
     assert res[-1]["range_db"] == 45.0 and res[-1]["margin"] == pytest.approx(tu.margin_db)
     assert (
-        tu.per_octave == DEFAULT_PER_OCTAVE and tu.edges_hz is not None and tu.edges_hz[-1] > 4500.0
+        tu.per_octave == TuneParams().default_per_octave and tu.edges_hz is not None and tu.edges_hz[-1] > 4500.0
     )  # past where the mode went
     c = _count(tu, _arrival_draws(4), ar.render)
     assert c["early"] == c["late"] == 0, c
@@ -128,7 +128,7 @@ def test_a_weakly_separated_shifted_stop_takes_finer_sub_bands(arm: int, chosen:
     tu = _arrival_tuning(arm)
     assert tu.per_octave == chosen
     margins = {r["per_octave"]: r["margin"] for r in _resolutions(tu)}
-    assert margins[chosen] >= margins[DEFAULT_PER_OCTAVE] + 0.2
+    assert margins[chosen] >= margins[TuneParams().default_per_octave] + 0.2
     c = _count(tu, _arrival_draws(arm), ar.render)
     assert c["early"] == c["late"] == 0, c
     assert c["right"] >= right_at_3, c  # measured 11 and 12
@@ -139,7 +139,7 @@ def test_a_strong_template_keeps_three_sub_bands_per_octave() -> None:
     explicit ``per_octave=3`` gives."""
     x = ar.render(ar.tuning_scene(ar.Arm(2, "shifted")))
     auto = tune(x, SR, 2.0)
-    assert [r["per_octave"] for r in _resolutions(auto)] == [DEFAULT_PER_OCTAVE]
+    assert [r["per_octave"] for r in _resolutions(auto)] == [TuneParams().default_per_octave]
     fixed = tune(x, SR, 2.0, per_octave=3)
     assert auto.edges_hz == fixed.edges_hz and auto.signature_db == fixed.signature_db
     assert auto.threshold_db == fixed.threshold_db and auto.per_octave == fixed.per_octave == 3.0
@@ -204,7 +204,7 @@ def test_the_pinned_tip_moves_the_audible_modes_up_a_few_per_cent(seed: int) -> 
 def test_the_stop_keeps_the_energy_and_changes_only_the_spectrum() -> None:
     """Beam 1: the stop's RMS is within 1 dB of the stepping's, while its spectrum moves (the power in 1/12-octave
     sub-bands changes by more than 6 dB somewhere)."""
-    from stickslip.audio.template import subband_edges, subband_levels_db
+    from stickslip.audio.features.spectra import subband_edges, subband_levels_db
 
     y = np.asarray(bm.render(bm.tuning_scene(bm.Beam(1))), dtype=np.float64)
     a, b = y[SR // 2 : int(1.9 * SR)], y[int(2.1 * SR) :]
@@ -264,7 +264,7 @@ def test_a_pinned_beam_is_heard(beam: int) -> None:
     round, as 3 per octave is kept for all of them: margins 0.86-0.95). Six of the ten here. Round 11a's second
     fit flagged one of beam 2's six; since round 12b's predicted drops it is on time again."""
     tu = _beam_tuning(beam)
-    assert tu.per_octave == DEFAULT_PER_OCTAVE
+    assert tu.per_octave == TuneParams().default_per_octave
     c = _count(tu, _beam_draws(beam, 6), bm.render)
     assert c["right"] == 6, c
 
@@ -278,7 +278,7 @@ def test_a_pinned_beam_is_heard(beam: int) -> None:
     ],
 )
 def test_beams_3_8_and_9_are_missed_sometimes_never_wrong(beam: int, measured: str) -> None:
-    """What is still missed (docs/audio.md, "A stop that only shifts the spectrum"): safe (a traverse times out),
+    """What is still missed (docs/audio-log.md, "A stop that only shifts the spectrum"): safe (a traverse times out),
     never silently wrong."""
     c = _count(_beam_tuning(beam), _beam_draws(beam, 10), bm.render)
     assert c["early"] == c["late"] == 0, (measured, c)

@@ -1,4 +1,4 @@
-"""The silent errors left by rounds 9a and 9b, each pinned (round 10a, docs/audio.md "Round 10a").
+"""The silent errors left by rounds 9a and 9b, each pinned (round 10a, docs/audio-log.md "Round 10a").
 
 * **A false "listening began at the stop"** (``TemplateState._started_at_stop``): in the
   fifth generator's strongest rooms (reverberation -10 to -9 dB, T60 0.22-0.3 s) at
@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 import test_audio_onset as on
 import test_audio_shifted as sh
-from stickslip.audio.detector import StopDetector, StopEvent
+from stickslip.audio.detector import StopEvent, detector_for
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
 
@@ -32,7 +32,7 @@ SR = 48_000
 
 def _heard_at_once(tu: Tuning, x: np.ndarray) -> list[StopEvent]:
     """The events of the first 0.6 s whose onset is the start of listening (the raw detector, no confirmation)."""
-    det = StopDetector(tu)
+    det = detector_for(tu)
     return [e for e in det.feed(np.asarray(x[: int(0.6 * SR)], dtype=np.float32)) if e.onset_s < 0.02]
 
 
@@ -64,7 +64,7 @@ def test_stepping_in_the_strongest_room_is_not_taken_for_a_stop_at_the_start() -
         x = ar.render(s)
         assert _heard_at_once(tu, x) == [], (arm, rate)
         ev, det = on._first(tu, x)
-        assert not on._silently_wrong(ev, s.stop_at), (arm, rate, ev, det.onset_log)
+        assert not on._silently_wrong(ev, s.stop_at), (arm, rate, ev, det.log.onset)
         outcomes.append(None if ev is None else round(1e3 * (ev.onset_s - s.stop_at)))
     assert [o is not None for o in outcomes] == [False, True, True, False, False], outcomes  # measured: 0 and 1 ms
 
@@ -80,7 +80,7 @@ def test_arm_6s_shifted_stop_is_not_heard_at_the_start_of_stepping_at_1038_hz() 
     x = ar.render(s)
     assert _heard_at_once(tu, x) == []
     ev, det = on._first(tu, x)
-    assert not on._silently_wrong(ev, s.stop_at), (ev, det.onset_log)
+    assert not on._silently_wrong(ev, s.stop_at), (ev, det.log.onset)
 
 
 @pytest.mark.slow
@@ -92,7 +92,7 @@ def test_arm_8s_shifted_stop_that_was_37_ms_late_is_taken_back_on_time() -> None
     assert s.stop_at is not None
     ev, det = on._first(tuned_alone(sh._arrival_tuning(8)), ar.render(s))
     assert ev is not None and not ev.onset_uncertain and abs(ev.onset_s - s.stop_at) <= TOL_S, ev
-    ((_, fired, taken),) = det.retime_log
+    ((_, fired, taken),) = det.log.retime
     assert fired - s.stop_at > TOL_S  # the crossing that fired was 37 ms late
     assert round(1e3 * (fired - taken)) == 43
 
@@ -133,7 +133,7 @@ def test_stepping_in_a_strong_room_never_fires_at_once(seed: int, t60_s: float, 
     strict=True,
     reason="measured (round 10a, a throwaway scan of 1000 draws at 800-1200 Hz): arm 2's damped stop at 1004 Hz in "
     "the strongest room (T60 0.26 s, -9.5 dB) crosses +25.3 ms late after a climb of 13 ms, under the 20 ms slow-rise "
-    "limit (confirm.ONSET_SLOW_S): the room's tail delays the crossing; unflagged, 0.3 ms beyond the tolerance",
+    "limit (OnsetParams.slow_s): the room's tail delays the crossing; unflagged, 0.3 ms beyond the tolerance",
 )
 def test_arm_2s_damped_stop_in_the_strongest_room_at_1004_hz_is_never_silently_wrong() -> None:
     arm, s = on._draw(np.random.default_rng(1764737161))
@@ -141,4 +141,4 @@ def test_arm_2s_damped_stop_in_the_strongest_room_at_1004_hz_is_never_silently_w
                     "rate": 1003.64385139928})  # fmt: skip
     assert arm == (2, "damped") and s.stop_at is not None
     ev, det = on._first(on._arrival_tuning(*arm), ar.render(s))
-    assert ev is not None and not on._silently_wrong(ev, s.stop_at), (ev, det.rise_log)
+    assert ev is not None and not on._silently_wrong(ev, s.stop_at), (ev, det.log.rise)

@@ -1,4 +1,4 @@
-"""The step clock as evidence at confirmation (stickslip.audio.stepclock, stickslip.audio.confirm).
+"""The step clock as evidence at confirmation (stickslip.audio.features.stepclock, stickslip.audio.confirm).
 
 Every sound a stepping joint makes is a train of clicks at the step rate, at the stop too;
 interference is not synchronous with it. The generators here are the battery's
@@ -27,16 +27,11 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.signal import butter, lfilter
 
-from stickslip.audio.confirm import (  # noqa: E402
-    MIN_SYNC_CHANGE_DB,
-    MIN_SYNC_SHARE,
-    MIN_SYNC_SHARPNESS,
-    MIN_SYNC_Z,
-    ConfirmedStopDetector,
-    step_clock_verdict,
-)
-from stickslip.audio.detector import StopDetector, StopEvent, Tuning  # noqa: E402
-from stickslip.audio.stepclock import (  # noqa: E402
+from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
+from stickslip.audio.confirm.sync import SYNC, step_clock_verdict  # noqa: E402
+from stickslip.audio.detector import StopEvent, Tuning, detector_for  # noqa: E402
+from stickslip.audio.events import StopDetector  # noqa: E402
+from stickslip.audio.features.stepclock import (  # noqa: E402
     LineChange,
     chi2_as_z,
     line_change,
@@ -136,7 +131,7 @@ def test_a_louder_stop_raises_the_synchronous_power_and_a_quieter_one_lowers_it(
         y, _ = render(variant(P, seed=5, stop_at=1.0, dur=2.0, rate=1080.0, stop_kind=kind))
         got = synchronous_change_db(y[SR - n - 3000 : SR - 3000], y[SR + 1000 : SR + 1000 + n], SR, [(4762.0, 6000.0)])
         assert got.rate_hz == pytest.approx(1080.0, rel=0.002)
-        assert got.share_before >= MIN_SYNC_SHARE and got.sharpness_before >= MIN_SYNC_SHARPNESS
+        assert got.share_before >= SYNC.min_share and got.sharpness_before >= SYNC.min_sharpness
         assert sign * got.change_db >= 3.0 and sign * got.change_z >= 10.0, (kind, got)
 
 
@@ -211,7 +206,7 @@ def _comb(kind: str, rate: float, seed: int, t: float) -> LineChange:
 def test_the_comb_sees_a_stop_in_any_direction(kind: str, rate: float, seed: int) -> None:
     """The stops of the battery's cross conditions (joint Q), which the level template misses when it was tuned on
     another kind: 0.24 s of the stop against the 0.48 s of stepping before it changes the lines by a deviate of 8 or
-    more, a verdict of "changed" (docs/audio.md, "A synchronous departure as a source of fires")."""
+    more, a verdict of "changed" (docs/audio-log.md, "A synchronous departure as a source of fires")."""
     got = _comb(kind, rate, seed, 2.0)
     assert got.change_z >= 8.0 and step_clock_verdict(got) is True, got
 
@@ -221,7 +216,7 @@ def test_stepping_before_the_stop_is_rarely_called_changed() -> None:
 
     It is a statistic, and it errs by chance: fresh draws of the property above (which asked it of every draw until
     session 26) found joint Q's stepping at 1165 Hz (seed 748) called "changed" (deviate 4.85, a line 2.6 dB), and at
-    1052 Hz (seed 391) a deviate of 4.18 that only the rule's second half (a line moved MIN_SYNC_CHANGE_DB) kept out.
+    1052 Hz (seed 391) a deviate of 4.18 that only the rule's second half (a line moved SYNC.min_change_db) kept out.
     Over 80 fixed draws (800-1300 Hz, the four kinds of stop) none is called "changed"; both draws are kept as found.
     """
     rng = np.random.default_rng(26)
@@ -234,7 +229,7 @@ def test_stepping_before_the_stop_is_rarely_called_changed() -> None:
             changed.append((kind, rate, seed, got))
     assert changed == [], changed
     near = _comb("brighter", 1051.9453125, 391, 1.7)
-    assert near.change_z >= MIN_SYNC_Z and abs(near.change_db) < MIN_SYNC_CHANGE_DB
+    assert near.change_z >= SYNC.min_z and abs(near.change_db) < SYNC.min_change_db
     assert step_clock_verdict(near) is not True
     chance = _comb("brighter", 1165.375, 748, 1.7)
     assert chance.change_z == pytest.approx(4.85, abs=0.01) and step_clock_verdict(chance) is True
@@ -275,8 +270,8 @@ def test_unsynchronised_sound_over_steady_steps_is_not_a_stop(kind: str, dur: fl
     unchanged), and the sound never becomes a stop with the clock on.
     """
     y = _splice(kind, dur, level_db, weaker=0.0)
-    assert _run(ConfirmedStopDetector(StopDetector(_tuning("P"))), y) == []
-    det = ConfirmedStopDetector(StopDetector(_tuning("P")), step_clock=True)
+    assert _run(ConfirmedStopDetector(detector_for(_tuning("P"))), y) == []
+    det = ConfirmedStopDetector(detector_for(_tuning("P")), step_clock=True)
     assert _run(det, y) == []
     n = int(0.48 * SR)
     i0 = int(1.5 * SR)
@@ -294,11 +289,11 @@ def test_a_run_of_weaker_steps_is_the_joints_own_sound_changing(kind: str, dur: 
     sub-bands); every line of the clock falls about 3 dB, a change of the joint's own sound the step clock cannot
     tell from a quieter stop, and it says so by confirming it."""
     y = _splice(kind, dur, 0.0)
-    (plain,) = _run(ConfirmedStopDetector(StopDetector(_tuning("P"))), y)
-    det = ConfirmedStopDetector(StopDetector(_tuning("P")), step_clock=True)
+    (plain,) = _run(ConfirmedStopDetector(detector_for(_tuning("P"))), y)
+    det = ConfirmedStopDetector(detector_for(_tuning("P")), step_clock=True)
     (ev,) = _run(det, y)
     assert ev.onset_s == plain.onset_s == pytest.approx(1.5, abs=0.06)
-    (_, got), *_ = det.step_clock_log
+    (_, got), *_ = det.log.step_clock
     assert step_clock_verdict(got) is True and got.change_z >= 10.0
     assert -8.0 <= got.change_db <= -2.0  # lines 3 dB down; a weak one more or less, within its noise
 
@@ -307,8 +302,8 @@ def test_a_run_of_weaker_steps_is_the_joints_own_sound_changing(kind: str, dur: 
 @given(block=st.integers(128, 65536))
 def test_the_step_clocks_verdict_does_not_depend_on_the_block_size(block: int) -> None:
     y = _handover_with_stop()
-    det = ConfirmedStopDetector(StopDetector(_tuning("P")), step_clock=True)
-    ref = ConfirmedStopDetector(StopDetector(_tuning("P")), step_clock=True)
+    det = ConfirmedStopDetector(detector_for(_tuning("P")), step_clock=True)
+    ref = ConfirmedStopDetector(detector_for(_tuning("P")), step_clock=True)
     got, want = _run(det, y, block), _run(ref, y, 4096)
     assert [(e.onset_s, e.detected_at_s, e.confirmed_at_s) for e in got] == [
         (e.onset_s, e.detected_at_s, e.confirmed_at_s) for e in want
@@ -316,10 +311,10 @@ def test_the_step_clocks_verdict_does_not_depend_on_the_block_size(block: int) -
     # the handover's fires, each persisting and each rejected by the clock (the template, frozen in every window,
     # does not get over the handover), then the stop, heard on un-latching inside the last window: uncertain
     assert len(got) == 1 and got[0].onset_uncertain and 10.0 < got[0].onset_s < 12.0
-    assert [t for t, _ in det.step_clock_log] == [t for t, _ in ref.step_clock_log]
-    assert [step_clock_verdict(g) for _, g in det.step_clock_log] == [False] * 5 + [True]
-    flat = [x for _, g in det.step_clock_log for x in g]
-    assert flat == pytest.approx([x for _, g in ref.step_clock_log for x in g], abs=1e-6)
+    assert [t for t, _ in det.log.step_clock] == [t for t, _ in ref.log.step_clock]
+    assert [step_clock_verdict(g) for _, g in det.log.step_clock] == [False] * 5 + [True]
+    flat = [x for _, g in det.log.step_clock for x in g]
+    assert flat == pytest.approx([x for _, g in ref.log.step_clock for x in g], abs=1e-6)
 
 
 def _handover(broad_db: float, mode_db: float, t1: float = 3.0, dur: float = 1.5, total: float = 6.0) -> np.ndarray:
@@ -349,12 +344,12 @@ def test_a_handover_of_unsynchronised_sounds_is_not_a_stop(broad_db: float, mode
     (under the 5 % it asks), so it gave no verdict and the handover stood on persistence.
     """
     y = _handover(broad_db, mode_db)
-    (plain,) = _run(ConfirmedStopDetector(StopDetector(_tuning("P"))), y)
+    (plain,) = _run(ConfirmedStopDetector(detector_for(_tuning("P"))), y)
     assert plain.onset_s == pytest.approx(3.0, abs=0.025)
-    det = ConfirmedStopDetector(StopDetector(_tuning("P")), step_clock=True)
+    det = ConfirmedStopDetector(detector_for(_tuning("P")), step_clock=True)
     assert _run(det, y) == []
-    assert det.step_clock_log
-    for _, got in det.step_clock_log:
+    assert det.log.step_clock
+    for _, got in det.log.step_clock:
         assert got.rate_hz == pytest.approx(1080.0, rel=0.005)
         assert step_clock_verdict(got) is False and got.change_z < 0.0 and got.change_db == 0.0, got
 
@@ -389,15 +384,15 @@ def test_a_true_stop_is_confirmed_with_the_step_clock_as_without(
     """
     s = variant(P if joint == "P" else Q, seed=seed, stop_at=2.0, dur=3.0, rate=rate, speech=talk)
     y, _ = render(s)
-    plain = _run(ConfirmedStopDetector(StopDetector(_tuning(joint))), y)
-    det = ConfirmedStopDetector(StopDetector(_tuning(joint)), step_clock=True)
+    plain = _run(ConfirmedStopDetector(detector_for(_tuning(joint))), y)
+    det = ConfirmedStopDetector(detector_for(_tuning(joint)), step_clock=True)
     events = _run(det, y)
     key = [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in events]
     on_time = [(e.onset_s, e.detected_at_s, e.onset_uncertain) for e in plain if abs(e.onset_s - 2.0) <= 0.025]
     assert all(k in key for k in on_time)
     before = {(e.onset_s, e.detected_at_s) for e in plain}
     assert all(e.onset_uncertain for e in events if (e.onset_s, e.detected_at_s) not in before)
-    for t, got in det.step_clock_log:
+    for t, got in det.log.step_clock:
         if abs(t - 2.0) < 0.06:  # the stop's own fire, on time
             assert step_clock_verdict(got) is not False, (t, got)
 
@@ -406,12 +401,12 @@ def test_a_true_stop_is_confirmed_with_the_step_clock_as_without(
 def test_a_stop_whose_rise_and_fall_cancel_on_the_comb(joint: str, rate: float, seed: int) -> None:
     """Round 6's blind spot (fails on main): summed, the lines hardly move; line by line they move both ways."""
     y, _ = render(variant(Q if joint == "Q" else P, seed=seed, stop_at=2.0, dur=3.0, rate=rate))
-    plain = _run(ConfirmedStopDetector(StopDetector(_tuning(joint))), y)
-    det = ConfirmedStopDetector(StopDetector(_tuning(joint)), step_clock=True)
+    plain = _run(ConfirmedStopDetector(detector_for(_tuning(joint))), y)
+    det = ConfirmedStopDetector(detector_for(_tuning(joint)), step_clock=True)
     events = _run(det, y)
     assert [(e.onset_s, e.onset_uncertain) for e in events] == [(e.onset_s, e.onset_uncertain) for e in plain]
     assert len(events) == 1 and not events[0].onset_uncertain
-    (_, got), *_ = det.step_clock_log
+    (_, got), *_ = det.log.step_clock
     assert step_clock_verdict(got) is True and got.change_z >= 6.0, got
 
 
@@ -419,13 +414,13 @@ def test_a_stop_heard_mainly_as_a_drop_is_judged_too() -> None:
     """The clock is judged over the whole stepping band: a quieter stop lowers every line (round 6 left it alone)."""
     x, sr = render(variant(P, stop_kind="quieter"))
     tu = tune(x, sr, 2.0, seed=0)
-    det = ConfirmedStopDetector(StopDetector(tu), step_clock=True)
+    det = ConfirmedStopDetector(detector_for(tu), step_clock=True)
     assert det.sync_bands == [(tu.edges_hz[0], tu.edges_hz[-1])]  # type: ignore[index]  # a template tuning
-    assert ConfirmedStopDetector(StopDetector(_tuning("P"))).sync_bands == []  # off by default
+    assert ConfirmedStopDetector(detector_for(_tuning("P"))).sync_bands == []  # off by default
     y, _ = render(variant(P, seed=41, stop_at=1.6, dur=2.2, rate=1080.0, stop_kind="quieter"))
     (ev,) = _run(det, y)
     assert ev.onset_s == pytest.approx(1.6, abs=0.025)
-    (_, got), *_ = det.step_clock_log
+    (_, got), *_ = det.log.step_clock
     assert step_clock_verdict(got) is True and -10.0 <= got.change_db <= -6.0  # the steps 8 dB quieter
 
 
@@ -442,12 +437,12 @@ def test_the_simulators_stop_is_seen_line_by_line() -> None:
     x, rate, stop_at = sim.labelled_recording(3, "+", before_s=2.0, after_s=1.0)
     tu = tune(x, rate, stop_at, joint=3)
     y, _, stop2 = SimulatedMM3A(seed=105, day="2026-11-22").labelled_recording(3, "+", before_s=3.0, after_s=1.5)
-    (ev,) = _run(ConfirmedStopDetector(StopDetector(tu)), y)
+    (ev,) = _run(ConfirmedStopDetector(detector_for(tu)), y)
     assert abs(ev.onset_s - stop2) <= 0.025
-    det = ConfirmedStopDetector(StopDetector(tu), step_clock=True)
+    det = ConfirmedStopDetector(detector_for(tu), step_clock=True)
     assert _run(det, y) == [ev]
-    (_, got), *_ = det.step_clock_log
-    assert got.sharpness_before >= MIN_SYNC_SHARPNESS and got.share_before >= MIN_SYNC_SHARE  # a clean clock, judged
+    (_, got), *_ = det.log.step_clock
+    assert got.sharpness_before >= SYNC.min_sharpness and got.share_before >= SYNC.min_share  # a clean clock, judged
     assert step_clock_verdict(got) is True and got.change_z >= 20.0
     # what round 6 measured: the sum over the stop's sub-bands, widened, moves by less than 2 standard deviations
     sig = np.asarray(tu.signature_db)

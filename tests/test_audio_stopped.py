@@ -4,7 +4,7 @@ At an end stop the controller goes on stepping and the joint still sounds. When 
 stepping stops (a pause in a recording, a controller that halted), the sound falls to the
 room's, every sub-band drops far more than any stop's signature, and the level detector
 fired on it: ``listen`` reported the pause as an unflagged stop, and a traverse whose
-controller halted mid-way counted its steps to that moment (``stickslip.audio.stopped``).
+controller halted mid-way counted its steps to that moment (``stickslip.audio.confirm.pause``).
 
 The pauses are spliced here from room noise, not rendered by any generator; the stops
 come from the battery's generator (``tests/support/battery_sound.py``), the fifth
@@ -31,13 +31,8 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
-from stickslip.audio.detector import StopDetector, Tuning, detect  # noqa: E402
-from stickslip.audio.stopped import (  # noqa: E402
-    STEPPING_LINES_DB,
-    STOPPED_DROP_DB,
-    step_lines_db,
-    tuned_change_db,
-)
+from stickslip.audio.confirm.pause import PAUSE, step_lines_db, tuned_change_db  # noqa: E402
+from stickslip.audio.detector import Tuning, detect, detector_for  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.cli import app  # noqa: E402
 from stickslip.procedures.traverse import TraverseError, TraverseResult, measure_traverse  # noqa: E402
@@ -85,11 +80,11 @@ def _stepping(joint: str, seconds: float, seed: int) -> np.ndarray:
 def test_a_pause_in_the_stepping_is_not_a_stop(joint: str, pause_s: float) -> None:
     """Stepping 2 s, the room alone for a while (-65 dB), stepping again: no stop. Before: one at the pause."""
     x = np.concatenate([_stepping(joint, 2.0, 301), _room(pause_s, 7), _stepping(joint, 2.0, 302)])
-    det = ConfirmedStopDetector(StopDetector(_battery_tuning(joint)))
+    det = ConfirmedStopDetector(detector_for(_battery_tuning(joint)))
     assert det.feed(x.astype(np.float32)) + det.finish() == []
-    assert det.stopped_log, "the pause fired and was judged the stepping stopping"
-    t, why = det.stopped_log[0]
-    assert abs(t - 2.0) < 0.05 and why.drop_db < -STOPPED_DROP_DB and why.line_db < STEPPING_LINES_DB
+    assert det.log.stopped, "the pause fired and was judged the stepping stopping"
+    t, why = det.log.stopped[0]
+    assert abs(t - 2.0) < 0.05 and why.drop_db < -PAUSE.drop_db and why.line_db < PAUSE.lines_db
 
 
 def test_traverses_with_pauses_between_them_each_stop_once_on_time() -> None:
@@ -134,10 +129,10 @@ def test_a_stop_that_mutes_the_slips_while_the_drive_sings_is_still_a_stop() -> 
     arm = dv.Arm(5, "muted")
     tu = tune(dv.render(dv.tuning_scene(arm, -10.0)), SR, 2.0)
     y = dv.render(dv.Scene(arm=arm, rate=1000.0, stop_at=1.6, dur=2.5, drive_db=-25.0, seed=3))
-    det = ConfirmedStopDetector(StopDetector(tu))
+    det = ConfirmedStopDetector(detector_for(tu))
     events = det.feed(y.astype(np.float32)) + det.finish()
     assert len(events) == 1 and abs(events[0].onset_s - 1.6) <= TOL_S and not events[0].onset_uncertain, events
-    assert det.stopped_log == []
+    assert det.log.stopped == []
 
 
 def test_a_controller_that_halts_mid_traverse_records_nothing() -> None:
@@ -160,7 +155,7 @@ def test_a_controller_that_halts_mid_traverse_records_nothing() -> None:
                     yield b if sim.clock_s < halt_s else (3e-5 * rng.standard_normal(len(b))).astype(np.float32)
 
         return measure_traverse(
-            sim, 3, "+", detector=StopDetector(tu), audio_blocks=blocks(), pose=sim.pose, day=day, burst_steps=1000,
+            sim, 3, "+", detector=detector_for(tu), audio_blocks=blocks(), pose=sim.pose, day=day, burst_steps=1000,
         )  # fmt: skip
 
     whole = traverse(float("inf"))  # 12338 steps
@@ -189,7 +184,7 @@ def test_a_live_listener_says_where_the_stepping_stopped(capsys: pytest.CaptureF
 
     tu = _battery_tuning("Q")
     x = np.concatenate([_stepping("Q", 2.0, 21), _room(1.2, 8), _stepping("Q", 1.0, 22)]).astype(np.float32)
-    det = ConfirmedStopDetector(StopDetector(tu))
+    det = ConfirmedStopDetector(detector_for(tu))
     closed = []
     _report_live(det, iter(np.array_split(x, 200)), lambda: closed.append(1), tu, True, 0.5, "")
     out, err = capsys.readouterr()
@@ -201,14 +196,14 @@ def test_a_live_listener_says_where_the_stepping_stopped(capsys: pytest.CaptureF
 def test_the_pause_judgement_does_not_depend_on_the_block_size(block: int) -> None:
     x = np.concatenate([_stepping("Q", 1.5, 11), _room(1.0, 3), bs.render(bs.Scene("Q", 1000.0, 1.4, 2.0, seed=12))[0]])
     ref, det = whole_and_in_blocks(_battery_tuning("Q"), x.astype(np.float32), block)
-    assert [t for t, _ in det.stopped_log] == [t for t, _ in ref.stopped_log] and len(ref.stopped_log) >= 1
+    assert [t for t, _ in det.log.stopped] == [t for t, _ in ref.log.stopped] and len(ref.log.stopped) >= 1
 
 
 def test_the_step_lines_read_low_on_noise_and_high_on_stepping() -> None:
     """600 windows of white noise at random rates: 8.8 dB at most (the threshold is 10); stepping: tens of dB."""
     rng = np.random.default_rng(0)
     noise = [step_lines_db(rng.standard_normal(SR // 2), SR, float(rng.uniform(700.0, 1300.0))) for _ in range(600)]
-    assert max(noise) < STEPPING_LINES_DB and 4.0 < float(np.median(noise)) < 7.0
+    assert max(noise) < PAUSE.lines_db and 4.0 < float(np.median(noise)) < 7.0
     assert step_lines_db(_stepping("P", 0.6, 5)[: SR // 2], SR, 1000.0) > 20.0
     assert step_lines_db(np.zeros(100), SR, 1000.0) == float("inf")  # too short to judge
 

@@ -26,8 +26,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
 
-from stickslip.audio.detector import StopDetector, StopEvent, detect
-from stickslip.audio.template import CONTINUUM_FRAME, continuum_levels_db
+from stickslip.audio.detector import StopEvent, detect, detector_for
+from stickslip.audio.features.spectra import SPECTRA, continuum_levels_db
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
@@ -160,7 +160,7 @@ def test_the_continuum_is_the_noise_between_the_lines(period: int, rms_db: float
     clicks = np.zeros(n)
     clicks[::period] = 1.0
     clicks *= s * 10 ** (line_db / 20) / np.std(clicks)
-    frame = CONTINUUM_FRAME * 512
+    frame = SPECTRA.continuum_frame * 512
     edges = (2000.0, 4000.0, 8000.0, 16000.0)
     expect = 10 * np.log10(2 * s**2 / frame)
     for x in (noise, noise + clicks):
@@ -170,13 +170,13 @@ def test_the_continuum_is_the_noise_between_the_lines(period: int, rms_db: float
 
 
 def test_the_detector_keeps_only_the_warm_ups_samples() -> None:
-    det = StopDetector(_tuning("P"))
+    det = detector_for(_tuning("P"))
     x, _ = render(variant(JOINTS["P"], seed=5, stop_at=None, dur=1.0))
     for i in range(0, x.size, 700):
         det.feed(x[i : i + 700])
-    st_ = det._template
+    st_ = det.state
     assert st_ is not None and st_.head is not None and st_.head.size == st_.head_samples
-    assert det._head == []
+    assert det._head is not None and det._head._parts == []  # the pieces are let go once joined
 
 
 @settings(max_examples=10, deadline=None)
@@ -205,10 +205,10 @@ def test_the_stale_template_check_does_not_depend_on_the_block_size() -> None:
     assert len(ref) == 1 and abs(ref[0][0] - 1.6) <= 0.025
     for block in (128, 777, 4096):
         assert [(e.onset_s, e.detected_at_s) for e in detect(x, _tuning("P"), block=block, confirm_s=0.5)] == ref
-        det = StopDetector(_tuning("P"))
+        det = detector_for(_tuning("P"))
         for i in range(0, x.size, block):
             det.feed(x[i : i + block])
-        assert det._template is not None and any(s for *_, s in det._template.stale_log)  # the false fire, judged
+        assert det.state is not None and any(s for *_, s in det.state.stale.log)  # the false fire, judged
 
 
 @pytest.mark.xfail(

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stickslip.audio.detector import StopDetector
-from stickslip.audio.guard import NoSignalError, SignalGuard, block_problem
+from stickslip.audio.detector import detector_for
+from stickslip.audio.sources.guard import NoSignalError, SignalGuard, block_problem
 from stickslip.audio.tuning import tune
 from stickslip.procedures.traverse import TraverseError, measure_traverse
 from stickslip.sim.arm import SimulatedMM3A
@@ -71,7 +71,7 @@ def test_a_traverse_on_a_dead_input_records_nothing(tuning, kind):
             sim,
             3,
             "+",
-            detector=StopDetector(tuning),
+            detector=detector_for(tuning),
             audio_blocks=_dead(kind),
             pose=sim.pose,
             day=DAY,
@@ -97,7 +97,7 @@ def test_a_microphone_unplugged_mid_traverse_stops_it(tuning):
             sim,
             3,
             "+",
-            detector=StopDetector(tuning),
+            detector=detector_for(tuning),
             audio_blocks=blocks(),
             pose=sim.pose,
             day=DAY,
@@ -122,7 +122,7 @@ def test_a_live_room_without_the_joints_steps_stops_the_traverse(tuning):
             sim,
             3,
             "+",
-            detector=StopDetector(tuning),
+            detector=detector_for(tuning),
             audio_blocks=room(),
             pose=sim.pose,
             day=DAY,
@@ -132,7 +132,7 @@ def test_a_live_room_without_the_joints_steps_stops_the_traverse(tuning):
 
 
 def test_step_line_is_strong_for_stepping_and_weak_for_noise():
-    from stickslip.audio.guard import step_line_db
+    from stickslip.audio.sources.guard import step_line_db
     from stickslip.sim.sound import render_traverse_recording
 
     x, sr = render_traverse_recording(2, 1000.0, 1e9, 0.5, seed=9, babble=True)

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from stickslip.audio.detector import StopDetector, Tuning
+from stickslip.audio.detector import Tuning, detector_for
 from stickslip.audio.tuning import tune
 from stickslip.procedures.traverse import TraverseResult, _count_before, measure_traverse
 from stickslip.sim.arm import SimulatedMM3A
@@ -61,7 +61,7 @@ def _traverse(
         sim,
         3,
         "+",
-        detector=StopDetector(tuning, sim.clock_s),
+        detector=detector_for(tuning, sim.clock_s),
         audio_blocks=_Spliced(sim.microphone(), sound, t_splice),
         pose=sim.pose,
         day=DAY,

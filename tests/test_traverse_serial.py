@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from stickslip import kinematics as kin
-from stickslip.audio import vibration
+from stickslip.audio.sources import vibration
 from stickslip.audio.tuning import tune
 from stickslip.procedures.session import traverse_on_device
 from stickslip.sim.arm import SimulatedMM3A

@@ -1,19 +1,29 @@
 """The audio limit switch: hear a joint reach its end stop.
 
-* :mod:`.detector` streaming band-power detector and its :class:`Tuning`
-* :mod:`.tuning`   learn the stepping template and the stop's signature from a labelled recording
-  (:mod:`.labels`, :mod:`.verification`; :mod:`.band_tuning` for version-1 tunings)
-* :mod:`.template` the spectral-template change detector; :mod:`.meter` the record meter
-* :mod:`.sources`  WAV files in blocks, a live microphone
-* :mod:`.confirm`  a fire confirmed by its persistence; :mod:`.stepclock` the step rate and the
-  step-synchronous power heard in the sound (the step clock, an opt-in condition of confirmation)
+The detector is a chain of stages, each a package with one job (docs/audio.md):
+
+* :mod:`.sources`     files, a microphone, a vibration stream; the dead-input guard
+* :mod:`.features`    per-frame sub-band levels; the step clock (rate, harmonic lines)
+* :mod:`.change`      the change detector: the stepping template, the fit to the stop's
+  signature, the drops, the masking (the fast path: every fire)
+* :mod:`.confirm`     a fire confirmed by its persistence; a pause is not a stop; when the
+  stop began; the step clock and the late path (opt-in)
+* :mod:`.tuning`      learn a joint's stop from a labelled recording, and check it
+* :mod:`.comparators` the version-1 band-power detector, kept for old files and comparison
+
+:mod:`.events` is the seam they share (:class:`StopEvent`, the :class:`StopDetector`
+protocol); :mod:`.tuningfile` the tuning and its file; :mod:`.detector` assembles the
+stages (:func:`detect`, :func:`detector_for`); :mod:`.parameters` lists every stage's
+parameters.
 """
 
 from __future__ import annotations
 
-from .detector import StopDetector, StopEvent, Tuning, TuningFileError, detect
+from .detector import detect, detector_for
+from .events import StopDetector, StopEvent
 from .sources import AudioSourceError, Microphone, read_wav, wav_blocks, write_wav
 from .tuning import TuningError, tune
+from .tuningfile import Tuning, TuningFileError
 
 __all__ = [
     "AudioSourceError",
@@ -24,6 +34,7 @@ __all__ = [
     "TuningError",
     "TuningFileError",
     "detect",
+    "detector_for",
     "read_wav",
     "tune",
     "wav_blocks",

@@ -17,12 +17,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .detector import frame_power_spectra
-from .tuningfile import default_frame
+from .features.spectra import SPECTRA, frame_power_spectra
+from .sources.guard import block_problem
+from .tuning import stepping_band
+from .tuningfile import TUNING_FILE, default_frame
 
 __all__ = ["BandMeter", "MeterReading"]
 
-_FLOOR = 1e-20
+_FLOOR = SPECTRA.power_floor
 
 
 @dataclass(frozen=True)
@@ -58,8 +60,8 @@ class BandMeter:
     """
 
     def __init__(self, sample_rate: int, band_hz: tuple[float, float] | None = None, learn_s: float = 0.5) -> None:
-        if not 8_000 <= int(sample_rate) <= 192_000:
-            raise ValueError(f"sample_rate {sample_rate} Hz is outside 8000-192000 Hz")
+        if (problem := TUNING_FILE.rate_problem(int(sample_rate))) is not None:
+            raise ValueError(problem.replace("sample rate", "sample_rate", 1))
         if not 0.05 <= learn_s <= 10:
             raise ValueError(f"learn_s {learn_s} s is outside 0.05-10 s")
         self.sample_rate = int(sample_rate)
@@ -89,9 +91,6 @@ class BandMeter:
         return MeterReading(10 * math.log10(float(p[inside].sum()) + _FLOOR), self.band_hz)
 
     def _learn(self) -> None:
-        from .guard import block_problem
-        from .tuning import stepping_band
-
         x = np.concatenate(self._seen)
         self._seen = []
         if block_problem(x) is not None:  # nothing to learn from yet: keep showing broadband, try again

@@ -1,7 +1,8 @@
 """A tuning: how to hear one joint's end stop, and its JSON file (``kind: stickslip.audio.Tuning``).
 
-Version 2 holds the spectral-template detector's settings (:mod:`.template`), version 1
-the band-power detector's (:mod:`.detector`); both load. Units are in the key names.
+Version 2 holds the spectral-template detector's settings (:mod:`stickslip.audio.change`),
+version 1 the band-power detector's (:mod:`stickslip.audio.comparators.band`); both load.
+Units are in the key names.
 """
 
 from __future__ import annotations
@@ -15,15 +16,38 @@ from typing import Any
 import numpy as np
 
 from .. import records
-from .template import CHUNK, TemplateParams
+from .paramfield import param
 
-__all__ = ["STEP_RATE_TOLERANCE", "Tuning", "TuningFileError", "default_frame"]
+__all__ = ["TUNING_FILE", "Tuning", "TuningFileError", "TuningFileParams", "default_frame"]
 
 _KIND = "stickslip.audio.Tuning"
 _CONTINUUM = ("continuum_levels_db", "continuum_signature_db", "continuum_spread_db")
 _FINE = ("fine_start_hz", "fine_bin_hz", "fine_stepping_db", "fine_stopped_db")
-#: at most this many values in each fine spectrum (20 kHz of 5.9 Hz bins is 3400)
-_FINE_MAX = 20_000
+
+
+@dataclass(frozen=True)
+class TuningFileParams:
+    """What a tuning file may hold, and when its step rate is too far from the one heard."""
+
+    step_rate_tolerance: float = param(
+        0.05,
+        "of the tuning's rate",
+        "farther, listen and traverse warn: 17 of 288 stops missed or late at 6-8 % off, none within 4 %",
+    )
+    fine_max: int = param(20_000, "levels", "at most this many levels in each fine spectrum (20 kHz is 3400)")
+    sample_rate_range: tuple[int, int] = param(
+        (2_000, 192_000),
+        "Hz",
+        "an accelerometer bridge sends 3.2-5 kHz (stepping under 1 kHz); a sound card up to 192 kHz",
+    )
+
+    def rate_problem(self, sample_rate: float) -> str | None:
+        """Why ``sample_rate`` (Hz) cannot be tuned or heard at, or None."""
+        lo, hi = self.sample_rate_range
+        return None if lo <= sample_rate <= hi else f"sample rate {sample_rate:g} Hz is outside {lo}-{hi} Hz"
+
+
+TUNING_FILE = TuningFileParams()
 
 
 class TuningFileError(ValueError):
@@ -33,16 +57,6 @@ class TuningFileError(ValueError):
 def default_frame(sample_rate: int) -> int:
     """Frame length in samples: the power of two closest to 10.7 ms (512 at 48 kHz)."""
     return int(2 ** round(math.log2(sample_rate * 512 / 48_000)))
-
-
-STEP_RATE_TOLERANCE = 0.05
-"""How far (a fraction) the step rate may be from the rate a tuning was made at before a
-warning: a click train's harmonics fall on a joint's narrow modes differently at another
-rate. Measured (docs/audio.md, "Tuned at one step rate"): on the fourth generator's arms
-(``tests/support/modal_sound.py``, 6 arms x 4 kinds of stop, tuned at 1000 Hz) every stop was heard
-once and on time at 960-1040 Hz (504 recordings), while at 920-940 and 1060-1080 Hz 17 of
-288 were missed or late, all but one of them stops that ring narrow contact modes; the
-battery's generator (``tests/support/battery_sound.py``) held to +-10 %."""
 
 
 def _number(name: str, v: Any) -> float:
@@ -91,7 +105,7 @@ class Tuning:
     reference_hz : (float, float) or None
         ``"band"`` method: the band level is taken relative to this band's, Hz.
     method : str
-        ``"template"``: the spectral-template change detector (:mod:`.template`; what
+        ``"template"``: the spectral-template change detector (:mod:`stickslip.audio.change`; what
         :func:`~stickslip.audio.tuning.tune` makes). ``"band"``: the band-power detector
         of tuning files version 1 (band level against ``threshold_db``).
     edges_hz : tuple of float
@@ -113,11 +127,11 @@ class Tuning:
         ``"template"``: sub-bands dropped from each frame's fit (those that fit worst).
     stepping_levels_db : tuple of float or None
         ``"template"``: stepping's level per sub-band in the tuning recording, dBFS; lets the
-        detector tell that it began listening at the stop (see :mod:`.template`).
+        detector tell that it began listening at the stop (see :mod:`stickslip.audio.change.start`).
     drop_threshold : (float, float) or None
         ``"template"``: the broad and the local drop below the stepping template at which
         a frame counts as a stop whatever its signature (spreads, see
-        :class:`~stickslip.audio.template.DropMeter`); None: only the tuned signature counts.
+        :class:`~stickslip.audio.change.drops.DropMeter`); None: only the tuned signature counts.
     step_rate_hz : float or None
         ``"template"``: the step rate heard in the tuning recording, Hz (None in files made
         before it was recorded: the detector then behaves as before).
@@ -126,7 +140,7 @@ class Tuning:
         continuum between the step clock's lines (dB, a power per frequency bin), the stop's
         departure from it (dB) and its frame-to-frame spread (dB); NaN (``null`` in the
         file) where a sub-band has no bin off the lines at the tuning's rate
-        (:func:`~stickslip.audio.template.continuum_levels_db`). They let the detector tell
+        (:func:`~stickslip.audio.features.spectra.continuum_levels_db`). They let the detector tell
         that it began listening at the stop when the stream steps at another rate.
     fine_start_hz, fine_bin_hz : float or None
         ``"template"``: the first bin's frequency and the bin width
@@ -135,9 +149,9 @@ class Tuning:
         ``"template"``, used with ``step_rate_hz``: the tuning recording's fine continuum
         spectra (Welch, ~5.9 Hz bins, the step clock's lines interpolated across; dB re
         full scale per Hz) of stepping and of the stop, over the sub-bands and a few bins
-        beyond (:func:`~stickslip.audio.rate_signature.fine_spectrum_db`). They let the
+        beyond (:func:`~stickslip.audio.features.fine.fine_spectrum_db`). They let the
         detector predict the stop's signature at another step rate
-        (:class:`~stickslip.audio.rate_signature.SignaturePredictor`); None in files made
+        (:class:`~stickslip.audio.features.fine.SignaturePredictor`); None in files made
         before they were recorded (the detector then fits the tuned signature alone).
     per_octave : float or None
         ``"template"``: sub-bands per octave that :func:`~stickslip.audio.tuning.tune` chose
@@ -194,160 +208,20 @@ class Tuning:
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
     def __post_init__(self) -> None:
-        lo, hi = (float(v) for v in self.band_hz)
-        object.__setattr__(self, "band_hz", (lo, hi))
-        nyq = self.sample_rate / 2
-        if not 8_000 <= self.sample_rate <= 192_000:
-            raise ValueError(f"sample_rate {self.sample_rate} Hz is outside 8000-192000 Hz")
-        if not 0 <= lo < hi <= nyq:
-            raise ValueError(f"band_hz ({lo:g}, {hi:g}) must satisfy 0 <= low < high <= {nyq:g} Hz")
-        if not (self.frame >= 32 and self.frame & (self.frame - 1) == 0):
-            raise ValueError(f"frame {self.frame} must be a power of two >= 32 samples")
-        if not 1 <= self.hop <= self.frame:
-            raise ValueError(f"hop {self.hop} must be between 1 and frame ({self.frame}) samples")
-        if hi - lo < 2 * self.sample_rate / self.frame:
-            raise ValueError(
-                f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
-                f"({2 * self.sample_rate / self.frame:g} Hz at frame {self.frame})"
-            )
-        if self.method not in ("band", "template"):
-            raise ValueError(f"method {self.method!r} must be 'band' or 'template'")
-        if self.method == "template":
-            self._check_template()
-        if self.reference_hz is not None:
-            r0, r1 = (float(v) for v in self.reference_hz)
-            object.__setattr__(self, "reference_hz", (r0, r1))
-            if not (0 <= r0 < r1 <= nyq and r1 - r0 >= 2 * self.sample_rate / self.frame):
-                raise ValueError(f"reference_hz ({r0:g}, {r1:g}) must be a band of at least two bins below {nyq:g} Hz")
-        if not 0 <= self.max_dips <= 16:
-            raise ValueError(f"max_dips {self.max_dips} is outside the allowed 0..16 frames")
-        if not math.isfinite(self.threshold_db) or not -200 <= self.threshold_db <= 50:
-            raise ValueError(f"threshold_db {self.threshold_db} must be within -200..50 dBFS")
-        for name, lo_, hi_ in (
-            ("hold_s", 0, 1),
-            ("release_s", 0, 10),
-            ("hysteresis_db", 0, 60),
-            ("onset_lag_s", -1, 1),
-        ):
-            v = getattr(self, name)
-            if not lo_ <= v <= hi_:
-                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
-        if self.joint is not None and (isinstance(self.joint, bool) or self.joint not in (1, 2, 3)):
-            raise ValueError(f"joint {self.joint!r} must be 1, 2 or 3 (or null)")
-        for name, lo_, hi_ in (  # what tuning saw: informational, but shown and (latency) used
-            ("latency_measured_s", 0, 1),
-            ("contrast_db", -400, 400),
-            ("margin_db", -400, 400),
-            ("stepping_db", -400, 400),
-            ("stopped_db", -400, 400),
-        ):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not lo_ <= v <= hi_):
-                raise ValueError(f"{name} {v!r} must be a number within {lo_}..{hi_} (or null)")
-
-    def _check_template(self) -> None:
-        if self.edges_hz is None or self.signature_db is None or self.spread_db is None:
-            raise ValueError("a template tuning needs edges_hz, signature_db and spread_db")
-        edges = tuple(float(e) for e in self.edges_hz)
-        sig = tuple(float(e) for e in self.signature_db)
-        spr = tuple(float(e) for e in self.spread_db)
-        object.__setattr__(self, "edges_hz", edges)
-        object.__setattr__(self, "signature_db", sig)
-        object.__setattr__(self, "spread_db", spr)
-        nb = len(edges) - 1
-        if nb < 1 or len(sig) != nb or len(spr) != nb:
-            raise ValueError(f"edges_hz ({len(edges)}), signature_db ({len(sig)}) and spread_db ({len(spr)}) disagree")
-        if any(not b > a for a, b in zip(edges, edges[1:], strict=False)) or edges[-1] > self.sample_rate / 2:
-            raise ValueError(f"edges_hz must increase and stay below {self.sample_rate / 2:g} Hz")
-        if not all(abs(v) <= 400 for v in sig) or not any(abs(v) > 0 for v in sig):
-            raise ValueError("signature_db must be within -400..400 dB and not all zero")
-        if not all(1e-3 <= v <= 400 for v in spr):
-            raise ValueError("spread_db must be within 0.001..400 dB")
-        if self.stepping_levels_db is not None:
-            lv = tuple(float(v) for v in self.stepping_levels_db)
-            object.__setattr__(self, "stepping_levels_db", lv)
-            if len(lv) != nb or not all(abs(v) <= 400 for v in lv):
-                raise ValueError(f"stepping_levels_db must hold {nb} levels within -400..400 dBFS")
-        if self.drop_threshold is not None:
-            dt = tuple(float(v) for v in self.drop_threshold)
-            if len(dt) != 2 or not all(math.isfinite(v) and 0.1 <= v <= 100 for v in dt):
-                raise ValueError(f"drop_threshold {self.drop_threshold} must be two numbers within 0.1..100 spreads")
-            object.__setattr__(self, "drop_threshold", dt)
-        self._check_continuum(nb)
-        self._check_fine()
-        if not 0 <= self.trim < nb:
-            raise ValueError(f"trim {self.trim} must be 0..{nb - 1} sub-bands")
-        for name, lo_, hi_ in (
-            ("residual_max", 0.1, 1e3),
-            ("decay_ratio", 0, 1),
-            ("tau_s", 0.01, 100),
-            ("warmup_s", 0, 10),
-        ):
-            v = getattr(self, name)
-            if not lo_ <= v <= hi_:
-                raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
-        if self.per_octave is not None:
-            po = self.per_octave
-            if isinstance(po, bool) or not isinstance(po, (int, float)) or not 0.5 <= po <= 48:
-                raise ValueError(f"per_octave {po!r} must be a number within 0.5..48 sub-bands per octave (or null)")
-            object.__setattr__(self, "per_octave", float(po))
-
-    def _check_continuum(self, nb: int) -> None:
-        if self.step_rate_hz is not None:
-            r = float(self.step_rate_hz)
-            if not (math.isfinite(r) and 10.0 <= r <= self.sample_rate / 4):
-                raise ValueError(f"step_rate_hz {self.step_rate_hz} must be within 10..{self.sample_rate / 4:g} Hz")
-            object.__setattr__(self, "step_rate_hz", r)
-        given = [getattr(self, k) is not None for k in _CONTINUUM]
-        if any(given) and not (all(given) and self.step_rate_hz is not None):
-            raise ValueError(
-                "continuum_levels_db, continuum_signature_db and continuum_spread_db come together, with step_rate_hz"
-            )
-        if not all(given):
-            return
-        for k in _CONTINUUM:
-            v = tuple(math.nan if e is None else float(e) for e in getattr(self, k))
-            object.__setattr__(self, k, v)
-            if len(v) != nb or any(not abs(e) <= 400 for e in v if not math.isnan(e)):
-                raise ValueError(
-                    f"{k} must hold {nb} numbers within -400..400 dB (null where a sub-band has no continuum)"
-                )
-        if any(not 1e-3 <= v for v in self.continuum_spread_db or () if not math.isnan(v)):
-            raise ValueError("continuum_spread_db must be at least 0.001 dB")
-
-    def _check_fine(self) -> None:
-        given = [getattr(self, k) is not None for k in _FINE]
-        if any(given) and not all(given):  # without step_rate_hz they are kept, and not used
-            raise ValueError(f"{', '.join(_FINE)} come together")
-        if not all(given):
-            return
-        start, bin_hz = float(self.fine_start_hz or 0.0), float(self.fine_bin_hz or 0.0)
-        if not (math.isfinite(start) and 0.0 <= start < self.sample_rate / 2):
-            raise ValueError(f"fine_start_hz {self.fine_start_hz} must be within 0..{self.sample_rate / 2:g} Hz")
-        if not (math.isfinite(bin_hz) and 0.1 <= bin_hz <= 100.0):
-            raise ValueError(f"fine_bin_hz {self.fine_bin_hz} must be within 0.1..100 Hz")
-        object.__setattr__(self, "fine_start_hz", start)
-        object.__setattr__(self, "fine_bin_hz", bin_hz)
-        n = None
-        for k in ("fine_stepping_db", "fine_stopped_db"):
-            v = tuple(float(e) for e in getattr(self, k))
-            object.__setattr__(self, k, v)
-            if not 2 <= len(v) <= _FINE_MAX or not all(abs(e) <= 400 for e in v):
-                raise ValueError(f"{k} must hold 2..{_FINE_MAX} levels within -400..400 dB")
-            if n is not None and len(v) != n:
-                raise ValueError("fine_stepping_db and fine_stopped_db must hold as many levels")
-            n = len(v)
+        _check(self)
 
     def step_rate_problem(self, step_hz: float, what: str = "the joint steps") -> str | None:
-        """A warning if ``step_hz`` (Hz) is more than :data:`STEP_RATE_TOLERANCE` from the tuning's rate.
+        """A warning if ``step_hz`` (Hz) is more than ``step_rate_tolerance`` from the tuning's rate.
 
-        ``None`` when the rates agree, or when either is unknown (a tuning made before
-        the rate was recorded, a rate not heard).
+        A click train's harmonics fall on a joint's narrow modes differently at another rate
+        (:class:`TuningFileParams`; docs/audio.md, "Another step rate than the tuning's").
+        ``None`` when the rates agree, or when either is unknown (a tuning made before the
+        rate was recorded, a rate not heard).
         """
         if self.step_rate_hz is None or not (math.isfinite(step_hz) and step_hz > 0):
             return None
         off = step_hz / self.step_rate_hz - 1.0
-        if abs(off) <= STEP_RATE_TOLERANCE + 1e-9:  # 1050 / 1000 - 1 is 0.050000000000000044
+        if abs(off) <= TUNING_FILE.step_rate_tolerance + 1e-9:  # 1050 / 1000 - 1 is 0.050000000000000044
             return None
         return (
             f"{what} at {step_hz:.0f} Hz, {100 * off:+.0f} % from the {self.step_rate_hz:.0f} Hz this tuning was "
@@ -387,8 +261,8 @@ class Tuning:
         """
         if sample_rate == self.sample_rate:
             return self
-        if not 8_000 <= sample_rate <= 192_000:
-            raise ValueError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
+        if (problem := TUNING_FILE.rate_problem(sample_rate)) is not None:
+            raise ValueError(problem)
         frame = default_frame(sample_rate) * self.frame // default_frame(self.sample_rate)
         hop = max(1, frame * self.hop // self.frame)
         kw: dict[str, Any] = {"sample_rate": int(sample_rate), "frame": int(frame), "hop": int(hop)}
@@ -417,128 +291,12 @@ class Tuning:
     # ------------------------------------------------------------- files
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict; units are in the key names (frame and hop are samples)."""
-        d = asdict(self)
-        d.pop("extra")
-        d["band_hz"] = list(self.band_hz)
-        d["reference_hz"] = list(self.reference_hz) if self.reference_hz is not None else None
-        d["latency_s"] = self.latency_s
-        version = 1
-        if self.method == "template":
-            version = 2
-            for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
-                d[k] = list(d[k]) if d[k] is not None else None
-            for k in _CONTINUUM:
-                d[k] = None if d[k] is None else [None if math.isnan(v) else v for v in d[k]]
-            for k in ("fine_stepping_db", "fine_stopped_db"):
-                d[k] = None if d[k] is None else list(d[k])
-            # absent, as in files made before they were recorded
-            for k in ("step_rate_hz", "per_octave", *_CONTINUUM, *_FINE):
-                if d[k] is None:
-                    d.pop(k)
-        else:
-            for k in (
-                "method",
-                "edges_hz",
-                "signature_db",
-                "spread_db",
-                "residual_max",
-                "decay_ratio",
-                "tau_s",
-                "warmup_s",
-                "trim",
-                "checks",
-                "stepping_levels_db",
-                "drop_threshold",
-                "step_rate_hz",
-                "per_octave",
-                *_CONTINUUM,
-                *_FINE,
-            ):
-                d.pop(k)
-        return {"kind": _KIND, "version": version, **d, **({"extra": self.extra} if self.extra else {})}
+        return _to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Tuning:
         """Inverse of :meth:`to_dict`; raises :class:`TuningFileError` naming the problem."""
-        if not isinstance(d, dict):
-            raise TuningFileError("a tuning must be a JSON object")
-        if d.get("kind", _KIND) != _KIND:
-            raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
-        version = d.get("version", 1)
-        if isinstance(version, bool) or version not in (1, 2):
-            raise TuningFileError(
-                f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
-                "upgrade stickslip or re-tune with 'stickslip tune'"
-            )
-        for key in ("band_hz", "threshold_db"):
-            if key not in d:
-                raise TuningFileError(f"tuning lacks {key!r}")
-        known = {f for f in cls.__dataclass_fields__}
-        kwargs = {k: v for k, v in d.items() if k in known}
-        try:
-            band = kwargs["band_hz"]
-            if not (isinstance(band, (list, tuple)) and len(band) == 2):
-                raise TuningFileError("band_hz must be [low_Hz, high_Hz]")
-            kwargs["band_hz"] = (_number("band_hz[0]", band[0]), _number("band_hz[1]", band[1]))
-            ref = kwargs.get("reference_hz")
-            if ref is not None:
-                if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
-                    raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
-                kwargs["reference_hz"] = (_number("reference_hz[0]", ref[0]), _number("reference_hz[1]", ref[1]))
-            for k in (
-                "edges_hz",
-                "signature_db",
-                "spread_db",
-                "stepping_levels_db",
-                "drop_threshold",
-                "fine_stepping_db",
-                "fine_stopped_db",
-            ):
-                if kwargs.get(k) is not None:
-                    if not isinstance(kwargs[k], (list, tuple)):
-                        raise TuningFileError(f"{k} must be a list of numbers")
-                    kwargs[k] = tuple(_number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k]))
-            for k in _CONTINUUM:
-                if kwargs.get(k) is not None:
-                    if not isinstance(kwargs[k], (list, tuple)):
-                        raise TuningFileError(f"{k} must be a list of numbers or nulls")
-                    kwargs[k] = tuple(
-                        math.nan if v is None else _number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k])
-                    )
-            for k in ("step_rate_hz", "per_octave", "fine_start_hz", "fine_bin_hz"):
-                if kwargs.get(k) is not None:
-                    kwargs[k] = _number(k, kwargs[k])
-            if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
-                raise TuningFileError("checks must be an object or null")
-            for k in (
-                "threshold_db",
-                "hold_s",
-                "hysteresis_db",
-                "release_s",
-                "onset_lag_s",
-                "residual_max",
-                "decay_ratio",
-                "tau_s",
-                "warmup_s",
-            ):
-                if k in kwargs:
-                    kwargs[k] = _number(k, kwargs[k])
-            for k in ("latency_measured_s", "contrast_db", "margin_db", "stepping_db", "stopped_db"):
-                if kwargs.get(k) is not None:
-                    kwargs[k] = _number(k, kwargs[k])
-            for k in ("sample_rate", "frame", "hop", "max_dips", "trim", "joint"):
-                if k == "joint" and kwargs.get(k) is None:
-                    continue
-                if k in kwargs:
-                    v = kwargs[k]
-                    if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
-                        raise TuningFileError(f"{k} must be an integer, got {v!r}")
-                    kwargs[k] = int(v)
-            return cls(**kwargs)
-        except TuningFileError:
-            raise
-        except (TypeError, ValueError) as e:
-            raise TuningFileError(f"bad tuning: {e}") from None
+        return _from_dict(d)
 
     def save(self, path: str | Path) -> Path:
         """Write the tuning as JSON; returns the path."""
@@ -567,83 +325,335 @@ class Tuning:
             raise TuningFileError(f"{p}: {e}") from None
 
     def report(self) -> str:
-        """A few human lines: band, threshold, contrast and margin."""
-        if self.method == "template":
-            return self._template_report()
-        lines = [
-            f"band {self.band_hz[0]:.0f}-{self.band_hz[1]:.0f} Hz, threshold {self.threshold_db:.1f} {self.level_unit}",
-            f"frame {self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), "
-            f"hop {self.hop} ({1e3 * self.hop / self.sample_rate:.2f} ms), "
-            f"hold {1e3 * self.hold_s:.1f} ms, hysteresis {self.hysteresis_db:.1f} dB",
-        ]
-        if self.contrast_db is not None:
-            lines.append(
-                f"stepping <= {self.stepping_db:.1f} {self.level_unit}, stopped >= {self.stopped_db:.1f} "
-                f"{self.level_unit}: "
-                f"contrast {self.contrast_db:.1f} dB, margin {self.margin_db:.1f} dB"
-            )
-        lines.append(f"latency {1e3 * self.latency_s:.1f} ms")
-        return "\n".join(lines)
+        """A few human lines: band (or template), threshold, contrast and margin, latency."""
+        return _template_report(self) if self.method == "template" else _report(self)
 
-    def _template_report(self) -> str:
-        assert self.edges_hz is not None and self.signature_db is not None
-        sig = np.asarray(self.signature_db)
-        k = int(np.argmax(np.abs(sig)))
-        e = self.edges_hz
-        per = f" ({self.per_octave:g} per octave)" if self.per_octave is not None else ""
-        lines = [
-            f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands{per}; the stop departs most "
-            f"at {e[k]:.0f}-{e[k + 1]:.0f} Hz ({sig[k]:+.1f} dB)",
-            f"stop signature {', '.join(f'{v:+.0f}' for v in sig)} dB",
-            f"fires at stop-likeness {self.threshold_db:.2f} (stepping 0, the stop 1) held "
-            f"{1e3 * self.hold_s:.1f} ms, residual <= {self.residual_max:.1f}; frame "
-            f"{self.frame} samples ({1e3 * self.frame / self.sample_rate:.1f} ms), hop {self.hop}",
-        ]
-        if self.contrast_db is not None:
-            lines.append(
-                f"worst stepping frame {self.stepping_db:.2f}, stop's low {self.stopped_db:.2f}: "
-                f"margin {self.margin_db:.2f} (stop-likeness), stop departure {self.contrast_db:.1f} dB"
-            )
-        lines.append(f"latency {1e3 * self.latency_s:.1f} ms, onset lag {1e3 * self.onset_lag_s:.1f} ms")
-        c = self.checks or {}
-        if "false_alarms_per_hour" in c:
-            lines.append(
-                f"self-check with knocks, babble, +-20 dB gain and a second click train: "
-                f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
-                f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
-                f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"
-            )
-        return "\n".join(lines)
 
-    def template_params(self) -> TemplateParams:
-        """The template detector's parameters (``method == "template"`` only)."""
-        assert self.edges_hz is not None and self.signature_db is not None and self.spread_db is not None
-        return TemplateParams(
-            sample_rate=self.sample_rate,
-            frame=self.frame,
-            hop=self.hop,
-            edges_hz=self.edges_hz,
-            signature_db=self.signature_db,
-            spread_db=self.spread_db,
-            threshold=self.threshold_db,
-            residual_max=self.residual_max,
-            hold_frames=self.hold_frames,
-            max_dips=self.max_dips,
-            release_frames=max(1, int(math.ceil(self.release_s * self.sample_rate / self.hop))),
-            hysteresis=self.hysteresis_db,
-            decay_ratio=self.decay_ratio,
-            tau_s=self.tau_s,
-            warmup_chunks=max(1, int(math.ceil(self.warmup_s * self.sample_rate / self.hop / CHUNK - 1e-9))),
-            trim=self.trim,
-            onset_lag_s=self.onset_lag_s,
-            stepping_levels_db=self.stepping_levels_db,
-            drop_threshold=self.drop_threshold,
-            step_rate_hz=self.step_rate_hz,
-            continuum_levels_db=self.continuum_levels_db,
-            continuum_signature_db=self.continuum_signature_db,
-            continuum_spread_db=self.continuum_spread_db,
-            fine_start_hz=self.fine_start_hz,
-            fine_bin_hz=self.fine_bin_hz,
-            fine_stepping_db=self.fine_stepping_db,
-            fine_stopped_db=self.fine_stopped_db,
+def _check(t: Tuning) -> None:
+    """Refuse a tuning that cannot be used (``ValueError`` naming the field and the reason)."""
+    lo, hi = (float(v) for v in t.band_hz)
+    object.__setattr__(t, "band_hz", (lo, hi))
+    nyq = t.sample_rate / 2
+    if (problem := TUNING_FILE.rate_problem(t.sample_rate)) is not None:
+        raise ValueError(problem.replace("sample rate", "sample_rate", 1))
+    if not 0 <= lo < hi <= nyq:
+        raise ValueError(f"band_hz ({lo:g}, {hi:g}) must satisfy 0 <= low < high <= {nyq:g} Hz")
+    if not (t.frame >= 32 and t.frame & (t.frame - 1) == 0):
+        raise ValueError(f"frame {t.frame} must be a power of two >= 32 samples")
+    if not 1 <= t.hop <= t.frame:
+        raise ValueError(f"hop {t.hop} must be between 1 and frame ({t.frame}) samples")
+    if hi - lo < 2 * t.sample_rate / t.frame:
+        raise ValueError(
+            f"band_hz ({lo:g}, {hi:g}) is narrower than two frequency bins "
+            f"({2 * t.sample_rate / t.frame:g} Hz at frame {t.frame})"
         )
+    if t.method not in ("band", "template"):
+        raise ValueError(f"method {t.method!r} must be 'band' or 'template'")
+    if t.method == "template":
+        _check_template(t)
+    if t.reference_hz is not None:
+        r0, r1 = (float(v) for v in t.reference_hz)
+        object.__setattr__(t, "reference_hz", (r0, r1))
+        if not (0 <= r0 < r1 <= nyq and r1 - r0 >= 2 * t.sample_rate / t.frame):
+            raise ValueError(f"reference_hz ({r0:g}, {r1:g}) must be a band of at least two bins below {nyq:g} Hz")
+    if not 0 <= t.max_dips <= 16:
+        raise ValueError(f"max_dips {t.max_dips} is outside the allowed 0..16 frames")
+    if not math.isfinite(t.threshold_db) or not -200 <= t.threshold_db <= 50:
+        raise ValueError(f"threshold_db {t.threshold_db} must be within -200..50 dBFS")
+    for name, lo_, hi_ in (
+        ("hold_s", 0, 1),
+        ("release_s", 0, 10),
+        ("hysteresis_db", 0, 60),
+        ("onset_lag_s", -1, 1),
+    ):
+        v = getattr(t, name)
+        if not lo_ <= v <= hi_:
+            raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+    if t.joint is not None and (isinstance(t.joint, bool) or t.joint not in (1, 2, 3)):
+        raise ValueError(f"joint {t.joint!r} must be 1, 2 or 3 (or null)")
+    for name, lo_, hi_ in (  # what tuning saw: informational, but shown and (latency) used
+        ("latency_measured_s", 0, 1),
+        ("contrast_db", -400, 400),
+        ("margin_db", -400, 400),
+        ("stepping_db", -400, 400),
+        ("stopped_db", -400, 400),
+    ):
+        v = getattr(t, name)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not lo_ <= v <= hi_):
+            raise ValueError(f"{name} {v!r} must be a number within {lo_}..{hi_} (or null)")
+
+
+def _check_template(t: Tuning) -> None:
+    if t.edges_hz is None or t.signature_db is None or t.spread_db is None:
+        raise ValueError("a template tuning needs edges_hz, signature_db and spread_db")
+    edges = tuple(float(e) for e in t.edges_hz)
+    sig = tuple(float(e) for e in t.signature_db)
+    spr = tuple(float(e) for e in t.spread_db)
+    object.__setattr__(t, "edges_hz", edges)
+    object.__setattr__(t, "signature_db", sig)
+    object.__setattr__(t, "spread_db", spr)
+    nb = len(edges) - 1
+    if nb < 1 or len(sig) != nb or len(spr) != nb:
+        raise ValueError(f"edges_hz ({len(edges)}), signature_db ({len(sig)}) and spread_db ({len(spr)}) disagree")
+    if any(not b > a for a, b in zip(edges, edges[1:], strict=False)) or edges[-1] > t.sample_rate / 2:
+        raise ValueError(f"edges_hz must increase and stay below {t.sample_rate / 2:g} Hz")
+    if not all(abs(v) <= 400 for v in sig) or not any(abs(v) > 0 for v in sig):
+        raise ValueError("signature_db must be within -400..400 dB and not all zero")
+    if not all(1e-3 <= v <= 400 for v in spr):
+        raise ValueError("spread_db must be within 0.001..400 dB")
+    if t.stepping_levels_db is not None:
+        lv = tuple(float(v) for v in t.stepping_levels_db)
+        object.__setattr__(t, "stepping_levels_db", lv)
+        if len(lv) != nb or not all(abs(v) <= 400 for v in lv):
+            raise ValueError(f"stepping_levels_db must hold {nb} levels within -400..400 dBFS")
+    if t.drop_threshold is not None:
+        dt = tuple(float(v) for v in t.drop_threshold)
+        if len(dt) != 2 or not all(math.isfinite(v) and 0.1 <= v <= 100 for v in dt):
+            raise ValueError(f"drop_threshold {t.drop_threshold} must be two numbers within 0.1..100 spreads")
+        object.__setattr__(t, "drop_threshold", dt)
+    _check_continuum(t, nb)
+    _check_fine(t)
+    if not 0 <= t.trim < nb:
+        raise ValueError(f"trim {t.trim} must be 0..{nb - 1} sub-bands")
+    for name, lo_, hi_ in (
+        ("residual_max", 0.1, 1e3),
+        ("decay_ratio", 0, 1),
+        ("tau_s", 0.01, 100),
+        ("warmup_s", 0, 10),
+    ):
+        v = getattr(t, name)
+        if not lo_ <= v <= hi_:
+            raise ValueError(f"{name} {v} is outside the allowed {lo_}..{hi_}")
+    if t.per_octave is not None:
+        po = t.per_octave
+        if isinstance(po, bool) or not isinstance(po, (int, float)) or not 0.5 <= po <= 48:
+            raise ValueError(f"per_octave {po!r} must be a number within 0.5..48 sub-bands per octave (or null)")
+        object.__setattr__(t, "per_octave", float(po))
+
+
+def _check_continuum(t: Tuning, nb: int) -> None:
+    if t.step_rate_hz is not None:
+        r = float(t.step_rate_hz)
+        if not (math.isfinite(r) and 10.0 <= r <= t.sample_rate / 4):
+            raise ValueError(f"step_rate_hz {t.step_rate_hz} must be within 10..{t.sample_rate / 4:g} Hz")
+        object.__setattr__(t, "step_rate_hz", r)
+    given = [getattr(t, k) is not None for k in _CONTINUUM]
+    if any(given) and not (all(given) and t.step_rate_hz is not None):
+        raise ValueError(
+            "continuum_levels_db, continuum_signature_db and continuum_spread_db come together, with step_rate_hz"
+        )
+    if not all(given):
+        return
+    for k in _CONTINUUM:
+        v = tuple(math.nan if e is None else float(e) for e in getattr(t, k))
+        object.__setattr__(t, k, v)
+        if len(v) != nb or any(not abs(e) <= 400 for e in v if not math.isnan(e)):
+            raise ValueError(f"{k} must hold {nb} numbers within -400..400 dB (null where a sub-band has no continuum)")
+    if any(not 1e-3 <= v for v in t.continuum_spread_db or () if not math.isnan(v)):
+        raise ValueError("continuum_spread_db must be at least 0.001 dB")
+
+
+def _check_fine(t: Tuning) -> None:
+    given = [getattr(t, k) is not None for k in _FINE]
+    if any(given) and not all(given):  # without step_rate_hz they are kept, and not used
+        raise ValueError(f"{', '.join(_FINE)} come together")
+    if not all(given):
+        return
+    start, bin_hz = float(t.fine_start_hz or 0.0), float(t.fine_bin_hz or 0.0)
+    if not (math.isfinite(start) and 0.0 <= start < t.sample_rate / 2):
+        raise ValueError(f"fine_start_hz {t.fine_start_hz} must be within 0..{t.sample_rate / 2:g} Hz")
+    if not (math.isfinite(bin_hz) and 0.1 <= bin_hz <= 100.0):
+        raise ValueError(f"fine_bin_hz {t.fine_bin_hz} must be within 0.1..100 Hz")
+    object.__setattr__(t, "fine_start_hz", start)
+    object.__setattr__(t, "fine_bin_hz", bin_hz)
+    n = None
+    for k in ("fine_stepping_db", "fine_stopped_db"):
+        v = tuple(float(e) for e in getattr(t, k))
+        object.__setattr__(t, k, v)
+        top = TUNING_FILE.fine_max
+        if not 2 <= len(v) <= top or not all(abs(e) <= 400 for e in v):
+            raise ValueError(f"{k} must hold 2..{top} levels within -400..400 dB")
+        if n is not None and len(v) != n:
+            raise ValueError("fine_stepping_db and fine_stopped_db must hold as many levels")
+        n = len(v)
+
+
+def _to_dict(t: Tuning) -> dict[str, Any]:
+    """JSON-ready dict; units are in the key names (frame and hop are samples)."""
+    d = asdict(t)
+    d.pop("extra")
+    d["band_hz"] = list(t.band_hz)
+    d["reference_hz"] = list(t.reference_hz) if t.reference_hz is not None else None
+    d["latency_s"] = t.latency_s
+    version = 1
+    if t.method == "template":
+        version = 2
+        for k in ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold"):
+            d[k] = list(d[k]) if d[k] is not None else None
+        for k in _CONTINUUM:
+            d[k] = None if d[k] is None else [None if math.isnan(v) else v for v in d[k]]
+        for k in ("fine_stepping_db", "fine_stopped_db"):
+            d[k] = None if d[k] is None else list(d[k])
+        # absent, as in files made before they were recorded
+        for k in ("step_rate_hz", "per_octave", *_CONTINUUM, *_FINE):
+            if d[k] is None:
+                d.pop(k)
+    else:
+        for k in (
+            "method",
+            "edges_hz",
+            "signature_db",
+            "spread_db",
+            "residual_max",
+            "decay_ratio",
+            "tau_s",
+            "warmup_s",
+            "trim",
+            "checks",
+            "stepping_levels_db",
+            "drop_threshold",
+            "step_rate_hz",
+            "per_octave",
+            *_CONTINUUM,
+            *_FINE,
+        ):
+            d.pop(k)
+    return {"kind": _KIND, "version": version, **d, **({"extra": t.extra} if t.extra else {})}
+
+
+_LISTS = ("edges_hz", "signature_db", "spread_db", "stepping_levels_db", "drop_threshold", "fine_stepping_db",
+          "fine_stopped_db")  # fmt: skip
+_NUMBERS = ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s", "residual_max", "decay_ratio",
+            "tau_s", "warmup_s")  # fmt: skip
+_RATES = ("step_rate_hz", "per_octave", "fine_start_hz", "fine_bin_hz")
+_SEEN = ("latency_measured_s", "contrast_db", "margin_db", "stepping_db", "stopped_db")
+
+
+def _from_dict(d: dict[str, Any]) -> Tuning:
+    """Inverse of :meth:`Tuning.to_dict`; raises :class:`TuningFileError` naming the problem."""
+    if not isinstance(d, dict):
+        raise TuningFileError("a tuning must be a JSON object")
+    if d.get("kind", _KIND) != _KIND:
+        raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
+    version = d.get("version", 1)
+    if isinstance(version, bool) or version not in (1, 2):
+        raise TuningFileError(
+            f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
+            "upgrade stickslip or re-tune with 'stickslip tune'"
+        )
+    for key in ("band_hz", "threshold_db"):
+        if key not in d:
+            raise TuningFileError(f"tuning lacks {key!r}")
+    known = {f for f in Tuning.__dataclass_fields__}
+    kwargs = {k: v for k, v in d.items() if k in known}
+    try:
+        _parse_bands(kwargs)
+        _parse_lists(kwargs)
+        _parse_optional(kwargs, _RATES)
+        if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
+            raise TuningFileError("checks must be an object or null")
+        _parse_numbers(kwargs)
+        return Tuning(**kwargs)
+    except TuningFileError:
+        raise
+    except (TypeError, ValueError) as e:
+        raise TuningFileError(f"bad tuning: {e}") from None
+
+
+def _parse_bands(kwargs: dict[str, Any]) -> None:
+    """``band_hz`` and ``reference_hz`` as pairs of numbers, Hz."""
+    band = kwargs["band_hz"]
+    if not (isinstance(band, (list, tuple)) and len(band) == 2):
+        raise TuningFileError("band_hz must be [low_Hz, high_Hz]")
+    kwargs["band_hz"] = (_number("band_hz[0]", band[0]), _number("band_hz[1]", band[1]))
+    ref = kwargs.get("reference_hz")
+    if ref is not None:
+        if not (isinstance(ref, (list, tuple)) and len(ref) == 2):
+            raise TuningFileError("reference_hz must be [low_Hz, high_Hz] or null")
+        kwargs["reference_hz"] = (_number("reference_hz[0]", ref[0]), _number("reference_hz[1]", ref[1]))
+
+
+def _parse_lists(kwargs: dict[str, Any]) -> None:
+    """The lists of numbers (the continuum's may hold nulls: NaN) as tuples."""
+    for k in _LISTS:
+        if kwargs.get(k) is not None:
+            if not isinstance(kwargs[k], (list, tuple)):
+                raise TuningFileError(f"{k} must be a list of numbers")
+            kwargs[k] = tuple(_number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k]))
+    for k in _CONTINUUM:
+        if kwargs.get(k) is not None:
+            if not isinstance(kwargs[k], (list, tuple)):
+                raise TuningFileError(f"{k} must be a list of numbers or nulls")
+            kwargs[k] = tuple(math.nan if v is None else _number(f"{k}[{i}]", v) for i, v in enumerate(kwargs[k]))
+
+
+def _parse_optional(kwargs: dict[str, Any], keys: tuple[str, ...]) -> None:
+    """The numbers ``keys`` that may be null."""
+    for k in keys:
+        if kwargs.get(k) is not None:
+            kwargs[k] = _number(k, kwargs[k])
+
+
+def _parse_numbers(kwargs: dict[str, Any]) -> None:
+    """The numbers (finite), what tuning saw (or null) and the integers (whole)."""
+    for k in _NUMBERS:
+        if k in kwargs:
+            kwargs[k] = _number(k, kwargs[k])
+    _parse_optional(kwargs, _SEEN)
+    for k in ("sample_rate", "frame", "hop", "max_dips", "trim", "joint"):
+        if k == "joint" and kwargs.get(k) is None:
+            continue
+        if k in kwargs:
+            v = kwargs[k]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
+                raise TuningFileError(f"{k} must be an integer, got {v!r}")
+            kwargs[k] = int(v)
+
+
+def _report(t: Tuning) -> str:
+    """A band tuning's report: band, threshold, contrast and margin."""
+    lines = [
+        f"band {t.band_hz[0]:.0f}-{t.band_hz[1]:.0f} Hz, threshold {t.threshold_db:.1f} {t.level_unit}",
+        f"frame {t.frame} samples ({1e3 * t.frame / t.sample_rate:.1f} ms), "
+        f"hop {t.hop} ({1e3 * t.hop / t.sample_rate:.2f} ms), "
+        f"hold {1e3 * t.hold_s:.1f} ms, hysteresis {t.hysteresis_db:.1f} dB",
+    ]
+    if t.contrast_db is not None:
+        lines.append(
+            f"stepping <= {t.stepping_db:.1f} {t.level_unit}, stopped >= {t.stopped_db:.1f} "
+            f"{t.level_unit}: "
+            f"contrast {t.contrast_db:.1f} dB, margin {t.margin_db:.1f} dB"
+        )
+    lines.append(f"latency {1e3 * t.latency_s:.1f} ms")
+    return "\n".join(lines)
+
+
+def _template_report(t: Tuning) -> str:
+    assert t.edges_hz is not None and t.signature_db is not None
+    sig = np.asarray(t.signature_db)
+    k = int(np.argmax(np.abs(sig)))
+    e = t.edges_hz
+    per = f" ({t.per_octave:g} per octave)" if t.per_octave is not None else ""
+    lines = [
+        f"spectral template over {e[0]:.0f}-{e[-1]:.0f} Hz in {len(e) - 1} sub-bands{per}; the stop departs most "
+        f"at {e[k]:.0f}-{e[k + 1]:.0f} Hz ({sig[k]:+.1f} dB)",
+        f"stop signature {', '.join(f'{v:+.0f}' for v in sig)} dB",
+        f"fires at stop-likeness {t.threshold_db:.2f} (stepping 0, the stop 1) held "
+        f"{1e3 * t.hold_s:.1f} ms, residual <= {t.residual_max:.1f}; frame "
+        f"{t.frame} samples ({1e3 * t.frame / t.sample_rate:.1f} ms), hop {t.hop}",
+    ]
+    if t.contrast_db is not None:
+        lines.append(
+            f"worst stepping frame {t.stepping_db:.2f}, stop's low {t.stopped_db:.2f}: "
+            f"margin {t.margin_db:.2f} (stop-likeness), stop departure {t.contrast_db:.1f} dB"
+        )
+    lines.append(f"latency {1e3 * t.latency_s:.1f} ms, onset lag {1e3 * t.onset_lag_s:.1f} ms")
+    c = t.checks or {}
+    if "false_alarms_per_hour" in c:
+        lines.append(
+            f"t-check with knocks, babble, +-20 dB gain and a second click train: "
+            f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
+            f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
+            f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"
+        )
+    return "\n".join(lines)

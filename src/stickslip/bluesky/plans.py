@@ -28,7 +28,7 @@ import bluesky.preprocessors as bpp
 from bluesky.utils import Msg
 
 from .. import kinematics as kin
-from ..audio.detector import StopDetector, Tuning
+from ..audio.detector import Tuning, detector_for
 from ..calibration import Calibration, calibrate
 from ..clock import check_day_label, today_label
 from ..devices.base import Controller, PoseSettable
@@ -97,7 +97,7 @@ class _Switch:
                 self.tunings[joint] = tune(samples, rate, stop_at, joint=joint)
             if self.mic is None:
                 self.mic = ctrl.microphone()
-            det = StopDetector(self.tunings[joint], ctrl.clock_s)
+            det = detector_for(self.tunings[joint], ctrl.clock_s)
         return measure_traverse(
             ctrl, joint, direction, detector=det, audio_blocks=self.mic, pose=pose, day=day, burst_steps=burst
         )

@@ -12,8 +12,9 @@ import typer
 
 from . import app
 from ._common import console, device_url, err_console, fail, print_json, user_errors
+from ._output import CARRIAGE_RETURN, data_stream, styled
 
-#: file suffixes read as a CSV of vibration samples (stickslip.audio.vibration); anything else is audio
+#: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
 _CSV_SUFFIXES = (".csv", ".txt")
 
 _SAMPLE_RATE_HELP = (
@@ -24,10 +25,10 @@ _SAMPLE_RATE_HELP = (
 
 def _check_sample_rate(sample_rate: float | None) -> None:
     """``fail`` unless ``--sample-rate`` is absent or one a vibration stream may have."""
-    from ..audio.vibration import SAMPLE_RATE_RANGE, sample_rate_ok
+    from ..audio.sources.vibration import VIBRATION, sample_rate_ok
 
     if sample_rate is not None and not sample_rate_ok(sample_rate):
-        lo, hi = SAMPLE_RATE_RANGE
+        lo, hi = VIBRATION.sample_rate_range
         fail(f"--sample-rate must be {lo:.0f}-{hi:.0f} Hz, got {sample_rate:g}")
 
 
@@ -65,7 +66,7 @@ def _channels(path: Path, channel: int | None) -> int | None:
 def _load_recording(path: Path, sample_rate: float | None, channel: int | None = None) -> tuple[Any, int]:
     """Samples and rate of a WAV (any audio file soundfile reads) or of a CSV of vibration samples."""
     from ..audio.sources import AudioSourceError, read_wav
-    from ..audio.vibration import read_vibration
+    from ..audio.sources.vibration import read_vibration
 
     if sample_rate is not None and not _is_csv(path):
         fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
@@ -154,7 +155,7 @@ def tune(
     if json_out:
         print_json(tuning.to_dict())
         return
-    console.print(f"[bold]tuning for {recording}[/] (joint {joint if joint else '?'})")
+    console.print(styled(f"tuning for {recording}", "bold"), f"(joint {joint if joint else '?'})")
     console.print(tuning.report(), highlight=False, soft_wrap=True)
     console.print(f"saved to {out}", soft_wrap=True)
 
@@ -194,7 +195,8 @@ def listen(
         help=(
             "Also ask the step clock before reporting a stop: a real stop's clicks keep the steps' rhythm, talk, a "
             "radio or another instrument do not (fewer false alarms). Off by default: check first that your arm's "
-            "stop is on the clock (docs/audio.md, 'The step clock'); where it is not, no stop is ever reported."
+            "stop is on the clock (docs/audio.md, 'The step clock and the late path'); where it is not, no stop is "
+            "ever reported."
         ),
     ),
     late: bool = typer.Option(
@@ -203,7 +205,7 @@ def listen(
         help=(
             "Also report stops the detector never heard, found late on the step clock's lines (0.5-0.75 s after the "
             "stop, the onset estimated back; found_late in --json): a stop whose sound the tuning never saw (trained "
-            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'Round 12a')."
+            "on a quieter stop, this one louder). Off by default (docs/audio.md, 'The step clock and the late path')."
         ),
     ),
     json_out: bool = typer.Option(
@@ -228,7 +230,7 @@ def listen(
               stickslip listen --serial /dev/ttyACM0 --sample-rate 25000 --tuning accel-tuning.json
     """
     from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, check_confirm_s, confirming
-    from ..audio.detector import StopDetector, Tuning, TuningFileError
+    from ..audio.detector import Tuning, TuningFileError, detector_for
 
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
@@ -258,8 +260,8 @@ def listen(
 
     import numpy as np
 
-    from ..audio.guard import block_problem, non_finite
     from ..audio.sources import AudioSourceError, wav_blocks
+    from ..audio.sources.guard import block_problem, non_finite
 
     if tuning.method == "band":
         err_console.print(
@@ -293,7 +295,7 @@ def listen(
             if det is None:
                 try:
                     det = confirming(
-                        StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late
+                        detector_for(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late
                     )
                 except ValueError as e:
                     fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
@@ -305,7 +307,7 @@ def listen(
         fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
     if isinstance(det, ConfirmedStopDetector):
         events += det.finish()
-        for t_s, why in det.stopped_log:
+        for t_s, why in det.log.stopped:
             _note_stopped(t_s, why)
     warmup_s = tuning.warmup_s if tuning.method == "template" else 0.0
     if heard < (warmup_s + tuning.hold_s) * heard_rate:
@@ -318,7 +320,7 @@ def listen(
             soft_wrap=True,
         )
     if opening and tuning.step_rate_hz is not None:
-        from ..audio.stepclock import step_rate_hz
+        from ..audio.features.stepclock import step_rate_hz
 
         # damaged samples count as silence here: one infinity read as full scale would be the only 'click' heard
         first = np.nan_to_num(np.concatenate(opening), nan=0.0, posinf=0.0, neginf=0.0)
@@ -370,7 +372,9 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
 
 def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
     if json_out:
-        typer.echo(json.dumps(ev.to_dict()))
+        out = data_stream()  # one JSON object per line, as it is confirmed: written and flushed now
+        out.write(json.dumps(ev.to_dict()) + "\n")
+        out.flush()
     else:
         console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
 
@@ -386,13 +390,13 @@ def _listen_serial(
 ) -> None:
     """Live vibration samples from a serial port through the same detector as sound."""
     from ..audio.confirm import confirming
-    from ..audio.detector import StopDetector
+    from ..audio.detector import detector_for
     from ..audio.sources import AudioSourceError
-    from ..audio.vibration import SerialSamples
+    from ..audio.sources.vibration import SerialSamples
 
     rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
     try:
-        det = confirming(StopDetector(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late)
+        det = confirming(detector_for(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late)
     except ValueError as e:
         fail(f"the tuning does not fit {rate} Hz samples: {e}")
     try:
@@ -408,12 +412,12 @@ def _listen_live(
     tuning: Any, device: str | None, json_out: bool, confirm_s: float, step_clock: bool, late: bool = False
 ) -> None:
     from ..audio.confirm import confirming
-    from ..audio.detector import StopDetector
+    from ..audio.detector import detector_for
     from ..audio.sources import AudioSourceError, Microphone
 
     dev: int | str | None = int(device) if device is not None and device.isdigit() else device
     mic = Microphone(sample_rate=tuning.sample_rate, block=1024, device=dev)
-    det = confirming(StopDetector(tuning), confirm_s, step_clock=step_clock, late=late)
+    det = confirming(detector_for(tuning), confirm_s, step_clock=step_clock, late=late)
     try:
         mic.start()
     except AudioSourceError as err:
@@ -439,7 +443,7 @@ def _warn_overflows(mic: Any) -> Iterator[Any]:
 
 
 def _note_stopped(t_s: float, why: Any) -> None:
-    """One line on stderr: the stepping stopped at ``t_s`` (s), which is not an end stop (stickslip.audio.stopped)."""
+    """One line on stderr: the stepping stopped at ``t_s`` (s), which is not an end stop (audio.confirm.pause)."""
     err_console.print(
         f"note: the stepping stopped at {t_s:.2f} s (the sound fell {-why.drop_db:.0f} dB, to the room's, and no "
         "stepping was heard in it): a pause, not an end stop, so no stop is reported there",
@@ -452,6 +456,7 @@ def _report_live(
     det: Any, blocks: Iterator[Any], close: Any, tuning: Any, json_out: bool, confirm_s: float, where: str
 ) -> None:
     """Feed a live source's blocks to ``det`` and print each event as it comes, until Ctrl-C; then ``close()``."""
+    from ..audio.confirm import ConfirmedStopDetector
     from ..audio.sources import AudioSourceError
 
     noted = 0
@@ -459,7 +464,7 @@ def _report_live(
         for block in blocks:
             for ev in det.feed(block):
                 _print_live(ev, tuning, json_out, confirm_s)
-            stopped = getattr(det, "stopped_log", ())
+            stopped = det.log.stopped if isinstance(det, ConfirmedStopDetector) else []
             for t_s, why in stopped[noted:]:
                 _note_stopped(t_s, why)
             noted = len(stopped)
@@ -663,7 +668,7 @@ def _record_real(
             issued += n
             for b in _drain(mic, tb + n / hz):
                 blocks.append(b)
-                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
+                err_console.print(CARRIAGE_RETURN, meter.feed(b).line(), sep="", end="", highlight=False)
         blocks += list(_drain(mic, time.monotonic() + 0.3))
         ctrl.stop(joint)
     finally:
@@ -694,7 +699,7 @@ class _SerialRecorder:
         import queue
 
         from ..audio.sources import AudioSourceError
-        from ..audio.vibration import SerialSamples
+        from ..audio.sources.vibration import SerialSamples
 
         try:
             self.src = SerialSamples(port, sample_rate=sample_rate)

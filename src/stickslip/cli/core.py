@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -32,6 +31,7 @@ from ._common import (
     fail_table,
     length_option,
     max_age_setting,
+    pose_options,
     print_json,
     read_step_table,
     read_table,
@@ -39,6 +39,7 @@ from ._common import (
     validation_table,
     warn_later,
 )
+from ._output import data_stream, styled
 
 CalibrationOpt = Annotated[
     Path | None,
@@ -236,7 +237,7 @@ def calibrate_cmd(
     if cal.selection:
         console.print(_selection_table(cal))
     for n in cal.provenance.notes:
-        console.print(f"[dim]note:[/] {n}", highlight=False)
+        console.print(styled("note:", "dim"), n, highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
 
@@ -393,7 +394,7 @@ def predict_cmd(
     try:
         if output is None:
             check_pose_file(poses)  # a table that fails further on must not leave half of it on the screen
-            emit(sys.stdout)
+            emit(data_stream())
         else:
             with user_errors():
                 atomic_write(output, emit)  # a failed write or a bad row leaves no half file
@@ -460,7 +461,7 @@ def plan_cmd(
 
     Example: stickslip plan -c cal.json --joint 3 --from 2mm --to 2.03mm --q2 -60deg
     """
-    from ..kinematics import JOINTS, Pose
+    from ..kinematics import JOINTS
     from ..models import NonPhysicalError
 
     if joint not in JOINTS:
@@ -469,10 +470,14 @@ def plan_cmd(
 
     pos = angle_option if joint_spec(joint).rotary else length_option
     try:
-        qa, qb = pos(q_from), pos(q_to)
-        pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
+        qa = pos(q_from)
     except typer.BadParameter as e:
-        fail(str(e))
+        fail(f"--from: {e.message}")
+    try:
+        qb = pos(q_to)
+    except typer.BadParameter as e:
+        fail(f"--to: {e.message}")
+    pose = pose_options(q1, q2, q3, theta, psi)
     cal = _load_calibration(calibration)
     try:
         plan = plan_move(cal, joint, qa, qb, pose)

@@ -350,7 +350,7 @@ def _limit_switches(sim: SimulatedMM3A, switch: str, bar: _Bars) -> tuple[dict[i
     """Tunings, detectors and microphone per joint: tuned from labelled recordings, or the oracle."""
     if switch != "audio":
         return {}, {j: OracleStopDetector(sim, j, delay_s=0.03) for j in (1, 2, 3)}, sim.microphone(silent=True)
-    from ..audio.detector import StopDetector
+    from ..audio.detector import detector_for
     from ..audio.tuning import tune
 
     tunings: dict[int, Any] = {}
@@ -359,7 +359,7 @@ def _limit_switches(sim: SimulatedMM3A, switch: str, bar: _Bars) -> tuple[dict[i
         bar.stage(f"tuning the limit switch of joint {joint}")
         samples, rate, stop_at = sim.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
         tunings[joint] = tune(samples, rate, stop_at, joint=joint)
-        detectors[joint] = StopDetector(tunings[joint], sim.clock_s)
+        detectors[joint] = detector_for(tunings[joint], sim.clock_s)
     return tunings, detectors, sim.microphone()
 
 

@@ -31,7 +31,9 @@ from numpy.typing import NDArray
 from ..calibration import Calibration
 from ..calibration.intervals import relative_sd
 from ..measurements import PoseChunk, PoseTable, TableError, stream_pose_table
+from ..measurements.poses import POSE_COLUMNS
 from ..models import NonPhysicalError
+from ..records import guard_cell, needs_guard, unguard_cell
 
 __all__ = ["PredictionError", "PredictedChunk", "predict_pose_file", "check_pose_file", "write_csv", "write_json"]
 
@@ -185,36 +187,47 @@ def _texts(values: NDArray[np.float64]) -> Iterator[str]:
 
 def write_csv(header: list[str], chunks: Iterator[PredictedChunk], f: TextIO, interval: bool = False) -> int:
     """Write the predictions as CSV: the rows as they stand plus ``gamma_pred`` (and ``gamma_pi95``);
-    a ``gamma_pred`` column already there is replaced. Returns the rows written."""
+    a ``gamma_pred`` column already there is replaced. Returns the rows written.
+
+    A cell a spreadsheet would run as a formula is written guarded (``records.guard_cell``;
+    guarding a cell that needs none gives it back as it is). The pose columns hold checked
+    numbers and signs; a chunk whose own columns and names need no guard passes through as
+    it stands.
+    """
     gamma_at = [i for i, h in enumerate(header) if h == "gamma_pred"]
     out_header = header + (["gamma_pred"] if not gamma_at else [])
     # a cell of a repeated (empty) column name holds the last such cell, as a dict of the row would
     last = {h: i for i, h in enumerate(header)}
     take = [last[h] for h in header]
     k = gamma_at[0] if gamma_at else len(take)
+    own = [i for i, h in enumerate(header) if h not in POSE_COLUMNS]
+    safe_header = not any(map(needs_guard, header))
     w = csv.writer(f, lineterminator="\n")
-    w.writerow([*out_header, "gamma_pi95"] if interval else out_header)
+    head = [guard_cell(unguard_cell(h)) for h in out_header]
+    w.writerow([*head, "gamma_pi95"] if interval else head)
     n = 0
     for ch in chunks:
         n += len(ch.table)
         texts = _texts(ch.gamma)
+        safe = safe_header and not (own and any(needs_guard(cs[i]) for cs in ch.cells for i in own))
+        rows = ch.cells if safe else [[guard_cell(unguard_cell(c)) for c in cs] for cs in ch.cells]
         if ch.pi95 is not None:
             w.writerows(
                 [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :]), repr(h)]
-                for cells, g, h in zip(ch.cells, texts, ch.pi95.tolist(), strict=True)
+                for cells, g, h in zip(rows, texts, ch.pi95.tolist(), strict=True)
             )
-        elif ch.table.raw is not None and not gamma_at:
+        elif ch.table.raw is not None and not gamma_at and safe:
             # plain rows (no quotes, none blank or short): csv would write each back as it stands
-            rows = map("{},{}\n".format, ch.table.raw, texts)
-            while part := "".join(itertools.islice(rows, 65536)):
+            lines = map("{},{}\n".format, ch.table.raw, texts)
+            while part := "".join(itertools.islice(lines, 65536)):
                 f.write(part)
         elif gamma_at:
             w.writerows(
                 [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :])]
-                for cells, g in zip(ch.cells, texts, strict=True)
+                for cells, g in zip(rows, texts, strict=True)
             )
         else:
-            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(ch.cells, texts, strict=True))
+            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(rows, texts, strict=True))
     return n
 
 
@@ -239,7 +252,7 @@ def write_json(header: list[str], chunks: Iterator[PredictedChunk], f: TextIO) -
     for ch in chunks:
         pi95 = ch.pi95.tolist() if ch.pi95 is not None else None
         for r_i, (cells, g) in enumerate(zip(ch.cells, ch.gamma.tolist(), strict=True)):
-            row: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
+            row: dict[str, object] = {h: _maybe_number(unguard_cell(cells[i])) for h, i in last.items()}
             row["gamma_pred"] = g
             if pi95 is not None:
                 row["gamma_pi95"] = pi95[r_i]

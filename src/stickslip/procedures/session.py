@@ -17,11 +17,11 @@ from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S
-from ..audio.detector import StopDetector, Tuning
+from ..audio.detector import Tuning, detector_for
 from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock, device_key
 from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
-from ..records import atomic_write_text
+from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 from .traverse import TraverseError, TraverseResult, measure_traverse
 
 __all__ = [
@@ -80,12 +80,12 @@ def traverse_on_device(
         :func:`~.traverse.measure_traverse`; 0: the detector's first fire).
     serial_port : str, optional
         Listen to a vibration sensor that sends one ASCII sample per line on this serial
-        port, at the tuning's sample rate (:class:`~stickslip.audio.vibration.SerialSamples`;
+        port, at the tuning's sample rate (:class:`~stickslip.audio.sources.vibration.SerialSamples`;
         a vacuum chamber, where no air carries the sound), instead of a sound card. The
         tuning must have been made from the same sensor.
     on_warning : callable
         Gets a warning, before the joint moves, when the controller steps more than
-        :data:`~stickslip.audio.tuningfile.STEP_RATE_TOLERANCE` away from the rate the
+        ``TuningFileParams.step_rate_tolerance`` away from the rate the
         tuning was made at (:meth:`~stickslip.audio.tuningfile.Tuning.step_rate_problem`).
         Default: a :class:`StepRateWarning` (Python's ``warnings``).
     """
@@ -98,7 +98,7 @@ def traverse_on_device(
     close: Callable[[], None] | None = None  # what to close after, for a source this opened
     mic: Any = None  # a sound card: it may drop audio
     if serial_port is not None:
-        from ..audio.vibration import SerialSamples
+        from ..audio.sources.vibration import SerialSamples
 
         src = SerialSamples(serial_port, sample_rate=int(tuning.sample_rate))
         blocks: Any = src.blocks()
@@ -113,7 +113,7 @@ def traverse_on_device(
         blocks, close = mic.blocks(), mic.stop
     try:
         result = measure_traverse(
-            ctrl, joint, direction, detector=StopDetector(tuning, t0), audio_blocks=blocks,
+            ctrl, joint, direction, detector=detector_for(tuning, t0), audio_blocks=blocks,
             pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
         )
     finally:
@@ -149,7 +149,7 @@ def check_append_target(path: Path) -> str:
     """
     if not path.exists():
         return ""
-    old = path.read_text(encoding="utf-8-sig")
+    old = read_text_bounded(path, "measurement table", MAX_TABLE_BYTES)  # a FIFO or device: refused, never opened
     if not old.strip():
         return ""
     header = measurements_to_csv([]).split("\n", 1)[0]

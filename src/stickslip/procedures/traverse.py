@@ -6,7 +6,7 @@ The traverse procedure (docs/design.md §5), for any :class:`~stickslip.devices.
    hears that stop (``predrive="listen"``), or overdrive it by more steps than the
    whole range can take (``predrive="overdrive"``; no listening needed).
 2. *Measure*: step in bursts in the measured direction while the
-   :class:`~stickslip.audio.detector.StopDetector` listens to the audio recorded
+   limit switch (any :class:`~stickslip.audio.events.StopDetector`) listens to the audio recorded
    during each burst; stop at the first event.
 3. *Count*: every burst is logged as ``(stream time it began, steps, frequency)``.
    The steps that moved the joint are those issued before the stop's onset; the
@@ -44,8 +44,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
-from ..audio.confirm import CONFIRM_S, confirming
-from ..audio.guard import NoSignalError, SignalGuard
+from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, confirming
+from ..audio.events import StopDetector, StopEvent
+from ..audio.sources.guard import NoSignalError, SignalGuard
 from ..clock import check_day_label
 from ..devices.base import Controller, VirtualClock
 from ..measurements import Traverse
@@ -156,7 +157,7 @@ class _Listener:
     at the controller clock when listening first starts, and to run continuously.
     """
 
-    def __init__(self, detector: Any, audio_blocks: Any, sample_rate: float, step_hz: float | None = None):
+    def __init__(self, detector: StopDetector, audio_blocks: Any, sample_rate: float, step_hz: float | None = None):
         self.detector = detector
         self.sample_rate = float(sample_rate)
         self._callable = callable(audio_blocks) and not isinstance(audio_blocks, Iterator)
@@ -168,7 +169,7 @@ class _Listener:
         self._last_block_s = 0.0
         # a dead input must never look like a stop; only a detector that declares it does not
         # listen to the samples (the simulator's oracle) is exempt
-        listens = getattr(detector, "uses_audio", True)
+        listens = detector.uses_audio
         # ... and the joint's stepping must be heard at the commanded rate
         self.guard = SignalGuard(self.sample_rate, step_hz=step_hz) if listens else None
 
@@ -210,7 +211,7 @@ class _Listener:
             self._last_block_s = len(block) / self.sample_rate
             yield block
 
-    def listen(self, until_s: float) -> Any:
+    def listen(self, until_s: float) -> StopEvent | None:
         """Feed the audio recorded up to ``until_s``; the first event, or ``None``."""
         for block in self._blocks(until_s):
             if isinstance(block, tuple):
@@ -223,7 +224,7 @@ class _Listener:
             except NoSignalError as e:
                 raise TraverseError(str(e)) from None
             self.t_s += block.shape[0] / self.sample_rate
-            dropped = getattr(self.detector, "rejected", None)
+            dropped = self.detector.log.rejected if isinstance(self.detector, ConfirmedStopDetector) else None
             before = len(dropped) if dropped is not None else 0
             events = self.detector.feed(block)
             if dropped is not None:
@@ -236,7 +237,7 @@ class _Listener:
         return None
 
 
-def _sample_rate(detector: Any, audio_blocks: Any) -> float:
+def _sample_rate(detector: StopDetector, audio_blocks: Any) -> float:
     for obj in (audio_blocks, getattr(detector, "tuning", None), detector):
         sr = getattr(obj, "sample_rate", None)
         if sr:
@@ -276,7 +277,7 @@ def measure_traverse(
     joint: int,
     direction: str | int,
     *,
-    detector: Any,
+    detector: StopDetector,
     audio_blocks: Callable[[], Iterable[np.ndarray]] | Iterable[np.ndarray],
     pose: kin.Pose,
     day: str,
@@ -396,7 +397,7 @@ def measure_traverse(
         )
         return replace(redo, retried=True)
 
-    if getattr(event, "onset_uncertain", False):  # heard as the switch passed interference by: when did it begin?
+    if event.onset_uncertain:  # heard as the switch passed interference by: when did it begin?
         raise TraverseError(
             f"joint {joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed by a sound "
             "that did not persist (interference near the stop), so when the stop began is uncertain; nothing "
@@ -404,7 +405,7 @@ def measure_traverse(
         )
     # 3. count the steps made before the stop, latency corrected
     detected = float(event.detected_at_s)
-    t_stop = {"onset": float(event.onset_s), "fixed": detected - float(getattr(detector, "latency_s", 0.0))}.get(
+    t_stop = {"onset": float(event.onset_s), "fixed": detected - float(detector.latency_s)}.get(
         latency, detected
     )
     steps = _count_before(t_stop, run.bursts, hz)
@@ -426,7 +427,7 @@ def measure_traverse(
         predrive_steps=predrive_steps,
         listen_after_steps=listen_after_steps,
         bursts=tuple(run.bursts),
-        confirmed_at_s=getattr(event, "confirmed_at_s", None),
+        confirmed_at_s=event.confirmed_at_s,
         unconfirmed=tuple(t for t in listener.unconfirmed if t >= t_start),
     )
 
@@ -523,7 +524,7 @@ class _Run:
 
     def until_heard(
         self, t_start: float, listen_after_steps: int, settle_s: float, update: Callable[[int, float], None]
-    ) -> Any:
+    ) -> StopEvent | None:
         """Step in bursts until the end stop is heard; its event, or ``None`` if it was heard at once."""
         while self.commanded < listen_after_steps:  # the stop cannot be this close: do not listen yet
             self._burst(min(listen_after_steps - self.commanded, 50 * self.burst_steps))

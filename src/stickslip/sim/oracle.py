@@ -3,11 +3,11 @@ emulators that need the traverse procedure without audio)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
-import numpy as np
 from numpy.typing import NDArray
+
+from ..audio.events import StopEvent
 
 
 class StoppingArm(Protocol):
@@ -19,23 +19,14 @@ class StoppingArm(Protocol):
         """``(begin, end)`` times (s) of runs of steps against an end stop."""
         ...
 
-__all__ = ["OracleEvent", "OracleStopDetector"]
-
-
-@dataclass(frozen=True)
-class OracleEvent:
-    """A stop event of :class:`OracleStopDetector` (same fields as ``StopEvent``)."""
-
-    detected_at_s: float
-    onset_s: float
-    level_db: float = 0.0
+__all__ = ["OracleStopDetector"]
 
 
 class OracleStopDetector:
     """A limit switch that cheats: it knows the simulator's true stop times.
 
     For tests and emulators that need the traverse procedure without audio. It
-    consumes blocks like :class:`~stickslip.audio.detector.StopDetector` (the stream
+    consumes blocks like the audio detectors (:class:`~stickslip.audio.events.StopDetector`; the stream
     time advances by the block length) and fires once per stop, at the end of the
     first block that reaches ``true stop + delay_s``; its onset estimate is the true
     stop plus ``onset_error_s``. A stop already sounding when the stream starts (or
@@ -80,7 +71,7 @@ class OracleStopDetector:
         self.t_s = float(t0_s)
         self._fired_upto = float(t0_s)
 
-    def feed(self, block: NDArray[np.float64]) -> list[OracleEvent]:
+    def feed(self, block: NDArray[Any]) -> list[StopEvent]:
         """Consume a block; the events whose detection time falls within it."""
         t_end = self.t_s + len(block) / self.sample_rate
         self.t_s = t_end
@@ -89,6 +80,6 @@ class OracleStopDetector:
             # a run already under way when listening began is heard from then on
             onset = max(begin, self._fired_upto)
             if onset < end and onset + self.delay_s <= t_end:
-                out.append(OracleEvent(t_end, onset + self.onset_error_s))
+                out.append(StopEvent(t_end, onset + self.onset_error_s, 0.0))
                 self._fired_upto = max(end, t_end)
         return out

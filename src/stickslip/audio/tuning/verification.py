@@ -1,4 +1,10 @@
-"""Scoring and verifying template candidates: what the detector decides on, the refusal, the self-check."""
+"""Verifying template candidates: the refusal that names what spoils them, and the self-check.
+
+A candidate that fires once, at the stop, on its own recording is checked again with
+interference injected (:mod:`.inject`: knocks, babble, a second click train, +-20 dB of
+gain) and with a sound that adds what the stop adds and lowers nothing (``mimic_*``): the
+first that neither clearly fails nor is mimicked wins (:func:`pick`).
+"""
 
 from __future__ import annotations
 
@@ -7,50 +13,50 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import rank_filter
 
-from .detector import StopDetector, Tuning
-from .labels import TuningError, _fmt_spans, _spans
-from .template import fit_departure
+from ..change import TemplateDetector
+from ..change.fit import fit_departure
+from ..features.spectra import subband_levels_db
+from ..paramfield import param
+from ..tuningfile import Tuning
+from . import inject
+from .candidates import Candidate, decided
+from .labels import TuningError, fmt_spans, spans
+
+__all__ = ["VERIFY", "VerifyParams", "no_template", "one_stop", "pick", "self_check_failed"]
 
 FloatArray = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class _Candidate:
-    name: str
-    bands: tuple[int, ...]  # sub-band indices (contiguous)
-    margin: float
-    threshold: float
-    residual_max: float
-    trim: int
-    step_hi: float
-    stop_lo: float
-    contrast_db: float
+class VerifyParams:
+    """The self-check's sound that adds what the stop adds (and lowers nothing)."""
+
+    mimic_levels_db: tuple[float, ...] = param(
+        (-6.0, 0.0, 6.0), "dB re the stop's rise", "its levels: below, at and above the rise itself"
+    )
+    mimic_bursts_s: tuple[float, ...] = param((0.06, 0.3, 1.0), "s", "its bursts: a syllable, a word, a sentence")
+    mimic_start_s: float = param(0.45, "s", "the bursts start this long into the recording (after the warm-up) ...")
+    mimic_gap_s: float = param(0.4, "s", "... and this far apart")
 
 
-def _one_stop(tu: Tuning) -> StopDetector:
+VERIFY = VerifyParams()
+
+
+def one_stop(tu: Tuning) -> TemplateDetector:
     """A detector judged as tuning always has: after a fire it stays latched until *a* stays low.
 
-    The end-of-stop re-arming (:class:`~stickslip.audio.template.Release`) is for a session
-    with several stops; the tuning's recordings hold one, and its self-check counts fires on
+    The end-of-stop re-arming (:mod:`stickslip.audio.change.release`) is for a session with
+    several stops; the tuning's recordings hold one, and its self-check counts fires on
     interference bursts as they were counted when its rules were measured.
     """
-    det = StopDetector(tu)
+    det = TemplateDetector(tu)
     det.hold(True)
     return det
 
 
-def _decided(a: FloatArray, rho: FloatArray, rmax: float, hold: int, window: int) -> FloatArray:
-    """What the detector decides on: the ``hold``-th largest usable stop-likeness in each window of frames."""
-    use = np.where(rho <= rmax, a, -10.0)
-    if use.size < window:
-        return np.full_like(use, -10.0)
-    return np.asarray(rank_filter(use, rank=window - hold, size=window, origin=(window - 1) // 2), dtype=np.float64)
-
-
-def _no_template(
-    best: _Candidate,
+def no_template(
+    best: Candidate,
     D: FloatArray,
     delta: FloatArray,
     sigma: FloatArray,
@@ -63,12 +69,12 @@ def _no_template(
     """The refusal when no candidate verified: which time spans of the stepping sound like the stop."""
     sub = list(best.bands)
     a, rho = fit_departure(D[:, sub], delta[sub], sigma[sub], best.trim)
-    dec = _decided(a, rho, best.residual_max, hold, window)
+    dec = decided(a, rho, best.residual_max, hold, window)
     bad = stepping & (dec >= min(best.threshold, 0.5))
-    spans = _spans(bad, ends)
+    found = spans(bad, ends)
     hint = (
-        f"the stepping part sounds like the stop at {_fmt_spans(spans)}"
-        if spans
+        f"the stepping part sounds like the stop at {fmt_spans(found)}"
+        if found
         else "the stop does not stay distinct long enough"
     )
     return TuningError(
@@ -83,7 +89,7 @@ def self_check_failed(checks: dict[str, Any]) -> bool:
     return bool(checks.get("false_alarms", 0) > 1 or checks.get("stops_found") != checks.get("stops"))
 
 
-def _pick(
+def pick(
     passing: list[tuple[Tuning, float, float]],
     x: FloatArray,
     sample_rate: int,
@@ -98,13 +104,14 @@ def _pick(
 ) -> Tuning:
     """Of the verified candidates, the first whose self-check neither clearly fails nor is mimicked by added sound.
 
-    The ranking stands unless the self-check with interference fails clearly (more than
-    one false alarm, or a stop missed) or a sound shaped like the stop's own rise fires
-    the candidate (:func:`_rise_mimicry`) at more of its levels than a later one: a
-    tuning that also checks what the stop lowers cannot be fooled by a sound that only
-    adds.
-    Its onset lag and latency are the medians over the clean and the injected runs; the
-    self-check, the warnings and both stop times go into ``Tuning.checks``.
+    ``passing`` holds each candidate with its onset lag and latency on the recording ``x``
+    (stop at ``stop_s``, guard ``g``). The ranking stands unless the self-check with
+    interference fails clearly (more than one false alarm, or a stop missed) or a sound
+    shaped like the stop's own rise fires the candidate (:func:`_rise_mimicry`) at more of
+    its levels than a later one: a tuning that also checks what the stop lowers cannot be
+    fooled by a sound that only adds. Its onset lag and latency are the medians over the
+    clean and the injected runs; the self-check, the warnings and both stop times (labelled
+    ``stop_at_s``, heard ``change``) go into ``Tuning.checks``.
     """
     results: list[tuple[int, int, int, Tuning, float, float, dict[str, Any]]] = []
     for tu, lag, lat in passing:
@@ -133,6 +140,12 @@ def _pick(
     checks["warnings"] = warnings
     checks["stop_at_label_s"] = float(stop_at_s)
     checks["stop_at_sound_s"] = round(float(change), 4)
+    _warn(tu, checks, warnings, self_check, bool(mimicked))
+    return replace(tu, onset_lag_s=round(lag, 6), latency_measured_s=round(lat, 6), checks=checks)
+
+
+def _warn(tu: Tuning, checks: dict[str, Any], warnings: list[str], self_check: bool, mimicked: bool) -> None:
+    """The self-check's warnings: false alarms with interference injected, a sound that adds what the stop adds."""
     if self_check and checks.get("false_alarms", 0):
         warnings.append(
             f"with interference injected the detector gave {checks['false_alarms']} false alarms in "
@@ -146,16 +159,6 @@ def _pick(
             f"the self-check ({at} re the stop's rise): a voice, a tap or another instrument there can look like the "
             "stop (listen confirms a stop by its persistence; keep such sounds away from the microphone)"
         )
-    return replace(tu, onset_lag_s=round(lag, 6), latency_measured_s=round(lat, 6), checks=checks)
-
-
-#: levels of the rise-shaped sound re the stop's own rise, dB (its power added, scaled)
-MIMIC_LEVELS_DB = (-6.0, 0.0, 6.0)
-#: durations of its bursts, s (a syllable, a word, a sentence), played in this order in the stepping part
-MIMIC_BURSTS_S = (0.06, 0.3, 1.0)
-#: the bursts start this long after the recording does (the detector's warm-up), and this far apart, s
-MIMIC_START_S = 0.45
-MIMIC_GAP_S = 0.4
 
 
 def _rise_mimicry(
@@ -165,27 +168,25 @@ def _rise_mimicry(
 
     Per sub-band of the tuning, noise with the power the stop adds there (the stepping
     part's mean power times ``10**(signature/10) - 1`` where the signature is positive;
-    nothing where the stop lowers the sound), in bursts of :data:`MIMIC_BURSTS_S`, at
-    each of :data:`MIMIC_LEVELS_DB`. A tuning whose stop signature has drops worth
-    checking (:mod:`.template`) is seldom fired by it: no added sound lowers a sub-band
+    nothing where the stop lowers the sound), in bursts of ``mimic_bursts_s``, at each of
+    ``mimic_levels_db`` (:class:`VerifyParams`). A tuning whose stop signature has drops worth
+    checking (:mod:`stickslip.audio.change.drops`) is seldom fired by it: no added sound lowers a sub-band
     (a faint one asks for drops in proportion, which drops only just worth checking can
     meet by the stepping's wobble). One that relies on rises alone is, and so it is, in a
     room, by a voice, a tap or another instrument in those sub-bands. Returns the fires
     per level (empty when the stepping part is too short to hold a burst).
     """
-    from . import inject
-    from .template import subband_levels_db
-
+    p = VERIFY
     assert tu.edges_hz is not None and tu.signature_db is not None
     end_s = stop_s - guard_s - 0.05
     spans: list[tuple[float, float]] = []
-    t = MIMIC_START_S
-    for d in MIMIC_BURSTS_S:
+    t = p.mimic_start_s
+    for d in p.mimic_bursts_s:
         d = min(d, end_s - t)
         if d < 0.05:
             break
         spans.append((t, d))
-        t += d + MIMIC_GAP_S
+        t += d + p.mimic_gap_s
     if not spans:
         return {}
     n_step = int((stop_s - guard_s) * sample_rate)
@@ -196,9 +197,9 @@ def _rise_mimicry(
     rng = np.random.default_rng([seed, 7])
     noise = inject.shaped_noise(n, sample_rate, tu.edges_hz, added, rng) * inject.bursts(n, sample_rate, spans)
     out: dict[str, int] = {}
-    for level in MIMIC_LEVELS_DB:
+    for level in p.mimic_levels_db:
         y = x[:n] + noise * 10.0 ** (level / 20.0)
-        out[f"{level:+.0f} dB"] = len(_one_stop(tu).feed(y))
+        out[f"{level:+.0f} dB"] = len(one_stop(tu).feed(y))
     return out
 
 
@@ -206,8 +207,6 @@ def _self_check(
     tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int
 ) -> dict[str, Any]:
     """Run ``tu`` on the recording with interference injected; count false alarms and stops found."""
-    from . import inject
-
     rng = np.random.default_rng(seed)
     n_stop = int(stop_s * sample_rate)
     lo, hi = tu.band_hz
@@ -229,7 +228,7 @@ def _self_check(
     lags: list[float] = []
     per: dict[str, int] = {}
     for name, y in variants.items():
-        events = _one_stop(tu).feed(y)
+        events = one_stop(tu).feed(y)
         hits = [e for e in events if stop_s - guard_s <= e.detected_at_s <= stop_s + 0.2]
         fa = len(events) - min(1, len(hits))
         per[name] = fa

@@ -1,15 +1,15 @@
 """The stop's line-level signature predicted at another step rate, from the tuning's fine continuum.
 
 A stepping joint's sound is a click train: its power lies on lines at the step rate ``r``
-and its multiples, and the detector's sub-band levels (:mod:`.template`) are sums of those
+and its multiples, and the detector's sub-band levels (:mod:`.spectra`) are sums of those
 lines as the arm's modes shape them. At another rate the lines sample the modes
 elsewhere, so the stop's signature ``delta_b`` (dB per sub-band), learned at the tuning's
 rate ``r0``, is no longer what the stop does to the levels.
 
 The steps' irregularity (timing jitter, amplitude scatter) puts a *continuum* between the
 lines, shaped by the same transfer function ``|H(f)|**2`` as the lines. The training
-recording's fine continuum spectrum (Welch, :data:`FINE_SEGMENT_S` segments, ~5.9 Hz bins,
-the bins within :data:`FINE_GUARD_BINS` of the tuning's lines interpolated across), of
+recording's fine continuum spectrum (Welch, ``segment_s`` segments, ~5.9 Hz bins,
+the bins within ``guard_bins`` of the tuning's lines interpolated across; :class:`FineParams`), of
 stepping and of the stop, is therefore ``|H|**2`` of each up to a factor. The line level
 of sub-band ``b`` at rate ``r`` is
 
@@ -23,22 +23,22 @@ the heard rate ``r`` is the tuned one plus the change the lines' move predicts:
 
 (no change in a sub-band no line reaches, at ``r`` or at ``r0``). At ``r = r0`` the
 bracket is exactly 0. Units: Hz for frequencies and rates, dB for levels and signatures.
-See docs/audio.md, "Another step rate than the tuning's" (rounds 10b and 11a).
+See docs/audio.md, "Another step rate than the tuning's".
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..paramfield import param
+
 __all__ = [
-    "FINE_GUARD_BINS",
-    "FINE_SEGMENT_S",
-    "MIN_SIGNATURE_RMS",
-    "RATE_MIN_CHANGE",
-    "RATE_WINDOW",
+    "FINE",
+    "FineParams",
     "SignaturePredictor",
     "fine_range_hz",
     "fine_segment",
@@ -47,33 +47,32 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: Welch segment of the fine spectrum, s (8192 samples at 48 kHz: 5.86 Hz bins, finer than the arms' narrow modes)
-FINE_SEGMENT_S = 8192 / 48_000
-#: bins within this many of a multiple of the tuning's step rate hold its lines, not the continuum: interpolated across
-#: (a 4-term Blackman-Harris window's main lobe is +-4 bins wide)
-FINE_GUARD_BINS = 4.0
-#: the fine spectrum reaches this many detector bins beyond the sub-bands (a Hann frame's line leaks into 2 bins
-#: either side; lines beyond that reach a sub-band 31 dB down or more)
-FINE_MARGIN_BINS = 4
-#: the predicted signature is fitted only where the heard rate is within this share of the tuning's: round 10b
-#: measured the prediction at up to 10 % off, and 4 of 102 warm-ups heard 1.67 or 2 times the rate (a multiple,
-#: not a rate to predict at)
-RATE_WINDOW = 0.12
-#: ... and differs from it by more than this share: below it the prediction is the tuned signature plus the rate
-#: estimate's noise (its error in a 0.17 s warm-up: median 0.12 %, p95 0.67 %), a second chance to fire for nothing
-RATE_MIN_CHANGE = 0.01
-#: a predicted signature weaker than this (RMS over sub-bands, in stepping spreads) is not fitted: ``tune`` keeps no
-#: candidate below 1 spread either, and a weak signature's ``a`` is noisy on stepping
-MIN_SIGNATURE_RMS = 1.0
-#: a line summed response under this (a unit line inside a sub-band gives 1.5) reaches the sub-band too little to
-#: predict its level from
-_REACH = 0.05
-_TINY = 1e-30
+
+@dataclass(frozen=True)
+class FineParams:
+    """The fine continuum spectrum a tuning keeps, and the line model that predicts a signature from it."""
+
+    segment_s: float = param(
+        8192 / 48_000, "s", "Welch segment: 5.86 Hz bins at 48 kHz, finer than the arms' narrow modes"
+    )
+    guard_bins: float = param(
+        4.0, "bins", "bins this near a multiple of the tuning's rate hold its lines: interpolated across"
+    )
+    margin_bins: int = param(
+        4, "detector bins", "the spectrum reaches this far beyond the sub-bands (a Hann frame's line leaks 2 bins)"
+    )
+    reach: float = param(
+        0.05, "of a unit line's level", "a sub-band the lines reach less than this is not predicted (1.5 inside)"
+    )
+    power_floor: float = param(1e-30, "full scale^2 per Hz", "added to every power before its log")
 
 
-def fine_segment(sample_rate: int) -> int:
-    """The Welch segment of the fine spectrum, samples: the power of two nearest :data:`FINE_SEGMENT_S`."""
-    return int(2 ** round(math.log2(FINE_SEGMENT_S * sample_rate)))
+FINE = FineParams()
+
+
+def fine_segment(sample_rate: int, p: FineParams = FINE) -> int:
+    """The Welch segment of the fine spectrum, samples: the power of two nearest ``segment_s``."""
+    return int(2 ** round(math.log2(p.segment_s * sample_rate)))
 
 
 def fine_spectrum_db(
@@ -82,37 +81,40 @@ def fine_spectrum_db(
     rate_hz: float,
     lo_hz: float,
     hi_hz: float,
+    p: FineParams = FINE,
 ) -> tuple[float, float, FloatArray] | None:
     """The fine continuum spectrum of ``x`` over ``lo_hz``..``hi_hz``: (first bin, Hz; bin width, Hz; levels, dB).
 
     Welch's average of 4-term Blackman-Harris periodograms (:func:`fine_segment` samples,
     half overlapping), as a power spectral density (full scale 1: dB re 1/Hz); the bins
-    within :data:`FINE_GUARD_BINS` of a multiple of ``rate_hz`` are the step clock's lines
+    within ``guard_bins`` of a multiple of ``rate_hz`` are the step clock's lines
     and are replaced by the straight line (in power) between their neighbours. None when
     ``x`` is shorter than one segment or no rate is given.
     """
     from scipy.signal import welch
 
-    n = fine_segment(sample_rate)
+    n = fine_segment(sample_rate, p)
     v = np.asarray(x, dtype=np.float64)
     if v.size < n or not (math.isfinite(rate_hz) and rate_hz > 0):
         return None
-    f, p = welch(v, sample_rate, window="blackmanharris", nperseg=n, noverlap=n // 2)
+    f, psd = welch(v, sample_rate, window="blackmanharris", nperseg=n, noverlap=n // 2)
     bin_hz = float(sample_rate) / n
-    line = np.abs(f - np.round(f / rate_hz) * rate_hz) <= FINE_GUARD_BINS * bin_hz
-    p = np.asarray(p, dtype=np.float64).copy()
+    line = np.abs(f - np.round(f / rate_hz) * rate_hz) <= p.guard_bins * bin_hz
+    psd = np.asarray(psd, dtype=np.float64).copy()
     if (~line).sum() >= 2:
-        p[line] = np.interp(f[line], f[~line], p[~line])
+        psd[line] = np.interp(f[line], f[~line], psd[~line])
     i0 = max(int(math.floor(lo_hz / bin_hz)), 0)
     i1 = min(int(math.ceil(hi_hz / bin_hz)) + 1, f.size)
     if i1 - i0 < 2:
         return None
-    return float(f[i0]), bin_hz, np.asarray(10 * np.log10(p[i0:i1] + _TINY), dtype=np.float64)
+    return float(f[i0]), bin_hz, np.asarray(10 * np.log10(psd[i0:i1] + p.power_floor), dtype=np.float64)
 
 
-def fine_range_hz(edges_hz: tuple[float, ...] | list[float], sample_rate: int, frame: int) -> tuple[float, float]:
+def fine_range_hz(
+    edges_hz: tuple[float, ...] | list[float], sample_rate: int, frame: int, p: FineParams = FINE
+) -> tuple[float, float]:
     """The span the fine spectrum must cover for sub-bands ``edges_hz`` heard in ``frame``-sample frames, Hz."""
-    m = FINE_MARGIN_BINS * sample_rate / frame
+    m = p.margin_bins * sample_rate / frame
     return max(float(edges_hz[0]) - m, 0.0), min(float(edges_hz[-1]) + m, sample_rate / 2)
 
 
@@ -146,7 +148,9 @@ class SignaturePredictor:
         fine_bin_hz: float,
         fine_stepping_db: tuple[float, ...] | list[float] | FloatArray,
         fine_stopped_db: tuple[float, ...] | list[float] | FloatArray,
+        p: FineParams = FINE,
     ) -> None:
+        self.p = p
         self.delta = np.asarray(signature_db, dtype=np.float64)
         self.rate0 = float(rate0_hz)
         cs = np.asarray(fine_stepping_db, dtype=np.float64)
@@ -175,8 +179,9 @@ class SignaturePredictor:
         """What the lines' move from the tuning's rate to ``rate_hz`` does to the stop's signature, dB per sub-band."""
         s0, p0, c0 = self._l0
         s1, p1, c1 = self._levels(float(rate_hz))
-        corr = 10 * np.log10((p1 + _TINY) / (s1 + _TINY)) - 10 * np.log10((p0 + _TINY) / (s0 + _TINY))
-        return np.where((c0 > _REACH) & (c1 > _REACH), corr, 0.0)
+        tiny, reach = self.p.power_floor, self.p.reach
+        corr = 10 * np.log10((p1 + tiny) / (s1 + tiny)) - 10 * np.log10((p0 + tiny) / (s0 + tiny))
+        return np.asarray(np.where((c0 > reach) & (c1 > reach), corr, 0.0), dtype=np.float64)
 
     def predict(self, rate_hz: float) -> FloatArray:
         """The stop's signature at step rate ``rate_hz``, dB per sub-band (the tuned one at the tuning's rate)."""

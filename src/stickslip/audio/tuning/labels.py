@@ -8,18 +8,20 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import median_filter
 
-from .template import QUANTILE, fit_departure
+from ..change.fit import fit_departure
+from ..change.template import TEMPLATE
+from ..tuningfile import TUNING_FILE
 
 FloatArray = NDArray[np.float64]
 
-__all__ = ["TuningError"]
+__all__ = ["TuningError", "fmt_spans", "recording", "sound_change", "spans"]
 
 
 class TuningError(ValueError):
     """The recording cannot give a usable tuning (the message says why)."""
 
 
-def _recording(
+def recording(
     samples: NDArray[np.floating] | FloatArray, sample_rate: int, stop_at_s: float, min_part_s: float, guard_s: float
 ) -> tuple[FloatArray, int]:
     """A labelled recording as mono float64 and its rate, or :class:`TuningError` saying what is wrong with it."""
@@ -29,8 +31,8 @@ def _recording(
     if x.ndim != 1:
         raise TuningError(f"expected mono samples, got an array of shape {np.shape(samples)}")
     sample_rate = int(sample_rate)
-    if not 8_000 <= sample_rate <= 192_000:
-        raise TuningError(f"sample rate {sample_rate} Hz is outside 8000-192000 Hz")
+    if (problem := TUNING_FILE.rate_problem(sample_rate)) is not None:
+        raise TuningError(problem)
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
         raise TuningError(
@@ -79,7 +81,7 @@ def _change_point(a: FloatArray, t_end: FloatArray, label_s: float, search_s: fl
     return float(t_end[i])
 
 
-def _sound_change(
+def sound_change(
     V: FloatArray,
     starts: FloatArray,
     ends: FloatArray,
@@ -102,7 +104,7 @@ def _sound_change(
     stop_far = starts >= stop_at_s + far
     if step_far.sum() < 8 or stop_far.sum() < 8:
         step_far, stop_far = ends < stop_at_s - guard_s, starts >= stop_at_s + guard_s
-    mu_step = np.percentile(V[step_far], 100 * QUANTILE, axis=0)  # what the detector's template tracks
+    mu_step = np.percentile(V[step_far], 100 * TEMPLATE.quantile, axis=0)  # what the detector's template tracks
     sigma = np.maximum(1.4826 * np.median(np.abs(V[step_far] - np.median(V[step_far], axis=0)), axis=0), 1.0)
     delta0 = np.median(V[stop_far], axis=0) - mu_step
     strength = float(np.sqrt(np.mean((delta0 / sigma) ** 2)))
@@ -137,7 +139,7 @@ def _sound_change(
     return change
 
 
-def _spans(mask: NDArray[np.bool_], t: FloatArray, gap_s: float = 0.05) -> list[tuple[float, float]]:
+def spans(mask: NDArray[np.bool_], t: FloatArray, gap_s: float = 0.05) -> list[tuple[float, float]]:
     """Merge the times where ``mask`` holds into (start, end) spans, s."""
     out: list[tuple[float, float]] = []
     for ti in t[mask]:
@@ -148,6 +150,7 @@ def _spans(mask: NDArray[np.bool_], t: FloatArray, gap_s: float = 0.05) -> list[
     return out
 
 
-def _fmt_spans(spans: list[tuple[float, float]], limit: int = 6) -> str:
-    s = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in spans[:limit])
-    return s + (f" and {len(spans) - limit} more" if len(spans) > limit else "")
+def fmt_spans(found: list[tuple[float, float]], limit: int = 6) -> str:
+    """Spans as text ("1.20-1.45 s, ..."), at most ``limit`` of them."""
+    s = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in found[:limit])
+    return s + (f" and {len(found) - limit} more" if len(found) > limit else "")

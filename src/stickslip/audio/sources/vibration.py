@@ -1,11 +1,11 @@
-"""Other sensors for the limit switch: vibration (an accelerometer) and position read-back.
+"""Vibration for the limit switch: an accelerometer's stream, from a file or a serial port.
 
 In a vacuum chamber or an SEM there is no air to carry the sound of a step, but the
 structure still carries it: an accelerometer (or a piezo disc) on the arm's base picks
 up the same clicks and the same change at the end stop. The detector does not care
 where its samples come from, so the vibration stream goes through the same
-:func:`~stickslip.audio.tuning.tune` and :class:`~stickslip.audio.detector.StopDetector`
-as sound: *samples in, end-stop events out*.
+:func:`~stickslip.audio.tuning.tune` and detector as sound: *samples in, end-stop events
+out*.
 
 Sources here:
 
@@ -15,10 +15,10 @@ Sources here:
   given);
 * :class:`SerialSamples` - a live stream of ASCII samples, one per line, from a serial
   port (an Arduino or a DAQ bridge reading the accelerometer): blocks like
-  :class:`~stickslip.audio.sources.Microphone`;
-* :class:`ReadbackStopDetector` - a third kind of sensor, a position read-back (a
-  capacitive sensor, an encoder): fed position samples, it reports a stop when the
-  position stops changing while the joint is stepping. Same interface as the detector.
+  :class:`~stickslip.audio.sources.microphone.Microphone`.
+
+A third kind of sensor, a position read-back, has its own detector
+(:class:`~stickslip.audio.readback.ReadbackStopDetector`).
 
 Samples are floats scaled to the sensor's full scale (``full_scale``).
 """
@@ -28,27 +28,38 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .detector import StopEvent
-from .sources import AudioSourceError, read_wav
+from ...records import regular_file
+from ..paramfield import param
+from .files import AudioSourceError, read_wav
 
-__all__ = ["ReadbackStopDetector", "SerialSamples", "read_vibration"]
+__all__ = ["VIBRATION", "SerialSamples", "VibrationParams", "read_vibration", "sample_rate_ok"]
 
 _RATE = re.compile(r"sample_rate(?:_hz)?\s*[=:]\s*([0-9.eE+]+)")
 
 
-#: sample rates a vibration stream may have, Hz (the detector's frame needs kHz; a DAQ gives at most MHz)
-SAMPLE_RATE_RANGE = (1_000.0, 1_000_000.0)
+@dataclass(frozen=True)
+class VibrationParams:
+    """What a vibration stream may be."""
+
+    sample_rate_range: tuple[float, float] = param(
+        (1_000.0, 1_000_000.0), "Hz", "the detector's frame needs kHz; a DAQ gives at most MHz"
+    )
+    headroom: float = param(1.25, "", "without a full scale, the file's largest magnitude times this maps to 1")
 
 
-def sample_rate_ok(rate: float) -> bool:
-    """Whether ``rate`` (Hz) is a sample rate a vibration stream may have (:data:`SAMPLE_RATE_RANGE`)."""
-    lo, hi = SAMPLE_RATE_RANGE
+VIBRATION = VibrationParams()
+
+
+def sample_rate_ok(rate: float, p: VibrationParams = VIBRATION) -> bool:
+    """Whether ``rate`` (Hz) is a sample rate a vibration stream may have (``sample_rate_range``)."""
+    lo, hi = p.sample_rate_range
     return math.isfinite(rate) and lo <= rate <= hi
 
 
@@ -77,8 +88,35 @@ def read_vibration(
     p = Path(path)
     if p.suffix.lower() == ".wav":
         return read_wav(p)
+    rows, rate = _csv_rows(p, sample_rate)
+    data = np.asarray(rows, dtype=np.float64)
+    if data.shape[1] == 2:
+        t, x = data[:, 0], data[:, 1]
+        dt = np.diff(t)
+        if dt.size == 0 or not np.all(dt > 0) or float(np.ptp(dt)) > 1e-3 * float(np.mean(dt)):
+            raise AudioSourceError(f"{p}: the times are not uniformly spaced (resample first)")
+        rate = rate or 1.0 / float(np.mean(dt))
+    else:
+        x = data[:, 0]
+    if rate is None:
+        raise AudioSourceError(f"{p}: no sample rate: add a '# sample_rate_hz=...' line, or give it (--sample-rate)")
+    if not sample_rate_ok(rate):
+        raise AudioSourceError(f"{p}: sample rate {rate:g} Hz is outside 1000-1000000 Hz")
+    if not np.all(np.isfinite(x)):
+        k = int(np.argmax(~np.isfinite(x)))
+        raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, not a finite number")
+    fs = float(full_scale) if full_scale else VIBRATION.headroom * float(np.max(np.abs(x))) or 1.0
+    return (x / fs).astype(np.float32), int(round(rate))
+
+
+def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], float | None]:
+    """The rows of numbers of a CSV of samples, and its rate (``sample_rate``, or its ``# sample_rate_hz=`` line)."""
     try:
+        if p.exists():
+            regular_file(p, "CSV of samples")  # a folder, FIFO or device is never opened
         text = p.read_text(encoding="utf-8")
+    except ValueError as e:
+        raise AudioSourceError(str(e)) from None
     except FileNotFoundError:
         raise AudioSourceError(f"{p}: no such file") from None
     except (OSError, UnicodeDecodeError) as e:
@@ -106,24 +144,7 @@ def read_vibration(
     width = {len(r) for r in rows}
     if len(width) != 1 or width.pop() not in (1, 2):
         raise AudioSourceError(f"{p}: every row must hold 'value' or 'time_s,value'")
-    data = np.asarray(rows, dtype=np.float64)
-    if data.shape[1] == 2:
-        t, x = data[:, 0], data[:, 1]
-        dt = np.diff(t)
-        if dt.size == 0 or not np.all(dt > 0) or float(np.ptp(dt)) > 1e-3 * float(np.mean(dt)):
-            raise AudioSourceError(f"{p}: the times are not uniformly spaced (resample first)")
-        rate = rate or 1.0 / float(np.mean(dt))
-    else:
-        x = data[:, 0]
-    if rate is None:
-        raise AudioSourceError(f"{p}: no sample rate: add a '# sample_rate_hz=...' line, or give it (--sample-rate)")
-    if not sample_rate_ok(rate):
-        raise AudioSourceError(f"{p}: sample rate {rate:g} Hz is outside 1000-1000000 Hz")
-    if not np.all(np.isfinite(x)):
-        k = int(np.argmax(~np.isfinite(x)))
-        raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, not a finite number")
-    fs = float(full_scale) if full_scale else 1.25 * float(np.max(np.abs(x))) or 1.0
-    return (x / fs).astype(np.float32), int(round(rate))
+    return rows, rate
 
 
 class SerialSamples:
@@ -205,75 +226,3 @@ class SerialSamples:
         close = getattr(self._serial, "close", None)
         if close is not None:
             close()
-
-
-class ReadbackStopDetector:
-    """End stops from a position read-back: the position stops changing while stepping.
-
-    Feed it position samples (any unit, sampled at ``sample_rate``) the way the audio
-    detector is fed sound; it fires when the position has moved less than
-    ``min_motion`` over the last ``window_s`` after having moved, and estimates the
-    onset as the time of the last sample that still moved. A controller whose "counter"
-    counts the steps *issued* (NanoControl's ``counterread``) cannot serve: it keeps
-    counting against the stop; only a sensor of the slider's position can.
-
-    Parameters
-    ----------
-    sample_rate : float
-        Position samples per second, Hz.
-    min_motion : float
-        Smallest change of position over ``window_s`` that counts as moving (position unit).
-    window_s : float
-        Stall time that makes a stop, s (the latency is about this).
-    t0_s : float
-        Stream time of the first sample, s.
-    """
-
-    uses_audio = False  # the no-signal guard is for sound and vibration, not positions
-
-    def __init__(self, sample_rate: float, min_motion: float, window_s: float = 0.02, t0_s: float = 0.0) -> None:
-        if not (sample_rate > 0 and min_motion > 0 and window_s > 0):
-            raise ValueError("sample_rate, min_motion and window_s must be > 0")
-        self.sample_rate = float(sample_rate)
-        self.min_motion = float(min_motion)
-        self.window_s = float(window_s)
-        self.reset(t0_s)
-
-    @property
-    def latency_s(self) -> float:
-        """Typical detected_at - onset, s."""
-        return self.window_s
-
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget everything; the next sample is at stream time ``t0_s``."""
-        self._t0 = float(t0_s)
-        self._n = 0
-        self._recent: list[float] = []
-        self._anchor: float | None = None
-        self._anchor_i = 0
-        self._moved = False
-        self.latched = False
-
-    def feed(self, block: NDArray[np.floating[Any]] | list[float]) -> list[StopEvent]:
-        """Consume position samples; return the stops that fired."""
-        out: list[StopEvent] = []
-        w = max(2, int(round(self.window_s * self.sample_rate)))
-        for v in np.asarray(block, dtype=np.float64).ravel().tolist():
-            i = self._n
-            self._n += 1
-            if self._anchor is None or abs(v - self._anchor) >= self.min_motion:
-                if self._anchor is not None:
-                    self._moved = True
-                    self.latched = False
-                self._anchor, self._anchor_i = v, i
-                continue
-            if self._moved and not self.latched and i - self._anchor_i >= w:
-                self.latched = True
-                out.append(
-                    StopEvent(
-                        detected_at_s=self._t0 + i / self.sample_rate,
-                        onset_s=self._t0 + self._anchor_i / self.sample_rate,
-                        level_db=0.0,
-                    )
-                )
-        return out

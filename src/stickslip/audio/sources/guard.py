@@ -11,14 +11,15 @@ Thresholds (samples are floats in [-1, 1], full scale 1):
 * silence: peak amplitude below ``floor`` (default 1e-6, -120 dBFS; a real microphone's
   self-noise is far above it);
 * constant: peak-to-peak below ``floor`` (a DC offset, however large);
-* clipping: more than half the samples at or beyond 0.999 of the block's peak: pinned at its
-  rails, wherever they are (a float file may go past 1 without clipping; an analog stage may
-  clip below full scale); rails below :data:`QUIET_RAILS` (-60 dBFS) are silence in which
-  only the converter's last bits toggle (a 16-bit file's least step is 3e-5, -90 dBFS);
+* clipping: more than ``clip_share`` of the samples at or beyond ``clip_level`` of the
+  block's peak: pinned at its rails, wherever they are (a float file may go past 1 without
+  clipping; an analog stage may clip below full scale); rails below ``quiet_rails``
+  (-60 dBFS) are silence in which only the converter's last bits toggle (a 16-bit file's
+  least step is 3e-5, -90 dBFS);
 * no stepping (when the commanded step rate ``step_hz`` is given): in every window of
   ``window_s`` for ``no_step_s`` without a break, the envelope of the sound (the
   first-differenced signal squared, so hum and thumps count little) shows no line at the
-  step rate (within +-3 %) at least ``min_line_db`` above its neighbourhood
+  step rate (within ``line_tolerance``) at least ``min_line_db`` above its neighbourhood
   (:func:`step_line_db`). A microphone that hears the room but not the joint - unplugged
   from the arm's mount, pointed away, a preamplifier's hiss - trips this.
 """
@@ -30,20 +31,37 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .stepclock import band_envelope_spectrum
+from ..features.stepclock import band_envelope_spectrum
+from ..paramfield import param
 
-__all__ = ["QUIET_RAILS", "NoSignalError", "SignalGuard", "block_problem", "non_finite", "step_line_db"]
+__all__ = ["GUARD", "GuardParams", "NoSignalError", "SignalGuard", "block_problem", "non_finite", "step_line_db"]
+
+
+@dataclass(frozen=True)
+class GuardParams:
+    """When the input is dead, or hears no stepping (the defaults of :class:`SignalGuard`)."""
+
+    floor: float = param(1e-6, "full scale", "a block whose peak (or peak-to-peak) is under this is silent (-120 dBFS)")
+    quiet_rails: float = param(
+        1e-3, "full scale", "a signal pinned at rails under this is silence with the last bits toggling (-60 dBFS)"
+    )
+    clip_level: float = param(0.999, "of the peak", "samples at or beyond this share of the block's peak are at a rail")
+    clip_share: float = param(0.5, "", "a block with more than this share of its samples at a rail is clipping")
+    hold_s: float = param(0.2, "s", "the input must be dead this long without a break before the guard trips")
+    no_step_s: float = param(1.0, "s", "no stepping line this long (at the commanded rate): the guard trips")
+    window_s: float = param(0.25, "s", "audio judged at a time for the stepping line")
+    min_line_db: float = param(8.0, "dB", "the step-rate line must stand this clear (noise: 7 dB median, 8+ in 1/4)")
+    line_tolerance: float = param(0.03, "of the rate", "the step-rate line is looked for this near the commanded rate")
+
+
+GUARD = GuardParams()
 
 
 class NoSignalError(RuntimeError):
     """The audio input is dead (silence, a constant or clipping throughout)."""
 
 
-#: a signal pinned at rails below this (-60 dBFS) is silence with the converter's last bits toggling, not clipping
-QUIET_RAILS = 1e-3
-
-
-def block_problem(block: ArrayLike, floor: float = 1e-6) -> str | None:
+def block_problem(block: ArrayLike, floor: float = GUARD.floor, p: GuardParams = GUARD) -> str | None:
     """Why ``block`` carries no usable signal ("silence", "a constant", "clipping"), or ``None`` if it is alive."""
     x = np.asarray(block, dtype=np.float64).ravel()
     if x.size == 0:
@@ -55,10 +73,12 @@ def block_problem(block: ArrayLike, floor: float = 1e-6) -> str | None:
         return "silence"
     if float(np.ptp(x)) < floor:
         return "a constant"
-    if float(np.mean(np.abs(x) >= 0.999 * peak)) > 0.5:  # stuck at its rails, wherever they are (a float
+    if (
+        float(np.mean(np.abs(x) >= p.clip_level * peak)) > p.clip_share
+    ):  # stuck at its rails, wherever they are (a float
         # file may go past 1 unclipped; an analog stage may clip below full scale) - but rails this low are the
         # converter's last bits toggling over silence (a 16-bit file's least step is 3e-5), not a clipped sound
-        return "silence: only the converter's last bits toggle" if peak < QUIET_RAILS else "clipping"
+        return "silence: only the converter's last bits toggle" if peak < p.quiet_rails else "clipping"
     return None
 
 
@@ -69,7 +89,7 @@ def non_finite(block: ArrayLike) -> tuple[int, int | None]:
     return count, (int(np.argmax(bad)) if count else None)
 
 
-def step_line_db(x: ArrayLike, sample_rate: float, step_hz: float, tolerance: float = 0.03) -> float:
+def step_line_db(x: ArrayLike, sample_rate: float, step_hz: float, tolerance: float = GUARD.line_tolerance) -> float:
     """How far the step-rate line stands above the envelope spectrum around it, dB.
 
     The envelope is the first-differenced signal squared (a click train's envelope has
@@ -114,13 +134,13 @@ class SignalGuard:
     """
 
     sample_rate: float
-    hold_s: float = 0.2
-    floor: float = 1e-6
+    hold_s: float = GUARD.hold_s
+    floor: float = GUARD.floor
     dead_s: float = 0.0
     step_hz: float | None = None
-    no_step_s: float = 1.0
-    window_s: float = 0.25
-    min_line_db: float = 8.0
+    no_step_s: float = GUARD.no_step_s
+    window_s: float = GUARD.window_s
+    min_line_db: float = GUARD.min_line_db
     no_step_for_s: float = 0.0
 
     def __post_init__(self) -> None:

@@ -10,10 +10,10 @@ Two measures over a stretch of samples (tens to hundreds of ms):
 
 * :func:`step_rate_hz`, the step rate heard: the strongest line of the envelope spectrum
   (first-differenced signal squared, as the guard's
-  :func:`~stickslip.audio.guard.step_line_db`) between :data:`RATE_LO_HZ` and
-  :data:`RATE_HI_HZ`, refined by its harmonics, Hz;
+  :func:`~stickslip.audio.sources.guard.step_line_db`) between ``rate_lo_hz`` and
+  ``rate_hi_hz`` (:class:`StepClockParams`), refined by its harmonics, Hz;
 * :func:`synchrony`, the share of a band's envelope fluctuation that lies on the lines at
-  the step rate and its first :data:`HARMONICS` multiples (within :data:`LINE_TOL` of each,
+  the step rate and its first ``harmonics`` multiples (within ``line_tol`` of each,
   at least two bins), against all of it from 20 Hz to just above the last line: 1 for a
   clean click train through the joint's modes, near 0 for noise or a voice.
 
@@ -26,28 +26,20 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..paramfield import param
+
 __all__ = [
-    "COMB_TOL",
-    "FLANK",
-    "HALF_LINE_DB",
-    "HARMONICS",
-    "LINE_TOL",
-    "LINE_Z",
-    "MIN_LINES",
-    "RATE_HI_HZ",
-    "RATE_LO_HZ",
-    "SHARP_WIDTH",
-    "SUB_LINE_DB",
-    "TRIM_LINES",
+    "STEP_CLOCK",
     "LineChange",
     "Lines",
+    "StepClockParams",
     "SyncChange",
-    "WIDEN",
     "band_envelope_spectrum",
     "chi2_as_z",
     "line_change",
@@ -60,35 +52,37 @@ __all__ = [
     "widen_bands",
 ]
 
-#: step rates looked for, Hz (the controller's range with margin: 700-1400 Hz +- 10 %, and slower arms)
-RATE_LO_HZ = 250.0
-RATE_HI_HZ = 2500.0
-#: harmonics of the step rate counted as synchronous
-HARMONICS = 3
-#: lines at a third or a half of the strongest one's frequency (and the next multiple) make that the step rate
-#: when each holds this much more power than the continuum would put there, dB
-SUB_LINE_DB = 8.0
-#: ... a line at half of it alone must hold this much more, dB
-HALF_LINE_DB = 10.0
-#: a sub-band is widened to at least this many step rates before its lines are counted (it must hold one)
-WIDEN = 2.0
-#: half-width of a harmonic line in the signal's spectrum, as a fraction of its frequency (at least 3 bins)
-COMB_TOL = 0.004
-#: the comb that tells how sharp the lines are is this many times wider
-SHARP_WIDTH = 4.0
-#: the continuum under a harmonic line is read on its flanks, out to this many half-widths
-FLANK = 4.0
-#: half-width of a line, as a fraction of its frequency (a rough clock spreads the k-th line k times wider)
-LINE_TOL = 0.02
-#: :func:`line_change` drops this many lines, those that changed most, before it sums the rest (a voice's harmonic on
-#: a line for a syllable; 2 would also drop a second instrument's on two, and with them the whole change of a stop
-#: that moves two lines only: joint Q of the battery at 1362.5 Hz; measured: docs/audio.md)
-TRIM_LINES = 1
-#: ... and reports the largest change in dB among the lines kept that moved by this many standard deviations
-LINE_Z = 3.0
-#: ... and gives no verdict on fewer lines than this (a rate heard at twice the step rate under loud talk leaves 5
-#: in the band: too few to tell a stop's change from a voice's harmonic on one of them; measured: docs/audio.md)
-MIN_LINES = 6
+
+@dataclass(frozen=True)
+class StepClockParams:
+    """How the step clock is heard: the rate, its harmonic lines and their change."""
+
+    rate_lo_hz: float = param(
+        250.0, "Hz", "slowest step rate looked for (the controllers' 700-1400 Hz, and slower arms)"
+    )
+    rate_hi_hz: float = param(2500.0, "Hz", "fastest step rate looked for")
+    harmonics: int = param(3, "lines", "harmonics of the step rate counted as synchronous (synchrony)")
+    sub_line_db: float = param(
+        8.0, "dB", "lines at a third (with two thirds) or a half (with three halves) this clear make that the rate"
+    )
+    half_line_db: float = param(10.0, "dB", "a line at half the winner alone must stand this clear to be the rate")
+    widen: float = param(2.0, "step rates", "a sub-band is widened to this many rates before its lines are counted")
+    comb_tol: float = param(
+        0.004, "of the line's frequency", "half-width of a harmonic line in the signal's spectrum (at least 3 bins)"
+    )
+    sharp_width: float = param(4.0, "combs", "the comb that tells how sharp the lines are is this many times wider")
+    flank: float = param(4.0, "half-widths", "the continuum under a line is read on its flanks out to this far")
+    line_tol: float = param(
+        0.02, "of the line's frequency", "half-width of an envelope line (a rough clock widens the k-th line k times)"
+    )
+    trim_lines: int = param(
+        1, "lines", "the lines that changed most are dropped before the sum (a voice's harmonic on one line)"
+    )
+    line_z: float = param(3.0, "standard deviations", "a kept line that moved this far reports its change in dB")
+    min_lines: int = param(6, "lines", "no verdict on fewer lines (a rate heard at twice the step rate leaves 5)")
+
+
+STEP_CLOCK = StepClockParams()
 
 FloatArray = NDArray[np.float64]
 
@@ -136,19 +130,19 @@ def band_envelope_spectrum(
     return np.asarray(np.fft.rfftfreq(e.size, 1 / sr), dtype=np.float64), np.asarray(p, dtype=np.float64)
 
 
-def _line_mask(f: FloatArray, centre_hz: float) -> NDArray[np.bool_]:
+def _line_mask(f: FloatArray, centre_hz: float, tol: float) -> NDArray[np.bool_]:
     df = float(f[1] - f[0]) if f.size > 1 else 1.0
-    return np.asarray(np.abs(f - centre_hz) <= max(LINE_TOL * centre_hz, 2.0 * df), dtype=bool)
+    return np.asarray(np.abs(f - centre_hz) <= max(tol * centre_hz, 2.0 * df), dtype=bool)
 
 
-def _prominence_db(f: FloatArray, p: FloatArray, centre_hz: float) -> float:
-    """The power within :data:`LINE_TOL` of ``centre_hz`` over what the continuum around it would put there, dB.
+def _prominence_db(f: FloatArray, p: FloatArray, centre_hz: float, tol: float) -> float:
+    """The power within ``tol`` (a share of ``centre_hz``) of it over what the continuum around it would put there, dB.
 
     The continuum: the median bin of 0.75-1.25 x ``centre_hz`` outside, divided by ln 2 (the median of noise's
     periodogram bins is ln 2 of their mean). Integrated, so a line smeared by a rough clock counts in full; noise
     alone gives 0 dB give or take 1-2.
     """
-    near = _line_mask(f, centre_hz)
+    near = _line_mask(f, centre_hz, tol)
     around = (f >= 0.75 * centre_hz) & (f <= 1.25 * centre_hz) & ~near
     if not near.any() or not around.any():
         return float("-inf")
@@ -156,20 +150,31 @@ def _prominence_db(f: FloatArray, p: FloatArray, centre_hz: float) -> float:
     return float(10 * np.log10((float(np.sum(p[near])) + 1e-300) / (floor + 1e-300)))
 
 
-def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi_hz: float = RATE_HI_HZ) -> float:
-    """The step rate heard in ``x``, Hz: the envelope spectrum's strongest line in [lo, hi].
+def step_rate_hz(
+    x: ArrayLike,
+    sample_rate: float,
+    lo_hz: float | None = None,
+    hi_hz: float | None = None,
+    params: StepClockParams = STEP_CLOCK,
+) -> float:
+    """The step rate heard in ``x``, Hz: the envelope spectrum's strongest line in [lo, hi] (default: the params').
 
-    Each candidate bin is scored by the log power of its first three harmonics (a line
-    at half the rate, or 1.5 times it, lacks some of them); a line at a third or half
-    the winner that stands :data:`SUB_LINE_DB` above the continuum (a third: with the
-    line at two thirds; a half: by :data:`HALF_LINE_DB`, or with the line at three
-    halves) is taken instead
-    (an envelope can be stronger at two or three times the rate); the winner is refined
-    by the power-weighted mean frequency over its line.
-    NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
+    The default ``hi`` is also under a quarter of the sample rate: the envelope (the signal
+    squared) holds twice the signal's frequencies, and what lies beyond the Nyquist frequency
+    folds back as lines that are no step rate (an accelerometer at 5 kHz stepping at 700 Hz
+    showed its strongest line at 5000 - 4 x 700 = 2200 Hz). A sound card at 10 kHz and more
+    keeps the default range.
+
+    Each candidate bin is scored by the log power of its first three harmonics (a line at
+    half the rate, or 1.5 times it, lacks some of them); a line at a third or a half of the
+    winner heard clearly is taken instead (:func:`_fraction`: an envelope can be stronger at
+    two or three times the rate); the winner is refined by the power-weighted mean
+    frequency over its line. NaN when ``x`` is shorter than 20 periods of ``lo_hz`` or silent.
     """
-    v = np.asarray(x, dtype=np.float64).ravel()
+    lo_hz = params.rate_lo_hz if lo_hz is None else lo_hz
     sr = float(sample_rate)
+    hi_hz = min(params.rate_hi_hz, sr / 4) if hi_hz is None else hi_hz
+    v = np.asarray(x, dtype=np.float64).ravel()
     if v.size < 20 * sr / lo_hz or not np.any(v != v[0]):
         return float("nan")
     f, p = band_envelope_spectrum(v, sr)
@@ -184,27 +189,7 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
     for k in (1, 2, 3):
         idx = np.minimum(k * sel, f.size - 1)
         score += np.maximum.reduce([logp[np.clip(idx + j, 0, f.size - 1)] for j in range(-2 * k, 2 * k + 1)])
-    i = int(sel[int(np.argmax(score))])
-    # the clicks' envelope may be stronger at two or three times the rate than at the rate (modes that beat
-    # there): clear lines at a third and two thirds, or a half and three halves, of the winner: the rate
-    for div in (3, 2):
-        sub = f[i] / div
-        # a third: its line and the one at two thirds both clear (chance does not do that); a half: its line, by
-        # HALF_LINE_DB (one line cleared 8 dB by chance: a fresh hypothesis draw, joint Q's brighter stop at 1000 Hz,
-        # heard at 500 Hz; a true half stands 24-27 dB clear on the battery's joint P at 700-750 Hz, but only
-        # 11.7-13.6 dB through the fourth generator's rough clock, arm 3 at 882 Hz: 15 dB lost it)
-        # (a fresh draw, arm 3 at 1115 Hz, seed 2000: its half 9.8 dB clear, the line at three halves 18.2 dB): or a
-        # half and three halves both SUB_LINE_DB clear, as a third's two lines must be
-        if div == 3:
-            heard = sub >= lo_hz and min(_prominence_db(f, p, c) for c in (sub, 2 * sub)) >= SUB_LINE_DB
-        else:
-            half = _prominence_db(f, p, sub) if sub >= lo_hz else -math.inf
-            heard = half >= HALF_LINE_DB or min(half, _prominence_db(f, p, 3 * sub)) >= SUB_LINE_DB
-        if heard:
-            j = int(np.argmin(np.abs(f - f[i] / div)))
-            j0, j1 = max(j - 2, 0), min(j + 3, f.size)
-            i = j0 + int(np.argmax(p[j0:j1]))
-            break
+    i = _fraction(f, p, int(sel[int(np.argmax(score))]), lo_hz, params)
     w = max(2, int(round(0.01 * f[i] / df)))
     j0, j1 = max(i - w, 0), min(i + w + 1, f.size)
     total = float(np.sum(p[j0:j1]))
@@ -213,11 +198,39 @@ def step_rate_hz(x: ArrayLike, sample_rate: float, lo_hz: float = RATE_LO_HZ, hi
     return float(np.sum(f[j0:j1] * p[j0:j1]) / total)
 
 
+def _fraction(f: FloatArray, p: FloatArray, i: int, lo_hz: float, params: StepClockParams) -> int:
+    """The bin of the step rate given the envelope's strongest line in bin ``i``: that line, or a third or a half of it.
+
+    The clicks' envelope may be stronger at two or three times the rate than at the rate
+    (modes that beat there). A third: its line and the one at two thirds both stand
+    ``sub_line_db`` clear (chance does not do that). A half: its line by ``half_line_db``
+    (one line cleared 8 dB by chance: joint Q's brighter stop at 1000 Hz was heard at
+    500 Hz; a true half stands 24-27 dB clear on the battery's joint P at 700-750 Hz, but
+    only 11.7-13.6 dB through the fourth generator's rough clock, arm 3 at 882 Hz), or the
+    half and three halves both ``sub_line_db`` clear (arm 3 at 1115 Hz: its half 9.8 dB
+    clear, the line at three halves 18.2 dB).
+    """
+    tol = params.line_tol
+    for div in (3, 2):
+        sub = f[i] / div
+        if div == 3:
+            heard = sub >= lo_hz and min(_prominence_db(f, p, c, tol) for c in (sub, 2 * sub)) >= params.sub_line_db
+        else:
+            half = _prominence_db(f, p, sub, tol) if sub >= lo_hz else -math.inf
+            heard = half >= params.half_line_db or min(half, _prominence_db(f, p, 3 * sub, tol)) >= params.sub_line_db
+        if heard:
+            j = int(np.argmin(np.abs(f - f[i] / div)))
+            j0, j1 = max(j - 2, 0), min(j + 3, f.size)
+            return j0 + int(np.argmax(p[j0:j1]))
+    return i
+
+
 def synchrony(
     x: ArrayLike,
     sample_rate: float,
     rate_hz: float,
     bands_hz: Sequence[tuple[float, float]] | None = None,
+    params: StepClockParams = STEP_CLOCK,
 ) -> float:
     """Share of the band envelope's fluctuation on the lines at ``rate_hz`` and its multiples.
 
@@ -235,9 +248,9 @@ def synchrony(
     Returns
     -------
     float
-        In [0, 1]: the envelope power within :data:`LINE_TOL` of the first
-        :data:`HARMONICS` multiples of ``rate_hz`` over the power from 20 Hz to
-        ``(HARMONICS + 0.5) * rate_hz``; NaN for a rate that is not finite, a stretch
+        In [0, 1]: the envelope power within ``line_tol`` of the first
+        ``harmonics`` multiples of ``rate_hz`` over the power from 20 Hz to
+        ``(harmonics + 0.5) * rate_hz``; NaN for a rate that is not finite, a stretch
         too short, or a silent band.
     """
     v = np.asarray(x, dtype=np.float64).ravel()
@@ -245,20 +258,20 @@ def synchrony(
     if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
         return float("nan")
     f, p = band_envelope_spectrum(v, sr, bands_hz)
-    span = (f >= 20.0) & (f <= (HARMONICS + 0.5) * rate_hz)
+    span = (f >= 20.0) & (f <= (params.harmonics + 0.5) * rate_hz)
     total = float(np.sum(p[span]))
     if not total > 0.0:
         return float("nan")
     lines = np.zeros(f.size, dtype=bool)
-    for k in range(1, HARMONICS + 1):
-        lines |= _line_mask(f, k * rate_hz)
+    for k in range(1, params.harmonics + 1):
+        lines |= _line_mask(f, k * rate_hz, params.line_tol)
     return float(np.sum(p[span & lines]) / total)
 
 
 def widen_bands(
-    bands_hz: Sequence[tuple[float, float]], rate_hz: float, sample_rate: float
+    bands_hz: Sequence[tuple[float, float]], rate_hz: float, sample_rate: float, params: StepClockParams = STEP_CLOCK
 ) -> list[tuple[float, float]]:
-    """``bands_hz`` each widened about its centre to at least :data:`WIDEN` x ``rate_hz``, merged where they meet, Hz.
+    """``bands_hz`` each widened about its centre to at least ``widen`` x ``rate_hz``, merged where they meet, Hz.
 
     A sub-band narrower than the step rate may hold no harmonic of it at all (joint P's
     5.2 kHz mode between the 1160 Hz lines at 4640 and 5800 Hz): the stop's sound is on
@@ -266,9 +279,9 @@ def widen_bands(
     """
     out = []
     for lo, hi in bands_hz:
-        if hi - lo < WIDEN * rate_hz:
+        if hi - lo < params.widen * rate_hz:
             c = 0.5 * (lo + hi)
-            lo, hi = c - WIDEN * rate_hz / 2, c + WIDEN * rate_hz / 2
+            lo, hi = c - params.widen * rate_hz / 2, c + params.widen * rate_hz / 2
         out.append((max(50.0, float(lo)), min(0.48 * float(sample_rate), float(hi))))
     out.sort()
     merged: list[tuple[float, float]] = []
@@ -296,13 +309,18 @@ class Lines(NamedTuple):
 
 
 def line_powers(
-    x: ArrayLike, sample_rate: float, rate_hz: float, bands_hz: Sequence[tuple[float, float]], width: float = 1.0
+    x: ArrayLike,
+    sample_rate: float,
+    rate_hz: float,
+    bands_hz: Sequence[tuple[float, float]],
+    width: float = 1.0,
+    params: StepClockParams = STEP_CLOCK,
 ) -> tuple[Lines, float]:
     """Power of ``x`` on each harmonic line of ``rate_hz`` in ``bands_hz``, above the continuum; the bands' power.
 
     Per harmonic ``k * rate_hz`` in a band: the Hann-windowed power within
-    ``h = max(3 bins, COMB_TOL * k * rate_hz)`` of it, less the continuum under it (the
-    mean of the median bins of its two flanks, h to :data:`FLANK` h away: a straight
+    ``h = max(3 bins, comb_tol * k * rate_hz)`` of it, less the continuum under it (the
+    mean of the median bins of its two flanks, h to ``flank`` h away: a straight
     line through the flanks, so a sloping noise spectrum is not taken for a line) times
     the bins counted (a median of noise's periodogram bins is ln 2 of their mean: it is
     divided by ln 2). Not clipped at 0 (clipping would turn noise into line power). The
@@ -325,7 +343,7 @@ def line_powers(
     w = _hann(v.size)
     p = 2.0 * np.abs(np.fft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
     bands = tuple((float(lo), float(hi)) for lo, hi in bands_hz)
-    in_bands, lines = _line_grid(v.size, sr, float(rate_hz), bands, float(width))
+    in_bands, lines = _line_grid(v.size, sr, float(rate_hz), bands, float(width), params.comb_tol, params.flank)
     whole = 0.0
     for inb in in_bands:
         whole += float(np.sum(p[inb]))
@@ -345,7 +363,15 @@ _Grid = tuple[list[NDArray[np.intp]], list[tuple[float, NDArray[np.intp], NDArra
 
 
 @functools.lru_cache(maxsize=64)
-def _line_grid(n: int, sr: float, rate_hz: float, bands: tuple[tuple[float, float], ...], width: float) -> _Grid:
+def _line_grid(
+    n: int,
+    sr: float,
+    rate_hz: float,
+    bands: tuple[tuple[float, float], ...],
+    width: float,
+    comb_tol: float,
+    flank: float,
+) -> _Grid:
     """The bins of :func:`line_powers` for a stretch of ``n`` samples: per band, its bins; per line (found in a band and
     with both flanks), its frequency and the bins of the line and of its two flanks. Kept: the late path asks for the
     same stretch length and rate again and again."""
@@ -358,10 +384,10 @@ def _line_grid(n: int, sr: float, rate_hz: float, bands: tuple[tuple[float, floa
         in_bands.append(np.flatnonzero(inb))
         for k in range(max(1, int(math.ceil(lo / rate_hz))), int(math.floor(hi / rate_hz)) + 1):
             c = k * rate_hz
-            half = width * max(3 * df, COMB_TOL * c)
+            half = width * max(3 * df, comb_tol * c)
             near = (np.abs(f - c) <= half) & inb
-            left = (f < c - half) & (f >= c - FLANK * half)
-            right = (f > c + half) & (f <= c + FLANK * half)
+            left = (f < c - half) & (f >= c - flank * half)
+            right = (f > c + half) & (f <= c + flank * half)
             if near.any() and left.any() and right.any():
                 lines.append((c, np.flatnonzero(near), np.flatnonzero(left), np.flatnonzero(right)))
     return in_bands, lines
@@ -401,7 +427,7 @@ class SyncChange(NamedTuple):
     change_z: float
     #: share of the bands' power that lies on the step clock's lines before
     share_before: float
-    #: how sharp the lines are before: their power in the comb over that in a comb :data:`SHARP_WIDTH` times
+    #: how sharp the lines are before: their power in the comb over that in a comb ``sharp_width`` times
     #: wider (1 for a clean clock; a rough clock spreads its higher harmonics wider than the comb)
     sharpness_before: float
 
@@ -414,7 +440,7 @@ def synchronous_change_db(
     ``before`` (the stepping) and ``after`` should be of equal length. The rate is heard
     on ``before`` alone and used for both (a stop does not change it; a louder clock that
     comes with the interference must not be taken for the joint's); each band is widened
-    to :data:`WIDEN` step rates (:func:`widen_bands`). Interference adds no power on the
+    to ``widen`` step rates (:func:`widen_bands`). Interference adds no power on the
     lines (it is not synchronous with the clock), only noise to their estimate; a stop
     that is louder there adds power, one that is quieter takes it away. NaN fields (no
     verdict) when no rate is heard or there is no line power on either side.
@@ -429,7 +455,7 @@ def synchronous_change_db(
     bands = widen_bands(bands_hz, rate, sr)
     (p0, s0, w0), (p1, s1, _) = line_power(a, sr, rate, bands), line_power(b, sr, rate, bands)
     share = p0 / w0 if w0 > 0 else nan
-    wide = line_power(a, sr, rate, bands, SHARP_WIDTH)[0]
+    wide = line_power(a, sr, rate, bands, STEP_CLOCK.sharp_width)[0]
     sharp = p0 / wide if wide > 0 else nan
     top = max(p0, p1)
     if not (np.isfinite(top) and top > 0.0):
@@ -446,9 +472,9 @@ class LineChange(NamedTuple):
     #: the step rate heard before, Hz
     rate_hz: float
     #: how far the lines changed, as a standard normal deviate: the trimmed chi-square of the per-line changes
-    #: (:data:`TRIM_LINES` largest dropped) against its degrees of freedom (Wilson-Hilferty), dimensionless
+    #: (``trim_lines`` largest dropped) against its degrees of freedom (Wilson-Hilferty), dimensionless
     change_z: float
-    #: the largest change, dB, of a line kept in that sum that moved by :data:`LINE_Z` standard deviations or more
+    #: the largest change, dB, of a line kept in that sum that moved by ``line_z`` standard deviations or more
     #: (each side floored at 1 % of the larger: -20 to +20 dB at most; 0 when none did), signed
     change_db: float
     #: lines judged (in the sum) and lines found in the bands
@@ -456,7 +482,7 @@ class LineChange(NamedTuple):
     lines: int
     #: share of the bands' power that lies on the step clock's lines before
     share_before: float
-    #: how sharp the lines are before: their power in the comb over that in a comb :data:`SHARP_WIDTH` times
+    #: how sharp the lines are before: their power in the comb over that in a comb ``sharp_width`` times
     #: wider (1 for a clean clock; a rough clock spreads its higher harmonics wider than the comb)
     sharpness_before: float
 
@@ -496,8 +522,9 @@ def line_change(
     after: ArrayLike,
     sample_rate: float,
     bands_hz: Sequence[tuple[float, float]],
-    trim: int = TRIM_LINES,
+    trim: int | None = None,
     rate_hz: float | None = None,
+    params: StepClockParams = STEP_CLOCK,
 ) -> LineChange:
     """How much the step clock's lines in ``bands_hz`` changed from ``before`` to ``after``, line by line.
 
@@ -506,19 +533,20 @@ def line_change(
     set against its standard deviation: the two estimates' noise (continuum alone) plus
     the line's own scatter under that noise, ``2 x P x continuum`` per side, doubled for
     the Hann window's correlated neighbours (``4 P floor``). A stop changes the joint's
-    sound on many lines, up on some and down on others; a sum over the lines (round 6)
+    sound on many lines, up on some and down on others; a sum over the lines
     can cancel, a sum of squares cannot: ``sum (d_k / s_k)^2`` is chi-square with one
     degree of freedom per line when nothing changed. Interference adds no power on the
     lines on average, but a voice's or a radio's harmonic that sits on a line for a
-    syllable or a note does, in one stretch and not the other: the :data:`TRIM_LINES`
+    syllable or a note does, in one stretch and not the other: the ``trim_lines``
     largest terms are dropped before the sum is compared with its degrees of freedom
     (the lines left; the trimmed sum is smaller than a chi-square of that many, so the
     deviate errs towards "nothing changed"). ``before`` and ``after`` may differ in
     length (each line's estimate is a mean square). NaN fields (no verdict) when no rate
-    is heard or fewer than :data:`MIN_LINES` lines are found. ``trim`` lines are dropped
-    (:data:`TRIM_LINES` by default; the late path of :mod:`.late` drops 2); ``rate_hz``, if
+    is heard or fewer than ``min_lines`` lines are found. ``trim`` lines are dropped
+    (``trim_lines`` by default; the late path drops 2); ``rate_hz``, if
     given, is used instead of the rate heard on ``before`` (Hz).
     """
+    trim = params.trim_lines if trim is None else trim
     if not (isinstance(trim, int) and trim >= 0):
         raise ValueError(f"trim = {trim!r} must be a whole number of lines, 0 or more")
     a = np.asarray(before, dtype=np.float64).ravel()
@@ -531,17 +559,17 @@ def line_change(
     l0, w0 = line_powers(a, sr, rate, bands_hz)
     l1, _ = line_powers(b, sr, rate, bands_hz)
     p0 = float(np.sum(l0.power))
-    wide = float(np.sum(line_powers(a, sr, rate, bands_hz, SHARP_WIDTH)[0].power))
+    wide = float(np.sum(line_powers(a, sr, rate, bands_hz, params.sharp_width)[0].power))
     share = p0 / w0 if w0 > 0 else nan
     sharp = p0 / wide if wide > 0 else nan
     k = int(l0.power.size)
-    if k != l1.power.size or k < max(MIN_LINES, trim + 2):
+    if k != l1.power.size or k < max(params.min_lines, trim + 2):
         return LineChange(rate, nan, nan, 0, k, share, sharp)
     z = line_z(l0, l1)
     keep = np.argsort(-(z**2), kind="stable")[trim:]
     dof = k - trim
     top = np.maximum(np.maximum(l0.power, l1.power), 0.0)
     db = 10 * np.log10(np.maximum(l1.power, 0.01 * top + 1e-300) / np.maximum(l0.power, 0.01 * top + 1e-300))
-    moved = keep[np.abs(z[keep]) >= LINE_Z]
+    moved = keep[np.abs(z[keep]) >= params.line_z]
     change_db = float(db[moved[np.argmax(np.abs(db[moved]))]]) if moved.size else 0.0
     return LineChange(rate, chi2_as_z(float(np.sum(z[keep] ** 2)), dof), change_db, dof, k, share, sharp)

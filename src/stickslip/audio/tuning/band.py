@@ -26,9 +26,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import rank_filter
 
-from .detector import StopDetector, Tuning, _band_bins, frame_power_spectra
-from .labels import TuningError, _recording
-from .tuningfile import default_frame
+from ..comparators import BandDetector
+from ..features.spectra import band_bins, frame_power_spectra
+from ..tuningfile import Tuning, default_frame
+from .labels import TuningError, recording
 
 FloatArray = NDArray[np.float64]
 
@@ -63,7 +64,7 @@ def _band_level_matrix(
     samples: NDArray[Any], sample_rate: int, frame: int, hop: int, bands: list[tuple[float, float]], chunk: int = 4096
 ) -> NDArray[np.float64]:
     """frames x bands matrix of band levels, dBFS (spectra computed in chunks)."""
-    idx = [_band_bins(b, sample_rate, frame) for b in bands]
+    idx = [band_bins(b, sample_rate, frame) for b in bands]
     n_frames = (samples.size - frame) // hop + 1
     out = np.empty((max(n_frames, 0), len(bands)))
     for f0 in range(0, n_frames, chunk):
@@ -99,67 +100,21 @@ def tune_band(
     max_stopped_s: float = 10.0,
     relative: bool = True,
 ) -> Tuning:
-    """Choose band and threshold that tell stepping from stepping against the stop.
+    """Choose band and threshold that tell stepping from stepping against the stop (see the module docstring).
 
-    Parameters
-    ----------
-    samples : numpy.ndarray
-        Mono recording (float, full scale 1.0).
-    sample_rate : int
-        Its sample rate, Hz.
-    stop_at_s : float
-        When the joint reached the stop, s from the start of the recording.
-    joint : int, optional
-        Joint the recording belongs to (stored in the tuning).
-    frame, hop : int, optional
-        Frame length and hop, samples (default about 10.7 ms and a quarter of it).
-    hold_s : float
-        Time the level must stay above threshold before firing, s (longer than a frame,
-        so that a knock, which lights up every frame overlapping it, does not fire).
-    release_s : float
-        Time below threshold minus hysteresis before re-arming, s.
-    guard_s : float
-        Frames within this distance of ``stop_at_s`` belong to neither part, s.
-    stepping_percentile, stopped_percentile : float
-        Percentiles (0-100) that define the contrast.
-    margin : float
-        Where the threshold sits between the stepping (0) and stopped (1) levels.
-    min_contrast_db : float
-        Refuse to tune below this contrast, dB.
-    min_part_s : float
-        Each part must be at least this long, s.
-    f_min_hz : float
-        Lowest band centre considered, Hz.
-    min_band_hz : float
-        Narrowest band considered, Hz. Keep it above the highest step rate you will
-        use: the steps sound as a line spectrum at multiples of the step rate, and a
-        narrower band tuned at one rate can sit between two harmonics there and on
-        top of one at another rate.
-    rate_shift_hz : float
-        Judge the stepping level of a band as the highest of the band shifted by up to
-        this much either way, Hz (0, the default, judges the band as is). ``min_band_hz``
-        already keeps a harmonic of any step rate inside every band; a shift is more
-        conservative still, but a neighbouring stepping resonance then eats the contrast.
-    max_stepping_s, max_stopped_s : float
-        Analyse at most this much of the recording before and after the stop, s.
-    relative : bool
-        Measure the band relative to the broadband level (``f_min_hz`` to 0.9 of the
-        Nyquist frequency; default), so that the threshold does not move with the
-        microphone gain; ``False`` uses the absolute band level in dBFS.
-
-    Returns
-    -------
-    Tuning
-
-    Raises
-    ------
-    TuningError
-        If ``stop_at_s`` leaves a part too short, no band separates the two parts by
-        ``min_contrast_db``, or the tuned detector does not fire exactly once at the stop.
-    """
+    ``samples`` (mono, full scale 1.0) at ``sample_rate`` (Hz) reach the stop at ``stop_at_s``
+    (s); times are s, frequencies Hz: ``hold_s`` above threshold before firing, ``release_s``
+    below it before re-arming, ``guard_s`` around the stop in neither part, each part at
+    least ``min_part_s`` and at most ``max_stepping_s`` / ``max_stopped_s``. The contrast is
+    the ``stopped_percentile`` of the stop part less the ``stepping_percentile`` of the
+    stepping part (refused under ``min_contrast_db``); the threshold sits ``margin`` of the
+    way. Bands are centred from ``f_min_hz``, at least ``min_band_hz`` wide (above the
+    highest step rate: a narrower one sits between two harmonics at one rate, on one at
+    another); ``rate_shift_hz`` judges the stepping at the band shifted that far either way;
+    ``relative``: against the broadband level, so a gain change cancels."""
     if not 0.0 < margin < 1.0:
         raise TuningError(f"margin {margin} must be between 0 and 1 (exclusive)")
-    x, sample_rate = _recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
+    x, sample_rate = recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     frame = int(frame or default_frame(sample_rate))
     hop = int(hop or max(1, frame // 4))
     bands = candidate_bands(sample_rate, frame, f_min_hz, min_band_hz=min_band_hz)
@@ -168,32 +123,25 @@ def tune_band(
     # analyse at most max_stepping_s before the stop and max_stopped_s after it
     first = max(0, int((stop_at_s - max_stepping_s) * sample_rate) // hop * hop)
     last = min(x.size, int((stop_at_s + max_stopped_s) * sample_rate))
-    seg = x[first:last]
-    t_first = first / sample_rate
     reference = (float(f_min_hz), round(0.9 * sample_rate / 2, 1)) if relative else None
-    ref_level = _band_level_matrix(seg, sample_rate, frame, hop, [reference])[:, :1] if reference else 0.0
     hold = max(1, int(math.ceil(hold_s * sample_rate / hop - 1e-9)))
-    window = hold + _DEFAULT_MAX_DIPS
+    sc = _Scorer(x[first:last], first / sample_rate, sample_rate, frame, hop, hold, reference)
+    stop_lo, step_hi = sc.parts(bands, stop_at_s, guard_s, stopped_percentile, stepping_percentile, rate_shift_hz)
+    band, c, step, stop = _best_band(bands, stop_lo, step_hi, min_contrast_db)
+    threshold = float(step + margin * c)
+    tuning = Tuning(
+        band_hz=band, threshold_db=round(threshold, 2), sample_rate=sample_rate, frame=frame, hop=hop, hold_s=hold_s,
+        hysteresis_db=round(min(6.0, 0.25 * c), 2), release_s=release_s, onset_lag_s=0.0, joint=joint,
+        contrast_db=round(c, 2), margin_db=round(threshold - step, 2), stepping_db=round(step, 2),
+        stopped_db=round(stop, 2), reference_hz=reference,
+    )  # fmt: skip
+    return _verified_band(tuning, x, stop_at_s, guard_s)
 
-    def decided(lv: np.ndarray) -> np.ndarray:
-        """The level ``hold`` of every ``window`` consecutive frames reach: what the detector decides on."""
-        return np.asarray(rank_filter(lv - ref_level, rank=window - hold, size=(window, 1), mode="nearest"))
 
-    levels = decided(_band_level_matrix(seg, sample_rate, frame, hop, bands))
-    starts = t_first + np.arange(levels.shape[0]) * hop / sample_rate
-    ends = starts + (frame - 1) / sample_rate
-    stepping_rows = ends < stop_at_s - guard_s
-    stopped = levels[starts >= stop_at_s + guard_s]
-    stop_lo = np.percentile(stopped, stopped_percentile, axis=0)
-    # The steps sound as a line spectrum at multiples of the step rate; at another rate
-    # the lines fall elsewhere in the band. Judge the stepping level by the loudest of
-    # the band and its copies shifted by up to +-rate_shift_hz (half the highest step
-    # rate covers every placement of the lines), so the threshold holds at any rate.
-    step_hi = np.full(len(bands), -np.inf)
-    for shift in np.linspace(-rate_shift_hz, rate_shift_hz, 5) if rate_shift_hz else [0.0]:
-        moved = [(max(lo + shift, 0.0), min(hi + shift, sample_rate / 2)) for lo, hi in bands]
-        lv = decided(_band_level_matrix(seg, sample_rate, frame, hop, moved))[stepping_rows]
-        step_hi = np.maximum(step_hi, np.percentile(lv, stepping_percentile, axis=0))
+def _best_band(
+    bands: list[tuple[float, float]], stop_lo: np.ndarray, step_hi: np.ndarray, min_contrast_db: float
+) -> tuple[tuple[float, float], float, float, float]:
+    """The band with the largest contrast (dB), the contrast, and its stepping and stopped levels."""
     contrast = stop_lo - step_hi
     best = int(np.argmax(contrast))
     band = bands[best]
@@ -204,30 +152,62 @@ def tune_band(
             f"{band[1]:.0f} Hz, separates them by {c:.1f} dB, below the {min_contrast_db:g} dB "
             "needed; check --stop-at and that the recording reaches the end stop"
         )
-    threshold = float(step_hi[best] + margin * c)
-    tuning = Tuning(
-        band_hz=band,
-        threshold_db=round(threshold, 2),
-        sample_rate=sample_rate,
-        frame=frame,
-        hop=hop,
-        hold_s=hold_s,
-        hysteresis_db=round(min(6.0, 0.25 * c), 2),
-        release_s=release_s,
-        onset_lag_s=0.0,
-        joint=joint,
-        contrast_db=round(c, 2),
-        margin_db=round(threshold - float(step_hi[best]), 2),
-        stepping_db=round(float(step_hi[best]), 2),
-        stopped_db=round(float(stop_lo[best]), 2),
-        reference_hz=reference,
-    )
-    return _verified_band(tuning, x, stop_at_s, guard_s)
+    return band, c, float(step_hi[best]), float(stop_lo[best])
+
+
+class _Scorer:
+    """Band levels of a recording's segment as the detector decides on them (``hold`` of every window of frames)."""
+
+    def __init__(
+        self,
+        seg: FloatArray,
+        t_first: float,
+        sample_rate: int,
+        frame: int,
+        hop: int,
+        hold: int,
+        reference: tuple[float, float] | None,
+    ) -> None:
+        self.seg, self.t_first, self.sample_rate = seg, t_first, sample_rate
+        self.frame, self.hop, self.hold = frame, hop, hold
+        self.window = hold + _DEFAULT_MAX_DIPS
+        self.ref_level: Any = _band_level_matrix(seg, sample_rate, frame, hop, [reference])[:, :1] if reference else 0.0
+
+    def decided(self, bands: list[tuple[float, float]]) -> np.ndarray:
+        """The level ``hold`` of every ``window`` consecutive frames reach, per band: what the detector decides on."""
+        lv = _band_level_matrix(self.seg, self.sample_rate, self.frame, self.hop, bands)
+        w, h = self.window, self.hold
+        return np.asarray(rank_filter(lv - self.ref_level, rank=w - h, size=(w, 1), mode="nearest"))
+
+    def parts(
+        self,
+        bands: list[tuple[float, float]],
+        stop_at_s: float,
+        guard_s: float,
+        stopped_percentile: float,
+        stepping_percentile: float,
+        rate_shift_hz: float,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per band: the stopped part's low percentile and the stepping part's high percentile."""
+        levels = self.decided(bands)
+        starts = self.t_first + np.arange(levels.shape[0]) * self.hop / self.sample_rate
+        ends = starts + (self.frame - 1) / self.sample_rate
+        stepping_rows = ends < stop_at_s - guard_s
+        stop_lo = np.percentile(levels[starts >= stop_at_s + guard_s], stopped_percentile, axis=0)
+        # The steps sound as a line spectrum at multiples of the step rate; at another rate the lines fall elsewhere in
+        # the band. Judge the stepping level by the loudest of the band and its copies shifted by up to
+        # +-rate_shift_hz (half the highest step rate covers every placement of the lines).
+        step_hi = np.full(len(bands), -np.inf)
+        for shift in np.linspace(-rate_shift_hz, rate_shift_hz, 5) if rate_shift_hz else [0.0]:
+            moved = [(max(lo + shift, 0.0), min(hi + shift, self.sample_rate / 2)) for lo, hi in bands]
+            lv = self.decided(moved)[stepping_rows]
+            step_hi = np.maximum(step_hi, np.percentile(lv, stepping_percentile, axis=0))
+        return stop_lo, step_hi
 
 
 def _verified_band(tuning: Tuning, x: FloatArray, stop_at_s: float, guard_s: float) -> Tuning:
     """``tuning`` if its detector fires once, at the stop, with the onset lag and latency it measured there."""
-    events = StopDetector(tuning).feed(x)
+    events = BandDetector(tuning).feed(x)
     near = [e for e in events if stop_at_s - guard_s <= e.detected_at_s <= stop_at_s + 0.2]
     if len(events) != 1 or len(near) != 1:
         where = ", ".join(f"{e.detected_at_s:.3f} s" for e in events) or "never"

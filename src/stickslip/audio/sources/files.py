@@ -1,0 +1,130 @@
+"""Audio files: read in blocks (mono, or one channel), written atomically.
+
+soundfile (libsndfile) is imported lazily; a missing one is named with the extra to install.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...records import atomic_write, regular_file
+
+__all__ = [
+    "AUDIO_EXTRA",
+    "AudioSourceError",
+    "open_error",
+    "read_wav",
+    "load_soundfile",
+    "wav_blocks",
+    "wav_info",
+    "write_wav",
+]
+
+AUDIO_EXTRA = "install the audio extra: pip install 'stickslip[audio]'"
+
+
+class AudioSourceError(OSError):
+    """An audio source that cannot be opened or read (the message says why)."""
+
+
+def load_soundfile() -> Any:
+    """The soundfile module, or :class:`AudioSourceError` saying what to install."""
+    try:
+        import soundfile
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise AudioSourceError(f"reading WAV files needs soundfile; {AUDIO_EXTRA}") from e
+    except OSError as e:  # pragma: no cover - libsndfile missing
+        raise AudioSourceError(f"soundfile cannot load libsndfile ({e}); apt-get install libsndfile1") from e
+    return soundfile
+
+
+def regular(path: str | Path) -> Path:
+    """``path`` if it is a regular file: a FIFO or device is never opened (records.regular_file), else the reason."""
+    p = Path(path)
+    if not p.exists():
+        return p  # said where it is opened, as before
+    try:
+        return regular_file(p, "recording")
+    except ValueError as e:
+        raise AudioSourceError(str(e)) from None
+
+
+def open_error(path: Path, e: Exception) -> AudioSourceError:
+    if not path.exists():
+        return AudioSourceError(f"{path}: no such file")
+    if path.is_dir():
+        return AudioSourceError(f"{path}: is a directory, not a WAV file")
+    return AudioSourceError(f"{path}: not a readable audio file ({e})")
+
+
+def wav_info(path: str | Path) -> tuple[int, int, float]:
+    """(sample rate Hz, channels, duration s) of an audio file."""
+    sf = load_soundfile()
+    p = regular(path)
+    try:
+        info = sf.info(str(p))
+    except Exception as e:  # soundfile raises LibsndfileError / RuntimeError / TypeError
+        raise open_error(p, e) from None
+    return int(info.samplerate), int(info.channels), float(info.frames) / info.samplerate
+
+
+def _check_channel(p: Path, channel: int | None, channels: int) -> None:
+    if channel is not None and not 0 <= int(channel) < channels:
+        have = "1 channel" if channels == 1 else f"{channels} channels (1 to {channels})"
+        raise AudioSourceError(f"{p} has {have}: there is no channel {int(channel) + 1}")
+
+
+def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) -> Iterator[tuple[np.ndarray, int]]:
+    """Read an audio file in blocks: yields ``(mono float32 samples, sample rate Hz)``.
+
+    Multi-channel files are mixed down to mono (mean of the channels), or ``channel``
+    (0-based: 0 is the first, left) is read alone (see :func:`channel_problem` for when
+    the mean loses the stepping sound). The last block may be shorter.
+    """
+    if int(block) < 1:
+        raise ValueError(f"block must be >= 1 sample, got {block}")
+    sf = load_soundfile()
+    p = regular(path)
+    try:
+        f = sf.SoundFile(str(p))
+    except Exception as e:
+        raise open_error(p, e) from None
+    with f:
+        rate = int(f.samplerate)
+        _check_channel(p, channel, int(f.channels))
+        for data in f.blocks(blocksize=int(block), dtype="float32", always_2d=True):
+            if channel is not None:
+                yield data[:, int(channel)].copy(), rate
+            else:
+                yield data.mean(axis=1, dtype=np.float32) if data.shape[1] > 1 else data[:, 0], rate
+
+
+def read_wav(path: str | Path, channel: int | None = None) -> tuple[np.ndarray, int]:
+    """A whole audio file as ``(mono float32 samples, sample rate Hz)`` (``channel``: see :func:`wav_blocks`)."""
+    rate = wav_info(path)[0]
+    blocks = [b for b, _ in wav_blocks(path, block=1 << 16, channel=channel)]
+    return (np.concatenate(blocks) if blocks else np.zeros(0, np.float32)), rate
+
+
+def write_wav(path: str | Path, samples: np.ndarray, sample_rate: int) -> Path:
+    """Write mono samples as a 32-bit float WAV file.
+
+    The write goes through a temporary file in the same folder: a write that fails (a
+    full disk, a folder that is not there or not writable) leaves an earlier file at
+    ``path`` as it was, and raises ``OSError``.
+    """
+    sf = load_soundfile()
+    p = Path(path)
+    data = np.asarray(samples, dtype=np.float32)
+
+    def write(f: Any) -> None:
+        try:
+            sf.write(f, data, int(sample_rate), subtype="FLOAT", format="WAV")
+        except (RuntimeError, ValueError, TypeError) as e:  # libsndfile's errors are RuntimeErrors
+            raise OSError(f"cannot write a WAV file: {e}") from None
+
+    return atomic_write(p, write, mode="wb")
