@@ -11,7 +11,7 @@ from synth import history_csv
 from typer.testing import CliRunner
 
 import stickslip.measurements.chunks as chunks
-from stickslip.calibration import calibrate
+from stickslip.calibration import Calibration, calibrate
 from stickslip.cli import app
 from stickslip.measurements import parse_measurements, read_pose_columns, stream_measurement_table
 from stickslip.storage import Store
@@ -54,7 +54,7 @@ def test_predict_in_small_chunks_writes_what_one_chunk_writes(tmp_path, cal_path
     assert len(rows) == 50 and rows[1]["note"] == "a, 1" and ("gamma_pi95" in rows[0]) == interval
     table = read_pose_columns(poses)  # the columns read whole predict the same steps
     assert [r["gamma_pred"] for r in rows[::2]] == pytest.approx(
-        calibrate(parse_measurements(history_csv(300), "h.csv"), model="auto").model(2, "-").average_gamma(
+        Calibration.load(cal_path).model(2, "-").average_gamma(
             table.start[::2], table.end[::2], table.q1[::2], table.q2[::2], table.q3[::2], table.theta[::2],
             table.psi[::2]).tolist(), rel=1e-12)
 
@@ -94,8 +94,8 @@ def test_import_streams_and_stores_all_or_nothing(tmp_path, monkeypatch):
 
 def test_calibrate_reads_its_table_whole_so_its_cap_is_an_option_with_the_reason(tmp_path):
     table = tmp_path / "h.csv"
-    table.write_text(history_csv(30_000))  # about 2.2 MB
-    r = runner.invoke(app, ["calibrate", str(table), "--max-table-mb", "1"])
+    table.write_text(history_csv(3_000))  # about 220 kB
+    r = runner.invoke(app, ["calibrate", str(table), "--max-table-mb", "0.1"])
     assert r.exit_code == 2
     assert "held in memory" in r.stderr and "--max-table-mb raises the limit" in r.stderr
     r = runner.invoke(app, ["calibrate", str(table), "--max-table-mb", "-3"])
