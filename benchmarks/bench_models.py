@@ -132,7 +132,7 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
 
 
 def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("physics", "lugre", "dahl")) -> None:
-    print(f"seeds {', '.join(map(str, seeds))}; days {', '.join(DAYS)}; {8 * ERROR_POSES} validation traverses "
+    print(f"seeds {', '.join(map(str, seeds))}; days {', '.join(DAYS)}; {4 * ERROR_POSES} validation traverses "
           f"per day for the errors, {4 * VALIDATION_POSES} for the coverage")
     print("Largest |relative error| of a day's validation traverses on the median and the worst day, and the")
     print("mean over all; the issue's targets with 46 traverses: 7.5 % / 3.5 % on the median day, and never")
