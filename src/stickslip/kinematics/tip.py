@@ -35,8 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..units import UnitError, format_position, parse_length
 from ..joints import MM3A_GEOMETRY
+from ..units import UnitError, format_position, parse_length
 from .frames import JOINTS
 
 __all__ = [

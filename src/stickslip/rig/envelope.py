@@ -31,6 +31,7 @@ margin, and a refused path does, or comes within ``tol`` of doing so.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -271,7 +272,7 @@ def tip_margin(arm: Arm, q: ArrayLike, q_sd: ArrayLike, n_sigma: float) -> float
     return float(n_sigma * np.linalg.norm(sd * np.linalg.norm(np.asarray(arm.axes), axis=1)))
 
 
-def _obstacles(rig: Rig, arm: Arm, others: dict[str, ArrayLike], sigma_margin: float) -> _Obstacles:
+def _obstacles(rig: Rig, arm: Arm, others: Mapping[str, ArrayLike], sigma_margin: float) -> _Obstacles:
     vols = rig.volumes
     allowed_v = np.array([v.margin + arm.radius + sigma_margin for v in vols], dtype=float)
     segs, allowed_o, names = [], [], []
@@ -441,7 +442,7 @@ def _units(arm: Arm) -> tuple[str, str, str]:
 
 
 def _prepare(
-    rig: Rig, arm: str | None, path: ArrayLike, q_sd: ArrayLike, others: dict[str, ArrayLike] | None
+    rig: Rig, arm: str | None, path: ArrayLike, q_sd: ArrayLike, others: Mapping[str, ArrayLike] | None
 ) -> tuple[Arm, _Obstacles, Array]:
     a = rig.arm(arm)
     p = np.asarray(path, dtype=float)
@@ -460,7 +461,7 @@ def check_path(
     path: ArrayLike,
     *,
     q_sd: ArrayLike = (0.0, 0.0, 0.0),
-    others: dict[str, ArrayLike] | None = None,
+    others: Mapping[str, ArrayLike] | None = None,
     tol: float = TOLERANCE,
 ) -> None:
     """Refuse ``path`` (poses ``(N, 3)`` rad, rad, m, joined by straight joint-space lines) if it leaves the envelope.
@@ -498,7 +499,7 @@ def safe_fraction(
     path: ArrayLike,
     *,
     q_sd: ArrayLike = (0.0, 0.0, 0.0),
-    others: dict[str, ArrayLike] | None = None,
+    others: Mapping[str, ArrayLike] | None = None,
     tol: float = TOLERANCE,
 ) -> tuple[float, Refusal | None]:
     """How far along ``path`` (0 to 1) the arm may go, and the refusal that stops it (``None``: all the way).

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..devices.base import SECRET_OPTIONS, redact_url
+from ..devices.base import SECRET_OPTIONS, device_key, redact_url
 from ..joints import MM3A_FILE
 from ..kinematics import Geometry
 from ..records import read_text_bounded
@@ -196,10 +196,19 @@ class _Reader:
             raise self.fail(("arm",), "a rig needs at least one [[arm]]")
         arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
         seen: set[str] = set()
+        devices: dict[str, str] = {}
         for i, a in enumerate(arms):
             if a.name in seen:
                 raise self.fail(("arm", i, "name"), f"a second arm named {a.name!r}")
             seen.add(a.name)
+            try:
+                dev = device_key(a.controller)
+            except ValueError as e:
+                raise self.fail(("arm", i, "controller"), str(e)) from None
+            if dev in devices:
+                raise self.fail(("arm", i, "controller"), f"arm {devices[dev]!r} is on this controller already: "
+                                "each arm needs its own (its positions are kept under its URL)")
+            devices[dev] = a.name
         vols_raw = doc.get("volume", [])
         if not isinstance(vols_raw, list):
             raise self.fail(("volume",), "must be an array of tables ([[volume]])")
