@@ -121,6 +121,14 @@ def test_two_arms_from_the_command_line(tmp_path):
         r = run("move", *common, "--arm", "gripper", "--joint", 2, "--to", "-160deg")
         assert r.exit_code == 2 and "sample" in r.output, r.output
 
+        # a straight tip line up into the objective is refused; a short one is driven
+        r = run("reach", *common, "--arm", "probe", "--by", "0,0,8mm")
+        assert r.exit_code == 2 and "objective" in r.output, r.output
+        r = run("reach", *common, "--arm", "probe", "--by", "0,0,1mm", "--segment", "100um", "--json")
+        assert r.exit_code == 0, r.output
+        plan = json.loads(r.stdout)
+        assert plan["end"]["tip"][2] - plan["start"]["tip"][2] == pytest.approx(0.001, abs=2e-6)
+
         # the named position: joint 3 retracted first, then joint 2
         r = run("rig", "go", "park", "--rig", rig, "--db", db, "--from-unreferenced", "--trust-calibration")
         assert r.exit_code == 0, r.output

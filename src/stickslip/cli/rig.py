@@ -8,6 +8,8 @@ workflows are :mod:`stickslip.procedures.arms`; these commands parse, call them 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,7 +30,11 @@ from ._common import (
 )
 
 if TYPE_CHECKING:
+    from ..devices.base import Controller
+    from ..devices.positions import StateStore
+    from ..kinematics import Geometry
     from ..rig import Rig
+    from ..rig.guard import Guard
 
 rig_app = typer.Typer(
     name="rig",
@@ -53,6 +59,45 @@ def load(path: Path) -> Rig:
 
     with user_errors():
         return load_rig(path)
+
+
+@dataclass(frozen=True)
+class RigArm:
+    """What ``--rig FILE --arm NAME`` gives a command: the arm's device, geometry, calibration file and envelope."""
+
+    rig: Rig
+    arm: str
+    device: str
+    geometry: Geometry
+    calibration: Path | None
+    opener: Callable[[str], Controller]
+
+    def guard(self, store: StateStore) -> Guard:
+        """The arm's envelope, with the other arms where ``store`` keeps them."""
+        from ..procedures.arms import guard_for
+
+        return guard_for(store, self.rig, self.arm)
+
+
+def rig_arm(rig_file: Path | None, arm: str | None, device: str | None, geometry: str | None,
+            calibration: Path | None) -> RigArm | None:
+    """``--rig``/``--arm`` read, checked against ``--device``/``--geometry`` (exit 2); ``None`` without a rig."""
+    if rig_file is None:
+        if arm is not None:
+            fail("--arm names an arm of a rig: give --rig FILE too")
+        return None
+    if device is not None:
+        fail("give --device or --rig, not both (the rig file names each arm's controller)")
+    if geometry is not None:
+        fail("give --geometry or --rig, not both (the rig file gives each arm's geometry)")
+    from ..kinematics import DEFAULT_GEOMETRY
+    from ..procedures.arms import opener_for
+
+    rig = load(rig_file)
+    with user_errors(KeyError):
+        a = rig.arm(arm)
+    cal = calibration or (rig_file.parent / a.calibration if a.calibration else None)
+    return RigArm(rig, a.name, a.controller, a.geometry or DEFAULT_GEOMETRY, cal, opener_for(rig, a.name))
 
 
 def _joint_text(kind: str, v: float) -> str:

@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 import socket
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -67,6 +67,7 @@ __all__ = [
     "TargetOutOfRange",
     "TrackedPlan",
     "check_envelope",
+    "check_envelope_path",
     "device_lock",
     "drive",
     "exact_positions",
@@ -491,9 +492,18 @@ def check_envelope(guard: Guard | None, state: DeviceState, joint: int, q_to: fl
     if guard is None:
         return
     q = [state.positions[j] for j in (1, 2, 3)]
+    end = list(q)
+    end[joint - 1] = q_to
+    check_envelope_path(guard, state, [q, end])
+
+
+def check_envelope_path(guard: Guard | None, state: DeviceState, path: Sequence[Sequence[float]]) -> None:
+    """A whole planned path (poses, rad or m) against a rig's envelope: :class:`MoveRefused`, else nothing."""
+    if guard is None:
+        return
     sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
     try:
-        guard.check_joint(q, joint, q_to, sd)
+        guard.check(path, sd)
     except EnvelopeViolation as e:
         raise MoveRefused(f"refused by the rig's envelope: {e}") from None
 
