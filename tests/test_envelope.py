@@ -199,3 +199,31 @@ def test_a_jog_goes_as_far_as_the_boundary():
     # it may go to x = 24.9 mm: 3.9 of 12 mm, to TOLERANCE
     assert frac * 0.012 == pytest.approx(0.0039, abs=2 * TOLERANCE)
     assert safe_fraction(rig, None, [q, q + [0, 0, 0.003]]) == (1.0, None)
+
+
+def test_a_jog_stops_at_the_rig_envelope():
+    """The resolved-rate jog toward a wall 50 µm beyond the tip stops within one tick's motion of its margin."""
+    from test_reach import CAL
+
+    from stickslip.procedures.jog import JogController
+    from stickslip.rig.guard import Guard
+
+    arm = mm3a()
+    q = [0.0, -math.pi / 2, 0.002]
+    tip = arm.tip(q)  # (23 mm, 0, 0): "d" moves the tip along +x (joint 3)
+    wall = HalfSpace("wall", (float(tip[0]) + 60e-6, 0.0, 0.0), (1.0, 0.0, 0.0), margin=10e-6)
+    rig = Rig("r", "r", (arm,), (wall,))
+    c = JogController(CAL, list(q), speed_index=4, hold=0.0, guard=Guard(rig, "a"))  # 10 µm/s
+    c.press("d", 0.0)
+    t, moved = 0.0, 0
+    while c.direction is not None and t < 20.0:
+        steps = c.tick(t, 0.05)
+        for j, n in enumerate(steps, start=1):
+            if n:
+                c.sent_steps(j, n)
+                moved += abs(n)
+        t += 0.05
+    assert c.direction is None and "rig's envelope (wall)" in c.message
+    gap = wall.point[0] - wall.margin - float(arm.tip(c.q)[0])
+    assert 0.0 <= gap <= 10e-6 * 0.05 + 2e-6  # within one tick's motion (0.5 µm) plus a step of the arm
+    assert moved > 0

@@ -367,6 +367,11 @@ def jog(
         "controller (refused without it: its step sizes may be another arm's).",
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the tip stops at the rig's envelope.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 
@@ -382,6 +387,9 @@ def jog(
     joints and their distance to the end stops are shown live; positions are kept after
     every burst, as for `move`. Motion stops near an end stop or joint 1's axis.
 
+    With --rig FILE (and --arm NAME) motion also stops before a step that would leave
+    the rig's envelope (volumes, soft limits, other arms).
+
     Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
     """
     from ..calibration import Calibration
@@ -392,6 +400,9 @@ def jog(
     from ..procedures.reach import BORROWED_JOINT1
 
     geom = parse_geometry(geometry)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -406,8 +417,11 @@ def jog(
     screen = _Screen()
     try:
         with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+            if in_rig is not None:
+                request = dataclasses.replace(request, guard=in_rig.guard(store))
             result = jog_session(
-                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
+                opener=None if in_rig is None else in_rig.opener,
             )
     finally:
         screen.close()
