@@ -203,10 +203,9 @@ def test_a_jog_goes_as_far_as_the_boundary():
 
 def test_a_jog_stops_at_the_rig_envelope():
     """The resolved-rate jog toward a wall 50 µm beyond the tip stops within one tick's motion of its margin."""
-    from test_reach import CAL
-
     from stickslip.procedures.jog import JogController
     from stickslip.rig.guard import Guard
+    from test_reach import CAL
 
     arm = mm3a()
     q = [0.0, -math.pi / 2, 0.002]
