@@ -226,3 +226,31 @@ def test_a_jog_stops_at_the_rig_envelope():
     gap = wall.point[0] - wall.margin - float(arm.tip(c.q)[0])
     assert 0.0 <= gap <= 10e-6 * 0.05 + 2e-6  # within one tick's motion (0.5 µm) plus a step of the arm
     assert moved > 0
+
+
+def test_a_bluesky_axis_checks_the_rig_envelope(tmp_path):
+    """The Bluesky axis calls the same hook: a move into a volume fails before a step is sent."""
+    pytest.importorskip("ophyd_async")
+    import asyncio
+
+    from stickslip.bluesky import MoveError, StickSlipAxis
+    from stickslip.rig.guard import Guard
+    from stickslip.sim.arm import SimulatedMM3A
+    from test_bluesky import true_calibration
+
+    sim = SimulatedMM3A(seed=0)
+    arm = mm3a()
+    wall = HalfSpace("wall", (0.030, 0.0, 0.0), (1.0, 0.0, 0.0))  # x >= 30 mm: joint 3 may go to 9 mm
+    rig = Rig("r", "r", (arm,), (wall,))
+
+    async def move(target: float) -> None:
+        axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3", db=tmp_path / "s.db", guard=Guard(rig, "a"))
+        await axis.connect()
+        await axis.set(target)
+
+    asyncio.run(move(5e-3))
+    assert sim.position(3) == pytest.approx(5e-3, abs=2e-5)  # the simulator's own step noise
+    before = sim.steps_simulated
+    with pytest.raises(MoveError, match="'wall'"):
+        asyncio.run(move(11e-3))
+    assert sim.steps_simulated == before
