@@ -8,7 +8,8 @@
 * :mod:`.envelope` — a whole planned path checked against volumes, other arms and soft
   limits before one step is sent;
 * :mod:`.guard` — the one call the procedures make (``stickslip.procedures`` plan, then
-  ask it), and the controller that maps joints to an arm's channels.
+  ask it), and the controller that maps joints to an arm's channels;
+* :mod:`.draw` — the picture ``stickslip rig check -o`` draws (two views).
 """
 
 from __future__ import annotations
