@@ -62,6 +62,7 @@ from ..procedures.move import (
     MoveOutcome,
     MoveRefused,
     MoveRequest,
+    check_envelope,
     device_lock,
     drive,
     failure_text,
@@ -69,6 +70,7 @@ from ..procedures.move import (
     reference_problem,
     settle,
 )
+from ..rig.guard import Guard
 from ..storage import Store, StoreError
 from ..units import format_position, position_display_unit
 
@@ -350,9 +352,13 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         max_burst_s: float = MAX_BURST_S,
         from_unreferenced: bool = False,
         camera: CameraLoop | str | None = None,
+        guard: Guard | None = None,
     ) -> None:
         self.from_unreferenced = bool(from_unreferenced)
         self.camera = CameraLoop(camera) if isinstance(camera, str) else camera
+        self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move checked first
+        if self.camera is not None and guard is not None:
+            raise ValueError("camera= and guard= together: the closed loop does not check a rig's envelope yet")
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         self.burst = check_burst(burst)
@@ -480,6 +486,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
+                check_envelope(self.guard, state, joint, target)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
             publish(state)

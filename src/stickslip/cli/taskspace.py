@@ -7,6 +7,7 @@ kept per device in the database exactly as for ``move`` and ``where``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,6 +36,7 @@ from ._common import (
     warn_later,
 )
 from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, camera_errors, camera_loop, run_seen
+from .rig import rig_arm
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
@@ -123,6 +125,11 @@ def reach(
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
     camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the whole line is checked against the rig's envelope first.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Move the tip in a straight line to a point or by a displacement (task space).
 
@@ -139,12 +146,20 @@ def reach(
     before any step is sent. Without --dry-run the positions are kept after every burst,
     as for `move`.
 
+    With --rig FILE (and --arm NAME) the line, as driven, is checked against the
+    rig's keep-out volumes, soft limits and other arms before a step is sent.
+
     Example: stickslip reach -c cal.json -d mm3a:///dev/ttyUSB0 --by 20um,-10um,5um
     """
     if (by is None) == (to is None):
         fail("give exactly one of --by and --to")
     point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
     geom = parse_geometry(geometry)
+    if rig_file is not None and camera is not None:
+        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     from ..calibration import Calibration
     from ..motion.reach import borrow_joint1
@@ -170,7 +185,10 @@ def reach(
         run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
-        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings)
+        if in_rig is not None:
+            request = dataclasses.replace(request, guard=in_rig.guard(store))
+        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings,
+                            opener=None if in_rig is None else in_rig.opener)
     failure = result.failure()
     if failure is not None:
         fail(failure)
@@ -367,6 +385,11 @@ def jog(
         "and kept as seen, their step scales corrected as the tip moves.",
     ),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the tip stops at the rig's envelope.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 
@@ -385,6 +408,9 @@ def jog(
     joints and their distance to the end stops are shown live; positions are kept after
     every burst, as for `move`. Motion stops near an end stop or joint 1's axis.
 
+    With --rig FILE (and --arm NAME) motion also stops before a step that would leave
+    the rig's envelope (volumes, soft limits, other arms).
+
     Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
     """
     from ..calibration import Calibration
@@ -395,6 +421,11 @@ def jog(
     from ..procedures.reach import BORROWED_JOINT1
 
     geom = parse_geometry(geometry)
+    if rig_file is not None and camera is not None:
+        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -409,8 +440,11 @@ def jog(
     screen = _Screen()
     try:
         with open_store(db) as store, user_errors(DeviceBusy, DeviceError, *(camera_errors() if camera else ())):
+            if in_rig is not None:
+                request = dataclasses.replace(request, guard=in_rig.guard(store))
             result = jog_session(
-                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
+                opener=None if in_rig is None else in_rig.opener,
             )
     finally:
         screen.close()

@@ -566,6 +566,8 @@ def move_seen(
     (:class:`~.move.MoveRefused`, ``KeyError``, ``ValueError``, :class:`DeviceError`, the
     camera's errors); a stop during the move is in the result's ``reason``.
     """
+    if getattr(request, "guard", None) is not None:
+        raise MoveRefused("the closed loop does not check a rig's envelope yet: a move with a guard goes without it")
     key = device_key(request.device)
     joint = request.joint
     made_on = calibration_device_problem(calibration, request.device)
@@ -644,6 +646,8 @@ def reach_seen(
     """
     if request.dry_run:
         raise ValueError("a closed-loop reach drives the arm: --dry-run plans without the camera")
+    if getattr(request, "guard", None) is not None:
+        raise MoveRefused("the closed loop does not check a rig's envelope yet: a move with a guard goes without it")
     key = device_key(request.device)
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
