@@ -6,7 +6,6 @@ else ``$STICKSLIP_DB``, else the config file's, else the user's data directory).
 
 from __future__ import annotations
 
-import hashlib
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -149,27 +148,18 @@ def import_(
 
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
-    ts = read_table(meas)
-    digest = "sha256:" + hashlib.sha256(meas.read_bytes()).hexdigest()
-    with open_store(db) as st:
-        if st.has_source(digest) and not force:
-            fail(f"{meas} was imported before (same contents); use --force to import it again")
-        dup = [] if allow_duplicates else st.duplicates(ts, device)
-        if dup:
-            rows = ", ".join(str(k + 2) for k in dup[:5]) + (" ..." if len(dup) > 5 else "")
-            fail(
-                f"{meas}: {len(dup)} of {len(ts)} rows are already stored for {redact_url(device)} "
-                f"(same day, pose, interval and steps; rows {rows}); nothing imported. "
-                "Use --allow-duplicates if they are genuine repeats"
-            )
-        with user_errors():
-            ids = st.add_traverses(ts, device=device, how=how, source=digest)
+    from ..procedures.table_import import import_table
+
+    with open_store(db) as st:  # the table streams through twice: any length in bounded memory
+        with user_errors():  # a bad row (every one listed), a file imported before, rows stored already
+            res = import_table(st, meas, device, how, force, allow_duplicates, shown_device=redact_url(device))
         path = st.path
     if json_out:
-        print_json({"imported": len(ids), "ids": ids, "db": str(path)})
+        print_json({"imported": len(res.ids), "ids": res.ids, "db": str(path)})
     else:
-        days = sorted({t.day for t in ts})
-        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {redact_url(device)} into {path}")
+        console.print(
+            f"imported {len(res.ids)} traverses ({', '.join(res.days)}) for {redact_url(device)} into {path}"
+        )
 
 
 # ---------------------------------------------------------------- exclude / delete

@@ -352,7 +352,7 @@ def plan_tracked(
     plan = Planner(scaled, joint, state.pose).plan(q_from, q_to)
     return TrackedPlan(
         joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
-        joint_sigma_model(calibration, joint),
+        joint_sigma_model(calibration, joint, state.pose),  # the model error in this pose (docs/models.md §4)
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
         from_uncertain=state.uncertain.get(joint),
     )
