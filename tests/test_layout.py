@@ -14,24 +14,19 @@ MAX_FUNCTION_LINES = 60
 MAX_CLASS_LINES = 300
 
 # Over the limits today and being restructured by other work at the same time (the calibration
-# and vision packages, the prediction command), so not touched here: listed so this test holds
+# and vision packages), so not touched here: listed so this test holds
 # meanwhile. An entry is (folder or module, qualified name), so a move inside its folder keeps it;
 # when its owner brings it under the limit, the entry must go (test_allow_list_is_not_stale).
 ALLOWED = {
     # calibration/: the calibration groups its traverses once (issue 35 item 4)
-    ("calibration/", "select_joint"),
     ("calibration/", "read_ext_fields"),
     ("calibration/", "update_calibration"),
-    ("calibration/", "fit_joint"),
-    ("calibration/", "calibrate_families"),
     ("calibration/", "calibrate_lsq"),
-    # (class Calibration is 277 lines by this measure, within the limit: not listed)
+    # (class Calibration, 280 lines by this measure, is within the limit: not listed)
     # vision/: the tip tracker, its refinement and template learning
     ("vision/", "refine"),
     ("vision/", "TipTemplate.learn"),
     ("vision/", "TipTracker"),
-    # cli/core.py: predict's workflow moves into procedures/ (issue 35 item 3)
-    ("cli/core.py", "predict_cmd"),
 }
 
 
