@@ -60,6 +60,7 @@ from ..procedures.move import (
     DeviceBusy,
     MoveOutcome,
     MoveRefused,
+    check_envelope,
     device_lock,
     drive,
     failure_text,
@@ -67,6 +68,7 @@ from ..procedures.move import (
     reference_problem,
     settle,
 )
+from ..rig.guard import Guard
 from ..storage import Store, StoreError
 from ..units import format_position, position_display_unit
 
@@ -324,8 +326,10 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         db: str | os.PathLike[str] | None = None,
         max_burst_s: float = MAX_BURST_S,
         from_unreferenced: bool = False,
+        guard: Guard | None = None,
     ) -> None:
         self.from_unreferenced = bool(from_unreferenced)
+        self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move checked first
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         self.burst = check_burst(burst)
@@ -451,6 +455,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
+                check_envelope(self.guard, state, joint, target)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
             publish(state)

@@ -7,6 +7,7 @@ kept per device in the database exactly as for ``move`` and ``where``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,6 +35,7 @@ from ._common import (
     warn,
     warn_later,
 )
+from .rig import rig_arm
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
@@ -120,6 +122,11 @@ def reach(
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the whole line is checked against the rig's envelope first.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Move the tip in a straight line to a point or by a displacement (task space).
 
@@ -136,12 +143,18 @@ def reach(
     before any step is sent. Without --dry-run the positions are kept after every burst,
     as for `move`.
 
+    With --rig FILE (and --arm NAME) the line, as driven, is checked against the
+    rig's keep-out volumes, soft limits and other arms before a step is sent.
+
     Example: stickslip reach -c cal.json -d mm3a:///dev/ttyUSB0 --by 20um,-10um,5um
     """
     if (by is None) == (to is None):
         fail("give exactly one of --by and --to")
     point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
     geom = parse_geometry(geometry)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     from ..calibration import Calibration
     from ..motion.reach import borrow_joint1
@@ -160,7 +173,10 @@ def reach(
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
-        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings)
+        if in_rig is not None:
+            request = dataclasses.replace(request, guard=in_rig.guard(store))
+        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings,
+                            opener=None if in_rig is None else in_rig.opener)
     failure = result.failure()
     if failure is not None:
         fail(failure)
@@ -351,6 +367,11 @@ def jog(
         "controller (refused without it: its step sizes may be another arm's).",
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the tip stops at the rig's envelope.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 
@@ -366,6 +387,9 @@ def jog(
     joints and their distance to the end stops are shown live; positions are kept after
     every burst, as for `move`. Motion stops near an end stop or joint 1's axis.
 
+    With --rig FILE (and --arm NAME) motion also stops before a step that would leave
+    the rig's envelope (volumes, soft limits, other arms).
+
     Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
     """
     from ..calibration import Calibration
@@ -376,6 +400,9 @@ def jog(
     from ..procedures.reach import BORROWED_JOINT1
 
     geom = parse_geometry(geometry)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -390,8 +417,11 @@ def jog(
     screen = _Screen()
     try:
         with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+            if in_rig is not None:
+                request = dataclasses.replace(request, guard=in_rig.guard(store))
             result = jog_session(
-                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
+                opener=None if in_rig is None else in_rig.opener,
             )
     finally:
         screen.close()

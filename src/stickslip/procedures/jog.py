@@ -56,8 +56,10 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
+from ..rig.envelope import EnvelopeViolation
+from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions
+from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, track_fields
 from .reach import referenced_state
 
 __all__ = [
@@ -68,6 +70,7 @@ __all__ = [
     "JogRequest",
     "JogResult",
     "KeySource",
+    "envelope_stop",
     "jog",
     "max_rates",
     "parse_keys",
@@ -220,6 +223,9 @@ class JogController:
     margin : float
         Motion stops when a joint would come closer than this fraction of its range to
         an end stop (dimensionless).
+    guard : Guard or None
+        A rig's envelope: motion stops before a tick whose steps would leave it (so within
+        one tick's motion of the boundary), with ``guard_sd`` (rad, rad, m) as the joints' σ.
     """
 
     calibration: Calibration
@@ -245,6 +251,8 @@ class JogController:
     _pending: list[tuple[int, int, int]] = field(default_factory=list)
     _setpoint: tuple[float, float, float] | None = None
     _queued: list[tuple[float, float, float]] = field(default_factory=list)
+    guard: Guard | None = None
+    guard_sd: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         self.q = [float(v) for v in self.q]
@@ -377,6 +385,7 @@ class JogController:
 
     def _limit_problem(self, steps: tuple[int, int, int]) -> str | None:
         q = list(self.q)
+        path = [list(q)]
         for j in (1, 2, 3):
             if steps[j - 1]:
                 pose = kin.Pose(q[0], q[1], q[2], self.theta, self.psi)
@@ -390,7 +399,8 @@ class JogController:
                 ):
                     side = "lower" if q[j - 1] < before else "upper"
                     return f"joint {j} is at its {side} limit: stopped (move the other way)"
-        return None
+                path.append(list(q))
+        return envelope_stop(self.guard, path, self.guard_sd)
 
     def _single_step(self, direction: tuple[float, float, float]) -> None:
         """Plan a straight move of ``speed`` metres along ``direction``; queue its segments."""
@@ -515,6 +525,22 @@ class KeySource(Protocol):
         ...
 
 
+def _sds(state: DeviceState) -> tuple[float, float, float]:
+    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
+    return (sd[0], sd[1], sd[2])
+
+
+def envelope_stop(guard: Guard | None, path: list[list[float]], q_sd: tuple[float, float, float]) -> str | None:
+    """Why a jog tick's path (poses, rad or m) must not be sent: it leaves the rig's envelope; ``None`` if it may."""
+    if guard is None or len(path) < 2:
+        return None
+    try:
+        guard.check(path, q_sd)
+    except EnvelopeViolation as e:
+        return f"stopped at the rig's envelope ({e.refusal.obstacle}): move another way"
+    return None
+
+
 @dataclass(frozen=True)
 class JogRequest:
     """A jog session on one device.
@@ -541,6 +567,8 @@ class JogRequest:
         refused on a real controller. Uncertain joints are always refused.
     trust_calibration : bool
         Use a calibration without its device, or the simulator's, on a real controller.
+    guard : Guard or None
+        A rig's envelope: the tip stops at its boundary (:class:`JogController`).
     """
 
     device: str
@@ -553,6 +581,7 @@ class JogRequest:
     max_age_days: int = 0
     from_unreferenced: bool = False
     trust_calibration: bool = False
+    guard: Guard | None = None
 
 
 @dataclass(frozen=True)
@@ -615,6 +644,7 @@ def jog(
             ctl = JogController(
                 calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
                 max_rates(dev, request.max_rate), request.image_angle, request.hold, request.speed - 1,
+                guard=request.guard, guard_sd=_sds(state),
             )
 
             def save(st: DeviceState) -> None:
