@@ -19,7 +19,12 @@ from ._common import DB_HELP, OneLineErrors, console, device_url, err_console, f
 from ._output import styled
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from ..devices.base import Controller
+    from ..kinematics import Pose
     from ..procedures.camera import CameraCalibrationResult
+    from ..vision.camera import Camera
     from ..vision.locate import Located
 
 PIXELS = "Pixels: x to the right, y down, the centre of the top-left pixel at (0, 0)."
@@ -184,28 +189,15 @@ def calibrate_cmd(
 
     Example: stickslip camera calibrate -d sim:// --camera "simcam://?pixel=0.5um" -o steps.csv
     """
-    from rich.progress import BarColumn, Progress, TextColumn
-
     from ..clock import today_label
     from ..devices.positions import load_state, save_state
-    from ..kinematics import JOINTS
     from ..measurements import write_step_sizes
-    from ..procedures.camera import calibrate_camera
+    from ..procedures.camera import calibrate_camera, dead_reckon
     from ..procedures.move import DeviceBusy, device_lock
-    from ..vision.acquire import AcquireError
-    from ..vision.camera import CameraError, open_camera
-    from ..vision.frame import ImageError
-    from ..vision.jacobian import JacobianError
-    from ..vision.template import TemplateError
 
     url = device_url(device)
     at = _pixel(tip, "--tip") if tip is not None else None
-    try:
-        order = [int(j) for j in joints.split(",")]
-        if not order or any(j not in (1, 2, 3) for j in order) or len(set(order)) != len(order):
-            raise ValueError
-    except ValueError:
-        fail(f"--joints {joints!r}: write the joints to measure, e.g. 3,1 (each of 1, 2, 3 once)")
+    order = _joint_order(joints)
     view = _view(view_tilt, view_azimuth, view_roll)
     label = day if day is not None else today_label()
     with user_errors():
@@ -214,47 +206,16 @@ def calibrate_cmd(
         with device_lock(store, key):
             with user_errors():
                 state = load_state(store, key)
-            try:
-                dev = open_device(url)
-            except (DeviceError, ValueError) as e:
-                fail(str(e))
-            try:
-                if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
-                    dev.set_pose(*state.pose)
-                try:
-                    cam = open_camera(camera, dev)
-                except (CameraError, ValueError) as e:
-                    fail(str(e))
-                try:
-                    columns = (
-                        TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}")
-                    )
-                    with Progress(*columns, console=err_console, transient=True) as bar:
-                        task = bar.add_task("camera", total=None)
 
-                        def progress(done: int, total: int) -> None:
-                            bar.update(task, completed=done, total=total)
+            def measure(dev: Controller, cam: Camera, progress: Callable[[int, int], None]) -> CameraCalibrationResult:
+                return calibrate_camera(
+                    dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
+                    auto_steps=auto_steps, max_steps=max_steps, progress=progress,
+                )
 
-                        result = calibrate_camera(
-                            dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
-                            auto_steps=auto_steps, max_steps=max_steps, progress=progress,
-                        )
-                except (AcquireError, TemplateError, JacobianError, ImageError, CameraError, DeviceError,
-                        ValueError) as e:
-                    fail(str(e))
-                finally:
-                    cam.close()
-            finally:
-                try:
-                    dev.close()
-                except DeviceError:
-                    pass
-            for jr in result.joints:  # where the measured joints ended, by the steps the camera saw
-                if jr.net_q:
-                    q = min(max(state.positions[jr.joint] + jr.net_q, JOINTS[jr.joint].lower), JOINTS[jr.joint].upper)
-                    with user_errors():
-                        state.set_position(jr.joint, q, "dead-reckoned")
+            result = _with_device_and_camera(url, camera, state.pose, measure)
             with user_errors():
+                dead_reckon(state, result)  # where the measured joints ended, by the steps the camera saw
                 save_state(store, state)
     if not result.rows:
         reasons = "; ".join(r.refused or f"joint {r.joint}: no step size" for r in result.joints)
@@ -266,6 +227,61 @@ def calibrate_cmd(
         print_json({**result.as_dict(), "device": key, "output": str(output) if output else None})
         return
     _print_calibration(result, output)
+
+
+def _joint_order(joints: str) -> list[int]:
+    """``--joints``: each of 1, 2, 3 at most once, in the order given."""
+    try:
+        order = [int(j) for j in joints.split(",")]
+        if not order or any(j not in (1, 2, 3) for j in order) or len(set(order)) != len(order):
+            raise ValueError
+    except ValueError:
+        fail(f"--joints {joints!r}: write the joints to measure, e.g. 3,1 (each of 1, 2, 3 once)")
+    return order
+
+
+def _with_device_and_camera(
+    url: str, camera: str, pose: Pose,
+    measure: Callable[[Controller, Camera, Callable[[int, int], None]], CameraCalibrationResult],
+) -> CameraCalibrationResult:
+    """Open the device (a simulator placed at ``pose``) and the camera, ``measure`` with a progress bar, close both."""
+    from rich.progress import BarColumn, Progress, TextColumn
+
+    from ..vision.acquire import AcquireError
+    from ..vision.camera import CameraError, open_camera
+    from ..vision.frame import ImageError
+    from ..vision.jacobian import JacobianError
+    from ..vision.template import TemplateError
+
+    try:
+        dev = open_device(url)
+    except (DeviceError, ValueError) as e:
+        fail(str(e))
+    try:
+        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+            dev.set_pose(*pose)
+        try:
+            cam = open_camera(camera, dev)
+        except (CameraError, ValueError) as e:
+            fail(str(e))
+        try:
+            columns = (TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}"))
+            with Progress(*columns, console=err_console, transient=True) as bar:
+                task = bar.add_task("camera", total=None)
+
+                def progress(done: int, total: int) -> None:
+                    bar.update(task, completed=done, total=total)
+
+                return measure(dev, cam, progress)
+        except (AcquireError, TemplateError, JacobianError, ImageError, CameraError, DeviceError, ValueError) as e:
+            fail(str(e))
+        finally:
+            cam.close()
+    finally:
+        try:
+            dev.close()
+        except DeviceError:
+            pass
 
 
 def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> None:

@@ -19,6 +19,7 @@ from ._common import DB_HELP, console, fail, open_store, print_json, read_table,
 from ._output import styled, visible
 
 if TYPE_CHECKING:
+    from ..analysis import AnovaResult
     from ..measurements import Traverse
 
 
@@ -292,33 +293,7 @@ def anova(
     if not res.tests:
         warn("no testable groups: a pose must be measured on several days (or both ways on one day), repeated")
     else:
-        from ..analysis import PoseGroup
-
-        table = Table(pad_edge=False)
-        table.add_column("test", no_wrap=True)
-        table.add_column("pose", overflow="fold", ratio=1)
-        table.add_column("n", justify="right", no_wrap=True)
-        table.add_column("F", justify="right", no_wrap=True)
-        table.add_column("p", justify="right", no_wrap=True)
-        table.add_column(f"α={alpha:g}", no_wrap=True)
-        for t in res.tests:
-            what = {
-                "day": f"days {t.joint}{t.direction}",
-                "direction": f"+/- {t.joint} {t.day}",
-                "two-way": f"2-way {t.joint} {t.term}",
-            }[t.test]
-            verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
-            if not math.isfinite(t.F):
-                verdict = "degenerate"
-            table.add_row(
-                what,
-                PoseGroup(t.joint, t.pose, t.interval).describe(),
-                str(t.n),
-                f"{t.F:.4g}" if math.isfinite(t.F) else "-",
-                f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
-                styled(verdict, "bold red") if verdict == "SIGNIFICANT" else verdict,
-            )
-        console.print(table)
+        console.print(_anova_table(res, alpha))
     if show_skipped:
         for s in res.skipped:
             console.print(styled(f"skipped: {s}", "dim"))
@@ -330,6 +305,37 @@ def anova(
                 "dim",
             )
         )
+
+
+def _anova_table(res: AnovaResult, alpha: float) -> Table:
+    """The tests as a table: what, the pose, n, F, p and the verdict at ``alpha`` (degenerate where F is undefined)."""
+    from ..analysis import PoseGroup
+
+    table = Table(pad_edge=False)
+    table.add_column("test", no_wrap=True)
+    table.add_column("pose", overflow="fold", ratio=1)
+    table.add_column("n", justify="right", no_wrap=True)
+    table.add_column("F", justify="right", no_wrap=True)
+    table.add_column("p", justify="right", no_wrap=True)
+    table.add_column(f"α={alpha:g}", no_wrap=True)
+    for t in res.tests:
+        what = {
+            "day": f"days {t.joint}{t.direction}",
+            "direction": f"+/- {t.joint} {t.day}",
+            "two-way": f"2-way {t.joint} {t.term}",
+        }[t.test]
+        verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
+        if not math.isfinite(t.F):
+            verdict = "degenerate"
+        table.add_row(
+            what,
+            PoseGroup(t.joint, t.pose, t.interval).describe(),
+            str(t.n),
+            f"{t.F:.4g}" if math.isfinite(t.F) else "-",
+            f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
+            styled(verdict, "bold red") if verdict == "SIGNIFICANT" else verdict,
+        )
+    return table
 
 
 # ---------------------------------------------------------------- fit
