@@ -27,10 +27,6 @@ ALLOWED = {
     ("vision/", "refine"),
     ("vision/", "TipTemplate.learn"),
     ("vision/", "TipTracker"),
-    # rig/: the rig file's reader came with issue 32 after this test was written; over the limits,
-    # left to be split by its owners
-    ("rig/", "_Reader"),
-    ("rig/", "_Reader.arm"),
 }
 
 

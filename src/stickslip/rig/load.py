@@ -107,8 +107,8 @@ def line_of(text: str, key: Key) -> int | None:
     return None
 
 
-class _Reader:
-    """Reads one document; ``fail(key, why)`` makes the one-line error."""
+class _Values:
+    """Checks one value each; ``fail(key, why)`` makes the one-line error naming its line."""
 
     def __init__(self, text: str, path: str) -> None:
         self.text = text
@@ -179,7 +179,18 @@ class _Reader:
             raise self.fail(key, f"must be a whole number from {lo} to {hi}")
         return value
 
-    # -- the document
+    def pair(self, value: Any, key: Key, unit: str) -> tuple[float, float]:
+        if not isinstance(value, list) or len(value) != 2:
+            raise self.fail(key, "must be [lower, upper]")
+        lo, hi = (self.quantity(v, key, unit) for v in value)
+        if not lo < hi:
+            raise self.fail(key, "lower must be less than upper")
+        return lo, hi
+
+
+class _Reader(_Values):
+    """Reads one document: the rig, its arms, joints, volumes and named positions."""
+
     def rig(self, doc: dict[str, Any], base: Rig | None) -> Rig:
         self.table(doc, (), ("name", "n_sigma", "arm_distance", "stage", "arm", "volume", "position"))
         name = self.string(doc.get("name", Path(self.path).stem), ("name",))
@@ -241,25 +252,8 @@ class _Reader:
         kind = self.string(doc.get("kind", "mm3a"), key + ("kind",))
         if kind not in ARM_KINDS:
             raise self.fail(key + ("kind",), f"{kind!r} is no arm kind (the kinds: {', '.join(ARM_KINDS)})")
-        if "controller" not in doc:
-            raise self.fail(key, "an arm needs a controller URL (e.g. controller = \"sim://\")")
-        controller = self.string(doc["controller"], key + ("controller",))
-        if redact_url(controller) != controller or _has_secret(controller):
-            raise self.fail(key + ("controller",), "no password in the rig file: use password_env or "
-                            "password_keyring (docs/rig.md)")
-        if "://" not in controller and not controller.endswith(":"):
-            raise self.fail(key + ("controller",),
-                            f"{controller!r} is not a URL such as sim:// or mm3a:///dev/ttyUSB0")
-        penv = doc.get("password_env")
-        if penv is not None and not _ENV_NAME.match(self.string(penv, key + ("password_env",))):
-            raise self.fail(key + ("password_env",), "must be an environment variable's name")
-        keyring: tuple[str, str] | None = None
-        if "password_keyring" in doc:
-            k = self.table(doc["password_keyring"], key + ("password_keyring",), ("service", "user"))
-            if "service" not in k or "user" not in k:
-                raise self.fail(key + ("password_keyring",), "needs service and user")
-            keyring = (self.string(k["service"], key + ("password_keyring", "service")),
-                       self.string(k["user"], key + ("password_keyring", "user")))
+        controller = self.controller(doc, key)
+        penv, keyring = self.credentials(doc, key)
         files = {}
         for f in ("calibration", "tuning"):
             files[f] = self.string(doc[f], key + (f,)) if f in doc else None
@@ -272,46 +266,88 @@ class _Reader:
         axes: tuple[Vec, Vec, Vec] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
         tool: Vec = (0.0, 0.0, -0.01)
         if kind == "mm3a":
-            for xk in ("axes", "tool"):
-                if xk in doc:
-                    raise self.fail(key + (xk,), "belongs to an xyz arm, not an mm3a")
-            g = self.table(doc.get("geometry", {}), key + ("geometry",), ("offset", "length"))
-            g0 = template.geometry if template is not None and template.geometry is not None else Geometry()
-            offset = self.quantity(g.get("offset", g0.offset), key + ("geometry", "offset"), "length")
-            length = self.quantity(g.get("length", g0.length), key + ("geometry", "length"), "length", positive=True)
-            try:
-                geometry = Geometry(offset, length)
-            except ValueError as e:
-                raise self.fail(key + ("geometry",), str(e)) from None
+            geometry = self.mm3a_geometry(doc, key, template)
         else:
-            if "geometry" in doc:
-                raise self.fail(key + ("geometry",), "belongs to an mm3a arm; an xyz arm has axes and tool")
-            if "axes" in doc:
-                ax = doc["axes"]
-                if not isinstance(ax, list) or len(ax) != 3:
-                    raise self.fail(key + ("axes",), "must be 3 directions, one per stage")
-                a1, a2, a3 = (self.direction(a, key + ("axes",)) for a in ax)
-                axes = (a1, a2, a3)
-                if abs(float(np.linalg.det(np.asarray(axes)))) < 1e-6:
-                    raise self.fail(key + ("axes",), "the 3 stage directions must not lie in one plane")
-            if "tool" in doc:
-                tool = self.vector(doc["tool"], key + ("tool",), "length")
+            axes, tool = self.xyz_frame(doc, key, axes, tool)
         joints = self.joints(doc, key, kind, template)
+        home = self.home(doc, key, joints, template)
+        return Arm(name, kind, controller, joints, mount, geometry, axes, tool, radius, files["calibration"],
+                   files["tuning"], penv, keyring, home)
+
+    def controller(self, doc: dict[str, Any], key: Key) -> str:
+        """The arm's controller URL: present, a URL, and with no password in it."""
+        if "controller" not in doc:
+            raise self.fail(key, "an arm needs a controller URL (e.g. controller = \"sim://\")")
+        controller = self.string(doc["controller"], key + ("controller",))
+        if redact_url(controller) != controller or _has_secret(controller):
+            raise self.fail(key + ("controller",), "no password in the rig file: use password_env or "
+                            "password_keyring (docs/rig.md)")
+        if "://" not in controller and not controller.endswith(":"):
+            raise self.fail(key + ("controller",),
+                            f"{controller!r} is not a URL such as sim:// or mm3a:///dev/ttyUSB0")
+        return controller
+
+    def credentials(self, doc: dict[str, Any], key: Key) -> tuple[str | None, tuple[str, str] | None]:
+        """Where the controller's password is found: an environment variable's name, a keyring entry."""
+        penv = doc.get("password_env")
+        if penv is not None and not _ENV_NAME.match(self.string(penv, key + ("password_env",))):
+            raise self.fail(key + ("password_env",), "must be an environment variable's name")
+        keyring: tuple[str, str] | None = None
+        if "password_keyring" in doc:
+            k = self.table(doc["password_keyring"], key + ("password_keyring",), ("service", "user"))
+            if "service" not in k or "user" not in k:
+                raise self.fail(key + ("password_keyring",), "needs service and user")
+            keyring = (self.string(k["service"], key + ("password_keyring", "service")),
+                       self.string(k["user"], key + ("password_keyring", "user")))
+        return penv, keyring
+
+    def mm3a_geometry(self, doc: dict[str, Any], key: Key, template: Arm | None) -> Geometry:
+        """An mm3a arm's geometry (offset, length; m), the template's where the file leaves them out."""
+        for xk in ("axes", "tool"):
+            if xk in doc:
+                raise self.fail(key + (xk,), "belongs to an xyz arm, not an mm3a")
+        g = self.table(doc.get("geometry", {}), key + ("geometry",), ("offset", "length"))
+        g0 = template.geometry if template is not None and template.geometry is not None else Geometry()
+        offset = self.quantity(g.get("offset", g0.offset), key + ("geometry", "offset"), "length")
+        length = self.quantity(g.get("length", g0.length), key + ("geometry", "length"), "length", positive=True)
+        try:
+            return Geometry(offset, length)
+        except ValueError as e:
+            raise self.fail(key + ("geometry",), str(e)) from None
+
+    def xyz_frame(
+        self, doc: dict[str, Any], key: Key, axes: tuple[Vec, Vec, Vec], tool: Vec
+    ) -> tuple[tuple[Vec, Vec, Vec], Vec]:
+        """An xyz arm's stage directions (unit vectors) and tool offset (m); ``axes``, ``tool`` by default."""
+        if "geometry" in doc:
+            raise self.fail(key + ("geometry",), "belongs to an mm3a arm; an xyz arm has axes and tool")
+        if "axes" in doc:
+            ax = doc["axes"]
+            if not isinstance(ax, list) or len(ax) != 3:
+                raise self.fail(key + ("axes",), "must be 3 directions, one per stage")
+            a1, a2, a3 = (self.direction(a, key + ("axes",)) for a in ax)
+            axes = (a1, a2, a3)
+            if abs(float(np.linalg.det(np.asarray(axes)))) < 1e-6:
+                raise self.fail(key + ("axes",), "the 3 stage directions must not lie in one plane")
+        if "tool" in doc:
+            tool = self.vector(doc["tool"], key + ("tool",), "length")
+        return axes, tool
+
+    def home(self, doc: dict[str, Any], key: Key, joints: tuple[Joint, Joint, Joint], template: Arm | None) -> Vec:
+        """The arm's home (joints 1, 2, 3; rad or m): the file's, else the template's, else 0 within range."""
         home_raw = doc.get("home")
         if home_raw is None:
             home: Vec = template.home if template is not None else tuple(  # type: ignore[assignment]
                 min(max(0.0, j.limits[0]), j.limits[1]) for j in joints)
-        else:
-            if not isinstance(home_raw, list) or len(home_raw) != 3:
-                raise self.fail(key + ("home",), "must be 3 values, joints 1, 2, 3")
-            h = [self.quantity(v, key + ("home",), "angle" if j.kind == "rotary" else "length")
-                 for v, j in zip(home_raw, joints, strict=True)]
-            for v, j in zip(h, joints, strict=True):
-                if not j.lower <= v <= j.upper:
-                    raise self.fail(key + ("home",), f"joint {j.number}'s home is outside its range")
-            home = (h[0], h[1], h[2])
-        return Arm(name, kind, controller, joints, mount, geometry, axes, tool, radius, files["calibration"],
-                   files["tuning"], penv, keyring, home)
+            return home
+        if not isinstance(home_raw, list) or len(home_raw) != 3:
+            raise self.fail(key + ("home",), "must be 3 values, joints 1, 2, 3")
+        h = [self.quantity(v, key + ("home",), "angle" if j.kind == "rotary" else "length")
+             for v, j in zip(home_raw, joints, strict=True)]
+        for v, j in zip(h, joints, strict=True):
+            if not j.lower <= v <= j.upper:
+                raise self.fail(key + ("home",), f"joint {j.number}'s home is outside its range")
+        return (h[0], h[1], h[2])
 
     def joints(self, doc: dict[str, Any], key: Key, kind: str, template: Arm | None) -> tuple[Joint, Joint, Joint]:
         raw = doc.get("joint")
@@ -341,14 +377,14 @@ class _Reader:
             unit = "angle" if jkind == "rotary" else "length"
             if "range" not in d:
                 raise self.fail(jk, "needs its range = [lower, upper]")
-            lo, hi = self._pair(d["range"], jk + ("range",), unit)
+            lo, hi = self.pair(d["range"], jk + ("range",), unit)
             stops = d.get("stops", ["lower", "upper"])
             if (not isinstance(stops, list) or any(s not in ("lower", "upper") for s in stops)
                     or len(set(stops)) != len(stops)):
                 raise self.fail(jk + ("stops",), "must list the end stops it has: \"lower\", \"upper\"")
             slo, shi = -math.inf, math.inf
             if "soft" in d:
-                slo, shi = self._pair(d["soft"], jk + ("soft",), unit)
+                slo, shi = self.pair(d["soft"], jk + ("soft",), unit)
                 if slo < lo or shi > hi:
                     raise self.fail(jk + ("soft",), "the soft limits must lie within the range")
             out.append(Joint(number, channel, int(sign), jkind, lo, hi, tuple(stops), slo, shi))
@@ -358,14 +394,6 @@ class _Reader:
                 raise self.fail(key + ("joint", i, "channel"), f"channel {c} drives joint {channels.index(c) + 1} "
                                 "already: two joints on one channel")
         return (out[0], out[1], out[2])
-
-    def _pair(self, value: Any, key: Key, unit: str) -> tuple[float, float]:
-        if not isinstance(value, list) or len(value) != 2:
-            raise self.fail(key, "must be [lower, upper]")
-        lo, hi = (self.quantity(v, key, unit) for v in value)
-        if not lo < hi:
-            raise self.fail(key, "lower must be less than upper")
-        return lo, hi
 
     def volume(self, raw: Any, key: Key, tilt: float) -> Volume:
         shape = raw.get("shape") if isinstance(raw, dict) else None
