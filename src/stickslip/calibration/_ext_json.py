@@ -183,62 +183,69 @@ def _read_uncertainty(cal: ExtFields, unc: object) -> None:
             cal.predictive[key] = _read_predictive(rec, f"uncertainty[{i}]")
 
 
-def read_ext_fields(cal: ExtFields, data: dict[str, object]) -> None:
-    """Fill ``cal`` from the ``families``, ``uncertainty`` and ``selection`` entries; ``ValueError`` on bad ones."""
-    fams = data.get("families") or []
-    if not isinstance(fams, list):
-        raise ValueError("families must be a list")
-    for i, rec in enumerate(fams):
-        where = f"families[{i}]"
-        if not isinstance(rec, dict):
-            raise ValueError(f"{where} must be an object")
-        try:
-            j = int(rec["joint"])
-            d = direction_label(rec["direction"])
-            if j not in (1, 2, 3):
-                raise ValueError(f"{where}: joint must be 1, 2 or 3, got {j!r}")
-            fp, ses = _read_family(rec, j, where)
-            members_raw = rec.get("members")
-            members: list[tuple[float, FamilyParams]] = []
-            member_labels: list[str] = []
-            if members_raw is not None:
-                if not isinstance(members_raw, list) or not members_raw:
-                    raise ValueError(f"{where}: members must be a non-empty list")
-                for k, mrec in enumerate(members_raw):
-                    mw = f"{where}.members[{k}]"
-                    if not isinstance(mrec, dict):
-                        raise ValueError(f"{mw} must be an object")
-                    w = finite_number(mrec["weight"], f"{mw} weight")
-                    if not 0.0 < w <= 1.0:
-                        raise ValueError(f"{mw}: weight must be in (0, 1], got {w!r}")
-                    members.append((w, _read_family(mrec, j, mw)[0]))
-                    lab = mrec.get("label")
-                    if lab is not None:
-                        fam = members[-1][1].family
-                        if lab not in (fam, fam + "+shared"):
-                            raise ValueError(f"{mw}: label {lab!r} is not {fam!r} or {fam + '+shared'!r}")
-                        member_labels.append(lab)
-                total = sum(w for w, _ in members)
-                if abs(total - 1.0) > 1e-6:
-                    raise ValueError(f"{where}: the members' weights must sum to 1, got {total!r}")
-                _, heaviest = max(members, key=lambda m: m[0])
-                if (heaviest.family, heaviest.values, heaviest.scale) != (fp.family, fp.values, fp.scale):
-                    # the parameters shown (show, --json) are the heaviest member's; the step is the members'
-                    raise ValueError(
-                        f"{where}: the parameters are not those of the member with the largest weight "
-                        f"({heaviest.family}): the file was edited by hand or is damaged"
-                    )
-        except (KeyError, TypeError) as e:
-            raise ValueError(f"{where}: missing or malformed field {e}") from None
-        labels_known = len(member_labels) == len(members)  # files before the labels have none
-        cal.models[(j, d)] = FamilyModel(
-            j, d, fp, members=tuple(members), member_labels=tuple(member_labels) if labels_known else ()
+def _read_members(
+    members_raw: object, j: int, where: str, fp: FamilyParams
+) -> tuple[list[tuple[float, FamilyParams]], list[str]]:
+    """A model average's members (weight, family) and their labels, checked against the shown ``fp``."""
+    if not isinstance(members_raw, list) or not members_raw:
+        raise ValueError(f"{where}: members must be a non-empty list")
+    members: list[tuple[float, FamilyParams]] = []
+    member_labels: list[str] = []
+    for k, mrec in enumerate(members_raw):
+        mw = f"{where}.members[{k}]"
+        if not isinstance(mrec, dict):
+            raise ValueError(f"{mw} must be an object")
+        w = finite_number(mrec["weight"], f"{mw} weight")
+        if not 0.0 < w <= 1.0:
+            raise ValueError(f"{mw}: weight must be in (0, 1], got {w!r}")
+        members.append((w, _read_family(mrec, j, mw)[0]))
+        lab = mrec.get("label")
+        if lab is not None:
+            fam = members[-1][1].family
+            if lab not in (fam, fam + "+shared"):
+                raise ValueError(f"{mw}: label {lab!r} is not {fam!r} or {fam + '+shared'!r}")
+            member_labels.append(lab)
+    total = sum(w for w, _ in members)
+    if abs(total - 1.0) > 1e-6:
+        raise ValueError(f"{where}: the members' weights must sum to 1, got {total!r}")
+    _, heaviest = max(members, key=lambda m: m[0])
+    if (heaviest.family, heaviest.values, heaviest.scale) != (fp.family, fp.values, fp.scale):
+        # the parameters shown (show, --json) are the heaviest member's; the step is the members'
+        raise ValueError(
+            f"{where}: the parameters are not those of the member with the largest weight "
+            f"({heaviest.family}): the file was edited by hand or is damaged"
         )
-        cal.stderr[(j, d)] = (
-            None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
-        )
-    _read_uncertainty(cal, data.get("uncertainty") or [])
-    sel = data.get("selection") or []
+    return members, member_labels
+
+
+def _read_families_entry(cal: ExtFields, rec: object, where: str) -> None:
+    """One ``families`` entry: the joint and direction's family model and its standard errors."""
+    if not isinstance(rec, dict):
+        raise ValueError(f"{where} must be an object")
+    members: list[tuple[float, FamilyParams]] = []
+    member_labels: list[str] = []
+    try:
+        j = int(rec["joint"])
+        d = direction_label(rec["direction"])
+        if j not in (1, 2, 3):
+            raise ValueError(f"{where}: joint must be 1, 2 or 3, got {j!r}")
+        fp, ses = _read_family(rec, j, where)
+        members_raw = rec.get("members")
+        if members_raw is not None:
+            members, member_labels = _read_members(members_raw, j, where, fp)
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"{where}: missing or malformed field {e}") from None
+    labels_known = len(member_labels) == len(members)  # files before the labels have none
+    cal.models[(j, d)] = FamilyModel(
+        j, d, fp, members=tuple(members), member_labels=tuple(member_labels) if labels_known else ()
+    )
+    cal.stderr[(j, d)] = (
+        None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
+    )
+
+
+def _read_selection(cal: ExtFields, sel: object) -> None:
+    """The ``selection`` entries: per joint and direction, how its family was chosen."""
     if not isinstance(sel, list):
         raise ValueError("selection must be a list")
     for i, rec in enumerate(sel):
@@ -247,3 +254,14 @@ def read_ext_fields(cal: ExtFields, data: dict[str, object]) -> None:
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"selection[{i}]: bad joint or direction ({e})") from None
         cal.selection[key] = {k: v for k, v in rec.items() if k not in ("joint", "direction")}
+
+
+def read_ext_fields(cal: ExtFields, data: dict[str, object]) -> None:
+    """Fill ``cal`` from the ``families``, ``uncertainty`` and ``selection`` entries; ``ValueError`` on bad ones."""
+    fams = data.get("families") or []
+    if not isinstance(fams, list):
+        raise ValueError("families must be a list")
+    for i, rec in enumerate(fams):
+        _read_families_entry(cal, rec, f"families[{i}]")
+    _read_uncertainty(cal, data.get("uncertainty") or [])
+    _read_selection(cal, data.get("selection") or [])

@@ -147,70 +147,89 @@ def calibrate_lsq(
         When the poses cannot determine a parameter (rank-deficient Jacobian, with the
         parameter named and a hint which pose would help), or the fit is non-physical.
     """
-    from scipy.optimize import least_squares
-
     grouped = group_traverses(traverses)
     groups = grouped.as_dict()
     traverses = grouped.traverses
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
-    group_w: dict[tuple[int, str], FloatArray] = {}
-    if weights is not None:
-        if len(weights) != len(traverses):
-            raise ValueError(f"{len(weights)} weights for {len(traverses)} traverses")
-        by_key: dict[tuple[int, str], list[float]] = {}
-        for t, w in zip(traverses, weights, strict=True):
-            if not (np.isfinite(w) and w > 0):
-                raise ValueError(f"a traverse's weight must be finite and > 0, got {w!r}")
-            by_key.setdefault((t.joint, t.direction), []).append(float(w))
-        group_w = {k: np.asarray(v) for k, v in by_key.items()}
+    group_w = _group_weights(traverses, weights)
     models: dict[tuple[int, str], JointModel] = {}
     stderr: dict[tuple[int, str], FloatArray | None] = {}
     notes: list[str] = []
     for (j, d), ts in sorted(groups.items()):
-        resid, scale = _residual_fn(j, ts, knots)
-        if (j, d) in group_w:
-            resid = _weighted(resid, group_w[(j, d)])
-        x0 = _initial_guess(j, ts)
-        if j == 3:
-            names = PrismaticParams(0, 0, 0).names()
-            lb, ub = np.array([0.0, 0.0, -np.inf]), np.array([np.inf, 0.999999, np.inf])
-            probe = x0 + np.array([0.0, 0.0, 0.05 * x0[0]])
-        else:
-            names = RotaryParams((0, 0), (0, 0), knots).names()
-            lb, ub = np.array([0.0, 0.0, -np.inf, -np.inf]), np.full(4, np.inf)
-            probe = x0 + np.array([0.0, 0.0, 0.05 * x0[0], 0.05 * x0[0]])
-        # identifiability at a generic point (non-zero load sensitivity), before fitting
-        jac0 = _numjac(resid, probe)
-        _identifiability(j, d, names, jac0)
-        res = least_squares(
-            resid, x0, bounds=(lb, ub), x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000, method="trf"
-        )
-        if not np.all(np.isfinite(res.fun)):
-            raise CalibrationError(f"joint {j}{d}: the fit did not converge to a physical model (a step would be <= 0)")
-        jac = _numjac(resid, res.x)
-        _identifiability(j, d, names, jac)
-        n, p = len(ts), len(x0)
-        x = res.x * scale
-        if n > p:
-            s2 = float(res.fun @ res.fun) / (n - p)
-            try:
-                cov = np.linalg.inv(jac.T @ jac) * s2
-                se = np.sqrt(np.clip(np.diag(cov), 0, None)) * scale
-            except np.linalg.LinAlgError:
-                se = np.full(p, np.nan)
-            stderr[(j, d)] = se
-        else:
-            stderr[(j, d)] = None
-            notes.append(f"joint {j}{d}: {n} traverses for {p} parameters: exactly determined, no standard errors")
-        params: Params = PrismaticParams.from_vector(x) if j == 3 else RotaryParams.from_vector(x, knots)
-        models[(j, d)] = JointModel(j, d, params)
+        models[(j, d)], stderr[(j, d)], note = _fit_group(j, d, ts, knots, group_w.get((j, d)))
+        notes.extend(note)
     _check_physical(models)
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
     return Calibration(
         models, stderr, consts, _day_of(traverses, day), "lsq",
         _provenance(provenance, traverses, source, len(traverses), notes),
     )
+
+
+def _group_weights(
+    traverses: Sequence[Traverse], weights: Sequence[float] | None
+) -> dict[tuple[int, str], FloatArray]:
+    """Each joint and direction's traverse weights, in the traverses' order; empty without weights."""
+    if weights is None:
+        return {}
+    if len(weights) != len(traverses):
+        raise ValueError(f"{len(weights)} weights for {len(traverses)} traverses")
+    by_key: dict[tuple[int, str], list[float]] = {}
+    for t, w in zip(traverses, weights, strict=True):
+        if not (np.isfinite(w) and w > 0):
+            raise ValueError(f"a traverse's weight must be finite and > 0, got {w!r}")
+        by_key.setdefault((t.joint, t.direction), []).append(float(w))
+    return {k: np.asarray(v) for k, v in by_key.items()}
+
+
+def _fit_group(
+    j: int, d: str, ts: Sequence[Traverse], knots: tuple[float, float], w: FloatArray | None
+) -> tuple[JointModel, FloatArray | None, list[str]]:
+    """One joint and direction's paper model by least squares, its standard errors and a note.
+
+    The standard errors are ``None`` when the traverses exactly determine the parameters (``n = p``),
+    and the note then says so; otherwise there is no note.
+    """
+    from scipy.optimize import least_squares
+
+    resid, scale = _residual_fn(j, ts, knots)
+    if w is not None:
+        resid = _weighted(resid, w)
+    x0 = _initial_guess(j, ts)
+    if j == 3:
+        names = PrismaticParams(0, 0, 0).names()
+        lb, ub = np.array([0.0, 0.0, -np.inf]), np.array([np.inf, 0.999999, np.inf])
+        probe = x0 + np.array([0.0, 0.0, 0.05 * x0[0]])
+    else:
+        names = RotaryParams((0, 0), (0, 0), knots).names()
+        lb, ub = np.array([0.0, 0.0, -np.inf, -np.inf]), np.full(4, np.inf)
+        probe = x0 + np.array([0.0, 0.0, 0.05 * x0[0], 0.05 * x0[0]])
+    # identifiability at a generic point (non-zero load sensitivity), before fitting
+    jac0 = _numjac(resid, probe)
+    _identifiability(j, d, names, jac0)
+    res = least_squares(
+        resid, x0, bounds=(lb, ub), x_scale="jac", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=2000, method="trf"
+    )
+    if not np.all(np.isfinite(res.fun)):
+        raise CalibrationError(f"joint {j}{d}: the fit did not converge to a physical model (a step would be <= 0)")
+    jac = _numjac(resid, res.x)
+    _identifiability(j, d, names, jac)
+    n, p = len(ts), len(x0)
+    x = res.x * scale
+    se: FloatArray | None = None
+    notes: list[str] = []
+    if n > p:
+        s2 = float(res.fun @ res.fun) / (n - p)
+        try:
+            cov = np.linalg.inv(jac.T @ jac) * s2
+            se = np.sqrt(np.clip(np.diag(cov), 0, None)) * scale
+        except np.linalg.LinAlgError:
+            se = np.full(p, np.nan)
+    else:
+        notes.append(f"joint {j}{d}: {n} traverses for {p} parameters: exactly determined, no standard errors")
+    params: Params = PrismaticParams.from_vector(x) if j == 3 else RotaryParams.from_vector(x, knots)
+    return JointModel(j, d, params), se, notes
 
 
 def _weighted(f: Callable[[FloatArray], FloatArray], w: FloatArray) -> Callable[[FloatArray], FloatArray]:

@@ -203,15 +203,48 @@ def update_calibration(
     """
     if not drift > 0 or not math.isfinite(drift):
         raise ValueError(f"drift = {drift!r} must be a positive relative standard deviation")
+    traverses, extra_var = _with_step_sizes(traverses, step_sizes)
+    groups = _group(traverses)
+    if not groups:
+        raise CalibrationError("no new traverses to update the calibration with")
+    _check_prior_has(prior, groups)
+    state = _Updating.of(prior, len(traverses))
+    for j in sorted({jj for jj, _ in prior.models}):
+        _update_joint(state, prior, groups, j, drift, load_drift, extra_var or None)
+    consts = {k: _constant_step(k[0], k[1], m) for k, m in state.models.items()}
+    all_ts = list(traverses)
+    prov = dataclasses.replace(
+        Provenance.of(all_ts, source, len(all_ts), state.notes),
+        extra={
+            "prior": {"day": prior.day, "method": prior.method, "created": prior.created},
+            "updates": [u.as_dict() for u in state.updates],
+        },
+    )
+    cal = Calibration(state.models, state.stderr, consts, _day_of(all_ts, day), f"{prior.method} + update", prov)
+    cal.sigma_model.update(state.sigma)
+    cal.covariance.update(state.cov)
+    cal.selection.update(prior.selection)
+    return cal, state.updates
+
+
+def _with_step_sizes(
+    traverses: Sequence[Traverse], step_sizes: Sequence[StepSize]
+) -> tuple[Sequence[Traverse], dict[tuple[int, str], list[float]]]:
+    """The traverses with the step sizes appended as short ones, and each one's extra relative variance.
+
+    Without step sizes the extra variances are empty (every traverse has the model's error alone).
+    """
     extra_var: dict[tuple[int, str], list[float]] = {}
     if step_sizes:
         extra_var = {k: [0.0] * len(v) for k, v in _group(traverses).items()}
         for r in step_sizes:
             extra_var.setdefault((r.joint, r.direction), []).append(r.relative_sigma**2)
         traverses = [*traverses, *(r.as_traverse() for r in step_sizes)]
-    groups = _group(traverses)
-    if not groups:
-        raise CalibrationError("no new traverses to update the calibration with")
+    return traverses, extra_var
+
+
+def _check_prior_has(prior: Calibration, groups: dict[tuple[int, str], list[Traverse]]) -> None:
+    """:class:`CalibrationError` naming each joint and direction with new traverses but no prior model."""
     missing = sorted(k for k in groups if k not in prior.models)
     if missing:
         have = ", ".join(f"{j}{d}" for j, d in sorted(prior.models))
@@ -220,58 +253,71 @@ def update_calibration(
             + ", ".join(f"joint {j}{d}" for j, d in missing)
             + f" (it has: {have}); calibrate those from scratch"
         )
-    models = dict(prior.models)
-    sigma = dict(prior.sigma_model)
-    cov = dict(prior.covariance)
-    stderr = dict(prior.stderr)
-    updates: list[ScaleUpdate] = []
-    notes = [f"updated from the calibration of {prior.day or '?'} ({prior.method}) with {len(traverses)} traverses"]
-    for j in sorted({jj for jj, _ in prior.models}):
-        dirs = sorted(d for jj, d in prior.models if jj == j)
-        sig = {d: model_sigma(prior, j, d) for d in dirs}
-        mean, post_cov = _posterior(
-            prior, groups, j, dirs, {d: sig[d][0] for d in dirs}, drift, load_drift, extra_var or None
+
+
+@dataclass
+class _Updating:
+    """The updated calibration's parts, filled joint by joint (copies of the prior's to begin with)."""
+
+    models: dict[tuple[int, str], JointModel]
+    sigma: dict[tuple[int, str], float]
+    cov: dict[tuple[int, str], NDArray[np.float64]]
+    stderr: dict[tuple[int, str], NDArray[np.float64] | None]
+    updates: list[ScaleUpdate]
+    notes: list[str]
+
+    @classmethod
+    def of(cls, prior: Calibration, n_traverses: int) -> _Updating:
+        note = f"updated from the calibration of {prior.day or '?'} ({prior.method}) with {n_traverses} traverses"
+        return cls(
+            dict(prior.models), dict(prior.sigma_model), dict(prior.covariance), dict(prior.stderr), [], [note]
         )
-        lam = float(mean[-1])
-        for k, d in enumerate(dirs):
-            key = (j, d)
-            s0, assumed = sig[d]
-            n_new = len(groups.get(key, []))
-            factor = math.exp(float(mean[k]))
-            sd = math.sqrt(float(post_cov[k, k]))
-            if n_new == 0 and abs(lam) < 1e-12:
-                sigma[key] = math.hypot(s0, drift)
-                notes.append(f"joint {j}{d}: no new traverse; kept from the prior, uncertainty widened by the drift")
-                continue
-            models[key] = scaled_model(load_scaled(prior.models[key], 1.0 + lam), factor)
-            if key in cov and not isinstance(models[key], FamilyModel):
-                names = models[key].params.names()
-                fvec = np.array([1.0 if n in DIMENSIONLESS_PARAMETERS else factor for n, _ in names])
-                cov[key] = cov[key] * np.outer(fvec, fvec)
-            se = stderr.get(key)
-            if se is not None and not isinstance(models[key], FamilyModel):
-                names = models[key].params.names()
-                stderr[key] = np.array(
-                    [x if n in DIMENSIONLESS_PARAMETERS else x * factor for x, (n, _) in zip(se, names, strict=True)]
-                )
-            sigma[key] = math.hypot(s0, sd)
-            if n_new:
-                updates.append(ScaleUpdate(j, d, n_new, factor, sd))
-            notes.append(
-                f"joint {j}{d}: step scale x{factor:.4f} (± {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
-                f"from {n_new} traverse(s)" + (" (prior model error assumed)" if assumed else "")
+
+    def rescale_errors(self, key: tuple[int, str], factor: float) -> None:
+        """Scale the covariance and standard errors of a paper model's dimensional parameters by ``factor``."""
+        model = self.models[key]
+        if key in self.cov and not isinstance(model, FamilyModel):
+            names = model.params.names()
+            fvec = np.array([1.0 if n in DIMENSIONLESS_PARAMETERS else factor for n, _ in names])
+            self.cov[key] = self.cov[key] * np.outer(fvec, fvec)
+        se = self.stderr.get(key)
+        if se is not None and not isinstance(model, FamilyModel):
+            names = model.params.names()
+            self.stderr[key] = np.array(
+                [x if n in DIMENSIONLESS_PARAMETERS else x * factor for x, (n, _) in zip(se, names, strict=True)]
             )
-    consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    all_ts = list(traverses)
-    prov = dataclasses.replace(
-        Provenance.of(all_ts, source, len(all_ts), notes),
-        extra={
-            "prior": {"day": prior.day, "method": prior.method, "created": prior.created},
-            "updates": [u.as_dict() for u in updates],
-        },
-    )
-    cal = Calibration(models, stderr, consts, _day_of(all_ts, day), f"{prior.method} + update", prov)
-    cal.sigma_model.update(sigma)
-    cal.covariance.update(cov)
-    cal.selection.update(prior.selection)
-    return cal, updates
+
+
+def _update_joint(
+    state: _Updating,
+    prior: Calibration,
+    groups: dict[tuple[int, str], list[Traverse]],
+    j: int,
+    drift: float,
+    load_drift: float,
+    extra_var: dict[tuple[int, str], list[float]] | None,
+) -> None:
+    """Joint ``j``'s step scales (one per direction) and load sensitivity, from its posterior, into ``state``."""
+    dirs = sorted(d for jj, d in prior.models if jj == j)
+    sig = {d: model_sigma(prior, j, d) for d in dirs}
+    mean, post_cov = _posterior(prior, groups, j, dirs, {d: sig[d][0] for d in dirs}, drift, load_drift, extra_var)
+    lam = float(mean[-1])
+    for k, d in enumerate(dirs):
+        key = (j, d)
+        s0, assumed = sig[d]
+        n_new = len(groups.get(key, []))
+        factor = math.exp(float(mean[k]))
+        sd = math.sqrt(float(post_cov[k, k]))
+        if n_new == 0 and abs(lam) < 1e-12:
+            state.sigma[key] = math.hypot(s0, drift)
+            state.notes.append(f"joint {j}{d}: no new traverse; kept from the prior, uncertainty widened by the drift")
+            continue
+        state.models[key] = scaled_model(load_scaled(prior.models[key], 1.0 + lam), factor)
+        state.rescale_errors(key, factor)
+        state.sigma[key] = math.hypot(s0, sd)
+        if n_new:
+            state.updates.append(ScaleUpdate(j, d, n_new, factor, sd))
+        state.notes.append(
+            f"joint {j}{d}: step scale x{factor:.4f} (± {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
+            f"from {n_new} traverse(s)" + (" (prior model error assumed)" if assumed else "")
+        )
