@@ -19,8 +19,6 @@ MAX_CLASS_LINES = 300
 # when its owner brings it under the limit, the entry must go (test_allow_list_is_not_stale).
 ALLOWED = {
     # vision/: the tip tracker, its refinement and template learning
-    ("vision/", "refine"),
-    ("vision/", "TipTemplate.learn"),
     ("vision/", "TipTracker"),
 }
 

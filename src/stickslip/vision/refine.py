@@ -310,7 +310,6 @@ def refine(
     scale: float | None = None
     it = 0
     e = np.zeros_like(T)
-    omega = w0
     inside = np.ones(T.shape, dtype=bool)
     for it in range(1, max_iter + 1):
         v3, inside = _warped3(image, st, tx, ty, theta)
@@ -318,58 +317,26 @@ def refine(
         omega = w0 * inside * robust_w
         if float(omega.sum()) <= 1e-9:
             break
-        # efficient second-order minimisation (Benhimane and Malis 2004): the mean of the template's and the
-        # warped frame's gradients (the frame's turned into the template's axes, divided by its contrast)
-        ct, st_ = math.cos(theta), math.sin(theta)
-        fgx = (v3[1] * ct + v3[2] * st_) / g
-        fgy = (-v3[1] * st_ + v3[2] * ct) / g
-        # the model's gradient is the template's plus the blur term's
-        jac = 0.5 * (sd + blur_c * st.sd_lap + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx]))
+        jac = _esm_jacobian(st, v3, theta, g, blur_c)
         # one linear least squares for the brightness planes and the motion together: apart, the planes
         # would soak up half of every edge's shift at each step, and the motion would creep
         D = np.concatenate([basis, g * st.lap[:, None], (g * jac).T], axis=1)
         r0 = Iw - basis @ beta_prev
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
-        sol = None
-        # a contrast plane too steep for this window: a plain contrast, and that for good (a model that changed
-        # back and forth between iterations would never settle)
-        choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
-        for cols in choices:  # once plain, plain to the end
-            sol = _joint(D, omega, Iw, cols, kappa or 0.0, theta - theta_prior)
-            if sol is None:
-                break
-            gain = sol[0] + sol[1] * basis[:, 4] + sol[2] * basis[:, 5]
-            if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
-                model = cols
-                break
-            sol = None
-        if sol is None:  # contrast reversed, or no solution: not this template
+        sol, gain, model = _solve_positive_gain(D, omega, Iw, basis, model, kappa or 0.0, theta - theta_prior)
+        if sol is None or gain is None:  # contrast reversed, or no solution: not this template
             converged = False
             break
-        beta = sol[:6]
-        g_new = float(beta[0])
-        g, c = g_new, float(beta[3])
-        beta_prev = beta
-        blur_c = float(sol[6]) / g_new  # half the blur variance the frame has beyond the template's, px²
-        e = (Iw - beta[3] - beta[4] * basis[:, 4] - beta[5] * basis[:, 5]) / gain - T - blur_c * st.lap
+        beta_prev = sol[:6]
+        g, c = float(sol[0]), float(sol[3])
+        blur_c = float(sol[6]) / g  # half the blur variance the frame has beyond the template's, px²
+        e = (Iw - sol[3] - sol[4] * basis[:, 4] - sol[5] * basis[:, 5]) / gain - T - blur_c * st.lap
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
-            if scale is None:  # the robust spread, once: a spread that moved with the weights would never settle
-                m = omega > 0
-                scale = max(1.4826 * float(np.median(np.abs(e[m]))) if m.any() else 0.0, 1e-12)
-            u = e / (TUKEY * scale)
-            robust_w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
-        dp = sol[_NL:].copy()
-        if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
-            dp *= 0.5  # the step turned back on the last one: overshooting, halve it
+            robust_w, scale = _tukey_weights(e, omega, scale)
+        dp = _damped(sol[_NL:].copy(), prev_dp)
         prev_dp = dp
-        dx, dy, dth = (float(v) for v in dp)
-        theta_new = theta - dth
-        ct2, s2 = math.cos(theta_new), math.sin(theta_new)
-        tx -= ct2 * dx - s2 * dy
-        ty -= s2 * dx + ct2 * dy
-        theta = theta_new
-        step = math.hypot(dx, dy) + abs(dth) * 20.0
+        tx, ty, theta, step = _moved(tx, ty, theta, dp)
         last_jac = jac
         if step < tol:
             converged = True
@@ -378,20 +345,107 @@ def refine(
             break
     if not converged and step < 5 * tol:  # still creeping by less than a twentieth of a pixel: settled
         converged = True
-    # covariance of the translation, from the last iteration's weights and residuals (the brightness planes
-    # estimated alongside: their uncertainty widens the motion's)
     omega = w0 * inside * robust_w
-    n_eff = float(omega.sum())
-    D = np.concatenate([basis, g * st.lap[:, None], (g * last_jac).T], axis=1)
+    cov = _covariance(st, g, last_jac, omega, e, theta)
+    score, outliers, coverage = _score(image, st, tx, ty, theta, inside, robust_w)
+    return Refinement(tx, ty, theta, g, c, cov, score, outliers, coverage, it, converged, 2.0 * blur_c)
+
+
+def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: float) -> FloatArray:
+    """The motion's Jacobian (3 x window): the mean of the model's and the warped frame's gradients.
+
+    Efficient second-order minimisation (Benhimane and Malis 2004): the frame's gradients
+    (``v3[1:]``) turned into the template's axes and divided by its contrast ``g``; the
+    model's are the template's plus the blur term's (``blur_c``, px²).
+    """
+    ct, st_ = math.cos(theta), math.sin(theta)
+    fgx = (v3[1] * ct + v3[2] * st_) / g
+    fgy = (-v3[1] * st_ + v3[2] * ct) / g
+    return np.asarray(0.5 * (st.sd + blur_c * st.sd_lap + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx])))
+
+
+def _solve_positive_gain(
+    D: FloatArray, omega: FloatArray, Iw: FloatArray, basis: FloatArray, model: NDArray[np.intp] | None,
+    kappa: float, turn: float,
+) -> tuple[FloatArray | None, FloatArray | None, NDArray[np.intp] | None]:
+    """The joint solution (:func:`_joint`), its contrast across the window and the columns used.
+
+    A contrast plane too steep for this window (the contrast below a fifth of its centre's
+    somewhere): a plain contrast, and that for good (``model``: a model that changed back
+    and forth between iterations would never settle). ``(None, None, model)`` when no
+    solution has a positive contrast.
+    """
+    choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
+    for cols in choices:  # once plain, plain to the end
+        sol = _joint(D, omega, Iw, cols, kappa, turn)
+        if sol is None:
+            break
+        gain = sol[0] + sol[1] * basis[:, 4] + sol[2] * basis[:, 5]
+        if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
+            return sol, gain, cols
+    return None, None, model
+
+
+def _tukey_weights(e: FloatArray, omega: FloatArray, scale: float | None) -> tuple[FloatArray, float]:
+    """Tukey's biweights of the residuals ``e``, and the robust spread (computed once, then ``scale``).
+
+    The spread is fixed at its first value: a spread that moved with the weights would never settle.
+    """
+    if scale is None:
+        m = omega > 0
+        scale = max(1.4826 * float(np.median(np.abs(e[m]))) if m.any() else 0.0, 1e-12)
+    u = e / (TUKEY * scale)
+    return np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0), scale
+
+
+def _damped(dp: FloatArray, prev_dp: FloatArray | None) -> FloatArray:
+    """The motion's step ``dp``, halved when it turned back on the last one (overshooting)."""
+    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
+        dp *= 0.5
+    return dp
+
+
+def _moved(tx: float, ty: float, theta: float, dp: FloatArray) -> tuple[float, float, float, float]:
+    """The tip (frame px) and turn (rad) after the inverse-compositional step ``dp``, and the step's size.
+
+    The size is the tip's move plus the turn's at 20 px from the tip (px).
+    """
+    dx, dy, dth = (float(v) for v in dp)
+    theta_new = theta - dth
+    ct2, s2 = math.cos(theta_new), math.sin(theta_new)
+    tx -= ct2 * dx - s2 * dy
+    ty -= s2 * dx + ct2 * dy
+    return tx, ty, theta_new, math.hypot(dx, dy) + abs(dth) * 20.0
+
+
+def _covariance(
+    st: Steepest, g: float, last_jac: FloatArray, omega: FloatArray, e: FloatArray, theta: float
+) -> FloatArray:
+    """Covariance of the translation (frame px²), from the last iteration's weights ``omega`` and residuals.
+
+    The brightness planes are estimated alongside: their uncertainty widens the motion's.
+    """
+    D = np.concatenate([st.basis, g * st.lap[:, None], (g * last_jac).T], axis=1)
     M = (D * omega[:, None]).T @ D
-    s2 = float((omega * (g * e) ** 2).sum()) / max(n_eff - 10.0, 1.0)
+    s2 = float((omega * (g * e) ** 2).sum()) / max(float(omega.sum()) - 10.0, 1.0)
     try:
         cov_win = (np.linalg.inv(M) * s2)[_NL : _NL + 2, _NL : _NL + 2]
     except np.linalg.LinAlgError:
         cov_win = np.full((2, 2), np.inf)
     R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
-    cov = R @ cov_win @ R.T if np.all(np.isfinite(cov_win)) else cov_win
-    # the score: correlation over the template's own weights, inside the frame
+    return np.asarray(R @ cov_win @ R.T if np.all(np.isfinite(cov_win)) else cov_win)
+
+
+def _score(
+    image: Patch, st: Steepest, tx: float, ty: float, theta: float, inside: NDArray[np.bool_], robust_w: FloatArray
+) -> tuple[float, float, float]:
+    """The fit's score, outlier share and coverage.
+
+    The score is the correlation over the template's own weights inside the frame; the
+    outliers are the share of those weights the robust fit set to zero; the coverage is
+    the share of the template's weight inside the frame.
+    """
+    T, w0 = st.t, st.w
     wi = w0 * inside
     swi = float(wi.sum())
     wsum = float(w0.sum())
@@ -405,5 +459,4 @@ def refine(
         den = math.sqrt(float((wi * (T - mt) ** 2).sum()) * float((wi * (Iw - mi) ** 2).sum()))
         score = num / den if den > 0 else 0.0
         outliers = float((wi * (robust_w == 0)).sum() / swi)
-    return Refinement(tx, ty, theta, g, c, cov, score, outliers, swi / wsum if wsum > 0 else 0.0, it, converged,
-                      2.0 * blur_c)
+    return score, outliers, swi / wsum if wsum > 0 else 0.0

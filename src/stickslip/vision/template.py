@@ -228,17 +228,8 @@ class TipTemplate:
 
         Raises :class:`TemplateError` if nothing trackable stands there.
         """
-        H, W = image.shape
         x, y = float(tip[0]), float(tip[1])
-        if not (math.isfinite(x) and math.isfinite(y)):
-            raise TemplateError(f"the tip ({x}, {y}) is not a finite pixel")
-        if not (-0.5 <= x < W - 0.5 and -0.5 <= y < H - 0.5):
-            raise TemplateError(f"the tip ({x:g}, {y:g}) is outside the {W} x {H} frame (x right, y down, from 0)")
-        margin = 4
-        if min(x, y, W - 1 - x, H - 1 - y) < margin:
-            raise TemplateError(
-                f"the tip ({x:g}, {y:g}) is within {margin} px of the frame's edge: too close to learn it"
-            )
+        _check_tip(image.shape, x, y)
         h = params.half_window
         cx, cy = int(round(x)), int(round(y))
         win, inside = _window(image, cx, cy, h)
@@ -246,73 +237,140 @@ class TipTemplate:
             fill = float(np.median(win[inside]))
             win = np.where(inside, win, fill)
         apex = (x - cx + h, y - cy + h)
-        ring = np.ones_like(inside)
-        ring[4:-4, 4:-4] = False
-        ring &= inside
-        smooth = ndimage.gaussian_filter(win, 1.0)
-        level = float(np.median(smooth[ring]))
-        spread = float(1.4826 * np.median(np.abs(smooth[ring] - level)))
         noise = noise_sigma(image)
-        spread = max(spread, 0.3 * noise, 1e-12)
-        dev = np.abs(smooth - level) / spread
-        needle = dev > params.contrast
-        labels, n = ndimage.label(needle)
-        yy, xx = np.mgrid[0 : 2 * h + 1, 0 : 2 * h + 1]
-        near = np.hypot(xx - apex[0], yy - apex[1]) <= 8.0
-        touching = set(np.unique(labels[near & needle]).tolist()) - {0}
-        if not touching:
-            raise TemplateError(
-                f"nothing stands out from the background at the tip ({x:g}, {y:g}): no needle within 8 px "
-                f"(it must stand {params.contrast:g} background spreads from the background level)"
-            )
-        mask = np.isin(labels, list(touching))
-        if mask.sum() < 12:
-            raise TemplateError(f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out")
-        radial = np.exp(-0.5 * ((xx - apex[0]) ** 2 + (yy - apex[1]) ** 2) / (h / 2.0) ** 2)
-        level_weights = []
-        for b in (*params.blur_bank, *params.sharpen_bank):
-            # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further
-            grown = ndimage.binary_dilation(mask, iterations=params.edge_px + int(round(2.0 * b)))
-            soft = ndimage.gaussian_filter(grown.astype(float), 0.7)
-            level_weights.append(np.clip(soft, 0.0, 1.0) * radial * inside)
+        mask = _needle_mask(win, inside, apex, noise, params, (x, y))
+        level_weights = _level_weights(mask, inside, apex, params)
         weights = level_weights[0]
-        # the shaft's direction (from the tip back along the needle), the needle's core near the tip and
-        # the background around it: what the occlusion check compares the region in front of the tip with
-        ox, oy = xx - apex[0], yy - apex[1]
-        dist = np.hypot(ox, oy)
-        near_mask = mask & (dist <= h)
-        vx, vy = float(ox[near_mask].mean()), float(oy[near_mask].mean())
-        norm = math.hypot(vx, vy)
-        shaft = (vx / norm, vy / norm) if norm > 1e-9 else (1.0, 0.0)
-        eroded = ndimage.binary_erosion(mask, iterations=1)
-        core_pick = (eroded if eroded.sum() >= 4 else mask) & (dist >= 2.0) & (dist <= 10.0)
-        wide = ndimage.binary_dilation(mask, iterations=params.edge_px + 2 * int(round(params.blur_bank[-1])))
-        ring_sel = ~wide & (dist >= 6.0) & inside
-        core = (ox[core_pick].astype(float), oy[core_pick].astype(float))
-        ring_off = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
-        # in front of the tip: within 60 deg of straight ahead, 2..14 px away, and background in this frame
-        ahead = (ox * shaft[0] + oy * shaft[1]) < -0.5 * dist
-        grown2 = ndimage.binary_dilation(mask, iterations=params.edge_px + 1)
-        front_sel = ahead & (dist >= 2.0) & (dist <= 14.0) & ~grown2 & inside
-        front = (ox[front_sel].astype(float), oy[front_sel].astype(float))
+        shaft, core, ring_off, front = _surroundings(mask, inside, apex, params)
         s0 = params.template_blur
         bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in params.blur_bank]
         # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
         # blurred by blur_bank[k] more than the first
-        sw = float(weights.sum())
-        mean = float((weights * win).sum() / sw)
-        contrast = math.sqrt(float((weights * (win - mean) ** 2).sum() / sw))
-        snr = contrast / max(noise, 1e-12) * math.sqrt(sw)
-        if snr < 10.0:
-            raise TemplateError(
-                f"the needle at ({x:g}, {y:g}) stands out by {contrast / max(noise, 1e-12):.2g} times the pixel noise "
-                f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track"
-            )
+        contrast = _trackable_contrast(win, weights, noise, (x, y))
         return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front)
 
     @property
     def half(self) -> int:
         return self.params.half_window
+
+
+Offsets = tuple[FloatArray, FloatArray]
+
+
+def _check_tip(shape: tuple[int, ...], x: float, y: float) -> None:
+    """:class:`TemplateError` unless the tip (x, y; px) is a finite pixel at least 4 px inside the frame."""
+    H, W = shape
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise TemplateError(f"the tip ({x}, {y}) is not a finite pixel")
+    if not (-0.5 <= x < W - 0.5 and -0.5 <= y < H - 0.5):
+        raise TemplateError(f"the tip ({x:g}, {y:g}) is outside the {W} x {H} frame (x right, y down, from 0)")
+    margin = 4
+    if min(x, y, W - 1 - x, H - 1 - y) < margin:
+        raise TemplateError(
+            f"the tip ({x:g}, {y:g}) is within {margin} px of the frame's edge: too close to learn it"
+        )
+
+
+def _offsets(h: int, apex: tuple[float, float]) -> Offsets:
+    """Each pixel's offset from the tip ``apex`` (x, y; px) in the window of half-width ``h`` (px)."""
+    yy, xx = np.mgrid[0 : 2 * h + 1, 0 : 2 * h + 1]
+    return xx - apex[0], yy - apex[1]
+
+
+def _needle_mask(
+    win: FloatArray, inside: NDArray[np.bool_], apex: tuple[float, float], noise: float, params: TrackerParams,
+    tip: tuple[float, float],
+) -> NDArray[np.bool_]:
+    """The pixels of the needle at the tip: those standing out from the window's ring, connected to the tip.
+
+    Raises :class:`TemplateError` when nothing stands out within 8 px of the tip, or too little.
+    """
+    x, y = tip
+    ring = np.ones_like(inside)
+    ring[4:-4, 4:-4] = False
+    ring &= inside
+    smooth = ndimage.gaussian_filter(win, 1.0)
+    level = float(np.median(smooth[ring]))
+    spread = float(1.4826 * np.median(np.abs(smooth[ring] - level)))
+    spread = max(spread, 0.3 * noise, 1e-12)
+    dev = np.abs(smooth - level) / spread
+    needle = dev > params.contrast
+    labels, n = ndimage.label(needle)
+    ox, oy = _offsets(params.half_window, apex)
+    near = np.hypot(ox, oy) <= 8.0
+    touching = set(np.unique(labels[near & needle]).tolist()) - {0}
+    if not touching:
+        raise TemplateError(
+            f"nothing stands out from the background at the tip ({x:g}, {y:g}): no needle within 8 px "
+            f"(it must stand {params.contrast:g} background spreads from the background level)"
+        )
+    mask = np.isin(labels, list(touching))
+    if mask.sum() < 12:
+        raise TemplateError(f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out")
+    return np.asarray(mask)
+
+
+def _level_weights(
+    mask: NDArray[np.bool_], inside: NDArray[np.bool_], apex: tuple[float, float], params: TrackerParams
+) -> list[FloatArray]:
+    """The window's weights for each copy of the blur and sharpen banks: the needle, grown, near the tip."""
+    h = params.half_window
+    ox, oy = _offsets(h, apex)
+    radial = np.exp(-0.5 * (ox**2 + oy**2) / (h / 2.0) ** 2)
+    level_weights = []
+    for b in (*params.blur_bank, *params.sharpen_bank):
+        # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further
+        grown = ndimage.binary_dilation(mask, iterations=params.edge_px + int(round(2.0 * b)))
+        soft = ndimage.gaussian_filter(grown.astype(float), 0.7)
+        level_weights.append(np.clip(soft, 0.0, 1.0) * radial * inside)
+    return level_weights
+
+
+def _surroundings(
+    mask: NDArray[np.bool_], inside: NDArray[np.bool_], apex: tuple[float, float], params: TrackerParams
+) -> tuple[tuple[float, float], Offsets, Offsets, Offsets]:
+    """What the occlusion check compares the region in front of the tip with (offsets from the tip, px).
+
+    The shaft's direction (a unit vector from the tip back along the needle), the needle's
+    core near the tip, the background around it, and the background in front of the tip
+    (within 60 deg of straight ahead, 2..14 px away).
+    """
+    h = params.half_window
+    ox, oy = _offsets(h, apex)
+    dist = np.hypot(ox, oy)
+    near_mask = mask & (dist <= h)
+    vx, vy = float(ox[near_mask].mean()), float(oy[near_mask].mean())
+    norm = math.hypot(vx, vy)
+    shaft = (vx / norm, vy / norm) if norm > 1e-9 else (1.0, 0.0)
+    eroded = ndimage.binary_erosion(mask, iterations=1)
+    core_pick = (eroded if eroded.sum() >= 4 else mask) & (dist >= 2.0) & (dist <= 10.0)
+    wide = ndimage.binary_dilation(mask, iterations=params.edge_px + 2 * int(round(params.blur_bank[-1])))
+    ring_sel = ~wide & (dist >= 6.0) & inside
+    core = (ox[core_pick].astype(float), oy[core_pick].astype(float))
+    ring_off = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
+    ahead = (ox * shaft[0] + oy * shaft[1]) < -0.5 * dist
+    grown2 = ndimage.binary_dilation(mask, iterations=params.edge_px + 1)
+    front_sel = ahead & (dist >= 2.0) & (dist <= 14.0) & ~grown2 & inside
+    front = (ox[front_sel].astype(float), oy[front_sel].astype(float))
+    return shaft, core, ring_off, front
+
+
+def _trackable_contrast(win: FloatArray, weights: FloatArray, noise: float, tip: tuple[float, float]) -> float:
+    """The needle's weighted contrast (its standard deviation over ``weights``; image units).
+
+    Raises :class:`TemplateError` when its signal to noise over the window is below 10.
+    """
+    x, y = tip
+    sw = float(weights.sum())
+    mean = float((weights * win).sum() / sw)
+    contrast = math.sqrt(float((weights * (win - mean) ** 2).sum() / sw))
+    snr = contrast / max(noise, 1e-12) * math.sqrt(sw)
+    if snr < 10.0:
+        raise TemplateError(
+            f"the needle at ({x:g}, {y:g}) stands out by {contrast / max(noise, 1e-12):.2g} times the pixel noise "
+            f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track"
+        )
+    return contrast
 
 
 @dataclass
