@@ -115,6 +115,58 @@ class _Candidate:
     patch: Patch
 
 
+def _downsample(a: FloatArray, f: int) -> FloatArray:
+    """``a`` averaged over blocks of ``f`` x ``f`` pixels (the rows and columns past the last whole block dropped)."""
+    if f <= 1:
+        return a
+    h, w = (a.shape[0] // f) * f, (a.shape[1] // f) * f
+    return np.asarray(a[:h, :w].reshape(h // f, f, w // f, f).mean(axis=(1, 3)), dtype=float)
+
+
+def _region(image: FloatArray, h: int, cx: float, cy: float, radius: int) -> tuple[FloatArray, int, int]:
+    """A region of the frame holding every template position (window half-width ``h``) within ``radius`` of
+    ``(cx, cy)``, and its top-left corner in the frame (px); past the frame's edge, the frame's median level."""
+    H, W = image.shape
+    x0 = int(round(cx)) - radius - h
+    y0 = int(round(cy)) - radius - h
+    n = 2 * (radius + h) + 1
+    out = np.full((n, n), float(np.median(image[::8, ::8])))
+    ys, xs = max(0, y0), max(0, x0)
+    ye, xe = min(H, y0 + n), min(W, x0 + n)
+    if ye > ys and xe > xs:
+        out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
+    return out, x0, y0
+
+
+def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
+    """Share of the half-ring in front of the tip whose grey level is nearer the needle's than the background's.
+
+    The template's core, ring and front offsets are turned and moved to the candidate's fit
+    and sampled in its patch; ``blur`` (px) keeps the ground a blurred tip spreads over out.
+    """
+    r = cand.ref
+    ct, st_ = math.cos(r.theta), math.sin(r.theta)
+
+    def at(ox: FloatArray, oy: FloatArray) -> FloatArray:
+        v, _ = _sample(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+        out: FloatArray = v[0]
+        return out
+
+    if t.core[0].size < 3 or t.ring[0].size < 8:
+        return 0.0
+    needle = float(np.median(at(*t.core)))
+    ground = float(np.median(at(*t.ring)))
+    if abs(needle - ground) < 1e-12:
+        return 1.0
+    fx, fy = t.front
+    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+    if int(far.sum()) < 6:
+        return 0.0
+    v = at(fx[far], fy[far])
+    like = (v - ground) / (needle - ground) > 0.5
+    return float(np.mean(like))
+
+
 class TipTracker:
     """Tracks one tip through a sequence of frames (see the module docstring).
 
@@ -152,8 +204,8 @@ class TipTracker:
         self._select = sel
         self._bank_sel = [b[sel.keep] for b in t.bank]
         coarse = params.coarse_factor
-        self._coarse = [self._downsample(b, coarse) for b in t.bank]
-        self._coarse_w = self._downsample(t.weights, coarse)
+        self._coarse = [_downsample(b, coarse) for b in t.bank]
+        self._coarse_w = _downsample(t.weights, coarse)
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
         self._level = 0
@@ -172,27 +224,6 @@ class TipTracker:
         self._first_mismatch = min(0.5, 1.0 - 1.0 / math.sqrt(1.0 + n2 / max(t.contrast**2, 1e-300)))
 
     # ------------------------------------------------------------------ helpers
-
-    @staticmethod
-    def _downsample(a: FloatArray, f: int) -> FloatArray:
-        if f <= 1:
-            return a
-        h, w = (a.shape[0] // f) * f, (a.shape[1] // f) * f
-        return np.asarray(a[:h, :w].reshape(h // f, f, w // f, f).mean(axis=(1, 3)), dtype=float)
-
-    def _region(self, image: FloatArray, cx: float, cy: float, radius: int) -> tuple[FloatArray, int, int]:
-        """A region of the frame holding every template position within ``radius`` of ``(cx, cy)``."""
-        h = self.template.half
-        H, W = image.shape
-        x0 = int(round(cx)) - radius - h
-        y0 = int(round(cy)) - radius - h
-        n = 2 * (radius + h) + 1
-        out = np.full((n, n), float(np.median(image[::8, ::8])))
-        ys, xs = max(0, y0), max(0, x0)
-        ye, xe = min(H, y0 + n), min(W, x0 + n)
-        if ye > ys and xe > xs:
-            out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
-        return out, x0, y0
 
     def _levels(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, theta: float) -> list[float]:
         """Weighted correlation of each level with the frame, at the widest mask's pixels, for a tip at ``(x, y)``.
@@ -273,7 +304,7 @@ class TipTracker:
     def _local(self, image: FloatArray) -> _Candidate | None:
         assert self._last is not None
         p = self.params
-        region, x0, y0 = self._region(image, self._last[0], self._last[1], p.search_radius)
+        region, x0, y0 = _region(image, self.template.half, self._last[0], self._last[1], p.search_radius)
         t = self.template
         k = self._spec[self._level][0]
         ncc = masked_ncc(region, t.bank[k], t.level_weights[k], self._fft, ("local", k))
@@ -287,7 +318,7 @@ class TipTracker:
     def _global(self, image: FloatArray) -> list[_Candidate | None]:
         p = self.params
         f = p.coarse_factor
-        small = self._downsample(image, f)
+        small = _downsample(image, f)
         best: list[tuple[float, int, int, int]] = []
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
@@ -313,7 +344,7 @@ class TipTracker:
                 continue
             seen.append((x, y))
             # a full-resolution look around the coarse peak, then the fit
-            region, rx0, ry0 = self._region(image, x, y, 2 * f)
+            region, rx0, ry0 = _region(image, self.template.half, x, y, 2 * f)
             ncc = masked_ncc(region, t.bank[_k], t.level_weights[_k], self._fft, ("local", _k))
             i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
             if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
@@ -344,7 +375,7 @@ class TipTracker:
         sigma = max(p.sigma_floor, p.sigma_factor * r.sigma)
         if r.outliers > p.occluded_fraction:
             return Lost("occluded", f"{100 * r.outliers:.0f} % of the tip's template disagrees with the frame")
-        front = self._front(cand, max(blur, 0.0))
+        front = _front_share(self.template, cand, max(blur, 0.0))
         if front > p.front_fraction:
             return Lost("occluded", f"{100 * front:.0f} % of the ground in front of the tip looks like the needle")
         if cand.level == self._top or blur > p.max_blur:
@@ -369,31 +400,6 @@ class TipTracker:
         if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
-
-    def _front(self, cand: _Candidate, blur: float) -> float:
-        """Share of the half-ring in front of the tip whose grey level is nearer the needle's than the background's."""
-        t = self.template
-        r = cand.ref
-        ct, st_ = math.cos(r.theta), math.sin(r.theta)
-
-        def at(ox: FloatArray, oy: FloatArray) -> FloatArray:
-            v, _ = _sample(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
-            out: FloatArray = v[0]
-            return out
-
-        if t.core[0].size < 3 or t.ring[0].size < 8:
-            return 0.0
-        needle = float(np.median(at(*t.core)))
-        ground = float(np.median(at(*t.ring)))
-        if abs(needle - ground) < 1e-12:
-            return 1.0
-        fx, fy = t.front
-        far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
-        if int(far.sum()) < 6:
-            return 0.0
-        v = at(fx[far], fy[far])
-        like = (v - ground) / (needle - ground) > 0.5
-        return float(np.mean(like))
 
     def update(self, frame: FloatArray | Frame) -> Result:
         """The tip in the next frame: a :class:`Fix` or a :class:`Lost` with its reason."""
