@@ -153,7 +153,8 @@ def start(durable: bool = False, timeout: float = 60.0) -> PostgresServer:
         out = subprocess.run(
             [str(bin_dir / "initdb"), "-D", str(root / "data"), "-U", "postgres", "-E", "UTF8", "--no-locale",
              "--auth-local=trust", "--auth-host=scram-sha-256", "--no-sync"],
-            capture_output=True, env=env, cwd=root, timeout=timeout, check=False, **who,  # type: ignore[call-overload]
+            capture_output=True, env=env, cwd=root, timeout=timeout, check=False,
+            user=who.get("user"), group=who.get("group"),
         )
         if out.returncode != 0:
             raise Unavailable(f"initdb failed: {out.stderr.decode(errors='replace').strip()[-300:]}")
@@ -166,7 +167,8 @@ def start(durable: bool = False, timeout: float = 60.0) -> PostgresServer:
             for s in settings:
                 args += ["-c", s]
             proc = subprocess.Popen(
-                args, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=root, start_new_session=True, **who
+                args, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=root, start_new_session=True,
+                user=who.get("user"), group=who.get("group"),
             )
             log.close()
             server = PostgresServer(root, port, bin_dir, proc, password)

@@ -104,7 +104,7 @@ def _row(s: Setting[Any]) -> dict[str, Any]:
 def show_cmd(
     device: str | None = typer.Option(None, "--device", "-d", help="As a command's --device (shows it winning)."),
     calibration: Path | None = typer.Option(None, "--calibration", "-c", help="As a command's --calibration."),
-    db: Path | None = typer.Option(None, "--db", help="As a command's --db."),
+    db: str | None = typer.Option(None, "--db", metavar="FILE|URL", help="As a command's --db."),
     geometry: str | None = typer.Option(None, "--geometry", help="As a command's --geometry (OFFSET,LENGTH)."),
     max_age: int | None = typer.Option(None, "--max-age", min=0, max=36500, help="As a command's --max-age (days)."),
     json_out: bool = typer.Option(False, "--json", help="Print the settings as JSON (paths, metres, days)."),
@@ -119,6 +119,8 @@ def show_cmd(
 
     Example: stickslip config show --json
     """
+    from ..storage import describe_database
+
     cfg = user_config()
     dev = device_setting(device)
     cal = calibration_setting(calibration)
@@ -137,7 +139,11 @@ def show_cmd(
                         "value": None if cal.value is None else str(cal.value),
                         "exists": None if cal.value is None else cal.value.is_file(),
                     },
-                    "database": {**_row(base), "value": str(base.value), "exists": base.value.is_file()},
+                    "database": {
+                        **_row(base),
+                        "value": describe_database(base.value),
+                        "exists": base.value.is_file() if isinstance(base.value, Path) else None,
+                    },
                     "max_age_days": _row(age),
                     "geometry": {**_row(geom), "value": geom.value.as_dict()},
                 },
@@ -163,7 +169,10 @@ def show_cmd(
     g = geom.value
     t.add_row("device", dev.value, origin(dev))
     t.add_row("calibration", path_text(cal.value), origin(cal))
-    t.add_row("database", str(base.value) + ("" if base.value.is_file() else " (not there yet)"), origin(base))
+    if isinstance(base.value, Path):
+        t.add_row("database", str(base.value) + ("" if base.value.is_file() else " (not there yet)"), origin(base))
+    else:  # a PostgreSQL server: not asked here (config show never connects)
+        t.add_row("database", f"{describe_database(base.value)} (PostgreSQL)", origin(base))
     t.add_row("max_age_days", f"{age.value} day{'s' if age.value != 1 else ''}", origin(age))
     t.add_row("geometry", f"offset {g.offset * 1e3:g} mm, length {g.length * 1e3:g} mm", origin(geom))
     console.print(t, highlight=False)

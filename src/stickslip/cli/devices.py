@@ -20,10 +20,10 @@ from ..joints import JOINTS, joint_spec
 from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
 from . import app
 from ._common import (
-    DB_HELP,
     angle_option,
     calibration_file,
     console,
+    db_option,
     device_url,
     fail,
     flush_warnings,
@@ -282,7 +282,7 @@ def move(
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
         "else max_age_days in the config file, else 0).",
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
 ) -> None:
     """Move a joint by a distance or to a position, with the calibrated step-size model.
@@ -424,7 +424,7 @@ def where(
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     offline: bool = typer.Option(
         False, "--offline", help="Do not open the device: only show the kept positions."
     ),

@@ -10,7 +10,6 @@ day's step scale, which the next ``move`` plans with (docs/models.md §7).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import typer
 
@@ -18,7 +17,7 @@ from ..devices.base import device_key
 from ..joints import JOINTS
 from ..units import format_position
 from . import app
-from ._common import DB_HELP, console, fail, open_store, print_json, user_errors, warn_later
+from ._common import console, db_option, fail, open_store, print_json, user_errors, warn_later
 from .devices import _DEVICE_HELP, _degree_hint, _parse_joint_value, _sd_text
 
 DEFAULT_SIGMA = {3: 1e-6, 2: 50e-6, 1: 50e-6}
@@ -45,7 +44,7 @@ def observe(
         help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
     ),
     device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the update as JSON (SI units)."),
 ) -> None:
     """Feed a measured position of a joint into its dead reckoning (Kalman update).

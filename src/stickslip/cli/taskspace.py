@@ -18,10 +18,10 @@ from ..joints import joint_spec
 from ..units import UnitError, parse_length
 from . import app
 from ._common import (
-    DB_HELP,
     angle_option,
     calibration_file,
     console,
+    db_option,
     device_url,
     fail,
     flush_warnings,
@@ -149,7 +149,7 @@ def reach(
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
 ) -> None:
     """Move the tip in a straight line to a point or by a displacement (task space).
@@ -426,7 +426,7 @@ def jog(
     hold: float = typer.Option(
         0.5, "--hold", min=0.0, max=10.0, help="Seconds a direction key keeps moving without a repeat (0: until space)."
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 

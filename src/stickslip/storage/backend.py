@@ -111,7 +111,7 @@ class Backend(Protocol):
         ...
 
     def not_a(self, column: str, kind: Kind) -> str:
-        """SQL that is true where ``column`` holds a value that is not of ``kind`` (``"0 = 1"`` where types are enforced)."""
+        """SQL true where ``column`` holds a value not of ``kind`` (``"0 = 1"`` where the engine enforces types)."""
         ...
 
     def claim(self, name: str) -> bool | None:

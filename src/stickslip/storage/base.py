@@ -10,7 +10,7 @@ from typing import Any, Self
 
 from ..devices.base import redact_url
 from ..measurements import Traverse
-from .backend import Backend, Cursor
+from .backend import Backend
 from .schema import (
     MIGRATIONS,
     SCHEMA_VERSION,

@@ -35,6 +35,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from functools import lru_cache
 from itertools import count
+from pathlib import Path
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -157,7 +158,7 @@ class PostgresBackend:
     def __init__(self, con: psycopg.Connection[Any], where: str, secrets: Sequence[str]) -> None:
         self._psycopg = load_psycopg()
         self._con: psycopg.Connection[Any] | None = con
-        self.where: str = where
+        self.where: Path | str = where
         self.path = where
         self._secrets = sorted({s for s in secrets if s}, key=len, reverse=True)
         self._writing = False
@@ -176,7 +177,8 @@ class PostgresBackend:
         try:
             params = pg.conninfo.conninfo_to_dict(url)
         except pg.Error as e:
-            raise StoreError(f"{where} is not a PostgreSQL URL libpq can read: {_mask(_first_line(e), secrets)}") from None
+            text = _mask(_first_line(e), secrets)
+            raise StoreError(f"{where} is not a PostgreSQL URL libpq can read: {text}") from None
         secrets += [str(params.get("password") or "")]
         extra: dict[str, Any] = {}
         if "connect_timeout" not in params and not os.environ.get("PGCONNECT_TIMEOUT"):
@@ -256,7 +258,7 @@ class PostgresBackend:
     def _run(self, sql: str, args: Sequence[Any] = ()) -> Any:
         """Execute ``sql`` (format paramstyle); a driver error outside a write is one :class:`StoreError`."""
         try:
-            return self.con.execute(sql, args if args else None)  # type: ignore[call-overload]
+            return self.con.execute(sql, args if args else None)
         except self._psycopg.Error as e:
             if self._writing:
                 raise
@@ -304,7 +306,7 @@ class PostgresBackend:
         try:
             cur = self.con.cursor(name=name, withhold=True)
             cur.itersize = chunk
-            cur.execute(qmarks_to_format(sql) if args else sql, args if args else None)  # type: ignore[arg-type]
+            cur.execute(qmarks_to_format(sql) if args else sql, args if args else None)
         except self._psycopg.Error as e:
             raise self._problem(e, "read") from None
         try:
@@ -399,7 +401,8 @@ class PostgresBackend:
     def claim(self, name: str) -> bool | None:
         if name in self._held:
             return False  # held by this very store (another holder in this process)
-        taken = bool(self._run("SELECT pg_try_advisory_lock(%s)", (_key("stickslip lock", self._schema, name),)).fetchone()[0])
+        key = _key("stickslip lock", self._schema, name)
+        taken = bool(self._run("SELECT pg_try_advisory_lock(%s)", (key,)).fetchone()[0])
         if taken:
             self._held.add(name)
         return taken

@@ -159,7 +159,7 @@ def default_db_path() -> Path:
 
 
 def resolve_db_path(path: str | os.PathLike[str] | None = None) -> Path:
-    """``path`` if given, else ``$STICKSLIP_DB`` if set, else :func:`default_db_path` (a file; see :func:`resolve_database`)."""
+    """``path``, else ``$STICKSLIP_DB``, else :func:`default_db_path`: a file only (see :func:`resolve_database`)."""
     target = resolve_database(path)
     if isinstance(target, str):
         raise StoreError(f"{describe_database(target)} is a database server, not a file")
