@@ -75,13 +75,20 @@ class PostgresServer:
     def socket_dir(self) -> Path:
         return self.root
 
-    def admin(self, sql: str, dbname: str = DATABASE) -> list[tuple[object, ...]]:
-        """Run ``sql`` as the superuser over the Unix socket (trust); the rows it returns."""
+    def admin(self, sql: str, dbname: str = DATABASE, schema: str | None = None) -> list[tuple[object, ...]]:
+        """Run ``sql`` as the superuser over the Unix socket (trust), in ``schema`` if given; the last rows it returns."""
         import psycopg
 
         with psycopg.connect(host=str(self.root), port=self.port, user="postgres", dbname=dbname, autocommit=True) as c:
+            if schema:
+                c.execute(f"SET search_path = {schema}".encode())
             cur = c.execute(sql.encode())
-            return list(cur.fetchall()) if cur.description else []
+            rows: list[tuple[object, ...]] = []
+            while True:
+                if cur.description:
+                    rows = list(cur.fetchall())
+                if not cur.nextset():
+                    return rows
 
     def new_schema(self) -> str:
         """A new empty schema owned by the rig's role (one per test: a fresh database in milliseconds)."""

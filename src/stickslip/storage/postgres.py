@@ -50,6 +50,7 @@ from .schema import (
     _now,
     describe_database,
     schema_tables,
+    url_secrets,
 )
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -173,7 +174,7 @@ class PostgresBackend:
         """Connect to ``url`` and decide, before anything is written, whether the schema is ours (or empty)."""
         pg = load_psycopg()
         where = describe_database(url)
-        secrets = _secrets_of(url)
+        secrets = url_secrets(url)
         try:
             params = pg.conninfo.conninfo_to_dict(url)
         except pg.Error as e:
@@ -443,24 +444,6 @@ def _first_line(e: BaseException) -> str:
     primary = getattr(diag, "message_primary", None) if diag is not None else None
     text = str(primary or e).strip()
     return text.splitlines()[0] if text else type(e).__name__
-
-
-def _secrets_of(url: str) -> list[str]:
-    """Every form the URL's password may take in a message: as written, and percent-decoded."""
-    from urllib.parse import unquote
-
-    out: list[str] = []
-    _, _, rest = url.partition("://")
-    main = rest.partition("?")[0]
-    userinfo, at, _ = main.rpartition("@")
-    if at and ":" in userinfo:
-        pw = userinfo.partition(":")[2]
-        out += [pw, unquote(pw)]
-    for opt in rest.partition("?")[2].split("&"):
-        key, eq, value = opt.partition("=")
-        if eq and "pass" in key.lower():
-            out += [value, unquote(value)]
-    return [s for s in out if s]
 
 
 def _mask(text: str, secrets: Sequence[str]) -> str:

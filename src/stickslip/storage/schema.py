@@ -216,11 +216,11 @@ def describe_database(target: Path | str) -> str:
     """``target`` as it may be shown: a file's path, or the URL without its password.
 
     The URL is cut apart without trusting it to be well formed: everything between
-    ``://`` and the last ``@`` before the query is the user information, of which only
-    the user name is kept (so a password holding ``/``, ``@`` or ``:`` that was not
+    ``://`` and the last ``@`` is the user information, of which only the user name is
+    kept (so a password holding ``/``, ``?``, ``@`` or ``:`` that was not
     percent-encoded is dropped whole, never shown in part); a query option whose name
-    holds ``pass``, ``secret`` or ``token`` (``password``, ``sslpassword``) shows
-    ``***``. Never raises.
+    holds ``pass``, ``secret``, ``token`` or ``pw`` (``password``, ``sslpassword``)
+    shows ``***``. Never raises.
     """
     if isinstance(target, Path):
         return str(target)
@@ -228,9 +228,10 @@ def describe_database(target: Path | str) -> str:
     scheme, sep, rest = text.partition("://")
     if not sep:
         return redact_url(text)
-    main, q, query = rest.partition("?")
-    userinfo, at, hostpart = main.rpartition("@")
-    shown = f"{scheme}://" + (userinfo.partition(":")[0] + "@" if at else "") + (hostpart if at else main)
+    userinfo, at, after = rest.rpartition("@")
+    shown = f"{scheme}://" + (userinfo.partition(":")[0] + "@" if at else "")
+    main, q, query = after.partition("?")
+    shown += main
     if q:
         opts = []
         for opt in query.split("&"):
@@ -238,7 +239,27 @@ def describe_database(target: Path | str) -> str:
             secret = eq and any(w in key.lower() for w in ("pass", "secret", "token", "pw"))
             opts.append(f"{key}=***" if secret else opt)
         shown += "?" + "&".join(opts)
+    for secret in url_secrets(text):
+        if len(secret) >= 4:  # belt and braces: a password that got into another part anyway
+            shown = shown.replace(secret, "***")
     return redact_url(shown)
+
+
+def url_secrets(url: str) -> list[str]:
+    """Every form a URL's password may take in a message: as written, and percent-decoded."""
+    from urllib.parse import unquote
+
+    out: list[str] = []
+    rest = str(url).partition("://")[2]
+    userinfo, at, after = rest.rpartition("@")
+    if at and ":" in userinfo:
+        pw = userinfo.partition(":")[2]
+        out += [pw, unquote(pw)]
+    for opt in after.partition("?")[2].split("&"):
+        key, eq, value = opt.partition("=")
+        if eq and any(w in key.lower() for w in ("pass", "secret", "token", "pw")):
+            out += [value, unquote(value)]
+    return [s for s in out if s]
 
 
 def _now() -> str:

@@ -167,6 +167,8 @@ class _Connection(sqlite3.Connection):
             return cur.execute(sql, parameters)
         except sqlite3.DatabaseError as e:
             raise self._problem(e) from None
+        except OverflowError as e:  # an integer past 64 bits: as PostgreSQL's "out of range"
+            raise ConstraintError(f"the database refused the value: {e}; nothing of this change was stored") from None
 
     def executemany(self, sql: str, parameters: Any, /) -> Any:
         cur = self.cursor()
@@ -174,6 +176,8 @@ class _Connection(sqlite3.Connection):
             return cur.executemany(sql, parameters)
         except sqlite3.DatabaseError as e:
             raise self._problem(e) from None
+        except OverflowError as e:
+            raise ConstraintError(f"the database refused the value: {e}; nothing of this change was stored") from None
 
 
 def _connect(path: Path) -> _Connection:
@@ -207,11 +211,10 @@ class SQLiteBackend:
 
     dialect = "sqlite"
 
-    def __init__(self, con: _Connection, path: Path, whose: str) -> None:
+    def __init__(self, con: _Connection, path: Path) -> None:
         self._con: _Connection | None = con
         self.where: Path | str = path
         self.path = path
-        self._whose = whose
 
     @classmethod
     def open(cls, path: Path, create: bool = True) -> SQLiteBackend:
@@ -230,7 +233,7 @@ class SQLiteBackend:
             con = _connect(path)
         except sqlite3.DatabaseError as e:
             raise StoreError(f"cannot open the database {path}: {e}") from None
-        return cls(con, path, whose)
+        return cls(con, path)
 
     @property
     def con(self) -> _Connection:
@@ -308,11 +311,24 @@ class SQLiteBackend:
         return int(self.con.execute("PRAGMA user_version").fetchone()[0])
 
     def owned(self) -> bool:
-        return self._whose == "ours"
+        # through the connection, not the file's header: a new file's first transactions may
+        # still be in the WAL, where check_database_file (which reads only the header) cannot see them
+        return int(self.con.execute("PRAGMA application_id").fetchone()[0]) == APPLICATION_ID
 
     def claim_ownership(self) -> None:
-        self.con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
-        self._whose = "ours"
+        """Under ``BEGIN IMMEDIATE``: look again (with what the WAL holds), then stamp the application id."""
+        con = self.con
+        app_id = int(con.execute("PRAGMA application_id").fetchone()[0])
+        if app_id == APPLICATION_ID:
+            return
+        version = self.schema_version()
+        tables = tables_of(con)
+        if app_id != 0 or tables and not (1 <= version <= len(MIGRATIONS) and tables == schema_tables(version)):
+            raise StoreError(
+                f"{self.path} is an SQLite database of another application; stickslip leaves it untouched: "
+                "give --db another file"
+            )
+        con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
 
     def set_schema_version(self, version: int) -> None:
         self.con.execute(f"PRAGMA user_version = {int(version)}")

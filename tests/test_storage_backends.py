@@ -1,0 +1,365 @@
+"""The two storage backends: what differs behind the seam, and what must not.
+
+* the same schema on both (tables and columns; PostgreSQL's column types are doubles and 64-bit integers);
+* a database that is not stickslip's is refused without a write, on both (a PostgreSQL schema with other
+  tables and no marker; a marker of another owner; a newer schema version);
+* a password in a PostgreSQL URL never reaches a message, a log record or a stored row;
+* a writer killed inside its transaction leaves no partial rows and no lock behind, on both;
+* the device lock: one holder at a time on both; on PostgreSQL a lock whose process died is free on any host;
+* ``--db``, ``$STICKSLIP_DB`` and the config file's ``database`` take a URL as well as a file.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+from urllib.parse import quote
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stickslip import config, storage
+from stickslip.measurements import Traverse
+from stickslip.storage import ConstraintError, Store, StoreError, describe_database, resolve_database
+
+ROW = Traverse("2026-11-20", 3, "+", 0.0, -math.pi / 2, 0.0, 0.0, 0.0, 0.0, 0.012, 12000)
+
+
+def _admin(server, schema: str, sql: str) -> list[tuple[object, ...]]:
+    return server.admin(sql, schema=schema)
+
+
+def _schema_of(url: str) -> str:
+    return url.rsplit("%3D", 1)[1]
+
+
+# ---------------------------------------------------------------- where the database is
+
+
+def test_a_url_is_a_server_and_anything_else_a_file(tmp_path, monkeypatch):
+    url = "postgresql://rig@db.lab:5432/stickslip"
+    assert resolve_database(url) == url and resolve_database("postgres://h/d") == "postgres://h/d"
+    assert resolve_database(tmp_path / "a.db") == tmp_path / "a.db"
+    assert resolve_database("C://data/s.db") == Path("C://data/s.db")  # a drive letter is no scheme
+    monkeypatch.setenv("STICKSLIP_DB", url)
+    assert resolve_database(None) == url
+    with pytest.raises(StoreError, match=r"^\$STICKSLIP_DB: mysql:// is not a database") as e:
+        monkeypatch.setenv("STICKSLIP_DB", "mysql://u:hunter2@h/d")
+        resolve_database(None)
+    assert "hunter2" not in str(e.value)
+    # the config file takes the same schemes as the store
+    assert config.DATABASE_SCHEMES == storage.POSTGRES_SCHEMES
+
+
+_CLEAN = "postgresql://rig@db.lab:5432/stickslip?options=-csearch_path%3Dlab"
+
+
+@settings(max_examples=200, deadline=None)
+@given(password=st.text(st.characters(blacklist_categories=("Cs",)), min_size=1, max_size=24))
+def test_a_url_is_shown_the_same_whatever_its_password(password):
+    """The shown form does not depend on the password: percent-encoded, written raw, or as an option."""
+    encoded = _CLEAN.replace("rig@", f"rig:{quote(password, safe='')}@")
+    assert describe_database(encoded) == _CLEAN
+    raw = _CLEAN.replace("rig@", f"rig:{password}@")  # not encoded: '/', '?', '@', ':' inside it
+    if password not in _CLEAN:
+        assert password not in describe_database(raw)
+    as_option = f"{_CLEAN}&password={quote(password, safe='')}"
+    assert describe_database(as_option) == f"{_CLEAN}&password=***"
+
+
+def test_without_psycopg_the_message_names_the_extra(monkeypatch, tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    monkeypatch.setitem(sys.modules, "psycopg", None)  # import psycopg raises ImportError
+    with pytest.raises(StoreError, match=r"needs psycopg.*pip install 'stickslip\[postgres\]'"):
+        Store.open("postgresql://rig:hunter2@127.0.0.1/stickslip")
+    r = CliRunner().invoke(app, ["history", "--db", "postgresql://rig:hunter2@127.0.0.1/stickslip"])
+    assert r.exit_code == 2 and "stickslip[postgres]" in r.stderr and "hunter2" not in r.output
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.output
+
+
+def test_a_server_that_is_not_there_is_one_line_without_the_password(tmp_path):
+    pytest.importorskip("psycopg")
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    url = "postgresql://rig:hunter2-secret@127.0.0.1:1/stickslip?connect_timeout=2"
+    r = CliRunner().invoke(app, ["history", "--db", url])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.startswith("error: cannot connect to the database postgresql://rig@127.0.0.1:1/stickslip")
+    assert "hunter2" not in r.output and r.stderr.count("\n") == 1
+
+
+# ---------------------------------------------------------------- one schema on both engines
+
+
+def test_the_same_tables_and_columns_on_both_and_doubles_on_postgresql(postgres_url, postgres_server, tmp_path):
+    with Store.open(tmp_path / "s.db") as a, Store.open(postgres_url) as b:
+        assert a.schema_version == b.schema_version == storage.SCHEMA_VERSION
+        assert a.integrity_check() == b.integrity_check() == "ok"
+        assert (a.backend, b.backend) == ("sqlite", "postgresql")
+    schema = _schema_of(postgres_url)
+    types = dict(
+        _admin(
+            postgres_server,
+            schema,
+            "SELECT column_name, data_type FROM information_schema.columns "
+            f"WHERE table_schema = '{schema}' AND table_name = 'traverses'",
+        )
+    )
+    assert types["q2"] == types["theta"] == "double precision"  # not REAL's 4 bytes
+    assert types["id"] == types["steps"] == "bigint" and types["day" if "day" in types else "how"] == "text"
+    marker = _admin(postgres_server, schema, "SELECT owner, application_id, version FROM stickslip_marker")
+    assert marker == [("stickslip", storage.APPLICATION_ID, storage.SCHEMA_VERSION)]
+    # a column gone is what integrity_check reports
+    _admin(postgres_server, schema, "ALTER TABLE traverses DROP COLUMN content")
+    with Store.open(postgres_url) as b:
+        assert "table traverses: columns" in b.integrity_check()
+
+
+def test_a_value_postgresql_keeps_but_no_traverse_has_is_named_before_any_row_is_read(postgres_url, postgres_server):
+    with Store.open(postgres_url) as st:
+        tid = st.add_traverse(ROW)
+    _admin(postgres_server, _schema_of(postgres_url), f"UPDATE traverses SET q2 = 'NaN' WHERE id = {tid}")
+    with Store.open(postgres_url) as st, pytest.raises(StoreError, match=rf"traverse {tid}: q2 holds nan"):
+        st.traverses()
+
+
+def test_a_value_out_of_range_is_a_constraint_error_on_both(db):
+    with Store.open(db) as st:
+        with pytest.raises(ConstraintError):
+            st.add_traverse(Traverse("d", 3, "+", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.012, 2**63))  # past 64 bits
+        assert st.count_traverses() == 0 and st.days() == []
+
+
+# ---------------------------------------------------------------- whose database it is
+
+
+def test_a_postgresql_schema_of_another_application_is_refused_untouched(postgres_url, postgres_server):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    schema = _schema_of(postgres_url)
+    _admin(postgres_server, schema, "CREATE TABLE photos (id int); INSERT INTO photos VALUES (1)")
+    snapshot = "SELECT relname, relkind FROM pg_class c JOIN pg_namespace n ON n.oid = c.relnamespace " \
+        f"WHERE n.nspname = '{schema}' ORDER BY relname"
+    before = _admin(postgres_server, schema, snapshot)
+    with pytest.raises(StoreError, match=r"another application's tables \(schema t\S+: photos\).*untouched"):
+        Store.open(postgres_url)
+    for cmd in (["history"], ["import", "x.csv"], ["where", "--offline", "-d", "sim://"]):
+        r = CliRunner().invoke(app, [*cmd, "--db", postgres_url])
+        assert r.exit_code == 2, (cmd, r.output)
+    assert _admin(postgres_server, schema, snapshot) == before  # not a table, index or sequence more
+    assert _admin(postgres_server, schema, "SELECT * FROM photos") == [(1,)]
+
+
+def test_a_marker_of_another_owner_or_a_newer_version_is_refused(postgres_url, postgres_server):
+    schema = _schema_of(postgres_url)
+    with Store.open(postgres_url) as st:
+        st.add_traverse(ROW)
+    _admin(postgres_server, schema, f"UPDATE stickslip_marker SET version = {storage.SCHEMA_VERSION + 1}")
+    with pytest.raises(StoreError, match="newer than this stickslip understands"):
+        Store.open(postgres_url)
+    _admin(postgres_server, schema, f"UPDATE stickslip_marker SET version = {storage.SCHEMA_VERSION}, owner = 'x'")
+    with pytest.raises(StoreError, match="names another owner"):
+        Store.open(postgres_url)
+    assert _admin(postgres_server, schema, "SELECT count(*) FROM traverses") == [(1,)]
+
+
+def test_a_search_path_without_a_schema_is_one_line(postgres_url):
+    url = postgres_url.rsplit("%3D", 1)[0] + "%3Dnot_there"
+    with pytest.raises(StoreError, match="no schema to keep the tables in"):
+        Store.open(url)
+
+
+# ---------------------------------------------------------------- secrets
+
+
+def test_a_password_in_the_url_is_never_shown_logged_or_stored(
+    postgres_server, postgres_url, caplog, monkeypatch, tmp_path
+):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    monkeypatch.delenv("PGPASSWORD")
+    secret = postgres_server.password
+    forms = {secret, quote(secret, safe="")}
+    url = postgres_server.url(_schema_of(postgres_url), with_password=True)
+    wrong = url.replace(quote(secret, safe=""), quote(secret[::-1], safe=""))
+    caplog.set_level(logging.DEBUG)
+    seen: list[str] = []
+    with Store.open(url) as st:
+        seen += [str(st.path)]
+        st.add_traverse(ROW, device=f"sim://?password={secret}", how=f"by {url}", source=url)
+    with pytest.raises(StoreError, match="password authentication failed") as e:
+        Store.open(wrong)
+    seen += [str(e.value), e.value.args[0]]
+    runner = CliRunner()
+    out = tmp_path / "out.csv"
+    for args in (["history", "--json"], ["export", "-o", str(out)], ["config", "show", "--json"], ["config", "show"]):
+        r = runner.invoke(app, [*args, "--db", url])
+        assert r.exit_code == 0, r.output
+        seen += [r.output]
+    r = runner.invoke(app, ["history", "--db", wrong])
+    assert r.exit_code == 2 and "PGPASSWORD" in r.stderr  # the hint says where a password belongs
+    seen += [r.output, caplog.text, out.read_text()]
+    dump = _admin(
+        postgres_server,
+        _schema_of(postgres_url),
+        "SELECT string_agg(t::text, ' ') FROM (SELECT * FROM traverses) t "
+        "UNION ALL SELECT string_agg(d::text, ' ') FROM devices d UNION ALL SELECT string_agg(m::text, ' ') "
+        "FROM stickslip_marker m",
+    )
+    seen += [str(dump)]
+    assert "sim://?password=***" in str(dump) and "by postgresql://rig:***@127.0.0.1" in str(dump)
+    for text in seen:
+        for form in forms:
+            assert form not in text
+
+
+# ---------------------------------------------------------------- crashes and locks
+
+_KILLED_WRITER = textwrap.dedent("""
+    import sys, time
+    from stickslip.measurements import Traverse
+    from stickslip.storage import Store
+    st = Store.open(sys.argv[1])
+    st.add_traverse(Traverse("2026-11-20", 3, "+", 0.0, -1.5, 0.0, 0.0, 0.0, 0.0, 0.012, 1))  # committed
+    assert st.acquire_lock("sim://", {"pid": int(sys.argv[2]), "host": sys.argv[3], "since": "now"}) is None
+    rows = [Traverse("2026-11-20", 3, "+", 0.0, -1.5, 0.0, 0.0, 0.0, 0.0, 0.012, k) for k in range(2, 1002)]
+    with st._write() as con:  # a transaction left open: 1000 rows written, not committed
+        sid = st._session_id(con, st._device_id(con, "sim://"), "2026-11-20")
+        for t in rows:
+            st._insert_row(con, t, sid, "measured", "x", None, "k")
+        print("inside", flush=True)
+        time.sleep(600)
+""")
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_a_writer_killed_inside_its_transaction_leaves_no_partial_rows_and_no_lock(db):
+    import socket
+
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WRITER, str(db), "0", socket.gethostname()],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout.readline().strip() == "inside"
+        with Store.open(db) as st:  # while it holds the write transaction, readers still read
+            assert [t.steps for t in st.traverses()] == [1]
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        proc.stdout.close()
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "since": "now"}
+    with Store.open(db) as st:
+        assert [t.steps for t in st.traverses()] == [1]  # none of the 1000
+        st.add_traverse(ROW)  # the write lock is free (else: "kept it busy for 30 s")
+        assert st.count_traverses() == 2 and st.integrity_check() == "ok"
+        # the device lock of the dead process (pid 0 here stands for "no such process") is taken over
+        if st.backend == "sqlite":
+            st.set_state("sim://", "lock", {"pid": 2**22 + 12345, "host": socket.gethostname(), "since": "x"})
+        assert st.acquire_lock("sim://", me) is None
+        st.release_lock("sim://", me["pid"])
+
+
+_HOLDER = textwrap.dedent("""
+    import sys, time
+    from stickslip.storage import Store
+    st = Store.open(sys.argv[1])
+    print(st.acquire_lock("sim://", {"pid": 424242, "host": "rig-2.lab", "since": "09:00"}), flush=True)
+    time.sleep(600)
+""")
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_a_lock_held_on_another_host_is_refused_and_on_postgresql_freed_when_its_process_dies(db):
+    proc = subprocess.Popen([sys.executable, "-c", _HOLDER, str(db)], stdout=subprocess.PIPE, text=True)
+    me = {"pid": os.getpid(), "host": "rig-1.lab", "since": "10:00"}
+    try:
+        assert proc.stdout.readline().strip() == "None"  # it took the lock
+        with Store.open(db) as st:
+            assert st.acquire_lock("sim://", me) == {"pid": 424242, "host": "rig-2.lab", "since": "09:00"}
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        proc.stdout.close()
+    with Store.open(db) as st:
+        got = st.acquire_lock("sim://", me)
+        if st.backend == "postgresql":  # the server freed the dead connection's advisory lock
+            assert got is None
+            with Store.open(db) as other:  # and it is held again, now by us
+                assert other.acquire_lock("sim://", {"pid": 1, "host": "h", "since": "s"}) == me
+            st.release_lock("sim://", me["pid"])
+            with Store.open(db) as other:
+                assert other.acquire_lock("sim://", {"pid": 1, "host": "h", "since": "s"}) is None
+        else:  # SQLite cannot see a process on another host: still refused, until `where --unlock`
+            assert got == {"pid": 424242, "host": "rig-2.lab", "since": "09:00"}
+            st.set_state("sim://", "lock", "null")
+            assert st.acquire_lock("sim://", me) is None
+
+
+def test_one_store_cannot_hold_a_device_twice(db):
+    me = {"pid": os.getpid(), "host": "h", "since": "s"}
+    with Store.open(db) as st:
+        assert st.acquire_lock("sim://a", me) is None
+        assert st.acquire_lock("sim://a", {**me, "pid": 7}) == me
+        assert st.acquire_lock("sim://b", {**me, "pid": 7}) is None  # another device: its own lock
+        st.release_lock("sim://a", me["pid"])
+        assert st.acquire_lock("sim://a", {**me, "pid": 7}) is None
+
+
+# ---------------------------------------------------------------- the command line and the config file
+
+
+def test_the_config_files_database_may_be_a_url_but_never_with_a_password(tmp_path, postgres_url, monkeypatch):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    cfg = tmp_path / "cfg" / "config.toml"
+    cfg.parent.mkdir()
+    monkeypatch.setenv("STICKSLIP_CONFIG", str(cfg))
+    monkeypatch.delenv("STICKSLIP_DB")
+    cfg.write_text(f"database = {json.dumps(postgres_url)}\n")
+    runner = CliRunner()
+    r = runner.invoke(app, ["import", str(_table(tmp_path)), "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["db"] == describe_database(postgres_url)
+    r = runner.invoke(app, ["config", "show", "--json"])
+    row = json.loads(r.stdout)["settings"]["database"]
+    assert row == {"value": postgres_url, "source": "file", "where": str(cfg), "exists": None}
+    r = runner.invoke(app, ["history", "--json"])
+    assert [e["traverses"] for e in json.loads(r.stdout)] == [1]
+    for bad, reason in (
+        ("postgresql://rig:hunter2@db.lab/stickslip", "a password in the database URL is refused"),
+        ("postgresql://rig@db.lab/stickslip?password=hunter2", "a password in the database URL is refused"),
+        ("mysql://rig@db.lab/stickslip", "mysql:// is not a database stickslip can use"),
+    ):
+        cfg.write_text(f"\ndatabase = {json.dumps(bad)}\n")
+        r = runner.invoke(app, ["history"])
+        assert r.exit_code == 2 and f"{cfg}:2: database: {reason}" in r.stderr, r.output
+        assert "hunter2" not in r.output
+
+
+def _table(tmp_path: Path) -> Path:
+    from stickslip.measurements import write_measurements
+
+    path = tmp_path / "m.csv"
+    write_measurements(path, [ROW])
+    return path
