@@ -16,7 +16,8 @@ Safety
   steps (a device's row, a session's, the device lock) cannot interleave; readers
   never wait (MVCC). A writer waits at most ``lock_timeout`` (30 s, as SQLite's busy
   timeout), a statement runs at most ``statement_timeout`` (10 min), a connection
-  attempt at most ``connect_timeout`` (10 s) unless the URL says otherwise.
+  attempt at most ``connect_timeout`` (10 s) unless the URL says otherwise, and TCP
+  keepalives find a network that went silent in about a minute.
 * A process killed mid-transaction: the server rolls the transaction back when the
   connection drops, and frees its locks; a device lock is also a session-level
   advisory lock, so a lock whose process died on any host is seen as free.
@@ -186,6 +187,8 @@ class PostgresBackend:
             extra["connect_timeout"] = CONNECT_TIMEOUT_S
         if "application_name" not in params and not os.environ.get("PGAPPNAME"):
             extra["application_name"] = "stickslip"
+        if "keepalives_idle" not in params:  # a network that goes silent is found in about a minute
+            extra.update(keepalives=1, keepalives_idle=30, keepalives_interval=10, keepalives_count=3)
         try:
             con = pg.connect(url, autocommit=True, row_factory=_rows, **extra)
         except pg.Error as e:
