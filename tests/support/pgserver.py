@@ -76,7 +76,7 @@ class PostgresServer:
         return self.root
 
     def admin(self, sql: str, dbname: str = DATABASE, schema: str | None = None) -> list[tuple[object, ...]]:
-        """Run ``sql`` as the superuser over the Unix socket (trust), in ``schema`` if given; the last rows it returns."""
+        """Run ``sql`` as the superuser over the Unix socket (trust), in ``schema`` if given; its last rows."""
         import psycopg
 
         with psycopg.connect(host=str(self.root), port=self.port, user="postgres", dbname=dbname, autocommit=True) as c:

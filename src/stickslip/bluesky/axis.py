@@ -54,7 +54,7 @@ from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, Vi
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.planning import Planner
 from ..procedures.move import DeviceBusy, device_lock, drive
-from ..storage import Store, StoreError
+from ..storage import Store, StoreError, resolve_database
 from ..units import format_position, position_display_unit
 
 __all__ = ["DeviceLink", "MoveError", "StickSlipAxis", "MAX_BURST_S", "STOP_RETURN_S"]
@@ -95,8 +95,9 @@ class DeviceLink:
     device : str or Controller
         A controller URL (``sim://``, ``mm3a:///dev/ttyUSB0``, ...) or an open
         controller (its ``info.url`` names it in the database).
-    db : path, optional
-        The SQLite database (default ``$STICKSLIP_DB``, else the user's data folder).
+    db : path or str, optional
+        The database: an SQLite file or a ``postgresql://`` URL (default ``$STICKSLIP_DB``,
+        else the user's data folder).
     """
 
     def __init__(self, device: str | Controller, db: str | os.PathLike[str] | None = None):
@@ -108,7 +109,7 @@ class DeviceLink:
             self._ctrl = device
         self.owned = isinstance(device, str)
         self.key = device_key(self.url)
-        self.db = None if db is None else Path(db)
+        self.db: Path | str | None = None if db is None else resolve_database(db)
         self.lock = asyncio.Lock()
         self._open_lock = threading.Lock()
 

@@ -236,12 +236,12 @@ def describe_database(target: Path | str) -> str:
         opts = []
         for opt in query.split("&"):
             key, eq, _ = opt.partition("=")
-            secret = eq and any(w in key.lower() for w in ("pass", "secret", "token", "pw"))
-            opts.append(f"{key}=***" if secret else opt)
+            hidden = bool(eq) and any(w in key.lower() for w in ("pass", "secret", "token", "pw"))
+            opts.append(f"{key}=***" if hidden else opt)
         shown += "?" + "&".join(opts)
-    for secret in url_secrets(text):
-        if len(secret) >= 4:  # belt and braces: a password that got into another part anyway
-            shown = shown.replace(secret, "***")
+    for pw in url_secrets(text):
+        if len(pw) >= 4:  # belt and braces: a password that got into another part anyway
+            shown = shown.replace(pw, "***")
     return redact_url(shown)
 
 
