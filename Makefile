@@ -18,7 +18,8 @@ demo: $(STAMP)
 	$(VENV)/bin/stickslip demo
 
 # The storage tests start a throwaway PostgreSQL server: .ci/postgres installs the server's binaries
-# quietly when they are missing and apt-get can (CI runs as root); elsewhere those tests are skipped.
+# quietly when they are missing and apt-get can run (root, or sudo without a password); elsewhere
+# those tests are skipped with the reason.
 test: $(STAMP)
 	@bash .ci/postgres
 	$(VENV)/bin/ruff check src tests benchmarks
