@@ -22,6 +22,7 @@ import textwrap
 from pathlib import Path
 from urllib.parse import quote
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -98,6 +99,74 @@ def test_a_server_that_is_not_there_is_one_line_without_the_password(tmp_path):
     r = CliRunner().invoke(app, ["history", "--db", url])
     assert r.exit_code == 2, r.output
     assert r.stderr.startswith("error: cannot connect to the database postgresql://rig@127.0.0.1:1/stickslip")
+    assert "hunter2" not in r.output and r.stderr.count("\n") == 1
+
+
+def _terminate_stickslips_connections(server) -> None:
+    """What a server that is stopped or restarted does to its clients: end every stickslip connection."""
+    server.admin(
+        "SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+        "WHERE application_name = 'stickslip' AND pid <> pg_backend_pid()",
+        dbname="postgres",
+    )
+
+
+@pytest.mark.parametrize("command", ["history", "export", "import"])
+def test_a_server_that_goes_away_mid_command_is_one_line_exit_2(
+    command, postgres_server, postgres_url, monkeypatch, tmp_path
+):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    with Store.open(postgres_url) as st:
+        st.add_traverse(ROW, device="sim://")
+    opened = Store.open.__func__  # type: ignore[attr-defined]
+
+    def open_then_lose_the_server(cls, *args, **kwargs):
+        store = opened(cls, *args, **kwargs)
+        _terminate_stickslips_connections(postgres_server)  # between opening and the command's work
+        return store
+
+    args = {
+        "history": ["history"],
+        "export": ["export", "-o", str(tmp_path / "out.csv")],
+        "import": ["import", str(_table(tmp_path)), "--allow-duplicates"],
+    }[command]
+    with monkeypatch.context() as m:
+        m.setattr(Store, "open", classmethod(open_then_lose_the_server))
+        r = CliRunner().invoke(app, [*args, "--db", postgres_url])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.startswith(f"error: cannot read the database {describe_database(postgres_url)}: ")
+    assert "(the server or the network went away)" in r.stderr
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.output and r.stdout == ""
+    assert not (tmp_path / "out.csv").exists()
+    with Store.open(postgres_url) as st:  # the server is still there for the next connection; nothing half-done
+        assert st.count_traverses() == 1
+
+
+def test_a_server_that_never_answers_is_one_line_after_the_connect_timeout(monkeypatch):
+    """A host that accepts the connection and then says nothing (a hung server): no hang, one line."""
+    pytest.importorskip("psycopg")
+    import socket
+
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.storage import postgres
+
+    for k in [k for k in os.environ if k.startswith("PG")]:
+        monkeypatch.delenv(k)
+    monkeypatch.setattr(postgres, "CONNECT_TIMEOUT_S", 2)  # libpq's smallest; the default is 10 s
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen(4)  # the kernel completes the handshake; nobody ever reads or answers
+        port = silent.getsockname()[1]
+        url = f"postgresql://rig:hunter2-secret@127.0.0.1:{port}/stickslip"
+        r = CliRunner().invoke(app, ["history", "--db", url])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.startswith(f"error: cannot connect to the database postgresql://rig@127.0.0.1:{port}/stickslip")
+    assert "timeout" in r.stderr and "is the server running" in r.stderr
     assert "hunter2" not in r.output and r.stderr.count("\n") == 1
 
 
@@ -363,3 +432,112 @@ def _table(tmp_path: Path) -> Path:
     path = tmp_path / "m.csv"
     write_measurements(path, [ROW])
     return path
+
+
+def test_every_command_that_takes_db_keeps_a_url_as_text():
+    """A ``Path`` would fold ``postgresql://`` to ``postgresql:/``: each ``--db`` is read as text (db_option)."""
+    import inspect
+
+    import click
+    import typer
+
+    from stickslip.cli import app
+
+    root = typer.main.get_command(app)
+    ctx = click.Context(root)
+
+    def commands(c: click.Command, path: tuple[str, ...] = ()):
+        if isinstance(c, click.Group) or hasattr(c, "list_commands"):
+            for name in c.list_commands(ctx):  # type: ignore[attr-defined]
+                yield from commands(c.get_command(ctx, name), (*path, name))  # type: ignore[attr-defined]
+        else:
+            yield " ".join(path), c
+
+    seen = {}
+    for name, c in commands(root):
+        if any("--db" in (p.opts or []) for p in c.params):
+            seen[name] = str(inspect.signature(c.callback).parameters["db"].annotation)
+    assert {"history", "import", "export", "fit", "move", "where", "jog", "reach", "demo", "config show"} <= set(seen)
+    assert set(seen.values()) == {"str | None"}, seen
+
+
+def test_a_bluesky_device_link_keeps_its_positions_in_a_postgresql_database(postgres_url):
+    pytest.importorskip("ophyd_async")
+    from stickslip.bluesky import DeviceLink
+
+    link = DeviceLink("sim://?seed=7", db=postgres_url)
+    assert link.db == postgres_url  # not folded into a path
+    assert link.load().device == "sim://?seed=7"
+    with link.store() as st:
+        assert st.backend == "postgresql"
+
+
+# ---------------------------------------------------------------- several rigs, one history
+
+_RIG = textwrap.dedent("""
+    import json, sys
+    from typer.testing import CliRunner
+    from stickslip.cli import app
+    url, device, table, cal = sys.argv[1:5]
+    steps = (
+        ("import", ["import", table, "--device", device, "--json"]),
+        ("fit", ["fit", "--device", device, "--record", "-o", cal, "--json"]),
+        ("move", ["move", "-d", device, "-c", cal, "--joint", "3", "--by", "30um", "--json"]),
+        ("where", ["where", "-d", device, "--offline", "--json"]),
+    )
+    out = {}
+    for name, args in steps:
+        r = CliRunner().invoke(app, [*args, "--db", url])
+        if r.exit_code != 0:
+            sys.exit(f"{name}: {r.output}")
+        out[name] = json.loads(r.stdout)
+    print(json.dumps(out))
+""")
+
+
+@pytest.mark.slow  # two Python processes importing the command line (a few seconds on a loaded machine)
+def test_two_rigs_in_two_processes_share_one_postgresql_history(postgres_url, tmp_path):
+    """The issue's "Done when", for storage: two rigs (two processes, two device URLs) record their
+    traverses, calibrations and positions at once in one PostgreSQL database; `history` shows both."""
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    rigs = {"sim://?seed=4": 0.001, "sim://?seed=5": 0.002}  # two arms, each with its own table
+    procs = {}
+    for k, (device, noise) in enumerate(rigs.items()):
+        table = tmp_path / f"rig{k}.csv"
+        write_measurements(table, paper_table(rng=np.random.default_rng(k), noise=noise))
+        procs[device] = subprocess.Popen(
+            [sys.executable, "-c", _RIG, postgres_url, device, str(table), str(tmp_path / f"cal{k}.json")],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+    results = {}
+    for device, proc in procs.items():
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0, err
+        results[device] = json.loads(out)
+    n = len(paper_table())
+    for device, res in results.items():
+        assert res["import"]["imported"] == n
+        assert res["where"]["device"] == device
+        q3 = res["where"]["joints"][2]
+        assert q3["source"] == "dead-reckoned" and q3["q"] == pytest.approx(res["move"]["q_end_predicted"], abs=1e-15)
+    runner = CliRunner()
+    r = runner.invoke(app, ["history", "--db", postgres_url, "--json"])
+    assert r.exit_code == 0, r.output
+    entries = {e["device"]: e for e in json.loads(r.stdout)}
+    assert set(entries) == set(rigs)
+    for device, res in results.items():
+        e = entries[device]
+        assert e["traverses"] == n and sum(e["by_joint"].values()) == n
+        assert [c["id"] for c in e["calibrations"]] == [res["fit"]["stored_id"]]
+    r = runner.invoke(app, ["history", "--db", postgres_url])
+    assert r.exit_code == 0 and r.stdout.count("sim://?seed=") == 2  # the table: one row per rig (folded)
+    with Store.open(postgres_url) as st:  # each rig's calibration was fitted from its own rows only
+        for device, res in results.items():
+            assert st.calibration_traverses(res["fit"]["stored_id"]) == st.traverses(device=device)

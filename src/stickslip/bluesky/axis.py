@@ -276,8 +276,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     burst : int
         Steps per burst, 1..65535 (as ``stickslip move --burst``); a stop takes effect
         between bursts.
-    db : path, optional
-        The database keeping positions (default ``$STICKSLIP_DB``, else the user's data folder).
+    db : path or str, optional
+        The database keeping positions: an SQLite file or a ``postgresql://`` URL (default
+        ``$STICKSLIP_DB``, else the user's data folder).
     max_burst_s : float
         Longest burst, s (default :data:`MAX_BURST_S`, 0.2 s; in (0, 0.4]): on a controller
         that steps in real time a burst is cut to ``frequency * max_burst_s`` steps, so a

@@ -17,7 +17,11 @@ Safety
   never wait (MVCC). A writer waits at most ``lock_timeout`` (30 s, as SQLite's busy
   timeout), a statement runs at most ``statement_timeout`` (10 min), a connection
   attempt at most ``connect_timeout`` (10 s) unless the URL says otherwise, and TCP
-  keepalives find a network that went silent in about a minute.
+  keepalives (and, on Linux, ``tcp_user_timeout``) find a network or a host that went
+  silent in about a minute. A server that goes away (stopped, restarted, its
+  connection ended) is one :class:`~.schema.StoreError` at the next statement. What no
+  timeout on this side can see is a server process that hangs while its host still
+  answers TCP: ``statement_timeout`` is the server's own.
 * A process killed mid-transaction: the server rolls the transaction back when the
   connection drops, and frees its locks; a device lock is also a session-level
   advisory lock, so a lock whose process died on any host is seen as free.
@@ -69,6 +73,8 @@ CONNECT_TIMEOUT_S = 10
 """Longest wait for a connection (s), unless the URL or ``$PGCONNECT_TIMEOUT`` gives one."""
 STATEMENT_TIMEOUT_MS = 600_000
 """Longest a statement may run (ms): a backstop, far above any import or history."""
+TCP_USER_TIMEOUT_MS = 60_000
+"""Longest data sent may stay unacknowledged before the connection is given up (ms): a host that vanished."""
 
 _MARKER_DDL = (
     f"CREATE TABLE {MARKER} ("
@@ -189,6 +195,8 @@ class PostgresBackend:
             extra["application_name"] = "stickslip"
         if "keepalives_idle" not in params:  # a network that goes silent is found in about a minute
             extra.update(keepalives=1, keepalives_idle=30, keepalives_interval=10, keepalives_count=3)
+        if "tcp_user_timeout" not in params:  # ... also while a request is unanswered (Linux; ignored elsewhere)
+            extra["tcp_user_timeout"] = TCP_USER_TIMEOUT_MS
         try:
             con = pg.connect(url, autocommit=True, row_factory=_rows, **extra)
         except pg.Error as e:
