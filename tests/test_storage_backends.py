@@ -6,7 +6,7 @@
 * a password in a PostgreSQL URL never reaches a message, a log record or a stored row;
 * a writer killed inside its transaction leaves no partial rows and no lock behind, on both;
 * the device lock: one holder at a time on both; on PostgreSQL a lock whose process died is free on any host;
-* ``--db``, ``$STICKSLIP_DB`` and the config file's ``database`` take a URL as well as a file.
+* ``--db``, ``$STICKSLIP_DB`` and the config file's ``database`` take a URL as well as a file;
 * a server that goes away mid-command, or never answers, is one line (exit 2);
 * two rigs in two processes share one history.
 """
