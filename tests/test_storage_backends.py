@@ -523,3 +523,50 @@ def test_two_rigs_in_two_processes_share_one_postgresql_history(postgres_url, tm
     with Store.open(postgres_url) as st:  # each rig's calibration was fitted from its own rows only
         for device, res in results.items():
             assert st.calibration_traverses(res["fit"]["stored_id"]) == st.traverses(device=device)
+
+
+def test_backup_copies_either_backend_into_an_sqlite_file_every_command_reads(db, tmp_path):
+    """`stickslip backup`: the same rows, ids and links in the copy, from a file or from a shared database."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.devices.positions import DeviceState, save_state
+
+    cal, rows = _calibration_and_rows()
+    with Store.open(db) as st:
+        ids = st.add_traverses(rows, device="sim://?seed=4")
+        st.add_traverse(ROW, device="sim://?seed=5")
+        cid = st.add_calibration(cal, "sim://?seed=4", ids)
+        save_state(st, DeviceState.default("sim://?seed=5"))
+        st.set_excluded(ids[:1], "a bad run")
+        used = st.calibration_traverses(cid)
+        want = (st.history(), st.traverse_records(), st.calibrations(), st.get_state("sim://?seed=5", "positions"))
+    out = tmp_path / "copy.db"
+    r = CliRunner().invoke(app, ["backup", str(out), "--db", str(db)])
+    assert r.exit_code == 0, r.output
+    assert f"copied {len(rows) + 1} traverse(s)" in r.stdout and out.is_file()
+    assert not list(tmp_path.glob(".copy.db.part*"))
+    with Store.open(out) as copy:
+        assert copy.backend == "sqlite" and copy.integrity_check() == "ok"
+        assert copy.schema_version == storage.SCHEMA_VERSION
+        state = copy.get_state("sim://?seed=5", "positions")
+        assert (copy.history(), copy.traverse_records(), copy.calibrations(), state) == want
+        assert copy.calibration_traverses(cid) == used == rows[1:]  # the excluded one is left out, as in the source
+        assert copy.latest_calibration("sim://?seed=4").to_dict() == cal.to_dict()
+    r = CliRunner().invoke(app, ["backup", str(out), "--db", str(db)])  # never over an existing file
+    assert r.exit_code == 2 and "exists" in r.stderr and r.stderr.count("\n") == 1
+
+
+def _calibration_and_rows():
+    from stickslip.calibration import calibrate
+
+    rows = []
+    for q2, th, n_plus, n_minus in (
+        (-math.pi / 2, 0.0, 12346, 13348),
+        (0.0, -math.pi / 2, 16900, 17790),
+        (0.0, 0.0, 25010, 11100),
+        (-1.0, -0.5, 13000, 14000),
+    ):
+        rows.append(Traverse("2026-11-20", 3, "+", 0.0, q2, 0.0, th, 0.0, 0.0, 0.012, n_plus))
+        rows.append(Traverse("2026-11-20", 3, "-", 0.0, q2, 0.0, th, 0.0, 0.012, 0.0, n_minus))
+    return calibrate(rows, method="lsq"), rows

@@ -131,6 +131,18 @@ class Backend(Protocol):
         """``"ok"`` when the database is sound, else what is wrong."""
         ...
 
+    def snapshot(self) -> AbstractContextManager[None]:
+        """Reads that all see the database as it was at the first of them (no write inside)."""
+        ...
+
+    def online_copy(self, dest: Path) -> bool:
+        """Copy the database into the new SQLite file ``dest`` by the engine's own means.
+
+        ``True`` when done; ``False`` when the engine has none (the store then copies the
+        rows, :meth:`Store.backup`).
+        """
+        ...
+
     def close(self) -> None:
         """Close the connection (idempotent)."""
         ...

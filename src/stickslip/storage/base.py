@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from itertools import islice
 from pathlib import Path
 from typing import Any, Self
 
@@ -19,6 +20,7 @@ from .schema import (
     _split_sql,
     content_key,
     resolve_database,
+    schema_tables,
 )
 from .sqlite import SQLiteBackend, check_database_file
 
@@ -272,6 +274,46 @@ class _Base:
     def integrity_check(self) -> str:
         """``"ok"`` when the database is sound (SQLite: ``PRAGMA integrity_check``; PostgreSQL: every table there)."""
         return self._con.integrity_check()
+
+    def backup(self, path: str | os.PathLike[str]) -> Path:
+        """Copy the whole database, consistently, into a new SQLite file ``path``.
+
+        Safe while other processes use the database. An SQLite file is copied by SQLite's
+        online backup (a plain file copy can miss what the write-ahead log still holds); a
+        PostgreSQL database row by row, every table read in one snapshot (``REPEATABLE
+        READ``), into a new file made by the same migrations, the ids kept: the copy is
+        what every command reads with ``--db``, e.g. a shared history taken home. An
+        existing ``path`` is refused (``FileExistsError``); the copy is written beside it
+        and renamed into place, so a failed backup leaves nothing.
+        """
+        dest = Path(path).expanduser()
+        if dest.exists():
+            raise FileExistsError(f"{dest} exists: give a new file for the backup")
+        tmp = dest.with_name(f".{dest.name}.part")
+        try:
+            if not self._con.online_copy(tmp):
+                self._copy_rows_into(tmp)
+            os.replace(tmp, dest)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
+        return dest
+
+    def _copy_rows_into(self, path: Path) -> None:
+        """Every row of every table, read in one snapshot, into a new SQLite database at ``path``."""
+        tables = schema_tables(self.schema_version)
+        order = [t for t in _COPY_ORDER if t in tables] + [t for t in tables if t not in _COPY_ORDER]
+        with type(self).open(path) as copy, self._con.snapshot(), copy._write() as out:
+            for table in order:
+                names = ", ".join(f'"{c}"' for c in tables[table])
+                marks = ", ".join("?" * len(tables[table]))
+                rows = self._con.stream(f"SELECT {names} FROM {table}", (), 5000)
+                while chunk := list(islice(rows, 5000)):
+                    out.executemany(f"INSERT INTO {table} ({names}) VALUES ({marks})", [tuple(r) for r in chunk])
+
+
+_COPY_ORDER = ("devices", "sessions", "traverses", "calibrations", "calibration_traverses", "device_state")
+"""Tables in the order their foreign keys allow them to be filled (any later table after these)."""
 
 
 _REAL_COLUMNS = ("q1", "q2", "q3", "theta", "psi", "start", "end")

@@ -441,6 +441,26 @@ class PostgresBackend:
         ]
         return "; ".join(problems) or "ok"
 
+    # -- copies
+
+    @contextmanager
+    def snapshot(self) -> Iterator[None]:
+        """Reads in one ``REPEATABLE READ, READ ONLY`` transaction: every table as it was at the first read."""
+        if self._writing:
+            raise RuntimeError("a snapshot inside a write transaction")
+        self._run("BEGIN ISOLATION LEVEL REPEATABLE READ, READ ONLY")
+        try:
+            yield
+        finally:
+            try:
+                self.con.execute("COMMIT")
+            except self._psycopg.Error:
+                pass  # the connection is gone, and with it the transaction (nothing was written)
+
+    def online_copy(self, dest: Path) -> bool:
+        """None on a server: the store copies the rows (``False``)."""
+        return False
+
     def close(self) -> None:
         if self._con is not None:
             try:

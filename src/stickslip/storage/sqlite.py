@@ -353,6 +353,32 @@ class SQLiteBackend:
         """``PRAGMA integrity_check`` (``"ok"`` when the file is sound)."""
         return "; ".join(r[0] for r in self.con.execute("PRAGMA integrity_check"))
 
+    # -- copies
+
+    @contextmanager
+    def snapshot(self) -> Iterator[None]:
+        """Reads in one deferred transaction: in WAL mode they all see the database as it was at the first."""
+        con = self.con
+        con.execute("BEGIN")
+        try:
+            yield
+        finally:
+            if con.in_transaction:
+                con.execute("COMMIT")
+
+    def online_copy(self, dest: Path) -> bool:
+        """SQLite's online backup into the new file ``dest`` (page by page, consistent, pragmas and all)."""
+        try:
+            out = sqlite3.connect(dest)
+            try:
+                self.con.backup(out)
+                out.commit()
+            finally:
+                out.close()
+        except sqlite3.Error as e:
+            raise StoreError(f"cannot write the backup {dest}: {e}") from None
+        return True
+
     def close(self) -> None:
         if self._con is not None:
             self._con.close()
