@@ -477,9 +477,10 @@ def test_a_bluesky_device_link_keeps_its_positions_in_a_postgresql_database(post
 # ---------------------------------------------------------------- several rigs, one history
 
 @pytest.mark.slow  # a second Python process importing the command line (seconds on a loaded machine)
-def test_two_rigs_in_two_processes_share_one_postgresql_history(postgres_url, tmp_path):
+def test_two_rigs_in_two_processes_share_one_postgresql_history(postgres_server, postgres_url, tmp_path):
     """The issue's "Done when", for storage: two rigs (two processes, two device URLs) record their
     traverses, calibrations and positions side by side in one PostgreSQL database; `history` shows both."""
+    import pgserver
     import shared_rig
     from synth import paper_table
     from typer.testing import CliRunner
@@ -494,8 +495,15 @@ def test_two_rigs_in_two_processes_share_one_postgresql_history(postgres_url, tm
         write_measurements(table, paper_table(rng=np.random.default_rng(k), noise=noise))
         args[device] = (postgres_url, device, str(table), str(tmp_path / f"cal{k}.json"))
     first, second = rigs
+    # the second rig's password comes from a password file, as on a rig PC (~/.pgpass); the first's from $PGPASSWORD
+    env = {k: v for k, v in os.environ.items() if k != "PGPASSWORD"}
+    env["PGPASSFILE"] = str(pgserver.write_pgpass(postgres_server, tmp_path / "pgpass"))
     other = subprocess.Popen(  # the second rig in its own process, while the first runs in this one
-        [sys.executable, shared_rig.__file__, *args[second]], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, shared_rig.__file__, *args[second]],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
     )
     try:
         results = {first: shared_rig.run_rig(*args[first])}

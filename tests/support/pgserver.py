@@ -27,7 +27,7 @@ from itertools import count
 from pathlib import Path
 from urllib.parse import quote
 
-__all__ = ["PostgresServer", "Unavailable", "find_bin", "start"]
+__all__ = ["PostgresServer", "Unavailable", "find_bin", "start", "write_pgpass"]
 
 ROLE = "rig"
 DATABASE = "stickslip"
@@ -210,8 +210,18 @@ def _wait_ready(server: PostgresServer, timeout: float) -> bool:
     return False
 
 
-if __name__ == "__main__":  # pragma: no cover - by hand: start one, print its URL, stop on Enter
+def write_pgpass(server: PostgresServer, path: Path) -> Path:
+    """A libpq password file for the rig's role at ``path`` (mode 600): ``PGPASSFILE=path`` keeps it off screens."""
+    esc = server.password.replace("\\", "\\\\").replace(":", "\\:")
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(f"127.0.0.1:{server.port}:{DATABASE}:{ROLE}:{esc}\n")
+    return path
+
+
+if __name__ == "__main__":  # pragma: no cover - by hand: start one, print how to reach it, stop on Enter
     s = start()
-    print(s.url(with_password=True), flush=True)
+    passfile = write_pgpass(s, s.root / "pgpass")
+    print(f"PGPASSFILE={passfile} stickslip history --db {s.url()}", flush=True)  # the password stays in the file
     sys.stdin.readline()
     s.stop()
