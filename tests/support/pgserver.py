@@ -22,6 +22,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import count
 from pathlib import Path
@@ -105,15 +106,38 @@ class PostgresServer:
         return url
 
     def stop(self) -> None:
-        """Fast shutdown (clients disconnected), then remove the folder."""
+        """Immediate shutdown (no checkpoint: the data is thrown away), then remove the folder."""
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.proc.send_signal(signal.SIGQUIT)
             try:
                 self.proc.wait(20)
             except subprocess.TimeoutExpired:  # pragma: no cover - a server that does not stop
                 self.proc.kill()
                 self.proc.wait(10)
         shutil.rmtree(self.root, ignore_errors=True)
+
+
+def _die_with_parent() -> Callable[[], None] | None:
+    """Linux: the server gets SIGQUIT (an immediate shutdown) when the test process dies, even by ``kill -9``.
+
+    Without it a killed test run would leave its server running. Elsewhere ``None``: the
+    server is stopped by the session's teardown only.
+    """
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        prctl = libc.prctl
+    except (OSError, AttributeError):  # pragma: no cover - a libc without prctl
+        return None
+    pr_set_pdeathsig = 1
+
+    def arm() -> None:  # in the child, after the user switch, before exec
+        prctl(pr_set_pdeathsig, int(signal.SIGQUIT), 0, 0, 0)
+
+    return arm
 
 
 def _run_as() -> dict[str, int]:
@@ -175,7 +199,7 @@ def start(durable: bool = False, timeout: float = 60.0) -> PostgresServer:
                 args += ["-c", s]
             proc = subprocess.Popen(
                 args, stdout=log, stderr=subprocess.STDOUT, env=env, cwd=root, start_new_session=True,
-                user=who.get("user"), group=who.get("group"),
+                user=who.get("user"), group=who.get("group"), preexec_fn=_die_with_parent(),
             )
             log.close()
             server = PostgresServer(root, port, bin_dir, proc, password)
