@@ -463,6 +463,28 @@ def test_every_command_that_takes_db_keeps_a_url_as_text():
     assert set(seen.values()) == {"str | None"}, seen
 
 
+def test_calibrate_finds_the_device_and_keeps_the_calibration_and_show_reads_it_back_on_both(db, tmp_path):
+    """calibrate TABLE learns the arm from the database holding the table's rows, keeps the calibration there;
+    show N reads it back: the same commands on a file and on a server."""
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    runner = CliRunner()
+    meas = tmp_path / "m.csv"
+    write_measurements(meas, paper_table())
+    assert runner.invoke(app, ["import", str(meas), "-d", "mm3a:///dev/ttyUSB0", "--db", str(db)]).exit_code == 0
+    r = runner.invoke(app, ["calibrate", str(meas), "-o", str(tmp_path / "cal.json"), "--db", str(db)])
+    assert r.exit_code == 0 and "kept in the database as calibration #1" in r.stdout, r.output
+    r = runner.invoke(app, ["show", "1", "--db", str(db), "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["conditions"]["device"] == "mm3a:///dev/ttyUSB0"
+    with Store.open(db) as st:
+        assert st.calibration_traverses(1) == paper_table()
+
+
 def test_a_bluesky_device_link_keeps_its_positions_in_a_postgresql_database(postgres_url):
     pytest.importorskip("ophyd_async")
     from stickslip.bluesky import DeviceLink
