@@ -600,3 +600,30 @@ def _calibration_and_rows():
         rows.append(Traverse("2026-11-20", 3, "+", 0.0, q2, 0.0, th, 0.0, 0.0, 0.012, n_plus))
         rows.append(Traverse("2026-11-20", 3, "-", 0.0, q2, 0.0, th, 0.0, 0.012, 0.0, n_minus))
     return calibrate(rows, method="lsq"), rows
+
+
+def test_the_control_room_keeps_its_positions_in_a_postgresql_database(postgres_url, tmp_path):
+    """`stickslip serve --db postgresql://...`: the room's move is kept where every rig of the lab sees it."""
+    pytest.importorskip("fastapi", reason="the serve extra (fastapi) is not installed")
+    from fastapi.testclient import TestClient
+    from server_support import true_calibration
+
+    from stickslip.devices.positions import load_state
+    from stickslip.server.app import create_app
+    from stickslip.server.room import ControlRoom, RoomOptions
+    from stickslip.server.security import Access
+
+    url = "sim://?realtime=1&speed=50"
+    cal = tmp_path / "true-cal.json"
+    true_calibration(url).save(cal)
+    room = ControlRoom(RoomOptions(device=url, db=postgres_url, calibration=cal))
+    try:
+        with TestClient(create_app(room, Access(None, True)), base_url="http://127.0.0.1:8765") as client:
+            r = client.post("/api/move", json={"joint": 3, "by": "100um"})
+            assert r.status_code in (200, 202), r.text
+            m = client.get(f"/api/motions/{r.json()['id']}", params={"wait": 20}).json()
+            assert m["status"] == "done" and m["error"] is None, m
+    finally:
+        room.close()
+    with Store.open(postgres_url) as st:
+        assert load_state(st, "sim://").positions[3] == pytest.approx(m["result"]["q_end_predicted"], abs=1e-15)
