@@ -355,23 +355,7 @@ class PostgresBackend:
     # -- what went wrong, without a password
 
     def _problem(self, e: Exception, action: str) -> Exception:
-        pg = self._psycopg
-        text = self._mask(_first_line(e))
-        nothing = "; nothing of this change was stored" if action == "write" else ""
-        if isinstance(e, pg.IntegrityError | pg.DataError):
-            return ConstraintError(f"the database refused the value: {text}{nothing}")
-        if isinstance(e, pg.errors.LockNotAvailable):
-            hint = f"another process kept it busy for {BUSY_TIMEOUT_MS // 1000} s"
-        elif isinstance(e, pg.errors.QueryCanceled):
-            hint = f"it took longer than the statement timeout ({STATEMENT_TIMEOUT_MS // 1000} s)"
-        elif isinstance(e, pg.errors.InsufficientPrivilege):
-            hint = "the role needs the privileges named in docs/storage.md"
-        elif isinstance(e, pg.OperationalError):
-            hint = "the server or the network went away"
-        else:
-            hint = ""
-        verb = "write to" if action == "write" else "read"
-        return StoreError(f"cannot {verb} the database {self.where}: {text}" + (f" ({hint})" if hint else "") + nothing)
+        return _problem_of(self, e, action)
 
     def _mask(self, text: str) -> str:
         return _mask(text, self._secrets)
@@ -468,6 +452,27 @@ class PostgresBackend:
             finally:
                 self._con = None
                 self._held.clear()
+
+
+def _problem_of(self: PostgresBackend, e: Exception, action: str) -> Exception:
+    """A driver error as one StoreError (or ConstraintError) naming the database, never a password."""
+    pg = self._psycopg
+    text = self._mask(_first_line(e))
+    nothing = "; nothing of this change was stored" if action == "write" else ""
+    if isinstance(e, pg.IntegrityError | pg.DataError):
+        return ConstraintError(f"the database refused the value: {text}{nothing}")
+    if isinstance(e, pg.errors.LockNotAvailable):
+        hint = f"another process kept it busy for {BUSY_TIMEOUT_MS // 1000} s"
+    elif isinstance(e, pg.errors.QueryCanceled):
+        hint = f"it took longer than the statement timeout ({STATEMENT_TIMEOUT_MS // 1000} s)"
+    elif isinstance(e, pg.errors.InsufficientPrivilege):
+        hint = "the role needs the privileges named in docs/storage.md"
+    elif isinstance(e, pg.OperationalError):
+        hint = "the server or the network went away"
+    else:
+        hint = ""
+    verb = "write to" if action == "write" else "read"
+    return StoreError(f"cannot {verb} the database {self.where}: {text}" + (f" ({hint})" if hint else "") + nothing)
 
 
 def _first_line(e: BaseException) -> str:
