@@ -1,0 +1,96 @@
+"""A fan switching on shortly before the stop, and pauses in stepping with no stop, on an acoustic generator.
+
+Issue 35 (item 6): on an independent battery one draw gave a false stop and then missed the
+stop when a fan switched on shortly before it, and two false stops over pauses in the
+stepping. These tests come from the tenth generator (``tests/support/fan_sound.py``: slip
+pulses of finite length through a bank of resonators, a fan that spins up by the fan laws,
+pauses), written before the detector was changed for them and never used to tune it.
+
+Each arm is tuned on its own quiet 1000 Hz recording and heard as a traverse hears it (the
+confirming detector, told the commanded rate). A fan switched on 0.3-1.0 s before the stop,
+at -4 to +4 dB of the stepping's level: the first event must be the stop, its onset within
+25 ms, or flagged (a traverse refuses it: never a wrong count). Two pauses of 0.2-0.8 s and
+no stop: no event at all. Draws that fail today are strict xfails with what was measured.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+from fan_sound import SR, Arm, Scene, render, tuning_scene
+
+from stickslip.audio.confirm import ConfirmedStopDetector
+from stickslip.audio.detector import detector_for
+from stickslip.audio.events import StopEvent
+from stickslip.audio.tuning import tune
+from stickslip.audio.tuningfile import Tuning
+
+STOP_S = 2.4
+TOL_S = 0.025
+ARMS = range(1, 9)
+#: (arm, draw) -> what was measured (the detector as of this test's writing)
+FAN_KNOWN = {
+    (3, 1): "a false stop 315 ms before the stop (the fan's spin-up, 0.86 s before it, +0.7 dB)",
+    (6, 0): "the stop flagged, not heard cleanly (fan 0.68 s before it, -1.3 dB)",
+    (6, 1): "the stop missed (fan 0.56 s before it, -1.0 dB)",
+}
+
+
+@cache
+def _tuning(arm: int) -> Tuning:
+    return tune(render(tuning_scene(Arm(arm))), SR, 2.0)
+
+
+def _events(tu: Tuning, y: np.ndarray) -> list[StopEvent]:
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=1000.0)  # as a traverse tells it
+    return det.feed(y) + det.finish()
+
+
+def _fan_draw(arm: int, k: int) -> Scene:
+    rng = np.random.default_rng(arm)
+    draws = [(float(rng.uniform(0.3, 1.0)), float(rng.uniform(-4.0, 4.0))) for _ in range(2)]
+    lead, fan_db = draws[k]
+    return Scene(Arm(arm), stop_at=STOP_S, dur=3.4, fan_at=STOP_S - lead, fan_db=fan_db, seed=100 + 10 * arm + k)
+
+
+def _pause_draw(arm: int) -> Scene:
+    rng = np.random.default_rng(arm)
+    for _ in range(4):  # the fan draws come first from the same stream
+        rng.uniform()
+    p1 = (float(rng.uniform(1.0, 1.5)), float(rng.uniform(0.2, 0.8)))
+    p2 = (float(rng.uniform(2.4, 2.8)), float(rng.uniform(0.2, 0.8)))
+    return Scene(Arm(arm), stop_at=None, dur=4.0, pauses=(p1, p2), seed=200 + arm)
+
+
+def test_generator_levels() -> None:
+    """The generator as documented: stepping at -30 dBFS; the fan at its level relative to it at full speed."""
+    y = render(Scene(Arm(1), stop_at=None, dur=2.0, snr_db=80.0))
+    assert 20 * np.log10(np.sqrt(np.mean(y.astype(np.float64) ** 2))) == pytest.approx(-30.0, abs=0.05)
+    quiet = render(Scene(Arm(1), stop_at=None, dur=3.0, snr_db=80.0, seed=3))
+    fan = render(Scene(Arm(1), stop_at=None, dur=3.0, snr_db=80.0, seed=3, fan_at=0.5, fan_db=6.0, spin_s=0.1))
+    added = (fan - quiet)[int(2.0 * SR) :].astype(np.float64)
+    assert 20 * np.log10(np.sqrt(np.mean(added**2))) == pytest.approx(-24.0, abs=0.5)  # -30 + 6 dB, at full speed
+    assert np.all((fan - quiet)[: int(0.5 * SR)] == 0.0)  # silent before it is switched on
+
+
+def _known(a: int, k: int) -> list[pytest.MarkDecorator]:
+    return [pytest.mark.xfail(strict=True, reason=FAN_KNOWN[(a, k)])] if (a, k) in FAN_KNOWN else []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("arm", "k"), [pytest.param(a, k, marks=_known(a, k)) for a in ARMS for k in (0, 1)])
+def test_fan_switching_on_before_the_stop(arm: int, k: int) -> None:
+    events = _events(_tuning(arm), render(_fan_draw(arm, k)))
+    assert events, "the stop was missed"
+    first = events[0]
+    assert first.onset_uncertain is False, "the stop was flagged"
+    assert abs(first.onset_s - STOP_S) <= TOL_S, f"the first event is {1e3 * (first.onset_s - STOP_S):+.0f} ms off"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm", ARMS)
+def test_pauses_without_a_stop(arm: int) -> None:
+    assert _events(_tuning(arm), render(_pause_draw(arm))) == []
