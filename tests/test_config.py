@@ -282,7 +282,7 @@ def test_a_user_name_without_a_password_is_allowed(tmp_path):
         ("[[geometry]]\n", ":1: geometry: must be a table"),
         ('[geometry]\nlength = "3 furlongs"\n', ":2: geometry.length: unknown length unit 'furlongs'"),
         ('[geometry]\nlength = "-90deg"\n', ":2: geometry.length: unknown length unit 'deg'"),
-        ('[geometry]\noffset = "pi/0"\n', ":2: geometry.offset: 'pi/0' is not a usable length"),
+        ('[geometry]\noffset = "pi/0"\n', ":2: geometry.offset: 'pi/0' divides by zero"),
         ('[geometry]\noffset = "1e999mm"\n', ":2: geometry.offset: '1e999mm' is not a finite length"),
         ("[geometry]\noffset = inf\n", ":2: geometry.offset: inf is not a finite length"),
         ("[geometry]\nlength = true\n", ":2: geometry.length: must be a length"),

@@ -411,3 +411,38 @@ def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
         key = st._con.execute("SELECT content FROM traverses").fetchone()[0]
         assert key == content_key(t, "sim://")
         assert st.integrity_check() == "ok"
+
+
+def test_a_database_carries_stickslips_application_id_and_one_made_before_it_is_stamped(tmp_path):
+    """PRAGMA application_id says a file is ours; one of ours without it (older releases) is known by its tables."""
+    from stickslip.storage import APPLICATION_ID
+
+    p = tmp_path / "s.db"
+    with Store.open(p) as st:
+        st.add_traverse(_t(steps=4242))
+
+    def app_id() -> int:
+        con = sqlite3.connect(p)
+        try:
+            return int(con.execute("PRAGMA application_id").fetchone()[0])
+        finally:
+            con.close()
+
+    assert app_id() == APPLICATION_ID == 0x5374536C
+    con = sqlite3.connect(p)
+    con.execute("PRAGMA application_id = 0")  # as every database made before the id was set
+    con.commit()
+    con.close()
+    with Store.open(p) as st:
+        assert [t.steps for t in st.traverses()] == [4242] and st.integrity_check() == "ok"
+    assert app_id() == APPLICATION_ID
+    # one more table than a stickslip schema has: another application's file, refused untouched
+    con = sqlite3.connect(p)
+    con.execute("PRAGMA application_id = 0")
+    con.execute("CREATE TABLE photos (x)")
+    con.commit()
+    con.close()
+    before = p.read_bytes()
+    with pytest.raises(StoreError, match="another application"):
+        Store.open(p)
+    assert p.read_bytes() == before

@@ -9,8 +9,10 @@ checks a calibration document's physical ranges (``0 <= b < 1``, finite step siz
 the right scale for each joint) before it is turned into a model, so a file written in
 nanometres where metres are expected is refused with the reason instead of planned with.
 
-:func:`atomic_write_text` writes an output file through a temporary file in the same
-folder and ``os.replace``: a failed write leaves the old file as it was.
+:func:`atomic_write` writes an output file through a temporary file in the same
+folder, flushed and synced, then ``os.replace``: a failed write leaves the old file as it
+was and says so (:class:`WriteError`); a folder, FIFO or device is never written into
+(:func:`writable_target`), nor read from (:func:`regular_file`).
 
 This module imports only the standard library (it sits below every other layer).
 """
@@ -42,12 +44,27 @@ STEP_RANGE = {"m": (1e-10, 1e-4), "rad": (1e-10, 1e-2)}
 """``unit -> (smallest, largest)`` magnitude accepted for a step size or a step-size term."""
 
 
-def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> str:
-    """The text of a regular file of at most ``max_bytes`` bytes (UTF-8).
+def special_kind(mode: int) -> str | None:
+    """What a file of ``st_mode`` ``mode`` is (``"a folder"``, ``"a FIFO ..."``), or ``None`` for a regular file."""
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (a named pipe)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    return "not a regular file"
 
-    Raises ``ValueError`` ``"<path>: <reason>"`` for a missing file, a folder, a FIFO or
-    device (never opened, so a pipe cannot hang the reader), a file over the limit, or
-    text that is not UTF-8. ``what`` names the kind of file in the message.
+
+def regular_file(path: str | os.PathLike[str], what: str) -> Path:
+    """``path`` if it is a regular file (a symbolic link to one counts); else ``ValueError`` naming it and what it is.
+
+    Checked with ``stat`` before anything opens it: a folder, a FIFO (whose opening
+    blocks until someone writes), a device (``/dev/zero`` never ends) or a socket is
+    refused, never opened. ``what`` names the kind of file in the message.
     """
     p = Path(path)
     try:
@@ -56,10 +73,44 @@ def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = 
         raise ValueError(f"cannot read {what} {p}: no such {what} file") from None
     except OSError as e:
         raise ValueError(f"{p}: cannot read the {what} file ({e.strerror or e})") from None
-    if stat.S_ISDIR(st.st_mode):
+    kind = special_kind(st.st_mode)
+    if kind == "a folder":
         raise ValueError(f"{p}: is a folder, not a {what} file")
-    if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{p}: not a regular file (a pipe or device?); give a {what} file")
+    if kind is not None:
+        raise ValueError(f"{p}: is {kind}, not a regular file; give a {what} file")
+    return p
+
+
+def writable_target(path: str | os.PathLike[str], what: str = "output") -> Path:
+    """The file a write to ``path`` should replace: ``path``, or the file a symbolic link at it points to.
+
+    Raises ``ValueError`` naming ``path`` when what is there is not a regular file (a
+    folder, a FIFO, a device such as ``/dev/full`` or ``/dev/null``, a socket): such a
+    thing is never opened, written through or replaced by a file. A path where nothing
+    is yet is fine.
+    """
+    p = Path(path)
+    target = Path(os.path.realpath(p)) if p.is_symlink() else p
+    try:
+        st = os.stat(target)
+    except FileNotFoundError:
+        return target
+    except OSError as e:
+        raise ValueError(f"{p}: cannot write the {what} file ({e.strerror or e})") from None
+    kind = special_kind(st.st_mode)
+    if kind is not None:
+        raise ValueError(f"{p}: is {kind}, not a file; give the path of a file to write the {what} to")
+    return target
+
+
+def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> str:
+    """The text of a regular file of at most ``max_bytes`` bytes (UTF-8).
+
+    Raises ``ValueError`` ``"<path>: <reason>"`` for a missing file, a folder, a FIFO or
+    device (never opened, so a pipe cannot hang the reader: :func:`regular_file`), a file
+    over the limit, or text that is not UTF-8. ``what`` names the kind of file in the message.
+    """
+    p = regular_file(path, what)
     try:
         with open(p, "rb") as f:
             data = f.read(max_bytes + 1)
@@ -103,6 +154,80 @@ def check_json_text(text: str, where: str, max_depth: int = MAX_JSON_DEPTH) -> s
 def read_json_text(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> str:
     """:func:`read_text_bounded` + :func:`check_json_text`: text safe to give ``json.loads``."""
     return check_json_text(read_text_bounded(path, what, max_bytes), str(path))
+
+
+# what json's parser says, as a person would (its own words name its grammar, not the file)
+_JSON_PROBLEMS = (
+    ("Expecting property name", "a key must be a string in double quotes (no trailing comma before '}')"),
+    ("Expecting value", "a value is missing or is not JSON (text in double quotes, no trailing comma)"),
+    ("Expecting ',' delimiter", "a ',' is missing between two items"),
+    ("Expecting ':' delimiter", "a ':' is missing after a key"),
+    ("Extra data", "more text after the end of the document"),
+    ("Unterminated string", "a string is not closed with a double quote"),
+    ("Invalid control character", "a control character (a tab, a line break) inside a string"),
+    ("Invalid \\escape", "a backslash escape JSON does not know inside a string"),
+)
+
+
+def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any]]:
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, v in items:
+            if k in out:
+                raise ValueError(f"{where}: the key {k!r} is given twice in one object (which one is meant?)")
+            out[k] = v
+        return out
+
+    return pairs
+
+
+def loads_json(text: str, where: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
+    """The JSON document in ``text``, read strictly; ``ValueError`` ``"<where>: <reason>"`` otherwise.
+
+    The one JSON reader of the toolkit (calibrations, tunings, device state, stored
+    documents): nesting deeper than ``max_depth`` and ``NaN``/``Infinity`` are refused
+    (:func:`check_json_text`), so is a key given twice in one object (``json`` would keep
+    the last silently), and a syntax error is said in words with its line and column.
+
+    >>> loads_json('{"a": 1}', "x.json")
+    {'a': 1}
+    >>> loads_json('{"version": 1, "version": 9}', "x.json")
+    Traceback (most recent call last):
+    ...
+    ValueError: x.json: the key 'version' is given twice in one object (which one is meant?)
+    >>> loads_json('[1 2]', "x.json")
+    Traceback (most recent call last):
+    ...
+    ValueError: x.json: not valid JSON at line 1, column 4: a ',' is missing between two items
+    """
+    check_json_text(text, where, max_depth)
+    try:
+        return json.loads(text, object_pairs_hook=_no_key_twice(where))
+    except json.JSONDecodeError as e:
+        reason = next((ours for theirs, ours in _JSON_PROBLEMS if e.msg.startswith(theirs)), "a syntax error")
+        raise ValueError(f"{where}: not valid JSON at line {e.lineno}, column {e.colno}: {reason}") from None
+    except RecursionError:  # pragma: no cover - check_json_text bounds the depth first
+        raise ValueError(f"{where}: JSON nested too deeply") from None
+
+
+def read_json(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> Any:
+    """The JSON document in the file ``path`` (:func:`read_text_bounded` + :func:`loads_json`)."""
+    return loads_json(read_text_bounded(path, what, max_bytes), str(path))
+
+
+def check_version(data: object, where: str, what: str, newest: int) -> None:
+    """Refuse a document whose ``"version"`` is newer than ``newest`` (this release reads up to it), naming it.
+
+    A document without a version, or with one this release knows, passes; the caller
+    checks what else its versions mean.
+    """
+    if not isinstance(data, dict) or "version" not in data:
+        return
+    v = data["version"]
+    if isinstance(v, int) and not isinstance(v, bool) and v > newest:
+        raise ValueError(
+            f"{where}: {what} version {v} is newer than this stickslip reads ({newest}): upgrade stickslip"
+        )
 
 
 # -- calibration documents ---------------------------------------------------------------------
@@ -238,17 +363,14 @@ def check_tuning_dict(data: object) -> None:
 
 
 def read_tuning_text(path: str | os.PathLike[str], error: type[ValueError] = ValueError) -> str:
-    """The text of a tuning file, bounded, depth-checked and, if it parses, range-checked.
+    """The text of a tuning file, bounded, read strictly (:func:`loads_json`) and range-checked.
 
-    Text that is not JSON is returned as is, for the caller's parser to report. Problems
-    raise ``error`` (a ``ValueError`` subclass the caller already handles).
+    Problems (not JSON, a key given twice, a range) raise ``error`` (a ``ValueError``
+    subclass the caller already handles), naming the file.
     """
     try:
         text = read_json_text(path, "tuning")
-        try:
-            data = json.loads(text)
-        except ValueError:
-            return text
+        data = loads_json(text, str(path))
         try:
             check_tuning_dict(data)
         except ValueError as e:
@@ -256,6 +378,49 @@ def read_tuning_text(path: str | os.PathLike[str], error: type[ValueError] = Val
     except ValueError as e:
         raise error(str(e)) from None
     return text
+
+
+# -- spreadsheet cells ---------------------------------------------------------------------------
+
+FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+"""What a spreadsheet reads as the start of a formula in a CSV cell (OWASP's CSV injection list)."""
+_PLAIN_NUMBER = re.compile(r"[+-]?(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?\Z")
+
+
+def needs_guard(cell: str) -> bool:
+    """Whether :func:`guard_cell` changes ``cell`` (it would start a formula, after any leading quotes)."""
+    rest = cell.lstrip("'")
+    if not rest.startswith(FORMULA_START) or rest in ("+", "-"):
+        return False
+    return _PLAIN_NUMBER.match(rest) is None
+
+
+def guard_cell(cell: str) -> str:
+    """A CSV cell as it is written: one a spreadsheet would run as a formula gets a leading ``'``.
+
+    The rule (OWASP's, for CSV injection), kept exact so that numbers stay numbers:
+
+    * a cell that begins with ``=``, ``+``, ``-``, ``@``, a tab or a carriage return is
+      prefixed with ``'`` (a spreadsheet then shows it as text);
+    * except a plain decimal number (``-1.5707963``, ``+3``, ``-2.5e-06``: what the
+      tables hold in SI units, and what a spreadsheet reads as a number, never a
+      formula) and a lone ``+`` or ``-`` (the direction column: nothing to compute);
+    * a cell that begins with quotes before such a start gets one more quote, so that
+      :func:`unguard_cell` gives every cell back exactly: guarding is reversible.
+
+    >>> [guard_cell(c) for c in ("=HYPERLINK(x)", "-1.5e-06", "+", "@SUM(A1)", "'=x", "day1", "-1+1")]
+    ["'=HYPERLINK(x)", '-1.5e-06', '+', "'@SUM(A1)", "''=x", 'day1', "'-1+1"]
+    """
+    return "'" + cell if needs_guard(cell) else cell
+
+
+def unguard_cell(cell: str) -> str:
+    """A cell as :func:`guard_cell` was given it (our own readers take the guard off).
+
+    >>> [unguard_cell(c) for c in ("'=HYPERLINK(x)", "''=x", "'abc", "-1.5")]
+    ['=HYPERLINK(x)', "'=x", "'abc", '-1.5']
+    """
+    return cell[1:] if cell.startswith("'") and needs_guard(cell[1:]) else cell
 
 
 # -- safe writes -------------------------------------------------------------------------------
@@ -271,24 +436,53 @@ def _file_mode(p: Path) -> int:
         return 0o666 & ~mask
 
 
+class WriteError(OSError):
+    """A file could not be written; the message names it, says why, and that the old file is kept.
+
+    An ``OSError`` (with the errno, reason and the path asked for), whose text is one
+    line for a person: ``cannot write out.csv: No space left on device; the old file is
+    kept as it was`` (or ``; nothing was written`` where there was none).
+    """
+
+    def __init__(self, path: Path, error: OSError, kept: bool) -> None:
+        super().__init__(error.errno, error.strerror or str(error), str(path))
+        reason = error.strerror or str(error)
+        after = "the old file is kept as it was" if kept else "nothing was written"
+        self.message = f"cannot write {path}: {reason}; {after}"
+
+    def __str__(self) -> str:
+        return self.message
+
+
 def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mode: str = "w") -> Path:
     """Write ``path`` through a temporary file in its folder, then ``os.replace`` it.
+
+    The checked write every output file of the toolkit goes through:
+
+    * what is at ``path`` must be a regular file or nothing (:func:`writable_target`): a
+      folder, a FIFO or a device (``/dev/full``) is refused, never replaced by a file; a
+      symbolic link is written through (the file it points to is replaced, the link stays);
+    * ``write(f)`` receives the open temporary file; it is flushed and ``fsync``-ed before
+      the rename, and the folder is ``fsync``-ed after it (POSIX), so the new file is on
+      the disk when this returns;
+    * if anything fails (a full disk, a quota, an I/O error, a read-only folder, an
+      exception in ``write``) the temporary file is removed and the old ``path`` is left
+      exactly as it was; an ``OSError`` is raised as :class:`WriteError` (one line naming
+      the file, the reason and that the old file is kept), the writer's own exception as it is.
 
     The file gets the permissions a plain ``open(path, "w")`` would give it (an existing
     file keeps its own; a new one 0666 less the umask), not the temporary file's 0600:
     colleagues who read a lab's shared results folder still can.
-
-    ``write(f)`` receives the open temporary file. If anything fails (a full disk, a
-    read-only folder, an exception in ``write``) the temporary file is removed, the old
-    ``path`` is left exactly as it was, and ``OSError``/the writer's exception propagates.
     """
-    p = Path(path)
+    asked = Path(path)
+    p = writable_target(asked)
     folder = p.parent if str(p.parent) else Path(".")
     mode_bits = _file_mode(p)
+    kept = p.exists()
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
     except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
-        raise OSError(e.errno, e.strerror, str(p)) from None
+        raise WriteError(asked, e, kept) from None
     try:
         kwargs: dict[str, Any] = {} if "b" in mode else {"encoding": "utf-8", "newline": ""}
         with os.fdopen(fd, mode, **kwargs) as f:
@@ -302,10 +496,27 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
             os.unlink(tmp)
         except OSError:
             pass
-        if isinstance(e, OSError) and e.filename == tmp:  # name the file asked for, not the temporary one
-            raise OSError(e.errno, e.strerror, str(p)) from None
+        if isinstance(e, OSError) and not isinstance(e, WriteError):
+            raise WriteError(asked, e, kept) from None
         raise
+    _sync_folder(folder)
     return p
+
+
+def _sync_folder(folder: Path) -> None:
+    """``fsync`` a folder after a rename in it, so the new name survives a power cut (POSIX; elsewhere nothing)."""
+    if os.name != "posix":
+        return
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems cannot sync a folder; the file itself is synced
+    finally:
+        os.close(fd)
 
 
 def atomic_write_text(path: str | os.PathLike[str], text: str) -> Path:

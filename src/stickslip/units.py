@@ -93,7 +93,10 @@ def parse_quantity(text: str | float, kind: str | None = None) -> float:
         if mul == "-" or m.group("sign") == "-":
             value = -value
         if m.group("pidiv"):
-            value /= float(m.group("pidiv"))
+            divisor = float(m.group("pidiv"))
+            if divisor == 0:
+                raise UnitError(f"{str(text).strip()!r} divides by zero")
+            value /= divisor
     unit = m.group("unit")
     if not unit:
         return value

@@ -487,11 +487,9 @@ class Calibration:
         """Read a calibration JSON file; raises ``ValueError`` naming the file and the reason."""
         p = Path(path)
         try:
-            data = json.loads(records.read_json_text(p, "calibration"))
+            data = records.read_json(p, "calibration")
         except FileNotFoundError:
             raise ValueError(f"{p}: no such calibration file") from None
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{p}: not valid JSON ({e.msg} at line {e.lineno})") from None
         try:
             return cls.from_dict(data)
         except ValueError as e:

@@ -22,7 +22,7 @@ from pathlib import Path
 import typer
 from typer.models import CommandInfo
 
-from ._common import OneLineErrors, drop_warnings, flush_warnings
+from ._common import DEVICE_FILTERS, OneLineErrors, describe, drop_warnings, flush_warnings, guard_options
 
 app = typer.Typer(
     name="stickslip",
@@ -58,25 +58,38 @@ def _logging(verbose: int, log_file: Path | None) -> None:
     """-v: INFO to stderr, -vv: DEBUG (every message to and from a controller); --log-file: DEBUG to a file."""
     import logging
 
+    from ..devices.base import RedactText
+
     log = logging.getLogger("stickslip")
     for old in [h for h in log.handlers if getattr(h, "_stickslip_cli", False)]:
         log.removeHandler(old)
         old.close()
+    from ._output import visible
+
+    class Visible(logging.Formatter):  # a log line on the terminal follows the output rules (docs/cli.md)
+        def format(self, record: logging.LogRecord) -> str:
+            return visible(super().format(record))
+
     fmt = logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s")
     handlers: list[logging.Handler] = []
     if verbose:
         h: logging.Handler = logging.StreamHandler()
         h.setLevel(logging.INFO if verbose == 1 else logging.DEBUG)
+        h.setFormatter(Visible(fmt._fmt))
         handlers.append(h)
     if log_file is not None:
+        from ..records import writable_target
+
         try:
-            h = logging.FileHandler(log_file, encoding="utf-8")
-        except OSError as e:
-            raise typer.BadParameter(f"cannot write the log file: {e}", param_hint="--log-file") from None
+            h = logging.FileHandler(writable_target(log_file, "log"), encoding="utf-8")  # never a FIFO: it would hang
+        except (OSError, ValueError) as e:
+            raise typer.BadParameter(f"cannot write the log file: {describe(e)}", param_hint="--log-file") from None
         h.setLevel(logging.DEBUG)
         handlers.append(h)
     for h in handlers:
-        h.setFormatter(fmt)
+        if h.formatter is None:
+            h.setFormatter(fmt)
+        h.addFilter(RedactText())  # every log line through the one redaction
         h._stickslip_cli = True  # type: ignore[attr-defined]  # to find ours again on the next call
         log.addHandler(h)
     log.setLevel(logging.DEBUG if handlers else logging.NOTSET)
@@ -136,11 +149,16 @@ def _name(info: CommandInfo) -> str:
 
 
 for _info in app.registered_commands:
+    if _info.callback is not None:
+        # finite floats, non-blank --day, a --device that can be opened: the checks every command shares
+        guard_options(_info.callback, device_is_filter=_name(_info) in DEVICE_FILTERS)
     if _info.callback is not None and _info.callback.__doc__ and _info.help is None:
         _info.callback.__doc__ = _unwrap(_info.callback.__doc__)
     _info.rich_help_panel = _PANEL_OF.get(_name(_info), "Other")
 for _group in app.registered_groups:  # the commands of a group (config path, show, init)
     for _sub in _group.typer_instance.registered_commands if _group.typer_instance else []:
+        if _sub.callback is not None:
+            guard_options(_sub.callback)
         if _sub.callback is not None and _sub.callback.__doc__ and _sub.help is None:
             _sub.callback.__doc__ = _unwrap(_sub.callback.__doc__)
 app.registered_commands.sort(key=lambda i: _ORDER.index(_name(i)) if _name(i) in _ORDER else len(_ORDER))

@@ -18,8 +18,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any, Generic, NoReturn, TypeVar, overload
 
 import typer
-from rich.console import Console
-from rich.markup import escape
+from rich.text import Text
 from typer.core import TyperGroup
 
 try:  # recent typer vendors click; older ones use the click package
@@ -28,13 +27,14 @@ except ImportError:  # pragma: no cover - depends on the installed typer
     from click.exceptions import ClickException, UsageError  # type: ignore[assignment]  # same names
 
 from ..config import ConfigError, UserConfig, config_path, load_config
-from ..devices.base import redact_url, url_scheme
+from ..devices.base import check_device_url, redact_text, redact_url
 from ..units import UnitError, parse_angle, parse_length
+from ._output import OutputError, console, data_stream, err_console, finish, silence, styled, visible
 
 if TYPE_CHECKING:
     from rich.table import Table
 
-    from ..kinematics import Geometry
+    from ..kinematics import Geometry, Pose
     from ..measurements import StepSize, TableError, Traverse
     from ..storage import Store
 
@@ -58,16 +58,17 @@ def lazy_import(name: str) -> ModuleType:
     return module
 
 
-console = Console()
-err_console = Console(stderr=True)
+__all__ = ["console", "err_console"]  # the consoles of ._output, re-exported: the commands print through them
 
 EXIT_OK = 0
 EXIT_ABORTED = 1
 EXIT_BAD_INPUT = 2
 EXIT_CODES = {
     EXIT_OK: "success",
-    EXIT_ABORTED: "interrupted (Ctrl-C) or declined at a confirmation",
-    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault: one `error:` line says which",
+    EXIT_ABORTED: "interrupted (Ctrl-C), declined at a confirmation, or the reader of the output went away "
+    "(a closed pipe: `| head`; nothing more is printed)",
+    EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault, or output that could not be written "
+    "(a full device): one `error:` line says which",
 }
 """The documented exit codes of every command."""
 
@@ -77,11 +78,36 @@ class OneLineErrors(TyperGroup):
 
     Click prints usage errors (a missing option, ``--joint 4``, a count out of range)
     as a multi-line panel; here they become the same one line as every other error.
+    The group also ends every command's output (:func:`._output.finish`) and turns a
+    write that failed (:class:`._output.OutputError`) into a quiet exit 1 for a closed
+    pipe or one ``error:`` line and exit 2 for anything else.
     """
 
     def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         try:
-            rv = super().main(*args, **{**kwargs, "standalone_mode": False})
+            return self._main(*args, standalone_mode=standalone_mode, **kwargs)
+        except OutputError as e:
+            if not standalone_mode:
+                raise
+            silence("stdout")  # what is left in the buffer goes nowhere: no "Exception ignored" at exit
+            if e.stream == "standard error":  # nowhere to say it
+                silence("stderr")
+                sys.exit(EXIT_ABORTED if e.closed else EXIT_BAD_INPUT)
+            if e.closed:  # the reader went away (| head): a quiet end
+                sys.exit(EXIT_ABORTED)
+            try:
+                _print_error(f"{e}; the output is incomplete")
+                finish()
+            except OutputError:
+                silence("stderr")
+            sys.exit(EXIT_BAD_INPUT)
+
+    def _main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        try:
+            try:
+                rv = super().main(*args, **{**kwargs, "standalone_mode": False})
+            finally:
+                finish()
         except UsageError as e:
             hint = f" (see {e.ctx.command_path} --help)" if e.ctx is not None else ""
             message = " ".join(e.format_message().split())
@@ -97,7 +123,7 @@ class OneLineErrors(TyperGroup):
         except (typer.Abort, KeyboardInterrupt):
             if not standalone_mode:
                 raise
-            err_console.print("[bold red]error:[/] interrupted", highlight=False)
+            err_console.print(Text.assemble(styled("error:", "bold red"), " interrupted"))
             sys.exit(EXIT_ABORTED)
         if not standalone_mode:
             return rv
@@ -111,19 +137,18 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
 
 
 def _print_error(message: object) -> None:
-    err_console.print(f"[bold red]error:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    err_console.print(Text.assemble(styled("error:", "bold red"), " ", one_line(message)), soft_wrap=True)
 
 
 def one_line(message: object) -> str:
-    """``message`` as one printable line: line breaks become ``; ``, control characters escapes."""
+    """``message`` as one printable line: line breaks become ``; ``, control characters escapes, secrets ``***``."""
     parts = [p.strip() for p in str(message).splitlines() if p.strip()]
-    text = "; ".join(parts)
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return visible(redact_text("; ".join(parts)))
 
 
 def warn(message: str) -> None:
     """Print ``warning: message`` to stderr."""
-    err_console.print(f"[bold yellow]warning:[/] {escape(one_line(message))}", highlight=False, soft_wrap=True)
+    err_console.print(Text.assemble(styled("warning:", "bold yellow"), " ", one_line(message)), soft_wrap=True)
 
 
 _pending_warnings: list[str] = []
@@ -153,19 +178,26 @@ def drop_warnings() -> None:
 
 @contextmanager
 def user_errors(*types: type[BaseException]) -> Iterator[None]:
-    """Turn the given exception types (and ValueError, OSError) into ``fail(str(e))``."""
+    """Turn the given exception types (and ValueError, OSError) into ``fail`` with :func:`describe`."""
     catch = types + (ValueError, OSError)
     try:
         yield
     except typer.Exit:
         raise
     except catch as e:  # noqa: B902
-        fail(str(e))
+        fail(describe(e))
+
+
+def describe(e: BaseException) -> str:
+    """An exception as a person reads it: an ``OSError`` as ``path: reason`` (not ``[Errno 28] ...: 'path'``)."""
+    if isinstance(e, OSError) and type(e).__str__ is OSError.__str__ and e.strerror:
+        return f"{e.filename}: {e.strerror}" if e.filename else str(e.strerror)
+    return str(e)
 
 
 def print_json(obj: object) -> None:
-    """Print ``obj`` as JSON on stdout (NaN/inf become null)."""
-    sys.stdout.write(json.dumps(_clean(obj), indent=2) + "\n")
+    """Print ``obj`` as JSON on stdout (NaN/inf become null; ASCII, so any stream can take it)."""
+    data_stream().write(json.dumps(_clean(obj), indent=2) + "\n")
 
 
 def _clean(obj: object) -> object:
@@ -237,6 +269,22 @@ def length_option(value: str | None) -> float | None:
     return None if value is None else _parse_unit(parse_length, "a length: metres, or with mm / um / nm", value)
 
 
+def pose_options(q1: str, q2: str, q3: str, theta: str, psi: str) -> Pose:
+    """The pose of ``--q1 --q2 --q3 --theta --psi`` given as text (units allowed); an ``error:`` naming the option."""
+    from ..kinematics import Pose
+
+    values = []
+    for flag, text, parse in (
+        ("--q1", q1, angle_option), ("--q2", q2, angle_option), ("--q3", q3, length_option),
+        ("--theta", theta, angle_option), ("--psi", psi, angle_option),
+    ):  # fmt: skip
+        try:
+            values.append(parse(text))
+        except typer.BadParameter as e:
+            fail(f"{flag}: {e.message}")
+    return Pose(*values)
+
+
 def day_option(value: str | None) -> str | None:
     """A session label option (``--day``): stripped, or ``typer.BadParameter`` saying why it cannot be one."""
     if value is None:
@@ -245,6 +293,68 @@ def day_option(value: str | None) -> str | None:
 
     try:
         return check_day_label(value)
+    except ValueError as e:
+        raise typer.BadParameter(str(e)) from None
+
+
+def _finite_option(value: float | None) -> float | None:
+    """A float option's value, or ``typer.BadParameter`` for ``inf`` (``1e999``) or ``nan``."""
+    if value is not None and not math.isfinite(value):
+        raise typer.BadParameter(f"not a finite number (got {value!r})")
+    return value
+
+
+DEVICE_FILTERS = frozenset({"history", "export", "anova", "report", "delete"})
+"""Commands whose ``--device`` only picks stored rows: any text may match a device stored by an older release."""
+
+
+def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) -> None:
+    """Give the options of one command the checks every command shares (one place for the whole CLI).
+
+    * a ``float`` option (without a parser of its own) refuses ``inf``, ``1e999`` and
+      ``nan``, naming the option (click's float type takes them);
+    * a ``--day`` option (a session label, or a filter by one) is checked by
+      :func:`day_option`: a blank or whitespace label is refused, naming ``--day``;
+    * a ``--device`` option is checked by :func:`device_option`: a URL that could never
+      be opened (no scheme, an unknown one, a bad port, a host name DNS cannot carry) is
+      refused before any command uses it, records it or stores anything with it (not
+      where it only filters stored rows, ``device_is_filter``: :data:`DEVICE_FILTERS`).
+
+    The check is set as the option's typer callback where it has none (an option with a
+    callback of its own checks itself). Called on every command when the CLI is built.
+    """
+    import inspect
+    import typing
+
+    from typer.models import ParameterInfo
+
+    for p in inspect.signature(callback, eval_str=True).parameters.values():
+        annotation, info = p.annotation, p.default
+        if typing.get_origin(annotation) is typing.Annotated:
+            annotation, *meta = typing.get_args(annotation)
+            info = next((m for m in meta if isinstance(m, ParameterInfo)), info)
+            # a string annotation (from __future__ import annotations) is evaluated afresh, with a new
+            # OptionInfo, each time it is read: keep the evaluated one, whose OptionInfo is set below
+            callback.__annotations__[p.name] = p.annotation
+        if not isinstance(info, ParameterInfo) or info.callback is not None or getattr(info, "parser", None):
+            continue
+        kinds = {a for a in (typing.get_args(annotation) or (annotation,)) if a is not type(None)}
+        if kinds == {float}:
+            info.callback = _finite_option
+        elif kinds == {str} and p.name == "day":
+            info.callback = day_option
+        elif kinds == {str} and p.name == "device" and not device_is_filter:
+            info.callback = device_option
+
+
+def device_option(value: str | None) -> str | None:
+    """A ``--device`` option: the URL if a device could be opened with it, else ``typer.BadParameter`` saying why."""
+    if value is None:
+        return None
+    from ..devices.base import check_device_url
+
+    try:
+        return check_device_url(value)
     except ValueError as e:
         raise typer.BadParameter(str(e)) from None
 
@@ -296,7 +406,7 @@ def device_setting(option: str | None, flag: str = "--device") -> Setting[str]:
     """The controller URL: ``option``, else the file's ``device``, else ``sim://``."""
     if option is not None:
         try:
-            url_scheme(option)
+            check_device_url(option)
         except ValueError as e:
             fail(f"{flag}: {e}")
         return Setting(option, "option", flag)
@@ -416,11 +526,16 @@ def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Ge
     return Setting(DEFAULT_GEOMETRY, "default")
 
 
-def open_store(db: Path | None, must_exist: bool = False) -> Store:
+@contextmanager
+def open_store(db: Path | None, must_exist: bool = False) -> Iterator[Store]:
     """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the config file's, else the data folder).
 
-    A command that only reads passes ``must_exist=True`` and refuses a file that does not
-    exist yet instead of creating an empty one; storage faults are one ``error:`` line.
+    A context manager (``with open_store(db) as st:``), the one way commands open the
+    database. A command that only reads passes ``must_exist=True`` and refuses a file
+    that does not exist yet instead of creating an empty one. Every storage fault, when
+    opening (another application's file, a FIFO, a newer schema) or inside the block (a
+    damaged page, a stored value of the wrong type, a full disk), is one ``error:`` line
+    naming the file; the store is closed either way.
     """
     from ..storage import Store, StoreError
 
@@ -428,8 +543,12 @@ def open_store(db: Path | None, must_exist: bool = False) -> Store:
     if must_exist and not path.exists():
         fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
     with user_errors(StoreError):
-        return Store.open(path)
-    raise AssertionError("unreachable")  # pragma: no cover - user_errors exits on a StoreError
+        store = Store.open(path)
+    try:
+        with store:
+            yield store
+    except StoreError as e:
+        fail(describe(e))
 
 
 def fail_table(e: TableError) -> NoReturn:

@@ -12,6 +12,7 @@ import typer
 
 from . import app
 from ._common import console, device_url, err_console, fail, print_json, user_errors
+from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
 _CSV_SUFFIXES = (".csv", ".txt")
@@ -154,7 +155,7 @@ def tune(
     if json_out:
         print_json(tuning.to_dict())
         return
-    console.print(f"[bold]tuning for {recording}[/] (joint {joint if joint else '?'})")
+    console.print(styled(f"tuning for {recording}", "bold"), f"(joint {joint if joint else '?'})")
     console.print(tuning.report(), highlight=False, soft_wrap=True)
     console.print(f"saved to {out}", soft_wrap=True)
 
@@ -383,7 +384,9 @@ def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
 
 def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
     if json_out:
-        typer.echo(json.dumps(ev.to_dict()))
+        out = data_stream()  # one JSON object per line, as it is confirmed: written and flushed now
+        out.write(json.dumps(ev.to_dict()) + "\n")
+        out.flush()
     else:
         console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
 
@@ -686,7 +689,7 @@ def _record_real(
             issued += n
             for b in _drain(mic, tb + n / hz):
                 blocks.append(b)
-                err_console.print("\r" + meter.feed(b).line(), end="", highlight=False)
+                err_console.print(CARRIAGE_RETURN, meter.feed(b).line(), sep="", end="", highlight=False)
         blocks += list(_drain(mic, time.monotonic() + 0.3))
         ctrl.stop(joint)
     finally:

@@ -16,6 +16,7 @@ import typer
 from ..devices.base import DeviceError, PoseSettable, device_key, open_device
 from . import app
 from ._common import DB_HELP, OneLineErrors, console, device_url, err_console, fail, open_store, print_json, user_errors
+from ._output import styled
 
 if TYPE_CHECKING:
     from ..procedures.camera import CameraCalibrationResult
@@ -281,10 +282,10 @@ def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> 
                       f"{100 * s.sigma / s.gamma:.2f} %", str(s.steps), f"{100 * s.visibility:.0f} %")
     console.print(t)
     for n in result.notes:
-        console.print(f"[dim]note:[/] {n}", highlight=False)
+        console.print(styled("note:", "dim"), n, highlight=False)
     for jr in result.joints:
         if jr.refused:
-            console.print(f"[yellow]refused:[/] {jr.refused}", highlight=False)
+            console.print(styled("refused:", "yellow"), jr.refused, highlight=False)
     if output is not None:
         console.print(f"{len(result.rows)} step sizes written to {output} (stickslip calibrate --step-sizes)",
                       highlight=False)

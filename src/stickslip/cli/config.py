@@ -31,6 +31,7 @@ from ._common import (
     print_json,
     user_config,
 )
+from ._output import data_stream
 
 config_app = typer.Typer(
     name="config",
@@ -69,7 +70,7 @@ def path_cmd(
             }
         )
         return
-    typer.echo(str(p))
+    data_stream().write(f"{p}\n")  # for a shell: the path as it is
 
 
 @config_app.command("init")

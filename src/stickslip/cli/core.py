@@ -6,8 +6,7 @@ import csv
 import dataclasses
 import itertools
 import math
-import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, TextIO
 
@@ -24,7 +23,7 @@ if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --h
 from ..clock import stale_message
 from ..devices.base import device_key
 from ..joints import joint_spec
-from ..records import atomic_write
+from ..records import atomic_write, guard_cell, needs_guard, unguard_cell
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
@@ -35,6 +34,7 @@ from ._common import (
     fail_table,
     length_option,
     max_age_setting,
+    pose_options,
     print_json,
     read_step_table,
     read_table,
@@ -42,6 +42,7 @@ from ._common import (
     validation_table,
     warn_later,
 )
+from ._output import data_stream, styled
 
 CalibrationOpt = Annotated[
     Path | None,
@@ -222,7 +223,7 @@ def calibrate_cmd(
     if cal.selection:
         console.print(_selection_table(cal))
     for n in cal.provenance.notes:
-        console.print(f"[dim]note:[/] {n}", highlight=False)
+        console.print(styled("note:", "dim"), n, highlight=False)
     if output is not None:
         console.print(f"saved to {output}")
 
@@ -317,6 +318,7 @@ def predict_cmd(
     Example: stickslip predict -c cal.json poses.csv -o predicted.csv
     """
     from ..measurements import TableError, read_pose_columns
+    from ..measurements.poses import POSE_COLUMNS
 
     cal = _load_calibration(calibration)
     try:
@@ -334,7 +336,7 @@ def predict_cmd(
     if json_out:
         out = []
         for cells, g in zip(table.cells(), preds.tolist(), strict=True):
-            r: dict[str, object] = {h: _maybe_number(cells[i]) for h, i in last.items()}
+            r: dict[str, object] = {h: _maybe_number(unguard_cell(cells[i])) for h, i in last.items()}
             r["gamma_pred"] = g
             out.append(r)
         if pi95 is not None:
@@ -348,18 +350,29 @@ def predict_cmd(
         for i in range(0, len(preds), 65536):
             yield from repr(preds[i : i + 65536].tolist())[1:-1].split(", ")
 
+    # a cell a spreadsheet would run as a formula is written guarded (records.guard_cell). The pose columns
+    # hold checked numbers and signs; a table whose own columns and names need no guard passes through as it is
+    own = [i for i, h in enumerate(header) if h not in POSE_COLUMNS]
+    safe = not any(map(needs_guard, header)) and not (
+        own and any(needs_guard(cs[i]) for cs in table.cells() for i in own)
+    )
+
+    def cells_of() -> Iterator[Sequence[str]]:
+        return table.cells() if safe else ([guard_cell(unguard_cell(c)) for c in cs] for cs in table.cells())
+
     def emit(f: TextIO) -> None:
         w = csv.writer(f, lineterminator="\n")
+        head = out_header if safe else [guard_cell(unguard_cell(h)) for h in out_header]
         if pi95 is not None:  # the general path, one more column
-            w.writerow([*out_header, "gamma_pi95"])
+            w.writerow([*head, "gamma_pi95"])
             k = gamma_at[0] if gamma_at else len(take)
             w.writerows(
                 [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :]), repr(h)]
-                for cells, g, h in zip(table.cells(), texts(), pi95.tolist(), strict=True)
+                for cells, g, h in zip(cells_of(), texts(), pi95.tolist(), strict=True)
             )
             return
-        w.writerow(out_header)
-        if table.raw is not None and not gamma_at:
+        w.writerow(head)
+        if table.raw is not None and not gamma_at and safe:
             # plain rows (no quotes, none blank or short): csv would write each back as it stands
             rows = map("{},{}\n".format, table.raw, texts())
             while part := "".join(itertools.islice(rows, 65536)):
@@ -368,13 +381,13 @@ def predict_cmd(
             k = gamma_at[0]
             w.writerows(
                 [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :])]
-                for cells, g in zip(table.cells(), texts(), strict=True)
+                for cells, g in zip(cells_of(), texts(), strict=True)
             )
         else:
-            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(table.cells(), texts(), strict=True))
+            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(cells_of(), texts(), strict=True))
 
     if output is None:
-        emit(sys.stdout)
+        emit(data_stream())
     else:
         with user_errors():
             atomic_write(output, emit)  # streamed; a failed write leaves no half file
@@ -513,7 +526,7 @@ def plan_cmd(
 
     Example: stickslip plan -c cal.json --joint 3 --from 2mm --to 2.03mm --q2 -60deg
     """
-    from ..kinematics import JOINTS, Pose
+    from ..kinematics import JOINTS
     from ..models import NonPhysicalError
 
     if joint not in JOINTS:
@@ -522,10 +535,14 @@ def plan_cmd(
 
     pos = angle_option if joint_spec(joint).rotary else length_option
     try:
-        qa, qb = pos(q_from), pos(q_to)
-        pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
+        qa = pos(q_from)
     except typer.BadParameter as e:
-        fail(str(e))
+        fail(f"--from: {e.message}")
+    try:
+        qb = pos(q_to)
+    except typer.BadParameter as e:
+        fail(f"--to: {e.message}")
+    pose = pose_options(q1, q2, q3, theta, psi)
     cal = _load_calibration(calibration)
     try:
         plan = plan_move(cal, joint, qa, qb, pose)

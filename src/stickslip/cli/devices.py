@@ -35,6 +35,7 @@ from ._common import (
     user_errors,
     warn_later,
 )
+from ._output import styled
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
@@ -488,7 +489,7 @@ def where(
              "info": info}
         )
         return
-    console.print(f"[bold]{key}[/]" + (f" (answers: {answers})" if answers else ""), highlight=False)
+    console.print(styled(key, "bold"), *([f"(answers: {answers})"] if answers else []), highlight=False)
     line = _info_line(info) if info else None
     if line:
         console.print(f"  {line}", highlight=False)

@@ -12,12 +12,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import typer
-from rich.markup import escape
 from rich.table import Table
 
 from ..devices.base import redact_url
 from . import app
 from ._common import DB_HELP, console, fail, open_store, print_json, read_table, user_errors, warn, warn_later
+from ._output import styled, visible
 
 if TYPE_CHECKING:
     from ..measurements import Traverse
@@ -215,7 +215,7 @@ def delete(
             if not ids:
                 fail(f"no stored traverses for day {day}" + (f" of {redact_url(device)}" if device else ""))
         what = f"{len(set(ids))} traverse(s)" + (f" of day {day}" if day else "")
-        if not yes and not typer.confirm(f"delete {what} from {st.path}?", default=False, err=True):
+        if not yes and not typer.confirm(visible(f"delete {what} from {st.path}?"), default=False, err=True):
             fail("nothing deleted (not confirmed; --yes skips the question)", code=1)
         with user_errors():
             done = st.delete_traverses(ids)
@@ -319,16 +319,19 @@ def anova(
                 str(t.n),
                 f"{t.F:.4g}" if math.isfinite(t.F) else "-",
                 f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
-                f"[bold red]{verdict}[/]" if verdict == "SIGNIFICANT" else verdict,
+                styled(verdict, "bold red") if verdict == "SIGNIFICANT" else verdict,
             )
         console.print(table)
     if show_skipped:
         for s in res.skipped:
-            console.print(f"[dim]skipped: {escape(s)}[/]")
+            console.print(styled(f"skipped: {s}", "dim"))
     elif res.skipped:
         console.print(
-            f"[dim]{len(res.skipped)} pose groups could not be tested (one traverse per day or direction); "
-            "--show-skipped lists them[/]"
+            styled(
+                f"{len(res.skipped)} pose groups could not be tested (one traverse per day or direction); "
+                "--show-skipped lists them",
+                "dim",
+            )
         )
 
 

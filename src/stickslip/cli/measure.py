@@ -23,6 +23,7 @@ from ._common import (
     warn,
     warn_later,
 )
+from ._output import styled
 
 
 @app.command()
@@ -122,9 +123,11 @@ def demo(
     from rich.table import Table
 
     console.print(
-        f"[bold]stickslip demo[/]: simulated MM3A, seed {result.seed}, day {result.day}: "
+        styled("stickslip demo", "bold"),
+        f": simulated MM3A, seed {result.seed}, day {result.day}: "
         f"{len(result.traverses)} calibration traverses ({result.device_s:.0f} s on the device "
-        f"in {result.elapsed_s:.1f} s), method {result.calibration.method}"
+        f"in {result.elapsed_s:.1f} s), method {result.calibration.method}",
+        sep="",
     )
     table = Table(title="Calibrated parameters beside the simulator's truth")
     with_se = any(c.parameter.stderr is not None for c in result.parameters)
@@ -256,14 +259,14 @@ def traverse_cmd(
     from ..audio.detector import Tuning
     from ..clock import today_label
     from ..devices import DeviceError, open_device
-    from ..kinematics import JOINTS, Pose
+    from ..kinematics import JOINTS
     from ..measurements import HEADER, measurements_to_csv
     from ..models import direction_label
     from ..procedures.session import append_row, check_append_target, record_traverse, traverse_on_device
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
     from ..units import format_step
-    from ._common import angle_option, length_option
+    from ._common import pose_options
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
@@ -278,9 +281,9 @@ def traverse_cmd(
     device = device_url(device)
     try:
         label = direction_label(direction)
-        pose = Pose(angle_option(q1), angle_option(q2), length_option(q3), angle_option(theta), angle_option(psi))
-    except (ValueError, typer.BadParameter) as e:
-        fail(str(e))
+    except ValueError as e:
+        fail(f"--direction: {e}")
+    pose = pose_options(q1, q2, q3, theta, psi)
     day = day or today_label()
     with user_errors(DeviceError, TraverseError, StoreError):
         if append is not None:

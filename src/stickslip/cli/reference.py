@@ -38,9 +38,57 @@ def _section(name: str, cmd: Any) -> list[str]:
     return out
 
 
+_OUTPUT_RULES = """\
+## Output and exit codes
+
+What every command writes, and how it ends (`stickslip.cli._output`, the one way out of
+the command line):
+
+* **Text is shown, never interpreted.** A session label, path, device URL or table cell is
+  printed as it stands: console markup (`[bold]`, `[/]`) and emoji codes are not read.
+* **Nothing raw reaches the terminal.** A control character (ESC, CR, BEL, the C1
+  controls), a bidirectional override or isolate (U+202E) or a line separator in any
+  printed text is shown as its escape: `\\x1b[2J`, `\\r`, `\\u202e`.
+* **No secret is printed, logged or stored.** Every message, log line (`-v`, `--log-file`)
+  and stored note passes through `devices.base.redact_text`: `?password=...` and
+  `user:PASSWORD@` in any URL become `***`.
+* **Units degrade where the output cannot encode them** (an ASCII locale, a Windows code
+  page): `µm` is written `um`, `±` as `+/-`, `°` as `deg`; tables are drawn in ASCII.
+  Data is never changed: `--json` is ASCII; a CSV cell the output cannot encode ends the
+  command with one line (write it with `-o`).
+* **Files:** every output file (`-o`, `--out`, `--append`, `record`) is written to a
+  temporary file beside it, flushed and synced, then renamed over it: a full disk or any
+  other failed write is one line (`cannot write OUT: No space left on device; the old file
+  is kept as it was`) and the old file is unchanged. A folder, FIFO or device is never
+  written to, read from or replaced: it is refused before it is opened.
+* **CSV cells a spreadsheet would run are guarded.** A cell beginning with `=`, `+`, `-`,
+  `@`, a tab or a carriage return is written with a leading `'`, except a plain decimal
+  number (`-1.5707963`, `+3`, `-2.5e-06`: a spreadsheet reads it as a number, so SI values
+  round-trip) and a lone `+` or `-` (the direction column). stickslip's own readers take
+  the guard off: an exported table reads back exactly.
+* **Databases:** stickslip writes only into its own SQLite files (`PRAGMA application_id`
+  0x5374536C; a database made before the id is known by its tables and stamped). Another
+  application's file is refused untouched; a damaged one, or a stored value of the wrong
+  type, is one line naming the file (and the traverse and column).
+* **JSON** (calibrations, tunings, device state) is read strictly: a key given twice, a
+  newer format version, `NaN`, deep nesting or a syntax error is one line naming the file,
+  the key or the line and column.
+* **Waits end on time.** A device URL's `timeout` bounds how long a fault is waited for:
+  once a reply has not come in time, the stops that follow are sent without waiting for
+  answers. A FIFO given as a recording or table is refused, never opened (it would block).
+* **Options:** a number option of infinite size (`1e999`, `inf`, `nan`), a blank `--day`,
+  or a `--device` URL that could never be opened (an unknown scheme, a port beyond 65535,
+  a host name longer than DNS allows) is refused naming the option, before anything runs.
+
+| exit code | meaning |
+| --- | --- |
+"""
+
+
 def render() -> str:
     """The Markdown reference of every ``stickslip`` command, in the order of ``stickslip --help``."""
     from . import app
+    from ._common import EXIT_CODES
 
     group: Any = typer.main.get_command(app)
     ctx = group.make_context("stickslip", ["--help"], resilient_parsing=True)
@@ -50,6 +98,9 @@ def render() -> str:
         "Generated from the code by `python -m stickslip.cli.reference`; do not edit by hand.",
         "Lengths and angles take units on the command line (`12mm`, `850nm`, `-90deg`, `40urad`,",
         "`-pi/2`); files are SI. Every command exits 2 with a one-line `error:` on bad input.",
+        "",
+        *_OUTPUT_RULES.splitlines(),
+        *(f"| {code} | {meaning.replace('|', chr(92) + '|')} |" for code, meaning in sorted(EXIT_CODES.items())),
         "",
     ]
     for name in group.list_commands(ctx):

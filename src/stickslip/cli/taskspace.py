@@ -335,51 +335,75 @@ class _Keys:
 
 
 _KEY_HELP = (
-    "keys: arrows or A/D, W/S: -x/+x, +y/-y; PgUp/PgDn or R/F: +z/-z; space: stop; 1-7: speed; "
-    "m: single-step; b: base/image frame; [ ]: turn image frame; q: quit"
+    "keys: arrows or A/D, W/S: -x/+x, +y/-y; PgUp/PgDn or R/F: +z/-z; space: stop",
+    "1-7: speed; m: single-step; b: base/image frame; [ ]: turn image frame; q: quit",
 )
 
 
 def _status_lines(s: Any) -> list[str]:
-    names = ("joint 1", "joint 2", "joint 3")
-    lines = [
-        "tip (predicted, base frame): "
-        + ", ".join(f"{a} = {v * 1e6:10.2f} µm" for a, v in zip("xyz", s.tip, strict=True))
-    ]
-    for j, name in enumerate(names, start=1):
+    """The live display's lines, each at most 80 characters (the message may be longer: it is cut to fit)."""
+    lines = ["tip (predicted, base frame) x y z: " + " ".join(f"{v * 1e6:+10.2f}" for v in s.tip) + " µm"]
+    for j in (1, 2, 3):
         q, lim = s.q[j - 1], s.to_limits[j - 1]
         if joint_spec(j).prismatic:
-            shown, left = f"{q * 1e6:10.2f} µm", f"{lim * 1e6:.2f} µm"
+            shown, left = f"{q * 1e6:10.2f} µm ", f"{lim * 1e6:.2f} µm"
         else:
             shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
-        lines.append(f"{name}: {shown}   to its nearer limit {left}   sent {s.sent[j - 1]:+d} steps")
-    mode = f"single-step: {s.speed * 1e6:g} µm per press" if s.single_step else f"speed {s.speed * 1e6:g} µm/s"
+        lines.append(f"joint {j}: {shown}  to its nearer limit {left}  sent {s.sent[j - 1]:+d}")
+    mode = f"single-step {s.speed * 1e6:g} µm/press" if s.single_step else f"speed {s.speed * 1e6:g} µm/s"
     frame = f"image frame ({math.degrees(s.image_angle):+.0f} deg)" if s.image_frame else "base frame"
-    rates = ", ".join(f"{r:+.0f}" for r in s.rates)
-    lines.append(f"{mode} | {frame} | step rates {rates} /s")
+    rates = " ".join(f"{r:+.0f}" for r in s.rates)
+    lines.append(f"{mode} | {frame} | steps/s {rates}")
     lines.append(s.message or "")
-    lines.append(_KEY_HELP)
+    lines.extend(_KEY_HELP)
     return lines
 
 
 class _Screen:
-    """Redraws the status lines in place (ANSI cursor movement)."""
+    """The live status display: redrawn in place (rich ``Live``), one row per line at any width.
+
+    Every line is cut to the terminal's width rather than wrapped (a wrapped line would
+    make the redraw miss it, and the screen scroll on every update); at 80 columns and
+    more nothing but an over-long message is cut.
+    """
 
     def __init__(self) -> None:
-        import sys
+        from ._output import SafeConsole
 
-        self._out = sys.stdout
+        self._console = SafeConsole()
+        self._live: Any = None
         self._shown: list[str] = []
+
+    def _frame(self, lines: list[str]) -> Any:
+        from rich.console import Group
+        from rich.text import Text
+
+        return Group(*(Text(line, no_wrap=True, overflow="ellipsis") for line in lines))
 
     def show(self, status: Any) -> None:
         lines = _status_lines(status)
         if lines == self._shown:
             return
-        text = "" if not self._shown else f"\x1b[{len(self._shown)}F"
-        text += "".join(f"\x1b[2K{line}\n" for line in lines)
-        self._out.write(text)
-        self._out.flush()
         self._shown = lines
+        if self._live is None:
+            from rich.live import Live
+
+            self._live = Live(  # our console writes to sys.stdout itself: no redirection of it into the Live
+                self._frame(lines),
+                console=self._console,
+                auto_refresh=False,
+                redirect_stdout=False,
+                redirect_stderr=False,
+            )
+            self._live.start(refresh=True)
+        else:
+            self._live.update(self._frame(lines), refresh=True)
+
+    def close(self) -> None:
+        """End the display (the last frame stays on the screen)."""
+        if self._live is not None:
+            self._live.stop()
+            self._live = None
 
 
 @app.command()
@@ -475,10 +499,13 @@ def jog(
                         save_state(store, st)
 
                 keys = _Keys()
+                screen = _Screen()
                 try:
-                    error = run_jog(dev, state, ctl, keys.read, _Screen().show, save, time.monotonic)
+                    error = run_jog(dev, state, ctl, keys.read, screen.show, save, time.monotonic)
                 except KeyboardInterrupt:
                     error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
+                finally:
+                    screen.close()
             finally:
                 if keys is not None:
                     keys.close()

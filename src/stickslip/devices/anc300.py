@@ -270,9 +270,26 @@ class ANC300:
             self.stop(joint)
             raise
 
+    def _send_unanswered(self, commands: Sequence[str]) -> None:
+        """Send best-effort ``commands`` without waiting for answers (the console stopped answering). Never raises."""
+        for command in commands:
+            try:
+                self.transport.write((command + "\r\n").encode("ascii"))
+            except Exception as e:  # noqa: BLE001 - best effort, the caller has a real error
+                log.warning("could not send %r to %s: %s", command, self.transport.name, e)
+                return
+
     def stop(self, joint: int | None = None) -> None:
-        """Stop ``joint`` (or every joint) now (``stop AXIS``). Never raises."""
+        """Stop ``joint`` (or every joint) now (``stop AXIS``). Never raises.
+
+        When the console has stopped answering (a reply timed out), the stops are sent
+        without waiting for answers: the URL's timeout is the whole wait for a fault,
+        not that plus a wait per axis.
+        """
         joints = sorted(self.axes) if joint is None else [int(joint)]
+        if getattr(self.transport, "silent", False):
+            self._send_unanswered([f"stop {self._axis(j).id}" for j in joints])
+            return
         for j in joints:
             ax = self._axis(j)
             try:
@@ -312,6 +329,9 @@ class ANC300:
             return
         try:
             self.stop()
+            if getattr(self.transport, "silent", False):  # not answering: ground every axis, waiting for no answer
+                self._send_unanswered([f"setm {self._axis(j).id} gnd" for j in sorted(self.axes)])
+                return
             for j in sorted(self.axes):
                 ax = self._axis(j)
                 try:

@@ -43,10 +43,13 @@ __all__ = [
     "open_device",
     "device_key",
     "check_setting",
+    "check_device_url",
     "check_steps",
     "url_options",
     "redact_url",
+    "redact_text",
     "RedactSecrets",
+    "RedactText",
     "SECRET_OPTIONS",
 ]
 
@@ -75,6 +78,29 @@ def redact_url(url: str) -> str:
     return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}{m.group(2)}=***", text)
 
 
+_URL_IN_TEXT = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*:(?://|[^\s'\"<>]*@)[^\s'\"<>]*")
+_SECRET_IN_TEXT = re.compile(r"(?i)(?<![A-Za-z0-9_])(" + "|".join(sorted(SECRET_OPTIONS)) + r")=([^\s&;#'\"]*)")
+
+
+def redact_text(text: str) -> str:
+    """``text`` (a message, a log line, a stored note) with each device URL in it redacted.
+
+    Every ``scheme://...`` in the text goes through :func:`redact_url`, and so does a
+    ``password=...`` (or ``token=``, ...) outside a URL: the one redaction, wherever a URL
+    was pasted into a message. Never raises.
+
+    >>> redact_text("on anc300://HOST:7230?password=hunter2 measure with '--device anc300://u:pw@h'")
+    "on anc300://HOST:7230?password=*** measure with '--device anc300://u:***@h'"
+    >>> redact_text("token=abc and 5 um")
+    'token=*** and 5 um'
+    """
+    text = str(text)
+    if "=" not in text and "@" not in text:
+        return text
+    text = _URL_IN_TEXT.sub(lambda m: redact_url(m.group(0)), text)
+    return _SECRET_IN_TEXT.sub(lambda m: f"{m.group(1)}=***", text)
+
+
 class RedactSecrets(logging.Filter):
     """A logging filter that replaces given secret strings in every record by ``***``.
 
@@ -91,6 +117,18 @@ class RedactSecrets(logging.Filter):
         for s in self.secrets:
             msg = msg.replace(s, "***")
         record.msg, record.args = msg, None
+        return True
+
+
+class RedactText(logging.Filter):
+    """A logging filter that passes every record's message through :func:`redact_text` (URLs, ``password=...``).
+
+    Attached to every handler the command line installs (``-v``, ``--log-file``), so no
+    log line shows a secret that reached a message in a URL.
+    """
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        record.msg, record.args = redact_text(record.getMessage()), None
         return True
 
 
@@ -247,8 +285,10 @@ BACKENDS: dict[str, str | Factory] = {
     "sim": "stickslip.sim.urls:open_url",
     "sim+physics": "stickslip.sim.urls:open_url",
     "mm3a": "stickslip.devices.nanocontrol:open_url",
+    "mm3a+socket": "stickslip.devices.nanocontrol:open_url",
     "anc300": "stickslip.devices.anc300:open_url",
     "smaract-mcs": "stickslip.devices.smaract:open_mcs",
+    "smaract-mcs+socket": "stickslip.devices.smaract:open_mcs",
     "smaract-mcs2": "stickslip.devices.smaract:open_mcs2",
 }
 
@@ -258,11 +298,57 @@ def register_backend(scheme: str, factory: str | Factory) -> None:
     BACKENDS[scheme] = factory
 
 
+def check_device_url(url: str) -> str:
+    """``url`` if it names a device that could be opened; ``ValueError`` (without a secret) if it never can.
+
+    Checked without opening anything: a scheme with ``//`` (:func:`url_scheme`) that a
+    backend is registered for, a URL that parses, a port in 1..65535, a host name DNS
+    could carry (labels of 1 to 63 characters, at most 253 in all), and a host or a
+    port for anything but the simulator. A URL that
+    passes may still fail to open (nothing answers there); one that fails never would,
+    and is neither opened nor stored.
+
+    >>> check_device_url("anc300://10.0.0.2:7230?axes=1,2,3")
+    'anc300://10.0.0.2:7230?axes=1,2,3'
+    >>> check_device_url("anc300://h:99999")
+    Traceback (most recent call last):
+    ...
+    ValueError: malformed device URL 'anc300://h:99999': the port must be a number in 1..65535
+    """
+    scheme = url_scheme(url)
+    if BACKENDS.get(scheme) is None:  # a variant (mm3a+socket) is registered as such: anc300+x is no URL
+        known = ", ".join(f"{s}://" for s in sorted(BACKENDS))
+        raise ValueError(f"unknown device URL scheme {scheme!r} in {redact_url(url)!r} (known: {known})")
+    try:
+        parts = urlsplit(url)
+        port = parts.port
+        host = parts.hostname
+    except ValueError:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535") from None
+    if port == 0:
+        raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
+    if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
+        raise ValueError(
+            f"device URL {redact_url(url)!r} names no host and no port: give the serial port "
+            f"({scheme}:///dev/ttyUSB0) or, where the controller has one, its network address"
+        )
+    if host and not (host.startswith("[") or ":" in host):  # a name (or IPv4 address), not an IPv6 address
+        labels = host.rstrip(".").split(".")
+        if len(host) > 253 or any(not 1 <= len(label) <= 63 for label in labels):
+            raise ValueError(
+                f"the host name in {redact_url(url)[:80]!r} cannot exist: a host name has labels of 1 to 63 "
+                f"characters between its dots, at most 253 in all (this one: {len(host)}, its longest label "
+                f"{max(map(len, labels))})"
+            )
+    return url
+
+
 def open_device(url: str = "sim://") -> Controller:
     """Open the controller a URL names.
 
     Raises :class:`DeviceError` for an unknown scheme or a device that cannot be opened,
-    ``ValueError`` for a malformed URL or option; messages never contain a secret.
+    ``ValueError`` for a malformed URL or option (:func:`check_device_url`); messages
+    never contain a secret.
     """
     scheme = url_scheme(url)
     base_scheme = scheme.split("+", 1)[0]
@@ -272,6 +358,7 @@ def open_device(url: str = "sim://") -> Controller:
         raise DeviceError(
             f"unknown device URL scheme {scheme!r} in {redact_url(url)!r} (known: {known})"
         )
+    check_device_url(url)
     if isinstance(factory, str):
         mod_name, func_name = factory.split(":")
         try:

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from .. import kinematics as kin
-from ..records import atomic_write_text
+from ..records import atomic_write_text, check_version, loads_json, read_json
 from .base import device_key
 
 __all__ = [
@@ -66,14 +66,9 @@ class JsonStateFile:
         self.path = Path(path).expanduser()
 
     def _read(self) -> dict[str, dict[str, Any]]:
-        try:
-            text = self.path.read_text(encoding="utf-8")
-        except FileNotFoundError:
+        if not self.path.exists():
             return {}
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise ValueError(f"{self.path} is not valid JSON ({e}); fix or delete it") from None
+        data = read_json(self.path, "device state")  # strict: a key twice, not JSON, a FIFO: refused naming it
         if not isinstance(data, dict):
             raise ValueError(f"{self.path}: expected a JSON object of devices")
         return data
@@ -84,7 +79,7 @@ class JsonStateFile:
 
     def set_state(self, device: str, key: str, value_json: Any) -> None:
         """Store ``value_json`` (JSON text or a JSON-serialisable object) for ``device``."""
-        value = json.loads(value_json) if isinstance(value_json, str) else value_json
+        value = loads_json(value_json, f"the state {key!r} of {device}") if isinstance(value_json, str) else value_json
         data = self._read()
         data.setdefault(device, {})[key] = value
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -180,8 +175,9 @@ class DeviceState:
             setattr(self, name, v)
 
     def to_json(self) -> dict[str, Any]:
-        """The JSON shape kept in the store (SI units)."""
+        """The JSON shape kept in the store (SI units), format :data:`STATE_VERSION`."""
         return {
+            "version": STATE_VERSION,
             "positions": {str(j): self.positions[j] for j in sorted(self.positions)},
             "sources": {str(j): self.sources[j] for j in sorted(self.sources)},
             "theta": self.theta,
@@ -192,6 +188,8 @@ class DeviceState:
 
 
 _KEY = "positions"
+STATE_VERSION = 1
+"""Format of the stored positions: a state of a newer stickslip (a higher version) is refused, not guessed at."""
 
 
 def load_state(store: StateStore, device: str) -> DeviceState:
@@ -201,7 +199,8 @@ def load_state(store: StateStore, device: str) -> DeviceState:
     if not raw:
         return state
     if isinstance(raw, str):
-        raw = json.loads(raw)
+        raw = loads_json(raw, f"the stored positions of {device}")
+    check_version(raw, f"the stored positions of {device}", "device state", STATE_VERSION)
     try:
         for j, q in raw.get("positions", {}).items():
             state.positions[int(j)] = float(q)

@@ -62,6 +62,9 @@ class Transport:
         self.timeout = float(timeout)
         self._buffer = b""
         self.closed = False
+        self.silent = False
+        """True once a reply did not come within its timeout, until one does: the other end stopped answering,
+        and best-effort commands (a stop, grounding on close) are then sent without waiting for answers."""
 
     # -- to implement -------------------------------------------------------------------
     def _send(self, data: bytes) -> None:  # pragma: no cover - abstract
@@ -99,9 +102,11 @@ class Transport:
             cut = _first_terminator(self._buffer, terms)
             if cut is not None:
                 message, self._buffer = self._buffer[:cut], self._buffer[cut:]
+                self.silent = False
                 return message
             remaining = deadline - time.monotonic()
             if remaining <= 0:
+                self.silent = True
                 partial = f" (received so far: {self._buffer!r})" if self._buffer else ""
                 raise DeviceError(f"{self.name}: no complete reply within {timeout:g} s{partial}")
             if self.closed:

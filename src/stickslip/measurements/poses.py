@@ -18,6 +18,8 @@ from .rows import TableError, _csv_problem, _parse_float, check_pose
 from .table import _read_table_text
 
 POSE_TABLE_REQUIRED = ("joint", "q1", "q2", "q3", "theta", "psi")
+POSE_COLUMNS = ("joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end")
+"""The columns a pose table's rows are checked in (numbers, a joint, a direction); any other is passed through."""
 
 
 @dataclass(frozen=True)

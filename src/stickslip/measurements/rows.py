@@ -10,6 +10,7 @@ from dataclasses import asdict, dataclass, replace
 from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
+from ..records import unguard_cell
 
 HEADER = ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
 POSE_COLUMNS = ("q1", "q2", "q3", "theta", "psi")
@@ -142,7 +143,7 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
 def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
     """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
     problems: list[str] = []
-    day = (row.get("day") or "").strip()
+    day = unguard_cell(row.get("day") or "").strip()  # a label written guarded against formulas
     if not day:
         problems.append(f"{where}: day is empty (use a session label, e.g. an ISO date)")
     elif (why := day_label_problem(day)) is not None:

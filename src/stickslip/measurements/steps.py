@@ -31,7 +31,7 @@ from typing import TextIO
 from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
-from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, read_text_bounded
+from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, guard_cell, read_text_bounded, unguard_cell
 from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_pose
 
 __all__ = [
@@ -106,7 +106,7 @@ class StepSize:
 
 def _problems(row: dict[str, str], where: str) -> tuple[StepSize | None, list[str]]:
     problems: list[str] = []
-    day = (row.get("day") or "").strip()
+    day = unguard_cell(row.get("day") or "").strip()  # a label written guarded against formulas
     if not day:
         problems.append(f"{where}: day is empty (use a session label, e.g. an ISO date)")
     elif (why := day_label_problem(day)) is not None:
@@ -217,7 +217,8 @@ def step_sizes_to_csv(rows: Iterable[StepSize]) -> str:
 def _write(f: TextIO, rows: Iterable[StepSize]) -> None:
     w = csv.writer(f, lineterminator="\n")
     w.writerow(STEP_HEADER)
-    w.writerows(map(operator.attrgetter(*STEP_HEADER), rows))
+    rest = operator.attrgetter(*STEP_HEADER[1:])
+    w.writerows((guard_cell(str(r.day)), *rest(r)) for r in rows)  # a label a spreadsheet would run: guarded
 
 
 def write_step_sizes(path: str | Path, rows: Sequence[StepSize]) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import operator
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, TextIO
@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..clock import day_label_problem
-from ..records import MAX_TABLE_BYTES, atomic_write, read_text_bounded
+from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, unguard_cell
 from .chunks import _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok
 from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
 
@@ -189,7 +189,9 @@ def _measurement_chunk(
     cols: Sequence[Sequence[str]], lines: list[int], source: str
 ) -> tuple[TraverseTable, list[tuple[int, str]]]:
     """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`."""
-    days = [c.strip() for c in cols[0]]
+    # a guarded label (records.guard_cell) loses its guard before it is stripped: "'\t" is a tab, a blank label
+    quoted = {d: unguard_cell(d).strip() for d in set(cols[0]) if d.startswith("'")}
+    days = [quoted[c] if c in quoted else c.strip() for c in cols[0]] if quoted else [c.strip() for c in cols[0]]
     ok = ~_equal(days, "")
     bad_labels = {d for d in set(days) if d and day_label_problem(d) is not None}  # a table holds few labels
     if bad_labels:
@@ -267,13 +269,28 @@ def read_measurement_table(path: str | Path) -> TraverseTable:
     return parse_measurement_table(_read_table_text(path), str(path))
 
 
+def _csv_rows(traverses: Iterable[Traverse]) -> Iterator[tuple[Any, ...]]:
+    """The rows a table is written with: the session label guarded against spreadsheet formulas.
+
+    A label such as ``=HYPERLINK(...)`` is written ``'=HYPERLINK(...)`` (records.guard_cell);
+    every other cell is a number or a direction, left as it is. Labels are few: each is
+    guarded once.
+    """
+    rest = operator.attrgetter(*HEADER[1:])
+    guarded: dict[str, str] = {}
+    for t in traverses:
+        day = guarded.get(t.day)
+        if day is None:
+            day = guarded[t.day] = guard_cell(str(t.day))
+        yield (day, *rest(t))
+
+
 def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
     """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them)."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(HEADER)
-    row = operator.attrgetter(*HEADER)
-    w.writerows(map(row, traverses))
+    w.writerows(_csv_rows(traverses))
     return buf.getvalue()
 
 
@@ -283,12 +300,11 @@ def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
     Streamed (an iterator of a million stored traverses is never held as text); the
     file appears only when complete: a failed write keeps the old file.
     """
-    row = operator.attrgetter(*HEADER)
 
     def write(f: TextIO) -> None:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(HEADER)
-        w.writerows(map(row, traverses))
+        w.writerows(_csv_rows(traverses))
 
     atomic_write(path, write)
 

@@ -21,7 +21,7 @@ from ..audio.detector import Tuning, detector_for
 from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock, device_key
 from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
-from ..records import atomic_write_text
+from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 from .traverse import TraverseError, TraverseResult, measure_traverse
 
 __all__ = [
@@ -149,7 +149,7 @@ def check_append_target(path: Path) -> str:
     """
     if not path.exists():
         return ""
-    old = path.read_text(encoding="utf-8-sig")
+    old = read_text_bounded(path, "measurement table", MAX_TABLE_BYTES)  # a FIFO or device: refused, never opened
     if not old.strip():
         return ""
     header = measurements_to_csv([]).split("\n", 1)[0]

@@ -13,6 +13,11 @@ Safety
   file, and several processes may write at once without losing rows.
 * :meth:`Store.add_traverse` commits each traverse on its own: a measurement session
   that dies keeps every traverse completed before it died.
+* The file is stickslip's: ``PRAGMA application_id`` is :data:`APPLICATION_ID`. Another
+  application's SQLite file, a file that is not a database, a folder, FIFO or device is
+  refused before anything is written (a database made before the id existed is known by
+  its tables and stamped); a damaged file is one :class:`StoreError` naming it, never a
+  ``sqlite3.DatabaseError``.
 * The schema is versioned with ``PRAGMA user_version``; :data:`MIGRATIONS` is the
   ordered list of SQL scripts that bring a file from version *k* to *k + 1*. Opening a
   file runs the missing ones in one transaction; a file from a newer stickslip is
@@ -31,6 +36,7 @@ from __future__ import annotations
 from ..clock import stale_message
 from .calibrations import CalibrationStore
 from .schema import (
+    APPLICATION_ID,
     BUSY_TIMEOUT_MS,
     DEFAULT_DEVICE,
     ENV_VAR,
@@ -46,6 +52,7 @@ from .state import StateStore
 from .traverses import TraverseStore
 
 __all__ = [
+    "APPLICATION_ID",
     "BUSY_TIMEOUT_MS",
     "DEFAULT_DEVICE",
     "ENV_VAR",

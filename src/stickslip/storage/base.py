@@ -12,7 +12,9 @@ from typing import TYPE_CHECKING, Any, Self
 
 from ..devices.base import redact_url
 from ..measurements import Traverse
+from ..records import special_kind
 from .schema import (
+    APPLICATION_ID,
     BUSY_TIMEOUT_MS,
     MIGRATIONS,
     SCHEMA_VERSION,
@@ -27,8 +29,178 @@ if TYPE_CHECKING:  # pragma: no cover
     pass
 
 
+# ---------------------------------------------------------------- whose file is it?
+
+_MAGIC = b"SQLite format 3\x00"
+
+
+def _tables_of(con: sqlite3.Connection) -> dict[str, tuple[str, ...]]:
+    """``{table: column names}`` of a database (its own tables, not SQLite's)."""
+    sql = "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%'"
+    names = [r[0] for r in con.execute(sql)]
+    return {n: tuple(r[1] for r in con.execute(f'PRAGMA table_info("{n}")')) for n in names}
+
+
+def _our_schema(version: int) -> dict[str, tuple[str, ...]]:
+    """The tables and columns a stickslip database has at schema ``version`` (the migrations run in memory)."""
+    con = sqlite3.connect(":memory:")
+    try:
+        for script in MIGRATIONS[:version]:
+            for stmt in _split_sql(script):
+                con.execute(stmt)
+        return _tables_of(con)
+    finally:
+        con.close()
+
+
+def check_database_file(path: Path) -> str:
+    """Whether stickslip may open ``path``: ``"new"``, ``"ours"`` or ``"legacy"``; else :class:`StoreError`.
+
+    Decided before anything opens the file for writing, from its first 100 bytes and, for
+    a file without an application id, a read-only look at its tables (``immutable``: no
+    lock, no journal, nothing created beside it):
+
+    * nothing there, an empty file, or an SQLite file without tables: ``"new"``;
+    * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``;
+    * no application id, and the tables and columns of a stickslip schema version
+      (a database made before the id was set): ``"legacy"``, stamped when opened;
+    * anything else is refused untouched, naming the file and why: a folder, FIFO or
+      device; not an SQLite file; another application's id; another schema; a schema
+      newer than this stickslip; a file too damaged to read its tables.
+    """
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        return "new"
+    except OSError as e:
+        raise StoreError(f"cannot open the database {path}: {e.strerror or e}") from None
+    kind = special_kind(st.st_mode)
+    if kind is not None:
+        raise StoreError(f"{path} is {kind}, not a database file: give --db the path of a file")
+    if st.st_size == 0:
+        return "new"
+    try:
+        with open(path, "rb") as f:
+            head = f.read(100)
+    except OSError as e:
+        raise StoreError(f"cannot open the database {path}: {e.strerror or e}") from None
+    if not head.startswith(_MAGIC) or len(head) < 100:
+        raise StoreError(
+            f"{path} is not an SQLite database (it begins {head[:16]!r}); stickslip leaves it untouched: "
+            "give --db another file"
+        )
+    user_version = int.from_bytes(head[60:64], "big", signed=True)
+    app_id = int.from_bytes(head[68:72], "big", signed=True)
+    if app_id == APPLICATION_ID:
+        return "ours"
+    if app_id != 0:
+        raise StoreError(
+            f"{path} is another application's SQLite file (application id {app_id & 0xFFFFFFFF:#010x}, "
+            f"not stickslip's {APPLICATION_ID:#010x}); stickslip leaves it untouched: give --db another file"
+        )
+    try:
+        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
+        try:
+            tables = _tables_of(con)
+        finally:
+            con.close()
+    except sqlite3.DatabaseError as e:
+        raise StoreError(f"the database {path} is damaged or not a database ({e}); it was left untouched") from None
+    if not tables and user_version == 0:
+        return "new"
+    if 1 <= user_version <= len(MIGRATIONS) and tables == _our_schema(user_version):
+        return "legacy"
+    if user_version > len(MIGRATIONS):
+        raise StoreError(
+            f"{path} has schema version {user_version}, newer than this stickslip understands ({len(MIGRATIONS)}), "
+            "or is another application's file: left untouched (upgrade stickslip, or give --db another file)"
+        )
+    shown = ", ".join(sorted(tables)[:5]) + (" ..." if len(tables) > 5 else "")
+    raise StoreError(
+        f"{path} is an SQLite database of another application (tables: {shown or 'none'}; schema version "
+        f"{user_version}); stickslip leaves it untouched: give --db another file"
+    )
+
+
+# ---------------------------------------------------------------- a connection that names a damaged file
+
+_DAMAGED = ("SQLITE_CORRUPT", "SQLITE_NOTADB")
+
+
+def _damaged(e: sqlite3.DatabaseError) -> bool:
+    name = str(getattr(e, "sqlite_errorname", "") or "")
+    text = str(e)
+    return name.startswith(_DAMAGED) or "malformed" in text or "not a database" in text
+
+
+class _Cursor(sqlite3.Cursor):
+    """A cursor whose reads turn a damaged file (``database disk image is malformed``) into :class:`StoreError`."""
+
+    def _problem(self, e: sqlite3.DatabaseError) -> BaseException:
+        con = self.connection
+        return con._problem(e) if isinstance(con, _Connection) else e
+
+    def fetchone(self) -> Any:
+        try:
+            return super().fetchone()
+        except sqlite3.DatabaseError as e:
+            raise self._problem(e) from None
+
+    def fetchmany(self, size: int | None = None) -> list[Any]:
+        try:
+            return super().fetchmany(self.arraysize if size is None else size)
+        except sqlite3.DatabaseError as e:
+            raise self._problem(e) from None
+
+    def fetchall(self) -> list[Any]:
+        try:
+            return super().fetchall()
+        except sqlite3.DatabaseError as e:
+            raise self._problem(e) from None
+
+    def __next__(self) -> Any:
+        try:
+            return super().__next__()
+        except sqlite3.DatabaseError as e:
+            raise self._problem(e) from None
+
+
+class _Connection(sqlite3.Connection):
+    """The store's connection: a damaged file is one :class:`StoreError` naming it, wherever it is found."""
+
+    path: Path = Path()
+
+    def _problem(self, e: sqlite3.DatabaseError) -> BaseException:
+        if not _damaged(e):
+            return e
+        return StoreError(
+            f"the database {self.path} is damaged ({e}); nothing was changed: restore it from a backup, "
+            f"or see what `sqlite3 {self.path} .recover` can save"
+        )
+
+    def cursor(self, factory: Any = None) -> Any:  # the same, with our cursor
+        return super().cursor(factory or _Cursor)
+
+    def execute(self, sql: str, parameters: Any = (), /) -> Any:
+        cur = self.cursor()  # sqlite3's own execute makes a plain cursor, whose reads we could not watch
+        try:
+            return cur.execute(sql, parameters)
+        except sqlite3.DatabaseError as e:
+            raise self._problem(e) from None
+
+    def executemany(self, sql: str, parameters: Any, /) -> Any:
+        cur = self.cursor()
+        try:
+            return cur.executemany(sql, parameters)
+        except sqlite3.DatabaseError as e:
+            raise self._problem(e) from None
+
+
 def _connect(path: Path) -> sqlite3.Connection:
-    con = sqlite3.connect(str(path), timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None)
+    con = sqlite3.connect(
+        str(path), timeout=BUSY_TIMEOUT_MS / 1000, isolation_level=None, factory=_Connection
+    )
+    con.path = path
     con.row_factory = sqlite3.Row
     con.execute(f"PRAGMA busy_timeout = {BUSY_TIMEOUT_MS}")
     con.execute("PRAGMA foreign_keys = ON")
@@ -65,10 +237,14 @@ class _Base:
         """Open (creating and migrating if needed) the database at ``path``.
 
         ``path`` defaults to ``$STICKSLIP_DB``, else the user's data directory (see
-        :func:`default_db_path`). Raises :class:`StoreError` when the file is not a
-        stickslip database or comes from a newer version.
+        :func:`default_db_path`). Before anything writes to it, :func:`check_database_file`
+        decides whose the file is: another application's SQLite file, a file that is not a
+        database, a folder, FIFO or device is refused untouched (:class:`StoreError`
+        naming it); a stickslip database made before the application id is stamped with
+        it; a new one gets it. A damaged file, or one from a newer stickslip, is refused.
         """
         p = resolve_db_path(path)
+        whose = check_database_file(p)
         try:
             p.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
@@ -79,13 +255,13 @@ class _Base:
             raise StoreError(f"cannot open the database {p}: {e}") from None
         store = cls(con, p)
         try:
-            store._migrate()
+            store._migrate(stamp=whose != "ours")
         except sqlite3.DatabaseError as e:
             con.close()
             raise StoreError(f"{p} is not a usable stickslip database: {e}") from None
         except StoreError as e:
             con.close()
-            if "newer than" in str(e):
+            if "newer than" in str(e) or "damaged" in str(e):
                 raise
             raise StoreError(f"{p} is not a usable stickslip database: {e}") from None
         return store
@@ -142,16 +318,19 @@ class _Base:
             + "; nothing of this change was stored"
         )
 
-    def _migrate(self) -> None:
+    def _migrate(self, stamp: bool = False) -> None:
+        """Bring the file to :data:`SCHEMA_VERSION`; with ``stamp``, also set stickslip's application id."""
         version = self.schema_version
         if version > SCHEMA_VERSION:
             raise StoreError(
                 f"{self.path} has schema version {version}, newer than this stickslip understands "
                 f"({SCHEMA_VERSION}): upgrade stickslip"
             )
-        if version == SCHEMA_VERSION:
+        if version == SCHEMA_VERSION and not stamp:
             return
         with self._write() as con:
+            if stamp:
+                con.execute(f"PRAGMA application_id = {APPLICATION_ID}")
             version = int(
                 con.execute("PRAGMA user_version").fetchone()[0]
             )  # another process may have won
@@ -235,6 +414,20 @@ class _Base:
             "SELECT t.*, s.day AS day, d.url AS device FROM traverses t "
             "JOIN sessions s ON s.id = t.session_id JOIN devices d ON d.id = s.device_id WHERE 1=1"
         )
+        where, args = self._traverse_filter(device, day, joint, ids, include_excluded)
+        self._check_stored_types(where, args)
+        return self._con.execute(sql + where + " ORDER BY t.id", args)
+
+    @staticmethod
+    def _traverse_filter(
+        device: str | None,
+        day: str | None,
+        joint: int | None,
+        ids: Sequence[int] | None,
+        include_excluded: bool,
+    ) -> tuple[str, list[Any]]:
+        """The ``AND ...`` clauses (and their arguments) that pick the traverses asked for."""
+        sql = ""
         if not include_excluded:
             sql += " AND t.excluded IS NULL"
         args: list[Any] = []
@@ -250,8 +443,34 @@ class _Base:
         if ids is not None:
             sql += f" AND t.id IN ({','.join('?' * len(ids))})"
             args += [int(i) for i in ids]
-        sql += " ORDER BY t.id"
-        return self._con.execute(sql, args)
+        return sql, args
+
+    def _check_stored_types(self, where: str, args: list[Any]) -> None:
+        """Refuse, naming the traverse and the column, a stored value of the wrong type or out of its range.
+
+        SQLite keeps what it is given (text in a REAL column, 2.5 in an INTEGER one, a
+        joint 7 past a CHECK turned off): one query over the traverses asked for finds
+        the first such row, before any is read, so none is exported or fitted silently.
+        """
+        row = self._con.execute(
+            "SELECT id, bad FROM (SELECT t.id AS id, " + _BAD_COLUMN + " AS bad FROM traverses t "
+            "JOIN sessions s ON s.id = t.session_id JOIN devices d ON d.id = s.device_id WHERE 1=1" + where
+            + ") WHERE bad IS NOT NULL ORDER BY id LIMIT 1",
+            args,
+        ).fetchone()
+        if row is None:
+            return
+        tid, col = int(row[0]), str(row[1])
+        if col == "day":
+            value = self._con.execute(
+                "SELECT s.day FROM traverses t JOIN sessions s ON s.id = t.session_id WHERE t.id = ?", (tid,)
+            ).fetchone()[0]
+        else:
+            value = self._con.execute(f'SELECT "{col}" FROM traverses WHERE id = ?', (tid,)).fetchone()[0]
+        raise StoreError(
+            f"{self.path}: traverse {tid}: {col} holds {value!r} ({type(value).__name__}), {_SHOULD[col]}; "
+            f"nothing was read (fix or delete it: stickslip delete -t {tid})"
+        )
 
     @staticmethod
     def _to_traverse(r: sqlite3.Row) -> Traverse:
@@ -275,6 +494,29 @@ class _Base:
 
 
 
+
+
+_REAL_COLUMNS = ("q1", "q2", "q3", "theta", "psi", "start", "end")
+_SHOULD = {
+    "joint": "not a joint (1, 2 or 3)",
+    "direction": "not a direction ('+' or '-')",
+    "steps": "not a positive whole number of steps",
+    "day": "not a session label (non-blank text)",
+    **dict.fromkeys(_REAL_COLUMNS, "not a finite number (SI units)"),
+}
+_BAD_COLUMN = (
+    "CASE"
+    " WHEN typeof(t.joint) != 'integer' OR t.joint NOT IN (1, 2, 3) THEN 'joint'"
+    " WHEN typeof(t.direction) != 'text' OR t.direction NOT IN ('+', '-') THEN 'direction'"
+    + "".join(
+        f" WHEN typeof(t.\"{c}\") NOT IN ('real', 'integer') OR abs(t.\"{c}\") > 1.7976931348623157e308 THEN '{c}'"
+        for c in _REAL_COLUMNS
+    )
+    + " WHEN typeof(t.steps) != 'integer' OR t.steps <= 0 THEN 'steps'"
+    " WHEN typeof(s.day) != 'text' OR trim(s.day) = '' THEN 'day'"
+    " END"
+)
+"""SQL: the first column of a stored traverse ``t`` (with its session ``s``) whose value cannot be what it says."""
 
 
 def _rowid(cur: sqlite3.Cursor) -> int:

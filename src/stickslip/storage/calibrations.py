@@ -6,10 +6,11 @@ import json
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
+from ..records import loads_json
 from .base import _Base, _rowid
-from .schema import DEFAULT_DEVICE, _now
+from .schema import DEFAULT_DEVICE, StoreError, _now
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..calibration import Calibration
@@ -30,7 +31,7 @@ class CalibrationStore(_Base):
 
         Raises ``ValueError`` naming the ids that do not exist.
         """
-        doc = json.dumps(cal.to_dict(), sort_keys=True)
+        doc = redact_text(json.dumps(cal.to_dict(), sort_keys=True))  # a URL or note in it: no secret stored
         day = getattr(cal, "day", None)
         method = getattr(cal, "method", None)
         ids = [int(i) for i in (traverse_ids or [])]
@@ -59,10 +60,16 @@ class CalibrationStore(_Base):
             )
             return cid
 
-    def _load_cal(self, doc: str) -> Calibration:
+    def _load_cal(self, doc: object, cid: object = "?") -> Calibration:
         from ..calibration import Calibration
 
-        return Calibration.from_dict(json.loads(doc))
+        where = f"{self.path}: stored calibration #{cid}"
+        try:
+            if not isinstance(doc, str):
+                raise ValueError(f"{where} holds {type(doc).__name__}, not JSON text")
+            return Calibration.from_dict(loads_json(doc, where))
+        except ValueError as e:
+            raise StoreError(str(e) if str(e).startswith(where) else f"{where}: {e}") from None
 
     def calibration(self, calibration_id: int) -> Calibration:
         """The stored calibration with this id (``KeyError`` if none)."""
@@ -71,17 +78,17 @@ class CalibrationStore(_Base):
         ).fetchone()
         if row is None:
             raise KeyError(f"no calibration with id {calibration_id}")
-        return self._load_cal(row[0])
+        return self._load_cal(row[0], calibration_id)
 
     def latest_calibration(self, device: str | None = None) -> Calibration | None:
         """The most recently stored calibration (of ``device``, or of any), or ``None``."""
-        sql = "SELECT c.json FROM calibrations c JOIN devices d ON d.id = c.device_id"
+        sql = "SELECT c.json, c.id FROM calibrations c JOIN devices d ON d.id = c.device_id"
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
             args = (redact_url(device),)
         row = self._con.execute(sql + " ORDER BY c.id DESC LIMIT 1", args).fetchone()
-        return None if row is None else self._load_cal(row[0])
+        return None if row is None else self._load_cal(row[0], row[1])
 
     def calibration_traverses(self, calibration_id: int) -> list[Traverse]:
         """The traverses a stored calibration was made from."""

@@ -18,6 +18,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 ENV_VAR = "STICKSLIP_DB"
+APPLICATION_ID = 0x5374536C
+"""``PRAGMA application_id`` of every stickslip database (``"StSl"``): a file without it is not written to
+unless its tables are a stickslip schema (a database made before the id was set, stamped when opened)."""
 DEFAULT_DEVICE = "sim://"
 BUSY_TIMEOUT_MS = 30_000
 

@@ -6,9 +6,10 @@ import json
 import os
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
+from ..records import loads_json
 from .base import _Base
-from .schema import _now
+from .schema import StoreError, _now
 
 if TYPE_CHECKING:  # pragma: no cover
     pass
@@ -32,6 +33,7 @@ class StateStore(_Base):
                 text = json.dumps(value_json)
         else:
             text = json.dumps(value_json)
+        text = redact_text(text)  # no secret is stored
         with self._write() as con:
             dev = self._device_id(con, device)
             con.execute(
@@ -42,13 +44,26 @@ class StateStore(_Base):
             )
 
     def get_state(self, device: str, key: str, default: Any = None) -> Any:
-        """The decoded JSON value stored under ``key`` for ``device``, or ``default``."""
+        """The decoded JSON value stored under ``key`` for ``device``, or ``default``.
+
+        A stored value that is not JSON (or gives a key twice) raises :class:`StoreError`
+        naming the database, the device and the key.
+        """
         row = self._con.execute(
             "SELECT s.value FROM device_state s JOIN devices d ON d.id = s.device_id "
             "WHERE d.url = ? AND s.key = ?",
             (redact_url(device), key),
         ).fetchone()
-        return default if row is None else json.loads(row[0])
+        return default if row is None else self._json(row[0], device, key)
+
+    def _json(self, text: object, device: str, key: str) -> Any:
+        where = f"{self.path}: the stored {key!r} of {redact_url(device)}"
+        if not isinstance(text, str):
+            raise StoreError(f"{where} holds {type(text).__name__}, not JSON text")
+        try:
+            return loads_json(text, where)
+        except ValueError as e:
+            raise StoreError(str(e)) from None
 
     # -- one process drives a device at a time
 
@@ -65,7 +80,7 @@ class StateStore(_Base):
                 "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
             ).fetchone()
             if row is not None:
-                current = json.loads(row[0])
+                current = self._json(row[0], device, "lock")
                 if isinstance(current, dict) and _alive(current):
                     return dict(current)
             con.execute(
@@ -83,7 +98,8 @@ class StateStore(_Base):
             row = con.execute(
                 "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
             ).fetchone()
-            if row is not None and json.loads(row[0]).get("pid") == pid:
+            current = None if row is None else self._json(row[0], device, "lock")
+            if isinstance(current, dict) and current.get("pid") == pid:
                 con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
 
 

@@ -7,7 +7,7 @@ import sqlite3
 from collections.abc import Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
 from .base import _Base, _require_traverses, _rowid
 from .schema import _COLUMNS, DEFAULT_DEVICE, StoreError, _content_keys, _iso, content_key
@@ -113,6 +113,7 @@ class TraverseStore(_Base):
             Provenance (e.g. the file it was imported from).
         """
         self._check(traverse)
+        how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
             return self._insert_traverse(con, traverse, dev, how, _iso(measured_at), source)
@@ -134,6 +135,7 @@ class TraverseStore(_Base):
         for t in ts:
             self._check(t)
         when = _iso(measured_at)
+        how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
             url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
@@ -232,6 +234,7 @@ class TraverseStore(_Base):
         ids = sorted({int(i) for i in ids})
         if reason is not None and not reason.strip():
             raise ValueError("give a reason for excluding (e.g. 'cable snagged')")
+        reason = _note(reason)
         marks = ",".join("?" * len(ids))
         with self._write() as con:
             _require_traverses(con, ids, marks)
@@ -259,3 +262,7 @@ class TraverseStore(_Base):
             )
         return {"traverses": int(n), "calibration_links": int(links)}
 
+
+def _note(text: str | None) -> str | None:
+    """Free text kept with a row (how, source, a reason), through the one redaction: no secret is stored."""
+    return None if text is None else redact_text(str(text))

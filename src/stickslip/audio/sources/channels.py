@@ -24,7 +24,7 @@ import numpy as np
 
 from ..features.stepclock import step_rate_hz
 from ..paramfield import param
-from .files import load_soundfile, open_error
+from .files import load_soundfile, open_error, regular
 from .guard import GUARD, step_line_db
 
 __all__ = ["CHANNELS", "ChannelParams", "channel_problem"]
@@ -60,7 +60,7 @@ def channel_problem(path: str | Path, seconds: float | None = None, p: ChannelPa
     """
     seconds = p.seconds if seconds is None else seconds
     sf = load_soundfile()
-    path_ = Path(path)
+    path_ = regular(path)
     try:
         with sf.SoundFile(str(path_)) as f:
             rate, n = int(f.samplerate), int(f.channels)

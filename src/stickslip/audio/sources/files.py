@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ...records import atomic_write
+from ...records import atomic_write, regular_file
 
 __all__ = [
     "AUDIO_EXTRA",
@@ -42,6 +42,17 @@ def load_soundfile() -> Any:
     return soundfile
 
 
+def regular(path: str | Path) -> Path:
+    """``path`` if it is a regular file: a FIFO or device is never opened (records.regular_file), else the reason."""
+    p = Path(path)
+    if not p.exists():
+        return p  # said where it is opened, as before
+    try:
+        return regular_file(p, "recording")
+    except ValueError as e:
+        raise AudioSourceError(str(e)) from None
+
+
 def open_error(path: Path, e: Exception) -> AudioSourceError:
     if not path.exists():
         return AudioSourceError(f"{path}: no such file")
@@ -53,7 +64,7 @@ def open_error(path: Path, e: Exception) -> AudioSourceError:
 def wav_info(path: str | Path) -> tuple[int, int, float]:
     """(sample rate Hz, channels, duration s) of an audio file."""
     sf = load_soundfile()
-    p = Path(path)
+    p = regular(path)
     try:
         info = sf.info(str(p))
     except Exception as e:  # soundfile raises LibsndfileError / RuntimeError / TypeError
@@ -77,7 +88,7 @@ def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) 
     if int(block) < 1:
         raise ValueError(f"block must be >= 1 sample, got {block}")
     sf = load_soundfile()
-    p = Path(path)
+    p = regular(path)
     try:
         f = sf.SoundFile(str(p))
     except Exception as e:

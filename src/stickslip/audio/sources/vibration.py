@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ...records import regular_file
 from ..paramfield import param
 from .files import AudioSourceError, read_wav
 
@@ -111,7 +112,11 @@ def read_vibration(
 def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], float | None]:
     """The rows of numbers of a CSV of samples, and its rate (``sample_rate``, or its ``# sample_rate_hz=`` line)."""
     try:
+        if p.exists():
+            regular_file(p, "CSV of samples")  # a folder, FIFO or device is never opened
         text = p.read_text(encoding="utf-8")
+    except ValueError as e:
+        raise AudioSourceError(str(e)) from None
     except FileNotFoundError:
         raise AudioSourceError(f"{p}: no such file") from None
     except (OSError, UnicodeDecodeError) as e:

@@ -232,6 +232,7 @@ class NanoControlConsole:
         self._active: int | None = None
         self._scratch_values: tuple[str, str, str, str] | None = None
         self._profile_dirty = False
+        self._brief: float | None = None
         self.user_profile: int | None = None
         self.user_values: tuple[str, str, str, str] | None = None
         self.version = self.command("version") if version is None else version
@@ -250,6 +251,8 @@ class NanoControlConsole:
             or garbage; the message names the command and the port.
         """
         wait = self.timeout if timeout is None else timeout
+        if self._brief is not None:  # best-effort after a timeout: the console may not answer at all
+            wait = min(wait, self._brief)
         with self._lock:
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):
@@ -413,12 +416,22 @@ class NanoControlConsole:
                 self._restore_quietly()
 
     def _restore_quietly(self) -> None:
+        """Make the user's profile active again, best effort (a warning if that fails).
+
+        After a reply timed out (the console stopped answering), each command of it waits
+        at most 0.25 s: the URL's timeout bounds the fault, not the fault plus a timeout per
+        clean-up command.
+        """
         if self.transport.closed or self._driving:
             return
+        if getattr(self.transport, "silent", False):
+            self._brief = min(self.timeout, 0.25)
         try:
             self._restore_profile()
         except DeviceError as e:
             log.warning("could not make the user's speed profile active again: %s", e)
+        finally:
+            self._brief = None
 
     def _part(self, ch: str, count: int, m: int, made: int) -> None:
         """One ``go``: ``count x |m|`` steps in the sign of ``m``, stopped on time or raising."""
