@@ -31,6 +31,7 @@ from ..events import check_step_rate
 from ..features.fine import SignaturePredictor
 from ..features.spectra import SPECTRA, SpectraParams
 from ..features.stepclock import step_rate_hz
+from .added import ADDED, AddedParams, joint_alone_db
 from .drops import DROPS, DropCheck, DropParams
 from .fit import FIT, FitParams
 from .hold import Hold
@@ -58,6 +59,8 @@ class ChangeParams:
     stale: StaleParams = field(default_factory=lambda: STALE)
     release: ReleaseParams = field(default_factory=lambda: RELEASE)
     spectra: SpectraParams = field(default_factory=lambda: SPECTRA)
+    #: sound added from the start of listening (None: the floor is the templates' alone, as before)
+    added: AddedParams | None = field(default_factory=lambda: ADDED)
 
 
 class ChangeState:
@@ -281,7 +284,17 @@ class ChangeState:
         self.drops.arm(end)
         if self.fits.predicts:
             self._hear_rate(self._heard_head_rate(), end)
+        self._added_from_start()
         self._start(end)
+
+    def _added_from_start(self) -> None:
+        """Sound added from the first sample: the floor capped at the joint's own level (:mod:`.added`)."""
+        if self.params.added is None or self.tpl.template is None:
+            return
+        alone = joint_alone_db(self.tpl.template, self.tuned, self._heard_head_rate(), self.params.added)
+        if alone is not None:
+            self.tpl.set_joint_alone(alone, self.drops.scale)
+            self.fits.mask(self.tpl.added_db)
 
     def _start(self, end: int) -> None:
         """Did listening begin at the stop (:mod:`.start`)? Then fire at once, the onset the start of listening."""
