@@ -18,6 +18,7 @@ Independent views, not the device's own:
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import os
 import socket
@@ -438,3 +439,51 @@ def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_tru
     ripple = 0.005 * hi  # the model's dead reckoning against the truth (no noise; the ripple)
     assert lo - ripple <= sim.position(3) <= hi + ripple
     assert sim.steps_simulated == 400
+
+
+def test_a_bluesky_move_plans_with_the_step_scale_observe_taught(RE: Any, sim: SimulatedMM3A) -> None:
+    """The axis plans as ``stickslip move`` does: with the joint's tracked step scale (procedures.move).
+
+    Reference: joint 3's step does not depend on q3 in a fixed pose, so a move of d takes
+    d / (f gamma) steps when the day's steps are f times the calibration's gamma; here
+    f+ = 1.25, set in the kept track by hand, and the CLI's move from the same kept state
+    must agree.
+    """
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.devices.base import device_key
+    from stickslip.devices.positions import save_state
+    from stickslip.motion.tracking import JointTrack
+
+    cal = true_calibration(sim)
+    key = device_key(sim.info.url)
+    pose = kin.Pose()
+    gamma = cal.gamma(3, "+", pose)
+    d = 200.3 * gamma * 1.25  # 200.3 scaled steps: far from a half step either way
+    track = JointTrack.fresh(cal, 3)
+    track.log_scale = np.array([math.log(1.25), math.log(0.8)])
+
+    def prepare() -> None:
+        with Store.open() as store:
+            state = load_state(store, key)
+            state.set_position(3, 1e-3, "set")
+            state.track[3] = track.to_json()
+            save_state(store, state)
+
+    prepare()
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, cal, name="q3")
+    RE(bps.mv(axis, 1e-3 + d))
+    steps = asyncio.run(axis.last_steps.get_value())
+    assert steps == 200 and round(d / gamma) == 250  # the unscaled calibration would send 250
+    with Store.open() as store:
+        kept_track = JointTrack.from_json(load_state(store, key).track[3])
+    assert kept_track.scale_of("+") == pytest.approx(1.25) and kept_track.sd > 0  # kept, and its spread grew
+    prepare()  # the same kept state again: the command line plans the same steps
+    cal_path = os.environ["STICKSLIP_DB"] + "-cal.json"
+    cal.save(cal_path)
+    to = f"{(1e-3 + d) * 1e3!r}mm"
+    r = CliRunner().invoke(app, ["move", "-d", sim.info.url, "-c", cal_path, "--joint", "3", "--to", to, "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["steps_signed"] == steps

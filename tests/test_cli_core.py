@@ -83,7 +83,7 @@ def test_plan_json_matches_library(files):
     tmp, meas = files
     cal_path = _cal(tmp, meas)
     r = runner.invoke(app, ["plan", "-c", str(cal_path), "--joint", "2", "--from", "10deg", "--to", "-100deg",
-                            "--q3", "6mm", "--theta", "-0.3", "--json"])
+                            "--q3", "6mm", "--theta", "-0.3rad", "--json"])
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
     lib = plan_move(Calibration.load(cal_path), 2, math.radians(10), math.radians(-100), Pose(q3=0.006, theta=-0.3))

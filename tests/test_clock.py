@@ -249,5 +249,5 @@ def test_traverse_and_demo_refuse_an_impossible_day_before_anything_moves(tmp_pa
     )
     assert r.exit_code == 2 and "day is out of range for month" in r.output
     assert not (tmp_path / "out").exists() and not db.exists()
-    r = runner.invoke(app, ["traverse", "-j", "3", "-d", "+", "--tuning", "t.json", "--day", "2026-1-5"])
+    r = runner.invoke(app, ["traverse", "-j", "3", "--direction", "+", "--tuning", "t.json", "--day", "2026-1-5"])
     assert r.exit_code == 2 and "write the date as 2026-01-05" in r.output

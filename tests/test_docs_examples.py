@@ -139,6 +139,8 @@ def test_readme_hardware_moves_run_against_the_emulator(tmp_path):
     lines = _readme_block_after("### Moving with the model")
     with NanoControlEmulator() as emu:
         lines = [ln.replace("mm3a:///dev/ttyUSB0", emu.url) for ln in lines]
-        r = _bash([". .venv/bin/activate", "stickslip calibrate meas.csv -o cal.json", *lines], tmp_path, env)
+        # the calibration records the device its traverses came from (the one the moves then drive)
+        calibrate = f"stickslip calibrate meas.csv -o cal.json --device {emu.url}"
+        r = _bash([". .venv/bin/activate", calibrate, *lines], tmp_path, env)
     assert r.returncode == 0, f"{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
     assert "Traceback" not in r.stderr

@@ -48,9 +48,12 @@ def test_the_site_builds_without_warnings(site: tuple[Path, str]) -> None:
         ("api/calibration", ["stickslip.calibration.calibrate", "Calibration", "validate"]),
         ("api/models", ["JointModel", "PrismaticParams", "RotaryParams"]),
         ("api/motion", ["Planner", "plan_reach", "ReachPlan", "JointTrack"]),
+        ("api/procedures", ["MoveRequest", "plan_tracked", "ObserveResult", "ReachRequest", "JogRequest",
+                            "listen_blocks"]),
         ("api/bluesky", ["StickSlipAxis", "StickSlipManipulator", "TipAxis", "calibration_day", "STOP_RETURN_S"]),
         ("api/devices", ["Controller", "KnowsTruePosition", "NanoControl"]),
         ("howto/anc300", ["STICKSLIP_ANC300_PASSWORD", "stepu"]),
+        ("howto/day-one", ["Day one on hardware", "18000", "126000", "backup", "Ctrl-C"]),
     ],
 )
 def test_api_pages_document_the_public_names(site: tuple[Path, str], page: str, names: list[str]) -> None:

@@ -300,7 +300,7 @@ def test_a_blank_session_label_is_refused(tmp_path, kit, label, where):
     args = {
         "calibrate": ["calibrate", kit["table"], "-o", d / "c.json"],
         "fit": ["fit", kit["table"], "-o", d / "c.json"],
-        "traverse": ["traverse", "-j", "3", "-d", "+", "--tuning", kit["tuning"], "--no-db"],
+        "traverse": ["traverse", "-j", "3", "--direction", "+", "--tuning", kit["tuning"], "--no-db"],
         "demo": ["demo", "--no-db", "--out", d / "res"],
     }[cmd]
     r = invoke([*args, "--day", label])
@@ -847,7 +847,7 @@ ROLES = {
     "log": (["--log-file", "{x}", "config", "path"], "w"),
     "calibrate -o": (["calibrate", "{table}", "-o", "{x}"], "w"),
     "export -o": (["export", "--db", "{db}", "-o", "{x}"], "w"),
-    "append": (["traverse", "-j", "3", "-d", "+", "--tuning", "{tuning}", "--no-db", "-a", "{x}"], "w"),
+    "append": (["traverse", "-j", "3", "--direction", "+", "--tuning", "{tuning}", "--no-db", "-a", "{x}"], "w"),
 }
 
 
@@ -930,7 +930,7 @@ def test_a_silent_anc300_ends_within_the_urls_timeout(tmp_path, kit, timeout, af
         tr.Transport.read_until, tr.Transport.read_available = read_until, read_available
         try:
             r = invoke(["move", "-d", url, "-c", kit["cal"], "--db", db, "-j", 3, "--by", "100um",
-                        "--burst", burst])
+                        "--burst", burst, "--trust-calibration"])
         finally:
             tr.Transport.read_until, tr.Transport.read_available = real_until, real_available
     error_line(r, "no complete reply")
@@ -1134,7 +1134,8 @@ def test_jogs_display_fits_and_redraws_in_place(monkeypatch, statuses, width):
             (["where", "--offline", "--db", "{db}", "--q2", "pi/0"], ["--q2", "pi/0", "zero"]),
             (["plan", "-c", "{cal}", "-j", "3", "--from", "0", "--to", "1um", "--q1", "-pi/0"], ["--q1", "zero"]),
             (["plan", "-c", "{cal}", "-j", "3", "--from", "0", "--to", "1e999"], ["--to", "finite"]),
-            (["traverse", "-j", "3", "-d", "+", "--tuning", "{tuning}", "--no-db", "--psi", "x"], ["--psi", "x"]),
+            (["traverse", "-j", "3", "--direction", "+", "--tuning", "{tuning}", "--no-db", "--psi", "x"],
+             ["--psi", "x"]),
             (["move", "-c", "{cal}", "-j", "2", "--by", "pi/0", "--db", "{db}"], ["--by", "zero"]),
             (["where", "-d", "anc300://" + "a" * 64 + ".lab:7230", "--db", "{db}"], ["--device", "host name"]),
             (["where", "-d", "anc300://" + ".".join(["abcdefgh"] * 30), "--db", "{db}"], ["--device", "host name"]),

@@ -253,7 +253,7 @@ def test_jog_in_a_terminal_steps_the_emulated_nanocontrol(tmp_path):
     env = {**os.environ, "STICKSLIP_DB": str(db), "STICKSLIP_TODAY": "2026-11-22"}
     with NanoControlEmulator() as emu:
         term = Terminal(["jog", "-c", str(cal_path), "-d", emu.url, "--q1", "0", "--q2", "-90deg", "--q3", "2mm",
-                         "--hold", "0"], env)  # fmt: skip
+                         "--hold", "0", "--trust-calibration"], env)  # fmt: skip
         term.wait_for(b"keys:")
         term.keys(b"m5d\x1b[A", pause=0.0)  # single-step, 10 µm per press: +x (along the arm), then +y
         _quiet(emu)

@@ -176,8 +176,10 @@ def test_rotary_move_in_a_recorded_pose_matches_the_plan(tmp_path, cal_path):
     "args, msg",
     [
         (["--joint", 3, "--by", "20mm"], "outside joint 3's range"),
-        (["--joint", 3, "--by", "1um", "--to", "2um"], "exactly one of --by and --to"),
-        (["--joint", 3], "exactly one of --by and --to"),
+        (["--joint", 3, "--by", "1um", "--to", "2um"], "exactly one of --by, --to and --steps"),
+        (["--joint", 3], "exactly one of --by, --to and --steps"),
+        (["--joint", 3, "--by", "30"], "30 has no unit: did you mean 30um?"),
+        (["--joint", 2, "--by", "1"], "1 has no unit: did you mean 1deg?"),
         (["--joint", 2, "--by", "3um"], "takes an angle"),
         (["--joint", 3, "--by", "3um", "--q2", "40deg"], "outside joint 2's range"),
     ],
@@ -205,10 +207,11 @@ def test_move_over_the_emulated_nanocontrol(tmp_path, cal_path):
         r = run("where", "-d", url, "--db", db, "--set", "3=min", "--q2", "-90deg")
         assert r.exit_code == 0, r.output
         r = run("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "0.5mm",
-                "--burst", 100, "--json")  # fmt: skip
+                "--burst", 100, "--json", "--trust-calibration")  # fmt: skip
         assert r.exit_code == 0, r.output
         r2 = run(
-            "move", "-d", url, "-c", cal_path, "--db", db, "--joint", 2, "--by", "-5deg", "--json"
+            "move", "-d", url, "-c", cal_path, "--db", db, "--joint", 2, "--by", "-5deg", "--json",
+            "--trust-calibration",
         )
         assert r2.exit_code == 0, r2.output
         sent = list(emu.received)
@@ -235,7 +238,7 @@ def test_device_failing_mid_move_keeps_the_dead_reckoned_position(tmp_path, cal_
     with NanoControlEmulator() as emu:
         emu.inject("silent", after=3)
         r = run("move", "-d", emu.url + "?timeout=0.2", "-c", cal_path, "--db", db, "--joint", 3,
-                "--by", "100um", "--burst", 10)  # fmt: skip
+                "--by", "100um", "--burst", 10, "--trust-calibration", "--from-unreferenced")  # fmt: skip
         url = emu.url
     assert r.exit_code == 2
     assert "did not answer" in r.output and "sent 30 of" in r.output
@@ -259,7 +262,7 @@ def test_move_over_the_emulated_anc300(tmp_path, cal_path):
     with ANC300Emulator() as emu:
         url = emu.url + "&delay=0.002"
         r = run("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "40um",
-                "--burst", 20, "--json")  # fmt: skip
+                "--burst", 20, "--json", "--trust-calibration", "--from-unreferenced")  # fmt: skip
         assert r.exit_code == 0, r.output
         sent = list(emu.received)
         assert emu.continuous_moves == 0

@@ -57,6 +57,7 @@ def test_move_without_dialect_option_makes_exactly_the_planned_steps(cal: Path, 
     with ConsolePeer() as peer:
         assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
         r = _cli("move", "-d", peer.url, "-c", str(cal), "--joint", "3", "--by", "1mm", "--q2", "-90deg",
+                 "--trust-calibration",  # the calibration records no device
                  "--db", db)
         assert r.returncode == 0, r.stderr
         assert r.stderr == ""
@@ -94,7 +95,8 @@ def test_a_fault_at_go_is_one_line_naming_the_port_with_a_stop_sent(
         url = peer.url + "?timeout=0.5"
         assert _cli("where", "-d", url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
         t0 = time.monotonic()
-        r = _cli("move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg", "--db", db)
+        r = _cli("move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg",
+                 "--db", db, "--trust-calibration")  # the calibration records no device
         elapsed = time.monotonic() - t0
         w = _cli("where", "-d", url, "--offline", "--db", db, "--json")
         driving_at_end = peer.driving

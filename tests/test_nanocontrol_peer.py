@@ -51,6 +51,7 @@ def test_a_good_move_sends_exactly_the_planned_steps_and_nothing_on_stderr(cal: 
     with NanoControlPeer() as peer:
         assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
         r = _cli("move", "-d", peer.url, "-c", str(cal), "--joint", "3", "--by", "300um", "--q2", "-90deg",
+                 "--trust-calibration",  # the calibration records no device
                  "--burst", "100", "--db", db)
         assert r.returncode == 0, r.stderr
         assert r.stderr == ""
@@ -73,7 +74,8 @@ def test_each_fault_is_one_line_naming_the_port_with_a_stop_sent(
     with NanoControlPeer(fault=fault) as peer:
         assert _cli("where", "-d", peer.url, "--offline", "--set", "3=2mm", "--db", db).returncode == 0
         t0 = time.monotonic()
-        r = _cli("move", "-d", peer.url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg", "--db", db)
+        r = _cli("move", "-d", peer.url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg",
+                 "--db", db, "--trust-calibration")  # the calibration records no device
         elapsed = time.monotonic() - t0
         assert r.returncode == 2, r.stderr
         lines = [ln for ln in r.stderr.splitlines() if ln.strip()]

@@ -175,7 +175,7 @@ def test_zero_move_and_bad_arguments():
 
 def test_out_of_reach_names_the_limit_and_where():
     pose = kin.Pose(0.0, -math.pi / 2, 0.0115, 0.0, 0.0)
-    with pytest.raises(kin.OutOfReach, match=r"leaves the arm.s reach 5[01]% of the way.*joint 3.*upper limit 12 mm"):
+    with pytest.raises(kin.OutOfReach, match=r"reach 5[01]% of the way.*joint 3.*upper limit 12000 µm"):
         plan_reach(CAL, pose, by=(1e-3, 0.0, 0.0))
     with pytest.raises(kin.OutOfReach, match=r"joint 1 would be at .* beyond its upper limit 120 deg"):
         plan_reach(CAL, kin.Pose(math.radians(119.9), -math.pi / 2, 0.005), by=(-200e-6, 200e-6, 0.0))
@@ -283,7 +283,8 @@ def test_cli_to_and_geometry(tmp_path, cal_path):
         (("--to", "1um,0,0", "--by", "1um,0,0"), "exactly one"),
         (("--by", "1um,0,0", "--geometry", "0mm,-1mm"), "geometry"),
         (("--by", "1um,0,0", "--segment", "-1um"), "segment"),
-        (("--by", "1e9,0,0"), "within 1 m"),
+        (("--by", "1e9um,0,0"), "within 1 m"),
+        (("--by", "20,0,0"), "20 has no unit: did you mean 20um or 20mm?"),
     ],
 )
 def test_cli_refusals_are_one_line_and_send_nothing(tmp_path, cal_path, args, message):
@@ -298,7 +299,8 @@ def test_cli_refusals_are_one_line_and_send_nothing(tmp_path, cal_path, args, me
 @pytest.mark.skipif(not hasattr(os, "openpty"), reason="needs pseudo-terminals")
 def test_cli_out_of_reach_sends_no_step_to_the_controller(tmp_path, cal_path):
     with NanoControlEmulator() as emu:
-        r = run("reach", "-c", cal_path, "--db", tmp_path / "s.db", "-d", emu.url, "--by", "0,0,30mm")
+        r = run("reach", "-c", cal_path, "--db", tmp_path / "s.db", "-d", emu.url, "--by", "0,0,30mm",
+                "--trust-calibration", "--from-unreferenced")  # fmt: skip
         sent = list(emu.received)
     assert r.exit_code == 2 and "joint" in r.output
     assert not any(m.startswith("coarse") for m in sent), sent
@@ -328,7 +330,7 @@ def test_cli_drives_the_emulated_nanocontrol_with_the_planned_steps(tmp_path, ca
     db = tmp_path / "s.db"
     with NanoControlEmulator() as emu:
         r = run("reach", "-c", cal_path, "--db", db, "-d", emu.url, "--by", "30um,20um,-10um", "--q1", "5deg",
-                "--q2", "-80deg", "--q3", "2mm", "--json")  # fmt: skip
+                "--q2", "-80deg", "--q3", "2mm", "--json", "--trust-calibration")  # fmt: skip
         sent = list(emu.received)
     assert r.exit_code == 0, r.output
     out = json.loads(r.stdout)
@@ -345,7 +347,7 @@ def test_cli_device_failing_mid_move_leaves_the_joint_uncertain(tmp_path, cal_pa
     with NanoControlEmulator() as emu:
         emu.inject("silent", after=4)
         r = run("reach", "-c", cal_path, "--db", db, "-d", emu.url + "?timeout=0.2", "--by", "0,0,-100um",
-                "--q2", "-60deg", "--q3", "5mm")  # fmt: skip
+                "--q2", "-60deg", "--q3", "5mm", "--trust-calibration", "--from-unreferenced")  # fmt: skip
         url = emu.url
     assert r.exit_code == 2 and r.output.count("error:") == 1
     assert "did not answer" in r.output and "stopped in segment" in r.output

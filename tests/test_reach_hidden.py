@@ -120,8 +120,9 @@ def test_hidden_arm_through_the_cli_dry_run(hidden, tmp_path):
     runner = CliRunner()
     for pose, by in _moves(seed=7, n=4):
         args = ["reach", "-c", str(cal_path), "--db", str(tmp_path / "s.db"), "--dry-run", "--json"]
-        args += [f"--q1={pose.q1!r}", f"--q2={pose.q2!r}", f"--q3={pose.q3!r}"]
-        args += [f"--theta={pose.theta!r}", f"--psi={pose.psi!r}", "--by=" + ",".join(repr(float(v)) for v in by)]
+        args += [f"--q1={pose.q1!r}rad", f"--q2={pose.q2!r}rad", f"--q3={pose.q3!r}m"]  # every value with its unit
+        args += [f"--theta={pose.theta!r}rad", f"--psi={pose.psi!r}rad"]
+        args += ["--by=" + ",".join(f"{float(v)!r}m" for v in by)]
         r = runner.invoke(app, args)
         assert r.exit_code == 0, r.output
         out = json.loads(r.stdout)

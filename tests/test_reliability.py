@@ -206,11 +206,13 @@ def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch,
             ("import", table, "--device", url, "--db", db),
             ("fit", "--db", db, "--device", url, "--record", "-o", tmp_path / "fit.json"),
             ("where", "-d", url, "--db", db, "--set", "3=min"),
-            ("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "20um", "--burst", 10),
+            ("move", "--trust-calibration", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "20um",
+             "--burst", 10),
             ("where", "-d", url, "--db", db, "--json"),
             ("history", "--db", db, "--json"),
             (
                 "move",
+                "--trust-calibration",
                 "-d",
                 url.replace("delay=", "bogus=1&delay="),
                 "-c",
@@ -226,7 +228,8 @@ def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch,
             r = run(*args)
             outputs.append((args[0], r.exit_code, r.output))
         monkeypatch.setenv("STICKSLIP_ANC300_PASSWORD", SECRET)  # the recommended way
-        r = run("move", "-d", base + "?delay=0.002", "-c", cal_path, "--db", db, "--joint", 3, "--by", "5um")
+        r = run("move", "--trust-calibration", "-d", base + "?delay=0.002", "-c", cal_path, "--db", db,
+                "--joint", 3, "--by", "5um")  # fmt: skip
         outputs.append(("move-env", r.exit_code, r.output))
         monkeypatch.setenv("STICKSLIP_ANC300_PASSWORD", SECRET + "x")  # a wrong one: refused, not echoed
         r = run("where", "-d", base + "?delay=0.002", "--db", db)
@@ -262,7 +265,8 @@ def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faul
     url = f"faulty://arm?drop_after=3&partial=0.5&log={log}"
     cal = calibration.Calibration.load(cal_path)
     assert run("where", "-d", url, "--db", db, "--set", "3=min").exit_code == 0
-    r = run("move", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "100um", "--burst", 10)
+    r = run("move", "--trust-calibration", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "100um",
+            "--burst", 10)  # fmt: skip
     one_error(r, "link dropped", "sent 30 of", "uncertain")
     moved = sum(int(x) for x in log.read_text().split())
     assert moved == 35  # 3 bursts of 10 and half of the 4th: the truth the database cannot know
@@ -277,15 +281,18 @@ def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faul
     assert lo <= truth <= hi  # never silently wrong: the truth is inside the bounds
     # move refuses to plan from it; joints 1 and 2 are unaffected
     one_error(
-        run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3, "--by", "1um"),
+        run("move", "--trust-calibration", "-d", "faulty://arm", "-c", cal_path,
+            "--db", db, "--joint", 3, "--by", "1um"),  # fmt: skip
         "uncertain",
         "--set 3=min",
     )
-    assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 2, "--by", "1deg").exit_code == 0
+    assert run("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+               "--joint", 2, "--by", "1deg").exit_code == 0  # fmt: skip
     # re-referenced at the stop: planning works again
     assert run("where", "-d", "faulty://arm", "--db", db, "--set", "3=min").exit_code == 0
     assert _where(db, "faulty://arm")["joints"][2]["source"] == "set"
-    r = run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3, "--by", "1um", "--json")
+    r = run("move", "--trust-calibration", "-d", "faulty://arm", "-c", cal_path, "--db", db, "--joint", 3,
+            "--by", "1um", "--json")  # fmt: skip
     assert r.exit_code == 0, r.output
 
 
@@ -349,6 +356,8 @@ def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path)
                 sys.executable,
                 str(script),
                 "move",
+                "--trust-calibration",
+                "--from-unreferenced",
                 "-d",
                 url,
                 "-c",
@@ -526,17 +535,22 @@ def test_foreign_sqlite_and_read_only_database(tmp_path):
 @pytest.mark.parametrize(
     "args, words",
     [
-        (["move", "-j", "2", "--by", "-60"], ["outside joint 2's range", "did you mean -60deg?"]),
+        (["move", "-j", "2", "--by", "-60"], ["--by: -60 has no unit", "did you mean -60deg?"]),
         (["move", "-j", "1", "--to", "45"], ["did you mean 45deg?"]),
+        (["move", "-j", "2", "--by", "-0.01"], ["did you mean -0.01deg?"]),
+        (["move", "-j", "3", "--by", "1"], ["did you mean 1um or 1mm?"]),
         (["where", "--offline", "--set", "2=-60"], ["did you mean -60deg?"]),
+        (["where", "--offline", "--set", "3=30"], ["did you mean 30um?"]),
     ],
 )
-def test_bare_numbers_outside_the_range_suggest_degrees(tmp_path, cal_path, args, words):
+def test_bare_numbers_are_refused_with_a_did_you_mean(tmp_path, cal_path, args, words):
+    # issue 36: `move --joint 2 --by 1` drove 57 deg (1 rad) where 1 deg was meant: every amount takes its unit
     extra = ["-c", cal_path] if args[0] == "move" else []
     one_error(run(*args, *extra, "--db", tmp_path / "s.db"), *words)
-    # in range, a bare number is radians, as documented
-    r = run("move", "-j", "2", "--by", "-0.01", "-c", cal_path, "--db", tmp_path / "s.db", "--json")
+    r = run("move", "-j", "2", "--by", "-0.01rad", "-c", cal_path, "--db", tmp_path / "s.db", "--json")
     assert r.exit_code == 0 and json.loads(r.stdout)["q_to"] == pytest.approx(-math.pi / 2 - 0.01)
+    r = run("move", "-j", "3", "--to", "0", "-c", cal_path, "--db", tmp_path / "s.db", "--json")  # 0 needs no unit
+    assert r.exit_code == 0 and json.loads(r.stdout)["q_to"] == 0.0
 
 
 # -- 5: duplicates ----------------------------------------------------------------------------
@@ -561,11 +575,12 @@ def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path)
     assert run("import", a, "--db", db).exit_code == 0
     one_error(run("import", a, "--db", db), "imported before")
     one_error(run("import", b, "--db", db), "4 of 4 rows are already stored")  # same rows, another file
-    assert run("import", b, "--db", db, "--allow-duplicates").exit_code == 0  # forced in: anova copes
+    assert run("import", b, "--db", db, "--allow-duplicates").exit_code == 0  # genuine repeats, the user says
     r = run("anova", "--db", db, "--json")
     assert r.exit_code == 0, r.output
-    assert "4 traverse(s) are exact copies" in r.stderr and "no spread" in r.stderr
+    assert "exact copies" not in r.stderr and "no spread" in r.stderr  # every stored traverse counts
     out = json.loads(r.stdout)
+    assert sum(row["n"] for row in out if row["test"] == "day") == 8
     assert out and all(row["F"] is None or math.isfinite(row["F"]) for row in out)
     degenerate = [row for row in out if row.get("verdict") == "degenerate"]
     assert degenerate and not any(row["significant"] for row in degenerate)
@@ -675,12 +690,14 @@ def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path,
             st.acquire_lock("faulty://arm", {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"}) is None
         )
     one_error(
-        run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um"),
+        run("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um"),  # fmt: skip
         "pid 4242 on bench-pc since 2026-11-22T10:00:00",
         "--unlock",
     )
     assert run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline").exit_code == 0
-    assert run("move", "-d", "faulty://arm", "-c", cal_path, "--db", db, "-j", 3, "--by", "1um").exit_code == 0
+    assert run("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path,
+        "--db", db, "-j", 3, "--by", "1um").exit_code == 0  # fmt: skip
 
 
 @pytest.mark.parametrize("cmd", [["plan", "-j", "3", "--from", "2mm", "--to", "2.03mm"], ["where", "--offline"]])

@@ -192,6 +192,7 @@ def test_the_command_line_moves_and_reports_through_the_emulator(emulator: type,
         url = emu.url + "?hz=5000"
         assert runner.invoke(app, ["where", "-d", url, "--offline", "--set", "3=1mm", "--db", db]).exit_code == 0
         r = runner.invoke(app, ["move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "500um", "--q2", "-90deg",
+                                "--trust-calibration",  # the calibration records no device
                                 "--db", db])
         assert r.exit_code == 0, r.output
         w = runner.invoke(app, ["where", "-d", url, "--db", db])

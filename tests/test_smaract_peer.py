@@ -55,6 +55,7 @@ def test_a_move_makes_exactly_the_planned_steps_on_the_mapped_channel(cal: Path,
         url = peer.url + "?channels=1,0,-3&hz=5000"  # joint 3 on channel 3, reversed
         assert _cli("where", "-d", url, "--offline", "--set", "3=2mm", "--db", db).exit_code == 0
         r = _cli("move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "300um", "--q2", "-90deg",
+                 "--trust-calibration",  # the calibration records no device
                  "--burst", "100", "--db", db)
         assert r.exit_code == 0, r.output
         assert r.stderr == ""
@@ -88,7 +89,8 @@ def test_each_fault_is_one_line_naming_the_port_and_bounds_the_position(
     with SmarActPeer(kind, fault=fault) as peer:
         url = peer.url + "?timeout=0.3&hz=5000"
         assert _cli("where", "-d", url, "--offline", "--set", "3=2mm", "--db", db).exit_code == 0
-        r = _cli("move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg", "--db", db)
+        r = _cli("move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg",
+                 "--db", db, "--trust-calibration")  # the calibration records no device
         w = _cli("where", "-d", url, "--offline", "--db", db, "--json")
         log = list(peer.log)
         violations = list(peer.violations)

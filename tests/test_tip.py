@@ -136,9 +136,9 @@ def test_inverse_picks_a_branch_within_limits():
 
 
 def test_inverse_out_of_reach_names_joint3():
-    with pytest.raises(OutOfReach, match=r"joint 3 would be at 14 mm, beyond its upper limit 12 mm"):
+    with pytest.raises(OutOfReach, match=r"joint 3 would be at 14000 µm, beyond its upper limit 12000 µm"):
         inverse([0.035, 0.0, 0.0], Geometry(0.0, 0.021))
-    with pytest.raises(OutOfReach, match=r"joint 3 would be at -1 mm, beyond its lower limit 0 mm"):
+    with pytest.raises(OutOfReach, match=r"joint 3 would be at -1000 µm, beyond its lower limit 0 µm"):
         inverse([0.020, 0.0, 0.0], Geometry(0.0, 0.021))
 
 

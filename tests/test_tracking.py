@@ -180,14 +180,14 @@ def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
     from typer.testing import CliRunner
 
     from stickslip.cli import app
-    from stickslip.cli import devices as cli_devices
+    from stickslip.procedures import move as move_procedure
 
     cal = _true_cal("2026-03-01")
     path = tmp_path / "cal.json"
     cal.save(path)
     arm = SimulatedMM3A(seed=8, day="2026-03-09")
     arm.set_pose(q2=-math.pi / 2, q3=0.0)
-    monkeypatch.setattr(cli_devices, "open_device", lambda url: _RealLike(arm))
+    monkeypatch.setattr(move_procedure, "open_device", lambda url: _RealLike(arm))
     db = tmp_path / "s.db"
     runner = CliRunner()
 
@@ -236,11 +236,11 @@ def test_a_calibration_made_today_starts_without_a_days_drift(monkeypatch):
 
 def test_a_positions_spread_is_shown_in_units_a_person_reads():
     # "± 1.37e+05 µrad" after a few moves of joint 2 told nobody it was 7.85 degrees
-    from stickslip.cli.devices import _sd_text
+    from stickslip.units import format_spread
 
-    assert _sd_text(0.137, 2) == "7.85 deg"
-    assert _sd_text(5.0e-5, 1) == "50 µrad" and _sd_text(9.99e-4, 2) == "999 µrad"
-    assert _sd_text(5.03e-6, 3) == "5.03 µm"
+    assert format_spread(0.137, 2) == "7.85 deg"
+    assert format_spread(5.0e-5, 1) == "50 µrad" and format_spread(9.99e-4, 2) == "999 µrad"
+    assert format_spread(5.03e-6, 3) == "5.03 µm"
 
 
 def test_observe_a_bare_number_on_a_rotary_joint_hints_at_degrees(tmp_path, monkeypatch):
@@ -251,3 +251,11 @@ def test_observe_a_bare_number_on_a_rotary_joint_hints_at_degrees(tmp_path, monk
     monkeypatch.setenv("STICKSLIP_DB", str(tmp_path / "s.db"))
     r = CliRunner().invoke(app, ["observe", "--joint", "2", "--at", "-30", "--sigma", "1deg"])
     assert r.exit_code == 2 and "did you mean -30deg?" in r.output
+
+
+def test_observe_s_help_names_the_gate_the_procedure_applies():
+    # the command keeps its own copy (its --help loads no numpy): they must agree
+    from stickslip.cli import observe as cli_observe
+    from stickslip.procedures import observe as procedure
+
+    assert cli_observe.MAX_INNOVATION == procedure.MAX_INNOVATION

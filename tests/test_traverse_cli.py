@@ -32,7 +32,7 @@ def test_traverse_on_the_simulator_measures_the_true_step(tuning3, tmp_path):
         "traverse",
         "--joint",
         "3",
-        "-d",
+        "--direction",
         "-",
         "--tuning",
         str(tuning3),
@@ -66,16 +66,17 @@ def test_traverse_on_the_simulator_measures_the_true_step(tuning3, tmp_path):
 
 
 def test_traverse_refuses_a_tuning_of_another_joint(tuning3):
-    r = runner.invoke(app, ["traverse", "--joint", "2", "-d", "+", "--tuning", str(tuning3), "--no-db"])
+    r = runner.invoke(app, ["traverse", "--joint", "2", "--direction", "+", "--tuning", str(tuning3), "--no-db"])
     assert r.exit_code == 2 and "tuned for joint 3, not joint 2" in r.stderr
 
 
 def test_traverse_bad_pose_and_device(tuning3):
-    r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--theta", "5parsec"])
+    base = ["traverse", "--joint", "3", "--direction", "+", "--tuning", str(tuning3)]
+    r = runner.invoke(app, [*base, "--theta", "5parsec"])
     assert r.exit_code == 2 and "unknown angle unit" in r.stderr
-    r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--device", "warp://x"])
+    r = runner.invoke(app, [*base, "-d", "warp://x"])  # -d is the device, as in every command
     assert r.exit_code == 2 and "unknown device URL scheme" in r.stderr
-    r = runner.invoke(app, ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tuning3), "--confirm-s", "-0.5"])
+    r = runner.invoke(app, [*base, "--confirm-s", "-0.5"])
     assert r.exit_code == 2 and r.stderr.strip().startswith("error: --confirm-s") and "[0, 5]" in r.stderr
 
 
@@ -91,7 +92,7 @@ def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):
         state.set_position(3, 5e-3, "set")
         state.intend(3, 6e-3)
         save_state(st, state)
-    args = ["traverse", "--joint", "3", "-d", "-", "--tuning", str(tuning3), "--device", URL, "--q2", "0",
+    args = ["traverse", "--joint", "3", "--direction", "-", "--tuning", str(tuning3), "--device", URL, "--q2", "0",
             "--theta", "-90deg", "--day", "2026-11-20", "--db", str(db), "--json"]  # fmt: skip
     r = runner.invoke(app, args)
     assert r.exit_code == 0, r.output
@@ -126,7 +127,7 @@ def test_appending_never_glues_rows_or_writes_into_another_table(tmp_path, monke
     assert [t.steps for t in read_measurements(table)] == [12000, 12000]
     other = tmp_path / "other.csv"
     other.write_text("name,value\nx,1\n")
-    args = ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tmp_path / "none.json"), "-a", str(other)]
+    args = ["traverse", "--joint", "3", "--direction", "+", "--tuning", str(tmp_path / "none.json"), "-a", str(other)]
     r = runner.invoke(app, args)
     assert r.exit_code == 2 and "not a measurement table" in r.output and other.read_text() == "name,value\nx,1\n"
     before = table.read_bytes()
@@ -146,7 +147,7 @@ def test_appending_never_glues_rows_or_writes_into_another_table(tmp_path, monke
 def test_a_tuning_made_at_another_step_rate_is_warned_about_before_the_joint_moves(tuning3, tmp_path):
     tuned = json.loads(tuning3.read_text())
     assert tuned["step_rate_hz"] == pytest.approx(1000.0, rel=0.01)  # heard in the simulator's recording
-    args = ["traverse", "--joint", "3", "-d", "-", "--device", URL, "--q2", "0", "--no-db", "--json"]
+    args = ["traverse", "--joint", "3", "--direction", "-", "--device", URL, "--q2", "0", "--no-db", "--json"]
     r = runner.invoke(app, [*args, "--tuning", str(tuning3)])
     assert r.exit_code == 0 and "this tuning was made at" not in r.stderr
     other = tmp_path / "t1300.json"

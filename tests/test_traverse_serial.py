@@ -110,6 +110,6 @@ def test_traverse_takes_a_sound_card_or_a_serial_sensor_not_both(tmp_path: Any) 
 
     from stickslip.cli import app
 
-    args = ["traverse", "--joint", "3", "-d", "+", "--tuning", str(tmp_path / "t.json"), "--no-db"]
+    args = ["traverse", "--joint", "3", "--direction", "+", "--tuning", str(tmp_path / "t.json"), "--no-db"]
     r = CliRunner().invoke(app, [*args, "--serial", "/dev/ttyACM0", "--input", "2"])
     assert r.exit_code == 2 and "not both" in r.output

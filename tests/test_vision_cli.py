@@ -37,7 +37,7 @@ def frames(tmp_path):
     """Three frames of the simulated microscope with the arm moved between them, and the true tips."""
     tips = []
     for k, (q3, q1) in enumerate(((0.0, 0.0), (5e-6, 5e-4), (12e-6, -3e-4))):
-        _ok(["where", "-d", "sim://", "--set", f"3={q3}", "--set", f"1={q1}"])
+        _ok(["where", "-d", "sim://", "--set", f"3={q3}m", "--set", f"1={q1}rad"])  # every value with its unit
         r = _ok(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / f"f{k}.png"), "--json"])
         tips.append(json.loads(r.stdout)["sim_true_tip"])
     return tmp_path, tips

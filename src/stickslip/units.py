@@ -28,6 +28,8 @@ __all__ = [
     "step_display_unit",
     "position_display_unit",
     "format_quantity",
+    "format_spread",
+    "bare_number_problem",
 ]
 
 LENGTH_UNITS: dict[str, float] = {
@@ -178,3 +180,48 @@ def format_step(value: float, joint: int, digits: int = 4) -> str:
 def format_position(value: float, joint: int, digits: int = 6) -> str:
     """Format a joint position (µm for the prismatic joint, degrees for rotary ones)."""
     return format_quantity(value, position_display_unit(joint), digits)
+
+
+def format_spread(sd: float, joint: int) -> str:
+    """A position's spread (a standard deviation, an interval's half-width) of ``joint`` for a person.
+
+    µm for the prismatic joint; µrad for the rotary joints, in degrees from 1 mrad
+    (``1.37e+05 µrad`` would tell nobody it is 7.85 deg).
+    """
+    if not joint_spec(joint).rotary:
+        return f"{sd * 1e6:.3g} µm"
+    return f"{sd * 1e6:.3g} µrad" if abs(sd) < 1e-3 else f"{math.degrees(sd):.3g} deg"
+
+
+_SUGGEST = {"angle": ("deg",), "length": ("um", "mm")}
+
+
+def bare_number_problem(text: str, kind: str, span: float | None = None) -> str | None:
+    """Why ``text`` cannot be an amount typed on the command line: a number without its unit.
+
+    On the command line every length and angle carries its unit (``30um``, ``2deg``,
+    ``-pi/2`` is radians): a bare ``30`` could be 30 m or 30 µm, a bare ``1`` 1 rad
+    (57 deg) or 1 deg. Zero needs none. Returns ``None`` for anything else (a unit given,
+    zero, or not a number at all: the parser says what is wrong with that), else a
+    message with a did-you-mean: degrees for an angle; µm and mm for a length, only
+    those within ``span`` (m; the joint's range) when given.
+
+    >>> bare_number_problem("-60", "angle")
+    '-60 has no unit: did you mean -60deg? (an angle takes deg, rad, mrad or urad)'
+    >>> bare_number_problem("30", "length", span=0.012)
+    '30 has no unit: did you mean 30um? (a length takes m, mm, um or nm)'
+    """
+    t = str(text).strip().replace("−", "-")
+    try:
+        value = float(t)
+    except ValueError:
+        return None
+    if value == 0.0 or not math.isfinite(value):
+        return None
+    table = ANGLE_UNITS if kind == "angle" else LENGTH_UNITS
+    options = [u for u in _SUGGEST[kind] if span is None or abs(value) * table[u] <= span + 1e-15]
+    if not options:  # beyond the range in every unit: the smallest is the likeliest meant
+        options = [_SUGGEST[kind][0]]
+    mean = " or ".join(f"{t}{u}" for u in options)
+    takes = "an angle takes deg, rad, mrad or urad" if kind == "angle" else "a length takes m, mm, um or nm"
+    return f"{t} has no unit: did you mean {mean}? ({takes})"

@@ -1,10 +1,13 @@
 """One joint of a stick-slip manipulator as an ophyd-async device (Movable, Locatable, Stoppable, Readable).
 
-:class:`StickSlipAxis` moves a joint the way ``stickslip move`` does, from the library
-pieces the CLI uses: the position kept for the device in the database
-(:func:`~stickslip.devices.positions.load_state`), the calibration's step-size model in
-that pose (:class:`~stickslip.motion.planning.Planner`), the burst loop with its write-ahead
-journal (:func:`~stickslip.procedures.move.drive`) and the one-process-per-device lock
+:class:`StickSlipAxis` moves a joint the way ``stickslip move`` does, with the same
+procedure's pieces: the position kept for the device in the database
+(:func:`~stickslip.devices.positions.load_state`), the move planned with the day's
+tracked step scale (:func:`~stickslip.procedures.move.plan_tracked`: the calibration's
+step-size model in that pose, scaled by what ``stickslip observe`` taught the joint's
+Kalman track), the burst loop with its write-ahead journal
+(:func:`~stickslip.procedures.move.drive`), the kept end and grown uncertainty
+(:func:`~stickslip.procedures.move.settle`) and the one-process-per-device lock
 (:func:`~stickslip.procedures.move.device_lock`). A move made here is seen by
 ``stickslip where`` and the other way round.
 
@@ -53,7 +56,17 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, VirtualClock, device_key, open_device
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.planning import Planner
-from ..procedures.move import DeviceBusy, device_lock, drive
+from ..procedures.move import (
+    DeviceBusy,
+    MoveOutcome,
+    MoveRefused,
+    device_lock,
+    drive,
+    failure_text,
+    plan_tracked,
+    reference_problem,
+    settle,
+)
 from ..storage import Store, StoreError
 from ..units import format_position, position_display_unit
 
@@ -281,6 +294,10 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         Longest burst, s (default :data:`MAX_BURST_S`, 0.2 s; in (0, 0.4]): on a controller
         that steps in real time a burst is cut to ``frequency * max_burst_s`` steps, so a
         stop returns within :data:`STOP_RETURN_S` even if the controller finishes its burst.
+    from_unreferenced : bool
+        Plan from a position never referenced (assumed) or uncertain, as ``stickslip move
+        --from-unreferenced``; without it such a joint is refused on a real controller
+        (:func:`~stickslip.procedures.move.reference_problem`).
 
     Signals
     -------
@@ -306,7 +323,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         burst: int = 1000,
         db: str | os.PathLike[str] | None = None,
         max_burst_s: float = MAX_BURST_S,
+        from_unreferenced: bool = False,
     ) -> None:
+        self.from_unreferenced = bool(from_unreferenced)
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         self.burst = check_burst(burst)
@@ -418,26 +437,28 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     # ------------------------------------------------------------------ moving
 
     def _move_sync(self, target: float, publish: Callable[[DeviceState], None]) -> _MoveResult:
-        """The whole move, in a worker thread: lock, plan from the kept state, drive in bursts, record."""
+        """The whole move, in a worker thread: lock, plan from the kept state with its step scale, drive, record."""
         joint = self.joint
+        cal = self._calibration()
         with self.link.store() as store, device_lock(store, self.link.key):
             state = load_state(store, self.link.key)
-            problem = state.uncertainty_problem(joint)
-            if problem:
-                raise MoveError(problem)
-            q_from = state.positions[joint]
-            planner = Planner(self._calibration(), joint, state.pose)
-            plan = planner.plan(q_from, target)
-            steps = plan.signed_steps
+            unreferenced = self.from_unreferenced
+            try:
+                problem = reference_problem(state, joint, self.link.url, cal)
+                if problem and not unreferenced:
+                    raise MoveRefused(problem)
+                plan = plan_tracked(
+                    cal, state, joint, target, from_unreferenced=unreferenced,
+                    assumed=problem is not None and joint not in state.uncertain,
+                )
+            except MoveRefused as e:
+                raise MoveError(str(e)) from None
             publish(state)
-            if steps == 0:
+            if plan.steps == 0:
                 return _MoveResult(0, 0, False, state)
             dev = self.link.controller()
             proxy = _Interruptible(dev, self._stop_event, atomic=isinstance(dev, VirtualClock))
             source = state.sources[joint]
-
-            def reckon(n: int) -> float:
-                return planner.position_after(q_from, n)
 
             def save(st: DeviceState) -> None:
                 save_state(store, st)
@@ -445,31 +466,20 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
 
             burst = bounded_burst(dev, joint, self.burst, self.max_burst_s)
             try:
-                outcome = drive(proxy, state, joint, steps, burst, reckon, save)
+                moved_as = "assumed" if plan.assumed else "dead-reckoned"
+                outcome = drive(proxy, state, joint, plan.steps, burst, plan.position_after, save, moved_as)
             except _Stopped as s:
                 if not s.partial:  # the next burst was never sent: the confirmed position stands
-                    state.set_position(joint, reckon(proxy.sent), "dead-reckoned" if proxy.sent else source)
-                    save(state)
-                return _MoveResult(steps, proxy.sent, True, state)
-            if outcome.error is not None:
-                raise MoveError(self._failure_text(outcome.error, outcome.sent, steps, state, q_from))
-            state.set_position(joint, plan.q_end_predicted, "dead-reckoned")
+                    kept = plan.position_after(proxy.sent)
+                    state.set_position(joint, kept, moved_as if proxy.sent else source)
+                settle(state, plan, MoveOutcome(proxy.sent, error="stopped"))
+                save(state)
+                return _MoveResult(plan.steps, proxy.sent, True, state)
+            settle(state, plan, outcome)
             save(state)
-            return _MoveResult(steps, outcome.sent, False, state)
-
-    def _failure_text(self, error: str, sent: int, steps: int, state: DeviceState, q_from: float) -> str:
-        """The CLI's message for a failed move: what was sent, and what the kept position is."""
-        j = self.joint
-        if j in state.uncertain:
-            lo, hi = state.uncertain[j]
-            kept = (
-                f"joint {j}'s position is now uncertain, between {format_position(lo, j)} and "
-                f"{format_position(hi, j)}; re-reference it (stickslip where --set {j}=min at the lower "
-                f"stop) before the next move"
-            )
-        else:
-            kept = f"joint {j}'s dead-reckoned position {format_position(q_from, j)} is kept"
-        return f"{error}; sent {sent} of {steps} steps; {kept}"
+            if outcome.error is not None:
+                raise MoveError(failure_text(state, joint, outcome.error, outcome.sent, plan.steps))
+            return _MoveResult(plan.steps, outcome.sent, False, state)
 
     def set(self, value: float) -> WatchableAsyncStatus[float]:
         """Move the joint to ``value`` (m or rad) in bursts; progress is reported after every burst.
@@ -555,6 +565,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         await halt(self.link, self.joint, self._task)
 
     def describe_move(self, target: float) -> dict[str, Any]:
-        """What a move to ``target`` (m or rad) would do from the kept state: the plan's fields (SI)."""
+        """What a move to ``target`` (m or rad) would do from the kept state and step scale: the plan's fields (SI)."""
         state = self.link.load()
-        return Planner(self._calibration(), self.joint, state.pose).plan(state.positions[self.joint], target).as_dict()
+        plan = plan_tracked(self._calibration(), state, self.joint, target)
+        return Planner(plan.calibration, self.joint, plan.pose).plan(plan.q_from, target).as_dict()

@@ -42,9 +42,9 @@ from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import DeviceError, VirtualClock
 from ..devices.positions import DeviceState, load_state, save_state
-from ..motion.reach import ReachPlan, borrow_joint1, plan_reach
-from ..procedures.move import DeviceBusy, device_lock
-from ..procedures.reach import drive_reach
+from ..motion.reach import ReachPlan, borrow_joint1
+from ..procedures.move import DeviceBusy, MoveRefused, device_lock
+from ..procedures.reach import BORROWED_JOINT1, ReachRequest, check_referenced, drive_reach, plan_from_state
 from ..storage import StoreError
 from .axis import DeviceLink, MoveError, _Interruptible, _Stopped, bounded_burst, check_burst, check_max_burst_s, halt
 
@@ -53,11 +53,6 @@ __all__ = ["Tip", "TipAxis", "BORROWED_JOINT1"]
 COORDINATES = ("x", "y", "z")
 _MAX_COORDINATE = 1.0  # m: nothing on a micromanipulator is a metre away; catches unit slips (µm given as m)
 
-BORROWED_JOINT1 = (
-    "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "
-    "gravity load (the paper: the same actuator); calibrate joint 1 for accurate moves across the arm's plane"
-)
-"""The warning (``UserWarning``) of a tip move that steps joint 1 with borrowed parameters."""
 
 Vec3 = tuple[float, float, float]
 
@@ -128,18 +123,24 @@ class _TipDriver:
         return borrow_joint1(cal)
 
     def plan(self, state: DeviceState, goal: Vec3) -> tuple[ReachPlan, Calibration]:
-        """The straight move from the kept pose to ``goal`` (``ValueError`` if it cannot be made; nothing sent)."""
-        for j in (1, 2, 3):
-            problem = state.uncertainty_problem(j)
-            if problem:
-                raise MoveError(problem)
+        """The straight move from the kept pose to ``goal`` (``ValueError`` if it cannot be made; nothing sent).
+
+        Planned as ``stickslip reach`` plans (:func:`stickslip.procedures.reach.plan_from_state`).
+        """
         cal, borrowed = self._calibration()
         try:
-            plan = plan_reach(cal, state.pose, to=goal, geometry=self.geometry, segment=self.segment)
+            check_referenced(state, self.link.url, cal)
+        except MoveRefused as e:
+            raise MoveError(str(e)) from None
+        request = ReachRequest(self.link.url, to=goal, geometry=self.geometry, segment=self.segment)
+
+        def warn(message: str) -> None:
+            warnings.warn(message, UserWarning, stacklevel=4)
+
+        try:
+            plan = plan_from_state(cal, borrowed, state, request, warn)
         except KeyError as e:  # a joint or direction the move needs is not calibrated
             raise MoveError(str(e).strip("'\"")) from None
-        if borrowed and plan.total_steps[0]:
-            warnings.warn(BORROWED_JOINT1, UserWarning, stacklevel=2)
         return plan, cal
 
     def move_sync(self, goal: Vec3, publish: Callable[[DeviceState], None]) -> _TipResult:

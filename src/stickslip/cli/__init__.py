@@ -5,7 +5,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.core`     calibrate, predict, validate, plan, show
 * :mod:`.measure`  demo
 * :mod:`.audio`    tune, listen
-* :mod:`.history`  history, export, import, anova, fit, report
+* :mod:`.history`  history, export, import, backup, anova, fit, report
 * :mod:`.models`   suggest
 * :mod:`.devices`  move, where
 * :mod:`.observe`  observe (a measured position into the dead reckoning)
@@ -23,6 +23,7 @@ import typer
 from typer.models import CommandInfo
 
 from ._common import DEVICE_FILTERS, OneLineErrors, describe, drop_warnings, flush_warnings, guard_options
+from ._help import HelpCommand
 
 app = typer.Typer(
     name="stickslip",
@@ -31,8 +32,8 @@ app = typer.Typer(
         "Make piezoelectric stick-slip micromanipulators predictable without joint sensors.\n\n"
         "Measure a joint's average step size between its end stops, calibrate the load-aware "
         "step-size model, and turn 'move 30 um' into the right number of steps in any pose.\n\n"
-        "Files are SI (metres, radians); on the command line lengths and angles also take "
-        "units: 12mm, 850nm, -90deg, 40urad, -pi/2."
+        "Files are SI (metres, radians); on the command line every length and angle takes its "
+        "unit: 12mm, 850nm, -90deg, 40urad, -pi/2 (a bare number other than 0 is refused)."
     ),
     no_args_is_help=True,
     add_completion=False,
@@ -124,7 +125,7 @@ def _unwrap(doc: str) -> str:
     out = []
     for para in inspect.cleandoc(doc).split("\n\n"):
         lines = para.splitlines()
-        if any(ln.startswith((" ", "-", "*", "$")) for ln in lines[1:]):
+        if any(ln.startswith((" ", "- ", "* ", "$")) for ln in lines[1:]):
             out.append(para)
         else:
             out.append(" ".join(ln.strip() for ln in lines))
@@ -135,7 +136,7 @@ _PANELS = {
     "Measure": ("demo", "traverse", "record", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan", "suggest"),
     "Drive a manipulator": ("move", "observe", "where", "reach", "jog"),
-    "Keep and study": ("history", "import", "export", "exclude", "delete", "anova", "report"),
+    "Keep and study": ("history", "import", "export", "backup", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}
 _ORDER = [name for names in _PANELS.values() for name in names]
@@ -155,12 +156,14 @@ for _info in app.registered_commands:
     if _info.callback is not None and _info.callback.__doc__ and _info.help is None:
         _info.callback.__doc__ = _unwrap(_info.callback.__doc__)
     _info.rich_help_panel = _PANEL_OF.get(_name(_info), "Other")
+    _info.cls = HelpCommand  # --help fits the terminal without cutting a word (._help)
 for _group in app.registered_groups:  # the commands of a group (config path, show, init)
     for _sub in _group.typer_instance.registered_commands if _group.typer_instance else []:
         if _sub.callback is not None:
             guard_options(_sub.callback)
         if _sub.callback is not None and _sub.callback.__doc__ and _sub.help is None:
             _sub.callback.__doc__ = _unwrap(_sub.callback.__doc__)
+        _sub.cls = HelpCommand
 app.registered_commands.sort(key=lambda i: _ORDER.index(_name(i)) if _name(i) in _ORDER else len(_ORDER))
 
 

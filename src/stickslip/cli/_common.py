@@ -28,7 +28,7 @@ except ImportError:  # pragma: no cover - depends on the installed typer
 
 from ..config import ConfigError, UserConfig, config_path, load_config
 from ..devices.base import check_device_url, redact_text, redact_url
-from ..units import UnitError, parse_angle, parse_length
+from ..units import UnitError, bare_number_problem, parse_angle, parse_length
 from ._output import OutputError, console, data_stream, err_console, finish, silence, styled, visible
 
 if TYPE_CHECKING:
@@ -63,14 +63,17 @@ __all__ = ["console", "err_console"]  # the consoles of ._output, re-exported: t
 EXIT_OK = 0
 EXIT_ABORTED = 1
 EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
 EXIT_CODES = {
     EXIT_OK: "success",
-    EXIT_ABORTED: "interrupted (Ctrl-C), declined at a confirmation, or the reader of the output went away "
+    EXIT_ABORTED: "declined at a confirmation, or the reader of the output went away "
     "(a closed pipe: `| head`; nothing more is printed)",
     EXIT_BAD_INPUT: "bad input, file, URL, device or storage fault, or output that could not be written "
     "(a full device): one `error:` line says which",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C): one `error: interrupted` line says what was interrupted and where "
+    "each joint now stands (exact, or uncertain with bounds)",
 }
-"""The documented exit codes of every command."""
+"""The documented exit codes of every command (130 = 128 + SIGINT, the shells' convention for Ctrl-C)."""
 
 
 class OneLineErrors(TyperGroup):
@@ -123,11 +126,35 @@ class OneLineErrors(TyperGroup):
         except (typer.Abort, KeyboardInterrupt):
             if not standalone_mode:
                 raise
-            err_console.print(Text.assemble(styled("error:", "bold red"), " interrupted"))
-            sys.exit(EXIT_ABORTED)
+            err_console.print(Text.assemble(styled("error:", "bold red"), " interrupted (Ctrl-C)"))
+            sys.exit(EXIT_INTERRUPTED)
         if not standalone_mode:
             return rv
         sys.exit(rv if isinstance(rv, int) else EXIT_OK)
+
+    def invoke(self, ctx: Any) -> Any:
+        """Run the command; Ctrl-C anywhere in it ends in one line and exit 130 (:func:`interrupted_line`)."""
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as e:
+            _print_error(interrupted_line(e, ctx.invoked_subcommand or ""))
+            raise typer.Exit(EXIT_INTERRUPTED) from None
+
+
+def interrupted_line(e: BaseException, command: str) -> str:
+    """What Ctrl-C interrupted, and where each joint now stands if a device was being driven.
+
+    A workflow that drives a device raises :class:`stickslip.procedures.move.Interrupted`
+    with the kept state (its journal was saved before every burst); anywhere else nothing
+    was being sent.
+    """
+    what = getattr(e, "what", None)
+    state = getattr(e, "state", None)
+    if what is None:
+        return f"interrupted: stickslip {command}".rstrip() + " (Ctrl-C)"
+    from ..procedures.move import where_line
+
+    return f"interrupted: {what} (Ctrl-C); " + (where_line(state) if state is not None else "positions unknown")
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
@@ -137,7 +164,21 @@ def fail(message: str, code: int = EXIT_BAD_INPUT) -> NoReturn:
 
 
 def _print_error(message: object) -> None:
-    err_console.print(Text.assemble(styled("error:", "bold red"), " ", one_line(message)), soft_wrap=True)
+    _print_labelled("error:", "bold red", one_line(message))
+
+
+def _print_labelled(label: str, style: str, text: str) -> None:
+    """``label text`` on stderr: one line for a pipe or a log (grep finds it whole); on a terminal wrapped
+    at its width at spaces only, later lines indented (a URL or a path is never broken)."""
+    if not err_console.is_terminal:
+        err_console.print(Text.assemble(styled(label, style), " ", text), soft_wrap=True)
+        return
+    from ._help import wrap
+
+    lines = wrap(f"{label} {text}", err_console.width, "  ", first="")
+    err_console.print(Text.assemble(styled(label, style), lines[0][len(label) :]), soft_wrap=True)
+    for line in lines[1:]:
+        err_console.print(line, soft_wrap=True)
 
 
 def one_line(message: object) -> str:
@@ -146,9 +187,22 @@ def one_line(message: object) -> str:
     return visible(redact_text("; ".join(parts)))
 
 
+def say(text: str, indent: str = "  ") -> None:
+    """Print a result line on stdout, wrapped at the console's width at spaces only, later lines indented.
+
+    A URL, a path or a number with its unit is never broken (rich's own wrapping folds a
+    long word), and what belongs together reads as one item.
+    """
+    from ._help import wrap
+
+    lead = text[: len(text) - len(text.lstrip())]
+    for line in wrap(text.strip(), console.width, lead + indent, first=lead):
+        console.print(line, soft_wrap=True)
+
+
 def warn(message: str) -> None:
-    """Print ``warning: message`` to stderr."""
-    err_console.print(Text.assemble(styled("warning:", "bold yellow"), " ", one_line(message)), soft_wrap=True)
+    """Print ``warning: message`` to stderr (wrapped at spaces on a terminal: :func:`_print_labelled`)."""
+    _print_labelled("warning:", "bold yellow", one_line(message))
 
 
 _pending_warnings: list[str] = []
@@ -234,7 +288,14 @@ def validation_table(rows: list[dict[str, Any]], title: str) -> Table:
 
 
 def _parse_unit(parse: Callable[[str], float], what: str, value: str) -> float:
-    """SI value of an option given with units; ``typer.BadParameter`` (one ``error:`` line) with the reason."""
+    """SI value of an option given with units; ``typer.BadParameter`` (one ``error:`` line) with the reason.
+
+    A bare number other than 0 is refused with a did-you-mean (:func:`~stickslip.units.bare_number_problem`):
+    on the command line every length and angle carries its unit.
+    """
+    bare = bare_number_problem(value, "angle" if parse is parse_angle else "length")
+    if bare is not None:
+        raise typer.BadParameter(bare)
     try:
         v = parse(value)
     except UnitError as e:
@@ -243,11 +304,6 @@ def _parse_unit(parse: Callable[[str], float], what: str, value: str) -> float:
         raise typer.BadParameter(f"{value!r} is not a usable value ({e}; {what})") from None
     if not math.isfinite(v):
         raise typer.BadParameter(f"{value!r} is not a finite value ({what})")
-    if parse is parse_angle and abs(v) > 2 * math.pi and _bare_number(value):
-        raise typer.BadParameter(
-            f"{value.strip()} would be {value.strip()} rad (bare numbers are radians), beyond a full turn: "
-            f"did you mean {value.strip()}deg?"
-        )
     return v
 
 
@@ -257,7 +313,7 @@ def angle_option(value: str) -> float: ...
 def angle_option(value: None) -> None: ...
 def angle_option(value: str | None) -> float | None:
     """An angle option in rad (``-90deg``, ``-pi/2``, ``500urad``); ``None`` if not given (typer parser or callback)."""
-    return None if value is None else _parse_unit(parse_angle, "an angle: radians, or with deg / mrad / urad", value)
+    return None if value is None else _parse_unit(parse_angle, "an angle: deg, rad, mrad, urad, or -pi/2", value)
 
 
 @overload
@@ -266,7 +322,7 @@ def length_option(value: str) -> float: ...
 def length_option(value: None) -> None: ...
 def length_option(value: str | None) -> float | None:
     """A length option in m (``2mm``, ``30um``, ``850nm``); ``None`` if not given (typer parser or callback)."""
-    return None if value is None else _parse_unit(parse_length, "a length: metres, or with mm / um / nm", value)
+    return None if value is None else _parse_unit(parse_length, "a length: m, mm, um or nm", value)
 
 
 def pose_options(q1: str, q2: str, q3: str, theta: str, psi: str) -> Pose:
@@ -357,16 +413,6 @@ def device_option(value: str | None) -> str | None:
         return check_device_url(value)
     except ValueError as e:
         raise typer.BadParameter(str(e)) from None
-
-
-def _bare_number(text: str) -> bool:
-    try:
-        float(text.strip())
-    except ValueError:
-        return False
-    return True
-
-
 
 
 # ---------------------------------------------------------------- the user's configuration file
@@ -512,6 +558,10 @@ def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Ge
     from ..kinematics import DEFAULT_GEOMETRY, Geometry
 
     if option is not None:
+        for part in option.split(","):
+            bare = bare_number_problem(part, "length")
+            if bare is not None:
+                fail(f"{flag}: {bare}")
         try:
             return Setting(Geometry.parse(option), "option", flag)
         except ValueError as e:

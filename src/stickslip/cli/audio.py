@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
 import typer
 
 from . import app
-from ._common import console, device_url, err_console, fail, print_json, user_errors
+from ._common import console, device_url, err_console, fail, print_json, say, user_errors
 from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
@@ -87,9 +87,10 @@ def tune(
     ),
     stop_at: float = typer.Option(..., "--stop-at", help="When the joint reached its stop, seconds from the start."),
     out: Path = typer.Option(
-        ..., "-o", "--out", help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB)."
+        ..., "--output", "-o", "--out",
+        help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB).",
     ),
-    joint: int = typer.Option(None, "--joint", help="Joint 1, 2 or 3 the recording belongs to."),
+    joint: int = typer.Option(None, "--joint", "-j", help="Joint 1, 2 or 3 the recording belongs to."),
     min_band: float = typer.Option(
         1400.0,
         "--min-band",
@@ -238,8 +239,8 @@ def listen(
               stickslip listen --mic --tuning joint2-tuning.json
               stickslip listen --serial /dev/ttyACM0 --sample-rate 25000 --tuning accel-tuning.json
     """
-    from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, check_confirm_s, confirming
-    from ..audio.detector import Tuning, TuningFileError, detector_for
+    from ..audio.confirm import CONFIRM_S, check_confirm_s
+    from ..audio.detector import Tuning, TuningFileError
 
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
@@ -268,11 +269,24 @@ def listen(
     if serial_port is not None:
         _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock, late, step_rate)
         return
+    _listen_file(recording, tuning, tuning_path, sample_rate, channel, json_out, confirm_s, step_clock, late, step_rate)
 
-    import numpy as np
 
+def _listen_file(
+    recording: Path,
+    tuning: Any,
+    tuning_path: Path,
+    sample_rate: float | None,
+    channel: int | None,
+    json_out: bool,
+    confirm_s: float,
+    step_clock: bool,
+    late: bool,
+    step_rate: float | None = None,
+) -> None:
+    """``listen`` on a recording: read it in blocks through the procedure, print the notes, warnings and stops."""
     from ..audio.sources import AudioSourceError, wav_blocks
-    from ..audio.sources.guard import block_problem, non_finite
+    from ..procedures.listen import ListenSettings, TuningMismatch, listen_blocks
 
     if tuning.method == "band":
         err_console.print(
@@ -280,6 +294,7 @@ def listen(
             "spectral-template detector (it rejects knocks and hears quieter or duller stops)",
             highlight=False,
         )
+    blocks: Iterable[tuple[Any, float]]
     if _is_csv(recording):
         samples, csv_rate = _load_recording(recording, sample_rate, channel)
         blocks = ((samples[i : i + (1 << 16)], csv_rate) for i in range(0, samples.size, 1 << 16))
@@ -287,81 +302,25 @@ def listen(
         if sample_rate is not None:
             fail(f"--sample-rate is for a CSV of samples or --serial; {recording} carries its own rate")
         blocks = wav_blocks(recording, block=1 << 16, channel=_channels(recording, channel))
-    events = []
-    problems: set[str | None] = set()
-    n_bad, first_bad_s, heard = 0, None, 0  # samples that are not numbers (a damaged file)
-    heard_rate = float(tuning.sample_rate)
-    opening: list[np.ndarray] = []  # the first second: the step rate heard, against the tuning's
     try:
-        det = None
-        for block, rate in blocks:
-            bad, first = non_finite(block)
-            if bad:
-                n_bad += bad
-                first_bad_s = first_bad_s if first_bad_s is not None else (heard + int(first or 0)) / rate
-            if heard < rate:
-                opening.append(block[: int(rate) - heard])
-            heard += block.size
-            heard_rate = float(rate)
-            if det is None:
-                try:
-                    det = confirming(
-                        detector_for(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late
-                    )
-                    det.reset(0.0, step_rate)
-                except ValueError as e:
-                    fail(f"tuning {tuning_path} does not fit {recording} at {rate} Hz: {e}")
-            problems.add(block_problem(np.nan_to_num(block) if bad else block))  # damage is reported apart
-            events += det.feed(block)
+        report = listen_blocks(blocks, tuning, ListenSettings(confirm_s, step_clock, late, step_rate))
+    except TuningMismatch as e:
+        fail(f"tuning {tuning_path} does not fit {recording} at {e.rate} Hz: {e}")
     except AudioSourceError as err:
         fail(str(err))
-    if det is None or heard == 0:  # an empty or truncated file
+    if report.samples == 0:  # an empty or truncated file
         fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
-    if isinstance(det, ConfirmedStopDetector):
-        events += det.finish()
-        for t_s, why in det.log.stopped:
-            _note_stopped(t_s, why)
-    warmup_s = tuning.warmup_s if tuning.method == "template" else 0.0
-    if heard < (warmup_s + tuning.hold_s) * heard_rate:
-        lasts_ms = 1e3 * heard / heard_rate
-        err_console.print(
-            f"warning: {recording} lasts only {lasts_ms:.{1 if lasts_ms >= 0.1 else 4}f} ms ({heard} sample"
-            f"{'s' if heard != 1 else ''}): less than the {1e3 * warmup_s:.0f} ms of stepping the detector learns "
-            "from before it can hear a stop (unless the recording starts at the stop)",
-            highlight=False,
-            soft_wrap=True,
-        )
-    if opening and tuning.step_rate_hz is not None:
-        from ..audio.features.stepclock import step_rate_hz
-
-        # damaged samples count as silence here: one infinity read as full scale would be the only 'click' heard
-        first = np.nan_to_num(np.concatenate(opening), nan=0.0, posinf=0.0, neginf=0.0)
-        dead = block_problem(first) is not None  # no rate to hear in silence (the warning below says so)
-        heard_hz = math.nan if dead else step_rate_hz(first, heard_rate)
-        why = tuning.step_rate_problem(heard_hz, f"{recording}: the joint steps")
-        if why is not None:
-            err_console.print(f"warning: {why}", highlight=False, soft_wrap=True)
-    if problems and None not in problems:
-        err_console.print(
-            f"warning: {recording} carries no signal ({', '.join(sorted(p for p in problems if p))})",
-            highlight=False,
-            soft_wrap=True,
-        )
-    if n_bad:
-        err_console.print(
-            f"warning: {recording}: {n_bad} "
-            f"{'samples are not numbers' if n_bad != 1 else 'sample is not a number'} (NaN or infinity), the first at "
-            f"{first_bad_s:.4f} s: the file is damaged there (heard as 0 for NaN, full scale for infinity)",
-            highlight=False,
-            soft_wrap=True,
-        )
+    for t_s, why in report.stopped:
+        _note_stopped(t_s, why)
+    for line in report.warnings(str(recording), tuning):
+        err_console.print(f"warning: {line}", highlight=False, soft_wrap=True)
     if json_out:
-        print_json([e.to_dict() for e in events])
+        print_json([e.to_dict() for e in report.events])
         return
-    if not events:
+    if not report.events:
         console.print("no end stop heard")
-    for ev in events:
-        console.print(_event_line(ev, tuning.level_unit, confirm_s, 4), highlight=False, soft_wrap=True)
+    for ev in report.events:
+        say(_event_line(ev, tuning.level_unit, confirm_s, 4))
 
 
 def _event_line(ev: Any, unit: str, confirm_s: float, digits: int) -> str:
@@ -388,7 +347,7 @@ def _print_live(ev: Any, tuning: Any, json_out: bool, confirm_s: float) -> None:
         out.write(json.dumps(ev.to_dict()) + "\n")
         out.flush()
     else:
-        console.print(_event_line(ev, tuning.level_unit, confirm_s, 3), highlight=False, soft_wrap=True)
+        say(_event_line(ev, tuning.level_unit, confirm_s, 3))
 
 
 def _listen_serial(
@@ -402,16 +361,14 @@ def _listen_serial(
     step_rate: float | None = None,
 ) -> None:
     """Live vibration samples from a serial port through the same detector as sound."""
-    from ..audio.confirm import confirming
-    from ..audio.detector import detector_for
     from ..audio.sources import AudioSourceError
     from ..audio.sources.vibration import SerialSamples
+    from ..procedures.listen import ListenSettings, TuningMismatch, detector_for
 
     rate = int(round(sample_rate)) if sample_rate is not None else int(tuning.sample_rate)
     try:
-        det = confirming(detector_for(tuning.for_sample_rate(rate)), confirm_s, step_clock=step_clock, late=late)
-        det.reset(0.0, step_rate)
-    except ValueError as e:
+        det = detector_for(tuning, rate, ListenSettings(confirm_s, step_clock, late, step_rate))
+    except TuningMismatch as e:
         fail(f"the tuning does not fit {rate} Hz samples: {e}")
     try:
         src = SerialSamples(port, sample_rate=rate)
@@ -477,20 +434,11 @@ def _report_live(
     det: Any, blocks: Iterator[Any], close: Any, tuning: Any, json_out: bool, confirm_s: float, where: str
 ) -> None:
     """Feed a live source's blocks to ``det`` and print each event as it comes, until Ctrl-C; then ``close()``."""
-    from ..audio.confirm import ConfirmedStopDetector
     from ..audio.sources import AudioSourceError
+    from ..procedures.listen import listen_live
 
-    noted = 0
     try:
-        for block in blocks:
-            for ev in det.feed(block):
-                _print_live(ev, tuning, json_out, confirm_s)
-            stopped = det.log.stopped if isinstance(det, ConfirmedStopDetector) else []
-            for t_s, why in stopped[noted:]:
-                _note_stopped(t_s, why)
-            noted = len(stopped)
-    except KeyboardInterrupt:
-        pass
+        listen_live(det, blocks, lambda ev: _print_live(ev, tuning, json_out, confirm_s), _note_stopped)
     except AudioSourceError as err:
         fail(f"{where}{err}")
     finally:
@@ -502,11 +450,14 @@ def record(
     out: Path = typer.Argument(
         ..., help="WAV file to write (a JSON label file is written beside it).", metavar="OUT.wav"
     ),
-    joint: int = typer.Option(..., "--joint", help="Joint 1, 2 or 3 to drive into its end stop."),
-    direction: str = typer.Option("+", "--direction", "-d", help="'+' (towards the upper stop) or '-'."),
+    joint: int = typer.Option(..., "--joint", "-j", help="Joint 1, 2 or 3 to drive into its end stop."),
+    direction: str = typer.Option(
+        "+", "--direction", metavar="<+|->", help="'+' (towards the upper stop) or '-'. (-d is the device.)"
+    ),
     device: str | None = typer.Option(
         None,
         "--device",
+        "-d",
         help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: device in the config file, "
         "else sim://).",
     ),
@@ -545,10 +496,9 @@ def record(
 
     Example: stickslip record j2.wav --joint 2 --device sim://?seed=3 --tune j2-tuning.json
     """
-    from ..audio.sources import AudioSourceError, write_wav
+    from ..audio.sources import AudioSourceError
     from ..devices import DeviceError, open_device
     from ..models import direction_label
-    from ..records import atomic_write_text
 
     if joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
@@ -587,6 +537,17 @@ def record(
                 )
         finally:
             ctrl.close()
+    _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out)
+
+
+def _finish_recording(
+    out: Path, samples: Any, rate: int, stop_at: float, how: str, joint: int, sign_label: str,
+    tune_out: Path | None, json_out: bool,
+) -> None:
+    """Write the recording and its label (and the tuning, with --tune), then say what was written."""
+    from ..audio.sources import write_wav
+    from ..records import atomic_write_text
+
     try:
         write_wav(out, samples, rate)
         label = {
@@ -676,25 +637,8 @@ def _record_real(
 
         threading.Thread(target=wait_for_enter, daemon=True).start()
         err_console.print("press Enter when you hear the stop")
-    blocks: list[Any] = []
-    sign = 1 if direction == "+" else -1
-    try:
-        t_first = time.monotonic() - t0
-        burst = max(1, int(hz * 0.1))
-        issued = 0
-        while issued < steps:
-            n = min(burst, steps - issued)
-            tb = time.monotonic()
-            ctrl.step(joint, sign * n)
-            issued += n
-            for b in _drain(mic, tb + n / hz):
-                blocks.append(b)
-                err_console.print(CARRIAGE_RETURN, meter.feed(b).line(), sep="", end="", highlight=False)
-        blocks += list(_drain(mic, time.monotonic() + 0.3))
-        ctrl.stop(joint)
-    finally:
-        mic.stop()
-        err_console.print()
+    t_first = time.monotonic() - t0
+    blocks = _step_while_recording(ctrl, joint, 1 if direction == "+" else -1, steps, hz, mic, meter)
     if getattr(mic, "error", None) is not None:
         fail(f"{serial_port}: {mic.error}")
     dropped = int(getattr(mic, "overflows", 0) or 0)
@@ -711,6 +655,30 @@ def _record_real(
         return samples, rate, pressed[0], "a key press"
     assert stop_at_step is not None
     return samples, rate, t_first + stop_at_step / hz, f"step {stop_at_step} at {hz:g} Hz"
+
+
+def _step_while_recording(ctrl: Any, joint: int, sign: int, steps: int, hz: float, mic: Any, meter: Any) -> list[Any]:
+    """Issue ``steps`` in bursts of 0.1 s while ``mic`` records (the meter on stderr); the blocks recorded."""
+    import time
+
+    blocks: list[Any] = []
+    try:
+        burst = max(1, int(hz * 0.1))
+        issued = 0
+        while issued < steps:
+            n = min(burst, steps - issued)
+            tb = time.monotonic()
+            ctrl.step(joint, sign * n)
+            issued += n
+            for b in _drain(mic, tb + n / hz):
+                blocks.append(b)
+                err_console.print(CARRIAGE_RETURN, meter.feed(b).line(), sep="", end="", highlight=False)
+        blocks += list(_drain(mic, time.monotonic() + 0.3))
+        ctrl.stop(joint)
+    finally:
+        mic.stop()
+        err_console.print()
+    return blocks
 
 
 class _SerialRecorder:

@@ -29,6 +29,7 @@ from ._common import (
     geometry_setting,
     max_age_setting,
     print_json,
+    say,
     user_config,
 )
 from ._output import data_stream
@@ -115,7 +116,8 @@ def show_cmd(
     ($STICKSLIP_DB, $STICKSLIP_MAX_AGE_DAYS), then the configuration file, then the
     built-in default. Give a command's options here to see them win. A configuration
     file that cannot be used (not TOML, an unknown key, a password in the device URL)
-    is one error line naming the file, the line and the key (exit 2).
+    is one error line naming the file, the line and the key (exit 2); so is a
+    calibration it names that is not there, after the settings are shown.
 
     Example: stickslip config show --json
     """
@@ -143,14 +145,10 @@ def show_cmd(
                 },
             }
         )
+        _check_named_files(cal)
         return
-    from rich.table import Table
-
     state = "found" if cfg.found else "not there: built-in defaults (stickslip config init writes a template)"
-    console.print(f"config file: {cfg.path} ({state})", highlight=False, soft_wrap=True)
-    t = Table(show_edge=False)
-    for col in ("setting", "value", "from"):
-        t.add_column(col, overflow="fold")
+    say(f"config file: {cfg.path} ({state})")
 
     def origin(s: Setting[Any]) -> str:
         return s.source + (f" {s.where}" if s.where else "")
@@ -161,9 +159,18 @@ def show_cmd(
         return str(p) + ("" if p.is_file() else " (not there)")
 
     g = geom.value
-    t.add_row("device", dev.value, origin(dev))
-    t.add_row("calibration", path_text(cal.value), origin(cal))
-    t.add_row("database", str(base.value) + ("" if base.value.is_file() else " (not there yet)"), origin(base))
-    t.add_row("max_age_days", f"{age.value} day{'s' if age.value != 1 else ''}", origin(age))
-    t.add_row("geometry", f"offset {g.offset * 1e3:g} mm, length {g.length * 1e3:g} mm", origin(geom))
-    console.print(t, highlight=False)
+    for name, value, setting in (
+        ("device", dev.value, dev),
+        ("calibration", path_text(cal.value), cal),
+        ("database", str(base.value) + ("" if base.value.is_file() else " (not there yet)"), base),
+        ("max_age_days", f"{age.value} day{'s' if age.value != 1 else ''}", age),
+        ("geometry", f"offset {g.offset * 1e3:g} mm, length {g.length * 1e3:g} mm", geom),
+    ):
+        say(f"  {name}: {value} (from {origin(setting)})", indent="      ")
+    _check_named_files(cal)
+
+
+def _check_named_files(cal: Setting[Path | None]) -> None:
+    """Exit 2 naming the configuration file when the calibration it names is not there (every command would fail)."""
+    if cal.source == "file" and cal.value is not None and not cal.value.is_file():
+        fail(f"{cal.where}: calibration: {cal.value} does not exist (fix the config file, or give --calibration)")

@@ -8,7 +8,7 @@ import itertools
 import math
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, TextIO
+from typing import TYPE_CHECKING, Annotated, Any, TextIO
 
 import typer
 from rich.table import Table
@@ -27,17 +27,21 @@ from ..records import atomic_write, guard_cell, needs_guard, unguard_cell
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
+    DB_HELP,
     angle_option,
     calibration_file,
     console,
+    db_path,
     fail,
     fail_table,
     length_option,
     max_age_setting,
+    open_store,
     pose_options,
     print_json,
     read_step_table,
     read_table,
+    say,
     user_errors,
     validation_table,
     warn_later,
@@ -131,8 +135,14 @@ def calibrate_cmd(
     ] = None,
     device: Annotated[
         str | None,
-        typer.Option(help="Device URL the traverses were measured on (recorded without options or secrets)."),
+        typer.Option(
+            "--device", "-d",
+            help="Device URL the traverses were measured on (recorded without options or secrets; default: the "
+            "one device the database holds them all under, if any). A calibration without its device, or from "
+            "the simulator, is refused on a real controller unless --trust-calibration.",
+        ),
     ] = None,
+    db: Annotated[Path | None, typer.Option("--db", help=DB_HELP)] = None,
     frequency: Annotated[
         float | None, typer.Option(help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).")
     ] = None,
@@ -184,6 +194,12 @@ def calibrate_cmd(
     on the paper's model, each step size weighted by its uncertainty; with --prior they
     bring the calibration up to date at the poses where you work.
 
+    When the database holds every row of the table under one device (measured with
+    traverse or demo, or imported with --device), the calibration records that device and
+    is kept in the database beside them (history lists it; show N gets it back). One
+    without a device, or from the simulator, is refused on a real controller unless
+    --trust-calibration.
+
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
@@ -197,6 +213,9 @@ def calibrate_cmd(
     traverses = read_table(measurements) if measurements is not None else []
     steps: list[StepSize] = read_step_table(step_sizes) if step_sizes is not None else []
     source = str(measurements) if measurements is not None else str(step_sizes)
+    stored = _stored_device(traverses, db) if device is None and traverses else None
+    if stored is not None:
+        device = stored[0]
     try:
         conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
         if prior is not None:
@@ -213,6 +232,7 @@ def calibrate_cmd(
     if output is not None:
         with user_errors():
             cal.save(output)
+    kept = _keep(cal, stored, db)
     if json_out:
         print_json(cal.to_dict())
         return
@@ -225,7 +245,33 @@ def calibrate_cmd(
     for n in cal.provenance.notes:
         console.print(styled("note:", "dim"), n, highlight=False)
     if output is not None:
-        console.print(f"saved to {output}")
+        say(f"saved to {output}")
+    if kept is not None:
+        say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
+
+
+def _stored_device(traverses: list[Any], db: Path | None) -> tuple[str, list[int]] | None:
+    """The device the database holds every one of ``traverses`` under, and their ids (``None``: not so)."""
+    from ..storage import Store, StoreError
+
+    path = db_path(db)
+    if not path.is_file():
+        return None  # a calibration never creates a database
+    try:
+        with Store.open(path) as store:
+            return store.device_holding(traverses)
+    except (StoreError, ValueError):
+        return None  # the device stays unknown; the database's own problem is for the commands that use it
+
+
+def _keep(cal: Calibration, stored: tuple[str, list[int]] | None, db: Path | None) -> int | None:
+    """Keep ``cal`` in the database beside the traverses it was made from (its id), if the database holds them."""
+    if stored is None:
+        return None
+    from ..storage import Store, StoreError
+
+    with user_errors(StoreError), Store.open(db_path(db)) as store:
+        return store.add_calibration(cal, stored[0], stored[1])
 
 
 def _selection_table(cal: Calibration) -> Table:
@@ -264,30 +310,62 @@ def _selection_table(cal: Calibration) -> Table:
 @app.command("show")
 def show_cmd(
     calibration: Annotated[
-        Path | None, typer.Argument(help="Calibration JSON (default: calibration in the config file).")
+        str | None,
+        typer.Argument(
+            help="Calibration JSON, or the number of a stored calibration (`stickslip history` lists them: #1 "
+            "is 1) (default: calibration in the config file).",
+            metavar="[CAL.json|N]",
+            show_default=False,
+        ),
     ] = None,
+    output: Annotated[
+        Path | None,
+        typer.Option("--output", "-o", help="Also write the calibration to this JSON file (use it with -c)."),
+    ] = None,
+    db: Annotated[Path | None, typer.Option("--db", help=DB_HELP)] = None,
     json_out: JsonOpt = False,
 ) -> None:
     """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints).
 
     A calibration that averages model families (calibrate --model auto) also shows each
     family's cross-validation error and weight; ◀ marks the family whose parameters are
-    listed. --json gives every family's parameters.
-    """
-    from ..calibration import Calibration
+    listed. --json gives every family's parameters. A number (or #N) that is not a file
+    names a calibration kept in the database; -o writes it out for -c.
 
-    calibration = calibration_file(calibration, "CAL.json")
-    with user_errors():
-        cal = Calibration.load(calibration)
+    Example: stickslip show 1 -o cal.json
+    """
+    cal, name = _calibration_to_show(calibration, db)
+    if output is not None:
+        with user_errors():
+            cal.save(output)
     if json_out:
         print_json(cal.to_dict())
         return
-    console.print(_params_table(cal, f"{calibration} — day {cal.day}, method {cal.method}"))
+    console.print(_params_table(cal, f"{name} — day {cal.day}, method {cal.method}"))
     if cal.selection:  # an averaged model: which families, with what weight (◀: the one whose parameters are shown)
         console.print(_selection_table(cal))
     for (j, d), v in sorted(cal.constant_steps.items()):
         s, u = step_scale(j)
-        console.print(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}", highlight=False)
+        say(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}")
+    if output is not None:
+        say(f"saved to {output}")
+
+
+def _calibration_to_show(text: str | None, db: Path | None) -> tuple[Calibration, str]:
+    """The calibration ``show`` names: a file, or ``N`` / ``#N`` kept in the database; and what to call it."""
+    from ..calibration import Calibration
+    from ..storage import StoreError
+
+    number = (text or "").strip().lstrip("#")
+    if text is not None and number.isdigit() and not Path(text).exists():
+        with open_store(db, must_exist=True) as store, user_errors(StoreError):
+            try:
+                return store.calibration(int(number)), f"calibration #{number} of {store.path}"
+            except KeyError as e:
+                fail(f"{e.args[0]} in {store.path} (stickslip history lists them)")
+    path = calibration_file(None if text is None else Path(text), "CAL.json")
+    with user_errors():
+        return Calibration.load(path), str(path)
 
 
 @app.command("predict")
@@ -334,15 +412,7 @@ def predict_cmd(
     last = {h: i for i, h in enumerate(header)}
     take = [last[h] for h in header]
     if json_out:
-        out = []
-        for cells, g in zip(table.cells(), preds.tolist(), strict=True):
-            r: dict[str, object] = {h: _maybe_number(unguard_cell(cells[i])) for h, i in last.items()}
-            r["gamma_pred"] = g
-            out.append(r)
-        if pi95 is not None:
-            for r, h in zip(out, pi95.tolist(), strict=True):
-                r["gamma_pi95"] = h
-        print_json(out)
+        _print_predictions(table, preds, pi95, last)
         return
 
     def texts() -> Iterator[str]:
@@ -392,6 +462,21 @@ def predict_cmd(
         with user_errors():
             atomic_write(output, emit)  # streamed; a failed write leaves no half file
         console.print(f"wrote {len(table)} rows to {output}")
+
+
+def _print_predictions(
+    table: PoseTable, preds: NDArray[np.float64], pi95: NDArray[np.float64] | None, last: dict[str, int]
+) -> None:
+    """``predict --json``: every row as an object, with gamma_pred (and gamma_pi95)."""
+    out = []
+    for cells, g in zip(table.cells(), preds.tolist(), strict=True):
+        r: dict[str, object] = {h: _maybe_number(unguard_cell(cells[i])) for h, i in last.items()}
+        r["gamma_pred"] = g
+        out.append(r)
+    if pi95 is not None:
+        for r, h in zip(out, pi95.tolist(), strict=True):
+            r["gamma_pi95"] = h
+    print_json(out)
 
 
 def _interval_column(cal: Calibration, table: PoseTable, preds: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -561,22 +646,21 @@ def plan_cmd(
         print_json(d)
         return
     err = plan.q_end_predicted - plan.q_to
-    console.print(
+    say(
         f"joint {joint}: {plan.steps} steps in direction {plan.direction} "
-        f"from {format_position(plan.q_from, joint)} to {format_position(plan.q_to, joint)}",
-        highlight=False,
+        f"from {format_position(plan.q_from, joint)} to {format_position(plan.q_to, joint)}"
     )
-    console.print(
+    say(
         f"  predicted end {format_position(plan.q_end_predicted, joint)} "
         f"(off by {format_position(err, joint, 3)}; step {format_step(plan.gamma_start, joint)} at the start, "
         f"{format_step(plan.gamma_end, joint)} at the target)",
-        highlight=False,
+        indent="    ",
     )
-    console.print(
-        f"  95 % prediction interval of the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
-        f"± {format_position(half, joint, 3)}"
+    say(
+        f"  the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
+        f"± {format_position(half, joint, 3)} (95 % prediction interval)"
         + (" (model error assumed: the calibration has none)" if assumed else ""),
-        highlight=False,
+        indent="    ",
     )
     if math.isclose(plan.q_from, plan.q_to):
-        console.print("  nothing to do: start and target are the same")
+        say("  nothing to do: start and target are the same")

@@ -3,55 +3,53 @@
 Positions are kept per device in the database (``--db``, default ``$STICKSLIP_DB``, the config file or
 the user's data directory) under the device URL without its query options, so every
 invocation continues from where the last one left the arm. A ``sim://`` device is
-opened at the kept positions (each invocation starts a fresh simulator).
+opened at the kept positions (each invocation starts a fresh simulator). The workflows
+are :func:`stickslip.procedures.move.move` and :func:`stickslip.procedures.where.where`;
+these commands parse, call them and print.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import re
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..devices.base import DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
+from ..devices.base import DeviceError, device_key
 from ..joints import JOINTS, joint_spec
-from ..units import UnitError, format_position, parse_angle, parse_length, position_display_unit, step_scale
+from ..units import (
+    UnitError,
+    bare_number_problem,
+    format_position,
+    format_spread,
+    parse_angle,
+    parse_length,
+    step_scale,
+)
 from . import app
 from ._common import (
     DB_HELP,
     angle_option,
     calibration_file,
-    console,
     device_url,
     fail,
     flush_warnings,
-    lazy_import,
     length_option,
     max_age_setting,
     open_store,
     print_json,
+    say,
     user_errors,
     warn_later,
 )
-from ._output import styled
 
 if TYPE_CHECKING:
-    from .. import kinematics as kin
-    from ..calibration import Calibration
-    from ..devices.positions import DeviceState, load_state, save_state
-else:  # numpy loads when a command first needs it, not for --help
-    kin = lazy_import("stickslip.kinematics")
-    _positions = lazy_import("stickslip.devices.positions")
+    from ..procedures.move import MoveResult
+    from ..procedures.where import WhereResult
 
-    def load_state(*args, **kwargs):
-        return _positions.load_state(*args, **kwargs)
-
-    def save_state(*args, **kwargs):
-        return _positions.save_state(*args, **kwargs)
-
-_Q1 = "Record q1 (angle: -30deg, 0.1) first."
+_Q1 = "Record q1 (angle: -30deg, -pi/6) first."
 _Q2 = "Record q2 (angle: -90deg, -pi/2) first."
 _Q3 = "Record q3 (length: 2mm, 0) first."
 _THETA = "Record the base tilt theta (angle)."
@@ -63,8 +61,15 @@ _DEVICE_HELP = (
 
 
 def _parse_joint_value(joint: int, text: str, what: str) -> float:
-    """A position or displacement of ``joint``: a length for joint 3, an angle for 1 and 2."""
-    rotary = joint_spec(joint).rotary
+    """A position or displacement of ``joint`` with its unit: a length for joint 3, an angle for 1 and 2.
+
+    A bare number (other than 0) is refused with a did-you-mean for that joint.
+    """
+    spec = joint_spec(joint)
+    rotary = spec.rotary
+    bare = bare_number_problem(text, "angle" if rotary else "length", spec.span)
+    if bare is not None:
+        fail(f"{what}: {bare}")
     try:
         v = parse_angle(text) if rotary else parse_length(text)
     except (UnitError, ArithmeticError, ValueError, TypeError) as e:
@@ -75,210 +80,66 @@ def _parse_joint_value(joint: int, text: str, what: str) -> float:
     return v
 
 
-def _apply_pose_options(
-    state: DeviceState, q1: float | None, q2: float | None, q3: float | None, theta: float | None, psi: float | None
-) -> list[str]:
-    changed = []
-    for j, v in ((1, q1), (2, q2), (3, q3)):
-        if v is not None:
-            with user_errors():
-                state.set_position(j, v, "set")
-            changed.append(f"q{j}")
-    with user_errors():
-        state.set_tilt(theta, psi)
-    changed += [n for n, v in (("theta", theta), ("psi", psi)) if v is not None]
-    return changed
-
-
-def _plan(
-    cal: Calibration, joint: int, q_from: float, q_to: float, pose: kin.Pose
-) -> tuple[int, float, Callable[[int], float]]:
-    """``(steps (signed int), q_end_predicted, dead_reckon(n) -> q)`` from stickslip.motion.planning."""
-    from ..motion.planning import dead_reckon, plan_move
-
-    plan = plan_move(cal, joint, q_from, q_to, pose)
-    steps = int(plan.signed_steps)
-
-    def reckon(n_signed: int) -> float:
-        return float(dead_reckon(cal, joint, q_from, n_signed, pose))
-
-    return steps, float(plan.q_end_predicted), reckon
-
-
-def _state_rows(state: DeviceState) -> list[dict[str, object]]:
-    rows: list[dict[str, object]] = []
-    for j in (1, 2, 3):
-        spec = JOINTS[j]
-        rows.append(
-            {
-                "joint": j,
-                "q": state.positions[j],
-                "unit": spec.unit,
-                "display": format_position(state.positions[j], j),
-                "source": "uncertain" if j in state.uncertain else state.sources[j],
-                "uncertain": list(state.uncertain[j]) if j in state.uncertain else None,
-                **_track_fields(state, j),
-            }
-        )
-    return rows
-
-
-def _track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
-    """``sd`` (m or rad) of the position and the learned ``step_scale`` (1) of a joint, ``None`` if untracked."""
-    from ..motion.tracking import JointTrack
-
-    raw = state.track.get(joint)
-    if raw is None:
-        return {"sd": None, "step_scale": None, "step_scale_sd": None}
-    try:
-        t = JointTrack.from_json(raw)
-    except ValueError:
-        return {"sd": None, "step_scale": None, "step_scale_sd": None}
-    return {"sd": t.sd, "step_scale": t.scale, "step_scale_sd": t.scale_sd}
-
-
-def _sd_text(sd: float, joint: int) -> str:
-    """A position's spread for a person: µm (joint 3); µrad (joints 1, 2), in degrees from 1 mrad (1.37e+05 µrad
-    told nobody it was 7.85 deg)."""
-    if not joint_spec(joint).rotary:
-        return f"{sd * 1e6:.3g} µm"
-    return f"{sd * 1e6:.3g} µrad" if abs(sd) < 1e-3 else f"{math.degrees(sd):.3g} deg"
-
-
-def _degree_hint(joint: int, text: str | None) -> str:
-    """For a bare number on a rotary joint: ``"; a bare number is radians: did you mean 5deg?"``."""
-    if not joint_spec(joint).rotary or text is None:
-        return ""
-    try:
-        float(text.strip())
-    except ValueError:
-        return ""
-    return f"; a bare number is radians: did you mean {text.strip()}deg?"
-
-
-def _target(joint: int, state: DeviceState, by: str | None, to: str | None) -> tuple[float, float]:
+def _position_or_stop(joint: int, text: str, what: str) -> float:
+    """A position of ``joint`` (rad or m) from ``text``: a value with its unit, or ``min``/``max`` (an end stop)."""
     spec = JOINTS[joint]
-    q_from = state.positions[joint]
-    if to is not None:
-        word = to.strip().lower()
-        if word in ("min", "lower"):
-            q_to = spec.lower
-        elif word in ("max", "upper"):
-            q_to = spec.upper
-        else:
-            q_to = _parse_joint_value(joint, to, "--to")
-    else:
-        q_to = q_from + _parse_joint_value(joint, by or "", "--by")
-    if not spec.contains(q_to):
-        unit = position_display_unit(joint)
-        fail(
-            f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
-            f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
-            f"(from {format_position(q_from, joint)}); positions are in {unit}"
-            + _degree_hint(joint, to if to is not None else by)
-        )
-    return q_from, min(max(q_to, spec.lower), spec.upper)
+    word = text.strip().lower()
+    if word in ("min", "lower"):
+        return spec.lower
+    if word in ("max", "upper"):
+        return spec.upper
+    return _parse_joint_value(joint, text, what)
 
 
-def _move_locked(
-    store: Any,
-    key: str,
-    device: str,
-    cal: Any,
-    joint: int,
-    by: str | None,
-    to: str | None,
-    burst: int,
-    pose_opts: tuple[float | None, ...],
-    drive: Callable[..., Any],
-    max_age: int = 0,
-) -> tuple[Any, DeviceState, int, float, float, float, float | None]:
-    """The part of `move` that runs holding the device lock: plan from the kept state, drive."""
-    from ..procedures.conditions import usage_warnings
-    from ..procedures.move import MoveOutcome
+RAW_BURST = 20000
+"""Steps per burst of raw steps (``--steps``): fewer round trips; a device error still ends it within one burst."""
 
-    with user_errors():
-        state = load_state(store, key)
-    _apply_pose_options(state, *pose_opts)
-    problem = state.uncertainty_problem(joint)
-    if problem:
-        fail(problem)
-    q_from, q_to = _target(joint, state, by, to)
-    pose = state.pose
-    from ..motion.tracking import joint_sigma_model, scaled_calibration, track_for
-
-    with user_errors():  # the day's step scale learned from observations (stickslip observe)
-        track, note = track_for(state.track.get(joint), cal, joint)
-    if note:
-        warn_later(note)
-    with user_errors(KeyError):
-        steps, q_end, reckon = _plan(
-            scaled_calibration(cal, joint, {d: track.scale_of(d) for d in "+-"}), joint, q_from, q_to, pose
-        )
-    with user_errors():
-        save_state(store, state)  # the recorded pose, even if nothing moves
-    outcome, sim_true = MoveOutcome(), None
-    if not steps:
-        for w in usage_warnings(cal, None, device, joint, max_age):
-            warn_later(w)
-        flush_warnings()
-    if steps:
-        try:
-            dev = open_device(device)
-        except (DeviceError, ValueError) as e:
-            fail(str(e))
-        try:
-            for w in usage_warnings(cal, dev, device, joint, max_age):
-                warn_later(w)
-            flush_warnings()  # the input is good: say it before driving
-            if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
-                dev.set_pose(*pose)
-
-            def save(st: DeviceState) -> None:
-                with user_errors():
-                    save_state(store, st)
-
-            outcome = drive(dev, state, joint, steps, burst, reckon, save)
-            if outcome.error is None:
-                state.set_position(joint, q_end, "dead-reckoned")
-            if outcome.sent and joint not in state.uncertain:  # the position's uncertainty grows with the move
-                track.predict(state.positions[joint] - q_from, outcome.sent, pose, joint, joint_sigma_model(cal, joint))
-                state.track[joint] = track.to_json()
-            if outcome.error is None or state.track.get(joint) is not None:
-                save(state)
-            if outcome.error is None:
-                if isinstance(dev, KnowsTruePosition):
-                    sim_true = float(dev.position(joint))
-        finally:
-            try:
-                dev.close()
-            except DeviceError:
-                pass
-    return outcome, state, steps, q_from, q_to, q_end, sim_true
+_STEPS = re.compile(r"^\s*([-+]?\d+)\s*steps?\s*$")
 
 
 @app.command()
 def move(
     joint: int = typer.Option(..., "--joint", "-j", min=1, max=3, help="Joint to move: 1, 2 or 3."),
     by: str | None = typer.Option(
-        None, "--by", help="Move by: 30um, -0.5mm (joint 3); 2deg, -500urad (joints 1, 2)."
+        None, "--by", metavar="<length|angle|steps>",
+        help="Move by: 30um, -0.5mm (joint 3); 2deg, -500urad (joints 1, 2); 100steps (raw steps, as --steps).",
     ),
     to: str | None = typer.Option(
-        None, "--to", help="Move to this position (same units as --by); 'min'/'max' = an end stop."
+        None, "--to", metavar="<length|angle>",
+        help="Move to this position (units as --by); 'min'/'max' = an end stop.",
+    ),
+    steps: int | None = typer.Option(
+        None, "--steps", metavar="<steps>",
+        help="Send this many raw steps (signed): no calibration, no plan. The joint is then uncertain "
+        "until referenced: drive it into a stop, then `stickslip where --set J=min`.",
     ),
     calibration: Path | None = typer.Option(
         None, "--calibration", "-c",
         help="Calibration JSON (from `stickslip calibrate`; default: calibration in the config file).",
     ),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
+    from_unreferenced: bool = typer.Option(
+        False, "--from-unreferenced",
+        help="Plan from a position never referenced (assumed) or uncertain (its last confirmed value). "
+        "Without it such a joint is refused on a real controller, with the commands that reference it.",
+    ),
+    trust_calibration: bool = typer.Option(
+        False, "--trust-calibration",
+        help="Use a calibration that does not record its device, or was made on the simulator, on a real "
+        "controller (refused without it: its step sizes may be another arm's).",
+    ),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help=_Q1),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help=_Q2),
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Steps per burst."),
+    burst: int | None = typer.Option(
+        None, "--burst", min=1, max=65535, metavar="<steps>",
+        help="Most steps per burst (the position is kept after each). Default 1000; raw --steps 20000 (the "
+        "joint is uncertain until referenced anyway).",
+    ),
     max_age: int | None = typer.Option(
-        None, "--max-age", min=0, max=36500,
+        None, "--max-age", min=0, max=36500, metavar="<days>",
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
         "else max_age_days in the config file, else 0).",
     ),
@@ -287,108 +148,110 @@ def move(
 ) -> None:
     """Move a joint by a distance or to a position, with the calibrated step-size model.
 
-    The pose is the one kept for the device (see `stickslip where`).
+    The pose is the one kept for the device (see `stickslip where`); --q1 --q2 --q3
+    --theta --psi record a new pose first. Steps come from the calibration's model in
+    that pose (exact for rotary joints), scaled by the day's step scale learned from
+    measured positions (stickslip observe). They are sent in bursts; the dead-reckoned
+    position and its standard deviation are kept after every burst.
 
-    --q1 --q2 --q3 --theta --psi record a new pose first.
+    A joint never referenced (its position assumed) or left uncertain is refused on a
+    real controller: reference it first (raw --steps into its lower stop, then
+    `stickslip where --set J=min`), or pass --from-unreferenced.
 
-    Steps come from the calibration's model in that pose (exact for rotary joints).
-
-    They are sent in bursts; the dead-reckoned position is kept after every burst.
-
-    The steps use the day's step scale learned from measured positions (stickslip
-    observe), and the position's standard deviation grows with the move.
+    Every amount takes its unit (30um, 2deg, 100steps); a bare number other than 0 is
+    refused.
 
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
-    if (by is None) == (to is None):
-        fail("give exactly one of --by and --to")
-    from ..calibration import Calibration
-
+    raw = _raw_steps(by, to, steps)
     device = device_url(device)
+    with user_errors():
+        device_key(device)  # a URL that names no device is refused before the database is opened
+    if raw is not None:
+        _step_raw(device, joint, raw, burst or RAW_BURST, db, json_out)
+        return
+    from ..calibration import Calibration
+    from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate
+    from ..procedures.move import move as move_joint
+
     with user_errors(KeyError):
         cal = Calibration.load(calibration_file(calibration))
-    with user_errors():
-        key = device_key(device)
-    days = max_age_setting(max_age).value
-    spec = JOINTS[joint]
-    from ..procedures.move import DeviceBusy, device_lock, drive
-
-    with open_store(db) as store, user_errors(DeviceBusy):
-        with device_lock(store, key):
-            outcome, state, steps, q_from, q_to, q_end, sim_true = _move_locked(
-                store, key, device, cal, joint, by, to, burst, (q1, q2, q3, theta, psi), drive, days
-            )
-    if outcome.error is not None:
-        if joint in state.uncertain:
-            lo, hi = state.uncertain[joint]
-            kept = (
-                f"joint {joint}'s position is now uncertain, between {format_position(lo, joint)} "
-                f"and {format_position(hi, joint)}; re-reference it (stickslip where --set {joint}=min "
-                f"at the lower stop) before the next move"
-            )
-        else:
-            kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], joint)} is kept"
-        fail(f"{outcome.error}; sent {outcome.sent} of {steps} steps; {kept}")
-    bursts = outcome.bursts
-    result = {
-        "device": key,
-        "joint": joint,
-        "direction": "+" if steps >= 0 else "-",
-        "steps": abs(steps),
-        "steps_signed": steps,
-        "bursts": bursts,
-        "q_from": q_from,
-        "q_to": q_to,
-        "q_end_predicted": q_end,
-        "unit": spec.unit,
-    }
-    tf = _track_fields(state, joint)  # the position's standard deviation and the step scale the move used
-    if tf["sd"] is not None:
-        result.update({"q_sd": tf["sd"], "step_scale": tf["step_scale"], "step_scale_sd": tf["step_scale_sd"]})
-    if sim_true is not None:
-        result["sim_true_end"] = sim_true
-    if json_out:
-        print_json(result)
-        return
-    console.print(
-        f"joint {joint}: {format_position(q_from, joint)} -> {format_position(q_to, joint)}: "
-        f"{steps:+d} steps in {len(bursts)} burst(s); planned end {format_position(q_end, joint)}"
-        + (f" ± {_sd_text(tf['sd'], joint)} (step scale x{tf['step_scale'] or 1.0:.4f})"
-           if tf["sd"] is not None else ""),
-        highlight=False,
+    request = MoveRequest(
+        device, joint,
+        by=None if by is None else _parse_joint_value(joint, by, "--by"),
+        to=None if to is None else _position_or_stop(joint, to, "--to"),
+        burst=burst or 1000, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
+        from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
-    if sim_true is not None:
-        err = sim_true - q_end
-        k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the ± above)
+    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
+        result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
+    failure = result.failure()
+    if failure is not None:
+        fail(failure)
+    if json_out:
+        print_json(result.as_dict())
+        return
+    _print_move(result)
+
+
+def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
+    """The raw steps asked for (``--steps N`` or ``--by Nsteps``), ``None`` for a planned move; one of the three."""
+    if (by is not None) + (to is not None) + (steps is not None) != 1:
+        fail("give exactly one of --by, --to and --steps")
+    if to is not None and _STEPS.match(to):
+        fail(f"--to {to}: a target is a position (30um, 2deg, min); raw steps go with --by Nsteps or --steps N")
+    m = _STEPS.match(by) if by is not None else None
+    n = int(m.group(1)) if m else steps
+    if n == 0:
+        fail("--steps: 0 steps moves nothing")
+    return n
+
+
+def _step_raw(device: str, joint: int, steps: int, burst: int, db: Path | None, json_out: bool) -> None:
+    """``move --steps N``: raw steps through the procedure, then what is known about the joint now."""
+    from ..procedures.move import DeviceBusy, step_joint
+
+    with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+        result = step_joint(store, device, joint, steps, burst=burst, ready=flush_warnings)
+    lo, hi = result.state.bounds(joint)
+    if result.outcome.error is not None:
+        fail(
+            f"{result.outcome.error}; sent {result.outcome.sent} of {steps:+d} raw steps; joint {joint} is "
+            f"uncertain, {format_position(lo, joint)} to {format_position(hi, joint)}"
+        )
+    if json_out:
+        print_json(result.as_dict())
+        return
+    say(f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)")
+    say(f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}")
+    say(f"at the stop, reference it: stickslip where --set {joint}={'min' if steps < 0 else 'max'}")
+
+
+def _print_move(result: MoveResult) -> None:
+    """``move``'s lines for a person: the move, its planned end with its σ, the simulator's true end."""
+    from ..procedures.move import track_fields
+
+    p = result.plan
+    joint = p.joint
+    tf = track_fields(result.state, joint)
+    say(
+        f"joint {joint}: {format_position(p.q_from, joint)} -> {format_position(p.q_to, joint)}, "
+        f"{p.steps:+d} steps in {len(result.outcome.bursts)} burst(s)"
+    )
+    spread = (
+        f" (σ {format_spread(tf['sd'], joint)}, step scale x{tf['step_scale'] or 1.0:.4f})"
+        if tf["sd"] is not None else ""
+    )
+    kept = "assumed end" if result.state.sources.get(joint) == "assumed" else "planned end"
+    say(f"{kept} {format_position(p.q_end, joint)}{spread}")
+    if result.sim_true_end is not None:
+        err = result.sim_true_end - p.q_end
+        k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the σ above)
         if abs(err * k) < 1000:
             shown = f"{err * k:+.1f} {unit}"
         else:  # a miss of a micrometre or a milliradian or more: in the position's own unit
             shown = f"{math.degrees(err):+.3f} deg" if joint_spec(joint).rotary else f"{err * 1e6:+.2f} µm"
-        console.print(
-            f"simulator's true end {format_position(sim_true, joint)} ({shown})", highlight=False
-        )
-
-
-def _probe(device: str) -> dict[str, Any]:
-    """Open ``device`` and close it again: what it says about itself, or ``fail`` naming why it does not answer.
-
-    ``{"model": ..., **info.extra}``: for a NanoControl the dialect, firmware version,
-    stepping frequencies and active speed profile (docs/devices/nanocontrol.md).
-    """
-    try:
-        dev = open_device(device)
-    except (DeviceError, ValueError, OSError) as e:
-        fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
-    try:
-        info = dev.info
-        return {"model": str(info.model), **{str(k): v for k, v in info.extra.items()}}
-    except (DeviceError, ValueError, OSError) as e:
-        fail(f"the device does not answer: {e} (use --offline to see the kept positions only)")
-    finally:
-        try:
-            dev.close()
-        except (DeviceError, OSError):
-            pass
+        say(f"simulator's true end {format_position(result.sim_true_end, joint)} ({shown})")
 
 
 def _info_line(info: dict[str, Any]) -> str | None:
@@ -435,12 +298,15 @@ def where(
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
-    Source: default (never set; outstretched pose assumed), set, dead-reckoned,
-    observed (stickslip observe), or uncertain (a move was interrupted: the bounds are
-    shown; re-reference with --set). A joint moved since it was set shows ± its standard
-    deviation and the step scale learned from observations.
+    Source: default (never referenced: the outstretched pose assumed), set, dead-reckoned,
+    observed (stickslip observe), assumed (moved from a position never referenced), or
+    uncertain (a move, raw steps or a traverse left it between the bounds shown, and
+    why). A joint moved since it was set shows its standard deviation (σ) and the step
+    scale learned from observations.
 
-    Reset a joint at an end stop after a traverse, a crash or a manual move.
+    --set J=min (or max, or a position with its unit) references a joint at an end stop:
+    after a traverse, a crash or a manual move, and on day one (raw steps into the stop
+    first: stickslip move --steps). It clears an uncertainty and the position's σ.
 
     Without --set or a pose option the device is opened to say whether it answers
     (--offline skips that); a device that does not answer exits 2. A NanoControl
@@ -449,63 +315,58 @@ def where(
 
     Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
     """
+    from ..procedures.move import PoseUpdate
+    from ..procedures.where import DeviceUnreachable, ReferenceRefused
+    from ..procedures.where import where as kept_positions
+
     device = device_url(device)
     with user_errors():
-        key = device_key(device)
-    with open_store(db) as store:
-        if unlock:
-            with user_errors():
-                store.set_state(key, "lock", "null")
-        with user_errors():
-            state = load_state(store, key)
-        changed = _apply_pose_options(state, q1, q2, q3, theta, psi)
-        for item in set_ or []:
-            j_text, sep, value = item.partition("=")
-            if not sep or j_text.strip() not in ("1", "2", "3"):
-                fail(f"--set {item!r}: write JOINT=VALUE, e.g. 3=0, 3=min, 2=-90deg")
-            j = int(j_text)
-            spec = JOINTS[j]
-            word = value.strip().lower()
-            if word in ("min", "lower"):
-                q = spec.lower
-            elif word in ("max", "upper"):
-                q = spec.upper
-            else:
-                q = _parse_joint_value(j, value, f"--set {item}")
-            try:
-                state.set_position(j, q, "set")
-            except ValueError as e:
-                fail(f"--set {item}: {e}{_degree_hint(j, value)}")
-            changed.append(f"q{j}")
-        if changed:
-            with user_errors():
-                save_state(store, state)
-    info = None if (changed or offline) else _probe(device)
-    answers = info["model"] if info else None
-    rows = _state_rows(state)
+        device_key(device)
+    items = list(set_ or [])
+    references = [_reference(item) for item in items]
+    with open_store(db) as store, user_errors(DeviceUnreachable):
+        try:
+            result = kept_positions(
+                store, device, references=references, pose=PoseUpdate(q1, q2, q3, theta, psi), offline=offline,
+                unlock=unlock,
+            )
+        except ReferenceRefused as e:
+            fail(f"--set {items[e.index]}: {e}")
     if json_out:
-        print_json(
-            {"device": key, "joints": rows, "theta": state.theta, "psi": state.psi, "answers": answers,
-             "info": info}
-        )
+        print_json(result.as_dict())
         return
-    console.print(styled(key, "bold"), *([f"(answers: {answers})"] if answers else []), highlight=False)
+    _print_where(result)
+
+
+def _reference(item: str) -> tuple[int, float]:
+    """``--set J=VALUE`` (VALUE with its unit, or min/max) to ``(joint, q)`` (rad or m)."""
+    j_text, sep, value = item.partition("=")
+    if not sep or j_text.strip() not in ("1", "2", "3"):
+        fail(f"--set {item!r}: write JOINT=VALUE, e.g. 3=0, 3=min, 2=-90deg")
+    j = int(j_text)
+    return j, _position_or_stop(j, value, f"--set {item}")
+
+
+def _print_where(result: WhereResult) -> None:
+    """``where``'s lines for a person: the device, what it said, each joint and how it is known, the tilt."""
+    from ..procedures.move import track_fields
+    from ..procedures.where import state_rows
+
+    state, info = result.state, result.info
+    answers = info["model"] if info else None
+    say(f"{result.device}" + (f" (answers: {answers})" if answers else ""))
     line = _info_line(info) if info else None
     if line:
-        console.print(f"  {line}", highlight=False)
-    for r, j in zip(rows, (1, 2, 3), strict=True):
+        say(f"  {line}")
+    for r, j in zip(state_rows(state), (1, 2, 3), strict=True):
         extra = ""
-        tf = _track_fields(state, j)
+        tf = track_fields(state, j)
         if tf["sd"] is not None and j not in state.uncertain:
-            extra = f", ± {_sd_text(tf['sd'], j)}, step scale x{tf['step_scale'] or 1.0:.4f}"
+            extra = f", σ {format_spread(tf['sd'], j)}, step scale x{tf['step_scale'] or 1.0:.4f}"
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
             extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
-        console.print(
-            f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", highlight=False
-        )
-    console.print(
-        f"  tilt: theta = {math.degrees(state.theta):.4g} deg, "
-        f"psi = {math.degrees(state.psi):.4g} deg",
-        highlight=False,
-    )
+        say(f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", indent="    ")
+        if j in state.uncertain and j in state.why:
+            say(f"  {'':>25}{state.why[j]}")
+    say(f"  tilt: theta = {math.degrees(state.theta):.4g} deg, psi = {math.degrees(state.psi):.4g} deg")

@@ -16,7 +16,7 @@ from rich.table import Table
 
 from ..devices.base import redact_url
 from . import app
-from ._common import DB_HELP, console, fail, open_store, print_json, read_table, user_errors, warn, warn_later
+from ._common import DB_HELP, console, fail, open_store, print_json, read_table, say, user_errors, warn, warn_later
 from ._output import styled, visible
 
 if TYPE_CHECKING:
@@ -67,24 +67,27 @@ def history(
     if not entries:
         console.print(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""))
         return
-    table = Table(title=f"stickslip history ({path})")
-    table.add_column("device", overflow="fold")
-    table.add_column("day", no_wrap=True)
-    table.add_column("n", justify="right")
-    table.add_column("by joint")
-    table.add_column("measured (UTC)")
-    table.add_column("calibrations", no_wrap=True)
-    for e in entries:
-        span = ""
-        if e["first_measured_at"]:
-            span = f"{e['first_measured_at'][11:16]}-{e['last_measured_at'][11:16]}"
-            if e["first_measured_at"][:10] != e["day"]:
-                span = f"{e['first_measured_at'][:10]} {span}"
-        cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
-        by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
-        n = str(e["traverses"]) + (f" (+{e['excluded']} excluded)" if e.get("excluded") else "")
-        table.add_row(e["device"], e["day"], n, by, span, cals)
-    console.print(table)
+    say(f"stickslip history of {path}")
+    for dev in dict.fromkeys(e["device"] for e in entries):  # one table per device: a URL is never folded
+        say(f"device {dev}")
+        table = Table(pad_edge=False)
+        table.add_column("day", no_wrap=True)
+        table.add_column("n", justify="right")
+        table.add_column("by joint")
+        table.add_column("measured (UTC)")
+        table.add_column("calibrations")
+        for e in (e for e in entries if e["device"] == dev):
+            span = ""
+            if e["first_measured_at"]:
+                span = f"{e['first_measured_at'][11:16]}-{e['last_measured_at'][11:16]}"
+                if e["first_measured_at"][:10] != e["day"]:
+                    span = f"{e['first_measured_at'][:10]} {span}"
+            cals = ", ".join(f"#{c['id']} {c['method']}" for c in e["calibrations"]) or "-"
+            by = " ".join(f"{k}:{v}" for k, v in sorted(e["by_joint"].items()))
+            n = str(e["traverses"]) + (f" (+{e['excluded']} excluded)" if e.get("excluded") else "")
+            table.add_row(e["day"], n, by, span, cals)
+        console.print(table)
+    say("a calibration #N: stickslip show N (or show N -o cal.json to use it with -c)")
 
 
 @app.command()
@@ -230,20 +233,28 @@ def delete(
     )
 
 
+@app.command()
+def backup(
+    out: Path = typer.Argument(..., help="The new file to copy the database into.", metavar="OUT.db"),
+    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+) -> None:
+    """Copy the whole database (traverses, calibrations, kept positions) into a new file.
+
+    A consistent copy even while another stickslip command is running (a plain copy of
+    the file can miss what SQLite still holds in its write-ahead log). Keep it, or give
+    it to a colleague: every command reads it with --db OUT.db.
+
+    Example: stickslip backup stickslip-2026-11-22.db
+    """
+    from ..storage import StoreError
+
+    with open_store(db, must_exist=True) as st, user_errors(StoreError):
+        written = st.backup(out)
+        n = st.count_traverses()
+    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}")
+
+
 # ---------------------------------------------------------------- anova
-
-
-def _without_duplicates(ts: list[Traverse]) -> tuple[list[Traverse], int]:
-    """``ts`` with exact copies removed (same day, joint, direction, pose, range, steps), and how many."""
-    seen: set[tuple[object, ...]] = set()
-    kept = []
-    for t in ts:
-        key = tuple(getattr(t, f) for f in ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi",
-                                             "start", "end", "steps"))
-        if key not in seen:
-            seen.add(key)
-            kept.append(t)
-    return kept, len(ts) - len(kept)
 
 
 @app.command()
@@ -262,6 +273,8 @@ def anova(
     in poses repeated on several days. For each joint and day: + against -. With
     --two-way, the day x direction table with interaction. Poses match when
     fixed joints, tilt and traversed interval agree within 1e-3 rad / 10 um.
+    Every row of the table (every stored traverse) counts: two repeats that took
+    the same number of steps are two measurements, not a copy.
 
     Example: [bold]stickslip anova meas.csv --json[/]
     """
@@ -269,13 +282,7 @@ def anova(
 
     if not 0.0 < alpha < 1.0:
         fail(f"--alpha must be in (0, 1), got {alpha}")
-    ts, where = _traverses_from(meas, db, device, None)
-    ts, dups = _without_duplicates(ts)
-    if dups:
-        warn_later(
-            f"{dups} traverse(s) are exact copies of others (a table imported twice, a demo run twice?); "
-            "each is counted once"
-        )
+    ts, where = _traverses_from(meas, db, device, None)  # each row a traverse: equal numbers are repeats, kept
     with user_errors(ImportError):
         res = run_anova(ts, alpha=alpha, two_way=two_way)
     degenerate = [t for t in res.tests if not math.isfinite(t.F)]

@@ -18,6 +18,7 @@ from ._common import (
     device_url,
     fail,
     print_json,
+    say,
     user_errors,
     validation_table,
     warn,
@@ -37,6 +38,8 @@ def demo(
     ),
     out: Path = typer.Option(
         Path("stickslip-results"),
+        "--output",
+        "-o",
         "--out",
         help="Results folder: measurements.csv, calibration.json, tunings, summary.",
     ),
@@ -56,6 +59,7 @@ def demo(
     device: str = typer.Option(
         None,
         "--device",
+        "-d",
         help="A simulator URL, sim://?seed=3&day=2026-11-22 (same as --seed/--day). The demo compares "
         "with the simulator's truth; on a real manipulator use 'stickslip traverse' and 'calibrate'.",
     ),
@@ -119,7 +123,11 @@ def demo(
     if json_out:
         print_json(result.to_dict())
         return
+    _print_demo(result)
 
+
+def _print_demo(result: Any) -> None:
+    """The demo's summary for a person: the run, the parameters beside the truth, the validation, the files."""
     from rich.table import Table
 
     console.print(
@@ -159,7 +167,7 @@ def demo(
         title = "Validation on other poses: |relative error| of the average step"
         console.print(validation_table(result.validation.rows(), title))
     for what, path in result.files.items():
-        console.print(f"saved {what}: {path}", highlight=False)
+        say(f"saved {what}: {path}")
 
 
 def _already_recorded(store: Any, seed: int, day: str) -> bool:
@@ -209,11 +217,14 @@ def _sim_seed_day(device: str, seed: int, day: str | None, physics: bool = False
 @app.command("traverse")
 def traverse_cmd(
     joint: int = typer.Option(..., "--joint", "-j", help="Joint to traverse: 1, 2 (rotary) or 3 (prismatic)."),
-    direction: str = typer.Option(..., "--direction", "-d", help="'+' (lower stop to upper) or '-'."),
+    direction: str = typer.Option(
+        ..., "--direction", metavar="<+|->", help="'+' (lower stop to upper) or '-'. (-d is the device.)"
+    ),
     tuning: Path = typer.Option(..., "--tuning", help="This joint's limit-switch tuning (stickslip tune, or demo)."),
     device: str | None = typer.Option(
         None,
         "--device",
+        "-d",
         help="Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: device in the config file, "
         "else sim://).",
     ),
@@ -254,15 +265,17 @@ def traverse_cmd(
     and base are set (on a real manipulator you set them; the simulator is placed there).
     The row goes to the database and, with --append, to a measurement table.
 
-    Example: stickslip traverse --joint 3 -d + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
+    Example: stickslip traverse --joint 3 --direction + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
     """
+    from ..audio.confirm import CONFIRM_S, check_confirm_s
     from ..audio.detector import Tuning
     from ..clock import today_label
-    from ..devices import DeviceError, open_device
+    from ..devices import DeviceError
     from ..kinematics import JOINTS
-    from ..measurements import HEADER, measurements_to_csv
+    from ..measurements import HEADER
     from ..models import direction_label
-    from ..procedures.session import append_row, check_append_target, record_traverse, traverse_on_device
+    from ..procedures.move import DeviceBusy
+    from ..procedures.session import TraverseRequest, check_append_target, traverse
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
     from ..units import format_step
@@ -270,8 +283,6 @@ def traverse_cmd(
 
     if joint not in JOINTS:
         fail(f"unknown joint {joint} (joints are 1, 2 and 3)")
-    from ..audio.confirm import CONFIRM_S, check_confirm_s
-
     try:
         confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
     except ValueError as e:
@@ -284,42 +295,23 @@ def traverse_cmd(
     except ValueError as e:
         fail(f"--direction: {e}")
     pose = pose_options(q1, q2, q3, theta, psi)
-    day = day or today_label()
-    with user_errors(DeviceError, TraverseError, StoreError):
+    with user_errors(DeviceError, TraverseError, StoreError, DeviceBusy):
         if append is not None:
-            check_append_target(append)  # before the joint moves: a traverse takes a while
+            check_append_target(append)  # before anything else: a traverse takes a while
         tun = Tuning.load(tuning)
         if getattr(tun, "joint", None) not in (None, joint):
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
-        ctrl = open_device(device)
+        request = TraverseRequest(
+            device, joint, label, pose, day or today_label(), tun, audio_input=audio_input, serial_port=serial_port,
+            burst=burst, confirm_s=confirm_s, append=append,
+        )
+        store = Store.open(db_path(db)) if use_db else None
         try:
-            result = traverse_on_device(
-                ctrl,
-                joint,
-                label,
-                pose,
-                day,
-                tun,
-                audio_input=audio_input,
-                serial_port=serial_port,
-                burst_steps=burst,
-                progress=not json_out,
-                confirm_s=confirm_s,
-                on_warning=warn,  # before the joint moves
-            )
+            result = traverse(store, request, progress=not json_out, on_warning=warn)
         finally:
-            ctrl.close()
-        row = result.traverse
-        if use_db:
-            with Store.open(db_path(db)) as st:
-                record_traverse(st, device, row, how="audio")
-        if append is not None:
-            try:
-                append_row(append, row)
-            except (OSError, ValueError) as e:
-                stored = "it is stored in the database; " if use_db else ""
-                line = measurements_to_csv([row]).split("\n")[1]
-                fail(f"the traverse was measured but not appended to {append} ({e}); {stored}its row: {line}")
+            if store is not None:
+                store.close()
+    row = result.traverse
     if json_out:
         print_json({**row.as_row(), "gamma": row.gamma, "header": list(HEADER)})
         return

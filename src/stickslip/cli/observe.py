@@ -16,17 +16,13 @@ import typer
 
 from ..devices.base import device_key
 from ..joints import JOINTS
-from ..units import format_position
+from ..units import format_position, format_spread
 from . import app
-from ._common import DB_HELP, console, fail, open_store, print_json, user_errors, warn_later
-from .devices import _DEVICE_HELP, _degree_hint, _parse_joint_value, _sd_text
-
-DEFAULT_SIGMA = {3: 1e-6, 2: 50e-6, 1: 50e-6}
-"""Standard deviation assumed for a measured position when --sigma is not given (m, rad, rad)."""
+from ._common import DB_HELP, device_url, fail, open_store, print_json, say, user_errors, warn_later
+from .devices import _DEVICE_HELP, _parse_joint_value
 
 MAX_INNOVATION = 5.0
-"""A measurement further than this many standard deviations from the kept position is refused
-(a wrong reading or a slipped joint would otherwise teach the filter a wrong step scale)."""
+"""As :data:`stickslip.procedures.observe.MAX_INNOVATION` (here for --help, without loading numpy)."""
 
 
 @app.command()
@@ -44,7 +40,7 @@ def observe(
         False, "--force",
         help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
     ),
-    device: str = typer.Option("sim://", "--device", "-d", help=_DEVICE_HELP),
+    device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the update as JSON (SI units)."),
 ) -> None:
@@ -60,9 +56,9 @@ def observe(
 
     Example: stickslip observe -d mm3a:///dev/ttyUSB0 --joint 3 --at 1.234mm --sigma 2um
     """
-    from ..devices.positions import load_state, save_state
-    from ..motion.tracking import JointTrack
-    from ..procedures.move import DeviceBusy, device_lock
+    from ..procedures.move import DeviceBusy
+    from ..procedures.observe import Observation
+    from ..procedures.observe import observe as update
 
     spec = JOINTS[joint]
     word = at.strip().lower()
@@ -75,83 +71,35 @@ def observe(
             fail(
                 f"--at {at}: {format_position(q_meas, joint)} is outside joint {joint}'s range "
                 f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}]"
-                + _degree_hint(joint, at)
             )
-    if sigma is None:
-        sd = 0.0 if at_stop else DEFAULT_SIGMA[joint]
-    else:
+    sd = None
+    if sigma is not None:
         sd = _parse_joint_value(joint, sigma, "--sigma")
         if not (math.isfinite(sd) and sd >= 0):
             fail(f"--sigma {sigma}: a standard deviation must be >= 0")
+    device = device_url(device)
     with user_errors():
-        key = device_key(device)
+        device_key(device)
     with open_store(db) as store, user_errors(DeviceBusy):
-        with device_lock(store, key):
-            with user_errors():
-                state = load_state(store, key)
-            q_before = state.positions[joint]
-            was_uncertain = joint in state.uncertain
-            raw = state.track.get(joint)
-            with user_errors():
-                track = JointTrack.from_json(raw) if raw is not None else JointTrack()
-            sd_before = track.sd
-            scale_before = track.scale
-            re_reference = was_uncertain or raw is None
-            if re_reference:  # an interrupted move, or no move tracked: the measurement re-references the joint
-                track.reset_position(sd)
-                q_new = q_meas
-                innovation_sigmas = None
-            else:
-                s_pred = math.sqrt(sd_before**2 + sd**2)
-                innovation_sigmas = abs(q_meas - q_before) / s_pred if s_pred > 0 else math.inf
-                if innovation_sigmas > MAX_INNOVATION and not force:
-                    fail(
-                        f"the measured position {format_position(q_meas, joint)} is {innovation_sigmas:.3g} standard "
-                        f"deviations from the kept {format_position(q_before, joint)} ± {_sd_text(sd_before, joint)}: "
-                        "check the reading (units, which joint); if the joint slipped or was moved by hand, "
-                        f"re-reference it (stickslip where --set {joint}=VALUE) or pass --force to use it"
-                    )
-                with user_errors():
-                    q_new = track.observe(q_before, q_meas, sd)
-            q_new = min(max(q_new, spec.lower), spec.upper)
-            with user_errors():
-                state.set_position(joint, q_new, "observed")
-            state.track[joint] = track.to_json()
-            with user_errors():
-                save_state(store, state)
-    if innovation_sigmas is not None and innovation_sigmas > MAX_INNOVATION:
-        warn_later(f"the measured position is {innovation_sigmas:.3g} standard deviations from the kept one (--force)")
-    result = {
-        "device": key,
-        "joint": joint,
-        "unit": spec.unit,
-        "q_before": q_before,
-        "q_sd_before": None if re_reference else sd_before,
-        "q_measured": q_meas,
-        "sigma": sd,
-        "q": q_new,
-        "q_sd": track.sd,
-        "step_scale_before": scale_before,
-        "step_scale": track.scale,
-        "step_scale_sd": track.scale_sd,
-        "re_referenced": re_reference,
-        "innovation_sigmas": innovation_sigmas,
-    }
+        r = update(store, device, Observation(joint, q_meas, sd, at_stop, force))
+    if r.forced:
+        warn_later(
+            f"the measured position is {r.innovation_sigmas:.3g} standard deviations from the kept one (--force)"
+        )
     if json_out:
-        print_json(result)
+        print_json(r.as_dict())
         return
-    before = ("uncertain (interrupted move)" if was_uncertain else "not tracked") if re_reference else (
-        f"{format_position(q_before, joint)} ± {_sd_text(sd_before, joint)}"
+    before = ("uncertain (interrupted move)" if r.was_uncertain else "not tracked") if r.re_referenced else (
+        f"{format_position(r.q_before, joint)} (σ {format_spread(r.q_sd_before or 0.0, joint)})"
     )
-    console.print(
-        f"joint {joint}: kept {before}; measured {format_position(q_meas, joint)} ± {_sd_text(sd, joint)}"
-        f" -> {format_position(q_new, joint)} ± {_sd_text(track.sd, joint)}",
-        highlight=False,
+    say(
+        f"joint {joint}: kept {before}, measured {format_position(r.q_measured, joint)} "
+        f"(σ {format_spread(r.sigma, joint)})"
     )
-    if re_reference:
+    say(f"now {format_position(r.q, joint)} (σ {format_spread(r.q_sd, joint)})")
+    if r.re_referenced:
         return
-    console.print(
-        f"step scale x{scale_before:.4f} -> x{track.scale:.4f} (± {100 * track.scale_sd:.2g} %)"
-        + ("; the next move plans with it" if track.scale != scale_before else ""),
-        highlight=False,
+    say(
+        f"step scale x{r.step_scale_before:.4f} -> x{r.step_scale:.4f} (σ {100 * r.step_scale_sd:.2g} %)"
+        + ("; the next move plans with it" if r.step_scale != r.step_scale_before else "")
     )

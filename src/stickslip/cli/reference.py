@@ -76,6 +76,12 @@ the command line):
 * **Waits end on time.** A device URL's `timeout` bounds how long a fault is waited for:
   once a reply has not come in time, the stops that follow are sent without waiting for
   answers. A FIFO given as a recording or table is refused, never opened (it would block).
+* **Lines fit the terminal, and no word is cut.** `--help` is laid out in two columns at the
+  terminal's width (80 and up), wrapped at spaces only: a URL, a path or a variable name
+  is never broken. Results wrap at spaces with later lines indented. On a terminal a
+  warning or an error longer than its width wraps the same way; in a pipe or a log it
+  stays one line (grep finds it whole). A `±` always says what it is: `(σ ...)` for a
+  standard deviation, `(95 % prediction interval)` for an interval.
 * **Options:** a number option of infinite size (`1e999`, `inf`, `nan`), a blank `--day`,
   or a `--device` URL that could never be opened (an unknown scheme, a port beyond 65535,
   a host name longer than DNS allows) is refused naming the option, before anything runs.
@@ -96,8 +102,9 @@ def render() -> str:
         "# Command-line reference",
         "",
         "Generated from the code by `python -m stickslip.cli.reference`; do not edit by hand.",
-        "Lengths and angles take units on the command line (`12mm`, `850nm`, `-90deg`, `40urad`,",
-        "`-pi/2`); files are SI. Every command exits 2 with a one-line `error:` on bad input.",
+        "Every length and angle on the command line takes its unit (`12mm`, `850nm`, `-90deg`, `40urad`,",
+        "`-pi/2`; a bare number other than 0 is refused); files are SI. Every command exits 2 with a",
+        "one-line `error:` on bad input, and 130 with one `error: interrupted` line on Ctrl-C.",
         "",
         *_OUTPUT_RULES.splitlines(),
         *(f"| {code} | {meaning.replace('|', chr(92) + '|')} |" for code, meaning in sorted(EXIT_CODES.items())),

@@ -13,24 +13,23 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
+from ..devices.base import DeviceError, device_key
 from ..joints import joint_spec
-from ..units import UnitError, parse_length
+from ..units import UnitError, bare_number_problem, format_position, parse_length
 from . import app
 from ._common import (
     DB_HELP,
     angle_option,
     calibration_file,
-    console,
     device_url,
     fail,
     flush_warnings,
     geometry_setting,
-    lazy_import,
     length_option,
     max_age_setting,
     open_store,
     print_json,
+    say,
     user_errors,
     warn,
     warn_later,
@@ -38,16 +37,7 @@ from ._common import (
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
-    from ..devices.positions import DeviceState, load_state, save_state
-else:  # numpy loads when a command first needs it, not for --help
-    kin = lazy_import("stickslip.kinematics")
-    _positions = lazy_import("stickslip.devices.positions")
-
-    def load_state(*args, **kwargs):
-        return _positions.load_state(*args, **kwargs)
-
-    def save_state(*args, **kwargs):
-        return _positions.save_state(*args, **kwargs)
+    from ..procedures.reach import ReachResult
 
 _DEVICE_HELP = (
     "Controller URL: sim://, mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230] "
@@ -60,19 +50,16 @@ _GEOMETRY_HELP = (
 _CAL_HELP = "Calibration JSON (from `stickslip calibrate`; default: calibration in the config file)."
 
 
-_BORROWED = (
-    "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "
-    "gravity load (the paper: the same actuator); calibrate joint 1 for accurate moves across the arm's plane"
-)
-
-
 def parse_point(text: str, what: str) -> tuple[float, float, float]:
-    """``"X,Y,Z"`` lengths with units (``20um,-10um,5um``; bare numbers are metres) to metres."""
+    """``"X,Y,Z"`` lengths with their units (``20um,-10um,5um``; 0 needs none) to metres."""
     parts = text.split(",")
     if len(parts) != 3:
         fail(f"{what} {text!r}: write three lengths X,Y,Z, e.g. 20um,-10um,5um")
     out = []
     for axis, part in zip("XYZ", parts, strict=True):
+        bare = bare_number_problem(part, "length")
+        if bare is not None:
+            fail(f"{what} {axis}: {bare}")
         try:
             v = parse_length(part)
         except (UnitError, ArithmeticError, ValueError) as e:
@@ -91,38 +78,6 @@ def parse_geometry(text: str | None) -> kin.Geometry:
     return geometry_setting(text).value
 
 
-def _max_rates(dev: Controller, max_rate: float) -> list[float]:
-    """Each joint's highest step rate for jogging: the controller's frequency, capped at ``max_rate`` (Hz)."""
-    rates = []
-    for j in (1, 2, 3):
-        try:
-            rates.append(min(max_rate, float(dev.frequency(j))))
-        except (DeviceError, ValueError, AttributeError):
-            rates.append(max_rate)
-    return rates
-
-
-def _apply_pose(state: DeviceState, pose_opts: tuple[float | None, ...]) -> None:
-    q1, q2, q3, theta, psi = pose_opts
-    for j, v in ((1, q1), (2, q2), (3, q3)):
-        if v is not None:
-            with user_errors():
-                state.set_position(j, v, "set")
-    with user_errors():
-        state.set_tilt(theta, psi)
-
-
-def _start_state(store: Any, key: str, pose_opts: tuple[float | None, ...]) -> DeviceState:
-    with user_errors():
-        state = load_state(store, key)
-    _apply_pose(state, pose_opts)
-    for j in (1, 2, 3):
-        problem = state.uncertainty_problem(j)
-        if problem:
-            fail(problem)
-    return state
-
-
 def _um(v: tuple[float, float, float] | list[float]) -> str:
     return "(" + ", ".join(f"{x * 1e6:.2f}" for x in v) + ") µm"
 
@@ -135,8 +90,12 @@ def _miss(d: float) -> str:
 @app.command()
 def reach(
     calibration: Path | None = typer.Option(None, "--calibration", "-c", help=_CAL_HELP),
-    to: str | None = typer.Option(None, "--to", help="Tip target X,Y,Z in the base frame: 21mm,0,50um."),
-    by: str | None = typer.Option(None, "--by", help="Tip displacement DX,DY,DZ: 20um,-10um,5um."),
+    to: str | None = typer.Option(
+        None, "--to", metavar="<x,y,z>", help="Tip target X,Y,Z in the base frame (lengths): 21mm,0,50um."
+    ),
+    by: str | None = typer.Option(
+        None, "--by", metavar="<x,y,z>", help="Tip displacement DX,DY,DZ (lengths): 20um,-10um,5um."
+    ),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     q1: float | None = typer.Option(None, "--q1", parser=angle_option, help="Record q1 (angle) first."),
     q2: float | None = typer.Option(None, "--q2", parser=angle_option, help="Record q2 (angle) first."),
@@ -149,6 +108,16 @@ def reach(
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
+    from_unreferenced: bool = typer.Option(
+        False, "--from-unreferenced",
+        help="Plan from joints never referenced (positions assumed); without it they are refused on a real "
+        "controller, with the commands that reference them.",
+    ),
+    trust_calibration: bool = typer.Option(
+        False, "--trust-calibration",
+        help="Use a calibration that does not record its device, or was made on the simulator, on a real "
+        "controller (refused without it: its step sizes may be another arm's).",
+    ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
 ) -> None:
@@ -173,110 +142,55 @@ def reach(
         fail("give exactly one of --by and --to")
     point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
     geom = parse_geometry(geometry)
-    seg = float(segment)
     device = device_url(device)
     from ..calibration import Calibration
-    from ..motion.reach import borrow_joint1, plan_reach
+    from ..motion.reach import borrow_joint1
+    from ..procedures.move import DeviceBusy, PoseUpdate
+    from ..procedures.reach import ReachRequest
+    from ..procedures.reach import reach as reach_line
 
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
     with user_errors():
-        key = device_key(device)
-    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)
-
-    def plan_from(state: DeviceState) -> Any:
-        with user_errors(KeyError):  # OutOfReach and SingularPose are ValueErrors
-            if to is not None:
-                plan = plan_reach(cal, state.pose, to=point, geometry=geom, segment=seg)
-            else:
-                plan = plan_reach(cal, state.pose, by=point, geometry=geom, segment=seg)
-        if borrowed and plan.total_steps[0]:
-            warn_later(_BORROWED)
-        return plan
-
-    if dry_run:
-        with open_store(db) as store:
-            state = _start_state(store, key, pose_opts)
-        plan = plan_from(state)
-        _print_plan(plan, json_out, None, None)
-        return
-
-    from ..procedures.conditions import usage_warnings
-    from ..procedures.move import DeviceBusy, device_lock
-    from ..procedures.reach import ReachOutcome, drive_reach
-
-    with open_store(db) as store, user_errors(DeviceBusy):
-        with device_lock(store, key):
-            state = _start_state(store, key, pose_opts)
-            plan = plan_from(state)
-            with user_errors():
-                save_state(store, state)  # the recorded pose, even if nothing moves
-            for w in usage_warnings(cal, None, device, 3, max_age_setting(None).value):
-                warn_later(w)
-            flush_warnings()
-            outcome, sim_true = ReachOutcome(), None
-            if any(plan.total_steps):
-                try:
-                    dev = open_device(device)
-                except (DeviceError, ValueError) as e:
-                    fail(str(e))
-                try:
-                    if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
-                        dev.set_pose(*state.pose)
-
-                    def save(st: DeviceState) -> None:
-                        with user_errors():
-                            save_state(store, st)
-
-                    outcome = drive_reach(dev, state, plan, cal, save, burst)
-                    if outcome.error is None and isinstance(dev, KnowsTruePosition):
-                        sim_true = [float(dev.position(j)) for j in (1, 2, 3)]
-                finally:
-                    try:
-                        dev.close()
-                    except DeviceError:
-                        pass
-    if outcome.error is not None:
-        j = outcome.joint or 0
-        if j in state.uncertain:
-            kept = (
-                f"joint {j}'s position is now uncertain; re-reference it (stickslip where --set {j}=min at the "
-                f"lower stop) before the next move"
-            )
-        else:
-            kept = "the dead-reckoned positions are kept"
-        fail(
-            f"{outcome.error}; stopped in segment {outcome.segments_done + 1} of {len(plan.segments)} "
-            f"(steps sent per joint: {outcome.sent}); {kept}"
-        )
-    _print_plan(plan, json_out, key, sim_true)
+        device_key(device)
+    request = ReachRequest(
+        device, to=point if to is not None else None, by=point if to is None else None, geometry=geom,
+        segment=float(segment), burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi),
+        max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
+        from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+    )
+    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
+        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings)
+    failure = result.failure()
+    if failure is not None:
+        fail(failure)
+    _print_plan(result, json_out)
 
 
-def _print_plan(plan: Any, json_out: bool, device: str | None, sim_true: list[float] | None) -> None:
-    geom = plan.geometry
-    true_tip = None if sim_true is None else [float(v) for v in kin.tip(sim_true, geom)]
+def _print_plan(result: ReachResult, json_out: bool) -> None:
+    from .. import kinematics as kin
+
+    plan = result.plan
     if json_out:
-        out = plan.as_dict()
-        if sim_true is not None:
-            out["sim_true"] = {"q": sim_true, "tip": true_tip}
-        print_json(out)
+        print_json(result.as_dict())
         return
     n1, n2, n3 = plan.total_steps
-    verb = "moved" if device else "plan"
-    console.print(
-        f"{verb}: tip {_um(plan.tip_start)} -> {_um(plan.target)} ({plan.length * 1e6:.2f} µm) in "
-        f"{len(plan.segments)} segment(s); steps |joint 1| {n1}, |joint 2| {n2}, |joint 3| {n3}",
-        highlight=False,
+    verb = "moved" if result.moved else "plan"
+    say(f"{verb}: tip {_um(plan.tip_start)} -> {_um(plan.target)}")
+    say(
+        f"  {plan.length * 1e6:.2f} µm in {len(plan.segments)} segment(s); steps |joint 1| {n1}, |joint 2| {n2}, "
+        f"|joint 3| {n3}"
     )
-    console.print(
-        f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target; joints "
-        f"q1 = {math.degrees(plan.q_end[0]):.4f} deg, q2 = {math.degrees(plan.q_end[1]):.4f} deg, "
-        f"q3 = {plan.q_end[2] * 1e6:.2f} µm",
-        highlight=False,
+    say(f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target")
+    q = plan.q_end
+    say(
+        f"  joints q1 = {format_position(q[0], 1)}, q2 = {format_position(q[1], 2)}, "
+        f"q3 = {format_position(q[2], 3)}"
     )
-    if true_tip is not None:
+    if result.sim_true is not None:
+        true_tip = [float(v) for v in kin.tip(result.sim_true, plan.geometry)]
         err = math.dist(true_tip, plan.target)
-        console.print(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target", highlight=False)
+        say(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target")
 
 
 # ---------------------------------------------------------------- jog: the terminal part
@@ -426,6 +340,16 @@ def jog(
     hold: float = typer.Option(
         0.5, "--hold", min=0.0, max=10.0, help="Seconds a direction key keeps moving without a repeat (0: until space)."
     ),
+    from_unreferenced: bool = typer.Option(
+        False, "--from-unreferenced",
+        help="Plan from joints never referenced (positions assumed); without it they are refused on a real "
+        "controller, with the commands that reference them.",
+    ),
+    trust_calibration: bool = typer.Option(
+        False, "--trust-calibration",
+        help="Use a calibration that does not record its device, or was made on the simulator, on a real "
+        "controller (refused without it: its step sizes may be another arm's).",
+    ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
@@ -444,83 +368,40 @@ def jog(
 
     Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
     """
-    import time
-
     from ..calibration import Calibration
     from ..motion.reach import borrow_joint1
-    from ..procedures.conditions import usage_warnings
-    from ..procedures.jog import JogController, run_jog
-    from ..procedures.move import DeviceBusy, device_lock
+    from ..procedures.jog import JogRequest
+    from ..procedures.jog import jog as jog_session
+    from ..procedures.move import DeviceBusy, PoseUpdate
+    from ..procedures.reach import BORROWED_JOINT1
 
     geom = parse_geometry(geometry)
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
     if borrowed:
-        warn_later(_BORROWED)
+        warn_later(BORROWED_JOINT1)
     with user_errors():
-        key = device_key(device)
-    pose_opts: tuple[float | None, ...] = (q1, q2, q3, theta, psi)
-    with open_store(db) as store, user_errors(DeviceBusy):
-        with device_lock(store, key):
-            state = _start_state(store, key, pose_opts)
-            missing = [j for j in (1, 2, 3) if j not in cal.joints]
-            if missing:
-                fail(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
-            with user_errors():
-                save_state(store, state)
-            for w in usage_warnings(cal, None, device, 3, max_age_setting(None).value):
-                warn_later(w)
-            flush_warnings()
-            try:
-                dev = open_device(device)
-            except (DeviceError, ValueError) as e:
-                fail(str(e))
-            error = None
-            keys = None
-            try:
-                if isinstance(dev, PoseSettable):
-                    dev.set_pose(*state.pose)
-                rates = _max_rates(dev, max_rate)
-                ctl = JogController(
-                    cal,
-                    [state.positions[j] for j in (1, 2, 3)],
-                    state.theta,
-                    state.psi,
-                    geom,
-                    (rates[0], rates[1], rates[2]),
-                    float(image_angle),
-                    hold,
-                    speed - 1,
-                )
-
-                def save(st: DeviceState) -> None:
-                    with user_errors():
-                        save_state(store, st)
-
-                keys = _Keys()
-                screen = _Screen()
-                try:
-                    error = run_jog(dev, state, ctl, keys.read, screen.show, save, time.monotonic)
-                except KeyboardInterrupt:
-                    error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
-                finally:
-                    screen.close()
-            finally:
-                if keys is not None:
-                    keys.close()
-                try:
-                    dev.close()
-                except DeviceError:
-                    pass
-    if error is not None:
-        fail(f"{error}; the session ended; positions are kept (see `stickslip where`)")
-    s = ctl.status()
-    console.print(
-        f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}; positions kept for {key}", highlight=False
+        device_key(device)
+    request = JogRequest(
+        device, geom, float(image_angle), speed, max_rate, hold, PoseUpdate(q1, q2, q3, theta, psi),
+        max_age_setting(None).value, from_unreferenced, trust_calibration,
     )
-    if state.uncertain:  # Ctrl-C in the middle of a burst
-        joints = ", ".join(str(j) for j in sorted(state.uncertain))
+    screen = _Screen()
+    try:
+        with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+            result = jog_session(
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings
+            )
+    finally:
+        screen.close()
+    if result.error is not None:
+        fail(f"{result.error}; the session ended; positions are kept (see `stickslip where`)")
+    s = result.status
+    say(f"jog ended: tip {_um(s.tip)}; steps sent per joint {s.sent}")
+    say(f"positions kept for {result.device}")
+    if result.state.uncertain:  # Ctrl-C in the middle of a burst
+        joints = ", ".join(str(j) for j in sorted(result.state.uncertain))
         warn(
             f"joint(s) {joints} were interrupted mid-burst and are uncertain: re-reference them (stickslip where --set)"
         )

@@ -6,14 +6,18 @@ sent since. This module keeps that per device URL:
 
 * ``positions``: ``q1, q2, q3`` (rad, rad, m), each with its *source*: ``"default"``
   (never set: the outstretched pose is assumed), ``"set"`` (the user put it there, e.g.
-  at an end stop) or ``"dead-reckoned"`` (moved by the model since);
+  at an end stop), ``"dead-reckoned"`` (moved by the model since), ``"observed"`` (a
+  measured position) or ``"assumed"`` (moved by the model from a position never
+  referenced: still not known). A joint is *referenced* when its source is ``set``,
+  ``dead-reckoned`` or ``observed``;
 * ``tilt``: the base tilt ``theta, psi`` (rad) the device is set up with;
 * ``uncertain``: the write-ahead journal of a move. Before a burst is sent the joint is
   recorded as *in flight* between its last confirmed position and the burst's intended
   end (:meth:`DeviceState.intend`); when the controller confirms the burst the new
   position is recorded and the mark cleared. A link drop or a crash in between leaves
   the joint *uncertain* with those bounds, never silently wrong, until it is
-  re-referenced (:meth:`DeviceState.set_position` with source ``"set"``);
+  re-referenced (:meth:`DeviceState.set_position` with source ``"set"``); ``why`` says
+  what left it so (a move, a traverse or raw steps interrupted or sent);
 * ``track``: per joint, the Kalman state of its dead reckoning (the day's step scale and
   the covariance of position and scale, :class:`stickslip.motion.tracking.JointTrack` as JSON),
   which ``stickslip move`` propagates and ``stickslip observe`` updates with a measured
@@ -36,6 +40,7 @@ from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..records import atomic_write_text, check_version, loads_json, read_json
+from ..units import format_position
 from .base import device_key
 
 __all__ = [
@@ -43,12 +48,15 @@ __all__ = [
     "JsonStateFile",
     "DeviceState",
     "SOURCES",
+    "REFERENCED",
     "load_state",
     "save_state",
     "device_key",
 ]
 
-SOURCES = ("default", "set", "dead-reckoned", "observed")
+SOURCES = ("default", "set", "dead-reckoned", "observed", "assumed")
+REFERENCED = ("set", "dead-reckoned", "observed")
+"""The sources of a position that was put somewhere known (not assumed)."""
 
 
 class StateStore(Protocol):
@@ -97,7 +105,7 @@ class DeviceState:
     positions : dict
         ``{1: q1 (rad), 2: q2 (rad), 3: q3 (m)}``.
     sources : dict
-        ``{joint: "default" | "set" | "dead-reckoned"}``.
+        ``{joint: source}``, one of :data:`SOURCES`.
     theta, psi : float
         Base tilt, rad.
     """
@@ -110,6 +118,8 @@ class DeviceState:
     uncertain: dict[int, tuple[float, float]] = field(default_factory=dict)
     track: dict[int, dict[str, Any]] = field(default_factory=dict)
     """``{joint: JointTrack JSON}``: step scale and position covariance (stickslip.motion.tracking)."""
+    why: dict[int, str] = field(default_factory=dict)
+    """``{joint: what left it uncertain}`` ("a move was interrupted", "a traverse was interrupted", ...)."""
 
     @classmethod
     def default(cls, device: str) -> DeviceState:
@@ -127,40 +137,62 @@ class DeviceState:
         """Record ``q`` (rad or m) for ``joint``; ``ValueError`` outside its end stops."""
         spec = kin.joint_spec(joint)
         q = float(q)
-        problem = spec.range_problem(f"q{spec.number}", q)
-        if problem:
-            raise ValueError(problem)
+        if spec.range_problem(f"q{spec.number}", q):
+            shown = format_position(q, spec.number) if math.isfinite(q) else repr(q)
+            raise ValueError(
+                f"q{spec.number} = {shown} is outside joint {spec.number}'s range "
+                f"[{format_position(spec.lower, spec.number)}, {format_position(spec.upper, spec.number)}]"
+            )
         if source not in SOURCES:
             raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
         self.positions[spec.number] = min(max(q, spec.lower), spec.upper)
         self.sources[spec.number] = source
         self.uncertain.pop(spec.number, None)
+        self.why.pop(spec.number, None)
         if source == "set" and spec.number in self.track:  # put there by hand: known exactly, scale kept
-            t = self.track[spec.number]
-            p = t.get("P")
-            if isinstance(p, list) and len(p) == 2 and all(isinstance(r, list) and len(r) == 2 for r in p):
-                t["P"] = [[0.0, 0.0], [0.0, p[1][1]]]
+            _exact_position(self.track[spec.number])
 
-    def intend(self, joint: int, q_intended: float) -> None:
+    def referenced(self, joint: int) -> bool:
+        """Whether ``joint`` was put somewhere known (set, observed, or moved by the model since), not uncertain."""
+        return joint not in self.uncertain and self.sources.get(joint) in REFERENCED
+
+    def intend(self, joint: int, q_intended: float, why: str = "a move was interrupted") -> None:
         """Journal a burst about to be sent: ``joint`` is in flight to ``q_intended`` (rad or m).
 
         Until :meth:`set_position` records the confirmed end, the joint is *uncertain*
-        between its last confirmed position and ``q_intended``.
+        between its last confirmed position and ``q_intended``; ``why`` is what a person
+        is told if it stays so.
         """
         spec = kin.joint_spec(joint)
         q = min(max(float(q_intended), spec.lower), spec.upper)
         confirmed = self.positions[spec.number]
-        self.uncertain[spec.number] = (min(confirmed, q), max(confirmed, q))
+        self.mark_uncertain(joint, min(confirmed, q), max(confirmed, q), why)
+
+    def mark_uncertain(self, joint: int, lo: float, hi: float, why: str) -> None:
+        """Record that ``joint`` lies somewhere in ``[lo, hi]`` (rad or m, clipped to its range), and why."""
+        spec = kin.joint_spec(joint)
+        lo, hi = (min(max(float(v), spec.lower), spec.upper) for v in (lo, hi))
+        self.uncertain[spec.number] = (min(lo, hi), max(lo, hi))
+        self.why[spec.number] = why
+
+    def bounds(self, joint: int) -> tuple[float, float]:
+        """Where ``joint`` may be (rad or m): its uncertain bounds, its position if referenced, else its whole range."""
+        if joint in self.uncertain:
+            return self.uncertain[joint]
+        if self.referenced(joint):
+            return (self.positions[joint], self.positions[joint])
+        spec = kin.joint_spec(joint)
+        return (spec.lower, spec.upper)
 
     def uncertainty_problem(self, joint: int) -> str | None:
         """Why ``joint``'s position cannot be planned from (``None`` if it can)."""
         if joint not in self.uncertain:
             return None
         lo, hi = self.uncertain[joint]
-        unit = kin.joint_spec(joint).unit
+        why = self.why.get(joint, "a move was interrupted")
         return (
-            f"joint {joint}'s position is uncertain (a move was interrupted): between {lo:.9g} and "
-            f"{hi:.9g} {unit}; re-reference it at an end stop first, e.g. "
+            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, joint)} and "
+            f"{format_position(hi, joint)}; re-reference it at an end stop first, e.g. "
             f"`stickslip where --set {joint}=min` after driving it to the lower stop"
         )
 
@@ -183,8 +215,18 @@ class DeviceState:
             "theta": self.theta,
             "psi": self.psi,
             "uncertain": {str(j): list(b) for j, b in sorted(self.uncertain.items())},
+            "why": {str(j): w for j, w in sorted(self.why.items()) if j in self.uncertain},
             "track": {str(j): t for j, t in sorted(self.track.items())},
         }
+
+
+def _exact_position(track: dict[str, Any]) -> None:
+    """Zero the position's variance and its covariances in a kept track's JSON ``P`` (any square size)."""
+    p = track.get("P")
+    if isinstance(p, list) and p and all(isinstance(r, list) and len(r) == len(p) for r in p):
+        for k in range(len(p)):
+            p[0][k] = 0.0
+            p[k][0] = 0.0
 
 
 _KEY = "positions"
@@ -210,6 +252,8 @@ def load_state(store: StateStore, device: str) -> DeviceState:
         state.psi = float(raw.get("psi", 0.0))
         for j, (lo, hi) in (raw.get("uncertain") or {}).items():
             state.uncertain[int(j)] = (float(lo), float(hi))
+        for j, w in (raw.get("why") or {}).items():
+            state.why[int(j)] = str(w)
         for j, t in (raw.get("track") or {}).items():
             if not isinstance(t, dict):
                 raise ValueError(f"track of joint {j} is not an object")

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..units import UnitError, parse_length
+from ..units import UnitError, format_position, parse_length
 from .frames import JOINTS
 
 __all__ = [
@@ -205,11 +205,7 @@ def limit_problem(q: ArrayLike) -> str | None:
             continue
         side = "lower" if v < spec.lower else "upper"
         bound = spec.lower if side == "lower" else spec.upper
-        if spec.rotary:
-            shown, b, unit = math.degrees(v), math.degrees(bound), "deg"
-        else:
-            shown, b, unit = v * 1e3, bound * 1e3, "mm"
-        return f"joint {j} would be at {shown:.6g} {unit}, beyond its {side} limit {b:.6g} {unit}"
+        return f"joint {j} would be at {format_position(v, j)}, beyond its {side} limit {format_position(bound, j)}"
     return None
 
 

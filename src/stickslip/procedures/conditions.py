@@ -15,9 +15,9 @@ from dataclasses import replace
 
 from ..calibration import Calibration, Conditions
 from ..clock import stale_message
-from ..devices.base import Controller, device_key
+from ..devices.base import Controller, device_key, redact_url, url_scheme
 
-__all__ = ["conditions_of", "usage_warnings"]
+__all__ = ["calibration_device_problem", "conditions_of", "usage_warnings"]
 
 
 def _voltage(dev: Controller, joint: int) -> float | None:
@@ -86,3 +86,39 @@ def usage_warnings(
             "its step sizes may not hold here; recalibrate on this device and settings"
         )
     return out
+
+
+def _simulated(key: str) -> bool:
+    try:
+        return url_scheme(key) in ("sim", "sim+physics")
+    except ValueError:
+        return False
+
+
+def calibration_device_problem(cal: Calibration, url: str) -> str | None:
+    """Why ``cal`` must not plan moves on the controller at ``url`` unless the user says so (``None`` if it may).
+
+    A calibration holds for the arm its traverses were measured on. On a real controller
+    one that does not record its device (made from a table that did not say, e.g. the
+    README tour's ``calibrate measurements.csv`` without a database that holds its rows)
+    or that was made on the simulator is refused, with the reason; a calibration of
+    another real device is only warned about (:func:`usage_warnings`). The simulator
+    takes any calibration.
+    """
+    if _simulated(url):
+        return None
+    made_on = cal.conditions.device
+    here = redact_url(url)
+    if made_on is None:
+        return (
+            f"the calibration does not record the device its traverses came from (made from a table that did not "
+            f"say), so its step sizes may be another arm's: recalibrate on {here}, or record the device "
+            f"(stickslip calibrate MEAS.csv --device URL), or pass --trust-calibration to use it anyway"
+        )
+    if _simulated(made_on):
+        return (
+            f"the calibration was made on the simulator ({made_on}), not on {here}: its step sizes are the "
+            "simulated arm's; calibrate this arm (docs/howto/day-one.md), or pass --trust-calibration to use "
+            "it anyway"
+        )
+    return None

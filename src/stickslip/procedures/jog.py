@@ -17,7 +17,9 @@ The control law, in the spirit of the resolved-rate teleoperation the paper poin
 :class:`JogController` is that law as a pure object (keys and a clock in, signed step
 counts out; no I/O); :func:`run_jog` is the loop that reads keys, steps a device
 through the move journal (:func:`stickslip.procedures.move.drive`) and shows the
-status. The terminal (raw keys, the status lines) lives in the CLI.
+status; :func:`jog` is the whole session behind ``stickslip jog`` (the lock, the kept
+state, the device). The terminal (raw keys, the status lines) lives in the CLI and comes
+in as a :class:`KeySource` and a ``show`` function.
 
 Keys (names as :func:`parse_keys` returns them):
 
@@ -42,23 +44,32 @@ the tip): a dead man's switch.
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
 from .. import kinematics as kin
 from ..calibration import Calibration
-from ..devices.base import Controller, DeviceError
-from ..devices.positions import DeviceState
+from ..devices.base import Controller, DeviceError, PoseSettable, device_key, open_device
+from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
-from .move import drive
+from .conditions import calibration_device_problem, usage_warnings
+from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions
+from .reach import referenced_state
 
 __all__ = [
     "SPEEDS",
     "DIRECTION_KEYS",
     "JogStatus",
     "JogController",
+    "JogRequest",
+    "JogResult",
+    "KeySource",
+    "jog",
+    "max_rates",
     "parse_keys",
     "run_jog",
 ]
@@ -472,7 +483,8 @@ def run_jog(
                 def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
                     return stepper.position_after(q_from, m)
 
-                out = drive(dev, state, j, n, max(abs(n), 1), reckon, save)
+                source = "dead-reckoned" if exact_positions(dev, state, j) else "assumed"
+                out = drive(dev, state, j, n, max(abs(n), 1), reckon, save, source)
                 controller.sent_steps(j, out.sent)
                 if out.error is not None:
                     controller.stop()
@@ -486,3 +498,138 @@ def run_jog(
         except DeviceError:
             pass
     return None
+
+
+# ---------------------------------------------------------------- the whole session
+
+
+class KeySource(Protocol):
+    """Where a jog session's keys come from (a terminal in raw mode, a script, a web page)."""
+
+    def read(self, timeout: float) -> list[str]:
+        """Key names (as :func:`parse_keys` returns them) typed within ``timeout`` seconds."""
+        ...
+
+    def close(self) -> None:
+        """Give the input back (restore the terminal)."""
+        ...
+
+
+@dataclass(frozen=True)
+class JogRequest:
+    """A jog session on one device.
+
+    Attributes
+    ----------
+    device : str
+        Controller URL.
+    geometry : Geometry
+    image_angle : float
+        The image frame's turn about z0, rad.
+    speed : int
+        Speed preset 1-7 (:data:`SPEEDS`).
+    max_rate : float
+        Most steps per second of any joint (also capped at the controller's frequency).
+    hold : float
+        Seconds a direction key keeps moving without a repeat (0: until ``space``).
+    pose : PoseUpdate
+        Positions and tilt to record first.
+    max_age_days : int
+        A calibration older than this is warned about.
+    from_unreferenced : bool
+        Steer from joints never referenced (their positions assumed); without it they are
+        refused on a real controller. Uncertain joints are always refused.
+    trust_calibration : bool
+        Use a calibration without its device, or the simulator's, on a real controller.
+    """
+
+    device: str
+    geometry: kin.Geometry = kin.DEFAULT_GEOMETRY
+    image_angle: float = 0.0
+    speed: int = 4
+    max_rate: float = 1000.0
+    hold: float = 0.5
+    pose: PoseUpdate = PoseUpdate()
+    max_age_days: int = 0
+    from_unreferenced: bool = False
+    trust_calibration: bool = False
+
+
+@dataclass(frozen=True)
+class JogResult:
+    """How a jog session ended: the last status, the kept state, the device error that ended it (if any)."""
+
+    device: str
+    status: JogStatus
+    state: DeviceState
+    error: str | None
+
+
+def max_rates(dev: Controller, max_rate: float) -> tuple[float, float, float]:
+    """Each joint's highest step rate for jogging: the controller's frequency, capped at ``max_rate`` (Hz)."""
+    rates = []
+    for j in (1, 2, 3):
+        try:
+            rates.append(min(max_rate, float(dev.frequency(j))))
+        except (DeviceError, ValueError, AttributeError):
+            rates.append(max_rate)
+    return (rates[0], rates[1], rates[2])
+
+
+def jog(
+    store: MoveStore,
+    request: JogRequest,
+    calibration: Calibration,
+    *,
+    keys: Callable[[], KeySource],
+    show: Callable[[JogStatus], None],
+    clock: Callable[[], float] = time.monotonic,
+    warn: Callable[[str], None] = lambda _message: None,
+    ready: Callable[[], None] = lambda: None,
+    opener: Callable[[str], Controller] | None = None,
+) -> JogResult:
+    """Steer the tip from ``keys()`` until ``q`` (or Ctrl-C), holding the device's lock; positions kept every burst.
+
+    ``calibration`` must model joints 1, 2 and 3 (:class:`~.move.MoveRefused` otherwise,
+    or if a joint is uncertain). ``keys()`` is opened once the device is open and closed
+    however the session ends; ``show(status)`` draws. Ctrl-C ends the session like ``q``.
+    """
+    key = device_key(request.device)
+    made_on = calibration_device_problem(calibration, request.device)
+    if made_on and not request.trust_calibration:
+        raise MoveRefused(made_on)
+    with device_lock(store, key):
+        state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
+        missing = [j for j in (1, 2, 3) if j not in calibration.joints]
+        if missing:
+            raise MoveRefused(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
+        save_state(store, state)
+        for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
+            warn(w)
+        ready()
+        dev = (opener or open_device)(request.device)
+        keys_in: KeySource | None = None
+        try:
+            if isinstance(dev, PoseSettable):
+                dev.set_pose(*state.pose)
+            ctl = JogController(
+                calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
+                max_rates(dev, request.max_rate), request.image_angle, request.hold, request.speed - 1,
+            )
+
+            def save(st: DeviceState) -> None:
+                save_state(store, st)
+
+            keys_in = keys()
+            try:
+                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock)
+            except KeyboardInterrupt:
+                error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
+        finally:
+            if keys_in is not None:
+                keys_in.close()
+            try:
+                dev.close()
+            except DeviceError:
+                pass
+    return JogResult(key, ctl.status(), state, error)

@@ -1,12 +1,20 @@
-"""The burst-and-journal loop of a planned move, and the one-process-per-device lock.
+"""A planned move of one joint: plan from the kept state with the day's step scale, drive in bursts, keep.
 
-A move of ``N`` steps is sent in bursts. Before each burst the joint is journalled as
-*in flight* between its last confirmed position and the burst's intended end
-(:meth:`~stickslip.devices.positions.DeviceState.intend`, saved); after the controller
-confirms the burst, the dead-reckoned end is saved and the mark cleared. A link drop,
-a crash or Ctrl-C between the two leaves the joint *uncertain* with bounds, which
-``stickslip where`` shows and ``stickslip move`` refuses to plan from until the joint
-is re-referenced. So the stored position is exact (to the model) or marked, never
+:func:`move` is the workflow behind ``stickslip move`` (and what a web page or a camera
+loop calls): under the device's lock it reads the kept state, records a new pose if
+given, plans the steps with the calibration scaled by the joint's tracked step scale
+(:mod:`stickslip.motion.tracking`, learned from ``stickslip observe``), sends them in
+bursts and keeps the dead-reckoned position and its growing uncertainty.
+:func:`plan_tracked` and :func:`settle` are its two halves for a front end that holds
+its own controller (the Bluesky axes).
+
+A move of ``N`` steps is sent in bursts (:func:`drive`). Before each burst the joint is
+journalled as *in flight* between its last confirmed position and the burst's intended
+end (:meth:`~stickslip.devices.positions.DeviceState.intend`, saved); after the
+controller confirms the burst, the dead-reckoned end is saved and the mark cleared. A
+link drop, a crash or Ctrl-C between the two leaves the joint *uncertain* with bounds,
+which ``stickslip where`` shows and ``stickslip move`` refuses to plan from until the
+joint is re-referenced. So the stored position is exact (to the model) or marked, never
 silently wrong.
 
 :func:`device_lock` makes sure one process drives a device at a time: a lock row in
@@ -16,6 +24,7 @@ that name. The lock is portable (SQLite transactions, no ``fcntl``).
 
 from __future__ import annotations
 
+import math
 import os
 import socket
 from collections.abc import Callable, Iterator
@@ -24,15 +33,99 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from .. import kinematics as kin
+from ..calibration import Calibration
 from ..clock import now_utc
-from ..devices.base import Controller, DeviceError, StepsUncertain
-from ..devices.positions import DeviceState
+from ..devices.base import (
+    Controller,
+    DeviceError,
+    KnowsTruePosition,
+    PoseSettable,
+    StepsUncertain,
+    device_key,
+    open_device,
+    redact_url,
+    url_scheme,
+)
+from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..motion.planning import Planner
+from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
+from ..units import format_position, position_display_unit
+from .conditions import calibration_device_problem, usage_warnings
 
-__all__ = ["DeviceBusy", "LockStore", "MoveOutcome", "device_lock", "drive"]
+__all__ = [
+    "DeviceBusy",
+    "Interrupted",
+    "LockStore",
+    "MoveOutcome",
+    "MoveRefused",
+    "MoveRequest",
+    "MoveResult",
+    "MoveStore",
+    "PoseUpdate",
+    "TargetOutOfRange",
+    "TrackedPlan",
+    "device_lock",
+    "drive",
+    "exact_positions",
+    "failure_text",
+    "kept_after_interrupt",
+    "move",
+    "plan_tracked",
+    "reference_commands",
+    "reference_problem",
+    "step_joint",
+    "steps_to_stop",
+    "settle",
+    "target_of",
+    "track_fields",
+    "where_line",
+]
 
 
 class DeviceBusy(RuntimeError):
     """Another process holds the device's lock (the message names it)."""
+
+
+class MoveRefused(ValueError):
+    """A move that cannot be planned from the kept state (the message says why); nothing was sent."""
+
+
+class TargetOutOfRange(MoveRefused):
+    """The target lies outside the joint's range (the message names both, in display units)."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C stopped a workflow that drives a device: ``what`` it was, and the ``state`` kept after it.
+
+    A :class:`KeyboardInterrupt`, so code that knows nothing of it still sees Ctrl-C. The
+    journal was saved before every burst: ``state`` (read back from the store) says where
+    each joint stands, exactly or uncertain with bounds (:func:`where_line`).
+    """
+
+    def __init__(self, what: str, state: DeviceState | None):
+        super().__init__(what)
+        self.what = what
+        self.state = state
+
+
+def where_line(state: DeviceState) -> str:
+    """Where each joint of ``state`` stands, for one line: ``joint 3 12 µm (set)``, or uncertain with bounds."""
+    parts = []
+    for j in (1, 2, 3):
+        if j in state.uncertain:
+            lo, hi = state.uncertain[j]
+            parts.append(f"joint {j} uncertain, {format_position(lo, j)} to {format_position(hi, j)}")
+        else:
+            parts.append(f"joint {j} {format_position(state.positions[j], j)} ({state.sources[j]})")
+    return "; ".join(parts)
+
+
+def kept_after_interrupt(store: StateStore, key: str, state: DeviceState) -> DeviceState:
+    """The state as stored after Ctrl-C (what the next command will read), else the one in memory."""
+    try:
+        return load_state(store, key)
+    except (OSError, ValueError):
+        return state
 
 
 class LockStore(Protocol):
@@ -61,6 +154,10 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
         store.release_lock(device, pid)
 
 
+class MoveStore(LockStore, StateStore, Protocol):
+    """What :func:`move` needs of a store: the device lock and the kept state (``stickslip.storage.Store``)."""
+
+
 @dataclass
 class MoveOutcome:
     """What a :func:`drive` did: steps sent and confirmed, the bursts, the device error if any."""
@@ -78,11 +175,13 @@ def drive(
     burst: int,
     reckon: Callable[[int], float],
     save: Callable[[DeviceState], None],
+    source: str = "dead-reckoned",
 ) -> MoveOutcome:
     """Send ``steps`` (signed) to ``joint`` in bursts of at most ``burst``, journalling each.
 
     ``reckon(n)`` is the dead-reckoned position (rad or m) after ``n`` signed steps from
-    the start; ``save(state)`` stores the state (one transaction). A :class:`DeviceError`
+    the start, kept with ``source`` (``"assumed"`` for a start never referenced);
+    ``save(state)`` stores the state (one transaction). A :class:`DeviceError`
     stops the loop and is returned in the outcome with the joint left *uncertain* over
     the failed burst; any other exception (Ctrl-C) propagates with the journal saved.
     A :class:`~stickslip.devices.base.StepsUncertain` narrows that: its ``made`` steps
@@ -104,7 +203,7 @@ def drive(
             if e.made:
                 out.sent += e.made
                 out.bursts.append(e.made)
-                state.set_position(joint, reckon(out.sent), "dead-reckoned")
+                state.set_position(joint, reckon(out.sent), source)
             else:  # nothing certainly made: back to the confirmed position, then widen below
                 state.set_position(joint, state.positions[joint], state.sources[joint])
             if e.at_most is None:
@@ -119,6 +218,529 @@ def drive(
             return out
         out.sent += n
         out.bursts.append(n)
-        state.set_position(joint, reckon(out.sent), "dead-reckoned")
+        state.set_position(joint, reckon(out.sent), source)
         save(state)  # done: the controller confirmed the burst
+    return out
+
+
+# ---------------------------------------------------------------- planning from the kept state
+
+
+@dataclass(frozen=True)
+class PoseUpdate:
+    """Joint positions and base tilt to record before planning (rad, rad, m; rad, rad); ``None`` keeps one."""
+
+    q1: float | None = None
+    q2: float | None = None
+    q3: float | None = None
+    theta: float | None = None
+    psi: float | None = None
+
+    def apply(self, state: DeviceState) -> list[str]:
+        """Record the given values in ``state`` (source ``"set"``); the names changed. ``ValueError`` out of range."""
+        changed = []
+        for j, v in ((1, self.q1), (2, self.q2), (3, self.q3)):
+            if v is not None:
+                state.set_position(j, v, "set")
+                changed.append(f"q{j}")
+        state.set_tilt(self.theta, self.psi)
+        return changed + [n for n, v in (("theta", self.theta), ("psi", self.psi)) if v is not None]
+
+
+def target_of(state: DeviceState, joint: int, by: float | None = None, to: float | None = None) -> tuple[float, float]:
+    """``(q_from, q_to)`` of a move of ``joint`` by ``by`` or to ``to`` (rad or m) from its kept position.
+
+    :class:`TargetOutOfRange` if the target lies outside the joint's range.
+    """
+    if (by is None) == (to is None):
+        raise ValueError("give exactly one of by and to")
+    spec = kin.joint_spec(joint)
+    q_from = state.positions[joint]
+    q_to = to if to is not None else q_from + float(by or 0.0)
+    if not spec.contains(q_to):
+        raise TargetOutOfRange(
+            f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
+            f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
+            f"(from {format_position(q_from, joint)}); positions are in {position_display_unit(joint)}"
+        )
+    return q_from, min(max(q_to, spec.lower), spec.upper)
+
+
+@dataclass(frozen=True)
+class TrackedPlan:
+    """A move of one joint planned with the day's tracked step scale.
+
+    Attributes
+    ----------
+    joint : int
+    q_from, q_to : float
+        Kept start and target, rad or m.
+    steps : int
+        Signed steps to send.
+    q_end : float
+        Predicted end, rad or m (within half a step of ``q_to``).
+    calibration : Calibration
+        The calibration with the joint's steps scaled by the tracked step scale of each direction.
+    pose : Pose
+        The kept pose the move is planned in.
+    track : JointTrack
+        The joint's Kalman state (updated by :func:`settle`).
+    note : str or None
+        Why the track started again (a scale learned with another calibration), if it did.
+    sigma_model : float
+        The joint's relative model error (1), the track's process noise for a new pose.
+    assumed : bool
+        Planned from a position never referenced (``--from-unreferenced``): the end is kept
+        as ``"assumed"``, not known.
+    from_uncertain : tuple of 2 floats or None
+        The bounds (rad or m) of an uncertain start planned from its last confirmed
+        position (``--from-unreferenced``); the end stays uncertain, the bounds moved along.
+    """
+
+    joint: int
+    q_from: float
+    q_to: float
+    steps: int
+    q_end: float
+    calibration: Calibration
+    pose: kin.Pose
+    track: JointTrack
+    note: str | None
+    sigma_model: float
+    assumed: bool = False
+    from_uncertain: tuple[float, float] | None = None
+
+    def position_after(self, n_signed: int, q_start: float | None = None) -> float:
+        """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start)."""
+        q0 = self.q_from if q_start is None else q_start
+        return float(Planner(self.calibration, self.joint, self.pose).position_after(q0, n_signed))
+
+    def bounds_after(self, n_signed: int) -> tuple[float, float] | None:
+        """Where an uncertain start's bounds are after ``n_signed`` steps (rad or m); ``None`` for a known start."""
+        if self.from_uncertain is None:
+            return None
+        lo, hi = (self.position_after(n_signed, q) for q in self.from_uncertain)
+        return (min(lo, hi), max(lo, hi))
+
+
+def plan_tracked(
+    calibration: Calibration,
+    state: DeviceState,
+    joint: int,
+    q_to: float,
+    *,
+    from_unreferenced: bool = False,
+    assumed: bool | None = None,
+) -> TrackedPlan:
+    """Plan a move of ``joint`` to ``q_to`` (rad or m) from ``state`` with its tracked step scale.
+
+    :class:`MoveRefused` if the joint's position is uncertain (an interrupted move),
+    unless ``from_unreferenced``: then the move is planned from its last confirmed
+    position and its bounds move along (:attr:`TrackedPlan.from_uncertain`). ``KeyError``
+    if the calibration lacks the joint or direction; ``ValueError`` if the kept track is
+    unreadable. Whether a joint never referenced may be planned from is the caller's
+    check (:func:`reference_problem`); ``assumed`` says whether its end is then kept as
+    assumed (default: its source is ``default`` or ``assumed``; the simulator's positions
+    are exact, so a caller that knows it drives one passes ``False``).
+    """
+    problem = state.uncertainty_problem(joint)
+    if problem and not from_unreferenced:
+        raise MoveRefused(problem)
+    track, note = track_for(state.track.get(joint), calibration, joint)
+    scaled = scaled_calibration(calibration, joint, {d: track.scale_of(d) for d in "+-"})
+    q_from = state.positions[joint]
+    plan = Planner(scaled, joint, state.pose).plan(q_from, q_to)
+    return TrackedPlan(
+        joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
+        joint_sigma_model(calibration, joint),
+        assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
+        from_uncertain=state.uncertain.get(joint),
+    )
+
+
+def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:
+    """Keep what a driven ``plan`` did: the planned end if it completed, the grown uncertainty if it sent steps.
+
+    A start never referenced ends ``"assumed"``; an uncertain start stays uncertain, its
+    bounds moved by the steps sent (and widened over a burst that failed).
+    """
+    joint = plan.joint
+    moved = plan.bounds_after(outcome.sent)
+    if outcome.error is None:
+        state.set_position(joint, plan.q_end, "assumed" if plan.assumed else "dead-reckoned")
+    if moved is not None:
+        lo, hi = moved
+        if joint in state.uncertain:  # a failed burst: it may be anywhere it could have gone
+            lo, hi = min(lo, state.uncertain[joint][0]), max(hi, state.uncertain[joint][1])
+        state.mark_uncertain(joint, lo, hi, "moved from an uncertain position")
+        return
+    if outcome.sent and joint not in state.uncertain and not plan.assumed:  # the uncertainty grows with the move
+        delta = state.positions[joint] - plan.q_from
+        plan.track.predict(delta, outcome.sent, plan.pose, joint, plan.sigma_model)
+        state.track[joint] = plan.track.to_json()
+
+
+NOMINAL_STEP = {"prismatic": 0.8e-6, "rotary": 40e-6}
+"""A small step of each kind of joint (m, rad): what :func:`steps_to_stop` assumes without a calibration."""
+
+
+def steps_to_stop(joint: int, calibration: Calibration | None = None) -> int:
+    """Steps that surely drive ``joint`` from anywhere into an end stop: 1.2 x its range over its smallest step.
+
+    The smallest step is the calibration's constant step of either direction, else
+    :data:`NOMINAL_STEP`; rounded up to a thousand. At the stop the slider slips: the
+    steps beyond it do no harm (a traverse steps into its stop the same way).
+    """
+    spec = kin.joint_spec(joint)
+    steps = [v for (j, _), v in (calibration.constant_steps.items() if calibration else ()) if j == joint and v > 0]
+    small = min(steps) if steps else NOMINAL_STEP["rotary" if spec.rotary else "prismatic"]
+    return int(math.ceil(1.2 * spec.span / small / 1000.0)) * 1000
+
+
+def exact_positions(dev: Controller, state: DeviceState, joint: int) -> bool:
+    """Whether a move of ``joint`` on ``dev`` starts from a known position: referenced, or on the simulator.
+
+    A simulator is placed at the kept positions (:class:`~stickslip.devices.base.PoseSettable`),
+    so they are exact there; on a real controller a position never referenced is assumed.
+    """
+    return isinstance(dev, PoseSettable) or state.sources[joint] not in ("default", "assumed")
+
+
+def is_simulator(url: str) -> bool:
+    """Whether ``url`` opens the simulator, which is placed at the kept positions (so they are exact)."""
+    return url_scheme(url) in ("sim", "sim+physics")
+
+
+def reference_commands(device: str, joint: int, calibration: Calibration | None = None) -> str:
+    """The two commands that reference ``joint``: raw steps into its lower stop, then ``where --set J=min``."""
+    url = redact_url(device)
+    n = steps_to_stop(joint, calibration)
+    return (
+        f"`stickslip move -d {url} --joint {joint} --steps -{n}` (into its lower stop: more steps than its range; "
+        f"the slider slips at the stop), then `stickslip where -d {url} --set {joint}=min`"
+    )
+
+
+def reference_problem(
+    state: DeviceState, joint: int, device: str, calibration: Calibration | None = None, from_uncertain: bool = True
+) -> str | None:
+    """Why a planned move of ``joint`` needs ``--from-unreferenced`` (``None`` if it does not).
+
+    A joint whose position is uncertain, or was never referenced (its position assumed),
+    is not planned from on a real controller; the reason names the commands that
+    reference it. The simulator is placed at the kept positions, so they are never made
+    up there (an uncertain joint is refused there too, by :func:`plan_tracked`).
+    ``from_uncertain``: whether the option may plan from an uncertain position (a
+    single-joint move) or not (a tip move: it needs all three joints known).
+    """
+    if is_simulator(device) or state.referenced(joint):
+        return None
+    how = reference_commands(device, joint, calibration)
+    if joint in state.uncertain:
+        lo, hi = state.uncertain[joint]
+        why = state.why.get(joint, "a move was interrupted")
+        option = (
+            f"; or pass --from-unreferenced to plan from {format_position(state.positions[joint], joint)} "
+            "(it stays uncertain)" if from_uncertain else ""
+        )
+        return (
+            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, joint)} and "
+            f"{format_position(hi, joint)}; reference it: {how}{option}"
+        )
+    return (
+        f"joint {joint} was never referenced: its position {format_position(state.positions[joint], joint)} is "
+        f"assumed, not known; reference it: {how}; or pass --from-unreferenced to plan from the assumed position"
+    )
+
+
+def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: int) -> str:
+    """One line for a move a device error stopped: what was sent, and what the kept position now is."""
+    if joint in state.uncertain:
+        lo, hi = state.uncertain[joint]
+        kept = (
+            f"joint {joint}'s position is now uncertain, between {format_position(lo, joint)} "
+            f"and {format_position(hi, joint)}; re-reference it (stickslip where --set {joint}=min "
+            f"at the lower stop) before the next move"
+        )
+    else:
+        kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], joint)} is kept"
+    return f"{error}; sent {sent} of {steps} steps; {kept}"
+
+
+def track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
+    """``sd`` (m or rad) of the kept position and the learned ``step_scale`` (1) of a joint, ``None`` if untracked."""
+    raw = state.track.get(joint)
+    if raw is None:
+        return {"sd": None, "step_scale": None, "step_scale_sd": None}
+    try:
+        t = JointTrack.from_json(raw)
+    except ValueError:
+        return {"sd": None, "step_scale": None, "step_scale_sd": None}
+    return {"sd": t.sd, "step_scale": t.scale, "step_scale_sd": t.scale_sd}
+
+
+# ---------------------------------------------------------------- the whole move
+
+
+@dataclass(frozen=True)
+class MoveRequest:
+    """A move of one joint on one device.
+
+    Attributes
+    ----------
+    device : str
+        Controller URL (``sim://``, ``mm3a:///dev/ttyUSB0``, ...).
+    joint : int
+    by, to : float or None
+        The displacement or the target, rad or m: exactly one.
+    burst : int
+        Most steps per burst (1..65535).
+    pose : PoseUpdate
+        Positions and tilt to record first.
+    max_age_days : int
+        A calibration older than this is warned about (:func:`~.conditions.usage_warnings`).
+    from_unreferenced : bool
+        Plan from a position never referenced (assumed) or uncertain (the last confirmed);
+        without it such a joint is refused on a real controller (:func:`reference_problem`).
+    trust_calibration : bool
+        Use a calibration that does not record its device, or was made on the simulator,
+        on a real controller (refused without it:
+        :func:`~.conditions.calibration_device_problem`).
+    """
+
+    device: str
+    joint: int
+    by: float | None = None
+    to: float | None = None
+    burst: int = 1000
+    pose: PoseUpdate = PoseUpdate()
+    max_age_days: int = 0
+    from_unreferenced: bool = False
+    trust_calibration: bool = False
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    """What :func:`move` did (SI units).
+
+    Attributes
+    ----------
+    device : str
+        The device's key (URL without options or secrets).
+    plan : TrackedPlan
+    outcome : MoveOutcome
+        Steps sent, the bursts, the device error that stopped it (``None`` if it completed).
+    state : DeviceState
+        The kept state after the move.
+    sim_true_end : float or None
+        The simulator's true end position (rad or m); ``None`` on a real controller.
+    """
+
+    device: str
+    plan: TrackedPlan
+    outcome: MoveOutcome
+    state: DeviceState
+    sim_true_end: float | None = None
+
+    def failure(self) -> str | None:
+        """The one line of a move a device error stopped (:func:`failure_text`), else ``None``."""
+        if self.outcome.error is None:
+            return None
+        return failure_text(self.state, self.plan.joint, self.outcome.error, self.outcome.sent, self.plan.steps)
+
+    def as_dict(self) -> dict[str, object]:
+        """The JSON shape of ``stickslip move --json`` (SI units)."""
+        p = self.plan
+        out: dict[str, object] = {
+            "device": self.device, "joint": p.joint, "direction": "+" if p.steps >= 0 else "-",
+            "steps": abs(p.steps), "steps_signed": p.steps, "bursts": list(self.outcome.bursts),
+            "q_from": p.q_from, "q_to": p.q_to, "q_end_predicted": p.q_end, "unit": kin.joint_spec(p.joint).unit,
+        }
+        tf = track_fields(self.state, p.joint)
+        if tf["sd"] is not None:
+            out.update({"q_sd": tf["sd"], "step_scale": tf["step_scale"], "step_scale_sd": tf["step_scale_sd"]})
+        if self.sim_true_end is not None:
+            out["sim_true_end"] = self.sim_true_end
+        return out
+
+
+def _nothing() -> None:
+    pass
+
+
+def move(
+    store: MoveStore,
+    request: MoveRequest,
+    calibration: Calibration,
+    *,
+    warn: Callable[[str], None] = lambda _message: None,
+    ready: Callable[[], None] = _nothing,
+    opener: Callable[[str], Controller] | None = None,
+) -> MoveResult:
+    """Move one joint as ``request`` says, holding the device's lock; the kept state is saved after every burst.
+
+    ``warn(message)`` gets each warning (the track restarted, the calibration's age or
+    conditions); ``ready()`` is called once the input is checked, just before the first
+    burst (a command prints its warnings there). Refusals raise before anything is sent:
+    :class:`DeviceBusy`, :class:`MoveRefused` (:class:`TargetOutOfRange`), ``KeyError`` (a
+    joint or direction not calibrated), ``ValueError``, :class:`DeviceError` (the device
+    cannot be opened). A device error during the move is returned in the result's
+    ``outcome`` (:meth:`MoveResult.failure`), the joint kept honest. ``opener(url)`` opens
+    the controller (default :func:`~stickslip.devices.base.open_device`).
+    """
+    key = device_key(request.device)
+    joint = request.joint
+    made_on = calibration_device_problem(calibration, request.device)
+    if made_on and not request.trust_calibration:
+        raise MoveRefused(made_on)
+    with device_lock(store, key):
+        state = load_state(store, key)
+        try:
+            request.pose.apply(state)
+            problem = reference_problem(state, joint, request.device, calibration)
+            if problem and not request.from_unreferenced:
+                raise MoveRefused(problem)
+            _, q_to = target_of(state, joint, request.by, request.to)
+            plan = plan_tracked(
+                calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
+                assumed=problem is not None and joint not in state.uncertain,
+            )
+            if plan.note:
+                warn(plan.note)
+            save_state(store, state)  # the recorded pose, even if nothing moves
+            if not plan.steps:
+                for w in usage_warnings(calibration, None, request.device, joint, request.max_age_days):
+                    warn(w)
+                ready()
+                return MoveResult(key, plan, MoveOutcome(), state)
+            outcome, true_end = _drive_opened(
+                store, request, calibration, state, plan, warn, ready, opener or open_device
+            )
+        except KeyboardInterrupt:
+            raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
+    return MoveResult(key, plan, outcome, state, true_end)
+
+
+def _drive_opened(
+    store: StateStore,
+    request: MoveRequest,
+    calibration: Calibration,
+    state: DeviceState,
+    plan: TrackedPlan,
+    warn: Callable[[str], None],
+    ready: Callable[[], None],
+    opener: Callable[[str], Controller],
+) -> tuple[MoveOutcome, float | None]:
+    """Open the device, send ``plan`` in bursts, keep the state; the outcome and the simulator's true end."""
+    dev = opener(request.device)
+    try:
+        for w in usage_warnings(calibration, dev, request.device, plan.joint, request.max_age_days):
+            warn(w)
+        ready()  # the input is good: say so before driving
+        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+            dev.set_pose(*plan.pose)
+        def save(st: DeviceState) -> None:
+            if plan.from_uncertain is not None:  # in flight from an uncertain start: anywhere it could reach
+                lo, hi = plan.from_uncertain
+                to = plan.bounds_after(plan.steps) or (lo, hi)
+                st.mark_uncertain(plan.joint, min(lo, to[0]), max(hi, to[1]), "a move from an uncertain position")
+            save_state(store, st)
+
+        source = "assumed" if plan.assumed else "dead-reckoned"
+        outcome = drive(dev, state, plan.joint, plan.steps, request.burst, plan.position_after, save, source)
+        settle(state, plan, outcome)
+        if outcome.error is None or state.track.get(plan.joint) is not None:
+            save_state(store, state)
+        true_end = None
+        if outcome.error is None and isinstance(dev, KnowsTruePosition):
+            true_end = float(dev.position(plan.joint))
+        return outcome, true_end
+    finally:
+        try:
+            dev.close()
+        except DeviceError:
+            pass
+
+
+# ---------------------------------------------------------------- raw steps, no calibration
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """What :func:`step_joint` did: the steps sent (signed, per burst), the kept state, a device error if any."""
+
+    device: str
+    joint: int
+    steps: int
+    outcome: MoveOutcome
+    state: DeviceState
+
+    def as_dict(self) -> dict[str, object]:
+        """The JSON shape of ``stickslip move --steps N --json`` (SI units)."""
+        lo, hi = self.state.bounds(self.joint)
+        return {
+            "device": self.device, "joint": self.joint, "steps_signed": self.steps, "sent": self.outcome.sent,
+            "bursts": list(self.outcome.bursts), "uncertain": [lo, hi], "unit": kin.joint_spec(self.joint).unit,
+            "error": self.outcome.error,
+        }
+
+
+def step_joint(
+    store: MoveStore,
+    device: str,
+    joint: int,
+    steps: int,
+    *,
+    burst: int = 1000,
+    ready: Callable[[], None] = _nothing,
+    opener: Callable[[str], Controller] | None = None,
+) -> StepResult:
+    """Send ``steps`` raw signed steps to ``joint``: no calibration, no plan (a first check, a drive into a stop).
+
+    Without a model the steps move the joint by an unknown amount, so the joint is kept
+    *uncertain*: from where it may have been (its bounds, :meth:`DeviceState.bounds`) to
+    its end stop in the direction stepped, journalled before the first burst. Reference it
+    afterwards (``stickslip where --set J=min`` at the lower stop).
+    """
+    if steps == 0:
+        raise ValueError("--steps must not be 0")
+    key = device_key(device)
+    spec = kin.joint_spec(joint)
+    with device_lock(store, key):
+        state = load_state(store, key)
+        try:
+            lo, hi = state.bounds(joint)
+            after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)
+            state.mark_uncertain(joint, *after, f"{steps:+d} raw steps were sent")
+            save_state(store, state)  # write-ahead: uncertain before anything is sent
+            ready()
+            dev = (opener or open_device)(device)
+            try:
+                if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+                    dev.set_pose(*state.pose)
+                out = _send_raw(dev, joint, steps, burst)
+            finally:
+                try:
+                    dev.close()
+                except DeviceError:
+                    pass
+        except KeyboardInterrupt:
+            what = f"{steps:+d} raw steps of joint {joint}"
+            raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
+    return StepResult(key, joint, steps, out, state)
+
+
+def _send_raw(dev: Controller, joint: int, steps: int, burst: int) -> MoveOutcome:
+    """Send ``steps`` (signed) in bursts of at most ``burst``; a device error ends the loop and is kept."""
+    out = MoveOutcome()
+    sign = 1 if steps > 0 else -1
+    while out.sent != steps:
+        n = sign * min(burst, abs(steps - out.sent))
+        try:
+            dev.step(joint, n)
+        except DeviceError as e:
+            out.error = str(e)
+            break
+        out.sent += n
+        out.bursts.append(n)
     return out

@@ -1,4 +1,8 @@
-"""Driving a straight tip move: the segments of a :class:`~stickslip.motion.reach.ReachPlan`, joint by joint.
+"""A straight tip move: the workflow behind ``stickslip reach`` (:func:`reach`), and its driving loop.
+
+:func:`reach` plans the line from the kept pose (:func:`plan_from_state`) and, under the
+device's lock, drives it (:func:`drive_reach`): the segments of a
+:class:`~stickslip.motion.reach.ReachPlan`, joint by joint.
 
 Each joint's steps in a segment go through :func:`stickslip.procedures.move.drive`
 (the write-ahead journal: *in flight* before a burst, the dead-reckoned end after it),
@@ -17,13 +21,43 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from .. import kinematics as kin
 from ..calibration import Calibration
-from ..devices.base import Controller
-from ..devices.positions import DeviceState
-from ..motion.reach import JointStepper, ReachPlan
-from .move import drive
+from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
+from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..motion.reach import JointStepper, ReachPlan, plan_reach
+from .conditions import calibration_device_problem, usage_warnings
+from .move import (
+    Interrupted,
+    MoveRefused,
+    MoveStore,
+    PoseUpdate,
+    device_lock,
+    drive,
+    exact_positions,
+    kept_after_interrupt,
+    reference_problem,
+)
 
-__all__ = ["ReachOutcome", "drive_reach"]
+__all__ = [
+    "BORROWED_JOINT1",
+    "ReachOutcome",
+    "ReachRequest",
+    "ReachResult",
+    "check_referenced",
+    "drive_reach",
+    "plan_from_state",
+    "reach",
+    "referenced_state",
+]
+
+Vec3 = tuple[float, float, float]
+
+BORROWED_JOINT1 = (
+    "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "
+    "gravity load (the paper: the same actuator); calibrate joint 1 for accurate moves across the arm's plane"
+)
+"""The warning of a move that steps joint 1 with joint 2's parameters (``motion.reach.borrow_joint1``)."""
 
 
 @dataclass
@@ -80,7 +114,8 @@ def drive_reach(
             def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
                 return stepper.position_after(q_from, m)
 
-            moved = drive(dev, state, j, n, burst, reckon, save)
+            source = "dead-reckoned" if exact_positions(dev, state, j) else "assumed"
+            moved = drive(dev, state, j, n, burst, reckon, save, source)
             out.sent[j - 1] += moved.sent
             if moved.error is not None:
                 out.error, out.joint = moved.error, j
@@ -89,3 +124,210 @@ def drive_reach(
         if on_segment is not None:
             on_segment(k, state)
     return out
+
+
+# ---------------------------------------------------------------- the whole move
+
+
+@dataclass(frozen=True)
+class ReachRequest:
+    """A straight tip move on one device.
+
+    Attributes
+    ----------
+    device : str
+        Controller URL.
+    to, by : tuple of 3 floats or None
+        The tip's target or displacement, base frame before the tilt, m: exactly one.
+    geometry : Geometry
+        The arm's offset and length.
+    segment : float
+        Longest segment of the line, m.
+    burst : int
+        Most steps per burst.
+    pose : PoseUpdate
+        Positions and tilt to record first.
+    max_age_days : int
+        A calibration older than this is warned about.
+    dry_run : bool
+        Plan only: no lock, nothing sent, nothing kept.
+    from_unreferenced : bool
+        Plan from joints never referenced (their positions assumed); without it they are
+        refused on a real controller. Uncertain joints are always refused.
+    trust_calibration : bool
+        Use a calibration without its device, or the simulator's, on a real controller.
+    """
+
+    device: str
+    to: Vec3 | None = None
+    by: Vec3 | None = None
+    geometry: kin.Geometry = kin.DEFAULT_GEOMETRY
+    segment: float = 10e-6
+    burst: int = 1000
+    pose: PoseUpdate = PoseUpdate()
+    max_age_days: int = 0
+    dry_run: bool = False
+    from_unreferenced: bool = False
+    trust_calibration: bool = False
+
+
+@dataclass(frozen=True)
+class ReachResult:
+    """What :func:`reach` did: the plan, what was sent, the kept state, the simulator's true joints (SI)."""
+
+    device: str
+    plan: ReachPlan
+    outcome: ReachOutcome
+    state: DeviceState
+    moved: bool
+    sim_true: tuple[float, float, float] | None = None
+
+    def failure(self) -> str | None:
+        """One line for a move a device error stopped: where it stopped and what is kept; else ``None``."""
+        out = self.outcome
+        if out.error is None:
+            return None
+        j = out.joint or 0
+        if j in self.state.uncertain:
+            kept = (
+                f"joint {j}'s position is now uncertain; re-reference it (stickslip where --set {j}=min at the "
+                f"lower stop) before the next move"
+            )
+        else:
+            kept = "the dead-reckoned positions are kept"
+        return (
+            f"{out.error}; stopped in segment {out.segments_done + 1} of {len(self.plan.segments)} "
+            f"(steps sent per joint: {out.sent}); {kept}"
+        )
+
+    def as_dict(self) -> dict[str, object]:
+        """The JSON shape of ``stickslip reach --json`` (metres, radians)."""
+        out: dict[str, object] = dict(self.plan.as_dict())
+        if self.sim_true is not None:
+            tip = [float(v) for v in kin.tip(self.sim_true, self.plan.geometry)]
+            out["sim_true"] = {"q": list(self.sim_true), "tip": tip}
+        return out
+
+
+def check_referenced(
+    state: DeviceState, device: str = "sim://", calibration: Calibration | None = None, from_unreferenced: bool = False
+) -> None:
+    """:class:`MoveRefused` unless every joint of ``state`` may be planned from: a tip move needs all three known.
+
+    An uncertain joint (an interrupted move) is always refused; one never referenced
+    (its position assumed) on a real controller unless ``from_unreferenced``
+    (:func:`~.move.reference_problem` names the commands that reference it).
+    """
+    for j in sorted((1, 2, 3), key=lambda j: j not in state.uncertain):  # an uncertain joint is said first
+        problem = reference_problem(state, j, device, calibration, from_uncertain=False)
+        if problem and (j in state.uncertain or not from_unreferenced):
+            raise MoveRefused(problem)
+        problem = state.uncertainty_problem(j)
+        if problem:
+            raise MoveRefused(problem)
+
+
+def referenced_state(
+    store: StateStore,
+    device: str,
+    pose: PoseUpdate,
+    calibration: Calibration | None = None,
+    from_unreferenced: bool = False,
+) -> DeviceState:
+    """The kept state of ``device`` with ``pose`` recorded; :class:`MoveRefused` unless it may be planned from."""
+    state = load_state(store, device_key(device))
+    pose.apply(state)
+    check_referenced(state, device, calibration, from_unreferenced)
+    return state
+
+
+def plan_from_state(
+    calibration: Calibration, borrowed: bool, state: DeviceState, request: ReachRequest, warn: Callable[[str], None]
+) -> ReachPlan:
+    """The straight line of ``request`` from the kept pose; ``warn`` says when joint 1 borrows joint 2's parameters.
+
+    ``KeyError`` if a joint or direction the line needs is not calibrated; ``ValueError``
+    (:class:`~stickslip.kinematics.OutOfReach`, :class:`~stickslip.kinematics.SingularPose`)
+    if the line cannot be made.
+    """
+    geom, seg = request.geometry, request.segment
+    if request.to is not None:
+        plan = plan_reach(calibration, state.pose, to=request.to, geometry=geom, segment=seg)
+    else:
+        plan = plan_reach(calibration, state.pose, by=request.by, geometry=geom, segment=seg)
+    if borrowed and plan.total_steps[0]:
+        warn(BORROWED_JOINT1)
+    return plan
+
+
+def reach(
+    store: MoveStore,
+    request: ReachRequest,
+    calibration: Calibration,
+    borrowed: bool = False,
+    *,
+    warn: Callable[[str], None] = lambda _message: None,
+    ready: Callable[[], None] = lambda: None,
+    opener: Callable[[str], Controller] | None = None,
+) -> ReachResult:
+    """Move the tip in a straight line as ``request`` says (or plan it only, ``dry_run``).
+
+    ``calibration`` has joint 1 (or borrows it: ``borrowed``, :func:`~stickslip.motion.reach.borrow_joint1`).
+    ``warn`` gets each warning, ``ready()`` is called before the first burst. Refusals
+    raise before anything is sent (:class:`~.move.DeviceBusy`, :class:`~.move.MoveRefused`,
+    ``KeyError``, ``ValueError``, :class:`~stickslip.devices.base.DeviceError`); a device
+    error during the move is in the result (:meth:`ReachResult.failure`).
+    """
+    key = device_key(request.device)
+    refs = (calibration, request.from_unreferenced)
+    if request.dry_run:
+        state = referenced_state(store, request.device, request.pose, *refs)
+        plan = plan_from_state(calibration, borrowed, state, request, warn)
+        return ReachResult(key, plan, ReachOutcome(), state, moved=False)
+    made_on = calibration_device_problem(calibration, request.device)
+    if made_on and not request.trust_calibration:
+        raise MoveRefused(made_on)
+    with device_lock(store, key):
+        state = referenced_state(store, request.device, request.pose, *refs)
+        plan = plan_from_state(calibration, borrowed, state, request, warn)
+        save_state(store, state)  # the recorded pose, even if nothing moves
+        for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
+            warn(w)
+        ready()
+        if not any(plan.total_steps):
+            return ReachResult(key, plan, ReachOutcome(), state, moved=True)
+        try:
+            outcome, true_q = _drive_opened(store, request, calibration, state, plan, opener or open_device)
+        except KeyboardInterrupt:
+            raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
+    return ReachResult(key, plan, outcome, state, moved=True, sim_true=true_q)
+
+
+def _drive_opened(
+    store: StateStore,
+    request: ReachRequest,
+    calibration: Calibration,
+    state: DeviceState,
+    plan: ReachPlan,
+    opener: Callable[[str], Controller],
+) -> tuple[ReachOutcome, tuple[float, float, float] | None]:
+    """Open the device, drive ``plan``, close; the outcome and the simulator's true joints."""
+    dev = opener(request.device)
+    try:
+        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+            dev.set_pose(*state.pose)
+
+        def save(st: DeviceState) -> None:
+            save_state(store, st)
+
+        outcome = drive_reach(dev, state, plan, calibration, save, request.burst)
+        true_q = None
+        if outcome.error is None and isinstance(dev, KnowsTruePosition):
+            q = [float(dev.position(j)) for j in (1, 2, 3)]
+            true_q = (q[0], q[1], q[2])
+        return outcome, true_q
+    finally:
+        try:
+            dev.close()
+        except DeviceError:
+            pass

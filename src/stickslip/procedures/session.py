@@ -1,6 +1,10 @@
 """One audio-timed traverse on a device, and keeping it: the workflow behind
-``stickslip traverse`` (and what a calibration day repeats).
+``stickslip traverse`` (:func:`traverse`; what a calibration day repeats).
 
+:func:`traverse` holds the device's lock, journals the joint as *uncertain* over its whole
+range before it moves (a traverse that is interrupted, or hears no stop, leaves it so,
+never at a made-up position), measures, records the row and re-references the joint at
+the stop it reached, and appends the row to a table if asked.
 :func:`traverse_on_device` places the arm where it can be placed (the simulator), listens
 with the device's own microphone where it has one (the simulator) or the sound card
 otherwise, and counts the steps between the end stops (:func:`~.traverse.measure_traverse`).
@@ -12,24 +16,29 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S
 from ..audio.detector import Tuning, detector_for
-from ..devices.base import Controller, HasMicrophone, PoseSettable, VirtualClock, device_key
+from ..devices.base import Controller, DeviceError, HasMicrophone, PoseSettable, VirtualClock, device_key, open_device
 from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
 from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
+from .move import Interrupted, LockStore, device_lock, kept_after_interrupt
 from .traverse import TraverseError, TraverseResult, measure_traverse
 
 __all__ = [
+    "RowNotAppended",
     "StepRateWarning",
+    "TraverseRequest",
     "TraverseStore",
     "append_row",
     "check_append_target",
     "record_traverse",
+    "traverse",
     "traverse_on_device",
 ]
 
@@ -46,6 +55,14 @@ class TraverseStore(StateStore, Protocol):
     """What :func:`record_traverse` needs of a store (``stickslip.storage.Store`` is one)."""
 
     def add_traverse(self, t: Traverse, device: str = ..., how: str = ...) -> int: ...
+
+
+class LockedTraverseStore(TraverseStore, LockStore, Protocol):
+    """What :func:`traverse` needs of a store: the rows, the kept state and the device lock."""
+
+
+class RowNotAppended(ValueError):
+    """The traverse was measured (and stored, if a store was given) but its row could not be appended to the table."""
 
 
 def traverse_on_device(
@@ -173,3 +190,110 @@ def append_row(path: Path, row: Traverse) -> None:
     if old:
         text = old + ("" if old.endswith("\n") else "\n") + text.split("\n", 1)[1]
     atomic_write_text(path, text)
+
+
+@dataclass(frozen=True)
+class TraverseRequest:
+    """One traverse to measure.
+
+    Attributes
+    ----------
+    device : str
+        Controller URL.
+    joint : int
+    direction : str
+        ``"+"`` (lower stop to upper) or ``"-"``.
+    pose : Pose
+        The other joints (rad, rad, m) and the base tilt (rad).
+    day : str
+        Session label.
+    tuning : Tuning
+        The joint's limit-switch tuning.
+    audio_input, serial_port : optional
+        Sound-card input, or a vibration sensor's serial port (:func:`traverse_on_device`).
+    burst : int
+        Steps per burst between checks of the limit switch.
+    confirm_s : float
+        How long a stop must persist before it is taken, s.
+    append : Path or None
+        Measurement table to append the row to.
+    """
+
+    device: str
+    joint: int
+    direction: str
+    pose: kin.Pose
+    day: str
+    tuning: Tuning
+    audio_input: str | int | None = None
+    serial_port: str | None = None
+    burst: int = 2000
+    confirm_s: float = CONFIRM_S
+    append: Path | None = None
+
+
+def traverse(
+    store: LockedTraverseStore | None,
+    request: TraverseRequest,
+    *,
+    progress: bool = True,
+    on_warning: Callable[[str], None] = _warn,
+    opener: Callable[[str], Controller] | None = None,
+) -> TraverseResult:
+    """Measure one traverse on ``request.device`` and keep it; the joint ends referenced at the stop reached.
+
+    With a ``store`` the device's lock is held, the joint is journalled uncertain over its
+    whole range before it moves (so an interrupted or failed traverse leaves it uncertain,
+    and ``stickslip where`` says so), the row is stored and the joint re-referenced at the
+    end stop. Raises :class:`~.traverse.TraverseError`, :class:`~stickslip.devices.base.DeviceError`,
+    ``ValueError``, :class:`~.move.Interrupted` (Ctrl-C, with the kept state) and
+    :class:`RowNotAppended` (measured and stored, but not appended: the message has the row).
+    """
+    if request.append is not None:
+        check_append_target(request.append)  # before the joint moves: a traverse takes a while
+    if store is None:
+        result = _measure(request, progress, on_warning, opener)
+    else:
+        key = device_key(request.device)
+        with device_lock(store, key):
+            state = load_state(store, key)
+            spec = kin.joint_spec(request.joint)
+            state.mark_uncertain(request.joint, spec.lower, spec.upper, "a traverse did not finish")
+            save_state(store, state)  # write-ahead: the joint may be anywhere until the stop is heard
+            try:
+                result = _measure(request, progress, on_warning, opener)
+            except KeyboardInterrupt:
+                what = f"traverse of joint {request.joint}{request.direction}"
+                raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
+            record_traverse(store, request.device, result.traverse, how="audio")
+    if request.append is not None:
+        try:
+            append_row(request.append, result.traverse)
+        except (OSError, ValueError) as e:
+            stored = "it is stored in the database; " if store is not None else ""
+            line = measurements_to_csv([result.traverse]).split("\n")[1]
+            raise RowNotAppended(
+                f"the traverse was measured but not appended to {request.append} ({e}); {stored}its row: {line}"
+            ) from None
+    return result
+
+
+def _measure(
+    request: TraverseRequest,
+    progress: bool,
+    on_warning: Callable[[str], None],
+    opener: Callable[[str], Controller] | None,
+) -> TraverseResult:
+    """Open the device, measure the traverse (:func:`traverse_on_device`), close it."""
+    ctrl = (opener or open_device)(request.device)
+    try:
+        return traverse_on_device(
+            ctrl, request.joint, request.direction, request.pose, request.day, request.tuning,
+            audio_input=request.audio_input, serial_port=request.serial_port, burst_steps=request.burst,
+            progress=progress, confirm_s=request.confirm_s, on_warning=on_warning,
+        )
+    finally:
+        try:
+            ctrl.close()
+        except DeviceError:
+            pass

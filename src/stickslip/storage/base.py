@@ -492,6 +492,30 @@ class _Base:
         """``PRAGMA integrity_check`` (``"ok"`` when the file is sound)."""
         return "; ".join(r[0] for r in self._con.execute("PRAGMA integrity_check"))
 
+    def backup(self, path: str | os.PathLike[str]) -> Path:
+        """Copy the whole database, consistently, into a new file ``path`` (SQLite's online backup).
+
+        Safe while other processes use the database (a plain file copy can miss what the
+        write-ahead log still holds). An existing ``path`` is refused (``FileExistsError``);
+        the copy is written beside it and renamed into place, so a failed backup leaves nothing.
+        """
+        dest = Path(path).expanduser()
+        if dest.exists():
+            raise FileExistsError(f"{dest} exists: give a new file for the backup")
+        tmp = dest.with_name(f".{dest.name}.part")
+        try:
+            out = sqlite3.connect(tmp)
+            try:
+                self._con.backup(out)
+                out.commit()
+            finally:
+                out.close()
+            os.replace(tmp, dest)
+        except (OSError, sqlite3.Error):
+            tmp.unlink(missing_ok=True)
+            raise
+        return dest
+
 
 
 

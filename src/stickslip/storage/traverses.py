@@ -89,6 +89,29 @@ class TraverseStore(_Base):
             stored.update(r[0] for r in rows)
         return [k for k, key in enumerate(keys) if key in stored]
 
+    def device_holding(self, traverses: Iterable[Traverse]) -> tuple[str, list[int]] | None:
+        """The one device whose stored traverses include every one of ``traverses`` (by content), and their ids.
+
+        How a calibration made from a table learns which arm its traverses came from: the
+        rows were stored when they were measured (``stickslip traverse``, ``demo``, ``import
+        --device``). ``None`` when no device, or more than one, holds them all.
+        """
+        rows = list(traverses)
+        if not rows:
+            return None
+        urls = [str(r[0]) for r in self._con.execute("SELECT url FROM devices ORDER BY id")]
+        holders = [url for url in urls if len(self.duplicates(rows, url)) == len(rows)]
+        if len(holders) != 1:
+            return None
+        keys = sorted(set(_content_keys(rows, holders[0])))
+        ids: list[int] = []
+        for i in range(0, len(keys), 500):
+            part = keys[i : i + 500]
+            ids += [int(r[0]) for r in self._con.execute(
+                f"SELECT MIN(id) FROM traverses WHERE content IN ({','.join('?' * len(part))}) GROUP BY content", part
+            )]
+        return holders[0], sorted(ids)
+
     def add_traverse(
         self,
         traverse: Traverse,

@@ -1,0 +1,144 @@
+"""Where a device's joints are kept, and putting them somewhere known: the workflow behind ``stickslip where``.
+
+:func:`where` reads the kept state of a device (positions, how each is known, the base
+tilt, the Kalman track of each joint), records a pose or a reference first if asked
+(a joint put at a known point, e.g. an end stop), and asks the device whether it
+answers (:func:`probe_device`) unless told not to.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from ..devices.base import DeviceError, device_key, open_device
+from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..joints import JOINTS
+from ..units import format_position
+from .move import PoseUpdate, track_fields
+
+__all__ = ["DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "probe_device", "state_rows", "where"]
+
+
+class DeviceUnreachable(DeviceError):
+    """The device could not be opened or did not answer (the message says why and how to go on)."""
+
+
+class ReferenceRefused(ValueError):
+    """A reference (``joint``, ``q``) cannot be kept: ``index`` is its place in the list given."""
+
+    def __init__(self, index: int, message: str):
+        super().__init__(message)
+        self.index = index
+
+
+class WhereStore(StateStore, Protocol):
+    """What :func:`where` needs of a store (``stickslip.storage.Store`` implements it)."""
+
+
+def probe_device(url: str, opener: Callable[[str], Any] = open_device) -> dict[str, Any]:
+    """Open ``url`` and close it again: what it says about itself; :class:`DeviceUnreachable` if it does not answer.
+
+    ``{"model": ..., **info.extra}``: for a NanoControl the dialect, firmware version,
+    stepping frequencies and active speed profile (docs/devices/nanocontrol.md).
+    """
+    hint = "(use --offline to see the kept positions only)"
+    try:
+        dev = opener(url)
+    except (DeviceError, ValueError, OSError) as e:
+        raise DeviceUnreachable(f"the device does not answer: {e} {hint}") from None
+    try:
+        info = dev.info
+        return {"model": str(info.model), **{str(k): v for k, v in info.extra.items()}}
+    except (DeviceError, ValueError, OSError) as e:
+        raise DeviceUnreachable(f"the device does not answer: {e} {hint}") from None
+    finally:
+        try:
+            dev.close()
+        except (DeviceError, OSError):
+            pass
+
+
+def state_rows(state: DeviceState) -> list[dict[str, object]]:
+    """One row per joint (SI): position, unit, display text, source, uncertain bounds, ``sd`` and step scale."""
+    rows: list[dict[str, object]] = []
+    for j in (1, 2, 3):
+        rows.append(
+            {
+                "joint": j,
+                "q": state.positions[j],
+                "unit": JOINTS[j].unit,
+                "display": format_position(state.positions[j], j),
+                "source": "uncertain" if j in state.uncertain else state.sources[j],
+                "uncertain": list(state.uncertain[j]) if j in state.uncertain else None,
+                **track_fields(state, j),
+            }
+        )
+    return rows
+
+
+@dataclass(frozen=True)
+class WhereResult:
+    """What :func:`where` found (SI units).
+
+    Attributes
+    ----------
+    device : str
+        The device's key (URL without options or secrets).
+    state : DeviceState
+        The kept state (after any reference or pose recorded).
+    changed : tuple of str
+        What was recorded (``"q3"``, ``"theta"``, ...).
+    info : dict or None
+        What the device said about itself (``model`` and more), ``None`` if it was not asked.
+    """
+
+    device: str
+    state: DeviceState
+    changed: tuple[str, ...] = ()
+    info: dict[str, Any] | None = field(default=None)
+
+    def as_dict(self) -> dict[str, object]:
+        """The JSON shape of ``stickslip where --json``."""
+        s = self.state
+        answers = self.info["model"] if self.info else None
+        return {
+            "device": self.device, "joints": state_rows(s), "theta": s.theta, "psi": s.psi, "answers": answers,
+            "info": self.info,
+        }
+
+
+def where(
+    store: WhereStore,
+    device: str,
+    *,
+    references: Sequence[tuple[int, float]] = (),
+    pose: PoseUpdate = PoseUpdate(),
+    offline: bool = False,
+    unlock: bool = False,
+    probe: Callable[[str], dict[str, Any]] = probe_device,
+) -> WhereResult:
+    """The kept state of ``device``, after recording ``pose`` and ``references`` (``(joint, q)``, rad or m).
+
+    A reference puts a joint at a known point (an end stop, a measured position): its
+    source becomes ``"set"`` and an interrupted move's uncertainty is cleared. Without
+    anything recorded and unless ``offline``, the device is asked whether it answers
+    (:func:`probe_device`; :class:`DeviceUnreachable`). ``unlock`` releases a lock left by
+    a process that is gone. :class:`ReferenceRefused` names a reference that cannot be kept.
+    """
+    key = device_key(device)
+    if unlock:
+        store.set_state(key, "lock", "null")
+    state = load_state(store, key)
+    changed = pose.apply(state)
+    for i, (joint, q) in enumerate(references):
+        try:
+            state.set_position(joint, q, "set")
+        except ValueError as e:
+            raise ReferenceRefused(i, str(e)) from None
+        changed.append(f"q{joint}")
+    if changed:
+        save_state(store, state)
+    info = None if (changed or offline) else probe(device)
+    return WhereResult(key, state, tuple(changed), info)
