@@ -31,8 +31,8 @@ from stickslip.audio.tuningfile import Tuning
 JOINTS = (1, 2, 3)
 #: joint -> what was measured when the test was written (before any change for it)
 KNOWN = {
-    3: "3 false stops: 0.40 s (a radio from the first sample; not flagged: a wrong count), 34.5 and 49.7 s"
-    " (speech over the radio, -2 and -4 dB; flagged)",
+    3: "3 false stops, none flagged (a wrong count): 0.40 s (a radio from the first sample, +0.4 dB), 34.5 and"
+    " 49.7 s (speech over the radio switched on, +0.4 and +1.6 dB); the drop channel off, the same three",
 }
 
 

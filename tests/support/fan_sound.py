@@ -111,7 +111,8 @@ def _steps(s: Scene, n: int, rng: np.random.Generator) -> np.ndarray:
         if not any(a <= t < a + d for a, d in s.pauses):
             times.append(t)
         t += (1.0 + s.jitter * rng.standard_normal()) / s.rate
-    return np.asarray(np.round(np.asarray(times) * SR), dtype=np.int64)
+    idx = np.asarray(np.round(np.asarray(times) * SR), dtype=np.int64)
+    return idx[idx < n]  # a step within half a sample of the end rounds past it
 
 
 def _pink(n: int, rng: np.random.Generator) -> np.ndarray:
