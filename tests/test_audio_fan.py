@@ -168,8 +168,9 @@ def _known_louder(a: int) -> list[pytest.MarkDecorator]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("arm", [pytest.param(a, marks=_known_louder(a)) for a in ARMS])
+@pytest.mark.parametrize("arm", [pytest.param(a, marks=_known_louder(a)) for a in (1, 3, 5, 7)])
 def test_a_test_recorded_12_to_20_db_louder_than_the_tuning(arm: int) -> None:
+    """Half the arms (CI's time): all eight, on four draws each, in ``benchmarks/bench_audio_tenth.py``."""
     scene, gain_db = _louder_draw(arm)
     y = (render(scene) * np.float32(10 ** (gain_db / 20))).astype(np.float32)
     events = _events(_tuning(arm), y)
@@ -195,8 +196,9 @@ def _known_rate(a: int) -> list[pytest.MarkDecorator]:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("arm", [pytest.param(a, marks=_known_rate(a)) for a in ARMS])
+@pytest.mark.parametrize("arm", [pytest.param(a, marks=_known_rate(a)) for a in (2, 4, 5, 7)])
 def test_stepping_20_percent_off_the_tuning_with_the_commanded_rate_told(arm: int) -> None:
+    """Two arms slower, two faster (CI's time; all eight pass, told and untold: docs/audio-log.md)."""
     scene = _rate_draw(arm)
     events = _events(_tuning(arm), render(scene), scene.rate)
     assert events, f"the stop was missed at {scene.rate:.0f} Hz"
