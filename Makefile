@@ -11,7 +11,7 @@ STAMP  := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[plot,stats,audio,serial,anc300,dev,bluesky,docs,vision,opencv]'
+	$(PY) -m pip install --quiet -e '.[plot,stats,audio,serial,anc300,dev,bluesky,docs,vision,opencv,serve]'
 	touch $(STAMP)
 
 demo: $(STAMP)

@@ -10,6 +10,7 @@ Each area keeps its commands in its own module, which adds them to :data:`app`:
 * :mod:`.devices`  move, where
 * :mod:`.observe`  observe (a measured position into the dead reckoning)
 * :mod:`.taskspace` reach, jog
+* :mod:`.serve`    serve (the control room: a web page and an API)
 * :mod:`.config`   config path, config show, config init (the user's configuration file)
 * :mod:`.camera`   camera locate, camera calibrate, camera grab (see the tip)
 """
@@ -113,7 +114,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, camera, config, core, devices, history, measure, models, observe, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, camera, config, core, devices, history, measure, models, observe, serve, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:
@@ -135,7 +136,7 @@ def _unwrap(doc: str) -> str:
 _PANELS = {
     "Measure": ("demo", "traverse", "record", "tune", "listen"),
     "Calibrate and predict": ("calibrate", "fit", "show", "predict", "validate", "plan", "suggest"),
-    "Drive a manipulator": ("move", "observe", "where", "reach", "jog"),
+    "Drive a manipulator": ("move", "observe", "where", "reach", "jog", "serve"),
     "Keep and study": ("history", "import", "export", "backup", "exclude", "delete", "anova", "report"),
 }
 _PANEL_OF = {name: panel for panel, names in _PANELS.items() for name in names}

@@ -38,6 +38,7 @@ __all__ = [
     "DeviceInfo",
     "DeviceError",
     "StepsUncertain",
+    "BurstStopped",
     "BACKENDS",
     "register_backend",
     "open_device",
@@ -156,6 +157,19 @@ class StepsUncertain(DeviceError):
         super().__init__(message)
         self.made = int(made)
         self.at_most = None if at_most is None else int(at_most)
+
+
+class BurstStopped(StepsUncertain):
+    """A stop command ended a burst early, and the controller knows exactly how many steps it made.
+
+    ``made == at_most``: :func:`stickslip.procedures.move.drive` keeps the position of the
+    steps made and no uncertainty. Raised by a controller that counts its steps as it
+    makes them (the simulator in real time, :mod:`stickslip.sim.realtime`) when
+    :meth:`Controller.stop` comes from another thread during :meth:`Controller.step`.
+    """
+
+    def __init__(self, message: str, made: int):
+        super().__init__(message, made, made)
 
 
 @dataclass(frozen=True)

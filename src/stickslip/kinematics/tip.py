@@ -46,6 +46,7 @@ __all__ = [
     "SingularPose",
     "tip",
     "jacobian",
+    "tip_sd",
     "distance_from_axis",
     "inverse",
     "joint_rates",
@@ -155,6 +156,17 @@ def jacobian(q: ArrayLike, geometry: Geometry = DEFAULT_GEOMETRY) -> NDArray[np.
     j2 = np.stack((-r * c2 * c1, -r * c2 * s1, -r * s2), axis=-1)
     j3 = np.stack((-s2 * c1, -s2 * s1, c2), axis=-1)
     return np.stack((j1, j2, j3), axis=-1)
+
+
+def tip_sd(q: ArrayLike, q_sd: ArrayLike, geometry: Geometry = DEFAULT_GEOMETRY) -> NDArray[np.float64]:
+    """Standard deviation of each tip coordinate, m, from independent joint standard deviations (rad, rad, m).
+
+    First-order propagation: ``Cov(p) = J diag(sd**2) J^T`` and the square roots of its
+    diagonal, ``sd_k = sqrt(sum_i (J_ki sd_i)**2)``; ``q`` and ``q_sd`` have shape ``(3,)``.
+    """
+    J = jacobian(_q(q), geometry)
+    sd = np.asarray(q_sd, dtype=float).reshape(3)
+    return np.asarray(np.sqrt(np.sum((J * sd) ** 2, axis=-1)), dtype=float)
 
 
 def distance_from_axis(q: ArrayLike, geometry: Geometry = DEFAULT_GEOMETRY) -> NDArray[np.float64]:

@@ -75,7 +75,7 @@ def traverse_on_device(
     *,
     audio_input: str | int | None = None,
     burst_steps: int = 2000,
-    progress: bool = True,
+    progress: bool | Callable[[int, float], None] = True,
     confirm_s: float = CONFIRM_S,
     serial_port: str | None = None,
     on_warning: Callable[[str], None] = _warn,
@@ -92,6 +92,9 @@ def traverse_on_device(
         The joint's limit-switch tuning.
     audio_input : str or int, optional
         Sound-card input for a controller without a microphone of its own.
+    progress : bool or callable
+        ``True`` shows a progress bar; a callable gets ``(steps, device_s)`` after every
+        burst (:func:`~.traverse.measure_traverse`).
     confirm_s : float
         How long a stop must persist before it is taken, s (see
         :func:`~.traverse.measure_traverse`; 0: the detector's first fire).
@@ -236,7 +239,7 @@ def traverse(
     store: LockedTraverseStore | None,
     request: TraverseRequest,
     *,
-    progress: bool = True,
+    progress: bool | Callable[[int, float], None] = True,
     on_warning: Callable[[str], None] = _warn,
     opener: Callable[[str], Controller] | None = None,
 ) -> TraverseResult:
@@ -280,7 +283,7 @@ def traverse(
 
 def _measure(
     request: TraverseRequest,
-    progress: bool,
+    progress: bool | Callable[[int, float], None],
     on_warning: Callable[[str], None],
     opener: Callable[[str], Controller] | None,
 ) -> TraverseResult:

@@ -1,0 +1,116 @@
+"""One joint of a served rig as an ophyd-async device: Bluesky drives ``stickslip serve`` through the client.
+
+:class:`ServedAxis` is :class:`~stickslip.bluesky.axis.StickSlipAxis`'s counterpart for a
+rig that a ``stickslip serve`` process owns: it opens nothing itself and plans nothing
+itself; ``set`` asks the server for a move (:meth:`stickslip.client.Rig.move`, the same
+procedure the command line runs there: the tracked step scale, the journal, one motion
+at a time), the readback is the server's kept position, ``stop`` is the server's STOP.
+A Bluesky session, the page and a notebook can then share one arm.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+
+from bluesky.protocols import Locatable, Location, Stoppable
+from ophyd_async.core import AsyncStatus, StandardReadable, soft_signal_r_and_setter
+from ophyd_async.core import StandardReadableFormat as Format
+
+from .. import kinematics as kin
+from ..client import MotionFailed, Rig, RigError
+from .axis import MoveError
+
+__all__ = ["ServedAxis"]
+
+
+class ServedAxis(StandardReadable, Locatable[float], Stoppable):
+    """One joint of a served manipulator (``stickslip serve``), moved by the server.
+
+    Parameters
+    ----------
+    rig : Rig
+        The client of the server (:class:`stickslip.client.Rig`).
+    joint : int
+        1, 2 (rotary, rad) or 3 (prismatic, m).
+    name : str
+        Device name (the readback's data key).
+
+    Signals
+    -------
+    readback : m or rad
+        The server's kept (dead-reckoned) position (hinted).
+    setpoint : m or rad
+        The last target.
+    sd : m or rad
+        The kept position's standard deviation (NaN before a tracked move).
+    """
+
+    def __init__(self, rig: Rig, joint: int, name: str = "") -> None:
+        self.rig = rig
+        self.spec = kin.joint_spec(joint)
+        self.joint = self.spec.number
+        unit = self.spec.unit
+        with self.add_children_as_readables(Format.HINTED_SIGNAL):
+            self.readback, self._set_readback = soft_signal_r_and_setter(float, math.nan, units=unit)
+        with self.add_children_as_readables(Format.UNCACHED_SIGNAL):
+            self.setpoint, self._set_setpoint = soft_signal_r_and_setter(float, math.nan, units=unit)
+            self.sd, self._set_sd = soft_signal_r_and_setter(float, math.nan, units=unit)
+        self._stop_success = False
+        super().__init__(name=name)
+
+    def set_name(self, name: str, *, child_name_separator: str | None = None) -> None:
+        super().set_name(name, child_name_separator=child_name_separator)
+        self.readback.set_name(name)
+
+    async def refresh(self) -> float:
+        """Read the server's kept position into the signals; the position (m or rad)."""
+        try:
+            where = await asyncio.to_thread(self.rig.where)
+        except RigError as e:
+            raise MoveError(str(e)) from None
+        row = where["joints"][self.joint - 1]
+        q = float(row["q"])
+        self._set_readback(q)
+        sd = row.get("sd")
+        self._set_sd(float(sd) if isinstance(sd, (int, float)) else math.nan)
+        if math.isnan(await self.setpoint.get_value()):
+            self._set_setpoint(q)
+        return q
+
+    async def locate(self) -> Location[float]:
+        """Setpoint (the last target) and readback (the server's kept position), m or rad."""
+        readback = await self.refresh()
+        return Location(setpoint=await self.setpoint.get_value(), readback=readback)
+
+    def set(self, value: float) -> AsyncStatus[None]:
+        """Ask the server to move the joint to ``value`` (m or rad); the status ends with the move.
+
+        Fails with :class:`~stickslip.bluesky.axis.MoveError` (the server's one line) for a
+        refused or failed move, and after ``stop(success=False)``.
+        """
+        self._stop_success = False
+        return self._set(value)
+
+    @AsyncStatus.wrap
+    async def _set(self, value: float) -> None:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+            raise ValueError(f"the target of joint {self.joint} must be a number in {self.spec.unit}, got {value!r}")
+        self._set_setpoint(float(value))
+        try:
+            await asyncio.to_thread(self.rig.move, self.joint, None, float(value))
+        except MotionFailed as e:
+            if not (self._stop_success and e.motion.get("status") == "stopped"):
+                raise MoveError(str(e)) from None
+        except RigError as e:
+            raise MoveError(str(e)) from None
+        finally:
+            await self.refresh()
+
+    async def stop(self, success: bool = False) -> None:
+        """The server's STOP (every axis of the rig: there is one STOP); ``success``: the move's status completes."""
+        self._stop_success = success
+        try:
+            await asyncio.to_thread(self.rig.stop)
+        except RigError as e:
+            raise MoveError(str(e)) from None

@@ -1,0 +1,125 @@
+"""Start the server: the access rules, the room, the camera, uvicorn (what ``stickslip serve`` calls)."""
+
+from __future__ import annotations
+
+import errno
+import socket
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from ..devices.base import redact_url
+from .app import create_app
+from .camera import CameraFeed, FrameFeed
+from .room import ControlRoom, RoomOptions
+from .security import Access, default_token_path, is_loopback, load_or_create_token
+
+__all__ = ["ServeError", "access_for", "open_camera_feed", "port_problem", "serve"]
+
+
+class ServeError(RuntimeError):
+    """The server cannot start (a port in use, a camera that cannot be opened, a token file); one line says why."""
+
+
+def access_for(host: str, token_path: Path | None, echo: Callable[[str], None]) -> Access:
+    """The rules for ``host``: no token on a loopback address; else the token (made and printed once)."""
+    if is_loopback(host):
+        return Access(None, True)
+    path = token_path or default_token_path()
+    try:
+        token, new = load_or_create_token(path)
+    except (OSError, ValueError) as e:
+        raise ServeError(f"the token file {path}: {e}") from None
+    if new:
+        echo(f"new token (shown this once): {token}")
+        echo(f"kept in {path}, readable by you only;")
+        echo("the page asks for it (or add #token=TOKEN to its address);")
+        echo("scripts send 'Authorization: Bearer TOKEN'")
+    else:
+        echo(f"this address needs the token kept in {path}")
+    return Access(token, False)
+
+
+def port_problem(host: str, port: int) -> str | None:
+    """Why ``host:port`` cannot be served (in use, no such address), or ``None``."""
+    try:
+        infos = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+    except OSError as e:
+        return f"cannot serve on {host}: {e.strerror or e}"
+    family, kind, proto, _, addr = infos[0]
+    with socket.socket(family, kind, proto) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind(addr)
+        except OSError as e:
+            if e.errno == errno.EADDRINUSE:
+                return f"port {port} on {host} is in use (another server?): choose another with --port"
+            return f"cannot serve on {host}:{port}: {e.strerror or e}"
+    return None
+
+
+def open_camera_feed(url: str, device: Any, tip: tuple[float, float] | None = None) -> CameraFeed:
+    """The camera panel's feed of the camera ``url`` names (:func:`stickslip.vision.open_camera`).
+
+    With ``tip`` (px, where the tip is in the first frame) the tip is tracked
+    (:class:`stickslip.vision.track.TipTracker`) and marked on the page; without it the
+    frames are shown alone. ``ServeError`` for a camera that cannot be opened or a tip
+    that cannot be tracked.
+    """
+    from ..vision import CameraError, open_camera
+    from ..vision.template import TemplateError
+    from ..vision.track import Fix, TipTracker
+
+    try:
+        cam = open_camera(url, device)
+    except (CameraError, ValueError) as e:
+        raise ServeError(f"--camera {redact_url(url)}: {e}") from None
+    if tip is None:
+        return FrameFeed(cam)
+    try:
+        tracker = TipTracker(cam.grab(), tip)
+    except (CameraError, TemplateError, ValueError) as e:
+        cam.close()
+        raise ServeError(f"--camera-tip {tip[0]:g},{tip[1]:g}: {e}") from None
+
+    def tip_of(frame: Any) -> tuple[float, float, float | None] | None:
+        found = tracker.update(frame)
+        return (found.x, found.y, found.sigma) if isinstance(found, Fix) else None
+
+    return FrameFeed(cam, tip_of=tip_of)
+
+
+def serve(
+    options: RoomOptions,
+    host: str = "127.0.0.1",
+    port: int = 8765,
+    *,
+    camera_url: str | None = None,
+    camera_tip: tuple[float, float] | None = None,
+    token_path: Path | None = None,
+    echo: Callable[[str], None] = print,
+) -> None:
+    """Serve ``options``' device on ``host:port`` until Ctrl-C (or SIGTERM); then stop the arm and close everything."""
+    import uvicorn
+
+    problem = port_problem(host, port)
+    if problem:
+        raise ServeError(problem)
+    access = access_for(host, token_path, echo)
+    room = ControlRoom(options)
+    camera: CameraFeed | None = None
+    try:
+        if camera_url is not None:
+            camera = open_camera_feed(camera_url, room.owned, camera_tip)
+        app = create_app(room, access, camera)
+        shown = f"[{host}]" if ":" in host else host
+        echo(f"serving {redact_url(options.device)} ({room.info.model})")
+        echo(f"open http://{shown}:{port}/ in a browser; Ctrl-C stops")
+        if room.calibration is None:
+            echo("no calibration yet: run the calibration day on the page")
+        config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False, lifespan="on")
+        uvicorn.Server(config).run()
+    finally:
+        if camera is not None:
+            camera.close()
+        room.close()

@@ -1,0 +1,203 @@
+"""The page in a real headless browser (Debian's chromium driven by Playwright), as a user would use it.
+
+One browser and one server for the module: the page loads and shows what a user needs,
+positions move on the page while a move runs, the keyboard jogs the simulated arm and
+the arm stops when the key is let go, STOP (Esc) ends a long move, and screenshots at a
+laptop's and a tablet's size show the controls. A simulated camera feeds the camera
+panel (the tip marked where the arm's tip is).
+
+Skipped, with the reason, where Playwright or Debian's chromium is missing
+(``apt-get install chromium``; ``make test`` installs it in CI). Playwright never
+downloads a browser of its own here: it drives ``/usr/bin/chromium``.
+"""
+
+from __future__ import annotations
+
+import shutil
+import struct
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+pytest.importorskip("fastapi", reason="the serve extra (fastapi) is not installed")
+playwright_api = pytest.importorskip("playwright.sync_api", reason="playwright (the dev extra) is not installed")
+
+from server_support import room_on, served, until  # noqa: E402
+
+from stickslip import kinematics as kin  # noqa: E402
+from stickslip.server.app import create_app  # noqa: E402
+from stickslip.server.camera import FrameFeed  # noqa: E402
+from stickslip.server.room import ControlRoom  # noqa: E402
+from stickslip.server.security import Access  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
+if CHROMIUM is None:
+    pytest.skip("Debian's chromium is not installed (apt-get install chromium)", allow_module_level=True)
+
+FLAGS = [
+    "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync",
+]
+
+PX = 2e-6
+"""The simulated camera's pixel size, m (a top view: x right, y down in the image = -y of the rig)."""
+
+
+class TopCamera:
+    """A simulated top-view camera of the arm: a dark field with a bright tip where the arm's true tip is."""
+
+    def __init__(self, room: ControlRoom, size: int = 160):
+        self.room = room
+        self.size = size
+
+    def tip_px(self) -> tuple[float, float]:
+        q = [self.room.owned.dev.position(j) for j in (1, 2, 3)]
+        p = kin.tip(q)
+        return (self.size / 2 + (p[0] - 0.021) / PX, self.size / 2 - p[1] / PX)
+
+    def grab(self) -> Any:
+        x, y = self.tip_px()
+        yy, xx = np.mgrid[0 : self.size, 0 : self.size]
+        image = 0.1 + 0.8 * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / 8.0)
+        return type("Frame", (), {"image": image})()
+
+    def close(self) -> None:
+        pass
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory: pytest.TempPathFactory) -> Iterator[ControlRoom]:
+    r = room_on(tmp_path_factory.mktemp("browser"), "sim://?realtime=1&speed=5", jog_idle_end_s=0.3)
+    yield r
+    r.close()
+
+
+@pytest.fixture(scope="module")
+def url(room: ControlRoom) -> Iterator[str]:
+    cam = TopCamera(room)
+
+    def project(points: Any) -> list[tuple[float, float]]:
+        return [(cam.size / 2 + (p[0] - 0.021) / PX, cam.size / 2 - p[1] / PX) for p in points]
+
+    feed = FrameFeed(cam, tip_of=lambda frame: (*cam.tip_px(), 0.5), project=project)
+    with served(create_app(room, Access(None, True), feed)) as base:
+        yield base
+
+
+@pytest.fixture(scope="module")
+def page(url: str) -> Iterator[Any]:
+    with playwright_api.sync_playwright() as p, tempfile.TemporaryDirectory() as profile:
+        context = p.chromium.launch_persistent_context(
+            profile, executable_path=CHROMIUM, headless=True, args=FLAGS, viewport={"width": 1366, "height": 768}
+        )
+        pg = context.pages[0] if context.pages else context.new_page()
+        errors: list[str] = []
+        pg.on("pageerror", lambda e: errors.append(str(e)))
+        pg.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+        pg.goto(url + "/")
+        # polled from here: a function waited for in the page would be evaluated there, which its CSP forbids
+        until(lambda: pg.evaluate("document.querySelectorAll('#joints .joint').length") == 3, 15, "the joints")
+        pg.errors = errors
+        yield pg
+        context.close()
+
+
+def joint_text(page: Any, joint: int) -> str:
+    return str(page.inner_text(f"#joints .joint:nth-child({joint}) .value"))
+
+
+def idle(room: ControlRoom) -> None:
+    until(lambda: room.current() is None, 30, "the motion to end")
+
+
+def test_the_page_loads_with_what_a_user_needs(page: Any, room: ControlRoom) -> None:
+    assert "simulated MM3A, real time" in page.inner_text("#device")
+    assert page.is_visible("#stop")
+    for sel in ("#joints", "#pad", "#move-form", "#save-form", "#day-start", "#plot", "#events"):
+        assert page.is_visible(sel), sel
+    assert joint_text(page, 2).startswith("-90 deg")
+    page.wait_for_selector("#camera-panel:not(.hidden)", timeout=10_000)
+    until(lambda: page.evaluate("document.getElementById('frame').naturalWidth") == 160, 10, "a camera frame")
+    assert "tip at (80.0, 80.0) px" in page.inner_text("#camera-tip")
+    assert page.errors == []
+
+
+def test_positions_update_while_a_move_runs(page: Any, room: ControlRoom) -> None:
+    page.select_option("#move-joint", "2")
+    page.select_option("#move-mode", "by")
+    page.fill("#move-amount", "20deg")  # ~7000 steps: 1.4 s at 5x
+    before = joint_text(page, 2)
+    page.click("#move-form button[type=submit]")
+    seen = {before}
+    until(lambda: room.current() is not None, 10, "the move to start")
+    while room.current() is not None:
+        seen.add(joint_text(page, 2))
+    seen.add(joint_text(page, 2))
+    assert len(seen) >= 4, seen  # the start, positions along the way, the end
+    until(lambda: abs(float(joint_text(page, 2).split(" deg")[0]) + 70.0) < 0.01, 5, "the page to show the end")
+    until(lambda: "done" in page.inner_text("#motion"), 5, "the page to say the move is done")
+
+
+def test_keyboard_jog_moves_the_arm_and_stops_on_release(page: Any, room: ControlRoom) -> None:
+    idle(room)
+    arm = room.owned.dev
+    page.click("h2#h-joints")  # the page has the focus, no input field
+    start = arm.steps_simulated
+    page.keyboard.down("ArrowUp")
+    until(lambda: arm.steps_simulated > start + 5, 10, "the arm to step")
+    assert page.eval_on_selector('#pad button[data-dir="+y"]', "b => b.classList.contains('held')")
+    page.keyboard.up("ArrowUp")
+    until(lambda: room._pad is None or room._pad.held is None, 5, "the pad to let go")  # noqa: SLF001
+    stopped_at = arm.steps_simulated
+    idle(room)  # the session ends by itself (nothing held); no step after the release
+    assert arm.steps_simulated == stopped_at
+    assert not page.eval_on_selector('#pad button[data-dir="+y"]', "b => b.classList.contains('held')")
+    m = room.motion(max(room._motions))  # noqa: SLF001
+    assert m.kind == "jog" and m.result is not None and m.result["deadman"] == 0
+
+
+def test_stop_ends_a_long_move(page: Any, room: ControlRoom) -> None:
+    idle(room)
+    arm = room.owned.dev
+    page.select_option("#move-joint", "2")
+    page.select_option("#move-mode", "to")
+    page.fill("#move-amount", "min")  # ~60 000 steps: 12 s at 5x
+    page.click("#move-form button[type=submit]")
+    until(lambda: room.current() is not None and room.current().status == "running", 10, "the move")  # type: ignore[union-attr]
+    start = arm.steps_simulated
+    until(lambda: arm.steps_simulated > start + 500, 10, "the move to get going")
+    page.click("h2#h-joints")
+    page.keyboard.press("Escape")
+    idle(room)
+    m = room.motion(max(room._motions))  # noqa: SLF001
+    assert m.status == "stopped"
+    after = arm.steps_simulated
+    assert after - start < 30_000  # stopped long before its end
+    until(lambda: "stopped" in page.inner_text("#motion"), 5, "the page to say so")
+    assert "STOP" in page.inner_text("#events")
+
+
+@pytest.mark.parametrize(("name", "width", "height"), [("laptop", 1366, 768), ("tablet", 768, 1024)])
+def test_screenshots_show_the_controls(page: Any, tmp_path: Path, name: str, width: int, height: int) -> None:
+    page.set_viewport_size({"width": width, "height": height})
+    page.wait_for_timeout(300)  # a frame or two of the live state at the new size
+    shot = tmp_path / f"serve-{name}.png"
+    page.screenshot(path=str(shot), full_page=True)
+    w, h = struct.unpack(">II", shot.read_bytes()[16:24])  # the PNG's IHDR
+    assert w == width and h >= height
+    stop = page.query_selector("#stop").bounding_box()
+    assert stop["y"] + stop["height"] <= 90 and stop["x"] + stop["width"] <= width  # always in view, at the top
+    assert stop["height"] >= 44 and stop["width"] >= 88  # big enough to hit
+    for b in page.query_selector_all("#pad button"):
+        box = b.bounding_box()
+        assert box["height"] >= 44 and box["width"] >= 44 and box["x"] + box["width"] <= width
+    for sel in ("#joints", "#pad", "#move-form", "#save-form", "#day-start", "#plot"):
+        box = page.query_selector(sel).bounding_box()
+        assert box is not None and box["width"] > 0 and box["x"] >= 0 and box["x"] + box["width"] <= width, sel
+    page.set_viewport_size({"width": 1366, "height": 768})
