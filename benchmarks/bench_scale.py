@@ -48,7 +48,7 @@ FULL = {
     "calibrate": (1_000, 10_000, 100_000),
     "fit": (1_000, 10_000, 100_000),
     "anova": (1_000, 3_000, 10_000),
-    "import": (1_000, 10_000, 100_000),
+    "import": (1_000, 10_000, 100_000, 1_000_000),
 }
 QUICK = {k: (60, 120) for k in FULL}
 
@@ -86,18 +86,29 @@ def measurement_table(path: Path, n: int, seed: int = 0, distinct_poses: bool = 
 
 
 def pose_table(path: Path, n: int, seed: int = 0) -> None:
-    """``n`` poses of joint 3 (step at a pose) and joint 2 (average over a traverse), alternating."""
+    """``n`` poses of joint 3 (step at a pose) and joint 2 (average over a traverse), alternating, each
+    with a day and a note passed through (about 90 bytes a row: a million rows are about 90 MB)."""
     rng = np.random.default_rng(seed)
     q2 = rng.uniform(-3.6, 0.5, n)
     q3 = rng.uniform(0.0, 0.012, n)
     th = rng.uniform(-1.5, 0.0, n)
-    lines = ["joint,direction,q1,q2,q3,theta,psi,start,end"]
+    lines = ["joint,direction,q1,q2,q3,theta,psi,start,end,day,note"]
     for i in range(n):
+        note = f"2026-05-11,sample {i:08d} under the objective"
         if i % 2:
-            lines.append(f"3,{'+-'[i % 4 // 2]},0,{q2[i]:.7g},0,{th[i]:.7g},0,,")
+            lines.append(f"3,{'+-'[i % 4 // 2]},0,{q2[i]:.7g},0,{th[i]:.7g},0,,,{note}")
         else:
-            lines.append(f"2,,0,0,{q3[i]:.7g},{th[i]:.7g},0,0.5,-3.5")
+            lines.append(f"2,,0,0,{q3[i]:.7g},{th[i]:.7g},0,0.5,-3.5,{note}")
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def history_table(path: Path, n: int, seed: int = 0) -> None:
+    """A lab's history of ``n`` traverses: sessions of the paper's 14 calibration poses and 86 random
+    ones (``tests/support/synth.py``), what ``calibrate`` meets after months of daily calibrations."""
+    sys.path.insert(0, str(HERE.parent / "tests" / "support"))
+    from synth import history_csv
+
+    path.write_text(history_csv(n, seed), encoding="utf-8")
 
 
 # ----------------------------------------------------------------------------- child process
@@ -310,8 +321,8 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     print(f"machine: {machine()}")
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
-        cal = d / "cal.json"
-        measurement_table(d / "cal.csv", 14)
+        cal = d / "cal.json"  # a family calibration (its intervals depend on the pose) for predict
+        history_table(d / "cal.csv", 1000)
         run_child(["calibrate", str(d / "cal.csv"), "-o", str(cal), "--json"], env)
         head = f"{'command':10s} {'rows':>9s} {'seconds':>9s} {'cpu s':>8s} {'µs/row':>8s} {'peak MiB':>9s}"
         print(f"\n{head}   baseline")
@@ -322,13 +333,16 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                 base = ""
                 if cmd == "predict":
                     pose_table(d / f"p{n}.csv", n)
-                    argv_ = ["predict", str(d / f"p{n}.csv"), "-c", str(cal), "-o", str(d / "out.csv")]
+                    argv_ = ["predict", str(d / f"p{n}.csv"), "-c", str(cal), "-o", str(d / "out.csv"), "--interval"]
                     tb = numpy_predict(d / f"p{n}.csv")
                     base = f"pandas read_csv + numpy closed form: {tb:.3g} s"
                 else:
-                    measurement_table(meas, n, distinct_poses=(cmd == "anova"))
+                    if cmd == "calibrate":
+                        history_table(meas, n)
+                    else:
+                        measurement_table(meas, n, distinct_poses=(cmd == "anova"))
                     argv_ = {
-                        "calibrate": ["calibrate", str(meas), "--json"],
+                        "calibrate": ["calibrate", str(meas), "-o", str(d / f"cal{n}.json")],
                         "fit": ["fit", str(meas), "--json"],
                         "anova": ["anova", str(meas), "--json"],
                         "import": ["import", str(meas), "--db", str(d / f"db{n}.sqlite"), "--json"],

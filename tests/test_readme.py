@@ -86,6 +86,7 @@ def test_camera_block_runs_after_the_tour(tour_dir):
     assert located[0]["x"] == 307.2 and abs(located[1]["x"] - 323.2) < 0.5  # 8 µm at 0.5 µm a pixel
     assert (results / "camera-steps.csv").read_text().count(",camera") == 2
     assert "step sizes" in json.loads((results / "cal-camera.json").read_text())["method"]
+    assert "reached: the seen tip" in r.stdout  # the closed loop ended within its tolerance
 
 
 def test_python_example_runs(tour_dir, monkeypatch):

@@ -172,6 +172,8 @@ def test_every_bad_request_is_one_line(client: TestClient) -> None:
     for raw in (b'{"joint": 3, "by": 1e400}', b'{"joint": 3, "by": NaN}'):
         refused(client.post("/api/move", content=raw, headers={"content-type": "application/json"}), 422)
     refused(client.post("/api/move", json={"joint": 3, "by": "1 parsec"}), 422, "unknown length unit")
+    # a finite amount so large that the drawn path's steps overflowed (a 500 once): refused as out of range
+    refused(client.post("/api/move", json={"joint": 1, "by": 5.617791046444737e306}), 422, "outside joint 1's range")
     refused(client.post("/api/step", json={"joint": 3, "steps": 0}), 422, "0 steps")
     refused(client.post("/api/step", json={"joint": 3, "steps": 2.5}), 422, "steps")
     refused(client.post("/api/reach", json={"by": ["1um", "2um"]}), 422, "by")

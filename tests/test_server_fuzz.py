@@ -24,7 +24,8 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from server_support import room_on  # noqa: E402
 
-from stickslip.server.app import _command, create_app  # noqa: E402
+from stickslip.server.app import create_app  # noqa: E402
+from stickslip.server.live import command  # noqa: E402
 from stickslip.server.room import ControlRoom  # noqa: E402
 from stickslip.server.security import Access  # noqa: E402
 
@@ -101,7 +102,7 @@ _JSON = st.recursive(
 )
 @settings(max_examples=150, deadline=None, suppress_health_check=list(HealthCheck))
 def test_no_socket_message_raises(fuzz_room: ControlRoom, text: str) -> None:
-    reply = _command(fuzz_room, text)
+    reply = command(fuzz_room, text)
     assert isinstance(reply, dict)
     if "error" in reply:
         assert "\n" not in reply["error"] and "Traceback" not in reply["error"]

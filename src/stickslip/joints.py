@@ -7,20 +7,54 @@ of the package (standard library only) so that units, file checks and physics ca
 use it.
 
 Ranges (docs/design.md §2): joints 1 and 2 span 4π/3 rad, ``q2`` in [−7π/6, π/6];
-joint 3 spans [0, 0.012] m.
+joint 3 spans [0, 0.012] m. The numbers are read from the MM3A's description shipped
+with the package (:data:`MM3A_FILE`, a rig file: docs/rig.md), as is its geometry
+(:data:`MM3A_GEOMETRY`, which :class:`stickslip.kinematics.Geometry` defaults to).
 """
 
 from __future__ import annotations
 
 import math
+import re
+import tomllib
 from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
 
-__all__ = ["JOINTS", "Q3_MAX", "ROTARY_SPAN", "JointSpec", "joint_spec"]
+__all__ = ["JOINTS", "MM3A_FILE", "MM3A_GEOMETRY", "Q3_MAX", "ROTARY_SPAN", "JointSpec", "joint_spec"]
 
-ROTARY_SPAN = 4.0 * math.pi / 3.0
-"""Range of motion of rotary joints 1 and 2, rad (the paper's R_j)."""
-Q3_MAX = 0.012
-"""Stroke of prismatic joint 3, m."""
+MM3A_FILE = Path(__file__).parent / "rig" / "mm3a.toml"
+"""The MM3A's description: a rig file of one arm shipped with the package (docs/rig.md)."""
+
+_SI = {"deg": math.pi / 180.0, "rad": 1.0, "mm": 1e-3, "um": 1e-6, "m": 1.0}
+
+
+def _si(text: Any) -> float:
+    """``"-210deg"``, ``"12mm"`` or a bare SI number from the shipped file (the few units it uses)."""
+    m = re.fullmatch(r"\s*([-+]?[0-9.]+(?:[eE][-+]?[0-9]+)?)\s*([a-z]*)\s*", str(text))
+    if m is None or m.group(2) not in ("", *_SI):
+        raise ValueError(f"{MM3A_FILE.name}: cannot read {text!r}")
+    if m.group(2) == "deg":  # pi * (d / 180) as a fraction: -210deg is exactly -7 * pi / 6
+        f = Fraction(m.group(1)) / 180
+        return math.pi * f.numerator / f.denominator
+    return float(m.group(1)) * _SI.get(m.group(2), 1.0)
+
+
+def _mm3a() -> tuple[dict[int, tuple[str, float, float]], tuple[float, float]]:
+    arm = tomllib.loads(MM3A_FILE.read_text(encoding="utf-8"))["arm"][0]
+    joints = {int(j["number"]): (str(j["kind"]), _si(j["range"][0]), _si(j["range"][1])) for j in arm["joint"]}
+    geometry = arm["geometry"]
+    return joints, (_si(geometry["offset"]), _si(geometry["length"]))
+
+
+_RANGES, MM3A_GEOMETRY = _mm3a()
+"""``MM3A_GEOMETRY``: the MM3A's ``(offset, length)``, m, from :data:`MM3A_FILE`."""
+
+ROTARY_SPAN = _RANGES[1][2] - _RANGES[1][1]
+"""Range of motion of rotary joints 1 and 2, rad (the paper's R_j): 4π/3."""
+Q3_MAX = _RANGES[3][2]
+"""Stroke of prismatic joint 3, m: 12 mm."""
 
 
 
@@ -76,12 +110,10 @@ class JointSpec:
         )
 
 
-# Joint 1's stops are not given by the paper; we take the same span as joint 2,
-# centred on zero. Joint 2: q2 in [-7pi/6, pi/6]. Joint 3: [0, 12 mm].
+# Joint 1's stops are not given by the paper; the shipped file takes the same span as
+# joint 2, centred on zero. Joint 2: q2 in [-7pi/6, pi/6]. Joint 3: [0, 12 mm].
 JOINTS: dict[int, JointSpec] = {
-    1: JointSpec(1, "rotary", -ROTARY_SPAN / 2, ROTARY_SPAN / 2, "rad"),
-    2: JointSpec(2, "rotary", -7.0 * math.pi / 6.0, math.pi / 6.0, "rad"),
-    3: JointSpec(3, "prismatic", 0.0, Q3_MAX, "m"),
+    j: JointSpec(j, kind, lo, hi, "rad" if kind == "rotary" else "m") for j, (kind, lo, hi) in sorted(_RANGES.items())
 }
 
 

@@ -1,7 +1,8 @@
 """Validated file loading and safe file writing: the boundary between files and the library.
 
 Every file the toolkit reads goes through :func:`read_text_bounded` (regular files
-only, a size limit, UTF-8) and every JSON document through :func:`read_json_text`
+only, a size limit, UTF-8) or, where it streams a table, :func:`text_lines` (the same
+checks, no size limit), and every JSON document through :func:`read_json_text`
 (also a nesting-depth limit and no ``NaN``/``Infinity``), so a folder, a FIFO,
 ``/dev/zero``, a huge or deeply nested file ends in one ``ValueError`` naming the file
 and the reason, never a hang or a ``RecursionError``. :func:`check_calibration_dict`
@@ -19,13 +20,14 @@ This module imports only the standard library (it sits below every other layer).
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
 import re
 import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -122,6 +124,42 @@ def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = 
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         raise ValueError(f"{p}: not UTF-8 text (byte {e.start})") from None
+
+
+def text_lines(path: str | os.PathLike[str], what: str) -> Iterator[str]:
+    """The lines of a regular UTF-8 text file, read a block at a time (memory bounded by a line).
+
+    The same refusals as :func:`read_text_bounded`, raised here, before any line is read (a
+    missing file, a folder, a FIFO or device, which is never opened), but no size limit: the
+    caller streams. A line that is not UTF-8 raises ``ValueError`` naming its number when it
+    is reached; a leading byte-order mark is dropped. Lines keep their line endings.
+    """
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise ValueError(f"cannot read {what} {p}: no such {what} file") from None
+    except OSError as e:
+        raise ValueError(f"{p}: cannot read the {what} file ({e.strerror or e})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise ValueError(f"{p}: is a folder, not a {what} file")
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{p}: not a regular file (a pipe or device?); give a {what} file")
+    try:
+        f = open(p, "rb")  # closed by the generator
+    except OSError as e:
+        raise ValueError(f"{p}: cannot read the {what} file ({e.strerror or e})") from None
+    return _decoded(f, p)
+
+
+def _decoded(f: io.BufferedReader, p: Path) -> Iterator[str]:
+    with f:
+        for n, raw in enumerate(f, start=1):
+            try:
+                line = raw.decode("utf-8-sig" if n == 1 else "utf-8")
+            except UnicodeDecodeError as e:
+                raise ValueError(f"{p}: not UTF-8 text (line {n}, byte {e.start + 1} of the line)") from None
+            yield line
 
 
 _STRING = re.compile(r'"(?:[^"\\]|\\.)*"', re.S)

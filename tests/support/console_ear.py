@@ -117,6 +117,7 @@ class ConsoleEar:
         self.delay_s = delay_s
         self.clock = clock
         self.deaf = False
+        self._begins: dict[int, float] = {}  # drive index -> when it reached the stop (emulator clock, s)
         self.reset(0.0)
 
     @property
@@ -133,13 +134,15 @@ class ConsoleEar:
         """``(begin, end)`` stream times of runs of steps against an end stop of the joint."""
         spec = kin.JOINTS[self.joint]
         sim = self.emu.sim
-        for d in list(self.emu.drives):
+        for k, d in enumerate(list(self.emu.drives)):
             if d.channel != self.channel or math.isnan(d.q0):
                 continue
-            stop = spec.upper if d.sign > 0 else spec.lower
-            gamma = float(sim.true_mean_step(self.joint, d.sign, 0.5 * (d.q0 + stop)))
-            need = max(0, math.ceil(abs(stop - d.q0) / gamma))
-            begin = d.time_of_step(need) if need else d.t0
+            begin = self._begins.get(k)
+            if begin is None:  # a drive's start, rate and distance never change: its first step at the stop once
+                stop = spec.upper if d.sign > 0 else spec.lower
+                gamma = float(sim.true_mean_step(self.joint, d.sign, 0.5 * (d.q0 + stop)))
+                need = max(0, math.ceil(abs(stop - d.q0) / gamma))
+                begin = self._begins[k] = d.time_of_step(need) if need else d.t0
             end = math.inf if d.t_end is None else d.t_end
             if begin < end:
                 yield begin - self.offset, end - self.offset

@@ -36,7 +36,7 @@ import threading
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from bluesky.protocols import Checkable, Locatable, Location, Stoppable
@@ -56,10 +56,13 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, VirtualClock, device_key, open_device
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.planning import Planner
+from ..procedures.closed_loop import CameraLoop, move_seen
 from ..procedures.move import (
     DeviceBusy,
     MoveOutcome,
     MoveRefused,
+    MoveRequest,
+    check_envelope,
     device_lock,
     drive,
     failure_text,
@@ -67,6 +70,7 @@ from ..procedures.move import (
     reference_problem,
     settle,
 )
+from ..rig.guard import Guard
 from ..storage import Store, StoreError
 from ..units import format_position, position_display_unit
 
@@ -237,6 +241,23 @@ async def halt(link: DeviceLink, joint: int | None, task: asyncio.Future[Any] | 
     await asyncio.wait([task, told], timeout=STOP_RETURN_S)
 
 
+class _Held:
+    """The link's controller as a closed-loop move sees it: steps through the stop-aware proxy, never closed."""
+
+    def __init__(self, proxy: _Interruptible, dev: Controller):
+        self._proxy = proxy
+        self._dev = dev
+
+    def step(self, joint: int, n: int) -> None:
+        self._proxy.step(joint, n)
+
+    def close(self) -> None:
+        pass  # the link keeps it open for the next move
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._dev, name)
+
+
 @dataclass(frozen=True)
 class _MoveResult:
     steps: int
@@ -298,6 +319,12 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         Plan from a position never referenced (assumed) or uncertain, as ``stickslip move
         --from-unreferenced``; without it such a joint is refused on a real controller
         (:func:`~stickslip.procedures.move.reference_problem`).
+    camera : CameraLoop, str or None
+        A camera that looks at the tip (a URL with ``pixel=``, or a
+        :class:`~stickslip.procedures.closed_loop.CameraLoop`): each move is then the
+        closed loop of ``stickslip move --camera``
+        (:func:`~stickslip.procedures.closed_loop.move_seen`), kept as ``seen``; a loop
+        that stops short fails the status with its reason. A stop is taken between bursts.
 
     Signals
     -------
@@ -324,8 +351,14 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         db: str | os.PathLike[str] | None = None,
         max_burst_s: float = MAX_BURST_S,
         from_unreferenced: bool = False,
+        camera: CameraLoop | str | None = None,
+        guard: Guard | None = None,
     ) -> None:
         self.from_unreferenced = bool(from_unreferenced)
+        self.camera = CameraLoop(camera) if isinstance(camera, str) else camera
+        self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move checked first
+        if self.camera is not None and guard is not None:
+            raise ValueError("camera= and guard= together: the closed loop does not check a rig's envelope yet")
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         self.burst = check_burst(burst)
@@ -440,6 +473,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         """The whole move, in a worker thread: lock, plan from the kept state with its step scale, drive, record."""
         joint = self.joint
         cal = self._calibration()
+        if self.camera is not None:
+            return self._move_seen(target, publish, cal, self.camera)
         with self.link.store() as store, device_lock(store, self.link.key):
             state = load_state(store, self.link.key)
             unreferenced = self.from_unreferenced
@@ -451,6 +486,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
+                check_envelope(self.guard, state, joint, target)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
             publish(state)
@@ -480,6 +516,31 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             if outcome.error is not None:
                 raise MoveError(failure_text(state, joint, outcome.error, outcome.sent, plan.steps))
             return _MoveResult(plan.steps, outcome.sent, False, state)
+
+    def _move_seen(
+        self, target: float, publish: Callable[[DeviceState], None], cal: Calibration, camera: CameraLoop
+    ) -> _MoveResult:
+        """The closed-loop move (``move --camera``) through the link's controller, stop-aware between bursts."""
+        dev = self.link.controller()
+        proxy = _Interruptible(dev, self._stop_event, atomic=True)
+        request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
+            dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced)
+        with self.link.store() as store:
+            try:
+                result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))
+            except _Stopped:  # before a burst was sent: the confirmed position stands
+                state = load_state(store, self.link.key)
+                state.set_position(self.joint, state.positions[self.joint], state.sources[self.joint])
+                save_state(store, state)
+                publish(state)
+                return _MoveResult(0, proxy.sent, True, state)
+            except (MoveRefused, ValueError, RuntimeError) as e:
+                raise MoveError(str(e)) from None
+        publish(result.state)
+        if not result.reached:
+            raise MoveError(f"the closed loop stopped: {result.reason}")
+        steps = sum(k.steps[self.joint - 1] for k in result.looks)
+        return _MoveResult(steps, steps, False, result.state)
 
     def set(self, value: float) -> WatchableAsyncStatus[float]:
         """Move the joint to ``value`` (m or rad) in bursts; progress is reported after every burst.

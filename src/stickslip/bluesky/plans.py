@@ -174,15 +174,7 @@ def calibration_day(
         )
     switch = _Switch(ctrl, detector)
     how = f"bluesky calibration_day, {switch.kind} switch"
-    metadata = {
-        "plan_name": "calibration_day",
-        "device": link.key,
-        "day": day,
-        "detector": switch.kind,
-        "poses": [[j, p] for j, p in plan],
-        **dict(md or {}),
-    }
-
+    metadata = _day_metadata(link.key, day, switch.kind, plan, md)
     made: list[Calibration] = []
 
     def inner() -> Generator[Msg, Any, None]:
@@ -224,6 +216,20 @@ def calibration_day(
 
     yield from bpp.run_wrapper(inner(), md=metadata)  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
     return made[0]
+
+
+def _day_metadata(
+    device: str, day: str, detector: str, plan: list[tuple[int, dict[str, float]]], md: Mapping[str, Any] | None
+) -> dict[str, Any]:
+    """The calibration day's run metadata: plan name, device, day, detector, poses, and the caller's ``md``."""
+    return {
+        "plan_name": "calibration_day",
+        "device": device,
+        "day": day,
+        "detector": detector,
+        "poses": [[j, p] for j, p in plan],
+        **dict(md or {}),
+    }
 
 
 def _call(link: DeviceLink, fn: Callable[[], T]) -> Generator[Msg, Any, T]:

@@ -13,6 +13,7 @@ from numpy.typing import NDArray
 from ..models import JointModel, direction_label
 from ..models.families import FamilyModel, FamilyParams, family_spec
 from ..records import finite_number
+from .errormodel import Predictive
 
 __all__ = ["ExtFields", "ext_fields", "read_ext_fields"]
 
@@ -25,6 +26,11 @@ class ExtFields(Protocol):
     covariance: dict[tuple[int, str], NDArray[np.float64]]
     sigma_model: dict[tuple[int, str], float]
     selection: dict[tuple[int, str], dict[str, object]]
+    predictive: dict[tuple[int, str], Predictive]
+
+
+MAX_POSES = 10_000
+"""Calibrated poses an ``uncertainty`` entry may list (a calibration writes at most 400)."""
 
 
 def _key(j: int, d: str) -> dict[str, object]:
@@ -71,17 +77,7 @@ def ext_fields(cal: ExtFields) -> dict[str, object]:
                 }
                 for (w, mp), lab in zip(m.members, labels, strict=True)
             ]
-    unc: list[dict[str, object]] = []
-    for key in sorted(set(cal.sigma_model) | set(cal.covariance)):
-        s = cal.sigma_model.get(key)
-        c = cal.covariance.get(key)
-        unc.append(
-            {
-                **_key(*key),
-                "sigma_model": None if s is None or not math.isfinite(s) else float(s),
-                "covariance": None if c is None else np.asarray(c, dtype=float).tolist(),
-            }
-        )
+    unc = _uncertainty_entries(cal)
     out: dict[str, object] = {}
     if fams:
         out["families"] = fams
@@ -90,6 +86,27 @@ def ext_fields(cal: ExtFields) -> dict[str, object]:
     if cal.selection:
         out["selection"] = [{**_key(*k), **v} for k, v in sorted(cal.selection.items())]
     return out
+
+
+def _uncertainty_entries(cal: ExtFields) -> list[dict[str, object]]:
+    """The ``uncertainty`` entries: per joint and direction the model error, the covariance and the error
+    model of the intervals (docs/models.md §4): ``sqrt(floor^2 + (slope d)^2)``, ``d`` the load-space
+    distance to the nearest of the calibrated ``poses`` (q1, q2, q3, theta, psi; SI)."""
+    unc: list[dict[str, object]] = []
+    for key in sorted(set(cal.sigma_model) | set(cal.covariance) | set(cal.predictive)):
+        s = cal.sigma_model.get(key)
+        c = cal.covariance.get(key)
+        pr = cal.predictive.get(key)
+        unc.append(
+            {
+                **_key(*key),
+                "sigma_model": None if s is None or not math.isfinite(s) else float(s),
+                "covariance": None if c is None else np.asarray(c, dtype=float).tolist(),
+                **({"floor": pr.floor, "slope": pr.slope, "poses": np.asarray(pr.poses, dtype=float).tolist()}
+                   if pr is not None else {}),
+            }
+        )
+    return unc
 
 
 def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyParams, list[float | None]]:
@@ -112,6 +129,58 @@ def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyPara
     if not scale > 0:
         raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
     return FamilyParams(spec.name, j, tuple(values), scale), ses
+
+
+def _read_predictive(rec: dict[str, object], where: str) -> Predictive:
+    """The interval's error model of an ``uncertainty`` entry; ``ValueError`` names what is wrong."""
+    try:
+        floor = finite_number(rec["floor"], f"{where}.floor")
+        slope = finite_number(rec["slope"], f"{where}.slope")
+        raw = rec["poses"]
+    except KeyError as e:
+        raise ValueError(f"{where}: floor, slope and poses go together ({e} is missing)") from None
+    if not 0.0 <= floor < 10.0 or not 0.0 <= slope < 100.0:
+        raise ValueError(f"{where}: floor must be in [0, 10) and slope in [0, 100), got {floor!r}, {slope!r}")
+    if not isinstance(raw, list) or not 0 < len(raw) <= MAX_POSES:
+        raise ValueError(f"{where}.poses must be a list of 1 to {MAX_POSES} poses")
+    if not all(isinstance(p, list) and len(p) == 5 for p in raw):
+        raise ValueError(f"{where}.poses: each pose is [q1, q2, q3, theta, psi] (SI)")
+    poses = np.array([[finite_number(v, f"{where}.poses") for v in p] for p in raw], dtype=float)
+    if np.any(np.abs(poses) > 10.0):
+        raise ValueError(f"{where}.poses: a value is beyond 10 (rad or m): not a pose")
+    return Predictive(floor, slope, poses)
+
+
+def _read_uncertainty(cal: ExtFields, unc: object) -> None:
+    """The ``uncertainty`` entries: model errors, covariances, the intervals' error models."""
+    if not isinstance(unc, list):
+        raise ValueError("uncertainty must be a list")
+    for i, rec in enumerate(unc):
+        if not isinstance(rec, dict):
+            raise ValueError(f"uncertainty[{i}] must be an object")
+        try:
+            key = (int(rec["joint"]), direction_label(rec["direction"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"uncertainty[{i}]: bad joint or direction ({e})") from None
+        s = rec.get("sigma_model")
+        if s is not None:
+            sv = finite_number(s, f"uncertainty[{i}].sigma_model")
+            if not 0.0 <= sv < 10.0:
+                raise ValueError(f"uncertainty[{i}].sigma_model must be in [0, 10), got {sv!r}")
+            cal.sigma_model[key] = sv
+        c = rec.get("covariance")
+        if c is not None:
+            try:
+                arr = np.asarray(c, dtype=float)
+            except (TypeError, ValueError):
+                raise ValueError(f"uncertainty[{i}].covariance must be a matrix of numbers") from None
+            m = cal.models.get(key)
+            n = len(m.params.names()) if m is not None else -1
+            if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
+                raise ValueError(f"uncertainty[{i}].covariance must be a finite {n}x{n} matrix")
+            cal.covariance[key] = arr
+        if any(k in rec for k in ("floor", "slope", "poses")):
+            cal.predictive[key] = _read_predictive(rec, f"uncertainty[{i}]")
 
 
 def read_ext_fields(cal: ExtFields, data: dict[str, object]) -> None:
@@ -168,33 +237,7 @@ def read_ext_fields(cal: ExtFields, data: dict[str, object]) -> None:
         cal.stderr[(j, d)] = (
             None if all(x is None for x in ses) else np.array([np.nan if x is None else float(x) for x in ses])
         )
-    unc = data.get("uncertainty") or []
-    if not isinstance(unc, list):
-        raise ValueError("uncertainty must be a list")
-    for i, rec in enumerate(unc):
-        if not isinstance(rec, dict):
-            raise ValueError(f"uncertainty[{i}] must be an object")
-        try:
-            key = (int(rec["joint"]), direction_label(rec["direction"]))
-        except (KeyError, TypeError, ValueError) as e:
-            raise ValueError(f"uncertainty[{i}]: bad joint or direction ({e})") from None
-        s = rec.get("sigma_model")
-        if s is not None:
-            sv = finite_number(s, f"uncertainty[{i}].sigma_model")
-            if not 0.0 <= sv < 10.0:
-                raise ValueError(f"uncertainty[{i}].sigma_model must be in [0, 10), got {sv!r}")
-            cal.sigma_model[key] = sv
-        c = rec.get("covariance")
-        if c is not None:
-            try:
-                arr = np.asarray(c, dtype=float)
-            except (TypeError, ValueError):
-                raise ValueError(f"uncertainty[{i}].covariance must be a matrix of numbers") from None
-            m = cal.models.get(key)
-            n = len(m.params.names()) if m is not None else -1
-            if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
-                raise ValueError(f"uncertainty[{i}].covariance must be a finite {n}x{n} matrix")
-            cal.covariance[key] = arr
+    _read_uncertainty(cal, data.get("uncertainty") or [])
     sel = data.get("selection") or []
     if not isinstance(sel, list):
         raise ValueError("selection must be a list")

@@ -3,23 +3,27 @@ joint and direction (``method="auto"``) and merges the parts."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
+from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
-from .result import Calibration, Provenance, _day_of, _group
+from .result import Calibration, Provenance, _day_of
+from .selection import Progress
 
 _OLD_METHOD_NAMES = {"seed": "paper", "seed-quadratic": "paper-quadratic"}
 """Method names of earlier versions (the paper was called "the seed"), still accepted."""
 
 
 def calibrate(
-    traverses: Sequence[Traverse],
+    traverses: Sequence[Traverse] | TraverseGroups,
     method: str = "auto",
     day: str | None = None,
     source: str | None = None,
     model: str = "paper",
+    progress: Progress | None = None,
     step_sizes: Sequence[StepSize] = (),
 ) -> Calibration:
     """Calibrate every joint and direction present in ``traverses``.
@@ -41,11 +45,14 @@ def calibrate(
         ``"auto"``): the paper's models, calibrated by ``method``;
         ``"auto"``: the paper's procedure for every joint and direction whose traverses
         are all at the paper's calibration poses, and for the others every model family
-        the data can identify, chosen by leave-one-pose-out cross-validation
+        the data can identify, averaged by cross-validation on held-out poses
         (:func:`~stickslip.calibration.selection.calibrate_families`); or a family's name
         (docs/models.md §2) to fit that family everywhere. With ``method`` other than
         ``"auto"``, ``"auto"`` means ``"paper"`` (the method names how to calibrate the
         paper's models).
+    progress : callable, optional
+        ``progress(fraction, what)``, called as the model families are fitted and
+        cross-validated (the part that takes seconds on a long table).
     step_sizes : sequence of StepSize
         Step sizes measured at poses (by a camera, ``stickslip camera calibrate``). Each
         joint and direction that has some is fitted by weighted least squares on the
@@ -54,36 +61,42 @@ def calibrate(
         default): exactly the calibration without step sizes.
     """
     if step_sizes:
-        return calibrate_with_step_sizes(traverses, step_sizes, method, day, source, model)
-    traverses = list(traverses)
+        return calibrate_with_step_sizes(group_traverses(traverses).traverses, step_sizes, method, day, source, model,
+                                         progress)
+    groups = group_traverses(traverses)  # once: every stage below takes these groups
+    traverses = groups.traverses
     method = _OLD_METHOD_NAMES.get(method, method)
     if method not in ("auto", "paper", "paper-quadratic", "lsq"):
         raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
     if model == "auto" and method != "auto":
         model = "paper"  # a method names how to calibrate the paper's models (as before families existed)
+    if not groups:
+        return calibrate_paper(groups, day, source)  # raises: no traverses
+    prov = Provenance.of(traverses, source, len(traverses), ())  # the table hashed once
     if model != "paper":
-        return _calibrate_models(traverses, method, day, source, model)
+        return _calibrate_models(groups, method, day, source, model, prov, progress)
     if method == "auto":
-        groups = _group(traverses)
-        seed_keys = {k for k, ts in groups.items() if paper_applicable(ts)}
+        seed_keys = {k for k in groups.keys if paper_applicable(groups.of(k))}
         if not seed_keys:
             method = "lsq"
-        elif len(seed_keys) == len(groups):
+        elif len(seed_keys) == len(groups.keys):
             method = "paper"
         else:
-            by_seed = [t for t in traverses if (t.joint, t.direction) in seed_keys]
-            by_lsq = [t for t in traverses if (t.joint, t.direction) not in seed_keys]
-            return _merge(calibrate_paper(by_seed, day, source), calibrate_lsq(by_lsq, day, source), traverses, day)
+            rest = set(groups.keys) - seed_keys
+            return _merge(calibrate_paper(groups.only(seed_keys), day, source, provenance=prov),
+                          calibrate_lsq(groups.only(rest), day, source, provenance=prov), traverses, day, prov)
     if method == "paper":
-        return calibrate_paper(traverses, day, source)
+        return calibrate_paper(groups, day, source, provenance=prov)
     if method == "paper-quadratic":
-        return calibrate_paper(traverses, day, source, rotary_inversion="paper-quadratic")
+        return calibrate_paper(groups, day, source, rotary_inversion="paper-quadratic", provenance=prov)
     if method == "lsq":
-        return calibrate_lsq(traverses, day, source)
+        return calibrate_lsq(groups, day, source, provenance=prov)
     raise ValueError(f"unknown calibration method {method!r} (use auto, paper, paper-quadratic or lsq)")
 
 
-def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], day: str | None) -> Calibration:
+def _merge(
+    seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], day: str | None, prov: Provenance
+) -> Calibration:
     """One calibration from a paper's-procedure part and a least-squares part (disjoint joints/directions)."""
 
     def keys(c: Calibration) -> str:
@@ -96,7 +109,7 @@ def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], d
         *lsq.provenance.notes,
     ]
     used = seed.provenance.rows_used + lsq.provenance.rows_used
-    prov = Provenance.of(traverses, seed.provenance.source, used, notes)
+    prov = dataclasses.replace(prov, rows_used=used, notes=tuple(notes))
     return Calibration(
         {**seed.models, **lsq.models},
         {**seed.stderr, **lsq.stderr},
@@ -110,7 +123,13 @@ def _merge(seed: Calibration, lsq: Calibration, traverses: Sequence[Traverse], d
 
 
 def _calibrate_models(
-    traverses: list[Traverse], method: str, day: str | None, source: str | None, model: str
+    groups: TraverseGroups,
+    method: str,
+    day: str | None,
+    source: str | None,
+    model: str,
+    prov: Provenance,
+    progress: Progress | None,
 ) -> Calibration:
     """``model="auto"`` or a family name: the paper's procedure where the data are exactly its poses,
     families elsewhere."""
@@ -118,17 +137,17 @@ def _calibrate_models(
     from .selection import calibrate_families
 
     if model != "auto":
-        return calibrate_families(traverses, day, source, model=model)
-    groups = _group(traverses)
-    paper_keys = {k for k, ts in groups.items() if only_paper_poses(ts)} if method in ("auto", "paper") else set()
-    rest = [t for t in traverses if (t.joint, t.direction) not in paper_keys]
+        return calibrate_families(groups, day, source, model=model, progress=progress, provenance=prov)
+    paper_keys = {k for k in groups.keys if only_paper_poses(groups.of(k))} if method in ("auto", "paper") else set()
+    rest = set(groups.keys) - paper_keys
     if not rest:
-        return calibrate_paper(traverses, day, source)
-    fam = calibrate_families(rest, day, source, model="auto")
+        return calibrate_paper(groups, day, source, provenance=prov)
+    fam = calibrate_families(groups if not paper_keys else groups.only(rest), day, source, model="auto",
+                             progress=progress, provenance=prov)
     if not paper_keys:
         return fam
-    by_paper = [t for t in traverses if (t.joint, t.direction) in paper_keys]
-    merged = _merge(calibrate_paper(by_paper, day, source), fam, traverses, day)
+    merged = _merge(calibrate_paper(groups.only(paper_keys), day, source, provenance=prov), fam, groups.traverses,
+                    day, prov)
     merged.method = merged.method.replace("lsq (", "families (")
     merged.covariance.update(fam.covariance)
     merged.sigma_model.update(fam.sigma_model)
@@ -159,6 +178,7 @@ def calibrate_with_step_sizes(
     day: str | None = None,
     source: str | None = None,
     model: str = "paper",
+    progress: Progress | None = None,
 ) -> Calibration:
     """Calibrate from traverses and step sizes measured at poses.
 
@@ -184,7 +204,7 @@ def calibrate_with_step_sizes(
         cam.provenance = _with_extra(prov, extra)
         cam.day = _day_of([*traverses, *(r.as_traverse() for r in step_sizes)], day)
         return cam
-    other = calibrate(rest, method, day, source, model)
+    other = calibrate(rest, method, day, source, model, progress)
     notes = [note, *other.provenance.notes, *cam.provenance.notes]
     merged = Calibration(
         {**other.models, **cam.models},
@@ -197,6 +217,7 @@ def calibrate_with_step_sizes(
     merged.covariance.update(other.covariance)
     merged.sigma_model.update(other.sigma_model)
     merged.selection.update(other.selection)
+    merged.predictive.update(other.predictive)
     return merged
 
 
@@ -205,6 +226,4 @@ def _row(r: StepSize) -> tuple[object, ...]:
 
 
 def _with_extra(prov: Provenance, extra: Mapping[str, object]) -> Provenance:
-    import dataclasses
-
     return dataclasses.replace(prov, extra={**prov.extra, **extra})

@@ -17,7 +17,8 @@ from ..models import (
     RotaryParams,
     steps_between,
 )
-from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _group
+from .groups import TraverseGroups, group_traverses
+from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _provenance
 
 FloatArray = NDArray[np.float64]
 
@@ -121,10 +122,11 @@ def _identifiability(j: int, d: str, names: list[tuple[str, float | None]], jac:
 
 
 def calibrate_lsq(
-    traverses: Sequence[Traverse],
+    traverses: Sequence[Traverse] | TraverseGroups,
     day: str | None = None,
     source: str | None = None,
     knots: tuple[float, float] = (0.0, kin.Q3_MAX),
+    provenance: Provenance | None = None,
     weights: Sequence[float] | None = None,
 ) -> Calibration:
     """Nonlinear least squares on any set of traverses, per joint and direction.
@@ -147,7 +149,9 @@ def calibrate_lsq(
     """
     from scipy.optimize import least_squares
 
-    groups = _group(traverses)
+    grouped = group_traverses(traverses)
+    groups = grouped.as_dict()
+    traverses = grouped.traverses
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
     group_w: dict[tuple[int, str], FloatArray] = {}
@@ -204,7 +208,8 @@ def calibrate_lsq(
     _check_physical(models)
     consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
     return Calibration(
-        models, stderr, consts, _day_of(traverses, day), "lsq", Provenance.of(traverses, source, len(traverses), notes)
+        models, stderr, consts, _day_of(traverses, day), "lsq",
+        _provenance(provenance, traverses, source, len(traverses), notes),
     )
 
 

@@ -17,8 +17,9 @@ from ..models import (
     PrismaticParams,
     RotaryParams,
 )
+from .groups import TraverseGroups, group_traverses
 from .inversion import _LOAD_ZERO, PaperQuadratic, fit_paper_quadratic, invert_d_exact_many
-from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _group
+from .result import Calibration, CalibrationError, Provenance, _check_physical, _constant_step, _day_of, _provenance
 
 PRISMATIC_PAPER_POSES = {
     "a": (-math.pi / 2, 0.0, 0.0),  # Eq. (4): no axial load, full efficiency
@@ -75,9 +76,9 @@ def _paper_rotary_rows(ts: Sequence[Traverse]) -> dict[tuple[int, str], list[Tra
     return found if all(found.values()) else None
 
 
-def paper_applicable(traverses: Sequence[Traverse]) -> bool:
+def paper_applicable(traverses: Sequence[Traverse] | TraverseGroups) -> bool:
     """Whether every (joint, direction) present has the paper's calibration poses."""
-    groups = _group(traverses)
+    groups = group_traverses(traverses).as_dict()
     if not groups:
         return False
     for (j, _d), ts in groups.items():
@@ -115,11 +116,12 @@ def only_paper_poses(ts: Sequence[Traverse]) -> bool:
 
 
 def calibrate_paper(
-    traverses: Sequence[Traverse],
+    traverses: Sequence[Traverse] | TraverseGroups,
     day: str | None = None,
     source: str | None = None,
     rotary_inversion: str = "exact",
     quadratic: PaperQuadratic | None = None,
+    provenance: Provenance | None = None,
 ) -> Calibration:
     """The paper's procedure: Eqs. (4)–(6) for joint 3, exact inversion of Eq. (8) for rotary joints.
 
@@ -137,10 +139,15 @@ def calibrate_paper(
     rotary_inversion : {"exact", "paper-quadratic"}
         ``"paper-quadratic"`` reproduces the paper's Eq. 9 method (with ``quadratic``,
         default :func:`fit_paper_quadratic`) instead of the exact inversion.
+    provenance : Provenance, optional
+        The table's provenance when the caller has it (hashing a long table once); the
+        rows used and the notes are this procedure's.
     """
     if rotary_inversion not in ("exact", "paper-quadratic"):
         raise ValueError(f"rotary_inversion must be 'exact' or 'paper-quadratic', got {rotary_inversion!r}")
-    groups = _group(traverses)
+    grouped = group_traverses(traverses)
+    groups = grouped.as_dict()
+    traverses = grouped.traverses
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
     if rotary_inversion == "paper-quadratic":
@@ -183,7 +190,7 @@ def calibrate_paper(
         consts,
         _day_of(traverses, day),
         method,
-        Provenance.of(traverses, source, used, notes),
+        _provenance(provenance, traverses, source, used, notes),
     )
 
 

@@ -33,6 +33,7 @@ from ..models import (
 )
 from ..models.families import FamilyParams
 from ..units import param_scale, step_scale
+from .errormodel import Predictive
 
 FORMAT = "stickslip.calibration"
 FORMAT_VERSION = 1
@@ -332,6 +333,9 @@ class Calibration:
     """``(joint, direction) ->`` relative model error (1 sigma) for prediction intervals, where known."""
     selection: dict[tuple[int, str], dict[str, object]] = field(default_factory=dict)
     """``(joint, direction) ->`` the family chosen, why, and the CV error of every family."""
+    predictive: dict[tuple[int, str], Predictive] = field(default_factory=dict)
+    """``(joint, direction) ->`` what a prediction's interval is made of in each pose (docs/models.md §4),
+    where known (a family calibration); elsewhere the interval is the constant ``sigma_model``."""
 
     # -- access
     @property
@@ -634,6 +638,15 @@ def _check_physical(models: dict[tuple[int, str], JointModel]) -> None:
             m.params.check_physical()
         except NonPhysicalError as e:
             raise CalibrationError(f"joint {j}{d}: non-physical calibration refused: {e}") from None
+
+
+def _provenance(
+    base: Provenance | None, traverses: Sequence[Traverse], source: str | None, used: int, notes: Sequence[str]
+) -> Provenance:
+    """``base`` (the table's provenance, hashed once by the caller) with ``used`` and ``notes``, or a new one."""
+    if base is None:
+        return Provenance.of(traverses, source, used, notes)
+    return dataclasses.replace(base, rows_used=used, notes=tuple(notes))
 
 
 def _group(traverses: Iterable[Traverse]) -> dict[tuple[int, str], list[Traverse]]:

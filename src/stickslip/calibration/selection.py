@@ -1,62 +1,104 @@
-"""Averaging (or choosing) model families by leave-one-pose-out cross-validation (docs/models.md §3).
+"""Averaging model families by cross-validation on held-out poses (docs/models.md §3).
 
 For each joint, every family of :mod:`stickslip.models.families` (and its variant with terms
-shared by + and -) that the traverses can identify, with at least two poses per
-parameter of a direction, is fitted to both directions; then each *pose* (the fixed
-joints and the tilt) beyond the paper's calibration poses is left out in turn, the
-family is refitted on the rest and predicts the left-out traverses. With ``auto`` the
-families are averaged with pseudo-BMA+ weights from those left-out errors
-(:func:`averaging_weights`); asked for one family, that one is fitted. A joint and
+shared by + and -) that the traverses can identify, with at least two poses per parameter
+of a direction, is fitted to both directions. The poses are split into folds whose
+held-out poses are as far from the poses their refit keeps as new poses of the workspace
+are from the calibration's (:func:`~.folds.cv_folds`, nearest-neighbour distance
+matching), and each fold is left out in turn: every family is refitted without it (from its
+fit on all traverses) and predicts the fold's traverses.
+
+With ``auto`` the families are averaged with pseudo-BMA+ weights from those held-out errors
+(:func:`averaging_weights`), with a prior that puts half the weight on the paper's form
+(:data:`PAPER_PRIOR`): where the held-out poses cannot tell the families apart, the
+average stays near the paper's model. The average's own held-out error is measured
+honestly (the weights used for a fold are computed without it), and if it is larger than
+the paper's form's, in RMS or at its largest, the calibration falls back to the paper's
+form and says so. The error model of the intervals (:func:`error_model`) comes from the
+residuals of the model returned and its held-out errors against their distance from the
+poses kept; ``sigma_model`` is that error's RMS over new poses of the workspace.
+
+Asked for one family, that one is fitted and cross-validated the same way. A joint and
 direction with too few poses for any family beyond the constant step falls back to it:
 calibration never stops for lack of data once every joint and direction present has one
-traverse.
+traverse. On a long table the choice is made on a sample of the poses and the families
+chosen are refitted to every traverse (:data:`SELECTION_ROWS`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 from ..measurements import Traverse
 from ..models.families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
-from .family_fit import (
-    Columns,
-    FamilyFit,
-    JointFit,
-    fit_family,
-    fit_joint,
-    predict_columns,
-    shared_names,
-    traverse_columns,
-)
-from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
+from .errormodel import Predictive
+from .family_fit import FamilyProblem, JointFit, full_rank, shared_names
+from .folds import cv_folds, workspace_coordinates, workspace_pose_array
+from .groups import JointData, TraverseGroups, group_traverses, nearest
+from .intervals import relative_sd
+from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of
 
 __all__ = [
-    "CVScore", "select_family", "select_joint", "calibrate_families", "pose_groups", "averaging_weights",
-    "PREFER_SIMPLER", "MIN_WEIGHT",
+    "CVScore",
+    "JointSelection",
+    "select_joint",
+    "calibrate_families",
+    "averaging_weights",
+    "MIN_WEIGHT",
+    "PAPER_PRIOR",
+    "Progress",
 ]
 
-PREFER_SIMPLER = 1.05
-"""A simpler family is chosen when its CV error is within this factor of the best."""
+Progress = Callable[[float, str], None]
+"""A progress callback: ``(fraction done in [0, 1], what is being done)``."""
+
+MIN_WEIGHT = 0.01
+"""Families with a smaller weight are left out of the average (and the rest renormalised)."""
+
+PAPER_PRIOR = 0.5
+"""Prior weight of the paper's form (its variants together) in the average; the other families
+share the rest equally. It decides only where the held-out errors cannot (a difference of ~2
+in summed log density overturns it)."""
+
+REFIT_ITERATIONS = 6
+"""Levenberg-Marquardt iterations of a refit without one fold, started from the fit on all
+traverses (a refit converges in 2-4; the cap bounds the cost)."""
+
+EXACT_REFIT_ROWS = 400
+"""Up to this many traverses of a joint, a fold's refit iterates (:data:`REFIT_ITERATIONS`); above,
+it is one Gauss-Newton step from the fit on all traverses, in closed form (a fold is a small share
+of the data, so one step lands close to the refit: a test checks it)."""
+
+FULL_REFIT_ITERATIONS = 5
+"""Levenberg-Marquardt iterations of a chosen family's refit to every traverse of a long table,
+from its fit on the sample (close already: 2-3 iterations reach the relative cost change of 1e-12)."""
+
+SELECTION_ROWS = 1500
+"""Above this many traverses of a joint, the families are cross-validated and weighed on a seeded
+sample of its poses (all traverses of each pose sampled, about this many), and the families chosen
+are then refitted to every traverse: the choice costs the same on any table, the fits grow linearly."""
 
 
 @dataclass(frozen=True)
 class CVScore:
-    """Cross-validation of one family for one joint and direction.
+    """Cross-validation of one family (both directions of a joint).
 
     Attributes
     ----------
     family : str
+        The selection's label: the family's name, ``+shared`` for the shared variant.
     n_params : int
     status : str
         ``"ok"``, or why the family was not scored (``"not identifiable"``, ``"too few poses"``).
     cv_rms, cv_max : float
-        Root-mean-square and largest |relative error| of left-out predictions (nan if not scored).
+        Root-mean-square and largest |relative error| of the predictions of held-out regions (nan if
+        not scored).
     fit_rms : float
         RMS relative residual of the fit on all traverses.
     weight : float
@@ -86,210 +128,90 @@ class CVScore:
         }
 
 
-def pose_groups(joint: int, ts: Sequence[Traverse]) -> NDArray[np.int64]:
-    """Index of each traverse's pose (the fixed joints and tilt, to 1e-4), for leave-one-pose-out."""
-    keys: dict[tuple[float, ...], int] = {}
-    out = []
-    for t in ts:
-        vals = [t.q1, t.q2, t.q3, t.theta, t.psi]
-        vals[joint - 1] = 0.0
-        key = tuple(round(v, 4) for v in vals)
-        out.append(keys.setdefault(key, len(keys)))
-    return np.array(out, dtype=np.int64)
+@dataclass(frozen=True)
+class JointSelection:
+    """What :func:`select_joint` decided for one joint.
 
-
-def _cv(spec: FamilySpec, joint: int, ts: Sequence[Traverse], full: FamilyFit) -> tuple[float, float]:
-    cols = traverse_columns(ts)
-    groups = pose_groups(joint, ts)
-    errs = np.full(len(ts), np.nan)
-    for g in np.unique(groups):
-        test = groups == g
-        train = [t for t, m in zip(ts, test, strict=True) if not m]
-        fit = fit_family(spec, joint, train, x0=full.values, cols=cols.subset(~test))
-        if not fit.identifiable:
-            return np.nan, np.nan
-        held = cols.subset(test)
-        pred = predict_columns(spec, joint, fit.values, held)
-        errs[test] = pred / held.gamma - 1.0
-    if not np.all(np.isfinite(errs)):
-        return np.inf, np.inf
-    return float(np.sqrt(np.mean(errs**2))), float(np.max(np.abs(errs)))
-
-
-def select_family(
-    joint: int, ts: Sequence[Traverse], candidates: Sequence[str] | None = None
-) -> tuple[FamilyFit, list[CVScore], str]:
-    """Fit every identifiable family and pick one by leave-one-pose-out CV.
-
-    Returns ``(fit of the chosen family on all traverses, scores, reason)``.
+    Attributes
+    ----------
+    fit : JointFit
+        The family whose parameters are shown (the one chosen, or the average's heaviest).
+    scores : list of CVScore
+    reason : str
+        One line for people: what was chosen and why.
+    mixture : dict
+        ``label -> (weight, fit)`` of an average (empty for one family).
+    cv_errors : ndarray
+        Held-out relative errors of the model returned (every traverse of a region left out;
+        empty when not cross-validated).
+    fallback : bool
+        Whether the average predicted held-out regions worse than the paper's form, which is returned.
+    n_folds : int
+        Folds left out in turn (0: not cross-validated).
+    floor, slope : float
+        :func:`error_model` of the model returned (relative, 1; slope per unit of load-space
+        distance); ``nan`` when not cross-validated.
+    cv_distance : ndarray
+        The distance of each held-out traverse's pose to the nearest pose its refit kept
+        (load coordinates, 1), in the order of ``cv_errors``.
+    sample : int
+        Traverses the choice was made on when that was a sample (0: all of them).
     """
-    specs = families_for(joint) if candidates is None else [family_spec(joint, c) for c in candidates]
-    n_poses = len(set(pose_groups(joint, ts).tolist()))
-    scores: list[CVScore] = []
-    fits: dict[str, FamilyFit] = {}
-    for spec in specs:
-        p = spec.n_params
-        if n_poses < p + 1 and spec.name != "constant":
-            scores.append(CVScore(spec.name, p, f"too few poses ({n_poses} for {p} parameters)", np.nan, np.nan,
-                                  np.nan))
-            continue
-        fit = fit_family(spec, joint, ts)
-        if not fit.identifiable:
-            scores.append(CVScore(spec.name, p, "not identifiable from these poses", np.nan, np.nan, fit.rms))
-            continue
-        fits[spec.name] = fit
-        if n_poses >= 2:
-            rms, mx = _cv(spec, joint, ts, fit)
-        else:
-            rms, mx = np.nan, np.nan
-        status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
-        scores.append(CVScore(spec.name, p, status, rms, mx, fit.rms))
-    scored = [s for s in scores if s.status == "ok"]
-    if scored:
-        best = min(scored, key=lambda s: s.cv_rms)
-        chosen = min(
-            (s for s in scored if s.cv_rms <= PREFER_SIMPLER * best.cv_rms), key=lambda s: (s.n_params, s.cv_rms)
-        )
-        reason = f"smallest leave-one-pose-out error ({chosen.cv_rms * 100:.2g} % RMS over {n_poses} poses)"
-        if chosen.family != best.family:
-            reason = (
-                f"within {100 * (PREFER_SIMPLER - 1):.0f} % of the best CV error ({best.family}: "
-                f"{best.cv_rms * 100:.2g} %) with fewer parameters ({chosen.cv_rms * 100:.2g} % RMS)"
-            )
-        return fits[chosen.family], scores, reason
-    if fits:  # identifiable but not cross-validatable (a single pose): the simplest
-        name = min(fits, key=lambda k: fits[k].spec.n_params)
-        return fits[name], scores, f"only {n_poses} pose: the simplest identifiable family, not cross-validated"
-    raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
+
+    fit: JointFit
+    scores: list[CVScore]
+    reason: str
+    mixture: dict[str, tuple[float, JointFit]]
+    cv_errors: NDArray[np.float64]
+    fallback: bool = False
+    n_folds: int = 0
+    floor: float = math.nan
+    slope: float = math.nan
+    cv_distance: NDArray[np.float64] = field(default_factory=lambda: np.empty(0))
+    sample: int = 0
+
+    @property
+    def cv_rms(self) -> float:
+        e = self.cv_errors
+        return float(np.sqrt(np.mean(e**2))) if e.size and np.all(np.isfinite(e)) else float("nan")
 
 
-def _criterion(s: CVScore) -> float:
-    """What the selection minimises: the mean of the CV RMS and the CV largest error.
-
-    The largest left-out error guards against a family that fits the poses it has and
-    swings between them; the RMS keeps one unlucky pose from deciding alone.
-    """
-    return 0.5 * (s.cv_rms + s.cv_max)
-
-
-def _anchor_groups(
-    joint: int, by_dir: Mapping[str, Sequence[Traverse]], groups: dict[str, NDArray[np.int64]]
-) -> frozenset[int]:
-    """Pose groups at the paper's calibration poses: they anchor every family and are not held out
-    (when at least three other poses are), so CV measures prediction at new poses in the workspace."""
-    from .paper import only_paper_poses
-
-    out = set()
-    for d, ts in by_dir.items():
-        for t, g in zip(ts, groups[d], strict=True):
-            if only_paper_poses([t]) or (joint != 1 and _at_paper_pose(t)):
-                out.add(int(g))
-    return frozenset(out)
-
-
-def _at_paper_pose(t: Traverse) -> bool:
-    from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
-
-    tol = 1e-3
-    if abs(t.q1) > tol:
-        return False
-    if t.joint == 3:
-        return any(abs(t.q2 - a) <= tol and abs(t.theta - b) <= tol and abs(t.psi - c) <= tol
-                   for a, b, c in PRISMATIC_PAPER_POSES.values())
-    return any(abs(t.q3 - a) <= 1e-5 and abs(t.theta - b) <= tol and abs(t.psi - c) <= tol
-               for a, b, c in ROTARY_PAPER_POSES)
-
-
-def _joint_pose_groups(joint: int, by_dir: Mapping[str, Sequence[Traverse]]) -> dict[str, NDArray[np.int64]]:
-    keys: dict[tuple[float, ...], int] = {}
-    out: dict[str, NDArray[np.int64]] = {}
-    for d, ts in sorted(by_dir.items()):
-        idx = []
-        for t in ts:
-            vals = [t.q1, t.q2, t.q3, t.theta, t.psi]
-            vals[joint - 1] = 0.0
-            idx.append(keys.setdefault(tuple(round(v, 4) for v in vals), len(keys)))
-        out[d] = np.array(idx, dtype=np.int64)
-    return out
-
-
-def _cv_joint(
-    spec: FamilySpec,
-    joint: int,
-    cols: dict[str, Columns],
-    groups: dict[str, NDArray[np.int64]],
-    full: JointFit,
-    anchors: frozenset[int] = frozenset(),
-) -> tuple[float, float]:
-    rms, mx, _, _ = _cv_joint_errors(spec, joint, cols, groups, full, anchors)
-    return rms, mx
-
-
-def _cv_joint_errors(
-    spec: FamilySpec,
-    joint: int,
-    cols: dict[str, Columns],
-    groups: dict[str, NDArray[np.int64]],
-    full: JointFit,
-    anchors: frozenset[int] = frozenset(),
-) -> tuple[float, float, NDArray[np.float64], NDArray[np.int64]]:
-    """CV RMS and largest error, and the left-out relative errors with their pose group (in a fixed order)."""
-    all_groups = np.unique(np.concatenate(list(groups.values())))
-    held_out = [g for g in all_groups if g not in anchors]
-    if len(held_out) < 3:
-        held_out = list(all_groups)
-    none = (np.nan, np.nan, np.empty(0), np.empty(0, dtype=np.int64))
-    errs = {d: np.full(len(cols[d]), np.nan) for d in cols}
-    for g in held_out:
-        train = {d: cols[d].subset(groups[d] != g) for d in cols}
-        if any(len(c) == 0 for c in train.values()):
-            return none
-        fit = fit_joint(spec, joint, train, full.shared, x0=full.values)
-        if not fit.identifiable:
-            return none
-        for d in cols:
-            test = groups[d] == g
-            if np.any(test):
-                held = cols[d].subset(test)
-                errs[d][test] = predict_columns(spec, joint, fit.values[d], held) / held.gamma - 1.0
-    keep = {d: np.isin(groups[d], held_out) for d in sorted(errs)}
-    e = np.concatenate([errs[d][keep[d]] for d in sorted(errs)])
-    ids = np.concatenate([groups[d][keep[d]] for d in sorted(errs)])
-    if not np.all(np.isfinite(e)):
-        return np.inf, np.inf, e, ids
-    return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e))), e, ids
-
-
-MIN_WEIGHT = 0.01
-"""Families with a smaller weight are left out of the average (and the rest renormalised)."""
+# ----------------------------------------------------------------------------- weights
 
 
 def averaging_weights(
-    errors: Mapping[str, NDArray[np.float64]], ids: NDArray[np.int64], draws: int = 1000, seed: int = 0
+    errors: Mapping[str, NDArray[np.float64]],
+    ids: NDArray[np.int64],
+    draws: int = 1000,
+    seed: int = 0,
+    prior: Mapping[str, float] | None = None,
 ) -> dict[str, float]:
-    """Pseudo-BMA+ weights of families from their leave-one-pose-out errors (Yao et al. 2018).
+    """Pseudo-BMA+ weights of families from their held-out errors (Yao et al. 2018).
 
-    Each family's left-out relative errors ``e`` get a normal predictive density with
-    its own CV variance ``s² = mean(e²)``; the log densities are summed per pose (the
-    unit left out), ``elpd_k = sum_i lp_ik``. Weights ``∝ exp(elpd_k)`` would trust the
-    CV estimate fully and pick one family almost always; pseudo-BMA+ averages them over
-    Bayesian-bootstrap draws of the poses (Dirichlet(1) weights ``α``,
-    ``w = E_α[softmax(m Σ_i α_i lp_ik)]``), which accounts for how uncertain the CV
-    comparison is with ~10 poses. Deterministic (fixed ``seed``).
+    Each family's held-out relative errors ``e`` get a normal predictive density with its
+    own CV variance ``s² = mean(e²)``; the log densities are summed per unit left out
+    (``ids``: the region of each error), ``elpd_k = sum_i lp_ik``. Weights
+    ``∝ prior_k exp(elpd_k)`` would trust the CV estimate fully and pick one family almost
+    always; pseudo-BMA+ averages them over Bayesian-bootstrap draws of the units
+    (Dirichlet(1) weights ``α``, ``w = E_α[softmax(log prior + m Σ_i α_i lp_ik)]``), which
+    accounts for how uncertain the comparison is with few regions. ``prior`` (default
+    uniform) is normalised over the families given. Deterministic (fixed ``seed``).
     """
     labels = sorted(errors)
     if len(labels) == 1:
         return {labels[0]: 1.0}
-    groups = np.unique(ids)
+    groups, inv = np.unique(ids, return_inverse=True)
     lp = np.empty((len(labels), len(groups)))
     for k, lab in enumerate(labels):
         e = np.asarray(errors[lab], dtype=float)
         s2 = max(float(np.mean(e**2)), 1e-12)
         point = -0.5 * math.log(2 * math.pi * s2) - 0.5 * e**2 / s2
-        lp[k] = [float(np.sum(point[ids == g])) for g in groups]
+        lp[k] = np.bincount(inv, weights=point, minlength=len(groups))
+    pri = np.array([1.0 if prior is None else max(float(prior.get(lab, 0.0)), 1e-300) for lab in labels])
+    log_prior = np.log(pri / pri.sum())
     rng = np.random.default_rng(seed)
-    alpha = rng.dirichlet(np.ones(len(groups)), draws)  # (draws, poses)
-    z = len(groups) * alpha @ lp.T  # (draws, families)
+    alpha = rng.dirichlet(np.ones(len(groups)), draws)  # (draws, units)
+    z = len(groups) * alpha @ lp.T + log_prior  # (draws, families)
     z -= z.max(axis=1, keepdims=True)
     w = np.exp(z)
     w /= w.sum(axis=1, keepdims=True)
@@ -299,182 +221,431 @@ def averaging_weights(
     return {lab: float(x) for lab, x in zip(labels, mean, strict=True) if x > 0.0}
 
 
+def _paper_prior(labels: Sequence[str]) -> dict[str, float]:
+    """:data:`PAPER_PRIOR` shared by the paper's form's variants, the rest shared by the others."""
+    paper = [lab for lab in labels if lab.partition("+")[0] == "paper"]
+    rest = [lab for lab in labels if lab not in paper]
+    if not paper or not rest:
+        return {lab: 1.0 / len(labels) for lab in labels}
+    return {**{lab: PAPER_PRIOR / len(paper) for lab in paper}, **{lab: (1 - PAPER_PRIOR) / len(rest) for lab in rest}}
+
+
+# ----------------------------------------------------------------------------- cross-validation
+
+
+def _cross_validate(
+    prob: FamilyProblem, fit: JointFit, folds: NDArray[np.int64], n_folds: int
+) -> NDArray[np.float64]:
+    """Held-out relative errors of every traverse (directions in ``prob.dirs`` order), each predicted
+    by the family refitted without its fold; empty if the family is not identifiable without one."""
+    data = prob.data
+    region = {d: folds[data.pose[d]] for d in prob.dirs}
+    errs = {d: np.full(data.gamma[d].size, np.nan) for d in prob.dirs}
+    exact = data.n_rows() <= EXACT_REFIT_ROWS
+    for k in range(n_folds):
+        train = {d: region[d] != k for d in prob.dirs}
+        if not any(np.any(~t) for t in train.values()):
+            continue
+        rows = np.concatenate([train[d] for d in prob.dirs])
+        if exact:
+            x, _, jac, n_data = prob.solve(fit.x, train, REFIT_ITERATIONS)
+            ok = int(rows.sum()) >= prob.n_params and full_rank(jac[:n_data][rows])
+        else:
+            x, ok = prob.one_step(fit, ~rows)
+        if not ok:
+            return np.empty(0)
+        for d in prob.dirs:
+            test = ~train[d]
+            if np.any(test):
+                errs[d][test] = prob.average(x, d, test) / data.gamma[d][test] - 1.0
+    return np.concatenate([errs[d] for d in prob.dirs])
+
+
+def _stats(e: NDArray[np.float64]) -> tuple[float, float]:
+    if not e.size:
+        return math.nan, math.nan
+    if not np.all(np.isfinite(e)):
+        return math.inf, math.inf
+    return float(np.sqrt(np.mean(e**2))), float(np.max(np.abs(e)))
+
+
+def _honest_mixture(
+    errors: Mapping[str, NDArray[np.float64]], ids: NDArray[np.int64], prior: Mapping[str, float]
+) -> NDArray[np.float64]:
+    """The average's held-out errors with the weights for each fold computed without it."""
+    out = np.empty_like(next(iter(errors.values())))
+    for k in np.unique(ids):
+        rest, here = ids != k, ids == k
+        w = averaging_weights({lab: e[rest] for lab, e in errors.items()}, ids[rest], prior=prior)
+        out[here] = sum((wt * errors[lab][here] for lab, wt in w.items()), np.zeros(int(here.sum())))
+    return out
+
+
+def held_out_distances(coords: NDArray[np.float64], folds: NDArray[np.int64]) -> NDArray[np.float64]:
+    """Each pose's distance (load coordinates, 1) to the nearest pose outside its fold: how far the
+    refit that predicted it had to reach."""
+    out = np.full(len(coords), np.nan)
+    for k in np.unique(folds):
+        here = folds == k
+        if np.all(here):
+            continue
+        out[here] = nearest(coords[here], coords[~here])[0]
+    return out
+
+
+def error_model(
+    cv_errors: NDArray[np.float64], cv_distance: NDArray[np.float64], residuals: NDArray[np.float64]
+) -> tuple[float, float]:
+    """``(floor, slope)`` of the relative error at a new pose, ``sd(x) = sqrt(floor^2 + (slope d(x))^2)``
+    with ``d(x)`` its distance to the nearest calibrated pose in the load space.
+
+    At a calibrated pose the error is the model's residual there (``floor^2 = mean(r^2)``); a
+    held-out pose at distance ``d_i`` from the poses its refit kept erred by ``e_i``, so
+    ``slope^2 = max(0, mean(e^2) - floor^2) / mean(d^2)``. Both are multiplied by
+    ``t_{0.975, n-1} / 1.96`` (Student's t for the ``n`` held-out traverses they are estimated
+    from), so that ``1.96 sd`` is the 95 % interval.
+    """
+    from scipy.special import stdtrit
+
+    ok = np.isfinite(cv_errors) & np.isfinite(cv_distance)
+    floor2 = float(np.mean(residuals**2)) if residuals.size else 0.0
+    n = int(ok.sum())
+    if n < 3:
+        return math.sqrt(floor2), 0.0
+    d2 = float(np.mean(cv_distance[ok] ** 2))
+    slope2 = max(0.0, float(np.mean(cv_errors[ok] ** 2)) - floor2) / d2 if d2 > 0 else 0.0
+    t = float(stdtrit(n - 1, 0.975)) / 1.959963984540054
+    return t * math.sqrt(floor2), t * math.sqrt(slope2)
+
+
+# ----------------------------------------------------------------------------- one joint
+
+
 def select_joint(
-    joint: int,
-    by_dir: Mapping[str, Sequence[Traverse]],
+    data: JointData,
     candidates: Sequence[str] | None = None,
     average: bool | None = None,
-) -> tuple[JointFit, list[CVScore], str, dict[str, tuple[float, JointFit]], float]:
-    """Fit every identifiable family (separate and with shared terms) to both directions of
-    ``joint`` and weigh or pick them by leave-one-pose-out CV over both directions.
+    progress: Progress | None = None,
+) -> JointSelection:
+    """Fit every identifiable family (separate and with shared terms) to both directions of one joint,
+    cross-validate each on held-out poses, and average them (or fit the one asked for).
 
-    ``candidates`` names families, ``"name+shared"`` for the shared variant. With
-    ``average`` (the default when no candidates are named) the cross-validated families
-    are averaged with :func:`averaging_weights`; otherwise one is picked (the smallest mean
-    of CV RMS and largest error, a simpler one within 5 %). Returns ``(fit of the chosen
-    or most weighted family, scores, reason, {label: (weight, fit)} of the average or empty,
-    CV RMS error of what is returned)``.
+    ``candidates`` names families, ``"name+shared"`` for the shared variant. With ``average``
+    (the default when no candidates are named) the families are averaged with
+    :func:`averaging_weights` and the paper's form as the prior's favourite; the average
+    is replaced by the paper's form when it predicts held-out poses worse.
     """
     if average is None:
         average = candidates is None
-    cv_errors: dict[str, NDArray[np.float64]] = {}
-    cv_ids: NDArray[np.int64] = np.empty(0, dtype=np.int64)
-    cols = {d: traverse_columns(ts) for d, ts in sorted(by_dir.items()) if ts}
-    groups = _joint_pose_groups(joint, {d: by_dir[d] for d in cols})
-    anchors = _anchor_groups(joint, {d: by_dir[d] for d in cols}, groups)
-    poses = {d: len(set(g.tolist())) for d, g in groups.items()}
-    n_poses = len(set(np.concatenate(list(groups.values())).tolist()))
-    variants: list[tuple[FamilySpec, tuple[str, ...]]] = []
+    if data.n_rows() > SELECTION_ROWS:
+        return _select_on_sample(data, candidates, average, progress)
+    variants = _variants(data.joint, len(data.dirs), candidates)
+    design = cv_folds(data.coords, workspace_coordinates(data.joint))
+    ev = _Evidence(data, design.folds, design.n_folds)
+    known: dict[tuple[str, str, float | None], float] = {}
+    for step, (spec, sh) in enumerate(variants):
+        if progress is not None:
+            progress(step / len(variants), f"joint {data.joint}: {spec.name}{'+shared' if sh else ''}")
+        fit = ev.score(spec, sh, candidates is None, known)
+        if fit is not None and spec.name == "paper" and not sh:  # where the other families start
+            known = {(d, n, None if k is None else round(k, 9)): float(v)
+                     for d in data.dirs for (n, k), v in zip(spec.names, fit.values[d], strict=True)}
+    if progress is not None:
+        progress(1.0, f"joint {data.joint}: weighing")
+    return _decide(ev, average)
+
+
+def _variants(joint: int, n_dirs: int, candidates: Sequence[str] | None) -> list[tuple[FamilySpec, tuple[str, ...]]]:
+    """The families to fit (every one of ``joint``, or those named) and the terms each shares."""
+    out: list[tuple[FamilySpec, tuple[str, ...]]] = []
     if candidates is None:
         for spec in families_for(joint):
-            variants.append((spec, ()))
+            out.append((spec, ()))
             sh = shared_names(spec)
-            if sh and len(cols) == 2:
-                variants.append((spec, sh))
-    else:
-        for c in candidates:
-            name, _, tail = c.partition("+")
-            spec = family_spec(joint, name)
-            variants.append((spec, shared_names(spec) if tail == "shared" and len(cols) == 2 else ()))
-    scores: list[CVScore] = []
-    fits: dict[str, JointFit] = {}
-    for spec, sh in variants:
+            if sh and n_dirs == 2:
+                out.append((spec, sh))
+        return out
+    for c in candidates:
+        name, _, tail = c.partition("+")
+        spec = family_spec(joint, name)
+        out.append((spec, shared_names(spec) if tail == "shared" and n_dirs == 2 else ()))
+    return out
+
+
+class _Evidence:
+    """What the cross-validation of one joint's families found: each family's score, fit and held-out errors."""
+
+    def __init__(self, data: JointData, folds: NDArray[np.int64], n_folds: int) -> None:
+        self.data, self.folds, self.n_folds = data, folds, n_folds
+        self.poses = {d: data.poses_of(d) for d in data.dirs}
+        cv = n_folds >= 2
+        self.ids = np.concatenate([folds[data.pose[d]] for d in data.dirs]) if cv else np.empty(0, dtype=np.int64)
+        dist = held_out_distances(data.coords, folds) if cv else np.empty(0)
+        self.row_dist = np.concatenate([dist[data.pose[d]] for d in data.dirs]) if cv else np.empty(0)
+        self.scores: list[CVScore] = []
+        self.fits: dict[str, JointFit] = {}
+        self.cv_errors: dict[str, NDArray[np.float64]] = {}
+
+    def score(self, spec: FamilySpec, sh: tuple[str, ...], strict: bool,
+              known: dict[tuple[str, str, float | None], float]) -> JointFit | None:
+        """Fit and cross-validate one family; its fit if it is identifiable. ``strict``: at least two poses
+        per parameter of a direction (a shared one counts half): fewer, and a family fits the poses it has
+        and swings between them (a family asked for by name needs one more pose than parameters)."""
+        dirs = self.data.dirs
         label = spec.name + ("+shared" if sh else "")
         own = sum(1 for n, _ in spec.names if n not in sh)
         n_sh = spec.n_params - own
-        # at least two poses per parameter of a direction (a shared one counts half): fewer, and a
-        # family fits the poses it has and swings between them (the benchmark's worst cases)
-        need = math.ceil(2 * (own + n_sh / max(len(cols), 1))) if candidates is None else own + 1  # asked for: fit it
-        short = [d for d in cols if poses[d] < need] if spec.name != "constant" else []
-        p_total = own * len(cols) + n_sh
+        need = math.ceil(2 * (own + n_sh / max(len(dirs), 1))) if strict else own + 1
+        short = [d for d in dirs if self.poses[d] < need] if spec.name != "constant" else []
+        p_total = own * len(dirs) + n_sh
         if short:
-            scores.append(CVScore(label, p_total, f"too few poses in {', '.join(short)} (needs {need})", np.nan, np.nan,
-                                  np.nan))
-            continue
-        fit = fit_joint(spec, joint, cols, sh)
+            why = f"too few poses in {', '.join(short)} (needs {need})"
+            self.scores.append(CVScore(label, p_total, why, math.nan, math.nan, math.nan))
+            return None
+        prob = FamilyProblem(spec, self.data, sh)
+        fit = prob.fit(prob.initial(known))
         if not fit.identifiable:
-            scores.append(CVScore(label, p_total, "not identifiable from these poses", np.nan, np.nan, fit.rms))
-            continue
-        fits[label] = fit
-        if n_poses >= 2:
-            rms, mx, e, ids = _cv_joint_errors(spec, joint, cols, groups, fit, anchors)
-        else:
-            rms, mx, e, ids = np.nan, np.nan, np.empty(0), np.empty(0, dtype=np.int64)
-        status = "ok" if np.isfinite(rms) else "not identifiable without one of the poses"
+            self.scores.append(CVScore(label, p_total, "not identifiable from these poses", math.nan, math.nan,
+                                       fit.rms))
+            return None
+        self.fits[label] = fit
+        e = _cross_validate(prob, fit, self.folds, self.n_folds) if self.n_folds >= 2 else np.empty(0)
+        rms, mx = _stats(e)
+        status = "ok" if np.isfinite(rms) else (
+            "not identifiable without one of the folds" if self.n_folds >= 2 else "not cross-validated")
         if status == "ok":
-            cv_errors[label] = e
-            cv_ids = ids
-        scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
-    scored = [s for s in scores if s.status == "ok"]
-    if scored and average and len(scored) > 1:
-        weights = averaging_weights(cv_errors, cv_ids)
-        mix = sum(w * cv_errors[lab] for lab, w in weights.items())
-        assert isinstance(mix, np.ndarray)
-        scores = [dataclasses.replace(sc, weight=weights.get(sc.family, 0.0)) for sc in scores]
-        top = max(weights, key=lambda k: weights[k])
-        mix_rms, mix_max = float(np.sqrt(np.mean(mix**2))), float(np.max(np.abs(mix)))
-        parts = ", ".join(f"{lab} {w:.2f}" for lab, w in sorted(weights.items(), key=lambda kv: -kv[1]))
-        reason = (
-            f"average of {len(weights)} famil{'y' if len(weights) == 1 else 'ies'} weighted by their "
-            f"leave-one-pose-out predictive density (pseudo-BMA+: {parts}); CV of the average: RMS "
-            f"{mix_rms * 100:.2g} %, max {mix_max * 100:.2g} % over {n_poses} poses"
-        )
-        return fits[top], scores, reason, {lab: (w, fits[lab]) for lab, w in weights.items()}, mix_rms
-    if scored:
-        best = min(scored, key=_criterion)
-        chosen = min(
-            (s for s in scored if _criterion(s) <= PREFER_SIMPLER * _criterion(best)),
-            key=lambda s: (s.n_params, _criterion(s)),
-        )
-        reason = (
-            f"smallest leave-one-pose-out error (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} % "
-            f"over {n_poses} poses)"
-        )
-        if chosen.family != best.family:
-            reason = (
-                f"within {100 * (PREFER_SIMPLER - 1):.0f} % of the best CV error ({best.family}) with fewer "
-                f"parameters (RMS {chosen.cv_rms * 100:.2g} %, max {chosen.cv_max * 100:.2g} %)"
-            )
-        scores = [dataclasses.replace(sc, weight=1.0 if sc.family == chosen.family else 0.0) for sc in scores]
-        return fits[chosen.family], scores, reason, {}, chosen.cv_rms
-    if fits:
-        name = min(fits, key=lambda k: fits[k].n_params)
-        reason = f"{n_poses} pose(s): the simplest identifiable family, not cross-validated"
-        return fits[name], scores, reason, {}, float("nan")
-    raise CalibrationError(f"joint {joint}: no model family can be fitted to these traverses")
+            self.cv_errors[label] = e
+        self.scores.append(CVScore(label, p_total, status, rms, mx, fit.rms))
+        return fit
+
+    def residuals(self, mix: Mapping[str, float]) -> NDArray[np.float64]:
+        """The relative residuals of the weighted mixture ``mix`` of fits (traverses in direction order)."""
+        return sum((w * np.concatenate(list(self.fits[lab].residuals.values())) for lab, w in mix.items()),
+                   np.zeros(self.data.n_rows()))
+
+    def chosen(self, mix: dict[str, float], e: NDArray[np.float64], reason: str,
+               fallback: bool = False) -> JointSelection:
+        """The selection of the mixture ``mix`` (one family: weight 1) whose held-out errors are ``e``."""
+        floor, slope = error_model(e, self.row_dist, self.residuals(mix))
+        top = max(mix, key=lambda k: mix[k])
+        members = {lab: (w, self.fits[lab]) for lab, w in mix.items()} if len(mix) > 1 else {}
+        scores = [dataclasses.replace(sc, weight=mix.get(sc.family, 0.0)) for sc in self.scores]
+        return JointSelection(self.fits[top], scores, reason, members, e, fallback, self.n_folds, floor, slope,
+                              self.row_dist)
+
+
+def _select_on_sample(
+    data: JointData, candidates: Sequence[str] | None, average: bool, progress: Progress | None
+) -> JointSelection:
+    """:func:`select_joint` on a sample of the poses (:data:`SELECTION_ROWS`), then the families it
+    chose refitted to every traverse, from their fits on the sample."""
+    sub = data.sample(SELECTION_ROWS)
+
+    def part(frac: float, what: str) -> None:
+        if progress is not None:
+            progress(0.8 * frac, what)
+
+    sel = select_joint(sub, candidates, average, part)
+    mix = {lab: w for lab, (w, _) in sel.mixture.items()} or {sel.fit.label: 1.0}
+    sample_fits = {lab: f for lab, (_, f) in sel.mixture.items()} or {sel.fit.label: sel.fit}
+    full: dict[str, JointFit] = {}
+    for n, (lab, f) in enumerate(sample_fits.items()):
+        if progress is not None:
+            progress(0.8 + 0.2 * n / len(sample_fits), f"joint {data.joint}: {lab} on all {data.n_rows()} traverses")
+        full[lab] = FamilyProblem(f.spec, data, f.shared).fit(f.x, max_iter=FULL_REFIT_ITERATIONS)
+    resid = sum((w * np.concatenate(list(full[lab].residuals.values())) for lab, w in mix.items()),
+                np.zeros(data.n_rows()))
+    floor, slope = error_model(sel.cv_errors, sel.cv_distance, resid) if sel.n_folds else (math.nan, math.nan)
+    top = max(mix, key=lambda k: mix[k])
+    reason = f"{sel.reason}; chosen on {sub.n_rows()} of the {data.n_rows()} traverses, refitted to all"
+    return dataclasses.replace(
+        sel, fit=full[top], mixture={lab: (w, full[lab]) for lab, (w, _) in sel.mixture.items()}, reason=reason,
+        floor=floor, slope=slope, sample=sub.n_rows(),
+    )
+
+
+def _decide(ev: _Evidence, average: bool) -> JointSelection:
+    """The average (or the paper's form where it predicted held-out poses worse), the best family, or
+    without cross-validation the simplest one that fits."""
+    where = f"{ev.n_folds} folds of {ev.data.n_poses} poses"
+    cv = ev.cv_errors
+    if len(cv) > 1 and average:
+        return _average(ev, where)
+    if cv:
+        lab = min(cv, key=lambda k: (_stats(cv[k])[0], ev.fits[k].n_params))
+        rms, mx = _stats(cv[lab])
+        return ev.chosen({lab: 1.0}, cv[lab],
+                         f"{lab}: held-out poses predicted with RMS {rms * 100:.2g} %, max {mx * 100:.2g} % ({where})")
+    if ev.fits:
+        name = min(ev.fits, key=lambda k: ev.fits[k].n_params)
+        reason = f"{ev.data.n_poses} pose(s): the simplest identifiable family, not cross-validated"
+        scores = [dataclasses.replace(sc, weight=1.0 if sc.family == name else 0.0) for sc in ev.scores]
+        return JointSelection(ev.fits[name], scores, reason, {}, np.empty(0), False, 0)
+    raise CalibrationError(f"joint {ev.data.joint}: no model family can be fitted to these traverses")
+
+
+def _average(ev: _Evidence, where: str) -> JointSelection:
+    """The families averaged, unless the average predicted held-out poses worse than the paper's form."""
+    cv = ev.cv_errors
+    prior = _paper_prior(list(cv))
+    mix = averaging_weights(cv, ev.ids, prior=prior)
+    honest = _honest_mixture(cv, ev.ids, prior)
+    m_rms, m_max = _stats(honest)
+    paper = min((lab for lab in cv if lab.partition("+")[0] == "paper"), key=lambda lab: _stats(cv[lab])[0],
+                default=None)
+    if paper is not None and set(mix) != {paper}:
+        p_rms, p_max = _stats(cv[paper])
+        if m_rms > p_rms or m_max > p_max:
+            return ev.chosen({paper: 1.0}, cv[paper], (
+                f"the paper's form: the average of the families predicted held-out poses worse "
+                f"(RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} %) than the paper's form alone "
+                f"(RMS {p_rms * 100:.2g} %, max {p_max * 100:.2g} %; {where})"
+            ), fallback=True)
+    if len(mix) == 1:
+        top = next(iter(mix))
+        return ev.chosen(mix, honest, f"{top}: the held-out poses weigh it alone (pseudo-BMA+); CV of the "
+                         f"procedure: RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})")
+    parts = ", ".join(f"{lab} {w:.2f}" for lab, w in sorted(mix.items(), key=lambda kv: -kv[1]))
+    return ev.chosen(mix, honest, (
+        f"average of {len(mix)} families weighted by how they predicted held-out poses "
+        f"(pseudo-BMA+, half the prior on the paper's form: {parts}); CV of the average: "
+        f"RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})"
+    ))
+
+
+# ----------------------------------------------------------------------------- calibration
 
 
 def calibrate_families(
-    traverses: Sequence[Traverse],
+    traverses: Sequence[Traverse] | TraverseGroups,
     day: str | None = None,
     source: str | None = None,
     model: str = "auto",
+    progress: Progress | None = None,
+    provenance: Provenance | None = None,
 ) -> Calibration:
-    """Calibrate every joint and direction with a family chosen by CV (``model="auto"``) or a named one.
+    """Calibrate every joint and direction with the families averaged (``model="auto"``) or a named one.
 
-    The calibration records, per joint and direction, the family, the covariance of its
-    parameters, the CV error of every family (``selection``) and the relative model
-    error ``sigma_model`` (the chosen family's CV RMS error, or its fit RMS when it could
-    not be cross-validated) that prediction intervals use.
+    The calibration records, per joint and direction, the family (or average), the
+    covariance of its (heaviest) family's parameters, the CV error of every family
+    (``selection``), the error model of its intervals (``predictive``) and the relative
+    model error ``sigma_model`` (that model's RMS over new poses of the workspace, or the
+    fit's RMS when it could not be cross-validated).
     """
-    groups = _group(traverses)
+    groups = group_traverses(traverses)
     if not groups:
         raise CalibrationError("no traverses to calibrate from")
-    models: dict[tuple[int, str], FamilyModel] = {}
-    stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
-    cov: dict[tuple[int, str], NDArray[np.float64]] = {}
-    sigma: dict[tuple[int, str], float] = {}
-    selection: dict[tuple[int, str], dict[str, object]] = {}
-    notes: list[str] = []
-    for j in sorted({j for j, _ in groups}):
-        by_dir = {d: groups[(j, d)] for (jj, d) in groups if jj == j}
-        candidates = None if model == "auto" else [model]
-        fit, scores, reason, mixture, cv_rms = select_joint(j, by_dir, candidates)
-        sig = cv_rms if np.isfinite(cv_rms) else fit.rms
-        for d in sorted(by_dir):
+    parts = _Parts()
+    joints = groups.joints
+    for n, j in enumerate(joints):
+
+        def part(frac: float, what: str, n: int = n) -> None:
+            if progress is not None:
+                progress((n + frac) / len(joints), what)
+
+        data = groups.joint_data(j)
+        parts.add(data, select_joint(data, None if model == "auto" else [model], progress=part))
+    for (j, d), m in parts.models.items():
+        try:
+            m.check_physical()
+        except ValueError as e:
+            parts.notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
+    consts = {k: _constant_step(k[0], k[1], m) for k, m in parts.models.items()}
+    labels = {
+        j: (f"average of {len(parts.models[(j, d)].members)}, mostly " if parts.models[(j, d)].members else "")
+        + str(parts.selection[(j, d)]["chosen"])
+        for (j, d) in parts.selection
+    }
+    method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
+    prov = provenance if provenance is not None else Provenance.of(groups.traverses, source, len(groups), ())
+    prov = dataclasses.replace(prov, notes=(*prov.notes, *parts.notes))
+    cal = Calibration(dict(parts.models), parts.stderr, consts, _day_of(groups.traverses, day), method, prov)
+    cal.covariance.update(parts.cov)
+    cal.sigma_model.update(parts.sigma)
+    cal.selection.update(parts.selection)
+    cal.predictive.update(parts.predictive)
+    for key in parts.predictive:  # the model error at new poses: the interval's RMS over the workspace
+        cal.sigma_model[key] = workspace_sigma(cal, *key)
+        parts.selection[key]["sigma_workspace"] = cal.sigma_model[key]
+    return cal
+
+
+class _Parts:
+    """A family calibration's pieces, joint by joint and direction by direction."""
+
+    def __init__(self) -> None:
+        self.models: dict[tuple[int, str], FamilyModel] = {}
+        self.stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
+        self.cov: dict[tuple[int, str], NDArray[np.float64]] = {}
+        self.sigma: dict[tuple[int, str], float] = {}
+        self.selection: dict[tuple[int, str], dict[str, object]] = {}
+        self.predictive: dict[tuple[int, str], Predictive] = {}
+        self.notes: list[str] = []
+
+    def add(self, data: JointData, sel: JointSelection) -> None:
+        """The models, uncertainties and selection record of one joint's directions."""
+        j, fit = data.joint, sel.fit
+        sig = sel.cv_rms if np.isfinite(sel.cv_rms) else fit.rms
+        ranked = sorted(sel.mixture.items(), key=lambda kv: -kv[1][0])
+        cross_validated = sel.n_folds >= 2 and math.isfinite(sel.floor) and math.isfinite(sel.slope)
+        kept = stored_poses(data.poses, data.coords) if cross_validated else np.empty((0, 5))
+        for d in data.dirs:
             params = FamilyParams(fit.spec.name, j, tuple(float(v) for v in fit.values[d]))
-            ranked = sorted(mixture.items(), key=lambda kv: -kv[1][0])
             members = tuple(
                 (w, FamilyParams(f.spec.name, j, tuple(float(v) for v in f.values[d]))) for _, (w, f) in ranked
             )
             averaged = len(members) > 1
-            models[(j, d)] = FamilyModel(
-                j,
-                d,
-                params,
-                members=members if averaged else (),
-                member_labels=tuple(lab for lab, _ in ranked) if averaged else (),
-            )
+            self.models[(j, d)] = FamilyModel(j, d, params, members=members if averaged else (),
+                                              member_labels=tuple(lab for lab, _ in ranked) if averaged else ())
+            if cross_validated:
+                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept)
             c = fit.cov[d]
             if c is not None:
-                cov[(j, d)] = c
-                stderr[(j, d)] = np.sqrt(np.clip(np.diag(c), 0.0, None))
-            else:
-                stderr[(j, d)] = None
-            sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
-            selection[(j, d)] = {
-                "chosen": fit.label, "shared": list(fit.shared), "reason": reason,
-                "scores": [s.as_dict() for s in scores],
-                "weights": {lab: w for lab, (w, _) in mixture.items()} if len(mixture) > 1 else {fit.label: 1.0},
+                self.cov[(j, d)] = c
+            self.stderr[(j, d)] = None if c is None else np.sqrt(np.clip(np.diag(c), 0.0, None))
+            self.sigma[(j, d)] = float(sig) if sig > 0 else float("nan")
+            self.selection[(j, d)] = {
+                "chosen": fit.label, "shared": list(fit.shared), "reason": sel.reason,
+                "scores": [s.as_dict() for s in sel.scores],
+                "weights": {lab: w for lab, (w, _) in sel.mixture.items()} if len(sel.mixture) > 1
+                else {fit.label: 1.0},
+                "fallback": sel.fallback,
+                "folds": sel.n_folds,
+                "cv_rms": sel.cv_rms if math.isfinite(sel.cv_rms) else None,
             }
-        notes.append(f"joint {j}: family {fit.label} — {reason}")
-    for (j, d), m in models.items():
-        try:
-            m.check_physical()
-        except ValueError as e:
-            notes.append(f"joint {j}{d}: {e} (outside the calibrated poses)")
-    consts = {k: _constant_step(k[0], k[1], m) for k, m in models.items()}
-    labels = {
-        j: (f"average of {len(models[(j, d)].members)}, mostly " if models[(j, d)].members else "")
-        + str(selection[(j, d)]["chosen"])
-        for (j, d) in selection
-    }
-    method = "families (" + ", ".join(f"{j} {lab}" for j, lab in sorted(labels.items())) + ")"
-    cal = Calibration(
-        dict(models), stderr, consts, _day_of(traverses, day), method,
-        Provenance.of(traverses, source, len(traverses), notes),
-    )
-    cal.covariance.update(cov)
-    cal.sigma_model.update(sigma)
-    cal.selection.update(selection)
-    return cal
+        self.notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
+
+
+MAX_STORED_POSES = 400
+"""Calibrated poses kept in a calibration for the distance term of its intervals, at most (a longer
+table keeps a farthest-point sample of a seeded random sample of its poses: a pose is then about
+that sample's spacing from one kept, and the intervals are wider by it, which is small where the
+poses are that many)."""
+
+
+def stored_poses(poses: NDArray[np.float64], coords: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The calibrated poses an interval measures its distance from (all, or a farthest-point sample)."""
+    n = len(poses)
+    if n <= MAX_STORED_POSES:
+        return np.asarray(poses, dtype=float).copy()
+    pool = np.sort(np.random.default_rng(0).choice(n, min(n, 10 * MAX_STORED_POSES), replace=False))
+    x = coords[pool]
+    pick = [0]
+    d = np.sum((x - x[0]) ** 2, axis=1)
+    for _ in range(MAX_STORED_POSES - 1):
+        k = int(np.argmax(d))
+        pick.append(k)
+        d = np.minimum(d, np.sum((x - x[k]) ** 2, axis=1))
+    return np.asarray(poses[pool[np.sort(pick)]], dtype=float)
+
+
+def workspace_sigma(cal: Calibration, joint: int, direction: str) -> float:
+    """The RMS relative standard deviation of full-range traverses at random workspace poses
+    (:func:`~.folds.workspace_pose_array`): the calibration's expected error at a new pose."""
+    from ..joints import JOINTS
+
+    spec = JOINTS[joint]
+    lo, hi = (spec.lower, spec.upper) if direction == "+" else (spec.upper, spec.lower)
+    w = workspace_pose_array(joint)
+    sd = relative_sd(cal, joint, direction, w[:, 0], w[:, 1], w[:, 2], w[:, 3], w[:, 4], start=lo, end=hi)
+    return float(np.sqrt(np.mean(sd**2)))

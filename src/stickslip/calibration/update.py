@@ -41,19 +41,16 @@ from ..measurements import StepSize, Traverse
 from ..models import JointModel, PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams
 from ..units import DIMENSIONLESS_PARAMETERS
+from .intervals import DEFAULT_SIGMA, STEP_NOISE, model_sigma, prediction_sd
 from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
 
-__all__ = ["DRIFT_PRIOR", "ScaleUpdate", "update_calibration", "scaled_model", "model_sigma", "prediction_sd"]
+__all__ = [
+    "DRIFT_PRIOR", "DEFAULT_SIGMA", "STEP_NOISE", "ScaleUpdate", "update_calibration", "scaled_model", "model_sigma",
+    "prediction_sd",
+]
 
 DRIFT_PRIOR = 0.15
 """Default prior standard deviation of the day-to-day change of a joint's step scale (relative)."""
-
-DEFAULT_SIGMA = {3: 0.075, 2: 0.02, 1: 0.02}
-"""Relative model error (1 sigma) assumed where a calibration carries none (the paper's
-procedure is exactly determined, so it has no residuals): half the largest errors the
-paper reports for its models (15 % prismatic; rotary 2 %, taken as 4 %), so that ~95 %
-intervals span those errors. Calibrate with more poses to measure it instead."""
-
 
 @dataclass(frozen=True)
 class ScaleUpdate:
@@ -85,31 +82,6 @@ class ScaleUpdate:
             "scale": self.scale,
             "scale_sd": self.scale_sd,
         }
-
-
-def model_sigma(cal: Calibration, joint: int, direction: str) -> tuple[float, bool]:
-    """Relative model error of ``cal`` for a joint and direction, and whether it is assumed (not measured)."""
-    s = cal.sigma_model.get((joint, direction))
-    if s is not None and math.isfinite(s) and s > 0:
-        return float(s), False
-    return DEFAULT_SIGMA.get(joint, 0.05), True
-
-
-STEP_NOISE = 0.03
-"""Relative standard deviation of a single step assumed for short moves (docs/models.md §4)."""
-
-
-def prediction_sd(cal: Calibration, joint: int, direction: str, n_steps: float | None = None) -> tuple[float, bool]:
-    """Relative standard deviation of a prediction, and whether it rests on an assumed model error.
-
-    The mean step: ``sigma_model`` (the leave-one-pose-out error of the chosen family,
-    which already holds the parameters' estimation error). A move of ``n_steps`` steps adds
-    the per-step scatter ``STEP_NOISE / sqrt(n_steps)``.
-    """
-    sig, assumed = model_sigma(cal, joint, direction)
-    if n_steps is not None and n_steps > 0:
-        sig = math.hypot(sig, STEP_NOISE / math.sqrt(n_steps))
-    return sig, assumed
 
 
 def scaled_model(model: JointModel, factor: float) -> JointModel:

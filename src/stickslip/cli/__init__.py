@@ -114,7 +114,7 @@ def _root(
     _logging(verbose, log_file)
 
 
-from . import audio, camera, config, core, devices, history, measure, models, observe, serve, taskspace  # noqa: E402,F401  (they register their commands)
+from . import audio, camera, config, core, devices, history, measure, models, observe, rig, serve, taskspace  # noqa: E402,F401  (they register their commands)
 
 
 def _unwrap(doc: str) -> str:

@@ -606,12 +606,12 @@ def fail_table(e: TableError) -> NoReturn:
     fail("\n".join(e.problems))
 
 
-def read_table(path: Path) -> list[Traverse]:
+def read_table(path: Path, max_bytes: int | None = None) -> list[Traverse]:
     """The traverses of a measurement table, or every bad row's reason and exit 2 (nothing is read)."""
     from ..measurements import TableError, read_measurements
 
     try:
-        return read_measurements(path)
+        return read_measurements(path, max_bytes)
     except TableError as e:
         fail_table(e)
 

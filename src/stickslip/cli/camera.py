@@ -19,7 +19,12 @@ from ._common import DB_HELP, OneLineErrors, console, device_url, err_console, f
 from ._output import styled
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from ..devices.base import Controller
+    from ..kinematics import Pose
     from ..procedures.camera import CameraCalibrationResult
+    from ..vision.camera import Camera
     from ..vision.locate import Located
 
 PIXELS = "Pixels: x to the right, y down, the centre of the top-left pixel at (0, 0)."
@@ -184,28 +189,15 @@ def calibrate_cmd(
 
     Example: stickslip camera calibrate -d sim:// --camera "simcam://?pixel=0.5um" -o steps.csv
     """
-    from rich.progress import BarColumn, Progress, TextColumn
-
     from ..clock import today_label
     from ..devices.positions import load_state, save_state
-    from ..kinematics import JOINTS
     from ..measurements import write_step_sizes
-    from ..procedures.camera import calibrate_camera
+    from ..procedures.camera import calibrate_camera, dead_reckon
     from ..procedures.move import DeviceBusy, device_lock
-    from ..vision.acquire import AcquireError
-    from ..vision.camera import CameraError, open_camera
-    from ..vision.frame import ImageError
-    from ..vision.jacobian import JacobianError
-    from ..vision.template import TemplateError
 
     url = device_url(device)
     at = _pixel(tip, "--tip") if tip is not None else None
-    try:
-        order = [int(j) for j in joints.split(",")]
-        if not order or any(j not in (1, 2, 3) for j in order) or len(set(order)) != len(order):
-            raise ValueError
-    except ValueError:
-        fail(f"--joints {joints!r}: write the joints to measure, e.g. 3,1 (each of 1, 2, 3 once)")
+    order = _joint_order(joints)
     view = _view(view_tilt, view_azimuth, view_roll)
     label = day if day is not None else today_label()
     with user_errors():
@@ -214,47 +206,16 @@ def calibrate_cmd(
         with device_lock(store, key):
             with user_errors():
                 state = load_state(store, key)
-            try:
-                dev = open_device(url)
-            except (DeviceError, ValueError) as e:
-                fail(str(e))
-            try:
-                if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
-                    dev.set_pose(*state.pose)
-                try:
-                    cam = open_camera(camera, dev)
-                except (CameraError, ValueError) as e:
-                    fail(str(e))
-                try:
-                    columns = (
-                        TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}")
-                    )
-                    with Progress(*columns, console=err_console, transient=True) as bar:
-                        task = bar.add_task("camera", total=None)
 
-                        def progress(done: int, total: int) -> None:
-                            bar.update(task, completed=done, total=total)
+            def measure(dev: Controller, cam: Camera, progress: Callable[[int, int], None]) -> CameraCalibrationResult:
+                return calibrate_camera(
+                    dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
+                    auto_steps=auto_steps, max_steps=max_steps, progress=progress,
+                )
 
-                        result = calibrate_camera(
-                            dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
-                            auto_steps=auto_steps, max_steps=max_steps, progress=progress,
-                        )
-                except (AcquireError, TemplateError, JacobianError, ImageError, CameraError, DeviceError,
-                        ValueError) as e:
-                    fail(str(e))
-                finally:
-                    cam.close()
-            finally:
-                try:
-                    dev.close()
-                except DeviceError:
-                    pass
-            for jr in result.joints:  # where the measured joints ended, by the steps the camera saw
-                if jr.net_q:
-                    q = min(max(state.positions[jr.joint] + jr.net_q, JOINTS[jr.joint].lower), JOINTS[jr.joint].upper)
-                    with user_errors():
-                        state.set_position(jr.joint, q, "dead-reckoned")
+            result = _with_device_and_camera(url, camera, state.pose, measure)
             with user_errors():
+                dead_reckon(state, result)  # where the measured joints ended, by the steps the camera saw
                 save_state(store, state)
     if not result.rows:
         reasons = "; ".join(r.refused or f"joint {r.joint}: no step size" for r in result.joints)
@@ -266,6 +227,61 @@ def calibrate_cmd(
         print_json({**result.as_dict(), "device": key, "output": str(output) if output else None})
         return
     _print_calibration(result, output)
+
+
+def _joint_order(joints: str) -> list[int]:
+    """``--joints``: each of 1, 2, 3 at most once, in the order given."""
+    try:
+        order = [int(j) for j in joints.split(",")]
+        if not order or any(j not in (1, 2, 3) for j in order) or len(set(order)) != len(order):
+            raise ValueError
+    except ValueError:
+        fail(f"--joints {joints!r}: write the joints to measure, e.g. 3,1 (each of 1, 2, 3 once)")
+    return order
+
+
+def _with_device_and_camera(
+    url: str, camera: str, pose: Pose,
+    measure: Callable[[Controller, Camera, Callable[[int, int], None]], CameraCalibrationResult],
+) -> CameraCalibrationResult:
+    """Open the device (a simulator placed at ``pose``) and the camera, ``measure`` with a progress bar, close both."""
+    from rich.progress import BarColumn, Progress, TextColumn
+
+    from ..vision.acquire import AcquireError
+    from ..vision.camera import CameraError, open_camera
+    from ..vision.frame import ImageError
+    from ..vision.jacobian import JacobianError
+    from ..vision.template import TemplateError
+
+    try:
+        dev = open_device(url)
+    except (DeviceError, ValueError) as e:
+        fail(str(e))
+    try:
+        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+            dev.set_pose(*pose)
+        try:
+            cam = open_camera(camera, dev)
+        except (CameraError, ValueError) as e:
+            fail(str(e))
+        try:
+            columns = (TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}"))
+            with Progress(*columns, console=err_console, transient=True) as bar:
+                task = bar.add_task("camera", total=None)
+
+                def progress(done: int, total: int) -> None:
+                    bar.update(task, completed=done, total=total)
+
+                return measure(dev, cam, progress)
+        except (AcquireError, TemplateError, JacobianError, ImageError, CameraError, DeviceError, ValueError) as e:
+            fail(str(e))
+        finally:
+            cam.close()
+    finally:
+        try:
+            dev.close()
+        except DeviceError:
+            pass
 
 
 def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> None:
@@ -354,3 +370,88 @@ def grab_cmd(
     console.print(f"{w} x {h} px{px} at t = {frame.time_s:.3f} s -> {output}", highlight=False)
     if truth is not None:
         console.print(f"simulator's true tip: {truth[0]:.2f}, {truth[1]:.2f} px", highlight=False)
+
+
+# ---------------------------------------------------------------- the closed loop (move, reach --camera)
+
+CAMERA_LOOP_HELP = (
+    "Close the loop with this camera (it must know its pixel size: simcam://?pixel=1um with -d sim://, "
+    "opencv://0?pixel=0.5um): the tip is tracked after each short leg, the position and the day's step scale "
+    "corrected, until the tip is within 1 px or 0.5 µm (the larger) of the target. See docs/vision.md."
+)
+CAMERA_TIP_HELP = (
+    "With --camera: the tip's pixel now, X,Y (default: found by stepping joint 3 back and forth). " + PIXELS
+)
+
+
+def camera_errors() -> tuple[type[BaseException], ...]:
+    """What opening a camera and learning the tip may raise: one ``error:`` line each (imported when used)."""
+    from ..vision.acquire import AcquireError
+    from ..vision.camera import CameraError
+    from ..vision.frame import ImageError
+    from ..vision.jacobian import JacobianError
+    from ..vision.template import TemplateError
+
+    return (CameraError, AcquireError, ImageError, JacobianError, TemplateError)
+
+
+def camera_loop(camera: str | None, tip: str | None) -> Any:
+    """The :class:`~stickslip.procedures.closed_loop.CameraLoop` of ``--camera`` and ``--camera-tip`` (or ``None``)."""
+    if camera is None:
+        if tip is not None:
+            fail("--camera-tip goes with --camera")
+        return None
+    from ..procedures.closed_loop import CameraLoop
+
+    at = _pixel(tip, "--camera-tip") if tip is not None else None
+    with user_errors():
+        return CameraLoop(camera, tip=at)
+
+
+def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: Path | None,
+             json_out: bool, borrowed: bool = False) -> None:
+    """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short."""
+    from ..procedures.closed_loop import move_seen, reach_seen
+    from ..procedures.move import DeviceBusy
+    from ._common import flush_warnings, warn_later
+
+    loop = camera_loop(camera, tip)
+    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError, *camera_errors()):
+        if kind == "move":
+            result = move_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
+        else:
+            if borrowed:
+                from ..procedures.reach import BORROWED_JOINT1
+
+                warn_later(BORROWED_JOINT1)
+            result = reach_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
+    if json_out:
+        print_json({"camera": result.as_dict()})
+    else:
+        _print_seen(result)
+    if not result.reached:
+        fail(f"the closed loop stopped: {result.reason}")
+
+
+def _print_seen(result: Any) -> None:
+    from ..kinematics import tip as tip_of
+    from ..units import format_position
+
+    say_ = console.print
+    tol = result.tolerance * 1e6
+    state = "reached" if result.reached else "stopped"
+    if result.looks:
+        say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
+             highlight=False)
+    else:
+        say_(f"{state} before the first look (tolerance {tol:.2g} µm)", highlight=False)
+    say_(f"  {len(result.looks)} leg(s) looked at, {result.corrections} correction(s)", highlight=False)
+    for j in (1, 2, 3):
+        src = result.state.sources[j]
+        say_(f"  joint {j} {format_position(result.state.positions[j], j)} ({src})", highlight=False)
+    scales = result.looks[-1].step_scale if result.looks else {}
+    if scales:
+        say_("  step scale " + ", ".join(f"joint {j} x{s:.4f}" for j, s in sorted(scales.items())), highlight=False)
+    if result.sim_true is not None:
+        err = math.dist(tip_of(result.sim_true, result.geometry), result.target)
+        say_(f"  simulator's true tip {err * 1e6:.2f} µm from the target", highlight=False)

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import csv
+import contextlib
 import dataclasses
-import itertools
 import math
-from collections.abc import Iterator, Sequence
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, TextIO
 
@@ -14,16 +14,13 @@ import typer
 from rich.table import Table
 
 if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --help starts fast
-    import numpy as np
-    from numpy.typing import NDArray
-
     from ..calibration import Calibration
-    from ..measurements import PoseTable
+    from ..measurements import Traverse
 
 from ..clock import stale_message
 from ..devices.base import device_key
 from ..joints import joint_spec
-from ..records import atomic_write, guard_cell, needs_guard, unguard_cell
+from ..records import atomic_write
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
@@ -156,7 +153,8 @@ def calibrate_cmd(
             "--model",
             help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
             "traverses are exactly the paper's poses, else every model family the data identify, averaged "
-            "with weights from leave-one-pose-out cross-validation (pseudo-BMA+). 'paper': the paper's models "
+            "with weights from cross-validation on held-out poses (pseudo-BMA+, leaning to the paper's form), "
+            "or the paper's form where the average predicted held-out poses worse. 'paper': the paper's models "
             "only (also what 'auto' means "
             "with a --method other than auto).",
         ),
@@ -172,6 +170,14 @@ def calibrate_cmd(
     drift: Annotated[
         float, typer.Option(help="With --prior: prior standard deviation of a day's change of step scale (relative).")
     ] = 0.15,
+    max_table_mb: Annotated[
+        float,
+        typer.Option(
+            "--max-table-mb",
+            help="Largest measurement table read, MB: calibrate holds every row in memory (about ten times "
+            "the file), so a table beyond this is refused rather than filling the memory.",
+        ),
+    ] = 64.0,
     json_out: JsonOpt = False,
 ) -> None:
     """Calibrate the step-size models from measured traverses.
@@ -183,11 +189,15 @@ def calibrate_cmd(
     integral. Any other set of traverses is fitted by least squares, with standard errors.
 
     With more traverses than the paper's poses, every model family the data can
-    identify is fitted and scored by leave-one-pose-out cross-validation, and the
-    prediction averages them, each weighted by how well it predicted the poses left out
-    (pseudo-BMA+); the table gives each family's parameter count (+ and - together), CV
-    error and weight, and ◀ marks the one whose parameters are shown. With --prior, an earlier
-    calibration is brought up to date with as few as one traverse per joint and direction.
+    identify is fitted and cross-validated on held-out poses (folds as far from the rest
+    as new poses of the workspace are from the calibration's), and the prediction averages
+    them, each weighted by how well it predicted the poses held out (pseudo-BMA+, half the
+    prior on the paper's form); where that average predicts held-out poses worse than the
+    paper's form, the paper's form is used and the note says so. The table gives each
+    family's parameter count (+ and - together), CV error and weight, and ◀ marks the one
+    whose parameters are shown; below it, the error to expect at new poses (what
+    predict --interval and plan use). With --prior, an earlier calibration is brought up to
+    date with as few as one traverse per joint and direction.
 
     With --step-sizes, step sizes a camera measured at poses (stickslip camera calibrate)
     join the traverses: each joint and direction that has some is fitted by least squares
@@ -210,7 +220,9 @@ def calibrate_cmd(
 
     if measurements is None and (step_sizes is None or prior is None):
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
-    traverses = read_table(measurements) if measurements is not None else []
+    if not (math.isfinite(max_table_mb) and max_table_mb > 0):
+        fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
+    traverses = _whole_table(measurements, int(max_table_mb * 1024 * 1024)) if measurements is not None else []
     steps: list[StepSize] = read_step_table(step_sizes) if step_sizes is not None else []
     source = str(measurements) if measurements is not None else str(step_sizes)
     stored = _stored_device(traverses, db) if device is None and traverses else None
@@ -225,7 +237,9 @@ def calibrate_cmd(
                 old = Calibration.load(prior)
             cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
         else:
-            cal = calibrate(traverses, method=method, day=day, source=source, model=model, step_sizes=steps)
+            with _progress_bar("calibrating") as progress:  # shown once it has taken a second
+                cal = calibrate(traverses, method=method, day=day, source=source, model=model, step_sizes=steps,
+                                progress=progress)
     except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
         fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
@@ -274,9 +288,52 @@ def _keep(cal: Calibration, stored: tuple[str, list[int]] | None, db: Path | Non
         return store.add_calibration(cal, stored[0], stored[1])
 
 
+def _whole_table(path: Path, max_bytes: int) -> list[Traverse]:
+    """A measurement table read whole (calibrate holds every row), or every problem and exit 2; over the size
+    limit, the message says how to raise it."""
+    from ..measurements import TableError, read_measurements
+
+    try:
+        return read_measurements(path, max_bytes)
+    except TableError as e:
+        fail("\n".join(p + ("; --max-table-mb raises the limit" if "limit for a CSV" in p else "")
+                       for p in e.problems))
+
+
+@contextlib.contextmanager
+def _progress_bar(what: str, after_s: float = 1.0) -> Iterator[Callable[[float, str], None]]:
+    """A ``progress(fraction, text)`` callback that shows a bar on stderr once ``after_s`` have passed
+    (a calibration of a few hundred traverses ends before it would flicker), removed when done."""
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    start = time.monotonic()
+    bar: Progress | None = None
+    task = None
+
+    def update(fraction: float, text: str) -> None:
+        nonlocal bar, task
+        if bar is None and time.monotonic() - start < after_s:
+            return
+        if bar is None:
+            bar = Progress(TextColumn(what), BarColumn(), TextColumn("{task.percentage:>3.0f} %"),
+                           TextColumn("{task.description}"), TimeElapsedColumn(),
+                           console=Console(stderr=True), transient=True)
+            bar.start()
+            task = bar.add_task(text, total=1.0)
+        assert task is not None
+        bar.update(task, completed=min(max(fraction, 0.0), 1.0), description=text)
+
+    try:
+        yield update
+    finally:
+        if bar is not None:
+            bar.stop()
+
+
 def _selection_table(cal: Calibration) -> Table:
     """Each scored family's CV errors and weight; the families the data could not score, in the caption."""
-    t = Table(title="model families: leave-one-pose-out cross-validation (relative error of the average step)")
+    t = Table(title="model families: cross-validation on held-out poses (relative error of the average step)")
     for col in ("joint", "family", "params", "CV RMS", "CV max", "fit RMS", "weight"):
         t.add_column(
             col, justify="left" if col in ("joint", "family") else "right", no_wrap=col != "family", overflow="fold"
@@ -302,8 +359,14 @@ def _selection_table(cal: Calibration) -> Table:
             w = weights.get(str(sc["family"]))
             t.add_row(str(j), str(sc["family"]), str(sc["n_params"]), pct(sc["cv_rms"]), pct(sc["cv_max"]),
                       pct(sc["fit_rms"]), (f"{w:.2f}" if w else "") + mark)
+    captions = []
+    expected = [f"{j}{d} {cal.sigma_model[(j, d)] * 100:.1f} %" for (j, d) in sorted(cal.predictive)
+                if (j, d) in cal.sigma_model]
+    if expected:
+        captions.append("expected RMS error at new poses of the workspace: " + ", ".join(expected))
     if unscored:
-        t.caption = "not scored: " + "; ".join(unscored)
+        captions.append("not scored: " + "; ".join(unscored))
+    t.caption = "\n".join(captions) or None
     return t
 
 
@@ -387,173 +450,38 @@ def predict_cmd(
     """Predict step sizes: adds a gamma_pred column (m for joint 3, rad for joints 1, 2).
 
     With --interval also gamma_pi95, the half-width of a 95 % prediction interval: 1.96
-    times the calibration's relative model error (its leave-one-pose-out error; an
-    assumed one for the paper's exactly determined procedure) times gamma_pred.
+    times the relative error the calibration expects in that pose (it grows with the pose's
+    distance from the calibrated poses; an assumed one for the paper's exactly determined
+    procedure) times gamma_pred.
 
     A row with start,end gets the average step over that traverse (exact integral);
     a row without them gets the step size at its pose (the moving joint at q1/q2/q3).
 
     Example: stickslip predict -c cal.json poses.csv -o predicted.csv
     """
-    from ..measurements import TableError, read_pose_columns
-    from ..measurements.poses import POSE_COLUMNS
+    from ..measurements import TableError
+    from ..procedures.predict import PredictionError, check_pose_file, predict_pose_file, write_csv, write_json
 
     cal = _load_calibration(calibration)
+    rows = [0]
+
+    def emit(f: TextIO) -> None:  # the table streams through, a chunk at a time (any length, bounded memory)
+        header, chunks = predict_pose_file(cal, poses, interval)
+        rows[0] = write_json(header, chunks, f) if json_out else write_csv(header, chunks, f, interval)
+
     try:
-        table = read_pose_columns(poses)
+        if output is None:
+            check_pose_file(poses)  # a table that fails further on must not leave half of it on the screen
+            emit(data_stream())
+        else:
+            with user_errors():
+                atomic_write(output, emit)  # a failed write or a bad row leaves no half file
     except TableError as e:
         fail_table(e)
-    preds = _predict_columns(cal, table, poses)
-    pi95 = _interval_column(cal, table, preds) if interval else None
-    header = table.header
-    gamma_at = [i for i, h in enumerate(header) if h == "gamma_pred"]
-    out_header = header + (["gamma_pred"] if not gamma_at else [])
-    # a cell of a repeated (empty) column name holds the last such cell, as a dict of the row would
-    last = {h: i for i, h in enumerate(header)}
-    take = [last[h] for h in header]
-    if json_out:
-        _print_predictions(table, preds, pi95, last)
-        return
-
-    def texts() -> Iterator[str]:
-        """repr of each prediction, a chunk at a time (one repr of a list runs in C)."""
-        for i in range(0, len(preds), 65536):
-            yield from repr(preds[i : i + 65536].tolist())[1:-1].split(", ")
-
-    # a cell a spreadsheet would run as a formula is written guarded (records.guard_cell). The pose columns
-    # hold checked numbers and signs; a table whose own columns and names need no guard passes through as it is
-    own = [i for i, h in enumerate(header) if h not in POSE_COLUMNS]
-    safe = not any(map(needs_guard, header)) and not (
-        own and any(needs_guard(cs[i]) for cs in table.cells() for i in own)
-    )
-
-    def cells_of() -> Iterator[Sequence[str]]:
-        return table.cells() if safe else ([guard_cell(unguard_cell(c)) for c in cs] for cs in table.cells())
-
-    def emit(f: TextIO) -> None:
-        w = csv.writer(f, lineterminator="\n")
-        head = out_header if safe else [guard_cell(unguard_cell(h)) for h in out_header]
-        if pi95 is not None:  # the general path, one more column
-            w.writerow([*head, "gamma_pi95"])
-            k = gamma_at[0] if gamma_at else len(take)
-            w.writerows(
-                [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :]), repr(h)]
-                for cells, g, h in zip(cells_of(), texts(), pi95.tolist(), strict=True)
-            )
-            return
-        w.writerow(head)
-        if table.raw is not None and not gamma_at and safe:
-            # plain rows (no quotes, none blank or short): csv would write each back as it stands
-            rows = map("{},{}\n".format, table.raw, texts())
-            while part := "".join(itertools.islice(rows, 65536)):
-                f.write(part)
-        elif gamma_at:
-            k = gamma_at[0]
-            w.writerows(
-                [*(cells[i] for i in take[:k]), g, *(cells[i] for i in take[k + 1 :])]
-                for cells, g in zip(cells_of(), texts(), strict=True)
-            )
-        else:
-            w.writerows([*(cells[i] for i in take), g] for cells, g in zip(cells_of(), texts(), strict=True))
-
-    if output is None:
-        emit(data_stream())
-    else:
-        with user_errors():
-            atomic_write(output, emit)  # streamed; a failed write leaves no half file
-        console.print(f"wrote {len(table)} rows to {output}")
-
-
-def _print_predictions(
-    table: PoseTable, preds: NDArray[np.float64], pi95: NDArray[np.float64] | None, last: dict[str, int]
-) -> None:
-    """``predict --json``: every row as an object, with gamma_pred (and gamma_pi95)."""
-    out = []
-    for cells, g in zip(table.cells(), preds.tolist(), strict=True):
-        r: dict[str, object] = {h: _maybe_number(unguard_cell(cells[i])) for h, i in last.items()}
-        r["gamma_pred"] = g
-        out.append(r)
-    if pi95 is not None:
-        for r, h in zip(out, pi95.tolist(), strict=True):
-            r["gamma_pi95"] = h
-    print_json(out)
-
-
-def _interval_column(cal: Calibration, table: PoseTable, preds: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Half-width of each prediction's 95 % interval: 1.96 x the relative model error of its joint and direction."""
-    import numpy as np
-
-    from ..calibration.update import prediction_sd
-
-    sd = np.zeros(len(table))
-    for j in np.unique(table.joint).tolist():
-        for d in ("+", "-"):
-            group = (table.joint == j) & (table.direction == d)
-            if group.any():
-                sd[group] = prediction_sd(cal, int(j), d)[0]
-    out: NDArray[np.float64] = 1.96 * sd * preds
-    return out
-
-
-def _predict_columns(cal: Calibration, table: PoseTable, poses: Path) -> NDArray[np.float64]:
-    """gamma_pred of every row, vectorised per joint, direction and kind (pose or traverse).
-
-    A row the calibration cannot answer fails the command with the first such row's
-    number (counted from 1 over the table's rows) and the reason.
-    """
-    import numpy as np
-
-    from ..models import NonPhysicalError
-
-    out = np.empty(len(table))
-    trav = table.is_traverse
-    first_error: tuple[int, str] | None = None
-    cols = (table.q1, table.q2, table.q3, table.theta, table.psi)
-    for j in np.unique(table.joint).tolist():
-        for d in ("+", "-"):
-            group = (table.joint == j) & (table.direction == d)
-            if not group.any():
-                continue
-            try:
-                m = cal.model(j, d)
-            except KeyError as e:
-                first = int(np.flatnonzero(group)[0])
-                first_error = min(first_error or (first, ""), (first, str(e.args[0])))
-                continue
-            for kind in (True, False):
-                idx = np.flatnonzero(group & (trav == kind))
-                if not idx.size:
-                    continue
-                c = [v[idx] for v in cols]
-                try:
-                    if kind:
-                        out[idx] = m.average_gamma(table.start[idx], table.end[idx], *c)
-                    else:
-                        out[idx] = m.gamma(*c)
-                except NonPhysicalError:
-                    for i in idx.tolist():  # the first row that fails, as a row-by-row loop would find it
-                        try:
-                            v = [float(x[i]) for x in cols]
-                            if kind:
-                                m.average_gamma(float(table.start[i]), float(table.end[i]), *v)
-                            else:
-                                m.gamma(*v)
-                        except NonPhysicalError as e:
-                            first_error = min(first_error or (i, ""), (i, str(e)))
-                            break
-    if first_error is not None:
-        fail(f"{poses}: row {first_error[0] + 1}: {first_error[1]}")
-    return out
-
-
-def _maybe_number(v: str) -> object:
-    try:
-        x = float(v)
-    except (TypeError, ValueError):
-        return v
-    if x.is_integer() and v.strip().lstrip("+-").isdigit():
-        return int(x)
-    return x
+    except PredictionError as e:
+        fail(str(e))
+    if output is not None:
+        console.print(f"wrote {rows[0]} rows to {output}")
 
 
 @app.command("validate")
@@ -635,9 +563,10 @@ def plan_cmd(
         fail(str(e.args[0]))
     except (ValueError, NonPhysicalError) as e:
         fail(str(e))
-    from ..calibration.update import prediction_sd
+    from ..calibration.intervals import prediction_sd
 
-    sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1))
+    sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1), pose=tuple(pose),
+                                span=(plan.q_from, plan.q_end_predicted))
     half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
         d = plan.as_dict()

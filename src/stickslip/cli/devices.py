@@ -44,6 +44,7 @@ from ._common import (
     user_errors,
     warn_later,
 )
+from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
 
 if TYPE_CHECKING:
     from ..procedures.move import MoveResult
@@ -145,6 +146,13 @@ def move(
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
+    camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
+    camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller and calibration come from it, and the "
+        "move is checked against the rig's envelope first.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Move a joint by a distance or to a position, with the calibrated step-size model.
 
@@ -161,13 +169,28 @@ def move(
     Every amount takes its unit (30um, 2deg, 100steps); a bare number other than 0 is
     refused.
 
+    With --rig FILE (and --arm NAME) the arm's controller and calibration come from
+    the rig file, and the planned move is checked against the rig's keep-out volumes,
+    soft limits and other arms before a step is sent (refused, exit 2, naming the
+    obstacle and its closest point).
+
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
     raw = _raw_steps(by, to, steps)
+    if rig_file is not None and (camera is not None or camera_tip is not None):
+        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
+    if rig_file is not None:
+        _move_in_rig(rig_file, arm, device, joint, by, to, raw, calibration, burst, db, json_out,
+                     from_unreferenced, trust_calibration)
+        return
+    if arm is not None:
+        fail("--arm names an arm of a rig: give --rig FILE too")
     device = device_url(device)
     with user_errors():
         device_key(device)  # a URL that names no device is refused before the database is opened
     if raw is not None:
+        if camera is not None or camera_tip is not None:
+            fail("--camera closes the loop of a planned move (--by LENGTH or --to), not of raw steps")
         _step_raw(device, joint, raw, burst or RAW_BURST, db, json_out)
         return
     from ..calibration import Calibration
@@ -183,6 +206,11 @@ def move(
         burst=burst or 1000, pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
+    if camera_tip is not None and camera is None:
+        fail("--camera-tip goes with --camera")
+    if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
+        run_seen("move", request, cal, camera, camera_tip, db, json_out)
+        return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
     failure = result.failure()
@@ -192,6 +220,63 @@ def move(
         print_json(result.as_dict())
         return
     _print_move(result)
+
+
+def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
+                 raw: int | None, calibration: Path | None, burst: int | None, db: Path | None, json_out: bool,
+                 from_unreferenced: bool, trust_calibration: bool) -> None:
+    """``move --rig FILE --arm NAME``: the arm's device, calibration and envelope from the rig file."""
+    from ..calibration import Calibration
+    from ..procedures.arms import guard_for, opener_for
+    from ..procedures.move import DeviceBusy, MoveRequest
+    from ..procedures.move import move as move_joint
+    from .rig import load
+
+    if device is not None:
+        fail("give --device or --rig, not both (the rig file names each arm's controller)")
+    if raw is not None:
+        fail("raw --steps bypass the envelope: give them with --device, not --rig")
+    rig = load(rig_file)
+    with user_errors(KeyError):
+        a = rig.arm(arm)
+    cal_path = calibration or (rig_file.parent / a.calibration if a.calibration else None)
+    with user_errors(KeyError):
+        cal = Calibration.load(calibration_file(cal_path))
+    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
+        request = MoveRequest(
+            a.controller, joint,
+            by=None if by is None else _parse_joint_value(joint, by, "--by"),
+            to=None if to is None else _position_or_stop(joint, to, "--to"),
+            burst=burst or 1000, guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
+            trust_calibration=trust_calibration,
+        )
+        result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings, opener=opener_for(rig, a.name))
+    failure = result.failure()
+    if failure is not None:
+        fail(failure)
+    if json_out:
+        print_json({"arm": a.name, **result.as_dict()})
+        return
+    say(f"arm {a.name!r}")
+    _print_move(result)
+
+
+def _where_arms(rig_file: Path, db: Path | None, json_out: bool) -> None:
+    """``where --rig FILE``: every arm's kept positions (the devices are not opened)."""
+    from ..procedures.arms import arm_states
+    from ..procedures.move import where_line
+    from .rig import load
+
+    rig = load(rig_file)
+    with open_store(db) as store, user_errors():
+        states = arm_states(store, rig)
+    if json_out:
+        print_json({"rig": rig.name, "arms": [
+            {"arm": s.arm, "device": s.device, "q": [s.state.positions[j] for j in (1, 2, 3)],
+             "sources": [s.state.sources[j] for j in (1, 2, 3)]} for s in states]})
+        return
+    for s in states:
+        say(f"arm {s.arm!r} on {s.device}: {where_line(s.state)}")
 
 
 def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
@@ -295,14 +380,19 @@ def where(
         False, "--unlock", help="Release the device's lock left by a process that is gone."
     ),
     json_out: bool = typer.Option(False, "--json", help="Print the positions as JSON (SI units)."),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): list the kept positions of every arm (or of --arm).",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig: its device is the one shown or reset."),
 ) -> None:
     """Show (or reset) the dead-reckoned joint positions and base tilt kept for a device.
 
     Source: default (never referenced: the outstretched pose assumed), set, dead-reckoned,
-    observed (stickslip observe), assumed (moved from a position never referenced), or
-    uncertain (a move, raw steps or a traverse left it between the bounds shown, and
-    why). A joint moved since it was set shows its standard deviation (σ) and the step
-    scale learned from observations.
+    observed (stickslip observe), seen (tracked by the camera: move, reach, jog with
+    --camera), assumed (moved from a position never referenced), or uncertain (a move,
+    raw steps or a traverse left it between the bounds shown, and why). A joint moved
+    since it was set shows its standard deviation (σ) and the step scale learned from
+    observations.
 
     --set J=min (or max, or a position with its unit) references a joint at an end stop:
     after a traverse, a crash or a manual move, and on day one (raw steps into the stop
@@ -313,9 +403,26 @@ def where(
     also reports its dialect (console or legacy), firmware version, stepping
     frequencies and active speed profile (in --json: "info").
 
+    With --rig FILE every arm of the rig is listed (kept positions, the device not
+    opened); with --arm NAME too, that arm's device is the one shown or reset.
+
     Example: stickslip where -d mm3a:///dev/ttyUSB0 --set 3=min --set 2=max
     """
     from ..procedures.move import PoseUpdate
+
+    if rig_file is not None and device is not None:
+        fail("give --device or --rig, not both (the rig file names each arm's controller)")
+    if rig_file is None and arm is not None:
+        fail("--arm names an arm of a rig: give --rig FILE too")
+    if rig_file is not None:
+        from .rig import load
+
+        rig = load(rig_file)
+        if arm is None:
+            _where_arms(rig_file, db, json_out)
+            return
+        with user_errors(KeyError):
+            device = rig.arm(arm).controller
     from ..procedures.where import DeviceUnreachable, ReferenceRefused
     from ..procedures.where import where as kept_positions
 

@@ -6,7 +6,6 @@ else ``$STICKSLIP_DB``, else the config file's, else the user's data directory).
 
 from __future__ import annotations
 
-import hashlib
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +19,7 @@ from ._common import DB_HELP, console, fail, open_store, print_json, read_table,
 from ._output import styled, visible
 
 if TYPE_CHECKING:
+    from ..analysis import AnovaResult
     from ..measurements import Traverse
 
 
@@ -148,27 +148,18 @@ def import_(
 
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
-    ts = read_table(meas)
-    digest = "sha256:" + hashlib.sha256(meas.read_bytes()).hexdigest()
-    with open_store(db) as st:
-        if st.has_source(digest) and not force:
-            fail(f"{meas} was imported before (same contents); use --force to import it again")
-        dup = [] if allow_duplicates else st.duplicates(ts, device)
-        if dup:
-            rows = ", ".join(str(k + 2) for k in dup[:5]) + (" ..." if len(dup) > 5 else "")
-            fail(
-                f"{meas}: {len(dup)} of {len(ts)} rows are already stored for {redact_url(device)} "
-                f"(same day, pose, interval and steps; rows {rows}); nothing imported. "
-                "Use --allow-duplicates if they are genuine repeats"
-            )
-        with user_errors():
-            ids = st.add_traverses(ts, device=device, how=how, source=digest)
+    from ..procedures.table_import import import_table
+
+    with open_store(db) as st:  # the table streams through twice: any length in bounded memory
+        with user_errors():  # a bad row (every one listed), a file imported before, rows stored already
+            res = import_table(st, meas, device, how, force, allow_duplicates, shown_device=redact_url(device))
         path = st.path
     if json_out:
-        print_json({"imported": len(ids), "ids": ids, "db": str(path)})
+        print_json({"imported": len(res.ids), "ids": res.ids, "db": str(path)})
     else:
-        days = sorted({t.day for t in ts})
-        console.print(f"imported {len(ids)} traverses ({', '.join(days)}) for {redact_url(device)} into {path}")
+        console.print(
+            f"imported {len(res.ids)} traverses ({', '.join(res.days)}) for {redact_url(device)} into {path}"
+        )
 
 
 # ---------------------------------------------------------------- exclude / delete
@@ -302,33 +293,7 @@ def anova(
     if not res.tests:
         warn("no testable groups: a pose must be measured on several days (or both ways on one day), repeated")
     else:
-        from ..analysis import PoseGroup
-
-        table = Table(pad_edge=False)
-        table.add_column("test", no_wrap=True)
-        table.add_column("pose", overflow="fold", ratio=1)
-        table.add_column("n", justify="right", no_wrap=True)
-        table.add_column("F", justify="right", no_wrap=True)
-        table.add_column("p", justify="right", no_wrap=True)
-        table.add_column(f"α={alpha:g}", no_wrap=True)
-        for t in res.tests:
-            what = {
-                "day": f"days {t.joint}{t.direction}",
-                "direction": f"+/- {t.joint} {t.day}",
-                "two-way": f"2-way {t.joint} {t.term}",
-            }[t.test]
-            verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
-            if not math.isfinite(t.F):
-                verdict = "degenerate"
-            table.add_row(
-                what,
-                PoseGroup(t.joint, t.pose, t.interval).describe(),
-                str(t.n),
-                f"{t.F:.4g}" if math.isfinite(t.F) else "-",
-                f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
-                styled(verdict, "bold red") if verdict == "SIGNIFICANT" else verdict,
-            )
-        console.print(table)
+        console.print(_anova_table(res, alpha))
     if show_skipped:
         for s in res.skipped:
             console.print(styled(f"skipped: {s}", "dim"))
@@ -340,6 +305,37 @@ def anova(
                 "dim",
             )
         )
+
+
+def _anova_table(res: AnovaResult, alpha: float) -> Table:
+    """The tests as a table: what, the pose, n, F, p and the verdict at ``alpha`` (degenerate where F is undefined)."""
+    from ..analysis import PoseGroup
+
+    table = Table(pad_edge=False)
+    table.add_column("test", no_wrap=True)
+    table.add_column("pose", overflow="fold", ratio=1)
+    table.add_column("n", justify="right", no_wrap=True)
+    table.add_column("F", justify="right", no_wrap=True)
+    table.add_column("p", justify="right", no_wrap=True)
+    table.add_column(f"α={alpha:g}", no_wrap=True)
+    for t in res.tests:
+        what = {
+            "day": f"days {t.joint}{t.direction}",
+            "direction": f"+/- {t.joint} {t.day}",
+            "two-way": f"2-way {t.joint} {t.term}",
+        }[t.test]
+        verdict = {"significant": "SIGNIFICANT", "not significant": "not sig."}.get(t.verdict(alpha), "undefined")
+        if not math.isfinite(t.F):
+            verdict = "degenerate"
+        table.add_row(
+            what,
+            PoseGroup(t.joint, t.pose, t.interval).describe(),
+            str(t.n),
+            f"{t.F:.4g}" if math.isfinite(t.F) else "-",
+            f"{t.p:.3g}" if math.isfinite(t.p) and math.isfinite(t.F) else "-",
+            styled(verdict, "bold red") if verdict == "SIGNIFICANT" else verdict,
+        )
+    return table
 
 
 # ---------------------------------------------------------------- fit

@@ -7,6 +7,7 @@ kept per device in the database exactly as for ``move`` and ``where``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -34,6 +35,8 @@ from ._common import (
     warn,
     warn_later,
 )
+from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, camera_errors, camera_loop, run_seen
+from .rig import rig_arm
 
 if TYPE_CHECKING:
     from .. import kinematics as kin
@@ -120,6 +123,13 @@ def reach(
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
+    camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
+    camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the whole line is checked against the rig's envelope first.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Move the tip in a straight line to a point or by a displacement (task space).
 
@@ -136,12 +146,20 @@ def reach(
     before any step is sent. Without --dry-run the positions are kept after every burst,
     as for `move`.
 
+    With --rig FILE (and --arm NAME) the line, as driven, is checked against the
+    rig's keep-out volumes, soft limits and other arms before a step is sent.
+
     Example: stickslip reach -c cal.json -d mm3a:///dev/ttyUSB0 --by 20um,-10um,5um
     """
     if (by is None) == (to is None):
         fail("give exactly one of --by and --to")
     point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
     geom = parse_geometry(geometry)
+    if rig_file is not None and camera is not None:
+        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     from ..calibration import Calibration
     from ..motion.reach import borrow_joint1
@@ -159,8 +177,18 @@ def reach(
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
     )
+    if camera_tip is not None and camera is None:
+        fail("--camera-tip goes with --camera")
+    if camera is not None and dry_run:
+        fail("--dry-run plans without moving: the camera closes the loop of a move (drop one of them)")
+    if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
+        run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed)
+        return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
-        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings)
+        if in_rig is not None:
+            request = dataclasses.replace(request, guard=in_rig.guard(store))
+        result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings,
+                            opener=None if in_rig is None else in_rig.opener)
     failure = result.failure()
     if failure is not None:
         fail(failure)
@@ -263,7 +291,8 @@ def _status_lines(s: Any) -> list[str]:
             shown, left = f"{q * 1e6:10.2f} µm ", f"{lim * 1e6:.2f} µm"
         else:
             shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
-        lines.append(f"joint {j}: {shown}  to its nearer limit {left}  sent {s.sent[j - 1]:+d}")
+        seen = f" {s.sources[j - 1]}" if s.sources[j - 1] else ""
+        lines.append(f"joint {j}: {shown}  to its nearer limit {left}  sent {s.sent[j - 1]:+d}{seen}")
     mode = f"single-step {s.speed * 1e6:g} µm/press" if s.single_step else f"speed {s.speed * 1e6:g} µm/s"
     frame = f"image frame ({math.degrees(s.image_angle):+.0f} deg)" if s.image_frame else "base frame"
     rates = " ".join(f"{r:+.0f}" for r in s.rates)
@@ -351,6 +380,16 @@ def jog(
         "controller (refused without it: its step sizes may be another arm's).",
     ),
     db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    camera: str | None = typer.Option(
+        None, "--camera", help="A camera that looks at the tip (pixel= in its URL): the joints it sees are shown "
+        "and kept as seen, their step scales corrected as the tip moves.",
+    ),
+    camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
+        "and the tip stops at the rig's envelope.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="Arm of the rig (default: its first arm)."),
 ) -> None:
     """Steer the tip from the keyboard (teleoperation in task space).
 
@@ -360,11 +399,17 @@ def jog(
     single-step mode, where each press moves the tip by the preset's distance
     (0.1 to 100 µm); space stops at once; q quits.
 
+    With --camera the tip is looked at each time it has moved 8 px or stopped: the
+    joints the camera sees are shown and kept as seen (docs/vision.md).
+
     The tip velocity becomes joint velocities through the inverse Jacobian and step
     rates through the calibrated step sizes in the current pose, capped at --max-rate
     (all joints slowed together, so the direction is kept). The predicted tip, the
     joints and their distance to the end stops are shown live; positions are kept after
     every burst, as for `move`. Motion stops near an end stop or joint 1's axis.
+
+    With --rig FILE (and --arm NAME) motion also stops before a step that would leave
+    the rig's envelope (volumes, soft limits, other arms).
 
     Example: stickslip jog -c cal.json -d mm3a:///dev/ttyUSB0 --speed 5
     """
@@ -376,6 +421,11 @@ def jog(
     from ..procedures.reach import BORROWED_JOINT1
 
     geom = parse_geometry(geometry)
+    if rig_file is not None and camera is not None:
+        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    if in_rig is not None:
+        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -385,13 +435,16 @@ def jog(
         device_key(device)
     request = JogRequest(
         device, geom, float(image_angle), speed, max_rate, hold, PoseUpdate(q1, q2, q3, theta, psi),
-        max_age_setting(None).value, from_unreferenced, trust_calibration,
+        max_age_setting(None).value, from_unreferenced, trust_calibration, camera_loop(camera, camera_tip),
     )
     screen = _Screen()
     try:
-        with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+        with open_store(db) as store, user_errors(DeviceBusy, DeviceError, *(camera_errors() if camera else ())):
+            if in_rig is not None:
+                request = dataclasses.replace(request, guard=in_rig.guard(store))
             result = jog_session(
-                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
+                opener=None if in_rig is None else in_rig.opener,
             )
     finally:
         screen.close()

@@ -7,9 +7,10 @@ sent since. This module keeps that per device URL:
 * ``positions``: ``q1, q2, q3`` (rad, rad, m), each with its *source*: ``"default"``
   (never set: the outstretched pose is assumed), ``"set"`` (the user put it there, e.g.
   at an end stop), ``"dead-reckoned"`` (moved by the model since), ``"observed"`` (a
-  measured position) or ``"assumed"`` (moved by the model from a position never
+  measured position), ``"seen"`` (tracked by the camera in a closed-loop move) or
+  ``"assumed"`` (moved by the model from a position never
   referenced: still not known). A joint is *referenced* when its source is ``set``,
-  ``dead-reckoned`` or ``observed``;
+  ``dead-reckoned``, ``observed`` or ``seen``;
 * ``tilt``: the base tilt ``theta, psi`` (rad) the device is set up with;
 * ``uncertain``: the write-ahead journal of a move. Before a burst is sent the joint is
   recorded as *in flight* between its last confirmed position and the burst's intended
@@ -54,8 +55,8 @@ __all__ = [
     "device_key",
 ]
 
-SOURCES = ("default", "set", "dead-reckoned", "observed", "assumed")
-REFERENCED = ("set", "dead-reckoned", "observed")
+SOURCES = ("default", "set", "dead-reckoned", "observed", "seen", "assumed")
+REFERENCED = ("set", "dead-reckoned", "observed", "seen")
 """The sources of a position that was put somewhere known (not assumed)."""
 
 

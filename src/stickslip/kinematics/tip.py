@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..joints import MM3A_GEOMETRY
 from ..units import UnitError, format_position, parse_length
 from .frames import JOINTS
 
@@ -78,16 +79,17 @@ class Geometry:
     ----------
     offset : float
         Distance from joint 1's axis to joint 2's axis, along ``x1`` (the arm's plane), m.
-        Default 0: the MM3A's joint-2 axis crosses joint 1's axis (to within a
-        millimetre; measure yours, docs/taskspace.md).
+        Default 0 (read from the MM3A's description, ``stickslip.joints.MM3A_FILE``):
+        the MM3A's joint-2 axis crosses joint 1's axis (to within a millimetre;
+        measure yours, docs/taskspace.md).
     length : float
         Distance from joint 2's axis to the tip with joint 3 retracted (``q3 = 0``), m,
-        > 0. Default 21 mm: an MM3A with a short tip holder and tip. Measure yours: it
-        scales every rotary move of the tip.
+        > 0. Default 21 mm (from the same file): an MM3A with a short tip holder and
+        tip. Measure yours: it scales every rotary move of the tip.
     """
 
-    offset: float = 0.0
-    length: float = 0.021
+    offset: float = MM3A_GEOMETRY[0]
+    length: float = MM3A_GEOMETRY[1]
 
     def __post_init__(self) -> None:
         for name in ("offset", "length"):

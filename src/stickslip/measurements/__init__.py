@@ -21,12 +21,14 @@ camera: :class:`StepSize`). Everything is imported from here.
 from .chunks import CHUNK_ROWS
 from .poses import (
     POSE_TABLE_REQUIRED,
+    PoseChunk,
     PoseQuery,
     PoseTable,
     parse_pose_columns,
     parse_pose_table,
     read_pose_columns,
     read_pose_table,
+    stream_pose_table,
 )
 from .rows import HEADER, MAX_STEPS, POSE_COLUMNS, TableError, Traverse, check_pose, parse_row
 from .steps import STEP_HEADER, StepSize, parse_step_sizes, read_step_sizes, step_sizes_to_csv, write_step_sizes
@@ -38,6 +40,7 @@ from .table import (
     parse_measurements,
     read_measurement_table,
     read_measurements,
+    stream_measurement_table,
     write_measurements,
 )
 
@@ -65,6 +68,9 @@ __all__ = [
     "PoseQuery",
     "parse_pose_table",
     "read_pose_table",
+    "stream_measurement_table",
+    "PoseChunk",
+    "stream_pose_table",
     "STEP_HEADER",
     "StepSize",
     "parse_step_sizes",

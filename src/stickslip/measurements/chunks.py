@@ -177,3 +177,47 @@ def _all_wide_and_filled(chunk: list[list[str]], width: int, key: int) -> bool:
     widths = set(map(len, chunk))
     return widths == {width} and all(map(str.strip, map(operator.itemgetter(key), chunk)))
 
+
+
+def _blocks(lines: Iterator[str]) -> Iterator[str]:
+    """Up to :data:`CHUNK_ROWS` lines at a time as one text, never cutting a quoted cell: a block
+    ends only where it holds an even number of quotes (a cell's line break is inside quotes)."""
+    while True:
+        part = list(itertools.islice(lines, CHUNK_ROWS))
+        if not part:
+            return
+        text = "".join(part)
+        while text.count('"') % 2:
+            more = next(lines, None)
+            if more is None:
+                break
+            text += more
+        yield text
+
+
+def stream_table(lines: Iterator[str]) -> tuple[list[str] | None, Callable[[int, int], Iterator[_Chunk]]]:
+    """:func:`_open_table` over lines read as they come (:func:`stickslip.records.text_lines`).
+
+    The header record (``None`` for an empty file) and a function that yields the rest in
+    chunks of :data:`CHUNK_ROWS` records; each block of lines is parsed as the whole text
+    would be (plain lines split at commas, others by :mod:`csv`), so records, cells and
+    their numbering are the same. Memory is bounded by a chunk.
+    """
+    blocks = _blocks(lines)
+    first = next(blocks, "")
+    header, rest_chunks = _open_table(first)
+    if header is None:
+        return None, lambda width, key: iter(())
+
+    def chunks(width: int, key: int) -> Iterator[_Chunk]:
+        yield from rest_chunks(width, key)
+        for text in blocks:
+            yield from _open_table_body(text, width, key)
+
+    return header, chunks
+
+
+def _open_table_body(text: str, width: int, key: int) -> Iterator[_Chunk]:
+    """The records of ``text`` (no header) in chunks, as :func:`_open_table` yields them after its header."""
+    _, chunks = _open_table("h\n" + text)
+    yield from chunks(width, key)

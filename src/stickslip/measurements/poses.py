@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..models import direction_label
-from .chunks import _Chunk, _equal, _floats, _joint_cells, _moving_within, _open_table, _pose_ok
+from .chunks import _Chunk, _equal, _floats, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
 from .rows import TableError, _csv_problem, _parse_float, check_pose
 from .table import _read_table_text
 
@@ -379,3 +379,77 @@ def _pose_chunk(
 def read_pose_table(path: str | Path) -> tuple[list[str], list[dict[str, str]], list[PoseQuery]]:
     """Read a pose table from a CSV file (see :func:`parse_pose_table`)."""
     return parse_pose_table(_read_table_text(path), str(path))
+
+
+@dataclass(frozen=True, eq=False)
+class PoseChunk:
+    """A chunk of a pose table read as it streams (:func:`stream_pose_table`).
+
+    Attributes
+    ----------
+    table : PoseTable
+        The chunk's good rows as columns (``raw``: their text lines when plain, as
+        :class:`PoseTable` keeps them; ``text`` empty).
+    cells : list of sequence of str
+        Each good row's cells, as many as the header has (missing cells empty).
+    problems : list of (int, str)
+        ``(line, reason)`` of every bad row of the chunk.
+    """
+
+    table: PoseTable
+    cells: list[Sequence[str]]
+    problems: list[tuple[int, str]]
+
+
+def stream_pose_table(path: str | Path) -> tuple[list[str], Iterator[PoseChunk]]:
+    """A pose table (see :func:`parse_pose_table`) read a chunk at a time: the header, and the chunks.
+
+    The same rules, line numbers and messages as :func:`read_pose_columns`, with no size
+    limit: memory is bounded by a chunk (:data:`~.chunks.CHUNK_ROWS` rows). A problem with
+    the file itself or its header raises :class:`TableError` here; each chunk reports its bad
+    rows (a file that stops being UTF-8 or CSV further on raises :class:`TableError` there).
+    """
+    from ..records import text_lines
+
+    source = str(path)
+    try:
+        header_record, chunks = stream_table(text_lines(path, "CSV"))
+    except (ValueError, csv.Error) as e:
+        raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
+    header = _pose_header(header_record, source)
+    has_traverse = "start" in header and "end" in header
+    where_col = {h: i for i, h in enumerate(header)}
+    plain_header = len(set(header)) == len(header)
+
+    def gen() -> Iterator[PoseChunk]:
+        records = _pose_records(chunks(len(header), header.index("joint")), header)
+        while True:
+            try:
+                item = next(records, None)
+            except (ValueError, csv.Error) as e:
+                raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
+            if item is None:
+                return
+            lines, cols, overlong, raw_part = item
+            problems = [(n, f"{source}:{n}: more cells than header columns") for n in overlong]
+            if not lines:
+                yield PoseChunk(_empty_pose_table(header), [], problems)
+                continue
+            (joint, direction, nums, lines_a), errs = _pose_chunk(cols, lines, source, where_col, has_traverse,
+                                                                  header)
+            problems += errs
+            table = PoseTable(header, joint, direction, nums["q1"], nums["q2"], nums["q3"], nums["theta"],
+                              nums["psi"], nums["start"], nums["end"], lines_a, "",
+                              raw_part if raw_part is not None and plain_header and not errs else None)
+            rows: list[Sequence[str]] = list(zip(*cols, strict=True))
+            if errs:
+                kept = set(lines_a.tolist())
+                rows = [r for r, n in zip(rows, lines, strict=True) if n in kept]
+            yield PoseChunk(table, rows, problems)
+
+    return header, gen()
+
+
+def _empty_pose_table(header: list[str]) -> PoseTable:
+    z = np.zeros(0)
+    return PoseTable(header, np.zeros(0, np.int64), np.zeros(0, "<U1"), z, z, z, z, z, z, z, np.zeros(0, np.int64))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import operator
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, TextIO
@@ -14,8 +14,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..clock import day_label_problem
-from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, unguard_cell
-from .chunks import _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok
+from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, text_lines, unguard_cell
+from .chunks import _Chunk, _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
 from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
 
 
@@ -133,6 +133,14 @@ def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTabl
 
 def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
     header, chunks = _open_table(text)
+    parts = list(_measurement_parts(header, chunks, source))
+    table = TraverseTable.concat(parts)
+    if not len(table):
+        raise TableError([f"{source}:2: the table has a header but no rows"])
+    return table
+
+
+def _check_header(header: list[str] | None, source: str) -> None:
     if header is None:
         raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"])
     header = [h.strip() for h in header]
@@ -150,7 +158,14 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
             sep = "';'" if ";" in header[0] else "a tab"
             detail = [f"the columns are separated by {sep}: save the table with commas (CSV)"]
         raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
-    parts: list[TraverseTable] = []
+
+
+def _measurement_parts(
+    header: list[str] | None, chunks: Callable[[int, int], Iterator[_Chunk]], source: str
+) -> Iterator[TraverseTable]:
+    """The table's rows a chunk at a time, checked; after the last, :class:`TableError` with every bad row
+    if there was one (no chunk is yielded after the first problem)."""
+    _check_header(header, source)
     problems: list[tuple[int, str]] = []  # (line, reason): sorted by line at the end, stable within a line
     lineno = 1
     for chunk in chunks(len(HEADER), 0):
@@ -175,14 +190,45 @@ def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
             cols = list(zip(*rows, strict=True))
         if lines:
             part, errs = _measurement_chunk(cols, lines, source)
-            parts.append(part)
             problems += errs
+            if not problems:
+                yield part
     if problems:
         raise TableError([p for _, p in sorted(problems, key=lambda lp: lp[0])])
-    table = TraverseTable.concat(parts)
-    if not len(table):
+
+
+def stream_measurement_table(path: str | Path) -> Iterator[TraverseTable]:
+    """A measurement table read a chunk at a time, as columns (any length, memory bounded by a chunk).
+
+    The same rules, line numbers and messages as :func:`read_measurement_table`: a bad file or
+    header raises :class:`TableError` at once, bad rows when the table has been read to its
+    end (every one listed; no chunk is yielded after the first), and a table with a header
+    but no rows then too.
+    """
+    source = str(path)
+    try:
+        header, chunks = stream_table(text_lines(path, "CSV"))
+    except (ValueError, csv.Error) as e:
+        raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
+    _check_header(header, source)
+    return _streamed(_measurement_parts(header, chunks, source), source)
+
+
+def _streamed(parts: Iterator[TraverseTable], source: str) -> Iterator[TraverseTable]:
+    rows = 0
+    while True:
+        try:
+            part = next(parts, None)
+        except (ValueError, csv.Error) as e:
+            if isinstance(e, TableError):
+                raise
+            raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
+        if part is None:
+            break
+        rows += len(part)
+        yield part
+    if not rows:
         raise TableError([f"{source}:2: the table has a header but no rows"])
-    return table
 
 
 def _measurement_chunk(
@@ -244,24 +290,34 @@ def _measurement_chunk(
     return (table.take(ok) if bad.size else table), problems
 
 
-def _read_table_text(path: str | Path) -> str:
-    """The text of a CSV table (a regular file, at most :data:`records.MAX_TABLE_BYTES`).
+def _read_table_text(path: str | Path, max_bytes: int | None = None) -> str:
+    """The text of a CSV table (a regular file, at most ``max_bytes``, default :data:`records.MAX_TABLE_BYTES`).
 
     A missing file, a folder, a pipe or device (never opened, so it cannot hang), a file
-    over the size limit or non-UTF-8 text raises :class:`TableError`.
+    over the size limit or non-UTF-8 text raises :class:`TableError`. The limit is there
+    because a table read whole is held in memory (text, columns and a row object each, about
+    ten times the file); :func:`stream_measurement_table` and ``predict`` stream instead.
     """
     p = Path(path)
     if not p.exists():
         raise TableError([f"{p}: no such file"])
+    limit = MAX_TABLE_BYTES if max_bytes is None else int(max_bytes)
     try:
-        return read_text_bounded(p, "CSV", MAX_TABLE_BYTES)
+        return read_text_bounded(p, "CSV", limit)
     except ValueError as e:
-        raise TableError([str(e)]) from None
+        text = str(e)
+        if "limit" in text:
+            text += " (a table read whole is held in memory, about ten times the file)"
+        raise TableError([text]) from None
 
 
-def read_measurements(path: str | Path) -> list[Traverse]:
-    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row."""
-    return parse_measurements(_read_table_text(path), str(path))
+def read_measurements(path: str | Path, max_bytes: int | None = None) -> list[Traverse]:
+    """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row.
+
+    ``max_bytes`` (default :data:`records.MAX_TABLE_BYTES`, 64 MiB) bounds the file: it is
+    read whole and held in memory.
+    """
+    return parse_measurements(_read_table_text(path, max_bytes), str(path))
 
 
 def read_measurement_table(path: str | Path) -> TraverseTable:

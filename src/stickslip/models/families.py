@@ -68,6 +68,9 @@ __all__ = [
     "TabulatedProfile",
     "RATIO_NAMES",
     "BOUNDS",
+    "FitBasis",
+    "fit_basis",
+    "average_and_jacobian",
 ]
 
 Q3_MID = kin.Q3_MAX / 2.0
@@ -328,6 +331,222 @@ def average_from_gamma(kind: str, g: NDArray[np.float64]) -> NDArray[np.float64]
     with np.errstate(divide="ignore", invalid="ignore"):
         avg = 1.0 / (np.sum(_GL_W / g, axis=-1) * 0.5)
     return np.where(np.all(g > 0.0, axis=-1), avg, np.nan)
+
+
+@dataclass(frozen=True)
+class FitBasis:
+    """Traverses of one joint in the form a fit needs: what (F1)-(F5) depend on, per traverse.
+
+    Prismatic joint (the step does not change along its own travel): the features at the
+    pose, ``feats`` (shape ``(n,)``). Rotary joints: every load of (F3) is a sinusoid of the
+    joint's own angle, ``F(q) = F0 + Fc cos q + Fs sin q`` (gravity projected on axes that
+    turn with the joint), so a traverse is its coefficients (``T``, ``R``: ``(3, n)``), the
+    constant normal load ``P`` and ``q3`` (``(n,)``), and the 48 Gauss-Legendre nodes along
+    it (``cos``, ``sin``, and ``T2 = T(q)^2``: ``(n, 48)``; the rule of
+    :func:`traverse_features`, so averages agree with it to rounding).
+    """
+
+    kind: str
+    feats: Features | None = None
+    q3: NDArray[np.float64] | None = None
+    T: NDArray[np.float64] | None = None
+    R: NDArray[np.float64] | None = None
+    P: NDArray[np.float64] | None = None
+    cos: NDArray[np.float64] | None = None
+    sin: NDArray[np.float64] | None = None
+    T2: NDArray[np.float64] | None = None
+
+    def __len__(self) -> int:
+        if self.feats is not None:
+            return int(np.size(self.feats.L))
+        assert self.q3 is not None
+        return int(self.q3.size)
+
+    def knot_basis(self, knots: tuple[float, ...]) -> list[NDArray[np.float64]]:
+        """The Lagrange basis functions of ``knots`` at these traverses' ``q3`` (computed once per knots)."""
+        cache: dict[tuple[float, ...], list[NDArray[np.float64]]] = self.__dict__.setdefault("_knots", {})
+        if knots not in cache:
+            cache[knots] = _knot_basis(_req(self.q3), knots)
+        return cache[knots]
+
+    def take(self, index: NDArray[np.intp] | NDArray[np.bool_]) -> FitBasis:
+        """The traverses selected by ``index`` (an index array or a mask)."""
+        if self.feats is not None:
+            feats = Features(*(getattr(self.feats, k)[index] for k in Features.__dataclass_fields__))
+            return FitBasis(self.kind, feats)
+        assert self.T is not None and self.R is not None
+        return FitBasis(
+            self.kind, None, _req(self.q3)[index], self.T[:, index], self.R[:, index], _req(self.P)[index],
+            _req(self.cos)[index], _req(self.sin)[index], _req(self.T2)[index],
+        )
+
+
+def _req(x: NDArray[np.float64] | None) -> NDArray[np.float64]:
+    assert x is not None
+    return x
+
+
+def fit_basis(
+    joint: int,
+    start: ArrayLike,
+    end: ArrayLike,
+    q1: ArrayLike,
+    q2: ArrayLike,
+    q3: ArrayLike,
+    theta: ArrayLike,
+    psi: ArrayLike,
+) -> FitBasis:
+    """The :class:`FitBasis` of traverses of ``joint`` (arrays of one length; SI)."""
+    st, en, a1, a2, a3, th, ps = (
+        np.atleast_1d(x) for x in np.broadcast_arrays(*(np.asarray(x, dtype=float) for x in (start, end, q1, q2, q3,
+                                                                                               theta, psi)))
+    )
+    if joint_spec(joint).prismatic:
+        return FitBasis("prismatic", features(joint, a1, a2, a3, th, ps))
+    # the sinusoids' coefficients from the loads at q = 0, pi/2, pi
+    at = []
+    for q in (0.0, 0.5 * math.pi, math.pi):
+        cols = [a1, a2, a3]
+        cols[joint - 1] = np.full_like(a1, q)
+        at.append(features(joint, cols[0], cols[1], cols[2], th, ps))
+
+    def coef(name: str) -> NDArray[np.float64]:
+        f0, f1, f2 = (getattr(f, name) for f in at)
+        mid = 0.5 * (f0 + f2)
+        return np.stack([mid, 0.5 * (f0 - f2), f1 - mid])
+
+    T, R = coef("T"), coef("R")
+    mid, half = 0.5 * (st + en), 0.5 * (en - st)
+    q = mid[:, None] + half[:, None] * _GL_X
+    c, s = np.cos(q), np.sin(q)
+    t_along = T[0][:, None] + T[1][:, None] * c + T[2][:, None] * s
+    return FitBasis("rotary", None, a3, T, R, at[0].P, c, s, t_along**2)
+
+
+def _knot_basis(q3: NDArray[np.float64], knots: tuple[float, ...]) -> list[NDArray[np.float64]]:
+    """The Lagrange basis functions of ``knots`` at ``q3`` (one array per knot)."""
+    return [_lagrange(q3, knots, [1.0 if i == k else 0.0 for i in range(len(knots))]) for k in range(len(knots))]
+
+
+def average_and_jacobian(
+    spec: FamilySpec, values: ArrayLike, basis: FitBasis
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Average step over each traverse of ``basis`` (m or rad; nan where it would stall) and its
+    derivative with respect to the parameters ``values`` (SI), ``(n,)`` and ``(n, p)``.
+
+    The same averages as :func:`average_from_features` ((F1)-(F5); rotary: the harmonic mean of
+    (F3) at the 48 nodes), with the derivatives in closed form: for a rotary joint
+    ``d avg / d x = avg^2 sum_k (w_k / 2) g_k^-2 d g_k / d x``, and ``g`` is linear in every
+    parameter of (F3).
+    """
+    v = np.asarray(values, dtype=float)
+    if basis.kind == "prismatic":
+        return _prismatic_average_and_jacobian(spec, v, basis)
+    return _rotary_average_and_jacobian(spec, v, basis)
+
+
+def _prismatic_average_and_jacobian(
+    spec: FamilySpec, v: NDArray[np.float64], basis: FitBasis
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(F1), (F2), (F4), (F5) at the poses and their derivatives (the step is the traverse's average)."""
+    names = spec.names
+    f = basis.feats
+    assert f is not None
+    idx = {name: i for i, (name, _) in enumerate(names)}
+
+    def val(name: str) -> float:
+        return float(v[idx[name]]) if name in idx else 0.0
+
+    ac = f.abs_cos_q2
+    eta = 1.0 - val("b") * ac - val("b2") * ac**2
+    den = 1.0 + val("k") * f.X if "k" in idx else np.ones_like(f.L)
+    lam = f.L / den
+    c_eff = val("c") + val("m") * ac
+    core = val("a") - c_eff * lam - val("e") * lam**2 - val("f") * f.X - val("h") * f.Y
+    g = eta * core
+    jac = np.empty((g.size, len(names)))
+    for i, (name, _) in enumerate(names):
+        if name == "a":
+            jac[:, i] = eta
+        elif name == "b":
+            jac[:, i] = -ac * core
+        elif name == "b2":
+            jac[:, i] = -(ac**2) * core
+        elif name == "c":
+            jac[:, i] = -eta * lam
+        elif name == "m":
+            jac[:, i] = -eta * ac * lam
+        elif name == "e":
+            jac[:, i] = -eta * lam**2
+        elif name == "f":
+            jac[:, i] = -eta * f.X
+        elif name == "h":
+            jac[:, i] = -eta * f.Y
+        elif name == "k":
+            jac[:, i] = eta * (c_eff + 2.0 * val("e") * lam) * lam * f.X / den
+        else:  # pragma: no cover - every prismatic name is above
+            raise KeyError(name)
+    ok = g > 0.0
+    return np.where(ok, g, np.nan), jac
+
+
+def _rotary_average_and_jacobian(
+    spec: FamilySpec, v: NDArray[np.float64], basis: FitBasis
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(F3)'s harmonic mean along each traverse and its derivatives (``g`` is linear in every parameter)."""
+    names = spec.names
+    q3, T, R, P = _req(basis.q3), _req(basis.T), _req(basis.R), _req(basis.P)
+    groups: dict[str, list[tuple[int, float | None]]] = {}
+    for i, (name, knot) in enumerate(names):
+        groups.setdefault(name, []).append((i, knot))
+
+    def knots_of(name: str) -> tuple[float, ...]:
+        return tuple(float(k) for _, k in groups[name] if k is not None)
+
+    def of_q3(name: str) -> tuple[NDArray[np.float64], list[NDArray[np.float64]]]:
+        if name not in groups:
+            return np.zeros_like(q3), []
+        items = groups[name]
+        if len(items) == 1 and items[0][1] is None:
+            return np.full_like(q3, v[items[0][0]]), [np.ones_like(q3)]
+        b = basis.knot_basis(knots_of(name))
+        return sum((v[i] * bk for (i, _), bk in zip(items, b, strict=True)), np.zeros_like(q3)), b
+
+    def scalar(name: str) -> float:
+        return float(v[groups[name][0][0]]) if name in groups else 0.0
+
+    G, g_basis = of_q3("gamma0")
+    D, d_basis = of_q3("d")
+    e, fcoef, t2 = scalar("e"), scalar("f"), scalar("t2")
+    A = G + fcoef * P + D * T[0] + e * R[0]
+    B = D * T[1] + e * R[1]
+    C = D * T[2] + e * R[2]
+    cs, sn = _req(basis.cos), _req(basis.sin)
+    g = A[:, None] + B[:, None] * cs + C[:, None] * sn
+    if t2:
+        g = g + t2 * _req(basis.T2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / g
+        avg = 1.0 / (0.5 * (inv @ _GL_W))
+        wgt = (0.5 * _GL_W) * inv**2
+        s0 = wgt.sum(axis=1)
+        s1 = np.einsum("ik,ik->i", wgt, cs)
+        s2 = np.einsum("ik,ik->i", wgt, sn)
+        s3 = np.einsum("ik,ik->i", wgt, _req(basis.T2)) if "t2" in groups else None
+        a2 = avg**2
+    jac = np.empty((q3.size, len(names)))
+    for k, (i, _) in enumerate(groups.get("gamma0", [])):
+        jac[:, i] = a2 * s0 * g_basis[k]
+    for k, (i, _) in enumerate(groups.get("d", [])):
+        jac[:, i] = a2 * d_basis[k] * (T[0] * s0 + T[1] * s1 + T[2] * s2)
+    if "e" in groups:
+        jac[:, groups["e"][0][0]] = a2 * (R[0] * s0 + R[1] * s1 + R[2] * s2)
+    if "f" in groups:
+        jac[:, groups["f"][0][0]] = a2 * P * s0
+    if s3 is not None:
+        jac[:, groups["t2"][0][0]] = a2 * s3
+    ok = np.all(g > 0.0, axis=1)
+    return np.where(ok, avg, np.nan), jac
 
 
 def average_over_traverse(

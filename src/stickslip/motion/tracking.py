@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..calibration import Calibration
+from ..calibration.intervals import relative_sd
 from ..calibration.update import DRIFT_PRIOR, STEP_NOISE, model_sigma, scaled_model
 from ..clock import age_days
 from .planning import Planner
@@ -83,9 +84,18 @@ def scaled_calibration(cal: Calibration, joint: int, factor: float | dict[str, f
     return dataclasses.replace(cal, models=models)
 
 
-def joint_sigma_model(cal: Calibration, joint: int) -> float:
-    """The larger relative model error of ``joint``'s two directions (1; assumed where not measured)."""
-    vals = [model_sigma(cal, j, d)[0] for (j, d) in cal.models if j == joint]
+def joint_sigma_model(cal: Calibration, joint: int, pose: kin.Pose | None = None) -> float:
+    """The larger relative model error of ``joint``'s two directions (1; assumed where not measured).
+
+    In ``pose`` (the other joints and the tilt): the calibration's expected error there, the
+    standard deviation ``predict --interval`` and ``plan`` use (docs/models.md §4); without
+    a pose, its error over the workspace.
+    """
+    dirs = [d for (j, d) in cal.models if j == joint]
+    if pose is None:
+        vals = [model_sigma(cal, joint, d)[0] for d in dirs]
+    else:
+        vals = [float(relative_sd(cal, joint, d, *pose)) for d in dirs]
     return max(vals) if vals else 0.05
 
 
@@ -295,7 +305,7 @@ class PositionTracker:
             raise ValueError("standard deviations must be >= 0 (scale_sd > 0)")
         self._planner = Planner(self.calibration, self.joint, self.pose)
         if self.sigma_model is None:
-            self.sigma_model = joint_sigma_model(self.calibration, self.joint)
+            self.sigma_model = joint_sigma_model(self.calibration, self.joint, self.pose)
         self.track = JointTrack(
             np.zeros(2), _prior(self.scale_sd**2 + self.sigma_model**2, float(self.q0_sd) ** 2),
             calibration_id(self.calibration),

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from .. import kinematics as kin
 from ..devices.base import Controller
+from ..devices.positions import DeviceState
 from ..measurements import StepSize
 from ..vision.acquire import find_moving_tip
 from ..vision.camera import Camera
@@ -41,6 +42,7 @@ __all__ = [
     "CameraCalibrationResult",
     "acquire_tip",
     "calibrate_camera",
+    "dead_reckon",
 ]
 
 
@@ -191,12 +193,7 @@ def calibrate_camera(
     progress : callable, optional
         ``progress(done, total)`` after each move.
     """
-    if increments is not None and (not increments or any(int(n) <= 0 for n in increments)):
-        raise ValueError(f"increments must be positive step counts, got {list(increments)}")
-    if not (1 <= probe <= max_steps):
-        raise ValueError(f"probe = {probe} steps must be in 1..max_steps ({max_steps})")
-    for j in joints:
-        kin.joint_spec(j)
+    _check_arguments(joints, increments, probe, max_steps)
     if pixel_size_m is None:
         pixel_size_m = camera.info.pixel_size_m
     notes: list[str] = []
@@ -209,109 +206,17 @@ def calibrate_camera(
         notes.append("the camera's pixel size is unknown: image Jacobians only, no step sizes (give pixel= in its URL)")
     start_tip = (float(tip[0]), float(tip[1]))
     total = len(joints) * 2 * (len(increments) if increments else max(4, int(max_steps // probe)))
-    done = 0
+    session = _Session(device, camera, pose, view, geometry, pixel_size_m, day, params, increments, probe, max_steps,
+                       max_move_px, progress, total)
     results: list[JointResult] = []
     rows: list[StepSize] = []
     fits_all: list[DirectionFit] = []
     current = start_tip
     for j in joints:
-        if pixel_size_m is not None:
-            m = visibility(j, pose, view, geometry)
-            if m < MIN_VISIBILITY:
-                results.append(JointResult(j, refused=(
-                    f"joint {j} moves the tip mostly along the camera's optical axis at this pose "
-                    f"(only {100 * m:.0f} % "
-                    "of its motion is in the image): not moved; tilt the camera or measure it in another pose"
-                )))
-                continue
-        try:
-            tracker = TipTracker(camera.grab(), current, params)
-        except TemplateError as e:
-            results.append(JointResult(j, refused=f"joint {j}: not measured, the tip could not be learned ({e})"))
-            continue
-        fits: list[DirectionFit] = []
-        sizes: list[StepSizeEstimate] = []
-        refused: str | None = None
-        moved = 0  # signed steps sent on this joint
-        plan: list[int] = [int(n) for n in increments] if increments else []
-        for sign in (1, -1):
-            d = "+" if sign > 0 else "-"
-            counts, points, sigmas = [0], [current], [0.05]
-            n = 0
-            steps_this_way = list(plan) if plan else [probe]
-            k = 0
-            misses = 0
-            while k < len(steps_this_way):
-                inc = steps_this_way[k]
-                k += 1
-                device.step(j, sign * int(inc))
-                moved += sign * int(inc)
-                n += int(inc)
-                done += 1
-                if progress is not None:
-                    progress(min(done, total), total)
-                r = _track(tracker, camera)
-                if isinstance(r, Lost) and not plan:  # the probe's frame refused: another look, without moving
-                    r = _track(tracker, camera)
-                if isinstance(r, Lost):
-                    misses += 1
-                    if misses >= 2 or not plan:  # one frame may be refused; the tip must come back in the next
-                        refused = f"joint {j}{d}: the tip was lost after {n} steps ({r.reason}: {r.detail})"
-                        break
-                    continue
-                misses = 0
-                counts.append(n)
-                points.append((r.x, r.y))
-                sigmas.append(r.sigma)
-                if not plan and k == 1:  # after the probe: the moves that keep the tip in view, a few px each
-                    speed = math.hypot(r.x - current[0], r.y - current[1]) / max(n, 1)
-                    plan = _plan(speed, n, camera_shape(camera, tracker), max_steps, max_move_px)
-                    steps_this_way += plan[1:]
-                current = (r.x, r.y)
-            if refused is not None:
-                break
-            try:
-                fit = fit_image_jacobian(j, d, counts, points, sigmas)
-            except JacobianError as e:
-                refused = str(e)
-                break
-            fits.append(fit)
-        lost_tip = False
-        if moved:  # bring the joint back to where it began, in step count, a move at a time, following the tip
-            per = max(1, max(plan) if plan else probe)
-            last: Fix | Lost | None = None
-            while moved:
-                back = -moved if abs(moved) <= per else (-per if moved > 0 else per)
-                device.step(j, back)
-                moved += back
-                last = _track(tracker, camera)
-            if isinstance(last, Fix):
-                current = (last.x, last.y)
-            else:
-                lost_tip = True
-        if refused is None and pixel_size_m is not None:
-            try:
-                q0 = (pose.q1, pose.q2, pose.q3)[j - 1]
-                plus = step_size(fits[0], _at(pose, j, q0), pixel_size_m, view, geometry)
-                q_far = q0 + plus.gamma * plus.steps
-                q_mid = q0 + 0.5 * plus.gamma * plus.steps
-                plus = step_size(fits[0], _at(pose, j, q_mid), pixel_size_m, view, geometry)
-                minus = step_size(fits[1], _at(pose, j, q_far), pixel_size_m, view, geometry)
-                minus = step_size(fits[1], _at(pose, j, q_far - 0.5 * minus.gamma * minus.steps), pixel_size_m,
-                                  view, geometry)
-                sizes = [plus, minus]
-                for s, q_mid in ((plus, q0 + 0.5 * plus.gamma * plus.steps),
-                                 (minus, q_far - 0.5 * minus.gamma * minus.steps)):
-                    p = _at(pose, j, q_mid)
-                    rows.append(StepSize(day, j, s.direction, p.q1, p.q2, p.q3, p.theta, p.psi, s.gamma, s.sigma,
-                                         s.steps, "camera"))
-            except JacobianError as e:
-                refused = str(e)
-        net = 0.0
-        if len(sizes) == 2:
-            net = sizes[0].gamma * sizes[0].steps - sizes[1].gamma * sizes[1].steps
-        fits_all += fits if refused is None else []
-        results.append(JointResult(j, tuple(fits), tuple(sizes), refused, net))
+        result, joint_rows, current, lost_tip = _measure_joint(session, j, current)
+        results.append(result)
+        rows += joint_rows
+        fits_all += list(result.fits) if result.refused is None else []
         if lost_tip:
             rest = [k for k in joints if k not in {r.joint for r in results}]
             for k in rest:
@@ -322,6 +227,185 @@ def calibrate_camera(
     if fits_all and pixel_size_m is not None:
         cal = CameraCalibration.from_fits(fits_all, pose, start_tip, pixel_size_m, view, geometry)
     return CameraCalibrationResult(pose, start_tip, tuple(results), tuple(rows), cal, pixel_size_m, tuple(notes))
+
+
+def _check_arguments(joints: Sequence[int], increments: Sequence[int] | None, probe: int, max_steps: int) -> None:
+    """``ValueError`` for an unknown joint, a step count that is not positive, a probe outside 1..max_steps."""
+    if increments is not None and (not increments or any(int(n) <= 0 for n in increments)):
+        raise ValueError(f"increments must be positive step counts, got {list(increments)}")
+    if not (1 <= probe <= max_steps):
+        raise ValueError(f"probe = {probe} steps must be in 1..max_steps ({max_steps})")
+    for j in joints:
+        kin.joint_spec(j)
+
+
+@dataclass
+class _Session:
+    """One camera calibration: the arm, the camera, the pose and how to move; the moves made so far."""
+
+    device: Controller
+    camera: Camera
+    pose: kin.Pose
+    view: View
+    geometry: kin.Geometry
+    pixel_size_m: float | None
+    day: str
+    params: TrackerParams
+    increments: Sequence[int] | None
+    probe: int
+    max_steps: int
+    max_move_px: float
+    progress: Progress | None
+    total: int
+    done: int = 0
+
+    def moved(self) -> None:
+        """One move out made: the progress callback is told."""
+        self.done += 1
+        if self.progress is not None:
+            self.progress(min(self.done, self.total), self.total)
+
+
+class _Refusal(Exception):
+    """Why a joint gave no step size (the tip lost, a motion not linear in its steps)."""
+
+
+@dataclass
+class _JointRun:
+    """One joint moved out and back while the tracker follows the tip: its plan of moves, the steps it is out."""
+
+    session: _Session
+    joint: int
+    tracker: TipTracker
+    current: tuple[float, float]
+    plan: list[int]
+    moved: int = 0  # signed steps sent on this joint
+
+    def direction(self, sign: int) -> DirectionFit:
+        """Move out in ``sign``'s direction (the probe, then the plan), tracking; the direction's image motion."""
+        se, j = self.session, self.joint
+        d = "+" if sign > 0 else "-"
+        counts, points, sigmas = [0], [self.current], [0.05]
+        n = 0
+        steps_this_way = list(self.plan) if self.plan else [se.probe]
+        k = 0
+        misses = 0
+        while k < len(steps_this_way):
+            inc = steps_this_way[k]
+            k += 1
+            se.device.step(j, sign * int(inc))
+            self.moved += sign * int(inc)
+            n += int(inc)
+            se.moved()
+            r = _track(self.tracker, se.camera)
+            if isinstance(r, Lost) and not self.plan:  # the probe's frame refused: another look, without moving
+                r = _track(self.tracker, se.camera)
+            if isinstance(r, Lost):
+                misses += 1
+                if misses >= 2 or not self.plan:  # one frame may be refused; the tip must come back in the next
+                    raise _Refusal(f"joint {j}{d}: the tip was lost after {n} steps ({r.reason}: {r.detail})")
+                continue
+            misses = 0
+            counts.append(n)
+            points.append((r.x, r.y))
+            sigmas.append(r.sigma)
+            if not self.plan and k == 1:  # after the probe: the moves that keep the tip in view, a few px each
+                speed = math.hypot(r.x - self.current[0], r.y - self.current[1]) / max(n, 1)
+                self.plan = _plan(speed, n, camera_shape(se.camera, self.tracker), se.max_steps, se.max_move_px)
+                steps_this_way += self.plan[1:]
+            self.current = (r.x, r.y)
+        try:
+            return fit_image_jacobian(j, d, counts, points, sigmas)
+        except JacobianError as e:
+            raise _Refusal(str(e)) from None
+
+    def back(self) -> bool:
+        """Bring the joint back to where it began, in step count, a move at a time, following the tip.
+
+        True if the tip was lost on the way.
+        """
+        if not self.moved:
+            return False
+        per = max(1, max(self.plan) if self.plan else self.session.probe)
+        last: Fix | Lost | None = None
+        while self.moved:
+            back = -self.moved if abs(self.moved) <= per else (-per if self.moved > 0 else per)
+            self.session.device.step(self.joint, back)
+            self.moved += back
+            last = _track(self.tracker, self.session.camera)
+        if isinstance(last, Fix):
+            self.current = (last.x, last.y)
+            return False
+        return True
+
+
+def _measure_joint(
+    se: _Session, j: int, current: tuple[float, float]
+) -> tuple[JointResult, list[StepSize], tuple[float, float], bool]:
+    """Joint ``j`` measured from the tip at ``current``: its result, its rows, the tip after, whether it was lost."""
+    if se.pixel_size_m is not None:
+        m = visibility(j, se.pose, se.view, se.geometry)
+        if m < MIN_VISIBILITY:
+            return JointResult(j, refused=(
+                f"joint {j} moves the tip mostly along the camera's optical axis at this pose "
+                f"(only {100 * m:.0f} % "
+                "of its motion is in the image): not moved; tilt the camera or measure it in another pose"
+            )), [], current, False
+    try:
+        tracker = TipTracker(se.camera.grab(), current, se.params)
+    except TemplateError as e:
+        refusal = f"joint {j}: not measured, the tip could not be learned ({e})"
+        return JointResult(j, refused=refusal), [], current, False
+    run = _JointRun(se, j, tracker, current, [int(n) for n in se.increments] if se.increments else [])
+    fits: list[DirectionFit] = []
+    refused: str | None = None
+    try:
+        for sign in (1, -1):
+            fits.append(run.direction(sign))
+    except _Refusal as e:
+        refused = str(e)
+    lost_tip = run.back()
+    sizes: list[StepSizeEstimate] = []
+    rows: list[StepSize] = []
+    if refused is None and se.pixel_size_m is not None:
+        try:
+            sizes, rows = _step_sizes(se, j, fits, se.pixel_size_m)
+        except JacobianError as e:
+            refused = str(e)
+    net = 0.0
+    if len(sizes) == 2:
+        net = sizes[0].gamma * sizes[0].steps - sizes[1].gamma * sizes[1].steps
+    return JointResult(j, tuple(fits), tuple(sizes), refused, net), rows, run.current, lost_tip
+
+
+def _step_sizes(
+    se: _Session, j: int, fits: list[DirectionFit], pixel_size_m: float
+) -> tuple[list[StepSizeEstimate], list[StepSize]]:
+    """The step size of ``+`` and ``-`` at the middle of each one's travel, and as rows (method ``camera``)."""
+    pose, view, geometry = se.pose, se.view, se.geometry
+    q0 = (pose.q1, pose.q2, pose.q3)[j - 1]
+    plus = step_size(fits[0], _at(pose, j, q0), pixel_size_m, view, geometry)
+    q_far = q0 + plus.gamma * plus.steps
+    q_mid = q0 + 0.5 * plus.gamma * plus.steps
+    plus = step_size(fits[0], _at(pose, j, q_mid), pixel_size_m, view, geometry)
+    minus = step_size(fits[1], _at(pose, j, q_far), pixel_size_m, view, geometry)
+    minus = step_size(fits[1], _at(pose, j, q_far - 0.5 * minus.gamma * minus.steps), pixel_size_m,
+                      view, geometry)
+    rows: list[StepSize] = []
+    for s, q_mid in ((plus, q0 + 0.5 * plus.gamma * plus.steps),
+                     (minus, q_far - 0.5 * minus.gamma * minus.steps)):
+        p = _at(pose, j, q_mid)
+        rows.append(StepSize(se.day, j, s.direction, p.q1, p.q2, p.q3, p.theta, p.psi, s.gamma, s.sigma,
+                             s.steps, "camera"))
+    return [plus, minus], rows
+
+
+def dead_reckon(state: DeviceState, result: CameraCalibrationResult) -> None:
+    """Put the measured joints where they ended, by the steps the camera saw (within their stops, ``dead-reckoned``)."""
+    for jr in result.joints:
+        if jr.net_q:
+            q = min(max(state.positions[jr.joint] + jr.net_q, kin.JOINTS[jr.joint].lower), kin.JOINTS[jr.joint].upper)
+            state.set_position(jr.joint, q, "dead-reckoned")
 
 
 def camera_shape(camera: Camera, tracker: TipTracker) -> tuple[int, int]:

@@ -302,6 +302,18 @@ class _Metered:
         return microphone
 
 
+def _check_request(request: DayRequest, done: Sequence[tuple[Traverse, int]]) -> None:
+    """``ValueError`` for a day that cannot run: a joint without a tuning, ``start_at`` or ``done`` not fitting."""
+    plan = request.plan
+    missing = sorted({t.joint for t in plan[request.start_at:]} - set(request.tunings))
+    if missing:
+        raise ValueError(f"the calibration day needs a limit-switch tuning of joint(s) {missing} (stickslip tune)")
+    if not 0 <= request.start_at < len(plan):
+        raise ValueError(f"start_at = {request.start_at} is outside 0..{len(plan) - 1}")
+    if len(done) != request.start_at:
+        raise ValueError(f"resuming at traverse {request.start_at + 1} needs the {request.start_at} rows before it")
+
+
 def calibration_day(
     store: DayStore,
     request: DayRequest,
@@ -323,13 +335,7 @@ def calibration_day(
     """
     day = check_day_label(request.day)
     plan = request.plan
-    missing = sorted({t.joint for t in plan[request.start_at:]} - set(request.tunings))
-    if missing:
-        raise ValueError(f"the calibration day needs a limit-switch tuning of joint(s) {missing} (stickslip tune)")
-    if not 0 <= request.start_at < len(plan):
-        raise ValueError(f"start_at = {request.start_at} is outside 0..{len(plan) - 1}")
-    if len(done) != request.start_at:
-        raise ValueError(f"resuming at traverse {request.start_at + 1} needs the {request.start_at} rows before it")
+    _check_request(request, done)
     open_dev = opener or open_device
     rows = [r for r, _ in done]
     ids = _Ids(store)

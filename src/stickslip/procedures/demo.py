@@ -363,6 +363,22 @@ def _limit_switches(sim: SimulatedMM3A, switch: str, bar: _Bars) -> tuple[dict[i
     return tunings, detectors, sim.microphone()
 
 
+def _simulator(
+    seed: int, day: str, step_noise: float, soundscape_kwargs: dict[str, Any] | None, physics: bool
+) -> tuple[SimulatedMM3A, str]:
+    """The demo's simulated arm (the physics-based one if ``physics``) and its URL."""
+    url = f"sim://?seed={seed}&day={day}" + ("&physics=1" if physics else "")
+    if physics:
+        from ..sim.physics import PhysicsMM3A
+
+        sim: SimulatedMM3A = PhysicsMM3A(
+            seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url
+        )
+    else:
+        sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
+    return sim, url
+
+
 def run_demo(
     seed: int = 0,
     day: str | None = None,
@@ -432,15 +448,7 @@ def run_demo(
     check_confirm_s(confirm_s)
     t_wall = time.perf_counter()
     day = check_day_label(day) if day is not None else today_label()
-    url = f"sim://?seed={seed}&day={day}" + ("&physics=1" if physics else "")
-    if physics:
-        from ..sim.physics import PhysicsMM3A
-
-        sim: SimulatedMM3A = PhysicsMM3A(
-            seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url
-        )
-    else:
-        sim = SimulatedMM3A(seed=seed, day=day, step_noise=step_noise, soundscape_kwargs=soundscape_kwargs, url=url)
+    sim, url = _simulator(seed, day, step_noise, soundscape_kwargs, physics)
     n_val = 2 * len(VALIDATION_PLAN) if validation else 0
     bar = _Bars(progress, 2 * len(CALIBRATION_PLAN) + n_val + 2 * len(REPEAT_PLAN) * repeats)
     try:

@@ -47,7 +47,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -56,9 +56,14 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
+from ..rig.envelope import EnvelopeViolation
+from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions
+from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, track_fields
 from .reach import referenced_state
+
+if TYPE_CHECKING:
+    from .closed_loop import CameraLoop, JogEyes
 
 __all__ = [
     "SPEEDS",
@@ -68,6 +73,7 @@ __all__ = [
     "JogRequest",
     "JogResult",
     "KeySource",
+    "envelope_stop",
     "jog",
     "max_rates",
     "parse_keys",
@@ -194,6 +200,8 @@ class JogStatus:
     image_angle: float
     sent: list[int]
     message: str
+    sources: tuple[str, str, str] = ("", "", "")
+    """Each joint's kept source when a camera looks (``seen``, ``dead-reckoned``), else empty."""
 
 
 @dataclass
@@ -220,6 +228,9 @@ class JogController:
     margin : float
         Motion stops when a joint would come closer than this fraction of its range to
         an end stop (dimensionless).
+    guard : Guard or None
+        A rig's envelope: motion stops before a tick whose steps would leave it (so within
+        one tick's motion of the boundary), with ``guard_sd`` (rad, rad, m) as the joints' σ.
     """
 
     calibration: Calibration
@@ -238,6 +249,7 @@ class JogController:
     quit: bool = False
     message: str = ""
     sent: list[int] = field(default_factory=lambda: [0, 0, 0])
+    sources: tuple[str, str, str] = ("", "", "")
     _acc: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
     _last_key_t: float = 0.0
     _rates: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -245,6 +257,8 @@ class JogController:
     _pending: list[tuple[int, int, int]] = field(default_factory=list)
     _setpoint: tuple[float, float, float] | None = None
     _queued: list[tuple[float, float, float]] = field(default_factory=list)
+    guard: Guard | None = None
+    guard_sd: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         self.q = [float(v) for v in self.q]
@@ -377,6 +391,7 @@ class JogController:
 
     def _limit_problem(self, steps: tuple[int, int, int]) -> str | None:
         q = list(self.q)
+        path = [list(q)]
         for j in (1, 2, 3):
             if steps[j - 1]:
                 pose = kin.Pose(q[0], q[1], q[2], self.theta, self.psi)
@@ -390,7 +405,8 @@ class JogController:
                 ):
                     side = "lower" if q[j - 1] < before else "upper"
                     return f"joint {j} is at its {side} limit: stopped (move the other way)"
-        return None
+                path.append(list(q))
+        return envelope_stop(self.guard, path, self.guard_sd)
 
     def _single_step(self, direction: tuple[float, float, float]) -> None:
         """Plan a straight move of ``speed`` metres along ``direction``; queue its segments."""
@@ -441,6 +457,7 @@ class JogController:
             self.image_angle,
             list(self.sent),
             self.message,
+            self.sources,
         )
 
 
@@ -453,13 +470,16 @@ def run_jog(
     save: Callable[[DeviceState], None],
     clock: Callable[[], float],
     tick: float = 0.05,
+    eyes: JogEyes | None = None,
 ) -> str | None:
     """The jog loop: keys, the law, steps through the move journal, the status; until ``q``.
 
     ``read_keys(timeout)`` waits up to ``timeout`` seconds and returns key names;
     ``show(status)`` draws; ``save(state)`` stores the positions; ``clock()`` is a
     monotonic time in seconds. Returns the device error that ended the session, if any.
-    The device is told to stop when the loop ends, however it ends.
+    The device is told to stop when the loop ends, however it ends. With ``eyes`` (a
+    camera, :class:`~stickslip.procedures.closed_loop.JogEyes`) the tip is looked at as
+    it moves and the positions shown are the seen ones.
     """
     t_prev = clock()
     show(controller.status())
@@ -491,6 +511,9 @@ def run_jog(
                     controller.message = out.error
                     show(controller.status())
                     return out.error
+            if eyes is not None:
+                _look(eyes, controller, steps)
+                t_prev = clock()  # the time spent looking is not moving time: no catch-up burst
             show(controller.status())
     finally:
         try:
@@ -498,6 +521,17 @@ def run_jog(
         except DeviceError:
             pass
     return None
+
+
+def _look(eyes: JogEyes, controller: JogController, steps: tuple[int, int, int]) -> None:
+    """Let the camera look after a tick: the seen positions and corrected step scales go to the jog law."""
+    q, why = eyes.after(steps)
+    if q is not None:
+        controller.q = list(q)
+        controller.calibration = eyes.calibration()
+        if why:
+            controller.message = why
+    controller.sources = eyes.sources()
 
 
 # ---------------------------------------------------------------- the whole session
@@ -513,6 +547,22 @@ class KeySource(Protocol):
     def close(self) -> None:
         """Give the input back (restore the terminal)."""
         ...
+
+
+def _sds(state: DeviceState) -> tuple[float, float, float]:
+    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
+    return (sd[0], sd[1], sd[2])
+
+
+def envelope_stop(guard: Guard | None, path: list[list[float]], q_sd: tuple[float, float, float]) -> str | None:
+    """Why a jog tick's path (poses, rad or m) must not be sent: it leaves the rig's envelope; ``None`` if it may."""
+    if guard is None or len(path) < 2:
+        return None
+    try:
+        guard.check(path, q_sd)
+    except EnvelopeViolation as e:
+        return f"stopped at the rig's envelope ({e.refusal.obstacle}): move another way"
+    return None
 
 
 @dataclass(frozen=True)
@@ -541,6 +591,11 @@ class JogRequest:
         refused on a real controller. Uncertain joints are always refused.
     trust_calibration : bool
         Use a calibration without its device, or the simulator's, on a real controller.
+    camera : CameraLoop or None
+        A camera that looks at the tip: the positions shown and kept are the seen ones
+        (:class:`~stickslip.procedures.closed_loop.JogEyes`).
+    guard : Guard or None
+        A rig's envelope: the tip stops at its boundary (:class:`JogController`).
     """
 
     device: str
@@ -553,6 +608,8 @@ class JogRequest:
     max_age_days: int = 0
     from_unreferenced: bool = False
     trust_calibration: bool = False
+    camera: CameraLoop | None = None
+    guard: Guard | None = None
 
 
 @dataclass(frozen=True)
@@ -609,23 +666,29 @@ def jog(
         ready()
         dev = (opener or open_device)(request.device)
         keys_in: KeySource | None = None
+        eyes: JogEyes | None = None
         try:
             if isinstance(dev, PoseSettable):
                 dev.set_pose(*state.pose)
             ctl = JogController(
                 calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
                 max_rates(dev, request.max_rate), request.image_angle, request.hold, request.speed - 1,
+                guard=request.guard, guard_sd=_sds(state),
             )
 
             def save(st: DeviceState) -> None:
                 save_state(store, st)
 
+            if request.camera is not None:
+                eyes = _open_eyes(store, dev, state, calibration, request, ctl)
             keys_in = keys()
             try:
-                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock)
+                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock, eyes=eyes)
             except KeyboardInterrupt:
                 error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
         finally:
+            if eyes is not None:
+                eyes.close()
             if keys_in is not None:
                 keys_in.close()
             try:
@@ -633,3 +696,17 @@ def jog(
             except DeviceError:
                 pass
     return JogResult(key, ctl.status(), state, error)
+
+
+def _open_eyes(
+    store: MoveStore, dev: Controller, state: DeviceState, calibration: Calibration, request: JogRequest,
+    ctl: JogController,
+) -> JogEyes:
+    """The session's camera (:class:`~stickslip.procedures.closed_loop.JogEyes`), the jog law on its step scales."""
+    from .closed_loop import JogEyes
+
+    assert request.camera is not None
+    eyes = JogEyes.open(store, dev, state, calibration, request.camera, request.geometry)
+    ctl.calibration = eyes.calibration()
+    ctl.sources = eyes.sources()
+    return eyes

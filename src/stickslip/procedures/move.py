@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 import socket
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -49,6 +49,8 @@ from ..devices.base import (
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.planning import Planner
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
+from ..rig.envelope import EnvelopeViolation
+from ..rig.guard import Guard
 from ..units import format_position, position_display_unit
 from .conditions import calibration_device_problem, usage_warnings
 
@@ -64,6 +66,8 @@ __all__ = [
     "PoseUpdate",
     "TargetOutOfRange",
     "TrackedPlan",
+    "check_envelope",
+    "check_envelope_path",
     "device_lock",
     "drive",
     "exact_positions",
@@ -352,7 +356,7 @@ def plan_tracked(
     plan = Planner(scaled, joint, state.pose).plan(q_from, q_to)
     return TrackedPlan(
         joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
-        joint_sigma_model(calibration, joint),
+        joint_sigma_model(calibration, joint, state.pose),  # the model error in this pose (docs/models.md §4)
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
         from_uncertain=state.uncertain.get(joint),
     )
@@ -479,6 +483,31 @@ def track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
     return {"sd": t.sd, "step_scale": t.scale, "step_scale_sd": t.scale_sd}
 
 
+def check_envelope(guard: Guard | None, state: DeviceState, joint: int, q_to: float) -> None:
+    """The planning step's one call into a rig's envelope: :class:`MoveRefused` naming the obstacle, else nothing.
+
+    The move of ``joint`` from the kept pose to ``q_to`` (rad or m), with each joint's
+    tracked σ as a margin (:func:`stickslip.rig.envelope.check_path`); no guard, no check.
+    """
+    if guard is None:
+        return
+    q = [state.positions[j] for j in (1, 2, 3)]
+    end = list(q)
+    end[joint - 1] = q_to
+    check_envelope_path(guard, state, [q, end])
+
+
+def check_envelope_path(guard: Guard | None, state: DeviceState, path: Sequence[Sequence[float]]) -> None:
+    """A whole planned path (poses, rad or m) against a rig's envelope: :class:`MoveRefused`, else nothing."""
+    if guard is None:
+        return
+    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
+    try:
+        guard.check(path, sd)
+    except EnvelopeViolation as e:
+        raise MoveRefused(f"refused by the rig's envelope: {e}") from None
+
+
 # ---------------------------------------------------------------- the whole move
 
 
@@ -506,6 +535,9 @@ class MoveRequest:
         Use a calibration that does not record its device, or was made on the simulator,
         on a real controller (refused without it:
         :func:`~.conditions.calibration_device_problem`).
+    guard : Guard or None
+        A rig's envelope for this arm (:mod:`stickslip.rig`): the planned move is checked
+        against it before a step is sent (:func:`check_envelope`).
     """
 
     device: str
@@ -517,6 +549,7 @@ class MoveRequest:
     max_age_days: int = 0
     from_unreferenced: bool = False
     trust_calibration: bool = False
+    guard: Guard | None = None
 
 
 @dataclass(frozen=True)
@@ -605,6 +638,7 @@ def move(
                 calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
                 assumed=problem is not None and joint not in state.uncertain,
             )
+            check_envelope(request.guard, state, joint, plan.q_to)
             if plan.note:
                 warn(plan.note)
             save_state(store, state)  # the recorded pose, even if nothing moves

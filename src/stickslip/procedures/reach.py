@@ -26,12 +26,14 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.reach import JointStepper, ReachPlan, plan_reach
+from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
 from .move import (
     Interrupted,
     MoveRefused,
     MoveStore,
     PoseUpdate,
+    check_envelope_path,
     device_lock,
     drive,
     exact_positions,
@@ -46,6 +48,7 @@ __all__ = [
     "ReachResult",
     "check_referenced",
     "drive_reach",
+    "joint_path",
     "plan_from_state",
     "reach",
     "referenced_state",
@@ -126,6 +129,18 @@ def drive_reach(
     return out
 
 
+def joint_path(plan: ReachPlan) -> list[list[float]]:
+    """The poses a reach passes through as driven: in each segment joint 1, then 2, then 3 (rad or m)."""
+    q = list(plan.q_start)
+    path = [list(q)]
+    for seg in plan.segments:
+        for j in (1, 2, 3):
+            if seg.steps[j - 1]:
+                q[j - 1] = float(seg.q[j - 1])
+                path.append(list(q))
+    return path
+
+
 # ---------------------------------------------------------------- the whole move
 
 
@@ -156,6 +171,9 @@ class ReachRequest:
         refused on a real controller. Uncertain joints are always refused.
     trust_calibration : bool
         Use a calibration without its device, or the simulator's, on a real controller.
+    guard : Guard or None
+        A rig's envelope for this arm: the whole line, as driven (:func:`joint_path`), is
+        checked against it before a step is sent.
     """
 
     device: str
@@ -169,6 +187,7 @@ class ReachRequest:
     dry_run: bool = False
     from_unreferenced: bool = False
     trust_calibration: bool = False
+    guard: Guard | None = None
 
 
 @dataclass(frozen=True)
@@ -290,6 +309,7 @@ def reach(
     with device_lock(store, key):
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
+        check_envelope_path(request.guard, state, joint_path(plan))
         save_state(store, state)  # the recorded pose, even if nothing moves
         for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
             warn(w)

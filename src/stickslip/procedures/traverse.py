@@ -400,39 +400,8 @@ def measure_traverse(
         )
         return replace(redo, retried=True)
 
-    if event.onset_uncertain:  # heard as the switch passed interference by: when did it begin?
-        raise TraverseError(
-            f"joint {joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed by a sound "
-            "that did not persist (interference near the stop), so when the stop began is uncertain; nothing "
-            "recorded: keep talk and other sounds away from the arm and measure again"
-        )
     # 3. count the steps made before the stop, latency corrected
-    detected = float(event.detected_at_s)
-    t_stop = {"onset": float(event.onset_s), "fixed": detected - float(detector.latency_s)}.get(
-        latency, detected
-    )
-    steps = _count_before(t_stop, run.bursts, hz)
-    if steps <= 0:
-        raise TraverseError(
-            f"joint {joint}: the stop was heard at once ({steps} steps before it): the joint did not "
-            "start from the opposite stop, or the detector fired on the start stop's sound"
-        )
-    return TraverseResult(
-        traverse=_row(spec, sign, pose, day, steps),
-        steps=int(steps),
-        commanded_steps=run.commanded,
-        steps_after_stop=run.commanded - int(steps),
-        latency_steps_corrected=_count_before(detected, run.bursts, hz) - int(steps),
-        detected_at_s=detected,
-        onset_s=float(event.onset_s),
-        elapsed_device_s=clock() - t_start,
-        frequency_hz=hz,
-        predrive_steps=predrive_steps,
-        listen_after_steps=listen_after_steps,
-        bursts=tuple(run.bursts),
-        confirmed_at_s=event.confirmed_at_s,
-        unconfirmed=tuple(t for t in listener.unconfirmed if t >= t_start),
-    )
+    return run.counted(event, t_start, latency, pose, day, predrive_steps, listen_after_steps)
 
 
 def _check_options(latency: str, predrive: str, burst_steps: int, listen_after_steps: int) -> None:
@@ -556,3 +525,41 @@ class _Run:
             update(self.commanded, self.clock() - t_start)
         self.controller.stop(self.joint)
         return event
+
+    def counted(
+        self, event: StopEvent, t_start: float, latency: str, pose: kin.Pose, day: str, predrive_steps: int,
+        listen_after_steps: int,
+    ) -> TraverseResult:
+        """The steps made from ``t_start`` (s) to the stop heard as ``event``, latency corrected, as the result."""
+        if event.onset_uncertain:  # heard as the switch passed interference by: when did it begin?
+            raise TraverseError(
+                f"joint {self.joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed "
+                "by a sound that did not persist (interference near the stop), so when the stop began is uncertain; "
+                "nothing recorded: keep talk and other sounds away from the arm and measure again"
+            )
+        detected = float(event.detected_at_s)
+        t_stop = {"onset": float(event.onset_s), "fixed": detected - float(self.listener.detector.latency_s)}.get(
+            latency, detected
+        )
+        steps = _count_before(t_stop, self.bursts, self.hz)
+        if steps <= 0:
+            raise TraverseError(
+                f"joint {self.joint}: the stop was heard at once ({steps} steps before it): the joint did not "
+                "start from the opposite stop, or the detector fired on the start stop's sound"
+            )
+        return TraverseResult(
+            traverse=_row(kin.joint_spec(self.joint), self.sign, pose, day, steps),
+            steps=int(steps),
+            commanded_steps=self.commanded,
+            steps_after_stop=self.commanded - int(steps),
+            latency_steps_corrected=_count_before(detected, self.bursts, self.hz) - int(steps),
+            detected_at_s=detected,
+            onset_s=float(event.onset_s),
+            elapsed_device_s=self.clock() - t_start,
+            frequency_hz=self.hz,
+            predrive_steps=predrive_steps,
+            listen_after_steps=listen_after_steps,
+            bursts=tuple(self.bursts),
+            confirmed_at_s=event.confirmed_at_s,
+            unconfirmed=tuple(t for t in self.listener.unconfirmed if t >= t_start),
+        )

@@ -31,12 +31,10 @@ so a 90 s rotary traverse takes a few milliseconds.
 
 from __future__ import annotations
 
-import bisect
 import math
 import threading
 import weakref
 import zlib
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qsl, urlsplit
 
@@ -44,13 +42,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
-from ..calibration.result import Parameter
 from ..devices.base import DeviceError, DeviceInfo, check_setting, check_steps
-from ..models import DIRECTIONS, JointModel, PrismaticParams, RotaryParams, direction_sign
-from .microphone import VirtualMicrophone, _soundscape
+from ..models import JointModel, PrismaticParams, RotaryParams, direction_sign
+from .step_log import StepLog
+from .true_steps import _CHUNK as _CHUNK  # sim.physics steps in the same chunks
+from .true_steps import RIPPLE, TrueSteps
 
 if TYPE_CHECKING:
-    from .sound import Soundscape
+    pass
 
 __all__ = [
     "NOMINAL",
@@ -64,12 +63,6 @@ __all__ = [
 FREQUENCY_RANGE = (1.0, 5000.0)
 """Allowed stepping frequencies of the simulated controller, Hz."""
 
-RIPPLE = 0.004
-"""Relative amplitude of the smooth position-dependent ripple of the true mean step."""
-
-_RIPPLE_PERIODS = {1: 7, 2: 7, 3: 5}
-_CHUNK = 4096
-_KEEP_BURSTS = 4096  # burst records kept before those all microphones have heard are dropped
 _MAX_BURST = 10_000_000
 
 # Nominal (undrifted) true parameters. Prismatic: the paper's published values
@@ -111,23 +104,7 @@ def _drifted(
     )
 
 
-@dataclass
-class _Burst:
-    """One burst of steps, for the virtual microphone: steps at ``t0 + k / hz``, k < n."""
-
-    t0: float
-    hz: float
-    joint: int
-    n: int
-    k_stop: int  # steps with k >= k_stop began at the end stop (did not move)
-    sign: int = 1
-
-    @property
-    def t_end(self) -> float:
-        return self.t0 + self.n / self.hz
-
-
-class SimulatedMM3A:
+class SimulatedMM3A(TrueSteps, StepLog):
     """A simulated Kleindiek MM3A on a virtual clock (a :class:`~.base.Controller`).
 
     Parameters
@@ -191,7 +168,7 @@ class SimulatedMM3A:
         self._url = url
         key = day_key(day)
         drift_rng = np.random.default_rng([self.seed, key, 0])
-        self._models: dict[tuple[int, str], JointModel] = {}
+        self._models = {}
         for (joint, direction), nominal in NOMINAL.items():
             self._models[(joint, direction)] = JointModel(joint, direction, _drifted(nominal, drift_rng, self.drift))
         self._ripple_phase = {j: float(drift_rng.uniform(0.0, 2.0 * math.pi)) for j in (1, 2, 3)}
@@ -204,13 +181,13 @@ class SimulatedMM3A:
         self.set_pose(*p)
         self._hz = {1: 1000.0, 2: 1000.0, 3: 1000.0}
         self.clock_s = 0.0
-        self._bursts: list[_Burst] = []
-        self._burst_ends: list[float] = []
-        self._runs: dict[int, list[list[float]]] = {1: [], 2: [], 3: []}
-        self._last_burst: dict[int, _Burst | None] = {1: None, 2: None, 3: None}
-        self._mics: weakref.WeakSet[VirtualMicrophone] = weakref.WeakSet()
+        self._bursts = []
+        self._burst_ends = []
+        self._runs = {1: [], 2: [], 3: []}
+        self._last_burst = {1: None, 2: None, 3: None}
+        self._mics = weakref.WeakSet()
         self._lock = threading.RLock()  # emulators step from a server thread
-        self._soundscape: Soundscape | None = None
+        self._soundscape = None
         self.steps_simulated = 0
         self._closed = False
 
@@ -259,12 +236,7 @@ class SimulatedMM3A:
             hz = self._hz[joint]
             k_stop, q_end = self._advance(joint, sign, abs(n))
             self._q[joint] = q_end
-            burst = _Burst(self.clock_s, hz, joint, abs(n), k_stop, sign)
-            self._bursts.append(burst)
-            self._burst_ends.append(burst.t_end)
-            self._note_stop_run(burst)
-            if len(self._bursts) > _KEEP_BURSTS:
-                self._forget_heard()
+            self._log_burst(self.clock_s, hz, joint, abs(n), k_stop, sign)
             self.clock_s += abs(n) / hz
             self.steps_simulated += abs(n)
 
@@ -287,6 +259,10 @@ class SimulatedMM3A:
     def close(self) -> None:
         """Stop everything; further steps raise :class:`DeviceError`."""
         self._closed = True
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise DeviceError("the simulated MM3A is closed")
 
     def __enter__(self) -> SimulatedMM3A:
         return self
@@ -326,11 +302,6 @@ class SimulatedMM3A:
                 raise ValueError(f"{name} = {v:.6g} rad is outside [-pi, pi]")
             setattr(self, f"_{name}", v)
 
-    @property
-    def pose(self) -> kin.Pose:
-        """The current true pose (joints rad, rad, m; tilt rad)."""
-        return kin.Pose(self._q[1], self._q[2], self._q[3], self._theta, self._psi)
-
     def position(self, joint: int) -> float:
         """True position of ``joint`` (rad or m)."""
         return self._q[self._joint(joint)]
@@ -350,199 +321,6 @@ class SimulatedMM3A:
         if not seconds >= 0.0:
             raise ValueError(f"wait time must be >= 0 s, got {seconds!r}")
         self.clock_s += float(seconds)
-
-    # ------------------------------------------------------------ the truth
-
-    def true_models(self) -> dict[tuple[int, str], JointModel]:
-        """The day's true mean-step models, ``{(joint, direction): JointModel}`` (SI)."""
-        return dict(self._models)
-
-    def true_parameters(self) -> list[Parameter]:
-        """The day's true parameters, as :meth:`Calibration.parameters` gives calibrated ones.
-
-        ``stderr`` is ``None``; values are SI (m, 1, rad).
-        """
-        out: list[Parameter] = []
-        for joint in (3, 2, 1):
-            for direction in DIRECTIONS:
-                p = self._models[(joint, direction)].params
-                if isinstance(p, PrismaticParams):
-                    for name, value, unit in (("a", p.a, "m"), ("b", p.b, "1"), ("c", p.c, "m")):
-                        out.append(Parameter(joint, direction, name, None, float(value), None, unit))
-                else:
-                    for name, values in (("gamma0", p.gamma0), ("d", p.d)):
-                        for k, value in zip(p.knots, values, strict=True):
-                            out.append(Parameter(joint, direction, name, float(k), float(value), None, "rad"))
-        return out
-
-    def true_mean_step(
-        self, joint: int, direction: str | int, q: float | NDArray[np.float64] | None = None
-    ) -> NDArray[np.float64]:
-        """The true mean step (m or rad) of ``joint`` in ``direction`` at position ``q``.
-
-        Includes the ripple (what a single step averages to); the other joints and the
-        tilt are the current pose.
-        """
-        joint = self._joint(joint)
-        sign = direction_sign(direction)
-        A, al, be = self._coefficients(joint, sign)
-        qq = self._q[joint] if q is None else q
-        return self._mean_step(joint, np.asarray(qq, dtype=float), A, al, be)
-
-    # ------------------------------------------------------------ physics
-
-    @staticmethod
-    def _joint(joint: int) -> int:
-        try:
-            j = int(joint)
-        except (TypeError, ValueError):
-            j = -1
-        if j not in (1, 2, 3) or (isinstance(joint, float) and not float(joint).is_integer()):
-            raise ValueError(f"unknown joint {joint!r}: joints are 1, 2 (rotary) and 3 (prismatic)")
-        return j
-
-    def _check_open(self) -> None:
-        if self._closed:
-            raise DeviceError("the simulated MM3A is closed")
-
-    def _coefficients(self, joint: int, sign: int) -> tuple[float, float, float]:
-        """``(A, alpha, beta)``: model step along the travel ``A + alpha cos q + beta sin q``."""
-        model = self._models[(joint, "+" if sign > 0 else "-")]
-        q1, q2, q3, theta, psi = self.pose
-        A, al, be = model.rotary_coefficients(q1, q2, q3, theta, psi)
-        return float(A), float(al), float(be)
-
-    def _mean_step(
-        self, joint: int, q: NDArray[np.float64], A: float, al: float, be: float
-    ) -> NDArray[np.float64]:
-        spec = kin.JOINTS[joint]
-        base = A if (al == 0.0 and be == 0.0) else A + al * np.cos(q) + be * np.sin(q)
-        phase = 2.0 * math.pi * _RIPPLE_PERIODS[joint] * (q - spec.lower) / spec.span + self._ripple_phase[joint]
-        return base * (1.0 + RIPPLE * np.sin(phase))
-
-    def _advance(self, joint: int, sign: int, n: int) -> tuple[int, float]:
-        """Simulate ``n`` steps of ``joint`` in direction ``sign``; returns ``(k_stop, q_end)``.
-
-        ``k_stop`` is the index of the first step that began at the end stop (``n``
-        if none did). Step positions within a chunk are found by fixed-point
-        iteration of ``p_k = q + sign * sum_{j<k} gamma(p_j) eps_j`` (converges to
-        1e-12 of the span in a few rounds, since gamma changes slowly).
-        """
-        spec = kin.JOINTS[joint]
-        stop = spec.upper if sign > 0 else spec.lower
-        q = self._q[joint]
-        if sign * (stop - q) <= 0.0:
-            return 0, stop
-        A, al, be = self._coefficients(joint, sign)
-        if not A - math.hypot(al, be) > 0.0:
-            raise DeviceError(f"the true step of joint {joint} would be <= 0 in this pose")
-        tol = 1e-12 * spec.span
-        done = 0
-        while done < n:
-            m = min(_CHUNK, n - done)
-            eps = np.exp(self._sigma * self._rng.standard_normal(m) - 0.5 * self._sigma**2)
-            p = np.full(m, q)
-            for _ in range(12):
-                sizes = self._mean_step(joint, p, A, al, be) * eps
-                csum = np.cumsum(sizes)
-                p_new = q + sign * np.concatenate(([0.0], csum[:-1]))
-                change = float(np.max(np.abs(p_new - p)))
-                p = p_new
-                if change <= tol:
-                    break
-            sizes = self._mean_step(joint, p, A, al, be) * eps
-            ends = p + sign * sizes
-            hit = np.nonzero(sign * (ends - stop) >= 0.0)[0]
-            if hit.size:
-                return done + int(hit[0]) + 1, stop
-            q = float(ends[-1])
-            done += m
-        return n, q
-
-    def _note_stop_run(self, b: _Burst) -> None:
-        """Extend or start a run of at-stop steps (see :meth:`stop_runs`)."""
-        prev = self._last_burst[b.joint]
-        self._last_burst[b.joint] = b
-        if b.k_stop >= b.n:
-            return
-        runs = self._runs[b.joint]
-        continued = (
-            prev is not None
-            and runs
-            and b.k_stop == 0
-            and prev.sign == b.sign
-            and prev.k_stop < prev.n
-            and abs(prev.t_end - b.t0) < 0.5 / b.hz
-        )
-        if continued:
-            runs[-1][1] = b.t_end
-        else:
-            runs.append([b.t0 + b.k_stop / b.hz, b.t_end])
-
-    def _forget_heard(self) -> None:
-        """Drop burst records every live microphone has rendered (keeps long sessions lean)."""
-        horizon = min((m.t_s for m in list(self._mics)), default=self.clock_s) - 1.0
-        k = bisect.bisect_left(self._burst_ends, horizon)
-        if k > 0:
-            del self._bursts[:k]
-            del self._burst_ends[:k]
-
-    # ------------------------------------------------------------ sound
-
-    @property
-    def soundscape(self) -> Soundscape:
-        """The :class:`stickslip.sim.sound.Soundscape` the virtual microphone renders with."""
-        if self._soundscape is None:
-            self._soundscape = _soundscape(self.sample_rate, self.seed, self.soundscape_kwargs)
-        return self._soundscape
-
-    def step_events(
-        self, t_from: float, t_to: float
-    ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
-        """Step events with ``t_from <= t < t_to``: ``(times_s, joints, at_stop)`` arrays."""
-        times, joints, stops = [], [], []
-        with self._lock:
-            first = bisect.bisect_right(self._burst_ends, t_from)
-            bursts = self._bursts[first:]
-        for b in bursts:
-            if b.t0 >= t_to:
-                break
-            if b.t_end <= t_from:
-                continue
-            k0 = max(0, math.ceil((t_from - b.t0) * b.hz - 1e-9))
-            k1 = min(b.n, math.ceil((t_to - b.t0) * b.hz - 1e-9))
-            if k1 <= k0:
-                continue
-            k = np.arange(k0, k1)
-            times.append(b.t0 + k / b.hz)
-            joints.append(np.full(k.size, b.joint, dtype=np.int64))
-            stops.append(k >= b.k_stop)
-        if not times:
-            return np.empty(0), np.empty(0, dtype=np.int64), np.empty(0, dtype=bool)
-        return np.concatenate(times), np.concatenate(joints), np.concatenate(stops)
-
-    def stop_runs(self, joint: int | None = None) -> list[tuple[float, float]]:
-        """``(begin, end)`` times (s, virtual clock) of runs of steps against an end stop.
-
-        A run begins with the first step that began at a stop and lasts while the
-        joint keeps stepping into it without a pause.
-        """
-        with self._lock:
-            joints = (joint,) if joint is not None else (1, 2, 3)
-            runs = [(a, e) for j in joints for a, e in self._runs[self._joint(j)]]
-        return sorted(runs)
-
-    def stop_times(self, joint: int | None = None) -> list[float]:
-        """Times (s, virtual clock) when ``joint`` began stepping against a stop (true stops)."""
-        return [a for a, _ in self.stop_runs(joint)]
-
-    def add_listener(self, mic: VirtualMicrophone) -> None:
-        """Keep the step events ``mic`` has not heard yet (held weakly: a dropped microphone frees them)."""
-        self._mics.add(mic)
-
-    def microphone(self, block: int = 1024, silent: bool = False) -> VirtualMicrophone:
-        """A virtual microphone starting now on the virtual clock (blocks of ``block`` samples)."""
-        return VirtualMicrophone(self, block, silent=silent)
 
     def labelled_recording(
         self, joint: int, direction: str | int = "+", before_s: float = 2.0, after_s: float = 1.0

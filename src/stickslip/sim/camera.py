@@ -42,7 +42,7 @@ from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_optio
 from ..vision.frame import Frame
 from ..vision.view import View, project
 
-__all__ = ["SimCamera", "SimCamSettings", "open_url", "LOOKS"]
+__all__ = ["SimCamera", "SimCamSettings", "SimScene", "open_url", "LOOKS"]
 
 LOOKS = ("optical", "sem")
 """The simulated microscope's looks."""
@@ -139,22 +139,12 @@ class SimCamera:
         elif isinstance(centre_base, str) and centre_base == "tip":  # centred on the tip as it is now
             centre_base = self._tip_base()
         self.centre_base = np.asarray(centre_base, dtype=float).reshape(3)
-        rng = np.random.default_rng([s.seed, 7])
-        self._rng = np.random.default_rng([s.seed, 8])
-        self._margin = 48
-        self._substrate = _substrate(s.height + 2 * self._margin, s.width + 2 * self._margin, s.look, s.debris, rng)
-        self._drift_dir = rng.uniform(0.0, 2.0 * math.pi)
+        self.scene = SimScene(settings)
+        self._rng = self.scene.rng
+        self._drift_dir = self.scene.drift_dir
         self._walk = np.zeros(2)
         self._t_last: float | None = None
         self._t_own = 0.0
-        yy, xx = np.mgrid[0 : s.height, 0 : s.width]
-        self._xx = xx.astype(float)
-        self._yy = yy.astype(float)
-        r2 = ((xx - s.width / 2) ** 2 + (yy - s.height / 2) ** 2) / ((s.width / 2) ** 2 + (s.height / 2) ** 2)
-        if s.look == "optical":
-            self._illumination = 1.0 - 0.35 * r2  # vignetting
-        else:
-            self._illumination = 0.85 + 0.3 * (xx / s.width)  # the detector sees one side better
 
     # ---------------------------------------------------------------- the truth
 
@@ -221,30 +211,94 @@ class SimCamera:
         shift = self.drift_px(t) + self._walk
         tip_px, depth = project(self._tip_base(), s.view, s.pixel_size_m, self.centre_base, self.centre_px,
                                 pose.theta, pose.psi)
-        tip_px = tip_px + shift
         axis = kin.arm_axis(pose.q1, pose.q2)  # the needle points along joint 3's axis, base frame
         back, _ = project(self._tip_base() - 50e-6 * np.asarray(axis), s.view, s.pixel_size_m, self.centre_base,
                           self.centre_px, pose.theta, pose.psi)
-        direction = (back + shift) - tip_px  # from the apex back along the shaft, pixels per 50 µm
+        direction = back - tip_px  # from the apex back along the shaft, pixels per 50 µm
         foreshortening = float(np.hypot(*direction)) / (50e-6 / s.pixel_size_m)
-        m = self._margin
-        bg = ndimage.shift(self._substrate, (float(shift[1]), float(shift[0])), order=1, mode="nearest")
-        bg = bg[m : m + s.height, m : m + s.width]
-        cover, edge = self._needle(tip_px, direction, foreshortening)
         sigma = math.hypot(s.blur_px, abs(depth) / s.dof_m)
+        return self.scene.render(tip_px + shift, direction, sigma, shift, foreshortening)
+
+
+class SimScene:
+    """What the simulated microscope renders, apart from the arm: substrate, needle, look, noise.
+
+    :class:`SimCamera` places the needle from the arm's pose; tests and benchmarks place it
+    directly (:meth:`render`), with particles over it if they like.
+
+    Parameters
+    ----------
+    settings : SimCamSettings
+        The look, size, pixel size, noise, tip radius and taper, debris and seed (the
+        view, focus and drift are the camera's).
+    """
+
+    margin = 48
+    """Substrate beyond each edge of the field, px: room for the drift."""
+
+    def __init__(self, settings: SimCamSettings = SimCamSettings()) -> None:
+        s = settings
+        if s.look not in LOOKS:
+            raise ValueError(f"look={s.look!r}: the simulated microscope has the looks {', '.join(LOOKS)}")
+        self.settings = s
+        rng = np.random.default_rng([s.seed, 7])
+        self.rng = np.random.default_rng([s.seed, 8])
+        m = self.margin
+        self.substrate = _substrate(s.height + 2 * m, s.width + 2 * m, s.look, s.debris, rng)
+        self.drift_dir = float(rng.uniform(0.0, 2.0 * math.pi))
+        yy, xx = np.mgrid[0 : s.height, 0 : s.width]
+        self._xx = xx.astype(float)
+        self._yy = yy.astype(float)
+        r2 = ((xx - s.width / 2) ** 2 + (yy - s.height / 2) ** 2) / ((s.width / 2) ** 2 + (s.height / 2) ** 2)
+        if s.look == "optical":
+            self.illumination = 1.0 - 0.35 * r2  # vignetting
+        else:
+            self.illumination = 0.85 + 0.3 * (xx / s.width)  # the detector sees one side better
+
+    def render(self, tip_px: NDArray[np.float64], direction: NDArray[np.float64], sigma: float,
+               shift: NDArray[np.float64] | None = None, foreshortening: float = 1.0,
+               particles: tuple[tuple[float, float, float], ...] = ()) -> NDArray[np.float64]:
+        """A noisy frame, grey values in [0, 1].
+
+        Parameters
+        ----------
+        tip_px : array_like
+            The tip (the needle's extreme end), px ``(x, y)``.
+        direction : array_like
+            From the tip back along the shaft (any length), px.
+        sigma : float
+            The needle's blur (Gaussian sigma), px.
+        shift : array_like, optional
+            The substrate's drift, px ``(x, y)`` (default none).
+        foreshortening : float
+            How much shorter the needle looks than it is (1: lying in the image plane).
+        particles : tuple of (x, y, r)
+            Opaque particles over everything (px): as dark as the needle in bright field,
+            as bright as its edges in an SEM.
+        """
+        s = self.settings
+        tip_px = np.asarray(tip_px, dtype=float)
+        shift = np.zeros(2) if shift is None else np.asarray(shift, dtype=float)
+        m = self.margin
+        bg = ndimage.shift(self.substrate, (float(shift[1]), float(shift[0])), order=1, mode="nearest")
+        bg = bg[m : m + s.height, m : m + s.width]
+        cover, edge = self._needle(tip_px, np.asarray(direction, dtype=float), foreshortening)
         if sigma > 0.3:
             cover = ndimage.gaussian_filter(cover, sigma, truncate=3.0)
             edge = ndimage.gaussian_filter(edge, sigma, truncate=3.0)
         if s.look == "optical":
-            clean = self._illumination * bg * (1.0 - 0.82 * cover)
+            clean = self.illumination * bg * (1.0 - 0.82 * cover)
         else:
-            clean = self._illumination * (bg * (1.0 - cover) + 0.45 * cover + 0.5 * edge)
+            clean = self.illumination * (bg * (1.0 - cover) + 0.45 * cover + 0.5 * edge)
+        for px, py, r in particles:
+            disc = np.clip(r + 0.5 - np.hypot(self._xx - px, self._yy - py), 0.0, 1.0)
+            level = 0.1 if s.look == "optical" else 0.8
+            clean = clean * (1.0 - disc) + level * self.illumination * disc
         lam = np.clip(clean, 0.0, None) * s.photons
-        counts = self._rng.poisson(lam).astype(float)
+        counts = self.rng.poisson(lam).astype(float)
         if s.look == "sem":  # the beam's line-by-line jitter
-            counts += self._rng.normal(0.0, 0.005 * s.photons, (s.height, 1))
+            counts += self.rng.normal(0.0, 0.005 * s.photons, (s.height, 1))
         return np.asarray(np.clip(counts / s.photons, 0.0, 1.0), dtype=float)
-
     def _needle(self, tip: NDArray[np.float64], direction: NDArray[np.float64],
                 foreshortening: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Coverage of the needle (0..1) and its edge brightness (SEM), unblurred.

@@ -172,67 +172,78 @@ class ConsoleEmulator(_Emulator):
             self._driving.clear()
 
     def _execute(self, name: str, args: list[str]) -> str | None:
-        if name == "version":
-            _nargs(args, 0)
-            return "NanoControl console emulator 1.0 (stickslip)"
-        if name == "stopnack":
-            _nargs(args, 0)
-            self._halt()
-            return None
-        if name == "stop":
-            _nargs(args, 0)
-            self._halt()
-            return "stopped"
-        if name == "beep":
-            _nargs(args, 2)
-            _int(args[0], 1, 20000, "beep frequency")
-            _int(args[1], 1, 5000, "beep duration")
+        """One command; its answer's message, or None for no answer (``stopnack``)."""
+        handler = {
+            "version": self._version, "stopnack": self._stop_command, "stop": self._stop_command, "beep": self._beep,
+            "frequency": self._frequency, "finewithcoarse": self._fine_with_coarse, "speed": self._speed,
+            "go": self._go,
+        }.get(name)
+        if handler is None:
+            raise _Refuse(f"unknown command {name!r}")
+        return handler(name, args)
+
+    def _version(self, name: str, args: list[str]) -> str:
+        _nargs(args, 0)
+        return "NanoControl console emulator 1.0 (stickslip)"
+
+    def _stop_command(self, name: str, args: list[str]) -> str | None:
+        _nargs(args, 0)
+        self._halt()
+        return "stopped" if name == "stop" else None  # stopnack is not answered
+
+    def _beep(self, name: str, args: list[str]) -> str:
+        _nargs(args, 2)
+        _int(args[0], 1, 20000, "beep frequency")
+        _int(args[1], 1, 5000, "beep duration")
+        return ""
+
+    def _frequency(self, name: str, args: list[str]) -> str:
+        _nargs(args, 4)
+        values = [_int(a, 300, 20000, "frequency") for a in args]
+        self.hz = dict(zip(_CH, values, strict=True))
+        for ch, j in self.joints.items():
+            lo, hi = FREQUENCY_RANGE
+            self.sim.set_frequency(j, min(max(float(self.hz[ch]), lo), hi))
+        return ""
+
+    def _fine_with_coarse(self, name: str, args: list[str]) -> str:
+        _nargs(args, 4)
+        flags = [_int(a, 0, 1, "finewithcoarse") for a in args]
+        self.fine_with_coarse = {c: bool(v) for c, v in zip(_CH, flags, strict=True)}
+        return ""
+
+    def _speed(self, name: str, args: list[str]) -> str:
+        if args == ["?"]:
+            padded = " ".join(f"{v[0]}{int(v[1:]):03d}" for v in self.profiles[self.active])
+            return f"{self.active} {padded}"
+        if len(args) not in (1, 5):
+            raise _Refuse("syntax error: speed P | speed P vA vB vC vD | speed ?")
+        p = _int(args[0], 1, 6, "speed profile")
+        if len(args) == 1:
+            self.active = p
             return ""
-        if name == "frequency":
-            _nargs(args, 4)
-            values = [_int(a, 300, 20000, "frequency") for a in args]
-            self.hz = dict(zip(_CH, values, strict=True))
-            for ch, j in self.joints.items():
-                lo, hi = FREQUENCY_RANGE
-                self.sim.set_frequency(j, min(max(float(self.hz[ch]), lo), hi))
-            return ""
-        if name == "finewithcoarse":
-            _nargs(args, 4)
-            flags = [_int(a, 0, 1, "finewithcoarse") for a in args]
-            self.fine_with_coarse = {c: bool(v) for c, v in zip(_CH, flags, strict=True)}
-            return ""
-        if name == "speed":
-            if args == ["?"]:
-                padded = " ".join(f"{v[0]}{int(v[1:]):03d}" for v in self.profiles[self.active])
-                return f"{self.active} {padded}"
-            if len(args) not in (1, 5):
-                raise _Refuse("syntax error: speed P | speed P vA vB vC vD | speed ?")
-            p = _int(args[0], 1, 6, "speed profile")
-            if len(args) == 1:
-                self.active = p
-                return ""
-            for v in args[1:]:
-                if len(v) != 3 or v[0] not in "cf" or not v[1:].isdigit() or not 1 <= int(v[1:]) <= 64:
-                    raise _Refuse(f"speed value {v!r} is not c01..c64 or f01..f64")
-            self.profiles[p] = list(args[1:])
-            return ""
-        if name == "go":
-            _nargs(args, 5)
-            mults = [_int(a, -100, 100, "step multiplier") for a in args[:4]]
-            t_ms = _int(args[4], 1, 65535, "interval (ms)")
-            self._halt()
-            now = self.clock()
-            with self._state:
-                for ch, m in zip(_CH, mults, strict=True):
-                    if m == 0:
-                        continue
-                    value = self.profiles[self.active][_CH.index(ch)]
-                    self._driving[ch] = _Drive(
-                        now, int(value[1:]) * abs(m), t_ms / 1000.0, 1 if m > 0 else -1,
-                        float(self.hz[ch]), value[0] == "f",
-                    )
-            return ""
-        raise _Refuse(f"unknown command {name!r}")
+        for v in args[1:]:
+            if len(v) != 3 or v[0] not in "cf" or not v[1:].isdigit() or not 1 <= int(v[1:]) <= 64:
+                raise _Refuse(f"speed value {v!r} is not c01..c64 or f01..f64")
+        self.profiles[p] = list(args[1:])
+        return ""
+
+    def _go(self, name: str, args: list[str]) -> str:
+        _nargs(args, 5)
+        mults = [_int(a, -100, 100, "step multiplier") for a in args[:4]]
+        t_ms = _int(args[4], 1, 65535, "interval (ms)")
+        self._halt()
+        now = self.clock()
+        with self._state:
+            for ch, m in zip(_CH, mults, strict=True):
+                if m == 0:
+                    continue
+                value = self.profiles[self.active][_CH.index(ch)]
+                self._driving[ch] = _Drive(
+                    now, int(value[1:]) * abs(m), t_ms / 1000.0, 1 if m > 0 else -1,
+                    float(self.hz[ch]), value[0] == "f",
+                )
+        return ""
 
 
 def _nargs(args: list[str], n: int) -> None:

@@ -423,71 +423,99 @@ class ANC300Emulator(_Emulator):
         return a
 
     def _execute(self, name: str, args: list[str]) -> list[str]:
-        if name == "echo":
-            _nargs(args, 1)
-            if args[0] not in ("on", "off"):
-                raise _Refuse("Error: echo takes on or off")
-            self._echo = args[0] == "on"
-            return []
-        if name == "ver":
-            return ["attocube ANC300 controller version 1.1.0 (stickslip emulator)"]
-        if name == "getcser":
-            return ["ANC300B-EMU-0001"]
+        """One command: a console command, or an axis command (its first argument the axis)."""
+        console = {"echo": self._echo_command, "ver": self._version, "getcser": self._controller_serial}
+        if name in console:
+            return console[name](args)
         if not args:
             raise _Refuse(f"Error: {name or 'empty command'}: missing axis")
         axis = self._axis(args[0])
-        rest = args[1:]
-        if name == "getser":
-            return [f"ANM-EMU-{axis:04d}"]
-        if name == "getm":
-            return [f"mode = {self.mode[axis]}"]
-        if name == "setm":
-            _nargs(rest, 1)
-            if rest[0] not in self.MODES:
-                raise _Refuse(f"Error: unknown mode {rest[0]!r}")
-            self.mode[axis] = rest[0]
-            return []
-        if name == "getf":
-            return [f"frequency = {self.hz[axis]} Hz"]
-        if name == "setf":
-            _nargs(rest, 1)
-            value = _float(rest[0])
-            lo, hi = self.FREQUENCY_RANGE
-            if not (value.is_integer() and lo <= value <= hi):
-                raise _Refuse(f"Error: frequency out of range ({lo}..{hi} Hz)")
-            self.hz[axis] = int(value)
-            if axis in self.joints.values():
-                hz = float(min(max(value, FREQUENCY_RANGE[0]), FREQUENCY_RANGE[1]))
-                self.sim.set_frequency(axis, hz)
-            return []
-        if name == "getv":
-            return [f"voltage = {self.voltage[axis]:.6f} V"]
-        if name == "setv":
-            _nargs(rest, 1)
-            value = _float(rest[0])
-            vlo, vhi = self.VOLTAGE_RANGE
-            if not vlo <= value <= vhi:
-                raise _Refuse(f"Error: voltage out of range ({vlo:g}..{vhi:g} V)")
-            self.voltage[axis] = value
-            return []
-        if name == "getc":
-            return ["capacitance = 1000.000000 nF"]
-        if name in ("stepu", "stepd"):
-            _nargs(rest, 1)
-            if self.mode[axis] not in ("stp", "stp+", "stp-"):
-                raise _Refuse("Axis in wrong mode")
-            if rest[0] in ("c", "0"):
-                self.continuous_moves += 1
-                n = _CONTINUOUS
-            else:
-                n = _int(rest[0], 1, 2**31 - 1, "steps")
-            if axis in self.joints.values():
-                self.sim.step(axis, n if name == "stepu" else -n)
-                self._wait(n / self.hz[axis] if n != _CONTINUOUS else 0.0)
-            return []
-        if name in ("stepw", "stop"):
-            return []
-        raise _Refuse(f"Error: unknown command {name!r}")
+        handler = {
+            "getser": self._serial, "getm": self._get_mode, "setm": self._set_mode,
+            "getf": self._get_frequency, "setf": self._set_frequency,
+            "getv": self._get_voltage, "setv": self._set_voltage, "getc": self._capacitance,
+            "stepu": self._step, "stepd": self._step, "stepw": self._nothing, "stop": self._nothing,
+        }.get(name)
+        if handler is None:
+            raise _Refuse(f"Error: unknown command {name!r}")
+        return handler(name, axis, args[1:])
+
+    # -- console commands (no axis)
+
+    def _echo_command(self, args: list[str]) -> list[str]:
+        _nargs(args, 1)
+        if args[0] not in ("on", "off"):
+            raise _Refuse("Error: echo takes on or off")
+        self._echo = args[0] == "on"
+        return []
+
+    def _version(self, args: list[str]) -> list[str]:
+        return ["attocube ANC300 controller version 1.1.0 (stickslip emulator)"]
+
+    def _controller_serial(self, args: list[str]) -> list[str]:
+        return ["ANC300B-EMU-0001"]
+
+    # -- axis commands: (command, axis, the arguments after the axis)
+
+    def _serial(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        return [f"ANM-EMU-{axis:04d}"]
+
+    def _get_mode(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        return [f"mode = {self.mode[axis]}"]
+
+    def _set_mode(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        _nargs(rest, 1)
+        if rest[0] not in self.MODES:
+            raise _Refuse(f"Error: unknown mode {rest[0]!r}")
+        self.mode[axis] = rest[0]
+        return []
+
+    def _get_frequency(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        return [f"frequency = {self.hz[axis]} Hz"]
+
+    def _set_frequency(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        _nargs(rest, 1)
+        value = _float(rest[0])
+        lo, hi = self.FREQUENCY_RANGE
+        if not (value.is_integer() and lo <= value <= hi):
+            raise _Refuse(f"Error: frequency out of range ({lo}..{hi} Hz)")
+        self.hz[axis] = int(value)
+        if axis in self.joints.values():
+            hz = float(min(max(value, FREQUENCY_RANGE[0]), FREQUENCY_RANGE[1]))
+            self.sim.set_frequency(axis, hz)
+        return []
+
+    def _get_voltage(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        return [f"voltage = {self.voltage[axis]:.6f} V"]
+
+    def _set_voltage(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        _nargs(rest, 1)
+        value = _float(rest[0])
+        vlo, vhi = self.VOLTAGE_RANGE
+        if not vlo <= value <= vhi:
+            raise _Refuse(f"Error: voltage out of range ({vlo:g}..{vhi:g} V)")
+        self.voltage[axis] = value
+        return []
+
+    def _capacitance(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        return ["capacitance = 1000.000000 nF"]
+
+    def _step(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        _nargs(rest, 1)
+        if self.mode[axis] not in ("stp", "stp+", "stp-"):
+            raise _Refuse("Axis in wrong mode")
+        if rest[0] in ("c", "0"):
+            self.continuous_moves += 1
+            n = _CONTINUOUS
+        else:
+            n = _int(rest[0], 1, 2**31 - 1, "steps")
+        if axis in self.joints.values():
+            self.sim.step(axis, n if name == "stepu" else -n)
+            self._wait(n / self.hz[axis] if n != _CONTINUOUS else 0.0)
+        return []
+
+    def _nothing(self, name: str, axis: int, rest: list[str]) -> list[str]:
+        return []
 
 
 class _Refuse(Exception):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as _dt
+import itertools
 import sqlite3
 from collections.abc import Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
@@ -152,30 +153,35 @@ class TraverseStore(_Base):
         """Record many traverses in ONE transaction (all or nothing); returns their ids.
 
         Use it for imports; use :meth:`add_traverse` while measuring, so that each
-        completed traverse is safe on its own.
+        completed traverse is safe on its own. ``traverses`` is consumed in batches (an
+        iterator of a million rows is never held as a list); an exception while it is read
+        rolls the whole transaction back.
         """
-        ts = list(traverses)
-        for t in ts:
-            self._check(t)
         when = _iso(measured_at)
+        it = iter(traverses)
         how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
             url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
             sessions: dict[str, int] = {}  # one look-up per day, not per row
-            values = []
-            for t, key in zip(ts, _content_keys(ts, url), strict=True):
-                day = str(t.day)
-                sid = sessions.get(day)
-                if sid is None:
-                    sid = sessions[day] = self._session_id(con, dev, day)
-                values.append(self._row_values(t, sid, how, when, source, key))
-            # one executemany; in this write transaction the new rows are exactly those above the old largest id
+            # in this write transaction the new rows are exactly those above the old largest id
             before = int(con.execute("SELECT COALESCE(MAX(id), 0) FROM traverses").fetchone()[0])
-            con.executemany(self._INSERT, values)
+            count = 0
+            while batch := list(itertools.islice(it, 10_000)):
+                for t in batch:
+                    self._check(t)
+                values = []
+                for t, key in zip(batch, _content_keys(batch, url), strict=True):
+                    day = str(t.day)
+                    sid = sessions.get(day)
+                    if sid is None:
+                        sid = sessions[day] = self._session_id(con, dev, day)
+                    values.append(self._row_values(t, sid, how, when, source, key))
+                con.executemany(self._INSERT, values)
+                count += len(values)
             ids = [int(r[0]) for r in con.execute("SELECT id FROM traverses WHERE id > ? ORDER BY id", (before,))]
-            if len(ids) != len(values):  # pragma: no cover - would mean another writer inside our transaction
-                raise StoreError(f"{self.path}: stored {len(ids)} rows for {len(values)} traverses; nothing kept")
+            if len(ids) != count:  # pragma: no cover - would mean another writer inside our transaction
+                raise StoreError(f"{self.path}: stored {len(ids)} rows for {count} traverses; nothing kept")
             return ids
 
     def iter_traverses(

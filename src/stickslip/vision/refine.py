@@ -61,6 +61,11 @@ class Steepest:
     basis : ndarray, shape (m, 6)
         The photometric model's columns: ``T``, ``T x``, ``T y``, ``1``, ``x``, ``y`` (x, y
         across the window, about ±0.5).
+    lap : ndarray, shape (m,)
+        The template's Laplacian (per px²): the blur term's column (a Gaussian blur of
+        variance ``v`` changes the template by ``v/2`` times its Laplacian, the heat equation).
+    sd_lap : ndarray, shape (3, m)
+        The Laplacian's steepest-descent images (the blur term's part of the model's gradient).
     keep : ndarray of bool, shape (n, n)
         Which window pixels these are.
     """
@@ -74,6 +79,8 @@ class Steepest:
     sd: FloatArray
     basis: FloatArray
     keep: NDArray[np.bool_]
+    lap: FloatArray
+    sd_lap: FloatArray
 
 
 def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray) -> Steepest:
@@ -90,7 +97,11 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     sd = np.stack([gx[keep], gy[keep], -gx[keep] * rym + gy[keep] * rxm])
     bx, by = rxm / n, rym / n
     basis = np.stack([T, T * bx, T * by, np.ones_like(T), bx, by], axis=1)
-    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep)
+    # the Laplacian of the template smoothed by 1 px more: of the template itself it would be mostly its noise
+    lap_full = ndimage.gaussian_laplace(template, 1.0, mode="nearest")
+    ly, lx = np.gradient(lap_full)
+    sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
+    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap)
 
 
 @dataclass(frozen=True)
@@ -116,6 +127,9 @@ class Refinement:
         Share of the template's weight that fell inside the frame, 1.
     iterations : int
     converged : bool
+    dvar : float
+        Blur variance of the frame beyond the template's, px² (the blur term's coefficient,
+        twice; negative: sharper than the template).
     """
 
     x: float
@@ -129,6 +143,7 @@ class Refinement:
     coverage: float
     iterations: int
     converged: bool
+    dvar: float = 0.0
 
     @property
     def sigma(self) -> float:
@@ -229,13 +244,15 @@ def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
         return None
 
 
-_ALL = np.arange(9)
-_NO_GAIN_PLANE = np.array([0, 3, 4, 5, 6, 7, 8])
+_ALL = np.arange(10)
+_NO_GAIN_PLANE = np.array([0, 3, 4, 5, 6, 7, 8, 9])
+_NL = 7
+"""The linear columns before the motion's: the six brightness planes and the blur term."""
 
 
 def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], kappa: float,
            turn: float) -> FloatArray | None:
-    """Weighted least squares of ``y`` on the columns ``cols`` of ``D`` (9 columns: 6 brightness, 3 motion).
+    """Weighted least squares of ``y`` on the columns ``cols`` of ``D`` (10: 6 brightness, blur, 3 motion).
 
     ``kappa`` weighs a prior that pulls the turn's step towards ``turn`` (the current turn's
     distance from its prior). The columns left out are 0 in the result.
@@ -251,7 +268,7 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
         sol = np.linalg.solve(M + 1e-12 * np.trace(M) * np.eye(len(cols)), rhs)
     except np.linalg.LinAlgError:
         return None
-    out = np.zeros(9)
+    out = np.zeros(D.shape[1])
     out[cols] = sol
     return out
 
@@ -289,6 +306,7 @@ def refine(
     robust_w = np.ones_like(T)
     converged = False
     step = math.inf
+    blur_c = 0.0
     scale: float | None = None
     it = 0
     e = np.zeros_like(T)
@@ -305,10 +323,11 @@ def refine(
         ct, st_ = math.cos(theta), math.sin(theta)
         fgx = (v3[1] * ct + v3[2] * st_) / g
         fgy = (-v3[1] * st_ + v3[2] * ct) / g
-        jac = 0.5 * (sd + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx]))
+        # the model's gradient is the template's plus the blur term's
+        jac = 0.5 * (sd + blur_c * st.sd_lap + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx]))
         # one linear least squares for the brightness planes and the motion together: apart, the planes
         # would soak up half of every edge's shift at each step, and the motion would creep
-        D = np.concatenate([basis, (g * jac).T], axis=1)
+        D = np.concatenate([basis, g * st.lap[:, None], (g * jac).T], axis=1)
         r0 = Iw - basis @ beta_prev
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
@@ -332,14 +351,15 @@ def refine(
         g_new = float(beta[0])
         g, c = g_new, float(beta[3])
         beta_prev = beta
-        e = (Iw - beta[3] - beta[4] * basis[:, 4] - beta[5] * basis[:, 5]) / gain - T
+        blur_c = float(sol[6]) / g_new  # half the blur variance the frame has beyond the template's, px²
+        e = (Iw - beta[3] - beta[4] * basis[:, 4] - beta[5] * basis[:, 5]) / gain - T - blur_c * st.lap
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             if scale is None:  # the robust spread, once: a spread that moved with the weights would never settle
                 m = omega > 0
                 scale = max(1.4826 * float(np.median(np.abs(e[m]))) if m.any() else 0.0, 1e-12)
             u = e / (TUKEY * scale)
             robust_w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
-        dp = sol[6:].copy()
+        dp = sol[_NL:].copy()
         if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
             dp *= 0.5  # the step turned back on the last one: overshooting, halve it
         prev_dp = dp
@@ -362,11 +382,11 @@ def refine(
     # estimated alongside: their uncertainty widens the motion's)
     omega = w0 * inside * robust_w
     n_eff = float(omega.sum())
-    D = np.concatenate([basis, (g * last_jac).T], axis=1)
+    D = np.concatenate([basis, g * st.lap[:, None], (g * last_jac).T], axis=1)
     M = (D * omega[:, None]).T @ D
-    s2 = float((omega * (g * e) ** 2).sum()) / max(n_eff - 9.0, 1.0)
+    s2 = float((omega * (g * e) ** 2).sum()) / max(n_eff - 10.0, 1.0)
     try:
-        cov_win = (np.linalg.inv(M) * s2)[6:8, 6:8]
+        cov_win = (np.linalg.inv(M) * s2)[_NL : _NL + 2, _NL : _NL + 2]
     except np.linalg.LinAlgError:
         cov_win = np.full((2, 2), np.inf)
     R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
@@ -385,4 +405,5 @@ def refine(
         den = math.sqrt(float((wi * (T - mt) ** 2).sum()) * float((wi * (Iw - mi) ** 2).sum()))
         score = num / den if den > 0 else 0.0
         outliers = float((wi * (robust_w == 0)).sum() / swi)
-    return Refinement(tx, ty, theta, g, c, cov, score, outliers, swi / wsum if wsum > 0 else 0.0, it, converged)
+    return Refinement(tx, ty, theta, g, c, cov, score, outliers, swi / wsum if wsum > 0 else 0.0, it, converged,
+                      2.0 * blur_c)

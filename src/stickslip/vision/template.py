@@ -108,6 +108,14 @@ class TrackerParams:
         than one blur copy beyond the last fix's: a search over the whole frame meets
         many things that resemble a blurred tip a little, and a false fix there would
         be far off.
+    max_blur_step : float
+        Largest change of the tip's blur between two consecutive fixes, px (sigma): focus
+        drifts slowly, and a match that needs a very different blur copy is something
+        else (a blob that looks like the tip blurred, or the tip's edge under a particle).
+    reacquire_ncc : float
+        A peak of the whole-frame search is fitted only when the template correlates with
+        the frame there by this much at whole pixels, 1: the fit costs as much as the
+        search, and a tip found again must correlate by ``reacquire_score`` anyway.
     front_fraction : float
         Largest share of the half-ring in front of the tip that may look like the needle,
         1: where the needle seems to end at something as dark (or bright) as itself, the
@@ -138,7 +146,9 @@ class TrackerParams:
     front_fraction: float = 0.3
     reacquire_ratio: float = 1.5
     reacquire_sigma: float = 0.6
+    reacquire_ncc: float = 0.5
     level_hysteresis: float = 0.01
+    max_blur_step: float = 2.0
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:

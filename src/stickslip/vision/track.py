@@ -158,6 +158,7 @@ class TipTracker:
         self._theta = 0.0
         self._level = 0
         self._fresh = True  # the last frame gave a fix
+        self._since = 1  # frames since the last fix (1: the last frame gave one)
         self._fft: dict[object, object] = {}  # the template's transforms, by region size
         self._mismatch: list[float] = []  # 1 - score of the recent fixes
         s0 = params.template_blur
@@ -239,8 +240,12 @@ class TipTracker:
             return current
         return best
 
-    def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int) -> _Candidate:
-        """Refine a tip position found by correlation, and settle the level of blur that matches it."""
+    def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int,
+             worth: float = -1.0) -> _Candidate:
+        """Refine a tip position found by correlation, and settle the level of blur that matches it.
+
+        The blur copies are compared only when the first fit correlates by ``worth`` or more.
+        """
         corr = self.params.sigma_factor
         patches: dict[float, Patch] = {}
         lvl = level
@@ -249,6 +254,7 @@ class TipTracker:
         usual = self._usual_mismatch()
         # the blur copies are compared only when the fit matches worse than the recent fixes did (focus changed)
         settled = usual is not None and ref.converged and 1.0 - ref.score <= 1.5 * usual + 0.005
+        settled = settled or ref.score < worth
         for _ in range(0 if settled else 2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
                 break
@@ -278,12 +284,14 @@ class TipTracker:
         y = y0 + i + t.apex[1]
         return self._try(image, x, y, self._theta, self._level)
 
-    def _global(self, image: FloatArray) -> list[_Candidate]:
+    def _global(self, image: FloatArray) -> list[_Candidate | None]:
         p = self.params
         f = p.coarse_factor
         small = self._downsample(image, f)
         best: list[tuple[float, int, int, int]] = []
-        for k in range(len(self._coarse)):
+        # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
+        # it was learnt)
+        for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
             tpl = self._coarse[k]
             if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
                 continue
@@ -293,7 +301,7 @@ class TipTracker:
             for i, j in zip(ii.tolist(), jj.tolist(), strict=True):
                 best.append((float(ncc[i, j]), i, j, k))
         best.sort(reverse=True)
-        out: list[_Candidate] = []
+        out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
         t = self.template
         for _s, i, j, _k in best:
@@ -306,9 +314,14 @@ class TipTracker:
             seen.append((x, y))
             # a full-resolution look around the coarse peak, then the fit
             region, rx0, ry0 = self._region(image, x, y, 2 * f)
-            ncc = masked_ncc(region, t.bank[0], t.weights, self._fft, ("local", 0))
+            ncc = masked_ncc(region, t.bank[_k], t.level_weights[_k], self._fft, ("local", _k))
             i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
-            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k))
+            if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
+                out.append(None)
+                continue
+            # a tip found again must correlate by reacquire_score: a fit far below is not worth the copies' comparison
+            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k,
+                                 p.reacquire_score - 0.1))
         return out
 
     # ------------------------------------------------------------------ decision
@@ -350,6 +363,9 @@ class TipTracker:
         if sigma > max_sigma:
             return Lost("lost", f"position undetermined (sigma {sigma:.2f} px > {max_sigma:g} px)")
         last_blur = self._spec[self._level][2]
+        if abs(blur - last_blur) > p.max_blur_step * math.sqrt(self._since):
+            return Lost("lost", f"the focus would have changed by {blur - last_blur:+g} px in {self._since} "
+                                f"frame(s) (at most {p.max_blur_step:g} px a frame)")
         if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
@@ -398,6 +414,8 @@ class TipTracker:
         # not found near the last fix (or refused there, or refused last time): the whole frame
         best: Result | None = None
         for cand in self._global(image):
+            if cand is None:
+                continue
             res = self._judge(cand, image, reacquire=True)
             if isinstance(res, Fix):
                 if best is None or not isinstance(best, Fix) or res.score > best.score:
@@ -406,6 +424,7 @@ class TipTracker:
         if isinstance(best, Fix):
             return self._accept(best, best_cand)
         self._fresh = False
+        self._since += 1
         if first_refusal is not None:
             return first_refusal
         return Lost("lost", "not found near the last fix nor anywhere in the frame")
@@ -433,6 +452,7 @@ class TipTracker:
         self._theta = cand.ref.theta
         self._level = cand.level
         self._fresh = True
+        self._since = 1
         return fix
 
 

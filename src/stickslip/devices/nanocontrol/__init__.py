@@ -35,6 +35,7 @@ opening); legacy only: ``ack=0`` (no answers; implies ``dialect=legacy``).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from urllib.parse import urlsplit
 
 from ..base import DeviceError, url_options
@@ -171,7 +172,58 @@ def open_url(url: str) -> NanoControl | NanoControlConsole:
     :class:`DeviceError` if the port cannot be opened or nothing answers, ``ValueError``
     for a malformed URL or option (before the port is opened).
     """
-    parts = urlsplit(url)
+    o = _url_settings(url)
+    transport = _open_transport(url, o)
+    try:
+        dialect, version = o.dialect, None
+        if dialect is None:
+            dialect, version = detect_dialect(transport, o.timeout, o.baud)
+        else:
+            log.info("NanoControl on %s: %s dialect (from the URL)", transport.name, dialect)
+        if dialect == "legacy":
+            hz = float(o.hz_text) if o.hz_text is not None else 1000.0
+            legacy = NanoControl(
+                transport, channels=o.channels, timeout=o.timeout, nominal_hz=hz, ack=o.ack, url=url,
+                query_version=version is None,
+            )
+            if version is not None:
+                legacy.version = version
+            return legacy
+        console = NanoControlConsole(
+            transport,
+            channels=o.channels,
+            timeout=o.timeout,
+            hz=_console_hz(o.hz_text),
+            profile=o.profile,
+            margin=o.margin,
+            url=url,
+            version=version,
+        )
+        if o.fwc is not None:
+            console.set_fine_with_coarse(o.fwc)
+        return console
+    except BaseException:
+        transport.close()
+        raise
+
+
+@dataclass(frozen=True)
+class _UrlSettings:
+    """A NanoControl URL's options, checked (timeout and margin s, the frequency as given)."""
+
+    dialect: str | None
+    ack: bool
+    timeout: float
+    baud: int | None
+    hz_text: str | None
+    profile: int
+    margin: float
+    fwc: dict[str, bool] | None
+    channels: dict[int, str]
+
+
+def _url_settings(url: str) -> _UrlSettings:
+    """The options of ``url``, each checked before any port is opened (``ValueError`` naming it)."""
     opts = url_options(url, _OPTIONS)
     dialect = opts.get("dialect", "").lower() or None
     if dialect is not None and dialect not in DIALECTS:
@@ -201,51 +253,25 @@ def open_url(url: str) -> NanoControl | NanoControlConsole:
     if dialect == "console":
         _console_hz(hz_text)  # refuse a bad frequency before opening the port
     channels = check_channels({i + 1: c for i, c in enumerate(opts.get("channels", "ABC"))})
+    return _UrlSettings(dialect, ack, timeout, baud, hz_text, profile, margin, fwc, channels)
+
+
+def _open_transport(url: str, o: _UrlSettings) -> Transport:
+    """The serial port (``mm3a://``) or socket (``mm3a+socket://``) of ``url``, opened."""
+    parts = urlsplit(url)
     if parts.scheme == "mm3a+socket":
         if not parts.hostname or not parts.port:
             raise ValueError(f"{url!r}: give host and port, e.g. mm3a+socket://192.168.1.20:4001")
-        transport: Transport = SocketTransport(parts.hostname, parts.port, timeout=timeout)
-    elif parts.scheme == "mm3a":
+        return SocketTransport(parts.hostname, parts.port, timeout=o.timeout)
+    if parts.scheme == "mm3a":
         port = parts.path or parts.netloc
         if not port:
             raise ValueError(f"{url!r}: give the serial port, e.g. mm3a:///dev/ttyUSB0")
-        first = baud or (LEGACY_BAUD if dialect == "legacy" else CONSOLE_BAUD)
-        transport = SerialTransport(port, baudrate=first, timeout=timeout)
-    else:
-        raise ValueError(
-            f"not a NanoControl URL: {url!r} (use mm3a:///dev/ttyUSB0 or mm3a+socket://host:port)"
-        )
-    try:
-        version: str | None = None
-        if dialect is None:
-            dialect, version = detect_dialect(transport, timeout, baud)
-        else:
-            log.info("NanoControl on %s: %s dialect (from the URL)", transport.name, dialect)
-        if dialect == "legacy":
-            hz = float(hz_text) if hz_text is not None else 1000.0
-            legacy = NanoControl(
-                transport, channels=channels, timeout=timeout, nominal_hz=hz, ack=ack, url=url,
-                query_version=version is None,
-            )
-            if version is not None:
-                legacy.version = version
-            return legacy
-        console = NanoControlConsole(
-            transport,
-            channels=channels,
-            timeout=timeout,
-            hz=_console_hz(hz_text),
-            profile=profile,
-            margin=margin,
-            url=url,
-            version=version,
-        )
-        if fwc is not None:
-            console.set_fine_with_coarse(fwc)
-        return console
-    except BaseException:
-        transport.close()
-        raise
+        first = o.baud or (LEGACY_BAUD if o.dialect == "legacy" else CONSOLE_BAUD)
+        return SerialTransport(port, baudrate=first, timeout=o.timeout)
+    raise ValueError(
+        f"not a NanoControl URL: {url!r} (use mm3a:///dev/ttyUSB0 or mm3a+socket://host:port)"
+    )
 
 
 def _console_hz(text: str | None) -> int:

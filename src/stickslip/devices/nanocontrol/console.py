@@ -67,7 +67,8 @@ from collections.abc import Callable, Mapping
 
 from ..base import DeviceError, DeviceInfo, StepsUncertain, check_setting, check_steps
 from ..transport import Transport
-from ._common import DEFAULT_CHANNELS, check_channels, log, parse_console_reply
+from ._common import DEFAULT_CHANNELS, check_channels, log
+from .console_line import CHANNELS, COUNT_RANGE, PROFILES, SpeedProfiles, parse_profile
 
 __all__ = [
     "NanoControlConsole",
@@ -88,14 +89,8 @@ CONSOLE_BAUD = 115200
 FREQUENCY_RANGE_HZ = (300, 20000)
 """Allowed stepping frequency of a channel, Hz (``frequency``), inclusive."""
 
-COUNT_RANGE = (1, 64)
-"""Allowed coarse step count per interval of a profile entry ``cNN``, inclusive."""
-
 MULTIPLIER_MAX = 100
 """Largest |m| of ``go``."""
-
-PROFILES = (1, 2, 3, 4, 5, 6)
-"""The speed profiles ``speed P`` selects."""
 
 MAX_BURST = COUNT_RANGE[1] * MULTIPLIER_MAX
 """Most steps of one burst (at most two ``go`` parts; longer ``step()`` calls are split)."""
@@ -103,7 +98,6 @@ MAX_BURST = COUNT_RANGE[1] * MULTIPLIER_MAX
 T_MAX_MS = 65535
 """Longest ``go`` interval this driver sends, ms (an assumption: see the module docstring)."""
 
-_CHANNELS = "ABCD"
 _MIN_SLACK_MS = 200.0
 """Least time between a burst's stop being due and the next interval when T is capped, ms."""
 
@@ -130,34 +124,7 @@ def split_burst(n: int) -> list[tuple[int, int]]:
     return [(hi, m), (r, 1)]
 
 
-def parse_profile(message: str) -> tuple[int, tuple[str, str, str, str]]:
-    """``"P cNNN cNNN cNNN cNNN"`` (the answer to ``speed ?``) as ``(P, (vA, vB, vC, vD))``.
-
-    Each value is normalised to ``c``/``f`` and its count (``"c064"`` -> ``"c64"``).
-    Raises ``ValueError`` naming what does not fit.
-
-    >>> parse_profile("2 c064 c032 f008 c016")
-    (2, ('c64', 'c32', 'f08', 'c16'))
-    """
-    words = message.split()
-    if len(words) != 5:
-        raise ValueError(f"expected 'P cNNN cNNN cNNN cNNN', got {message!r}")
-    try:
-        number = int(words[0])
-    except ValueError:
-        raise ValueError(f"profile number {words[0]!r} is not an integer in {message!r}") from None
-    if number not in PROFILES:
-        raise ValueError(f"profile number {number} is not in 1..6 in {message!r}")
-    values = []
-    for w in words[1:]:
-        kind, digits = w[:1].lower(), w[1:]
-        if kind not in ("c", "f") or not digits.isdigit() or not 1 <= int(digits) <= COUNT_RANGE[1]:
-            raise ValueError(f"speed value {w!r} is not c1..c64 or f1..f64 in {message!r}")
-        values.append(f"{kind}{int(digits):02d}")
-    return number, (values[0], values[1], values[2], values[3])
-
-
-class NanoControlConsole:
+class NanoControlConsole(SpeedProfiles):
     """A current Kleindiek NanoControl (console dialect), as a :class:`~stickslip.devices.base.Controller`.
 
     Parameters
@@ -214,9 +181,9 @@ class NanoControlConsole:
         if isinstance(profile, bool) or profile not in PROFILES:
             raise ValueError(f"scratch profile must be an integer in 1..6, got {profile!r}")
         self.scratch = int(profile)
-        per = {c: hz for c in _CHANNELS} if not isinstance(hz, Mapping) else dict(hz)
+        per = {c: hz for c in CHANNELS} if not isinstance(hz, Mapping) else dict(hz)
         self._hz: dict[str, int] = {}
-        for c in _CHANNELS:
+        for c in CHANNELS:
             value = check_setting(
                 f"frequency of channel {c}", per.get(c, 1000), *FREQUENCY_RANGE_HZ, "Hz", integer=True
             )
@@ -238,46 +205,6 @@ class NanoControlConsole:
         self.version = self.command("version") if version is None else version
         self._read_user_profile()
 
-    # -- the wire -----------------------------------------------------------------------
-    def command(self, text: str, timeout: float | None = None) -> str:
-        """Send ``text`` + CR and return the message of its answer (without the status).
-
-        An ``i`` answer is logged as a warning and returned.
-
-        Raises
-        ------
-        DeviceError
-            On no answer within ``timeout`` (default :attr:`timeout`), an ``e`` answer,
-            or garbage; the message names the command and the port.
-        """
-        wait = self.timeout if timeout is None else timeout
-        if self._brief is not None:  # best-effort after a timeout: the console may not answer at all
-            wait = min(wait, self._brief)
-        with self._lock:
-            stale = self.transport.drain()
-            if stale.strip(b"\r\n\t "):
-                log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
-            self._write(text)
-            try:
-                raw = self.transport.read_until(b"\r", timeout=wait)
-            except DeviceError as e:
-                raise DeviceError(
-                    f"NanoControl on {self.transport.name} did not answer {text!r}: {e}"
-                ) from None
-            log.debug("<- %r", raw)
-            status, message = parse_console_reply(raw[:-1], text, self.transport.name)
-            if status == "info":
-                log.warning("NanoControl says: %s (after %s)", message, text)
-            elif status == "error":
-                raise DeviceError(
-                    f"NanoControl on {self.transport.name} refused {text!r}: {message}"
-                )
-            return message
-
-    def _write(self, text: str) -> None:
-        log.debug("-> %s<CR>", text)
-        self.transport.write(text.encode("ascii") + b"\r")
-
     def _channel(self, joint: int) -> str:
         try:
             return self.channels[int(joint)]
@@ -285,20 +212,6 @@ class NanoControlConsole:
             raise ValueError(
                 f"joint must be one of {sorted(self.channels)}, got {joint!r}"
             ) from None
-
-    def _read_user_profile(self) -> None:
-        message = self.command("speed ?")
-        try:
-            self.user_profile, self.user_values = parse_profile(message)
-        except ValueError as e:
-            log.warning(
-                "NanoControl on %s: cannot read the active speed profile (%s); "
-                "bursts are refused until it can be restored", self.transport.name, e
-            )
-            return
-        self._active = self.user_profile
-        if self.user_profile == self.scratch:
-            self._scratch_values = self.user_values
 
     # -- settings -----------------------------------------------------------------------
     def set_frequency(self, joint: int, hz: float) -> None:
@@ -318,7 +231,7 @@ class NanoControlConsole:
             raise
 
     def _send_frequency(self) -> None:
-        self.command("frequency " + " ".join(str(self._hz[c]) for c in _CHANNELS))
+        self.command("frequency " + " ".join(str(self._hz[c]) for c in CHANNELS))
         self._frequency_sent = True
 
     def frequency(self, joint: int) -> float:
@@ -327,46 +240,16 @@ class NanoControlConsole:
 
     def set_fine_with_coarse(self, values: Mapping[str, bool]) -> None:
         """Send ``finewithcoarse a b c d`` (every channel must be given: the console cannot be read)."""
-        missing = [c for c in _CHANNELS if c not in values]
+        missing = [c for c in CHANNELS if c not in values]
         if missing:
             raise ValueError(f"finewithcoarse needs a value for every channel; missing {missing}")
-        self.command("finewithcoarse " + " ".join("1" if values[c] else "0" for c in _CHANNELS))
+        self.command("finewithcoarse " + " ".join("1" if values[c] else "0" for c in CHANNELS))
 
     def beep(self, hz: int, ms: int) -> None:
         """Let the controller beep at ``hz`` Hz for ``ms`` ms (integers, 1..20000 and 1..5000)."""
         f = int(check_setting("beep frequency", hz, 1, 20000, "Hz", integer=True))
         d = int(check_setting("beep duration", ms, 1, 5000, "ms", integer=True))
         self.command(f"beep {f} {d}")
-
-    def _activate(self, number: int) -> None:
-        if self._active != number:
-            self.command(f"speed {number}")
-            self._active = number
-
-    def _write_scratch(self, channel: str, count: int) -> None:
-        base = self.user_values if self.user_profile == self.scratch else self._scratch_values
-        values = list(base or ("c01",) * 4)
-        values = [v if v.startswith("c") else "c01" for v in values]  # never a fine entry
-        values[_CHANNELS.index(channel)] = f"c{count:02d}"
-        new = (values[0], values[1], values[2], values[3])
-        if new != self._scratch_values or self._active != self.scratch:
-            if new != self._scratch_values:
-                self._profile_dirty = True
-                self.command(f"speed {self.scratch} " + " ".join(new))
-                self._scratch_values = new
-            self._active = None  # written: activate it again (assumption, see docstring)
-            self._activate(self.scratch)
-
-    def _restore_profile(self) -> None:
-        """Make the user's profile active again (writing its values back if it is the scratch one)."""
-        if self.user_profile is None or self.user_values is None:
-            return
-        if self.user_profile == self.scratch and self._scratch_values != self.user_values:
-            self.command(f"speed {self.scratch} " + " ".join(self.user_values))
-            self._scratch_values = self.user_values
-            self._active = None
-        self._activate(self.user_profile)
-        self._profile_dirty = False
 
     # -- motion -------------------------------------------------------------------------
     def step(self, joint: int, n: int) -> None:
@@ -415,24 +298,6 @@ class NanoControlConsole:
                 self._in_step = False
                 self._restore_quietly()
 
-    def _restore_quietly(self) -> None:
-        """Make the user's profile active again, best effort (a warning if that fails).
-
-        After a reply timed out (the console stopped answering), each command of it waits
-        at most 0.25 s: the URL's timeout bounds the fault, not the fault plus a timeout per
-        clean-up command.
-        """
-        if self.transport.closed or self._driving:
-            return
-        if getattr(self.transport, "silent", False):
-            self._brief = min(self.timeout, 0.25)
-        try:
-            self._restore_profile()
-        except DeviceError as e:
-            log.warning("could not make the user's speed profile active again: %s", e)
-        finally:
-            self._brief = None
-
     def _part(self, ch: str, count: int, m: int, made: int) -> None:
         """One ``go``: ``count x |m|`` steps in the sign of ``m``, stopped on time or raising."""
         steps = count * abs(m)
@@ -447,7 +312,7 @@ class NanoControlConsole:
                 f"interval sent ({T_MAX_MS} ms); raise the frequency (?hz=)"
             )
         self._write_scratch(ch, count)
-        mults = " ".join(str(m) if c == ch else "0" for c in _CHANNELS)
+        mults = " ".join(str(m) if c == ch else "0" for c in CHANNELS)
         go = f"go {mults} {t_ms}"
         t_sent = self._clock()
         self._driving = True
@@ -498,25 +363,6 @@ class NanoControlConsole:
             if left <= 0:
                 return
             self._sleep(min(left, 0.05))
-
-    def _emergency_stop(self, wait: float = 0.25) -> str:
-        """``stopnack`` at once, then ``stop``, its answer awaited at most ``min(timeout, wait)`` s.
-
-        Returns ``"acknowledged"``, ``"unanswered"`` or ``"unsent"`` (the line is down).
-        Never raises.
-        """
-        try:
-            self._write("stopnack")
-        except DeviceError as e:
-            log.warning("could not send stopnack to %s: %s", self.transport.name, e)
-            return "unsent"
-        try:
-            self.command("stop", timeout=min(self.timeout, wait))
-        except DeviceError as e:
-            log.warning("no answer to stop from %s: %s", self.transport.name, e)
-            return "unanswered"
-        self._driving = False
-        return "acknowledged"
 
     def stop(self, joint: int | None = None) -> None:
         """Stop every channel now (the console has no per-channel stop). Never raises.

@@ -1,0 +1,512 @@
+"""The safety envelope: check a whole planned path of one arm before one step is sent.
+
+A path is a list of poses (rad, rad, m) joined by straight lines in joint space (a move
+of one joint is one line; a named position reached joint by joint is one line per
+joint). Along it every link of the arm (a capsule of the arm's ``radius`` around a
+segment, :meth:`~.model.Arm.segments`) must keep
+
+* out of every keep-out volume by the volume's ``margin``,
+* away from every other arm's links (at their kept poses) by the rig's ``arm_distance``,
+* within each joint's range and soft limits,
+
+with every margin widened by ``n_sigma`` standard deviations of the tip's position (the
+Kalman filter's joint σ through :func:`stickslip.kinematics.tip_sd`: a tip that may be
+there counts as there).
+
+How nothing between samples is missed (docs/rig.md): at one pose the distance from a
+link segment to a volume is computed exactly (a half-space and another arm's segment in
+closed form; a box from the convex piecewise quadratic along the segment, all of whose
+pieces are checked; a cylinder by golden-section search of the convex distance along the
+segment, to a few nm). Between two poses of a straight joint-space line every point of
+the arm moves at most ``D = sum_i r_i |dq_i|`` (:meth:`~.model.Arm.reach_radii`), and a
+distance to a set changes no faster than the point moves, so a stretch whose end
+clearances ``c_a``, ``c_b`` satisfy ``(c_a + c_b - D) / 2 >= 0`` is clear everywhere in
+between. A stretch not shown clear is cut in 8 and checked again, until it is either
+shown clear, or a pose on it is closer than allowed (refused: that pose and its closest
+point are named), or it is shorter than ``tol`` (refused too: the path then comes within
+the margin plus ``tol``; 0.1 µm by default). So an accepted path never enters a volume's
+margin, and a refused path does, or comes within ``tol`` of doing so.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..kinematics import Geometry, tip_sd
+from .model import Arm, Box, Cylinder, HalfSpace, Rig
+
+__all__ = [
+    "TOLERANCE",
+    "EnvelopeViolation",
+    "Refusal",
+    "check_path",
+    "clearances",
+    "safe_fraction",
+    "segment_distance",
+    "tip_margin",
+]
+
+TOLERANCE = 1e-7
+"""Shortest stretch of path (m of the arm's largest motion) the check cuts a path into: 0.1 µm."""
+
+_GOLDEN_STEPS = 40  # 0.618**40 ~ 4e-9 of a segment's length: nm for a link of tens of mm
+_SPLIT = 8
+_MAX_ROUNDS = 40
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """Why a path was refused: the obstacle, where, how close (SI units, rig frame).
+
+    Attributes
+    ----------
+    arm : str
+    obstacle : str
+        The volume's name, ``"arm NAME"`` for another arm, or ``"joint J limit"``.
+    point : tuple of 3 floats or None
+        The closest point of the arm to the obstacle, m, rig frame (``None`` for a limit).
+    distance : float
+        Its distance from the obstacle, m (0 inside it); for a limit, how far beyond (rad or m).
+    allowed : float
+        The least distance allowed (margin + radii + n_sigma σ), m.
+    q : tuple of 3 floats
+        The pose where it happens (rad or m per joint).
+    units : tuple of 3 str
+        Each joint's unit, ``"rad"`` or ``"m"``.
+    fraction : float
+        How far along the path, 0 (start) to 1 (end).
+    undecided : bool
+        True when the path comes within ``tol`` of the allowed distance without crossing
+        it (refused as the envelope cannot show it clear).
+    """
+
+    arm: str
+    obstacle: str
+    point: tuple[float, float, float] | None
+    distance: float
+    allowed: float
+    q: tuple[float, float, float]
+    fraction: float
+    undecided: bool = False
+    units: tuple[str, str, str] = ("rad", "rad", "m")
+
+    def message(self) -> str:
+        """One line in display units (µm, deg)."""
+        shown = [f"{math.degrees(v):.3f} deg" if u == "rad" else f"{v * 1e6:.1f} µm"
+                 for v, u in zip(self.q, self.units, strict=True)]
+        pose = f"q = ({', '.join(shown)})"
+        where = f"{self.fraction * 100:.0f}% along the path"
+        if self.point is None:
+            return f"arm {self.arm!r}: the path goes beyond the {self.obstacle} at {where}, {pose}"
+        p = ", ".join(f"{v * 1e6:.1f}" for v in self.point)
+        how = (
+            f"reaches the edge of the {self.allowed * 1e6:.2f} µm kept around {self.obstacle!r}"
+            if self.undecided else
+            f"comes {self.distance * 1e6:.2f} µm from {self.obstacle!r}, closer than the "
+            f"{self.allowed * 1e6:.2f} µm allowed"
+        )
+        return f"arm {self.arm!r}: the path {how} at ({p}) µm in the rig frame, {where}, {pose}"
+
+
+class EnvelopeViolation(ValueError):
+    """A planned path leaves the envelope; ``refusal`` says where. Nothing was sent."""
+
+    def __init__(self, refusal: Refusal) -> None:
+        super().__init__(refusal.message())
+        self.refusal = refusal
+
+
+# ---------------------------------------------------------------- distances from segments
+
+
+def _seg_halfspace(a: Array, b: Array, v: HalfSpace) -> Array:
+    n, p0 = np.asarray(v.normal), np.asarray(v.point)
+    s = np.minimum(-(a - p0) @ n, -(b - p0) @ n)  # outside where (p - p0).n < 0
+    return np.asarray(np.maximum(s, 0.0), dtype=float)
+
+
+def _seg_seg(a: Array, b: Array, c: Array, d: Array) -> tuple[Array, Array]:
+    """Distance between segments ab and cd (broadcast), and the parameter on ab of the closest point."""
+    d1, d2, r = b - a, d - c, a - c
+    aa = np.sum(d1 * d1, axis=-1)
+    ee = np.sum(d2 * d2, axis=-1)
+    ff = np.sum(d2 * r, axis=-1)
+    cc = np.sum(d1 * r, axis=-1)
+    bb = np.sum(d1 * d2, axis=-1)
+    den = aa * ee - bb * bb
+    tiny = 1e-30
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.where(den > tiny * np.maximum(aa * ee, tiny), np.clip((bb * ff - cc * ee) / den, 0.0, 1.0), 0.0)
+        t = np.where(ee > tiny, (bb * s + ff) / np.where(ee > tiny, ee, 1.0), 0.0)
+        s_lo = np.where(aa > tiny, np.clip(-cc / np.where(aa > tiny, aa, 1.0), 0.0, 1.0), 0.0)
+        s_hi = np.where(aa > tiny, np.clip((bb - cc) / np.where(aa > tiny, aa, 1.0), 0.0, 1.0), 0.0)
+    s = np.where(t < 0.0, s_lo, np.where(t > 1.0, s_hi, s))
+    t = np.clip(t, 0.0, 1.0)
+    p = a + s[..., None] * d1
+    q = c + t[..., None] * d2
+    return np.asarray(np.linalg.norm(p - q, axis=-1), dtype=float), np.asarray(s, dtype=float)
+
+
+def _box_sq(p: Array, h: Array) -> Array:
+    e = np.maximum(np.abs(p) - h, 0.0)
+    return np.asarray(np.sum(e * e, axis=-1), dtype=float)
+
+
+def _seg_box(a: Array, b: Array, v: Box) -> tuple[Array, Array]:
+    r, c, h = v.matrix(), np.asarray(v.centre), np.asarray(v.half)
+    la, lb = (a - c) @ r, (b - c) @ r
+    d = lb - la
+    with np.errstate(divide="ignore", invalid="ignore"):
+        brk = np.concatenate(((h - la) / d, (-h - la) / d), axis=-1)
+    brk = np.where(np.isfinite(brk), np.clip(brk, 0.0, 1.0), 0.0)
+    zeros = np.zeros(la.shape[:-1] + (1,))
+    u = np.sort(np.concatenate((zeros, zeros + 1.0, brk), axis=-1), axis=-1)  # (..., 8)
+    lo, hi = u[..., :-1], u[..., 1:]
+    mid = (lo + hi) / 2.0
+    pm = la[..., None, :] + mid[..., None] * d[..., None, :]
+    target = np.where(pm > h, h, np.where(pm < -h, -h, np.nan))
+    active = ~np.isnan(target)
+    dd = np.where(active, d[..., None, :], 0.0)
+    num = np.sum(np.where(active, dd * (target - la[..., None, :]), 0.0), axis=-1)
+    den = np.sum(dd * dd, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ustar = np.where(den > 0.0, num / np.where(den > 0.0, den, 1.0), mid)
+    ustar = np.clip(ustar, lo, hi)
+    cand = np.concatenate((u, ustar), axis=-1)  # (..., 15)
+    pts = la[..., None, :] + cand[..., None] * d[..., None, :]
+    f = _box_sq(pts, h)
+    i = np.argmin(f, axis=-1)
+    best = np.take_along_axis(f, i[..., None], axis=-1)[..., 0]
+    return np.asarray(np.sqrt(best), dtype=float), np.asarray(np.take_along_axis(cand, i[..., None], axis=-1)[..., 0])
+
+
+def _cyl_dist(p: Array, v: Cylinder) -> Array:
+    ax = np.asarray(v.axis)
+    rel = p - np.asarray(v.base)
+    z = rel @ ax
+    rho = np.linalg.norm(rel - z[..., None] * ax, axis=-1)
+    er = np.maximum(rho - v.radius, 0.0)
+    ez = np.maximum(np.maximum(z - v.height, -z), 0.0)
+    return np.asarray(np.hypot(er, ez), dtype=float)
+
+
+def _seg_cylinder(a: Array, b: Array, v: Cylinder) -> tuple[Array, Array]:
+    """Golden-section search of the distance along the segment (convex: the cylinder is convex)."""
+    g = (math.sqrt(5.0) - 1.0) / 2.0
+    d = b - a
+    lo = np.zeros(a.shape[:-1])
+    hi = np.ones(a.shape[:-1])
+    x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
+    f1 = _cyl_dist(a + x1[..., None] * d, v)
+    f2 = _cyl_dist(a + x2[..., None] * d, v)
+    for _ in range(_GOLDEN_STEPS):
+        left = f1 <= f2
+        hi = np.where(left, x2, hi)
+        lo = np.where(left, lo, x1)
+        nx = np.where(left, hi - g * (hi - lo), lo + g * (hi - lo))
+        fn = _cyl_dist(a + nx[..., None] * d, v)
+        x2, f2, x1, f1 = np.where(left, x1, nx), np.where(left, f1, fn), np.where(left, nx, x2), np.where(left, fn, f2)
+    cand = np.stack((np.zeros_like(lo), np.ones_like(lo), x1, x2), axis=-1)
+    f = _cyl_dist(a[..., None, :] + cand[..., None] * d[..., None, :], v)
+    i = np.argmin(f, axis=-1)
+    return (np.asarray(np.take_along_axis(f, i[..., None], axis=-1)[..., 0], dtype=float),
+            np.asarray(np.take_along_axis(cand, i[..., None], axis=-1)[..., 0], dtype=float))
+
+
+def segment_distance(a: ArrayLike, b: ArrayLike, volume: Box | Cylinder | HalfSpace) -> tuple[Array, Array]:
+    """Distance from segments ``a``-``b`` (``(..., 3)``, m) to ``volume`` (0 if they touch it), and closest points."""
+    aa, bb = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if isinstance(volume, HalfSpace):
+        n, p0 = np.asarray(volume.normal), np.asarray(volume.point)
+        sa, sb = -(aa - p0) @ n, -(bb - p0) @ n
+        pts = np.where((sa <= sb)[..., None], aa, bb)
+        return np.asarray(np.maximum(np.minimum(sa, sb), 0.0), dtype=float), pts
+    dist, u = _seg_box(aa, bb, volume) if isinstance(volume, Box) else _seg_cylinder(aa, bb, volume)
+    return dist, np.asarray(aa + u[..., None] * (bb - aa), dtype=float)
+
+
+def _bound_sphere(v: Box | Cylinder) -> tuple[Array, float]:
+    if isinstance(v, Box):
+        return np.asarray(v.centre), float(np.linalg.norm(v.half))
+    return np.asarray(v.base) + np.asarray(v.axis) * v.height / 2.0, math.hypot(v.radius, v.height / 2.0)
+
+
+# ---------------------------------------------------------------- the obstacles of one arm
+
+
+@dataclass(frozen=True)
+class _Obstacles:
+    """What one arm must keep from: volumes and other arms' segments, each with its allowed distance (m).
+
+    Columns: the volumes in the rig's order, then the other arms' links.
+    """
+
+    volumes: tuple[Box | Cylinder | HalfSpace, ...]
+    allowed_v: Array
+    others: Array  # (K, 2, 3) other arms' segments
+    allowed_o: Array  # (K,)
+    other_names: tuple[str, ...]
+    half: tuple[int, ...] = ()  # columns of half-spaces
+    bounded: tuple[int, ...] = ()  # columns of boxes and cylinders
+
+    @property
+    def count(self) -> int:
+        """Number of obstacles (columns of :func:`clearances`)."""
+        return len(self.volumes) + len(self.others)
+
+
+def tip_margin(arm: Arm, q: ArrayLike, q_sd: ArrayLike, n_sigma: float) -> float:
+    """``n_sigma`` times the tip's position σ at ``q`` (m) for joint σ ``q_sd`` (rad, rad, m)."""
+    sd = np.asarray(q_sd, dtype=float).reshape(3)
+    if not np.any(sd > 0) or n_sigma == 0:
+        return 0.0
+    if arm.kind == "mm3a":
+        return float(n_sigma * np.linalg.norm(tip_sd(np.asarray(q, dtype=float), sd, arm.geometry or Geometry())))
+    return float(n_sigma * np.linalg.norm(sd * np.linalg.norm(np.asarray(arm.axes), axis=1)))
+
+
+def _obstacles(rig: Rig, arm: Arm, others: Mapping[str, ArrayLike], sigma_margin: float) -> _Obstacles:
+    vols = rig.volumes
+    allowed_v = np.array([v.margin + arm.radius + sigma_margin for v in vols], dtype=float)
+    segs, allowed_o, names = [], [], []
+    for other in rig.arms:
+        if other.name == arm.name or other.name not in others:
+            continue
+        s = other.segments(np.asarray(others[other.name], dtype=float).reshape(3))
+        for link in s:
+            segs.append(link)
+            allowed_o.append(rig.arm_distance + arm.radius + other.radius + sigma_margin)
+            names.append(f"arm {other.name}")
+    return _Obstacles(
+        vols, allowed_v, np.asarray(segs, dtype=float).reshape(-1, 2, 3), np.asarray(allowed_o, dtype=float),
+        tuple(names), tuple(i for i, v in enumerate(vols) if isinstance(v, HalfSpace)),
+        tuple(i for i, v in enumerate(vols) if not isinstance(v, HalfSpace)),
+    )
+
+
+def _sphere_gap(mid: Array, half: Array, centres: Array, radii: Array) -> Array:
+    """Lower bound of the distance between segments (midpoints, half lengths) and spheres: ``(M, B)``, m."""
+    d2 = np.sum(mid * mid, axis=1)[:, None] - 2.0 * (mid @ centres.T) + np.sum(centres * centres, axis=1)[None, :]
+    return np.asarray(np.sqrt(np.maximum(d2, 0.0)) - half[:, None] - radii[None, :], dtype=float)
+
+
+def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float = 0.0) -> Array:
+    """Clearance of the arm at poses ``q`` ``(P, 3)`` from each obstacle, m: distance minus allowed, ``(P, V + K)``.
+
+    A box, cylinder or other arm's link whose bounding sphere is farther than ``pad``
+    beyond the allowed distance from a link gets a lower bound (the spheres' gap), not its
+    exact distance: that is all a stretch's test needs.
+    """
+    segs = arm.segments(q)  # (P, L, 2, 3)
+    n_pose, n_link = segs.shape[0], segs.shape[1]
+    a, b = segs[..., 0, :].reshape(-1, 3), segs[..., 1, :].reshape(-1, 3)
+    nv = len(obstacles.volumes)
+    out = np.empty((len(a), obstacles.count))
+    if obstacles.half:
+        normals = np.array([obstacles.volumes[i].normal for i in obstacles.half]).T  # type: ignore[union-attr]
+        offsets = np.array([np.dot(obstacles.volumes[i].point, obstacles.volumes[i].normal)  # type: ignore[union-attr]
+                            for i in obstacles.half])
+        sa, sb = offsets - a @ normals, offsets - b @ normals
+        out[:, list(obstacles.half)] = np.maximum(np.minimum(sa, sb), 0.0)
+    mid, half = (a + b) / 2.0, np.linalg.norm(b - a, axis=1) / 2.0
+    if obstacles.bounded:
+        spheres = [_bound_sphere(obstacles.volumes[i]) for i in obstacles.bounded]  # type: ignore[arg-type]
+        gap = _sphere_gap(mid, half, np.array([c for c, _ in spheres]), np.array([r for _, r in spheres]))
+        for col, i in enumerate(obstacles.bounded):
+            v = obstacles.volumes[i]
+            near = gap[:, col] < obstacles.allowed_v[i] + pad
+            d = np.maximum(gap[:, col], 0.0)
+            if np.any(near) and isinstance(v, Box):
+                d[near], _ = _seg_box(a[near], b[near], v)
+            elif np.any(near) and isinstance(v, Cylinder):
+                d[near], _ = _seg_cylinder(a[near], b[near], v)
+            out[:, i] = d
+    if len(obstacles.others):
+        oa, ob = obstacles.others[:, 0, :], obstacles.others[:, 1, :]
+        gap = _sphere_gap(mid, half, (oa + ob) / 2.0, np.linalg.norm(ob - oa, axis=1) / 2.0)
+        near = gap < obstacles.allowed_o[None, :] + pad
+        d = np.maximum(gap, 0.0)
+        rows, cols = np.nonzero(near)
+        if len(rows):
+            d[rows, cols], _ = _seg_seg(a[rows], b[rows], oa[cols], ob[cols])
+        out[:, nv:] = d
+    out -= np.concatenate((obstacles.allowed_v, obstacles.allowed_o))[None, :]
+    return np.asarray(out.reshape(n_pose, n_link, -1).min(axis=1), dtype=float)
+
+
+# ---------------------------------------------------------------- the path
+
+
+def _limit_refusal(arm: Arm, path: Array) -> Refusal | None:
+    n = len(path) - 1
+    lo = np.array([j.limits[0] for j in arm.joints])
+    hi = np.array([j.limits[1] for j in arm.joints])
+    bad = (path < lo - 1e-12) | (path > hi + 1e-12)
+    if not np.any(bad):
+        return None
+    k = int(np.argmax(np.any(bad, axis=1)))
+    j = arm.joints[int(np.argmax(bad[k]))]
+    v = float(path[k, j.number - 1])
+    below = v < j.limits[0]
+    bound = j.limits[0] if below else j.limits[1]
+    which = "soft limit" if bound in (j.soft_lower, j.soft_upper) else "range"
+    qk = path[k]
+    return Refusal(arm.name, f"joint {j.number} {which}", None, v - bound, 0.0,
+                   (float(qk[0]), float(qk[1]), float(qk[2])), k / max(n, 1), units=_units(arm))
+
+
+def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float) -> tuple[float, Refusal | None]:
+    """The fraction of the path shown clear from its start, and the refusal at its first problem (``None``: none)."""
+    radii = np.asarray(arm.reach_radii())
+    n = len(path) - 1
+    rate = np.abs(np.diff(path, axis=0)) @ radii  # m of motion per unit of s on each segment
+    s0 = np.arange(n, dtype=float)
+    s1 = s0 + 1.0
+    seg = np.arange(n)
+    first_bad: tuple[float, int, bool] | None = None  # (s, obstacle, undecided)
+
+    def pose(s: Array, k: Array) -> Array:
+        return np.asarray(path[k] + (s - k)[:, None] * (path[k + 1] - path[k]), dtype=float)
+
+    for _ in range(_MAX_ROUNDS):
+        if not len(s0):
+            break
+        span = (s1 - s0) * rate[seg]
+        pad = float(np.max(span)) if len(span) else 0.0
+        if obs.count == 0:
+            break
+        nodes, back = np.unique(np.concatenate((s0, s1)), return_inverse=True)
+        kn = np.minimum(np.floor(nodes).astype(int), n - 1)
+        c = clearances(arm, obs, pose(nodes, kn), pad)
+        c0, c1 = c[back[: len(s0)]], c[back[len(s0):]]
+        bad0, bad1 = np.any(c0 < 0, axis=1), np.any(c1 < 0, axis=1)
+        for mask, s, c in ((bad0, s0, c0), (bad1, s1, c1)):
+            if np.any(mask):
+                i = int(np.argmin(np.where(mask, s, np.inf)))
+                if first_bad is None or s[i] < first_bad[0]:
+                    first_bad = (float(s[i]), int(np.argmin(c[i])), False)
+        clear = np.all((c0 + c1 - span[:, None]) / 2.0 >= 0.0, axis=1)
+        open_ = ~clear & ~bad0  # a stretch that ends badly is cut too: where does it begin to?
+        tiny = open_ & (span <= tol)
+        if np.any(tiny):
+            i = int(np.argmin(np.where(tiny, s0, np.inf)))
+            if first_bad is None or s0[i] < first_bad[0]:
+                first_bad = (float(s0[i]), int(np.argmin((c0[i] + c1[i]) / 2.0)), True)
+        keep = open_ & ~tiny
+        if first_bad is not None:
+            keep &= s0 < first_bad[0]  # what lies beyond the first problem does not matter
+        if not np.any(keep):
+            break
+        k0, k1, ks = s0[keep], s1[keep], seg[keep]
+        frac = np.linspace(0.0, 1.0, _SPLIT + 1)
+        cuts = k0[:, None] + (k1 - k0)[:, None] * frac[None, :]
+        s0, s1 = cuts[:, :-1].ravel(), cuts[:, 1:].ravel()
+        seg = np.repeat(ks, _SPLIT)
+    if first_bad is None:
+        return 1.0, None
+    at, which, undecided = first_bad
+    k = min(int(at), n - 1)
+    q = path[k] + (at - k) * (path[k + 1] - path[k])
+    return at / n, _refusal(arm, obs, q, which, at / n, undecided)
+
+
+def _refusal(arm: Arm, obs: _Obstacles, q: Array, which: int, fraction: float, undecided: bool) -> Refusal:
+    segs = arm.segments(q)
+    a, b = segs[:, 0, :], segs[:, 1, :]
+    nv = len(obs.volumes)
+    if which < nv:
+        v = obs.volumes[which]
+        d, pts = segment_distance(a, b, v)
+        name, allowed = v.name, float(obs.allowed_v[which])
+    else:
+        o = obs.others[which - nv]
+        d, u = _seg_seg(a, b, o[0][None, :], o[1][None, :])
+        pts = a + u[:, None] * (b - a)
+        name, allowed = obs.other_names[which - nv], float(obs.allowed_o[which - nv])
+    i = int(np.argmin(d))
+    p = pts[i]
+    return Refusal(arm.name, name, (float(p[0]), float(p[1]), float(p[2])), float(d[i]), allowed,
+                   (float(q[0]), float(q[1]), float(q[2])), fraction, undecided, _units(arm))
+
+
+def _units(arm: Arm) -> tuple[str, str, str]:
+    u = [j.unit for j in arm.joints]
+    return (u[0], u[1], u[2])
+
+
+def _prepare(
+    rig: Rig, arm: str | None, path: ArrayLike, q_sd: ArrayLike, others: Mapping[str, ArrayLike] | None
+) -> tuple[Arm, _Obstacles, Array]:
+    a = rig.arm(arm)
+    p = np.asarray(path, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 1 or not np.all(np.isfinite(p)):
+        raise ValueError(f"a path is a list of finite poses (q1 rad, q2 rad, q3 m), got shape {p.shape}")
+    if len(p) == 1:
+        p = np.vstack((p, p))
+    sd = np.asarray(q_sd, dtype=float).reshape(3)
+    sigma = max(tip_margin(a, q, sd, rig.n_sigma) for q in (p[0], p[-1]))
+    return a, _obstacles(rig, a, others or {}, sigma), p
+
+
+def check_path(
+    rig: Rig,
+    arm: str | None,
+    path: ArrayLike,
+    *,
+    q_sd: ArrayLike = (0.0, 0.0, 0.0),
+    others: Mapping[str, ArrayLike] | None = None,
+    tol: float = TOLERANCE,
+) -> None:
+    """Refuse ``path`` (poses ``(N, 3)`` rad, rad, m, joined by straight joint-space lines) if it leaves the envelope.
+
+    Parameters
+    ----------
+    rig, arm
+        The rig and the moving arm's name (``None``: the first arm).
+    q_sd
+        The joints' position σ (rad, rad, m) from the Kalman filter: ``rig.n_sigma`` times
+        the tip's σ (the larger of the path's two ends) widens every margin.
+    others
+        The other arms' kept poses by name; an arm not given is not checked against.
+    tol
+        The shortest stretch the path is cut into, m (module docstring).
+
+    Raises
+    ------
+    EnvelopeViolation
+        At the path's first problem: a joint beyond its range or soft limit, a link within a
+        volume's margin or too near another arm (the obstacle and closest point named).
+    """
+    a, obs, p = _prepare(rig, arm, path, q_sd, others)
+    limit = _limit_refusal(a, p)
+    _, refusal = _search(a, obs, p, tol)
+    if limit is not None and (refusal is None or limit.fraction <= refusal.fraction):
+        raise EnvelopeViolation(limit)
+    if refusal is not None:
+        raise EnvelopeViolation(refusal)
+
+
+def safe_fraction(
+    rig: Rig,
+    arm: str | None,
+    path: ArrayLike,
+    *,
+    q_sd: ArrayLike = (0.0, 0.0, 0.0),
+    others: Mapping[str, ArrayLike] | None = None,
+    tol: float = TOLERANCE,
+) -> tuple[float, Refusal | None]:
+    """How far along ``path`` (0 to 1) the arm may go, and the refusal that stops it (``None``: all the way).
+
+    What a jog uses to stop at the boundary. The path is clear up to the fraction returned
+    (to ``tol``); a path whose start is already outside the envelope gets 0. Joint limits
+    are left to the jog (it clamps to them).
+    """
+    a, obs, p = _prepare(rig, arm, path, q_sd, others)
+    return _search(a, obs, p, tol)

@@ -1,0 +1,81 @@
+"""The issue's day on three independent arms (issue 33): tests and benchmarks share it.
+
+Per day: the paper's 14 calibration traverses, 32 more at poses spread over the load space
+(8 poses per joint, both directions; ``calibration.design.spread_poses``) and validation
+traverses at *random* poses of the workspace. The arms:
+
+* ``physics``: the library's physics arm (``stickslip.sim.physics``: Coulomb friction with
+  stiction and Stribeck, piezo lag, mass-spring mount, backlash, warm-up);
+* ``lugre``: ``lugre_arm.py`` (LuGre bristles, first-order piezo lag, ``sin^2`` slack);
+* ``dahl``: ``dahl_arm.py`` (Dahl friction, Hertzian contact compliance, static anisotropic
+  mount), written for issue 33 before the fitting changed and never tuned to.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from dahl_arm import DahlArm
+from lugre_arm import LugreArm
+from physics_scenarios import paper_poses, random_pose
+
+from stickslip import kinematics as kin
+from stickslip.calibration.design import spread_poses
+from stickslip.measurements import Traverse
+from stickslip.sim import physics as ph
+
+
+class Arm(Protocol):
+    def traverse(self, joint: int, direction: str, pose: kin.Pose, day: str) -> Traverse: ...
+
+
+class _Physics:
+    def __init__(self, seed: int, day: str) -> None:
+        self.arm = ph.PhysicsMM3A(seed=seed, day=day)
+
+    def traverse(self, joint: int, direction: str, pose: kin.Pose, day: str) -> Traverse:
+        return ph.traverse(self.arm, joint, direction, pose, day)
+
+
+ARMS: dict[str, Callable[[int, str], Arm]] = {"physics": _Physics, "lugre": LugreArm, "dahl": DahlArm}
+"""Arm name -> factory ``(seed, day) -> arm``."""
+
+
+@dataclass(frozen=True)
+class Day:
+    """One day's traverses of one arm."""
+
+    arm: str
+    seed: int
+    day: str
+    paper14: list[Traverse]
+    spread32: list[Traverse]
+    validation: list[Traverse]
+    new4: list[Traverse]
+    """One traverse per joint and direction at random poses, measured last (to update yesterday's calibration)."""
+
+    @property
+    def calibration46(self) -> list[Traverse]:
+        return self.paper14 + self.spread32
+
+
+def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8) -> Day:
+    """The day's tables (``validation_poses`` random poses per joint, both directions), measured in this order
+    on one arm (a joint that warms up is warm by the validation)."""
+    arm = ARMS[arm_name](seed, day)
+    p14 = [arm.traverse(j, d, p, day) for j in (3, 2) for p in paper_poses(j) for d in "+-"]
+    s32 = [arm.traverse(j, d, p, day) for j in (3, 2)
+           for p in spread_poses(j, 8, int(rng.integers(2**31)), existing=paper_poses(j)) for d in "+-"]
+    val = [arm.traverse(j, d, p, day) for j in (3, 2)
+           for p in [random_pose(rng, j) for _ in range(validation_poses)] for d in "+-"]
+    new4 = [arm.traverse(j, d, random_pose(rng, j), day) for j in (3, 2) for d in "+-"]
+    return Day(arm_name, seed, day, p14, s32, val, new4)
+
+
+def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:
+    """``pred / measured - 1`` per traverse."""
+    out: np.ndarray = np.asarray(pred, dtype=float) / np.array([t.gamma for t in ts]) - 1.0
+    return out

@@ -1,0 +1,140 @@
+"""Sequences of the simulated microscope's renderer with their truth: where the tracker is designed.
+
+The tip tracker (:mod:`stickslip.vision.track`) is designed, and its decision rules
+calibrated, on these frames only: the renderer of ``simcam://``
+(:class:`stickslip.sim.camera.SimScene`: a cone with a rounded apex, Gaussian defocus,
+bright field or SEM edge contrast, a smooth substrate with dust, Poisson noise) with the
+needle placed directly, not through the arm. The second renderer
+(``tests/support/vision_peer.py``) is the check it is never tuned to.
+
+The conditions are issue 30's (tip widths 3 to 20 px, blur up to sigma 3 px, 40 to 400
+photons a pixel, small turns, image drift, frames with the tip out of the field,
+occluded or far out of focus), with this module's own motion: an arm's moves (glides of
+up to 12 px a frame, holds, jumps of up to 40 px), a needle that turns by a few degrees
+about a point far up its shaft, a substrate drifting at 0.05 px a frame plus a random
+walk, a blur that wanders.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from stickslip.sim.camera import SimCamSettings, SimScene
+
+__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "KINDS"]
+
+KINDS = ("visible", "out", "occluded", "defocused")
+
+EDGE_IN = 10.0
+"""A visible tip stays at least this far inside the field, px."""
+
+
+@dataclass(frozen=True)
+class OwnFrame:
+    """One frame and its truth: the tip (px, x right, y down), what the frame is, the blur (sigma, px)."""
+
+    image: NDArray[np.float64]
+    tip: tuple[float, float]
+    kind: str
+    blur: float
+
+
+@dataclass(frozen=True)
+class OwnSequence:
+    """Frames of one needle, look and noise."""
+
+    frames: list[OwnFrame]
+    width_px: float
+    look: str
+    photons: float
+
+
+def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None = None, look: str | None = None,
+                 photons: float | None = None, max_blur: float = 3.0, events: bool = True,
+                 event_rate: float = 0.08) -> OwnSequence:
+    """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
+
+    ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
+    log-uniform in 40..400) the count at full brightness; ``look`` optical or sem (drawn).
+    With ``events``, a frame starts an event (the tip out of the field, under a particle,
+    far out of focus) with probability ``event_rate``, for 1 to 4 frames.
+    """
+    rng = np.random.default_rng([seed, 31337])
+    look = look or ("optical", "sem")[int(rng.integers(0, 2))]
+    W = float(width_px if width_px is not None else rng.uniform(3.0, 20.0))
+    ph = float(photons if photons is not None else math.exp(rng.uniform(math.log(40.0), math.log(400.0))))
+    taper = math.radians(float(rng.uniform(4.0, 15.0)))
+    scene = SimScene(SimCamSettings(look=look, width=size, height=size, photons=ph, seed=int(seed) + 1,
+                                    tip_radius_m=0.5 * W * 0.5e-6, taper=taper, pixel_size_m=0.5e-6))
+    phi0 = float(rng.uniform(-math.pi, math.pi))  # the shaft's direction from the tip
+    pivot = float(rng.uniform(100.0, 1000.0))
+    lo, hi = EDGE_IN, size - 1 - EDGE_IN
+    tip = rng.uniform(0.3, 0.7, 2) * size
+    vel = np.zeros(2)
+    turn = 0.0
+    blur = float(rng.uniform(0.0, max_blur))
+    drift_v = rng.normal(0.0, 0.05, 2)
+    shift = np.zeros(2)
+    frames: list[OwnFrame] = []
+    event: tuple[str, int] | None = None
+    for k in range(n):
+        kind = "visible"
+        if event is None and events and k > 2 and rng.random() < event_rate:
+            event = (["out", "occluded", "defocused"][int(rng.integers(0, 3))], int(rng.integers(1, 5)))
+        sigma = blur
+        particles: tuple[tuple[float, float, float], ...] = ()
+        apex = tip.copy()
+        phi = phi0 + turn
+        if event is not None:
+            kind, left = event
+            if kind == "out":  # beyond the nearest edge, along the shaft's direction so the needle still shows
+                d = np.array([apex[0], size - 1 - apex[0], apex[1], size - 1 - apex[1]])
+                side = int(np.argmin(d))
+                beyond = float(rng.uniform(10.0, 60.0))
+                apex[side // 2] = -beyond if side % 2 == 0 else size - 1 + beyond
+            elif kind == "occluded":
+                r = float(rng.uniform(max(5.0, 0.5 * W + 3.0), max(12.0, W)))
+                off = rng.normal(0.0, 0.25 * r, 2)
+                off *= min(1.0, 0.6 * r / max(float(np.hypot(*off)), 1e-9))
+                particles = ((float(apex[0] + off[0]), float(apex[1] + off[1]), r),)
+            else:
+                sigma = float(rng.uniform(7.0, 12.0))
+            event = None if left <= 1 else (kind, left - 1)
+        direction = np.array([math.cos(phi), math.sin(phi)])
+        shift = shift + drift_v + rng.normal(0.0, 0.02, 2)
+        image = scene.render(apex, direction, sigma, shift, 1.0, particles)
+        frames.append(OwnFrame(image, (float(apex[0]), float(apex[1])), kind, float(sigma)))
+        # the next frame: the arm holds, glides or jumps; the needle turns about a point far up its shaft
+        u = rng.random()
+        if u < 0.35:
+            vel = 0.8 * vel + rng.normal(0.0, 0.3, 2)
+        elif u < 0.85:
+            if rng.random() < 0.3:
+                vel = rng.uniform(-1.0, 1.0, 2) * rng.uniform(0.0, 12.0)
+        else:
+            vel = np.zeros(2)
+        step = vel + rng.normal(0.0, 0.3, 2)
+        if rng.random() < 0.05:
+            step = step + rng.uniform(-40.0, 40.0, 2)
+        dturn = float(np.clip(turn + rng.normal(0.0, math.radians(0.5)), -math.radians(4.0), math.radians(4.0))) - turn
+        turn += dturn
+        # turning about the pivot moves the tip sideways by pivot * dturn
+        side_dir = np.array([-math.sin(phi), math.cos(phi)])
+        step = step - pivot * dturn * side_dir
+        new = tip + step
+        vel = np.where((new < lo) | (new > hi), -vel, vel)
+        tip = np.clip(new, lo, hi)
+        blur = float(np.clip(blur + rng.normal(0.0, 0.35), 0.0, max_blur))
+    return OwnSequence(frames, W, look, ph)
+
+
+def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256) -> list[OwnSequence]:
+    """Sequences of ``per_sequence`` frames, tip widths spread over 3..20 px, looks alternating."""
+    n_seq = max(1, n_frames // per_sequence)
+    widths = np.linspace(3.0, 20.0, n_seq)
+    return [own_sequence(seed * 1000 + i, per_sequence, size, float(widths[i]), ("optical", "sem")[i % 2])
+            for i in range(n_seq)]

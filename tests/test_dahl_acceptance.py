@@ -1,0 +1,82 @@
+"""Issue 33's acceptance on the Dahl arm (tests/support/dahl_arm.py), which the fitting was not developed on.
+
+The arm (Dahl friction, Hertzian contact compliance, a static anisotropic mount) was written
+before the selection, the fallback rule and the intervals of issue 33 were, and nothing was
+tuned on it. Per day: the paper's 14 calibration traverses, 32 more at poses spread over the
+load space, 32 validation traverses at random poses. A small sample (one seed, three days);
+the full numbers, three arms × 3 seeds × 3 days, are in benchmarks/bench_models.py.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from arm_days import make_day
+
+from stickslip.calibration import calibrate
+from stickslip.calibration.intervals import relative_sd
+
+DAYS = ("2026-10-05", "2026-10-06", "2026-10-07")
+pytestmark = pytest.mark.slow  # about 5 s: make test-fast leaves this file out
+
+
+@pytest.fixture(scope="module")
+def days():
+    rng = np.random.default_rng(5)
+    out = []
+    for day in DAYS:
+        d = make_day("dahl", 5, day, rng)
+        out.append((d, calibrate(d.paper14), calibrate(d.calibration46, model="auto")))
+    return out
+
+
+def _errors(cal, ts):
+    return np.array([cal.predict(t) / t.gamma - 1.0 for t in ts])
+
+
+def test_auto_never_predicts_held_out_poses_worse_than_the_papers_form(days):
+    # the rule itself: the model returned predicted the poses held out no worse than the paper's form did,
+    # in RMS and at its largest (or it is the paper's form, and says so)
+    for _, _, auto in days:
+        for (j, d), sel in auto.selection.items():
+            scores = {s["family"]: s for s in sel["scores"]}
+            paper = min((s for lab, s in scores.items() if lab.partition("+")[0] == "paper" and s["cv_rms"]),
+                        key=lambda s: s["cv_rms"])
+            if sel["fallback"]:
+                assert sel["chosen"].startswith("paper") and "paper's form" in sel["reason"]
+                continue
+            assert sel["cv_rms"] <= paper["cv_rms"] + 1e-12, (j, d, sel["reason"])
+
+
+def test_auto_predicts_new_poses_better_than_the_papers_procedure(days):
+    for j in (3, 2):
+        a = np.concatenate([_errors(auto, [t for t in d.validation if t.joint == j]) for d, _, auto in days])
+        p = np.concatenate([_errors(p14, [t for t in d.validation if t.joint == j]) for d, p14, _ in days])
+        assert np.sqrt(np.mean(a**2)) < np.sqrt(np.mean(p**2)), j
+        assert np.max(np.abs(a)) <= np.max(np.abs(p)), j  # the worst of these days, not above the paper's
+        assert np.max(np.abs(a)) <= (0.075 if j == 3 else 0.035), j
+
+
+def test_intervals_cover_new_poses_and_the_printed_error_is_honest(days):
+    for j in (3, 2):
+        inside, z, expected, actual = [], [], [], []
+        for d, _, auto in days:
+            for s in "+-":
+                ts = [t for t in d.validation if t.joint == j and t.direction == s]
+                e = _errors(auto, ts)
+                sd = relative_sd(auto, j, s, *(np.array([getattr(t, k) for t in ts])
+                                               for k in ("q1", "q2", "q3", "theta", "psi")))
+                inside += list(np.abs(e) <= 1.96 * sd)
+                z += list(e / sd)
+                expected.append(auto.sigma_model[(j, s)])
+                actual.append(np.sqrt(np.mean(e**2)))
+        coverage = np.mean(inside)
+        # 48 traverses a joint: the issue's arm held 77-81 %; the benchmark measures 90-98 % on 216
+        assert coverage >= 0.85, (j, coverage)
+        # and not wide: standardized errors of a calibrated interval have an RMS near 1 (measured 0.71
+        # prismatic, 0.90 rotary on these days; an interval
+        # twice too wide would give 0.5 and still cover everything)
+        z_rms = float(np.sqrt(np.mean(np.square(z))))
+        assert 0.6 <= z_rms <= 1.4, (j, z_rms)
+        ratio = np.sqrt(np.mean(np.square(expected))) / np.sqrt(np.mean(np.square(actual)))
+        assert 0.5 <= ratio <= 2.5, (j, ratio)  # the error calibrate prints at new poses, against the truth

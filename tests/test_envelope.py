@@ -1,0 +1,256 @@
+"""The safety envelope (stickslip.rig.envelope) against an independent geometric check (tests/support/rig_geometry)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import rig_geometry as geo
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from stickslip.kinematics import Geometry
+from stickslip.rig import Arm, Box, Cylinder, EnvelopeViolation, HalfSpace, Joint, Mount, Rig, check_path, safe_fraction
+from stickslip.rig.envelope import TOLERANCE, segment_distance
+from stickslip.rig.model import rotation_matrix
+
+MM3A_JOINTS = (Joint(1, 1, 1, "rotary", -2.0, 2.0), Joint(2, 2, 1, "rotary", -3.6, 0.5),
+               Joint(3, 3, 1, "prismatic", 0.0, 0.012))
+
+
+def mm3a(name: str = "a", origin=(0.0, 0.0, 0.0), rotation=(0.0, 0.0, 0.0), radius: float = 0.0,
+         offset: float = 0.0) -> Arm:
+    return Arm(name, "mm3a", "sim://", MM3A_JOINTS, Mount(origin, rotation), Geometry(offset, 0.021), radius=radius)
+
+
+# ---------------------------------------------------------------- distances at one pose: analytic values
+
+
+def test_segment_distances_match_closed_forms():
+    box = Box("b", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0))
+    # a segment parallel to a face at height 3: distance 2; one passing a corner diagonally
+    d, p = segment_distance([[-5, 0, 3]], [[5, 0, 3]], box)
+    assert d == pytest.approx([2.0]) and p[0] == pytest.approx([p[0][0], 0, 3]) and abs(p[0][0]) <= 1
+    d, _ = segment_distance([[3, 0, 0]], [[0, 3, 0]], box)  # the line x + y = 3 from the edge x = y = 1
+    assert d == pytest.approx([1 / math.sqrt(2)])
+    d, _ = segment_distance([[-5, 0.5, 0]], [[5, 0.5, 0]], box)  # through it
+    assert d == pytest.approx([0.0])
+    turned = Box("t", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), rotation=tuple(rotation_matrix((0, 0, math.pi / 4)).ravel()))
+    d, _ = segment_distance([[3, -5, 0]], [[3, 5, 0]], turned)  # the corner at x = sqrt(2)
+    assert d == pytest.approx([3 - math.sqrt(2)])
+    cyl = Cylinder("c", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 1.0, 2.0)
+    d, _ = segment_distance([[-5, 3, 1]], [[5, 3, 1]], cyl)  # passes at 3 from the axis
+    assert d == pytest.approx([2.0], abs=1e-8)
+    d, _ = segment_distance([[0, 4, 5]], [[4, 0, 5]], cyl)  # 2 sqrt 2 - 1 sideways, 3 above
+    assert d == pytest.approx([math.hypot(2 * math.sqrt(2) - 1, 3)], abs=1e-8)
+    half = HalfSpace("h", (0.0, 0.0, 0.0), (0.0, 0.0, -1.0))
+    d, p = segment_distance([[0, 0, 2]], [[1, 0, 5]], half)
+    assert d == pytest.approx([2.0]) and p[0] == pytest.approx([0, 0, 2])
+
+
+# ---------------------------------------------------------------- random rigs and paths
+
+
+@st.composite
+def volumes(draw):
+    kind = draw(st.sampled_from(["box", "cylinder", "half-space"]))
+    c = np.array([draw(st.floats(-0.04, 0.04)) for _ in range(3)])
+    size = draw(st.floats(0.0005, 0.01))
+    margin = draw(st.sampled_from([0.0, 1e-4, 5e-4]))
+    if kind == "box":
+        rot = rotation_matrix(tuple(draw(st.floats(-3.2, 3.2)) for _ in range(3)))  # type: ignore[arg-type]
+        half = (size, draw(st.floats(0.0002, 0.01)), draw(st.floats(0.0002, 0.01)))
+        return Box("box", tuple(c), half, margin, tuple(rot.ravel()))
+    if kind == "cylinder":
+        ax = np.array([draw(st.floats(-1, 1)) for _ in range(3)]) + np.array([0, 0, 1e-3])
+        ax /= np.linalg.norm(ax)
+        return Cylinder("cylinder", tuple(c), tuple(ax), size, draw(st.floats(0.001, 0.03)), margin)
+    n = np.array([draw(st.floats(-1, 1)) for _ in range(3)]) + np.array([0, 0, 1e-3])
+    n /= np.linalg.norm(n)
+    return HalfSpace("half-space", tuple(c), tuple(n), margin)
+
+
+def poses(draw, n):
+    return np.array([[draw(st.floats(-2.0, 2.0)), draw(st.floats(-3.6, 0.5)), draw(st.floats(0.0, 0.012))]
+                     for _ in range(n)])
+
+
+@st.composite
+def cases(draw):
+    arm = mm3a(rotation=tuple(draw(st.floats(-1, 1)) for _ in range(3)), radius=draw(st.sampled_from([0.0, 3e-4])),
+               offset=draw(st.sampled_from([0.0, 0.002])))
+    vols = tuple(draw(st.lists(volumes(), min_size=1, max_size=2)))
+    vols = tuple(dataclasses.replace(v, name=f"{v.name}{i}") for i, v in enumerate(vols))
+    path = poses(draw, draw(st.integers(2, 3)))
+    # small moves as often as big ones: scale the path towards its first pose
+    scale = draw(st.sampled_from([1.0, 0.1, 0.01]))
+    path = path[0] + scale * (path - path[0])
+    return Rig("r", "r", (arm,), vols), path
+
+
+def _on_path(path, q):
+    """Whether pose q lies on the polyline (joint space)."""
+    for a, b in zip(path[:-1], path[1:], strict=True):
+        d = b - a
+        t = float(np.clip(np.dot(q - a, d) / max(float(d @ d), 1e-300), 0, 1))
+        if np.linalg.norm(a + t * d - q) < 1e-9:
+            return True
+    return False
+
+
+@pytest.mark.slow
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cases())
+def test_accepted_paths_keep_out_and_refused_ones_come_within_the_margin(case):
+    rig, path = case
+    arm = rig.arms[0]
+    try:
+        check_path(rig, None, path)
+    except EnvelopeViolation as e:
+        r = e.refusal
+        q = np.array(r.q)
+        assert _on_path(path, q) and 0.0 <= r.fraction <= 1.0
+        if r.point is None:  # a joint limit: the independent look at the poses agrees
+            assert any(not (j.lower <= p[j.number - 1] <= j.upper) for p in path for j in arm.joints)
+            return
+        vol = next(v for v in rig.volumes if v.name == r.obstacle)
+        p = np.array(r.point)
+        on_arm = min(float(geo.point_segment(p[None, :], a, b)[0]) for a, b in geo.links(arm, q))
+        assert on_arm < 1e-9  # the named point is on the arm at the named pose
+        allowed = vol.margin + arm.radius
+        assert float(geo.point_distance(p[None, :], vol)[0]) <= allowed + TOLERANCE + 1e-9
+        assert r.allowed == pytest.approx(allowed)
+        return
+    clearance, _ = geo.dense_clearance(rig, arm, path, poses_per_segment=40, points_per_link=40)
+    assert clearance >= -1e-9
+
+
+@settings(max_examples=20, deadline=None)
+@given(t=st.floats(0.2, 0.8), q2=st.floats(-2.8, -0.3), q3=st.floats(0.0, 0.012), thick=st.sampled_from([2e-5, 2e-4]))
+def test_a_path_safe_at_both_ends_that_crosses_a_volume_between_them_is_refused(t, q2, q3, thick):
+    """A thin wall across the arm's arc (at 90% of the way to the tip) between two clear ends."""
+    arm = mm3a()
+    a, b = np.array([-1.0, q2, q3]), np.array([1.0, q2, q3])
+    mid = a + t * (b - a)
+    tip = arm.tip(mid)
+    # a wall through a point of the link, its thin side along the motion (the tangent of joint 1's turn)
+    tangent = np.array([-math.sin(mid[0]), math.cos(mid[0]), 0.0])
+    radial = np.array([math.cos(mid[0]), math.sin(mid[0]), 0.0])
+    rot = np.column_stack((tangent, radial, np.cross(tangent, radial)))
+    wall = Box("wall", tuple(0.9 * tip), (thick / 2, 0.0002, 0.0002), 0.0, tuple(rot.ravel()))
+    rig = Rig("r", "r", (arm,), (wall,))
+    for end in (a, b):  # both ends clear by the independent check
+        pts = np.vstack([p0 + np.linspace(0, 1, 400)[:, None] * (p1 - p0) for p0, p1 in geo.links(arm, end)])
+        assert float(np.min(geo.point_distance(pts, wall))) > 0.0
+    with pytest.raises(EnvelopeViolation, match="'wall'") as e:
+        check_path(rig, None, [a, b])
+    assert abs(e.value.refusal.fraction - t) < 0.05
+
+
+def test_the_kalman_sigma_widens_the_margin():
+    arm = mm3a()
+    q = np.array([0.0, -math.pi / 2, 0.0])
+    tip = arm.tip(q)  # (21 mm, 0, 0)
+    wall = HalfSpace("wall", tuple(tip + [0.0, 0.0, -0.0001]), (0.0, 0.0, -1.0))  # 100 µm below the tip
+    rig = Rig("r", "r", (arm,), (wall,), n_sigma=3.0)
+    path = [q, q + [0.1, 0, 0]]
+    check_path(rig, None, path)  # no σ: clear
+    # σ of 2e-3 rad on joint 2 moves the 21 mm tip by 42 µm (1σ): 3σ = 126 µm > 100 µm
+    with pytest.raises(EnvelopeViolation, match=r"'wall'.*closer than the 12[56]\.\d+ µm allowed"):
+        check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
+    check_path(rig, None, path, q_sd=(0.0, 1e-3, 0.0))  # 3σ = 63 µm: clear
+
+
+def test_two_arms_keep_the_stated_distance():
+    left = mm3a("left", origin=(-0.03, 0.0, 0.0), radius=5e-4)
+    right = mm3a("right", origin=(0.03, 0.0, 0.0), rotation=(0.0, 0.0, math.pi), radius=5e-4)
+    rig = Rig("r", "r", (left, right), (), arm_distance=1e-3)
+    out = [0.0, -math.pi / 2, 0.0]  # each tip 21 mm towards the other: 18 mm apart
+    # left stretches joint 3 by 12 mm: the tips come to 6 mm, then right's out by 8 mm more: 2 - 1 mm gap
+    check_path(rig, "left", [out, [0.0, -math.pi / 2, 0.012]], others={"right": out})
+    with pytest.raises(EnvelopeViolation, match="'arm right'") as e:
+        check_path(rig, "left", [out, [0.0, -math.pi / 2, 0.012]], others={"right": [0.0, -math.pi / 2, 0.0095]})
+    r = e.value.refusal
+    # the allowed gap is 1 mm + two radii = 2 mm; the tips' gap closes to 18 - 12 - 9.5 = -3.5 mm: refused where
+    # it first reaches 2 mm: left's q3 = 18 - 9.5 - 2 = 6.5 mm
+    assert r.allowed == pytest.approx(2e-3)
+    assert r.q[2] == pytest.approx(6.5e-3, abs=2e-6)
+
+
+def test_joint_limits_and_soft_limits_are_part_of_the_envelope():
+    joints = (MM3A_JOINTS[0], MM3A_JOINTS[1], Joint(3, 3, 1, "prismatic", 0.0, 0.012, soft_upper=0.008))
+    arm = Arm("a", "mm3a", "sim://", joints, Mount(), Geometry())
+    rig = Rig("r", "r", (arm,))
+    with pytest.raises(EnvelopeViolation, match="joint 3 soft limit"):
+        check_path(rig, None, [[0, -1, 0.0], [0, -1, 0.009]])
+    with pytest.raises(EnvelopeViolation, match="joint 1 range"):
+        check_path(rig, None, [[0, -1, 0.0], [2.5, -1, 0.0]])
+
+
+def test_a_jog_goes_as_far_as_the_boundary():
+    arm = mm3a()
+    q = np.array([0.0, -math.pi / 2, 0.0])
+    wall = HalfSpace("wall", (0.025, 0.0, 0.0), (1.0, 0.0, 0.0), margin=1e-4)  # x >= 25 mm, margin 0.1 mm
+    rig = Rig("r", "r", (arm,), (wall,))
+    frac, refusal = safe_fraction(rig, None, [q, q + [0, 0, 0.012]])  # the tip from x = 21 to 33 mm
+    assert refusal is not None and refusal.obstacle == "wall"
+    # it may go to x = 24.9 mm: 3.9 of 12 mm, to TOLERANCE
+    assert frac * 0.012 == pytest.approx(0.0039, abs=2 * TOLERANCE)
+    assert safe_fraction(rig, None, [q, q + [0, 0, 0.003]]) == (1.0, None)
+
+
+def test_a_jog_stops_at_the_rig_envelope():
+    """The resolved-rate jog toward a wall 50 µm beyond the tip stops within one tick's motion of its margin."""
+    from stickslip.procedures.jog import JogController
+    from stickslip.rig.guard import Guard
+    from test_reach import CAL
+
+    arm = mm3a()
+    q = [0.0, -math.pi / 2, 0.002]
+    tip = arm.tip(q)  # (23 mm, 0, 0): "d" moves the tip along +x (joint 3)
+    wall = HalfSpace("wall", (float(tip[0]) + 60e-6, 0.0, 0.0), (1.0, 0.0, 0.0), margin=10e-6)
+    rig = Rig("r", "r", (arm,), (wall,))
+    c = JogController(CAL, list(q), speed_index=4, hold=0.0, guard=Guard(rig, "a"))  # 10 µm/s
+    c.press("d", 0.0)
+    t, moved = 0.0, 0
+    while c.direction is not None and t < 20.0:
+        steps = c.tick(t, 0.05)
+        for j, n in enumerate(steps, start=1):
+            if n:
+                c.sent_steps(j, n)
+                moved += abs(n)
+        t += 0.05
+    assert c.direction is None and "rig's envelope (wall)" in c.message
+    gap = wall.point[0] - wall.margin - float(arm.tip(c.q)[0])
+    assert 0.0 <= gap <= 10e-6 * 0.05 + 2e-6  # within one tick's motion (0.5 µm) plus a step of the arm
+    assert moved > 0
+
+
+def test_a_bluesky_axis_checks_the_rig_envelope(tmp_path):
+    """The Bluesky axis calls the same hook: a move into a volume fails before a step is sent."""
+    pytest.importorskip("ophyd_async")
+    import asyncio
+
+    from stickslip.bluesky import MoveError, StickSlipAxis
+    from stickslip.rig.guard import Guard
+    from stickslip.sim.arm import SimulatedMM3A
+    from test_bluesky import true_calibration
+
+    sim = SimulatedMM3A(seed=0)
+    arm = mm3a()
+    wall = HalfSpace("wall", (0.030, 0.0, 0.0), (1.0, 0.0, 0.0))  # x >= 30 mm: joint 3 may go to 9 mm
+    rig = Rig("r", "r", (arm,), (wall,))
+
+    async def move(target: float) -> None:
+        axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3", db=tmp_path / "s.db", guard=Guard(rig, "a"))
+        await axis.connect()
+        await axis.set(target)
+
+    asyncio.run(move(5e-3))
+    assert sim.position(3) == pytest.approx(5e-3, abs=2e-5)  # the simulator's own step noise
+    before = sim.steps_simulated
+    with pytest.raises(MoveError, match="'wall'"):
+        asyncio.run(move(11e-3))
+    assert sim.steps_simulated == before
