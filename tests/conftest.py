@@ -1,5 +1,10 @@
 """Test-wide settings: no test touches the real database, data folder or config file, and none reads the calendar.
 
+The storage tests run against both backends through the ``db`` fixture: an SQLite file,
+and a schema of its own in a throwaway PostgreSQL server (``tests/support/pgserver.py``:
+one per test process, started at the first test that needs it, stopped at the end;
+skipped, with the reason, where PostgreSQL's binaries or psycopg are missing).
+
 "Today" is pinned (``$STICKSLIP_TODAY``, read by :func:`stickslip.clock.today`), so the
 suite gives the same answers on any date and in any time zone. The pinned day is the
 session label of the synthetic tables in ``synth.py``: a calibration made from them is
@@ -12,14 +17,19 @@ draws are a deliberate run, ``make test-explore`` (``STICKSLIP_HYPOTHESIS=explor
 and a draw that breaks something is pinned as an ``@example`` where it is fixed.
 """
 
+from __future__ import annotations
+
 import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import pytest
 from hypothesis import settings
 from pinned import PINNED_TODAY  # tests/support: also read by the generators and benchmarks
+
+if TYPE_CHECKING:
+    from pgserver import PostgresServer
 
 settings.register_profile("repeatable", derandomize=True, print_blob=True)
 settings.register_profile("explore", derandomize=False, print_blob=True)
@@ -49,3 +59,43 @@ def RE() -> Iterator[Any]:
     yield re
     if re.state != "idle":
         re.halt()
+
+
+# ---------------------------------------------------------------- the two storage backends
+
+
+@pytest.fixture(scope="session")
+def postgres_server() -> Iterator[PostgresServer]:
+    """A PostgreSQL server of this test process (skips with the reason where none can be started)."""
+    import pgserver
+
+    try:
+        server = pgserver.start()
+    except pgserver.Unavailable as e:
+        pytest.skip(f"no PostgreSQL server: {e}")
+    try:
+        yield server
+    finally:
+        server.stop()
+
+
+@pytest.fixture()
+def postgres_url(postgres_server: PostgresServer, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> str:
+    """The URL of a new empty schema; the password in ``$PGPASSWORD`` (as docs/storage.md advises), not the URL.
+
+    No ``PG*`` variable of the machine reaches libpq, and ``~/.pgpass`` is never read.
+    """
+    for k in [k for k in os.environ if k.startswith("PG")]:
+        monkeypatch.delenv(k)
+    monkeypatch.setenv("PGPASSFILE", str(tmp_path / "no-pgpass"))
+    monkeypatch.setenv("PGPASSWORD", postgres_server.password)
+    return postgres_server.url(postgres_server.new_schema())
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db(request: pytest.FixtureRequest, tmp_path: Path) -> Path | str:
+    """Where a test keeps its database, once per backend: an SQLite file, then a PostgreSQL URL."""
+    if request.param == "sqlite":
+        return tmp_path / "s.db"
+    url: str = request.getfixturevalue("postgres_url")
+    return url

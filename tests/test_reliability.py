@@ -337,8 +337,9 @@ _WORKER = textwrap.dedent(
 
 
 @pytest.mark.slow
-def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path):
-    db, log = tmp_path / "s.db", tmp_path / "moved.txt"
+def test_four_concurrent_moves_end_at_the_sum_or_are_refused(tmp_path, cal_path, db):
+    """On both backends (``db``: an SQLite file, a PostgreSQL schema): the device lock and the move journal."""
+    log = tmp_path / "moved.txt"
     url = f"faulty://arm?delay=0.05&log={log}"
     script = tmp_path / "worker.py"
     script.write_text(_WORKER.format(tests=str(Path(__file__).parent / "support")))

@@ -1,4 +1,6 @@
-"""The SQLite store: round trips, schema versioning, concurrent writers, crash safety."""
+"""The store on both backends (the ``db`` fixture: an SQLite file, a PostgreSQL schema): round trips, schema
+versioning, concurrent writers, crash safety. Tests of the SQLite file's own mechanics (its header, PRAGMAs) take
+``tmp_path`` alone."""
 
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import pytest
 
 from stickslip import storage
 from stickslip.measurements import Traverse
-from stickslip.storage import SCHEMA_VERSION, Store, StoreError, stale_message, warn_if_stale
+from stickslip.storage import SCHEMA_VERSION, ConstraintError, Store, StoreError, stale_message, warn_if_stale
 
 
 def _t(day="2026-11-20", joint=3, direction="+", steps=12000, q2=-math.pi / 2, theta=0.0):
@@ -25,7 +27,7 @@ def _t(day="2026-11-20", joint=3, direction="+", steps=12000, q2=-math.pi / 2, t
     return Traverse(day, joint, direction, 0.0, q2, 0.0, theta, 0.0, start, end, steps)
 
 
-def test_round_trip_keeps_every_field_exactly(tmp_path):
+def test_round_trip_keeps_every_field_exactly(db):
     rows = [
         _t(steps=12001, q2=-1.2345678901234567),
         _t(direction="-", steps=13313, theta=-0.5),
@@ -43,10 +45,11 @@ def test_round_trip_keeps_every_field_exactly(tmp_path):
             104729,
         ),
     ]
-    with Store.open(tmp_path / "s.db") as st:
+    with Store.open(db) as st:
         ids = [st.add_traverse(t, device="sim://", how="simulated") for t in rows]
         assert ids == sorted(ids) and len(set(ids)) == 3
-        assert st.traverses() == rows  # floats survive bit for bit (REAL is a double)
+        assert st.traverses() == rows  # floats survive bit for bit (SQLite's REAL and PostgreSQL's float8: doubles)
+        assert list(st.iter_traverses(chunk=2)) == rows  # read 2 at a time (PostgreSQL: a cursor on the server)
         assert st.traverses(day="day2") == [rows[2]]
         assert st.traverses(joint=3) == rows[:2]
         assert st.traverses(device="other://") == []
@@ -55,29 +58,29 @@ def test_round_trip_keeps_every_field_exactly(tmp_path):
         assert rec["how"] == "simulated" and rec["device"] == "sim://"
 
 
-def test_measured_at_is_stored_as_utc(tmp_path):
+def test_measured_at_is_stored_as_utc(db):
     when = dt.datetime(2026, 11, 20, 9, 30, tzinfo=dt.timezone(dt.timedelta(hours=2)))
-    with Store.open(tmp_path / "s.db") as st:
+    with Store.open(db) as st:
         st.add_traverse(_t(), measured_at=when)
         assert st.traverse_records()[0]["measured_at"] == "2026-11-20T07:30:00.000000+00:00"
 
 
-def test_add_traverses_is_all_or_nothing(tmp_path):
+def test_add_traverses_is_all_or_nothing(db):
     bad = Traverse("", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 10)
-    with Store.open(tmp_path / "s.db") as st:
+    with Store.open(db) as st:
         with pytest.raises(ValueError, match="empty day"):
             st.add_traverses([_t(), bad])
         assert st.count_traverses() == 0
-        # the database's own CHECK constraints hold too, and roll the batch back
-        with pytest.raises(sqlite3.IntegrityError):
+        # the database's own CHECK constraints hold too, and roll the batch back (one error type on both backends)
+        with pytest.raises(ConstraintError, match="steps"):
             st.add_traverses([_t(), Traverse("d", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 0)])
-        assert st.count_traverses() == 0
+        assert st.count_traverses() == 0 and st.days() == []  # nor the session it made on the way
         ids = st.add_traverses([_t(), _t(direction="-")], device="sim://", how="imported", source="abc")
         assert len(ids) == 2 and st.has_source("abc") and not st.has_source("xyz")
 
 
-def test_history_counts_per_day_and_direction(tmp_path):
-    with Store.open(tmp_path / "s.db") as st:
+def test_history_counts_per_day_and_direction(db):
+    with Store.open(db) as st:
         for _ in range(3):
             st.add_traverse(_t("2026-11-20"))
         st.add_traverse(_t("2026-11-20", direction="-"))
@@ -92,8 +95,8 @@ def test_history_counts_per_day_and_direction(tmp_path):
         assert st.days(device="sim://") == ["2026-11-20"]
 
 
-def test_device_state_round_trip(tmp_path):
-    with Store.open(tmp_path / "s.db") as st:
+def test_device_state_round_trip(db):
+    with Store.open(db) as st:
         assert st.get_state("sim://", "position") is None
         st.set_state("sim://", "position", {"q1": 0.0, "q2": -1.5707963267948966, "q3": 0.006})
         st.set_state("sim://", "position", '{"q1": 0.1, "q2": -1.0, "q3": 0.001}')  # JSON text works too
@@ -158,16 +161,16 @@ def test_stale_warning():
 # ---------------------------------------------------------------- concurrency and crashes
 
 
-def _writer(path: str, who: int, n: int) -> None:
+def _writer(path: str, who: int, n: int) -> None:  # path: a file or a URL (its password in $PGPASSWORD)
     with Store.open(path) as st:
         for k in range(n):
             st.add_traverse(_t(day=f"w{who}", steps=1000 * (who + 1) + k), device=f"sim://{who}")
 
 
 @pytest.mark.slow
-def test_concurrent_writers_lose_no_rows(tmp_path):
-    """4 processes x 25 traverses each, all opening a fresh file at once: 100 rows, none lost."""
-    path = str(tmp_path / "c.db")
+def test_concurrent_writers_lose_no_rows(db):
+    """4 processes x 25 traverses each, all opening a fresh database at once: 100 rows, none lost."""
+    path = str(db)
     n_proc, n_rows = 4, 25
     ctx = mp.get_context("spawn")
     procs = [ctx.Process(target=_writer, args=(path, w, n_rows)) for w in range(n_proc)]
@@ -182,6 +185,7 @@ def test_concurrent_writers_lose_no_rows(tmp_path):
             got = sorted(t.steps for t in st.traverses(device=f"sim://{w}"))
             assert got == [1000 * (w + 1) + k for k in range(n_rows)]
         assert st.integrity_check() == "ok"
+        assert len(st.devices()) == n_proc and len(st.days()) == n_proc  # each made once, though all raced to
 
 
 _KILL_SCRIPT = textwrap.dedent("""
@@ -198,8 +202,8 @@ _KILL_SCRIPT = textwrap.dedent("""
 
 
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
-def test_kill_minus_9_mid_session_keeps_every_completed_traverse(tmp_path):
-    path = tmp_path / "k.db"
+def test_kill_minus_9_mid_session_keeps_every_completed_traverse(db):
+    path = db
     proc = subprocess.Popen([sys.executable, "-c", _KILL_SCRIPT, str(path)], stdout=subprocess.PIPE, text=True)
     done = 0
     for line in proc.stdout:  # noqa: B007  (read until enough rows are committed)
@@ -236,9 +240,9 @@ def _calibration(day="2026-11-20"):
     return calibrate(rows, method="lsq"), rows
 
 
-def test_calibrations_round_trip_with_their_traverses(tmp_path):
+def test_calibrations_round_trip_with_their_traverses(db):
     cal, rows = _calibration()
-    with Store.open(tmp_path / "s.db") as st:
+    with Store.open(db) as st:
         assert st.latest_calibration() is None
         ids = st.add_traverses(rows, device="sim://")
         cid = st.add_calibration(cal, "sim://", ids)
@@ -256,14 +260,14 @@ def test_calibrations_round_trip_with_their_traverses(tmp_path):
 # ---------------------------------------------------------------- command line
 
 
-def test_cli_import_history_export_round_trip(tmp_path):
+def test_cli_import_history_export_round_trip(tmp_path, db):
     from typer.testing import CliRunner
 
     from stickslip.cli import app
     from stickslip.measurements import read_measurements, write_measurements
 
     runner = CliRunner()
-    db, meas, out = tmp_path / "s.db", tmp_path / "m.csv", tmp_path / "out.csv"
+    meas, out = tmp_path / "m.csv", tmp_path / "out.csv"
     rows = [_t("2026-11-20"), _t("2026-11-20", direction="-", steps=13000), _t("2026-11-21", steps=12500)]
     write_measurements(meas, rows)
     r = runner.invoke(app, ["import", str(meas), "--db", str(db), "--device", "sim://", "--json"])
@@ -279,12 +283,12 @@ def test_cli_import_history_export_round_trip(tmp_path):
     assert r.exit_code == 2 and "stored days: 2026-11-20, 2026-11-21" in r.output
 
 
-def test_cli_import_reports_every_bad_row_and_stores_nothing(tmp_path):
+def test_cli_import_reports_every_bad_row_and_stores_nothing(tmp_path, db):
     from typer.testing import CliRunner
 
     from stickslip.cli import app
 
-    db, bad = tmp_path / "s.db", tmp_path / "bad.csv"
+    bad = tmp_path / "bad.csv"
     bad.write_text(
         "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
         "d1,3,+,0,0,0,0,0,0,0.012,12000\n"
@@ -298,47 +302,73 @@ def test_cli_import_reports_every_bad_row_and_stores_nothing(tmp_path):
         assert st.count_traverses() == 0
 
 
-def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(tmp_path, monkeypatch):
-    p = tmp_path / "s.db"
+def _columns(st, table):
+    """The columns of ``table``, by each engine's own catalogue."""
+    if st.backend == "sqlite":
+        return [r[1] for r in st._con.execute(f"PRAGMA table_info({table})")]
+    sql = "SELECT column_name FROM information_schema.columns WHERE table_schema = current_schema() AND table_name = ?"
+    return [r[0] for r in st._con.execute(sql, (table,))]
+
+
+def _version_on_disk(db):
+    """The schema version the database says, read without the store (which would migrate it)."""
+    if not isinstance(db, str):
+        con = sqlite3.connect(db)
+        try:
+            return con.execute("PRAGMA user_version").fetchone()[0]
+        finally:
+            con.close()
+    import psycopg
+
+    with psycopg.connect(db) as con:
+        return con.execute("SELECT version FROM stickslip_marker").fetchone()[0]
+
+
+def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(db, monkeypatch):
+    p = db
     with Store.open(p) as st:
         st.add_traverse(_t(steps=4242))
     future = (*storage.MIGRATIONS, "ALTER TABLE traverses ADD COLUMN note TEXT; CREATE TABLE extra (x INTEGER)")
-    monkeypatch.setattr(storage.base, "MIGRATIONS", future)
+    for module in (storage.base, storage.schema):  # the store's, and the reference integrity_check compares to
+        monkeypatch.setattr(module, "MIGRATIONS", future)
     monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(future))
     with Store.open(p) as st:
         assert st.schema_version == len(future)
         assert [t.steps for t in st.traverses()] == [4242]
-        cols = [r[1] for r in st._con.execute("PRAGMA table_info(traverses)")]
-        assert "note" in cols
+        assert "note" in _columns(st, "traverses") and _columns(st, "extra") == ["x"]
+        assert st.integrity_check() == "ok"
     # a migration that fails leaves the file at its old version, untouched
     broken = (*future, "CREATE TABLE extra (x INTEGER)")  # 'extra' exists already
     monkeypatch.setattr(storage.base, "MIGRATIONS", broken)
     monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(broken))
     with pytest.raises(StoreError, match="not a usable stickslip database"):
         Store.open(p)
-    con = sqlite3.connect(p)
-    assert con.execute("PRAGMA user_version").fetchone()[0] == len(future)
-    con.close()
+    assert _version_on_disk(p) == len(future)
 
 
-def test_cli_reading_commands_refuse_a_missing_database(tmp_path):
+def test_cli_reading_commands_refuse_a_missing_database(tmp_path, db):
     from typer.testing import CliRunner
 
     from stickslip.cli import app
 
-    missing = tmp_path / "nope.db"
+    missing = tmp_path / "nope.db" if not isinstance(db, str) else db  # a file not there; an empty schema
     for args in (["history"], ["export", "-o", str(tmp_path / "x.csv")], ["anova"], ["fit"]):
         r = CliRunner().invoke(app, [*args, "--db", str(missing)])
         assert r.exit_code == 2 and "no database at" in r.output, args
-    assert not missing.exists()
+    if isinstance(db, str):  # nothing was created in the schema
+        import psycopg
+
+        with psycopg.connect(db) as con:
+            assert con.execute("SELECT count(*) FROM pg_tables WHERE schemaname = current_schema()").fetchone() == (0,)
+    else:
+        assert not missing.exists()
 
 
-def test_cli_fit_record_from_the_database_links_the_traverses(tmp_path):
+def test_cli_fit_record_from_the_database_links_the_traverses(db):
     from typer.testing import CliRunner
 
     from stickslip.cli import app
 
-    db = tmp_path / "s.db"
     cal, rows = _calibration("2026-11-21")
     with Store.open(db) as st:
         st.add_traverses(rows, device="mm3a:///dev/ttyUSB0")
@@ -354,7 +384,7 @@ def test_cli_fit_record_from_the_database_links_the_traverses(tmp_path):
 # ---------------------------------------------------------------- duplicates
 
 
-def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
+def test_import_refuses_rows_already_stored_unless_allowed(tmp_path, db):
     from synth import paper_table
     from typer.testing import CliRunner
 
@@ -362,7 +392,6 @@ def test_import_refuses_rows_already_stored_unless_allowed(tmp_path):
     from stickslip.measurements import measurements_to_csv
 
     runner = CliRunner()
-    db = tmp_path / "d.db"
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     rows = paper_table()
     a.write_text(measurements_to_csv(rows))

@@ -40,14 +40,14 @@ def test_bulk_keys_equal_the_definition(rows, device):
     assert [content_key(t, device) for t in rows] == want
 
 
-def test_bulk_insert_returns_the_ids_of_the_rows_in_order(tmp_path):
-    """add_traverses inserts with one executemany: the ids it returns are the new rows, in the order given."""
+def test_bulk_insert_returns_the_ids_of_the_rows_in_order(db):
+    """add_traverses inserts in bulk (SQLite: one executemany; PostgreSQL: COPY): the ids are the new rows, in order."""
     from synth import paper_table
 
     from stickslip.storage import Store
 
     ts = paper_table()
-    with Store.open(tmp_path / "s.db") as st:
+    with Store.open(db) as st:
         first = st.add_traverses(ts[:5], device="sim://")
         st.delete_traverses([first[-1]])  # the largest id is free again
         ids = st.add_traverses(ts, device="sim://a")
@@ -57,3 +57,5 @@ def test_bulk_insert_returns_the_ids_of_the_rows_in_order(tmp_path):
         r = recs[i]
         got = (r["day"], r["joint"], r["direction"], r["q2"], r["steps"])
         assert got == (t.day, t.joint, t.direction, t.q2, t.steps)
+    with Store.open(db) as st:  # and the keys stored in bulk are the definition's
+        assert st.duplicates(ts, "sim://a") == list(range(len(ts)))

@@ -8,7 +8,7 @@ A TOML file (docs/config.md) in the platform's configuration folder
 
     device = "mm3a:///dev/ttyUSB0"      # the controller the device commands drive
     calibration = "cal/today.json"      # relative paths: from this file's folder
-    database = "~/lab/stickslip.db"
+    database = "~/lab/stickslip.db"    # or a shared one: "postgresql://rig1@labdb/stickslip"
     max_age_days = 1                    # a calibration this many days old is still fresh
 
     [geometry]                          # the arm (docs/taskspace.md): lengths with units
@@ -72,7 +72,7 @@ MAX_AGE_LIMIT = 36500
 KEYS: dict[str, str] = {
     "device": "the controller URL the device commands use without --device (no password)",
     "calibration": "the calibration JSON used without --calibration",
-    "database": "the SQLite database used without --db (after $STICKSLIP_DB)",
+    "database": "the database used without --db (after $STICKSLIP_DB): an SQLite file or a postgresql:// URL",
     "max_age_days": "the age in days up to which a calibration is fresh (after --max-age, $STICKSLIP_MAX_AGE_DAYS)",
     "geometry.offset": "joint-1 axis to joint-2 axis (a length: 0mm), used without --geometry",
     "geometry.length": "joint-2 axis to the tip at q3 = 0 (a length: 21mm), used without --geometry",
@@ -80,6 +80,21 @@ KEYS: dict[str, str] = {
 """Every key the file may hold (dotted for ``[geometry]``), with what it sets."""
 
 _TABLES = {"geometry"}
+
+DATABASE_SCHEMES = ("postgresql", "postgres")
+"""URL schemes the ``database`` key takes (as :data:`stickslip.storage.POSTGRES_SCHEMES`; a test keeps them equal)."""
+
+
+def _has_password(url: str) -> bool:
+    """Whether a URL carries a password: ``user:PASSWORD@`` (before the last ``@``), or a ``...pass...=`` option."""
+    rest = url.partition("://")[2]
+    main, _, query = rest.partition("?")
+    userinfo, at, _ = main.rpartition("@")
+    if at and ":" in userinfo:
+        return True
+    return redact_url(url) != url or any(
+        "pass" in opt.partition("=")[0].lower() for opt in query.split("&") if "=" in opt
+    )
 
 
 class ConfigError(ValueError):
@@ -101,8 +116,9 @@ class UserConfig:
     calibration : Path or None
         Default calibration JSON, absolute (a relative path in the file is read from
         the file's folder; ``~`` is the home folder).
-    database : Path or None
-        Default SQLite database, absolute (as ``calibration``).
+    database : Path or str or None
+        Default database: an SQLite file, absolute (as ``calibration``), or a shared
+        PostgreSQL database's ``postgresql://`` URL (``str``; never holds a password).
     max_age_days : int or None
         Largest age of a calibration, days (0..36500), still used without a warning.
     geometry_offset : float or None
@@ -115,7 +131,7 @@ class UserConfig:
     found: bool = False
     device: str | None = None
     calibration: Path | None = None
-    database: Path | None = None
+    database: Path | str | None = None
     max_age_days: int | None = None
     geometry_offset: float | None = None
     geometry_length: float | None = None
@@ -240,7 +256,7 @@ class _Reader:
             found=True,
             device=self._device(doc.get("device")),
             calibration=self._path("calibration", doc.get("calibration")),
-            database=self._path("database", doc.get("database")),
+            database=self._database(doc.get("database")),
             max_age_days=self._days(doc.get("max_age_days")),
             geometry_offset=self._length("geometry.offset", geometry.get("offset")),
             geometry_length=self._length("geometry.length", geometry.get("length")),
@@ -287,6 +303,26 @@ class _Reader:
             hint = f"did you mean {near[0]}://? " if near else ""
             raise self.fail("device", f"unknown device scheme {scheme}:// ({hint}known: {', '.join(sorted(BACKENDS))})")
         return url
+
+    def _database(self, value: object) -> Path | str | None:
+        """An SQLite file (as ``calibration``), or a ``postgresql://`` URL without a password."""
+        if value is None:
+            return None
+        text = self._string("database", value, "a file path or a postgresql:// URL")
+        head, sep, _ = text.partition("://")
+        if not sep or len(head) < 2:  # a path (a one-letter "scheme" is a Windows drive)
+            return self._path("database", text)
+        if head.lower() not in DATABASE_SCHEMES:
+            raise self.fail(
+                "database", f"{head}:// is not a database stickslip can use: give a file path or a postgresql:// URL"
+            )
+        if _has_password(text):
+            raise self.fail(
+                "database",
+                "a password in the database URL is refused (a config file is plain text others may read): "
+                "remove it and give it in $PGPASSWORD or ~/.pgpass (docs/storage.md)",
+            )
+        return text
 
     def _path(self, key: str, value: object) -> Path | None:
         if value is None:
@@ -369,7 +405,8 @@ _TEMPLATE = """\
 # plan, show).
 # calibration = "calibration.json"
 
-# The database of traverses, calibrations and positions, used without --db.
+# The database of traverses, calibrations and positions, used without --db: a file, or a shared
+# PostgreSQL database (postgresql://USER@HOST/DBNAME; the password in $PGPASSWORD or ~/.pgpass).
 # database = "stickslip.db"
 
 # A calibration up to this many days old is used without a recalibration warning

@@ -71,7 +71,7 @@ from ..procedures.move import (
     settle,
 )
 from ..rig.guard import Guard
-from ..storage import Store, StoreError
+from ..storage import Store, StoreError, resolve_database
 from ..units import format_position, position_display_unit
 
 __all__ = ["DeviceLink", "MoveError", "StickSlipAxis", "MAX_BURST_S", "STOP_RETURN_S"]
@@ -112,8 +112,9 @@ class DeviceLink:
     device : str or Controller
         A controller URL (``sim://``, ``mm3a:///dev/ttyUSB0``, ...) or an open
         controller (its ``info.url`` names it in the database).
-    db : path, optional
-        The SQLite database (default ``$STICKSLIP_DB``, else the user's data folder).
+    db : path or str, optional
+        The database: an SQLite file or a ``postgresql://`` URL (default ``$STICKSLIP_DB``,
+        else the user's data folder).
     """
 
     def __init__(self, device: str | Controller, db: str | os.PathLike[str] | None = None):
@@ -125,7 +126,7 @@ class DeviceLink:
             self._ctrl = device
         self.owned = isinstance(device, str)
         self.key = device_key(self.url)
-        self.db = None if db is None else Path(db)
+        self.db: Path | str | None = None if db is None else resolve_database(db)
         self.lock = asyncio.Lock()
         self._open_lock = threading.Lock()
 
@@ -309,8 +310,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     burst : int
         Steps per burst, 1..65535 (as ``stickslip move --burst``); a stop takes effect
         between bursts.
-    db : path, optional
-        The database keeping positions (default ``$STICKSLIP_DB``, else the user's data folder).
+    db : path or str, optional
+        The database keeping positions: an SQLite file or a ``postgresql://`` URL (default
+        ``$STICKSLIP_DB``, else the user's data folder).
     max_burst_s : float
         Longest burst, s (default :data:`MAX_BURST_S`, 0.2 s; in (0, 0.4]): on a controller
         that steps in real time a burst is cut to ``frequency * max_burst_s`` steps, so a

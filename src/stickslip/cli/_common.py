@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import os
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -503,39 +504,48 @@ def calibration_file(option: Path | None, flag: str = "--calibration") -> Path:
 
 #: ``--db``'s help, for every command that reads or records the database (:func:`database_setting`)
 DB_HELP = (
-    "SQLite database file (default: $STICKSLIP_DB, else database in the config file, else stickslip.db in your "
-    "data folder: ~/.local/share/stickslip on Linux, %LOCALAPPDATA%\\stickslip on Windows; "
-    "`stickslip config show` says which)."
+    "Database: an SQLite file, or a shared PostgreSQL database as postgresql://USER@HOST/DBNAME "
+    "(password from $PGPASSWORD or ~/.pgpass; docs/storage.md). Default: $STICKSLIP_DB, else database in the "
+    "config file, else stickslip.db in your data folder: ~/.local/share/stickslip on Linux, "
+    "%LOCALAPPDATA%\\stickslip on Windows; `stickslip config show` says which."
 )
 
 
-def database_setting(option: Path | None, flag: str = "--db") -> Setting[Path]:
-    """The database: ``option``, else ``$STICKSLIP_DB``, else the file's ``database``, else the data folder."""
-    import os
+def db_option(help_extra: str = "") -> Any:
+    """The ``--db`` option: a file path or a ``postgresql://`` URL, kept as text (a ``Path`` would fold ``//``)."""
+    return typer.Option(None, "--db", help=DB_HELP + help_extra, metavar="FILE|URL")
 
-    from ..storage import default_db_path
+
+def database_setting(option: str | os.PathLike[str] | None, flag: str = "--db") -> Setting[Path | str]:
+    """The database: ``option``, else ``$STICKSLIP_DB``, else the file's ``database``, else the data folder.
+
+    A file is a ``Path``; a PostgreSQL database is its URL (``str``, shown only through
+    :func:`stickslip.storage.describe_database`). Another ``scheme://`` is one ``error:`` line.
+    """
+    from ..storage import StoreError, default_db_path, resolve_database
     from ..storage.schema import ENV_VAR
 
     if option is not None and str(option) != "":
-        return Setting(option.expanduser(), "option", flag)
+        with user_errors(StoreError):
+            return Setting(resolve_database(option), "option", flag)
     env = os.environ.get(ENV_VAR)
     if env:
-        return Setting(Path(env).expanduser(), "env", f"${ENV_VAR}")
+        with user_errors(StoreError):
+            return Setting(resolve_database(env), "env", f"${ENV_VAR}")
     cfg = user_config()
     if cfg.database is not None:
-        return Setting(cfg.database, "file", str(cfg.path))
+        with user_errors(StoreError):
+            return Setting(resolve_database(cfg.database), "file", str(cfg.path))
     return Setting(default_db_path(), "default")
 
 
-def db_path(option: Path | None) -> Path:
-    """The database file a command uses (:func:`database_setting`)."""
+def db_path(option: str | os.PathLike[str] | None) -> Path | str:
+    """The database a command uses (:func:`database_setting`): a file, or a PostgreSQL URL."""
     return database_setting(option).value
 
 
 def max_age_setting(option: int | None, flag: str = "--max-age") -> Setting[int]:
     """Largest calibration age (days) without a warning: ``option``, ``$STICKSLIP_MAX_AGE_DAYS``, the file, 0."""
-    import os
-
     from ..clock import ENV_MAX_AGE, max_age_days
 
     if option is not None:
@@ -577,23 +587,29 @@ def geometry_setting(option: str | None, flag: str = "--geometry") -> Setting[Ge
 
 
 @contextmanager
-def open_store(db: Path | None, must_exist: bool = False) -> Iterator[Store]:
+def open_store(db: str | os.PathLike[str] | None, must_exist: bool = False) -> Iterator[Store]:
     """The database at ``db`` (``--db``, else ``$STICKSLIP_DB``, else the config file's, else the data folder).
 
     A context manager (``with open_store(db) as st:``), the one way commands open the
-    database. A command that only reads passes ``must_exist=True`` and refuses a file
-    that does not exist yet instead of creating an empty one. Every storage fault, when
-    opening (another application's file, a FIFO, a newer schema) or inside the block (a
-    damaged page, a stored value of the wrong type, a full disk), is one ``error:`` line
-    naming the file; the store is closed either way.
+    database: a file, or a shared PostgreSQL database (``postgresql://``). A command that
+    only reads passes ``must_exist=True`` and refuses a database that is not there yet
+    instead of creating an empty one. Every storage fault, when opening (another
+    application's file or tables, a FIFO, a newer schema, a server that does not answer)
+    or inside the block (a damaged page, a stored value of the wrong type, a full disk),
+    is one ``error:`` line naming the database, never a password; the store is closed
+    either way.
     """
-    from ..storage import Store, StoreError
+    from ..storage import NoDatabase, Store, StoreError, describe_database
 
-    path = db_path(db)
-    if must_exist and not path.exists():
-        fail(f"no database at {path} (nothing recorded yet: run stickslip demo, or stickslip import MEAS.csv)")
+    target = db_path(db)
     with user_errors(StoreError):
-        store = Store.open(path)
+        try:
+            store = Store.open(target, create=not must_exist)
+        except NoDatabase:
+            fail(
+                f"no database at {describe_database(target)} (nothing recorded yet: run stickslip demo, "
+                "or stickslip import MEAS.csv)"
+            )
     try:
         with store:
             yield store

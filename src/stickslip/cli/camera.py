@@ -15,7 +15,17 @@ import typer
 
 from ..devices.base import DeviceError, PoseSettable, device_key, open_device
 from . import app
-from ._common import DB_HELP, OneLineErrors, console, device_url, err_console, fail, open_store, print_json, user_errors
+from ._common import (
+    OneLineErrors,
+    console,
+    db_option,
+    device_url,
+    err_console,
+    fail,
+    open_store,
+    print_json,
+    user_errors,
+)
 from ._output import styled
 
 if TYPE_CHECKING:
@@ -171,7 +181,7 @@ def calibrate_cmd(
         None, "--output", "-o", help="Write the step sizes (CSV, for stickslip calibrate --step-sizes)."
     ),
     day: str | None = typer.Option(None, "--day", help="Session label of the rows (default: today)."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the fits, step sizes and refusals as JSON (SI, px)."),
 ) -> None:
     """Calibrate the camera against the manipulator: each joint's image motion and step size at this pose.
@@ -312,7 +322,7 @@ def grab_cmd(
     camera: str = typer.Option(..., "--camera", help=_CAMERA_HELP),
     output: Path = typer.Option(..., "--output", "-o", help="Write the frame here (PNG, 16-bit grey)."),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP + " Only simcam:// needs it."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the frame's size, time and pixel size as JSON."),
 ) -> None:
     """Take one frame from a camera and save it as a 16-bit grey PNG.
@@ -408,7 +418,7 @@ def camera_loop(camera: str | None, tip: str | None) -> Any:
         return CameraLoop(camera, tip=at)
 
 
-def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: Path | None,
+def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: str | None,
              json_out: bool, borrowed: bool = False) -> None:
     """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short."""
     from ..procedures.closed_loop import move_seen, reach_seen

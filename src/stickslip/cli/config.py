@@ -105,7 +105,7 @@ def _row(s: Setting[Any]) -> dict[str, Any]:
 def show_cmd(
     device: str | None = typer.Option(None, "--device", "-d", help="As a command's --device (shows it winning)."),
     calibration: Path | None = typer.Option(None, "--calibration", "-c", help="As a command's --calibration."),
-    db: Path | None = typer.Option(None, "--db", help="As a command's --db."),
+    db: str | None = typer.Option(None, "--db", metavar="FILE|URL", help="As a command's --db."),
     geometry: str | None = typer.Option(None, "--geometry", help="As a command's --geometry (OFFSET,LENGTH)."),
     max_age: int | None = typer.Option(None, "--max-age", min=0, max=36500, help="As a command's --max-age (days)."),
     json_out: bool = typer.Option(False, "--json", help="Print the settings as JSON (paths, metres, days)."),
@@ -121,6 +121,8 @@ def show_cmd(
 
     Example: stickslip config show --json
     """
+    from ..storage import describe_database
+
     cfg = user_config()
     dev = device_setting(device)
     cal = calibration_setting(calibration)
@@ -139,7 +141,11 @@ def show_cmd(
                         "value": None if cal.value is None else str(cal.value),
                         "exists": None if cal.value is None else cal.value.is_file(),
                     },
-                    "database": {**_row(base), "value": str(base.value), "exists": base.value.is_file()},
+                    "database": {
+                        **_row(base),
+                        "value": describe_database(base.value),
+                        "exists": base.value.is_file() if isinstance(base.value, Path) else None,
+                    },
                     "max_age_days": _row(age),
                     "geometry": {**_row(geom), "value": geom.value.as_dict()},
                 },
@@ -162,7 +168,7 @@ def show_cmd(
     for name, value, setting in (
         ("device", dev.value, dev),
         ("calibration", path_text(cal.value), cal),
-        ("database", str(base.value) + ("" if base.value.is_file() else " (not there yet)"), base),
+        ("database", _database_text(base.value), base),
         ("max_age_days", f"{age.value} day{'s' if age.value != 1 else ''}", age),
         ("geometry", f"offset {g.offset * 1e3:g} mm, length {g.length * 1e3:g} mm", geom),
     ):
@@ -174,3 +180,12 @@ def _check_named_files(cal: Setting[Path | None]) -> None:
     """Exit 2 naming the configuration file when the calibration it names is not there (every command would fail)."""
     if cal.source == "file" and cal.value is not None and not cal.value.is_file():
         fail(f"{cal.where}: calibration: {cal.value} does not exist (fix the config file, or give --calibration)")
+
+
+def _database_text(where: Path | str) -> str:
+    """The database as ``config show`` names it: a file (and whether it is there yet), or a server (never asked)."""
+    from ..storage import describe_database
+
+    if isinstance(where, Path):
+        return str(where) + ("" if where.is_file() else " (not there yet)")
+    return f"{describe_database(where)} (PostgreSQL)"

@@ -24,10 +24,10 @@ from ..records import atomic_write
 from ..units import format_position, format_step, param_scale, step_scale
 from . import app
 from ._common import (
-    DB_HELP,
     angle_option,
     calibration_file,
     console,
+    db_option,
     db_path,
     fail,
     fail_table,
@@ -139,7 +139,7 @@ def calibrate_cmd(
             "the simulator, is refused on a real controller unless --trust-calibration.",
         ),
     ] = None,
-    db: Annotated[Path | None, typer.Option("--db", help=DB_HELP)] = None,
+    db: str | None = db_option(),
     frequency: Annotated[
         float | None, typer.Option(help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).")
     ] = None,
@@ -264,21 +264,21 @@ def calibrate_cmd(
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
 
 
-def _stored_device(traverses: list[Any], db: Path | None) -> tuple[str, list[int]] | None:
+def _stored_device(traverses: list[Any], db: str | None) -> tuple[str, list[int]] | None:
     """The device the database holds every one of ``traverses`` under, and their ids (``None``: not so)."""
     from ..storage import Store, StoreError
 
     path = db_path(db)
-    if not path.is_file():
+    if isinstance(path, Path) and not path.is_file():
         return None  # a calibration never creates a database
     try:
-        with Store.open(path) as store:
+        with Store.open(path, create=False) as store:
             return store.device_holding(traverses)
     except (StoreError, ValueError):
         return None  # the device stays unknown; the database's own problem is for the commands that use it
 
 
-def _keep(cal: Calibration, stored: tuple[str, list[int]] | None, db: Path | None) -> int | None:
+def _keep(cal: Calibration, stored: tuple[str, list[int]] | None, db: str | None) -> int | None:
     """Keep ``cal`` in the database beside the traverses it was made from (its id), if the database holds them."""
     if stored is None:
         return None
@@ -385,7 +385,7 @@ def show_cmd(
         Path | None,
         typer.Option("--output", "-o", help="Also write the calibration to this JSON file (use it with -c)."),
     ] = None,
-    db: Annotated[Path | None, typer.Option("--db", help=DB_HELP)] = None,
+    db: str | None = db_option(),
     json_out: JsonOpt = False,
 ) -> None:
     """Show a calibration's parameters (nm for the prismatic joint, µrad for rotary joints).
@@ -414,7 +414,7 @@ def show_cmd(
         say(f"saved to {output}")
 
 
-def _calibration_to_show(text: str | None, db: Path | None) -> tuple[Calibration, str]:
+def _calibration_to_show(text: str | None, db: str | None) -> tuple[Calibration, str]:
     """The calibration ``show`` names: a file, or ``N`` / ``#N`` kept in the database; and what to call it."""
     from ..calibration import Calibration
     from ..storage import StoreError

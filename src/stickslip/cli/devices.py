@@ -30,9 +30,9 @@ from ..units import (
 )
 from . import app
 from ._common import (
-    DB_HELP,
     angle_option,
     calibration_file,
+    db_option,
     device_url,
     fail,
     flush_warnings,
@@ -144,7 +144,7 @@ def move(
         help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
         "else max_age_days in the config file, else 0).",
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
     camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
@@ -223,7 +223,7 @@ def move(
 
 
 def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
-                 raw: int | None, calibration: Path | None, burst: int | None, db: Path | None, json_out: bool,
+                 raw: int | None, calibration: Path | None, burst: int | None, db: str | None, json_out: bool,
                  from_unreferenced: bool, trust_calibration: bool) -> None:
     """``move --rig FILE --arm NAME``: the arm's device, calibration and envelope from the rig file."""
     from ..calibration import Calibration
@@ -261,7 +261,7 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
     _print_move(result)
 
 
-def _where_arms(rig_file: Path, db: Path | None, json_out: bool) -> None:
+def _where_arms(rig_file: Path, db: str | None, json_out: bool) -> None:
     """``where --rig FILE``: every arm's kept positions (the devices are not opened)."""
     from ..procedures.arms import arm_states
     from ..procedures.move import where_line
@@ -292,7 +292,7 @@ def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
     return n
 
 
-def _step_raw(device: str, joint: int, steps: int, burst: int, db: Path | None, json_out: bool) -> None:
+def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, json_out: bool) -> None:
     """``move --steps N``: raw steps through the procedure, then what is known about the joint now."""
     from ..procedures.move import DeviceBusy, step_joint
 
@@ -372,7 +372,7 @@ def where(
     q3: float | None = typer.Option(None, "--q3", parser=length_option, help=_Q3),
     theta: float | None = typer.Option(None, "--theta", parser=angle_option, help=_THETA),
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help=_PSI),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     offline: bool = typer.Option(
         False, "--offline", help="Do not open the device: only show the kept positions."
     ),

@@ -15,7 +15,18 @@ from rich.table import Table
 
 from ..devices.base import redact_url
 from . import app
-from ._common import DB_HELP, console, fail, open_store, print_json, read_table, say, user_errors, warn, warn_later
+from ._common import (
+    console,
+    db_option,
+    fail,
+    open_store,
+    print_json,
+    read_table,
+    say,
+    user_errors,
+    warn,
+    warn_later,
+)
 from ._output import styled, visible
 
 if TYPE_CHECKING:
@@ -25,7 +36,7 @@ if TYPE_CHECKING:
 
 
 def _traverses_from(
-    meas: Path | None, db: Path | None, device: str | None, day: str | None
+    meas: Path | None, db: str | None, device: str | None, day: str | None
 ) -> tuple[list[Traverse], str]:
     """Traverses from a CSV file, or else from the database."""
     if meas is not None:
@@ -51,7 +62,7 @@ def _traverses_from(
 @app.command()
 def history(
     device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per device and day."),
 ) -> None:
     """Show stored sessions: traverses per day and joint, and calibrations made.
@@ -96,7 +107,7 @@ def export(
     day: str | None = typer.Option(None, "--day", help="Only this session day (e.g. 2026-11-21); default all."),
     device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
     joint: int | None = typer.Option(None, "--joint", "-j", help="Only this joint (1, 2 or 3)."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
 ) -> None:
     """Write stored traverses to a measurement table (CSV, SI units).
 
@@ -137,7 +148,7 @@ def import_(
     allow_duplicates: bool = typer.Option(
         False, "--allow-duplicates", help="Store rows identical to stored ones (same device, day, pose, steps)."
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the new traverse ids as JSON."),
 ) -> None:
     """Store a measurement table; on any bad row nothing is stored.
@@ -170,7 +181,7 @@ def exclude(
     traverse: list[int] = typer.Option(..., "--traverse", "-t", help="Id of a traverse (repeatable)."),
     reason: str | None = typer.Option(None, "--reason", "-r", help="Why (kept with the row), e.g. 'cable snagged'."),
     undo: bool = typer.Option(False, "--undo", help="Use the traverses again."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
 ) -> None:
     """Exclude stored traverses from calibration and analyses (kept, with the reason), or --undo.
 
@@ -190,7 +201,7 @@ def delete(
     day: str | None = typer.Option(None, "--day", help="Delete every traverse of this session day."),
     device: str | None = typer.Option(None, "--device", "-d", help="With --day: only this device."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask for confirmation."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print what was deleted as JSON."),
 ) -> None:
     """Delete stored traverses (by id, or a whole session day), after confirmation.
@@ -226,14 +237,17 @@ def delete(
 
 @app.command()
 def backup(
-    out: Path = typer.Argument(..., help="The new file to copy the database into.", metavar="OUT.db"),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    out: Path = typer.Argument(..., help="The new SQLite file to copy the database into.", metavar="OUT.db"),
+    db: str | None = db_option(),
 ) -> None:
     """Copy the whole database (traverses, calibrations, kept positions) into a new file.
 
     A consistent copy even while another stickslip command is running (a plain copy of
     the file can miss what SQLite still holds in its write-ahead log). Keep it, or give
-    it to a colleague: every command reads it with --db OUT.db.
+    it to a colleague: every command reads it with --db OUT.db. A shared PostgreSQL
+    database (--db postgresql://...) is copied into an SQLite file the same way, every
+    table read at one instant: a rig's history to take home (pg_dump backs up the
+    server, docs/storage.md).
 
     Example: stickslip backup stickslip-2026-11-22.db
     """
@@ -254,7 +268,7 @@ def anova(
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
     alpha: float = typer.Option(0.05, "--alpha", help="Significance level, in (0, 1)."),
     two_way: bool = typer.Option(True, "--two-way/--no-two-way", help="Also the day x direction table."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per test."),
     show_skipped: bool = typer.Option(False, "--show-skipped", help="List every pose group that could not be tested."),
 ) -> None:
@@ -350,7 +364,7 @@ def fit(
     record: bool = typer.Option(
         False, "--record", help="Also store the calibration in the database (for --device, default sim://)."
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
     model: str = typer.Option(
         "paper", "--model", help="paper (the paper's models, least squares) | auto (the model families averaged with "
@@ -421,7 +435,7 @@ def report(
         None, "--calibration", "-c", help="Calibration JSON (default: fit the table by least squares)."
     ),
     out: Path = typer.Option(Path("stickslip-report"), "-o", "--output", help="Directory for the PNGs and index.html."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP + " Used when MEAS.csv is not given."),
+    db: str | None = db_option(" Used when MEAS.csv is not given."),
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
     validate_on: Path | None = typer.Option(
         None,

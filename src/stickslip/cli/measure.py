@@ -11,9 +11,9 @@ from ..clock import today_label
 from ..units import param_scale
 from . import app
 from ._common import (
-    DB_HELP,
     console,
     day_option,
+    db_option,
     db_path,
     device_url,
     fail,
@@ -49,12 +49,7 @@ def demo(
         help="Also measure the validation sweep of other poses.",
     ),
     json_out: bool = typer.Option(False, "--json", help="Print the summary as one JSON object (SI units)."),
-    db: Path = typer.Option(
-        None,
-        "--db",
-        help="Record every traverse and the calibration in this SQLite file "
-        "(default: $STICKSLIP_DB, else database in the config file, else the user's data folder).",
-    ),
+    db: str | None = db_option(" The demo records every traverse and the calibration there."),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record into the database (default) or not."),
     device: str = typer.Option(
         None,
@@ -243,7 +238,7 @@ def traverse_cmd(
     psi: str = typer.Option("0", help="Base tilt about the new y0."),
     day: str = typer.Option(None, "--day", help="Session label (default: today's ISO date).", callback=day_option),
     append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
-    db: Path = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
     burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
     confirm_s: float | None = typer.Option(

@@ -10,7 +10,6 @@ day's step scale, which the next ``move`` plans with (docs/models.md §7).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import typer
 
@@ -18,7 +17,7 @@ from ..devices.base import device_key
 from ..joints import JOINTS
 from ..units import format_position, format_spread
 from . import app
-from ._common import DB_HELP, device_url, fail, open_store, print_json, say, user_errors, warn_later
+from ._common import db_option, device_url, fail, open_store, print_json, say, user_errors, warn_later
 from .devices import _DEVICE_HELP, _parse_joint_value
 
 MAX_INNOVATION = 5.0
@@ -41,7 +40,7 @@ def observe(
         help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
     ),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the update as JSON (SI units)."),
 ) -> None:
     """Feed a measured position of a joint into its dead reckoning (Kalman update).

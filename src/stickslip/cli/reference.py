@@ -67,9 +67,11 @@ the command line):
   round-trip) and a lone `+` or `-` (the direction column). stickslip's own readers take
   the guard off: an exported table reads back exactly.
 * **Databases:** stickslip writes only into its own SQLite files (`PRAGMA application_id`
-  0x5374536C; a database made before the id is known by its tables and stamped). Another
-  application's file is refused untouched; a damaged one, or a stored value of the wrong
-  type, is one line naming the file (and the traverse and column).
+  0x5374536C; a database made before the id is known by its tables and stamped) and
+  PostgreSQL schemas (`--db postgresql://...`: an empty schema, or one with its marker
+  table `stickslip_marker`; docs/storage.md). Another application's file or tables are
+  refused untouched; a damaged one, or a stored value of the wrong type, is one line
+  naming the database (and the traverse and column), never a password.
 * **JSON** (calibrations, tunings, device state) is read strictly: a key given twice, a
   newer format version, `NaN`, deep nesting or a syntax error is one line naming the file,
   the key or the line and column.

@@ -18,9 +18,9 @@ import typer
 from ..devices.base import DeviceError, redact_url
 from . import app
 from ._common import (
-    DB_HELP,
     OneLineErrors,
     calibration_file,
+    db_option,
     fail,
     flush_warnings,
     open_store,
@@ -108,7 +108,7 @@ def _joint_text(kind: str, v: float) -> str:
 def check(
     path: Path = typer.Argument(..., help="The rig file.", metavar="FILE"),
     out: Path | None = typer.Option(None, "--output", "-o", help="Draw the rig into this PNG (two views)."),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP + " The arms are drawn at their kept poses."),
+    db: str | None = db_option(" The arms are drawn at their kept poses."),
 ) -> None:
     """List what a rig file holds (arms, joints, volumes, named positions) and draw it.
 
@@ -179,7 +179,7 @@ def go(
     calibration: Path | None = typer.Option(
         None, "--calibration", "-c", help="Calibration JSON (default: the arm's in the rig file, else the config's)."
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     from_unreferenced: bool = typer.Option(
         False, "--from-unreferenced", help="Plan from positions never referenced (as move's option)."
     ),

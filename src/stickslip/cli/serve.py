@@ -17,9 +17,9 @@ import typer
 
 from . import app
 from ._common import (
-    DB_HELP,
     calibration_setting,
     database_setting,
+    db_option,
     device_setting,
     err_console,
     fail,
@@ -109,7 +109,7 @@ def serve(
     token_file: Path | None = typer.Option(
         None, "--token-file", help="Where the token is kept (default: serve-token in your configuration folder)."
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
 ) -> None:
     """Serve a manipulator: a web page to drive it live, and an API for notebooks and scripts.
 

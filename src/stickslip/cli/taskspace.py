@@ -19,9 +19,9 @@ from ..joints import joint_spec
 from ..units import UnitError, bare_number_problem, format_position, parse_length
 from . import app
 from ._common import (
-    DB_HELP,
     angle_option,
     calibration_file,
+    db_option,
     device_url,
     fail,
     flush_warnings,
@@ -121,7 +121,7 @@ def reach(
         help="Use a calibration that does not record its device, or was made on the simulator, on a real "
         "controller (refused without it: its step sizes may be another arm's).",
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
     camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
@@ -379,7 +379,7 @@ def jog(
         help="Use a calibration that does not record its device, or was made on the simulator, on a real "
         "controller (refused without it: its step sizes may be another arm's).",
     ),
-    db: Path | None = typer.Option(None, "--db", help=DB_HELP),
+    db: str | None = db_option(),
     camera: str | None = typer.Option(
         None, "--camera", help="A camera that looks at the tip (pixel= in its URL): the joints it sees are shown "
         "and kept as seen, their step scales corrected as the tip moves.",

@@ -147,7 +147,7 @@ class RoomOptions:
     """
 
     device: str = "sim://?realtime=1"
-    db: Path | None = None
+    db: Path | str | None = None
     calibration: Path | None = None
     tunings: Mapping[int, Tuning] = field(default_factory=dict)
     geometry: kin.Geometry = kin.DEFAULT_GEOMETRY

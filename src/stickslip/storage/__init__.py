@@ -1,9 +1,14 @@
-"""Calibration history and every measured traverse, kept in an embedded SQLite file.
+"""Calibration history and every measured traverse, kept in an SQLite file or a shared PostgreSQL database.
 
 The database lives in the user's data directory by default
 (``$XDG_DATA_HOME/stickslip/stickslip.db``, else ``~/.local/share/stickslip/stickslip.db``;
 ``~/Library/Application Support/stickslip`` on macOS, ``%LOCALAPPDATA%\\stickslip`` on
-Windows). The environment variable ``STICKSLIP_DB`` or an explicit path overrides it.
+Windows). The environment variable ``STICKSLIP_DB`` or an explicit path overrides it. A
+``postgresql://user@host/dbname`` URL in their place keeps the same tables, through the
+same :class:`Store`, in a PostgreSQL server several rigs share (the ``postgres`` extra;
+:mod:`.postgres`, docs/storage.md). What differs between the two engines is behind one
+typed seam, :class:`.backend.Backend`; the SQLite specifics below have their PostgreSQL
+counterparts there.
 
 Safety
 ------
@@ -41,10 +46,15 @@ from .schema import (
     DEFAULT_DEVICE,
     ENV_VAR,
     MIGRATIONS,
+    POSTGRES_SCHEMES,
     SCHEMA_VERSION,
+    ConstraintError,
+    NoDatabase,
     StoreError,
     content_key,
     default_db_path,
+    describe_database,
+    resolve_database,
     resolve_db_path,
     warn_if_stale,
 )
@@ -57,11 +67,16 @@ __all__ = [
     "DEFAULT_DEVICE",
     "ENV_VAR",
     "MIGRATIONS",
+    "POSTGRES_SCHEMES",
     "SCHEMA_VERSION",
+    "ConstraintError",
+    "NoDatabase",
     "Store",
     "StoreError",
     "content_key",
     "default_db_path",
+    "describe_database",
+    "resolve_database",
     "resolve_db_path",
     "warn_if_stale",
     "stale_message",
@@ -69,13 +84,16 @@ __all__ = [
 
 
 class Store(TraverseStore, CalibrationStore, StateStore):
-    """The SQLite store of devices, sessions, traverses, calibrations and device state.
+    """The store of devices, sessions, traverses, calibrations and device state (SQLite or PostgreSQL).
 
     Open with :meth:`Store.open` (a context manager)::
 
         with Store.open() as store:               # default path, or $STICKSLIP_DB
             tid = store.add_traverse(t, device="sim://", how="simulated")
             cal = store.latest_calibration("sim://")
+
+        with Store.open("postgresql://rig1@labdb/stickslip") as store:   # the lab's shared history
+            ...
 
     Device URLs name a controller (``sim://``, ``serial:///dev/ttyUSB0`` ...); a device
     row is created the first time a URL is used.

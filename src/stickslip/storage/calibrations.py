@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
 from ..records import loads_json
-from .base import _Base, _rowid
+from .base import _Base
 from .schema import DEFAULT_DEVICE, StoreError, _now
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -49,14 +49,13 @@ class CalibrationStore(_Base):
                 missing = sorted(set(ids) - found)
                 if missing:
                     raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
-            cur = con.execute(
-                "INSERT INTO calibrations (device_id, day, method, created_at, json) "
-                "VALUES (?, ?, ?, ?, ?)",
+            cid = con.insert(
+                "INSERT INTO calibrations (device_id, day, method, created_at, json) VALUES (?, ?, ?, ?, ?)",
                 (dev, day, method, _now(), doc),
             )
-            cid = _rowid(cur)
             con.executemany(
-                "INSERT OR IGNORE INTO calibration_traverses VALUES (?, ?)", [(cid, i) for i in ids]
+                "INSERT INTO calibration_traverses (calibration_id, traverse_id) VALUES (?, ?) ON CONFLICT DO NOTHING",
+                [(cid, i) for i in sorted(set(ids))],
             )
             return cid
 
@@ -132,7 +131,7 @@ class CalibrationStore(_Base):
         """
         sql = (
             "SELECT d.url AS device, s.day AS day, t.joint AS joint, t.direction AS direction, "
-            "COUNT(t.id) AS n, SUM(t.excluded IS NOT NULL) AS x, "
+            "COUNT(t.id) AS n, COUNT(t.excluded) AS x, "
             "MIN(t.measured_at) AS first, MAX(t.measured_at) AS last "
             "FROM sessions s JOIN devices d ON d.id = s.device_id "
             "LEFT JOIN traverses t ON t.session_id = s.id"

@@ -1,10 +1,11 @@
-"""The database's schema and its migrations, content keys of traverses, where the file lives."""
+"""The database's schema and its migrations, content keys of traverses, where the database lives."""
 
 from __future__ import annotations
 
 import datetime as _dt
 import hashlib
 import os
+import sqlite3
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -130,6 +131,18 @@ class StoreError(OSError):
     """
 
 
+class NoDatabase(StoreError):
+    """Opened only to read (``create=False``), and there is no stickslip database there yet."""
+
+
+class ConstraintError(ValueError):
+    """A value the database's constraints refuse (a CHECK, a unique key, a number out of range).
+
+    Raised by either backend in place of its driver's integrity error; the write it was
+    part of was rolled back, so nothing of it was stored.
+    """
+
+
 # ---------------------------------------------------------------- where the file lives
 
 
@@ -146,13 +159,107 @@ def default_db_path() -> Path:
 
 
 def resolve_db_path(path: str | os.PathLike[str] | None = None) -> Path:
-    """``path`` if given, else ``$STICKSLIP_DB`` if set, else :func:`default_db_path`."""
-    if path is not None and str(path) != "":
-        return Path(path).expanduser()
-    env = os.environ.get(ENV_VAR)
-    if env:
-        return Path(env).expanduser()
-    return default_db_path()
+    """``path``, else ``$STICKSLIP_DB``, else :func:`default_db_path`: a file only (see :func:`resolve_database`)."""
+    target = resolve_database(path)
+    if isinstance(target, str):
+        raise StoreError(f"{describe_database(target)} is a database server, not a file")
+    return target
+
+
+POSTGRES_SCHEMES = ("postgresql", "postgres")
+"""URL schemes of a PostgreSQL database (libpq's two spellings): ``postgresql://user@host:5432/dbname``."""
+
+
+def database_scheme(spec: str) -> str | None:
+    """The URL scheme ``spec`` begins with (``"postgresql"``), else ``None`` for a file path.
+
+    A one-letter scheme is a Windows drive (``C:\\data``, ``C://data``), not a URL.
+    """
+    head, sep, _ = str(spec).strip().partition("://")
+    if not sep or len(head) < 2 or not head[0].isalpha():
+        return None
+    if not all(c.isalnum() or c in "+-." for c in head):
+        return None
+    return head.lower()
+
+
+def resolve_database(spec: str | os.PathLike[str] | None = None) -> Path | str:
+    """Where the database is: a file (``Path``) or a PostgreSQL URL (``str``), as :meth:`Store.open` takes it.
+
+    ``spec`` if given, else ``$STICKSLIP_DB`` if set, else :func:`default_db_path`. A
+    ``postgresql://`` (or ``postgres://``) URL is returned as given, password and all
+    (libpq needs it; :func:`describe_database` is the form to show). Any other
+    ``scheme://`` is refused (:class:`StoreError` naming the scheme, not the rest): a
+    URL is never taken for a file name.
+    """
+    if spec is None or str(spec) == "":
+        env = os.environ.get(ENV_VAR)
+        if not env:
+            return default_db_path()
+        spec, where = env, f"${ENV_VAR}"
+    else:
+        where = "the database"
+    if isinstance(spec, os.PathLike):
+        return Path(spec).expanduser()
+    scheme = database_scheme(spec)
+    if scheme is None:
+        return Path(spec).expanduser()
+    if scheme in POSTGRES_SCHEMES:
+        return spec.strip()
+    raise StoreError(
+        f"{where}: {scheme}:// is not a database stickslip can use: give a file path (SQLite) or "
+        "a postgresql://user@host/dbname URL (docs/storage.md)"
+    )
+
+
+def describe_database(target: Path | str) -> str:
+    """``target`` as it may be shown: a file's path, or the URL without its password.
+
+    The URL is cut apart without trusting it to be well formed: everything between
+    ``://`` and the last ``@`` is the user information, of which only the user name is
+    kept (so a password holding ``/``, ``?``, ``@`` or ``:`` that was not
+    percent-encoded is dropped whole, never shown in part); a query option whose name
+    holds ``pass``, ``secret``, ``token`` or ``pw`` (``password``, ``sslpassword``)
+    shows ``***``. Never raises.
+    """
+    if isinstance(target, Path):
+        return str(target)
+    text = str(target).strip()
+    scheme, sep, rest = text.partition("://")
+    if not sep:
+        return redact_url(text)
+    userinfo, at, after = rest.rpartition("@")
+    shown = f"{scheme}://" + (userinfo.partition(":")[0] + "@" if at else "")
+    main, q, query = after.partition("?")
+    shown += main
+    if q:
+        opts = []
+        for opt in query.split("&"):
+            key, eq, _ = opt.partition("=")
+            hidden = bool(eq) and any(w in key.lower() for w in ("pass", "secret", "token", "pw"))
+            opts.append(f"{key}=***" if hidden else opt)
+        shown += "?" + "&".join(opts)
+    for pw in url_secrets(text):
+        if len(pw) >= 4:  # belt and braces: a password that got into another part anyway
+            shown = shown.replace(pw, "***")
+    return redact_url(shown)
+
+
+def url_secrets(url: str) -> list[str]:
+    """Every form a URL's password may take in a message: as written, and percent-decoded."""
+    from urllib.parse import unquote
+
+    out: list[str] = []
+    rest = str(url).partition("://")[2]
+    userinfo, at, after = rest.rpartition("@")
+    if at and ":" in userinfo:
+        pw = userinfo.partition(":")[2]
+        out += [pw, unquote(pw)]
+    for opt in after.partition("?")[2].split("&"):
+        key, eq, value = opt.partition("=")
+        if eq and any(w in key.lower() for w in ("pass", "secret", "token", "pw")):
+            out += [value, unquote(value)]
+    return [s for s in out if s]
 
 
 def _now() -> str:
@@ -183,3 +290,26 @@ def warn_if_stale(cal: Calibration, today: str | None = None, max_age_days: int 
 def _split_sql(script: str) -> list[str]:
     """Statements of a migration script (no semicolons inside our statements)."""
     return [s.strip() for s in script.split(";") if s.strip()]
+
+
+def tables_of(con: sqlite3.Connection) -> dict[str, tuple[str, ...]]:
+    """``{table: column names}`` of an SQLite database (its own tables, not SQLite's)."""
+    sql = "SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%'"
+    names = [r[0] for r in con.execute(sql)]
+    return {n: tuple(r[1] for r in con.execute(f'PRAGMA table_info("{n}")')) for n in names}
+
+
+def schema_tables(version: int) -> dict[str, tuple[str, ...]]:
+    """The tables and columns a stickslip database has at schema ``version``, on either backend.
+
+    The migrations run in an SQLite database in memory: they are the reference the
+    SQLite file's legacy check and the PostgreSQL backend's integrity check compare to.
+    """
+    con = sqlite3.connect(":memory:")
+    try:
+        for script in MIGRATIONS[:version]:
+            for stmt in _split_sql(script):
+                con.execute(stmt)
+        return tables_of(con)
+    finally:
+        con.close()

@@ -71,37 +71,54 @@ class StateStore(_Base):
         """Take ``device``'s lock for ``holder`` (``{"pid", "host", "since"}``), atomically.
 
         Returns ``None`` when taken, else the current holder (the caller refuses, naming
-        it). A lock whose holder is a process on this host that no longer exists (POSIX
-        only; elsewhere a lock is released only by its holder) is taken over.
+        it). The lock is a row of the device's state, written in one write transaction.
+        On PostgreSQL it is also a session-level advisory lock, which the server frees
+        when the holder's connection ends: a lock left by a process that died, on any
+        host, is taken over. On SQLite a lock whose holder is a process on this host
+        that no longer exists (POSIX only; elsewhere a lock is released only by its
+        holder, or by ``where --unlock``) is taken over.
         """
-        with self._write() as con:
-            dev = self._device_id(con, device)
-            row = con.execute(
-                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
-            ).fetchone()
-            if row is not None:
-                current = self._json(row[0], device, "lock")
-                if isinstance(current, dict) and _alive(current):
+        name = f"device {redact_url(device)}"
+        claimed: bool | None = None
+        try:
+            with self._write() as con:
+                dev = self._device_id(con, device)
+                row = con.execute(
+                    "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+                ).fetchone()
+                current = None if row is None else self._json(row[0], device, "lock")
+                claimed = con.claim(name)
+                if claimed is False:  # a live connection holds it (the server knows)
+                    if isinstance(current, dict):
+                        return dict(current)
+                    return {"pid": "?", "host": "another connection to the shared database", "since": "?"}
+                if claimed is None and isinstance(current, dict) and _alive(current):
                     return dict(current)
-            con.execute(
-                "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
-                "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
-                "updated_at = excluded.updated_at",
-                (dev, json.dumps(holder), _now()),
-            )
+                con.execute(
+                    "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
+                    "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
+                    "updated_at = excluded.updated_at",
+                    (dev, json.dumps(holder), _now()),
+                )
+        except BaseException:
+            if claimed:  # the row was not written: nor is the lock held
+                self._con.release(name)
+            raise
         return None
 
     def release_lock(self, device: str, pid: int) -> None:
         """Release ``device``'s lock if process ``pid`` holds it."""
-        with self._write() as con:
-            dev = self._device_id(con, device)
-            row = con.execute(
-                "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
-            ).fetchone()
-            current = None if row is None else self._json(row[0], device, "lock")
-            if isinstance(current, dict) and current.get("pid") == pid:
-                con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
-
+        try:
+            with self._write() as con:
+                dev = self._device_id(con, device)
+                row = con.execute(
+                    "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
+                ).fetchone()
+                current = None if row is None else self._json(row[0], device, "lock")
+                if isinstance(current, dict) and current.get("pid") == pid:
+                    con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
+        finally:
+            self._con.release(f"device {redact_url(device)}")
 
 
 def _alive(holder: dict[str, Any]) -> bool:

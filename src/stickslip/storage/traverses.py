@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import datetime as _dt
 import itertools
-import sqlite3
 from collections.abc import Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
-from .base import _Base, _require_traverses, _rowid
-from .schema import _COLUMNS, DEFAULT_DEVICE, StoreError, _content_keys, _iso, content_key
+from .backend import Backend
+from .base import _Base, _require_traverses
+from .schema import _COLUMNS, DEFAULT_DEVICE, _content_keys, _iso, content_key
 
 if TYPE_CHECKING:  # pragma: no cover
     pass
@@ -31,7 +31,7 @@ class TraverseStore(_Base):
 
     def _insert_traverse(
         self,
-        con: sqlite3.Connection,
+        con: Backend,
         t: Traverse,
         device_id: int,
         how: str,
@@ -42,18 +42,20 @@ class TraverseStore(_Base):
         url = con.execute("SELECT url FROM devices WHERE id = ?", (device_id,)).fetchone()["url"]
         return self._insert_row(con, t, sid, how, measured_at, source, content_key(t, url))
 
+    _FIELDS = (
+        "session_id", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps",
+        "measured_at", "how", "source", "content",
+    )
     _INSERT = (
-        "INSERT INTO traverses (session_id, joint, direction, q1, q2, q3, theta, psi, "
-        '    start, "end", steps, '
-        "measured_at, how, source, content) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)"
+        "INSERT INTO traverses (" + ", ".join(f'"{c}"' for c in _FIELDS) + ") "
+        "VALUES (" + ", ".join("?" * len(_FIELDS)) + ")"
     )
 
     @staticmethod
     def _insert_row(
-        con: sqlite3.Connection, t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
+        con: Backend, t: Traverse, sid: int, how: str, measured_at: str, source: str | None, key: str
     ) -> int:
-        cur = con.execute(TraverseStore._INSERT, TraverseStore._row_values(t, sid, how, measured_at, source, key))
-        return _rowid(cur)
+        return con.insert(TraverseStore._INSERT, TraverseStore._row_values(t, sid, how, measured_at, source, key))
 
     @staticmethod
     def _row_values(
@@ -164,9 +166,7 @@ class TraverseStore(_Base):
             dev = self._device_id(con, device)
             url = con.execute("SELECT url FROM devices WHERE id = ?", (dev,)).fetchone()["url"]
             sessions: dict[str, int] = {}  # one look-up per day, not per row
-            # in this write transaction the new rows are exactly those above the old largest id
-            before = int(con.execute("SELECT COALESCE(MAX(id), 0) FROM traverses").fetchone()[0])
-            count = 0
+            ids: list[int] = []
             while batch := list(itertools.islice(it, 10_000)):
                 for t in batch:
                     self._check(t)
@@ -177,20 +177,15 @@ class TraverseStore(_Base):
                     if sid is None:
                         sid = sessions[day] = self._session_id(con, dev, day)
                     values.append(self._row_values(t, sid, how, when, source, key))
-                con.executemany(self._INSERT, values)
-                count += len(values)
-            ids = [int(r[0]) for r in con.execute("SELECT id FROM traverses WHERE id > ? ORDER BY id", (before,))]
-            if len(ids) != count:  # pragma: no cover - would mean another writer inside our transaction
-                raise StoreError(f"{self.path}: stored {len(ids)} rows for {count} traverses; nothing kept")
+                ids += con.insert_many("traverses", self._FIELDS, values)  # executemany (SQLite), COPY (PostgreSQL)
             return ids
 
     def iter_traverses(
         self, device: str | None = None, day: str | None = None, joint: int | None = None, chunk: int = 10_000
     ) -> Iterator[Traverse]:
         """Like :meth:`traverses`, read ``chunk`` rows at a time (exports of any size in bounded memory)."""
-        cur = self._traverse_cursor(device, day, joint)
-        while rows := cur.fetchmany(chunk):
-            yield from map(self._to_traverse, rows)
+        sql, args = self._traverse_query(device, day, joint)
+        yield from map(self._to_traverse, self._con.stream(sql, args, chunk))
 
     def traverses(
         self, device: str | None = None, day: str | None = None, joint: int | None = None
