@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from ..events import check_step_rate
 from ..features.fine import SignaturePredictor
 from ..features.spectra import SPECTRA, SpectraParams
-from ..features.stepclock import step_rate_hz
+from ..features.stepclock import rate_near_hz
 from .added import ADDED, AddedParams, joint_alone_db
 from .drops import DROPS, DropCheck, DropParams
 from .fit import FIT, FitParams
@@ -348,14 +348,8 @@ class ChangeState:
 
     # --- the step rate --------------------------------------------------------------------------
     def _rate_in(self, x: FloatArray | None) -> float:
-        """The step rate heard in ``x``, Hz (NaN: none): near the commanded rate where it was told (that rate where
-        none is heard near it), else the envelope's strongest line anywhere (:func:`step_rate_hz`)."""
-        cmd = self.commanded_hz
-        if cmd is None:
-            return math.nan if x is None else step_rate_hz(x, self.tuned.sample_rate)
-        tol = self.params.rate.commanded_tol
-        heard = math.nan if x is None else step_rate_hz(x, self.tuned.sample_rate, (1 - tol) * cmd, (1 + tol) * cmd)
-        return heard if math.isfinite(heard) else cmd
+        """The step rate heard in ``x``, Hz (NaN: none), near the commanded rate if told (:func:`rate_near_hz`)."""
+        return rate_near_hz(x, self.tuned.sample_rate, self.commanded_hz, self.params.rate.commanded_tol)
 
     def _heard_head_rate(self) -> float:
         """The step rate heard in the warm-up's samples :attr:`head`, Hz (NaN: none), heard once."""

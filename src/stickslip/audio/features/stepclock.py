@@ -37,6 +37,7 @@ from ..paramfield import param
 
 __all__ = [
     "STEP_CLOCK",
+    "rate_near_hz",
     "LineChange",
     "Lines",
     "StepClockParams",
@@ -574,3 +575,17 @@ def line_change(
     moved = keep[np.abs(z[keep]) >= params.line_z]
     change_db = float(db[moved[np.argmax(np.abs(db[moved]))]]) if moved.size else 0.0
     return LineChange(rate, chi2_as_z(float(np.sum(z[keep] ** 2)), dof), change_db, dof, k, share, sharp)
+
+
+def rate_near_hz(x: ArrayLike | None, sample_rate: float, commanded_hz: float | None, tol: float) -> float:
+    """The step rate heard in ``x``, Hz (NaN: none), near the commanded rate where it is known.
+
+    Without a commanded rate: :func:`step_rate_hz` over its whole range (``x`` ``None``:
+    NaN). With one: the strongest line within ``commanded_hz x (1 +/- tol)``, and the
+    commanded rate itself where none is heard there (``tol``: a fraction, e.g. 0.25).
+    """
+    if commanded_hz is None:
+        return math.nan if x is None else step_rate_hz(x, sample_rate)
+    lo, hi = (1 - tol) * commanded_hz, (1 + tol) * commanded_hz
+    heard = math.nan if x is None else step_rate_hz(x, sample_rate, lo, hi)
+    return heard if math.isfinite(heard) else commanded_hz
