@@ -25,14 +25,14 @@ test: $(STAMP)
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/lint-imports
 	$(PY) -m mypy
-	$(PY) -m pytest -q -n auto --maxprocesses 4 --durations=15
+	$(PY) -m pytest -q -n auto --maxprocesses 4 --dist loadgroup --durations=15
 
 # Day-to-day: the suite without the tests marked slow (long batteries, documentation pages run as
 # written, subprocesses); under 90 s on two cores. CI runs `make test`, which runs everything.
 test-fast: $(STAMP)
 	@bash .ci/postgres
 	$(VENV)/bin/ruff check src tests benchmarks
-	$(PY) -m pytest -q -n auto --maxprocesses 4 -m "not slow" --durations=10
+	$(PY) -m pytest -q -n auto --maxprocesses 4 --dist loadgroup -m "not slow" --durations=10
 
 # The suite with fresh hypothesis draws (make test draws the same examples every run, so CI never
 # fails on a lucky draw): run it now and then; pin a draw that breaks something as an @example.

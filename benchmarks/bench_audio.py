@@ -300,6 +300,8 @@ LONG_CONDITIONS: list[tuple[str, dict[str, object]]] = [
     # round 2, never developed against: a radio, and a second talker at another pitch
     ("radio music", {"music": True}),
     ("second talker (espeak-ng)", {"speech": "espeak2"}),
+    # issue 35: speech, music and a radio together (a talk show over a radio's music)
+    ("speech over a radio's music", {"speech": "espeak", "music": True}),
 ]
 
 
@@ -311,6 +313,7 @@ def false_alarms_per_hour(
     step_clock: bool = False,
     in_spec: bool = False,
     late: bool = False,
+    commanded: bool = False,
 ) -> dict[str, tuple[int, int]]:
     """One hour of stepping without a stop per joint of the battery's generator: false alarms per hour.
 
@@ -323,7 +326,8 @@ def false_alarms_per_hour(
     event still provisional when a piece ends counted if it persisted so far); the
     detector's unconfirmed fires (``confirm_s`` 0, the old behaviour) are counted beside
     them on the same sound; ``step_clock`` also asks the step clock
-    (:class:`~stickslip.audio.confirm.ConfirmedStopDetector`). Returns per joint (confirmed, unconfirmed).
+    (:class:`~stickslip.audio.confirm.ConfirmedStopDetector`); ``commanded`` tells the
+    detectors each piece's step rate, as a traverse does. Returns per joint (confirmed, unconfirmed).
     """
     import sys
     from pathlib import Path
@@ -335,7 +339,8 @@ def false_alarms_per_hour(
     print(
         f"\nfalse alarms in {hours:g} h of stepping without a stop per joint ({piece_s:g} s pieces, seeds from "
         f"{seed0}, step rates {'950-1050' if in_spec else '900-1260'} Hz, tuned at 1000 Hz): confirmed over "
-        f"{confirm_s:g} s{' with the step clock' if step_clock else ''}{' with the late path' if late else ''} "
+        f"{confirm_s:g} s{' with the step clock' if step_clock else ''}{' with the late path' if late else ''}"
+        f"{', the commanded rate told' if commanded else ''} "
         "(unconfirmed fires in brackets)"
     )
     totals: dict[str, tuple[int, int]] = {}
@@ -352,13 +357,17 @@ def false_alarms_per_hour(
             rate = (950.0 + 100.0 * ((i * 0.618) % 1.0)) if in_spec else (900.0 + 360.0 * ((i * 0.618) % 1.0))
             y, _ = render(Scene(joint, rate, None, piece_s, seed=seed0 + i, **kw))  # type: ignore[arg-type]
             per.setdefault(name, [0.0, 0.0, 0.0, 0.0])
+            hz = rate if commanded else None
             det = confirming(detector_for(tu), confirm_s, step_clock, late=late)
+            det.reset(0.0, hz)
             confirmed = det.feed(y) + (det.finish() if isinstance(det, ConfirmedStopDetector) else [])
             for e in confirmed:
                 if e.found_late:
                     print(f"      late event: {name}, seed {seed0 + i}, rate {rate:.0f} Hz, at {e.detected_at_s:.2f} s")
             per[name][0] += len(confirmed)
-            per[name][1] += len(detector_for(tu).feed(y))
+            fast = detector_for(tu)
+            fast.reset(0.0, hz)
+            per[name][1] += len(fast.feed(y))
             per[name][2] += piece_s
             per[name][3] += bool(confirmed)  # a traverse ends at its first event: the pieces a traverse fails in
             near = tu.step_rate_problem(rate) is None  # within the tuning's step-rate warning (step_rate_tolerance)
@@ -572,6 +581,7 @@ if __name__ == "__main__":
     ap.add_argument("--in-spec", action="store_true", help="step rates within the tuning's 5 %% warning (--long-only)")
     ap.add_argument("--onset", action="store_true", help="count the confirmed first event's onset errors alone")
     ap.add_argument("--late", action="store_true", help="run the late path too (round 12a, opt-in)")
+    ap.add_argument("--commanded", action="store_true", help="tell the detector each piece's step rate (--long-only)")
     args = ap.parse_args()
     if args.onset:
         onset_errors(late=args.late)
@@ -579,7 +589,14 @@ if __name__ == "__main__":
         true_stops_under_talk(step_clock=args.step_clock, late=args.late)
     elif args.long_only:
         false_alarms_per_hour(
-            args.hours, args.piece_s, args.seed, args.confirm_s, args.step_clock, args.in_spec, late=args.late
+            args.hours,
+            args.piece_s,
+            args.seed,
+            args.confirm_s,
+            args.step_clock,
+            args.in_spec,
+            late=args.late,
+            commanded=args.commanded,
         )
     else:
         main()

@@ -409,6 +409,7 @@ def main() -> int:
     ap.add_argument("path", type=Path)
     ap.add_argument("--quick", action="store_true", help="a subset (about a fifth)")
     ap.add_argument("--only", help="only the cases whose name holds this")
+    ap.add_argument("--save", type=Path, help="compare: also write what was heard now to this file (to compare later)")
     args = ap.parse_args()
     t = time.perf_counter()
     got = run_all(args.quick, args.only)
@@ -417,14 +418,22 @@ def main() -> int:
         args.path.write_text(json.dumps(got, indent=1) + "\n", encoding="utf-8")
         print(f"recorded {args.path}")
         return 0
+    if args.save is not None:
+        args.save.write_text(json.dumps(got, indent=1) + "\n", encoding="utf-8")
     ref = json.loads(args.path.read_text(encoding="utf-8"))
     found: list[str] = []
     near: list[str] = []
+    per_case: dict[str, int] = {}
     for name, rec in got.items():
         if name not in ref:
             found.append(f"{name}: not in the reference")
             continue
+        before = len(found)
         diff(ref[name], json.loads(json.dumps(rec)), name, found, near)
+        if len(found) > before:
+            per_case[name] = len(found) - before
+    for name, n in per_case.items():
+        print(f"DIFFERS  {name}: {n} values")
     for line in found[:60]:
         print("DIFFERS  " + line)
     for line in near[:20]:

@@ -67,6 +67,12 @@ def test_tune_then_listen_json(wavs):
     r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out)])
     assert r.exit_code == 0 and "detected at 1.3" in r.output
 
+    # told the commanded rate (the recording steps at 1250 Hz, 25 % off the tuning's): the same one stop
+    r = runner.invoke(app, ["listen", str(wavs / "test.wav"), "--tuning", str(out), "--json", "--rate", "1250"])
+    assert r.exit_code == 0, r.output
+    (told,) = json.loads(r.stdout)
+    assert abs(told["onset_s"] - 1.3) < 0.025
+
 
 def test_tune_json_output(wavs, tmp_path):
     r = runner.invoke(
@@ -111,6 +117,8 @@ def test_tune_refuses_indistinguishable_halves(wavs, tmp_path):
         (["listen", "--tuning", "{d}/tuning_bad.json"], ["--mic"]),
         (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json", "--confirm-s", "-1"], ["--confirm-s", "0, 5"]),
         (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json", "--confirm-s", "nan"], ["--confirm-s"]),
+        (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json", "--rate", "0"], ["--rate", "1-100000 Hz"]),
+        (["listen", "{d}/test.wav", "--tuning", "{d}/tuning_bad.json", "--rate", "nan"], ["--rate", "nan"]),
     ],
 )
 def test_bad_input_is_one_line_exit_2(wavs, args, words):

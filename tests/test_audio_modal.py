@@ -44,7 +44,6 @@ ARM3 = (
     "where the stop does fires it"
 )
 KNOWN = {
-    (2, "quieter", "fan and hum"): "detected +51 ms (limit 50), onset +3 ms",
     (2, "duller", "a voice from the first sample"): VOICE + ": onset +61 ms",
     (2, "louder", "steps 15 % faster"): "onset +96 ms at a step clock 15 % faster than the tuning's",
     (3, "duller", "a voice from the first sample"): VOICE + ": onset +70 ms",

@@ -225,3 +225,23 @@ def test_bad_arguments():
             )
     with pytest.raises(ValueError, match="direction"):
         measure_traverse(sim, 3, "up", detector=det, audio_blocks=mic, pose=sim.pose, day=DAY)
+
+
+def test_a_traverse_tells_the_detector_the_rate_it_commands():
+    """Every reset of the detector carries the controller's step rate (Hz): the detector hears the clock near it."""
+
+    class Spy(OracleStopDetector):
+        rates: list[float | None] = []
+
+        def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+            self.rates.append(step_rate_hz)
+            super().reset(t0_s, step_rate_hz)
+
+    sim = SimulatedMM3A(seed=3, day=DAY)
+    spy = Spy(sim, 3, delay_s=0.06)
+    res = measure_traverse(
+        sim, 3, "+", detector=spy, audio_blocks=sim.microphone(block=512, silent=True), pose=sim.pose, day=DAY
+    )
+    # the first reset is the confirming wrapper's own, when it is made; every reset the traverse makes tells the rate
+    assert spy.rates[0] is None and len(spy.rates) >= 2
+    assert set(spy.rates[1:]) == {res.frequency_hz} and res.frequency_hz == sim.frequency(3) > 0

@@ -124,8 +124,8 @@ class ConsoleEar:
     def latency_s(self) -> float:
         return self.delay_s
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Stream time ``t0_s`` is now."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Stream time ``t0_s`` is now (the commanded step rate is not needed: the ear knows the step counts)."""
         self.t_s = float(t0_s)
         self.offset = self.clock() - self.t_s  # emulator clock = stream time + offset
         self._heard_upto = self.t_s

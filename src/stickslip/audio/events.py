@@ -10,12 +10,13 @@ A traverse (:func:`stickslip.procedures.traverse.measure_traverse`) takes any
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 from numpy.typing import NDArray
 
-__all__ = ["StopDetector", "StopEvent"]
+__all__ = ["StopDetector", "StopEvent", "check_step_rate"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +74,16 @@ class StopEvent:
         }
 
 
+def check_step_rate(step_rate_hz: float | None) -> float | None:
+    """``step_rate_hz`` as a float, or None; ``ValueError`` (one line) unless it is finite and positive, Hz."""
+    if step_rate_hz is None:
+        return None
+    hz = float(step_rate_hz)
+    if not (math.isfinite(hz) and hz > 0.0):
+        raise ValueError(f"the commanded step rate must be a positive number of Hz, got {step_rate_hz!r}")
+    return hz
+
+
 class StopDetector(Protocol):
     """What a traverse needs of an end-stop detector.
 
@@ -90,8 +101,14 @@ class StopDetector(Protocol):
         """Typical ``detected_at_s`` minus the stop's onset, s."""
         ...
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget everything; the next sample fed is at stream time ``t0_s`` (s)."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s`` (s).
+
+        ``step_rate_hz`` is the step rate the controller commands for the stream that
+        follows, Hz (None: not told). A detector that hears the step clock looks for the
+        rate near it, and may hear a stop at a rate farther from its tuning's; the others
+        ignore it.
+        """
         ...
 
     def feed(self, block: NDArray[Any]) -> list[StopEvent]:

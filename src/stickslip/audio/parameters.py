@@ -11,6 +11,7 @@ from __future__ import annotations
 import re
 from typing import Any
 
+from .change.added import AddedParams
 from .change.drops import DropParams
 from .change.fit import FitParams
 from .change.rate import RateParams
@@ -42,7 +43,7 @@ STAGES: tuple[tuple[str, tuple[type[Any], ...]], ...] = (
     ("features", (SpectraParams, StepClockParams, FineParams)),
     (
         "change detector",
-        (TemplateParams, FitParams, RateParams, DropParams, StartParams, StaleParams, ReleaseParams),
+        (TemplateParams, AddedParams, FitParams, RateParams, DropParams, StartParams, StaleParams, ReleaseParams),
     ),
     ("confirmation", (PersistenceParams, PauseParams, OnsetParams, SyncParams, LateParams)),
     ("tuning and verification", (TuneParams, VerifyParams, TuningFileParams)),

@@ -54,8 +54,8 @@ class ReadbackStopDetector:
         """Typical detected_at - onset, s."""
         return self.window_s
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget everything; the next sample is at stream time ``t0_s``."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Forget everything; the next sample is at stream time ``t0_s`` (positions ignore the step rate)."""
         self._t0 = float(t0_s)
         self._n = 0
         self._recent: list[float] = []

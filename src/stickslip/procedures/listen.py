@@ -28,11 +28,16 @@ __all__ = ["ListenReport", "ListenSettings", "TuningMismatch", "detector_for", "
 
 @dataclass(frozen=True)
 class ListenSettings:
-    """How stops are confirmed: ``confirm_s`` (s; 0: every fire), the step clock asked, the late path run."""
+    """How stops are confirmed: ``confirm_s`` (s; 0: every fire), the step clock asked, the late path run.
+
+    ``step_rate_hz`` is the step rate the controller commands, Hz (None: not told): the
+    detector hears the step clock near it (:meth:`~stickslip.audio.events.StopDetector.reset`).
+    """
 
     confirm_s: float = CONFIRM_S
     step_clock: bool = False
     late: bool = False
+    step_rate_hz: float | None = None
 
 
 class TuningMismatch(ValueError):
@@ -47,7 +52,9 @@ def detector_for(tuning: Tuning, rate: float, settings: ListenSettings) -> Any:
     """The detector ``settings`` ask for at ``rate`` (Hz); :class:`TuningMismatch` if the tuning does not fit it."""
     try:
         base = stop_detector_for(tuning.for_sample_rate(int(rate)))
-        return confirming(base, settings.confirm_s, step_clock=settings.step_clock, late=settings.late)
+        det = confirming(base, settings.confirm_s, step_clock=settings.step_clock, late=settings.late)
+        det.reset(0.0, settings.step_rate_hz)
+        return det
     except ValueError as e:
         raise TuningMismatch(rate, str(e)) from None
 

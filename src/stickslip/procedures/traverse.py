@@ -167,6 +167,9 @@ class _Listener:
         self.unconfirmed: list[float] = []
         self._started = False
         self._last_block_s = 0.0
+        #: the step rate the controller commands, Hz: told to the detector at every reset (it hears the step clock
+        #: near it, and knows the stop at a rate farther from its tuning's)
+        self.step_hz = step_hz
         # a dead input must never look like a stop; only a detector that declares it does not
         # listen to the samples (the simulator's oracle) is exempt
         listens = detector.uses_audio
@@ -191,7 +194,7 @@ class _Listener:
                 if isinstance(block, tuple):
                     block = block[0]
                 self.t_s += len(block) / self.sample_rate
-        self.detector.reset(self.t_s)
+        self.detector.reset(self.t_s, self.step_hz)
         if self.guard is not None:
             self.guard.restart_stepping_check()
 
@@ -230,7 +233,7 @@ class _Listener:
             if dropped is not None:
                 self.unconfirmed += [float(e.onset_s) for e in dropped[before:]]
             if events and not alive:  # heard in a dead input: not a stop; start afresh, in step
-                self.detector.reset(self.t_s)
+                self.detector.reset(self.t_s, self.step_hz)
                 continue
             if events:
                 return events[0]
@@ -517,7 +520,7 @@ class _Run:
                 return None  # the stop was there as soon as we listened: it came before listen_after_steps
             while event is not None and float(event.onset_s) < t_start + settle_s:
                 # the start stop's sound still ringing as the joint leaves it: not our stop
-                self.listener.detector.reset(self.listener.t_s)
+                self.listener.detector.reset(self.listener.t_s, self.listener.step_hz)
                 event = self.listener.listen(self.clock())
             update(self.commanded, self.clock() - t_start)
         self.controller.stop(self.joint)

@@ -66,8 +66,8 @@ class OracleStopDetector:
         """The detection delay, s."""
         return self.delay_s
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Restart the stream at ``t0_s`` (s); stops before it are forgotten."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Restart the stream at ``t0_s`` (s); stops before it are forgotten (the oracle ignores the step rate)."""
         self.t_s = float(t0_s)
         self._fired_upto = float(t0_s)
 

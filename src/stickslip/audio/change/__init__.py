@@ -2,6 +2,7 @@
 
 * :mod:`.tuned`    what it takes from a tuning, in frames, and the fires it gives
 * :mod:`.template` the running template of the stepping sound and its floor (the sound added to it)
+* :mod:`.added`    sound there from the start: the joint's own level under the first template
 * :mod:`.fit`      each frame fitted to the stop's signature: the stop-likeness and the residual
 * :mod:`.rate`     the signatures fitted: the tuned one, the one predicted at the heard rate, masked
 * :mod:`.drops`    the drops below the floor: in proportion to the rise, and the drop channel

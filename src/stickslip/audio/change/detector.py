@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from ..events import StopEvent
 from ..features.frames import FrameCutter, HeadSamples, RecentSamples, bounded
-from ..features.spectra import levels_from_frames, subband_bins, window
+from ..features.spectra import SubbandLevels, subband_bins, window
 from ..tuningfile import Tuning
 from .state import ChangeParams, ChangeState
 from .tuned import TunedTemplate
@@ -52,6 +52,7 @@ class TemplateDetector:
         assert tuning.edges_hz is not None
         self._w, self._scale = window(tuning.frame)
         self._edge_bins = subband_bins(tuning.edges_hz, tuning.sample_rate, tuning.frame)
+        self._levels = SubbandLevels(self._w, self._scale, self._edge_bins, self.params.spectra)
         self._cutter = FrameCutter(tuning.frame, tuning.hop)
         st = self.state
         # the warm-up's samples, for the judgement whether listening began at the stop (tunings with a step rate)
@@ -71,8 +72,13 @@ class TemplateDetector:
         self.hot_evidence: list[bool] | None = None
         self.reset(t0_s)
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget everything; the next sample fed is at stream time ``t0_s``."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s``.
+
+        ``step_rate_hz``: the step rate the controller commands, Hz (None: not told). The
+        step clock is then heard near it, and the stop's signature is predicted at the rate
+        heard up to ``RateParams.commanded_window`` from the tuning's (a traverse tells it).
+        """
         self.t0_s = float(t0_s)
         self._cutter.reset()
         #: frames heard since the last reset (frame ``i`` ends at sample ``i * hop + frame - 1``)
@@ -81,7 +87,7 @@ class TemplateDetector:
             self._head.reset()
         if self._recent is not None:
             self._recent.reset()
-        self.state.reset(t0_s)
+        self.state.reset(t0_s, step_rate_hz)
 
     def hold(self, on: bool) -> None:
         """While ``on``, a latched detector does not re-arm by itself (a confirmation decides; :meth:`unlatch`)."""
@@ -133,7 +139,7 @@ class TemplateDetector:
         n = view.shape[0]
         events: list[StopEvent] = []
         if n > 0:
-            v = levels_from_frames(view, self._w, self._scale, self._edge_bins, self.params.spectra)
+            v = self._levels(view)
             events = self._decide(v, self._cutter.ends(n))
             self.frames_seen += n
         self._cutter.advance(n)

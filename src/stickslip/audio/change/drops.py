@@ -274,12 +274,13 @@ class DropCheck:
         lag = np.zeros(a.size)
         if tu.drop_threshold is None:
             return a, hot, lag
-        b = np.zeros(a.size)
         # either statistic reaches its threshold only where some sub-band dropped that far
         near = (m.min(axis=1) <= -min(tu.drop_threshold)) & ((ends - self.arm_sample) >= 0)
-        if near.any():
-            broad, local = DropMeter.drops(m[near])
-            b[near] = np.maximum(broad / tu.drop_threshold[0], local / tu.drop_threshold[1])
+        if not near.any():  # no frame near: nothing changes
+            return a, hot, lag
+        b = np.zeros(a.size)
+        broad, local = DropMeter.drops(m[near])
+        b[near] = np.maximum(broad / tu.drop_threshold[0], local / tu.drop_threshold[1])
         by_drop = (b >= 1.0) & ~hot
         a = np.where(by_drop, tu.threshold * b, a)
         lag = np.where(by_drop, self.p.lag_frames * tu.hop / tu.sample_rate, 0.0)

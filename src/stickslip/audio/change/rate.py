@@ -42,6 +42,14 @@ class RateParams:
     min_signature_rms: float = param(
         1.0, "spreads", "a predicted signature weaker than this (RMS over sub-bands) is not fitted: its a is noise"
     )
+    commanded_window: float = param(
+        0.25,
+        "of the tuning's rate",
+        "with the commanded rate told, predicted this far: the rate heard near it is no multiple",
+    )
+    commanded_tol: float = param(
+        0.03, "of the commanded rate", "the rate is looked for this near the commanded one (a controller's clock)"
+    )
 
 
 RATE = RateParams()
@@ -102,10 +110,11 @@ class RateFits:
         if self.pred_delta is not None:
             self._rate_now = Fitter(masked_signature(self.pred_delta, added_db), self.sigma, trim, self.fit_p)
 
-    def hear(self, rate: float, end: int) -> None:
+    def hear(self, rate: float, end: int, commanded: bool = False) -> None:
         """The template was learned (at stream sample ``end``) from stepping heard at ``rate``, Hz (NaN: none).
 
-        Within ``window`` of the tuning's rate and more than ``min_change`` from it, each
+        Within ``window`` of the tuning's rate (``commanded_window`` where the rate was heard
+        near the commanded one, ``commanded``) and more than ``min_change`` from it, each
         frame is fitted on the tuned signature and on the one predicted at ``rate``;
         otherwise (no rate heard, the tuning's rate, a rate far off: a multiple heard) on
         the tuned one alone.
@@ -114,7 +123,8 @@ class RateFits:
         self.pred_delta = None
         used = False
         r0 = self.tuned.step_rate_hz
-        if r0 is not None and math.isfinite(rate) and self.p.min_change < abs(rate / r0 - 1.0) <= self.p.window:
+        window = self.p.commanded_window if commanded else self.p.window
+        if r0 is not None and math.isfinite(rate) and self.p.min_change < abs(rate / r0 - 1.0) <= window:
             pred = self.predictor().predict(rate)
             if float(np.sqrt(np.mean((pred / self.sigma) ** 2))) >= self.p.min_signature_rms:
                 self._fit_rate = Fitter(pred, self.sigma, self.tuned.trim, self.fit_p)

@@ -27,9 +27,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from ..events import check_step_rate
 from ..features.fine import SignaturePredictor
 from ..features.spectra import SPECTRA, SpectraParams
-from ..features.stepclock import step_rate_hz
+from ..features.stepclock import rate_near_hz
+from .added import ADDED, AddedParams, joint_alone_db
 from .drops import DROPS, DropCheck, DropParams
 from .fit import FIT, FitParams
 from .hold import Hold
@@ -57,6 +59,8 @@ class ChangeParams:
     stale: StaleParams = field(default_factory=lambda: STALE)
     release: ReleaseParams = field(default_factory=lambda: RELEASE)
     spectra: SpectraParams = field(default_factory=lambda: SPECTRA)
+    #: sound added from the start of listening (None: the floor is the templates' alone, as before)
+    added: AddedParams | None = field(default_factory=lambda: ADDED)
 
 
 class ChangeState:
@@ -86,8 +90,10 @@ class ChangeState:
         self.samples: Callable[[int, int], FloatArray | None] | None = None
         self.reset(t0_s)
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget the template, the warm-up's samples and every decision."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Forget the template, the warm-up's samples and every decision; ``step_rate_hz``: the commanded rate, Hz."""
+        #: the step rate the controller commands for the stream that follows, Hz (None: not told)
+        self.commanded_hz = check_step_rate(step_rate_hz)
         #: the warm-up's samples from the stream start (:attr:`head_samples` of them); set by the stream's owner
         self.head: FloatArray | None = None
         self._head_rate: float | None = None  # the step rate heard in them (once), Hz
@@ -278,7 +284,17 @@ class ChangeState:
         self.drops.arm(end)
         if self.fits.predicts:
             self._hear_rate(self._heard_head_rate(), end)
+        self._added_from_start()
         self._start(end)
+
+    def _added_from_start(self) -> None:
+        """Sound added from the first sample: the floor capped at the joint's own level (:mod:`.added`)."""
+        if self.params.added is None or self.tpl.template is None:
+            return
+        alone = joint_alone_db(self.tpl.template, self.tuned, self._heard_head_rate(), self.params.added)
+        if alone is not None:
+            self.tpl.set_joint_alone(alone, self.drops.scale)
+            self.fits.mask(self.tpl.added_db)
 
     def _start(self, end: int) -> None:
         """Did listening begin at the stop (:mod:`.start`)? Then fire at once, the onset the start of listening."""
@@ -331,19 +347,22 @@ class ChangeState:
         self._hear_rate_over(end, int(self.params.stale.relearn_s * sr) + self.tuned.frame)
 
     # --- the step rate --------------------------------------------------------------------------
+    def _rate_in(self, x: FloatArray | None) -> float:
+        """The step rate heard in ``x``, Hz (NaN: none), near the commanded rate if told (:func:`rate_near_hz`)."""
+        return rate_near_hz(x, self.tuned.sample_rate, self.commanded_hz, self.params.rate.commanded_tol)
+
     def _heard_head_rate(self) -> float:
         """The step rate heard in the warm-up's samples :attr:`head`, Hz (NaN: none), heard once."""
         if self._head_rate is None:
-            self._head_rate = math.nan if self.head is None else step_rate_hz(self.head, self.tuned.sample_rate)
+            self._head_rate = self._rate_in(self.head)
         return self._head_rate
 
     def _hear_rate(self, rate: float, end: int) -> None:
-        self.fits.hear(rate, end)
+        self.fits.hear(rate, end, commanded=self.commanded_hz is not None)
         self.drops.forget_predicted()
 
     def _hear_rate_over(self, end: int, n: int) -> None:
         """The rate over the stream's last ``n`` samples up to sample ``end`` (where they are kept): which fits."""
         if not self.fits.predicts:
             return
-        x = None if self.samples is None else self.samples(end + 1 - n, end + 1)
-        self._hear_rate(math.nan if x is None else step_rate_hz(x, self.tuned.sample_rate), end)
+        self._hear_rate(self._rate_in(None if self.samples is None else self.samples(end + 1 - n, end + 1)), end)

@@ -56,6 +56,9 @@ class TemplateParams:
     floor_chunks: int = param(
         8, "chunks", "the floor is the lowest template of this many updates (1.4 s at 48 kHz): a voice lifts it not"
     )
+    alone_reached_db: float = param(
+        1.0, "dB", "the joint's own level under sound added from the start is dropped once the template is this near it"
+    )
     mask_added: float | None = param(
         2.0,
         "spreads",
@@ -101,6 +104,9 @@ class RunningTemplate:
         self.added_db: FloatArray | None = None
         #: the stream samples (ends of the chunk) at which a template that fitted nothing was learned anew
         self.relearned: list[int] = []
+        #: the joint's own level under the first template where sound was added from the start, dB per sub-band
+        #: (:mod:`.added`): a lower bound of the floor until the template comes down to it (None: none)
+        self.joint_alone: FloatArray | None = None
 
     # --- the warm-up ----------------------------------------------------------------------------
     def warm(self, v: FloatArray) -> None:
@@ -163,6 +169,13 @@ class RunningTemplate:
         if chunk:
             self._chunk_rho, self._chunk_v = [], []
 
+    def set_joint_alone(self, alone: FloatArray, scale: FloatArray) -> None:
+        """Sound was added from the start: ``alone`` (dB per sub-band) caps the floor (:mod:`.added`)."""
+        self.joint_alone = np.asarray(alone, dtype=np.float64)
+        if self.template is not None and self.floor is not None:
+            self._floors = self._floors[:-1]  # the latest template again, now with the bound
+            self.set_floor(scale)
+
     def set_levels(self, template: FloatArray) -> None:
         """Take ``template`` (dB per sub-band) as the template."""
         self.template = template
@@ -175,6 +188,13 @@ class RunningTemplate:
         self._floors = ([] if reset else self._floors[-(self.p.floor_chunks - 1) :]) + [self.template.copy()]
         kept = np.stack(self._floors)
         self.floor = np.min(kept, axis=0)
+        if reset:
+            self.joint_alone = None
+        elif self.joint_alone is not None:
+            if bool(np.all(self.template <= self.joint_alone + self.p.alone_reached_db)):
+                self.joint_alone = None  # the added sound stopped: the template came down to the joint's own level
+            else:
+                self.floor = np.minimum(self.floor, self.joint_alone)
         self.added_db = None
         if self.p.mask_added is not None:
             added = self.template - self.floor

@@ -64,8 +64,8 @@ class BandDetector:
         self.hot_evidence: list[bool] | None = None
         self.reset(t0_s)
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget everything; the next sample fed is at stream time ``t0_s``."""
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s`` (a band level ignores the step rate)."""
         self.t0_s = float(t0_s)
         self._cutter.reset()
         self.frames_seen = 0

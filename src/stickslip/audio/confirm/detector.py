@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 
 from ..change import TemplateDetector
 from ..comparators import BandDetector
-from ..events import StopDetector, StopEvent
+from ..events import StopDetector, StopEvent, check_step_rate
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
 from .chain import FireChain
@@ -156,9 +156,15 @@ class ConfirmedStopDetector:
         self.late: LatePath | None = LatePath(self._sr, band, inner.t0_s, p.late) if late and band else None
         self.reset(inner.t0_s)
 
-    def reset(self, t0_s: float = 0.0) -> None:
-        """Forget everything; the next sample fed is at stream time ``t0_s``."""
-        self.inner.reset(t0_s)
+    def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
+        """Forget everything; the next sample fed is at stream time ``t0_s``.
+
+        ``step_rate_hz``: the step rate the controller commands, Hz (None: not told); the
+        fast path hears the step clock near it (see ``TemplateDetector.reset``), also after
+        a pause restarts the stream.
+        """
+        self._step_rate_hz = check_step_rate(step_rate_hz)
+        self.inner.reset(t0_s, self._step_rate_hz)
         self.inner.evidence, self.inner.hot_evidence = [], []
         self._t0 = float(t0_s)
         self._fed = 0
@@ -377,7 +383,7 @@ class ConfirmedStopDetector:
         t, self._pause_at = self._pause_at, None
         assert t is not None
         kept = self.log
-        self.reset(t)
+        self.reset(t, self._step_rate_hz)
         self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped)
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:

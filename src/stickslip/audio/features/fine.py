@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import fft as sfft
 
 from ..paramfield import param
 
@@ -210,7 +211,7 @@ def _line_response(
     norm = (float(np.sum(w)) / 2) ** 2
     for j0 in range(0, freqs.size, 512):
         fr = freqs[j0 : j0 + 512]
-        s = np.fft.rfft(w * np.cos(2 * np.pi * fr[:, None] * t[None, :]), axis=1)[:, lo:hi]
+        s = sfft.rfft(w * np.cos(2 * np.pi * fr[:, None] * t[None, :]), axis=1)[:, lo:hi]
         p = s.real**2 + s.imag**2
         if hi > lo:
             band = np.add.reduceat(p, starts, axis=1)

@@ -31,11 +31,13 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import fft as sfft
 
 from ..paramfield import param
 
 __all__ = [
     "STEP_CLOCK",
+    "rate_near_hz",
     "LineChange",
     "Lines",
     "StepClockParams",
@@ -117,16 +119,16 @@ def band_envelope_spectrum(
     if bands_hz is None:
         y = np.diff(v)
     else:
-        spec = np.fft.rfft(v * _hann(v.size))
+        spec = sfft.rfft(v * _hann(v.size))
         f = np.fft.rfftfreq(v.size, 1 / sr)
         keep = np.zeros(f.size, dtype=bool)
         for lo, hi in bands_hz:
             keep |= (f >= lo) & (f < hi)
         spec[~keep] = 0.0
-        y = np.fft.irfft(spec, v.size)
+        y = sfft.irfft(spec, v.size)
     e = y**2
     e = (e - e.mean()) * _hann(e.size)
-    p = np.abs(np.fft.rfft(e)) ** 2
+    p = np.abs(sfft.rfft(e)) ** 2
     return np.asarray(np.fft.rfftfreq(e.size, 1 / sr), dtype=np.float64), np.asarray(p, dtype=np.float64)
 
 
@@ -341,7 +343,7 @@ def line_powers(
         e = np.zeros(0)
         return Lines(e, e, e, e, np.zeros(0, dtype=np.int64)), float("nan")
     w = _hann(v.size)
-    p = 2.0 * np.abs(np.fft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
+    p = 2.0 * np.abs(sfft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
     bands = tuple((float(lo), float(hi)) for lo, hi in bands_hz)
     in_bands, lines = _line_grid(v.size, sr, float(rate_hz), bands, float(width), params.comb_tol, params.flank)
     whole = 0.0
@@ -573,3 +575,17 @@ def line_change(
     moved = keep[np.abs(z[keep]) >= params.line_z]
     change_db = float(db[moved[np.argmax(np.abs(db[moved]))]]) if moved.size else 0.0
     return LineChange(rate, chi2_as_z(float(np.sum(z[keep] ** 2)), dof), change_db, dof, k, share, sharp)
+
+
+def rate_near_hz(x: ArrayLike | None, sample_rate: float, commanded_hz: float | None, tol: float) -> float:
+    """The step rate heard in ``x``, Hz (NaN: none), near the commanded rate where it is known.
+
+    Without a commanded rate: :func:`step_rate_hz` over its whole range (``x`` ``None``:
+    NaN). With one: the strongest line within ``commanded_hz x (1 +/- tol)``, and the
+    commanded rate itself where none is heard there (``tol``: a fraction, e.g. 0.25).
+    """
+    if commanded_hz is None:
+        return math.nan if x is None else step_rate_hz(x, sample_rate)
+    lo, hi = (1 - tol) * commanded_hz, (1 + tol) * commanded_hz
+    heard = math.nan if x is None else step_rate_hz(x, sample_rate, lo, hi)
+    return heard if math.isfinite(heard) else commanded_hz

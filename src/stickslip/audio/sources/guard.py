@@ -62,22 +62,29 @@ class NoSignalError(RuntimeError):
 
 
 def block_problem(block: ArrayLike, floor: float = GUARD.floor, p: GuardParams = GUARD) -> str | None:
-    """Why ``block`` carries no usable signal ("silence", "a constant", "clipping"), or ``None`` if it is alive."""
-    x = np.asarray(block, dtype=np.float64).ravel()
+    """Why ``block`` carries no usable signal ("silence", "a constant", "clipping"), or ``None`` if it is alive.
+
+    Read in the block's own precision (a float32 block is not copied to float64): its
+    largest and smallest sample are exact either way, and a NaN or an infinity shows in them.
+    """
+    x = np.asarray(block).ravel()
     if x.size == 0:
         return None
-    if not np.all(np.isfinite(x)):
+    if x.dtype.kind != "f":  # integers (whose abs can overflow), booleans: as float64
+        x = x.astype(np.float64)
+    lo, hi = float(x.min()), float(x.max())
+    if not (np.isfinite(lo) and np.isfinite(hi)):  # NaN propagates into both; an infinity is one of them
         return "non-finite samples"
-    peak = float(np.max(np.abs(x)))
+    peak = max(abs(lo), abs(hi))
     if peak < floor:
         return "silence"
-    if float(np.ptp(x)) < floor:
+    if hi - lo < floor:
         return "a constant"
-    if (
-        float(np.mean(np.abs(x) >= p.clip_level * peak)) > p.clip_share
-    ):  # stuck at its rails, wherever they are (a float
-        # file may go past 1 unclipped; an analog stage may clip below full scale) - but rails this low are the
-        # converter's last bits toggling over silence (a 16-bit file's least step is 3e-5), not a clipped sound
+    # stuck at its rails, wherever they are (a float file may go past 1 unclipped; an analog stage may clip below
+    # full scale) - but rails this low are the converter's last bits toggling over silence (a 16-bit file's least
+    # step is 3e-5), not a clipped sound. The rail is compared in float64 whatever the block's type.
+    rail = np.float64(p.clip_level * peak)
+    if np.count_nonzero(np.abs(x) >= rail) / x.size > p.clip_share:
         return "silence: only the converter's last bits toggle" if peak < p.quiet_rails else "clipping"
     return None
 
@@ -175,7 +182,8 @@ class SignalGuard:
 
     def _check_stepping(self, x: np.ndarray) -> None:
         assert self.step_hz is not None
-        self._window.append(np.asarray(x, dtype=np.float64).reshape(x.shape[0], -1).mean(axis=1))
+        mono = np.asarray(x, dtype=np.float64)
+        self._window.append(mono if mono.ndim == 1 else mono.reshape(x.shape[0], -1).mean(axis=1))
         self._window_n += x.shape[0]
         need = int(self.window_s * self.sample_rate)
         if self._window_n < need:

@@ -1,0 +1,84 @@
+"""An hour of stepping with speech, music and a radio and no stop, per joint: the false stops a traverse would hear.
+
+The eleventh generator (``tests/support/hour_sound.py``), independent of the detector's
+development: each joint (arms of the tenth generator, ``tests/support/fan_sound.py``) tuned on
+its own quiet 1000 Hz recording, then an hour of stepping at the commanded rate (told to the
+detector, as a traverse tells it) rendered as a stream of 1 s blocks and heard by the confirming
+detector block by block, without a restart: spans of 15-90 s of nothing added, speech, music,
+a radio, or speech over the radio, at -12 to +3 dB re the stepping. Every confirmed event is a
+false stop; a flagged one (``onset_uncertain``) a traverse refuses, an unflagged one it would
+count to. The table gives, per joint and per kind of sound, the minutes heard and the false
+stops (unflagged / flagged); then the events.
+
+``tests/test_audio_hour.py`` runs a minute per joint with shorter spans (the slow tier).
+
+Run: ``.venv/bin/python benchmarks/bench_audio_hour.py`` (arms 1-3, an hour each: several
+minutes per joint on a shared machine, the generator about as costly as the detector);
+``--minutes 10`` for a shorter stretch, ``--arms 1,2,3,4,5,6,7,8`` for every arm of the generator,
+``--rate 1150`` to step (and tell) another rate than the tuning's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tests" / "support"))  # the generators
+
+from fan_sound import SR, Arm, render, tuning_scene  # noqa: E402
+from hour_sound import KINDS, Hour, spans, stream  # noqa: E402
+
+from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
+from stickslip.audio.detector import detector_for  # noqa: E402
+from stickslip.audio.tuning import tune  # noqa: E402
+
+
+def hour(arm: int, minutes: float, rate: float) -> tuple[dict[str, list[float]], list[str]]:
+    """Per kind: [seconds, unflagged, flagged]; and one line per event."""
+    tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
+    h = Hour(Arm(arm), rate=rate, dur=60.0 * minutes, seed=arm)
+    sched = spans(h)
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=rate)
+    events = [e for block in stream(h) for e in det.feed(block)] + det.finish()
+    per = {k: [0.0, 0.0, 0.0] for k in KINDS}
+    for t0, t1, kind, _ in sched:
+        per[kind][0] += t1 - t0
+    lines = []
+    for e in events:
+        t0, t1, kind, db = next(s for s in sched if s[0] <= e.onset_s < s[1])
+        per[kind][2 if e.onset_uncertain else 1] += 1
+        lines.append(
+            f"    {e.onset_s:8.2f} s  {'flagged' if e.onset_uncertain else 'COUNTED'}  {kind} at {db:+.1f} dB"
+            f" (its span {t0:.1f}-{t1:.1f} s)"
+        )
+    return per, lines
+
+
+def main(arms: tuple[int, ...] = (1, 2, 3), minutes: float = 60.0, rate: float = 1000.0) -> None:
+    print(
+        f"{minutes:g} min of stepping at {rate:g} Hz (told) with speech, music and a radio, no stop: "
+        "false stops (unflagged, a wrong count / flagged, refused)"
+    )
+    print("| joint | " + " | ".join(KINDS) + " | all | s |")
+    print("| --- " * (len(KINDS) + 3) + "|")
+    for arm in arms:
+        t = time.perf_counter()
+        per, lines = hour(arm, minutes, rate)
+        cells = [f"{int(u)} / {int(f)} in {s / 60:.0f} min" for s, u, f in per.values()]
+        u_all, f_all = sum(v[1] for v in per.values()), sum(v[2] for v in per.values())
+        print(f"| {arm} | " + " | ".join(cells) + f" | {int(u_all)} / {int(f_all)} | {time.perf_counter() - t:.0f} |")
+        for line in lines:
+            print(line)
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description="An hour of stepping under speech, music and a radio (docstring).")
+    ap.add_argument("--arms", default="1,2,3", help="arms of the tenth generator, comma-separated")
+    ap.add_argument("--minutes", type=float, default=60.0, help="minutes of stepping per joint")
+    ap.add_argument("--rate", type=float, default=1000.0, help="the step rate, Hz (told to the detector)")
+    a = ap.parse_args()
+    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate)

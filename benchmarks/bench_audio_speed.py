@@ -1,0 +1,128 @@
+"""The detector's kernels before and after they were made faster, side by side in one run (ratios, not times).
+
+Each kernel that was made faster without changing a decision (``benchmarks/golden_audio.py``
+compares every event, bit for bit) is timed here beside the code it replaced, which this file
+keeps as the comparator, on the same inputs, in turns (A B A B ...); the outputs are checked
+equal first:
+
+* the float64 power spectra of ``frame_power_spectra`` (the guard's step-clock check and the
+  tuning): ``numpy.fft.rfft`` before, ``scipy.fft.rfft`` after (bit-identical);
+* the sub-band levels of live blocks of a few frames (``SubbandLevels``): the window, the bins'
+  starts and the empty sub-bands made once per detector, not per block;
+* the guard's dead-block test (``block_problem``) on float32 blocks: one pass over the block
+  in its own precision, not a float64 copy and three passes.
+
+The whole detector's speed is in ``bench_audio.py`` (its real-time table). On a shared,
+loaded machine the ratios swing by factors: run it on a quiet one.
+
+Run: ``.venv/bin/python benchmarks/bench_audio_speed.py`` (seconds).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from stickslip.audio.features.spectra import SubbandLevels, frame_power_spectra, window
+from stickslip.audio.sources.guard import GUARD, block_problem
+
+
+def _old_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray:
+    x = np.asarray(samples, dtype=np.float64)
+    frames = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
+    w, scale = window(frame)
+    spec = np.fft.rfft(frames * w, axis=1)
+    p = (spec.real**2 + spec.imag**2) * scale
+    p[:, 0] *= 0.5
+    if frame % 2 == 0:
+        p[:, -1] *= 0.5
+    return np.asarray(p)
+
+
+def _old_levels(frames: np.ndarray, w: np.ndarray, scale: float, idx: np.ndarray) -> np.ndarray:
+    from scipy import fft as sfft
+
+    n, nb = frames.shape[0], idx.size - 1
+    out = np.empty((n, nb))
+    w32 = w.astype(np.float32)
+    lo, hi = int(idx[0]), int(idx[-1])
+    starts = (idx[:-1] - lo).astype(np.intp)
+    for f0 in range(0, n, 1024):
+        seg = np.asarray(frames[f0 : f0 + 1024], dtype=np.float32) * w32
+        spec = sfft.rfft(seg, axis=1)[:, lo:hi]
+        power = spec.real**2 + spec.imag**2
+        band = np.add.reduceat(power, starts, axis=1, dtype=np.float64) * scale
+        empty = idx[1:] <= idx[:-1]
+        if empty.any():
+            band[:, empty] = 0.0
+        out[f0 : f0 + 1024] = 10 * np.log10(band + 1e-20)
+    return out
+
+
+def _old_block_problem(block: Any, floor: float = GUARD.floor) -> str | None:
+    x = np.asarray(block, dtype=np.float64).ravel()
+    if x.size == 0:
+        return None
+    if not np.all(np.isfinite(x)):
+        return "non-finite samples"
+    peak = float(np.max(np.abs(x)))
+    if peak < floor:
+        return "silence"
+    if float(np.ptp(x)) < floor:
+        return "a constant"
+    if float(np.mean(np.abs(x) >= GUARD.clip_level * peak)) > GUARD.clip_share:
+        return "clipping"
+    return None
+
+
+def side_by_side(name: str, a: Callable[[], Any], b: Callable[[], Any], turns: int = 15) -> float:
+    """Median time of ``a`` (before) over ``b`` (after), run in turns; prints and returns the ratio."""
+    ta, tb = [], []
+    for _ in range(turns):
+        for f, t in ((a, ta), (b, tb)):
+            t0 = time.perf_counter()
+            f()
+            t.append(time.perf_counter() - t0)
+    r = float(np.median(ta) / np.median(tb))
+    print(f"  {name:58s} before / after = {r:5.2f}")
+    return r
+
+
+def main() -> None:
+    rng = np.random.default_rng(1)
+    print("kernels, before / after (1 = no faster); outputs checked equal first")
+    x = (0.03 * rng.standard_normal(48_000)).astype(np.float32)
+    for frame in (4096, 4410, 12_000):  # a power of two; 0.1 s at 44.1 kHz; the guard's 0.25 s window at 48 kHz
+        old, new = _old_power_spectra(x, frame, frame // 2), frame_power_spectra(x, frame, frame // 2)
+        assert np.array_equal(old, new), "the spectra differ"
+        side_by_side(
+            f"power spectra (float64), {frame}-sample frames, 1 s",
+            lambda frame=frame: _old_power_spectra(x, frame, frame // 2),
+            lambda frame=frame: frame_power_spectra(x, frame, frame // 2),
+        )
+    frame, hop = 512, 128
+    w, scale = window(frame)
+    idx = np.unique(np.linspace(10, 200, 25).astype(np.intp))
+    view = np.lib.stride_tricks.sliding_window_view
+    blocks = [view(x[i : i + 1024 + frame], frame)[::hop] for i in range(0, 40_000, 1024)]
+    levels = SubbandLevels(w, scale, idx)
+    assert all(np.allclose(_old_levels(f, w, scale, idx), levels(f), rtol=0, atol=1e-9) for f in blocks[:5])
+    side_by_side(
+        "sub-band levels, 39 live blocks of 8 frames",
+        lambda: [_old_levels(f, w, scale, idx) for f in blocks],
+        lambda: [levels(f) for f in blocks],
+    )
+    many = [(0.1 * rng.standard_normal(4096)).astype(np.float32) for _ in range(200)]
+    assert [_old_block_problem(b) for b in many] == [block_problem(b) for b in many]
+    side_by_side(
+        "dead-block test, 200 float32 blocks of 4096",
+        lambda: [_old_block_problem(b) for b in many],
+        lambda: [block_problem(b) for b in many],
+    )
+
+
+if __name__ == "__main__":
+    main()

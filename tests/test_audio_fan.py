@@ -1,0 +1,208 @@
+"""A fan switching on before the stop, pauses with no stop, another instrument in bursts: an acoustic generator.
+
+Issue 35 (item 6): on an independent battery one draw gave a false stop and then missed the
+stop when a fan switched on shortly before it, and two false stops over pauses in the
+stepping. These tests come from the tenth generator (``tests/support/fan_sound.py``: slip
+pulses of finite length through a bank of resonators, a fan that spins up by the fan laws,
+pauses), written before the detector was changed for them and never used to tune it.
+
+Each arm is tuned on its own quiet 1000 Hz recording and heard as a traverse hears it (the
+confirming detector, told the commanded rate). A fan switched on 0.3-1.0 s before the stop,
+at -4 to +4 dB of the stepping's level: the first event must be the stop, its onset within
+25 ms, or flagged (a traverse refuses it: never a wrong count). Two pauses of 0.2-0.8 s and
+no stop: no event at all. Another arm of the generator stepping at 730 Hz in bursts of
+0.3-0.8 s (gaps 0.4-1.2 s), as loud as the joint (RMS), in the tuning recording, the test
+recording or both: the tuning may refuse (never a wrong count), else the first event is the
+stop within 25 ms, or flagged. A test recording 12-20 dB louder than the tuning's: the stop
+within 25 ms, heard within 50 ms (the battery's latency bound). A test stepping 20 % slower
+or faster than the tuning, the commanded rate told: the stop within 25 ms. Draws that fail
+today are strict xfails with what was measured; ``benchmarks/bench_audio_tenth.py`` runs the
+same conditions on other draws.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+from fan_sound import SR, Arm, Scene, render, tuning_scene
+
+from stickslip.audio.confirm import ConfirmedStopDetector
+from stickslip.audio.detector import detector_for
+from stickslip.audio.events import StopEvent
+from stickslip.audio.tuning import TuningError, tune
+from stickslip.audio.tuningfile import Tuning
+
+STOP_S = 2.4
+TOL_S = 0.025
+ARMS = range(1, 9)
+#: (arm, draw) -> what was measured (the detector as of this test's writing)
+FAN_KNOWN = {
+    (3, 1): "a false stop 315 ms before the stop (the fan's spin-up, 0.86 s before it, +0.7 dB)",
+    (6, 0): "the stop flagged, not heard cleanly (fan 0.68 s before it, -1.3 dB)",
+    (6, 1): "the stop missed (fan 0.56 s before it, -1.0 dB)",
+}
+
+
+@cache
+def _tuning(arm: int) -> Tuning:
+    return tune(render(tuning_scene(Arm(arm))), SR, 2.0)
+
+
+def _events(tu: Tuning, y: np.ndarray, rate_hz: float = 1000.0) -> list[StopEvent]:
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=rate_hz)  # as a traverse tells it
+    return det.feed(y) + det.finish()
+
+
+def _fan_draw(arm: int, k: int, other: int = 0) -> Scene:
+    """The fan's ``k``-th draw for ``arm`` (``other`` > 0: another battery, every seed moved by 1000 x other)."""
+    rng = np.random.default_rng(arm + 1000 * other)
+    draws = [(float(rng.uniform(0.3, 1.0)), float(rng.uniform(-4.0, 4.0))) for _ in range(2)]
+    lead, fan_db = draws[k]
+    return Scene(
+        Arm(arm), stop_at=STOP_S, dur=3.4, fan_at=STOP_S - lead, fan_db=fan_db, seed=100 + 10 * arm + k + 1000 * other
+    )
+
+
+def _pause_draw(arm: int, other: int = 0) -> Scene:
+    rng = np.random.default_rng(arm + 1000 * other)
+    for _ in range(4):  # the fan draws come first from the same stream
+        rng.uniform()
+    p1 = (float(rng.uniform(1.0, 1.5)), float(rng.uniform(0.2, 0.8)))
+    p2 = (float(rng.uniform(2.4, 2.8)), float(rng.uniform(0.2, 0.8)))
+    return Scene(Arm(arm), stop_at=None, dur=4.0, pauses=(p1, p2), seed=200 + arm + 1000 * other)
+
+
+def _louder_draw(arm: int, other: int = 0) -> tuple[Scene, float]:
+    """A test recording 12-20 dB louder than the tuning's (the gain in dB), with the stop at ``STOP_S``."""
+    gain_db = float(np.random.default_rng(700 + arm + 1000 * other).uniform(12.0, 20.0))
+    return Scene(Arm(arm), stop_at=STOP_S, dur=3.4, seed=400 + arm + 1000 * other), gain_db
+
+
+def test_generator_levels() -> None:
+    """The generator as documented: stepping at -30 dBFS; the fan at its level relative to it at full speed."""
+    y = render(Scene(Arm(1), stop_at=None, dur=2.0, snr_db=80.0))
+    assert 20 * np.log10(np.sqrt(np.mean(y.astype(np.float64) ** 2))) == pytest.approx(-30.0, abs=0.05)
+    quiet = render(Scene(Arm(1), stop_at=None, dur=3.0, snr_db=80.0, seed=3))
+    fan = render(Scene(Arm(1), stop_at=None, dur=3.0, snr_db=80.0, seed=3, fan_at=0.5, fan_db=6.0, spin_s=0.1))
+    added = (fan - quiet)[int(2.0 * SR) :].astype(np.float64)
+    assert 20 * np.log10(np.sqrt(np.mean(added**2))) == pytest.approx(-24.0, abs=0.5)  # -30 + 6 dB, at full speed
+    assert np.all((fan - quiet)[: int(0.5 * SR)] == 0.0)  # silent before it is switched on
+
+
+#: (arm, where the bursts are) -> what was measured. Before the floor was capped at the joint's own level
+#: (stickslip.audio.change.added) bursts in the test recording gave 6 events 1.7-1.9 s early and 2 flags
+BURSTS_KNOWN = {
+    (3, "test"): "the stop flagged (before the floor was capped at the joint's own level: 1884 ms early)",
+    (4, "both"): "an event 2400 ms before the stop, not flagged: listening taken to begin at the stop",
+}
+
+
+def _bursts(arm: int, dur: float, seed: int) -> np.ndarray:
+    """Another arm stepping at 730 Hz in bursts, its RMS over the recording (gaps included) the joint's."""
+    rng = np.random.default_rng(seed)
+    t, pauses = 0.0, []
+    while t < dur:
+        on, off = float(rng.uniform(0.3, 0.8)), float(rng.uniform(0.4, 1.2))
+        pauses.append((t + on, off))
+        t += on + off
+    return render(Scene(Arm(arm + 50), rate=730.0, stop_at=None, dur=dur, pauses=tuple(pauses), snr_db=80.0, seed=seed))
+
+
+def _known(a: int, k: int) -> list[pytest.MarkDecorator]:
+    return [pytest.mark.xfail(strict=True, reason=FAN_KNOWN[(a, k)])] if (a, k) in FAN_KNOWN else []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("arm", "k"), [pytest.param(a, k, marks=_known(a, k)) for a in ARMS for k in (0, 1)])
+def test_fan_switching_on_before_the_stop(arm: int, k: int) -> None:
+    events = _events(_tuning(arm), render(_fan_draw(arm, k)))
+    assert events, "the stop was missed"
+    first = events[0]
+    assert first.onset_uncertain is False, "the stop was flagged"
+    assert abs(first.onset_s - STOP_S) <= TOL_S, f"the first event is {1e3 * (first.onset_s - STOP_S):+.0f} ms off"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm", ARMS)
+def test_pauses_without_a_stop(arm: int) -> None:
+    assert _events(_tuning(arm), render(_pause_draw(arm))) == []
+
+
+def _known_bursts(a: int, where: str) -> list[pytest.MarkDecorator]:
+    why = BURSTS_KNOWN.get((a, where))
+    return [pytest.mark.xfail(strict=True, reason=why)] if why else []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("arm", "where"),
+    [pytest.param(a, w, marks=_known_bursts(a, w)) for a in ARMS for w in ("training", "test", "both")],
+)
+def test_another_instrument_in_bursts(arm: int, where: str) -> None:
+    x = render(tuning_scene(Arm(arm)))
+    if where in ("training", "both"):
+        x = (x + _bursts(arm, 3.2, 500 + arm)).astype(np.float32)
+    y = render(Scene(Arm(arm), stop_at=STOP_S, dur=3.4, seed=300 + arm))
+    if where in ("test", "both"):
+        y = (y + _bursts(arm, 3.4, 600 + arm)).astype(np.float32)
+    try:
+        tu = tune(x, SR, 2.0)
+    except TuningError:
+        return  # refused: the tuning names the stepping that sounds like the stop; never a wrong count
+    events = _events(tu, y)
+    assert events, "the stop was missed"
+    assert events[0].onset_uncertain is False, "the stop was flagged"
+    err_ms = 1e3 * (events[0].onset_s - STOP_S)
+    assert abs(err_ms) <= 1e3 * TOL_S, f"the first event is {err_ms:+.0f} ms off"
+
+
+#: arm -> what was measured when the test was written (before any change for it)
+LOUDER_KNOWN: dict[int, str] = {}
+
+
+def _known_louder(a: int) -> list[pytest.MarkDecorator]:
+    return [pytest.mark.xfail(strict=True, reason=LOUDER_KNOWN[a])] if a in LOUDER_KNOWN else []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm", [pytest.param(a, marks=_known_louder(a)) for a in (1, 3, 5, 7)])
+def test_a_test_recorded_12_to_20_db_louder_than_the_tuning(arm: int) -> None:
+    """Half the arms (CI's time): all eight, on four draws each, in ``benchmarks/bench_audio_tenth.py``."""
+    scene, gain_db = _louder_draw(arm)
+    y = (render(scene) * np.float32(10 ** (gain_db / 20))).astype(np.float32)
+    events = _events(_tuning(arm), y)
+    assert events, f"the stop was missed ({gain_db:.1f} dB louder)"
+    first = events[0]
+    assert first.onset_uncertain is False, f"the stop was flagged ({gain_db:.1f} dB louder)"
+    err_ms = 1e3 * (first.onset_s - STOP_S)
+    assert abs(err_ms) <= 1e3 * TOL_S, f"the first event is {err_ms:+.0f} ms off ({gain_db:.1f} dB louder)"
+    assert first.detected_at_s - STOP_S <= 0.050, f"heard {1e3 * (first.detected_at_s - STOP_S):.0f} ms after the stop"
+
+
+#: arm -> what was measured when the test was written (the detector told the commanded rate)
+RATE_KNOWN: dict[int, str] = {}
+
+
+def _rate_draw(arm: int, other: int = 0) -> Scene:
+    """A test recording stepping 20 % slower (odd arms) or faster (even arms) than the 1000 Hz tuning."""
+    return Scene(Arm(arm), rate=800.0 if arm % 2 else 1200.0, stop_at=STOP_S, dur=3.4, seed=800 + arm + 1000 * other)
+
+
+def _known_rate(a: int) -> list[pytest.MarkDecorator]:
+    return [pytest.mark.xfail(strict=True, reason=RATE_KNOWN[a])] if a in RATE_KNOWN else []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm", [pytest.param(a, marks=_known_rate(a)) for a in (2, 4, 5, 7)])
+def test_stepping_20_percent_off_the_tuning_with_the_commanded_rate_told(arm: int) -> None:
+    """Two arms slower, two faster (CI's time; all eight pass, told and untold: docs/audio-log.md)."""
+    scene = _rate_draw(arm)
+    events = _events(_tuning(arm), render(scene), scene.rate)
+    assert events, f"the stop was missed at {scene.rate:.0f} Hz"
+    first = events[0]
+    assert first.onset_uncertain is False, f"the stop was flagged at {scene.rate:.0f} Hz"
+    err_ms = 1e3 * (first.onset_s - STOP_S)
+    assert abs(err_ms) <= 1e3 * TOL_S, f"the first event is {err_ms:+.0f} ms off at {scene.rate:.0f} Hz"

@@ -1,0 +1,90 @@
+"""Stepping with speech, music and a radio and no stop, on every joint: no stop heard.
+
+The eleventh generator (``tests/support/hour_sound.py``: the tenth generator's joints rendered
+as a stream in 1 s blocks, a source-filter talker, a band of harmonic notes and a snare, a
+radio's narrow channel) was written before the detector was judged on it and is never used
+to tune it. Each joint (arms 1-3 of the tenth generator, as the three joints of an MM3A) is
+tuned on its own quiet 1000 Hz recording and heard as a traverse hears it: the confirming
+detector, told the commanded 1000 Hz, fed block by block.
+
+The whole hour per joint is ``benchmarks/bench_audio_hour.py`` (minutes per joint: it is a
+measurement, not a test). Here, 40 s per joint with spans of 4-12 s, so added sound starts
+and stops several times (marked slow), and the stream's own properties.
+"""
+
+from __future__ import annotations
+
+from functools import cache
+
+import numpy as np
+import pytest
+from fan_sound import SR, Arm, render, tuning_scene
+from hour_sound import KINDS, Hour, spans, stream
+
+from stickslip.audio.confirm import ConfirmedStopDetector
+from stickslip.audio.detector import detector_for
+from stickslip.audio.events import StopEvent
+from stickslip.audio.tuning import tune
+from stickslip.audio.tuningfile import Tuning
+
+JOINTS = (1, 2, 3)
+#: joint -> what was measured when the test was written (before any change for it)
+KNOWN = {
+    3: "2 false stops, none flagged (a wrong count): 0.40 s (a radio from the first sample, +0.4 dB) and 34.5 s"
+    " (speech over the radio switched on, +0.4 dB); with the drop channel off, the same two",
+}
+
+
+@cache
+def _tuning(arm: int) -> Tuning:
+    return tune(render(tuning_scene(Arm(arm))), SR, 2.0)
+
+
+def hear(h: Hour, tu: Tuning) -> list[StopEvent]:
+    """The confirmed events of ``h`` streamed block by block, the commanded rate told."""
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=h.rate)
+    events = [e for block in stream(h) for e in det.feed(block)]
+    return events + det.finish()
+
+
+def test_the_stream_does_not_depend_on_its_blocks() -> None:
+    """Rendered in 1 s or in 0.37 s blocks, the same samples: the filters' states and the events carry over."""
+    a = np.concatenate(list(stream(Hour(Arm(2), dur=12.0, seed=5, span_s=(2.0, 4.0)))))
+    b = np.concatenate(list(stream(Hour(Arm(2), dur=12.0, seed=5, span_s=(2.0, 4.0), block_s=0.37))))
+    assert a.size == b.size == 12 * SR
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_the_levels_are_as_documented() -> None:
+    """The stepping at -30 dBFS alone; each span's sound at its level re the stepping (+-2.5 dB: 2-3 voices)."""
+    h = Hour(Arm(1), dur=30.0, seed=13, span_s=(4.5, 7.0))
+    y = np.concatenate(list(stream(h))).astype(np.float64)
+    alone = np.concatenate(list(stream(Hour(Arm(1), dur=30.0, seed=13, span_s=(4.5, 7.0), kinds=("nothing",)))))
+    sched = spans(h)
+    assert {k for _, _, k, _ in sched} >= set(KINDS[1:])  # every kind of sound plays in the 30 s
+    step_db = 20 * np.log10(np.sqrt(np.mean(alone.astype(np.float64) ** 2)))
+    assert step_db == pytest.approx(-30.0, abs=0.3)
+    for t0, t1, kind, db in sched:
+        if t1 - t0 < 4.0:
+            continue  # the minute's last span, cut short: a talker may not have begun
+        i, j = int((t0 + 0.5) * SR), int((t1 - 0.5) * SR)
+        added = y[i:j] - alone[i:j]
+        if kind == "nothing":
+            assert np.all(added == 0.0)
+        else:
+            assert 20 * np.log10(np.sqrt(np.mean(added**2))) == pytest.approx(-30.0 + db, abs=2.5), kind
+
+
+def _known(j: int) -> list[pytest.MarkDecorator]:
+    return [pytest.mark.xfail(strict=True, reason=KNOWN[j])] if j in KNOWN else []
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("joint", [pytest.param(j, marks=_known(j)) for j in JOINTS])
+def test_stepping_under_speech_music_and_a_radio_raises_no_stop(joint: int) -> None:
+    h = Hour(Arm(joint), dur=40.0, seed=joint, span_s=(4.0, 12.0))
+    events = hear(h, _tuning(joint))
+    where = [(round(e.onset_s, 2), next(k for t0, t1, k, _ in spans(h) if t0 <= e.onset_s < t1)) for e in events]
+    assert events == [], f"{len(events)} false stops: {where}"
