@@ -56,7 +56,7 @@ def test_every_docs_page_with_console_blocks_is_listed_here():
     assert pages == sorted(RUN_PAGES), f"pages with console blocks: {pages}; run them in this module"
 
 
-RUN_PAGES = ["tutorial.md", "config.md", "vision.md"]  # config.md names its own $STICKSLIP_CONFIG
+RUN_PAGES = ["tutorial.md", "config.md", "vision.md", "rig.md"]  # config.md names its own $STICKSLIP_CONFIG
 
 
 @POSIX
