@@ -17,7 +17,8 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+# make test-fast leaves this file out; one worker builds the site once for all its tests (--dist loadgroup)
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("docs_site")]
 
 ROOT = Path(__file__).resolve().parents[1]
 
