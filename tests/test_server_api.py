@@ -110,7 +110,8 @@ def test_positions_update_on_the_live_socket_while_a_move_runs(client: TestClien
             seqs.append(msg["seq"])
             q2.append(msg["state"]["joints"][1]["q"])
             truth.append(msg["state"]["truth"]["q"][1])
-            if msg["state"]["motion"]["status"] == "done":
+            motion = msg["state"]["motion"]  # None in a message sent before the move was registered
+            if motion is not None and motion["status"] == "done":
                 break
     assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # none lost, in order
     # the kept position moves on after every burst; the simulator's truth as it steps
