@@ -157,9 +157,9 @@ def reach(
     geom = parse_geometry(geometry)
     if rig_file is not None and camera is not None:
         fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
-    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration, db)
     if in_rig is not None:
-        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
+        device, geom, calibration, db = in_rig.device, in_rig.geometry, in_rig.calibration, in_rig.database
     device = device_url(device)
     from ..calibration import Calibration
     from ..motion.reach import borrow_joint1
@@ -176,6 +176,7 @@ def reach(
         segment=float(segment), burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi),
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+        joints=None if in_rig is None else in_rig.joints, stage=None if in_rig is None else in_rig.stage,
     )
     if camera_tip is not None and camera is None:
         fail("--camera-tip goes with --camera")
@@ -211,12 +212,13 @@ def _print_plan(result: ReachResult, json_out: bool) -> None:
     )
     say(f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target")
     q = plan.q_end
+    js = result.state.joints  # the arm's: a stage's joints in µm
     say(
-        f"  joints q1 = {format_position(q[0], 1)}, q2 = {format_position(q[1], 2)}, "
-        f"q3 = {format_position(q[2], 3)}"
+        f"  joints q1 = {format_position(q[0], js[1])}, q2 = {format_position(q[1], js[2])}, "
+        f"q3 = {format_position(q[2], js[3])}"
     )
     if result.sim_true is not None:
-        true_tip = [float(v) for v in kin.tip(result.sim_true, plan.geometry)]
+        true_tip = [float(v) for v in plan.tip_of(result.sim_true)]
         err = math.dist(true_tip, plan.target)
         say(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target")
 

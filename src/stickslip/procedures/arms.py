@@ -31,7 +31,7 @@ def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
     others = {}
     for other in rig.arms:
         if other.name != me.name:
-            s = load_state(store, device_key(other.controller))
+            s = load_state(store, device_key(other.controller), other.joint_specs())
             others[other.name] = [s.positions[j] for j in (1, 2, 3)]
     return Guard(rig, me.name, others)
 
@@ -60,7 +60,8 @@ class ArmState:
 
 def arm_states(store: StateStore, rig: Rig) -> list[ArmState]:
     """Every arm's kept state, in the rig's order."""
-    return [ArmState(a.name, device_key(a.controller), load_state(store, device_key(a.controller))) for a in rig.arms]
+    return [ArmState(a.name, device_key(a.controller), load_state(store, device_key(a.controller), a.joint_specs()))
+            for a in rig.arms]
 
 
 def go_to(
@@ -90,7 +91,7 @@ def go_to(
     a = rig.arm(arm)
     target = rig.position(a.name, name)
     key = device_key(a.controller)
-    state = load_state(store, key)
+    state = load_state(store, key, a.joint_specs())
     guard = guard_for(store, rig, a.name)
     q = [state.positions[j] for j in (1, 2, 3)]
     path = [list(q)]
@@ -116,7 +117,8 @@ def go_to(
     for before, after in zip(path[:-1], path[1:], strict=True):
         j = next(i + 1 for i in range(3) if before[i] != after[i])
         request = MoveRequest(a.controller, j, to=after[j - 1], burst=burst, guard=guard_for(store, rig, a.name),
-                              from_unreferenced=from_unreferenced, trust_calibration=trust_calibration)
+                              from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+                              joints=a.joint_specs())
         result = move(store, request, calibration, warn=warn, ready=once, opener=opener_for(rig, a.name, opener))
         results.append(result)
         if result.outcome.error is not None:

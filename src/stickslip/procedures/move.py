@@ -51,6 +51,7 @@ from ..motion.planning import Planner
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
 from ..rig.envelope import EnvelopeViolation
 from ..rig.guard import Guard
+from ..joints import JointSet, JointSpec
 from ..units import format_position, position_display_unit
 from .conditions import calibration_device_problem, usage_warnings
 
@@ -118,9 +119,10 @@ def where_line(state: DeviceState) -> str:
     for j in (1, 2, 3):
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
-            parts.append(f"joint {j} uncertain, {format_position(lo, j)} to {format_position(hi, j)}")
+            parts.append(f"joint {j} uncertain, {format_position(lo, state.spec(j))} to "
+                         f"{format_position(hi, state.spec(j))}")
         else:
-            parts.append(f"joint {j} {format_position(state.positions[j], j)} ({state.sources[j]})")
+            parts.append(f"joint {j} {format_position(state.positions[j], state.spec(j))} ({state.sources[j]})")
     return "; ".join(parts)
 
 
@@ -211,7 +213,7 @@ def drive(
             else:  # nothing certainly made: back to the confirmed position, then widen below
                 state.set_position(joint, state.positions[joint], state.sources[joint])
             if e.at_most is None:
-                spec = kin.joint_spec(joint)
+                spec = state.spec(joint)
                 state.intend(joint, spec.upper if sign > 0 else spec.lower)
             elif e.at_most != e.made:
                 state.intend(joint, reckon(out.sent - e.made + e.at_most))
@@ -258,14 +260,14 @@ def target_of(state: DeviceState, joint: int, by: float | None = None, to: float
     """
     if (by is None) == (to is None):
         raise ValueError("give exactly one of by and to")
-    spec = kin.joint_spec(joint)
+    spec = state.spec(joint)
     q_from = state.positions[joint]
     q_to = to if to is not None else q_from + float(by or 0.0)
     if not spec.contains(q_to):
         raise TargetOutOfRange(
-            f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
-            f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
-            f"(from {format_position(q_from, joint)}); positions are in {position_display_unit(joint)}"
+            f"the target {format_position(q_to, spec)} is outside joint {joint}'s range "
+            f"[{format_position(spec.lower, spec)}, {format_position(spec.upper, spec)}] "
+            f"(from {format_position(q_from, spec)}); positions are in {position_display_unit(spec)}"
         )
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
@@ -299,6 +301,8 @@ class TrackedPlan:
     from_uncertain : tuple of 2 floats or None
         The bounds (rad or m) of an uncertain start planned from its last confirmed
         position (``--from-unreferenced``); the end stays uncertain, the bounds moved along.
+    spec : JointSpec or None
+        The arm's joint when it is not the MM3A's (a rig file's arm); ``None``: the MM3A's.
     """
 
     joint: int
@@ -313,11 +317,12 @@ class TrackedPlan:
     sigma_model: float
     assumed: bool = False
     from_uncertain: tuple[float, float] | None = None
+    spec: JointSpec | None = None
 
     def position_after(self, n_signed: int, q_start: float | None = None) -> float:
         """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start)."""
         q0 = self.q_from if q_start is None else q_start
-        return float(Planner(self.calibration, self.joint, self.pose).position_after(q0, n_signed))
+        return float(Planner(self.calibration, self.spec or self.joint, self.pose).position_after(q0, n_signed))
 
     def bounds_after(self, n_signed: int) -> tuple[float, float] | None:
         """Where an uncertain start's bounds are after ``n_signed`` steps (rad or m); ``None`` for a known start."""
@@ -353,12 +358,14 @@ def plan_tracked(
     track, note = track_for(state.track.get(joint), calibration, joint)
     scaled = scaled_calibration(calibration, joint, {d: track.scale_of(d) for d in "+-"})
     q_from = state.positions[joint]
-    plan = Planner(scaled, joint, state.pose).plan(q_from, q_to)
+    spec = state.spec(joint)
+    own = None if spec is kin.joint_spec(joint) else spec  # an arm's own joint (a rig file's), else the MM3A's
+    plan = Planner(scaled, spec, state.pose).plan(q_from, q_to)
     return TrackedPlan(
         joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
         joint_sigma_model(calibration, joint, state.pose),  # the model error in this pose (docs/models.md §4)
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
-        from_uncertain=state.uncertain.get(joint),
+        from_uncertain=state.uncertain.get(joint), spec=own,
     )
 
 
@@ -384,20 +391,18 @@ def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:
         state.track[joint] = plan.track.to_json()
 
 
-NOMINAL_STEP = {"prismatic": 0.8e-6, "rotary": 40e-6}
-"""A small step of each kind of joint (m, rad): what :func:`steps_to_stop` assumes without a calibration."""
-
-
-def steps_to_stop(joint: int, calibration: Calibration | None = None) -> int:
+def steps_to_stop(joint: int, calibration: Calibration | None = None, spec: JointSpec | None = None) -> int:
     """Steps that surely drive ``joint`` from anywhere into an end stop: 1.2 x its range over its smallest step.
 
-    The smallest step is the calibration's constant step of either direction, else
-    :data:`NOMINAL_STEP`; rounded up to a thousand. At the stop the slider slips: the
-    steps beyond it do no harm (a traverse steps into its stop the same way).
+    The smallest step is the calibration's constant step of either direction, else the
+    joint's nominal step (:attr:`~stickslip.joints.JointSpec.small_step`: a rig file's
+    ``step``, else :data:`~stickslip.joints.NOMINAL_STEP` of its kind); rounded up to a
+    thousand. At the stop the slider slips: the steps beyond it do no harm (a traverse
+    steps into its stop the same way). ``spec``: the arm's joint (default the MM3A's).
     """
-    spec = kin.joint_spec(joint)
+    spec = spec or kin.joint_spec(joint)
     steps = [v for (j, _), v in (calibration.constant_steps.items() if calibration else ()) if j == joint and v > 0]
-    small = min(steps) if steps else NOMINAL_STEP["rotary" if spec.rotary else "prismatic"]
+    small = min(steps) if steps else spec.small_step
     return int(math.ceil(1.2 * spec.span / small / 1000.0)) * 1000
 
 
@@ -415,10 +420,12 @@ def is_simulator(url: str) -> bool:
     return url_scheme(url) in ("sim", "sim+physics")
 
 
-def reference_commands(device: str, joint: int, calibration: Calibration | None = None) -> str:
+def reference_commands(
+    device: str, joint: int, calibration: Calibration | None = None, spec: JointSpec | None = None
+) -> str:
     """The two commands that reference ``joint``: raw steps into its lower stop, then ``where --set J=min``."""
     url = redact_url(device)
-    n = steps_to_stop(joint, calibration)
+    n = steps_to_stop(joint, calibration, spec)
     return (
         f"`stickslip move -d {url} --joint {joint} --steps -{n}` (into its lower stop: more steps than its range; "
         f"the slider slips at the stop), then `stickslip where -d {url} --set {joint}=min`"
@@ -439,35 +446,37 @@ def reference_problem(
     """
     if is_simulator(device) or state.referenced(joint):
         return None
-    how = reference_commands(device, joint, calibration)
+    spec = state.spec(joint)
+    how = reference_commands(device, joint, calibration, spec)
     if joint in state.uncertain:
         lo, hi = state.uncertain[joint]
         why = state.why.get(joint, "a move was interrupted")
         option = (
-            f"; or pass --from-unreferenced to plan from {format_position(state.positions[joint], joint)} "
+            f"; or pass --from-unreferenced to plan from {format_position(state.positions[joint], spec)} "
             "(it stays uncertain)" if from_uncertain else ""
         )
         return (
-            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, joint)} and "
-            f"{format_position(hi, joint)}; reference it: {how}{option}"
+            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, spec)} and "
+            f"{format_position(hi, spec)}; reference it: {how}{option}"
         )
     return (
-        f"joint {joint} was never referenced: its position {format_position(state.positions[joint], joint)} is "
+        f"joint {joint} was never referenced: its position {format_position(state.positions[joint], spec)} is "
         f"assumed, not known; reference it: {how}; or pass --from-unreferenced to plan from the assumed position"
     )
 
 
 def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: int) -> str:
     """One line for a move a device error stopped: what was sent, and what the kept position now is."""
+    spec = state.spec(joint)
     if joint in state.uncertain:
         lo, hi = state.uncertain[joint]
         kept = (
-            f"joint {joint}'s position is now uncertain, between {format_position(lo, joint)} "
-            f"and {format_position(hi, joint)}; re-reference it (stickslip where --set {joint}=min "
+            f"joint {joint}'s position is now uncertain, between {format_position(lo, spec)} "
+            f"and {format_position(hi, spec)}; re-reference it (stickslip where --set {joint}=min "
             f"at the lower stop) before the next move"
         )
     else:
-        kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], joint)} is kept"
+        kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], spec)} is kept"
     return f"{error}; sent {sent} of {steps} steps; {kept}"
 
 
@@ -538,6 +547,9 @@ class MoveRequest:
     guard : Guard or None
         A rig's envelope for this arm (:mod:`stickslip.rig`): the planned move is checked
         against it before a step is sent (:func:`check_envelope`).
+    joints : JointSet or None
+        The arm's joints (kinds, ranges, nominal steps: :meth:`stickslip.rig.Arm.joint_specs`);
+        ``None``: the MM3A's (:data:`stickslip.joints.JOINTS`).
     """
 
     device: str
@@ -550,6 +562,7 @@ class MoveRequest:
     from_unreferenced: bool = False
     trust_calibration: bool = False
     guard: Guard | None = None
+    joints: JointSet | None = None
 
 
 @dataclass(frozen=True)
@@ -587,7 +600,7 @@ class MoveResult:
         out: dict[str, object] = {
             "device": self.device, "joint": p.joint, "direction": "+" if p.steps >= 0 else "-",
             "steps": abs(p.steps), "steps_signed": p.steps, "bursts": list(self.outcome.bursts),
-            "q_from": p.q_from, "q_to": p.q_to, "q_end_predicted": p.q_end, "unit": kin.joint_spec(p.joint).unit,
+            "q_from": p.q_from, "q_to": p.q_to, "q_end_predicted": p.q_end, "unit": self.state.spec(p.joint).unit,
         }
         tf = track_fields(self.state, p.joint)
         if tf["sd"] is not None:
@@ -627,7 +640,7 @@ def move(
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
     with device_lock(store, key):
-        state = load_state(store, key)
+        state = load_state(store, key, request.joints)
         try:
             request.pose.apply(state)
             problem = reference_problem(state, joint, request.device, calibration)
@@ -714,7 +727,7 @@ class StepResult:
         lo, hi = self.state.bounds(self.joint)
         return {
             "device": self.device, "joint": self.joint, "steps_signed": self.steps, "sent": self.outcome.sent,
-            "bursts": list(self.outcome.bursts), "uncertain": [lo, hi], "unit": kin.joint_spec(self.joint).unit,
+            "bursts": list(self.outcome.bursts), "uncertain": [lo, hi], "unit": self.state.spec(self.joint).unit,
             "error": self.outcome.error,
         }
 
@@ -728,6 +741,7 @@ def step_joint(
     burst: int = 1000,
     ready: Callable[[], None] = _nothing,
     opener: Callable[[str], Controller] | None = None,
+    joints: JointSet | None = None,
 ) -> StepResult:
     """Send ``steps`` raw signed steps to ``joint``: no calibration, no plan (a first check, a drive into a stop).
 
@@ -739,9 +753,9 @@ def step_joint(
     if steps == 0:
         raise ValueError("--steps must not be 0")
     key = device_key(device)
-    spec = kin.joint_spec(joint)
     with device_lock(store, key):
-        state = load_state(store, key)
+        state = load_state(store, key, joints)
+        spec = state.spec(joint)
         try:
             lo, hi = state.bounds(joint)
             after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)

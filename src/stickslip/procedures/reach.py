@@ -111,7 +111,7 @@ def drive_reach(
             n = seg.steps[j - 1]
             if n == 0:
                 continue
-            stepper = JointStepper(calibration, j, state.pose, plan.step_model)
+            stepper = JointStepper(calibration, state.spec(j), state.pose, plan.step_model)
             q_from = state.positions[j]
 
             def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
@@ -174,6 +174,11 @@ class ReachRequest:
     guard : Guard or None
         A rig's envelope for this arm: the whole line, as driven (:func:`joint_path`), is
         checked against it before a step is sent.
+    joints : JointSet or None
+        The arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`); the MM3A's by default.
+    stage : Stage or None
+        A Cartesian arm's kinematics (a rig file's ``xyz`` arm, :meth:`stickslip.rig.Arm.stage`):
+        ``to``/``by`` are then in its base frame and ``geometry`` is not used.
     """
 
     device: str
@@ -188,6 +193,8 @@ class ReachRequest:
     from_unreferenced: bool = False
     trust_calibration: bool = False
     guard: Guard | None = None
+    joints: kin.JointSet | None = None
+    stage: kin.Stage | None = None
 
 
 @dataclass(frozen=True)
@@ -223,7 +230,7 @@ class ReachResult:
         """The JSON shape of ``stickslip reach --json`` (metres, radians)."""
         out: dict[str, object] = dict(self.plan.as_dict())
         if self.sim_true is not None:
-            tip = [float(v) for v in kin.tip(self.sim_true, self.plan.geometry)]
+            tip = [float(v) for v in self.plan.tip_of(self.sim_true)]
             out["sim_true"] = {"q": list(self.sim_true), "tip": tip}
         return out
 
@@ -252,9 +259,13 @@ def referenced_state(
     pose: PoseUpdate,
     calibration: Calibration | None = None,
     from_unreferenced: bool = False,
+    joints: kin.JointSet | None = None,
 ) -> DeviceState:
-    """The kept state of ``device`` with ``pose`` recorded; :class:`MoveRefused` unless it may be planned from."""
-    state = load_state(store, device_key(device))
+    """The kept state of ``device`` (an arm of ``joints``, the MM3A's by default) with ``pose`` recorded.
+
+    :class:`MoveRefused` unless it may be planned from.
+    """
+    state = load_state(store, device_key(device), joints)
     pose.apply(state)
     check_referenced(state, device, calibration, from_unreferenced)
     return state
@@ -270,10 +281,13 @@ def plan_from_state(
     if the line cannot be made.
     """
     geom, seg = request.geometry, request.segment
+    stage, joints = request.stage, request.joints
     if request.to is not None:
-        plan = plan_reach(calibration, state.pose, to=request.to, geometry=geom, segment=seg)
+        plan = plan_reach(calibration, state.pose, to=request.to, geometry=geom, segment=seg, stage=stage,
+                          joints=joints)
     else:
-        plan = plan_reach(calibration, state.pose, by=request.by, geometry=geom, segment=seg)
+        plan = plan_reach(calibration, state.pose, by=request.by, geometry=geom, segment=seg, stage=stage,
+                          joints=joints)
     if borrowed and plan.total_steps[0]:
         warn(BORROWED_JOINT1)
     return plan
@@ -298,7 +312,7 @@ def reach(
     error during the move is in the result (:meth:`ReachResult.failure`).
     """
     key = device_key(request.device)
-    refs = (calibration, request.from_unreferenced)
+    refs = (calibration, request.from_unreferenced, request.joints)
     if request.dry_run:
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
