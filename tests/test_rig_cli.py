@@ -172,6 +172,7 @@ def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, post
                       "volume 'objective': cylinder, margin 200 µm", "position 'park' of 'probe': q3 0.100 mm, "
                       "then q2 -120.00 deg", "no problem found"):
             assert words in r.output
+        assert (tmp_path / "rig.png").stat().st_size > 10_000
 
         # each arm moves from the CLI: the probe's joint 3 out by 1 mm, the stack's y stage to -4 mm (µm shown)
         r = run("move", *common, "--arm", "probe", "--joint", 3, "--by", "1mm", "--json")

@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from ..devices.base import DeviceError, device_key
-from ..joints import joint_spec
 from ..units import UnitError, bare_number_problem, format_position, parse_length
 from . import app
 from ._common import (
@@ -197,7 +196,6 @@ def reach(
 
 
 def _print_plan(result: ReachResult, json_out: bool) -> None:
-    from .. import kinematics as kin
 
     plan = result.plan
     if json_out:
@@ -289,7 +287,7 @@ def _status_lines(s: Any) -> list[str]:
     lines = ["tip (predicted, base frame) x y z: " + " ".join(f"{v * 1e6:+10.2f}" for v in s.tip) + " µm"]
     for j in (1, 2, 3):
         q, lim = s.q[j - 1], s.to_limits[j - 1]
-        if joint_spec(j).prismatic:
+        if s.kinds[j - 1] == "prismatic":
             shown, left = f"{q * 1e6:10.2f} µm ", f"{lim * 1e6:.2f} µm"
         else:
             shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
@@ -425,9 +423,9 @@ def jog(
     geom = parse_geometry(geometry)
     if rig_file is not None and camera is not None:
         fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
-    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration, db)
     if in_rig is not None:
-        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
+        device, geom, calibration, db = in_rig.device, in_rig.geometry, in_rig.calibration, in_rig.database
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -443,7 +441,8 @@ def jog(
     try:
         with open_store(db) as store, user_errors(DeviceBusy, DeviceError, *(camera_errors() if camera else ())):
             if in_rig is not None:
-                request = dataclasses.replace(request, guard=in_rig.guard(store))
+                request = dataclasses.replace(request, guard=in_rig.guard(store), joints=in_rig.joints,
+                                              stage=in_rig.stage)
             result = jog_session(
                 store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
                 opener=None if in_rig is None else in_rig.opener,

@@ -240,8 +240,8 @@ class Planner:
         n = round(exact)
         end = self.position_after(q_from, sign * n)  # exactly what dead_reckon gives for these steps
         return MovePlan(
-            self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from), c.gamma(q_to),
-            None if self.spec is kin.joint_spec(self.joint) else self.spec,
+            self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from),
+            c.gamma(q_to), None if self.spec is kin.joint_spec(self.joint) else self.spec,
         )
 
 

@@ -47,11 +47,11 @@ from ..devices.base import (
     url_scheme,
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..joints import JointSet, JointSpec
 from ..motion.planning import Planner
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
 from ..rig.envelope import EnvelopeViolation
 from ..rig.guard import Guard
-from ..joints import JointSet, JointSpec
 from ..units import format_position, position_display_unit
 from .conditions import calibration_device_problem, usage_warnings
 
