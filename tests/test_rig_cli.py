@@ -247,8 +247,51 @@ def test_rig_options_are_checked(tmp_path):
     assert r.exit_code == 2 and f"{bad}:" in r.output and "radius" in r.output
 
 
-def test_two_arms_on_one_controller_are_refused(tmp_path):
+def test_two_arms_on_one_controllers_channels_are_refused(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(RIG.format(nano="sim://", smaract="sim://"), encoding="utf-8")
     r = run("rig", "check", bad)
-    assert r.exit_code == 2 and "arm 'probe' is on this controller already" in r.output
+    assert r.exit_code == 2 and "arm 'probe' drives channel 1 of this controller already" in r.output, r.output
+
+
+TWO_ON_ONE = """\
+arm_distance = "0.5mm"
+{arms}
+"""
+STAGE = """
+[[arm]]
+name = "{name}"
+kind = "xyz"
+controller = "{url}"
+calibration = "stack.json"
+mount = {{ origin = ["{x}", "0mm", "0mm"] }}
+{joints}
+"""
+
+
+def test_two_arms_on_one_controller_keep_their_own_positions(tmp_path):
+    """Two stacks on one MCS2 (channels 0-2 and 3-5): one lock (the controller's), positions kept per arm."""
+    _stack_cal(tmp_path / "stack.json")
+    joints = "".join(f'\n  [[arm.joint]]\n  channel = {c}\n  range = ["-5mm", "5mm"]\n' for c in (1, 2, 3))
+    with MCS2Emulator() as emu:
+        arms = [STAGE.format(name="left", url=f"{emu.url}?channels=0,1,2&hz=20000", x="-20mm", joints=joints),
+                STAGE.format(name="right", url=f"{emu.url}?channels=3,4,5&hz=20000", x="20mm", joints=joints)]
+        rig = tmp_path / "rig.toml"
+        rig.write_text(TWO_ON_ONE.format(arms="".join(arms)), encoding="utf-8")
+        common = ("--rig", rig, "--db", tmp_path / "s.db", "--from-unreferenced", "--trust-calibration")
+        for arm, by in (("left", "100um"), ("right", "-30um")):
+            r = run("move", *common, "--arm", arm, "--joint", 1, "--by", by, "--json")
+            assert r.exit_code == 0, r.output
+            assert json.loads(r.stdout)["device"] == f"{emu.url}#arm={arm}"
+        assert emu.steps[0] == 100 and emu.steps[3] == -30  # 1 µm steps, each arm on its own channels
+        r = run("where", "--rig", rig, "--db", tmp_path / "s.db", "--json")
+        left, right = json.loads(r.stdout)["arms"]
+        assert left["q"] == pytest.approx([1e-4, 0.0, 0.0], abs=1e-12)
+        assert right["q"] == pytest.approx([-3e-5, 0.0, 0.0], abs=1e-12)
+        # the controller's one lock: held for one arm, the other waits its turn (refused, naming the holder)
+        from stickslip.storage import Store
+
+        with Store.open(tmp_path / "s.db") as st:
+            assert st.acquire_lock(emu.url, {"pid": 1, "host": "elsewhere", "since": "then"}) is None
+        r = run("move", *common, "--arm", "right", "--joint", 2, "--by", "10um")
+        assert r.exit_code == 2 and "being driven by another stickslip process (pid 1 on elsewhere" in r.output

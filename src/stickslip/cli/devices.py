@@ -251,7 +251,7 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
             by=None if by is None else _parse_joint_value(joint, by, "--by", joints),
             to=None if to is None else _position_or_stop(joint, to, "--to", joints),
             burst=burst or 1000, guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
-            trust_calibration=trust_calibration, joints=joints,
+            trust_calibration=trust_calibration, joints=joints, state_key=rig.state_key(a.name),
         )
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings, opener=opener_for(rig, a.name))
     failure = result.failure()
@@ -420,6 +420,7 @@ def where(
     if rig_file is None and arm is not None:
         fail("--arm names an arm of a rig: give --rig FILE too")
     joints: JointSet | None = None
+    key: str | None = None
     if rig_file is not None:
         from .rig import load, rig_database
 
@@ -430,6 +431,7 @@ def where(
         with user_errors(KeyError):
             device = rig.arm(arm).controller
             joints = rig.arm(arm).joint_specs()
+            key = rig.state_key(arm)
         db = str(rig_database(db, rig)) if db is None and rig.database else db
     from ..procedures.where import DeviceUnreachable, ReferenceRefused
     from ..procedures.where import where as kept_positions
@@ -443,7 +445,7 @@ def where(
         try:
             result = kept_positions(
                 store, device, references=references, pose=PoseUpdate(q1, q2, q3, theta, psi), offline=offline,
-                unlock=unlock, joints=joints,
+                unlock=unlock, joints=joints, key=key,
             )
         except ReferenceRefused as e:
             fail(f"--set {items[e.index]}: {e}")

@@ -77,7 +77,8 @@ class RigArm:
 
     ``joints`` are the arm's joints (kinds, ranges: :meth:`stickslip.rig.Arm.joint_specs`);
     ``stage`` an ``xyz`` arm's kinematics (``None`` for an ``mm3a``, whose ``geometry`` counts);
-    ``database`` the rig's (:func:`rig_database`: ``--db`` wins).
+    ``database`` the rig's (:func:`rig_database`: ``--db`` wins); ``state_key`` where the arm's
+    positions are kept (:meth:`stickslip.rig.Rig.state_key`).
     """
 
     rig: Rig
@@ -89,6 +90,7 @@ class RigArm:
     joints: JointSet
     stage: Stage | None
     database: str | None
+    state_key: str
 
     def guard(self, store: StateStore) -> Guard:
         """The arm's envelope, with the other arms where ``store`` keeps them."""
@@ -116,7 +118,7 @@ def rig_arm(rig_file: Path | None, arm: str | None, device: str | None, geometry
         a = rig.arm(arm)
     cal = calibration or (rig_file.parent / a.calibration if a.calibration else None)
     return RigArm(rig, a.name, a.controller, a.geometry or DEFAULT_GEOMETRY, cal, opener_for(rig, a.name),
-                  a.joint_specs(), a.stage(), rig_database(db, rig))
+                  a.joint_specs(), a.stage(), rig_database(db, rig), rig.state_key(a.name))
 
 
 def _joint_text(kind: str, v: float) -> str:

@@ -176,6 +176,7 @@ def reach(
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
         joints=None if in_rig is None else in_rig.joints, stage=None if in_rig is None else in_rig.stage,
+        state_key=None if in_rig is None else in_rig.state_key,
     )
     if camera_tip is not None and camera is None:
         fail("--camera-tip goes with --camera")
@@ -442,7 +443,7 @@ def jog(
         with open_store(db) as store, user_errors(DeviceBusy, DeviceError, *(camera_errors() if camera else ())):
             if in_rig is not None:
                 request = dataclasses.replace(request, guard=in_rig.guard(store), joints=in_rig.joints,
-                                              stage=in_rig.stage)
+                                              stage=in_rig.stage, state_key=in_rig.state_key)
             result = jog_session(
                 store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
                 opener=None if in_rig is None else in_rig.opener,

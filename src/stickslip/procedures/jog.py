@@ -619,6 +619,8 @@ class JogRequest:
         The arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`); the MM3A's by default.
     stage : Stage or None
         A Cartesian arm's kinematics (:meth:`stickslip.rig.Arm.stage`); keys move its tip in its base frame.
+    state_key : str or None
+        The key the arm's positions are kept under (:meth:`stickslip.rig.Rig.state_key`); the device's by default.
     """
 
     device: str
@@ -635,6 +637,7 @@ class JogRequest:
     guard: Guard | None = None
     joints: kin.JointSet | None = None
     stage: kin.Stage | None = None
+    state_key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -676,13 +679,14 @@ def jog(
     or if a joint is uncertain). ``keys()`` is opened once the device is open and closed
     however the session ends; ``show(status)`` draws. Ctrl-C ends the session like ``q``.
     """
-    key = device_key(request.device)
+    lock = device_key(request.device)
+    key = request.state_key or lock
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
+    with device_lock(store, lock):
         state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced,
-                                 request.joints)
+                                 request.joints, key)
         missing = [j for j in (1, 2, 3) if not _calibrated(calibration, state.spec(j))]
         if missing:
             raise MoveRefused(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")

@@ -550,6 +550,9 @@ class MoveRequest:
     joints : JointSet or None
         The arm's joints (kinds, ranges, nominal steps: :meth:`stickslip.rig.Arm.joint_specs`);
         ``None``: the MM3A's (:data:`stickslip.joints.JOINTS`).
+    state_key : str or None
+        The key the arm's positions and journal are kept under (:meth:`stickslip.rig.Rig.state_key`:
+        two arms on one controller); ``None``: the device's key. The lock is the device's either way.
     """
 
     device: str
@@ -563,6 +566,7 @@ class MoveRequest:
     trust_calibration: bool = False
     guard: Guard | None = None
     joints: JointSet | None = None
+    state_key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -634,12 +638,13 @@ def move(
     ``outcome`` (:meth:`MoveResult.failure`), the joint kept honest. ``opener(url)`` opens
     the controller (default :func:`~stickslip.devices.base.open_device`).
     """
-    key = device_key(request.device)
+    lock = device_key(request.device)
+    key = request.state_key or lock
     joint = request.joint
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
+    with device_lock(store, lock):
         state = load_state(store, key, request.joints)
         try:
             request.pose.apply(state)

@@ -179,6 +179,8 @@ class ReachRequest:
     stage : Stage or None
         A Cartesian arm's kinematics (a rig file's ``xyz`` arm, :meth:`stickslip.rig.Arm.stage`):
         ``to``/``by`` are then in its base frame and ``geometry`` is not used.
+    state_key : str or None
+        The key the arm's positions are kept under (:meth:`stickslip.rig.Rig.state_key`); the device's by default.
     """
 
     device: str
@@ -195,6 +197,7 @@ class ReachRequest:
     guard: Guard | None = None
     joints: kin.JointSet | None = None
     stage: kin.Stage | None = None
+    state_key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -260,12 +263,14 @@ def referenced_state(
     calibration: Calibration | None = None,
     from_unreferenced: bool = False,
     joints: kin.JointSet | None = None,
+    key: str | None = None,
 ) -> DeviceState:
     """The kept state of ``device`` (an arm of ``joints``, the MM3A's by default) with ``pose`` recorded.
 
-    :class:`MoveRefused` unless it may be planned from.
+    :class:`MoveRefused` unless it may be planned from. ``key``: where its positions are
+    kept (:meth:`stickslip.rig.Rig.state_key`), the device's key by default.
     """
-    state = load_state(store, device_key(device), joints)
+    state = load_state(store, key or device_key(device), joints)
     pose.apply(state)
     check_referenced(state, device, calibration, from_unreferenced)
     return state
@@ -311,8 +316,9 @@ def reach(
     ``KeyError``, ``ValueError``, :class:`~stickslip.devices.base.DeviceError`); a device
     error during the move is in the result (:meth:`ReachResult.failure`).
     """
-    key = device_key(request.device)
-    refs = (calibration, request.from_unreferenced, request.joints)
+    lock = device_key(request.device)
+    key = request.state_key or lock
+    refs = (calibration, request.from_unreferenced, request.joints, key)
     if request.dry_run:
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
@@ -320,7 +326,7 @@ def reach(
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
+    with device_lock(store, lock):
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
         check_envelope_path(request.guard, state, joint_path(plan))

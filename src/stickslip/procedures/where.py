@@ -119,6 +119,7 @@ def where(
     unlock: bool = False,
     probe: Callable[[str], dict[str, Any]] = probe_device,
     joints: JointSet | None = None,
+    key: str | None = None,
 ) -> WhereResult:
     """The kept state of ``device``, after recording ``pose`` and ``references`` (``(joint, q)``, rad or m).
 
@@ -128,11 +129,13 @@ def where(
     (:func:`probe_device`; :class:`DeviceUnreachable`). ``unlock`` releases a lock left by
     a process that is gone. :class:`ReferenceRefused` names a reference that cannot be kept.
     ``joints``: the arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`),
-    the MM3A's by default.
+    the MM3A's by default; ``key`` where they are kept (:meth:`stickslip.rig.Rig.state_key`:
+    two arms on one controller), the device's key by default.
     """
-    key = device_key(device)
+    lock = device_key(device)
+    key = key or lock
     if unlock:
-        store.set_state(key, "lock", "null")
+        store.set_state(lock, "lock", "null")
     state = load_state(store, key, joints)
     changed = pose.apply(state)
     for i, (joint, q) in enumerate(references):

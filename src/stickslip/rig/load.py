@@ -207,19 +207,24 @@ class _Reader(_Values):
             raise self.fail(("arm",), "a rig needs at least one [[arm]]")
         arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
         seen: set[str] = set()
-        devices: dict[str, str] = {}
+        # (controller URL, channel) -> the arm it drives: a channel is the URL's joint number, so two
+        # arms on one controller differ in their channels, or in the URL's channel map (channels=...)
+        channels: dict[tuple[str, int], str] = {}
         for i, a in enumerate(arms):
             if a.name in seen:
                 raise self.fail(("arm", i, "name"), f"a second arm named {a.name!r}")
             seen.add(a.name)
             try:
-                dev = device_key(a.controller)
+                device_key(a.controller)
             except ValueError as e:
                 raise self.fail(("arm", i, "controller"), str(e)) from None
-            if dev in devices:
-                raise self.fail(("arm", i, "controller"), f"arm {devices[dev]!r} is on this controller already: "
-                                "each arm needs its own (its positions are kept under its URL)")
-            devices[dev] = a.name
+            for j in a.joints:
+                other = channels.get((a.controller, j.channel))
+                if other is not None:
+                    raise self.fail(("arm", i, "controller"), f"arm {other!r} drives channel {j.channel} of this "
+                                    f"controller already (joint {j.number} of {a.name!r}): two arms on one "
+                                    "controller need channels of their own")
+                channels[(a.controller, j.channel)] = a.name
         vols_raw = doc.get("volume", [])
         if not isinstance(vols_raw, list):
             raise self.fail(("volume",), "must be an array of tables ([[volume]])")

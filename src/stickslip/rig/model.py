@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..devices.base import device_key
 from ..joints import JointSpec
 from ..kinematics import Geometry, Stage
 
@@ -346,6 +347,18 @@ class Rig:
                 return a
         names = ", ".join(a.name for a in self.arms)
         raise KeyError(f"{self.path}: no arm named {name!r} (the arms: {names})")
+
+    def state_key(self, arm: str | None = None) -> str:
+        """The key ``arm``'s positions and journal are kept under: its controller's device key, or
+        ``KEY#arm=NAME`` when another arm of the rig shares its controller (on other channels).
+
+        The lock stays the controller's (:func:`~stickslip.devices.base.device_key`): one process
+        drives a controller at a time.
+        """
+        a = self.arm(arm)
+        key = device_key(a.controller)
+        shared = any(o.name != a.name and device_key(o.controller) == key for o in self.arms)
+        return f"{key}#arm={a.name}" if shared else key
 
     def position(self, arm: str, name: str) -> NamedPosition:
         """The named position ``name`` of ``arm``; ``KeyError`` naming the known ones otherwise."""
