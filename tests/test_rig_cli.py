@@ -284,6 +284,10 @@ def test_two_arms_on_one_controller_keep_their_own_positions(tmp_path):
             assert r.exit_code == 0, r.output
             assert json.loads(r.stdout)["device"] == f"{emu.url}#arm={arm}"
         assert emu.steps[0] == 100 and emu.steps[3] == -30  # 1 µm steps, each arm on its own channels
+        _cal(tmp_path / "mm3a.json")  # an MM3A's calibration given to a stage: refused, nothing sent
+        r = run("move", *common, "--arm", "left", "-c", tmp_path / "mm3a.json", "--joint", 3, "--by", "10um")
+        assert r.exit_code == 2 and "models joint 3 as an MM3A's" in r.output and "Traceback" not in r.output
+        assert emu.steps[2] == 0
         r = run("where", "--rig", rig, "--db", tmp_path / "s.db", "--json")
         left, right = json.loads(r.stdout)["arms"]
         assert left["q"] == pytest.approx([1e-4, 0.0, 0.0], abs=1e-12)

@@ -22,6 +22,7 @@ from stickslip.motion.tracking import scaled_calibration
 from stickslip.procedures.jog import JogController
 from stickslip.procedures.move import steps_to_stop, target_of
 from stickslip.rig import RigError, mm3a_rig, parse_rig
+from stickslip.sim.arm import SimulatedMM3A
 from stickslip.units import format_position, format_spread
 
 STEP = 0.5e-6  # m: a stage's constant step in both directions
@@ -103,6 +104,11 @@ def test_a_stage_is_planned_with_its_constant_step_and_the_tracked_scale():
     assert Planner(scaled, js[3], kin.Pose()).steps(0.0, 0.001) == 1600
     with pytest.raises(KeyError, match="no constant step"):
         Planner(Calibration({}, {}, {}, "2026-11-22", "constant"), js[1], kin.Pose())
+    # an MM3A's calibration (joint 1 in rad) is never taken for a stage's steps (m): refused, not misread
+    mm3a = SimulatedMM3A(seed=0).true_models()
+    consts = {k: 40e-6 for k in mm3a}
+    with pytest.raises(ValueError, match="models joint 1 as an MM3A's"):
+        Planner(Calibration(mm3a, dict.fromkeys(mm3a), consts, "2026-11-22", "paper"), js[1], kin.Pose())
 
 
 @given(st.lists(st.floats(-0.005, 0.005), min_size=3, max_size=3))

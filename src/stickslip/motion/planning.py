@@ -143,6 +143,8 @@ class Planner:
         1, 2 or 3 of the MM3A, or an arm's own joint (:meth:`stickslip.rig.Arm.joint_specs`).
         A joint whose ``step_model`` is ``"constant"`` (an ``xyz`` arm's stage) is planned
         with the calibration's constant step of each direction; the pose does not enter.
+        A calibration that models such a joint the MM3A's way is refused (``ValueError``):
+        its steps are another arm's (an MM3A's joint 1 in rad, not a stage's in m).
     pose : Pose
         The other joints and the tilt; the joint's own coordinate in it is ignored.
 
@@ -161,6 +163,11 @@ class Planner:
         self.pose = pose
         self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
         if self.spec.step_model == "constant":  # a stage: the calibration's constant step of each direction
+            if any(j == self.joint for j, _ in calibration.models):  # an MM3A's: its steps are not a stage's
+                raise ValueError(
+                    f"this calibration models joint {self.joint} as an MM3A's (the paper's load terms), and this "
+                    "joint is a stage's, planned with a constant step: give the stage's own calibration"
+                )
             self._models: dict[int, JointModel] = {}
             for s, lab in ((1, "+"), (-1, "-")):
                 step = calibration.constant_steps.get((self.joint, lab))
