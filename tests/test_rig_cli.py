@@ -213,6 +213,8 @@ def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, post
         moved = [e - s for e, s in zip(plan["end"]["tip"], plan["start"]["tip"], strict=True)]
         assert moved == pytest.approx([0.0, 0.001, -0.001], abs=STACK_STEP / 2)
         assert plan["end"]["q"] == pytest.approx([0.0, -0.003, -0.001], abs=STACK_STEP / 2)
+        # the same tip in the rig frame: the mount's origin (-7, 6, 2) mm added, the tool 5 mm below the holder
+        assert plan["arm"] == "stack" and plan["rig_frame"]["end"] == pytest.approx([-0.007, 0.003, -0.004], abs=1e-6)
 
         # the named positions: joint 3 first, then joint 2, for each arm
         for arm, name in (("probe", "park"), ("stack", "retract")):

@@ -164,3 +164,22 @@ def test_the_rig_file_names_its_database():
     with pytest.raises(RigError, match=r"r.toml:13: arm\[1\].joint\[1\].step: '-1um' must be greater than 0"):
         parse_rig(XYZ.format(database="s.db").replace('step = "0.2um"', 'step = "-1um"'), "r.toml")
     assert mm3a_rig().database is None  # the shipped MM3A's file names none
+
+
+def test_the_simulated_mm3a_does_not_stand_for_a_stage(tmp_path):
+    """On sim:// a stage is dead-reckoned like a real controller's: no true end, never referenced until set."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    _cal().save(tmp_path / "stack.json")
+    rig = tmp_path / "lab.toml"
+    rig.write_text(XYZ.format(database="hist.db").replace('controller = "sim://"', 'controller = "sim://?realtime=0"\n'
+                                                         'calibration = "stack.json"'), encoding="utf-8")
+    runner = CliRunner()
+    r = runner.invoke(app, ["move", "--rig", str(rig), "--joint", "1", "--by", "250um"])
+    assert r.exit_code == 2 and "joint 1 was never referenced: its position 0 µm is assumed" in r.output, r.output
+    r = runner.invoke(app, ["move", "--rig", str(rig), "--joint", "1", "--by", "250um", "--from-unreferenced"])
+    assert r.exit_code == 0, r.output
+    assert "+500 steps" in r.output and "assumed end 250 µm" in r.output and "simulator" not in r.output
+    assert (tmp_path / "hist.db").is_file()  # the rig file's database (relative to the file)

@@ -40,6 +40,7 @@ from .rig import rig_arm
 if TYPE_CHECKING:
     from .. import kinematics as kin
     from ..procedures.reach import ReachResult
+    from ..rig import Arm
 
 _DEVICE_HELP = (
     "Controller URL: sim://, mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230] "
@@ -193,14 +194,18 @@ def reach(
     failure = result.failure()
     if failure is not None:
         fail(failure)
-    _print_plan(result, json_out)
+    _print_plan(result, json_out, None if in_rig is None else in_rig.rig.arm(in_rig.arm))
 
 
-def _print_plan(result: ReachResult, json_out: bool) -> None:
-
+def _print_plan(result: ReachResult, json_out: bool, arm: Arm | None = None) -> None:
+    """``reach``'s output; with a rig's ``arm``, also its name and the tip in the rig frame (its mount's pose)."""
     plan = result.plan
+    rig_frame = None
+    if arm is not None:
+        rig_frame = {k: [float(v) for v in arm.tip(q)] for k, q in (("start", plan.q_start), ("end", plan.q_end))}
     if json_out:
-        print_json(result.as_dict())
+        extra = {} if arm is None else {"arm": arm.name, "rig_frame": rig_frame}
+        print_json({**extra, **result.as_dict()})
         return
     n1, n2, n3 = plan.total_steps
     verb = "moved" if result.moved else "plan"
@@ -216,6 +221,9 @@ def _print_plan(result: ReachResult, json_out: bool) -> None:
         f"  joints q1 = {format_position(q[0], js[1])}, q2 = {format_position(q[1], js[2])}, "
         f"q3 = {format_position(q[2], js[3])}"
     )
+    if rig_frame is not None:
+        a, b = (", ".join(f"{x * 1e6:.2f}" for x in rig_frame[k]) for k in ("start", "end"))
+        say(f"  rig frame: ({a}) -> ({b}) µm")
     if result.sim_true is not None:
         true_tip = [float(v) for v in plan.tip_of(result.sim_true)]
         err = math.dist(true_tip, plan.target)

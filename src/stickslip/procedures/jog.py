@@ -59,7 +59,7 @@ from ..motion.reach import JointStepper, plan_reach
 from ..rig.envelope import EnvelopeViolation
 from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, track_fields
+from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, simulates, track_fields
 from .reach import referenced_state
 
 if TYPE_CHECKING:
@@ -698,7 +698,8 @@ def jog(
         keys_in: KeySource | None = None
         eyes: JogEyes | None = None
         try:
-            if isinstance(dev, PoseSettable):
+            if simulates(dev, state):  # the simulator: start where the positions say
+                assert isinstance(dev, PoseSettable)
                 dev.set_pose(*state.pose)
             ctl = JogController(
                 calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,

@@ -81,6 +81,7 @@ __all__ = [
     "step_joint",
     "steps_to_stop",
     "settle",
+    "simulates",
     "target_of",
     "track_fields",
     "where_line",
@@ -406,13 +407,24 @@ def steps_to_stop(joint: int, calibration: Calibration | None = None, spec: Join
     return int(math.ceil(1.2 * spec.span / small / 1000.0)) * 1000
 
 
+def simulates(dev: Controller, state: DeviceState) -> bool:
+    """Whether ``dev`` is the simulator and its arm (an MM3A) stands for ``state``'s arm.
+
+    The simulator is placed at the kept positions and knows its true joints; an arm whose
+    joints are not the MM3A's kind (a rig file's ``xyz`` stage) is not what it simulates,
+    so neither is used for it (its positions are dead-reckoned as on a real controller).
+    """
+    return isinstance(dev, PoseSettable) and all(state.spec(j).step_model == "paper" for j in (1, 2, 3))
+
+
 def exact_positions(dev: Controller, state: DeviceState, joint: int) -> bool:
     """Whether a move of ``joint`` on ``dev`` starts from a known position: referenced, or on the simulator.
 
     A simulator is placed at the kept positions (:class:`~stickslip.devices.base.PoseSettable`),
-    so they are exact there; on a real controller a position never referenced is assumed.
+    so they are exact there (:func:`simulates`); on a real controller a position never
+    referenced is assumed.
     """
-    return isinstance(dev, PoseSettable) or state.sources[joint] not in ("default", "assumed")
+    return simulates(dev, state) or state.sources[joint] not in ("default", "assumed")
 
 
 def is_simulator(url: str) -> bool:
@@ -444,7 +456,8 @@ def reference_problem(
     ``from_uncertain``: whether the option may plan from an uncertain position (a
     single-joint move) or not (a tip move: it needs all three joints known).
     """
-    if is_simulator(device) or state.referenced(joint):
+    simulated = is_simulator(device) and all(state.spec(j).step_model == "paper" for j in (1, 2, 3))
+    if simulated or state.referenced(joint):
         return None
     spec = state.spec(joint)
     how = reference_commands(device, joint, calibration, spec)
@@ -689,7 +702,8 @@ def _drive_opened(
         for w in usage_warnings(calibration, dev, request.device, plan.joint, request.max_age_days):
             warn(w)
         ready()  # the input is good: say so before driving
-        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+        if simulates(dev, state):  # the simulator: start where the positions say
+            assert isinstance(dev, PoseSettable)
             dev.set_pose(*plan.pose)
         def save(st: DeviceState) -> None:
             if plan.from_uncertain is not None:  # in flight from an uncertain start: anywhere it could reach
@@ -704,7 +718,7 @@ def _drive_opened(
         if outcome.error is None or state.track.get(plan.joint) is not None:
             save_state(store, state)
         true_end = None
-        if outcome.error is None and isinstance(dev, KnowsTruePosition):
+        if outcome.error is None and isinstance(dev, KnowsTruePosition) and simulates(dev, state):
             true_end = float(dev.position(plan.joint))
         return outcome, true_end
     finally:

@@ -39,6 +39,7 @@ from .move import (
     exact_positions,
     kept_after_interrupt,
     reference_problem,
+    simulates,
 )
 
 __all__ = [
@@ -354,7 +355,8 @@ def _drive_opened(
     """Open the device, drive ``plan``, close; the outcome and the simulator's true joints."""
     dev = opener(request.device)
     try:
-        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+        if simulates(dev, state):  # the simulator: start where the positions say
+            assert isinstance(dev, PoseSettable)
             dev.set_pose(*state.pose)
 
         def save(st: DeviceState) -> None:
@@ -362,7 +364,7 @@ def _drive_opened(
 
         outcome = drive_reach(dev, state, plan, calibration, save, request.burst)
         true_q = None
-        if outcome.error is None and isinstance(dev, KnowsTruePosition):
+        if outcome.error is None and isinstance(dev, KnowsTruePosition) and simulates(dev, state):
             q = [float(dev.position(j)) for j in (1, 2, 3)]
             true_q = (q[0], q[1], q[2])
         return outcome, true_q
