@@ -17,7 +17,7 @@ from stickslip.calibration import calibrate
 from stickslip.calibration.intervals import relative_sd
 
 DAYS = ("2026-10-05", "2026-10-06", "2026-10-07")
-pytestmark = pytest.mark.slow  # about 5 s: make test-fast leaves this file out
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("dahl_acceptance")]  # about 5 s, its days fitted once
 
 
 @pytest.fixture(scope="module")
