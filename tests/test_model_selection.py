@@ -203,6 +203,10 @@ def test_intervals_grow_away_from_the_calibrated_poses_and_the_filter_uses_them(
     old = Calibration.load(path)
     assert old.predictive[(3, "+")].exponent == 1.0
     assert float(relative_sd(old, 3, "+", *far)) == pytest.approx(math.hypot(pred.floor, pred.slope * d), rel=1e-9)
+    doc["uncertainty"][0]["exponent"] = 3
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(ValueError, match=r"uncertainty\[0\]\.exponent must be 1 or 2"):
+        Calibration.load(path)
 
 
 def test_the_papers_procedure_is_untouched():
