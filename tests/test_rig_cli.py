@@ -55,7 +55,7 @@ margin = "100um"
 name = "park"
 arm = "probe"
 q2 = "-120deg"
-q3 = "0.1mm"
+q3 = "0mm"
 order = [3, 2]
 """
 
@@ -92,7 +92,7 @@ def test_two_arms_from_the_command_line(tmp_path):
         r = run("rig", "check", rig, "-o", tmp_path / "rig.png")
         assert r.exit_code == 0, r.output
         for words in ("2 arm(s), 2 volume(s), 1 named position(s)", "arm 'probe' (mm3a)", "arm 'gripper'",
-                      "volume 'objective': cylinder, margin 200 µm", "position 'park' of 'probe': q3 0.100 mm, "
+                      "volume 'objective': cylinder, margin 200 µm", "position 'park' of 'probe': q3 0.000 mm, "
                       "then q2 -120.00 deg", "no problem found"):
             assert words in r.output
         assert (tmp_path / "rig.png").stat().st_size > 10_000
@@ -137,7 +137,10 @@ def test_two_arms_from_the_command_line(tmp_path):
         r = run("where", "--rig", rig, "--db", db, "--json")
         probe = json.loads(r.stdout)["arms"][0]
         assert probe["q"][1] == pytest.approx(-2 * math.pi / 3, abs=1e-4)
-        assert probe["q"][2] == pytest.approx(1e-4, abs=2e-6)
+        assert 0.0 <= probe["q"][2] <= 0.5e-6  # within half a step of the stop, never past it
+        r = run("move", *common, "--arm", "probe", "--joint", 3, "--by", "0.5mm", "--json")
+        assert r.exit_code == 0, r.output
+        assert json.loads(r.stdout)["q_from"] == probe["q"][2]
 
 
 def test_rig_options_are_checked(tmp_path):

@@ -83,6 +83,7 @@ __all__ = [
     "target_of",
     "track_fields",
     "where_line",
+    "within_stops",
 ]
 
 
@@ -270,6 +271,18 @@ def target_of(state: DeviceState, joint: int, by: float | None = None, to: float
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
 
+def within_stops(joint: int, q: float) -> float:
+    """``q`` (rad or m) held within ``joint``'s end stops: where dead reckoning past a stop leaves the joint.
+
+    A planned move rounds to whole steps, so its predicted end may lie up to half a step
+    beyond its target; when the target is an end stop that is beyond the stop, where the
+    joint cannot be (its slider slips at the stop). The kept position is then the stop;
+    its σ stays what the track says (the stop was not heard, only predicted).
+    """
+    spec = kin.joint_spec(joint)
+    return float(min(max(float(q), spec.lower), spec.upper))
+
+
 @dataclass(frozen=True)
 class TrackedPlan:
     """A move of one joint planned with the day's tracked step scale.
@@ -315,9 +328,13 @@ class TrackedPlan:
     from_uncertain: tuple[float, float] | None = None
 
     def position_after(self, n_signed: int, q_start: float | None = None) -> float:
-        """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start)."""
+        """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start).
+
+        Held at the joint's end stops (:func:`within_stops`): steps that would carry it past
+        a stop slip there.
+        """
         q0 = self.q_from if q_start is None else q_start
-        return float(Planner(self.calibration, self.joint, self.pose).position_after(q0, n_signed))
+        return within_stops(self.joint, Planner(self.calibration, self.joint, self.pose).position_after(q0, n_signed))
 
     def bounds_after(self, n_signed: int) -> tuple[float, float] | None:
         """Where an uncertain start's bounds are after ``n_signed`` steps (rad or m); ``None`` for a known start."""
@@ -355,7 +372,8 @@ def plan_tracked(
     q_from = state.positions[joint]
     plan = Planner(scaled, joint, state.pose).plan(q_from, q_to)
     return TrackedPlan(
-        joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
+        joint, q_from, q_to, int(plan.signed_steps), within_stops(joint, plan.q_end_predicted), scaled, state.pose,
+        track, note,
         joint_sigma_model(calibration, joint, state.pose),  # the model error in this pose (docs/models.md §4)
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
         from_uncertain=state.uncertain.get(joint),
