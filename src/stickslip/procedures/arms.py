@@ -10,19 +10,19 @@ joint in its order, after checking the whole path.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 from ..calibration import Calibration
 from ..devices.base import Controller, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state
-from ..rig import Rig
+from ..rig import NamedPosition, Rig
 from ..rig.envelope import EnvelopeViolation
 from ..rig.guard import Guard, mapped
 from ..rig.secrets import controller_url
 from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, move, track_fields
 
-__all__ = ["ArmState", "arm_states", "go_to", "guard_for", "opener_for"]
+__all__ = ["ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "safe_order"]
 
 
 def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
@@ -45,6 +45,17 @@ def opener_for(
 
     def open_arm(_url: str) -> Controller:
         return inner(controller_url(a))
+
+    return mapped(open_arm, a)
+
+
+def arm_opener(rig: Rig, arm: str | None, inner: Callable[[str], Controller]) -> Callable[[str], Controller]:
+    """Opens ``arm``'s controller at the URL it is given (its options kept, e.g. ``realtime=1``), with the arm's
+    password added and its joints mapped to channels (what a server that owns the arm opens it with)."""
+    a = rig.arm(arm)
+
+    def open_arm(url: str) -> Controller:
+        return inner(controller_url(replace(a, controller=url)))
 
     return mapped(open_arm, a)
 
@@ -88,7 +99,44 @@ def go_to(
     ``from_unreferenced`` and ``trust_calibration`` go to each move (:class:`~.move.MoveRequest`).
     """
     a = rig.arm(arm)
-    target = rig.position(a.name, name)
+    return go_to_position(store, rig, a.name, rig.position(a.name, name), calibration, burst=burst, warn=warn,
+                          ready=ready, opener=opener, tolerance=tolerance, from_unreferenced=from_unreferenced,
+                          trust_calibration=trust_calibration)
+
+
+def safe_order(q_from: Sequence[float], q_to: Sequence[float]) -> tuple[int, ...]:
+    """The order to reach a position saved without one (rad, rad, m): joint 3 first when it retracts, else last.
+
+    The tip is drawn back before the arm swings and pushed out only once it points where
+    it should (the order :func:`stickslip.procedures.named.go_to` uses).
+    """
+    return (3, 1, 2) if q_to[2] < q_from[2] else (1, 2, 3)
+
+
+def go_to_position(
+    store: MoveStore,
+    rig: Rig,
+    arm: str | None,
+    target: NamedPosition,
+    calibration: Calibration,
+    *,
+    burst: int = 1000,
+    warn: Callable[[str], None] = lambda _message: None,
+    ready: Callable[[], None] = lambda: None,
+    opener: Callable[[str], Controller] | None = None,
+    tolerance: float = 1e-9,
+    from_unreferenced: bool = False,
+    trust_calibration: bool = False,
+    device: str | None = None,
+) -> tuple[MoveResult, ...]:
+    """Reach ``target`` (a rig file's named position, or one saved and given its order) as :func:`go_to` does.
+
+    ``device`` is the URL the moves open, and ``opener`` then opens it as it is (a server
+    gives its own URL and its controller, already mapped to the arm's channels); without
+    it, the arm's controller through :func:`opener_for`.
+    """
+    a = rig.arm(arm)
+    name = target.name
     key = device_key(a.controller)
     state = load_state(store, key)
     guard = guard_for(store, rig, a.name)
@@ -115,9 +163,11 @@ def go_to(
 
     for before, after in zip(path[:-1], path[1:], strict=True):
         j = next(i + 1 for i in range(3) if before[i] != after[i])
-        request = MoveRequest(a.controller, j, to=after[j - 1], burst=burst, guard=guard_for(store, rig, a.name),
-                              from_unreferenced=from_unreferenced, trust_calibration=trust_calibration)
-        result = move(store, request, calibration, warn=warn, ready=once, opener=opener_for(rig, a.name, opener))
+        request = MoveRequest(device or a.controller, j, to=after[j - 1], burst=burst,
+                              guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
+                              trust_calibration=trust_calibration)
+        result = move(store, request, calibration, warn=warn, ready=once,
+                      opener=opener if device is not None else opener_for(rig, a.name, opener))
         results.append(result)
         if result.outcome.error is not None:
             break
