@@ -488,7 +488,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
-                check_envelope(self.guard, state, joint, target)
+                check_envelope(self.guard, state, joint, target, cal)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
             publish(state)

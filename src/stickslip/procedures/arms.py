@@ -17,10 +17,9 @@ from ..calibration import Calibration
 from ..devices.base import Controller, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state
 from ..rig import NamedPosition, Rig
-from ..rig.envelope import EnvelopeViolation
 from ..rig.guard import Guard, mapped
 from ..rig.secrets import controller_url
-from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, move, track_fields
+from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, check_envelope_path, move
 
 __all__ = ["ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "safe_order"]
 
@@ -147,11 +146,10 @@ def go_to_position(
         if goal is not None and abs(goal - q[j - 1]) > tolerance:
             q[j - 1] = goal
             path.append(list(q))
-    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
     try:
-        guard.check(path, sd)
-    except EnvelopeViolation as e:
-        raise MoveRefused(f"going to {name!r}: refused by the rig's envelope: {e}") from None
+        check_envelope_path(guard, state, path, calibration)
+    except MoveRefused as e:
+        raise MoveRefused(f"going to {name!r}: {e}") from None
     results: list[MoveResult] = []
     started = False
 

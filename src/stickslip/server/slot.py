@@ -389,7 +389,7 @@ class MotionSlot:
         path = [list(q), list(q), list(q)]
         path[1][joint - 1], path[2][joint - 1] = ends
         try:
-            check_envelope_path(guard, st, path)
+            check_envelope_path(guard, st, path, self.calibration)
         except MoveRefused as e:
             raise Conflict(f"{what} of joint {joint}{direction} from stop to stop: {one_line(e)}") from None
 
