@@ -318,6 +318,10 @@ def test_the_sigma_along_a_path_is_the_kalman_filters_prediction():
     assert got == pytest.approx(np.array([expect[v] for v in s]), rel=1e-9)
     # joint 3 grew over its 2 mm (5 % scale σ: 50 µm half way, 100 µm at the end)
     assert got[0, 2] == pytest.approx(50e-6, rel=0.01) and got[1, 2] == pytest.approx(100e-6, rel=0.01)
+    # what a jog's next tick starts from: the model at the path's end, its pose bookkeeping carried on
+    after = growth.after(path)
+    assert [math.sqrt(after.P[j][0][0]) for j in range(3)] == pytest.approx(expect[3.0], rel=1e-9)
+    assert after.last_pose[2] == (0.0, round(-math.pi / 2 + 0.2, 9), 0.0)
     assert SigmaGrowth.constant((1e-4, 2e-4, 1e-6)).sd_at(path, SigmaGrowth.constant((1e-4, 2e-4, 1e-6)).starts(
         path), s) == pytest.approx(np.tile([1e-4, 2e-4, 1e-6], (len(s), 1)))
 

@@ -40,6 +40,7 @@ moves, so over a stretch it grows by at most ``D`` times the rotary joints' σ.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -301,13 +302,23 @@ class SigmaGrowth:
 
         The six numbers are ``P00, P01, P02, P11, P12, P22``.
         """
+        return self._propagate(np.asarray(path, dtype=float))[0]
+
+    def after(self, path: ArrayLike) -> SigmaGrowth:
+        """The σ model at the end of ``path`` (poses, rad or m): what a jog's next tick starts from."""
+        _, P, last = self._propagate(np.asarray(path, dtype=float))
+        return dataclasses.replace(self, P=P, last_pose=last)
+
+    def _propagate(self, path: Array) -> tuple[Array, tuple[tuple[tuple[float, float, float], ...], ...],
+                                               tuple[tuple[float, float, float] | None, ...]]:
         n = len(path) - 1
-        out = np.empty((n, 3, 6))
+        out = np.empty((max(n, 0), 3, 6))
         if self.step_noise == 0 and not any(self.P[j][a][b] for j in range(3) for a in range(3) for b in range(3)
                                             if (a, b) != (0, 0)):
             out[:] = 0.0  # nothing grows: the start's σ all along
             out[:, :, 0] = [self.P[j][0][0] for j in range(3)]
-            return out
+            return out, self.P, self.last_pose
+        ends, lasts = [], []
         for j in range(3):
             p = self.P[j]
             p00, p01, p02, p11, p12, p22 = p[0][0], p[0][1], p[0][2], p[1][1], p[1][2], p[2][2]
@@ -335,7 +346,9 @@ class SigmaGrowth:
                     p00 += 2.0 * d * p02 + d * d * p22 + self.step_noise**2 * abs(d) * gamma
                     p01, p02 = p01 + d * p12, p02 + d * p22
                     p22 += self.scale_walk**2 * steps
-        return out
+            ends.append(((p00, p01, p02), (p01, p11, p12), (p02, p12, p22)))
+            lasts.append(last)
+        return out, tuple(ends), tuple(lasts)
 
     def sd_at(self, path: Array, starts: Array, s: Array) -> Array:
         """Each joint's σ (rad, rad, m) at path parameters ``s`` (``k + t`` on segment ``k``): ``(M, 3)``.
