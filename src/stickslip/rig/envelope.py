@@ -263,7 +263,10 @@ class SigmaGrowth:
     (the filter's predict: the step scale's uncertainty carried over the distance, and the
     per-step scatter) and ``scale_walk² n`` to the scale's. A joint that starts to move
     after another joint has moved since its own last move (its pose changed) first gets
-    ``sigma_model²`` added to its scales' variance (correlation ``correlation``).
+    ``sigma_model²`` added to its scales' variance (correlation ``correlation``), as the
+    filter does after a move in a new pose; along one path (and one jog session) that
+    happens at most once per joint: the model's error in the path's nearby poses is one
+    bias, not a new one at each of a reach's segments.
 
     Attributes
     ----------
@@ -280,6 +283,8 @@ class SigmaGrowth:
     last_pose : tuple of 3 (tuple of 3 floats or None)
         Each joint's other joints at its last move before the path (``None``: unknown,
         no pose change counted at its first move).
+    bumped : tuple of 3 bools
+        Whether each joint's new-pose error was added already (:meth:`after` carries it).
     """
 
     P: tuple[tuple[tuple[float, float, float], ...], ...]
@@ -289,6 +294,7 @@ class SigmaGrowth:
     sigma_model: tuple[float, float, float] = (0.0, 0.0, 0.0)
     correlation: float = 0.0
     last_pose: tuple[tuple[float, float, float] | None, ...] = (None, None, None)
+    bumped: tuple[bool, ...] = (False, False, False)
 
     @classmethod
     def constant(cls, q_sd: ArrayLike) -> SigmaGrowth:
@@ -306,49 +312,69 @@ class SigmaGrowth:
 
     def after(self, path: ArrayLike) -> SigmaGrowth:
         """The σ model at the end of ``path`` (poses, rad or m): what a jog's next tick starts from."""
-        _, P, last = self._propagate(np.asarray(path, dtype=float))
-        return dataclasses.replace(self, P=P, last_pose=last)
+        _, P, last, bumped = self._propagate(np.asarray(path, dtype=float))
+        return dataclasses.replace(self, P=P, last_pose=last, bumped=bumped)
 
     def _propagate(self, path: Array) -> tuple[Array, tuple[tuple[tuple[float, float, float], ...], ...],
-                                               tuple[tuple[float, float, float] | None, ...]]:
+                                               tuple[tuple[float, float, float] | None, ...], tuple[bool, ...]]:
         n = len(path) - 1
         out = np.empty((max(n, 0), 3, 6))
         if self.step_noise == 0 and not any(self.P[j][a][b] for j in range(3) for a in range(3) for b in range(3)
                                             if (a, b) != (0, 0)):
             out[:] = 0.0  # nothing grows: the start's σ all along
             out[:, :, 0] = [self.P[j][0][0] for j in range(3)]
-            return out, self.P, self.last_pose
-        ends, lasts = [], []
+            return out, self.P, self.last_pose, self.bumped
+        ends, lasts, bumps = [], [], []
+        rounded = np.round(path[:-1], 9)
+
+        def excl(v: Array) -> tuple[Array, float]:  # the sums before each segment, and the whole sum
+            c = np.cumsum(v)
+            return np.concatenate(([0.0], c[:-1])), float(c[-1]) if len(c) else 0.0
+
         for j in range(3):
             p = self.P[j]
-            p00, p01, p02, p11, p12, p22 = p[0][0], p[0][1], p[0][2], p[1][1], p[1][2], p[2][2]
-            last = self.last_pose[j]
-            gamma = max(abs(self.step[j]), 1e-300)
+            d = np.diff(path[:, j])
+            up, down = d > 0, d < 0
+            moving = np.flatnonzero(d != 0)
+            last, bumped = self.last_pose[j], self.bumped[j]
+            bump = np.zeros(n)
             sm2 = self.sigma_model[j] ** 2
-            col = path[:, j]
-            for k in range(n):
-                d = float(col[k + 1] - col[k])
-                if d != 0.0:
-                    o = [round(float(path[k, i]), 9) if i != j else 0.0 for i in range(3)]
-                    others = (o[0], o[1], o[2])
-                    if last is not None and others != last and sm2 > 0.0:
-                        p11, p22, p12 = p11 + sm2, p22 + sm2, p12 + self.correlation * sm2
-                    last = others
-                out[k, j] = (p00, p01, p02, p11, p12, p22)
-                if d == 0.0:
-                    continue
-                steps = abs(d) / gamma
-                if d > 0:
-                    p00 += 2.0 * d * p01 + d * d * p11 + self.step_noise**2 * abs(d) * gamma
-                    p01, p02 = p01 + d * p11, p02 + d * p12
-                    p11 += self.scale_walk**2 * steps
-                else:
-                    p00 += 2.0 * d * p02 + d * d * p22 + self.step_noise**2 * abs(d) * gamma
-                    p01, p02 = p01 + d * p12, p02 + d * p22
-                    p22 += self.scale_walk**2 * steps
-            ends.append(((p00, p01, p02), (p01, p11, p12), (p02, p12, p22)))
+            if len(moving):
+                others = rounded[moving].copy()
+                others[:, j] = 0.0
+                changed = np.zeros(len(moving), dtype=bool)
+                changed[1:] = np.any(others[1:] != others[:-1], axis=1)
+                if last is not None:  # the first move against the track's pose (kept with Python's round)
+                    first = [round(float(path[moving[0], i]), 9) if i != j else 0.0 for i in range(3)]
+                    changed[0] = tuple(first) != tuple(last)
+                if sm2 > 0.0 and not bumped and np.any(changed):
+                    bump[moving[int(np.argmax(changed))]:] = 1.0
+                    bumped = True
+                row = [round(float(path[moving[-1], i]), 9) if i != j else 0.0 for i in range(3)]
+                last = (row[0], row[1], row[2])
+            gamma = max(abs(self.step[j]), 1e-300)
+            steps = np.abs(d) / gamma
+            w2 = self.scale_walk**2
+            walk_up, walk_up_all = excl(np.where(up, w2 * steps, 0.0))
+            walk_dn, walk_dn_all = excl(np.where(down, w2 * steps, 0.0))
+            p11 = p[1][1] + sm2 * bump + walk_up
+            p22 = p[2][2] + sm2 * bump + walk_dn
+            p12 = p[1][2] + self.correlation * sm2 * bump
+            p01, p01_all = excl(np.where(up, d * p11, np.where(down, d * p12, 0.0)))
+            p02, p02_all = excl(np.where(up, d * p12, np.where(down, d * p22, 0.0)))
+            p01, p02 = p[0][1] + p01, p[0][2] + p02
+            inc = np.where(up, 2.0 * d * p01 + d * d * p11, np.where(down, 2.0 * d * p02 + d * d * p22, 0.0))
+            p00, p00_all = excl(inc + self.step_noise**2 * np.abs(d) * gamma)
+            p00 = p[0][0] + p00
+            out[:, j] = np.stack((p00, p01, p02, p11, p12, p22), axis=1)
+            b = sm2 * (float(bump[-1]) if n else 0.0)
+            e11, e22 = p[1][1] + b + walk_up_all, p[2][2] + b + walk_dn_all
+            e12 = p[1][2] + self.correlation * b
+            e00, e01, e02 = p[0][0] + p00_all, p[0][1] + p01_all, p[0][2] + p02_all
+            ends.append(((e00, e01, e02), (e01, e11, e12), (e02, e12, e22)))
             lasts.append(last)
-        return out, tuple(ends), tuple(lasts)
+            bumps.append(bumped)
+        return out, tuple(ends), tuple(lasts), tuple(bumps)
 
     def sd_at(self, path: Array, starts: Array, s: Array) -> Array:
         """Each joint's σ (rad, rad, m) at path parameters ``s`` (``k + t`` on segment ``k``): ``(M, 3)``.
@@ -497,15 +523,16 @@ def _sphere_gap(mid: Array, half: Array, centres: Array, radii: Array) -> Array:
     return np.asarray(np.sqrt(np.maximum(d2, 0.0)) - half[:, None] - radii[None, :], dtype=float)
 
 
-def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float = 0.0) -> Array:
+def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float | Array = 0.0) -> Array:
     """Clearance of the arm at poses ``q`` ``(P, 3)`` from each obstacle, m: distance minus allowed, ``(P, V + K)``.
 
-    A box, cylinder or other arm's link whose bounding sphere is farther than ``pad``
-    beyond the allowed distance from a link gets a lower bound (the spheres' gap), not its
-    exact distance: that is all a stretch's test needs.
+    A box, cylinder or other arm's link whose bounding sphere is farther than ``pad`` (m;
+    one value, or one per pose) beyond the allowed distance from a link gets a lower bound
+    (the spheres' gap), not its exact distance: that is all a stretch's test needs.
     """
     segs = arm.segments(q)  # (P, L, 2, 3)
     n_pose, n_link = segs.shape[0], segs.shape[1]
+    pad = np.repeat(np.broadcast_to(np.asarray(pad, dtype=float), (n_pose,)), n_link)  # per link row
     a, b = segs[..., 0, :].reshape(-1, 3), segs[..., 1, :].reshape(-1, 3)
     nv = len(obstacles.volumes)
     out = np.empty((len(a), obstacles.count))
@@ -531,7 +558,7 @@ def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float = 0.0) -> A
     if len(obstacles.others):
         oa, ob = obstacles.others[:, 0, :], obstacles.others[:, 1, :]
         gap = _sphere_gap(mid, half, (oa + ob) / 2.0, np.linalg.norm(ob - oa, axis=1) / 2.0)
-        near = gap < obstacles.allowed_o[None, :] + pad
+        near = gap < obstacles.allowed_o[None, :] + pad[:, None]
         d = np.maximum(gap, 0.0)
         rows, cols = np.nonzero(near)
         if len(rows):
@@ -580,19 +607,23 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margin
         if not len(s0):
             break
         span = (s1 - s0) * rate[seg]
-        pad = float(np.max(span)) + extra if len(span) else 0.0
         if obs.count == 0:
             break
         nodes, back = np.unique(np.concatenate((s0, s1)), return_inverse=True)
         kn = np.minimum(np.floor(nodes).astype(int), n - 1)
         qn = pose(nodes, kn)
-        c = clearances(arm, obs, qn, pad)  # without the σ margin
+        longest = float(np.max(span)) if len(span) else 0.0
+        if margins.fixed is None and margins.growth is not None:  # a growing σ: the margin at every node
+            at = margins.at(nodes, qn)
+            c = clearances(arm, obs, qn, longest + at)  # without the σ margin
+        else:  # one σ all along: the margin where it may matter
+            c = clearances(arm, obs, qn, longest + extra)
+            at = np.zeros(len(nodes))
+            near = np.min(c, axis=1) < extra
+            if np.any(near):
+                at[near] = margins.at(nodes[near], qn[near])
         i0, i1 = back[: len(s0)], back[len(s0):]
         c0, c1 = c[i0], c[i1]
-        at = np.zeros(len(nodes))  # the σ margin at each node: where it may matter
-        near = np.min(c, axis=1) < extra
-        if np.any(near):
-            at[near] = margins.at(nodes[near], qn[near])
         m0, m1 = c0 - at[i0][:, None], c1 - at[i1][:, None]
         bad0, bad1 = np.any(m0 < 0, axis=1), np.any(m1 < 0, axis=1)
         for mask, s, cc in ((bad0, s0, m0), (bad1, s1, m1)):
