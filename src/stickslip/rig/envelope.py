@@ -589,6 +589,25 @@ def _limit_refusal(arm: Arm, path: Array) -> Refusal | None:
                    (float(qk[0]), float(qk[1]), float(qk[2])), k / max(n, 1), units=_units(arm))
 
 
+def _node_clearances(
+    arm: Arm, obs: _Obstacles, margins: _Margins, nodes: Array, qn: Array, longest: float, extra: float
+) -> tuple[Array, Array]:
+    """The clearances at the nodes without the σ margin ``(P, V + K)``, and the σ margin at each node (m).
+
+    The exact distances are computed where they may matter: within the longest stretch's
+    motion plus the node's margin (or, with one σ all along, the path's largest margin).
+    """
+    if margins.fixed is None and margins.growth is not None:  # a growing σ: the margin at every node
+        at = margins.at(nodes, qn)
+        return clearances(arm, obs, qn, longest + at), at
+    c = clearances(arm, obs, qn, longest + extra)
+    at = np.zeros(len(nodes))
+    near = np.min(c, axis=1) < extra  # one σ all along: its margin where it may matter
+    if np.any(near):
+        at[near] = margins.at(nodes[near], qn[near])
+    return c, at
+
+
 def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins) -> tuple[float, Refusal | None]:
     """The fraction of the path shown clear from its start, and the refusal at its first problem (``None``: none)."""
     radii = np.asarray(arm.reach_radii())
@@ -612,16 +631,7 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margin
         nodes, back = np.unique(np.concatenate((s0, s1)), return_inverse=True)
         kn = np.minimum(np.floor(nodes).astype(int), n - 1)
         qn = pose(nodes, kn)
-        longest = float(np.max(span)) if len(span) else 0.0
-        if margins.fixed is None and margins.growth is not None:  # a growing σ: the margin at every node
-            at = margins.at(nodes, qn)
-            c = clearances(arm, obs, qn, longest + at)  # without the σ margin
-        else:  # one σ all along: the margin where it may matter
-            c = clearances(arm, obs, qn, longest + extra)
-            at = np.zeros(len(nodes))
-            near = np.min(c, axis=1) < extra
-            if np.any(near):
-                at[near] = margins.at(nodes[near], qn[near])
+        c, at = _node_clearances(arm, obs, margins, nodes, qn, float(np.max(span)) if len(span) else 0.0, extra)
         i0, i1 = back[: len(s0)], back[len(s0):]
         c0, c1 = c[i0], c[i1]
         m0, m1 = c0 - at[i0][:, None], c1 - at[i1][:, None]
