@@ -386,3 +386,32 @@ def test_accepted_paths_keep_out_by_the_grown_margin(case, scale_sd, sd0):
         pts = np.vstack([a + u * (b - a) for a, b in geo.links(arm, q)])
         for v in rig.volumes:
             assert float(np.min(geo.point_distance(pts, v))) >= v.margin + arm.radius + margin - 1e-9
+
+
+def test_a_new_pose_adds_the_models_error_once_along_a_path():
+    """Joint 3, joint 2, joint 3, joint 2, joint 3: the filter move by move would add σ_model² to joint 3's scales
+    at each of its moves after the first; along one path (a reach's segments, a jog session) it is added once."""
+    q = [0.0, -math.pi / 2, 0.0]
+    path = [list(q)]
+    for j, d in ((3, 1e-3), (2, 0.1), (3, 1e-3), (2, 0.1), (3, 1e-3)):
+        q[j - 1] += d
+        path.append(list(q))
+    path = np.array(path)
+    steps = (40e-6, 40e-6, 1e-6)
+    key3 = (0.0, round(-math.pi / 2, 9), 0.0, 0.0, 0.0)
+    tracks = [_track(0.0, 0.0), _track(0.0, 0.0), _track(1e-6, 0.02, key3)]
+    growth = _growth(tracks, steps, (0.0, 0.0, 0.05))
+    got = growth.sd_at(path, growth.starts(path), np.array([5.0]))[0, 2]
+    once = _filtered(tracks[:2] + [_track(1e-6, 0.02, key3)], path[:4], steps, (0.0, 0.0, 0.05), (1.0,))[3.0][2]
+    assert growth.after(path[:4]).bumped == (False, False, True)
+    # the filter's prediction over the first three moves (one pose change), then the last with no new error
+    t = _track(1e-6, 0.02, key3)
+    from stickslip import kinematics as kin
+
+    for k in range(4):
+        d = float(path[k + 1][2] - path[k][2])
+        if d:
+            t.predict(d, round(d / 1e-6), kin.Pose(*path[k]), 3, 0.05)
+    assert t.sd == pytest.approx(once, rel=1e-9)
+    t.predict(1e-3, 1000, None, 3, 0.0)  # no pose: no new model error
+    assert got == pytest.approx(t.sd, rel=1e-9)
