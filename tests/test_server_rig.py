@@ -24,6 +24,7 @@ from server_support import rig_room_on, until  # noqa: E402
 from typer.testing import CliRunner  # noqa: E402
 
 from stickslip.cli import app  # noqa: E402
+from stickslip.procedures.arms import position_of  # noqa: E402
 from stickslip.procedures.move import PoseUpdate  # noqa: E402
 from stickslip.server.app import create_app  # noqa: E402
 from stickslip.server.room import ControlRoom  # noqa: E402
@@ -119,6 +120,14 @@ def test_the_rig_files_positions_and_the_saved_ones_are_one_set(client: TestClie
     before = room.owned.dev.steps_simulated
     refused(client.post("/api/positions/inside/go"), 409, "going to 'inside'", "'objective'")
     assert room.owned.dev.steps_simulated == before
+    # the command line's `rig go` finds the saved ones too, with their safe order from the kept pose
+    rig = room.options.rig
+    assert rig is not None
+    here = position_of(room.store, rig, "probe", "here")
+    retracts = here.q[2] < room.state().positions[3]
+    assert here.q[2] == pytest.approx(200e-6, abs=0.6e-6) and here.order == ((3, 1, 2) if retracts else (1, 2, 3))
+    with pytest.raises(KeyError, match="no named position 'nowhere'.*saved for it: here, inside"):
+        position_of(room.store, rig, "probe", "nowhere")
 
 
 def test_a_jog_stops_at_the_envelope_with_its_margin(tmp_path: Path) -> None:

@@ -19,9 +19,13 @@ from ..devices.positions import DeviceState, StateStore, load_state
 from ..rig import NamedPosition, Rig
 from ..rig.guard import Guard, mapped
 from ..rig.secrets import controller_url
+from . import named
 from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, check_envelope_path, move
 
-__all__ = ["ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "safe_order"]
+__all__ = [
+    "ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "position_of",
+    "safe_order",
+]
 
 
 def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
@@ -88,7 +92,8 @@ def go_to(
     from_unreferenced: bool = False,
     trust_calibration: bool = False,
 ) -> tuple[MoveResult, ...]:
-    """Reach the rig file's named position ``name`` of ``arm``, joint by joint in its order.
+    """Reach the named position ``name`` of ``arm`` (the rig file's, or one saved for it: :func:`position_of`),
+    joint by joint in its order.
 
     The whole path (one straight joint move after another, in the position's order) is
     checked against the envelope before the first step; then each joint is moved by
@@ -98,9 +103,26 @@ def go_to(
     ``from_unreferenced`` and ``trust_calibration`` go to each move (:class:`~.move.MoveRequest`).
     """
     a = rig.arm(arm)
-    return go_to_position(store, rig, a.name, rig.position(a.name, name), calibration, burst=burst, warn=warn,
-                          ready=ready, opener=opener, tolerance=tolerance, from_unreferenced=from_unreferenced,
+    target = position_of(store, rig, a.name, name)
+    return go_to_position(store, rig, a.name, target, calibration, burst=burst, warn=warn, ready=ready, opener=opener,
+                          tolerance=tolerance, from_unreferenced=from_unreferenced,
                           trust_calibration=trust_calibration)
+
+
+def position_of(store: StateStore, rig: Rig, arm: str | None, name: str) -> NamedPosition:
+    """The named position ``name`` of ``arm``: the rig file's, else one saved for the arm (``stickslip serve``,
+    :mod:`.named`) with its :func:`safe_order` from the kept pose. ``KeyError`` naming both sets otherwise."""
+    a = rig.arm(arm)
+    try:
+        return rig.position(a.name, name)
+    except KeyError as e:
+        saved = {p.name: p for p in named.positions(store, a.controller)}
+        if name not in saved:
+            also = ", ".join(saved) or "none"
+            raise KeyError(f"{e.args[0]}; saved for it: {also}") from None
+    state = load_state(store, device_key(a.controller))
+    q = saved[name].q
+    return NamedPosition(name, a.name, q, safe_order([state.positions[j] for j in (1, 2, 3)], q))
 
 
 def safe_order(q_from: Sequence[float], q_to: Sequence[float]) -> tuple[int, ...]:
