@@ -391,7 +391,7 @@ class MotionSlot:
         try:
             check_envelope_path(guard, st, path, self.calibration)
         except MoveRefused as e:
-            raise Conflict(f"{what} of joint {joint}{direction} from stop to stop: {one_line(e)}") from None
+            raise Conflict(f"{what} (joint {joint}{direction}, from stop to stop): {one_line(e)}") from None
 
     def _need_calibration(self, what: str, borrow: bool = False) -> tuple[Calibration, bool]:
         cal = self.calibration
