@@ -169,3 +169,8 @@ def test_serve_takes_a_rig_and_checks_its_options(tmp_path: Path) -> None:
     assert r.exit_code == 2 and "not both" in r.output
     r = runner.invoke(app, ["serve", "--arm", "a"])
     assert r.exit_code == 2 and "--rig" in r.output
+    stage = tmp_path / "stage.toml"
+    stage.write_text("[[arm]]\nname = 's'\nkind = 'xyz'\ncontroller = 'sim://'\n"
+                     + "[[arm.joint]]\nrange = ['-1mm', '1mm']\n" * 3, encoding="utf-8")
+    r = runner.invoke(app, ["serve", "--rig", str(stage)])
+    assert r.exit_code == 2 and "arm 's' is a stage (xyz)" in r.output, r.output

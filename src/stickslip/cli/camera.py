@@ -430,6 +430,12 @@ def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | 
     from ..procedures.move import DeviceBusy
     from ._common import flush_warnings, warn_later
 
+    if rig_arm is not None and rig_arm.stage is not None:
+        fail(f"--camera with arm {rig_arm.arm!r}: the closed loop plans an MM3A's joints, and this arm is a "
+             "stage (xyz); move it without the camera")
+    if rig_arm is not None and rig_arm.state_key != device_key(rig_arm.device):
+        fail(f"--camera with arm {rig_arm.arm!r}: it shares its controller with another arm, and the closed loop "
+             "keeps positions per controller; move it without the camera")
     loop = camera_loop(camera, tip)
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError, *camera_errors()):
         opener = None

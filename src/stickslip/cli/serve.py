@@ -135,22 +135,25 @@ def serve(
         fail(f"stickslip serve needs the serve extra ({', '.join(missing)} missing): pip install 'stickslip[serve]'")
     from .rig import rig_arm
 
-    ra = rig_arm(rig_file, arm, device, geometry, calibration)
+    ra = rig_arm(rig_file, arm, device, geometry, calibration, db)
     url = with_realtime(ra.device if ra is not None else device_setting(device).value)
     from ..devices.base import DeviceError, device_key
     from ..procedures.move import DeviceBusy
-    from ..server.room import RoomOptions
+    from ..server.room import RoomOptions, serve_problem
     from ..server.run import ServeError
     from ..server.run import serve as run_server
     from ..storage import StoreError
 
+    if ra is not None and (problem := serve_problem(ra.rig, ra.arm)) is not None:
+        fail(problem)
     with user_errors():
         device_key(url)
     cal = ra.calibration if ra is not None else calibration_setting(calibration).value
     if cal is not None and not cal.exists():
         fail(f"--calibration: {cal} does not exist")
     options = RoomOptions(
-        device=url, db=database_setting(db).value, calibration=cal, tunings=_tunings(tuning),
+        device=url, db=database_setting(ra.database if ra is not None else db).value, calibration=cal,
+        tunings=_tunings(tuning),
         geometry=ra.geometry if ra is not None else geometry_setting(geometry).value,
         max_age_days=max_age_setting(max_age).value, rig=ra.rig if ra is not None else None,
         arm=ra.arm if ra is not None else None,

@@ -50,6 +50,7 @@ from ..procedures.observe import Observation, observe
 from ..procedures.reach import BORROWED_JOINT1, ReachRequest, reach
 from ..procedures.session import TraverseRequest, traverse
 from ..procedures.where import where
+from ..rig import Rig
 from ..storage import Store
 from ..units import format_position
 from .day import CalibrationDay
@@ -75,10 +76,26 @@ from .view import LiveView
 
 __all__ = [
     "MAX_BURST_S", "START_TIMEOUT_S", "Busy", "Conflict", "ControlRoom", "Motion", "NotFound", "Refused",
-    "RoomOptions", "Unavailable", "one_line", "refusal",
+    "RoomOptions", "Unavailable", "one_line", "refusal", "serve_problem",
 ]
 
 log = logging.getLogger("stickslip.server")
+
+
+def serve_problem(rig: Rig, arm: str | None) -> str | None:
+    """Why the room cannot serve ``arm`` of ``rig`` (one line), or ``None``.
+
+    The room's procedures plan an MM3A's joints and keep positions per controller, so an
+    ``xyz`` arm, or one that shares its controller with another arm, is not served yet.
+    """
+    a = rig.arm(arm)
+    if a.kind != "mm3a":
+        return (f"--rig: arm {a.name!r} is a stage ({a.kind}); the server plans an MM3A's joints, so it serves "
+                "MM3A arms only for now (drive the stage from the command line)")
+    if rig.state_key(a.name) != device_key(a.controller):
+        return (f"--rig: arm {a.name!r} shares its controller with another arm; the server keeps positions per "
+                "controller, so it serves arms on a controller of their own only for now")
+    return None
 
 
 class ControlRoom(LiveView, CalibrationDay, NamedPositions):
@@ -99,6 +116,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         opener: Callable[[str], Controller] | None = None,
         store_factory: Callable[[], Store] | None = None,
     ):
+        if options.rig is not None and (problem := serve_problem(options.rig, options.arm)) is not None:
+            raise ValueError(problem)
         self.options = options
         self.url = options.device
         self.key = device_key(options.device)
