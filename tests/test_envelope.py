@@ -161,6 +161,13 @@ def test_the_kalman_sigma_widens_the_margin():
     with pytest.raises(EnvelopeViolation, match=r"'wall'.*closer than the 12[56]\.\d+ µm allowed"):
         check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
     check_path(rig, None, path, q_sd=(0.0, 1e-3, 0.0))  # 3σ = 63 µm: clear
+    # refused where it starts, because of its σ alone: the line says what shrinks it
+    with pytest.raises(EnvelopeViolation, match=r"starts there, and 12[56]\.\d+ µm of the margin is its position's σ"):
+        check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
+    with pytest.raises(EnvelopeViolation) as e:  # inside the wall itself: σ or not, no hint
+        check_path(Rig("r", "r", (arm,), (dataclasses.replace(wall, point=tuple(tip + [0.0, 0.0, 1e-4])),)), None,
+                   path, q_sd=(0.0, 2e-3, 0.0))
+    assert "σ" not in str(e.value)
 
 
 def test_two_arms_keep_the_stated_distance():

@@ -88,6 +88,8 @@ class Refusal:
         Its distance from the obstacle, m (0 inside it); for a limit, how far beyond (rad or m).
     allowed : float
         The least distance allowed (margin + radii + n_sigma σ), m.
+    sigma : float
+        Of which the σ margin (``n_sigma`` times the tip's σ there), m.
     q : tuple of 3 floats
         The pose where it happens (rad or m per joint).
     units : tuple of 3 str
@@ -108,6 +110,7 @@ class Refusal:
     fraction: float
     undecided: bool = False
     units: tuple[str, str, str] = ("rad", "rad", "m")
+    sigma: float = 0.0
 
     def message(self) -> str:
         """One line in display units (µm, deg)."""
@@ -124,7 +127,11 @@ class Refusal:
             f"comes {self.distance * 1e6:.2f} µm from {self.obstacle!r}, closer than the "
             f"{self.allowed * 1e6:.2f} µm allowed"
         )
-        return f"arm {self.arm!r}: the path {how} at ({p}) µm in the rig frame, {where}, {pose}"
+        hint = ""
+        if self.fraction == 0.0 and self.sigma > 0.0 and self.distance > self.allowed - self.sigma:
+            hint = (f"; the arm starts there, and {self.sigma * 1e6:.2f} µm of the margin is its position's σ: "
+                    "observe or reference its joints to shrink it")
+        return f"arm {self.arm!r}: the path {how} at ({p}) µm in the rig frame, {where}, {pose}{hint}"
 
 
 class EnvelopeViolation(ValueError):
@@ -689,7 +696,7 @@ def _refusal(
     i = int(np.argmin(d))
     p = pts[i]
     return Refusal(arm.name, name, (float(p[0]), float(p[1]), float(p[2])), float(d[i]), allowed + sigma,
-                   (float(q[0]), float(q[1]), float(q[2])), fraction, undecided, _units(arm))
+                   (float(q[0]), float(q[1]), float(q[2])), fraction, undecided, _units(arm), sigma)
 
 
 def _units(arm: Arm) -> tuple[str, str, str]:
