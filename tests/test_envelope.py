@@ -119,10 +119,12 @@ def test_accepted_paths_keep_out_and_refused_ones_come_within_the_margin(case):
         p = np.array(r.point)
         on_arm = min(float(geo.point_segment(p[None, :], a, b)[0]) for a, b in geo.links(arm, q))
         assert on_arm < 1e-9  # the named point is on the arm at the named pose
-        allowed = vol.margin + arm.radius
+        allowed = arm.radius if r.start == "volume" else vol.margin + arm.radius
         assert float(geo.point_distance(p[None, :], vol)[0]) <= allowed + TOLERANCE + 1e-9
         assert r.allowed == pytest.approx(allowed)
         return
+    if np.min(geo.pair_clearances(rig, arm, np.vstack((path[0], path[0])), 1)) < 1e-9:
+        return  # it starts inside a margin: its way out is checked by test_a_way_out_of_a_margin_never_goes_deeper
     clearance, _ = geo.dense_clearance(rig, arm, path, poses_per_segment=40, points_per_link=40)
     assert clearance >= -1e-9
 
@@ -155,18 +157,19 @@ def test_the_kalman_sigma_widens_the_margin():
     tip = arm.tip(q)  # (21 mm, 0, 0)
     wall = HalfSpace("wall", tuple(tip + [0.0, 0.0, -0.0001]), (0.0, 0.0, -1.0))  # 100 µm below the tip
     rig = Rig("r", "r", (arm,), (wall,), n_sigma=3.0)
-    path = [q, q + [0.1, 0, 0]]
+    path = [q, q + [0.1, -5e-4, 0]]  # the tip 10.5 µm lower at the end
     check_path(rig, None, path)  # no σ: clear
-    # σ of 2e-3 rad on joint 2 moves the 21 mm tip by 42 µm (1σ): 3σ = 126 µm > 100 µm
-    with pytest.raises(EnvelopeViolation, match=r"'wall'.*closer than the 12[56]\.\d+ µm allowed"):
+    # σ of 2e-3 rad on joint 2 moves the 21 mm tip by 42 µm (1σ): 3σ = 126 µm > 100 µm, and it goes deeper
+    with pytest.raises(EnvelopeViolation, match=r"'wall' and the path goes deeper.*12[56]\.\d+ µm kept "
+                                                r"\(12[56]\.\d+ µm of it the position's σ\)"):
         check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
     check_path(rig, None, path, q_sd=(0.0, 1e-3, 0.0))  # 3σ = 63 µm: clear
-    # refused where it starts, because of its σ alone: the line says what shrinks it
+    # a pose refused because of its σ alone: the line says what shrinks it
     with pytest.raises(EnvelopeViolation, match=r"starts there, and 12[56]\.\d+ µm of the margin is its position's σ"):
-        check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
+        check_path(rig, None, path[:1], q_sd=(0.0, 2e-3, 0.0))
     with pytest.raises(EnvelopeViolation) as e:  # inside the wall itself: σ or not, no hint
         check_path(Rig("r", "r", (arm,), (dataclasses.replace(wall, point=tuple(tip + [0.0, 0.0, 1e-4])),)), None,
-                   path, q_sd=(0.0, 2e-3, 0.0))
+                   path[:1], q_sd=(0.0, 2e-3, 0.0))
     assert "σ" not in str(e.value)
 
 
@@ -371,8 +374,8 @@ def test_accepted_paths_keep_out_by_the_grown_margin(case, scale_sd, sd0):
         check_path(rig, None, path, q_sd=_growth(tracks, steps, (0.0, 0.0, 0.0)))
     except EnvelopeViolation as e:  # the named point is within the margin grown to where it is on the path
         r = e.refusal
-        if r.point is None:
-            return
+        if r.point is None or r.start == "volume":
+            return  # a limit, or a collision already at the start (test_a_way_out_of_a_margin_never_goes_deeper)
         at = r.fraction * (len(path) - 1)
         k = min(int(at), len(path) - 2)
         joint_sd = _filtered(tracks, path[:k + 2], steps, (0.0, 0.0, 0.0), (at - k,))[k + (at - k)]
@@ -382,6 +385,10 @@ def test_accepted_paths_keep_out_by_the_grown_margin(case, scale_sd, sd0):
         assert r.allowed == pytest.approx(allowed, rel=1e-6, abs=1e-12)
         assert float(geo.point_distance(np.array(r.point)[None, :], vol)[0]) <= allowed + TOLERANCE + 1e-9
         return
+    start_sd = np.array([sd0, sd0, sd0 * 1e-3])
+    start = rig.n_sigma * float(np.linalg.norm(kin.tip_sd(path[0], start_sd, arm.geometry)))
+    if np.min(geo.pair_clearances(rig, arm, np.vstack((path[0], path[0])), 1)) < start + 1e-9:
+        return  # it starts inside a margin: test_a_way_out_of_a_margin_never_goes_deeper
     fractions = np.linspace(0.0, 1.0, 21)[1:]
     sd = _filtered(tracks, path, steps, (0.0, 0.0, 0.0), fractions)
     u = np.linspace(0.0, 1.0, 40)[:, None]
@@ -422,3 +429,94 @@ def test_a_new_pose_adds_the_models_error_once_along_a_path():
     assert t.sd == pytest.approx(once, rel=1e-9)
     t.predict(1e-3, 1000, None, 3, 0.0)  # no pose: no new model error
     assert got == pytest.approx(t.sd, rel=1e-9)
+
+
+# ---------------------------------------------------------------- starting inside a margin
+
+
+def _wall_in_reach(margin: float, below: float):
+    """An arm whose tip (21 mm, 0, 0) is ``below`` m above a 10 mm wide block's top (the arm's base 16 mm away)."""
+    arm = mm3a()
+    q = np.array([0.0, -math.pi / 2, 0.0])
+    wall = Box("wall", (0.021, 0.0, -below - 1e-3), (5e-3, 5e-3, 1e-3), margin=margin)
+    return Rig("r", "r", (arm,), (wall,)), q
+
+
+def test_a_way_out_of_a_margin_is_accepted_and_a_way_deeper_refused():
+    rig, q = _wall_in_reach(margin=1e-4, below=4e-5)  # 40 µm above the wall, 60 µm inside its margin
+    up = q + [0.0, 0.01, 0.0]  # joint 2 turns the 21 mm tip up by 210 µm: out, then clear
+    check_path(rig, None, [q, up])
+    check_path(rig, None, [q, q + [0.3, 0.0, 0.0]])  # joint 1 turns it about z: no lower anywhere
+    with pytest.raises(EnvelopeViolation) as e:  # down: deeper
+        check_path(rig, None, [q, q - [0.0, 0.001, 0.0]])
+    r = e.value.refusal
+    assert r.start == "margin" and r.obstacle == "wall" and r.fraction < 0.01
+    assert r.distance == pytest.approx(4e-5, abs=1e-7) and r.allowed == pytest.approx(1e-4)
+    assert "move away from 'wall', or observe or reference its joints to shrink σ" in str(e.value)
+    # out, then down again into the margin: the normal rule once out
+    with pytest.raises(EnvelopeViolation) as e:
+        check_path(rig, None, [q, up, up - [0.0, 0.0095, 0.0]])
+    assert e.value.refusal.start == "" and e.value.refusal.fraction > 0.5
+    # a jog: all the way up, not a step down
+    assert safe_fraction(rig, None, [q, up]) == (1.0, None)
+    assert safe_fraction(rig, None, [q, q - [0.0, 0.001, 0.0]])[0] == 0.0
+    # a pose alone (rig check) is still reported inside the margin
+    with pytest.raises(EnvelopeViolation, match="closer than the 100.00 µm allowed"):
+        check_path(rig, None, [q])
+
+
+def test_a_start_inside_a_volume_is_refused_whichever_way_it_goes():
+    rig, q = _wall_in_reach(margin=1e-4, below=-2e-5)  # the tip 20 µm inside the wall
+    for path in ([q, q + [0.0, 0.01, 0.0]], [q, q + [0.3, 0.0, 0.0]]):
+        with pytest.raises(EnvelopeViolation, match="inside 'wall' already") as e:
+            check_path(rig, None, path)
+        assert e.value.refusal.start == "volume" and e.value.refusal.fraction == 0.0
+
+
+def test_the_sigma_margin_counts_on_the_way_out():
+    """In the margin by its σ alone: out while the distance gains on the σ, not along the wall."""
+    rig, q = _wall_in_reach(margin=0.0, below=1e-4)
+    rig = dataclasses.replace(rig, n_sigma=3.0)
+    sd = (0.0, 2e-3, 0.0)  # 3σ of the 21 mm tip: 126 µm > 100 µm
+    check_path(rig, None, [q, q + [0.0, 0.01, 0.0]], q_sd=sd)
+    with pytest.raises(EnvelopeViolation, match="observe or reference its joints to shrink σ"):
+        check_path(rig, None, [q, q - [0.0, 0.001, 0.0]], q_sd=sd)
+
+
+@st.composite
+def starts_in_a_margin(draw):
+    rig, path = draw(cases())
+    path = path[0] + draw(st.sampled_from([0.1, 0.01])) * (path - path[0])
+    arm, i = rig.arms[0], draw(st.integers(0, len(rig.volumes) - 1))
+    v = rig.volumes[i]
+    d0 = min(geo.link_distance(a, b, v) for a, b in geo.links(arm, path[0]))
+    margin = max(d0 - arm.radius, 0.0) + draw(st.floats(1e-6, 3e-4))
+    vols = tuple(dataclasses.replace(w, margin=margin) if j == i else w for j, w in enumerate(rig.volumes))
+    return dataclasses.replace(rig, volumes=vols), path
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(starts_in_a_margin())
+def test_a_way_out_of_a_margin_never_goes_deeper(case):
+    """Accepted from inside a margin: no (link, volume) pair's clearance falls while inside, none enters."""
+    rig, path = case
+    arm = rig.arms[0]
+    try:
+        check_path(rig, None, path)
+    except EnvelopeViolation as e:
+        r = e.refusal
+        q = np.array(r.q)
+        assert _on_path(path, q)
+        if r.point is None:
+            return
+        vol = next(v for v in rig.volumes if v.name == r.obstacle)
+        d = min(geo.link_distance(a, b, vol) for a, b in geo.links(arm, q))
+        if r.start == "volume":  # a collision already where it starts
+            assert r.fraction == 0.0 and d <= arm.radius + 1e-9
+        else:  # where it is refused it is within the margin (deeper, or back in)
+            assert d - vol.margin - arm.radius <= TOLERANCE + 1e-9
+        return
+    c = geo.pair_clearances(rig, arm, path, 30)  # (poses, links, volumes), m
+    before = np.maximum.accumulate(c, axis=0)[:-1]
+    floor = np.where(c[0] < 0, np.minimum(before, 0.0), 0.0) - TOLERANCE - 1e-8
+    assert np.all(c[1:] >= floor)

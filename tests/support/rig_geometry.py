@@ -90,3 +90,29 @@ def dense_clearance(rig: Any, arm: Any, path: Array, margin_extra: float = 0.0,
                 if c < best:
                     best, name = c, v.name
     return best, name
+
+
+def link_distance(a: Array, b: Array, v: Any, points: int = 64, rounds: int = 60) -> float:
+    """Distance of the segment ab from volume ``v``, m: the distance along a segment from a convex set is
+    convex, so the best of ``points`` samples is refined by ternary search between its neighbours."""
+    t = np.linspace(0.0, 1.0, points)
+    d = point_distance(a + np.outer(t, b - a), v)
+    i = int(np.argmin(d))
+    lo, hi = t[max(i - 1, 0)], t[min(i + 1, points - 1)]
+    for _ in range(rounds):
+        m1, m2 = lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0
+        f = point_distance(np.vstack((a + m1 * (b - a), a + m2 * (b - a))), v)
+        lo, hi = (lo, m2) if f[0] <= f[1] else (m1, hi)
+    return float(min(float(np.min(d)), float(point_distance((a + (lo + hi) / 2.0 * (b - a))[None, :], v)[0])))
+
+
+def pair_clearances(rig: Any, arm: Any, path: Array, poses_per_segment: int) -> Array:
+    """Each (link, volume) pair's clearance (distance minus margin and radius, m) at poses sampled evenly along
+    ``path``: ``(poses, links, volumes)``."""
+    out = []
+    for k in range(len(path) - 1):
+        for t in np.linspace(0.0, 1.0, poses_per_segment, endpoint=k == len(path) - 2):
+            q = path[k] + t * (path[k + 1] - path[k])
+            out.append([[link_distance(a, b, v) - v.margin - arm.radius for v in rig.volumes]
+                        for a, b in links(arm, q)])
+    return np.asarray(out, dtype=float)

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -111,6 +111,7 @@ class Refusal:
     undecided: bool = False
     units: tuple[str, str, str] = ("rad", "rad", "m")
     sigma: float = 0.0
+    start: str = ""
 
     def message(self) -> str:
         """One line in display units (µm, deg)."""
@@ -121,6 +122,16 @@ class Refusal:
         if self.point is None:
             return f"arm {self.arm!r}: the path goes beyond the {self.obstacle} at {where}, {pose}"
         p = ", ".join(f"{v * 1e6:.1f}" for v in self.point)
+        if self.start == "volume":
+            return (f"arm {self.arm!r} is inside {self.obstacle!r} already (a collision: "
+                    f"{self.distance * 1e6:.2f} µm from it, the link's radius {self.allowed * 1e6:.2f} µm) "
+                    f"at ({p}) µm in the rig frame, {pose}: no move is planned from there")
+        if self.start == "margin":
+            sig = (f" ({self.sigma * 1e6:.2f} µm of it the position's σ)" if self.sigma > 0.0 else "")
+            return (f"arm {self.arm!r} starts within the margin of {self.obstacle!r} and the path goes "
+                    f"deeper: {self.distance * 1e6:.2f} µm from it at ({p}) µm in the rig frame, "
+                    f"{self.allowed * 1e6:.2f} µm kept{sig}, {where}, {pose}; move away from "
+                    f"{self.obstacle!r}, or observe or reference its joints to shrink σ")
         how = (
             f"reaches the edge of the {self.allowed * 1e6:.2f} µm kept around {self.obstacle!r}"
             if self.undecided else
@@ -436,6 +447,13 @@ class _Margins:
             return cls(arm, path, n_sigma, g, np.zeros((0, 3, 6)), np.sqrt([g.P[j][0][0] for j in range(3)]))
         return cls(arm, path, n_sigma, g, g.starts(path))
 
+    def rest(self, before: Array, path: Array) -> _Margins:
+        """The margins along ``path``, which follows the poses ``before`` (rad or m) of this one."""
+        if self.growth is None or self.fixed is not None:
+            return dataclasses.replace(self, path=path)
+        g = self.growth.after(before)
+        return dataclasses.replace(self, path=path, growth=g, starts=g.starts(path))
+
     def sd(self, s: Array) -> Array:
         """Each joint's σ at path parameters ``s``, ``(M, 3)``."""
         if self.fixed is not None:
@@ -486,6 +504,7 @@ class _Obstacles:
     others: Array  # (K, 2, 3) other arms' segments
     allowed_o: Array  # (K,)
     other_names: tuple[str, ...]
+    contact: Array  # (V + K,) the distance at which the link's capsule touches the obstacle, m
     half: tuple[int, ...] = ()  # columns of half-spaces
     bounded: tuple[int, ...] = ()  # columns of boxes and cylinders
 
@@ -519,7 +538,8 @@ def _obstacles(rig: Rig, arm: Arm, others: Mapping[str, ArrayLike]) -> _Obstacle
             names.append(f"arm {other.name}")
     return _Obstacles(
         vols, allowed_v, np.asarray(segs, dtype=float).reshape(-1, 2, 3), np.asarray(allowed_o, dtype=float),
-        tuple(names), tuple(i for i, v in enumerate(vols) if isinstance(v, HalfSpace)),
+        tuple(names), np.asarray([arm.radius] * len(vols) + [a - rig.arm_distance for a in allowed_o], dtype=float),
+        tuple(i for i, v in enumerate(vols) if isinstance(v, HalfSpace)),
         tuple(i for i, v in enumerate(vols) if not isinstance(v, HalfSpace)),
     )
 
@@ -537,6 +557,11 @@ def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float | Array = 0
     one value, or one per pose) beyond the allowed distance from a link gets a lower bound
     (the spheres' gap), not its exact distance: that is all a stretch's test needs.
     """
+    return np.asarray(_link_clearances(arm, obstacles, q, pad).min(axis=1), dtype=float)
+
+
+def _link_clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float | Array = 0.0) -> Array:
+    """:func:`clearances` of each link (the tip's is its last link's): ``(P, L, V + K)``, m."""
     segs = arm.segments(q)  # (P, L, 2, 3)
     n_pose, n_link = segs.shape[0], segs.shape[1]
     pad = np.repeat(np.broadcast_to(np.asarray(pad, dtype=float), (n_pose,)), n_link)  # per link row
@@ -572,7 +597,7 @@ def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float | Array = 0
             d[rows, cols], _ = _seg_seg(a[rows], b[rows], oa[cols], ob[cols])
         out[:, nv:] = d
     out -= np.concatenate((obstacles.allowed_v, obstacles.allowed_o))[None, :]
-    return np.asarray(out.reshape(n_pose, n_link, -1).min(axis=1), dtype=float)
+    return out.reshape(n_pose, n_link, -1)
 
 
 # ---------------------------------------------------------------- the path
@@ -678,6 +703,103 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margin
     return at_s / n, _refusal(arm, obs, q, which, at_s / n, undecided, sigma)
 
 
+_NOISE = 1e-9  # m: a clearance may fall by this (the distances' rounding) and still count as not decreasing
+_CHUNK = 2048  # poses per round of the way out of a margin
+
+
+def _pose(path: Array, s: Array) -> Array:
+    k = np.minimum(np.floor(s).astype(int), len(path) - 2)
+    return np.asarray(path[k] + (s - k)[:, None] * (path[k + 1] - path[k]), dtype=float)
+
+
+def _samples(rate: Array, tol: float) -> Iterator[Array]:
+    """The path parameters ``k + t`` (``t`` in (0, 1]) at most ``tol`` of motion apart, a chunk at a time."""
+    for k, r in enumerate(rate):
+        m = max(1, math.ceil(float(r) / tol))
+        for i in range(0, m, _CHUNK):
+            yield k + np.arange(i + 1, min(i + _CHUNK, m) + 1, dtype=float) / m
+
+
+def _escape(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins) -> tuple[float, float, Refusal | None]:
+    """The way out of the margins a path starts in (docs/rig.md, "Starting inside a margin").
+
+    Returns the path parameter where every link is ``tol`` clear of every margin (0: the
+    start is; ``n``: the whole path is the way out), the last parameter shown good, and the
+    refusal (``None``: none). Each (link, obstacle) pair that starts inside its margin must
+    not lose clearance (distance minus allowed, σ margin included) until it is out, and
+    then stays out; every other pair stays out: checked at poses at most ``tol`` of motion
+    apart, so between two of them a clearance falls by at most ``tol`` / 2.
+    """
+    n = len(path) - 1
+    zero = np.zeros(1)
+    at0 = margins.at(zero, path[:1])
+    c = _link_clearances(arm, obs, path[:1], at0)[0] - at0[0]  # (L, C)
+    if np.all(c >= 0.0):
+        return 0.0, 0.0, None
+    allowed = np.concatenate((obs.allowed_v, obs.allowed_o))
+    dist = c + at0[0] + allowed[None, :]
+    hit = (dist <= obs.contact[None, :]) & (c < 0.0)
+    if np.any(hit):
+        which = int(np.argmax(np.any(hit, axis=0)))
+        r = _refusal(arm, obs, path[0], which, 0.0, False, float(at0[0]))
+        return 0.0, 0.0, dataclasses.replace(r, allowed=float(obs.contact[which]), start="volume")
+    inside = c < 0.0
+    best = c.copy()  # each pair's largest clearance so far
+    rate = np.abs(np.diff(path, axis=0)) @ np.asarray(arm.reach_radii())
+    last = 0.0
+    for s in _samples(rate, tol):
+        q = _pose(path, s)
+        at = margins.at(s, q)
+        cs = _link_clearances(arm, obs, q, at) - at[:, None, None]  # (P, L, C)
+        before = np.maximum.accumulate(np.concatenate((best[None], cs[:-1])), axis=0)
+        floor = np.where(inside[None], np.minimum(before, 0.0) - _NOISE, 0.0)
+        bad = np.any(cs < floor, axis=(1, 2))
+        out = np.all(cs >= tol, axis=(1, 2))
+        i_bad = int(np.argmax(bad)) if np.any(bad) else len(s)
+        i_out = int(np.argmax(out)) if np.any(out) else len(s)
+        if i_out < i_bad:
+            return float(s[i_out]), float(s[i_out]), None
+        if i_bad < len(s):
+            short = cs[i_bad] - floor[i_bad]
+            link, which = np.unravel_index(int(np.argmin(short)), short.shape)
+            deeper = bool(inside[link, which])
+            r = _refusal(arm, obs, q[i_bad], int(which), float(s[i_bad]) / n, False, float(at[i_bad]))
+            prev = float(s[i_bad - 1]) if i_bad else last
+            return prev, prev, dataclasses.replace(r, start="margin") if deeper else r
+        best = np.maximum(best, cs.max(axis=0))
+        last = float(s[-1])
+    return float(n), float(n), None
+
+
+def _check(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins,
+           pose_only: bool = False) -> tuple[float, Refusal | None]:
+    """The fraction of the path shown clear from its start, and the refusal at its first problem.
+
+    A path that starts inside a margin first takes its way out (:func:`_escape`), then the
+    rest of it is checked as any other path (``pose_only``: a pose, no way out).
+    """
+    n = len(path) - 1
+    if obs.count == 0 or pose_only:
+        return _search(arm, obs, path, tol, margins)
+    s_out, good, refusal = _escape(arm, obs, path, tol, margins)
+    if refusal is not None:
+        return good / n, refusal
+    if s_out == 0.0:
+        return _search(arm, obs, path, tol, margins)
+    if s_out >= n:
+        return 1.0, None
+    k1 = math.floor(s_out) + 1
+    here = _pose(path, np.array([s_out]))
+    rest = np.vstack((here, path[k1:]))
+    first = k1 - s_out
+    frac, refusal = _search(arm, obs, rest, tol, margins.rest(np.vstack((path[:k1], here)), rest))
+    t = frac * (len(rest) - 1)
+    whole = (s_out + t * first if t <= 1.0 else k1 + (t - 1.0)) / n
+    if refusal is not None:
+        refusal = dataclasses.replace(refusal, fraction=whole)
+    return whole, refusal
+
+
 def _refusal(
     arm: Arm, obs: _Obstacles, q: Array, which: int, fraction: float, undecided: bool, sigma: float = 0.0
 ) -> Refusal:
@@ -748,7 +870,7 @@ def check_path(
     """
     a, obs, p, margins = _prepare(rig, arm, path, q_sd, others)
     limit = _limit_refusal(a, p)
-    _, refusal = _search(a, obs, p, tol, margins)
+    _, refusal = _check(a, obs, p, tol, margins, pose_only=np.asarray(path).shape[0] == 1)
     if limit is not None and (refusal is None or limit.fraction <= refusal.fraction):
         raise EnvelopeViolation(limit)
     if refusal is not None:
@@ -771,4 +893,4 @@ def safe_fraction(
     are left to the jog (it clamps to them).
     """
     a, obs, p, margins = _prepare(rig, arm, path, q_sd, others)
-    return _search(a, obs, p, tol, margins)
+    return _check(a, obs, p, tol, margins)
