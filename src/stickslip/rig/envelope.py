@@ -779,13 +779,14 @@ def _check(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins
     rest of it is checked as any other path (``pose_only``: a pose, no way out).
     """
     n = len(path) - 1
-    if obs.count == 0 or pose_only:
-        return _search(arm, obs, path, tol, margins)
-    s_out, good, refusal = _escape(arm, obs, path, tol, margins)
-    if refusal is not None:
-        return good / n, refusal
-    if s_out == 0.0:
-        return _search(arm, obs, path, tol, margins)
+    frac, refusal = _search(arm, obs, path, tol, margins)
+    if refusal is None or refusal.fraction > 0.0 or pose_only:  # only a start inside a margin stops at 0
+        return frac, refusal
+    s_out, good, out = _escape(arm, obs, path, tol, margins)
+    if out is not None:
+        return good / n, out
+    if s_out == 0.0:  # the start is clear: the search's refusal stands
+        return frac, refusal
     if s_out >= n:
         return 1.0, None
     k1 = math.floor(s_out) + 1
