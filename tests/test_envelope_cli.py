@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 
 import pytest
-from test_rig_cli import _cal, run
 
 from stickslip.sim.emulators import NanoControlEmulator
+from test_rig_cli import _cal, run
 
 RIG = """\
 name = "bench"

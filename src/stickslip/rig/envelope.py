@@ -30,6 +30,12 @@ point are named), or it is shorter than ``tol`` (refused too: the path then come
 the margin plus ``tol``; 0.1 µm by default). So an accepted path never enters a volume's
 margin, and a refused path does, or comes within ``tol`` of doing so.
 
+A path that starts inside a margin (not inside a volume: that is refused) may take the
+arm out (docs/rig.md, "Starting inside a margin"): until each link is out of each margin
+it started in, its clearance from that obstacle (σ margin included) must not fall, and
+from every other one it must stay positive, checked at poses ``tol`` of motion apart;
+once every link is ``tol`` clear, the rest of the path is checked as above.
+
 The σ margin on a stretch is bounded the same way: each joint's variance is convex along
 a straight joint move (a quadratic in the distance moved, :class:`SigmaGrowth`), so its
 largest value on a stretch is at one of the stretch's ends; and the tip's σ is
@@ -720,7 +726,9 @@ def _samples(rate: Array, tol: float) -> Iterator[Array]:
             yield k + np.arange(i + 1, min(i + _CHUNK, m) + 1, dtype=float) / m
 
 
-def _escape(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins) -> tuple[float, float, Refusal | None]:
+def _escape(
+    arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins
+) -> tuple[float, float, Refusal | None]:
     """The way out of the margins a path starts in (docs/rig.md, "Starting inside a margin").
 
     Returns the path parameter where every link is ``tol`` clear of every margin (0: the
@@ -761,9 +769,9 @@ def _escape(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margin
             return float(s[i_out]), float(s[i_out]), None
         if i_bad < len(s):
             short = cs[i_bad] - floor[i_bad]
-            link, which = np.unravel_index(int(np.argmin(short)), short.shape)
-            deeper = bool(inside[link, which])
-            r = _refusal(arm, obs, q[i_bad], int(which), float(s[i_bad]) / n, False, float(at[i_bad]))
+            link, col = np.unravel_index(int(np.argmin(short)), short.shape)
+            deeper = bool(inside[link, col])
+            r = _refusal(arm, obs, q[i_bad], int(col), float(s[i_bad]) / n, False, float(at[i_bad]))
             prev = float(s[i_bad - 1]) if i_bad else last
             return prev, prev, dataclasses.replace(r, start="margin") if deeper else r
         best = np.maximum(best, cs.max(axis=0))
