@@ -66,6 +66,7 @@ from .move import (
     device_lock,
     drive,
     exact_positions,
+    grow_track,
     sigma_growth,
     simulates,
 )
@@ -515,6 +516,7 @@ def run_jog(
     """
     t_prev = clock()
     show(controller.status())
+    seen: set[int] = set()  # the joints whose track has had the new pose's model error
     try:
         while not controller.quit:
             for key in read_keys(tick):
@@ -536,8 +538,12 @@ def run_jog(
                     return stepper.position_after(q_from, m)
 
                 source = "dead-reckoned" if exact_positions(dev, state, j) else "assumed"
+                assumed = state.sources[j] in ("default", "assumed")
                 out = drive(dev, state, j, n, max(abs(n), 1), reckon, save, source)
                 controller.sent_steps(j, out.sent)
+                if eyes is None and out.error is None and grow_track(  # (a camera's jog keeps its own tracks)
+                        state, j, q_from, out.sent, controller.calibration, pose, assumed, seen):
+                    save(state)  # the σ grown as a move's (docs/models.md §7)
                 if out.error is not None:
                     controller.stop()
                     controller.message = out.error

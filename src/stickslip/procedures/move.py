@@ -89,6 +89,7 @@ __all__ = [
     "step_joint",
     "steps_to_stop",
     "settle",
+    "grow_track",
     "sigma_growth",
     "simulates",
     "target_of",
@@ -419,6 +420,32 @@ def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:
         delta = state.positions[joint] - plan.q_from
         plan.track.predict(delta, outcome.sent, plan.pose, joint, plan.sigma_model)
         state.track[joint] = plan.track.to_json()
+
+
+def grow_track(
+    state: DeviceState, joint: int, q_from: float, sent: int, calibration: Calibration, pose: kin.Pose,
+    assumed: bool, seen: set[int],
+) -> bool:
+    """Grow ``joint``'s Kalman track over ``sent`` steps driven from ``q_from`` (rad or m), as :func:`settle` does.
+
+    For the moves driven without a :class:`TrackedPlan` (a reach's segments, a jog's
+    ticks): the displacement is the kept position's change; ``pose`` the kept pose the
+    steps were planned in. The model's error in a new pose is added at the joint's first
+    move in a new pose of the reach or jog session only (``seen``: the joints that had it, updated), as
+    :class:`~stickslip.rig.envelope.SigmaGrowth` predicts: one bias over a path's nearby
+    poses. Nothing for an uncertain joint or an ``assumed`` start (never referenced), as
+    for a move. Returns whether the track changed (the caller saves it).
+    """
+    if sent == 0 or joint in state.uncertain or assumed:
+        return False
+    track, _ = track_for(state.track.get(joint), calibration, joint)
+    model = 0.0 if joint in seen else joint_sigma_model(calibration, joint, pose)
+    before = track.pose
+    track.predict(state.positions[joint] - q_from, sent, pose, joint, model)
+    if before is not None and track.pose != before:  # a new pose: its error was added now
+        seen.add(joint)
+    state.track[joint] = track.to_json()
+    return True
 
 
 def steps_to_stop(joint: int, calibration: Calibration | None = None, spec: JointSpec | None = None) -> int:

@@ -37,6 +37,7 @@ from .move import (
     device_lock,
     drive,
     exact_positions,
+    grow_track,
     kept_after_interrupt,
     reference_problem,
     simulates,
@@ -107,6 +108,7 @@ def drive_reach(
     if any(abs(a - b) > 1e-12 * max(1.0, abs(b)) for a, b in zip(start, plan.q_start, strict=True)):
         raise ValueError(f"the device's kept positions {start} are not the plan's start {plan.q_start}")
     out = ReachOutcome()
+    seen: set[int] = set()  # the joints whose track has had the new pose's model error
     for k, seg in enumerate(plan.segments):
         for j in (1, 2, 3):
             n = seg.steps[j - 1]
@@ -119,8 +121,11 @@ def drive_reach(
                 return stepper.position_after(q_from, m)
 
             source = "dead-reckoned" if exact_positions(dev, state, j) else "assumed"
+            assumed, pose = state.sources[j] in ("default", "assumed"), state.pose
             moved = drive(dev, state, j, n, burst, reckon, save, source)
             out.sent[j - 1] += moved.sent
+            if moved.error is None and grow_track(state, j, q_from, moved.sent, calibration, pose, assumed, seen):
+                save(state)  # the σ grown as a move's (docs/models.md §7)
             if moved.error is not None:
                 out.error, out.joint = moved.error, j
                 return out
