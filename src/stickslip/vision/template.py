@@ -116,6 +116,17 @@ class TrackerParams:
         A peak of the whole-frame search is fitted only when the template correlates with
         the frame there by this much at whole pixels, 1: the fit costs as much as the
         search, and a tip found again must correlate by ``reacquire_score`` anyway.
+    edge_near : float
+        The needle's edges right behind a fix (within 4.5 px) must keep at least this share
+        of their contrast further back (:mod:`.edges`), 1: a particle over the tip, or a fix
+        ahead of the tip, interrupts them there.
+    edge_blur_ratio : float
+        When the edges behind a fix are steeper (or flatter) than its blur copy's by more
+        than this ratio (their contrast further back against the copy's), the next copy
+        sharper (blurrier) is fitted too, 1.
+    edge_tie : float
+        ... and kept when its edges match better and its correlation is at most this much
+        lower (the blur copies tie), 1.
     front_fraction : float
         Largest share of the half-ring in front of the tip that may look like the needle,
         1: where the needle seems to end at something as dark (or bright) as itself, the
@@ -149,6 +160,9 @@ class TrackerParams:
     reacquire_ncc: float = 0.5
     level_hysteresis: float = 0.01
     max_blur_step: float = 2.0
+    edge_near: float = 0.6
+    edge_blur_ratio: float = 1.3
+    edge_tie: float = 0.05
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:
@@ -201,6 +215,9 @@ class TipTemplate:
         Offsets from the tip (x, y; px) of the needle's core near the tip, of the
         background around it (away from the needle), and of the background in front of
         the tip (within 60 deg of straight ahead, 2 to 14 px away, clear of the needle).
+    mask : ndarray of bool
+        The needle's pixels in the window (those standing out from the background,
+        connected to the tip).
     apex : tuple of float
         The tip in window coordinates, px ``(x, y)``.
     noise : float
@@ -221,6 +238,7 @@ class TipTemplate:
     core: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     ring: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     front: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+    mask: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
 
     @classmethod
     def learn(cls, image: FloatArray, tip: tuple[float, float], params: TrackerParams = TrackerParams()) -> TipTemplate:
@@ -247,7 +265,7 @@ class TipTemplate:
         # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
         # blurred by blur_bank[k] more than the first
         contrast = _trackable_contrast(win, weights, noise, (x, y))
-        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front)
+        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front, mask)
 
     @property
     def half(self) -> int:

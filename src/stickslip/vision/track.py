@@ -38,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample, patch, refine, steepest, warped
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc
@@ -113,6 +114,7 @@ class _Candidate:
     level: int
     ncc: float
     patch: Patch
+    edges: EdgeCheck | None = None
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -206,6 +208,8 @@ class TipTracker:
         coarse = params.coarse_factor
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
+        self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
+        self.edge_log: list[EdgeCheck | None] = []
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
         self._level = 0
@@ -297,7 +301,40 @@ class TipTracker:
             if not ref2.score >= ref.score - self.params.level_hysteresis or (ref.converged and not ref2.converged):
                 break
             ref, lvl = ref2, lvl2
-        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
+        ec = self._edge_check(patches, image, ref, lvl)
+        # the edges behind the tip steeper (or flatter) than this blur copy's: the next copy sharper (blurrier) is
+        # tried, and kept when its edges match better and its correlation is as good (the blur copies' tie)
+        p = self.params
+        if ec is not None and math.isfinite(ref.x) and math.isfinite(ref.y):
+            step = -1 if ec.far > p.edge_blur_ratio else (1 if ec.far < 1.0 / p.edge_blur_ratio else 0)
+            lvl2 = self._neighbour(lvl, step)
+            if lvl2 is not None:
+                pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
+                ref2 = refine(pt2, self._steep[lvl2], (ref.x, ref.y), ref.theta, correlation=corr)
+                ec2 = self._edge_check(patches, image, ref2, lvl2) if ref2.converged else None
+                if (ec2 is not None and abs(math.log(max(ec2.far, 1e-3))) < abs(math.log(max(ec.far, 1e-3)))
+                        and ref2.score >= ref.score - p.edge_tie):
+                    ref, lvl, ec = ref2, lvl2, ec2
+        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]), ec)
+
+    def _neighbour(self, level: int, step: int) -> int | None:
+        """The level one blur copy sharper (``step`` -1) or blurrier (+1) than ``level``, by signed blur."""
+        if step == 0:
+            return None
+        blurs = [b for _, _, b in self._spec]
+        order = sorted(range(len(blurs)), key=lambda i: blurs[i])
+        i = order.index(level) + step
+        return order[i] if 0 <= i < len(order) else None
+
+    def _edge_check(self, patches: dict[float, Patch], image: FloatArray, ref: Refinement, level: int
+                    ) -> EdgeCheck | None:
+        """The needle's edges behind the fitted tip against blur copy ``level``'s (:func:`~.edges.check_edges`)."""
+        if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
+            return None
+        k, f, _ = self._spec[level]
+        noise = self.template.noise / (2.0 * math.sqrt(math.pi) * math.hypot(self.params.template_blur, f))
+        return check_edges(self._edges, k, self._patch(patches, image, ref.x, ref.y, f), ref.x, ref.y, ref.theta,
+                           noise)
 
     # ------------------------------------------------------------------ search
 
@@ -399,6 +436,11 @@ class TipTracker:
                                 f"frame(s) (at most {p.max_blur_step:g} px a frame)")
         if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
+        ec = cand.edges
+        self.edge_log.append(ec)
+        if ec is not None and ec.near < p.edge_near * ec.far:
+            return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their contrast "
+                                    f"further back, needs {p.edge_near:g})")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
 
     def update(self, frame: FloatArray | Frame) -> Result:

@@ -1,0 +1,254 @@
+"""The needle's two edges followed back from a candidate tip: a check the template fit cannot give.
+
+The template fit (:mod:`.refine`) weighs every window pixel together and sets aside
+what disagrees (Tukey's weights): a tip under a particle, or a tip fitted with the wrong
+blur copy a few pixels ahead of or beside the true one, can still match the rest of the
+window well. This check looks instead at *where* the needle is: across the shaft, at
+stations 1.5 to 14 px back from the candidate tip, the frame's profile (averaged over
+three lines along the shaft) is compared with the template's at the same station, with
+a lateral shift of up to 1 px. At each station it measures
+
+* ``a``, the profile's contrast against the template's (least squares: 1 for the needle
+  as in the first frame, 0 for plain ground); and
+* the shift that matched best (the needle's axis against the candidate's).
+
+A needle whose edges are there right behind the tip (the first :data:`NEAR` stations,
+within 4.5 px) as they are further back confirms the candidate; a particle over the
+tip, or a candidate ahead of the tip, interrupts them there (``a`` near 0), and a
+candidate beside the needle's axis moves them (the shift at its bound). See
+docs/vision.md, "Following the edges".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .refine import Patch, _sample
+
+__all__ = ["EdgeProfiles", "EdgeCheck", "STATIONS", "NEAR", "learn_edges", "check_edges"]
+
+FloatArray = NDArray[np.float64]
+
+STATIONS = (1.5, 3.0, 4.5, 6.0, 8.0, 10.0, 12.0, 14.0)
+"""Distances from the tip back along the shaft where the profile across it is compared, px."""
+
+NEAR = 3
+"""The first ``NEAR`` stations are "right behind the tip"."""
+
+LINES = (-1.0, 0.0, 1.0)
+"""Offsets along the shaft of the lines averaged at each station, px (against the noise)."""
+
+STEP = 0.5
+"""Spacing of the samples across the shaft, px."""
+
+SHIFTS = 2
+"""Largest lateral shift tried, in samples (``SHIFTS * STEP`` px)."""
+
+GROUND = 7.0
+"""Ground on each side of the needle that a profile takes in, px."""
+
+GAP = 2.0
+"""The ground on each side is taken from this far out from the needle's edge, px."""
+
+
+@dataclass(frozen=True)
+class EdgeProfiles:
+    """The template's profiles across the shaft, for each blur copy (learnt once).
+
+    Attributes
+    ----------
+    shaft : tuple of float
+        Unit vector from the tip back along the needle (window axes).
+    offsets : ndarray, shape (m, q, 2)
+        Each sample's offset from the tip, px (window axes, before a turn), for the
+        stations ``s`` and samples across the shaft (padded by :data:`SHIFTS` on each side).
+    use : ndarray of bool, shape (m, q)
+        Which samples a station's comparison uses (the needle and :data:`GROUND` px of
+        ground on each side, within the template's window; none in the padding).
+    expected : list of ndarray, shape (m, q)
+        The template's profile at each blur copy, grey units (averaged over :data:`LINES`).
+    s : ndarray, shape (m,)
+        The stations kept (those where the template's needle is seen), px.
+    """
+
+    shaft: tuple[float, float]
+    offsets: FloatArray
+    use: NDArray[np.bool_]
+    expected: list[FloatArray]
+    s: FloatArray
+    inner: NDArray[np.bool_]
+    left: NDArray[np.bool_]
+    right: NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class EdgeCheck:
+    """What the edges behind a candidate tip show.
+
+    Attributes
+    ----------
+    near, far : float
+        The profile's contrast against the template's right behind the tip (the first
+        :data:`NEAR` stations) and further back (the median of the others), 1.
+    near_sd : float
+        Standard deviation of ``near`` from the pixel noise, 1.
+    shift : float
+        The median lateral shift of the needle's axis that matched best, px.
+    """
+
+    near: float
+    far: float
+    near_sd: float
+    shift: float
+    a: FloatArray
+    sd: FloatArray
+
+
+def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray[np.bool_],
+                shaft: tuple[float, float]) -> EdgeProfiles:
+    """The template's profiles across the shaft at :data:`STATIONS`, for each copy in ``bank``.
+
+    ``mask`` is the needle in the window, ``apex`` the tip in the window (x, y; px),
+    ``shaft`` the unit vector from the tip back along the needle.
+    """
+    n = mask.shape[0]
+    ux, uy = shaft
+    nx, ny = -uy, ux
+    t_half = n / 2.0
+    ts = np.arange(-t_half, t_half + 1e-9, STEP)
+    q = ts.size + 2 * SHIFTS
+    # the needle's axis and half-width at each station, from the mask across the shaft (a station nearer the
+    # tip than the mask reaches, where the threshold ate the blurred end, takes the nearest station's)
+    found: list[tuple[float, float] | None] = []
+    for s in STATIONS:
+        px = apex[0] + s * ux + ts * nx
+        py = apex[1] + s * uy + ts * ny
+        ix, iy = np.round(px).astype(int), np.round(py).astype(int)
+        inwin = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
+        on = np.zeros(ts.size, dtype=bool)
+        on[inwin] = mask[iy[inwin], ix[inwin]]
+        if not on.any():
+            found.append(None)
+            continue
+        idx = np.flatnonzero(on)
+        c = int(idx[np.argmin(np.abs(ts[idx]))])  # the run of needle samples nearest the axis
+        lo = hi = c
+        while lo > 0 and on[lo - 1]:
+            lo -= 1
+        while hi < ts.size - 1 and on[hi + 1]:
+            hi += 1
+        found.append((0.5 * float(ts[lo] + ts[hi]), 0.5 * float(ts[hi] - ts[lo]) + 0.5))
+    known = [f for f in found if f is not None]
+    offs, uses, kept, parts = [], [], [], []
+    for s, f in zip(STATIONS, found, strict=True):
+        if f is None:
+            if not known or s > STATIONS[NEAR - 1]:
+                continue
+            f = (known[0][0], 1.0)  # nearer the tip than the mask reaches: the axis there, the needle narrow
+        centre, half = f
+        tt = centre + (np.arange(q) - (q // 2)) * STEP
+        use = np.abs(tt - centre) <= half + GROUND
+        use[:SHIFTS] = False
+        use[-SHIFTS:] = False
+        ox = s * ux + tt * nx
+        oy = s * uy + tt * ny
+        # every line of the station must lie within the window
+        for line in LINES:
+            wx = apex[0] + ox + line * ux
+            wy = apex[1] + oy + line * uy
+            use &= (wx >= 0) & (wx <= n - 1) & (wy >= 0) & (wy <= n - 1)
+        if int(use.sum()) < 8:
+            continue
+        inner = use & (np.abs(tt - centre) <= half)
+        left = use & (tt - centre <= -half - GAP)
+        right = use & (tt - centre >= half + GAP)
+        if int(inner.sum()) < 1 or int(left.sum()) < 3 or int(right.sum()) < 3:
+            continue
+        offs.append(np.stack([ox, oy], axis=-1))
+        uses.append(use)
+        kept.append(s)
+        parts.append((inner, left, right))
+    if not kept:
+        none = np.zeros((0, q), dtype=bool)
+        return EdgeProfiles(shaft, np.zeros((0, q, 2)), none, [np.zeros((0, q))] * len(bank), np.zeros(0),
+                            none, none, none)
+    offsets = np.stack(offs)
+    use_a = np.stack(uses)
+    expected = []
+    for b in bank:
+        gy, gx = np.gradient(b)
+        p = Patch(np.stack([b, gx, gy]), 0, 0, (n, n))
+        acc = np.zeros(use_a.shape)
+        for line in LINES:
+            v, _ = _sample(p, apex[0] + offsets[..., 0].ravel() + line * ux, apex[1] + offsets[..., 1].ravel() + line * uy)
+            acc += v[0].reshape(use_a.shape)
+        expected.append(acc / len(LINES))
+    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept), np.stack([p[0] for p in parts]),
+                        np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts]))
+
+
+def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, theta: float,
+                noise: float) -> EdgeCheck | None:
+    """The edges behind a tip at ``(x, y)`` (frame px) turned by ``theta`` (rad), against blur copy ``copy``.
+
+    ``frame`` is the frame's patch smoothed as that copy is compared; ``noise`` the
+    standard deviation of one of its samples (grey units). ``None`` when too few
+    stations lie in the frame to say.
+    """
+    m = ep.s.size
+    if m < 3:
+        return None
+    ct, st_ = math.cos(theta), math.sin(theta)
+    ox, oy = ep.offsets[..., 0], ep.offsets[..., 1]
+    ux, uy = ep.shaft
+    acc = np.zeros(ep.use.shape)
+    ok = np.ones(ep.use.shape, dtype=bool)
+    for line in LINES:
+        wx, wy = ox + line * ux, oy + line * uy
+        v, inside = _sample(frame, (ct * wx - st_ * wy + x).ravel(), (st_ * wx + ct * wy + y).ravel())
+        acc += v[0].reshape(ep.use.shape)
+        ok &= inside.reshape(ep.use.shape)
+    F = acc / len(LINES)
+    E = ep.expected[copy]
+    q = E.shape[1]
+    a = np.full(m, np.nan)
+    sd = np.full(m, np.inf)
+    shift = np.zeros(m)
+    for j in range(m):
+        idx = np.flatnonzero(ep.use[j])
+        # the profiles' level and slope taken out (the ground's shading, vignetting): the needle's two edges left
+        ramp = np.stack([np.ones(idx.size), (idx - idx.mean()) / max(idx.size, 1)], axis=1)
+        proj = ramp @ np.linalg.pinv(ramp)
+        e = E[j, idx] - proj @ E[j, idx]
+        ve = float(e @ e)
+        if ve <= 1e-18:
+            continue
+        best = -math.inf
+        for d in range(-SHIFTS, SHIFTS + 1):
+            k = idx + d
+            if not ok[j, k].all():
+                continue
+            f = F[j, k] - proj @ F[j, k]
+            vf = float(f @ f)
+            cov = float(f @ e)
+            r = cov / math.sqrt(ve * vf) if vf > 0 else 0.0
+            if r > best:
+                best = r
+                a[j] = cov / ve
+                shift[j] = d * STEP
+        # samples STEP apart on a frame smoothed by about 1 px: about one independent sample a pixel
+        sd[j] = noise / math.sqrt(len(LINES)) / math.sqrt(ve * STEP)
+    is_near = ep.s <= STATIONS[NEAR - 1]
+    near_ok = np.isfinite(a) & is_near
+    far_ok = np.isfinite(a) & ~is_near
+    if not near_ok.any() or int(far_ok.sum()) < 2:
+        return None
+    w = 1.0 / sd[near_ok] ** 2
+    near = float((w * a[near_ok]).sum() / w.sum())
+    near_sd = float(1.0 / math.sqrt(w.sum()))
+    far = float(np.median(a[far_ok]))
+    return EdgeCheck(near, far, near_sd, float(np.median(shift[np.isfinite(a)])), a, sd)
