@@ -106,6 +106,7 @@ class EdgeCheck:
     shift: float
     a: FloatArray
     sd: FloatArray
+    shape: float = 1.0
 
 
 def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray[np.bool_],
@@ -218,6 +219,7 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     a = np.full(m, np.nan)
     sd = np.full(m, np.inf)
     shift = np.zeros(m)
+    rs = np.full(m, np.nan)
     for j in range(m):
         idx = np.flatnonzero(ep.use[j])
         # the profiles' level and slope taken out (the ground's shading, vignetting): the needle's two edges left
@@ -240,6 +242,7 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
                 best = r
                 a[j] = cov / ve
                 shift[j] = d * STEP
+                rs[j] = r
         # samples STEP apart on a frame smoothed by about 1 px: about one independent sample a pixel
         sd[j] = noise / math.sqrt(len(LINES)) / math.sqrt(ve * STEP)
     is_near = ep.s <= STATIONS[NEAR - 1]
@@ -251,4 +254,5 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     near = float((w * a[near_ok]).sum() / w.sum())
     near_sd = float(1.0 / math.sqrt(w.sum()))
     far = float(np.median(a[far_ok]))
-    return EdgeCheck(near, far, near_sd, float(np.median(shift[np.isfinite(a)])), a, sd)
+    return EdgeCheck(near, far, near_sd, float(np.median(shift[np.isfinite(a)])), a, sd,
+                     float(np.median(rs[np.isfinite(rs)])))

@@ -120,6 +120,10 @@ class TrackerParams:
         The needle's edges right behind a fix (within 4.5 px) must keep at least this share
         of their contrast further back (:mod:`.edges`), 1: a particle over the tip, or a fix
         ahead of the tip, interrupts them there.
+    edge_contrast : float
+        The needle's edges behind a fix (6 to 14 px back) must have at least this share of
+        the template's contrast there, 1: a fit on plain ground (whose shading the
+        brightness planes explain) finds them faint or missing.
     edge_blur_ratio : float
         When the edges behind a fix are steeper (or flatter) than its blur copy's by more
         than this ratio (their contrast further back against the copy's), the next copy
@@ -161,6 +165,7 @@ class TrackerParams:
     level_hysteresis: float = 0.01
     max_blur_step: float = 2.0
     edge_near: float = 0.6
+    edge_contrast: float = 0.6
     edge_blur_ratio: float = 1.3
     edge_tie: float = 0.05
 

@@ -438,6 +438,9 @@ class TipTracker:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
         ec = cand.edges
         self.edge_log.append(ec)
+        if ec is not None and ec.far < p.edge_contrast:
+            return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
+                                f"(needs {p.edge_contrast:g})")
         if ec is not None and ec.near < p.edge_near * ec.far:
             return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their contrast "
                                     f"further back, needs {p.edge_near:g})")
