@@ -124,6 +124,11 @@ class TrackerParams:
         The needle's edges behind a fix (6 to 14 px back) must have at least this share of
         the template's contrast there, 1: a fit on plain ground (whose shading the
         brightness planes explain) finds them faint or missing.
+    edge_shape : float
+        The profiles across the shaft behind a fix must correlate with the template's
+        by at least this much (the median over the stations, each shifted by up to 1 px
+        and its level and slope taken out), 1: the needle's two edges are where the
+        template has them, not a blob's or the ground's.
     edge_blur_ratio : float
         When the edges behind a fix are steeper (or flatter) than its blur copy's by more
         than this ratio (their contrast further back against the copy's), the next copy
@@ -166,6 +171,7 @@ class TrackerParams:
     max_blur_step: float = 2.0
     edge_near: float = 0.6
     edge_contrast: float = 0.6
+    edge_shape: float = 0.9
     edge_blur_ratio: float = 1.3
     edge_tie: float = 0.05
 

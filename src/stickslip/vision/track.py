@@ -441,6 +441,9 @@ class TipTracker:
         if ec is not None and ec.far < p.edge_contrast:
             return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
                                 f"(needs {p.edge_contrast:g})")
+        if ec is not None and ec.shape < p.edge_shape:
+            return Lost("lost", f"the needle's edges behind the tip are not where the template's are (profiles "
+                                f"correlate by {ec.shape:.2f}, needs {p.edge_shape:g})")
         if ec is not None and ec.near < p.edge_near * ec.far:
             return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their contrast "
                                     f"further back, needs {p.edge_near:g})")
