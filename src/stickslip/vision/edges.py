@@ -223,9 +223,15 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     for j in range(m):
         idx = np.flatnonzero(ep.use[j])
         # the profiles' level and slope taken out (the ground's shading, vignetting): the needle's two edges left
-        ramp = np.stack([np.ones(idx.size), (idx - idx.mean()) / max(idx.size, 1)], axis=1)
-        proj = ramp @ np.linalg.pinv(ramp)
-        e = E[j, idx] - proj @ E[j, idx]
+        tc = idx - idx.mean()
+        tc = tc / math.sqrt(float(tc @ tc))
+
+        def flat(v: FloatArray, tc: FloatArray = tc) -> FloatArray:
+            """``v`` less its level and slope across the shaft (the ground's shading)."""
+            v = v - v.mean()
+            return np.asarray(v - float(v @ tc) * tc)
+
+        e = flat(E[j, idx])
         ve = float(e @ e)
         if ve <= 1e-18:
             continue
@@ -234,7 +240,7 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
             k = idx + d
             if not ok[j, k].all():
                 continue
-            f = F[j, k] - proj @ F[j, k]
+            f = flat(F[j, k])
             vf = float(f @ f)
             cov = float(f @ e)
             r = cov / math.sqrt(ve * vf) if vf > 0 else 0.0

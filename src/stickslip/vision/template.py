@@ -136,6 +136,9 @@ class TrackerParams:
     edge_tie : float
         ... and kept when its edges match better and its correlation is at most this much
         lower (the blur copies tie), 1.
+    thin_blur : float
+        A blur copy as blurred as this or more (its blur and the smoothing every frame
+        gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
     front_fraction : float
         Largest share of the half-ring in front of the tip that may look like the needle,
         1: where the needle seems to end at something as dark (or bright) as itself, the
@@ -174,6 +177,7 @@ class TrackerParams:
     edge_shape: float = 0.9
     edge_blur_ratio: float = 1.3
     edge_tie: float = 0.05
+    thin_blur: float = 2.2
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:

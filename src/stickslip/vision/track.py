@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -200,7 +200,9 @@ class TipTracker:
             (0, f, -f) for f in params.sharpen_bank
         ]
         self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
-        self._steep = [steepest(t.bank[k], t.apex, w) for (k, _, _), w in zip(self._spec, t.level_weights, strict=True)]
+        # a copy blurred by 2 px or more (with the smoothing both get) is fitted on every second pixel
+        self._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(params.template_blur, abs(b)) >= params.thin_blur)
+                       for (k, _, b), w in zip(self._spec, t.level_weights, strict=True)]
         widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
         sel = self._steep[widest]  # the levels are compared on the widest mask
         self._select = sel
@@ -209,7 +211,7 @@ class TipTracker:
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
-        self.edge_log: list[EdgeCheck | None] = []
+        self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
         self._level = 0
@@ -301,21 +303,7 @@ class TipTracker:
             if not ref2.score >= ref.score - self.params.level_hysteresis or (ref.converged and not ref2.converged):
                 break
             ref, lvl = ref2, lvl2
-        ec = self._edge_check(patches, image, ref, lvl)
-        # the edges behind the tip steeper (or flatter) than this blur copy's: the next copy sharper (blurrier) is
-        # tried, and kept when its edges match better and its correlation is as good (the blur copies' tie)
-        p = self.params
-        if ec is not None and math.isfinite(ref.x) and math.isfinite(ref.y):
-            step = -1 if ec.far > p.edge_blur_ratio else (1 if ec.far < 1.0 / p.edge_blur_ratio else 0)
-            lvl2 = self._neighbour(lvl, step)
-            if lvl2 is not None:
-                pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
-                ref2 = refine(pt2, self._steep[lvl2], (ref.x, ref.y), ref.theta, correlation=corr)
-                ec2 = self._edge_check(patches, image, ref2, lvl2) if ref2.converged else None
-                if (ec2 is not None and abs(math.log(max(ec2.far, 1e-3))) < abs(math.log(max(ec.far, 1e-3)))
-                        and ref2.score >= ref.score - p.edge_tie):
-                    ref, lvl, ec = ref2, lvl2, ec2
-        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]), ec)
+        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
 
     def _neighbour(self, level: int, step: int) -> int | None:
         """The level one blur copy sharper (``step`` -1) or blurrier (+1) than ``level``, by signed blur."""
@@ -394,7 +382,52 @@ class TipTracker:
 
     # ------------------------------------------------------------------ decision
 
-    def _judge(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
+    def _judge(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> tuple[Result, _Candidate]:
+        """The decision on a candidate (docs/vision.md, "Decision rules"), and the candidate decided on.
+
+        A candidate the template's rules take is checked by its edges (:mod:`.edges`): when
+        they are steeper (flatter) than its blur copy's, the next copy sharper (blurrier) is
+        fitted from there and taken if its edges match better and its correlation ties
+        (the blur copies' tie broken); then the edges' rules decide.
+        """
+        p = self.params
+        res = self._rules(cand, image, reacquire)
+        r = cand.ref
+        # the edges only for a fit that correlates well enough to be taken (the template's rules refuse the others)
+        if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged:
+            return res, cand
+        patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
+        ec = self._edge_check(patches, image, cand.ref, cand.level)
+        if ec is not None:
+            step = -1 if ec.far > p.edge_blur_ratio else (1 if ec.far < 1.0 / p.edge_blur_ratio else 0)
+            lvl2 = self._neighbour(cand.level, step)
+            if lvl2 is not None:
+                pt2 = self._patch(patches, image, r.x, r.y, self._spec[lvl2][1])
+                ref2 = refine(pt2, self._steep[lvl2], (r.x, r.y), r.theta, correlation=p.sigma_factor)
+                ec2 = self._edge_check(patches, image, ref2, lvl2) if ref2.converged else None
+                if (ec2 is not None and abs(math.log(max(ec2.far, 1e-3))) < abs(math.log(max(ec.far, 1e-3)))
+                        and ref2.score >= r.score - p.edge_tie):
+                    cand2 = _Candidate(ref2, lvl2, ref2.score,
+                                       self._patch(patches, image, ref2.x, ref2.y, self._spec[lvl2][1]))
+                    res2 = self._rules(cand2, image, reacquire)
+                    if isinstance(res2, Fix) or not isinstance(res, Fix):
+                        cand, res, ec = cand2, res2, ec2
+        cand = replace(cand, edges=ec)
+        if ec is None or not isinstance(res, Fix):
+            return res, cand
+        if ec.far < p.edge_contrast:
+            return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
+                                f"(needs {p.edge_contrast:g})"), cand
+        if ec.shape < p.edge_shape:
+            return Lost("lost", f"the needle's edges behind the tip are not where the template's are (profiles "
+                                f"correlate by {ec.shape:.2f}, needs {p.edge_shape:g})"), cand
+        if ec.near < p.edge_near * ec.far:
+            return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
+                                    f"contrast further back, needs {p.edge_near:g})"), cand
+        return res, cand
+
+    def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
+        """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
         p = self.params
         r = cand.ref
         H, W = image.shape
@@ -436,17 +469,6 @@ class TipTracker:
                                 f"frame(s) (at most {p.max_blur_step:g} px a frame)")
         if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
-        ec = cand.edges
-        self.edge_log.append(ec)
-        if ec is not None and ec.far < p.edge_contrast:
-            return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
-                                f"(needs {p.edge_contrast:g})")
-        if ec is not None and ec.shape < p.edge_shape:
-            return Lost("lost", f"the needle's edges behind the tip are not where the template's are (profiles "
-                                f"correlate by {ec.shape:.2f}, needs {p.edge_shape:g})")
-        if ec is not None and ec.near < p.edge_near * ec.far:
-            return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their contrast "
-                                    f"further back, needs {p.edge_near:g})")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
 
     def update(self, frame: FloatArray | Frame) -> Result:
@@ -461,7 +483,7 @@ class TipTracker:
         if self._last is not None:
             cand = self._local(image)
             if cand is not None:
-                res = self._judge(cand, image)
+                res, cand = self._judge(cand, image)
                 if isinstance(res, Fix):
                     return self._accept(res, cand)
                 first_refusal = res
@@ -470,7 +492,7 @@ class TipTracker:
         for cand in self._global(image):
             if cand is None:
                 continue
-            res = self._judge(cand, image, reacquire=True)
+            res, cand = self._judge(cand, image, reacquire=True)
             if isinstance(res, Fix):
                 if best is None or not isinstance(best, Fix) or res.score > best.score:
                     best = res
@@ -500,6 +522,7 @@ class TipTracker:
         return ratio * float(np.median(self._mismatch[-p.recent :])) + p.mismatch_floor
 
     def _accept(self, fix: Fix, cand: _Candidate) -> Fix:
+        self._last_edges = cand.edges
         self._mismatch.append(1.0 - fix.score)
         del self._mismatch[: -self.params.recent]
         self._last = (fix.x, fix.y)
