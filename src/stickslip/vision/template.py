@@ -129,13 +129,6 @@ class TrackerParams:
         by at least this much (the median over the stations, each shifted by up to 1 px
         and its level and slope taken out), 1: the needle's two edges are where the
         template has them, not a blob's or the ground's.
-    edge_blur_ratio : float
-        When the edges behind a fix are steeper (or flatter) than its blur copy's by more
-        than this ratio (their contrast further back against the copy's), the next copy
-        sharper (blurrier) is fitted too, 1.
-    edge_tie : float
-        ... and kept when its edges match better and its correlation is at most this much
-        lower (the blur copies tie), 1.
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -175,8 +168,6 @@ class TrackerParams:
     edge_near: float = 0.6
     edge_contrast: float = 0.6
     edge_shape: float = 0.9
-    edge_blur_ratio: float = 1.3
-    edge_tie: float = 0.05
     thin_blur: float = 2.2
 
     def __post_init__(self) -> None:

@@ -305,15 +305,6 @@ class TipTracker:
             ref, lvl = ref2, lvl2
         return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
 
-    def _neighbour(self, level: int, step: int) -> int | None:
-        """The level one blur copy sharper (``step`` -1) or blurrier (+1) than ``level``, by signed blur."""
-        if step == 0:
-            return None
-        blurs = [b for _, _, b in self._spec]
-        order = sorted(range(len(blurs)), key=lambda i: blurs[i])
-        i = order.index(level) + step
-        return order[i] if 0 <= i < len(order) else None
-
     def _edge_check(self, patches: dict[float, Patch], image: FloatArray, ref: Refinement, level: int
                     ) -> EdgeCheck | None:
         """The needle's edges behind the fitted tip against blur copy ``level``'s (:func:`~.edges.check_edges`)."""
@@ -385,10 +376,9 @@ class TipTracker:
     def _judge(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> tuple[Result, _Candidate]:
         """The decision on a candidate (docs/vision.md, "Decision rules"), and the candidate decided on.
 
-        A candidate the template's rules take is checked by its edges (:mod:`.edges`): when
-        they are steeper (flatter) than its blur copy's, the next copy sharper (blurrier) is
-        fitted from there and taken if its edges match better and its correlation ties
-        (the blur copies' tie broken); then the edges' rules decide.
+        A candidate that correlates well enough to be taken is checked by the needle's edges
+        behind it (:mod:`.edges`); a fix the template's rules take stands only if the edges'
+        rules take it too.
         """
         p = self.params
         res = self._rules(cand, image, reacquire)
@@ -398,20 +388,6 @@ class TipTracker:
             return res, cand
         patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
         ec = self._edge_check(patches, image, cand.ref, cand.level)
-        if ec is not None:
-            step = -1 if ec.far > p.edge_blur_ratio else (1 if ec.far < 1.0 / p.edge_blur_ratio else 0)
-            lvl2 = self._neighbour(cand.level, step)
-            if lvl2 is not None:
-                pt2 = self._patch(patches, image, r.x, r.y, self._spec[lvl2][1])
-                ref2 = refine(pt2, self._steep[lvl2], (r.x, r.y), r.theta, correlation=p.sigma_factor)
-                ec2 = self._edge_check(patches, image, ref2, lvl2) if ref2.converged else None
-                if (ec2 is not None and abs(math.log(max(ec2.far, 1e-3))) < abs(math.log(max(ec.far, 1e-3)))
-                        and ref2.score >= r.score - p.edge_tie):
-                    cand2 = _Candidate(ref2, lvl2, ref2.score,
-                                       self._patch(patches, image, ref2.x, ref2.y, self._spec[lvl2][1]))
-                    res2 = self._rules(cand2, image, reacquire)
-                    if isinstance(res2, Fix) or not isinstance(res, Fix):
-                        cand, res, ec = cand2, res2, ec2
         cand = replace(cand, edges=ec)
         if ec is None or not isinstance(res, Fix):
             return res, cand
@@ -487,6 +463,12 @@ class TipTracker:
                 if isinstance(res, Fix):
                     return self._accept(res, cand)
                 first_refusal = res
+                if res.reason in ("lost", "out of focus") and self._edges_hold(cand.edges):
+                    # the needle's edges are where the fit put its tip, which a rule refused (its position
+                    # undetermined, its focus changed too fast): the tip is here, the whole frame has no other
+                    self._fresh = False
+                    self._since += 1
+                    return res
         # not found near the last fix (or refused there, or refused last time): the whole frame
         best: Result | None = None
         for cand in self._global(image):
@@ -504,6 +486,12 @@ class TipTracker:
         if first_refusal is not None:
             return first_refusal
         return Lost("lost", "not found near the last fix nor anywhere in the frame")
+
+    def _edges_hold(self, ec: EdgeCheck | None) -> bool:
+        """Whether the needle's edges behind a candidate pass the edge rules (``False`` when not checked)."""
+        p = self.params
+        return ec is not None and ec.far >= p.edge_contrast and ec.shape >= p.edge_shape and ec.near >= (
+            p.edge_near * ec.far)
 
     def _usual_mismatch(self) -> float | None:
         """The median ``1 - score`` of the recent fixes (``None`` before three)."""
