@@ -1,22 +1,23 @@
 """The needle's two edges followed back from a candidate tip: a check the template fit cannot give.
 
 The template fit (:mod:`.refine`) weighs every window pixel together and sets aside
-what disagrees (Tukey's weights): a tip under a particle, or a tip fitted with the wrong
-blur copy a few pixels ahead of or beside the true one, can still match the rest of the
-window well. This check looks instead at *where* the needle is: across the shaft, at
-stations 1.5 to 14 px back from the candidate tip, the frame's profile (averaged over
-three lines along the shaft) is compared with the template's at the same station, with
-a lateral shift of up to 1 px. At each station it measures
+what disagrees (Tukey's weights), and its brightness planes explain smooth ground well:
+a tip under a particle, a fit a few pixels ahead of the tip with the wrong blur copy,
+or a fit on the ground or a blob far from the tip can all score well. This check looks
+instead at *where* the needle is: across the shaft, at stations 1.5 to 14 px back from
+the candidate tip, the frame's profile (averaged over three lines along the shaft) is
+compared with the template's at the same station and blur copy, both with their level
+and slope taken out (the ground's shading), the frame's shifted sideways by up to 1 px.
+At each station it measures
 
 * ``a``, the profile's contrast against the template's (least squares: 1 for the needle
-  as in the first frame, 0 for plain ground); and
-* the shift that matched best (the needle's axis against the candidate's).
+  as in the first frame, 0 for plain ground);
+* ``r``, their correlation (near 1 where the two edges are where the template has them).
 
-A needle whose edges are there right behind the tip (the first :data:`NEAR` stations,
-within 4.5 px) as they are further back confirms the candidate; a particle over the
-tip, or a candidate ahead of the tip, interrupts them there (``a`` near 0), and a
-candidate beside the needle's axis moves them (the shift at its bound). See
-docs/vision.md, "Following the edges".
+Edges faint further back (``a``) or elsewhere (``r``) say the fit is not on the needle;
+edges that fade right behind the tip (the stations within 4.5 px) against further back
+say something lies over the tip, or the fit is ahead of it. See docs/vision.md,
+"Tracking the tip".
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ GROUND = 7.0
 """Ground on each side of the needle that a profile takes in, px."""
 
 GAP = 2.0
-"""The ground on each side is taken from this far out from the needle's edge, px."""
+"""A station is kept only where the window holds ground on both sides from this far out of the needle's
+edge, px."""
 
 
 @dataclass(frozen=True)
@@ -80,9 +82,6 @@ class EdgeProfiles:
     use: NDArray[np.bool_]
     expected: list[FloatArray]
     s: FloatArray
-    inner: NDArray[np.bool_]
-    left: NDArray[np.bool_]
-    right: NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -92,12 +91,16 @@ class EdgeCheck:
     Attributes
     ----------
     near, far : float
-        The profile's contrast against the template's right behind the tip (the first
-        :data:`NEAR` stations) and further back (the median of the others), 1.
+        The profiles' contrast against the template's right behind the tip (the stations
+        within 4.5 px, weighted by their noise) and further back (the median), 1.
     near_sd : float
         Standard deviation of ``near`` from the pixel noise, 1.
     shift : float
         The median lateral shift of the needle's axis that matched best, px.
+    a, sd : ndarray
+        Each station's contrast and its standard deviation from the pixel noise, 1.
+    shape : float
+        The lower quartile of the stations' correlations with the template's profiles, 1.
     """
 
     near: float
@@ -106,7 +109,7 @@ class EdgeCheck:
     shift: float
     a: FloatArray
     sd: FloatArray
-    shape: float = 1.0
+    shape: float
 
 
 def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray[np.bool_],
@@ -144,7 +147,7 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
             hi += 1
         found.append((0.5 * float(ts[lo] + ts[hi]), 0.5 * float(ts[hi] - ts[lo]) + 0.5))
     known = [f for f in found if f is not None]
-    offs, uses, kept, parts = [], [], [], []
+    offs, uses, kept = [], [], []
     for s, f in zip(STATIONS, found, strict=True):
         if f is None:
             if not known or s > STATIONS[NEAR - 1]:
@@ -164,19 +167,17 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
             use &= (wx >= 0) & (wx <= n - 1) & (wy >= 0) & (wy <= n - 1)
         if int(use.sum()) < 8:
             continue
-        inner = use & (np.abs(tt - centre) <= half)
+        # the needle and ground on both sides of it (beyond its blurred edge) in the window
         left = use & (tt - centre <= -half - GAP)
         right = use & (tt - centre >= half + GAP)
-        if int(inner.sum()) < 1 or int(left.sum()) < 3 or int(right.sum()) < 3:
+        if int(left.sum()) < 3 or int(right.sum()) < 3:
             continue
         offs.append(np.stack([ox, oy], axis=-1))
         uses.append(use)
         kept.append(s)
-        parts.append((inner, left, right))
     if not kept:
-        none = np.zeros((0, q), dtype=bool)
-        return EdgeProfiles(shaft, np.zeros((0, q, 2)), none, [np.zeros((0, q))] * len(bank), np.zeros(0),
-                            none, none, none)
+        return EdgeProfiles(shaft, np.zeros((0, q, 2)), np.zeros((0, q), dtype=bool), [np.zeros((0, q))] * len(bank),
+                            np.zeros(0))
     offsets = np.stack(offs)
     use_a = np.stack(uses)
     expected = []
@@ -185,11 +186,11 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
         p = Patch(np.stack([b, gx, gy]), 0, 0, (n, n))
         acc = np.zeros(use_a.shape)
         for line in LINES:
-            v, _ = _sample(p, apex[0] + offsets[..., 0].ravel() + line * ux, apex[1] + offsets[..., 1].ravel() + line * uy)
+            v, _ = _sample(p, apex[0] + offsets[..., 0].ravel() + line * ux,
+                           apex[1] + offsets[..., 1].ravel() + line * uy)
             acc += v[0].reshape(use_a.shape)
         expected.append(acc / len(LINES))
-    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept), np.stack([p[0] for p in parts]),
-                        np.stack([p[1] for p in parts]), np.stack([p[2] for p in parts]))
+    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept))
 
 
 def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, theta: float,
@@ -215,7 +216,6 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
         ok &= inside.reshape(ep.use.shape)
     F = acc / len(LINES)
     E = ep.expected[copy]
-    q = E.shape[1]
     a = np.full(m, np.nan)
     sd = np.full(m, np.inf)
     shift = np.zeros(m)

@@ -21,9 +21,15 @@
      fix's standard deviation above :attr:`~.template.TrackerParams.max_sigma` (its position
      is not determined: only the shaft is seen);
 
-4. when the tip is not found near the last fix (or was refused in the frame before), it is
+4. **follows the needle's edges** back from a fix the rules take (:mod:`.edges`): the fix
+   is refused when they are faint or misplaced (*lost*: the fit is on the ground or a
+   blob) or fade right behind the tip (*occluded*: something over it, or the fit ahead
+   of it);
+5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
-   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`.
+   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
+   not when the fit near the last fix was refused while its edges hold (the tip is
+   there, only not vouched for).
 
 A fix is never a guess: a frame the rules cannot vouch for is refused.
 """
