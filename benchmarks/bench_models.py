@@ -17,7 +17,9 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
   per joint (3 prismatic, 2 rotary) and day: the median and the worst day, the mean over
   all; how many days ``auto`` erred more than the paper's procedure on the same day;
 * the 95 % intervals of ``auto`` (``predict --interval``): the share of validation traverses
-  inside, per joint and direction, with its 95 % Wilson interval; and how honest the error ``calibrate`` prints is: the
+  inside, per joint and direction, with its 95 % Wilson interval, side by side with the interval
+  of the same calibrations' held-out errors whose model error grows linearly with the distance
+  (as before issue 33's second round; "linear"); and how honest the error ``calibrate`` prints is: the
   expected RMS error at new poses, and the cross-validation RMS of the average, each over
   the validation traverses' actual RMS error (median over days; 1 = honest).
 
@@ -38,6 +40,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"
 from arm_days import make_day  # noqa: E402
 
 from stickslip.calibration import calibrate  # noqa: E402
+from stickslip.calibration import selection as _selection  # noqa: E402
+from stickslip.calibration.groups import load_coordinates_of, nearest  # noqa: E402
 from stickslip.calibration.intervals import relative_sd  # noqa: E402
 from stickslip.calibration.update import update_calibration  # noqa: E402
 from stickslip.measurements import Traverse  # noqa: E402
@@ -72,9 +76,41 @@ def _errors(pred: np.ndarray, val: list[Traverse]) -> dict[int, np.ndarray]:
     return {j: e[[t.joint == j for t in val]] for j in (3, 2)}
 
 
-def _inside(cal: object, val: list[Traverse]) -> dict[tuple[int, str], list[bool]]:
-    """Whether each validation traverse is inside its 95 % interval, by joint and direction."""
-    out: dict[tuple[int, str], list[bool]] = {}
+_HELD_OUT: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+"""Per joint, the last calibration's held-out errors, their distances and the residuals (the error
+model's inputs), for the baseline interval measured side by side."""
+_chosen = _selection._Evidence.chosen
+
+
+def _capture(self, mix, e, reason, fallback=False):  # type: ignore[no-untyped-def]
+    out = _chosen(self, mix, e, reason, fallback)
+    _HELD_OUT[self.data.joint] = (np.asarray(e), np.asarray(self.row_dist), self.residuals(mix))
+    return out
+
+
+_selection._Evidence.chosen = _capture  # type: ignore[method-assign]
+
+
+def _linear_sd(cal: object, j: int, d: str, poses: np.ndarray) -> np.ndarray:
+    """The interval before issue 33's second round, from the same calibration's held-out errors: the
+    error growing linearly with the distance, ``slope^2 = (mean e^2 - floor^2) / mean d^2``."""
+    from scipy.special import stdtrit
+
+    e, dist, r = _HELD_OUT[j]
+    ok = np.isfinite(e) & np.isfinite(dist)
+    floor2 = float(np.mean(r**2))
+    slope2 = max(0.0, float(np.mean(e[ok] ** 2)) - floor2) / float(np.mean(dist[ok] ** 2))
+    t = float(stdtrit(int(ok.sum()) - 1, 0.975)) / 1.959963984540054
+    kept = cal.predictive[(j, d)].poses  # type: ignore[attr-defined]
+    near = nearest(load_coordinates_of(j, poses), load_coordinates_of(j, kept))[0]
+    out: np.ndarray = t * np.sqrt(floor2 + slope2 * near**2)
+    return out
+
+
+def _inside(cal: object, val: list[Traverse]) -> dict[tuple[str, int, str], list[bool]]:
+    """Whether each validation traverse is inside its 95 % interval, by joint and direction: the
+    calibration's (``"now"``) and the linear growth's from the same held-out errors (``"linear"``)."""
+    out: dict[tuple[str, int, str], list[bool]] = {}
     for j in (3, 2):
         for d in "+-":
             ts = [t for t in val if t.joint == j and t.direction == d]
@@ -82,14 +118,15 @@ def _inside(cal: object, val: list[Traverse]) -> dict[tuple[int, str], list[bool
             sd = relative_sd(cal, j, d, *cols)  # type: ignore[arg-type]
             pred = cal.predict_many(ts)  # type: ignore[attr-defined]
             e = np.abs(pred / np.array([t.gamma for t in ts]) - 1.0)
-            out[(j, d)] = (e <= 1.96 * sd).tolist()
+            out[("now", j, d)] = (e <= 1.96 * sd).tolist()
+            out[("linear", j, d)] = (e <= 1.96 * _linear_sd(cal, j, d, np.stack(cols, axis=1))).tolist()
     return out
 
 
 def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
     """Every day of one arm: errors per calibration, coverage, honesty ratios, fallbacks."""
     errs: dict[str, dict[int, list[np.ndarray]]] = defaultdict(lambda: {3: [], 2: []})
-    inside: dict[tuple[int, str], list[bool]] = defaultdict(list)
+    inside: dict[tuple[str, int, str], list[bool]] = defaultdict(list)
     honest: dict[str, dict[int, list[float]]] = {"expected": {3: [], 2: []}, "cv": {3: [], 2: []}}
     worse = {3: 0, 2: 0}
     fallback = {3: 0, 2: 0}
@@ -162,9 +199,10 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
         cov = []
         for j in (3, 2):
             for d in "+-":
-                k, n = int(np.sum(inside[(j, d)])), len(inside[(j, d)])
+                k, n = int(np.sum(inside[("now", j, d)])), len(inside[("now", j, d)])
                 lo, hi = _wilson(k, n)
-                cov.append(f"{100 * k / n:.1f} % ({100 * lo:.0f}–{100 * hi:.0f})")
+                lin = 100 * float(np.mean(inside[("linear", j, d)]))
+                cov.append(f"{100 * k / n:.1f} % ({100 * lo:.0f}–{100 * hi:.0f}; linear {lin:.1f} %)")
         h = res["honest"]  # type: ignore[index]
         print(f"| {arm} | {res['days']} | {res['worse'][3]} / {res['worse'][2]} | "  # type: ignore[index]
               f"{res['fallback'][3]} / {res['fallback'][2]} | " + " | ".join(cov) + " | "  # type: ignore[index]

@@ -12,6 +12,8 @@ series the growth exponent k of ``time ~ rows^k`` is fitted over the two largest
   groups, given the groups (no parsing, no pose grouping);
 * planner: the same moves by adaptive quadrature per move (scipy ``quad``) and by
   stepping through the move one step at a time;
+* calibrate: at the largest size, the same command with the chosen families' refit to every
+  traverse run to convergence (5 Levenberg-Marquardt steps, as before) instead of one step;
 * start-up: ``stickslip --help`` against a bare ``python -c pass``.
 
 The audio path (our detector against aubio and librosa onset detection) is
@@ -19,7 +21,8 @@ The audio path (our detector against aubio and librosa onset detection) is
 
 Run: ``.venv/bin/python benchmarks/bench_scale.py`` (``make bench``; sizes 1e3 .. 1e6,
 several minutes) or ``--quick`` (tiny sizes, seconds: what CI runs through
-``tests/test_bench_smoke.py``). ``--markdown`` also prints the table for the README.
+``tests/test_bench_smoke.py``). ``--markdown`` also prints the table for the README;
+``--only calibrate`` (names separated by commas) runs those commands' sizes only.
 """
 
 from __future__ import annotations
@@ -115,8 +118,18 @@ def history_table(path: Path, n: int, seed: int = 0) -> None:
 
 
 def child(argv: Sequence[str]) -> None:
-    """Run one command in this process; print its time (s) and this process's peak memory (MiB)."""
+    """Run one command in this process; print its time (s) and this process's peak memory (MiB).
+
+    ``BENCH_REFIT_ITERATIONS`` in the environment sets the refit of a long table's chosen families
+    (``calibration.selection.FULL_REFIT_ITERATIONS``): the baseline of ``calibrate``, the refit run
+    to convergence as before issue 33's second round, side by side.
+    """
     from stickslip.cli import app
+
+    if os.environ.get("BENCH_REFIT_ITERATIONS"):
+        from stickslip.calibration import selection
+
+        selection.FULL_REFIT_ITERATIONS = int(os.environ["BENCH_REFIT_ITERATIONS"])
 
     t = time.perf_counter()
     cpu0 = time.process_time()
@@ -316,6 +329,8 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
         return []
     quick = "--quick" in args
     sizes = QUICK if quick else FULL
+    if "--only" in args:  # e.g. --only calibrate: that command's sizes, then the rest as usual
+        sizes = {k: v for k, v in sizes.items() if k in args[args.index("--only") + 1].split(",")}
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(SRC), os.environ.get("PYTHONPATH", "")])}
     rows: list[dict[str, object]] = []
     print(f"machine: {machine()}")
@@ -348,6 +363,10 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                         "import": ["import", str(meas), "--db", str(d / f"db{n}.sqlite"), "--json"],
                     }[cmd]
                 r = run_child(argv_, env)
+                if cmd == "calibrate" and n == ns[-1]:  # the refit to convergence, side by side
+                    rb = run_child(argv_, {**env, "BENCH_REFIT_ITERATIONS": "5"})
+                    base = (f"refit to convergence (5 steps): {rb['seconds']:.3g} s, {rb['cpu_seconds']:.3g} CPU s "
+                            f"({rb['seconds'] / r['seconds']:.2f}x)")
                 times.append(float(r["seconds"]))
                 cpus.append(float(r["cpu_seconds"]))
                 rows.append({"command": cmd, "rows": n, **r})
@@ -356,13 +375,13 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
             k, kc = exponent(ns, times), exponent(ns, cpus)
             rows.append({"command": cmd, "exponent": k, "exponent_cpu": kc})
             print(f"{cmd:10s} growth exponent {k:.2f} wall, {kc:.2f} CPU (time ~ rows^k, two largest sizes)")
-        # anova with repeats (pose groups that are tested), against scipy and statsmodels
-        n = sizes["anova"][-1]
-        measurement_table(d / "rep.csv", n)
-        r = run_child(["anova", str(d / "rep.csv"), "--json"], env)
-        print(f"\nanova, {n} rows in 14 repeated poses: {r['seconds']:.3f} s (grouping, one-way and two-way tests)")
-        for name, t in anova_baselines(d / "rep.csv").items():
-            print(f"  baseline {name}: {t:.3f} s")
+        if "anova" in sizes:  # anova with repeats (pose groups that are tested), against scipy and statsmodels
+            n = sizes["anova"][-1]
+            measurement_table(d / "rep.csv", n)
+            r = run_child(["anova", str(d / "rep.csv"), "--json"], env)
+            print(f"\nanova, {n} rows in 14 repeated poses: {r['seconds']:.3f} s (grouping, one-way and two-way tests)")
+            for name, t in anova_baselines(d / "rep.csv").items():
+                print(f"  baseline {name}: {t:.3f} s")
     print("\nplanning one move of joint 2 (µs per move)")
     prow = planner_rows(40 if quick else 2000)
     base = prow[0][1]

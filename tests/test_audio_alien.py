@@ -14,7 +14,7 @@ from alien_sound import JOINT_SOUNDS, recording
 from stickslip.audio.detector import detect
 from stickslip.audio.tuning import tune
 
-pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("audio_alien")]  # slow; one worker renders each draw once
 
 SR = 48_000
 CASES = [(800, 7.7, -3.0), (1300, 6.1, 3.0), (1050, 5.55, 0.0)]

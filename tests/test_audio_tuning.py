@@ -18,7 +18,7 @@ from stickslip.audio.detector import detect
 from stickslip.audio.tuning import TuningError, candidate_bands, tune, tune_band
 from stickslip.sim.sound import render_traverse_recording
 
-pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("audio_tuning")]  # slow; its tunings made once
 
 TUNE_STOP_S = 2.0
 

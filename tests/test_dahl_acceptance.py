@@ -17,7 +17,7 @@ from stickslip.calibration import calibrate
 from stickslip.calibration.intervals import relative_sd
 
 DAYS = ("2026-10-05", "2026-10-06", "2026-10-07")
-pytestmark = pytest.mark.slow  # about 5 s: make test-fast leaves this file out
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("dahl_acceptance")]  # about 5 s, its days fitted once
 
 
 @pytest.fixture(scope="module")
@@ -73,9 +73,9 @@ def test_intervals_cover_new_poses_and_the_printed_error_is_honest(days):
         coverage = np.mean(inside)
         # 48 traverses a joint: the arm held 77-81 %; the benchmark measures 90-98 % on 216
         assert coverage >= 0.85, (j, coverage)
-        # and not wide: standardized errors of a calibrated interval have an RMS near 1 (measured 0.71
-        # prismatic, 0.90 rotary on these days; an interval
-        # twice too wide would give 0.5 and still cover everything)
+        # and not wide: standardized errors of a calibrated interval have an RMS near 1 (measured 0.79
+        # prismatic, 1.02 rotary on these days with the error growing as the distance squared; 0.71 and
+        # 0.90 when it grew linearly; an interval twice too wide would give 0.5 and still cover everything)
         z_rms = float(np.sqrt(np.mean(np.square(z))))
         assert 0.6 <= z_rms <= 1.4, (j, z_rms)
         ratio = np.sqrt(np.mean(np.square(expected))) / np.sqrt(np.mean(np.square(actual)))

@@ -19,7 +19,7 @@ from stickslip.calibration import calibrate
 from stickslip.calibration.design import spread_poses
 from stickslip.calibration.update import update_calibration
 
-pytestmark = pytest.mark.slow  # make test-fast leaves this file out
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("lugre_acceptance")]  # one worker computes `results` once
 
 DAYS = ("2026-10-05", "2026-10-06", "2026-10-07")
 
@@ -56,7 +56,7 @@ def run(seed: int = 7):
     return out
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def results():
     return run()
 

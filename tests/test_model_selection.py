@@ -4,6 +4,7 @@ for the choice on a long table)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -139,7 +140,8 @@ def test_error_model_floor_and_slope():
     floor, slope = sel_mod.error_model(e, d, r)
     t = student.ppf(0.975, len(e) - 1) / 1.959963984540054
     assert floor == pytest.approx(t * math.sqrt(np.mean(r**2)), rel=1e-12)
-    assert slope == pytest.approx(t * math.sqrt((np.mean(e**2) - np.mean(r**2)) / np.mean(d**2)), rel=1e-12)
+    # the error between poses grows with the square of the distance (an interpolation error)
+    assert slope == pytest.approx(t * math.sqrt((np.mean(e**2) - np.mean(r**2)) / np.mean(d**4)), rel=1e-12)
     assert sel_mod.error_model(0.001 * e, d, r)[1] == 0.0  # held-out errors below the residuals: no growth
 
 
@@ -180,7 +182,8 @@ def test_intervals_grow_away_from_the_calibrated_poses_and_the_filter_uses_them(
     far = np.array([0.0, 0.3, 0.0, 1.2, 0.9])  # tilted beyond the table's poses
     coords = load_coordinates_of(3, pred.poses)
     d = float(np.min(np.linalg.norm(coords - load_coordinates_of(3, far[None])[0], axis=1)))
-    assert float(relative_sd(cal, 3, "+", *far)) == pytest.approx(math.hypot(pred.floor, pred.slope * d), rel=1e-9)
+    assert pred.exponent == 2.0
+    assert float(relative_sd(cal, 3, "+", *far)) == pytest.approx(math.hypot(pred.floor, pred.slope * d**2), rel=1e-9)
     assert d > 0.1 and float(relative_sd(cal, 3, "+", *far)) > at
     pose = kin.Pose(*far)
     assert joint_sigma_model(cal, 3, pose) == pytest.approx(
@@ -190,8 +193,20 @@ def test_intervals_grow_away_from_the_calibrated_poses_and_the_filter_uses_them(
     back = Calibration.load(path)
     for key, p in cal.predictive.items():
         q = back.predictive[key]
-        assert (q.floor, q.slope) == (p.floor, p.slope)
+        assert (q.floor, q.slope, q.exponent) == (p.floor, p.slope, p.exponent)
         np.testing.assert_array_equal(q.poses, p.poses)
+    # a file written before the exponent was kept: its intervals grow linearly, as they were made
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    for rec in doc["uncertainty"]:
+        rec.pop("exponent", None)
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    old = Calibration.load(path)
+    assert old.predictive[(3, "+")].exponent == 1.0
+    assert float(relative_sd(old, 3, "+", *far)) == pytest.approx(math.hypot(pred.floor, pred.slope * d), rel=1e-9)
+    doc["uncertainty"][0]["exponent"] = 3
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(ValueError, match=r"uncertainty\[0\]\.exponent must be 1 or 2"):
+        Calibration.load(path)
 
 
 def test_the_papers_procedure_is_untouched():

@@ -21,7 +21,10 @@ from synth import paper_table
 
 from stickslip.measurements import measurements_to_csv
 
-pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
+pytestmark = [
+    pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only"),
+    pytest.mark.xdist_group("nanocontrol_console_peer"),  # one worker starts the console once
+]
 if sys.platform != "win32":
     from console_peer import ConsolePeer
 

@@ -34,7 +34,7 @@ from stickslip.server.camera import FrameFeed  # noqa: E402
 from stickslip.server.room import ControlRoom  # noqa: E402
 from stickslip.server.security import Access  # noqa: E402
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("server_browser")]  # one worker starts the browser once
 
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
 if CHROMIUM is None:

@@ -17,6 +17,8 @@ from typing import Any
 
 import pytest
 
+pytestmark = pytest.mark.xdist_group("server_fuzz")  # one worker starts the fuzzed room once
+
 pytest.importorskip("fastapi", reason="the serve extra (fastapi) is not installed")
 schemathesis = pytest.importorskip("schemathesis", reason="schemathesis (the dev extra) is not installed")
 

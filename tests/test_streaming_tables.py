@@ -16,10 +16,11 @@ from stickslip.cli import app
 from stickslip.measurements import parse_measurements, read_pose_columns, stream_measurement_table
 from stickslip.storage import Store
 
+pytestmark = pytest.mark.xdist_group("streaming_tables")  # one worker calibrates `cal_path` once
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def cal_path(tmp_path_factory):
     path = tmp_path_factory.mktemp("cal") / "cal.json"
     calibrate(parse_measurements(history_csv(300), "h.csv"), model="auto").save(path)

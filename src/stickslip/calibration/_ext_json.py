@@ -90,7 +90,7 @@ def ext_fields(cal: ExtFields) -> dict[str, object]:
 
 def _uncertainty_entries(cal: ExtFields) -> list[dict[str, object]]:
     """The ``uncertainty`` entries: per joint and direction the model error, the covariance and the error
-    model of the intervals (docs/models.md §4): ``sqrt(floor^2 + (slope d)^2)``, ``d`` the load-space
+    model of the intervals (docs/models.md §4): ``sqrt(floor^2 + (slope d^exponent)^2)``, ``d`` the load-space
     distance to the nearest of the calibrated ``poses`` (q1, q2, q3, theta, psi; SI)."""
     unc: list[dict[str, object]] = []
     for key in sorted(set(cal.sigma_model) | set(cal.covariance) | set(cal.predictive)):
@@ -102,7 +102,8 @@ def _uncertainty_entries(cal: ExtFields) -> list[dict[str, object]]:
                 **_key(*key),
                 "sigma_model": None if s is None or not math.isfinite(s) else float(s),
                 "covariance": None if c is None else np.asarray(c, dtype=float).tolist(),
-                **({"floor": pr.floor, "slope": pr.slope, "poses": np.asarray(pr.poses, dtype=float).tolist()}
+                **({"floor": pr.floor, "slope": pr.slope, "exponent": pr.exponent,
+                    "poses": np.asarray(pr.poses, dtype=float).tolist()}
                    if pr is not None else {}),
             }
         )
@@ -148,7 +149,10 @@ def _read_predictive(rec: dict[str, object], where: str) -> Predictive:
     poses = np.array([[finite_number(v, f"{where}.poses") for v in p] for p in raw], dtype=float)
     if np.any(np.abs(poses) > 10.0):
         raise ValueError(f"{where}.poses: a value is beyond 10 (rad or m): not a pose")
-    return Predictive(floor, slope, poses)
+    exponent = finite_number(rec.get("exponent", 1.0), f"{where}.exponent")  # files before it: linear
+    if exponent not in (1.0, 2.0):
+        raise ValueError(f"{where}.exponent must be 1 or 2 (how the error grows with the distance), got {exponent!r}")
+    return Predictive(floor, slope, poses, exponent)
 
 
 def _read_uncertainty(cal: ExtFields, unc: object) -> None:

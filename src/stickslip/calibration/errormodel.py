@@ -15,21 +15,26 @@ class Predictive:
     """How uncertain one joint and direction's predictions are, pose by pose (docs/models.md §4).
 
     The relative standard deviation of a predicted mean step at a pose is
-    ``sqrt(floor^2 + (slope d)^2)``, ``d`` the pose's distance to the nearest of ``poses`` in
-    the space of the loads the step depends on (:func:`~.groups.load_coordinates_of`): the
-    model's residual at a calibrated pose, growing with the distance as the
-    cross-validation's held-out poses did (:func:`~.selection.error_model`).
+    ``sqrt(floor^2 + (slope d^exponent)^2)``, ``d`` the pose's distance to the nearest of
+    ``poses`` in the space of the loads the step depends on
+    (:func:`~.groups.load_coordinates_of`): the model's residual at a calibrated pose, growing
+    with the distance as the cross-validation's held-out poses did
+    (:func:`~.selection.error_model`).
 
     Attributes
     ----------
     floor : float
         Relative error at a calibrated pose, 1.
     slope : float
-        Growth of the relative error per unit of load-space distance, 1.
+        Growth of the relative error per unit of load-space distance to the power ``exponent``, 1.
     poses : ndarray, shape (n, 5)
         The calibrated poses (q1, q2, q3, theta, psi; SI), or a farthest-point sample of them.
+    exponent : float
+        How the model's error grows with the distance: 2 (an interpolation error, as the
+        calibrations make it since issue 33's second round), 1 (linear: files written before).
     """
 
     floor: float
     slope: float
     poses: NDArray[np.float64]
+    exponent: float = 1.0

@@ -4,9 +4,10 @@ A family calibration keeps, per joint and direction, a :class:`~.result.Predicti
 relative error at a calibrated pose (the model's residual there), how fast the error grew
 with the distance from the poses a refit kept in the cross-validation, and the calibrated
 poses. The relative standard deviation of a predicted mean step at a pose is
-``sqrt(floor^2 + (slope d)^2)``, ``d`` the pose's distance to the nearest calibrated pose in
+``sqrt(floor^2 + (slope d^2)^2)``, ``d`` the pose's distance to the nearest calibrated pose in
 the space of the loads the step depends on: narrow where the calibration measured, wider
-between and beyond its poses. The same standard deviation is what ``predict --interval``
+between and beyond its poses (``d`` to the first power in files written before issue 33's
+second round). The same standard deviation is what ``predict --interval``
 and ``plan`` print (``1.96 sigma``) and what the tracking filter
 (:mod:`stickslip.motion.tracking`) starts its step scales' variance from in a pose.
 
@@ -77,7 +78,7 @@ def relative_sd(
     flat = [np.ravel(c) for c in cols[:5]]
     here = load_coordinates_of(joint, np.stack(flat, axis=1))
     d = nearest(here, load_coordinates_of(joint, pred.poses))[0]
-    out: NDArray[np.float64] = np.sqrt(pred.floor**2 + (pred.slope * d) ** 2).reshape(shape)
+    out: NDArray[np.float64] = np.sqrt(pred.floor**2 + (pred.slope * d**pred.exponent) ** 2).reshape(shape)
     return out
 
 

@@ -75,9 +75,18 @@ EXACT_REFIT_ROWS = 400
 it is one Gauss-Newton step from the fit on all traverses, in closed form (a fold is a small share
 of the data, so one step lands close to the refit: a test checks it)."""
 
-FULL_REFIT_ITERATIONS = 5
-"""Levenberg-Marquardt iterations of a chosen family's refit to every traverse of a long table,
-from its fit on the sample (close already: 2-3 iterations reach the relative cost change of 1e-12)."""
+FULL_REFIT_ITERATIONS = 1
+"""Levenberg-Marquardt steps of a chosen family's refit to every traverse of a long table, from its
+fit on the sample. The sample's fit is close already: on a history of 1e5 traverses one step lands
+within 4e-4 (relative) of the converged refit's predictions (two: 6e-6; the day-to-day scatter of a
+step is ~3 %), and each step is a pass over every traverse (docs/models-log.md)."""
+
+GROWTH = 2.0
+"""How the model's error grows with the distance ``d`` from the calibrated poses in the intervals'
+error model (:func:`error_model`): ``slope d^GROWTH``. 2: an interpolation error (a smooth misfit
+between nodes grows with the square of the distance to the nearest); the linear growth used before
+carried the held-out poses' errors, made at about twice new poses' distances, over in proportion
+and made the intervals too wide (docs/models-log.md)."""
 
 SELECTION_ROWS = 1500
 """Above this many traverses of a joint, the families are cross-validated and weighed on a seeded
@@ -296,14 +305,18 @@ def held_out_distances(coords: NDArray[np.float64], folds: NDArray[np.int64]) ->
 def error_model(
     cv_errors: NDArray[np.float64], cv_distance: NDArray[np.float64], residuals: NDArray[np.float64]
 ) -> tuple[float, float]:
-    """``(floor, slope)`` of the relative error at a new pose, ``sd(x) = sqrt(floor^2 + (slope d(x))^2)``
+    """``(floor, slope)`` of the relative error at a new pose, ``sd(x) = sqrt(floor^2 + (slope d(x)^2)^2)``
     with ``d(x)`` its distance to the nearest calibrated pose in the load space.
 
     At a calibrated pose the error is the model's residual there (``floor^2 = mean(r^2)``); a
     held-out pose at distance ``d_i`` from the poses its refit kept erred by ``e_i``, so
-    ``slope^2 = max(0, mean(e^2) - floor^2) / mean(d^2)``. Both are multiplied by
-    ``t_{0.975, n-1} / 1.96`` (Student's t for the ``n`` held-out traverses they are estimated
-    from), so that ``1.96 sd`` is the 95 % interval.
+    ``slope^2 = max(0, mean(e^2) - floor^2) / mean(d^4)``: the model's error between poses
+    grows with the square of the distance (:data:`GROWTH`), as the error of interpolating a
+    smooth function between nodes does, so that the errors measured at the held-out poses,
+    farther from the rest than new poses are from the calibrated ones, are not carried
+    over in proportion. Both are multiplied by ``t_{0.975, n-1} / 1.96`` (Student's t for
+    the ``n`` held-out traverses they are estimated from), so that ``1.96 sd`` is the 95 %
+    interval.
     """
     from scipy.special import stdtrit
 
@@ -312,8 +325,8 @@ def error_model(
     n = int(ok.sum())
     if n < 3:
         return math.sqrt(floor2), 0.0
-    d2 = float(np.mean(cv_distance[ok] ** 2))
-    slope2 = max(0.0, float(np.mean(cv_errors[ok] ** 2)) - floor2) / d2 if d2 > 0 else 0.0
+    d4 = float(np.mean(cv_distance[ok] ** (2 * GROWTH)))
+    slope2 = max(0.0, float(np.mean(cv_errors[ok] ** 2)) - floor2) / d4 if d4 > 0 else 0.0
     t = float(stdtrit(n - 1, 0.975)) / 1.959963984540054
     return t * math.sqrt(floor2), t * math.sqrt(slope2)
 
@@ -598,7 +611,7 @@ class _Parts:
             self.models[(j, d)] = FamilyModel(j, d, params, members=members if averaged else (),
                                               member_labels=tuple(lab for lab, _ in ranked) if averaged else ())
             if cross_validated:
-                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept)
+                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept, GROWTH)
             c = fit.cov[d]
             if c is not None:
                 self.cov[(j, d)] = c
