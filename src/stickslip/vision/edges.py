@@ -100,7 +100,7 @@ class EdgeCheck:
     a, sd : ndarray
         Each station's contrast and its standard deviation from the pixel noise, 1.
     shape : float
-        The lower quartile of the stations' correlations with the template's profiles, 1.
+        The median of the stations' correlations with the template's profiles, 1.
     """
 
     near: float
