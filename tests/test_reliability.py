@@ -250,7 +250,13 @@ def test_password_never_reaches_db_output_or_logs(tmp_path, caplog, monkeypatch,
 
 @pytest.fixture()
 def faulty():
+    """``faulty://`` opens the fault-injecting controller for this test only (left registered, later tests of
+    other modules in the same worker that draw ``faulty://`` as an unknown scheme would open it)."""
+    from stickslip.devices.base import BACKENDS
+
     faults.install()
+    yield
+    BACKENDS.pop("faulty", None)
 
 
 def _where(db, url):

@@ -1,10 +1,13 @@
-"""A rig from the user's side: two arms (an MM3A on the NanoControl console emulator, a SmarAct MCS2 on its
-emulator), an objective (cylinder) and a sample plane (half-space), driven from the command line."""
+"""A rig from the user's side: two arms (an MM3A on the NanoControl console emulator, a SmarAct xyz stack on the
+MCS2 emulator), an objective (cylinder) and a sample plane (half-space), driven from the command line, its
+history in PostgreSQL."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -80,64 +83,155 @@ def run(*args):
     return runner.invoke(app, [str(a) for a in args])
 
 
+STACK_RIG = """\
+name = "two arms"
+arm_distance = "1mm"
+database = "{db}"
+
+[[arm]]
+name = "probe"
+controller = "{nano}"
+calibration = "cal.json"
+mount = {{ origin = ["-30mm", "0mm", "0mm"] }}
+
+[[arm]]
+name = "stack"
+kind = "xyz"
+controller = "{smaract}?hz=20000"  # the driver waits out each burst: 20 kHz keeps the test short
+calibration = "stack.json"
+tool = ["0mm", "0mm", "-5mm"]
+mount = {{ origin = ["-7mm", "6mm", "2mm"] }}
+
+  [[arm.joint]]
+  range = ["-10mm", "10mm"]
+  step = "50nm"
+
+  [[arm.joint]]
+  range = ["-10mm", "10mm"]
+
+  [[arm.joint]]
+  range = ["-10mm", "10mm"]
+
+[[volume]]
+name = "objective"
+shape = "cylinder"
+base = ["-7mm", "0mm", "6mm"]
+axis = [0, 0, 1]
+radius = "3mm"
+height = "20mm"
+margin = "200um"
+
+[[volume]]
+name = "sample"
+shape = "half-space"
+point = ["0mm", "0mm", "-12mm"]
+normal = [0, 0, -1]
+margin = "100um"
+
+[[position]]
+name = "park"
+arm = "probe"
+q2 = "-120deg"
+q3 = "0.1mm"
+order = [3, 2]
+
+[[position]]
+name = "retract"
+arm = "stack"
+q2 = "3mm"
+q3 = "-2mm"
+order = [3, 2]
+"""
+
+STACK_STEP = 1e-6  # m: the stack's calibrated constant step, both directions
+
+
+def _stack_cal(path):
+    """The stack's calibration: a constant step per stage and direction (what it is planned with)."""
+    steps = {(j, d): STACK_STEP for j in (1, 2, 3) for d in "+-"}
+    calibration.Calibration(models={}, stderr={}, constant_steps=steps, day=DAY, method="constant").save(path)
+
+
 @pytest.mark.slow
-def test_two_arms_from_the_command_line(tmp_path):
+def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, postgres_url):
+    """The issue's "Done when": an MM3A on the NanoControl emulator and a SmarAct xyz stack on the MCS2
+    emulator, an objective and a sample plane; both arms driven from the CLI, every colliding move refused
+    naming the obstacle, named positions reached in their order, the history in a PostgreSQL server."""
+    from stickslip.storage import Store
+
     _cal(tmp_path / "cal.json")
-    db = tmp_path / "s.db"
+    _stack_cal(tmp_path / "stack.json")
     with NanoControlEmulator() as nano, MCS2Emulator() as smaract:
         rig = tmp_path / "rig.toml"
-        rig.write_text(RIG.format(nano=nano.url, smaract=smaract.url), encoding="utf-8")
-        common = ("--rig", rig, "--db", db, "--from-unreferenced", "--trust-calibration")
+        rig.write_text(STACK_RIG.format(nano=nano.url, smaract=smaract.url, db=postgres_url), encoding="utf-8")
+        common = ("--rig", rig, "--from-unreferenced", "--trust-calibration")  # no --db: the rig file's
 
         r = run("rig", "check", rig, "-o", tmp_path / "rig.png")
         assert r.exit_code == 0, r.output
-        for words in ("2 arm(s), 2 volume(s), 1 named position(s)", "arm 'probe' (mm3a)", "arm 'gripper'",
+        for words in ("2 arm(s), 2 volume(s), 2 named position(s)", "arm 'probe' (mm3a)", "arm 'stack' (xyz)",
                       "volume 'objective': cylinder, margin 200 µm", "position 'park' of 'probe': q3 0.100 mm, "
                       "then q2 -120.00 deg", "no problem found"):
             assert words in r.output
         assert (tmp_path / "rig.png").stat().st_size > 10_000
 
-        # each arm moves from the CLI: joint 3 out by 1 mm
-        for arm in ("probe", "gripper"):
-            r = run("move", *common, "--arm", arm, "--joint", 3, "--by", "1mm", "--json")
-            assert r.exit_code == 0, r.output
-            out = json.loads(r.stdout)
-            assert out["arm"] == arm and out["q_end_predicted"] == pytest.approx(0.001, abs=2e-6)
-        assert smaract.steps[2] > 0  # the MCS2's channel 2 drove the gripper's joint 3
-        r = run("where", "--rig", rig, "--db", db, "--json")
+        # each arm moves from the CLI: the probe's joint 3 out by 1 mm, the stack's y stage to -4 mm (µm shown)
+        r = run("move", *common, "--arm", "probe", "--joint", 3, "--by", "1mm", "--json")
+        assert r.exit_code == 0, r.output
+        assert json.loads(r.stdout)["q_end_predicted"] == pytest.approx(0.001, abs=2e-6)
+        r = run("move", *common, "--arm", "stack", "--joint", 2, "--to", "-4mm")
+        assert r.exit_code == 0, r.output
+        assert "joint 2: 0 µm -> -4000 µm, -4000 steps" in r.output  # 4 mm / 1 µm, no angle anywhere
+        assert smaract.steps[1] == -4000  # the MCS2's channel 1 drove the stack's joint 2
+        r = run("move", *common, "--arm", "stack", "--joint", 1, "--by", "30deg")
+        assert r.exit_code == 2 and "joint 1 takes a length" in r.output, r.output
+
+        # where: every arm, a stage's joints in µm
+        r = run("where", "--rig", rig, "--json")
         assert r.exit_code == 0, r.output
         arms = json.loads(r.stdout)["arms"]
-        assert [a["arm"] for a in arms] == ["probe", "gripper"]
-        assert [a["q"][2] for a in arms] == pytest.approx([0.001, 0.001], abs=2e-6)
+        assert [a["arm"] for a in arms] == ["probe", "stack"]
+        assert arms[1]["q"] == pytest.approx([0.0, -0.004, 0.0], abs=1e-12) and arms[1]["units"] == ["m"] * 3
+        r = run("where", "--rig", rig, "--arm", "stack", "--offline")
+        assert r.exit_code == 0 and "-4000 µm" in r.output and "deg" not in r.output.split("tilt")[0], r.output
 
-        # a colliding move is refused, nothing sent: the probe's tip (at x = -8 mm) up into the objective
-        before = dict(nano.steps) if hasattr(nano, "steps") else None
+        # colliding moves are refused, nothing sent: the probe up into the objective, the stack's holder into
+        # it and its tip into the sample plane; a straight line of the stack into the objective
+        before = dict(smaract.steps)
         r = run("move", *common, "--arm", "probe", "--joint", 2, "--to", "-60deg")
-        assert r.exit_code == 2, r.output
-        assert "objective" in r.output and "rig frame" in r.output and "Traceback" not in r.output
-        if before is not None:
-            assert dict(nano.steps) == before
-        # into the sample plane
-        r = run("move", *common, "--arm", "gripper", "--joint", 2, "--to", "-160deg")
-        assert r.exit_code == 2 and "sample" in r.output, r.output
-
-        # a straight tip line up into the objective is refused; a short one is driven
-        r = run("reach", *common, "--arm", "probe", "--by", "0,0,8mm")
-        assert r.exit_code == 2 and "objective" in r.output, r.output
-        r = run("reach", *common, "--arm", "probe", "--by", "0,0,1mm", "--segment", "100um", "--json")
+        assert r.exit_code == 2 and "objective" in r.output and "rig frame" in r.output, r.output
+        r = run("move", *common, "--arm", "stack", "--joint", 3, "--to", "6mm")
+        assert r.exit_code == 2 and "'objective'" in r.output and "Traceback" not in r.output, r.output
+        r = run("move", *common, "--arm", "stack", "--joint", 3, "--to", "-10mm")
+        assert r.exit_code == 2 and "'sample'" in r.output, r.output
+        r = run("reach", *common, "--arm", "stack", "--by", "0,0,6mm")
+        assert r.exit_code == 2 and "'objective'" in r.output, r.output
+        assert dict(smaract.steps) == before
+        # a short straight line of the stack is driven: its tip moves by the line, to within half a step
+        r = run("reach", *common, "--arm", "stack", "--by", "0,1mm,-1mm", "--json")
         assert r.exit_code == 0, r.output
         plan = json.loads(r.stdout)
-        assert plan["end"]["tip"][2] - plan["start"]["tip"][2] == pytest.approx(0.001, abs=2e-6)
+        moved = [e - s for e, s in zip(plan["end"]["tip"], plan["start"]["tip"], strict=True)]
+        assert moved == pytest.approx([0.0, 0.001, -0.001], abs=STACK_STEP / 2)
+        assert plan["end"]["q"] == pytest.approx([0.0, -0.003, -0.001], abs=STACK_STEP / 2)
+        # the same tip in the rig frame: the mount's origin (-7, 6, 2) mm added, the tool 5 mm below the holder
+        assert plan["arm"] == "stack" and plan["rig_frame"]["end"] == pytest.approx([-0.007, 0.003, -0.004], abs=1e-6)
 
-        # the named position: joint 3 retracted first, then joint 2
-        r = run("rig", "go", "park", "--rig", rig, "--db", db, "--from-unreferenced", "--trust-calibration")
-        assert r.exit_code == 0, r.output
-        lines = [ln for ln in r.output.splitlines() if "joint" in ln]
-        assert "joint 3" in lines[0] and "joint 2" in lines[1], r.output
-        r = run("where", "--rig", rig, "--db", db, "--json")
-        probe = json.loads(r.stdout)["arms"][0]
-        assert probe["q"][1] == pytest.approx(-2 * math.pi / 3, abs=1e-4)
-        assert probe["q"][2] == pytest.approx(1e-4, abs=2e-6)
+        # the named positions: joint 3 first, then joint 2, for each arm
+        for arm, name in (("probe", "park"), ("stack", "retract")):
+            r = run("rig", "go", name, "--rig", rig, "--arm", arm, "--from-unreferenced", "--trust-calibration")
+            assert r.exit_code == 0, r.output
+            lines = [ln for ln in r.output.splitlines() if "joint" in ln]
+            assert "joint 3" in lines[0] and "joint 2" in lines[1], r.output
+        r = run("where", "--rig", rig, "--json")
+        probe, stack = json.loads(r.stdout)["arms"]
+        assert probe["q"][1:] == pytest.approx([-2 * math.pi / 3, 1e-4], abs=1e-4)
+        assert stack["q"] == pytest.approx([0.0, 0.003, -0.002], abs=STACK_STEP / 2)
+
+    # the history is in the PostgreSQL database the rig file names, none in $STICKSLIP_DB's file
+    assert not Path(os.environ["STICKSLIP_DB"]).exists()
+    with Store.open(postgres_url) as st:
+        kept = {a: st.get_state(a, "positions") for a in (arms[0]["device"], arms[1]["device"])}
+    assert all(kept.values())
 
 
 def test_rig_options_are_checked(tmp_path):
@@ -155,8 +249,55 @@ def test_rig_options_are_checked(tmp_path):
     assert r.exit_code == 2 and f"{bad}:" in r.output and "radius" in r.output
 
 
-def test_two_arms_on_one_controller_are_refused(tmp_path):
+def test_two_arms_on_one_controllers_channels_are_refused(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(RIG.format(nano="sim://", smaract="sim://"), encoding="utf-8")
     r = run("rig", "check", bad)
-    assert r.exit_code == 2 and "arm 'probe' is on this controller already" in r.output
+    assert r.exit_code == 2 and "arm 'probe' drives channel 1 of this controller already" in r.output, r.output
+
+
+TWO_ON_ONE = """\
+arm_distance = "0.5mm"
+{arms}
+"""
+STAGE = """
+[[arm]]
+name = "{name}"
+kind = "xyz"
+controller = "{url}"
+calibration = "stack.json"
+mount = {{ origin = ["{x}", "0mm", "0mm"] }}
+{joints}
+"""
+
+
+def test_two_arms_on_one_controller_keep_their_own_positions(tmp_path):
+    """Two stacks on one MCS2 (channels 0-2 and 3-5): one lock (the controller's), positions kept per arm."""
+    _stack_cal(tmp_path / "stack.json")
+    joints = "".join(f'\n  [[arm.joint]]\n  channel = {c}\n  range = ["-5mm", "5mm"]\n' for c in (1, 2, 3))
+    with MCS2Emulator() as emu:
+        arms = [STAGE.format(name="left", url=f"{emu.url}?channels=0,1,2&hz=20000", x="-20mm", joints=joints),
+                STAGE.format(name="right", url=f"{emu.url}?channels=3,4,5&hz=20000", x="20mm", joints=joints)]
+        rig = tmp_path / "rig.toml"
+        rig.write_text(TWO_ON_ONE.format(arms="".join(arms)), encoding="utf-8")
+        common = ("--rig", rig, "--db", tmp_path / "s.db", "--from-unreferenced", "--trust-calibration")
+        for arm, by in (("left", "100um"), ("right", "-30um")):
+            r = run("move", *common, "--arm", arm, "--joint", 1, "--by", by, "--json")
+            assert r.exit_code == 0, r.output
+            assert json.loads(r.stdout)["device"] == f"{emu.url}#arm={arm}"
+        assert emu.steps[0] == 100 and emu.steps[3] == -30  # 1 µm steps, each arm on its own channels
+        _cal(tmp_path / "mm3a.json")  # an MM3A's calibration given to a stage: refused, nothing sent
+        r = run("move", *common, "--arm", "left", "-c", tmp_path / "mm3a.json", "--joint", 3, "--by", "10um")
+        assert r.exit_code == 2 and "models joint 3 as an MM3A's" in r.output and "Traceback" not in r.output
+        assert emu.steps[2] == 0
+        r = run("where", "--rig", rig, "--db", tmp_path / "s.db", "--json")
+        left, right = json.loads(r.stdout)["arms"]
+        assert left["q"] == pytest.approx([1e-4, 0.0, 0.0], abs=1e-12)
+        assert right["q"] == pytest.approx([-3e-5, 0.0, 0.0], abs=1e-12)
+        # the controller's one lock: held for one arm, the other waits its turn (refused, naming the holder)
+        from stickslip.storage import Store
+
+        with Store.open(tmp_path / "s.db") as st:
+            assert st.acquire_lock(emu.url, {"pid": 1, "host": "elsewhere", "since": "then"}) is None
+        r = run("move", *common, "--arm", "right", "--joint", 2, "--by", "10um")
+        assert r.exit_code == 2 and "being driven by another stickslip process (pid 1 on elsewhere" in r.output

@@ -17,12 +17,24 @@ from __future__ import annotations
 import math
 import re
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
-__all__ = ["JOINTS", "MM3A_FILE", "MM3A_GEOMETRY", "Q3_MAX", "ROTARY_SPAN", "JointSpec", "joint_spec"]
+__all__ = [
+    "JOINTS",
+    "MM3A_FILE",
+    "MM3A_GEOMETRY",
+    "NOMINAL_STEP",
+    "Q3_MAX",
+    "ROTARY_SPAN",
+    "STEP_MODELS",
+    "JointSet",
+    "JointSpec",
+    "joint_spec",
+]
 
 MM3A_FILE = Path(__file__).parent / "rig" / "mm3a.toml"
 """The MM3A's description: a rig file of one arm shipped with the package (docs/rig.md)."""
@@ -58,6 +70,13 @@ Q3_MAX = _RANGES[3][2]
 
 
 
+NOMINAL_STEP = {"prismatic": 0.8e-6, "rotary": 40e-6}
+"""A small step of each kind of joint (m, rad): what is assumed without a calibration or a rig file's ``step``."""
+
+STEP_MODELS = ("paper", "constant")
+"""How a joint's step size is planned: the paper's load-dependent model, or a constant step per direction."""
+
+
 @dataclass(frozen=True)
 class JointSpec:
     """Static description of one joint.
@@ -71,6 +90,15 @@ class JointSpec:
         End stops, rad for rotary joints, m for the prismatic joint.
     unit : str
         SI unit of the joint coordinate ("rad" or "m").
+    nominal_step : float
+        A small step of the joint, rad or m: how many steps surely reach a stop without a
+        calibration. ``nan`` (the default) means :data:`NOMINAL_STEP` of its kind.
+    home : float
+        The position assumed before the joint is referenced, rad or m.
+    step_model : {"paper", "constant"}
+        ``"paper"``: the calibration's load-dependent model of the MM3A's joint
+        (docs/design.md §3); ``"constant"``: the calibration's constant step of each
+        direction (a positioner stage: docs/rig.md).
     """
 
     number: int
@@ -78,6 +106,14 @@ class JointSpec:
     lower: float
     upper: float
     unit: str
+    nominal_step: float = math.nan
+    home: float = 0.0
+    step_model: str = "paper"
+
+    @property
+    def small_step(self) -> float:
+        """:attr:`nominal_step`, or :data:`NOMINAL_STEP` of the joint's kind where none is given (rad or m)."""
+        return self.nominal_step if math.isfinite(self.nominal_step) else NOMINAL_STEP[self.kind]
 
     @property
     def span(self) -> float:
@@ -112,14 +148,25 @@ class JointSpec:
 
 # Joint 1's stops are not given by the paper; the shipped file takes the same span as
 # joint 2, centred on zero. Joint 2: q2 in [-7pi/6, pi/6]. Joint 3: [0, 12 mm].
+# The MM3A's assumed pose before it is referenced: outstretched (q2 = -pi/2), joint 3 retracted.
+_HOME = {1: 0.0, 2: -math.pi / 2, 3: 0.0}
 JOINTS: dict[int, JointSpec] = {
-    j: JointSpec(j, kind, lo, hi, "rad" if kind == "rotary" else "m") for j, (kind, lo, hi) in sorted(_RANGES.items())
+    j: JointSpec(j, kind, lo, hi, "rad" if kind == "rotary" else "m", home=_HOME[j])
+    for j, (kind, lo, hi) in sorted(_RANGES.items())
 }
 
+JointSet = Mapping[int, JointSpec]
+"""An arm's joints by number (1, 2, 3): :data:`JOINTS` for the MM3A, an arm's own from a rig file."""
 
-def joint_spec(joint: int) -> JointSpec:
-    """The :class:`JointSpec` of ``joint`` (1, 2 or 3); raises ``ValueError`` otherwise."""
+
+def joint_spec(joint: int | JointSpec, joints: JointSet | None = None) -> JointSpec:
+    """The :class:`JointSpec` of ``joint`` (1, 2 or 3) in ``joints`` (the MM3A's by default); ``ValueError`` otherwise.
+
+    A :class:`JointSpec` given as ``joint`` is returned as it is (an arm's own joint).
+    """
+    if isinstance(joint, JointSpec):
+        return joint
     try:
-        return JOINTS[int(joint)]
+        return (JOINTS if joints is None else joints)[int(joint)]
     except (KeyError, ValueError, TypeError):
         raise ValueError(f"unknown joint {joint!r}: joints are 1, 2 (rotary) and 3 (prismatic)") from None

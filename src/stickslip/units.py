@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import re
 
-from .joints import joint_spec
+from .joints import JointSpec, joint_spec
 
 __all__ = [
     "LENGTH_UNITS",
@@ -132,7 +132,7 @@ def format_quantity(value: float, unit: str, digits: int = 4) -> str:
     return f"{value / table[unit]:.{digits}g} {unit}"
 
 
-def step_scale(joint: int) -> tuple[float, str]:
+def step_scale(joint: int | JointSpec) -> tuple[float, str]:
     """``(factor, unit)`` to show a step size of ``joint``: SI value × factor is in ``unit``.
 
     nm for the prismatic joint, µrad for rotary ones (the paper's units).
@@ -147,7 +147,7 @@ DIMENSIONLESS_PARAMETERS = frozenset({"b", "b2", "k"})
 """Model parameters without a unit: ``b`` of Eq. (2) and the ratios of the model families beyond it."""
 
 
-def param_scale(name: str, joint: int) -> tuple[float, str]:
+def param_scale(name: str, joint: int | JointSpec) -> tuple[float, str]:
     """``(factor, unit)`` to show calibration parameter ``name`` of ``joint``.
 
     Dimensionless parameters (``b`` of Eq. (2), :data:`DIMENSIONLESS_PARAMETERS`) are shown
@@ -157,32 +157,37 @@ def param_scale(name: str, joint: int) -> tuple[float, str]:
     return (1.0, "") if name in DIMENSIONLESS_PARAMETERS else step_scale(joint)
 
 
-def position_scale(joint: int) -> tuple[float, str]:
-    """``(factor, unit)`` to show a position of ``joint``: µm for the prismatic, degrees for rotary."""
+def position_scale(joint: int | JointSpec) -> tuple[float, str]:
+    """``(factor, unit)`` to show a position of ``joint``: µm for the prismatic, degrees for rotary.
+
+    ``joint`` is a joint number of the MM3A (:data:`stickslip.joints.JOINTS`) or an arm's
+    own :class:`~stickslip.joints.JointSpec` (a rig file's stage: µm for each of its joints);
+    so for every function here.
+    """
     return (180.0 / math.pi, "deg") if joint_spec(joint).rotary else (1e6, "µm")
 
 
-def step_display_unit(joint: int) -> str:
+def step_display_unit(joint: int | JointSpec) -> str:
     """The unit people read step sizes of ``joint`` in: nm for the prismatic, µrad for rotary."""
     return step_scale(joint)[1]
 
 
-def position_display_unit(joint: int) -> str:
+def position_display_unit(joint: int | JointSpec) -> str:
     """The unit people read positions of ``joint`` in: µm for the prismatic, degrees for rotary."""
     return position_scale(joint)[1]
 
 
-def format_step(value: float, joint: int, digits: int = 4) -> str:
+def format_step(value: float, joint: int | JointSpec, digits: int = 4) -> str:
     """Format a step size for ``joint`` (nm for the prismatic joint, µrad for rotary ones)."""
     return format_quantity(value, step_display_unit(joint), digits)
 
 
-def format_position(value: float, joint: int, digits: int = 6) -> str:
+def format_position(value: float, joint: int | JointSpec, digits: int = 6) -> str:
     """Format a joint position (µm for the prismatic joint, degrees for rotary ones)."""
     return format_quantity(value, position_display_unit(joint), digits)
 
 
-def format_spread(sd: float, joint: int) -> str:
+def format_spread(sd: float, joint: int | JointSpec) -> str:
     """A position's spread (a standard deviation, an interval's half-width) of ``joint`` for a person.
 
     µm for the prismatic joint; µrad for the rotary joints, in degrees from 1 mrad

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from ..devices.base import DeviceError, device_key
-from ..joints import JOINTS, joint_spec
+from ..joints import JointSet, joint_spec
 from ..units import (
     UnitError,
     bare_number_problem,
@@ -61,12 +61,14 @@ _DEVICE_HELP = (
 )
 
 
-def _parse_joint_value(joint: int, text: str, what: str) -> float:
-    """A position or displacement of ``joint`` with its unit: a length for joint 3, an angle for 1 and 2.
+def _parse_joint_value(joint: int, text: str, what: str, joints: JointSet | None = None) -> float:
+    """A position or displacement of ``joint`` with its unit: a length for a prismatic joint, an angle for a rotary.
 
-    A bare number (other than 0) is refused with a did-you-mean for that joint.
+    ``joints``: the arm's (a rig file's), the MM3A's by default (joint 3 a length,
+    joints 1 and 2 angles). A bare number (other than 0) is refused with a did-you-mean
+    for that joint.
     """
-    spec = joint_spec(joint)
+    spec = joint_spec(joint, joints)
     rotary = spec.rotary
     bare = bare_number_problem(text, "angle" if rotary else "length", spec.span)
     if bare is not None:
@@ -81,15 +83,15 @@ def _parse_joint_value(joint: int, text: str, what: str) -> float:
     return v
 
 
-def _position_or_stop(joint: int, text: str, what: str) -> float:
+def _position_or_stop(joint: int, text: str, what: str, joints: JointSet | None = None) -> float:
     """A position of ``joint`` (rad or m) from ``text``: a value with its unit, or ``min``/``max`` (an end stop)."""
-    spec = JOINTS[joint]
+    spec = joint_spec(joint, joints)
     word = text.strip().lower()
     if word in ("min", "lower"):
         return spec.lower
     if word in ("max", "upper"):
         return spec.upper
-    return _parse_joint_value(joint, text, what)
+    return _parse_joint_value(joint, text, what, joints)
 
 
 RAW_BURST = 20000
@@ -230,7 +232,7 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
     from ..procedures.arms import guard_for, opener_for
     from ..procedures.move import DeviceBusy, MoveRequest
     from ..procedures.move import move as move_joint
-    from .rig import load
+    from .rig import load, rig_database
 
     if device is not None:
         fail("give --device or --rig, not both (the rig file names each arm's controller)")
@@ -242,13 +244,14 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
     cal_path = calibration or (rig_file.parent / a.calibration if a.calibration else None)
     with user_errors(KeyError):
         cal = Calibration.load(calibration_file(cal_path))
-    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
+    joints = a.joint_specs()
+    with open_store(rig_database(db, rig)) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         request = MoveRequest(
             a.controller, joint,
-            by=None if by is None else _parse_joint_value(joint, by, "--by"),
-            to=None if to is None else _position_or_stop(joint, to, "--to"),
+            by=None if by is None else _parse_joint_value(joint, by, "--by", joints),
+            to=None if to is None else _position_or_stop(joint, to, "--to", joints),
             burst=burst or 1000, guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
-            trust_calibration=trust_calibration,
+            trust_calibration=trust_calibration, joints=joints, state_key=rig.state_key(a.name),
         )
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings, opener=opener_for(rig, a.name))
     failure = result.failure()
@@ -265,14 +268,15 @@ def _where_arms(rig_file: Path, db: str | None, json_out: bool) -> None:
     """``where --rig FILE``: every arm's kept positions (the devices are not opened)."""
     from ..procedures.arms import arm_states
     from ..procedures.move import where_line
-    from .rig import load
+    from .rig import load, rig_database
 
     rig = load(rig_file)
-    with open_store(db) as store, user_errors():
+    with open_store(rig_database(db, rig)) as store, user_errors():
         states = arm_states(store, rig)
     if json_out:
         print_json({"rig": rig.name, "arms": [
             {"arm": s.arm, "device": s.device, "q": [s.state.positions[j] for j in (1, 2, 3)],
+             "units": [s.state.spec(j).unit for j in (1, 2, 3)],
              "sources": [s.state.sources[j] for j in (1, 2, 3)]} for s in states]})
         return
     for s in states:
@@ -318,25 +322,26 @@ def _print_move(result: MoveResult) -> None:
 
     p = result.plan
     joint = p.joint
+    spec = result.state.spec(joint)  # the arm's joint: units from its kind
     tf = track_fields(result.state, joint)
     say(
-        f"joint {joint}: {format_position(p.q_from, joint)} -> {format_position(p.q_to, joint)}, "
+        f"joint {joint}: {format_position(p.q_from, spec)} -> {format_position(p.q_to, spec)}, "
         f"{p.steps:+d} steps in {len(result.outcome.bursts)} burst(s)"
     )
     spread = (
-        f" (σ {format_spread(tf['sd'], joint)}, step scale x{tf['step_scale'] or 1.0:.4f})"
+        f" (σ {format_spread(tf['sd'], spec)}, step scale x{tf['step_scale'] or 1.0:.4f})"
         if tf["sd"] is not None else ""
     )
     kept = "assumed end" if result.state.sources.get(joint) == "assumed" else "planned end"
-    say(f"{kept} {format_position(p.q_end, joint)}{spread}")
+    say(f"{kept} {format_position(p.q_end, spec)}{spread}")
     if result.sim_true_end is not None:
         err = result.sim_true_end - p.q_end
-        k, unit = step_scale(joint)  # nm / µrad; a miss of a micrometre or more in µm (as the σ above)
+        k, unit = step_scale(spec)  # nm / µrad; a miss of a micrometre or more in µm (as the σ above)
         if abs(err * k) < 1000:
             shown = f"{err * k:+.1f} {unit}"
         else:  # a miss of a micrometre or a milliradian or more: in the position's own unit
-            shown = f"{math.degrees(err):+.3f} deg" if joint_spec(joint).rotary else f"{err * 1e6:+.2f} µm"
-        say(f"simulator's true end {format_position(result.sim_true_end, joint)} ({shown})")
+            shown = f"{math.degrees(err):+.3f} deg" if spec.rotary else f"{err * 1e6:+.2f} µm"
+        say(f"simulator's true end {format_position(result.sim_true_end, spec)} ({shown})")
 
 
 def _info_line(info: dict[str, Any]) -> str | None:
@@ -414,8 +419,10 @@ def where(
         fail("give --device or --rig, not both (the rig file names each arm's controller)")
     if rig_file is None and arm is not None:
         fail("--arm names an arm of a rig: give --rig FILE too")
+    joints: JointSet | None = None
+    key: str | None = None
     if rig_file is not None:
-        from .rig import load
+        from .rig import load, rig_database
 
         rig = load(rig_file)
         if arm is None:
@@ -423,6 +430,9 @@ def where(
             return
         with user_errors(KeyError):
             device = rig.arm(arm).controller
+            joints = rig.arm(arm).joint_specs()
+            key = rig.state_key(arm)
+        db = str(rig_database(db, rig)) if db is None and rig.database else db
     from ..procedures.where import DeviceUnreachable, ReferenceRefused
     from ..procedures.where import where as kept_positions
 
@@ -430,12 +440,12 @@ def where(
     with user_errors():
         device_key(device)
     items = list(set_ or [])
-    references = [_reference(item) for item in items]
+    references = [_reference(item, joints) for item in items]
     with open_store(db) as store, user_errors(DeviceUnreachable):
         try:
             result = kept_positions(
                 store, device, references=references, pose=PoseUpdate(q1, q2, q3, theta, psi), offline=offline,
-                unlock=unlock,
+                unlock=unlock, joints=joints, key=key,
             )
         except ReferenceRefused as e:
             fail(f"--set {items[e.index]}: {e}")
@@ -445,13 +455,13 @@ def where(
     _print_where(result)
 
 
-def _reference(item: str) -> tuple[int, float]:
-    """``--set J=VALUE`` (VALUE with its unit, or min/max) to ``(joint, q)`` (rad or m)."""
+def _reference(item: str, joints: JointSet | None = None) -> tuple[int, float]:
+    """``--set J=VALUE`` (VALUE with its unit, or min/max) to ``(joint, q)`` (rad or m) of the arm's ``joints``."""
     j_text, sep, value = item.partition("=")
     if not sep or j_text.strip() not in ("1", "2", "3"):
         fail(f"--set {item!r}: write JOINT=VALUE, e.g. 3=0, 3=min, 2=-90deg")
     j = int(j_text)
-    return j, _position_or_stop(j, value, f"--set {item}")
+    return j, _position_or_stop(j, value, f"--set {item}", joints)
 
 
 def _print_where(result: WhereResult) -> None:
@@ -469,10 +479,10 @@ def _print_where(result: WhereResult) -> None:
         extra = ""
         tf = track_fields(state, j)
         if tf["sd"] is not None and j not in state.uncertain:
-            extra = f", σ {format_spread(tf['sd'], j)}, step scale x{tf['step_scale'] or 1.0:.4f}"
+            extra = f", σ {format_spread(tf['sd'], state.spec(j))}, step scale x{tf['step_scale'] or 1.0:.4f}"
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
-            extra = f", between {format_position(lo, j)} and {format_position(hi, j)}"
+            extra = f", between {format_position(lo, state.spec(j))} and {format_position(hi, state.spec(j))}"
         say(f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", indent="    ")
         if j in state.uncertain and j in state.why:
             say(f"  {'':>25}{state.why[j]}")

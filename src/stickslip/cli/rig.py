@@ -32,7 +32,8 @@ from ._common import (
 if TYPE_CHECKING:
     from ..devices.base import Controller
     from ..devices.positions import StateStore
-    from ..kinematics import Geometry
+    from ..joints import JointSet
+    from ..kinematics import Geometry, Stage
     from ..rig import Rig
     from ..rig.guard import Guard
 
@@ -61,9 +62,24 @@ def load(path: Path) -> Rig:
         return load_rig(path)
 
 
+def rig_database(db: str | None, rig: Rig) -> str | None:
+    """The database of a command given ``--rig``: ``--db`` wins, else the rig file's ``database``.
+
+    ``None`` when neither names one: then ``$STICKSLIP_DB``, the config file's and the
+    data folder's, as for any command (:func:`~._common.database_setting`).
+    """
+    return db if db is not None and str(db) != "" else rig.database
+
+
 @dataclass(frozen=True)
 class RigArm:
-    """What ``--rig FILE --arm NAME`` gives a command: the arm's device, geometry, calibration file and envelope."""
+    """What ``--rig FILE --arm NAME`` gives a command: the arm's device, kinematics, calibration, database, envelope.
+
+    ``joints`` are the arm's joints (kinds, ranges: :meth:`stickslip.rig.Arm.joint_specs`);
+    ``stage`` an ``xyz`` arm's kinematics (``None`` for an ``mm3a``, whose ``geometry`` counts);
+    ``database`` the rig's (:func:`rig_database`: ``--db`` wins); ``state_key`` where the arm's
+    positions are kept (:meth:`stickslip.rig.Rig.state_key`).
+    """
 
     rig: Rig
     arm: str
@@ -71,6 +87,10 @@ class RigArm:
     geometry: Geometry
     calibration: Path | None
     opener: Callable[[str], Controller]
+    joints: JointSet
+    stage: Stage | None
+    database: str | None
+    state_key: str
 
     def guard(self, store: StateStore) -> Guard:
         """The arm's envelope, with the other arms where ``store`` keeps them."""
@@ -80,7 +100,7 @@ class RigArm:
 
 
 def rig_arm(rig_file: Path | None, arm: str | None, device: str | None, geometry: str | None,
-            calibration: Path | None) -> RigArm | None:
+            calibration: Path | None, db: str | None = None) -> RigArm | None:
     """``--rig``/``--arm`` read, checked against ``--device``/``--geometry`` (exit 2); ``None`` without a rig."""
     if rig_file is None:
         if arm is not None:
@@ -97,7 +117,8 @@ def rig_arm(rig_file: Path | None, arm: str | None, device: str | None, geometry
     with user_errors(KeyError):
         a = rig.arm(arm)
     cal = calibration or (rig_file.parent / a.calibration if a.calibration else None)
-    return RigArm(rig, a.name, a.controller, a.geometry or DEFAULT_GEOMETRY, cal, opener_for(rig, a.name))
+    return RigArm(rig, a.name, a.controller, a.geometry or DEFAULT_GEOMETRY, cal, opener_for(rig, a.name),
+                  a.joint_specs(), a.stage(), rig_database(db, rig), rig.state_key(a.name))
 
 
 def _joint_text(kind: str, v: float) -> str:
@@ -108,7 +129,7 @@ def _joint_text(kind: str, v: float) -> str:
 def check(
     path: Path = typer.Argument(..., help="The rig file.", metavar="FILE"),
     out: Path | None = typer.Option(None, "--output", "-o", help="Draw the rig into this PNG (two views)."),
-    db: str | None = db_option(" The arms are drawn at their kept poses."),
+    db: str | None = db_option(" The arms are drawn at their kept poses (the rig file's database too)."),
 ) -> None:
     """List what a rig file holds (arms, joints, volumes, named positions) and draw it.
 
@@ -124,6 +145,7 @@ def check(
         f"{len(rig.positions)} named position(s); arms kept {rig.arm_distance * 1e6:.0f} µm apart, "
         f"margins widened by {rig.n_sigma:g} σ")
     poses = {a.name: a.home for a in rig.arms}
+    db = rig_database(db, rig)
     if db is not None:
         with open_store(db) as store:
             for s in arm_states(store, rig):
@@ -205,7 +227,7 @@ def go(
     cal_path = calibration or (rig_file.parent / a.calibration if a.calibration else None)
     with user_errors(KeyError):
         cal = Calibration.load(calibration_file(cal_path))
-    with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
+    with open_store(rig_database(db, rig)) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         results = go_to(store, rig, a.name, name, cal, warn=warn_later, ready=flush_warnings,
                         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration)
     for r in results:

@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 import typer
 
 from ..devices.base import DeviceError, device_key
-from ..joints import joint_spec
 from ..units import UnitError, bare_number_problem, format_position, parse_length
 from . import app
 from ._common import (
@@ -41,6 +40,7 @@ from .rig import rig_arm
 if TYPE_CHECKING:
     from .. import kinematics as kin
     from ..procedures.reach import ReachResult
+    from ..rig import Arm
 
 _DEVICE_HELP = (
     "Controller URL: sim://, mm3a:///dev/ttyUSB0, mm3a+socket://host:port, anc300://host[:7230] "
@@ -157,9 +157,9 @@ def reach(
     geom = parse_geometry(geometry)
     if rig_file is not None and camera is not None:
         fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
-    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration, db)
     if in_rig is not None:
-        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
+        device, geom, calibration, db = in_rig.device, in_rig.geometry, in_rig.calibration, in_rig.database
     device = device_url(device)
     from ..calibration import Calibration
     from ..motion.reach import borrow_joint1
@@ -176,6 +176,8 @@ def reach(
         segment=float(segment), burst=burst, pose=PoseUpdate(q1, q2, q3, theta, psi),
         max_age_days=0 if dry_run else max_age_setting(None).value, dry_run=dry_run,
         from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+        joints=None if in_rig is None else in_rig.joints, stage=None if in_rig is None else in_rig.stage,
+        state_key=None if in_rig is None else in_rig.state_key,
     )
     if camera_tip is not None and camera is None:
         fail("--camera-tip goes with --camera")
@@ -192,15 +194,18 @@ def reach(
     failure = result.failure()
     if failure is not None:
         fail(failure)
-    _print_plan(result, json_out)
+    _print_plan(result, json_out, None if in_rig is None else in_rig.rig.arm(in_rig.arm))
 
 
-def _print_plan(result: ReachResult, json_out: bool) -> None:
-    from .. import kinematics as kin
-
+def _print_plan(result: ReachResult, json_out: bool, arm: Arm | None = None) -> None:
+    """``reach``'s output; with a rig's ``arm``, also its name and the tip in the rig frame (its mount's pose)."""
     plan = result.plan
+    rig_frame = None
+    if arm is not None:
+        rig_frame = {k: [float(v) for v in arm.tip(q)] for k, q in (("start", plan.q_start), ("end", plan.q_end))}
     if json_out:
-        print_json(result.as_dict())
+        extra = {} if arm is None else {"arm": arm.name, "rig_frame": rig_frame}
+        print_json({**extra, **result.as_dict()})
         return
     n1, n2, n3 = plan.total_steps
     verb = "moved" if result.moved else "plan"
@@ -211,12 +216,16 @@ def _print_plan(result: ReachResult, json_out: bool) -> None:
     )
     say(f"predicted end {_um(plan.tip_end)}, {_miss(plan.end_error)} from the target")
     q = plan.q_end
+    js = result.state.joints  # the arm's: a stage's joints in µm
     say(
-        f"  joints q1 = {format_position(q[0], 1)}, q2 = {format_position(q[1], 2)}, "
-        f"q3 = {format_position(q[2], 3)}"
+        f"  joints q1 = {format_position(q[0], js[1])}, q2 = {format_position(q[1], js[2])}, "
+        f"q3 = {format_position(q[2], js[3])}"
     )
+    if rig_frame is not None:
+        a, b = (", ".join(f"{x * 1e6:.2f}" for x in rig_frame[k]) for k in ("start", "end"))
+        say(f"  rig frame: ({a}) -> ({b}) µm")
     if result.sim_true is not None:
-        true_tip = [float(v) for v in kin.tip(result.sim_true, plan.geometry)]
+        true_tip = [float(v) for v in plan.tip_of(result.sim_true)]
         err = math.dist(true_tip, plan.target)
         say(f"simulator's true tip {_um(true_tip)}, {_miss(err)} from the target")
 
@@ -287,7 +296,7 @@ def _status_lines(s: Any) -> list[str]:
     lines = ["tip (predicted, base frame) x y z: " + " ".join(f"{v * 1e6:+10.2f}" for v in s.tip) + " µm"]
     for j in (1, 2, 3):
         q, lim = s.q[j - 1], s.to_limits[j - 1]
-        if joint_spec(j).prismatic:
+        if s.kinds[j - 1] == "prismatic":
             shown, left = f"{q * 1e6:10.2f} µm ", f"{lim * 1e6:.2f} µm"
         else:
             shown, left = f"{math.degrees(q):10.4f} deg", f"{math.degrees(lim):.4f} deg"
@@ -423,9 +432,9 @@ def jog(
     geom = parse_geometry(geometry)
     if rig_file is not None and camera is not None:
         fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
-    in_rig = rig_arm(rig_file, arm, device, geometry, calibration)
+    in_rig = rig_arm(rig_file, arm, device, geometry, calibration, db)
     if in_rig is not None:
-        device, geom, calibration = in_rig.device, in_rig.geometry, in_rig.calibration
+        device, geom, calibration, db = in_rig.device, in_rig.geometry, in_rig.calibration, in_rig.database
     device = device_url(device)
     with user_errors(KeyError):
         cal, borrowed = borrow_joint1(Calibration.load(calibration_file(calibration)))
@@ -441,7 +450,8 @@ def jog(
     try:
         with open_store(db) as store, user_errors(DeviceBusy, DeviceError, *(camera_errors() if camera else ())):
             if in_rig is not None:
-                request = dataclasses.replace(request, guard=in_rig.guard(store))
+                request = dataclasses.replace(request, guard=in_rig.guard(store), joints=in_rig.joints,
+                                              stage=in_rig.stage, state_key=in_rig.state_key)
             result = jog_session(
                 store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
                 opener=None if in_rig is None else in_rig.opener,

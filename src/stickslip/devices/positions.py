@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from .. import kinematics as kin
+from ..joints import JointSet, JointSpec
 from ..records import atomic_write_text, check_version, loads_json, read_json
 from ..units import format_position
 from .base import device_key
@@ -121,12 +122,18 @@ class DeviceState:
     """``{joint: JointTrack JSON}``: step scale and position covariance (stickslip.motion.tracking)."""
     why: dict[int, str] = field(default_factory=dict)
     """``{joint: what left it uncertain}`` ("a move was interrupted", "a traverse was interrupted", ...)."""
+    joints: JointSet = field(default_factory=lambda: kin.JOINTS, compare=False, repr=False)
+    """The arm's joints (kinds, ranges): the MM3A's, or an arm's of a rig file. Not stored."""
 
     @classmethod
-    def default(cls, device: str) -> DeviceState:
-        """The outstretched pose (``q2 = -pi/2``), level base, nothing known."""
-        p = kin.Pose()
-        return cls(device, {1: p.q1, 2: p.q2, 3: p.q3}, dict.fromkeys((1, 2, 3), "default"))
+    def default(cls, device: str, joints: JointSet | None = None) -> DeviceState:
+        """Each joint at its ``home`` (the MM3A outstretched, ``q2 = -pi/2``), level base, nothing known."""
+        js = kin.JOINTS if joints is None else joints
+        return cls(device, {j: js[j].home for j in (1, 2, 3)}, dict.fromkeys((1, 2, 3), "default"), joints=js)
+
+    def spec(self, joint: int) -> JointSpec:
+        """The :class:`~stickslip.joints.JointSpec` of ``joint`` on this arm; ``ValueError`` for no such joint."""
+        return kin.joint_spec(joint, self.joints)
 
     @property
     def pose(self) -> kin.Pose:
@@ -136,13 +143,13 @@ class DeviceState:
 
     def set_position(self, joint: int, q: float, source: str = "set") -> None:
         """Record ``q`` (rad or m) for ``joint``; ``ValueError`` outside its end stops."""
-        spec = kin.joint_spec(joint)
+        spec = self.spec(joint)
         q = float(q)
         if spec.range_problem(f"q{spec.number}", q):
-            shown = format_position(q, spec.number) if math.isfinite(q) else repr(q)
+            shown = format_position(q, spec) if math.isfinite(q) else repr(q)
             raise ValueError(
                 f"q{spec.number} = {shown} is outside joint {spec.number}'s range "
-                f"[{format_position(spec.lower, spec.number)}, {format_position(spec.upper, spec.number)}]"
+                f"[{format_position(spec.lower, spec)}, {format_position(spec.upper, spec)}]"
             )
         if source not in SOURCES:
             raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
@@ -164,14 +171,14 @@ class DeviceState:
         between its last confirmed position and ``q_intended``; ``why`` is what a person
         is told if it stays so.
         """
-        spec = kin.joint_spec(joint)
+        spec = self.spec(joint)
         q = min(max(float(q_intended), spec.lower), spec.upper)
         confirmed = self.positions[spec.number]
         self.mark_uncertain(joint, min(confirmed, q), max(confirmed, q), why)
 
     def mark_uncertain(self, joint: int, lo: float, hi: float, why: str) -> None:
         """Record that ``joint`` lies somewhere in ``[lo, hi]`` (rad or m, clipped to its range), and why."""
-        spec = kin.joint_spec(joint)
+        spec = self.spec(joint)
         lo, hi = (min(max(float(v), spec.lower), spec.upper) for v in (lo, hi))
         self.uncertain[spec.number] = (min(lo, hi), max(lo, hi))
         self.why[spec.number] = why
@@ -182,7 +189,7 @@ class DeviceState:
             return self.uncertain[joint]
         if self.referenced(joint):
             return (self.positions[joint], self.positions[joint])
-        spec = kin.joint_spec(joint)
+        spec = self.spec(joint)
         return (spec.lower, spec.upper)
 
     def uncertainty_problem(self, joint: int) -> str | None:
@@ -192,8 +199,8 @@ class DeviceState:
         lo, hi = self.uncertain[joint]
         why = self.why.get(joint, "a move was interrupted")
         return (
-            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, joint)} and "
-            f"{format_position(hi, joint)}; re-reference it at an end stop first, e.g. "
+            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, self.spec(joint))} and "
+            f"{format_position(hi, self.spec(joint))}; re-reference it at an end stop first, e.g. "
             f"`stickslip where --set {joint}=min` after driving it to the lower stop"
         )
 
@@ -235,9 +242,9 @@ STATE_VERSION = 1
 """Format of the stored positions: a state of a newer stickslip (a higher version) is refused, not guessed at."""
 
 
-def load_state(store: StateStore, device: str) -> DeviceState:
-    """The stored state of ``device`` (the default state if none was stored)."""
-    state = DeviceState.default(device)
+def load_state(store: StateStore, device: str, joints: JointSet | None = None) -> DeviceState:
+    """The stored state of ``device`` (the default state if none was stored), an arm of ``joints`` (the MM3A's)."""
+    state = DeviceState.default(device, joints)
     raw = store.get_state(device, _KEY)
     if not raw:
         return state

@@ -38,11 +38,12 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..joints import JOINTS, Q3_MAX, ROTARY_SPAN, JointSpec, joint_spec
+from ..joints import JOINTS, Q3_MAX, ROTARY_SPAN, JointSet, JointSpec, joint_spec
 
 __all__ = [
     "Pose",
     "JointSpec",
+    "JointSet",
     "JOINTS",
     "Q3_MAX",
     "ROTARY_SPAN",

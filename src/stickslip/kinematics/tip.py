@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..joints import MM3A_GEOMETRY
+from ..joints import MM3A_GEOMETRY, JointSet
 from ..units import UnitError, format_position, parse_length
 from .frames import JOINTS
 
@@ -209,17 +209,21 @@ def joint_rates(
     return np.asarray((J.T @ vv) / norms2, dtype=float)
 
 
-def limit_problem(q: ArrayLike) -> str | None:
-    """``"joint j would be at ... beyond its lower/upper limit ..."`` for the first joint out of range, or ``None``."""
+def limit_problem(q: ArrayLike, joints: JointSet | None = None) -> str | None:
+    """``"joint j would be at ... beyond its lower/upper limit ..."`` for the first joint out of range, or ``None``.
+
+    ``joints``: the arm's (a rig file's), the MM3A's by default.
+    """
     a = _q(q)
     for j in (1, 2, 3):
-        spec = JOINTS[j]
+        spec = (JOINTS if joints is None else joints)[j]
         v = float(a[j - 1])
         if spec.contains(v):
             continue
         side = "lower" if v < spec.lower else "upper"
         bound = spec.lower if side == "lower" else spec.upper
-        return f"joint {j} would be at {format_position(v, j)}, beyond its {side} limit {format_position(bound, j)}"
+        return (f"joint {j} would be at {format_position(v, spec)}, beyond its {side} limit "
+                f"{format_position(bound, spec)}")
     return None
 
 

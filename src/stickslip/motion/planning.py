@@ -46,6 +46,8 @@ class MovePlan:
         The unrounded integral.
     gamma_start, gamma_end : float
         Predicted step size at the start and at the target (rad or m).
+    spec : JointSpec or None
+        The arm's joint when it is not the MM3A's (its kind and unit); ``None``: the MM3A's.
     """
 
     joint: int
@@ -57,6 +59,7 @@ class MovePlan:
     exact_steps: float
     gamma_start: float
     gamma_end: float
+    spec: kin.JointSpec | None = None
 
     @property
     def signed_steps(self) -> int:
@@ -66,9 +69,9 @@ class MovePlan:
     def __repr__(self) -> str:
         from ..units import format_position, format_step
 
-        j = self.joint
+        j = self.spec or self.joint
         return (
-            f"MovePlan(joint {j}: {format_position(self.q_from, j)} -> {format_position(self.q_to, j)}, "
+            f"MovePlan(joint {self.joint}: {format_position(self.q_from, j)} -> {format_position(self.q_to, j)}, "
             f"{self.signed_steps:+d} steps, predicted end {format_position(self.q_end_predicted, j)}, "
             f"step {format_step(self.gamma_start, j)} -> {format_step(self.gamma_end, j)})"
         )
@@ -78,8 +81,8 @@ class MovePlan:
         from ..notebook import html_table
         from ..units import position_scale, step_scale
 
-        k, pu = position_scale(self.joint)
-        s, su = step_scale(self.joint)
+        k, pu = position_scale(self.spec or self.joint)
+        s, su = step_scale(self.spec or self.joint)
         return html_table(
             f"move of joint {self.joint}",
             ["steps", f"from ({pu})", f"to ({pu})", f"predicted end ({pu})", f"step at start ({su})",
@@ -100,7 +103,7 @@ class MovePlan:
             "exact_steps": self.exact_steps,
             "gamma_start": self.gamma_start,
             "gamma_end": self.gamma_end,
-            "unit": kin.joint_spec(self.joint).unit,
+            "unit": kin.joint_spec(self.spec or self.joint).unit,
         }
 
 
@@ -136,8 +139,12 @@ class Planner:
     Parameters
     ----------
     calibration : Calibration
-    joint : int
-        1, 2 or 3.
+    joint : int or JointSpec
+        1, 2 or 3 of the MM3A, or an arm's own joint (:meth:`stickslip.rig.Arm.joint_specs`).
+        A joint whose ``step_model`` is ``"constant"`` (an ``xyz`` arm's stage) is planned
+        with the calibration's constant step of each direction; the pose does not enter.
+        A calibration that models such a joint the MM3A's way is refused (``ValueError``):
+        its steps are another arm's (an MM3A's joint 1 in rad, not a stage's in m).
     pose : Pose
         The other joints and the tilt; the joint's own coordinate in it is ignored.
 
@@ -150,18 +157,35 @@ class Planner:
     -32
     """
 
-    def __init__(self, calibration: Calibration, joint: int, pose: kin.Pose):
-        self.joint = int(joint)
+    def __init__(self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose):
         self.spec = kin.joint_spec(joint)
+        self.joint = self.spec.number
+        self.pose = pose
+        self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
+        if self.spec.step_model == "constant":  # a stage: the calibration's constant step of each direction
+            if any(j == self.joint for j, _ in calibration.models):  # an MM3A's: its steps are not a stage's
+                raise ValueError(
+                    f"this calibration models joint {self.joint} as an MM3A's (the paper's load terms), and this "
+                    "joint is a stage's, planned with a constant step: give the stage's own calibration"
+                )
+            self._models: dict[int, JointModel] = {}
+            for s, lab in ((1, "+"), (-1, "-")):
+                step = calibration.constant_steps.get((self.joint, lab))
+                if step is not None:
+                    if not (math.isfinite(step) and step > 0):
+                        raise ValueError(f"joint {self.joint}{lab}: the calibration's constant step {step!r} "
+                                         "is not a positive number")
+                    self._coeffs[s] = StepProfile(step)
+            if not self._coeffs:
+                raise KeyError(f"joint {self.joint} has no constant step in this calibration")
+            return
         problems = check_pose(self.joint, dict(zip(kin.Pose._fields, map(float, pose), strict=True)))
         if problems:  # a pose the arm cannot take is never planned in
-            raise ValueError(f"pose for a move of joint {joint}: " + "; ".join(problems))
-        self.pose = pose
+            raise ValueError(f"pose for a move of joint {self.joint}: " + "; ".join(problems))
         models = calibration.models
         self._models = {s: models[(self.joint, lab)] for s, lab in ((1, "+"), (-1, "-")) if (self.joint, lab) in models}
         if not self._models:
-            raise KeyError(f"joint {joint} is not in this calibration")
-        self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
+            raise KeyError(f"joint {self.joint} is not in this calibration")
 
     def _dir(self, sign: int) -> StepProfile | TabulatedProfile:
         c = self._coeffs.get(sign)
@@ -223,7 +247,8 @@ class Planner:
         n = round(exact)
         end = self.position_after(q_from, sign * n)  # exactly what dead_reckon gives for these steps
         return MovePlan(
-            self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from), c.gamma(q_to)
+            self.joint, direction_label(sign), n, float(q_from), float(q_to), end, exact, c.gamma(q_from),
+            c.gamma(q_to), None if self.spec is kin.joint_spec(self.joint) else self.spec,
         )
 
 

@@ -29,6 +29,12 @@ axis (:class:`~stickslip.kinematics.SingularPose`).
 
 With ``step_model="constant"`` the paper's constant step of each joint and direction
 replaces the model: the comparator of the benchmark.
+
+A Cartesian arm (``stage``: three prismatic stages carrying a tool, a rig file's
+``xyz`` arm, :class:`stickslip.kinematics.Stage`) is planned the same way with its own
+kinematics: its task space is its joint space turned by its axes, so the ideal joint
+path is a straight line and there is no singular pose; each stage steps with the
+calibration's constant step of its direction (its :class:`~stickslip.joints.JointSpec`).
 """
 
 from __future__ import annotations
@@ -114,6 +120,8 @@ class ReachPlan:
         Base tilt, rad.
     step_model : str
         ``"calibrated"`` or ``"constant"``.
+    stage : Stage or None
+        A Cartesian arm's kinematics (then ``geometry`` is not used); ``None``: the MM3A's.
     """
 
     q_start: Vec3
@@ -125,6 +133,11 @@ class ReachPlan:
     psi: float = 0.0
     step_model: str = "calibrated"
     segment_length: float = field(default=0.0)
+    stage: kin.Stage | None = None
+
+    def tip_of(self, q: ArrayLike) -> NDArray[np.float64]:
+        """The tip at joints ``q`` (base frame, m) with this plan's arm: the MM3A's geometry or the stage."""
+        return self.stage.tip(q) if self.stage is not None else kin.tip(q, self.geometry)
 
     @property
     def q_end(self) -> Vec3:
@@ -234,14 +247,17 @@ class JointStepper:
     Parameters
     ----------
     calibration : Calibration
-    joint : int
+    joint : int or JointSpec
+        The MM3A's joint, or an arm's own (:class:`~.planning.Planner`).
     pose : Pose
         The pose at the moment the joint is stepped (its own coordinate ignored).
     step_model : {"calibrated", "constant"}
     """
 
-    def __init__(self, calibration: Calibration, joint: int, pose: kin.Pose, step_model: str = "calibrated"):
-        self.joint = joint
+    def __init__(
+        self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose, step_model: str = "calibrated"
+    ):
+        self.joint = kin.joint_spec(joint).number
         self.step_model = step_model
         if step_model == "calibrated":
             self._planner: Planner | None = Planner(calibration, joint, pose)
@@ -251,7 +267,7 @@ class JointStepper:
             self._const = {}
             for sign, label in ((1, "+"), (-1, "-")):
                 try:
-                    self._const[sign] = float(calibration.constant_step(joint, label))
+                    self._const[sign] = float(calibration.constant_step(self.joint, label))
                 except KeyError:
                     continue
         else:
@@ -323,20 +339,25 @@ def _ideal_path(
     n: int,
     geometry: kin.Geometry,
     min_reach: float,
+    stage: kin.Stage | None = None,
+    joints: kin.JointSet | None = None,
 ) -> list[NDArray[np.float64]]:
     """Joint coordinates on the line at the end of each segment (the branch continued from ``q0``)."""
     out = []
     prev = q0
     for k in range(1, n + 1):
         aim = p0 + (p1 - p0) * (k / n)
-        q = kin.inverse(aim, geometry, near=prev, min_reach=min_reach, check_limits=False)
-        problem = kin.limit_problem(q)
+        if stage is not None:
+            q = stage.inverse(aim)
+        else:
+            q = kin.inverse(aim, geometry, near=prev, min_reach=min_reach, check_limits=False)
+        problem = kin.limit_problem(q, joints)
         if problem:
             shown = ", ".join(f"{v * 1e6:.1f}" for v in aim)
             raise kin.OutOfReach(
                 f"the straight line leaves the arm's reach {k / n:.0%} of the way, at ({shown}) µm: {problem}"
             )
-        if abs(q[0] - prev[0]) > 0.5 or abs(q[1] - prev[1]) > 0.5:  # a branch flip: past the axis
+        if stage is None and (abs(q[0] - prev[0]) > 0.5 or abs(q[1] - prev[1]) > 0.5):  # a branch flip
             raise kin.SingularPose("the straight line crosses joint 1's axis (a singular pose); move in two legs")
         out.append(q)
         prev = q
@@ -357,6 +378,8 @@ def _segment_steps(
     p1: NDArray[np.float64],
     aim: NDArray[np.float64],
     last: bool,
+    stage: kin.Stage | None = None,
+    joints: kin.JointSet | None = None,
 ) -> tuple[tuple[int, int, int], Vec3]:
     """Whole steps of joints 1, 2, 3 for one segment, and the predicted joints after them.
 
@@ -370,6 +393,10 @@ def _segment_steps(
     """
     d = p1 - p0
     dd = float(d @ d)
+    specs = kin.JOINTS if joints is None else joints
+
+    def tip_at(qq: Vec3) -> NDArray[np.float64]:
+        return stage.tip(qq) if stage is not None else kin.tip(qq, geometry)
 
     def off_line(p: NDArray[np.float64]) -> float:
         r = p - p0
@@ -380,7 +407,7 @@ def _segment_steps(
     def expand(j: int, qq: Vec3, steps: tuple[int, ...], worst: float) -> None:
         nonlocal best
         if j == 4:
-            tip_end = kin.tip(qq, geometry)
+            tip_end = tip_at(qq)
             miss = float(np.linalg.norm(tip_end - aim))
             score = miss if last else worst + _ALONG_WEIGHT * miss
             if best is None or score < best[0]:
@@ -392,11 +419,11 @@ def _segment_steps(
             return
         here = kin.Pose(qq[0], qq[1], qq[2], *tilt)
         try:
-            stepper = JointStepper(calibration, j, here, step_model)
+            stepper = JointStepper(calibration, specs[j], here, step_model)
             exact = stepper.exact_steps(qq[j - 1], target)
         except NonPhysicalError as e:
             raise ValueError(f"joint {j} cannot step in this pose: {e}") from None
-        spec = kin.JOINTS[j]
+        spec = specs[j]
         choices: set[tuple[int, float]] = set()
         for nj in {math.floor(exact), math.ceil(exact)}:
             q_new = stepper.position_after(qq[j - 1], nj)
@@ -408,7 +435,7 @@ def _segment_steps(
             moved = list(qq)
             moved[j - 1] = q_new
             q_next = (moved[0], moved[1], moved[2])
-            worst_next = max(worst, off_line(kin.tip(q_next, geometry))) if dd else 0.0
+            worst_next = max(worst, off_line(tip_at(q_next))) if dd else 0.0
             expand(j + 1, q_next, (*steps, nj), worst_next)
 
     expand(1, q, (), 0.0)
@@ -425,6 +452,8 @@ def plan_reach(
     segment: float = 10e-6,
     min_reach: float = kin.MIN_REACH,
     step_model: str = "calibrated",
+    stage: kin.Stage | None = None,
+    joints: kin.JointSet | None = None,
 ) -> ReachPlan:
     """Plan a straight move of the tip to ``to`` or by ``by`` (m, base frame) from ``pose``.
 
@@ -442,6 +471,11 @@ def plan_reach(
     min_reach : float
         Closest the line may pass joint 1's axis, m.
     step_model : {"calibrated", "constant"}
+    stage : Stage or None
+        A Cartesian arm's kinematics (the module docstring); ``geometry`` and
+        ``min_reach`` are then not used.
+    joints : JointSet or None
+        The arm's joints (ranges, how each steps): the MM3A's by default.
 
     Returns
     -------
@@ -458,30 +492,32 @@ def plan_reach(
     if (to is None) == (by is None):
         raise ValueError("give exactly one of to and by")
     q0 = np.array(pose[:3], dtype=float)
-    problem = kin.limit_problem(q0)
+    problem = kin.limit_problem(q0, joints)
     if problem:
         raise kin.OutOfReach(f"the start pose is outside the joints' ranges: {problem}")
-    p0 = kin.tip(q0, geometry)
+    p0 = stage.tip(q0) if stage is not None else kin.tip(q0, geometry)
     vec = np.asarray(to if to is not None else by, dtype=float).reshape(3)
     if not np.all(np.isfinite(vec)):
         raise ValueError(f"the {'target' if to is not None else 'displacement'} {vec.tolist()} is not finite")
     p1 = vec if to is not None else p0 + vec
     length = float(np.linalg.norm(p1 - p0))
     n, seg_len = _segment_count(length, float(segment))
-    rho0 = float(kin.distance_from_axis(q0, geometry))
+    rho0 = math.inf if stage is not None else float(kin.distance_from_axis(q0, geometry))
     if n and rho0 < min_reach:
         raise kin.SingularPose(
             f"the tip is {rho0 * 1e3:.3g} mm from joint 1's axis, closer than {min_reach * 1e3:.3g} mm: a singular "
             f"pose; tilt the arm (joint 2) away from the vertical first"
         )
-    if n:
+    if n and stage is None:
         _check_line_clear_of_axis(p0, p1, min_reach)
-    ideal = _ideal_path(q0, p0, p1, n, geometry, min_reach)
+    ideal = _ideal_path(q0, p0, p1, n, geometry, min_reach, stage, joints)
     theta, psi = float(pose[3]), float(pose[4])
     q: Vec3 = _vec(q0)
     segments: list[ReachSegment] = []
     for k, goal in enumerate(ideal, start=1):
         aim = p0 + (p1 - p0) * (k / n)
-        steps, q = _segment_steps(calibration, step_model, q, goal, (theta, psi), geometry, p0, p1, aim, k == n)
-        segments.append(ReachSegment(steps, q, _vec(kin.tip(q, geometry)), _vec(aim)))
-    return ReachPlan(_vec(q0), _vec(p0), _vec(p1), segments, geometry, theta, psi, step_model, seg_len)
+        steps, q = _segment_steps(calibration, step_model, q, goal, (theta, psi), geometry, p0, p1, aim, k == n,
+                                  stage, joints)
+        tip = stage.tip(q) if stage is not None else kin.tip(q, geometry)
+        segments.append(ReachSegment(steps, q, _vec(tip), _vec(aim)))
+    return ReachPlan(_vec(q0), _vec(p0), _vec(p1), segments, geometry, theta, psi, step_model, seg_len, stage)

@@ -73,7 +73,10 @@ def calibration_id(cal: Calibration) -> str:
 
 
 def scaled_calibration(cal: Calibration, joint: int, factor: float | dict[str, float]) -> Calibration:
-    """``cal`` with every step of ``joint`` multiplied by ``factor`` (1; or ``{direction: factor}``)."""
+    """``cal`` with every step of ``joint`` multiplied by ``factor`` (1; or ``{direction: factor}``).
+
+    Its models and its constant steps (what a stage's joint is planned with) alike.
+    """
     factors = factor if isinstance(factor, dict) else {"+": factor, "-": factor}
     for f in factors.values():
         if not (math.isfinite(f) and f > 0):
@@ -81,7 +84,8 @@ def scaled_calibration(cal: Calibration, joint: int, factor: float | dict[str, f
     if all(f == 1.0 for f in factors.values()):
         return cal
     models = {k: (scaled_model(m, factors.get(k[1], 1.0)) if k[0] == joint else m) for k, m in cal.models.items()}
-    return dataclasses.replace(cal, models=models)
+    constant = {k: (v * factors.get(k[1], 1.0) if k[0] == joint else v) for k, v in cal.constant_steps.items()}
+    return dataclasses.replace(cal, models=models, constant_steps=constant)
 
 
 def joint_sigma_model(cal: Calibration, joint: int, pose: kin.Pose | None = None) -> float:

@@ -1,9 +1,11 @@
 """Several arms in one rig (docs/rig.md): which device an arm is, its envelope, its named positions.
 
-An arm's positions, lock and journal are kept under its controller's device key
-(:func:`stickslip.devices.base.device_key`), as for any device: arms on different
-controllers have their own, and moves of different arms may run at once (each holds
-only its own lock). :func:`guard_for` builds the arm's envelope from the rig and the
+An arm's positions and journal are kept under its controller's device key
+(:func:`stickslip.devices.base.device_key`), as for any device, or, when two arms of the
+rig share a controller (each on its own channels), under ``KEY#arm=NAME``
+(:meth:`stickslip.rig.Rig.state_key`). The lock is the controller's: moves of arms on
+different controllers may run at once (each holds only its own lock); two arms on one
+controller move one after the other. :func:`guard_for` builds the arm's envelope from the rig and the
 other arms' kept poses; :func:`go_to` reaches a rig file's named position joint by
 joint in its order, after checking the whole path.
 """
@@ -14,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..calibration import Calibration
-from ..devices.base import Controller, device_key, open_device
+from ..devices.base import Controller, open_device
 from ..devices.positions import DeviceState, StateStore, load_state
 from ..rig import Rig
 from ..rig.envelope import EnvelopeViolation
@@ -31,7 +33,7 @@ def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
     others = {}
     for other in rig.arms:
         if other.name != me.name:
-            s = load_state(store, device_key(other.controller))
+            s = load_state(store, rig.state_key(other.name), other.joint_specs())
             others[other.name] = [s.positions[j] for j in (1, 2, 3)]
     return Guard(rig, me.name, others)
 
@@ -60,7 +62,8 @@ class ArmState:
 
 def arm_states(store: StateStore, rig: Rig) -> list[ArmState]:
     """Every arm's kept state, in the rig's order."""
-    return [ArmState(a.name, device_key(a.controller), load_state(store, device_key(a.controller))) for a in rig.arms]
+    return [ArmState(a.name, rig.state_key(a.name), load_state(store, rig.state_key(a.name), a.joint_specs()))
+            for a in rig.arms]
 
 
 def go_to(
@@ -89,8 +92,7 @@ def go_to(
     """
     a = rig.arm(arm)
     target = rig.position(a.name, name)
-    key = device_key(a.controller)
-    state = load_state(store, key)
+    state = load_state(store, rig.state_key(a.name), a.joint_specs())
     guard = guard_for(store, rig, a.name)
     q = [state.positions[j] for j in (1, 2, 3)]
     path = [list(q)]
@@ -116,7 +118,8 @@ def go_to(
     for before, after in zip(path[:-1], path[1:], strict=True):
         j = next(i + 1 for i in range(3) if before[i] != after[i])
         request = MoveRequest(a.controller, j, to=after[j - 1], burst=burst, guard=guard_for(store, rig, a.name),
-                              from_unreferenced=from_unreferenced, trust_calibration=trust_calibration)
+                              from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+                              joints=a.joint_specs(), state_key=rig.state_key(a.name))
         result = move(store, request, calibration, warn=warn, ready=once, opener=opener_for(rig, a.name, opener))
         results.append(result)
         if result.outcome.error is not None:

@@ -59,7 +59,7 @@ from ..motion.reach import JointStepper, plan_reach
 from ..rig.envelope import EnvelopeViolation
 from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, track_fields
+from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, simulates, track_fields
 from .reach import referenced_state
 
 if TYPE_CHECKING:
@@ -202,6 +202,8 @@ class JogStatus:
     message: str
     sources: tuple[str, str, str] = ("", "", "")
     """Each joint's kept source when a camera looks (``seen``, ``dead-reckoned``), else empty."""
+    kinds: tuple[str, str, str] = ("rotary", "rotary", "prismatic")
+    """Each joint's kind (the arm's: an ``xyz`` stage's are all prismatic), for the units it is shown in."""
 
 
 @dataclass
@@ -231,6 +233,11 @@ class JogController:
     guard : Guard or None
         A rig's envelope: motion stops before a tick whose steps would leave it (so within
         one tick's motion of the boundary), with ``guard_sd`` (rad, rad, m) as the joints' σ.
+    joints : JointSet or None
+        The arm's joints (a rig file's arm); the MM3A's by default.
+    stage : Stage or None
+        A Cartesian arm's kinematics (a rig file's ``xyz`` arm): ``dq = A^-T v`` in every
+        pose, and ``geometry`` is not used.
     """
 
     calibration: Calibration
@@ -259,6 +266,14 @@ class JogController:
     _queued: list[tuple[float, float, float]] = field(default_factory=list)
     guard: Guard | None = None
     guard_sd: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    joints: kin.JointSet | None = None
+    stage: kin.Stage | None = None
+
+    def _spec(self, joint: int) -> kin.JointSpec:
+        return kin.joint_spec(joint, self.joints)
+
+    def _tip(self, q: tuple[float, float, float]) -> np.ndarray:
+        return self.stage.tip(q) if self.stage is not None else kin.tip(q, self.geometry)
 
     def __post_init__(self) -> None:
         self.q = [float(v) for v in self.q]
@@ -331,7 +346,7 @@ class JogController:
     def gamma(self, joint: int, sign: int) -> float:
         """Calibrated mean step of ``joint`` in direction ``sign`` at the predicted pose (rad or m)."""
         pose = kin.Pose(self.q[0], self.q[1], self.q[2], self.theta, self.psi)
-        stepper = JointStepper(self.calibration, joint, pose)
+        stepper = JointStepper(self.calibration, self._spec(joint), pose)
         return float(abs(stepper.position_after(self.q[joint - 1], sign) - self.q[joint - 1]))
 
     def rates(self, v: tuple[float, float, float]) -> tuple[tuple[float, float, float], float]:
@@ -340,7 +355,7 @@ class JogController:
         ``dq = J⁻¹ v``; ``rate_j = dq_j / gamma_j``; all scaled by one factor so that
         none exceeds its joint's maximum. Raises ``SingularPose`` near joint 1's axis.
         """
-        dq = kin.joint_rates(self.q, v, self.geometry)
+        dq = self.stage.joint_rates(v) if self.stage is not None else kin.joint_rates(self.q, v, self.geometry)
         raw = []
         for j in (1, 2, 3):
             if dq[j - 1] == 0.0:
@@ -396,8 +411,8 @@ class JogController:
             if steps[j - 1]:
                 pose = kin.Pose(q[0], q[1], q[2], self.theta, self.psi)
                 before = q[j - 1]
-                q[j - 1] = JointStepper(self.calibration, j, pose).position_after(before, steps[j - 1])
-                spec = kin.JOINTS[j]
+                spec = self._spec(j)
+                q[j - 1] = JointStepper(self.calibration, spec, pose).position_after(before, steps[j - 1])
                 guard = self.margin * spec.span
                 # inside the guard band and going further in (moving away from a stop is always allowed)
                 if (q[j - 1] < spec.lower + guard and q[j - 1] < before) or (
@@ -415,7 +430,7 @@ class JogController:
                 self._queued.append(direction)
             return
         q_now = (self.q[0], self.q[1], self.q[2])
-        start = self._setpoint if self._setpoint is not None else tuple(float(c) for c in kin.tip(q_now, self.geometry))
+        start = self._setpoint if self._setpoint is not None else tuple(float(c) for c in self._tip(q_now))
         target = tuple(start[i] + self.speed * direction[i] for i in range(3))
         try:
             plan = plan_reach(
@@ -424,6 +439,8 @@ class JogController:
                 to=target,
                 geometry=self.geometry,
                 segment=max(self.speed / 4, 1e-7),
+                stage=self.stage,
+                joints=self.joints,
             )
         except (kin.OutOfReach, kin.SingularPose, KeyError, ValueError) as e:
             self.message = str(e).strip("'\"")
@@ -437,14 +454,15 @@ class JogController:
         if n == 0:
             return
         pose = kin.Pose(self.q[0], self.q[1], self.q[2], self.theta, self.psi)
-        self.q[joint - 1] = JointStepper(self.calibration, joint, pose).position_after(self.q[joint - 1], n)
+        self.q[joint - 1] = JointStepper(self.calibration, self._spec(joint), pose).position_after(self.q[joint - 1], n)
         self.sent[joint - 1] += n
 
     def status(self) -> JogStatus:
         """The current :class:`JogStatus`."""
         q = (self.q[0], self.q[1], self.q[2])
-        p = kin.tip(q, self.geometry)
-        lim = tuple(min(self.q[j - 1] - kin.JOINTS[j].lower, kin.JOINTS[j].upper - self.q[j - 1]) for j in (1, 2, 3))
+        p = self._tip(q)
+        specs = [self._spec(j) for j in (1, 2, 3)]
+        lim = tuple(min(self.q[j - 1] - specs[j - 1].lower, specs[j - 1].upper - self.q[j - 1]) for j in (1, 2, 3))
         return JogStatus(
             q,
             (float(p[0]), float(p[1]), float(p[2])),
@@ -458,6 +476,7 @@ class JogController:
             list(self.sent),
             self.message,
             self.sources,
+            (specs[0].kind, specs[1].kind, specs[2].kind),
         )
 
 
@@ -498,7 +517,7 @@ def run_jog(
                     continue
                 pose = state.pose
                 q_from = state.positions[j]
-                stepper = JointStepper(controller.calibration, j, pose)
+                stepper = JointStepper(controller.calibration, state.spec(j), pose)
 
                 def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
                     return stepper.position_after(q_from, m)
@@ -596,6 +615,12 @@ class JogRequest:
         (:class:`~stickslip.procedures.closed_loop.JogEyes`).
     guard : Guard or None
         A rig's envelope: the tip stops at its boundary (:class:`JogController`).
+    joints : JointSet or None
+        The arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`); the MM3A's by default.
+    stage : Stage or None
+        A Cartesian arm's kinematics (:meth:`stickslip.rig.Arm.stage`); keys move its tip in its base frame.
+    state_key : str or None
+        The key the arm's positions are kept under (:meth:`stickslip.rig.Rig.state_key`); the device's by default.
     """
 
     device: str
@@ -610,6 +635,9 @@ class JogRequest:
     trust_calibration: bool = False
     camera: CameraLoop | None = None
     guard: Guard | None = None
+    joints: kin.JointSet | None = None
+    stage: kin.Stage | None = None
+    state_key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -651,13 +679,15 @@ def jog(
     or if a joint is uncertain). ``keys()`` is opened once the device is open and closed
     however the session ends; ``show(status)`` draws. Ctrl-C ends the session like ``q``.
     """
-    key = device_key(request.device)
+    lock = device_key(request.device)
+    key = request.state_key or lock
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
-        state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
-        missing = [j for j in (1, 2, 3) if j not in calibration.joints]
+    with device_lock(store, lock):
+        state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced,
+                                 request.joints, key)
+        missing = [j for j in (1, 2, 3) if not _calibrated(calibration, state.spec(j))]
         if missing:
             raise MoveRefused(f"jog steers all three joints, and this calibration has no model of joint(s) {missing}")
         save_state(store, state)
@@ -668,12 +698,13 @@ def jog(
         keys_in: KeySource | None = None
         eyes: JogEyes | None = None
         try:
-            if isinstance(dev, PoseSettable):
+            if simulates(dev, state):  # the simulator: start where the positions say
+                assert isinstance(dev, PoseSettable)
                 dev.set_pose(*state.pose)
             ctl = JogController(
                 calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
                 max_rates(dev, request.max_rate), request.image_angle, request.hold, request.speed - 1,
-                guard=request.guard, guard_sd=_sds(state),
+                guard=request.guard, guard_sd=_sds(state), joints=request.joints, stage=request.stage,
             )
 
             def save(st: DeviceState) -> None:
@@ -696,6 +727,13 @@ def jog(
             except DeviceError:
                 pass
     return JogResult(key, ctl.status(), state, error)
+
+
+def _calibrated(calibration: Calibration, spec: kin.JointSpec) -> bool:
+    """Whether ``calibration`` can step ``spec``: a model of it, or a constant step for a stage's joint."""
+    if spec.step_model == "constant":
+        return any(j == spec.number for j, _ in calibration.constant_steps)
+    return spec.number in calibration.joints
 
 
 def _open_eyes(

@@ -47,6 +47,7 @@ from ..devices.base import (
     url_scheme,
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..joints import JointSet, JointSpec
 from ..motion.planning import Planner
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
 from ..rig.envelope import EnvelopeViolation
@@ -80,6 +81,7 @@ __all__ = [
     "step_joint",
     "steps_to_stop",
     "settle",
+    "simulates",
     "target_of",
     "track_fields",
     "where_line",
@@ -118,9 +120,10 @@ def where_line(state: DeviceState) -> str:
     for j in (1, 2, 3):
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
-            parts.append(f"joint {j} uncertain, {format_position(lo, j)} to {format_position(hi, j)}")
+            parts.append(f"joint {j} uncertain, {format_position(lo, state.spec(j))} to "
+                         f"{format_position(hi, state.spec(j))}")
         else:
-            parts.append(f"joint {j} {format_position(state.positions[j], j)} ({state.sources[j]})")
+            parts.append(f"joint {j} {format_position(state.positions[j], state.spec(j))} ({state.sources[j]})")
     return "; ".join(parts)
 
 
@@ -211,7 +214,7 @@ def drive(
             else:  # nothing certainly made: back to the confirmed position, then widen below
                 state.set_position(joint, state.positions[joint], state.sources[joint])
             if e.at_most is None:
-                spec = kin.joint_spec(joint)
+                spec = state.spec(joint)
                 state.intend(joint, spec.upper if sign > 0 else spec.lower)
             elif e.at_most != e.made:
                 state.intend(joint, reckon(out.sent - e.made + e.at_most))
@@ -258,14 +261,14 @@ def target_of(state: DeviceState, joint: int, by: float | None = None, to: float
     """
     if (by is None) == (to is None):
         raise ValueError("give exactly one of by and to")
-    spec = kin.joint_spec(joint)
+    spec = state.spec(joint)
     q_from = state.positions[joint]
     q_to = to if to is not None else q_from + float(by or 0.0)
     if not spec.contains(q_to):
         raise TargetOutOfRange(
-            f"the target {format_position(q_to, joint)} is outside joint {joint}'s range "
-            f"[{format_position(spec.lower, joint)}, {format_position(spec.upper, joint)}] "
-            f"(from {format_position(q_from, joint)}); positions are in {position_display_unit(joint)}"
+            f"the target {format_position(q_to, spec)} is outside joint {joint}'s range "
+            f"[{format_position(spec.lower, spec)}, {format_position(spec.upper, spec)}] "
+            f"(from {format_position(q_from, spec)}); positions are in {position_display_unit(spec)}"
         )
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
@@ -299,6 +302,8 @@ class TrackedPlan:
     from_uncertain : tuple of 2 floats or None
         The bounds (rad or m) of an uncertain start planned from its last confirmed
         position (``--from-unreferenced``); the end stays uncertain, the bounds moved along.
+    spec : JointSpec or None
+        The arm's joint when it is not the MM3A's (a rig file's arm); ``None``: the MM3A's.
     """
 
     joint: int
@@ -313,11 +318,12 @@ class TrackedPlan:
     sigma_model: float
     assumed: bool = False
     from_uncertain: tuple[float, float] | None = None
+    spec: JointSpec | None = None
 
     def position_after(self, n_signed: int, q_start: float | None = None) -> float:
         """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start)."""
         q0 = self.q_from if q_start is None else q_start
-        return float(Planner(self.calibration, self.joint, self.pose).position_after(q0, n_signed))
+        return float(Planner(self.calibration, self.spec or self.joint, self.pose).position_after(q0, n_signed))
 
     def bounds_after(self, n_signed: int) -> tuple[float, float] | None:
         """Where an uncertain start's bounds are after ``n_signed`` steps (rad or m); ``None`` for a known start."""
@@ -353,12 +359,14 @@ def plan_tracked(
     track, note = track_for(state.track.get(joint), calibration, joint)
     scaled = scaled_calibration(calibration, joint, {d: track.scale_of(d) for d in "+-"})
     q_from = state.positions[joint]
-    plan = Planner(scaled, joint, state.pose).plan(q_from, q_to)
+    spec = state.spec(joint)
+    own = None if spec is kin.joint_spec(joint) else spec  # an arm's own joint (a rig file's), else the MM3A's
+    plan = Planner(scaled, spec, state.pose).plan(q_from, q_to)
     return TrackedPlan(
         joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
         joint_sigma_model(calibration, joint, state.pose),  # the model error in this pose (docs/models.md §4)
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
-        from_uncertain=state.uncertain.get(joint),
+        from_uncertain=state.uncertain.get(joint), spec=own,
     )
 
 
@@ -384,30 +392,39 @@ def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:
         state.track[joint] = plan.track.to_json()
 
 
-NOMINAL_STEP = {"prismatic": 0.8e-6, "rotary": 40e-6}
-"""A small step of each kind of joint (m, rad): what :func:`steps_to_stop` assumes without a calibration."""
-
-
-def steps_to_stop(joint: int, calibration: Calibration | None = None) -> int:
+def steps_to_stop(joint: int, calibration: Calibration | None = None, spec: JointSpec | None = None) -> int:
     """Steps that surely drive ``joint`` from anywhere into an end stop: 1.2 x its range over its smallest step.
 
-    The smallest step is the calibration's constant step of either direction, else
-    :data:`NOMINAL_STEP`; rounded up to a thousand. At the stop the slider slips: the
-    steps beyond it do no harm (a traverse steps into its stop the same way).
+    The smallest step is the calibration's constant step of either direction, else the
+    joint's nominal step (:attr:`~stickslip.joints.JointSpec.small_step`: a rig file's
+    ``step``, else :data:`~stickslip.joints.NOMINAL_STEP` of its kind); rounded up to a
+    thousand. At the stop the slider slips: the steps beyond it do no harm (a traverse
+    steps into its stop the same way). ``spec``: the arm's joint (default the MM3A's).
     """
-    spec = kin.joint_spec(joint)
+    spec = spec or kin.joint_spec(joint)
     steps = [v for (j, _), v in (calibration.constant_steps.items() if calibration else ()) if j == joint and v > 0]
-    small = min(steps) if steps else NOMINAL_STEP["rotary" if spec.rotary else "prismatic"]
+    small = min(steps) if steps else spec.small_step
     return int(math.ceil(1.2 * spec.span / small / 1000.0)) * 1000
+
+
+def simulates(dev: Controller, state: DeviceState) -> bool:
+    """Whether ``dev`` is the simulator and its arm (an MM3A) stands for ``state``'s arm.
+
+    The simulator is placed at the kept positions and knows its true joints; an arm whose
+    joints are not the MM3A's kind (a rig file's ``xyz`` stage) is not what it simulates,
+    so neither is used for it (its positions are dead-reckoned as on a real controller).
+    """
+    return isinstance(dev, PoseSettable) and all(state.spec(j).step_model == "paper" for j in (1, 2, 3))
 
 
 def exact_positions(dev: Controller, state: DeviceState, joint: int) -> bool:
     """Whether a move of ``joint`` on ``dev`` starts from a known position: referenced, or on the simulator.
 
     A simulator is placed at the kept positions (:class:`~stickslip.devices.base.PoseSettable`),
-    so they are exact there; on a real controller a position never referenced is assumed.
+    so they are exact there (:func:`simulates`); on a real controller a position never
+    referenced is assumed.
     """
-    return isinstance(dev, PoseSettable) or state.sources[joint] not in ("default", "assumed")
+    return simulates(dev, state) or state.sources[joint] not in ("default", "assumed")
 
 
 def is_simulator(url: str) -> bool:
@@ -415,10 +432,12 @@ def is_simulator(url: str) -> bool:
     return url_scheme(url) in ("sim", "sim+physics")
 
 
-def reference_commands(device: str, joint: int, calibration: Calibration | None = None) -> str:
+def reference_commands(
+    device: str, joint: int, calibration: Calibration | None = None, spec: JointSpec | None = None
+) -> str:
     """The two commands that reference ``joint``: raw steps into its lower stop, then ``where --set J=min``."""
     url = redact_url(device)
-    n = steps_to_stop(joint, calibration)
+    n = steps_to_stop(joint, calibration, spec)
     return (
         f"`stickslip move -d {url} --joint {joint} --steps -{n}` (into its lower stop: more steps than its range; "
         f"the slider slips at the stop), then `stickslip where -d {url} --set {joint}=min`"
@@ -437,37 +456,40 @@ def reference_problem(
     ``from_uncertain``: whether the option may plan from an uncertain position (a
     single-joint move) or not (a tip move: it needs all three joints known).
     """
-    if is_simulator(device) or state.referenced(joint):
+    simulated = is_simulator(device) and all(state.spec(j).step_model == "paper" for j in (1, 2, 3))
+    if simulated or state.referenced(joint):
         return None
-    how = reference_commands(device, joint, calibration)
+    spec = state.spec(joint)
+    how = reference_commands(device, joint, calibration, spec)
     if joint in state.uncertain:
         lo, hi = state.uncertain[joint]
         why = state.why.get(joint, "a move was interrupted")
         option = (
-            f"; or pass --from-unreferenced to plan from {format_position(state.positions[joint], joint)} "
+            f"; or pass --from-unreferenced to plan from {format_position(state.positions[joint], spec)} "
             "(it stays uncertain)" if from_uncertain else ""
         )
         return (
-            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, joint)} and "
-            f"{format_position(hi, joint)}; reference it: {how}{option}"
+            f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, spec)} and "
+            f"{format_position(hi, spec)}; reference it: {how}{option}"
         )
     return (
-        f"joint {joint} was never referenced: its position {format_position(state.positions[joint], joint)} is "
+        f"joint {joint} was never referenced: its position {format_position(state.positions[joint], spec)} is "
         f"assumed, not known; reference it: {how}; or pass --from-unreferenced to plan from the assumed position"
     )
 
 
 def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: int) -> str:
     """One line for a move a device error stopped: what was sent, and what the kept position now is."""
+    spec = state.spec(joint)
     if joint in state.uncertain:
         lo, hi = state.uncertain[joint]
         kept = (
-            f"joint {joint}'s position is now uncertain, between {format_position(lo, joint)} "
-            f"and {format_position(hi, joint)}; re-reference it (stickslip where --set {joint}=min "
+            f"joint {joint}'s position is now uncertain, between {format_position(lo, spec)} "
+            f"and {format_position(hi, spec)}; re-reference it (stickslip where --set {joint}=min "
             f"at the lower stop) before the next move"
         )
     else:
-        kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], joint)} is kept"
+        kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], spec)} is kept"
     return f"{error}; sent {sent} of {steps} steps; {kept}"
 
 
@@ -538,6 +560,12 @@ class MoveRequest:
     guard : Guard or None
         A rig's envelope for this arm (:mod:`stickslip.rig`): the planned move is checked
         against it before a step is sent (:func:`check_envelope`).
+    joints : JointSet or None
+        The arm's joints (kinds, ranges, nominal steps: :meth:`stickslip.rig.Arm.joint_specs`);
+        ``None``: the MM3A's (:data:`stickslip.joints.JOINTS`).
+    state_key : str or None
+        The key the arm's positions and journal are kept under (:meth:`stickslip.rig.Rig.state_key`:
+        two arms on one controller); ``None``: the device's key. The lock is the device's either way.
     """
 
     device: str
@@ -550,6 +578,8 @@ class MoveRequest:
     from_unreferenced: bool = False
     trust_calibration: bool = False
     guard: Guard | None = None
+    joints: JointSet | None = None
+    state_key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -587,7 +617,7 @@ class MoveResult:
         out: dict[str, object] = {
             "device": self.device, "joint": p.joint, "direction": "+" if p.steps >= 0 else "-",
             "steps": abs(p.steps), "steps_signed": p.steps, "bursts": list(self.outcome.bursts),
-            "q_from": p.q_from, "q_to": p.q_to, "q_end_predicted": p.q_end, "unit": kin.joint_spec(p.joint).unit,
+            "q_from": p.q_from, "q_to": p.q_to, "q_end_predicted": p.q_end, "unit": self.state.spec(p.joint).unit,
         }
         tf = track_fields(self.state, p.joint)
         if tf["sd"] is not None:
@@ -621,13 +651,14 @@ def move(
     ``outcome`` (:meth:`MoveResult.failure`), the joint kept honest. ``opener(url)`` opens
     the controller (default :func:`~stickslip.devices.base.open_device`).
     """
-    key = device_key(request.device)
+    lock = device_key(request.device)
+    key = request.state_key or lock
     joint = request.joint
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
-        state = load_state(store, key)
+    with device_lock(store, lock):
+        state = load_state(store, key, request.joints)
         try:
             request.pose.apply(state)
             problem = reference_problem(state, joint, request.device, calibration)
@@ -671,7 +702,8 @@ def _drive_opened(
         for w in usage_warnings(calibration, dev, request.device, plan.joint, request.max_age_days):
             warn(w)
         ready()  # the input is good: say so before driving
-        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+        if simulates(dev, state):  # the simulator: start where the positions say
+            assert isinstance(dev, PoseSettable)
             dev.set_pose(*plan.pose)
         def save(st: DeviceState) -> None:
             if plan.from_uncertain is not None:  # in flight from an uncertain start: anywhere it could reach
@@ -686,7 +718,7 @@ def _drive_opened(
         if outcome.error is None or state.track.get(plan.joint) is not None:
             save_state(store, state)
         true_end = None
-        if outcome.error is None and isinstance(dev, KnowsTruePosition):
+        if outcome.error is None and isinstance(dev, KnowsTruePosition) and simulates(dev, state):
             true_end = float(dev.position(plan.joint))
         return outcome, true_end
     finally:
@@ -714,7 +746,7 @@ class StepResult:
         lo, hi = self.state.bounds(self.joint)
         return {
             "device": self.device, "joint": self.joint, "steps_signed": self.steps, "sent": self.outcome.sent,
-            "bursts": list(self.outcome.bursts), "uncertain": [lo, hi], "unit": kin.joint_spec(self.joint).unit,
+            "bursts": list(self.outcome.bursts), "uncertain": [lo, hi], "unit": self.state.spec(self.joint).unit,
             "error": self.outcome.error,
         }
 
@@ -728,6 +760,7 @@ def step_joint(
     burst: int = 1000,
     ready: Callable[[], None] = _nothing,
     opener: Callable[[str], Controller] | None = None,
+    joints: JointSet | None = None,
 ) -> StepResult:
     """Send ``steps`` raw signed steps to ``joint``: no calibration, no plan (a first check, a drive into a stop).
 
@@ -739,9 +772,9 @@ def step_joint(
     if steps == 0:
         raise ValueError("--steps must not be 0")
     key = device_key(device)
-    spec = kin.joint_spec(joint)
     with device_lock(store, key):
-        state = load_state(store, key)
+        state = load_state(store, key, joints)
+        spec = state.spec(joint)
         try:
             lo, hi = state.bounds(joint)
             after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)

@@ -39,6 +39,7 @@ from .move import (
     exact_positions,
     kept_after_interrupt,
     reference_problem,
+    simulates,
 )
 
 __all__ = [
@@ -111,7 +112,7 @@ def drive_reach(
             n = seg.steps[j - 1]
             if n == 0:
                 continue
-            stepper = JointStepper(calibration, j, state.pose, plan.step_model)
+            stepper = JointStepper(calibration, state.spec(j), state.pose, plan.step_model)
             q_from = state.positions[j]
 
             def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
@@ -174,6 +175,13 @@ class ReachRequest:
     guard : Guard or None
         A rig's envelope for this arm: the whole line, as driven (:func:`joint_path`), is
         checked against it before a step is sent.
+    joints : JointSet or None
+        The arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`); the MM3A's by default.
+    stage : Stage or None
+        A Cartesian arm's kinematics (a rig file's ``xyz`` arm, :meth:`stickslip.rig.Arm.stage`):
+        ``to``/``by`` are then in its base frame and ``geometry`` is not used.
+    state_key : str or None
+        The key the arm's positions are kept under (:meth:`stickslip.rig.Rig.state_key`); the device's by default.
     """
 
     device: str
@@ -188,6 +196,9 @@ class ReachRequest:
     from_unreferenced: bool = False
     trust_calibration: bool = False
     guard: Guard | None = None
+    joints: kin.JointSet | None = None
+    stage: kin.Stage | None = None
+    state_key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -223,7 +234,7 @@ class ReachResult:
         """The JSON shape of ``stickslip reach --json`` (metres, radians)."""
         out: dict[str, object] = dict(self.plan.as_dict())
         if self.sim_true is not None:
-            tip = [float(v) for v in kin.tip(self.sim_true, self.plan.geometry)]
+            tip = [float(v) for v in self.plan.tip_of(self.sim_true)]
             out["sim_true"] = {"q": list(self.sim_true), "tip": tip}
         return out
 
@@ -252,9 +263,15 @@ def referenced_state(
     pose: PoseUpdate,
     calibration: Calibration | None = None,
     from_unreferenced: bool = False,
+    joints: kin.JointSet | None = None,
+    key: str | None = None,
 ) -> DeviceState:
-    """The kept state of ``device`` with ``pose`` recorded; :class:`MoveRefused` unless it may be planned from."""
-    state = load_state(store, device_key(device))
+    """The kept state of ``device`` (an arm of ``joints``, the MM3A's by default) with ``pose`` recorded.
+
+    :class:`MoveRefused` unless it may be planned from. ``key``: where its positions are
+    kept (:meth:`stickslip.rig.Rig.state_key`), the device's key by default.
+    """
+    state = load_state(store, key or device_key(device), joints)
     pose.apply(state)
     check_referenced(state, device, calibration, from_unreferenced)
     return state
@@ -270,10 +287,13 @@ def plan_from_state(
     if the line cannot be made.
     """
     geom, seg = request.geometry, request.segment
+    stage, joints = request.stage, request.joints
     if request.to is not None:
-        plan = plan_reach(calibration, state.pose, to=request.to, geometry=geom, segment=seg)
+        plan = plan_reach(calibration, state.pose, to=request.to, geometry=geom, segment=seg, stage=stage,
+                          joints=joints)
     else:
-        plan = plan_reach(calibration, state.pose, by=request.by, geometry=geom, segment=seg)
+        plan = plan_reach(calibration, state.pose, by=request.by, geometry=geom, segment=seg, stage=stage,
+                          joints=joints)
     if borrowed and plan.total_steps[0]:
         warn(BORROWED_JOINT1)
     return plan
@@ -297,8 +317,9 @@ def reach(
     ``KeyError``, ``ValueError``, :class:`~stickslip.devices.base.DeviceError`); a device
     error during the move is in the result (:meth:`ReachResult.failure`).
     """
-    key = device_key(request.device)
-    refs = (calibration, request.from_unreferenced)
+    lock = device_key(request.device)
+    key = request.state_key or lock
+    refs = (calibration, request.from_unreferenced, request.joints, key)
     if request.dry_run:
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
@@ -306,7 +327,7 @@ def reach(
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
+    with device_lock(store, lock):
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
         check_envelope_path(request.guard, state, joint_path(plan))
@@ -334,7 +355,8 @@ def _drive_opened(
     """Open the device, drive ``plan``, close; the outcome and the simulator's true joints."""
     dev = opener(request.device)
     try:
-        if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
+        if simulates(dev, state):  # the simulator: start where the positions say
+            assert isinstance(dev, PoseSettable)
             dev.set_pose(*state.pose)
 
         def save(st: DeviceState) -> None:
@@ -342,7 +364,7 @@ def _drive_opened(
 
         outcome = drive_reach(dev, state, plan, calibration, save, request.burst)
         true_q = None
-        if outcome.error is None and isinstance(dev, KnowsTruePosition):
+        if outcome.error is None and isinstance(dev, KnowsTruePosition) and simulates(dev, state):
             q = [float(dev.position(j)) for j in (1, 2, 3)]
             true_q = (q[0], q[1], q[2])
         return outcome, true_q

@@ -14,7 +14,7 @@ from typing import Any, Protocol
 
 from ..devices.base import DeviceError, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
-from ..joints import JOINTS
+from ..joints import JointSet
 from ..units import format_position
 from .move import PoseUpdate, track_fields
 
@@ -68,8 +68,8 @@ def state_rows(state: DeviceState) -> list[dict[str, object]]:
             {
                 "joint": j,
                 "q": state.positions[j],
-                "unit": JOINTS[j].unit,
-                "display": format_position(state.positions[j], j),
+                "unit": state.spec(j).unit,
+                "display": format_position(state.positions[j], state.spec(j)),
                 "source": "uncertain" if j in state.uncertain else state.sources[j],
                 "uncertain": list(state.uncertain[j]) if j in state.uncertain else None,
                 **track_fields(state, j),
@@ -118,6 +118,8 @@ def where(
     offline: bool = False,
     unlock: bool = False,
     probe: Callable[[str], dict[str, Any]] = probe_device,
+    joints: JointSet | None = None,
+    key: str | None = None,
 ) -> WhereResult:
     """The kept state of ``device``, after recording ``pose`` and ``references`` (``(joint, q)``, rad or m).
 
@@ -126,11 +128,15 @@ def where(
     anything recorded and unless ``offline``, the device is asked whether it answers
     (:func:`probe_device`; :class:`DeviceUnreachable`). ``unlock`` releases a lock left by
     a process that is gone. :class:`ReferenceRefused` names a reference that cannot be kept.
+    ``joints``: the arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`),
+    the MM3A's by default; ``key`` where they are kept (:meth:`stickslip.rig.Rig.state_key`:
+    two arms on one controller), the device's key by default.
     """
-    key = device_key(device)
+    lock = device_key(device)
+    key = key or lock
     if unlock:
-        store.set_state(key, "lock", "null")
-    state = load_state(store, key)
+        store.set_state(lock, "lock", "null")
+    state = load_state(store, key, joints)
     changed = pose.apply(state)
     for i, (joint, q) in enumerate(references):
         try:

@@ -192,7 +192,7 @@ class _Reader(_Values):
     """Reads one document: the rig, its arms, joints, volumes and named positions."""
 
     def rig(self, doc: dict[str, Any], base: Rig | None) -> Rig:
-        self.table(doc, (), ("name", "n_sigma", "arm_distance", "stage", "arm", "volume", "position"))
+        self.table(doc, (), ("name", "n_sigma", "arm_distance", "stage", "database", "arm", "volume", "position"))
         name = self.string(doc.get("name", Path(self.path).stem), ("name",))
         n_sigma = doc.get("n_sigma", 3.0)
         if isinstance(n_sigma, bool) or not isinstance(n_sigma, (int, float)) or not 0 <= n_sigma <= 10:
@@ -207,19 +207,24 @@ class _Reader(_Values):
             raise self.fail(("arm",), "a rig needs at least one [[arm]]")
         arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
         seen: set[str] = set()
-        devices: dict[str, str] = {}
+        # (controller URL, channel) -> the arm it drives: a channel is the URL's joint number, so two
+        # arms on one controller differ in their channels, or in the URL's channel map (channels=...)
+        channels: dict[tuple[str, int], str] = {}
         for i, a in enumerate(arms):
             if a.name in seen:
                 raise self.fail(("arm", i, "name"), f"a second arm named {a.name!r}")
             seen.add(a.name)
             try:
-                dev = device_key(a.controller)
+                device_key(a.controller)
             except ValueError as e:
                 raise self.fail(("arm", i, "controller"), str(e)) from None
-            if dev in devices:
-                raise self.fail(("arm", i, "controller"), f"arm {devices[dev]!r} is on this controller already: "
-                                "each arm needs its own (its positions are kept under its URL)")
-            devices[dev] = a.name
+            for j in a.joints:
+                other = channels.get((a.controller, j.channel))
+                if other is not None:
+                    raise self.fail(("arm", i, "controller"), f"arm {other!r} drives channel {j.channel} of this "
+                                    f"controller already (joint {j.number} of {a.name!r}): two arms on one "
+                                    "controller need channels of their own")
+                channels[(a.controller, j.channel)] = a.name
         vols_raw = doc.get("volume", [])
         if not isinstance(vols_raw, list):
             raise self.fail(("volume",), "must be an array of tables ([[volume]])")
@@ -239,7 +244,26 @@ class _Reader(_Values):
             if (p.arm, p.name) in pseen:
                 raise self.fail(("position", i, "name"), f"arm {p.arm!r} has a second position named {p.name!r}")
             pseen.add((p.arm, p.name))
-        return Rig(self.path, name, arms, volumes, positions, arm_distance, tilt, float(n_sigma))
+        database = self.database(doc["database"]) if "database" in doc else None
+        return Rig(self.path, name, arms, volumes, positions, arm_distance, tilt, float(n_sigma), database)
+
+    def database(self, value: Any) -> str:
+        """The rig's history: an SQLite file (relative to the rig file's folder) or a postgresql:// URL, no password."""
+        text = self.string(value, ("database",))
+        head, sep, rest = text.partition("://")
+        if not sep or len(head) < 2:  # a path (a one-letter "scheme" is a Windows drive)
+            p = Path(text).expanduser()
+            return str(p if p.is_absolute() else Path(self.path).parent / p)
+        if head.lower() not in DATABASE_SCHEMES:
+            raise self.fail(("database",), f"{head}:// is not a database stickslip can use: give a file path or "
+                            "a postgresql:// URL")
+        userinfo, at, _ = rest.partition("?")[0].rpartition("@")
+        query = rest.partition("?")[2]
+        if (at and ":" in userinfo) or redact_url(text) != text or any(
+                "pass" in o.partition("=")[0].lower() for o in query.split("&") if "=" in o):
+            raise self.fail(("database",), "no password in the rig file: give it in $PGPASSWORD or ~/.pgpass "
+                            "(docs/storage.md)")
+        return text
 
     def arm(self, raw: Any, key: Key, base: Rig | None) -> Arm:
         doc = self.table(raw, key, (
@@ -360,7 +384,7 @@ class _Reader(_Values):
         out = []
         for i, j in enumerate(raw):
             jk = key + ("joint", i)
-            d = self.table(j, jk, ("number", "channel", "sign", "kind", "range", "stops", "soft"))
+            d = self.table(j, jk, ("number", "channel", "sign", "kind", "range", "stops", "soft", "step"))
             number = self.integer(d.get("number", i + 1), jk + ("number",), 1, 3)
             if number != i + 1:
                 raise self.fail(jk + ("number",), f"the joints are listed in order: this is joint {i + 1}")
@@ -387,7 +411,10 @@ class _Reader(_Values):
                 slo, shi = self.pair(d["soft"], jk + ("soft",), unit)
                 if slo < lo or shi > hi:
                     raise self.fail(jk + ("soft",), "the soft limits must lie within the range")
-            out.append(Joint(number, channel, int(sign), jkind, lo, hi, tuple(stops), slo, shi))
+            step = self.quantity(d["step"], jk + ("step",), unit, positive=True) if "step" in d else math.nan
+            if step >= hi - lo:
+                raise self.fail(jk + ("step",), "a step must be smaller than the joint's range")
+            out.append(Joint(number, channel, int(sign), jkind, lo, hi, tuple(stops), slo, shi, step))
         channels = [j.channel for j in out]
         for i, c in enumerate(channels):
             if c in channels[:i]:
@@ -486,6 +513,9 @@ def _has_secret(url: str) -> bool:
     low = url.lower()
     return any(f"{k}=" in low for k in SECRET_OPTIONS)
 
+
+DATABASE_SCHEMES = ("postgresql", "postgres")
+"""URL schemes the ``database`` key takes (as :data:`stickslip.storage.POSTGRES_SCHEMES`)."""
 
 _TOML_WHERE = re.compile(
     r"^(?P<reason>.*?)\s*\(at (?:line (?P<line>\d+), column (?P<col>\d+)|end of document)\)$", re.S

@@ -22,7 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..kinematics import Geometry
+from ..devices.base import device_key
+from ..joints import JointSpec
+from ..kinematics import Geometry, Stage
 
 __all__ = [
     "ARM_KINDS",
@@ -76,6 +78,10 @@ class Joint:
         Which end stops it has (``"lower"``, ``"upper"``): where a traverse may end.
     soft_lower, soft_upper : float
         Soft limits, rad or m, within the range: no planned path goes beyond them.
+    step : float
+        A small step of the joint, rad or m (the rig file's ``step``): how many steps
+        surely reach a stop without a calibration. ``nan``: the kind's
+        :data:`stickslip.joints.NOMINAL_STEP`.
     """
 
     number: int
@@ -87,6 +93,7 @@ class Joint:
     stops: tuple[str, ...] = ("lower", "upper")
     soft_lower: float = -math.inf
     soft_upper: float = math.inf
+    step: float = math.nan
 
     @property
     def unit(self) -> str:
@@ -160,6 +167,24 @@ class Arm:
     password_env: str | None = None
     password_keyring: tuple[str, str] | None = None
     home: Vec = (0.0, 0.0, 0.0)
+
+    def joint_specs(self) -> dict[int, JointSpec]:
+        """The arm's joints as the procedures take them (:data:`stickslip.joints.JointSet`).
+
+        Kind, range, nominal step and home from the rig file. An ``mm3a`` arm's joints
+        are planned with the calibration's load-dependent models (docs/design.md §3); an
+        ``xyz`` arm's stages with the calibration's constant step of each direction.
+        """
+        model = "paper" if self.kind == "mm3a" else "constant"
+        return {
+            j.number: JointSpec(j.number, j.kind, j.lower, j.upper, j.unit, nominal_step=j.step,
+                                home=self.home[j.number - 1], step_model=model)
+            for j in self.joints
+        }
+
+    def stage(self) -> Stage | None:
+        """An ``xyz`` arm's kinematics in its base frame (its axes and tool); ``None`` for an ``mm3a``."""
+        return Stage(self.axes, self.tool) if self.kind == "xyz" else None
 
     def joint(self, number: int) -> Joint:
         """The joint numbered ``number`` (1, 2, 3); ``KeyError`` otherwise."""
@@ -297,6 +322,10 @@ class Rig:
         The stage's tilt about the rig's x axis, rad (applied to volumes marked ``on_stage``).
     n_sigma : float
         How many standard deviations of the tip's position are added to every margin.
+    database : str or None
+        Where the rig's history is kept (the file's ``database``): an SQLite file (its
+        path, a relative one already taken from the rig file's folder) or a
+        ``postgresql://`` URL without a password; ``None`` when the file names none.
     """
 
     path: str
@@ -307,6 +336,7 @@ class Rig:
     arm_distance: float = 0.0
     stage_tilt: float = 0.0
     n_sigma: float = 3.0
+    database: str | None = None
 
     def arm(self, name: str | None = None) -> Arm:
         """The arm called ``name`` (the first one for ``None``); ``KeyError`` naming the arms otherwise."""
@@ -317,6 +347,18 @@ class Rig:
                 return a
         names = ", ".join(a.name for a in self.arms)
         raise KeyError(f"{self.path}: no arm named {name!r} (the arms: {names})")
+
+    def state_key(self, arm: str | None = None) -> str:
+        """The key ``arm``'s positions and journal are kept under: its controller's device key, or
+        ``KEY#arm=NAME`` when another arm of the rig shares its controller (on other channels).
+
+        The lock stays the controller's (:func:`~stickslip.devices.base.device_key`): one process
+        drives a controller at a time.
+        """
+        a = self.arm(arm)
+        key = device_key(a.controller)
+        shared = any(o.name != a.name and device_key(o.controller) == key for o in self.arms)
+        return f"{key}#arm={a.name}" if shared else key
 
     def position(self, arm: str, name: str) -> NamedPosition:
         """The named position ``name`` of ``arm``; ``KeyError`` naming the known ones otherwise."""
