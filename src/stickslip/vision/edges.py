@@ -112,6 +112,29 @@ class EdgeCheck:
     shape: float
 
 
+def _across(mask: NDArray[np.bool_], apex: tuple[float, float], shaft: tuple[float, float], s: float,
+            ts: FloatArray) -> tuple[float, float] | None:
+    """The needle's axis (offset across the shaft) and half-width at ``s`` px back from the tip, px, from the
+    run of ``mask`` across the shaft nearest the axis; ``None`` where the mask shows no needle."""
+    n = mask.shape[0]
+    ux, uy = shaft
+    ix = np.round(apex[0] + s * ux - ts * uy).astype(int)
+    iy = np.round(apex[1] + s * uy + ts * ux).astype(int)
+    inwin = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
+    on = np.zeros(ts.size, dtype=bool)
+    on[inwin] = mask[iy[inwin], ix[inwin]]
+    if not on.any():
+        return None
+    idx = np.flatnonzero(on)
+    c = int(idx[np.argmin(np.abs(ts[idx]))])
+    lo = hi = c
+    while lo > 0 and on[lo - 1]:
+        lo -= 1
+    while hi < ts.size - 1 and on[hi + 1]:
+        hi += 1
+    return 0.5 * float(ts[lo] + ts[hi]), 0.5 * float(ts[hi] - ts[lo]) + 0.5
+
+
 def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray[np.bool_],
                 shaft: tuple[float, float]) -> EdgeProfiles:
     """The template's profiles across the shaft at :data:`STATIONS`, for each copy in ``bank``.
@@ -127,25 +150,7 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
     q = ts.size + 2 * SHIFTS
     # the needle's axis and half-width at each station, from the mask across the shaft (a station nearer the
     # tip than the mask reaches, where the threshold ate the blurred end, takes the nearest station's)
-    found: list[tuple[float, float] | None] = []
-    for s in STATIONS:
-        px = apex[0] + s * ux + ts * nx
-        py = apex[1] + s * uy + ts * ny
-        ix, iy = np.round(px).astype(int), np.round(py).astype(int)
-        inwin = (ix >= 0) & (ix < n) & (iy >= 0) & (iy < n)
-        on = np.zeros(ts.size, dtype=bool)
-        on[inwin] = mask[iy[inwin], ix[inwin]]
-        if not on.any():
-            found.append(None)
-            continue
-        idx = np.flatnonzero(on)
-        c = int(idx[np.argmin(np.abs(ts[idx]))])  # the run of needle samples nearest the axis
-        lo = hi = c
-        while lo > 0 and on[lo - 1]:
-            lo -= 1
-        while hi < ts.size - 1 and on[hi + 1]:
-            hi += 1
-        found.append((0.5 * float(ts[lo] + ts[hi]), 0.5 * float(ts[hi] - ts[lo]) + 0.5))
+    found = [_across(mask, apex, shaft, s, ts) for s in STATIONS]
     known = [f for f in found if f is not None]
     offs, uses, kept = [], [], []
     for s, f in zip(STATIONS, found, strict=True):
@@ -193,6 +198,40 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
     return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept))
 
 
+def _station(expected: FloatArray, F: FloatArray, ok: NDArray[np.bool_], idx: NDArray[np.intp]
+             ) -> tuple[float, float, float, float] | None:
+    """One station: the frame's profile ``F`` (all samples, ``ok`` where in the frame) against the template's
+    ``expected`` over the samples ``idx``, shifted by up to :data:`SHIFTS` samples.
+
+    Returns the contrast, the correlation and the shift (px) that correlates best, and the
+    template profile's sum of squares; ``None`` for a flat template profile or none in the frame.
+    """
+    # the profiles' level and slope taken out (the ground's shading, vignetting): the needle's two edges left
+    tc = idx - idx.mean()
+    tc = tc / math.sqrt(float(tc @ tc))
+
+    def flat(v: FloatArray) -> FloatArray:
+        v = v - v.mean()
+        return np.asarray(v - float(v @ tc) * tc)
+
+    e = flat(expected)
+    ve = float(e @ e)
+    if ve <= 1e-18:
+        return None
+    best: tuple[float, float, float, float] | None = None
+    for d in range(-SHIFTS, SHIFTS + 1):
+        k = idx + d
+        if not ok[k].all():
+            continue
+        f = flat(F[k])
+        vf = float(f @ f)
+        cov = float(f @ e)
+        r = cov / math.sqrt(ve * vf) if vf > 0 else 0.0
+        if best is None or r > best[1]:
+            best = (cov / ve, r, d * STEP, ve)
+    return best
+
+
 def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, theta: float,
                 noise: float) -> EdgeCheck | None:
     """The edges behind a tip at ``(x, y)`` (frame px) turned by ``theta`` (rad), against blur copy ``copy``.
@@ -222,33 +261,10 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     rs = np.full(m, np.nan)
     for j in range(m):
         idx = np.flatnonzero(ep.use[j])
-        # the profiles' level and slope taken out (the ground's shading, vignetting): the needle's two edges left
-        tc = idx - idx.mean()
-        tc = tc / math.sqrt(float(tc @ tc))
-
-        def flat(v: FloatArray, tc: FloatArray = tc) -> FloatArray:
-            """``v`` less its level and slope across the shaft (the ground's shading)."""
-            v = v - v.mean()
-            return np.asarray(v - float(v @ tc) * tc)
-
-        e = flat(E[j, idx])
-        ve = float(e @ e)
-        if ve <= 1e-18:
+        res = _station(E[j, idx], F[j], ok[j], idx)
+        if res is None:
             continue
-        best = -math.inf
-        for d in range(-SHIFTS, SHIFTS + 1):
-            k = idx + d
-            if not ok[j, k].all():
-                continue
-            f = flat(F[j, k])
-            vf = float(f @ f)
-            cov = float(f @ e)
-            r = cov / math.sqrt(ve * vf) if vf > 0 else 0.0
-            if r > best:
-                best = r
-                a[j] = cov / ve
-                shift[j] = d * STEP
-                rs[j] = r
+        a[j], rs[j], shift[j], ve = res
         # samples STEP apart on a frame smoothed by about 1 px: about one independent sample a pixel
         sd[j] = noise / math.sqrt(len(LINES)) / math.sqrt(ve * STEP)
     is_near = ep.s <= STATIONS[NEAR - 1]

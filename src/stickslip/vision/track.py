@@ -175,6 +175,47 @@ def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
     return float(np.mean(like))
 
 
+def _pick_level(scores: list[float], current: int, hysteresis: float) -> int:
+    """The blur copy that matches best; the ``current`` one unless another beats it by ``hysteresis``."""
+    best = int(np.argmax(scores))
+    if best != current and scores[best] < scores[current] + hysteresis:
+        return current
+    return best
+
+
+def _noise_free_ncc(b: FloatArray, Iw: FloatArray, w: FloatArray, n_t2: float, n_f2: float) -> float:
+    """The weighted correlation of copy ``b`` with the frame's samples ``Iw``, divided by what the copy's and
+    the frame's own noise (variances ``n_t2``, ``n_f2`` a sample) cost it."""
+    sw = float(w.sum())
+    mi = float((w * Iw).sum() / sw)
+    di = Iw - mi
+    vi = float((w * di * di).sum())
+    mt = float((w * b).sum() / sw)
+    dt = b - mt
+    vt = float((w * dt * dt).sum())
+    den = math.sqrt(vi * vt)
+    ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
+    keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
+    keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
+    return ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25))
+
+
+def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams) -> Lost | None:
+    """The edge stage's refusal of a fix whose edges were checked (``None``: they hold, or were not checked)."""
+    if ec is None:
+        return None
+    if ec.far < p.edge_contrast:
+        return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
+                            f"(needs {p.edge_contrast:g})")
+    if ec.shape < p.edge_shape:
+        return Lost("lost", f"the needle's edges behind the tip are not where the template's are (profiles "
+                            f"correlate by {ec.shape:.2f}, needs {p.edge_shape:g})")
+    if ec.near < p.edge_near * ec.far:
+        return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
+                                f"contrast further back, needs {p.edge_near:g})")
+    return None
+
+
 class TipTracker:
     """Tracks one tip through a sequence of frames (see the module docstring).
 
@@ -252,19 +293,8 @@ class TipTracker:
             if sw <= 1e-9:
                 out.append(-1.0)
                 continue
-            b = self._bank_sel[k]
-            mi = float((w * Iw).sum() / sw)
-            di = Iw - mi
-            vi = float((w * di * di).sum())
-            mt = float((w * b).sum() / sw)
-            dt = b - mt
-            vt = float((w * dt * dt).sum())
-            den = math.sqrt(vi * vt)
-            ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
-            keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
-            keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
-            out.append(ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25)))
+            out.append(_noise_free_ncc(self._bank_sel[k], Iw, w, n_t2, n_f2))
         return out
 
     def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
@@ -275,13 +305,6 @@ class TipTracker:
             pt = patch(image, x, y, self.template.half * math.sqrt(2.0) + 12.0, s)
             patches[f] = pt
         return pt
-
-    def _pick_level(self, scores: list[float], current: int) -> int:
-        """The blur copy that matches best; the current one unless another beats it by ``level_hysteresis``."""
-        best = int(np.argmax(scores))
-        if best != current and scores[best] < scores[current] + self.params.level_hysteresis:
-            return current
-        return best
 
     def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int,
              worth: float = -1.0) -> _Candidate:
@@ -301,7 +324,8 @@ class TipTracker:
         for _ in range(0 if settled else 2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
                 break
-            lvl2 = self._pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl)
+            lvl2 = _pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl,
+                               self.params.level_hysteresis)
             if lvl2 == lvl:
                 break
             pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
@@ -395,18 +419,8 @@ class TipTracker:
         patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
         ec = self._edge_check(patches, image, cand.ref, cand.level)
         cand = replace(cand, edges=ec)
-        if ec is None or not isinstance(res, Fix):
-            return res, cand
-        if ec.far < p.edge_contrast:
-            return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
-                                f"(needs {p.edge_contrast:g})"), cand
-        if ec.shape < p.edge_shape:
-            return Lost("lost", f"the needle's edges behind the tip are not where the template's are (profiles "
-                                f"correlate by {ec.shape:.2f}, needs {p.edge_shape:g})"), cand
-        if ec.near < p.edge_near * ec.far:
-            return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
-                                    f"contrast further back, needs {p.edge_near:g})"), cand
-        return res, cand
+        refusal = _edge_refusal(ec, p) if isinstance(res, Fix) else None
+        return (refusal or res), cand
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
@@ -469,7 +483,8 @@ class TipTracker:
                 if isinstance(res, Fix):
                     return self._accept(res, cand)
                 first_refusal = res
-                if res.reason in ("lost", "out of focus") and self._edges_hold(cand.edges):
+                if res.reason in ("lost", "out of focus") and cand.edges is not None and (
+                        _edge_refusal(cand.edges, self.params) is None):
                     # the needle's edges are where the fit put its tip, which a rule refused (its position
                     # undetermined, its focus changed too fast): the tip is here, the whole frame has no other
                     self._fresh = False
@@ -492,12 +507,6 @@ class TipTracker:
         if first_refusal is not None:
             return first_refusal
         return Lost("lost", "not found near the last fix nor anywhere in the frame")
-
-    def _edges_hold(self, ec: EdgeCheck | None) -> bool:
-        """Whether the needle's edges behind a candidate pass the edge rules (``False`` when not checked)."""
-        p = self.params
-        return ec is not None and ec.far >= p.edge_contrast and ec.shape >= p.edge_shape and ec.near >= (
-            p.edge_near * ec.far)
 
     def _usual_mismatch(self) -> float | None:
         """The median ``1 - score`` of the recent fixes (``None`` before three)."""
