@@ -20,24 +20,32 @@ demo: $(STAMP)
 # The storage tests start a throwaway PostgreSQL server: .ci/postgres installs the server's binaries
 # quietly when they are missing and apt-get can run (root, or sudo without a password); elsewhere
 # those tests are skipped with the reason.
+# Python keeps compiled modules (__pycache__, git-ignored) during the tests even where the environment
+# says PYTHONDONTWRITEBYTECODE: otherwise every `stickslip` a test starts compiles the package again
+# (about 0.3 s of CPU each, hundreds of times) and pytest rewrites every test module again on every run.
+PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest
+COMPILE := env -u PYTHONDONTWRITEBYTECODE $(PY) -m compileall -q src tests/support
+
 test: $(STAMP)
 	@bash .ci/postgres
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/lint-imports
 	$(PY) -m mypy
-	$(PY) -m pytest -q -n auto --maxprocesses 4 --dist loadgroup --durations=15
+	@$(COMPILE)
+	$(PYTEST) -q -n auto --maxprocesses 4 --dist loadgroup --durations=15
 
 # Day-to-day: the suite without the tests marked slow (long batteries, documentation pages run as
 # written, subprocesses); under 90 s on two cores. CI runs `make test`, which runs everything.
 test-fast: $(STAMP)
 	@bash .ci/postgres
 	$(VENV)/bin/ruff check src tests benchmarks
-	$(PY) -m pytest -q -n auto --maxprocesses 4 --dist loadgroup -m "not slow" --durations=10
+	@$(COMPILE)
+	$(PYTEST) -q -n auto --maxprocesses 4 --dist loadgroup -m "not slow" --durations=10
 
 # The suite with fresh hypothesis draws (make test draws the same examples every run, so CI never
 # fails on a lucky draw): run it now and then; pin a draw that breaks something as an @example.
 test-explore: $(STAMP)
-	STICKSLIP_HYPOTHESIS=explore $(PY) -m pytest -q -n auto --maxprocesses 4 -p no:cacheprovider
+	STICKSLIP_HYPOTHESIS=explore $(PYTEST) -q -n auto --maxprocesses 4 -p no:cacheprovider
 
 # The whole suite with the machine's clock faked (libfaketime, from the dev extra; it reaches
 # subprocesses): 400 days ahead, then 30 s after midnight on New Year's Day at UTC+14.

@@ -57,3 +57,27 @@ def test_a_refused_move_fails_the_status_with_the_servers_line(RE: Any, rig: Rig
     with pytest.raises(FailedStatus) as info:
         RE(bps.mv(q3, 0.5))  # 50 cm: outside joint 3's range
     assert "outside joint 3's range" in str(info.value.__cause__ or info.value)
+
+
+def test_a_served_rig_refuses_a_path_through_a_volume_for_the_client_and_bluesky(RE: Any, tmp_path: Any) -> None:
+    import math
+
+    from server_support import rig_room_on
+
+    from stickslip.client import RigError
+
+    room = rig_room_on(tmp_path)
+    try:
+        with served(create_app(room, Access(None, True))) as url, Rig(url) as rig:
+            before = room.owned.dev.steps_simulated
+            with pytest.raises(RigError) as err:
+                rig.move(2, to="-60deg")
+            assert err.value.status == 409 and "'objective'" in str(err.value) and "rig frame" in str(err.value)
+            with init_devices():
+                q2 = ServedAxis(rig, 2, name="q2")
+            with pytest.raises(FailedStatus) as info:
+                RE(bps.mv(q2, math.radians(-60)))
+            assert "refused by the rig's envelope" in str(info.value.__cause__ or info.value)
+            assert room.owned.dev.steps_simulated == before  # nothing sent
+    finally:
+        room.close()

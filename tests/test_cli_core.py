@@ -157,3 +157,16 @@ def test_top_level_help_lists_commands():
         assert panel in r.stdout
     assert "─ Other ─" not in r.stdout  # every command sits in a workflow panel
     np.testing.assert_equal(r.exit_code, 0)
+
+
+def test_python_dash_m_runs_the_same_command_line(tmp_path):
+    """``python -m stickslip`` (no scripts folder on the PATH): the same commands, exit codes and help."""
+    import subprocess
+    import sys
+
+    ok = subprocess.run([sys.executable, "-m", "stickslip", "--version"], capture_output=True, text=True, cwd=tmp_path)
+    assert ok.returncode == 0 and ok.stdout.startswith("stickslip ")
+    bad = subprocess.run([sys.executable, "-m", "stickslip", "where", "--bogus"], capture_output=True, text=True,
+                         cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error:")
+    assert "python -m stickslip where --help" in bad.stderr

@@ -331,3 +331,73 @@ def _where_of(url: str) -> dict[int, dict]:
     r = _run(["where", "-d", url, "--json"])
     assert r.exit_code == 0, r.output
     return {int(j["joint"]): j for j in json.loads(r.stdout)["joints"]}
+
+
+# ---------------------------------------------------------------- a rig's envelope
+
+
+def test_the_closed_loop_checks_the_rig_envelope_with_the_grown_margin(cal_off, tmp_path):
+    """A wall 100 µm beyond the tip along joint 3: 60 µm is driven and seen; 80 µm is refused before a step,
+    by the σ the filter predicts at the end (yesterday's calibration: 15 % of 80 µm, 3 σ = 36 µm > 20 µm),
+    where the start's σ (0) alone would let it through."""
+    from stickslip.calibration import Calibration
+    from stickslip.procedures.closed_loop import move_seen
+    from stickslip.procedures.move import MoveRefused, MoveRequest
+    from stickslip.rig import check_path, parse_rig
+    from stickslip.rig.guard import Guard
+    from stickslip.storage import Store
+
+    rig = parse_rig(f"""
+[[arm]]
+name = "a"
+controller = "{DEV}"
+[[volume]]
+name = "wall"
+shape = "half-space"
+point = ["21.1mm", "0mm", "0mm"]
+normal = [1, 0, 0]
+""")
+    guard = Guard(rig, "a")
+    cal = Calibration.load(cal_off)
+    loop = CameraLoop("peercam://?pixel=1um&size=256x256", tip=(153.6, 128.0))
+    q0 = [0.0, -math.pi / 2, 0.0]
+    check_path(rig, "a", [q0, [0.0, -math.pi / 2, 80e-6]])  # the end margin: clear
+    with Store.open(tmp_path / "s.db") as store:
+        with pytest.raises(MoveRefused, match="'wall'"):
+            move_seen(store, MoveRequest(DEV, 3, by=80e-6, guard=guard, trust_calibration=True), cal, loop)
+        r = move_seen(store, MoveRequest(DEV, 3, by=60e-6, guard=guard, trust_calibration=True), cal, loop)
+    assert r.reached and r.reason is None
+    assert r.sim_true is not None and r.sim_true[2] == pytest.approx(60e-6, abs=1e-6)  # from 0: nothing moved before
+
+
+def test_a_leg_the_envelope_refuses_stops_the_loop_with_its_reason():
+    from types import SimpleNamespace
+
+    from stickslip.procedures.closed_loop import LegRefused, _run_loop
+
+    def leg(run, correction):
+        raise LegRefused("the next leg was refused by the rig's envelope: 'wall'")
+
+    run = SimpleNamespace(loop=CameraLoop("simcam://"), pixel_size_m=1e-6, looks=[], q=lambda: (0.0, 0.0, 0.0))
+    assert _run_loop(run, (0.0, 0.0, 0.0), leg) == (False, "the next leg was refused by the rig's envelope: 'wall'")
+
+
+def test_move_and_reach_with_the_camera_in_a_rig_are_checked_from_the_command_line(cal_off, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rig = tmp_path / "rig.toml"
+    rig.write_text(f"""
+[[arm]]
+name = "a"
+controller = "{DEV}"
+[[volume]]
+name = "wall"
+shape = "half-space"
+point = ["21.1mm", "0mm", "0mm"]
+normal = [1, 0, 0]
+""", encoding="utf-8")
+    cam = ["--camera", "peercam://?pixel=1um&size=256x256", "--camera-tip", "153.6,128"]
+    r = _run(["move", "--rig", str(rig), "-c", cal_off, "--joint", "3", "--by", "80um", *cam])
+    assert r.exit_code == 2 and "refused by the rig's envelope" in r.output and "'wall'" in r.output, r.output
+    r = _run(["reach", "--rig", str(rig), "-c", cal_off, "--by", "200um,0,0", *cam])
+    assert r.exit_code == 2 and "'wall'" in r.output, r.output
+    assert _where()[3]["source"] == "default"  # nothing moved

@@ -161,6 +161,13 @@ def test_the_kalman_sigma_widens_the_margin():
     with pytest.raises(EnvelopeViolation, match=r"'wall'.*closer than the 12[56]\.\d+ µm allowed"):
         check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
     check_path(rig, None, path, q_sd=(0.0, 1e-3, 0.0))  # 3σ = 63 µm: clear
+    # refused where it starts, because of its σ alone: the line says what shrinks it
+    with pytest.raises(EnvelopeViolation, match=r"starts there, and 12[56]\.\d+ µm of the margin is its position's σ"):
+        check_path(rig, None, path, q_sd=(0.0, 2e-3, 0.0))
+    with pytest.raises(EnvelopeViolation) as e:  # inside the wall itself: σ or not, no hint
+        check_path(Rig("r", "r", (arm,), (dataclasses.replace(wall, point=tuple(tip + [0.0, 0.0, 1e-4])),)), None,
+                   path, q_sd=(0.0, 2e-3, 0.0))
+    assert "σ" not in str(e.value)
 
 
 def test_two_arms_keep_the_stated_distance():
@@ -254,3 +261,164 @@ def test_a_bluesky_axis_checks_the_rig_envelope(tmp_path):
     with pytest.raises(MoveError, match="'wall'"):
         asyncio.run(move(11e-3))
     assert sim.steps_simulated == before
+
+
+# ---------------------------------------------------------------- the σ margin grows along the path
+
+
+def _track(sd: float, scale_sd: float, pose=None):
+    from stickslip.motion.tracking import SCALE_CORRELATION, JointTrack
+
+    v = scale_sd**2
+    c = SCALE_CORRELATION * v
+    return JointTrack(np.zeros(2), np.array([[sd**2, 0.0, 0.0], [0.0, v, c], [0.0, c, v]]), "", pose)
+
+
+def _growth(tracks, steps, sigma_model):
+    from stickslip.calibration.update import STEP_NOISE
+    from stickslip.motion.tracking import SCALE_CORRELATION, SCALE_WALK
+    from stickslip.rig.envelope import SigmaGrowth
+
+    P = tuple(tuple(tuple(float(v) for v in row) for row in t.P) for t in tracks)
+    last = tuple(None if t.pose is None else tuple(t.pose[:3]) for t in tracks)
+    return SigmaGrowth(P, steps, STEP_NOISE, SCALE_WALK, sigma_model, SCALE_CORRELATION, last)
+
+
+def _filtered(tracks, path, steps, sigma_model, fractions):
+    """Each joint's σ at ``k + f`` for each segment k and f in ``fractions``, by the filter's own predict."""
+    import copy
+
+    from stickslip import kinematics as kin
+
+    tracks = [copy.deepcopy(t) for t in tracks]
+    out = {}
+    for k in range(len(path) - 1):
+        pose = kin.Pose(*path[k])
+        for f in fractions:
+            part = [copy.deepcopy(t) for t in tracks]
+            for j in range(3):
+                d = float(path[k + 1][j] - path[k][j])
+                if d:
+                    n = int(math.copysign(round(abs(f * d) / steps[j]), d))
+                    part[j].predict(f * d, n, pose, j + 1, sigma_model[j])
+            out[k + f] = [t.sd for t in part]
+        for j in range(3):
+            d = float(path[k + 1][j] - path[k][j])
+            if d:
+                tracks[j].predict(d, int(math.copysign(round(abs(d) / steps[j]), d)), pose, j + 1, sigma_model[j])
+    return out
+
+
+def test_the_sigma_along_a_path_is_the_kalman_filters_prediction():
+    """Vertices and midpoints against JointTrack.predict run move by move (with a new pose's model error)."""
+    from stickslip.rig.envelope import SigmaGrowth
+
+    q0 = (0.0, -math.pi / 2, 0.0)
+    path = np.array([q0, (0.0, -math.pi / 2, 2e-3), (0.0, -math.pi / 2 + 0.2, 2e-3), (0.0, -math.pi / 2 + 0.2, 1e-3)])
+    steps, sm = (40e-6, 40e-6, 1e-6), (0.05, 0.04, 0.03)
+    key3 = (0.0, round(-math.pi / 2, 9), 0.0, 0.0, 0.0)
+    tracks = [_track(1e-4, 0.02), _track(2e-4, 0.03), _track(1e-6, 0.05, key3)]
+    growth = _growth(tracks, steps, sm)
+    expect = _filtered(tracks, path, steps, sm, (0.5, 1.0))
+    s = np.array(sorted(expect))
+    got = growth.sd_at(path, growth.starts(path), s)
+    assert got == pytest.approx(np.array([expect[v] for v in s]), rel=1e-9)
+    # joint 3 grew over its 2 mm (5 % scale σ: 50 µm half way, 100 µm at the end)
+    assert got[0, 2] == pytest.approx(50e-6, rel=0.01) and got[1, 2] == pytest.approx(100e-6, rel=0.01)
+    # what a jog's next tick starts from: the model at the path's end, its pose bookkeeping carried on
+    after = growth.after(path)
+    assert [math.sqrt(after.P[j][0][0]) for j in range(3)] == pytest.approx(expect[3.0], rel=1e-9)
+    assert after.last_pose[2] == (0.0, round(-math.pi / 2 + 0.2, 9), 0.0)
+    assert SigmaGrowth.constant((1e-4, 2e-4, 1e-6)).sd_at(path, SigmaGrowth.constant((1e-4, 2e-4, 1e-6)).starts(
+        path), s) == pytest.approx(np.tile([1e-4, 2e-4, 1e-6], (len(s), 1)))
+
+
+def test_a_path_safe_with_the_end_margin_is_refused_with_the_grown_one():
+    """Joint 3 out by 4 mm towards a wall 300 µm beyond the end; σ 1 µm at the start, 5 % of the distance after."""
+    arm = mm3a()
+    q0 = np.array([0.0, -math.pi / 2, 0.0])  # the tip at (21 mm, 0, 0); joint 3 pushes it along +x
+    path = np.array([q0, q0 + [0.0, 0.0, 4e-3]])
+    wall = HalfSpace("wall", (0.021 + 0.004 + 3e-4, 0.0, 0.0), (1.0, 0.0, 0.0))
+    rig = Rig("r", "r", (arm,), (wall,), n_sigma=3.0)
+    tracks = [_track(0.0, 0.0), _track(0.0, 0.0), _track(1e-6, 0.05)]
+    steps = (40e-6, 40e-6, 1e-6)
+    check_path(rig, None, path, q_sd=(0.0, 0.0, 1e-6))  # the end margin (the start's σ): 3 µm, clear
+    with pytest.raises(EnvelopeViolation, match="'wall'") as e:
+        check_path(rig, None, path, q_sd=_growth(tracks, steps, (0.0, 0.0, 0.0)))
+    # independently: the filter's σ and the geometry's clearance, sampled; the first sample inside the margin
+    fractions = np.linspace(0.0, 1.0, 2001)[1:]
+    sd = _filtered(tracks, path, steps, (0.0, 0.0, 0.0), fractions)
+    first = next(f for f in fractions
+                 if min(float(geo.point_distance(np.vstack([a, b]), wall).min())
+                        for a, b in geo.links(arm, path[0] + f * (path[1] - path[0]))) < 3.0 * sd[f][2])
+    assert first == pytest.approx(0.935, abs=0.01)  # 300 + 4000 (1 - s) = 3 x 200 s, in µm
+    assert abs(e.value.refusal.fraction - first) <= 1e-3
+    assert e.value.refusal.allowed == pytest.approx(3.0 * sd[first][2], rel=1e-3)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(cases(), st.floats(0.005, 0.1), st.floats(0.0, 2e-5))
+def test_accepted_paths_keep_out_by_the_grown_margin(case, scale_sd, sd0):
+    """Random rigs and paths, with σ growing by the filter: an accepted path keeps n σ of the tip from every
+    volume at every sampled pose, σ from JointTrack.predict and the tip's σ from the Jacobian (kinematics)."""
+    from stickslip import kinematics as kin
+
+    rig, path = case
+    arm = rig.arms[0]
+    tracks = [_track(sd0, scale_sd), _track(sd0, scale_sd), _track(sd0 * 1e-3, scale_sd)]
+    steps = (40e-6, 40e-6, 1e-6)
+    try:
+        check_path(rig, None, path, q_sd=_growth(tracks, steps, (0.0, 0.0, 0.0)))
+    except EnvelopeViolation as e:  # the named point is within the margin grown to where it is on the path
+        r = e.refusal
+        if r.point is None:
+            return
+        at = r.fraction * (len(path) - 1)
+        k = min(int(at), len(path) - 2)
+        joint_sd = _filtered(tracks, path[:k + 2], steps, (0.0, 0.0, 0.0), (at - k,))[k + (at - k)]
+        margin = rig.n_sigma * float(np.linalg.norm(kin.tip_sd(np.array(r.q), joint_sd, arm.geometry)))
+        vol = next(v for v in rig.volumes if v.name == r.obstacle)
+        allowed = vol.margin + arm.radius + margin
+        assert r.allowed == pytest.approx(allowed, rel=1e-6, abs=1e-12)
+        assert float(geo.point_distance(np.array(r.point)[None, :], vol)[0]) <= allowed + TOLERANCE + 1e-9
+        return
+    fractions = np.linspace(0.0, 1.0, 21)[1:]
+    sd = _filtered(tracks, path, steps, (0.0, 0.0, 0.0), fractions)
+    u = np.linspace(0.0, 1.0, 40)[:, None]
+    for s, joint_sd in sd.items():
+        k = min(int(s), len(path) - 2) if s < len(path) - 1 else len(path) - 2
+        t = s - k
+        q = path[k] + t * (path[k + 1] - path[k])
+        margin = rig.n_sigma * float(np.linalg.norm(kin.tip_sd(q, joint_sd, arm.geometry)))
+        pts = np.vstack([a + u * (b - a) for a, b in geo.links(arm, q)])
+        for v in rig.volumes:
+            assert float(np.min(geo.point_distance(pts, v))) >= v.margin + arm.radius + margin - 1e-9
+
+
+def test_a_new_pose_adds_the_models_error_once_along_a_path():
+    """Joint 3, joint 2, joint 3, joint 2, joint 3: the filter move by move would add σ_model² to joint 3's scales
+    at each of its moves after the first; along one path (a reach's segments, a jog session) it is added once."""
+    q = [0.0, -math.pi / 2, 0.0]
+    path = [list(q)]
+    for j, d in ((3, 1e-3), (2, 0.1), (3, 1e-3), (2, 0.1), (3, 1e-3)):
+        q[j - 1] += d
+        path.append(list(q))
+    path = np.array(path)
+    steps = (40e-6, 40e-6, 1e-6)
+    key3 = (0.0, round(-math.pi / 2, 9), 0.0, 0.0, 0.0)
+    tracks = [_track(0.0, 0.0), _track(0.0, 0.0), _track(1e-6, 0.02, key3)]
+    growth = _growth(tracks, steps, (0.0, 0.0, 0.05))
+    got = growth.sd_at(path, growth.starts(path), np.array([5.0]))[0, 2]
+    once = _filtered(tracks[:2] + [_track(1e-6, 0.02, key3)], path[:4], steps, (0.0, 0.0, 0.05), (1.0,))[3.0][2]
+    assert growth.after(path[:4]).bumped == (False, False, True)
+    # the filter's prediction over the first three moves (one pose change), then the last with no new error
+    t = _track(1e-6, 0.02, key3)
+    from stickslip import kinematics as kin
+
+    for k in range(4):
+        d = float(path[k + 1][2] - path[k][2])
+        if d:
+            t.predict(d, round(d / 1e-6), kin.Pose(*path[k]), 3, 0.05)
+    assert t.sd == pytest.approx(once, rel=1e-9)
+    t.predict(1e-3, 1000, None, 3, 0.0)  # no pose: no new model error
+    assert got == pytest.approx(t.sd, rel=1e-9)

@@ -274,3 +274,38 @@ def test_move_over_the_emulated_anc300(tmp_path, cal_path):
     w = where_json(db, url)
     assert "password" not in w["device"]
     assert w["joints"][2]["q"] == pytest.approx(plan.q_end_predicted, abs=1e-15)
+
+
+def test_a_move_to_the_lower_stop_ends_at_the_stop_and_the_next_move_runs(tmp_path, cal_path):
+    """Whole steps may overshoot a target by half a step; at an end stop the kept end is the stop.
+
+    Before, the predicted end (-0.33 µm) was kept as the position, refused as outside the
+    range after the last burst: the move failed and left joint 3 uncertain.
+    """
+    db = tmp_path / "s.db"
+    dev = f"sim://?seed=4&day={DAY}"
+    cal = calibration.Calibration.load(cal_path)
+    # a start from which the nearest whole number of steps lands below the stop
+    starts = [q for q in np.linspace(1.0e-3, 1.2e-3, 41)
+              if planning.Planner(cal, 3, kin.Pose(q3=q)).plan(q, 0.0).q_end_predicted < -0.05e-6]
+    assert starts
+    start = float(starts[0])
+    assert run("where", "-d", dev, "--db", db, "--set", f"3={start * 1e6!r}um").exit_code == 0
+    r = run("move", "-d", dev, "-c", cal_path, "--db", db, "--joint", 3, "--to", "min", "--json")
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    raw = planning.Planner(cal, 3, kin.Pose(q3=start)).plan(start, 0.0)
+    assert out["steps_signed"] == raw.signed_steps and out["q_end_predicted"] == 0.0
+    w = where_json(db, dev)["joints"][2]
+    assert w["q"] == 0.0 and w["source"] == "dead-reckoned"
+    r = run("move", "-d", dev, "-c", cal_path, "--db", db, "--joint", 3, "--by", "0.5mm", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["q_from"] == 0.0
+
+
+def test_within_stops_holds_a_position_at_the_stops():
+    from stickslip.procedures.move import within_stops
+
+    spec = kin.JOINTS[3]
+    assert within_stops(3, -3.3e-7) == spec.lower and within_stops(3, spec.upper + 1e-7) == spec.upper
+    assert within_stops(3, 1e-3) == 1e-3

@@ -132,7 +132,7 @@ margin = "100um"
 name = "park"
 arm = "probe"
 q2 = "-120deg"
-q3 = "0.1mm"
+q3 = "0mm"
 order = [3, 2]
 
 [[position]]
@@ -169,7 +169,7 @@ def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, post
         r = run("rig", "check", rig, "-o", tmp_path / "rig.png")
         assert r.exit_code == 0, r.output
         for words in ("2 arm(s), 2 volume(s), 2 named position(s)", "arm 'probe' (mm3a)", "arm 'stack' (xyz)",
-                      "volume 'objective': cylinder, margin 200 µm", "position 'park' of 'probe': q3 0.100 mm, "
+                      "volume 'objective': cylinder, margin 200 µm", "position 'park' of 'probe': q3 0.000 mm, "
                       "then q2 -120.00 deg", "no problem found"):
             assert words in r.output
         assert (tmp_path / "rig.png").stat().st_size > 10_000
@@ -224,8 +224,12 @@ def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, post
             assert "joint 3" in lines[0] and "joint 2" in lines[1], r.output
         r = run("where", "--rig", rig, "--json")
         probe, stack = json.loads(r.stdout)["arms"]
-        assert probe["q"][1:] == pytest.approx([-2 * math.pi / 3, 1e-4], abs=1e-4)
+        assert probe["q"][1] == pytest.approx(-2 * math.pi / 3, abs=1e-4)
+        assert 0.0 <= probe["q"][2] <= 0.5e-6  # within half a step of the lower stop, never past it
         assert stack["q"] == pytest.approx([0.0, 0.003, -0.002], abs=STACK_STEP / 2)
+        r = run("move", *common, "--arm", "probe", "--joint", 3, "--by", "0.5mm", "--json")  # from the stop
+        assert r.exit_code == 0, r.output
+        assert json.loads(r.stdout)["q_from"] == probe["q"][2]
 
     # the history is in the PostgreSQL database the rig file names, none in $STICKSLIP_DB's file
     assert not Path(os.environ["STICKSLIP_DB"]).exists()

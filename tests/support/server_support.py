@@ -80,3 +80,58 @@ def until(predicate: Callable[[], object], timeout: float = 20.0, what: str = "t
         if time.monotonic() > end:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         time.sleep(0.01)
+
+
+RIG = """\
+name = "bench"
+arm_distance = "1mm"
+
+[[arm]]
+name = "probe"
+controller = "sim://"
+mount = { origin = ["-30mm", "0mm", "0mm"] }
+
+[[arm]]
+name = "other"
+controller = "sim://?seed=2"
+mount = { origin = ["30mm", "0mm", "0mm"], rotation = ["0deg", "0deg", "180deg"] }
+
+[[volume]]
+name = "objective"
+shape = "cylinder"
+base = ["-7mm", "0mm", "6mm"]
+axis = [0, 0, 1]
+radius = "3mm"
+height = "20mm"
+margin = "200um"
+
+[[volume]]
+name = "lid"
+shape = "half-space"
+point = ["0mm", "0mm", "{lid}"]
+normal = [0, 0, 1]
+margin = "10um"
+
+[[position]]
+name = "park"
+arm = "probe"
+q2 = "-120deg"
+q3 = "0mm"
+order = [3, 2]
+"""
+"""A rig for the server's tests: the probe (served; its tip at (-9, 0, 0) mm outstretched), another arm
+kept 60 mm away, an objective above the probe's tip, a lid (a half-space above, at ``lid``) and a named
+position ``park``."""
+
+
+def rig_room_on(tmp_path: Path, lid: str = "30mm", **options: Any) -> ControlRoom:
+    """A control room serving the rig :data:`RIG`'s probe on the simulator in real time at 50x."""
+    from stickslip.rig import load_rig
+
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG.replace("{lid}", lid), encoding="utf-8")
+    url = "sim://?realtime=1&speed=50"
+    cal_path = tmp_path / "true-cal.json"
+    true_calibration(url).save(cal_path)
+    return ControlRoom(RoomOptions(device=url, db=tmp_path / "serve.db", calibration=cal_path, rig=load_rig(path),
+                                   arm="probe", **options))

@@ -358,9 +358,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     ) -> None:
         self.from_unreferenced = bool(from_unreferenced)
         self.camera = CameraLoop(camera) if isinstance(camera, str) else camera
-        self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move checked first
-        if self.camera is not None and guard is not None:
-            raise ValueError("camera= and guard= together: the closed loop does not check a rig's envelope yet")
+        self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move (and leg) checked first
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         self.burst = check_burst(burst)
@@ -488,7 +486,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
-                check_envelope(self.guard, state, joint, target)
+                check_envelope(self.guard, state, joint, target, cal)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
             publish(state)
@@ -526,7 +524,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         dev = self.link.controller()
         proxy = _Interruptible(dev, self._stop_event, atomic=True)
         request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
-            dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced)
+            dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced, guard=self.guard)
         with self.link.store() as store:
             try:
                 result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))

@@ -7,6 +7,7 @@ print. Pixel convention: x to the right, y down, the centre of the top-left pixe
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -419,22 +420,38 @@ def camera_loop(camera: str | None, tip: str | None) -> Any:
 
 
 def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: str | None,
-             json_out: bool, borrowed: bool = False) -> None:
-    """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short."""
+             json_out: bool, borrowed: bool = False, rig_arm: Any = None) -> None:
+    """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short.
+
+    With ``rig_arm`` (``--rig``, :class:`~.rig.RigArm`) the arm's envelope checks the whole
+    path and every leg, and its controller is opened through the rig (password, channels).
+    """
     from ..procedures.closed_loop import move_seen, reach_seen
     from ..procedures.move import DeviceBusy
     from ._common import flush_warnings, warn_later
 
+    if rig_arm is not None and rig_arm.stage is not None:
+        fail(f"--camera with arm {rig_arm.arm!r}: the closed loop plans an MM3A's joints, and this arm is a "
+             "stage (xyz); move it without the camera")
+    if rig_arm is not None and rig_arm.state_key != device_key(rig_arm.device):
+        fail(f"--camera with arm {rig_arm.arm!r}: it shares its controller with another arm, and the closed loop "
+             "keeps positions per controller; move it without the camera")
     loop = camera_loop(camera, tip)
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError, *camera_errors()):
+        opener = None
+        if rig_arm is not None:
+            request = dataclasses.replace(request, guard=rig_arm.guard(store))
+            opener = rig_arm.opener
         if kind == "move":
-            result = move_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
+            result = move_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings,
+                               opener=opener)
         else:
             if borrowed:
                 from ..procedures.reach import BORROWED_JOINT1
 
                 warn_later(BORROWED_JOINT1)
-            result = reach_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings)
+            result = reach_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings,
+                                opener=opener)
     if json_out:
         print_json({"camera": result.as_dict()})
     else:

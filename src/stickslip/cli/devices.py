@@ -179,11 +179,9 @@ def move(
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
     raw = _raw_steps(by, to, steps)
-    if rig_file is not None and (camera is not None or camera_tip is not None):
-        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
     if rig_file is not None:
         _move_in_rig(rig_file, arm, device, joint, by, to, raw, calibration, burst, db, json_out,
-                     from_unreferenced, trust_calibration)
+                     from_unreferenced, trust_calibration, camera, camera_tip)
         return
     if arm is not None:
         fail("--arm names an arm of a rig: give --rig FILE too")
@@ -226,8 +224,12 @@ def move(
 
 def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
                  raw: int | None, calibration: Path | None, burst: int | None, db: str | None, json_out: bool,
-                 from_unreferenced: bool, trust_calibration: bool) -> None:
-    """``move --rig FILE --arm NAME``: the arm's device, calibration and envelope from the rig file."""
+                 from_unreferenced: bool, trust_calibration: bool, camera: str | None = None,
+                 camera_tip: str | None = None) -> None:
+    """``move --rig FILE --arm NAME``: the arm's device, calibration and envelope from the rig file.
+
+    With ``--camera`` the closed loop checks the whole path and each leg against the envelope.
+    """
     from ..calibration import Calibration
     from ..procedures.arms import guard_for, opener_for
     from ..procedures.move import DeviceBusy, MoveRequest
@@ -244,6 +246,20 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
     cal_path = calibration or (rig_file.parent / a.calibration if a.calibration else None)
     with user_errors(KeyError):
         cal = Calibration.load(calibration_file(cal_path))
+    if camera_tip is not None and camera is None:
+        fail("--camera-tip goes with --camera")
+    if camera is not None:  # the closed loop, each leg checked against the envelope
+        from .camera import run_seen
+        from .rig import rig_arm
+
+        seen = MoveRequest(
+            a.controller, joint, by=None if by is None else _parse_joint_value(joint, by, "--by"),
+            to=None if to is None else _position_or_stop(joint, to, "--to"), burst=burst or 1000,
+            from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+        )
+        ra = rig_arm(rig_file, a.name, None, None, cal_path, db)
+        run_seen("move", seen, cal, camera, camera_tip, ra.database if ra else db, json_out, rig_arm=ra)
+        return
     joints = a.joint_specs()
     with open_store(rig_database(db, rig)) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         request = MoveRequest(

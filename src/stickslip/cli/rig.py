@@ -195,7 +195,10 @@ def _problems(rig: Rig, poses: dict[str, tuple[float, float, float]]) -> list[st
 
 @rig_app.command("go")
 def go(
-    name: str = typer.Argument(..., help="The named position (a [[position]] of the rig file).", metavar="NAME"),
+    name: str = typer.Argument(
+        ..., help="The named position: a [[position]] of the rig file, else one saved for the arm (stickslip serve).",
+        metavar="NAME",
+    ),
     rig_file: Path = typer.Option(..., "--rig", help=RIG_HELP),
     arm: str | None = typer.Option(None, "--arm", help=ARM_HELP),
     calibration: Path | None = typer.Option(
@@ -209,7 +212,7 @@ def go(
         False, "--trust-calibration", help="Use a calibration that does not record this device (as move's option)."
     ),
 ) -> None:
-    """Reach a named position of the rig file, one joint at a time in its order.
+    """Reach a named position of the rig file (or one saved for the arm), one joint at a time in its order.
 
     The whole path (each joint in the position's order, e.g. joint 3 retracted first)
     is checked against the rig's envelope before the first step; a path that would

@@ -74,8 +74,15 @@ def serve(
         None, "--device", "-d",
         help="Controller URL (default: device in the config file, else the simulator in real time, "
         "sim://?realtime=1; a sim:// URL runs in real time unless it says realtime=0; &speed=10 runs it "
-        "10 times faster). A rig file (--rig FILE, several manipulators) comes with issue 32.",
+        "10 times faster). With --rig, the rig file names the controller.",
     ),
+    rig_file: Path | None = typer.Option(
+        None, "--rig", metavar="FILE",
+        help="Rig file (TOML, docs/rig.md): serve one of its arms; every move, reach, jog, traverse and named "
+        "position is checked against the rig's envelope before a step is sent, and the rig file's named "
+        "positions join the saved ones.",
+    ),
+    arm: str | None = typer.Option(None, "--arm", help="The rig's arm to serve (default: its first arm)."),
     camera: str | None = typer.Option(
         None, "--camera", help="Camera URL for the camera panel: simcam://, opencv://0, files://frames/*.png "
         "(docs/vision.md)."
@@ -119,26 +126,37 @@ def serve(
     address it prints in a browser. STOP (the button, Esc or Space) stops every axis.
 
     Example: stickslip serve        (the simulator in real time, on http://127.0.0.1:8765/)
+
+    Example: stickslip serve --rig lab.toml --arm left   (one arm of a rig; another
+    server on another --port serves another arm)
     """
     missing = [m for m in _EXTRA if importlib.util.find_spec(m) is None]
     if missing:
         fail(f"stickslip serve needs the serve extra ({', '.join(missing)} missing): pip install 'stickslip[serve]'")
-    url = with_realtime(device_setting(device).value)
+    from .rig import rig_arm
+
+    ra = rig_arm(rig_file, arm, device, geometry, calibration, db)
+    url = with_realtime(ra.device if ra is not None else device_setting(device).value)
     from ..devices.base import DeviceError, device_key
     from ..procedures.move import DeviceBusy
-    from ..server.room import RoomOptions
+    from ..server.room import RoomOptions, serve_problem
     from ..server.run import ServeError
     from ..server.run import serve as run_server
     from ..storage import StoreError
 
+    if ra is not None and (problem := serve_problem(ra.rig, ra.arm)) is not None:
+        fail(problem)
     with user_errors():
         device_key(url)
-    cal = calibration_setting(calibration).value
+    cal = ra.calibration if ra is not None else calibration_setting(calibration).value
     if cal is not None and not cal.exists():
         fail(f"--calibration: {cal} does not exist")
     options = RoomOptions(
-        device=url, db=database_setting(db).value, calibration=cal, tunings=_tunings(tuning),
-        geometry=geometry_setting(geometry).value, max_age_days=max_age_setting(max_age).value,
+        device=url, db=database_setting(ra.database if ra is not None else db).value, calibration=cal,
+        tunings=_tunings(tuning),
+        geometry=ra.geometry if ra is not None else geometry_setting(geometry).value,
+        max_age_days=max_age_setting(max_age).value, rig=ra.rig if ra is not None else None,
+        arm=ra.arm if ra is not None else None,
     )
 
     def echo(line: str) -> None:

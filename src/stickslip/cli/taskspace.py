@@ -155,8 +155,6 @@ def reach(
         fail("give exactly one of --by and --to")
     point = parse_point(to if to is not None else str(by), "--to" if to is not None else "--by")
     geom = parse_geometry(geometry)
-    if rig_file is not None and camera is not None:
-        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
     in_rig = rig_arm(rig_file, arm, device, geometry, calibration, db)
     if in_rig is not None:
         device, geom, calibration, db = in_rig.device, in_rig.geometry, in_rig.calibration, in_rig.database
@@ -184,7 +182,7 @@ def reach(
     if camera is not None and dry_run:
         fail("--dry-run plans without moving: the camera closes the loop of a move (drop one of them)")
     if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
-        run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed)
+        run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed, rig_arm=in_rig)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         if in_rig is not None:
@@ -431,7 +429,7 @@ def jog(
 
     geom = parse_geometry(geometry)
     if rig_file is not None and camera is not None:
-        fail("--camera with --rig: the closed loop does not check the rig's envelope yet (use one of them)")
+        fail("jog --camera with --rig: a jog's camera is not used in a rig yet (use one of them)")
     in_rig = rig_arm(rig_file, arm, device, geometry, calibration, db)
     if in_rig is not None:
         device, geom, calibration, db = in_rig.device, in_rig.geometry, in_rig.calibration, in_rig.database

@@ -12,19 +12,22 @@ joint in its order, after checking the whole path.
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 from ..calibration import Calibration
 from ..devices.base import Controller, open_device
 from ..devices.positions import DeviceState, StateStore, load_state
-from ..rig import Rig
-from ..rig.envelope import EnvelopeViolation
+from ..rig import NamedPosition, Rig
 from ..rig.guard import Guard, mapped
 from ..rig.secrets import controller_url
-from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, move, track_fields
+from . import named
+from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, check_envelope_path, move
 
-__all__ = ["ArmState", "arm_states", "go_to", "guard_for", "opener_for"]
+__all__ = [
+    "ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "position_of",
+    "safe_order",
+]
 
 
 def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
@@ -47,6 +50,17 @@ def opener_for(
 
     def open_arm(_url: str) -> Controller:
         return inner(controller_url(a))
+
+    return mapped(open_arm, a)
+
+
+def arm_opener(rig: Rig, arm: str | None, inner: Callable[[str], Controller]) -> Callable[[str], Controller]:
+    """Opens ``arm``'s controller at the URL it is given (its options kept, e.g. ``realtime=1``), with the arm's
+    password added and its joints mapped to channels (what a server that owns the arm opens it with)."""
+    a = rig.arm(arm)
+
+    def open_arm(url: str) -> Controller:
+        return inner(controller_url(replace(a, controller=url)))
 
     return mapped(open_arm, a)
 
@@ -81,7 +95,8 @@ def go_to(
     from_unreferenced: bool = False,
     trust_calibration: bool = False,
 ) -> tuple[MoveResult, ...]:
-    """Reach the rig file's named position ``name`` of ``arm``, joint by joint in its order.
+    """Reach the named position ``name`` of ``arm`` (the rig file's, or one saved for it: :func:`position_of`),
+    joint by joint in its order.
 
     The whole path (one straight joint move after another, in the position's order) is
     checked against the envelope before the first step; then each joint is moved by
@@ -91,7 +106,61 @@ def go_to(
     ``from_unreferenced`` and ``trust_calibration`` go to each move (:class:`~.move.MoveRequest`).
     """
     a = rig.arm(arm)
-    target = rig.position(a.name, name)
+    target = position_of(store, rig, a.name, name)
+    return go_to_position(store, rig, a.name, target, calibration, burst=burst, warn=warn, ready=ready, opener=opener,
+                          tolerance=tolerance, from_unreferenced=from_unreferenced,
+                          trust_calibration=trust_calibration)
+
+
+def position_of(store: StateStore, rig: Rig, arm: str | None, name: str) -> NamedPosition:
+    """The named position ``name`` of ``arm``: the rig file's, else one saved for the arm (``stickslip serve``,
+    :mod:`.named`) with its :func:`safe_order` from the kept pose. ``KeyError`` naming both sets otherwise."""
+    a = rig.arm(arm)
+    try:
+        return rig.position(a.name, name)
+    except KeyError as e:
+        saved = {p.name: p for p in named.positions(store, a.controller)}
+        if name not in saved:
+            also = ", ".join(saved) or "none"
+            raise KeyError(f"{e.args[0]}; saved for it: {also}") from None
+    state = load_state(store, rig.state_key(a.name), a.joint_specs())
+    q = saved[name].q
+    return NamedPosition(name, a.name, q, safe_order([state.positions[j] for j in (1, 2, 3)], q))
+
+
+def safe_order(q_from: Sequence[float], q_to: Sequence[float]) -> tuple[int, ...]:
+    """The order to reach a position saved without one (rad, rad, m): joint 3 first when it retracts, else last.
+
+    The tip is drawn back before the arm swings and pushed out only once it points where
+    it should (the order :func:`stickslip.procedures.named.go_to` uses).
+    """
+    return (3, 1, 2) if q_to[2] < q_from[2] else (1, 2, 3)
+
+
+def go_to_position(
+    store: MoveStore,
+    rig: Rig,
+    arm: str | None,
+    target: NamedPosition,
+    calibration: Calibration,
+    *,
+    burst: int = 1000,
+    warn: Callable[[str], None] = lambda _message: None,
+    ready: Callable[[], None] = lambda: None,
+    opener: Callable[[str], Controller] | None = None,
+    tolerance: float = 1e-9,
+    from_unreferenced: bool = False,
+    trust_calibration: bool = False,
+    device: str | None = None,
+) -> tuple[MoveResult, ...]:
+    """Reach ``target`` (a rig file's named position, or one saved and given its order) as :func:`go_to` does.
+
+    ``device`` is the URL the moves open, and ``opener`` then opens it as it is (a server
+    gives its own URL and its controller, already mapped to the arm's channels); without
+    it, the arm's controller through :func:`opener_for`.
+    """
+    a = rig.arm(arm)
+    name = target.name
     state = load_state(store, rig.state_key(a.name), a.joint_specs())
     guard = guard_for(store, rig, a.name)
     q = [state.positions[j] for j in (1, 2, 3)]
@@ -101,11 +170,10 @@ def go_to(
         if goal is not None and abs(goal - q[j - 1]) > tolerance:
             q[j - 1] = goal
             path.append(list(q))
-    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
     try:
-        guard.check(path, sd)
-    except EnvelopeViolation as e:
-        raise MoveRefused(f"going to {name!r}: refused by the rig's envelope: {e}") from None
+        check_envelope_path(guard, state, path, calibration)
+    except MoveRefused as e:
+        raise MoveRefused(f"going to {name!r}: {e}") from None
     results: list[MoveResult] = []
     started = False
 
@@ -117,10 +185,12 @@ def go_to(
 
     for before, after in zip(path[:-1], path[1:], strict=True):
         j = next(i + 1 for i in range(3) if before[i] != after[i])
-        request = MoveRequest(a.controller, j, to=after[j - 1], burst=burst, guard=guard_for(store, rig, a.name),
-                              from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
-                              joints=a.joint_specs(), state_key=rig.state_key(a.name))
-        result = move(store, request, calibration, warn=warn, ready=once, opener=opener_for(rig, a.name, opener))
+        request = MoveRequest(device or a.controller, j, to=after[j - 1], burst=burst,
+                              guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
+                              trust_calibration=trust_calibration, joints=a.joint_specs(),
+                              state_key=rig.state_key(a.name))
+        result = move(store, request, calibration, warn=warn, ready=once,
+                      opener=opener if device is not None else opener_for(rig, a.name, opener))
         results.append(result)
         if result.outcome.error is not None:
             break

@@ -45,6 +45,8 @@ from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.planning import Planner
 from ..motion.reach import plan_reach
 from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
+from ..rig.envelope import EnvelopeViolation
+from ..rig.guard import Guard
 from ..units import format_position
 from ..vision.acquire import AcquireError
 from ..vision.camera import Camera, CameraError, open_camera
@@ -64,14 +66,16 @@ from .move import (
     MoveRefused,
     MoveRequest,
     MoveStore,
+    check_envelope_path,
     device_lock,
     drive,
     kept_after_interrupt,
     reference_problem,
+    sigma_growth,
     target_of,
 )
 from .observe import MAX_INNOVATION
-from .reach import ReachRequest, drive_reach, referenced_state
+from .reach import ReachRequest, drive_reach, joint_path, referenced_state
 
 __all__ = [
     "CameraLoop",
@@ -406,6 +410,27 @@ Leg = Callable[[_Run, bool], tuple[tuple[int, int, int], str | None, bool]]
 """``leg(run, correction)``: drive one leg; the signed steps sent, a device error, whether it was the last."""
 
 
+class LegRefused(Exception):
+    """A leg the rig's envelope refused before a step of it was sent (the loop stops with this reason)."""
+
+
+def check_leg(run: _Run, guard: Guard | None, path: Sequence[Sequence[float]]) -> None:
+    """A leg's planned path (poses, rad or m) against a rig's envelope: :class:`LegRefused` naming the obstacle.
+
+    The margin is the σ the joints' tracks predict along the leg (:func:`~.move.sigma_growth`),
+    with the start's own σ, which the loop keeps apart while it looks, added back.
+    """
+    if guard is None:
+        return
+    growth = sigma_growth(run.state, run.calibration)
+    P = tuple(((p[0][0] + run.sd0.get(j + 1, 0.0) ** 2, p[0][1], p[0][2]), p[1], p[2])
+              for j, p in enumerate(growth.P))
+    try:
+        guard.check(path, replace(growth, P=P))
+    except EnvelopeViolation as e:
+        raise LegRefused(f"the next leg was refused by the rig's envelope: {e}") from None
+
+
 def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
     """Legs and looks until the tip is within the tolerance or a reason to stop."""
     tol = tolerance_m(run.loop, run.pixel_size_m)
@@ -423,7 +448,10 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
                 )
             corrections += 1
         before = run.q()
-        steps, error, last = leg(run, arrived)
+        try:
+            steps, error, last = leg(run, arrived)
+        except LegRefused as e:
+            return False, str(e)
         if error is not None:
             return False, f"{error} (a limit: the device stopped the move)"
         if not any(steps):
@@ -499,6 +527,36 @@ def _out_and_back(state: DeviceState, calibration: Calibration, joint: int) -> C
     return keep
 
 
+def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
+    """The kept pose and the pose with ``joint`` at ``q_to`` (rad or m): a one-joint move's path."""
+    q = [state.positions[j] for j in (1, 2, 3)]
+    end = list(q)
+    end[joint - 1] = q_to
+    return [q, end]
+
+
+def _check_start(
+    guard: Guard | None, state: DeviceState, calibration: Calibration, loop: CameraLoop,
+    path: Sequence[Sequence[float]],
+) -> None:
+    """Before anything moves: the whole planned path, and the steps out and back that may find the tip.
+
+    :class:`~.move.MoveRefused` naming the obstacle; each leg is checked again as it is
+    planned (:func:`check_leg`).
+    """
+    if guard is None:
+        return
+    check_envelope_path(guard, state, path, calibration)
+    if loop.tip is None:  # the tip is found by stepping a joint out and back
+        j = loop.auto_joint
+        q0 = state.positions[j]
+        q_out = float(Planner(calibration, j, state.pose).position_after(q0, AUTO_STEPS))
+        q = [state.positions[i] for i in (1, 2, 3)]
+        out = list(q)
+        out[j - 1] = q0 + 1.5 * (q_out - q0)  # as far as the journal allows
+        check_envelope_path(guard, state, [q, out, q], calibration)
+
+
 def _start(
     store: StateStore, dev: Controller, state: DeviceState, calibration: Calibration, loop: CameraLoop,
     geometry: kin.Geometry, camera_opener: CameraOpener, joints: Sequence[int],
@@ -566,8 +624,6 @@ def move_seen(
     (:class:`~.move.MoveRefused`, ``KeyError``, ``ValueError``, :class:`DeviceError`, the
     camera's errors); a stop during the move is in the result's ``reason``.
     """
-    if getattr(request, "guard", None) is not None:
-        raise MoveRefused("the closed loop does not check a rig's envelope yet: a move with a guard goes without it")
     key = device_key(request.device)
     joint = request.joint
     made_on = calibration_device_problem(calibration, request.device)
@@ -580,6 +636,7 @@ def move_seen(
         if problem:
             raise MoveRefused(problem + " (a closed-loop move starts from a known position)")
         _, q_to = target_of(state, joint, request.by, request.to)
+        _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to))
         loop_geometry = kin.DEFAULT_GEOMETRY
         dev = (opener or open_device)(request.device)
         cam: Camera | None = None
@@ -609,6 +666,9 @@ def move_seen(
                 def reckon(m: int) -> float:
                     return float(planner.position_after(q_from, m))
 
+                end = list(run.q())
+                end[joint - 1] = reckon(n)
+                check_leg(run, request.guard, [list(run.q()), end])
                 out = drive(dev, run.state, joint, n, request.burst, reckon, run.save)
                 steps = [0, 0, 0]
                 steps[joint - 1] = out.sent
@@ -646,8 +706,6 @@ def reach_seen(
     """
     if request.dry_run:
         raise ValueError("a closed-loop reach drives the arm: --dry-run plans without the camera")
-    if getattr(request, "guard", None) is not None:
-        raise MoveRefused("the closed loop does not check a rig's envelope yet: a move with a guard goes without it")
     key = device_key(request.device)
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
@@ -657,6 +715,7 @@ def reach_seen(
         state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
         first = plan_reach(calibration, state.pose, to=request.to, by=request.by, geometry=geometry,
                            segment=request.segment)  # refused here when out of reach, before anything moves
+        _check_start(request.guard, state, calibration, loop, joint_path(first))
         target_v = first.target
         save_state(store, state)
         dev = (opener or open_device)(request.device)
@@ -681,6 +740,7 @@ def reach_seen(
                 while k < len(plan.segments) and np.linalg.norm(np.asarray(plan.segments[k].tip) - start) <= max_leg_m:
                     k += 1
                 part = replace(plan, segments=plan.segments[:k])
+                check_leg(run, request.guard, joint_path(part))
                 out = drive_reach(dev, run.state, part, cal, run.save, request.burst)
                 s = out.sent
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)

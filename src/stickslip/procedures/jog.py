@@ -56,10 +56,19 @@ from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
-from ..rig.envelope import EnvelopeViolation
+from ..rig.envelope import EnvelopeViolation, SigmaGrowth
 from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
-from .move import MoveRefused, MoveStore, PoseUpdate, device_lock, drive, exact_positions, simulates, track_fields
+from .move import (
+    MoveRefused,
+    MoveStore,
+    PoseUpdate,
+    device_lock,
+    drive,
+    exact_positions,
+    sigma_growth,
+    simulates,
+)
 from .reach import referenced_state
 
 if TYPE_CHECKING:
@@ -232,7 +241,8 @@ class JogController:
         an end stop (dimensionless).
     guard : Guard or None
         A rig's envelope: motion stops before a tick whose steps would leave it (so within
-        one tick's motion of the boundary), with ``guard_sd`` (rad, rad, m) as the joints' σ.
+        one tick's motion of the boundary), with ``guard_sd`` (rad, rad, m) as the joints' σ, or
+        the σ model (:func:`~.move.sigma_growth`) that grows with every tick let through.
     joints : JointSet or None
         The arm's joints (a rig file's arm); the MM3A's by default.
     stage : Stage or None
@@ -265,7 +275,7 @@ class JogController:
     _setpoint: tuple[float, float, float] | None = None
     _queued: list[tuple[float, float, float]] = field(default_factory=list)
     guard: Guard | None = None
-    guard_sd: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    guard_sd: tuple[float, float, float] | SigmaGrowth = (0.0, 0.0, 0.0)
     joints: kin.JointSet | None = None
     stage: kin.Stage | None = None
 
@@ -421,7 +431,10 @@ class JogController:
                     side = "lower" if q[j - 1] < before else "upper"
                     return f"joint {j} is at its {side} limit: stopped (move the other way)"
                 path.append(list(q))
-        return envelope_stop(self.guard, path, self.guard_sd)
+        problem = envelope_stop(self.guard, path, self.guard_sd)
+        if problem is None and isinstance(self.guard_sd, SigmaGrowth) and len(path) > 1:
+            self.guard_sd = self.guard_sd.after(path)  # the σ the tick's steps leave, for the next tick
+        return problem
 
     def _single_step(self, direction: tuple[float, float, float]) -> None:
         """Plan a straight move of ``speed`` metres along ``direction``; queue its segments."""
@@ -568,12 +581,9 @@ class KeySource(Protocol):
         ...
 
 
-def _sds(state: DeviceState) -> tuple[float, float, float]:
-    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
-    return (sd[0], sd[1], sd[2])
-
-
-def envelope_stop(guard: Guard | None, path: list[list[float]], q_sd: tuple[float, float, float]) -> str | None:
+def envelope_stop(
+    guard: Guard | None, path: list[list[float]], q_sd: tuple[float, float, float] | SigmaGrowth
+) -> str | None:
     """Why a jog tick's path (poses, rad or m) must not be sent: it leaves the rig's envelope; ``None`` if it may."""
     if guard is None or len(path) < 2:
         return None
@@ -704,7 +714,8 @@ def jog(
             ctl = JogController(
                 calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
                 max_rates(dev, request.max_rate), request.image_angle, request.hold, request.speed - 1,
-                guard=request.guard, guard_sd=_sds(state), joints=request.joints, stage=request.stage,
+                guard=request.guard, guard_sd=sigma_growth(state, calibration), joints=request.joints,
+                stage=request.stage,
             )
 
             def save(st: DeviceState) -> None:

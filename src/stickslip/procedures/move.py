@@ -34,6 +34,7 @@ from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..calibration import Calibration
+from ..calibration.update import STEP_NOISE
 from ..clock import now_utc
 from ..devices.base import (
     Controller,
@@ -49,8 +50,15 @@ from ..devices.base import (
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..joints import JointSet, JointSpec
 from ..motion.planning import Planner
-from ..motion.tracking import JointTrack, joint_sigma_model, scaled_calibration, track_for
-from ..rig.envelope import EnvelopeViolation
+from ..motion.tracking import (
+    SCALE_CORRELATION,
+    SCALE_WALK,
+    JointTrack,
+    joint_sigma_model,
+    scaled_calibration,
+    track_for,
+)
+from ..rig.envelope import EnvelopeViolation, SigmaGrowth
 from ..rig.guard import Guard
 from ..units import format_position, position_display_unit
 from .conditions import calibration_device_problem, usage_warnings
@@ -81,10 +89,12 @@ __all__ = [
     "step_joint",
     "steps_to_stop",
     "settle",
+    "sigma_growth",
     "simulates",
     "target_of",
     "track_fields",
     "where_line",
+    "within_stops",
 ]
 
 
@@ -273,6 +283,19 @@ def target_of(state: DeviceState, joint: int, by: float | None = None, to: float
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
 
+def within_stops(joint: int | JointSpec, q: float) -> float:
+    """``q`` (rad or m) held within ``joint``'s end stops (the MM3A's joint, or an arm's own spec): where dead
+    reckoning past a stop leaves the joint.
+
+    A planned move rounds to whole steps, so its predicted end may lie up to half a step
+    beyond its target; when the target is an end stop that is beyond the stop, where the
+    joint cannot be (its slider slips at the stop). The kept position is then the stop;
+    its σ stays what the track says (the stop was not heard, only predicted).
+    """
+    spec = kin.joint_spec(joint) if isinstance(joint, int) else joint
+    return float(min(max(float(q), spec.lower), spec.upper))
+
+
 @dataclass(frozen=True)
 class TrackedPlan:
     """A move of one joint planned with the day's tracked step scale.
@@ -321,9 +344,14 @@ class TrackedPlan:
     spec: JointSpec | None = None
 
     def position_after(self, n_signed: int, q_start: float | None = None) -> float:
-        """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start)."""
+        """The dead-reckoned position (rad or m) after ``n_signed`` steps from ``q_start`` (default: the start).
+
+        Held at the joint's end stops (:func:`within_stops`): steps that would carry it past
+        a stop slip there.
+        """
         q0 = self.q_from if q_start is None else q_start
-        return float(Planner(self.calibration, self.spec or self.joint, self.pose).position_after(q0, n_signed))
+        spec = self.spec or self.joint
+        return within_stops(spec, Planner(self.calibration, spec, self.pose).position_after(q0, n_signed))
 
     def bounds_after(self, n_signed: int) -> tuple[float, float] | None:
         """Where an uncertain start's bounds are after ``n_signed`` steps (rad or m); ``None`` for a known start."""
@@ -363,7 +391,8 @@ def plan_tracked(
     own = None if spec is kin.joint_spec(joint) else spec  # an arm's own joint (a rig file's), else the MM3A's
     plan = Planner(scaled, spec, state.pose).plan(q_from, q_to)
     return TrackedPlan(
-        joint, q_from, q_to, int(plan.signed_steps), float(plan.q_end_predicted), scaled, state.pose, track, note,
+        joint, q_from, q_to, int(plan.signed_steps), within_stops(spec, plan.q_end_predicted), scaled, state.pose,
+        track, note,
         joint_sigma_model(calibration, joint, state.pose),  # the model error in this pose (docs/models.md §4)
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
         from_uncertain=state.uncertain.get(joint), spec=own,
@@ -505,27 +534,73 @@ def track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
     return {"sd": t.sd, "step_scale": t.scale, "step_scale_sd": t.scale_sd}
 
 
-def check_envelope(guard: Guard | None, state: DeviceState, joint: int, q_to: float) -> None:
+def sigma_growth(state: DeviceState, calibration: Calibration | None = None) -> SigmaGrowth:
+    """Each joint's position σ along a planned path as its Kalman track predicts it.
+
+    The :class:`~stickslip.rig.envelope.SigmaGrowth` a path is checked with.
+
+    From the kept tracks (the position's and the step scales' covariance); with
+    ``calibration``, a joint's track as a move with it would use it (:func:`track_for`: a
+    fresh one where none is kept or it was learned with another calibration), its steps
+    (the larger constant step of its two directions) and its model error. Without one, a
+    joint with no track keeps σ 0 and its nominal step (:attr:`~stickslip.joints.JointSpec.small_step`).
+    """
+    P, steps, models, poses = [], [], [], []
+    for j in (1, 2, 3):
+        raw = state.track.get(j)
+        track: JointTrack | None = None
+        try:
+            if calibration is not None and j in {jj for jj, _ in calibration.models}:
+                track, _ = track_for(raw, calibration, j)
+            elif raw is not None:
+                track = JointTrack.from_json(raw)
+        except ValueError:
+            track = None
+        if track is None:
+            P.append(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
+        else:
+            r0, r1, r2 = ((float(r[0]), float(r[1]), float(r[2])) for r in track.P)
+            P.append((r0, r1, r2))
+        known = [v for (jj, _), v in (calibration.constant_steps.items() if calibration else ()) if jj == j and v > 0]
+        steps.append(max(known) if known else state.spec(j).small_step)
+        models.append(joint_sigma_model(calibration, j) if calibration is not None and track is not None else 0.0)
+        pose = track.pose if track is not None else None
+        poses.append(None if pose is None else (float(pose[0]), float(pose[1]), float(pose[2])))
+    return SigmaGrowth(
+        tuple(P), (steps[0], steps[1], steps[2]), STEP_NOISE, SCALE_WALK, (models[0], models[1], models[2]),
+        SCALE_CORRELATION, tuple(poses),
+    )
+
+
+def check_envelope(
+    guard: Guard | None, state: DeviceState, joint: int, q_to: float, calibration: Calibration | None = None
+) -> None:
     """The planning step's one call into a rig's envelope: :class:`MoveRefused` naming the obstacle, else nothing.
 
-    The move of ``joint`` from the kept pose to ``q_to`` (rad or m), with each joint's
-    tracked σ as a margin (:func:`stickslip.rig.envelope.check_path`); no guard, no check.
+    The move of ``joint`` from the kept pose to ``q_to`` (rad or m), with each joint's σ
+    as its Kalman track predicts it along the move as the margin (:func:`sigma_growth`,
+    :func:`stickslip.rig.envelope.check_path`); no guard, no check.
     """
     if guard is None:
         return
     q = [state.positions[j] for j in (1, 2, 3)]
     end = list(q)
     end[joint - 1] = q_to
-    check_envelope_path(guard, state, [q, end])
+    check_envelope_path(guard, state, [q, end], calibration)
 
 
-def check_envelope_path(guard: Guard | None, state: DeviceState, path: Sequence[Sequence[float]]) -> None:
-    """A whole planned path (poses, rad or m) against a rig's envelope: :class:`MoveRefused`, else nothing."""
+def check_envelope_path(
+    guard: Guard | None, state: DeviceState, path: Sequence[Sequence[float]], calibration: Calibration | None = None
+) -> None:
+    """A whole planned path (poses, rad or m) against a rig's envelope: :class:`MoveRefused`, else nothing.
+
+    The σ margin grows along the path as the joints' Kalman tracks predict
+    (:func:`sigma_growth`).
+    """
     if guard is None:
         return
-    sd = [track_fields(state, j)["sd"] or 0.0 for j in (1, 2, 3)]
     try:
-        guard.check(path, sd)
+        guard.check(path, sigma_growth(state, calibration))
     except EnvelopeViolation as e:
         raise MoveRefused(f"refused by the rig's envelope: {e}") from None
 
@@ -669,7 +744,7 @@ def move(
                 calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
                 assumed=problem is not None and joint not in state.uncertain,
             )
-            check_envelope(request.guard, state, joint, plan.q_to)
+            check_envelope(request.guard, state, joint, plan.q_to, calibration)
             if plan.note:
                 warn(plan.note)
             save_state(store, state)  # the recorded pose, even if nothing moves

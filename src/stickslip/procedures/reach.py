@@ -330,7 +330,7 @@ def reach(
     with device_lock(store, lock):
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
-        check_envelope_path(request.guard, state, joint_path(plan))
+        check_envelope_path(request.guard, state, joint_path(plan), calibration)
         save_state(store, state)  # the recorded pose, even if nothing moves
         for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
             warn(w)

@@ -9,9 +9,12 @@ segment, :meth:`~.model.Arm.segments`) must keep
 * away from every other arm's links (at their kept poses) by the rig's ``arm_distance``,
 * within each joint's range and soft limits,
 
-with every margin widened by ``n_sigma`` standard deviations of the tip's position (the
-Kalman filter's joint σ through :func:`stickslip.kinematics.tip_sd`: a tip that may be
-there counts as there).
+with every margin widened by ``n_sigma`` standard deviations of the tip's position where
+the arm is on the path (the Kalman filter's joint σ through the Jacobian, as
+:func:`stickslip.kinematics.tip_sd`: a tip that may be there counts as there). The joint
+σ may be one value per joint for the whole path, or :class:`SigmaGrowth`: the σ the
+Kalman model predicts at each point of the path, growing with the steps taken to get
+there (docs/rig.md).
 
 How nothing between samples is missed (docs/rig.md): at one pose the distance from a
 link segment to a volume is computed exactly (a half-space and another arm's segment in
@@ -26,10 +29,18 @@ shown clear, or a pose on it is closer than allowed (refused: that pose and its 
 point are named), or it is shorter than ``tol`` (refused too: the path then comes within
 the margin plus ``tol``; 0.1 µm by default). So an accepted path never enters a volume's
 margin, and a refused path does, or comes within ``tol`` of doing so.
+
+The σ margin on a stretch is bounded the same way: each joint's variance is convex along
+a straight joint move (a quadratic in the distance moved, :class:`SigmaGrowth`), so its
+largest value on a stretch is at one of the stretch's ends; and the tip's σ is
+``|J(q) σ|`` whose rotary columns are distances from a joint's axis (joint 1: the tip's
+distance from its axis; joint 2: ``length + q3``), which change no faster than the arm
+moves, so over a stretch it grows by at most ``D`` times the rotary joints' σ.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -44,6 +55,7 @@ __all__ = [
     "TOLERANCE",
     "EnvelopeViolation",
     "Refusal",
+    "SigmaGrowth",
     "check_path",
     "clearances",
     "safe_fraction",
@@ -76,6 +88,8 @@ class Refusal:
         Its distance from the obstacle, m (0 inside it); for a limit, how far beyond (rad or m).
     allowed : float
         The least distance allowed (margin + radii + n_sigma σ), m.
+    sigma : float
+        Of which the σ margin (``n_sigma`` times the tip's σ there), m.
     q : tuple of 3 floats
         The pose where it happens (rad or m per joint).
     units : tuple of 3 str
@@ -96,6 +110,7 @@ class Refusal:
     fraction: float
     undecided: bool = False
     units: tuple[str, str, str] = ("rad", "rad", "m")
+    sigma: float = 0.0
 
     def message(self) -> str:
         """One line in display units (µm, deg)."""
@@ -112,7 +127,11 @@ class Refusal:
             f"comes {self.distance * 1e6:.2f} µm from {self.obstacle!r}, closer than the "
             f"{self.allowed * 1e6:.2f} µm allowed"
         )
-        return f"arm {self.arm!r}: the path {how} at ({p}) µm in the rig frame, {where}, {pose}"
+        hint = ""
+        if self.fraction == 0.0 and self.sigma > 0.0 and self.distance > self.allowed - self.sigma:
+            hint = (f"; the arm starts there, and {self.sigma * 1e6:.2f} µm of the margin is its position's σ: "
+                    "observe or reference its joints to shrink it")
+        return f"arm {self.arm!r}: the path {how} at ({p}) µm in the rig frame, {where}, {pose}{hint}"
 
 
 class EnvelopeViolation(ValueError):
@@ -238,6 +257,220 @@ def _bound_sphere(v: Box | Cylinder) -> tuple[Array, float]:
     return np.asarray(v.base) + np.asarray(v.axis) * v.height / 2.0, math.hypot(v.radius, v.height / 2.0)
 
 
+# ---------------------------------------------------------------- the position's σ along the path
+
+
+@dataclass(frozen=True)
+class SigmaGrowth:
+    """Each joint's position σ along a path as the Kalman model predicts it (:mod:`stickslip.motion.tracking`).
+
+    Per joint, the covariance ``P`` of ``(q, s+, s-)`` (m² or rad², m or rad, 1) at the
+    path's start; a move of ``δ`` in direction ``k`` at ``n = |δ| / step`` steps adds
+    ``2 δ P[0, k] + δ² P[k, k] + step_noise² |δ| step`` to the position's variance
+    (the filter's predict: the step scale's uncertainty carried over the distance, and the
+    per-step scatter) and ``scale_walk² n`` to the scale's. A joint that starts to move
+    after another joint has moved since its own last move (its pose changed) first gets
+    ``sigma_model²`` added to its scales' variance (correlation ``correlation``), as the
+    filter does after a move in a new pose; along one path (and one jog session) that
+    happens at most once per joint: the model's error in the path's nearby poses is one
+    bias, not a new one at each of a reach's segments.
+
+    Attributes
+    ----------
+    P : tuple of 3 3x3 nested tuples
+        Joint 1, 2, 3's covariance at the start.
+    step : tuple of 3 floats
+        A step of each joint, m or rad (for the per-step scatter and the step count).
+    step_noise, scale_walk : float
+        Relative per-step scatter (1) and the log scale's random walk per sqrt(step).
+    sigma_model : tuple of 3 floats
+        Each joint's relative model error, added to the scales' variance in a new pose.
+    correlation : float
+        The prior correlation of the + and - scales' added variance.
+    last_pose : tuple of 3 (tuple of 3 floats or None)
+        Each joint's other joints at its last move before the path (``None``: unknown,
+        no pose change counted at its first move).
+    bumped : tuple of 3 bools
+        Whether each joint's new-pose error was added already (:meth:`after` carries it).
+    """
+
+    P: tuple[tuple[tuple[float, float, float], ...], ...]
+    step: tuple[float, float, float]
+    step_noise: float = 0.0
+    scale_walk: float = 0.0
+    sigma_model: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    correlation: float = 0.0
+    last_pose: tuple[tuple[float, float, float] | None, ...] = (None, None, None)
+    bumped: tuple[bool, ...] = (False, False, False)
+
+    @classmethod
+    def constant(cls, q_sd: ArrayLike) -> SigmaGrowth:
+        """No growth: the σ ``q_sd`` (rad, rad, m) all along."""
+        sd = np.asarray(q_sd, dtype=float).reshape(3)
+        z = (0.0, 0.0, 0.0)
+        return cls(tuple(((float(v) ** 2, 0.0, 0.0), z, z) for v in sd), (1.0, 1.0, 1.0))
+
+    def starts(self, path: Array) -> Array:
+        """Each segment's start covariance, per joint, after a new pose's addition: ``(n, 3, 6)``.
+
+        The six numbers are ``P00, P01, P02, P11, P12, P22``.
+        """
+        return self._propagate(np.asarray(path, dtype=float))[0]
+
+    def after(self, path: ArrayLike) -> SigmaGrowth:
+        """The σ model at the end of ``path`` (poses, rad or m): what a jog's next tick starts from."""
+        _, P, last, bumped = self._propagate(np.asarray(path, dtype=float))
+        return dataclasses.replace(self, P=P, last_pose=last, bumped=bumped)
+
+    def _propagate(self, path: Array) -> tuple[Array, tuple[tuple[tuple[float, float, float], ...], ...],
+                                               tuple[tuple[float, float, float] | None, ...], tuple[bool, ...]]:
+        n = len(path) - 1
+        out = np.empty((max(n, 0), 3, 6))
+        if self.step_noise == 0 and not any(self.P[j][a][b] for j in range(3) for a in range(3) for b in range(3)
+                                            if (a, b) != (0, 0)):
+            out[:] = 0.0  # nothing grows: the start's σ all along
+            out[:, :, 0] = [self.P[j][0][0] for j in range(3)]
+            return out, self.P, self.last_pose, self.bumped
+        ends, lasts, bumps = [], [], []
+        rounded = np.round(path[:-1], 9)
+
+        def excl(v: Array) -> tuple[Array, float]:  # the sums before each segment, and the whole sum
+            c = np.cumsum(v)
+            return np.concatenate(([0.0], c[:-1])), float(c[-1]) if len(c) else 0.0
+
+        for j in range(3):
+            p = self.P[j]
+            d = np.diff(path[:, j])
+            up, down = d > 0, d < 0
+            moving = np.flatnonzero(d != 0)
+            last, bumped = self.last_pose[j], self.bumped[j]
+            bump = np.zeros(n)
+            sm2 = self.sigma_model[j] ** 2
+            if len(moving):
+                others = rounded[moving].copy()
+                others[:, j] = 0.0
+                changed = np.zeros(len(moving), dtype=bool)
+                changed[1:] = np.any(others[1:] != others[:-1], axis=1)
+                if last is not None:  # the first move against the track's pose (kept with Python's round)
+                    first = [round(float(path[moving[0], i]), 9) if i != j else 0.0 for i in range(3)]
+                    changed[0] = tuple(first) != tuple(last)
+                if sm2 > 0.0 and not bumped and np.any(changed):
+                    bump[moving[int(np.argmax(changed))]:] = 1.0
+                    bumped = True
+                row = [round(float(path[moving[-1], i]), 9) if i != j else 0.0 for i in range(3)]
+                last = (row[0], row[1], row[2])
+            gamma = max(abs(self.step[j]), 1e-300)
+            steps = np.abs(d) / gamma
+            w2 = self.scale_walk**2
+            walk_up, walk_up_all = excl(np.where(up, w2 * steps, 0.0))
+            walk_dn, walk_dn_all = excl(np.where(down, w2 * steps, 0.0))
+            p11 = p[1][1] + sm2 * bump + walk_up
+            p22 = p[2][2] + sm2 * bump + walk_dn
+            p12 = p[1][2] + self.correlation * sm2 * bump
+            p01, p01_all = excl(np.where(up, d * p11, np.where(down, d * p12, 0.0)))
+            p02, p02_all = excl(np.where(up, d * p12, np.where(down, d * p22, 0.0)))
+            p01, p02 = p[0][1] + p01, p[0][2] + p02
+            inc = np.where(up, 2.0 * d * p01 + d * d * p11, np.where(down, 2.0 * d * p02 + d * d * p22, 0.0))
+            p00, p00_all = excl(inc + self.step_noise**2 * np.abs(d) * gamma)
+            p00 = p[0][0] + p00
+            out[:, j] = np.stack((p00, p01, p02, p11, p12, p22), axis=1)
+            b = sm2 * (float(bump[-1]) if n else 0.0)
+            e11, e22 = p[1][1] + b + walk_up_all, p[2][2] + b + walk_dn_all
+            e12 = p[1][2] + self.correlation * b
+            e00, e01, e02 = p[0][0] + p00_all, p[0][1] + p01_all, p[0][2] + p02_all
+            ends.append(((e00, e01, e02), (e01, e11, e12), (e02, e12, e22)))
+            lasts.append(last)
+            bumps.append(bumped)
+        return out, tuple(ends), tuple(lasts), tuple(bumps)
+
+    def sd_at(self, path: Array, starts: Array, s: Array) -> Array:
+        """Each joint's σ (rad, rad, m) at path parameters ``s`` (``k + t`` on segment ``k``): ``(M, 3)``.
+
+        ``starts`` is :meth:`starts` of ``path``.
+        """
+        n = len(path) - 1
+        k = np.minimum(np.floor(s).astype(int), n - 1)
+        t = (s - k)[:, None]
+        d = path[k + 1] - path[k]  # (M, 3)
+        c = starts[k]  # (M, 3, 6)
+        up = d > 0
+        p0k = np.where(up, c[..., 1], c[..., 2])
+        pkk = np.where(up, c[..., 3], c[..., 5])
+        td = t * d
+        noise = np.array([self.step_noise**2 * abs(g) for g in self.step])
+        var = c[..., 0] + 2.0 * td * p0k + td * td * pkk + np.abs(td) * noise[None, :]
+        return np.asarray(np.sqrt(np.maximum(var, 0.0)), dtype=float)
+
+
+def levers(arm: Arm, q: Array) -> Array:
+    """The norms of the Jacobian's columns at poses ``q`` ``(P, 3)``: how far the tip moves per unit of each joint.
+
+    An MM3A: the tip's distance from joint 1's axis, ``length + q3``, 1; an xyz stack: the
+    axes' lengths. ``n_sigma`` times ``|levers * σ|`` is the tip's σ margin.
+    """
+    if arm.kind == "mm3a":
+        g = arm.geometry or Geometry()
+        r = g.length + q[:, 2]
+        return np.stack((np.abs(g.offset - r * np.sin(q[:, 1])), np.abs(r), np.ones(len(q))), axis=1)
+    return np.broadcast_to(np.linalg.norm(np.asarray(arm.axes, dtype=float), axis=1), q.shape).astype(float)
+
+
+@dataclass(frozen=True)
+class _Margins:
+    """The σ margin along one path: at points, and a bound over a stretch (m)."""
+
+    arm: Arm
+    path: Array
+    n_sigma: float
+    growth: SigmaGrowth | None  # None: no σ anywhere
+    starts: Array
+    fixed: Array | None = None  # the same σ all along
+
+    @classmethod
+    def of(cls, arm: Arm, path: Array, n_sigma: float, q_sd: ArrayLike | SigmaGrowth) -> _Margins:
+        g = q_sd if isinstance(q_sd, SigmaGrowth) else SigmaGrowth.constant(q_sd)
+        if n_sigma == 0 or not (any(g.P[j][0][0] > 0 or g.P[j][1][1] > 0 or g.P[j][2][2] > 0 for j in range(3))
+                                or g.step_noise > 0):
+            return cls(arm, path, n_sigma, None, np.zeros((0, 3, 6)))
+        if not isinstance(q_sd, SigmaGrowth):
+            return cls(arm, path, n_sigma, g, np.zeros((0, 3, 6)), np.sqrt([g.P[j][0][0] for j in range(3)]))
+        return cls(arm, path, n_sigma, g, g.starts(path))
+
+    def sd(self, s: Array) -> Array:
+        """Each joint's σ at path parameters ``s``, ``(M, 3)``."""
+        if self.fixed is not None:
+            return np.broadcast_to(self.fixed, (len(s), 3))
+        assert self.growth is not None
+        return self.growth.sd_at(self.path, self.starts, s)
+
+    def at(self, s: Array, q: Array) -> Array:
+        """``n_sigma`` times the tip's σ at path parameters ``s`` (poses ``q``), m."""
+        if self.growth is None:
+            return np.zeros(len(s))
+        return np.asarray(self.n_sigma * np.linalg.norm(levers(self.arm, q) * self.sd(s), axis=1), dtype=float)
+
+    def over(self, s0: Array, s1: Array, q0: Array, q1: Array, span: Array) -> Array:
+        """An upper bound of :meth:`at` over each stretch ``[s0, s1]`` (which moves the arm by at most ``span``)."""
+        if self.growth is None:
+            return np.zeros(len(s0))
+        big = np.maximum(self.sd(s0), self.sd(s1))
+        tip = np.minimum(np.linalg.norm(levers(self.arm, q0) * big, axis=1),
+                         np.linalg.norm(levers(self.arm, q1) * big, axis=1))
+        if self.arm.kind == "mm3a":  # its rotary levers change no faster than the arm moves
+            tip = tip + span * np.linalg.norm(big[:, :2], axis=1)
+        return np.asarray(self.n_sigma * tip, dtype=float)
+
+    @property
+    def largest(self) -> float:
+        """A bound of the margin anywhere on the path, m: the largest σ of each joint (at a vertex: each variance
+        is convex along a segment) through the arm's reach radii (which bound the Jacobian's columns)."""
+        if self.growth is None:
+            return 0.0
+        n = len(self.path) - 1
+        sd = self.sd(np.arange(n + 1, dtype=float)).max(axis=0)
+        return float(self.n_sigma * np.linalg.norm(np.asarray(self.arm.reach_radii()) * sd))
+
+
 # ---------------------------------------------------------------- the obstacles of one arm
 
 
@@ -272,9 +505,9 @@ def tip_margin(arm: Arm, q: ArrayLike, q_sd: ArrayLike, n_sigma: float) -> float
     return float(n_sigma * np.linalg.norm(sd * np.linalg.norm(np.asarray(arm.axes), axis=1)))
 
 
-def _obstacles(rig: Rig, arm: Arm, others: Mapping[str, ArrayLike], sigma_margin: float) -> _Obstacles:
+def _obstacles(rig: Rig, arm: Arm, others: Mapping[str, ArrayLike]) -> _Obstacles:
     vols = rig.volumes
-    allowed_v = np.array([v.margin + arm.radius + sigma_margin for v in vols], dtype=float)
+    allowed_v = np.array([v.margin + arm.radius for v in vols], dtype=float)
     segs, allowed_o, names = [], [], []
     for other in rig.arms:
         if other.name == arm.name or other.name not in others:
@@ -282,7 +515,7 @@ def _obstacles(rig: Rig, arm: Arm, others: Mapping[str, ArrayLike], sigma_margin
         s = other.segments(np.asarray(others[other.name], dtype=float).reshape(3))
         for link in s:
             segs.append(link)
-            allowed_o.append(rig.arm_distance + arm.radius + other.radius + sigma_margin)
+            allowed_o.append(rig.arm_distance + arm.radius + other.radius)
             names.append(f"arm {other.name}")
     return _Obstacles(
         vols, allowed_v, np.asarray(segs, dtype=float).reshape(-1, 2, 3), np.asarray(allowed_o, dtype=float),
@@ -297,15 +530,16 @@ def _sphere_gap(mid: Array, half: Array, centres: Array, radii: Array) -> Array:
     return np.asarray(np.sqrt(np.maximum(d2, 0.0)) - half[:, None] - radii[None, :], dtype=float)
 
 
-def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float = 0.0) -> Array:
+def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float | Array = 0.0) -> Array:
     """Clearance of the arm at poses ``q`` ``(P, 3)`` from each obstacle, m: distance minus allowed, ``(P, V + K)``.
 
-    A box, cylinder or other arm's link whose bounding sphere is farther than ``pad``
-    beyond the allowed distance from a link gets a lower bound (the spheres' gap), not its
-    exact distance: that is all a stretch's test needs.
+    A box, cylinder or other arm's link whose bounding sphere is farther than ``pad`` (m;
+    one value, or one per pose) beyond the allowed distance from a link gets a lower bound
+    (the spheres' gap), not its exact distance: that is all a stretch's test needs.
     """
     segs = arm.segments(q)  # (P, L, 2, 3)
     n_pose, n_link = segs.shape[0], segs.shape[1]
+    pad = np.repeat(np.broadcast_to(np.asarray(pad, dtype=float), (n_pose,)), n_link)  # per link row
     a, b = segs[..., 0, :].reshape(-1, 3), segs[..., 1, :].reshape(-1, 3)
     nv = len(obstacles.volumes)
     out = np.empty((len(a), obstacles.count))
@@ -331,7 +565,7 @@ def clearances(arm: Arm, obstacles: _Obstacles, q: Array, pad: float = 0.0) -> A
     if len(obstacles.others):
         oa, ob = obstacles.others[:, 0, :], obstacles.others[:, 1, :]
         gap = _sphere_gap(mid, half, (oa + ob) / 2.0, np.linalg.norm(ob - oa, axis=1) / 2.0)
-        near = gap < obstacles.allowed_o[None, :] + pad
+        near = gap < obstacles.allowed_o[None, :] + pad[:, None]
         d = np.maximum(gap, 0.0)
         rows, cols = np.nonzero(near)
         if len(rows):
@@ -362,7 +596,26 @@ def _limit_refusal(arm: Arm, path: Array) -> Refusal | None:
                    (float(qk[0]), float(qk[1]), float(qk[2])), k / max(n, 1), units=_units(arm))
 
 
-def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float) -> tuple[float, Refusal | None]:
+def _node_clearances(
+    arm: Arm, obs: _Obstacles, margins: _Margins, nodes: Array, qn: Array, longest: float, extra: float
+) -> tuple[Array, Array]:
+    """The clearances at the nodes without the σ margin ``(P, V + K)``, and the σ margin at each node (m).
+
+    The exact distances are computed where they may matter: within the longest stretch's
+    motion plus the node's margin (or, with one σ all along, the path's largest margin).
+    """
+    if margins.fixed is None and margins.growth is not None:  # a growing σ: the margin at every node
+        at = margins.at(nodes, qn)
+        return clearances(arm, obs, qn, longest + at), at
+    c = clearances(arm, obs, qn, longest + extra)
+    at = np.zeros(len(nodes))
+    near = np.min(c, axis=1) < extra  # one σ all along: its margin where it may matter
+    if np.any(near):
+        at[near] = margins.at(nodes[near], qn[near])
+    return c, at
+
+
+def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins) -> tuple[float, Refusal | None]:
     """The fraction of the path shown clear from its start, and the refusal at its first problem (``None``: none)."""
     radii = np.asarray(arm.reach_radii())
     n = len(path) - 1
@@ -371,6 +624,7 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float) -> tuple[float, 
     s1 = s0 + 1.0
     seg = np.arange(n)
     first_bad: tuple[float, int, bool] | None = None  # (s, obstacle, undecided)
+    extra = margins.largest
 
     def pose(s: Array, k: Array) -> Array:
         return np.asarray(path[k] + (s - k)[:, None] * (path[k + 1] - path[k]), dtype=float)
@@ -379,26 +633,32 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float) -> tuple[float, 
         if not len(s0):
             break
         span = (s1 - s0) * rate[seg]
-        pad = float(np.max(span)) if len(span) else 0.0
         if obs.count == 0:
             break
         nodes, back = np.unique(np.concatenate((s0, s1)), return_inverse=True)
         kn = np.minimum(np.floor(nodes).astype(int), n - 1)
-        c = clearances(arm, obs, pose(nodes, kn), pad)
-        c0, c1 = c[back[: len(s0)]], c[back[len(s0):]]
-        bad0, bad1 = np.any(c0 < 0, axis=1), np.any(c1 < 0, axis=1)
-        for mask, s, c in ((bad0, s0, c0), (bad1, s1, c1)):
+        qn = pose(nodes, kn)
+        c, at = _node_clearances(arm, obs, margins, nodes, qn, float(np.max(span)) if len(span) else 0.0, extra)
+        i0, i1 = back[: len(s0)], back[len(s0):]
+        c0, c1 = c[i0], c[i1]
+        m0, m1 = c0 - at[i0][:, None], c1 - at[i1][:, None]
+        bad0, bad1 = np.any(m0 < 0, axis=1), np.any(m1 < 0, axis=1)
+        for mask, s, cc in ((bad0, s0, m0), (bad1, s1, m1)):
             if np.any(mask):
                 i = int(np.argmin(np.where(mask, s, np.inf)))
                 if first_bad is None or s[i] < first_bad[0]:
-                    first_bad = (float(s[i]), int(np.argmin(c[i])), False)
-        clear = np.all((c0 + c1 - span[:, None]) / 2.0 >= 0.0, axis=1)
+                    first_bad = (float(s[i]), int(np.argmin(cc[i])), False)
+        mid = np.min(c0 + c1, axis=1) / 2.0 - span / 2.0
+        clear = mid - extra >= 0.0  # clear even with the largest σ margin of the path
+        if not np.all(clear):  # else the σ margin anywhere on each stretch, at most
+            rest = ~clear
+            clear[rest] = mid[rest] - margins.over(s0[rest], s1[rest], qn[i0[rest]], qn[i1[rest]], span[rest]) >= 0.0
         open_ = ~clear & ~bad0  # a stretch that ends badly is cut too: where does it begin to?
         tiny = open_ & (span <= tol)
         if np.any(tiny):
             i = int(np.argmin(np.where(tiny, s0, np.inf)))
             if first_bad is None or s0[i] < first_bad[0]:
-                first_bad = (float(s0[i]), int(np.argmin((c0[i] + c1[i]) / 2.0)), True)
+                first_bad = (float(s0[i]), int(np.argmin((m0[i] + m1[i]) / 2.0)), True)
         keep = open_ & ~tiny
         if first_bad is not None:
             keep &= s0 < first_bad[0]  # what lies beyond the first problem does not matter
@@ -411,13 +671,16 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float) -> tuple[float, 
         seg = np.repeat(ks, _SPLIT)
     if first_bad is None:
         return 1.0, None
-    at, which, undecided = first_bad
-    k = min(int(at), n - 1)
-    q = path[k] + (at - k) * (path[k + 1] - path[k])
-    return at / n, _refusal(arm, obs, q, which, at / n, undecided)
+    at_s, which, undecided = first_bad
+    k = min(int(at_s), n - 1)
+    q = path[k] + (at_s - k) * (path[k + 1] - path[k])
+    sigma = float(margins.at(np.array([at_s]), q[None, :])[0])
+    return at_s / n, _refusal(arm, obs, q, which, at_s / n, undecided, sigma)
 
 
-def _refusal(arm: Arm, obs: _Obstacles, q: Array, which: int, fraction: float, undecided: bool) -> Refusal:
+def _refusal(
+    arm: Arm, obs: _Obstacles, q: Array, which: int, fraction: float, undecided: bool, sigma: float = 0.0
+) -> Refusal:
     segs = arm.segments(q)
     a, b = segs[:, 0, :], segs[:, 1, :]
     nv = len(obs.volumes)
@@ -432,8 +695,8 @@ def _refusal(arm: Arm, obs: _Obstacles, q: Array, which: int, fraction: float, u
         name, allowed = obs.other_names[which - nv], float(obs.allowed_o[which - nv])
     i = int(np.argmin(d))
     p = pts[i]
-    return Refusal(arm.name, name, (float(p[0]), float(p[1]), float(p[2])), float(d[i]), allowed,
-                   (float(q[0]), float(q[1]), float(q[2])), fraction, undecided, _units(arm))
+    return Refusal(arm.name, name, (float(p[0]), float(p[1]), float(p[2])), float(d[i]), allowed + sigma,
+                   (float(q[0]), float(q[1]), float(q[2])), fraction, undecided, _units(arm), sigma)
 
 
 def _units(arm: Arm) -> tuple[str, str, str]:
@@ -442,17 +705,15 @@ def _units(arm: Arm) -> tuple[str, str, str]:
 
 
 def _prepare(
-    rig: Rig, arm: str | None, path: ArrayLike, q_sd: ArrayLike, others: Mapping[str, ArrayLike] | None
-) -> tuple[Arm, _Obstacles, Array]:
+    rig: Rig, arm: str | None, path: ArrayLike, q_sd: ArrayLike | SigmaGrowth, others: Mapping[str, ArrayLike] | None
+) -> tuple[Arm, _Obstacles, Array, _Margins]:
     a = rig.arm(arm)
     p = np.asarray(path, dtype=float)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) < 1 or not np.all(np.isfinite(p)):
         raise ValueError(f"a path is a list of finite poses (q1 rad, q2 rad, q3 m), got shape {p.shape}")
     if len(p) == 1:
         p = np.vstack((p, p))
-    sd = np.asarray(q_sd, dtype=float).reshape(3)
-    sigma = max(tip_margin(a, q, sd, rig.n_sigma) for q in (p[0], p[-1]))
-    return a, _obstacles(rig, a, others or {}, sigma), p
+    return a, _obstacles(rig, a, others or {}), p, _Margins.of(a, p, rig.n_sigma, q_sd)
 
 
 def check_path(
@@ -460,7 +721,7 @@ def check_path(
     arm: str | None,
     path: ArrayLike,
     *,
-    q_sd: ArrayLike = (0.0, 0.0, 0.0),
+    q_sd: ArrayLike | SigmaGrowth = (0.0, 0.0, 0.0),
     others: Mapping[str, ArrayLike] | None = None,
     tol: float = TOLERANCE,
 ) -> None:
@@ -471,8 +732,9 @@ def check_path(
     rig, arm
         The rig and the moving arm's name (``None``: the first arm).
     q_sd
-        The joints' position σ (rad, rad, m) from the Kalman filter: ``rig.n_sigma`` times
-        the tip's σ (the larger of the path's two ends) widens every margin.
+        The joints' position σ (rad, rad, m) from the Kalman filter, the same all along;
+        or :class:`SigmaGrowth`, the σ the filter predicts at each point of the path.
+        ``rig.n_sigma`` times the tip's σ where the arm is widens every margin there.
     others
         The other arms' kept poses by name; an arm not given is not checked against.
     tol
@@ -484,9 +746,9 @@ def check_path(
         At the path's first problem: a joint beyond its range or soft limit, a link within a
         volume's margin or too near another arm (the obstacle and closest point named).
     """
-    a, obs, p = _prepare(rig, arm, path, q_sd, others)
+    a, obs, p, margins = _prepare(rig, arm, path, q_sd, others)
     limit = _limit_refusal(a, p)
-    _, refusal = _search(a, obs, p, tol)
+    _, refusal = _search(a, obs, p, tol, margins)
     if limit is not None and (refusal is None or limit.fraction <= refusal.fraction):
         raise EnvelopeViolation(limit)
     if refusal is not None:
@@ -498,7 +760,7 @@ def safe_fraction(
     arm: str | None,
     path: ArrayLike,
     *,
-    q_sd: ArrayLike = (0.0, 0.0, 0.0),
+    q_sd: ArrayLike | SigmaGrowth = (0.0, 0.0, 0.0),
     others: Mapping[str, ArrayLike] | None = None,
     tol: float = TOLERANCE,
 ) -> tuple[float, Refusal | None]:
@@ -508,5 +770,5 @@ def safe_fraction(
     (to ``tol``); a path whose start is already outside the envelope gets 0. Joint limits
     are left to the jog (it clamps to them).
     """
-    a, obs, p = _prepare(rig, arm, path, q_sd, others)
-    return _search(a, obs, p, tol)
+    a, obs, p, margins = _prepare(rig, arm, path, q_sd, others)
+    return _search(a, obs, p, tol, margins)

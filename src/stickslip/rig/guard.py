@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..devices.base import Controller, DeviceInfo
-from .envelope import check_path, safe_fraction
+from .envelope import SigmaGrowth, check_path, safe_fraction
 from .model import Arm, Rig
 
 __all__ = ["Guard", "mapped"]
@@ -30,8 +30,11 @@ class Guard:
     arm: str
     others: Mapping[str, Sequence[float]] = field(default_factory=dict)
 
-    def check(self, path: Sequence[Sequence[float]], q_sd: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
-        """Refuse ``path`` (poses, rad or m) if it leaves the envelope (:func:`~.envelope.check_path`)."""
+    def check(self, path: Sequence[Sequence[float]], q_sd: Sequence[float] | SigmaGrowth = (0.0, 0.0, 0.0)) -> None:
+        """Refuse ``path`` (poses, rad or m) if it leaves the envelope (:func:`~.envelope.check_path`).
+
+        ``q_sd``: each joint's σ (rad, rad, m) all along, or as it grows along the path.
+        """
         check_path(self.rig, self.arm, np.asarray(path, dtype=float), q_sd=q_sd, others=dict(self.others))
 
     def check_joint(self, q: Sequence[float], joint: int, q_to: float, q_sd: Sequence[float] = (0.0, 0.0, 0.0)) -> None:

@@ -37,6 +37,10 @@ class CalibrationDay(MotionSlot):
                 self._wait_for_pose(index, t)
 
         def body(m: Motion, ready: Callable[[], None]) -> dict[str, Any]:
+            st = self.state()
+            for i, t in enumerate(DAY_PLAN[len(done):], start=len(done)):  # with a rig: every sweep, first
+                p = t.pose
+                self.check_sweep(t.joint, t.direction, [p.q1, p.q2, p.q3], st, f"traverse {i + 1} of the day")
             ready()
 
             def progress(p: DayProgress) -> None:

@@ -35,6 +35,7 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 from .. import kinematics as kin
@@ -42,12 +43,14 @@ from ..calibration import Calibration
 from ..clock import today_label
 from ..devices.base import Controller, KnowsTruePosition, device_key, open_device, redact_url
 from ..devices.positions import load_state
+from ..procedures.arms import arm_opener
 from ..procedures.jog import JogRequest, JogStatus, jog
 from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate, device_lock, move, step_joint
 from ..procedures.observe import Observation, observe
 from ..procedures.reach import BORROWED_JOINT1, ReachRequest, reach
 from ..procedures.session import TraverseRequest, traverse
 from ..procedures.where import where
+from ..rig import Rig
 from ..storage import Store
 from ..units import format_position
 from .day import CalibrationDay
@@ -73,10 +76,26 @@ from .view import LiveView
 
 __all__ = [
     "MAX_BURST_S", "START_TIMEOUT_S", "Busy", "Conflict", "ControlRoom", "Motion", "NotFound", "Refused",
-    "RoomOptions", "Unavailable", "one_line", "refusal",
+    "RoomOptions", "Unavailable", "one_line", "refusal", "serve_problem",
 ]
 
 log = logging.getLogger("stickslip.server")
+
+
+def serve_problem(rig: Rig, arm: str | None) -> str | None:
+    """Why the room cannot serve ``arm`` of ``rig`` (one line), or ``None``.
+
+    The room's procedures plan an MM3A's joints and keep positions per controller, so an
+    ``xyz`` arm, or one that shares its controller with another arm, is not served yet.
+    """
+    a = rig.arm(arm)
+    if a.kind != "mm3a":
+        return (f"--rig: arm {a.name!r} is a stage ({a.kind}); the server plans an MM3A's joints, so it serves "
+                "MM3A arms only for now (drive the stage from the command line)")
+    if rig.state_key(a.name) != device_key(a.controller):
+        return (f"--rig: arm {a.name!r} shares its controller with another arm; the server keeps positions per "
+                "controller, so it serves arms on a controller of their own only for now")
+    return None
 
 
 class ControlRoom(LiveView, CalibrationDay, NamedPositions):
@@ -97,6 +116,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         opener: Callable[[str], Controller] | None = None,
         store_factory: Callable[[], Store] | None = None,
     ):
+        if options.rig is not None and (problem := serve_problem(options.rig, options.arm)) is not None:
+            raise ValueError(problem)
         self.options = options
         self.url = options.device
         self.key = device_key(options.device)
@@ -121,6 +142,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         self._state = load_state(main, self.key)
         self.calibration, self.calibration_source = self._first_calibration(main)
         self._take_device_lock(main)
+        if options.rig is not None:
+            opener = arm_opener(options.rig, options.arm, opener or open_device)
         try:
             dev = (opener or open_device)(options.device)
         except BaseException:
@@ -218,7 +241,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         path = self._joint_path(joint, by, to)
 
         def body(m: Motion, ready: Callable[[], None]) -> dict[str, Any]:
-            r = move(self.store, req, cal, warn=self._warn(m), ready=ready, opener=self._opener)
+            r = move(self.store, replace(req, guard=self._guard()), cal, warn=self._warn(m), ready=ready,
+                     opener=self._opener)
             out = r.as_dict()
             out["failure"] = r.failure()
             return out
@@ -242,6 +266,9 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         """Raw steps, no calibration (:func:`~stickslip.procedures.move.step_joint`): the joint is then uncertain."""
         if steps == 0:
             raise Refused("steps: 0 steps moves nothing")
+        if self.options.rig is not None:
+            raise Conflict("raw steps are refused with a rig: they are not planned, so the rig's envelope cannot "
+                           "check where they go; move the joint by or to an amount instead")
 
         def body(m: Motion, ready: Callable[[], None]) -> dict[str, Any]:
             r = step_joint(self.store, self.url, joint, steps, burst=self._burst(joint), ready=ready,
@@ -266,7 +293,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         )
 
         def body(m: Motion, ready: Callable[[], None]) -> dict[str, Any]:
-            r = reach(self.store, req, cal, borrowed, warn=self._warn(m), ready=ready, opener=self._opener)
+            r = reach(self.store, replace(req, guard=self._guard()), cal, borrowed, warn=self._warn(m), ready=ready,
+                      opener=self._opener)
             out = dict(r.as_dict())
             out["failure"] = r.failure()
             return out
@@ -301,8 +329,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
             if borrowed:
                 self._warn(m)(BORROWED_JOINT1)
             try:
-                r = jog(self.store, req, cal, keys=lambda: new_pad, show=show, warn=self._warn(m), ready=ready,
-                        opener=self._opener)
+                r = jog(self.store, replace(req, guard=self._guard()), cal, keys=lambda: new_pad, show=show,
+                        warn=self._warn(m), ready=ready, opener=self._opener)
             finally:
                 with self._lock:
                     if self._pad is new_pad:
@@ -353,6 +381,7 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         st = self.state()
 
         def body(m: Motion, ready: Callable[[], None]) -> dict[str, Any]:
+            self.check_sweep(joint, direction, [st.positions[j] for j in (1, 2, 3)], st)
             ready()
             r = traverse(self.store, TraverseRequest(self.url, joint, direction, st.pose, today_label(), tuning),
                          progress=lambda steps, t: self._progress(m, {"steps": steps, "device_s": t}),

@@ -114,6 +114,9 @@ def serve(
         app = create_app(room, access, camera)
         shown = f"[{host}]" if ":" in host else host
         echo(f"serving {redact_url(options.device)} ({room.info.model})")
+        if options.rig is not None:
+            echo(f"arm {options.rig.arm(options.arm).name!r} of the rig {options.rig.name!r}: every move is "
+                 "checked against its envelope")
         echo(f"open http://{shown}:{port}/ in a browser; Ctrl-C stops")
         if room.calibration is None:
             echo("no calibration yet: run the calibration day on the page")

@@ -27,10 +27,13 @@ from ..clock import now_utc
 from ..devices.base import Controller, DeviceError, DeviceInfo, redact_url
 from ..devices.positions import DeviceState
 from ..motion.reach import borrow_joint1
+from ..procedures.arms import guard_for
 from ..procedures.day import simulator_tunings
 from ..procedures.jog import JogStatus
-from ..procedures.move import DeviceBusy, MoveRefused, TargetOutOfRange, is_simulator
+from ..procedures.move import DeviceBusy, MoveRefused, TargetOutOfRange, check_envelope_path, is_simulator
 from ..procedures.traverse import TraverseError
+from ..rig import Rig
+from ..rig.guard import Guard
 from ..storage import StoreError
 from .owned import HeldStore, OwnedController
 from .pad import IDLE_END_S, PadKeys
@@ -144,6 +147,12 @@ class RoomOptions:
         controller: 300 steps/s each fit a 1 kHz controller's time).
     jog_idle_end_s : float
         A jog session with nothing held for this long ends, s (then a move may run).
+    rig : Rig or None
+        A rig file (docs/rig.md): the room drives its arm ``arm`` (``device`` is that
+        arm's controller), and every motion is checked against the rig's envelope
+        before one step is sent; the rig file's named positions join the saved ones.
+    arm : str or None
+        The rig's arm to drive (``None``: its first).
     """
 
     device: str = "sim://?realtime=1"
@@ -155,6 +164,8 @@ class RoomOptions:
     max_burst_s: float = MAX_BURST_S
     jog_max_rate: float = 300.0
     jog_idle_end_s: float = IDLE_END_S
+    rig: Rig | None = None
+    arm: str | None = None
 
 
 class Motion:
@@ -350,6 +361,37 @@ class MotionSlot:
 
     def _opener(self, url: str) -> Controller:
         return self.owned
+
+    def _guard(self) -> Guard | None:
+        """The rig's envelope for the room's arm, the other arms where the store keeps them now; ``None``: no rig.
+
+        Built in the thread that checks (a motion's own): the other arms' kept poses are
+        read when the check is made, not when the server started.
+        """
+        rig = self.options.rig
+        if rig is None:
+            return None
+        return guard_for(self.store, rig, self.options.arm)
+
+    def check_sweep(self, joint: int, direction: str, q: list[float], st: DeviceState, what: str = "the traverse",
+                    ) -> None:
+        """Refuse a traverse of ``joint`` (``direction`` ``+``: from its lower stop to its upper) from the pose
+        ``q`` (rad, rad, m) that leaves the rig's envelope: :class:`Conflict` naming the obstacle; no rig, no check.
+
+        The path checked runs from ``q`` to the stop the traverse starts from, then to the
+        other stop, with the σ kept in ``st``.
+        """
+        guard = self._guard()
+        if guard is None:
+            return
+        spec = kin.joint_spec(joint)
+        ends = (spec.lower, spec.upper) if direction == "+" else (spec.upper, spec.lower)
+        path = [list(q), list(q), list(q)]
+        path[1][joint - 1], path[2][joint - 1] = ends
+        try:
+            check_envelope_path(guard, st, path, self.calibration)
+        except MoveRefused as e:
+            raise Conflict(f"{what} (joint {joint}{direction}, from stop to stop): {one_line(e)}") from None
 
     def _need_calibration(self, what: str, borrow: bool = False) -> tuple[Calibration, bool]:
         cal = self.calibration

@@ -75,8 +75,17 @@ class LiveView(MotionSlot):
             "theta": state.theta, "psi": state.psi,
             "moving": bool(m is not None and m.active and m.status == "running"),
             "motion": motion, "jog": jog_status, "day": day, "audio": level,
-            "calibration": self.calibration_summary(),
+            "calibration": self.calibration_summary(), "rig": self.rig_summary(),
         }
+
+    def rig_summary(self) -> dict[str, Any] | None:
+        """The rig the room drives an arm of: its name, the arm, its volumes and margins (None without one)."""
+        rig = self.options.rig
+        if rig is None:
+            return None
+        return {"name": rig.name, "arm": rig.arm(self.options.arm).name, "n_sigma": rig.n_sigma,
+                "arm_distance": rig.arm_distance, "volumes": [{"name": v.name, "shape": v.shape, "margin": v.margin}
+                                                              for v in rig.volumes]}
 
     def calibration_summary(self) -> dict[str, Any] | None:
         """The calibration in use: day, method, joints, where it came from (None without one)."""

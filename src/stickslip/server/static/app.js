@@ -104,6 +104,7 @@ function spread(v) {  // a standard deviation in µm, with as many digits as it 
 function render(st) {
   const cal = st.calibration;
   $("device").textContent = st.model + " · " + st.device + " · " +
+    (st.rig ? "arm " + st.rig.arm + " of rig " + st.rig.name + " (envelope checked) · " : "") +
     (cal ? "calibration " + cal.day + " (" + cal.method + ")" : "no calibration yet: run the calibration day");
   const m = st.motion;
   const running = m && (m.status === "running" || m.status === "starting");
@@ -404,13 +405,14 @@ async function refreshPositions() {
     const li = document.createElement("li");
     li.innerHTML = '<span class="pname"></span><span class="pq"></span>' +
       '<button class="go">Go</button><button class="del" aria-label="delete">✕</button>';
-    li.querySelector(".pname").textContent = p.name;
+    li.querySelector(".pname").textContent = p.name + (p.source === "rig" ? " (rig file)" : "");
     li.querySelector(".pq").textContent = p.display.join(", ");
+    if (p.source === "rig") li.querySelector(".del").remove();  // changed in the rig file, not here
     li.querySelector(".go").addEventListener("click", async () => {
       try { const m = await api("POST", "/api/positions/" + encodeURIComponent(p.name) + "/go"); note(m.what + ": " + m.status, false, "pos-msg"); }
       catch (err) { note(err.message, true, "pos-msg"); }
     });
-    li.querySelector(".del").addEventListener("click", async () => {
+    if (p.source !== "rig") li.querySelector(".del").addEventListener("click", async () => {
       try { await api("DELETE", "/api/positions/" + encodeURIComponent(p.name)); refreshPositions(); }
       catch (err) { note(err.message, true, "pos-msg"); }
     });
