@@ -68,6 +68,9 @@ class Steepest:
         The Laplacian's steepest-descent images (the blur term's part of the model's gradient).
     keep : ndarray of bool, shape (n, n)
         Which window pixels these are.
+    density : float
+        The share of the weighted pixels kept (1, or 1/2 when every second one is, in a
+        chequerboard, for a template blurred enough that its neighbours say the same).
     """
 
     template: FloatArray
@@ -81,10 +84,15 @@ class Steepest:
     keep: NDArray[np.bool_]
     lap: FloatArray
     sd_lap: FloatArray
+    density: float = 1.0
 
 
-def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray) -> Steepest:
-    """The fixed parts of ``template`` (weighed by ``weights``) for a turn about ``apex`` (x, y, window px)."""
+def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray, thin: bool = False) -> Steepest:
+    """The fixed parts of ``template`` (weighed by ``weights``) for a turn about ``apex`` (x, y, window px).
+
+    ``thin`` keeps every second pixel (a chequerboard): for a template blurred by 2 px or
+    more, neighbouring pixels carry nearly the same information and the fit costs half.
+    """
     grads: list[FloatArray] = list(np.gradient(template))
     gy, gx = grads[0], grads[1]
     n = template.shape[0]
@@ -92,6 +100,11 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     rx, ry = xx - apex[0], yy - apex[1]
     top = float(np.max(weights)) if weights.size else 0.0
     keep: NDArray[np.bool_] = weights > 1e-3 * top if top > 0 else weights > 0
+    density = 1.0
+    if thin:
+        full = int(keep.sum())
+        keep = keep & ((yy + xx).astype(int) % 2 == 0)
+        density = int(keep.sum()) / max(full, 1)
     T = template[keep]
     rxm, rym = rx[keep], ry[keep]
     sd = np.stack([gx[keep], gy[keep], -gx[keep] * rym + gy[keep] * rxm])
@@ -101,7 +114,7 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     lap_full = ndimage.gaussian_laplace(template, 1.0, mode="nearest")
     ly, lx = np.gradient(lap_full)
     sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
-    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap)
+    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap, density)
 
 
 @dataclass(frozen=True)
@@ -433,6 +446,7 @@ def _covariance(
     except np.linalg.LinAlgError:
         cov_win = np.full((2, 2), np.inf)
     R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
+    cov_win = cov_win * st.density  # the pixels left out said what their kept neighbours say
     return np.asarray(R @ cov_win @ R.T if np.all(np.isfinite(cov_win)) else cov_win)
 
 

@@ -116,6 +116,22 @@ class TrackerParams:
         A peak of the whole-frame search is fitted only when the template correlates with
         the frame there by this much at whole pixels, 1: the fit costs as much as the
         search, and a tip found again must correlate by ``reacquire_score`` anyway.
+    edge_near : float
+        The needle's edges right behind a fix (within 4.5 px) must keep at least this share
+        of their contrast further back (:mod:`.edges`), 1: a particle over the tip, or a fix
+        ahead of the tip, interrupts them there.
+    edge_contrast : float
+        The needle's edges behind a fix (6 to 14 px back) must have at least this share of
+        the template's contrast there, 1: a fit on plain ground (whose shading the
+        brightness planes explain) finds them faint or missing.
+    edge_shape : float
+        The profiles across the shaft behind a fix must correlate with the template's
+        by at least this much (the median over the stations, each shifted by up to 1 px
+        and its level and slope taken out), 1: the needle's two edges are where the
+        template has them, not a blob's or the ground's.
+    thin_blur : float
+        A blur copy as blurred as this or more (its blur and the smoothing every frame
+        gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
     front_fraction : float
         Largest share of the half-ring in front of the tip that may look like the needle,
         1: where the needle seems to end at something as dark (or bright) as itself, the
@@ -149,6 +165,10 @@ class TrackerParams:
     reacquire_ncc: float = 0.5
     level_hysteresis: float = 0.01
     max_blur_step: float = 2.0
+    edge_near: float = 0.6
+    edge_contrast: float = 0.6
+    edge_shape: float = 0.9
+    thin_blur: float = 2.2
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:
@@ -201,6 +221,9 @@ class TipTemplate:
         Offsets from the tip (x, y; px) of the needle's core near the tip, of the
         background around it (away from the needle), and of the background in front of
         the tip (within 60 deg of straight ahead, 2 to 14 px away, clear of the needle).
+    mask : ndarray of bool
+        The needle's pixels in the window (those standing out from the background,
+        connected to the tip).
     apex : tuple of float
         The tip in window coordinates, px ``(x, y)``.
     noise : float
@@ -221,6 +244,7 @@ class TipTemplate:
     core: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     ring: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     front: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
+    mask: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
 
     @classmethod
     def learn(cls, image: FloatArray, tip: tuple[float, float], params: TrackerParams = TrackerParams()) -> TipTemplate:
@@ -247,7 +271,7 @@ class TipTemplate:
         # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
         # blurred by blur_bank[k] more than the first
         contrast = _trackable_contrast(win, weights, noise, (x, y))
-        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front)
+        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front, mask)
 
     @property
     def half(self) -> int:

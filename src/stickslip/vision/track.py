@@ -21,9 +21,15 @@
      fix's standard deviation above :attr:`~.template.TrackerParams.max_sigma` (its position
      is not determined: only the shaft is seen);
 
-4. when the tip is not found near the last fix (or was refused in the frame before), it is
+4. **follows the needle's edges** back from a fix the rules take (:mod:`.edges`): the fix
+   is refused when they are faint or misplaced (*lost*: the fit is on the ground or a
+   blob) or fade right behind the tip (*occluded*: something over it, or the fit ahead
+   of it);
+5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
-   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`.
+   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
+   not when the fit near the last fix was refused while its edges hold (the tip is
+   there, only not vouched for).
 
 A fix is never a guess: a frame the rules cannot vouch for is refused.
 """
@@ -32,12 +38,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample, patch, refine, steepest, warped
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc
@@ -113,6 +120,7 @@ class _Candidate:
     level: int
     ncc: float
     patch: Patch
+    edges: EdgeCheck | None = None
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -167,6 +175,47 @@ def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
     return float(np.mean(like))
 
 
+def _pick_level(scores: list[float], current: int, hysteresis: float) -> int:
+    """The blur copy that matches best; the ``current`` one unless another beats it by ``hysteresis``."""
+    best = int(np.argmax(scores))
+    if best != current and scores[best] < scores[current] + hysteresis:
+        return current
+    return best
+
+
+def _noise_free_ncc(b: FloatArray, Iw: FloatArray, w: FloatArray, n_t2: float, n_f2: float) -> float:
+    """The weighted correlation of copy ``b`` with the frame's samples ``Iw``, divided by what the copy's and
+    the frame's own noise (variances ``n_t2``, ``n_f2`` a sample) cost it."""
+    sw = float(w.sum())
+    mi = float((w * Iw).sum() / sw)
+    di = Iw - mi
+    vi = float((w * di * di).sum())
+    mt = float((w * b).sum() / sw)
+    dt = b - mt
+    vt = float((w * dt * dt).sum())
+    den = math.sqrt(vi * vt)
+    ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
+    keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
+    keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
+    return ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25))
+
+
+def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams) -> Lost | None:
+    """The edge stage's refusal of a fix whose edges were checked (``None``: they hold, or were not checked)."""
+    if ec is None:
+        return None
+    if ec.far < p.edge_contrast:
+        return Lost("lost", f"the needle's edges behind the tip have {ec.far:.2f} of the template's contrast "
+                            f"(needs {p.edge_contrast:g})")
+    if ec.shape < p.edge_shape:
+        return Lost("lost", f"the needle's edges behind the tip are not where the template's are (profiles "
+                            f"correlate by {ec.shape:.2f}, needs {p.edge_shape:g})")
+    if ec.near < p.edge_near * ec.far:
+        return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
+                                f"contrast further back, needs {p.edge_near:g})")
+    return None
+
+
 class TipTracker:
     """Tracks one tip through a sequence of frames (see the module docstring).
 
@@ -198,7 +247,9 @@ class TipTracker:
             (0, f, -f) for f in params.sharpen_bank
         ]
         self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
-        self._steep = [steepest(t.bank[k], t.apex, w) for (k, _, _), w in zip(self._spec, t.level_weights, strict=True)]
+        # a copy blurred by 2 px or more (with the smoothing both get) is fitted on every second pixel
+        self._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(params.template_blur, abs(b)) >= params.thin_blur)
+                       for (k, _, b), w in zip(self._spec, t.level_weights, strict=True)]
         widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
         sel = self._steep[widest]  # the levels are compared on the widest mask
         self._select = sel
@@ -206,6 +257,8 @@ class TipTracker:
         coarse = params.coarse_factor
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
+        self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
+        self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
         self._level = 0
@@ -240,19 +293,8 @@ class TipTracker:
             if sw <= 1e-9:
                 out.append(-1.0)
                 continue
-            b = self._bank_sel[k]
-            mi = float((w * Iw).sum() / sw)
-            di = Iw - mi
-            vi = float((w * di * di).sum())
-            mt = float((w * b).sum() / sw)
-            dt = b - mt
-            vt = float((w * dt * dt).sum())
-            den = math.sqrt(vi * vt)
-            ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
-            keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
-            keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
-            out.append(ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25)))
+            out.append(_noise_free_ncc(self._bank_sel[k], Iw, w, n_t2, n_f2))
         return out
 
     def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
@@ -263,13 +305,6 @@ class TipTracker:
             pt = patch(image, x, y, self.template.half * math.sqrt(2.0) + 12.0, s)
             patches[f] = pt
         return pt
-
-    def _pick_level(self, scores: list[float], current: int) -> int:
-        """The blur copy that matches best; the current one unless another beats it by ``level_hysteresis``."""
-        best = int(np.argmax(scores))
-        if best != current and scores[best] < scores[current] + self.params.level_hysteresis:
-            return current
-        return best
 
     def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int,
              worth: float = -1.0) -> _Candidate:
@@ -289,7 +324,8 @@ class TipTracker:
         for _ in range(0 if settled else 2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
                 break
-            lvl2 = self._pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl)
+            lvl2 = _pick_level(self._levels(patches, image, ref.x, ref.y, ref.theta), lvl,
+                               self.params.level_hysteresis)
             if lvl2 == lvl:
                 break
             pt2 = self._patch(patches, image, ref.x, ref.y, self._spec[lvl2][1])
@@ -298,6 +334,16 @@ class TipTracker:
                 break
             ref, lvl = ref2, lvl2
         return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
+
+    def _edge_check(self, patches: dict[float, Patch], image: FloatArray, ref: Refinement, level: int
+                    ) -> EdgeCheck | None:
+        """The needle's edges behind the fitted tip against blur copy ``level``'s (:func:`~.edges.check_edges`)."""
+        if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
+            return None
+        k, f, _ = self._spec[level]
+        noise = self.template.noise / (2.0 * math.sqrt(math.pi) * math.hypot(self.params.template_blur, f))
+        return check_edges(self._edges, k, self._patch(patches, image, ref.x, ref.y, f), ref.x, ref.y, ref.theta,
+                           noise)
 
     # ------------------------------------------------------------------ search
 
@@ -357,7 +403,27 @@ class TipTracker:
 
     # ------------------------------------------------------------------ decision
 
-    def _judge(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
+    def _judge(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> tuple[Result, _Candidate]:
+        """The decision on a candidate (docs/vision.md, "Decision rules"), and the candidate decided on.
+
+        A candidate that correlates well enough to be taken is checked by the needle's edges
+        behind it (:mod:`.edges`); a fix the template's rules take stands only if the edges'
+        rules take it too.
+        """
+        p = self.params
+        res = self._rules(cand, image, reacquire)
+        r = cand.ref
+        # the edges only for a fit that correlates well enough to be taken (the template's rules refuse the others)
+        if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged:
+            return res, cand
+        patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
+        ec = self._edge_check(patches, image, cand.ref, cand.level)
+        cand = replace(cand, edges=ec)
+        refusal = _edge_refusal(ec, p) if isinstance(res, Fix) else None
+        return (refusal or res), cand
+
+    def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
+        """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
         p = self.params
         r = cand.ref
         H, W = image.shape
@@ -413,16 +479,23 @@ class TipTracker:
         if self._last is not None:
             cand = self._local(image)
             if cand is not None:
-                res = self._judge(cand, image)
+                res, cand = self._judge(cand, image)
                 if isinstance(res, Fix):
                     return self._accept(res, cand)
                 first_refusal = res
+                if res.reason in ("lost", "out of focus") and cand.edges is not None and (
+                        _edge_refusal(cand.edges, self.params) is None):
+                    # the needle's edges are where the fit put its tip, which a rule refused (its position
+                    # undetermined, its focus changed too fast): the tip is here, the whole frame has no other
+                    self._fresh = False
+                    self._since += 1
+                    return res
         # not found near the last fix (or refused there, or refused last time): the whole frame
         best: Result | None = None
         for cand in self._global(image):
             if cand is None:
                 continue
-            res = self._judge(cand, image, reacquire=True)
+            res, cand = self._judge(cand, image, reacquire=True)
             if isinstance(res, Fix):
                 if best is None or not isinstance(best, Fix) or res.score > best.score:
                     best = res
@@ -452,6 +525,7 @@ class TipTracker:
         return ratio * float(np.median(self._mismatch[-p.recent :])) + p.mismatch_floor
 
     def _accept(self, fix: Fix, cand: _Candidate) -> Fix:
+        self._last_edges = cand.edges
         self._mismatch.append(1.0 - fix.score)
         del self._mismatch[: -self.params.recent]
         self._last = (fix.x, fix.y)
