@@ -105,6 +105,10 @@ class Refusal:
     undecided : bool
         True when the path comes within ``tol`` of the allowed distance without crossing
         it (refused as the envelope cannot show it clear).
+    start : str
+        ``""``; ``"margin"``: the path starts inside this obstacle's margin and goes deeper;
+        ``"volume"``: the arm starts inside the volume (``allowed`` is then the distance at
+        which the link touches it: its radius, or both arms' radii).
     """
 
     arm: str
@@ -130,7 +134,7 @@ class Refusal:
         p = ", ".join(f"{v * 1e6:.1f}" for v in self.point)
         if self.start == "volume":
             return (f"arm {self.arm!r} is inside {self.obstacle!r} already (a collision: "
-                    f"{self.distance * 1e6:.2f} µm from it, the link's radius {self.allowed * 1e6:.2f} µm) "
+                    f"{self.distance * 1e6:.2f} µm from it, {self.allowed * 1e6:.2f} µm or less is touching) "
                     f"at ({p}) µm in the rig frame, {pose}: no move is planned from there")
         if self.start == "margin":
             sig = (f" ({self.sigma * 1e6:.2f} µm of it the position's σ)" if self.sigma > 0.0 else "")
