@@ -283,7 +283,18 @@ def test_a_jog_whose_client_stops_sending_is_stopped_by_the_dead_man(client: Tes
     assert m["result"]["message"] == "stopped"
 
 
-def test_a_jog_whose_socket_closes_stops_at_once(client: TestClient, room: ControlRoom) -> None:
+def test_a_jog_whose_socket_closes_stops_at_once(tmp_path: Path) -> None:
+    # the dead man given 30 s (not 0.15 s), so only the closing socket can end the jog this soon: on a
+    # starved machine the 0.15 s one let go first once (a failure of the test, not of the server)
+    room = room_on(tmp_path, jog_idle_end_s=0.3, jog_hold_s=30.0)
+    try:
+        with TestClient(create_app(room, LOCAL), base_url="http://127.0.0.1:8765") as client:
+            _jog_then_close_the_socket(client, room)
+    finally:
+        room.close()
+
+
+def _jog_then_close_the_socket(client: TestClient, room: ControlRoom) -> None:
     with client.websocket_connect("ws://127.0.0.1:8765/api/live") as ws:
         ws.receive_text()
         ws.send_text(json.dumps({"type": "jog", "direction": "+y", "speed": 5}))

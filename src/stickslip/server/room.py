@@ -316,7 +316,7 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         if cur is not None:
             raise Busy(f"jog is disabled while a plan runs: {cur.what} (motion {cur.id}); wait for it or press STOP")
         cal, borrowed = self._need_calibration("jogging", borrow=True)
-        new_pad = PadKeys(idle_end_s=self.options.jog_idle_end_s)
+        new_pad = PadKeys(hold_s=self.options.jog_hold_s, idle_end_s=self.options.jog_idle_end_s)
         new_pad.hold(direction, speed)  # the first key: checked before the session starts
         req = JogRequest(self.url, self.options.geometry, speed=speed or 4, max_rate=self.options.jog_max_rate,
                          hold=new_pad.hold_s, max_age_days=self.options.max_age_days)

@@ -36,7 +36,7 @@ from ..rig import Rig
 from ..rig.guard import Guard
 from ..storage import StoreError
 from .owned import HeldStore, OwnedController
-from .pad import IDLE_END_S, PadKeys
+from .pad import HOLD_S, IDLE_END_S, PadKeys
 
 __all__ = [
     "MAX_BURST_S", "START_TIMEOUT_S", "Busy", "Conflict", "Motion", "MotionSlot", "NotFound", "Refused",
@@ -147,6 +147,9 @@ class RoomOptions:
         controller: 300 steps/s each fit a 1 kHz controller's time).
     jog_idle_end_s : float
         A jog session with nothing held for this long ends, s (then a move may run).
+    jog_hold_s : float
+        The dead man's switch: a held direction with no keep-alive for this long is let go, s
+        (:data:`~.pad.HOLD_S`).
     rig : Rig or None
         A rig file (docs/rig.md): the room drives its arm ``arm`` (``device`` is that
         arm's controller), and every motion is checked against the rig's envelope
@@ -164,6 +167,7 @@ class RoomOptions:
     max_burst_s: float = MAX_BURST_S
     jog_max_rate: float = 300.0
     jog_idle_end_s: float = IDLE_END_S
+    jog_hold_s: float = HOLD_S
     rig: Rig | None = None
     arm: str | None = None
 
