@@ -287,7 +287,9 @@ def test_a_real_ctrl_c_in_a_terminal_session(tmp_path, cal_path):
         cal = calibration_of(cal_path, url, tmp_path)
         subprocess.run([sys.executable, "-c", main, "where", "-d", url, "--set", "3=min", "--offline"], env=env,
                        check=True, capture_output=True, timeout=60)  # fmt: skip
-        argv = [sys.executable, "-c", main, "move", "-d", url, "-c", str(cal), "-j", "3", "--by", "4mm"]
+        # 10 mm: about 10 s of stepping, so the signal lands mid-move even when the machine is slow to send it
+        # (4 mm, about 4 s, once ended before a starved test sent it: exit 0)
+        argv = [sys.executable, "-c", main, "move", "-d", url, "-c", str(cal), "-j", "3", "--by", "10mm"]
         argv += ["--burst", "50"]
         p = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         deadline = time.monotonic() + 30
