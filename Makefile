@@ -19,15 +19,15 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/stickslip demo
 
-# The storage tests start a throwaway PostgreSQL server: .ci/postgres installs the server's binaries
-# quietly when they are missing and apt-get can run (root, or sudo without a password); elsewhere
-# those tests are skipped with the reason.
 # Python keeps compiled modules (__pycache__, git-ignored) during the tests even where the environment
 # says PYTHONDONTWRITEBYTECODE: otherwise every `stickslip` a test starts compiles the package again
 # (about 0.3 s of CPU each, hundreds of times) and pytest rewrites every test module again on every run.
 PYTEST := env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest
 COMPILE := env -u PYTHONDONTWRITEBYTECODE $(PY) -m compileall -q src tests/support
 
+# The storage tests start a throwaway PostgreSQL server: .ci/postgres installs the server's binaries
+# quietly when they are missing and apt-get can run (root, or sudo without a password); elsewhere
+# those tests are skipped with the reason.
 # mypy --strict runs beside the tests (its output kept and shown after theirs): the tests keep both
 # cores busy but for their waits, and mypy alone would add about 25 s one after the other.
 test: $(STAMP)
