@@ -21,8 +21,9 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..models import PrismaticParams, RotaryParams
-from ..models.families import FamilyModel, FamilyParams, average_from_features, features, traverse_features
+from ..models.families import FamilyModel, FamilyParams, average_from_features, traverse_features
 from .family_fit import unit_scale
+from .groups import load_coordinates_of
 from .result import Calibration
 from .update import model_sigma
 
@@ -150,23 +151,9 @@ def suggest_poses(
 def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
     """Where traverses at ``poses`` lie in the space of what the step depends on, ``(n, k)`` (1).
 
-    Joint 3: the axial load ``L``, the loads across the axis ``X``, ``Y`` and ``|cos q2|``
-    ((F1), (F2)). Rotary joints: the torque term ``T``, the radial and axial loads ``R``,
-    ``P`` at five points along the traverse (each group divided by sqrt(5), so that each
-    quantity weighs as much as one coordinate) and ``2 q3 / 12 mm - 1`` ((F3)). Every
-    coordinate is within [-1, 1].
+    :func:`~.groups.load_coordinates_of` (its one home) for a list of :class:`~stickslip.kinematics.Pose`.
     """
-    cols = np.array([list(p) for p in poses], dtype=float).reshape(-1, 5)
-    if kin.joint_spec(joint).prismatic:
-        f = features(joint, cols[:, 0], cols[:, 1], cols[:, 2], cols[:, 3], cols[:, 4])
-        return np.stack([f.L, f.X, f.Y, f.abs_cos_q2], axis=1)
-    spec = kin.JOINTS[joint]
-    q = np.linspace(spec.lower, spec.upper, 5)
-    args = [cols[:, k, None] * np.ones_like(q) for k in range(5)]
-    args[joint - 1] = np.broadcast_to(q, (len(cols), 5))
-    f = features(joint, *args)
-    g = 1.0 / math.sqrt(5.0)
-    return np.concatenate([g * f.T, g * f.R, g * f.P, (2.0 * cols[:, 2:3] / kin.Q3_MAX - 1.0)], axis=1)
+    return load_coordinates_of(joint, np.array([list(p) for p in poses], dtype=float))
 
 
 def spread_poses(
