@@ -12,7 +12,7 @@ from .base import _Base
 from .schema import StoreError, _now
 
 if TYPE_CHECKING:  # pragma: no cover
-    pass
+    from .backend import Backend
 
 
 class StateStore(_Base):
@@ -82,11 +82,7 @@ class StateStore(_Base):
         claimed: bool | None = None
         try:
             with self._write() as con:
-                dev = self._device_id(con, device)
-                row = con.execute(
-                    "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
-                ).fetchone()
-                current = None if row is None else self._json(row[0], device, "lock")
+                dev, current = self._lock_row(con, device)
                 claimed = con.claim(name)
                 if claimed is False:  # a live connection holds it (the server knows)
                     if isinstance(current, dict):
@@ -106,15 +102,17 @@ class StateStore(_Base):
             raise
         return None
 
+    def _lock_row(self, con: Backend, device: str) -> tuple[int, Any]:
+        """``device``'s id and its stored lock holder (decoded, or ``None``), read inside the write ``con``."""
+        dev = self._device_id(con, device)
+        row = con.execute("SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)).fetchone()
+        return dev, None if row is None else self._json(row[0], device, "lock")
+
     def release_lock(self, device: str, pid: int) -> None:
         """Release ``device``'s lock if process ``pid`` holds it."""
         try:
             with self._write() as con:
-                dev = self._device_id(con, device)
-                row = con.execute(
-                    "SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)
-                ).fetchone()
-                current = None if row is None else self._json(row[0], device, "lock")
+                dev, current = self._lock_row(con, device)
                 if isinstance(current, dict) and current.get("pid") == pid:
                     con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
         finally:
