@@ -129,22 +129,12 @@ def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = 
 def text_lines(path: str | os.PathLike[str], what: str) -> Iterator[str]:
     """The lines of a regular UTF-8 text file, read a block at a time (memory bounded by a line).
 
-    The same refusals as :func:`read_text_bounded`, raised here, before any line is read (a
-    missing file, a folder, a FIFO or device, which is never opened), but no size limit: the
+    The same refusals as :func:`read_text_bounded` (:func:`regular_file`), raised here, before any
+    line is read (a missing file, a folder, a FIFO or device, which is never opened), but no size limit: the
     caller streams. A line that is not UTF-8 raises ``ValueError`` naming its number when it
     is reached; a leading byte-order mark is dropped. Lines keep their line endings.
     """
-    p = Path(path)
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        raise ValueError(f"cannot read {what} {p}: no such {what} file") from None
-    except OSError as e:
-        raise ValueError(f"{p}: cannot read the {what} file ({e.strerror or e})") from None
-    if stat.S_ISDIR(st.st_mode):
-        raise ValueError(f"{p}: is a folder, not a {what} file")
-    if not stat.S_ISREG(st.st_mode):
-        raise ValueError(f"{p}: not a regular file (a pipe or device?); give a {what} file")
+    p = regular_file(path, what)
     try:
         f = open(p, "rb")  # closed by the generator
     except OSError as e:
