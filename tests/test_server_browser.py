@@ -124,6 +124,8 @@ def test_the_page_loads_with_what_a_user_needs(page: Any, room: ControlRoom) -> 
     assert joint_text(page, 2).startswith("-90 deg")
     page.wait_for_selector("#camera-panel:not(.hidden)", timeout=10_000)
     until(lambda: page.evaluate("document.getElementById('frame').naturalWidth") == 160, 10, "a camera frame")
+    # the page shows a frame first and then asks /api/camera for the tip: the text follows the frame
+    until(lambda: page.inner_text("#camera-tip") != "", 10, "the tip's text after the frame")
     assert "tip at (80.0, 80.0) px" in page.inner_text("#camera-tip")
     assert page.errors == []
 
