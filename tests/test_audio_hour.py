@@ -21,18 +21,17 @@ import pytest
 from fan_sound import SR, Arm, render, tuning_scene
 from hour_sound import KINDS, Hour, spans, stream
 
-from stickslip.audio.confirm import ConfirmedStopDetector
+from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
 JOINTS = (1, 2, 3)
-#: joint -> what was measured when the test was written (before any change for it)
-KNOWN = {
-    3: "2 false stops, none flagged (a wrong count): 0.40 s (a radio from the first sample, +0.4 dB) and 34.5 s"
-    " (speech over the radio switched on, +0.4 dB); with the drop channel off, the same two",
-}
+#: joint -> what is measured today where it fails. When the test was written, joint 3 gave 2 false stops, none
+#: flagged: 0.40 s (a radio from the first sample, +0.4 dB) and 34.5 s (speech over the radio switched on, +0.4 dB),
+#: the level's fit to a stop that only rises; the step clock's lines (stickslip.audio.confirm.clocked) removed them
+KNOWN: dict[int, str] = {}
 
 
 @cache
@@ -40,12 +39,32 @@ def _tuning(arm: int) -> Tuning:
     return tune(render(tuning_scene(Arm(arm))), SR, 2.0)
 
 
-def hear(h: Hour, tu: Tuning) -> list[StopEvent]:
+def hear(h: Hour, tu: Tuning, params: ConfirmParams | None = None) -> list[StopEvent]:
     """The confirmed events of ``h`` streamed block by block, the commanded rate told."""
-    det = ConfirmedStopDetector(detector_for(tu))
+    det = ConfirmedStopDetector(detector_for(tu), params=params)
     det.reset(0.0, step_rate_hz=h.rate)
     events = [e for block in stream(h) for e in det.feed(block)]
     return events + det.finish()
+
+
+def test_a_radio_that_fits_a_stop_that_only_rises_is_off_the_step_clock() -> None:
+    """Joint 3's stop only rises (2.5-8.6 dB): a radio as loud as the stepping fits it, and persists.
+
+    The hour's draw 3 begins with a radio at +0.4 dB re the stepping: without the step clock's
+    check a false stop at 0.40 s, counted (a wrong count); with it, the fire's window shows
+    none of the signature on the lines (``a_L`` under 0.2), and no event.
+    """
+    h = Hour(Arm(3), dur=3.0, seed=3)
+    assert spans(h)[0][2:] == ("radio", pytest.approx(0.4, abs=0.05))
+    tu = _tuning(3)
+    assert min(tu.signature_db or (0.0,)) > 2.0  # a stop that only rises
+    before = hear(h, tu, ConfirmParams(clocked=None))
+    assert [(round(e.onset_s, 2), e.onset_uncertain) for e in before] == [(0.40, False)]
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=h.rate)
+    assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
+    judged = [g for _, g in det.log.clocked]
+    assert judged and all(abs(g.a) < 0.2 and g.bands == 2 for g in judged)
 
 
 def test_the_stream_does_not_depend_on_its_blocks() -> None:

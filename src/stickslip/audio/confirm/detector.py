@@ -46,6 +46,7 @@ from ..events import StopDetector, StopEvent, check_step_rate
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
 from .chain import FireChain
+from .clocked import CLOCKED, ClockedCheck, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
@@ -68,6 +69,8 @@ class ConfirmParams:
     pause: PauseParams = field(default_factory=lambda: PAUSE)
     sync: SyncParams = field(default_factory=lambda: SYNC)
     late: LateParams = field(default_factory=lambda: LATE)
+    #: the stop's signature on the step clock's lines (None: not asked)
+    clocked: ClockedParams | None = field(default_factory=lambda: CLOCKED)
 
 
 def _stepping_band(tu: Tuning) -> list[tuple[float, float]]:
@@ -96,6 +99,8 @@ class ConfirmLog:
     retime: list[tuple[float, float, float]] = field(default_factory=list)
     #: the fast path's fires swallowed while the late path was latched on a stop it found (not counted twice)
     late_swallowed: list[StopEvent] = field(default_factory=list)
+    #: per fire that persisted whose change was judged on the step clock's lines: (its ``detected_at_s``, what)
+    clocked: list[tuple[float, OnClock]] = field(default_factory=list)
 
 
 class ConfirmedStopDetector:
@@ -151,6 +156,7 @@ class ConfirmedStopDetector:
         self._kept = KeptSamples(self._span + self._gap + self._F + (w.after_reject + 2) * self._H)
         self._pause = PauseCheck(tu, p.pause)
         self._sync = SyncCheck(_stepping_band(tu) if step_clock else [], self._sr, p.sync)
+        self._clocked = ClockedCheck(tu, p.clocked) if p.clocked is not None else None
         band = _stepping_band(tu)
         #: the late path (:mod:`.late`): stops the fast path never heard, found on the step clock's lines
         self.late: LatePath | None = LatePath(self._sr, band, inner.t0_s, p.late) if late and band else None
@@ -172,6 +178,8 @@ class ConfirmedStopDetector:
         self._pause_at: float | None = None  # stream time at which a pause was heard: restart there
         for part in (self._chain, self._kept, self._sync, self._pause):
             part.reset()
+        if self._clocked is not None:
+            self._clocked.reset(self._step_rate_hz)
         #: what was noted since the last reset
         self.log = ConfirmLog()
         if self.late is not None:
@@ -326,10 +334,12 @@ class ConfirmedStopDetector:
         recent = self._chain.recent(fire)
         if not recent or not math.isfinite(self._pause.before_power):
             self._pause.hear_before(self._before(fire), self.params.sync.min_s * self._sr)
+        # the stepping before this fire is the step clock's reference (a fire soon after a rejected one keeps its
+        # chain's: the interference may have been going on since)
         if self._sync.bands and (not recent or self._sync.ref is None):
-            # the stepping before this fire is the reference (a fire soon after a rejected one keeps its chain's:
-            # the interference may have been going on since)
             self._sync.ref = self._before(fire)
+        if self._clocked is not None and (not recent or self._clocked.ref is None):
+            self._clocked.ref = self._before(fire)
         self._chain.start(ev, fire, recent)
         self.inner.hold(True)  # the window decides whether this was a stop: the fast path does not re-arm meanwhile
         return []
@@ -340,6 +350,7 @@ class ConfirmedStopDetector:
             persisted(*self._frames.window(fire, frames), self.w.gap, self.params.persistence)
             and self._in_step(ev, fire, frames)
             and not self._stepping_stopped(ev, fire, frames)
+            and self._on_clock(ev, fire, frames)
         )
 
     def _decide(self) -> list[StopEvent]:
@@ -367,6 +378,16 @@ class ConfirmedStopDetector:
             return True
         self.log.step_clock.append((ev.detected_at_s, got))
         return step_clock_verdict(got, self.params.sync) is not False
+
+    def _on_clock(self, ev: StopEvent, fire: int, frames: int) -> bool:
+        """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
+        if self._clocked is None:
+            return True
+        start = fire * self._H + self._F
+        got = self._clocked.judge(self._kept.get(start, start + min(self._span, frames * self._H)))
+        if got is not None:
+            self.log.clocked.append((ev.detected_at_s, got))
+        return self._clocked.verdict(got)
 
     def _stepping_stopped(self, ev: StopEvent, fire: int, frames: int) -> bool:
         """Was the fire the stepping stopping (a pause), not an end stop (:mod:`.pause`)?"""

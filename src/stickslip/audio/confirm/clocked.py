@@ -1,0 +1,187 @@
+"""Is the change on the step clock? A stop changes the joint's own clicks; added sound does not.
+
+At an end stop the controller keeps stepping: the joint's sound is still a train of clicks
+at the step rate, and the stop changes *that* sound (a shorter slip, the end stop ringing:
+louder in some sub-bands, quieter in others). Music, a radio, a voice or a fan is not in
+step with the clock: it adds power between the step clock's harmonic lines and, on
+average, none on them. The level detector cannot tell the two apart where the stop's
+signature is a rise (a louder stop): any sound added in those sub-bands fits it.
+
+So a fire that persisted must also show the stop's signature on the lines. Over the
+tuning's sub-bands whose signature moves by ``min_signature_db`` or more, the power on the
+step clock's lines above the continuum beside them
+(:func:`~stickslip.audio.features.stepclock.line_powers`) is measured over the stepping
+before the fire (the reference the confirmation keeps: for a fire soon after a rejected
+one, the stepping before the first of them) and over the window's first samples, at the
+step rate commanded (or, untold, heard in the stepping). Per sub-band the change ``dL_b``
+(dB, each side floored at ``floor_share`` of the larger), kept where the lines stood
+``min_line_z`` standard deviations over their noise before the fire and were sharp there
+(``min_sharpness`` of the power in a comb four times wider: a rough clock smears its
+higher harmonics, and what is left on the narrow lines is not the joint's sound alone);
+the *lines' stop-likeness* is the least-squares fit of the tuned signature ``delta`` to
+them,
+
+    a_L = sum_b delta_b dL_b / sum_b delta_b^2,
+
+1 for a stop like the tuning's, 0 for a change that is all off the clock. A fire whose
+``a_L`` is under ``min_a`` is not a stop. No verdict (the fire stands on the other rules)
+when the sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
+(one sub-band's estimate is not the stop's signature), the rate is not known or is more than ``max_rate_off`` from
+the tuning's (the lines then sample the arm's narrow modes elsewhere, and the tuned
+signature is not what the stop does on them), or less than ``min_s`` of stepping or
+``min_after_s`` of the window was heard. The lines are immune to what is added between
+them, so the tuned signature is fitted as tuned (no masking). It runs once per fire that
+persisted, never per frame.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..features.stepclock import STEP_CLOCK, line_powers, rate_near_hz
+from ..paramfield import param
+from ..tuningfile import Tuning
+
+__all__ = ["CLOCKED", "ClockedCheck", "ClockedParams", "OnClock", "lines_stop_likeness"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ClockedParams:
+    """The stop's signature on the step clock's lines: a fire whose change is off the clock is not a stop."""
+
+    min_a: float = param(
+        0.35, "", "the lines' stop-likeness a fire must reach (music, a radio: under 0.2; stops: 0.66 and more)"
+    )
+    min_signature_db: float = param(
+        3.0, "dB", "sub-bands the tuned stop moves less than this are not judged (their lines hardly change)"
+    )
+    min_line_z: float = param(
+        3.0, "standard deviations", "a sub-band is judged only where its lines stood this far over their noise before"
+    )
+    min_sharpness: float = param(
+        0.85, "", "and where they held this share of a comb four times wider's power (a rough clock smears them)"
+    )
+    min_covered: float = param(
+        0.5, "", "no verdict unless the sub-bands judged hold this share of the signature's sum of squares"
+    )
+    floor_share: float = param(0.01, "", "each side of a change is floored at this share of the larger (+-20 dB)")
+    commanded_tol: float = param(0.03, "", "the rate is heard within this share of the commanded one (else taken)")
+    max_rate_off: float = param(
+        0.05, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere"
+    )
+    min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
+    min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
+
+
+CLOCKED = ClockedParams()
+
+
+@dataclass(frozen=True)
+class OnClock:
+    """What the check measured on one fire."""
+
+    #: the lines' stop-likeness (NaN: no verdict)
+    a: float
+    #: the step rate the lines were read at, Hz
+    rate_hz: float
+    #: the sub-bands judged
+    bands: int
+
+
+def lines_stop_likeness(
+    before: FloatArray,
+    after: FloatArray,
+    sample_rate: float,
+    rate_hz: float,
+    edges_hz: Sequence[float],
+    signature_db: Sequence[float],
+    p: ClockedParams = CLOCKED,
+) -> tuple[float, int]:
+    """The lines' stop-likeness ``a_L`` from ``before`` to ``after`` and the number of sub-bands judged.
+
+    Parameters
+    ----------
+    before, after : array
+        The stepping before the fire and the window after it (samples; the longer is cut to the shorter: ``before``
+        keeps its end, ``after`` its start).
+    sample_rate : float
+        Samples per second, Hz.
+    rate_hz : float
+        The step rate whose harmonic lines are read, Hz.
+    edges_hz, signature_db : sequence of float
+        The sub-bands' edges (Hz, one more than sub-bands) and the stop's signature on them (dB per sub-band).
+    p : ClockedParams
+        The check's parameters.
+
+    Returns
+    -------
+    (float, int)
+        ``a_L`` (dimensionless: 1 a stop like the tuned one on the lines, 0 no change on them; NaN where no sub-band
+        was judged) and how many sub-bands were judged.
+    """
+    edges, sig = edges_hz, signature_db
+    n = min(before.size, after.size)
+    b, a = before[before.size - n :], after[:n]
+    num = den = whole = 0.0
+    used = 0
+    for i, delta in enumerate(sig):
+        if abs(delta) < p.min_signature_db:
+            continue
+        whole += float(delta) ** 2
+        band = [(float(edges[i]), float(edges[i + 1]))]
+        lb, _ = line_powers(b, sample_rate, rate_hz, band)
+        la, _ = line_powers(a, sample_rate, rate_hz, band)
+        p0, p1 = float(np.sum(lb.power)), float(np.sum(la.power))
+        if lb.power.size != la.power.size or not p0 > p.min_line_z * math.sqrt(float(np.sum(lb.var))):
+            continue  # no lines heard there before the fire
+        wide = float(np.sum(line_powers(b, sample_rate, rate_hz, band, STEP_CLOCK.sharp_width)[0].power))
+        if not p0 >= p.min_sharpness * wide:
+            continue  # a rough clock smears its lines there: their change is not the joint's sound alone
+        top = max(p0, p1) * p.floor_share
+        d = 10.0 * math.log10(max(p1, top) / max(p0, top))
+        num += float(delta) * d
+        den += float(delta) ** 2
+        used += 1
+    if den == 0.0 or den < p.min_covered * whole:
+        return math.nan, used
+    return num / den, used
+
+
+class ClockedCheck:
+    """The check over a stream: the stepping before a chain of fires, then each window (see the module)."""
+
+    def __init__(self, tuning: Tuning, p: ClockedParams = CLOCKED) -> None:
+        self.tuning, self.p = tuning, p
+        self.enabled = tuning.method == "template" and tuning.signature_db is not None and tuning.edges_hz is not None
+        self.sample_rate = int(tuning.sample_rate)
+        self.reset()
+
+    def reset(self, commanded_hz: float | None = None) -> None:
+        #: the stepping before the fire that began the current chain
+        self.ref: FloatArray | None = None
+        self.commanded_hz = commanded_hz
+
+    def judge(self, after: FloatArray) -> OnClock | None:
+        """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged)."""
+        sr, p, ref = self.sample_rate, self.p, self.ref
+        if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
+            return None
+        rate = rate_near_hz(ref, sr, self.commanded_hz, p.commanded_tol)
+        tuned = self.tuning.step_rate_hz
+        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
+            return None
+        tu = self.tuning
+        assert tu.edges_hz is not None and tu.signature_db is not None  # enabled
+        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, p)
+        return OnClock(a, rate, used)
+
+    def verdict(self, got: OnClock | None) -> bool:
+        """False where the change is off the clock; True where it is on it or nothing was judged."""
+        return got is None or not math.isfinite(got.a) or got.a >= self.p.min_a

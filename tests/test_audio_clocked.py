@@ -1,0 +1,126 @@
+"""The stop's signature on the step clock's lines (``stickslip.audio.confirm.clocked``).
+
+A click train at the step rate has all its power on the rate's harmonic lines; the check
+reads the change of that power per sub-band and fits the stop's signature to it. Built
+from a click train and band masks, so the answers are known: the joint's own sound scaled
+by the signature gives ``a_L`` = 1, noise added between the lines gives 0, a drop counts as
+a rise does, and the cases with nothing to judge give no verdict.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from stickslip.audio.confirm.clocked import CLOCKED, ClockedCheck, ClockedParams, OnClock, lines_stop_likeness
+
+SR = 48_000
+RATE = 1000.0
+EDGES = (2000.0, 4000.0, 8000.0, 16000.0)
+
+
+def _clicks(n: int, seed: int) -> np.ndarray:
+    """Clicks every 48 samples (1000 Hz), their strength scattered by 10 %, and a little noise."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros(n)
+    x[::48] = 1.0 + 0.1 * rng.standard_normal(x[::48].size)
+    return x + 1e-4 * rng.standard_normal(n)
+
+
+def _band(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``x`` with only the frequencies in [lo, hi) kept (an FFT mask)."""
+    X = np.fft.rfft(x)
+    f = np.fft.rfftfreq(x.size, 1 / SR)
+    return np.fft.irfft(np.where((f >= lo) & (f < hi), X, 0.0), x.size)
+
+
+def _scaled(x: np.ndarray, gains_db: tuple[float, ...]) -> np.ndarray:
+    """``x`` with each of EDGES' sub-bands scaled by its gain (dB), the rest left out."""
+    return sum(
+        (10 ** (g / 20) * _band(x, lo, hi) for g, lo, hi in zip(gains_db, EDGES[:-1], EDGES[1:], strict=True)),
+        np.zeros(x.size),
+    )
+
+
+N = int(0.48 * SR)
+
+
+def test_the_joints_own_sound_changed_by_the_signature_is_a_stop() -> None:
+    sig = (0.0, 6.0, -4.0)
+    before = _scaled(_clicks(N, 1), (0.0, 0.0, 0.0))
+    after = _scaled(_clicks(N, 2), sig)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig)
+    assert used == 2  # the sub-band the stop moves by 0 dB is not judged
+    assert a == pytest.approx(1.0, abs=0.05)
+
+
+def test_half_the_signature_on_the_lines_is_half_a_stop() -> None:
+    """The fit is linear in dB: the lines moved by half the signature give a_L = 1/2."""
+    sig = (8.0, 8.0, -6.0)
+    a, used = lines_stop_likeness(
+        _scaled(_clicks(N, 3), (0.0, 0.0, 0.0)), _scaled(_clicks(N, 4), (4.0, 4.0, -3.0)), SR, RATE, EDGES, sig
+    )
+    assert used == 3
+    assert a == pytest.approx(0.5, abs=0.05)
+
+
+def test_noise_added_between_the_lines_is_not_a_stop() -> None:
+    """Noise that raises the rising sub-band by 6 dB (as the stop would) leaves the lines where they were."""
+    sig = (0.0, 6.0, 0.0)
+    rng = np.random.default_rng(5)
+    joint = _scaled(_clicks(N, 6), (0.0, 0.0, 0.0))
+    mid = _band(joint, EDGES[1], EDGES[2])
+    noise = _band(rng.standard_normal(N), EDGES[1], EDGES[2])
+    noise *= math.sqrt(3.0) * np.sqrt(np.mean(mid**2)) / np.sqrt(np.mean(noise**2))  # 3x the joint's power: +6 dB
+    after = _scaled(_clicks(N, 7), (0.0, 0.0, 0.0)) + noise
+    power_db = 10 * np.log10(np.mean(_band(after, EDGES[1], EDGES[2]) ** 2) / np.mean(mid**2))
+    assert power_db == pytest.approx(6.0, abs=0.3)  # the level detector would see the stop's rise
+    a, used = lines_stop_likeness(joint, after, SR, RATE, EDGES, sig)
+    assert used == 1
+    assert abs(a) < 0.1
+
+
+def test_nothing_to_judge_gives_no_verdict() -> None:
+    x = _scaled(_clicks(N, 8), (0.0, 0.0, 0.0))
+    a, used = lines_stop_likeness(x, x, SR, RATE, EDGES, (1.0, -2.0, 2.9))  # the stop moves no sub-band by 3 dB
+    assert (math.isnan(a), used) == (True, 0)
+    noise = np.random.default_rng(9).standard_normal(N)  # no lines before the fire
+    a, used = lines_stop_likeness(noise, noise, SR, RATE, EDGES, (6.0, 6.0, 6.0))
+    assert (math.isnan(a), used) == (True, 0)
+
+
+class _Tuning:
+    """The fields of a template tuning the check reads."""
+
+    method = "template"
+    sample_rate = SR
+    edges_hz = EDGES
+    signature_db = (0.0, 6.0, -4.0)
+    step_rate_hz = RATE
+
+
+def test_the_check_judges_a_window_against_its_reference() -> None:
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    assert chk.enabled
+    after = _scaled(_clicks(N, 11), (0.0, 6.0, -4.0))
+    assert chk.judge(after) is None  # no reference yet
+    chk.ref = _scaled(_clicks(int(0.1 * SR), 10), (0.0, 0.0, 0.0))
+    assert chk.judge(after) is None  # under min_s of stepping heard before the fire
+    chk.ref = _scaled(_clicks(N, 10), (0.0, 0.0, 0.0))
+    got = chk.judge(after)
+    assert got is not None and got.bands == 2 and got.rate_hz == pytest.approx(RATE, rel=0.01)
+    assert got.a == pytest.approx(1.0, abs=0.05) and chk.verdict(got)
+    chk.reset(1.1 * RATE)  # told a rate 10 % from the tuning's: the signature on the lines is not known there
+    assert chk.ref is None and chk.commanded_hz == 1.1 * RATE
+    chk.ref = _scaled(_clicks(N, 10), (0.0, 0.0, 0.0))
+    assert chk.judge(after) is None
+
+
+def test_the_verdict_vetoes_only_a_change_off_the_clock() -> None:
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    assert chk.verdict(None) and chk.verdict(OnClock(math.nan, RATE, 0))
+    assert chk.verdict(OnClock(CLOCKED.min_a, RATE, 1)) and not chk.verdict(OnClock(CLOCKED.min_a - 0.01, RATE, 1))
+    strict = ClockedCheck(_Tuning(), ClockedParams(min_a=0.9))  # type: ignore[arg-type]
+    assert not strict.verdict(OnClock(0.8, RATE, 2))
