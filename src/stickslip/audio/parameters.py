@@ -19,6 +19,7 @@ from .change.release import ReleaseParams
 from .change.stale import StaleParams
 from .change.start import StartParams
 from .change.template import TemplateParams
+from .confirm.clocked import ClockedParams
 from .confirm.late import LateParams
 from .confirm.onset import OnsetParams
 from .confirm.pause import PauseParams
@@ -45,7 +46,7 @@ STAGES: tuple[tuple[str, tuple[type[Any], ...]], ...] = (
         "change detector",
         (TemplateParams, AddedParams, FitParams, RateParams, DropParams, StartParams, StaleParams, ReleaseParams),
     ),
-    ("confirmation", (PersistenceParams, PauseParams, OnsetParams, SyncParams, LateParams)),
+    ("confirmation", (PersistenceParams, PauseParams, ClockedParams, OnsetParams, SyncParams, LateParams)),
     ("tuning and verification", (TuneParams, VerifyParams, TuningFileParams)),
 )
 
