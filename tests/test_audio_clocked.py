@@ -18,7 +18,7 @@ from stickslip.audio.confirm.clocked import CLOCKED, ClockedCheck, ClockedParams
 
 SR = 48_000
 RATE = 1000.0
-EDGES = (2000.0, 4000.0, 8000.0, 16000.0)
+EDGES = (2500.0, 4500.0, 8500.0, 16500.0)  # no line on an edge: each line and its flanks in one sub-band
 
 
 def _clicks(n: int, seed: int) -> np.ndarray:
@@ -124,3 +124,16 @@ def test_the_verdict_vetoes_only_a_change_off_the_clock() -> None:
     assert chk.verdict(OnClock(CLOCKED.min_a, RATE, 1)) and not chk.verdict(OnClock(CLOCKED.min_a - 0.01, RATE, 1))
     strict = ClockedCheck(_Tuning(), ClockedParams(min_a=0.9))  # type: ignore[arg-type]
     assert not strict.verdict(OnClock(0.8, RATE, 2))
+
+
+def test_too_little_of_the_signature_judged_gives_no_verdict() -> None:
+    """Lines heard only where the stop moves little (9 of the signature's 153 dB^2): no verdict, not a veto."""
+    rng = np.random.default_rng(12)
+    sig = (3.0, 12.0, 0.0)
+    low = _band(_clicks(N, 13), EDGES[0], EDGES[1])
+    before = low + _band(rng.standard_normal(N), EDGES[1], EDGES[2])  # no lines where the stop rises 12 dB
+    after = _band(_clicks(N, 14), EDGES[0], EDGES[1]) + _band(rng.standard_normal(N), EDGES[1], EDGES[2])
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig)
+    assert used == 1 and math.isnan(a)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, ClockedParams(min_covered=0.05))
+    assert used == 1 and abs(a) < 0.1  # judged on that one sub-band, where nothing changed

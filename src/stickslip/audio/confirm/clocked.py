@@ -26,10 +26,10 @@ them,
 1 for a stop like the tuning's, 0 for a change that is all off the clock. A fire whose
 ``a_L`` is under ``min_a`` is not a stop. No verdict (the fire stands on the other rules)
 when the sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
-(one sub-band's estimate is not the stop's signature), the rate is not known or is more than ``max_rate_off`` from
-the tuning's (the lines then sample the arm's narrow modes elsewhere, and the tuned
-signature is not what the stop does on them), or less than ``min_s`` of stepping or
-``min_after_s`` of the window was heard. The lines are immune to what is added between
+(one sub-band's estimate is not the stop's signature), the rate is not known or is more
+than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
+elsewhere, and the tuned signature is not what the stop does on them), or less than
+``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune to what is added between
 them, so the tuned signature is fitted as tuned (no masking). It runs once per fire that
 persisted, never per frame.
 """
