@@ -106,9 +106,15 @@ def test_the_check_judges_a_window_against_its_reference() -> None:
     assert chk.enabled
     after = _scaled(_clicks(N, 11), (0.0, 6.0, -4.0))
     assert chk.judge(after) is None  # no reference yet
-    chk.ref = _scaled(_clicks(int(0.1 * SR), 10), (0.0, 0.0, 0.0))
+    chk.hear_before(_scaled(_clicks(int(0.1 * SR), 10), (0.0, 0.0, 0.0)), np.full(40, -0.5))
     assert chk.judge(after) is None  # under min_s of stepping heard before the fire
-    chk.ref = _scaled(_clicks(N, 10), (0.0, 0.0, 0.0))
+    stepping = _scaled(_clicks(N, 10), (0.0, 0.0, 0.0))
+    chk.hear_before(stepping, np.r_[np.full(60, -0.6), np.full(60, 0.2), np.full(20, np.nan)])
+    assert chk.ref_stoplike == pytest.approx(0.5)  # half its frames stop-like (NaN: learning, not counted)
+    assert chk.judge(after) is not None
+    chk.hear_before(stepping, np.r_[np.full(59, -0.6), np.full(61, 0.2)])
+    assert chk.judge(after) is None  # mostly stop-like before the fire: a stop heard late, no stepping to compare
+    chk.hear_before(stepping, np.full(120, -0.6))
     got = chk.judge(after)
     assert got is not None and got.bands == 2 and got.rate_hz == pytest.approx(RATE, rel=0.01)
     assert got.a == pytest.approx(1.0, abs=0.05) and chk.verdict(got)

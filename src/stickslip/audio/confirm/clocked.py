@@ -28,10 +28,12 @@ them,
 when the sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
 (one sub-band's estimate is not the stop's signature), the rate is not known or is more
 than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
-elsewhere, and the tuned signature is not what the stop does on them), or less than
-``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune to what is added between
-them, so the tuned signature is fitted as tuned (no masking). It runs once per fire that
-persisted, never per frame.
+elsewhere, and the tuned signature is not what the stop does on them), where more than
+``max_ref_stoplike`` of the reference's frames were already stop-like (a stop heard late
+began there: the reference is the stop, not stepping), or where less than ``min_s`` of
+stepping or ``min_after_s`` of the window was heard. The lines are immune to what is
+added between them, so the tuned signature is fitted as tuned (no masking). It runs once
+per fire that persisted, never per frame.
 """
 
 from __future__ import annotations
@@ -75,6 +77,9 @@ class ClockedParams:
     commanded_tol: float = param(0.03, "", "the rate is heard within this share of the commanded one (else taken)")
     max_rate_off: float = param(
         0.05, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere"
+    )
+    max_ref_stoplike: float = param(
+        0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
@@ -166,13 +171,23 @@ class ClockedCheck:
     def reset(self, commanded_hz: float | None = None) -> None:
         #: the stepping before the fire that began the current chain
         self.ref: FloatArray | None = None
+        #: the share of its frames that were stop-like (NaN: none measured)
+        self.ref_stoplike = math.nan
         self.commanded_hz = commanded_hz
+
+    def hear_before(self, ref: FloatArray, margins: FloatArray) -> None:
+        """The stepping before a fire (samples) and its frames' margins over the threshold (NaN while learning)."""
+        m = margins[np.isfinite(margins)]
+        self.ref = ref
+        self.ref_stoplike = float(np.mean(m >= 0.0)) if m.size else math.nan
 
     def judge(self, after: FloatArray) -> OnClock | None:
         """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged)."""
         sr, p, ref = self.sample_rate, self.p, self.ref
         if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
             return None
+        if self.ref_stoplike > p.max_ref_stoplike:
+            return None  # the stop may have begun there, heard late: no stepping to compare with
         rate = rate_near_hz(ref, sr, self.commanded_hz, p.commanded_tol)
         tuned = self.tuning.step_rate_hz
         if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):

@@ -339,7 +339,8 @@ class ConfirmedStopDetector:
         if self._sync.bands and (not recent or self._sync.ref is None):
             self._sync.ref = self._before(fire)
         if self._clocked is not None and (not recent or self._clocked.ref is None):
-            self._clocked.ref = self._before(fire)
+            g, sp = self._gap // self._H, self._span // self._H
+            self._clocked.hear_before(self._before(fire), self._frames.between(fire - g - sp, fire - g))
         self._chain.start(ev, fire, recent)
         self.inner.hold(True)  # the window decides whether this was a stop: the fast path does not re-arm meanwhile
         return []
