@@ -131,32 +131,53 @@ def lines_stop_likeness(
         ``a_L`` (dimensionless: 1 a stop like the tuned one on the lines, 0 no change on them; NaN where no sub-band
         was judged) and how many sub-bands were judged.
     """
-    edges, sig = edges_hz, signature_db
+    judged = [i for i, delta in enumerate(signature_db) if abs(delta) >= p.min_signature_db]
+    bands = [(float(edges_hz[i]), float(edges_hz[i + 1])) for i in judged]
     n = min(before.size, after.size)
     b, a = before[before.size - n :], after[:n]
+    # one spectrum per side for every sub-band: the lines in band order, split by where each band's run begins
+    lb, _ = line_powers(b, sample_rate, rate_hz, bands)
+    la, _ = line_powers(a, sample_rate, rate_hz, bands)
+    lw, _ = line_powers(b, sample_rate, rate_hz, bands, STEP_CLOCK.sharp_width)
+    if not lb.power.size == la.power.size == lw.power.size:
+        return math.nan, 0
+    which = _band_of_lines(lb.freq_hz, bands)
     num = den = whole = 0.0
     used = 0
-    for i, delta in enumerate(sig):
-        if abs(delta) < p.min_signature_db:
-            continue
-        whole += float(delta) ** 2
-        band = [(float(edges[i]), float(edges[i + 1]))]
-        lb, _ = line_powers(b, sample_rate, rate_hz, band)
-        la, _ = line_powers(a, sample_rate, rate_hz, band)
-        p0, p1 = float(np.sum(lb.power)), float(np.sum(la.power))
-        if lb.power.size != la.power.size or not p0 > p.min_line_z * math.sqrt(float(np.sum(lb.var))):
+    for j, i in enumerate(judged):
+        delta = float(signature_db[i])
+        whole += delta**2
+        on = which == j
+        p0, p1, wide = float(np.sum(lb.power[on])), float(np.sum(la.power[on])), float(np.sum(lw.power[on]))
+        if not p0 > p.min_line_z * math.sqrt(float(np.sum(lb.var[on]))):
             continue  # no lines heard there before the fire
-        wide = float(np.sum(line_powers(b, sample_rate, rate_hz, band, STEP_CLOCK.sharp_width)[0].power))
         if not p0 >= p.min_sharpness * wide:
             continue  # a rough clock smears its lines there: their change is not the joint's sound alone
         top = max(p0, p1) * p.floor_share
         d = 10.0 * math.log10(max(p1, top) / max(p0, top))
-        num += float(delta) * d
-        den += float(delta) ** 2
+        num += delta * d
+        den += delta**2
         used += 1
     if den == 0.0 or den < p.min_covered * whole:
         return math.nan, used
     return num / den, used
+
+
+def _band_of_lines(freq_hz: FloatArray, bands: Sequence[tuple[float, float]]) -> NDArray[np.int64]:
+    """The band each line of :func:`line_powers` over ``bands`` (ascending) was found in.
+
+    The lines come band by band, each band's in rising frequency; a line on an edge two bands
+    share comes twice (once per band), so a line no higher than the one before starts the next band.
+    """
+    out = np.zeros(freq_hz.size, dtype=np.int64)
+    j, prev = 0, -math.inf
+    for k, c in enumerate(freq_hz.tolist()):
+        if c <= prev:
+            j += 1
+        while j < len(bands) - 1 and c > bands[j][1]:
+            j += 1
+        out[k], prev = j, c
+    return out
 
 
 class ClockedCheck:
