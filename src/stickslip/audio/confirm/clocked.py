@@ -59,7 +59,7 @@ class ClockedParams:
     """The stop's signature on the step clock's lines: a fire whose change is off the clock is not a stop."""
 
     min_a: float = param(
-        0.35, "", "the lines' stop-likeness a fire must reach (music, a radio: under 0.2; stops: 0.66 and more)"
+        0.25, "", "the lines' stop-likeness a fire must reach (music, a radio: mostly under 0.15; stops: 0.3 and more)"
     )
     min_signature_db: float = param(
         3.0, "dB", "sub-bands the tuned stop moves less than this are not judged (their lines hardly change)"
@@ -202,14 +202,22 @@ class ClockedCheck:
         self.ref = ref
         self.ref_stoplike = float(np.mean(m >= 0.0)) if m.size else math.nan
 
-    def judge(self, after: FloatArray) -> OnClock | None:
-        """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged)."""
+    def judge(self, after: FloatArray, heard_hz: float = math.nan) -> OnClock | None:
+        """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged).
+
+        ``heard_hz``: the step rate already heard in the same stepping (the pause check's, Hz; NaN: none), taken
+        where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard again near it.
+        """
         sr, p, ref = self.sample_rate, self.p, self.ref
         if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
             return None
         if self.ref_stoplike > p.max_ref_stoplike:
             return None  # the stop may have begun there, heard late: no stepping to compare with
-        rate = rate_near_hz(ref, sr, self.commanded_hz, p.commanded_tol)
+        told = self.commanded_hz
+        if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
+            rate = heard_hz
+        else:
+            rate = rate_near_hz(ref, sr, told, p.commanded_tol)
         tuned = self.tuning.step_rate_hz
         if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
             return None

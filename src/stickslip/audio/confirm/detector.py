@@ -385,7 +385,8 @@ class ConfirmedStopDetector:
         if self._clocked is None:
             return True
         start = fire * self._H + self._F
-        got = self._clocked.judge(self._kept.get(start, start + min(self._span, frames * self._H)))
+        after = self._kept.get(start, start + min(self._span, frames * self._H))
+        got = self._clocked.judge(after, self._pause.before_hz)
         if got is not None:
             self.log.clocked.append((ev.detected_at_s, got))
         return self._clocked.verdict(got)
