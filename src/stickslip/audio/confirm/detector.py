@@ -4,7 +4,8 @@ It wraps a fast-path detector (:class:`~stickslip.audio.change.TemplateDetector`
 version-1 :class:`~stickslip.audio.comparators.BandDetector`) with the same interface
 (samples in through :meth:`~ConfirmedStopDetector.feed`, :class:`StopEvent` s out) and holds
 each fire as *provisional*: it is emitted once the stop persisted (:mod:`.persistence`), the
-stepping did not merely stop (:mod:`.pause`), the step clock agrees where asked
+stepping did not merely stop (:mod:`.pause`), the change was on the step clock's lines
+(:mod:`.clocked`: not sound added between them), the step clock agrees where asked
 (:mod:`.sync`, opt-in), and flagged ``onset_uncertain`` where the evidence doubts its onset
 (:mod:`.onset`). A fire that does not persist is dropped and the fast path un-latched at once,
 so it hears the next stop; its template was frozen since the fire, so the rejected span never
