@@ -206,28 +206,48 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
     return Patch(np.stack([crop, gx, gy]), x0, y0, (H, W))
 
 
-def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Bilinear samples of the patch (value, d/dx, d/dy: shape (3, m)) at frame points ``(xs, ys)`` (px).
-
-    Also which points lie in the frame and the patch (the others sample the patch's edge).
-    """
+def _corners(p: Patch, xs: FloatArray, ys: FloatArray
+             ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The flat index of the pixel up and left of each frame point ``(xs, ys)`` (px) in the patch, the point's
+    fractions to the right and down from it, and which points lie in the frame and the patch (the others sample
+    the patch's edge)."""
     H, W = p.shape
     _, ch, cw = p.data.shape
     lx, ly = xs - p.x0, ys - p.y0
     inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
     inside &= (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
-    lx = np.clip(lx, 0.0, cw - 1.000001)
-    ly = np.clip(ly, 0.0, ch - 1.000001)
+    lx = np.minimum(np.maximum(lx, 0.0), cw - 1.000001)
+    ly = np.minimum(np.maximum(ly, 0.0), ch - 1.000001)
     ix = lx.astype(np.intp)
     iy = ly.astype(np.intp)
     fx = lx - ix
     fy = ly - iy
-    flat = p.data.reshape(3, -1)
-    i00 = iy * cw + ix
-    v00 = np.take(flat, i00, axis=1)
-    v01 = np.take(flat, i00 + 1, axis=1)
-    v10 = np.take(flat, i00 + cw, axis=1)
-    v11 = np.take(flat, i00 + cw + 1, axis=1)
+    return iy * cw + ix, fx, fy, inside
+
+
+def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Bilinear samples of the patch (value, d/dx, d/dy: shape (3, m)) at frame points ``(xs, ys)`` (px).
+
+    Also which points lie in the frame and the patch (the others sample the patch's edge).
+    """
+    i00, fx, fy, inside = _corners(p, xs, ys)
+    cw = p.data.shape[2]
+    m = i00.size
+    # the four neighbours in one gather
+    v = p.data.reshape(3, -1).take(np.concatenate([i00, i00 + 1, i00 + cw, i00 + (cw + 1)]), axis=1)
+    v00, v01, v10, v11 = v[:, :m], v[:, m : 2 * m], v[:, 2 * m : 3 * m], v[:, 3 * m :]
+    top = v00 + (v01 - v00) * fx
+    bottom = v10 + (v11 - v10) * fx
+    return top + (bottom - top) * fy, inside
+
+
+def _sample_value(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The values of :func:`_sample` only (shape (m,)): the same bilinear interpolation, not the gradients'."""
+    i00, fx, fy, inside = _corners(p, xs, ys)
+    cw = p.data.shape[2]
+    m = i00.size
+    v = p.data[0].reshape(-1).take(np.concatenate([i00, i00 + 1, i00 + cw, i00 + (cw + 1)]))
+    v00, v01, v10, v11 = v[:m], v[m : 2 * m], v[2 * m : 3 * m], v[3 * m :]
     top = v00 + (v01 - v00) * fx
     bottom = v10 + (v11 - v10) * fx
     return top + (bottom - top) * fy, inside
@@ -238,8 +258,8 @@ def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[Fl
 
     Returns the values, shape ``(m,)``, and which samples lie inside the frame.
     """
-    v, inside = _warped3(p, st, x, y, theta)
-    return v[0], inside
+    ct, s_ = math.cos(theta), math.sin(theta)
+    return _sample_value(p, ct * st.rx - s_ * st.ry + x, s_ * st.rx + ct * st.ry + y)
 
 
 def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:

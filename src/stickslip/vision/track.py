@@ -46,7 +46,7 @@ from scipy import ndimage
 
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
-from .refine import Patch, Refinement, _sample, patch, refine, steepest, warped
+from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc
 
 __all__ = [
@@ -153,25 +153,23 @@ def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
     and sampled in its patch; ``blur`` (px) keeps the ground a blurred tip spreads over out.
     """
     r = cand.ref
-    ct, st_ = math.cos(r.theta), math.sin(r.theta)
-
-    def at(ox: FloatArray, oy: FloatArray) -> FloatArray:
-        v, _ = _sample(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
-        out: FloatArray = v[0]
-        return out
-
     if t.core[0].size < 3 or t.ring[0].size < 8:
         return 0.0
-    needle = float(np.median(at(*t.core)))
-    ground = float(np.median(at(*t.ring)))
-    if abs(needle - ground) < 1e-12:
-        return 1.0
     fx, fy = t.front
     far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+    # the core, the ring and the front ahead of a blurred tip, sampled in one go
+    ox = np.concatenate([t.core[0], t.ring[0], fx[far]])
+    oy = np.concatenate([t.core[1], t.ring[1], fy[far]])
+    ct, st_ = math.cos(r.theta), math.sin(r.theta)
+    v, _ = _sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+    nc, nr = t.core[0].size, t.ring[0].size
+    needle = float(np.median(v[:nc]))
+    ground = float(np.median(v[nc : nc + nr]))
+    if abs(needle - ground) < 1e-12:
+        return 1.0
     if int(far.sum()) < 6:
         return 0.0
-    v = at(fx[far], fy[far])
-    like = (v - ground) / (needle - ground) > 0.5
+    like = (v[nc + nr :] - ground) / (needle - ground) > 0.5
     return float(np.mean(like))
 
 
@@ -183,13 +181,24 @@ def _pick_level(scores: list[float], current: int, hysteresis: float) -> int:
     return best
 
 
-def _noise_free_ncc(b: FloatArray, Iw: FloatArray, w: FloatArray, n_t2: float, n_f2: float) -> float:
-    """The weighted correlation of copy ``b`` with the frame's samples ``Iw``, divided by what the copy's and
-    the frame's own noise (variances ``n_t2``, ``n_f2`` a sample) cost it."""
+def _frame_stats(Iw: FloatArray, w: FloatArray) -> tuple[float, FloatArray, float]:
+    """The sum of the weights ``w``, and the frame's samples ``Iw`` less their weighted mean with their weighted
+    sum of squares (what :func:`_noise_free_ncc` needs of the frame, the same for every copy)."""
     sw = float(w.sum())
+    if sw <= 1e-9:
+        return sw, Iw, 0.0
     mi = float((w * Iw).sum() / sw)
     di = Iw - mi
     vi = float((w * di * di).sum())
+    return sw, di, vi
+
+
+def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: FloatArray, n_t2: float,
+                    n_f2: float) -> float:
+    """The weighted correlation of copy ``b`` with the frame's samples (:func:`_frame_stats` of them and the
+    weights ``w``), divided by what the copy's and the frame's own noise (variances ``n_t2``, ``n_f2`` a
+    sample) cost it."""
+    sw, di, vi = frame
     mt = float((w * b).sum() / sw)
     dt = b - mt
     vt = float((w * dt * dt).sum())
@@ -286,15 +295,19 @@ class TipTracker:
         """
         out = []
         w_all = self._select.w
+        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float]]] = {}  # by the frame's blur
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
-            Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
-            w = w_all * inside
-            sw = float(w.sum())
-            if sw <= 1e-9:
+            got = seen.get(f)
+            if got is None:  # the copies matched against the frame as it is share its samples
+                Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
+                w = w_all * inside
+                got = seen[f] = (w, _frame_stats(Iw, w))
+            w, stats = got
+            if stats[0] <= 1e-9:
                 out.append(-1.0)
                 continue
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
-            out.append(_noise_free_ncc(self._bank_sel[k], Iw, w, n_t2, n_f2))
+            out.append(_noise_free_ncc(self._bank_sel[k], stats, w, n_t2, n_f2))
         return out
 
     def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
