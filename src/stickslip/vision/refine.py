@@ -214,8 +214,11 @@ def _corners(p: Patch, xs: FloatArray, ys: FloatArray
     H, W = p.shape
     _, ch, cw = p.data.shape
     lx, ly = xs - p.x0, ys - p.y0
-    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
-    inside &= (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
+    inside = (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
+    if p.x0 < 0 or p.y0 < 0 or p.x0 + cw > W or p.y0 + ch > H:  # a patch not within the frame (an empty one)
+        inside &= (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+    # (a patch within the frame: a point in the patch is in the frame; lx >= 0 is exact, xs - x0 being a multiple
+    # of the ulp of xs >= x0 >= 0 no larger than xs)
     lx = np.minimum(np.maximum(lx, 0.0), cw - 1.000001)
     ly = np.minimum(np.maximum(ly, 0.0), ch - 1.000001)
     ix = lx.astype(np.intp)
@@ -280,6 +283,7 @@ def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
 _ALL = np.arange(10)
 _NO_GAIN_PLANE = np.array([0, 3, 4, 5, 6, 7, 8, 9])
 _NL = 7
+_EYE = {n: np.eye(n) for n in (_ALL.size, _NO_GAIN_PLANE.size)}
 """The linear columns before the motion's: the six brightness planes and the blur term."""
 
 
@@ -298,7 +302,7 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
         M[-1, -1] += kappa
         rhs[-1] += kappa * turn
     try:
-        sol = np.linalg.solve(M + 1e-12 * np.trace(M) * np.eye(len(cols)), rhs)
+        sol = np.linalg.solve(M + 1e-12 * M.trace() * _EYE[len(cols)], rhs)
     except np.linalg.LinAlgError:
         return None
     out = np.zeros(D.shape[1])
@@ -344,6 +348,8 @@ def refine(
     it = 0
     e = np.zeros_like(T)
     inside = np.ones(T.shape, dtype=bool)
+    D = np.empty((T.size, 10))  # the brightness planes' columns, then each iteration's blur and motion
+    D[:, :6] = basis
     for it in range(1, max_iter + 1):
         v3, inside = _warped3(image, st, tx, ty, theta)
         Iw = v3[0]
@@ -353,7 +359,8 @@ def refine(
         jac = _esm_jacobian(st, v3, theta, g, blur_c)
         # one linear least squares for the brightness planes and the motion together: apart, the planes
         # would soak up half of every edge's shift at each step, and the motion would creep
-        D = np.concatenate([basis, g * st.lap[:, None], (g * jac).T], axis=1)
+        D[:, 6] = g * st.lap
+        D[:, _NL:] = (g * jac).T
         r0 = Iw - basis @ beta_prev
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
@@ -433,7 +440,8 @@ def _tukey_weights(e: FloatArray, omega: FloatArray, scale: float | None) -> tup
 
 def _damped(dp: FloatArray, prev_dp: FloatArray | None) -> FloatArray:
     """The motion's step ``dp``, halved when it turned back on the last one (overshooting)."""
-    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
+    # the norms as numpy.linalg.norm makes them (the square root of the vector's dot with itself)
+    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.sqrt(dp.dot(dp)) * np.sqrt(prev_dp.dot(prev_dp))):
         dp *= 0.5
     return dp
 
@@ -443,7 +451,7 @@ def _moved(tx: float, ty: float, theta: float, dp: FloatArray) -> tuple[float, f
 
     The size is the tip's move plus the turn's at 20 px from the tip (px).
     """
-    dx, dy, dth = (float(v) for v in dp)
+    dx, dy, dth = dp.tolist()
     theta_new = theta - dth
     ct2, s2 = math.cos(theta_new), math.sin(theta_new)
     tx -= ct2 * dx - s2 * dy

@@ -138,9 +138,11 @@ def _region(image: FloatArray, h: int, cx: float, cy: float, radius: int) -> tup
     x0 = int(round(cx)) - radius - h
     y0 = int(round(cy)) - radius - h
     n = 2 * (radius + h) + 1
-    out = np.full((n, n), float(np.median(image[::8, ::8])))
     ys, xs = max(0, y0), max(0, x0)
     ye, xe = min(H, y0 + n), min(W, x0 + n)
+    if ys == y0 and xs == x0 and ye == y0 + n and xe == x0 + n:  # within the frame: a copy
+        return image[ys:ye, xs:xe].copy(), x0, y0
+    out = np.full((n, n), float(np.median(image[::8, ::8])))
     if ye > ys and xe > xs:
         out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
     return out, x0, y0
