@@ -47,7 +47,7 @@ from scipy import ndimage
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
-from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc
+from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 
 __all__ = [
     "Fix",
@@ -381,13 +381,14 @@ class TipTracker:
         f = p.coarse_factor
         small = _downsample(image, f)
         best: list[tuple[float, int, int, int]] = []
+        spectra = region_spectra(small)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
             tpl = self._coarse[k]
             if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
                 continue
-            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k))
+            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k), spectra)
             peaks = ncc == ndimage.maximum_filter(ncc, size=5)
             ii, jj = np.nonzero(peaks & (ncc > 0.3))
             for i, j in zip(ii.tolist(), jj.tolist(), strict=True):
