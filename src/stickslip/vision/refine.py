@@ -199,11 +199,27 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
     y1 = min(H, int(math.ceil(cy + radius)) + 4)
     if x1 - x0 < 4 or y1 - y0 < 4:
         return Patch(np.zeros((3, 4, 4)), x0, y0, (H, W))
-    crop = image[y0:y1, x0:x1]
+    data = np.empty((3, y1 - y0, x1 - x0))
+    crop = data[0]
     if smooth > 0:
-        crop = ndimage.gaussian_filter(crop, smooth, mode="nearest")
-    gy, gx = np.gradient(crop)
-    return Patch(np.stack([crop, gx, gy]), x0, y0, (H, W))
+        ndimage.gaussian_filter(image[y0:y1, x0:x1], smooth, output=crop, mode="nearest")
+    else:
+        crop[...] = image[y0:y1, x0:x1]
+    _gradient(crop, data[1], data[2])
+    return Patch(data, x0, y0, (H, W))
+
+
+def _gradient(a: FloatArray, gx: FloatArray, gy: FloatArray) -> None:
+    """``a``'s derivatives along x and y into ``gx``, ``gy`` (px⁻¹), as :func:`numpy.gradient` makes them:
+    central differences inside, one-sided at the edges (``a`` at least 2 x 2)."""
+    np.subtract(a[:, 2:], a[:, :-2], out=gx[:, 1:-1])
+    gx[:, 1:-1] /= 2.0
+    np.subtract(a[:, 1], a[:, 0], out=gx[:, 0])
+    np.subtract(a[:, -1], a[:, -2], out=gx[:, -1])
+    np.subtract(a[2:], a[:-2], out=gy[1:-1])
+    gy[1:-1] /= 2.0
+    np.subtract(a[1], a[0], out=gy[0])
+    np.subtract(a[-1], a[-2], out=gy[-1])
 
 
 def _corners(p: Patch, xs: FloatArray, ys: FloatArray
@@ -350,6 +366,7 @@ def refine(
     inside = np.ones(T.shape, dtype=bool)
     D = np.empty((T.size, 10))  # the brightness planes' columns, then each iteration's blur and motion
     D[:, :6] = basis
+    bx, by = basis[:, 4].copy(), basis[:, 5].copy()  # the position across the window, x and y: contiguous
     for it in range(1, max_iter + 1):
         v3, inside = _warped3(image, st, tx, ty, theta)
         Iw = v3[0]
@@ -364,14 +381,14 @@ def refine(
         r0 = Iw - basis @ beta_prev
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
-        sol, gain, model = _solve_positive_gain(D, omega, Iw, basis, model, kappa or 0.0, theta - theta_prior)
+        sol, gain, model = _solve_positive_gain(D, omega, Iw, bx, by, model, kappa or 0.0, theta - theta_prior)
         if sol is None or gain is None:  # contrast reversed, or no solution: not this template
             converged = False
             break
         beta_prev = sol[:6]
         g, c = float(sol[0]), float(sol[3])
         blur_c = float(sol[6]) / g  # half the blur variance the frame has beyond the template's, px²
-        e = (Iw - sol[3] - sol[4] * basis[:, 4] - sol[5] * basis[:, 5]) / gain - T - blur_c * st.lap
+        e = (Iw - sol[3] - sol[4] * bx - sol[5] * by) / gain - T - blur_c * st.lap
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             robust_w, scale = _tukey_weights(e, omega, scale)
         dp = _damped(sol[_NL:].copy(), prev_dp)
@@ -405,22 +422,23 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
 
 
 def _solve_positive_gain(
-    D: FloatArray, omega: FloatArray, Iw: FloatArray, basis: FloatArray, model: NDArray[np.intp] | None,
-    kappa: float, turn: float,
+    D: FloatArray, omega: FloatArray, Iw: FloatArray, bx: FloatArray, by: FloatArray,
+    model: NDArray[np.intp] | None, kappa: float, turn: float,
 ) -> tuple[FloatArray | None, FloatArray | None, NDArray[np.intp] | None]:
     """The joint solution (:func:`_joint`), its contrast across the window and the columns used.
 
     A contrast plane too steep for this window (the contrast below a fifth of its centre's
     somewhere): a plain contrast, and that for good (``model``: a model that changed back
     and forth between iterations would never settle). ``(None, None, model)`` when no
-    solution has a positive contrast.
+    solution has a positive contrast. ``bx``, ``by``: each pixel's place across the window
+    (the basis's x and y columns).
     """
     choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
     for cols in choices:  # once plain, plain to the end
         sol = _joint(D, omega, Iw, cols, kappa, turn)
         if sol is None:
             break
-        gain = sol[0] + sol[1] * basis[:, 4] + sol[2] * basis[:, 5]
+        gain = sol[0] + sol[1] * bx + sol[2] * by
         if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
             return sol, gain, cols
     return None, None, model
