@@ -39,7 +39,7 @@ from vision_own import own_benchmark  # noqa: E402
 from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.vision.frame import as_image  # noqa: E402
-from stickslip.vision.track import Fix, TipTracker  # noqa: E402
+from stickslip.vision.track import TipTracker  # noqa: E402
 
 BEFORE = "e5a6c35"
 """The last commit with the tracker as it was before the speed-ups."""
@@ -79,7 +79,7 @@ def run(tracker_cls: Any, images: list[Any], tip: tuple[float, float]) -> tuple[
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = sys.argv[1:] if argv is None else argv
+    args = list(argv or [])
     rev = BEFORE
     if "--before" in args:
         i = args.index("--before")
@@ -128,4 +128,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))

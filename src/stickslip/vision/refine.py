@@ -378,8 +378,8 @@ def refine(
         # would soak up half of every edge's shift at each step, and the motion would creep
         D[:, 6] = g * st.lap
         D[:, _NL:] = (g * jac).T
-        r0 = Iw - basis @ beta_prev
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
+            r0 = Iw - basis @ beta_prev
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
         sol, gain, model = _solve_positive_gain(D, omega, Iw, bx, by, model, kappa or 0.0, theta - theta_prior)
         if sol is None or gain is None:  # contrast reversed, or no solution: not this template
@@ -416,9 +416,23 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
     model's are the template's plus the blur term's (``blur_c``, px²).
     """
     ct, st_ = math.cos(theta), math.sin(theta)
-    fgx = (v3[1] * ct + v3[2] * st_) / g
-    fgy = (-v3[1] * st_ + v3[2] * ct) / g
-    return np.asarray(0.5 * (st.sd + blur_c * st.sd_lap + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx])))
+    f = np.empty_like(st.sd)  # the frame's: fgx, fgy and the turn's, made in place
+    fgx, fgy, fth = f[0], f[1], f[2]
+    np.multiply(v3[1], ct, out=fgx)
+    fgx += v3[2] * st_
+    fgx /= g
+    np.negative(v3[1], out=fgy)
+    fgy *= st_
+    fgy += v3[2] * ct
+    fgy /= g
+    np.negative(fgx, out=fth)
+    fth *= st.ry
+    fth += fgy * st.rx
+    model = blur_c * st.sd_lap
+    model += st.sd
+    model += f
+    model *= 0.5
+    return model
 
 
 def _solve_positive_gain(
