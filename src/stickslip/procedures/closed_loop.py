@@ -6,9 +6,12 @@ image, so the tracker follows it from frame to frame). After each leg the camera
 grabbed, the tip tracked (:class:`stickslip.vision.track.TipTracker`) and the fix turned
 into joint observations through the image Jacobian (:func:`stickslip.vision.jacobian.joint_observation`):
 
-* the image Jacobian at the kept pose ``q_k`` is the kinematic one, ``G = (P / s) J_tip(q_k)``
-  (:func:`stickslip.vision.view.base_to_image`, :func:`stickslip.kinematics.jacobian`);
-* the tip is expected at ``u_k = u_0 + (P / s) (tip(q_k) - tip(q_0))``, ``u_0`` the fix at
+* the image Jacobian at the kept pose ``q_k`` is ``G = A J_tip(q_k)``
+  (:func:`stickslip.kinematics.jacobian`), ``A`` the image map (:func:`image_map`): the
+  kinematic ``P / s`` of the assumed view (:func:`stickslip.vision.view.base_to_image`),
+  or the camera fitted to the image Jacobian ``camera calibrate`` measured
+  (:attr:`CameraLoop.jacobian`, :meth:`stickslip.vision.jacobian.MeasuredJacobian.image_map`);
+* the tip is expected at ``u_k = u_0 + A (tip(q_k) - tip(q_0))``, ``u_0`` the fix at
   the start ``q_0``; the fix's difference from ``u_k`` gives the joints moved in the leg
   (one joint: ``joint_observation``; several: the same least squares over their columns);
 * each observation goes into the joint's Kalman filter as ``stickslip observe`` does
@@ -81,6 +84,7 @@ from .reach import ReachRequest, drive_reach, joint_path, referenced_state
 __all__ = [
     "CameraLoop",
     "JogEyes",
+    "image_map",
     "Look",
     "LoopResult",
     "move_seen",
