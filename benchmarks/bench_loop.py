@@ -151,7 +151,8 @@ def run(camera: str, off: float, kind: str, by: tuple[float, float, float] | flo
                 res = move_seen(st, MoveRequest(DEV, 3, by=by), cal, loop)
         except ValueError as e:  # refused before anything moved (the tip not seen at the start)
             STOPS.append(f"{camera}, {kind}: refused before moving: {e}")
-            return [camera[:30] + label, f"{off:.1f}", kind, f"{miss * 1e6:5.1f}", f"no ({len(STOPS)})", "-", "0", "-", "-"]
+            return [camera[:30] + label, f"{off:.1f}", kind, f"{miss * 1e6:5.1f}", f"no ({len(STOPS)})", "-", "0",
+                    "-", "-"]
         dt = time.perf_counter() - t
     true_miss = res.sim_true_error if res.sim_true_error is not None else math.nan
     what = f"{kind} {length * 1e6:.0f}"
