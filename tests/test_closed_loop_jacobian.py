@@ -199,6 +199,9 @@ def test_a_file_of_another_camera_or_pixel_is_refused_in_one_line():
         m.check_camera("peercam://?pixel=1um&password=x", 0.5e-6)
     with pytest.raises(JacobianError, match="the camera's unknown"):
         m.check_camera("peercam://?pixel=1um&password=y", None)
+    m.check_base(POSE._replace(q1=1.0, theta=math.radians(0.05)))  # the joints may move; the base may not turn
+    with pytest.raises(JacobianError, match="base's theta at 0 deg, the arm's is 5 deg"):
+        m.check_base(POSE._replace(theta=math.radians(5.0)))
 
 
 @pytest.mark.parametrize(
@@ -240,7 +243,13 @@ def test_the_options_refuse_a_wrong_file_before_anything_moves(cals, tmp_path):
     r = _run(["reach", "-d", DEV, "-c", yesterday, "--by", "0,10um,0", "--camera", CAM, "--camera-tip", "150,128",
               "--camera-calibration", str(tmp_path / "missing.json")])
     assert r.exit_code == 2 and "no such camera calibration file" in r.output
-    r = _run(["where", "-d", DEV, "--json"])
+    today, _ = cals
+    r = _run(["camera", "calibrate", "-d", DEV, "--camera", CAM, "--tip", "150,128", "-c", today])
+    assert r.exit_code == 2 and "--calibration goes with --jacobian" in r.output
+    r = _run(["camera", "calibrate", "-d", DEV, "--camera", CAM, "--tip", "150,128", "-c", today, "--jacobian",
+              str(tmp_path)])
+    assert r.exit_code == 2 and "not a file" in r.output
+    r = _run(["where", "-d", DEV, "--json"])  # nothing moved
     assert all(j["q"] == pytest.approx(q) for j, q in zip(sorted(json.loads(r.stdout)["joints"],
                                                                   key=lambda j: j["joint"]),
                                                            (0.0, -math.pi / 2, 0.0), strict=True))

@@ -523,6 +523,7 @@ def _open(
             raise ValueError(f"the camera {loop.camera} does not know its pixel size: give pixel= in its URL")
         if loop.jacobian is not None:
             loop.jacobian.check_camera(loop.camera, cam.info.pixel_size_m)
+            loop.jacobian.check_base(state.pose)
         tip = loop.tip
         if tip is None:
             kept = journal()

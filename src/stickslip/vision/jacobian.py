@@ -388,6 +388,9 @@ JACOBIAN_VERSION = 1
 PIXEL_SIZE_MATCH = 1e-6
 """Largest relative difference between the file's pixel size and the camera's."""
 
+BASE_TILT_MATCH = math.radians(0.1)
+"""Largest difference between the base tilt (theta, psi) the Jacobian was measured at and the arm's now, rad."""
+
 
 @dataclass(frozen=True)
 class MeasuredDirection:
@@ -494,6 +497,19 @@ class MeasuredJacobian:
                 f"the camera calibration's pixel is {self.pixel_size_m * 1e6:.6g} µm, the camera's {got}: "
                 "measure it again at this magnification"
             )
+
+    def check_base(self, pose: kin.Pose) -> None:
+        """:class:`JacobianError` (one line) unless the arm's base is tilted as it was when measured.
+
+        ``A`` is the camera seen from the base: a base tilted otherwise turns it.
+        """
+        for name in ("theta", "psi"):
+            was, now = getattr(self.pose, name), getattr(pose, name)
+            if abs(was - now) > BASE_TILT_MATCH:
+                raise JacobianError(
+                    f"the camera calibration was measured with the base's {name} at {math.degrees(was):.3g} deg, "
+                    f"the arm's is {math.degrees(now):.3g} deg: measure it again in this set-up"
+                )
 
     def to_dict(self) -> dict[str, object]:
         """The file's content (SI units, px), ``"version"`` first."""
