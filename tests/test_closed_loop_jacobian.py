@@ -103,6 +103,8 @@ def test_a_tilted_microscope_misleads_the_kinematic_loop_and_not_the_measured_on
     r = _run(["camera", "calibrate", "-d", DEV, "--camera", CAM, "--tip", _true_tip(CAM), "--joints", "3",
               "--max-steps", "40", "-c", today, "--jacobian", str(jac), "--json"])
     assert r.exit_code == 0, r.output
+    vs = json.loads(r.stdout)["jacobian"]["against_view"]["3"]  # against straight down: shortened, not turned
+    assert vs["length_ratio"] == pytest.approx(math.cos(math.radians(TILT)), abs=0.01) and vs["angle_deg"] < 0.5
     stored = json.loads(jac.read_text())
     assert stored["version"] == JACOBIAN_VERSION and stored["camera"] == CAM
     assert [(d["joint"], d["direction"]) for d in stored["directions"]] == [(3, "+"), (3, "-")]

@@ -261,19 +261,38 @@ def calibrate_cmd(
     if output is not None:
         with user_errors():
             write_step_sizes(output, list(result.rows))
+    against: dict[int, tuple[float, float]] = {}
     if jacobian is not None and steps_cal is not None:
         from ..vision.jacobian import measured_jacobian
+        from ..vision.view import base_to_image
 
         fits = [f for jr in result.joints if jr.refused is None for f in jr.fits]
         if not result.pixel_size_m:
             fail("--jacobian needs the camera's pixel size (pixel= in its URL): nothing written")
         with user_errors():
-            measured_jacobian(fits, result.pose, result.tip, steps_cal, camera,
-                              float(result.pixel_size_m or 0.0)).save(jacobian)
+            measured = measured_jacobian(fits, result.pose, result.tip, steps_cal, camera, float(result.pixel_size_m))
+            measured.save(jacobian)
+        pose = result.pose
+        against = measured.against(base_to_image(view, float(result.pixel_size_m), pose.theta, pose.psi))
     if json_out:
-        print_json({**result.as_dict(), "device": key, "output": str(output) if output else None})
+        extra: dict[str, object] = {}
+        if jacobian is not None:
+            extra["jacobian"] = {
+                "file": str(jacobian),
+                "against_view": {str(j): {"length_ratio": r if math.isfinite(r) else None,
+                                          "angle_deg": a if math.isfinite(a) else None}
+                                 for j, (r, a) in against.items()},
+            }
+        print_json({**result.as_dict(), "device": key, "output": str(output) if output else None, **extra})
         return
     _print_calibration(result, output)
+    if jacobian is not None:
+        console.print(f"image Jacobian written to {jacobian} (move, reach, jog --camera-calibration)",
+                      highlight=False)
+        for j, (r, a) in against.items():
+            seen = (f"{100 * r:.1f} % of the stated view's length, turned {a:.1f} deg" if math.isfinite(r)
+                    else "seen where the stated view sees nothing")
+            console.print(f"  joint {j}: {seen}", highlight=False)
 
 
 def _joint_order(joints: str) -> list[int]:

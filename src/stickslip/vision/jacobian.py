@@ -482,6 +482,27 @@ class MeasuredJacobian:
         G = np.array([cols[j] for j in joints], dtype=float).T
         return np.asarray(A0 + (G - A0 @ Jc) @ np.linalg.pinv(Jc), dtype=float)
 
+    def against(
+        self, fallback: FloatArray, geometry: kin.Geometry = kin.DEFAULT_GEOMETRY
+    ) -> dict[int, tuple[float, float]]:
+        """``{joint: (length ratio, angle deg)}``: each measured column against the assumed view's at the pose.
+
+        ``fallback`` is the assumed view's ``P / s`` (px per m). A ratio other than 1 is a
+        tilted view or steps off the calibration by that much (the camera cannot tell which);
+        an angle is a turned or tilted view. A joint the view does not see has ratio ``inf``.
+        """
+        J = np.asarray(fallback, dtype=float) @ kin.jacobian((self.pose.q1, self.pose.q2, self.pose.q3), geometry)
+        out: dict[int, tuple[float, float]] = {}
+        for j, g in sorted(self.px_per_unit().items()):
+            c = J[:, j - 1]
+            gn, cn = math.hypot(*g), float(np.linalg.norm(c))
+            if cn <= 1e-9 * gn:
+                out[j] = (math.inf, math.nan)
+                continue
+            cos = float(np.dot(g, c)) / (gn * cn)
+            out[j] = (gn / cn, math.degrees(math.acos(min(1.0, max(-1.0, cos)))))
+        return out
+
     def check_camera(self, url: str, pixel_size_m: float | None) -> None:
         """:class:`JacobianError` (one line) unless ``url`` and ``pixel_size_m`` are the file's camera's."""
         from ..devices.base import redact_url
