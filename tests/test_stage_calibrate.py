@@ -27,7 +27,8 @@ runner = CliRunner()
 DAY = "2026-11-22"
 STAGE = {j: JointSpec(j, "prismatic", -0.01, 0.01, "m", step_model="constant") for j in (1, 2, 3)}
 # the walk's true mean steps, m: every joint and direction its own
-TRUE = {(1, "+"): 1.00e-6, (1, "-"): 0.92e-6, (2, "+"): 0.45e-6, (2, "-"): 0.50e-6, (3, "+"): 1.30e-6, (3, "-"): 1.21e-6}
+TRUE = {(1, "+"): 1.00e-6, (1, "-"): 0.92e-6, (2, "+"): 0.45e-6, (2, "-"): 0.50e-6,
+        (3, "+"): 1.30e-6, (3, "-"): 1.21e-6}
 
 RIG = """\
 [[arm]]
@@ -144,7 +145,8 @@ def test_the_command_line_refuses_what_a_stage_calibration_cannot_use(tmp_path):
     cases = {
         "joint4.csv": ([*walk, f"{DAY},4,+,0,0,0,0,0,0.0,0.001,1000"], ["joint4.csv:14: unknown joint '4'"]),
         "oneway.csv": ([ln for ln in walk if ",3,-," not in ln], ["no traverse of joint 3- for arm 'stack'"]),
-        "beyond.csv": ([*walk, f"{DAY},3,-,0,0,0,0,0,0.0,-0.011,1000"], ["beyond.csv:14: end = -0.011 m is outside joint 3's range"]),
+        "beyond.csv": ([*walk, f"{DAY},3,-,0,0,0,0,0,0.0,-0.011,1000"],
+                       ["beyond.csv:14: end = -0.011 m is outside joint 3's range"]),
     }
     for name, (lines, words) in cases.items():
         (tmp_path / name).write_text("\n".join(lines) + "\n", encoding="utf-8")

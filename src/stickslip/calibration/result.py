@@ -20,7 +20,6 @@ if TYPE_CHECKING:
 
 from .. import kinematics as kin
 from .. import plotting, records
-from ..records import finite_number
 from ..clock import day_label_problem, now_utc
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
@@ -33,6 +32,7 @@ from ..models import (
     direction_label,
 )
 from ..models.families import FamilyParams
+from ..records import finite_number
 from ..units import param_scale, step_scale
 from .errormodel import Predictive
 
@@ -548,10 +548,10 @@ class Calibration:
             for d in DIRECTIONS:
                 if (j, d) in self.constant_steps:
                     scale, unit = (1e9, "nm") if kind == "prismatic" else step_scale(j)
-                    se = self.constant_stderr.get((j, d))
-                    pm = f" ± {se * scale:.3g}" if se is not None else ""
-                    n = self.constant_traverses.get((j, d))
-                    of = f" ({n} traverse{'s' if n != 1 else ''})" if n is not None else ""
+                    cse = self.constant_stderr.get((j, d))
+                    pm = f" ± {cse * scale:.3g}" if cse is not None else ""
+                    count = self.constant_traverses.get((j, d))
+                    of = f" ({count} traverse{'s' if count != 1 else ''})" if count is not None else ""
                     what = "mean step" if not self.models else "constant-step comparator"
                     lines.append(f"  {what} {d}: {self.constant_steps[(j, d)] * scale:.5g}{pm} {unit}{of}")
         if self.conditions.recorded:
@@ -661,7 +661,9 @@ def _constant_records(
         unit = c.get("unit")
         if unit is not None:
             if unit not in ("m", "rad"):
-                raise ValueError(f"constant step of joint {key[0]}{key[1]}: unit must be 'm' or 'rad', got {unit!r:.40}")
+                raise ValueError(
+                    f"constant step of joint {key[0]}{key[1]}: unit must be 'm' or 'rad', got {unit!r:.40}"
+                )
             kind = "prismatic" if unit == "m" else "rotary"
             if kinds.setdefault(key[0], kind) != kind:
                 raise ValueError(f"joint {key[0]}: its constant steps are labelled both m and rad")
