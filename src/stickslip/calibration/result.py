@@ -347,11 +347,7 @@ class Calibration:
     """``(joint, direction) ->`` how many traverses the constant step was averaged from, where recorded."""
 
     def __post_init__(self) -> None:
-        for j, k in list(self.kinds.items()):
-            if k not in ("prismatic", "rotary"):
-                raise ValueError(f"joint {j}: kind must be 'prismatic' or 'rotary', got {k!r}")
-        # only what differs from the MM3A's is kept, so that a file read back equals the calibration written
-        self.kinds = {j: k for j, k in sorted(self.kinds.items()) if _mm3a_kind(j) != k}
+        self.kinds = _differing_kinds(self.kinds)
 
     # -- access
     @property
@@ -436,14 +432,7 @@ class Calibration:
             "created": self.created,
             "units": "SI: prismatic steps in m, rotary steps in rad, q3 in m; b is dimensionless",
             "parameters": [p.to_dict() for p in self.parameters() if not _is_family(self, p)],
-            "constant_steps": [
-                {
-                    "joint": j, "direction": d, "value": v, "unit": self.unit(j),
-                    **({"stderr": self.constant_stderr[(j, d)]} if (j, d) in self.constant_stderr else {}),
-                    **({"traverses": self.constant_traverses[(j, d)]} if (j, d) in self.constant_traverses else {}),
-                }
-                for (j, d), v in sorted(self.constant_steps.items())
-            ],
+            "constant_steps": [_constant_record(self, j, d) for j, d in sorted(self.constant_steps)],
             "provenance": self.provenance.to_dict(),
             "conditions": self.conditions.to_dict(),
         }
@@ -545,15 +534,7 @@ class Calibration:
                 where = f" @ q3 = {rec.q3 * 1e3:g} mm" if rec.q3 is not None else ""
                 se = f" ± {rec.stderr * scale:.3g}" if rec.stderr is not None else ""
                 lines.append(f"  {rec.name}{rec.direction}{where}: {rec.value * scale:.5g}{se} {unit}".rstrip())
-            for d in DIRECTIONS:
-                if (j, d) in self.constant_steps:
-                    scale, unit = (1e9, "nm") if kind == "prismatic" else step_scale(j)
-                    cse = self.constant_stderr.get((j, d))
-                    pm = f" ± {cse * scale:.3g}" if cse is not None else ""
-                    count = self.constant_traverses.get((j, d))
-                    of = f" ({count} traverse{'s' if count != 1 else ''})" if count is not None else ""
-                    what = "mean step" if not self.models else "constant-step comparator"
-                    lines.append(f"  {what} {d}: {self.constant_steps[(j, d)] * scale:.5g}{pm} {unit}{of}")
+            lines += [_constant_line(self, j, d) for d in DIRECTIONS if (j, d) in self.constant_steps]
         if self.conditions.recorded:
             c = self.conditions
             parts = [
@@ -636,6 +617,35 @@ class Calibration:
         ax.set_title(f"joint {joint}, calibration of {self.day} ({self.method})")
         ax.legend(fontsize="small")
         return ax
+
+
+def _differing_kinds(kinds: dict[int, str]) -> dict[int, str]:
+    """``kinds`` checked, keeping what differs from the MM3A's (so that a file read back equals the one written)."""
+    for j, k in kinds.items():
+        if k not in ("prismatic", "rotary"):
+            raise ValueError(f"joint {j}: kind must be 'prismatic' or 'rotary', got {k!r}")
+    return {j: k for j, k in sorted(kinds.items()) if _mm3a_kind(j) != k}
+
+
+def _constant_record(cal: Calibration, j: int, d: str) -> dict[str, object]:
+    """A ``constant_steps`` entry of the file: value, unit (from the joint's kind), standard error and count."""
+    out: dict[str, object] = {"joint": j, "direction": d, "value": cal.constant_steps[(j, d)], "unit": cal.unit(j)}
+    if (j, d) in cal.constant_stderr:
+        out["stderr"] = cal.constant_stderr[(j, d)]
+    if (j, d) in cal.constant_traverses:
+        out["traverses"] = cal.constant_traverses[(j, d)]
+    return out
+
+
+def _constant_line(cal: Calibration, j: int, d: str) -> str:
+    """The report's line of a constant step (nm or µrad), with its standard error and count where known."""
+    scale, unit = (1e9, "nm") if cal.kind(j) == "prismatic" else step_scale(j)
+    se = cal.constant_stderr.get((j, d))
+    pm = f" ± {se * scale:.3g}" if se is not None else ""
+    count = cal.constant_traverses.get((j, d))
+    of = f" ({count} traverse{'s' if count != 1 else ''})" if count is not None else ""
+    what = "mean step" if not cal.models else "constant-step comparator"
+    return f"  {what} {d}: {cal.constant_steps[(j, d)] * scale:.5g}{pm} {unit}{of}"
 
 
 def _mm3a_kind(joint: int) -> str:
