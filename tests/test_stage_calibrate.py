@@ -11,6 +11,8 @@ import json
 import math
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from stage_walk import StageTruth, table
 from typer.testing import CliRunner
 
@@ -70,6 +72,20 @@ def test_the_mean_step_is_the_length_weighted_mean_of_the_traverses():
     assert m.stderr == pytest.approx(se, rel=1e-12) and (m.count, m.length) == (2, pytest.approx(0.015))
     one = mean_step([_t(2, "-", 0.004, -0.004, 16_000)])
     assert (one.value, one.stderr, one.count) == (pytest.approx(0.5e-6, rel=1e-12), None, 1)
+
+
+@settings(max_examples=60)
+@given(st.lists(st.tuples(st.floats(1e-4, 0.02), st.integers(100, 50_000)), min_size=2, max_size=12))
+def test_the_mean_step_lies_among_the_traverses_and_a_doubled_table_keeps_it(rows):
+    traverses = [_t(3, "+", -0.01, length - 0.01, n) for length, n in rows]
+    m = mean_step(traverses)
+    gammas = [t.gamma for t in traverses]
+    assert min(gammas) * (1 - 1e-12) <= m.value <= max(gammas) * (1 + 1e-12)
+    # the same traverses twice: the same mean; se^2 goes from n/(n-1) S/W^2 to 2n/(2n-1) 2S/(2W)^2
+    twice = mean_step(traverses * 2)
+    n = len(traverses)
+    assert twice.value == pytest.approx(m.value, rel=1e-12) and twice.count == 2 * n
+    assert twice.stderr == pytest.approx(m.stderr * math.sqrt((n - 1) / (2 * n - 1)), rel=1e-9, abs=1e-30)
 
 
 def test_a_stage_file_is_labelled_by_its_joints_kinds_and_plans_the_same_after_a_round_trip(tmp_path):
