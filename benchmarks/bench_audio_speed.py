@@ -10,7 +10,11 @@ equal first:
 * the sub-band levels of live blocks of a few frames (``SubbandLevels``): the window, the bins'
   starts and the empty sub-bands made once per detector, not per block;
 * the guard's dead-block test (``block_problem``) on float32 blocks: one pass over the block
-  in its own precision, not a float64 copy and three passes.
+  in its own precision, not a float64 copy and three passes;
+* the guard's stepping check (``SignalGuard`` with a step rate) on live blocks of 1024: windows
+  of whatever the blocks add up to (12 288 samples, an envelope FFT of 12 287 = 11 x 1117)
+  before, windows of a length whose FFT is fast (12 001) after, the rest carried. The windows
+  differ, so the check here is the verdict (stepping heard in every window), not bit-equality.
 
 The whole detector's speed is in ``bench_audio.py`` (its real-time table). On a shared,
 loaded machine the ratios swing by factors: run it on a quiet one.
@@ -27,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from stickslip.audio.features.spectra import SubbandLevels, frame_power_spectra, window
-from stickslip.audio.sources.guard import GUARD, block_problem
+from stickslip.audio.sources.guard import GUARD, SignalGuard, block_problem, step_line_db
 
 
 def _old_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray:
@@ -78,6 +82,42 @@ def _old_block_problem(block: Any, floor: float = GUARD.floor) -> str | None:
     return None
 
 
+class _OldWindowGuard(SignalGuard):
+    """The stepping check as it was: a window of whatever the blocks added up to, nothing carried."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.lines: list[float] = []
+
+    def _check_stepping(self, x: np.ndarray) -> None:
+        assert self.step_hz is not None
+        self._window.append(np.asarray(x, dtype=np.float64))
+        self._window_n += x.shape[0]
+        if self._window_n < int(self.window_s * self.sample_rate):
+            return
+        w = np.concatenate(self._window)
+        self._window, self._window_n = [], 0
+        self.lines.append(step_line_db(w, self.sample_rate, self.step_hz))
+
+
+def _guard_lines(guard: SignalGuard, blocks: list[np.ndarray]) -> list[float]:
+    """The step-rate line of every window ``guard`` judged over ``blocks``, dB."""
+    seen: list[float] = []
+    if isinstance(guard, _OldWindowGuard):
+        guard.lines = seen
+    else:
+        judge = guard._judge
+
+        def spy(w: np.ndarray) -> None:
+            seen.append(step_line_db(w, guard.sample_rate, float(guard.step_hz or 0.0)))
+            judge(w)
+
+        guard._judge = spy  # type: ignore[method-assign]
+    for b in blocks:
+        guard.check(b)
+    return seen
+
+
 def side_by_side(name: str, a: Callable[[], Any], b: Callable[[], Any], turns: int = 15) -> float:
     """Median time of ``a`` (before) over ``b`` (after), run in turns; prints and returns the ratio."""
     ta, tb = [], []
@@ -121,6 +161,19 @@ def main() -> None:
         "dead-block test, 200 float32 blocks of 4096",
         lambda: [_old_block_problem(b) for b in many],
         lambda: [block_problem(b) for b in many],
+    )
+    sr, n = 48_000, 10 * 48_000  # 10 s of clicks at 1 kHz over noise, as the guard hears a traverse
+    clicks = 0.02 * rng.standard_normal(n)
+    clicks[:: sr // 1000] += 0.5
+    live = [clicks[i : i + 1024].astype(np.float32) for i in range(0, n - 1023, 1024)]
+    old_lines = _guard_lines(_OldWindowGuard(sr, step_hz=1000.0), live)
+    new_lines = _guard_lines(SignalGuard(sr, step_hz=1000.0), live)
+    assert len(old_lines) == len(new_lines) == 39, (len(old_lines), len(new_lines))
+    assert min(old_lines) > GUARD.min_line_db and min(new_lines) > GUARD.min_line_db, "stepping not heard"
+    side_by_side(
+        "guard's stepping check, 10 s in live blocks of 1024",
+        lambda: [g.check(b) for g in [_OldWindowGuard(sr, step_hz=1000.0)] for b in live],
+        lambda: [g.check(b) for g in [SignalGuard(sr, step_hz=1000.0)] for b in live],
     )
 
 
