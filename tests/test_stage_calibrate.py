@@ -177,3 +177,5 @@ def test_the_command_line_refuses_what_a_stage_calibration_cannot_use(tmp_path):
     assert r.exit_code == 2 and "from its traverses alone" in r.output, r.output
     r = run("calibrate", tmp_path / "walk.csv", "--arm", "stack")
     assert r.exit_code == 2 and "give --rig FILE too" in r.output, r.output
+    r = run("calibrate", tmp_path / "walk.csv", "--rig", rig, "--arm", "stack", "--db", tmp_path / "x.db")
+    assert r.exit_code == 2 and "leave out --db" in r.output and not (tmp_path / "x.db").exists(), r.output

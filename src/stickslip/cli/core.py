@@ -245,6 +245,8 @@ def calibrate_cmd(
                  "--model are for an MM3A")
         if measurements is None:
             fail("give the stage's measurement table (MEASUREMENTS.csv)")
+        if db is not None:
+            fail("a stage's calibration is kept in its file (-o), not in a database: leave out --db")
         _calibrate_stage(measurements, rig_file, arm, output, day, device, frequency, amplitude, temperature,
                          int(max_table_mb * 1024 * 1024), json_out)
         return
