@@ -227,17 +227,7 @@ def calibrate_cmd(
     order = _joint_order(joints)
     view = _view(view_tilt, view_azimuth, view_roll)
     label = day if day is not None else today_label()
-    steps_cal = None
-    if jacobian is not None:
-        from ..calibration import Calibration
-        from ..records import writable_target
-        from ._common import calibration_file
-
-        with user_errors():
-            writable_target(jacobian, "--jacobian")
-            steps_cal = Calibration.load(calibration_file(calibration))
-    elif calibration is not None:
-        fail("--calibration goes with --jacobian (it scales the measured image Jacobian)")
+    steps_cal = _jacobian_steps(jacobian, calibration)
     with user_errors():
         key = device_key(url)
     with open_store(db) as store, user_errors(DeviceBusy):
@@ -263,17 +253,7 @@ def calibrate_cmd(
             write_step_sizes(output, list(result.rows))
     against: dict[int, tuple[float, float]] = {}
     if jacobian is not None and steps_cal is not None:
-        from ..vision.jacobian import measured_jacobian
-        from ..vision.view import base_to_image
-
-        fits = [f for jr in result.joints if jr.refused is None for f in jr.fits]
-        if not result.pixel_size_m:
-            fail("--jacobian needs the camera's pixel size (pixel= in its URL): nothing written")
-        with user_errors():
-            measured = measured_jacobian(fits, result.pose, result.tip, steps_cal, camera, float(result.pixel_size_m))
-            measured.save(jacobian)
-        pose = result.pose
-        against = measured.against(base_to_image(view, float(result.pixel_size_m), pose.theta, pose.psi))
+        against = _write_jacobian(result, steps_cal, camera, jacobian, view)
     if json_out:
         extra: dict[str, object] = {}
         if jacobian is not None:
@@ -287,12 +267,47 @@ def calibrate_cmd(
         return
     _print_calibration(result, output)
     if jacobian is not None:
-        console.print(f"image Jacobian written to {jacobian} (move, reach, jog --camera-calibration)",
-                      highlight=False)
-        for j, (r, a) in against.items():
-            seen = (f"{100 * r:.1f} % of the stated view's length, turned {a:.1f} deg" if math.isfinite(r)
-                    else "seen where the stated view sees nothing")
-            console.print(f"  joint {j}: {seen}", highlight=False)
+        _print_against(jacobian, against)
+
+
+def _jacobian_steps(jacobian: Path | None, calibration: Path | None) -> Any:
+    """The step calibration that scales ``--jacobian`` (``-c``), with the output path checked first (or ``None``)."""
+    if jacobian is None:
+        if calibration is not None:
+            fail("--calibration goes with --jacobian (it scales the measured image Jacobian)")
+        return None
+    from ..calibration import Calibration
+    from ..records import writable_target
+    from ._common import calibration_file
+
+    with user_errors():
+        writable_target(jacobian, "--jacobian")
+        return Calibration.load(calibration_file(calibration))
+
+
+def _write_jacobian(
+    result: CameraCalibrationResult, steps_cal: Any, camera: str, jacobian: Path, view: Any
+) -> dict[int, tuple[float, float]]:
+    """Write the measured image Jacobian; each joint's motion against the stated view's (length ratio, angle)."""
+    from ..vision.jacobian import measured_jacobian
+    from ..vision.view import base_to_image
+
+    fits = [f for jr in result.joints if jr.refused is None for f in jr.fits]
+    if not result.pixel_size_m:
+        fail("--jacobian needs the camera's pixel size (pixel= in its URL): nothing written")
+    with user_errors():
+        measured = measured_jacobian(fits, result.pose, result.tip, steps_cal, camera, float(result.pixel_size_m))
+        measured.save(jacobian)
+    pose = result.pose
+    return measured.against(base_to_image(view, float(result.pixel_size_m), pose.theta, pose.psi))
+
+
+def _print_against(jacobian: Path, against: dict[int, tuple[float, float]]) -> None:
+    console.print(f"image Jacobian written to {jacobian} (move, reach, jog --camera-calibration)", highlight=False)
+    for j, (r, a) in against.items():
+        seen = (f"{100 * r:.1f} % of the stated view's length, turned {a:.1f} deg" if math.isfinite(r)
+                else "seen where the stated view sees nothing")
+        console.print(f"  joint {j}: {seen}", highlight=False)
 
 
 def _joint_order(joints: str) -> list[int]:

@@ -240,13 +240,8 @@ def calibrate_cmd(
     if not (math.isfinite(max_table_mb) and max_table_mb > 0):
         fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
     if rig_file is not None:
-        if prior is not None or step_sizes is not None or method != "auto" or model != "auto":
-            fail("a stage (--rig) is calibrated from its traverses alone: --prior, --step-sizes, --method and "
-                 "--model are for an MM3A")
-        if measurements is None:
-            fail("give the stage's measurement table (MEASUREMENTS.csv)")
-        if db is not None:
-            fail("a stage's calibration is kept in its file (-o), not in a database: leave out --db")
+        mm3a_only = prior is not None or step_sizes is not None or method != "auto" or model != "auto"
+        measurements = _stage_table(measurements, mm3a_only, db)
         _calibrate_stage(measurements, rig_file, arm, output, day, device, frequency, amplitude, temperature,
                          int(max_table_mb * 1024 * 1024), json_out)
         return
@@ -292,6 +287,18 @@ def calibrate_cmd(
         say(f"saved to {output}")
     if kept is not None:
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
+
+
+def _stage_table(measurements: Path | None, mm3a_only: bool, db: str | None) -> Path:
+    """The stage's table (``calibrate --rig``), refusing what only an MM3A's calibration uses."""
+    if mm3a_only:
+        fail("a stage (--rig) is calibrated from its traverses alone: --prior, --step-sizes, --method and "
+             "--model are for an MM3A")
+    if measurements is None:
+        fail("give the stage's measurement table (MEASUREMENTS.csv)")
+    if db is not None:
+        fail("a stage's calibration is kept in its file (-o), not in a database: leave out --db")
+    return measurements
 
 
 def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output: Path | None, day: str | None,
