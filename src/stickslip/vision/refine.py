@@ -310,7 +310,8 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
     ``kappa`` weighs a prior that pulls the turn's step towards ``turn`` (the current turn's
     distance from its prior). The columns left out are 0 in the result.
     """
-    Dc = D[:, cols]
+    # D is column-major, as indexing its columns makes them: the products come out the same either way
+    Dc = D if cols is _ALL else D[:, cols]
     Dw = Dc * w[:, None]
     M = Dw.T @ Dc
     rhs = Dw.T @ y
@@ -364,7 +365,8 @@ def refine(
     it = 0
     e = np.zeros_like(T)
     inside = np.ones(T.shape, dtype=bool)
-    D = np.empty((T.size, 10))  # the brightness planes' columns, then each iteration's blur and motion
+    # the brightness planes' columns, then each iteration's blur and motion; column-major (see _joint)
+    D = np.empty((T.size, 10), order="F")
     D[:, :6] = basis
     bx, by = basis[:, 4].copy(), basis[:, 5].copy()  # the position across the window, x and y: contiguous
     for it in range(1, max_iter + 1):
