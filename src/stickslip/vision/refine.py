@@ -235,13 +235,27 @@ def _corners(p: Patch, xs: FloatArray, ys: FloatArray
         inside &= (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
     # (a patch within the frame: a point in the patch is in the frame; lx >= 0 is exact, xs - x0 being a multiple
     # of the ulp of xs >= x0 >= 0 no larger than xs)
-    lx = np.minimum(np.maximum(lx, 0.0), cw - 1.000001)
-    ly = np.minimum(np.maximum(ly, 0.0), ch - 1.000001)
+    np.minimum(np.maximum(lx, 0.0, out=lx), cw - 1.000001, out=lx)  # numpy.clip's values, in place
+    np.minimum(np.maximum(ly, 0.0, out=ly), ch - 1.000001, out=ly)
     ix = lx.astype(np.intp)
     iy = ly.astype(np.intp)
-    fx = lx - ix
-    fy = ly - iy
-    return iy * cw + ix, fx, fy, inside
+    lx -= ix  # the fractions
+    ly -= iy
+    iy *= cw
+    iy += ix
+    return iy, lx, ly, inside
+
+
+def _neighbours(i00: NDArray[np.intp], cw: int) -> NDArray[np.intp]:
+    """The flat indices of the four pixels around each point (up left, up right, down left, down right), one
+    block of points after the other, in a patch ``cw`` px wide."""
+    m = i00.size
+    idx = np.empty(4 * m, dtype=np.intp)
+    idx[:m] = i00
+    np.add(i00, 1, out=idx[m : 2 * m])
+    np.add(i00, cw, out=idx[2 * m : 3 * m])
+    np.add(i00, cw + 1, out=idx[3 * m :])
+    return idx
 
 
 def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -253,7 +267,7 @@ def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArr
     cw = p.data.shape[2]
     m = i00.size
     # the four neighbours in one gather
-    v = p.data.reshape(3, -1).take(np.concatenate([i00, i00 + 1, i00 + cw, i00 + (cw + 1)]), axis=1)
+    v = p.data.reshape(3, -1).take(_neighbours(i00, cw), axis=1)
     v00, v01, v10, v11 = v[:, :m], v[:, m : 2 * m], v[:, 2 * m : 3 * m], v[:, 3 * m :]
     top = v00 + (v01 - v00) * fx
     bottom = v10 + (v11 - v10) * fx
@@ -265,7 +279,7 @@ def _sample_value(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray,
     i00, fx, fy, inside = _corners(p, xs, ys)
     cw = p.data.shape[2]
     m = i00.size
-    v = p.data[0].reshape(-1).take(np.concatenate([i00, i00 + 1, i00 + cw, i00 + (cw + 1)]))
+    v = p.data[0].reshape(-1).take(_neighbours(i00, cw))
     v00, v01, v10, v11 = v[:m], v[m : 2 * m], v[2 * m : 3 * m], v[3 * m :]
     top = v00 + (v01 - v00) * fx
     bottom = v10 + (v11 - v10) * fx

@@ -447,8 +447,8 @@ def masked_ncc(
     a = fft.irfft2(fi * k.w, shape, workers=1)[n - 1 :, n - 1 :]
     b = fft.irfft2(fi2 * k.w, shape, workers=1)[n - 1 :, n - 1 :]
     c = fft.irfft2(fi * k.wt, shape, workers=1)[n - 1 :, n - 1 :]
-    var = np.clip(b - a * a / k.sw, 0.0, None)
+    var = np.maximum(b - a * a / k.sw, 0.0)  # (numpy.clip's values, without its wrapper's cost)
     denom = np.sqrt(var * k.st2)
-    scale = float(np.max(denom)) if denom.size else 0.0
+    scale = float(denom.max()) if denom.size else 0.0
     out = np.where(denom > 1e-9 * max(scale, 1e-300), c / np.where(denom > 0, denom, 1.0), 0.0)
-    return np.asarray(np.clip(out, -1.0, 1.0), dtype=float)
+    return np.minimum(np.maximum(out, -1.0), 1.0)
