@@ -296,20 +296,15 @@ class TipTracker:
         (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
         """
         out = []
-        w_all = self._select.w
-        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float]]] = {}  # by the frame's blur
+        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float]]] = {}  # copies of one blur share samples
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
-            got = seen.get(f)
-            if got is None:  # the copies matched against the frame as it is share its samples
+            if f not in seen:
                 Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
-                w = w_all * inside
-                got = seen[f] = (w, _frame_stats(Iw, w))
-            w, stats = got
-            if stats[0] <= 1e-9:
-                out.append(-1.0)
-                continue
+                w = self._select.w * inside
+                seen[f] = (w, _frame_stats(Iw, w))
+            w, stats = seen[f]
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
-            out.append(_noise_free_ncc(self._bank_sel[k], stats, w, n_t2, n_f2))
+            out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(self._bank_sel[k], stats, w, n_t2, n_f2))
         return out
 
     def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
