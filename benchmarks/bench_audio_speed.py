@@ -16,7 +16,9 @@ equal first:
   before, windows of a length whose FFT is fast (12 001) after, the rest carried. The windows
   differ, so the check here is the verdict (stepping heard in every window), not bit-equality;
 * the tuner's running template (``running_template``): a 2-D percentile filter with a
-  (W, 1) footprint before, a 1-D one per sub-band after (the same element selected).
+  (W, 1) footprint before, a 1-D one per sub-band after (the same element selected);
+* the self-check's noise shaped like the stop's rise (``shaped_noise``) at the near-prime
+  lengths a recording's stepping part has: ``numpy.fft`` before, ``scipy.fft`` after.
 
 Times are CPU times of this process (``time.process_time``): the machine may be shared.
 
@@ -39,6 +41,7 @@ from stickslip.audio.change.template import TEMPLATE
 from stickslip.audio.features.spectra import SubbandLevels, frame_power_spectra, window
 from stickslip.audio.sources.guard import GUARD, SignalGuard, block_problem, step_line_db
 from stickslip.audio.tuning.candidates import running_template
+from stickslip.audio.tuning.inject import shaped_noise
 from stickslip.sim.sound import render_traverse_recording
 
 
@@ -139,6 +142,20 @@ def _old_running_template(V: np.ndarray, stepping: np.ndarray, hop_s: float, tau
     return np.asarray(out, dtype=np.float64)
 
 
+def _old_shaped_noise(n: int, sample_rate: int, edges_hz: list[float], mean_square: np.ndarray, rng: Any) -> np.ndarray:
+    w = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1 / sample_rate)
+    idx = np.searchsorted(f, np.asarray(edges_hz, dtype=np.float64), side="left")
+    gain = np.zeros(f.size)
+    for b, ms in enumerate(np.asarray(mean_square, dtype=np.float64).tolist()):
+        i0, i1 = int(idx[b]), int(idx[b + 1])
+        if i1 <= i0 or not ms > 0.0:
+            continue
+        have = 2.0 * float(np.sum(np.abs(w[i0:i1]) ** 2)) / n**2
+        gain[i0:i1] = np.sqrt(ms / max(have, 1e-300))
+    return np.asarray(np.fft.irfft(w * gain, n), dtype=np.float64)
+
+
 def side_by_side(name: str, a: Callable[[], Any], b: Callable[[], Any], turns: int = 15) -> float:
     """Median time of ``a`` (before) over ``b`` (after), run in turns; prints and returns the ratio."""
     ta, tb = [], []
@@ -205,6 +222,20 @@ def main() -> None:
         f"tuner's running template, {V.shape[0]} frames x {V.shape[1]} sub-bands",
         lambda: _old_running_template(V, stepping, hop_s),
         lambda: running_template(V, stepping, hop_s),
+        turns=9,
+    )
+    edges = [300.0 * 2 ** (k / 3) for k in range(20)]
+    ms = np.linspace(1e-6, 1e-4, 19)
+    lengths = (94_445, 94_485, 94_488, 94_499, 94_500, 94_514)  # the stepping parts of four tuning recordings
+
+    def noises(f: Callable[..., np.ndarray]) -> list[np.ndarray]:
+        return [f(n, sr, edges, ms, np.random.default_rng([n, 7])) for n in lengths]
+
+    assert all(np.array_equal(a, b) for a, b in zip(noises(_old_shaped_noise), noises(shaped_noise), strict=True))
+    side_by_side(
+        "self-check's shaped noise, 6 lengths near 94 500 samples",
+        lambda: noises(_old_shaped_noise),
+        lambda: noises(shaped_noise),
         turns=9,
     )
 
