@@ -14,7 +14,13 @@ equal first:
 * the guard's stepping check (``SignalGuard`` with a step rate) on live blocks of 1024: windows
   of whatever the blocks add up to (12 288 samples, an envelope FFT of 12 287 = 11 x 1117)
   before, windows of a length whose FFT is fast (12 001) after, the rest carried. The windows
-  differ, so the check here is the verdict (stepping heard in every window), not bit-equality.
+  differ, so the check here is the verdict (stepping heard in every window), not bit-equality;
+* the tuner's running template (``running_template``): a 2-D percentile filter with a
+  (W, 1) footprint before, a 1-D one per sub-band after (the same element selected);
+* the self-check's noise shaped like the stop's rise (``shaped_noise``) at the near-prime
+  lengths a recording's stepping part has: ``numpy.fft`` before, ``scipy.fft`` after.
+
+Times are CPU times of this process (``time.process_time``): the machine may be shared.
 
 The whole detector's speed is in ``bench_audio.py`` (its real-time table). On a shared,
 loaded machine the ratios swing by factors: run it on a quiet one.
@@ -29,9 +35,14 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
+from scipy.ndimage import percentile_filter
 
+from stickslip.audio.change.template import TEMPLATE
 from stickslip.audio.features.spectra import SubbandLevels, frame_power_spectra, window
 from stickslip.audio.sources.guard import GUARD, SignalGuard, block_problem, step_line_db
+from stickslip.audio.tuning.candidates import running_template
+from stickslip.audio.tuning.inject import shaped_noise
+from stickslip.sim.sound import render_traverse_recording
 
 
 def _old_power_spectra(samples: np.ndarray, frame: int, hop: int) -> np.ndarray:
@@ -118,14 +129,41 @@ def _guard_lines(guard: SignalGuard, blocks: list[np.ndarray]) -> list[float]:
     return seen
 
 
+def _old_running_template(V: np.ndarray, stepping: np.ndarray, hop_s: float, tau_s: float = 0.5) -> np.ndarray:
+    q = 100 * TEMPLATE.quantile
+    last = int(np.flatnonzero(stepping)[-1]) + 1
+    W = max(TEMPLATE.chunk, int(round(tau_s / hop_s)))
+    head = V[:last]
+    pad = np.concatenate((np.repeat(np.percentile(head[:W], q, axis=0)[None, :], W, axis=0), head))
+    run = percentile_filter(pad, q, size=(W, 1), origin=((W - 1) // 2, 0))[W:]
+    out = np.empty_like(V)
+    out[:last] = run
+    out[last:] = run[-1]
+    return np.asarray(out, dtype=np.float64)
+
+
+def _old_shaped_noise(n: int, sample_rate: int, edges_hz: list[float], mean_square: np.ndarray, rng: Any) -> np.ndarray:
+    w = np.fft.rfft(rng.standard_normal(n))
+    f = np.fft.rfftfreq(n, 1 / sample_rate)
+    idx = np.searchsorted(f, np.asarray(edges_hz, dtype=np.float64), side="left")
+    gain = np.zeros(f.size)
+    for b, ms in enumerate(np.asarray(mean_square, dtype=np.float64).tolist()):
+        i0, i1 = int(idx[b]), int(idx[b + 1])
+        if i1 <= i0 or not ms > 0.0:
+            continue
+        have = 2.0 * float(np.sum(np.abs(w[i0:i1]) ** 2)) / n**2
+        gain[i0:i1] = np.sqrt(ms / max(have, 1e-300))
+    return np.asarray(np.fft.irfft(w * gain, n), dtype=np.float64)
+
+
 def side_by_side(name: str, a: Callable[[], Any], b: Callable[[], Any], turns: int = 15) -> float:
     """Median time of ``a`` (before) over ``b`` (after), run in turns; prints and returns the ratio."""
     ta, tb = [], []
     for _ in range(turns):
         for f, t in ((a, ta), (b, tb)):
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             f()
-            t.append(time.perf_counter() - t0)
+            t.append(time.process_time() - t0)
     r = float(np.median(ta) / np.median(tb))
     print(f"  {name:58s} before / after = {r:5.2f}")
     return r
@@ -174,6 +212,31 @@ def main() -> None:
         "guard's stepping check, 10 s in live blocks of 1024",
         lambda: [g.check(b) for g in [_OldWindowGuard(sr, step_hz=1000.0)] for b in live],
         lambda: [g.check(b) for g in [SignalGuard(sr, step_hz=1000.0)] for b in live],
+    )
+    x_tune, sr = render_traverse_recording(1, 1000.0, 2.0, 3.5, seed=11)
+    V = 10.0 * np.log10(frame_power_spectra(x_tune, 512, 128)[:, 10:202].reshape(-1, 24, 8).sum(axis=2))
+    stepping = np.arange(V.shape[0]) < V.shape[0] * 2 // 3
+    hop_s = 128 / sr
+    assert np.array_equal(_old_running_template(V, stepping, hop_s), running_template(V, stepping, hop_s))
+    side_by_side(
+        f"tuner's running template, {V.shape[0]} frames x {V.shape[1]} sub-bands",
+        lambda: _old_running_template(V, stepping, hop_s),
+        lambda: running_template(V, stepping, hop_s),
+        turns=9,
+    )
+    edges = [300.0 * 2 ** (k / 3) for k in range(20)]
+    ms = np.linspace(1e-6, 1e-4, 19)
+    lengths = (94_445, 94_485, 94_488, 94_499, 94_500, 94_514)  # the stepping parts of four tuning recordings
+
+    def noises(f: Callable[..., np.ndarray]) -> list[np.ndarray]:
+        return [f(n, sr, edges, ms, np.random.default_rng([n, 7])) for n in lengths]
+
+    assert all(np.array_equal(a, b) for a, b in zip(noises(_old_shaped_noise), noises(shaped_noise), strict=True))
+    side_by_side(
+        "self-check's shaped noise, 6 lengths near 94 500 samples",
+        lambda: noises(_old_shaped_noise),
+        lambda: noises(shaped_noise),
+        turns=9,
     )
 
 
