@@ -101,7 +101,7 @@ def test_a_wide_tip_20_px_inside_the_edge_is_fixed():
 @pytest.mark.xfail(strict=True, raises=AssertionError,
                    reason="measured: a 16 px tip 14 to 8 px inside the edge (its shaft from that edge) is "
                           "refused 'out of the field': 13 to 41 % of its 41 px window is outside")
-def test_a_wide_tip_8_to_12_px_inside_the_edge_is_fixed():
+def test_a_wide_tip_8_to_14_px_inside_the_edge_is_fixed():
     answers = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0, 14.0, 12.0, 10.0, 8.0))
     for x, r in zip((14.0, 12.0, 10.0, 8.0), answers[4:], strict=True):
         assert isinstance(r, Fix) and math.hypot(r.x - x, r.y - 80.0) <= 3.0, (x, r)
