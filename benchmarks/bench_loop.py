@@ -16,6 +16,11 @@ Cameras: ``simcam://`` (the simulated microscope, optical and SEM, several subst
 seeds) and ``peercam://`` (tests/support/loop_peer.py: another renderer through
 another projection).
 
+The tilted rows (``tilt=30``: the peer microscope leaning 30 deg about the world's y
+axis) run the loop twice: with the kinematic straight-down Jacobian (``kin``) and with
+the image Jacobian ``camera calibrate`` measured at the start pose (``jac``: joints 3
+and 1, up to 200 steps each way, scaled by the day's true steps), side by side.
+
 Run: ``.venv/bin/python benchmarks/bench_loop.py`` (about a minute and a half on 2 cores).
 """
 
@@ -39,12 +44,14 @@ from stickslip import kinematics as kin  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402
 from stickslip.devices.base import open_device  # noqa: E402
 from stickslip.motion.tracking import scaled_calibration  # noqa: E402
+from stickslip.procedures.camera import calibrate_camera  # noqa: E402
 from stickslip.procedures.closed_loop import CameraLoop, move_seen, reach_seen  # noqa: E402
 from stickslip.procedures.move import MoveRequest, move  # noqa: E402
 from stickslip.procedures.reach import ReachRequest, reach  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.storage import Store  # noqa: E402
 from stickslip.vision.camera import open_camera  # noqa: E402
+from stickslip.vision.jacobian import MeasuredJacobian, measured_jacobian  # noqa: E402
 
 DAY = "2026-11-22"
 DEV = f"sim://?seed=4&day={DAY}"
@@ -60,6 +67,11 @@ SCENARIOS: list[tuple[str, float, str, tuple[float, float, float] | float]] = [
     ("simcam://?pixel=0.5um", 0.8, "move", 80e-6),
     ("peercam://?pixel=1um&size=512x512", 1.2, "reach", (0.0, -200e-6, 0.0)),
     ("peercam://?pixel=1um&size=512x512&look=sem", 0.8, "move", 150e-6),
+]
+
+TILTED: list[tuple[str, float, str, tuple[float, float, float] | float]] = [
+    ("peercam://?pixel=1um&size=512x512&tilt=30", 1.2, "move", 150e-6),
+    ("peercam://?pixel=1um&size=512x512&tilt=30", 1.2, "reach", (0.0, -200e-6, 0.0)),
 ]
 
 
@@ -98,9 +110,24 @@ def _tip(camera: str) -> tuple[float, float]:
     return (float(xy[0]), float(xy[1]))
 
 
-def run(camera: str, off: float, kind: str, by: tuple[float, float, float] | float, folder: Path) -> list[str]:
+def measure(camera: str) -> MeasuredJacobian:
+    """``camera calibrate`` at the start pose (joints 3 and 1), scaled by the day's true steps."""
+    dev = open_device(DEV)
+    try:
+        cam = open_camera(camera, dev)
+        pose = kin.Pose(*(float(dev.position(j)) for j in (1, 2, 3)))  # type: ignore[attr-defined]
+        res = calibrate_camera(dev, cam, pose, (3, 1), tip=_tip(camera))
+        cam.close()
+    finally:
+        dev.close()
+    fits = [f for jr in res.joints if jr.refused is None for f in jr.fits]
+    return measured_jacobian(fits, res.pose, res.tip, calibration(1.0), camera, float(res.pixel_size_m or 0.0))
+
+
+def run(camera: str, off: float, kind: str, by: tuple[float, float, float] | float, folder: Path,
+        jacobian: MeasuredJacobian | None = None, label: str = "") -> list[str]:
     cal = calibration(off)
-    with Store.open(folder / f"open-{abs(hash((camera, off, kind, str(by))))}.db") as st:
+    with Store.open(folder / f"open-{abs(hash((camera, off, kind, str(by), label)))}.db") as st:
         if kind == "reach":
             assert isinstance(by, tuple)
             r = reach(st, ReachRequest(DEV, by=by), cal)
@@ -112,8 +139,8 @@ def run(camera: str, off: float, kind: str, by: tuple[float, float, float] | flo
             m = move(st, MoveRequest(DEV, 3, by=by), cal)
             assert m.sim_true_end is not None
             miss, length = abs(m.sim_true_end - by), by
-    loop = CameraLoop(camera, tip=_tip(camera))
-    with Store.open(folder / f"seen-{abs(hash((camera, off, kind, str(by))))}.db") as st:
+    loop = CameraLoop(camera, tip=_tip(camera), jacobian=jacobian)
+    with Store.open(folder / f"seen-{abs(hash((camera, off, kind, str(by), label)))}.db") as st:
         t = time.perf_counter()
         try:
             if kind == "reach":
@@ -124,12 +151,13 @@ def run(camera: str, off: float, kind: str, by: tuple[float, float, float] | flo
                 res = move_seen(st, MoveRequest(DEV, 3, by=by), cal, loop)
         except ValueError as e:  # refused before anything moved (the tip not seen at the start)
             STOPS.append(f"{camera}, {kind}: refused before moving: {e}")
-            return [camera[:30], f"{off:.1f}", kind, f"{miss * 1e6:5.1f}", f"no ({len(STOPS)})", "-", "0", "-", "-"]
+            return [camera[:30] + label, f"{off:.1f}", kind, f"{miss * 1e6:5.1f}", f"no ({len(STOPS)})", "-", "0",
+                    "-", "-"]
         dt = time.perf_counter() - t
     true_miss = res.sim_true_error if res.sim_true_error is not None else math.nan
     what = f"{kind} {length * 1e6:.0f}"
     short = camera.replace("simcam://?", "sim ").replace("peercam://?", "peer ").replace("pixel=", "")
-    short = short.replace("&size=512x512", "").replace("&", " ")
+    short = short.replace("&size=512x512", "").replace("&", " ") + label
     if not res.reached:
         STOPS.append(f"{short}, {what} µm: {res.reason}")
     return [
@@ -147,6 +175,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as d:
         for camera, off, kind, by in SCENARIOS:
             rows.append(run(camera, off, kind, by, Path(d)))
+        measured: dict[str, MeasuredJacobian] = {}
+        for camera, off, kind, by in TILTED:
+            if camera not in measured:
+                measured[camera] = measure(camera)
+            rows.append(run(camera, off, kind, by, Path(d), None, " kin"))
+            rows.append(run(camera, off, kind, by, Path(d), measured[camera], " jac"))
     widths = [max(len(r[k]) for r in rows) for k in range(len(head))]
     for r in rows:
         print("  ".join(v.ljust(w) for v, w in zip(r, widths, strict=True)))

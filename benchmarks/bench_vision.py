@@ -18,6 +18,13 @@
 
 Run: ``.venv/bin/python benchmarks/bench_vision.py [FRAMES] [--tracking-only]`` (default 500;
 a few minutes; ``--tracking-only`` skips the calibration).
+
+``--lobed`` measures instead the tracker on the OWN renderer's frames in its lobed mode
+(``tests/support/vision_own.py``'s ``lobed_benchmark``, 256 x 256, sequences of 40: lobed
+grains of 2 to 4 discs, 1 to 2.5 times the tip's width, darker or lighter than the
+needle, over the tip; tips 4 to 12 px inside the field's edge): the fixes more than 3 px
+off and the worst, and the verdicts by what the frame is (``FRAMES`` default 400), for tips
+3 to 20 px in both looks, then for wide tips (14 to 18 px) in bright field.
 """
 
 from __future__ import annotations
@@ -37,6 +44,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
+from vision_own import OwnFrame, lobed_benchmark  # noqa: E402
 from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.devices.base import DeviceInfo  # noqa: E402
@@ -44,6 +52,7 @@ from stickslip.procedures.camera import calibrate_camera  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
+from stickslip.vision.template import TemplateError  # noqa: E402
 from stickslip.vision.track import Fix, TipTracker  # noqa: E402
 
 
@@ -107,6 +116,59 @@ def tracking(n_frames: int) -> dict[str, float]:
         met = v <= target if op == "<=" else v >= target
         print(f"{name:36} {v:>9.3f} {op}{target:>6g} {ratio:>7.2f}  {'yes' if met else 'NO'}")
     return out
+
+
+def _lobed_class(f: OwnFrame, image_size: int) -> str:
+    """What a lobed-mode frame is, for the tally: its kind, cause, and a visible tip's room to the edge."""
+    kind, cause = f.kind, f.cause
+    if kind == "occluded":
+        return "occluded by a lobed grain" if cause == "lobed" else "occluded by a disc"
+    if kind != "visible":
+        return kind
+    x, y = f.tip
+    room = min(x, y, image_size - 1 - x, image_size - 1 - y)
+    return "visible, 4-10 px inside" if room < 10.0 else "visible, 10+ px inside"
+
+
+def lobed(n_frames: int, wide: bool = False) -> int:
+    """Track the own renderer's lobed-mode frames; the number of fixes more than 3 px off.
+
+    ``wide``: bright field only, tips 14 to 18 px wide (seed 1), as the second renderer's
+    worst fixes were; else tips 3 to 20 px, both looks (seed 0).
+    """
+    seqs = (lobed_benchmark(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
+            else lobed_benchmark(n_frames, 40, seed=0, size=256))
+    tally: dict[tuple[str, str], int] = {}
+    bad: list[tuple[float, int, int, str, float]] = []
+    errors: list[float] = []
+    for i, seq in enumerate(seqs):
+        images = [as_image(f.image) for f in seq.frames]
+        try:
+            tracker = TipTracker(images[0], seq.frames[0].tip)
+        except TemplateError as exc:
+            print(f"sequence {i} ({seq.look}, tip {seq.width_px:.1f} px) not learnt: {exc}")
+            continue
+        for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
+            r = tracker.update(img)
+            what = _lobed_class(f, img.shape[1])
+            verdict = "fix" if isinstance(r, Fix) else r.reason
+            tally[(what, verdict)] = tally.get((what, verdict), 0) + 1
+            if isinstance(r, Fix):
+                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
+                if f.kind == "visible":
+                    errors.append(e)
+                if e > 3.0:
+                    bad.append((e, i, k, what, seq.width_px))
+    print(f"{len(seqs)} sequences ({', '.join(f'{s.look} {s.width_px:.1f} px' for s in seqs)})")
+    for what in sorted({w for w, _ in tally}):
+        row = {v: n for (w, v), n in tally.items() if w == what}
+        print(f"{what:>28}: {sum(row.values()):>4} frames; " + ", ".join(f"{v} {n}" for v, n in sorted(row.items())))
+    e = np.array(errors) if errors else np.array([math.nan])
+    print(f"visible tips: median error {np.median(e):.2f} px, 95th percentile {np.percentile(e, 95):.2f} px")
+    print(f"fixes more than 3 px off: {len(bad)}" + (f", worst {max(bad)[0]:.1f} px" if bad else ""))
+    for err, i, k, what, w in sorted(bad, reverse=True):
+        print(f"  {err:6.1f} px  sequence {i} frame {k}: {what}, tip {w:.1f} px, {seqs[i].look}")
+    return len(bad)
 
 
 class _Recording:
@@ -189,7 +251,14 @@ def calibration(seeds: int = 5) -> list[float]:
 
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
-    n = int(args[0]) if args else 500
+    numbers = [a for a in args if not a.startswith("--")]
+    if "--lobed" in args:
+        print("tip tracking on the own renderer's frames with lobed grains and tips near the edge")
+        lobed(int(numbers[0]) if numbers else 400)
+        print("\nthe same, bright field only, tips 14 to 18 px wide")
+        lobed(int(numbers[0]) if numbers else 400, wide=True)
+        return
+    n = int(numbers[0]) if numbers else 500
     print("1. tip tracking on the second renderer's frames")
     tracking(n)
     if "--tracking-only" in args:

@@ -149,7 +149,8 @@ STACK_STEP = 1e-6  # m: the stack's calibrated constant step, both directions
 def _stack_cal(path):
     """The stack's calibration: a constant step per stage and direction (what it is planned with)."""
     steps = {(j, d): STACK_STEP for j in (1, 2, 3) for d in "+-"}
-    calibration.Calibration(models={}, stderr={}, constant_steps=steps, day=DAY, method="constant").save(path)
+    calibration.Calibration(models={}, stderr={}, constant_steps=steps, day=DAY, method="constant",
+                            kinds=dict.fromkeys((1, 2, 3), "prismatic")).save(path)
 
 
 @pytest.mark.slow

@@ -55,7 +55,8 @@ home = ["0mm", "1mm", "-2mm"]
 
 def _cal(plus=STEP, minus=STEP):
     steps = {(j, d): (plus if d == "+" else minus) for j in (1, 2, 3) for d in "+-"}
-    return Calibration(models={}, stderr={}, constant_steps=steps, day="2026-11-22", method="constant")
+    return Calibration(models={}, stderr={}, constant_steps=steps, day="2026-11-22", method="constant",
+                       kinds=dict.fromkeys((1, 2, 3), "prismatic"))
 
 
 def _rig(database="stack.db"):
@@ -103,7 +104,7 @@ def test_a_stage_is_planned_with_its_constant_step_and_the_tracked_scale():
     scaled = scaled_calibration(_cal(), 3, {"+": 1.25, "-": 1.0})  # the tracked step scale multiplies it
     assert Planner(scaled, js[3], kin.Pose()).steps(0.0, 0.001) == 1600
     with pytest.raises(KeyError, match="no constant step"):
-        Planner(Calibration({}, {}, {}, "2026-11-22", "constant"), js[1], kin.Pose())
+        Planner(Calibration({}, {}, {}, "2026-11-22", "constant", kinds={1: "prismatic"}), js[1], kin.Pose())
     # an MM3A's calibration (joint 1 in rad) is never taken for a stage's steps (m): refused, not misread
     mm3a = SimulatedMM3A(seed=0).true_models()
     consts = {k: 40e-6 for k in mm3a}

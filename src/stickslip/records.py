@@ -323,7 +323,8 @@ def check_calibration_dict(data: object) -> None:
 
     Checks: an object; ``parameters`` and ``constant_steps`` lists of objects; every value
     finite; ``0 <= b < 1``; step sizes positive and within :data:`STEP_RANGE` for the joint's
-    unit (metres for joint 3, radians for joints 1 and 2); ``provenance`` an object.
+    unit (metres for joint 3, radians for joints 1 and 2; a constant step's own ``unit``, ``m``
+    or ``rad``, where it gives one: a stage's); ``provenance`` an object.
     Raises ``ValueError`` naming the field and the reason. The format/version check is the
     caller's (``Calibration.from_dict``).
     """
@@ -354,7 +355,10 @@ def check_calibration_dict(data: object) -> None:
         where = f"constant_steps[{i}]"
         step, joint = _record_joint(rec, where)
         v = finite_number(step.get("value"), f"{where} (joint {joint})")
-        _check_scale(v, joint_spec(joint).unit, f"{where} (joint {joint})", signed=False)
+        unit = step.get("unit")  # a stage's joints 1 and 2 are prismatic: their steps in m (the file says)
+        if unit not in ("m", "rad"):
+            unit = joint_spec(joint).unit  # a file without it, or a unit Calibration.from_dict refuses by name
+        _check_scale(v, unit, f"{where} (joint {joint})", signed=False)
 
 
 # -- tuning documents ----------------------------------------------------------------------------

@@ -23,14 +23,17 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from stickslip.sim.camera import SimCamSettings, SimScene
+from stickslip.sim.camera import LobedParticle, SimCamSettings, SimScene
 
-__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "KINDS"]
+__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "KINDS"]
 
 KINDS = ("visible", "out", "occluded", "defocused")
 
 EDGE_IN = 10.0
 """A visible tip stays at least this far inside the field, px."""
+
+EDGE_IN_LOBED = 4.0
+"""With lobed debris, a visible tip comes this close to the field's edge, px."""
 
 
 @dataclass(frozen=True)
@@ -41,6 +44,8 @@ class OwnFrame:
     tip: tuple[float, float]
     kind: str
     blur: float
+    cause: str = ""
+    """What the lobed mode did to the frame: ``lobed`` (a lobed grain over the tip), ``edge``."""
 
 
 @dataclass(frozen=True)
@@ -55,13 +60,17 @@ class OwnSequence:
 
 def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None = None, look: str | None = None,
                  photons: float | None = None, max_blur: float = 3.0, events: bool = True,
-                 event_rate: float = 0.08) -> OwnSequence:
+                 event_rate: float = 0.08, lobed_rate: float = 0.0) -> OwnSequence:
     """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
 
     ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
     log-uniform in 40..400) the count at full brightness; ``look`` optical or sem (drawn).
     With ``events``, a frame starts an event (the tip out of the field, under a particle,
     far out of focus) with probability ``event_rate``, for 1 to 4 frames.
+    With ``lobed_rate`` > 0 (the lobed mode, :class:`_Extras`), a frame without such an
+    event starts another with that probability: a lobed grain over the tip, or the tip
+    4 to 12 px inside the field's edge; the tip then roams to 4 px of the edge. Its draws
+    come from a stream of their own: the motion and the other events stay as without it.
     """
     rng = np.random.default_rng([seed, 31337])
     look = look or ("optical", "sem")[int(rng.integers(0, 2))]
@@ -72,7 +81,9 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
                                     tip_radius_m=0.5 * W * 0.5e-6, taper=taper, pixel_size_m=0.5e-6))
     phi0 = float(rng.uniform(-math.pi, math.pi))  # the shaft's direction from the tip
     pivot = float(rng.uniform(100.0, 1000.0))
-    lo, hi = EDGE_IN, size - 1 - EDGE_IN
+    extras = _Extras(seed, lobed_rate, W, look, size) if lobed_rate > 0 else None
+    edge_in = EDGE_IN if extras is None else EDGE_IN_LOBED
+    lo, hi = edge_in, size - 1 - edge_in
     tip = rng.uniform(0.3, 0.7, 2) * size
     vel = np.zeros(2)
     turn = 0.0
@@ -105,9 +116,13 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
                 sigma = float(rng.uniform(7.0, 12.0))
             event = None if left <= 1 else (kind, left - 1)
         direction = np.array([math.cos(phi), math.sin(phi)])
+        grains: tuple[LobedParticle, ...] = ()
+        cause = ""
+        if extras is not None:
+            kind, cause, grains = extras.frame(k, kind, apex, tip, direction)
         shift = shift + drift_v + rng.normal(0.0, 0.02, 2)
-        image = scene.render(apex, direction, sigma, shift, 1.0, particles)
-        frames.append(OwnFrame(image, (float(apex[0]), float(apex[1])), kind, float(sigma)))
+        image = scene.render(apex, direction, sigma, shift, 1.0, particles, grains)
+        frames.append(OwnFrame(image, (float(apex[0]), float(apex[1])), kind, float(sigma), cause))
         # the next frame: the arm holds, glides or jumps; the needle turns about a point far up its shaft
         u = rng.random()
         if u < 0.35:
@@ -132,9 +147,102 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     return OwnSequence(frames, W, look, ph)
 
 
+class _Extras:
+    """The lobed mode's events: lobed grains over the tip, the tip close to the field's edge.
+
+    A grain (:class:`~stickslip.sim.camera.LobedParticle`) is 2 to 4 overlapping discs
+    spanning 1 to 2.5 times the tip's width (at least 6 px), one lobe over the apex, the
+    others grown from a lobe already placed, as dust clumps; darker than the needle (6 in
+    10) or lighter, its outline softened by 0 to 1.5 px. It stays over the tip (it moves
+    with it) for the 1 to 4 frames of its event. An edge event takes the tip to 4 to 12 px
+    inside an edge (the one the shaft comes from, or any), gliding up to 12 px a frame,
+    holds it there for 1 to 4 frames and lets it move on. Events start from frame 3.
+    """
+
+    def __init__(self, seed: int, rate: float, width_px: float, look: str, size: int) -> None:
+        self.rng = np.random.default_rng([seed, 4711])
+        self.rate, self.W, self.look, self.size = rate, width_px, look, size
+        self.event: tuple[str, int] | None = None
+        self.grain: tuple[tuple[tuple[float, float, float], ...], float, float] = ((), 0.0, 0.0)
+        self.goal = (0, 0.0)
+
+    def frame(self, k: int, kind: str, apex: NDArray[np.float64], tip: NDArray[np.float64],
+              direction: NDArray[np.float64]) -> tuple[str, str, tuple[LobedParticle, ...]]:
+        """Frame ``k``'s kind, cause and grains; an edge event moves ``apex`` and ``tip`` (in place)."""
+        xr = self.rng
+        if self.event is None and k > 2 and xr.random() < self.rate:
+            self.event = (("lobed", "edge")[int(xr.integers(0, 2))], int(xr.integers(1, 5)))
+            if self.event[0] == "lobed":
+                self.grain = self._grain()
+            else:
+                axis = int(xr.integers(0, 2)) if xr.random() < 0.5 else int(np.argmax(np.abs(direction)))
+                low = direction[axis] < 0 if xr.random() < 0.5 else xr.random() < 0.5
+                inside = float(xr.uniform(4.0, 12.0))
+                self.goal = (axis, inside if low else self.size - 1 - inside)
+        if self.event is None:
+            return kind, "", ()
+        cause, left = self.event
+        if cause == "edge":
+            return self._edge(kind, apex, tip)
+        self.event = None if left <= 1 else (cause, left - 1)
+        if kind != "visible":
+            return kind, "", ()
+        discs, level, blur = self.grain
+        moved = tuple((float(apex[0] + x), float(apex[1] + y), r) for x, y, r in discs)
+        return "occluded", "lobed", (LobedParticle(moved, level, blur),)
+
+    def _edge(self, kind: str, apex: NDArray[np.float64],
+              tip: NDArray[np.float64]) -> tuple[str, str, tuple[LobedParticle, ...]]:
+        """The tip glides (12 px a frame at most) to its goal by the edge, and stays 1 to 4 frames."""
+        assert self.event is not None
+        axis, goal = self.goal
+        gap = goal - tip[axis]
+        tip[axis] += float(np.clip(gap, -12.0, 12.0))
+        if kind == "visible":
+            apex[:] = tip
+        if abs(gap) <= 12.0:
+            cause, left = self.event
+            self.event = None if left <= 1 else (cause, left - 1)
+        return kind, ("edge" if abs(gap) <= 12.0 and kind == "visible" else ""), ()
+
+    def _grain(self) -> tuple[tuple[tuple[float, float, float], ...], float, float]:
+        """Lobes relative to the apex (px), the level and the outline's blur."""
+        xr = self.rng
+        span = max(6.0, float(xr.uniform(1.0, 2.5)) * self.W)
+        r = float(xr.uniform(0.3, 0.45)) * span
+        off = xr.normal(0.0, 0.25 * r, 2)
+        off *= min(1.0, 0.5 * r / max(float(np.hypot(*off)), 1e-9))
+        discs = [(float(off[0]), float(off[1]), r)]
+        for _ in range(int(xr.integers(1, 4))):
+            x0, y0, r0 = discs[int(xr.integers(0, len(discs)))]
+            r = float(xr.uniform(0.25, 0.45)) * span
+            a = float(xr.uniform(0.0, 2.0 * math.pi))
+            d = float(xr.uniform(0.5, 0.9)) * (r0 + r)
+            discs.append((x0 + d * math.cos(a), y0 + d * math.sin(a), r))
+        dark = xr.random() < 0.6
+        if self.look == "optical":  # what it lets through; the needle: about 0.15
+            level = float(xr.uniform(0.02, 0.1) if dark else xr.uniform(0.3, 0.6))
+        else:  # its yield; the needle: 0.45, brighter at its edges
+            level = float(xr.uniform(0.05, 0.2) if dark else xr.uniform(0.65, 0.95))
+        return tuple(discs), level, float(xr.uniform(0.0, 1.5))
+
+
 def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256) -> list[OwnSequence]:
     """Sequences of ``per_sequence`` frames, tip widths spread over 3..20 px, looks alternating."""
     n_seq = max(1, n_frames // per_sequence)
     widths = np.linspace(3.0, 20.0, n_seq)
     return [own_sequence(seed * 1000 + i, per_sequence, size, float(widths[i]), ("optical", "sem")[i % 2])
             for i in range(n_seq)]
+
+
+def lobed_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
+                    lobed_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
+                    looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
+    """:func:`own_benchmark`'s sequences in the lobed mode (lobed grains, tips near the edge).
+
+    Tip widths spread over ``widths`` (px), the looks taken in turn.
+    """
+    n_seq = max(1, n_frames // per_sequence)
+    ws = np.linspace(widths[0], widths[1], n_seq)
+    return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
+                         lobed_rate=lobed_rate) for i in range(n_seq)]

@@ -32,6 +32,7 @@ from ..models import (
     direction_label,
 )
 from ..models.families import FamilyParams
+from ..records import finite_number
 from ..units import param_scale, step_scale
 from .errormodel import Predictive
 
@@ -306,7 +307,8 @@ class Calibration:
         ``(joint, direction) -> array`` of standard errors in the order of
         ``params.names()`` (SI), or ``None`` where unknown (exactly determined).
     constant_steps : dict
-        ``(joint, direction) -> float``: the paper's constant-step comparator (m or rad).
+        ``(joint, direction) -> float``: the paper's constant-step comparator (m or rad); for a
+        stage (:mod:`.stage`) the mean step it is planned with.
     day : str
         Session label of the traverses (ISO date preferred).
     method : str
@@ -336,6 +338,16 @@ class Calibration:
     predictive: dict[tuple[int, str], Predictive] = field(default_factory=dict)
     """``(joint, direction) ->`` what a prediction's interval is made of in each pose (docs/models.md §4),
     where known (a family calibration); elsewhere the interval is the constant ``sigma_model``."""
+    kinds: dict[int, str] = field(default_factory=dict)
+    """``joint -> "prismatic" | "rotary"`` where the calibrated arm's joint is not the MM3A's kind
+    (a stage's joints 1 and 2 are prismatic); the units written come from it (:meth:`kind`)."""
+    constant_stderr: dict[tuple[int, str], float] = field(default_factory=dict)
+    """``(joint, direction) ->`` standard error of the constant step (m or rad), where measured."""
+    constant_traverses: dict[tuple[int, str], int] = field(default_factory=dict)
+    """``(joint, direction) ->`` how many traverses the constant step was averaged from, where recorded."""
+
+    def __post_init__(self) -> None:
+        self.kinds = _differing_kinds(self.kinds)
 
     # -- access
     @property
@@ -354,6 +366,14 @@ class Calibration:
     def constant_step(self, joint: int, direction: str | int) -> float:
         """The paper's constant-step comparator for ``joint``/``direction`` (m or rad)."""
         return self.constant_steps[(int(joint), direction_label(direction))]
+
+    def kind(self, joint: int) -> str:
+        """``"prismatic"`` or ``"rotary"``: the calibrated arm's joint (:attr:`kinds`, else the MM3A's)."""
+        return self.kinds.get(int(joint)) or _mm3a_kind(int(joint))
+
+    def unit(self, joint: int) -> str:
+        """The SI unit of ``joint``'s steps in this calibration: ``"m"`` (prismatic) or ``"rad"`` (rotary)."""
+        return "m" if self.kind(joint) == "prismatic" else "rad"
 
     def gamma(self, joint: int, direction: str | int, pose: kin.Pose, q: float | None = None) -> float:
         """Mean step size (m or rad) of ``joint`` at ``pose``; ``q`` overrides the joint's own coordinate."""
@@ -412,10 +432,7 @@ class Calibration:
             "created": self.created,
             "units": "SI: prismatic steps in m, rotary steps in rad, q3 in m; b is dimensionless",
             "parameters": [p.to_dict() for p in self.parameters() if not _is_family(self, p)],
-            "constant_steps": [
-                {"joint": j, "direction": d, "value": v, "unit": kin.joint_spec(j).unit}
-                for (j, d), v in sorted(self.constant_steps.items())
-            ],
+            "constant_steps": [_constant_record(self, j, d) for j, d in sorted(self.constant_steps)],
             "provenance": self.provenance.to_dict(),
             "conditions": self.conditions.to_dict(),
         }
@@ -464,6 +481,7 @@ class Calibration:
             consts = {
                 (int(c["joint"]), direction_label(c["direction"])): float(c["value"]) for c in data["constant_steps"]
             }
+            kinds, const_se, const_n = _constant_records(data["constant_steps"], models)
             conditions = Conditions.from_dict(data.get("conditions"))
         except (KeyError, TypeError) as e:
             raise ValueError(f"calibration file is missing or has a malformed field: {e}") from None
@@ -476,6 +494,9 @@ class Calibration:
             Provenance.from_dict(data.get("provenance")),
             str(data.get("created", "")),
             conditions,
+            kinds=kinds,
+            constant_stderr=const_se,
+            constant_traverses=const_n,
         )
         from ._ext_json import read_ext_fields
 
@@ -503,8 +524,8 @@ class Calibration:
     def report(self) -> str:
         """A readable text report of the parameters with standard errors (nm, µrad)."""
         lines = [f"stickslip calibration — day {self.day or '?'}, method {self.method}"]
-        for j in self.joints:
-            kind = kin.joint_spec(j).kind
+        for j in sorted({*self.joints, *(jj for jj, _ in self.constant_steps)}):
+            kind = self.kind(j)
             lines.append(f"joint {j} ({kind}):")
             for rec in self.parameters():
                 if rec.joint != j:
@@ -513,10 +534,7 @@ class Calibration:
                 where = f" @ q3 = {rec.q3 * 1e3:g} mm" if rec.q3 is not None else ""
                 se = f" ± {rec.stderr * scale:.3g}" if rec.stderr is not None else ""
                 lines.append(f"  {rec.name}{rec.direction}{where}: {rec.value * scale:.5g}{se} {unit}".rstrip())
-            for d in DIRECTIONS:
-                if (j, d) in self.constant_steps:
-                    scale, unit = step_scale(j)
-                    lines.append(f"  constant-step comparator {d}: {self.constant_steps[(j, d)] * scale:.5g} {unit}")
+            lines += [_constant_line(self, j, d) for d in DIRECTIONS if (j, d) in self.constant_steps]
         if self.conditions.recorded:
             c = self.conditions
             parts = [
@@ -599,6 +617,79 @@ class Calibration:
         ax.set_title(f"joint {joint}, calibration of {self.day} ({self.method})")
         ax.legend(fontsize="small")
         return ax
+
+
+def _differing_kinds(kinds: dict[int, str]) -> dict[int, str]:
+    """``kinds`` checked, keeping what differs from the MM3A's (so that a file read back equals the one written)."""
+    for j, k in kinds.items():
+        if k not in ("prismatic", "rotary"):
+            raise ValueError(f"joint {j}: kind must be 'prismatic' or 'rotary', got {k!r}")
+    return {j: k for j, k in sorted(kinds.items()) if _mm3a_kind(j) != k}
+
+
+def _constant_record(cal: Calibration, j: int, d: str) -> dict[str, object]:
+    """A ``constant_steps`` entry of the file: value, unit (from the joint's kind), standard error and count."""
+    out: dict[str, object] = {"joint": j, "direction": d, "value": cal.constant_steps[(j, d)], "unit": cal.unit(j)}
+    if (j, d) in cal.constant_stderr:
+        out["stderr"] = cal.constant_stderr[(j, d)]
+    if (j, d) in cal.constant_traverses:
+        out["traverses"] = cal.constant_traverses[(j, d)]
+    return out
+
+
+def _constant_line(cal: Calibration, j: int, d: str) -> str:
+    """The report's line of a constant step (nm or µrad), with its standard error and count where known."""
+    scale, unit = (1e9, "nm") if cal.kind(j) == "prismatic" else step_scale(j)
+    se = cal.constant_stderr.get((j, d))
+    pm = f" ± {se * scale:.3g}" if se is not None else ""
+    count = cal.constant_traverses.get((j, d))
+    of = f" ({count} traverse{'s' if count != 1 else ''})" if count is not None else ""
+    what = "mean step" if not cal.models else "constant-step comparator"
+    return f"  {what} {d}: {cal.constant_steps[(j, d)] * scale:.5g}{pm} {unit}{of}"
+
+
+def _mm3a_kind(joint: int) -> str:
+    """The MM3A's kind of ``joint`` (what a calibration's joint is unless it says otherwise)."""
+    spec = kin.JOINTS.get(joint)
+    return spec.kind if spec is not None else "prismatic"
+
+
+def _constant_records(
+    records_: list[dict[str, Any]], models: dict[tuple[int, str], JointModel]
+) -> tuple[dict[int, str], dict[tuple[int, str], float], dict[tuple[int, str], int]]:
+    """The joints' kinds (from each constant step's ``unit``), standard errors and traverse counts of a file.
+
+    A file written before units followed the joints' kinds labels each as the MM3A's joint;
+    a unit other than ``m`` or ``rad``, two units for one joint, or a unit that contradicts
+    the joint's model is refused (``ValueError``).
+    """
+    kinds: dict[int, str] = {}
+    stderr: dict[tuple[int, str], float] = {}
+    count: dict[tuple[int, str], int] = {}
+    for c in records_:
+        key = (int(c["joint"]), direction_label(c["direction"]))
+        unit = c.get("unit")
+        if unit is not None:
+            if unit not in ("m", "rad"):
+                raise ValueError(
+                    f"constant step of joint {key[0]}{key[1]}: unit must be 'm' or 'rad', got {unit!r:.40}"
+                )
+            kind = "prismatic" if unit == "m" else "rotary"
+            if kinds.setdefault(key[0], kind) != kind:
+                raise ValueError(f"joint {key[0]}: its constant steps are labelled both m and rad")
+            m = models.get(key)
+            if m is not None and (m.params.kind == "prismatic") != (kind == "prismatic"):
+                raise ValueError(f"joint {key[0]}{key[1]}: the constant step is in {unit}, but the joint's model "
+                                 f"is {m.params.kind}")
+        if c.get("stderr") is not None:
+            stderr[key] = finite_number(c["stderr"], f"constant step of joint {key[0]}{key[1]}: stderr")
+        if c.get("traverses") is not None:
+            n = c["traverses"]
+            if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+                raise ValueError(f"constant step of joint {key[0]}{key[1]}: traverses must be a count >= 1, "
+                                 f"got {n!r:.40}")
+            count[key] = n
+    return kinds, stderr, count
 
 
 def _is_family(cal: Calibration, p: Parameter) -> bool:

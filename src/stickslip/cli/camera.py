@@ -181,6 +181,16 @@ def calibrate_cmd(
     output: Path | None = typer.Option(
         None, "--output", "-o", help="Write the step sizes (CSV, for stickslip calibrate --step-sizes)."
     ),
+    jacobian: Path | None = typer.Option(
+        None, "--jacobian", help="Write the measured image Jacobian (JSON, for move/reach/jog "
+        "--camera-calibration): px per step of each joint and direction, and px per m or rad by the "
+        "calibration's steps (-c; run it right after stickslip calibrate).",
+    ),
+    calibration: Path | None = typer.Option(
+        None, "--calibration", "-c",
+        help="With --jacobian: the step calibration that turns px per step into px per m or rad "
+        "(default: the config file's).",
+    ),
     day: str | None = typer.Option(None, "--day", help="Session label of the rows (default: today)."),
     db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the fits, step sizes and refusals as JSON (SI, px)."),
@@ -198,6 +208,12 @@ def calibrate_cmd(
     The rows (-o) are step sizes measured at a pose (method camera): stickslip calibrate
     --step-sizes fits them beside traverses, weighted by their uncertainty.
 
+    --jacobian FILE keeps the measured image Jacobian for the closed loop (move, reach,
+    jog --camera-calibration FILE): the px per step of each joint and direction, and
+    the px per m or rad they make with the step calibration (-c) at this pose. The
+    camera's tilt then needs no stating; the steps' error at this moment does enter:
+    measure right after stickslip calibrate.
+
     Example: stickslip camera calibrate -d sim:// --camera "simcam://?pixel=0.5um" -o steps.csv
     """
     from ..clock import today_label
@@ -211,6 +227,7 @@ def calibrate_cmd(
     order = _joint_order(joints)
     view = _view(view_tilt, view_azimuth, view_roll)
     label = day if day is not None else today_label()
+    steps_cal = _jacobian_steps(jacobian, calibration)
     with user_errors():
         key = device_key(url)
     with open_store(db) as store, user_errors(DeviceBusy):
@@ -234,10 +251,63 @@ def calibrate_cmd(
     if output is not None:
         with user_errors():
             write_step_sizes(output, list(result.rows))
+    against: dict[int, tuple[float, float]] = {}
+    if jacobian is not None and steps_cal is not None:
+        against = _write_jacobian(result, steps_cal, camera, jacobian, view)
     if json_out:
-        print_json({**result.as_dict(), "device": key, "output": str(output) if output else None})
+        extra: dict[str, object] = {}
+        if jacobian is not None:
+            extra["jacobian"] = {
+                "file": str(jacobian),
+                "against_view": {str(j): {"length_ratio": r if math.isfinite(r) else None,
+                                          "angle_deg": a if math.isfinite(a) else None}
+                                 for j, (r, a) in against.items()},
+            }
+        print_json({**result.as_dict(), "device": key, "output": str(output) if output else None, **extra})
         return
     _print_calibration(result, output)
+    if jacobian is not None:
+        _print_against(jacobian, against)
+
+
+def _jacobian_steps(jacobian: Path | None, calibration: Path | None) -> Any:
+    """The step calibration that scales ``--jacobian`` (``-c``), with the output path checked first (or ``None``)."""
+    if jacobian is None:
+        if calibration is not None:
+            fail("--calibration goes with --jacobian (it scales the measured image Jacobian)")
+        return None
+    from ..calibration import Calibration
+    from ..records import writable_target
+    from ._common import calibration_file
+
+    with user_errors():
+        writable_target(jacobian, "--jacobian")
+        return Calibration.load(calibration_file(calibration))
+
+
+def _write_jacobian(
+    result: CameraCalibrationResult, steps_cal: Any, camera: str, jacobian: Path, view: Any
+) -> dict[int, tuple[float, float]]:
+    """Write the measured image Jacobian; each joint's motion against the stated view's (length ratio, angle)."""
+    from ..vision.jacobian import measured_jacobian
+    from ..vision.view import base_to_image
+
+    fits = [f for jr in result.joints if jr.refused is None for f in jr.fits]
+    if not result.pixel_size_m:
+        fail("--jacobian needs the camera's pixel size (pixel= in its URL): nothing written")
+    with user_errors():
+        measured = measured_jacobian(fits, result.pose, result.tip, steps_cal, camera, float(result.pixel_size_m))
+        measured.save(jacobian)
+    pose = result.pose
+    return measured.against(base_to_image(view, float(result.pixel_size_m), pose.theta, pose.psi))
+
+
+def _print_against(jacobian: Path, against: dict[int, tuple[float, float]]) -> None:
+    console.print(f"image Jacobian written to {jacobian} (move, reach, jog --camera-calibration)", highlight=False)
+    for j, (r, a) in against.items():
+        seen = (f"{100 * r:.1f} % of the stated view's length, turned {a:.1f} deg" if math.isfinite(r)
+                else "seen where the stated view sees nothing")
+        console.print(f"  joint {j}: {seen}", highlight=False)
 
 
 def _joint_order(joints: str) -> list[int]:
@@ -390,6 +460,11 @@ CAMERA_LOOP_HELP = (
     "opencv://0?pixel=0.5um): the tip is tracked after each short leg, the position and the day's step scale "
     "corrected, until the tip is within 1 px or 0.5 µm (the larger) of the target. See docs/vision.md."
 )
+CAMERA_CALIBRATION_HELP = (
+    "With --camera: the image Jacobian 'stickslip camera calibrate --jacobian' measured with this camera "
+    "(JSON): the loop turns pixels into joint motion with it instead of the straight-down view's. A file "
+    "of another camera URL or pixel size is refused."
+)
 CAMERA_TIP_HELP = (
     "With --camera: the tip's pixel now, X,Y (default: found by stepping joint 3 back and forth). " + PIXELS
 )
@@ -406,21 +481,30 @@ def camera_errors() -> tuple[type[BaseException], ...]:
     return (CameraError, AcquireError, ImageError, JacobianError, TemplateError)
 
 
-def camera_loop(camera: str | None, tip: str | None) -> Any:
-    """The :class:`~stickslip.procedures.closed_loop.CameraLoop` of ``--camera`` and ``--camera-tip`` (or ``None``)."""
+def camera_loop(camera: str | None, tip: str | None, calibration: Path | None = None) -> Any:
+    """The :class:`~stickslip.procedures.closed_loop.CameraLoop` of ``--camera``, ``--camera-tip`` and
+    ``--camera-calibration`` (or ``None``)."""
     if camera is None:
         if tip is not None:
             fail("--camera-tip goes with --camera")
+        if calibration is not None:
+            fail("--camera-calibration goes with --camera")
         return None
+    from ..devices.base import redact_url
     from ..procedures.closed_loop import CameraLoop
+    from ..vision.jacobian import MeasuredJacobian
 
     at = _pixel(tip, "--camera-tip") if tip is not None else None
     with user_errors():
-        return CameraLoop(camera, tip=at)
+        jac = None if calibration is None else MeasuredJacobian.load(calibration)
+        if jac is not None and redact_url(camera) != jac.camera:
+            jac.check_camera(camera, jac.pixel_size_m)  # the URL's one line
+        return CameraLoop(camera, tip=at, jacobian=jac)
 
 
 def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | None, db: str | None,
-             json_out: bool, borrowed: bool = False, rig_arm: Any = None) -> None:
+             json_out: bool, borrowed: bool = False, rig_arm: Any = None,
+             camera_calibration: Path | None = None) -> None:
     """``move``/``reach`` with ``--camera``: call the closed loop, print what it did, exit 2 if it stopped short.
 
     With ``rig_arm`` (``--rig``, :class:`~.rig.RigArm`) the arm's envelope checks the whole
@@ -436,7 +520,7 @@ def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | 
     if rig_arm is not None and rig_arm.state_key != device_key(rig_arm.device):
         fail(f"--camera with arm {rig_arm.arm!r}: it shares its controller with another arm, and the closed loop "
              "keeps positions per controller; move it without the camera")
-    loop = camera_loop(camera, tip)
+    loop = camera_loop(camera, tip, camera_calibration)
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError, *camera_errors()):
         opener = None
         if rig_arm is not None:

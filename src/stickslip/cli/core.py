@@ -179,6 +179,15 @@ def calibrate_cmd(
         ),
     ] = 64.0,
     json_out: JsonOpt = False,
+    rig_file: Annotated[
+        Path | None,
+        typer.Option(
+            "--rig",
+            help="Rig file (docs/rig.md): calibrate its stage arm (--arm) from the table, each joint and "
+            "direction's mean step, checked against the arm's joints; an MM3A arm is calibrated without --rig.",
+        ),
+    ] = None,
+    arm: Annotated[str | None, typer.Option("--arm", help="Arm of the rig (default: its first arm).")] = None,
 ) -> None:
     """Calibrate the step-size models from measured traverses.
 
@@ -210,9 +219,17 @@ def calibrate_cmd(
     without a device, or from the simulator, is refused on a real controller unless
     --trust-calibration.
 
+    A stage (a rig file's xyz arm, --rig RIG --arm NAME) is planned with a constant step
+    per joint and direction: each is the mean of its traverses' average steps (length over
+    steps counted, weighted by length), with its standard error and count; every joint
+    needs a traverse each way. The table's rows are checked against the arm's joints
+    (their numbers and ranges, positions in m); the calibration records the arm's
+    controller as its device unless --device.
+
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
+    Example: stickslip calibrate stack.csv --rig lab.toml --arm gripper -o cal/gripper.json
     """
     from ..calibration import Calibration, CalibrationError, Conditions, calibrate
     from ..measurements import StepSize
@@ -222,6 +239,14 @@ def calibrate_cmd(
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
     if not (math.isfinite(max_table_mb) and max_table_mb > 0):
         fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
+    if rig_file is not None:
+        mm3a_only = prior is not None or step_sizes is not None or method != "auto" or model != "auto"
+        measurements = _stage_table(measurements, mm3a_only, db)
+        _calibrate_stage(measurements, rig_file, arm, output, day, device, frequency, amplitude, temperature,
+                         int(max_table_mb * 1024 * 1024), json_out)
+        return
+    if arm is not None:
+        fail("--arm names an arm of a rig: give --rig FILE too")
     traverses = _whole_table(measurements, int(max_table_mb * 1024 * 1024)) if measurements is not None else []
     steps: list[StepSize] = read_step_table(step_sizes) if step_sizes is not None else []
     source = str(measurements) if measurements is not None else str(step_sizes)
@@ -262,6 +287,62 @@ def calibrate_cmd(
         say(f"saved to {output}")
     if kept is not None:
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
+
+
+def _stage_table(measurements: Path | None, mm3a_only: bool, db: str | None) -> Path:
+    """The stage's table (``calibrate --rig``), refusing what only an MM3A's calibration uses."""
+    if mm3a_only:
+        fail("a stage (--rig) is calibrated from its traverses alone: --prior, --step-sizes, --method and "
+             "--model are for an MM3A")
+    if measurements is None:
+        fail("give the stage's measurement table (MEASUREMENTS.csv)")
+    if db is not None:
+        fail("a stage's calibration is kept in its file (-o), not in a database: leave out --db")
+    return measurements
+
+
+def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output: Path | None, day: str | None,
+                     device: str | None, frequency: float | None, amplitude: float | None,
+                     temperature: float | None, max_bytes: int, json_out: bool) -> None:
+    """``calibrate TABLE --rig RIG --arm NAME``: a stage arm's mean steps (:mod:`stickslip.calibration.stage`)."""
+    from ..calibration import CalibrationError, Conditions
+    from ..calibration.stage import calibrate_stage, check_stage
+    from ..measurements import TableError, read_measurements
+    from .rig import load
+
+    with user_errors(KeyError):
+        a = load(rig_file).arm(arm)
+    joints = a.joint_specs()
+    try:
+        check_stage(joints, a.name)
+        traverses = read_measurements(measurements, max_bytes, joints)
+        conditions = Conditions(device_key(device or a.controller), frequency, amplitude, temperature)
+        cal = calibrate_stage(traverses, joints, arm=a.name, day=day, source=str(measurements))
+    except TableError as e:
+        fail("\n".join(p + ("; --max-table-mb raises the limit" if "limit for a CSV" in p else "")
+                       for p in e.problems))
+    except (CalibrationError, ValueError) as e:
+        fail(str(e))
+    cal = dataclasses.replace(cal, conditions=conditions)
+    if output is not None:
+        with user_errors():
+            cal.save(output)
+    if json_out:
+        print_json(cal.to_dict())
+        return
+    t = Table(title=f"arm {a.name!r}: mean steps — day {cal.day}, {len(traverses)} traverses")
+    for col in ("joint", "dir", "mean step", "std. error", "traverses", "unit"):
+        t.add_column(col, justify="left" if col in ("joint", "dir", "unit") else "right")
+    for (j, d), v in sorted(cal.constant_steps.items()):
+        scale, unit = step_scale(joints[j])
+        se = cal.constant_stderr.get((j, d))
+        t.add_row(str(j), d, f"{v * scale:.5g}", "—" if se is None else f"{se * scale:.3g}",
+                  str(cal.constant_traverses.get((j, d), "")), unit)
+    console.print(t)
+    for n in cal.provenance.notes:
+        console.print(styled("note:", "dim"), n, highlight=False)
+    if output is not None:
+        say(f"saved to {output}")
 
 
 def _stored_device(traverses: list[Any], db: str | None) -> tuple[str, list[int]] | None:
@@ -408,8 +489,8 @@ def show_cmd(
     if cal.selection:  # an averaged model: which families, with what weight (◀: the one whose parameters are shown)
         console.print(_selection_table(cal))
     for (j, d), v in sorted(cal.constant_steps.items()):
-        s, u = step_scale(j)
-        say(f"constant-step comparator, joint {j}{d}: {v * s:.5g} {u}")
+        s, u = (1e9, "nm") if cal.kind(j) == "prismatic" else step_scale(j)
+        say(f"{'constant-step comparator' if cal.models else 'mean step'}, joint {j}{d}: {v * s:.5g} {u}")
     if output is not None:
         say(f"saved to {output}")
 

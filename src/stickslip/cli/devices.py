@@ -44,7 +44,7 @@ from ._common import (
     user_errors,
     warn_later,
 )
-from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
+from .camera import CAMERA_CALIBRATION_HELP, CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
 
 if TYPE_CHECKING:
     from ..procedures.move import MoveResult
@@ -150,6 +150,9 @@ def move(
     json_out: bool = typer.Option(False, "--json", help="Print steps, bursts, end as JSON."),
     camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    camera_calibration: Path | None = typer.Option(
+        None, "--camera-calibration", metavar="<file>", help=CAMERA_CALIBRATION_HELP
+    ),
     rig_file: Path | None = typer.Option(
         None, "--rig", help="Rig file (docs/rig.md): the arm's controller and calibration come from it, and the "
         "move is checked against the rig's envelope first.",
@@ -179,9 +182,11 @@ def move(
     Example: stickslip move -d mm3a:///dev/ttyUSB0 -c cal.json --joint 3 --by 30um
     """
     raw = _raw_steps(by, to, steps)
+    if camera_calibration is not None and camera is None:
+        fail("--camera-calibration goes with --camera")
     if rig_file is not None:
         _move_in_rig(rig_file, arm, device, joint, by, to, raw, calibration, burst, db, json_out,
-                     from_unreferenced, trust_calibration, camera, camera_tip)
+                     from_unreferenced, trust_calibration, camera, camera_tip, camera_calibration)
         return
     if arm is not None:
         fail("--arm names an arm of a rig: give --rig FILE too")
@@ -209,7 +214,7 @@ def move(
     if camera_tip is not None and camera is None:
         fail("--camera-tip goes with --camera")
     if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
-        run_seen("move", request, cal, camera, camera_tip, db, json_out)
+        run_seen("move", request, cal, camera, camera_tip, db, json_out, camera_calibration=camera_calibration)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
@@ -225,7 +230,7 @@ def move(
 def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
                  raw: int | None, calibration: Path | None, burst: int | None, db: str | None, json_out: bool,
                  from_unreferenced: bool, trust_calibration: bool, camera: str | None = None,
-                 camera_tip: str | None = None) -> None:
+                 camera_tip: str | None = None, camera_calibration: Path | None = None) -> None:
     """``move --rig FILE --arm NAME``: the arm's device, calibration and envelope from the rig file.
 
     With ``--camera`` the closed loop checks the whole path and each leg against the envelope.
@@ -258,7 +263,8 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
             from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
         )
         ra = rig_arm(rig_file, a.name, None, None, cal_path, db)
-        run_seen("move", seen, cal, camera, camera_tip, ra.database if ra else db, json_out, rig_arm=ra)
+        run_seen("move", seen, cal, camera, camera_tip, ra.database if ra else db, json_out, rig_arm=ra,
+                 camera_calibration=camera_calibration)
         return
     joints = a.joint_specs()
     with open_store(rig_database(db, rig)) as store, user_errors(DeviceBusy, KeyError, DeviceError):

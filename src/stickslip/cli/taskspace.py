@@ -34,7 +34,14 @@ from ._common import (
     warn,
     warn_later,
 )
-from .camera import CAMERA_LOOP_HELP, CAMERA_TIP_HELP, camera_errors, camera_loop, run_seen
+from .camera import (
+    CAMERA_CALIBRATION_HELP,
+    CAMERA_LOOP_HELP,
+    CAMERA_TIP_HELP,
+    camera_errors,
+    camera_loop,
+    run_seen,
+)
 from .rig import rig_arm
 
 if TYPE_CHECKING:
@@ -125,6 +132,9 @@ def reach(
     json_out: bool = typer.Option(False, "--json", help="Print the plan as JSON (metres, radians)."),
     camera: str | None = typer.Option(None, "--camera", help=CAMERA_LOOP_HELP),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    camera_calibration: Path | None = typer.Option(
+        None, "--camera-calibration", metavar="<file>", help=CAMERA_CALIBRATION_HELP
+    ),
     rig_file: Path | None = typer.Option(
         None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
         "and the whole line is checked against the rig's envelope first.",
@@ -179,10 +189,13 @@ def reach(
     )
     if camera_tip is not None and camera is None:
         fail("--camera-tip goes with --camera")
+    if camera_calibration is not None and camera is None:
+        fail("--camera-calibration goes with --camera")
     if camera is not None and dry_run:
         fail("--dry-run plans without moving: the camera closes the loop of a move (drop one of them)")
     if camera is not None:  # the closed loop: stickslip.procedures.closed_loop
-        run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed, rig_arm=in_rig)
+        run_seen("reach", request, cal, camera, camera_tip, db, json_out, borrowed, rig_arm=in_rig,
+                 camera_calibration=camera_calibration)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
         if in_rig is not None:
@@ -392,6 +405,9 @@ def jog(
         "and kept as seen, their step scales corrected as the tip moves.",
     ),
     camera_tip: str | None = typer.Option(None, "--camera-tip", metavar="<x,y>", help=CAMERA_TIP_HELP),
+    camera_calibration: Path | None = typer.Option(
+        None, "--camera-calibration", metavar="<file>", help=CAMERA_CALIBRATION_HELP
+    ),
     rig_file: Path | None = typer.Option(
         None, "--rig", help="Rig file (docs/rig.md): the arm's controller, calibration and geometry come from it, "
         "and the tip stops at the rig's envelope.",
@@ -442,7 +458,8 @@ def jog(
         device_key(device)
     request = JogRequest(
         device, geom, float(image_angle), speed, max_rate, hold, PoseUpdate(q1, q2, q3, theta, psi),
-        max_age_setting(None).value, from_unreferenced, trust_calibration, camera_loop(camera, camera_tip),
+        max_age_setting(None).value, from_unreferenced, trust_calibration,
+        camera_loop(camera, camera_tip, camera_calibration),
     )
     screen = _Screen()
     try:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 
 from .. import kinematics as kin
@@ -87,17 +87,19 @@ class TableError(ValueError):
         super().__init__("\n".join(self.problems))
 
 
-def check_pose(joint: int, values: dict[str, float]) -> list[str]:
+def check_pose(joint: int, values: dict[str, float], joints: Mapping[int, kin.JointSpec] | None = None) -> list[str]:
     """Range problems of a pose for a traverse of ``joint`` (empty if fine).
 
-    The fixed joints must lie within their stops; ``theta`` and ``psi`` within
-    [-pi, pi]. Values use the tolerance of :meth:`JointSpec.contains`.
+    The fixed joints must lie within their stops (the MM3A's, or ``joints``: an arm's own,
+    :meth:`stickslip.rig.Arm.joint_specs`); ``theta`` and ``psi`` within [-pi, pi]. Values
+    use the tolerance of :meth:`JointSpec.contains`.
     """
+    specs = kin.JOINTS if joints is None else joints
     problems = []
     for j in (1, 2, 3):
-        if j == joint:
+        if j == joint or j not in specs:
             continue
-        problem = kin.JOINTS[j].range_problem(f"q{j}", values[f"q{j}"])
+        problem = specs[j].range_problem(f"q{j}", values[f"q{j}"])
         if problem:
             problems.append(problem)
     for name in ("theta", "psi"):
@@ -140,8 +142,14 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
     return v, None
 
 
-def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
-    """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
+def parse_row(
+    row: dict[str, str], where: str, joints: Mapping[int, kin.JointSpec] | None = None
+) -> tuple[Traverse | None, list[str]]:
+    """Validate one CSV row (a dict of strings). Returns the traverse or the problems.
+
+    ``joints``: the arm's own joints (their numbers, kinds and ranges) where the table is
+    not the MM3A's, e.g. a rig file's stage (:meth:`stickslip.rig.Arm.joint_specs`).
+    """
     problems: list[str] = []
     day = unguard_cell(row.get("day") or "").strip()  # a label written guarded against formulas
     if not day:
@@ -152,9 +160,13 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
     joint: int | None
     try:
         joint = int(jtext)
-        kin.joint_spec(joint)
+        if joints is None:
+            kin.joint_spec(joint)
+        elif joint not in joints:
+            raise ValueError(joint)
     except ValueError:
-        problems.append(f"{where}: unknown joint {jtext!r} (joints are 1, 2 and 3)")
+        have = "1, 2 and 3" if joints is None else ", ".join(map(str, sorted(joints)))
+        problems.append(f"{where}: unknown joint {jtext!r} (joints are {have})")
         joint = None
     dtext = (row.get("direction") or "").strip()
     try:
@@ -182,10 +194,10 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
             f"{where}: direction {direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
         )
     for name in ("start", "end"):
-        problem = kin.JOINTS[joint].range_problem(name, nums[name])
+        problem = (kin.JOINTS if joints is None else joints)[joint].range_problem(name, nums[name])
         if problem:
             problems.append(f"{where}: {problem}")
-    problems += [f"{where}: {p}" for p in check_pose(joint, nums)]
+    problems += [f"{where}: {p}" for p in check_pose(joint, nums, joints)]
     if problems:
         return None, problems
     return Traverse(

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..clock import day_label_problem
+from ..joints import JointSet
 from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, text_lines, unguard_cell
 from .chunks import _Chunk, _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
 from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
@@ -107,15 +108,19 @@ class TraverseTable:
         return TraverseTable(*(getattr(self, f.name)[index] for f in fields(TraverseTable)))
 
 
-def parse_measurements(text: str, source: str = "<string>") -> list[Traverse]:
-    """Parse measurement-table CSV text. Raises :class:`TableError` listing every bad row."""
+def parse_measurements(text: str, source: str = "<string>", joints: JointSet | None = None) -> list[Traverse]:
+    """Parse measurement-table CSV text. Raises :class:`TableError` listing every bad row.
+
+    ``joints``: an arm's own joints (numbers, kinds, ranges; e.g. a rig file's stage,
+    :meth:`stickslip.rig.Arm.joint_specs`) to check the rows against instead of the MM3A's.
+    """
     try:
-        return _parse_measurements(text, source)
+        return _parse_measurements(text, source, joints)
     except csv.Error as e:
         raise TableError([_csv_problem(source, e)]) from None
 
-def _parse_measurements(text: str, source: str) -> list[Traverse]:
-    return _parse_measurement_columns(text, source).traverses()
+def _parse_measurements(text: str, source: str, joints: JointSet | None = None) -> list[Traverse]:
+    return _parse_measurement_columns(text, source, joints).traverses()
 
 
 def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTable:
@@ -131,9 +136,9 @@ def parse_measurement_table(text: str, source: str = "<string>") -> TraverseTabl
         raise TableError([_csv_problem(source, e)]) from None
 
 
-def _parse_measurement_columns(text: str, source: str) -> TraverseTable:
+def _parse_measurement_columns(text: str, source: str, joints: JointSet | None = None) -> TraverseTable:
     header, chunks = _open_table(text)
-    parts = list(_measurement_parts(header, chunks, source))
+    parts = list(_measurement_parts(header, chunks, source, joints))
     table = TraverseTable.concat(parts)
     if not len(table):
         raise TableError([f"{source}:2: the table has a header but no rows"])
@@ -161,7 +166,8 @@ def _check_header(header: list[str] | None, source: str) -> None:
 
 
 def _measurement_parts(
-    header: list[str] | None, chunks: Callable[[int, int], Iterator[_Chunk]], source: str
+    header: list[str] | None, chunks: Callable[[int, int], Iterator[_Chunk]], source: str,
+    joints: JointSet | None = None,
 ) -> Iterator[TraverseTable]:
     """The table's rows a chunk at a time, checked; after the last, :class:`TableError` with every bad row
     if there was one (no chunk is yielded after the first problem)."""
@@ -189,7 +195,7 @@ def _measurement_parts(
                 lines.append(lineno)
             cols = list(zip(*rows, strict=True))
         if lines:
-            part, errs = _measurement_chunk(cols, lines, source)
+            part, errs = _measurement_chunk(cols, lines, source, joints)
             problems += errs
             if not problems:
                 yield part
@@ -232,9 +238,13 @@ def _streamed(parts: Iterator[TraverseTable], source: str) -> Iterator[TraverseT
 
 
 def _measurement_chunk(
-    cols: Sequence[Sequence[str]], lines: list[int], source: str
+    cols: Sequence[Sequence[str]], lines: list[int], source: str, joints: JointSet | None = None
 ) -> tuple[TraverseTable, list[tuple[int, str]]]:
-    """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`."""
+    """Check 11-cell rows (as columns) with numpy; rows failing a check are re-parsed by :func:`parse_row`.
+
+    With an arm's own ``joints`` (the vector checks know the MM3A's ranges only) every row is
+    checked by :func:`parse_row` against them.
+    """
     # a guarded label (records.guard_cell) loses its guard before it is stripped: "'\t" is a tab, a blank label
     quoted = {d: unguard_cell(d).strip() for d in set(cols[0]) if d.startswith("'")}
     days = [quoted[c] if c in quoted else c.strip() for c in cols[0]] if quoted else [c.strip() for c in cols[0]]
@@ -258,10 +268,12 @@ def _measurement_chunk(
         ok &= (end != start) & ((end > start) == plus)
         ok &= _moving_within(joint, start) & _moving_within(joint, end)
         ok &= _pose_ok(joint, nums)
+    if joints is not None:
+        ok[:] = False
     problems: list[tuple[int, str]] = []
     bad = np.flatnonzero(~ok)
     for i in bad.tolist():
-        t, errs = parse_row({h: c[i] for h, c in zip(HEADER, cols, strict=True)}, f"{source}:{lines[i]}")
+        t, errs = parse_row({h: c[i] for h, c in zip(HEADER, cols, strict=True)}, f"{source}:{lines[i]}", joints)
         if errs or t is None:
             problems += [(lines[i], e) for e in errs]
             continue
@@ -311,13 +323,14 @@ def _read_table_text(path: str | Path, max_bytes: int | None = None) -> str:
         raise TableError([text]) from None
 
 
-def read_measurements(path: str | Path, max_bytes: int | None = None) -> list[Traverse]:
+def read_measurements(path: str | Path, max_bytes: int | None = None, joints: JointSet | None = None) -> list[Traverse]:
     """Read a measurement table from a CSV file. Raises :class:`TableError` on any bad row.
 
     ``max_bytes`` (default :data:`records.MAX_TABLE_BYTES`, 64 MiB) bounds the file: it is
-    read whole and held in memory.
+    read whole and held in memory. ``joints``: an arm's own joints to check the rows
+    against (:func:`parse_measurements`).
     """
-    return parse_measurements(_read_table_text(path, max_bytes), str(path))
+    return parse_measurements(_read_table_text(path, max_bytes), str(path), joints)
 
 
 def read_measurement_table(path: str | Path) -> TraverseTable:

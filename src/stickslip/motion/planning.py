@@ -143,8 +143,9 @@ class Planner:
         1, 2 or 3 of the MM3A, or an arm's own joint (:meth:`stickslip.rig.Arm.joint_specs`).
         A joint whose ``step_model`` is ``"constant"`` (an ``xyz`` arm's stage) is planned
         with the calibration's constant step of each direction; the pose does not enter.
-        A calibration that models such a joint the MM3A's way is refused (``ValueError``):
-        its steps are another arm's (an MM3A's joint 1 in rad, not a stage's in m).
+        A calibration that models such a joint the MM3A's way, or whose steps of it are of
+        another kind (in rad for a prismatic stage: :meth:`Calibration.kind`), is refused
+        (``ValueError``): its steps are another arm's (an MM3A's joint 1 in rad, not a stage's in m).
     pose : Pose
         The other joints and the tilt; the joint's own coordinate in it is ignored.
 
@@ -167,6 +168,12 @@ class Planner:
                 raise ValueError(
                     f"this calibration models joint {self.joint} as an MM3A's (the paper's load terms), and this "
                     "joint is a stage's, planned with a constant step: give the stage's own calibration"
+                )
+            if calibration.kind(self.joint) != self.spec.kind:  # its steps in rad for a stage's metres, or back
+                raise ValueError(
+                    f"this calibration's steps of joint {self.joint} are in {calibration.unit(self.joint)} (a "
+                    f"{calibration.kind(self.joint)} joint's), and this joint is {self.spec.kind}: give the stage's "
+                    "own calibration (stickslip calibrate TABLE --rig RIG --arm NAME)"
                 )
             self._models: dict[int, JointModel] = {}
             for s, lab in ((1, "+"), (-1, "-")):

@@ -6,9 +6,12 @@ image, so the tracker follows it from frame to frame). After each leg the camera
 grabbed, the tip tracked (:class:`stickslip.vision.track.TipTracker`) and the fix turned
 into joint observations through the image Jacobian (:func:`stickslip.vision.jacobian.joint_observation`):
 
-* the image Jacobian at the kept pose ``q_k`` is the kinematic one, ``G = (P / s) J_tip(q_k)``
-  (:func:`stickslip.vision.view.base_to_image`, :func:`stickslip.kinematics.jacobian`);
-* the tip is expected at ``u_k = u_0 + (P / s) (tip(q_k) - tip(q_0))``, ``u_0`` the fix at
+* the image Jacobian at the kept pose ``q_k`` is ``G = A J_tip(q_k)``
+  (:func:`stickslip.kinematics.jacobian`), ``A`` the image map (:func:`image_map`): the
+  kinematic ``P / s`` of the assumed view (:func:`stickslip.vision.view.base_to_image`),
+  or the camera fitted to the image Jacobian ``camera calibrate`` measured
+  (:attr:`CameraLoop.jacobian`, :meth:`stickslip.vision.jacobian.MeasuredJacobian.image_map`);
+* the tip is expected at ``u_k = u_0 + A (tip(q_k) - tip(q_0))``, ``u_0`` the fix at
   the start ``q_0``; the fix's difference from ``u_k`` gives the joints moved in the leg
   (one joint: ``joint_observation``; several: the same least squares over their columns);
 * each observation goes into the joint's Kalman filter as ``stickslip observe`` does
@@ -54,6 +57,7 @@ from ..vision.jacobian import (
     MIN_VISIBILITY,
     CameraCalibration,
     JacobianError,
+    MeasuredJacobian,
     joint_observation,
     visibility,
 )
@@ -80,6 +84,7 @@ from .reach import ReachRequest, drive_reach, joint_path, referenced_state
 __all__ = [
     "CameraLoop",
     "JogEyes",
+    "image_map",
     "Look",
     "LoopResult",
     "move_seen",
@@ -121,6 +126,11 @@ class CameraLoop:
         How the camera looks at the rig (default straight down).
     auto_joint : int
         The joint stepped to find the tip when ``tip`` is ``None``.
+    jacobian : MeasuredJacobian or None
+        The image Jacobian ``stickslip camera calibrate --jacobian`` measured with this
+        camera (``--camera-calibration``): the loop's image Jacobian is then the camera
+        fitted to it (:meth:`~stickslip.vision.jacobian.MeasuredJacobian.image_map`),
+        ``view`` filling in only what it did not measure. ``None``: the kinematic one of ``view``.
     """
 
     camera: str
@@ -131,6 +141,7 @@ class CameraLoop:
     max_leg_px: float = 16.0
     view: View = TOP_VIEW
     auto_joint: int = 3
+    jacobian: MeasuredJacobian | None = None
 
     def __post_init__(self) -> None:
         for name in ("tolerance_px", "tolerance", "max_leg_px"):
@@ -254,20 +265,38 @@ def tolerance_m(loop: CameraLoop, pixel_size_m: float) -> float:
 # ---------------------------------------------------------------- seeing the joints
 
 
+def image_map(loop: CameraLoop, pixel_size_m: float, pose: kin.Pose, geometry: kin.Geometry) -> np.ndarray:
+    """The loop's 2 x 3 image map at ``pose`` (px per m of a base-frame displacement).
+
+    The kinematic ``P / s`` of ``loop.view``, or, with a measured Jacobian
+    (``loop.jacobian``), the camera fitted to it.
+    """
+    A0 = base_to_image(loop.view, pixel_size_m, pose.theta, pose.psi)
+    if loop.jacobian is None:
+        return A0
+    return loop.jacobian.image_map(A0, geometry)
+
+
 def image_calibration(
     pose: kin.Pose, reference_px: tuple[float, float], pixel_size_m: float, view: View, geometry: kin.Geometry,
-    range_px: float,
+    range_px: float, image_map: np.ndarray | None = None,
 ) -> CameraCalibration:
-    """The kinematic camera calibration at ``pose``: each visible joint's image motion per unit (px per rad or m).
+    """The camera calibration at ``pose``: each visible joint's image motion per unit (px per rad or m).
 
-    ``G = (P / s) J_tip(q)``, the columns of the joints that move the tip at least
-    :data:`~stickslip.vision.jacobian.MIN_VISIBILITY` in the image plane.
+    ``G = A J_tip(q)`` with ``A`` the image map (default the kinematic ``P / s`` of
+    ``view``), the columns of the joints that move the tip at least
+    :data:`~stickslip.vision.jacobian.MIN_VISIBILITY` of their motion's length in the image.
     """
-    G = base_to_image(view, pixel_size_m, pose.theta, pose.psi) @ kin.jacobian((pose.q1, pose.q2, pose.q3), geometry)
-    cols = {
-        j: (float(G[0, j - 1]), float(G[1, j - 1]))
-        for j in (1, 2, 3) if visibility(j, pose, view, geometry) >= MIN_VISIBILITY
-    }
+    J = kin.jacobian((pose.q1, pose.q2, pose.q3), geometry)
+    if image_map is None:
+        G = base_to_image(view, pixel_size_m, pose.theta, pose.psi) @ J
+        seen = [j for j in (1, 2, 3) if visibility(j, pose, view, geometry) >= MIN_VISIBILITY]
+    else:
+        G = np.asarray(image_map, dtype=float) @ J
+        seen = [j for j in (1, 2, 3)
+                if float(np.linalg.norm(G[:, j - 1])) * pixel_size_m
+                >= MIN_VISIBILITY * float(np.linalg.norm(J[:, j - 1])) > 0]
+    cols = {j: (float(G[0, j - 1]), float(G[1, j - 1])) for j in seen}
     return CameraCalibration(pose, reference_px, cols, pixel_size_m, view, geometry, range_px)
 
 
@@ -360,11 +389,12 @@ class _Run:
             self.looks.append(Look(steps, None, {}, self.q(), self._error(target), correction, self._scales()))
             return f"the tip was lost ({r.reason}: {r.detail}); the positions are dead-reckoned, not seen"
         pose = self.state.pose
-        u_k = np.asarray(self.u0) + base_to_image(self.loop.view, self.pixel_size_m, pose.theta, pose.psi) @ (
+        A = self.image_map()
+        u_k = np.asarray(self.u0) + A @ (
             np.asarray(kin.tip(self.q(), self.geometry)) - np.asarray(kin.tip(self.q0, self.geometry))
         )
         cal = image_calibration(pose, (float(u_k[0]), float(u_k[1])), self.pixel_size_m, self.loop.view,
-                                self.geometry, range_px=4.0 * self.loop.max_leg_px)
+                                self.geometry, range_px=4.0 * self.loop.max_leg_px, image_map=A)
         sigma_px = math.hypot(r.sigma, self.sigma0)
         try:
             seen = observe_joints(cal, moved, r.x, r.y, sigma_px)
@@ -390,6 +420,10 @@ class _Run:
         self.save(self.state)
         self.looks.append(Look(steps, (r.x, r.y), seen, self.q(), self._error(target), correction, self._scales()))
         return None
+
+    def image_map(self) -> np.ndarray:
+        """The image map at the kept pose (px per m of a base-frame displacement): :func:`image_map`."""
+        return image_map(self.loop, self.pixel_size_m, self.state.pose, self.geometry)
 
     def _scales(self) -> dict[int, float]:
         return {j: t.scale for j, t in self.tracks.items()}
@@ -487,6 +521,9 @@ def _open(
     try:
         if cam.info.pixel_size_m is None:
             raise ValueError(f"the camera {loop.camera} does not know its pixel size: give pixel= in its URL")
+        if loop.jacobian is not None:
+            loop.jacobian.check_camera(loop.camera, cam.info.pixel_size_m)
+            loop.jacobian.check_base(state.pose)
         tip = loop.tip
         if tip is None:
             kept = journal()
@@ -602,8 +639,7 @@ def _close(dev: Controller, cam: Camera | None) -> None:
 
 def _leg_px(run: _Run, joint: int) -> float:
     """Pixels the tip moves per unit of ``joint`` at the kept pose (px per rad or m)."""
-    pose = run.state.pose
-    G = base_to_image(run.loop.view, run.pixel_size_m, pose.theta, pose.psi) @ kin.jacobian(run.q(), run.geometry)
+    G = run.image_map() @ kin.jacobian(run.q(), run.geometry)
     return float(np.linalg.norm(G[:, joint - 1])) or 1.0
 
 
@@ -801,8 +837,7 @@ class JogEyes:
             return None, None
         run = self.run
         moved = np.subtract(kin.tip(run.q(), run.geometry), kin.tip(self.before, run.geometry))
-        pose = run.state.pose
-        px = float(np.linalg.norm(base_to_image(run.loop.view, run.pixel_size_m, pose.theta, pose.psi) @ moved))
+        px = float(np.linalg.norm(run.image_map() @ moved))
         if any(steps) and px < 0.5 * run.loop.max_leg_px:
             return None, None  # still moving, less than half a leg since the last look
         sent = (self.pending[0], self.pending[1], self.pending[2])

@@ -42,7 +42,7 @@ from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_optio
 from ..vision.frame import Frame
 from ..vision.view import View, project
 
-__all__ = ["SimCamera", "SimCamSettings", "SimScene", "open_url", "LOOKS"]
+__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "open_url", "LOOKS"]
 
 LOOKS = ("optical", "sem")
 """The simulated microscope's looks."""
@@ -220,6 +220,31 @@ class SimCamera:
         return self.scene.render(tip_px + shift, direction, sigma, shift, foreshortening)
 
 
+@dataclass(frozen=True)
+class LobedParticle:
+    """A dust grain of a few overlapping discs (a lobed outline), lying over the needle.
+
+    Real dust is rarely a disc: grains clump, and a clump's outline is a few rounded lobes.
+    Its body is as opaque as its ``level`` says and its outline as sharp as ``blur``
+    (a grain lying a little above the focal plane is softer than the substrate).
+
+    Parameters
+    ----------
+    discs : tuple of (x, y, r)
+        The lobes' centres and radii, px; the grain is their union.
+    level : float
+        Its brightness as a share of the illumination: bright field, what it lets through
+        (the needle lets through about 0.15 of the ground's); SEM, its yield (the needle's
+        body is about 0.45).
+    blur : float
+        The Gaussian sigma of its outline, px.
+    """
+
+    discs: tuple[tuple[float, float, float], ...]
+    level: float
+    blur: float = 0.0
+
+
 class SimScene:
     """What the simulated microscope renders, apart from the arm: substrate, needle, look, noise.
 
@@ -257,7 +282,8 @@ class SimScene:
 
     def render(self, tip_px: NDArray[np.float64], direction: NDArray[np.float64], sigma: float,
                shift: NDArray[np.float64] | None = None, foreshortening: float = 1.0,
-               particles: tuple[tuple[float, float, float], ...] = ()) -> NDArray[np.float64]:
+               particles: tuple[tuple[float, float, float], ...] = (),
+               lobed: tuple[LobedParticle, ...] = ()) -> NDArray[np.float64]:
         """A noisy frame, grey values in [0, 1].
 
         Parameters
@@ -275,6 +301,8 @@ class SimScene:
         particles : tuple of (x, y, r)
             Opaque particles over everything (px): as dark as the needle in bright field,
             as bright as its edges in an SEM.
+        lobed : tuple of LobedParticle
+            Grains of a few lobes over everything, painted after ``particles``.
         """
         s = self.settings
         tip_px = np.asarray(tip_px, dtype=float)
@@ -294,11 +322,23 @@ class SimScene:
             disc = np.clip(r + 0.5 - np.hypot(self._xx - px, self._yy - py), 0.0, 1.0)
             level = 0.1 if s.look == "optical" else 0.8
             clean = clean * (1.0 - disc) + level * self.illumination * disc
+        for grain in lobed:
+            clean = self._paint_lobed(clean, grain)
         lam = np.clip(clean, 0.0, None) * s.photons
         counts = self.rng.poisson(lam).astype(float)
         if s.look == "sem":  # the beam's line-by-line jitter
             counts += self.rng.normal(0.0, 0.005 * s.photons, (s.height, 1))
         return np.asarray(np.clip(counts / s.photons, 0.0, 1.0), dtype=float)
+
+    def _paint_lobed(self, clean: NDArray[np.float64], grain: LobedParticle) -> NDArray[np.float64]:
+        """``clean`` with ``grain`` over it: its lobes' coverage (anti-aliased, their union), softened."""
+        cover = np.zeros_like(clean)
+        for px, py, r in grain.discs:
+            cover = np.maximum(cover, np.clip(r + 0.5 - np.hypot(self._xx - px, self._yy - py), 0.0, 1.0))
+        if grain.blur > 0.3:
+            cover = ndimage.gaussian_filter(cover, grain.blur, truncate=3.0)
+        return np.asarray(clean * (1.0 - cover) + grain.level * self.illumination * cover, dtype=float)
+
     def _needle(self, tip: NDArray[np.float64], direction: NDArray[np.float64],
                 foreshortening: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Coverage of the needle (0..1) and its edge brightness (SEM), unblurred.

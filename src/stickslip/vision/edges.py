@@ -23,12 +23,12 @@ say something lies over the tip, or the fit is ahead of it. See docs/vision.md,
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .refine import Patch, _sample
+from .refine import Patch, _sample, _sample_value
 
 __all__ = ["EdgeProfiles", "EdgeCheck", "STATIONS", "NEAR", "learn_edges", "check_edges"]
 
@@ -58,6 +58,16 @@ edge, px."""
 
 
 @dataclass(frozen=True)
+class _Profile:
+    """The template's side of one station's comparison (:func:`_station`)."""
+
+    idx: NDArray[np.intp]
+    tc: FloatArray
+    e: FloatArray
+    ve: float
+
+
+@dataclass(frozen=True)
 class EdgeProfiles:
     """The template's profiles across the shaft, for each blur copy (learnt once).
 
@@ -75,6 +85,10 @@ class EdgeProfiles:
         The template's profile at each blur copy, grey units (averaged over :data:`LINES`).
     s : ndarray, shape (m,)
         The stations kept (those where the template's needle is seen), px.
+    stations : list of list
+        For each blur copy and station, what :func:`_station` compares the frame's profile with:
+        the samples used, the unit vector of their level-free slope, the template's profile
+        with its level and slope taken out and its sum of squares (``None`` where it is flat).
     """
 
     shaft: tuple[float, float]
@@ -82,6 +96,7 @@ class EdgeProfiles:
     use: NDArray[np.bool_]
     expected: list[FloatArray]
     s: FloatArray
+    stations: list[list[_Profile | None]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -195,35 +210,44 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
                            apex[1] + offsets[..., 1].ravel() + line * uy)
             acc += v[0].reshape(use_a.shape)
         expected.append(acc / len(LINES))
-    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept))
+    stations = [[_profile(E[j, np.flatnonzero(use_a[j])], np.flatnonzero(use_a[j])) for j in range(len(kept))]
+                for E in expected]
+    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept), stations)
 
 
-def _station(expected: FloatArray, F: FloatArray, ok: NDArray[np.bool_], idx: NDArray[np.intp]
-             ) -> tuple[float, float, float, float] | None:
-    """One station: the frame's profile ``F`` (all samples, ``ok`` where in the frame) against the template's
-    ``expected`` over the samples ``idx``, shifted by up to :data:`SHIFTS` samples.
+def _flat(v: FloatArray, tc: FloatArray) -> FloatArray:
+    """``v`` with its mean and its slope along the unit vector ``tc`` taken out."""
+    v = v - v.sum() / v.size
+    return np.asarray(v - float(v @ tc) * tc)
 
-    Returns the contrast, the correlation and the shift (px) that correlates best, and the
-    template profile's sum of squares; ``None`` for a flat template profile or none in the frame.
-    """
+
+def _profile(expected: FloatArray, idx: NDArray[np.intp]) -> _Profile | None:
+    """The template's profile ``expected`` at the samples ``idx`` made ready for :func:`_station` (``None``:
+    flat)."""
     # the profiles' level and slope taken out (the ground's shading, vignetting): the needle's two edges left
-    tc = idx - idx.mean()
+    tc = idx - idx.sum() / idx.size
     tc = tc / math.sqrt(float(tc @ tc))
-
-    def flat(v: FloatArray) -> FloatArray:
-        v = v - v.mean()
-        return np.asarray(v - float(v @ tc) * tc)
-
-    e = flat(expected)
+    e = _flat(expected, tc)
     ve = float(e @ e)
     if ve <= 1e-18:
         return None
+    return _Profile(idx, tc, e, ve)
+
+
+def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_]) -> tuple[float, float, float, float] | None:
+    """One station: the frame's profile ``F`` (all samples, ``ok`` where in the frame) against the template's
+    (:func:`_profile`), shifted by up to :data:`SHIFTS` samples.
+
+    Returns the contrast, the correlation and the shift (px) that correlates best, and the
+    template profile's sum of squares; ``None`` when no shift lies in the frame.
+    """
+    idx, tc, e, ve = pr.idx, pr.tc, pr.e, pr.ve
     best: tuple[float, float, float, float] | None = None
     for d in range(-SHIFTS, SHIFTS + 1):
         k = idx + d
         if not ok[k].all():
             continue
-        f = flat(F[k])
+        f = _flat(F[k], tc)
         vf = float(f @ f)
         cov = float(f @ e)
         r = cov / math.sqrt(ve * vf) if vf > 0 else 0.0
@@ -246,22 +270,25 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     ct, st_ = math.cos(theta), math.sin(theta)
     ox, oy = ep.offsets[..., 0], ep.offsets[..., 1]
     ux, uy = ep.shaft
+    # the three lines of every station sampled in one go
+    wx = np.concatenate([(ox + line * ux).ravel() for line in LINES])
+    wy = np.concatenate([(oy + line * uy).ravel() for line in LINES])
+    v, inside = _sample_value(frame, ct * wx - st_ * wy + x, st_ * wx + ct * wy + y)
+    q = ep.use.size
     acc = np.zeros(ep.use.shape)
     ok = np.ones(ep.use.shape, dtype=bool)
-    for line in LINES:
-        wx, wy = ox + line * ux, oy + line * uy
-        v, inside = _sample(frame, (ct * wx - st_ * wy + x).ravel(), (st_ * wx + ct * wy + y).ravel())
-        acc += v[0].reshape(ep.use.shape)
-        ok &= inside.reshape(ep.use.shape)
+    for i in range(len(LINES)):
+        acc += v[i * q : (i + 1) * q].reshape(ep.use.shape)
+        ok &= inside[i * q : (i + 1) * q].reshape(ep.use.shape)
     F = acc / len(LINES)
-    E = ep.expected[copy]
     a = np.full(m, np.nan)
     sd = np.full(m, np.inf)
     shift = np.zeros(m)
     rs = np.full(m, np.nan)
-    for j in range(m):
-        idx = np.flatnonzero(ep.use[j])
-        res = _station(E[j, idx], F[j], ok[j], idx)
+    for j, pr in enumerate(ep.stations[copy]):
+        if pr is None:
+            continue
+        res = _station(pr, F[j], ok[j])
         if res is None:
             continue
         a[j], rs[j], shift[j], ve = res

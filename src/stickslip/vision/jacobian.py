@@ -24,9 +24,12 @@ the dead reckoning's Kalman filter (:class:`stickslip.motion.tracking.JointTrack
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +38,9 @@ from .. import kinematics as kin
 from ..joints import joint_spec
 from ..models import direction_label
 from .view import View, image_axes
+
+if TYPE_CHECKING:
+    from ..calibration import Calibration
 
 __all__ = [
     "JacobianError",
@@ -48,6 +54,10 @@ __all__ = [
     "joint_observation",
     "MIN_VISIBILITY",
     "MAX_NONLINEARITY",
+    "JACOBIAN_VERSION",
+    "MeasuredDirection",
+    "MeasuredJacobian",
+    "measured_jacobian",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -368,3 +378,291 @@ def joint_observation(
     q = q_ref + dq
     del spec
     return JointObservation(joint, q, sigma_px / math.sqrt(g2), off)
+
+
+# ---------------------------------------------------------------- the measured image Jacobian, kept in a file
+
+JACOBIAN_VERSION = 1
+"""Version of the image-Jacobian file (``camera calibrate --jacobian``) this release writes and reads."""
+
+PIXEL_SIZE_MATCH = 1e-6
+"""Largest relative difference between the file's pixel size and the camera's."""
+
+BASE_TILT_MATCH = math.radians(0.1)
+"""Largest difference between the base tilt (theta, psi) the Jacobian was measured at and the arm's now, rad."""
+
+
+@dataclass(frozen=True)
+class MeasuredDirection:
+    """One joint and direction of a measured image Jacobian.
+
+    Attributes
+    ----------
+    joint : int
+    direction : str
+        ``"+"`` or ``"-"``.
+    px_per_step : tuple of float
+        The tip's image motion per step in this direction, px (the fit, :class:`DirectionFit`).
+    px_per_step_sd : float
+        Standard deviation of its length, px per step.
+    residual_px : float
+        The largest distance of a fix from the fitted line, px.
+    steps : int
+        Steps the fit spans.
+    gamma : float
+        The step calibration's mean step over those steps, m or rad (what turns px per
+        step into px per m or rad).
+    """
+
+    joint: int
+    direction: str
+    px_per_step: tuple[float, float]
+    px_per_step_sd: float
+    residual_px: float
+    steps: int
+    gamma: float
+
+    @property
+    def px_per_unit(self) -> tuple[float, float]:
+        """The tip's image motion per unit of the joint, px per m (joint 3) or px per rad: ``± J / gamma``."""
+        sign = 1.0 if self.direction == "+" else -1.0
+        return (sign * self.px_per_step[0] / self.gamma, sign * self.px_per_step[1] / self.gamma)
+
+
+@dataclass(frozen=True)
+class MeasuredJacobian:
+    """The image Jacobian ``camera calibrate`` measured, as the closed loop uses it (``--camera-calibration``).
+
+    Attributes
+    ----------
+    camera : str
+        The camera's URL, secrets redacted: the file is refused for another camera.
+    pixel_size_m : float
+        The camera's pixel size, m: refused for another.
+    pose : Pose
+        The pose the joints were stepped from (rad, rad, m; base tilt rad).
+    tip_px : tuple of float
+        The tip's pixel at ``pose``.
+    directions : tuple of MeasuredDirection
+    calibration_day : str
+        The day of the step calibration whose steps scaled the fits.
+    """
+
+    camera: str
+    pixel_size_m: float
+    pose: kin.Pose
+    tip_px: tuple[float, float]
+    directions: tuple[MeasuredDirection, ...]
+    calibration_day: str = ""
+
+    def px_per_unit(self) -> dict[int, tuple[float, float]]:
+        """``{joint: (dx, dy)}``: each measured joint's image motion per unit (px per rad or m), its two
+        directions averaged."""
+        out: dict[int, list[tuple[float, float]]] = {}
+        for d in self.directions:
+            out.setdefault(d.joint, []).append(d.px_per_unit)
+        return {j: (float(np.mean([v[0] for v in vs])), float(np.mean([v[1] for v in vs]))) for j, vs in out.items()}
+
+    def image_map(self, fallback: FloatArray, geometry: kin.Geometry = kin.DEFAULT_GEOMETRY) -> FloatArray:
+        """``A`` (2 × 3, px per m of a base-frame displacement): the camera fitted to the measured columns.
+
+        ``A J_tip(q_c)`` equals the measured columns ``G`` (the joints measured at the pose
+        ``q_c``); what they do not fix is taken from ``fallback`` (the kinematic ``P / s`` of
+        the assumed view): ``A = A0 + (G - A0 J_c) J_c⁺`` with ``J_c`` the measured joints'
+        columns of the tip's Jacobian. At another pose the image Jacobian is ``A J_tip(q)``
+        (an orthographic microscope: ``A`` does not depend on the pose).
+        """
+        cols = self.px_per_unit()
+        joints = sorted(cols)
+        A0 = np.asarray(fallback, dtype=float)
+        if not joints:
+            return A0
+        Jt = kin.jacobian((self.pose.q1, self.pose.q2, self.pose.q3), geometry)
+        Jc = Jt[:, [j - 1 for j in joints]]
+        G = np.array([cols[j] for j in joints], dtype=float).T
+        return np.asarray(A0 + (G - A0 @ Jc) @ np.linalg.pinv(Jc), dtype=float)
+
+    def against(
+        self, fallback: FloatArray, geometry: kin.Geometry = kin.DEFAULT_GEOMETRY
+    ) -> dict[int, tuple[float, float]]:
+        """``{joint: (length ratio, angle deg)}``: each measured column against the assumed view's at the pose.
+
+        ``fallback`` is the assumed view's ``P / s`` (px per m). A ratio other than 1 is a
+        tilted view or steps off the calibration by that much (the camera cannot tell which);
+        an angle is a turned or tilted view. A joint the view does not see has ratio ``inf``.
+        """
+        J = np.asarray(fallback, dtype=float) @ kin.jacobian((self.pose.q1, self.pose.q2, self.pose.q3), geometry)
+        out: dict[int, tuple[float, float]] = {}
+        for j, g in sorted(self.px_per_unit().items()):
+            c = J[:, j - 1]
+            gn, cn = math.hypot(*g), float(np.linalg.norm(c))
+            if cn <= 1e-9 * gn:
+                out[j] = (math.inf, math.nan)
+                continue
+            cos = float(np.dot(g, c)) / (gn * cn)
+            out[j] = (gn / cn, math.degrees(math.acos(min(1.0, max(-1.0, cos)))))
+        return out
+
+    def check_camera(self, url: str, pixel_size_m: float | None) -> None:
+        """:class:`JacobianError` (one line) unless ``url`` and ``pixel_size_m`` are the file's camera's."""
+        from ..devices.base import redact_url
+
+        if redact_url(url) != self.camera:
+            raise JacobianError(
+                f"the camera calibration was measured with {self.camera}, not {redact_url(url)}: "
+                "measure it with this camera (stickslip camera calibrate --jacobian)"
+            )
+        if pixel_size_m is None or abs(pixel_size_m - self.pixel_size_m) > PIXEL_SIZE_MATCH * self.pixel_size_m:
+            got = "unknown" if pixel_size_m is None else f"{pixel_size_m * 1e6:.6g} µm"
+            raise JacobianError(
+                f"the camera calibration's pixel is {self.pixel_size_m * 1e6:.6g} µm, the camera's {got}: "
+                "measure it again at this magnification"
+            )
+
+    def check_base(self, pose: kin.Pose) -> None:
+        """:class:`JacobianError` (one line) unless the arm's base is tilted as it was when measured.
+
+        ``A`` is the camera seen from the base: a base tilted otherwise turns it.
+        """
+        for name in ("theta", "psi"):
+            was, now = getattr(self.pose, name), getattr(pose, name)
+            if abs(was - now) > BASE_TILT_MATCH:
+                raise JacobianError(
+                    f"the camera calibration was measured with the base's {name} at {math.degrees(was):.3g} deg, "
+                    f"the arm's is {math.degrees(now):.3g} deg: measure it again in this set-up"
+                )
+
+    def to_dict(self) -> dict[str, object]:
+        """The file's content (SI units, px), ``"version"`` first."""
+        return {
+            "version": JACOBIAN_VERSION,
+            "kind": "stickslip image jacobian",
+            "camera": self.camera,
+            "pixel_size_m": self.pixel_size_m,
+            "pose": dict(self.pose._asdict()),
+            "tip_px": list(self.tip_px),
+            "calibration_day": self.calibration_day,
+            "directions": [
+                {"joint": d.joint, "direction": d.direction, "px_per_step": list(d.px_per_step),
+                 "px_per_step_sd": d.px_per_step_sd, "residual_px": d.residual_px, "steps": d.steps,
+                 "gamma": d.gamma, "px_per_unit": list(d.px_per_unit)}
+                for d in self.directions
+            ],
+        }
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write the JSON file atomically (a failed write keeps the old file)."""
+        from .. import records
+
+        records.atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def from_dict(cls, data: object, where: str = "the camera calibration") -> MeasuredJacobian:
+        """Read :meth:`to_dict`'s content; :class:`JacobianError` naming the field and the reason."""
+        from ..records import check_version, finite_number
+
+        try:
+            check_version(data, where, "image jacobian", JACOBIAN_VERSION)
+        except ValueError as e:
+            raise JacobianError(str(e)) from None
+        if not isinstance(data, dict) or data.get("kind") != "stickslip image jacobian":
+            raise JacobianError(f"{where}: not an image Jacobian written by stickslip camera calibrate --jacobian")
+
+        def num(v: object, name: str, positive: bool = False) -> float:
+            try:
+                x = finite_number(v, f"{where}: {name}")
+            except ValueError as e:
+                raise JacobianError(str(e)) from None
+            if positive and x <= 0:
+                raise JacobianError(f"{where}: {name} must be > 0, got {x!r}")
+            return x
+
+        def pair(v: object, name: str) -> tuple[float, float]:
+            if not isinstance(v, list) or len(v) != 2:
+                raise JacobianError(f"{where}: {name} must be a pair of numbers, got {v!r}")
+            return (num(v[0], name), num(v[1], name))
+
+        camera = data.get("camera")
+        if not isinstance(camera, str) or not camera:
+            raise JacobianError(f"{where}: camera must be the camera's URL, got {camera!r}")
+        pose_d = data.get("pose")
+        if not isinstance(pose_d, dict) or set(pose_d) != set(kin.Pose._fields):
+            raise JacobianError(f"{where}: pose must have {', '.join(kin.Pose._fields)}")
+        pose = kin.Pose(**{k: num(pose_d[k], f"pose.{k}") for k in kin.Pose._fields})
+        raw = data.get("directions")
+        if not isinstance(raw, list) or not raw:
+            raise JacobianError(f"{where}: directions must be a non-empty list")
+        dirs: list[MeasuredDirection] = []
+        for i, r in enumerate(raw):
+            name = f"directions[{i}]"
+            if not isinstance(r, dict):
+                raise JacobianError(f"{where}: {name} must be an object")
+            j, d, steps = r.get("joint"), r.get("direction"), r.get("steps")
+            if j not in (1, 2, 3) or isinstance(j, bool) or d not in ("+", "-"):
+                raise JacobianError(f"{where}: {name}: joint must be 1, 2 or 3 and direction + or -")
+            if isinstance(steps, bool) or not isinstance(steps, int) or steps <= 0:
+                raise JacobianError(f"{where}: {name}.steps must be a positive whole number, got {steps!r}")
+            assert isinstance(j, int) and isinstance(d, str)
+            px = pair(r.get("px_per_step"), f"{name}.px_per_step")
+            if math.hypot(*px) <= 0:
+                raise JacobianError(f"{where}: {name}.px_per_step is zero: the joint did not move the tip")
+            dirs.append(MeasuredDirection(
+                j, d, px, num(r.get("px_per_step_sd"), f"{name}.px_per_step_sd"),
+                num(r.get("residual_px"), f"{name}.residual_px"), steps,
+                num(r.get("gamma"), f"{name}.gamma", positive=True),
+            ))
+        if len({(d.joint, d.direction) for d in dirs}) != len(dirs):
+            raise JacobianError(f"{where}: a joint and direction is given twice")
+        day = data.get("calibration_day", "")
+        return cls(camera, num(data.get("pixel_size_m"), "pixel_size_m", positive=True), pose,
+                   pair(data.get("tip_px"), "tip_px"), tuple(dirs), day if isinstance(day, str) else "")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> MeasuredJacobian:
+        """Read ``camera calibrate --jacobian``'s file; :class:`JacobianError` (one line) naming it and the reason."""
+        from ..records import read_json
+
+        try:
+            data = read_json(path, "camera calibration")
+        except FileNotFoundError:
+            raise JacobianError(f"{path}: no such camera calibration file") from None
+        except (OSError, ValueError) as e:
+            text = str(e)
+            raise JacobianError(text if str(path) in text else f"{path}: {text}") from None
+        return cls.from_dict(data, str(path))
+
+
+def measured_jacobian(
+    fits: Sequence[DirectionFit], pose: kin.Pose, tip_px: tuple[float, float], calibration: Calibration,
+    camera: str, pixel_size_m: float,
+) -> MeasuredJacobian:
+    """The fits of ``camera calibrate`` as a :class:`MeasuredJacobian`, each scaled by ``calibration``'s steps.
+
+    The ``+`` fit of a joint starts at ``pose``; its ``-`` fit where the ``+`` steps
+    ended (by the model). ``gamma`` is the model's mean step over each fit's steps: the
+    px per m or rad are as good as the calibration is at this pose *now*; measure right
+    after ``stickslip calibrate``, and the closed loop corrects the steps' drift since.
+    """
+    from ..devices.base import redact_url
+    from ..motion.planning import Planner
+
+    out: list[MeasuredDirection] = []
+    far: dict[int, float] = {}
+    for f in sorted(fits, key=lambda f: (f.joint, f.direction != "+")):
+        j = f.joint
+        q0 = (pose.q1, pose.q2, pose.q3)[j - 1]
+        n = f.steps[-1] - f.steps[0]
+        planner = Planner(calibration, j, pose)
+        if f.direction == "+":
+            q_end = float(planner.position_after(q0, n))
+            far[j] = q_end
+            gamma = (q_end - q0) / n
+        else:
+            start = far.get(j, q0)
+            gamma = (start - float(planner.position_after(start, -n))) / n
+        if not (math.isfinite(gamma) and gamma > 0):
+            raise JacobianError(f"joint {j}{f.direction}: the calibration gives no step at this pose")
+        out.append(MeasuredDirection(j, f.direction, (float(f.jacobian[0]), float(f.jacobian[1])), f.jacobian_sd,
+                                     float(np.max(f.residuals)), n, gamma))
+    return MeasuredJacobian(redact_url(camera), float(pixel_size_m), pose, (float(tip_px[0]), float(tip_px[1])),
+                            tuple(out), calibration.day)

@@ -199,11 +199,63 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
     y1 = min(H, int(math.ceil(cy + radius)) + 4)
     if x1 - x0 < 4 or y1 - y0 < 4:
         return Patch(np.zeros((3, 4, 4)), x0, y0, (H, W))
-    crop = image[y0:y1, x0:x1]
+    data = np.empty((3, y1 - y0, x1 - x0))
+    crop = data[0]
     if smooth > 0:
-        crop = ndimage.gaussian_filter(crop, smooth, mode="nearest")
-    gy, gx = np.gradient(crop)
-    return Patch(np.stack([crop, gx, gy]), x0, y0, (H, W))
+        ndimage.gaussian_filter(image[y0:y1, x0:x1], smooth, output=crop, mode="nearest")
+    else:
+        crop[...] = image[y0:y1, x0:x1]
+    _gradient(crop, data[1], data[2])
+    return Patch(data, x0, y0, (H, W))
+
+
+def _gradient(a: FloatArray, gx: FloatArray, gy: FloatArray) -> None:
+    """``a``'s derivatives along x and y into ``gx``, ``gy`` (px⁻¹), as :func:`numpy.gradient` makes them:
+    central differences inside, one-sided at the edges (``a`` at least 2 x 2)."""
+    np.subtract(a[:, 2:], a[:, :-2], out=gx[:, 1:-1])
+    gx[:, 1:-1] /= 2.0
+    np.subtract(a[:, 1], a[:, 0], out=gx[:, 0])
+    np.subtract(a[:, -1], a[:, -2], out=gx[:, -1])
+    np.subtract(a[2:], a[:-2], out=gy[1:-1])
+    gy[1:-1] /= 2.0
+    np.subtract(a[1], a[0], out=gy[0])
+    np.subtract(a[-1], a[-2], out=gy[-1])
+
+
+def _corners(p: Patch, xs: FloatArray, ys: FloatArray
+             ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The flat index of the pixel up and left of each frame point ``(xs, ys)`` (px) in the patch, the point's
+    fractions to the right and down from it, and which points lie in the frame and the patch (the others sample
+    the patch's edge)."""
+    H, W = p.shape
+    _, ch, cw = p.data.shape
+    lx, ly = xs - p.x0, ys - p.y0
+    inside = (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
+    if p.x0 < 0 or p.y0 < 0 or p.x0 + cw > W or p.y0 + ch > H:  # a patch not within the frame (an empty one)
+        inside &= (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+    # (a patch within the frame: a point in the patch is in the frame; lx >= 0 is exact, xs - x0 being a multiple
+    # of the ulp of xs >= x0 >= 0 no larger than xs)
+    np.minimum(np.maximum(lx, 0.0, out=lx), cw - 1.000001, out=lx)  # numpy.clip's values, in place
+    np.minimum(np.maximum(ly, 0.0, out=ly), ch - 1.000001, out=ly)
+    ix = lx.astype(np.intp)
+    iy = ly.astype(np.intp)
+    lx -= ix  # the fractions
+    ly -= iy
+    iy *= cw
+    iy += ix
+    return iy, lx, ly, inside
+
+
+def _neighbours(i00: NDArray[np.intp], cw: int) -> NDArray[np.intp]:
+    """The flat indices of the four pixels around each point (up left, up right, down left, down right), one
+    block of points after the other, in a patch ``cw`` px wide."""
+    m = i00.size
+    idx = np.empty(4 * m, dtype=np.intp)
+    idx[:m] = i00
+    np.add(i00, 1, out=idx[m : 2 * m])
+    np.add(i00, cw, out=idx[2 * m : 3 * m])
+    np.add(i00, cw + 1, out=idx[3 * m :])
+    return idx
 
 
 def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -211,23 +263,24 @@ def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArr
 
     Also which points lie in the frame and the patch (the others sample the patch's edge).
     """
-    H, W = p.shape
-    _, ch, cw = p.data.shape
-    lx, ly = xs - p.x0, ys - p.y0
-    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
-    inside &= (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
-    lx = np.clip(lx, 0.0, cw - 1.000001)
-    ly = np.clip(ly, 0.0, ch - 1.000001)
-    ix = lx.astype(np.intp)
-    iy = ly.astype(np.intp)
-    fx = lx - ix
-    fy = ly - iy
-    flat = p.data.reshape(3, -1)
-    i00 = iy * cw + ix
-    v00 = np.take(flat, i00, axis=1)
-    v01 = np.take(flat, i00 + 1, axis=1)
-    v10 = np.take(flat, i00 + cw, axis=1)
-    v11 = np.take(flat, i00 + cw + 1, axis=1)
+    i00, fx, fy, inside = _corners(p, xs, ys)
+    cw = p.data.shape[2]
+    m = i00.size
+    # the four neighbours in one gather
+    v = p.data.reshape(3, -1).take(_neighbours(i00, cw), axis=1)
+    v00, v01, v10, v11 = v[:, :m], v[:, m : 2 * m], v[:, 2 * m : 3 * m], v[:, 3 * m :]
+    top = v00 + (v01 - v00) * fx
+    bottom = v10 + (v11 - v10) * fx
+    return top + (bottom - top) * fy, inside
+
+
+def _sample_value(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The values of :func:`_sample` only (shape (m,)): the same bilinear interpolation, not the gradients'."""
+    i00, fx, fy, inside = _corners(p, xs, ys)
+    cw = p.data.shape[2]
+    m = i00.size
+    v = p.data[0].reshape(-1).take(_neighbours(i00, cw))
+    v00, v01, v10, v11 = v[:m], v[m : 2 * m], v[2 * m : 3 * m], v[3 * m :]
     top = v00 + (v01 - v00) * fx
     bottom = v10 + (v11 - v10) * fx
     return top + (bottom - top) * fy, inside
@@ -238,8 +291,8 @@ def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[Fl
 
     Returns the values, shape ``(m,)``, and which samples lie inside the frame.
     """
-    v, inside = _warped3(p, st, x, y, theta)
-    return v[0], inside
+    ct, s_ = math.cos(theta), math.sin(theta)
+    return _sample_value(p, ct * st.rx - s_ * st.ry + x, s_ * st.rx + ct * st.ry + y)
 
 
 def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -260,6 +313,7 @@ def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
 _ALL = np.arange(10)
 _NO_GAIN_PLANE = np.array([0, 3, 4, 5, 6, 7, 8, 9])
 _NL = 7
+_EYE = {n: np.eye(n) for n in (_ALL.size, _NO_GAIN_PLANE.size)}
 """The linear columns before the motion's: the six brightness planes and the blur term."""
 
 
@@ -270,7 +324,8 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
     ``kappa`` weighs a prior that pulls the turn's step towards ``turn`` (the current turn's
     distance from its prior). The columns left out are 0 in the result.
     """
-    Dc = D[:, cols]
+    # D is column-major, as indexing its columns makes them: the products come out the same either way
+    Dc = D if cols is _ALL else D[:, cols]
     Dw = Dc * w[:, None]
     M = Dw.T @ Dc
     rhs = Dw.T @ y
@@ -278,7 +333,7 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
         M[-1, -1] += kappa
         rhs[-1] += kappa * turn
     try:
-        sol = np.linalg.solve(M + 1e-12 * np.trace(M) * np.eye(len(cols)), rhs)
+        sol = np.linalg.solve(M + 1e-12 * M.trace() * _EYE[len(cols)], rhs)
     except np.linalg.LinAlgError:
         return None
     out = np.zeros(D.shape[1])
@@ -324,6 +379,10 @@ def refine(
     it = 0
     e = np.zeros_like(T)
     inside = np.ones(T.shape, dtype=bool)
+    # the brightness planes' columns, then each iteration's blur and motion; column-major (see _joint)
+    D = np.empty((T.size, 10), order="F")
+    D[:, :6] = basis
+    bx, by = basis[:, 4].copy(), basis[:, 5].copy()  # the position across the window, x and y: contiguous
     for it in range(1, max_iter + 1):
         v3, inside = _warped3(image, st, tx, ty, theta)
         Iw = v3[0]
@@ -333,18 +392,19 @@ def refine(
         jac = _esm_jacobian(st, v3, theta, g, blur_c)
         # one linear least squares for the brightness planes and the motion together: apart, the planes
         # would soak up half of every edge's shift at each step, and the motion would creep
-        D = np.concatenate([basis, g * st.lap[:, None], (g * jac).T], axis=1)
-        r0 = Iw - basis @ beta_prev
+        D[:, 6] = g * st.lap
+        D[:, _NL:] = (g * jac).T
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
+            r0 = Iw - basis @ beta_prev
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
-        sol, gain, model = _solve_positive_gain(D, omega, Iw, basis, model, kappa or 0.0, theta - theta_prior)
+        sol, gain, model = _solve_positive_gain(D, omega, Iw, bx, by, model, kappa or 0.0, theta - theta_prior)
         if sol is None or gain is None:  # contrast reversed, or no solution: not this template
             converged = False
             break
         beta_prev = sol[:6]
         g, c = float(sol[0]), float(sol[3])
         blur_c = float(sol[6]) / g  # half the blur variance the frame has beyond the template's, px²
-        e = (Iw - sol[3] - sol[4] * basis[:, 4] - sol[5] * basis[:, 5]) / gain - T - blur_c * st.lap
+        e = (Iw - sol[3] - sol[4] * bx - sol[5] * by) / gain - T - blur_c * st.lap
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             robust_w, scale = _tukey_weights(e, omega, scale)
         dp = _damped(sol[_NL:].copy(), prev_dp)
@@ -372,28 +432,43 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
     model's are the template's plus the blur term's (``blur_c``, px²).
     """
     ct, st_ = math.cos(theta), math.sin(theta)
-    fgx = (v3[1] * ct + v3[2] * st_) / g
-    fgy = (-v3[1] * st_ + v3[2] * ct) / g
-    return np.asarray(0.5 * (st.sd + blur_c * st.sd_lap + np.stack([fgx, fgy, -fgx * st.ry + fgy * st.rx])))
+    f = np.empty_like(st.sd)  # the frame's: fgx, fgy and the turn's, made in place
+    fgx, fgy, fth = f[0], f[1], f[2]
+    np.multiply(v3[1], ct, out=fgx)
+    fgx += v3[2] * st_
+    fgx /= g
+    np.negative(v3[1], out=fgy)
+    fgy *= st_
+    fgy += v3[2] * ct
+    fgy /= g
+    np.negative(fgx, out=fth)
+    fth *= st.ry
+    fth += fgy * st.rx
+    model = blur_c * st.sd_lap
+    model += st.sd
+    model += f
+    model *= 0.5
+    return model
 
 
 def _solve_positive_gain(
-    D: FloatArray, omega: FloatArray, Iw: FloatArray, basis: FloatArray, model: NDArray[np.intp] | None,
-    kappa: float, turn: float,
+    D: FloatArray, omega: FloatArray, Iw: FloatArray, bx: FloatArray, by: FloatArray,
+    model: NDArray[np.intp] | None, kappa: float, turn: float,
 ) -> tuple[FloatArray | None, FloatArray | None, NDArray[np.intp] | None]:
     """The joint solution (:func:`_joint`), its contrast across the window and the columns used.
 
     A contrast plane too steep for this window (the contrast below a fifth of its centre's
     somewhere): a plain contrast, and that for good (``model``: a model that changed back
     and forth between iterations would never settle). ``(None, None, model)`` when no
-    solution has a positive contrast.
+    solution has a positive contrast. ``bx``, ``by``: each pixel's place across the window
+    (the basis's x and y columns).
     """
     choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
     for cols in choices:  # once plain, plain to the end
         sol = _joint(D, omega, Iw, cols, kappa, turn)
         if sol is None:
             break
-        gain = sol[0] + sol[1] * basis[:, 4] + sol[2] * basis[:, 5]
+        gain = sol[0] + sol[1] * bx + sol[2] * by
         if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
             return sol, gain, cols
     return None, None, model
@@ -413,7 +488,8 @@ def _tukey_weights(e: FloatArray, omega: FloatArray, scale: float | None) -> tup
 
 def _damped(dp: FloatArray, prev_dp: FloatArray | None) -> FloatArray:
     """The motion's step ``dp``, halved when it turned back on the last one (overshooting)."""
-    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.linalg.norm(dp) * np.linalg.norm(prev_dp)):
+    # the norms as numpy.linalg.norm makes them (the square root of the vector's dot with itself)
+    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.sqrt(dp.dot(dp)) * np.sqrt(prev_dp.dot(prev_dp))):
         dp *= 0.5
     return dp
 
@@ -423,7 +499,7 @@ def _moved(tx: float, ty: float, theta: float, dp: FloatArray) -> tuple[float, f
 
     The size is the tip's move plus the turn's at 20 px from the tip (px).
     """
-    dx, dy, dth = (float(v) for v in dp)
+    dx, dy, dth = dp.tolist()
     theta_new = theta - dth
     ct2, s2 = math.cos(theta_new), math.sin(theta_new)
     tx -= ct2 * dx - s2 * dy

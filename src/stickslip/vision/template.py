@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft, ndimage
 
-__all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "noise_sigma"]
+__all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "region_spectra", "noise_sigma"]
 
 FloatArray = NDArray[np.float64]
 
@@ -415,9 +415,15 @@ def _kernel_fft(t: FloatArray, w: FloatArray, shape: tuple[int, int]) -> _Kernel
     return _KernelFFT(shape, fw, fwt, sw, float((w * tc * tc).sum()))
 
 
+def region_spectra(region: FloatArray) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+    """The transforms of ``region`` and of its square that :func:`masked_ncc` needs (made once for several
+    templates over the same region)."""
+    return fft.rfft2(region, workers=1), fft.rfft2(region * region, workers=1)
+
+
 def masked_ncc(
     region: FloatArray, template: FloatArray, weights: FloatArray, cache: dict[object, object] | None = None,
-    key: object = None,
+    key: object = None, spectra: tuple[NDArray[np.complex128], NDArray[np.complex128]] | None = None,
 ) -> FloatArray:
     """Weighted normalised cross-correlation of ``template`` at every offset inside ``region``.
 
@@ -425,7 +431,8 @@ def masked_ncc(
     side), each pixel weighted by ``weights``: ``sum w (T - T_w)(I - I_w) / sqrt(sum w (T -
     T_w)² · sum w (I - I_w)²)`` with ``T_w``, ``I_w`` the weighted means; in [-1, 1], 0 where
     the region is flat. By FFT (region and its square once each). ``cache`` (a dict the
-    caller keeps for this template) holds the template's transforms under ``key``.
+    caller keeps for this template) holds the template's transforms under ``key``; ``spectra``
+    are the region's own (:func:`region_spectra`) when the caller has them.
     """
     n = template.shape[0]
     rh, rw = region.shape
@@ -436,13 +443,12 @@ def masked_ncc(
         k = _kernel_fft(template, weights, shape)
         if cache is not None:
             cache[ck] = k
-    fi = fft.rfft2(region, workers=1)
-    fi2 = fft.rfft2(region * region, workers=1)
+    fi, fi2 = region_spectra(region) if spectra is None else spectra
     a = fft.irfft2(fi * k.w, shape, workers=1)[n - 1 :, n - 1 :]
     b = fft.irfft2(fi2 * k.w, shape, workers=1)[n - 1 :, n - 1 :]
     c = fft.irfft2(fi * k.wt, shape, workers=1)[n - 1 :, n - 1 :]
-    var = np.clip(b - a * a / k.sw, 0.0, None)
+    var = np.maximum(b - a * a / k.sw, 0.0)  # (numpy.clip's values, without its wrapper's cost)
     denom = np.sqrt(var * k.st2)
-    scale = float(np.max(denom)) if denom.size else 0.0
+    scale = float(denom.max()) if denom.size else 0.0
     out = np.where(denom > 1e-9 * max(scale, 1e-300), c / np.where(denom > 0, denom, 1.0), 0.0)
-    return np.asarray(np.clip(out, -1.0, 1.0), dtype=float)
+    return np.minimum(np.maximum(out, -1.0), 1.0)

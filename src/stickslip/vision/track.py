@@ -46,8 +46,8 @@ from scipy import ndimage
 
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
-from .refine import Patch, Refinement, _sample, patch, refine, steepest, warped
-from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc
+from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
+from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 
 __all__ = [
     "Fix",
@@ -138,9 +138,11 @@ def _region(image: FloatArray, h: int, cx: float, cy: float, radius: int) -> tup
     x0 = int(round(cx)) - radius - h
     y0 = int(round(cy)) - radius - h
     n = 2 * (radius + h) + 1
-    out = np.full((n, n), float(np.median(image[::8, ::8])))
     ys, xs = max(0, y0), max(0, x0)
     ye, xe = min(H, y0 + n), min(W, x0 + n)
+    if ys == y0 and xs == x0 and ye == y0 + n and xe == x0 + n:  # within the frame: a copy
+        return image[ys:ye, xs:xe].copy(), x0, y0
+    out = np.full((n, n), float(np.median(image[::8, ::8])))
     if ye > ys and xe > xs:
         out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
     return out, x0, y0
@@ -153,25 +155,23 @@ def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
     and sampled in its patch; ``blur`` (px) keeps the ground a blurred tip spreads over out.
     """
     r = cand.ref
-    ct, st_ = math.cos(r.theta), math.sin(r.theta)
-
-    def at(ox: FloatArray, oy: FloatArray) -> FloatArray:
-        v, _ = _sample(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
-        out: FloatArray = v[0]
-        return out
-
     if t.core[0].size < 3 or t.ring[0].size < 8:
         return 0.0
-    needle = float(np.median(at(*t.core)))
-    ground = float(np.median(at(*t.ring)))
-    if abs(needle - ground) < 1e-12:
-        return 1.0
     fx, fy = t.front
     far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+    # the core, the ring and the front ahead of a blurred tip, sampled in one go
+    ox = np.concatenate([t.core[0], t.ring[0], fx[far]])
+    oy = np.concatenate([t.core[1], t.ring[1], fy[far]])
+    ct, st_ = math.cos(r.theta), math.sin(r.theta)
+    v, _ = _sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+    nc, nr = t.core[0].size, t.ring[0].size
+    needle = float(np.median(v[:nc]))
+    ground = float(np.median(v[nc : nc + nr]))
+    if abs(needle - ground) < 1e-12:
+        return 1.0
     if int(far.sum()) < 6:
         return 0.0
-    v = at(fx[far], fy[far])
-    like = (v - ground) / (needle - ground) > 0.5
+    like = (v[nc + nr :] - ground) / (needle - ground) > 0.5
     return float(np.mean(like))
 
 
@@ -183,13 +183,24 @@ def _pick_level(scores: list[float], current: int, hysteresis: float) -> int:
     return best
 
 
-def _noise_free_ncc(b: FloatArray, Iw: FloatArray, w: FloatArray, n_t2: float, n_f2: float) -> float:
-    """The weighted correlation of copy ``b`` with the frame's samples ``Iw``, divided by what the copy's and
-    the frame's own noise (variances ``n_t2``, ``n_f2`` a sample) cost it."""
+def _frame_stats(Iw: FloatArray, w: FloatArray) -> tuple[float, FloatArray, float]:
+    """The sum of the weights ``w``, and the frame's samples ``Iw`` less their weighted mean with their weighted
+    sum of squares (what :func:`_noise_free_ncc` needs of the frame, the same for every copy)."""
     sw = float(w.sum())
+    if sw <= 1e-9:
+        return sw, Iw, 0.0
     mi = float((w * Iw).sum() / sw)
     di = Iw - mi
     vi = float((w * di * di).sum())
+    return sw, di, vi
+
+
+def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: FloatArray, n_t2: float,
+                    n_f2: float) -> float:
+    """The weighted correlation of copy ``b`` with the frame's samples (:func:`_frame_stats` of them and the
+    weights ``w``), divided by what the copy's and the frame's own noise (variances ``n_t2``, ``n_f2`` a
+    sample) cost it."""
+    sw, di, vi = frame
     mt = float((w * b).sum() / sw)
     dt = b - mt
     vt = float((w * dt * dt).sum())
@@ -285,16 +296,15 @@ class TipTracker:
         (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
         """
         out = []
-        w_all = self._select.w
+        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float]]] = {}  # copies of one blur share samples
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
-            Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
-            w = w_all * inside
-            sw = float(w.sum())
-            if sw <= 1e-9:
-                out.append(-1.0)
-                continue
+            if f not in seen:
+                Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
+                w = self._select.w * inside
+                seen[f] = (w, _frame_stats(Iw, w))
+            w, stats = seen[f]
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
-            out.append(_noise_free_ncc(self._bank_sel[k], Iw, w, n_t2, n_f2))
+            out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(self._bank_sel[k], stats, w, n_t2, n_f2))
         return out
 
     def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
@@ -366,13 +376,14 @@ class TipTracker:
         f = p.coarse_factor
         small = _downsample(image, f)
         best: list[tuple[float, int, int, int]] = []
+        spectra = region_spectra(small)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
             tpl = self._coarse[k]
             if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
                 continue
-            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k))
+            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k), spectra)
             peaks = ncc == ndimage.maximum_filter(ncc, size=5)
             ii, jj = np.nonzero(peaks & (ncc > 0.3))
             for i, j in zip(ii.tolist(), jj.tolist(), strict=True):

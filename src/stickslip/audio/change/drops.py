@@ -96,7 +96,8 @@ class DropMeter:
         """The departures ``z`` (frames x bands, spreads) averaged over the last ``frames`` frames."""
         w = self.frames
         zz = np.concatenate((self._tail, z)) if self._tail.size else z
-        c = np.concatenate((np.zeros((1, self.nb)), np.cumsum(zz, axis=0)))
+        c = np.zeros((zz.shape[0] + 1, self.nb))
+        np.cumsum(zz, axis=0, out=c[1:])
         k = np.arange(zz.shape[0] - z.shape[0], zz.shape[0]) + 1  # rows of zz ending each new frame
         lo = np.maximum(k - w, 0)
         self._tail = zz[max(len(zz) - (w - 1), 0) :].copy()
@@ -186,6 +187,7 @@ class DropCheck:
         gt = np.maximum(np.minimum(self.delta, 0.0) * self.inv_sigma, -p.cap)
         self.info_tuned = float(gt @ gt)
         self.meter = DropMeter(self.delta.size, p.frames)
+        self._weights: list[tuple[FloatArray, FloatArray, FloatArray]] = []  # (signature, 1 / spread, drops' weights)
         self.reset()
 
     def reset(self) -> None:
@@ -229,7 +231,10 @@ class DropCheck:
     ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
         """The frames ``v`` (levels, dB) with the fit's ``a`` and ``hot``: ``a``, ``hot`` and onset lags (s) after
         both rules."""
-        zs = np.clip(v - floor, -self.clip_db, self.clip_db) * self.scale
+        zs = v - floor
+        np.maximum(zs, -self.clip_db, out=zs)  # clipped to +-clip_db (np.clip's values, without its wrappers' cost)
+        np.minimum(zs, self.clip_db, out=zs)
+        zs *= self.scale
         m = self.meter(zs)
         if self.info_tuned >= self.p.informative**2:
             hot &= self._in_proportion(zs, a, hot, pred_delta, pred_drops)
@@ -245,7 +250,7 @@ class DropCheck:
     ) -> NDArray[np.bool_]:
         """The first rule: per frame, whether the sub-bands the stop lowers are lower, in proportion."""
         p = self.p
-        gn = np.maximum(np.minimum(self.delta, 0.0) * self.scale, -p.cap)
+        gn = self._drop_weights(self.delta, self.scale)
         clear = zs <= p.excess
         # the verdicts matter only where the fit is hot; elsewhere only the last frames are kept for the average
         if hot.any():
@@ -256,7 +261,7 @@ class DropCheck:
             # at another rate the sub-bands the tuned signature lowers may hold or rise: a frame the predicted fit
             # took and explains well may show the predicted signature's drops instead; the tuned verdict stands
             # everywhere else, so this check never withholds what it passed before
-            gp = np.maximum(np.minimum(pred_delta, 0.0) * self.scale, -p.cap)
+            gp = self._drop_weights(pred_delta, self.scale)
             ask = hot & ~shown & (False if pred_drops is None else pred_drops)
             if ask.any():
                 gpi = np.maximum(np.minimum(pred_delta, 0.0) * self.inv_sigma, -p.cap)
@@ -265,6 +270,20 @@ class DropCheck:
             else:
                 self._tail_p = drops_tail(zs, clear, gp, self._tail_p, p)
         return shown
+
+    def _drop_weights(self, delta: FloatArray, scale: FloatArray) -> FloatArray:
+        """A signature's drops in spreads (``scale``: 1 / spread), each capped at ``cap``.
+
+        The signatures and the spreads are new arrays when they change (the template
+        learned, the rate heard), never changed in place: the weights of the last two
+        (the tuned and the predicted signature) are kept, not made anew per block.
+        """
+        for d, sc, w in self._weights:
+            if d is delta and sc is scale:
+                return w
+        w = np.maximum(np.minimum(delta, 0.0) * scale, -self.p.cap)
+        self._weights = [*self._weights[-1:], (delta, scale, w)]
+        return w
 
     def _channel(
         self, m: FloatArray, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64]

@@ -53,14 +53,17 @@ class Fitter:
     def __call__(self, d: FloatArray) -> tuple[FloatArray, FloatArray]:
         """``a`` and ``rho`` of the departures ``d`` (frames x bands, dB)."""
         g = self.g
-        z = np.clip(d, -self.clip_db, self.clip_db) * self.inv_sigma
+        z = np.minimum(np.maximum(d, -self.clip_db), self.clip_db)  # np.clip's values, without its wrappers' cost
+        z *= self.inv_sigma
         a = (z @ g) / self.gg
         if self.trim > 0:
             r = z - a[:, None] * g
             if self.trim == 1:
                 kth = r.max(axis=1, keepdims=True)
             else:
-                kth = -np.partition(-r, self.trim - 1, axis=1)[:, self.trim - 1 : self.trim]
+                neg = -r
+                neg.partition(self.trim - 1, axis=1)  # in place: np.partition's copy and wrappers spared
+                kth = -neg[:, self.trim - 1 : self.trim]
             keep = r < kth  # ties (rare) drop one band more
             keep |= ~keep.any(axis=1, keepdims=True)  # all tied (a constant input): keep every band
             zk = z * keep

@@ -28,7 +28,8 @@ def bounded(block: NDArray[Any], p: SpectraParams = SPECTRA) -> FloatArray:
     if x.ndim != 1:
         raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
     lim = p.sample_limit
-    if x.size and not float(np.max(np.abs(x))) <= lim:  # NaN, infinity or absurd values: bounded
+    # NaN, infinity or absurd values: bounded (the largest and the smallest sample: no array of magnitudes made)
+    if x.size and not (float(x.max()) <= lim and float(x.min()) >= -lim):
         x = np.clip(np.nan_to_num(x, nan=0.0, posinf=lim, neginf=-lim), -lim, lim)
     return x
 
@@ -59,10 +60,11 @@ class FrameCutter:
         seg = self._buf[self.next - self._buf_start :]
         if n_frames <= 0:
             return np.zeros((0, F))
-        view = np.lib.stride_tricks.as_strided(
-            seg, shape=(n_frames, F), strides=(H * seg.strides[0], seg.strides[0]), writeable=False
-        )
-        return np.asarray(view)
+        # the frames as a read-only view of the samples (made directly: as_strided's checks cost more than the view)
+        step = seg.itemsize
+        view: FloatArray = np.ndarray((n_frames, F), dtype=seg.dtype, buffer=seg, strides=(H * step, step))
+        view.flags.writeable = False
+        return view
 
     def ends(self, n_frames: int) -> NDArray[np.int64]:
         """The absolute index of the last sample of each of the next ``n_frames`` frames."""

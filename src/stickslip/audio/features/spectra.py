@@ -150,7 +150,8 @@ class SubbandLevels:
         for f0 in range(0, n, 1024):
             seg = np.multiply(frames[f0 : f0 + 1024], self.w32, dtype=np.float32)  # each cast to float32, then x
             spec = sfft.rfft(seg, axis=1)[:, self.lo : self.hi]
-            power = spec.real**2 + spec.imag**2
+            power = spec.real**2
+            power += spec.imag**2
             band = np.add.reduceat(power, self.starts, axis=1, dtype=np.float64) * self.scale
             if self.empty is not None:
                 band[:, self.empty] = 0.0

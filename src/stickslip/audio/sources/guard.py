@@ -29,6 +29,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.fft as sfft
 from numpy.typing import ArrayLike
 
 from ..features.stepclock import band_envelope_spectrum
@@ -135,7 +136,8 @@ class SignalGuard:
     no_step_s : float
         How long without a stepping line before the guard trips, s.
     window_s : float
-        Length of audio judged at a time for the stepping line, s.
+        Length of audio judged at a time for the stepping line, s (rounded up by a few samples to a
+        length whose FFT is fast; what the blocks bring beyond it goes into the next window).
     min_line_db : float
         The step-rate line must stand this far above its neighbourhood, dB.
     """
@@ -153,6 +155,11 @@ class SignalGuard:
     def __post_init__(self) -> None:
         self._window: list[np.ndarray] = []
         self._window_n = 0
+        # Every window judged is exactly this long, the rest carried into the next: the envelope's FFT
+        # (one sample shorter, the first difference) then has a length with small prime factors. A window
+        # of whatever the blocks add up to (12 blocks of 1024: an FFT of 12287 = 11 x 1117) took 15 times
+        # as long and was a fifth of a simulated traverse's CPU time (benchmarks/bench_audio_speed.py).
+        self._window_len = int(sfft.next_fast_len(max(int(self.window_s * self.sample_rate), 2) - 1, real=True)) + 1
 
     def check(self, block: ArrayLike) -> bool:
         """Account for one block: ``True`` if it is alive, ``False`` if it is dead.
@@ -185,11 +192,18 @@ class SignalGuard:
         mono = np.asarray(x, dtype=np.float64)
         self._window.append(mono if mono.ndim == 1 else mono.reshape(x.shape[0], -1).mean(axis=1))
         self._window_n += x.shape[0]
-        need = int(self.window_s * self.sample_rate)
-        if self._window_n < need:
+        n = self._window_len
+        if self._window_n < n:
             return
-        w = np.concatenate(self._window)
-        self._window, self._window_n = [], 0
+        joined = np.concatenate(self._window)
+        whole = joined.size // n * n  # a block longer than a window gives several
+        rest = joined[whole:]
+        self._window, self._window_n = ([rest], rest.size) if rest.size else ([], 0)
+        for w in joined[:whole].reshape(-1, n):
+            self._judge(w)
+
+    def _judge(self, w: np.ndarray) -> None:
+        assert self.step_hz is not None
         line = step_line_db(w, self.sample_rate, self.step_hz)
         if line >= self.min_line_db:
             self.no_step_for_s = 0.0

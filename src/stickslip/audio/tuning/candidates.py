@@ -86,7 +86,12 @@ def running_template(V: FloatArray, stepping: NDArray[np.bool_], hop_s: float, t
     W = max(TEMPLATE.chunk, int(round(tau_s / hop_s)))
     head = V[:last]
     pad = np.concatenate((np.repeat(np.percentile(head[:W], q, axis=0)[None, :], W, axis=0), head))
-    run = percentile_filter(pad, q, size=(W, 1), origin=((W - 1) // 2, 0))[W:]
+    # sub-band by sub-band: a 1-D rank filter selects the same element as the 2-D one with a (W, 1) footprint, and
+    # scipy's 1-D path is tens of times faster (the 2-D filter was a tenth of the tuner's time)
+    run = np.empty_like(pad)
+    for b in range(pad.shape[1]):
+        run[:, b] = percentile_filter(np.ascontiguousarray(pad[:, b]), q, size=W, origin=(W - 1) // 2)
+    run = run[W:]
     out = np.empty_like(V)
     out[:last] = run
     out[last:] = run[-1]
