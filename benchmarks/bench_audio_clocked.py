@@ -14,8 +14,9 @@ rule (``ConfirmParams(clocked=None)``) and the check - hear the same samples:
   by ``1000 k``, k = 0 .. ``--seeds``): a fan before the stop (2 draws per arm), two pauses
   and no stop, a test 12-20 dB louder, another arm in bursts in the test, a test 20 %
   off the tuning's rate (told): the first event judged as ``bench_audio_tenth.py`` does;
-* **the cost**: the confirming detector over the same minute of the hour in 1024-sample
-  blocks, with and without the check, in turns (A B A B): the ratio of the times.
+* **the cost**: the confirming detector in 1024-sample blocks over the tenth generator's 16
+  recordings of a stop (one decision each), with and without the check, in turns (A B A
+  B): the ratio of the CPU times (``time.process_time``: the machine may be shared).
 
 Run: ``.venv/bin/python benchmarks/bench_audio_clocked.py --minutes 10 --seeds 2``
 (several minutes on a shared machine).
@@ -105,20 +106,24 @@ def tenth(k: int) -> dict[str, dict[str, list[str]]]:
     return out
 
 
-def cost(arm: int = 3, seconds: float = 60.0, turns: int = 3) -> float:
-    """Time with the check over time without it, the confirming detector fed 1024-sample blocks (A B A B)."""
-    y = np.concatenate(list(stream(Hour(Arm(arm), dur=seconds, seed=arm + 1000))))
-    tu = tf._tuning(arm)
+def cost(turns: int = 7) -> float:
+    """CPU time with the check over without it: the confirming detector in 1024-sample blocks over the tenth
+    generator's 16 recordings of a stop (quiet and under a fan; one decision each, the same events), in turns."""
+    recs = []
+    for arm in tf.ARMS:
+        recs.append((tf._tuning(arm), render(Scene(Arm(arm), stop_at=tf.STOP_S, dur=3.4, seed=300 + arm))))
+        recs.append((tf._tuning(arm), render(tf._fan_draw(arm, 0))))
     spent = {k: 0.0 for k in RULES}
     for _ in range(turns):
         for k, p in RULES.items():
-            d = ConfirmedStopDetector(detector_for(tu), params=p)
-            d.reset(0.0, step_rate_hz=1000.0)
-            t = time.perf_counter()
-            for i in range(0, y.size, 1024):
-                d.feed(y[i : i + 1024])
-            d.finish()
-            spent[k] += time.perf_counter() - t
+            t = time.process_time()
+            for tu, y in recs:
+                d = ConfirmedStopDetector(detector_for(tu), params=p)
+                d.reset(0.0, step_rate_hz=1000.0)
+                for i in range(0, y.size, 1024):
+                    d.feed(y[i : i + 1024])
+                d.finish()
+            spent[k] += time.process_time() - t
     return spent["clocked"] / spent["present"]
 
 
@@ -149,7 +154,7 @@ def main(minutes: float, seeds: int, arms: tuple[int, ...]) -> None:
             ]
             note = f" ({'; '.join(moved)})" if moved else ""
             print(f"| {'own' if k == 0 else f'+{1000 * k}'} | {cond} | {_counts(a)} | {_counts(b)}{note} |", flush=True)
-    print(f"\ncost: the confirming detector with the check / without it, 1024-sample blocks: {cost():.3f}")
+    print(f"\ncost: CPU time with the check / without it, 16 recordings of a stop in 1024-sample blocks: {cost():.3f}")
 
 
 if __name__ == "__main__":
