@@ -51,7 +51,7 @@ def test_the_joints_own_sound_changed_by_the_signature_is_a_stop() -> None:
     sig = (0.0, 6.0, -4.0)
     before = _scaled(_clicks(N, 1), (0.0, 0.0, 0.0))
     after = _scaled(_clicks(N, 2), sig)
-    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig)
     assert used == 2  # the sub-band the stop moves by 0 dB is not judged
     assert a == pytest.approx(1.0, abs=0.05)
 
@@ -60,7 +60,7 @@ def test_half_the_signature_on_the_lines_is_half_a_stop() -> None:
     """The fit is linear in dB: the lines moved by half the signature give a_L = 1/2."""
     sig = (8.0, 8.0, -6.0)
     a, used = lines_stop_likeness(
-        _scaled(_clicks(N, 3), (0.0, 0.0, 0.0)), _scaled(_clicks(N, 4), (4.0, 4.0, -3.0)), SR, RATE, EDGES, sig
+        _scaled(_clicks(N, 3), (0.0, 0.0, 0.0)), _scaled(_clicks(N, 4), (4.0, 4.0, -3.0)), SR, RATE, EDGES, sig, sig
     )
     assert used == 3
     assert a == pytest.approx(0.5, abs=0.05)
@@ -77,17 +77,18 @@ def test_noise_added_between_the_lines_is_not_a_stop() -> None:
     after = _scaled(_clicks(N, 7), (0.0, 0.0, 0.0)) + noise
     power_db = 10 * np.log10(np.mean(_band(after, EDGES[1], EDGES[2]) ** 2) / np.mean(mid**2))
     assert power_db == pytest.approx(6.0, abs=0.3)  # the level detector would see the stop's rise
-    a, used = lines_stop_likeness(joint, after, SR, RATE, EDGES, sig)
+    a, used = lines_stop_likeness(joint, after, SR, RATE, EDGES, sig, sig)
     assert used == 1
     assert abs(a) < 0.1
 
 
 def test_nothing_to_judge_gives_no_verdict() -> None:
     x = _scaled(_clicks(N, 8), (0.0, 0.0, 0.0))
-    a, used = lines_stop_likeness(x, x, SR, RATE, EDGES, (1.0, -2.0, 2.9))  # the stop moves no sub-band by 3 dB
+    small = (1.0, -2.0, 2.9)  # the stop moves no sub-band by 3 dB
+    a, used = lines_stop_likeness(x, x, SR, RATE, EDGES, small, small)
     assert (math.isnan(a), used) == (True, 0)
     noise = np.random.default_rng(9).standard_normal(N)  # no lines before the fire
-    a, used = lines_stop_likeness(noise, noise, SR, RATE, EDGES, (6.0, 6.0, 6.0))
+    a, used = lines_stop_likeness(noise, noise, SR, RATE, EDGES, (6.0, 6.0, 6.0), (6.0, 6.0, 6.0))
     assert (math.isnan(a), used) == (True, 0)
 
 
@@ -98,6 +99,7 @@ class _Tuning:
     sample_rate = SR
     edges_hz = EDGES
     signature_db = (0.0, 6.0, -4.0)
+    continuum_signature_db = (0.0, 5.0, -4.5)
     step_rate_hz = RATE
 
 
@@ -139,7 +141,19 @@ def test_too_little_of_the_signature_judged_gives_no_verdict() -> None:
     low = _band(_clicks(N, 13), EDGES[0], EDGES[1])
     before = low + _band(rng.standard_normal(N), EDGES[1], EDGES[2])  # no lines where the stop rises 12 dB
     after = _band(_clicks(N, 14), EDGES[0], EDGES[1]) + _band(rng.standard_normal(N), EDGES[1], EDGES[2])
-    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig)
     assert used == 1 and math.isnan(a)
-    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, ClockedParams(min_covered=0.05))
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig, ClockedParams(min_covered=0.05))
     assert used == 1 and abs(a) < 0.1  # judged on that one sub-band, where nothing changed
+
+
+def test_a_stop_whose_tuned_change_was_off_the_lines_is_not_judged_there() -> None:
+    """The tuning's continuum rose 14 dB more than its level where the stop rises (a stop that rattles out of step):
+    the lines there say nothing about the stop; the other sub-band is under half the signature: no verdict."""
+    sig = (0.0, 12.0, -4.0)
+    before = _scaled(_clicks(N, 15), (0.0, 0.0, 0.0))
+    after = _scaled(_clicks(N, 16), (0.0, 0.0, -4.0))  # the lines do not rise: the stop's rise is off them
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, (0.0, 26.0, -3.0))
+    assert (math.isnan(a), used) == (True, 1)  # the drop judged alone: 16 of 160 dB^2, too little
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, (0.0, 14.0, -3.0))  # within 3 dB: judged
+    assert used == 2 and a == pytest.approx(16.0 / 160.0, abs=0.05)  # only the drop's -4 dB of the signature

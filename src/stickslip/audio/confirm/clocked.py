@@ -18,14 +18,18 @@ step rate commanded (or, untold, heard in the stepping). Per sub-band the change
 ``min_line_z`` standard deviations over their noise before the fire and were sharp there
 (``min_sharpness`` of the power in a comb four times wider: a rough clock smears its
 higher harmonics, and what is left on the narrow lines is not the joint's sound alone);
-the *lines' stop-likeness* is the least-squares fit of the tuned signature ``delta`` to
-them,
+and where the tuned stop's change was on the lines itself (the tuning's continuum between
+the lines moved no further in the stop's direction than its level, plus
+``max_continuum_excess_db``: a stop that rattles out of step with the clock changes the
+continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
+least-squares fit of the tuned signature ``delta`` to them,
 
     a_L = sum_b delta_b dL_b / sum_b delta_b^2,
 
 1 for a stop like the tuning's, 0 for a change that is all off the clock. A fire whose
 ``a_L`` is under ``min_a`` is not a stop. No verdict (the fire stands on the other rules)
-when the sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
+when the tuning has no continuum signature (made before it was stored), when the
+sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
 (one sub-band's estimate is not the stop's signature), the rate is not known or is more
 than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
 elsewhere, and the tuned signature is not what the stop does on them), where more than
@@ -70,13 +74,16 @@ class ClockedParams:
     min_sharpness: float = param(
         0.85, "", "and where they held this share of a comb four times wider's power (a rough clock smears them)"
     )
+    max_continuum_excess_db: float = param(
+        3.0, "dB", "judged only where the tuned stop moved the continuum no further than its level, plus this"
+    )
     min_covered: float = param(
         0.5, "", "no verdict unless the sub-bands judged hold this share of the signature's sum of squares"
     )
     floor_share: float = param(0.01, "", "each side of a change is floored at this share of the larger (+-20 dB)")
     commanded_tol: float = param(0.03, "", "the rate is heard within this share of the commanded one (else taken)")
     max_rate_off: float = param(
-        0.05, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere"
+        0.01, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere (as the fit)"
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -107,6 +114,7 @@ def lines_stop_likeness(
     rate_hz: float,
     edges_hz: Sequence[float],
     signature_db: Sequence[float],
+    continuum_db: Sequence[float],
     p: ClockedParams = CLOCKED,
 ) -> tuple[float, int]:
     """The lines' stop-likeness ``a_L`` from ``before`` to ``after`` and the number of sub-bands judged.
@@ -122,6 +130,10 @@ def lines_stop_likeness(
         The step rate whose harmonic lines are read, Hz.
     edges_hz, signature_db : sequence of float
         The sub-bands' edges (Hz, one more than sub-bands) and the stop's signature on them (dB per sub-band).
+    continuum_db : sequence of float
+        The tuned stop's change of the continuum between the lines, dB per sub-band: where it moved further in the
+        stop's direction than the level did (by ``max_continuum_excess_db``), the stop's change was off the lines
+        (a stop that rattles out of step) and the sub-band is not judged.
     p : ClockedParams
         The check's parameters.
 
@@ -131,8 +143,18 @@ def lines_stop_likeness(
         ``a_L`` (dimensionless: 1 a stop like the tuned one on the lines, 0 no change on them; NaN where no sub-band
         was judged) and how many sub-bands were judged.
     """
-    judged = [i for i, delta in enumerate(signature_db) if abs(delta) >= p.min_signature_db]
+    moved = [i for i, delta in enumerate(signature_db) if abs(delta) >= p.min_signature_db]
+    whole = sum(float(signature_db[i]) ** 2 for i in moved)
+    if len(continuum_db) != len(signature_db):
+        return math.nan, 0
+    on = [
+        math.copysign(1.0, d) * c <= abs(d) + p.max_continuum_excess_db
+        for d, c in zip(signature_db, continuum_db, strict=True)
+    ]
+    judged = [i for i in moved if on[i]]  # the tuned stop's change was on the lines there
     bands = [(float(edges_hz[i]), float(edges_hz[i + 1])) for i in judged]
+    if not bands:
+        return math.nan, 0
     n = min(before.size, after.size)
     b, a = before[before.size - n :], after[:n]
     # one spectrum per side for every sub-band: the lines in band order, split by where each band's run begins
@@ -142,11 +164,10 @@ def lines_stop_likeness(
     if not lb.power.size == la.power.size == lw.power.size:
         return math.nan, 0
     which = _band_of_lines(lb.freq_hz, bands)
-    num = den = whole = 0.0
+    num = den = 0.0
     used = 0
     for j, i in enumerate(judged):
         delta = float(signature_db[i])
-        whole += delta**2
         on = which == j
         p0, p1, wide = float(np.sum(lb.power[on])), float(np.sum(la.power[on])), float(np.sum(lw.power[on]))
         if not p0 > p.min_line_z * math.sqrt(float(np.sum(lb.var[on]))):
@@ -185,7 +206,12 @@ class ClockedCheck:
 
     def __init__(self, tuning: Tuning, p: ClockedParams = CLOCKED) -> None:
         self.tuning, self.p = tuning, p
-        self.enabled = tuning.method == "template" and tuning.signature_db is not None and tuning.edges_hz is not None
+        self.enabled = (
+            tuning.method == "template"
+            and tuning.signature_db is not None
+            and tuning.edges_hz is not None
+            and tuning.continuum_signature_db is not None
+        )
         self.sample_rate = int(tuning.sample_rate)
         self.reset()
 
@@ -222,8 +248,8 @@ class ClockedCheck:
         if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
             return None
         tu = self.tuning
-        assert tu.edges_hz is not None and tu.signature_db is not None  # enabled
-        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, p)
+        assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
+        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
         return OnClock(a, rate, used)
 
     def verdict(self, got: OnClock | None) -> bool:
