@@ -71,6 +71,9 @@ class TrackerParams:
     edge_margin : float
         A fix nearer the field's edge than this plus twice its blur is refused as out of
         the field, px: a tip just beyond the edge looks like one on it.
+    min_coverage : float
+        Least share of the template's weight that must lie in the frame, 1 (below: out of
+        the field).
     occluded_fraction : float
         Largest share of the template's weight that may disagree with the frame, 1
         (above: something covers the tip).
@@ -150,6 +153,7 @@ class TrackerParams:
     reacquire_score: float = 0.8
     max_sigma: float = 1.0
     edge_margin: float = 3.0
+    min_coverage: float = 0.5
     occluded_fraction: float = 0.3
     max_blur: float = 5.0
     sigma_floor: float = 0.03

@@ -447,7 +447,7 @@ class TipTracker:
         if edge < margin:
             where = "beyond the edge" if edge < 0 else f"{edge:.1f} px from the edge"
             return Lost("out of the field", f"the tip would be {where} (needs {margin:.1f} px)")
-        if r.coverage < 0.9:
+        if r.coverage < p.min_coverage:
             return Lost("out of the field", f"{100 * (1 - r.coverage):.0f} % of the tip's window is outside the field")
         sigma = max(p.sigma_floor, p.sigma_factor * r.sigma)
         if r.outliers > p.occluded_fraction:
