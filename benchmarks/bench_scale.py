@@ -337,7 +337,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         cal = d / "cal.json"  # a family calibration (its intervals depend on the pose) for predict
-        history_table(d / "cal.csv", 1000)
+        history_table(d / "cal.csv", QUICK["calibrate"][-1] if quick else 1000)  # quick: only that it runs
         run_child(["calibrate", str(d / "cal.csv"), "-o", str(cal), "--json"], env)
         head = f"{'command':10s} {'rows':>9s} {'seconds':>9s} {'cpu s':>8s} {'µs/row':>8s} {'peak MiB':>9s}"
         print(f"\n{head}   baseline")
@@ -363,7 +363,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                         "import": ["import", str(meas), "--db", str(d / f"db{n}.sqlite"), "--json"],
                     }[cmd]
                 r = run_child(argv_, env)
-                if cmd == "calibrate" and n == ns[-1]:  # the refit to convergence, side by side
+                if cmd == "calibrate" and n == ns[-1] and not quick:  # the refit to convergence, side by side
                     rb = run_child(argv_, {**env, "BENCH_REFIT_ITERATIONS": "5"})
                     base = (f"refit to convergence (5 steps): {rb['seconds']:.3g} s, {rb['cpu_seconds']:.3g} CPU s "
                             f"({rb['seconds'] / r['seconds']:.2f}x)")
