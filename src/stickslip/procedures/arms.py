@@ -12,7 +12,7 @@ joint in its order, after checking the whole path.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 from ..calibration import Calibration
@@ -23,6 +23,7 @@ from ..rig.guard import Guard, mapped
 from ..rig.secrets import controller_url
 from . import named
 from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, check_envelope_path, move
+from .named import once, safe_order
 
 __all__ = [
     "ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "position_of",
@@ -128,15 +129,6 @@ def position_of(store: StateStore, rig: Rig, arm: str | None, name: str) -> Name
     return NamedPosition(name, a.name, q, safe_order([state.positions[j] for j in (1, 2, 3)], q))
 
 
-def safe_order(q_from: Sequence[float], q_to: Sequence[float]) -> tuple[int, ...]:
-    """The order to reach a position saved without one (rad, rad, m): joint 3 first when it retracts, else last.
-
-    The tip is drawn back before the arm swings and pushed out only once it points where
-    it should (the order :func:`stickslip.procedures.named.go_to` uses).
-    """
-    return (3, 1, 2) if q_to[2] < q_from[2] else (1, 2, 3)
-
-
 def go_to_position(
     store: MoveStore,
     rig: Rig,
@@ -175,24 +167,17 @@ def go_to_position(
     except MoveRefused as e:
         raise MoveRefused(f"going to {name!r}: {e}") from None
     results: list[MoveResult] = []
-    started = False
-
-    def once() -> None:
-        nonlocal started
-        if not started:
-            started = True
-            ready()
-
+    first = once(ready)
     for before, after in zip(path[:-1], path[1:], strict=True):
         j = next(i + 1 for i in range(3) if before[i] != after[i])
         request = MoveRequest(device or a.controller, j, to=after[j - 1], burst=burst,
                               guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
                               trust_calibration=trust_calibration, joints=a.joint_specs(),
                               state_key=rig.state_key(a.name))
-        result = move(store, request, calibration, warn=warn, ready=once,
+        result = move(store, request, calibration, warn=warn, ready=first,
                       opener=opener if device is not None else opener_for(rig, a.name, opener))
         results.append(result)
         if result.outcome.error is not None:
             break
-    once()
+    first()
     return tuple(results)

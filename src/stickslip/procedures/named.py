@@ -12,7 +12,7 @@ frame; these are per device.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +24,10 @@ from ..joints import JOINTS
 from ..units import format_position
 from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, move
 
-__all__ = ["NAME_PATTERN", "GoToResult", "NamedPosition", "delete_position", "go_to", "positions", "save_position"]
+__all__ = [
+    "NAME_PATTERN", "GoToResult", "NamedPosition", "delete_position", "go_to", "once", "positions", "safe_order",
+    "save_position",
+]
 
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9 _.\-]{0,39}$"
 """A position's name: 1 to 40 letters, digits, spaces, ``_``, ``.`` or ``-``, beginning with a letter or digit."""
@@ -131,6 +134,29 @@ class GoToResult:
         return {"position": self.position.as_dict(), "moves": [m.as_dict() for m in self.moves]}
 
 
+def safe_order(q_from: Sequence[float], q_to: Sequence[float]) -> tuple[int, ...]:
+    """The order to reach a position saved without one (rad, rad, m): joint 3 first when it retracts, else last.
+
+    The tip is drawn back before the arm swings and pushed out only once it points where
+    it should (:func:`go_to`, and a rig's saved positions: :func:`stickslip.procedures.arms.position_of`).
+    """
+    return (3, 1, 2) if q_to[2] < q_from[2] else (1, 2, 3)
+
+
+def once(ready: Callable[[], None]) -> Callable[[], None]:
+    """``ready`` called at the first call only: the ``ready`` of a sequence of moves, each of which calls it, and
+    called once more after the last so that a sequence with no move calls it too."""
+    started = False
+
+    def first() -> None:
+        nonlocal started
+        if not started:
+            started = True
+            ready()
+
+    return first
+
+
 def go_to(
     store: MoveStore,
     device: str,
@@ -155,30 +181,21 @@ def go_to(
         raise KeyError(f"{device_key(device)} has no position named {name!r}")
     target = found[name]
     state = load_state(store, device_key(device))
-    order = [1, 2, 3]
-    if target.q[2] < state.positions[3]:
-        order = [3, 1, 2]  # retract first
+    order = safe_order([state.positions[j] for j in (1, 2, 3)], target.q)
     for j in order:
         if j not in {jj for jj, _ in calibration.models} and abs(target.q[j - 1] - state.positions[j]) > tolerance:
             raise MoveRefused(f"going to {name!r} moves joint {j}, and the calibration has no model of it")
-    started = False
-
-    def once() -> None:
-        nonlocal started
-        if not started:
-            started = True
-            ready()
-
+    first = once(ready)
     moves: list[MoveResult] = []
     for j in order:
         state = load_state(store, device_key(device))
         if abs(target.q[j - 1] - state.positions[j]) <= tolerance and j not in state.uncertain:
             continue
         q_to = min(max(target.q[j - 1], JOINTS[j].lower), JOINTS[j].upper)
-        result = move(store, MoveRequest(device, j, to=q_to, burst=burst), calibration, warn=warn, ready=once,
+        result = move(store, MoveRequest(device, j, to=q_to, burst=burst), calibration, warn=warn, ready=first,
                       opener=opener)
         moves.append(result)
         if result.outcome.error is not None:
             break
-    once()
+    first()
     return GoToResult(target, tuple(moves))
