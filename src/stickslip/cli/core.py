@@ -307,7 +307,6 @@ def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output
     """``calibrate TABLE --rig RIG --arm NAME``: a stage arm's mean steps (:mod:`stickslip.calibration.stage`)."""
     from ..calibration import CalibrationError, Conditions
     from ..calibration.stage import calibrate_stage, check_stage
-    from ..measurements import TableError, read_measurements
     from .rig import load
 
     with user_errors(KeyError):
@@ -315,12 +314,9 @@ def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output
     joints = a.joint_specs()
     try:
         check_stage(joints, a.name)
-        traverses = read_measurements(measurements, max_bytes, joints)
+        traverses = _whole_table(measurements, max_bytes, joints)
         conditions = Conditions(device_key(device or a.controller), frequency, amplitude, temperature)
         cal = calibrate_stage(traverses, joints, arm=a.name, day=day, source=str(measurements))
-    except TableError as e:
-        fail("\n".join(p + ("; --max-table-mb raises the limit" if "limit for a CSV" in p else "")
-                       for p in e.problems))
     except (CalibrationError, ValueError) as e:
         fail(str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
@@ -369,13 +365,14 @@ def _keep(cal: Calibration, stored: tuple[str, list[int]] | None, db: str | None
         return store.add_calibration(cal, stored[0], stored[1])
 
 
-def _whole_table(path: Path, max_bytes: int) -> list[Traverse]:
+def _whole_table(path: Path, max_bytes: int, joints: Any = None) -> list[Traverse]:
     """A measurement table read whole (calibrate holds every row), or every problem and exit 2; over the size
-    limit, the message says how to raise it."""
+    limit, the message says how to raise it. ``joints``: an arm's own joints to check the rows against
+    (:func:`~stickslip.measurements.read_measurements`; default the MM3A's)."""
     from ..measurements import TableError, read_measurements
 
     try:
-        return read_measurements(path, max_bytes)
+        return read_measurements(path, max_bytes, joints)
     except TableError as e:
         fail("\n".join(p + ("; --max-table-mb raises the limit" if "limit for a CSV" in p else "")
                        for p in e.problems))
