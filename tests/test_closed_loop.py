@@ -33,6 +33,17 @@ from test_reach import DAY, true_calibration
 
 runner = CliRunner()
 DEV = f"sim://?seed=4&day={DAY}"
+# the envelope tests' rig: arm "a" on the simulator, a wall 21.1 mm out along x (within the tip's reach)
+WALL_RIG = f"""
+[[arm]]
+name = "a"
+controller = "{DEV}"
+[[volume]]
+name = "wall"
+shape = "half-space"
+point = ["21.1mm", "0mm", "0mm"]
+normal = [1, 0, 0]
+"""
 G = kin.DEFAULT_GEOMETRY
 OFF = 1.2
 """The day's true steps over the calibrated ones."""
@@ -347,16 +358,7 @@ def test_the_closed_loop_checks_the_rig_envelope_with_the_grown_margin(cal_off, 
     from stickslip.rig.guard import Guard
     from stickslip.storage import Store
 
-    rig = parse_rig(f"""
-[[arm]]
-name = "a"
-controller = "{DEV}"
-[[volume]]
-name = "wall"
-shape = "half-space"
-point = ["21.1mm", "0mm", "0mm"]
-normal = [1, 0, 0]
-""")
+    rig = parse_rig(WALL_RIG)
     guard = Guard(rig, "a")
     cal = Calibration.load(cal_off)
     loop = CameraLoop("peercam://?pixel=1um&size=256x256", tip=(153.6, 128.0))
@@ -385,16 +387,7 @@ def test_a_leg_the_envelope_refuses_stops_the_loop_with_its_reason():
 def test_move_and_reach_with_the_camera_in_a_rig_are_checked_from_the_command_line(cal_off, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     rig = tmp_path / "rig.toml"
-    rig.write_text(f"""
-[[arm]]
-name = "a"
-controller = "{DEV}"
-[[volume]]
-name = "wall"
-shape = "half-space"
-point = ["21.1mm", "0mm", "0mm"]
-normal = [1, 0, 0]
-""", encoding="utf-8")
+    rig.write_text(WALL_RIG, encoding="utf-8")
     cam = ["--camera", "peercam://?pixel=1um&size=256x256", "--camera-tip", "153.6,128"]
     r = _run(["move", "--rig", str(rig), "-c", cal_off, "--joint", "3", "--by", "80um", *cam])
     assert r.exit_code == 2 and "refused by the rig's envelope" in r.output and "'wall'" in r.output, r.output
