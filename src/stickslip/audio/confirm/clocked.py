@@ -157,13 +157,13 @@ def lines_stop_likeness(
         return math.nan, 0
     n = min(before.size, after.size)
     b, a = before[before.size - n :], after[:n]
-    # one spectrum per side for every sub-band: the lines in band order, split by where each band's run begins
+    # one spectrum per side for every sub-band, each line with the band it was found in
     lb, _ = line_powers(b, sample_rate, rate_hz, bands)
     la, _ = line_powers(a, sample_rate, rate_hz, bands)
     lw, _ = line_powers(b, sample_rate, rate_hz, bands, STEP_CLOCK.sharp_width)
     if not lb.power.size == la.power.size == lw.power.size:
         return math.nan, 0
-    which = _band_of_lines(lb.freq_hz, bands)
+    which = lb.band
     num = den = 0.0
     used = 0
     for j, i in enumerate(judged):
@@ -182,23 +182,6 @@ def lines_stop_likeness(
     if den == 0.0 or den < p.min_covered * whole:
         return math.nan, used
     return num / den, used
-
-
-def _band_of_lines(freq_hz: FloatArray, bands: Sequence[tuple[float, float]]) -> NDArray[np.int64]:
-    """The band each line of :func:`line_powers` over ``bands`` (ascending) was found in.
-
-    The lines come band by band, each band's in rising frequency; a line on an edge two bands
-    share comes twice (once per band), so a line no higher than the one before starts the next band.
-    """
-    out = np.zeros(freq_hz.size, dtype=np.int64)
-    j, prev = 0, -math.inf
-    for k, c in enumerate(freq_hz.tolist()):
-        if c <= prev:
-            j += 1
-        while j < len(bands) - 1 and c > bands[j][1]:
-            j += 1
-        out[k], prev = j, c
-    return out
 
 
 class ClockedCheck:

@@ -135,6 +135,7 @@ def _mean_lines(a: Lines, b: Lines) -> Lines:
         0.25 * (a.var + b.var),
         0.25 * (a.floor + b.floor),  # line_z's scatter term 4 P floor: halved as the average's variance is
         a.bins,
+        a.band,
     )
 
 

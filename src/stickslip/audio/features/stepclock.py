@@ -308,6 +308,9 @@ class Lines(NamedTuple):
     floor: FloatArray
     #: the bins the line spans
     bins: NDArray[np.int64]
+    #: the index (in the bands asked for) of the band the line was found in; a line on an edge two bands share
+    #: comes once for each
+    band: NDArray[np.int64]
 
 
 def line_powers(
@@ -339,9 +342,10 @@ def line_powers(
     var: list[float] = []
     floors: list[float] = []
     bins: list[int] = []
+    band: list[int] = []
     if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
         e = np.zeros(0)
-        return Lines(e, e, e, e, np.zeros(0, dtype=np.int64)), float("nan")
+        return Lines(e, e, e, e, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)), float("nan")
     w = _hann(v.size)
     p = 2.0 * np.abs(sfft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
     bands = tuple((float(lo), float(hi)) for lo, hi in bands_hz)
@@ -349,7 +353,7 @@ def line_powers(
     whole = 0.0
     for inb in in_bands:
         whole += float(np.sum(p[inb]))
-    for c, near, left, right in lines:
+    for j, c, near, left, right in lines:
         # the median of noise's periodogram bins is ln 2 of their mean (they scatter exponentially)
         floor = 0.5 * (_median(p[left]) + _median(p[right])) / math.log(2.0)
         n = int(near.size)
@@ -358,10 +362,13 @@ def line_powers(
         var.append(4.0 * n * floor**2)
         floors.append(floor)
         bins.append(n)
-    return Lines(_f64(freq), _f64(power), _f64(var), _f64(floors), np.asarray(bins, dtype=np.int64)), whole
+        band.append(j)
+    lines_ = Lines(_f64(freq), _f64(power), _f64(var), _f64(floors), np.asarray(bins, dtype=np.int64),
+                   np.asarray(band, dtype=np.int64))
+    return lines_, whole
 
 
-_Grid = tuple[list[NDArray[np.intp]], list[tuple[float, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]]]
+_Grid = tuple[list[NDArray[np.intp]], list[tuple[int, float, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]]]
 
 
 @functools.lru_cache(maxsize=64)
@@ -375,13 +382,13 @@ def _line_grid(
     flank: float,
 ) -> _Grid:
     """The bins of :func:`line_powers` for a stretch of ``n`` samples: per band, its bins; per line (found in a band and
-    with both flanks), its frequency and the bins of the line and of its two flanks. Kept: the late path asks for the
-    same stretch length and rate again and again."""
+    with both flanks), the band's index, its frequency and the bins of the line and of its two flanks. Kept: the late
+    path asks for the same stretch length and rate again and again."""
     f = np.fft.rfftfreq(n, 1 / sr)
     df = float(f[1] - f[0])
     in_bands: list[NDArray[np.intp]] = []
-    lines: list[tuple[float, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]] = []
-    for lo, hi in bands:
+    lines: list[tuple[int, float, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]] = []
+    for j, (lo, hi) in enumerate(bands):
         inb = (f >= lo) & (f < hi)
         in_bands.append(np.flatnonzero(inb))
         for k in range(max(1, int(math.ceil(lo / rate_hz))), int(math.floor(hi / rate_hz)) + 1):
@@ -391,7 +398,7 @@ def _line_grid(
             left = (f < c - half) & (f >= c - flank * half)
             right = (f > c + half) & (f <= c + flank * half)
             if near.any() and left.any() and right.any():
-                lines.append((c, np.flatnonzero(near), np.flatnonzero(left), np.flatnonzero(right)))
+                lines.append((j, c, np.flatnonzero(near), np.flatnonzero(left), np.flatnonzero(right)))
     return in_bands, lines
 
 
