@@ -228,6 +228,10 @@ class TipTemplate:
     mask : ndarray of bool
         The needle's pixels in the window (those standing out from the background,
         connected to the tip).
+    ground : tuple of float
+        The background's level and spread (grey units) the needle was told from: the
+        median of the window's outer ring, smoothed by 1 px, and its scaled median
+        absolute deviation.
     apex : tuple of float
         The tip in window coordinates, px ``(x, y)``.
     noise : float
@@ -249,6 +253,7 @@ class TipTemplate:
     ring: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     front: tuple[FloatArray, FloatArray] = (np.zeros(0), np.zeros(0))
     mask: NDArray[np.bool_] = field(default_factory=lambda: np.zeros((0, 0), dtype=bool))
+    ground: tuple[float, float] = (0.0, 0.0)
 
     @classmethod
     def learn(cls, image: FloatArray, tip: tuple[float, float], params: TrackerParams = TrackerParams()) -> TipTemplate:
@@ -266,7 +271,7 @@ class TipTemplate:
             win = np.where(inside, win, fill)
         apex = (x - cx + h, y - cy + h)
         noise = noise_sigma(image)
-        mask = _needle_mask(win, inside, apex, noise, params, (x, y))
+        mask, ground = _needle_mask(win, inside, apex, noise, params, (x, y))
         level_weights = _level_weights(mask, inside, apex, params)
         weights = level_weights[0]
         shaft, core, ring_off, front = _surroundings(mask, inside, apex, params)
@@ -275,7 +280,8 @@ class TipTemplate:
         # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
         # blurred by blur_bank[k] more than the first
         contrast = _trackable_contrast(win, weights, noise, (x, y))
-        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front, mask)
+        return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front, mask,
+                   ground)
 
     @property
     def half(self) -> int:
@@ -308,8 +314,9 @@ def _offsets(h: int, apex: tuple[float, float]) -> Offsets:
 def _needle_mask(
     win: FloatArray, inside: NDArray[np.bool_], apex: tuple[float, float], noise: float, params: TrackerParams,
     tip: tuple[float, float],
-) -> NDArray[np.bool_]:
-    """The pixels of the needle at the tip: those standing out from the window's ring, connected to the tip.
+) -> tuple[NDArray[np.bool_], tuple[float, float]]:
+    """The pixels of the needle at the tip: those standing out from the window's ring, connected to the tip, and
+    the ring's level and spread (grey units).
 
     Raises :class:`TemplateError` when nothing stands out within 8 px of the tip, or too little.
     """
@@ -335,7 +342,7 @@ def _needle_mask(
     mask = np.isin(labels, list(touching))
     if mask.sum() < 12:
         raise TemplateError(f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out")
-    return np.asarray(mask)
+    return np.asarray(mask), (level, spread)
 
 
 def _level_weights(

@@ -47,6 +47,7 @@ from scipy import ndimage
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
+from .shaft import ShaftCheck, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 
 __all__ = [
@@ -121,6 +122,7 @@ class _Candidate:
     ncc: float
     patch: Patch
     edges: EdgeCheck | None = None
+    shaft: ShaftCheck | None = None
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -211,8 +213,13 @@ def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: Fl
     return ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25))
 
 
-def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams) -> Lost | None:
-    """The edge stage's refusal of a fix whose edges were checked (``None``: they hold, or were not checked)."""
+def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
+    """The edge stage's refusal of a fix whose edges (and shaft) were checked (``None``: they hold, or were not
+    checked)."""
+    if sc is not None and (sc.back < p.edge_contrast or sc.shape < p.edge_shape):
+        return Lost("lost", f"the needle's shaft {sc.reach:.0f} px behind the tip is not where the first frame "
+                            f"had it (contrast {sc.back:.2f}, profiles correlate by {sc.shape:.2f}; needs "
+                            f"{p.edge_contrast:g}, {p.edge_shape:g})")
     if ec is None:
         return None
     if ec.far < p.edge_contrast:
@@ -269,6 +276,10 @@ class TipTracker:
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
+        s0 = params.template_blur
+        self._shaft = learn_shaft(image, (float(tip[0]), float(tip[1])), t.shaft, t.ground[0], t.ground[1],
+                                  params.contrast,
+                                  [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in self._spec])
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
@@ -429,8 +440,11 @@ class TipTracker:
             return res, cand
         patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
         ec = self._edge_check(patches, image, cand.ref, cand.level)
-        cand = replace(cand, edges=ec)
-        refusal = _edge_refusal(ec, p) if isinstance(res, Fix) else None
+        # the shaft further back only where the edges near the tip hold (their refusal stands without it)
+        sc = check_shaft(self._shaft, cand.level, image, r.x, r.y, r.theta) if (
+            ec is not None and _edge_refusal(ec, p) is None) else None
+        cand = replace(cand, edges=ec, shaft=sc)
+        refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         return (refusal or res), cand
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
@@ -495,7 +509,7 @@ class TipTracker:
                     return self._accept(res, cand)
                 first_refusal = res
                 if res.reason in ("lost", "out of focus") and cand.edges is not None and (
-                        _edge_refusal(cand.edges, self.params) is None):
+                        _edge_refusal(cand.edges, self.params, cand.shaft) is None):
                     # the needle's edges are where the fit put its tip, which a rule refused (its position
                     # undetermined, its focus changed too fast): the tip is here, the whole frame has no other
                     self._fresh = False

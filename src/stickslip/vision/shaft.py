@@ -1,0 +1,319 @@
+"""The needle's shaft followed back from a candidate tip as far as the first frame showed it.
+
+The edge check (:mod:`.edges`) compares the needle's two edges with the template's within
+the template's window, 1.5 to 14 px behind the candidate tip. Something over the tip that
+is about as wide as the needle there (a rounded lobe of a dust grain) has edges like the
+needle's for that short way, and the fit can take its end for the tip. Behind it, the
+grain ends; the needle's shaft, further back, is where the *real* tip puts it, not where
+the candidate puts it. This check follows the shaft from :data:`BACK_FROM` px behind the
+tip, every :data:`BACK_STEP` px, as far as the first frame showed the needle
+continuously (at most :data:`BACK_TO` px): at each station the frame's profile across the
+shaft (averaged over three lines 1 px apart along it, smoothed across it as the blur copy
+is) is compared with the first frame's, each with its level and slope taken out, the
+frame's shifted sideways by up to :data:`SHIFTS` samples. Each station gives the
+profile's contrast against the first frame's (1 for the shaft as first seen, 0 for plain
+ground) and their correlation (near 1 where the two edges are where the first frame had
+them).
+
+The first frame's profiles are learnt from the frame itself, beyond the template's
+window; the blur copies' profiles are the first frame's smoothed across the shaft (the
+shaft is straight over a station's lines: a Gaussian blur of the image is the same blur
+of the profile across it). See docs/vision.md, "Tracking the tip".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+__all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO", "learn_shaft", "check_shaft"]
+
+FloatArray = NDArray[np.float64]
+
+BACK_FROM = 18.0
+"""The first station behind the tip, px (the edge check's stations end at 14 px)."""
+
+BACK_STEP = 6.0
+"""Spacing of the stations along the shaft, px."""
+
+BACK_TO = 64.0
+"""The last station the shaft is followed to, px."""
+
+LINES = (-1.0, 0.0, 1.0)
+"""Offsets along the shaft of the lines averaged at each station, px (against the noise)."""
+
+STEP = 1.0
+"""Spacing of the samples across the shaft, px (the shaft is wide this far back, and its
+profile smoothed by 1 px or more)."""
+
+SHIFTS = 1
+"""Largest lateral shift tried, in samples (``SHIFTS * STEP`` px): an error of the fitted turn
+moves a station far back sideways (1 deg: 1 px at 60 px)."""
+
+GROUND = 7.0
+"""Ground on each side of the needle that a profile takes in, px."""
+
+REACH = 48.0
+"""Half the span across the shaft sampled when learning, px (a needle up to 2 x (REACH - GROUND) px wide)."""
+
+PAD = 12.0
+"""Samples beyond the ground on each side, px: room for smoothing the frame's profile across the shaft."""
+
+GAP_ACROSS = 12.0
+"""Gaps in a needle's run across the shaft up to this wide are closed, px (an SEM needle's middle can sink
+into the ground's spread between its bright edges)."""
+
+
+@dataclass(frozen=True)
+class ShaftProfiles:
+    """The first frame's shaft profiles at the stations behind the tip, for each blur copy (learnt once).
+
+    Attributes
+    ----------
+    shaft : tuple of float
+        Unit vector from the tip back along the needle (frame axes of the first frame).
+    s : ndarray, shape (m,)
+        The stations kept (behind the tip, where the first frame showed the needle), px.
+    offsets : ndarray, shape (m, q, 2)
+        Each sample's offset from the tip, px (before a turn), across the shaft at each
+        station (every :data:`STEP` px, centred on the needle's axis there).
+    gather : ndarray of int, shape (m, 2 * SHIFTS + 1, n)
+        For each station and lateral shift, the flat indices (into the ``(m, q)`` profiles)
+        of the samples compared: the needle and :data:`GROUND` px of ground each side.
+    shift_ok : ndarray of bool, shape (m, 2 * SHIFTS + 1)
+        Which shifts keep a station's samples within its profile (a shift past its end is
+        not tried).
+    valid : ndarray of bool, shape (m, n)
+        Which of the ``n`` places of a station hold a sample (stations differ in width).
+    tc : ndarray, shape (m, n)
+        Each station's unit slope across the shaft (zero-mean), for taking the slope out.
+    lengths : ndarray, shape (m,)
+        The samples compared at each station.
+    e : list of ndarray, shape (m, n)
+        For each blur copy, the first frame's profiles with their level and slope taken out.
+    ve : list of ndarray, shape (m,)
+        Their sums of squares.
+    smooth : list of float
+        For each blur copy, the smoothing of a frame's profile across the shaft, in samples.
+    """
+
+    shaft: tuple[float, float]
+    s: FloatArray
+    offsets: FloatArray
+    gather: NDArray[np.intp]
+    shift_ok: NDArray[np.bool_]
+    valid: NDArray[np.bool_]
+    tc: FloatArray
+    lengths: FloatArray
+    e: list[FloatArray]
+    ve: list[FloatArray]
+    smooth: list[float]
+
+    @property
+    def valid_f(self) -> FloatArray:
+        """:attr:`valid` as 1 and 0, shaped to multiply the gathered samples."""
+        return np.asarray(self.valid[:, None, :], dtype=float)
+
+    @property
+    def invalid(self) -> NDArray[np.bool_]:
+        """The places holding no sample, shaped as the gathered samples."""
+        return ~self.valid[:, None, :]
+
+
+@dataclass(frozen=True)
+class ShaftCheck:
+    """What the shaft behind a candidate tip shows.
+
+    Attributes
+    ----------
+    back : float
+        The median of the stations' contrasts against the first frame's, 1.
+    shape : float
+        The median of the stations' correlations with the first frame's profiles, 1.
+    reach : float
+        The furthest station compared, px behind the tip.
+    n : int
+        Stations compared.
+    """
+
+    back: float
+    shape: float
+    reach: float
+    n: int
+
+
+def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """Bilinear samples of ``image`` at ``(xs, ys)`` (px), and which lie in the frame (the others: its edge)."""
+    H, W = image.shape
+    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+    x = np.minimum(np.maximum(xs, 0.0), W - 1.000001)
+    y = np.minimum(np.maximum(ys, 0.0), H - 1.000001)
+    ix = x.astype(np.intp)
+    iy = y.astype(np.intp)
+    fx = x - ix
+    fy = y - iy
+    flat = image.reshape(-1)
+    i00 = iy * W + ix
+    v00, v01 = flat.take(i00), flat.take(i00 + 1)
+    v10, v11 = flat.take(i00 + W), flat.take(i00 + W + 1)
+    top = v00 + (v01 - v00) * fx
+    bottom = v10 + (v11 - v10) * fx
+    return top + (bottom - top) * fy, inside
+
+
+def _lines(image: FloatArray, x: float, y: float, ox: FloatArray, oy: FloatArray, ux: float, uy: float
+           ) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The mean over :data:`LINES` of ``image`` at the offsets ``(ox, oy)`` from ``(x, y)`` (px), and which
+    samples lie in the frame on every line."""
+    d = np.asarray(LINES)
+    xs = (ox[..., None] + d * ux + x).ravel()
+    ys = (oy[..., None] + d * uy + y).ravel()
+    v, inside = _bilinear(image, xs, ys)
+    n = len(LINES)
+    return v.reshape(*ox.shape, n).mean(axis=-1), np.asarray(inside.reshape(*ox.shape, n).all(axis=-1), dtype=bool)
+
+
+def _median(a: FloatArray) -> float:
+    """The median of a few values (:func:`numpy.median`'s, without its overhead)."""
+    b = np.sort(a)
+    n = b.size
+    return float(b[n // 2]) if n % 2 else 0.5 * float(b[n // 2 - 1] + b[n // 2])
+
+
+def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float,
+                spread: float, contrast: float, smooth: list[tuple[float, float]]) -> ShaftProfiles:
+    """The first frame's profiles across the shaft behind the tip, as far as it shows the needle.
+
+    ``image`` is the first frame, ``tip`` the tip in it (x, y; px), ``shaft`` the unit
+    vector from the tip back along the needle; a sample is needle where the profile,
+    smoothed by 1 px, stands more than ``contrast`` times ``spread`` from the ground's
+    ``level`` (grey units). ``smooth`` gives, for each blur copy, the smoothing of the
+    first frame's profile and of a later frame's across the shaft (Gaussian sigma, px).
+    """
+    ux, uy = shaft
+    nx, ny = -uy, ux
+    half_q = int(round(REACH / STEP))
+    ts = (np.arange(2 * half_q + 1) - half_q) * STEP
+    x0, y0 = tip
+    offs: list[FloatArray] = []
+    raws: list[FloatArray] = []
+    widths: list[float] = []
+    kept: list[float] = []
+    centre = 0.0
+    width = 0.0
+    for s in np.arange(BACK_FROM, BACK_TO + 1e-9, BACK_STEP):
+        ox = s * ux + (centre + ts) * nx
+        oy = s * uy + (centre + ts) * ny
+        raw, ok = _lines(image, x0, y0, ox, oy, ux, uy)
+        sm = ndimage.gaussian_filter1d(raw, 1.0 / STEP, mode="nearest")
+        on = (np.abs(sm - level) > contrast * spread) & ok
+        # a needle whose middle is nearer the ground than its edges (an SEM's edge contrast) is one run
+        on = ndimage.binary_closing(on, np.ones(int(round(GAP_ACROSS / STEP)) + 1, dtype=bool)) & ok
+        mid = half_q
+        # the run of needle samples nearest the axis followed so far
+        idx = np.flatnonzero(on)
+        if idx.size == 0:
+            break
+        c = int(idx[np.argmin(np.abs(idx - mid))])
+        if abs(c - mid) * STEP > 2.0 + 0.5 * width:
+            break  # the needle is not where it was followed to
+        lo = hi = c
+        while lo > 0 and on[lo - 1]:
+            lo -= 1
+        while hi < on.size - 1 and on[hi + 1]:
+            hi += 1
+        new_width = (hi - lo + 1) * STEP
+        g = int(round((GROUND + PAD) / STEP))
+        if lo - g < 0 or hi + g > on.size - 1 or not ok[lo - g : hi + g + 1].all():
+            break  # the frame ends (or the needle is too wide to hold): as far as the first frame shows it
+        g, gap = int(round(GROUND / STEP)), max(1, int(round(1.0 / STEP)))
+        if on[lo - g : lo - gap].any() or on[hi + gap + 1 : hi + g + 1].any():
+            break  # no plain ground beside it: something lies against the needle
+        if width > 0 and new_width > width + 2.0 * BACK_STEP + 2.0:
+            break  # much wider than a station before: something merges with it
+        width = new_width
+        centre = centre + 0.5 * (ts[lo] + ts[hi])
+        ox = s * ux + (centre + ts) * nx
+        oy = s * uy + (centre + ts) * ny
+        offs.append(np.stack([ox, oy], axis=-1))
+        raws.append(_lines(image, x0, y0, ox, oy, ux, uy)[0])
+        widths.append(width)
+        kept.append(float(s))
+    n_copies = len(smooth)
+    if not kept:
+        return ShaftProfiles(shaft, np.zeros(0), np.zeros((0, 0, 2)), np.zeros((0, 2 * SHIFTS + 1, 0), dtype=np.intp),
+                             np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool),
+                             np.zeros((0, 0)), np.zeros(0), [np.zeros((0, 0))] * n_copies, [np.zeros(0)] * n_copies,
+                             [0.0] * n_copies)
+    # the samples a check needs: the widest station's needle and ground, the shifts, and room to smooth
+    reach = max(0.5 * w + GROUND for w in widths) + SHIFTS * STEP + 3.0 * max(f for _, f in smooth)
+    cut = np.flatnonzero(np.abs(ts) <= reach + 1e-9)
+    k0, q = int(cut[0]), int(cut.size)
+    tq = ts[k0 : k0 + q]
+    m = len(kept)
+    lengths = np.array([int(np.count_nonzero(np.abs(tq) <= 0.5 * w + GROUND)) for w in widths])
+    starts = np.array([int(np.flatnonzero(np.abs(tq) <= 0.5 * w + GROUND)[0]) for w in widths])
+    lmax = int(lengths.max())
+    j_ = np.arange(lmax)
+    valid = j_[None, :] < lengths[:, None]
+    tc = np.where(valid, j_[None, :] - 0.5 * (lengths[:, None] - 1), 0.0)
+    tc /= np.sqrt((tc * tc).sum(axis=1, keepdims=True))
+    d = np.arange(-SHIFTS, SHIFTS + 1)
+    k = starts[:, None, None] + j_[None, None, :] + d[None, :, None]  # (m, shifts, lmax)
+    shift_ok = np.asarray((((k >= 0) & (k < q)) | ~valid[:, None, :]).all(axis=2), dtype=bool)
+    gather = np.arange(m)[:, None, None] * q + np.clip(k, 0, q - 1)
+    raw_a = np.stack(raws)
+    es, ves = [], []
+    for tsig, _ in smooth:
+        ex = ndimage.gaussian_filter1d(raw_a, tsig / STEP, axis=1, mode="nearest")[:, k0 : k0 + q]
+        e = ex.take(np.arange(m)[:, None] * q + np.clip(starts[:, None] + j_[None, :], 0, q - 1))
+        e = np.where(valid, e, 0.0)
+        e = e - np.where(valid, e.sum(axis=1, keepdims=True) / lengths[:, None], 0.0)
+        e -= (e * tc).sum(axis=1, keepdims=True) * tc
+        es.append(e)
+        ves.append((e * e).sum(axis=1))
+    return ShaftProfiles(shaft, np.array(kept), np.stack(offs)[:, k0 : k0 + q], gather, shift_ok, valid, tc,
+                         lengths.astype(float), es, ves, [f / STEP for _, f in smooth])
+
+
+def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: float, theta: float
+                ) -> ShaftCheck | None:
+    """The shaft behind a tip at ``(x, y)`` (frame px) turned by ``theta`` (rad), against blur copy ``copy``.
+
+    ``None`` when fewer than three stations lie in the frame (too few to say).
+    """
+    m = sp.s.size
+    if m < 3:
+        return None
+    ct, st_ = math.cos(theta), math.sin(theta)
+    ox, oy = sp.offsets[..., 0], sp.offsets[..., 1]
+    ux, uy = sp.shaft
+    F, ok = _lines(image, x, y, ct * ox - st_ * oy, st_ * ox + ct * oy, ct * ux - st_ * uy, st_ * ux + ct * uy)
+    sig = sp.smooth[copy]
+    if sig > 0:
+        F = ndimage.gaussian_filter1d(F, sig, axis=1, mode="nearest")
+    # every station at every shift at once: its samples' sums against the flat ones, the slope and the profile
+    G = F.reshape(-1).take(sp.gather)
+    G *= sp.valid_f
+    good = sp.shift_ok
+    if not ok.all():  # part of the shaft outside the frame: the shifts that reach past it are not compared
+        good = good & (ok.reshape(-1).take(sp.gather) | sp.invalid).all(axis=2)
+    s1 = G.sum(axis=2)
+    G2 = G * G
+    vf = G2.sum(axis=2) - s1 * s1 / sp.lengths[:, None] - np.einsum("isk,ik->is", G, sp.tc) ** 2
+    e, ve = sp.e[copy], sp.ve[copy]
+    cov = np.einsum("isk,ik->is", G, e)
+    use = good & (vf > 0) & (ve[:, None] > 1e-18)
+    r = np.where(use, cov / np.sqrt(np.maximum(ve[:, None] * vf, 1e-300)), -np.inf)
+    best = r.argmax(axis=1)
+    rows = np.arange(m)
+    seen = use[rows, best]
+    if int(seen.sum()) < 3:
+        return None
+    a = cov[rows, best][seen] / ve[seen]
+    return ShaftCheck(_median(a), _median(r[rows, best][seen]), float(sp.s[seen].max()),
+                      int(seen.sum()))

@@ -1,0 +1,55 @@
+"""The shaft followed back from a candidate tip (stickslip.vision.shaft), on the simulated microscope's needle.
+
+The needle runs from its tip at x = 60 px to the field's left edge: the first frame shows
+it for 60 px, and the stations are learnt that far and no further. At the true tip the
+shaft behind is where the first frame had it (contrast and correlation near 1); a
+candidate 5 px to the side of the needle's axis (a lobe beside the tip) finds its edges
+elsewhere.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from stickslip.sim.camera import SimCamSettings, SimScene
+from stickslip.vision.shaft import BACK_FROM, BACK_STEP, check_shaft, learn_shaft
+from stickslip.vision.template import TipTemplate, TrackerParams
+
+SHAFT = np.array([-1.0, 0.15])
+TIP = (60.0, 80.0)
+
+
+def _profiles(look: str):  # type: ignore[no-untyped-def]
+    scene = SimScene(SimCamSettings(look=look, width=160, height=160, photons=200.0, seed=5,
+                                    tip_radius_m=0.25e-6 * 10.0, pixel_size_m=0.5e-6))
+    first = scene.render(np.array(TIP), SHAFT, 1.0)
+    p = TrackerParams()
+    t = TipTemplate.learn(first, TIP, p)
+    smooth = [(math.hypot(p.template_blur, b), p.template_blur) for b in p.blur_bank]
+    sp = learn_shaft(first, TIP, t.shaft, t.ground[0], t.ground[1], p.contrast, smooth)
+    return scene, sp
+
+
+@pytest.mark.parametrize("look", ["optical", "sem"])
+def test_the_shaft_is_learnt_as_far_as_the_first_frame_shows_it(look):
+    _, sp = _profiles(look)
+    # the needle leaves the field 60 px behind the tip: the stations from 18 px every 6 px up to it
+    assert sp.s[0] == BACK_FROM
+    np.testing.assert_allclose(np.diff(sp.s), BACK_STEP)
+    assert 48.0 <= sp.s[-1] <= 58.0
+
+
+@pytest.mark.parametrize("look", ["optical", "sem"])
+def test_the_shaft_holds_behind_the_tip_and_not_beside_it(look):
+    scene, sp = _profiles(look)
+    frame = scene.render(np.array(TIP), SHAFT, 1.0)
+    at = check_shaft(sp, 0, frame, *TIP, 0.0)
+    assert at is not None and at.n == sp.s.size
+    assert 0.85 <= at.back <= 1.15 and at.shape >= 0.97, at
+    u = SHAFT / np.hypot(*SHAFT)
+    side = (TIP[0] - 5.0 * u[1], TIP[1] + 5.0 * u[0])  # 5 px across the shaft
+    off = check_shaft(sp, 0, frame, *side, 0.0)
+    assert off is not None and off.shape < 0.9, off
