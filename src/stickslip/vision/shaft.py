@@ -97,8 +97,13 @@ class ShaftProfiles:
         For each blur copy, the first frame's profiles with their level and slope taken out.
     ve : list of ndarray, shape (m,)
         Their sums of squares.
-    smooth : list of float
-        For each blur copy, the smoothing of a frame's profile across the shaft, in samples.
+    smooth : list of ndarray or None
+        For each blur copy, the matrix that smooths a frame's profiles across the shaft
+        (``F @ smooth[k]``: a Gaussian, the profile's end samples repeated beyond it).
+    lines : ndarray, shape (2, m * q * len(LINES))
+        Every sample of every line, its offset from the tip (x, y; px, before a turn).
+    valid_f, invalid : ndarray, shape (m, 1, n)
+        :attr:`valid` as 1 and 0, and its negation, shaped as the gathered samples.
     """
 
     shaft: tuple[float, float]
@@ -111,17 +116,10 @@ class ShaftProfiles:
     lengths: FloatArray
     e: list[FloatArray]
     ve: list[FloatArray]
-    smooth: list[float]
-
-    @property
-    def valid_f(self) -> FloatArray:
-        """:attr:`valid` as 1 and 0, shaped to multiply the gathered samples."""
-        return np.asarray(self.valid[:, None, :], dtype=float)
-
-    @property
-    def invalid(self) -> NDArray[np.bool_]:
-        """The places holding no sample, shaped as the gathered samples."""
-        return ~self.valid[:, None, :]
+    smooth: list[FloatArray | None]
+    lines: FloatArray
+    valid_f: FloatArray
+    invalid: NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -245,10 +243,11 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
         kept.append(float(s))
     n_copies = len(smooth)
     if not kept:
+        z = np.zeros((0, 0))
         return ShaftProfiles(shaft, np.zeros(0), np.zeros((0, 0, 2)), np.zeros((0, 2 * SHIFTS + 1, 0), dtype=np.intp),
-                             np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool),
-                             np.zeros((0, 0)), np.zeros(0), [np.zeros((0, 0))] * n_copies, [np.zeros(0)] * n_copies,
-                             [0.0] * n_copies)
+                             np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool), z, np.zeros(0),
+                             [z] * n_copies, [np.zeros(0)] * n_copies, [None] * n_copies, np.zeros((2, 0)),
+                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool))
     # the samples a check needs: the widest station's needle and ground, the shifts, and room to smooth
     reach = max(0.5 * w + GROUND for w in widths) + SHIFTS * STEP + 3.0 * max(f for _, f in smooth)
     cut = np.flatnonzero(np.abs(ts) <= reach + 1e-9)
@@ -276,8 +275,17 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
         e -= (e * tc).sum(axis=1, keepdims=True) * tc
         es.append(e)
         ves.append((e * e).sum(axis=1))
-    return ShaftProfiles(shaft, np.array(kept), np.stack(offs)[:, k0 : k0 + q], gather, shift_ok, valid, tc,
-                         lengths.astype(float), es, ves, [f / STEP for _, f in smooth])
+    offsets = np.stack(offs)[:, k0 : k0 + q]
+    d_lines = np.asarray(LINES)
+    lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
+                      (offsets[..., 1][..., None] + d_lines * uy).ravel()])
+    kernels: dict[float, FloatArray] = {}
+    for _, f in smooth:
+        if f > 0 and f not in kernels:
+            kernels[f] = ndimage.gaussian_filter1d(np.eye(q), f / STEP, axis=1, mode="nearest")
+    return ShaftProfiles(shaft, np.array(kept), offsets, gather, shift_ok, valid, tc, lengths.astype(float), es, ves,
+                         [kernels.get(f) for _, f in smooth], lines, valid[:, None, :].astype(float),
+                         ~valid[:, None, :])
 
 
 def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: float, theta: float
@@ -290,12 +298,15 @@ def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: fl
     if m < 3:
         return None
     ct, st_ = math.cos(theta), math.sin(theta)
-    ox, oy = sp.offsets[..., 0], sp.offsets[..., 1]
-    ux, uy = sp.shaft
-    F, ok = _lines(image, x, y, ct * ox - st_ * oy, st_ * ox + ct * oy, ct * ux - st_ * uy, st_ * ux + ct * uy)
-    sig = sp.smooth[copy]
-    if sig > 0:
-        F = ndimage.gaussian_filter1d(F, sig, axis=1, mode="nearest")
+    lx, ly = sp.lines
+    v, inside = _bilinear(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
+    n = len(LINES)
+    shape = (m, sp.offsets.shape[1], n)
+    F = v.reshape(shape).mean(axis=2)
+    ok = inside.reshape(shape).all(axis=2)
+    kernel = sp.smooth[copy]
+    if kernel is not None:
+        F = F @ kernel
     # every station at every shift at once: its samples' sums against the flat ones, the slope and the profile
     G = F.reshape(-1).take(sp.gather)
     G *= sp.valid_f

@@ -24,7 +24,9 @@
 4. **follows the needle's edges** back from a fix the rules take (:mod:`.edges`): the fix
    is refused when they are faint or misplaced (*lost*: the fit is on the ground or a
    blob) or fade right behind the tip (*occluded*: something over it, or the fit ahead
-   of it);
+   of it); where they hold, **the shaft further back** (:mod:`.shaft`, as far as the
+   first frame showed the needle) must be where the first frame had it (*lost*: the fit
+   took the end of something over the tip, a grain's lobe, for the tip);
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
