@@ -157,8 +157,8 @@ def _read_predictive(rec: dict[str, object], where: str) -> Predictive:
         raise ValueError(f"{where}.exponent must be 1 or 2 (how the error grows with the distance), got {exponent!r}")
     drift = finite_number(rec.get("drift", 0.0), f"{where}.drift")  # files before it: no drift term
     drift_sd = finite_number(rec.get("drift_sd", 0.0), f"{where}.drift_sd")
-    if not abs(drift) < 1.0 or not 0.0 <= drift_sd < 1.0:
-        raise ValueError(f"{where}: drift must be in (-1, 1) and drift_sd in [0, 1), got {drift!r}, {drift_sd!r}")
+    if not abs(drift) < 10.0 or not 0.0 <= drift_sd < 10.0:
+        raise ValueError(f"{where}: drift must be in (-10, 10) and drift_sd in [0, 10), got {drift!r}, {drift_sd!r}")
     return Predictive(floor, slope, poses, exponent, drift, drift_sd)
 
 

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ..measurements import Traverse
 from ..models.families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
-from .drift import SessionDrift, session_drift
+from .drift import SessionDrift, session_drifts
 from .errormodel import Predictive
 from .family_fit import FamilyProblem, JointFit, full_rank, shared_names
 from .folds import cv_folds, workspace_coordinates, workspace_pose_array
@@ -558,7 +558,7 @@ def calibrate_families(
                 progress((n + frac) / len(joints), what)
 
         data = groups.joint_data(j)
-        drifts = {d: session_drift(groups.traverses, j, d, STEP_NOISE) for d in data.dirs}
+        drifts = session_drifts(groups, j, STEP_NOISE)
         parts.add(data, select_joint(data, None if model == "auto" else [model], progress=part), drifts)
     for (j, d), m in parts.models.items():
         try:
