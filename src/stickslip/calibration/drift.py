@@ -4,7 +4,8 @@ A joint's step changes while a session goes on: a cold piezo steps further than 
 (the physics arm's warm-up), the room and the drive warm. Every cross-validation of one
 session compares traverses of that session, so none can see it; a pose traversed again
 later in the same session can. For each joint and direction, every pair of traverses at the
-same pose on the same day (consecutive ones where a pose has more) is a measurement of the
+same pose (the fits' pose groups: fixed joints and tilt to 1e-4) on the same day
+(consecutive ones where a pose has more) is a measurement of the
 relative drift over the traverses between them,
 ``log(gamma_later / gamma_earlier) = r tau + noise``, ``tau`` the number of the joint's
 traverses (both directions) from the earlier to the later one: the joint's own stepping
