@@ -4,24 +4,29 @@ For each arm (``tests/support/arm_days.py``: the library's physics arm, the LuGr
 Dahl arm written for issue 33 and never tuned to), several seeds and three days each:
 
 * the paper's 14 calibration traverses, 32 more at poses spread over the load space (8 poses
-  per joint, both directions; ``calibration.design.spread_poses``) and 64 validation
-  traverses at random poses of the workspace (16 per joint, both directions): the largest
-  errors are taken over the first 32 (8 poses per joint: the issue's day), the intervals'
-  coverage over all 64 (144 traverses per joint and direction over 9 days, so that a
-  coverage of 95 % is measured to about ±2 points rather than ±3);
+  per joint, both directions; ``calibration.design.spread_poses``), then each joint's first
+  paper pose traversed again in both directions (4 repeats: the drift within the session,
+  docs/models.md §4), and 64 validation traverses at random poses of the workspace (16 per
+  joint, both directions): the largest errors are taken over the first 32 (8 poses per joint:
+  the issue's day), the intervals' coverage over all 64 (144 traverses per joint and direction
+  over 9 days, so that a coverage of 95 % is measured to about ±2 points rather than ±3);
 * calibrations: the constant step (the paper's comparator, from the 14), the paper's
   procedure on the 14, the paper's form fitted to the 46 by least squares, ``--model auto``
-  on the 46, and yesterday's ``auto`` updated with 4 of today's traverses (one per joint and
-  direction, random poses, measured after the validation on the same arm; ``--prior``);
+  on the 46, ``--model auto`` on the 46 and the 4 repeats (the table a calibration with the
+  repeat writes), and yesterday's ``auto`` (with the repeats) updated with 4 of today's
+  traverses (one per joint and direction, random poses, measured after the validation on the
+  same arm; ``--prior``);
 * the largest |relative error| of the predicted average step at the validation traverses,
   per joint (3 prismatic, 2 rotary) and day: the median and the worst day, the mean over
-  all; how many days ``auto`` erred more than the paper's procedure on the same day;
-* the 95 % intervals of ``auto`` (``predict --interval``): the share of validation traverses
-  inside, per joint and direction, with its 95 % Wilson interval, side by side with the interval
-  of the same calibrations' held-out errors whose model error grows linearly with the distance
-  (as before issue 33's second round; "linear"); and how honest the error ``calibrate`` prints is: the
-  expected RMS error at new poses, and the cross-validation RMS of the average, each over
-  the validation traverses' actual RMS error (median over days; 1 = honest).
+  all; how many days ``auto`` (with the repeats) erred more than the paper's procedure on
+  the same day;
+* the 95 % intervals of ``auto`` with the repeats (``predict --interval``): the share of
+  validation traverses inside, per joint and direction, with its 95 % Wilson interval, side
+  by side with the same calibration's interval without its drift term ("no drift") and with
+  ``auto`` on the 46 alone ("46": no repeat, so no drift term, as before); and how honest
+  the error ``calibrate`` prints is: the expected RMS error at new poses, and the
+  cross-validation RMS of the average, each over the validation traverses' actual RMS error
+  (median over days; 1 = honest).
 
 Prints Markdown tables (the README's). Run: ``.venv/bin/python benchmarks/bench_models.py``
 (a few minutes on 2 cores); ``--seeds 101,102`` and ``--arms dahl`` to choose.
@@ -29,6 +34,7 @@ Prints Markdown tables (the README's). Run: ``.venv/bin/python benchmarks/bench_
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from collections import defaultdict
 from pathlib import Path
@@ -39,9 +45,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"
 
 from arm_days import make_day  # noqa: E402
 
-from stickslip.calibration import calibrate  # noqa: E402
-from stickslip.calibration import selection as _selection  # noqa: E402
-from stickslip.calibration.groups import load_coordinates_of, nearest  # noqa: E402
+from stickslip.calibration import Calibration, calibrate  # noqa: E402
 from stickslip.calibration.intervals import relative_sd  # noqa: E402
 from stickslip.calibration.update import update_calibration  # noqa: E402
 from stickslip.measurements import Traverse  # noqa: E402
@@ -49,7 +53,9 @@ from stickslip.measurements import Traverse  # noqa: E402
 DAYS = ("2026-09-01", "2026-09-02", "2026-09-03")
 TARGET = {3: 0.075, 2: 0.035}
 ROWS = ("constant step (14)", "paper's procedure (14)", "paper's form, least squares (46)", "auto (46)",
-        "yesterday's auto + 4 today (--prior)")
+        "auto (46 + 4 repeats)", "yesterday's auto + 4 today (--prior)")
+AUTO = ROWS[4]
+"""The calibration whose intervals and fallbacks are measured (the design with the repeats)."""
 
 
 VALIDATION_POSES = 16
@@ -76,50 +82,24 @@ def _errors(pred: np.ndarray, val: list[Traverse]) -> dict[int, np.ndarray]:
     return {j: e[[t.joint == j for t in val]] for j in (3, 2)}
 
 
-_HELD_OUT: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
-"""Per joint, the last calibration's held-out errors, their distances and the residuals (the error
-model's inputs), for the baseline interval measured side by side."""
-_chosen = _selection._Evidence.chosen
+def _without_drift(cal: Calibration) -> Calibration:
+    """``cal`` with its intervals' drift term set to zero (the same fit and error model otherwise)."""
+    pred = {k: dataclasses.replace(p, drift=0.0, drift_sd=0.0) for k, p in cal.predictive.items()}
+    return dataclasses.replace(cal, predictive=pred)
 
 
-def _capture(self, mix, e, reason, fallback=False):  # type: ignore[no-untyped-def]
-    out = _chosen(self, mix, e, reason, fallback)
-    _HELD_OUT[self.data.joint] = (np.asarray(e), np.asarray(self.row_dist), self.residuals(mix))
-    return out
-
-
-_selection._Evidence.chosen = _capture  # type: ignore[method-assign]
-
-
-def _linear_sd(cal: object, j: int, d: str, poses: np.ndarray) -> np.ndarray:
-    """The interval before issue 33's second round, from the same calibration's held-out errors: the
-    error growing linearly with the distance, ``slope^2 = (mean e^2 - floor^2) / mean d^2``."""
-    from scipy.special import stdtrit
-
-    e, dist, r = _HELD_OUT[j]
-    ok = np.isfinite(e) & np.isfinite(dist)
-    floor2 = float(np.mean(r**2))
-    slope2 = max(0.0, float(np.mean(e[ok] ** 2)) - floor2) / float(np.mean(dist[ok] ** 2))
-    t = float(stdtrit(int(ok.sum()) - 1, 0.975)) / 1.959963984540054
-    kept = cal.predictive[(j, d)].poses  # type: ignore[attr-defined]
-    near = nearest(load_coordinates_of(j, poses), load_coordinates_of(j, kept))[0]
-    out: np.ndarray = t * np.sqrt(floor2 + slope2 * near**2)
-    return out
-
-
-def _inside(cal: object, val: list[Traverse]) -> dict[tuple[str, int, str], list[bool]]:
-    """Whether each validation traverse is inside its 95 % interval, by joint and direction: the
-    calibration's (``"now"``) and the linear growth's from the same held-out errors (``"linear"``)."""
+def _inside(cals: dict[str, Calibration], val: list[Traverse]) -> dict[tuple[str, int, str], list[bool]]:
+    """Whether each validation traverse is inside its 95 % interval, by joint and direction, for each
+    named calibration."""
     out: dict[tuple[str, int, str], list[bool]] = {}
     for j in (3, 2):
         for d in "+-":
             ts = [t for t in val if t.joint == j and t.direction == d]
             cols = [np.array([getattr(t, k) for t in ts]) for k in ("q1", "q2", "q3", "theta", "psi")]
-            sd = relative_sd(cal, j, d, *cols)  # type: ignore[arg-type]
-            pred = cal.predict_many(ts)  # type: ignore[attr-defined]
-            e = np.abs(pred / np.array([t.gamma for t in ts]) - 1.0)
-            out[("now", j, d)] = (e <= 1.96 * sd).tolist()
-            out[("linear", j, d)] = (e <= 1.96 * _linear_sd(cal, j, d, np.stack(cols, axis=1))).tolist()
+            for name, cal in cals.items():
+                sd = relative_sd(cal, j, d, *cols)
+                e = np.abs(cal.predict_many(ts) / np.array([t.gamma for t in ts]) - 1.0)
+                out[(name, j, d)] = (e <= 1.96 * sd).tolist()
     return out
 
 
@@ -130,30 +110,37 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
     honest: dict[str, dict[int, list[float]]] = {"expected": {3: [], 2: []}, "cv": {3: [], 2: []}}
     worse = {3: 0, 2: 0}
     fallback = {3: 0, 2: 0}
+    drift: dict[tuple[int, str], list[float]] = defaultdict(list)
     days = 0
     for seed in seeds:
         rng = np.random.default_rng(seed)
         prev = None
         for day in DAYS:
-            d = make_day(arm, seed, day, rng, validation_poses=VALIDATION_POSES)
+            d = make_day(arm, seed, day, rng, validation_poses=VALIDATION_POSES, repeat_first=True)
             new4 = d.new4
             c14 = calibrate(d.paper14)
-            auto = calibrate(d.calibration46, model="auto")
+            auto46 = calibrate(d.calibration46, model="auto")
+            auto = calibrate(d.calibration, model="auto")
             val = _first(d.validation, ERROR_POSES)
             rows = {
                 ROWS[0]: np.array([c14.constant_step(t.joint, t.direction) for t in val]),
                 ROWS[1]: c14.predict_many(val),
                 ROWS[2]: calibrate(d.calibration46, method="lsq").predict_many(val),
-                ROWS[3]: auto.predict_many(val),
+                ROWS[3]: auto46.predict_many(val),
+                AUTO: auto.predict_many(val),
             }
             if prev is not None:
-                rows[ROWS[4]] = update_calibration(prev, new4)[0].predict_many(val)
+                rows[ROWS[5]] = update_calibration(prev, new4)[0].predict_many(val)
             for label, pred in rows.items():
                 for j, e in _errors(pred, val).items():
                     errs[label][j].append(e)
-            for key, ok in _inside(auto, d.validation).items():
+            cals = {"now": auto, "no drift": _without_drift(auto), "46": auto46}
+            for key, ok in _inside(cals, d.validation).items():
                 inside[key] += ok
-            e_auto, e_p14 = _errors(rows[ROWS[3]], val), _errors(rows[ROWS[1]], val)
+            for j in (3, 2):
+                for s in "+-":
+                    drift[(j, s)].append(auto.predictive[(j, s)].drift)
+            e_auto, e_p14 = _errors(rows[AUTO], val), _errors(rows[ROWS[1]], val)
             for j in (3, 2):
                 worse[j] += int(e_auto[j].max() > e_p14[j].max())
                 sel = auto.selection[(j, "+")]
@@ -165,7 +152,8 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
                 honest["cv"][j].append(cv / rms)
             days += 1
             prev = auto
-    return {"errs": errs, "inside": inside, "honest": honest, "worse": worse, "fallback": fallback, "days": days}
+    return {"errs": errs, "inside": inside, "honest": honest, "worse": worse, "fallback": fallback, "days": days,
+            "drift": drift}
 
 
 def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("physics", "lugre", "dahl")) -> None:
@@ -201,13 +189,22 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
             for d in "+-":
                 k, n = int(np.sum(inside[("now", j, d)])), len(inside[("now", j, d)])
                 lo, hi = _wilson(k, n)
-                lin = 100 * float(np.mean(inside[("linear", j, d)]))
-                cov.append(f"{100 * k / n:.1f} % ({100 * lo:.0f}–{100 * hi:.0f}; linear {lin:.1f} %)")
+                nod = 100 * float(np.mean(inside[("no drift", j, d)]))
+                c46 = 100 * float(np.mean(inside[("46", j, d)]))
+                cov.append(f"{100 * k / n:.1f} % ({100 * lo:.0f}–{100 * hi:.0f}; no drift {nod:.1f}; 46 {c46:.1f} %)")
         h = res["honest"]  # type: ignore[index]
         print(f"| {arm} | {res['days']} | {res['worse'][3]} / {res['worse'][2]} | "  # type: ignore[index]
               f"{res['fallback'][3]} / {res['fallback'][2]} | " + " | ".join(cov) + " | "  # type: ignore[index]
               f"{np.median(h['expected'][3]):.2f} / {np.median(h['expected'][2]):.2f} | "
               f"{np.median(h['cv'][3]):.2f} / {np.median(h['cv'][2]):.2f} |")
+    print("\nThe drift term (docs/models.md §4): the calibration's bias to the session's end from the repeats, "
+          "mean and range over the days")
+    print("\n| arm | 3+ | 3- | 2+ | 2- |\n| --- | ---: | ---: | ---: | ---: |")
+    for arm, res in results.items():
+        dr = res["drift"]  # type: ignore[index]
+        cells = [f"{100 * np.mean(dr[k]):+.2f} % ({100 * min(dr[k]):+.2f}…{100 * max(dr[k]):+.2f})"
+                 for k in ((3, "+"), (3, "-"), (2, "+"), (2, "-"))]
+        print(f"| {arm} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

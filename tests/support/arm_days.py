@@ -14,7 +14,7 @@ traverses at *random* poses of the workspace. The arms:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
@@ -56,23 +56,35 @@ class Day:
     validation: list[Traverse]
     new4: list[Traverse]
     """One traverse per joint and direction at random poses, measured last (to update yesterday's calibration)."""
+    repeat: list[Traverse] = field(default_factory=list)
+    """Each joint's first paper pose traversed again (both directions) at the end of the calibration, before
+    the validation (``make_day(..., repeat_first=True)``): the drift within the session."""
 
     @property
     def calibration46(self) -> list[Traverse]:
+        """The paper's 14 and the 32 spread traverses (without the repeats)."""
         return self.paper14 + self.spread32
 
+    @property
+    def calibration(self) -> list[Traverse]:
+        """The whole calibration in the order measured: the 46 and the repeats."""
+        return self.paper14 + self.spread32 + self.repeat
 
-def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8) -> Day:
+
+def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8,
+             repeat_first: bool = False) -> Day:
     """The day's tables (``validation_poses`` random poses per joint, both directions), measured in this order
-    on one arm (a joint that warms up is warm by the validation)."""
+    on one arm (a joint that warms up is warm by the validation). ``repeat_first``: each joint's first paper
+    pose is traversed again in both directions after the 46 (the random poses drawn are the same)."""
     arm = ARMS[arm_name](seed, day)
     p14 = [arm.traverse(j, d, p, day) for j in (3, 2) for p in paper_poses(j) for d in "+-"]
     s32 = [arm.traverse(j, d, p, day) for j in (3, 2)
            for p in spread_poses(j, 8, int(rng.integers(2**31)), existing=paper_poses(j)) for d in "+-"]
+    rep = [arm.traverse(j, d, paper_poses(j)[0], day) for j in (3, 2) for d in "+-"] if repeat_first else []
     val = [arm.traverse(j, d, p, day) for j in (3, 2)
            for p in [random_pose(rng, j) for _ in range(validation_poses)] for d in "+-"]
     new4 = [arm.traverse(j, d, random_pose(rng, j), day) for j in (3, 2) for d in "+-"]
-    return Day(arm_name, seed, day, p14, s32, val, new4)
+    return Day(arm_name, seed, day, p14, s32, val, new4, rep)
 
 
 def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:

@@ -90,8 +90,9 @@ def ext_fields(cal: ExtFields) -> dict[str, object]:
 
 def _uncertainty_entries(cal: ExtFields) -> list[dict[str, object]]:
     """The ``uncertainty`` entries: per joint and direction the model error, the covariance and the error
-    model of the intervals (docs/models.md §4): ``sqrt(floor^2 + (slope d^exponent)^2)``, ``d`` the load-space
-    distance to the nearest of the calibrated ``poses`` (q1, q2, q3, theta, psi; SI)."""
+    model of the intervals (docs/models.md §4): ``sqrt(floor^2 + (slope d^exponent)^2 + drift^2 + drift_sd^2)``,
+    ``d`` the load-space distance to the nearest of the calibrated ``poses`` (q1, q2, q3, theta, psi; SI),
+    ``drift`` the bias towards the session's end (written only where a repeated pose measured it)."""
     unc: list[dict[str, object]] = []
     for key in sorted(set(cal.sigma_model) | set(cal.covariance) | set(cal.predictive)):
         s = cal.sigma_model.get(key)
@@ -105,6 +106,8 @@ def _uncertainty_entries(cal: ExtFields) -> list[dict[str, object]]:
                 **({"floor": pr.floor, "slope": pr.slope, "exponent": pr.exponent,
                     "poses": np.asarray(pr.poses, dtype=float).tolist()}
                    if pr is not None else {}),
+                **({"drift": pr.drift, "drift_sd": pr.drift_sd}
+                   if pr is not None and (pr.drift or pr.drift_sd) else {}),
             }
         )
     return unc
@@ -152,7 +155,11 @@ def _read_predictive(rec: dict[str, object], where: str) -> Predictive:
     exponent = finite_number(rec.get("exponent", 1.0), f"{where}.exponent")  # files before it: linear
     if exponent not in (1.0, 2.0):
         raise ValueError(f"{where}.exponent must be 1 or 2 (how the error grows with the distance), got {exponent!r}")
-    return Predictive(floor, slope, poses, exponent)
+    drift = finite_number(rec.get("drift", 0.0), f"{where}.drift")  # files before it: no drift term
+    drift_sd = finite_number(rec.get("drift_sd", 0.0), f"{where}.drift_sd")
+    if not abs(drift) < 10.0 or not 0.0 <= drift_sd < 10.0:
+        raise ValueError(f"{where}: drift must be in (-10, 10) and drift_sd in [0, 10), got {drift!r}, {drift_sd!r}")
+    return Predictive(floor, slope, poses, exponent, drift, drift_sd)
 
 
 def _read_uncertainty(cal: ExtFields, unc: object) -> None:

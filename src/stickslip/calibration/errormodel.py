@@ -15,11 +15,13 @@ class Predictive:
     """How uncertain one joint and direction's predictions are, pose by pose (docs/models.md §4).
 
     The relative standard deviation of a predicted mean step at a pose is
-    ``sqrt(floor^2 + (slope d^exponent)^2)``, ``d`` the pose's distance to the nearest of
-    ``poses`` in the space of the loads the step depends on
+    ``sqrt(floor^2 + (slope d^exponent)^2 + drift^2 + drift_sd^2)``, ``d`` the pose's distance
+    to the nearest of ``poses`` in the space of the loads the step depends on
     (:func:`~.groups.load_coordinates_of`): the model's residual at a calibrated pose, growing
     with the distance as the cross-validation's held-out poses did
-    (:func:`~.selection.error_model`).
+    (:func:`~.selection.error_model`), and the step's drift from the calibration to the end of
+    its session, which no cross-validation of one session sees (:mod:`~.drift`; zero without a
+    pose traversed twice in a session).
 
     Attributes
     ----------
@@ -32,9 +34,16 @@ class Predictive:
     exponent : float
         How the model's error grows with the distance: 2 (an interpolation error, as the
         calibrations make it since issue 33's second round), 1 (linear: files written before).
+    drift : float
+        The calibration's relative bias towards the end of its session
+        (:attr:`~.drift.SessionDrift.bias`), 1; 0 without a repeated pose (and in files before).
+    drift_sd : float
+        Its standard error, 1.
     """
 
     floor: float
     slope: float
     poses: NDArray[np.float64]
     exponent: float = 1.0
+    drift: float = 0.0
+    drift_sd: float = 0.0

@@ -167,6 +167,10 @@ class TraverseGroups:
     def joints(self) -> list[int]:
         return sorted({j for j, _ in self._index})
 
+    def rows(self, key: tuple[int, str]) -> NDArray[np.int64]:
+        """The positions in the table of one joint and direction's traverses, in table order."""
+        return np.asarray(self._index.get(key, []), dtype=np.int64)
+
     def of(self, key: tuple[int, str]) -> list[Traverse]:
         """The traverses of one joint and direction, in table order."""
         return [self.traverses[i] for i in self._index.get(key, [])]

@@ -4,12 +4,16 @@ A family calibration keeps, per joint and direction, a :class:`~.result.Predicti
 relative error at a calibrated pose (the model's residual there), how fast the error grew
 with the distance from the poses a refit kept in the cross-validation, and the calibrated
 poses. The relative standard deviation of a predicted mean step at a pose is
-``sqrt(floor^2 + (slope d^2)^2)``, ``d`` the pose's distance to the nearest calibrated pose in
-the space of the loads the step depends on: narrow where the calibration measured, wider
-between and beyond its poses (``d`` to the first power in files written before issue 33's
-second round). The same standard deviation is what ``predict --interval``
-and ``plan`` print (``1.96 sigma``) and what the tracking filter
-(:mod:`stickslip.motion.tracking`) starts its step scales' variance from in a pose.
+``sqrt(floor^2 + (slope d^2)^2 + drift^2 + drift_sd^2)``, ``d`` the pose's distance to the
+nearest calibrated pose in the space of the loads the step depends on: narrow where the
+calibration measured, wider between and beyond its poses (``d`` to the first power in files
+written before issue 33's second round); ``drift`` the calibration's bias towards the end of
+its session, where a user predicts, measured by a pose traversed twice (:mod:`.drift`; a bias
+of one sign for every prediction of the session, so it adds to the interval as a bias adds to
+the mean square error, in quadrature, with its standard error; zero without a repeat). The
+same standard deviation is what ``predict --interval`` and ``plan`` print (``1.96 sigma``) and
+what the tracking filter (:mod:`stickslip.motion.tracking`) starts its step scales' variance
+from in a pose.
 
 A calibration without it (the paper's exactly determined procedure, a file from before,
 an updated calibration) has one relative model error per joint and direction,
@@ -78,7 +82,8 @@ def relative_sd(
     flat = [np.ravel(c) for c in cols[:5]]
     here = load_coordinates_of(joint, np.stack(flat, axis=1))
     d = nearest(here, load_coordinates_of(joint, pred.poses))[0]
-    out: NDArray[np.float64] = np.sqrt(pred.floor**2 + (pred.slope * d**pred.exponent) ** 2).reshape(shape)
+    var = pred.floor**2 + (pred.slope * d**pred.exponent) ** 2 + pred.drift**2 + pred.drift_sd**2
+    out: NDArray[np.float64] = np.sqrt(var).reshape(shape)
     return out
 
 

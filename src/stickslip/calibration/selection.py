@@ -37,11 +37,12 @@ from numpy.typing import NDArray
 
 from ..measurements import Traverse
 from ..models.families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
+from .drift import SessionDrift, session_drifts
 from .errormodel import Predictive
 from .family_fit import FamilyProblem, JointFit, full_rank, shared_names
 from .folds import cv_folds, workspace_coordinates, workspace_pose_array
 from .groups import JointData, TraverseGroups, group_traverses, nearest
-from .intervals import relative_sd
+from .intervals import STEP_NOISE, relative_sd
 from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of
 
 __all__ = [
@@ -557,7 +558,8 @@ def calibrate_families(
                 progress((n + frac) / len(joints), what)
 
         data = groups.joint_data(j)
-        parts.add(data, select_joint(data, None if model == "auto" else [model], progress=part))
+        drifts = session_drifts(groups, j, STEP_NOISE)
+        parts.add(data, select_joint(data, None if model == "auto" else [model], progress=part), drifts)
     for (j, d), m in parts.models.items():
         try:
             m.check_physical()
@@ -595,8 +597,9 @@ class _Parts:
         self.predictive: dict[tuple[int, str], Predictive] = {}
         self.notes: list[str] = []
 
-    def add(self, data: JointData, sel: JointSelection) -> None:
-        """The models, uncertainties and selection record of one joint's directions."""
+    def add(self, data: JointData, sel: JointSelection, drifts: Mapping[str, SessionDrift | None]) -> None:
+        """The models, uncertainties and selection record of one joint's directions (``drifts``: each
+        direction's drift within the session, from its repeated poses, or ``None``)."""
         j, fit = data.joint, sel.fit
         sig = sel.cv_rms if np.isfinite(sel.cv_rms) else fit.rms
         ranked = sorted(sel.mixture.items(), key=lambda kv: -kv[1][0])
@@ -610,8 +613,12 @@ class _Parts:
             averaged = len(members) > 1
             self.models[(j, d)] = FamilyModel(j, d, params, members=members if averaged else (),
                                               member_labels=tuple(lab for lab, _ in ranked) if averaged else ())
+            drift = drifts.get(d)
             if cross_validated:
-                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept, GROWTH)
+                bias, bias_sd = (0.0, 0.0) if drift is None else (drift.bias, drift.bias_sd)
+                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept, GROWTH, bias, bias_sd)
+                if drift is not None:
+                    self.notes.append(_drift_note(j, d, drift))
             c = fit.cov[d]
             if c is not None:
                 self.cov[(j, d)] = c
@@ -627,6 +634,13 @@ class _Parts:
                 "cv_rms": sel.cv_rms if math.isfinite(sel.cv_rms) else None,
             }
         self.notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
+
+
+def _drift_note(joint: int, direction: str, drift: SessionDrift) -> str:
+    """What ``calibrate`` says of a joint and direction's drift within the session (docs/models.md §4)."""
+    return (f"joint {joint}{direction}: a pose traversed again {drift.span:.0f} traverses later stepped "
+            f"{drift.change * 100:+.2f} % ({drift.pairs} repeat(s)); the intervals include the "
+            f"calibration's bias to the session's end, {drift.bias * 100:+.2f} ± {drift.bias_sd * 100:.2f} %")
 
 
 MAX_STORED_POSES = 400
