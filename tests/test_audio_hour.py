@@ -27,6 +27,9 @@ from stickslip.audio.events import StopEvent
 from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
+#: one worker tunes each joint once for this file and tests/test_audio_blocks.py
+pytestmark = pytest.mark.xdist_group("audio_hour")
+
 JOINTS = (1, 2, 3)
 #: joint -> what is measured today where it fails. When the test was written, joint 3 gave 2 false stops, none
 #: flagged: 0.40 s (a radio from the first sample, +0.4 dB) and 34.5 s (speech over the radio switched on, +0.4 dB),
@@ -35,7 +38,8 @@ KNOWN: dict[int, str] = {}
 
 
 @cache
-def _tuning(arm: int) -> Tuning:
+def joint_tuning(arm: int) -> Tuning:
+    """Joint ``arm`` tuned on its own quiet 1000 Hz recording (once per process)."""
     return tune(render(tuning_scene(Arm(arm))), SR, 2.0)
 
 
@@ -57,7 +61,7 @@ def test_a_radio_that_fits_a_stop_that_only_rises_is_off_the_step_clock() -> Non
     h = Hour(Arm(3), dur=3.0, seed=3)
     _, _, kind, level_db = spans(h)[0]
     assert kind == "radio" and level_db == pytest.approx(0.4, abs=0.05)
-    tu = _tuning(3)
+    tu = joint_tuning(3)
     assert min(tu.signature_db or (0.0,)) > 2.0  # a stop that only rises
     before = hear(h, tu, ConfirmParams(clocked=None))
     assert [(round(e.onset_s, 2), e.onset_uncertain) for e in before] == [(0.40, False)]
@@ -105,6 +109,6 @@ def _known(j: int) -> list[pytest.MarkDecorator]:
 @pytest.mark.parametrize("joint", [pytest.param(j, marks=_known(j)) for j in JOINTS])
 def test_stepping_under_speech_music_and_a_radio_raises_no_stop(joint: int) -> None:
     h = Hour(Arm(joint), dur=40.0, seed=joint, span_s=(4.0, 12.0))
-    events = hear(h, _tuning(joint))
+    events = hear(h, joint_tuning(joint))
     where = [(round(e.onset_s, 2), next(k for t0, t1, k, _ in spans(h) if t0 <= e.onset_s < t1)) for e in events]
     assert events == [], f"{len(events)} false stops: {where}"

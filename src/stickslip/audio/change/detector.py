@@ -93,6 +93,19 @@ class TemplateDetector:
         """While ``on``, a latched detector does not re-arm by itself (a confirmation decides; :meth:`unlatch`)."""
         self.state.held = bool(on)
 
+    @property
+    def hold_on_fire(self) -> bool:
+        """Whether every fire holds the latch from its own frame on (:meth:`hold`), until its owner decides.
+
+        A confirming detector sets it: it hears of a fire only once the block that held it was
+        fed, and holding from there would make the events depend on the block size.
+        """
+        return self.state.hold_on_fire
+
+    @hold_on_fire.setter
+    def hold_on_fire(self, on: bool) -> None:
+        self.state.hold_on_fire = bool(on)
+
     def unlatch(self) -> None:
         """Forget the latest fire and listen for the next stop from the next frame on.
 

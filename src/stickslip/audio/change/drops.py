@@ -31,7 +31,7 @@ from ..paramfield import param
 from .fit import FIT, FitParams
 from .tuned import TunedTemplate
 
-__all__ = ["DROPS", "DropCheck", "DropMeter", "DropParams", "drops_shown", "drops_tail"]
+__all__ = ["DROPS", "DropCheck", "DropMeter", "DropParams", "drops_shown", "drops_tail", "window_sums"]
 
 FloatArray = NDArray[np.float64]
 Tail = tuple[FloatArray, FloatArray]
@@ -73,6 +73,23 @@ class DropParams:
 DROPS = DropParams()
 
 
+def window_sums(x: FloatArray, n: int, w: int) -> FloatArray:
+    """The sums over the ``w`` rows of ``x`` that end each of its last ``n`` rows (fewer at its start).
+
+    Each sum is added row by row, oldest first, so a frame's average is the same floating-point
+    number whatever pieces the stream came in (a running cumulative sum is rounded from the
+    piece's start: its averages differed in the last bit between block sizes).
+    """
+    pad = max(w - 1 - (x.shape[0] - n), 0)
+    if pad:
+        x = np.concatenate((np.zeros((pad, *x.shape[1:])), x))
+    m = x.shape[0]
+    s = x[m - n - (w - 1) : m - (w - 1)].copy()
+    for o in range(w - 2, -1, -1):
+        s += x[m - n - o : m - o]
+    return s
+
+
 class DropMeter:
     """How far the sound has dropped below the floor, averaged over the last ``frames`` frames (spreads).
 
@@ -96,12 +113,11 @@ class DropMeter:
         """The departures ``z`` (frames x bands, spreads) averaged over the last ``frames`` frames."""
         w = self.frames
         zz = np.concatenate((self._tail, z)) if self._tail.size else z
-        c = np.zeros((zz.shape[0] + 1, self.nb))
-        np.cumsum(zz, axis=0, out=c[1:])
-        k = np.arange(zz.shape[0] - z.shape[0], zz.shape[0]) + 1  # rows of zz ending each new frame
-        lo = np.maximum(k - w, 0)
+        n = z.shape[0]
+        count = np.minimum(np.arange(zz.shape[0] - n, zz.shape[0]) + 1, w)  # the frames averaged (fewer at first)
+        out = window_sums(zz, n, w) / count[:, None]
         self._tail = zz[max(len(zz) - (w - 1), 0) :].copy()
-        return np.asarray((c[k] - c[lo]) / (k - lo)[:, None], dtype=np.float64)
+        return np.asarray(out, dtype=np.float64)
 
     @staticmethod
     def drops(m: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -116,9 +132,11 @@ class DropMeter:
 
 
 def _terms(zs: FloatArray, clear: NDArray[np.bool_], gn: FloatArray, gg: float, tail: Tail, p: DropParams) -> Tail:
-    """The drops' check's per-frame terms after ``tail``: (drops shown, information left), as shares of ``gg``."""
-    num = np.concatenate((tail[0], (np.maximum(zs, -p.cap) * clear) @ gn / gg))
-    den = np.concatenate((tail[1], clear.astype(np.float64) @ (gn * gn) / gg))
+    """The drops' check's per-frame terms after ``tail``: (drops shown, information left), as shares of ``gg``.
+
+    Row by row (einsum), not a matrix product, whose rounding depends on the rows beside each."""
+    num = np.concatenate((tail[0], np.einsum("ij,j->i", np.maximum(zs, -p.cap) * clear, gn) / gg))
+    den = np.concatenate((tail[1], np.einsum("ij,j->i", clear, gn * gn) / gg))
     return num, den
 
 
@@ -156,16 +174,14 @@ def drops_shown(
     if gg <= 0.0:
         return np.zeros(a.size, dtype=bool), tail
     num, den = _terms(zs, clear, gn, gg, tail, p)
-    cn = np.concatenate(([0.0], np.cumsum(num)))
-    cd = np.concatenate(([0.0], np.cumsum(den)))
-    k = np.arange(num.size - a.size, num.size) + 1
-    lo = np.maximum(k - p.judge_frames, 0)
-    info = (cd[k] - cd[lo]) / (k - lo)  # share of the signature's drop information left
-    shown_avg = (cn[k] - cn[lo]) / np.maximum(cd[k] - cd[lo], 1e-12)
+    sn, sd = window_sums(num, a.size, p.judge_frames), window_sums(den, a.size, p.judge_frames)
+    count = np.minimum(np.arange(num.size - a.size, num.size) + 1, p.judge_frames)
+    info = sd / count  # share of the signature's drop information left
+    shown_avg = sn / np.maximum(sd, 1e-12)
     judged = info * info_sig >= p.informative**2
     # the share shown is measured with noise: one spread per sub-band and frame gives a standard error of
     # 1 / sqrt(frames x drops' information); a weak drop signature is not held to the share it cannot show
-    se = 1.0 / np.sqrt(np.maximum((cd[k] - cd[lo]) * gg, 1e-12))
+    se = 1.0 / np.sqrt(np.maximum(sd * gg, 1e-12))
     need = np.maximum(p.min_share, p.ratio * np.clip(a, 0.0, 1.0) - p.se_slack * se)
     keep = max(num.size - (p.judge_frames - 1), 0)
     return judged & (shown_avg >= need), (num[keep:], den[keep:])

@@ -55,7 +55,9 @@ class Fitter:
         g = self.g
         z = np.minimum(np.maximum(d, -self.clip_db), self.clip_db)  # np.clip's values, without its wrappers' cost
         z *= self.inv_sigma
-        a = (z @ g) / self.gg
+        # row by row (einsum), not a matrix product: BLAS rounds a row differently by the number of rows with it,
+        # and a frame's a would depend on the block it came in
+        a = np.einsum("ij,j->i", z, g) / self.gg
         if self.trim > 0:
             r = z - a[:, None] * g
             if self.trim == 1:
@@ -67,7 +69,7 @@ class Fitter:
             keep = r < kth  # ties (rare) drop one band more
             keep |= ~keep.any(axis=1, keepdims=True)  # all tied (a constant input): keep every band
             zk = z * keep
-            a = (zk @ g) / np.maximum(keep @ self.g2, 1e-12)
+            a = np.einsum("ij,j->i", zk, g) / np.maximum(np.einsum("ij,j->i", keep, self.g2), 1e-12)
             res = zk - (a[:, None] * g) * keep
             rho = np.sqrt(np.einsum("ij,ij->i", res, res) / keep.sum(axis=1))
         else:

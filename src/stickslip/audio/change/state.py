@@ -14,8 +14,9 @@ check (:mod:`.stale`) and, at the warm-up's end, whether listening began at the 
 (:mod:`.start`).
 
 Everything that changes the state happens at frame boundaries counted from the stream
-start (the template is updated every ``chunk`` frames), so the fires do not depend on how
-the stream is cut into blocks.
+start (the template is updated every ``chunk`` frames), and each frame's numbers are
+computed frame by frame (:mod:`.fit`, :func:`.drops.window_sums`: no rounding that depends
+on the frames fed with it), so the fires do not depend on how the stream is cut into blocks.
 """
 
 from __future__ import annotations
@@ -88,6 +89,10 @@ class ChangeState:
         #: the stream's samples ``[lo, hi)`` (absolute indices), or None where they are gone; set by the stream's
         #: owner where the stale check or the rate prediction needs them
         self.samples: Callable[[int, int], FloatArray | None] | None = None
+        #: set by a confirming owner: every fire holds the latch (:attr:`held`) from its own frame on, until the
+        #: owner decides (``held`` False, or :meth:`unlatch`); set at the fire, not when the owner next hears of it,
+        #: which is the end of the block it was fed and would make the state depend on the block size
+        self.hold_on_fire = False
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
@@ -149,6 +154,7 @@ class ChangeState:
     def _latch(self) -> None:
         """A stop fired (or listening began at it): latched, its release window and its own sound to learn anew."""
         self.latched = True
+        self.held = self.held or self.hold_on_fire
         self.below = 0
         self.release.reset()
 

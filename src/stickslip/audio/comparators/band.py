@@ -78,6 +78,9 @@ class BandDetector:
     def hold(self, on: bool) -> None:
         """Ignored: this detector re-arms only when the level falls (a confirmation un-latches it)."""
 
+    #: ignored, as :meth:`hold`
+    hold_on_fire = False
+
     def unlatch(self) -> None:
         """Forget the latest fire and listen for the next stop from the next frame on."""
         self._latched = False

@@ -28,8 +28,9 @@ straight into a real stop, without a pause of ``gap_s``, cannot be told apart: t
 keeps the interference's onset.
 
 The decision is made at the end of the window, at a frame counted from the stream start,
-and the fast path is fed exactly up to it, so the events do not depend on how the stream is
-cut into blocks.
+and the fast path is fed exactly up to it; the fast path holds its latch from the fire's own
+frame (``hold_on_fire``), not from the end of the piece in which this wrapper hears of the
+fire. So the events do not depend on how the stream is cut into blocks.
 """
 
 from __future__ import annotations
@@ -144,6 +145,7 @@ class ConfirmedStopDetector:
         if c <= 0.0:
             raise ValueError("confirm_s must be > 0 for a ConfirmedStopDetector (use the fast path itself for 0)")
         self.inner, self.confirm_s = inner, c
+        inner.hold_on_fire = True  # every fire is held from its own frame on, until the window decides
         tu = inner.tuning
         self._H, self._F, self._sr = int(tu.hop), int(tu.frame), int(tu.sample_rate)
         #: the spans the confirmation judges on, frames
@@ -327,6 +329,7 @@ class ConfirmedStopDetector:
         fire = self._fire_frame(ev)
         if self.late is not None and self.late.latched:  # the late path found this stop already: not counted twice
             self.log.late_swallowed.append(ev)
+            self.inner.hold(False)  # nothing to decide: the fast path re-arms by itself
             return []
         prev = self._chain.refired(fire)  # the fast path released and fired again inside the window: no persistence
         if prev is not None:
@@ -343,7 +346,8 @@ class ConfirmedStopDetector:
             g, sp = self._gap // self._H, self._span // self._H
             self._clocked.hear_before(self._before(fire), self._frames.between(fire - g - sp, fire - g))
         self._chain.start(ev, fire, recent)
-        self.inner.hold(True)  # the window decides whether this was a stop: the fast path does not re-arm meanwhile
+        # the window decides whether this was a stop: the fast path, held since the fire's frame (hold_on_fire), does
+        # not re-arm meanwhile
         return []
 
     def _holds(self, ev: StopEvent, fire: int, frames: int) -> bool:
