@@ -192,10 +192,27 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     ``level`` (grey units). ``smooth`` gives, for each blur copy, the smoothing of the
     first frame's profile and of a later frame's across the shaft (Gaussian sigma, px).
     """
+    half_q = int(round(REACH / STEP))
+    ts: FloatArray = (np.arange(2 * half_q + 1, dtype=np.float64) - half_q) * STEP
+    offs, raws, widths, kept = _follow(image, tip, shaft, level, spread, contrast, ts)
+    n_copies = len(smooth)
+    if not kept:
+        z = np.zeros((0, 0))
+        return ShaftProfiles(shaft, np.zeros(0), np.zeros((0, 0, 2)), np.zeros((0, 2 * SHIFTS + 1, 0), dtype=np.intp),
+                             np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool), z, np.zeros(0),
+                             [z] * n_copies, [np.zeros(0)] * n_copies, [None] * n_copies, np.zeros((2, 0)),
+                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool))
+    return _assemble(shaft, ts, offs, raws, widths, kept, smooth)
+
+
+def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float, spread: float,
+            contrast: float, ts: FloatArray
+            ) -> tuple[list[FloatArray], list[FloatArray], list[float], list[float]]:
+    """:func:`learn_shaft`'s walk back along the needle: each station's sample offsets, raw profile, the
+    needle's width there (px) and its distance behind the tip (px), as far as the first frame shows it."""
     ux, uy = shaft
     nx, ny = -uy, ux
-    half_q = int(round(REACH / STEP))
-    ts = (np.arange(2 * half_q + 1) - half_q) * STEP
+    half_q = (ts.size - 1) // 2
     x0, y0 = tip
     offs: list[FloatArray] = []
     raws: list[FloatArray] = []
@@ -241,13 +258,13 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
         raws.append(_lines(image, x0, y0, ox, oy, ux, uy)[0])
         widths.append(width)
         kept.append(float(s))
-    n_copies = len(smooth)
-    if not kept:
-        z = np.zeros((0, 0))
-        return ShaftProfiles(shaft, np.zeros(0), np.zeros((0, 0, 2)), np.zeros((0, 2 * SHIFTS + 1, 0), dtype=np.intp),
-                             np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool), z, np.zeros(0),
-                             [z] * n_copies, [np.zeros(0)] * n_copies, [None] * n_copies, np.zeros((2, 0)),
-                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool))
+    return offs, raws, widths, kept
+
+
+def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray], raws: list[FloatArray],
+              widths: list[float], kept: list[float], smooth: list[tuple[float, float]]) -> ShaftProfiles:
+    """:func:`learn_shaft`'s profiles from the stations followed: what a check gathers and compares."""
+    ux, uy = shaft
     # the samples a check needs: the widest station's needle and ground, the shifts, and room to smooth
     reach = max(0.5 * w + GROUND for w in widths) + SHIFTS * STEP + 3.0 * max(f for _, f in smooth)
     cut = np.flatnonzero(np.abs(ts) <= reach + 1e-9)

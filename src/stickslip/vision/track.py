@@ -39,7 +39,7 @@ A fix is never a guess: a frame the rules cannot vouch for is refused.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -49,7 +49,7 @@ from scipy import ndimage
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
-from .shaft import ShaftCheck, check_shaft, learn_shaft
+from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 
 __all__ = [
@@ -215,6 +215,14 @@ def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: Fl
     return ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25))
 
 
+def _learn_shaft(image: FloatArray, tip: Sequence[float], t: TipTemplate, params: TrackerParams,
+                 spec: Sequence[tuple[int, float, float]]) -> ShaftProfiles:
+    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`), smoothed as each blur copy is."""
+    s0 = params.template_blur
+    return learn_shaft(image, (float(tip[0]), float(tip[1])), t.shaft, t.ground[0], t.ground[1], params.contrast,
+                       [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in spec])
+
+
 def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
     """The edge stage's refusal of a fix whose edges (and shaft) were checked (``None``: they hold, or were not
     checked)."""
@@ -263,9 +271,7 @@ class TipTracker:
         # levels: (template copy, the frame's extra blur px, the signed blur px): the blurred copies for a tip out of
         # focus, then the sharp template against a blurred frame for a tip sharper than in the first frame
         nb = len(params.blur_bank)
-        self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [
-            (0, f, -f) for f in params.sharpen_bank
-        ]
+        self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [(0, f, -f) for f in params.sharpen_bank]
         self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
         # a copy blurred by 2 px or more (with the smoothing both get) is fitted on every second pixel
         self._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(params.template_blur, abs(b)) >= params.thin_blur)
@@ -278,10 +284,7 @@ class TipTracker:
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
-        s0 = params.template_blur
-        self._shaft = learn_shaft(image, (float(tip[0]), float(tip[1])), t.shaft, t.ground[0], t.ground[1],
-                                  params.contrast,
-                                  [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in self._spec])
+        self._shaft = _learn_shaft(image, tip, t, params, self._spec)
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
@@ -443,8 +446,8 @@ class TipTracker:
         patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
         ec = self._edge_check(patches, image, cand.ref, cand.level)
         # the shaft further back only where the edges near the tip hold (their refusal stands without it)
-        sc = check_shaft(self._shaft, cand.level, image, r.x, r.y, r.theta) if (
-            ec is not None and _edge_refusal(ec, p) is None) else None
+        sc = None if ec is None or _edge_refusal(ec, p) else check_shaft(
+            self._shaft, cand.level, image, r.x, r.y, r.theta)
         cand = replace(cand, edges=ec, shaft=sc)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         return (refusal or res), cand
@@ -542,14 +545,10 @@ class TipTracker:
         return float(np.median(self._mismatch[-self.params.recent :]))
 
     def _mismatch_limit(self, ratio: float) -> float:
-        """Largest ``1 - score`` a fix may have: ``ratio`` times the recent fixes' median mismatch, plus the floor.
-
-        Until three fixes are in, the first frame's own mismatch stands in: its noise against the template.
-        """
-        p = self.params
-        if len(self._mismatch) < 3:  # near the tip the user gave: the noise's share, with room for the rest
-            return ratio * self._first_mismatch + 0.1
-        return ratio * float(np.median(self._mismatch[-p.recent :])) + p.mismatch_floor
+        """Largest ``1 - score`` a fix may have: ``ratio`` times the recent fixes' median mismatch, plus the floor
+        (before three fixes, the first frame's own: its noise against the template, with room for the rest)."""
+        usual = self._usual_mismatch()
+        return ratio * self._first_mismatch + 0.1 if usual is None else ratio * usual + self.params.mismatch_floor
 
     def _accept(self, fix: Fix, cand: _Candidate) -> Fix:
         self._last_edges = cand.edges

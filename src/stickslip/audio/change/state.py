@@ -89,9 +89,8 @@ class ChangeState:
         #: the stream's samples ``[lo, hi)`` (absolute indices), or None where they are gone; set by the stream's
         #: owner where the stale check or the rate prediction needs them
         self.samples: Callable[[int, int], FloatArray | None] | None = None
-        #: set by a confirming owner: every fire holds the latch (:attr:`held`) from its own frame on, until the
-        #: owner decides (``held`` False, or :meth:`unlatch`); set at the fire, not when the owner next hears of it,
-        #: which is the end of the block it was fed and would make the state depend on the block size
+        #: set by a confirming owner: a fire holds the latch (:attr:`held`) from its own frame until the owner decides
+        #: (not from the end of the block the owner hears of it in: that would depend on the block size)
         self.hold_on_fire = False
         self.reset(t0_s)
 

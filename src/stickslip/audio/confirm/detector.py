@@ -346,9 +346,7 @@ class ConfirmedStopDetector:
             g, sp = self._gap // self._H, self._span // self._H
             self._clocked.hear_before(self._before(fire), self._frames.between(fire - g - sp, fire - g))
         self._chain.start(ev, fire, recent)
-        # the window decides whether this was a stop: the fast path, held since the fire's frame (hold_on_fire), does
-        # not re-arm meanwhile
-        return []
+        return []  # the window decides: the fast path, held since the fire's frame (hold_on_fire), waits for it
 
     def _holds(self, ev: StopEvent, fire: int, frames: int) -> bool:
         """The fire at frame ``fire`` persisted over ``frames``, the step clock agrees and the stepping went on."""
