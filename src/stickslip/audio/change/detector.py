@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from ..events import StopEvent
 from ..features.frames import FrameCutter, HeadSamples, RecentSamples, bounded
-from ..features.spectra import SubbandLevels, subband_bins, window
+from ..features.spectra import FramePowers, SubbandLevels, subband_bins, window
 from ..tuningfile import Tuning
 from .state import ChangeParams, ChangeState
 from .tuned import TunedTemplate
@@ -70,6 +70,9 @@ class TemplateDetector:
         #: set to a list to collect every frame's full verdict alongside :attr:`evidence`: True where the frame is
         #: *hot* (stop-like by the fit with its residual and the drops in proportion, or by the drop channel)
         self.hot_evidence: list[bool] | None = None
+        #: set to share the frames' spectra of whole sounds between detectors (a tuning's candidates): a stream fed
+        #: in one block has its spectra from there (the same floats, computed once per sound)
+        self.powers: FramePowers | None = None
         self.reset(t0_s)
 
     def reset(self, t0_s: float = 0.0, step_rate_hz: float | None = None) -> None:
@@ -148,11 +151,15 @@ class TemplateDetector:
             st.head = self._head.samples
         if self._recent is not None and x.size:
             self._recent.push(x)
+        whole = self.powers is not None and self._cutter.fresh
         view = self._cutter.push(x)
         n = view.shape[0]
         events: list[StopEvent] = []
         if n > 0:
-            v = self._levels(view)
+            if whole and self.powers is not None:
+                v = self._levels.from_powers(self.powers(x, self.tuning.frame, self.tuning.hop, self._levels.w32))
+            else:
+                v = self._levels(view)
             events = self._decide(v, self._cutter.ends(n))
             self.frames_seen += n
         self._cutter.advance(n)

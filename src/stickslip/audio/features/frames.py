@@ -48,6 +48,11 @@ class FrameCutter:
         #: the absolute sample index where the next frame starts
         self.next = 0
 
+    @property
+    def fresh(self) -> bool:
+        """Nothing pushed since the last reset: the next push's frames are those of its samples alone."""
+        return self.next == 0 and self._buf.size == 0
+
     def push(self, x: FloatArray) -> FloatArray:
         """Hold the samples ``x``; the frames now complete (frames x ``frame``, a read-only view).
 

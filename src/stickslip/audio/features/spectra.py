@@ -18,12 +18,14 @@ from scipy import fft as sfft
 from ..paramfield import param
 
 __all__ = [
+    "FramePowers",
     "SpectraParams",
     "SubbandLevels",
     "band_bins",
     "band_levels_db",
     "continuum_levels_db",
     "frame_power_spectra",
+    "frame_powers32",
     "levels_from_frames",
     "subband_bins",
     "subband_edges",
@@ -148,17 +150,90 @@ class SubbandLevels:
         n = frames.shape[0]
         out = np.empty((n, self.nb))
         for f0 in range(0, n, 1024):
-            seg = np.multiply(frames[f0 : f0 + 1024], self.w32, dtype=np.float32)  # each cast to float32, then x
-            spec = sfft.rfft(seg, axis=1)[:, self.lo : self.hi]
-            power = spec.real**2
-            power += spec.imag**2
-            band = np.add.reduceat(power, self.starts, axis=1, dtype=np.float64) * self.scale
-            if self.empty is not None:
-                band[:, self.empty] = 0.0
-            band += self.power_floor
-            np.log10(band, out=band)
-            np.multiply(band, 10, out=out[f0 : f0 + 1024])
+            self._bands(frame_powers32(frames[f0 : f0 + 1024], self.w32, self.lo, self.hi), out[f0 : f0 + 1024])
         return out
+
+    def from_powers(self, powers: NDArray[np.float32]) -> FloatArray:
+        """The levels from the frames' powers of every bin (:func:`frame_powers32`, no bins cut): the same floats."""
+        n = powers.shape[0]
+        out = np.empty((n, self.nb))
+        for f0 in range(0, n, 1024):
+            self._bands(np.ascontiguousarray(powers[f0 : f0 + 1024, self.lo : self.hi]), out[f0 : f0 + 1024])
+        return out
+
+    def _bands(self, power: NDArray[np.float32], out: FloatArray) -> None:
+        band = np.add.reduceat(power, self.starts, axis=1, dtype=np.float64) * self.scale
+        if self.empty is not None:
+            band[:, self.empty] = 0.0
+        band += self.power_floor
+        np.log10(band, out=band)
+        np.multiply(band, 10, out=out)
+
+
+def frame_powers32(
+    frames: NDArray[Any], w32: NDArray[np.float32], lo: int = 0, hi: int | None = None
+) -> NDArray[np.float32]:
+    """Single-precision power of the bins ``[lo, hi)`` of windowed frames (frames x bins; unscaled)."""
+    seg = np.multiply(frames, w32, dtype=np.float32)  # each cast to float32, then x
+    spec = sfft.rfft(seg, axis=1)[:, lo:hi]
+    power: NDArray[np.float32] = spec.real**2
+    power += spec.imag**2
+    return power
+
+
+class FramePowers:
+    """The single-precision powers of every frame of whole streams, kept by their samples (:meth:`__call__`).
+
+    A tuning runs its candidates over the same few sounds (the recording, its gain changes,
+    the interference injected), each a detector fed the whole sound at once, and measures
+    parts of the recording that begin where it begins; their frames' spectra are computed
+    once here. A sound is known again by equal samples (a few compared first, then all; a
+    sound that begins a kept one has the kept one's first frames), never by a hash. At most
+    ``max_bytes`` are kept, the latest used.
+    """
+
+    def __init__(self, max_bytes: int = 64 << 20) -> None:
+        self.max_bytes = int(max_bytes)
+        self._kept: list[tuple[int, int, FloatArray, NDArray[np.float32]]] = []
+
+    def __call__(self, x: FloatArray, frame: int, hop: int, w32: NDArray[np.float32]) -> NDArray[np.float32]:
+        """The powers (frames x ``frame // 2 + 1`` bins) of the frames of ``x`` (float64, 1-D) under ``w32``."""
+        n = (x.size - frame) // hop + 1 if x.size >= frame else 0
+        done: NDArray[np.float32] | None = None  # the powers of a kept sound that begins x
+        for i, (kf, kh, kx, kp) in enumerate(self._kept):
+            if kf != frame or kh != hop:
+                continue
+            if kx.size >= x.size and _begins(kx, x):
+                self._kept.append(self._kept.pop(i))
+                return kp[:n]
+            if kx.size < x.size and _begins(x, kx) and (done is None or kp.shape[0] > done.shape[0]):
+                done = kp
+        p = np.empty((n, frame // 2 + 1), dtype=np.float32)
+        n0 = 0 if done is None else done.shape[0]
+        if n0:
+            p[:n0] = done
+        frames = np.lib.stride_tricks.sliding_window_view(x[n0 * hop :], frame)[::hop][: n - n0]
+        for f0 in range(0, n - n0, 1024):
+            p[n0 + f0 : n0 + f0 + 1024] = frame_powers32(frames[f0 : f0 + 1024], w32)
+        self._keep(frame, hop, x, p)
+        return p
+
+    def _keep(self, frame: int, hop: int, x: FloatArray, p: NDArray[np.float32]) -> None:
+        """Keep ``x``'s powers (and forget the kept sounds that begin it: theirs are its first)."""
+        size = x.nbytes + p.nbytes
+        if size > self.max_bytes:
+            return
+        self._kept = [k for k in self._kept if not (k[:2] == (frame, hop) and k[2].size <= x.size and _begins(x, k[2]))]
+        while self._kept and sum(kx.nbytes + kp.nbytes for _, _, kx, kp in self._kept) + size > self.max_bytes:
+            self._kept.pop(0)
+        self._kept.append((frame, hop, x.copy(), p))
+
+
+def _begins(long: FloatArray, short: FloatArray) -> bool:
+    """Whether ``long`` begins with the samples ``short`` (a few compared first, then all)."""
+    head = long[: short.size]
+    step = max(1, short.size // 64)
+    return bool(np.array_equal(head[::step], short[::step]) and np.array_equal(head, short))
 
 
 def levels_from_frames(
@@ -178,14 +253,18 @@ def subband_levels_db(
     frame: int,
     hop: int,
     edges: tuple[float, ...] | list[float],
+    powers: FramePowers | None = None,
 ) -> FloatArray:
-    """Sub-band levels of every frame of a recording (frames x bands), dBFS."""
+    """Sub-band levels of every frame of a recording (frames x bands), dBFS; ``powers``: its spectra kept there."""
     x = np.asarray(samples, dtype=np.float64)
     idx = subband_bins(edges, sample_rate, frame)
     nb = len(edges) - 1
     if x.size < frame:
         return np.zeros((0, nb))
     w, scale = window(frame)
+    if powers is not None:
+        levels = SubbandLevels(w, scale, idx)
+        return levels.from_powers(powers(x, frame, hop, levels.w32))
     view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
     out = np.empty((view.shape[0], nb))
     for f0 in range(0, view.shape[0], 4096):

@@ -36,7 +36,7 @@ The numbers are :class:`~.params.TuneParams`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -53,7 +53,7 @@ from .candidates import Candidate, candidates, checks_drops, drop_threshold, mak
 from .candidates import stepping_band as stepping_band
 from .labels import TuningError, recording, sound_change
 from .params import TUNE, TuneParams
-from .verification import no_template, one_stop, pick, self_check_failed
+from .verification import Shared, no_template, one_stop, pick, self_check_failed
 
 FloatArray = NDArray[np.float64]
 
@@ -117,7 +117,8 @@ def tune(
     args = _Args(sample_rate, stop_at_s, joint, frame, int(hop or max(1, frame // 4)), hold_s, release_s, guard_s,
                  f_min_hz, max_stepping_s, max_stopped_s, label_tolerance_s, search_s, self_check, seed)  # fmt: skip
     if per_octave is not None:
-        return replace(_tune_at(x, args, float(per_octave)), per_octave=float(per_octave))
+        tu, cut = _tune_at(x, args, float(per_octave))
+        return _finished(x, args, replace(tu, per_octave=float(per_octave)), cut)
     return _tune_resolutions(x, args)
 
 
@@ -142,6 +143,8 @@ class _Args:
     seed: int
     range_db: float = TUNE.range_db
     p: TuneParams = TUNE
+    #: the sounds every candidate hears and their frames' spectra, made once per tuning
+    shared: Shared = field(default_factory=Shared, compare=False)
 
 
 def _tried(tu: Tuning, po: float, **more: Any) -> tuple[bool, dict[str, Any]]:
@@ -155,49 +158,51 @@ def _tune_resolutions(x: FloatArray, args: _Args) -> Tuning:
     """Tune at ``default_per_octave``, and at ``finer_per_octave`` where that is refused or weak (module docstring)."""
     p = args.p
     tried: list[dict[str, Any]] = []
-    best: Tuning | None = None
+    best: tuple[Tuning, _Cut] | None = None
     first_error: TuningError | None = None
     for po in (p.default_per_octave, *p.finer_per_octave):
-        if best is not None and po != p.default_per_octave and (best.margin_db or 0.0) >= p.finer_below:
+        if best is not None and po != p.default_per_octave and (best[0].margin_db or 0.0) >= p.finer_below:
             break
         try:
-            tu = replace(_tune_at(x, args, po), per_octave=po)
+            tu, cut = _tune_at(x, args, po)
         except TuningError as e:
             first_error = first_error or e
             tried.append({"per_octave": po, "refused": str(e)[:200]})
             continue
+        tu = replace(tu, per_octave=po)
         failed, row = _tried(tu, po)
         tried.append(row)
         if best is None:
             if po == p.default_per_octave or (not failed and (tu.margin_db or 0.0) >= p.finer_min_margin):
-                best = tu
+                best = tu, cut
         elif (
             not failed
-            and (tu.margin_db or 0.0) >= max(p.finer_min_margin, (best.margin_db or 0.0) + p.finer_gain)
-            and len(tu.signature_db or ()) >= len(best.signature_db or ())
+            and (tu.margin_db or 0.0) >= max(p.finer_min_margin, (best[0].margin_db or 0.0) + p.finer_gain)
+            and len(tu.signature_db or ()) >= len(best[0].signature_db or ())
         ):
-            best = tu
+            best = tu, cut
     if best is None and p.wide_range_db is not None:
         best = _tune_wide(x, args, p.wide_range_db, tried)
     if best is None:
         assert first_error is not None
         raise first_error
-    checks = dict(best.checks or {})
+    checks = dict(best[0].checks or {})
     checks["resolutions"] = tried
-    return replace(best, checks=checks)
+    return _finished(x, args, replace(best[0], checks=checks), best[1])
 
 
-def _tune_wide(x: FloatArray, args: _Args, range_db: float, tried: list[dict[str, Any]]) -> Tuning | None:
+def _tune_wide(x: FloatArray, args: _Args, range_db: float, tried: list[dict[str, Any]]) -> tuple[Tuning, _Cut] | None:
     """Every resolution refused: a stop that moves the modes at the band's edge out of it is heard beyond it."""
     po = args.p.default_per_octave
     try:
-        tu = replace(_tune_at(x, replace(args, range_db=range_db), po), per_octave=po)
+        tu, cut = _tune_at(x, replace(args, range_db=range_db), po)
     except TuningError as e:
         tried.append({"per_octave": po, "range_db": range_db, "refused": str(e)[:200]})
         return None
+    tu = replace(tu, per_octave=po)
     failed, row = _tried(tu, po, range_db=range_db)
     tried.append(row)
-    return tu if not failed and (tu.margin_db or 0.0) >= args.p.finer_min_margin else None
+    return (tu, cut) if not failed and (tu.margin_db or 0.0) >= args.p.finer_min_margin else None
 
 
 @dataclass(frozen=True)
@@ -230,7 +235,7 @@ def _parts(x: FloatArray, args: _Args, per_octave: float) -> _Parts:
     f_lo, f_hi = stepping_band(x[first : int((stop_at_s - 0.15) * sr)], sr, frame, hop, args.f_min_hz,
                                range_db=args.range_db)  # fmt: skip
     edges = subband_edges(f_lo, f_hi, sr, frame, per_octave)
-    V = subband_levels_db(x[first:last], sr, frame, hop, edges)
+    V = subband_levels_db(x[first:last], sr, frame, hop, edges, args.shared.powers)
     starts = first / sr + np.arange(V.shape[0]) * hop / sr
     ends = starts + (frame - 1) / sr
     # where the sound changes (from a provisional signature of frames well away from the label)
@@ -277,7 +282,7 @@ def _verify(x: FloatArray, args: _Args, pt: _Parts) -> list[tuple[Tuning, float,
                          args.joint, pt.mu_step)  # fmt: skip
         b0, b1 = cand.bands[0], cand.bands[-1] + 1
         tu = replace(tu, drop_threshold=drop_threshold(pt.D[:, b0:b1], pt.sigma[b0:b1], pt.stepping, hold, window, p))
-        events = one_stop(tu).feed(x)
+        events = one_stop(tu, args.shared.powers).feed(x)
         near = [e for e in events if pt.stop_s - pt.g <= e.detected_at_s <= pt.stop_s + 0.2]
         if len(events) == 1 and len(near) == 1:
             ev = near[0]
@@ -294,15 +299,30 @@ def _verify(x: FloatArray, args: _Args, pt: _Parts) -> list[tuple[Tuning, float,
     return passing
 
 
-def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> Tuning:
-    """Steps 1-5 and 7 of the module docstring at ``per_octave`` sub-bands per octave."""
-    sr, p = args.sample_rate, args.p
+@dataclass(frozen=True)
+class _Cut:
+    """Where a resolution's tuning found the parts (samples ``first`` to ``last``, the stop at ``stop_s`` +- ``g``)."""
+
+    first: int
+    last: int
+    stop_s: float
+    g: float
+
+
+def _tune_at(x: FloatArray, args: _Args, per_octave: float) -> tuple[Tuning, _Cut]:
+    """Steps 1-5 of the module docstring at ``per_octave`` sub-bands per octave (step 7: :func:`_finished`)."""
     pt = _parts(x, args, per_octave)
     passing = _verify(x, args, pt)
     # the self-check with interference; the quietest passing candidate wins
-    tu = pick(passing, x, sr, args.frame, pt.stop_s, pt.g, args.seed, args.self_check, pt.warnings, args.stop_at_s,
-              pt.change)  # fmt: skip
-    stop_s, g, first, last = pt.stop_s, pt.g, pt.first, pt.last
+    tu = pick(passing, x, args.sample_rate, args.frame, pt.stop_s, pt.g, args.seed, args.self_check, pt.warnings,
+              args.stop_at_s, pt.change, args.shared)  # fmt: skip
+    return tu, _Cut(pt.first, pt.last, pt.stop_s, pt.g)
+
+
+def _finished(x: FloatArray, args: _Args, tu: Tuning, cut: _Cut) -> Tuning:
+    """Step 7 of the module docstring, for the chosen resolution only (nothing in the choice reads it)."""
+    sr, p = args.sample_rate, args.p
+    stop_s, g, first, last = cut.stop_s, cut.g, cut.first, cut.last
     # the step rate, and the continuum between its lines: how a stream at another rate tells it began at the stop
     tu = _with_continuum(tu, x[first : int((stop_s - g) * sr)], x[int((stop_s + g) * sr) : last])
     # the fine continuum spectra: the stop's signature predicted at another step rate

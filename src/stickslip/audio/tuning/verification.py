@@ -16,14 +16,14 @@ from numpy.typing import NDArray
 
 from ..change import TemplateDetector
 from ..change.fit import fit_departure
-from ..features.spectra import subband_levels_db
+from ..features.spectra import FramePowers, subband_levels_db
 from ..paramfield import param
 from ..tuningfile import Tuning
 from . import inject
 from .candidates import Candidate, decided
 from .labels import TuningError, fmt_spans, spans
 
-__all__ = ["VERIFY", "VerifyParams", "no_template", "one_stop", "pick", "self_check_failed"]
+__all__ = ["VERIFY", "Shared", "VerifyParams", "no_template", "one_stop", "pick", "self_check_failed"]
 
 FloatArray = NDArray[np.float64]
 
@@ -43,7 +43,7 @@ class VerifyParams:
 VERIFY = VerifyParams()
 
 
-def one_stop(tu: Tuning) -> TemplateDetector:
+def one_stop(tu: Tuning, powers: FramePowers | None = None) -> TemplateDetector:
     """A detector judged as tuning always has: after a fire it stays latched until *a* stays low.
 
     The end-of-stop re-arming (:mod:`stickslip.audio.change.release`) is for a session with
@@ -52,6 +52,7 @@ def one_stop(tu: Tuning) -> TemplateDetector:
     """
     det = TemplateDetector(tu)
     det.hold(True)
+    det.powers = powers  # the frames' spectra of the sounds every candidate hears, computed once
     return det
 
 
@@ -101,6 +102,7 @@ def pick(
     warnings: list[str],
     stop_at_s: float,
     change: float,
+    shared: Shared | None = None,
 ) -> Tuning:
     """Of the verified candidates, the first whose self-check neither clearly fails nor is mimicked by added sound.
 
@@ -115,11 +117,11 @@ def pick(
     """
     results: list[tuple[int, int, int, Tuning, float, float, dict[str, Any]]] = []
     for tu, lag, lat in passing:
-        checks: dict[str, Any] = _self_check(tu, x, sample_rate, stop_s, g, seed) if self_check else {}
+        checks: dict[str, Any] = _self_check(tu, x, sample_rate, stop_s, g, seed, shared) if self_check else {}
         failed = int(self_check_failed(checks))
         mimicked = 0
         if self_check and not failed:
-            checks["rise_mimic"] = _rise_mimicry(tu, x, sample_rate, stop_s, g, seed)
+            checks["rise_mimic"] = _rise_mimicry(tu, x, sample_rate, stop_s, g, seed, shared)
             mimicked = int(sum(checks["rise_mimic"].values()))
         results.append((failed, mimicked, len(results), tu, lag, lat, checks))
         if not failed and not mimicked:
@@ -162,7 +164,7 @@ def _warn(tu: Tuning, checks: dict[str, Any], warnings: list[str], self_check: b
 
 
 def _rise_mimicry(
-    tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int
+    tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int, shared: Shared | None = None
 ) -> dict[str, int]:
     """Fires of ``tu`` on the stepping part with a sound added that does what the stop does where it adds sound.
 
@@ -190,7 +192,8 @@ def _rise_mimicry(
     if not spans:
         return {}
     n_step = int((stop_s - guard_s) * sample_rate)
-    V = subband_levels_db(x[:n_step], sample_rate, tu.frame, tu.hop, tu.edges_hz)
+    powers = None if shared is None else shared.powers  # the recording's spectra, computed once
+    V = subband_levels_db(x[:n_step], sample_rate, tu.frame, tu.hop, tu.edges_hz, powers)
     power = np.mean(10.0 ** (V / 10.0), axis=0)
     added = power * (10.0 ** (np.maximum(np.asarray(tu.signature_db, dtype=np.float64), 0.0) / 10.0) - 1.0)
     n = min(x.size, n_step)
@@ -203,32 +206,61 @@ def _rise_mimicry(
     return out
 
 
-def _self_check(
-    tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int
-) -> dict[str, Any]:
-    """Run ``tu`` on the recording with interference injected; count false alarms and stops found."""
-    rng = np.random.default_rng(seed)
-    n_stop = int(stop_s * sample_rate)
-    lo, hi = tu.band_hz
-    from scipy.signal import butter, sosfilt
+class Shared:
+    """What a tuning's candidates share, at every resolution: the same sounds, made and measured once.
 
-    sos = butter(4, [lo, min(hi, 0.49 * sample_rate)], btype="band", fs=sample_rate, output="sos")
-    rms = float(np.sqrt(np.mean(sosfilt(sos, x[:n_stop]) ** 2)))
-    n = x.size
-    variants = {
-        "knocks": x + inject.knocks(n, sample_rate, rms, rng),
-        "babble": x + inject.babble(n, sample_rate, rms, rng),
-        "second click train": x + inject.click_train(n, sample_rate, rms, rng),
-        "gain +20 dB": x * 10.0,
-        "gain -20 dB": x * 0.1,
-    }
+    The self-check's interference is seeded and scaled to the stepping's level in the
+    candidate's band: candidates with the same band hear the same sounds. Their frames'
+    spectra (:class:`~..features.spectra.FramePowers`) and the sounds themselves are kept
+    for one recording ``x`` (forgotten when another is given).
+    """
+
+    def __init__(self) -> None:
+        self.powers = FramePowers()
+        self._x: FloatArray | None = None
+        self._rms: dict[tuple[float, float, int, int], float] = {}
+        self._sounds: dict[tuple[float, int, int], dict[str, FloatArray]] = {}
+
+    def variants(self, x: FloatArray, sample_rate: int, band_hz: tuple[float, float], n_stop: int, seed: int
+                 ) -> dict[str, FloatArray]:  # fmt: skip
+        """The recording ``x`` with each interference injected (:mod:`.inject`), and at +-20 dB of gain."""
+        if x is not self._x:
+            self._x, self._rms, self._sounds = x, {}, {}
+        lo, hi = band_hz
+        if (lo, hi, n_stop, sample_rate) not in self._rms:
+            from scipy.signal import butter, sosfilt
+
+            sos = butter(4, [lo, min(hi, 0.49 * sample_rate)], btype="band", fs=sample_rate, output="sos")
+            self._rms[lo, hi, n_stop, sample_rate] = float(np.sqrt(np.mean(sosfilt(sos, x[:n_stop]) ** 2)))
+        rms = self._rms[lo, hi, n_stop, sample_rate]
+        if (rms, seed, sample_rate) not in self._sounds:
+            rng = np.random.default_rng(seed)
+            n = x.size
+            self._sounds[rms, seed, sample_rate] = {
+                "knocks": x + inject.knocks(n, sample_rate, rms, rng),
+                "babble": x + inject.babble(n, sample_rate, rms, rng),
+                "second click train": x + inject.click_train(n, sample_rate, rms, rng),
+                "gain +20 dB": x * 10.0,
+                "gain -20 dB": x * 0.1,
+            }
+        return self._sounds[rms, seed, sample_rate]
+
+
+def _self_check(
+    tu: Tuning, x: FloatArray, sample_rate: int, stop_s: float, guard_s: float, seed: int,
+    shared: Shared | None = None,
+) -> dict[str, Any]:  # fmt: skip
+    """Run ``tu`` on the recording with interference injected; count false alarms and stops found."""
+    shared = shared or Shared()
+    powers = shared.powers
+    variants = shared.variants(x, sample_rate, tu.band_hz, int(stop_s * sample_rate), seed)
     false_alarms = 0
     found = 0
     lat: list[float] = []
     lags: list[float] = []
     per: dict[str, int] = {}
     for name, y in variants.items():
-        events = one_stop(tu).feed(y)
+        events = one_stop(tu, powers).feed(y)
         hits = [e for e in events if stop_s - guard_s <= e.detected_at_s <= stop_s + 0.2]
         fa = len(events) - min(1, len(hits))
         per[name] = fa
