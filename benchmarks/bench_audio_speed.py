@@ -18,7 +18,13 @@ equal first:
 * the tuner's running template (``running_template``): a 2-D percentile filter with a
   (W, 1) footprint before, a 1-D one per sub-band after (the same element selected);
 * the self-check's noise shaped like the stop's rise (``shaped_noise``) at the near-prime
-  lengths a recording's stepping part has: ``numpy.fft`` before, ``scipy.fft`` after.
+  lengths a recording's stepping part has: ``numpy.fft`` before, ``scipy.fft`` after;
+* a whole tuning (``tune``, three resolutions and their self-checks) with what its candidates
+  share made once (``verification.Shared``: the frames' spectra of the recording, of its
+  parts and of the sounds injected, kept by ``FramePowers``; the injected sounds themselves)
+  against the same code with nothing kept (every detector computes its spectra, every
+  self-check makes its sounds). The tunings are checked equal first. The continuum and fine
+  spectra made for the chosen resolution only (not for every one tried) are in both.
 
 Times are CPU times of this process (``time.process_time``): the machine may be shared.
 
@@ -31,17 +37,20 @@ Run: ``.venv/bin/python benchmarks/bench_audio_speed.py`` (seconds).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
 from scipy.ndimage import percentile_filter
 
 from stickslip.audio.change.template import TEMPLATE
-from stickslip.audio.features.spectra import SubbandLevels, frame_power_spectra, window
+from stickslip.audio.features.spectra import FramePowers, SubbandLevels, frame_power_spectra, window
 from stickslip.audio.sources.guard import GUARD, SignalGuard, block_problem, step_line_db
+from stickslip.audio.tuning import tune
 from stickslip.audio.tuning.candidates import running_template
 from stickslip.audio.tuning.inject import shaped_noise
+from stickslip.audio.tuning.verification import Shared
 from stickslip.sim.sound import render_traverse_recording
 
 
@@ -156,6 +165,31 @@ def _old_shaped_noise(n: int, sample_rate: int, edges_hz: list[float], mean_squa
     return np.asarray(np.fft.irfft(w * gain, n), dtype=np.float64)
 
 
+@contextmanager
+def _nothing_shared() -> Iterator[None]:
+    """Within: a tuning's candidates share nothing (no spectra kept, the self-check's sounds made per candidate)."""
+    init, variants = Shared.__init__, Shared.variants
+
+    def init_kept_none(self: Shared) -> None:
+        init(self)
+        self.powers = FramePowers(max_bytes=0)
+
+    def variants_anew(self: Shared, *args: Any) -> dict[str, np.ndarray]:
+        self._x = None
+        return variants(self, *args)
+
+    Shared.__init__, Shared.variants = init_kept_none, variants_anew  # type: ignore[method-assign]
+    try:
+        yield
+    finally:
+        Shared.__init__, Shared.variants = init, variants  # type: ignore[method-assign]
+
+
+def _tune_unshared(x: np.ndarray, sr: int, stop_s: float) -> Any:
+    with _nothing_shared():
+        return tune(x, sr, stop_s, seed=0)
+
+
 def side_by_side(name: str, a: Callable[[], Any], b: Callable[[], Any], turns: int = 15) -> float:
     """Median time of ``a`` (before) over ``b`` (after), run in turns; prints and returns the ratio."""
     ta, tb = [], []
@@ -238,6 +272,16 @@ def main() -> None:
         lambda: noises(shaped_noise),
         turns=9,
     )
+    talk, _ = render_traverse_recording(1, 1000.0, 2.0, 3.5, seed=11, babble=True, babble_db=-30.0)
+    for what, y in (("clean, 1 resolution", x_tune), ("talk in the room, 3 resolutions", talk)):
+        y = np.asarray(y, dtype=np.float64)
+        assert _tune_unshared(y, sr, 2.0).to_dict() == tune(y, sr, 2.0, seed=0).to_dict(), "the tunings differ"
+        side_by_side(
+            f"tune, {what}: none shared",
+            lambda y=y: _tune_unshared(y, sr, 2.0),
+            lambda y=y: tune(y, sr, 2.0, seed=0),
+            turns=5,
+        )
 
 
 if __name__ == "__main__":

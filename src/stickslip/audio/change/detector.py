@@ -151,13 +151,13 @@ class TemplateDetector:
             st.head = self._head.samples
         if self._recent is not None and x.size:
             self._recent.push(x)
-        whole = self.powers is not None and self._cutter.fresh
+        whole = self.powers is not None and self.frames_seen == 0 and self._cutter.fresh
         view = self._cutter.push(x)
         n = view.shape[0]
         events: list[StopEvent] = []
         if n > 0:
             if whole and self.powers is not None:
-                v = self._levels.from_powers(self.powers(x, self.tuning.frame, self.tuning.hop, self._levels.w32))
+                v = self._levels.from_powers(self._levels.powers(x, self.tuning.hop, self.powers))
             else:
                 v = self._levels(view)
             events = self._decide(v, self._cutter.ends(n))

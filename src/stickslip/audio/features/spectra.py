@@ -149,17 +149,30 @@ class SubbandLevels:
     def __call__(self, frames: NDArray[Any]) -> FloatArray:
         n = frames.shape[0]
         out = np.empty((n, self.nb))
-        for f0 in range(0, n, 1024):
-            self._bands(frame_powers32(frames[f0 : f0 + 1024], self.w32, self.lo, self.hi), out[f0 : f0 + 1024])
+        for f0 in range(0, n, 1024):  # frame_powers32 and _bands inline: a live block of a few frames comes often
+            seg = np.multiply(frames[f0 : f0 + 1024], self.w32, dtype=np.float32)  # each cast to float32, then x
+            spec = sfft.rfft(seg, axis=1)[:, self.lo : self.hi]
+            power = spec.real**2
+            power += spec.imag**2
+            band = np.add.reduceat(power, self.starts, axis=1, dtype=np.float64) * self.scale
+            if self.empty is not None:
+                band[:, self.empty] = 0.0
+            band += self.power_floor
+            np.log10(band, out=band)
+            np.multiply(band, 10, out=out[f0 : f0 + 1024])
         return out
 
     def from_powers(self, powers: NDArray[np.float32]) -> FloatArray:
-        """The levels from the frames' powers of every bin (:func:`frame_powers32`, no bins cut): the same floats."""
+        """The levels from the frames' powers of the bins ``[lo, hi)`` (:func:`frame_powers32`): the same floats."""
         n = powers.shape[0]
         out = np.empty((n, self.nb))
         for f0 in range(0, n, 1024):
-            self._bands(np.ascontiguousarray(powers[f0 : f0 + 1024, self.lo : self.hi]), out[f0 : f0 + 1024])
+            self._bands(np.ascontiguousarray(powers[f0 : f0 + 1024]), out[f0 : f0 + 1024])
         return out
+
+    def powers(self, x: FloatArray, hop: int, kept: FramePowers) -> NDArray[np.float32]:
+        """The powers of the bins these levels read, of the frames of a whole stream ``x``, from ``kept``."""
+        return kept(x, self.w32.size, hop, self.w32, self.lo, self.hi)
 
     def _bands(self, power: NDArray[np.float32], out: FloatArray) -> None:
         band = np.add.reduceat(power, self.starts, axis=1, dtype=np.float64) * self.scale
@@ -194,39 +207,48 @@ class FramePowers:
 
     def __init__(self, max_bytes: int = 64 << 20) -> None:
         self.max_bytes = int(max_bytes)
-        self._kept: list[tuple[int, int, FloatArray, NDArray[np.float32]]] = []
+        #: (frame, hop, first bin, end bin, samples, powers)
+        self._kept: list[tuple[int, int, int, int, FloatArray, NDArray[np.float32]]] = []
 
-    def __call__(self, x: FloatArray, frame: int, hop: int, w32: NDArray[np.float32]) -> NDArray[np.float32]:
-        """The powers (frames x ``frame // 2 + 1`` bins) of the frames of ``x`` (float64, 1-D) under ``w32``."""
+    def __call__(
+        self, x: FloatArray, frame: int, hop: int, w32: NDArray[np.float32], lo: int = 0, hi: int | None = None
+    ) -> NDArray[np.float32]:
+        """The powers of the bins ``[lo, hi)`` (:func:`frame_powers32`) of the frames of ``x`` (float64, 1-D)."""
         n = (x.size - frame) // hop + 1 if x.size >= frame else 0
+        hi = frame // 2 + 1 if hi is None else hi
         done: NDArray[np.float32] | None = None  # the powers of a kept sound that begins x
-        for i, (kf, kh, kx, kp) in enumerate(self._kept):
-            if kf != frame or kh != hop:
+        for i, (kf, kh, klo, khi, kx, kp) in enumerate(self._kept):
+            if (kf, kh) != (frame, hop) or not klo <= lo <= hi <= khi:
                 continue
             if kx.size >= x.size and _begins(kx, x):
                 self._kept.append(self._kept.pop(i))
-                return kp[:n]
+                return kp[:n, lo - klo : hi - klo]
             if kx.size < x.size and _begins(x, kx) and (done is None or kp.shape[0] > done.shape[0]):
-                done = kp
-        p = np.empty((n, frame // 2 + 1), dtype=np.float32)
+                done = kp[:, lo - klo : hi - klo]
+        p = np.empty((n, hi - lo), dtype=np.float32)
         n0 = 0 if done is None else done.shape[0]
-        if n0:
+        if done is not None:
             p[:n0] = done
         frames = np.lib.stride_tricks.sliding_window_view(x[n0 * hop :], frame)[::hop][: n - n0]
         for f0 in range(0, n - n0, 1024):
-            p[n0 + f0 : n0 + f0 + 1024] = frame_powers32(frames[f0 : f0 + 1024], w32)
-        self._keep(frame, hop, x, p)
+            p[n0 + f0 : n0 + f0 + 1024] = frame_powers32(frames[f0 : f0 + 1024], w32, lo, hi)
+        self._keep((frame, hop, lo, hi), x, p)
         return p
 
-    def _keep(self, frame: int, hop: int, x: FloatArray, p: NDArray[np.float32]) -> None:
-        """Keep ``x``'s powers (and forget the kept sounds that begin it: theirs are its first)."""
+    def _keep(self, key: tuple[int, int, int, int], x: FloatArray, p: NDArray[np.float32]) -> None:
+        """Keep ``x``'s powers (and forget the kept ones that begin it over fewer bins: theirs are its first)."""
         size = x.nbytes + p.nbytes
         if size > self.max_bytes:
             return
-        self._kept = [k for k in self._kept if not (k[:2] == (frame, hop) and k[2].size <= x.size and _begins(x, k[2]))]
-        while self._kept and sum(kx.nbytes + kp.nbytes for _, _, kx, kp in self._kept) + size > self.max_bytes:
+        frame, hop, lo, hi = key
+
+        def within(k: tuple[int, int, int, int, FloatArray, NDArray[np.float32]]) -> bool:
+            return k[:2] == (frame, hop) and lo <= k[2] <= k[3] <= hi and k[4].size <= x.size and _begins(x, k[4])
+
+        self._kept = [k for k in self._kept if not within(k)]
+        while self._kept and sum(k[4].nbytes + k[5].nbytes for k in self._kept) + size > self.max_bytes:
             self._kept.pop(0)
-        self._kept.append((frame, hop, x.copy(), p))
+        self._kept.append((frame, hop, lo, hi, x.copy(), p))
 
 
 def _begins(long: FloatArray, short: FloatArray) -> bool:
@@ -264,7 +286,7 @@ def subband_levels_db(
     w, scale = window(frame)
     if powers is not None:
         levels = SubbandLevels(w, scale, idx)
-        return levels.from_powers(powers(x, frame, hop, levels.w32))
+        return levels.from_powers(levels.powers(x, hop, powers))
     view = np.lib.stride_tricks.sliding_window_view(x, frame)[::hop]
     out = np.empty((view.shape[0], nb))
     for f0 in range(0, view.shape[0], 4096):
