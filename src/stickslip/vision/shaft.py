@@ -236,9 +236,9 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
                              np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool), [z] * n_copies, [z] * n_copies)
     # the same lines ALONG_STEP px nearer the tip and further from it: the profiles' change along the shaft (taper)
     ux, uy = shaft
-    tapers = [[_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0] for o in offs]
-              for d in (-ALONG_STEP, ALONG_STEP)]
-    return _assemble(shaft, ts, offs, (raws, *tapers), widths, kept, smooth)
+    nearer, further = ([_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
+                        for o in offs] for d in (-ALONG_STEP, ALONG_STEP))
+    return _assemble(shaft, ts, offs, (raws, nearer, further), widths, kept, smooth)
 
 
 def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float, spread: float,
