@@ -26,7 +26,9 @@
    blob) or fade right behind the tip (*occluded*: something over it, or the fit ahead
    of it); where they hold, **the shaft further back** (:mod:`.shaft`, as far as the
    first frame showed the needle) must be where the first frame had it (*lost*: the fit
-   took the end of something over the tip, a grain's lobe, for the tip);
+   took the end of something over the tip, a grain's lobe, for the tip), and its taper
+   must put the tip within 3 px (plus 3 standard deviations) of the fix along the axis
+   (*occluded*: a grain as dark as the needle prolongs it, its end taken for the tip);
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
