@@ -125,9 +125,12 @@ class ShaftProfiles:
         Every sample of every line, its offset from the tip (x, y; px, before a turn).
     valid_f, invalid : ndarray, shape (m, 1, n)
         :attr:`valid` as 1 and 0, and its negation, shaped as the gathered samples.
-    de, ett : list of ndarray, shape (m, n)
-        For each blur copy, the derivative of :attr:`e` along the shaft (per px behind the
-        tip) and its second derivative across the shaft (px⁻²), level and slope taken out.
+    basis : list of ndarray, shape (m, 3, n)
+        For each blur copy, what a station's profile is fitted with for the taper: :attr:`e`,
+        its derivative along the shaft (per px behind the tip) and its second derivative
+        across the shaft (px⁻²), level and slope taken out.
+    gram_inv : list of ndarray, shape (m, 3, 3)
+        The inverses of their Gram matrices (NaN where singular).
     """
 
     shaft: tuple[float, float]
@@ -144,8 +147,8 @@ class ShaftProfiles:
     lines: FloatArray
     valid_f: FloatArray
     invalid: NDArray[np.bool_]
-    de: list[FloatArray]
-    ett: list[FloatArray]
+    basis: list[FloatArray]
+    gram_inv: list[FloatArray]
 
 
 @dataclass(frozen=True)
@@ -233,7 +236,8 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
         return ShaftProfiles(shaft, np.zeros(0), np.zeros((0, 0, 2)), np.zeros((0, 2 * SHIFTS + 1, 0), dtype=np.intp),
                              np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool), z, np.zeros(0),
                              [z] * n_copies, [np.zeros(0)] * n_copies, [None] * n_copies, np.zeros((2, 0)),
-                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool), [z] * n_copies, [z] * n_copies)
+                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool), [np.zeros((0, 3, 0))] * n_copies,
+                             [np.zeros((0, 3, 3))] * n_copies)
     # the same lines ALONG_STEP px nearer the tip and further from it: the profiles' change along the shaft (taper)
     ux, uy = shaft
     nearer, further = ([_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
@@ -329,16 +333,21 @@ def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray]
         e = e - np.where(valid, e.sum(axis=1, keepdims=True) / lengths[:, None], 0.0)
         return np.asarray(e - (e * tc).sum(axis=1, keepdims=True) * tc)
 
-    es, ves, des, etts = [], [], [], []
+    es, ves, bases, grams = [], [], [], []
     for tsig, _ in smooth:
         e = flat(np.stack(raws[0]), tsig)
         es.append(e)
         ves.append((e * e).sum(axis=1))
-        des.append((flat(np.stack(raws[2]), tsig) - flat(np.stack(raws[1]), tsig)) / (2.0 * ALONG_STEP))
-        ett = np.gradient(np.gradient(e, STEP, axis=1), STEP, axis=1)
-        ett = np.where(valid, ett, 0.0)
+        de = (flat(np.stack(raws[2]), tsig) - flat(np.stack(raws[1]), tsig)) / (2.0 * ALONG_STEP)
+        ett = np.where(valid, np.gradient(np.gradient(e, STEP, axis=1), STEP, axis=1), 0.0)
         ett = ett - np.where(valid, ett.sum(axis=1, keepdims=True) / lengths[:, None], 0.0)
-        etts.append(ett - (ett * tc).sum(axis=1, keepdims=True) * tc)
+        basis = np.stack([e, de, ett - (ett * tc).sum(axis=1, keepdims=True) * tc], axis=1)
+        gram = np.einsum("kin,kjn->kij", basis, basis)
+        ok = np.abs(np.linalg.det(gram)) > 1e-30
+        inv = np.full(gram.shape, np.nan)
+        inv[ok] = np.linalg.inv(gram[ok])
+        bases.append(basis)
+        grams.append(inv)
     offsets = np.stack(offs)[:, k0 : k0 + q]
     d_lines = np.asarray(LINES)
     lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
@@ -349,7 +358,7 @@ def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray]
             kernels[f] = ndimage.gaussian_filter1d(np.eye(q), f / STEP, axis=1, mode="nearest")
     return ShaftProfiles(shaft, np.array(kept), offsets, gather, shift_ok, valid, tc, lengths.astype(float), es, ves,
                          [kernels.get(f) for _, f in smooth], lines, valid[:, None, :].astype(float),
-                         ~valid[:, None, :], des, etts)
+                         ~valid[:, None, :], bases, grams)
 
 
 def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: float, theta: float
@@ -390,34 +399,29 @@ def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: fl
     if int(seen.sum()) < 3:
         return None
     a = cov[rows, best][seen] / ve[seen]
-    along, along_sd = _taper(sp, copy, G[rows, best][seen], seen)
+    along, along_sd = _taper(sp, copy, G[rows, best][seen], vf[rows, best][seen], seen)
     return ShaftCheck(_median(a), _median(r[rows, best][seen]), float(sp.s[seen].max()),
                       int(seen.sum()), along, along_sd)
 
 
-def _taper(sp: ShaftProfiles, copy: int, G: FloatArray, seen: NDArray[np.bool_]) -> tuple[float, float]:
-    """The displacement along the axis that the stations' profiles ``G`` (at their best shifts) show through the
-    taper, px (the median of the stations'), and its standard deviation; ``(0, inf)`` when none says."""
-    valid, tc, n = sp.valid[seen], sp.tc[seen], sp.lengths[seen]
-    g = np.where(valid, G, 0.0)
-    g = g - np.where(valid, g.sum(axis=1, keepdims=True) / n[:, None], 0.0)
-    g -= (g * tc).sum(axis=1, keepdims=True) * tc
-    A = np.stack([sp.e[copy][seen], sp.de[copy][seen], sp.ett[copy][seen]], axis=2)  # (k, n, 3)
-    M = np.einsum("kni,knj->kij", A, A)
-    rhs = np.einsum("kni,kn->ki", A, g)
-    ok = np.abs(np.linalg.det(M)) > 1e-30
-    if int(ok.sum()) < 3:
-        return 0.0, math.inf
-    Minv = np.linalg.inv(M[ok])
-    sol = np.einsum("kij,kj->ki", Minv, rhs[ok])
-    s2 = np.maximum((g[ok] * g[ok]).sum(axis=1) - (sol * rhs[ok]).sum(axis=1), 0.0) / np.maximum(n[ok] - 4.0, 1.0)
+def _taper(sp: ShaftProfiles, copy: int, G: FloatArray, vf: FloatArray, seen: NDArray[np.bool_]
+           ) -> tuple[float, float]:
+    """The displacement along the axis that the stations' profiles ``G`` (at their best shifts; ``vf`` their sums
+    of squares with level and slope taken out) show through the taper, px (the median of the stations'), and its
+    standard deviation; ``(0, inf)`` when fewer than three stations say."""
+    basis, inv = sp.basis[copy][seen], sp.gram_inv[copy][seen]
+    # the basis has no level nor slope: G's own drop out of its products with it
+    rhs = np.einsum("kin,kn->ki", basis, G)
+    sol = np.einsum("kij,kj->ki", inv, rhs)
     a, b = sol[:, 0], sol[:, 1]
-    good = np.abs(a) > 1e-9
+    n = sp.lengths[seen]
+    s2 = np.maximum(vf - (sol * rhs).sum(axis=1), 0.0) / np.maximum(n - 4.0, 1.0)
+    good = np.isfinite(a) & (np.abs(a) > 1e-9)
     if int(good.sum()) < 3:
         return 0.0, math.inf
-    a, b, s2, Minv = a[good], b[good], s2[good], Minv[good]
+    a, b, s2, inv = a[good], b[good], s2[good], inv[good]
     d = b / a
-    # the ratio's variance, to first order, from the fit's covariance s2 * M^-1
-    var = s2 * (Minv[:, 1, 1] + d * d * Minv[:, 0, 0] - 2.0 * d * Minv[:, 0, 1]) / (a * a)
+    # the ratio's variance, to first order, from the fit's covariance s2 * inv
+    var = s2 * (inv[:, 1, 1] + d * d * inv[:, 0, 0] - 2.0 * d * inv[:, 0, 1]) / (a * a)
     w = 1.0 / np.maximum(var, 1e-6)
     return _median(d), float(1.0 / math.sqrt(float(w.sum())))
