@@ -20,11 +20,14 @@ and a draw that breaks something is pinned as an ``@example`` where it is fixed.
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+import tuned
 from hypothesis import settings
 from pinned import PINNED_TODAY  # tests/support: also read by the generators and benchmarks
 
@@ -34,6 +37,24 @@ if TYPE_CHECKING:
 settings.register_profile("repeatable", derandomize=True, print_blob=True)
 settings.register_profile("explore", derandomize=False, print_blob=True)
 settings.load_profile(os.environ.get("STICKSLIP_HYPOTHESIS", "repeatable"))
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The session's folder of kept tunings (``tests/support/tuned.py``), made by the process that starts the
+    xdist workers, which inherit its name through the environment; removed at the session's end."""
+    if not hasattr(config, "workerinput") and tuned.ENV not in os.environ:
+        os.environ[tuned.ENV] = tempfile.mkdtemp(prefix="stickslip-tunings-")
+        config.stash[_TUNINGS] = os.environ[tuned.ENV]
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    folder = config.stash.get(_TUNINGS, None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.environ.pop(tuned.ENV, None)
+
+
+_TUNINGS = pytest.StashKey[str]()
 
 
 

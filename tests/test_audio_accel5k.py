@@ -16,12 +16,12 @@ from dataclasses import replace
 import mount_sound as mt
 import numpy as np
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 from typer.testing import CliRunner
 
 from stickslip.audio.detector import detect
 from stickslip.audio.events import StopEvent
 from stickslip.audio.sources.vibration import read_vibration
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 from stickslip.cli import app
 

@@ -10,9 +10,9 @@ test_audio_tuning add more).
 import numpy as np
 import pytest
 from alien_sound import JOINT_SOUNDS, recording
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.detector import detect
-from stickslip.audio.tuning import tune
 
 pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("audio_alien")]  # slow; one worker renders each draw once
 

@@ -31,10 +31,11 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect  # noqa: E402
-from stickslip.audio.tuning import TuningError, tune  # noqa: E402
+from stickslip.audio.tuning import TuningError  # noqa: E402
 
 # make test-fast leaves this file out; make test (--dist loadgroup) runs it on one worker, so the latency test reads
 # the outcomes the conditions' tests cached instead of hearing half the battery again

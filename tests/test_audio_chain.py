@@ -21,10 +21,11 @@ import modal_sound as ms  # noqa: E402
 import numpy as np
 import pytest
 import recording_chain as rc  # noqa: E402
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect  # noqa: E402
-from stickslip.audio.tuning import TuningError, tune  # noqa: E402
+from stickslip.audio.tuning import TuningError  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

@@ -27,8 +27,9 @@ from stickslip.audio.confirm import (  # noqa: E402
 from stickslip.audio.events import StopDetector  # noqa: E402
 
 AFTER_REJECT_S = PersistenceParams().after_reject_s
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
+
 from stickslip.audio.detector import StopEvent, Tuning, detector_for  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 

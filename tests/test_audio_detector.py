@@ -217,7 +217,8 @@ _TEMPLATE: dict[str, object] = {}
 def _template_case():
     """A template tuning (simulator, joint 1) and a test recording with two stops, 0.6 s apart."""
     if not _TEMPLATE:
-        from stickslip.audio.tuning import tune
+        from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
+
         from stickslip.sim.sound import render_traverse_recording
 
         x, sr = render_traverse_recording(1, 1000.0, 1.0, 1.6, seed=31)

@@ -34,6 +34,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.change import ChangeParams, TemplateDetector
 from stickslip.audio.change.drops import DROPS, DropParams
@@ -43,7 +44,6 @@ from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.confirm.onset import ONSET
 from stickslip.audio.detector import StopEvent, detector_for
 from stickslip.audio.features.spectra import subband_levels_db
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
 

@@ -30,10 +30,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import detector_for
-from stickslip.audio.tuning import TuningError, tune
+from stickslip.audio.tuning import TuningError
 from stickslip.audio.tuningfile import Tuning
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

@@ -27,11 +27,12 @@ from functools import cache
 import numpy as np
 import pytest
 from fan_sound import SR, Arm, Scene, render, tuning_scene
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
-from stickslip.audio.tuning import TuningError, tune
+from stickslip.audio.tuning import TuningError
 from stickslip.audio.tuningfile import Tuning
 
 STOP_S = 2.4

@@ -17,11 +17,11 @@ from functools import cache
 import battery_sound as bs  # noqa: E402
 import numpy as np
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector, confirming  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
 SR = 48_000

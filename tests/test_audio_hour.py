@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 from fan_sound import SR, Arm, render, tuning_scene
 from hour_sound import KINDS, Hour, spans, stream
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
 #: one worker tunes each joint once for this file and tests/test_audio_blocks.py

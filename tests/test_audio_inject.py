@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuning.inject import babble, click_train, knocks
 from stickslip.sim.sound import render_traverse_recording
 

@@ -26,12 +26,12 @@ import pytest
 from battery_sound import Scene, espeak_speech, render, variant  # noqa: E402
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.change import TemplateDetector  # noqa: E402
 from stickslip.audio.confirm import ConfirmedStopDetector, confirming  # noqa: E402
 from stickslip.audio.confirm.late import LatePath, onset_change_point, rate_moved  # noqa: E402
 from stickslip.audio.detector import StopEvent, Tuning, detect, detector_for  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 

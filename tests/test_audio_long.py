@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import pytest
 from battery_sound import Scene, render  # noqa: E402
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import Tuning, detect, detector_for  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 

@@ -18,13 +18,13 @@ from battery_sound import Scene, render, variant  # noqa: E402
 from hypothesis import given
 from hypothesis import strategies as st
 from scipy.signal import butter, sosfilt
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.change import ChangeParams  # noqa: E402
 from stickslip.audio.change.fit import masked_signature  # noqa: E402
 from stickslip.audio.change.template import TemplateParams  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.detector import Tuning, detect, detector_for  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 

@@ -14,9 +14,9 @@ from functools import cache
 import numpy as np
 import pytest
 from modal_sound import Scene, render
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.detector import detect
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

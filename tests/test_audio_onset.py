@@ -21,10 +21,11 @@ import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopEvent, detector_for
-from stickslip.audio.tuning import TuningError, tune
+from stickslip.audio.tuning import TuningError
 from stickslip.audio.tuningfile import Tuning
 from test_audio_rate_signature import tuned_alone
 

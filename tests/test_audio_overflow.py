@@ -17,11 +17,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 from typer.testing import CliRunner
 
 import stickslip.audio.sources as sources
 from stickslip.audio.sources import Microphone
-from stickslip.audio.tuning import tune
 from stickslip.procedures.session import traverse_on_device
 from stickslip.procedures.traverse import TraverseError
 from stickslip.sim.arm import SimulatedMM3A

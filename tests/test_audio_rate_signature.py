@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.change import TemplateDetector
 from stickslip.audio.change.rate import RATE
@@ -36,7 +37,6 @@ from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import StopEvent, detector_for
 from stickslip.audio.features.fine import SignaturePredictor, fine_spectrum_db
 from stickslip.audio.features.spectra import subband_edges, subband_levels_db
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

@@ -25,11 +25,11 @@ import numpy as np
 import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.change.release import RELEASE, Release  # noqa: E402
 from stickslip.audio.confirm import CONFIRM_S  # noqa: E402
 from stickslip.audio.detector import detect, detector_for  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

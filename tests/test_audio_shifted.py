@@ -28,10 +28,11 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector
 from stickslip.audio.detector import detector_for
-from stickslip.audio.tuning import TuneParams, TuningError, tune
+from stickslip.audio.tuning import TuneParams, TuningError
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 from test_audio_rate_signature import tuned_alone
 

@@ -26,6 +26,7 @@ from battery_sound import MODES, Scene, _bank, _impulses, _res, _train, render, 
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from scipy.signal import butter, lfilter
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.confirm.sync import SYNC, step_clock_verdict  # noqa: E402
@@ -42,7 +43,6 @@ from stickslip.audio.features.stepclock import (  # noqa: E402
     synchronous_change_db,
     widen_bands,
 )
-from stickslip.audio.tuning import tune  # noqa: E402
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 

@@ -28,12 +28,12 @@ import pytest
 import soundfile as sf
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)  # noqa: E402
 from typer.testing import CliRunner
 
 from stickslip.audio.confirm import CONFIRM_S, ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.confirm.pause import PAUSE, step_lines_db, tuned_change_db  # noqa: E402
 from stickslip.audio.detector import Tuning, detect, detector_for  # noqa: E402
-from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.cli import app  # noqa: E402
 from stickslip.procedures.traverse import TraverseError, TraverseResult, measure_traverse  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402

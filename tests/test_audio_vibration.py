@@ -15,12 +15,12 @@ import io
 import numpy as np
 import pytest
 from scipy.signal import lfilter
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.detector import detect, detector_for
 from stickslip.audio.readback import ReadbackStopDetector
 from stickslip.audio.sources import AudioSourceError, write_wav
 from stickslip.audio.sources.vibration import SerialSamples, read_vibration
-from stickslip.audio.tuning import tune
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 

@@ -25,10 +25,10 @@ from battery_sound import Scene, espeak_speech, render, variant
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.signal import lfilter
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.detector import StopEvent, detect, detector_for
 from stickslip.audio.features.spectra import SPECTRA, continuum_levels_db
-from stickslip.audio.tuning import tune
 from stickslip.audio.tuningfile import Tuning
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.detector import detector_for
 from stickslip.audio.sources.guard import NoSignalError, SignalGuard, block_problem
-from stickslip.audio.tuning import tune
 from stickslip.procedures.traverse import TraverseError, measure_traverse
 from stickslip.sim.arm import SimulatedMM3A
 

@@ -63,8 +63,9 @@ def test_latency_correction_with_a_known_delay(direction):
 
 def test_audio_latency_correction_on_the_simulated_microphone():
     """With the tuned audio switch the raw detection time overcounts; the onset fixes it."""
+    from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
+
     from stickslip.audio.detector import detector_for
-    from stickslip.audio.tuning import tune
 
     sim = SimulatedMM3A(seed=5, day=DAY)
     samples, rate, stop_at = sim.labelled_recording(3, "+", before_s=2.0, after_s=1.0)
@@ -96,8 +97,9 @@ def test_prismatic_round_trip_recovers_the_true_parameters():
     Tolerances: a within 0.5 %, b within 0.005, c within 2 % (per-step noise 3 % over
     >12 000 steps gives ~0.03 % on each count; the ripple ~1e-5).
     """
+    from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
+
     from stickslip.audio.detector import detector_for
-    from stickslip.audio.tuning import tune
 
     sim = SimulatedMM3A(seed=8, day=DAY)
     samples, rate, stop_at = sim.labelled_recording(3, "+")

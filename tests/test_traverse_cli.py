@@ -4,9 +4,9 @@ import json
 import math
 
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 from typer.testing import CliRunner
 
-from stickslip.audio.tuning import tune
 from stickslip.cli import app
 from stickslip.measurements import read_measurements
 from stickslip.sim.arm import SimulatedMM3A

@@ -13,9 +13,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.detector import Tuning, detector_for
-from stickslip.audio.tuning import tune
 from stickslip.procedures.traverse import TraverseResult, _count_before, measure_traverse
 from stickslip.sim.arm import SimulatedMM3A
 

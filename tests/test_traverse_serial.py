@@ -13,10 +13,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip import kinematics as kin
 from stickslip.audio.sources import vibration
-from stickslip.audio.tuning import tune
 from stickslip.procedures.session import traverse_on_device
 from stickslip.sim.arm import SimulatedMM3A
 
