@@ -2,8 +2,8 @@
 
 The generator is checked (a grain paints its level over the union of its lobes, the
 default frames are untouched, the mode's frames carry their truth), and the tracker is
-measured on a few of its frames: what holds now is asserted (docs/vision-log.md, fifth and
-sixth rounds).
+measured on a few of its frames: what holds now is asserted (docs/vision-log.md, fifth,
+sixth and seventh rounds).
 """
 
 from __future__ import annotations
