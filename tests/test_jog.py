@@ -181,6 +181,26 @@ def test_run_jog_on_the_simulator_with_scripted_keys():
     assert saved and shown[-1].sent == c.sent
 
 
+def test_a_late_tick_moves_as_two_ticks_at_most_not_by_the_stall():
+    """A machine that stalls 3 s in the middle of a held key: the tick after it moves the arm as two ticks would."""
+
+    def sent_with(times: list[float]) -> int:
+        sim = SimulatedMM3A(seed=4, day="2026-11-22", pose=OUT)
+        state = DeviceState("sim://", {1: OUT.q1, 2: OUT.q2, 3: OUT.q3}, dict.fromkeys((1, 2, 3), "set"))
+        c = ctl(speed_index=6, hold=0.0)
+        clock = iter(times)
+        script = [["w"]] + [[]] * 20 + [["q"]]
+        assert run_jog(sim, state, c, lambda t: script.pop(0), lambda s: None, lambda s: None,
+                       lambda: float(next(clock))) is None
+        return c.sent[0]
+
+    steady = list(np.arange(0.0, 100.0, 0.05))
+    stalled = steady[:20] + [t + 3.0 for t in steady[20:]]  # 3 s between two readings of the clock
+    per_tick = sent_with(steady) / 20  # about 20 ticks of motion
+    assert per_tick > 2
+    assert abs(sent_with(stalled) - sent_with(steady)) <= 1.5 * per_tick  # at most one tick more (3 s: 60 ticks)
+
+
 # ---------------------------------------------------------------- through a pseudo-terminal
 
 

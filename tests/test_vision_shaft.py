@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from stickslip.sim.camera import SimCamSettings, SimScene
-from stickslip.vision.shaft import BACK_FROM, BACK_STEP, check_shaft, learn_shaft
+from stickslip.vision.shaft import ALONG_LIMIT, ALONG_SIGMAS, BACK_FROM, BACK_STEP, check_shaft, learn_shaft
 from stickslip.vision.template import TipTemplate, TrackerParams
 
 SHAFT = np.array([-1.0, 0.15])
@@ -53,3 +53,22 @@ def test_the_shaft_holds_behind_the_tip_and_not_beside_it(look):
     side = (TIP[0] - 5.0 * u[1], TIP[1] + 5.0 * u[0])  # 5 px across the shaft
     off = check_shaft(sp, 0, frame, *side, 0.0)
     assert off is not None and off.shape < 0.9, off
+
+
+@pytest.mark.parametrize("look", ["optical", "sem"])
+def test_the_taper_says_how_far_along_the_axis_a_candidate_lies_from_the_tip(look):
+    """The needle widens away from its tip: the shaft behind a candidate displaced along the axis is the
+    first frame's taper shifted. At the tip the taper shows no displacement; 5 px ahead of the tip or behind
+    it, a displacement of the right sign, at 60 to 95 % of its size (the taper's first-order model)."""
+    scene, sp = _profiles(look)
+    frame = scene.render(np.array(TIP), SHAFT, 1.0)
+    u = SHAFT / np.hypot(*SHAFT)  # from the tip back along the needle
+    at = check_shaft(sp, 0, frame, *TIP, 0.0)
+    assert at is not None and abs(at.along) <= 0.6 and at.along_sd < 0.25, at
+    ahead = check_shaft(sp, 0, frame, TIP[0] - 5.0 * u[0], TIP[1] - 5.0 * u[1], 0.0)
+    behind = check_shaft(sp, 0, frame, TIP[0] + 5.0 * u[0], TIP[1] + 5.0 * u[1], 0.0)
+    assert ahead is not None and -4.75 <= ahead.along <= -3.0, ahead  # the tip behind the candidate
+    assert behind is not None and 3.0 <= behind.along <= 4.75, behind
+    # the candidate behind the tip is refused (ALONG_LIMIT + ALONG_SIGMAS standard deviations); at the tip it is not
+    assert abs(behind.along) > ALONG_LIMIT + ALONG_SIGMAS * behind.along_sd
+    assert abs(at.along) < ALONG_LIMIT + ALONG_SIGMAS * at.along_sd

@@ -509,7 +509,8 @@ def run_jog(
 
     ``read_keys(timeout)`` waits up to ``timeout`` seconds and returns key names;
     ``show(status)`` draws; ``save(state)`` stores the positions; ``clock()`` is a
-    monotonic time in seconds. Returns the device error that ended the session, if any.
+    monotonic time in seconds; a tick is ``tick`` s, and a late one moves as two ticks at most
+    (no lurch after a stall). Returns the device error that ended the session, if any.
     The device is told to stop when the loop ends, however it ends. With ``eyes`` (a
     camera, :class:`~stickslip.procedures.closed_loop.JogEyes`) the tip is looked at as
     it moves and the positions shown are the seen ones.
@@ -524,7 +525,9 @@ def run_jog(
                 if key == "space":
                     dev.stop()
             t = clock()
-            steps = controller.tick(t, t - t_prev)
+            # a tick that comes late (a busy machine, a slow device) moves as two ticks at most: after a stall the
+            # arm does not lurch by the stall's worth of motion, and the envelope is approached a tick at a time
+            steps = controller.tick(t, min(t - t_prev, 2.0 * tick))
             t_prev = t
             for j in (1, 2, 3):
                 n = steps[j - 1]

@@ -15,6 +15,16 @@ profile's contrast against the first frame's (1 for the shaft as first seen, 0 f
 ground) and their correlation (near 1 where the two edges are where the first frame had
 them).
 
+The same stations also say where the needle *ends*, through its taper: a needle widens
+away from its tip, so the profile at ``s`` px behind a fix displaced by ``d`` px along
+the axis is the first frame's at ``s - d``. At each station the frame's profile is fitted
+(least squares) by the first frame's ``e``, its derivative along the shaft ``de/ds`` and
+its second derivative across the shaft (a blur's change; the heat equation), ``a e + b
+de/ds + c e''``; ``b / a`` is the displacement (minus ``d``), and the stations' median is
+compared with :data:`ALONG_LIMIT` plus :data:`ALONG_SIGMAS` standard deviations. It sees
+a fix the shaft's position cannot: one moved along the needle's axis (a grain as dark as
+the needle prolonging it, its end taken for the tip).
+
 The first frame's profiles are learnt from the frame itself, beyond the template's
 window; the blur copies' profiles are the first frame's smoothed across the shaft (the
 shaft is straight over a station's lines: a Gaussian blur of the image is the same blur
@@ -30,7 +40,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-__all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO", "learn_shaft", "check_shaft"]
+__all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO", "ALONG_LIMIT", "ALONG_SIGMAS",
+           "learn_shaft", "check_shaft"]
 
 FloatArray = NDArray[np.float64]
 
@@ -62,6 +73,16 @@ REACH = 48.0
 
 PAD = 12.0
 """Samples beyond the ground on each side, px: room for smoothing the frame's profile across the shaft."""
+
+ALONG_STEP = 3.0
+"""Half the span along the shaft over which the first frame's profiles are differenced (their taper), px."""
+
+ALONG_LIMIT = 3.0
+"""Largest displacement of a fix along the needle's axis that its taper may show, px (issue 30: a fix more than
+3 px from the tip is a defect)."""
+
+ALONG_SIGMAS = 3.0
+"""... plus this many standard deviations of the taper's estimate (from the pixel noise at the stations)."""
 
 GAP_ACROSS = 12.0
 """Gaps in a needle's run across the shaft up to this wide are closed, px (an SEM needle's middle can sink
@@ -104,6 +125,12 @@ class ShaftProfiles:
         Every sample of every line, its offset from the tip (x, y; px, before a turn).
     valid_f, invalid : ndarray, shape (m, 1, n)
         :attr:`valid` as 1 and 0, and its negation, shaped as the gathered samples.
+    basis : list of ndarray, shape (m, 3, n)
+        For each blur copy, what a station's profile is fitted with for the taper: :attr:`e`,
+        its derivative along the shaft (per px behind the tip) and its second derivative
+        across the shaft (px⁻²), level and slope taken out.
+    gram_inv : list of ndarray, shape (m, 3, 3)
+        The inverses of their Gram matrices (NaN where singular).
     """
 
     shaft: tuple[float, float]
@@ -120,6 +147,8 @@ class ShaftProfiles:
     lines: FloatArray
     valid_f: FloatArray
     invalid: NDArray[np.bool_]
+    basis: list[FloatArray]
+    gram_inv: list[FloatArray]
 
 
 @dataclass(frozen=True)
@@ -136,12 +165,18 @@ class ShaftCheck:
         The furthest station compared, px behind the tip.
     n : int
         Stations compared.
+    along, along_sd : float
+        The displacement of the candidate from the tip along the needle's axis that the
+        taper shows (the median of the stations'; negative: the tip lies behind the
+        candidate, towards the shaft), px, and its standard deviation from the pixel noise.
     """
 
     back: float
     shape: float
     reach: float
     n: int
+    along: float = 0.0
+    along_sd: float = math.inf
 
 
 def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -201,8 +236,13 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
         return ShaftProfiles(shaft, np.zeros(0), np.zeros((0, 0, 2)), np.zeros((0, 2 * SHIFTS + 1, 0), dtype=np.intp),
                              np.zeros((0, 2 * SHIFTS + 1), dtype=bool), np.zeros((0, 0), dtype=bool), z, np.zeros(0),
                              [z] * n_copies, [np.zeros(0)] * n_copies, [None] * n_copies, np.zeros((2, 0)),
-                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool))
-    return _assemble(shaft, ts, offs, raws, widths, kept, smooth)
+                             np.zeros((0, 1, 0)), np.zeros((0, 1, 0), dtype=bool), [np.zeros((0, 3, 0))] * n_copies,
+                             [np.zeros((0, 3, 3))] * n_copies)
+    # the same lines ALONG_STEP px nearer the tip and further from it: the profiles' change along the shaft (taper)
+    ux, uy = shaft
+    nearer, further = ([_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
+                        for o in offs] for d in (-ALONG_STEP, ALONG_STEP))
+    return _assemble(shaft, ts, offs, (raws, nearer, further), widths, kept, smooth)
 
 
 def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float, spread: float,
@@ -261,9 +301,11 @@ def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, flo
     return offs, raws, widths, kept
 
 
-def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray], raws: list[FloatArray],
-              widths: list[float], kept: list[float], smooth: list[tuple[float, float]]) -> ShaftProfiles:
-    """:func:`learn_shaft`'s profiles from the stations followed: what a check gathers and compares."""
+def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray],
+              raws: tuple[list[FloatArray], list[FloatArray], list[FloatArray]], widths: list[float],
+              kept: list[float], smooth: list[tuple[float, float]]) -> ShaftProfiles:
+    """:func:`learn_shaft`'s profiles from the stations followed (``raws``: at the stations, :data:`ALONG_STEP`
+    px nearer the tip and further from it): what a check gathers and compares."""
     ux, uy = shaft
     # the samples a check needs: the widest station's needle and ground, the shifts, and room to smooth
     reach = max(0.5 * w + GROUND for w in widths) + SHIFTS * STEP + 3.0 * max(f for _, f in smooth)
@@ -282,16 +324,30 @@ def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray]
     k = starts[:, None, None] + j_[None, None, :] + d[None, :, None]  # (m, shifts, lmax)
     shift_ok = np.asarray((((k >= 0) & (k < q)) | ~valid[:, None, :]).all(axis=2), dtype=bool)
     gather = np.arange(m)[:, None, None] * q + np.clip(k, 0, q - 1)
-    raw_a = np.stack(raws)
-    es, ves = [], []
-    for tsig, _ in smooth:
-        ex = ndimage.gaussian_filter1d(raw_a, tsig / STEP, axis=1, mode="nearest")[:, k0 : k0 + q]
-        e = ex.take(np.arange(m)[:, None] * q + np.clip(starts[:, None] + j_[None, :], 0, q - 1))
+    take = np.arange(m)[:, None] * q + np.clip(starts[:, None] + j_[None, :], 0, q - 1)
+
+    def flat(raw: FloatArray, tsig: float) -> FloatArray:
+        """Profiles smoothed by ``tsig`` px, gathered, their level and slope taken out."""
+        e = ndimage.gaussian_filter1d(raw, tsig / STEP, axis=1, mode="nearest")[:, k0 : k0 + q].take(take)
         e = np.where(valid, e, 0.0)
         e = e - np.where(valid, e.sum(axis=1, keepdims=True) / lengths[:, None], 0.0)
-        e -= (e * tc).sum(axis=1, keepdims=True) * tc
+        return np.asarray(e - (e * tc).sum(axis=1, keepdims=True) * tc)
+
+    es, ves, bases, grams = [], [], [], []
+    for tsig, _ in smooth:
+        e = flat(np.stack(raws[0]), tsig)
         es.append(e)
         ves.append((e * e).sum(axis=1))
+        de = (flat(np.stack(raws[2]), tsig) - flat(np.stack(raws[1]), tsig)) / (2.0 * ALONG_STEP)
+        ett = np.where(valid, np.gradient(np.gradient(e, STEP, axis=1), STEP, axis=1), 0.0)
+        ett = ett - np.where(valid, ett.sum(axis=1, keepdims=True) / lengths[:, None], 0.0)
+        basis = np.stack([e, de, ett - (ett * tc).sum(axis=1, keepdims=True) * tc], axis=1)
+        gram = np.einsum("kin,kjn->kij", basis, basis)
+        ok = np.abs(np.linalg.det(gram)) > 1e-30
+        inv = np.full(gram.shape, np.nan)
+        inv[ok] = np.linalg.inv(gram[ok])
+        bases.append(basis)
+        grams.append(inv)
     offsets = np.stack(offs)[:, k0 : k0 + q]
     d_lines = np.asarray(LINES)
     lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
@@ -302,7 +358,7 @@ def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray]
             kernels[f] = ndimage.gaussian_filter1d(np.eye(q), f / STEP, axis=1, mode="nearest")
     return ShaftProfiles(shaft, np.array(kept), offsets, gather, shift_ok, valid, tc, lengths.astype(float), es, ves,
                          [kernels.get(f) for _, f in smooth], lines, valid[:, None, :].astype(float),
-                         ~valid[:, None, :])
+                         ~valid[:, None, :], bases, grams)
 
 
 def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: float, theta: float
@@ -343,5 +399,29 @@ def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: fl
     if int(seen.sum()) < 3:
         return None
     a = cov[rows, best][seen] / ve[seen]
+    along, along_sd = _taper(sp, copy, G[rows, best][seen], vf[rows, best][seen], seen)
     return ShaftCheck(_median(a), _median(r[rows, best][seen]), float(sp.s[seen].max()),
-                      int(seen.sum()))
+                      int(seen.sum()), along, along_sd)
+
+
+def _taper(sp: ShaftProfiles, copy: int, G: FloatArray, vf: FloatArray, seen: NDArray[np.bool_]
+           ) -> tuple[float, float]:
+    """The displacement along the axis that the stations' profiles ``G`` (at their best shifts; ``vf`` their sums
+    of squares with level and slope taken out) show through the taper, px (the median of the stations'), and its
+    standard deviation; ``(0, inf)`` when fewer than three stations say."""
+    basis, inv = sp.basis[copy][seen], sp.gram_inv[copy][seen]
+    # the basis has no level nor slope: G's own drop out of its products with it
+    rhs = np.einsum("kin,kn->ki", basis, G)
+    sol = np.einsum("kij,kj->ki", inv, rhs)
+    a, b = sol[:, 0], sol[:, 1]
+    n = sp.lengths[seen]
+    s2 = np.maximum(vf - (sol * rhs).sum(axis=1), 0.0) / np.maximum(n - 4.0, 1.0)
+    good = np.isfinite(a) & (np.abs(a) > 1e-9)
+    if int(good.sum()) < 3:
+        return 0.0, math.inf
+    a, b, s2, inv = a[good], b[good], s2[good], inv[good]
+    d = b / a
+    # the ratio's variance, to first order, from the fit's covariance s2 * inv
+    var = s2 * (inv[:, 1, 1] + d * d * inv[:, 0, 0] - 2.0 * d * inv[:, 0, 1]) / (a * a)
+    w = 1.0 / np.maximum(var, 1e-6)
+    return _median(d), float(1.0 / math.sqrt(float(w.sum())))

@@ -26,7 +26,9 @@
    blob) or fade right behind the tip (*occluded*: something over it, or the fit ahead
    of it); where they hold, **the shaft further back** (:mod:`.shaft`, as far as the
    first frame showed the needle) must be where the first frame had it (*lost*: the fit
-   took the end of something over the tip, a grain's lobe, for the tip);
+   took the end of something over the tip, a grain's lobe, for the tip), and its taper
+   must put the tip within 3 px (plus 3 standard deviations) of the fix along the axis
+   (*occluded*: a grain as dark as the needle prolongs it, its end taken for the tip);
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
@@ -49,7 +51,7 @@ from scipy import ndimage
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
-from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
+from .shaft import ALONG_LIMIT, ALONG_SIGMAS, ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 
 __all__ = [
@@ -230,6 +232,9 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
         return Lost("lost", f"the needle's shaft {sc.reach:.0f} px behind the tip is not where the first frame "
                             f"had it (contrast {sc.back:.2f}, profiles correlate by {sc.shape:.2f}; needs "
                             f"{p.edge_contrast:g}, {p.edge_shape:g})")
+    if sc is not None and abs(sc.along) > ALONG_LIMIT + ALONG_SIGMAS * sc.along_sd:
+        return Lost("occluded", f"the needle's taper puts its end {abs(sc.along):.1f} px "
+                                f"{'behind' if sc.along < 0 else 'ahead of'} the fit's tip (+-{sc.along_sd:.1f} px)")
     if ec is None:
         return None
     if ec.far < p.edge_contrast:
