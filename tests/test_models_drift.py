@@ -12,6 +12,7 @@ from analysis_tables import simulated_table
 from stickslip.calibration import Calibration, calibrate
 from stickslip.calibration.drift import session_drift
 from stickslip.calibration.intervals import STEP_NOISE, relative_sd
+from stickslip.calibration.selection import NO_REPEAT_NOTE
 from stickslip.measurements import Traverse
 
 DAY = "2026-10-05"
@@ -93,6 +94,8 @@ def test_a_calibration_with_a_repeat_widens_its_intervals_by_the_drift_and_keeps
     assert (pr.drift, pr.drift_sd) == (dr.bias, dr.bias_sd) and pr.drift > 0.0
     assert cal.predictive[(3, "-")].drift == 0.0  # no - traverse was repeated
     assert any("traversed again" in n and "3+" in n for n in cal.provenance.notes)
+    # without a repeat calibrate says once that the intervals leave the drift out, and how to measure it
+    assert plain.provenance.notes.count(NO_REPEAT_NOTE) == 1 and NO_REPEAT_NOTE not in cal.provenance.notes
     # the interval: the error model's sd and the drift in quadrature, at any pose
     q2 = np.linspace(-3.0, 0.0, 7)
     zero = np.zeros_like(q2)

@@ -560,6 +560,8 @@ def calibrate_families(
         data = groups.joint_data(j)
         drifts = session_drifts(groups, j, STEP_NOISE)
         parts.add(data, select_joint(data, None if model == "auto" else [model], progress=part), drifts)
+    if parts.predictive and not parts.drifted:
+        parts.notes.append(NO_REPEAT_NOTE)
     for (j, d), m in parts.models.items():
         try:
             m.check_physical()
@@ -596,6 +598,7 @@ class _Parts:
         self.selection: dict[tuple[int, str], dict[str, object]] = {}
         self.predictive: dict[tuple[int, str], Predictive] = {}
         self.notes: list[str] = []
+        self.drifted = False  # a repeated pose measured some joint's drift within its session
 
     def add(self, data: JointData, sel: JointSelection, drifts: Mapping[str, SessionDrift | None]) -> None:
         """The models, uncertainties and selection record of one joint's directions (``drifts``: each
@@ -619,6 +622,7 @@ class _Parts:
                 self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept, GROWTH, bias, bias_sd)
                 if drift is not None:
                     self.notes.append(_drift_note(j, d, drift))
+                    self.drifted = True
             c = fit.cov[d]
             if c is not None:
                 self.cov[(j, d)] = c
@@ -634,6 +638,14 @@ class _Parts:
                 "cv_rms": sel.cv_rms if math.isfinite(sel.cv_rms) else None,
             }
         self.notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
+
+
+NO_REPEAT_NOTE = (
+    "no pose was traversed twice in a session: the intervals leave out the step's drift within it "
+    "(a joint warming up); traverse the first pose again at the end of the session to measure it "
+    "(docs/models.md §4)"
+)
+"""What ``calibrate`` says when its intervals could include the drift within a session but no repeat measured it."""
 
 
 def _drift_note(joint: int, direction: str, drift: SessionDrift) -> str:
