@@ -25,6 +25,10 @@ grains of 2 to 4 discs, 1 to 2.5 times the tip's width, darker or lighter than t
 needle, over the tip; tips 4 to 12 px inside the field's edge): the fixes more than 3 px
 off and the worst, and the verdicts by what the frame is (``FRAMES`` default 400), for tips
 3 to 20 px in both looks, then for wide tips (14 to 18 px) in bright field.
+
+``--flake`` does the same in the own renderer's flake mode (``flake_benchmark``: a flat,
+nearly opaque chip with rounded corners stuck on the tip for 1 to 4 frames, reaching 0.9
+to 1.5 tip widths from its middle, sharper than the needle; ``FRAMES`` default 200).
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
-from vision_own import OwnFrame, lobed_benchmark  # noqa: E402
+from vision_own import OwnFrame, flake_benchmark, lobed_benchmark  # noqa: E402
 from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.devices.base import DeviceInfo  # noqa: E402
@@ -122,7 +126,7 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
     """What a lobed-mode frame is, for the tally: its kind, cause, and a visible tip's room to the edge."""
     kind, cause = f.kind, f.cause
     if kind == "occluded":
-        return "occluded by a lobed grain" if cause == "lobed" else "occluded by a disc"
+        return {"lobed": "occluded by a lobed grain", "flake": "occluded by a flake"}.get(cause, "occluded by a disc")
     if kind != "visible":
         return kind
     x, y = f.tip
@@ -130,14 +134,16 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
     return "visible, 4-10 px inside" if room < 10.0 else "visible, 10+ px inside"
 
 
-def lobed(n_frames: int, wide: bool = False) -> int:
+def lobed(n_frames: int, wide: bool = False, flake: bool = False) -> int:
     """Track the own renderer's lobed-mode frames; the number of fixes more than 3 px off.
 
     ``wide``: bright field only, tips 14 to 18 px wide (seed 1), as the second renderer's
-    worst fixes were; else tips 3 to 20 px, both looks (seed 0).
+    worst fixes were; else tips 3 to 20 px, both looks (seed 0). ``flake``: the flake
+    mode's frames instead.
     """
-    seqs = (lobed_benchmark(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
-            else lobed_benchmark(n_frames, 40, seed=0, size=256))
+    make = flake_benchmark if flake else lobed_benchmark
+    seqs = (make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
+            else make(n_frames, 40, seed=0, size=256))
     tally: dict[tuple[str, str], int] = {}
     bad: list[tuple[float, int, int, str, float]] = []
     errors: list[float] = []
@@ -257,6 +263,12 @@ def main(argv: list[str] | None = None) -> None:
         lobed(int(numbers[0]) if numbers else 400)
         print("\nthe same, bright field only, tips 14 to 18 px wide")
         lobed(int(numbers[0]) if numbers else 400, wide=True)
+        return
+    if "--flake" in args:
+        print("tip tracking on the own renderer's frames with flat chips stuck on the tip")
+        lobed(int(numbers[0]) if numbers else 200, flake=True)
+        print("\nthe same, bright field only, tips 14 to 18 px wide")
+        lobed(int(numbers[0]) if numbers else 200, wide=True, flake=True)
         return
     n = int(numbers[0]) if numbers else 500
     print("1. tip tracking on the second renderer's frames")

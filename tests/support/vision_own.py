@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from stickslip.sim.camera import LobedParticle, SimCamSettings, SimScene
+from stickslip.sim.camera import Flake, LobedParticle, SimCamSettings, SimScene
 
-__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "KINDS"]
+__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "flake_benchmark", "KINDS"]
 
 KINDS = ("visible", "out", "occluded", "defocused")
 
@@ -45,7 +45,8 @@ class OwnFrame:
     kind: str
     blur: float
     cause: str = ""
-    """What the lobed mode did to the frame: ``lobed`` (a lobed grain over the tip), ``edge``."""
+    """What the lobed mode did to the frame: ``lobed`` (a lobed grain over the tip), ``edge``;
+    the flake mode: ``flake`` (a flake stuck on the tip)."""
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,7 @@ class OwnSequence:
 
 def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None = None, look: str | None = None,
                  photons: float | None = None, max_blur: float = 3.0, events: bool = True,
-                 event_rate: float = 0.08, lobed_rate: float = 0.0) -> OwnSequence:
+                 event_rate: float = 0.08, lobed_rate: float = 0.0, flake_rate: float = 0.0) -> OwnSequence:
     """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
 
     ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
@@ -71,6 +72,9 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     event starts another with that probability: a lobed grain over the tip, or the tip
     4 to 12 px inside the field's edge; the tip then roams to 4 px of the edge. Its draws
     come from a stream of their own: the motion and the other events stay as without it.
+    With ``flake_rate`` > 0 (the flake mode, :class:`_Flakes`), a visible frame untouched
+    by the other events starts, with that probability, a flake stuck on the tip for 1 to 4
+    frames (its own stream too).
     """
     rng = np.random.default_rng([seed, 31337])
     look = look or ("optical", "sem")[int(rng.integers(0, 2))]
@@ -82,6 +86,7 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     phi0 = float(rng.uniform(-math.pi, math.pi))  # the shaft's direction from the tip
     pivot = float(rng.uniform(100.0, 1000.0))
     extras = _Extras(seed, lobed_rate, W, look, size) if lobed_rate > 0 else None
+    chips = _Flakes(seed, flake_rate, W, look) if flake_rate > 0 else None
     edge_in = EDGE_IN if extras is None else EDGE_IN_LOBED
     lo, hi = edge_in, size - 1 - edge_in
     tip = rng.uniform(0.3, 0.7, 2) * size
@@ -120,8 +125,11 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
         cause = ""
         if extras is not None:
             kind, cause, grains = extras.frame(k, kind, apex, tip, direction)
+        flakes: tuple[Flake, ...] = ()
+        if chips is not None:
+            kind, cause, flakes = chips.frame(k, kind, cause, apex, direction)
         shift = shift + drift_v + rng.normal(0.0, 0.02, 2)
-        image = scene.render(apex, direction, sigma, shift, 1.0, particles, grains)
+        image = scene.render(apex, direction, sigma, shift, 1.0, particles, grains, flakes)
         frames.append(OwnFrame(image, (float(apex[0]), float(apex[1])), kind, float(sigma), cause))
         # the next frame: the arm holds, glides or jumps; the needle turns about a point far up its shaft
         u = rng.random()
@@ -227,6 +235,83 @@ class _Extras:
         return tuple(discs), level, float(xr.uniform(0.0, 1.5))
 
 
+class _Flakes:
+    """The flake mode's events: a flat chip picked up by the tip, carried for 1 to 4 frames.
+
+    A chip of a coating or a crystal is flat, straight-sided and nearly opaque; one the
+    tip picks up swallows its end and moves and turns with it. The outline: a convex
+    polygon of 3 to 6 corners spread round an ellipse (its short axis 0.35 to 1 times its
+    long one: a sliver at the one end), grown by a rounding of 0.2 to 0.5 of its reach.
+    Half the chips lie along the needle (within 20 degrees: dragged along), the others any
+    way. It reaches 0.9 to 1.5 times the tip's width (at least 7 px) from its middle, which
+    lies within 0.4 of that reach of the apex, the apex at least 0.3 tip widths inside the
+    outline. Far darker than the needle in bright field; in an SEM dark or (an insulator
+    charging) bright; sharper than the needle (the outline softened by at most 0.8 px).
+    Events start from frame 3, on visible frames the other events left alone.
+    """
+
+    def __init__(self, seed: int, rate: float, width_px: float, look: str) -> None:
+        self.rng = np.random.default_rng([seed, 2718])
+        self.rate, self.W, self.look = rate, width_px, look
+        self.left = 0
+        self.shape: tuple[tuple[tuple[float, float], ...], float, float, float] = ((), 0.0, 0.0, 0.0)
+
+    def frame(self, k: int, kind: str, cause: str, apex: NDArray[np.float64],
+              direction: NDArray[np.float64]) -> tuple[str, str, tuple[Flake, ...]]:
+        """Frame ``k``'s kind, cause and flakes (the chip's corners kept in the needle's frame)."""
+        if self.left == 0 and k > 2 and kind == "visible" and not cause and self.rng.random() < self.rate:
+            self.left = int(self.rng.integers(1, 5))
+            self.shape = self._chip()
+        if self.left == 0:
+            return kind, cause, ()
+        self.left -= 1
+        if kind != "visible" or cause:
+            return kind, cause, ()
+        corners, rounding, level, blur = self.shape
+        u = direction / max(float(np.hypot(*direction)), 1e-12)  # along the shaft
+        v = np.array([-u[1], u[0]])
+        placed = tuple((float(apex[0] + a * u[0] + b * v[0]), float(apex[1] + a * u[1] + b * v[1]))
+                       for a, b in corners)
+        return "occluded", "flake", (Flake(placed, rounding, level, blur),)
+
+    def _chip(self) -> tuple[tuple[tuple[float, float], ...], float, float, float]:
+        """Corners relative to the apex in the needle's frame (along, across; px), rounding, level, blur."""
+        xr = self.rng
+        reach = max(7.0, float(xr.uniform(0.9, 1.5)) * self.W)
+        rounding = float(xr.uniform(0.2, 0.5)) * reach
+        r = reach - rounding
+        for _ in range(50):  # drawn again until the apex lies deep enough inside (a few draws at most)
+            n = int(xr.integers(3, 7))
+            angles = (np.arange(n) + xr.uniform(-0.2, 0.2, n)) * (2.0 * math.pi / n) + float(xr.uniform(0.0, math.pi))
+            # a sliver dragged along by the needle lies along it (half the chips); the others any way
+            along = xr.random() < 0.5
+            slant = float(xr.uniform(-0.35, 0.35) if along else xr.uniform(0.0, math.pi))
+            squash = float(xr.uniform(0.35, 1.0))
+            c, s = math.cos(slant), math.sin(slant)
+            off = xr.normal(0.0, 0.25 * reach, 2)
+            off *= min(1.0, 0.4 * reach / max(float(np.hypot(*off)), 1e-9))
+            pts = [(r * math.cos(t), squash * r * math.sin(t)) for t in angles]
+            moved = tuple((c * x - s * y + float(off[0]), s * x + c * y + float(off[1])) for x, y in pts)
+            if _depth(moved, rounding) >= 0.3 * self.W:
+                break
+        dark = self.look == "optical" or xr.random() < 0.5
+        level = float(xr.uniform(0.0, 0.08) if dark else xr.uniform(0.8, 1.0))
+        return moved, rounding, level, float(xr.uniform(0.0, 0.8))
+
+
+def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
+    """How far the origin lies inside a convex polygon grown by ``rounding`` (px; negative: outside)."""
+    pts = np.asarray(corners, dtype=float)
+    best, inside = math.inf, True
+    area = float(np.sum(pts[:, 0] * np.roll(pts[:, 1], -1) - np.roll(pts[:, 0], -1) * pts[:, 1]))
+    for a, b in zip(pts, np.roll(pts, -1, axis=0), strict=True):
+        e = b - a
+        t = float(np.clip(-a @ e / max(float(e @ e), 1e-12), 0.0, 1.0))
+        best = min(best, float(np.hypot(*(a + t * e))))
+        inside &= math.copysign(1.0, area) * float(e[0] * -a[1] - e[1] * -a[0]) >= 0.0
+    return rounding + (best if inside else -best)
+
+
 def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256) -> list[OwnSequence]:
     """Sequences of ``per_sequence`` frames, tip widths spread over 3..20 px, looks alternating."""
     n_seq = max(1, n_frames // per_sequence)
@@ -246,3 +331,16 @@ def lobed_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, 
     ws = np.linspace(widths[0], widths[1], n_seq)
     return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
                          lobed_rate=lobed_rate) for i in range(n_seq)]
+
+
+def flake_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
+                    flake_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
+                    looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
+    """:func:`own_benchmark`'s sequences in the flake mode (flat chips stuck on the tip).
+
+    Tip widths spread over ``widths`` (px), the looks taken in turn.
+    """
+    n_seq = max(1, n_frames // per_sequence)
+    ws = np.linspace(widths[0], widths[1], n_seq)
+    return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
+                         flake_rate=flake_rate) for i in range(n_seq)]

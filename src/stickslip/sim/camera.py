@@ -42,7 +42,7 @@ from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_optio
 from ..vision.frame import Frame
 from ..vision.view import View, project
 
-__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "open_url", "LOOKS"]
+__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "open_url", "LOOKS"]
 
 LOOKS = ("optical", "sem")
 """The simulated microscope's looks."""
@@ -245,6 +245,34 @@ class LobedParticle:
     blur: float = 0.0
 
 
+@dataclass(frozen=True)
+class Flake:
+    """A flat flake with rounded corners lying over the needle: an opaque chip, not a clump.
+
+    Chips of a broken coating or a cleaved crystal are flat and straight-sided; a flake the
+    tip has picked up sits on it and moves with it. Its outline is a convex polygon grown
+    by ``rounding`` (every point within ``rounding`` of the polygon: straight sides joined
+    by arcs), lying closer to the objective than the needle's end, so it is as sharp as
+    ``blur`` says whatever the needle's focus.
+
+    Parameters
+    ----------
+    corners : tuple of (x, y)
+        The polygon's corners, px, in order around it (convex).
+    rounding : float
+        How far the outline lies outside the polygon, px (the corners' radius).
+    level : float
+        Its brightness as a share of the illumination, as :class:`LobedParticle`'s.
+    blur : float
+        The Gaussian sigma of its outline, px.
+    """
+
+    corners: tuple[tuple[float, float], ...]
+    rounding: float
+    level: float
+    blur: float = 0.0
+
+
 class SimScene:
     """What the simulated microscope renders, apart from the arm: substrate, needle, look, noise.
 
@@ -283,7 +311,8 @@ class SimScene:
     def render(self, tip_px: NDArray[np.float64], direction: NDArray[np.float64], sigma: float,
                shift: NDArray[np.float64] | None = None, foreshortening: float = 1.0,
                particles: tuple[tuple[float, float, float], ...] = (),
-               lobed: tuple[LobedParticle, ...] = ()) -> NDArray[np.float64]:
+               lobed: tuple[LobedParticle, ...] = (),
+               flakes: tuple[Flake, ...] = ()) -> NDArray[np.float64]:
         """A noisy frame, grey values in [0, 1].
 
         Parameters
@@ -303,6 +332,8 @@ class SimScene:
             as bright as its edges in an SEM.
         lobed : tuple of LobedParticle
             Grains of a few lobes over everything, painted after ``particles``.
+        flakes : tuple of Flake
+            Flat chips with rounded corners over everything, painted last.
         """
         s = self.settings
         tip_px = np.asarray(tip_px, dtype=float)
@@ -324,6 +355,8 @@ class SimScene:
             clean = clean * (1.0 - disc) + level * self.illumination * disc
         for grain in lobed:
             clean = self._paint_lobed(clean, grain)
+        for flake in flakes:
+            clean = self._paint_flake(clean, flake)
         lam = np.clip(clean, 0.0, None) * s.photons
         counts = self.rng.poisson(lam).astype(float)
         if s.look == "sem":  # the beam's line-by-line jitter
@@ -338,6 +371,25 @@ class SimScene:
         if grain.blur > 0.3:
             cover = ndimage.gaussian_filter(cover, grain.blur, truncate=3.0)
         return np.asarray(clean * (1.0 - cover) + grain.level * self.illumination * cover, dtype=float)
+
+    def _paint_flake(self, clean: NDArray[np.float64], flake: Flake) -> NDArray[np.float64]:
+        """``clean`` with ``flake`` over it: coverage from the distance to its polygon (anti-aliased)."""
+        xx, yy = self._xx, self._yy
+        pts = np.asarray(flake.corners, dtype=float)
+        nxt = np.roll(pts, -1, axis=0)
+        sense = float(np.sign(np.sum(pts[:, 0] * nxt[:, 1] - nxt[:, 0] * pts[:, 1])) or 1.0)
+        dist = np.full_like(clean, np.inf)
+        inside = np.ones(clean.shape, dtype=bool)
+        for (ax, ay), (bx, by) in zip(pts, nxt, strict=True):
+            ex, ey = bx - ax, by - ay
+            t = np.clip(((xx - ax) * ex + (yy - ay) * ey) / max(ex * ex + ey * ey, 1e-12), 0.0, 1.0)
+            dist = np.minimum(dist, np.hypot(xx - ax - t * ex, yy - ay - t * ey))
+            inside &= sense * (ex * (yy - ay) - ey * (xx - ax)) >= 0.0  # on the polygon's side of this edge
+        signed = np.where(inside, -dist, dist)
+        cover = np.clip(flake.rounding + 0.5 - signed, 0.0, 1.0)
+        if flake.blur > 0.3:
+            cover = ndimage.gaussian_filter(cover, flake.blur, truncate=3.0)
+        return np.asarray(clean * (1.0 - cover) + flake.level * self.illumination * cover, dtype=float)
 
     def _needle(self, tip: NDArray[np.float64], direction: NDArray[np.float64],
                 foreshortening: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
