@@ -475,3 +475,45 @@ def test_a_database_carries_stickslips_application_id_and_one_made_before_it_is_
     with pytest.raises(StoreError, match="another application"):
         Store.open(p)
     assert p.read_bytes() == before
+
+
+def test_a_file_another_process_is_making_is_looked_at_again_not_refused(tmp_path, monkeypatch):
+    """Another stickslip process makes the file (id, version and tables in one transaction) while this one looks:
+    the header read before its tables still says version 0, the tables are stickslip's. Looked at again, it is ours;
+    a file that changes at every look is refused in one line."""
+    from stickslip.storage import sqlite as backend
+
+    p = tmp_path / "s.db"
+    with Store.open(p):
+        pass
+    stamp = (backend.APPLICATION_ID, SCHEMA_VERSION)
+
+    def set_header(app_id: int, version: int) -> None:
+        con = sqlite3.connect(p)
+        con.execute(f"PRAGMA application_id = {app_id}")
+        con.execute(f"PRAGMA user_version = {version}")
+        con.commit()
+        con.close()
+
+    set_header(0, 0)  # the moment before the other process's transaction reached the file
+    real_tables = backend._tables
+
+    def tables_then_stamped(path):  # ... which it does between this process's two reads of the header
+        tables = real_tables(path)
+        set_header(*stamp)
+        return tables
+
+    monkeypatch.setattr(backend, "_tables", tables_then_stamped)
+    assert backend.check_database_file(p) == "ours"
+
+    looks = iter(range(100, 200))
+
+    def tables_then_changed(path):  # a file rewritten at every look (its schema version: 100, 101, ...)
+        tables = real_tables(path)
+        set_header(0, next(looks))
+        return tables
+
+    set_header(0, 0)
+    monkeypatch.setattr(backend, "_tables", tables_then_changed)
+    with pytest.raises(StoreError, match="kept changing"):
+        backend.check_database_file(p, looks=3)

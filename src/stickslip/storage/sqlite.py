@@ -8,7 +8,7 @@ import time
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from ..records import special_kind
 from .backend import Cursor, Kind
@@ -31,12 +31,38 @@ __all__ = ["SQLiteBackend", "check_database_file"]
 _MAGIC = b"SQLite format 3\x00"
 
 
-def check_database_file(path: Path) -> str:
+def _header(path: Path) -> bytes:
+    try:
+        with open(path, "rb") as f:
+            return f.read(100)
+    except OSError as e:
+        raise StoreError(f"cannot open the database {path}: {e.strerror or e}") from None
+
+
+def _tables(path: Path) -> dict[str, tuple[str, ...]]:
+    try:
+        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
+        try:
+            return tables_of(con)
+        finally:
+            con.close()
+    except sqlite3.DatabaseError as e:
+        raise StoreError(f"the database {path} is damaged or not a database ({e}); it was left untouched") from None
+
+
+def _changing(path: Path) -> NoReturn:
+    raise StoreError(f"the database {path} kept changing while stickslip looked at whose it is; try again")
+
+
+def check_database_file(path: Path, looks: int = 50) -> str:
     """Whether stickslip may open ``path``: ``"new"``, ``"ours"`` or ``"legacy"``; else :class:`StoreError`.
 
     Decided before anything opens the file for writing, from its first 100 bytes and, for
     a file without an application id, a read-only look at its tables (``immutable``: no
-    lock, no journal, nothing created beside it):
+    lock, no journal, nothing created beside it). The first 100 bytes are read again after
+    the tables: a file another stickslip process is making (its id, schema version and
+    tables in one transaction, reaching the file when the WAL is copied back) is looked at
+    again, up to ``looks`` times, rather than judged from a header older than its tables:
 
     * nothing there, an empty file, or an SQLite file without tables: ``"new"``;
     * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``;
@@ -57,11 +83,7 @@ def check_database_file(path: Path) -> str:
         raise StoreError(f"{path} is {kind}, not a database file: give --db the path of a file")
     if st.st_size == 0:
         return "new"
-    try:
-        with open(path, "rb") as f:
-            head = f.read(100)
-    except OSError as e:
-        raise StoreError(f"cannot open the database {path}: {e.strerror or e}") from None
+    head = _header(path)
     if not head.startswith(_MAGIC) or len(head) < 100:
         raise StoreError(
             f"{path} is not an SQLite database (it begins {head[:16]!r}); stickslip leaves it untouched: "
@@ -76,14 +98,9 @@ def check_database_file(path: Path) -> str:
             f"{path} is another application's SQLite file (application id {app_id & 0xFFFFFFFF:#010x}, "
             f"not stickslip's {APPLICATION_ID:#010x}); stickslip leaves it untouched: give --db another file"
         )
-    try:
-        con = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro&immutable=1", uri=True)
-        try:
-            tables = tables_of(con)
-        finally:
-            con.close()
-    except sqlite3.DatabaseError as e:
-        raise StoreError(f"the database {path} is damaged or not a database ({e}); it was left untouched") from None
+    tables, again = _tables(path), _header(path)
+    if again != head:  # written meanwhile (another stickslip making it: ours and its tables in one transaction)
+        return check_database_file(path, looks - 1) if looks > 1 else _changing(path)
     if not tables and user_version == 0:
         return "new"
     if 1 <= user_version <= len(MIGRATIONS) and tables == schema_tables(user_version):
