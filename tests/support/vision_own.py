@@ -312,35 +312,26 @@ def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
     return rounding + (best if inside else -best)
 
 
-def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256) -> list[OwnSequence]:
-    """Sequences of ``per_sequence`` frames, tip widths spread over 3..20 px, looks alternating."""
+def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256,
+                  widths: tuple[float, float] = (3.0, 20.0), looks: tuple[str, ...] = ("optical", "sem"),
+                  lobed_rate: float = 0.0, flake_rate: float = 0.0) -> list[OwnSequence]:
+    """Sequences of ``per_sequence`` frames, tip widths spread over ``widths`` (px), the looks taken in turn;
+    ``lobed_rate``, ``flake_rate``: :func:`own_sequence`'s modes (0: the plain frames)."""
     n_seq = max(1, n_frames // per_sequence)
-    widths = np.linspace(3.0, 20.0, n_seq)
-    return [own_sequence(seed * 1000 + i, per_sequence, size, float(widths[i]), ("optical", "sem")[i % 2])
-            for i in range(n_seq)]
+    ws = np.linspace(widths[0], widths[1], n_seq)
+    return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
+                         lobed_rate=lobed_rate, flake_rate=flake_rate) for i in range(n_seq)]
 
 
 def lobed_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
                     lobed_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
                     looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
-    """:func:`own_benchmark`'s sequences in the lobed mode (lobed grains, tips near the edge).
-
-    Tip widths spread over ``widths`` (px), the looks taken in turn.
-    """
-    n_seq = max(1, n_frames // per_sequence)
-    ws = np.linspace(widths[0], widths[1], n_seq)
-    return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
-                         lobed_rate=lobed_rate) for i in range(n_seq)]
+    """:func:`own_benchmark`'s sequences in the lobed mode (lobed grains, tips near the edge)."""
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, lobed_rate=lobed_rate)
 
 
 def flake_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
                     flake_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
                     looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
-    """:func:`own_benchmark`'s sequences in the flake mode (flat chips stuck on the tip).
-
-    Tip widths spread over ``widths`` (px), the looks taken in turn.
-    """
-    n_seq = max(1, n_frames // per_sequence)
-    ws = np.linspace(widths[0], widths[1], n_seq)
-    return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
-                         flake_rate=flake_rate) for i in range(n_seq)]
+    """:func:`own_benchmark`'s sequences in the flake mode (flat chips stuck on the tip)."""
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, flake_rate=flake_rate)
