@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from stickslip.sim.camera import SimCamSettings, SimScene
-from stickslip.vision.shaft import ALONG_LIMIT, ALONG_SIGMAS, BACK_FROM, BACK_STEP, check_shaft, learn_shaft
+from stickslip.vision.shaft import BACK_FROM, BACK_STEP, check_shaft, learn_shaft
 from stickslip.vision.template import TipTemplate, TrackerParams
 
 SHAFT = np.array([-1.0, 0.15])
@@ -69,6 +69,7 @@ def test_the_taper_says_how_far_along_the_axis_a_candidate_lies_from_the_tip(loo
     behind = check_shaft(sp, 0, frame, TIP[0] + 5.0 * u[0], TIP[1] + 5.0 * u[1], 0.0)
     assert ahead is not None and -4.75 <= ahead.along <= -3.0, ahead  # the tip behind the candidate
     assert behind is not None and 3.0 <= behind.along <= 4.75, behind
-    # the candidate behind the tip is refused (ALONG_LIMIT + ALONG_SIGMAS standard deviations); at the tip it is not
-    assert abs(behind.along) > ALONG_LIMIT + ALONG_SIGMAS * behind.along_sd
-    assert abs(at.along) < ALONG_LIMIT + ALONG_SIGMAS * at.along_sd
+    # the candidate behind the tip is refused (along_limit + along_sigmas standard deviations); at the tip it is not
+    p = TrackerParams()
+    assert abs(behind.along) > p.along_limit + p.along_sigmas * behind.along_sd
+    assert abs(at.along) < p.along_limit + p.along_sigmas * at.along_sd

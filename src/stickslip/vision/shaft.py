@@ -21,7 +21,8 @@ the axis is the first frame's at ``s - d``. At each station the frame's profile 
 (least squares) by the first frame's ``e``, its derivative along the shaft ``de/ds`` and
 its second derivative across the shaft (a blur's change; the heat equation), ``a e + b
 de/ds + c e''``; ``b / a`` is the displacement (minus ``d``), and the stations' median is
-compared with :data:`ALONG_LIMIT` plus :data:`ALONG_SIGMAS` standard deviations. It sees
+compared with :attr:`~.template.TrackerParams.along_limit` plus ``along_sigmas`` standard
+deviations (:func:`~.track._edge_refusal`). It sees
 a fix the shaft's position cannot: one moved along the needle's axis (a grain as dark as
 the needle prolonging it, its end taken for the tip).
 
@@ -40,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-__all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO", "ALONG_LIMIT", "ALONG_SIGMAS",
+__all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO",
            "learn_shaft", "check_shaft"]
 
 FloatArray = NDArray[np.float64]
@@ -76,13 +77,6 @@ PAD = 12.0
 
 ALONG_STEP = 3.0
 """Half the span along the shaft over which the first frame's profiles are differenced (their taper), px."""
-
-ALONG_LIMIT = 3.0
-"""Largest displacement of a fix along the needle's axis that its taper may show, px (issue 30: a fix more than
-3 px from the tip is a defect)."""
-
-ALONG_SIGMAS = 3.0
-"""... plus this many standard deviations of the taper's estimate (from the pixel noise at the stations)."""
 
 GAP_ACROSS = 12.0
 """Gaps in a needle's run across the shaft up to this wide are closed, px (an SEM needle's middle can sink

@@ -132,6 +132,14 @@ class TrackerParams:
         by at least this much (the median over the stations, each shifted by up to 1 px
         and its level and slope taken out), 1: the needle's two edges are where the
         template has them, not a blob's or the ground's.
+    along_limit : float
+        Largest displacement of a fix along the needle's axis that the shaft's taper may
+        show (:mod:`.shaft`), px, plus ``along_sigmas`` standard deviations of that
+        estimate: issue 30's limit for a fix (a fix more than 3 px from the tip is a
+        defect), so a grain as dark as the needle prolonging it is not taken for its end.
+    along_sigmas : float
+        Standard deviations of the taper's estimate (from the pixel noise at the stations)
+        allowed beyond ``along_limit``, 1: a fix is refused only where the taper is sure.
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -172,6 +180,8 @@ class TrackerParams:
     edge_near: float = 0.6
     edge_contrast: float = 0.6
     edge_shape: float = 0.9
+    along_limit: float = 3.0
+    along_sigmas: float = 3.0
     thin_blur: float = 2.2
 
     def __post_init__(self) -> None:

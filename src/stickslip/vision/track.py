@@ -51,7 +51,7 @@ from scipy import ndimage
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
-from .shaft import ALONG_LIMIT, ALONG_SIGMAS, ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
+from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 
 __all__ = [
@@ -232,7 +232,7 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
         return Lost("lost", f"the needle's shaft {sc.reach:.0f} px behind the tip is not where the first frame "
                             f"had it (contrast {sc.back:.2f}, profiles correlate by {sc.shape:.2f}; needs "
                             f"{p.edge_contrast:g}, {p.edge_shape:g})")
-    if sc is not None and abs(sc.along) > ALONG_LIMIT + ALONG_SIGMAS * sc.along_sd:
+    if sc is not None and abs(sc.along) > p.along_limit + p.along_sigmas * sc.along_sd:
         return Lost("occluded", f"the needle's taper puts its end {abs(sc.along):.1f} px "
                                 f"{'behind' if sc.along < 0 else 'ahead of'} the fit's tip (+-{sc.along_sd:.1f} px)")
     if ec is None:
