@@ -12,7 +12,7 @@ from analysis_tables import simulated_table
 from stickslip.calibration import Calibration, calibrate
 from stickslip.calibration.drift import EndBias, end_bias, session_drift
 from stickslip.calibration.intervals import STEP_NOISE, relative_sd
-from stickslip.calibration.selection import NO_REPEAT_NOTE, calibrate_families
+from stickslip.calibration.selection import NO_REPEAT_NOTE
 from stickslip.measurements import Traverse
 
 DAY = "2026-10-05"
@@ -93,23 +93,20 @@ def test_the_end_bias_is_the_residual_beyond_the_models_own_misfit() -> None:
 
 
 def _with_repeat(scale_first: float, scale_rest: float) -> tuple[list[Traverse], Traverse]:
-    """Joint 3 of the paper's model (0.3 % scatter), the session opened at a central pose of the load space
-    (q2 -90 deg, theta -60 deg: a pose whose residual is the fit's, not its own), that traverse's step times
-    ``scale_first``, the others' (both directions) times ``scale_rest``, and that pose's + traversed again at
-    the end at its true step (the step at the session's end)."""
-    rows = [r for r in simulated_table(3, noise=0.003) if r.joint == 3]
-    rows.insert(0, rows.pop(10))
-    assert (rows[0].direction, rows[0].q2, rows[0].theta) == ("+", pytest.approx(-math.pi / 2),
-                                                              pytest.approx(-math.pi / 3))
-    out = [dataclasses.replace(r, steps=round(r.steps / (scale_first if k == 0 else scale_rest)))
-           for k, r in enumerate(rows)]
-    return [*out, rows[0]], rows[0]
+    """Joint 3 at 12 poses, + then - at each, steps of a constant size per direction with 0.3 % scatter
+    (the constant family fits them but for it); the first traverse's step times ``scale_first``, the
+    others' times ``scale_rest``, and the first pose's + traversed again at the end at its true step."""
+    rng = np.random.default_rng(5)
+    truth = [_row(d, -0.25 * p, (1e-6 if d == "+" else 0.9e-6) * (1.0 + 0.003 * float(rng.standard_normal())))
+             for p in range(12) for d in "+-"]
+    rows = [_row(r.direction, r.q2, r.gamma * (scale_first if k == 0 else scale_rest)) for k, r in enumerate(truth)]
+    return [*rows, truth[0]], truth[0]
 
 
 def test_a_drift_the_fit_absorbs_adds_nothing_and_one_it_cannot_is_recovered() -> None:
     # a cold first traverse (3 % further) among warm ones: the drift is there, the fit hardly keeps it
     rows, first = _with_repeat(1.03, 1.0)
-    cal = calibrate_families(rows, model="paper")
+    cal = calibrate(rows, model="constant")
     dr = session_drift(rows, 3, "+", STEP_NOISE)
     assert dr is not None and dr.change == pytest.approx(-math.log(1.03), abs=1e-4) and dr.late == (rows[-1],)
     pr = cal.predictive[(3, "+")]
@@ -118,15 +115,16 @@ def test_a_drift_the_fit_absorbs_adds_nothing_and_one_it_cannot_is_recovered() -
                for n in cal.provenance.notes)
     # the whole calibration 2 % further than the step at the session's end: the fit keeps it all
     rows, first = _with_repeat(1.02, 1.02)
-    cal = calibrate_families(rows, model="paper")
+    cal = calibrate(rows, model="constant")
     pr = cal.predictive[(3, "+")]
     resid = float(cal.predict_many([first])[0] / first.gamma - 1.0)
     assert (pr.drift, pr.drift_sd) == pytest.approx(
         (end_bias([resid], pr.floor).bias, end_bias([resid], pr.floor).bias_sd), rel=1e-12)
     # the fit's actual bias at the session's end, over the calibrated poses
-    truth = float(np.mean(cal.predict_many(rows[1:-1]) / np.array([r.gamma / 1.02 for r in rows[1:-1]]) - 1.0))
-    assert truth == pytest.approx(0.02, abs=0.002)
-    assert abs(pr.drift - truth) < 2.0 * pr.drift_sd and pr.drift_sd < 0.005
+    plus = [r for r in rows[:-1] if r.direction == "+"]
+    truth = float(np.mean(cal.predict_many(plus) / np.array([r.gamma / 1.02 for r in plus]) - 1.0))
+    assert truth == pytest.approx(0.02 * 12 / 13, abs=0.002)  # the fit keeps 12 of its 13 traverses' drift
+    assert abs(pr.drift - truth) < 2.0 * pr.drift_sd and 0.001 < pr.drift_sd < 0.006
     assert cal.predictive[(3, "-")].drift == 0.0  # no - traverse repeated
     # the interval: the error model's sd and the bias in quadrature, at any pose; kept in the file
     q2 = np.linspace(-3.0, 0.0, 7)

@@ -43,7 +43,10 @@ and the interval adds their squares, the posterior mean square of the bias,
 model's own error at a calibrated pose (the fit absorbed the drift, or there was none),
 the bias less the misfit's share where it is not. The residual is at the repeated pose, a
 calibrated one: the bias at new poses is taken to be the same (a fit's scale carries most
-of it). No pose traversed twice on one day: no term, and no widening.
+of it). Where that pose weighs much in the fit (an edge of the load space), the fit is pulled
+towards the repeat and its earlier twin, and the residual shows only part of a bias the whole
+calibration carries, and the twin's own pull (docs/models-log.md). No pose traversed twice on
+one day: no term, and no widening.
 """
 
 from __future__ import annotations
