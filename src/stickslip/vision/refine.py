@@ -25,7 +25,7 @@ weighted residual variance), in frame pixels after the turn.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -71,6 +71,11 @@ class Steepest:
     density : float
         The share of the weighted pixels kept (1, or 1/2 when every second one is, in a
         chequerboard, for a template blurred enough that its neighbours say the same).
+    r, r_perp : ndarray, shape (2, m)
+        ``(rx, ry)`` and ``(-ry, rx)`` stacked (px): a turned window's points in three
+        operations (:func:`_turned`).
+    bx, by : ndarray, shape (m,)
+        The basis's x and y columns, contiguous.
     """
 
     template: FloatArray
@@ -85,6 +90,10 @@ class Steepest:
     lap: FloatArray
     sd_lap: FloatArray
     density: float = 1.0
+    r: FloatArray = field(default_factory=lambda: np.zeros((2, 0)))
+    r_perp: FloatArray = field(default_factory=lambda: np.zeros((2, 0)))
+    bx: FloatArray = field(default_factory=lambda: np.zeros(0))
+    by: FloatArray = field(default_factory=lambda: np.zeros(0))
 
 
 def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray, thin: bool = False) -> Steepest:
@@ -114,7 +123,8 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     lap_full = ndimage.gaussian_laplace(template, 1.0, mode="nearest")
     ly, lx = np.gradient(lap_full)
     sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
-    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap, density)
+    return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap, density,
+                    np.stack([rxm, rym]), np.stack([-rym, rxm]), bx.copy(), by.copy())
 
 
 @dataclass(frozen=True)
@@ -201,12 +211,30 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
         return Patch(np.zeros((3, 4, 4)), x0, y0, (H, W))
     data = np.empty((3, y1 - y0, x1 - x0))
     crop = data[0]
-    if smooth > 0:
-        ndimage.gaussian_filter(image[y0:y1, x0:x1], smooth, output=crop, mode="nearest")
+    if smooth > 1e-15:  # scipy.ndimage.gaussian_filter's two passes, its kernel made once for each smoothing
+        w = _gaussian_weights(smooth)
+        ndimage.correlate1d(image[y0:y1, x0:x1], w, 0, crop, "nearest")
+        ndimage.correlate1d(crop, w, 1, crop, "nearest")
     else:
         crop[...] = image[y0:y1, x0:x1]
     _gradient(crop, data[1], data[2])
     return Patch(data, x0, y0, (H, W))
+
+
+_WEIGHTS: dict[float, FloatArray] = {}
+
+
+def _gaussian_weights(sigma: float) -> FloatArray:
+    """The weights :func:`scipy.ndimage.gaussian_filter1d` correlates with for a Gaussian of ``sigma`` px (its
+    default reach, 4 sigma), made once for each ``sigma``: read off its response to a single 1."""
+    w = _WEIGHTS.get(sigma)
+    if w is None:
+        lw = int(4.0 * float(sigma) + 0.5)
+        delta = np.zeros(2 * lw + 1)
+        delta[lw] = 1.0
+        w = ndimage.gaussian_filter1d(delta, sigma, mode="constant")[::-1].copy()
+        _WEIGHTS[sigma] = w
+    return w
 
 
 def _gradient(a: FloatArray, gx: FloatArray, gy: FloatArray) -> None:
@@ -222,40 +250,85 @@ def _gradient(a: FloatArray, gx: FloatArray, gy: FloatArray) -> None:
     np.subtract(a[-1], a[-2], out=gy[-1])
 
 
-def _corners(p: Patch, xs: FloatArray, ys: FloatArray
-             ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_]]:
-    """The flat index of the pixel up and left of each frame point ``(xs, ys)`` (px) in the patch, the point's
-    fractions to the right and down from it, and which points lie in the frame and the patch (the others sample
-    the patch's edge)."""
+def _corners(p: Patch, xy: FloatArray) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_]]:
+    """The flat index of the pixel up and left of each frame point ``xy`` (shape (2, m), x then y, px; overwritten)
+    in the patch, the point's fractions to the right and down from it, and which points lie in the frame and the
+    patch (the others sample the patch's edge).
+
+    x and y are handled together, a row each: each value is what the two coordinates
+    handled apart would give, bit for bit, in half the operations.
+    """
     H, W = p.shape
     _, ch, cw = p.data.shape
-    lx, ly = xs - p.x0, ys - p.y0
-    inside = (lx >= 0) & (lx <= cw - 1) & (ly >= 0) & (ly <= ch - 1)
+    in_frame = None
     if p.x0 < 0 or p.y0 < 0 or p.x0 + cw > W or p.y0 + ch > H:  # a patch not within the frame (an empty one)
-        inside &= (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+        in_frame = ((xy >= 0) & (xy <= np.array(((W - 1.0,), (H - 1.0,))))).all(axis=0)
     # (a patch within the frame: a point in the patch is in the frame; lx >= 0 is exact, xs - x0 being a multiple
     # of the ulp of xs >= x0 >= 0 no larger than xs)
-    np.minimum(np.maximum(lx, 0.0, out=lx), cw - 1.000001, out=lx)  # numpy.clip's values, in place
-    np.minimum(np.maximum(ly, 0.0, out=ly), ch - 1.000001, out=ly)
-    ix = lx.astype(np.intp)
-    iy = ly.astype(np.intp)
-    lx -= ix  # the fractions
-    ly -= iy
-    iy *= cw
-    iy += ix
-    return iy, lx, ly, inside
+    xy[0] -= p.x0
+    xy[1] -= p.y0
+    last, clip, corners = _limits(ch, cw)
+    ok = xy >= 0
+    ok &= xy <= last
+    inside = ok[0] & ok[1]
+    if in_frame is not None:
+        inside &= in_frame
+    np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
+    ixy = xy.astype(np.intp)
+    xy -= ixy  # the fractions
+    i00 = ixy[1]
+    i00 *= cw
+    i00 += ixy[0]
+    return i00, xy[0], xy[1], inside
 
 
-def _neighbours(i00: NDArray[np.intp], cw: int) -> NDArray[np.intp]:
+_LIMITS: dict[tuple[int, int], tuple[FloatArray, FloatArray, NDArray[np.intp]]] = {}
+
+
+def _limits(ch: int, cw: int) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+    """For a patch of ``ch`` x ``cw`` px (made once for each size): its last column and row, the largest
+    coordinates sampled (just inside them), each as a column (x, y), and the flat offsets of a pixel's four
+    neighbours (:func:`_neighbours`)."""
+    lim = _LIMITS.get((ch, cw))
+    if lim is None:
+        lim = (np.array(((cw - 1.0,), (ch - 1.0,))), np.array(((cw - 1.000001,), (ch - 1.000001,))),
+               np.array(((0,), (1,), (cw,), (cw + 1,)), dtype=np.intp))
+        _LIMITS[(ch, cw)] = lim
+    return lim
+
+
+def _neighbours(i00: NDArray[np.intp], ch: int, cw: int) -> NDArray[np.intp]:
     """The flat indices of the four pixels around each point (up left, up right, down left, down right), one
-    block of points after the other, in a patch ``cw`` px wide."""
-    m = i00.size
-    idx = np.empty(4 * m, dtype=np.intp)
-    idx[:m] = i00
-    np.add(i00, 1, out=idx[m : 2 * m])
-    np.add(i00, cw, out=idx[2 * m : 3 * m])
-    np.add(i00, cw + 1, out=idx[3 * m :])
-    return idx
+    row of points after the other (shape (4, m)), in a patch of ``ch`` x ``cw`` px."""
+    return np.add(_limits(ch, cw)[2], i00)
+
+
+def _bilinear(v: FloatArray, fx: FloatArray, fy: FloatArray) -> FloatArray:
+    """The bilinear interpolation of the four neighbours ``v`` (shape (..., 4, m), as :func:`_neighbours` orders
+    them) at the fractions ``fx``, ``fy``: the top and bottom rows along x together, then along y."""
+    left, right = v[..., 0::2, :], v[..., 1::2, :]  # (up left, down left), (up right, down right)
+    tb = right - left
+    tb *= fx
+    tb += left
+    top, bottom = tb[..., 0, :], tb[..., 1, :]
+    out = bottom - top
+    out *= fy
+    out += top
+    return out
+
+
+def _sample_xy(p: Patch, xy: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`_sample` at the points ``xy`` (shape (2, m), px; overwritten)."""
+    i00, fx, fy, inside = _corners(p, xy)
+    v = p.data.reshape(3, -1).take(_neighbours(i00, *p.data.shape[1:]), axis=1)  # the four neighbours in one gather
+    return _bilinear(v, fx, fy), inside
+
+
+def _sample_value_xy(p: Patch, xy: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`_sample_value` at the points ``xy`` (shape (2, m), px; overwritten)."""
+    i00, fx, fy, inside = _corners(p, xy)
+    v = p.data[0].reshape(-1).take(_neighbours(i00, *p.data.shape[1:]))
+    return _bilinear(v, fx, fy), inside
 
 
 def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -263,27 +336,22 @@ def _sample(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArr
 
     Also which points lie in the frame and the patch (the others sample the patch's edge).
     """
-    i00, fx, fy, inside = _corners(p, xs, ys)
-    cw = p.data.shape[2]
-    m = i00.size
-    # the four neighbours in one gather
-    v = p.data.reshape(3, -1).take(_neighbours(i00, cw), axis=1)
-    v00, v01, v10, v11 = v[:, :m], v[:, m : 2 * m], v[:, 2 * m : 3 * m], v[:, 3 * m :]
-    top = v00 + (v01 - v00) * fx
-    bottom = v10 + (v11 - v10) * fx
-    return top + (bottom - top) * fy, inside
+    return _sample_xy(p, np.stack((xs, ys)).astype(float, copy=False))
 
 
 def _sample_value(p: Patch, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
     """The values of :func:`_sample` only (shape (m,)): the same bilinear interpolation, not the gradients'."""
-    i00, fx, fy, inside = _corners(p, xs, ys)
-    cw = p.data.shape[2]
-    m = i00.size
-    v = p.data[0].reshape(-1).take(_neighbours(i00, cw))
-    v00, v01, v10, v11 = v[:m], v[m : 2 * m], v[2 * m : 3 * m], v[3 * m :]
-    top = v00 + (v01 - v00) * fx
-    bottom = v10 + (v11 - v10) * fx
-    return top + (bottom - top) * fy, inside
+    return _sample_value_xy(p, np.stack((xs, ys)).astype(float, copy=False))
+
+
+def _turned(st: Steepest, x: float, y: float, theta: float) -> FloatArray:
+    """The template's weighted pixels in the frame (shape (2, m), px), the tip at ``(x, y)`` turned by ``theta``:
+    ``cos(theta) rx - sin(theta) ry + x`` and ``sin(theta) rx + cos(theta) ry + y``, bit for bit."""
+    xy = st.r * math.cos(theta)
+    xy += st.r_perp * math.sin(theta)
+    xy[0] += x
+    xy[1] += y
+    return xy
 
 
 def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -291,13 +359,11 @@ def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[Fl
 
     Returns the values, shape ``(m,)``, and which samples lie inside the frame.
     """
-    ct, s_ = math.cos(theta), math.sin(theta)
-    return _sample_value(p, ct * st.rx - s_ * st.ry + x, s_ * st.rx + ct * st.ry + y)
+    return _sample_value_xy(p, _turned(st, x, y, theta))
 
 
 def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:
-    ct, s_ = math.cos(theta), math.sin(theta)
-    return _sample(p, ct * st.rx - s_ * st.ry + x, s_ * st.rx + ct * st.ry + y)
+    return _sample_xy(p, _turned(st, x, y, theta))
 
 
 def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
@@ -317,6 +383,28 @@ _EYE = {n: np.eye(n) for n in (_ALL.size, _NO_GAIN_PLANE.size)}
 """The linear columns before the motion's: the six brightness planes and the blur term."""
 
 
+_SOLVE1 = getattr(getattr(np.linalg, "_umath_linalg", None), "solve1", None)
+"""The gufunc behind :func:`numpy.linalg.solve` for one right-hand side (the same LAPACK call, without the
+wrapper's checks: 4 us against 10 us for a 10 x 10 system); ``None`` where numpy has it elsewhere."""
+
+
+def _solve_small(M: FloatArray, rhs: FloatArray) -> FloatArray | None:
+    """:func:`numpy.linalg.solve` of the square system ``M x = rhs``, bit for bit; ``None`` where it is singular.
+
+    A solution that is not finite everywhere (a singular matrix gives NaN) is solved again
+    by :func:`numpy.linalg.solve`, which tells a singular matrix (``None``) from one that gives NaN.
+    """
+    if _SOLVE1 is not None:
+        with np.errstate(invalid="ignore"):
+            sol = np.asarray(_SOLVE1(M, rhs, signature="dd->d"), dtype=float)
+        if np.isfinite(sol).all():
+            return sol
+    try:
+        return np.asarray(np.linalg.solve(M, rhs), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
+
+
 def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], kappa: float,
            turn: float) -> FloatArray | None:
     """Weighted least squares of ``y`` on the columns ``cols`` of ``D`` (10: 6 brightness, blur, 3 motion).
@@ -332,10 +420,11 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
     if kappa > 0:
         M[-1, -1] += kappa
         rhs[-1] += kappa * turn
-    try:
-        sol = np.linalg.solve(M + 1e-12 * M.trace() * _EYE[len(cols)], rhs)
-    except np.linalg.LinAlgError:
+    sol = _solve_small(M + 1e-12 * M.trace() * _EYE[len(cols)], rhs)
+    if sol is None:
         return None
+    if cols is _ALL:
+        return np.asarray(sol, dtype=float)
     out = np.zeros(D.shape[1])
     out[cols] = sol
     return out
@@ -382,7 +471,7 @@ def refine(
     # the brightness planes' columns, then each iteration's blur and motion; column-major (see _joint)
     D = np.empty((T.size, 10), order="F")
     D[:, :6] = basis
-    bx, by = basis[:, 4].copy(), basis[:, 5].copy()  # the position across the window, x and y: contiguous
+    bx, by = st.bx, st.by  # the position across the window, x and y: contiguous
     for it in range(1, max_iter + 1):
         v3, inside = _warped3(image, st, tx, ty, theta)
         Iw = v3[0]
@@ -392,8 +481,8 @@ def refine(
         jac = _esm_jacobian(st, v3, theta, g, blur_c)
         # one linear least squares for the brightness planes and the motion together: apart, the planes
         # would soak up half of every edge's shift at each step, and the motion would creep
-        D[:, 6] = g * st.lap
-        D[:, _NL:] = (g * jac).T
+        np.multiply(st.lap, g, out=D[:, 6])
+        np.multiply(jac, g, out=D[:, _NL:].T)
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             r0 = Iw - basis @ beta_prev
             kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
@@ -434,13 +523,10 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
     ct, st_ = math.cos(theta), math.sin(theta)
     f = np.empty_like(st.sd)  # the frame's: fgx, fgy and the turn's, made in place
     fgx, fgy, fth = f[0], f[1], f[2]
-    np.multiply(v3[1], ct, out=fgx)
-    fgx += v3[2] * st_
-    fgx /= g
-    np.negative(v3[1], out=fgy)
-    fgy *= st_
-    fgy += v3[2] * ct
-    fgy /= g
+    # (gx cos + gy sin, gy cos - gx sin) / g, both rows at once
+    np.multiply(v3[1:], ct, out=f[:2])
+    f[:2] += v3[2:0:-1] * np.array(((st_,), (-st_,)))
+    f[:2] /= g
     np.negative(fgx, out=fth)
     fth *= st.ry
     fth += fgy * st.rx
@@ -469,7 +555,7 @@ def _solve_positive_gain(
         if sol is None:
             break
         gain = sol[0] + sol[1] * bx + sol[2] * by
-        if sol[0] > 1e-12 and np.all(gain[omega > 0] > 0.2 * sol[0]):
+        if sol[0] > 1e-12 and bool((gain[omega > 0] > 0.2 * sol[0]).all()):
             return sol, gain, cols
     return None, None, model
 
@@ -481,15 +567,28 @@ def _tukey_weights(e: FloatArray, omega: FloatArray, scale: float | None) -> tup
     """
     if scale is None:
         m = omega > 0
-        scale = max(1.4826 * float(np.median(np.abs(e[m]))) if m.any() else 0.0, 1e-12)
+        scale = max(1.4826 * median(np.abs(e[m])) if m.any() else 0.0, 1e-12)
     u = e / (TUKEY * scale)
     return np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0), scale
+
+
+def median(a: FloatArray) -> float:
+    """:func:`numpy.median` of a 1-D array, bit for bit (NaN if it holds one, NaN for none), without its
+    overhead: one partition and the middle value, or the mean of the middle two."""
+    n = a.size
+    if n == 0:
+        return math.nan
+    k = n // 2
+    b = np.partition(a, (k, n - 1) if n % 2 else (k - 1, k, n - 1))
+    if math.isnan(b[n - 1]):
+        return math.nan
+    return float(b[k]) if n % 2 else (float(b[k - 1]) + float(b[k])) / 2.0
 
 
 def _damped(dp: FloatArray, prev_dp: FloatArray | None) -> FloatArray:
     """The motion's step ``dp``, halved when it turned back on the last one (overshooting)."""
     # the norms as numpy.linalg.norm makes them (the square root of the vector's dot with itself)
-    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * float(np.sqrt(dp.dot(dp)) * np.sqrt(prev_dp.dot(prev_dp))):
+    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * (math.sqrt(dp.dot(dp)) * math.sqrt(prev_dp.dot(prev_dp))):
         dp *= 0.5
     return dp
 
