@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .refine import Patch, _sample, _sample_value
+from .refine import Patch, _sample, _sample_value_xy, median
 
 __all__ = ["EdgeProfiles", "EdgeCheck", "STATIONS", "NEAR", "learn_edges", "check_edges"]
 
@@ -65,6 +65,7 @@ class _Profile:
     tc: FloatArray
     e: FloatArray
     ve: float
+    shifted: NDArray[np.intp]  # idx shifted by each of -SHIFTS..SHIFTS samples, a row each
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,9 @@ class EdgeProfiles:
         For each blur copy and station, what :func:`_station` compares the frame's profile with:
         the samples used, the unit vector of their level-free slope, the template's profile
         with its level and slope taken out and its sum of squares (``None`` where it is flat).
+    lines, lines_perp : ndarray, shape (2, len(LINES) * m * q)
+        Every sample of every line, its offset from the tip (x, y; px, before a turn), one
+        line after the other; and ``(-y, x)`` of each (a turn in three operations).
     """
 
     shaft: tuple[float, float]
@@ -97,6 +101,8 @@ class EdgeProfiles:
     expected: list[FloatArray]
     s: FloatArray
     stations: list[list[_Profile | None]] = field(default_factory=list)
+    lines: FloatArray = field(default_factory=lambda: np.zeros((2, 0)))
+    lines_perp: FloatArray = field(default_factory=lambda: np.zeros((2, 0)))
 
 
 @dataclass(frozen=True)
@@ -212,7 +218,11 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
         expected.append(acc / len(LINES))
     stations = [[_profile(E[j, np.flatnonzero(use_a[j])], np.flatnonzero(use_a[j])) for j in range(len(kept))]
                 for E in expected]
-    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept), stations)
+    ox, oy = offsets[..., 0], offsets[..., 1]
+    wx = np.concatenate([(ox + line * ux).ravel() for line in LINES])
+    wy = np.concatenate([(oy + line * uy).ravel() for line in LINES])
+    return EdgeProfiles(shaft, offsets, use_a, expected, np.array(kept), stations, np.stack([wx, wy]),
+                        np.stack([-wy, wx]))
 
 
 def _flat(v: FloatArray, tc: FloatArray) -> FloatArray:
@@ -231,7 +241,7 @@ def _profile(expected: FloatArray, idx: NDArray[np.intp]) -> _Profile | None:
     ve = float(e @ e)
     if ve <= 1e-18:
         return None
-    return _Profile(idx, tc, e, ve)
+    return _Profile(idx, tc, e, ve, idx[None, :] + np.arange(-SHIFTS, SHIFTS + 1)[:, None])
 
 
 def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_]) -> tuple[float, float, float, float] | None:
@@ -239,20 +249,25 @@ def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_]) -> tuple[float,
     (:func:`_profile`), shifted by up to :data:`SHIFTS` samples.
 
     Returns the contrast, the correlation and the shift (px) that correlates best, and the
-    template profile's sum of squares; ``None`` when no shift lies in the frame.
+    template profile's sum of squares; ``None`` when no shift lies in the frame. Every shift
+    is compared at once (a row each).
     """
-    idx, tc, e, ve = pr.idx, pr.tc, pr.e, pr.ve
+    good: NDArray[np.bool_] = np.asarray(ok[pr.shifted].all(axis=1), dtype=bool)
+    if not good.any():
+        return None
+    tc, e, ve = pr.tc, pr.e, pr.ve
+    f = F[pr.shifted]
+    f -= f.sum(axis=1, keepdims=True) / f.shape[1]
+    f -= (f @ tc)[:, None] * tc
+    vf = np.einsum("ij,ij->i", f, f)
+    cov = f @ e
     best: tuple[float, float, float, float] | None = None
-    for d in range(-SHIFTS, SHIFTS + 1):
-        k = idx + d
-        if not ok[k].all():
+    for k, (g, c, v) in enumerate(zip(good.tolist(), cov.tolist(), vf.tolist(), strict=True)):
+        if not g:
             continue
-        f = _flat(F[k], tc)
-        vf = float(f @ f)
-        cov = float(f @ e)
-        r = cov / math.sqrt(ve * vf) if vf > 0 else 0.0
+        r = c / math.sqrt(ve * v) if v > 0 else 0.0
         if best is None or r > best[1]:
-            best = (cov / ve, r, d * STEP, ve)
+            best = (c / ve, r, (k - SHIFTS) * STEP, ve)
     return best
 
 
@@ -267,20 +282,14 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     m = ep.s.size
     if m < 3:
         return None
-    ct, st_ = math.cos(theta), math.sin(theta)
-    ox, oy = ep.offsets[..., 0], ep.offsets[..., 1]
-    ux, uy = ep.shaft
-    # the three lines of every station sampled in one go
-    wx = np.concatenate([(ox + line * ux).ravel() for line in LINES])
-    wy = np.concatenate([(oy + line * uy).ravel() for line in LINES])
-    v, inside = _sample_value(frame, ct * wx - st_ * wy + x, st_ * wx + ct * wy + y)
-    q = ep.use.size
-    acc = np.zeros(ep.use.shape)
-    ok = np.ones(ep.use.shape, dtype=bool)
-    for i in range(len(LINES)):
-        acc += v[i * q : (i + 1) * q].reshape(ep.use.shape)
-        ok &= inside[i * q : (i + 1) * q].reshape(ep.use.shape)
-    F = acc / len(LINES)
+    # the three lines of every station sampled in one go, turned about the tip and moved to it
+    xy = ep.lines * math.cos(theta)
+    xy += ep.lines_perp * math.sin(theta)
+    xy[0] += x
+    xy[1] += y
+    v, inside = _sample_value_xy(frame, xy)
+    F = v.reshape(len(LINES), *ep.use.shape).sum(axis=0) / len(LINES)
+    ok: NDArray[np.bool_] = np.asarray(inside.reshape(len(LINES), *ep.use.shape).all(axis=0), dtype=bool)
     a = np.full(m, np.nan)
     sd = np.full(m, np.inf)
     shift = np.zeros(m)
@@ -302,6 +311,5 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     w = 1.0 / sd[near_ok] ** 2
     near = float((w * a[near_ok]).sum() / w.sum())
     near_sd = float(1.0 / math.sqrt(w.sum()))
-    far = float(np.median(a[far_ok]))
-    return EdgeCheck(near, far, near_sd, float(np.median(shift[np.isfinite(a)])), a, sd,
-                     float(np.median(rs[np.isfinite(rs)])))
+    far = median(a[far_ok])
+    return EdgeCheck(near, far, near_sd, median(shift[np.isfinite(a)]), a, sd, median(rs[np.isfinite(rs)]))
