@@ -8,11 +8,26 @@ points outside the patch and far off.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from scipy import ndimage
 
-from stickslip.vision.refine import Patch, _gradient, _sample, _sample_value, patch
+from stickslip.vision.refine import (
+    Patch,
+    _gradient,
+    _sample,
+    _sample_value,
+    _solve_small,
+    _turned,
+    median,
+    patch,
+    steepest,
+    warped,
+)
 from stickslip.vision.template import masked_ncc, region_spectra
 
 
@@ -73,3 +88,84 @@ def test_spectra_given_or_made_give_the_same_correlation() -> None:
     given_ = masked_ncc(region, t, w, spectra=region_spectra(region))
     assert made.shape == (32, 32) and np.array_equal(made, given_)
     assert np.all(np.abs(made) <= 1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(n=st.integers(1, 30), nans=st.integers(0, 2), seed=st.integers(0, 2**32 - 1))
+def test_median_is_numpys_bit_for_bit(n: int, nans: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a = rng.choice([-1.5, 0.0, 0.1, 2.0, 1e300], n) if seed % 2 else rng.normal(size=n)  # ties and extremes
+    a[: min(nans, n)] = np.nan
+    got, want = median(a), float(np.median(a))
+    assert (math.isnan(got) and math.isnan(want)) or got == want
+    assert math.isnan(median(np.zeros(0)))
+
+
+def test_small_solve_is_numpys_and_refuses_a_singular_system() -> None:
+    rng = np.random.default_rng(5)
+    for _ in range(50):
+        A = rng.normal(size=(40, 10))
+        M, b = A.T @ A, rng.normal(size=10)
+        got = _solve_small(M, b)
+        assert got is not None and np.array_equal(got, np.linalg.solve(M, b))
+    assert _solve_small(np.zeros((10, 10)), np.ones(10)) is None
+    nan = _solve_small(np.full((3, 3), np.nan), np.ones(3))  # not singular to LAPACK: NaN, as numpy gives it
+    assert nan is not None and np.isnan(nan).all()
+
+
+@pytest.mark.parametrize("smooth", [1.0, 1.8027756377319946, 3.1622776601683795])
+def test_patch_smooths_as_gaussian_filter(smooth: float) -> None:
+    image = np.random.default_rng(2).normal(0.5, 0.1, (60, 80))
+    p = patch(image, 30.3, 20.7, 15.0, smooth)
+    h, w = p.data.shape[1:]
+    crop = image[p.y0 : p.y0 + h, p.x0 : p.x0 + w]
+    assert np.array_equal(p.data[0], ndimage.gaussian_filter(crop, smooth, mode="nearest"))
+
+
+def test_turned_window_is_the_plain_rotation_bit_for_bit() -> None:
+    rng = np.random.default_rng(4)
+    t = ndimage.gaussian_filter(rng.normal(size=(21, 21)), 1.5)
+    st_ = steepest(t, (10.3, 9.6), rng.uniform(0.0, 1.0, (21, 21)))
+    image = rng.normal(size=(60, 60))
+    for theta in (0.0, 0.13, -0.71, 3.0):
+        ct, s_ = math.cos(theta), math.sin(theta)
+        xs, ys = ct * st_.rx - s_ * st_.ry + 30.2, s_ * st_.rx + ct * st_.ry + 28.9
+        xy = _turned(st_, 30.2, 28.9, theta)
+        assert np.array_equal(xy[0], xs) and np.array_equal(xy[1], ys)
+        p = patch(image, 30.2, 28.9, 20.0, 1.0)
+        v, inside = warped(p, st_, 30.2, 28.9, theta)
+        v_old, inside_old = _sample_before(p, xs, ys)
+        assert np.array_equal(v, v_old[0]) and np.array_equal(inside, inside_old)
+
+
+def test_correlation_is_the_plain_formula_bit_for_bit() -> None:
+    from scipy import fft
+
+    rng = np.random.default_rng(8)
+    region = rng.normal(size=(37, 45))
+    region[:, :12] = 1.0  # flat: the variance there is rounding noise, clipped at 0
+    t, w = rng.normal(size=(9, 9)), rng.uniform(0.0, 1.0, (9, 9))
+    got = masked_ncc(region, t, w)
+    sw = float(w.sum())
+    tc = t - float((w * t).sum() / sw)
+    fw, fwt = fft.rfft2(w[::-1, ::-1], region.shape), fft.rfft2((w * tc)[::-1, ::-1], region.shape)
+    fi, fi2 = fft.rfft2(region), fft.rfft2(region * region)
+    a, b, c = (fft.irfft2(x, region.shape)[8:, 8:] for x in (fi * fw, fi2 * fw, fi * fwt))
+    denom = np.sqrt(np.maximum(b - a * a / sw, 0.0) * float((w * tc * tc).sum()))
+    out = np.where(denom > 1e-9 * denom.max(), c / np.where(denom > 0, denom, 1.0), 0.0)
+    assert np.array_equal(got, np.clip(out, -1.0, 1.0))
+    assert np.abs(got).max() <= 1.0 and np.abs(got[:, 8:]).min() > 0.0
+
+
+def test_copies_with_the_same_weights_share_the_variance_and_give_their_own_correlation() -> None:
+    rng = np.random.default_rng(9)
+    region = rng.normal(size=(48, 48))
+    w = rng.uniform(0.0, 1.0, (9, 9))
+    spectra = region_spectra(region)
+    cache: dict[object, object] = {}
+    for k in range(3):  # as the whole-frame search compares its blur copies
+        t = rng.normal(size=(9, 9))
+        assert np.array_equal(masked_ncc(region, t, w, cache, ("coarse", k), spectra), masked_ncc(region, t, w))
+    other = rng.uniform(0.0, 1.0, (9, 9))  # other weights: their own variance
+    t = rng.normal(size=(9, 9))
+    assert np.array_equal(masked_ncc(region, t, other, cache, ("coarse", 9), spectra), masked_ncc(region, t, other))

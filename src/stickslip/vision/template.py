@@ -442,6 +442,24 @@ def region_spectra(region: FloatArray) -> tuple[NDArray[np.complex128], NDArray[
     return fft.rfft2(region, workers=1), fft.rfft2(region * region, workers=1)
 
 
+_SHARED = ("shared variance",)
+"""The key under which :func:`masked_ncc` keeps the last variance it made from given spectra."""
+
+
+def _variance(fi: NDArray[np.complex128], fi2: NDArray[np.complex128], k: _KernelFFT, n: int,
+              shape: tuple[int, int]) -> FloatArray:
+    """The weighted sum of squares about the weighted mean of the region under the window at every offset
+    (``max(sum w I² - (sum w I)² / sum w, 0)``), from the region's spectra ``fi``, ``fi2`` (of it and its
+    square) and the weights' transform in ``k``."""
+    a = fft.irfft2(fi * k.w, shape, workers=1)[n - 1 :, n - 1 :]
+    b = fft.irfft2(fi2 * k.w, shape, workers=1)[n - 1 :, n - 1 :]
+    var: FloatArray = a * a
+    var /= k.sw
+    np.subtract(b, var, out=var)
+    np.maximum(var, 0.0, out=var)
+    return var
+
+
 def masked_ncc(
     region: FloatArray, template: FloatArray, weights: FloatArray, cache: dict[object, object] | None = None,
     key: object = None, spectra: tuple[NDArray[np.complex128], NDArray[np.complex128]] | None = None,
@@ -453,7 +471,9 @@ def masked_ncc(
     T_w)² · sum w (I - I_w)²)`` with ``T_w``, ``I_w`` the weighted means; in [-1, 1], 0 where
     the region is flat. By FFT (region and its square once each). ``cache`` (a dict the
     caller keeps for this template) holds the template's transforms under ``key``; ``spectra``
-    are the region's own (:func:`region_spectra`) when the caller has them.
+    are the region's own (:func:`region_spectra`) when the caller has them. With both, the
+    region's variance under the weights is kept in ``cache`` and used again by the next call
+    with the same ``spectra`` and ``weights`` objects (neither changed in place between calls).
     """
     n = template.shape[0]
     rh, rw = region.shape
@@ -465,11 +485,21 @@ def masked_ncc(
         if cache is not None:
             cache[ck] = k
     fi, fi2 = region_spectra(region) if spectra is None else spectra
-    a = fft.irfft2(fi * k.w, shape, workers=1)[n - 1 :, n - 1 :]
-    b = fft.irfft2(fi2 * k.w, shape, workers=1)[n - 1 :, n - 1 :]
+    # the region's weighted variance under the window depends on the weights, not the template: templates with
+    # the same weights over the same spectra share it (the whole-frame search's blur copies)
+    shared = cache.get(_SHARED) if cache is not None and spectra is not None else None
+    if isinstance(shared, tuple) and shared[0] is spectra and shared[1] is weights and shared[2] == (n, rh, rw):
+        var: FloatArray = shared[3]
+    else:
+        var = _variance(fi, fi2, k, n, shape)
+        if cache is not None and spectra is not None:
+            cache[_SHARED] = (spectra, weights, (n, rh, rw), var)
     c = fft.irfft2(fi * k.wt, shape, workers=1)[n - 1 :, n - 1 :]
-    var = np.maximum(b - a * a / k.sw, 0.0)  # (numpy.clip's values, without its wrapper's cost)
-    denom = np.sqrt(var * k.st2)
+    # c over sqrt(var st2) where that is above 1e-9 of its largest (0 elsewhere), clipped to [-1, 1]; in place
+    denom = var * k.st2
+    np.sqrt(denom, out=denom)
     scale = float(denom.max()) if denom.size else 0.0
-    out = np.where(denom > 1e-9 * max(scale, 1e-300), c / np.where(denom > 0, denom, 1.0), 0.0)
-    return np.minimum(np.maximum(out, -1.0), 1.0)
+    out = np.zeros(denom.shape)
+    np.divide(c, denom, out=out, where=denom > 1e-9 * max(scale, 1e-300))
+    np.maximum(out, -1.0, out=out)
+    return np.minimum(out, 1.0, out=out)
