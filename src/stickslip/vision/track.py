@@ -53,6 +53,7 @@ from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
+from .width import WidthCheck, WidthStations, check_width, learn_width
 
 __all__ = [
     "Fix",
@@ -127,6 +128,7 @@ class _Candidate:
     patch: Patch
     edges: EdgeCheck | None = None
     shaft: ShaftCheck | None = None
+    width: WidthCheck | None = None
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -218,16 +220,21 @@ def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: Fl
 
 
 def _learn_shaft(image: FloatArray, tip: Sequence[float], t: TipTemplate, params: TrackerParams,
-                 spec: Sequence[tuple[int, float, float]]) -> ShaftProfiles:
-    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`), smoothed as each blur copy is."""
+                 spec: Sequence[tuple[int, float, float]]) -> tuple[ShaftProfiles, WidthStations | None]:
+    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`) and its edges there
+    (:func:`.width.learn_width`), smoothed as each blur copy is."""
     s0 = params.template_blur
-    return learn_shaft(image, (float(tip[0]), float(tip[1])), t.shaft, t.ground[0], t.ground[1], params.contrast,
-                       [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in spec])
+    smooth = [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in spec]
+    at = (float(tip[0]), float(tip[1]))
+    return (learn_shaft(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, smooth),
+            learn_width(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, t.noise, smooth,
+                        params.width_shift, params.width_slack))
 
 
-def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
-    """The edge stage's refusal of a fix whose edges (and shaft) were checked (``None``: they hold, or were not
-    checked)."""
+def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None,
+                  wc: WidthCheck | None = None) -> Lost | None:
+    """The edge stage's refusal of a fix whose edges (and shaft, and its width) were checked (``None``: they hold,
+    or were not checked)."""
     if sc is not None and (sc.back < p.edge_contrast or sc.shape < p.edge_shape):
         return Lost("lost", f"the needle's shaft {sc.reach:.0f} px behind the tip is not where the first frame "
                             f"had it (contrast {sc.back:.2f}, profiles correlate by {sc.shape:.2f}; needs "
@@ -246,6 +253,10 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
     if ec.near < p.edge_near * ec.far:
         return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
                                 f"contrast further back, needs {p.edge_near:g})")
+    if wc is not None and wc.excess > 0.0:
+        return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
+                                f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px "
+                                f"off): the end of something over the tip")
     return None
 
 
@@ -289,7 +300,7 @@ class TipTracker:
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
-        self._shaft = _learn_shaft(image, tip, t, params, self._spec)
+        self._shaft, self._width = _learn_shaft(image, tip, t, params, self._spec)
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
@@ -453,8 +464,13 @@ class TipTracker:
         # the shaft further back only where the edges near the tip hold (their refusal stands without it)
         sc = None if ec is None or _edge_refusal(ec, p) else check_shaft(
             self._shaft, cand.level, image, r.x, r.y, r.theta)
-        cand = replace(cand, edges=ec, shaft=sc)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
+        # the needle's width at the shaft's stations, for a fix every other rule takes
+        wc = None if refusal or not isinstance(res, Fix) or self._width is None else check_width(
+            self._width, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas)
+        cand = replace(cand, edges=ec, shaft=sc, width=wc)
+        if wc is not None:
+            refusal = _edge_refusal(ec, p, sc, wc)
         return (refusal or res), cand
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
