@@ -231,10 +231,9 @@ def _learn_shaft(image: FloatArray, tip: Sequence[float], t: TipTemplate, params
                         params.width_shift, params.width_slack))
 
 
-def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None,
-                  wc: WidthCheck | None = None) -> Lost | None:
-    """The edge stage's refusal of a fix whose edges (and shaft, and its width) were checked (``None``: they hold,
-    or were not checked)."""
+def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
+    """The edge stage's refusal of a fix whose edges (and shaft) were checked (``None``: they hold, or were not
+    checked)."""
     if sc is not None and (sc.back < p.edge_contrast or sc.shape < p.edge_shape):
         return Lost("lost", f"the needle's shaft {sc.reach:.0f} px behind the tip is not where the first frame "
                             f"had it (contrast {sc.back:.2f}, profiles correlate by {sc.shape:.2f}; needs "
@@ -253,11 +252,17 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
     if ec.near < p.edge_near * ec.far:
         return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
                                 f"contrast further back, needs {p.edge_near:g})")
-    if wc is not None and wc.excess > 0.0:
-        return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
-                                f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px "
-                                f"off): the end of something over the tip")
     return None
+
+
+def _width_refusal(wc: WidthCheck | None) -> Lost | None:
+    """The refusal of a fix behind which the needle is not as wide as the first frame showed it
+    (:mod:`.width`; ``None``: it is, or was not checked)."""
+    if wc is None or wc.excess <= 0.0:
+        return None
+    return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
+                            f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px off): "
+                            f"the end of something over the tip")
 
 
 class TipTracker:
@@ -465,13 +470,10 @@ class TipTracker:
         sc = None if ec is None or _edge_refusal(ec, p) else check_shaft(
             self._shaft, cand.level, image, r.x, r.y, r.theta)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
-        # the needle's width at the shaft's stations, for a fix every other rule takes
+        # the needle's width at the stations behind a fix every other rule takes
         wc = None if refusal or not isinstance(res, Fix) or self._width is None else check_width(
             self._width, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas)
-        cand = replace(cand, edges=ec, shaft=sc, width=wc)
-        if wc is not None:
-            refusal = _edge_refusal(ec, p, sc, wc)
-        return (refusal or res), cand
+        return (refusal or _width_refusal(wc) or res), replace(cand, edges=ec, shaft=sc, width=wc)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""

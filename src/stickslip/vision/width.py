@@ -116,9 +116,11 @@ class WidthCheck:
     Attributes
     ----------
     n : int
-        Stations compared.
+        Stations compared (those whose samples lie in the frame).
     disagree : int
         Stations whose width differs by more than a fix within the along-axis limit shows.
+    s : tuple of float
+        The stations compared, px behind the candidate tip.
     dw : tuple of float
         Each station's width change (px; positive: wider than in the first frame).
     tolerance : tuple of float
@@ -127,6 +129,7 @@ class WidthCheck:
 
     n: int
     disagree: int
+    s: tuple[float, ...]
     dw: tuple[float, ...]
     tolerance: tuple[float, ...]
 
@@ -202,12 +205,13 @@ def _edges(profiles: FloatArray, windows: list[tuple[IntArray, IntArray]], lengt
 
 def _on_the_taper(s: FloatArray, widths: FloatArray, slack: float) -> list[int]:
     """The stations whose width (px, at ``s`` px behind the tip) lies within ``slack`` px of the needle's
-    straight taper, a robust line through them all (Theil and Sen's: the median of the pairwise slopes, then
-    the median intercept)."""
+    straight taper, a robust line through them all (Siegel's repeated median: each station's median slope to
+    the others, their median, then the median intercept; up to half the stations may be off it)."""
     if s.size < 3:
         return []
-    i, j = np.triu_indices(s.size, 1)
-    slope = float(np.median((widths[j] - widths[i]) / (s[j] - s[i])))
+    ds = s[None, :] - s[:, None]
+    np.fill_diagonal(ds, np.nan)
+    slope = float(np.median(np.nanmedian((widths[None, :] - widths[:, None]) / ds, axis=1)))
     base = float(np.median(widths - slope * s))
     return [int(k) for k in np.flatnonzero(np.abs(widths - base - slope * s) <= slack)]
 
@@ -291,5 +295,5 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     dw = _register(ws.refs[copy], ws.ref_ss[copy], profiles, ws.index, ws.frac, ws.mask, ws.shifts).sum(axis=1)
     tol = along_limit * np.abs(ws.taper) + sigmas * ws.sd[copy]
     dw, tol = dw[ok], tol[ok]
-    return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)),
+    return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(float(a) for a in ws.s[ok]),
                       tuple(float(a) for a in dw), tuple(float(a) for a in tol))
