@@ -29,6 +29,10 @@
    took the end of something over the tip, a grain's lobe, for the tip), and its taper
    must put the tip within 3 px (plus 3 standard deviations) of the fix along the axis
    (*occluded*: a grain as dark as the needle prolongs it, its end taken for the tip);
+   last, **the needle's width** at each station behind the fix (:mod:`.width`) must be
+   the first frame's there, within what 3 px along the axis change it (*occluded* when
+   most stations differ: the far end of a chip stuck on the tip, wider than the needle
+   where it lies and the needle narrower behind it);
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
