@@ -51,12 +51,24 @@ __all__ = ["WidthStations", "WidthCheck", "SHIFT_STEP", "FROM", "learn_width", "
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
 
-SHIFT_STEP = 0.25
+SHIFT_STEP = 0.5
 """Spacing of the edge shifts tried, px (the best is then refined by a parabola)."""
 
 FROM = 6.0
 """The first station, px behind the tip; then every :data:`~.shaft.BACK_STEP` px as far as the first frame
 showed the needle (as :mod:`.shaft`'s stations, which start further back)."""
+
+
+@dataclass(frozen=True)
+class _Shifted:
+    """What :func:`_register` gathers: see :class:`WidthStations`."""
+
+    count: FloatArray
+    below: IntArray
+    above: IntArray
+    w_below: FloatArray
+    w_above: FloatArray
+    shifts: FloatArray
 
 
 @dataclass(frozen=True)
@@ -78,11 +90,13 @@ class WidthStations:
         Their sums of squares.
     sd : list of ndarray, shape (m,)
         For each blur copy, the standard deviation of a station's width change, px.
-    mask : ndarray, shape (m, 2, L)
-        Which places of a window hold a sample.
-    index, frac : ndarray, shape (m, 2, k, L)
-        For each shift tried, the flat index (into a frame's ``(m, q)`` profiles) of the
-        sample below each shifted place and the interpolation's share of the one above.
+    shifted : _Shifted
+        For each station, edge and outward shift tried (``k`` of them, every
+        :data:`SHIFT_STEP` px): the samples in each window (``count``, shape ``(m, 2, 1)``),
+        the flat indices into a frame's ``(m, q)`` profiles (and a zero after them) of the
+        samples either side of each shifted place (``below``, ``above``, shape
+        ``(m, 2, k, L)``) and their shares in the linear interpolation (``w_below``,
+        ``w_above``; 0 past a window's end), and the shifts (``shifts``, px).
     span : ndarray of bool, shape (m, q)
         The samples a station's registration may reach (they must lie in the frame).
     taper : ndarray, shape (m,)
@@ -90,8 +104,6 @@ class WidthStations:
     smooth : list of float
         For each blur copy, the smoothing of a frame's profiles across the shaft (Gaussian
         sigma, px).
-    shifts : ndarray, shape (k,)
-        The outward shifts tried, px.
     """
 
     s: FloatArray
@@ -100,13 +112,10 @@ class WidthStations:
     refs: list[FloatArray]
     ref_ss: list[FloatArray]
     sd: list[FloatArray]
-    mask: FloatArray
-    index: IntArray
-    frac: FloatArray
+    shifted: _Shifted
     span: NDArray[np.bool_]
     taper: FloatArray
     smooth: list[float]
-    shifts: FloatArray
 
 
 @dataclass(frozen=True)
@@ -151,32 +160,34 @@ def _windows(widths: Sequence[float], ts: FloatArray) -> list[tuple[IntArray, In
     return out
 
 
-def _shifted(windows: list[tuple[IntArray, IntArray]], q: int, shifts: FloatArray, length: int
-             ) -> tuple[IntArray, FloatArray, FloatArray]:
-    """For every station, edge and shift: the index below each shifted place (flat, into ``(m, q)``
-    profiles), the share of the one above, and which places hold a sample."""
+def _shifted(windows: list[tuple[IntArray, IntArray]], q: int, shifts: FloatArray, length: int) -> _Shifted:
+    """For every station, edge and shift: the samples either side of each shifted place (flat indices into
+    ``(m, q)`` profiles, the place past a window's end the zero after them) and their interpolation shares."""
     m, k = len(windows), shifts.size
-    index = np.zeros((m, 2, k, length), dtype=np.intp)
-    frac = np.zeros((m, 2, k, length))
-    mask = np.zeros((m, 2, length))
+    below = np.full((m, 2, k, length), m * q, dtype=np.intp)
+    w_below = np.zeros((m, 2, k, length))
+    w_above = np.zeros((m, 2, k, length))
+    count = np.zeros((m, 2, 1))
     for i, pair in enumerate(windows):
         for e, (idx, sign) in enumerate(zip(pair, (-1.0, 1.0), strict=True)):
             pos = idx[None, :] + sign * shifts[:, None] / STEP
             lo = np.clip(np.floor(pos), 0, q - 2)
-            index[i, e, :, : idx.size] = i * q + lo.astype(np.intp)
-            frac[i, e, :, : idx.size] = np.clip(pos - lo, 0.0, 1.0)
-            mask[i, e, : idx.size] = 1.0
-    return index, frac, mask
+            frac = np.clip(pos - lo, 0.0, 1.0)
+            below[i, e, :, : idx.size] = i * q + lo.astype(np.intp)
+            w_below[i, e, :, : idx.size] = 1.0 - frac
+            w_above[i, e, :, : idx.size] = frac
+            count[i, e, 0] = idx.size
+    above = np.where(below < m * q, below + 1, m * q)
+    return _Shifted(count, below, above, w_below, w_above, shifts)
 
 
-def _register(refs: FloatArray, ref_ss: FloatArray, profiles: FloatArray, index: IntArray, frac: FloatArray,
-              mask: FloatArray, shifts: FloatArray) -> FloatArray:
+def _register(refs: FloatArray, ref_ss: FloatArray, profiles: FloatArray, g: _Shifted) -> FloatArray:
     """Each station's two outward edge shifts (px, shape ``(m, 2)``) registering ``profiles`` (``(m, q)``)
     to the edge windows ``refs`` (their mean out, sums of squares ``ref_ss``)."""
-    flat = profiles.reshape(-1)
-    f = flat.take(index) * (1.0 - frac) + flat.take(np.minimum(index + 1, flat.size - 1)) * frac
-    f *= mask[:, :, None, :]
-    n = np.maximum(mask.sum(axis=2), 1.0)[:, :, None]
+    flat = np.append(profiles.reshape(-1), 0.0)
+    f = flat.take(g.below) * g.w_below + flat.take(g.above) * g.w_above
+    n = g.count
+    shifts = g.shifts
     s1 = f.sum(axis=3)
     ff = (f * f).sum(axis=3) - s1 * s1 / n
     cov = np.einsum("iekl,iel->iek", f, refs)
@@ -242,7 +253,7 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     shifts = np.arange(-max_shift, max_shift + 1e-9, SHIFT_STEP)
     windows = _windows(widths, ts)
     length = max(max(a.size, b.size) for a, b in windows)
-    index, frac, mask = _shifted(windows, q, shifts, length)
+    shifted = _shifted(windows, q, shifts, length)
     reach = np.array([0.5 * w + GROUND + max_shift + 1.0 for w in widths])
     span = np.abs(ts)[None, :] <= reach[:, None]
     # the taper: the first frame's profiles ALONG_STEP px nearer the tip registered to those as far beyond
@@ -251,7 +262,7 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     s0 = smooth[0][0]
     near_e, near_ss = _edges(ndimage.gaussian_filter1d(near, s0 / STEP, axis=1, mode="nearest"), windows, length)
     far_s = ndimage.gaussian_filter1d(far, s0 / STEP, axis=1, mode="nearest")
-    taper = _register(near_e, near_ss, far_s, index, frac, mask, shifts).sum(axis=1) / (2.0 * ALONG_STEP)
+    taper = _register(near_e, near_ss, far_s, shifted).sum(axis=1) / (2.0 * ALONG_STEP)
     refs, ref_ss, sds = [], [], []
     n2 = noise * noise / len(LINES)  # a sample of the mean of the lines
     for tsig, _ in smooth:
@@ -267,8 +278,8 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     d_lines = np.asarray(LINES)
     lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
                       (offsets[..., 1][..., None] + d_lines * uy).ravel()])
-    return WidthStations(np.array([kept[i] for i in use]), lines, q, refs, ref_ss, sds, mask, index, frac, span,
-                         np.asarray(taper, dtype=float), [f for _, f in smooth], shifts)
+    return WidthStations(np.array([kept[i] for i in use]), lines, q, refs, ref_ss, sds, shifted, span,
+                         np.asarray(taper, dtype=float), [f for _, f in smooth])
 
 
 def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: float, theta: float,
@@ -292,7 +303,7 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     f = ws.smooth[copy]
     if f > 0:
         profiles = ndimage.gaussian_filter1d(profiles, f / STEP, axis=1, mode="nearest")
-    dw = _register(ws.refs[copy], ws.ref_ss[copy], profiles, ws.index, ws.frac, ws.mask, ws.shifts).sum(axis=1)
+    dw = _register(ws.refs[copy], ws.ref_ss[copy], profiles, ws.shifted).sum(axis=1)
     tol = along_limit * np.abs(ws.taper) + sigmas * ws.sd[copy]
     dw, tol = dw[ok], tol[ok]
     return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(float(a) for a in ws.s[ok]),
