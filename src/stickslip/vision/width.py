@@ -202,15 +202,24 @@ def _register(refs: FloatArray, ref_ss: FloatArray, profiles: FloatArray, g: _Sh
     return np.asarray(shifts[j] + np.clip(off, -0.5, 0.5) * step)
 
 
-def _edges(profiles: FloatArray, windows: list[tuple[IntArray, IntArray]], length: int
-           ) -> tuple[FloatArray, FloatArray]:
-    """The edge windows of ``profiles`` (``(m, q)``), their mean taken out, and their sums of squares."""
+def _gather(windows: list[tuple[IntArray, IntArray]], q: int, length: int) -> tuple[IntArray, FloatArray]:
+    """The edge windows as flat indices into ``(m, q)`` profiles (shape ``(m, 2, length)``, 0 past a window's
+    end) and which places hold a sample."""
     m = len(windows)
-    out = np.zeros((m, 2, length))
+    index = np.zeros((m, 2, length), dtype=np.intp)
+    mask = np.zeros((m, 2, length))
     for i, pair in enumerate(windows):
         for e, idx in enumerate(pair):
-            v = profiles[i, idx]
-            out[i, e, : idx.size] = v - v.mean()
+            index[i, e, : idx.size] = i * q + idx
+            mask[i, e, : idx.size] = 1.0
+    return index, mask
+
+
+def _edges(profiles: FloatArray, index: IntArray, mask: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The edge windows (:func:`_gather`) of ``profiles`` (``(m, q)``), their mean taken out, and their sums of
+    squares."""
+    v = profiles.reshape(-1).take(index) * mask
+    out = (v - (v.sum(axis=2) / mask.sum(axis=2))[..., None]) * mask
     return out, (out * out).sum(axis=2)
 
 
@@ -257,24 +266,29 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     reach = np.array([0.5 * w + GROUND + max_shift + 1.0 for w in widths])
     span = np.abs(ts)[None, :] <= reach[:, None]
     # the taper: the first frame's profiles ALONG_STEP px nearer the tip registered to those as far beyond
-    near, far = (np.stack([_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
-                           for o in offs]) for d in (-ALONG_STEP, ALONG_STEP))
+    o = np.stack(offs)
+    near, far = (_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
+                 for d in (-ALONG_STEP, ALONG_STEP))
     s0 = smooth[0][0]
-    near_e, near_ss = _edges(ndimage.gaussian_filter1d(near, s0 / STEP, axis=1, mode="nearest"), windows, length)
+    index, wmask = _gather(windows, q, length)
+    near_e, near_ss = _edges(ndimage.gaussian_filter1d(near, s0 / STEP, axis=1, mode="nearest"), index, wmask)
     far_s = ndimage.gaussian_filter1d(far, s0 / STEP, axis=1, mode="nearest")
     taper = _register(near_e, near_ss, far_s, shifted).sum(axis=1) / (2.0 * ALONG_STEP)
     refs, ref_ss, sds = [], [], []
     n2 = noise * noise / len(LINES)  # a sample of the mean of the lines
+    made: dict[float, tuple[FloatArray, FloatArray, FloatArray]] = {}
     for tsig, _ in smooth:
-        e = ndimage.gaussian_filter1d(raw, tsig / STEP, axis=1, mode="nearest")
-        r, ss = _edges(e, windows, length)
+        if tsig not in made:
+            e = ndimage.gaussian_filter1d(raw, tsig / STEP, axis=1, mode="nearest")
+            g = np.gradient(e, STEP, axis=1).reshape(-1).take(index) * wmask
+            # a matched filter's variance for each edge, the frame's noise and the first frame's alike
+            made[tsig] = (*_edges(e, index, wmask), np.sqrt((2.0 * n2 / np.maximum((g * g).sum(axis=2), 1e-300))
+                                                           .sum(axis=1)))
+        r, ss, sd = made[tsig]
         refs.append(r)
         ref_ss.append(ss)
-        g = np.gradient(e, STEP, axis=1)
-        g2 = np.array([[float((g[i, idx] ** 2).sum()) for idx in pair] for i, pair in enumerate(windows)])
-        # a matched filter's variance for each edge, the frame's noise and the first frame's alike
-        sds.append(np.sqrt((2.0 * n2 / np.maximum(g2, 1e-300)).sum(axis=1)))
-    offsets = np.stack(offs)
+        sds.append(sd)
+    offsets = o
     d_lines = np.asarray(LINES)
     lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
                       (offsets[..., 1][..., None] + d_lines * uy).ravel()])
