@@ -16,10 +16,10 @@ apart, sampled every 1 px, smoothed as the blur copy is) is registered to the fi
 frame's, each edge on its own: the outward shift of the edge (up to
 :attr:`~.template.TrackerParams.width_shift`) at which the edge's half of the profile
 (from the needle's middle to :data:`~.shaft.GROUND` px of ground beyond the edge)
-correlates best, to a quarter of a pixel and then by a parabola. The two shifts' sum is
-the width's change ``dw``. Its standard deviation comes from the pixel noise and the
-first frame's edge gradients (a matched filter's); the taper, the width's growth per px
-along the shaft, from registering the first frame's profiles
+correlates best, tried every :data:`SHIFT_STEP` px and then refined by a parabola. The
+two shifts' sum is the width's change ``dw``. Its standard deviation comes from the
+pixel noise and the first frame's edge gradients (a matched filter's); the taper, the
+width's growth per px along the shaft, from registering the first frame's profiles
 :data:`~.shaft.ALONG_STEP` px nearer the tip and further from it the same way.
 
 A station *disagrees* when ``|dw|`` exceeds what a fix
