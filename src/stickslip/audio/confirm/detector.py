@@ -9,8 +9,8 @@ stepping did not merely stop (:mod:`.pause`), the change was on the step clock's
 (:mod:`.sync`, opt-in), and flagged ``onset_uncertain`` where the evidence doubts its onset
 (:mod:`.onset`). A fire that does not persist is dropped and the fast path un-latched at once,
 so it hears the next stop; its template was frozen since the fire, so the rejected span never
-enters it. A pause restarts the detector at the window's end, as for a new recording, so
-that the stepping that resumes is learned afresh. The late path (:mod:`.late`, opt-in) adds
+enters it. A pause restarts the detector where the stepping comes back (:mod:`.resume`), as
+for a new recording, so that the stepping that resumes is learned afresh. The late path (:mod:`.late`, opt-in) adds
 stops the fast path never heard.
 
 What it costs: nothing in accuracy - a traverse counts its steps to the event's ``onset_s``
@@ -54,6 +54,7 @@ from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
 from .pause import PAUSE, PauseCheck, PauseParams, Stopped
 from .persistence import PERSISTENCE, PersistenceParams, Windows, check_confirm_s, persisted
+from .resume import Resumption
 from .sync import SYNC, SyncCheck, SyncParams, step_clock_verdict
 
 __all__ = ["ConfirmLog", "ConfirmParams", "ConfirmedStopDetector", "FastPath", "confirming"]
@@ -84,7 +85,8 @@ def _stepping_band(tu: Tuning) -> list[tuple[float, float]]:
 
 @dataclass
 class ConfirmLog:
-    """What a confirming detector noted since it was made or reset (a pause's restart keeps the first two)."""
+    """What a confirming detector noted since it was made or reset (a pause's restart keeps ``rejected``,
+    ``stopped`` and ``restarts``)."""
 
     #: the fires dropped: they did not persist (or were a pause)
     rejected: list[StopEvent] = field(default_factory=list)
@@ -103,6 +105,8 @@ class ConfirmLog:
     late_swallowed: list[StopEvent] = field(default_factory=list)
     #: per fire that persisted whose change was judged on the step clock's lines: (its ``detected_at_s``, what)
     clocked: list[tuple[float, OnClock]] = field(default_factory=list)
+    #: per pause: (the stream time it was judged at, the stream time the stepping came back and was heard afresh), s
+    restarts: list[tuple[float, float]] = field(default_factory=list)
 
 
 class ConfirmedStopDetector:
@@ -158,6 +162,7 @@ class ConfirmedStopDetector:
         # samples kept: the stepping before a fire and the longest window after it
         self._kept = KeptSamples(self._span + self._gap + self._F + (w.after_reject + 2) * self._H)
         self._pause = PauseCheck(tu, p.pause)
+        self._resume = Resumption(self._pause.sos, self._sr, p.pause)
         self._sync = SyncCheck(_stepping_band(tu) if step_clock else [], self._sr, p.sync)
         self._clocked = ClockedCheck(tu, p.clocked) if p.clocked is not None else None
         band = _stepping_band(tu)
@@ -178,7 +183,8 @@ class ConfirmedStopDetector:
         self._t0 = float(t0_s)
         self._fed = 0
         self._frames.reset(t0_s)
-        self._pause_at: float | None = None  # stream time at which a pause was heard: restart there
+        self._pause_at: float | None = None  # stream time at which a pause was heard: restart where stepping is back
+        self._resume.waiting = False
         for part in (self._chain, self._kept, self._sync, self._pause):
             part.reset()
         if self._clocked is not None:
@@ -201,8 +207,8 @@ class ConfirmedStopDetector:
 
     @property
     def ready(self) -> bool:
-        """False while the fast path is still learning the stepping sound."""
-        return self.inner.ready
+        """False while the fast path is still learning the stepping sound (or, after a pause, waits for it)."""
+        return self.inner.ready and not self._resume.waiting
 
     @property
     def latched(self) -> bool:
@@ -224,6 +230,8 @@ class ConfirmedStopDetector:
         x = np.asarray(block)
         if x.ndim != 1:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        if self._resume.waiting:
+            return self._wait(x)
         out: list[StopEvent] = []
         pos = 0
         while pos < x.size:
@@ -241,7 +249,18 @@ class ConfirmedStopDetector:
             for ev in events:
                 out += self._fired(ev)
             out += self._decide()
+            if self._resume.waiting:  # a pause: what follows is heard once the stepping is back
+                return out + self._wait(x[pos:])
         return out
+
+    def _wait(self, x: NDArray[Any]) -> list[StopEvent]:
+        """After a pause: hear ``x`` until the stepping is back (:mod:`.resume`), then restart there."""
+        got = self._resume.push(x)
+        if got is None:
+            return []
+        at, rest = got
+        self._restart_after_pause(at)
+        return self.feed(rest)
 
     def _take(self, left: int) -> int:
         """How many of the ``left`` samples the fast path may take now: up to the pending window's end, else a window.
@@ -299,6 +318,8 @@ class ConfirmedStopDetector:
     def finish(self) -> list[StopEvent]:
         """The stream ended: the provisional stop, if what was heard of its window persisted (see the module);
         else a stop the late path found and held back while the fast path was deciding."""
+        if self._resume.waiting:  # paused since the last pause was judged: nothing to hear
+            return []
         out = self._finish_fast()
         if self.late is not None and not out:
             out = self._late_event(self.late.finish(), self._fed)
@@ -365,8 +386,8 @@ class ConfirmedStopDetector:
         if self._holds(fire.ev, fire.frame, fire.window):
             return [self._confirmed(fire.ev, fire.frame, fire.window)]
         self.log.rejected.append(fire.ev)
-        if self._pause_at is not None:
-            self._restart_after_pause()
+        if self._pause_at is not None:  # the stepping stopped: restart where it comes back
+            self._resume.start(self._pause.before_power)
             return []
         self.inner.unlatch()
         self._chain.rejected(fire)
@@ -404,13 +425,15 @@ class ConfirmedStopDetector:
         self._pause_at = self._t0 + self._fed / self._sr
         return True
 
-    def _restart_after_pause(self) -> None:
-        """The stepping stopped: hear what follows afresh, as a new recording (the logs are kept)."""
+    def _restart_after_pause(self, at: int) -> None:
+        """The stepping is back ``at`` samples after the pause was judged: hear it afresh, as a new recording (the
+        logs are kept)."""
         t, self._pause_at = self._pause_at, None
         assert t is not None
         kept = self.log
-        self.reset(t, self._step_rate_hz)
-        self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped)
+        self.reset(t + at / self._sr, self._step_rate_hz)
+        self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped, restarts=kept.restarts)
+        self.log.restarts.append((t, self._t0))
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
