@@ -35,7 +35,6 @@ fire. So the events do not depend on how the stream is cut into blocks.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -48,14 +47,14 @@ from ..events import StopDetector, StopEvent, check_step_rate
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
 from .chain import FireChain
-from .clocked import CLOCKED, ClockedCheck, ClockedParams, OnClock
+from .checks import WindowChecks
+from .clocked import CLOCKED, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
-from .pause import PAUSE, PauseCheck, PauseParams, Stopped
+from .pause import PAUSE, PauseParams, Stopped
 from .persistence import PERSISTENCE, PersistenceParams, Windows, check_confirm_s, persisted
-from .resume import Resumption
-from .sync import SYNC, SyncCheck, SyncParams, step_clock_verdict
+from .sync import SYNC, SyncParams
 
 __all__ = ["ConfirmLog", "ConfirmParams", "ConfirmedStopDetector", "FastPath", "confirming"]
 
@@ -157,15 +156,12 @@ class ConfirmedStopDetector:
         self._frames = FrameLog(self._H, self._F, self._sr, 2 * w.after_reject + 4 * w.refire)
         self._onset = OnsetJudge(tu, self._frames, w.window, w.look, p.onset)
         self._chain = FireChain(w, self._frames, self._onset)
-        self._span = int(round(p.sync.span_s * self._sr))
-        self._gap = int(round(p.sync.gap_s * self._sr))
         # samples kept: the stepping before a fire and the longest window after it
-        self._kept = KeptSamples(self._span + self._gap + self._F + (w.after_reject + 2) * self._H)
-        self._pause = PauseCheck(tu, p.pause)
-        self._resume = Resumption(self._pause.sos, self._sr, p.pause)
-        self._sync = SyncCheck(_stepping_band(tu) if step_clock else [], self._sr, p.sync)
-        self._clocked = ClockedCheck(tu, p.clocked) if p.clocked is not None else None
+        span_gap = int(round(p.sync.span_s * self._sr)) + int(round(p.sync.gap_s * self._sr))
+        self._kept = KeptSamples(span_gap + self._F + (w.after_reject + 2) * self._H)
         band = _stepping_band(tu)
+        #: the checks besides persistence: the step clock (opt-in), a pause, the change on the clock's lines
+        self.checks = WindowChecks(tu, self._kept, band if step_clock else [], p.pause, p.sync, p.clocked)
         #: the late path (:mod:`.late`): stops the fast path never heard, found on the step clock's lines
         self.late: LatePath | None = LatePath(self._sr, band, inner.t0_s, p.late) if late and band else None
         self.reset(inner.t0_s)
@@ -183,12 +179,9 @@ class ConfirmedStopDetector:
         self._t0 = float(t0_s)
         self._fed = 0
         self._frames.reset(t0_s)
-        self._pause_at: float | None = None  # stream time at which a pause was heard: restart where stepping is back
-        self._resume.waiting = False
-        for part in (self._chain, self._kept, self._sync, self._pause):
-            part.reset()
-        if self._clocked is not None:
-            self._clocked.reset(self._step_rate_hz)
+        self._chain.reset()
+        self._kept.reset()
+        self.checks.reset(self._step_rate_hz)
         #: what was noted since the last reset
         self.log = ConfirmLog()
         if self.late is not None:
@@ -208,7 +201,7 @@ class ConfirmedStopDetector:
     @property
     def ready(self) -> bool:
         """False while the fast path is still learning the stepping sound (or, after a pause, waits for it)."""
-        return self.inner.ready and not self._resume.waiting
+        return self.inner.ready and not self.checks.after.waiting
 
     @property
     def latched(self) -> bool:
@@ -218,7 +211,7 @@ class ConfirmedStopDetector:
     @property
     def sync_bands(self) -> list[tuple[float, float]]:
         """The band the step clock is judged on, Hz (empty: no step-clock check)."""
-        return self._sync.bands
+        return self.checks.sync.bands
 
     @property
     def pending(self) -> StopEvent | None:
@@ -230,7 +223,7 @@ class ConfirmedStopDetector:
         x = np.asarray(block)
         if x.ndim != 1:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
-        if self._resume.waiting:
+        if self.checks.after.waiting:
             return self._wait(x)
         out: list[StopEvent] = []
         pos = 0
@@ -249,17 +242,20 @@ class ConfirmedStopDetector:
             for ev in events:
                 out += self._fired(ev)
             out += self._decide()
-            if self._resume.waiting:  # a pause: what follows is heard once the stepping is back
+            if self.checks.after.waiting:  # a pause: what follows is heard once the stepping is back
                 return out + self._wait(x[pos:])
         return out
 
     def _wait(self, x: NDArray[Any]) -> list[StopEvent]:
-        """After a pause: hear ``x`` until the stepping is back (:mod:`.resume`), then restart there."""
-        got = self._resume.push(x)
+        """After a pause: hear ``x`` until the stepping is back (:mod:`.resume`), then listen afresh from there, as
+        to a new recording (the logs of rejections, pauses and restarts are kept)."""
+        got = self.checks.after.push(x)
         if got is None:
             return []
-        at, rest = got
-        self._restart_after_pause(at)
+        judged, t, rest = got
+        kept = self.log
+        self.reset(t, self._step_rate_hz)
+        self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped, restarts=[*kept.restarts, (judged, t)])
         return self.feed(rest)
 
     def _take(self, left: int) -> int:
@@ -318,7 +314,7 @@ class ConfirmedStopDetector:
     def finish(self) -> list[StopEvent]:
         """The stream ended: the provisional stop, if what was heard of its window persisted (see the module);
         else a stop the late path found and held back while the fast path was deciding."""
-        if self._resume.waiting:  # paused since the last pause was judged: nothing to hear
+        if self.checks.after.waiting:  # paused since the last pause was judged: nothing to hear
             return []
         out = self._finish_fast()
         if self.late is not None and not out:
@@ -332,7 +328,7 @@ class ConfirmedStopDetector:
         heard = self.inner.frames_seen - 1 - fire.frame
         if not self._holds(fire.ev, fire.frame, heard):
             self.log.rejected.append(fire.ev)
-            self._pause_at = None
+            self.checks.after.judged_s = None
             return []
         return [self._confirmed(fire.ev, fire.frame, heard)]
 
@@ -340,11 +336,6 @@ class ConfirmedStopDetector:
     def _fire_frame(self, ev: StopEvent) -> int:
         end = int(round((ev.detected_at_s - self._t0) * self._sr))
         return (end - (self._F - 1)) // self._H
-
-    def _before(self, fire: int) -> NDArray[np.float64]:
-        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` before it (as kept)."""
-        end = fire * self._H + self._F - self._gap
-        return self._kept.get(end - self._span, end)
 
     def _fired(self, ev: StopEvent) -> list[StopEvent]:
         fire = self._fire_frame(ev)
@@ -357,25 +348,15 @@ class ConfirmedStopDetector:
             self.log.rejected.append(prev.ev)
         ev = self._chain.flagged(ev, fire)
         recent = self._chain.recent(fire)
-        if not recent or not math.isfinite(self._pause.before_power):
-            self._pause.hear_before(self._before(fire), self.params.sync.min_s * self._sr)
-        # the stepping before this fire is the step clock's reference (a fire soon after a rejected one keeps its
-        # chain's: the interference may have been going on since)
-        if self._sync.bands and (not recent or self._sync.ref is None):
-            self._sync.ref = self._before(fire)
-        if self._clocked is not None and (not recent or self._clocked.ref is None):
-            g, sp = self._gap // self._H, self._span // self._H
-            self._clocked.hear_before(self._before(fire), self._frames.between(fire - g - sp, fire - g))
+        self.checks.hear_before(fire, recent, self._frames)  # the stepping before it is each check's reference
         self._chain.start(ev, fire, recent)
         return []  # the window decides: the fast path, held since the fire's frame (hold_on_fire), waits for it
 
     def _holds(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """The fire at frame ``fire`` persisted over ``frames``, the step clock agrees and the stepping went on."""
-        return (
-            persisted(*self._frames.window(fire, frames), self.w.gap, self.params.persistence)
-            and self._in_step(ev, fire, frames)
-            and not self._stepping_stopped(ev, fire, frames)
-            and self._on_clock(ev, fire, frames)
+        """The fire at frame ``fire`` persisted over ``frames`` and passed the other checks (:mod:`.checks`)."""
+        now_s = self._t0 + self._fed / self._sr
+        return persisted(*self._frames.window(fire, frames), self.w.gap, self.params.persistence) and (
+            self.checks.passed(ev, fire, frames, self.log, now_s)
         )
 
     def _decide(self) -> list[StopEvent]:
@@ -386,54 +367,11 @@ class ConfirmedStopDetector:
         if self._holds(fire.ev, fire.frame, fire.window):
             return [self._confirmed(fire.ev, fire.frame, fire.window)]
         self.log.rejected.append(fire.ev)
-        if self._pause_at is not None:  # the stepping stopped: restart where it comes back
-            self._resume.start(self._pause.before_power)
+        if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back
             return []
         self.inner.unlatch()
         self._chain.rejected(fire)
         return []
-
-    def _in_step(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """Did the joint's step-synchronous sound change, line by line (:mod:`.sync`)? No verdict: True."""
-        if not self._sync.bands or self._sync.ref is None:
-            return True
-        start = fire * self._H + self._F  # the first sample after the fire's frame
-        got = self._sync.judge(self._kept.get(start, start + min(self._span, frames * self._H)))
-        if got is None:
-            return True
-        self.log.step_clock.append((ev.detected_at_s, got))
-        return step_clock_verdict(got, self.params.sync) is not False
-
-    def _on_clock(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
-        if self._clocked is None:
-            return True
-        start = fire * self._H + self._F
-        after = self._kept.get(start, start + min(self._span, frames * self._H))
-        got = self._clocked.judge(after, self._pause.before_hz)
-        if got is not None:
-            self.log.clocked.append((ev.detected_at_s, got))
-        return self._clocked.verdict(got)
-
-    def _stepping_stopped(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """Was the fire the stepping stopping (a pause), not an end stop (:mod:`.pause`)?"""
-        start = fire * self._H + self._F
-        got = self._pause.stopped(self._kept.get(start, start + frames * self._H))
-        if got is None:
-            return False
-        self.log.stopped.append((ev.detected_at_s, got))
-        self._pause_at = self._t0 + self._fed / self._sr
-        return True
-
-    def _restart_after_pause(self, at: int) -> None:
-        """The stepping is back ``at`` samples after the pause was judged: hear it afresh, as a new recording (the
-        logs are kept)."""
-        t, self._pause_at = self._pause_at, None
-        assert t is not None
-        kept = self.log
-        self.reset(t + at / self._sr, self._step_rate_hz)
-        self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped, restarts=kept.restarts)
-        self.log.restarts.append((t, self._t0))
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""

@@ -24,14 +24,15 @@ from piece to piece, so the restart does not depend on how the stream is cut int
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import sosfilt
 
-from .pause import PAUSE, PauseParams
+from .pause import PAUSE, PauseCheck, PauseParams
 
-__all__ = ["Resumption"]
+__all__ = ["AfterPause", "Resumption"]
 
 
 class Resumption:
@@ -59,17 +60,22 @@ class Resumption:
         known = math.isfinite(before_power) and before_power > 0.0
         self._back = before_power * 10.0 ** (-self.p.back_db / 10.0) if known else math.inf
         self._zi = np.zeros((self.sos.shape[0], 2))
-        self._raw: list[NDArray[np.float64]] = []  # the samples since the first piece of the current run
+        self._raw: list[NDArray[Any]] = []  # the samples since the first piece of the current run
         self._part = np.zeros(0)  # the filtered samples of the piece being heard
         self._floor = math.inf  # the quietest piece since the pause, full scale 1
         self._run = 0  # pieces in a row that were the stepping back
         self._seen = 0  # samples heard since the pause
         self._run_at = 0  # where the current run began, samples since the pause
 
-    def push(self, x: NDArray[np.float64]) -> tuple[int, NDArray[np.float64]] | None:
-        """Hear ``x``; once the stepping is back: (where to restart, samples since the pause; the samples from there on).
+    def push(self, x: NDArray[Any]) -> tuple[int, NDArray[Any]] | None:
+        """Hear ``x``; once the stepping is back, where to restart and the samples from there on.
 
-        ``None``: still waiting (all of ``x`` is heard and, but for the current run's, forgotten).
+        Returns
+        -------
+        tuple of (int, numpy.ndarray) or None
+            Where to restart, samples since the pause was judged, and the samples from there to
+            the end of ``x`` (as given, of its dtype); ``None``: still waiting (all of ``x`` is
+            heard and, but for the current run's samples, forgotten).
         """
         x = np.asarray(x)  # kept as given: the detector hears the same samples it would have
         if x.size == 0:
@@ -104,7 +110,7 @@ class Resumption:
         self._run += 1
         return self._run >= self.p.resume_pieces
 
-    def _restart(self, x: NDArray[np.float64]) -> tuple[int, NDArray[np.float64]]:
+    def _restart(self, x: NDArray[Any]) -> tuple[int, NDArray[Any]]:
         """The run is complete (in ``x``, the samples just heard): the restart point and the samples from it on."""
         self.waiting = False
         kept = np.concatenate(self._raw)
@@ -118,3 +124,46 @@ class Resumption:
         kept = np.concatenate(self._raw) if self._raw else np.zeros(0)
         first = self._seen - kept.size
         self._raw = [kept[max(0, keep_from - first) :]]
+
+
+class AfterPause:
+    """The restart after a pause: where the pause was judged, then the wait for the stepping (:class:`Resumption`).
+
+    Parameters
+    ----------
+    pause : PauseCheck
+        The pause judgement: its band-pass, and the stepping's level before the fire.
+    p : PauseParams
+    """
+
+    def __init__(self, pause: PauseCheck, p: PauseParams = PAUSE) -> None:
+        self.pause = pause
+        self.resumption = Resumption(pause.sos, pause.sample_rate, p)
+        self.reset()
+
+    def reset(self) -> None:
+        #: the stream time a pause was judged at, s (None: none since the last restart)
+        self.judged_s: float | None = None
+        self.resumption.waiting = False
+
+    @property
+    def waiting(self) -> bool:
+        """True from the pause's verdict until the stepping is back."""
+        return self.resumption.waiting
+
+    def wait(self) -> bool:
+        """The window was rejected: wait for the stepping if it was a pause (True), else nothing (False)."""
+        if self.judged_s is None:
+            return False
+        self.resumption.start(self.pause.before_power)
+        return True
+
+    def push(self, x: NDArray[Any]) -> tuple[float, float, NDArray[Any]] | None:
+        """Hear ``x``; once the stepping is back: (the pause judged, the restart, stream times in s; the samples from
+        the restart to the end of ``x``). ``None``: still waiting."""
+        got = self.resumption.push(x)
+        if got is None or self.judged_s is None:
+            return None
+        at, rest = got
+        judged, self.judged_s = self.judged_s, None
+        return judged, judged + at / self.pause.sample_rate, rest
