@@ -22,8 +22,9 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
   the same day;
 * the 95 % intervals of ``auto`` with the repeats (``predict --interval``): the share of
   validation traverses inside, per joint and direction, with its 95 % Wilson interval, side
-  by side with the same calibration's interval without its drift term ("no drift") and with
-  ``auto`` on the 46 alone ("46": no repeat, so no drift term, as before); and how honest
+  by side with the same calibration's interval without its drift term ("no drift": the bias the
+  fit leaves at the session's end, measured by the repeats' residuals, docs/models.md §4) and
+  with ``auto`` on the 46 alone ("46": no repeat, so no drift term, as before); and how honest
   the error ``calibrate`` prints is: the expected RMS error at new poses, and the
   cross-validation RMS of the average, each over the validation traverses' actual RMS error
   (median over days; 1 = honest).
@@ -139,7 +140,8 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
                 inside[key] += ok
             for j in (3, 2):
                 for s in "+-":
-                    drift[(j, s)].append(auto.predictive[(j, s)].drift)
+                    pr = auto.predictive[(j, s)]
+                    drift[(j, s)].append(float(np.hypot(pr.drift, pr.drift_sd)))
             e_auto, e_p14 = _errors(rows[AUTO], val), _errors(rows[ROWS[1]], val)
             for j in (3, 2):
                 worse[j] += int(e_auto[j].max() > e_p14[j].max())
@@ -197,12 +199,12 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
               f"{res['fallback'][3]} / {res['fallback'][2]} | " + " | ".join(cov) + " | "  # type: ignore[index]
               f"{np.median(h['expected'][3]):.2f} / {np.median(h['expected'][2]):.2f} | "
               f"{np.median(h['cv'][3]):.2f} / {np.median(h['cv'][2]):.2f} |")
-    print("\nThe drift term (docs/models.md §4): the calibration's bias to the session's end from the repeats, "
-          "mean and range over the days")
+    print("\nThe drift term (docs/models.md §4): what the intervals add for the bias the fit leaves at the "
+          "session's end, sqrt(drift^2 + drift_sd^2), mean and range over the days")
     print("\n| arm | 3+ | 3- | 2+ | 2- |\n| --- | ---: | ---: | ---: | ---: |")
     for arm, res in results.items():
         dr = res["drift"]  # type: ignore[index]
-        cells = [f"{100 * np.mean(dr[k]):+.2f} % ({100 * min(dr[k]):+.2f}…{100 * max(dr[k]):+.2f})"
+        cells = [f"{100 * np.mean(dr[k]):.2f} % ({100 * min(dr[k]):.2f}…{100 * max(dr[k]):.2f})"
                  for k in ((3, "+"), (3, "-"), (2, "+"), (2, "-"))]
         print(f"| {arm} | " + " | ".join(cells) + " |")
 

@@ -92,7 +92,7 @@ def _uncertainty_entries(cal: ExtFields) -> list[dict[str, object]]:
     """The ``uncertainty`` entries: per joint and direction the model error, the covariance and the error
     model of the intervals (docs/models.md §4): ``sqrt(floor^2 + (slope d^exponent)^2 + drift^2 + drift_sd^2)``,
     ``d`` the load-space distance to the nearest of the calibrated ``poses`` (q1, q2, q3, theta, psi; SI),
-    ``drift`` the bias towards the session's end (written only where a repeated pose measured it)."""
+    ``drift`` the bias the fit leaves at the session's end (written only where it is not zero)."""
     unc: list[dict[str, object]] = []
     for key in sorted(set(cal.sigma_model) | set(cal.covariance) | set(cal.predictive)):
         s = cal.sigma_model.get(key)

@@ -19,9 +19,9 @@ class Predictive:
     to the nearest of ``poses`` in the space of the loads the step depends on
     (:func:`~.groups.load_coordinates_of`): the model's residual at a calibrated pose, growing
     with the distance as the cross-validation's held-out poses did
-    (:func:`~.selection.error_model`), and the step's drift from the calibration to the end of
-    its session, which no cross-validation of one session sees (:mod:`~.drift`; zero without a
-    pose traversed twice in a session).
+    (:func:`~.selection.error_model`; both directions of the joint together), and the bias the
+    fit leaves at the end of its session, which no cross-validation of one session sees
+    (:mod:`~.drift`; zero without a pose traversed twice in a session).
 
     Attributes
     ----------
@@ -35,10 +35,12 @@ class Predictive:
         How the model's error grows with the distance: 2 (an interpolation error, as the
         calibrations make it since issue 33's second round), 1 (linear: files written before).
     drift : float
-        The calibration's relative bias towards the end of its session
-        (:attr:`~.drift.SessionDrift.bias`), 1; 0 without a repeated pose (and in files before).
+        The relative bias the fit leaves at the end of its session, its posterior mean from the late
+        repeats' residuals (:attr:`~.drift.EndBias.bias`), 1; 0 without a repeated pose (and in
+        files before).
     drift_sd : float
-        Its standard error, 1.
+        Its posterior standard deviation, 1 (``drift^2 + drift_sd^2`` is the bias's posterior mean
+        square, :func:`~.drift.end_bias`).
     """
 
     floor: float

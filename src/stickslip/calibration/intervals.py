@@ -7,10 +7,11 @@ poses. The relative standard deviation of a predicted mean step at a pose is
 ``sqrt(floor^2 + (slope d^2)^2 + drift^2 + drift_sd^2)``, ``d`` the pose's distance to the
 nearest calibrated pose in the space of the loads the step depends on: narrow where the
 calibration measured, wider between and beyond its poses (``d`` to the first power in files
-written before issue 33's second round); ``drift`` the calibration's bias towards the end of
-its session, where a user predicts, measured by a pose traversed twice (:mod:`.drift`; a bias
-of one sign for every prediction of the session, so it adds to the interval as a bias adds to
-the mean square error, in quadrature, with its standard error; zero without a repeat). The
+written before issue 33's second round); ``drift`` the bias the fit leaves at the end of its
+session, where a user predicts, from the residual of a pose traversed again there
+(:mod:`.drift`; a bias of one sign for every prediction of the session, so it adds to the
+interval as a bias adds to the mean square error, in quadrature, with its posterior standard
+deviation; zero without a repeat). The
 same standard deviation is what ``predict --interval`` and ``plan`` print (``1.96 sigma``) and
 what the tracking filter (:mod:`stickslip.motion.tracking`) starts its step scales' variance
 from in a pose.

@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from ..measurements import Traverse
 from ..models.families import FamilyModel, FamilyParams, FamilySpec, families_for, family_spec
-from .drift import SessionDrift, session_drifts
+from .drift import EndBias, SessionDrift, end_bias, session_drifts
 from .errormodel import Predictive
 from .family_fit import FamilyProblem, JointFit, full_rank, shared_names
 from .folds import cv_folds, workspace_coordinates, workspace_pose_array
@@ -618,10 +618,11 @@ class _Parts:
                                               member_labels=tuple(lab for lab, _ in ranked) if averaged else ())
             drift = drifts.get(d)
             if cross_validated:
-                bias, bias_sd = (0.0, 0.0) if drift is None else (drift.bias, drift.bias_sd)
-                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept, GROWTH, bias, bias_sd)
-                if drift is not None:
-                    self.notes.append(_drift_note(j, d, drift))
+                bias = None if drift is None else end_bias(_late_errors(self.models[(j, d)], drift), sel.floor)
+                self.predictive[(j, d)] = Predictive(sel.floor, sel.slope, kept, GROWTH,
+                                                     *((0.0, 0.0) if bias is None else (bias.bias, bias.bias_sd)))
+                if drift is not None and bias is not None:
+                    self.notes.append(_drift_note(j, d, drift, bias))
                     self.drifted = True
             c = fit.cov[d]
             if c is not None:
@@ -648,11 +649,26 @@ NO_REPEAT_NOTE = (
 """What ``calibrate`` says when its intervals could include the drift within a session but no repeat measured it."""
 
 
-def _drift_note(joint: int, direction: str, drift: SessionDrift) -> str:
+def _late_errors(model: FamilyModel, drift: SessionDrift) -> NDArray[np.float64]:
+    """The model's relative residuals ``predicted / measured - 1`` at the drift's late repeats (``nan``
+    where it would stall there)."""
+    ts = drift.late
+    cols = [np.array([getattr(t, k) for t in ts], dtype=float) for k in ("start", "end", "q1", "q2", "q3",
+                                                                         "theta", "psi")]
+    try:
+        pred = model.average_gamma(*cols)
+    except ValueError:  # NonPhysicalError: no prediction, no residual
+        return np.full(len(ts), np.nan)
+    out: NDArray[np.float64] = pred / np.array([t.gamma for t in ts]) - 1.0
+    return out
+
+
+def _drift_note(joint: int, direction: str, drift: SessionDrift, bias: EndBias) -> str:
     """What ``calibrate`` says of a joint and direction's drift within the session (docs/models.md §4)."""
     return (f"joint {joint}{direction}: a pose traversed again {drift.span:.0f} traverses later stepped "
-            f"{drift.change * 100:+.2f} % ({drift.pairs} repeat(s)); the intervals include the "
-            f"calibration's bias to the session's end, {drift.bias * 100:+.2f} ± {drift.bias_sd * 100:.2f} %")
+            f"{drift.change * 100:+.2f} % ({drift.pairs} repeat(s)); the calibration predicts it "
+            f"{bias.residual * 100:+.2f} % off (its error at a calibrated pose: {bias.misfit * 100:.2f} %): "
+            f"the intervals add the bias beyond it, {bias.term * 100:.2f} %")
 
 
 MAX_STORED_POSES = 400
