@@ -197,6 +197,8 @@ def test_the_pause_judgement_does_not_depend_on_the_block_size(block: int) -> No
     x = np.concatenate([_stepping("Q", 1.5, 11), _room(1.0, 3), bs.render(bs.Scene("Q", 1000.0, 1.4, 2.0, seed=12))[0]])
     ref, det = whole_and_in_blocks(_battery_tuning("Q"), x.astype(np.float32), block)
     assert [t for t, _ in det.log.stopped] == [t for t, _ in ref.log.stopped] and len(ref.log.stopped) >= 1
+    assert det.log.restarts == ref.log.restarts and len(ref.log.restarts) == 1  # where the stepping came back
+    assert 2.5 - 0.01 <= ref.log.restarts[0][1] <= 2.5 + 0.01
 
 
 def test_the_step_lines_read_low_on_noise_and_high_on_stepping() -> None:

@@ -3,6 +3,7 @@
 * :mod:`.persistence` the window after a fire and the rule it must meet
 * :mod:`.evidence`    what is kept of the stream: the per-frame evidence, the latest samples
 * :mod:`.pause`       a fire that persisted but was the stepping stopping: not an end stop
+* :mod:`.resume`      after a pause: where the stepping comes back, from which the detector listens afresh
 * :mod:`.clocked`     a fire whose change is off the step clock's lines (added sound): not an end stop
 * :mod:`.onset`       whether the confirmed stop began at the fire's onset
 * :mod:`.sync`        the step clock's verdict (opt-in)

@@ -9,8 +9,8 @@ stepping did not merely stop (:mod:`.pause`), the change was on the step clock's
 (:mod:`.sync`, opt-in), and flagged ``onset_uncertain`` where the evidence doubts its onset
 (:mod:`.onset`). A fire that does not persist is dropped and the fast path un-latched at once,
 so it hears the next stop; its template was frozen since the fire, so the rejected span never
-enters it. A pause restarts the detector at the window's end, as for a new recording, so
-that the stepping that resumes is learned afresh. The late path (:mod:`.late`, opt-in) adds
+enters it. A pause restarts the detector where the stepping comes back (:mod:`.resume`), as
+for a new recording, so that the stepping that resumes is learned afresh. The late path (:mod:`.late`, opt-in) adds
 stops the fast path never heard.
 
 What it costs: nothing in accuracy - a traverse counts its steps to the event's ``onset_s``
@@ -35,7 +35,6 @@ fire. So the events do not depend on how the stream is cut into blocks.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -48,13 +47,14 @@ from ..events import StopDetector, StopEvent, check_step_rate
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
 from .chain import FireChain
-from .clocked import CLOCKED, ClockedCheck, ClockedParams, OnClock
+from .checks import WindowChecks
+from .clocked import CLOCKED, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
-from .pause import PAUSE, PauseCheck, PauseParams, Stopped
+from .pause import PAUSE, PauseParams, Stopped
 from .persistence import PERSISTENCE, PersistenceParams, Windows, check_confirm_s, persisted
-from .sync import SYNC, SyncCheck, SyncParams, step_clock_verdict
+from .sync import SYNC, SyncParams
 
 __all__ = ["ConfirmLog", "ConfirmParams", "ConfirmedStopDetector", "FastPath", "confirming"]
 
@@ -84,7 +84,8 @@ def _stepping_band(tu: Tuning) -> list[tuple[float, float]]:
 
 @dataclass
 class ConfirmLog:
-    """What a confirming detector noted since it was made or reset (a pause's restart keeps the first two)."""
+    """What a confirming detector noted since it was made or reset (a pause's restart keeps ``rejected``,
+    ``stopped`` and ``restarts``)."""
 
     #: the fires dropped: they did not persist (or were a pause)
     rejected: list[StopEvent] = field(default_factory=list)
@@ -103,6 +104,8 @@ class ConfirmLog:
     late_swallowed: list[StopEvent] = field(default_factory=list)
     #: per fire that persisted whose change was judged on the step clock's lines: (its ``detected_at_s``, what)
     clocked: list[tuple[float, OnClock]] = field(default_factory=list)
+    #: per pause: (the stream time it was judged at, the stream time the stepping came back and was heard afresh), s
+    restarts: list[tuple[float, float]] = field(default_factory=list)
 
 
 class ConfirmedStopDetector:
@@ -153,14 +156,12 @@ class ConfirmedStopDetector:
         self._frames = FrameLog(self._H, self._F, self._sr, 2 * w.after_reject + 4 * w.refire)
         self._onset = OnsetJudge(tu, self._frames, w.window, w.look, p.onset)
         self._chain = FireChain(w, self._frames, self._onset)
-        self._span = int(round(p.sync.span_s * self._sr))
-        self._gap = int(round(p.sync.gap_s * self._sr))
         # samples kept: the stepping before a fire and the longest window after it
-        self._kept = KeptSamples(self._span + self._gap + self._F + (w.after_reject + 2) * self._H)
-        self._pause = PauseCheck(tu, p.pause)
-        self._sync = SyncCheck(_stepping_band(tu) if step_clock else [], self._sr, p.sync)
-        self._clocked = ClockedCheck(tu, p.clocked) if p.clocked is not None else None
+        span_gap = int(round(p.sync.span_s * self._sr)) + int(round(p.sync.gap_s * self._sr))
+        self._kept = KeptSamples(span_gap + self._F + (w.after_reject + 2) * self._H)
         band = _stepping_band(tu)
+        #: the checks besides persistence: the step clock (opt-in), a pause, the change on the clock's lines
+        self.checks = WindowChecks(tu, self._kept, band if step_clock else [], p.pause, p.sync, p.clocked)
         #: the late path (:mod:`.late`): stops the fast path never heard, found on the step clock's lines
         self.late: LatePath | None = LatePath(self._sr, band, inner.t0_s, p.late) if late and band else None
         self.reset(inner.t0_s)
@@ -178,11 +179,9 @@ class ConfirmedStopDetector:
         self._t0 = float(t0_s)
         self._fed = 0
         self._frames.reset(t0_s)
-        self._pause_at: float | None = None  # stream time at which a pause was heard: restart there
-        for part in (self._chain, self._kept, self._sync, self._pause):
-            part.reset()
-        if self._clocked is not None:
-            self._clocked.reset(self._step_rate_hz)
+        self._chain.reset()
+        self._kept.reset()
+        self.checks.reset(self._step_rate_hz)
         #: what was noted since the last reset
         self.log = ConfirmLog()
         if self.late is not None:
@@ -201,8 +200,8 @@ class ConfirmedStopDetector:
 
     @property
     def ready(self) -> bool:
-        """False while the fast path is still learning the stepping sound."""
-        return self.inner.ready
+        """False while the fast path is still learning the stepping sound (or, after a pause, waits for it)."""
+        return self.inner.ready and not self.checks.after.waiting
 
     @property
     def latched(self) -> bool:
@@ -212,7 +211,7 @@ class ConfirmedStopDetector:
     @property
     def sync_bands(self) -> list[tuple[float, float]]:
         """The band the step clock is judged on, Hz (empty: no step-clock check)."""
-        return self._sync.bands
+        return self.checks.sync.bands
 
     @property
     def pending(self) -> StopEvent | None:
@@ -224,6 +223,8 @@ class ConfirmedStopDetector:
         x = np.asarray(block)
         if x.ndim != 1:
             raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        if self.checks.after.waiting:
+            return self._wait(x)
         out: list[StopEvent] = []
         pos = 0
         while pos < x.size:
@@ -241,7 +242,21 @@ class ConfirmedStopDetector:
             for ev in events:
                 out += self._fired(ev)
             out += self._decide()
+            if self.checks.after.waiting:  # a pause: what follows is heard once the stepping is back
+                return out + self._wait(x[pos:])
         return out
+
+    def _wait(self, x: NDArray[Any]) -> list[StopEvent]:
+        """After a pause: hear ``x`` until the stepping is back (:mod:`.resume`), then listen afresh from there, as
+        to a new recording (the logs of rejections, pauses and restarts are kept)."""
+        got = self.checks.after.push(x)
+        if got is None:
+            return []
+        judged, t, rest = got
+        kept = self.log
+        self.reset(t, self._step_rate_hz)
+        self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped, restarts=[*kept.restarts, (judged, t)])
+        return self.feed(rest)
 
     def _take(self, left: int) -> int:
         """How many of the ``left`` samples the fast path may take now: up to the pending window's end, else a window.
@@ -299,6 +314,8 @@ class ConfirmedStopDetector:
     def finish(self) -> list[StopEvent]:
         """The stream ended: the provisional stop, if what was heard of its window persisted (see the module);
         else a stop the late path found and held back while the fast path was deciding."""
+        if self.checks.after.waiting:  # paused since the last pause was judged: nothing to hear
+            return []
         out = self._finish_fast()
         if self.late is not None and not out:
             out = self._late_event(self.late.finish(), self._fed)
@@ -311,7 +328,7 @@ class ConfirmedStopDetector:
         heard = self.inner.frames_seen - 1 - fire.frame
         if not self._holds(fire.ev, fire.frame, heard):
             self.log.rejected.append(fire.ev)
-            self._pause_at = None
+            self.checks.after.judged_s = None
             return []
         return [self._confirmed(fire.ev, fire.frame, heard)]
 
@@ -319,11 +336,6 @@ class ConfirmedStopDetector:
     def _fire_frame(self, ev: StopEvent) -> int:
         end = int(round((ev.detected_at_s - self._t0) * self._sr))
         return (end - (self._F - 1)) // self._H
-
-    def _before(self, fire: int) -> NDArray[np.float64]:
-        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` before it (as kept)."""
-        end = fire * self._H + self._F - self._gap
-        return self._kept.get(end - self._span, end)
 
     def _fired(self, ev: StopEvent) -> list[StopEvent]:
         fire = self._fire_frame(ev)
@@ -336,25 +348,15 @@ class ConfirmedStopDetector:
             self.log.rejected.append(prev.ev)
         ev = self._chain.flagged(ev, fire)
         recent = self._chain.recent(fire)
-        if not recent or not math.isfinite(self._pause.before_power):
-            self._pause.hear_before(self._before(fire), self.params.sync.min_s * self._sr)
-        # the stepping before this fire is the step clock's reference (a fire soon after a rejected one keeps its
-        # chain's: the interference may have been going on since)
-        if self._sync.bands and (not recent or self._sync.ref is None):
-            self._sync.ref = self._before(fire)
-        if self._clocked is not None and (not recent or self._clocked.ref is None):
-            g, sp = self._gap // self._H, self._span // self._H
-            self._clocked.hear_before(self._before(fire), self._frames.between(fire - g - sp, fire - g))
+        self.checks.hear_before(fire, recent, self._frames)  # the stepping before it is each check's reference
         self._chain.start(ev, fire, recent)
         return []  # the window decides: the fast path, held since the fire's frame (hold_on_fire), waits for it
 
     def _holds(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """The fire at frame ``fire`` persisted over ``frames``, the step clock agrees and the stepping went on."""
-        return (
-            persisted(*self._frames.window(fire, frames), self.w.gap, self.params.persistence)
-            and self._in_step(ev, fire, frames)
-            and not self._stepping_stopped(ev, fire, frames)
-            and self._on_clock(ev, fire, frames)
+        """The fire at frame ``fire`` persisted over ``frames`` and passed the other checks (:mod:`.checks`)."""
+        now_s = self._t0 + self._fed / self._sr
+        return persisted(*self._frames.window(fire, frames), self.w.gap, self.params.persistence) and (
+            self.checks.passed(ev, fire, frames, self.log, now_s)
         )
 
     def _decide(self) -> list[StopEvent]:
@@ -365,52 +367,11 @@ class ConfirmedStopDetector:
         if self._holds(fire.ev, fire.frame, fire.window):
             return [self._confirmed(fire.ev, fire.frame, fire.window)]
         self.log.rejected.append(fire.ev)
-        if self._pause_at is not None:
-            self._restart_after_pause()
+        if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back
             return []
         self.inner.unlatch()
         self._chain.rejected(fire)
         return []
-
-    def _in_step(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """Did the joint's step-synchronous sound change, line by line (:mod:`.sync`)? No verdict: True."""
-        if not self._sync.bands or self._sync.ref is None:
-            return True
-        start = fire * self._H + self._F  # the first sample after the fire's frame
-        got = self._sync.judge(self._kept.get(start, start + min(self._span, frames * self._H)))
-        if got is None:
-            return True
-        self.log.step_clock.append((ev.detected_at_s, got))
-        return step_clock_verdict(got, self.params.sync) is not False
-
-    def _on_clock(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
-        if self._clocked is None:
-            return True
-        start = fire * self._H + self._F
-        after = self._kept.get(start, start + min(self._span, frames * self._H))
-        got = self._clocked.judge(after, self._pause.before_hz)
-        if got is not None:
-            self.log.clocked.append((ev.detected_at_s, got))
-        return self._clocked.verdict(got)
-
-    def _stepping_stopped(self, ev: StopEvent, fire: int, frames: int) -> bool:
-        """Was the fire the stepping stopping (a pause), not an end stop (:mod:`.pause`)?"""
-        start = fire * self._H + self._F
-        got = self._pause.stopped(self._kept.get(start, start + frames * self._H))
-        if got is None:
-            return False
-        self.log.stopped.append((ev.detected_at_s, got))
-        self._pause_at = self._t0 + self._fed / self._sr
-        return True
-
-    def _restart_after_pause(self) -> None:
-        """The stepping stopped: hear what follows afresh, as a new recording (the logs are kept)."""
-        t, self._pause_at = self._pause_at, None
-        assert t is not None
-        kept = self.log
-        self.reset(t, self._step_rate_hz)
-        self.log = ConfirmLog(rejected=kept.rejected, stopped=kept.stopped)
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""

@@ -72,6 +72,12 @@ class PauseParams:
     back_db: float = param(
         10.0, "dB", "a piece within this of the stepping's level ends a pause: its lines are judged before it"
     )
+    resume_pieces: int = param(
+        3, "pieces", "after a pause, restart where this many pieces in a row are the stepping back (a knock is shorter)"
+    )
+    rise_db: float = param(
+        10.0, "dB", "... each within back_db of its level, or this far over the pause's quietest piece (another gain)"
+    )
 
 
 PAUSE = PauseParams()

@@ -1,0 +1,138 @@
+"""The checks a fire that persisted must pass besides persistence, on the samples kept around it.
+
+* the step clock agrees, where asked (:mod:`.sync`, opt-in);
+* the stepping did not merely stop (:mod:`.pause`); if it did, the detector waits for it to
+  come back (:mod:`.resume`);
+* the change was on the step clock's lines, not sound added between them (:mod:`.clocked`).
+
+Each compares the window after the fire with the stepping before it: ``span_s`` of samples
+ending ``gap_s`` before the fire's frame (``SyncParams``). A fire soon after a rejected one
+keeps its chain's reference: the interference may have been going on since.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..events import StopEvent
+from ..features.stepclock import LineChange
+from ..tuningfile import Tuning
+from .clocked import ClockedCheck, ClockedParams, OnClock
+from .evidence import FrameLog, KeptSamples
+from .pause import PauseCheck, PauseParams, Stopped
+from .resume import AfterPause
+from .sync import SyncCheck, SyncParams, step_clock_verdict
+
+__all__ = ["Verdicts", "WindowChecks"]
+
+
+class Verdicts(Protocol):
+    """Where the checks note what they measured, per fire (its ``detected_at_s``, what): the confirming detector's
+    log."""
+
+    step_clock: list[tuple[float, LineChange]]
+    stopped: list[tuple[float, Stopped]]
+    clocked: list[tuple[float, OnClock]]
+
+
+class WindowChecks:
+    """The step clock's, the pause's and the clocked check, on the samples ``kept`` (see the module docstring).
+
+    Parameters
+    ----------
+    tuning : Tuning
+        The fast path's tuning.
+    kept : KeptSamples
+        The latest samples of the stream, counted from its start (the confirming detector's).
+    sync_bands : list of (float, float)
+        The band the step clock is judged on, Hz (empty: not asked).
+    pause, sync : PauseParams, SyncParams
+    clocked : ClockedParams or None
+        None: the change is not judged on the step clock's lines.
+    """
+
+    def __init__(
+        self,
+        tuning: Tuning,
+        kept: KeptSamples,
+        sync_bands: list[tuple[float, float]],
+        pause: PauseParams,
+        sync: SyncParams,
+        clocked: ClockedParams | None,
+    ) -> None:
+        self.kept, self.p_sync = kept, sync
+        self._H, self._F, sr = int(tuning.hop), int(tuning.frame), int(tuning.sample_rate)
+        self.span, self.gap = int(round(sync.span_s * sr)), int(round(sync.gap_s * sr))
+        self.min_before = sync.min_s * sr
+        self.pause = PauseCheck(tuning, pause)
+        self.after = AfterPause(self.pause, pause)
+        self.sync = SyncCheck(sync_bands, sr, sync)
+        self.clocked = ClockedCheck(tuning, clocked) if clocked is not None else None
+
+    def reset(self, step_rate_hz: float | None) -> None:
+        for part in (self.pause, self.after, self.sync):
+            part.reset()
+        if self.clocked is not None:
+            self.clocked.reset(step_rate_hz)
+
+    def before(self, fire: int) -> NDArray[np.float64]:
+        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` before it (as kept)."""
+        end = fire * self._H + self._F - self.gap
+        return self.kept.get(end - self.span, end)
+
+    def after_fire(self, fire: int, n: int) -> NDArray[np.float64]:
+        """The ``n`` samples kept from the first sample after the fire's frame ``fire``."""
+        start = fire * self._H + self._F
+        return self.kept.get(start, start + n)
+
+    def hear_before(self, fire: int, recent: bool, frames: FrameLog) -> None:
+        """The stepping before the fire at frame ``fire`` is each check's reference (``recent``: a fire soon after
+        a rejected one, which keeps its chain's reference where there is one)."""
+        if not recent or not math.isfinite(self.pause.before_power):
+            self.pause.hear_before(self.before(fire), self.min_before)
+        if self.sync.bands and (not recent or self.sync.ref is None):
+            self.sync.ref = self.before(fire)
+        if self.clocked is not None and (not recent or self.clocked.ref is None):
+            g, sp = self.gap // self._H, self.span // self._H
+            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g))
+
+    def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
+        """The fire at frame ``fire``, which persisted over ``frames``: the step clock agrees, the stepping went on
+        (else the pause is noted as judged at ``now_s``, s) and the change was on the clock's lines."""
+        return (
+            self._in_step(ev, fire, frames, log)
+            and not self._stepping_stopped(ev, fire, frames, log, now_s)
+            and self._on_clock(ev, fire, frames, log)
+        )
+
+    def _in_step(self, ev: StopEvent, fire: int, frames: int, log: Verdicts) -> bool:
+        """Did the joint's step-synchronous sound change, line by line (:mod:`.sync`)? No verdict: True."""
+        if not self.sync.bands or self.sync.ref is None:
+            return True
+        got = self.sync.judge(self.after_fire(fire, min(self.span, frames * self._H)))
+        if got is None:
+            return True
+        log.step_clock.append((ev.detected_at_s, got))
+        return step_clock_verdict(got, self.p_sync) is not False
+
+    def _stepping_stopped(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
+        """Was the fire the stepping stopping (a pause), not an end stop (:mod:`.pause`)?"""
+        got = self.pause.stopped(self.after_fire(fire, frames * self._H))
+        if got is None:
+            return False
+        log.stopped.append((ev.detected_at_s, got))
+        self.after.judged_s = now_s
+        return True
+
+    def _on_clock(self, ev: StopEvent, fire: int, frames: int, log: Verdicts) -> bool:
+        """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
+        if self.clocked is None:
+            return True
+        got = self.clocked.judge(self.after_fire(fire, min(self.span, frames * self._H)), self.pause.before_hz)
+        if got is not None:
+            log.clocked.append((ev.detected_at_s, got))
+        return self.clocked.verdict(got)
