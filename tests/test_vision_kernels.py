@@ -169,3 +169,23 @@ def test_copies_with_the_same_weights_share_the_variance_and_give_their_own_corr
     other = rng.uniform(0.0, 1.0, (9, 9))  # other weights: their own variance
     t = rng.normal(size=(9, 9))
     assert np.array_equal(masked_ncc(region, t, other, cache, ("coarse", 9), spectra), masked_ncc(region, t, other))
+
+
+def test_shaft_sampling_is_the_plain_bilinear_one_bit_for_bit() -> None:
+    from stickslip.vision.shaft import _bilinear
+
+    rng = np.random.default_rng(6)
+    image = rng.normal(0.5, 0.1, (50, 70))
+    xs, ys = rng.uniform(-5.0, 75.0, 400), rng.uniform(-5.0, 55.0, 400)
+    xs[:4], ys[:4] = (0.0, 69.0, 68.9999999, -0.0), (49.0, 0.0, 48.9999999, 12.5)  # on the frame's edges
+    H, W = image.shape
+    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
+    x, y = np.minimum(np.maximum(xs, 0.0), W - 1.000001), np.minimum(np.maximum(ys, 0.0), H - 1.000001)
+    ix, iy = x.astype(np.intp), y.astype(np.intp)
+    fx, fy, flat, i00 = x - ix, y - iy, image.reshape(-1), iy * W + ix
+    top = flat[i00] + (flat[i00 + 1] - flat[i00]) * fx
+    bottom = flat[i00 + W] + (flat[i00 + W + 1] - flat[i00 + W]) * fx
+    v, got_inside = _bilinear(image, xs, ys)
+    assert np.array_equal(v, top + (bottom - top) * fy) and np.array_equal(got_inside, inside)
+    v2, inside2 = _bilinear(image, xs.reshape(20, 20), ys.reshape(20, 20))  # any shape, kept
+    assert np.array_equal(v2, v.reshape(20, 20)) and np.array_equal(inside2, inside.reshape(20, 20))

@@ -41,6 +41,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from .refine import _bilinear as _interpolate
+from .refine import _limits
+
 __all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO",
            "learn_shaft", "check_shaft"]
 
@@ -174,22 +177,26 @@ class ShaftCheck:
 
 
 def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """Bilinear samples of ``image`` at ``(xs, ys)`` (px), and which lie in the frame (the others: its edge)."""
+    """Bilinear samples of ``image`` at ``(xs, ys)`` (px), and which lie in the frame (the others: its edge).
+
+    x and y are handled together and the four neighbours gathered at once (:mod:`.refine`'s sampling, on the
+    whole frame): the same values as each coordinate and neighbour apart, bit for bit.
+    """
     H, W = image.shape
-    inside = (xs >= 0) & (xs <= W - 1) & (ys >= 0) & (ys <= H - 1)
-    x = np.minimum(np.maximum(xs, 0.0), W - 1.000001)
-    y = np.minimum(np.maximum(ys, 0.0), H - 1.000001)
-    ix = x.astype(np.intp)
-    iy = y.astype(np.intp)
-    fx = x - ix
-    fy = y - iy
-    flat = image.reshape(-1)
-    i00 = iy * W + ix
-    v00, v01 = flat.take(i00), flat.take(i00 + 1)
-    v10, v11 = flat.take(i00 + W), flat.take(i00 + W + 1)
-    top = v00 + (v01 - v00) * fx
-    bottom = v10 + (v11 - v10) * fx
-    return top + (bottom - top) * fy, inside
+    xy = np.stack((np.ravel(xs), np.ravel(ys))).astype(float, copy=False)
+    last, clip, corners = _limits(H, W)
+    ok = xy >= 0
+    ok &= xy <= last
+    inside = ok[0] & ok[1]
+    np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
+    ixy = xy.astype(np.intp)
+    xy -= ixy  # the fractions
+    i00 = ixy[1]
+    i00 *= W
+    i00 += ixy[0]
+    v = image.reshape(-1).take(np.add(corners, i00))
+    shape = np.shape(xs)
+    return _interpolate(v, xy[0], xy[1]).reshape(shape), inside.reshape(shape)
 
 
 def _lines(image: FloatArray, x: float, y: float, ox: FloatArray, oy: FloatArray, ux: float, uy: float
