@@ -493,7 +493,8 @@ def refine(
         beta_prev = sol[:6]
         g, c = float(sol[0]), float(sol[3])
         blur_c = float(sol[6]) / g  # half the blur variance the frame has beyond the template's, px²
-        e = (Iw - sol[3] - sol[4] * bx - sol[5] * by) / gain - T - blur_c * st.lap
+        c3, c4, c5 = sol[3:6].tolist()
+        e = (Iw - c3 - c4 * bx - c5 * by) / gain - T - blur_c * st.lap
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             robust_w, scale = _tukey_weights(e, omega, scale)
         dp = _damped(sol[_NL:].copy(), prev_dp)
@@ -513,6 +514,9 @@ def refine(
     return Refinement(tx, ty, theta, g, c, cov, score, outliers, coverage, it, converged, 2.0 * blur_c)
 
 
+_SIGNS = np.array(((1.0,), (-1.0,)))
+
+
 def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: float) -> FloatArray:
     """The motion's Jacobian (3 x window): the mean of the model's and the warped frame's gradients.
 
@@ -525,7 +529,7 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
     fgx, fgy, fth = f[0], f[1], f[2]
     # (gx cos + gy sin, gy cos - gx sin) / g, both rows at once
     np.multiply(v3[1:], ct, out=f[:2])
-    f[:2] += v3[2:0:-1] * np.array(((st_,), (-st_,)))
+    f[:2] += v3[2:0:-1] * (_SIGNS * st_)
     f[:2] /= g
     np.negative(fgx, out=fth)
     fth *= st.ry
@@ -554,8 +558,9 @@ def _solve_positive_gain(
         sol = _joint(D, omega, Iw, cols, kappa, turn)
         if sol is None:
             break
-        gain = sol[0] + sol[1] * bx + sol[2] * by
-        if sol[0] > 1e-12 and bool((gain[omega > 0] > 0.2 * sol[0]).all()):
+        s0, s1, s2 = sol[:3].tolist()  # (Python floats: numpy's scalars cost more against an array)
+        gain = s0 + s1 * bx + s2 * by
+        if s0 > 1e-12 and bool((gain[omega > 0] > 0.2 * s0).all()):
             return sol, gain, cols
     return None, None, model
 
