@@ -221,6 +221,9 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
     return Patch(data, x0, y0, (H, W))
 
 
+_CACHED = 256
+"""At most this many kernels (or patch sizes' limits) are kept; then the cache starts again."""
+
 _WEIGHTS: dict[float, FloatArray] = {}
 
 
@@ -233,6 +236,9 @@ def _gaussian_weights(sigma: float) -> FloatArray:
         delta = np.zeros(2 * lw + 1)
         delta[lw] = 1.0
         w = ndimage.gaussian_filter1d(delta, sigma, mode="constant")[::-1].copy()
+        w.flags.writeable = False
+        if len(_WEIGHTS) >= _CACHED:
+            _WEIGHTS.clear()
         _WEIGHTS[sigma] = w
     return w
 
@@ -293,6 +299,10 @@ def _limits(ch: int, cw: int) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]
     if lim is None:
         lim = (np.array(((cw - 1.0,), (ch - 1.0,))), np.array(((cw - 1.000001,), (ch - 1.000001,))),
                np.array(((0,), (1,), (cw,), (cw + 1,)), dtype=np.intp))
+        for a in lim:
+            a.flags.writeable = False
+        if len(_LIMITS) >= _CACHED:
+            _LIMITS.clear()
         _LIMITS[(ch, cw)] = lim
     return lim
 
