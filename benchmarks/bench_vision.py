@@ -29,6 +29,10 @@ off and the worst, and the verdicts by what the frame is (``FRAMES`` default 400
 ``--flake`` does the same in the own renderer's flake mode (``flake_benchmark``: a flat,
 nearly opaque chip with rounded corners stuck on the tip for 1 to 4 frames, reaching 0.9
 to 1.5 tip widths from its middle, sharper than the needle; ``FRAMES`` default 200).
+
+``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
+and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
+tracker must not make worse.
 """
 
 from __future__ import annotations
@@ -48,7 +52,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
-from vision_own import OwnFrame, flake_benchmark, lobed_benchmark  # noqa: E402
+from vision_own import OwnFrame, flake_benchmark, lobed_benchmark, own_benchmark  # noqa: E402
 from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.devices.base import DeviceInfo  # noqa: E402
@@ -134,15 +138,16 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
     return "visible, 4-10 px inside" if room < 10.0 else "visible, 10+ px inside"
 
 
-def lobed(n_frames: int, wide: bool = False, flake: bool = False) -> int:
+def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | None = None) -> int:
     """Track the own renderer's lobed-mode frames; the number of fixes more than 3 px off.
 
     ``wide``: bright field only, tips 14 to 18 px wide (seed 1), as the second renderer's
     worst fixes were; else tips 3 to 20 px, both looks (seed 0). ``flake``: the flake
-    mode's frames instead.
+    mode's frames instead; ``plain``: the plain frames of that seed instead.
     """
     make = flake_benchmark if flake else lobed_benchmark
-    seqs = (make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
+    seqs = (own_benchmark(n_frames, 40, seed=plain, size=256) if plain is not None
+            else make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
             else make(n_frames, 40, seed=0, size=256))
     tally: dict[tuple[str, str], int] = {}
     bad: list[tuple[float, int, int, str, float]] = []
@@ -263,6 +268,13 @@ def main(argv: list[str] | None = None) -> None:
         lobed(int(numbers[0]) if numbers else 400)
         print("\nthe same, bright field only, tips 14 to 18 px wide")
         lobed(int(numbers[0]) if numbers else 400, wide=True)
+        return
+    if "--plain" in args:
+        for seed in (0, 1, 2):
+            if seed:
+                print()
+            print(f"tip tracking on the own renderer's plain frames, seed {seed}")
+            lobed(int(numbers[0]) if numbers else 400, plain=seed)
         return
     if "--flake" in args:
         print("tip tracking on the own renderer's frames with flat chips stuck on the tip")

@@ -240,10 +240,11 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
 
 
 def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float, spread: float,
-            contrast: float, ts: FloatArray
+            contrast: float, ts: FloatArray, start: float = BACK_FROM
             ) -> tuple[list[FloatArray], list[FloatArray], list[float], list[float]]:
-    """:func:`learn_shaft`'s walk back along the needle: each station's sample offsets, raw profile, the
-    needle's width there (px) and its distance behind the tip (px), as far as the first frame shows it."""
+    """:func:`learn_shaft`'s walk back along the needle from ``start`` px behind the tip: each station's sample
+    offsets, raw profile, the needle's width there (px) and its distance behind the tip (px), as far as the
+    first frame shows it."""
     ux, uy = shaft
     nx, ny = -uy, ux
     half_q = (ts.size - 1) // 2
@@ -254,7 +255,7 @@ def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, flo
     kept: list[float] = []
     centre = 0.0
     width = 0.0
-    for s in np.arange(BACK_FROM, BACK_TO + 1e-9, BACK_STEP):
+    for s in np.arange(start, BACK_TO + 1e-9, BACK_STEP):
         ox = s * ux + (centre + ts) * nx
         oy = s * uy + (centre + ts) * ny
         raw, ok = _lines(image, x0, y0, ox, oy, ux, uy)

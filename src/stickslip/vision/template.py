@@ -140,6 +140,22 @@ class TrackerParams:
     along_sigmas : float
         Standard deviations of the taper's estimate (from the pixel noise at the stations)
         allowed beyond ``along_limit``, 1: a fix is refused only where the taper is sure.
+        The two also set what the needle's width may differ by at each station behind a
+        fix (:mod:`.width`): what ``along_limit`` px along the axis change it through the
+        first frame's taper, plus ``along_sigmas`` standard deviations of the width
+        measured; a fix is refused (occluded) where the stations' median difference is
+        beyond that: behind the far end of something stuck on the tip the dark is wider
+        (the thing) or narrower (the needle's own tip further back) than the needle.
+    width_shift : float
+        Largest outward shift of each edge tried when measuring a station's width, px: a
+        station beyond it disagrees anyway, and a wider search would reach past the
+        ground the first frame showed plain beside the needle.
+    width_slack : float
+        A station whose width in the first frame lies further than this from the needle's
+        straight taper (a robust line through all the stations' widths) is not used for
+        the width, px (the needle's run across the shaft is measured in whole pixels on
+        either side): a needle widens steadily away from its tip, so something lay beside
+        it there, or the run found was not the needle's.
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -182,6 +198,8 @@ class TrackerParams:
     edge_shape: float = 0.9
     along_limit: float = 3.0
     along_sigmas: float = 3.0
+    width_shift: float = 5.0
+    width_slack: float = 2.0
     thin_blur: float = 2.2
 
     def __post_init__(self) -> None:
@@ -193,6 +211,8 @@ class TrackerParams:
             raise ValueError("0 < min_score <= reacquire_score <= 1")
         if not self.blur_bank or self.blur_bank[0] != 0.0 or list(self.blur_bank) != sorted(self.blur_bank):
             raise ValueError("blur_bank must start at 0 px and increase")
+        if not (self.width_shift >= 1 and self.width_slack >= 0):
+            raise ValueError("width_shift >= 1 px and width_slack >= 0 px")
 
 
 def noise_sigma(image: FloatArray) -> float:

@@ -29,6 +29,10 @@
    took the end of something over the tip, a grain's lobe, for the tip), and its taper
    must put the tip within 3 px (plus 3 standard deviations) of the fix along the axis
    (*occluded*: a grain as dark as the needle prolongs it, its end taken for the tip);
+   last, **the needle's width** at each station behind the fix (:mod:`.width`) must be
+   the first frame's there, within what 3 px along the axis change it (*occluded* when
+   most stations differ: the far end of a chip stuck on the tip, wider than the needle
+   where it lies and the needle narrower behind it);
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
@@ -53,6 +57,7 @@ from .frame import Frame
 from .refine import Patch, Refinement, _sample_value, patch, refine, steepest, warped
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
+from .width import WidthCheck, WidthStations, check_width, learn_width
 
 __all__ = [
     "Fix",
@@ -127,6 +132,7 @@ class _Candidate:
     patch: Patch
     edges: EdgeCheck | None = None
     shaft: ShaftCheck | None = None
+    width: WidthCheck | None = None
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -218,11 +224,15 @@ def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: Fl
 
 
 def _learn_shaft(image: FloatArray, tip: Sequence[float], t: TipTemplate, params: TrackerParams,
-                 spec: Sequence[tuple[int, float, float]]) -> ShaftProfiles:
-    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`), smoothed as each blur copy is."""
+                 spec: Sequence[tuple[int, float, float]]) -> tuple[ShaftProfiles, WidthStations | None]:
+    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`) and its edges there
+    (:func:`.width.learn_width`), smoothed as each blur copy is."""
     s0 = params.template_blur
-    return learn_shaft(image, (float(tip[0]), float(tip[1])), t.shaft, t.ground[0], t.ground[1], params.contrast,
-                       [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in spec])
+    smooth = [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in spec]
+    at = (float(tip[0]), float(tip[1]))
+    return (learn_shaft(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, smooth),
+            learn_width(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, t.noise, smooth,
+                        params.width_shift, params.width_slack))
 
 
 def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
@@ -247,6 +257,16 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
         return Lost("occluded", f"the needle's edges fade right behind the tip ({ec.near:.2f} of their "
                                 f"contrast further back, needs {p.edge_near:g})")
     return None
+
+
+def _width_refusal(wc: WidthCheck | None) -> Lost | None:
+    """The refusal of a fix behind which the needle is not as wide as the first frame showed it
+    (:mod:`.width`; ``None``: it is, or was not checked)."""
+    if wc is None or wc.excess <= 0.0:
+        return None
+    return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
+                            f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px off): "
+                            f"the end of something over the tip")
 
 
 class TipTracker:
@@ -289,7 +309,7 @@ class TipTracker:
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
-        self._shaft = _learn_shaft(image, tip, t, params, self._spec)
+        self._shaft, self._width = _learn_shaft(image, tip, t, params, self._spec)
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
@@ -453,9 +473,11 @@ class TipTracker:
         # the shaft further back only where the edges near the tip hold (their refusal stands without it)
         sc = None if ec is None or _edge_refusal(ec, p) else check_shaft(
             self._shaft, cand.level, image, r.x, r.y, r.theta)
-        cand = replace(cand, edges=ec, shaft=sc)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
-        return (refusal or res), cand
+        # the needle's width at the stations behind a fix every other rule takes
+        wc = None if refusal or not isinstance(res, Fix) or self._width is None else check_width(
+            self._width, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas)
+        return (refusal or _width_refusal(wc) or res), replace(cand, edges=ec, shaft=sc, width=wc)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
