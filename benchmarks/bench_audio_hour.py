@@ -47,14 +47,15 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     clocked = (
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
         if got
-        else "not judged (the reference stop-like, too little heard, or the rate off)"
+        else "not judged (reference stop-like, too little heard or rate off)"
     )
     doubt = [why for t, why in log.onset if t == e.detected_at_s]
     before = [r.detected_at_s for r in log.rejected if e.detected_at_s - 30.0 < r.detected_at_s < e.detected_at_s]
     last = f", the last {e.detected_at_s - before[-1]:.2f} s before" if before else ""
     return (
-        f"      stop-likeness {e.level_db:.3f}, window {e.confirmed_s or 0.0:.2f} s; clocked check: {clocked};"
-        f" onset doubted: {doubt[0] if doubt else 'no'}; {len(before)} fires rejected in the 30 s before{last}"
+        f"      stop-likeness {e.level_db:.3f}, window {e.confirmed_s or 0.0:.2f} s; onset doubted:"
+        f" {doubt[0] if doubt else 'no'}\n      clocked check: {clocked}\n"
+        f"      {len(before)} fires rejected in the 30 s before{last}"
     )
 
 
