@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import soundfile
 from fan_sound import SR, Arm, render, tuning_scene
 from hour_sound import KINDS, Hour, spans, stream
 from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
@@ -32,7 +33,7 @@ from stickslip.audio.tuningfile import Tuning
 #: -0.6 dB re the stepping since 2625.0 s, the counted false stop at 2646.01 s (docs/audio-log.md, "Diagnosis of the
 #: hour's false stops"). The generator cannot start an hour 44 minutes in (its noises are drawn in order), so the
 #: excerpt is kept as samples.
-EXCERPT = Path(__file__).parent / "data" / "hour_joint1_music_2643s.npy"
+EXCERPT = Path(__file__).parent / "data" / "hour_joint1_music_2643s.flac"  # 16-bit, lossless
 EXCERPT_T0_S = 2643.0
 
 #: one worker tunes each joint once for this file and tests/test_audio_blocks.py
@@ -140,7 +141,9 @@ def test_music_that_smears_the_only_judged_lines_raises_no_stop() -> None:
     before it, a fresh detector learns another template and hears nothing there: the excerpt's
     start is part of the failure. The target: no unflagged event.
     """
-    samples = np.load(EXCERPT).astype(np.float32) / np.float32(32767.0)
+    raw, rate = soundfile.read(EXCERPT, dtype="int16")
+    assert rate == SR
+    samples = raw.astype(np.float32) / np.float32(32767.0)
     assert samples.shape == (int(3.6 * SR),)
     det = ConfirmedStopDetector(detector_for(joint_tuning(1)))
     det.reset(EXCERPT_T0_S, step_rate_hz=1000.0)
