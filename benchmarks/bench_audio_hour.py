@@ -15,7 +15,10 @@ stops (unflagged / flagged); then the events.
 Run: ``.venv/bin/python benchmarks/bench_audio_hour.py`` (arms 1-3, an hour each: several
 minutes per joint on a shared machine, the generator about as costly as the detector);
 ``--minutes 10`` for a shorter stretch, ``--arms 1,2,3,4,5,6,7,8`` for every arm of the generator,
-``--rate 1150`` to step (and tell) another rate than the tuning's.
+``--rate 1150`` to step (and tell) another rate than the tuning's, ``--details`` to print under each
+false stop what the confirming detector noted (``ConfirmLog``): the clocked check's verdict, the
+onset's doubt, the rejected fires before it. ``docs/audio-log.md`` ("Diagnosis of the hour's false
+stops") reads those lines.
 """
 
 from __future__ import annotations
@@ -32,12 +35,32 @@ from fan_sound import SR, Arm, render, tuning_scene  # noqa: E402
 from hour_sound import KINDS, Hour, spans, stream  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
+from stickslip.audio.confirm.detector import ConfirmLog  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
+from stickslip.audio.events import StopEvent  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 
 
-def hour(arm: int, minutes: float, rate: float) -> tuple[dict[str, list[float]], list[str]]:
-    """Per kind: [seconds, unflagged, flagged]; and one line per event."""
+def details(e: StopEvent, log: ConfirmLog) -> str:
+    """What the confirming detector noted about the event ``e``: the clocked check, the onset, the fires before."""
+    got = [g for t, g in log.clocked if t == e.detected_at_s]
+    clocked = (
+        f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
+        if got
+        else "not judged (reference stop-like, too little heard or rate off)"
+    )
+    doubt = [why for t, why in log.onset if t == e.detected_at_s]
+    before = [r.detected_at_s for r in log.rejected if e.detected_at_s - 30.0 < r.detected_at_s < e.detected_at_s]
+    last = f", the last {e.detected_at_s - before[-1]:.2f} s before" if before else ""
+    return (
+        f"      stop-likeness {e.level_db:.3f}, window {e.confirmed_s or 0.0:.2f} s; onset doubted:"
+        f" {doubt[0] if doubt else 'no'}\n      clocked check: {clocked}\n"
+        f"      {len(before)} fires rejected in the 30 s before{last}"
+    )
+
+
+def hour(arm: int, minutes: float, rate: float, detail: bool = False) -> tuple[dict[str, list[float]], list[str]]:
+    """Per kind: [seconds, unflagged, flagged]; and one line per event (two with ``detail``)."""
     tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
     h = Hour(Arm(arm), rate=rate, dur=60.0 * minutes, seed=arm)
     sched = spans(h)
@@ -55,10 +78,12 @@ def hour(arm: int, minutes: float, rate: float) -> tuple[dict[str, list[float]],
             f"    {e.onset_s:8.2f} s  {'flagged' if e.onset_uncertain else 'COUNTED'}  {kind} at {db:+.1f} dB"
             f" (its span {t0:.1f}-{t1:.1f} s)"
         )
+        if detail:
+            lines.append(details(e, det.log))
     return per, lines
 
 
-def main(arms: tuple[int, ...] = (1, 2, 3), minutes: float = 60.0, rate: float = 1000.0) -> None:
+def main(arms: tuple[int, ...] = (1, 2, 3), minutes: float = 60.0, rate: float = 1000.0, detail: bool = False) -> None:
     print(
         f"{minutes:g} min of stepping at {rate:g} Hz (told) with speech, music and a radio, no stop: "
         "false stops (unflagged, a wrong count / flagged, refused)"
@@ -67,7 +92,7 @@ def main(arms: tuple[int, ...] = (1, 2, 3), minutes: float = 60.0, rate: float =
     print("| --- " * (len(KINDS) + 3) + "|")
     for arm in arms:
         t = time.perf_counter()
-        per, lines = hour(arm, minutes, rate)
+        per, lines = hour(arm, minutes, rate, detail)
         cells = [f"{int(u)} / {int(f)} in {s / 60:.0f} min" for s, u, f in per.values()]
         u_all, f_all = sum(v[1] for v in per.values()), sum(v[2] for v in per.values())
         print(f"| {arm} | " + " | ".join(cells) + f" | {int(u_all)} / {int(f_all)} | {time.perf_counter() - t:.0f} |")
@@ -80,5 +105,6 @@ if __name__ == "__main__":
     ap.add_argument("--arms", default="1,2,3", help="arms of the tenth generator, comma-separated")
     ap.add_argument("--minutes", type=float, default=60.0, help="minutes of stepping per joint")
     ap.add_argument("--rate", type=float, default=1000.0, help="the step rate, Hz (told to the detector)")
+    ap.add_argument("--details", action="store_true", help="what the detector noted about each false stop")
     a = ap.parse_args()
-    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate)
+    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details)
