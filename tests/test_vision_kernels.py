@@ -113,6 +113,26 @@ def test_small_solve_is_numpys_and_refuses_a_singular_system() -> None:
     assert nan is not None and np.isnan(nan).all()
 
 
+@pytest.mark.parametrize("private", [None, "raises", "wrong shape"])
+def test_small_solve_falls_back_to_numpys_when_the_private_solver_is_gone_or_changed(
+    private: str | None, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`_solve_small` calls a private numpy gufunc: without it, or changed, the public solve answers."""
+    from stickslip.vision import refine
+
+    def changed(*args: object, **kw: object) -> object:
+        if private == "raises":
+            raise TypeError("solve1() got an unexpected keyword argument 'signature'")
+        return np.zeros(3)
+
+    monkeypatch.setattr(refine, "_SOLVE1", None if private is None else changed)
+    A = np.random.default_rng(7).normal(size=(40, 10))
+    M, b = A.T @ A, np.arange(10.0)
+    got = _solve_small(M, b)
+    assert got is not None and np.array_equal(got, np.linalg.solve(M, b))
+    assert _solve_small(np.zeros((10, 10)), np.ones(10)) is None
+
+
 @pytest.mark.parametrize("smooth", [1.0, 1.8027756377319946, 3.1622776601683795])
 def test_patch_smooths_as_gaussian_filter(smooth: float) -> None:
     image = np.random.default_rng(2).normal(0.5, 0.1, (60, 80))

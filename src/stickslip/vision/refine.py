@@ -405,9 +405,12 @@ def _solve_small(M: FloatArray, rhs: FloatArray) -> FloatArray | None:
     by :func:`numpy.linalg.solve`, which tells a singular matrix (``None``) from one that gives NaN.
     """
     if _SOLVE1 is not None:
-        with np.errstate(invalid="ignore"):
-            sol = np.asarray(_SOLVE1(M, rhs, signature="dd->d"), dtype=float)
-        if np.isfinite(sol).all():
+        try:  # a private numpy function: a numpy that changed it falls back to the public solve
+            with np.errstate(invalid="ignore"):
+                sol = np.asarray(_SOLVE1(M, rhs, signature="dd->d"), dtype=float)
+        except (TypeError, ValueError):
+            sol = np.full(len(rhs), np.nan)
+        if sol.shape == rhs.shape and np.isfinite(sol).all():
             return sol
     try:
         return np.asarray(np.linalg.solve(M, rhs), dtype=float)
