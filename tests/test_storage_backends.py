@@ -26,7 +26,7 @@ from urllib.parse import quote
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from stickslip import config, storage
@@ -67,15 +67,30 @@ _CLEAN = "postgresql://rig@db.lab:5432/stickslip?options=-csearch_path%3Dlab"
 
 @settings(max_examples=200, deadline=None)
 @given(password=st.text(st.characters(blacklist_categories=("Cs",)), min_size=1, max_size=24))
+@example(password="opti")  # drawn once (hypothesis took it from the word 'options'): part of the URL masked
+@example(password="word")  # part of the option's name "password"
+@example(password="rig@")
 def test_a_url_is_shown_the_same_whatever_its_password(password):
-    """The shown form does not depend on the password: percent-encoded, written raw, or as an option."""
+    """The shown form does not depend on the password: percent-encoded, written raw, or as an option.
+
+    A password of 4 characters or more is masked wherever it shows (describe_database's last
+    guard), so one whose characters are also part of the host, path or options masks them there.
+    """
     encoded = _CLEAN.replace("rig@", f"rig:{quote(password, safe='')}@")
-    assert describe_database(encoded) == _CLEAN
+    forms = [f for f in (quote(password, safe=""), password) if len(f) >= 4]
+    shown = describe_database(encoded)
+    if not any(f in _CLEAN for f in forms):
+        assert shown == _CLEAN
+    else:
+        assert not any(f in shown for f in forms), shown
     raw = _CLEAN.replace("rig@", f"rig:{password}@")  # not encoded: '/', '?', '@', ':' inside it
     if password not in _CLEAN:
         assert password not in describe_database(raw)
     as_option = f"{_CLEAN}&password={quote(password, safe='')}"
-    assert describe_database(as_option) == f"{_CLEAN}&password=***"
+    if not any(f in f"{_CLEAN}&password=***" for f in forms):
+        assert describe_database(as_option) == f"{_CLEAN}&password=***"
+    else:
+        assert not any(f in describe_database(as_option) for f in forms)
 
 
 def test_without_psycopg_the_message_names_the_extra(monkeypatch, tmp_path):

@@ -220,7 +220,9 @@ def describe_database(target: Path | str) -> str:
     kept (so a password holding ``/``, ``?``, ``@`` or ``:`` that was not
     percent-encoded is dropped whole, never shown in part); a query option whose name
     holds ``pass``, ``secret``, ``token`` or ``pw`` (``password``, ``sslpassword``)
-    shows ``***``. Never raises.
+    shows ``***``. Last, the password (4 characters or more, as written and decoded) shows
+    ``***`` wherever it still appears, even where the same characters are part of the host,
+    path or options (a password ``opti`` shows ``?***ons=``): never the secret. Never raises.
     """
     if isinstance(target, Path):
         return str(target)
