@@ -517,3 +517,40 @@ def test_a_file_another_process_is_making_is_looked_at_again_not_refused(tmp_pat
     monkeypatch.setattr(backend, "_tables", tables_then_changed)
     with pytest.raises(StoreError, match="kept changing"):
         backend.check_database_file(p, looks=3)
+
+
+def test_tables_unreadable_while_another_process_writes_the_file_are_looked_at_again(tmp_path, monkeypatch):
+    """A WAL copied back page by page reads as damaged until it is done: a file that changed is looked at again;
+    one that stayed the same is damaged (seen once: a Bluesky example's axes opening one new file at once)."""
+    from stickslip.storage import sqlite as backend
+
+    p = tmp_path / "new.db"
+    con = sqlite3.connect(p)
+    con.execute("CREATE TABLE t (x)")  # an SQLite file without stickslip's id: its tables are read
+    con.commit()
+    con.close()
+    real_tables = backend._tables
+    calls = []
+
+    def damaged_while_written(path):
+        calls.append(path)
+        if len(calls) == 1:  # the other process's pages land while this process reads them
+            with open(path, "ab") as f:
+                f.write(b"\0" * 4096)
+            raise StoreError(f"the database {path} is damaged or not a database (malformed)")
+        return real_tables(path)
+
+    monkeypatch.setattr(backend, "_tables", damaged_while_written)
+    with pytest.raises(StoreError, match="another application"):  # judged on the second look, from its tables
+        backend.check_database_file(p)
+    assert len(calls) == 2
+
+    def damaged(path):
+        calls.append(path)
+        raise StoreError(f"the database {path} is damaged or not a database (malformed)")
+
+    calls.clear()
+    monkeypatch.setattr(backend, "_tables", damaged)
+    with pytest.raises(StoreError, match="damaged"):  # nothing wrote it: damaged, after one look
+        backend.check_database_file(p)
+    assert len(calls) == 1

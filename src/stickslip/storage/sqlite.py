@@ -50,6 +50,23 @@ def _tables(path: Path) -> dict[str, tuple[str, ...]]:
         raise StoreError(f"the database {path} is damaged or not a database ({e}); it was left untouched") from None
 
 
+def _fingerprint(path: Path) -> tuple[int, int, bytes]:
+    """The file's size, modification time (ns) and first 100 bytes: what changes while anything writes it."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return (-1, -1, b"")
+    return (st.st_size, st.st_mtime_ns, _header(path))
+
+
+def _settled(path: Path, before: tuple[int, int, bytes], wait_s: float = 0.05) -> bool:
+    """Whether the file is as it was at ``before`` now and ``wait_s`` later: nothing is writing it."""
+    if _fingerprint(path) != before:
+        return False
+    time.sleep(wait_s)
+    return _fingerprint(path) == before
+
+
 def _changing(path: Path) -> NoReturn:
     raise StoreError(f"the database {path} kept changing while stickslip looked at whose it is; try again")
 
@@ -62,7 +79,10 @@ def check_database_file(path: Path, looks: int = 50) -> str:
     lock, no journal, nothing created beside it). The first 100 bytes are read again after
     the tables: a file another stickslip process is making (its id, schema version and
     tables in one transaction, reaching the file when the WAL is copied back) is looked at
-    again, up to ``looks`` times, rather than judged from a header older than its tables:
+    again, up to ``looks`` times, rather than judged from a header older than its tables, and
+    so is one whose tables could not be read while it changed (or within 50 ms after: a WAL
+    copied back page by page reads as damaged until it is done); a file that stayed the same
+    is damaged:
 
     * nothing there, an empty file, or an SQLite file without tables: ``"new"``;
     * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``;
@@ -98,7 +118,14 @@ def check_database_file(path: Path, looks: int = 50) -> str:
             f"{path} is another application's SQLite file (application id {app_id & 0xFFFFFFFF:#010x}, "
             f"not stickslip's {APPLICATION_ID:#010x}); stickslip leaves it untouched: give --db another file"
         )
-    tables, again = _tables(path), _header(path)
+    before = _fingerprint(path)
+    try:
+        tables = _tables(path)
+    except StoreError:  # damaged, or read while another stickslip writes it (a WAL copied back page by page)
+        if not _settled(path, before):
+            return check_database_file(path, looks - 1) if looks > 1 else _changing(path)
+        raise
+    again = _header(path)
     if again != head:  # written meanwhile (another stickslip making it: ours and its tables in one transaction)
         return check_database_file(path, looks - 1) if looks > 1 else _changing(path)
     if not tables and user_version == 0:
