@@ -273,12 +273,20 @@ def _corners(p: Patch, xy: FloatArray) -> tuple[NDArray[np.intp], FloatArray, Fl
     # of the ulp of xs >= x0 >= 0 no larger than xs)
     xy[0] -= p.x0
     xy[1] -= p.y0
-    last, clip, corners = _limits(ch, cw)
+    i00, fx, fy, inside = _cells(xy, ch, cw)
+    if in_frame is not None:
+        inside &= in_frame
+    return i00, fx, fy, inside
+
+
+def _cells(xy: FloatArray, ch: int, cw: int) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_]]:
+    """For points ``xy`` (shape (2, m), x then y, px; overwritten) in an array of ``ch`` x ``cw`` px: the flat
+    index of the pixel up and left of each, its fractions to the right and down, and which lie within the array
+    (the others are clipped to its edge). Shared by the patch's sampling and the whole frame's (:mod:`.shaft`)."""
+    last, clip, _ = _limits(ch, cw)
     ok = xy >= 0
     ok &= xy <= last
     inside = ok[0] & ok[1]
-    if in_frame is not None:
-        inside &= in_frame
     np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
     ixy = xy.astype(np.intp)
     xy -= ixy  # the fractions

@@ -42,7 +42,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from .refine import _bilinear as _interpolate
-from .refine import _limits
+from .refine import _cells, _neighbours
 
 __all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO",
            "learn_shaft", "check_shaft"]
@@ -184,19 +184,10 @@ def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatA
     """
     H, W = image.shape
     xy = np.stack((np.ravel(xs), np.ravel(ys))).astype(float, copy=False)
-    last, clip, corners = _limits(H, W)
-    ok = xy >= 0
-    ok &= xy <= last
-    inside = ok[0] & ok[1]
-    np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
-    ixy = xy.astype(np.intp)
-    xy -= ixy  # the fractions
-    i00 = ixy[1]
-    i00 *= W
-    i00 += ixy[0]
-    v = image.reshape(-1).take(np.add(corners, i00))
+    i00, fx, fy, inside = _cells(xy, H, W)
+    v = image.reshape(-1).take(_neighbours(i00, H, W))
     shape = np.shape(xs)
-    return _interpolate(v, xy[0], xy[1]).reshape(shape), inside.reshape(shape)
+    return _interpolate(v, fx, fy).reshape(shape), inside.reshape(shape)
 
 
 def _lines(image: FloatArray, x: float, y: float, ox: FloatArray, oy: FloatArray, ux: float, uy: float
