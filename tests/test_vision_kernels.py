@@ -29,6 +29,7 @@ from stickslip.vision.refine import (
     warped,
 )
 from stickslip.vision.template import masked_ncc, region_spectra
+from stickslip.vision.track import _downsample, _local_max, _peaks
 
 
 def _sample_before(p: Patch, xs: np.ndarray, ys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -209,3 +210,27 @@ def test_shaft_sampling_is_the_plain_bilinear_one_bit_for_bit() -> None:
     assert np.array_equal(v, top + (bottom - top) * fy) and np.array_equal(got_inside, inside)
     v2, inside2 = _bilinear(image, xs.reshape(20, 20), ys.reshape(20, 20))  # any shape, kept
     assert np.array_equal(v2, v.reshape(20, 20)) and np.array_equal(inside2, inside.reshape(20, 20))
+
+
+@settings(max_examples=30, deadline=None)
+@given(h=st.integers(1, 40), w=st.integers(1, 40), f=st.integers(1, 9), seed=st.integers(0, 2**32 - 1))
+def test_downsample_is_numpys_block_mean_bit_for_bit(h: int, w: int, f: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a = rng.normal(0.0, 10.0 ** rng.integers(-3, 6), (h, w))
+    a[rng.random((h, w)) < 0.2] = -0.0  # blocks of negative zeros keep their sign, as numpy's mean gives it
+    got = _downsample(a, f)
+    hh, ww = (h // f) * f, (w // f) * f
+    want = a if f == 1 else a[:hh, :ww].reshape(h // f, f, w // f, f).mean(axis=(1, 3))
+    assert got.shape == want.shape and np.array_equal(got, want)
+    assert np.array_equal(np.signbit(got), np.signbit(want))
+
+
+@settings(max_examples=30, deadline=None)
+@given(h=st.integers(1, 30), w=st.integers(1, 30), r=st.integers(1, 3), seed=st.integers(0, 2**32 - 1))
+def test_local_max_and_peaks_are_scipys_bit_for_bit(h: int, w: int, r: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    a = rng.choice([-1.0, -0.0, 0.0, 0.3, 0.31, 0.5, 1.0], (h, w)) if seed % 2 else rng.uniform(-1.0, 1.0, (h, w))
+    want = ndimage.maximum_filter(a, size=2 * r + 1)  # its default edges mirror the array
+    assert np.array_equal(_local_max(a, r), want)
+    ii, jj = np.nonzero((a == ndimage.maximum_filter(a, size=5)) & (a > 0.3))
+    assert _peaks(a, 0.3, 7) == [(float(a[i, j]), int(i), int(j), 7) for i, j in zip(ii, jj, strict=True)]
