@@ -234,3 +234,16 @@ def test_local_max_and_peaks_are_scipys_bit_for_bit(h: int, w: int, r: int, seed
     assert np.array_equal(_local_max(a, r), want)
     ii, jj = np.nonzero((a == ndimage.maximum_filter(a, size=5)) & (a > 0.3))
     assert _peaks(a, 0.3, 7) == [(float(a[i, j]), int(i), int(j), 7) for i, j in zip(ii, jj, strict=True)]
+
+
+@settings(max_examples=30, deadline=None)
+@given(m=st.integers(1, 12), q=st.integers(1, 30), n=st.integers(1, 9), seed=st.integers(0, 2**32 - 1))
+def test_lines_mean_is_numpys_bit_for_bit(m: int, q: int, n: int, seed: int) -> None:
+    from stickslip.vision.shaft import _mean_lines
+
+    rng = np.random.default_rng(seed)
+    v = rng.normal(0.0, 10.0 ** rng.integers(-3, 6), (m, q, n))
+    v[rng.random(v.shape) < 0.3] = -0.0  # lines of negative zeros keep their sign
+    for a in (v, v[0]):
+        got, want = _mean_lines(a), a.mean(axis=-1)
+        assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))

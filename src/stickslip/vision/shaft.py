@@ -199,7 +199,21 @@ def _lines(image: FloatArray, x: float, y: float, ox: FloatArray, oy: FloatArray
     ys = (oy[..., None] + d * uy + y).ravel()
     v, inside = _bilinear(image, xs, ys)
     n = len(LINES)
-    return v.reshape(*ox.shape, n).mean(axis=-1), np.asarray(inside.reshape(*ox.shape, n).all(axis=-1), dtype=bool)
+    return _mean_lines(v.reshape(*ox.shape, n)), np.asarray(inside.reshape(*ox.shape, n).all(axis=-1), dtype=bool)
+
+
+def _mean_lines(v: FloatArray) -> FloatArray:
+    """``v.mean(axis=-1)`` bit for bit, signed zeros included, for a last axis of fewer than 8 (the lines'
+    samples): numpy sums it from 0, one after the other, and divides by its length; here a slice at a time, in
+    a third of its time."""
+    n = v.shape[-1]
+    if not 1 <= n < 8:  # numpy sums 8 or more pairwise
+        return np.asarray(v.mean(axis=-1), dtype=float)
+    out = v[..., 0] + 0.0
+    for k in range(1, n):
+        out += v[..., k]
+    out /= n
+    return out
 
 
 def _median(a: FloatArray) -> float:
@@ -368,7 +382,7 @@ def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: fl
     v, inside = _bilinear(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
     n = len(LINES)
     shape = (m, sp.offsets.shape[1], n)
-    F = v.reshape(shape).mean(axis=2)
+    F = _mean_lines(v.reshape(shape))
     ok = inside.reshape(shape).all(axis=2)
     kernel = sp.smooth[copy]
     if kernel is not None:

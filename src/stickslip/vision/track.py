@@ -248,17 +248,24 @@ def _frame_stats(Iw: FloatArray, w: FloatArray) -> tuple[float, FloatArray, floa
     return sw, di, vi
 
 
+def _copy_terms(b: FloatArray, w: FloatArray, sw: float) -> tuple[FloatArray, float]:
+    """Copy ``b``'s part of :func:`_noise_free_ncc` under the weights ``w`` (their sum ``sw``): ``w`` times ``b``
+    less its weighted mean, and its weighted sum of squares (made once for the samples all in the frame)."""
+    wdt = b - float((w * b).sum() / sw)
+    vt = float((wdt * w * wdt).sum())  # (w * dt * dt).sum(): the products commute, their order is kept
+    wdt *= w
+    return wdt, vt
+
+
 def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: FloatArray, n_t2: float,
-                    n_f2: float) -> float:
+                    n_f2: float, terms: tuple[FloatArray, float] | None = None) -> float:
     """The weighted correlation of copy ``b`` with the frame's samples (:func:`_frame_stats` of them and the
     weights ``w``), divided by what the copy's and the frame's own noise (variances ``n_t2``, ``n_f2`` a
-    sample) cost it."""
+    sample) cost it. ``terms``: :func:`_copy_terms` of ``b`` and ``w``, when the caller has them."""
     sw, di, vi = frame
-    mt = float((w * b).sum() / sw)
-    dt = b - mt
-    vt = float((w * dt * dt).sum())
+    wdt, vt = _copy_terms(b, w, sw) if terms is None else terms
     den = math.sqrt(vi * vt)
-    ncc = float((w * dt * di).sum()) / den if den > 0 else 0.0
+    ncc = float((wdt * di).sum()) / den if den > 0 else 0.0
     keep_t = 1.0 - n_t2 * sw / vt if vt > 0 else 1.0
     keep_f = 1.0 - n_f2 * sw / vi if vi > 0 else 1.0
     return ncc / math.sqrt(max(keep_t, 0.25) * max(keep_f, 0.25))
@@ -346,6 +353,7 @@ class TipTracker:
         sel = self._steep[widest]  # the levels are compared on the widest mask
         self._select = sel
         self._bank_sel = [b[sel.keep] for b in t.bank]
+        self._bank_terms = [_copy_terms(b, sel.w, float(sel.w.sum())) for b in self._bank_sel]  # all in the frame
         coarse = params.coarse_factor
         self._coarse = [_downsample(b, coarse) for b in t.bank]
         self._coarse_w = _downsample(t.weights, coarse)
@@ -378,15 +386,18 @@ class TipTracker:
         (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
         """
         out = []
-        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float]]] = {}  # copies of one blur share samples
+        # copies of one blur share samples; with every sample in the frame the weights are the mask's own (w times
+        # True is w) and each copy's terms were made when the tip was learnt
+        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float], bool]] = {}
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
             if f not in seen:
                 Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
                 w = self._select.w * inside
-                seen[f] = (w, _frame_stats(Iw, w))
-            w, stats = seen[f]
+                seen[f] = (w, _frame_stats(Iw, w), bool(inside.all()))
+            w, stats, all_in = seen[f]
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
-            out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(self._bank_sel[k], stats, w, n_t2, n_f2))
+            out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(
+                self._bank_sel[k], stats, w, n_t2, n_f2, self._bank_terms[k] if all_in else None))
         return out
 
     def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:

@@ -44,7 +44,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .shaft import ALONG_STEP, GROUND, LINES, REACH, STEP, _bilinear, _follow, _lines
+from .refine import median
+from .shaft import ALONG_STEP, GROUND, LINES, REACH, STEP, _bilinear, _follow, _lines, _mean_lines
 
 __all__ = ["WidthStations", "WidthCheck", "SHIFT_STEP", "FROM", "learn_width", "check_width"]
 
@@ -145,7 +146,7 @@ class WidthCheck:
     @property
     def excess(self) -> float:
         """The stations' median of ``|dw|`` less what each allows, px (positive: most disagree)."""
-        return float(np.median(np.abs(np.asarray(self.dw)) - np.asarray(self.tolerance)))
+        return median(np.abs(np.asarray(self.dw)) - np.asarray(self.tolerance))  # numpy.median's, bit for bit
 
 
 def _windows(widths: Sequence[float], ts: FloatArray) -> list[tuple[IntArray, IntArray]]:
@@ -310,7 +311,7 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     v, inside = _bilinear(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
     n = len(LINES)
     shape = (m, ws.q, n)
-    profiles = v.reshape(shape).mean(axis=2)
+    profiles = _mean_lines(v.reshape(shape))
     ok = (inside.reshape(shape).all(axis=2) | ~ws.span).all(axis=1)
     if int(ok.sum()) < 3:
         return None
