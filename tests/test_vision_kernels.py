@@ -247,3 +247,17 @@ def test_lines_mean_is_numpys_bit_for_bit(m: int, q: int, n: int, seed: int) -> 
     for a in (v, v[0]):
         got, want = _mean_lines(a), a.mean(axis=-1)
         assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
+
+
+@pytest.mark.parametrize(("rows", "cols", "start"), [(105, 105, 40), (57, 57, 40), (128, 128, 9), (40, 48, 8),
+                                                     (33, 16, 15), (16, 17, 0)])
+def test_cropped_inverse_transform_is_scipys_bit_for_bit(rows: int, cols: int, start: int) -> None:
+    from scipy import fft
+
+    from stickslip.vision.template import _inverse
+
+    rng = np.random.default_rng(rows * cols + start)
+    for scale in (1e-3, 1.0, 1e4):  # a region's transform times a kernel's, as the correlation makes them
+        spectrum = fft.rfft2(rng.normal(0.0, scale, (rows, cols))) * fft.rfft2(rng.normal(size=(9, 9)), (rows, cols))
+        got = _inverse(spectrum, (rows, cols), start)
+        assert np.array_equal(got, fft.irfft2(spectrum, (rows, cols))[start:, start:])
