@@ -386,8 +386,7 @@ class TipTracker:
         (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
         """
         out = []
-        # copies of one blur share samples; with every sample in the frame the weights are the mask's own (w times
-        # True is w) and each copy's terms were made when the tip was learnt
+        # copies of one blur share samples; all in the frame, the copies' terms made at learning (w * True is w)
         seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float], bool]] = {}
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
             if f not in seen:
