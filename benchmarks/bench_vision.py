@@ -139,7 +139,7 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
                 "bead-edge": "bead, shaft leaving the field"}.get(cause, "occluded by a disc")
     if kind != "visible":
         return kind
-    if cause == "edge":
+    if cause == "shaft-edge":
         return "visible, shaft leaving the field"
     x, y = f.tip
     room = min(x, y, image_size - 1 - x, image_size - 1 - y)

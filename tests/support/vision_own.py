@@ -48,7 +48,7 @@ class OwnFrame:
     cause: str = ""
     """What the lobed mode did to the frame: ``lobed`` (a lobed grain over the tip), ``edge``;
     the flake mode: ``flake`` (a flake stuck on the tip); the round mode: ``bead`` (a bead
-    stuck on the tip), ``edge`` (the tip near the edge its shaft leaves by), ``bead-edge``
+    stuck on the tip), ``shaft-edge`` (the tip near the edge its shaft leaves by), ``bead-edge``
     (both)."""
 
 
@@ -366,7 +366,7 @@ class _Beads:
         if kind != "visible":
             return kind, cause, ()
         if not with_bead:
-            return kind, "edge", ()
+            return kind, "shaft-edge", ()
         (a, b, r), level, blur = self.bead
         u = direction / max(float(np.hypot(*direction)), 1e-12)  # along the shaft
         v = np.array([-u[1], u[0]])
