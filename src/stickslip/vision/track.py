@@ -261,11 +261,22 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
     return None
 
 
-def _width_refusal(wc: WidthCheck | None, learnt: bool = False, least: int = 3) -> Lost | None:
+def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
+              image: FloatArray) -> tuple[WidthCheck | None, bool]:
+    """The needle's width behind a candidate (:func:`.width.check_width`), and whether, unchecked, it is to be
+    refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame."""
+    if ws is None:
+        return None, False
+    r = cand.ref
+    wc = check_width(ws, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
+    return wc, wc is None and not p.trust_unchecked
+
+
+def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3) -> Lost | None:
     """The refusal of a fix behind which the needle is not as wide as the first frame showed it
-    (:mod:`.width`; ``None``: it is, or was not checked); with ``learnt`` (the first frame showed
-    the stations) also of a fix behind which fewer than ``least`` of them lie in the frame."""
-    if wc is None and learnt:
+    (:mod:`.width`; ``None``: it is, or was not checked); with ``unvouched``, of a fix behind which
+    fewer than ``least`` of the stations the first frame showed lie in the frame."""
+    if wc is None and unvouched:
         return Lost("lost", f"fewer than {least} of the needle's width stations behind the fit's tip lie in the "
                             f"field: nothing vouches that the end seen is the tip")
     if wc is None or wc.excess <= 0.0:
@@ -481,11 +492,9 @@ class TipTracker:
             self._shaft, cand.level, image, r.x, r.y, r.theta)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         # the needle's width at the stations behind a fix every other rule takes
-        checked = not refusal and isinstance(res, Fix) and self._width is not None
-        wc = None if not checked or self._width is None else check_width(
-            self._width, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
-        return ((refusal or _width_refusal(wc, checked and not p.trust_unchecked, p.width_stations) or res),
-                replace(cand, edges=ec, shaft=sc, width=wc))
+        wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(self._width, p, cand, image)
+        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
+        return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
