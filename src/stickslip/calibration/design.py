@@ -23,7 +23,7 @@ from .. import kinematics as kin
 from ..models import PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams, average_from_features, traverse_features
 from .family_fit import unit_scale
-from .groups import load_coordinates_of
+from .groups import load_coordinates_of, load_quantities
 from .result import Calibration
 from .update import model_sigma
 
@@ -159,27 +159,44 @@ def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
 def spread_poses(
     joint: int, n: int, seed: int = 0, existing: list[kin.Pose] | None = None, candidates: int = 2000
 ) -> list[kin.Pose]:
-    """``n`` poses for ``joint`` spread over its load space (greedy maximin design), reproducible.
+    """``n`` poses for ``joint`` spread over its load space and over each load's range, reproducible.
 
-    From ``candidates`` random workspace poses (:func:`workspace_poses`), each next pose is
-    the one farthest (Euclidean, in :func:`load_coordinates`) from every pose chosen so far
-    and from ``existing`` (e.g. the paper's calibration poses). Random poses leave parts of
-    the load space empty by chance (e.g. no arm pointing down, ``L < 0``), and a model
-    predicts there only by extrapolation; a spread design covers the corners first.
+    A greedy maximum projection design (docs/models.md §3): from ``candidates`` random
+    workspace poses (:func:`workspace_poses`), each next pose is the candidate that adds
+    least to ``sum_j prod_q 1 / d_q(c, j)^2`` over the poses chosen so far and ``existing``
+    (e.g. the paper's calibration poses), ``d_q`` the distance in one load quantity
+    (:func:`~.groups.load_quantities`: a column of :func:`load_coordinates` for joint 3; a
+    group of five, along the traverse, for ``T``, ``R``, ``P`` of a rotary joint). A pose
+    close to another in *any* quantity is penalised, so every quantity's range is filled,
+    the middle included (a maximin design in the whole space takes each coordinate's ends
+    first). Without ``existing`` the first pose is the candidate farthest from their mean.
     """
     if n < 1:
         return []
     cand = workspace_poses(joint, candidates, seed)
     x = load_coordinates(joint, cand)
-    if existing:
-        d_min = np.min(
-            np.linalg.norm(x[:, None, :] - load_coordinates(joint, existing)[None, :, :], axis=-1), axis=1
-        )
-    else:
-        d_min = np.linalg.norm(x - x.mean(axis=0), axis=1)
+    quantities = load_quantities(joint)
+    # a floor under each squared distance (a millionth of the quantity's variance over the
+    # candidates) keeps a quantity that is equal at two poses finite
+    eps = [1e-6 * float(np.sum(np.var(x[:, q], axis=0))) + 1e-300 for q in quantities]
+
+    def log_term(site: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``-sum_q log(d_q^2)`` of every candidate to ``site``: the log of its criterion term."""
+        out = np.zeros(len(x))
+        for q, e in zip(quantities, eps, strict=True):
+            out -= np.log(np.sum((x[:, q] - site[q]) ** 2, axis=1) + e)
+        return out
+
+    crit = np.full(len(x), -np.inf)  # log of the criterion's sum, per candidate
+    for site in load_coordinates(joint, existing) if existing else ():
+        crit = np.logaddexp(crit, log_term(site))
     out: list[kin.Pose] = []
     for _ in range(n):
-        k = int(np.argmax(d_min))
+        if np.isneginf(crit).all():  # nothing to be far from yet
+            k = int(np.argmax(np.linalg.norm(x - x.mean(axis=0), axis=1)))
+        else:
+            k = int(np.argmin(crit))
         out.append(cand[k])
-        d_min = np.minimum(d_min, np.linalg.norm(x - x[k], axis=1))
+        crit = np.logaddexp(crit, log_term(x[k]))
+        crit[k] = np.inf
     return out
