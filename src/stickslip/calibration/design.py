@@ -157,24 +157,62 @@ def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
 
 
 def spread_poses(
-    joint: int, n: int, seed: int = 0, existing: list[kin.Pose] | None = None, candidates: int = 2000
+    joint: int,
+    n: int,
+    seed: int = 0,
+    existing: list[kin.Pose] | None = None,
+    candidates: int = 2000,
+    criterion: str | None = None,
 ) -> list[kin.Pose]:
-    """``n`` poses for ``joint`` spread over its load space and over each load's range, reproducible.
+    """``n`` poses for ``joint`` spread over its load space, reproducible (docs/models.md §3).
 
-    A greedy maximum projection design (docs/models.md §3): from ``candidates`` random
-    workspace poses (:func:`workspace_poses`), each next pose is the candidate that adds
-    least to ``sum_j prod_q 1 / d_q(c, j)^2`` over the poses chosen so far and ``existing``
-    (e.g. the paper's calibration poses), ``d_q`` the distance in one load quantity
-    (:func:`~.groups.load_quantities`: a column of :func:`load_coordinates` for joint 3; a
-    group of five, along the traverse, for ``T``, ``R``, ``P`` of a rotary joint). A pose
-    close to another in *any* quantity is penalised, so every quantity's range is filled,
-    the middle included (a maximin design in the whole space takes each coordinate's ends
-    first). Without ``existing`` the first pose is the candidate farthest from their mean.
+    From ``candidates`` random workspace poses (:func:`workspace_poses`), poses are added one
+    at a time to ``existing`` (e.g. the paper's calibration poses) by ``criterion``:
+
+    * ``"maxpro"`` (the default for joint 3): a greedy maximum projection design. The next
+      pose is the candidate that adds least to ``sum_j prod_q 1 / d_q(c, j)^2`` over the poses
+      there, ``d_q`` the distance in one load quantity (:func:`~.groups.load_quantities`). A
+      pose close to another in *any* quantity is penalised, so every quantity's range is
+      filled, its middle included;
+    * ``"maximin"`` (the default for the rotary joints): the candidate farthest (Euclidean, in
+      :func:`load_coordinates`) from every pose there. It covers the corners of the load
+      space first and leaves each coordinate's middle to interpolation.
+
+    Without ``existing`` the first pose is the candidate farthest from the candidates' mean.
     """
+    if criterion is None:
+        criterion = "maxpro" if kin.joint_spec(joint).prismatic else "maximin"
+    if criterion not in ("maxpro", "maximin"):
+        raise ValueError(f"criterion {criterion!r}: not 'maxpro' or 'maximin'")
     if n < 1:
         return []
     cand = workspace_poses(joint, candidates, seed)
     x = load_coordinates(joint, cand)
+    sites = load_coordinates(joint, existing) if existing else np.empty((0, x.shape[1]))
+    pick = _max_projection if criterion == "maxpro" else _maximin
+    return [cand[k] for k in pick(joint, x, sites, n)]
+
+
+def _farthest_from_mean(x: NDArray[np.float64]) -> int:
+    return int(np.argmax(np.linalg.norm(x - x.mean(axis=0), axis=1)))
+
+
+def _maximin(joint: int, x: NDArray[np.float64], sites: NDArray[np.float64], n: int) -> list[int]:
+    """Greedy maximin: ``n`` rows of ``x``, each the farthest from ``sites`` and the rows chosen before."""
+    if len(sites):
+        d_min = np.min(np.linalg.norm(x[:, None, :] - sites[None, :, :], axis=-1), axis=1)
+    else:  # the first is the farthest from the candidates' mean
+        d_min = np.linalg.norm(x - x.mean(axis=0), axis=1)
+    out: list[int] = []
+    for _ in range(n):
+        k = int(np.argmax(d_min))
+        out.append(k)
+        d_min = np.minimum(d_min, np.linalg.norm(x - x[k], axis=1))
+    return out
+
+
+def _max_projection(joint: int, x: NDArray[np.float64], sites: NDArray[np.float64], n: int) -> list[int]:
+    """Greedy maximum projection: ``n`` rows of ``x``, each adding least to the criterion's sum."""
     quantities = load_quantities(joint)
     # a floor under each squared distance (a millionth of the quantity's variance over the
     # candidates) keeps a quantity that is equal at two poses finite
@@ -188,15 +226,12 @@ def spread_poses(
         return out
 
     crit = np.full(len(x), -np.inf)  # log of the criterion's sum, per candidate
-    for site in load_coordinates(joint, existing) if existing else ():
+    for site in sites:
         crit = np.logaddexp(crit, log_term(site))
-    out: list[kin.Pose] = []
+    out: list[int] = []
     for _ in range(n):
-        if np.isneginf(crit).all():  # nothing to be far from yet
-            k = int(np.argmax(np.linalg.norm(x - x.mean(axis=0), axis=1)))
-        else:
-            k = int(np.argmin(crit))
-        out.append(cand[k])
+        k = int(np.argmin(crit)) if len(sites) or out else _farthest_from_mean(x)
+        out.append(k)
         crit = np.logaddexp(crit, log_term(x[k]))
         crit[k] = np.inf
     return out
