@@ -111,11 +111,11 @@ def test_the_check_judges_a_window_against_its_reference() -> None:
     chk.hear_before(_scaled(_clicks(int(0.1 * SR), 10), (0.0, 0.0, 0.0)), np.full(40, -0.5))
     assert chk.judge(after) is None  # under min_s of stepping heard before the fire
     stepping = _scaled(_clicks(N, 10), (0.0, 0.0, 0.0))
-    chk.hear_before(stepping, np.r_[np.full(60, -0.6), np.full(60, 0.2), np.full(20, np.nan)])
-    assert chk.ref_stoplike == pytest.approx(0.5)  # half its frames stop-like (NaN: learning, not counted)
+    chk.hear_before(stepping, np.r_[np.full(96, -0.6), np.full(24, 0.2), np.full(20, np.nan)])
+    assert chk.ref_stoplike == pytest.approx(0.2)  # a fifth of its frames stop-like (NaN: learning, not counted)
     assert chk.judge(after) is not None
-    chk.hear_before(stepping, np.r_[np.full(59, -0.6), np.full(61, 0.2)])
-    assert chk.judge(after) is None  # mostly stop-like before the fire: a stop heard late, no stepping to compare
+    chk.hear_before(stepping, np.r_[np.full(95, -0.6), np.full(25, 0.2)])
+    assert chk.judge(after) is None  # not stepping: a stop heard late, or music lifting the stop's sub-bands
     chk.hear_before(stepping, np.full(120, -0.6))
     got = chk.judge(after)
     assert got is not None and got.bands == 2 and got.rate_hz == pytest.approx(RATE, rel=0.01)
@@ -157,3 +157,74 @@ def test_a_stop_whose_tuned_change_was_off_the_lines_is_not_judged_there() -> No
     assert (math.isnan(a), used) == (True, 1)  # the drop judged alone: 16 of 160 dB^2, too little
     a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, (0.0, 14.0, -3.0))  # within 3 dB: judged
     assert used == 2 and a == pytest.approx(16.0 / 160.0, abs=0.05)  # only the drop's -4 dB of the signature
+
+
+def test_the_reference_is_the_latest_stepping_before_the_fire() -> None:
+    """Frames stop-like before the fire (a stop heard late, music): the reference ends where at most a fifth of
+    its frames were; none within the look-back: the fire's own (and no verdict)."""
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    span = 100
+    clean = np.full(span + 50, -0.5)
+    assert chk.stepping_back(clean, span) == 0
+    late = np.r_[np.full(300, -0.5), np.full(60, 0.3)]  # the last 60 frames stop-like
+    k = chk.stepping_back(late, span)
+    assert k == 60 - 20  # the latest 100 frames with 20 stop-like end 40 frames back
+    assert np.mean(late[late.size - span - k : late.size - k] >= 0) == pytest.approx(CLOCKED.max_ref_stoplike)
+    learning = np.r_[np.full(span, np.nan), np.full(30, 0.4)]  # the warm-up (NaN), then stop-like frames
+    assert chk.stepping_back(learning, span) == 30  # the warm-up is the stepping the template was learned from
+    short = np.r_[np.full(20, -0.5), np.full(30, 0.4)]  # listening began 50 frames before: the fire's own
+    assert chk.stepping_back(short, span) == 0
+    busy = np.r_[np.full(200, 0.3)]  # stop-like all the way back
+    assert chk.stepping_back(busy, span) == 0
+
+
+def _tones(n: int, freqs_hz: list[float], power: float, seed: int) -> np.ndarray:
+    """Sines at ``freqs_hz``, each of mean square ``power``, random phases."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / SR
+    return sum(
+        (math.sqrt(2 * power) * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi)) for f in freqs_hz), np.zeros(n)
+    )
+
+
+def test_partials_beside_the_lines_are_read_on_the_narrow_comb() -> None:
+    """Music's partials 35 Hz from each line where the stop rises: the 0.4 % comb's wider comb holds them (not sharp:
+    no verdict), the comb as narrow as the window resolves does not, and reads no change: a_L near 0."""
+    sig = (0.0, 12.0, 0.0)
+    joint = _scaled(_clicks(N, 21), (0.0, 0.0, 0.0))
+    mid = _band(joint, EDGES[1], EDGES[2])
+    per_line = float(np.mean(mid**2)) / 4  # four lines, 5-8 kHz
+    music = _tones(N, [k * RATE + 35.0 for k in (5, 6, 7, 8)], per_line, 22)
+    before = joint + music
+    after = _scaled(_clicks(N, 23), (0.0, 0.0, 0.0)) + music
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig, ClockedParams(combs=(0.004,)))
+    assert (math.isnan(a), used) == (True, 0)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig)
+    assert used == 1 and abs(a) < 0.1
+    a, used = lines_stop_likeness(before, _scaled(_clicks(N, 24), sig) + music, SR, RATE, EDGES, sig, sig)
+    assert used == 1 and a == pytest.approx(1.0, abs=0.1)  # the stop itself, under the same partials
+
+
+def _wandering_clicks(n: int, seed: int) -> np.ndarray:
+    """Clicks at 1000 Hz whose rate wanders by +-0.2 % at 3 Hz (band-limited, at fractional sample times)."""
+    rng = np.random.default_rng(seed)
+    x = np.zeros(n + 64)
+    t, k = 0.0, np.arange(-16, 17)
+    while t * SR < n:
+        i = int(t * SR)
+        frac = t * SR - i
+        x[i + 16 + k] += (1.0 + 0.1 * rng.standard_normal()) * np.sinc(k - frac) * np.hanning(35)[1:-1]
+        t += (1.0 + 0.002 * math.sin(2 * math.pi * 3.0 * t)) / RATE
+    return x[16 : n + 16] + 1e-4 * rng.standard_normal(n)
+
+
+def test_lines_wider_than_the_narrow_comb_are_read_on_a_wider_one() -> None:
+    """A clock that wanders 0.2 %: its lines at 5-8 kHz spread +-10-16 Hz, beyond the narrow comb (not sharp
+    there) and within 0.4 % of their frequency: read there, the stop scaled by the signature gives a_L near 1."""
+    sig = (0.0, 12.0, 0.0)
+    before = _scaled(_wandering_clicks(N, 25), (0.0, 0.0, 0.0))
+    after = _scaled(_wandering_clicks(N, 26), sig)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig, ClockedParams(combs=(0.0,)))
+    assert (math.isnan(a), used) == (True, 0)
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig)
+    assert used == 1 and a == pytest.approx(1.0, abs=0.1)

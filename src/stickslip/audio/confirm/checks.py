@@ -66,6 +66,7 @@ class WindowChecks:
     ) -> None:
         self.kept, self.p_sync = kept, sync
         self._H, self._F, sr = int(tuning.hop), int(tuning.frame), int(tuning.sample_rate)
+        self._sr = sr
         self.span, self.gap = int(round(sync.span_s * sr)), int(round(sync.gap_s * sr))
         self.min_before = sync.min_s * sr
         self.pause = PauseCheck(tuning, pause)
@@ -79,9 +80,10 @@ class WindowChecks:
         if self.clocked is not None:
             self.clocked.reset(step_rate_hz)
 
-    def before(self, fire: int) -> NDArray[np.float64]:
-        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` before it (as kept)."""
-        end = fire * self._H + self._F - self.gap
+    def before(self, fire: int, back: int = 0) -> NDArray[np.float64]:
+        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` (and ``back`` frames) before it
+        (as kept)."""
+        end = (fire - back) * self._H + self._F - self.gap
         return self.kept.get(end - self.span, end)
 
     def after_fire(self, fire: int, n: int) -> NDArray[np.float64]:
@@ -98,7 +100,10 @@ class WindowChecks:
             self.sync.ref = self.before(fire)
         if self.clocked is not None and (not recent or self.clocked.ref is None):
             g, sp = self.gap // self._H, self.span // self._H
-            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g))
+            back = int(round(self.clocked.p.look_back_s * self._sr / self._H))
+            m = frames.between(fire - g - sp - back, fire - g)
+            k = self.clocked.stepping_back(m, sp)  # the latest stepping: the reference
+            self.clocked.hear_before(self.before(fire, k), m[max(m.size - sp - k, 0) : m.size - k])
 
     def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
         """The fire at frame ``fire``, which persisted over ``frames``: the step clock agrees, the stepping went on
