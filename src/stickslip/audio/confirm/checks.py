@@ -80,10 +80,9 @@ class WindowChecks:
         if self.clocked is not None:
             self.clocked.reset(step_rate_hz)
 
-    def before(self, fire: int, back: int = 0) -> NDArray[np.float64]:
-        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` (and ``back`` frames) before it
-        (as kept)."""
-        end = (fire - back) * self._H + self._F - self.gap
+    def before(self, fire: int) -> NDArray[np.float64]:
+        """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` before it (as kept)."""
+        end = fire * self._H + self._F - self.gap
         return self.kept.get(end - self.span, end)
 
     def after_fire(self, fire: int, n: int) -> NDArray[np.float64]:
@@ -100,10 +99,9 @@ class WindowChecks:
             self.sync.ref = self.before(fire)
         if self.clocked is not None and (not recent or self.clocked.ref is None):
             g, sp = self.gap // self._H, self.span // self._H
-            back = int(round(self.clocked.p.look_back_s * self._sr / self._H))
-            m = frames.between(fire - g - sp - back, fire - g)
-            k = self.clocked.stepping_back(m, sp)  # the latest stepping: the reference
-            self.clocked.hear_before(self.before(fire, k), m[max(m.size - sp - k, 0) : m.size - k])
+            end = fire * self._H + self._F - self.gap - self.span  # where the reference begins
+            earlier = self.kept.get(end - int(round(self.clocked.p.look_back_s * self._sr)), end)
+            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g), earlier)
 
     def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
         """The fire at frame ``fire``, which persisted over ``frames``: the step clock agrees, the stepping went on

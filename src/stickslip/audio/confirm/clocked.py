@@ -96,10 +96,10 @@ class ClockedParams:
         0.01, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere (as the fit)"
     )
     max_ref_stoplike: float = param(
-        0.2, "", "the reference is stepping: at most this share of its frames stop-like (a stop heard late, music)"
+        0.5, "", "where more of the reference's frames were stop-like, the stepping's lines are read over the look-back"
     )
     look_back_s: float = param(
-        1.5, "s", "the reference is looked for this far before the fire's own (none there: not judged)"
+        3.0, "s", "there, per sub-band the median over the reference and the 0.48 s pieces this far before it"
     )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
@@ -121,7 +121,7 @@ class OnClock:
 
 
 def lines_stop_likeness(
-    before: FloatArray,
+    before: FloatArray | Sequence[FloatArray],
     after: FloatArray,
     sample_rate: float,
     rate_hz: float,
@@ -136,7 +136,9 @@ def lines_stop_likeness(
     ----------
     before, after : array
         The stepping before the fire and the window after it (samples; the longer is cut to the shorter: ``before``
-        keeps its end, ``after`` its start).
+        keeps its end, ``after`` its start). ``before`` may be a list of pieces: each line's power, its noise and
+        the wider comb's power before are then the medians over the pieces (a stop heard late, or music that
+        drowned some of them, is outvoted by the stepping).
     sample_rate : float
         Samples per second, Hz.
     rate_hz : float
@@ -168,9 +170,8 @@ def lines_stop_likeness(
     bands = [(float(edges_hz[i]), float(edges_hz[i + 1])) for i in judged]
     if not bands:
         return math.nan, 0
-    n = min(before.size, after.size)
-    b, a = before[before.size - n :], after[:n]
-    reads = [_comb_read(b, a, sample_rate, rate_hz, bands, tol) for tol in p.combs]
+    pieces = [before] if isinstance(before, np.ndarray) else list(before)
+    reads = [_comb_read(pieces, after, sample_rate, rate_hz, bands, tol) for tol in p.combs]
     num = den = 0.0
     used = 0
     for j, i in enumerate(judged):
@@ -192,23 +193,35 @@ def lines_stop_likeness(
 
 
 def _comb_read(
-    b: FloatArray, a: FloatArray, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
+    pieces: list[FloatArray], after: FloatArray, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
 ) -> list[tuple[float, float, float, float]]:
     """Per band, on a comb of half-width ``tol`` of each line's frequency (at least 3 bins): the lines' power before
-    and after, its noise's variance before, and the power before on a comb ``sharp_width`` times wider (NaN: none)."""
+    (the median over the pieces, each cut to the window's length), after, its noise's variance before, and the power
+    before on a comb ``sharp_width`` times wider (NaN: none)."""
     comb = StepClockParams(comb_tol=tol)
-    lb, _ = line_powers(b, sr, rate_hz, bands, params=comb)
-    la, _ = line_powers(a, sr, rate_hz, bands, params=comb)
-    lw, _ = line_powers(b, sr, rate_hz, bands, STEP_CLOCK.sharp_width, params=comb)
     nan = (math.nan,) * 4
-    if not lb.power.size == la.power.size == lw.power.size:
+    per_piece = []  # per piece: per band, (power, variance, wider comb's power) before
+    la = None
+    for x in pieces:
+        n = min(x.size, after.size)
+        b = x[x.size - n :]
+        lb, _ = line_powers(b, sr, rate_hz, bands, params=comb)
+        lw, _ = line_powers(b, sr, rate_hz, bands, STEP_CLOCK.sharp_width, params=comb)
+        if la is None or la.power.size != lb.power.size:
+            la, _ = line_powers(after[:n], sr, rate_hz, bands, params=comb)
+        if not lb.power.size == la.power.size == lw.power.size:
+            return [nan for _ in bands]
+        sums = np.array([[np.sum(v[lb.band == j]) for v in (lb.power, lb.var, lw.power)] for j in range(len(bands))])
+        per_piece.append(sums)
+    if la is None:
         return [nan for _ in bands]
+    med = np.median(np.asarray(per_piece), axis=0)  # band x (power, variance, wider power)
     out = []
     for j in range(len(bands)):
-        on = lb.band == j
-        sums = (lb.power[on], la.power[on], lb.var[on], lw.power[on])
-        out.append(tuple(float(np.sum(v)) for v in sums) if on.any() else nan)
-    return out  # type: ignore[return-value]
+        on = la.band == j
+        got = (float(med[j, 0]), float(np.sum(la.power[on])), float(med[j, 1]), float(med[j, 2]))
+        out.append(got if on.any() else nan)
+    return out
 
 
 class ClockedCheck:
@@ -230,32 +243,29 @@ class ClockedCheck:
         self.ref: FloatArray | None = None
         #: the share of its frames that were stop-like (NaN: none measured)
         self.ref_stoplike = math.nan
+        #: the samples kept before it (the look-back)
+        self.earlier: FloatArray = np.zeros(0)
         self.commanded_hz = commanded_hz
 
-    def hear_before(self, ref: FloatArray, margins: FloatArray) -> None:
-        """The stepping before a fire (samples) and its frames' margins over the threshold (NaN while learning)."""
+    def hear_before(self, ref: FloatArray, margins: FloatArray, earlier: FloatArray | None = None) -> None:
+        """The stepping before a fire (samples), its frames' margins over the threshold (NaN while learning) and the
+        samples before it (up to ``look_back_s``, for a reference that was not stepping)."""
         m = margins[np.isfinite(margins)]
         self.ref = ref
         self.ref_stoplike = float(np.mean(m >= 0.0)) if m.size else math.nan
+        self.earlier = earlier if earlier is not None else np.zeros(0)
 
-    def stepping_back(self, margins: FloatArray, span: int) -> int:
-        """How many frames before the end of ``margins`` the reference ends: the latest ``span`` frames of which at
-        most ``max_ref_stoplike`` were stop-like (NaN frames, learning, not counted; none counted: stepping), 0 where
-        none is (then not judged).
-
-        ``margins``: the frames' margins over the threshold up to the end of the fire's own reference, as far back
-        as kept (``look_back_s`` more than ``span`` at most).
-        """
-        n = margins.size
-        fin = np.isfinite(margins)
-        hot = np.concatenate(([0], np.cumsum(fin & (np.nan_to_num(margins, nan=-1.0) >= 0.0))))
-        cnt = np.concatenate(([0], np.cumsum(fin)))
-        for k in range(0, max(n - span, 0) + 1):
-            lo, hi = max(n - span - k, 0), n - k
-            heard = cnt[hi] - cnt[lo]
-            if heard == 0 or (hot[hi] - hot[lo]) <= self.p.max_ref_stoplike * heard:
-                return k
-        return 0
+    def pieces(self) -> list[FloatArray] | None:
+        """What the lines before the fire are read on: the reference, or where more than ``max_ref_stoplike`` of its
+        frames were stop-like, it and the pieces of its length before it within ``look_back_s`` (None: too few
+        pieces for a median that stepping wins: under 3)."""
+        ref = self.ref
+        assert ref is not None
+        if not self.ref_stoplike > self.p.max_ref_stoplike:
+            return [ref]
+        e, n = self.earlier, ref.size
+        out = [ref] + [e[e.size - (k + 1) * n : e.size - k * n] for k in range(e.size // n)] if n else []
+        return out if len(out) >= 3 else None
 
     def judge(self, after: FloatArray, heard_hz: float = math.nan) -> OnClock | None:
         """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged).
@@ -266,8 +276,9 @@ class ClockedCheck:
         sr, p, ref = self.sample_rate, self.p, self.ref
         if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
             return None
-        if self.ref_stoplike > p.max_ref_stoplike:
-            return None  # the stop may have begun there, heard late: no stepping to compare with
+        before = self.pieces()
+        if before is None:
+            return None  # the stop may have begun there, heard late, and too little was kept to read past it
         told = self.commanded_hz
         if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
             rate = heard_hz
@@ -278,7 +289,9 @@ class ClockedCheck:
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
+        a, used = lines_stop_likeness(
+            before, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p
+        )
         return OnClock(a, rate, used)
 
     def verdict(self, got: OnClock | None) -> bool:

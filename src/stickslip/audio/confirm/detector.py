@@ -153,13 +153,12 @@ class ConfirmedStopDetector:
         self._H, self._F, self._sr = int(tu.hop), int(tu.frame), int(tu.sample_rate)
         #: the spans the confirmation judges on, frames
         self.w = w = Windows.of(tu, c, p.persistence)
-        back = 0 if p.clocked is None else int(round(p.clocked.look_back_s * self._sr / self._H))
-        self._frames = FrameLog(self._H, self._F, self._sr, 2 * w.after_reject + 4 * w.refire + back)
+        self._frames = FrameLog(self._H, self._F, self._sr, 2 * w.after_reject + 4 * w.refire)
         self._onset = OnsetJudge(tu, self._frames, w.window, w.look, p.onset)
         self._chain = FireChain(w, self._frames, self._onset)
         # samples kept: the stepping before a fire and the longest window after it
         span_gap = int(round(p.sync.span_s * self._sr)) + int(round(p.sync.gap_s * self._sr))
-        if p.clocked is not None:  # the clocked check looks further back for stepping
+        if p.clocked is not None:  # the clocked check reads the stepping further back where it must
             span_gap += int(round(p.clocked.look_back_s * self._sr))
         self._kept = KeptSamples(span_gap + self._F + (w.after_reject + 2) * self._H)
         band = _stepping_band(tu)
