@@ -12,11 +12,12 @@ tuning's sub-bands whose signature moves by ``min_signature_db`` or more, the po
 step clock's lines above the continuum beside them
 (:func:`~stickslip.audio.features.stepclock.line_powers`) is measured over the stepping
 before the fire and over the window's first samples, at the step rate commanded (or,
-untold, heard in the stepping). The reference is the latest stepping: the ``span_s`` before
-the fire, or, where more than ``max_ref_stoplike`` of its frames were stop-like (a stop
-heard late began there; music lifting the stop's sub-bands), the latest such span within
-``look_back_s`` before it of which at most that share was (for a fire soon after a rejected
-one, the reference of the first of them). Per sub-band the change ``dL_b`` (dB, each side
+untold, heard in the stepping). The reference is the stepping before the fire (for a fire
+soon after a rejected one, before the first of them); where more than ``max_ref_stoplike``
+of its frames were stop-like (a stop heard late began there, or music lifted the stop's
+sub-bands), each line's power before is the median over it and the pieces of its length in
+the ``look_back_s`` before it: the stepping outvotes a stop heard late and music that
+drowned a piece. Per sub-band the change ``dL_b`` (dB, each side
 floored at ``floor_share`` of the larger), kept where the lines stood ``min_line_z``
 standard deviations over their noise before the fire and were sharp there (``min_sharpness``
 of the power in a comb four times wider: a rough clock smears its higher harmonics, and what
@@ -38,8 +39,8 @@ when the tuning has no continuum signature (made before it was stored), when the
 sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
 (one sub-band's estimate is not the stop's signature), the rate is not known or is more
 than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
-elsewhere, and the tuned signature is not what the stop does on them), where no stepping
-was heard within ``look_back_s`` (the reference would be the stop), or where less than
+elsewhere, and the tuned signature is not what the stop does on them), where that median
+would be over fewer than 3 pieces (listening began just before), or where less than
 ``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune to what is
 added between them, so the tuned signature is fitted as tuned (no masking). It runs once
 per fire that persisted, never per frame.
