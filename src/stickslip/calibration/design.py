@@ -23,7 +23,7 @@ from .. import kinematics as kin
 from ..models import PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams, average_from_features, traverse_features
 from .family_fit import unit_scale
-from .groups import load_coordinates_of
+from .groups import load_coordinates_of, load_quantities
 from .result import Calibration
 from .update import model_sigma
 
@@ -157,29 +157,81 @@ def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
 
 
 def spread_poses(
-    joint: int, n: int, seed: int = 0, existing: list[kin.Pose] | None = None, candidates: int = 2000
+    joint: int,
+    n: int,
+    seed: int = 0,
+    existing: list[kin.Pose] | None = None,
+    candidates: int = 2000,
+    criterion: str | None = None,
 ) -> list[kin.Pose]:
-    """``n`` poses for ``joint`` spread over its load space (greedy maximin design), reproducible.
+    """``n`` poses for ``joint`` spread over its load space, reproducible (docs/models.md §3).
 
-    From ``candidates`` random workspace poses (:func:`workspace_poses`), each next pose is
-    the one farthest (Euclidean, in :func:`load_coordinates`) from every pose chosen so far
-    and from ``existing`` (e.g. the paper's calibration poses). Random poses leave parts of
-    the load space empty by chance (e.g. no arm pointing down, ``L < 0``), and a model
-    predicts there only by extrapolation; a spread design covers the corners first.
+    From ``candidates`` random workspace poses (:func:`workspace_poses`), poses are added one
+    at a time to ``existing`` (e.g. the paper's calibration poses) by ``criterion``:
+
+    * ``"maxpro"`` (the default for joint 3): a greedy maximum projection design. The next
+      pose is the candidate that adds least to ``sum_j prod_q 1 / d_q(c, j)^2`` over the poses
+      there, ``d_q`` the distance in one load quantity (:func:`~.groups.load_quantities`). A
+      pose close to another in *any* quantity is penalised, so every quantity's range is
+      filled, its middle included;
+    * ``"maximin"`` (the default for the rotary joints): the candidate farthest (Euclidean, in
+      :func:`load_coordinates`) from every pose there. It covers the corners of the load
+      space first and leaves each coordinate's middle to interpolation.
+
+    Without ``existing`` the first pose is the candidate farthest from the candidates' mean.
     """
+    if criterion is None:
+        criterion = "maxpro" if kin.joint_spec(joint).prismatic else "maximin"
+    if criterion not in ("maxpro", "maximin"):
+        raise ValueError(f"criterion {criterion!r}: not 'maxpro' or 'maximin'")
     if n < 1:
         return []
     cand = workspace_poses(joint, candidates, seed)
     x = load_coordinates(joint, cand)
-    if existing:
-        d_min = np.min(
-            np.linalg.norm(x[:, None, :] - load_coordinates(joint, existing)[None, :, :], axis=-1), axis=1
-        )
-    else:
+    sites = load_coordinates(joint, existing) if existing else np.empty((0, x.shape[1]))
+    pick = _max_projection if criterion == "maxpro" else _maximin
+    return [cand[k] for k in pick(joint, x, sites, n)]
+
+
+def _farthest_from_mean(x: NDArray[np.float64]) -> int:
+    return int(np.argmax(np.linalg.norm(x - x.mean(axis=0), axis=1)))
+
+
+def _maximin(joint: int, x: NDArray[np.float64], sites: NDArray[np.float64], n: int) -> list[int]:
+    """Greedy maximin: ``n`` rows of ``x``, each the farthest from ``sites`` and the rows chosen before."""
+    if len(sites):
+        d_min = np.min(np.linalg.norm(x[:, None, :] - sites[None, :, :], axis=-1), axis=1)
+    else:  # the first is the farthest from the candidates' mean
         d_min = np.linalg.norm(x - x.mean(axis=0), axis=1)
-    out: list[kin.Pose] = []
+    out: list[int] = []
     for _ in range(n):
         k = int(np.argmax(d_min))
-        out.append(cand[k])
+        out.append(k)
         d_min = np.minimum(d_min, np.linalg.norm(x - x[k], axis=1))
+    return out
+
+
+def _max_projection(joint: int, x: NDArray[np.float64], sites: NDArray[np.float64], n: int) -> list[int]:
+    """Greedy maximum projection: ``n`` rows of ``x``, each adding least to the criterion's sum."""
+    quantities = load_quantities(joint)
+    # a floor under each squared distance (a millionth of the quantity's variance over the
+    # candidates) keeps a quantity that is equal at two poses finite
+    eps = [1e-6 * float(np.sum(np.var(x[:, q], axis=0))) + 1e-300 for q in quantities]
+
+    def log_term(site: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``-sum_q log(d_q^2)`` of every candidate to ``site``: the log of its criterion term."""
+        out = np.zeros(len(x))
+        for q, e in zip(quantities, eps, strict=True):
+            out -= np.log(np.sum((x[:, q] - site[q]) ** 2, axis=1) + e)
+        return out
+
+    crit = np.full(len(x), -np.inf)  # log of the criterion's sum, per candidate
+    for site in sites:
+        crit = np.logaddexp(crit, log_term(site))
+    out: list[int] = []
+    for _ in range(n):
+        k = int(np.argmin(crit)) if len(sites) or out else _farthest_from_mean(x)
+        out.append(k)
+        crit = np.logaddexp(crit, log_term(x[k]))
+        crit[k] = np.inf
     return out

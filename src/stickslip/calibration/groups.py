@@ -21,7 +21,7 @@ from .. import kinematics as kin
 from ..measurements import Traverse
 from ..models.families import FitBasis, features, fit_basis
 
-__all__ = ["JointData", "TraverseGroups", "group_traverses", "load_coordinates_of", "nearest"]
+__all__ = ["JointData", "TraverseGroups", "group_traverses", "load_coordinates_of", "load_quantities", "nearest"]
 
 _COLS = ("start", "end", "q1", "q2", "q3", "theta", "psi")
 
@@ -110,6 +110,17 @@ def load_coordinates_of(joint: int, poses: NDArray[np.float64]) -> NDArray[np.fl
     f = features(joint, *args)
     g = 1.0 / np.sqrt(5.0)
     return np.concatenate([g * f.T, g * f.R, g * f.P, (2.0 * cols[:, 2:3] / kin.Q3_MAX - 1.0)], axis=1)
+
+
+def load_quantities(joint: int) -> tuple[slice, ...]:
+    """The columns of :func:`load_coordinates_of` that describe one load quantity each.
+
+    Joint 3: ``L``, ``X``, ``Y``, ``|cos q2|``, a column each. Rotary joints: ``T``, ``R``,
+    ``P`` (five columns each, the quantity along the traverse) and ``q3``.
+    """
+    if kin.joint_spec(joint).prismatic:
+        return tuple(slice(k, k + 1) for k in range(4))
+    return (slice(0, 5), slice(5, 10), slice(10, 15), slice(15, 16))
 
 
 def nearest(
