@@ -18,7 +18,7 @@ minutes per joint on a shared machine, the generator about as costly as the dete
 ``--rate 1150`` to step (and tell) another rate than the tuning's, ``--details`` to print under each
 false stop what the confirming detector noted (``ConfirmLog``): the clocked check's verdict, the
 onset's doubt, the rejected fires before it. ``docs/audio-log.md`` ("Diagnosis of the hour's false
-stops") reads those lines. ``--variants before,comb,reference,default`` hears the same samples with
+stops") reads those lines. ``--variants before,default`` hears the same samples with
 each variant of the clocked check (``VARIANTS``) side by side, one table each.
 """
 
@@ -61,12 +61,10 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     )
 
 
-#: the clocked check's variants ``--variants`` compares: its comb (a line's half-width, share of its frequency) and
-#: its reference (the stepping before the fire only, or the latest stepping within 1.5 s)
+#: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (the check before it
+#: read them in step), or first on the comb the window resolves (the default)
 VARIANTS: dict[str, ClockedParams | None] = {
-    "before": ClockedParams(combs=(0.004,), max_ref_stoplike=0.5, look_back_s=0.0),
-    "comb": ClockedParams(max_ref_stoplike=0.5, look_back_s=0.0),
-    "reference": ClockedParams(combs=(0.004,)),
+    "before": ClockedParams(combs=(0.004,)),
     "default": ClockedParams(),
     "off": None,
 }

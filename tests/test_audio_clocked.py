@@ -115,7 +115,7 @@ def test_the_check_judges_a_window_against_its_reference() -> None:
     assert chk.ref_stoplike == pytest.approx(0.5)  # half its frames stop-like (NaN: learning, not counted)
     assert chk.judge(after) is not None
     chk.hear_before(stepping, np.r_[np.full(59, -0.6), np.full(61, 0.2)])
-    assert chk.judge(after) is None  # mostly stop-like, and nothing kept before it: no stepping to compare
+    assert chk.judge(after) is None  # mostly stop-like before the fire: a stop heard late, no stepping to compare
     chk.hear_before(stepping, np.full(120, -0.6))
     got = chk.judge(after)
     assert got is not None and got.bands == 2 and got.rate_hz == pytest.approx(RATE, rel=0.01)
@@ -157,30 +157,6 @@ def test_a_stop_whose_tuned_change_was_off_the_lines_is_not_judged_there() -> No
     assert (math.isnan(a), used) == (True, 1)  # the drop judged alone: 16 of 160 dB^2, too little
     a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, (0.0, 14.0, -3.0))  # within 3 dB: judged
     assert used == 2 and a == pytest.approx(16.0 / 160.0, abs=0.05)  # only the drop's -4 dB of the signature
-
-
-def test_a_reference_that_was_not_stepping_is_outvoted_by_the_stepping_before_it() -> None:
-    """A stop heard late: the 0.48 s before the fire is the stop (its frames stop-like). Alone it reads no change
-    (no verdict); read with the pieces of the 3 s before it, the median is the stepping's and the stop reads a_L 1.
-    Music over the stepping (off the lines) in all of them: a_L 0."""
-    sig = (0.0, 6.0, -4.0)
-    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
-    stop = _scaled(_clicks(N, 31), sig)
-    earlier = np.concatenate([_scaled(_clicks(N, 32 + k), (0.0, 0.0, 0.0)) for k in range(6)])
-    chk.hear_before(stop, np.full(120, 0.3), earlier)
-    assert len(chk.pieces() or []) == 7
-    got = chk.judge(_scaled(_clicks(N, 40), sig))
-    assert got is not None and got.bands == 2 and got.a == pytest.approx(1.0, abs=0.1)
-    chk.hear_before(stop, np.full(120, 0.3), earlier[: N + N // 2])  # one piece before it: no median
-    assert chk.pieces() is None and chk.judge(_scaled(_clicks(N, 40), sig)) is None
-    chk.hear_before(stop, np.full(120, -0.3), earlier)  # the fire's own reference, stepping: read alone
-    assert chk.pieces() == [stop]
-    rng = np.random.default_rng(41)
-    noise = [_band(rng.standard_normal(N), EDGES[1], EDGES[2]) * 0.02 for _ in range(8)]
-    music = np.concatenate([_scaled(_clicks(N, 50 + k), (0.0, 0.0, 0.0)) + noise[k] for k in range(6)])
-    chk.hear_before(_scaled(_clicks(N, 49), (0.0, 0.0, 0.0)) + noise[6], np.full(120, 0.3), music)
-    got = chk.judge(_scaled(_clicks(N, 48), (0.0, 0.0, 0.0)) + noise[7])
-    assert got is not None and abs(got.a) < 0.1
 
 
 def _tones(n: int, freqs_hz: list[float], power: float, seed: int) -> np.ndarray:

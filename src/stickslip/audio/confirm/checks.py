@@ -66,7 +66,6 @@ class WindowChecks:
     ) -> None:
         self.kept, self.p_sync = kept, sync
         self._H, self._F, sr = int(tuning.hop), int(tuning.frame), int(tuning.sample_rate)
-        self._sr = sr
         self.span, self.gap = int(round(sync.span_s * sr)), int(round(sync.gap_s * sr))
         self.min_before = sync.min_s * sr
         self.pause = PauseCheck(tuning, pause)
@@ -99,9 +98,7 @@ class WindowChecks:
             self.sync.ref = self.before(fire)
         if self.clocked is not None and (not recent or self.clocked.ref is None):
             g, sp = self.gap // self._H, self.span // self._H
-            end = fire * self._H + self._F - self.gap - self.span  # where the reference begins
-            earlier = self.kept.get(end - int(round(self.clocked.p.look_back_s * self._sr)), end)
-            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g), earlier)
+            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g))
 
     def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
         """The fire at frame ``fire``, which persisted over ``frames``: the step clock agrees, the stepping went on

@@ -12,19 +12,16 @@ tuning's sub-bands whose signature moves by ``min_signature_db`` or more, the po
 step clock's lines above the continuum beside them
 (:func:`~stickslip.audio.features.stepclock.line_powers`) is measured over the stepping
 before the fire and over the window's first samples, at the step rate commanded (or,
-untold, heard in the stepping). The reference is the stepping before the fire (for a fire
-soon after a rejected one, before the first of them); where more than ``max_ref_stoplike``
-of its frames were stop-like (a stop heard late began there, or music lifted the stop's
-sub-bands), each line's power before is the median over it and the pieces of its length in
-the ``look_back_s`` before it: the stepping outvotes a stop heard late and music that
-drowned a piece. Per sub-band the change ``dL_b`` (dB, each side
+untold, heard in the stepping); the stepping before the fire is the reference the
+confirmation keeps (for a fire soon after a rejected one, the stepping before the first of
+them). Per sub-band the change ``dL_b`` (dB, each side
 floored at ``floor_share`` of the larger), kept where the lines stood ``min_line_z``
 standard deviations over their noise before the fire and were sharp there (``min_sharpness``
 of the power in a comb four times wider: a rough clock smears its higher harmonics, and what
 is left on the narrow lines is not the joint's sound alone). Each sub-band is read on the
 narrowest of ``combs`` on which its lines are sharp: first a line 3 bins of the window
 wide, the comb an average in step with the clock over the window resolves, on which music's
-partials a few hertz beside a clean clock's lines stay out; then 0.4 % of the line's
+partials beside a clean clock's lines stay out; then 0.4 % of the line's
 frequency, for a clock whose lines wander wider. And where the tuned stop's change was on
 the lines itself (the tuning's continuum between the lines moved no further in the stop's
 direction than its level, plus ``max_continuum_excess_db``: a stop that rattles out of step with the clock changes the
@@ -39,8 +36,9 @@ when the tuning has no continuum signature (made before it was stored), when the
 sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
 (one sub-band's estimate is not the stop's signature), the rate is not known or is more
 than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
-elsewhere, and the tuned signature is not what the stop does on them), where that median
-would be over fewer than 3 pieces (listening began just before), or where less than
+elsewhere, and the tuned signature is not what the stop does on them), where more than
+``max_ref_stoplike`` of the reference's frames were already stop-like (a stop heard late
+began there: the reference is the stop, not stepping), or where less than
 ``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune to what is
 added between them, so the tuned signature is fitted as tuned (no masking). It runs once
 per fire that persisted, never per frame.
@@ -97,10 +95,7 @@ class ClockedParams:
         0.01, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere (as the fit)"
     )
     max_ref_stoplike: float = param(
-        0.5, "", "where more of the reference's frames were stop-like, the stepping's lines are read over the look-back"
-    )
-    look_back_s: float = param(
-        3.0, "s", "there, per sub-band the median over the reference and the 0.48 s pieces this far before it"
+        0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
@@ -122,7 +117,7 @@ class OnClock:
 
 
 def lines_stop_likeness(
-    before: FloatArray | Sequence[FloatArray],
+    before: FloatArray,
     after: FloatArray,
     sample_rate: float,
     rate_hz: float,
@@ -137,9 +132,7 @@ def lines_stop_likeness(
     ----------
     before, after : array
         The stepping before the fire and the window after it (samples; the longer is cut to the shorter: ``before``
-        keeps its end, ``after`` its start). ``before`` may be a list of pieces: each line's power, its noise and
-        the wider comb's power before are then the medians over the pieces (a stop heard late, or music that
-        drowned some of them, is outvoted by the stepping).
+        keeps its end, ``after`` its start).
     sample_rate : float
         Samples per second, Hz.
     rate_hz : float
@@ -171,8 +164,9 @@ def lines_stop_likeness(
     bands = [(float(edges_hz[i]), float(edges_hz[i + 1])) for i in judged]
     if not bands:
         return math.nan, 0
-    pieces = [before] if isinstance(before, np.ndarray) else list(before)
-    reads = [_comb_read(pieces, after, sample_rate, rate_hz, bands, tol) for tol in p.combs]
+    n = min(before.size, after.size)
+    b, a = before[before.size - n :], after[:n]
+    reads = [_comb_read(b, a, sample_rate, rate_hz, bands, tol) for tol in p.combs]
     num = den = 0.0
     used = 0
     for j, i in enumerate(judged):
@@ -194,34 +188,22 @@ def lines_stop_likeness(
 
 
 def _comb_read(
-    pieces: list[FloatArray], after: FloatArray, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
+    b: FloatArray, a: FloatArray, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
 ) -> list[tuple[float, float, float, float]]:
     """Per band, on a comb of half-width ``tol`` of each line's frequency (at least 3 bins): the lines' power before
-    (the median over the pieces, each cut to the window's length), after, its noise's variance before, and the power
-    before on a comb ``sharp_width`` times wider (NaN: none)."""
+    and after, its noise's variance before, and the power before on a comb ``sharp_width`` times wider (NaN: none)."""
     comb = StepClockParams(comb_tol=tol)
+    lb, _ = line_powers(b, sr, rate_hz, bands, params=comb)
+    la, _ = line_powers(a, sr, rate_hz, bands, params=comb)
+    lw, _ = line_powers(b, sr, rate_hz, bands, STEP_CLOCK.sharp_width, params=comb)
     nan = (math.nan,) * 4
-    per_piece = []  # per piece: per band, (power, variance, wider comb's power) before
-    la = None
-    for x in pieces:
-        n = min(x.size, after.size)
-        b = x[x.size - n :]
-        lb, _ = line_powers(b, sr, rate_hz, bands, params=comb)
-        lw, _ = line_powers(b, sr, rate_hz, bands, STEP_CLOCK.sharp_width, params=comb)
-        if la is None or la.power.size != lb.power.size:
-            la, _ = line_powers(after[:n], sr, rate_hz, bands, params=comb)
-        if not lb.power.size == la.power.size == lw.power.size:
-            return [nan for _ in bands]
-        sums = np.array([[np.sum(v[lb.band == j]) for v in (lb.power, lb.var, lw.power)] for j in range(len(bands))])
-        per_piece.append(sums)
-    if la is None:
+    if not lb.power.size == la.power.size == lw.power.size:
         return [nan for _ in bands]
-    med = np.median(np.asarray(per_piece), axis=0)  # band x (power, variance, wider power)
     out = []
     for j in range(len(bands)):
-        on = la.band == j
-        got = (float(med[j, 0]), float(np.sum(la.power[on])), float(med[j, 1]), float(med[j, 2]))
-        out.append(got if on.any() else nan)
+        on = lb.band == j
+        sums = tuple(float(np.sum(v[on])) for v in (lb.power, la.power, lb.var, lw.power))
+        out.append((sums[0], sums[1], sums[2], sums[3]) if on.any() else nan)
     return out
 
 
@@ -244,29 +226,13 @@ class ClockedCheck:
         self.ref: FloatArray | None = None
         #: the share of its frames that were stop-like (NaN: none measured)
         self.ref_stoplike = math.nan
-        #: the samples kept before it (the look-back)
-        self.earlier: FloatArray = np.zeros(0)
         self.commanded_hz = commanded_hz
 
-    def hear_before(self, ref: FloatArray, margins: FloatArray, earlier: FloatArray | None = None) -> None:
-        """The stepping before a fire (samples), its frames' margins over the threshold (NaN while learning) and the
-        samples before it (up to ``look_back_s``, for a reference that was not stepping)."""
+    def hear_before(self, ref: FloatArray, margins: FloatArray) -> None:
+        """The stepping before a fire (samples) and its frames' margins over the threshold (NaN while learning)."""
         m = margins[np.isfinite(margins)]
         self.ref = ref
         self.ref_stoplike = float(np.mean(m >= 0.0)) if m.size else math.nan
-        self.earlier = earlier if earlier is not None else np.zeros(0)
-
-    def pieces(self) -> list[FloatArray] | None:
-        """What the lines before the fire are read on: the reference, or where more than ``max_ref_stoplike`` of its
-        frames were stop-like, it and the pieces of its length before it within ``look_back_s`` (None: too few
-        pieces for a median that stepping wins: under 3)."""
-        ref = self.ref
-        assert ref is not None
-        if not self.ref_stoplike > self.p.max_ref_stoplike:
-            return [ref]
-        e, n = self.earlier, ref.size
-        out = [ref] + [e[e.size - (k + 1) * n : e.size - k * n] for k in range(e.size // n)] if n else []
-        return out if len(out) >= 3 else None
 
     def judge(self, after: FloatArray, heard_hz: float = math.nan) -> OnClock | None:
         """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged).
@@ -277,9 +243,8 @@ class ClockedCheck:
         sr, p, ref = self.sample_rate, self.p, self.ref
         if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
             return None
-        before = self.pieces()
-        if before is None:
-            return None  # the stop may have begun there, heard late, and too little was kept to read past it
+        if self.ref_stoplike > p.max_ref_stoplike:
+            return None  # the stop may have begun there, heard late: no stepping to compare with
         told = self.commanded_hz
         if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
             rate = heard_hz
@@ -290,9 +255,7 @@ class ClockedCheck:
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-        a, used = lines_stop_likeness(
-            before, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p
-        )
+        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
         return OnClock(a, rate, used)
 
     def verdict(self, got: OnClock | None) -> bool:

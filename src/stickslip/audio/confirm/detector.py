@@ -158,8 +158,6 @@ class ConfirmedStopDetector:
         self._chain = FireChain(w, self._frames, self._onset)
         # samples kept: the stepping before a fire and the longest window after it
         span_gap = int(round(p.sync.span_s * self._sr)) + int(round(p.sync.gap_s * self._sr))
-        if p.clocked is not None:  # the clocked check reads the stepping further back where it must
-            span_gap += int(round(p.clocked.look_back_s * self._sr))
         self._kept = KeptSamples(span_gap + self._F + (w.after_reject + 2) * self._H)
         band = _stepping_band(tu)
         #: the checks besides persistence: the step clock (opt-in), a pause, the change on the clock's lines
