@@ -21,11 +21,11 @@ of the power in a comb four times wider: a rough clock smears its higher harmoni
 is left on the narrow lines is not the joint's sound alone). Each sub-band is read on the
 narrowest of ``combs`` on which its lines are sharp: first a line 3 bins of the window
 wide, the comb an average in step with the clock over the window resolves, on which music's
-partials beside a clean clock's lines stay out; then 0.4 % of the line's
-frequency, for a clock whose lines wander wider. And where the tuned stop's change was on
-the lines itself (the tuning's continuum between the lines moved no further in the stop's
-direction than its level, plus ``max_continuum_excess_db``: a stop that rattles out of step with the clock changes the
-continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
+partials beside a clean clock's lines stay out; then 0.4 % of the line's frequency, for a
+clock whose lines wander wider. And where the tuned stop's change was on the lines itself
+(the tuning's continuum between the lines moved no further in the stop's direction than its
+level, plus ``max_continuum_excess_db``: a stop that rattles out of step with the clock
+changes the continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
 least-squares fit of the tuned signature ``delta`` to them,
 
     a_L = sum_b delta_b dL_b / sum_b delta_b^2,
