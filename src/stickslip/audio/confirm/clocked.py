@@ -19,7 +19,8 @@ floored at ``floor_share`` of the larger), kept where the lines stood ``min_line
 standard deviations over their noise before the fire and were sharp there (``min_sharpness``
 of the power in a comb four times wider: a rough clock smears its higher harmonics, and what
 is left on the narrow lines is not the joint's sound alone). Each sub-band is read on the
-narrowest of ``combs`` on which its lines are sharp: first a line 3 bins of the window
+narrowest of ``combs`` on which its lines are sharp (heard, as before, on the widest):
+first a line 3 bins of the window
 wide, the comb an average in step with the clock over the window resolves, on which music's
 partials beside a clean clock's lines stay out; then 0.4 % of the line's frequency, for a
 clock whose lines wander wider. And where the tuned stop's change was on the lines itself
@@ -171,9 +172,12 @@ def lines_stop_likeness(
     used = 0
     for j, i in enumerate(judged):
         delta = float(signature_db[i])
+        held = reads[-1][j]  # the widest comb, which holds all of a line's power
+        if not held[0] > p.min_line_z * math.sqrt(held[2]):
+            continue  # no lines heard there before the fire (a narrower comb finds no line that this one misses)
         for p0, p1, var, wide in (r[j] for r in reads):
             if not p0 > p.min_line_z * math.sqrt(var):
-                continue  # no lines heard there before the fire
+                continue  # too few of the line's bins on this comb
             if not p0 >= p.min_sharpness * wide:
                 continue  # the lines are wider than this comb (a rough clock; sound beside them): a wider one
             top = max(p0, p1) * p.floor_share
