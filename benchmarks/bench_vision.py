@@ -30,6 +30,11 @@ off and the worst, and the verdicts by what the frame is (``FRAMES`` default 400
 nearly opaque chip with rounded corners stuck on the tip for 1 to 4 frames, reaching 0.9
 to 1.5 tip widths from its middle, sharper than the needle; ``FRAMES`` default 200).
 
+``--round`` does the same in the own renderer's round mode (``round_benchmark``: a blunt,
+paraboloid-ended needle; a round, nearly opaque bead 0.6 to 1.5 tip widths in radius stuck
+on its end for 1 to 4 frames, sharper than the needle; tips held 8 to 24 px inside the
+edge their shaft leaves by, with a bead or without; ``FRAMES`` default 200).
+
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -52,7 +57,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
-from vision_own import OwnFrame, flake_benchmark, lobed_benchmark, own_benchmark  # noqa: E402
+from vision_own import OwnFrame, flake_benchmark, lobed_benchmark, own_benchmark, round_benchmark  # noqa: E402
 from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.devices.base import DeviceInfo  # noqa: E402
@@ -130,22 +135,27 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
     """What a lobed-mode frame is, for the tally: its kind, cause, and a visible tip's room to the edge."""
     kind, cause = f.kind, f.cause
     if kind == "occluded":
-        return {"lobed": "occluded by a lobed grain", "flake": "occluded by a flake"}.get(cause, "occluded by a disc")
+        return {"lobed": "occluded by a lobed grain", "flake": "occluded by a flake", "bead": "occluded by a bead",
+                "bead-edge": "bead, shaft leaving the field"}.get(cause, "occluded by a disc")
     if kind != "visible":
         return kind
+    if cause == "shaft-edge":
+        return "visible, shaft leaving the field"
     x, y = f.tip
     room = min(x, y, image_size - 1 - x, image_size - 1 - y)
     return "visible, 4-10 px inside" if room < 10.0 else "visible, 10+ px inside"
 
 
-def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | None = None) -> int:
+def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | None = None,
+          bead: bool = False) -> int:
     """Track the own renderer's lobed-mode frames; the number of fixes more than 3 px off.
 
     ``wide``: bright field only, tips 14 to 18 px wide (seed 1), as the second renderer's
     worst fixes were; else tips 3 to 20 px, both looks (seed 0). ``flake``: the flake
-    mode's frames instead; ``plain``: the plain frames of that seed instead.
+    mode's frames instead; ``bead``: the round mode's; ``plain``: the plain frames of that
+    seed instead.
     """
-    make = flake_benchmark if flake else lobed_benchmark
+    make = flake_benchmark if flake else round_benchmark if bead else lobed_benchmark
     seqs = (own_benchmark(n_frames, 40, seed=plain, size=256) if plain is not None
             else make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
             else make(n_frames, 40, seed=0, size=256))
@@ -281,6 +291,12 @@ def main(argv: list[str] | None = None) -> None:
         lobed(int(numbers[0]) if numbers else 200, flake=True)
         print("\nthe same, bright field only, tips 14 to 18 px wide")
         lobed(int(numbers[0]) if numbers else 200, wide=True, flake=True)
+        return
+    if "--round" in args:
+        print("tip tracking on the own renderer's blunt needles with round beads and tips near the edge")
+        lobed(int(numbers[0]) if numbers else 200, bead=True)
+        print("\nthe same, bright field only, tips 14 to 18 px wide")
+        lobed(int(numbers[0]) if numbers else 200, wide=True, bead=True)
         return
     n = int(numbers[0]) if numbers else 500
     print("1. tip tracking on the second renderer's frames")

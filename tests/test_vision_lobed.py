@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from stickslip.sim.camera import LobedParticle, SimCamSettings, SimScene
+from stickslip.vision.template import TrackerParams
 from stickslip.vision.track import Fix, Lost, TipTracker
 
 SHAFT = np.array([-1.0, 0.15])
@@ -86,24 +87,41 @@ def test_a_wide_tip_under_a_lobed_grain_is_never_fixed_more_than_3_px_off():
     assert rows[26][2] is None and rows[27][2] is None  # frames 27 and 28: refused
 
 
-def _tip_towards_the_edge(xs: tuple[float, ...]) -> list[object]:
+def _tip_towards_the_edge(xs: tuple[float, ...], params: TrackerParams = TrackerParams()) -> list[object]:
+    """The tip moved towards the left edge, its shaft behind it leaving the field there."""
     scene = _scene()
     tip = np.array([60.0, 80.0])
-    tracker = TipTracker(scene.render(tip, SHAFT, 1.0), (60.0, 80.0))
+    tracker = TipTracker(scene.render(tip, SHAFT, 1.0), (60.0, 80.0), params)
     return [tracker.update(scene.render(np.array([x, 80.0]), SHAFT, 1.0)) for x in xs]
 
 
-def test_a_wide_tip_20_px_inside_the_edge_is_fixed():
-    *_, r = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0))
+TRUSTING = TrackerParams(trust_unchecked=True)
+"""The rule before the ninth round: a fix behind which fewer than three width stations lie in the frame is taken."""
+
+
+def test_a_wide_tip_20_px_inside_the_edge_is_fixed_where_unchecked_fixes_are_trusted():
+    *_, r = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0), TRUSTING)
     assert isinstance(r, Fix) and math.hypot(r.x - 20.0, r.y - 80.0) <= 1.0, r
 
 
 def test_a_wide_tip_8_to_14_px_inside_the_edge_is_fixed_and_one_mostly_outside_is_refused():
     """Fixed while half the template's weight is in the frame (TrackerParams.min_coverage; 0.9 refused the
-    tip at 14 px and nearer), refused as out of the field at 6 px, where 56 % of it lies outside."""
-    answers = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0, 14.0, 12.0, 10.0, 8.0, 6.0))
+    tip at 14 px and nearer), refused as out of the field at 6 px, where 56 % of it lies outside (unchecked
+    fixes trusted, as before the ninth round)."""
+    answers = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0, 14.0, 12.0, 10.0, 8.0, 6.0), TRUSTING)
     for x, r in zip((14.0, 12.0, 10.0, 8.0), answers[4:8], strict=True):
         assert isinstance(r, Fix) and math.hypot(r.x - x, r.y - 80.0) <= 1.0, (x, r)
+    assert isinstance(answers[8], Lost) and answers[8].reason == "out of the field", answers[8]
+
+
+def test_a_tip_whose_shaft_leaves_the_field_is_refused_by_default():
+    """The ninth round's rule: from 20 px inside the edge, fewer than three of the width's stations lie in the
+    frame behind the tip; nothing tells its end from a round particle's over it, so the fix is not given."""
+    answers = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0, 14.0, 12.0, 10.0, 8.0, 6.0))
+    for x, r in zip((50.0, 40.0, 30.0), answers[:3], strict=True):
+        assert isinstance(r, Fix) and math.hypot(r.x - x, r.y - 80.0) <= 1.0, (x, r)
+    for r in answers[3:8]:
+        assert isinstance(r, Lost) and r.reason == "lost" and "nothing vouches" in r.detail, r
     assert isinstance(answers[8], Lost) and answers[8].reason == "out of the field", answers[8]
 
 

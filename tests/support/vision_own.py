@@ -25,7 +25,8 @@ from numpy.typing import NDArray
 
 from stickslip.sim.camera import Flake, LobedParticle, SimCamSettings, SimScene
 
-__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "flake_benchmark", "KINDS"]
+__all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "flake_benchmark",
+           "round_benchmark", "KINDS"]
 
 KINDS = ("visible", "out", "occluded", "defocused")
 
@@ -46,7 +47,9 @@ class OwnFrame:
     blur: float
     cause: str = ""
     """What the lobed mode did to the frame: ``lobed`` (a lobed grain over the tip), ``edge``;
-    the flake mode: ``flake`` (a flake stuck on the tip)."""
+    the flake mode: ``flake`` (a flake stuck on the tip); the round mode: ``bead`` (a bead
+    stuck on the tip), ``shaft-edge`` (the tip near the edge its shaft leaves by), ``bead-edge``
+    (both)."""
 
 
 @dataclass(frozen=True)
@@ -61,7 +64,8 @@ class OwnSequence:
 
 def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None = None, look: str | None = None,
                  photons: float | None = None, max_blur: float = 3.0, events: bool = True,
-                 event_rate: float = 0.08, lobed_rate: float = 0.0, flake_rate: float = 0.0) -> OwnSequence:
+                 event_rate: float = 0.08, lobed_rate: float = 0.0, flake_rate: float = 0.0,
+                 round_rate: float = 0.0) -> OwnSequence:
     """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
 
     ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
@@ -75,6 +79,11 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     With ``flake_rate`` > 0 (the flake mode, :class:`_Flakes`), a visible frame untouched
     by the other events starts, with that probability, a flake stuck on the tip for 1 to 4
     frames (its own stream too).
+    With ``round_rate`` > 0 (the round mode, :class:`_Beads`), the needle ends in a blunt
+    paraboloid (apex radius of curvature ``width_px / 2``) instead of a cone's cap, and a
+    frame untouched by the other events starts, with that probability, a round opaque
+    bead stuck on the tip, or the tip held near the edge its shaft leaves by, with or
+    without a bead (its own stream too).
     """
     rng = np.random.default_rng([seed, 31337])
     look = look or ("optical", "sem")[int(rng.integers(0, 2))]
@@ -82,12 +91,14 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     ph = float(photons if photons is not None else math.exp(rng.uniform(math.log(40.0), math.log(400.0))))
     taper = math.radians(float(rng.uniform(4.0, 15.0)))
     scene = SimScene(SimCamSettings(look=look, width=size, height=size, photons=ph, seed=int(seed) + 1,
-                                    tip_radius_m=0.5 * W * 0.5e-6, taper=taper, pixel_size_m=0.5e-6))
+                                    tip_radius_m=0.5 * W * 0.5e-6, taper=taper, pixel_size_m=0.5e-6,
+                                    end="paraboloid" if round_rate > 0 else "cone"))
     phi0 = float(rng.uniform(-math.pi, math.pi))  # the shaft's direction from the tip
     pivot = float(rng.uniform(100.0, 1000.0))
     extras = _Extras(seed, lobed_rate, W, look, size) if lobed_rate > 0 else None
     chips = _Flakes(seed, flake_rate, W, look) if flake_rate > 0 else None
-    edge_in = EDGE_IN if extras is None else EDGE_IN_LOBED
+    beads = _Beads(seed, round_rate, W, look, size) if round_rate > 0 else None
+    edge_in = EDGE_IN if extras is None and beads is None else EDGE_IN_LOBED
     lo, hi = edge_in, size - 1 - edge_in
     tip = rng.uniform(0.3, 0.7, 2) * size
     vel = np.zeros(2)
@@ -128,6 +139,8 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
         flakes: tuple[Flake, ...] = ()
         if chips is not None:
             kind, cause, flakes = chips.frame(k, kind, cause, apex, direction)
+        if beads is not None:
+            kind, cause, grains = beads.frame(k, kind, cause, apex, tip, direction)
         shift = shift + drift_v + rng.normal(0.0, 0.02, 2)
         image = scene.render(apex, direction, sigma, shift, 1.0, particles, grains, flakes)
         frames.append(OwnFrame(image, (float(apex[0]), float(apex[1])), kind, float(sigma), cause))
@@ -299,6 +312,81 @@ class _Flakes:
         return moved, rounding, level, float(xr.uniform(0.0, 0.8))
 
 
+class _Beads:
+    """The round mode's events: a round opaque bead stuck on a blunt tip; the tip near the field's edge.
+
+    A bead (a latex or silica sphere, a ball of solder or of dried dust, the objects a
+    micromanipulator pushes and picks up) is round; one that sticks to the tip by its
+    adhesion moves and turns with it. Its radius is 0.6 to 1.5 times the tip's width (at
+    least 5 px), so its rim ahead of the tip is as blunt as the paraboloid's end; the apex
+    lies inside it, 0.1 to 0.9 of its radius in from the rim, the bead's middle any way
+    from the apex. Nearly opaque: in bright field it lets through 0 to 0.08 of the light
+    (the needle about 0.15); in an SEM it is dark, or bright when it charges. Its outline
+    is sharper than the needle's (softened by at most 0.8 px): it lies on the needle,
+    closer to the objective than the needle's focus may be.
+    An edge event takes the tip to 8 to 24 px inside the edge its shaft leaves the field
+    by (gliding up to 12 px a frame): behind it the shaft is in the frame over a few
+    stations only. It is held there for 1 to 4 frames, and each of those frames carries a
+    bead (drawn at the event's start) with probability one half. Events start from
+    frame 3, on visible frames the other events left alone.
+    """
+
+    def __init__(self, seed: int, rate: float, width_px: float, look: str, size: int) -> None:
+        self.rng = np.random.default_rng([seed, 1618])
+        self.rate, self.W, self.look, self.size = rate, width_px, look, size
+        self.event: tuple[str, int] | None = None
+        self.bead: tuple[tuple[float, float, float], float, float] = ((0.0, 0.0, 0.0), 0.0, 0.0)
+        self.goal = (0, 0.0)
+
+    def frame(self, k: int, kind: str, cause: str, apex: NDArray[np.float64], tip: NDArray[np.float64],
+              direction: NDArray[np.float64]) -> tuple[str, str, tuple[LobedParticle, ...]]:
+        """Frame ``k``'s kind, cause and bead; an edge event moves ``apex`` and ``tip`` (in place)."""
+        xr = self.rng
+        if self.event is None and k > 2 and kind == "visible" and not cause and xr.random() < self.rate:
+            self.event = (("bead", "edge")[int(xr.integers(0, 2))], int(xr.integers(1, 5)))
+            self.bead = self._bead()
+            if self.event[0] == "edge":
+                axis = int(np.argmax(np.abs(direction)))
+                inside = float(xr.uniform(8.0, 24.0))
+                self.goal = (axis, inside if direction[axis] < 0 else self.size - 1 - inside)
+        if self.event is None or cause:
+            return kind, cause, ()
+        what, left = self.event
+        with_bead = what == "bead"
+        if what == "edge":
+            axis, goal = self.goal
+            gap = goal - tip[axis]
+            tip[axis] += float(np.clip(gap, -12.0, 12.0))
+            if kind == "visible":
+                apex[:] = tip
+            if abs(gap) > 12.0:  # still gliding there
+                return kind, cause, ()
+            with_bead = xr.random() < 0.5
+        self.event = None if left <= 1 else (what, left - 1)
+        if kind != "visible":
+            return kind, cause, ()
+        if not with_bead:
+            return kind, "shaft-edge", ()
+        (a, b, r), level, blur = self.bead
+        u = direction / max(float(np.hypot(*direction)), 1e-12)  # along the shaft
+        v = np.array([-u[1], u[0]])
+        centre = apex + a * u + b * v
+        disc = ((float(centre[0]), float(centre[1]), r),)
+        return "occluded", ("bead" if what == "bead" else "bead-edge"), (LobedParticle(disc, level, blur),)
+
+    def _bead(self) -> tuple[tuple[float, float, float], float, float]:
+        """The bead's middle relative to the apex in the needle's frame (along, across; px), its radius, level
+        and the outline's blur."""
+        xr = self.rng
+        r = max(5.0, float(xr.uniform(0.6, 1.5)) * self.W)
+        depth = float(xr.uniform(0.1, 0.9)) * r
+        angle = float(xr.uniform(0.0, 2.0 * math.pi))
+        a, b = (r - depth) * math.cos(angle), (r - depth) * math.sin(angle)
+        dark = self.look == "optical" or xr.random() < 0.5
+        level = float(xr.uniform(0.0, 0.08) if dark else xr.uniform(0.8, 1.0))
+        return (a, b, r), level, float(xr.uniform(0.0, 0.8))
+
+
 def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
     """How far the origin lies inside a convex polygon grown by ``rounding`` (px; negative: outside)."""
     pts = np.asarray(corners, dtype=float)
@@ -314,13 +402,13 @@ def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
 
 def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256,
                   widths: tuple[float, float] = (3.0, 20.0), looks: tuple[str, ...] = ("optical", "sem"),
-                  lobed_rate: float = 0.0, flake_rate: float = 0.0) -> list[OwnSequence]:
+                  lobed_rate: float = 0.0, flake_rate: float = 0.0, round_rate: float = 0.0) -> list[OwnSequence]:
     """Sequences of ``per_sequence`` frames, tip widths spread over ``widths`` (px), the looks taken in turn;
-    ``lobed_rate``, ``flake_rate``: :func:`own_sequence`'s modes (0: the plain frames)."""
+    ``lobed_rate``, ``flake_rate``, ``round_rate``: :func:`own_sequence`'s modes (0: the plain frames)."""
     n_seq = max(1, n_frames // per_sequence)
     ws = np.linspace(widths[0], widths[1], n_seq)
     return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
-                         lobed_rate=lobed_rate, flake_rate=flake_rate) for i in range(n_seq)]
+                         lobed_rate=lobed_rate, flake_rate=flake_rate, round_rate=round_rate) for i in range(n_seq)]
 
 
 def lobed_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
@@ -335,3 +423,11 @@ def flake_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, 
                     looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
     """:func:`own_benchmark`'s sequences in the flake mode (flat chips stuck on the tip)."""
     return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, flake_rate=flake_rate)
+
+
+def round_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
+                    round_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
+                    looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
+    """:func:`own_benchmark`'s sequences in the round mode (blunt needles, beads stuck on the tip, tips near the
+    edge their shaft leaves by)."""
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, round_rate=round_rate)

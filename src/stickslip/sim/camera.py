@@ -42,10 +42,13 @@ from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_optio
 from ..vision.frame import Frame
 from ..vision.view import View, project
 
-__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "open_url", "LOOKS"]
+__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "open_url", "LOOKS", "ENDS"]
 
 LOOKS = ("optical", "sem")
 """The simulated microscope's looks."""
+
+ENDS = ("cone", "paraboloid")
+"""The simulated needle's ends (:class:`SimCamSettings`'s ``end``)."""
 
 
 @dataclass(frozen=True)
@@ -72,6 +75,11 @@ class SimCamSettings:
         Radius of the needle's rounded apex, m.
     taper : float
         Half-angle of the needle's cone, rad.
+    end : str
+        The needle's end: ``"cone"`` (a cone ending in a spherical cap of radius
+        ``tip_radius``, the default) or ``"paraboloid"`` (a blunt, etched end: a paraboloid
+        whose apex has the radius of curvature ``tip_radius``, so its radius grows as
+        ``sqrt(2 R s)`` at ``s`` behind the apex, joining the cone where their slopes meet).
     drift_px_s : float
         Speed of the slow drift of the whole image, pixels per second (of the arm's clock).
     debris : int
@@ -90,6 +98,7 @@ class SimCamSettings:
     blur_px: float = 0.7
     tip_radius_m: float = 1.0e-6
     taper: float = math.radians(8.0)
+    end: str = "cone"
     drift_px_s: float = 0.02
     debris: int = 40
     seed: int = 0
@@ -293,6 +302,8 @@ class SimScene:
         s = settings
         if s.look not in LOOKS:
             raise ValueError(f"look={s.look!r}: the simulated microscope has the looks {', '.join(LOOKS)}")
+        if s.end not in ENDS:
+            raise ValueError(f"end={s.end!r}: the simulated needle ends in one of {', '.join(ENDS)}")
         self.settings = s
         rng = np.random.default_rng([s.seed, 7])
         self.rng = np.random.default_rng([s.seed, 8])
@@ -428,19 +439,45 @@ class SimScene:
             return cover, np.zeros_like(cover)
         a = direction / n
         rx, ry = xx - tip[0], yy - tip[1]
-        along = rx * a[0] + ry * a[1] - r0  # pixels behind the apex cap's centre (the tip is its extreme end)
         across = np.abs(-rx * a[1] + ry * a[0])
         slope = math.tan(s.taper) / max(foreshortening, 1e-3)  # a foreshortened cone looks blunter
-        radius = r0 + np.clip(along, 0.0, None) * slope
-        radius = np.minimum(radius, 40e-6 / s.pixel_size_m)  # the needle's shank
-        # signed distance (pixels) to the cone's side, and to the apex's cap behind the tip
-        side = across - radius
-        cap = np.hypot(np.minimum(along, 0.0), across) - r0
-        sd = np.where(along < 0.0, cap, side)
+        shank = 40e-6 / s.pixel_size_m  # the needle's shank
+        if s.end == "paraboloid":
+            radius, sd = _paraboloid(rx * a[0] + ry * a[1], across, r0, slope)
+            sd = np.where(radius > shank, across - shank, sd)
+            radius = np.minimum(radius, shank)
+        else:
+            along = rx * a[0] + ry * a[1] - r0  # pixels behind the apex cap's centre (the tip is its extreme end)
+            radius = r0 + np.clip(along, 0.0, None) * slope
+            radius = np.minimum(radius, shank)
+            # signed distance (pixels) to the cone's side, and to the apex's cap behind the tip
+            side = across - radius
+            cap = np.hypot(np.minimum(along, 0.0), across) - r0
+            sd = np.where(along < 0.0, cap, side)
         cover = np.clip(0.5 - sd, 0.0, 1.0) if aa else (sd <= 0.0).astype(float)
         inside = np.clip(across / np.maximum(radius, 1e-6), 0.0, 1.0)
         edge = cover * inside**6  # secondary-electron yield rises where the surface turns from the beam
         return cover, edge
+
+
+def _paraboloid(s: NDArray[np.float64], c: NDArray[np.float64], r0: float,
+                slope: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A blunt end's radius and signed distance (px) at ``s`` px behind its apex, ``c`` px off its axis.
+
+    An etched needle's end is close to a paraboloid, ``r² = 2 R s`` with ``R`` (``r0``) its
+    apex's radius of curvature, which joins the cone of slope ``slope`` where its own slope
+    ``R / r`` has fallen to it: at ``r_t = R / slope``, ``s_t = R / (2 slope²)``. The signed
+    distance to the paraboloid is its implicit form ``c² - 2 R s`` over that form's gradient
+    (first order: exact on the outline, ``|s|`` ahead of the apex on the axis); to the cone,
+    ``c - r``.
+    """
+    r_t = r0 / max(slope, 1e-6)
+    s_t = 0.5 * r0 / max(slope, 1e-6) ** 2
+    para = np.sqrt(2.0 * r0 * np.clip(s, 0.0, None))
+    radius = np.where(s < s_t, para, r_t + (s - s_t) * slope)
+    implicit = (c * c - 2.0 * r0 * s) / (2.0 * np.sqrt(c * c + r0 * r0))
+    sd = np.where(s < s_t, implicit, c - radius)
+    return radius, sd
 
 
 def _substrate(h: int, w: int, look: str, debris: int, rng: np.random.Generator) -> NDArray[np.float64]:

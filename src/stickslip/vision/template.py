@@ -156,6 +156,16 @@ class TrackerParams:
         the width, px (the needle's run across the shaft is measured in whole pixels on
         either side): a needle widens steadily away from its tip, so something lay beside
         it there, or the run found was not the needle's.
+    width_stations : int
+        Least number of the width's stations (:mod:`.width`) that must lie in the frame
+        behind a fix for the width to be checked, 1: the check is a median over them.
+    trust_unchecked : bool
+        Whether a fix behind which fewer than ``width_stations`` lie in the frame (where the
+        first frame showed three or more) is taken unchecked (``True``, the eighth round's
+        rule) or refused (``False``: lost): a round opaque particle over a blunt end mimics
+        the end's outline (its chord is as wide as the needle over about its radius), and
+        only the shaft's width further back tells them apart, so a fix nothing vouches for
+        is not given.
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -198,6 +208,8 @@ class TrackerParams:
     edge_shape: float = 0.9
     along_limit: float = 3.0
     along_sigmas: float = 3.0
+    width_stations: int = 3
+    trust_unchecked: bool = False
     width_shift: float = 5.0
     width_slack: float = 2.0
     thin_blur: float = 2.2
@@ -211,8 +223,8 @@ class TrackerParams:
             raise ValueError("0 < min_score <= reacquire_score <= 1")
         if not self.blur_bank or self.blur_bank[0] != 0.0 or list(self.blur_bank) != sorted(self.blur_bank):
             raise ValueError("blur_bank must start at 0 px and increase")
-        if not (self.width_shift >= 1 and self.width_slack >= 0):
-            raise ValueError("width_shift >= 1 px and width_slack >= 0 px")
+        if not (self.width_shift >= 1 and self.width_slack >= 0 and self.width_stations >= 1):
+            raise ValueError("width_shift >= 1 px, width_slack >= 0 px and width_stations >= 1")
 
 
 def noise_sigma(image: FloatArray) -> float:

@@ -32,7 +32,9 @@
    last, **the needle's width** at each station behind the fix (:mod:`.width`) must be
    the first frame's there, within what 3 px along the axis change it (*occluded* when
    most stations differ: the far end of a chip stuck on the tip, wider than the needle
-   where it lies and the needle narrower behind it);
+   where it lies and the needle narrower behind it); where the first frame showed such
+   stations and fewer than three lie in the frame behind the fix (the shaft leaves the field), the
+   fix is refused (*lost*): nothing vouches that the end seen is the tip;
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
@@ -259,9 +261,24 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
     return None
 
 
-def _width_refusal(wc: WidthCheck | None) -> Lost | None:
+def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
+              image: FloatArray) -> tuple[WidthCheck | None, bool]:
+    """The needle's width behind a candidate (:func:`.width.check_width`), and whether, unchecked, it is to be
+    refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame."""
+    if ws is None:
+        return None, False
+    r = cand.ref
+    wc = check_width(ws, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
+    return wc, wc is None and not p.trust_unchecked
+
+
+def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3) -> Lost | None:
     """The refusal of a fix behind which the needle is not as wide as the first frame showed it
-    (:mod:`.width`; ``None``: it is, or was not checked)."""
+    (:mod:`.width`; ``None``: it is, or was not checked); with ``unvouched``, of a fix behind which
+    fewer than ``least`` of the stations the first frame showed lie in the frame."""
+    if wc is None and unvouched:
+        return Lost("lost", f"fewer than {least} of the needle's width stations behind the fit's tip lie in the "
+                            f"field: nothing vouches that the end seen is the tip")
     if wc is None or wc.excess <= 0.0:
         return None
     return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
@@ -475,9 +492,9 @@ class TipTracker:
             self._shaft, cand.level, image, r.x, r.y, r.theta)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         # the needle's width at the stations behind a fix every other rule takes
-        wc = None if refusal or not isinstance(res, Fix) or self._width is None else check_width(
-            self._width, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas)
-        return (refusal or _width_refusal(wc) or res), replace(cand, edges=ec, shaft=sc, width=wc)
+        wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(self._width, p, cand, image)
+        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
+        return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""

@@ -297,9 +297,9 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
 
 
 def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: float, theta: float,
-                along_limit: float, sigmas: float) -> WidthCheck | None:
+                along_limit: float, sigmas: float, least: int = 3) -> WidthCheck | None:
     """The needle's width at the stations behind a tip at ``(x, y)`` (frame px) turned by ``theta`` (rad),
-    against blur copy ``copy``; ``None`` when fewer than three stations lie in the frame.
+    against blur copy ``copy``; ``None`` when fewer than ``least`` (at least one) stations lie in the frame.
 
     A station disagrees when its width change exceeds ``along_limit`` px of the taper plus
     ``sigmas`` standard deviations.
@@ -312,7 +312,7 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     shape = (m, ws.q, n)
     profiles = v.reshape(shape).mean(axis=2)
     ok = (inside.reshape(shape).all(axis=2) | ~ws.span).all(axis=1)
-    if int(ok.sum()) < 3:
+    if int(ok.sum()) < max(least, 1):
         return None
     f = ws.smooth[copy]
     if f > 0:
