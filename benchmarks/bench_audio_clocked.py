@@ -19,7 +19,9 @@ rule (``ConfirmParams(clocked=None)``) and the check - hear the same samples:
   B): the ratio of the CPU times (``time.process_time``: the machine may be shared).
 
 Run: ``.venv/bin/python benchmarks/bench_audio_clocked.py --minutes 10 --seeds 2``
-(several minutes on a shared machine).
+(several minutes on a shared machine). ``--present wide-comb`` takes for the present rule the
+check as it was before it read the lines in step (``ClockedParams(combs=(0.004,))``);
+``--hour-only`` hears only the hour.
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from hour_sound import Hour, spans, stream  # noqa: E402
 
 import test_audio_fan as tf  # noqa: E402
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams  # noqa: E402
+from stickslip.audio.confirm.clocked import ClockedParams  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
@@ -131,7 +134,7 @@ def _counts(results: list[str]) -> str:
     return ", ".join(f"{n} {what}" for what, n in sorted(Counter(results).items()))
 
 
-def main(minutes: float, seeds: int, arms: tuple[int, ...]) -> None:
+def main(minutes: float, seeds: int, arms: tuple[int, ...], hour_only: bool = False) -> None:
     print(f"the hour on other draws: {minutes:g} min per joint, false stops counted / flagged")
     print("| joint | seed | present rule | with the check |")
     print("| --- | --- | --- | --- |")
@@ -140,6 +143,8 @@ def main(minutes: float, seeds: int, arms: tuple[int, ...]) -> None:
             got = hour(arm, arm + 1000 * k, minutes)
             cells = [f"{c} / {f}" + (f" ({'; '.join(sorted(set(w)))})" if w else "") for c, f, w in got.values()]
             print(f"| {arm} | {arm + 1000 * k} | " + " | ".join(cells) + " |", flush=True)
+    if hour_only:
+        return
     print("\nthe tenth generator, arms 1-8 (first event; pauses: quiet / false)")
     print("| draw | condition | present rule | with the check |")
     print("| --- | --- | --- | --- |")
@@ -162,5 +167,9 @@ if __name__ == "__main__":
     ap.add_argument("--minutes", type=float, default=10.0, help="minutes of the hour per joint and draw")
     ap.add_argument("--seeds", type=int, default=2, help="other draws (each seed + 1000 k)")
     ap.add_argument("--arms", default="1,2,3", help="joints of the hour (arms of the tenth generator)")
+    ap.add_argument("--present", choices=("none", "wide-comb"), default="none", help="the present rule's check")
+    ap.add_argument("--hour-only", action="store_true", help="hear only the hour")
     a = ap.parse_args()
-    main(a.minutes, a.seeds, tuple(int(x) for x in a.arms.split(",")))
+    if a.present == "wide-comb":
+        RULES["present"] = ConfirmParams(clocked=ClockedParams(combs=(0.004,)))
+    main(a.minutes, a.seeds, tuple(int(x) for x in a.arms.split(",")), a.hour_only)

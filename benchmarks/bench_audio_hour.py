@@ -18,7 +18,8 @@ minutes per joint on a shared machine, the generator about as costly as the dete
 ``--rate 1150`` to step (and tell) another rate than the tuning's, ``--details`` to print under each
 false stop what the confirming detector noted (``ConfirmLog``): the clocked check's verdict, the
 onset's doubt, the rejected fires before it. ``docs/audio-log.md`` ("Diagnosis of the hour's false
-stops") reads those lines.
+stops") reads those lines. ``--variants before,default`` hears the same samples with
+each variant of the clocked check (``VARIANTS``) side by side, one table each.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ sys.path.insert(0, str(HERE.parent / "tests" / "support"))  # the generators
 from fan_sound import SR, Arm, render, tuning_scene  # noqa: E402
 from hour_sound import KINDS, Hour, spans, stream  # noqa: E402
 
-from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
+from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams  # noqa: E402
+from stickslip.audio.confirm.clocked import ClockedParams  # noqa: E402
 from stickslip.audio.confirm.detector import ConfirmLog  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402
@@ -59,14 +61,34 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     )
 
 
-def hour(arm: int, minutes: float, rate: float, detail: bool = False) -> tuple[dict[str, list[float]], list[str]]:
-    """Per kind: [seconds, unflagged, flagged]; and one line per event (two with ``detail``)."""
+#: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (the check before it
+#: read them in step), or first on the comb the window resolves (the default)
+VARIANTS: dict[str, ClockedParams | None] = {
+    "before": ClockedParams(combs=(0.004,)),
+    "default": ClockedParams(),
+    "off": None,
+}
+
+
+def hour(
+    arm: int, minutes: float, rate: float, detail: bool = False, variants: tuple[str, ...] = ("default",)
+) -> dict[str, tuple[dict[str, list[float]], list[str]]]:
+    """Per variant: per kind [seconds, unflagged, flagged]; and one line per event (two with ``detail``)."""
     tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
     h = Hour(Arm(arm), rate=rate, dur=60.0 * minutes, seed=arm)
-    sched = spans(h)
-    det = ConfirmedStopDetector(detector_for(tu))
-    det.reset(0.0, step_rate_hz=rate)
-    events = [e for block in stream(h) for e in det.feed(block)] + det.finish()
+    dets = {v: ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=VARIANTS[v])) for v in variants}
+    heard: dict[str, list[StopEvent]] = {v: [] for v in variants}
+    for d in dets.values():
+        d.reset(0.0, step_rate_hz=rate)
+    for block in stream(h):
+        for v, d in dets.items():
+            heard[v] += d.feed(block)
+    return {v: _table(spans(h), heard[v] + d.finish(), d.log, detail) for v, d in dets.items()}
+
+
+def _table(
+    sched: list[tuple[float, float, str, float]], events: list[StopEvent], log: ConfirmLog, detail: bool
+) -> tuple[dict[str, list[float]], list[str]]:
     per = {k: [0.0, 0.0, 0.0] for k in KINDS}
     for t0, t1, kind, _ in sched:
         per[kind][0] += t1 - t0
@@ -79,25 +101,35 @@ def hour(arm: int, minutes: float, rate: float, detail: bool = False) -> tuple[d
             f" (its span {t0:.1f}-{t1:.1f} s)"
         )
         if detail:
-            lines.append(details(e, det.log))
+            lines.append(details(e, log))
     return per, lines
 
 
-def main(arms: tuple[int, ...] = (1, 2, 3), minutes: float = 60.0, rate: float = 1000.0, detail: bool = False) -> None:
+def main(
+    arms: tuple[int, ...] = (1, 2, 3),
+    minutes: float = 60.0,
+    rate: float = 1000.0,
+    detail: bool = False,
+    variants: tuple[str, ...] = ("default",),
+) -> None:
     print(
         f"{minutes:g} min of stepping at {rate:g} Hz (told) with speech, music and a radio, no stop: "
         "false stops (unflagged, a wrong count / flagged, refused)"
     )
-    print("| joint | " + " | ".join(KINDS) + " | all | s |")
-    print("| --- " * (len(KINDS) + 3) + "|")
+    print("| joint | clocked check | " + " | ".join(KINDS) + " | all | s |")
+    print("| --- " * (len(KINDS) + 4) + "|")
     for arm in arms:
         t = time.perf_counter()
-        per, lines = hour(arm, minutes, rate, detail)
-        cells = [f"{int(u)} / {int(f)} in {s / 60:.0f} min" for s, u, f in per.values()]
-        u_all, f_all = sum(v[1] for v in per.values()), sum(v[2] for v in per.values())
-        print(f"| {arm} | " + " | ".join(cells) + f" | {int(u_all)} / {int(f_all)} | {time.perf_counter() - t:.0f} |")
-        for line in lines:
-            print(line)
+        got = hour(arm, minutes, rate, detail, variants)
+        for v, (per, lines) in got.items():
+            cells = [f"{int(u)} / {int(f)} in {s / 60:.0f} min" for s, u, f in per.values()]
+            u_all, f_all = sum(x[1] for x in per.values()), sum(x[2] for x in per.values())
+            print(
+                f"| {arm} | {v} | " + " | ".join(cells) + f" | {int(u_all)} / {int(f_all)} |"
+                f" {time.perf_counter() - t:.0f} |"
+            )
+            for line in lines:
+                print(line)
 
 
 if __name__ == "__main__":
@@ -106,5 +138,9 @@ if __name__ == "__main__":
     ap.add_argument("--minutes", type=float, default=60.0, help="minutes of stepping per joint")
     ap.add_argument("--rate", type=float, default=1000.0, help="the step rate, Hz (told to the detector)")
     ap.add_argument("--details", action="store_true", help="what the detector noted about each false stop")
+    ap.add_argument("--variants", default="default", help=f"the clocked check's variants: {', '.join(VARIANTS)}")
     a = ap.parse_args()
-    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details)
+    vs = tuple(a.variants.split(","))
+    if not set(vs) <= set(VARIANTS):
+        ap.error(f"--variants: one of {', '.join(VARIANTS)}, comma-separated (got {a.variants})")
+    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details, vs)

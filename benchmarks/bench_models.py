@@ -19,7 +19,8 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
 * the largest |relative error| of the predicted average step at the validation traverses,
   per joint (3 prismatic, 2 rotary) and day: the median and the worst day, the mean over
   all; how many days ``auto`` (with the repeats) erred more than the paper's procedure on
-  the same day;
+  the same day, beside how many the draw of the poses alone would give (the share of the sets of 8
+  of the day's 16 validation poses on which it does, summed over days);
 * the 95 % intervals of ``auto`` with the repeats (``predict --interval``): the share of
   validation traverses inside, per joint and direction, with its 95 % Wilson interval, side
   by side with the same calibration's interval without its drift term ("no drift": the bias the
@@ -31,6 +32,11 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
 
 Prints Markdown tables (the README's). Run: ``.venv/bin/python benchmarks/bench_models.py``
 (a few minutes on 2 cores); ``--seeds 101,102`` and ``--arms dahl`` to choose.
+
+``--resample physics:202:1 --poses 150`` (arm, seed, day 1-3) diagnoses one day instead: the
+largest error's validation pose, then ``--poses`` more random poses per joint measured on the
+same arm after the day, and how often a day's 8 validation poses would show ``auto``'s
+largest error above the paper's procedure's (docs/models-log.md, eighth round).
 """
 
 from __future__ import annotations
@@ -44,10 +50,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
-from arm_days import make_day  # noqa: E402
+from arm_days import ARMS, make_day  # noqa: E402
+from physics_scenarios import random_pose  # noqa: E402
 
+from stickslip import kinematics as kin  # noqa: E402
 from stickslip.calibration import Calibration, calibrate  # noqa: E402
+from stickslip.calibration.groups import load_coordinates_of, nearest  # noqa: E402
 from stickslip.calibration.intervals import relative_sd  # noqa: E402
+from stickslip.calibration.selection import calibrate_families  # noqa: E402
 from stickslip.calibration.update import update_calibration  # noqa: E402
 from stickslip.measurements import Traverse  # noqa: E402
 
@@ -83,6 +93,21 @@ def _errors(pred: np.ndarray, val: list[Traverse]) -> dict[int, np.ndarray]:
     return {j: e[[t.joint == j for t in val]] for j in (3, 2)}
 
 
+def _chance_above(auto: Calibration, paper: Calibration, val: list[Traverse], joint: int) -> float:
+    """The share of the sets of :data:`ERROR_POSES` of the day's validation poses of ``joint`` (each pose's
+    larger error of + and -) on which ``auto``'s largest error is above ``paper``'s: summed over days, how
+    many days above the paper's procedure the draw of the poses alone would give (docs/models-log.md)."""
+    from itertools import combinations
+
+    ts = [t for t in val if t.joint == joint]
+    g = np.array([t.gamma for t in ts])
+    n = len(ts) // 2
+    e_auto = np.abs(auto.predict_many(ts) / g - 1.0).reshape(n, 2).max(axis=1)
+    e_paper = np.abs(paper.predict_many(ts) / g - 1.0).reshape(n, 2).max(axis=1)
+    sets = np.array(list(combinations(range(n), min(ERROR_POSES, n))))
+    return float(np.mean(e_auto[sets].max(axis=1) > e_paper[sets].max(axis=1)))
+
+
 def _without_drift(cal: Calibration) -> Calibration:
     """``cal`` with its intervals' drift term set to zero (the same fit and error model otherwise)."""
     pred = {k: dataclasses.replace(p, drift=0.0, drift_sd=0.0) for k, p in cal.predictive.items()}
@@ -110,6 +135,7 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
     inside: dict[tuple[str, int, str], list[bool]] = defaultdict(list)
     honest: dict[str, dict[int, list[float]]] = {"expected": {3: [], 2: []}, "cv": {3: [], 2: []}}
     worse = {3: 0, 2: 0}
+    chance = {3: 0.0, 2: 0.0}
     fallback = {3: 0, 2: 0}
     drift: dict[tuple[int, str], list[float]] = defaultdict(list)
     days = 0
@@ -145,6 +171,7 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
             e_auto, e_p14 = _errors(rows[AUTO], val), _errors(rows[ROWS[1]], val)
             for j in (3, 2):
                 worse[j] += int(e_auto[j].max() > e_p14[j].max())
+                chance[j] += _chance_above(auto, c14, d.validation, j)
                 sel = auto.selection[(j, "+")]
                 fallback[j] += int(bool(sel.get("fallback")))
                 rms = float(np.sqrt(np.mean(e_auto[j] ** 2)))
@@ -155,7 +182,7 @@ def run_arm(arm: str, seeds: tuple[int, ...]) -> dict[str, object]:
             days += 1
             prev = auto
     return {"errs": errs, "inside": inside, "honest": honest, "worse": worse, "fallback": fallback, "days": days,
-            "drift": drift}
+            "drift": drift, "chance": chance}
 
 
 def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("physics", "lugre", "dahl")) -> None:
@@ -180,7 +207,8 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
                 else:
                     cells += ["—"] * 3
             print(f"| {arm} | {label} | " + " | ".join(cells) + " |")
-    print("\n| arm | days | auto above the paper's procedure (prismatic / rotary days) | fell back to the paper's "
+    print("\n| arm | days | auto above the paper's procedure (prismatic / rotary days; expected from the draw of "
+          "the poses) | fell back to the paper's "
           "form | 95 % interval holds: 3+ | 3- | 2+ | 2- | expected error / actual RMS (3 / 2) | "
           "CV RMS / actual RMS (3 / 2) |")
     print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
@@ -195,7 +223,9 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
                 c46 = 100 * float(np.mean(inside[("46", j, d)]))
                 cov.append(f"{100 * k / n:.1f} % ({100 * lo:.0f}–{100 * hi:.0f}; no drift {nod:.1f}; 46 {c46:.1f} %)")
         h = res["honest"]  # type: ignore[index]
-        print(f"| {arm} | {res['days']} | {res['worse'][3]} / {res['worse'][2]} | "  # type: ignore[index]
+        ch = res["chance"]  # type: ignore[index]
+        print(f"| {arm} | {res['days']} | {res['worse'][3]} / {res['worse'][2]} "  # type: ignore[index]
+              f"({ch[3]:.1f} / {ch[2]:.1f}) | "
               f"{res['fallback'][3]} / {res['fallback'][2]} | " + " | ".join(cov) + " | "  # type: ignore[index]
               f"{np.median(h['expected'][3]):.2f} / {np.median(h['expected'][2]):.2f} | "
               f"{np.median(h['cv'][3]):.2f} / {np.median(h['cv'][2]):.2f} |")
@@ -209,8 +239,57 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
         print(f"| {arm} | " + " | ".join(cells) + " |")
 
 
+def _pose(t: Traverse) -> kin.Pose:
+    return kin.Pose(t.q1, t.q2, t.q3, t.theta, t.psi)
+
+
+def resample_day(arm: str, seed: int, day_index: int, poses: int) -> None:
+    """One day of ``run_arm`` again (day ``day_index`` from 1), diagnosed: per joint, the pose of
+    ``auto``'s largest validation error (load coordinates, distance to the nearest calibrated pose),
+    then ``poses`` random poses measured on a replay of the day's arm after its traverses: the largest
+    and RMS errors (each pose's larger of + and -) of ``auto``, the paper's procedure (14) and the
+    paper's form on the 46 + 4, and the share of 4000 sets of 8 of those poses on which ``auto``'s
+    largest error is above the procedure's."""
+    rng = np.random.default_rng(seed)
+    for day in DAYS[:day_index]:
+        d = make_day(arm, seed, day, rng, validation_poses=VALIDATION_POSES, repeat_first=True)
+    cals = {"auto": calibrate(d.calibration, model="auto"), "procedure": calibrate(d.paper14),
+            "form": calibrate_families(d.calibration, model="paper")}
+    replay = ARMS[arm](seed, day)
+    for t in d.paper14 + d.spread32 + d.repeat + d.validation:
+        replay.traverse(t.joint, t.direction, _pose(t), day)
+    draw = np.random.default_rng(999)
+    for j in (3, 2):
+        val = [t for t in _first(d.validation, ERROR_POSES) if t.joint == j]
+        e = np.abs(cals["auto"].predict_many(val) / np.array([t.gamma for t in val]) - 1.0)
+        w = val[int(np.argmax(e))]
+        cal = np.array([[t.q1, t.q2, t.q3, t.theta, t.psi] for t in d.calibration if t.joint == j])
+        at = load_coordinates_of(j, np.array([[w.q1, w.q2, w.q3, w.theta, w.psi]]))
+        dist = float(nearest(at, load_coordinates_of(j, cal))[0][0])
+        sel = cals["auto"].selection[(j, "+")]
+        print(f"{arm} seed {seed} {day} joint {j}: auto {sel['chosen']} (fell back: {sel['fallback']}); largest "
+              f"validation error {100 * e.max():.2f} % at {w.direction} {np.round(at[0], 2).tolist()}, "
+              f"{dist:.2f} from the nearest calibrated pose")
+        ts = [replay.traverse(j, s, p, day) for p in [random_pose(draw, j) for _ in range(poses)] for s in "+-"]
+        g = np.array([t.gamma for t in ts])
+        err = {n: np.abs(c.predict_many(ts) / g - 1.0).reshape(poses, 2).max(axis=1) for n, c in cals.items()}
+        sets = np.array([draw.choice(poses, ERROR_POSES, replace=False) for _ in range(4000)])
+        top = {n: x[sets].max(axis=1) for n, x in err.items()}
+        print(f"  {poses} more poses: largest " + ", ".join(f"{n} {100 * x.max():.2f} %" for n, x in err.items())
+              + "; RMS " + ", ".join(f"{n} {100 * np.sqrt(np.mean(x**2)):.2f} %" for n, x in err.items()))
+        print(f"  sets of {ERROR_POSES}: auto's largest above the procedure's in "
+              f"{100 * np.mean(top['auto'] > top['procedure']):.1f} %, the form's in "
+              f"{100 * np.mean(top['form'] > top['procedure']):.1f} %")
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
+    if "--resample" in args:
+        n = int(args[args.index("--poses") + 1]) if "--poses" in args else 150
+        for spec in args[args.index("--resample") + 1].split(","):
+            a, s, i = spec.split(":")
+            resample_day(a, int(s), int(i), n)
+        sys.exit(0)
     kw: dict[str, tuple] = {}
     for flag, key, conv in (("--seeds", "seeds", int), ("--arms", "arms", str)):
         if flag in args:

@@ -40,7 +40,8 @@ TOL_S = 0.025
 ARMS = range(1, 9)
 #: (arm, draw) -> what was measured (the detector as of this test's writing)
 FAN_KNOWN = {
-    (3, 1): "a false stop 315 ms before the stop (the fan's spin-up, 0.86 s before it, +0.7 dB)",
+    (3, 1): "the stop flagged, its onset 201 ms late (the fan's spin-up 0.86 s before it, +0.7 dB; before the"
+    " clocked check read the lines in step: a false stop 315 ms before the stop, counted)",
     (6, 0): "the stop flagged, not heard cleanly (fan 0.68 s before it, -1.3 dB)",
     (6, 1): "the stop missed (fan 0.56 s before it, -1.0 dB)",
 }

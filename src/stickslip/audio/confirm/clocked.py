@@ -11,17 +11,22 @@ So a fire that persisted must also show the stop's signature on the lines. Over 
 tuning's sub-bands whose signature moves by ``min_signature_db`` or more, the power on the
 step clock's lines above the continuum beside them
 (:func:`~stickslip.audio.features.stepclock.line_powers`) is measured over the stepping
-before the fire (the reference the confirmation keeps: for a fire soon after a rejected
-one, the stepping before the first of them) and over the window's first samples, at the
-step rate commanded (or, untold, heard in the stepping). Per sub-band the change ``dL_b``
-(dB, each side floored at ``floor_share`` of the larger), kept where the lines stood
-``min_line_z`` standard deviations over their noise before the fire and were sharp there
-(``min_sharpness`` of the power in a comb four times wider: a rough clock smears its
-higher harmonics, and what is left on the narrow lines is not the joint's sound alone);
-and where the tuned stop's change was on the lines itself (the tuning's continuum between
-the lines moved no further in the stop's direction than its level, plus
-``max_continuum_excess_db``: a stop that rattles out of step with the clock changes the
-continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
+before the fire and over the window's first samples, at the step rate commanded (or,
+untold, heard in the stepping); the stepping before the fire is the reference the
+confirmation keeps (for a fire soon after a rejected one, the stepping before the first of
+them). Per sub-band the change ``dL_b`` (dB, each side
+floored at ``floor_share`` of the larger), kept where the lines stood ``min_line_z``
+standard deviations over their noise before the fire and were sharp there (``min_sharpness``
+of the power in a comb four times wider: a rough clock smears its higher harmonics, and what
+is left on the narrow lines is not the joint's sound alone). Each sub-band is read on the
+narrowest of ``combs`` on which its lines are sharp (heard, as before, on the widest):
+first a line 3 bins of the window
+wide, the comb an average in step with the clock over the window resolves, on which music's
+partials beside a clean clock's lines stay out; then 0.4 % of the line's frequency, for a
+clock whose lines wander wider. And where the tuned stop's change was on the lines itself
+(the tuning's continuum between the lines moved no further in the stop's direction than its
+level, plus ``max_continuum_excess_db``: a stop that rattles out of step with the clock
+changes the continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
 least-squares fit of the tuned signature ``delta`` to them,
 
     a_L = sum_b delta_b dL_b / sum_b delta_b^2,
@@ -34,8 +39,8 @@ sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
 than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
 elsewhere, and the tuned signature is not what the stop does on them), where more than
 ``max_ref_stoplike`` of the reference's frames were already stop-like (a stop heard late
-began there: the reference is the stop, not stepping), or where less than ``min_s`` of
-stepping or ``min_after_s`` of the window was heard. The lines are immune to what is
+began there: the reference is the stop, not stepping), or where less than
+``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune to what is
 added between them, so the tuned signature is fitted as tuned (no masking). It runs once
 per fire that persisted, never per frame.
 """
@@ -49,7 +54,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..features.stepclock import STEP_CLOCK, line_powers, rate_near_hz
+from ..features.stepclock import STEP_CLOCK, StepClockParams, line_powers, rate_near_hz
 from ..paramfield import param
 from ..tuningfile import Tuning
 
@@ -73,6 +78,11 @@ class ClockedParams:
     )
     min_sharpness: float = param(
         0.85, "", "and where they held this share of a comb four times wider's power (a rough clock smears them)"
+    )
+    combs: tuple[float, ...] = param(
+        (0.0, 0.004),
+        "of the line's frequency",
+        "lines read narrowest first (0: 3 bins, what the window resolves): music beside a clean clock's lines is out",
     )
     max_continuum_excess_db: float = param(
         3.0, "dB", "judged only where the tuned stop moved the continuum no further than its level, plus this"
@@ -157,31 +167,48 @@ def lines_stop_likeness(
         return math.nan, 0
     n = min(before.size, after.size)
     b, a = before[before.size - n :], after[:n]
-    # one spectrum per side for every sub-band, each line with the band it was found in
-    lb, _ = line_powers(b, sample_rate, rate_hz, bands)
-    la, _ = line_powers(a, sample_rate, rate_hz, bands)
-    lw, _ = line_powers(b, sample_rate, rate_hz, bands, STEP_CLOCK.sharp_width)
-    if not lb.power.size == la.power.size == lw.power.size:
-        return math.nan, 0
-    which = lb.band
+    reads = [_comb_read(b, a, sample_rate, rate_hz, bands, tol) for tol in p.combs]
     num = den = 0.0
     used = 0
     for j, i in enumerate(judged):
         delta = float(signature_db[i])
-        on = which == j
-        p0, p1, wide = float(np.sum(lb.power[on])), float(np.sum(la.power[on])), float(np.sum(lw.power[on]))
-        if not p0 > p.min_line_z * math.sqrt(float(np.sum(lb.var[on]))):
-            continue  # no lines heard there before the fire
-        if not p0 >= p.min_sharpness * wide:
-            continue  # a rough clock smears its lines there: their change is not the joint's sound alone
-        top = max(p0, p1) * p.floor_share
-        d = 10.0 * math.log10(max(p1, top) / max(p0, top))
-        num += delta * d
-        den += delta**2
-        used += 1
+        held = reads[-1][j]  # the widest comb, which holds all of a line's power
+        if not held[0] > p.min_line_z * math.sqrt(held[2]):
+            continue  # no lines heard there before the fire (a narrower comb finds no line that this one misses)
+        for p0, p1, var, wide in (r[j] for r in reads):
+            if not p0 > p.min_line_z * math.sqrt(var):
+                continue  # too few of the line's bins on this comb
+            if not p0 >= p.min_sharpness * wide:
+                continue  # the lines are wider than this comb (a rough clock; sound beside them): a wider one
+            top = max(p0, p1) * p.floor_share
+            d = 10.0 * math.log10(max(p1, top) / max(p0, top))
+            num += delta * d
+            den += delta**2
+            used += 1
+            break
     if den == 0.0 or den < p.min_covered * whole:
         return math.nan, used
     return num / den, used
+
+
+def _comb_read(
+    b: FloatArray, a: FloatArray, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
+) -> list[tuple[float, float, float, float]]:
+    """Per band, on a comb of half-width ``tol`` of each line's frequency (at least 3 bins): the lines' power before
+    and after, its noise's variance before, and the power before on a comb ``sharp_width`` times wider (NaN: none)."""
+    comb = StepClockParams(comb_tol=tol)
+    lb, _ = line_powers(b, sr, rate_hz, bands, params=comb)
+    la, _ = line_powers(a, sr, rate_hz, bands, params=comb)
+    lw, _ = line_powers(b, sr, rate_hz, bands, STEP_CLOCK.sharp_width, params=comb)
+    nan = (math.nan,) * 4
+    if not lb.power.size == la.power.size == lw.power.size:
+        return [nan for _ in bands]
+    out = []
+    for j in range(len(bands)):
+        on = lb.band == j
+        sums = tuple(float(np.sum(v[on])) for v in (lb.power, la.power, lb.var, lw.power))
+        out.append((sums[0], sums[1], sums[2], sums[3]) if on.any() else nan)
+    return out
 
 
 class ClockedCheck:
