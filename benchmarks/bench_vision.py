@@ -35,6 +35,16 @@ paraboloid-ended needle; a round, nearly opaque bead 0.6 to 1.5 tip widths in ra
 on its end for 1 to 4 frames, sharper than the needle; tips held 8 to 24 px inside the
 edge their shaft leaves by, with a bead or without; ``FRAMES`` default 200).
 
+``--tracking-only --refusals`` sorts instead the second renderer's refused visible tips (the
+same frames as 1.): one row each (the sequence's look, background, tip width and photons,
+the frame's blur and room to the field's edge, the verdict before it), the rule that
+refused it (read from the refusal's detail: which check of ``track.py`` said it) and how
+far the fit it refused lay from the truth; the fit near the last fix, replayed from the
+tracker's state before the frame (``TipTracker``'s own search and judgement, the same
+calls ``update`` makes; nothing in the tracker changed), and the nearest of the whole
+frame's candidates. Then the counts by rule (fits within 1 px, 1 to 3 px, more than
+3 px) and by sequence.
+
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -50,6 +60,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import math  # noqa: E402
 import sys  # noqa: E402
+import textwrap  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -66,7 +77,7 @@ from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
 from stickslip.vision.template import TemplateError  # noqa: E402
-from stickslip.vision.track import Fix, TipTracker  # noqa: E402
+from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal  # noqa: E402
 
 
 def tracking(n_frames: int) -> dict[str, float]:
@@ -129,6 +140,163 @@ def tracking(n_frames: int) -> dict[str, float]:
         met = v <= target if op == "<=" else v >= target
         print(f"{name:36} {v:>9.3f} {op}{target:>6g} {ratio:>7.2f}  {'yes' if met else 'NO'}")
     return out
+
+
+# the refusal's detail -> (the check that said it, its reason); the first match wins (track.py's strings)
+_RULES = (
+    ("the tip would be", "edge margin"),
+    ("of the tip's window is outside", "coverage"),
+    ("of the tip's template disagrees", "outliers"),
+    ("of the ground in front of the tip", "front share"),
+    ("or more against the first frame", "top blur copy"),
+    ("worse than this sequence's fixes", "mismatch"),
+    ("correlation ", "min score"),
+    ("the match needs a turn", "turn"),
+    ("did not settle", "not settled"),
+    ("did not converge", "not converged"),
+    ("position undetermined", "sigma"),
+    ("the focus would have changed", "focus step"),
+    ("found again only blurred", "found blurred"),
+    ("shaft", "shaft back"),
+    ("taper puts its end", "taper"),
+    ("edges behind the tip have", "edge contrast"),
+    ("edges behind the tip are not where", "edge shape"),
+    ("edges fade right behind", "edges near"),
+    ("nothing vouches", "nothing vouches"),
+    ("not as wide as the first frame", "width"),
+    ("not found near the last fix", "not found"),
+)
+
+
+def _rule(res: Lost) -> str:
+    """The check of ``track.py`` that gave refusal ``res``, by a short name."""
+    for key, name in _RULES:
+        if key in res.detail:
+            return name
+    return f"? {res.detail[:40]}"
+
+
+def _state(t: TipTracker) -> dict[str, object]:
+    """What ``TipTracker.update`` changes between frames (the caches aside)."""
+    return {k: (list(v) if isinstance(v, list) else v) for k, v in vars(t).items()
+            if k in ("_last", "_theta", "_level", "_fresh", "_since", "_mismatch", "_last_edges")}
+
+
+def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
+            ) -> tuple[Lost | None, float, float, str]:
+    """``update``'s search and judgement on ``image`` from ``t``'s state, nothing accepted.
+
+    Returns the fit near the last fix's refusal (``None``: no fit there), its distance from
+    ``tip`` (px, NaN without one), and the whole frame's candidate nearest ``tip``: its
+    distance (px, NaN without one) and its verdict.
+    """
+    def dist(c: object) -> float:
+        r = c.ref  # type: ignore[attr-defined]
+        return math.hypot(r.x - tip[0], r.y - tip[1]) if math.isfinite(r.x) and math.isfinite(r.y) else math.inf
+
+    near, e_near = None, math.nan
+    cand = t._local(image)
+    if cand is not None:
+        res, cand = t._judge(cand, image)
+        e_near = dist(cand)
+        near = res if isinstance(res, Lost) else None
+        if isinstance(res, Lost) and res.reason in ("lost", "out of focus") and cand.edges is not None and (
+                _edge_refusal(cand.edges, t.params, cand.shaft) is None):
+            return near, e_near, math.nan, "not searched"
+    e_glob, v_glob = math.nan, "none"
+    for g in t._global(image):
+        if g is None:
+            continue
+        res, g = t._judge(g, image, reacquire=True)
+        e = dist(g)
+        if not e >= e_glob:
+            e_glob, v_glob = e, ("fix" if isinstance(res, Fix) else _rule(res))
+    return near, e_near, e_glob, v_glob
+
+
+def _in_reach(t: TipTracker, tip: tuple[float, float], w: int, h: int) -> bool:
+    """Whether ``TipTracker._global``'s down-sampled correlation can put the template's apex at ``tip``: the
+    whole template in the frame (it slides only there), within half a coarse pixel."""
+    f = t.params.coarse_factor
+    th, tw = t._coarse[0].shape
+    ax, ay = t.template.apex
+    return (ax - f / 2 <= tip[0] <= (w // f - tw) * f + ax + f / 2
+            and ay - f / 2 <= tip[1] <= (h // f - th) * f + ay + f / 2)
+
+
+def refusals(n_frames: int) -> int:
+    """Sort the second renderer's refused visible tips by the rule that refused them; the rows."""
+    seqs = peer_benchmark(n_frames, 50, seed=0, size=512)
+    rows: list[tuple[int, int, float, float, str, str, float, float, str, float, bool]] = []
+    reasons: dict[str, str] = {}
+    differ = visible = 0
+    for i, seq in enumerate(seqs):
+        images = [as_image(f.image) for f in seq.frames]
+        tracker = TipTracker(images[0], seq.frames[0].tip)
+        before = "fix"
+        for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
+            pre = _state(tracker)
+            r = tracker.update(img)
+            visible += f.kind == "visible"
+            if isinstance(r, Lost) and f.kind == "visible":
+                post = _state(tracker)
+                vars(tracker).update(pre)
+                near, e_near, e_glob, v_glob = _replay(tracker, img, f.tip)
+                vars(tracker).update(post)
+                differ += (_rule(near) if near else "not found") != _rule(r)
+                reasons[_rule(r)] = r.reason
+                h, w = img.shape
+                room = min(f.tip[0], f.tip[1], w - 1 - f.tip[0], h - 1 - f.tip[1])
+                last = pre["_last"]
+                gone = math.hypot(f.tip[0] - last[0], f.tip[1] - last[1])  # type: ignore[index]
+                rows.append((i, k, f.blur, room, before, _rule(r), e_near, e_glob, v_glob, gone,
+                             _in_reach(tracker, f.tip, w, h)))
+            before = "fix" if isinstance(r, Fix) else "refused" if f.kind == "visible" else f.kind[:7]
+    print("columns: sequence, frame, blur (px), room to the field's edge (px), the frame\n"
+          "before (fix, refused, or what it was), the rule that refused, the truth's\n"
+          "distance from the last fix (px), whether the whole frame's search can put the\n"
+          "template there, the distance from the truth (px) of the refused fit near the\n"
+          "last fix and of the whole frame's nearest candidate, that candidate's verdict")
+    print(f"{'seq':>3} {'fr':>2} {'blur':>4} {'room':>4} {'before':>7} {'rule':<15} {'last':>5} {'rch':>3} "
+          f"{'near':>4} {'frame':>5} nearest's")
+    for i, k, bl, room, bef, rule, en, eg, vg, gone, reach in rows:
+        print(f"{i:>3} {k:>2} {bl:>4.1f} {room:>4.0f} {bef:>7} {rule:<15} {gone:>5.1f} "
+              f"{'yes' if reach else 'no':>3} {en:>4.1f} {eg:>5.1f} {vg}")
+    print(f"{len(rows)} of {visible} visible tips refused; the replay refuses by another rule in {differ}")
+
+    def bands(es: list[float]) -> str:
+        a = np.array([e for e in es if math.isfinite(e)])
+        if a.size == 0:
+            return f"{'':>3} {'':>3} {'':>3} {'':>4} {'':>4}"
+        return (f"{int(np.sum(a <= 1)):>3} {int(np.sum((a > 1) & (a <= 3))):>3} {int(np.sum(a > 3)):>3} "
+                f"{np.median(a):>4.1f} {a.max():>4.1f}")
+
+    print("\nby rule: the distance from the truth (px) of the refused fit near the last fix\n"
+          "(near) and of the whole frame's nearest candidate (frame): how many within 1 px,\n"
+          "1 to 3 px and more than 3 px, their median and largest")
+    print(f"{'':<15} {'':>3} {'':>3} {'':>3}  {'near':<20}  frame")
+    print(f"{'rule':<15} {'n':>3} {'sem':>3} {'bf':>3}  {'<=1':>3} {'1-3':>3} {'>3':>3} {'med':>4} {'max':>4}  "
+          f"{'<=1':>3} {'1-3':>3} {'>3':>3} {'med':>4} {'max':>4}")
+    look = {i: s.look for i, s in enumerate(seqs)}
+    for rule in [*sorted(reasons, key=lambda u: -sum(r[5] == u for r in rows)), "all"]:
+        mine = [r for r in rows if rule in ("all", r[5])]
+        print(f"{rule:<15} {len(mine):>3} {sum(look[r[0]] == 'sem' for r in mine):>3} "
+              f"{sum(look[r[0]] == 'brightfield' for r in mine):>3}  {bands([r[6] for r in mine])}  "
+              f"{bands([r[7] for r in mine])}")
+    print(textwrap.fill("reasons: " + ", ".join(f"{u}: {v}" for u, v in sorted(reasons.items())), 80))
+    print("\nby sequence: look, background, tip width, photons a pixel; refused visible tips")
+    for i, seq in enumerate(seqs):
+        mine = [r for r in rows if r[0] == i]
+        n_vis = sum(f.kind == "visible" for f in seq.frames[1:])
+        tally: dict[str, int] = {}
+        for r in mine:
+            tally[r[5]] = tally.get(r[5], 0) + 1
+        print(textwrap.fill(
+            f"{i:>2} {'bf' if seq.look == 'brightfield' else seq.look:>3} {seq.background:>6} {seq.width_px:>4.1f} "
+            f"{seq.photons:>3.0f}: {len(mine):>2} of {n_vis:>2}" + ("; " if tally else "")
+            + ", ".join(f"{u} {n}" for u, n in sorted(tally.items(), key=lambda x: -x[1])),
+            80, subsequent_indent=" " * 4))
+    return len(rows)
 
 
 def _lobed_class(f: OwnFrame, image_size: int) -> str:
@@ -299,6 +467,10 @@ def main(argv: list[str] | None = None) -> None:
         lobed(int(numbers[0]) if numbers else 200, wide=True, bead=True)
         return
     n = int(numbers[0]) if numbers else 500
+    if "--refusals" in args:
+        print("the second renderer's refused visible tips, by the rule that refused them")
+        refusals(n)
+        return
     print("1. tip tracking on the second renderer's frames")
     tracking(n)
     if "--tracking-only" in args:
