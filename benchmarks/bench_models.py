@@ -37,6 +37,10 @@ Prints Markdown tables (the README's). Run: ``.venv/bin/python benchmarks/bench_
 largest error's validation pose, then ``--poses`` more random poses per joint measured on the
 same arm after the day, and how often a day's 8 validation poses would show ``auto``'s
 largest error above the paper's procedure's (docs/models-log.md, eighth round).
+
+``--design3 maximin`` spreads joint 3's 8 poses by the maximin design instead of its default
+(maximum projection; ``calibration.design.spread_poses``), for a side-by-side comparison: the
+random poses drawn are the same (docs/models-log.md, ninth round).
 """
 
 from __future__ import annotations
@@ -282,8 +286,22 @@ def resample_day(arm: str, seed: int, day_index: int, poses: int) -> None:
               f"{100 * np.mean(top['form'] > top['procedure']):.1f} %")
 
 
+def _design3(criterion: str) -> None:
+    """Spread joint 3's poses in :func:`make_day` by ``criterion`` (the rotary joints keep their default)."""
+    import arm_days
+
+    from stickslip.calibration.design import spread_poses
+
+    def spread(joint: int, n: int, seed: int = 0, existing: list[kin.Pose] | None = None) -> list[kin.Pose]:
+        return spread_poses(joint, n, seed, existing=existing, criterion=criterion if joint == 3 else None)
+
+    arm_days.spread_poses = spread  # type: ignore[assignment]
+
+
 if __name__ == "__main__":
     args = sys.argv[1:]
+    if "--design3" in args:
+        _design3(args[args.index("--design3") + 1])
     if "--resample" in args:
         n = int(args[args.index("--poses") + 1]) if "--poses" in args else 150
         for spec in args[args.index("--resample") + 1].split(","):
