@@ -37,6 +37,10 @@ Prints Markdown tables (the README's). Run: ``.venv/bin/python benchmarks/bench_
 largest error's validation pose, then ``--poses`` more random poses per joint measured on the
 same arm after the day, and how often a day's 8 validation poses would show ``auto``'s
 largest error above the paper's procedure's (docs/models-log.md, eighth round).
+
+``--design3 maximin`` spreads joint 3's 8 poses by the maximin design instead of its default
+(maximum projection; ``calibration.design.spread_poses``), for a side-by-side comparison: the
+random poses drawn are the same (docs/models-log.md, ninth round).
 """
 
 from __future__ import annotations
@@ -282,16 +286,62 @@ def resample_day(arm: str, seed: int, day_index: int, poses: int) -> None:
               f"{100 * np.mean(top['form'] > top['procedure']):.1f} %")
 
 
+def _design3(criterion: str) -> None:
+    """Spread joint 3's poses in :func:`make_day` by ``criterion`` (the rotary joints keep their default)."""
+    import arm_days
+
+    from stickslip.calibration.design import spread_poses
+
+    def spread(joint: int, n: int, seed: int = 0, existing: list[kin.Pose] | None = None) -> list[kin.Pose]:
+        return spread_poses(joint, n, seed, existing=existing, criterion=criterion if joint == 3 else None)
+
+    arm_days.spread_poses = spread  # type: ignore[assignment]
+
+
+def _cli(argv: list[str]) -> None:
+    import argparse
+
+    def ints(text: str) -> tuple[int, ...]:
+        try:
+            return tuple(int(v) for v in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: seeds are integers separated by commas") from None
+
+    def arms(text: str) -> tuple[str, ...]:
+        out = tuple(text.split(","))
+        unknown = [a for a in out if a not in ARMS]
+        if unknown:
+            raise argparse.ArgumentTypeError(f"{', '.join(unknown)}: not an arm ({', '.join(ARMS)})")
+        return out
+
+    def days(text: str) -> list[tuple[str, int, int]]:
+        out = []
+        for spec in text.split(","):
+            parts = spec.split(":")
+            if len(parts) != 3 or parts[0] not in ARMS or not parts[1].isdigit() or not parts[2].isdigit():
+                raise argparse.ArgumentTypeError(f"{spec!r}: ARM:SEED:DAY, e.g. physics:202:1")
+            out.append((parts[0], int(parts[1]), int(parts[2])))
+        return out
+
+    ap = argparse.ArgumentParser(
+        description="Largest errors, interval coverage and fallbacks of the calibrations on three "
+        "independent arms (docs/models.md; issue 33). Without options: the benchmark's seeds "
+        "101-103 on every arm, about 2-3 minutes.",
+    )
+    ap.add_argument("--seeds", type=ints, default=(101, 102, 103), help="seeds, e.g. 201,202 (default 101,102,103)")
+    ap.add_argument("--arms", type=arms, default=tuple(ARMS), help=f"arms, some of {','.join(ARMS)}")
+    ap.add_argument("--design3", choices=("maximin", "maxpro"), help="joint 3's spread design (default: the library's)")
+    ap.add_argument("--resample", type=days, help="ARM:SEED:DAY,...: one day's largest error on more random poses")
+    ap.add_argument("--poses", type=int, default=150, help="random poses for --resample (default 150)")
+    a = ap.parse_args(argv)
+    if a.design3:
+        _design3(a.design3)
+    if a.resample:
+        for arm, seed, day in a.resample:
+            resample_day(arm, seed, day, a.poses)
+        return
+    main(seeds=a.seeds, arms=a.arms)
+
+
 if __name__ == "__main__":
-    args = sys.argv[1:]
-    if "--resample" in args:
-        n = int(args[args.index("--poses") + 1]) if "--poses" in args else 150
-        for spec in args[args.index("--resample") + 1].split(","):
-            a, s, i = spec.split(":")
-            resample_day(a, int(s), int(i), n)
-        sys.exit(0)
-    kw: dict[str, tuple] = {}
-    for flag, key, conv in (("--seeds", "seeds", int), ("--arms", "arms", str)):
-        if flag in args:
-            kw[key] = tuple(conv(s) for s in args[args.index(flag) + 1].split(","))
-    main(**kw)
+    _cli(sys.argv[1:])

@@ -7,42 +7,41 @@ step with the clock: it adds power between the step clock's harmonic lines and, 
 average, none on them. The level detector cannot tell the two apart where the stop's
 signature is a rise (a louder stop): any sound added in those sub-bands fits it.
 
-So a fire that persisted must also show the stop's signature on the lines. Over the
-tuning's sub-bands whose signature moves by ``min_signature_db`` or more, the power on the
-step clock's lines above the continuum beside them
+So a fire that persisted must also show the stop's signature on the lines. Over the tuning's
+sub-bands whose signature moves by ``min_signature_db`` or more, the power on the step
+clock's lines above the continuum beside them
 (:func:`~stickslip.audio.features.stepclock.line_powers`) is measured over the stepping
-before the fire and over the window's first samples, at the step rate commanded (or,
-untold, heard in the stepping); the stepping before the fire is the reference the
-confirmation keeps (for a fire soon after a rejected one, the stepping before the first of
-them). Per sub-band the change ``dL_b`` (dB, each side
-floored at ``floor_share`` of the larger), kept where the lines stood ``min_line_z``
-standard deviations over their noise before the fire and were sharp there (``min_sharpness``
-of the power in a comb four times wider: a rough clock smears its higher harmonics, and what
-is left on the narrow lines is not the joint's sound alone). Each sub-band is read on the
-narrowest of ``combs`` on which its lines are sharp (heard, as before, on the widest):
-first a line 3 bins of the window
-wide, the comb an average in step with the clock over the window resolves, on which music's
-partials beside a clean clock's lines stay out; then 0.4 % of the line's frequency, for a
-clock whose lines wander wider. And where the tuned stop's change was on the lines itself
-(the tuning's continuum between the lines moved no further in the stop's direction than its
-level, plus ``max_continuum_excess_db``: a stop that rattles out of step with the clock
-changes the continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
+before the fire and over the window's first samples, at the step rate commanded (or, untold,
+heard in the stepping); the stepping before the fire is the reference the confirmation keeps
+(for a fire soon after a rejected one, the stepping before the first of them). Per sub-band
+the change ``dL_b`` (dB, each side floored at ``floor_share`` of the larger), kept where the
+lines stood ``min_line_z`` standard deviations over their noise before the fire and were
+sharp there (``min_sharpness`` of the power in a comb four times wider: a rough clock smears
+its higher harmonics, and what is left on the narrow lines is not the joint's sound alone).
+Each sub-band is read on the narrowest of ``combs`` on which its lines are sharp (heard, as
+before, on the widest): first a line 3 bins of the window wide, the comb an average in step
+with the clock over the window resolves, on which music's partials beside a clean clock's
+lines stay out; then 0.4 % of the line's frequency, for a clock whose lines wander wider.
+And where the tuned stop's change was on the lines itself (the tuning's continuum between
+the lines moved no further in the stop's direction than its level, plus
+``max_continuum_excess_db``: a stop that rattles out of step with the clock changes the
+continuum, not the lines, and is not judged there); the *lines' stop-likeness* is the
 least-squares fit of the tuned signature ``delta`` to them,
 
     a_L = sum_b delta_b dL_b / sum_b delta_b^2,
 
 1 for a stop like the tuning's, 0 for a change that is all off the clock. A fire whose
 ``a_L`` is under ``min_a`` is not a stop. No verdict (the fire stands on the other rules)
-when the tuning has no continuum signature (made before it was stored), when the
-sub-bands kept hold less than ``min_covered`` of the signature's sum of squares
-(one sub-band's estimate is not the stop's signature), the rate is not known or is more
-than ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes
-elsewhere, and the tuned signature is not what the stop does on them), where more than
+when the tuning has no continuum signature (made before it was stored), when the sub-bands
+kept hold less than ``min_covered`` of the signature's sum of squares (one sub-band's
+estimate is not the stop's signature), the rate is not known or is more than
+``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes elsewhere,
+and the tuned signature is not what the stop does on them), where more than
 ``max_ref_stoplike`` of the reference's frames were already stop-like (a stop heard late
-began there: the reference is the stop, not stepping), or where less than
-``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune to what is
-added between them, so the tuned signature is fitted as tuned (no masking). It runs once
-per fire that persisted, never per frame.
+began there: the reference is the stop, not stepping), or where less than ``min_s`` of
+stepping or ``min_after_s`` of the window was heard. The lines are immune to what is added
+between them, so the tuned signature is fitted as tuned (no masking). It runs once per fire
+that persisted, never per frame.
 """
 
 from __future__ import annotations
