@@ -13,7 +13,7 @@ import pytest
 
 from stickslip.sim.camera import SimCamSettings, SimScene
 from stickslip.vision.edges import check_edges, learn_edges
-from stickslip.vision.refine import patch
+from stickslip.vision.sampling import patch
 from stickslip.vision.template import TipTemplate, TrackerParams
 from stickslip.vision.track import Fix, Lost, TipTracker
 

@@ -16,18 +16,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-from stickslip.vision.refine import (
-    Patch,
-    _gradient,
-    _sample,
-    _sample_value,
-    _solve_small,
-    _turned,
-    median,
-    patch,
-    steepest,
-    warped,
-)
+from stickslip.vision.refine import _solve_small, _turned, steepest, warped
+from stickslip.vision.sampling import Patch, _gradient, median, patch
+from stickslip.vision.sampling import sample as _sample
+from stickslip.vision.sampling import sample_value as _sample_value
 from stickslip.vision.template import masked_ncc, region_spectra
 from stickslip.vision.track import _downsample, _local_max, _peaks
 

@@ -16,7 +16,8 @@ from vision_peer import peer_sequence
 from stickslip.sim.arm import SimulatedMM3A
 from stickslip.sim.camera import SimCamera, SimCamSettings, SimScene
 from stickslip.vision.frame import as_image
-from stickslip.vision.refine import patch, refine, steepest
+from stickslip.vision.refine import refine, steepest
+from stickslip.vision.sampling import patch
 from stickslip.vision.track import REASONS, Fix, Lost, TemplateError, TipTracker, track
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .refine import Patch, _sample, _sample_value_xy, median
+from .sampling import Patch, median, sample, sample_value_xy
 
 __all__ = ["EdgeProfiles", "EdgeCheck", "STATIONS", "NEAR", "learn_edges", "check_edges"]
 
@@ -212,7 +212,7 @@ def learn_edges(bank: list[FloatArray], apex: tuple[float, float], mask: NDArray
         p = Patch(np.stack([b, gx, gy]), 0, 0, (n, n))
         acc = np.zeros(use_a.shape)
         for line in LINES:
-            v, _ = _sample(p, apex[0] + offsets[..., 0].ravel() + line * ux,
+            v, _ = sample(p, apex[0] + offsets[..., 0].ravel() + line * ux,
                            apex[1] + offsets[..., 1].ravel() + line * uy)
             acc += v[0].reshape(use_a.shape)
         expected.append(acc / len(LINES))
@@ -287,7 +287,7 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     xy += ep.lines_perp * math.sin(theta)
     xy[0] += x
     xy[1] += y
-    v, inside = _sample_value_xy(frame, xy)
+    v, inside = sample_value_xy(frame, xy)
     F = v.reshape(len(LINES), *ep.use.shape).sum(axis=0) / len(LINES)
     ok: NDArray[np.bool_] = np.asarray(inside.reshape(len(LINES), *ep.use.shape).all(axis=0), dtype=bool)
     a = np.full(m, np.nan)

@@ -41,8 +41,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .refine import _bilinear as _interpolate
-from .refine import _cells, _neighbours
+from .sampling import bilinear as _interpolate
+from .sampling import cells, neighbours
 
 __all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO",
            "learn_shaft", "check_shaft"]
@@ -179,13 +179,13 @@ class ShaftCheck:
 def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Bilinear samples of ``image`` at ``(xs, ys)`` (px), and which lie in the frame (the others: its edge).
 
-    x and y are handled together and the four neighbours gathered at once (:mod:`.refine`'s sampling, on the
+    x and y are handled together and the four neighbours gathered at once (:mod:`.sampling`'s pieces, on the
     whole frame): the same values as each coordinate and neighbour apart, bit for bit.
     """
     H, W = image.shape
     xy = np.stack((np.ravel(xs), np.ravel(ys))).astype(float, copy=False)
-    i00, fx, fy, inside = _cells(xy, H, W)
-    v = image.reshape(-1).take(_neighbours(i00, H, W))
+    i00, fx, fy, inside = cells(xy, H, W)
+    v = image.reshape(-1).take(neighbours(i00, H, W))
     shape = np.shape(xs)
     return _interpolate(v, fx, fy).reshape(shape), inside.reshape(shape)
 

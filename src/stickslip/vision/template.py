@@ -319,7 +319,7 @@ class TipTemplate:
         shaft, core, ring_off, front = _surroundings(mask, inside, apex, params)
         s0 = params.template_blur
         bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in params.blur_bank]
-        # the frames are smoothed by s0 alike before the fit (refine.patch): copy k then matches a frame
+        # the frames are smoothed by s0 alike before the fit (sampling.patch): copy k then matches a frame
         # blurred by blur_bank[k] more than the first
         contrast = _trackable_contrast(win, weights, noise, (x, y))
         return cls(bank, weights, apex, noise, contrast, params, level_weights, shaft, core, ring_off, front, mask,

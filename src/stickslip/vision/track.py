@@ -55,7 +55,8 @@ from numpy.typing import NDArray
 
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
-from .refine import Patch, Refinement, _sample_value, median, patch, refine, steepest, warped
+from .refine import Refinement, refine, steepest, warped
+from .sampling import Patch, median, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
 from .width import WidthCheck, WidthStations, check_width, learn_width
@@ -218,7 +219,7 @@ def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
     ox = np.concatenate([t.core[0], t.ring[0], fx[far]])
     oy = np.concatenate([t.core[1], t.ring[1], fy[far]])
     ct, st_ = math.cos(r.theta), math.sin(r.theta)
-    v, _ = _sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+    v, _ = sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
     nc, nr = t.core[0].size, t.ring[0].size
     needle = median(v[:nc])  # numpy.median's, bit for bit
     ground = median(v[nc : nc + nr])

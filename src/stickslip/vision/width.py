@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .refine import median
+from .sampling import median
 from .shaft import ALONG_STEP, GROUND, LINES, REACH, STEP, _bilinear, _follow, _lines, _mean_lines
 
 __all__ = ["WidthStations", "WidthCheck", "SHIFT_STEP", "FROM", "learn_width", "check_width"]
