@@ -185,7 +185,7 @@ def test_copies_with_the_same_weights_share_the_variance_and_give_their_own_corr
 
 
 def test_shaft_sampling_is_the_plain_bilinear_one_bit_for_bit() -> None:
-    from stickslip.vision.shaft import _bilinear
+    from stickslip.vision.shaft import sample_frame
 
     rng = np.random.default_rng(6)
     image = rng.normal(0.5, 0.1, (50, 70))
@@ -198,9 +198,9 @@ def test_shaft_sampling_is_the_plain_bilinear_one_bit_for_bit() -> None:
     fx, fy, flat, i00 = x - ix, y - iy, image.reshape(-1), iy * W + ix
     top = flat[i00] + (flat[i00 + 1] - flat[i00]) * fx
     bottom = flat[i00 + W] + (flat[i00 + W + 1] - flat[i00 + W]) * fx
-    v, got_inside = _bilinear(image, xs, ys)
+    v, got_inside = sample_frame(image, xs, ys)
     assert np.array_equal(v, top + (bottom - top) * fy) and np.array_equal(got_inside, inside)
-    v2, inside2 = _bilinear(image, xs.reshape(20, 20), ys.reshape(20, 20))  # any shape, kept
+    v2, inside2 = sample_frame(image, xs.reshape(20, 20), ys.reshape(20, 20))  # any shape, kept
     assert np.array_equal(v2, v.reshape(20, 20)) and np.array_equal(inside2, inside.reshape(20, 20))
 
 
@@ -231,13 +231,13 @@ def test_local_max_and_peaks_are_scipys_bit_for_bit(h: int, w: int, r: int, seed
 @settings(max_examples=30, deadline=None)
 @given(m=st.integers(1, 12), q=st.integers(1, 30), n=st.integers(1, 9), seed=st.integers(0, 2**32 - 1))
 def test_lines_mean_is_numpys_bit_for_bit(m: int, q: int, n: int, seed: int) -> None:
-    from stickslip.vision.shaft import _mean_lines
+    from stickslip.vision.shaft import mean_lines
 
     rng = np.random.default_rng(seed)
     v = rng.normal(0.0, 10.0 ** rng.integers(-3, 6), (m, q, n))
     v[rng.random(v.shape) < 0.3] = -0.0  # lines of negative zeros keep their sign
     for a in (v, v[0]):
-        got, want = _mean_lines(a), a.mean(axis=-1)
+        got, want = mean_lines(a), a.mean(axis=-1)
         assert np.array_equal(got, want) and np.array_equal(np.signbit(got), np.signbit(want))
 
 

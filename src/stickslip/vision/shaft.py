@@ -44,8 +44,19 @@ from scipy import ndimage
 from .sampling import bilinear as _interpolate
 from .sampling import cells, neighbours
 
-__all__ = ["ShaftProfiles", "ShaftCheck", "BACK_FROM", "BACK_STEP", "BACK_TO",
-           "learn_shaft", "check_shaft"]
+__all__ = [
+    "ShaftProfiles",
+    "ShaftCheck",
+    "BACK_FROM",
+    "BACK_STEP",
+    "BACK_TO",
+    "learn_shaft",
+    "check_shaft",
+    "sample_frame",
+    "station_profiles",
+    "follow_shaft",
+    "mean_lines",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -176,7 +187,7 @@ class ShaftCheck:
     along_sd: float = math.inf
 
 
-def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+def sample_frame(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
     """Bilinear samples of ``image`` at ``(xs, ys)`` (px), and which lie in the frame (the others: its edge).
 
     x and y are handled together and the four neighbours gathered at once (:mod:`.sampling`'s pieces, on the
@@ -190,19 +201,19 @@ def _bilinear(image: FloatArray, xs: FloatArray, ys: FloatArray) -> tuple[FloatA
     return _interpolate(v, fx, fy).reshape(shape), inside.reshape(shape)
 
 
-def _lines(image: FloatArray, x: float, y: float, ox: FloatArray, oy: FloatArray, ux: float, uy: float
+def station_profiles(image: FloatArray, x: float, y: float, ox: FloatArray, oy: FloatArray, ux: float, uy: float
            ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """The mean over :data:`LINES` of ``image`` at the offsets ``(ox, oy)`` from ``(x, y)`` (px), and which
     samples lie in the frame on every line."""
     d = np.asarray(LINES)
     xs = (ox[..., None] + d * ux + x).ravel()
     ys = (oy[..., None] + d * uy + y).ravel()
-    v, inside = _bilinear(image, xs, ys)
+    v, inside = sample_frame(image, xs, ys)
     n = len(LINES)
-    return _mean_lines(v.reshape(*ox.shape, n)), np.asarray(inside.reshape(*ox.shape, n).all(axis=-1), dtype=bool)
+    return mean_lines(v.reshape(*ox.shape, n)), np.asarray(inside.reshape(*ox.shape, n).all(axis=-1), dtype=bool)
 
 
-def _mean_lines(v: FloatArray) -> FloatArray:
+def mean_lines(v: FloatArray) -> FloatArray:
     """``v.mean(axis=-1)`` bit for bit, signed zeros included, for a last axis of fewer than 8 (the lines'
     samples): numpy sums it from 0, one after the other, and divides by its length; here a slice at a time, in
     a third of its time."""
@@ -235,7 +246,7 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     """
     half_q = int(round(REACH / STEP))
     ts: FloatArray = (np.arange(2 * half_q + 1, dtype=np.float64) - half_q) * STEP
-    offs, raws, widths, kept = _follow(image, tip, shaft, level, spread, contrast, ts)
+    offs, raws, widths, kept = follow_shaft(image, tip, shaft, level, spread, contrast, ts)
     n_copies = len(smooth)
     if not kept:
         z = np.zeros((0, 0))
@@ -246,12 +257,12 @@ def learn_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
                              [np.zeros((0, 3, 3))] * n_copies)
     # the same lines ALONG_STEP px nearer the tip and further from it: the profiles' change along the shaft (taper)
     ux, uy = shaft
-    nearer, further = ([_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
+    nearer, further = ([station_profiles(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
                         for o in offs] for d in (-ALONG_STEP, ALONG_STEP))
     return _assemble(shaft, ts, offs, (raws, nearer, further), widths, kept, smooth)
 
 
-def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float, spread: float,
+def follow_shaft(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float, spread: float,
             contrast: float, ts: FloatArray, start: float = BACK_FROM
             ) -> tuple[list[FloatArray], list[FloatArray], list[float], list[float]]:
     """:func:`learn_shaft`'s walk back along the needle from ``start`` px behind the tip: each station's sample
@@ -270,7 +281,7 @@ def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, flo
     for s in np.arange(start, BACK_TO + 1e-9, BACK_STEP):
         ox = s * ux + (centre + ts) * nx
         oy = s * uy + (centre + ts) * ny
-        raw, ok = _lines(image, x0, y0, ox, oy, ux, uy)
+        raw, ok = station_profiles(image, x0, y0, ox, oy, ux, uy)
         sm = ndimage.gaussian_filter1d(raw, 1.0 / STEP, mode="nearest")
         on = (np.abs(sm - level) > contrast * spread) & ok
         # a needle whose middle is nearer the ground than its edges (an SEM's edge contrast) is one run
@@ -302,7 +313,7 @@ def _follow(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, flo
         ox = s * ux + (centre + ts) * nx
         oy = s * uy + (centre + ts) * ny
         offs.append(np.stack([ox, oy], axis=-1))
-        raws.append(_lines(image, x0, y0, ox, oy, ux, uy)[0])
+        raws.append(station_profiles(image, x0, y0, ox, oy, ux, uy)[0])
         widths.append(width)
         kept.append(float(s))
     return offs, raws, widths, kept
@@ -379,10 +390,10 @@ def check_shaft(sp: ShaftProfiles, copy: int, image: FloatArray, x: float, y: fl
         return None
     ct, st_ = math.cos(theta), math.sin(theta)
     lx, ly = sp.lines
-    v, inside = _bilinear(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
+    v, inside = sample_frame(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
     n = len(LINES)
     shape = (m, sp.offsets.shape[1], n)
-    F = _mean_lines(v.reshape(shape))
+    F = mean_lines(v.reshape(shape))
     ok = inside.reshape(shape).all(axis=2)
     kernel = sp.smooth[copy]
     if kernel is not None:

@@ -45,7 +45,17 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from .sampling import median
-from .shaft import ALONG_STEP, GROUND, LINES, REACH, STEP, _bilinear, _follow, _lines, _mean_lines
+from .shaft import (
+    ALONG_STEP,
+    GROUND,
+    LINES,
+    REACH,
+    STEP,
+    follow_shaft,
+    mean_lines,
+    sample_frame,
+    station_profiles,
+)
 
 __all__ = ["WidthStations", "WidthCheck", "SHIFT_STEP", "FROM", "learn_width", "check_width"]
 
@@ -251,7 +261,7 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     """
     half_q = int(round(REACH / STEP))
     ts: FloatArray = (np.arange(2 * half_q + 1, dtype=np.float64) - half_q) * STEP
-    offs, raws, widths, kept = _follow(image, tip, shaft, level, spread, contrast, ts, FROM)
+    offs, raws, widths, kept = follow_shaft(image, tip, shaft, level, spread, contrast, ts, FROM)
     use = _on_the_taper(np.asarray(kept), np.asarray(widths), slack)
     if len(use) < 3:
         return None
@@ -268,7 +278,7 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     span = np.abs(ts)[None, :] <= reach[:, None]
     # the taper: the first frame's profiles ALONG_STEP px nearer the tip registered to those as far beyond
     o = np.stack(offs)
-    near, far = (_lines(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
+    near, far = (station_profiles(image, tip[0], tip[1], o[..., 0] + d * ux, o[..., 1] + d * uy, ux, uy)[0]
                  for d in (-ALONG_STEP, ALONG_STEP))
     s0 = smooth[0][0]
     index, wmask = _gather(windows, q, length)
@@ -308,10 +318,10 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     m = ws.s.size
     ct, st_ = math.cos(theta), math.sin(theta)
     lx, ly = ws.lines
-    v, inside = _bilinear(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
+    v, inside = sample_frame(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
     n = len(LINES)
     shape = (m, ws.q, n)
-    profiles = _mean_lines(v.reshape(shape))
+    profiles = mean_lines(v.reshape(shape))
     ok = (inside.reshape(shape).all(axis=2) | ~ws.span).all(axis=1)
     if int(ok.sum()) < max(least, 1):
         return None
