@@ -438,33 +438,31 @@ def calibration(seeds: int = 5) -> list[float]:
     return errs
 
 
+_OWN_MODES: dict[str, tuple[str, int, dict[str, bool]]] = {
+    "--lobed": ("frames with lobed grains and tips near the edge", 400, {}),
+    "--flake": ("frames with flat chips stuck on the tip", 200, {"flake": True}),
+    "--round": ("blunt needles with round beads and tips near the edge", 200, {"bead": True}),
+}
+"""The own renderer's modes: what they show, their default number of frames, and :func:`lobed`'s options."""
+
+
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     numbers = [a for a in args if not a.startswith("--")]
-    if "--lobed" in args:
-        print("tip tracking on the own renderer's frames with lobed grains and tips near the edge")
-        lobed(int(numbers[0]) if numbers else 400)
-        print("\nthe same, bright field only, tips 14 to 18 px wide")
-        lobed(int(numbers[0]) if numbers else 400, wide=True)
-        return
+    for flag, (what, default, kw) in _OWN_MODES.items():
+        if flag in args:  # the mode on all tips, then on wide bright-field tips only
+            n_own = int(numbers[0]) if numbers else default
+            print(f"tip tracking on the own renderer's {what}")
+            lobed(n_own, **kw)
+            print("\nthe same, bright field only, tips 14 to 18 px wide")
+            lobed(n_own, wide=True, **kw)
+            return
     if "--plain" in args:
         for seed in (0, 1, 2):
             if seed:
                 print()
             print(f"tip tracking on the own renderer's plain frames, seed {seed}")
             lobed(int(numbers[0]) if numbers else 400, plain=seed)
-        return
-    if "--flake" in args:
-        print("tip tracking on the own renderer's frames with flat chips stuck on the tip")
-        lobed(int(numbers[0]) if numbers else 200, flake=True)
-        print("\nthe same, bright field only, tips 14 to 18 px wide")
-        lobed(int(numbers[0]) if numbers else 200, wide=True, flake=True)
-        return
-    if "--round" in args:
-        print("tip tracking on the own renderer's blunt needles with round beads and tips near the edge")
-        lobed(int(numbers[0]) if numbers else 200, bead=True)
-        print("\nthe same, bright field only, tips 14 to 18 px wide")
-        lobed(int(numbers[0]) if numbers else 200, wide=True, bead=True)
         return
     n = int(numbers[0]) if numbers else 500
     if "--refusals" in args:
