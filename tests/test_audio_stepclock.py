@@ -39,6 +39,7 @@ from stickslip.audio.features.stepclock import (  # noqa: E402
     line_power,
     line_powers,
     line_z,
+    periodogram,
     step_rate_hz,
     synchronous_change_db,
     widen_bands,
@@ -476,3 +477,20 @@ def test_listen_step_clock_on_the_command_line(tmp_path: Path) -> None:
     assert json.loads(r.stdout) == []
     r = runner.invoke(app, [*base, "--step-clock", "--confirm-s", "0"])
     assert r.exit_code == 2 and "--confirm-s > 0" in r.output
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**16), n=st.integers(0, 6000), width=st.sampled_from([1.0, 4.0]))
+def test_lines_read_from_a_periodogram_are_those_read_from_the_samples(seed: int, n: int, width: float) -> None:
+    # one spectrum read on several combs (the clocked check, the late path) gives each reading's values bit for bit
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / SR
+    x = rng.standard_normal(n) + np.sign(np.sin(2 * np.pi * 1000.0 * t))
+    bands = [(2000.0, 4000.0), (3500.0, 8000.0)]
+    want, whole = line_powers(x, SR, 1000.0, bands, width)
+    got, whole2 = line_powers(periodogram(x), SR, 1000.0, bands, width)
+    assert len(got.power) == len(want.power)
+    assert (len(want.power) > 0) == (n >= 20 * SR / 1000.0)  # lines from 20 step periods on
+    for a, b in zip(got, want, strict=True):
+        assert np.array_equal(a, b)
+    assert whole2 == whole or (math.isnan(whole) and math.isnan(whole2))

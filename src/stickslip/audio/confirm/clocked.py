@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..features.stepclock import STEP_CLOCK, StepClockParams, line_powers, rate_near_hz
+from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_powers, periodogram, rate_near_hz
 from ..paramfield import param
 from ..tuningfile import Tuning
 
@@ -166,7 +166,8 @@ def lines_stop_likeness(
         return math.nan, 0
     n = min(before.size, after.size)
     b, a = before[before.size - n :], after[:n]
-    reads = [_comb_read(b, a, sample_rate, rate_hz, bands, tol) for tol in p.combs]
+    pb, pa = periodogram(b), periodogram(a)  # one spectrum a side, read on every comb
+    reads = [_comb_read(pb, pa, sample_rate, rate_hz, bands, tol) for tol in p.combs]
     num = den = 0.0
     used = 0
     for j, i in enumerate(judged):
@@ -191,7 +192,7 @@ def lines_stop_likeness(
 
 
 def _comb_read(
-    b: FloatArray, a: FloatArray, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
+    b: Periodogram, a: Periodogram, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
 ) -> list[tuple[float, float, float, float]]:
     """Per band, on a comb of half-width ``tol`` of each line's frequency (at least 3 bins): the lines' power before
     and after, its noise's variance before, and the power before on a comb ``sharp_width`` times wider (NaN: none)."""

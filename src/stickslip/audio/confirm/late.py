@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..events import StopEvent
-from ..features.stepclock import STEP_CLOCK, Lines, chi2_as_z, line_powers, line_z, step_rate_hz
+from ..features.stepclock import STEP_CLOCK, Lines, chi2_as_z, line_powers, line_z, periodogram, step_rate_hz
 from ..paramfield import param
 
 __all__ = ["LATE", "LateJudgement", "LateParams", "LatePath", "late_event", "onset_change_point", "rate_moved"]
@@ -432,8 +432,9 @@ class LatePath:
         xb = self._samples((j0 - 3) * self.chunk, (j0 - 1) * self.chunk)
         if xb.size != 2 * self.chunk:
             return math.nan, math.nan
-        lb, whole = line_powers(xb, self.sr, self._rate, self.bands)
-        wide = float(np.sum(line_powers(xb, self.sr, self._rate, self.bands, STEP_CLOCK.sharp_width)[0].power))
+        pb = periodogram(xb)
+        lb, whole = line_powers(pb, self.sr, self._rate, self.bands)
+        wide = float(np.sum(line_powers(pb, self.sr, self._rate, self.bands, STEP_CLOCK.sharp_width)[0].power))
         p0 = float(np.sum(lb.power))
         return p0 / wide if wide > 0 else math.nan, p0 / whole if whole > 0 else math.nan
 

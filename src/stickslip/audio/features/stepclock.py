@@ -48,6 +48,8 @@ __all__ = [
     "line_power",
     "line_powers",
     "line_z",
+    "Periodogram",
+    "periodogram",
     "step_rate_hz",
     "synchronous_change_db",
     "synchrony",
@@ -313,8 +315,29 @@ class Lines(NamedTuple):
     band: NDArray[np.int64]
 
 
+@dataclass(frozen=True)
+class Periodogram:
+    """A stretch's one-sided, Hann-windowed power spectrum (:func:`periodogram`), made once for the
+    several readings :func:`line_powers` takes of the same samples (another comb, a wider one)."""
+
+    #: the power per rfft bin, mean-square units of the signal (the bins sum to the mean square)
+    power: FloatArray
+    #: the samples it was made from
+    n: int
+
+
+def periodogram(x: ArrayLike) -> Periodogram:
+    """The power spectrum :func:`line_powers` reads the lines from, for ``x`` (a stretch of samples)."""
+    v = np.asarray(x, dtype=np.float64).ravel()
+    if v.size == 0:
+        return Periodogram(np.zeros(0), 0)
+    w = _hann(v.size)
+    p = 2.0 * np.abs(sfft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
+    return Periodogram(p, int(v.size))
+
+
 def line_powers(
-    x: ArrayLike,
+    x: ArrayLike | Periodogram,
     sample_rate: float,
     rate_hz: float,
     bands_hz: Sequence[tuple[float, float]],
@@ -333,9 +356,12 @@ def line_powers(
     scatter by their mean, neighbours under a Hann window are correlated, and the
     continuum is itself an estimate). ``width`` multiplies ``h`` (a wider comb, for how
     sharp the lines are). Empty arrays and NaN for a rate that is not finite or a stretch
-    shorter than 20 step periods.
+    shorter than 20 step periods. ``x``: the samples, or their :func:`periodogram` when
+    several readings are taken of the same samples.
     """
-    v = np.asarray(x, dtype=np.float64).ravel()
+    spec = x if isinstance(x, Periodogram) else None
+    v = np.zeros(0) if spec is not None else np.asarray(x, dtype=np.float64).ravel()
+    size = spec.n if spec is not None else int(v.size)
     sr = float(sample_rate)
     freq: list[float] = []
     power: list[float] = []
@@ -343,13 +369,12 @@ def line_powers(
     floors: list[float] = []
     bins: list[int] = []
     band: list[int] = []
-    if not (np.isfinite(rate_hz) and rate_hz > 0 and v.size >= 20 * sr / rate_hz):
+    if not (np.isfinite(rate_hz) and rate_hz > 0 and size >= 20 * sr / rate_hz):
         e = np.zeros(0)
         return Lines(e, e, e, e, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)), float("nan")
-    w = _hann(v.size)
-    p = 2.0 * np.abs(sfft.rfft(v * w)) ** 2 / (v.size * float(np.sum(w**2)))  # one-sided: bins sum to the mean square
+    p = (spec if spec is not None else periodogram(v)).power
     bands = tuple((float(lo), float(hi)) for lo, hi in bands_hz)
-    in_bands, lines = _line_grid(v.size, sr, float(rate_hz), bands, float(width), params.comb_tol, params.flank)
+    in_bands, lines = _line_grid(size, sr, float(rate_hz), bands, float(width), params.comb_tol, params.flank)
     whole = 0.0
     for inb in in_bands:
         whole += float(np.sum(p[inb]))
@@ -565,10 +590,11 @@ def line_change(
     rate = step_rate_hz(a, sr) if rate_hz is None else float(rate_hz)
     if not (np.isfinite(rate) and rate > 0.0):
         return LineChange(rate, nan, nan, 0, 0, nan, nan)
-    l0, w0 = line_powers(a, sr, rate, bands_hz)
+    pa = periodogram(a)
+    l0, w0 = line_powers(pa, sr, rate, bands_hz)
     l1, _ = line_powers(b, sr, rate, bands_hz)
     p0 = float(np.sum(l0.power))
-    wide = float(np.sum(line_powers(a, sr, rate, bands_hz, params.sharp_width)[0].power))
+    wide = float(np.sum(line_powers(pa, sr, rate, bands_hz, params.sharp_width)[0].power))
     share = p0 / w0 if w0 > 0 else nan
     sharp = p0 / wide if wide > 0 else nan
     k = int(l0.power.size)
