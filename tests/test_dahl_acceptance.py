@@ -48,7 +48,9 @@ def test_auto_is_the_model_expected_to_err_less_at_new_poses_and_keeps_its_promi
             if sel["fallback"]:
                 assert sel["chosen"].startswith("paper") and "paper's form" in sel["reason"]
     # the promise, at the random validation poses: the model returned erred no more than the paper's form
-    # (least squares on the same traverses), and the paper's form erred about as expected
+    # (least squares on the same traverses), and the paper's form erred about as expected. Measured on these
+    # days (no fallback): RMS 1.62 against 2.09 % prismatic, 0.55 against 0.57 % rotary; the form's expected
+    # error over its actual RMS 1.6 and 1.2
     form = [calibrate(d.calibration46, method="lsq") for d, _, _ in days]
     for j in (3, 2):
         ts = [[t for t in d.validation if t.joint == j] for d, _, _ in days]
