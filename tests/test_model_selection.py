@@ -163,7 +163,7 @@ def _evidence(cv_errors, residuals=(0.01, 0.01)):
     return ev
 
 
-def test_the_average_falls_back_to_the_papers_form_when_it_predicts_held_out_poses_worse():
+def test_the_average_falls_back_to_the_papers_form_when_it_is_expected_to_err_more():
     paper = np.array([0.02, -0.01, 0.015, -0.02, 0.01, 0.012])
     good_in_most = np.array([0.001, -0.001, 0.002, -0.001, 0.001, 0.09])  # one fold badly wrong
     out = sel_mod._decide(_evidence({"paper": paper, "load2": good_in_most}), True)
