@@ -52,13 +52,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.fft import next_fast_len
 
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Refinement, refine, steepest, warped
 from .sampling import Patch, median, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
-from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
+from .template import TemplateError, TipTemplate, TrackerParams, inside_ncc, masked_ncc, region_spectra
 from .width import WidthCheck, WidthStations, check_width, learn_width
 
 __all__ = [
@@ -482,18 +483,19 @@ class TipTracker:
         return self._try(image, x, y, self._theta, self._level)
 
     def _global(self, image: FloatArray) -> list[_Candidate | None]:
+        """Candidates from the whole frame: the down-sampled frame padded with zeros so that the template
+        may hang over its border as far as puts the tip on the edge, correlated over the part inside
+        (:func:`~.template.inside_ncc`); the best few peaks looked at in full resolution and fitted."""
         p = self.params
         f = p.coarse_factor
-        small = _downsample(image, f)
+        small, inside, pad = self._padded(image)
         best: list[tuple[float, int, int, int]] = []
         spectra = region_spectra(small)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
-            tpl = self._coarse[k]
-            if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
-                continue
-            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k), spectra)
+            ncc, _ = inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k), spectra,
+                                p.min_coverage)
             best += _peaks(ncc, 0.3, k)
         best.sort(reverse=True)
         out: list[_Candidate | None] = []
@@ -502,14 +504,13 @@ class TipTracker:
         for _s, i, j, _k in best:
             if len(out) >= p.candidates:
                 break
-            x = j * f + t.apex[0]
-            y = i * f + t.apex[1]
+            x = (j - pad) * f + t.apex[0]
+            y = (i - pad) * f + t.apex[1]
             if any(math.hypot(x - a, y - b) < 2 * f for a, b in seen):
                 continue
             seen.append((x, y))
             # a full-resolution look around the coarse peak, then the fit
-            region, rx0, ry0 = _region(image, self.template.half, x, y, 2 * f)
-            ncc = masked_ncc(region, t.bank[_k], t.level_weights[_k], self._fft, ("local", _k))
+            ncc, rx0, ry0 = self._look(image, x, y, _k)
             i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
             if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
                 out.append(None)
@@ -518,6 +519,40 @@ class TipTracker:
             out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k,
                                  p.reacquire_score - 0.1))
         return out
+
+    def _padded(self, image: FloatArray) -> tuple[FloatArray, FloatArray, int]:
+        """The frame down-sampled by ``coarse_factor``, padded with zeros by ``pad`` cells each side (and to a
+        size the FFT is quick at below and to the right), which of its cells lie in the frame, and ``pad``: the
+        coarse template's window may start ``pad`` cells before the frame, where its tip lies on the edge."""
+        f = self.params.coarse_factor
+        small = _downsample(image, f)
+        pad = -(-(self.template.half + 1) // f)  # the tip lies half + 1/2 px or less from the window's edge
+        hs, ws = small.shape
+        shape = (next_fast_len(hs + 2 * pad, real=True), next_fast_len(ws + 2 * pad, real=True))
+        out = np.zeros(shape)
+        out[pad : pad + hs, pad : pad + ws] = small
+        inside = self._fft.get(("inside", shape, hs, ws))
+        if not isinstance(inside, np.ndarray):
+            inside = np.zeros(shape)
+            inside[pad : pad + hs, pad : pad + ws] = 1.0
+            self._fft[("inside", shape, hs, ws)] = inside
+        return out, inside, pad
+
+    def _look(self, image: FloatArray, x: float, y: float, k: int) -> tuple[FloatArray, int, int]:
+        """The correlation of blur copy ``k`` at whole pixels within ``2 coarse_factor`` of ``(x, y)`` and the
+        region's top-left corner (px): where the region leaves the frame, over the part inside
+        (:func:`~.template.inside_ncc`)."""
+        t, p = self.template, self.params
+        region, rx0, ry0 = _region(image, t.half, x, y, 2 * p.coarse_factor)
+        H, W = image.shape
+        n = region.shape[0]
+        if rx0 >= 0 and ry0 >= 0 and rx0 + n <= W and ry0 + n <= H:
+            return masked_ncc(region, t.bank[k], t.level_weights[k], self._fft, ("local", k)), rx0, ry0
+        yy, xx = np.arange(ry0, ry0 + n), np.arange(rx0, rx0 + n)
+        inside = (((yy >= 0) & (yy < H))[:, None] & ((xx >= 0) & (xx < W))[None, :]).astype(float)
+        ncc, _ = inside_ncc(region * inside, inside, t.bank[k], t.level_weights[k], self._fft, ("look", k),
+                            least=p.min_coverage)
+        return ncc, rx0, ry0
 
     # ------------------------------------------------------------------ decision
 
