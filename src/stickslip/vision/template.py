@@ -60,7 +60,8 @@ class TrackerParams:
     search_radius : int
         How far from the last fix the tip is looked for before the whole frame is, px.
     coarse_factor : int
-        Down-sampling of the whole-frame search, 1.
+        Down-sampling of the whole-frame search, 1 (the down-sampled frame is padded so the
+        template may hang over its border until the tip lies on the edge).
     candidates : int
         Peaks of the whole-frame search refined before giving up, 1.
     min_score : float
@@ -75,7 +76,7 @@ class TrackerParams:
         the field, px: a tip just beyond the edge looks like one on it.
     min_coverage : float
         Least share of the template's weight that must lie in the frame, 1 (below: out of
-        the field).
+        the field); the whole-frame search does not look where less lies in it.
     occluded_fraction : float
         Largest share of the template's weight that may disagree with the frame, 1
         (above: something covers the tip).

@@ -37,7 +37,10 @@
    fix is refused (*lost*): nothing vouches that the end seen is the tip;
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
-   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
+   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`; the
+   frame is padded so the template may hang over its border until its tip lies on the edge,
+   the part outside left out of the correlation (:func:`~.template.inside_ncc`): a tip near
+   the edge is found again as one in the middle is;
    not when the fit near the last fix was refused while its edges hold (the tip is
    there, only not vouched for).
 
@@ -485,7 +488,13 @@ class TipTracker:
     def _global(self, image: FloatArray) -> list[_Candidate | None]:
         """Candidates from the whole frame: the down-sampled frame padded with zeros so that the template
         may hang over its border as far as puts the tip on the edge, correlated over the part inside
-        (:func:`~.template.inside_ncc`); the best few peaks looked at in full resolution and fitted."""
+        (:func:`~.template.inside_ncc`); the best few peaks looked at in full resolution and fitted.
+
+        The peaks are ranked by their correlation's significance, Fisher's ``atanh(r)`` times the square root
+        of the share of the template's weight inside: over ``N`` pixels ``atanh(r)`` has a spread of about
+        ``1 / sqrt(N)`` where nothing matches, and a part of the template matches junk by chance better than
+        the whole does (a peak at the border would otherwise crowd out the tip in the middle). Where all the
+        weight lies in the frame this is the correlation's own order."""
         p = self.params
         f = p.coarse_factor
         small, inside, pad = self._padded(image)
@@ -494,14 +503,15 @@ class TipTracker:
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
-            ncc, _ = inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k), spectra,
-                                p.min_coverage)
-            best += _peaks(ncc, 0.3, k)
+            ncc, cover = inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
+                                    spectra, p.min_coverage)
+            best += [(math.atanh(min(v, 1.0 - 1e-12)) * math.sqrt(min(float(cover[i, j]), 1.0)), i, j, c)
+                     for v, i, j, c in _peaks(ncc, 0.3, k)]
         best.sort(reverse=True)
         out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
         t = self.template
-        for _s, i, j, _k in best:
+        for _s, i, j, k in best:
             if len(out) >= p.candidates:
                 break
             x = (j - pad) * f + t.apex[0]
@@ -509,16 +519,19 @@ class TipTracker:
             if any(math.hypot(x - a, y - b) < 2 * f for a, b in seen):
                 continue
             seen.append((x, y))
-            # a full-resolution look around the coarse peak, then the fit
-            ncc, rx0, ry0 = self._look(image, x, y, _k)
-            i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
-            if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
-                out.append(None)
-                continue
-            # a tip found again must correlate by reacquire_score: a fit far below is not worth the copies' comparison
-            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k,
-                                 p.reacquire_score - 0.1))
+            out.append(self._candidate(image, x, y, k))
         return out
+
+    def _candidate(self, image: FloatArray, x: float, y: float, k: int) -> _Candidate | None:
+        """A peak of the whole-frame search at about ``(x, y)`` (px, blur copy ``k``): a look at whole pixels
+        around it, then the fit (``None``: too unlike the tip there to be worth a fit)."""
+        p, t = self.params, self.template
+        ncc, rx0, ry0 = self._look(image, x, y, k)
+        i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
+        if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
+            return None
+        # a tip found again must correlate by reacquire_score: a fit far below is not worth the copies' comparison
+        return self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, k, p.reacquire_score - 0.1)
 
     def _padded(self, image: FloatArray) -> tuple[FloatArray, FloatArray, int]:
         """The frame down-sampled by ``coarse_factor``, padded with zeros by ``pad`` cells each side (and to a
