@@ -77,7 +77,7 @@ from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
 from stickslip.vision.template import TemplateError  # noqa: E402
-from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal  # noqa: E402
+from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal, _padded  # noqa: E402
 
 
 def tracking(n_frames: int) -> dict[str, float]:
@@ -219,7 +219,7 @@ def _in_reach(t: TipTracker, tip: tuple[float, float], w: int, h: int) -> bool:
     nearest coarse offset lies in its padded frame (the template hanging over the border until its tip lies on
     the edge) with at least ``min_coverage`` of the template's weight inside."""
     f = t.params.coarse_factor
-    small, inside, pad = t._padded(np.zeros((h, w)))
+    small, inside, pad = _padded(np.zeros((h, w)), f, t.template.half, {})
     ax, ay = t.template.apex
     j, i = int(round((tip[0] - ax) / f)) + pad, int(round((tip[1] - ay) / f)) + pad
     n = t._coarse[0].shape[0]

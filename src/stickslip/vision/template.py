@@ -593,8 +593,9 @@ def inside_ncc(
     cross-correlation). Every sum is a correlation with ``inside`` or with the region: six
     transforms in all, three of them (``inside`` against ``w``, ``w tc``, ``w tc²``)
     the same for every frame of a size, kept in ``cache`` with the ``inside`` they were
-    made for. Offsets where less than ``least`` of the weight lies inside get 0.
-    All inside, the values are :func:`masked_ncc`'s to rounding.
+    made for (``inside`` not changed in place between calls). Offsets where less than
+    ``least`` of the weight lies inside get 0. All inside, the values are
+    :func:`masked_ncc`'s to rounding.
 
     Returns
     -------
@@ -614,15 +615,17 @@ def inside_ncc(
     # the template's sums over the part inside: kept with the inside they were made for (one per key)
     tk = (key, rh, rw, "inside terms")
     kept = cache.get(tk) if cache is not None else None
-    if isinstance(kept, tuple) and np.array_equal(kept[0], inside):
-        m0, m1, vt = kept[1], kept[2], kept[3]
+    if isinstance(kept, tuple) and (kept[0] is inside or np.array_equal(kept[1], inside)):
+        inv_m0, ratio, vt, coverage = kept[2:]
     else:
         fm = fft.rfft2(inside, workers=1)
         m0, m1, m2 = (_inverse(fm * s, shape, n - 1) for s in (k.w, k.wt, k.wt2))
-        vt = m2 - m1 * m1 / np.maximum(m0, 1e-300)
-        np.maximum(vt, 0.0, out=vt)
+        inv_m0 = 1.0 / np.maximum(m0, 1e-300)
+        ratio = m1 * inv_m0  # the template's weighted mean over the part inside (less its mean over all)
+        vt = np.maximum(m2 - m1 * ratio, 0.0)
+        coverage = np.clip(m0 / k.sw, 0.0, 1.0)
         if cache is not None:
-            cache[tk] = (inside.copy(), m0, m1, vt)
+            cache[tk] = (inside, inside.copy(), inv_m0, ratio, vt, coverage)
     fi, fi2 = region_spectra(region) if spectra is None else spectra
     shared = cache.get(_SHARED_INSIDE) if cache is not None and spectra is not None else None
     if (isinstance(shared, tuple) and shared[0] is spectra and shared[1] is weights and shared[5] is inside
@@ -630,13 +633,15 @@ def inside_ncc(
         a, var = shared[3], shared[4]
     else:
         a = _inverse(fi * k.w, shape, n - 1)  # the sum of w I over the part inside (I is 0 outside)
-        var = _inverse(fi2 * k.w, shape, n - 1) - a * a / np.maximum(m0, 1e-300)
+        var = _inverse(fi2 * k.w, shape, n - 1)
+        var -= a * a * inv_m0
         np.maximum(var, 0.0, out=var)
         if cache is not None and spectra is not None:
             cache[_SHARED_INSIDE] = (spectra, weights, (n, rh, rw), a, var, inside)
-    cov = _inverse(fi * k.wt, shape, n - 1) - m1 * a / np.maximum(m0, 1e-300)
-    coverage = np.clip(m0 / k.sw, 0.0, 1.0)
-    denom = np.sqrt(var * vt)
+    cov = _inverse(fi * k.wt, shape, n - 1)
+    cov -= a * ratio
+    denom = var * vt
+    np.sqrt(denom, out=denom)
     scale = float(denom.max()) if denom.size else 0.0
     out = np.zeros(denom.shape)
     ok = (denom > 1e-9 * max(scale, 1e-300)) & (coverage >= max(least, 1e-9))
