@@ -187,8 +187,14 @@ def _local_max(a: FloatArray, r: int) -> FloatArray:
 def _peaks(ncc: FloatArray, floor: float, k: int) -> list[tuple[float, int, int, int]]:
     """``(value, row, column, k)`` of each pixel of ``ncc`` above ``floor`` that is the largest within 2 px (a
     5 x 5 square), row by row."""
-    ii, jj = np.nonzero((ncc == _local_max(ncc, 2)) & (ncc > floor))
+    ii, jj = _peak_cells(ncc, floor)
     return list(zip(ncc[ii, jj].tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
+
+
+def _peak_cells(ncc: FloatArray, floor: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The rows and columns of :func:`_peaks`: the pixels above ``floor``, each the largest within 2 px."""
+    ii, jj = np.nonzero((ncc == _local_max(ncc, 2)) & (ncc > floor))
+    return ii, jj
 
 
 def _region(image: FloatArray, h: int, cx: float, cy: float, radius: int) -> tuple[FloatArray, int, int]:
@@ -236,7 +242,7 @@ def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int
     template matches junk by chance better than the whole does, and a peak at the border would otherwise crowd
     out the tip in the middle. Where all the weight lies in the frame the order is the correlation's own.
     """
-    ii, jj = np.nonzero((ncc == _local_max(ncc, 2)) & (ncc > 0.3))  # the peaks, as _peaks finds them
+    ii, jj = _peak_cells(ncc, 0.3)
     z = np.arctanh(np.minimum(ncc[ii, jj], 1.0 - 1e-12)) * np.sqrt(np.minimum(cover[ii, jj], 1.0))
     return list(zip(z.tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
 
