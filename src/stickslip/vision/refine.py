@@ -78,6 +78,10 @@ class Steepest:
         operations (:func:`_turned`).
     bx, by : ndarray, shape (m,)
         The basis's x and y columns, contiguous.
+    score_terms : tuple
+        The template's side of the fit's score (:func:`_score`) over all of its weights:
+        the weights' sum, the weighted mean ``t_w``, ``w (t - t_w)`` and ``sum w (t -
+        t_w)²``, made once.
     """
 
     template: FloatArray
@@ -96,6 +100,16 @@ class Steepest:
     r_perp: FloatArray = field(default_factory=lambda: np.zeros((2, 0)))
     bx: FloatArray = field(default_factory=lambda: np.zeros(0))
     by: FloatArray = field(default_factory=lambda: np.zeros(0))
+    score_terms: tuple[float, float, FloatArray, float] | None = None
+
+
+def _score_terms(t: FloatArray, w: FloatArray) -> tuple[float, float, FloatArray, float]:
+    """:attr:`Steepest.score_terms` for the template's values ``t`` and weights ``w``, as :func:`_score` makes them."""
+    sw = float(w.sum())
+    if not sw > 1e-9:
+        return sw, 0.0, np.zeros_like(t), 0.0
+    mt = float((w * t).sum() / sw)
+    return sw, mt, w * (t - mt), float((w * (t - mt) ** 2).sum())
 
 
 def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray, thin: bool = False) -> Steepest:
@@ -126,7 +140,7 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     ly, lx = np.gradient(lap_full)
     sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
     return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap, density,
-                    np.stack([rxm, rym]), np.stack([-rym, rxm]), bx.copy(), by.copy())
+                    np.stack([rxm, rym]), np.stack([-rym, rxm]), bx.copy(), by.copy(), _score_terms(T, weights[keep]))
 
 
 @dataclass(frozen=True)
@@ -463,17 +477,26 @@ def _score(
     the share of the template's weight inside the frame.
     """
     T, w0 = st.t, st.w
-    wi = w0 * inside
-    swi = float(wi.sum())
+    terms = st.score_terms if st.score_terms is not None and bool(inside.all()) else None
+    # all inside (nearly always): the template's side made once (w0 * True is w0, bit for bit)
+    wi = w0 if terms is not None else w0 * inside
+    swi = terms[0] if terms is not None else float(wi.sum())
     wsum = float(w0.sum())
     score = 0.0
     outliers = 1.0
     if swi > 1e-9 and math.isfinite(tx) and math.isfinite(ty):
         Iw, _ = warped(image, st, tx, ty, theta)
-        mt = float((wi * T).sum() / swi)
+        if terms is not None:
+            _, mt, wtc, stt = terms
+        else:
+            mt = float((wi * T).sum() / swi)
+            wtc, stt = wi * (T - mt), float((wi * (T - mt) ** 2).sum())
         mi = float((wi * Iw).sum() / swi)
-        num = float((wi * (T - mt) * (Iw - mi)).sum())
-        den = math.sqrt(float((wi * (T - mt) ** 2).sum()) * float((wi * (Iw - mi) ** 2).sum()))
+        Ic = Iw - mi
+        num = float((wtc * Ic).sum())
+        Ic *= Ic
+        Ic *= wi
+        den = math.sqrt(stt * float(Ic.sum()))
         score = num / den if den > 0 else 0.0
         outliers = float((wi * (robust_w == 0)).sum() / swi)
     return score, outliers, swi / wsum if wsum > 0 else 0.0

@@ -131,7 +131,7 @@ def cells(xy: FloatArray, ch: int, cw: int) -> tuple[NDArray[np.intp], FloatArra
     """For points ``xy`` (shape (2, m), x then y, px; overwritten) in an array of ``ch`` x ``cw`` px: the flat
     index of the pixel up and left of each, its fractions to the right and down, and which lie within the array
     (the others are clipped to its edge). Shared by the patch's sampling and the whole frame's (:mod:`.shaft`)."""
-    last, clip, _ = _limits(ch, cw)
+    last, clip = _limits(ch, cw)[:2]
     ok = xy >= 0
     ok &= xy <= last
     inside = ok[0] & ok[1]
@@ -144,17 +144,19 @@ def cells(xy: FloatArray, ch: int, cw: int) -> tuple[NDArray[np.intp], FloatArra
     return i00, xy[0], xy[1], inside
 
 
-_LIMITS: dict[tuple[int, int], tuple[FloatArray, FloatArray, NDArray[np.intp]]] = {}
+_LIMITS: dict[tuple[int, int], tuple[FloatArray, FloatArray, NDArray[np.intp], NDArray[np.intp]]] = {}
 
 
-def _limits(ch: int, cw: int) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]:
+def _limits(ch: int, cw: int) -> tuple[FloatArray, FloatArray, NDArray[np.intp], NDArray[np.intp]]:
     """For a patch of ``ch`` x ``cw`` px (made once for each size): its last column and row, the largest
-    coordinates sampled (just inside them), each as a column (x, y), and the flat offsets of a pixel's four
-    neighbours (:func:`neighbours`)."""
+    coordinates sampled (just inside them), each as a column (x, y), the flat offsets of a pixel's four
+    neighbours (:func:`neighbours`), and the same offsets in each of a :class:`Patch`'s three planes (shape
+    (4, 3, 1): a neighbour, then a plane)."""
     lim = _LIMITS.get((ch, cw))
     if lim is None:
-        lim = (np.array(((cw - 1.0,), (ch - 1.0,))), np.array(((cw - 1.000001,), (ch - 1.000001,))),
-               np.array(((0,), (1,), (cw,), (cw + 1,)), dtype=np.intp))
+        four = np.array(((0,), (cw,), (1,), (cw + 1,)), dtype=np.intp)
+        lim = (np.array(((cw - 1.0,), (ch - 1.0,))), np.array(((cw - 1.000001,), (ch - 1.000001,))), four,
+               four[:, None, :] + ch * cw * np.arange(3, dtype=np.intp)[None, :, None])
         for a in lim:
             a.flags.writeable = False
         if len(_LIMITS) >= _CACHED:
@@ -164,20 +166,25 @@ def _limits(ch: int, cw: int) -> tuple[FloatArray, FloatArray, NDArray[np.intp]]
 
 
 def neighbours(i00: NDArray[np.intp], ch: int, cw: int) -> NDArray[np.intp]:
-    """The flat indices of the four pixels around each point (up left, up right, down left, down right), one
-    row of points after the other (shape (4, m)), in a patch of ``ch`` x ``cw`` px."""
+    """The flat indices of the four pixels around each point (up left, down left, up right, down right), one
+    row of points after the other (shape (4, m)), in a patch of ``ch`` x ``cw`` px: the left pair and the
+    right pair each contiguous (:func:`bilinear`)."""
     return np.add(_limits(ch, cw)[2], i00)
 
 
 def bilinear(v: FloatArray, fx: FloatArray, fy: FloatArray) -> FloatArray:
-    """The bilinear interpolation of the four neighbours ``v`` (shape (..., 4, m), as :func:`neighbours` orders
-    them) at the fractions ``fx``, ``fy``: the top and bottom rows along x together, then along y."""
-    left, right = v[..., 0::2, :], v[..., 1::2, :]  # (up left, down left), (up right, down right)
-    tb = right - left
+    """The bilinear interpolation of the four neighbours ``v`` (shape (4, ..., m), as :func:`neighbours` orders
+    them) at the fractions ``fx``, ``fy``: the top and bottom rows along x together, then along y.
+
+    Every operand is a contiguous block (the left pair, the right pair, the top and bottom
+    rows): numpy's quick loops, the same arithmetic in the same order.
+    """
+    left = v[0:2]  # (up left, down left); v[2:4] the right ones
+    tb = v[2:4] - left
     tb *= fx
     tb += left
-    top, bottom = tb[..., 0, :], tb[..., 1, :]
-    out = bottom - top
+    top = tb[0]
+    out = tb[1] - top
     out *= fy
     out += top
     return out
@@ -186,7 +193,8 @@ def bilinear(v: FloatArray, fx: FloatArray, fy: FloatArray) -> FloatArray:
 def sample_xy(p: Patch, xy: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
     """:func:`sample` at the points ``xy`` (shape (2, m), px; overwritten)."""
     i00, fx, fy, inside = _corners(p, xy)
-    v = p.data.reshape(3, -1).take(neighbours(i00, *p.data.shape[1:]), axis=1)  # the four neighbours in one gather
+    # the four neighbours in the three planes in one gather, shape (4, 3, m)
+    v = p.data.reshape(-1).take(np.add(_limits(*p.data.shape[1:])[3], i00))
     return bilinear(v, fx, fy), inside
 
 
