@@ -249,7 +249,11 @@ def test_cropped_inverse_transform_is_scipys_bit_for_bit(rows: int, cols: int, s
     from stickslip.vision.template import _inverse
 
     rng = np.random.default_rng(rows * cols + start)
+    alone = []
     for scale in (1e-3, 1.0, 1e4):  # a region's transform times a kernel's, as the correlation makes them
         spectrum = fft.rfft2(rng.normal(0.0, scale, (rows, cols))) * fft.rfft2(rng.normal(size=(9, 9)), (rows, cols))
         got = _inverse(spectrum, (rows, cols), start)
         assert np.array_equal(got, fft.irfft2(spectrum, (rows, cols))[start:, start:])
+        alone.append((spectrum, got))
+    stacked = _inverse(np.stack([s for s, _ in alone]), (rows, cols), start)  # several in one call: each alone's
+    assert all(np.array_equal(stacked[i], got) for i, (_, got) in enumerate(alone))

@@ -489,10 +489,12 @@ def _inverse(spectrum: NDArray[np.complex128], shape: tuple[int, int], start: in
     C compiler's long double, one product per value). Here the same two passes, the rows before
     ``start`` dropped between them (the correlation keeps none of them), and the same scale
     after: the values the full transform gives the rows kept (``tests/test_vision_kernels.py``).
+    Several spectra stacked (shape (k, rows, columns // 2 + 1)) are inverted in one call each
+    pass, each the values it gives alone.
     """
     scale = float(np.longdouble(1.0) / np.longdouble(shape[0] * shape[1]))
-    cols = fft.ifft(spectrum, shape[0], axis=0, norm="forward", workers=1)[start:]
-    out: FloatArray = fft.irfft(cols, shape[1], axis=1, norm="forward", workers=1)[:, start:]
+    cols = fft.ifft(spectrum, shape[0], axis=-2, norm="forward", workers=1)[..., start:, :]
+    out: FloatArray = fft.irfft(cols, shape[1], axis=-1, norm="forward", workers=1)[..., start:]
     out *= scale
     return out
 
@@ -509,6 +511,24 @@ def _variance(fi: NDArray[np.complex128], fi2: NDArray[np.complex128], k: _Kerne
     np.subtract(b, var, out=var)
     np.maximum(var, 0.0, out=var)
     return var
+
+
+def _variance_and_sums(region: FloatArray, k: _KernelFFT, n: int, shape: tuple[int, int]
+                       ) -> tuple[FloatArray, FloatArray]:
+    """:func:`_variance` of ``region`` and its correlation with the template's centred weights (``sum w (T -
+    T_w) I``), the region's two transforms and the three inverse ones stacked: each the values it has made
+    alone (pocketfft transforms each line by itself), in fewer calls."""
+    f = fft.rfft2(np.stack((region, region * region)), workers=1)
+    prod = np.empty((3, *f.shape[1:]), dtype=f.dtype)
+    np.multiply(f, k.w, out=prod[:2])
+    np.multiply(f[0], k.wt, out=prod[2])
+    sums = _inverse(prod, shape, n - 1)
+    a = sums[0]
+    var: FloatArray = a * a
+    var /= k.sw
+    np.subtract(sums[1], var, out=var)
+    np.maximum(var, 0.0, out=var)
+    return var, sums[2]
 
 
 def masked_ncc(
@@ -535,17 +555,20 @@ def masked_ncc(
         k = _kernel_fft(template, weights, shape)
         if cache is not None:
             cache[ck] = k
-    fi, fi2 = region_spectra(region) if spectra is None else spectra
-    # the region's weighted variance under the window depends on the weights, not the template: templates with
-    # the same weights over the same spectra share it (the whole-frame search's blur copies)
-    shared = cache.get(_SHARED) if cache is not None and spectra is not None else None
-    if isinstance(shared, tuple) and shared[0] is spectra and shared[1] is weights and shared[2] == (n, rh, rw):
-        var: FloatArray = shared[3]
+    if spectra is None:  # the region's own: its two transforms and the three inverse ones each in one call
+        var, c = _variance_and_sums(region, k, n, shape)
     else:
-        var = _variance(fi, fi2, k, n, shape)
-        if cache is not None and spectra is not None:
-            cache[_SHARED] = (spectra, weights, (n, rh, rw), var)
-    c = _inverse(fi * k.wt, shape, n - 1)
+        fi, fi2 = spectra
+        # the region's weighted variance under the window depends on the weights, not the template: templates with
+        # the same weights over the same spectra share it (the whole-frame search's blur copies)
+        shared = cache.get(_SHARED) if cache is not None else None
+        if isinstance(shared, tuple) and shared[0] is spectra and shared[1] is weights and shared[2] == (n, rh, rw):
+            var = shared[3]
+        else:
+            var = _variance(fi, fi2, k, n, shape)
+            if cache is not None:
+                cache[_SHARED] = (spectra, weights, (n, rh, rw), var)
+        c = _inverse(fi * k.wt, shape, n - 1)
     # c over sqrt(var st2) where that is above 1e-9 of its largest (0 elsewhere), clipped to [-1, 1]; in place
     denom = var * k.st2
     np.sqrt(denom, out=denom)
