@@ -48,6 +48,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     got = [g for t, g in log.clocked if t == e.detected_at_s]
     clocked = (
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
+        + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
@@ -62,10 +63,14 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 
 
 #: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (the check before it
-#: read them in step), or first on the comb the window resolves (the default)
+#: read them in step); the default (read in step; a reference stop-like to the levels: no verdict); the latest
+#: stepping kept no longer than 10 s, 30 s or 120 s before the fire's own reference taken for it instead
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": ClockedParams(combs=(0.004,)),
     "default": ClockedParams(),
+    "kept10": ClockedParams(kept_age_s=10.0),
+    "kept30": ClockedParams(kept_age_s=30.0),
+    "kept120": ClockedParams(kept_age_s=120.0),
     "off": None,
 }
 
