@@ -71,6 +71,8 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "kept10": ClockedParams(kept_age_s=10.0),
     "kept30": ClockedParams(kept_age_s=30.0),
     "kept120": ClockedParams(kept_age_s=120.0),
+    "pieces": ClockedParams(window_pieces=4),
+    "kept30pieces": ClockedParams(kept_age_s=30.0, window_pieces=4),
     "off": None,
 }
 

@@ -158,6 +158,22 @@ def test_a_reference_stop_like_to_the_levels_is_replaced_by_the_stepping_kept() 
     assert off.kept == [] and off.judge(stop_after) is None  # none kept: a reference stop-like gives no verdict
 
 
+def test_a_longer_window_is_read_in_spans_and_the_median_kept() -> None:
+    """A 2 s window (a fire soon after a rejected one) read in four spans: a change on the lines in one span only (a
+    note on a line) gives the median of the four, near 0; the stop's signature in all four gives 1."""
+    chk = ClockedCheck(_Tuning(), ClockedParams(window_pieces=4))  # type: ignore[arg-type]
+    chk.hear_before(_scaled(_clicks(N, 30), (0.0, 0.0, 0.0)), np.full(120, -0.4))
+    steps = [_scaled(_clicks(N, 31 + k), (0.0, 0.0, 0.0)) for k in range(4)]
+    one = chk.judge(np.concatenate([_scaled(_clicks(N, 35), (0.0, 6.0, -4.0)), *steps[1:]]))
+    assert one is not None and abs(one.a) < 0.1 and not chk.verdict(one)
+    stop = chk.judge(np.concatenate([_scaled(_clicks(N, 36 + k), (0.0, 6.0, -4.0)) for k in range(4)]))
+    assert stop is not None and stop.a == pytest.approx(1.0, abs=0.05)
+    first = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    first.hear_before(_scaled(_clicks(N, 30), (0.0, 0.0, 0.0)), np.full(120, -0.4))
+    got = first.judge(np.concatenate([_scaled(_clicks(N, 35), (0.0, 6.0, -4.0)), *steps[1:]]))
+    assert got is not None and got.a == pytest.approx(1.0, abs=0.05)  # the default reads the first span only
+
+
 def test_the_verdict_vetoes_only_a_change_off_the_clock() -> None:
     chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
     assert chk.verdict(None) and chk.verdict(OnClock(math.nan, RATE, 0))

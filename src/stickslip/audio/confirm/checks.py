@@ -145,7 +145,8 @@ class WindowChecks:
         """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
         if self.clocked is None:
             return True
-        got = self.clocked.judge(self.after_fire(fire, min(self.span, frames * self._H)), self.pause.before_hz)
+        pieces = self.clocked.p.window_pieces
+        got = self.clocked.judge(self.after_fire(fire, min(pieces * self.span, frames * self._H)), self.pause.before_hz)
         if got is not None:
             log.clocked.append((ev.detected_at_s, got))
         return self.clocked.verdict(got)

@@ -108,6 +108,9 @@ class ClockedParams:
     kept_stoplike: float = param(
         0.1, "", "stepping is kept every span where at most this share of its frames was stop-like"
     )
+    window_pieces: int = param(
+        1, "spans", "a longer window is read in up to this many spans, the median a_L kept (1: its first span only)"
+    )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
 
@@ -293,7 +296,16 @@ class ClockedCheck:
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
+        n = ref.size
+        pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
+        got = [
+            lines_stop_likeness(ref, x, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
+            for x in pieces
+        ]
+        a, used = got[0]
+        finite = [g[0] for g in got if math.isfinite(g[0])]
+        if len(got) > 1 and finite:
+            a = float(np.median(finite))
         return OnClock(a, rate, used, self.ref_age_s)
 
     def verdict(self, got: OnClock | None) -> bool:
