@@ -20,7 +20,7 @@ rule (``ConfirmParams(clocked=None)``) and the check - hear the same samples:
 
 Run: ``.venv/bin/python benchmarks/bench_audio_clocked.py --minutes 10 --seeds 2``
 (several minutes on a shared machine). ``--present wide-comb`` takes for the present rule the
-check as it was before it read the lines in step (``ClockedParams(combs=(0.004,))``);
+check as it was before it read the lines in step (``combs=(0.004,)``, nothing kept, one span);
 ``--hour-only`` hears only the hour.
 """
 
@@ -171,5 +171,5 @@ if __name__ == "__main__":
     ap.add_argument("--hour-only", action="store_true", help="hear only the hour")
     a = ap.parse_args()
     if a.present == "wide-comb":
-        RULES["present"] = ConfirmParams(clocked=ClockedParams(combs=(0.004,)))
+        RULES["present"] = ConfirmParams(clocked=ClockedParams(combs=(0.004,), kept_age_s=0.0, window_pieces=1))
     main(a.minutes, a.seeds, tuple(int(x) for x in a.arms.split(",")), a.hour_only)

@@ -37,14 +37,24 @@ kept hold less than ``min_covered`` of the signature's sum of squares (one sub-b
 estimate is not the stop's signature), the rate is not known or is more than
 ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes elsewhere,
 and the tuned signature is not what the stop does on them), where more than
-``max_ref_stoplike`` of the reference's frames were already stop-like (a stop heard late
-began there: the reference is the stop, not stepping; with ``kept_age_s`` over 0 the latest
-stepping kept, a ``span_s`` of the stream at most ``kept_stoplike`` stop-like, no older than
-that, is the reference instead: off by default, as music on joint 3's few lines then passes
-other fires), or where less than ``min_s`` of
-stepping or ``min_after_s`` of the window was heard. The lines are immune to what is added
-between them, so the tuned signature is fitted as tuned (no masking). It runs once per fire
-that persisted, never per frame.
+``max_ref_stoplike`` of the reference's frames were already stop-like and no stepping is
+kept (a stop heard late began there: the reference is the stop, not stepping), or where less
+than ``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune
+to what is added between them, so the tuned signature is fitted as tuned (no masking). It
+runs once per fire that persisted, never per frame.
+
+**The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
+makes that reference stop-like too, and the check could not judge it. So every ``span_s``
+of the stream (counted from its start) whose frames were at most ``kept_stoplike``
+stop-like, every one heard, is kept, and where the fire's own reference is over
+``max_ref_stoplike`` stop-like the latest kept that ended no more than ``kept_age_s``
+before it is the reference instead (a stop heard late is then judged against the stepping
+before it).
+
+**A long window in spans.** A window that persisted over more than one span (2 s, after a
+rejected fire) is read in up to ``window_pieces`` spans against the reference, the median
+``a_L`` kept: a stop's lines stay changed while the joint steps into it, a note of music on a
+line moves on.
 """
 
 from __future__ import annotations
@@ -101,15 +111,13 @@ class ClockedParams:
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )
     kept_age_s: float = param(
-        0.0,
-        "s",
-        "a reference stop-like to the levels is replaced by stepping kept no longer ago; 0: none (off: see the log)",
+        30.0, "s", "a reference stop-like to the levels is replaced by stepping kept no longer ago (0: none kept)"
     )
     kept_stoplike: float = param(
         0.1, "", "stepping is kept every span where at most this share of its frames was stop-like"
     )
     window_pieces: int = param(
-        1, "spans", "a longer window is read in up to this many spans, the median a_L kept (1: its first span only)"
+        4, "spans", "a longer window is read in up to this many spans, the median a_L kept (music moves, a stop stays)"
     )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
