@@ -77,7 +77,7 @@ from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
 from stickslip.vision.template import TemplateError  # noqa: E402
-from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal  # noqa: E402
+from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal, _padded  # noqa: E402
 
 
 def tracking(n_frames: int) -> dict[str, float]:
@@ -216,12 +216,17 @@ def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
 
 def _in_reach(t: TipTracker, tip: tuple[float, float], w: int, h: int) -> bool:
     """Whether ``TipTracker._global``'s down-sampled correlation can put the template's apex at ``tip``: the
-    whole template in the frame (it slides only there), within half a coarse pixel."""
+    nearest coarse offset lies in its padded frame (the template hanging over the border until its tip lies on
+    the edge) with at least ``min_coverage`` of the template's weight inside."""
     f = t.params.coarse_factor
-    th, tw = t._coarse[0].shape
+    small, inside, pad = _padded(np.zeros((h, w)), f, t.template.half, {})
     ax, ay = t.template.apex
-    return (ax - f / 2 <= tip[0] <= (w // f - tw) * f + ax + f / 2
-            and ay - f / 2 <= tip[1] <= (h // f - th) * f + ay + f / 2)
+    j, i = int(round((tip[0] - ax) / f)) + pad, int(round((tip[1] - ay) / f)) + pad
+    n = t._coarse[0].shape[0]
+    if not (0 <= i <= small.shape[0] - n and 0 <= j <= small.shape[1] - n):
+        return False
+    cover = float((t._coarse_w * inside[i : i + n, j : j + n]).sum() / t._coarse_w.sum())
+    return cover >= t.params.min_coverage
 
 
 def refusals(n_frames: int) -> int:

@@ -28,6 +28,7 @@ def test_scaling_benchmark_runs_quick(capsys):
     series = [r for r in rows if "rows" in r]
     assert {r["command"] for r in series} == {"predict", "calibrate", "fit", "anova", "import"}
     assert all(r["exit"] == 0 and r["seconds"] > 0 and r["peak_mib"] > 0 for r in series)
-    assert all(math.isfinite(r["exponent"]) for r in rows if "exponent" in r)
+    grown = [r for r in rows if "exponent" in r]
+    assert [r["command"] for r in grown] == ["calibrate"] and all(math.isfinite(r["exponent"]) for r in grown)
     for what in ("growth exponent", "pandas read_csv", "statsmodels", "per-move quadrature", "start-up"):
         assert what in out

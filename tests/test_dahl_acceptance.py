@@ -34,18 +34,32 @@ def _errors(cal, ts):
     return np.array([cal.predict(t) / t.gamma - 1.0 for t in ts])
 
 
-def test_auto_never_predicts_held_out_poses_worse_than_the_papers_form(days):
-    # the rule itself: the model returned predicted the poses held out no worse than the paper's form did,
-    # in RMS and at its largest (or it is the paper's form, and says so)
+def test_auto_is_the_model_expected_to_err_less_at_new_poses_and_keeps_its_promise(days):
+    # the rule: auto returns the average unless its error expected at new poses (its residuals and its
+    # held-out errors, through the intervals' error model) is above the paper's form's; then the paper's
+    # form, and it says so
     for _, _, auto in days:
         for (j, d), sel in auto.selection.items():
-            scores = {s["family"]: s for s in sel["scores"]}
-            paper = min((s for lab, s in scores.items() if lab.partition("+")[0] == "paper" and s["cv_rms"]),
-                        key=lambda s: s["cv_rms"])
+            if "expected_rms" not in sel:  # nothing compared: the paper's form alone
+                assert sel["chosen"].startswith("paper") and not sel["fallback"], (j, d, sel["reason"])
+                continue
+            avg, paper = sel["expected_rms"]["average"], sel["expected_rms"]["paper"]
+            assert sel["fallback"] == (avg > paper), (j, d, sel["reason"])
             if sel["fallback"]:
                 assert sel["chosen"].startswith("paper") and "paper's form" in sel["reason"]
-                continue
-            assert sel["cv_rms"] <= paper["cv_rms"] + 1e-12, (j, d, sel["reason"])
+    # the promise, at the random validation poses: the model returned erred no more than the paper's form
+    # (least squares on the same traverses), and the paper's form erred about as expected. Measured on these
+    # days (no fallback): RMS 1.62 against 2.09 % prismatic, 0.55 against 0.57 % rotary; the form's expected
+    # error over its actual RMS 1.6 and 1.2
+    form = [calibrate(d.calibration46, method="lsq") for d, _, _ in days]
+    for j in (3, 2):
+        ts = [[t for t in d.validation if t.joint == j] for d, _, _ in days]
+        a = np.concatenate([_errors(auto, t) for (_, _, auto), t in zip(days, ts, strict=True)])
+        f = np.concatenate([_errors(c, t) for c, t in zip(form, ts, strict=True)])
+        assert np.sqrt(np.mean(a**2)) <= np.sqrt(np.mean(f**2)), j
+        promised = np.sqrt(np.mean([auto.selection[(j, s)]["expected_rms"]["paper"] ** 2
+                                    for _, _, auto in days for s in "+-"]))
+        assert 0.5 <= promised / np.sqrt(np.mean(f**2)) <= 2.0, (j, promised)
 
 
 def test_auto_predicts_new_poses_better_than_the_papers_procedure(days):

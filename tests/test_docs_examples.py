@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import subprocess
@@ -53,10 +54,35 @@ def _bash(lines: list[str], cwd: Path, env: dict[str, str], timeout: float = 600
 def test_every_docs_page_with_console_blocks_is_listed_here():
     """A new page with shell examples must be run by a test: this list names the pages that have them."""
     pages = sorted(p.name for p in DOCS.glob("*.md") if console_lines(p.read_text(encoding="utf-8")))
-    assert pages == sorted(RUN_PAGES), f"pages with console blocks: {pages}; run them in this module"
+    assert pages == sorted([*RUN_PAGES, *RUN_IN_README]), f"pages with console blocks: {pages}; run them in this module"
 
 
-RUN_PAGES = ["tutorial.md", "config.md", "vision.md", "rig.md"]  # config.md names its own $STICKSLIP_CONFIG
+RUN_PAGES = ["tutorial.md", "config.md", "rig.md"]  # config.md names its own $STICKSLIP_CONFIG
+RUN_IN_README = ["vision.md"]  # its one block is the README's camera block, which tests/test_readme.py runs
+
+
+def test_the_vision_page_runs_as_the_readme_camera_block(tmp_path):
+    """docs/vision.md's block is the README's camera block from a fresh folder: the README's first line only states
+    the simulator's default pose (the arm outstretched), so running the README's block runs the page's lines as
+    written (tests/test_readme.py, in a fresh database) instead of a second time here."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    page = console_lines((DOCS / "vision.md").read_text(encoding="utf-8"))
+    readme = _readme_block_after("### Seeing the tip")
+    assert len(page) == 1 and page[0][0].startswith(". .venv/bin/activate")
+    def command(line: str) -> str:  # the line without its comment (the two pages comment it differently)
+        return line.split("  #")[0].rstrip()
+
+    first, rest = command(readme[0]).split(), [command(ln) for ln in readme[1:]]
+    assert first[:4] == ["stickslip", "where", "-d", "sim://"]
+    assert [command(ln) for ln in page[0][1:]] == rest[: len(page[0]) - 1]
+    fresh = CliRunner().invoke(app, ["where", "-d", "sim://", "--db", str(tmp_path / "fresh.db"), "--json"])
+    assert fresh.exit_code == 0, fresh.output
+    default = {j["joint"]: j["q"] for j in json.loads(fresh.stdout)["joints"]}
+    assert first[4:] == ["--set", "1=0", "--set", "2=-90deg", "--set", "3=0", "--theta", "0", "--psi", "0"]
+    assert default == {1: 0.0, 2: -math.pi / 2, 3: 0.0}
 
 
 @POSIX

@@ -145,25 +145,25 @@ def test_error_model_floor_and_slope():
     assert sel_mod.error_model(0.001 * e, d, r)[1] == 0.0  # held-out errors below the residuals: no growth
 
 
-def _fake_fit(label: str, n: int = 6) -> JointFit:
+def _fake_fit(label: str, n: int = 6, residual: float = 0.01) -> JointFit:
     spec = F.family_spec(3, label.partition("+")[0])
     z = np.zeros(spec.n_params)
-    return JointFit(spec, 3, (), {"+": z}, {"+": None}, {"+": np.full(n, 0.01)}, True, z, 1e-4)
+    return JointFit(spec, 3, (), {"+": z}, {"+": None}, {"+": np.full(n, residual)}, True, z, 1e-4)
 
 
-def _evidence(cv_errors):
+def _evidence(cv_errors, residuals=(0.01, 0.01)):
     from types import SimpleNamespace
 
     ev = sel_mod._Evidence.__new__(sel_mod._Evidence)
-    ev.data = SimpleNamespace(joint=3, n_poses=6, dirs=("+",), n_rows=lambda: 6)
-    ev.n_folds, ev.ids, ev.row_dist = 6, np.arange(6), np.ones(6)
-    ev.fits = {"paper": _fake_fit("paper"), "load2": _fake_fit("load2")}
+    ev.data = SimpleNamespace(joint=3, n_poses=6, dirs=("+",), n_rows=lambda: 6, coords=np.eye(6, 4))
+    ev.n_folds, ev.ids, ev.row_dist, ev._ws_d4 = 6, np.arange(6), np.ones(6), None
+    ev.fits = {"paper": _fake_fit("paper", residual=residuals[0]), "load2": _fake_fit("load2", residual=residuals[1])}
     ev.scores = [sel_mod.CVScore(lab, 3, "ok", 0.0, 0.0, 0.0) for lab in ev.fits]
     ev.cv_errors = cv_errors
     return ev
 
 
-def test_the_average_falls_back_to_the_papers_form_when_it_predicts_held_out_poses_worse():
+def test_the_average_falls_back_to_the_papers_form_when_it_is_expected_to_err_more():
     paper = np.array([0.02, -0.01, 0.015, -0.02, 0.01, 0.012])
     good_in_most = np.array([0.001, -0.001, 0.002, -0.001, 0.001, 0.09])  # one fold badly wrong
     out = sel_mod._decide(_evidence({"paper": paper, "load2": good_in_most}), True)
@@ -171,6 +171,33 @@ def test_the_average_falls_back_to_the_papers_form_when_it_predicts_held_out_pos
     # the same families where the other is better everywhere: no fallback
     out = sel_mod._decide(_evidence({"paper": paper, "load2": 0.3 * paper}), True)
     assert not out.fallback and out.fit.spec.name == "load2"
+
+
+def test_the_fallback_compares_the_errors_expected_at_new_poses():
+    from scipy.stats import t as student
+
+    from stickslip.calibration.folds import workspace_coordinates
+
+    paper = np.array([0.02, -0.01, 0.015, -0.02, 0.01, 0.012])
+    one_bad_fold = np.array([0.001, -0.001, 0.002, -0.001, 0.001, 0.03])  # its largest above the paper's
+    ev = _evidence({"paper": paper, "load2": one_bad_fold}, residuals=(0.02, 0.005))
+    out = sel_mod._decide(ev, True)
+    # one held-out pose's error is not the error at new poses: the family that fits 4x closer stays
+    assert not out.fallback and out.fit.spec.name == "load2"
+    # each expected error: floor^2 + slope^2 mean(d^4) over the workspace poses' distances to the calibrated
+    # ones, Student's t for 6 held-out traverses (what the intervals' error model gives there)
+    t2 = (student.ppf(0.975, 5) / 1.959963984540054) ** 2
+    d4 = np.mean(groups_mod.nearest(workspace_coordinates(3), np.eye(6, 4))[0] ** 4)
+
+    def expected(e, r):
+        return math.sqrt(t2 * (r**2 + max(0.0, np.mean(e**2) - r**2) * d4))
+
+    assert out.compared[1] == pytest.approx(expected(paper, 0.02), rel=1e-12)
+    # the average's: its honest held-out errors (each fold's weights without it) and its residuals
+    w = {lab: wt for lab, (wt, _) in out.mixture.items()}
+    assert 0 < w["paper"] < 1
+    r_mix = w["paper"] * 0.02 + w["load2"] * 0.005
+    assert out.compared[0] == pytest.approx(expected(out.cv_errors, r_mix), rel=1e-12)
 
 
 def test_intervals_grow_away_from_the_calibrated_poses_and_the_filter_uses_them(tmp_path):

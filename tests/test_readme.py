@@ -65,7 +65,8 @@ def test_tour_runs_literally_in_a_shell(tour_dir):
 
 @pytest.mark.skipif(sys.platform == "win32", reason="the tour is a POSIX shell session (bash)")
 def test_camera_block_runs_after_the_tour(tour_dir):
-    """The README's camera block, as written, in the tour's folder (after the tour, or on the paper's table)."""
+    """The README's camera block, as written, in the tour's folder (after the tour, or on the paper's table), in a
+    fresh database; its lines from the second on are docs/vision.md's block (test_docs_examples checks they match)."""
     venv = Path(sys.prefix)
     if not (venv / "bin" / "stickslip").exists():
         pytest.skip("not running inside the project's virtual environment (make test builds it)")

@@ -12,11 +12,13 @@ With ``auto`` the families are averaged with pseudo-BMA+ weights from those held
 (:func:`averaging_weights`), with a prior that puts half the weight on the paper's form
 (:data:`PAPER_PRIOR`): where the held-out poses cannot tell the families apart, the
 average stays near the paper's model. The average's own held-out error is measured
-honestly (the weights used for a fold are computed without it), and if it is larger than
-the paper's form's, in RMS or at its largest, the calibration falls back to the paper's
-form and says so. The error model of the intervals (:func:`error_model`) comes from the
-residuals of the model returned and its held-out errors against their distance from the
-poses kept; ``sigma_model`` is that error's RMS over new poses of the workspace.
+honestly (the weights used for a fold are computed without it); from it and the average's
+residuals, its error model gives the error expected at new poses of the workspace, and if
+that is larger than the paper's form's (from the form's own residuals and held-out errors),
+the calibration falls back to the paper's form and says so. The error model of the
+intervals (:func:`error_model`) comes from the residuals of the model returned and its
+held-out errors against their distance from the poses kept; ``sigma_model`` is that
+error's RMS over new poses of the workspace.
 
 Asked for one family, that one is fitted and cross-validated the same way. A joint and
 direction with too few poses for any family beyond the constant step falls back to it:
@@ -155,7 +157,8 @@ class JointSelection:
         Held-out relative errors of the model returned (every traverse of a region left out;
         empty when not cross-validated).
     fallback : bool
-        Whether the average predicted held-out regions worse than the paper's form, which is returned.
+        Whether the average was expected to err more at new poses than the paper's form, which is
+        returned (:meth:`_Evidence.expected`).
     n_folds : int
         Folds left out in turn (0: not cross-validated).
     floor, slope : float
@@ -166,6 +169,9 @@ class JointSelection:
         (load coordinates, 1), in the order of ``cv_errors``.
     sample : int
         Traverses the choice was made on when that was a sample (0: all of them).
+    compared : tuple of float
+        The RMS relative errors the average and the paper's form were expected to make at new
+        poses of the workspace when ``auto`` compared them (``nan`` when it did not).
     """
 
     fit: JointFit
@@ -179,6 +185,7 @@ class JointSelection:
     slope: float = math.nan
     cv_distance: NDArray[np.float64] = field(default_factory=lambda: np.empty(0))
     sample: int = 0
+    compared: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def cv_rms(self) -> float:
@@ -347,7 +354,7 @@ def select_joint(
     ``candidates`` names families, ``"name+shared"`` for the shared variant. With ``average``
     (the default when no candidates are named) the families are averaged with
     :func:`averaging_weights` and the paper's form as the prior's favourite; the average
-    is replaced by the paper's form when it predicts held-out poses worse.
+    is replaced by the paper's form when it is expected to err more at new poses.
     """
     if average is None:
         average = candidates is None
@@ -399,6 +406,7 @@ class _Evidence:
         self.scores: list[CVScore] = []
         self.fits: dict[str, JointFit] = {}
         self.cv_errors: dict[str, NDArray[np.float64]] = {}
+        self._ws_d4: float | None = None
 
     def score(self, spec: FamilySpec, sh: tuple[str, ...], strict: bool,
               known: dict[tuple[str, str, float | None], float]) -> JointFit | None:
@@ -437,15 +445,26 @@ class _Evidence:
         return sum((w * np.concatenate(list(self.fits[lab].residuals.values())) for lab, w in mix.items()),
                    np.zeros(self.data.n_rows()))
 
+    def expected(self, mix: Mapping[str, float], e: NDArray[np.float64]) -> float:
+        """The RMS relative error the mixture ``mix`` (held-out errors ``e``) is expected to make at new poses
+        of the workspace: its :func:`error_model` (in-sample floor, growth from the held-out errors) at each
+        workspace pose's distance to the nearest calibrated pose (docs/models.md §3)."""
+        if self._ws_d4 is None:
+            d = nearest(workspace_coordinates(self.data.joint), self.data.coords)[0]
+            self._ws_d4 = float(np.mean(d ** (2 * GROWTH)))
+        floor, slope = error_model(e, self.row_dist, self.residuals(mix))
+        return math.sqrt(floor**2 + slope**2 * self._ws_d4)
+
     def chosen(self, mix: dict[str, float], e: NDArray[np.float64], reason: str,
-               fallback: bool = False) -> JointSelection:
-        """The selection of the mixture ``mix`` (one family: weight 1) whose held-out errors are ``e``."""
+               fallback: bool = False, expected: tuple[float, float] = (math.nan, math.nan)) -> JointSelection:
+        """The selection of the mixture ``mix`` (one family: weight 1) whose held-out errors are ``e``
+        (``expected``: the average's and the paper's form's expected errors at new poses, when compared)."""
         floor, slope = error_model(e, self.row_dist, self.residuals(mix))
         top = max(mix, key=lambda k: mix[k])
         members = {lab: (w, self.fits[lab]) for lab, w in mix.items()} if len(mix) > 1 else {}
         scores = [dataclasses.replace(sc, weight=mix.get(sc.family, 0.0)) for sc in self.scores]
         return JointSelection(self.fits[top], scores, reason, members, e, fallback, self.n_folds, floor, slope,
-                              self.row_dist)
+                              self.row_dist, compared=expected)
 
 
 def _select_on_sample(
@@ -479,7 +498,7 @@ def _select_on_sample(
 
 
 def _decide(ev: _Evidence, average: bool) -> JointSelection:
-    """The average (or the paper's form where it predicted held-out poses worse), the best family, or
+    """The average (or the paper's form where it is expected to err more at new poses), the best family, or
     without cross-validation the simplest one that fits."""
     where = f"{ev.n_folds} folds of {ev.data.n_poses} poses"
     cv = ev.cv_errors
@@ -499,7 +518,7 @@ def _decide(ev: _Evidence, average: bool) -> JointSelection:
 
 
 def _average(ev: _Evidence, where: str) -> JointSelection:
-    """The families averaged, unless the average predicted held-out poses worse than the paper's form."""
+    """The families averaged, unless the average's expected error at new poses is above the paper's form's."""
     cv = ev.cv_errors
     prior = _paper_prior(list(cv))
     mix = averaging_weights(cv, ev.ids, prior=prior)
@@ -508,23 +527,27 @@ def _average(ev: _Evidence, where: str) -> JointSelection:
     paper = min((lab for lab in cv if lab.partition("+")[0] == "paper"), key=lambda lab: _stats(cv[lab])[0],
                 default=None)
     if paper is not None and set(mix) != {paper}:
-        p_rms, p_max = _stats(cv[paper])
-        if m_rms > p_rms or m_max > p_max:
+        m_new, p_new = ev.expected(mix, honest), ev.expected({paper: 1.0}, cv[paper])
+        if m_new > p_new:
             return ev.chosen({paper: 1.0}, cv[paper], (
-                f"the paper's form: the average of the families predicted held-out poses worse "
-                f"(RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} %) than the paper's form alone "
-                f"(RMS {p_rms * 100:.2g} %, max {p_max * 100:.2g} %; {where})"
-            ), fallback=True)
+                f"the paper's form: the average of the families is expected to err more at new poses "
+                f"(RMS {m_new * 100:.2g} % against {p_new * 100:.2g} %, from each one's residuals and "
+                f"held-out errors; CV RMS {m_rms * 100:.2g} % against {_stats(cv[paper])[0] * 100:.2g} %, "
+                f"{where})"
+            ), fallback=True, expected=(m_new, p_new))
+        expected: tuple[float, float] = (m_new, p_new)
+    else:
+        expected = (math.nan, math.nan)
     if len(mix) == 1:
         top = next(iter(mix))
         return ev.chosen(mix, honest, f"{top}: the held-out poses weigh it alone (pseudo-BMA+); CV of the "
-                         f"procedure: RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})")
+                         f"procedure: RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})", expected=expected)
     parts = ", ".join(f"{lab} {w:.2f}" for lab, w in sorted(mix.items(), key=lambda kv: -kv[1]))
     return ev.chosen(mix, honest, (
         f"average of {len(mix)} families weighted by how they predicted held-out poses "
         f"(pseudo-BMA+, half the prior on the paper's form: {parts}); CV of the average: "
         f"RMS {m_rms * 100:.2g} %, max {m_max * 100:.2g} % ({where})"
-    ))
+    ), expected=expected)
 
 
 # ----------------------------------------------------------------------------- calibration
@@ -638,6 +661,8 @@ class _Parts:
                 "folds": sel.n_folds,
                 "cv_rms": sel.cv_rms if math.isfinite(sel.cv_rms) else None,
             }
+            if all(math.isfinite(v) for v in sel.compared):
+                self.selection[(j, d)]["expected_rms"] = {"average": sel.compared[0], "paper": sel.compared[1]}
         self.notes.append(f"joint {j}: family {fit.label} — {sel.reason}")
 
 

@@ -154,7 +154,8 @@ def calibrate_cmd(
             help="auto | paper | a family name (docs/models.md). 'auto': the paper's procedure where a joint's "
             "traverses are exactly the paper's poses, else every model family the data identify, averaged "
             "with weights from cross-validation on held-out poses (pseudo-BMA+, leaning to the paper's form), "
-            "or the paper's form where the average predicted held-out poses worse. 'paper': the paper's models "
+            "or the paper's form where the average is expected to err more at new poses. 'paper': the paper's "
+            "models "
             "only (also what 'auto' means "
             "with a --method other than auto).",
         ),
@@ -201,8 +202,8 @@ def calibrate_cmd(
     identify is fitted and cross-validated on held-out poses (folds as far from the rest
     as new poses of the workspace are from the calibration's), and the prediction averages
     them, each weighted by how well it predicted the poses held out (pseudo-BMA+, half the
-    prior on the paper's form); where that average predicts held-out poses worse than the
-    paper's form, the paper's form is used and the note says so. The table gives each
+    prior on the paper's form); where that average is expected to err more at new poses
+    than the paper's form, the paper's form is used and the note says so. The table gives each
     family's parameter count (+ and - together), CV error and weight, and ◀ marks the one
     whose parameters are shown; below it, the error to expect at new poses (what
     predict --interval and plan use). With --prior, an earlier calibration is brought up to

@@ -15,7 +15,8 @@ and weighs each of its pixels by how much it belongs to the needle (docs/vision.
 The template is kept with extra blur (a bank of Gaussian blurs, :attr:`TrackerParams.blur_bank`):
 a tip that drifts out of focus is matched against the template blurred alike.
 :func:`masked_ncc` is the weighted normalised cross-correlation of the template over a
-region of a frame, by FFT.
+region of a frame, by FFT; :func:`inside_ncc` the same where the template may hang over the
+frame's border, the part outside left out of the sums.
 """
 
 from __future__ import annotations
@@ -27,7 +28,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import fft, ndimage
 
-__all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "region_spectra", "noise_sigma"]
+__all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "inside_ncc", "region_spectra",
+           "noise_sigma"]
 
 FloatArray = NDArray[np.float64]
 
@@ -58,7 +60,8 @@ class TrackerParams:
     search_radius : int
         How far from the last fix the tip is looked for before the whole frame is, px.
     coarse_factor : int
-        Down-sampling of the whole-frame search, 1.
+        Down-sampling of the whole-frame search, 1 (the down-sampled frame is padded so the
+        template may hang over its border until the tip lies on the edge).
     candidates : int
         Peaks of the whole-frame search refined before giving up, 1.
     min_score : float
@@ -73,7 +76,7 @@ class TrackerParams:
         the field, px: a tip just beyond the edge looks like one on it.
     min_coverage : float
         Least share of the template's weight that must lie in the frame, 1 (below: out of
-        the field).
+        the field); the whole-frame search does not look where less lies in it.
     occluded_fraction : float
         Largest share of the template's weight that may disagree with the frame, 1
         (above: something covers the tip).
@@ -551,3 +554,97 @@ def masked_ncc(
     np.divide(c, denom, out=out, where=denom > 1e-9 * max(scale, 1e-300))
     np.maximum(out, -1.0, out=out)
     return np.minimum(out, 1.0, out=out)
+
+
+@dataclass
+class _InsideKernels:
+    """The transforms of a template's weights ``w``, of ``w tc`` and of ``w tc²`` (``tc`` the template less its
+    weighted mean) at one region size, and the weights' sum."""
+
+    w: NDArray[np.complex128]
+    wt: NDArray[np.complex128]
+    wt2: NDArray[np.complex128]
+    sw: float
+
+
+def _inside_kernels(t: FloatArray, w: FloatArray, shape: tuple[int, int]) -> _InsideKernels:
+    sw = float(w.sum())
+    tc = t - float((w * t).sum() / sw)
+    spectra = [fft.rfft2(a[::-1, ::-1], shape, workers=1) for a in (w, w * tc, w * tc * tc)]
+    return _InsideKernels(spectra[0], spectra[1], spectra[2], sw)
+
+
+_SHARED_INSIDE = ("shared inside sums",)
+"""The key under which :func:`inside_ncc` keeps the region's sums it made from given spectra."""
+
+
+def inside_ncc(
+    region: FloatArray, inside: FloatArray, template: FloatArray, weights: FloatArray,
+    cache: dict[object, object] | None = None, key: object = None,
+    spectra: tuple[NDArray[np.complex128], NDArray[np.complex128]] | None = None, least: float = 0.0,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`masked_ncc` over the pixels of ``region`` that lie in the frame (``inside`` 1, else 0), and the
+    share of the template's weight there at each offset.
+
+    ``region`` is 0 outside the frame (a frame padded with zeros): at offset ``(i, j)`` the
+    weights are ``weights · inside[i:i+n, j:j+n]``, so the template's weighted mean and
+    spread, as the frame's, are taken over the part of it inside; a template hanging over
+    the border is compared with what the frame shows of it (masked normalised
+    cross-correlation). Every sum is a correlation with ``inside`` or with the region: six
+    transforms in all, three of them (``inside`` against ``w``, ``w tc``, ``w tc²``)
+    the same for every frame of a size, kept in ``cache`` with the ``inside`` they were
+    made for (``inside`` not changed in place between calls). Offsets where less than
+    ``least`` of the weight lies inside get 0. All inside, the values are
+    :func:`masked_ncc`'s to rounding.
+
+    Returns
+    -------
+    ncc, coverage : ndarray
+        The correlation in [-1, 1] and the share of the weight inside (0..1), each of
+        ``(rh - n + 1, rw - n + 1)`` offsets.
+    """
+    n = template.shape[0]
+    rh, rw = region.shape
+    shape = (rh, rw)
+    ck = (key, rh, rw, "inside")
+    k = cache.get(ck) if cache is not None else None
+    if not isinstance(k, _InsideKernels):
+        k = _inside_kernels(template, weights, shape)
+        if cache is not None:
+            cache[ck] = k
+    # the template's sums over the part inside: kept with the inside they were made for (one per key)
+    tk = (key, rh, rw, "inside terms")
+    kept = cache.get(tk) if cache is not None else None
+    if isinstance(kept, tuple) and (kept[0] is inside or np.array_equal(kept[1], inside)):
+        inv_m0, ratio, vt, coverage = kept[2:]
+    else:
+        fm = fft.rfft2(inside, workers=1)
+        m0, m1, m2 = (_inverse(fm * s, shape, n - 1) for s in (k.w, k.wt, k.wt2))
+        inv_m0 = 1.0 / np.maximum(m0, 1e-300)
+        ratio = m1 * inv_m0  # the template's weighted mean over the part inside (less its mean over all)
+        vt = np.maximum(m2 - m1 * ratio, 0.0)
+        coverage = np.clip(m0 / k.sw, 0.0, 1.0)
+        if cache is not None:
+            cache[tk] = (inside, inside.copy(), inv_m0, ratio, vt, coverage)
+    fi, fi2 = region_spectra(region) if spectra is None else spectra
+    shared = cache.get(_SHARED_INSIDE) if cache is not None and spectra is not None else None
+    if (isinstance(shared, tuple) and shared[0] is spectra and shared[1] is weights and shared[5] is inside
+            and shared[2] == (n, rh, rw)):
+        a, var = shared[3], shared[4]
+    else:
+        a = _inverse(fi * k.w, shape, n - 1)  # the sum of w I over the part inside (I is 0 outside)
+        var = _inverse(fi2 * k.w, shape, n - 1)
+        var -= a * a * inv_m0
+        np.maximum(var, 0.0, out=var)
+        if cache is not None and spectra is not None:
+            cache[_SHARED_INSIDE] = (spectra, weights, (n, rh, rw), a, var, inside)
+    cov = _inverse(fi * k.wt, shape, n - 1)
+    cov -= a * ratio
+    denom = var * vt
+    np.sqrt(denom, out=denom)
+    scale = float(denom.max()) if denom.size else 0.0
+    out = np.zeros(denom.shape)
+    ok = (denom > 1e-9 * max(scale, 1e-300)) & (coverage >= max(least, 1e-9))
+    np.divide(cov, denom, out=out, where=ok)
+    np.clip(out, -1.0, 1.0, out=out)
+    return out, coverage

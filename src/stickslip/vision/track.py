@@ -37,7 +37,10 @@
    fix is refused (*lost*): nothing vouches that the end seen is the tip;
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
-   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`;
+   and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`; the
+   frame is padded so the template may hang over its border until its tip lies on the edge,
+   the part outside left out of the correlation (:func:`~.template.inside_ncc`): a tip near
+   the edge is found again as one in the middle is;
    not when the fit near the last fix was refused while its edges hold (the tip is
    there, only not vouched for).
 
@@ -52,13 +55,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.fft import next_fast_len
 
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
 from .refine import Refinement, refine, steepest, warped
 from .sampling import Patch, median, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
-from .template import TemplateError, TipTemplate, TrackerParams, masked_ncc, region_spectra
+from .template import TemplateError, TipTemplate, TrackerParams, inside_ncc, masked_ncc, region_spectra
 from .width import WidthCheck, WidthStations, check_width, learn_width
 
 __all__ = [
@@ -183,8 +187,14 @@ def _local_max(a: FloatArray, r: int) -> FloatArray:
 def _peaks(ncc: FloatArray, floor: float, k: int) -> list[tuple[float, int, int, int]]:
     """``(value, row, column, k)`` of each pixel of ``ncc`` above ``floor`` that is the largest within 2 px (a
     5 x 5 square), row by row."""
-    ii, jj = np.nonzero((ncc == _local_max(ncc, 2)) & (ncc > floor))
+    ii, jj = _peak_cells(ncc, floor)
     return list(zip(ncc[ii, jj].tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
+
+
+def _peak_cells(ncc: FloatArray, floor: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """The rows and columns of :func:`_peaks`: the pixels above ``floor``, each the largest within 2 px."""
+    ii, jj = np.nonzero((ncc == _local_max(ncc, 2)) & (ncc > floor))
+    return ii, jj
 
 
 def _region(image: FloatArray, h: int, cx: float, cy: float, radius: int) -> tuple[FloatArray, int, int]:
@@ -202,6 +212,56 @@ def _region(image: FloatArray, h: int, cx: float, cy: float, radius: int) -> tup
     if ye > ys and xe > xs:
         out[ys - y0 : ye - y0, xs - x0 : xe - x0] = image[ys:ye, xs:xe]
     return out, x0, y0
+
+
+def _padded(image: FloatArray, f: int, half: int, cache: dict[object, object]
+            ) -> tuple[FloatArray, FloatArray, int]:
+    """The frame down-sampled by ``f``, padded with zeros by ``pad`` cells each side (and below and to the right
+    to a size the FFT is quick at), which of its cells lie in the frame (kept in ``cache``), and ``pad``: the
+    coarse template's window (half-width ``half`` px) may start ``pad`` cells before the frame, where its tip
+    lies on the edge; the whole-frame search then reaches a tip anywhere in the frame."""
+    small = _downsample(image, f)
+    pad = -(-(half + 1) // f)  # the tip lies half + 1/2 px or less from the window's edge
+    hs, ws = small.shape
+    shape = (next_fast_len(hs + 2 * pad, real=True), next_fast_len(ws + 2 * pad, real=True))
+    out = np.zeros(shape)
+    out[pad : pad + hs, pad : pad + ws] = small
+    inside = cache.get(("inside", shape, hs, ws))
+    if not isinstance(inside, np.ndarray):
+        inside = np.zeros(shape)
+        inside[pad : pad + hs, pad : pad + ws] = 1.0
+        cache[("inside", shape, hs, ws)] = inside
+    return out, inside, pad
+
+
+def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int, int, int]]:
+    """:func:`_peaks` of the whole-frame correlation ``ncc`` of copy ``k``, each ranked by its significance:
+    Fisher's ``atanh(r)`` times the square root of the share ``cover`` of the template's weight inside the frame.
+
+    Over ``N`` pixels where nothing matches, ``atanh(r)`` spreads by about ``1 / sqrt(N)``: a part of the
+    template matches junk by chance better than the whole does, and a peak at the border would otherwise crowd
+    out the tip in the middle. Where all the weight lies in the frame the order is the correlation's own.
+    """
+    ii, jj = _peak_cells(ncc, 0.3)
+    z = np.arctanh(np.minimum(ncc[ii, jj], 1.0 - 1e-12)) * np.sqrt(np.minimum(cover[ii, jj], 1.0))
+    return list(zip(z.tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
+
+
+def _look(image: FloatArray, t: TipTemplate, p: TrackerParams, cache: dict[object, object], x: float, y: float,
+          k: int) -> tuple[FloatArray, int, int]:
+    """The correlation of blur copy ``k`` at whole pixels within ``2 coarse_factor`` of ``(x, y)`` and the
+    region's top-left corner (px): where the region leaves the frame, over the part inside
+    (:func:`~.template.inside_ncc`)."""
+    region, rx0, ry0 = _region(image, t.half, x, y, 2 * p.coarse_factor)
+    H, W = image.shape
+    n = region.shape[0]
+    if rx0 >= 0 and ry0 >= 0 and rx0 + n <= W and ry0 + n <= H:
+        return masked_ncc(region, t.bank[k], t.level_weights[k], cache, ("local", k)), rx0, ry0
+    yy, xx = np.arange(ry0, ry0 + n), np.arange(rx0, rx0 + n)
+    inside = (((yy >= 0) & (yy < H))[:, None] & ((xx >= 0) & (xx < W))[None, :]).astype(float)
+    ncc, _ = inside_ncc(region * inside, inside, t.bank[k], t.level_weights[k], cache, ("look", k),
+                        least=p.min_coverage)
+    return ncc, rx0, ry0
 
 
 def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
@@ -482,40 +542,36 @@ class TipTracker:
         return self._try(image, x, y, self._theta, self._level)
 
     def _global(self, image: FloatArray) -> list[_Candidate | None]:
-        p = self.params
+        """Candidates from the whole frame (:func:`_padded`, :func:`_ranked`): the best few peaks of the
+        down-sampled correlation, each looked at in full resolution (:func:`_look`) and fitted."""
+        p, t = self.params, self.template
         f = p.coarse_factor
-        small = _downsample(image, f)
+        small, inside, pad = _padded(image, f, t.half, self._fft)
         best: list[tuple[float, int, int, int]] = []
         spectra = region_spectra(small)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
-            tpl = self._coarse[k]
-            if small.shape[0] < tpl.shape[0] or small.shape[1] < tpl.shape[1]:
-                continue
-            ncc = masked_ncc(small, tpl, self._coarse_w, self._fft, ("coarse", k), spectra)
-            best += _peaks(ncc, 0.3, k)
+            best += _ranked(*inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
+                                        spectra, p.min_coverage), k)
         best.sort(reverse=True)
         out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
-        t = self.template
-        for _s, i, j, _k in best:
+        for _s, i, j, k in best:
             if len(out) >= p.candidates:
                 break
-            x = j * f + t.apex[0]
-            y = i * f + t.apex[1]
+            x, y = (j - pad) * f + t.apex[0], (i - pad) * f + t.apex[1]
             if any(math.hypot(x - a, y - b) < 2 * f for a, b in seen):
                 continue
             seen.append((x, y))
             # a full-resolution look around the coarse peak, then the fit
-            region, rx0, ry0 = _region(image, self.template.half, x, y, 2 * f)
-            ncc = masked_ncc(region, t.bank[_k], t.level_weights[_k], self._fft, ("local", _k))
+            ncc, rx0, ry0 = _look(image, t, p, self._fft, x, y, k)
             i2, j2 = (int(v) for v in np.unravel_index(int(np.argmax(ncc)), ncc.shape))
             if ncc[i2, j2] < p.reacquire_ncc:  # too unlike the tip to be found again: not worth a fit
                 out.append(None)
                 continue
             # a tip found again must correlate by reacquire_score: a fit far below is not worth the copies' comparison
-            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, _k,
+            out.append(self._try(image, rx0 + j2 + t.apex[0], ry0 + i2 + t.apex[1], 0.0, k,
                                  p.reacquire_score - 0.1))
         return out
 

@@ -78,6 +78,26 @@ class Release:
         n = len(self._flags) - self._start
         return n >= self.frames and self.count >= self.share * n
 
+    def push_many(self, stepping: NDArray[np.bool_], rows: FloatArray, armed: bool = True) -> int | None:
+        """:meth:`push` of each frame in turn (``rows[i]`` its levels), stopping after the first that fills the window.
+
+        The index of that frame, or None (all pushed); with ``armed`` False all are pushed
+        and None is returned. The window's counts come from one cumulative sum.
+        """
+        prior = self._flags[self._start :]
+        m, frames = len(prior), self.frames
+        csum = np.concatenate(([0], np.cumsum(np.concatenate((np.asarray(prior, dtype=bool), stepping)))))
+        pos = m + np.arange(1, len(stepping) + 1)  # frames in the lists once frame i is pushed
+        n = np.minimum(pos, frames)
+        full = (n >= frames) & (csum[pos] - csum[pos - n] >= self.share * n)
+        hit = np.flatnonzero(full) if armed else np.empty(0, dtype=np.intp)
+        upto = int(hit[0]) + 1 if hit.size else len(stepping)
+        keep = min(m + upto, frames)
+        flags = [*prior, *stepping[:upto].tolist()][-keep:]
+        self._rows = [*self._rows[self._start :], *rows[max(0, upto - keep) : upto]][-keep:]
+        self._flags, self._start, self.count = flags, 0, sum(flags)
+        return upto - 1 if hit.size else None
+
     def stepping_rows(self) -> list[FloatArray]:
         """The levels of the window's frames that sounded like stepping (those pushed with a row)."""
         return [
@@ -117,10 +137,27 @@ class StopRelease:
         it are heard with the template learned anew.
         """
         d = v - template
-        for k in range(v.shape[0]):
+        n, k = v.shape[0], 0
+        while self._stop_e is None and k < n:  # frames that still teach the stop's own departure
             if self.frame(d[k], v[k], held):
                 return k
-        return None
+            k += 1
+        # the stop's departure known: the rest judged at once, as stepping_again and frame would one by one
+        first = k + max(0, self.min_latch - self.latched_frames)  # the first frame counted in the window
+        if first >= n:
+            self.latched_frames += n - k
+            return None
+        stepping = self._stepping(d[first:])
+        hit = self.window.push_many(stepping, v[first:], armed=not held)
+        end = n if hit is None else first + hit + 1
+        self.latched_frames += end - k
+        return None if hit is None else first + hit
+
+    def _stepping(self, d: FloatArray) -> NDArray[np.bool_]:
+        """:meth:`stepping_again` of each row of ``d`` once the stop's own departure is known."""
+        assert self._stop_e is not None
+        like = (np.sum(d * self._stop_e, axis=-1) < self.p.c) & (np.median(d, axis=-1) > -self.p.silent_db)
+        return np.asarray(like, dtype=np.bool_)
 
     def stepping_again(self, d: FloatArray) -> bool:
         """Whether a latched frame (its departure ``d`` from the frozen template, dB) sounds like stepping again.
@@ -141,4 +178,4 @@ class StopRelease:
                 e = self.delta
             # weighted, and scaled so that the projection of the stop's own departure is 1
             self._stop_e = e * w / max(float((e * w) @ e), 1e-12)
-        return float(d @ self._stop_e) < self.p.c and float(np.median(d)) > -self.p.silent_db
+        return bool(self._stepping(d))
