@@ -671,6 +671,7 @@ class TipTracker:
                     return res
         # not found near the last fix (or refused there, or refused last time): the whole frame
         best: Result | None = None
+        refused: tuple[float, Lost] | None = None  # the best-correlating candidate of the frame a rule refused
         for cand in self._global(image):
             if cand is None:
                 continue
@@ -679,12 +680,17 @@ class TipTracker:
                 if best is None or not isinstance(best, Fix) or res.score > best.score:
                     best = res
                     best_cand = cand
+            elif refused is None or cand.ref.score > refused[0]:
+                refused = (cand.ref.score, res)
         if isinstance(best, Fix):
             return self._accept(best, best_cand)
         self._fresh = False
         self._since += 1
         if first_refusal is not None:
             return first_refusal
+        if refused is not None:
+            return Lost("lost", f"not found near the last fix; in the frame, the best candidate was refused "
+                                f"({refused[1].reason}): {refused[1].detail}")
         return Lost("lost", "not found near the last fix nor anywhere in the frame")
 
     def _usual_mismatch(self) -> float | None:
