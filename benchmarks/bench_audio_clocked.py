@@ -20,7 +20,8 @@ rule (``ConfirmParams(clocked=None)``) and the check - hear the same samples:
 
 Run: ``.venv/bin/python benchmarks/bench_audio_clocked.py --minutes 10 --seeds 2``
 (several minutes on a shared machine). ``--present wide-comb`` takes for the present rule the
-check as it was before it read the lines in step (``ClockedParams(combs=(0.004,))``);
+check as it was before it read the lines in step (``combs=(0.004,)``, nothing kept, one span),
+``--present in-step`` the check before it kept stepping and read a long window in spans;
 ``--hour-only`` hears only the hour.
 """
 
@@ -167,9 +168,13 @@ if __name__ == "__main__":
     ap.add_argument("--minutes", type=float, default=10.0, help="minutes of the hour per joint and draw")
     ap.add_argument("--seeds", type=int, default=2, help="other draws (each seed + 1000 k)")
     ap.add_argument("--arms", default="1,2,3", help="joints of the hour (arms of the tenth generator)")
-    ap.add_argument("--present", choices=("none", "wide-comb"), default="none", help="the present rule's check")
+    ap.add_argument(
+        "--present", choices=("none", "wide-comb", "in-step"), default="none", help="the present rule's check"
+    )
     ap.add_argument("--hour-only", action="store_true", help="hear only the hour")
     a = ap.parse_args()
     if a.present == "wide-comb":
-        RULES["present"] = ConfirmParams(clocked=ClockedParams(combs=(0.004,)))
+        RULES["present"] = ConfirmParams(clocked=ClockedParams(combs=(0.004,), kept_age_s=0.0, window_pieces=1))
+    if a.present == "in-step":
+        RULES["present"] = ConfirmParams(clocked=ClockedParams(kept_age_s=0.0, window_pieces=1))
     main(a.minutes, a.seeds, tuple(int(x) for x in a.arms.split(",")), a.hour_only)

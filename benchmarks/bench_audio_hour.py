@@ -18,7 +18,7 @@ minutes per joint on a shared machine, the generator about as costly as the dete
 ``--rate 1150`` to step (and tell) another rate than the tuning's, ``--details`` to print under each
 false stop what the confirming detector noted (``ConfirmLog``): the clocked check's verdict, the
 onset's doubt, the rejected fires before it. ``docs/audio-log.md`` ("Diagnosis of the hour's false
-stops") reads those lines. ``--variants before,default`` hears the same samples with
+stops") reads those lines. ``--variants in-step,default`` hears the same samples with
 each variant of the clocked check (``VARIANTS``) side by side, one table each.
 """
 
@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -48,6 +49,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     got = [g for t, g in log.clocked if t == e.detected_at_s]
     clocked = (
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
+        + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
@@ -61,10 +63,18 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     )
 
 
-#: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (the check before it
-#: read them in step), or first on the comb the window resolves (the default)
+#: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (two rounds back); read
+#: in step, a reference stop-like to the levels giving no verdict and a window read on its first span (the round
+#: before); the latest stepping kept no longer than 10 s, 30 s or 120 s before taken for such a reference; a longer
+#: window read in four spans, the median kept; both (the default)
+ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1)
 VARIANTS: dict[str, ClockedParams | None] = {
-    "before": ClockedParams(combs=(0.004,)),
+    "before": replace(ROUND_BEFORE, combs=(0.004,)),
+    "in-step": ROUND_BEFORE,
+    "kept10": replace(ROUND_BEFORE, kept_age_s=10.0),
+    "kept30": replace(ROUND_BEFORE, kept_age_s=30.0),
+    "kept120": replace(ROUND_BEFORE, kept_age_s=120.0),
+    "pieces": replace(ROUND_BEFORE, window_pieces=4),
     "default": ClockedParams(),
     "off": None,
 }

@@ -11,7 +11,9 @@ independent battery per k, and the first confirmed event (the commanded 1000 Hz 
 * **missed**: no event; **refused**: the tuning refused its recording (an instrument in the training);
 * for the pauses without a stop: **quiet** (no event) or **false** (any event).
 
-Run: ``.venv/bin/python benchmarks/bench_audio_tenth.py --seeds 3`` (a few minutes per draw on 2 cores).
+Run: ``.venv/bin/python benchmarks/bench_audio_tenth.py --seeds 3`` (a few minutes per draw on 2 cores);
+``--kept-age 0 --window-pieces 1`` hears every condition with the clocked check's variant
+(``ClockedParams.kept_age_s``, ``window_pieces``; these two: the check of the round before) instead of the default.
 """
 
 from __future__ import annotations
@@ -31,8 +33,12 @@ sys.path.insert(0, str(HERE.parent / "tests" / "support"))  # the generator
 from fan_sound import SR, Arm, Scene, render, tuning_scene  # noqa: E402
 
 import test_audio_fan as tf  # noqa: E402
+from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams  # noqa: E402
+from stickslip.audio.confirm.clocked import ClockedParams  # noqa: E402
+from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
+from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
 
 def judge(events: list[StopEvent], heard_within_s: float | None = None) -> str:
@@ -92,7 +98,29 @@ def main(seeds: int = 2) -> None:
             print(f"  {cond:16s} {counts}" + (f"  ({'; '.join(bad)})" if bad else ""))
 
 
+def with_clocked(p: ClockedParams) -> None:
+    """Every condition heard with the clocked check's parameters ``p`` (as a traverse tells the rate)."""
+
+    def events(tu: Tuning, y: np.ndarray, rate_hz: float = 1000.0) -> list[StopEvent]:
+        det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=p))
+        det.reset(0.0, step_rate_hz=rate_hz)
+        return det.feed(y) + det.finish()
+
+    tf._events = events
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description="The tenth generator's conditions on other draws (docstring).")
     ap.add_argument("--seeds", type=int, default=2, help="how many other draws (each seed + 1000 k)")
-    main(ap.parse_args().seeds)
+    ap.add_argument("--kept-age", type=float, default=None, help="the clocked check's kept_age_s, s")
+    ap.add_argument("--window-pieces", type=int, default=None, help="the clocked check's window_pieces")
+    a = ap.parse_args()
+    if a.kept_age is not None or a.window_pieces is not None:
+        d = ClockedParams()
+        with_clocked(
+            ClockedParams(
+                kept_age_s=d.kept_age_s if a.kept_age is None else a.kept_age,
+                window_pieces=d.window_pieces if a.window_pieces is None else a.window_pieces,
+            )
+        )
+    main(a.seeds)

@@ -183,12 +183,13 @@ def _state(t: TipTracker) -> dict[str, object]:
 
 
 def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
-            ) -> tuple[Lost | None, float, float, str]:
+            ) -> tuple[Lost | None, float, float, str, str]:
     """``update``'s search and judgement on ``image`` from ``t``'s state, nothing accepted.
 
     Returns the fit near the last fix's refusal (``None``: no fit there), its distance from
-    ``tip`` (px, NaN without one), and the whole frame's candidate nearest ``tip``: its
-    distance (px, NaN without one) and its verdict.
+    ``tip`` (px, NaN without one), the whole frame's candidate nearest ``tip``: its
+    distance (px, NaN without one) and its verdict, and the rule that refused the frame's
+    best-correlating candidate (the one ``update`` names; "not found" without one).
     """
     def dist(c: object) -> float:
         r = c.ref  # type: ignore[attr-defined]
@@ -202,8 +203,9 @@ def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
         near = res if isinstance(res, Lost) else None
         if isinstance(res, Lost) and res.reason in ("lost", "out of focus") and cand.edges is not None and (
                 _edge_refusal(cand.edges, t.params, cand.shaft) is None):
-            return near, e_near, math.nan, "not searched"
+            return near, e_near, math.nan, "not searched", "not searched"
     e_glob, v_glob = math.nan, "none"
+    best: tuple[float, str] = (-math.inf, "not found")
     for g in t._global(image):
         if g is None:
             continue
@@ -211,7 +213,9 @@ def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
         e = dist(g)
         if not e >= e_glob:
             e_glob, v_glob = e, ("fix" if isinstance(res, Fix) else _rule(res))
-    return near, e_near, e_glob, v_glob
+        if isinstance(res, Lost) and g.ref.score > best[0]:
+            best = (g.ref.score, _rule(res))
+    return near, e_near, e_glob, v_glob, best[1]
 
 
 def _in_reach(t: TipTracker, tip: tuple[float, float], w: int, h: int) -> bool:
@@ -246,9 +250,9 @@ def refusals(n_frames: int) -> int:
             if isinstance(r, Lost) and f.kind == "visible":
                 post = _state(tracker)
                 vars(tracker).update(pre)
-                near, e_near, e_glob, v_glob = _replay(tracker, img, f.tip)
+                near, e_near, e_glob, v_glob, v_best = _replay(tracker, img, f.tip)
                 vars(tracker).update(post)
-                differ += (_rule(near) if near else "not found") != _rule(r)
+                differ += (_rule(near) if near else v_best) != _rule(r)
                 reasons[_rule(r)] = r.reason
                 h, w = img.shape
                 room = min(f.tip[0], f.tip[1], w - 1 - f.tip[0], h - 1 - f.tip[1])

@@ -126,6 +126,54 @@ def test_the_check_judges_a_window_against_its_reference() -> None:
     assert chk.judge(after) is None
 
 
+def test_a_reference_stop_like_to_the_levels_is_replaced_by_the_stepping_kept() -> None:
+    """Music that lifted the stop's sub-bands before the fire: judged against the stepping kept before it, not skipped.
+
+    A stretch is kept only where at most ``kept_stoplike`` of its frames were stop-like, and taken where it ended no
+    more than ``kept_age_s`` before the fire's own reference ended; a sound added between the lines then gives
+    ``a_L`` near 0 (a veto), the stop's signature on the lines near 1; with ``kept_age_s`` 0, no verdict."""
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    stepping, stoplike = _scaled(_clicks(N, 20), (0.0, 0.0, 0.0)), np.full(120, 0.3)
+    chk.keep(10 * N, stepping, np.r_[np.full(12, 0.2), np.full(108, -0.4)])  # 10 % stop-like: kept
+    chk.keep(11 * N, _scaled(_clicks(N, 21), (0.0, 6.0, -4.0)), np.r_[np.full(13, 0.2), np.full(107, -0.4)])  # 11 %
+    chk.keep(12 * N, stepping, np.r_[np.full(119, -0.4), math.nan])  # a frame not heard (learning): not kept
+    end = 10 * N + int(20.0 * SR)  # the fire's own reference ended 20 s after the stepping kept (30 s allowed)
+    chk.hear_before(_scaled(_clicks(N, 22), (0.0, 6.0, 0.0)), stoplike, end)
+    assert chk.ref is not None and np.array_equal(chk.ref, stepping) and chk.ref_stoplike == 0.0
+    rng = np.random.default_rng(23)
+    noise = _band(rng.standard_normal(N), EDGES[1], EDGES[2]) * 3.0 * np.sqrt(np.mean(_band(stepping, 4500, 8500) ** 2))
+    music = chk.judge(_scaled(_clicks(N, 24), (0.0, 0.0, 0.0)) + noise)
+    assert music is not None and music.kept_s == pytest.approx(20.0)
+    assert abs(music.a) < 0.1 and not chk.verdict(music)
+    stop = chk.judge(_scaled(_clicks(N, 25), (0.0, 6.0, -4.0)))
+    assert stop is not None and stop.a == pytest.approx(1.0, abs=0.05) and chk.verdict(stop)
+    chk.hear_before(stepping, stoplike, 10 * N + int(30.5 * SR))  # kept 30.5 s before: too old, no verdict
+    assert chk.judge(stop_after := _scaled(_clicks(N, 25), (0.0, 6.0, -4.0))) is None
+    chk.hear_before(stepping, np.full(120, -0.4), end)  # its own reference was stepping: kept nothing taken
+    own = chk.judge(stop_after)
+    assert own is not None and math.isnan(own.kept_s)
+    off = ClockedCheck(_Tuning(), ClockedParams(kept_age_s=0.0))  # type: ignore[arg-type]
+    off.keep(10 * N, stepping, np.full(120, -0.4))
+    off.hear_before(stepping, stoplike, end)
+    assert off.kept == [] and off.judge(stop_after) is None  # nothing kept: a reference stop-like, no verdict
+
+
+def test_a_longer_window_is_read_in_spans_and_the_median_kept() -> None:
+    """A 2 s window (a fire soon after a rejected one) read in four spans: a change on the lines in one span only (a
+    note on a line) gives the median of the four, near 0; the stop's signature in all four gives 1."""
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    chk.hear_before(_scaled(_clicks(N, 30), (0.0, 0.0, 0.0)), np.full(120, -0.4))
+    steps = [_scaled(_clicks(N, 31 + k), (0.0, 0.0, 0.0)) for k in range(4)]
+    one = chk.judge(np.concatenate([_scaled(_clicks(N, 35), (0.0, 6.0, -4.0)), *steps[1:]]))
+    assert one is not None and abs(one.a) < 0.1 and not chk.verdict(one)
+    stop = chk.judge(np.concatenate([_scaled(_clicks(N, 36 + k), (0.0, 6.0, -4.0)) for k in range(4)]))
+    assert stop is not None and stop.a == pytest.approx(1.0, abs=0.05)
+    first = ClockedCheck(_Tuning(), ClockedParams(window_pieces=1))  # type: ignore[arg-type]
+    first.hear_before(_scaled(_clicks(N, 30), (0.0, 0.0, 0.0)), np.full(120, -0.4))
+    got = first.judge(np.concatenate([_scaled(_clicks(N, 35), (0.0, 6.0, -4.0)), *steps[1:]]))
+    assert got is not None and got.a == pytest.approx(1.0, abs=0.05)  # read on its first span only
+
+
 def test_the_verdict_vetoes_only_a_change_off_the_clock() -> None:
     chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
     assert chk.verdict(None) and chk.verdict(OnClock(math.nan, RATE, 0))

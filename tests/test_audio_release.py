@@ -35,7 +35,7 @@ def _frame_by_frame(rel: StopRelease, v: np.ndarray, template: np.ndarray, held:
     return None
 
 
-@settings(max_examples=60, deadline=None)
+@settings(max_examples=30, deadline=None)
 @given(
     seed=st.integers(0, 2**32 - 1),
     bands=st.integers(1, 14),

@@ -18,7 +18,10 @@ from synth import paper_table
 
 from stickslip.measurements import measurements_to_csv
 
-pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only")
+pytestmark = [
+    pytest.mark.skipif(sys.platform == "win32", reason="pseudo-terminals are POSIX-only"),
+    pytest.mark.xdist_group("nanocontrol_peer"),  # one worker makes the calibration once
+]
 if sys.platform != "win32":
     from nanocontrol_peer import NanoControlPeer
 
@@ -29,19 +32,27 @@ def _cli(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-c", MAIN, *args], capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.fixture()
-def cal(tmp_path: Path) -> Path:
-    meas = tmp_path / "meas.csv"
+@pytest.fixture(scope="module")
+def cal(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The paper's calibration, made once by the CLI for the module's moves (none writes it)."""
+    tmp = tmp_path_factory.mktemp("cal")
+    meas = tmp / "meas.csv"
     meas.write_text(measurements_to_csv(paper_table()))
-    out = tmp_path / "cal.json"
+    out = tmp / "cal.json"
     r = _cli("calibrate", str(meas), "-o", str(out))
     assert r.returncode == 0, r.stderr
     return out
 
 
 def _planned(cal: Path, frm: str, to: str) -> int:
-    r = _cli("plan", "-c", str(cal), "--joint", "3", "--from", frm, "--to", to, "--q2", "-90deg", "--json")
-    assert r.returncode == 0, r.stderr
+    """What ``stickslip plan`` says the move takes (in this process: only the move runs as its own)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    r = CliRunner().invoke(app, ["plan", "-c", str(cal), "--joint", "3", "--from", frm, "--to", to, "--q2", "-90deg",
+                                 "--json"])
+    assert r.exit_code == 0, r.output
     return int(json.loads(r.stdout)["steps"])
 
 

@@ -93,3 +93,17 @@ def test_a_peak_over_part_of_the_template_ranks_by_its_significance():
     assert ranked[0][0] == pytest.approx(math.atanh(0.84))
     assert ranked[1][0] == pytest.approx(math.atanh(0.87) * math.sqrt(0.80))
     assert all(k == 2 for *_, k in ranked)
+
+
+def test_a_tip_the_whole_frame_search_finds_and_a_rule_refuses_is_not_called_nowhere(monkeypatch):
+    """The refusal names what refused the frame's best candidate (here: too near the edge to vouch for)."""
+    scene = SimScene(SimCamSettings(look="optical", width=SIZE, height=SIZE, photons=200.0, seed=5,
+                                    tip_radius_m=0.25e-6 * 16.0, pixel_size_m=0.5e-6))
+    d = np.array((-1.0, 0.15))
+    tracker = TipTracker(scene.render(np.array([80.0, 80.0]), d, 0.0), (80.0, 80.0))
+    monkeypatch.setattr(tracker, "_local", lambda image: None)  # nothing near the last fix: only the whole frame
+    r = tracker.update(scene.render(np.array([SIZE - 2.0, 70.0]), d, 0.0))
+    assert isinstance(r, Lost) and r.reason == "lost"
+    assert "the best candidate was refused (out of the field): the tip would be 1." in r.detail  # 1.0-1.1 px
+    blank = np.full((SIZE, SIZE), float(np.median(scene.render(np.array([80.0, 80.0]), d, 0.0))))
+    assert tracker.update(blank) == Lost("lost", "not found near the last fix nor anywhere in the frame")

@@ -59,6 +59,9 @@ class Day:
     repeat: list[Traverse] = field(default_factory=list)
     """Each joint's first paper pose traversed again (both directions) at the end of the calibration, before
     the validation (``make_day(..., repeat_first=True)``): the drift within the session."""
+    more_new: list[Traverse] = field(default_factory=list)
+    """``make_day(..., new_per_direction=n)``: ``n - 1`` more traverses per joint and direction at random poses,
+    measured after :attr:`new4` (drawn from their own generator: the other tables are those of ``n = 1``)."""
 
     @property
     def calibration46(self) -> list[Traverse]:
@@ -72,10 +75,11 @@ class Day:
 
 
 def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8,
-             repeat_first: bool = False) -> Day:
+             repeat_first: bool = False, new_per_direction: int = 1) -> Day:
     """The day's tables (``validation_poses`` random poses per joint, both directions), measured in this order
     on one arm (a joint that warms up is warm by the validation). ``repeat_first``: each joint's first paper
-    pose is traversed again in both directions after the 46 (the random poses drawn are the same)."""
+    pose is traversed again in both directions after the 46 (the random poses drawn are the same).
+    ``new_per_direction``: new traverses per joint and direction for the update (:attr:`Day.more_new`)."""
     arm = ARMS[arm_name](seed, day)
     p14 = [arm.traverse(j, d, p, day) for j in (3, 2) for p in paper_poses(j) for d in "+-"]
     s32 = [arm.traverse(j, d, p, day) for j in (3, 2)
@@ -84,7 +88,10 @@ def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, valid
     val = [arm.traverse(j, d, p, day) for j in (3, 2)
            for p in [random_pose(rng, j) for _ in range(validation_poses)] for d in "+-"]
     new4 = [arm.traverse(j, d, random_pose(rng, j), day) for j in (3, 2) for d in "+-"]
-    return Day(arm_name, seed, day, p14, s32, val, new4, rep)
+    more_rng = np.random.default_rng((seed, int(day.replace("-", "")), 11))
+    more = [arm.traverse(j, d, random_pose(more_rng, j), day)
+            for _ in range(new_per_direction - 1) for j in (3, 2) for d in "+-"]
+    return Day(arm_name, seed, day, p14, s32, val, new4, rep, more)
 
 
 def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:

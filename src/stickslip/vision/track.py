@@ -381,6 +381,15 @@ def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
     return wc, wc is None and not p.trust_unchecked
 
 
+def _not_found(refused: tuple[float, Lost] | None) -> Lost:
+    """The refusal of a frame with nothing near the last fix and no fix in the whole frame: what refused the
+    frame's best-correlating candidate (``refused``: its correlation and refusal), or that there was none."""
+    if refused is None:
+        return Lost("lost", "not found near the last fix nor anywhere in the frame")
+    return Lost("lost", f"not found near the last fix; in the frame, the best candidate was refused "
+                        f"({refused[1].reason}): {refused[1].detail}")
+
+
 def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3) -> Lost | None:
     """The refusal of a fix behind which the needle is not as wide as the first frame showed it
     (:mod:`.width`; ``None``: it is, or was not checked); with ``unvouched``, of a fix behind which
@@ -671,6 +680,7 @@ class TipTracker:
                     return res
         # not found near the last fix (or refused there, or refused last time): the whole frame
         best: Result | None = None
+        refused: tuple[float, Lost] | None = None  # the best-correlating candidate of the frame a rule refused
         for cand in self._global(image):
             if cand is None:
                 continue
@@ -679,13 +689,13 @@ class TipTracker:
                 if best is None or not isinstance(best, Fix) or res.score > best.score:
                     best = res
                     best_cand = cand
+            elif refused is None or cand.ref.score > refused[0]:
+                refused = (cand.ref.score, res)
         if isinstance(best, Fix):
             return self._accept(best, best_cand)
         self._fresh = False
         self._since += 1
-        if first_refusal is not None:
-            return first_refusal
-        return Lost("lost", "not found near the last fix nor anywhere in the frame")
+        return first_refusal if first_refusal is not None else _not_found(refused)
 
     def _usual_mismatch(self) -> float | None:
         """The median ``1 - score`` of the recent fixes (``None`` before three)."""

@@ -74,6 +74,7 @@ class WindowChecks:
         self.clocked = ClockedCheck(tuning, clocked) if clocked is not None else None
 
     def reset(self, step_rate_hz: float | None) -> None:
+        self._next_keep = 0  # the next stretch offered to the clocked check as stepping to keep begins here
         for part in (self.pause, self.after, self.sync):
             part.reset()
         if self.clocked is not None:
@@ -98,7 +99,19 @@ class WindowChecks:
             self.sync.ref = self.before(fire)
         if self.clocked is not None and (not recent or self.clocked.ref is None):
             g, sp = self.gap // self._H, self.span // self._H
-            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g))
+            end = fire * self._H + self._F - self.gap
+            self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g), end)
+
+    def keep_stepping(self, fed: int, frames: FrameLog) -> None:
+        """Every ``span_s`` of the stream (from its start) that ended by sample ``fed``, offered to the clocked check
+        as stepping to keep, with its frames' margins (the frames that lie wholly in it)."""
+        if self.clocked is None or self.clocked.p.kept_age_s <= 0.0:
+            return
+        while self._next_keep + self.span <= fed:
+            lo, hi = self._next_keep, self._next_keep + self.span
+            margins = frames.between(-(-lo // self._H), (hi - self._F) // self._H + 1)
+            self.clocked.keep(hi, self.kept.get(lo, hi), margins)
+            self._next_keep = hi
 
     def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
         """The fire at frame ``fire``, which persisted over ``frames``: the step clock agrees, the stepping went on
@@ -132,7 +145,8 @@ class WindowChecks:
         """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
         if self.clocked is None:
             return True
-        got = self.clocked.judge(self.after_fire(fire, min(self.span, frames * self._H)), self.pause.before_hz)
+        pieces = self.clocked.p.window_pieces
+        got = self.clocked.judge(self.after_fire(fire, min(pieces * self.span, frames * self._H)), self.pause.before_hz)
         if got is not None:
             log.clocked.append((ev.detected_at_s, got))
         return self.clocked.verdict(got)

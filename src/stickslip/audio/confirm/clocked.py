@@ -37,11 +37,24 @@ kept hold less than ``min_covered`` of the signature's sum of squares (one sub-b
 estimate is not the stop's signature), the rate is not known or is more than
 ``max_rate_off`` from the tuning's (the lines then sample the arm's narrow modes elsewhere,
 and the tuned signature is not what the stop does on them), where more than
-``max_ref_stoplike`` of the reference's frames were already stop-like (a stop heard late
-began there: the reference is the stop, not stepping), or where less than ``min_s`` of
-stepping or ``min_after_s`` of the window was heard. The lines are immune to what is added
-between them, so the tuned signature is fitted as tuned (no masking). It runs once per fire
-that persisted, never per frame.
+``max_ref_stoplike`` of the reference's frames were already stop-like and no stepping is
+kept (a stop heard late began there: the reference is the stop, not stepping), or where less
+than ``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines are immune
+to what is added between them, so the tuned signature is fitted as tuned (no masking). It
+runs once per fire that persisted, never per frame.
+
+**The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
+makes that reference stop-like too, and the check could not judge it. So every ``span_s``
+of the stream (counted from its start) whose frames were at most ``kept_stoplike``
+stop-like, every one heard, is kept, and where the fire's own reference is over
+``max_ref_stoplike`` stop-like the latest kept that ended no more than ``kept_age_s``
+before it is the reference instead (a stop heard late is then judged against the stepping
+before it).
+
+**A long window in spans.** A window that persisted over more than one span (2 s, after a
+rejected fire) is read in up to ``window_pieces`` spans against the reference, the median
+``a_L`` kept: a stop's lines stay changed while the joint steps into it, a note of music on a
+line moves on.
 """
 
 from __future__ import annotations
@@ -97,6 +110,15 @@ class ClockedParams:
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )
+    kept_age_s: float = param(
+        30.0, "s", "a reference stop-like to the levels is replaced by stepping kept no longer ago (0: none kept)"
+    )
+    kept_stoplike: float = param(
+        0.1, "", "stepping is kept every span where at most this share of its frames was stop-like"
+    )
+    window_pieces: int = param(
+        4, "spans", "a longer window is read in up to this many spans, the median a_L kept (music moves, a stop stays)"
+    )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
 
@@ -114,6 +136,8 @@ class OnClock:
     rate_hz: float
     #: the sub-bands judged
     bands: int
+    #: how long before the fire's own reference the kept stepping it was judged against ended, s (NaN: its own)
+    kept_s: float = math.nan
 
 
 def lines_stop_likeness(
@@ -230,13 +254,34 @@ class ClockedCheck:
         self.ref: FloatArray | None = None
         #: the share of its frames that were stop-like (NaN: none measured)
         self.ref_stoplike = math.nan
+        #: the stepping kept for a reference stop-like to the levels: (its end, absolute sample; its samples)
+        self.kept: list[tuple[int, FloatArray]] = []
+        #: how long before the current chain's own reference the kept stepping taken for it ended, s (NaN: its own)
+        self.ref_age_s = math.nan
         self.commanded_hz = commanded_hz
 
-    def hear_before(self, ref: FloatArray, margins: FloatArray) -> None:
-        """The stepping before a fire (samples) and its frames' margins over the threshold (NaN while learning)."""
+    def keep(self, end: int, samples: FloatArray, margins: FloatArray) -> None:
+        """A stretch of the stream ending at absolute sample ``end`` and its frames' margins: kept as stepping where
+        every frame was heard and at most ``kept_stoplike`` of them were stop-like (the latest few are kept)."""
+        if self.p.kept_age_s <= 0.0 or not margins.size or not np.all(np.isfinite(margins)):
+            return
+        if float(np.mean(margins >= 0.0)) <= self.p.kept_stoplike:
+            self.kept = [*self.kept[-7:], (end, np.array(samples, dtype=np.float64))]
+
+    def hear_before(self, ref: FloatArray, margins: FloatArray, end: int | None = None) -> None:
+        """The stepping before a fire (samples, ending at absolute sample ``end``) and its frames' margins over the
+        threshold (NaN while learning). Where more than ``max_ref_stoplike`` of them were stop-like, the latest
+        stepping kept that ended by then, no more than ``kept_age_s`` before, is the reference instead."""
         m = margins[np.isfinite(margins)]
-        self.ref = ref
+        self.ref, self.ref_age_s = ref, math.nan
         self.ref_stoplike = float(np.mean(m >= 0.0)) if m.size else math.nan
+        if end is None or not self.ref_stoplike > self.p.max_ref_stoplike:
+            return
+        oldest = end - self.p.kept_age_s * self.sample_rate
+        got = [(e, v) for e, v in self.kept if oldest <= e <= end]
+        if got:
+            kept_end, self.ref = got[-1]
+            self.ref_age_s, self.ref_stoplike = (end - kept_end) / self.sample_rate, 0.0
 
     def judge(self, after: FloatArray, heard_hz: float = math.nan) -> OnClock | None:
         """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged).
@@ -259,8 +304,17 @@ class ClockedCheck:
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-        a, used = lines_stop_likeness(ref, after, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
-        return OnClock(a, rate, used)
+        n = ref.size
+        pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
+        got = [
+            lines_stop_likeness(ref, x, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, p)
+            for x in pieces
+        ]
+        a, used = got[0]
+        finite = [g[0] for g in got if math.isfinite(g[0])]
+        if len(got) > 1 and finite:
+            a = float(np.median(finite))
+        return OnClock(a, rate, used, self.ref_age_s)
 
     def verdict(self, got: OnClock | None) -> bool:
         """False where the change is off the clock; True where it is on it or nothing was judged."""

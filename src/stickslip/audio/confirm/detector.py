@@ -237,6 +237,7 @@ class ConfirmedStopDetector:
             pos += take
             self._fed += take
             self._frames.absorb(self.inner.evidence, self.inner.hot_evidence)
+            self.checks.keep_stepping(self._fed, self._frames)
             if self.late is not None:
                 out, events = self._late_chunks(fed0, events, out)
             for ev in events:
