@@ -473,8 +473,9 @@ def _kernel_fft(t: FloatArray, w: FloatArray, shape: tuple[int, int]) -> _Kernel
 
 def region_spectra(region: FloatArray) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """The transforms of ``region`` and of its square that :func:`masked_ncc` needs (made once for several
-    templates over the same region)."""
-    return fft.rfft2(region, workers=1), fft.rfft2(region * region, workers=1)
+    templates over the same region): both in one call, each the values it has alone."""
+    f = fft.rfft2(np.stack((region, region * region)), workers=1)
+    return f[0], f[1]
 
 
 _SHARED = ("shared variance",)
@@ -518,10 +519,11 @@ def _variance_and_sums(region: FloatArray, k: _KernelFFT, n: int, shape: tuple[i
     """:func:`_variance` of ``region`` and its correlation with the template's centred weights (``sum w (T -
     T_w) I``), the region's two transforms and the three inverse ones stacked: each the values it has made
     alone (pocketfft transforms each line by itself), in fewer calls."""
-    f = fft.rfft2(np.stack((region, region * region)), workers=1)
-    prod = np.empty((3, *f.shape[1:]), dtype=f.dtype)
-    np.multiply(f, k.w, out=prod[:2])
-    np.multiply(f[0], k.wt, out=prod[2])
+    fi, fi2 = region_spectra(region)
+    prod = np.empty((3, *fi.shape), dtype=fi.dtype)
+    np.multiply(fi, k.w, out=prod[0])
+    np.multiply(fi2, k.w, out=prod[1])
+    np.multiply(fi, k.wt, out=prod[2])
     sums = _inverse(prod, shape, n - 1)
     a = sums[0]
     var: FloatArray = a * a
