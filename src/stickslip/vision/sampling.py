@@ -184,7 +184,7 @@ def bilinear(v: FloatArray, fx: FloatArray, fy: FloatArray) -> FloatArray:
     tb *= fx
     tb += left
     top = tb[0]
-    out = tb[1] - top
+    out: FloatArray = tb[1] - top
     out *= fy
     out += top
     return out
