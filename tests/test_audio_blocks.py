@@ -137,3 +137,26 @@ def test_the_running_averages_and_fits_are_rounded_the_same_in_any_pieces(seed: 
     # the sums are the plain windowed sums (fewer rows at the start)
     want = np.array([z[max(j - 7, 0) : j + 1].sum(axis=0) for j in range(z.shape[0])])
     np.testing.assert_allclose(window_sums(z, z.shape[0], 8), want, rtol=1e-12, atol=1e-12)
+
+
+@cache
+def _kept(block: int) -> list[tuple[int, np.ndarray]]:
+    """The stepping the clocked check kept (its end, absolute sample; its samples) after the 8 s in ``block``s."""
+    x = _samples()
+    det = ConfirmedStopDetector(detector_for(joint_tuning(3)), params=RULES["clocked"])
+    det.reset(0.0, step_rate_hz=HOUR.rate)
+    for i in range(0, x.size, block):
+        det.feed(x[i : i + block])
+    assert det.checks.clocked is not None
+    return det.checks.clocked.kept
+
+
+@pytest.mark.parametrize("block", [1024, 777])
+def test_the_stepping_kept_for_the_clocked_check_does_not_depend_on_the_block_size(block: int) -> None:
+    """The stretches kept as the clocked check's reference (every 0.48 s from the stream's start, where at most a
+    tenth of the frames were stop-like) are the same stretches, sample for sample, whatever the blocks."""
+    want = _kept(_samples().size)
+    got = _kept(block)
+    assert [e for e, _ in want] == [92_160, 115_200, 345_600]  # 3 of the 16 spans: the radio and music lift the rest
+    assert [e for e, _ in got] == [e for e, _ in want]
+    assert all(np.array_equal(g, w) for (_, g), (_, w) in zip(got, want, strict=True))
