@@ -45,6 +45,18 @@ calls ``update`` makes; nothing in the tracker changed), and the nearest of the 
 frame's candidates. Then the counts by rule (fits within 1 px, 1 to 3 px, more than
 3 px) and by sequence.
 
+``--vouch-signals [FRAMES [OWN]]`` reads, on every candidate the "nothing vouches" rule refused
+(fewer than three width stations in the frame behind it; near the last fix or in the whole
+frame), the other signals the tracker has or could have cheaply: the distance from where the
+last two fixes' motion puts the tip and from the last fix, the turn against the last fix, the
+correlation and mismatch ratio, sigma, the template's share inside the frame, the edges'
+contrast and shape behind the tip. Candidates of the second renderer (``FRAMES``, default 500)
+and of the own round mode (both sets) and lobed mode (wide set) (``OWN`` frames each, default
+200) are grouped by renderer and by their distance from the truth (good: 3 px or less); each
+signal's ranges by group, whether one threshold separates the wrong from the good, and for
+each pair of signals the good candidates inside the wrong ones' box. The tracker is not
+changed: its ``_judge`` is wrapped on the instance to record what it refused.
+
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -62,7 +74,9 @@ import math  # noqa: E402
 import sys  # noqa: E402
 import textwrap  # noqa: E402
 import time  # noqa: E402
+from collections.abc import Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 
@@ -308,6 +322,150 @@ def refusals(n_frames: int) -> int:
     return len(rows)
 
 
+_SIGNALS: tuple[tuple[str, str], ...] = (
+    ("pred", "distance from the position the last two fixes' motion predicts, px"),
+    ("last", "distance from the last fix, px"),
+    ("dtheta", "the fit's theta against the last fix's, deg (absolute)"),
+    ("score", "the template's correlation (the fit's score), 1"),
+    ("ratio", "mismatch ratio: 1 - score over the recent fixes' median, 1"),
+    ("sigma", "sigma: sigma_factor times the fit's worst standard deviation, px"),
+    ("cover", "share of the template's weight inside the frame, 1"),
+    ("near", "the edges' contrast right behind the tip (EdgeCheck.near), 1"),
+    ("far", "the edges' contrast further back (EdgeCheck.far), 1"),
+    ("nf", "near over far, 1"),
+    ("shape", "the edges' profiles' correlation (EdgeCheck.shape), 1"),
+)
+"""The signals ``--vouch-signals`` reads on each candidate "nothing vouches" refused: key, meaning and unit."""
+
+
+def _predicted(fixes: list[tuple[int, float, float]], k: int) -> tuple[float, float]:
+    """Where the last two fixes' motion puts the tip in frame ``k`` (the last fix alone: there)."""
+    k2, x2, y2 = fixes[-1]
+    if len(fixes) < 2:
+        return x2, y2
+    k1, x1, y1 = fixes[-2]
+    a = (k - k2) / max(k2 - k1, 1)
+    return x2 + a * (x2 - x1), y2 + a * (y2 - y1)
+
+
+def _unvouched(seqs: Sequence[object], group: str) -> list[tuple[str, float, dict[str, float]]]:
+    """Track ``seqs``; for every candidate refused by "nothing vouches" (near the last fix or in the whole
+    frame), its group, distance from the truth (px) and :data:`_SIGNALS`. The tracker is run as it is: its
+    ``_judge`` is wrapped on the instance to record what it refused, every decision unchanged."""
+    out: list[tuple[str, float, dict[str, float]]] = []
+    for seq in seqs:
+        frames = seq.frames  # type: ignore[attr-defined]
+        images = [as_image(f.image) for f in frames]
+        try:
+            tracker = TipTracker(images[0], frames[0].tip)
+        except TemplateError:
+            continue
+        fixes: list[tuple[int, float, float]] = [(0, *frames[0].tip)]
+        judge = tracker._judge
+        now = {"k": 0}
+
+        def watched(cand: Any, image: np.ndarray, reacquire: bool = False, *, t: TipTracker = tracker,
+                    judge: Any = judge, fixes: list[tuple[int, float, float]] = fixes,
+                    now: dict[str, int] = now, frames: Any = frames) -> Any:
+            res, cand = judge(cand, image, reacquire)
+            if isinstance(res, Lost) and "nothing vouches" in res.detail:
+                out.append((group, *_signals(t, cand, fixes, now["k"], frames[now["k"]].tip)))
+            return res, cand
+
+        tracker._judge = watched  # type: ignore[method-assign]
+        for k, img in enumerate(images[1:], start=1):
+            now["k"] = k
+            r = tracker.update(img)
+            if isinstance(r, Fix):
+                fixes.append((k, r.x, r.y))
+    return out
+
+
+def _signals(t: TipTracker, cand: Any, fixes: list[tuple[int, float, float]], k: int,
+             tip: tuple[float, float]) -> tuple[float, dict[str, float]]:
+    """A refused candidate's distance from ``tip`` (px) and its :data:`_SIGNALS`."""
+    r, p = cand.ref, t.params
+    px, py = _predicted(fixes, k)
+    usual = t._usual_mismatch()
+    ec = cand.edges
+    nan = math.nan
+    s = {"pred": math.hypot(r.x - px, r.y - py), "last": math.hypot(r.x - fixes[-1][1], r.y - fixes[-1][2]),
+         "dtheta": abs(math.degrees(r.theta - t._theta)), "score": r.score,
+         "ratio": (1.0 - r.score) / (usual if usual else t._first_mismatch),
+         "sigma": p.sigma_factor * r.sigma, "cover": r.coverage,
+         "near": ec.near if ec else nan, "far": ec.far if ec else nan,
+         "nf": ec.near / ec.far if ec and ec.far > 0 else nan, "shape": ec.shape if ec else nan}
+    return math.hypot(r.x - tip[0], r.y - tip[1]), s
+
+
+def _separation(good: np.ndarray, bad: np.ndarray) -> str:
+    """Whether one threshold separates ``bad`` from ``good``: the side and the gap, or, for the threshold
+    that refuses every one of ``bad`` at the least cost, how many of ``good`` it refuses too."""
+    good, bad = good[np.isfinite(good)], bad[np.isfinite(bad)]
+    if good.size == 0 or bad.size == 0:
+        return "-"
+    if bad.min() > good.max():
+        return f"yes, wrong above by {bad.min() - good.max():.3g}"
+    if bad.max() < good.min():
+        return f"yes, wrong below by {good.min() - bad.max():.3g}"
+    above, below = int(np.sum(good >= bad.min())), int(np.sum(good <= bad.max()))
+    return f"no: refusing all wrong refuses {min(above, below)} of {good.size} good"
+
+
+def _pairs(groups: dict[str, list[tuple[str, float, dict[str, float]]]]) -> None:
+    """For each pair of :data:`_SIGNALS`, the good candidates inside the wrong ones' box (both signals within the
+    wrong ones' range): what refusing that box, the least a two-signal rule must refuse, would cost. The best
+    five pairs are printed (with so few wrong ones, some pair's box is empty by chance more easily than one
+    signal's range)."""
+    good = groups["peer good"] + groups["own good"]
+    wrong = groups["peer wrong"] + groups["own wrong"]
+    if not wrong:
+        return
+    keys = [k for k, _ in _SIGNALS]
+    out = []
+    for i, a in enumerate(keys):
+        for b in keys[i + 1 :]:
+            box = [(min(r[2][k] for r in wrong), max(r[2][k] for r in wrong)) for k in (a, b)]
+            inside = [r for r in good if all(lo <= r[2][k] <= hi for k, (lo, hi) in zip((a, b), box, strict=True))]
+            tested = sum(math.isfinite(r[2][a]) and math.isfinite(r[2][b]) for r in good)
+            out.append((len(inside), a, b, sum(r[0] == "peer" for r in inside), tested))
+    print("\npairs: good candidates inside the wrong ones' box (peer among them), of those\nwith both signals")
+    for n, a, b, n_peer, tested in sorted(out)[:5]:
+        print(f"  {a:>6} and {b:<6}: {n:>3} ({n_peer} peer) of {tested}")
+
+
+def vouch_signals(n_peer: int, n_own: int) -> None:
+    """Tabulate :data:`_SIGNALS` on the candidates "nothing vouches" refused: the second renderer's (all
+    near the truth) against the own round and lobed modes' (those more than 3 px off are the wrong fixes the
+    rule exists for)."""
+    rows = _unvouched(peer_benchmark(n_peer, 50, seed=0, size=512), "peer")
+    wide = {"seed": 1, "size": 256, "widths": (14.0, 18.0), "looks": ("optical",)}
+    for make, kw in ((round_benchmark, {"seed": 0, "size": 256}), (round_benchmark, wide),
+                     (lobed_benchmark, wide)):
+        rows += _unvouched(make(n_own, 40, **kw), "own")  # type: ignore[operator]
+    groups = {f"{g} {v}": [r for r in rows if r[0] == g and (r[1] <= 3.0) == (v == "good")]
+              for g in ("peer", "own") for v in ("good", "wrong")}
+    for g, rs in groups.items():
+        e = [r[1] for r in rs]
+        print(f"{g:>10}: {len(rs)} candidates" + (f", {min(e):.2f} to {max(e):.2f} px from the truth" if e else ""))
+    print("\nranges (min, median, max); separation of the wrong from the peer's and from\nall good ones")
+    for key, what in _SIGNALS:
+        print(f"\n{key}: {what}")
+        vals = {g: np.array([r[2][key] for r in rs]) for g, rs in groups.items()}
+        for g, v in vals.items():
+            f = v[np.isfinite(v)]
+            print(f"  {g:>10}: " + (f"{f.min():8.3g} {np.median(f):8.3g} {f.max():8.3g}  ({f.size})" if f.size
+                                   else "none"))
+        wrong = np.concatenate([vals["peer wrong"], vals["own wrong"]])
+        print(f"  wrong against peer good: {_separation(vals['peer good'], wrong)}")
+        print(f"  against all good: {_separation(np.concatenate([vals['peer good'], vals['own good']]), wrong)}")
+    _pairs(groups)
+    print("\nthe wrong ones:")
+    for r in groups["peer wrong"] + groups["own wrong"]:
+        print(textwrap.fill(f"  {r[0]} {r[1]:5.1f} px: " + ", ".join(f"{k} {v:.3g}" for k, v in r[2].items()),
+                            80, subsequent_indent=" " * 4))
+
+
 def _lobed_class(f: OwnFrame, image_size: int) -> str:
     """What a lobed-mode frame is, for the tally: its kind, cause, and a visible tip's room to the edge."""
     kind, cause = f.kind, f.cause
@@ -474,6 +632,10 @@ def main(argv: list[str] | None = None) -> None:
             lobed(int(numbers[0]) if numbers else 400, plain=seed)
         return
     n = int(numbers[0]) if numbers else 500
+    if "--vouch-signals" in args:
+        print('the signals behind the candidates "nothing vouches" refused')
+        vouch_signals(n, int(numbers[1]) if len(numbers) > 1 else 200)
+        return
     if "--refusals" in args:
         print("the second renderer's refused visible tips, by the rule that refused them")
         refusals(n)
