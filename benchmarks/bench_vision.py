@@ -330,6 +330,7 @@ _SIGNALS: tuple[tuple[str, str], ...] = (
     ("ratio", "mismatch ratio: 1 - score over the recent fixes' median, 1"),
     ("sigma", "sigma: sigma_factor times the fit's worst standard deviation, px"),
     ("cover", "share of the template's weight inside the frame, 1"),
+    ("again", "1: a candidate of the whole frame's search (rules for a tip found again), 0: near the last fix"),
     ("near", "the edges' contrast right behind the tip (EdgeCheck.near), 1"),
     ("far", "the edges' contrast further back (EdgeCheck.far), 1"),
     ("nf", "near over far, 1"),
@@ -369,7 +370,8 @@ def _unvouched(seqs: Sequence[object], group: str) -> list[tuple[str, float, dic
                     now: dict[str, int] = now, frames: Any = frames) -> Any:
             res, cand = judge(cand, image, reacquire)
             if isinstance(res, Lost) and "nothing vouches" in res.detail:
-                out.append((group, *_signals(t, cand, fixes, now["k"], frames[now["k"]].tip)))
+                d, sig = _signals(t, cand, fixes, now["k"], frames[now["k"]].tip)
+                out.append((group, d, {**sig, "again": float(reacquire)}))
             return res, cand
 
         tracker._judge = watched  # type: ignore[method-assign]
@@ -445,6 +447,10 @@ def vouch_signals(n_peer: int, n_own: int) -> None:
         rows += _unvouched(make(n_own, 40, **kw), "own")  # type: ignore[operator]
     groups = {f"{g} {v}": [r for r in rows if r[0] == g and (r[1] <= 3.0) == (v == "good")]
               for g in ("peer", "own") for v in ("good", "wrong")}
+    # the like-for-like part: every wrong one was a fit near the last fix (the whole frame's candidates have
+    # passed the stricter rules for a tip found again, sigma among them)
+    groups["peer, local"] = [r for r in groups["peer good"] if not r[2]["again"]]
+    groups["own, local"] = [r for r in groups["own good"] if not r[2]["again"]]
     for g, rs in groups.items():
         e = [r[1] for r in rs]
         print(f"{g:>10}: {len(rs)} candidates" + (f", {min(e):.2f} to {max(e):.2f} px from the truth" if e else ""))
@@ -458,6 +464,9 @@ def vouch_signals(n_peer: int, n_own: int) -> None:
                                    else "none"))
         wrong = np.concatenate([vals["peer wrong"], vals["own wrong"]])
         print(f"  wrong against peer good: {_separation(vals['peer good'], wrong)}")
+        print(f"  against peer good, local: {_separation(vals['peer, local'], wrong)}")
+        local = np.concatenate([vals["peer, local"], vals["own, local"]])
+        print(f"  against all good, local: {_separation(local, wrong)}")
         print(f"  against all good: {_separation(np.concatenate([vals['peer good'], vals['own good']]), wrong)}")
     _pairs(groups)
     print("\nthe wrong ones:")
