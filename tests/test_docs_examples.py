@@ -72,6 +72,7 @@ def test_the_vision_page_runs_as_the_readme_camera_block(tmp_path):
     page = console_lines((DOCS / "vision.md").read_text(encoding="utf-8"))
     readme = _readme_block_after("### Seeing the tip")
     assert len(page) == 1 and page[0][0].startswith(". .venv/bin/activate")
+
     def command(line: str) -> str:  # the line without its comment (the two pages comment it differently)
         return line.split("  #")[0].rstrip()
 
