@@ -487,11 +487,11 @@ def explain(arm: int, fires: list[float], rate: float) -> None:
     if not got:
         return
     h = Hour(Arm(arm), rate=rate, dur=3600.0, seed=arm)
-    w, times = parts(h, [(min(r.ref_lo, r.win_lo - 60.0) - 1.0, r.win_lo + r.win_s + 0.1) for r in got])
+    w, times = parts(h, [(max(0.0, min(r.ref_lo, r.win_lo - 60.0) - 1.0), r.win_lo + r.win_s + 0.1) for r in got])
     cases: list[Case] = []
     quiet: list[float | None] = []
     for r, x in zip(got, w, strict=True):
-        t0 = min(r.ref_lo, r.win_lo - 60.0) - 1.0
+        t0 = max(0.0, min(r.ref_lo, r.win_lo - 60.0) - 1.0)
         c = Case(r, x, t0, step_phase(times, t0, x.shape[1]))
         s = next(x for x in spans(h) if x[0] <= r.win_lo < x[1])
         summary, q = minute_before(c, tu, r.win_lo)
