@@ -258,6 +258,27 @@ def step_phase(times: np.ndarray, t0: float, n: int) -> np.ndarray:
     return np.interp(t, times, np.arange(times.size, dtype=np.float64))
 
 
+def follow_phase(x: np.ndarray, t0: float, rate: float, harmonics: int = 12) -> np.ndarray:
+    """The steps' phase (cycles, per sample of ``x`` from ``t0`` s) followed from the sound: per 20 ms frame the
+    lines 1..``harmonics`` at the commanded ``rate``, the clock's offset the one within 0.04 cycles of the last frame's
+    that best matches a running template of those lines (its first frame, then 5 % of each new frame, aligned)."""
+    m = int(FRAME * SR)
+    n = x.size - x.size % m
+    tt = (t0 + np.arange(n) / SR).reshape(-1, m)
+    ks = np.arange(1, harmonics + 1)
+    z = np.stack([(x[:n].reshape(-1, m) * np.exp(-2j * np.pi * k * rate * tt)).sum(axis=1) for k in ks], axis=1)
+    grid, tmpl, th = np.linspace(-0.04, 0.04, 101), z[0].copy(), 0.0
+    off = np.zeros(z.shape[0])
+    for f in range(z.shape[0]):
+        cand = th + grid
+        score = np.real(np.exp(-2j * np.pi * np.outer(cand, ks)) @ (z[f] * np.conj(tmpl)))
+        th = float(cand[int(np.argmax(score))])
+        off[f] = th
+        tmpl = 0.95 * tmpl + 0.05 * z[f] * np.exp(-2j * np.pi * ks * th)
+    ts = t0 + np.arange(x.size) / SR
+    return np.asarray(rate * ts + np.interp(ts, t0 + (np.arange(off.size) + 0.5) * m / SR, off), dtype=np.float64)
+
+
 def _a(tu: Tuning, ref: np.ndarray, win: np.ndarray, rate: float, pieces: int, combs: tuple[float, ...]) -> float:
     """The check's ``a_L`` (``lines_stop_likeness``), the median over up to ``pieces`` spans of ``win``."""
     assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
@@ -397,12 +418,14 @@ def line_rows(c: Case, lines: list[tuple[int, int]], commanded: float) -> list[s
     return rows
 
 
-def a_row(c: Case, tu: Tuning, lines: list[tuple[int, int]], quiet: float | None) -> str:
+def a_row(c: Case, tu: Tuning, lines: list[tuple[int, int]], quiet: float | None, commanded: float) -> str:
     """``a_L``: the detector's; read again here on its reference and window (0.5 s; the 2 s median); on the 3-bin
-    comb only; against the quietest 0.48 s of the minute before; without the added sound; and from the power
-    locked to the steps' clock."""
+    comb only; against the quietest 0.48 s of the minute before; without the added sound; from the power locked
+    to the steps' clock; and from the power locked to the clock followed from the sound (``follow_phase``)."""
     r = c.read
     ref, win = c.cut(None, r.ref_lo, SPAN), c.cut(None, r.win_lo, r.win_s)
+    heard = Case(r, c.w, c.t0, follow_phase(c.w.sum(axis=0).astype(np.float64), c.t0, commanded))
+    followed = (heard.ph(r.ref_lo, SPAN), heard.ph(r.win_lo, r.win_s))
     dry = [
         c.cut(0, r.ref_lo, SPAN) + c.cut(1, r.ref_lo, SPAN),
         c.cut(0, r.win_lo, r.win_s) + c.cut(1, r.win_lo, r.win_s),
@@ -415,6 +438,7 @@ def a_row(c: Case, tu: Tuning, lines: list[tuple[int, int]], quiet: float | None
         math.nan if quiet is None else _a(tu, c.cut(None, quiet, SPAN), win, r.rate, 4, CLOCKED.combs),
         _a(tu, dry[0], dry[1], r.rate, 4, CLOCKED.combs),
         _coherent_a(tu, lines, ref, win, c.ph(r.ref_lo, SPAN), c.ph(r.win_lo, r.win_s)),
+        _coherent_a(tu, lines, ref, win, *followed),
     ]
     return f"| {r.name} | " + " | ".join("--" if not math.isfinite(x) else f"{x:.2f}" for x in got) + " |"
 
@@ -468,7 +492,8 @@ HEAD_LINES = (
 )
 HEAD_A = (
     "| fire | a_L, detector | read again, 0.5 s | 2 s (median) | 3-bin comb only | against the quietest 0.48 s"
-    " of the minute before | without the added sound | power locked to the steps' clock |\n" + "| --- " * 8 + "|"
+    " of the minute before | without the added sound | power locked to the steps' clock | to the clock followed"
+    " from the sound |\n" + "| --- " * 9 + "|"
 )
 
 
@@ -505,7 +530,7 @@ def explain(arm: int, fires: list[float], rate: float) -> None:
         print("\n".join(line_rows(c, lines, rate)))
     print(HEAD_A)
     for c, qs in zip(cases + stops, [*quiet, *[None] * len(stops)], strict=True):
-        print(a_row(c, tu, lines, qs))
+        print(a_row(c, tu, lines, qs, rate))
 
 
 if __name__ == "__main__":
