@@ -443,22 +443,27 @@ def a_row(c: Case, tu: Tuning, lines: list[tuple[int, int]], quiet: float | None
     return f"| {r.name} | " + " | ".join("--" if not math.isfinite(x) else f"{x:.2f}" for x in got) + " |"
 
 
-def minute_before(c: Case, tu: Tuning, at: float) -> tuple[str, float]:
-    """The check's ``a_L`` over the minute before ``at`` s, each 0.48 s span against the one before it (the
-    largest, the share at ``min_a`` or more) and the start of the span with the least added sound, s."""
+def minute_before(c: Case, tu: Tuning, at: float, lines: list[tuple[int, int]], commanded: float) -> tuple[str, float]:
+    """``a_L`` over the minute before ``at`` s, each 0.48 s span against the one before it: the check's, and from the
+    power locked to the clock followed from the sound (each: the largest, how many at ``min_a`` or more); and the
+    start of the span with the least added sound, s."""
     r, sp = c.read, SPAN
     lo = max(c.t0, at - 60.0)
     n = int((at - 1.0 - lo) / sp)
-    got = [_a(tu, c.cut(None, lo + (j - 1) * sp, sp), c.cut(None, lo + j * sp, sp), r.rate, 1, CLOCKED.combs)
-           for j in range(1, n)]  # fmt: skip
-    fin = np.asarray([g for g in got if math.isfinite(g)])
+    pairs = [(lo + (j - 1) * sp, lo + j * sp) for j in range(1, n)]
+    heard = Case(r, c.w, c.t0, follow_phase(c.w.sum(axis=0).astype(np.float64), c.t0, commanded))
+    got = [_a(tu, c.cut(None, a0, sp), c.cut(None, a1, sp), r.rate, 1, CLOCKED.combs) for a0, a1 in pairs]
+    locked = [
+        _coherent_a(tu, lines, c.cut(None, a0, sp), c.cut(None, a1, sp), heard.ph(a0, sp), heard.ph(a1, sp))
+        for a0, a1 in pairs
+    ]
     quiet = int(np.argmin([np.sum(c.cut(2, lo + j * sp, sp) ** 2) for j in range(n)]))
-    top = (
-        f"the largest {fin.max():.2f}, {int(np.sum(fin >= CLOCKED.min_a))} at {CLOCKED.min_a} or more"
-        if fin.size
-        else ""
-    )
-    return f"{fin.size} of {len(got)} judged, {top}", lo + quiet * sp
+    out = []
+    for name, vals in (("the check", got), ("locked to the clock followed", locked)):
+        fin = np.asarray([g for g in vals if math.isfinite(g)])
+        top = f"the largest {fin.max():.2f}, {int(np.sum(fin >= CLOCKED.min_a))} at {CLOCKED.min_a} or more"
+        out.append(f"{name}: {fin.size} of {len(vals)} judged" + (f", {top}" if fin.size else ""))
+    return "; ".join(out), lo + quiet * sp
 
 
 def stop_cases(arm: int, rate: float) -> list[Case]:
@@ -519,9 +524,10 @@ def explain(arm: int, fires: list[float], rate: float) -> None:
         t0 = max(0.0, min(r.ref_lo, r.win_lo - 60.0) - 1.0)
         c = Case(r, x, t0, step_phase(times, t0, x.shape[1]))
         s = next(x for x in spans(h) if x[0] <= r.win_lo < x[1])
-        summary, q = minute_before(c, tu, r.win_lo)
+        summary, q = minute_before(c, tu, r.win_lo, lines, rate)
         print(f"{r.name}: {s[2]} at {s[3]:+.1f} dB ({s[0]:.1f}-{s[1]:.1f} s); the reference {r.ref_lo:.2f} s,")
-        print(f"  the window {r.win_lo:.2f} s + {r.win_s:.2f} s at {r.rate:.2f} Hz; the minute before: {summary}")
+        print(f"  the window {r.win_lo:.2f} s + {r.win_s:.2f} s at {r.rate:.2f} Hz;")
+        print(f"  the minute before, {summary}")
         cases.append(c)
         quiet.append(q)
     stops = stop_cases(arm, rate)
