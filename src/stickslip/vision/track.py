@@ -184,15 +184,9 @@ def _local_max(a: FloatArray, r: int) -> FloatArray:
     return out
 
 
-def _peaks(ncc: FloatArray, floor: float, k: int) -> list[tuple[float, int, int, int]]:
-    """``(value, row, column, k)`` of each pixel of ``ncc`` above ``floor`` that is the largest within 2 px (a
-    5 x 5 square), row by row."""
-    ii, jj = _peak_cells(ncc, floor)
-    return list(zip(ncc[ii, jj].tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
-
-
 def _peak_cells(ncc: FloatArray, floor: float) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """The rows and columns of :func:`_peaks`: the pixels above ``floor``, each the largest within 2 px."""
+    """The rows and columns of the pixels of ``ncc`` above ``floor`` that are each the largest within 2 px (a
+    5 x 5 square), row by row."""
     ii, jj = np.nonzero((ncc == _local_max(ncc, 2)) & (ncc > floor))
     return ii, jj
 
@@ -235,8 +229,9 @@ def _padded(image: FloatArray, f: int, half: int, cache: dict[object, object]
 
 
 def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int, int, int]]:
-    """:func:`_peaks` of the whole-frame correlation ``ncc`` of copy ``k``, each ranked by its significance:
-    Fisher's ``atanh(r)`` times the square root of the share ``cover`` of the template's weight inside the frame.
+    """The peaks (:func:`_peak_cells`) of the whole-frame correlation ``ncc`` of copy ``k``, each ranked by its
+    significance: Fisher's ``atanh(r)`` times the square root of the share ``cover`` of the template's weight
+    inside the frame.
 
     Over ``N`` pixels where nothing matches, ``atanh(r)`` spreads by about ``1 / sqrt(N)``: a part of the
     template matches junk by chance better than the whole does, and a peak at the border would otherwise crowd
