@@ -61,6 +61,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     clocked = (
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
         + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
+        + (f"; in phase {got[0].locked:.2f}" if got[0].locked == got[0].locked else "")
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
@@ -77,7 +78,8 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (two rounds back); read
 #: in step, a reference stop-like to the levels giving no verdict and a window read on its first span (the round
 #: before); the latest stepping kept no longer than 10 s, 30 s or 120 s before taken for such a reference; a longer
-#: window read in four spans, the median kept; both (the default)
+#: window read in four spans, the median kept; both (the default); and the lines read in phase with the clock
+#: followed from the sound as well (``locked``)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -87,6 +89,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "kept120": replace(ROUND_BEFORE, kept_age_s=120.0),
     "pieces": replace(ROUND_BEFORE, window_pieces=4),
     "default": ClockedParams(),
+    "locked": ClockedParams(locked_frame_s=0.02),
     "off": None,
 }
 
