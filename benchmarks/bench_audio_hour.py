@@ -78,9 +78,9 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (two rounds back); read
 #: in step, a reference stop-like to the levels giving no verdict and a window read on its first span (the round
 #: before); the latest stepping kept no longer than 10 s, 30 s or 120 s before taken for such a reference; a longer
-#: window read in four spans, the median kept; both (the default); and the lines read in phase with the clock
-#: followed from the sound as well (``locked``)
-ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1)
+#: window read in four spans, the median kept; both (``spans``, the round before); and with them the lines read in
+#: phase with the clock followed from the sound (the default)
+ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
     "in-step": ROUND_BEFORE,
@@ -88,8 +88,8 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "kept30": replace(ROUND_BEFORE, kept_age_s=30.0),
     "kept120": replace(ROUND_BEFORE, kept_age_s=120.0),
     "pieces": replace(ROUND_BEFORE, window_pieces=4),
+    "spans": ClockedParams(locked_frame_s=0.0),
     "default": ClockedParams(),
-    "locked": ClockedParams(locked_frame_s=0.02),
     "off": None,
 }
 

@@ -268,7 +268,7 @@ def test_lines_wider_than_the_narrow_comb_are_read_on_a_wider_one() -> None:
 
 
 # The lines read in phase with the steps' clock followed from the sound (``locked_frame_s``, ``.features.lockin``).
-LOCKED = ClockedParams(locked_frame_s=0.02)
+LOCKED = CLOCKED  # on by default
 
 
 def _jumping_clicks(n: int, seed: int, jump_at: int) -> np.ndarray:
@@ -310,7 +310,8 @@ def test_in_phase_a_note_beside_a_line_is_not_a_stop_and_the_stop_is() -> None:
     assert abs(locked_stop_likeness(before, [after], SR, RATE, EDGES, sig, sig, LOCKED)) < 0.15
     stop = _scaled(_wandering_clicks(N, 36), sig)
     assert locked_stop_likeness(before, [stop], SR, RATE, EDGES, sig, sig, LOCKED) == pytest.approx(1.0, abs=0.1)
-    assert math.isnan(locked_stop_likeness(before, [stop], SR, RATE, EDGES, sig, sig))  # off: not read
+    off = ClockedParams(locked_frame_s=0.0)
+    assert math.isnan(locked_stop_likeness(before, [stop], SR, RATE, EDGES, sig, sig, off))  # off: not read
 
 
 def test_in_phase_no_verdict_where_the_lines_were_not_locked_before() -> None:

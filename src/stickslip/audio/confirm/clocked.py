@@ -121,7 +121,7 @@ class ClockedParams:
         4, "spans", "a longer window is read in up to this many spans, the median a_L kept (music moves, a stop stays)"
     )
     locked_frame_s: float = param(
-        0.0, "s", "frames the lines are read in phase with the clock followed in (0: not read in phase)"
+        0.02, "s", "the lines are read in phase with the clock followed, in frames this long (0: not; 20 steps)"
     )
     locked_harmonics: int = param(12, "lines", "the clock is followed on the step rate's first lines, this many")
     locked_slew: float = param(
