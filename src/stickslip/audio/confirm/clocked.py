@@ -51,6 +51,15 @@ stop-like, every one heard, is kept, and where the fire's own reference is over
 before it is the reference instead (a stop heard late is then judged against the stepping
 before it).
 
+**In phase with the steps.** A note on or beside one of the few lines a joint is judged on adds
+power the comb counts as the joint's. So the same sub-bands are also read in phase with the
+steps' clock, followed from the sound (:mod:`~stickslip.audio.features.lockin`, in frames of
+``locked_frame_s``): a note off its line turns against the clock and leaves little in phase,
+while a stop changes the steps' own sound, all of it in phase. A sub-band is read where its
+lines held ``min_locked`` of their power in phase before the fire; the signature is fitted as
+above (:func:`locked_stop_likeness`), and a fire whose reading in phase is under ``min_a`` is
+not a stop either (it can only veto).
+
 **A long window in spans.** A window that persisted over more than one span (2 s, after a
 rejected fire) is read in up to ``window_pieces`` spans against the reference, the median
 ``a_L`` kept: a stop's lines stay changed while the joint steps into it, a note of music on a
@@ -237,7 +246,9 @@ def _judged(signature_db: Sequence[float], continuum_db: Sequence[float], p: Clo
     return [i for i in moved if on[i]], whole  # the tuned stop's change was on the lines there
 
 
-def _in_phase(x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams) -> tuple[FloatArray, ...]:
+def _in_phase(
+    x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams
+) -> tuple[FloatArray, FloatArray]:
     """Per line ``ks``: the power in phase with the clock followed over ``x``, and the power in all."""
     clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
     both = sorted(set(clock) | set(ks))
@@ -274,8 +285,11 @@ def locked_stop_likeness(
     if not ks or p.locked_frame_s <= 0.0:
         return math.nan
     l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
-    keep = [i for i in judged if lines[i] and sum(l0[ks.index(k)] for k in lines[i]) >= p.min_locked
-            * sum(w0[ks.index(k)] for k in lines[i])]  # fmt: skip
+
+    def held(v: FloatArray, i: int) -> float:
+        return sum(float(v[ks.index(k)]) for k in lines[i])
+
+    keep = [i for i in judged if held(w0, i) > 0.0 and held(l0, i) >= p.min_locked * held(w0, i)]
     den = sum(float(signature_db[i]) ** 2 for i in keep)
     if den == 0.0 or den < p.min_covered * whole:
         return math.nan
@@ -284,7 +298,7 @@ def locked_stop_likeness(
         l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
         num = 0.0
         for i in keep:
-            p0, p1 = (sum(float(v[ks.index(k)]) for k in lines[i]) for v in (l0, l1))
+            p0, p1 = held(l0, i), held(l1, i)
             top = max(p0, p1) * p.floor_share
             num += float(signature_db[i]) * 10.0 * math.log10(max(p1, top) / max(p0, top))
         got.append(num / den)
