@@ -34,6 +34,7 @@ blocks whatever their length (the same samples whatever the blocks).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -235,11 +236,15 @@ class Stream:
         lines = np.abs(spec[np.round(np.arange(1, int(SR / 2 / rate)) * rate / SR * (1 << 16)).astype(np.int64)])
         # a step train's power: its lines (amplitude 2 |H(k rate)| / p each) and the amplitudes' spread between them
         power = float(np.sum(2 * lines**2) / p**2 + s.amp_spread**2 * np.sum(self.free**2) / p)
-        self.scale = 10 ** (STEP_DB / 20) / np.sqrt(power)
-        self.line_amp = lambda f: 2 * float(np.abs(spec[int(round(f / SR * (1 << 16)))])) / p * self.scale
+        self.scale = float(10 ** (STEP_DB / 20) / np.sqrt(power))
+        self.spec, self.period = spec, p
         self.notes = self._notes(np.random.default_rng(s.seed + 13))
         self.room = np.random.default_rng(s.seed + 17)
         self.room_zi = np.zeros(1)
+
+    def line_amp(self, f: float) -> float:
+        """The stepping's line at ``f`` Hz (a harmonic of the realised rate): its amplitude as a sine."""
+        return 2 * float(np.abs(self.spec[int(round(f / SR * (1 << 16)))])) / self.period * self.scale
 
     def _notes(self, rng: np.random.Generator) -> list[Note]:
         s, rate = self.s, self.s.clock.realised_hz()
@@ -284,12 +289,13 @@ class Stream:
         for nt in self.notes:
             if nt.t0 < t1 and nt.t0 + nt.dur > t0:
                 y += _note_samples(nt, start, n)
-        return y + self._room(n)
+        return np.asarray(y + self._room(n), dtype=np.float64)
 
     def _room(self, n: int) -> np.ndarray:
         """The room: white noise through a one-pole low-pass (a reddish hiss), ``snr_db`` under the stepping."""
         y, self.room_zi = lfilter([1.0], [1.0, -0.9], self.room.standard_normal(n), zi=self.room_zi)
-        return np.asarray(y, dtype=np.float64) * 10 ** ((STEP_DB - self.s.snr_db) / 20) * np.sqrt(1.0 - 0.81)
+        level = 10 ** ((STEP_DB - self.s.snr_db) / 20)
+        return np.asarray(np.asarray(y, dtype=np.float64) * level * math.sqrt(1.0 - 0.81), dtype=np.float64)
 
 
 def stream(s: Session, block_s: float | None = None) -> Iterator[np.ndarray]:
