@@ -22,6 +22,9 @@ stops") reads those lines. ``--variants in-step,default`` hears the same samples
 each variant of the clocked check (``VARIANTS``) side by side, one table each. ``--arms 3
 --explain 968.82,988.24,2423.50`` reads those fires on the step clock instead (the detector
 run to the last, the sound around each rendered with its parts apart; under a minute).
+``--crystal --minutes 20 --stops 6`` runs the twelfth generator instead (``tests/support/crystal_sound.py``:
+a divided crystal's step clock in bursts, music placed on and beside the joint's lines; its
+joints 1-3, no stop, then ``--stops`` recordings per joint of a stop under music on the lines).
 """
 
 from __future__ import annotations
