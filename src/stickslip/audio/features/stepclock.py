@@ -388,14 +388,8 @@ def line_powers(
         floors.append(floor)
         bins.append(n)
         band.append(j)
-    lines_ = Lines(
-        _f64(freq),
-        _f64(power),
-        _f64(var),
-        _f64(floors),
-        np.asarray(bins, dtype=np.int64),
-        np.asarray(band, dtype=np.int64),
-    )
+    lines_ = Lines(_f64(freq), _f64(power), _f64(var), _f64(floors), np.asarray(bins, dtype=np.int64),
+                   np.asarray(band, dtype=np.int64))
     return lines_, whole
 
 
