@@ -6,21 +6,23 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
 * the paper's 14 calibration traverses, 32 more at poses spread over the load space (8 poses
   per joint, both directions; ``calibration.design.spread_poses``), then each joint's first
   paper pose traversed again in both directions (4 repeats: the drift within the session,
-  docs/models.md §4), and 64 validation traverses at random poses of the workspace (16 per
-  joint, both directions): the largest errors are taken over the first 32 (8 poses per joint:
-  the issue's day), the intervals' coverage over all 64 (144 traverses per joint and direction
-  over 9 days, so that a coverage of 95 % is measured to about ±2 points rather than ±3);
+  docs/models.md §4), and validation traverses at random poses of the workspace, 64 per
+  joint and day in both directions (256 a day; ``--validation-poses``): the largest errors
+  and the intervals' coverage are taken over all of them (``--error-poses``), 576
+  traverses per joint and direction over 9 days (docs/models-log.md, twelfth round: until
+  then 16 poses, the errors over the first 8; ``--validation-poses 16 --error-poses 8``
+  gives that run again, the same numbers);
 * calibrations: the constant step (the paper's comparator, from the 14), the paper's
   procedure on the 14, the paper's form fitted to the 46 by least squares, ``--model auto``
   on the 46, ``--model auto`` on the 46 and the 4 repeats (the table a calibration with the
   repeat writes), and yesterday's ``auto`` (with the repeats) updated with 4 of today's
-  traverses (one per joint and direction, random poses, measured after the validation on the
-  same arm; ``--prior``);
+  traverses (one per joint and direction, random poses, measured after the first 16 validation
+  poses on the same arm, before the others; ``--prior``);
 * the largest |relative error| of the predicted average step at the validation traverses,
   per joint (3 prismatic, 2 rotary) and day: the median and the worst day, the mean over
   all; how many days ``auto`` (with the repeats) erred more than the paper's procedure on
-  the same day, beside how many the draw of the poses alone would give (the share of the sets of 8
-  of the day's 16 validation poses on which it does, summed over days);
+  the same day, beside how many the draw of the poses alone would give (the share of the sets of
+  M of the day's N validation poses on which it does, summed over days; ``arm_days.share_above``);
 * the 95 % intervals of ``auto`` with the repeats (``predict --interval``): the share of
   validation traverses inside, per joint and direction, with its 95 % Wilson interval, side
   by side with the same calibration's interval without its drift term ("no drift": the bias the
@@ -28,7 +30,9 @@ Dahl arm written for issue 33 and never tuned to), several seeds and three days 
   with ``auto`` on the 46 alone ("46": no repeat, so no drift term, as before); and how honest
   the error ``calibrate`` prints is: the expected RMS error at new poses, and the
   cross-validation RMS of the average, each over the validation traverses' actual RMS error
-  (median over days; 1 = honest).
+  (median over days; 1 = honest);
+* both verdicts again over the first 8, 16, 32, ... of the day's validation poses (what a run with
+  that many gives), and the coverage's spread between the days against binomial sampling's.
 
 Prints Markdown tables (the README's). Run: ``.venv/bin/python benchmarks/bench_models.py``
 (a few minutes on 2 cores); ``--seeds 101,102`` and ``--arms dahl`` to choose.
@@ -76,12 +80,18 @@ AUTO = ROWS[4]
 """The calibration whose intervals and fallbacks are measured (the design with the repeats)."""
 
 
-VALIDATION_POSES = 16
-"""Random validation poses per joint and day (both directions) by default: all for the coverage. More
-(``--validation-poses``) are measured after the day's other traverses (``make_day(more_validation=...)``),
-so that the first 16 and every other table are the same whatever their number."""
-ERROR_POSES = 8
-"""The first of them the largest errors are taken over by default (``--error-poses``)."""
+FIRST_POSES = 16
+"""Random validation poses per joint and day the day's own generator draws (``make_day``); more are measured
+after the day's other traverses (``make_day(more_validation=...)``), so that these 16 and every other table
+are the same whatever the number."""
+VALIDATION_POSES = 64
+"""Random validation poses per joint and day (both directions) by default (``--validation-poses``): the
+coverage is over all (docs/models-log.md, twelfth round: why 64)."""
+ERROR_POSES = 64
+"""The first of them the largest errors are taken over by default (``--error-poses``); until the twelfth
+round 8 of 16."""
+RESAMPLE_SET = 8
+"""``--resample``: the size of the sets of poses drawn (the eighth round's day)."""
 LADDER = (8, 16, 32, 64, 128, 256, 512)
 """The pose counts the verdicts are shown at, up to the day's validation poses."""
 
@@ -200,12 +210,12 @@ def run_arm(arm: str, seeds: tuple[int, ...], new_per_direction: int = 1, valida
     coverage (over all ``validation_poses``), honesty ratios, fallbacks (the update with ``new_per_direction``
     of today's traverses per joint and direction)."""
     tally = _Tally()
-    more = max(0, validation_poses - VALIDATION_POSES)
+    more = max(0, validation_poses - FIRST_POSES)
     for seed in seeds:
         rng = np.random.default_rng(seed)
         prev = None
         for day in DAYS:
-            d = make_day(arm, seed, day, rng, validation_poses=VALIDATION_POSES, repeat_first=True,
+            d = make_day(arm, seed, day, rng, validation_poses=FIRST_POSES, repeat_first=True,
                          new_per_direction=new_per_direction, more_validation=more)
             prev = _day(tally, d, prev, (validation_poses, error_poses))
     return tally
@@ -321,7 +331,7 @@ def resample_day(arm: str, seed: int, day_index: int, poses: int) -> None:
     largest error is above the procedure's."""
     rng = np.random.default_rng(seed)
     for day in DAYS[:day_index]:
-        d = make_day(arm, seed, day, rng, validation_poses=VALIDATION_POSES, repeat_first=True)
+        d = make_day(arm, seed, day, rng, validation_poses=FIRST_POSES, repeat_first=True)
     cals = {"auto": calibrate(d.calibration, model="auto"), "procedure": calibrate(d.paper14),
             "form": calibrate_families(d.calibration, model="paper")}
     replay = ARMS[arm](seed, day)
@@ -329,7 +339,7 @@ def resample_day(arm: str, seed: int, day_index: int, poses: int) -> None:
         replay.traverse(t.joint, t.direction, _pose(t), day)
     draw = np.random.default_rng(999)
     for j in (3, 2):
-        val = [t for t in _first(d.validation, ERROR_POSES) if t.joint == j]
+        val = [t for t in _first(d.validation, RESAMPLE_SET) if t.joint == j]
         e = np.abs(cals["auto"].predict_many(val) / np.array([t.gamma for t in val]) - 1.0)
         w = val[int(np.argmax(e))]
         cal = np.array([[t.q1, t.q2, t.q3, t.theta, t.psi] for t in d.calibration if t.joint == j])
@@ -342,11 +352,11 @@ def resample_day(arm: str, seed: int, day_index: int, poses: int) -> None:
         ts = [replay.traverse(j, s, p, day) for p in [random_pose(draw, j) for _ in range(poses)] for s in "+-"]
         g = np.array([t.gamma for t in ts])
         err = {n: np.abs(c.predict_many(ts) / g - 1.0).reshape(poses, 2).max(axis=1) for n, c in cals.items()}
-        sets = np.array([draw.choice(poses, ERROR_POSES, replace=False) for _ in range(4000)])
+        sets = np.array([draw.choice(poses, RESAMPLE_SET, replace=False) for _ in range(4000)])
         top = {n: x[sets].max(axis=1) for n, x in err.items()}
         print(f"  {poses} more poses: largest " + ", ".join(f"{n} {100 * x.max():.2f} %" for n, x in err.items())
               + "; RMS " + ", ".join(f"{n} {100 * np.sqrt(np.mean(x**2)):.2f} %" for n, x in err.items()))
-        print(f"  sets of {ERROR_POSES}: auto's largest above the procedure's in "
+        print(f"  sets of {RESAMPLE_SET}: auto's largest above the procedure's in "
               f"{100 * np.mean(top['auto'] > top['procedure']):.1f} %, the form's in "
               f"{100 * np.mean(top['form'] > top['procedure']):.1f} %")
 
