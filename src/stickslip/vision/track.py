@@ -343,7 +343,9 @@ def _focus_reread(t: TipTracker, cand: _Candidate, image: FloatArray, reacquire:
     frames at once. When the copy chosen lies further from the last fix's than the focus may
     drift (:attr:`~.template.TrackerParams.max_blur_step` a frame), the copies are compared at
     the last fix, on its own pixels (kept by :meth:`_View.keep`), as :meth:`TipTracker._try`
-    compares them, and the step is judged from the copy that matches there. Only for a fit
+    compares them (the copy fitted unless another matches better by
+    :attr:`~.template.TrackerParams.level_hysteresis`), and the step is judged from the copy
+    they pick. Only for a fit
     that matches as the recent fixes did (:func:`_as_usual`): a lag of the copy is then all
     that changed; a fit that matches worse (a grain over the tip) changed more than its focus.
     """
@@ -353,8 +355,8 @@ def _focus_reread(t: TipTracker, cand: _Candidate, image: FloatArray, reacquire:
         return res
     if not _as_usual(cand.ref.score, t._usual_mismatch()):  # more than the focus changed: the step stands
         return res
-    # the copy that matches best there, with no hysteresis: that would favour the copy fitted, the lag read past
-    read = int(np.argmax(t._levels({}, view.frame(), t._last[0], t._last[1], t._theta)))
+    scores = t._levels({}, view.frame(), t._last[0], t._last[1], t._theta)
+    read = _pick_level(scores, t._level, t.params.level_hysteresis)
     return res if read == t._level else t._rules(cand, image, reacquire, last=read)
 
 
