@@ -63,7 +63,8 @@ direction turned by the fix's angle) and across it, and prints each one's mean (
 and spread, by sequence (look, tip width, photons, blur range) of the second renderer
 (``FRAMES``, default 500) and of the own renderer's plain, lobed and round sets (``OWN``
 frames each, default 200), then by the frame's blur against the first frame's (signed: a
-negative one is sharper) and by how far the blur copy the fix was fitted with lies from it.
+negative one is sharper), by how far the blur copy the fix was fitted with lies from it, and
+by the needle's turn since the first frame.
 
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
@@ -554,9 +555,9 @@ def _split(fix: Fix, tip: tuple[float, float], shaft: tuple[float, float]) -> tu
     return ex * ux + ey * uy, -ex * uy + ey * ux
 
 
-def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, float, float, float, float]]:
+def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, float, float, float, float, float]]:
     """Every visible tip's fix: (set, sequence, along, across, the frame's blur against the first frame's (signed
-    sigma, px), the copy's blur, px, the error, px)."""
+    sigma, px), the copy's blur, px, the error, px, the fix's turn, deg)."""
     rows = []
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
@@ -570,7 +571,7 @@ def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, 
             if isinstance(r, Fix) and f.kind == "visible":
                 along, across = _split(r, f.tip, tracker.template.shaft)
                 rel = math.copysign(math.sqrt(abs(f.blur**2 - b0**2)), f.blur - b0)
-                rows.append((label, i, along, across, rel, r.blur, math.hypot(along, across)))
+                rows.append((label, i, along, across, rel, r.blur, math.hypot(along, across), math.degrees(r.angle)))
     return rows
 
 
@@ -596,7 +597,7 @@ def error_split(n_peer: int, n_own: int) -> None:
     print("px; along: + behind the tip (up the shaft); mean (bias) and sd of each component")
     for label, seqs in sets:
         rows = _split_rows(seqs, label)
-        a = np.array([r[2:] for r in rows]).reshape(-1, 5)
+        a = np.array([r[2:] for r in rows]).reshape(-1, 6)
         print(f"\n{label}: look, tip width px, photons; the sequence's blur range px\n{head}")
         for i, seq in enumerate(seqs):
             mine = a[[r[1] == i for r in rows]] if len(a) else a
@@ -613,6 +614,9 @@ def error_split(n_peer: int, n_own: int) -> None:
         for lo, hi in ((-9, -1.0), (-1.0, -0.3), (-0.3, 0.3), (0.3, 1.0), (1.0, 9)):
             d = a[:, 3] - a[:, 2]
             print(_split_line(f"  {lo:+.1f} to {hi:+.1f}", a[(d >= lo) & (d < hi)]))
+        print("by the needle's turn since the first frame (the fix's angle, deg)")
+        for lo, hi in ((-90, -2), (-2, -0.5), (-0.5, 0.5), (0.5, 2), (2, 90)):
+            print(_split_line(f"  {lo:+.1f} to {hi:+.1f}", a[(a[:, 5] >= lo) & (a[:, 5] < hi)]))
 
 
 class _Recording:
