@@ -349,7 +349,7 @@ def _focus_reread(t: TipTracker, cand: _Candidate, image: FloatArray, reacquire:
     that matches as the recent fixes did (:func:`_as_usual`): a lag of the copy is then all
     that changed; a fit that matches worse (a grain over the tip) changed more than its focus.
     """
-    res = t._rules(cand, image, reacquire)
+    res = t._rules(cand, image, reacquire, t._level)
     view = t._last_view
     if view is None or t._last is None or not (isinstance(res, Lost) and res.detail.startswith(FOCUS_STEP)):
         return res
@@ -680,9 +680,8 @@ class TipTracker:
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc)
 
-    def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False, last: int | None = None) -> Result:
-        """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost` (``last``: the blur copy the
-        last fix is read at, by default the one it was fitted with)."""
+    def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool, last: int) -> Result:
+        """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`; ``last``: the last fix's copy."""
         p = self.params
         r = cand.ref
         H, W = image.shape
@@ -718,7 +717,6 @@ class TipTracker:
         max_sigma = p.reacquire_sigma if reacquire else p.max_sigma
         if sigma > max_sigma:
             return Lost("lost", f"position undetermined (sigma {sigma:.2f} px > {max_sigma:g} px)")
-        last = self._level if last is None else last
         last_blur = self._spec[last][2]
         if abs(blur - last_blur) > p.max_blur_step * math.sqrt(self._since):
             return Lost("lost", f"{FOCUS_STEP} by {blur - last_blur:+g} px in {self._since} "
