@@ -57,6 +57,15 @@ signal's ranges by group, whether one threshold separates the wrong from the goo
 each pair of signals the good candidates inside the wrong ones' box. The tracker is not
 changed: its ``_judge`` is wrapped on the instance to record what it refused.
 
+``--error-split [FRAMES [OWN]]`` splits each visible tip's error into its component along the
+needle's axis (positive: behind the tip, up the shaft; the axis is the template's shaft
+direction turned by the fix's angle) and across it, and prints each one's mean (the bias)
+and spread, by sequence (look, tip width, photons, blur range) of the second renderer
+(``FRAMES``, default 500) and of the own renderer's plain, lobed and round sets (``OWN``
+frames each, default 200), then by the frame's blur against the first frame's (signed: a
+negative one is sharper), by how far the blur copy the fix was fitted with lies from it, and
+by the needle's turn since the first frame.
+
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -536,6 +545,80 @@ def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | N
     return len(bad)
 
 
+def _split(fix: Fix, tip: tuple[float, float], shaft: tuple[float, float]) -> tuple[float, float]:
+    """A fix's error along the needle's axis (positive: behind the tip, up the shaft) and across it (positive:
+    the axis turned by +90 deg, x right and y down), px; the axis is the template's shaft direction turned by
+    the fix's angle."""
+    c, s = math.cos(fix.angle), math.sin(fix.angle)
+    ux, uy = c * shaft[0] - s * shaft[1], s * shaft[0] + c * shaft[1]
+    ex, ey = fix.x - tip[0], fix.y - tip[1]
+    return ex * ux + ey * uy, -ex * uy + ey * ux
+
+
+def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, float, float, float, float, float]]:
+    """Every visible tip's fix: (set, sequence, along, across, the frame's blur against the first frame's (signed
+    sigma, px), the copy's blur, px, the error, px, the fix's turn, deg)."""
+    rows = []
+    for i, seq in enumerate(seqs):
+        images = [as_image(f.image) for f in seq.frames]
+        try:
+            tracker = TipTracker(images[0], seq.frames[0].tip)
+        except TemplateError:
+            continue
+        b0 = seq.frames[0].blur
+        for f, img in zip(seq.frames[1:], images[1:], strict=True):
+            r = tracker.update(img)
+            if isinstance(r, Fix) and f.kind == "visible":
+                along, across = _split(r, f.tip, tracker.template.shaft)
+                rel = math.copysign(math.sqrt(abs(f.blur**2 - b0**2)), f.blur - b0)
+                rows.append((label, i, along, across, rel, r.blur, math.hypot(along, across), math.degrees(r.angle)))
+    return rows
+
+
+def _split_line(name: str, a: np.ndarray) -> str:
+    """n, median error, along: mean and sd, across: mean and sd, the along bias over the error's RMS."""
+    if a.size == 0:
+        return f"{name:<26} {0:>4}"
+    al, ac = a[:, 0], a[:, 1]
+    rms = math.sqrt(float(np.mean(al**2 + ac**2)))
+    return (f"{name:<26} {len(a):>4} {np.median(np.hypot(al, ac)):>5.2f} {al.mean():>+6.2f} {al.std():>5.2f} "
+            f"{ac.mean():>+6.2f} {ac.std():>5.2f} {rms:>5.2f}")
+
+
+def error_split(n_peer: int, n_own: int) -> None:
+    """The visible tips' errors split along the needle's axis and across it, by sequence and by blur."""
+    sets: list[tuple[str, Sequence[Any]]] = [
+        ("peer", peer_benchmark(n_peer, 50, seed=0, size=512)),
+        ("own plain", own_benchmark(n_own, 40, seed=0, size=256)),
+        ("own lobed", lobed_benchmark(n_own, 40, seed=0, size=256)),
+        ("own round", round_benchmark(n_own, 40, seed=0, size=256)),
+    ]
+    head = (f"{'':<26} {'n':>4} {'med':>5} {'along':>6} {'sd':>5} {'across':>6} {'sd':>5} {'rms':>5}")
+    print("px; along: + behind the tip (up the shaft); mean (bias) and sd of each component")
+    for label, seqs in sets:
+        rows = _split_rows(seqs, label)
+        a = np.array([r[2:] for r in rows]).reshape(-1, 6)
+        print(f"\n{label}: look, tip width px, photons; the sequence's blur range px\n{head}")
+        for i, seq in enumerate(seqs):
+            mine = a[[r[1] == i for r in rows]] if len(a) else a
+            if len(mine):
+                blur = [f.blur for f in seq.frames[1:] if f.kind == "visible"]
+                name = (f"{i} {seq.look[:3]} {seq.width_px:4.1f} {seq.photons:3.0f} "
+                        f"{min(blur):.1f}-{max(blur):.1f}")
+                print(_split_line(name, mine))
+        print(_split_line("all", a))
+        print("by the frame's blur against the first frame's (signed sigma, px)")
+        for lo, hi in ((-9, -1.5), (-1.5, -0.5), (-0.5, 0.5), (0.5, 1.5), (1.5, 9)):
+            print(_split_line(f"  {lo:+.1f} to {hi:+.1f}", a[(a[:, 2] >= lo) & (a[:, 2] < hi)]))
+        print("by the copy's blur less the frame's (px): the copy lags the focus")
+        for lo, hi in ((-9, -1.0), (-1.0, -0.3), (-0.3, 0.3), (0.3, 1.0), (1.0, 9)):
+            d = a[:, 3] - a[:, 2]
+            print(_split_line(f"  {lo:+.1f} to {hi:+.1f}", a[(d >= lo) & (d < hi)]))
+        print("by the needle's turn since the first frame (the fix's angle, deg)")
+        for lo, hi in ((-90, -2), (-2, -0.5), (-0.5, 0.5), (0.5, 2), (2, 90)):
+            print(_split_line(f"  {lo:+.1f} to {hi:+.1f}", a[(a[:, 5] >= lo) & (a[:, 5] < hi)]))
+
+
 class _Recording:
     """The simulated arm, with its true position before and after every burst."""
 
@@ -644,6 +727,10 @@ def main(argv: list[str] | None = None) -> None:
     if "--vouch-signals" in args:
         print('the signals behind the candidates "nothing vouches" refused')
         vouch_signals(n, int(numbers[1]) if len(numbers) > 1 else 200)
+        return
+    if "--error-split" in args:
+        print("the visible tips' errors along the needle's axis and across it")
+        error_split(n, int(numbers[1]) if len(numbers) > 1 else 200)
         return
     if "--refusals" in args:
         print("the second renderer's refused visible tips, by the rule that refused them")

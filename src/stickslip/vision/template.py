@@ -118,6 +118,8 @@ class TrackerParams:
         Largest change of the tip's blur between two consecutive fixes, px (sigma): focus
         drifts slowly, and a match that needs a very different blur copy is something
         else (a blob that looks like the tip blurred, or the tip's edge under a particle).
+        The last fix's blur is the copy that matches best on its own pixels when the one it
+        was fitted with is beyond the step (that one lags a drifting focus; docs/vision.md).
     reacquire_ncc : float
         A peak of the whole-frame search is fitted only when the template correlates with
         the frame there by this much at whole pixels, 1: the fit costs as much as the

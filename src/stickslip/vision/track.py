@@ -286,6 +286,80 @@ def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
     return float(np.mean(like))
 
 
+FOCUS_STEP = "the focus would have changed"
+"""How the focus step rule's refusal begins (:meth:`TipTracker._rules`)."""
+
+
+@dataclass(frozen=True)
+class _View:
+    """The frame's pixels around a fix (a copy), enough to compare the blur copies there again.
+
+    Attributes
+    ----------
+    pixels : ndarray
+        The frame's grey values in the crop.
+    x0, y0 : int
+        The crop's top-left pixel in the frame.
+    shape : tuple of int
+        The frame's ``(height, width)``.
+    """
+
+    pixels: FloatArray
+    x0: int
+    y0: int
+    shape: tuple[int, int]
+
+    @classmethod
+    def keep(cls, image: FloatArray, x: float, y: float, half: int) -> _View:
+        """A copy of every pixel :meth:`TipTracker._levels` reads for a tip at ``(x, y)`` (window ``half``, px):
+        within its patches' radius (``half sqrt 2 + 12``) and the patch's own margin, with room to spare."""
+        r = int(math.ceil(half * math.sqrt(2.0) + 12.0)) + 8
+        H, W = image.shape
+        xi, yi = int(math.floor(x)), int(math.floor(y))
+        x0, y0 = min(max(xi - r, 0), W), min(max(yi - r, 0), H)
+        return cls(image[y0 : max(min(yi + r + 1, H), y0), x0 : max(min(xi + r + 1, W), x0)].copy(), x0, y0,
+                   (int(H), int(W)))
+
+    def frame(self) -> FloatArray:
+        """A frame holding the kept pixels where they were, zeros elsewhere (never read)."""
+        out = np.zeros(self.shape)
+        h, w = self.pixels.shape
+        out[self.y0 : self.y0 + h, self.x0 : self.x0 + w] = self.pixels
+        return out
+
+
+def _as_usual(score: float, usual: float | None) -> bool:
+    """Whether a fit correlating by ``score`` matches as the recent fixes did (their median ``1 - score``
+    ``usual``; ``None`` before three): a mismatch at most half as large again, and 0.005."""
+    return usual is not None and 1.0 - score <= 1.5 * usual + 0.005
+
+
+def _focus_reread(t: TipTracker, cand: _Candidate, image: FloatArray, reacquire: bool) -> Result:
+    """The template fit's rules on ``cand``, the focus step judged against the last fix's blur as read there.
+
+    The blur copy a fix was fitted with is not a reading of its focus: the copies are compared
+    only when a fit matches worse than the recent fixes did, so a fix keeps the last one's copy
+    while the focus drifts, until a fit is compared and the copy jumps by the drift of many
+    frames at once. When the copy chosen lies further from the last fix's than the focus may
+    drift (:attr:`~.template.TrackerParams.max_blur_step` a frame), the copies are compared at
+    the last fix, on its own pixels (kept by :meth:`_View.keep`), as :meth:`TipTracker._try`
+    compares them (the copy fitted unless another matches better by
+    :attr:`~.template.TrackerParams.level_hysteresis`), and the step is judged from the copy
+    they pick. Only for a fit
+    that matches as the recent fixes did (:func:`_as_usual`): a lag of the copy is then all
+    that changed; a fit that matches worse (a grain over the tip) changed more than its focus.
+    """
+    res = t._rules(cand, image, reacquire, t._level)
+    view = t._last_view
+    if view is None or t._last is None or not (isinstance(res, Lost) and res.detail.startswith(FOCUS_STEP)):
+        return res
+    if not _as_usual(cand.ref.score, t._usual_mismatch()):  # more than the focus changed: the step stands
+        return res
+    scores = t._levels({}, view.frame(), t._last[0], t._last[1], t._theta)
+    read = _pick_level(scores, t._level, t.params.level_hysteresis)
+    return res if read == t._level else t._rules(cand, image, reacquire, last=read)
+
+
 def _pick_level(scores: list[float], current: int, hysteresis: float) -> int:
     """The blur copy that matches best; the ``current`` one unless another beats it by ``hysteresis``."""
     best = int(np.argmax(scores))
@@ -442,6 +516,7 @@ class TipTracker:
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
         self._shaft, self._width = _learn_shaft(image, tip, t, params, self._spec)
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
+        self._last_view: _View | None = None  # the last fix's pixels, its blur re-read from them (_focus_reread)
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
         self._level = 0
@@ -503,7 +578,7 @@ class TipTracker:
                      correlation=corr)
         usual = self._usual_mismatch()
         # the blur copies are compared only when the fit matches worse than the recent fixes did (focus changed)
-        settled = usual is not None and ref.converged and 1.0 - ref.score <= 1.5 * usual + 0.005
+        settled = ref.converged and _as_usual(ref.score, usual)
         settled = settled or ref.score < worth
         for _ in range(0 if settled else 2):
             if not (math.isfinite(ref.x) and math.isfinite(ref.y)):
@@ -589,7 +664,7 @@ class TipTracker:
         rules take it too.
         """
         p = self.params
-        res = self._rules(cand, image, reacquire)
+        res = _focus_reread(self, cand, image, reacquire)
         r = cand.ref
         # the edges only for a fit that correlates well enough to be taken (the template's rules refuse the others)
         if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged:
@@ -605,8 +680,8 @@ class TipTracker:
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc)
 
-    def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
-        """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
+    def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool, last: int) -> Result:
+        """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`; ``last``: the last fix's copy."""
         p = self.params
         r = cand.ref
         H, W = image.shape
@@ -642,11 +717,11 @@ class TipTracker:
         max_sigma = p.reacquire_sigma if reacquire else p.max_sigma
         if sigma > max_sigma:
             return Lost("lost", f"position undetermined (sigma {sigma:.2f} px > {max_sigma:g} px)")
-        last_blur = self._spec[self._level][2]
+        last_blur = self._spec[last][2]
         if abs(blur - last_blur) > p.max_blur_step * math.sqrt(self._since):
-            return Lost("lost", f"the focus would have changed by {blur - last_blur:+g} px in {self._since} "
+            return Lost("lost", f"{FOCUS_STEP} by {blur - last_blur:+g} px in {self._since} "
                                 f"frame(s) (at most {p.max_blur_step:g} px a frame)")
-        if reacquire and cand.level <= self._top and cand.level > self._level + 1 and blur > last_blur:
+        if reacquire and cand.level <= self._top and cand.level > last + 1 and blur > last_blur:
             return Lost("lost", f"found again only blurred by {blur:g} px (the last fix: {last_blur:g} px)")
         return Fix(r.x, r.y, float(min(max(r.score, 0.0), 1.0)), sigma, blur, r.theta)
 
@@ -664,7 +739,7 @@ class TipTracker:
             if cand is not None:
                 res, cand = self._judge(cand, image)
                 if isinstance(res, Fix):
-                    return self._accept(res, cand)
+                    return self._accept(res, cand, image)
                 first_refusal = res
                 if res.reason in ("lost", "out of focus") and cand.edges is not None and (
                         _edge_refusal(cand.edges, self.params, cand.shaft) is None):
@@ -687,7 +762,7 @@ class TipTracker:
             elif refused is None or cand.ref.score > refused[0]:
                 refused = (cand.ref.score, res)
         if isinstance(best, Fix):
-            return self._accept(best, best_cand)
+            return self._accept(best, best_cand, image)
         self._fresh = False
         self._since += 1
         return first_refusal if first_refusal is not None else _not_found(refused)
@@ -704,8 +779,8 @@ class TipTracker:
         usual = self._usual_mismatch()
         return ratio * self._first_mismatch + 0.1 if usual is None else ratio * usual + self.params.mismatch_floor
 
-    def _accept(self, fix: Fix, cand: _Candidate) -> Fix:
-        self._last_edges = cand.edges
+    def _accept(self, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
+        self._last_edges, self._last_view = cand.edges, _View.keep(image, fix.x, fix.y, self.template.half)
         self._mismatch.append(1.0 - fix.score)
         del self._mismatch[: -self.params.recent]
         self._last = (fix.x, fix.y)
