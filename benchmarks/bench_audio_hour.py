@@ -22,6 +22,9 @@ stops") reads those lines. ``--variants in-step,default`` hears the same samples
 each variant of the clocked check (``VARIANTS``) side by side, one table each. ``--arms 3
 --explain 968.82,988.24,2423.50`` reads those fires on the step clock instead (the detector
 run to the last, the sound around each rendered with its parts apart; under a minute).
+``--crystal --minutes 20 --stops 6`` runs the twelfth generator instead (``tests/support/crystal_sound.py``:
+a divided crystal's step clock in bursts, music placed on and beside the joint's lines; its
+joints 1-3, no stop, then ``--stops`` recordings per joint of a stop under music on the lines).
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ sys.path.insert(0, str(HERE.parent / "tests" / "support"))  # the generators
 import math  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
 
+import crystal_sound as cs  # noqa: E402
 import numpy as np  # noqa: E402
 from fan_sound import SR, STEP_DB, Arm, Scene, _steps, render, tuning_scene  # noqa: E402
 from hour_sound import KINDS, RMS, Hour, _Band, _Filter, _span_source, _Stepping, spans, stream  # noqa: E402
@@ -60,6 +64,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
     clocked = (
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
         + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
+        + (f"; in phase {got[0].locked:.2f}" if got[0].locked == got[0].locked else "")
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
@@ -76,8 +81,9 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: the clocked check's variants ``--variants`` compares: its lines read on the 0.4 % comb only (two rounds back); read
 #: in step, a reference stop-like to the levels giving no verdict and a window read on its first span (the round
 #: before); the latest stepping kept no longer than 10 s, 30 s or 120 s before taken for such a reference; a longer
-#: window read in four spans, the median kept; both (the default)
-ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1)
+#: window read in four spans, the median kept; both (``spans``, the round before); and with them the lines read in
+#: phase with the clock followed from the sound (the default)
+ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
     "in-step": ROUND_BEFORE,
@@ -85,6 +91,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "kept30": replace(ROUND_BEFORE, kept_age_s=30.0),
     "kept120": replace(ROUND_BEFORE, kept_age_s=120.0),
     "pieces": replace(ROUND_BEFORE, window_pieces=4),
+    "spans": ClockedParams(locked_frame_s=0.0),
     "default": ClockedParams(),
     "off": None,
 }
@@ -539,6 +546,78 @@ def explain(arm: int, fires: list[float], rate: float) -> None:
         print(a_row(c, tu, lines, qs, rate))
 
 
+# --crystal: the twelfth generator (``tests/support/crystal_sound.py``): a divided crystal's step clock with a slow
+# drift, bursts whose phase restarts, a per-step amplitude spread, and music placed on and beside the joint's lines.
+# Written before the check was changed for it; measured, never tuned to.
+
+
+def crystal(
+    joint: int, minutes: float, detail: bool, variants: tuple[str, ...], stops: int
+) -> dict[str, tuple[list[str], list[str], tuple[int, int]]]:
+    """Per variant: the false stops of ``minutes`` of joint ``joint`` stepping with no stop, and the first events of
+    ``stops`` recordings of a stop under music on the lines (right: within 50 ms unflagged)."""
+    tu = tune(cs.render(cs.tuning_session(cs.Joint(joint))), SR, 2.0)
+    s = cs.Session(cs.Joint(joint), dur=60.0 * minutes, seed=joint)
+    dets = {v: ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=VARIANTS[v])) for v in variants}
+    heard: dict[str, list[StopEvent]] = {v: [] for v in variants}
+    for d in dets.values():
+        d.reset(0.0, step_rate_hz=s.clock.rate)
+    for block in cs.stream(s):
+        for v, d in dets.items():
+            heard[v] += d.feed(block)
+    sched = cs.spans(s)
+    out: dict[str, tuple[list[str], list[str], tuple[int, int]]] = {}
+    for v, d in dets.items():
+        lines, evs = [], heard[v] + d.finish()
+        for e in evs:
+            kind = next(k for a, b, k in sched if a <= e.onset_s < b)
+            lines.append(f"    {e.onset_s:8.2f} s  {'flagged' if e.onset_uncertain else 'COUNTED'}  {kind}")
+            if detail:
+                lines.append(details(e, d.log))
+        out[v] = (lines, [], (sum(not e.onset_uncertain for e in evs), sum(e.onset_uncertain for e in evs)))
+    rng = np.random.default_rng(joint + 900)
+    for k in range(stops):
+        at = float(rng.uniform(3.0, 5.0))
+        sc = cs.Session(cs.Joint(joint), dur=at + 2.5, stop_at=at, seed=1000 + 10 * joint + k,
+                        kinds=("music on the lines",), span_s=(20.0, 30.0))  # fmt: skip
+        x = cs.render(sc)
+        for v in variants:
+            det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=VARIANTS[v]))
+            det.reset(0.0, step_rate_hz=sc.clock.rate)
+            ev = det.feed(x) + det.finish()
+            out[v][1].append(_stop_verdict(ev, at))
+    return out
+
+
+def _stop_verdict(events: list[StopEvent], at: float) -> str:
+    """The first event against the stop at ``at`` s: right (within 50 ms), flagged, early, late or missed."""
+    if not events:
+        return "missed"
+    e = events[0]
+    err = e.onset_s - at
+    if e.onset_uncertain:
+        return "flagged"
+    return "right" if abs(err) <= 0.05 else ("early" if err < 0 else "late")
+
+
+def crystal_main(joints: tuple[int, ...], minutes: float, detail: bool, variants: tuple[str, ...], stops: int) -> None:
+    print(
+        f"the twelfth generator: {minutes:g} min of stepping at 1000 Hz (told) on a divided crystal in bursts, music "
+        f"on and beside the lines, no stop; and {stops} stops under music on the lines"
+    )
+    print(
+        "| joint | clocked check | false stops counted / flagged | stops: right / flagged / early / late / missed | s |"
+    )
+    print("| --- " * 5 + "|")
+    for j in joints:
+        t = time.perf_counter()
+        for v, (lines, verdicts, (u, f)) in crystal(j, minutes, detail, variants, stops).items():
+            tally = " / ".join(str(verdicts.count(w)) for w in ("right", "flagged", "early", "late", "missed"))
+            print(f"| {j} | {v} | {u} / {f} | {tally} | {time.perf_counter() - t:.0f} |")
+            for line in lines:
+                print(line)
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description="An hour of stepping under speech, music and a radio (docstring).")
     ap.add_argument("--arms", default="1,2,3", help="arms of the tenth generator, comma-separated")
@@ -546,6 +625,8 @@ if __name__ == "__main__":
     ap.add_argument("--rate", type=float, default=1000.0, help="the step rate, Hz (told to the detector)")
     ap.add_argument("--details", action="store_true", help="what the detector noted about each false stop")
     ap.add_argument("--variants", default="default", help=f"the clocked check's variants: {', '.join(VARIANTS)}")
+    ap.add_argument("--crystal", action="store_true", help="the twelfth generator instead (a crystal's clock)")
+    ap.add_argument("--stops", type=int, default=6, help="with --crystal: stops under music on the lines, per joint")
     ap.add_argument("--explain", default="", help="fires' onsets, s, comma-separated: read them on the step clock")
     a = ap.parse_args()
     if a.explain:
@@ -561,4 +642,7 @@ if __name__ == "__main__":
     vs = tuple(a.variants.split(","))
     if not set(vs) <= set(VARIANTS):
         ap.error(f"--variants: one of {', '.join(VARIANTS)}, comma-separated (got {a.variants})")
+    if a.crystal:
+        crystal_main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.details, vs, a.stops)
+        sys.exit(0)
     main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details, vs)

@@ -14,7 +14,15 @@ import math
 import numpy as np
 import pytest
 
-from stickslip.audio.confirm.clocked import CLOCKED, ClockedCheck, ClockedParams, OnClock, lines_stop_likeness
+from stickslip.audio.confirm.clocked import (
+    CLOCKED,
+    ClockedCheck,
+    ClockedParams,
+    OnClock,
+    lines_stop_likeness,
+    locked_stop_likeness,
+)
+from stickslip.audio.features.lockin import demodulate, follow_clock, locked_powers
 
 SR = 48_000
 RATE = 1000.0
@@ -257,3 +265,67 @@ def test_lines_wider_than_the_narrow_comb_are_read_on_a_wider_one() -> None:
     assert (math.isnan(a), used) == (True, 0)
     a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig)
     assert used == 1 and a == pytest.approx(1.0, abs=0.1)
+
+
+# The lines read in phase with the steps' clock followed from the sound (``locked_frame_s``, ``.features.lockin``).
+LOCKED = CLOCKED  # on by default
+
+
+def _jumping_clicks(n: int, seed: int, jump_at: int) -> np.ndarray:
+    """Clicks every 48 samples; from sample ``jump_at`` on, half a period (24 samples) later: a new burst."""
+    x = _clicks(n, seed)
+    x[jump_at:] = 0.0
+    rng = np.random.default_rng(seed + 100)
+    x[jump_at + 24 :: 48] = 1.0 + 0.1 * rng.standard_normal(x[jump_at + 24 :: 48].size)
+    return x + 1e-4 * rng.standard_normal(n)
+
+
+def test_the_clock_is_followed_through_a_wandering_rate_and_a_new_burst() -> None:
+    """A clock wandering 0.2 % keeps its 7th line in phase with the clock followed (the commanded clock loses it);
+    a burst restarting the phase half-way is re-acquired at once (followed slowly, half the stretch is lost)."""
+    ks = list(range(1, 13))
+    z = demodulate(_wandering_clicks(N, 31), SR, RATE, ks, 960)
+    locked, whole = locked_powers(z, ks, follow_clock(z, ks, LOCKED.locked_slew, LOCKED.locked_reacquire))
+    assert locked[6] / whole[6] > 0.9
+    fixed, _ = locked_powers(z, ks, np.zeros(z.shape[0]))
+    assert fixed[6] / whole[6] < 0.5
+    z = demodulate(_jumping_clicks(N, 32, N // 2), SR, RATE, ks, 960)
+    locked, whole = locked_powers(z, ks, follow_clock(z, ks, LOCKED.locked_slew, LOCKED.locked_reacquire))
+    assert locked[6] / whole[6] > 0.9
+    slow, _ = locked_powers(z, ks, follow_clock(z, ks, LOCKED.locked_slew, math.inf))
+    assert slow[6] / whole[6] < 0.6
+
+
+def test_in_phase_a_note_beside_a_line_is_not_a_stop_and_the_stop_is() -> None:
+    """A note 0.2 % off the 6th line (in the sub-band the stop raises 12 dB), 14 dB over the line: the lines' power
+    rises there (the comb reads a stop), their power in phase with the steps does not (a_L near 0); the joint's
+    own sound scaled by the signature reads 1 both ways."""
+    sig = (0.0, 12.0, 0.0)
+    before = _scaled(_wandering_clicks(N, 33), (0.0, 0.0, 0.0))
+    mid = _band(before, EDGES[1], EDGES[2])
+    note = _tones(N, [6 * RATE * 1.002], 10**1.4 * float(np.mean(mid**2)) / 4, 34)
+    after = _scaled(_wandering_clicks(N, 35), (0.0, 0.0, 0.0)) + note
+    a, used = lines_stop_likeness(before, after, SR, RATE, EDGES, sig, sig)
+    assert used == 1 and a > 0.5
+    assert abs(locked_stop_likeness(before, [after], SR, RATE, EDGES, sig, sig, LOCKED)) < 0.15
+    stop = _scaled(_wandering_clicks(N, 36), sig)
+    assert locked_stop_likeness(before, [stop], SR, RATE, EDGES, sig, sig, LOCKED) == pytest.approx(1.0, abs=0.1)
+    off = ClockedParams(locked_frame_s=0.0)
+    assert math.isnan(locked_stop_likeness(before, [stop], SR, RATE, EDGES, sig, sig, off))  # off: not read
+
+
+def test_in_phase_no_verdict_where_the_lines_were_not_locked_before() -> None:
+    """Noise where the stop rises (no lines in phase before the fire): no verdict, not a veto."""
+    sig = (0.0, 12.0, 0.0)
+    rng = np.random.default_rng(37)
+    before = _band(rng.standard_normal(N), EDGES[1], EDGES[2])
+    after = _band(rng.standard_normal(N), EDGES[1], EDGES[2])
+    assert math.isnan(locked_stop_likeness(before, [after], SR, RATE, EDGES, sig, sig, LOCKED))
+
+
+def test_the_verdict_vetoes_a_change_out_of_phase_too() -> None:
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    assert not chk.verdict(OnClock(1.0, RATE, 2, math.nan, 0.1))  # on the comb a stop, in phase not
+    assert not chk.verdict(OnClock(0.1, RATE, 2, math.nan, 1.0))
+    assert chk.verdict(OnClock(math.nan, RATE, 0, math.nan, 0.9)) and chk.verdict(OnClock(0.9, RATE, 2))
+    assert not chk.verdict(OnClock(math.nan, RATE, 0, math.nan, 0.1))  # the comb could not judge; in phase can

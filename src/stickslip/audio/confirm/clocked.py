@@ -51,6 +51,15 @@ stop-like, every one heard, is kept, and where the fire's own reference is over
 before it is the reference instead (a stop heard late is then judged against the stepping
 before it).
 
+**In phase with the steps.** A note on or beside one of the few lines a joint is judged on adds
+power the comb counts as the joint's. So the same sub-bands are also read in phase with the
+steps' clock, followed from the sound (:mod:`~stickslip.audio.features.lockin`, in frames of
+``locked_frame_s``): a note off its line turns against the clock and leaves little in phase,
+while a stop changes the steps' own sound, all of it in phase. A sub-band is read where its
+lines held ``min_locked`` of their power in phase before the fire; the signature is fitted as
+above (:func:`locked_stop_likeness`), and a fire whose reading in phase is under ``min_a`` is
+not a stop either (it can only veto).
+
 **A long window in spans.** A window that persisted over more than one span (2 s, after a
 rejected fire) is read in up to ``window_pieces`` spans against the reference, the median
 ``a_L`` kept: a stop's lines stay changed while the joint steps into it, a note of music on a
@@ -66,11 +75,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..features.lockin import demodulate, follow_clock, locked_powers
 from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_powers, periodogram, rate_near_hz
 from ..paramfield import param
 from ..tuningfile import Tuning
 
-__all__ = ["CLOCKED", "ClockedCheck", "ClockedParams", "OnClock", "lines_stop_likeness"]
+__all__ = ["CLOCKED", "ClockedCheck", "ClockedParams", "OnClock", "lines_stop_likeness", "locked_stop_likeness"]
 
 FloatArray = NDArray[np.float64]
 
@@ -119,6 +129,19 @@ class ClockedParams:
     window_pieces: int = param(
         4, "spans", "a longer window is read in up to this many spans, the median a_L kept (music moves, a stop stays)"
     )
+    locked_frame_s: float = param(
+        0.02, "s", "the lines are read in phase with the clock followed, in frames this long (0: not; 20 steps)"
+    )
+    locked_harmonics: int = param(12, "lines", "the clock is followed on the step rate's first lines, this many")
+    locked_slew: float = param(
+        0.04, "cycles", "the followed clock moves at most this from frame to frame (a jittering step clock)"
+    )
+    locked_reacquire: float = param(
+        1.5, "", "or jumps where the lines match this many times better (a burst restarted the clock's phase)"
+    )
+    min_locked: float = param(
+        0.5, "", "a sub-band is read in phase where its lines held this share of their power in phase before"
+    )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
 
@@ -138,6 +161,8 @@ class OnClock:
     bands: int
     #: how long before the fire's own reference the kept stepping it was judged against ended, s (NaN: its own)
     kept_s: float = math.nan
+    #: the lines' stop-likeness read in phase with the clock followed (NaN: not read, or no verdict)
+    locked: float = math.nan
 
 
 def lines_stop_likeness(
@@ -176,15 +201,7 @@ def lines_stop_likeness(
         ``a_L`` (dimensionless: 1 a stop like the tuned one on the lines, 0 no change on them; NaN where no sub-band
         was judged) and how many sub-bands were judged.
     """
-    moved = [i for i, delta in enumerate(signature_db) if abs(delta) >= p.min_signature_db]
-    whole = sum(float(signature_db[i]) ** 2 for i in moved)
-    if len(continuum_db) != len(signature_db):
-        return math.nan, 0
-    on = [
-        math.copysign(1.0, d) * c <= abs(d) + p.max_continuum_excess_db
-        for d, c in zip(signature_db, continuum_db, strict=True)
-    ]
-    judged = [i for i in moved if on[i]]  # the tuned stop's change was on the lines there
+    judged, whole = _judged(signature_db, continuum_db, p)
     bands = [(float(edges_hz[i]), float(edges_hz[i + 1])) for i in judged]
     if not bands:
         return math.nan, 0
@@ -213,6 +230,79 @@ def lines_stop_likeness(
     if den == 0.0 or den < p.min_covered * whole:
         return math.nan, used
     return num / den, used
+
+
+def _judged(signature_db: Sequence[float], continuum_db: Sequence[float], p: ClockedParams) -> tuple[list[int], float]:
+    """The sub-bands the check judges (the tuned stop moved them, on the lines) and the signature's sum of squares
+    over every sub-band it moved, dB^2."""
+    moved = [i for i, delta in enumerate(signature_db) if abs(delta) >= p.min_signature_db]
+    whole = sum(float(signature_db[i]) ** 2 for i in moved)
+    if len(continuum_db) != len(signature_db):
+        return [], whole
+    on = [
+        math.copysign(1.0, d) * c <= abs(d) + p.max_continuum_excess_db
+        for d, c in zip(signature_db, continuum_db, strict=True)
+    ]
+    return [i for i in moved if on[i]], whole  # the tuned stop's change was on the lines there
+
+
+def _in_phase(
+    x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams
+) -> tuple[FloatArray, FloatArray]:
+    """Per line ``ks``: the power in phase with the clock followed over ``x``, and the power in all."""
+    clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
+    both = sorted(set(clock) | set(ks))
+    z = demodulate(x, sr, rate_hz, both, max(1, int(round(p.locked_frame_s * sr))))
+    off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire)
+    pick = [both.index(k) for k in ks]
+    return locked_powers(z[:, pick], ks, off)
+
+
+def locked_stop_likeness(
+    before: FloatArray,
+    pieces: Sequence[FloatArray],
+    sample_rate: float,
+    rate_hz: float,
+    edges_hz: Sequence[float],
+    signature_db: Sequence[float],
+    continuum_db: Sequence[float],
+    p: ClockedParams = CLOCKED,
+) -> float:
+    """The lines' stop-likeness read in phase with the steps' clock, followed from the sound (:mod:`.lockin`).
+
+    As :func:`lines_stop_likeness`, on the same sub-bands, but each line's power is the power in phase with the
+    clock followed over each stretch, ``before`` and every piece of the window alike: a note on or beside a line
+    is not in phase with the steps and adds little, a stop changes the steps' own sound and all of it is in
+    phase. A sub-band is read where its lines held ``min_locked`` of their power in phase before; no verdict (NaN)
+    where those hold less than ``min_covered`` of the signature's sum of squares. The median over the pieces.
+    """
+    judged, whole = _judged(signature_db, continuum_db, p)
+    lines = {
+        i: [k for k in range(1, int(sample_rate / 2 / rate_hz) + 1) if edges_hz[i] <= k * rate_hz < edges_hz[i + 1]]
+        for i in judged
+    }
+    ks = sorted({k for v in lines.values() for k in v})
+    if not ks or p.locked_frame_s <= 0.0:
+        return math.nan
+    l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
+
+    def held(v: FloatArray, i: int) -> float:
+        return sum(float(v[ks.index(k)]) for k in lines[i])
+
+    keep = [i for i in judged if held(w0, i) > 0.0 and held(l0, i) >= p.min_locked * held(w0, i)]
+    den = sum(float(signature_db[i]) ** 2 for i in keep)
+    if den == 0.0 or den < p.min_covered * whole:
+        return math.nan
+    got = []
+    for x in pieces:
+        l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
+        num = 0.0
+        for i in keep:
+            p0, p1 = held(l0, i), held(l1, i)
+            top = max(p0, p1) * p.floor_share
+            num += float(signature_db[i]) * 10.0 * math.log10(max(p1, top) / max(p0, top))
+        got.append(num / den)
+    return float(np.median(got))
 
 
 def _comb_read(
@@ -314,8 +404,15 @@ class ClockedCheck:
         finite = [g[0] for g in got if math.isfinite(g[0])]
         if len(got) > 1 and finite:
             a = float(np.median(finite))
-        return OnClock(a, rate, used, self.ref_age_s)
+        locked = math.nan
+        if p.locked_frame_s > 0.0:
+            sig, cont = tu.signature_db, tu.continuum_signature_db
+            locked = locked_stop_likeness(ref, pieces, sr, rate, tu.edges_hz, sig, cont, p)
+        return OnClock(a, rate, used, self.ref_age_s, locked)
 
     def verdict(self, got: OnClock | None) -> bool:
-        """False where the change is off the clock; True where it is on it or nothing was judged."""
-        return got is None or not math.isfinite(got.a) or got.a >= self.p.min_a
+        """False where the change is off the clock, on the lines or in phase with the clock followed; True where
+        it is on it or nothing was judged."""
+        if got is None:
+            return True
+        return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
