@@ -226,8 +226,9 @@ def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
         res, cand = t._judge(cand, image)
         e_near = dist(cand)
         near = res if isinstance(res, Lost) else None
+        # as update: a fit refused only because nothing vouches for it goes on to the whole frame
         if isinstance(res, Lost) and res.reason in ("lost", "out of focus") and cand.edges is not None and (
-                _edge_refusal(cand.edges, t.params, cand.shaft) is None):
+                not getattr(cand, "unvouched", False)) and _edge_refusal(cand.edges, t.params, cand.shaft) is None:
             return near, e_near, math.nan, "not searched", "not searched"
     e_glob, v_glob = math.nan, "none"
     best: tuple[float, str] = (-math.inf, "not found")

@@ -139,6 +139,7 @@ class _Candidate:
     edges: EdgeCheck | None = None
     shaft: ShaftCheck | None = None
     width: WidthCheck | None = None
+    unvouched: bool = False  # refused only because nothing vouches for it (too few width stations in the frame)
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -366,14 +367,17 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
 
 
 def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
-              image: FloatArray) -> tuple[WidthCheck | None, bool]:
+              image: FloatArray, reacquire: bool = False) -> tuple[WidthCheck | None, bool]:
     """The needle's width behind a candidate (:func:`.width.check_width`), and whether, unchecked, it is to be
-    refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame."""
+    refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame behind a
+    fit near the last fix. A tip found again (``reacquire``) has passed the stricter rules for one (its
+    correlation, its mismatch against the recent fixes', its standard deviation): they vouch for it instead
+    (docs/vision.md, "Decision rules")."""
     if ws is None:
         return None, False
     r = cand.ref
     wc = check_width(ws, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
-    return wc, wc is None and not p.trust_unchecked
+    return wc, wc is None and not p.trust_unchecked and not reacquire
 
 
 def _not_found(refused: tuple[float, Lost] | None) -> Lost:
@@ -601,9 +605,10 @@ class TipTracker:
             self._shaft, cand.level, image, r.x, r.y, r.theta)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         # the needle's width at the stations behind a fix every other rule takes
-        wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(self._width, p, cand, image)
+        wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
+            self._width, p, cand, image, reacquire)
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
-        return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc)
+        return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool = False) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`."""
@@ -666,10 +671,10 @@ class TipTracker:
                 if isinstance(res, Fix):
                     return self._accept(res, cand)
                 first_refusal = res
-                if res.reason in ("lost", "out of focus") and cand.edges is not None and (
+                if res.reason in ("lost", "out of focus") and cand.edges is not None and not cand.unvouched and (
                         _edge_refusal(cand.edges, self.params, cand.shaft) is None):
-                    # the needle's edges are where the fit put its tip, which a rule refused (its position
-                    # undetermined, its focus changed too fast): the tip is here, the whole frame has no other
+                    # the edges are where the fit put its tip, which a rule refused (its position undetermined, its
+                    # focus changed too fast; not "nothing vouches": the whole frame's stricter rules decide that)
                     self._fresh = False
                     self._since += 1
                     return res
