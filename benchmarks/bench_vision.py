@@ -63,10 +63,6 @@ outline behind the fit up to the field's border: across the axis every 2 px, whe
 there, how long a stretch is not, the largest narrowing going back, and the width against the first
 frame's as far behind its tip (good against wrong, near the last fix and found again).
 
-``--found-again-vouches`` (with ``--then-frame``) runs the own modes with a variant of the vouching (a
-tip found again not refused by "nothing vouches"; a fit near the last fix that rule refused sent on to
-the whole frame's search): the tracker wrapped on the instance.
-
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -85,7 +81,6 @@ import sys  # noqa: E402
 import textwrap  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Sequence  # noqa: E402
-from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -590,33 +585,6 @@ def vouch_signals(n_peer: int, n_own: int) -> None:
                             80, subsequent_indent=" " * 4))
 
 
-_VARIANT: dict[str, bool] = {"found_again": False, "local_on": False}
-"""``--found-again-vouches`` (``found_again``): a tip found again by the whole frame's search is not refused
-by "nothing vouches"; with ``--then-frame`` also (``local_on``), a fit near the last fix that rule refused
-sends the frame on to the whole frame's search. Measured on the own modes only (a throwaway variant: the
-tracker is wrapped on the instance)."""
-
-
-def _own_tracker(image: np.ndarray, tip: tuple[float, float]) -> TipTracker:
-    """The tracker :func:`lobed` runs: as it is, or wrapped as :data:`_VARIANT` says."""
-    tracker = TipTracker(image, tip)
-    if not _VARIANT["found_again"]:
-        return tracker
-    judge = tracker._judge
-
-    def judged(cand: Any, img: np.ndarray, reacquire: bool = False) -> Any:
-        res, cand = judge(cand, img, reacquire)
-        if isinstance(res, Lost) and "nothing vouches" in res.detail:
-            if reacquire:  # the rules without the vouching: a Fix (the refusal came only where they gave one)
-                return tracker._rules(cand, img, True), cand
-            if _VARIANT["local_on"]:  # the edges' verdict dropped: update goes on to the whole frame
-                return res, replace(cand, edges=None)
-        return res, cand
-
-    tracker._judge = judged  # type: ignore[method-assign]
-    return tracker
-
-
 def _lobed_class(f: OwnFrame, image_size: int) -> str:
     """What a lobed-mode frame is, for the tally: its kind, cause, and a visible tip's room to the edge."""
     kind, cause = f.kind, f.cause
@@ -651,7 +619,7 @@ def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | N
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
         try:
-            tracker = _own_tracker(images[0], seq.frames[0].tip)
+            tracker = TipTracker(images[0], seq.frames[0].tip)
         except TemplateError as exc:
             print(f"sequence {i} ({seq.look}, tip {seq.width_px:.1f} px) not learnt: {exc}")
             continue
@@ -767,8 +735,6 @@ _OWN_MODES: dict[str, tuple[str, int, dict[str, bool]]] = {
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     numbers = [a for a in args if not a.startswith("--")]
-    _VARIANT["found_again"] = "--found-again-vouches" in args
-    _VARIANT["local_on"] = "--then-frame" in args
     for flag, (what, default, kw) in _OWN_MODES.items():
         if flag in args:  # the mode on all tips, then on wide bright-field tips only
             n_own = int(numbers[0]) if numbers else default

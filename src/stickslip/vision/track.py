@@ -34,15 +34,16 @@
    most stations differ: the far end of a chip stuck on the tip, wider than the needle
    where it lies and the needle narrower behind it); where the first frame showed such
    stations and fewer than three lie in the frame behind the fix (the shaft leaves the field), the
-   fix is refused (*lost*): nothing vouches that the end seen is the tip;
+   fix is refused (*lost*): nothing vouches that the end seen is the tip; the frame then goes on to
+   the whole frame's search, whose stricter rules vouch for a tip found again instead;
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`; the
    frame is padded so the template may hang over its border until its tip lies on the edge,
    the part outside left out of the correlation (:func:`~.template.inside_ncc`): a tip near
    the edge is found again as one in the middle is;
-   not when the fit near the last fix was refused while its edges hold (the tip is
-   there, only not vouched for).
+   not when the fit near the last fix was refused by another rule while its edges hold
+   (the tip is there, only its position or focus not vouched for).
 
 A fix is never a guess: a frame the rules cannot vouch for is refused.
 """
