@@ -13,6 +13,7 @@ traverses at *random* poses of the workspace. The arms:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -62,6 +63,9 @@ class Day:
     more_new: list[Traverse] = field(default_factory=list)
     """``make_day(..., new_per_direction=n)``: ``n - 1`` more traverses per joint and direction at random poses,
     measured after :attr:`new4` (drawn from their own generator: the other tables are those of ``n = 1``)."""
+    more_validation: list[Traverse] = field(default_factory=list)
+    """``make_day(..., more_validation=n)``: ``n`` more random validation poses per joint (both directions),
+    measured last (drawn from their own generator: the other tables are those of ``n = 0``)."""
 
     @property
     def calibration46(self) -> list[Traverse]:
@@ -75,11 +79,13 @@ class Day:
 
 
 def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8,
-             repeat_first: bool = False, new_per_direction: int = 1) -> Day:
+             repeat_first: bool = False, new_per_direction: int = 1, more_validation: int = 0) -> Day:
     """The day's tables (``validation_poses`` random poses per joint, both directions), measured in this order
     on one arm (a joint that warms up is warm by the validation). ``repeat_first``: each joint's first paper
     pose is traversed again in both directions after the 46 (the random poses drawn are the same).
-    ``new_per_direction``: new traverses per joint and direction for the update (:attr:`Day.more_new`)."""
+    ``new_per_direction``: new traverses per joint and direction for the update (:attr:`Day.more_new`).
+    ``more_validation``: random validation poses per joint measured after all of them
+    (:attr:`Day.more_validation`)."""
     arm = ARMS[arm_name](seed, day)
     p14 = [arm.traverse(j, d, p, day) for j in (3, 2) for p in paper_poses(j) for d in "+-"]
     s32 = [arm.traverse(j, d, p, day) for j in (3, 2)
@@ -91,10 +97,43 @@ def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, valid
     more_rng = np.random.default_rng((seed, int(day.replace("-", "")), 11))
     more = [arm.traverse(j, d, random_pose(more_rng, j), day)
             for _ in range(new_per_direction - 1) for j in (3, 2) for d in "+-"]
-    return Day(arm_name, seed, day, p14, s32, val, new4, rep, more)
+    val_rng = np.random.default_rng((seed, int(day.replace("-", "")), 13))
+    more_val = [arm.traverse(j, d, p, day) for j in (3, 2)
+                for p in [random_pose(val_rng, j) for _ in range(more_validation)] for d in "+-"]
+    return Day(arm_name, seed, day, p14, s32, val, new4, rep, more, more_val)
 
 
 def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:
     """``pred / measured - 1`` per traverse."""
     out: np.ndarray = np.asarray(pred, dtype=float) / np.array([t.gamma for t in ts]) - 1.0
     return out
+
+
+def wilson_interval(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    """Wilson score interval of a proportion ``k / n`` (default 95 %: ``z`` the normal quantile 0.975).
+
+    ``(c - h, c + h)`` with ``c = (k + z^2/2) / (n + z^2)`` and
+    ``h = z sqrt(k (n - k) / n + z^2 / 4) / (n + z^2)``. Raises ``ValueError`` unless ``0 <= k <= n``, ``n > 0``.
+    """
+    if not (n > 0 and 0 <= k <= n):
+        raise ValueError(f"k = {k}, n = {n}: a proportion needs 0 <= k <= n and n > 0")
+    c = (k + z * z / 2) / (n + z * z)
+    h = z * math.sqrt(k * (n - k) / n + z * z / 4) / (n + z * z)
+    return c - h, c + h
+
+
+def share_above(a: np.ndarray, b: np.ndarray, m: int) -> float:
+    """The share of the ``m``-subsets of the poses on which ``max a > max b`` over the subset (exact).
+
+    ``a[i]``, ``b[i]``: two models' errors at pose ``i`` (no ties between poses). On a subset the larger
+    maximum belongs to the pose with the largest ``max(a[i], b[i])``; the pose of rank ``r`` (0 the largest)
+    among ``n`` is the subset's top in ``C(n - 1 - r, m - 1) / C(n, m)`` of the subsets, so the share is the
+    sum of those over the poses with ``a > b``. ``m = n``: 1 or 0, the comparison itself.
+    """
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    n = a.size
+    if a.shape != b.shape or a.ndim != 1 or not 1 <= m <= n:
+        raise ValueError(f"m = {m} poses of {n} (shapes {a.shape}, {b.shape}): need 1 <= m <= n, equal 1-D shapes")
+    order = np.argsort(-np.maximum(a, b), kind="stable")
+    top = np.array([math.comb(n - 1 - r, m - 1) for r in range(n)], dtype=float) / math.comb(n, m)
+    return float(np.sum(top[(a > b)[order]]))
