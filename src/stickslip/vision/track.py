@@ -368,17 +368,18 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
 
 
 def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
-              image: FloatArray, reacquire: bool = False) -> tuple[WidthCheck | None, bool]:
+              image: FloatArray, found_sigma: float | None = None) -> tuple[WidthCheck | None, bool]:
     """The needle's width behind a candidate (:func:`.width.check_width`), and whether, unchecked, it is to be
     refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame behind a
-    fit near the last fix. A tip found again (``reacquire``) has passed the stricter rules for one (its
-    correlation, its mismatch against the recent fixes', its standard deviation): they vouch for it instead
-    (docs/vision.md, "Decision rules")."""
+    fit near the last fix. A tip found again (its standard deviation ``found_sigma``, px) has passed the
+    stricter rules for one (its correlation, its mismatch against the recent fixes'): they vouch for it
+    instead when its standard deviation is at most ``p.unvouched_sigma`` (docs/vision.md, "Decision rules")."""
     if ws is None:
         return None, False
     r = cand.ref
     wc = check_width(ws, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
-    return wc, wc is None and not p.trust_unchecked and not reacquire
+    vouched = found_sigma is not None and found_sigma <= p.unvouched_sigma
+    return wc, wc is None and not p.trust_unchecked and not vouched
 
 
 def _not_found(refused: tuple[float, Lost] | None) -> Lost:
@@ -607,7 +608,7 @@ class TipTracker:
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         # the needle's width at the stations behind a fix every other rule takes
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
-            self._width, p, cand, image, reacquire)
+            self._width, p, cand, image, res.sigma if reacquire else None)
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
