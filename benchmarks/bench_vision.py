@@ -66,6 +66,12 @@ frames each, default 200), then by the frame's blur against the first frame's (s
 negative one is sharper), by how far the blur copy the fix was fitted with lies from it, and
 by the needle's turn since the first frame.
 
+``--border-signals [OWN]`` reads instead, on the own round mode's candidates "nothing vouches" refused
+(seeds 0 and 2, 1 and 3 wide) and the lobed mode's wide set (``OWN`` frames each, default 400), the
+outline behind the fit up to the field's border: across the axis every 2 px, whether the axis is needle
+there, how long a stretch is not, the largest narrowing going back, and the width against the first
+frame's as far behind its tip (good against wrong, near the last fix and found again).
+
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -224,8 +230,9 @@ def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]
         res, cand = t._judge(cand, image)
         e_near = dist(cand)
         near = res if isinstance(res, Lost) else None
+        # as update: a fit refused only because nothing vouches for it goes on to the whole frame
         if isinstance(res, Lost) and res.reason in ("lost", "out of focus") and cand.edges is not None and (
-                _edge_refusal(cand.edges, t.params, cand.shaft) is None):
+                not getattr(cand, "unvouched", False)) and _edge_refusal(cand.edges, t.params, cand.shaft) is None:
             return near, e_near, math.nan, "not searched", "not searched"
     e_glob, v_glob = math.nan, "none"
     best: tuple[float, str] = (-math.inf, "not found")
@@ -348,6 +355,104 @@ _SIGNALS: tuple[tuple[str, str], ...] = (
 """The signals ``--vouch-signals`` reads on each candidate "nothing vouches" refused: key, meaning and unit."""
 
 
+_BORDER: tuple[tuple[str, str], ...] = (
+    ("axis", "length of the axis read, from 2 px behind the fit to 2 px inside the border, px"),
+    ("run", "share of it whose middle is needle (the outline continues to the border), 1"),
+    ("gap", "the longest stretch of it whose middle is not needle, px"),
+    ("turn", "the largest narrowing of the needle's run going back (a needle only widens), px"),
+    ("dw", "median width less the first frame's as far behind its tip, px"),
+)
+"""``--border-signals``: the outline behind the fit read across the axis every 2 px up to the border."""
+
+
+def _border_run(image: np.ndarray, x: float, y: float, u: tuple[float, float], ground: tuple[float, float],
+                contrast: float) -> list[tuple[float, bool, float]]:
+    """Across the axis from ``(x, y)`` back along ``u``, every 2 px to 2 px inside the field's border: the
+    distance behind the tip (px), whether the axis there is needle (the profile, smoothed by 1 px, standing
+    ``contrast`` ground spreads from the ground's level, gaps of 12 px closed as the shaft's walk does), and
+    the needle's run across through the axis (px; NaN when the run reaches the frame's edge)."""
+    from scipy import ndimage
+
+    from stickslip.vision.shaft import station_profiles
+
+    H, W = image.shape
+    ux, uy = u
+    nx, ny = -uy, ux
+    ts = np.arange(-48.0, 48.0 + 1e-9)
+    mid = ts.size // 2
+    out: list[tuple[float, bool, float]] = []
+    s = 2.0
+    while True:
+        px, py = x + s * ux, y + s * uy
+        if min(px, py, W - 1 - px, H - 1 - py) < 2.0 or s > 400:
+            return out
+        raw, ok = station_profiles(image, x, y, s * ux + ts * nx, s * uy + ts * ny, ux, uy)
+        sm = ndimage.gaussian_filter1d(raw, 1.0, mode="nearest")
+        on = (np.abs(sm - ground[0]) > contrast * ground[1]) & ok
+        on = ndimage.binary_closing(on, np.ones(13, dtype=bool)) & ok
+        near = np.flatnonzero(on[mid - 2 : mid + 3])
+        if near.size == 0:
+            out.append((s, False, math.nan))
+        else:
+            lo = hi = mid - 2 + int(near[0])
+            while lo > 0 and on[lo - 1]:
+                lo -= 1
+            while hi < on.size - 1 and on[hi + 1]:
+                hi += 1
+            bounded = lo > 0 and hi < on.size - 1 and bool(ok[lo - 1]) and bool(ok[hi + 1])
+            out.append((s, True, float(hi - lo + 1) if bounded else math.nan))
+        s += 2.0
+
+
+def _border_signals(t: TipTracker, cand: Any, image: np.ndarray, first: list[tuple[float, bool, float]]
+                    ) -> dict[str, float]:
+    """:data:`_BORDER` for a candidate (``first``: :func:`_border_run` of the first frame at its tip)."""
+    r = cand.ref
+    c, s_ = math.cos(r.theta), math.sin(r.theta)
+    ux, uy = t.template.shaft
+    run = _border_run(image, r.x, r.y, (c * ux - s_ * uy, s_ * ux + c * uy), t.template.ground, t.params.contrast)
+    if not run:
+        return {"axis": 0.0, "run": math.nan, "gap": math.nan, "turn": math.nan, "dw": math.nan}
+    on = [o for _, o, _ in run]
+    gap = best = 0
+    for o in on:
+        gap = 0 if o else gap + 1
+        best = max(best, gap)
+    w = [v for _, _, v in run if math.isfinite(v)]
+    turn = max((w[i] - min(w[i + 1 :]) for i in range(len(w) - 1)), default=math.nan)
+    w0 = {s: v for s, _, v in first}
+    dw = [v - w0[s] for s, _, v in run if math.isfinite(v) and math.isfinite(w0.get(s, math.nan))]
+    return {"axis": run[-1][0], "run": float(np.mean(on)), "gap": 2.0 * best, "turn": max(turn, 0.0),
+            "dw": float(np.median(dw)) if dw else math.nan}
+
+
+def border_signals(n_own: int) -> None:
+    """Tabulate :data:`_BORDER` on the own round and lobed modes' candidates "nothing vouches" refused (the
+    round mode's sets at seeds 0, 2 and 1, 3 (wide), the lobed mode's wide set): good (3 px or less from the
+    truth) against wrong, near the last fix and found again."""
+    wide = {"size": 256, "widths": (14.0, 18.0), "looks": ("optical",)}
+    rows: list[tuple[str, float, dict[str, float]]] = []
+    for make, kw in ((round_benchmark, {"seed": 0, "size": 256}), (round_benchmark, {"seed": 2, "size": 256}),
+                     (round_benchmark, {"seed": 1, **wide}), (round_benchmark, {"seed": 3, **wide}),
+                     (lobed_benchmark, {"seed": 1, **wide})):
+        rows += _unvouched(make(n_own, 40, **kw), "own", border=True)  # type: ignore[operator]
+    keys = [k for k, _ in _BORDER]
+    for again in (0.0, 1.0):
+        mine = [r for r in rows if r[2]["again"] == again]
+        good = [r for r in mine if r[1] <= 3.0]
+        wrong = [r for r in mine if r[1] > 3.0]
+        print(f"\n{'found again' if again else 'near the last fix'}: {len(good)} good, {len(wrong)} wrong")
+        for key, what in _BORDER:
+            g = np.array([r[2][key] for r in good])
+            b = np.array([r[2][key] for r in wrong])
+            fg = g[np.isfinite(g)]
+            print(f"  {key}: {what}\n    good: " + (f"{fg.min():.3g} {np.median(fg):.3g} {fg.max():.3g} ({fg.size})"
+                                                  if fg.size else "none") + f"; {_separation(g, b)}")
+        for r in sorted(wrong, key=lambda r: -r[1]):
+            print(f"    wrong {r[1]:5.1f} px: " + ", ".join(f"{k} {r[2][k]:.3g}" for k in keys)
+                  + f", sigma {r[2]['sigma']:.2f}")
+
+
 def _predicted(fixes: list[tuple[int, float, float]], k: int) -> tuple[float, float]:
     """Where the last two fixes' motion puts the tip in frame ``k`` (the last fix alone: there)."""
     k2, x2, y2 = fixes[-1]
@@ -358,7 +463,8 @@ def _predicted(fixes: list[tuple[int, float, float]], k: int) -> tuple[float, fl
     return x2 + a * (x2 - x1), y2 + a * (y2 - y1)
 
 
-def _unvouched(seqs: Sequence[object], group: str) -> list[tuple[str, float, dict[str, float]]]:
+def _unvouched(seqs: Sequence[object], group: str, border: bool = False
+               ) -> list[tuple[str, float, dict[str, float]]]:
     """Track ``seqs``; for every candidate refused by "nothing vouches" (near the last fix or in the whole
     frame), its group, distance from the truth (px) and :data:`_SIGNALS`. The tracker is run as it is: its
     ``_judge`` is wrapped on the instance to record what it refused, every decision unchanged."""
@@ -372,15 +478,19 @@ def _unvouched(seqs: Sequence[object], group: str) -> list[tuple[str, float, dic
             continue
         fixes: list[tuple[int, float, float]] = [(0, *frames[0].tip)]
         judge = tracker._judge
+        first = (_border_run(images[0], *frames[0].tip, tracker.template.shaft, tracker.template.ground,
+                             tracker.params.contrast) if border else [])
         now = {"k": 0}
 
         def watched(cand: Any, image: np.ndarray, reacquire: bool = False, *, t: TipTracker = tracker,
                     judge: Any = judge, fixes: list[tuple[int, float, float]] = fixes,
-                    now: dict[str, int] = now, frames: Any = frames) -> Any:
+                    now: dict[str, int] = now, frames: Any = frames,
+                    first: list[tuple[float, bool, float]] = first) -> Any:
             res, cand = judge(cand, image, reacquire)
             if isinstance(res, Lost) and "nothing vouches" in res.detail:
                 d, sig = _signals(t, cand, fixes, now["k"], frames[now["k"]].tip)
-                out.append((group, d, {**sig, "again": float(reacquire)}))
+                more = _border_signals(t, cand, image, first) if border else {}
+                out.append((group, d, {**sig, **more, "again": float(reacquire)}))
             return res, cand
 
         tracker._judge = watched  # type: ignore[method-assign]
@@ -731,6 +841,10 @@ def main(argv: list[str] | None = None) -> None:
     if "--error-split" in args:
         print("the visible tips' errors along the needle's axis and across it")
         error_split(n, int(numbers[1]) if len(numbers) > 1 else 200)
+        return
+    if "--border-signals" in args:
+        print('the outline up to the border behind the candidates "nothing vouches" refused')
+        border_signals(int(numbers[0]) if numbers else 400)
         return
     if "--refusals" in args:
         print("the second renderer's refused visible tips, by the rule that refused them")

@@ -114,6 +114,12 @@ class TrackerParams:
         than one blur copy beyond the last fix's: a search over the whole frame meets
         many things that resemble a blurred tip a little, and a false fix there would
         be far off.
+    unvouched_sigma : float
+        Largest standard deviation of a tip found again where fewer than
+        :attr:`width_stations` of the needle's width stations lie in the frame behind it
+        (nothing else vouches for it), px: on the own renderer's sets the wrong candidates
+        of this kind read 0.61-0.97 px and ``reacquire_sigma`` alone would leave a margin of
+        0.01 px; 0.5 keeps one of 0.1 px (docs/vision-log.md, twelfth round).
     max_blur_step : float
         Largest change of the tip's blur between two consecutive fixes, px (sigma): focus
         drifts slowly, and a match that needs a very different blur copy is something
@@ -205,6 +211,7 @@ class TrackerParams:
     front_fraction: float = 0.3
     reacquire_ratio: float = 1.5
     reacquire_sigma: float = 0.6
+    unvouched_sigma: float = 0.5
     reacquire_ncc: float = 0.5
     level_hysteresis: float = 0.01
     max_blur_step: float = 2.0

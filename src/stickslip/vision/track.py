@@ -34,15 +34,16 @@
    most stations differ: the far end of a chip stuck on the tip, wider than the needle
    where it lies and the needle narrower behind it); where the first frame showed such
    stations and fewer than three lie in the frame behind the fix (the shaft leaves the field), the
-   fix is refused (*lost*): nothing vouches that the end seen is the tip;
+   fix is refused (*lost*): nothing vouches that the end seen is the tip; the frame then goes on to
+   the whole frame's search, whose stricter rules vouch for a tip found again instead;
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`; the
    frame is padded so the template may hang over its border until its tip lies on the edge,
    the part outside left out of the correlation (:func:`~.template.inside_ncc`): a tip near
    the edge is found again as one in the middle is;
-   not when the fit near the last fix was refused while its edges hold (the tip is
-   there, only not vouched for).
+   not when the fit near the last fix was refused by another rule while its edges hold
+   (the tip is there, only its position or focus not vouched for).
 
 A fix is never a guess: a frame the rules cannot vouch for is refused.
 """
@@ -139,6 +140,7 @@ class _Candidate:
     edges: EdgeCheck | None = None
     shaft: ShaftCheck | None = None
     width: WidthCheck | None = None
+    unvouched: bool = False  # refused only because nothing vouches for it (too few width stations in the frame)
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -440,14 +442,18 @@ def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None 
 
 
 def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
-              image: FloatArray) -> tuple[WidthCheck | None, bool]:
+              image: FloatArray, found_sigma: float | None = None) -> tuple[WidthCheck | None, bool]:
     """The needle's width behind a candidate (:func:`.width.check_width`), and whether, unchecked, it is to be
-    refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame."""
+    refused: the first frame showed the stations and fewer than ``p.width_stations`` lie in the frame behind a
+    fit near the last fix. A tip found again (its standard deviation ``found_sigma``, px) has passed the
+    stricter rules for one (its correlation, its mismatch against the recent fixes'): they vouch for it
+    instead when its standard deviation is at most ``p.unvouched_sigma`` (docs/vision.md, "Decision rules")."""
     if ws is None:
         return None, False
     r = cand.ref
     wc = check_width(ws, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
-    return wc, wc is None and not p.trust_unchecked
+    vouched = found_sigma is not None and found_sigma <= p.unvouched_sigma
+    return wc, wc is None and not p.trust_unchecked and not vouched
 
 
 def _not_found(refused: tuple[float, Lost] | None) -> Lost:
@@ -676,9 +682,10 @@ class TipTracker:
             self._shaft, cand.level, image, r.x, r.y, r.theta)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
         # the needle's width at the stations behind a fix every other rule takes
-        wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(self._width, p, cand, image)
+        wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
+            self._width, p, cand, image, res.sigma if reacquire else None)
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
-        return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc)
+        return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool, last: int) -> Result:
         """The template fit's rules: a :class:`Fix` or the first rule's :class:`Lost`; ``last``: the last fix's copy."""
@@ -741,10 +748,10 @@ class TipTracker:
                 if isinstance(res, Fix):
                     return self._accept(res, cand, image)
                 first_refusal = res
-                if res.reason in ("lost", "out of focus") and cand.edges is not None and (
+                if res.reason in ("lost", "out of focus") and cand.edges is not None and not cand.unvouched and (
                         _edge_refusal(cand.edges, self.params, cand.shaft) is None):
-                    # the needle's edges are where the fit put its tip, which a rule refused (its position
-                    # undetermined, its focus changed too fast): the tip is here, the whole frame has no other
+                    # the edges are where the fit put its tip, which a rule refused (its position undetermined, its
+                    # focus changed too fast; not "nothing vouches": the whole frame's stricter rules decide that)
                     self._fresh = False
                     self._since += 1
                     return res
