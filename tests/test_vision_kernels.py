@@ -110,6 +110,8 @@ def test_sampling_of_points_all_inside_the_patch_is_the_plain_one_bit_for_bit(cx
     v, inside = _sample(p, xs, ys)
     v_old, inside_old = _sample_before(p, xs, ys)
     assert inside.all() and np.array_equal(v, v_old) and np.array_equal(inside, inside_old)
+    none, none_inside = _sample(p, xs[:0], ys[:0])  # no point at all
+    assert none.shape == (3, 0) and none_inside.shape == (0,)
 
 
 def test_positive_contrast_is_judged_where_the_weights_are_not_zero() -> None:

@@ -428,7 +428,8 @@ def _solve_positive_gain(
         s0, s1, s2 = sol[:3].tolist()  # (Python floats: numpy's scalars cost more against an array)
         gain = s0 + s1 * bx + s2 * by
         # above a fifth everywhere (no NaN), above it where omega > 0: the subset is looked at only otherwise
-        if s0 > 1e-12 and (float(gain.min()) > 0.2 * s0 or bool((gain[omega > 0] > 0.2 * s0).all())):
+        quick = gain.size > 0 and float(gain.min()) > 0.2 * s0
+        if s0 > 1e-12 and (quick or bool((gain[omega > 0] > 0.2 * s0).all())):
             return sol, gain, cols
     return None, None, model
 

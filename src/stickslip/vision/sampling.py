@@ -131,8 +131,9 @@ def cells(xy: FloatArray, ch: int, cw: int) -> tuple[NDArray[np.intp], FloatArra
     """For points ``xy`` (shape (2, m), x then y, px; overwritten) in an array of ``ch`` x ``cw`` px: the flat
     index of the pixel up and left of each, its fractions to the right and down, and which lie within the array
     (the others are clipped to its edge). Shared by the patch's sampling and the whole frame's (:mod:`.shaft`)."""
-    if float(xy.min()) > 0.0 and float(xy.max()) < min(cw, ch) - 1.000001:
-        # every point strictly inside (no NaN): the clipping below leaves each value as it is, and each is inside
+    if xy.size and float(xy.min()) > 0.0 and float(xy.max()) < min(cw, ch) - 1.000001:
+        # every point strictly inside (no NaN; no point: the plain way): the clipping below leaves each value
+        # as it is, and each is inside
         inside = np.ones(xy.shape[1], dtype=bool)
     else:
         last, clip = _limits(ch, cw)[:2]
