@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-from stickslip.vision.refine import _solve_small, _turned, steepest, warped
+from stickslip.vision.refine import _ALL, _NO_GAIN_PLANE, _solve_positive_gain, _solve_small, _turned, steepest, warped
 from stickslip.vision.sampling import Patch, _gradient, median, patch
 from stickslip.vision.sampling import sample as _sample
 from stickslip.vision.sampling import sample_value as _sample_value
@@ -92,6 +92,43 @@ def test_median_is_numpys_bit_for_bit(n: int, nans: int, seed: int) -> None:
     got, want = median(a), float(np.median(a))
     assert (math.isnan(got) and math.isnan(want)) or got == want
     assert math.isnan(median(np.zeros(0)))
+
+
+@settings(max_examples=30, deadline=None)
+@given(cx=st.floats(20.0, 60.0), cy=st.floats(15.0, 45.0), radius=st.floats(3.0, 14.0),
+       seed=st.integers(0, 2**32 - 1))
+def test_sampling_of_points_all_inside_the_patch_is_the_plain_one_bit_for_bit(cx: float, cy: float, radius: float,
+                                                                             seed: int) -> None:
+    # every point strictly inside: the clipping is skipped (sampling.cells), the values are the same
+    rng = np.random.default_rng(seed)
+    image = rng.normal(0.5, 0.1, (60, 80))
+    p = patch(image, cx, cy, radius, 1.0)
+    _, ch, cw = p.data.shape
+    xs = p.x0 + rng.uniform(1e-9, cw - 1.000002, 300)
+    ys = p.y0 + rng.uniform(1e-9, ch - 1.000002, 300)
+    xs[:2] = (p.x0 + 1e-300, p.x0 + cw - 1.0000011)  # just inside the patch's first and last columns
+    v, inside = _sample(p, xs, ys)
+    v_old, inside_old = _sample_before(p, xs, ys)
+    assert inside.all() and np.array_equal(v, v_old) and np.array_equal(inside, inside_old)
+    none, none_inside = _sample(p, xs[:0], ys[:0])  # no point at all
+    assert none.shape == (3, 0) and none_inside.shape == (0,)
+
+
+def test_positive_contrast_is_judged_where_the_weights_are_not_zero() -> None:
+    # a contrast plane below a fifth of its centre only where omega is 0 keeps the plane (the quick test of the
+    # whole window fails, the subset's passes); below it where omega > 0: the plain contrast
+    rng = np.random.default_rng(3)
+    m = 200
+    bx, by = np.linspace(-1.0, 1.0, m), np.zeros(m)
+    D = np.asfortranarray(np.column_stack([np.ones(m), bx, by, np.ones(m), bx, by, rng.normal(size=(m, 4))]))
+    y = D[:, :3] @ np.array([1.0, 0.9, 0.0]) + 0.01 * rng.normal(size=m)  # the gain 0.1 at bx = -1, 1.9 at +1
+    omega = np.ones(m)
+    omega[bx < -0.5] = 0.0  # the window's left quarter, where the gain falls from 0.55 to 0.1
+    sol, gain, cols = _solve_positive_gain(D, omega, y, bx, by, None, 0.0, 0.0)
+    assert cols is _ALL and sol is not None and gain is not None
+    assert float(gain.min()) < 0.2 * sol[0] and bool((gain[omega > 0] > 0.2 * sol[0]).all())
+    sol2, _, cols2 = _solve_positive_gain(D, np.ones(m), y, bx, by, None, 0.0, 0.0)
+    assert cols2 is _NO_GAIN_PLANE and sol2 is not None and sol2[1] == 0.0 and sol2[2] == 0.0
 
 
 def test_small_solve_is_numpys_and_refuses_a_singular_system() -> None:

@@ -326,7 +326,8 @@ def refine(
         v3, inside = _warped3(image, st, tx, ty, theta)
         Iw = v3[0]
         omega = w0 * inside * robust_w
-        if float(omega.sum()) <= 1e-9:
+        sw = float(omega.sum())
+        if sw <= 1e-9:
             break
         jac = _esm_jacobian(st, v3, theta, g, blur_c)
         # one linear least squares for the brightness planes and the motion together: apart, the planes
@@ -335,7 +336,7 @@ def refine(
         np.multiply(jac, g, out=D[:, _NL:].T)
         if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
             r0 = Iw - basis @ beta_prev
-            kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(float(omega.sum()), 1e-12) / theta_sd**2
+            kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(sw, 1e-12) / theta_sd**2
         sol, gain, model = _solve_positive_gain(D, omega, Iw, bx, by, model, kappa or 0.0, theta - theta_prior)
         if sol is None or gain is None:  # contrast reversed, or no solution: not this template
             converged = False
@@ -426,7 +427,9 @@ def _solve_positive_gain(
             break
         s0, s1, s2 = sol[:3].tolist()  # (Python floats: numpy's scalars cost more against an array)
         gain = s0 + s1 * bx + s2 * by
-        if s0 > 1e-12 and bool((gain[omega > 0] > 0.2 * s0).all()):
+        # above a fifth everywhere (no NaN), above it where omega > 0: the subset is looked at only otherwise
+        quick = gain.size > 0 and float(gain.min()) > 0.2 * s0
+        if s0 > 1e-12 and (quick or bool((gain[omega > 0] > 0.2 * s0).all())):
             return sol, gain, cols
     return None, None, model
 

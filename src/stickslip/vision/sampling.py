@@ -131,11 +131,16 @@ def cells(xy: FloatArray, ch: int, cw: int) -> tuple[NDArray[np.intp], FloatArra
     """For points ``xy`` (shape (2, m), x then y, px; overwritten) in an array of ``ch`` x ``cw`` px: the flat
     index of the pixel up and left of each, its fractions to the right and down, and which lie within the array
     (the others are clipped to its edge). Shared by the patch's sampling and the whole frame's (:mod:`.shaft`)."""
-    last, clip = _limits(ch, cw)[:2]
-    ok = xy >= 0
-    ok &= xy <= last
-    inside = ok[0] & ok[1]
-    np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
+    if xy.size and float(xy.min()) > 0.0 and float(xy.max()) < min(cw, ch) - 1.000001:
+        # every point strictly inside (no NaN; no point: the plain way): the clipping below leaves each value
+        # as it is, and each is inside
+        inside = np.ones(xy.shape[1], dtype=bool)
+    else:
+        last, clip = _limits(ch, cw)[:2]
+        ok = xy >= 0
+        ok &= xy <= last
+        inside = ok[0] & ok[1]
+        np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
     ixy = xy.astype(np.intp)
     xy -= ixy  # the fractions
     i00 = ixy[1]
