@@ -24,6 +24,7 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+import argparse  # noqa: E402
 import importlib  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -86,14 +87,27 @@ def run(tracker_cls: Any, images: list[Any], tip: tuple[float, float]) -> tuple[
     return [answer(r) for r in res], wall, cpu
 
 
+def _frames(text: str) -> int:
+    n = int(text)
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{text}: needs at least 1 frame")
+    return n
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = list(argv or [])
-    rev = BEFORE
-    if "--before" in args:
-        i = args.index("--before")
-        rev = args[i + 1]
-        del args[i : i + 2]
-    n = int(args[0]) if args else 100
+    parser = argparse.ArgumentParser(
+        prog="bench_vision_speed.py",
+        description="The tip tracker at an earlier commit (before) and now (after), side by side in one run: "
+        "frames/s by wall clock and by CPU time, their ratios, and how many answers differ (exit 1 if any "
+        "does: a speed-up changes no answer).",
+    )
+    parser.add_argument("frames", nargs="?", type=_frames, default=100,
+                        help="frames of each renderer (the second's and the own), 512 x 512 (default 100)")
+    parser.add_argument("--before", default=BEFORE, metavar="REV",
+                        help=f"the commit whose tracker is the comparator (default {BEFORE}); e.g. the one before "
+                        "a single speed-up, to measure it alone")
+    opts = parser.parse_args(argv)
+    rev, n = opts.before, opts.frames
     seqs = [("peer", [as_image(f.image) for f in s.frames], s.frames[0].tip)
             for s in peer_benchmark(n, 50, seed=0, size=512)]
     seqs += [("own", [as_image(f.image) for f in s.frames], s.frames[0].tip)
