@@ -139,6 +139,11 @@ class ClockedParams:
     locked_reacquire: float = param(
         1.5, "", "or jumps where the lines match this many times better (a burst restarted the clock's phase)"
     )
+    locked_memory: float = param(
+        0.05, "", "the followed clock's template and line powers take this share of each frame (about 20 frames)"
+    )
+    locked_grid: int = param(41, "offsets", "the clock's offsets tried within the slew each frame")
+    locked_whole: int = param(100, "offsets", "and over the whole cycle, to re-acquire (0.01 cycles apart)")
     min_locked: float = param(
         0.5, "", "a sub-band is read in phase where its lines held this share of their power in phase before"
     )
@@ -253,7 +258,8 @@ def _in_phase(
     clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
     both = sorted(set(clock) | set(ks))
     z = demodulate(x, sr, rate_hz, both, max(1, int(round(p.locked_frame_s * sr))))
-    off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire)
+    off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire,
+                       p.locked_memory, p.locked_grid, p.locked_whole)
     pick = [both.index(k) for k in ks]
     return locked_powers(z[:, pick], ks, off)
 

@@ -49,7 +49,10 @@ def demodulate(x: FloatArray, sample_rate: float, rate_hz: float, ks: Sequence[i
     return np.asarray(z * start, dtype=np.complex128)
 
 
-def follow_clock(z: ComplexArray, ks: Sequence[int], slew: float, reacquire: float) -> FloatArray:
+def follow_clock(
+    z: ComplexArray, ks: Sequence[int], slew: float, reacquire: float, memory: float = 0.05, near_n: int = 41,
+    whole_n: int = 100,
+) -> FloatArray:
     """The steps' clock offset per frame (cycles of the step period) followed from the demodulated lines ``z``.
 
     Parameters
@@ -62,6 +65,10 @@ def follow_clock(z: ComplexArray, ks: Sequence[int], slew: float, reacquire: flo
         The offset moves at most this from frame to frame (cycles)...
     reacquire : float
         ...unless the best offset anywhere in the cycle matches the template this many times better.
+    memory : float
+        The share by which the running template and each line's running power follow a frame (1).
+    near_n, whole_n : int
+        Offsets tried within the slew, and over the whole cycle (a grid of ``1 / whole_n`` cycles).
 
     Returns
     -------
@@ -69,8 +76,8 @@ def follow_clock(z: ComplexArray, ks: Sequence[int], slew: float, reacquire: flo
         The offset per frame, cycles (the first frame's is 0: the template is its lines).
     """
     k = np.asarray(ks, dtype=np.float64)
-    near = np.linspace(-slew, slew, 41)
-    whole = np.arange(100) / 100.0
+    near = np.linspace(-slew, slew, near_n)
+    whole = np.arange(whole_n) / float(whole_n)
     turn_near, turn_whole = (np.exp(-2j * np.pi * np.outer(g, k)) for g in (near, whole))
     off = np.zeros(z.shape[0])
     if z.shape[0] == 0:
@@ -88,8 +95,8 @@ def follow_clock(z: ComplexArray, ks: Sequence[int], slew: float, reacquire: flo
         else:
             th = float(th + near[best])
         off[f] = th
-        tmpl = 0.95 * tmpl + 0.05 * z[f] * np.exp(-2j * np.pi * k * th)
-        power = 0.95 * power + 0.05 * np.abs(z[f]) ** 2
+        tmpl = (1.0 - memory) * tmpl + memory * z[f] * np.exp(-2j * np.pi * k * th)
+        power = (1.0 - memory) * power + memory * np.abs(z[f]) ** 2
     return off
 
 
