@@ -514,10 +514,14 @@ def _variance(fi: NDArray[np.complex128], fi2: NDArray[np.complex128], k: _Kerne
     """The weighted sum of squares about the weighted mean of the region under the window at every offset
     (``max(sum w I² - (sum w I)² / sum w, 0)``), from the region's spectra ``fi``, ``fi2`` (of it and its
     square) and the weights' transform in ``k``."""
-    a = _inverse(fi * k.w, shape, n - 1)
-    b = _inverse(fi2 * k.w, shape, n - 1)
+    return _spread(_inverse(fi * k.w, shape, n - 1), _inverse(fi2 * k.w, shape, n - 1), k.sw)
+
+
+def _spread(a: FloatArray, b: FloatArray, sw: float) -> FloatArray:
+    """``max(b - a² / sw, 0)``: the weighted sum of squares about the weighted mean from the weighted sums of the
+    values ``a`` and of their squares ``b`` and the weights' sum ``sw`` (in place of a new array, in this order)."""
     var: FloatArray = a * a
-    var /= k.sw
+    var /= sw
     np.subtract(b, var, out=var)
     np.maximum(var, 0.0, out=var)
     return var
@@ -534,12 +538,7 @@ def _variance_and_sums(region: FloatArray, k: _KernelFFT, n: int, shape: tuple[i
     np.multiply(fi2, k.w, out=prod[1])
     np.multiply(fi, k.wt, out=prod[2])
     sums = _inverse(prod, shape, n - 1)
-    a = sums[0]
-    var: FloatArray = a * a
-    var /= k.sw
-    np.subtract(sums[1], var, out=var)
-    np.maximum(var, 0.0, out=var)
-    return var, sums[2]
+    return _spread(sums[0], sums[1], k.sw), sums[2]
 
 
 def masked_ncc(
