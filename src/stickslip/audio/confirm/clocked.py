@@ -226,15 +226,19 @@ def lines_stop_likeness(
                 continue  # too few of the line's bins on this comb
             if not p0 >= p.min_sharpness * wide:
                 continue  # the lines are wider than this comb (a rough clock; sound beside them): a wider one
-            top = max(p0, p1) * p.floor_share
-            d = 10.0 * math.log10(max(p1, top) / max(p0, top))
-            num += delta * d
+            num += delta * _change_db(p0, p1, p.floor_share)
             den += delta**2
             used += 1
             break
     if den == 0.0 or den < p.min_covered * whole:
         return math.nan, used
     return num / den, used
+
+
+def _change_db(p0: float, p1: float, floor_share: float) -> float:
+    """The change from power ``p0`` to ``p1``, dB, each side floored at ``floor_share`` of the larger."""
+    top = max(p0, p1) * floor_share
+    return 10.0 * math.log10(max(p1, top) / max(p0, top))
 
 
 def _judged(signature_db: Sequence[float], continuum_db: Sequence[float], p: ClockedParams) -> tuple[list[int], float]:
@@ -304,9 +308,7 @@ def locked_stop_likeness(
         l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
         num = 0.0
         for i in keep:
-            p0, p1 = held(l0, i), held(l1, i)
-            top = max(p0, p1) * p.floor_share
-            num += float(signature_db[i]) * 10.0 * math.log10(max(p1, top) / max(p0, top))
+            num += float(signature_db[i]) * _change_db(held(l0, i), held(l1, i), p.floor_share)
         got.append(num / den)
     return float(np.median(got))
 
