@@ -42,7 +42,8 @@ ARMS = range(1, 9)
 FAN_KNOWN = {
     (3, 1): "the stop flagged, its onset 201 ms late (the fan's spin-up 0.86 s before it, +0.7 dB; before the"
     " clocked check read the lines in step: a false stop 315 ms before the stop, counted)",
-    (6, 0): "the stop flagged, not heard cleanly (fan 0.68 s before it, -1.3 dB)",
+    (6, 0): "the stop flagged, not heard cleanly (fan 0.68 s before it, -1.3 dB): its fire at the stop hot in 21 % of"
+    " the window and its lines not read in phase (line 5 held 16 % of its power in phase under the fan): not affirmed",
     (6, 1): "the stop flagged, heard 32 ms late: its stop-like run began at 2.395 s, the hot verdict held back by the"
     " fan (0.56 s before it, -1.0 dB; before the lines in phase affirmed a fire not hot: missed)",
 }
