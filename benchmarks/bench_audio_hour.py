@@ -82,7 +82,8 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: in step, a reference stop-like to the levels giving no verdict and a window read on its first span (the round
 #: before); the latest stepping kept no longer than 10 s, 30 s or 120 s before taken for such a reference; a longer
 #: window read in four spans, the median kept; both (``spans``, the round before); and with them the lines read in
-#: phase with the clock followed from the sound (the default)
+#: phase with the clock followed from the sound, as a veto only (``veto``); and those lines also affirming a fire the
+#: levels hold but not hot, and read from each stop's onset (the default)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -92,6 +93,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "kept120": replace(ROUND_BEFORE, kept_age_s=120.0),
     "pieces": replace(ROUND_BEFORE, window_pieces=4),
     "spans": ClockedParams(locked_frame_s=0.0),
+    "veto": ClockedParams(min_affirm=math.inf, onset_read_s=0.0),
     "default": ClockedParams(),
     "off": None,
 }

@@ -13,7 +13,9 @@ independent battery per k, and the first confirmed event (the commanded 1000 Hz 
 
 Run: ``.venv/bin/python benchmarks/bench_audio_tenth.py --seeds 3`` (a few minutes per draw on 2 cores);
 ``--kept-age 0 --window-pieces 1`` hears every condition with the clocked check's variant
-(``ClockedParams.kept_age_s``, ``window_pieces``; these two: the check of the round before) instead of the default.
+(``ClockedParams.kept_age_s``, ``window_pieces``; these two: the check of the round before) instead of the default;
+``--min-affirm inf --onset-read-s 0`` with the lines in phase as a veto only (before they affirmed a fire the levels
+hold but not hot, and were read from each stop's onset).
 """
 
 from __future__ import annotations
@@ -114,13 +116,15 @@ if __name__ == "__main__":
     ap.add_argument("--seeds", type=int, default=2, help="how many other draws (each seed + 1000 k)")
     ap.add_argument("--kept-age", type=float, default=None, help="the clocked check's kept_age_s, s")
     ap.add_argument("--window-pieces", type=int, default=None, help="the clocked check's window_pieces")
+    ap.add_argument("--min-affirm", type=float, default=None, help="the clocked check's min_affirm (inf: none)")
+    ap.add_argument("--onset-read-s", type=float, default=None, help="the clocked check's onset_read_s, s (0: none)")
     a = ap.parse_args()
-    if a.kept_age is not None or a.window_pieces is not None:
-        d = ClockedParams()
-        with_clocked(
-            ClockedParams(
-                kept_age_s=d.kept_age_s if a.kept_age is None else a.kept_age,
-                window_pieces=d.window_pieces if a.window_pieces is None else a.window_pieces,
-            )
-        )
+    given = {
+        "kept_age_s": a.kept_age,
+        "window_pieces": a.window_pieces,
+        "min_affirm": a.min_affirm,
+        "onset_read_s": a.onset_read_s,
+    }
+    if any(v is not None for v in given.values()):
+        with_clocked(ClockedParams(**{k: v for k, v in given.items() if v is not None}))
     main(a.seeds)

@@ -329,3 +329,35 @@ def test_the_verdict_vetoes_a_change_out_of_phase_too() -> None:
     assert not chk.verdict(OnClock(0.1, RATE, 2, math.nan, 1.0))
     assert chk.verdict(OnClock(math.nan, RATE, 0, math.nan, 0.9)) and chk.verdict(OnClock(0.9, RATE, 2))
     assert not chk.verdict(OnClock(math.nan, RATE, 0, math.nan, 0.1))  # the comb could not judge; in phase can
+
+
+def test_only_both_readings_at_min_affirm_affirm_a_fire() -> None:
+    """A fire the levels hold but not hot is a stop only where the comb and the lines in phase both read
+    ``min_affirm`` or more: a reading missing (NaN), or one under it, does not affirm."""
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    m = CLOCKED.min_affirm
+    assert chk.affirms(OnClock(m, RATE, 2, math.nan, m)) and chk.affirms(OnClock(1.0, RATE, 2, math.nan, 0.9))
+    assert not chk.affirms(None)
+    assert not chk.affirms(OnClock(1.0, RATE, 2))  # in phase not read
+    assert not chk.affirms(OnClock(math.nan, RATE, 0, math.nan, 1.0))  # the comb could not judge
+    assert not chk.affirms(OnClock(m - 0.01, RATE, 2, math.nan, 1.0))
+    assert not chk.affirms(OnClock(1.0, RATE, 2, math.nan, m - 0.01))
+    assert chk.verdict(OnClock(0.3, RATE, 2, math.nan, 0.3))  # not vetoed, yet not affirmed either
+    assert not chk.affirms(OnClock(0.3, RATE, 2, math.nan, 0.3))
+
+
+def test_the_lines_read_in_phase_from_an_onset_tell_the_stop_from_stepping() -> None:
+    """From a stop's onset on, the joint's own sound scaled by the signature reads 1 in phase; stepping (the fire
+    came before the stop) reads near 0; too little read, or no fire judged, gives NaN."""
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    stepping = _scaled(_clicks(N, 40), (0.0, 0.0, 0.0))
+    chk.hear_before(stepping, np.full(120, -0.6))
+    got = chk.judge(_scaled(_clicks(N, 41), (0.0, 6.0, -4.0)))
+    assert got is not None
+    n = int(round(CLOCKED.onset_read_s * SR))
+    assert chk.at_onset(_scaled(_clicks(n, 42), (0.0, 6.0, -4.0)), got) == pytest.approx(1.0, abs=0.1)
+    assert abs(chk.at_onset(_scaled(_clicks(n, 43), (0.0, 0.0, 0.0)), got)) < 0.1
+    assert math.isnan(chk.at_onset(_scaled(_clicks(n - 1, 42), (0.0, 6.0, -4.0)), got))  # under onset_read_s
+    assert math.isnan(chk.at_onset(_scaled(_clicks(n, 42), (0.0, 6.0, -4.0)), None))
+    rough = OnClock(math.nan, got.rate_hz, 0, math.nan, got.locked)  # the comb could not judge the fire: not read
+    assert math.isnan(chk.at_onset(_scaled(_clicks(n, 43), (0.0, 0.0, 0.0)), rough))

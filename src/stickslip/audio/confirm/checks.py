@@ -72,6 +72,8 @@ class WindowChecks:
         self.after = AfterPause(self.pause, pause)
         self.sync = SyncCheck(sync_bands, sr, sync)
         self.clocked = ClockedCheck(tuning, clocked) if clocked is not None else None
+        #: what the clocked check measured on the fire last judged (None: not judged)
+        self.on_clock: OnClock | None = None
 
     def reset(self, step_rate_hz: float | None) -> None:
         self._next_keep = 0  # the next stretch offered to the clocked check as stepping to keep begins here
@@ -113,14 +115,32 @@ class WindowChecks:
             self.clocked.keep(hi, self.kept.get(lo, hi), margins)
             self._next_keep = hi
 
-    def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
+    def passed(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float, affirm: bool = False) -> bool:
         """The fire at frame ``fire``, which persisted over ``frames``: the step clock agrees, the stepping went on
-        (else the pause is noted as judged at ``now_s``, s) and the change was on the clock's lines."""
-        return (
-            self._in_step(ev, fire, frames, log)
-            and not self._stepping_stopped(ev, fire, frames, log, now_s)
-            and self._on_clock(ev, fire, frames, log)
-        )
+        (else the pause is noted as judged at ``now_s``, s) and the change was on the clock's lines.
+
+        ``affirm``: a fire stop-like throughout but not hot (:func:`.persistence.stoplike_throughout`): it passes only
+        where the clocked check affirms it (both readings of the lines at ``min_affirm``), asked first, and then the
+        others."""
+        self.on_clock = None
+        if affirm:
+            return self._on_clock(ev, fire, frames, log, True) and self._others(ev, fire, frames, log, now_s)
+        return self._others(ev, fire, frames, log, now_s) and self._on_clock(ev, fire, frames, log, False)
+
+    def _others(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
+        return self._in_step(ev, fire, frames, log) and not self._stepping_stopped(ev, fire, frames, log, now_s)
+
+    def onset_doubt(self, onset: int) -> str | None:
+        """Why a confirmed stop whose onset is at absolute sample ``onset`` may not have begun there: its lines, read
+        in phase over ``onset_read_s`` from it, do not show the stop (under ``min_a``: the fire came before the
+        stop, and the stop came in its window). None: they do, or nothing was read."""
+        if self.clocked is None:
+            return None
+        x = self.kept.get(onset, onset + int(round(self.clocked.p.onset_read_s * self.clocked.sample_rate)))
+        a = self.clocked.at_onset(x, self.on_clock)
+        if math.isfinite(a) and a < self.clocked.p.min_a:
+            return f"the stop not in phase with the steps at its onset (a {a:.2f})"
+        return None
 
     def _in_step(self, ev: StopEvent, fire: int, frames: int, log: Verdicts) -> bool:
         """Did the joint's step-synchronous sound change, line by line (:mod:`.sync`)? No verdict: True."""
@@ -141,12 +161,14 @@ class WindowChecks:
         self.after.judged_s = now_s
         return True
 
-    def _on_clock(self, ev: StopEvent, fire: int, frames: int, log: Verdicts) -> bool:
-        """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True."""
+    def _on_clock(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, affirm: bool) -> bool:
+        """Did the joint's own clicks show the stop's signature (:mod:`.clocked`)? No verdict: True, unless it must
+        ``affirm`` the stop."""
         if self.clocked is None:
-            return True
+            return not affirm
         pieces = self.clocked.p.window_pieces
         got = self.clocked.judge(self.after_fire(fire, min(pieces * self.span, frames * self._H)), self.pause.before_hz)
         if got is not None:
             log.clocked.append((ev.detected_at_s, got))
-        return self.clocked.verdict(got)
+        self.on_clock = got
+        return self.clocked.affirms(got) if affirm else self.clocked.verdict(got)

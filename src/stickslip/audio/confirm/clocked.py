@@ -147,6 +147,12 @@ class ClockedParams:
     min_locked: float = param(
         0.5, "", "a sub-band is read in phase where its lines held this share of their power in phase before"
     )
+    min_affirm: float = param(
+        0.5, "", "a fire stop-like throughout but not hot is a stop where both readings reach this (a fan masks drops)"
+    )
+    onset_read_s: float = param(
+        0.1, "s", "a stop's lines are read in phase this long from its onset: under min_a, it is doubted (0: not)"
+    )
     min_s: float = param(0.2, "s", "not judged on less stepping before the fire (listening began near it)")
     min_after_s: float = param(0.1, "s", "nor on less of the window (a recording that ends sooner)")
 
@@ -424,3 +430,22 @@ class ClockedCheck:
         if got is None:
             return True
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
+
+    def affirms(self, got: OnClock | None) -> bool:
+        """True only where both readings were made and reach ``min_affirm``: the stop's own change on the lines and
+        in phase with the steps (a fire the levels cannot confirm: added sound masks the stop's drops)."""
+        return got is not None and all(math.isfinite(a) and a >= self.p.min_affirm for a in (got.a, got.locked))
+
+    def at_onset(self, x: FloatArray, got: OnClock | None) -> float:
+        """The lines' stop-likeness read in phase over ``x``, the first ``onset_read_s`` from a stop's onset, against
+        the same stepping, at the rate its fire was judged at (``got``; NaN: not read, or no verdict). Read only where
+        the comb judged the fire too (its lines sharp: a clean clock); over a rough clock so short a reading scatters
+        (the modal generator: -0.01 and 0.07 at stops whose windows read 0.53-0.92 in phase)."""
+        tu, p, sr = self.tuning, self.p, self.sample_rate
+        if got is None or not math.isfinite(got.a) or self.ref is None or p.onset_read_s <= 0.0:
+            return math.nan
+        if x.size < round(p.onset_read_s * sr):
+            return math.nan
+        assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
+        sig, cont = tu.signature_db, tu.continuum_signature_db
+        return locked_stop_likeness(self.ref, [x], sr, got.rate_hz, tu.edges_hz, sig, cont, p)

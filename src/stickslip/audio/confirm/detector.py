@@ -53,7 +53,7 @@ from .evidence import FrameLog, KeptSamples
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
 from .pause import PAUSE, PauseParams, Stopped
-from .persistence import PERSISTENCE, PersistenceParams, Windows, check_confirm_s, persisted
+from .persistence import PERSISTENCE, PersistenceParams, Windows, check_confirm_s, persisted, stoplike_throughout
 from .sync import SYNC, SyncParams
 
 __all__ = ["ConfirmLog", "ConfirmParams", "ConfirmedStopDetector", "FastPath", "confirming"]
@@ -356,8 +356,12 @@ class ConfirmedStopDetector:
     def _holds(self, ev: StopEvent, fire: int, frames: int) -> bool:
         """The fire at frame ``fire`` persisted over ``frames`` and passed the other checks (:mod:`.checks`)."""
         now_s = self._t0 + self._fed / self._sr
-        return persisted(*self._frames.window(fire, frames), self.w.gap, self.params.persistence) and (
-            self.checks.passed(ev, fire, frames, self.log, now_s)
+        m, hot = self._frames.window(fire, frames)
+        if persisted(m, hot, self.w.gap, self.params.persistence):
+            return self.checks.passed(ev, fire, frames, self.log, now_s)
+        # stop-like throughout but not hot (added sound masks the stop's drops): a stop only where the lines affirm it
+        return stoplike_throughout(m, self.w.gap, self.params.persistence) and (
+            self.checks.passed(ev, fire, frames, self.log, now_s, affirm=True)
         )
 
     def _decide(self) -> list[StopEvent]:
@@ -382,6 +386,9 @@ class ConfirmedStopDetector:
         if not ev.onset_uncertain:
             ch = self._chain
             verdict = self._onset.doubt(ev, fire, frames, ch.covered_at, ch.rejected_fire, self.inner.relearned)
+            if verdict.why is None:  # the lines in phase from the onset on (the retimed one, where taken back)
+                at = ev.onset_s if verdict.retimed is None else verdict.retimed
+                verdict.why = self.checks.onset_doubt(int(round((at - self._t0) * self._sr)))
             if verdict.climb is not None:
                 self.log.rise.append((ev.detected_at_s, verdict.climb))
         self._chain.confirmed()

@@ -24,7 +24,15 @@ from numpy.typing import NDArray
 from ..paramfield import param
 from ..tuningfile import Tuning
 
-__all__ = ["PERSISTENCE", "PersistenceParams", "Windows", "check_confirm_s", "longest_gap", "persisted"]
+__all__ = [
+    "PERSISTENCE",
+    "PersistenceParams",
+    "Windows",
+    "check_confirm_s",
+    "longest_gap",
+    "persisted",
+    "stoplike_throughout",
+]
 
 
 @dataclass(frozen=True)
@@ -117,9 +125,17 @@ def persisted(
     m: NDArray[np.float64], hot: NDArray[np.bool_], gap_frames: int, p: PersistenceParams = PERSISTENCE
 ) -> bool:
     """Did the stop persist over the window's margins ``m`` and hot flags? (none heard: nothing contradicts it)"""
+    if m.size and float(np.mean(hot)) < float(p.min_hot):
+        return False
+    return stoplike_throughout(m, gap_frames, p)
+
+
+def stoplike_throughout(m: NDArray[np.float64], gap_frames: int, p: PersistenceParams = PERSISTENCE) -> bool:
+    """Were ``min_share`` of the window's margins ``m`` stop-like, with no run of others ``gap_frames`` long? (the
+    persistence rule without its hot share; none heard: nothing contradicts it)"""
     if m.size == 0:
         return True
     ok = m >= 0.0
-    if float(np.mean(ok)) < float(p.min_share) or float(np.mean(hot)) < float(p.min_hot):
+    if float(np.mean(ok)) < float(p.min_share):
         return False
     return longest_gap(ok) < gap_frames
