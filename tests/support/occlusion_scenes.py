@@ -112,7 +112,7 @@ def _psf(kind: str, size: float, rng: np.random.Generator) -> FloatArray:
         k = (1.0 + (rr / max(size, 0.3)) ** 2) ** (-beta)
     else:
         k = np.exp(-0.5 * ((rr - size) / 0.6) ** 2) + 0.5 * np.exp(-0.5 * (rr / 0.7) ** 2)
-    return k / k.sum()
+    return np.asarray(k / k.sum(), dtype=float)
 
 
 def _background(size: int, rng: np.random.Generator) -> FloatArray:
@@ -123,7 +123,7 @@ def _background(size: int, rng: np.random.Generator) -> FloatArray:
     vignette = 1.0 - rng.uniform(0.05, 0.25) * ((x - cx) ** 2 + (y - cy) ** 2)
     texture = ndimage.gaussian_filter(rng.normal(0.0, 1.0, (size, size)), rng.uniform(3.0, 9.0))
     texture /= max(float(np.std(texture)), 1e-9)
-    return 0.7 * tilt * vignette * (1.0 + rng.uniform(0.01, 0.05) * texture)
+    return np.asarray(0.7 * tilt * vignette * (1.0 + rng.uniform(0.01, 0.05) * texture), dtype=float)
 
 
 @dataclass
