@@ -32,7 +32,10 @@
    last, **the needle's width** at each station behind the fix (:mod:`.width`) must be
    the first frame's there, within what 3 px along the axis change it (*occluded* when
    most stations differ: the far end of a chip stuck on the tip, wider than the needle
-   where it lies and the needle narrower behind it); where the first frame showed such
+   where it lies and the needle narrower behind it; or when at any station the needle's
+   extent across the shaft is narrower than the first frame's beyond the taper's 3 px and a
+   slack: past an occluder taken for the tip, the needle's own end lies further back or to
+   the side); where the first frame showed such
    stations and fewer than three lie in the frame behind the fix (the shaft leaves the field), the
    fix is refused (*lost*): nothing vouches that the end seen is the tip; the frame then goes on to
    the whole frame's search, whose stricter rules vouch for a tip found again instead;

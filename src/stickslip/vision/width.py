@@ -31,6 +31,19 @@ first frame (the needle's run across the shaft) lies off the needle's straight t
 robust line through all the stations' widths) by more than
 :attr:`~.template.TrackerParams.width_slack` is not used: something lay beside the needle
 there, or the run found was not the needle's (an SEM needle's dark middle splits it).
+
+The registration reaches :attr:`~.template.TrackerParams.width_shift` px an edge, and the
+median wants most stations: past an occluder whose chord near the fit is as wide as the
+needle's end (the blunt chord), an edge 10 or 20 px inside reads a clipped shift at one or
+two stations. So each station also measures the needle's *extent* (:func:`runs`: the first
+to the last sample standing out from the ground, without a shift limit) against the first
+frame's, smoothed alike; :attr:`WidthCheck.short` is how much narrower it is, less what
+``along_limit`` px along the axis change it. Past an occluder taken for the tip the needle
+is its own, its end further back or to the side, so narrower; anything beside it only
+widens it: one station over :attr:`~.template.TrackerParams.extent_slack` refuses the fix
+(:func:`~.track._width_refusal`). Only stations where the first frame's needle stands
+:attr:`~.template.TrackerParams.extent_depth` times the threshold from the ground are
+compared (an SEM needle's edge contrast is not measured so).
 See docs/vision.md, "Tracking the tip".
 """
 
