@@ -122,3 +122,19 @@ def test_the_needle_s_end_is_the_tip() -> None:
         m = _needle(gx, gy, (30.0, 32.0), 0.3, shape, a, p, corner)
         s = (gx - 30.0) * math.cos(0.3) + (gy - 32.0) * math.sin(0.3)
         assert abs(float(s[m].min())) <= 1.0 / SUB
+
+
+@pytest.mark.parametrize(("gain", "offset"), [(1.3, 0.0), (0.75, 0.05), (1.0, -0.03)])
+def test_the_extent_reads_through_a_change_of_lamp(gain: float, offset: float) -> None:
+    """A lamp brighter or dimmer: the frame's ground beside the needle, against the first frame's, moves the
+    frame's grey levels back; the clean tip is as wide as first seen (the ground does not stand beyond the
+    threshold) and the bead's rim still refused."""
+    ws, p = _learnt()
+    clean = gain * _render(TIP, None, 2) + offset
+    got = check_width(ws, 0, clean, *TIP, 0.0, p.along_limit, p.along_sigmas)
+    assert got is not None and -6.0 < max(got.short) < 2.0, got  # a dimmer needle's blurred edges: 0.14 px at most
+    assert _width_refusal(got, slack=p.extent_slack) is None
+    true_tip = (TIP[0] + 14.0 * U[0], TIP[1] + 14.0 * U[1])
+    bead = gain * _render(true_tip, (true_tip[0], true_tip[1], 14.0), 4) + offset
+    rim = check_width(ws, 0, bead, *TIP, 0.0, p.along_limit, p.along_sigmas)
+    assert rim is not None and max(rim.short) > p.extent_slack, rim

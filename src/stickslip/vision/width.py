@@ -137,6 +137,9 @@ class WidthStations:
     runs : list of ndarray, shape (m,)
         For each blur copy, the needle's extent across the shaft at each station in the first
         frame smoothed as the copy is (:func:`runs`), px.
+    ring, ground : ndarray of bool, shape (m, q), and float
+        The samples beside the needle beyond ``reach`` (within ``span``), and the first
+        frame's median there (grey units).
     """
 
     s: FloatArray
@@ -153,6 +156,8 @@ class WidthStations:
     threshold: float = math.inf
     reach: FloatArray | None = None
     runs: tuple[FloatArray, ...] = ()
+    ring: NDArray[np.bool_] | None = None
+    ground: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -376,9 +381,10 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     d_lines = np.asarray(LINES)
     lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
                       (offsets[..., 1][..., None] + d_lines * uy).ravel()])
+    ring = span & (np.abs(ts)[None, :] > reach0[:, None])
     return WidthStations(np.array([kept[i] for i in use]), lines, q, refs, ref_ss, sds, shifted, span,
                          np.asarray(taper, dtype=float), [f for _, f in smooth], level, contrast * spread, reach0,
-                         tuple(run0))
+                         tuple(run0), ring, median(raw[ring]) if ring.any() else level)
 
 
 def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: float, theta: float,
@@ -387,7 +393,10 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     against blur copy ``copy``; ``None`` when fewer than ``least`` (at least one) stations lie in the frame.
 
     A station disagrees when its width change exceeds ``along_limit`` px of the taper plus
-    ``sigmas`` standard deviations.
+    ``sigmas`` standard deviations. For the extent (:func:`runs`) the frame's grey levels are
+    moved by the change of the ground beside the needle (the median over :attr:`WidthStations.ring`
+    against the first frame's): a lamp a few per cent brighter would otherwise put the whole
+    ground beyond the threshold.
     """
     m = ws.s.size
     ct, st_ = math.cos(theta), math.sin(theta)
@@ -407,7 +416,11 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     short = np.full(m, -math.inf)
     if ws.runs and ws.reach is not None:
         seen = np.asarray(inside.reshape(shape).all(axis=2), dtype=bool)
-        extent = runs(np.asarray(profiles, dtype=float), ws.level, ws.threshold, ws.reach, seen)
+        # the frame's ground against the first frame's, beside the needle at every station: a lamp a few per
+        # cent brighter would otherwise put the whole ground beyond the threshold
+        beside = None if ws.ring is None else ws.ring & seen
+        shift = median(profiles[beside]) - ws.ground if beside is not None and beside.any() else 0.0
+        extent = runs(np.asarray(profiles - shift, dtype=float), ws.level, ws.threshold, ws.reach, seen)
         short = np.asarray(ws.runs[copy] - extent - along_limit * np.abs(ws.taper), dtype=float)
     dw, tol, short = dw[ok], tol[ok], short[ok]
     return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(float(a) for a in ws.s[ok]),
