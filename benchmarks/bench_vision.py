@@ -72,6 +72,12 @@ outline behind the fit up to the field's border: across the axis every 2 px, whe
 there, how long a stretch is not, the largest narrowing going back, and the width against the first
 frame's as far behind its tip (good against wrong, near the last fix and found again).
 
+``--scenes`` does the same on the third generator's frames (``tests/support/occlusion_scenes.py``:
+power-law and truncated needles in transmitted light, a Moffat or ring point spread, speckle;
+fibres, refracting droplets, drifting particles and shadows over the tip; 256 x 256, sequences of
+30; ``FRAMES`` default 300, seeds 0 and 1), then for blunt tips 12 to 22 px wide: the fixes more
+than 3 px off, and the verdicts by what the frame is (occluded or visible, and the cause).
+
 ``--plain`` does the same on the own renderer's plain frames (``own_benchmark`` seeds 0, 1
 and 2, tips 3 to 20 px, both looks; ``FRAMES`` default 400 each): what a change to the
 tracker must not make worse.
@@ -97,6 +103,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
+from occlusion_scenes import scene_benchmark  # noqa: E402
 from vision_own import OwnFrame, flake_benchmark, lobed_benchmark, own_benchmark, round_benchmark  # noqa: E402
 from vision_peer import peer_benchmark  # noqa: E402
 
@@ -655,6 +662,45 @@ def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | N
     return len(bad)
 
 
+def scenes(n_frames: int, seed: int = 0, widths: tuple[float, float] = (6.0, 22.0)) -> tuple[int, int, int]:
+    """Track the third generator's frames (:mod:`occlusion_scenes`); the fixes more than 3 px off, the visible
+    tips refused and the visible tips."""
+    seqs = scene_benchmark(n_frames, 30, seed=seed, size=256, widths=widths)
+    tally: dict[tuple[str, str], int] = {}
+    bad: list[tuple[float, int, int, str, float]] = []
+    errors: list[float] = []
+    for i, seq in enumerate(seqs):
+        try:
+            tracker = TipTracker(seq.frames[0].image, seq.frames[0].tip)
+        except TemplateError as exc:
+            print(f"sequence {i} ({seq.shape}, tip {seq.width_px:.1f} px) not learnt: {exc}")
+            continue
+        for k, f in enumerate(seq.frames[1:], start=1):
+            r = tracker.update(f.image)
+            what = f"{f.kind}, {f.cause or 'clear'}"
+            verdict = "fix" if isinstance(r, Fix) else r.reason
+            tally[(what, verdict)] = tally.get((what, verdict), 0) + 1
+            if isinstance(r, Fix):
+                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
+                if f.kind == "visible":
+                    errors.append(e)
+                if e > 3.0:
+                    bad.append((e, i, k, what, seq.width_px))
+    print(f"{len(seqs)} sequences ({', '.join(f'{s.shape} {s.psf} {s.width_px:.1f} px' for s in seqs)})")
+    for what in sorted({w for w, _ in tally}):
+        row = {v: n for (w, v), n in tally.items() if w == what}
+        print(f"{what:>28}: {sum(row.values()):>4} frames; " + ", ".join(f"{v} {n}" for v, n in sorted(row.items())))
+    visible = sum(n for (w, _), n in tally.items() if w.startswith("visible"))
+    refused = sum(n for (w, v), n in tally.items() if w.startswith("visible") and v != "fix")
+    e = np.array(errors) if errors else np.array([math.nan])
+    print(f"visible tips: {refused} of {visible} refused; median error {np.median(e):.2f} px, "
+          f"95th percentile {np.percentile(e, 95):.2f} px")
+    print(f"fixes more than 3 px off: {len(bad)}" + (f", worst {max(bad)[0]:.1f} px" if bad else ""))
+    for err, i, k, what, w in sorted(bad, reverse=True):
+        print(f"  {err:6.1f} px  sequence {i} frame {k}: {what}, tip {w:.1f} px, {seqs[i].shape} {seqs[i].psf}")
+    return len(bad), refused, visible
+
+
 def _split(fix: Fix, tip: tuple[float, float], shaft: tuple[float, float]) -> tuple[float, float]:
     """A fix's error along the needle's axis (positive: behind the tip, up the shaft) and across it (positive:
     the axis turned by +90 deg, x right and y down), px; the axis is the template's shaft direction turned by
@@ -826,6 +872,15 @@ def main(argv: list[str] | None = None) -> None:
             print("\nthe same, bright field only, tips 14 to 18 px wide")
             lobed(n_own, wide=True, **kw)
             return
+    if "--scenes" in args:
+        n_sc = int(numbers[0]) if numbers else 300
+        for seed in (0, 1):
+            print(f"tip tracking on the third generator's occlusions, seed {seed}")
+            scenes(n_sc, seed)
+            print()
+        print("the same, blunt tips 12 to 22 px wide, seed 2")
+        scenes(n_sc, 2, (12.0, 22.0))
+        return
     if "--plain" in args:
         for seed in (0, 1, 2):
             if seed:

@@ -167,6 +167,19 @@ class TrackerParams:
         the width, px (the needle's run across the shaft is measured in whole pixels on
         either side): a needle widens steadily away from its tip, so something lay beside
         it there, or the run found was not the needle's.
+    extent_depth : float
+        A width station's extent is compared (``extent_slack``) only where the first frame's
+        needle stands this many times ``contrast`` background spreads from the ground (the
+        median over the station's extent), 1: its edges are then crossed by the threshold
+        well above their foot, where blur and noise hardly move them; an SEM needle's edge
+        contrast (1 to 1.5 times) is not measured so.
+    extent_slack : float
+        How much narrower than the first frame's, beyond what ``along_limit`` px along the
+        axis change it through the taper, the needle's extent across the shaft (the first to
+        the last sample standing ``contrast`` spreads from the ground) may be at any width
+        station behind a fix, px: whole samples on either edge and their jitter (up to 3.5
+        px behind the own frames' good fixes). Behind an occluder's far end taken for the
+        tip the needle, past the occluder, is its own further back: narrower, or to the side.
     width_stations : int
         Least number of the width's stations (:mod:`.width`) that must lie in the frame
         behind a fix for the width to be checked, 1: the check is a median over them.
@@ -224,6 +237,8 @@ class TrackerParams:
     trust_unchecked: bool = False
     width_shift: float = 5.0
     width_slack: float = 2.0
+    extent_depth: float = 2.0
+    extent_slack: float = 5.0
     thin_blur: float = 2.2
 
     def __post_init__(self) -> None:
@@ -237,6 +252,8 @@ class TrackerParams:
             raise ValueError("blur_bank must start at 0 px and increase")
         if not (self.width_shift >= 1 and self.width_slack >= 0 and self.width_stations >= 1):
             raise ValueError("width_shift >= 1 px, width_slack >= 0 px and width_stations >= 1")
+        if not (self.extent_depth > 0 and self.extent_slack >= 0):
+            raise ValueError("extent_depth > 0 and extent_slack >= 0 px")
 
 
 def noise_sigma(image: FloatArray) -> float:

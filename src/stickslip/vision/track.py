@@ -32,7 +32,10 @@
    last, **the needle's width** at each station behind the fix (:mod:`.width`) must be
    the first frame's there, within what 3 px along the axis change it (*occluded* when
    most stations differ: the far end of a chip stuck on the tip, wider than the needle
-   where it lies and the needle narrower behind it); where the first frame showed such
+   where it lies and the needle narrower behind it; or when at any station the needle's
+   extent across the shaft is narrower than the first frame's beyond the taper's 3 px and a
+   slack: past an occluder taken for the tip, the needle's own end lies further back or to
+   the side); where the first frame showed such
    stations and fewer than three lie in the frame behind the fix (the shaft leaves the field), the
    fix is refused (*lost*): nothing vouches that the end seen is the tip; the frame then goes on to
    the whole frame's search, whose stricter rules vouch for a tip found again instead;
@@ -414,7 +417,7 @@ def _learn_shaft(image: FloatArray, tip: Sequence[float], t: TipTemplate, params
     at = (float(tip[0]), float(tip[1]))
     return (learn_shaft(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, smooth),
             learn_width(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, t.noise, smooth,
-                        params.width_shift, params.width_slack))
+                        params.width_shift, params.width_slack, params.extent_depth))
 
 
 def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
@@ -465,18 +468,28 @@ def _not_found(refused: tuple[float, Lost] | None) -> Lost:
                         f"({refused[1].reason}): {refused[1].detail}")
 
 
-def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3) -> Lost | None:
+def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3,
+                   slack: float = math.inf) -> Lost | None:
     """The refusal of a fix behind which the needle is not as wide as the first frame showed it
-    (:mod:`.width`; ``None``: it is, or was not checked); with ``unvouched``, of a fix behind which
-    fewer than ``least`` of the stations the first frame showed lie in the frame."""
+    (:mod:`.width`; ``None``: it is, or was not checked): most stations' widths differ, or at one
+    station the needle's extent across the shaft is narrower by more than ``slack`` px beyond what
+    the along-axis limit changes it by (:attr:`~.width.WidthCheck.short`); with ``unvouched``, of a
+    fix behind which fewer than ``least`` of the stations the first frame showed lie in the frame."""
     if wc is None and unvouched:
         return Lost("lost", f"fewer than {least} of the needle's width stations behind the fit's tip lie in the "
                             f"field: nothing vouches that the end seen is the tip")
-    if wc is None or wc.excess <= 0.0:
+    if wc is None:
         return None
-    return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
-                            f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px off): "
-                            f"the end of something over the tip")
+    if wc.excess > 0.0:
+        return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
+                                f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px off): "
+                                f"the end of something over the tip")
+    k = int(np.argmax(wc.short)) if wc.short else -1
+    if k < 0 or not wc.short[k] > slack:
+        return None
+    return Lost("occluded", f"the needle {wc.s[k]:.0f} px behind the fit's tip is narrower than the first frame showed "
+                            f"it by {wc.short[k]:.1f} px more than its taper allows (at most {slack:g}): the far end "
+                            f"of something over the tip, the needle's own end further back")
 
 
 class TipTracker:
@@ -684,7 +697,7 @@ class TipTracker:
         # the needle's width at the stations behind a fix every other rule takes
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
             self._width, p, cand, image, res.sigma if reacquire else None)
-        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations)
+        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool, last: int) -> Result:

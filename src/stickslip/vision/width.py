@@ -31,6 +31,19 @@ first frame (the needle's run across the shaft) lies off the needle's straight t
 robust line through all the stations' widths) by more than
 :attr:`~.template.TrackerParams.width_slack` is not used: something lay beside the needle
 there, or the run found was not the needle's (an SEM needle's dark middle splits it).
+
+The registration reaches :attr:`~.template.TrackerParams.width_shift` px an edge, and the
+median wants most stations: past an occluder whose chord near the fit is as wide as the
+needle's end (the blunt chord), an edge 10 or 20 px inside reads a clipped shift at one or
+two stations. So each station also measures the needle's *extent* (:func:`runs`: the first
+to the last sample standing out from the ground, without a shift limit) against the first
+frame's, smoothed alike; :attr:`WidthCheck.short` is how much narrower it is, less what
+``along_limit`` px along the axis change it. Past an occluder taken for the tip the needle
+is its own, its end further back or to the side, so narrower; anything beside it only
+widens it: one station over :attr:`~.template.TrackerParams.extent_slack` refuses the fix
+(:func:`~.track._width_refusal`). Only stations where the first frame's needle stands
+:attr:`~.template.TrackerParams.extent_depth` times the threshold from the ground are
+compared (an SEM needle's edge contrast is not measured so).
 See docs/vision.md, "Tracking the tip".
 """
 
@@ -115,6 +128,18 @@ class WidthStations:
     smooth : list of float
         For each blur copy, the smoothing of a frame's profiles across the shaft (Gaussian
         sigma, px).
+    level, threshold : float
+        The ground's grey level and how far from it a sample is the needle's (grey units; as
+        :func:`.shaft.follow_shaft` tells the needle from the ground).
+    reach : ndarray, shape (m,)
+        How far from a station's middle its extent is looked for: half the needle's width
+        there in the first frame and :data:`~.shaft.GROUND` px, px.
+    runs : list of ndarray, shape (m,)
+        For each blur copy, the needle's extent across the shaft at each station in the first
+        frame smoothed as the copy is (:func:`runs`), px.
+    ring, ground : ndarray of bool, shape (m, q), and float
+        The samples beside the needle beyond ``reach`` (within ``span``), and the first
+        frame's median there (grey units).
     """
 
     s: FloatArray
@@ -127,6 +152,12 @@ class WidthStations:
     span: NDArray[np.bool_]
     taper: FloatArray
     smooth: list[float]
+    level: float = 0.0
+    threshold: float = math.inf
+    reach: FloatArray | None = None
+    runs: tuple[FloatArray, ...] = ()
+    ring: NDArray[np.bool_] | None = None
+    ground: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -145,6 +176,10 @@ class WidthCheck:
         Each station's width change (px; positive: wider than in the first frame).
     tolerance : tuple of float
         What each station allows, px.
+    short : tuple of float
+        At each station, how much narrower the needle's extent across the shaft is than the
+        first frame's there (:func:`runs`; px, positive: narrower), less what
+        ``along_limit`` px along the axis change it through the taper.
     """
 
     n: int
@@ -152,6 +187,7 @@ class WidthCheck:
     s: tuple[float, ...]
     dw: tuple[float, ...]
     tolerance: tuple[float, ...]
+    short: tuple[float, ...] = ()
 
     @property
     def excess(self) -> float:
@@ -234,6 +270,43 @@ def _edges(profiles: FloatArray, index: IntArray, mask: FloatArray) -> tuple[Flo
     return out, (out * out).sum(axis=2)
 
 
+def runs(profiles: FloatArray, level: float, threshold: float, reach: FloatArray,
+         inside: NDArray[np.bool_] | None = None) -> FloatArray:
+    """The needle's extent across the shaft at each station, px (shape ``(m,)``): from the first to the last
+    sample that is the needle's within ``reach`` (px, one a station) of the station's middle, 0 where none is.
+
+    A sample is the needle's where it lies more than ``threshold`` from the ground's ``level`` (and,
+    with ``inside``, in the frame), as :func:`.shaft.follow_shaft` tells the needle from the ground;
+    the extent, not the run through the middle, so that an SEM needle's middle near the ground's
+    level does not split it. Anything beside the needle only widens it.
+    """
+    m, q = profiles.shape
+    ts = (np.arange(q) - (q - 1) // 2) * STEP
+    on = (np.abs(profiles - level) > threshold) & (np.abs(ts)[None, :] <= reach[:, None])
+    if inside is not None:
+        on &= inside
+    any_on = on.any(axis=1)
+    first = np.argmax(on, axis=1)
+    last = q - 1 - np.argmax(on[:, ::-1], axis=1)
+    return np.asarray(np.where(any_on, (last - first + 1) * STEP, 0.0), dtype=float)
+
+
+def _solid(profiles: FloatArray, level: float, threshold: float, reach: FloatArray, extents: FloatArray,
+           depth: float) -> FloatArray:
+    """``extents`` (the first frame's, :func:`runs`), 0 at the stations where the needle does not stand
+    ``depth`` times ``threshold`` from the ground's ``level`` (the median over the extent's middle): there
+    the threshold crosses the needle's edges near their foot or its middle, and the extent is not a
+    measure of the needle (an SEM needle's edge contrast)."""
+    m, q = profiles.shape
+    ts = (np.arange(q) - (q - 1) // 2) * STEP
+    out = extents.copy()
+    for i in range(m):
+        inner = np.abs(ts) <= min(0.5 * extents[i], reach[i])
+        if not inner.any() or median(np.abs(profiles[i, inner] - level)) < depth * threshold:
+            out[i] = 0.0
+    return out
+
+
 def _on_the_taper(s: FloatArray, widths: FloatArray, slack: float) -> list[int]:
     """The stations whose width (px, at ``s`` px behind the tip) lies within ``slack`` px of the needle's
     straight taper, a robust line through them all (Siegel's repeated median: each station's median slope to
@@ -249,7 +322,7 @@ def _on_the_taper(s: FloatArray, widths: FloatArray, slack: float) -> list[int]:
 
 def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float,
                 spread: float, contrast: float, noise: float, smooth: list[tuple[float, float]],
-                max_shift: float, slack: float) -> WidthStations | None:
+                max_shift: float, slack: float, depth: float = math.inf) -> WidthStations | None:
     """The first frame's edges at the shaft's stations behind ``tip`` (``None``: fewer than three).
 
     ``image`` is the first frame, ``tip`` the tip in it (x, y; px), ``shaft`` the unit vector
@@ -257,7 +330,9 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     as :func:`.shaft.learn_shaft` does; ``noise`` is the pixel noise (grey units); ``smooth``
     gives, for each blur copy, the smoothing of the first frame's profiles and of a later
     frame's (Gaussian sigma, px); ``max_shift`` the largest edge shift tried and ``slack`` how
-    much wider than a station further back one may be (px).
+    much wider than a station further back one may be (px); ``depth``: how many times
+    ``contrast * spread`` the needle must stand from the ground at a station for its extent
+    across the shaft to be compared (:func:`runs`; ``inf``: never).
     """
     half_q = int(round(REACH / STEP))
     ts: FloatArray = (np.arange(2 * half_q + 1, dtype=np.float64) - half_q) * STEP
@@ -285,26 +360,31 @@ def learn_width(image: FloatArray, tip: tuple[float, float], shaft: tuple[float,
     near_e, near_ss = _edges(ndimage.gaussian_filter1d(near, s0 / STEP, axis=1, mode="nearest"), index, wmask)
     far_s = ndimage.gaussian_filter1d(far, s0 / STEP, axis=1, mode="nearest")
     taper = _register(near_e, near_ss, far_s, shifted).sum(axis=1) / (2.0 * ALONG_STEP)
-    refs, ref_ss, sds = [], [], []
+    reach0 = np.array([0.5 * w + GROUND for w in widths])
+    refs, ref_ss, sds, run0 = [], [], [], []
     n2 = noise * noise / len(LINES)  # a sample of the mean of the lines
-    made: dict[float, tuple[FloatArray, FloatArray, FloatArray]] = {}
+    made: dict[float, tuple[FloatArray, FloatArray, FloatArray, FloatArray]] = {}
     for tsig, _ in smooth:
         if tsig not in made:
             e = ndimage.gaussian_filter1d(raw, tsig / STEP, axis=1, mode="nearest")
             g = np.gradient(e, STEP, axis=1).reshape(-1).take(index) * wmask
             # a matched filter's variance for each edge, the frame's noise and the first frame's alike
             made[tsig] = (*_edges(e, index, wmask), np.sqrt((2.0 * n2 / np.maximum((g * g).sum(axis=2), 1e-300))
-                                                           .sum(axis=1)))
-        r, ss, sd = made[tsig]
+                                                           .sum(axis=1)),
+                         _solid(e, level, contrast * spread, reach0, runs(e, level, contrast * spread, reach0), depth))
+        r, ss, sd, w0 = made[tsig]
         refs.append(r)
         ref_ss.append(ss)
         sds.append(sd)
+        run0.append(w0)
     offsets = o
     d_lines = np.asarray(LINES)
     lines = np.stack([(offsets[..., 0][..., None] + d_lines * ux).ravel(),
                       (offsets[..., 1][..., None] + d_lines * uy).ravel()])
+    ring = span & (np.abs(ts)[None, :] > reach0[:, None])
     return WidthStations(np.array([kept[i] for i in use]), lines, q, refs, ref_ss, sds, shifted, span,
-                         np.asarray(taper, dtype=float), [f for _, f in smooth])
+                         np.asarray(taper, dtype=float), [f for _, f in smooth], level, contrast * spread, reach0,
+                         tuple(run0), ring, median(raw[ring]) if ring.any() else level)
 
 
 def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: float, theta: float,
@@ -313,7 +393,10 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     against blur copy ``copy``; ``None`` when fewer than ``least`` (at least one) stations lie in the frame.
 
     A station disagrees when its width change exceeds ``along_limit`` px of the taper plus
-    ``sigmas`` standard deviations.
+    ``sigmas`` standard deviations. For the extent (:func:`runs`) the frame's grey levels are
+    moved by the change of the ground beside the needle (the median over :attr:`WidthStations.ring`
+    against the first frame's): a lamp a few per cent brighter would otherwise put the whole
+    ground beyond the threshold.
     """
     m = ws.s.size
     ct, st_ = math.cos(theta), math.sin(theta)
@@ -330,6 +413,15 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
         profiles = ndimage.gaussian_filter1d(profiles, f / STEP, axis=1, mode="nearest")
     dw = _register(ws.refs[copy], ws.ref_ss[copy], profiles, ws.shifted).sum(axis=1)
     tol = along_limit * np.abs(ws.taper) + sigmas * ws.sd[copy]
-    dw, tol = dw[ok], tol[ok]
+    short = np.full(m, -math.inf)
+    if ws.runs and ws.reach is not None:
+        seen = np.asarray(inside.reshape(shape).all(axis=2), dtype=bool)
+        # the frame's ground against the first frame's, beside the needle at every station: a lamp a few per
+        # cent brighter would otherwise put the whole ground beyond the threshold
+        beside = None if ws.ring is None else ws.ring & seen
+        shift = median(profiles[beside]) - ws.ground if beside is not None and beside.any() else 0.0
+        extent = runs(np.asarray(profiles - shift, dtype=float), ws.level, ws.threshold, ws.reach, seen)
+        short = np.asarray(ws.runs[copy] - extent - along_limit * np.abs(ws.taper), dtype=float)
+    dw, tol, short = dw[ok], tol[ok], short[ok]
     return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(float(a) for a in ws.s[ok]),
-                      tuple(float(a) for a in dw), tuple(float(a) for a in tol))
+                      tuple(float(a) for a in dw), tuple(float(a) for a in tol), tuple(float(a) for a in short))
