@@ -44,6 +44,7 @@ __all__ = [
     "SyncChange",
     "band_envelope_spectrum",
     "chi2_as_z",
+    "clear_rates_hz",
     "line_change",
     "line_power",
     "line_powers",
@@ -200,6 +201,28 @@ def step_rate_hz(
     if not total > 0.0:
         return float("nan")
     return float(np.sum(f[j0:j1] * p[j0:j1]) / total)
+
+
+def clear_rates_hz(x: ArrayLike, sample_rate: float, piece: int, min_db: float) -> list[float]:
+    """The step rate heard in each ``piece`` samples of ``x`` (:func:`step_rate_hz`), Hz, where it is heard clearly.
+
+    A piece's rate counts where its envelope line stands ``min_db`` over the continuum
+    around it (:func:`_prominence_db`; noise alone gives 0-2 dB); unheard and unclear pieces
+    are left out. One clock heard throughout gives one rate (give or take its drift); a
+    second instrument stepping in bursts, louder than the first while it steps, gives its
+    own rate in the pieces it fills.
+    """
+    v = np.asarray(x, dtype=np.float64).ravel()
+    sr = float(sample_rate)
+    out: list[float] = []
+    for i in range(0, v.size - piece + 1, max(1, piece)):
+        rate = step_rate_hz(v[i : i + piece], sr)
+        if not math.isfinite(rate):
+            continue
+        f, p = band_envelope_spectrum(v[i : i + piece], sr)
+        if _prominence_db(f, p, rate, STEP_CLOCK.line_tol) >= min_db:
+            out.append(rate)
+    return out
 
 
 def _fraction(f: FloatArray, p: FloatArray, i: int, lo_hz: float, params: StepClockParams) -> int:

@@ -48,6 +48,15 @@ class TuneParams:
         6.0, "robust SDs", "... and at least its median plus this (a traverse is longer than the tuning recording) ..."
     )
     drop_floor: tuple[float, float] = param((1.0, 2.0), "spreads", "... and at least these (broad, local)")
+    clock_piece_s: float = param(
+        0.25, "s", "the stepping part's step rate is heard again in pieces this long (another instrument's bursts)"
+    )
+    clock_min_db: float = param(
+        10.0, "dB", "a piece's rate counts where its envelope line stands this far over the continuum (noise: 0-2)"
+    )
+    clock_off: float = param(
+        0.15, "of the rate", "pieces heard this far from their median rate and its harmonics: another clock (refused)"
+    )
 
 
 TUNE = TuneParams()

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from ..change.template import TEMPLATE
 from ..features.fine import fine_range_hz, fine_segment, fine_spectrum_db
 from ..features.spectra import SPECTRA, continuum_levels_db, subband_edges, subband_levels_db
-from ..features.stepclock import step_rate_hz
+from ..features.stepclock import clear_rates_hz, step_rate_hz
 from ..sources.guard import block_problem
 from ..tuningfile import Tuning, default_frame
 from .band import _DEFAULT_MAX_DIPS
@@ -113,6 +113,8 @@ def tune(
     x, sample_rate = recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     if (problem := block_problem(x[: int(stop_at_s * sample_rate)])) is not None:
         raise TuningError(f"the stepping part of the recording is {problem}: nothing to learn from")
+    if (problem := other_clock(x[: int((stop_at_s - 0.15) * sample_rate)], sample_rate)) is not None:
+        raise TuningError(f"the stepping part of the recording {problem}: the stop's sound cannot be told from it")
     frame = int(frame or default_frame(sample_rate))
     args = _Args(sample_rate, stop_at_s, joint, frame, int(hop or max(1, frame // 4)), hold_s, release_s, guard_s,
                  f_min_hz, max_stepping_s, max_stopped_s, label_tolerance_s, search_s, self_check, seed)  # fmt: skip
@@ -120,6 +122,27 @@ def tune(
         tu, cut = _tune_at(x, args, float(per_octave))
         return _finished(x, args, replace(tu, per_octave=float(per_octave)), cut)
     return _tune_resolutions(x, args)
+
+
+def other_clock(x: FloatArray, sample_rate: int, p: TuneParams = TUNE) -> str | None:
+    """What says another instrument steps in the stepping part ``x`` (None: one clock heard), in words.
+
+    The step rate is heard again in pieces ``clock_piece_s`` long (where its line is
+    ``clock_min_db`` clear): a joint's clock holds throughout (drifting at most a few per
+    cent), so a piece heard ``clock_off`` or more from the pieces' median rate and from its
+    harmonics and fractions is another instrument's (a second stick-slip arm stepping in
+    bursts, louder than the joint while it steps: the tuning learnt its clock and its
+    bursts' coming and going as the stop).
+    """
+    rates = clear_rates_hz(x, sample_rate, max(1, round(p.clock_piece_s * sample_rate)), p.clock_min_db)
+    if len(rates) < 2:
+        return None
+    mid = float(np.median(rates))
+    off = [r for r in rates if min(abs(q / round(q) - 1.0) for q in (r / mid, mid / r) if round(q) >= 1) >= p.clock_off]
+    if not off:
+        return None
+    lo, hi = sorted((mid, float(np.median(off))))
+    return f"holds two step clocks ({lo:.0f} Hz and {hi:.0f} Hz, in turns): another instrument"
 
 
 @dataclass(frozen=True)
