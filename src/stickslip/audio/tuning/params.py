@@ -57,6 +57,9 @@ class TuneParams:
     clock_off: float = param(
         0.15, "of the rate", "pieces heard this far from their median rate and its harmonics: another clock (refused)"
     )
+    clock_end_s: float = param(
+        0.15, "s", "the step rate is heard up to this long before the labelled stop (the stop's own sound left out)"
+    )
 
 
 TUNE = TuneParams()

@@ -113,7 +113,7 @@ def tune(
     x, sample_rate = recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     if (problem := block_problem(x[: int(stop_at_s * sample_rate)])) is not None:
         raise TuningError(f"the stepping part of the recording is {problem}: nothing to learn from")
-    if (problem := other_clock(x[: int((stop_at_s - 0.15) * sample_rate)], sample_rate)) is not None:
+    if (problem := other_clock(x[: int((stop_at_s - TUNE.clock_end_s) * sample_rate)], sample_rate)) is not None:
         raise TuningError(f"the stepping part of the recording {problem}: the stop's sound cannot be told from it")
     frame = int(frame or default_frame(sample_rate))
     args = _Args(sample_rate, stop_at_s, joint, frame, int(hop or max(1, frame // 4)), hold_s, release_s, guard_s,
