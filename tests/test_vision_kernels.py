@@ -356,13 +356,3 @@ def test_damped_steps_with_the_norm_kept_are_the_plain_ones_bit_for_bit(seed: in
             assert prev_norm == math.sqrt(dp.dot(dp))
         prev, prev_old = dp, old
 
-
-@settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), m=st.integers(0, 50))
-def test_weights_all_inside_are_the_weights_times_the_robust_ones_bit_for_bit(seed: int, m: int) -> None:
-    rng = np.random.default_rng(seed)
-    w0 = rng.uniform(1e-3, 1.0, m)  # a template's kept weights: positive
-    robust_w = np.where(rng.random(m) < 0.3, 0.0, rng.uniform(0.0, 1.0, m)) if m else np.zeros(0)
-    inside = np.ones(m, dtype=bool)
-    assert np.array_equal(w0 * inside * robust_w, w0 * robust_w)
-    assert np.array_equal(w0 * inside * np.ones(m), w0)

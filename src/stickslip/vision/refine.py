@@ -311,7 +311,7 @@ def refine(
     dp_norm: float | None = None
     model: NDArray[np.intp] | None = None
     last_jac = sd
-    robust_w, w_robust = np.ones_like(T), w0  # w_robust: w0 * robust_w (w0 * 1.0 is w0)
+    robust_w = np.ones_like(T)
     converged, step, blur_c = False, math.inf, 0.0
     scale: float | None = None
     it, e = 0, np.zeros_like(T)
@@ -323,8 +323,7 @@ def refine(
     for it in range(1, max_iter + 1):
         v3, inside = _warped3(image, st, tx, ty, theta)
         Iw = v3[0]
-        # every sample inside (nearly always): w0 * True is w0, bit for bit, and w0 * robust_w is made when they change
-        omega = w_robust if inside.all() else w0 * inside * robust_w
+        omega = w0 * inside * robust_w
         sw = float(omega.sum())
         if sw <= 1e-9:
             break
@@ -346,7 +345,6 @@ def refine(
         e = _residual(Iw, sl[3:6], bx, by, gain, T, blur_c, st.lap)
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             robust_w, scale = _tukey_weights(e, omega, scale)
-            w_robust = w0 * robust_w
         dp, dp_norm = _damped(sol[_NL:], prev_dp, dp_norm)  # (a view: nothing else reads sol's motion)
         prev_dp = dp
         tx, ty, theta, step = _moved(tx, ty, theta, dp)
