@@ -253,9 +253,9 @@ def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_] | None) -> tuple
     is compared at once (a row each).
     """
     if ok is None:  # every sample in the frame: every shift is
-        good = [True] * pr.shifted.shape[0]
+        good: list[bool] = [True] * pr.shifted.shape[0]
     else:
-        in_frame = ok[pr.shifted].all(axis=1)
+        in_frame: NDArray[np.bool_] = np.asarray(ok[pr.shifted].all(axis=1), dtype=bool)
         if not in_frame.any():
             return None
         good = in_frame.tolist()

@@ -405,7 +405,7 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     n = len(LINES)
     shape = (m, ws.q, n)
     profiles = mean_lines(v.reshape(shape))
-    seen = inside.reshape(shape).all(axis=2)  # each sample's three lines in the frame
+    seen = np.asarray(inside.reshape(shape).all(axis=2), dtype=bool)  # each sample's three lines in the frame
     ok = (seen | ~ws.span).all(axis=1)
     if int(ok.sum()) < max(least, 1):
         return None
