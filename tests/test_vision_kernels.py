@@ -295,3 +295,64 @@ def test_cropped_inverse_transform_is_scipys_bit_for_bit(rows: int, cols: int, s
         alone.append((spectrum, got))
     stacked = _inverse(np.stack([s for s, _ in alone]), (rows, cols), start)  # several in one call: each alone's
     assert all(np.array_equal(stacked[i], got) for i, (_, got) in enumerate(alone))
+
+
+@pytest.mark.parametrize("sigma", [0.5, 1.0, 1.8027756377319946, 3.0])
+def test_profiles_smoothed_by_the_kept_kernel_as_gaussian_filter1d(sigma: float) -> None:
+    from stickslip.vision.sampling import gaussian_weights
+
+    rng = np.random.default_rng(int(sigma * 10))
+    for shape in ((6, 81), (1, 5), (3, 1), (0, 9)):  # stations x samples; a profile shorter than the kernel; none
+        a = rng.normal(0.5, 0.1, shape)
+        got = ndimage.correlate1d(a, gaussian_weights(sigma), 1, mode="nearest")
+        assert np.array_equal(got, ndimage.gaussian_filter1d(a, sigma, axis=1, mode="nearest"))
+
+
+def test_edge_station_with_every_sample_in_the_frame_is_the_checked_one() -> None:
+    from stickslip.vision.edges import SHIFTS, STEP, _profile, _station
+
+    rng = np.random.default_rng(5)
+    idx = np.arange(SHIFTS, 40 - SHIFTS)
+    pr = _profile(np.tanh(np.linspace(-3.0, 3.0, idx.size)) + rng.normal(0.0, 0.05, idx.size), idx)
+    assert pr is not None
+    for _ in range(20):
+        F = rng.normal(0.0, 1.0, 40)
+        assert _station(pr, F, None) == _station(pr, F, np.ones(40, dtype=bool))
+    F = np.zeros(40)
+    F[idx - SHIFTS] = pr.e  # the template's profile SHIFTS samples before its place: the best shift is -SHIFTS
+    every = _station(pr, F, None)
+    assert every is not None and every[2] == -SHIFTS * STEP
+    ok = np.ones(40, dtype=bool)
+    ok[0] = False  # the shift -SHIFTS reaches outside the frame: not compared
+    some = _station(pr, F, ok)
+    assert some is not None and some[2] > -SHIFTS * STEP
+    ok[:] = False
+    assert _station(pr, F, ok) is None  # no shift in the frame
+
+
+def _damped_before(dp: np.ndarray, prev_dp: np.ndarray | None) -> np.ndarray:
+    """The step's damping as it was written before (both norms made at every step)."""
+    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * (math.sqrt(dp.dot(dp)) * math.sqrt(prev_dp.dot(prev_dp))):
+        dp *= 0.5
+    return dp
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12))
+def test_damped_steps_with_the_norm_kept_are_the_plain_ones_bit_for_bit(seed: int, n: int) -> None:
+    from stickslip.vision.refine import _damped
+
+    rng = np.random.default_rng(seed)
+    steps = rng.normal(0.0, 1.0, (n, 3)) * rng.choice([1e-6, 1.0, 30.0], (n, 1))
+    steps[rng.random(n) < 0.2] = 0.0  # a step of nothing
+    steps[1::2] = -rng.uniform(0.1, 3.0, (n // 2, 1)) * steps[0 : 2 * (n // 2) : 2]  # turning back: halved
+    prev, prev_norm = None, None
+    prev_old = None
+    for s in steps:
+        dp, prev_norm = _damped(s.copy(), prev, prev_norm)
+        old = _damped_before(s.copy(), prev_old)
+        assert np.array_equal(dp, old)
+        if prev_norm is not None:
+            assert prev_norm == math.sqrt(dp.dot(dp))
+        prev, prev_old = dp, old
+

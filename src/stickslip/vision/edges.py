@@ -244,17 +244,21 @@ def _profile(expected: FloatArray, idx: NDArray[np.intp]) -> _Profile | None:
     return _Profile(idx, tc, e, ve, idx[None, :] + np.arange(-SHIFTS, SHIFTS + 1)[:, None])
 
 
-def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_]) -> tuple[float, float, float, float] | None:
-    """One station: the frame's profile ``F`` (all samples, ``ok`` where in the frame) against the template's
-    (:func:`_profile`), shifted by up to :data:`SHIFTS` samples.
+def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_] | None) -> tuple[float, float, float, float] | None:
+    """One station: the frame's profile ``F`` (all samples, ``ok`` where in the frame; ``None``: every one)
+    against the template's (:func:`_profile`), shifted by up to :data:`SHIFTS` samples.
 
     Returns the contrast, the correlation and the shift (px) that correlates best, and the
     template profile's sum of squares; ``None`` when no shift lies in the frame. Every shift
     is compared at once (a row each).
     """
-    good: NDArray[np.bool_] = np.asarray(ok[pr.shifted].all(axis=1), dtype=bool)
-    if not good.any():
-        return None
+    if ok is None:  # every sample in the frame: every shift is
+        good: list[bool] = [True] * pr.shifted.shape[0]
+    else:
+        in_frame: NDArray[np.bool_] = np.asarray(ok[pr.shifted].all(axis=1), dtype=bool)
+        if not in_frame.any():
+            return None
+        good = in_frame.tolist()
     tc, e, ve = pr.tc, pr.e, pr.ve
     f = F[pr.shifted]
     f -= f.sum(axis=1, keepdims=True) / f.shape[1]
@@ -262,7 +266,7 @@ def _station(pr: _Profile, F: FloatArray, ok: NDArray[np.bool_]) -> tuple[float,
     vf = np.einsum("ij,ij->i", f, f)
     cov = f @ e
     best: tuple[float, float, float, float] | None = None
-    for k, (g, c, v) in enumerate(zip(good.tolist(), cov.tolist(), vf.tolist(), strict=True)):
+    for k, (g, c, v) in enumerate(zip(good, cov.tolist(), vf.tolist(), strict=True)):
         if not g:
             continue
         r = c / math.sqrt(ve * v) if v > 0 else 0.0
@@ -290,6 +294,7 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     v, inside = sample_value_xy(frame, xy)
     F = v.reshape(len(LINES), *ep.use.shape).sum(axis=0) / len(LINES)
     ok: NDArray[np.bool_] = np.asarray(inside.reshape(len(LINES), *ep.use.shape).all(axis=0), dtype=bool)
+    all_in = bool(ok.all())  # (nearly always): no station's shifts need looking at
     a = np.full(m, np.nan)
     sd = np.full(m, np.inf)
     shift = np.zeros(m)
@@ -297,7 +302,7 @@ def check_edges(ep: EdgeProfiles, copy: int, frame: Patch, x: float, y: float, t
     for j, pr in enumerate(ep.stations[copy]):
         if pr is None:
             continue
-        res = _station(pr, F[j], ok[j])
+        res = _station(pr, F[j], None if all_in else ok[j])
         if res is None:
             continue
         a[j], rs[j], shift[j], ve = res

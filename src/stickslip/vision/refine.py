@@ -308,15 +308,13 @@ def refine(
     beta_prev = np.array([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     kappa: float | None = None
     prev_dp: FloatArray | None = None
+    dp_norm: float | None = None
     model: NDArray[np.intp] | None = None
     last_jac = sd
     robust_w = np.ones_like(T)
-    converged = False
-    step = math.inf
-    blur_c = 0.0
+    converged, step, blur_c = False, math.inf, 0.0
     scale: float | None = None
-    it = 0
-    e = np.zeros_like(T)
+    it, e = 0, np.zeros_like(T)
     inside = np.ones(T.shape, dtype=bool)
     # the brightness planes' columns, then each iteration's blur and motion; column-major (see _joint)
     D = np.empty((T.size, 10), order="F")
@@ -342,12 +340,12 @@ def refine(
             converged = False
             break
         beta_prev = sol[:6]
-        g, c = float(sol[0]), float(sol[3])
-        blur_c = float(sol[6]) / g  # half the blur variance the frame has beyond the template's, px²
-        e = _residual(Iw, sol[3:6].tolist(), bx, by, gain, T, blur_c, st.lap)
+        sl = sol.tolist()  # (the same Python floats as float() of each; blur_c: half the blur variance the
+        g, c, blur_c = sl[0], sl[3], sl[6] / sl[0]  # frame has beyond the template's, px²)
+        e = _residual(Iw, sl[3:6], bx, by, gain, T, blur_c, st.lap)
         if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
             robust_w, scale = _tukey_weights(e, omega, scale)
-        dp = _damped(sol[_NL:].copy(), prev_dp)
+        dp, dp_norm = _damped(sol[_NL:], prev_dp, dp_norm)  # (a view: nothing else reads sol's motion)
         prev_dp = dp
         tx, ty, theta, step = _moved(tx, ty, theta, dp)
         last_jac = jac
@@ -446,12 +444,20 @@ def _tukey_weights(e: FloatArray, omega: FloatArray, scale: float | None) -> tup
     return np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0), scale
 
 
-def _damped(dp: FloatArray, prev_dp: FloatArray | None) -> FloatArray:
-    """The motion's step ``dp``, halved when it turned back on the last one (overshooting)."""
+def _damped(dp: FloatArray, prev_dp: FloatArray | None, prev_norm: float | None = None
+            ) -> tuple[FloatArray, float | None]:
+    """The motion's step ``dp``, halved when it turned back on the last one (overshooting), and its norm when
+    made and the step not halved (the next call's ``prev_norm``: ``prev_dp``'s, or ``None`` to make it)."""
+    if prev_dp is None:
+        return dp, None
     # the norms as numpy.linalg.norm makes them (the square root of the vector's dot with itself)
-    if prev_dp is not None and float(dp @ prev_dp) < -0.5 * (math.sqrt(dp.dot(dp)) * math.sqrt(prev_dp.dot(prev_dp))):
+    norm = math.sqrt(dp.dot(dp))
+    if prev_norm is None:
+        prev_norm = math.sqrt(prev_dp.dot(prev_dp))
+    if float(dp @ prev_dp) < -0.5 * (norm * prev_norm):
         dp *= 0.5
-    return dp
+        return dp, None
+    return dp, norm
 
 
 def _moved(tx: float, ty: float, theta: float, dp: FloatArray) -> tuple[float, float, float, float]:

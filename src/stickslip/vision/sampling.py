@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 __all__ = ["Patch", "patch", "sample", "sample_value", "sample_xy", "sample_value_xy", "cells", "neighbours",
-           "bilinear", "median"]
+           "bilinear", "median", "gaussian_weights"]
 
 FloatArray = NDArray[np.float64]
 
@@ -60,7 +60,7 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
     data = np.empty((3, y1 - y0, x1 - x0))
     crop = data[0]
     if smooth > 1e-15:  # scipy.ndimage.gaussian_filter's two passes, its kernel made once for each smoothing
-        w = _gaussian_weights(smooth)
+        w = gaussian_weights(smooth)
         ndimage.correlate1d(image[y0:y1, x0:x1], w, 0, crop, "nearest")
         ndimage.correlate1d(crop, w, 1, crop, "nearest")
     else:
@@ -75,7 +75,7 @@ _CACHED = 256
 _WEIGHTS: dict[float, FloatArray] = {}
 
 
-def _gaussian_weights(sigma: float) -> FloatArray:
+def gaussian_weights(sigma: float) -> FloatArray:
     """The weights :func:`scipy.ndimage.gaussian_filter1d` correlates with for a Gaussian of ``sigma`` px (its
     default reach, 4 sigma), made once for each ``sigma``: read off its response to a single 1."""
     w = _WEIGHTS.get(sigma)

@@ -57,7 +57,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .sampling import median
+from .sampling import gaussian_weights, median
 from .shaft import (
     ALONG_STEP,
     GROUND,
@@ -405,17 +405,18 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     n = len(LINES)
     shape = (m, ws.q, n)
     profiles = mean_lines(v.reshape(shape))
-    ok = (inside.reshape(shape).all(axis=2) | ~ws.span).all(axis=1)
+    seen = np.asarray(inside.reshape(shape).all(axis=2), dtype=bool)  # each sample's three lines in the frame
+    ok = (seen | ~ws.span).all(axis=1)
     if int(ok.sum()) < max(least, 1):
         return None
     f = ws.smooth[copy]
     if f > 0:
-        profiles = ndimage.gaussian_filter1d(profiles, f / STEP, axis=1, mode="nearest")
+        # scipy.ndimage.gaussian_filter1d's correlation, its kernel made once for each smoothing
+        profiles = ndimage.correlate1d(profiles, gaussian_weights(f / STEP), 1, mode="nearest")
     dw = _register(ws.refs[copy], ws.ref_ss[copy], profiles, ws.shifted).sum(axis=1)
     tol = along_limit * np.abs(ws.taper) + sigmas * ws.sd[copy]
     short = np.full(m, -math.inf)
     if ws.runs and ws.reach is not None:
-        seen = np.asarray(inside.reshape(shape).all(axis=2), dtype=bool)
         # the frame's ground against the first frame's, beside the needle at every station: a lamp a few per
         # cent brighter would otherwise put the whole ground beyond the threshold
         beside = None if ws.ring is None else ws.ring & seen
@@ -423,5 +424,6 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
         extent = runs(np.asarray(profiles - shift, dtype=float), ws.level, ws.threshold, ws.reach, seen)
         short = np.asarray(ws.runs[copy] - extent - along_limit * np.abs(ws.taper), dtype=float)
     dw, tol, short = dw[ok], tol[ok], short[ok]
-    return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(float(a) for a in ws.s[ok]),
-                      tuple(float(a) for a in dw), tuple(float(a) for a in tol), tuple(float(a) for a in short))
+    # (tolist: the same Python floats as float() of each, in one call)
+    return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(ws.s[ok].tolist()),
+                      tuple(dw.tolist()), tuple(tol.tolist()), tuple(short.tolist()))
