@@ -95,7 +95,7 @@ import math  # noqa: E402
 import sys  # noqa: E402
 import textwrap  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Sequence  # noqa: E402
+from collections.abc import Callable, Sequence  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -616,6 +616,49 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
     return "visible, 4-10 px inside" if room < 10.0 else "visible, 10+ px inside"
 
 
+def _tally(seqs: Sequence[Any], what: Callable[[Any, Any], str], name: Callable[[Any], str]
+           ) -> tuple[dict[tuple[str, str], int], list[tuple[float, int, int, str, float]], list[float]]:
+    """Track every sequence from its first frame's tip: the verdicts tallied by ``what`` a frame is, the
+    fixes more than 3 px off (error, sequence, frame, what, tip width) and the visible tips' errors, px;
+    ``name`` names a sequence (its look) in messages."""
+    tally: dict[tuple[str, str], int] = {}
+    bad: list[tuple[float, int, int, str, float]] = []
+    errors: list[float] = []
+    for i, seq in enumerate(seqs):
+        images = [as_image(f.image) for f in seq.frames]
+        try:
+            tracker = TipTracker(images[0], seq.frames[0].tip)
+        except TemplateError as exc:
+            print(f"sequence {i} ({name(seq)}, tip {seq.width_px:.1f} px) not learnt: {exc}")
+            continue
+        for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
+            r = tracker.update(img)
+            w = what(f, img)
+            verdict = "fix" if isinstance(r, Fix) else r.reason
+            tally[(w, verdict)] = tally.get((w, verdict), 0) + 1
+            if isinstance(r, Fix):
+                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
+                if f.kind == "visible":
+                    errors.append(e)
+                if e > 3.0:
+                    bad.append((e, i, k, w, seq.width_px))
+    return tally, bad, errors
+
+
+def _print_tally(seqs: Sequence[Any], tally: dict[tuple[str, str], int], bad: list[tuple[float, int, int, str, float]],
+                 errors: list[float], name: Callable[[Any], str], refused: str = "") -> None:
+    """:func:`_tally`'s counts by kind of frame, the visible tips' errors and every fix more than 3 px off."""
+    print(f"{len(seqs)} sequences ({', '.join(f'{name(s)} {s.width_px:.1f} px' for s in seqs)})")
+    for what in sorted({w for w, _ in tally}):
+        row = {v: n for (w, v), n in tally.items() if w == what}
+        print(f"{what:>28}: {sum(row.values()):>4} frames; " + ", ".join(f"{v} {n}" for v, n in sorted(row.items())))
+    e = np.array(errors) if errors else np.array([math.nan])
+    print(f"visible tips: {refused}median error {np.median(e):.2f} px, 95th percentile {np.percentile(e, 95):.2f} px")
+    print(f"fixes more than 3 px off: {len(bad)}" + (f", worst {max(bad)[0]:.1f} px" if bad else ""))
+    for err, i, k, what, w in sorted(bad, reverse=True):
+        print(f"  {err:6.1f} px  sequence {i} frame {k}: {what}, tip {w:.1f} px, {name(seqs[i])}")
+
+
 def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | None = None,
           bead: bool = False) -> int:
     """Track the own renderer's lobed-mode frames; the number of fixes more than 3 px off.
@@ -629,36 +672,8 @@ def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | N
     seqs = (own_benchmark(n_frames, 40, seed=plain, size=256) if plain is not None
             else make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
             else make(n_frames, 40, seed=0, size=256))
-    tally: dict[tuple[str, str], int] = {}
-    bad: list[tuple[float, int, int, str, float]] = []
-    errors: list[float] = []
-    for i, seq in enumerate(seqs):
-        images = [as_image(f.image) for f in seq.frames]
-        try:
-            tracker = TipTracker(images[0], seq.frames[0].tip)
-        except TemplateError as exc:
-            print(f"sequence {i} ({seq.look}, tip {seq.width_px:.1f} px) not learnt: {exc}")
-            continue
-        for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
-            r = tracker.update(img)
-            what = _lobed_class(f, img.shape[1])
-            verdict = "fix" if isinstance(r, Fix) else r.reason
-            tally[(what, verdict)] = tally.get((what, verdict), 0) + 1
-            if isinstance(r, Fix):
-                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
-                if f.kind == "visible":
-                    errors.append(e)
-                if e > 3.0:
-                    bad.append((e, i, k, what, seq.width_px))
-    print(f"{len(seqs)} sequences ({', '.join(f'{s.look} {s.width_px:.1f} px' for s in seqs)})")
-    for what in sorted({w for w, _ in tally}):
-        row = {v: n for (w, v), n in tally.items() if w == what}
-        print(f"{what:>28}: {sum(row.values()):>4} frames; " + ", ".join(f"{v} {n}" for v, n in sorted(row.items())))
-    e = np.array(errors) if errors else np.array([math.nan])
-    print(f"visible tips: median error {np.median(e):.2f} px, 95th percentile {np.percentile(e, 95):.2f} px")
-    print(f"fixes more than 3 px off: {len(bad)}" + (f", worst {max(bad)[0]:.1f} px" if bad else ""))
-    for err, i, k, what, w in sorted(bad, reverse=True):
-        print(f"  {err:6.1f} px  sequence {i} frame {k}: {what}, tip {w:.1f} px, {seqs[i].look}")
+    tally, bad, errors = _tally(seqs, lambda f, img: _lobed_class(f, img.shape[1]), lambda s: str(s.look))
+    _print_tally(seqs, tally, bad, errors, lambda s: str(s.look))
     return len(bad)
 
 
@@ -666,38 +681,12 @@ def scenes(n_frames: int, seed: int = 0, widths: tuple[float, float] = (6.0, 22.
     """Track the third generator's frames (:mod:`occlusion_scenes`); the fixes more than 3 px off, the visible
     tips refused and the visible tips."""
     seqs = scene_benchmark(n_frames, 30, seed=seed, size=256, widths=widths)
-    tally: dict[tuple[str, str], int] = {}
-    bad: list[tuple[float, int, int, str, float]] = []
-    errors: list[float] = []
-    for i, seq in enumerate(seqs):
-        try:
-            tracker = TipTracker(seq.frames[0].image, seq.frames[0].tip)
-        except TemplateError as exc:
-            print(f"sequence {i} ({seq.shape}, tip {seq.width_px:.1f} px) not learnt: {exc}")
-            continue
-        for k, f in enumerate(seq.frames[1:], start=1):
-            r = tracker.update(f.image)
-            what = f"{f.kind}, {f.cause or 'clear'}"
-            verdict = "fix" if isinstance(r, Fix) else r.reason
-            tally[(what, verdict)] = tally.get((what, verdict), 0) + 1
-            if isinstance(r, Fix):
-                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
-                if f.kind == "visible":
-                    errors.append(e)
-                if e > 3.0:
-                    bad.append((e, i, k, what, seq.width_px))
-    print(f"{len(seqs)} sequences ({', '.join(f'{s.shape} {s.psf} {s.width_px:.1f} px' for s in seqs)})")
-    for what in sorted({w for w, _ in tally}):
-        row = {v: n for (w, v), n in tally.items() if w == what}
-        print(f"{what:>28}: {sum(row.values()):>4} frames; " + ", ".join(f"{v} {n}" for v, n in sorted(row.items())))
+    def name(s: Any) -> str:
+        return f"{s.shape} {s.psf}"
+    tally, bad, errors = _tally(seqs, lambda f, img: f"{f.kind}, {f.cause or 'clear'}", name)
     visible = sum(n for (w, _), n in tally.items() if w.startswith("visible"))
     refused = sum(n for (w, v), n in tally.items() if w.startswith("visible") and v != "fix")
-    e = np.array(errors) if errors else np.array([math.nan])
-    print(f"visible tips: {refused} of {visible} refused; median error {np.median(e):.2f} px, "
-          f"95th percentile {np.percentile(e, 95):.2f} px")
-    print(f"fixes more than 3 px off: {len(bad)}" + (f", worst {max(bad)[0]:.1f} px" if bad else ""))
-    for err, i, k, what, w in sorted(bad, reverse=True):
-        print(f"  {err:6.1f} px  sequence {i} frame {k}: {what}, tip {w:.1f} px, {seqs[i].shape} {seqs[i].psf}")
+    _print_tally(seqs, tally, bad, errors, name, f"{refused} of {visible} refused; ")
     return len(bad), refused, visible
 
 
