@@ -179,10 +179,20 @@ def step_rate_hz(
     lo_hz = params.rate_lo_hz if lo_hz is None else lo_hz
     sr = float(sample_rate)
     hi_hz = min(params.rate_hi_hz, sr / 4) if hi_hz is None else hi_hz
+    spectrum = _envelope_spectrum(x, sr, lo_hz)
+    return float("nan") if spectrum is None else _strongest_rate_hz(*spectrum, lo_hz, hi_hz, params)
+
+
+def _envelope_spectrum(x: ArrayLike, sr: float, lo_hz: float) -> tuple[FloatArray, FloatArray] | None:
+    """:func:`band_envelope_spectrum` of ``x``; None where ``x`` is shorter than 20 periods of ``lo_hz`` or silent."""
     v = np.asarray(x, dtype=np.float64).ravel()
     if v.size < 20 * sr / lo_hz or not np.any(v != v[0]):
-        return float("nan")
-    f, p = band_envelope_spectrum(v, sr)
+        return None
+    return band_envelope_spectrum(v, sr)
+
+
+def _strongest_rate_hz(f: FloatArray, p: FloatArray, lo_hz: float, hi_hz: float, params: StepClockParams) -> float:
+    """:func:`step_rate_hz` read off the envelope spectrum ``p`` at frequencies ``f``, Hz (NaN: no line in range)."""
     df = float(f[1] - f[0])
     sel = np.flatnonzero((f >= lo_hz) & (f <= hi_hz))
     if sel.size == 0:
@@ -214,13 +224,14 @@ def clear_rates_hz(x: ArrayLike, sample_rate: float, piece: int, min_db: float) 
     """
     v = np.asarray(x, dtype=np.float64).ravel()
     sr = float(sample_rate)
+    lo_hz, hi_hz = STEP_CLOCK.rate_lo_hz, min(STEP_CLOCK.rate_hi_hz, sr / 4)  # step_rate_hz's defaults
     out: list[float] = []
     for i in range(0, v.size - piece + 1, max(1, piece)):
-        rate = step_rate_hz(v[i : i + piece], sr)
-        if not math.isfinite(rate):
+        spectrum = _envelope_spectrum(v[i : i + piece], sr, lo_hz)  # made once: the rate and its prominence
+        if spectrum is None:
             continue
-        f, p = band_envelope_spectrum(v[i : i + piece], sr)
-        if _prominence_db(f, p, rate, STEP_CLOCK.line_tol) >= min_db:
+        rate = _strongest_rate_hz(*spectrum, lo_hz, hi_hz, STEP_CLOCK)
+        if math.isfinite(rate) and _prominence_db(*spectrum, rate, STEP_CLOCK.line_tol) >= min_db:
             out.append(rate)
     return out
 
