@@ -116,10 +116,10 @@ def test_a_wide_tip_8_to_14_px_inside_the_edge_is_fixed_and_one_mostly_outside_i
 
 def test_a_tip_whose_shaft_leaves_the_field_is_vouched_for_by_the_whole_frame_s_rules():
     """From 20 px inside the edge, fewer than three of the width's stations lie in the frame behind the tip:
-    near the last fix nothing vouches for it (the ninth round's rule refused it), so the frame goes on to the
-    whole frame's search, which finds it again and takes it under the stricter rules for a tip found again
+    no station vouches for it (the ninth round's rule refused it); the stricter rules for a tip found again
     and a standard deviation of at most TrackerParams.unvouched_sigma (0.5 px; docs/vision-log.md, "Twelfth
-    round"): fixed within 1 px down to 10 px inside the edge; at 8 px, where the fit's standard deviation
+    round") do, near the last fix or in the whole frame's search: fixed within 1 px down to 10 px inside the
+    edge; at 8 px, where the fit's standard deviation
     is over that limit, refused as unvouched, not fixed; at 6 px out of the field."""
     p = TrackerParams()
     answers = _tip_towards_the_edge((50.0, 40.0, 30.0, 20.0, 14.0, 12.0, 10.0, 8.0, 6.0))

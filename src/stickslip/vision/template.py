@@ -115,11 +115,13 @@ class TrackerParams:
         many things that resemble a blurred tip a little, and a false fix there would
         be far off.
     unvouched_sigma : float
-        Largest standard deviation of a tip found again where fewer than
-        :attr:`width_stations` of the needle's width stations lie in the frame behind it
-        (nothing else vouches for it), px: on the own renderer's sets the wrong candidates
-        of this kind read 0.61-0.97 px and ``reacquire_sigma`` alone would leave a margin of
-        0.01 px; 0.5 keeps one of 0.1 px (docs/vision-log.md, twelfth round).
+        Largest standard deviation of a tip found again (or of a fit near the last fix that
+        passes the rules for one) where fewer than :attr:`width_stations` of the needle's
+        width stations lie in the frame behind it (nothing else vouches for it), px: on the
+        own renderer's sets the wrong candidates of this kind read 0.61-0.97 px and
+        ``reacquire_sigma`` alone would leave a margin of 0.01 px; 0.5 keeps one of 0.1 px
+        (docs/vision-log.md, twelfth round; the fits near the last fix, the nearest wrong one
+        0.61 px: "The vetoes taken together").
     max_blur_step : float
         Largest change of the tip's blur between two consecutive fixes, px (sigma): focus
         drifts slowly, and a match that needs a very different blur copy is something

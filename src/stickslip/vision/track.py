@@ -37,8 +37,9 @@
    slack: past an occluder taken for the tip, the needle's own end lies further back or to
    the side); where the first frame showed such
    stations and fewer than three lie in the frame behind the fix (the shaft leaves the field), the
-   fix is refused (*lost*): nothing vouches that the end seen is the tip; the frame then goes on to
-   the whole frame's search, whose stricter rules vouch for a tip found again instead;
+   fix is refused (*lost*): nothing vouches that the end seen is the tip, unless the fit passes the
+   stricter rules for a tip found again (they vouch for it instead); else the frame goes on to the
+   whole frame's search, whose rules vouch for a tip found again;
 5. when the tip is not found near the last fix (or was refused in the frame before), it is
    **looked for in the whole frame** (down-sampled correlation, the best few peaks refined)
    and taken only with the stricter :attr:`~.template.TrackerParams.reacquire_score`; the
@@ -459,6 +460,16 @@ def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
     return wc, wc is None and not p.trust_unchecked and not vouched
 
 
+def _vouched_as_found(t: TipTracker, r: Refinement, sigma: float) -> bool:
+    """Whether a fit near the last fix (its standard deviation ``sigma``, px) passes the rules a tip found again by
+    the whole frame's search must pass where no width station vouches for it: a correlation of
+    ``reacquire_score``, a mismatch at most ``reacquire_ratio`` times the recent fixes' median plus the floor, and
+    ``sigma`` at most ``unvouched_sigma`` (docs/vision.md, "Decision rules")."""
+    p = t.params
+    return sigma <= p.unvouched_sigma and r.score >= p.reacquire_score and (
+        1.0 - r.score <= t._mismatch_limit(p.reacquire_ratio))
+
+
 def _not_found(refused: tuple[float, Lost] | None) -> Lost:
     """The refusal of a frame with nothing near the last fix and no fix in the whole frame: what refused the
     frame's best-correlating candidate (``refused``: its correlation and refusal), or that there was none."""
@@ -694,9 +705,10 @@ class TipTracker:
         sc = None if ec is None or _edge_refusal(ec, p) else check_shaft(
             self._shaft, cand.level, image, r.x, r.y, r.theta)
         refusal = _edge_refusal(ec, p, sc) if isinstance(res, Fix) else None
-        # the needle's width at the stations behind a fix every other rule takes
+        # the needle's width behind a fix every other rule takes; unchecked, a found-again tip's rules vouch (or not)
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
             self._width, p, cand, image, res.sigma if reacquire else None)
+        unvouched = unvouched and not (isinstance(res, Fix) and _vouched_as_found(self, cand.ref, res.sigma))
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
