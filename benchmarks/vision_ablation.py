@@ -161,7 +161,8 @@ class _Averaging(TipTracker):
     ``AVERAGE[0] + 1``. With ``AVERAGE[1]`` the averaged template is fitted to the first frame and its apex moved
     by what that fit says (the averaged frames' registration carried the old template's bias)."""
 
-    def __init__(self, first: NDArray[np.float64], tip: tuple[float, float], params: TrackerParams) -> None:
+    def __init__(self, first: NDArray[np.float64], tip: tuple[float, float],
+                 params: TrackerParams = TrackerParams()) -> None:
         super().__init__(first, tip, params)
         h = params.half_window
         win, inside = _window(first, int(round(tip[0])), int(round(tip[1])), h)
