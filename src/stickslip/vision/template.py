@@ -195,6 +195,15 @@ class TrackerParams:
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
+    average_frames : int
+        The template is made again, once, from the first frame's window and the next this many
+        fixes' fitted with the sharp copy (:mod:`.average`), 1: the first frame's noise alone
+        biases the blur term and a round end's fix ahead of the tip. 0 (the default) keeps the
+        first frame's: with 8, the own sets' median and 95th percentile fell on six of seven,
+        but the second renderer's 95th percentile rose (1.157 to 1.197 px; docs/vision-log.md).
+    anchor_limit : float
+        Largest move of the averaged template's apex that its fit to the first frame may ask,
+        px (the own renderer's: 0.02 to 0.3 px); beyond, the first frame's template is kept.
     front_fraction : float
         Largest share of the half-ring in front of the tip that may look like the needle,
         1: where the needle seems to end at something as dark (or bright) as itself, the
@@ -242,6 +251,8 @@ class TrackerParams:
     extent_depth: float = 2.0
     extent_slack: float = 5.0
     thin_blur: float = 2.2
+    average_frames: int = 0
+    anchor_limit: float = 1.0
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:
@@ -256,6 +267,8 @@ class TrackerParams:
             raise ValueError("width_shift >= 1 px, width_slack >= 0 px and width_stations >= 1")
         if not (self.extent_depth > 0 and self.extent_slack >= 0):
             raise ValueError("extent_depth > 0 and extent_slack >= 0 px")
+        if not (self.average_frames >= 0 and self.anchor_limit > 0):
+            raise ValueError("average_frames >= 0 and anchor_limit > 0 px")
 
 
 def noise_sigma(image: FloatArray) -> float:

@@ -60,11 +60,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage
 from scipy.fft import next_fast_len
 
+from .average import TemplateAverage, anchor
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame
-from .refine import Refinement, refine, steepest, warped
+from .refine import Refinement, Steepest, refine, steepest, warped
 from .sampling import Patch, median, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import TemplateError, TipTemplate, TrackerParams, inside_ncc, masked_ncc, region_spectra
@@ -521,6 +523,15 @@ class TipTracker:
         When nothing that can be tracked stands at ``tip``.
     """
 
+    # the fit's parts of the template, made by _fit_parts (again when the template is averaged)
+    _steep: list[Steepest]
+    _select: Steepest
+    _bank_sel: list[FloatArray]
+    _bank_terms: list[tuple[FloatArray, float]]
+    _coarse: list[FloatArray]
+    _bank_noise2: list[float]
+    _spec_noise2: list[float]
+
     def __init__(self, first: FloatArray | Frame, tip: tuple[float, float], params: TrackerParams = TrackerParams()):
         image = first.image if isinstance(first, Frame) else np.asarray(first, dtype=float)
         self.params = params
@@ -532,17 +543,9 @@ class TipTracker:
         nb = len(params.blur_bank)
         self._spec = [(k, 0.0, b) for k, b in enumerate(params.blur_bank)] + [(0, f, -f) for f in params.sharpen_bank]
         self._top = nb - 1  # the most blurred copy: a tip that needs it is out of focus
-        # a copy blurred by 2 px or more (with the smoothing both get) is fitted on every second pixel
-        self._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(params.template_blur, abs(b)) >= params.thin_blur)
-                       for (k, _, b), w in zip(self._spec, t.level_weights, strict=True)]
-        widest = int(np.argmax([float(w.sum()) for w in t.level_weights]))
-        sel = self._steep[widest]  # the levels are compared on the widest mask
-        self._select = sel
-        self._bank_sel = [b[sel.keep] for b in t.bank]
-        self._bank_terms = [_copy_terms(b, sel.w, float(sel.w.sum())) for b in self._bank_sel]  # all in the frame
-        coarse = params.coarse_factor
-        self._coarse = [_downsample(b, coarse) for b in t.bank]
-        self._coarse_w = _downsample(t.weights, coarse)
+        self._fft: dict[object, object] = {}  # the template's transforms, by region size
+        _fit_parts(self, 1.0)
+        self._coarse_w = _downsample(t.weights, params.coarse_factor)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
         self._shaft, self._width = _learn_shaft(image, tip, t, params, self._spec)
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
@@ -552,13 +555,9 @@ class TipTracker:
         self._level = 0
         self._fresh = True  # the last frame gave a fix
         self._since = 1  # frames since the last fix (1: the last frame gave one)
-        self._fft: dict[object, object] = {}  # the template's transforms, by region size
         self._mismatch: list[float] = []  # 1 - score of the recent fixes
+        self._average = TemplateAverage(image, tip, t, params.average_frames) if params.average_frames else None
         s0 = params.template_blur
-        # variance of the first frame's noise left in each blur copy (white noise smoothed by a Gaussian of sigma s
-        # keeps 1 / (4 pi s²) of its variance)
-        self._bank_noise2 = [t.noise**2 / (4.0 * math.pi * (s0 * s0 + b * b)) for b in params.blur_bank]
-        self._spec_noise2 = [self._bank_noise2[k] for k, _, _ in self._spec]
         # what noise alone costs a perfect match, until fixes say better: the frame's and the template's noise
         # over the needle's contrast (both smoothed by s0)
         n2 = 2.0 * t.noise**2 / (4.0 * math.pi * s0 * s0)
@@ -820,7 +819,57 @@ class TipTracker:
         self._level = cand.level
         self._fresh = True
         self._since = 1
+        _averaged(self, cand, image)
         return fix
+
+
+def _fit_parts(tr: TipTracker, share: float) -> None:
+    """The fit's parts of ``tr``'s template (its bank, apex and weights): each level's steepest-descent images (a
+    copy blurred by 2 px or more, with the smoothing both get, fitted on every second pixel), the levels' samples
+    on the widest mask (where they are compared), the coarse copies for the whole-frame search, and the noise
+    variance left in each copy: ``share`` of the first frame's (white noise smoothed by a Gaussian of sigma ``s``
+    keeps ``1 / (4 pi s²)`` of its variance)."""
+    t, p = tr.template, tr.params
+    tr._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(p.template_blur, abs(b)) >= p.thin_blur)
+                 for (k, _, b), w in zip(tr._spec, t.level_weights, strict=True)]
+    sel = tr._steep[int(np.argmax([float(w.sum()) for w in t.level_weights]))]
+    tr._select = sel
+    tr._bank_sel = [b[sel.keep] for b in t.bank]
+    tr._bank_terms = [_copy_terms(b, sel.w, float(sel.w.sum())) for b in tr._bank_sel]  # all in the frame
+    tr._coarse = [_downsample(b, p.coarse_factor) for b in t.bank]
+    tr._fft.clear()
+    s0 = p.template_blur
+    tr._bank_noise2 = [share * t.noise**2 / (4.0 * math.pi * (s0 * s0 + b * b)) for b in p.blur_bank]
+    tr._spec_noise2 = [tr._bank_noise2[k] for k, _, _ in tr._spec]
+
+
+def _averaged(tr: TipTracker, cand: _Candidate, image: FloatArray) -> None:
+    """Give a fix fitted with the sharp copy to the template's average (:mod:`.average`); with the last one in,
+    the template made again from the average and its apex anchored on the first frame, or left as it was when
+    the anchoring fit does not settle within :attr:`~.template.TrackerParams.anchor_limit`."""
+    avg = tr._average
+    if avg is None or cand.level != 0:
+        return
+    win = avg.add(image, cand.ref.x, cand.ref.y, cand.ref.theta)
+    if win is None:
+        if not avg.open:
+            tr._average = None
+        return
+    tr._average = None
+    t, p = tr.template, tr.params
+    kept = t.bank
+    s0 = p.template_blur
+    t.bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in p.blur_bank]
+    share = 1.0 / (avg.count + 1)
+    _fit_parts(tr, share)
+    first = patch(avg.first, avg.tip[0], avg.tip[1], t.half * math.sqrt(2.0) + 12.0, s0)
+    move = anchor(first, tr._steep[0], avg.tip, p.sigma_factor, p.anchor_limit)
+    if move is None:
+        t.bank = kept
+        _fit_parts(tr, 1.0)
+        return
+    t.apex = (t.apex[0] + move[0], t.apex[1] + move[1])
+    _fit_parts(tr, share)
 
 
 def track(frames: Iterable[FloatArray | Frame], tip: tuple[float, float],
