@@ -69,7 +69,7 @@ line moves on.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -292,6 +292,23 @@ def locked_stop_likeness(
     phase. A sub-band is read where its lines held ``min_locked`` of their power in phase before; no verdict (NaN)
     where those hold less than ``min_covered`` of the signature's sum of squares. The median over the pieces.
     """
+    read = locked_reader(before, sample_rate, rate_hz, edges_hz, signature_db, continuum_db, p)
+    if read is None:
+        return math.nan
+    return float(np.median([read(x) for x in pieces]))
+
+
+def locked_reader(
+    before: FloatArray,
+    sample_rate: float,
+    rate_hz: float,
+    edges_hz: Sequence[float],
+    signature_db: Sequence[float],
+    continuum_db: Sequence[float],
+    p: ClockedParams = CLOCKED,
+) -> Callable[[FloatArray], float] | None:
+    """What :func:`locked_stop_likeness` reads of one stretch against ``before``, ``before`` read once (None: no
+    verdict on any stretch)."""
     judged, whole = _judged(signature_db, continuum_db, p)
     lines = {
         i: [k for k in range(1, int(sample_rate / 2 / rate_hz) + 1) if edges_hz[i] <= k * rate_hz < edges_hz[i + 1]]
@@ -299,7 +316,7 @@ def locked_stop_likeness(
     }
     ks = sorted({k for v in lines.values() for k in v})
     if not ks or p.locked_frame_s <= 0.0:
-        return math.nan
+        return None
     l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
 
     def held(v: FloatArray, i: int) -> float:
@@ -308,15 +325,16 @@ def locked_stop_likeness(
     keep = [i for i in judged if held(w0, i) > 0.0 and held(l0, i) >= p.min_locked * held(w0, i)]
     den = sum(float(signature_db[i]) ** 2 for i in keep)
     if den == 0.0 or den < p.min_covered * whole:
-        return math.nan
-    got = []
-    for x in pieces:
+        return None
+
+    def read(x: FloatArray) -> float:
         l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
         num = 0.0
         for i in keep:
             num += float(signature_db[i]) * _change_db(held(l0, i), held(l1, i), p.floor_share)
-        got.append(num / den)
-    return float(np.median(got))
+        return num / den
+
+    return read
 
 
 def _comb_read(
@@ -398,13 +416,8 @@ class ClockedCheck:
             return None
         if self.ref_stoplike > p.max_ref_stoplike:
             return None  # the stop may have begun there, heard late: no stepping to compare with
-        told = self.commanded_hz
-        if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
-            rate = heard_hz
-        else:
-            rate = rate_near_hz(ref, sr, told, p.commanded_tol)
-        tuned = self.tuning.step_rate_hz
-        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
+        rate = self.rate(heard_hz)
+        if not math.isfinite(rate):
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
@@ -423,6 +436,22 @@ class ClockedCheck:
             sig, cont = tu.signature_db, tu.continuum_signature_db
             locked = locked_stop_likeness(ref, pieces, sr, rate, tu.edges_hz, sig, cont, p)
         return OnClock(a, rate, used, self.ref_age_s, locked)
+
+    def rate(self, heard_hz: float = math.nan) -> float:
+        """The step rate the lines are read at, Hz (NaN: not judged): ``heard_hz`` (the step rate already heard in the
+        reference, Hz) where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard
+        again near it; not judged where that is more than ``max_rate_off`` from the tuning's rate or unknown."""
+        p, ref, told = self.p, self.ref, self.commanded_hz
+        if ref is None:
+            return math.nan
+        if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
+            rate = heard_hz
+        else:
+            rate = rate_near_hz(ref, self.sample_rate, told, p.commanded_tol)
+        tuned = self.tuning.step_rate_hz
+        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
+            return math.nan
+        return float(rate)
 
     def verdict(self, got: OnClock | None) -> bool:
         """False where the change is off the clock, on the lines or in phase with the clock followed; True where
