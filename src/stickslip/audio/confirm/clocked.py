@@ -80,9 +80,20 @@ from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_
 from ..paramfield import param
 from ..tuningfile import Tuning
 
-__all__ = ["CLOCKED", "ClockedCheck", "ClockedParams", "OnClock", "lines_stop_likeness", "locked_stop_likeness"]
+__all__ = [
+    "CLOCKED",
+    "ClockedCheck",
+    "ClockedParams",
+    "LockedReader",
+    "OnClock",
+    "lines_stop_likeness",
+    "locked_reader",
+    "locked_stop_likeness",
+    "turned_frames",
+]
 
 FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
 
 
 @dataclass(frozen=True)
@@ -261,6 +272,20 @@ def _judged(signature_db: Sequence[float], continuum_db: Sequence[float], p: Clo
     return [i for i in moved if on[i]], whole  # the tuned stop's change was on the lines there
 
 
+def turned_frames(
+    x: FloatArray, sr: float, rate_hz: float, ks: Sequence[int], p: ClockedParams = CLOCKED
+) -> ComplexArray:
+    """The lines ``ks`` of ``x`` demodulated in frames of ``locked_frame_s`` and turned by the clock followed
+    (frames x lines): the joint's lines keep one phasor from frame to frame, sound of another clock turns."""
+    clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
+    both = sorted(set(clock) | set(ks))
+    z = demodulate(x, sr, rate_hz, both, max(1, int(round(p.locked_frame_s * sr))))
+    off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire,
+                       p.locked_memory, p.locked_grid, p.locked_whole)  # fmt: skip
+    k = np.asarray(ks, dtype=np.float64)
+    return np.asarray(z[:, [both.index(j) for j in ks]] * np.exp(-2j * np.pi * np.outer(off, k)), dtype=np.complex128)
+
+
 def _in_phase(
     x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams
 ) -> tuple[FloatArray, FloatArray]:
@@ -292,10 +317,20 @@ def locked_stop_likeness(
     phase. A sub-band is read where its lines held ``min_locked`` of their power in phase before; no verdict (NaN)
     where those hold less than ``min_covered`` of the signature's sum of squares. The median over the pieces.
     """
-    read = locked_reader(before, sample_rate, rate_hz, edges_hz, signature_db, continuum_db, p)
-    if read is None:
+    reader = locked_reader(before, sample_rate, rate_hz, edges_hz, signature_db, continuum_db, p)
+    if reader is None:
         return math.nan
-    return float(np.median([read(x) for x in pieces]))
+    return float(np.median([reader.read(x) for x in pieces]))
+
+
+@dataclass(frozen=True)
+class LockedReader:
+    """What :func:`locked_stop_likeness` reads of one stretch against the stepping, that read once."""
+
+    #: the lines' stop-likeness in phase over a stretch of samples (dimensionless)
+    read: Callable[[FloatArray], float]
+    #: the lines read (multiples of the rate), in the sub-bands whose lines were locked before
+    lines: tuple[int, ...]
 
 
 def locked_reader(
@@ -306,7 +341,7 @@ def locked_reader(
     signature_db: Sequence[float],
     continuum_db: Sequence[float],
     p: ClockedParams = CLOCKED,
-) -> Callable[[FloatArray], float] | None:
+) -> LockedReader | None:
     """What :func:`locked_stop_likeness` reads of one stretch against ``before``, ``before`` read once (None: no
     verdict on any stretch)."""
     judged, whole = _judged(signature_db, continuum_db, p)
@@ -334,7 +369,7 @@ def locked_reader(
             num += float(signature_db[i]) * _change_db(held(l0, i), held(l1, i), p.floor_share)
         return num / den
 
-    return read
+    return LockedReader(read, tuple(k for i in keep for k in lines[i]))
 
 
 def _comb_read(

@@ -110,7 +110,7 @@ class ConfirmLog:
     #: per pause: (the stream time it was judged at, the stream time the stepping came back and was heard afresh), s
     restarts: list[tuple[float, float]] = field(default_factory=list)
     #: per stop found inside a rejected fire's window (:mod:`.inside`): (the fire's ``detected_at_s``, the onset
-    #: found, s; the reading's step over it)
+    #: found, its spread; s)
     inside: list[tuple[float, float, float]] = field(default_factory=list)
 
 
@@ -167,7 +167,7 @@ class ConfirmedStopDetector:
         self._kept = KeptSamples(span_gap + self._F + (w.after_reject + 2) * self._H)
         band = _stepping_band(tu)
         #: the checks besides persistence: the step clock (opt-in), a pause, the change on the clock's lines
-        self.checks = WindowChecks(tu, self._kept, band if step_clock else [], p.pause, p.sync, p.clocked)
+        self.checks = WindowChecks(tu, self._kept, band if step_clock else [], p.pause, p.sync, p.clocked, p.inside)
         #: the late path (:mod:`.late`): stops the fast path never heard, found on the step clock's lines
         self.late: LatePath | None = LatePath(self._sr, band, inner.t0_s, p.late) if late and band else None
         self.reset(inner.t0_s)
@@ -336,7 +336,8 @@ class ConfirmedStopDetector:
         if not self._holds(fire.ev, fire.frame, heard):
             self.log.rejected.append(fire.ev)
             self.checks.after.judged_s = None
-            return []
+            found = self._inside(Fire(fire.ev, fire.frame, heard))  # what was heard of the window
+            return [] if found is None else [found]
         return [self._confirmed(fire.ev, fire.frame, heard)]
 
     # --- internals ----------------------------------------------------------------------------
@@ -404,9 +405,9 @@ class ConfirmedStopDetector:
         onset_s = self._t0 + (start - lead + got.onset) / self._sr
         found_s = self._t0 + end / self._sr
         self.log.clocked.append((fire.ev.detected_at_s, got.on_clock))
-        self.log.inside.append((fire.ev.detected_at_s, onset_s, got.step))
+        self.log.inside.append((fire.ev.detected_at_s, onset_s, got.spread / self._sr))
         self._chain.confirmed()
-        uncertain = got.step < p.min_step
+        uncertain = got.spread > p.max_onset_off_s * self._sr
         return StopEvent(found_s, onset_s, fire.ev.level_db, found_s, found_s - onset_s, uncertain, found_late=True)
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
