@@ -40,6 +40,9 @@ TOL_S = 0.025
 ARMS = range(1, 9)
 #: (arm, draw) -> what was measured (the detector as of this test's writing)
 FAN_KNOWN = {
+    (3, 1): "the stop flagged, its onset 201 ms late (the fan's spin-up 0.86 s before it, +0.7 dB; before the"
+    " clocked check read the lines in step: a false stop 315 ms before the stop, counted); its window rejected 0.2 s"
+    " after the stop: too little of it to look for the stop inside on the joint's clock (confirm.inside, 0.48 s)",
     (6, 0): "the stop flagged, not heard cleanly (fan 0.68 s before it, -1.3 dB): its fire at the stop hot in 21 % of"
     " the window and its lines not read in phase (line 5 held 16 % of its power in phase under the fan): not affirmed",
     (6, 1): "the stop flagged, heard 32 ms late: its stop-like run began at 2.395 s, the hot verdict held back by the"
@@ -133,7 +136,6 @@ FAN_OTHER = {
     (6, 1, 3): ("right", "the stop missed: its fire stop-like throughout, hot in 23 % of the window (fan -1.3 dB)"),
     (3, 0, 2): ("flagged", "a false stop 137 ms early, counted: the fan's spin-up fired, the stop in its window"),
     (3, 1, 3): ("flagged", "a false stop 172 ms early, counted: the fan's spin-up fired, the stop in its window"),
-    (3, 1, 2): ("right", "flagged at the un-latching: the fan's spin-up fired, the stop inside its rejected window"),
 }
 
 
@@ -143,8 +145,7 @@ def test_fan_on_other_draws_the_stop_affirmed_in_phase_or_an_early_fire_doubted(
     """The draws of ``bench_audio_tenth.py`` the lines in phase with the steps changed. Arm 6: the fan masks the stop's
     drops (the window stop-like throughout, not hot), the lines in phase vanish as the stop's do: the stop, right.
     Arm 3: the fan's spin-up fires before the stop and the stop comes in its window, so the window reads as a stop;
-    the lines read in phase from the fire's onset are stepping: flagged, not counted. Arm 3, draw 1 on seeds + 2000:
-    the window rejected, the stop found inside it on the lines in phase (``confirm.inside``): right."""
+    the lines read in phase from the fire's onset are stepping: flagged, not counted."""
     expected, before = FAN_OTHER[(arm, k, other)]
     events = _events(_tuning(arm), render(_fan_draw(arm, k, other)))
     assert events, before
@@ -216,6 +217,37 @@ def test_another_instrument_in_bursts(arm: int, where: str) -> None:
     assert events, "the stop was missed"
     assert events[0].onset_uncertain is False, "the stop was flagged"
     err_ms = 1e3 * (events[0].onset_s - STOP_S)
+    assert abs(err_ms) <= 1e3 * TOL_S, f"the first event is {err_ms:+.0f} ms off"
+
+
+#: (arm, where) -> what was measured where the tuning told the commanded rate does not count the stop right
+TOLD_KNOWN = {
+    (3, "both"): "flagged: a burst in the test began 0.1 s before the stop and fired; the joint's lines changed later",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("arm", "where"), [(a, w) for a in ARMS for w in ("training", "both")])
+def test_another_instrument_in_the_training_left_out_where_the_rate_is_told(arm: int, where: str) -> None:
+    """Told the commanded rate (as a traverse's recording tells it), the tuning keeps the joint's clock and leaves out
+    the pieces the other instrument's holds (``stickslip.audio.tuning.clocks``); it may still refuse (too little
+    left). Not refused: the first event is the stop within 25 ms, or flagged where listed; never a wrong count.
+    Untold, every one of these tunings with a second clock heard is refused (``test_another_instrument_in_bursts``)."""
+    x = (render(tuning_scene(Arm(arm))) + _bursts(arm, 3.2, 500 + arm)).astype(np.float32)
+    y = render(Scene(Arm(arm), stop_at=STOP_S, dur=3.4, seed=300 + arm))
+    if where == "both":
+        y = (y + _bursts(arm, 3.4, 600 + arm)).astype(np.float32)
+    try:
+        tu = tune(x, SR, 2.0, step_rate_hz=1000.0)
+    except TuningError:
+        return  # refused (too little left, or the tuning's own checks): never a wrong count
+    events = _events(tu, y)
+    assert events, "the stop was missed"
+    err_ms = 1e3 * (events[0].onset_s - STOP_S)
+    if (arm, where) in TOLD_KNOWN:
+        assert events[0].onset_uncertain, f"{err_ms:+.0f} ms, counted ({TOLD_KNOWN[(arm, where)]})"
+        return
+    assert events[0].onset_uncertain is False, "the stop was flagged"
     assert abs(err_ms) <= 1e3 * TOL_S, f"the first event is {err_ms:+.0f} ms off"
 
 
