@@ -9,6 +9,7 @@ independent battery per k, and the first confirmed event (the commanded 1000 Hz 
 * **flagged**: ``onset_uncertain`` (a traverse refuses it: never a wrong count);
 * **early** / **late**: more than 25 ms off (or heard late), not flagged: a wrong count;
 * **missed**: no event; **refused**: the tuning refused its recording (an instrument in the training);
+  the tuning is told the commanded rate, as a traverse's recording tells it (``--untold``: not, as before);
 * for the pauses without a stop: **quiet** (no event) or **false** (any event).
 
 Run: ``.venv/bin/python benchmarks/bench_audio_tenth.py --seeds 3`` (a few minutes per draw on 2 cores);
@@ -41,6 +42,9 @@ from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402
 from stickslip.audio.tuning import TuningError, tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
+
+#: the step rate the tuning is told, Hz (None: not told, ``--untold``)
+TOLD: list[float | None] = [1000.0]
 
 
 def judge(events: list[StopEvent], heard_within_s: float | None = None) -> str:
@@ -75,7 +79,7 @@ def draw(k: int) -> dict[str, list[str]]:
         by = tf._bursts(arm, 3.4, 600 + arm + 1000 * k)
         for where, x, y in (("test", None, y0 + by), ("training", x0 + bx, y0), ("both", x0 + bx, y0 + by)):
             try:
-                t = tu if x is None else tune(np.asarray(x, dtype=np.float32), SR, 2.0)
+                t = tu if x is None else tune(np.asarray(x, dtype=np.float32), SR, 2.0, step_rate_hz=TOLD[0])
             except TuningError:
                 out[f"bursts {where}"].append("refused")
                 continue
@@ -118,7 +122,10 @@ if __name__ == "__main__":
     ap.add_argument("--window-pieces", type=int, default=None, help="the clocked check's window_pieces")
     ap.add_argument("--min-affirm", type=float, default=None, help="the clocked check's min_affirm (inf: none)")
     ap.add_argument("--onset-read-s", type=float, default=None, help="the clocked check's onset_read_s, s (0: none)")
+    ap.add_argument("--untold", action="store_true", help="the tuning not told the commanded rate (as before)")
     a = ap.parse_args()
+    if a.untold:
+        TOLD[0] = None
     given = {
         "kept_age_s": a.kept_age,
         "window_pieces": a.window_pieces,

@@ -249,6 +249,7 @@ def test_record_on_the_simulator_then_tune_and_listen(tmp_path):
     label = json.loads(wav.with_suffix(".json").read_text())
     assert label == out["label"] and label["joint"] == 1 and label["label_from"] == "the simulator's stop time"
     assert abs(label["stop_at_s"] - 1.5) < 0.05 and out["tuning"]["method"] == "template"
+    assert label["step_rate_hz"] == 1000.0  # the simulator's commanded rate
     r = runner.invoke(app, ["listen", str(wav), "--tuning", str(tj), "--json"])
     (ev,) = json.loads(r.stdout)
     assert abs(ev["onset_s"] - label["stop_at_s"]) < 0.01
@@ -432,6 +433,7 @@ def test_record_on_a_controller_labels_from_the_step_count_or_a_key(tmp_path, mo
     assert r.exit_code == 0, r.output
     label = json.loads(r.stdout)["label"]
     assert label["label_from"] == how and ctrl.closed
+    assert label["step_rate_hz"] == 4000.0  # the rate commanded while recording: 'stickslip tune --rate' takes it
     assert "dBFS broadband (learning the stepping band)" in r.stderr  # 0.26 s of input: the band is not known yet
     assert sum(n for _, n in ctrl.steps) == 400 and all(j == 2 and n > 0 for j, n in ctrl.steps)
     x, sr = read_wav(wav)

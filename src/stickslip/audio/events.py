@@ -50,8 +50,10 @@ class StopEvent:
     found_late : bool
         The fast path never heard this stop: the late path found it on the step clock's
         lines 0.5-0.75 s after it and estimated its onset back
-        (:mod:`stickslip.audio.confirm.late`, opt-in). ``detected_at_s`` is when it was
-        found, not the fast path's 30-50 ms.
+        (:mod:`stickslip.audio.confirm.late`, opt-in), or the confirmation found it inside
+        a rejected fire's window, read in phase with the steps at the window's end
+        (:mod:`stickslip.audio.confirm.inside`). ``detected_at_s`` is when it was found,
+        not the fast path's 30-50 ms.
     """
 
     detected_at_s: float

@@ -20,6 +20,7 @@ from .change.stale import StaleParams
 from .change.start import StartParams
 from .change.template import TemplateParams
 from .confirm.clocked import ClockedParams
+from .confirm.inside import InsideParams
 from .confirm.late import LateParams
 from .confirm.onset import OnsetParams
 from .confirm.pause import PauseParams
@@ -46,7 +47,10 @@ STAGES: tuple[tuple[str, tuple[type[Any], ...]], ...] = (
         "change detector",
         (TemplateParams, AddedParams, FitParams, RateParams, DropParams, StartParams, StaleParams, ReleaseParams),
     ),
-    ("confirmation", (PersistenceParams, PauseParams, ClockedParams, OnsetParams, SyncParams, LateParams)),
+    (
+        "confirmation",
+        (PersistenceParams, PauseParams, ClockedParams, InsideParams, OnsetParams, SyncParams, LateParams),
+    ),
     ("tuning and verification", (TuneParams, VerifyParams, TuningFileParams)),
 )
 

@@ -94,7 +94,7 @@ class _Switch:
                 from ..audio.tuning import tune
 
                 samples, rate, stop_at = ctrl.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
-                self.tunings[joint] = tune(samples, rate, stop_at, joint=joint)
+                self.tunings[joint] = tune(samples, rate, stop_at, joint=joint, step_rate_hz=ctrl.frequency(joint))
             if self.mic is None:
                 self.mic = ctrl.microphone()
             det = detector_for(self.tunings[joint], ctrl.clock_s)

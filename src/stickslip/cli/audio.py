@@ -109,6 +109,15 @@ def tune(
     sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
     channel: int = typer.Option(None, "--channel", help=_CHANNEL_HELP, show_default=False),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
+    step_rate: float | None = typer.Option(
+        None,
+        "--rate",
+        help=(
+            "The step rate the controller commanded while recording, Hz ('stickslip record' writes it in the label): "
+            "where another instrument steps in bursts at another rate, its pieces are left out (without it, refused)."
+        ),
+        show_default=False,
+    ),
 ) -> None:
     """Tune the audio limit switch of one joint from a labelled recording.
 
@@ -131,6 +140,8 @@ def tune(
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
+    if step_rate is not None and not (math.isfinite(step_rate) and 1.0 <= step_rate <= 1e5):
+        fail(f"--rate must be a step rate of 1-100000 Hz, got {step_rate:g}")
     samples, rate = _load_recording(recording, sample_rate, channel)
     duration = samples.size / rate
     if samples.size == 0:
@@ -144,7 +155,7 @@ def tune(
         if method == "band":
             tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
         else:
-            tuning = tune_(samples, rate, stop_at, joint=joint, self_check=self_check)
+            tuning = tune_(samples, rate, stop_at, joint=joint, self_check=self_check, step_rate_hz=step_rate)
     except TuningError as e:
         fail(f"{recording}: {e}")
     try:
@@ -535,16 +546,18 @@ def record(
                     serial_port,
                     int(round(sample_rate)) if sample_rate is not None else None,
                 )
+            hz = float(ctrl.frequency(joint))  # the rate commanded while recording
         finally:
             ctrl.close()
-    _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out)
+    _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out, hz)
 
 
 def _finish_recording(
     out: Path, samples: Any, rate: int, stop_at: float, how: str, joint: int, sign_label: str,
-    tune_out: Path | None, json_out: bool,
+    tune_out: Path | None, json_out: bool, step_rate_hz: float | None = None,
 ) -> None:
-    """Write the recording and its label (and the tuning, with --tune), then say what was written."""
+    """Write the recording and its label (and the tuning, with --tune), then say what was written; ``step_rate_hz``:
+    the rate commanded while recording, Hz, in the label and told to the tuning."""
     from ..audio.sources import write_wav
     from ..records import atomic_write_text
 
@@ -557,6 +570,7 @@ def _finish_recording(
             "joint": joint,
             "direction": sign_label,
             "label_from": how,
+            "step_rate_hz": step_rate_hz,
         }
         atomic_write_text(out.with_suffix(".json"), json.dumps(label, indent=2) + "\n")
     except OSError as e:
@@ -567,7 +581,7 @@ def _finish_recording(
         from ..audio.tuning import tune as tune_
 
         try:
-            tuning = tune_(samples, rate, float(stop_at), joint=joint)
+            tuning = tune_(samples, rate, float(stop_at), joint=joint, step_rate_hz=step_rate_hz)
             tuning.save(tune_out)
         except TuningError as e:
             fail(f"{out}: {e}")

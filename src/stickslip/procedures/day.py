@@ -409,7 +409,7 @@ def simulator_tunings(url: str, joints: Sequence[int] = (2, 3)) -> dict[int, Tun
     try:
         for joint in joints:
             samples, rate, stop_at = sim.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
-            out[joint] = tune(samples, rate, stop_at, joint=joint)
+            out[joint] = tune(samples, rate, stop_at, joint=joint, step_rate_hz=sim.frequency(joint))
     finally:
         sim.close()
     return out

@@ -366,7 +366,7 @@ def _limit_switches(sim: SimulatedMM3A, switch: str, bar: _Bars) -> tuple[dict[i
     for joint in (1, 2, 3):
         bar.stage(f"tuning the limit switch of joint {joint}")
         samples, rate, stop_at = sim.labelled_recording(joint, "+", before_s=2.0, after_s=1.0)
-        tunings[joint] = tune(samples, rate, stop_at, joint=joint)
+        tunings[joint] = tune(samples, rate, stop_at, joint=joint, step_rate_hz=sim.frequency(joint))
         detectors[joint] = detector_for(tunings[joint], sim.clock_s)
     return tunings, detectors, sim.microphone(MIC_BLOCK)
 

@@ -21,8 +21,9 @@ from numpy.typing import NDArray
 from ..events import StopEvent
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
-from .clocked import ClockedCheck, ClockedParams, OnClock
+from .clocked import ClockedCheck, ClockedParams, OnClock, locked_reader
 from .evidence import FrameLog, KeptSamples
+from .inside import InsideParams, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
 from .resume import AfterPause
 from .sync import SyncCheck, SyncParams, step_clock_verdict
@@ -63,6 +64,7 @@ class WindowChecks:
         pause: PauseParams,
         sync: SyncParams,
         clocked: ClockedParams | None,
+        inside: InsideParams | None = None,
     ) -> None:
         self.kept, self.p_sync = kept, sync
         self._H, self._F, sr = int(tuning.hop), int(tuning.frame), int(tuning.sample_rate)
@@ -72,6 +74,8 @@ class WindowChecks:
         self.after = AfterPause(self.pause, pause)
         self.sync = SyncCheck(sync_bands, sr, sync)
         self.clocked = ClockedCheck(tuning, clocked) if clocked is not None else None
+        #: where the joint's sound read in phase steps, against a confirmed stop's onset (None: not read)
+        self.inside = inside
         #: what the clocked check measured on the fire last judged (None: not judged)
         self.on_clock: OnClock | None = None
 
@@ -140,6 +144,29 @@ class WindowChecks:
         a = self.clocked.at_onset(x, self.on_clock)
         if math.isfinite(a) and a < self.clocked.p.min_a:
             return f"the stop not in phase with the steps at its onset (a {a:.2f})"
+        return self._step_elsewhere(onset)
+
+    def _step_elsewhere(self, onset: int) -> str | None:
+        """Why the stop at absolute sample ``onset`` may have begun elsewhere: the joint's lines, turned by the clock
+        followed, changed more than ``max_onset_off_s`` from it and further than the change's spread
+        (:func:`.inside.onset_in_phase`, over two pieces either side; read where the comb judged the fire, as
+        :meth:`~.clocked.ClockedCheck.at_onset`). None: they did not, or it was not read."""
+        c, p, got = self.clocked, self.inside, self.on_clock
+        if c is None or p is None or p.max_onset_off_s <= 0.0 or got is None or not math.isfinite(got.a):
+            return None
+        tu, sr = c.tuning, c.sample_rate
+        piece = int(round(p.piece_s * sr))
+        x = self.kept.get(onset - 2 * piece, onset + 2 * piece)
+        if c.ref is None or x.size != 4 * piece:
+            return None
+        assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
+        reader = locked_reader(c.ref, sr, got.rate_hz, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, c.p)
+        if reader is None:
+            return None
+        t, spread = onset_in_phase(x, sr, got.rate_hz, reader.lines, c.p, p)
+        off_s = (t - 2 * piece) / sr
+        if t >= 0 and abs(off_s) > max(p.max_onset_off_s, spread / sr):  # off by more than the fit could be
+            return f"the joint's lines changed {1e3 * off_s:+.0f} ms from the onset (in phase with the steps)"
         return None
 
     def _in_step(self, ev: StopEvent, fire: int, frames: int, log: Verdicts) -> bool:

@@ -69,7 +69,7 @@ line moves on.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -80,9 +80,20 @@ from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_
 from ..paramfield import param
 from ..tuningfile import Tuning
 
-__all__ = ["CLOCKED", "ClockedCheck", "ClockedParams", "OnClock", "lines_stop_likeness", "locked_stop_likeness"]
+__all__ = [
+    "CLOCKED",
+    "ClockedCheck",
+    "ClockedParams",
+    "LockedReader",
+    "OnClock",
+    "lines_stop_likeness",
+    "locked_reader",
+    "locked_stop_likeness",
+    "turned_frames",
+]
 
 FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
 
 
 @dataclass(frozen=True)
@@ -261,6 +272,20 @@ def _judged(signature_db: Sequence[float], continuum_db: Sequence[float], p: Clo
     return [i for i in moved if on[i]], whole  # the tuned stop's change was on the lines there
 
 
+def turned_frames(
+    x: FloatArray, sr: float, rate_hz: float, ks: Sequence[int], p: ClockedParams = CLOCKED
+) -> ComplexArray:
+    """The lines ``ks`` of ``x`` demodulated in frames of ``locked_frame_s`` and turned by the clock followed
+    (frames x lines): the joint's lines keep one phasor from frame to frame, sound of another clock turns."""
+    clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
+    both = sorted(set(clock) | set(ks))
+    z = demodulate(x, sr, rate_hz, both, max(1, int(round(p.locked_frame_s * sr))))
+    off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire,
+                       p.locked_memory, p.locked_grid, p.locked_whole)  # fmt: skip
+    k = np.asarray(ks, dtype=np.float64)
+    return np.asarray(z[:, [both.index(j) for j in ks]] * np.exp(-2j * np.pi * np.outer(off, k)), dtype=np.complex128)
+
+
 def _in_phase(
     x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams
 ) -> tuple[FloatArray, FloatArray]:
@@ -292,6 +317,33 @@ def locked_stop_likeness(
     phase. A sub-band is read where its lines held ``min_locked`` of their power in phase before; no verdict (NaN)
     where those hold less than ``min_covered`` of the signature's sum of squares. The median over the pieces.
     """
+    reader = locked_reader(before, sample_rate, rate_hz, edges_hz, signature_db, continuum_db, p)
+    if reader is None:
+        return math.nan
+    return float(np.median([reader.read(x) for x in pieces]))
+
+
+@dataclass(frozen=True)
+class LockedReader:
+    """What :func:`locked_stop_likeness` reads of one stretch against the stepping, that read once."""
+
+    #: the lines' stop-likeness in phase over a stretch of samples (dimensionless)
+    read: Callable[[FloatArray], float]
+    #: the lines read (multiples of the rate), in the sub-bands whose lines were locked before
+    lines: tuple[int, ...]
+
+
+def locked_reader(
+    before: FloatArray,
+    sample_rate: float,
+    rate_hz: float,
+    edges_hz: Sequence[float],
+    signature_db: Sequence[float],
+    continuum_db: Sequence[float],
+    p: ClockedParams = CLOCKED,
+) -> LockedReader | None:
+    """What :func:`locked_stop_likeness` reads of one stretch against ``before``, ``before`` read once (None: no
+    verdict on any stretch)."""
     judged, whole = _judged(signature_db, continuum_db, p)
     lines = {
         i: [k for k in range(1, int(sample_rate / 2 / rate_hz) + 1) if edges_hz[i] <= k * rate_hz < edges_hz[i + 1]]
@@ -299,7 +351,7 @@ def locked_stop_likeness(
     }
     ks = sorted({k for v in lines.values() for k in v})
     if not ks or p.locked_frame_s <= 0.0:
-        return math.nan
+        return None
     l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
 
     def held(v: FloatArray, i: int) -> float:
@@ -308,15 +360,16 @@ def locked_stop_likeness(
     keep = [i for i in judged if held(w0, i) > 0.0 and held(l0, i) >= p.min_locked * held(w0, i)]
     den = sum(float(signature_db[i]) ** 2 for i in keep)
     if den == 0.0 or den < p.min_covered * whole:
-        return math.nan
-    got = []
-    for x in pieces:
+        return None
+
+    def read(x: FloatArray) -> float:
         l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
         num = 0.0
         for i in keep:
             num += float(signature_db[i]) * _change_db(held(l0, i), held(l1, i), p.floor_share)
-        got.append(num / den)
-    return float(np.median(got))
+        return num / den
+
+    return LockedReader(read, tuple(k for i in keep for k in lines[i]))
 
 
 def _comb_read(
@@ -398,13 +451,8 @@ class ClockedCheck:
             return None
         if self.ref_stoplike > p.max_ref_stoplike:
             return None  # the stop may have begun there, heard late: no stepping to compare with
-        told = self.commanded_hz
-        if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
-            rate = heard_hz
-        else:
-            rate = rate_near_hz(ref, sr, told, p.commanded_tol)
-        tuned = self.tuning.step_rate_hz
-        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
+        rate = self.rate(heard_hz)
+        if not math.isfinite(rate):
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
@@ -423,6 +471,22 @@ class ClockedCheck:
             sig, cont = tu.signature_db, tu.continuum_signature_db
             locked = locked_stop_likeness(ref, pieces, sr, rate, tu.edges_hz, sig, cont, p)
         return OnClock(a, rate, used, self.ref_age_s, locked)
+
+    def rate(self, heard_hz: float = math.nan) -> float:
+        """The step rate the lines are read at, Hz (NaN: not judged): ``heard_hz`` (the step rate already heard in the
+        reference, Hz) where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard
+        again near it; not judged where that is more than ``max_rate_off`` from the tuning's rate or unknown."""
+        p, ref, told = self.p, self.ref, self.commanded_hz
+        if ref is None:
+            return math.nan
+        if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
+            rate = heard_hz
+        else:
+            rate = rate_near_hz(ref, self.sample_rate, told, p.commanded_tol)
+        tuned = self.tuning.step_rate_hz
+        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
+            return math.nan
+        return float(rate)
 
     def verdict(self, got: OnClock | None) -> bool:
         """False where the change is off the clock, on the lines or in phase with the clock followed; True where

@@ -46,10 +46,11 @@ from ..comparators import BandDetector
 from ..events import StopDetector, StopEvent, check_step_rate
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
-from .chain import FireChain
+from .chain import Fire, FireChain
 from .checks import WindowChecks
 from .clocked import CLOCKED, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
+from .inside import INSIDE, InsideParams, stop_inside
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
 from .pause import PAUSE, PauseParams, Stopped
@@ -73,6 +74,8 @@ class ConfirmParams:
     late: LateParams = field(default_factory=lambda: LATE)
     #: the stop's signature on the step clock's lines (None: not asked)
     clocked: ClockedParams | None = field(default_factory=lambda: CLOCKED)
+    #: a stop that began inside a rejected fire's window, found on the clock's lines (None: not looked for)
+    inside: InsideParams | None = field(default_factory=lambda: INSIDE)
 
 
 def _stepping_band(tu: Tuning) -> list[tuple[float, float]]:
@@ -106,6 +109,9 @@ class ConfirmLog:
     clocked: list[tuple[float, OnClock]] = field(default_factory=list)
     #: per pause: (the stream time it was judged at, the stream time the stepping came back and was heard afresh), s
     restarts: list[tuple[float, float]] = field(default_factory=list)
+    #: per stop found inside a rejected fire's window (:mod:`.inside`): (the fire's ``detected_at_s``, the onset
+    #: found, its spread; s)
+    inside: list[tuple[float, float, float]] = field(default_factory=list)
 
 
 class ConfirmedStopDetector:
@@ -161,7 +167,7 @@ class ConfirmedStopDetector:
         self._kept = KeptSamples(span_gap + self._F + (w.after_reject + 2) * self._H)
         band = _stepping_band(tu)
         #: the checks besides persistence: the step clock (opt-in), a pause, the change on the clock's lines
-        self.checks = WindowChecks(tu, self._kept, band if step_clock else [], p.pause, p.sync, p.clocked)
+        self.checks = WindowChecks(tu, self._kept, band if step_clock else [], p.pause, p.sync, p.clocked, p.inside)
         #: the late path (:mod:`.late`): stops the fast path never heard, found on the step clock's lines
         self.late: LatePath | None = LatePath(self._sr, band, inner.t0_s, p.late) if late and band else None
         self.reset(inner.t0_s)
@@ -330,7 +336,8 @@ class ConfirmedStopDetector:
         if not self._holds(fire.ev, fire.frame, heard):
             self.log.rejected.append(fire.ev)
             self.checks.after.judged_s = None
-            return []
+            found = self._inside(Fire(fire.ev, fire.frame, heard))  # what was heard of the window
+            return [] if found is None else [found]
         return [self._confirmed(fire.ev, fire.frame, heard)]
 
     # --- internals ----------------------------------------------------------------------------
@@ -374,9 +381,34 @@ class ConfirmedStopDetector:
         self.log.rejected.append(fire.ev)
         if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back
             return []
+        found = self._inside(fire)
+        if found is not None:  # the stop began inside the window: the fast path stays latched on it
+            return [found]
         self.inner.unlatch()
         self._chain.rejected(fire)
         return []
+
+    def _inside(self, fire: Fire) -> StopEvent | None:
+        """A stop that began inside ``fire``'s rejected window, found on the joint's own clock (:mod:`.inside`)."""
+        c, p = self.checks.clocked, self.params.inside
+        if c is None or p is None:
+            return None
+        start = fire.frame * self._H + self._F  # the window's first sample
+        end = min((fire.frame + fire.window) * self._H + self._F, self._fed)
+        lead = int(round(p.piece_s * self._sr))
+        x = self._kept.get(start - lead, end)
+        if x.size != end - start + lead:
+            return None  # not all kept (the stream began inside the lead)
+        got = stop_inside(x, lead, c, self.checks.pause.before_hz, p)
+        if got is None or self.checks.pause.stopped(x[got.onset :]) is not None:
+            return None
+        onset_s = self._t0 + (start - lead + got.onset) / self._sr
+        found_s = self._t0 + end / self._sr
+        self.log.clocked.append((fire.ev.detected_at_s, got.on_clock))
+        self.log.inside.append((fire.ev.detected_at_s, onset_s, got.spread / self._sr))
+        self._chain.confirmed()
+        uncertain = got.spread > p.max_onset_off_s * self._sr
+        return StopEvent(found_s, onset_s, fire.ev.level_db, found_s, found_s - onset_s, uncertain, found_late=True)
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""

@@ -43,6 +43,7 @@ __all__ = [
     "StepClockParams",
     "SyncChange",
     "band_envelope_spectrum",
+    "rate_prominence_db",
     "chi2_as_z",
     "clear_rates_hz",
     "line_change",
@@ -234,6 +235,16 @@ def clear_rates_hz(x: ArrayLike, sample_rate: float, piece: int, min_db: float) 
         if math.isfinite(rate) and _prominence_db(*spectrum, rate, STEP_CLOCK.line_tol) >= min_db:
             out.append(rate)
     return out
+
+
+def rate_prominence_db(x: ArrayLike, sample_rate: float, rate_hz: float) -> float:
+    """How far the envelope's line at ``rate_hz`` stands over the continuum around it in ``x``, dB
+    (:func:`_prominence_db` on the spectrum :func:`clear_rates_hz` reads; noise alone 0-2 dB; NaN where ``x`` is too
+    short or silent): is a clock at that rate heard in ``x``, whatever else is louder."""
+    spectrum = _envelope_spectrum(x, float(sample_rate), STEP_CLOCK.rate_lo_hz)
+    if spectrum is None:
+        return float("nan")
+    return _prominence_db(*spectrum, float(rate_hz), STEP_CLOCK.line_tol)
 
 
 def _fraction(f: FloatArray, p: FloatArray, i: int, lo_hz: float, params: StepClockParams) -> int:

@@ -60,6 +60,20 @@ class TuneParams:
     clock_end_s: float = param(
         0.15, "s", "the step rate is heard up to this long before the labelled stop (the stop's own sound left out)"
     )
+    clock_told_tol: float = param(
+        0.03, "of the rate", "two clocks, the rate told: the one this close to it is the joint's (the other left out)"
+    )
+    clock_cut_s: float = param(
+        0.1, "s", "the recording is cut in pieces this long from the stop outwards (a burst's edge: 0.1 s lost)"
+    )
+    clock_cut_db: float = param(
+        6.0,
+        "dB",
+        "a piece where the other clock's envelope line stands this clear is left out (noise 0-5, bursts 10-24)",
+    )
+    clock_kept_s: float = param(
+        0.5, "s", "refused where less stepping than this is left (the template and its checks learn from it)"
+    )
 
 
 TUNE = TuneParams()

@@ -43,14 +43,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..change.template import TEMPLATE
+from ..events import check_step_rate
 from ..features.fine import fine_range_hz, fine_segment, fine_spectrum_db
 from ..features.spectra import SPECTRA, continuum_levels_db, subband_edges, subband_levels_db
-from ..features.stepclock import clear_rates_hz, step_rate_hz
+from ..features.stepclock import step_rate_hz
 from ..sources.guard import block_problem
 from ..tuningfile import Tuning, default_frame
 from .band import _DEFAULT_MAX_DIPS
 from .candidates import Candidate, candidates, checks_drops, drop_threshold, make_tuning, running_template
 from .candidates import stepping_band as stepping_band
+from .clocks import joint_clock_only, two_clocks
 from .labels import TuningError, recording, sound_change
 from .params import TUNE, TuneParams
 from .verification import Shared, no_template, one_stop, pick, self_check_failed
@@ -81,6 +83,7 @@ def tune(
     self_check: bool = True,
     seed: int = 0,
     min_band_hz: float | None = None,
+    step_rate_hz: float | None = None,
 ) -> Tuning:
     """Learn the stepping sound's spectral template and the end stop's departure from it (see the module docstring).
 
@@ -104,24 +107,54 @@ def tune(
     self_check, seed, min_band_hz
         Check with seeded interference injected (``Tuning.checks``: false alarms per hour);
         ``min_band_hz`` is accepted for the version-1 command line (not used).
+    step_rate_hz : float, optional
+        The step rate the joint was commanded while recording, Hz (None: not told). Where the
+        stepping part holds two step clocks (another instrument in bursts), the one near it is
+        the joint's and the pieces the other holds are left out (:mod:`.clocks`); untold, such
+        a recording is refused.
 
     Raises
     ------
     TuningError
         The recording is too short, the label outside it or nothing changes near it, the parts
         sound alike, or no template fires once at the stop alone (it names what spoils it)."""
+    step_rate_hz = check_step_rate(step_rate_hz)
     x, sample_rate = recording(samples, sample_rate, stop_at_s, min_part_s, guard_s)
     if (problem := block_problem(x[: int(stop_at_s * sample_rate)])) is not None:
         raise TuningError(f"the stepping part of the recording is {problem}: nothing to learn from")
-    if (problem := other_clock(x[: int((stop_at_s - TUNE.clock_end_s) * sample_rate)], sample_rate)) is not None:
-        raise TuningError(f"the stepping part of the recording {problem}: the stop's sound cannot be told from it")
+    y, stop_s = _one_clock(x, sample_rate, stop_at_s, step_rate_hz, min_part_s, guard_s)
     frame = int(frame or default_frame(sample_rate))
-    args = _Args(sample_rate, stop_at_s, joint, frame, int(hop or max(1, frame // 4)), hold_s, release_s, guard_s,
+    args = _Args(sample_rate, stop_s, joint, frame, int(hop or max(1, frame // 4)), hold_s, release_s, guard_s,
                  f_min_hz, max_stepping_s, max_stopped_s, label_tolerance_s, search_s, self_check, seed)  # fmt: skip
-    if per_octave is not None:
-        tu, cut = _tune_at(x, args, float(per_octave))
-        return _finished(x, args, replace(tu, per_octave=float(per_octave)), cut)
-    return _tune_resolutions(x, args)
+    try:
+        if per_octave is not None:
+            tu, cut = _tune_at(y, args, float(per_octave))
+            return _finished(y, args, replace(tu, per_octave=float(per_octave)), cut)
+        return _tune_resolutions(y, args)
+    except TuningError as e:
+        if y is x:
+            raise
+        left = f"{y.size / sample_rate:.2f} s of {x.size / sample_rate:.2f} s, the stop at {stop_s:.2f} s"
+        raise TuningError(f"{e} (times in what is left with the other instrument's clock left out: {left})") from e
+
+
+def _one_clock(
+    x: FloatArray, sample_rate: int, stop_at_s: float, told_hz: float | None, min_part_s: float, guard_s: float
+) -> tuple[FloatArray, float]:
+    """The recording ``x`` and its label, with one step clock in its stepping part: as it is where it holds one;
+    where it holds two, refused untold, else without the pieces the other holds (:mod:`.clocks`)."""
+    clocks = two_clocks(x[: int((stop_at_s - TUNE.clock_end_s) * sample_rate)], sample_rate)
+    if clocks is None:
+        return x, stop_at_s
+    lo, hi = sorted(clocks)
+    two = f"holds two step clocks ({lo:.0f} Hz and {hi:.0f} Hz, in turns): another instrument"
+    if told_hz is None:  # which clock is the joint's is not known
+        raise TuningError(f"the stepping part of the recording {two}: the stop's sound cannot be told from it")
+    y, stop_s = joint_clock_only(x, sample_rate, stop_at_s, clocks, told_hz)
+    y, _ = recording(y, sample_rate, stop_s, min_part_s, guard_s)
+    if (problem := other_clock(y[: int((stop_s - TUNE.clock_end_s) * sample_rate)], sample_rate)) is not None:
+        raise TuningError(f"the stepping part of the recording {problem}; left out where heard, it still does")
+    return y, stop_s
 
 
 def other_clock(x: FloatArray, sample_rate: int, p: TuneParams = TUNE) -> str | None:
@@ -134,14 +167,10 @@ def other_clock(x: FloatArray, sample_rate: int, p: TuneParams = TUNE) -> str | 
     bursts, louder than the joint while it steps: the tuning learnt its clock and its
     bursts' coming and going as the stop).
     """
-    rates = clear_rates_hz(x, sample_rate, max(1, round(p.clock_piece_s * sample_rate)), p.clock_min_db)
-    if len(rates) < 2:
+    clocks = two_clocks(x, sample_rate, p)
+    if clocks is None:
         return None
-    mid = float(np.median(rates))
-    off = [r for r in rates if min(abs(q / round(q) - 1.0) for q in (r / mid, mid / r) if round(q) >= 1) >= p.clock_off]
-    if not off:
-        return None
-    lo, hi = sorted((mid, float(np.median(off))))
+    lo, hi = sorted(clocks)
     return f"holds two step clocks ({lo:.0f} Hz and {hi:.0f} Hz, in turns): another instrument"
 
 

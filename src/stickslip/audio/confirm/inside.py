@@ -1,0 +1,160 @@
+"""A stop that began inside a rejected fire's window, found on the joint's own clock.
+
+A fire that does not persist is rejected at its window's end (2 s after a rejected fire:
+:mod:`.persistence`), and the fast path listens again. A stop that began inside that window
+was heard at best at the un-latching, its onset unknown (flagged: :mod:`.chain`), and not
+at all where the levels had learned sound that was not the joint's (the tenth generator:
+another instrument stepping in bursts at 730 Hz from the first sample; the joint alone
+then reads stop-like to the levels, and its stop does not).
+
+The traverse knows the rate it commands, and the joint's own clicks are in step with it: the
+step clock's lines read in phase with the clock followed from the sound (:mod:`.clocked`)
+hold the joint's sound alone, whatever else steps at another rate (its lines turn against
+the clock and leave little in phase). So at a rejected window's end its samples are read so,
+in pieces of ``piece_s``, against the chain's stepping (the clocked check's reference). A
+stop began inside it where
+
+* the pieces from one of them to the window's end each read ``min_affirm`` or more in phase
+  (``ClockedParams``), ``min_run_s`` of them at least (half a second: a note of music within
+  0.05 % of a line stays in phase over a piece, and turns away over a span), and a piece
+  before them read under ``min_a`` (the joint stepping inside the window: else the fire was
+  the stop, judged as it);
+* its onset is where the joint's lines changed (:func:`onset_in_phase`: a step fitted to
+  the frames turned by the clock followed, over the two pieces around the first affirmed
+  one's start and a piece either side), ``min_run_s`` at least before the window's end;
+* from that onset to the window's end both readings of the clocked check, on the comb and
+  in phase, reach ``min_affirm`` (a fire the levels cannot confirm is affirmed so) and the
+  stepping went on (not a pause: :mod:`.pause`, checked by the caller).
+
+The event then carries ``found_late`` (``detected_at_s`` the window's end, when it was found)
+and, where the fit's spread exceeds ``max_onset_off_s`` (it does not pin where the stop
+began), ``onset_uncertain``. It runs only at a rejected window's end (or the stream's, while
+a window is pending), never per frame. The same fit around a confirmed stop's onset flags it
+where the lines changed more than ``max_onset_off_s`` and more than the spread away
+(:meth:`.checks.WindowChecks.onset_doubt`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ..paramfield import param
+from .clocked import ClockedCheck, ClockedParams, OnClock, locked_reader, turned_frames
+
+__all__ = ["INSIDE", "Inside", "InsideParams", "onset_in_phase", "stop_inside"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class InsideParams:
+    """A stop that began inside a rejected fire's window, found on the step clock's lines read in phase."""
+
+    piece_s: float = param(
+        0.1, "s", "the window is read in phase in pieces this long (5 of the lines' 20 ms frames: 100 steps at 1 kHz)"
+    )
+    min_run_s: float = param(
+        0.48, "s", "and from the onset to the window's end (a span: a note within 0.05 % of a line turns in it)"
+    )
+    scan_s: float = param(
+        0.005, "s", "the lines' step is fitted on frames started this far apart (a fifth of the 25 ms a count allows)"
+    )
+    max_onset_off_s: float = param(
+        0.025, "s", "an onset the step's fit does not pin within this is uncertain; a confirmed stop's this far off too"
+    )
+    spread_var: float = param(
+        4.0, "variances", "the splits whose misfit is within this many residual variances of the best: the spread"
+    )
+
+
+INSIDE = InsideParams()
+
+
+@dataclass(frozen=True)
+class Inside:
+    """A stop found inside a rejected window."""
+
+    #: its onset, samples from the start of the samples read
+    onset: int
+    #: how far the splits that fit about as well reach from it, samples
+    spread: int
+    #: the clocked check's readings from the onset to the window's end
+    on_clock: OnClock
+
+
+def stop_inside(
+    x: FloatArray, lead: int, clocked: ClockedCheck, heard_hz: float, p: InsideParams = INSIDE
+) -> Inside | None:
+    """The stop that began inside the rejected window ``x[lead:]`` (samples; ``x[:lead]`` before it), or None.
+
+    ``clocked`` holds the chain's stepping (its reference) and the commanded rate; ``heard_hz`` the step rate heard
+    in that stepping (Hz; NaN: none). See the module docstring.
+    """
+    cp, ref, sr = clocked.p, clocked.ref, clocked.sample_rate
+    tu = clocked.tuning
+    if not clocked.enabled or ref is None or ref.size < cp.min_s * sr or clocked.ref_stoplike > cp.max_ref_stoplike:
+        return None  # as the clocked check: no stepping to compare with
+    rate = clocked.rate(heard_hz)
+    piece = int(round(p.piece_s * sr))
+    if not math.isfinite(rate) or piece <= 0 or lead < piece:
+        return None
+    assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
+    reader = locked_reader(ref, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, cp)
+    if reader is None:
+        return None
+    n = (x.size - lead) // piece
+    got = [reader.read(x[lead + i * piece : lead + (i + 1) * piece]) for i in range(n)]
+    j = n
+    while j > 0 and got[j - 1] >= cp.min_affirm:  # NaN ends the run
+        j -= 1
+    stepping = [g for g in got[:j] if math.isfinite(g)]
+    if (n - j) * piece < p.min_run_s * sr or not stepping or not min(stepping) < cp.min_a:
+        return None
+    lo = lead + (j - 2) * piece  # the two pieces around the first affirmed one's start, and a piece either side
+    t, spread = onset_in_phase(x[lo : lead + (j + 1) * piece], sr, rate, reader.lines, cp, p)
+    if t < 0 or x.size - (lo + t) < p.min_run_s * sr:
+        return None
+    on = clocked.judge(x[lo + t :], heard_hz)
+    if not clocked.affirms(on):
+        return None
+    assert on is not None
+    return Inside(lo + t, spread, on)
+
+
+def onset_in_phase(
+    x: FloatArray, sr: float, rate_hz: float, lines: Sequence[int], cp: ClockedParams, p: InsideParams = INSIDE
+) -> tuple[int, int]:
+    """Where in ``x`` the joint's ``lines`` changed, samples, and the spread of that estimate, samples (-1 and the
+    length of ``x``: not fitted).
+
+    The lines demodulated in frames and turned by the clock followed (:func:`~.clocked.turned_frames`) keep one
+    phasor per line while the joint steps and another once it is stopped; sound of another clock turns and only
+    scatters them. A step (two means per line, each line weighted to unit power) is fitted by least squares, on
+    frames started every ``scan_s`` within one frame; the best split of the best-fitting series is the onset and the
+    splits within ``spread_var`` residual variances of its misfit its spread. Linear in the frames: a piece part
+    stepping and part stopped reads in between, whichever way the stop moves the lines.
+    """
+    frame = max(1, int(round(cp.locked_frame_s * sr)))
+    best = (math.inf, -1, x.size)
+    for o in range(0, frame, max(1, int(round(p.scan_s * sr)))):
+        z = turned_frames(x[o:], sr, rate_hz, lines, cp)
+        m = z.shape[0]
+        if m < 4:
+            continue
+        w = 1.0 / np.maximum(np.mean(np.abs(z) ** 2, axis=0), 1e-300)
+        s1, s2 = np.cumsum(z, axis=0), np.cumsum(np.abs(z) ** 2, axis=0)
+        k = np.arange(1, m)
+        left = (s2[k - 1] - np.abs(s1[k - 1]) ** 2 / k[:, None]) @ w
+        right = ((s2[-1] - s2[k - 1]) - np.abs(s1[-1] - s1[k - 1]) ** 2 / (m - k)[:, None]) @ w
+        sse = left + right
+        b = int(np.argmin(sse))
+        var = float(sse[b]) / max(m - 2, 1)
+        near = np.flatnonzero(sse - sse[b] <= p.spread_var * var)
+        if float(sse[b]) / m < best[0]:
+            best = (float(sse[b]) / m, o + int(k[b]) * frame, int(np.max(np.abs(near - b))) * frame)
+    return best[1], best[2]
