@@ -356,3 +356,18 @@ def test_damped_steps_with_the_norm_kept_are_the_plain_ones_bit_for_bit(seed: in
             assert prev_norm == math.sqrt(dp.dot(dp))
         prev, prev_old = dp, old
 
+
+
+def test_needle_mask_grown_by_nothing_stays_the_mask() -> None:
+    """``edge_px`` 0 and a sharp copy: the weights stay on the needle (scipy's dilation by 0 iterations would
+    grow the mask to the whole window); by 2 px the weights reach exactly 2 px (8-neighbour-free cross steps)."""
+    from stickslip.vision.template import TrackerParams, _grown, _level_weights
+
+    mask = np.zeros((41, 41), dtype=bool)
+    mask[20, 10:21] = True
+    assert (_grown(mask, 0) == mask).all()
+    assert int(_grown(mask, 2).sum()) == 11 * 5 + 2 * 3 + 2 * 1  # a 2-px cross-step dilation of a bar
+    p = TrackerParams(edge_px=0, blur_bank=(0.0,), sharpen_bank=())
+    (w,) = _level_weights(mask, np.ones_like(mask), (20.0, 20.0), p)
+    far = ~_grown(mask, 3)
+    assert float(w[far].max()) < 1e-3 < float(w[mask].min())

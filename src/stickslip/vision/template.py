@@ -441,10 +441,16 @@ def _level_weights(
     level_weights = []
     for b in (*params.blur_bank, *params.sharpen_bank):
         # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further
-        grown = ndimage.binary_dilation(mask, iterations=params.edge_px + int(round(2.0 * b)))
+        grown = _grown(mask, params.edge_px + int(round(2.0 * b)))
         soft = ndimage.gaussian_filter(grown.astype(float), 0.7)
         level_weights.append(np.clip(soft, 0.0, 1.0) * radial * inside)
     return level_weights
+
+
+def _grown(mask: NDArray[np.bool_], steps: int) -> NDArray[np.bool_]:
+    """``mask`` grown by ``steps`` pixels (none: ``mask`` itself; scipy's dilation by 0 iterations would grow it
+    until nothing changes, the whole window)."""
+    return mask if steps <= 0 else np.asarray(ndimage.binary_dilation(mask, iterations=steps))
 
 
 def _surroundings(
@@ -465,7 +471,7 @@ def _surroundings(
     shaft = (vx / norm, vy / norm) if norm > 1e-9 else (1.0, 0.0)
     eroded = ndimage.binary_erosion(mask, iterations=1)
     core_pick = (eroded if eroded.sum() >= 4 else mask) & (dist >= 2.0) & (dist <= 10.0)
-    wide = ndimage.binary_dilation(mask, iterations=params.edge_px + 2 * int(round(params.blur_bank[-1])))
+    wide = _grown(mask, params.edge_px + 2 * int(round(params.blur_bank[-1])))
     ring_sel = ~wide & (dist >= 6.0) & inside
     core = (ox[core_pick].astype(float), oy[core_pick].astype(float))
     ring_off = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
