@@ -83,6 +83,7 @@ def detect(
     step_clock: bool = False,
     change: ChangeParams | None = None,
     confirm: ConfirmParams | None = None,
+    step_rate_hz: float | None = None,
 ) -> list[StopEvent]:
     """Run a fresh detector over a whole recording (or an iterable of blocks): its events.
 
@@ -92,11 +93,15 @@ def detect(
     reports stops the fast path never heard, found late on the step clock, and
     ``step_clock`` asks the step clock too (both with ``confirm_s`` > 0 only). ``change``
     and ``confirm`` are the stages' parameters (default: their dataclasses' defaults).
+    ``step_rate_hz`` is the step rate the controller commanded, Hz, told to the detector as a
+    traverse tells it (:meth:`~.events.StopDetector.reset`; None: not told).
     """
     fast = detector_for(tuning, t0_s, change)
     det: TemplateDetector | BandDetector | ConfirmedStopDetector = fast
     if confirm_s:
         det = ConfirmedStopDetector(fast, confirm_s, step_clock=step_clock, late=late, params=confirm)
+    if step_rate_hz is not None:
+        det.reset(t0_s, step_rate_hz)
     events: list[StopEvent] = []
     if isinstance(samples, np.ndarray):
         for i in range(0, samples.size, block):
