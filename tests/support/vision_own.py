@@ -23,10 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from stickslip.sim.camera import Flake, LobedParticle, SimCamSettings, SimScene
+from stickslip.sim.camera import Droplet, Flake, LobedParticle, SimCamSettings, SimScene
 
 __all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "flake_benchmark",
-           "round_benchmark", "KINDS"]
+           "round_benchmark", "droplet_benchmark", "KINDS"]
 
 KINDS = ("visible", "out", "occluded", "defocused")
 
@@ -49,7 +49,7 @@ class OwnFrame:
     """What the lobed mode did to the frame: ``lobed`` (a lobed grain over the tip), ``edge``;
     the flake mode: ``flake`` (a flake stuck on the tip); the round mode: ``bead`` (a bead
     stuck on the tip), ``shaft-edge`` (the tip near the edge its shaft leaves by), ``bead-edge``
-    (both)."""
+    (both); the droplet mode: ``droplet`` (a visible tip seen through a droplet)."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class OwnSequence:
 def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None = None, look: str | None = None,
                  photons: float | None = None, max_blur: float = 3.0, events: bool = True,
                  event_rate: float = 0.08, lobed_rate: float = 0.0, flake_rate: float = 0.0,
-                 round_rate: float = 0.0) -> OwnSequence:
+                 round_rate: float = 0.0, droplet_rate: float = 0.0) -> OwnSequence:
     """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
 
     ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
@@ -84,6 +84,10 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     frame untouched by the other events starts, with that probability, a round opaque
     bead stuck on the tip, or the tip held near the edge its shaft leaves by, with or
     without a bead (its own stream too).
+    With ``droplet_rate`` > 0 (the droplet mode, :class:`_Drops`), a bright-field frame
+    untouched by the other events starts, with that probability, a transparent droplet
+    clinging to the tip for 1 to 4 frames: the tip stays visible, seen through it,
+    displaced and magnified (its own stream too).
     """
     rng = np.random.default_rng([seed, 31337])
     look = look or ("optical", "sem")[int(rng.integers(0, 2))]
@@ -98,6 +102,7 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     extras = _Extras(seed, lobed_rate, W, look, size) if lobed_rate > 0 else None
     chips = _Flakes(seed, flake_rate, W, look) if flake_rate > 0 else None
     beads = _Beads(seed, round_rate, W, look, size) if round_rate > 0 else None
+    drops = _Drops(seed, droplet_rate, W) if droplet_rate > 0 and look == "optical" else None
     edge_in = EDGE_IN if extras is None and beads is None else EDGE_IN_LOBED
     lo, hi = edge_in, size - 1 - edge_in
     tip = rng.uniform(0.3, 0.7, 2) * size
@@ -141,8 +146,11 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
             kind, cause, flakes = chips.frame(k, kind, cause, apex, direction)
         if beads is not None:
             kind, cause, grains = beads.frame(k, kind, cause, apex, tip, direction)
+        lenses: tuple[Droplet, ...] = ()
+        if drops is not None:
+            cause, lenses = drops.frame(k, kind, cause, apex, direction)
         shift = shift + drift_v + rng.normal(0.0, 0.02, 2)
-        image = scene.render(apex, direction, sigma, shift, 1.0, particles, grains, flakes)
+        image = scene.render(apex, direction, sigma, shift, 1.0, particles, grains, flakes, lenses)
         frames.append(OwnFrame(image, (float(apex[0]), float(apex[1])), kind, float(sigma), cause))
         # the next frame: the arm holds, glides or jumps; the needle turns about a point far up its shaft
         u = rng.random()
@@ -387,6 +395,54 @@ class _Beads:
         return (a, b, r), level, float(xr.uniform(0.0, 0.8))
 
 
+class _Drops:
+    """The droplet mode's events: a transparent droplet clinging to the tip for 1 to 4 frames.
+
+    A tip dipped into a liquid (water, oil, a glycerol film, a condensate) comes out with a
+    drop on it; the drop moves with the tip and, seen from above in bright field, is a
+    plano-convex lens (:class:`~stickslip.sim.camera.Droplet`): the needle's end under it is
+    seen displaced outwards from the drop's middle and magnified, the more the steeper the
+    cap. An SEM's electrons are not refracted (and a liquid drop would not survive its
+    vacuum): the mode makes drops in bright field only. The contact disc's radius is 0.5 to
+    2 times the tip's width (at least 4 px), its middle within 0.7 of that radius of the
+    apex, any way; the contact angle 40 to 90 degrees; the index 1.33 to 1.5; a third of
+    the drops show no rim, a third a dark one (the steep rim's light leaving the aperture:
+    0.3 to 0.7 of the light), a third a bright one (1.3 to 1.8), 1 to 2.5 px wide. The tip
+    is still the tip: the frame stays ``visible`` (a fix within 3 px of it is right, a
+    refusal allowed). Events start from frame 3, on visible frames the other events left
+    alone.
+    """
+
+    def __init__(self, seed: int, rate: float, width_px: float) -> None:
+        self.rng = np.random.default_rng([seed, 1414])
+        self.rate, self.W = rate, width_px
+        self.left = 0
+        self.drop = ((0.0, 0.0), 0.0, 0.0, 0.0, 1.0, 0.0)
+
+    def frame(self, k: int, kind: str, cause: str, apex: NDArray[np.float64],
+              direction: NDArray[np.float64]) -> tuple[str, tuple[Droplet, ...]]:
+        """Frame ``k``'s cause and droplet (its middle kept in the needle's frame)."""
+        xr = self.rng
+        if self.left == 0 and k > 2 and kind == "visible" and not cause and xr.random() < self.rate:
+            self.left = int(xr.integers(1, 5))
+            r = max(4.0, float(xr.uniform(0.5, 2.0)) * self.W)
+            off = float(xr.uniform(0.0, 0.7)) * r
+            angle = float(xr.uniform(0.0, 2.0 * math.pi))
+            rim = (1.0, float(xr.uniform(0.3, 0.7)), float(xr.uniform(1.3, 1.8)))[int(xr.integers(0, 3))]
+            self.drop = ((off * math.cos(angle), off * math.sin(angle)), r, math.radians(float(xr.uniform(40.0, 90.0))),
+                         float(xr.uniform(1.33, 1.5)), rim, float(xr.uniform(1.0, 2.5)))
+        if self.left == 0:
+            return cause, ()
+        self.left -= 1
+        if kind != "visible" or cause:
+            return cause, ()
+        (a, b), r, angle, index, rim, rim_width = self.drop
+        u = direction / max(float(np.hypot(*direction)), 1e-12)  # along the shaft
+        v = np.array([-u[1], u[0]])
+        centre = apex + a * u + b * v
+        return "droplet", (Droplet((float(centre[0]), float(centre[1])), r, angle, index, rim, rim_width),)
+
+
 def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
     """How far the origin lies inside a convex polygon grown by ``rounding`` (px; negative: outside)."""
     pts = np.asarray(corners, dtype=float)
@@ -402,13 +458,16 @@ def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
 
 def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256,
                   widths: tuple[float, float] = (3.0, 20.0), looks: tuple[str, ...] = ("optical", "sem"),
-                  lobed_rate: float = 0.0, flake_rate: float = 0.0, round_rate: float = 0.0) -> list[OwnSequence]:
+                  lobed_rate: float = 0.0, flake_rate: float = 0.0, round_rate: float = 0.0,
+                  droplet_rate: float = 0.0) -> list[OwnSequence]:
     """Sequences of ``per_sequence`` frames, tip widths spread over ``widths`` (px), the looks taken in turn;
-    ``lobed_rate``, ``flake_rate``, ``round_rate``: :func:`own_sequence`'s modes (0: the plain frames)."""
+    ``lobed_rate``, ``flake_rate``, ``round_rate``, ``droplet_rate``: :func:`own_sequence`'s modes (0: the plain
+    frames)."""
     n_seq = max(1, n_frames // per_sequence)
     ws = np.linspace(widths[0], widths[1], n_seq)
     return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
-                         lobed_rate=lobed_rate, flake_rate=flake_rate, round_rate=round_rate) for i in range(n_seq)]
+                         lobed_rate=lobed_rate, flake_rate=flake_rate, round_rate=round_rate,
+                         droplet_rate=droplet_rate) for i in range(n_seq)]
 
 
 def lobed_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
@@ -431,3 +490,10 @@ def round_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, 
     """:func:`own_benchmark`'s sequences in the round mode (blunt needles, beads stuck on the tip, tips near the
     edge their shaft leaves by)."""
     return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, round_rate=round_rate)
+
+
+def droplet_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
+                      droplet_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
+                      looks: tuple[str, ...] = ("optical",)) -> list[OwnSequence]:
+    """:func:`own_benchmark`'s sequences in the droplet mode (transparent droplets on the tip; bright field only)."""
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, droplet_rate=droplet_rate)

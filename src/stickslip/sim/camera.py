@@ -42,7 +42,7 @@ from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_optio
 from ..vision.frame import Frame
 from ..vision.view import View, project
 
-__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "open_url", "LOOKS", "ENDS"]
+__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "Droplet", "open_url", "LOOKS", "ENDS"]
 
 LOOKS = ("optical", "sem")
 """The simulated microscope's looks."""
@@ -282,6 +282,42 @@ class Flake:
     blur: float = 0.0
 
 
+@dataclass(frozen=True)
+class Droplet:
+    """A transparent droplet (a sessile spherical cap) over the needle: it refracts what lies under it.
+
+    A drop of water, oil or a glycerol film clinging to the tip is a plano-convex lens.
+    Seen from above, a point under it at ``rho`` from its middle is seen displaced outwards
+    by the cap's local prism: its thickness ``t`` times the surface's slope times
+    ``1 - 1/n`` (paraxial), so the image under it is magnified, most in the middle of a
+    hemisphere (by ``n``) and not at all at the contact line where ``t`` falls to zero. Where
+    the surface is steep the light leaves the objective's aperture (a dark rim) or is
+    gathered by it (a bright one); ``rim`` scales the brightness of the outer ``rim_width``.
+
+    Parameters
+    ----------
+    centre : (x, y)
+        The contact disc's middle, px.
+    radius : float
+        The contact disc's radius, px.
+    contact_angle : float
+        The cap's contact angle, rad (pi/2: a hemisphere).
+    index : float
+        The liquid's refractive index (water 1.33, glycerol 1.47).
+    rim : float
+        The rim's brightness as a share of what it covers (1: no rim; below: dark; above: bright).
+    rim_width : float
+        The rim's width inside the contact line, px.
+    """
+
+    centre: tuple[float, float]
+    radius: float
+    contact_angle: float
+    index: float = 1.33
+    rim: float = 1.0
+    rim_width: float = 1.5
+
+
 class SimScene:
     """What the simulated microscope renders, apart from the arm: substrate, needle, look, noise.
 
@@ -323,7 +359,7 @@ class SimScene:
                shift: NDArray[np.float64] | None = None, foreshortening: float = 1.0,
                particles: tuple[tuple[float, float, float], ...] = (),
                lobed: tuple[LobedParticle, ...] = (),
-               flakes: tuple[Flake, ...] = ()) -> NDArray[np.float64]:
+               flakes: tuple[Flake, ...] = (), droplets: tuple[Droplet, ...] = ()) -> NDArray[np.float64]:
         """A noisy frame, grey values in [0, 1].
 
         Parameters
@@ -344,7 +380,9 @@ class SimScene:
         lobed : tuple of LobedParticle
             Grains of a few lobes over everything, painted after ``particles``.
         flakes : tuple of Flake
-            Flat chips with rounded corners over everything, painted last.
+            Flat chips with rounded corners over everything, painted after ``lobed``.
+        droplets : tuple of Droplet
+            Transparent droplets over everything, refracting what lies under them (last).
         """
         s = self.settings
         tip_px = np.asarray(tip_px, dtype=float)
@@ -368,6 +406,8 @@ class SimScene:
             clean = self._paint_lobed(clean, grain)
         for flake in flakes:
             clean = self._paint_flake(clean, flake)
+        for drop in droplets:
+            clean = self._refract(clean, drop)
         lam = np.clip(clean, 0.0, None) * s.photons
         counts = self.rng.poisson(lam).astype(float)
         if s.look == "sem":  # the beam's line-by-line jitter
@@ -401,6 +441,24 @@ class SimScene:
         if flake.blur > 0.3:
             cover = ndimage.gaussian_filter(cover, flake.blur, truncate=3.0)
         return np.asarray(clean * (1.0 - cover) + flake.level * self.illumination * cover, dtype=float)
+
+    def _refract(self, clean: NDArray[np.float64], drop: Droplet) -> NDArray[np.float64]:
+        """``clean`` seen through ``drop``: each pixel inside its disc shows what lies ``delta(rho)`` nearer its middle.
+
+        ``delta = (1 - 1/n) t(rho) tan(slope) = (1 - 1/n) rho (1 - cos(a) / sqrt(1 - (rho / Rc)^2))`` for a
+        cap of contact angle ``a`` and curvature radius ``Rc = R / sin(a)`` (px); the rim's band scales the light.
+        """
+        cx, cy = drop.centre
+        dx, dy = self._xx - cx, self._yy - cy
+        rho = np.hypot(dx, dy)
+        inside = rho < drop.radius
+        rc = drop.radius / math.sin(drop.contact_angle)
+        lean = np.sqrt(np.clip(1.0 - (rho / rc) ** 2, 1e-9, None))
+        k = np.where(inside, (1.0 - 1.0 / drop.index) * (1.0 - math.cos(drop.contact_angle) / lean), 0.0)
+        src = np.array([cy + dy * (1.0 - k), cx + dx * (1.0 - k)])
+        seen = ndimage.map_coordinates(clean, src, order=1, mode="nearest")
+        band = np.clip((rho - (drop.radius - drop.rim_width)) / max(drop.rim_width, 1e-6), 0.0, 1.0)
+        return np.asarray(seen * (1.0 + (drop.rim - 1.0) * np.sin(math.pi * band) ** 2), dtype=float)
 
     def _needle(self, tip: NDArray[np.float64], direction: NDArray[np.float64],
                 foreshortening: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
