@@ -146,10 +146,8 @@ def _one_clock(
     clocks = two_clocks(x[: int((stop_at_s - TUNE.clock_end_s) * sample_rate)], sample_rate)
     if clocks is None:
         return x, stop_at_s
-    lo, hi = sorted(clocks)
-    two = f"holds two step clocks ({lo:.0f} Hz and {hi:.0f} Hz, in turns): another instrument"
     if told_hz is None:  # which clock is the joint's is not known
-        raise TuningError(f"the stepping part of the recording {two}: the stop's sound cannot be told from it")
+        raise TuningError(f"the stepping part of the recording {_two(clocks)}: the stop's sound cannot be told from it")
     y, stop_s = joint_clock_only(x, sample_rate, stop_at_s, clocks, told_hz)
     y, _ = recording(y, sample_rate, stop_s, min_part_s, guard_s)
     if (problem := other_clock(y[: int((stop_s - TUNE.clock_end_s) * sample_rate)], sample_rate)) is not None:
@@ -168,8 +166,11 @@ def other_clock(x: FloatArray, sample_rate: int, p: TuneParams = TUNE) -> str | 
     bursts' coming and going as the stop).
     """
     clocks = two_clocks(x, sample_rate, p)
-    if clocks is None:
-        return None
+    return None if clocks is None else _two(clocks)
+
+
+def _two(clocks: tuple[float, float]) -> str:
+    """What a recording holding the step clocks ``clocks`` (Hz, :func:`.clocks.two_clocks`) is told it holds."""
     lo, hi = sorted(clocks)
     return f"holds two step clocks ({lo:.0f} Hz and {hi:.0f} Hz, in turns): another instrument"
 
