@@ -277,26 +277,30 @@ def turned_frames(
 ) -> ComplexArray:
     """The lines ``ks`` of ``x`` demodulated in frames of ``locked_frame_s`` and turned by the clock followed
     (frames x lines): the joint's lines keep one phasor from frame to frame, sound of another clock turns."""
+    z, off = _followed(x, sr, rate_hz, ks, p)
+    k = np.asarray(ks, dtype=np.float64)
+    return np.asarray(z * np.exp(-2j * np.pi * np.outer(off, k)), dtype=np.complex128)
+
+
+def _followed(
+    x: FloatArray, sr: float, rate_hz: float, ks: Sequence[int], p: ClockedParams
+) -> tuple[ComplexArray, FloatArray]:
+    """The lines ``ks`` of ``x`` demodulated in frames of ``locked_frame_s`` (frames x lines) and the clock followed
+    through the first ``locked_harmonics`` lines: its phase offset per frame, in periods."""
     clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
     both = sorted(set(clock) | set(ks))
     z = demodulate(x, sr, rate_hz, both, max(1, int(round(p.locked_frame_s * sr))))
     off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire,
                        p.locked_memory, p.locked_grid, p.locked_whole)  # fmt: skip
-    k = np.asarray(ks, dtype=np.float64)
-    return np.asarray(z[:, [both.index(j) for j in ks]] * np.exp(-2j * np.pi * np.outer(off, k)), dtype=np.complex128)
+    return z[:, [both.index(k) for k in ks]], off
 
 
 def _in_phase(
     x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams
 ) -> tuple[FloatArray, FloatArray]:
     """Per line ``ks``: the power in phase with the clock followed over ``x``, and the power in all."""
-    clock = [k for k in range(1, p.locked_harmonics + 1) if k * rate_hz < sr / 2]
-    both = sorted(set(clock) | set(ks))
-    z = demodulate(x, sr, rate_hz, both, max(1, int(round(p.locked_frame_s * sr))))
-    off = follow_clock(z[:, [both.index(k) for k in clock]], clock, p.locked_slew, p.locked_reacquire,
-                       p.locked_memory, p.locked_grid, p.locked_whole)
-    pick = [both.index(k) for k in ks]
-    return locked_powers(z[:, pick], ks, off)
+    z, off = _followed(x, sr, rate_hz, ks, p)
+    return locked_powers(z, ks, off)
 
 
 def locked_stop_likeness(
