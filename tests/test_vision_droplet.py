@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 import pytest
@@ -89,3 +90,14 @@ def test_the_droplet_frames_are_where_the_set_had_them() -> None:
 def test_no_fix_through_a_droplet_is_more_than_3_px_off() -> None:
     errors = [e for _, e in _through_a_droplet() if e is not None]
     assert errors and max(errors) <= 3.0
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [dict(radius=0.0), dict(contact_angle=0.0), dict(contact_angle=math.pi), dict(index=0.9), dict(rim=-0.1),
+     dict(rim_width=0.0), dict(radius=float("nan"))],
+)
+def test_a_droplet_that_cannot_be_is_refused(bad: dict[str, float]) -> None:
+    args: dict[str, Any] = dict(centre=(10.0, 10.0), radius=5.0, contact_angle=1.0) | bad
+    with pytest.raises(ValueError, match="a droplet needs"):
+        Droplet(**args)

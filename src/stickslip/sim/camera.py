@@ -317,6 +317,14 @@ class Droplet:
     rim: float = 1.0
     rim_width: float = 1.5
 
+    def __post_init__(self) -> None:
+        if not (self.radius > 0 and 0 < self.contact_angle < math.pi and self.index >= 1.0 and self.rim >= 0
+                and self.rim_width > 0):
+            raise ValueError(
+                f"a droplet needs radius > 0 px, 0 < contact_angle < pi rad, index >= 1, rim >= 0 and rim_width > 0 "
+                f"px; got {self.radius:g}, {self.contact_angle:g}, {self.index:g}, {self.rim:g}, {self.rim_width:g}"
+            )
+
 
 class SimScene:
     """What the simulated microscope renders, apart from the arm: substrate, needle, look, noise.
