@@ -32,6 +32,12 @@ def _check_sample_rate(sample_rate: float | None) -> None:
         fail(f"--sample-rate must be {lo:.0f}-{hi:.0f} Hz, got {sample_rate:g}")
 
 
+def _check_step_rate(step_rate: float | None) -> None:
+    """``--rate`` (the step rate commanded, Hz), where given, is a step rate: one line and exit 2 otherwise."""
+    if step_rate is not None and not (math.isfinite(step_rate) and 1.0 <= step_rate <= 1e5):
+        fail(f"--rate must be a step rate of 1-100000 Hz, got {step_rate:g}")
+
+
 def _is_csv(path: Path) -> bool:
     return path.suffix.lower() in _CSV_SUFFIXES
 
@@ -140,8 +146,7 @@ def tune(
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
-    if step_rate is not None and not (math.isfinite(step_rate) and 1.0 <= step_rate <= 1e5):
-        fail(f"--rate must be a step rate of 1-100000 Hz, got {step_rate:g}")
+    _check_step_rate(step_rate)
     samples, rate = _load_recording(recording, sample_rate, channel)
     duration = samples.size / rate
     if samples.size == 0:
@@ -256,8 +261,7 @@ def listen(
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
     _check_sample_rate(sample_rate)
-    if step_rate is not None and not (math.isfinite(step_rate) and 1.0 <= step_rate <= 1e5):
-        fail(f"--rate must be a step rate of 1-100000 Hz, got {step_rate:g}")
+    _check_step_rate(step_rate)
     try:
         confirm_s = check_confirm_s(CONFIRM_S if confirm_s is None else confirm_s)
     except ValueError as e:
