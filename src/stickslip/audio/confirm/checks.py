@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from ..events import StopEvent
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
-from .clocked import ClockedCheck, ClockedParams, OnClock, locked_reader
+from .clocked import ClockedCheck, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
 from .inside import InsideParams, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
@@ -154,13 +154,10 @@ class WindowChecks:
         c, p, got = self.clocked, self.inside, self.on_clock
         if c is None or p is None or p.max_onset_off_s <= 0.0 or got is None or not math.isfinite(got.a):
             return None
-        tu, sr = c.tuning, c.sample_rate
+        sr = c.sample_rate
         piece = int(round(p.piece_s * sr))
         x = self.kept.get(onset - 2 * piece, onset + 2 * piece)
-        if c.ref is None or x.size != 4 * piece:
-            return None
-        assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-        reader = locked_reader(c.ref, sr, got.rate_hz, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, c.p)
+        reader = c.reader(got.rate_hz) if x.size == 4 * piece else None
         if reader is None:
             return None
         t, spread = onset_in_phase(x, sr, got.rate_hz, reader.lines, c.p, p)

@@ -470,11 +470,19 @@ class ClockedCheck:
         finite = [g[0] for g in got if math.isfinite(g[0])]
         if len(got) > 1 and finite:
             a = float(np.median(finite))
-        locked = math.nan
-        if p.locked_frame_s > 0.0:
-            sig, cont = tu.signature_db, tu.continuum_signature_db
-            locked = locked_stop_likeness(ref, pieces, sr, rate, tu.edges_hz, sig, cont, p)
+        reader = self.reader(rate)
+        locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
         return OnClock(a, rate, used, self.ref_age_s, locked)
+
+    def reader(self, rate_hz: float) -> LockedReader | None:
+        """The lines read in phase with the clock followed at ``rate_hz`` (Hz) against the reference (the chain's
+        stepping), as the tuning's signature judges them (:func:`locked_reader`; None: no reference, or no verdict)."""
+        tu, ref = self.tuning, self.ref
+        if ref is None:
+            return None
+        assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
+        sig, cont = tu.signature_db, tu.continuum_signature_db
+        return locked_reader(ref, self.sample_rate, rate_hz, tu.edges_hz, sig, cont, self.p)
 
     def rate(self, heard_hz: float = math.nan) -> float:
         """The step rate the lines are read at, Hz (NaN: not judged): ``heard_hz`` (the step rate already heard in the
@@ -509,11 +517,10 @@ class ClockedCheck:
         the same stepping, at the rate its fire was judged at (``got``; NaN: not read, or no verdict). Read only where
         the comb judged the fire too (its lines sharp: a clean clock); over a rough clock so short a reading scatters
         (the modal generator: -0.01 and 0.07 at stops whose windows read 0.53-0.92 in phase)."""
-        tu, p, sr = self.tuning, self.p, self.sample_rate
-        if got is None or not math.isfinite(got.a) or self.ref is None or p.onset_read_s <= 0.0:
+        p = self.p
+        if got is None or not math.isfinite(got.a) or p.onset_read_s <= 0.0:
             return math.nan
-        if x.size < round(p.onset_read_s * sr):
+        if x.size < round(p.onset_read_s * self.sample_rate):
             return math.nan
-        assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-        sig, cont = tu.signature_db, tu.continuum_signature_db
-        return locked_stop_likeness(self.ref, [x], sr, got.rate_hz, tu.edges_hz, sig, cont, p)
+        reader = self.reader(got.rate_hz)
+        return math.nan if reader is None else reader.read(x)

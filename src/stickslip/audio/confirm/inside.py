@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..paramfield import param
-from .clocked import ClockedCheck, ClockedParams, OnClock, locked_reader, turned_frames
+from .clocked import ClockedCheck, ClockedParams, OnClock, turned_frames
 
 __all__ = ["INSIDE", "Inside", "InsideParams", "onset_in_phase", "stop_inside"]
 
@@ -96,15 +96,13 @@ def stop_inside(
     in that stepping (Hz; NaN: none). See the module docstring.
     """
     cp, ref, sr = clocked.p, clocked.ref, clocked.sample_rate
-    tu = clocked.tuning
     if not clocked.enabled or ref is None or ref.size < cp.min_s * sr or clocked.ref_stoplike > cp.max_ref_stoplike:
         return None  # as the clocked check: no stepping to compare with
     rate = clocked.rate(heard_hz)
     piece = int(round(p.piece_s * sr))
     if not math.isfinite(rate) or piece <= 0 or lead < piece:
         return None
-    assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
-    reader = locked_reader(ref, sr, rate, tu.edges_hz, tu.signature_db, tu.continuum_signature_db, cp)
+    reader = clocked.reader(rate)
     if reader is None:
         return None
     n = (x.size - lead) // piece
