@@ -371,3 +371,12 @@ def test_needle_mask_grown_by_nothing_stays_the_mask() -> None:
     (w,) = _level_weights(mask, np.ones_like(mask), (20.0, 20.0), p)
     far = ~_grown(mask, 3)
     assert float(w[far].max()) < 1e-3 < float(w[mask].min())
+
+
+def test_a_negative_edge_growth_is_refused() -> None:
+    """``edge_px`` below 0 would ask scipy for a dilation by 0 or fewer iterations (the whole window): refused."""
+    from stickslip.vision.template import TrackerParams
+
+    with pytest.raises(ValueError, match="edge_px = -1 px must be >= 0"):
+        TrackerParams(edge_px=-1)
+    assert TrackerParams(edge_px=0).edge_px == 0

@@ -269,6 +269,8 @@ class TrackerParams:
             raise ValueError("extent_depth > 0 and extent_slack >= 0 px")
         if not (self.average_frames >= 0 and self.anchor_limit > 0):
             raise ValueError("average_frames >= 0 and anchor_limit > 0 px")
+        if self.edge_px < 0:
+            raise ValueError(f"edge_px = {self.edge_px} px must be >= 0 (the mask is grown, never shrunk)")
 
 
 def noise_sigma(image: FloatArray) -> float:
@@ -476,7 +478,7 @@ def _surroundings(
     core = (ox[core_pick].astype(float), oy[core_pick].astype(float))
     ring_off = (ox[ring_sel].astype(float), oy[ring_sel].astype(float))
     ahead = (ox * shaft[0] + oy * shaft[1]) < -0.5 * dist
-    grown2 = ndimage.binary_dilation(mask, iterations=params.edge_px + 1)
+    grown2 = _grown(mask, params.edge_px + 1)
     front_sel = ahead & (dist >= 2.0) & (dist <= 14.0) & ~grown2 & inside
     front = (ox[front_sel].astype(float), oy[front_sel].astype(float))
     return shaft, core, ring_off, front
