@@ -87,6 +87,16 @@ class OneLineErrors(TyperGroup):
     pipe or one ``error:`` line and exit 2 for anything else.
     """
 
+    def get_params(self, ctx: Any) -> list[Any]:
+        """The group's options, each named by what it takes as the commands' are (a flag by nothing, not ``<bool>``)."""
+        from ._help import metavar_of
+
+        params = super().get_params(ctx)
+        for p in params:
+            if p.metavar is None:
+                p.metavar = metavar_of(p)
+        return params
+
     def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
         try:
             return self._main(*args, standalone_mode=standalone_mode, **kwargs)
