@@ -102,7 +102,7 @@ def ablated(off: frozenset[str]) -> type[SimScene]:
 
         def render(self, tip_px: Any, direction: Any, sigma: float, shift: Any = None,
                    foreshortening: float = 1.0, particles: Any = (), lobed: Any = (),
-                   flakes: Any = ()) -> NDArray[np.float64]:
+                   flakes: Any = (), droplets: Any = ()) -> NDArray[np.float64]:
             if self._first is None:
                 self._first = (np.asarray(direction, dtype=float), float(sigma))
             if "drift" in off:
@@ -126,7 +126,8 @@ def ablated(off: frozenset[str]) -> type[SimScene]:
             if "template-ground" in off and self._count == 1:
                 self.substrate = np.full_like(ground, self._flat)
             try:
-                return super().render(tip_px, direction, sigma, shift, foreshortening, particles, lobed, flakes)
+                return super().render(tip_px, direction, sigma, shift, foreshortening, particles, lobed, flakes,
+                                      droplets)
             finally:
                 self.rng, self.substrate = kept, ground
 

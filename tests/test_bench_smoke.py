@@ -32,3 +32,19 @@ def test_scaling_benchmark_runs_quick(capsys):
     assert [r["command"] for r in grown] == ["calibrate"] and all(math.isfinite(r["exponent"]) for r in grown)
     for what in ("growth exponent", "pandas read_csv", "statsmodels", "per-move quadrature", "start-up"):
         assert what in out
+
+
+def test_the_ablation_renderer_takes_every_argument_the_scene_renders_with():
+    """``vision_ablation``'s patched scene (used by ``vision_ground`` too) renders what the own renderer asks:
+    an argument ``SimScene.render`` gained (the droplets) must reach it, or the script fails with a TypeError."""
+    import inspect
+
+    from stickslip.sim.camera import SimScene
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "vision_ablation.py"
+    spec = importlib.util.spec_from_file_location("vision_ablation", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ours = list(inspect.signature(mod.ablated(frozenset({"drift"})).render).parameters)
+    assert ours == list(inspect.signature(SimScene.render).parameters)

@@ -186,3 +186,30 @@ def test_a_sudden_change_of_focus_is_refused_and_a_slow_one_followed():
     assert isinstance(jump.update(scene.render(tip, shaft, 0.5)), Fix)
     r = jump.update(scene.render(tip, shaft, 4.0))  # 3.5 px of blur in one frame: not the same thing
     assert isinstance(r, Lost) and r.reason == "lost" and "focus would have changed" in r.detail
+
+
+def _noise_free_needle(tx: float, ty: float, size: int = 128) -> np.ndarray:
+    """A dark tapered needle pointing left with its apex at (tx, ty), rendered 8 x over and averaged: no noise."""
+    k = 8
+    yy, xx = np.mgrid[0 : size * k, 0 : size * k].astype(float)
+    along = (xx + 0.5) / k - 0.5 - tx
+    across = (yy + 0.5) / k - 0.5 - ty
+    inside = (along >= 0) & (np.abs(across) <= 1.0 + 0.15 * along)
+    img = np.where(inside, 0.2, 0.8).reshape(size, k, size, k).mean(axis=(1, 3))
+    return ndimage.gaussian_filter(img, 1.2)
+
+
+def test_a_noise_free_frame_is_tracked_without_dividing_by_its_zero_noise():
+    """A rendered frame has no pixel noise (its neighbour MAD is 0): the noise is floored at a 16-bit
+    camera's rounding over the frame's range, and the edge check no longer divides by zero (pytest turns
+    stickslip's RuntimeWarnings into errors); the moved tip is fixed within a pixel."""
+    from stickslip.vision.template import noise_sigma
+
+    first = _noise_free_needle(40.0, 64.0)
+    assert noise_sigma(first) == pytest.approx(0.6 / 65535 / math.sqrt(12), rel=0.05)  # the span: 0.8 - 0.2
+    tracker = TipTracker(first, (40.0, 64.0))
+    for k in range(1, 6):
+        truth = (40.0 + 0.7 * k, 64.0 + 0.3 * k)
+        fix = tracker.update(_noise_free_needle(*truth))
+        assert isinstance(fix, Fix), fix
+        assert math.hypot(fix.x - truth[0], fix.y - truth[1]) < 1.0

@@ -274,9 +274,16 @@ class TrackerParams:
 
 
 def noise_sigma(image: FloatArray) -> float:
-    """Standard deviation of a frame's pixel noise (robust: the MAD of a pixel against its neighbours)."""
+    """Standard deviation of a frame's pixel noise (robust: the MAD of a pixel against its neighbours).
+
+    At least the rounding noise of a 16-bit camera over the frame's range (its span / 65535 / √12):
+    a rendered, noise-free frame has a MAD of 0, and every weight the tracker makes from the noise
+    would divide by it.
+    """
     d = image[1:-1, 1:-1] - 0.25 * (image[:-2, 1:-1] + image[2:, 1:-1] + image[1:-1, :-2] + image[1:-1, 2:])
-    return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(1.25))
+    mad = float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(1.25))
+    span = float(np.max(image) - np.min(image)) if image.size else 0.0
+    return max(mad, span / 65535.0 / math.sqrt(12.0))
 
 
 def _window(image: FloatArray, cx: int, cy: int, h: int) -> tuple[FloatArray, NDArray[np.bool_]]:
