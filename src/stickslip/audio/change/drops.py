@@ -12,7 +12,12 @@ change of the joint's own sound gives. Two rules read it, per frame (:class:`Dro
   where the signature's drops are informative (``informative`` spreads, RMS-summed). At
   another step rate the sub-bands the tuned signature lowers may hold: a frame the signature
   predicted at the heard rate explains well (residual within ``pred_drops_rho`` of
-  ``residual_max``) may show the predicted signature's drops instead.
+  ``residual_max``) may show the predicted signature's drops instead. Where the rate was
+  heard near the commanded one (told: the controller's clock, not a guess) and the predicted
+  signature lowers nothing worth checking (its drops under ``informative``), the stop at
+  this rate cannot show drops at all: such a frame is *unasked* (``pred_unasked``), not
+  hot; the hold may fire on it, and the confirmation, which counts only hot frames, asks
+  the joint's lines to affirm the stop (:mod:`stickslip.audio.confirm.clocked`).
 * **the drop channel** (tunings with ``drop_threshold``): a lasting drop below the floor in
   any sub-bands, averaged over ``frames`` frames (:class:`DropMeter`: *broad*, the median
   sub-band; *local*, the RMS of the drops) counts as a stop whatever the signature: a
@@ -62,6 +67,11 @@ class DropParams:
         0.5,
         "residual_max",
         "a frame the predicted signature explains within this may show its drops instead (None: tuned only)",
+    )
+    pred_unasked: bool = param(
+        True,
+        "",
+        "at a rate told, where that signature has no drops worth checking, such a frame may fire, not hot: lines judge",
     )
 
     @property
@@ -244,17 +254,23 @@ class DropCheck:
         ends: NDArray[np.int64],
         pred_delta: FloatArray | None,
         pred_drops: NDArray[np.bool_] | None,
-    ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+        told: bool = False,
+    ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, NDArray[np.bool_]]:
         """The frames ``v`` (levels, dB) with the fit's ``a`` and ``hot``: ``a``, ``hot`` and onset lags (s) after
-        both rules."""
+        both rules, and the frames *unasked*: held back only by drops the signature predicted at this rate has not
+        (they may fire, but are not hot); ``told``: the prediction's rate was heard near the commanded one (only
+        then are frames unasked)."""
         zs = v - floor
         np.maximum(zs, -self.clip_db, out=zs)  # clipped to +-clip_db (np.clip's values, without its wrappers' cost)
         np.minimum(zs, self.clip_db, out=zs)
         zs *= self.scale
         m = self.meter(zs)
+        unasked = np.zeros(a.size, dtype=bool)
         if self.info_tuned >= self.p.informative**2:
-            hot &= self._in_proportion(zs, a, hot, pred_delta, pred_drops)
-        return self._channel(m, a, hot, ends)
+            shown, unasked = self._in_proportion(zs, a, hot, pred_delta, pred_drops, told)
+            hot &= shown
+        a, hot, lag = self._channel(m, a, hot, ends)
+        return a, hot, lag, unasked & ~hot
 
     def _in_proportion(
         self,
@@ -263,8 +279,10 @@ class DropCheck:
         hot: NDArray[np.bool_],
         pred_delta: FloatArray | None,
         pred_drops: NDArray[np.bool_] | None,
-    ) -> NDArray[np.bool_]:
-        """The first rule: per frame, whether the sub-bands the stop lowers are lower, in proportion."""
+        told: bool,
+    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """The first rule: per frame, whether the sub-bands the stop lowers are lower, in proportion; and the frames
+        held back only by the tuned drops where the signature predicted at this rate has none worth checking."""
         p = self.p
         gn = self._drop_weights(self.delta, self.scale)
         clear = zs <= p.excess
@@ -279,13 +297,19 @@ class DropCheck:
             # everywhere else, so this check never withholds what it passed before
             gp = self._drop_weights(pred_delta, self.scale)
             ask = hot & ~shown & (False if pred_drops is None else pred_drops)
+            gpi = np.maximum(np.minimum(pred_delta, 0.0) * self.inv_sigma, -p.cap)
+            info_p = float(gpi @ gpi)
+            if ask.any() and p.pred_unasked and told and info_p < p.informative**2:
+                # the stop at this rate lowers nothing worth checking: no drops can be asked of it (as of a tuning
+                # whose stop lowers nothing), nor can the levels tell it from added sound: unasked, not hot
+                self._tail_p = drops_tail(zs, clear, gp, self._tail_p, p)
+                return shown, ask
             if ask.any():
-                gpi = np.maximum(np.minimum(pred_delta, 0.0) * self.inv_sigma, -p.cap)
-                shown_p, self._tail_p = drops_shown(zs, clear, gp, float(gpi @ gpi), a, self._tail_p, p)
+                shown_p, self._tail_p = drops_shown(zs, clear, gp, info_p, a, self._tail_p, p)
                 shown = shown | (ask & shown_p)
             else:
                 self._tail_p = drops_tail(zs, clear, gp, self._tail_p, p)
-        return shown
+        return shown, np.zeros(a.size, dtype=bool)
 
     def _drop_weights(self, delta: FloatArray, scale: FloatArray) -> FloatArray:
         """A signature's drops in spreads (``scale``: 1 / spread), each capped at ``cap``.

@@ -205,7 +205,8 @@ class ChangeState:
         hot = (a >= tu.threshold) & (rho <= tu.residual_max)
         quiet = a < self.params.template.quiet * tu.threshold
         floor = tpl.template if tpl.floor is None else tpl.floor
-        a, hot, lag = self.drops.judge(v, floor, a, hot, ends, self.fits.pred_delta, pred_drops)
+        fits = self.fits
+        a, hot, lag, unasked = self.drops.judge(v, floor, a, hot, ends, fits.pred_delta, pred_drops, fits.pred_told)
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
@@ -214,10 +215,13 @@ class ChangeState:
         # the template follows every frame that is not stop-like (the low quantile taken per chunk ignores knocks
         # and voices); a chunk that fits neither stepping nor the stop at all means the template is stale
         tpl.gather(d, quiet, rho, v)
-        if not self.latched and self.hold.mask == 0 and not hot.any():
+        # the hold may fire on frames the drops could not be asked of at this rate (:mod:`.drops`), which the
+        # evidence above does not count as hot: the confirmation asks the joint's lines instead
+        fires = hot | unasked
+        if not self.latched and self.hold.mask == 0 and not fires.any():
             self.hold.prev_a = float(a[-1])
             return []
-        return self._decide(a, hot, ends, lag, d, v)
+        return self._decide(a, fires, ends, lag, d, v)
 
     def _decide(
         self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64], lag: FloatArray, d: FloatArray,
