@@ -222,6 +222,7 @@ class DropCheck:
         self.scale = self.inv_sigma
         #: the stream sample from which the drop channel is armed
         self.arm_sample = 0
+        self._told = False  # the predicted signature's rate was heard near the commanded one
         self.restart()
 
     def restart(self, arm_at: int | None = None) -> None:
@@ -235,9 +236,11 @@ class DropCheck:
         """Arm the drop channel ``arm_s`` after stream sample ``end``."""
         self.arm_sample = end + int(self.p.arm_s * self.tuned.sample_rate)
 
-    def forget_predicted(self) -> None:
-        """The predicted signature changed: forget its average."""
+    def forget_predicted(self, told: bool = False) -> None:
+        """The predicted signature changed: forget its average; ``told``: its rate was heard near the commanded one
+        (only then are frames unasked)."""
         self._tail_p = _empty()
+        self._told = told
 
     def learn_spread(self, warm: FloatArray) -> None:
         """After the warm-up: drops are judged in the larger of the tuning's and the warm-up's spreads."""
@@ -254,12 +257,10 @@ class DropCheck:
         ends: NDArray[np.int64],
         pred_delta: FloatArray | None,
         pred_drops: NDArray[np.bool_] | None,
-        told: bool = False,
     ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, NDArray[np.bool_]]:
         """The frames ``v`` (levels, dB) with the fit's ``a`` and ``hot``: ``a``, ``hot`` and onset lags (s) after
-        both rules, and the frames *unasked*: held back only by drops the signature predicted at this rate has not
-        (they may fire, but are not hot); ``told``: the prediction's rate was heard near the commanded one (only
-        then are frames unasked)."""
+        both rules, and the frames *unasked*: held back only by drops the signature predicted at the told rate has
+        not (they may fire, but are not hot)."""
         zs = v - floor
         np.maximum(zs, -self.clip_db, out=zs)  # clipped to +-clip_db (np.clip's values, without its wrappers' cost)
         np.minimum(zs, self.clip_db, out=zs)
@@ -267,7 +268,7 @@ class DropCheck:
         m = self.meter(zs)
         unasked = np.zeros(a.size, dtype=bool)
         if self.info_tuned >= self.p.informative**2:
-            shown, unasked = self._in_proportion(zs, a, hot, pred_delta, pred_drops, told)
+            shown, unasked = self._in_proportion(zs, a, hot, pred_delta, pred_drops)
             hot &= shown
         a, hot, lag = self._channel(m, a, hot, ends)
         return a, hot, lag, unasked & ~hot
@@ -279,7 +280,6 @@ class DropCheck:
         hot: NDArray[np.bool_],
         pred_delta: FloatArray | None,
         pred_drops: NDArray[np.bool_] | None,
-        told: bool,
     ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
         """The first rule: per frame, whether the sub-bands the stop lowers are lower, in proportion; and the frames
         held back only by the tuned drops where the signature predicted at this rate has none worth checking."""
@@ -299,7 +299,7 @@ class DropCheck:
             ask = hot & ~shown & (False if pred_drops is None else pred_drops)
             gpi = np.maximum(np.minimum(pred_delta, 0.0) * self.inv_sigma, -p.cap)
             info_p = float(gpi @ gpi)
-            if ask.any() and p.pred_unasked and told and info_p < p.informative**2:
+            if ask.any() and p.pred_unasked and self._told and info_p < p.informative**2:
                 # the stop at this rate lowers nothing worth checking: no drops can be asked of it (as of a tuning
                 # whose stop lowers nothing), nor can the levels tell it from added sound: unasked, not hot
                 self._tail_p = drops_tail(zs, clear, gp, self._tail_p, p)
