@@ -361,3 +361,39 @@ def test_the_lines_read_in_phase_from_an_onset_tell_the_stop_from_stepping() -> 
     assert math.isnan(chk.at_onset(_scaled(_clicks(n, 42), (0.0, 6.0, -4.0)), None))
     rough = OnClock(math.nan, got.rate_hz, 0, math.nan, got.locked)  # the comb could not judge the fire: not read
     assert math.isnan(chk.at_onset(_scaled(_clicks(n, 43), (0.0, 0.0, 0.0)), rough))
+
+
+def test_at_another_rate_the_lines_may_affirm_a_stop_never_veto_it() -> None:
+    """Told a rate 10 % from the tuning's, the tuned signature is not what the stop does on the lines: the check
+    gives no verdict for a veto (``judge``: None), but read for an affirmation the joint's clicks changed by the
+    signature still read a_L near 1 and affirm; the same window with its change undone reads near 0 and is no veto
+    there (nor is an onset read); within 1 % of the tuning's rate it is one. Beyond ``affirm_window``, or untold,
+    nothing is read."""
+    fast = 1.1 * RATE
+    step = round(SR / fast)  # a click every 44 samples: 1090.9 Hz, 9 % from the tuning's rate
+
+    def clicks(n: int, seed: int) -> np.ndarray:
+        rng = np.random.default_rng(seed)
+        x = np.zeros(n)
+        x[::step] = 1.0 + 0.1 * rng.standard_normal(x[::step].size)
+        return x + 1e-4 * rng.standard_normal(n)
+
+    chk = ClockedCheck(_Tuning())  # type: ignore[arg-type]
+    chk.reset(SR / step)
+    chk.hear_before(_scaled(clicks(N, 10), (0.0, 0.0, 0.0)), np.full(120, -0.6))
+    stop, none = _scaled(clicks(N, 11), (0.0, 6.0, -4.0)), _scaled(clicks(N, 11), (0.0, 0.0, 0.0))
+    assert chk.judge(stop) is None and chk.judge(none) is None  # no verdict for a veto at this rate
+    got = chk.judge(stop, affirm=True)
+    assert got is not None and got.rate_hz == pytest.approx(SR / step, rel=0.01) and not chk.at_tuned_rate(got.rate_hz)
+    assert got.a == pytest.approx(1.0, abs=0.1) and got.locked == pytest.approx(1.0, abs=0.1) and chk.affirms(got)
+    nothing = chk.judge(none, affirm=True)
+    assert nothing is not None and abs(nothing.a) < 0.1 and not chk.affirms(nothing)
+    assert chk.verdict(nothing) and math.isnan(chk.at_onset(none, nothing))  # at another rate: no veto, no doubt
+    assert not chk.verdict(OnClock(nothing.a, RATE, 2, math.nan, nothing.locked))  # at the tuning's rate: a veto
+    stepping = _scaled(clicks(N, 10), (0.0, 0.0, 0.0))
+    for p, told, read in ((CLOCKED, SR / step, True), (CLOCKED, None, False),
+                          (ClockedParams(affirm_window=0.05), SR / step, False)):  # fmt: skip
+        other = ClockedCheck(_Tuning(), p)  # type: ignore[arg-type]
+        other.reset(told)
+        other.hear_before(stepping, np.full(120, -0.6))
+        assert (other.judge(stop, SR / step, affirm=True) is not None) is read  # 9 % off: within 25 %, not 5 %

@@ -12,7 +12,12 @@ change of the joint's own sound gives. Two rules read it, per frame (:class:`Dro
   where the signature's drops are informative (``informative`` spreads, RMS-summed). At
   another step rate the sub-bands the tuned signature lowers may hold: a frame the signature
   predicted at the heard rate explains well (residual within ``pred_drops_rho`` of
-  ``residual_max``) may show the predicted signature's drops instead.
+  ``residual_max``) may show the predicted signature's drops instead. Where the rate was
+  heard near the commanded one (told: the controller's clock, not a guess) and the predicted
+  signature lowers nothing worth checking (its drops under ``informative``), the stop at
+  this rate cannot show drops at all: such a frame is *unasked* (``pred_unasked``), not
+  hot; the hold may fire on it, and the confirmation, which counts only hot frames, asks
+  the joint's lines to affirm the stop (:mod:`stickslip.audio.confirm.clocked`).
 * **the drop channel** (tunings with ``drop_threshold``): a lasting drop below the floor in
   any sub-bands, averaged over ``frames`` frames (:class:`DropMeter`: *broad*, the median
   sub-band; *local*, the RMS of the drops) counts as a stop whatever the signature: a
@@ -62,6 +67,11 @@ class DropParams:
         0.5,
         "residual_max",
         "a frame the predicted signature explains within this may show its drops instead (None: tuned only)",
+    )
+    pred_unasked: bool = param(
+        True,
+        "",
+        "at a rate told, where that signature has no drops worth checking, such a frame may fire, not hot: lines judge",
     )
 
     @property
@@ -212,6 +222,7 @@ class DropCheck:
         self.scale = self.inv_sigma
         #: the stream sample from which the drop channel is armed
         self.arm_sample = 0
+        self._told = False  # the predicted signature's rate was heard near the commanded one
         self.restart()
 
     def restart(self, arm_at: int | None = None) -> None:
@@ -225,9 +236,11 @@ class DropCheck:
         """Arm the drop channel ``arm_s`` after stream sample ``end``."""
         self.arm_sample = end + int(self.p.arm_s * self.tuned.sample_rate)
 
-    def forget_predicted(self) -> None:
-        """The predicted signature changed: forget its average."""
+    def forget_predicted(self, told: bool = False) -> None:
+        """The predicted signature changed: forget its average; ``told``: its rate was heard near the commanded one
+        (only then are frames unasked)."""
         self._tail_p = _empty()
+        self._told = told
 
     def learn_spread(self, warm: FloatArray) -> None:
         """After the warm-up: drops are judged in the larger of the tuning's and the warm-up's spreads."""
@@ -244,17 +257,21 @@ class DropCheck:
         ends: NDArray[np.int64],
         pred_delta: FloatArray | None,
         pred_drops: NDArray[np.bool_] | None,
-    ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray]:
+    ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, NDArray[np.bool_]]:
         """The frames ``v`` (levels, dB) with the fit's ``a`` and ``hot``: ``a``, ``hot`` and onset lags (s) after
-        both rules."""
+        both rules, and the frames *unasked*: held back only by drops the signature predicted at the told rate has
+        not (they may fire, but are not hot)."""
         zs = v - floor
         np.maximum(zs, -self.clip_db, out=zs)  # clipped to +-clip_db (np.clip's values, without its wrappers' cost)
         np.minimum(zs, self.clip_db, out=zs)
         zs *= self.scale
         m = self.meter(zs)
+        unasked = np.zeros(a.size, dtype=bool)
         if self.info_tuned >= self.p.informative**2:
-            hot &= self._in_proportion(zs, a, hot, pred_delta, pred_drops)
-        return self._channel(m, a, hot, ends)
+            shown, unasked = self._in_proportion(zs, a, hot, pred_delta, pred_drops)
+            hot &= shown
+        a, hot, lag = self._channel(m, a, hot, ends)
+        return a, hot, lag, unasked & ~hot
 
     def _in_proportion(
         self,
@@ -263,8 +280,9 @@ class DropCheck:
         hot: NDArray[np.bool_],
         pred_delta: FloatArray | None,
         pred_drops: NDArray[np.bool_] | None,
-    ) -> NDArray[np.bool_]:
-        """The first rule: per frame, whether the sub-bands the stop lowers are lower, in proportion."""
+    ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """The first rule: per frame, whether the sub-bands the stop lowers are lower, in proportion; and the frames
+        held back only by the tuned drops where the signature predicted at this rate has none worth checking."""
         p = self.p
         gn = self._drop_weights(self.delta, self.scale)
         clear = zs <= p.excess
@@ -279,13 +297,19 @@ class DropCheck:
             # everywhere else, so this check never withholds what it passed before
             gp = self._drop_weights(pred_delta, self.scale)
             ask = hot & ~shown & (False if pred_drops is None else pred_drops)
+            gpi = np.maximum(np.minimum(pred_delta, 0.0) * self.inv_sigma, -p.cap)
+            info_p = float(gpi @ gpi)
+            if ask.any() and p.pred_unasked and self._told and info_p < p.informative**2:
+                # the stop at this rate lowers nothing worth checking: no drops can be asked of it (as of a tuning
+                # whose stop lowers nothing), nor can the levels tell it from added sound: unasked, not hot
+                self._tail_p = drops_tail(zs, clear, gp, self._tail_p, p)
+                return shown, ask
             if ask.any():
-                gpi = np.maximum(np.minimum(pred_delta, 0.0) * self.inv_sigma, -p.cap)
-                shown_p, self._tail_p = drops_shown(zs, clear, gp, float(gpi @ gpi), a, self._tail_p, p)
+                shown_p, self._tail_p = drops_shown(zs, clear, gp, info_p, a, self._tail_p, p)
                 shown = shown | (ask & shown_p)
             else:
                 self._tail_p = drops_tail(zs, clear, gp, self._tail_p, p)
-        return shown
+        return shown, np.zeros(a.size, dtype=bool)
 
     def _drop_weights(self, delta: FloatArray, scale: FloatArray) -> FloatArray:
         """A signature's drops in spreads (``scale``: 1 / spread), each capped at ``cap``.

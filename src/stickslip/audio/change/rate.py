@@ -73,6 +73,8 @@ class RateFits:
         """The tuned signature alone, nothing masked; the log forgotten."""
         #: the signature predicted at the heard rate, dB (None: the tuned signature alone)
         self.pred_delta: FloatArray | None = None
+        #: whether that rate was heard near the commanded one (the controller's clock, not a guess)
+        self.pred_told = False
         self._fit_rate: Fitter | None = None
         self._added: FloatArray | None = None
         self._now: Fitter = self.tuned_fit
@@ -121,6 +123,7 @@ class RateFits:
         """
         self._fit_rate = None
         self.pred_delta = None
+        self.pred_told = False
         used = False
         r0 = self.tuned.step_rate_hz
         window = self.p.commanded_window if commanded else self.p.window
@@ -129,6 +132,7 @@ class RateFits:
             if float(np.sqrt(np.mean((pred / self.sigma) ** 2))) >= self.p.min_signature_rms:
                 self._fit_rate = Fitter(pred, self.sigma, self.tuned.trim, self.fit_p)
                 self.pred_delta = pred
+                self.pred_told = commanded
                 used = True
         self.mask(self._added)
         self.rate_log.append((int(end), float(rate), used))

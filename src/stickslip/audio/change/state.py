@@ -205,7 +205,7 @@ class ChangeState:
         hot = (a >= tu.threshold) & (rho <= tu.residual_max)
         quiet = a < self.params.template.quiet * tu.threshold
         floor = tpl.template if tpl.floor is None else tpl.floor
-        a, hot, lag = self.drops.judge(v, floor, a, hot, ends, self.fits.pred_delta, pred_drops)
+        a, hot, lag, unasked = self.drops.judge(v, floor, a, hot, ends, self.fits.pred_delta, pred_drops)
         self.last_a, self.last_rho = float(a[-1]), float(rho[-1])
         if self.trace is not None:
             self.trace.extend(a.tolist())
@@ -214,10 +214,10 @@ class ChangeState:
         # the template follows every frame that is not stop-like (the low quantile taken per chunk ignores knocks
         # and voices); a chunk that fits neither stepping nor the stop at all means the template is stale
         tpl.gather(d, quiet, rho, v)
-        if not self.latched and self.hold.mask == 0 and not hot.any():
+        if not self.latched and self.hold.mask == 0 and not (hot | unasked).any():
             self.hold.prev_a = float(a[-1])
             return []
-        return self._decide(a, hot, ends, lag, d, v)
+        return self._decide(a, hot | unasked, ends, lag, d, v)  # unasked (:mod:`.drops`): may fire, not hot
 
     def _decide(
         self, a: FloatArray, hot: NDArray[np.bool_], ends: NDArray[np.int64], lag: FloatArray, d: FloatArray,
@@ -364,7 +364,7 @@ class ChangeState:
 
     def _hear_rate(self, rate: float, end: int) -> None:
         self.fits.hear(rate, end, commanded=self.commanded_hz is not None)
-        self.drops.forget_predicted()
+        self.drops.forget_predicted(self.fits.pred_told)
 
     def _hear_rate_over(self, end: int, n: int) -> None:
         """The rate over the stream's last ``n`` samples up to sample ``end`` (where they are kept): which fits."""

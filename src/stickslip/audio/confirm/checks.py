@@ -154,6 +154,8 @@ class WindowChecks:
         c, p, got = self.clocked, self.inside, self.on_clock
         if c is None or p is None or p.max_onset_off_s <= 0.0 or got is None or not math.isfinite(got.a):
             return None
+        if not c.at_tuned_rate(got.rate_hz):
+            return None  # an affirmation at another rate: the tuned signature places no onset there
         sr = c.sample_rate
         piece = int(round(p.piece_s * sr))
         x = self.kept.get(onset - 2 * piece, onset + 2 * piece)
@@ -191,7 +193,8 @@ class WindowChecks:
         if self.clocked is None:
             return not affirm
         pieces = self.clocked.p.window_pieces
-        got = self.clocked.judge(self.after_fire(fire, min(pieces * self.span, frames * self._H)), self.pause.before_hz)
+        after = self.after_fire(fire, min(pieces * self.span, frames * self._H))
+        got = self.clocked.judge(after, self.pause.before_hz, affirm)
         if got is not None:
             log.clocked.append((ev.detected_at_s, got))
         self.on_clock = got

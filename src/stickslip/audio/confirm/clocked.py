@@ -43,6 +43,14 @@ than ``min_s`` of stepping or ``min_after_s`` of the window was heard. The lines
 to what is added between them, so the tuned signature is fitted as tuned (no masking). It
 runs once per fire that persisted, never per frame.
 
+**Affirmed at another rate.** Beyond ``max_rate_off`` the tuned signature is not what the
+stop does on the lines, and a reading under ``min_a`` is no evidence against a stop: no veto
+there. But both readings at ``min_affirm`` still say the joint's own sound changed as the
+tuned stop changes it, which no added sound does: with the commanded rate told, a fire the
+levels cannot confirm (:mod:`stickslip.audio.change.drops`: at a rate where the stop lowers
+nothing worth checking) may be affirmed so up to ``affirm_window`` from the tuning's rate
+(as the fit's ``commanded_window``); nothing else is read there, and nothing untold.
+
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
 of the stream (counted from its start) whose frames were at most ``kept_stoplike``
@@ -127,6 +135,11 @@ class ClockedParams:
     commanded_tol: float = param(0.03, "", "the rate is heard within this share of the commanded one (else taken)")
     max_rate_off: float = param(
         0.01, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere (as the fit)"
+    )
+    affirm_window: float = param(
+        0.25,
+        "of the tuning's rate",
+        "rate told: beyond max_rate_off and within this, the lines may affirm a stop, never veto it (as the fit)",
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -444,18 +457,20 @@ class ClockedCheck:
             kept_end, self.ref = got[-1]
             self.ref_age_s, self.ref_stoplike = (end - kept_end) / self.sample_rate, 0.0
 
-    def judge(self, after: FloatArray, heard_hz: float = math.nan) -> OnClock | None:
+    def judge(self, after: FloatArray, heard_hz: float = math.nan, affirm: bool = False) -> OnClock | None:
         """The lines' stop-likeness from the stepping to the window's first samples ``after`` (None: not judged).
 
         ``heard_hz``: the step rate already heard in the same stepping (the pause check's, Hz; NaN: none), taken
         where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard again near it.
+        ``affirm``: read for an affirmation only (:meth:`affirms`), with the rate told also at another rate
+        (``affirm_window``).
         """
         sr, p, ref = self.sample_rate, self.p, self.ref
         if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
             return None
         if self.ref_stoplike > p.max_ref_stoplike:
             return None  # the stop may have begun there, heard late: no stepping to compare with
-        rate = self.rate(heard_hz)
+        rate = self.rate(heard_hz, affirm)
         if not math.isfinite(rate):
             return None
         tu = self.tuning
@@ -484,10 +499,16 @@ class ClockedCheck:
         sig, cont = tu.signature_db, tu.continuum_signature_db
         return locked_reader(ref, self.sample_rate, rate_hz, tu.edges_hz, sig, cont, self.p)
 
-    def rate(self, heard_hz: float = math.nan) -> float:
+    def at_tuned_rate(self, rate_hz: float) -> bool:
+        """Whether ``rate_hz`` (Hz) is within ``max_rate_off`` of the tuning's rate: the lines may veto there."""
+        tuned = self.tuning.step_rate_hz
+        return tuned is not None and math.isfinite(rate_hz) and abs(rate_hz / tuned - 1.0) <= self.p.max_rate_off
+
+    def rate(self, heard_hz: float = math.nan, affirm: bool = False) -> float:
         """The step rate the lines are read at, Hz (NaN: not judged): ``heard_hz`` (the step rate already heard in the
         reference, Hz) where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard
-        again near it; not judged where that is more than ``max_rate_off`` from the tuning's rate or unknown."""
+        again near it; not judged where that is more than ``max_rate_off`` from the tuning's rate or unknown (with
+        ``affirm`` and the rate told, ``affirm_window``: an affirmation only)."""
         p, ref, told = self.p, self.ref, self.commanded_hz
         if ref is None:
             return math.nan
@@ -496,15 +517,18 @@ class ClockedCheck:
         else:
             rate = rate_near_hz(ref, self.sample_rate, told, p.commanded_tol)
         tuned = self.tuning.step_rate_hz
-        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= p.max_rate_off):
+        off = p.max_rate_off
+        if affirm and told is not None:
+            off = max(off, p.affirm_window)
+        if tuned is None or not (math.isfinite(rate) and abs(rate / tuned - 1.0) <= off):
             return math.nan
         return float(rate)
 
     def verdict(self, got: OnClock | None) -> bool:
         """False where the change is off the clock, on the lines or in phase with the clock followed; True where
         it is on it or nothing was judged."""
-        if got is None:
-            return True
+        if got is None or not self.at_tuned_rate(got.rate_hz):
+            return True  # at another rate the tuned signature is not what the stop does on the lines: no veto
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
 
     def affirms(self, got: OnClock | None) -> bool:
@@ -518,7 +542,7 @@ class ClockedCheck:
         the comb judged the fire too (its lines sharp: a clean clock); over a rough clock so short a reading scatters
         (the modal generator: -0.01 and 0.07 at stops whose windows read 0.53-0.92 in phase)."""
         p = self.p
-        if got is None or not math.isfinite(got.a) or p.onset_read_s <= 0.0:
+        if got is None or not math.isfinite(got.a) or p.onset_read_s <= 0.0 or not self.at_tuned_rate(got.rate_hz):
             return math.nan
         if x.size < round(p.onset_read_s * self.sample_rate):
             return math.nan
