@@ -542,10 +542,13 @@ class ClockedCheck:
         finite = [g[0] for g in got if math.isfinite(g[0])]
         if len(got) > 1 and finite:
             a = float(np.median(finite))
+        veto_off = not affirm and not self.at_tuned_rate(rate)  # read for the lines' moving alone
+        if veto_off and not math.isfinite(a):
+            return None  # the comb could not judge the tuned stop's sub-bands here: nothing read for a veto
         reader = self.reader(rate)
         locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
         moved = math.nan
-        if not self.at_tuned_rate(rate) and p.min_moved_db > 0.0 and math.isfinite(a):
+        if not self.at_tuned_rate(rate) and p.min_moved_db > 0.0 and math.isfinite(a):  # off-rate: affirm, or veto
             moved = lines_moved_db(ref, pieces, sr, rate, tu.edges_hz, p)
         return OnClock(a, rate, used, self.ref_age_s, locked, moved)
 
