@@ -363,12 +363,14 @@ def test_the_lines_read_in_phase_from_an_onset_tell_the_stop_from_stepping() -> 
     assert math.isnan(chk.at_onset(_scaled(_clicks(n, 43), (0.0, 0.0, 0.0)), rough))
 
 
-def test_at_another_rate_the_lines_may_affirm_a_stop_never_veto_it() -> None:
-    """Told a rate 10 % from the tuning's, the tuned signature is not what the stop does on the lines: the check
-    gives no verdict for a veto (``judge``: None), but read for an affirmation the joint's clicks changed by the
-    signature still read a_L near 1 and affirm; the same window with its change undone reads near 0 and is no veto
-    there (nor is an onset read); within 1 % of the tuning's rate it is one. Beyond ``affirm_window``, or untold,
-    nothing is read."""
+def test_at_another_rate_the_lines_may_affirm_a_stop_and_veto_only_lines_that_did_not_move() -> None:
+    """Told a rate 10 % from the tuning's, the tuned signature is not what the stop does on the lines: a reading
+    under ``min_a`` is no veto there, but read for an affirmation the joint's clicks changed by the signature still
+    read a_L near 1 and affirm. What vetoes there is the lines in phase not moving at all (``min_moved_db``): the
+    stop's window moved them by the signature's RMS (4.2 dB over its three sub-bands), the
+    same window with its change undone by about 0 dB, and that is no stop (nor is an onset read); with
+    ``min_moved_db`` 0 nothing is read for a veto (the check as it was); within 1 % of the tuning's rate the reading
+    under ``min_a`` is a veto. Beyond ``affirm_window``, or untold, nothing is read."""
     fast = 1.1 * RATE
     step = round(SR / fast)  # a click every 44 samples: 1090.9 Hz, 9 % from the tuning's rate
 
@@ -382,13 +384,22 @@ def test_at_another_rate_the_lines_may_affirm_a_stop_never_veto_it() -> None:
     chk.reset(SR / step)
     chk.hear_before(_scaled(clicks(N, 10), (0.0, 0.0, 0.0)), np.full(120, -0.6))
     stop, none = _scaled(clicks(N, 11), (0.0, 6.0, -4.0)), _scaled(clicks(N, 11), (0.0, 0.0, 0.0))
-    assert chk.judge(stop) is None and chk.judge(none) is None  # no verdict for a veto at this rate
+    moved, still = chk.judge(stop), chk.judge(none)
+    assert moved is not None and still is not None and not chk.at_tuned_rate(moved.rate_hz)
+    assert moved.moved_db == pytest.approx(math.sqrt((36.0 + 16.0) / 3.0), abs=0.5) and chk.verdict(moved)
+    assert still.moved_db < 0.3 and not chk.verdict(still)  # the lines did not move: the stepping went on
+    assert math.isnan(chk.at_onset(none, still))  # at another rate: no onset doubt
+    old = ClockedCheck(_Tuning(), ClockedParams(min_moved_db=0.0))  # type: ignore[arg-type]
+    old.reset(SR / step)
+    old.hear_before(_scaled(clicks(N, 10), (0.0, 0.0, 0.0)), np.full(120, -0.6))
+    assert old.judge(stop) is None and old.judge(none) is None  # no verdict for a veto at this rate
     got = chk.judge(stop, affirm=True)
-    assert got is not None and got.rate_hz == pytest.approx(SR / step, rel=0.01) and not chk.at_tuned_rate(got.rate_hz)
+    assert got is not None and got.rate_hz == pytest.approx(SR / step, rel=0.01)
     assert got.a == pytest.approx(1.0, abs=0.1) and got.locked == pytest.approx(1.0, abs=0.1) and chk.affirms(got)
     nothing = chk.judge(none, affirm=True)
     assert nothing is not None and abs(nothing.a) < 0.1 and not chk.affirms(nothing)
-    assert chk.verdict(nothing) and math.isnan(chk.at_onset(none, nothing))  # at another rate: no veto, no doubt
+    unmoved = OnClock(nothing.a, nothing.rate_hz, 2, math.nan, nothing.locked)  # moved not read
+    assert chk.verdict(unmoved)  # a reading under min_a at another rate: no veto
     assert not chk.verdict(OnClock(nothing.a, RATE, 2, math.nan, nothing.locked))  # at the tuning's rate: a veto
     stepping = _scaled(clicks(N, 10), (0.0, 0.0, 0.0))
     for p, told, read in ((CLOCKED, SR / step, True), (CLOCKED, None, False),

@@ -14,6 +14,7 @@ and stops several times (marked slow), and the stream's own properties.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cache
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from hour_sound import KINDS, Hour, spans, stream
 from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
+from stickslip.audio.confirm.clocked import CLOCKED
 from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
 from stickslip.audio.tuningfile import Tuning
@@ -79,6 +81,22 @@ def test_a_radio_that_fits_a_stop_that_only_rises_is_off_the_step_clock() -> Non
     assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
     judged = [g for _, g in det.log.clocked]
     assert judged and all(abs(g.a) < 0.2 and g.bands == 2 for g in judged)
+
+
+@pytest.mark.parametrize("rate", [950.0, 1050.0])
+def test_at_another_rate_told_a_radio_the_lines_do_not_move_for_is_no_stop(rate: float) -> None:
+    """The same radio with the joint stepping 5 % off the tuning's rate, told: the tuned signature is not read for a
+    veto there, and the fire was counted (a wrong count); the lines in phase at the commanded rate did not move
+    (under ``min_moved_db``: the stepping went on), and that is no stop."""
+    h = Hour(Arm(3), rate=rate, dur=3.0, seed=3)
+    tu = joint_tuning(3)
+    before = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_moved_db=0.0)))
+    assert [e.onset_uncertain for e in before] == [False] and before[0].onset_s < 0.5
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=h.rate)
+    assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
+    judged = [g for _, g in det.log.clocked]
+    assert judged and all(g.rate_hz == pytest.approx(rate, rel=0.01) and g.moved_db < 0.5 for g in judged)
 
 
 def test_the_stream_does_not_depend_on_its_blocks() -> None:

@@ -45,11 +45,19 @@ runs once per fire that persisted, never per frame.
 
 **Affirmed at another rate.** Beyond ``max_rate_off`` the tuned signature is not what the
 stop does on the lines, and a reading under ``min_a`` is no evidence against a stop: no veto
-there. But both readings at ``min_affirm`` still say the joint's own sound changed as the
+on it there. But both readings at ``min_affirm`` still say the joint's own sound changed as the
 tuned stop changes it, which no added sound does: with the commanded rate told, a fire the
 levels cannot confirm (:mod:`stickslip.audio.change.drops`: at a rate where the stop lowers
 nothing worth checking) may be affirmed so up to ``affirm_window`` from the tuning's rate
-(as the fit's ``commanded_window``); nothing else is read there, and nothing untold.
+(as the fit's ``commanded_window``). Nothing untold.
+
+**Unmoved at another rate.** What does hold there, whatever the signature, is that a stop
+changes the joint's own clicks, so it moves their lines somewhere, while sound added out of
+step with the clock leaves them in phase as they were (the stepping goes on through a false
+stop). So with the rate told (the controller's clock, not a guess), off the tuning's rate and
+within ``affirm_window``, where the comb could judge the tuned stop's sub-bands, a fire whose
+lines in phase moved less than ``min_moved_db`` RMS over every sub-band whose lines were locked
+before (:func:`lines_moved_db`) is not a stop.
 
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
@@ -94,6 +102,7 @@ __all__ = [
     "ClockedParams",
     "LockedReader",
     "OnClock",
+    "lines_moved_db",
     "lines_stop_likeness",
     "locked_reader",
     "locked_stop_likeness",
@@ -139,7 +148,12 @@ class ClockedParams:
     affirm_window: float = param(
         0.25,
         "of the tuning's rate",
-        "rate told: beyond max_rate_off and within this, the lines may affirm a stop, never veto it (as the fit)",
+        "rate told: beyond max_rate_off and within this, the lines may affirm a stop; veto only unmoved (as the fit)",
+    )
+    min_moved_db: float = param(
+        1.0,
+        "dB",
+        "rate told, off the tuning's: a fire whose lines in phase moved less (RMS) is not a stop (true stops: 2.4+)",
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -198,6 +212,9 @@ class OnClock:
     kept_s: float = math.nan
     #: the lines' stop-likeness read in phase with the clock followed (NaN: not read, or no verdict)
     locked: float = math.nan
+    #: how far the lines in phase moved, whatever the signature: RMS over the sub-bands locked before, dB (NaN: not
+    #: read; read only with the rate told, off the tuning's rate)
+    moved_db: float = math.nan
 
 
 def lines_stop_likeness(
@@ -389,6 +406,46 @@ def locked_reader(
     return LockedReader(read, tuple(k for i in keep for k in lines[i]))
 
 
+def lines_moved_db(
+    before: FloatArray,
+    pieces: Sequence[FloatArray],
+    sample_rate: float,
+    rate_hz: float,
+    edges_hz: Sequence[float],
+    p: ClockedParams = CLOCKED,
+) -> float:
+    """How far the joint's lines moved, whatever the stop's signature: the RMS over the sub-bands whose lines held
+    ``min_locked`` of their power in phase over ``before`` of their change in phase (dB, floored as
+    :func:`_change_db`), the median over the ``pieces``; NaN where no sub-band's lines were locked.
+
+    The tuned signature may not be what a stop does on the lines at another rate (they sample the arm's narrow
+    modes elsewhere), but a stop changes the joint's own clicks, so it moves its lines somewhere; sound added
+    between them, out of step with the clock, leaves them in phase as they were (the step rate told: the
+    controller's clock).
+    """
+    lines = [
+        [k for k in range(1, int(sample_rate / 2 / rate_hz) + 1) if edges_hz[i] <= k * rate_hz < edges_hz[i + 1]]
+        for i in range(len(edges_hz) - 1)
+    ]
+    ks = sorted({k for v in lines for k in v})
+    if not ks or p.locked_frame_s <= 0.0 or not pieces:
+        return math.nan
+    l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
+
+    def held(v: FloatArray, band: list[int]) -> float:
+        return sum(float(v[ks.index(k)]) for k in band)
+
+    keep = [b for b in lines if b and held(w0, b) > 0.0 and held(l0, b) >= p.min_locked * held(w0, b)]
+    if not keep:
+        return math.nan
+    changes = []
+    for x in pieces:
+        l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
+        changes.append([_change_db(held(l0, b), held(l1, b), p.floor_share) for b in keep])
+    d = np.median(np.asarray(changes, dtype=np.float64), axis=0)
+    return float(np.sqrt(np.mean(d**2)))
+
+
 def _comb_read(
     b: Periodogram, a: Periodogram, sr: float, rate_hz: float, bands: list[tuple[float, float]], tol: float
 ) -> list[tuple[float, float, float, float]]:
@@ -463,15 +520,15 @@ class ClockedCheck:
         ``heard_hz``: the step rate already heard in the same stepping (the pause check's, Hz; NaN: none), taken
         where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard again near it.
         ``affirm``: read for an affirmation only (:meth:`affirms`), with the rate told also at another rate
-        (``affirm_window``).
-        """
+        (``affirm_window``). With the rate told and ``min_moved_db`` over 0, read there for a veto too, on how far
+        the lines moved (``moved_db``; where the comb judged the tuned sub-bands) and nothing else."""
         sr, p, ref = self.sample_rate, self.p, self.ref
         if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
             return None
         if self.ref_stoplike > p.max_ref_stoplike:
             return None  # the stop may have begun there, heard late: no stepping to compare with
-        rate = self.rate(heard_hz, affirm)
-        if not math.isfinite(rate):
+        rate = self.rate(heard_hz, affirm or self.commanded_hz is not None)
+        if not math.isfinite(rate) or not (affirm or self.at_tuned_rate(rate) or p.min_moved_db > 0.0):
             return None
         tu = self.tuning
         assert tu.edges_hz is not None and tu.signature_db is not None and tu.continuum_signature_db is not None
@@ -485,9 +542,15 @@ class ClockedCheck:
         finite = [g[0] for g in got if math.isfinite(g[0])]
         if len(got) > 1 and finite:
             a = float(np.median(finite))
+        veto_off = not affirm and not self.at_tuned_rate(rate)  # read for the lines' moving alone
+        if veto_off and not math.isfinite(a):
+            return None  # the comb could not judge the tuned stop's sub-bands here: nothing read for a veto
         reader = self.reader(rate)
         locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
-        return OnClock(a, rate, used, self.ref_age_s, locked)
+        moved = math.nan
+        if not self.at_tuned_rate(rate) and p.min_moved_db > 0.0 and math.isfinite(a):  # off-rate: affirm, or veto
+            moved = lines_moved_db(ref, pieces, sr, rate, tu.edges_hz, p)
+        return OnClock(a, rate, used, self.ref_age_s, locked, moved)
 
     def reader(self, rate_hz: float) -> LockedReader | None:
         """The lines read in phase with the clock followed at ``rate_hz`` (Hz) against the reference (the chain's
@@ -528,7 +591,9 @@ class ClockedCheck:
         """False where the change is off the clock, on the lines or in phase with the clock followed; True where
         it is on it or nothing was judged."""
         if got is None or not self.at_tuned_rate(got.rate_hz):
-            return True  # at another rate the tuned signature is not what the stop does on the lines: no veto
+            # at another rate the tuned signature is not what the stop does on the lines: no veto on it; but lines
+            # that did not move at all (the rate told: the clock is the controller's) are the stepping going on
+            return not got.moved_db < self.p.min_moved_db if got is not None else True
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
 
     def affirms(self, got: OnClock | None) -> bool:
