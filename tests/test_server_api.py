@@ -43,6 +43,21 @@ def client(room: ControlRoom) -> Iterator[TestClient]:
         yield c
 
 
+@pytest.fixture()
+def held_room(tmp_path: Path) -> Iterator[ControlRoom]:
+    """A room whose dead man waits 30 s: only the release (or the socket) ends a jog, however starved the
+    machine is between two keep-alives (with the default hold a slow CI core once let the dead man go first)."""
+    r = room_on(tmp_path, jog_idle_end_s=0.3, jog_hold_s=30.0)
+    yield r
+    r.close()
+
+
+@pytest.fixture()
+def held_client(held_room: ControlRoom) -> Iterator[TestClient]:
+    with TestClient(create_app(held_room, LOCAL), base_url="http://127.0.0.1:8765") as c:
+        yield c
+
+
 def wait(client: TestClient, motion: dict[str, Any]) -> dict[str, Any]:
     r = client.get(f"/api/motions/{motion['id']}", params={"wait": 20})
     assert r.status_code == 200, r.text
@@ -254,7 +269,8 @@ def test_save_a_position_and_return_to_it(client: TestClient, room: ControlRoom)
     assert client.get("/api/positions").json()["positions"] == []
 
 
-def test_jog_moves_while_held_and_stops_on_release(client: TestClient, room: ControlRoom) -> None:
+def test_jog_moves_while_held_and_stops_on_release(held_client: TestClient, held_room: ControlRoom) -> None:
+    client, room = held_client, held_room
     arm = room.owned.dev
     start = [arm.position(j) for j in (1, 2, 3)]
     r = client.post("/api/jog", json={"direction": "+z", "speed": 7})
