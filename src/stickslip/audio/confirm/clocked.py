@@ -590,10 +590,12 @@ class ClockedCheck:
     def verdict(self, got: OnClock | None) -> bool:
         """False where the change is off the clock, on the lines or in phase with the clock followed; True where
         it is on it or nothing was judged."""
-        if got is None or not self.at_tuned_rate(got.rate_hz):
+        if got is None:
+            return True
+        if not self.at_tuned_rate(got.rate_hz):
             # at another rate the tuned signature is not what the stop does on the lines: no veto on it; but lines
             # that did not move at all (the rate told: the clock is the controller's) are the stepping going on
-            return not got.moved_db < self.p.min_moved_db if got is not None else True
+            return not got.moved_db < self.p.min_moved_db  # NaN (not read): no veto
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
 
     def affirms(self, got: OnClock | None) -> bool:
