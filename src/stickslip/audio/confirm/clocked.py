@@ -379,31 +379,53 @@ def locked_reader(
     """What :func:`locked_stop_likeness` reads of one stretch against ``before``, ``before`` read once (None: no
     verdict on any stretch)."""
     judged, whole = _judged(signature_db, continuum_db, p)
+    lk = _locked_bands(before, sample_rate, rate_hz, edges_hz, judged, p)
+    if lk is None:
+        return None
+    den = sum(float(signature_db[i]) ** 2 for i in lk.keep)
+    if den == 0.0 or den < p.min_covered * whole:
+        return None
+
+    def read(x: FloatArray) -> float:
+        l1, _ = _in_phase(x, sample_rate, rate_hz, lk.ks, p)
+        num = 0.0
+        for i in lk.keep:
+            num += float(signature_db[i]) * _change_db(lk.held(lk.l0, i), lk.held(l1, i), p.floor_share)
+        return num / den
+
+    return LockedReader(read, tuple(k for i in lk.keep for k in lk.lines[i]))
+
+
+@dataclass(frozen=True)
+class _Locked:
+    """The lines of each sub-band read in phase over the stepping, and the sub-bands whose lines were locked."""
+
+    ks: list[int]  #: every line read (multiples of the rate), in order
+    lines: dict[int, list[int]]  #: each sub-band's lines
+    l0: FloatArray  #: the lines' power in phase over the stepping
+    keep: list[int]  #: the sub-bands whose lines held ``min_locked`` of their power in phase
+
+    def held(self, v: FloatArray, i: int) -> float:
+        """The power ``v`` (one value per line of :attr:`ks`) summed over sub-band ``i``'s lines."""
+        return sum(float(v[self.ks.index(k)]) for k in self.lines[i])
+
+
+def _locked_bands(
+    before: FloatArray, sample_rate: float, rate_hz: float, edges_hz: Sequence[float], bands: Sequence[int],
+    p: ClockedParams,
+) -> _Locked | None:
+    """The lines of the sub-bands ``bands`` read in phase over ``before`` (None: no line, or no in-phase reading)."""
     lines = {
         i: [k for k in range(1, int(sample_rate / 2 / rate_hz) + 1) if edges_hz[i] <= k * rate_hz < edges_hz[i + 1]]
-        for i in judged
+        for i in bands
     }
     ks = sorted({k for v in lines.values() for k in v})
     if not ks or p.locked_frame_s <= 0.0:
         return None
     l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
-
-    def held(v: FloatArray, i: int) -> float:
-        return sum(float(v[ks.index(k)]) for k in lines[i])
-
-    keep = [i for i in judged if held(w0, i) > 0.0 and held(l0, i) >= p.min_locked * held(w0, i)]
-    den = sum(float(signature_db[i]) ** 2 for i in keep)
-    if den == 0.0 or den < p.min_covered * whole:
-        return None
-
-    def read(x: FloatArray) -> float:
-        l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
-        num = 0.0
-        for i in keep:
-            num += float(signature_db[i]) * _change_db(held(l0, i), held(l1, i), p.floor_share)
-        return num / den
-
-    return LockedReader(read, tuple(k for i in keep for k in lines[i]))
+    every = _Locked(ks, lines, l0, list(bands))
+    held = every.held
+    return _Locked(ks, lines, l0, [i for i in bands if held(w0, i) > 0.0 and held(l0, i) >= p.min_locked * held(w0, i)])
 
 
 def lines_moved_db(
@@ -423,25 +445,15 @@ def lines_moved_db(
     between them, out of step with the clock, leaves them in phase as they were (the step rate told: the
     controller's clock).
     """
-    lines = [
-        [k for k in range(1, int(sample_rate / 2 / rate_hz) + 1) if edges_hz[i] <= k * rate_hz < edges_hz[i + 1]]
-        for i in range(len(edges_hz) - 1)
-    ]
-    ks = sorted({k for v in lines for k in v})
-    if not ks or p.locked_frame_s <= 0.0 or not pieces:
+    if not pieces:
         return math.nan
-    l0, w0 = _in_phase(before, sample_rate, rate_hz, ks, p)
-
-    def held(v: FloatArray, band: list[int]) -> float:
-        return sum(float(v[ks.index(k)]) for k in band)
-
-    keep = [b for b in lines if b and held(w0, b) > 0.0 and held(l0, b) >= p.min_locked * held(w0, b)]
-    if not keep:
+    lk = _locked_bands(before, sample_rate, rate_hz, edges_hz, range(len(edges_hz) - 1), p)
+    if lk is None or not lk.keep:
         return math.nan
     changes = []
     for x in pieces:
-        l1, _ = _in_phase(x, sample_rate, rate_hz, ks, p)
-        changes.append([_change_db(held(l0, b), held(l1, b), p.floor_share) for b in keep])
+        l1, _ = _in_phase(x, sample_rate, rate_hz, lk.ks, p)
+        changes.append([_change_db(lk.held(lk.l0, i), lk.held(l1, i), p.floor_share) for i in lk.keep])
     d = np.median(np.asarray(changes, dtype=np.float64), axis=0)
     return float(np.sqrt(np.mean(d**2)))
 
