@@ -45,6 +45,8 @@ def test_help_fits_80_columns_and_names_what_each_option_takes(command, monkeypa
     assert "…" not in r.stdout  # nothing cut off ($STICKSLIP_ANC300_PASSWO…)
     assert "<float>" not in r.stdout and "FLOAT" not in r.stdout
     assert "<bool>" not in r.stdout  # a flag takes nothing: --version <bool> reads as if it took a value
+    usage = r.stdout.split("\n\n")[0]  # the usage line names arguments as their rows do: POSES, [MEASUREMENTS]
+    assert "{" not in usage and "[[" not in usage, usage
     monkeypatch.setenv("COLUMNS", "400")
     wide = runner.invoke(app, [*command, "--help"]).stdout
     words = {w for w in r.stdout.split() if any(not 0x2500 <= ord(c) <= 0x257F for c in w)}  # not the panels' lines

@@ -158,17 +158,35 @@ def _body(doc: str, width: int) -> list[str]:
     return out
 
 
+def _argument_name(p: Any) -> str:
+    """An argument as the help names it: its metavar, else its name in capitals (``POSES``)."""
+    return str(p.metavar or (p.name or "").upper())
+
+
+def _usage(ctx: Any, params: list[Any], dashed: list[Any]) -> str:
+    """The usage line, in the same names as the arguments' rows: ``POSES``, ``[MEASUREMENTS]``, ``FRAMES...``."""
+    pieces = [ctx.command_path] + (["[OPTIONS]"] if dashed else [])
+    for p in params:
+        if p in dashed:
+            continue
+        name = _argument_name(p)
+        if not p.required and not name.startswith("["):
+            name = f"[{name}]"
+        pieces.append(name + ("..." if p.nargs != 1 else ""))
+    return " ".join(pieces)
+
+
 class HelpCommand(TyperCommand):
     """A typer command whose ``--help`` fits the terminal (:func:`help_width`) without cutting a word."""
 
     def format_help(self, ctx: Any, formatter: Any) -> None:
         width = help_width()
-        lines = wrap(self.get_usage(ctx).replace("Usage: ", "", 1), width, "    ", first="Usage: ") + [""]
-        if self.help:
-            lines += _body(self.help, width)
         params = [p for p in self.get_params(ctx) if not getattr(p, "hidden", False)]
         dashed = [p for p in params if p.opts and p.opts[0].startswith("-")]
-        arguments = [(str(p.metavar or (p.name or "").upper()), _description(p)) for p in params if p not in dashed]
+        lines = wrap(_usage(ctx, params, dashed), width, "    ", first="Usage: ") + [""]
+        if self.help:
+            lines += _body(self.help, width)
+        arguments = [(_argument_name(p), _description(p)) for p in params if p not in dashed]
         options = [(_names(p), _description(p)) for p in dashed]
         for title, rows in (("Arguments:", arguments), ("Options:", options)):
             if rows:
