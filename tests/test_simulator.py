@@ -298,6 +298,8 @@ def test_open_url_and_registry():
     assert sim.settings()["frequency_hz"] == {1: 1000.0, 2: 1000.0, 3: 1000.0}
     with pytest.raises(DeviceError, match=r"unknown device URL scheme 'foo'.*sim://"):
         open_device("foo://x")
+    with pytest.raises(ValueError, match=r"gives the option 'seed' twice"):  # which seed would it be?
+        open_device("sim://?seed=1&noise=0.01&seed=2")
 
 
 @pytest.mark.slow

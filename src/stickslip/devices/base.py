@@ -317,8 +317,9 @@ def check_device_url(url: str) -> str:
 
     Checked without opening anything: a scheme with ``//`` (:func:`url_scheme`) that a
     backend is registered for, a URL that parses, a port in 1..65535, a host name DNS
-    could carry (labels of 1 to 63 characters, at most 253 in all), and a host or a
-    port for anything but the simulator. A URL that
+    could carry (labels of 1 to 63 characters, at most 253 in all), a host or a
+    port for anything but the simulator, and no option given twice (which one would
+    the device take?). A URL that
     passes may still fail to open (nothing answers there); one that fails never would,
     and is neither opened nor stored.
 
@@ -328,6 +329,10 @@ def check_device_url(url: str) -> str:
     Traceback (most recent call last):
     ...
     ValueError: malformed device URL 'anc300://h:99999': the port must be a number in 1..65535
+    >>> check_device_url("sim://?seed=1&seed=2")
+    Traceback (most recent call last):
+    ...
+    ValueError: device URL 'sim://?seed=1&seed=2' gives the option 'seed' twice: give it once
     """
     scheme = url_scheme(url)
     if BACKENDS.get(scheme) is None:  # a variant (mm3a+socket) is registered as such: anc300+x is no URL
@@ -341,6 +346,9 @@ def check_device_url(url: str) -> str:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535") from None
     if port == 0:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
+    twice = sorted(k for k, v in parse_qs(parts.query, keep_blank_values=True).items() if len(v) > 1)
+    if twice:
+        raise ValueError(f"device URL {redact_url(url)!r} gives the option {twice[0]!r} twice: give it once")
     if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
         raise ValueError(
             f"device URL {redact_url(url)!r} names no host and no port: give the serial port "
