@@ -137,6 +137,8 @@ def test_camera_urls(tmp_path):
     assert cam.info.pixel_size_m == pytest.approx(0.25e-6) and cam.grab().shape == (20, 30)
     with pytest.raises(ValueError, match=r"unknown option\(s\) \['zoom'\]"):
         open_camera(f"files://{tmp_path}?zoom=2")
+    with pytest.raises(ValueError, match=r"gives the option 'pixel' twice"):  # 0.25 or 2 um a pixel?
+        open_camera(f"files://{tmp_path}?pixel=0.25um&fps=5&pixel=2um")
     with pytest.raises(ValueError, match="has no scheme"):
         open_camera(str(tmp_path))
     with pytest.raises(CameraError, match="unknown camera URL scheme 'usb'"):

@@ -148,14 +148,18 @@ def camera_options(url: str, known: set[str] | frozenset[str]) -> tuple[str, dic
     """``(location, options)`` of a camera URL: what stands between ``://`` and ``?``, and the options.
 
     The location is taken as written (a relative path stays relative: ``files://frames/*.png``).
-    Unknown options raise ``ValueError`` naming them and the known ones.
+    Unknown options, and an option given twice, raise ``ValueError`` naming them (and the known ones).
     """
     rest = str(url).partition("://")[2]
     location, _, query = rest.partition("?")
-    opts = {k: v[-1] for k, v in parse_qs(query, keep_blank_values=True).items()}
-    unknown = sorted(set(opts) - set(known))
+    given = parse_qs(query, keep_blank_values=True)
+    unknown = sorted(set(given) - set(known))
     if unknown:
         raise ValueError(f"unknown option(s) {unknown} in {redact_url(url)!r} (known: {sorted(known)})")
+    twice = sorted(k for k, v in given.items() if len(v) > 1)
+    if twice:
+        raise ValueError(f"camera URL {redact_url(url)!r} gives the option {twice[0]!r} twice: give it once")
+    opts = {k: v[0] for k, v in given.items()}
     return location, opts
 
 
