@@ -35,6 +35,10 @@ MIN_SIDE = 16
 MAX_PIXELS = 64 * 1024 * 1024
 """Largest frame, pixels (64 Mpx, 512 MiB as float64): anything bigger is refused before it is decoded."""
 
+MAX_VALUE = 1e100
+"""Largest pixel value, in magnitude (grey units): the tracker sums squares of pixels over a window, which
+overflows float64 near 1e154; no camera's count, nor any physical unit a float image is written in, is near it."""
+
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 """Weights of red, green and blue in the grey value of a colour frame (Rec. 709)."""
 
@@ -102,7 +106,8 @@ def as_image(data: object, source: str = "image") -> NDArray[np.float64]:
     ImageError
         For another shape (a stack of images: ``(n, h, w)``), a side under
         :data:`MIN_SIDE` or more than :data:`MAX_PIXELS` pixels, a non-numeric type, or
-        a pixel that is NaN or infinite (its position is named, ``x, y``).
+        a pixel that is NaN or infinite, or beyond :data:`MAX_VALUE` in magnitude (its
+        position is named, ``x, y``).
     """
     a = np.asarray(data)
     if a.dtype == bool:
@@ -134,9 +139,14 @@ def as_image(data: object, source: str = "image") -> NDArray[np.float64]:
         f = f[:, :, 0]
     elif channels in (3, 4):
         f = f[:, :, 0] * LUMINANCE[0] + f[:, :, 1] * LUMINANCE[1] + f[:, :, 2] * LUMINANCE[2]
-    if not np.isfinite(f).all():
+    peak = float(np.max(np.abs(f)))  # NaN when any pixel is NaN
+    if not math.isfinite(peak):
         bad = np.argwhere(~np.isfinite(f))
         y, x = (int(v) for v in bad[0])
         what = "NaN" if math.isnan(float(f[y, x])) else "infinite"
         raise ImageError(f"{source}: {len(bad)} pixel(s) are NaN or infinite (the first, at x={x}, y={y}, is {what})")
+    if peak > MAX_VALUE:
+        y, x = (int(v) for v in np.unravel_index(int(np.argmax(np.abs(f))), f.shape))
+        raise ImageError(f"{source}: a pixel of {float(f[y, x]):g} (at x={x}, y={y}) is beyond the ±{MAX_VALUE:g} "
+                         "a frame's values may have (no camera records it; the tracker's sums would overflow)")
     return np.ascontiguousarray(f, dtype=np.float64)

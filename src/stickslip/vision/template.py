@@ -413,12 +413,18 @@ def _needle_mask(
     """The pixels of the needle at the tip: those standing out from the window's ring, connected to the tip, and
     the ring's level and spread (grey units).
 
-    Raises :class:`TemplateError` when nothing stands out within 8 px of the tip, or too little.
+    Raises :class:`TemplateError` when the ring lies outside the frame, when nothing stands out within 8 px of
+    the tip, or too little.
     """
     x, y = tip
     ring = np.ones_like(inside)
     ring[4:-4, 4:-4] = False
     ring &= inside
+    if not ring.any():  # a frame smaller than the window: no background to measure the needle against
+        raise TemplateError(
+            f"no background around the tip ({x:g}, {y:g}) in the frame: the ring {params.half_window - 4} to "
+            f"{params.half_window} px from it, where the background is read, lies wholly outside the frame"
+        )
     smooth = ndimage.gaussian_filter(win, 1.0)
     level = float(np.median(smooth[ring]))
     spread = float(1.4826 * np.median(np.abs(smooth[ring] - level)))

@@ -65,7 +65,7 @@ from scipy.fft import next_fast_len
 
 from .average import TemplateAverage, anchor
 from .edges import EdgeCheck, check_edges, learn_edges
-from .frame import Frame
+from .frame import Frame, as_image
 from .refine import Refinement, Steepest, refine, steepest, warped
 from .sampling import Patch, median, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
@@ -521,6 +521,10 @@ class TipTracker:
     ------
     TemplateError
         When nothing that can be tracked stands at ``tip``.
+    ImageError
+        When ``first`` is no image (:func:`~.frame.as_image`: not 2-D, too small, a pixel NaN, infinite or
+        beyond :data:`~.frame.MAX_VALUE`). Later frames given as arrays are taken as they are: a
+        :class:`~.frame.Frame` (made by :func:`~.frame.as_image`) is checked.
     """
 
     # the fit's parts of the template, made by _fit_parts (again when the template is averaged)
@@ -533,7 +537,8 @@ class TipTracker:
     _spec_noise2: list[float]
 
     def __init__(self, first: FloatArray | Frame, tip: tuple[float, float], params: TrackerParams = TrackerParams()):
-        image = first.image if isinstance(first, Frame) else np.asarray(first, dtype=float)
+        # an array is checked as a file's pixels are (2-D, finite, in range), its values kept as they are
+        image = first.image if isinstance(first, Frame) else as_image(np.asarray(first, dtype=float), "the first frame")
         self.params = params
         self.template = TipTemplate.learn(image, tip, params)
         self.shape = (int(image.shape[0]), int(image.shape[1]))
