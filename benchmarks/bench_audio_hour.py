@@ -66,6 +66,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
         + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
         + (f"; in phase {got[0].locked:.2f}" if got[0].locked == got[0].locked else "")
+        + (f"; its lines moved {got[0].moved_db:.2f} dB" if got[0].moved_db == got[0].moved_db else "")
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
