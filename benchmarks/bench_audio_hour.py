@@ -15,7 +15,8 @@ stops (unflagged / flagged); then the events.
 Run: ``.venv/bin/python benchmarks/bench_audio_hour.py`` (arms 1-3, an hour each: several
 minutes per joint on a shared machine, the generator about as costly as the detector);
 ``--minutes 10`` for a shorter stretch, ``--arms 1,2,3,4,5,6,7,8`` for every arm of the generator,
-``--rate 1150`` to step (and tell) another rate than the tuning's, ``--details`` to print under each
+``--rate 1150`` to step (and tell) another rate than the tuning's, ``--seed 1`` for another draw of the
+same joints (the seed the arm + 1000; 0, the default, is the hour as measured), ``--details`` to print under each
 false stop what the confirming detector noted (``ConfirmLog``): the clocked check's verdict, the
 onset's doubt, the rejected fires before it. ``docs/audio-log.md`` ("Diagnosis of the hour's false
 stops") reads those lines. ``--variants in-step,default`` hears the same samples with
@@ -65,6 +66,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
         f"a_L {got[0].a:.2f} on {got[0].bands} sub-bands at {got[0].rate_hz:.2f} Hz"
         + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
         + (f"; in phase {got[0].locked:.2f}" if got[0].locked == got[0].locked else "")
+        + (f"; its lines moved {got[0].moved_db:.2f} dB" if got[0].moved_db == got[0].moved_db else "")
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
@@ -100,11 +102,19 @@ VARIANTS: dict[str, ClockedParams | None] = {
 
 
 def hour(
-    arm: int, minutes: float, rate: float, detail: bool = False, variants: tuple[str, ...] = ("default",)
+    arm: int,
+    minutes: float,
+    rate: float,
+    detail: bool = False,
+    variants: tuple[str, ...] = ("default",),
+    draw: int = 0,
 ) -> dict[str, tuple[dict[str, list[float]], list[str]]]:
-    """Per variant: per kind [seconds, unflagged, flagged]; and one line per event (two with ``detail``)."""
+    """Per variant: per kind [seconds, unflagged, flagged]; and one line per event (two with ``detail``).
+
+    ``draw``: 0 the hour as measured (its seed the arm), N another draw of the same joint (seed the arm + 1000 N,
+    clear of every other joint's seeds)."""
     tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
-    h = Hour(Arm(arm), rate=rate, dur=60.0 * minutes, seed=arm)
+    h = Hour(Arm(arm), rate=rate, dur=60.0 * minutes, seed=arm + 1000 * draw)
     dets = {v: ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=VARIANTS[v])) for v in variants}
     heard: dict[str, list[StopEvent]] = {v: [] for v in variants}
     for d in dets.values():
@@ -140,16 +150,17 @@ def main(
     rate: float = 1000.0,
     detail: bool = False,
     variants: tuple[str, ...] = ("default",),
+    draw: int = 0,
 ) -> None:
     print(
-        f"{minutes:g} min of stepping at {rate:g} Hz (told) with speech, music and a radio, no stop: "
+        f"{minutes:g} min of stepping at {rate:g} Hz (told, draw {draw}) with speech, music and a radio, no stop: "
         "false stops (unflagged, a wrong count / flagged, refused)"
     )
     print("| joint | clocked check | " + " | ".join(KINDS) + " | all | s |")
     print("| --- " * (len(KINDS) + 4) + "|")
     for arm in arms:
         t = time.perf_counter()
-        got = hour(arm, minutes, rate, detail, variants)
+        got = hour(arm, minutes, rate, detail, variants, draw)
         for v, (per, lines) in got.items():
             cells = [f"{int(u)} / {int(f)} in {s / 60:.0f} min" for s, u, f in per.values()]
             u_all, f_all = sum(x[1] for x in per.values()), sum(x[2] for x in per.values())
@@ -626,6 +637,7 @@ if __name__ == "__main__":
     ap.add_argument("--minutes", type=float, default=60.0, help="minutes of stepping per joint")
     ap.add_argument("--rate", type=float, default=1000.0, help="the step rate, Hz (told to the detector)")
     ap.add_argument("--details", action="store_true", help="what the detector noted about each false stop")
+    ap.add_argument("--seed", type=int, default=0, help="the draw: 0 as measured, N another (seed arm + 1000 N)")
     ap.add_argument("--variants", default="default", help=f"the clocked check's variants: {', '.join(VARIANTS)}")
     ap.add_argument("--crystal", action="store_true", help="the twelfth generator instead (a crystal's clock)")
     ap.add_argument("--stops", type=int, default=6, help="with --crystal: stops under music on the lines, per joint")
@@ -647,4 +659,6 @@ if __name__ == "__main__":
     if a.crystal:
         crystal_main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.details, vs, a.stops)
         sys.exit(0)
-    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details, vs)
+    if a.seed < 0:
+        ap.error(f"--seed: a draw, 0 or more (got {a.seed})")
+    main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details, vs, a.seed)

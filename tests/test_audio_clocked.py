@@ -109,6 +109,11 @@ class _Tuning:
     signature_db = (0.0, 6.0, -4.0)
     continuum_signature_db = (0.0, 5.0, -4.5)
     step_rate_hz = RATE
+    frame = 1024
+    fine_start_hz: float | None = None  # no fine continuum: no signature predicted at another rate
+    fine_bin_hz: float | None = None
+    fine_stepping_db: tuple[float, ...] | None = None
+    fine_stopped_db: tuple[float, ...] | None = None
 
 
 def test_the_check_judges_a_window_against_its_reference() -> None:
@@ -408,3 +413,62 @@ def test_at_another_rate_the_lines_may_affirm_a_stop_and_veto_only_lines_that_di
         other.reset(told)
         other.hear_before(stepping, np.full(120, -0.6))
         assert (other.judge(stop, SR / step, affirm=True) is not None) is read  # 9 % off: within 25 %, not 5 %
+
+
+
+class _Predicting(_Tuning):
+    """A tuning whose stop the comb cannot judge at 1091 Hz but whose fine continuum says it moves the lines there.
+
+    The tuned stop rises in a fourth sub-band (16.5-20 kHz) where the stepping below holds no line: no comb verdict.
+    The stopped fine continuum is 10 dB over the stepping's at 3.20-3.35 kHz, between the tuning's lines (3 and 4 kHz)
+    and on the third line at 1091 Hz (3273 Hz): predicted there, the stop raises the first sub-band's two lines by
+    10 log10((10 + 1) / 2) = 7.4 dB and the others not, sqrt(7.4^2 / 3) = 4.3 dB RMS over the three locked."""
+
+    edges_hz = (*EDGES, 20000.0)
+    signature_db = (0.0, 0.0, 0.0, 6.0)
+    continuum_signature_db = (0.0, 0.0, 0.0, 6.0)
+    fine_start_hz = 2000.0
+    fine_bin_hz = 5.0
+    fine_stepping_db = (0.0,) * 4000
+    fine_stopped_db = tuple(10.0 if 3200.0 <= 2000.0 + 5.0 * i < 3350.0 else 0.0 for i in range(4000))
+
+
+def test_at_another_rate_unjudged_by_the_comb_the_prediction_says_whether_unmoved_lines_veto() -> None:
+    """Told 1091 Hz (9 % off), the comb gives no verdict (no line in the tuned stop's sub-band); where the signature
+    predicted at the rate moves the locked lines ``min_pred_moved_db`` or more (4.3 dB RMS here), lines that did not
+    move (noise added between them) are no stop, and lines raised by 6 dB are one; with the parameter 0 (the check
+    as it was), with a fine continuum that predicts no move, or with none, nothing is read for a veto."""
+    step = 44  # a click every 44 samples: 1090.9 Hz
+    rate = SR / step
+
+    def joint(seed: int) -> np.ndarray:  # the clicks up to 16.5 kHz, over a broadband hiss
+        rng = np.random.default_rng(seed)
+        x = np.zeros(N)
+        x[::step] = 1.0 + 0.1 * rng.standard_normal(x[::step].size)
+        return _band(x, EDGES[0], EDGES[-1]) + 1e-4 * rng.standard_normal(N)
+
+    def check(p: ClockedParams, tuning: _Tuning) -> ClockedCheck:
+        chk = ClockedCheck(tuning, p)  # type: ignore[arg-type]
+        chk.reset(rate)
+        chk.hear_before(joint(10), np.full(120, -0.6))
+        return chk
+
+    stepping = joint(11)
+    added = stepping + _band(0.05 * np.random.default_rng(3).standard_normal(N), EDGES[0], 20000.0)  # out of step
+    stop = 10 ** (6.0 / 20) * stepping
+    chk = check(ClockedParams(min_pred_moved_db=2.5), _Predicting())
+    assert chk.predicted_moved_db(rate) == pytest.approx(math.sqrt((10 * math.log10(11 / 2)) ** 2 / 3), abs=0.3)
+    still, moved = chk.judge(added), chk.judge(stop)
+    assert still is not None and moved is not None and math.isnan(still.a) and math.isnan(moved.a)
+    assert still.moved_db < 0.5 and not chk.verdict(still)  # the lines did not move: the stepping went on
+    assert moved.moved_db == pytest.approx(6.0, abs=0.5) and chk.verdict(moved)
+    assert math.isnan(chk.at_onset(stop, moved)) and not chk.affirms(moved)  # no comb verdict: no doubt, no affirm
+    assert check(ClockedParams(min_pred_moved_db=0.0), _Predicting()).judge(added) is None  # the check as it was
+    flat = _Predicting()
+    flat.fine_stopped_db = flat.fine_stepping_db  # the stop predicted to move nothing on these lines at this rate
+    assert check(ClockedParams(min_pred_moved_db=2.5), flat).predicted_moved_db(rate) < 0.1
+    assert check(ClockedParams(min_pred_moved_db=2.5), flat).judge(added) is None
+    old = _Predicting()
+    old.fine_stopped_db = None  # a tuning made before the fine continuum was kept
+    assert math.isnan(check(ClockedParams(min_pred_moved_db=2.5), old).predicted_moved_db(rate))
+    assert check(ClockedParams(min_pred_moved_db=2.5), old).judge(added) is None

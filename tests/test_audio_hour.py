@@ -165,3 +165,22 @@ def test_music_that_smears_the_only_judged_lines_raises_no_stop() -> None:
     assert counted == [], f"counted false stops at {counted} s; the clocked check: {det.log.clocked}"
     first = det.log.clocked[0][1]  # the fire at 2646.00 s, judged on the one sub-band, vetoed
     assert first.bands == 1 and abs(first.a) < 0.1
+
+
+def test_20_percent_off_told_music_the_comb_cannot_judge_and_the_lines_do_not_move_for_is_no_stop() -> None:
+    """Joint 2 stepping at 1200 Hz (20 % off the tuning's rate, told) under music from the first sample: its tuned
+    stop's sub-bands hold no sharp line there, so the comb gives no verdict and nothing vetoed the fires (with
+    ``min_pred_moved_db`` 0: four flagged and one counted in 16 s). The signature predicted at 1200 Hz moves the
+    locked lines 3 dB RMS or more; they moved under 1 dB (the stepping went on): no stop."""
+    h = Hour(Arm(2), rate=1200.0, dur=16.0, seed=2)
+    assert spans(h)[0][2] == "music"
+    tu = joint_tuning(2)
+    before = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_pred_moved_db=0.0)))
+    assert [e.onset_uncertain for e in before] == [True, True, True, True, False]
+    det = ConfirmedStopDetector(detector_for(tu))
+    det.reset(0.0, step_rate_hz=h.rate)
+    assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
+    judged = [g for _, g in det.log.clocked]
+    assert judged and all(g.rate_hz == pytest.approx(1200.0, rel=0.01) for g in judged)
+    vetoed = [g for g in judged if np.isnan(g.a)]
+    assert vetoed and all(g.moved_db < CLOCKED.min_moved_db for g in vetoed)

@@ -57,7 +57,12 @@ step with the clock leaves them in phase as they were (the stepping goes on thro
 stop). So with the rate told (the controller's clock, not a guess), off the tuning's rate and
 within ``affirm_window``, where the comb could judge the tuned stop's sub-bands, a fire whose
 lines in phase moved less than ``min_moved_db`` RMS over every sub-band whose lines were locked
-before (:func:`lines_moved_db`) is not a stop.
+before (:func:`lines_moved_db`) is not a stop. Where the comb could not judge them (the tuned stop's
+sub-bands hold no sharp line at this rate), only the tuning's fine continuum can say whether the stop
+changes the lines read there at all: the same veto holds where the signature predicted at the rate
+(:class:`~stickslip.audio.features.fine.SignaturePredictor`) moves the locked sub-bands
+``min_pred_moved_db`` RMS or more (:meth:`ClockedCheck.predicted_moved_db`); where it predicts less
+(a stop whose change at this rate lies off those lines) or cannot predict, no veto.
 
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
@@ -91,6 +96,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from ..features.fine import SignaturePredictor
 from ..features.lockin import demodulate, follow_clock, locked_powers
 from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_powers, periodogram, rate_near_hz
 from ..paramfield import param
@@ -154,6 +160,11 @@ class ClockedParams:
         1.0,
         "dB",
         "rate told, off the tuning's: a fire whose lines in phase moved less (RMS) is not a stop (true stops: 2.4+)",
+    )
+    min_pred_moved_db: float = param(
+        3.0,
+        "dB",
+        "no comb verdict there: unmoved lines veto where the stop predicted at the rate moves them this RMS (0: not)",
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -490,6 +501,7 @@ class ClockedCheck:
             and tuning.continuum_signature_db is not None
         )
         self.sample_rate = int(tuning.sample_rate)
+        self._predictor: SignaturePredictor | None = None  # built at the first fire that needs it
         self.reset()
 
     def reset(self, commanded_hz: float | None = None) -> None:
@@ -555,14 +567,37 @@ class ClockedCheck:
         if len(got) > 1 and finite:
             a = float(np.median(finite))
         veto_off = not affirm and not self.at_tuned_rate(rate)  # read for the lines' moving alone
-        if veto_off and not math.isfinite(a):
-            return None  # the comb could not judge the tuned stop's sub-bands here: nothing read for a veto
+        unjudged = veto_off and not math.isfinite(a)
+        predicted = unjudged and p.min_pred_moved_db > 0.0 and self.predicted_moved_db(rate) >= p.min_pred_moved_db
+        if unjudged and not predicted:
+            return None  # the comb could not judge the tuned stop's sub-bands here, nor says the prediction they move
         reader = self.reader(rate)
         locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
         moved = math.nan
-        if not self.at_tuned_rate(rate) and p.min_moved_db > 0.0 and math.isfinite(a):  # off-rate: affirm, or veto
+        if not self.at_tuned_rate(rate) and p.min_moved_db > 0.0 and (math.isfinite(a) or predicted):  # off-rate
             moved = lines_moved_db(ref, pieces, sr, rate, tu.edges_hz, p)
         return OnClock(a, rate, used, self.ref_age_s, locked, moved)
+
+    def predicted_moved_db(self, rate_hz: float) -> float:
+        """How far the stop, as predicted at ``rate_hz`` (Hz) from the tuning's fine continuum, moves the sub-bands
+        whose lines were locked in the reference: RMS of the predicted signature over them, dB (NaN: no prediction,
+        no reference or no sub-band locked)."""
+        tu, ref = self.tuning, self.ref
+        start, width, stepping, stopped = tu.fine_start_hz, tu.fine_bin_hz, tu.fine_stepping_db, tu.fine_stopped_db
+        if ref is None or tu.step_rate_hz is None or start is None or width is None or stepping is None:
+            return math.nan
+        if stopped is None or tu.edges_hz is None or tu.signature_db is None:
+            return math.nan
+        lk = _locked_bands(ref, self.sample_rate, rate_hz, tu.edges_hz, range(len(tu.edges_hz) - 1), self.p)
+        if lk is None or not lk.keep:
+            return math.nan
+        if self._predictor is None:
+            sig = np.asarray(tu.signature_db, dtype=np.float64)
+            self._predictor = SignaturePredictor(
+                tu.sample_rate, tu.frame, tu.edges_hz, sig, tu.step_rate_hz, start, width, stepping, stopped
+            )
+        pred = self._predictor.predict(rate_hz)
+        return float(np.sqrt(np.mean(pred[lk.keep] ** 2)))
 
     def reader(self, rate_hz: float) -> LockedReader | None:
         """The lines read in phase with the clock followed at ``rate_hz`` (Hz) against the reference (the chain's
