@@ -266,9 +266,16 @@ _ROTARY = {"gamma0": "step", "d": "term"}
 
 def finite_number(value: object, where: str) -> float:
     """A JSON number as a float, or ``ValueError`` naming ``where``: a string, a boolean, null, NaN or infinity."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"{where} must be a finite number, got {value!r}")
-    return float(value)
+    try:
+        x = float(value)
+    except OverflowError:  # an integer of 309 digits or more: JSON has no limit, a float has
+        x = math.inf
+    if not math.isfinite(x):
+        shown = "an integer beyond ±1.8e308" if isinstance(value, int) else repr(value)
+        raise ValueError(f"{where} must be a finite number, got {shown}")
+    return x
 
 
 def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
