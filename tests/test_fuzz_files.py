@@ -18,8 +18,10 @@ from test_fuzz_cli import check
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
 
-FILES = settings(max_examples=25, deadline=None, database=None, derandomize=True,
-                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FILES = settings(  # derandomized by the profile in `make test` (tests/conftest.py); `make test-explore` draws fresh
+    max_examples=25, deadline=None, database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 
 # -- image frames for `camera locate` --------------------------------------------------------------------------------
 

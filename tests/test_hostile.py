@@ -1206,3 +1206,14 @@ def test_a_calibration_number_beyond_a_float_is_one_error_line(tmp_path):
     assert r.exit_code == 2 and r.exception is None or isinstance(r.exception, SystemExit)
     assert r.stderr.strip() == (f"error: {p}: parameters[0] (joint 1 gamma0) must be a finite number, "
                                 "got an integer beyond ±1.8e308")
+
+
+def test_a_table_with_bare_carriage_returns_is_refused_in_the_users_words(tmp_path):
+    """Found by tests/test_fuzz_files.py: Python's "open the file in universal-newline mode" reached the user."""
+    p = tmp_path / "mac.csv"
+    p.write_bytes(b"day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\r2026-11-20,3,+,0,-1.5,0,0,0,0,0.004,4000\r")
+    for args in (["import", str(p), "--db", str(tmp_path / "s.db")], ["calibrate", str(p), "-o", str(tmp_path / "c.json")]):
+        r = CliRunner().invoke(app, args)
+        assert r.exit_code == 2 and r.stderr.strip() == (
+            f"error: {p}: not a readable CSV table (a line ends in a bare carriage return (CR, an old Mac export): "
+            "save the table with LF or CRLF ends)"), r.stderr
