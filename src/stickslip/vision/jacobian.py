@@ -614,10 +614,7 @@ class MeasuredJacobian:
                 num(r.get("residual_px"), f"{name}.residual_px", nonneg=True), steps,
                 num(r.get("gamma"), f"{name}.gamma", positive=True),
             ))
-            per_unit = math.hypot(*dirs[-1].px_per_unit)  # px / gamma: inf for a gamma of 1e-320, 0 for px of 1e-320
-            if not (math.isfinite(per_unit) and per_unit >= sys.float_info.min):
-                raise JacobianError(f"{where}: {name}: px_per_step {px!r} over gamma {dirs[-1].gamma!r} gives "
-                                    f"{per_unit!r} px per m or rad, not a usable number")
+            _check_per_unit(dirs[-1], f"{where}: {name}")
         if len({(d.joint, d.direction) for d in dirs}) != len(dirs):
             raise JacobianError(f"{where}: a joint and direction is given twice")
         day = data.get("calibration_day", "")
@@ -637,6 +634,15 @@ class MeasuredJacobian:
             text = str(e)
             raise JacobianError(text if str(path) in text else f"{path}: {text}") from None
         return cls.from_dict(data, str(path))
+
+
+def _check_per_unit(d: MeasuredDirection, where: str) -> None:
+    """:class:`JacobianError` unless ``d``'s px per m or rad is a usable number (``px / gamma`` can overflow or
+    underflow: a gamma of 1e-320 gives inf, px of 1e-320 a subnormal the loop would divide by)."""
+    per_unit = math.hypot(*d.px_per_unit)
+    if not (math.isfinite(per_unit) and per_unit >= sys.float_info.min):
+        raise JacobianError(f"{where}: px_per_step {d.px_per_step!r} over gamma {d.gamma!r} gives "
+                            f"{per_unit!r} px per m or rad, not a usable number")
 
 
 def measured_jacobian(
