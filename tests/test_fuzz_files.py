@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
 from test_fuzz_cli import check
 
 pytestmark = pytest.mark.slow  # make test-fast leaves this file out
@@ -193,7 +194,8 @@ order = [3, 2, 1]
 _RIG_VALUES = ['"0mm"', '"-5mm"', '"1e999mm"', '"nan mm"', '"inf"', "nan", "inf", "-inf", "1e308", "0", "-1",
                "true", '""', '"π"', '"probe"', "[0, 0, 0]", '["1e300m", "0m", "0m"]', '["nan", "0", "0"]',
                "[1e308, 1e308, 1e308]", "[0, 0, 1e-320]", "{}", "[]", '"\\u202e"', '"Ünïcødé 🧪"', "2**63",
-               "9223372036854775808", '["0mm", "0mm"]', '["6mm", "-6mm"]', '"-0deg"', "[[1, 0, 0], [1, 0, 0], [0, 0, 1]]"]
+               "9223372036854775808", '["0mm", "0mm"]', '["6mm", "-6mm"]', '"-0deg"', '"1e300deg"', '"20turns"',
+               "[[1, 0, 0], [1, 0, 0], [0, 0, 1]]", "[1e308, 1e308, 0]"]
 
 
 @st.composite
