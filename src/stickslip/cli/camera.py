@@ -62,8 +62,9 @@ _CAMERA_HELP = (
 _DEVICE_HELP = "Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: the config file's, else sim://)."
 
 
-_DECIMAL = re.compile(r"\s*[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?\s*")
-"""A plain decimal number (Python's float() also takes 1_0 for 10, Arabic-Indic digits, nan and inf)."""
+_DECIMAL = re.compile(r"\s*[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:nan|inf|infinity))\s*")
+"""A plain decimal number, or nan/inf for the finite check to name (Python's float() also takes 1_0 for 10
+and Arabic-Indic digits)."""
 
 
 def _pixel(text: str, what: str) -> tuple[float, float]:
