@@ -93,6 +93,29 @@ def test_read_vibration_refuses_what_it_cannot_use(tmp_path):
         read_vibration(tmp_path / "missing.csv")
 
 
+def test_read_vibration_odd_encodings_and_rate_lines(tmp_path):
+    """Found by tests/test_fuzz_files.py: a traceback, Python's codec words, a BOM that hid the rate, a second rate."""
+    body = "".join(f"{float(v)!r}\n" for v in np.random.default_rng(1).normal(0.0, 0.1, 50))
+    p = tmp_path / "a.csv"
+    p.write_bytes(b"\xef\xbb\xbf# sample_rate_hz=5000\r\n" + body.replace("\n", "\r\n").encode())  # Excel's UTF-8
+    x, rate = read_vibration(p)
+    assert rate == 5000 and x.size == 50
+    p.write_text("# sample_rate_hz=5000\n" + body, encoding="utf-16")
+    with pytest.raises(AudioSourceError, match=r"a.csv: not UTF-8 text \(byte 0xff at offset 0\)"):
+        read_vibration(p)
+    p.write_text("# sample_rate_hz=1.2.3\n" + body)
+    with pytest.raises(AudioSourceError, match=r"a.csv:1: the sample rate '1.2.3' is not a number"):
+        read_vibration(p)
+    p.write_text("# sample_rate_hz=5000\n# sample_rate_hz=8000\n" + body)
+    with pytest.raises(AudioSourceError, match=r"a.csv:2: a second sample rate, 8000 Hz after 5000 Hz"):
+        read_vibration(p)
+    p.write_text("# sample_rate_hz=5000\n# sample_rate_hz=5000\n" + body)
+    assert read_vibration(p)[1] == 5000 and read_vibration(p, sample_rate=8000)[1] == 8000  # the given rate wins
+    p.write_text("# sample_rate_hz=5000\n" + body + "1.5e308\n")  # full scale 1.25 x that is infinite: all zeros
+    with pytest.raises(AudioSourceError, match="data row 51 holds 1.5e[+]308, too large for a sample"):
+        read_vibration(p)
+
+
 class _FakeSerial:
     def __init__(self, values: np.ndarray):
         self._f = io.BytesIO("".join(f"{v:.5f}\r\n" for v in values).encode())

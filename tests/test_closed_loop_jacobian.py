@@ -219,6 +219,13 @@ def test_a_file_of_another_camera_or_pixel_is_refused_in_one_line():
         (lambda d: d.update(tip_px="1,2"), "tip_px must be a pair of numbers"),
         (lambda d: d["pose"].pop("q3"), "pose must have"),
         (lambda d: d.update(directions=[]), "non-empty list"),
+        # found by tests/test_fuzz_files.py: each was read, and the loop would have divided by it
+        (lambda d: d["directions"][0].update(gamma=1e-320), "gives inf px per m or rad"),
+        (lambda d: d["directions"][0].update(px_per_step=[1e308, 1e308], gamma=1e-6), "gives inf px per m"),
+        (lambda d: d["directions"][0].update(px_per_step=[1e-320, 0.0]), "not a usable number"),
+        (lambda d: d["directions"][0].update(px_per_step_sd=-0.1), "px_per_step_sd must be >= 0"),
+        (lambda d: d["directions"][0].update(residual_px=-1.0), "residual_px must be >= 0"),
+        (lambda d: d.update(pixel_size_m=10**340), "pixel_size_m must be a finite number, got an integer beyond"),
     ],
 )
 def test_a_bad_file_is_one_line(tmp_path, edit, words):

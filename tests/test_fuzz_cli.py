@@ -34,7 +34,8 @@ FUZZ = settings(  # derandomized by the profile in `make test`; `make test-explo
 TALLY = {"inputs": 0, "tracebacks": 0, "unclear": 0}
 #: Python's own words (issue 34): an error line names the option, file, row or column and the reason instead
 RAW = ("could not convert", "float division", "division by zero", "Expecting ", "codec", "[Errno", "invalid literal",
-       "object has no attribute", "NoneType", "unsupported operand", "index out of range", "sqlite3.")
+       "object has no attribute", "NoneType", "unsupported operand", "index out of range", "sqlite3.",
+       "universal-newline", "int too large", "Exceeds the limit", "int_max_str_digits")
 #: what never reaches a terminal raw (docs/cli.md, output rules): controls but LF and TAB, bidi marks, separators
 FORBIDDEN = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f\u061c\u200e\u200f\u202a-\u202e\u2066-\u2069\u2028\u2029]")
 
@@ -155,7 +156,7 @@ def test_device_urls(tmp_path, url):
 
 
 json_values = st.recursive(
-    st.none() | st.booleans() | st.floats(allow_nan=False) | st.integers() | st.text(max_size=8),
+    st.none() | st.booleans() | st.floats(allow_nan=False) | st.integers() | st.text(max_size=8) | st.just(10**340),
     lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=8), c, max_size=4),
     max_leaves=20,
 )

@@ -1191,3 +1191,43 @@ def test_visible_text_is_safe_for_the_terminal_and_the_stream(text, encoding):
     assert FORBIDDEN.search(out) is None
     out.encode(encoding)  # never a UnicodeEncodeError
     assert visible(out, encoding) == out  # shown once, as it stays
+
+
+def test_a_calibration_number_beyond_a_float_is_one_error_line(tmp_path):
+    """Found by tests/test_fuzz_files.py: a 341-digit integer in a calibration file ended in an OverflowError."""
+    from test_reach import true_calibration
+
+    p = tmp_path / "cal.json"
+    true_calibration().save(p)
+    doc = json.loads(p.read_text())
+    doc["parameters"][0]["value"] = 10**340
+    p.write_text(json.dumps(doc))
+    r = CliRunner().invoke(app, ["move", "-c", str(p), "-j", "3", "--by", "1um", "--db", str(tmp_path / "s.db")])
+    assert r.exit_code == 2 and r.exception is None or isinstance(r.exception, SystemExit)
+    assert r.stderr.strip() == (f"error: {p}: parameters[0] (joint 1 gamma0) must be a finite number, "
+                                "got an integer beyond ±1.8e308")
+
+
+def test_a_table_with_bare_carriage_returns_is_refused_in_the_users_words(tmp_path):
+    """Found by tests/test_fuzz_files.py: Python's "open the file in universal-newline mode" reached the user."""
+    p = tmp_path / "mac.csv"
+    p.write_bytes(b"day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\r2026-11-20,3,+,0,-1.5,0,0,0,0,0.004,4000\r")
+    for args in (["import", str(p), "--db", str(tmp_path / "s.db")],
+                 ["calibrate", str(p), "-o", str(tmp_path / "c.json")]):
+        r = CliRunner().invoke(app, args)
+        assert r.exit_code == 2 and r.stderr.strip() == (
+            f"error: {p}: not a readable CSV table (a line ends in a bare carriage return (CR, an old Mac export): "
+            "save the table with LF or CRLF ends)"), r.stderr
+
+
+@pytest.mark.parametrize(("digits", "words"), [(340, "frame must be in 1..10000000, got a number beyond 1e30"),
+                                               (5000, "a whole number of 5001 characters: no field takes one so long")])
+def test_a_tuning_with_a_whole_number_beyond_a_float_is_one_error_line(tmp_path, digits, words):
+    """Found by tests/test_fuzz_files.py: math.isfinite(10**340) raised OverflowError; 5000 digits hit Python's
+    4300-digit limit, whose words (sys.set_int_max_str_digits) reached the user."""
+    tuning = tmp_path / "t.json"
+    tuning.write_text('{"frame": 1' + "0" * (digits) + "}")
+    wav = tmp_path / "a.wav"
+    wav.write_bytes(b"")
+    r = CliRunner().invoke(app, ["listen", str(wav), "--tuning", str(tuning)])
+    assert r.exit_code == 2 and r.stderr.strip() == f"error: {tuning}: {words}", r.stderr

@@ -143,6 +143,9 @@ BAD = [
     ("order = [3, 2]", "order = [3, 1]", "order", "each joint the position gives"),
     ('password_env = "RIG_TEST_PASSWORD"', 'password_env = "not a name"', "password_env", "environment variable"),
     ('tool = ["0mm", "0mm", "-10mm"]', 'tool = ["0mm", "-10mm"]', "tool", "array of 3"),
+    ('tilt = "10deg"', 'tilt = "10deg"\n[[volume]]\nname = "far"\nshape = "box"\nlower = [0, 0, 0]\n'
+     'upper = ["1mm", "1mm", "1mm"]\nrotation = ["0deg", "0deg", "1e300deg"]', "1e300deg",
+     "more than ten turns"),  # found by tests/test_fuzz_files.py: its sine is noise, the box turned any way
 ]
 
 
@@ -214,3 +217,11 @@ def test_links_in_the_rig_frame_follow_the_mount():
     assert left.tip(q) == pytest.approx((-0.03, 0.023, 0.0), abs=1e-12)
     right = rig.arm("right")
     assert right.tip([0.001, 0.002, 0.003]) == pytest.approx((0.001, 0.002, 0.003 - 0.01))
+
+
+def test_a_direction_of_huge_or_tiny_components_is_a_unit_vector():
+    """Found by tests/test_fuzz_files.py: the norm of [1e308, 1e308, 0] overflowed and the axis became (0, 0, 0)."""
+    for axis, want in (("[1e308, 0, 1e308]", (math.sqrt(0.5), 0.0, math.sqrt(0.5))), ("[0, 0, 1e-320]", (0, 0, 1))):
+        rig = parse_rig(GOOD.replace("axis = [0, 0, 1]", f"axis = {axis}", 1), "rig.toml")
+        got = next(v for v in rig.volumes if v.shape == "cylinder").axis
+        assert got == pytest.approx(want, abs=1e-12)

@@ -81,6 +81,9 @@ def test_bad_frames_exit_2_with_one_line_and_print_nothing(tmp_path):
     _bad(["camera", "locate", str(tmp_path / "n.tif"), "--tip", "10,10"], "x=4, y=3")
     _bad(["camera", "locate", str(tmp_path / "nope.png"), "--tip", "10,10"], "no such file")
     _bad(["camera", "locate", str(tmp_path / "a.png"), "--tip", "10"], "write X,Y in pixels")
+    for tip in ("1_0,20", "\u0663,20"):  # float() took 1_0 for 10 and Arabic-Indic digits
+        _bad(["camera", "locate", str(tmp_path / "a.png"), "--tip", tip], "write X,Y in pixels")
+    _bad(["camera", "locate", str(tmp_path / "a.png"), "--tip", "NaN,20"], "the pixel must be finite")
     _bad(["camera", "locate", str(tmp_path / "a.png"), "--tip", "20,20"], "nothing stands out")
 
 

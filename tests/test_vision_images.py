@@ -139,6 +139,11 @@ def test_camera_urls(tmp_path):
         open_camera(f"files://{tmp_path}?zoom=2")
     with pytest.raises(ValueError, match=r"gives the option 'pixel' twice"):  # 0.25 or 2 um a pixel?
         open_camera(f"files://{tmp_path}?pixel=0.25um&fps=5&pixel=2um")
+    with pytest.raises(ValueError, match=r"must be a size in \[1 pm, 1 cm\)"):  # was taken: 1e306 px per m
+        open_camera(f"files://{tmp_path}?pixel=1e-300um")
+    assert open_camera(f"files://{tmp_path}?pixel=1pm").info.pixel_size_m == pytest.approx(1e-12)
+    with pytest.raises(ImageError, match=r"pixel size 1e-20 m must be in \[1 pm, 1 cm\)"):
+        Frame(np.zeros((20, 30)), 0.0, 1e-20)
     with pytest.raises(ValueError, match="has no scheme"):
         open_camera(str(tmp_path))
     with pytest.raises(CameraError, match="unknown camera URL scheme 'usb'"):

@@ -39,6 +39,9 @@ MAX_TABLE_BYTES = 64 * 1024 * 1024
 """Largest table (CSV) read (bytes)."""
 MAX_JSON_DEPTH = 32
 """Deepest nesting of arrays/objects accepted in a JSON document."""
+MAX_JSON_INT_DIGITS = 400
+"""Longest whole number a JSON document may hold, characters (a float ends at 309 digits; those up to here are
+refused by the field that reads them, naming it)."""
 
 # Plausible magnitudes of a step (SI): prismatic joint 3 in metres, rotary joints in radians.
 # A MM3A prismatic step is about 1 um (the paper: a = 972 nm), a rotary one tens of urad.
@@ -197,6 +200,17 @@ _JSON_PROBLEMS = (
 )
 
 
+class _LongNumber(ValueError):
+    """A JSON integer of more than :data:`MAX_JSON_INT_DIGITS` digits (its length in ``args[0]``)."""
+
+
+def _json_int(text: str) -> int:
+    """``int(text)`` for ``json.loads``, refusing what no field takes before Python's 4300-digit limit speaks."""
+    if len(text) > MAX_JSON_INT_DIGITS:
+        raise _LongNumber(len(text))
+    return int(text)
+
+
 def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any]]:
     def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -230,7 +244,9 @@ def loads_json(text: str, where: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
     """
     check_json_text(text, where, max_depth)
     try:
-        return json.loads(text, object_pairs_hook=_no_key_twice(where))
+        return json.loads(text, object_pairs_hook=_no_key_twice(where), parse_int=_json_int)
+    except _LongNumber as e:
+        raise ValueError(f"{where}: a whole number of {e.args[0]} characters: no field takes one so long") from None
     except json.JSONDecodeError as e:
         reason = next((ours for theirs, ours in _JSON_PROBLEMS if e.msg.startswith(theirs)), "a syntax error")
         raise ValueError(f"{where}: not valid JSON at line {e.lineno}, column {e.colno}: {reason}") from None
@@ -266,9 +282,16 @@ _ROTARY = {"gamma0": "step", "d": "term"}
 
 def finite_number(value: object, where: str) -> float:
     """A JSON number as a float, or ``ValueError`` naming ``where``: a string, a boolean, null, NaN or infinity."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"{where} must be a finite number, got {value!r}")
-    return float(value)
+    try:
+        x = float(value)
+    except OverflowError:  # an integer of 309 digits or more: JSON has no limit, a float has
+        x = math.inf
+    if not math.isfinite(x):
+        shown = "an integer beyond ±1.8e308" if isinstance(value, int) else repr(value)
+        raise ValueError(f"{where} must be a finite number, got {shown}")
+    return x
 
 
 def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
@@ -375,10 +398,12 @@ def check_tuning_dict(data: object) -> None:
     for k in ("sample_rate", "frame", "hop", "max_dips"):
         if k in data:
             v = data[k]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            bad = isinstance(v, bool) or not isinstance(v, (int, float))
+            if bad or (isinstance(v, float) and not math.isfinite(v)):  # math.isfinite(10**400): OverflowError
                 raise ValueError(f"{k} must be a whole number, got {v!r}")
             if not 0 < v <= 10_000_000 and not (k == "max_dips" and v == 0):
-                raise ValueError(f"{k} must be in 1..10000000, got {v!r}")
+                shown = repr(v) if abs(v) < 1e30 else "a number beyond 1e30"
+                raise ValueError(f"{k} must be in 1..10000000, got {shown}")
     for k in ("threshold_db", "hold_s", "hysteresis_db", "release_s", "onset_lag_s", "latency_s"):
         if data.get(k) is not None:
             finite_number(data[k], k)

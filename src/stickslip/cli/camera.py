@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
+import unicodedata
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -60,11 +62,16 @@ _CAMERA_HELP = (
 _DEVICE_HELP = "Controller URL: sim://, mm3a:///dev/ttyUSB0, anc300://host (default: the config file's, else sim://)."
 
 
+_DECIMAL = re.compile(r"\s*[+-]?(?:(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|(?i:nan|inf|infinity))\s*")
+"""A plain decimal number, or nan/inf for the finite check to name (Python's float() also takes 1_0 for 10
+and Arabic-Indic digits)."""
+
+
 def _pixel(text: str, what: str) -> tuple[float, float]:
     """``"X,Y"`` as two finite pixel coordinates."""
-    parts = text.split(",")
+    parts = unicodedata.normalize("NFKC", text).split(",")  # full-width digits, as the unit parser takes them
     try:
-        if len(parts) != 2:
+        if len(parts) != 2 or not all(_DECIMAL.fullmatch(p) for p in parts):
             raise ValueError
         x, y = float(parts[0]), float(parts[1])
     except ValueError:

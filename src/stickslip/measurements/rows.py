@@ -210,5 +210,7 @@ def _csv_problem(source: str, e: csv.Error) -> str:
     text = str(e)
     if "field limit" in text:
         text = f"a cell is longer than {csv.field_size_limit()} characters"
+    elif "new-line character seen in unquoted field" in text:  # Python's advice is for a programmer
+        text = "a line ends in a bare carriage return (CR, an old Mac export): save the table with LF or CRLF ends"
     return f"{source}: not a readable CSV table ({text})"
 

@@ -46,6 +46,7 @@ MAX_RIG_BYTES = 1_000_000
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9 _.\-]{0,39}$")
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")
 _MAX_SIZE = 10.0  # m: no rig is 10 m across; catches unit slips
+_MAX_ANGLE = 20.0 * math.pi  # rad: ten turns; beyond, a float angle's sine is noise (1e300 deg turns any way)
 
 
 class RigError(ValueError):
@@ -147,6 +148,8 @@ class _Values:
             raise self.fail(key, f"{value!r} is not finite")
         if kind == "length" and abs(v) > _MAX_SIZE:
             raise self.fail(key, f"{value!r} is {v:.3g} m: more than {_MAX_SIZE:g} m (a unit slip?)")
+        if kind == "angle" and abs(v) > _MAX_ANGLE:
+            raise self.fail(key, f"{value!r} is {math.degrees(v):.3g} deg: more than ten turns (a unit slip?)")
         if positive and not v > 0:
             raise self.fail(key, f"{value!r} must be greater than 0")
         if nonneg and v < 0:
@@ -168,10 +171,11 @@ class _Values:
 
     def direction(self, value: Any, key: Key) -> Vec:
         v = np.asarray(self.vector(value, key, None))
-        n = float(np.linalg.norm(v))
-        if n == 0.0:
+        big = float(np.max(np.abs(v)))
+        if big == 0.0:
             raise self.fail(key, "must not be the zero vector")
-        u = v / n
+        w = v / big  # scaled first: the norm of [1e308, 1e308, 0] overflows (a zero direction), of 1e-320 underflows
+        u = w / float(np.linalg.norm(w))
         return (float(u[0]), float(u[1]), float(u[2]))
 
     def integer(self, value: Any, key: Key, lo: int, hi: int) -> int:

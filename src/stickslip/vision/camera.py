@@ -26,7 +26,7 @@ from urllib.parse import parse_qs
 
 from ..devices.base import Controller, redact_url
 from ..units import UnitError, parse_length
-from .frame import Frame
+from .frame import PIXEL_SIZE_RANGE, Frame
 
 __all__ = [
     "Camera",
@@ -172,6 +172,7 @@ def pixel_option(opts: dict[str, str], url: str) -> float | None:
         v = parse_length(text)
     except (UnitError, ValueError, ArithmeticError) as e:
         raise ValueError(f"pixel={text!r} in {redact_url(url)!r}: {e} (write e.g. pixel=0.5um)") from None
-    if not 0 < v < 1e-2:
-        raise ValueError(f"pixel={text!r} in {redact_url(url)!r} must be a size in (0, 1 cm), e.g. pixel=0.5um")
+    lo, hi = PIXEL_SIZE_RANGE
+    if not lo <= v < hi:
+        raise ValueError(f"pixel={text!r} in {redact_url(url)!r} must be a size in [1 pm, 1 cm), e.g. pixel=0.5um")
     return v

@@ -26,6 +26,7 @@ __all__ = [
     "as_image",
     "MIN_SIDE",
     "MAX_PIXELS",
+    "PIXEL_SIZE_RANGE",
     "LUMINANCE",
 ]
 
@@ -38,6 +39,10 @@ MAX_PIXELS = 64 * 1024 * 1024
 MAX_VALUE = 1e100
 """Largest pixel value, in magnitude (grey units): the tracker sums squares of pixels over a window, which
 overflows float64 near 1e154; no camera's count, nor any physical unit a float image is written in, is near it."""
+
+PIXEL_SIZE_RANGE = (1e-12, 1e-2)
+"""Smallest and largest pixel size in the object plane, m: 1 pm to 1 cm (a microscope's pixel is nanometres to
+micrometres; a ``pixel=1e-300um`` would make a px per m of 1e306 that the closed loop divides by)."""
 
 LUMINANCE = (0.2126, 0.7152, 0.0722)
 """Weights of red, green and blue in the grey value of a colour frame (Rec. 709)."""
@@ -75,9 +80,10 @@ class Frame:
             raise ImageError(f"{self.source or 'frame'}: a frame is a 2-D float64 array (use as_image)")
         if not math.isfinite(self.time_s):
             raise ImageError(f"{self.source or 'frame'}: time {self.time_s!r} s is not finite")
-        if self.pixel_size_m is not None and not (math.isfinite(self.pixel_size_m) and 0 < self.pixel_size_m < 1e-2):
+        lo, hi = PIXEL_SIZE_RANGE
+        if self.pixel_size_m is not None and not (math.isfinite(self.pixel_size_m) and lo <= self.pixel_size_m < hi):
             raise ImageError(
-                f"{self.source or 'frame'}: pixel size {self.pixel_size_m!r} m must be in (0, 1 cm) "
+                f"{self.source or 'frame'}: pixel size {self.pixel_size_m!r} m must be in [1 pm, 1 cm) "
                 "(a microscope's pixel is nanometres to micrometres)"
             )
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -568,13 +569,15 @@ class MeasuredJacobian:
         if not isinstance(data, dict) or data.get("kind") != "stickslip image jacobian":
             raise JacobianError(f"{where}: not an image Jacobian written by stickslip camera calibrate --jacobian")
 
-        def num(v: object, name: str, positive: bool = False) -> float:
+        def num(v: object, name: str, positive: bool = False, nonneg: bool = False) -> float:
             try:
                 x = finite_number(v, f"{where}: {name}")
             except ValueError as e:
                 raise JacobianError(str(e)) from None
             if positive and x <= 0:
                 raise JacobianError(f"{where}: {name} must be > 0, got {x!r}")
+            if nonneg and x < 0:
+                raise JacobianError(f"{where}: {name} must be >= 0, got {x!r}")
             return x
 
         def pair(v: object, name: str) -> tuple[float, float]:
@@ -607,10 +610,11 @@ class MeasuredJacobian:
             if math.hypot(*px) <= 0:
                 raise JacobianError(f"{where}: {name}.px_per_step is zero: the joint did not move the tip")
             dirs.append(MeasuredDirection(
-                j, d, px, num(r.get("px_per_step_sd"), f"{name}.px_per_step_sd"),
-                num(r.get("residual_px"), f"{name}.residual_px"), steps,
+                j, d, px, num(r.get("px_per_step_sd"), f"{name}.px_per_step_sd", nonneg=True),
+                num(r.get("residual_px"), f"{name}.residual_px", nonneg=True), steps,
                 num(r.get("gamma"), f"{name}.gamma", positive=True),
             ))
+            _check_per_unit(dirs[-1], f"{where}: {name}")
         if len({(d.joint, d.direction) for d in dirs}) != len(dirs):
             raise JacobianError(f"{where}: a joint and direction is given twice")
         day = data.get("calibration_day", "")
@@ -630,6 +634,15 @@ class MeasuredJacobian:
             text = str(e)
             raise JacobianError(text if str(path) in text else f"{path}: {text}") from None
         return cls.from_dict(data, str(path))
+
+
+def _check_per_unit(d: MeasuredDirection, where: str) -> None:
+    """:class:`JacobianError` unless ``d``'s px per m or rad is a usable number (``px / gamma`` can overflow or
+    underflow: a gamma of 1e-320 gives inf, px of 1e-320 a subnormal the loop would divide by)."""
+    per_unit = math.hypot(*d.px_per_unit)
+    if not (math.isfinite(per_unit) and per_unit >= sys.float_info.min):
+        raise JacobianError(f"{where}: px_per_step {d.px_per_step!r} over gamma {d.gamma!r} gives "
+                            f"{per_unit!r} px per m or rad, not a usable number")
 
 
 def measured_jacobian(

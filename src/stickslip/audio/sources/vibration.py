@@ -106,6 +106,9 @@ def read_vibration(
         k = int(np.argmax(~np.isfinite(x)))
         raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, not a finite number")
     fs = float(full_scale) if full_scale else VIBRATION.headroom * float(np.max(np.abs(x))) or 1.0
+    if not math.isfinite(fs) or not np.all(np.abs(x / fs) <= np.finfo(np.float32).max):
+        k = int(np.argmax(np.abs(x)))
+        raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, too large for a sample")
     return (x / fs).astype(np.float32), int(round(rate))
 
 
@@ -114,23 +117,25 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
     try:
         if p.exists():
             regular_file(p, "CSV of samples")  # a folder, FIFO or device is never opened
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")  # a byte order mark (Excel's UTF-8) is not part of the first line
+    except UnicodeDecodeError as e:  # before ValueError, of which it is one
+        raise AudioSourceError(f"{p}: not UTF-8 text (byte {e.object[e.start]:#04x} at offset {e.start}): "
+                               "save the CSV as UTF-8") from None
     except ValueError as e:
         raise AudioSourceError(str(e)) from None
     except FileNotFoundError:
         raise AudioSourceError(f"{p}: no such file") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise AudioSourceError(f"{p}: cannot read ({e})") from None
+    except OSError as e:
+        raise AudioSourceError(f"{p}: cannot read ({e.strerror or e})") from None
     rate = sample_rate
+    said: float | None = None
     rows: list[list[float]] = []
     for lineno, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s:
             continue
         if s.startswith("#"):
-            m = _RATE.search(s)
-            if m and rate is None:
-                rate = float(m.group(1))
+            said = _rate_comment(p, lineno, s, said)
             continue
         parts = [x for x in re.split(r"[,;\s]+", s) if x]
         try:
@@ -141,10 +146,25 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
             raise AudioSourceError(f"{p}:{lineno}: not a number in {s!r}") from None
     if not rows:
         raise AudioSourceError(f"{p}: no samples")
+    rate = rate if rate is not None else said
     width = {len(r) for r in rows}
     if len(width) != 1 or width.pop() not in (1, 2):
         raise AudioSourceError(f"{p}: every row must hold 'value' or 'time_s,value'")
     return rows, rate
+
+
+def _rate_comment(p: Path, lineno: int, line: str, said: float | None) -> float | None:
+    """The rate a ``# sample_rate_hz=...`` comment says, Hz (``said``: an earlier one's, which it must repeat)."""
+    m = _RATE.search(line)
+    if m is None:
+        return said
+    try:
+        rate = float(m.group(1))
+    except ValueError:
+        raise AudioSourceError(f"{p}:{lineno}: the sample rate {m.group(1)!r} is not a number") from None
+    if said is not None and rate != said:
+        raise AudioSourceError(f"{p}:{lineno}: a second sample rate, {rate:g} Hz after {said:g} Hz: keep one")
+    return rate
 
 
 class SerialSamples:
