@@ -120,6 +120,7 @@ BAD = [
     ('name = "bench"', 'name = "bench', 'name = "bench', "not TOML"),
     ("n_sigma = 2", 'n_sigma = 2\ncolour = "red"', "colour", "colour: unknown key"),
     ('tilt = "10deg"', 'tilt = "10mm"', "tilt", "stage.tilt: unknown angle unit"),
+    ('tilt = "10deg"', "tilt = true", "tilt", "must be an angle such as"),
     ('tilt = "10deg"', 'tilt = "100deg"', "tilt", "within ±90 deg"),
     ('4001"', '4001?password=hunter2"', "4001", "no password"),
     ('"mm3a+socket://127.0.0.1:4001"', '"mm3a+socket://u:hunter2@h:4001"', "4001", "no password"),

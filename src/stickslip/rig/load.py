@@ -139,7 +139,7 @@ class _Values:
     def quantity(self, value: Any, key: Key, kind: str, positive: bool = False, nonneg: bool = False) -> float:
         parse: Callable[[str | float], float] = parse_angle if kind == "angle" else parse_length
         if isinstance(value, bool) or not isinstance(value, (str, int, float)):
-            raise self.fail(key, f"must be a {kind} such as {_EXAMPLE[kind]}, not {_kind(value)}")
+            raise self.fail(key, f"must be {_NOUN[kind]} such as {_EXAMPLE[kind]}, not {_kind(value)}")
         try:
             v = parse(value)
         except UnitError as e:
@@ -498,6 +498,7 @@ class _Reader(_Values):
 
 
 _EXAMPLE = {"angle": "\"-90deg\"", "length": "\"12mm\""}
+_NOUN = {"angle": "an angle", "length": "a length"}
 
 
 def _vec(a: Any) -> Vec:
