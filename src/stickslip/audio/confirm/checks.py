@@ -137,9 +137,14 @@ class WindowChecks:
     def onset_doubt(self, onset: int) -> str | None:
         """Why a confirmed stop whose onset is at absolute sample ``onset`` may not have begun there: its lines, read
         in phase over ``onset_read_s`` from it, do not show the stop (under ``min_a``: the fire came before the
-        stop, and the stop came in its window). None: they do, or nothing was read."""
+        stop, and the stop came in its window); or the stepping before the fire was over ``onset_ref_stoplike``
+        stop-like with none kept (no stepping to place it by: it may have begun there). None: they do, or nothing
+        was read."""
         if self.clocked is None:
             return None
+        c = self.clocked
+        if c.enabled and c.ref_stoplike > c.p.onset_ref_stoplike:  # no stepping heard before it to place it by
+            return f"the stepping before it {100 * c.ref_stoplike:.0f} % stop-like, none kept: it may have begun there"
         x = self.kept.get(onset, onset + int(round(self.clocked.p.onset_read_s * self.clocked.sample_rate)))
         a = self.clocked.at_onset(x, self.on_clock)
         if math.isfinite(a) and a < self.clocked.p.min_a:

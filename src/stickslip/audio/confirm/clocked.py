@@ -70,7 +70,9 @@ of the stream (counted from its start) whose frames were at most ``kept_stoplike
 stop-like, every one heard, is kept, and where the fire's own reference is over
 ``max_ref_stoplike`` stop-like the latest kept that ended no more than ``kept_age_s``
 before it is the reference instead (a stop heard late is then judged against the stepping
-before it).
+before it). Where none was kept either, the check gives no verdict, and a stop
+confirmed so has no stepping before it to place it by: it is flagged ``onset_uncertain``
+(``onset_ref_stoplike``; :meth:`.checks.WindowChecks.onset_doubt`), as it may have begun there.
 
 **In phase with the steps.** A note on or beside one of the few lines a joint is judged on adds
 power the comb counts as the joint's. So the same sub-bands are also read in phase with the
@@ -168,6 +170,9 @@ class ClockedParams:
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
+    )
+    onset_ref_stoplike: float = param(
+        0.5, "", "a stop confirmed on a reference more stop-like, none kept, is flagged: it may begin there (1: not)"
     )
     kept_age_s: float = param(
         30.0, "s", "a reference stop-like to the levels is replaced by stepping kept no longer ago (0: none kept)"

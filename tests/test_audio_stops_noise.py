@@ -1,0 +1,48 @@
+"""A stop confirmed with no stepping heard before it to place it by is flagged (issue 35 item 6).
+
+The tenth generator's arm 1 (``tests/support/fan_sound.py``) steps at 1200 Hz, told (the tuning's
+rate: 1000 Hz), into its stop at 12 s under the hour's speech over a radio at +3 dB to the
+stepping (``tests/support/hour_sound.py``), as ``benchmarks/bench_audio_stops_noise.py`` renders it.
+A fire 0.57 s before the stop is confirmed, flagged (the stop came in its window), and the fast
+path fires again 1.48 s into the stop: the stepping before that fire is the stop itself (over half
+its frames stop-like, no stepping kept), so the detector cannot know where the stop began. Before
+``ClockedParams.onset_ref_stoplike`` it was a confirmed stop 1.48 s late, unflagged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from fan_sound import SR, Arm, Scene, render, tuning_scene
+from hour_sound import RMS, _span_source
+from tuned import tune
+
+from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
+from stickslip.audio.confirm.clocked import ClockedParams
+from stickslip.audio.detector import detector_for
+from stickslip.audio.events import StopEvent
+
+STOP_S, RATE = 12.0, 1200.0
+
+
+def _heard(onset_ref_stoplike: float) -> tuple[list[StopEvent], list[tuple[float, str]]]:
+    arm = 1
+    tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
+    y = render(Scene(Arm(arm), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + arm + 77))
+    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
+    kind = "speech over the radio"
+    src = _span_source(kind, np.random.default_rng(arm * 100 + int(RATE) + 3))
+    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[kind], dtype=np.float32)  # type: ignore[operator]
+    p = ConfirmParams(clocked=ClockedParams(onset_ref_stoplike=onset_ref_stoplike))
+    det = ConfirmedStopDetector(detector_for(tu), params=p)
+    det.reset(0.0, step_rate_hz=RATE)
+    return det.feed(y) + det.finish(), det.log.onset
+
+
+def test_a_stop_confirmed_on_a_stoplike_reference_with_none_kept_is_flagged() -> None:
+    before, _ = _heard(1.0)  # not flagged so: the silently late count
+    after, why = _heard(ClockedParams().onset_ref_stoplike)
+    assert [round(e.onset_s, 2) for e in before] == [11.43, 13.48]
+    assert [e.onset_uncertain for e in before] == [True, False]
+    assert [round(e.onset_s, 2) for e in after] == [11.43, 13.48]
+    assert all(e.onset_uncertain for e in after)  # the first was flagged already; the late one is now
+    assert len(why) == 1 and "none kept" in why[0][1] and abs(why[0][0] - after[1].detected_at_s) < 1e-9
