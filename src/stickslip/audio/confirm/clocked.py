@@ -73,6 +73,8 @@ before it is the reference instead (a stop heard late is then judged against the
 before it). Where none was kept either, the check gives no verdict, and a stop
 confirmed so has no stepping before it to place it by: it is flagged ``onset_uncertain``
 (``onset_ref_stoplike``; :meth:`.checks.WindowChecks.onset_doubt`), as it may have begun there.
+So is a stop confirmed with under ``min_s`` of stepping heard before its fire (the stream
+began near it, the change detector still learning; ``onset_short_ref``): nothing places it.
 
 **In phase with the steps.** A note on or beside one of the few lines a joint is judged on adds
 power the comb counts as the joint's. So the same sub-bands are also read in phase with the
@@ -173,6 +175,9 @@ class ClockedParams:
     )
     onset_ref_stoplike: float = param(
         0.5, "", "a stop confirmed on a reference more stop-like, none kept, is flagged: it may begin there (1: not)"
+    )
+    onset_short_ref: bool = param(
+        True, "", "a stop confirmed with under min_s of stepping heard before its fire is flagged (False: not)"
     )
     kept_age_s: float = param(
         30.0, "s", "a reference stop-like to the levels is replaced by stepping kept no longer ago (0: none kept)"

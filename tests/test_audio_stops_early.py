@@ -1,0 +1,48 @@
+"""A stop confirmed with less stepping heard before its fire than ``min_s`` is flagged (issue 35 item 6).
+
+The tenth generator's arm 2 (``tests/support/fan_sound.py``) steps at 1050 Hz, told (the tuning's
+rate: 1000 Hz), into its stop at 12 s under the hour's music at +3 dB to the stepping
+(``tests/support/hour_sound.py``), as ``benchmarks/bench_audio_stops_noise.py`` renders it. The fast
+path fires 0.17 s into the recording, while it is still learning: 0.14 s of stepping lies before
+the fire, under the clocked check's ``min_s`` (0.2 s), so nothing places a stop there. Persistence
+confirms it; without ``ClockedParams.onset_short_ref`` it was a stop counted 11.8 s early, unflagged
+(and the true stop then got no event of its own).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from fan_sound import SR, Arm, Scene, render, tuning_scene
+from hour_sound import RMS, _span_source
+from tuned import tune
+
+from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
+from stickslip.audio.confirm.clocked import ClockedParams
+from stickslip.audio.detector import detector_for
+from stickslip.audio.events import StopEvent
+
+STOP_S, RATE, ARM = 12.0, 1050.0, 2
+
+
+def _heard(onset_short_ref: bool) -> tuple[list[StopEvent], list[tuple[float, str]]]:
+    tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
+    y = render(Scene(Arm(ARM), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + ARM + 77))
+    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
+    src = _span_source("music", np.random.default_rng(ARM * 100 + int(RATE) + 3))
+    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS["music"], dtype=np.float32)  # type: ignore[operator]
+    p = ConfirmParams(clocked=ClockedParams(onset_short_ref=onset_short_ref))
+    det = ConfirmedStopDetector(detector_for(tu), params=p)
+    det.reset(0.0, step_rate_hz=RATE)
+    return det.feed(y) + det.finish(), det.log.onset
+
+
+def test_a_stop_confirmed_with_under_min_s_of_stepping_before_it_is_flagged() -> None:
+    before, _ = _heard(False)  # not flagged so: the silently early count
+    after, why = _heard(ClockedParams().onset_short_ref)
+    assert [round(e.onset_s, 3) for e in before] == [0.171, 11.035]
+    assert [e.onset_uncertain for e in before] == [False, True]
+    assert [round(e.onset_s, 3) for e in after] == [0.171, 11.035]
+    assert all(e.onset_uncertain for e in after)  # the second was flagged already; the early one is now
+    assert len(why) == 1 and abs(why[0][0] - after[0].detected_at_s) < 1e-9
+    heard_s = float(why[0][1].split()[1])  # "only 0.14 s of stepping heard before it: ..."
+    assert 0.0 <= heard_s < ClockedParams().min_s and heard_s == 0.14
