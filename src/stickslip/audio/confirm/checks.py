@@ -139,15 +139,16 @@ class WindowChecks:
         in phase over ``onset_read_s`` from it, do not show the stop (under ``min_a``: the fire came before the
         stop, and the stop came in its window); or the stepping before the fire was over ``onset_ref_stoplike``
         stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; the
-        stream began near it): no stepping to place it by, it may have begun there. None: they do, or nothing was
-        read."""
+        stream began near it; not an onset at listening's start, which :mod:`~stickslip.audio.change.start`
+        judged): no stepping to place it by, it may have begun there. None: they do, or nothing was read."""
         if self.clocked is None:
             return None
         c = self.clocked
         if c.enabled and c.ref_stoplike > c.p.onset_ref_stoplike:  # no stepping heard before it to place it by
             return f"the stepping before it {100 * c.ref_stoplike:.0f} % stop-like, none kept: it may have begun there"
         heard = 0 if c.ref is None else c.ref.size
-        if c.enabled and c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate:  # too little to know the stepping
+        short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
+        if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
         x = self.kept.get(onset, onset + int(round(self.clocked.p.onset_read_s * self.clocked.sample_rate)))
         a = self.clocked.at_onset(x, self.on_clock)

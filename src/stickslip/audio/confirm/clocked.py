@@ -75,6 +75,8 @@ confirmed so has no stepping before it to place it by: it is flagged ``onset_unc
 (``onset_ref_stoplike``; :meth:`.checks.WindowChecks.onset_doubt`), as it may have begun there.
 So is a stop confirmed with under ``min_s`` of stepping heard before its fire (the stream
 began near it, the change detector still learning; ``onset_short_ref``): nothing places it.
+A stop whose onset is the start of listening is not (the warm-up judged that listening began
+at the stop, :mod:`~stickslip.audio.change.start`: no change after the start is claimed).
 
 **In phase with the steps.** A note on or beside one of the few lines a joint is judged on adds
 power the comb counts as the joint's. So the same sub-bands are also read in phase with the
