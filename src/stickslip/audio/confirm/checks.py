@@ -150,9 +150,9 @@ class WindowChecks:
         short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
-        x = self.kept.get(onset, onset + int(round(self.clocked.p.onset_read_s * self.clocked.sample_rate)))
-        a = self.clocked.at_onset(x, self.on_clock)
-        if math.isfinite(a) and a < self.clocked.p.min_a:
+        x = self.kept.get(onset, onset + int(round(c.p.onset_read_s * c.sample_rate)))
+        a = c.at_onset(x, self.on_clock)
+        if math.isfinite(a) and a < c.p.min_a:
             return f"the stop not in phase with the steps at its onset (a {a:.2f})"
         return self._step_elsewhere(onset)
 
