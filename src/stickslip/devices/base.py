@@ -42,6 +42,7 @@ __all__ = [
     "BACKENDS",
     "register_backend",
     "open_device",
+    "query_options",
     "device_key",
     "check_setting",
     "check_device_url",
@@ -346,9 +347,7 @@ def check_device_url(url: str) -> str:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535") from None
     if port == 0:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
-    twice = sorted(k for k, v in parse_qs(parts.query, keep_blank_values=True).items() if len(v) > 1)
-    if twice:
-        raise ValueError(f"device URL {redact_url(url)!r} gives the option {twice[0]!r} twice: give it once")
+    query_options(parts.query, url)
     if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
         raise ValueError(
             f"device URL {redact_url(url)!r} names no host and no port: give the serial port "
@@ -363,6 +362,16 @@ def check_device_url(url: str) -> str:
                 f"{max(map(len, labels))})"
             )
     return url
+
+
+def query_options(query: str, url: str, kind: str = "device") -> dict[str, str]:
+    """The options of a ``kind`` URL's ``query``, each given once; ``ValueError`` (without a secret) naming an
+    option given twice, since which of the two to take is not for us to guess."""
+    given = parse_qs(query, keep_blank_values=True)
+    twice = sorted(k for k, v in given.items() if len(v) > 1)
+    if twice:
+        raise ValueError(f"{kind} URL {redact_url(url)!r} gives the option {twice[0]!r} twice: give it once")
+    return {k: v[0] for k, v in given.items()}
 
 
 def open_device(url: str = "sim://") -> Controller:

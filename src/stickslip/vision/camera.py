@@ -22,9 +22,8 @@ import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
-from urllib.parse import parse_qs
 
-from ..devices.base import Controller, redact_url
+from ..devices.base import Controller, query_options, redact_url
 from ..units import UnitError, parse_length
 from .frame import PIXEL_SIZE_RANGE, Frame
 
@@ -152,14 +151,10 @@ def camera_options(url: str, known: set[str] | frozenset[str]) -> tuple[str, dic
     """
     rest = str(url).partition("://")[2]
     location, _, query = rest.partition("?")
-    given = parse_qs(query, keep_blank_values=True)
-    unknown = sorted(set(given) - set(known))
+    opts = query_options(query, url, "camera")
+    unknown = sorted(set(opts) - set(known))
     if unknown:
         raise ValueError(f"unknown option(s) {unknown} in {redact_url(url)!r} (known: {sorted(known)})")
-    twice = sorted(k for k, v in given.items() if len(v) > 1)
-    if twice:
-        raise ValueError(f"camera URL {redact_url(url)!r} gives the option {twice[0]!r} twice: give it once")
-    opts = {k: v[0] for k, v in given.items()}
     return location, opts
 
 

@@ -106,10 +106,11 @@ def read_vibration(
         k = int(np.argmax(~np.isfinite(x)))
         raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, not a finite number")
     fs = float(full_scale) if full_scale else VIBRATION.headroom * float(np.max(np.abs(x))) or 1.0
-    if not math.isfinite(fs) or not np.all(np.abs(x / fs) <= np.finfo(np.float32).max):
+    y = x / fs
+    if not math.isfinite(fs) or not np.all(np.abs(y) <= np.finfo(np.float32).max):
         k = int(np.argmax(np.abs(x)))
         raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, too large for a sample")
-    return (x / fs).astype(np.float32), int(round(rate))
+    return y.astype(np.float32), int(round(rate))
 
 
 def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], float | None]:
