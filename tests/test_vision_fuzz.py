@@ -79,6 +79,8 @@ def test_values_no_camera_records_are_refused_before_they_overflow_the_sums():
         as_image(image * 1e300)
     with pytest.raises(ImageError, match=r"the first frame: a pixel of -2e\+200"):
         TipTracker(np.where(image > 0.5, -2e200, image), (30.0, 32.0))
+    with pytest.raises(ImageError, match=r"a pixel of 1.0000001e\+100 .* beyond the ±1e\+100"):
+        as_image(np.full((20, 20), 1.0000001e100))  # just over the limit: said as it is, not rounded onto it
     assert as_image(image * MAX_VALUE).max() == pytest.approx(0.9 * MAX_VALUE)  # up to the limit: kept as it is
     tracker = TipTracker(image * 1e6, (30.0, 32.0))  # a float image in large units is tracked all the same
     r = tracker.update(image * 1e6)

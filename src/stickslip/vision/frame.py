@@ -153,6 +153,6 @@ def as_image(data: object, source: str = "image") -> NDArray[np.float64]:
         raise ImageError(f"{source}: {len(bad)} pixel(s) are NaN or infinite (the first, at x={x}, y={y}, is {what})")
     if peak > MAX_VALUE:
         y, x = (int(v) for v in np.unravel_index(int(np.argmax(np.abs(f))), f.shape))
-        raise ImageError(f"{source}: a pixel of {float(f[y, x]):g} (at x={x}, y={y}) is beyond the ±{MAX_VALUE:g} "
+        raise ImageError(f"{source}: a pixel of {float(f[y, x]):.8g} (at x={x}, y={y}) is beyond the ±{MAX_VALUE:g} "
                          "a frame's values may have (no camera records it; the tracker's sums would overflow)")
     return np.ascontiguousarray(f, dtype=np.float64)
