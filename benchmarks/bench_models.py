@@ -46,6 +46,12 @@ largest error above the paper's procedure's (docs/models-log.md, eighth round).
 ``--new-per-direction 3`` updates yesterday's ``auto`` with 3 of today's traverses per joint and direction
 (12 a day, at random poses) in the ``--prior`` row instead of 1 (docs/models-log.md, eleventh round).
 
+``--check 0,4`` runs each arm without and with check traverses at 4 random poses per joint (both
+directions, ``calibration.design.check_poses``; measured after the day's other traverses, not fitted): ``auto``
+(with the repeats) is ``calibrate(..., check=...)``, its intervals scaled by how those erred (docs/models.md §4;
+docs/models-log.md, seventeenth round); the rows "ARM, check N" side by side with "ARM" (the same traverses
+otherwise, so the same fits and errors).
+
 ``--design3 maximin`` spreads joint 3's 8 poses by the maximin design instead of its default
 (maximum projection; ``calibration.design.spread_poses``), for a side-by-side comparison: the
 random poses drawn are the same (docs/models-log.md, ninth round).
@@ -168,10 +174,11 @@ def _inside(cals: dict[str, Calibration], val: list[Traverse]) -> dict[tuple[str
 
 def _day(tally: _Tally, d: Day, prev: Calibration | None, poses: tuple[int, int]) -> Calibration:
     """One day into ``tally`` (``poses``: the validation poses per joint, and the first of them the largest
-    errors are taken over); returns the day's ``auto`` (with the repeats), tomorrow's prior."""
+    errors are taken over); returns the day's ``auto`` (with the repeats, checked by the day's check
+    traverses if any), tomorrow's prior."""
     c14 = calibrate(d.paper14)
     auto46 = calibrate(d.calibration46, model="auto")
-    auto = calibrate(d.calibration, model="auto")
+    auto = calibrate(d.calibration, model="auto", check=d.check)
     everything = _first(d.validation + d.more_validation, poses[0])
     val = _first(everything, poses[1])
     rows = {
@@ -206,10 +213,10 @@ def _day(tally: _Tally, d: Day, prev: Calibration | None, poses: tuple[int, int]
 
 
 def run_arm(arm: str, seeds: tuple[int, ...], new_per_direction: int = 1, validation_poses: int = VALIDATION_POSES,
-            error_poses: int = ERROR_POSES) -> _Tally:
+            error_poses: int = ERROR_POSES, check: int = 0) -> _Tally:
     """Every day of one arm: errors per calibration (over the first ``error_poses`` validation poses per joint),
     coverage (over all ``validation_poses``), honesty ratios, fallbacks (the update with ``new_per_direction``
-    of today's traverses per joint and direction)."""
+    of today's traverses per joint and direction); ``check`` poses per joint of check traverses."""
     tally = _Tally()
     more = max(0, validation_poses - FIRST_POSES)
     for seed in seeds:
@@ -217,7 +224,7 @@ def run_arm(arm: str, seeds: tuple[int, ...], new_per_direction: int = 1, valida
         prev = None
         for day in DAYS:
             d = make_day(arm, seed, day, rng, validation_poses=FIRST_POSES, repeat_first=True,
-                         new_per_direction=new_per_direction, more_validation=more)
+                         new_per_direction=new_per_direction, more_validation=more, check_per_joint=check)
             prev = _day(tally, d, prev, (validation_poses, error_poses))
     return tally
 
@@ -300,7 +307,8 @@ def _print_ladder(results: dict[str, _Tally], validation_poses: int) -> None:
 
 
 def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("physics", "lugre", "dahl"),
-         new_per_direction: int = 1, validation_poses: int = VALIDATION_POSES, error_poses: int = ERROR_POSES) -> None:
+         new_per_direction: int = 1, validation_poses: int = VALIDATION_POSES, error_poses: int = ERROR_POSES,
+         checks: tuple[int, ...] = (0,)) -> None:
     print(f"seeds {', '.join(map(str, seeds))}; days {', '.join(DAYS)}")
     print(f"{4 * error_poses} validation traverses a day for the errors ({error_poses} poses per joint), "
           f"{4 * validation_poses} for\nthe coverage ({len(seeds) * len(DAYS) * validation_poses} per joint and "
@@ -311,7 +319,11 @@ def main(seeds: tuple[int, ...] = (101, 102, 103), arms: tuple[str, ...] = ("phy
     if new_per_direction != 1:
         print(f"The --prior row: yesterday's auto updated with {4 * new_per_direction} of today's traverses "
               f"({new_per_direction} per joint and direction), not 4.\n")
-    results = {arm: run_arm(arm, seeds, new_per_direction, validation_poses, error_poses) for arm in arms}
+    if checks != (0,):
+        print("Rows 'ARM, check N': auto's intervals checked by N random poses per joint (docs/models.md §4).\n")
+    results = {arm if c == 0 else f"{arm}, check {c}": run_arm(arm, seeds, new_per_direction, validation_poses,
+                                                              error_poses, c)
+               for arm in arms for c in checks}
     _print_errors(results)
     _print_verdicts(results, error_poses, validation_poses)
     _print_ladder(results, validation_poses)
@@ -401,6 +413,12 @@ def _cli(argv: list[str]) -> None:
             raise argparse.ArgumentTypeError(f"{text!r}: a number of poses from 1 to 512")
         return int(text)
 
+    def checks(text: str) -> tuple[int, ...]:
+        out = tuple(text.split(","))
+        if not all(v.isdigit() and int(v) <= 16 for v in out) or len(set(out)) != len(out):
+            raise argparse.ArgumentTypeError(f"{text!r}: check poses per joint, 0-16, separated by commas")
+        return tuple(int(v) for v in out)
+
     def days(text: str) -> list[tuple[str, int, int]]:
         out = []
         for spec in text.split(","):
@@ -418,6 +436,8 @@ def _cli(argv: list[str]) -> None:
     )
     ap.add_argument("--seeds", type=ints, default=(101, 102, 103), help="seeds, e.g. 201,202 (default 101,102,103)")
     ap.add_argument("--arms", type=arms, default=tuple(ARMS), help=f"arms, some of {','.join(ARMS)}")
+    ap.add_argument("--check", type=checks, default=(0,), metavar="N,...",
+                    help="check poses per joint, 0-16, e.g. 0,4 for both side by side (default 0: none)")
     ap.add_argument("--design3", choices=("maximin", "maxpro"), help="joint 3's spread design (default: the library's)")
     ap.add_argument("--resample", type=days, help="ARM:SEED:DAY,...: one day's largest error on more random poses")
     ap.add_argument("--poses", type=int, default=150, help="random poses for --resample (default 150)")
@@ -438,7 +458,7 @@ def _cli(argv: list[str]) -> None:
             resample_day(arm, seed, day, a.poses)
         return
     main(seeds=a.seeds, arms=a.arms, new_per_direction=a.new_per_direction, validation_poses=a.validation_poses,
-         error_poses=a.error_poses)
+         error_poses=a.error_poses, checks=a.check)
 
 
 if __name__ == "__main__":

@@ -85,3 +85,16 @@ def test_more_validation_poses_leave_the_day_as_it_was() -> None:
     # new poses: none of them is one of the day's first validation poses
     first = {(t.q1, t.q2, t.q3, t.theta, t.psi) for t in base.validation}
     assert not first & {(t.q1, t.q2, t.q3, t.theta, t.psi) for t in more.more_validation}
+
+
+def test_check_poses_leave_the_day_as_it_was() -> None:
+    day = "2026-09-02"
+    base = make_day("lugre", 7, day, np.random.default_rng(7), validation_poses=2, repeat_first=True)
+    checked = make_day("lugre", 7, day, np.random.default_rng(7), validation_poses=2, repeat_first=True,
+                       check_per_joint=2)
+    for name in ("paper14", "spread32", "repeat", "validation", "new4", "more_new", "more_validation"):
+        assert getattr(checked, name) == getattr(base, name), name
+    assert base.check == []
+    assert [(t.joint, t.direction) for t in checked.check] == [(3, "+"), (3, "-")] * 2 + [(2, "+"), (2, "-")] * 2
+    calibrated = {(t.q1, t.q2, t.q3, t.theta, t.psi) for t in base.calibration + base.validation}
+    assert not calibrated & {(t.q1, t.q2, t.q3, t.theta, t.psi) for t in checked.check}

@@ -24,7 +24,7 @@ from lugre_arm import LugreArm
 from physics_scenarios import paper_poses, random_pose
 
 from stickslip import kinematics as kin
-from stickslip.calibration.design import spread_poses
+from stickslip.calibration.design import check_poses, spread_poses
 from stickslip.measurements import Traverse
 from stickslip.sim import physics as ph
 
@@ -66,6 +66,11 @@ class Day:
     more_validation: list[Traverse] = field(default_factory=list)
     """``make_day(..., more_validation=n)``: ``n`` more random validation poses per joint (both directions),
     measured last (drawn from their own generator: the other tables are those of ``n = 0``)."""
+    check: list[Traverse] = field(default_factory=list)
+    """``make_day(..., check_per_joint=n)``: check traverses at ``n`` random poses per joint (both directions;
+    :func:`stickslip.calibration.design.check_poses`), not fitted (``calibrate(..., check=...)``). Measured
+    after every other traverse of the day, so that those are the same whatever ``n`` (no arm here changes
+    within a day after its first traverse: docs/models-log.md, fifteenth round's control)."""
 
     @property
     def calibration46(self) -> list[Traverse]:
@@ -79,13 +84,14 @@ class Day:
 
 
 def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, validation_poses: int = 8,
-             repeat_first: bool = False, new_per_direction: int = 1, more_validation: int = 0) -> Day:
+             repeat_first: bool = False, new_per_direction: int = 1, more_validation: int = 0,
+             check_per_joint: int = 0) -> Day:
     """The day's tables (``validation_poses`` random poses per joint, both directions), measured in this order
     on one arm (a joint that warms up is warm by the validation). ``repeat_first``: each joint's first paper
     pose is traversed again in both directions after the 46 (the random poses drawn are the same).
     ``new_per_direction``: new traverses per joint and direction for the update (:attr:`Day.more_new`).
     ``more_validation``: random validation poses per joint measured after all of them
-    (:attr:`Day.more_validation`)."""
+    (:attr:`Day.more_validation`). ``check_per_joint``: check poses per joint measured last (:attr:`Day.check`)."""
     arm = ARMS[arm_name](seed, day)
     p14 = [arm.traverse(j, d, p, day) for j in (3, 2) for p in paper_poses(j) for d in "+-"]
     s32 = [arm.traverse(j, d, p, day) for j in (3, 2)
@@ -100,7 +106,10 @@ def make_day(arm_name: str, seed: int, day: str, rng: np.random.Generator, valid
     val_rng = np.random.default_rng((seed, int(day.replace("-", "")), 13))
     more_val = [arm.traverse(j, d, p, day) for j in (3, 2)
                 for p in [random_pose(val_rng, j) for _ in range(more_validation)] for d in "+-"]
-    return Day(arm_name, seed, day, p14, s32, val, new4, rep, more, more_val)
+    check_seed = int(np.random.default_rng((seed, int(day.replace("-", "")), 17)).integers(2**31))
+    check = [arm.traverse(j, d, p, day) for j in (3, 2) for p in check_poses(j, check_per_joint, check_seed)
+             for d in "+-"]
+    return Day(arm_name, seed, day, p14, s32, val, new4, rep, more, more_val, check)
 
 
 def relative_errors(pred: np.ndarray, ts: list[Traverse]) -> np.ndarray:

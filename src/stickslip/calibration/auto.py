@@ -7,6 +7,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
+from .check import apply_check
 from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
@@ -25,6 +26,7 @@ def calibrate(
     model: str = "paper",
     progress: Progress | None = None,
     step_sizes: Sequence[StepSize] = (),
+    check: Sequence[Traverse] = (),
 ) -> Calibration:
     """Calibrate every joint and direction present in ``traverses``.
 
@@ -59,7 +61,14 @@ def calibrate(
         paper's model, its traverses and its step sizes together
         (:func:`calibrate_with_step_sizes`); the others as without them. None (the
         default): exactly the calibration without step sizes.
+    check : sequence of Traverse
+        Check traverses: at random poses (:func:`~.design.check_poses`), measured in the
+        session after ``traverses`` and not fitted; each joint's intervals are scaled by how
+        they erred (:func:`~.check.apply_check`, docs/models.md §4). The fit and its
+        predictions are those without them. None (the default): no check.
     """
+    if check:
+        return apply_check(calibrate(traverses, method, day, source, model, progress, step_sizes), check)
     if step_sizes:
         return calibrate_with_step_sizes(group_traverses(traverses).traverses, step_sizes, method, day, source, model,
                                          progress)

@@ -27,7 +27,7 @@ from .groups import load_coordinates_of, load_quantities
 from .result import Calibration
 from .update import model_sigma
 
-__all__ = ["Suggestion", "suggest_poses", "workspace_poses", "spread_poses", "load_coordinates"]
+__all__ = ["Suggestion", "suggest_poses", "workspace_poses", "spread_poses", "check_poses", "load_coordinates"]
 
 
 @dataclass(frozen=True)
@@ -58,9 +58,10 @@ class Suggestion:
         }
 
 
-def workspace_poses(joint: int, n: int, seed: int = 0) -> list[kin.Pose]:
-    """``n`` random poses of the workspace for ``joint`` (tilts within ±90° and ±60°), reproducible."""
-    rng = np.random.default_rng([seed, joint])
+def workspace_poses(joint: int, n: int, seed: int = 0, stream: int = 0) -> list[kin.Pose]:
+    """``n`` random poses of the workspace for ``joint`` (tilts within ±90° and ±60°), reproducible
+    (``stream`` > 0: another sequence of the same ``seed``)."""
+    rng = np.random.default_rng([seed, joint] if stream == 0 else [seed, joint, stream])
     out = []
     for _ in range(n):
         q1 = 0.0 if joint == 1 else float(rng.uniform(-0.5, 0.5))
@@ -191,6 +192,16 @@ def spread_poses(
     sites = load_coordinates(joint, existing) if existing else np.empty((0, x.shape[1]))
     pick = _max_projection if criterion == "maxpro" else _maximin
     return [cand[k] for k in pick(joint, x, sites, n)]
+
+
+def check_poses(joint: int, n: int, seed: int = 0) -> list[kin.Pose]:
+    """``n`` random workspace poses for ``joint``'s check traverses (docs/models.md §4), reproducible.
+
+    Traversed after the calibration's poses and not fitted (:func:`~.check.apply_check`): random, so that
+    they lie between the calibrated poses as new poses do (a spread design's poses lie at its edges).
+    Their own stream of ``seed``, not :func:`spread_poses`' candidates.
+    """
+    return workspace_poses(joint, n, seed, stream=1) if n > 0 else []
 
 
 def _farthest_from_mean(x: NDArray[np.float64]) -> int:

@@ -21,7 +21,8 @@ class Predictive:
     with the distance as the cross-validation's held-out poses did
     (:func:`~.selection.error_model`; both directions of the joint together), and the bias the
     fit leaves at the end of its session, which no cross-validation of one session sees
-    (:mod:`~.drift`; zero without a pose traversed twice in a session).
+    (:mod:`~.drift`; zero without a pose traversed twice in a session). Check traverses at random
+    poses, not fitted, multiply all four by one scale per joint (:mod:`~.check`).
 
     Attributes
     ----------

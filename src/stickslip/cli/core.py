@@ -119,6 +119,14 @@ def calibrate_cmd(
             "traverses, each weighted by its uncertainty.",
         ),
     ] = None,
+    check: Annotated[
+        Path | None,
+        typer.Option(
+            "--check",
+            help="Check traverses (a measurement table): at random poses (none of the calibration's), measured "
+            "after the table's and not fitted; how they erred scales each joint's intervals (docs/models.md §4).",
+        ),
+    ] = None,
     method: Annotated[
         str,
         typer.Option(
@@ -227,6 +235,10 @@ def calibrate_cmd(
     (their numbers and ranges, positions in m); the calibration records the arm's
     controller as its device unless --device.
 
+    With --check, traverses at random poses measured after the table's (not fitted) show
+    how far the intervals are from the errors at new poses, and each joint's intervals are
+    scaled part of the way (a note says by how much).
+
     Example: stickslip calibrate day1.csv -o cal.json
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
     Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
@@ -240,8 +252,11 @@ def calibrate_cmd(
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
     if not (math.isfinite(max_table_mb) and max_table_mb > 0):
         fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
+    if check is not None and (prior is not None or step_sizes is not None):
+        fail("--check scales the intervals of a calibration made from the table: not with --prior or --step-sizes")
     if rig_file is not None:
-        mm3a_only = prior is not None or step_sizes is not None or method != "auto" or model != "auto"
+        mm3a_only = (prior is not None or step_sizes is not None or method != "auto" or model != "auto"
+                     or check is not None)
         measurements = _stage_table(measurements, mm3a_only, db)
         _calibrate_stage(measurements, rig_file, arm, output, day, device, frequency, amplitude, temperature,
                          int(max_table_mb * 1024 * 1024), json_out)
@@ -249,6 +264,7 @@ def calibrate_cmd(
     if arm is not None:
         fail("--arm names an arm of a rig: give --rig FILE too")
     traverses = _whole_table(measurements, int(max_table_mb * 1024 * 1024)) if measurements is not None else []
+    checks = _whole_table(check, int(max_table_mb * 1024 * 1024)) if check is not None else []
     steps: list[StepSize] = read_step_table(step_sizes) if step_sizes is not None else []
     source = str(measurements) if measurements is not None else str(step_sizes)
     stored = _stored_device(traverses, db) if device is None and traverses else None
@@ -265,7 +281,7 @@ def calibrate_cmd(
         else:
             with _progress_bar("calibrating") as progress:  # shown once it has taken a second
                 cal = calibrate(traverses, method=method, day=day, source=source, model=model, step_sizes=steps,
-                                progress=progress)
+                                progress=progress, check=checks)
     except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
         fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
@@ -293,8 +309,8 @@ def calibrate_cmd(
 def _stage_table(measurements: Path | None, mm3a_only: bool, db: str | None) -> Path:
     """The stage's table (``calibrate --rig``), refusing what only an MM3A's calibration uses."""
     if mm3a_only:
-        fail("a stage (--rig) is calibrated from its traverses alone: --prior, --step-sizes, --method and "
-             "--model are for an MM3A")
+        fail("a stage (--rig) is calibrated from its traverses alone: --prior, --step-sizes, --check, --method "
+             "and --model are for an MM3A")
     if measurements is None:
         fail("give the stage's measurement table (MEASUREMENTS.csv)")
     if db is not None:

@@ -1,0 +1,131 @@
+"""Check traverses: the misfit at new poses, measured, scales the intervals (docs/models.md §4).
+
+A calibration's error model infers its error at new poses from the cross-validation's held-out
+poses, which are the design's edge poses with their leverage; new poses lie between calibrated
+ones. A few traverses at random poses of the workspace (:func:`~.design.check_poses`), measured
+in the same session after the calibration's traverses and *not* fitted, show the error there
+directly: each one's standardized error ``z = (predicted / measured - 1) / sd`` has mean square 1
+where the intervals are right. Per joint (both directions together, as the error model is
+made), the intervals' standard deviation is multiplied by ``s`` with
+
+    s^2 = (nu_0 + sum z^2) / (nu_0 + m)
+
+over the ``m`` check traverses: the mean square of ``z`` pooled with the error model's own
+(1) counted as ``nu_0`` traverses (:attr:`CheckParams.prior_traverses`). A few traverses say
+little, so the scale moves only part of the way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..measurements import Traverse
+from .intervals import relative_sd
+from .result import Calibration
+
+__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check"]
+
+
+@dataclass(frozen=True)
+class CheckParams:
+    """How much check traverses move the intervals."""
+
+    prior_traverses: float = 8.0
+    """``nu_0``, traverses (1): the error model's own scale counts as this many check traverses, the prior of
+    ``s^2`` a chi-square over ``nu_0`` degrees of freedom, relative sd ``sqrt(2 / nu_0)``. The true scale (the
+    mean square of ``z`` over 128 validation traverses a joint and day) lay 0.42-3.13, 0.50 RMS about 1, over
+    the three development arms' 108 joint-days: ``sqrt(2 / 8)`` (docs/models-log.md, issue 33, seventeenth
+    round)."""
+
+
+CHECK = CheckParams()
+
+
+@dataclass(frozen=True)
+class CheckScale:
+    """One joint's check: ``traverses`` used, the RMS of their relative errors and of the intervals'
+    ``sd`` there (1), the RMS of ``z``, and the scale ``s`` applied to the joint's intervals."""
+
+    joint: int
+    traverses: int
+    rms_error: float
+    rms_sd: float
+    rms_z: float
+    scale: float
+
+    def as_dict(self) -> dict[str, object]:
+        return {"traverses": self.traverses, "rms_error": self.rms_error, "rms_sd": self.rms_sd,
+                "rms_z": self.rms_z, "scale": self.scale}
+
+
+def check_scales(cal: Calibration, check: Sequence[Traverse], params: CheckParams = CHECK) -> dict[int, CheckScale]:
+    """The scale of each joint's intervals from ``check`` (traverses not in ``cal``'s fit), for the joints
+    with an error model (:class:`~.errormodel.Predictive`) in a direction checked and a finite prediction
+    at some check traverse."""
+    out: dict[int, CheckScale] = {}
+    for j in sorted({t.joint for t in check}):
+        e2: list[float] = []
+        sd2: list[float] = []
+        for d in "+-":
+            ts = [t for t in check if t.joint == j and t.direction == d]
+            if not ts or (j, d) not in cal.predictive:
+                continue
+            pred = cal.predict_many(ts)
+            cols = [np.array([getattr(t, k) for t in ts], dtype=float) for k in ("q1", "q2", "q3", "theta", "psi")]
+            sd = relative_sd(cal, j, d, *cols)
+            e = pred / np.array([t.gamma for t in ts]) - 1.0
+            ok = np.isfinite(e) & np.isfinite(sd) & (sd > 0)
+            e2 += (e[ok] ** 2).tolist()
+            sd2 += (sd[ok] ** 2).tolist()
+        m = len(e2)
+        if m == 0:
+            continue
+        z2 = np.asarray(e2) / np.asarray(sd2)
+        s = math.sqrt((params.prior_traverses + float(z2.sum())) / (params.prior_traverses + m))
+        out[j] = CheckScale(j, m, math.sqrt(float(np.mean(e2))), math.sqrt(float(np.mean(sd2))),
+                            math.sqrt(float(z2.mean())), s)
+    return out
+
+
+def apply_check(cal: Calibration, check: Sequence[Traverse], params: CheckParams | None = None) -> Calibration:
+    """``cal`` with each checked joint's intervals scaled by :func:`check_scales` (every term of its error
+    model: floor, growth, drift), its ``sigma_model`` recomputed, the check recorded in ``selection``
+    (``"check"``) and a note per joint. Joints without an error model or without check traverses are
+    as they were (a note says so for a joint checked in vain). The predictions are unchanged."""
+    from .selection import workspace_sigma
+
+    p = CHECK if params is None else params
+    if not check:
+        return cal
+    scales = check_scales(cal, check, p)
+    predictive = dict(cal.predictive)
+    selection = {k: dict(v) for k, v in cal.selection.items()}
+    notes = list(cal.provenance.notes)
+    for j, c in scales.items():
+        for d in "+-":
+            pr = predictive.get((j, d))
+            if pr is None:
+                continue
+            predictive[(j, d)] = dataclasses.replace(pr, floor=pr.floor * c.scale, slope=pr.slope * c.scale,
+                                                     drift=pr.drift * c.scale, drift_sd=pr.drift_sd * c.scale)
+            if (j, d) in selection:
+                selection[(j, d)]["check"] = c.as_dict()
+        notes.append(f"joint {j}: {c.traverses} check traverse(s) at new poses erred RMS {100 * c.rms_error:.2g} % "
+                     f"where the intervals expected {100 * c.rms_sd:.2g} %: intervals scaled by {c.scale:.2f} "
+                     f"(docs/models.md §4)")
+    for j in sorted({t.joint for t in check} - set(scales)):
+        notes.append(f"joint {j}: check traverses not used: the calibration has no error model for this joint")
+    out = dataclasses.replace(cal, predictive=predictive, selection=selection,
+                              provenance=dataclasses.replace(cal.provenance, notes=tuple(notes)))
+    sigma = dict(cal.sigma_model)
+    for key in predictive:
+        if key[0] in scales:
+            sigma[key] = workspace_sigma(out, *key)
+            if key in selection:
+                selection[key]["sigma_workspace"] = sigma[key]
+    return dataclasses.replace(out, sigma_model=sigma)

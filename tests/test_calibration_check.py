@@ -1,0 +1,142 @@
+"""Check traverses scale a calibration's intervals (stickslip.calibration.check; docs/models.md §4).
+
+One Dahl arm day (tests/support/arm_days.py): ``auto`` on the paper's 14, the 32 spread and the 4
+repeats; the check traverses are the day's random validation traverses, not fitted. The scale is
+recomputed here from the standardized errors (``predict_many`` and ``relative_sd``) and the
+formula, and every interval, ``sigma_model`` and prediction compared with the calibration's own.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from arm_days import make_day
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from stickslip.calibration import Calibration, calibrate
+from stickslip.calibration.check import CHECK, CheckParams, apply_check, check_scales
+from stickslip.calibration.design import check_poses, spread_poses, workspace_poses
+from stickslip.calibration.intervals import relative_sd
+from stickslip.measurements import Traverse
+
+DAY = make_day("dahl", 7, "2026-09-02", np.random.default_rng(7), validation_poses=3, repeat_first=True)
+
+
+@pytest.fixture(scope="module")
+def day() -> tuple[Calibration, list[Traverse]]:
+    return calibrate(DAY.calibration, model="auto"), DAY.validation
+
+
+def _z2(cal: Calibration, ts: list[Traverse]) -> np.ndarray:
+    out = []
+    for t in ts:
+        sd = relative_sd(cal, t.joint, t.direction, t.q1, t.q2, t.q3, t.theta, t.psi).item()
+        out.append((cal.predict_many([t])[0] / t.gamma - 1.0) ** 2 / sd**2)
+    return np.array(out)
+
+
+def test_the_scale_is_the_pooled_mean_square(day: tuple[Calibration, list[Traverse]]) -> None:
+    cal, val = day
+    checked = apply_check(cal, val)
+    for j in (3, 2):
+        ts = [t for t in val if t.joint == j]
+        z2 = _z2(cal, ts)
+        s = math.sqrt((CHECK.prior_traverses + z2.sum()) / (CHECK.prior_traverses + len(ts)))
+        assert check_scales(cal, val)[j].scale == pytest.approx(s, rel=1e-12)
+        for d in "+-":
+            before, after = cal.predictive[(j, d)], checked.predictive[(j, d)]
+            assert after.floor == pytest.approx(s * before.floor, rel=1e-12)
+            assert after.slope == pytest.approx(s * before.slope, rel=1e-12)
+            poses = np.array([list(p) for p in workspace_poses(j, 20, 5)]).T
+            assert relative_sd(checked, j, d, *poses) == pytest.approx(s * relative_sd(cal, j, d, *poses), rel=1e-12)
+            assert checked.sigma_model[(j, d)] == pytest.approx(s * cal.sigma_model[(j, d)], rel=1e-12)
+            assert checked.selection[(j, d)]["check"]["traverses"] == len(ts)  # type: ignore[index]
+        assert sum(f"joint {j}: {len(ts)} check traverse(s)" in n for n in checked.provenance.notes) == 1
+    np.testing.assert_array_equal(checked.predict_many(val), cal.predict_many(val))  # the fit's predictions
+    assert cal.predictive != checked.predictive  # the original is left as it was
+
+
+def test_without_prior_the_scale_is_the_rms_of_z(day: tuple[Calibration, list[Traverse]]) -> None:
+    cal, val = day
+    got = check_scales(cal, val, CheckParams(prior_traverses=0.0))
+    for j in (3, 2):
+        z2 = _z2(cal, [t for t in val if t.joint == j])
+        assert got[j].scale == pytest.approx(math.sqrt(z2.mean()), rel=1e-12)
+        assert got[j].rms_z == pytest.approx(math.sqrt(z2.mean()), rel=1e-12)
+
+
+def test_wild_check_traverses_widen(day: tuple[Calibration, list[Traverse]]) -> None:
+    cal, val = day
+    slow = [dataclasses.replace(t, steps=2 * t.steps) for t in val if t.joint == 3]  # steps half as long
+    c = check_scales(cal, slow)[3]
+    assert c.rms_error == pytest.approx(1.0, abs=0.1)  # predicted about twice the measured step
+    assert c.scale > 5.0
+    assert set(check_scales(cal, slow)) == {3}
+
+
+@settings(max_examples=30, deadline=None)
+@given(nu=st.floats(0.0, 100.0), keep=st.lists(st.booleans(), min_size=12, max_size=12))
+def test_the_scale_lies_between_one_and_the_checks(day: tuple[Calibration, list[Traverse]], nu: float,
+                                                   keep: list[bool]) -> None:
+    cal, val = day
+    ts = [t for t, k in zip(val, keep, strict=True) if k]
+    for j, c in check_scales(cal, ts, CheckParams(prior_traverses=nu)).items():
+        lo, hi = sorted((1.0, c.rms_z))
+        assert lo - 1e-12 <= c.scale <= hi + 1e-12, j
+
+
+def test_nothing_to_check(day: tuple[Calibration, list[Traverse]]) -> None:
+    cal, val = day
+    assert apply_check(cal, []) is cal
+    paper = calibrate(DAY.paper14)  # the paper's procedure: no error model
+    checked = apply_check(paper, val)
+    assert checked.predictive == paper.predictive == {}
+    assert checked.sigma_model == paper.sigma_model
+    assert any("no error model" in n for n in checked.provenance.notes)
+
+
+def test_calibrate_takes_the_check(day: tuple[Calibration, list[Traverse]]) -> None:
+    cal, val = day
+    via = calibrate(DAY.calibration, model="auto", check=val)
+    direct = apply_check(cal, val)
+    assert via.predictive.keys() == direct.predictive.keys()
+    for k in via.predictive:
+        assert via.predictive[k].floor == pytest.approx(direct.predictive[k].floor, rel=1e-12)
+    np.testing.assert_array_equal(via.predict_many(val), cal.predict_many(val))
+
+
+def test_check_poses_are_their_own_stream() -> None:
+    a, b = check_poses(3, 4, 11), check_poses(3, 4, 11)
+    assert a == b and len(a) == 4 and check_poses(2, 0, 11) == []
+    assert not set(a) & set(workspace_poses(3, 2000, 11))  # not spread_poses' candidates
+    assert not set(a) & set(spread_poses(3, 8, 11))
+    assert all(p.q3 == 0.0 for p in a)  # the moving joint's own column
+
+
+def test_calibrate_command_takes_a_check_table(day: tuple[Calibration, list[Traverse]], tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    cal, val = day
+    meas, chk = tmp_path / "m.csv", tmp_path / "check.csv"
+    write_measurements(meas, DAY.calibration)
+    write_measurements(chk, val)
+    runner = CliRunner()
+    r = runner.invoke(app, ["calibrate", str(meas), "--check", str(chk), "-o", str(tmp_path / "c.json")])
+    assert r.exit_code == 0, r.output
+    assert "check traverse(s) at new poses" in " ".join(r.output.split())
+    saved = Calibration.load(tmp_path / "c.json")
+    want = apply_check(cal, val)
+    for k, p in want.predictive.items():
+        assert saved.predictive[k].floor == pytest.approx(p.floor, rel=1e-9)
+        assert saved.selection[k]["check"]["scale"] == pytest.approx(  # type: ignore[index]
+            want.selection[k]["check"]["scale"], rel=1e-9)  # type: ignore[index]
+    r = runner.invoke(app, ["calibrate", str(meas), "--check", str(chk), "--prior", str(tmp_path / "c.json")])
+    assert r.exit_code == 2 and "not with --prior" in r.stderr
