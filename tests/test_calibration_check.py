@@ -9,6 +9,7 @@ formula, and every interval, ``sigma_model`` and prediction compared with the ca
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -140,3 +141,26 @@ def test_calibrate_command_takes_a_check_table(day: tuple[Calibration, list[Trav
             want.selection[k]["check"]["scale"], rel=1e-9)  # type: ignore[index]
     r = runner.invoke(app, ["calibrate", str(meas), "--check", str(chk), "--prior", str(tmp_path / "c.json")])
     assert r.exit_code == 2 and "not with --prior" in r.stderr
+
+
+def test_suggest_check_writes_the_check_poses_in_both_directions(
+    day: tuple[Calibration, list[Traverse]], tmp_path: Path
+) -> None:
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    cal, _ = day
+    cal.save(tmp_path / "c.json")
+    out = tmp_path / "poses.csv"
+    runner = CliRunner()
+    r = runner.invoke(app, ["suggest", "-c", str(tmp_path / "c.json"), "--check", "2", "--seed", "5", "-o", str(out)])
+    assert r.exit_code == 0, r.output
+    rows = [line.split(",") for line in out.read_text(encoding="utf-8").splitlines()[1:]]
+    want = [(j, d, p) for j in cal.joints for p in check_poses(j, 2, 5) for d in "+-"]
+    assert [(int(r[0]), r[1], tuple(float(v) for v in r[2:])) for r in rows] == [(j, d, tuple(p)) for j, d, p in want]
+    r = runner.invoke(app, ["suggest", "-c", str(tmp_path / "c.json"), "--check", "1", "-j", "3", "--json"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.output) == [{"joint": 3, **check_poses(3, 1, 0)[0]._asdict()}]  # random: no sd to claim
+    r = runner.invoke(app, ["suggest", "-c", str(tmp_path / "c.json"), "--check", "21"])
+    assert r.exit_code == 2 and "--check 21 is outside 1..20" in r.stderr

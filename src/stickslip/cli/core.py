@@ -240,8 +240,13 @@ def calibrate_cmd(
     scaled part of the way (a note says by how much).
 
     Example: stickslip calibrate day1.csv -o cal.json
+
     Example: stickslip calibrate today4.csv --prior yesterday.json -o today.json
+
     Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
+
+    Example: stickslip calibrate day1.csv --check check1.csv -o cal.json
+
     Example: stickslip calibrate stack.csv --rig lab.toml --arm gripper -o cal/gripper.json
     """
     from ..calibration import Calibration, CalibrationError, Conditions, calibrate
