@@ -164,3 +164,5 @@ def test_suggest_check_writes_the_check_poses_in_both_directions(
     assert json.loads(r.output) == [{"joint": 3, **check_poses(3, 1, 0)[0]._asdict()}]  # random: no sd to claim
     r = runner.invoke(app, ["suggest", "-c", str(tmp_path / "c.json"), "--check", "21"])
     assert r.exit_code == 2 and "--check 21 is outside 1..20" in r.stderr
+    r = runner.invoke(app, ["suggest", "-c", str(tmp_path / "c.json"), "--seed", "3"])
+    assert r.exit_code == 2 and "give --check N too" in r.stderr

@@ -68,6 +68,8 @@ def suggest_cmd(
         fail(f"--n {n} is outside 1..20")
     if check is not None and not 1 <= check <= 20:
         fail(f"--check {check} is outside 1..20")
+    if check is None and seed != 0:
+        fail("--seed draws the random poses of --check: give --check N too (the designed poses have no seed)")
     from numpy.linalg import LinAlgError
 
     from ..calibration import Calibration
