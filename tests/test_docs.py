@@ -16,3 +16,10 @@ def test_cli_reference_covers_every_command():
     page = render()
     for name in ("demo", "calibrate", "predict", "validate", "plan", "tune", "listen", "anova", "report", "move"):
         assert f"## `stickslip {name}`" in page
+
+
+def test_the_cli_reference_describes_the_code_as_it_is():
+    """No help text speaks of an earlier version: the reference says what the commands do now."""
+    page = render().lower()
+    for history in ("the old behaviour", "as before", "no longer", "previous version", "formerly", "until recently"):
+        assert history not in page, f"a help text in docs/cli.md speaks of history: {history!r}"

@@ -202,7 +202,7 @@ def listen(
         "--confirm-s",
         help=(
             "Report a stop only once it persisted this long after the detector fired, s (default 0.5: a real stop "
-            "lasts, interference does not); events then appear this much later. 0: every fire (the old behaviour)."
+            "lasts, interference does not); events then appear this much later. 0: every fire, at once."
         ),
         show_default=False,
     ),

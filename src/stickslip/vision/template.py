@@ -187,8 +187,8 @@ class TrackerParams:
         behind a fix for the width to be checked, 1: the check is a median over them.
     trust_unchecked : bool
         Whether a fix behind which fewer than ``width_stations`` lie in the frame (where the
-        first frame showed three or more) is taken unchecked (``True``, the eighth round's
-        rule) or refused (``False``: lost): a round opaque particle over a blunt end mimics
+        first frame showed three or more) is taken unchecked (``True``: the other rules
+        decide) or refused (``False``: lost): a round opaque particle over a blunt end mimics
         the end's outline (its chord is as wide as the needle over about its radius), and
         only the shaft's width further back tells them apart, so a fix nothing vouches for
         is not given.
