@@ -101,6 +101,27 @@ def test_cli_prior_round_trip(tmp_path):
     assert r.exit_code == 2 and "no such calibration file" in r.stderr
 
 
+def test_suggest_after_the_papers_procedure_starts_from_its_traverses():
+    # the paper's procedure keeps no covariance: the design starts from the information of its own
+    # traverses (3 prismatic, 4 rotary poses for as many parameters), not from nothing (a ridge of
+    # 1e-6 said the workspace's sd was about 1000x the step: 99391 % on the demo's calibration)
+    from stickslip.calibration import design
+
+    arm = ph.PhysicsMM3A(seed=52, day="x")
+    cal = calibrate(paper14(arm, "x"))
+    assert cal.method.startswith("paper") and not cal.covariance
+    for joint, n_params in ((3, 3), (2, 4)):
+        poses = design._paper_poses(joint)
+        sig, _ = model_sigma(cal, joint, "+")
+        g = design._gradients(design._as_family(cal.models[(joint, "+")]), "+", poses)
+        assert g.shape == (n_params, n_params) and np.linalg.matrix_rank(g) == n_params
+        # exactly determined: the fit passes through each traverse, whose prediction keeps its sd (leverage 1)
+        m = g.T @ g / sig**2
+        np.testing.assert_allclose(np.einsum("ip,pq,iq->i", g, np.linalg.inv(m), g), sig**2, rtol=1e-6)
+        (first,) = design.suggest_poses(cal, joint, 1)
+        assert 0.5 * sig < first.rms_sd_before < 10 * sig and first.rms_sd_after < first.rms_sd_before
+
+
 @pytest.mark.slow
 def test_suggest_picks_informative_poses(tmp_path):
     # greedy I-optimal design: the suggested pose is the candidate that most reduces the workspace's

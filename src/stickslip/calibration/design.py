@@ -2,8 +2,9 @@
 
 For one joint, the calibration's model in each direction is linearised in its parameters:
 ``g(pose) = d log gamma_avg / d theta`` for a full-range traverse at ``pose``. With the
-information matrix ``M`` of the parameters (the inverse of the calibration's covariance,
-or a weak ridge where the calibration has none) and ``sigma`` the relative model error,
+information matrix ``M`` of the parameters (the inverse of the calibration's covariance;
+for the paper's procedure, which keeps none, that of its own traverses at the paper's poses;
+else a weak ridge) and ``sigma`` the relative model error,
 a traverse at pose ``c`` adds ``g_c g_c^T / sigma^2`` to ``M``. The workspace's average
 prediction variance is ``trace(W M^-1)`` with ``W`` the mean of ``g g^T`` over random
 workspace poses (I-optimality). Poses are chosen greedily: each time the candidate
@@ -24,6 +25,7 @@ from ..models import PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams, average_from_features, traverse_features
 from .family_fit import unit_scale
 from .groups import load_coordinates_of, load_quantities
+from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
 from .result import Calibration
 from .update import model_sigma
 
@@ -119,8 +121,12 @@ def suggest_poses(
         sig, _ = model_sigma(cal, joint, d)
         us = unit_scale(fp.spec, joint)
         cov = cal.covariance.get((joint, d))
+        paper = _paper_poses(joint) if cal.method.startswith("paper") else []
         if cov is not None and cov.shape == (len(us), len(us)):
             m = np.linalg.pinv(cov / np.outer(us, us)) + 1e-9 * np.eye(len(us))
+        elif paper:  # the paper's procedure keeps no covariance: the information of its own traverses
+            gp = _gradients(fp, d, paper)
+            m = gp.T @ gp / sig**2 + 1e-9 * np.eye(len(us))
         else:
             m = 1e-6 * np.eye(len(us))  # nothing known: design from scratch
         gw = _gradients(fp, d, work)
@@ -147,6 +153,16 @@ def suggest_poses(
             state[d] = (m + np.outer(gc[k], gc[k]) / sig**2, w, gc, sig)
         out.append(Suggestion(joint, cand[k], before, rms()))
     return out
+
+
+def _paper_poses(joint: int) -> list[kin.Pose]:
+    """The poses of the paper's calibration traverses of ``joint`` (none for joint 1), the joint's own
+    column 0: the traverses a calibration by the paper's procedure was made from."""
+    if joint == 3:
+        return [kin.Pose(0.0, q2, 0.0, th, ps) for q2, th, ps in PRISMATIC_PAPER_POSES.values()]
+    if joint == 2:
+        return [kin.Pose(0.0, 0.0, q3, th, ps) for q3, th, ps in ROTARY_PAPER_POSES]
+    return []
 
 
 def load_coordinates(joint: int, poses: list[kin.Pose]) -> NDArray[np.float64]:
