@@ -34,7 +34,7 @@ class Predictive:
         The calibrated poses (q1, q2, q3, theta, psi; SI), or a farthest-point sample of them.
     exponent : float
         How the model's error grows with the distance: 2 (an interpolation error, as the
-        calibrations make it since issue 33's second round), 1 (linear: files written before).
+        calibrations make it), 1 (linear: read from a file whose error model records no exponent).
     drift : float
         The relative bias the fit leaves at the end of its session, its posterior mean from the late
         repeats' residuals (:attr:`~.drift.EndBias.bias`), 1; 0 without a repeated pose (and in

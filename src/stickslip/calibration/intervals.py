@@ -6,8 +6,8 @@ with the distance from the poses a refit kept in the cross-validation, and the c
 poses. The relative standard deviation of a predicted mean step at a pose is
 ``sqrt(floor^2 + (slope d^2)^2 + drift^2 + drift_sd^2)``, ``d`` the pose's distance to the
 nearest calibrated pose in the space of the loads the step depends on: narrow where the
-calibration measured, wider between and beyond its poses (``d`` to the first power in files
-written before issue 33's second round); ``drift`` the bias the fit leaves at the end of its
+calibration measured, wider between and beyond its poses (``d`` to the first power in a file
+whose error model records no ``exponent``); ``drift`` the bias the fit leaves at the end of its
 session, where a user predicts, from the residual of a pose traversed again there
 (:mod:`.drift`; a bias of one sign for every prediction of the session, so it adds to the
 interval as a bias adds to the mean square error, in quadrature, with its posterior standard

@@ -4,7 +4,7 @@ A pause (:mod:`.pause`) is judged at the end of the fire's confirmation window. 
 stepping may still be paused there: a detector restarted at that point learned its
 template in its warm-up from the room's silence and the first few steps that came back,
 and the stepping's return was a lasting rise over that template, fitted as a stop (the
-tenth generator's arm 3: a false stop 0.1 s after the stepping came back). The restart now
+tenth generator's arm 3: a false stop 0.1 s after the stepping came back). So the restart
 waits for the stepping: :class:`Resumption` reads the sound after the pause in pieces of
 ``piece_s`` through the detector's band-pass, counted from the point the pause was judged,
 and the detector restarts at the first of ``resume_pieces`` pieces in a row that each are
