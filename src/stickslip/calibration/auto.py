@@ -65,7 +65,7 @@ def calibrate(
         Check traverses: at random poses (:func:`~.design.check_poses`), measured in the
         session after ``traverses`` and not fitted; each joint's intervals are scaled by how
         they erred (:func:`~.check.apply_check`, docs/models.md §4). The fit and its
-        predictions are those without them. None (the default): no check.
+        predictions are those without them. Empty (the default): no check.
     """
     if check:
         return apply_check(calibrate(traverses, method, day, source, model, progress, step_sizes), check)
