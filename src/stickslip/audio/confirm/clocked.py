@@ -617,13 +617,19 @@ class ClockedCheck:
         """Whether the model holds ``model_min_spans`` (weight) of stepping: until then the per-fire vetoes judge."""
         return self.model is not None and self.model.weight >= self.p.model_min_spans
 
-    def model_z(self, after: FloatArray) -> float:
-        """The lines after the fire against the stepping's modelled: RMS in spreads, the median over up to
-        ``window_pieces`` stretches as long as those modelled (NaN: no model, too little in it, or under
-        ``min_after_s`` of window)."""
+    def model_z(self, after: FloatArray, a: float = math.nan) -> float:
+        """The lines after the fire against the stepping's modelled: RMS in spreads, the least over up to
+        ``window_pieces`` stretches as long as those modelled (NaN: no model, too little in it, under
+        ``min_after_s`` of window, or where the comb gave no verdict ``a`` and the stop predicted at the rate
+        moves the model's locked sub-bands under ``min_pred_moved_db``: as the per-fire vetoes, what the lines
+        cannot show is not read)."""
         p, n = self.p, self.model_n
         if self.model is None or n <= 0 or after.size < p.min_after_s * self.sample_rate:
             return math.nan  # (a window cut by the stream's end is read whole: its level noisier, a veto rarer)
+        if not math.isfinite(a):  # no comb verdict: read only where the stop predicted at the rate moves the lines
+            pred = self.predicted_moved_db(self.model_hz, self.model.locked_bands())
+            if not (p.min_pred_moved_db > 0.0 and pred >= p.min_pred_moved_db):
+                return math.nan  # (a stop whose change lies off the lines read leaves them as the stepping's)
         pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
         return self.model.z(pieces, p.model_min_spans, p.model_floor_db)
 
@@ -677,7 +683,7 @@ class ClockedCheck:
         if veto_off and modelled:
             reader = self.reader(rate) if math.isfinite(a) else None
             locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
-            z = self.model_z(after)
+            z = self.model_z(after, a)
             on = OnClock(a, rate, used, self.ref_age_s, locked, still_z=z)
             return on if math.isfinite(a) or math.isfinite(z) else None
         unjudged = veto_off and not math.isfinite(a)
@@ -691,18 +697,21 @@ class ClockedCheck:
             moved = lines_moved_db(ref, pieces, sr, rate, tu.edges_hz, p)
         return OnClock(a, rate, used, self.ref_age_s, locked, moved)
 
-    def predicted_moved_db(self, rate_hz: float) -> float:
+    def predicted_moved_db(self, rate_hz: float, bands: Sequence[int] | None = None) -> float:
         """How far the stop, as predicted at ``rate_hz`` (Hz) from the tuning's fine continuum, moves the sub-bands
-        whose lines were locked in the reference: RMS of the predicted signature over them, dB (NaN: no prediction,
-        no reference or no sub-band locked)."""
+        ``bands`` (None: those whose lines were locked in the reference): RMS of the predicted signature over them,
+        dB (NaN: no prediction, no reference or no sub-band locked)."""
         tu, ref = self.tuning, self.ref
         start, width, stepping, stopped = tu.fine_start_hz, tu.fine_bin_hz, tu.fine_stepping_db, tu.fine_stopped_db
-        if ref is None or tu.step_rate_hz is None or start is None or width is None or stepping is None:
+        if tu.step_rate_hz is None or start is None or width is None or stepping is None:
             return math.nan
         if stopped is None or tu.edges_hz is None or tu.signature_db is None:
             return math.nan
-        lk = _locked_bands(ref, self.sample_rate, rate_hz, tu.edges_hz, range(len(tu.edges_hz) - 1), self.p)
-        if lk is None or not lk.keep:
+        if bands is None:
+            lk = None if ref is None else _locked_bands(ref, self.sample_rate, rate_hz, tu.edges_hz,
+                                                        range(len(tu.edges_hz) - 1), self.p)  # fmt: skip
+            bands = [] if lk is None else lk.keep
+        if not bands:
             return math.nan
         if self._predictor is None:
             sig = np.asarray(tu.signature_db, dtype=np.float64)
@@ -710,7 +719,7 @@ class ClockedCheck:
                 tu.sample_rate, tu.frame, tu.edges_hz, sig, tu.step_rate_hz, start, width, stepping, stopped
             )
         pred = self._predictor.predict(rate_hz)
-        return float(np.sqrt(np.mean(pred[lk.keep] ** 2)))
+        return float(np.sqrt(np.mean(pred[list(bands)] ** 2)))
 
     def reader(self, rate_hz: float) -> LockedReader | None:
         """The lines read in phase with the clock followed at ``rate_hz`` (Hz) against the reference (the chain's

@@ -51,6 +51,10 @@ class SteppingLines:
         self.locked = np.zeros(n)  # the weighted mean share of the lines' power in phase
         self.last_s = math.nan
 
+    def locked_bands(self) -> list[int]:
+        """The sub-bands whose lines held ``min_locked`` of their power in phase over the stepping modelled."""
+        return [b for b, share in zip(self.bands, self.locked, strict=True) if share >= self.min_locked]
+
     def levels(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Per sub-band: the level in phase of its lines over ``x`` (dB re 1; -inf: none) and its locked share."""
         l1, w1 = self.in_phase(x)
