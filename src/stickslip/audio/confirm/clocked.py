@@ -186,6 +186,9 @@ class ClockedParams:
         4.0, "spans", "the model judges once it holds this weight of accepted stepping (a spread needs a few)"
     )
     model_floor_db: float = param(0.3, "dB", "the model's spread is floored at this (a few spans may agree by chance)")
+    model_lag_s: float = param(
+        2.5, "s", "a span is modelled this long after it ended: any fire over it judged first (window 2 s, gap, span)"
+    )
     model_min_share: float = param(
         0.9,
         "",
@@ -559,6 +562,8 @@ class ClockedCheck:
         self.model: SteppingLines | None = None
         self.model_hz = math.nan  # the step rate the model reads the lines at, Hz
         self.model_n = 0  # the samples of each stretch it modelled
+        #: the spans read but not yet modelled (``model_lag_s``): their ends, s, levels and locked shares
+        self.pending: list[tuple[float, FloatArray, FloatArray]] = []
 
     def keep(self, end: int, samples: FloatArray, margins: FloatArray) -> None:
         """A stretch of the stream ending at absolute sample ``end`` and its frames' margins: kept as stepping where
@@ -581,9 +586,10 @@ class ClockedCheck:
 
     def model_stepping(self, end: int, x: FloatArray) -> None:
         """A span of the stream, ``x`` ending at absolute sample ``end``, into the model of the stepping's lines where
-        it is stepping accepted: its lines held ``model_min_share`` of their power in phase (the joint's clicks
-        alone; sound of another clock lowers it) and, once the model judges, sat within ``model_max_z`` of it (the
-        stepping going on; a stop moves them). Not one heard at another rate than the model's first."""
+        it is stepping accepted, ``model_lag_s`` after it ended (a fire over it is judged against the model as it
+        stood before): its lines held ``model_min_share`` of their power in phase (the joint's clicks alone; sound
+        of another clock lowers it) and, once the model judges, sat within ``model_max_z`` of it (the stepping going
+        on; a stop moves them). Not one heard at another rate than the model's first."""
         sr, p, tu = self.sample_rate, self.p, self.tuning
         assert self.commanded_hz is not None and tu.edges_hz is not None
         rate = rate_near_hz(x, sr, self.commanded_hz, p.commanded_tol)
@@ -608,10 +614,13 @@ class ClockedCheck:
             self.model = SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
             self.model_hz, self.model_n = rate, x.size
         level, share = self.model.levels(x)
-        if not float(np.mean(share)) >= p.model_min_share:
-            return  # sound of another clock on the lines: not the stepping's alone
-        if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
-            self.model.add(level, share, end / sr)
+        self.pending = [*self.pending, (end / sr, level, share)]
+        while self.pending and self.pending[0][0] <= end / sr - p.model_lag_s:  # any fire over it judged by now
+            t, level, share = self.pending.pop(0)
+            if not float(np.mean(share)) >= p.model_min_share:
+                continue  # sound of another clock on the lines: not the stepping's alone
+            if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
+                self.model.add(level, share, t)
 
     def model_ready(self) -> bool:
         """Whether the model holds ``model_min_spans`` (weight) of stepping: until then the per-fire vetoes judge."""
