@@ -64,6 +64,13 @@ changes the lines read there at all: the same veto holds where the signature pre
 ``min_pred_moved_db`` RMS or more (:meth:`ClockedCheck.predicted_moved_db`); where it predicts less
 (a stop whose change at this rate lies off those lines) or cannot predict, no veto.
 
+**The stepping's lines as one model** (``lines_model``, off by default: measured, not better everywhere). In
+place of the half second before each fire, the stepping's lines modelled across the listening
+(:mod:`.stepping_lines`, :meth:`ClockedCheck.model_stepping`) are the reference off the tuning's rate, the
+rate told: under the same reading conditions (a comb verdict, or the predicted move), a fire whose window
+has a piece within ``model_max_z`` spreads of the model is not a stop; read also where the fire's own
+reference was stop-like. Until the model holds ``model_min_spans``, ``min_moved_db`` judges.
+
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
 of the stream (counted from its start) whose frames were at most ``kept_stoplike``
