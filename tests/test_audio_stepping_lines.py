@@ -115,8 +115,8 @@ def test_a_radio_the_per_fire_vetoes_handle_the_model_of_the_stepping_handles_to
 
 def test_speech_the_per_fire_vetoes_miss_is_the_stepping_to_the_model() -> None:
     """Draw 113 (speech, nothing, music, nothing): a fire at 18.05 s under music was confirmed (flagged: a refusal)
-    by the per-fire vetoes, its reference too stop-like to be read; against the stepping modelled since the
-    listening began, its lines are still the stepping's: no event."""
+    past the per-fire vetoes; against the stepping modelled since the listening began, its lines are still the
+    stepping's: no event."""
     off, _ = _hear(113, False)
     on, judged = _hear(113, True)
     assert [(round(e.onset_s, 2), e.onset_uncertain) for e in off] == [(18.05, True)]
