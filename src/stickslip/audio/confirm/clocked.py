@@ -204,6 +204,11 @@ class ClockedParams:
     model_max_z: float = param(
         3.0, "spreads", "a fire whose lines after it sit within this RMS of the model is not a stop (the stepping's)"
     )
+    model_inside: bool = param(
+        True,
+        "",
+        "a fire the model vetoed whose later pieces depart from it to the window's end: a stop found inside there",
+    )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )
@@ -632,6 +637,11 @@ class ClockedCheck:
     def model_ready(self) -> bool:
         """Whether the model holds ``model_min_spans`` (weight) of stepping: until then the per-fire vetoes judge."""
         return self.model is not None and self.model.weight >= self.p.model_min_spans
+
+    def model_vetoed(self, got: OnClock | None) -> bool:
+        """Whether the fire judged ``got`` was vetoed by the stepping's lines modelled (a piece within
+        ``model_max_z``)."""
+        return got is not None and not self.at_tuned_rate(got.rate_hz) and got.still_z < self.p.model_max_z
 
     def model_z(self, after: FloatArray, a: float = math.nan) -> float:
         """The lines after the fire against the stepping's modelled: RMS in spreads, the least over up to
