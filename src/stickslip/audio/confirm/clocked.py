@@ -209,6 +209,11 @@ class ClockedParams:
         "",
         "a fire the model vetoed whose later pieces depart from it to the window's end: a stop found inside there",
     )
+    model_max_spread_s: float = param(
+        0.2,
+        "s",
+        "and the fit places that change within this (stops: 0.02-0.08 s; speech, music drifting: 0.34-0.82 s)",
+    )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )

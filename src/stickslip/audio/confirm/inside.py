@@ -133,6 +133,8 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     (``model_max_z`` or more: the lines changed and stayed so, ``min_run_s`` at least), the joint stopped there:
     its onset is fitted on the model's lines turned by its clock (:func:`onset_in_phase`, over the last piece
     within and the first departed), as a stop found inside a rejected window (the caller checks it is not a pause).
+    A stop changes the lines at once; sound added over them drifts in and out. So the fit must place the change
+    within ``model_max_spread_s``, else none was found.
     """
     cp, sr, m, n = clocked.p, clocked.sample_rate, clocked.model, clocked.model_n
     if m is None or n <= 0 or not (clocked.models_lines() and clocked.model_ready()):
@@ -147,7 +149,7 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
         return None  # no departure to the window's end, or none from stepping within it
     lo = lead + (j - 1) * n
     t, spread = onset_in_phase(x[lo : lead + (j + 1) * n], sr, clocked.model_hz, m.ks, cp, p)
-    if t < 0 or lead + k * n - (lo + t) < p.min_run_s * sr:
+    if t < 0 or spread > cp.model_max_spread_s * sr or lead + k * n - (lo + t) < p.min_run_s * sr:
         return None
     return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
 
