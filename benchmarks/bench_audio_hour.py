@@ -98,6 +98,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "veto": ClockedParams(min_affirm=math.inf, onset_read_s=0.0),
     "default": ClockedParams(),
     "model": ClockedParams(lines_model=True),
+    "per-fire": ClockedParams(lines_model=False),
     "off": None,
 }
 

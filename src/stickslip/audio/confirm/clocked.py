@@ -64,12 +64,15 @@ changes the lines read there at all: the same veto holds where the signature pre
 ``min_pred_moved_db`` RMS or more (:meth:`ClockedCheck.predicted_moved_db`); where it predicts less
 (a stop whose change at this rate lies off those lines) or cannot predict, no veto.
 
-**The stepping's lines as one model** (``lines_model``, off by default: measured, not better everywhere). In
-place of the half second before each fire, the stepping's lines modelled across the listening
-(:mod:`.stepping_lines`, :meth:`ClockedCheck.model_stepping`) are the reference off the tuning's rate, the
-rate told: under the same reading conditions (a comb verdict, or the predicted move), a fire whose window
-has a piece within ``model_max_z`` spreads of the model is not a stop; read also where the fire's own
-reference was stop-like. Until the model holds ``model_min_spans``, ``min_moved_db`` judges.
+**The stepping's lines as one model** (``lines_model``). In place of the half second before each
+fire, the stepping's lines modelled across the listening (:mod:`.stepping_lines`,
+:meth:`ClockedCheck.model_stepping`) are the reference off the tuning's rate, the rate told: under the
+same reading conditions (a comb verdict, or the predicted move), a fire whose window has a piece within
+``model_max_z`` spreads of the model is not a stop; read also where the fire's own reference was
+stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
+and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
+at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
+have begun there (``model_inside``; :func:`.inside.stop_departed`).
 
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
@@ -181,10 +184,10 @@ class ClockedParams:
         "no comb verdict there: unmoved lines veto where the stop predicted at the rate moves them this RMS (0: not)",
     )
     lines_model: bool = param(
-        False,
+        True,
         "",
         "rate told, off the tuning's: a fire is judged against the stepping's lines modelled across the listening, "
-        "not min_moved_db / min_pred_moved_db against the half second before it (False: those)",
+        "once ready; min_moved_db / min_pred_moved_db only until then (False: those always)",
     )
     model_tau_s: float = param(
         60.0, "s", "the model forgets stepping this long ago (outlives a song unheard; the joint's sound drifts slower)"
