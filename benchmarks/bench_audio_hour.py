@@ -97,6 +97,8 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "spans": ClockedParams(locked_frame_s=0.0),
     "veto": ClockedParams(min_affirm=math.inf, onset_read_s=0.0),
     "default": ClockedParams(),
+    "model": ClockedParams(lines_model=True),
+    "per-fire": ClockedParams(lines_model=False),
     "off": None,
 }
 

@@ -64,6 +64,16 @@ changes the lines read there at all: the same veto holds where the signature pre
 ``min_pred_moved_db`` RMS or more (:meth:`ClockedCheck.predicted_moved_db`); where it predicts less
 (a stop whose change at this rate lies off those lines) or cannot predict, no veto.
 
+**The stepping's lines as one model** (``lines_model``). In place of the half second before each
+fire, the stepping's lines modelled across the listening (:mod:`.stepping_lines`,
+:meth:`ClockedCheck.model_stepping`) are the reference off the tuning's rate, the rate told: under the
+same reading conditions (a comb verdict, or the predicted move), a fire whose window has a piece within
+``model_max_z`` spreads of the model is not a stop; read also where the fire's own reference was
+stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
+and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
+at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
+have begun there (``model_inside``; :func:`.inside.stop_departed`).
+
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
 of the stream (counted from its start) whose frames were at most ``kept_stoplike``
@@ -107,6 +117,7 @@ from ..features.lockin import demodulate, follow_clock, locked_powers
 from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_powers, periodogram, rate_near_hz
 from ..paramfield import param
 from ..tuningfile import Tuning
+from .stepping_lines import SteppingLines
 
 __all__ = [
     "CLOCKED",
@@ -171,6 +182,40 @@ class ClockedParams:
         3.0,
         "dB",
         "no comb verdict there: unmoved lines veto where the stop predicted at the rate moves them this RMS (0: not)",
+    )
+    lines_model: bool = param(
+        True,
+        "",
+        "rate told, off the tuning's: a fire is judged against the stepping's lines modelled across the listening, "
+        "once ready; min_moved_db / min_pred_moved_db only until then (False: those always)",
+    )
+    model_tau_s: float = param(
+        60.0, "s", "the model forgets stepping this long ago (outlives a song unheard; the joint's sound drifts slower)"
+    )
+    model_min_spans: float = param(
+        4.0, "spans", "the model judges once it holds this weight of accepted stepping (a spread needs a few)"
+    )
+    model_floor_db: float = param(0.3, "dB", "the model's spread is floored at this (a few spans may agree by chance)")
+    model_lag_s: float = param(
+        2.5, "s", "a span is modelled this long after it ended: any fire over it judged first (window 2 s, gap, span)"
+    )
+    model_min_share: float = param(
+        0.9,
+        "",
+        "a span is modelled where its lines held this share in phase (stepping alone: 0.97-1; speech, music less)",
+    )
+    model_max_z: float = param(
+        3.0, "spreads", "a fire whose lines after it sit within this RMS of the model is not a stop (the stepping's)"
+    )
+    model_inside: bool = param(
+        True,
+        "",
+        "a fire the model vetoed whose later pieces depart from it to the window's end: a stop found inside there",
+    )
+    model_max_spread_s: float = param(
+        0.2,
+        "s",
+        "and the fit places that change within this (stops: 0.02-0.08 s; speech, music drifting: 0.34-0.82 s)",
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -238,6 +283,9 @@ class OnClock:
     #: how far the lines in phase moved, whatever the signature: RMS over the sub-bands locked before, dB (NaN: not
     #: read; read only with the rate told, off the tuning's rate)
     moved_db: float = math.nan
+    #: the lines after the fire against the stepping's modelled across the listening: RMS, in spreads (NaN: not read;
+    #: read only with ``lines_model``, the rate told, off the tuning's rate)
+    still_z: float = math.nan
 
 
 def lines_stop_likeness(
@@ -434,7 +482,11 @@ class _Locked:
 
 
 def _locked_bands(
-    before: FloatArray, sample_rate: float, rate_hz: float, edges_hz: Sequence[float], bands: Sequence[int],
+    before: FloatArray,
+    sample_rate: float,
+    rate_hz: float,
+    edges_hz: Sequence[float],
+    bands: Sequence[int],
     p: ClockedParams,
 ) -> _Locked | None:
     """The lines of the sub-bands ``bands`` read in phase over ``before`` (None: no line, or no in-phase reading)."""
@@ -526,14 +578,94 @@ class ClockedCheck:
         #: how long before the current chain's own reference the kept stepping taken for it ended, s (NaN: its own)
         self.ref_age_s = math.nan
         self.commanded_hz = commanded_hz
+        #: the stepping's lines modelled across the listening (``lines_model``; None: none yet)
+        self.model: SteppingLines | None = None
+        self.model_hz = math.nan  # the step rate the model reads the lines at, Hz
+        self.model_n = 0  # the samples of each stretch it modelled
+        #: the spans read but not yet modelled (``model_lag_s``): their ends, s, levels and locked shares
+        self.pending: list[tuple[float, FloatArray, FloatArray]] = []
 
     def keep(self, end: int, samples: FloatArray, margins: FloatArray) -> None:
         """A stretch of the stream ending at absolute sample ``end`` and its frames' margins: kept as stepping where
         every frame was heard and at most ``kept_stoplike`` of them were stop-like (the latest few are kept)."""
-        if self.p.kept_age_s <= 0.0 or not margins.size or not np.all(np.isfinite(margins)):
+        if self.p.kept_age_s <= 0.0 or not margins.size:
             return
-        if float(np.mean(margins >= 0.0)) <= self.p.kept_stoplike:
+        quiet = bool(np.all(np.isfinite(margins))) and float(np.mean(margins >= 0.0)) <= self.p.kept_stoplike
+        if quiet:
             self.kept = [*self.kept[-7:], (end, np.array(samples, dtype=np.float64))]
+        if self.models_lines():
+            self.model_stepping(end, np.asarray(samples, dtype=np.float64))
+
+    def models_lines(self) -> bool:
+        """Whether the stepping's lines are modelled across the listening: ``lines_model``, the rate told, off the
+        tuning's rate (beyond ``max_rate_off``, within ``affirm_window``)."""
+        p, told, tuned = self.p, self.commanded_hz, self.tuning.step_rate_hz
+        if not (p.lines_model and self.enabled and told is not None and tuned is not None):
+            return False
+        return p.max_rate_off < abs(told / tuned - 1.0) <= p.affirm_window
+
+    def model_stepping(self, end: int, x: FloatArray) -> None:
+        """A span of the stream, ``x`` ending at absolute sample ``end``, into the model of the stepping's lines where
+        it is stepping accepted, ``model_lag_s`` after it ended (a fire over it is judged against the model as it
+        stood before): its lines held ``model_min_share`` of their power in phase (the joint's clicks alone; sound
+        of another clock lowers it) and, once the model judges, sat within ``model_max_z`` of it (the stepping going
+        on; a stop moves them). Not one heard at another rate than the model's first."""
+        sr, p, tu = self.sample_rate, self.p, self.tuning
+        assert self.commanded_hz is not None and tu.edges_hz is not None
+        rate = rate_near_hz(x, sr, self.commanded_hz, p.commanded_tol)
+        if not math.isfinite(rate):
+            return
+        if self.model is not None and (abs(rate / self.model_hz - 1.0) > p.max_rate_off or x.size != self.model_n):
+            return  # not stepping at the model's rate (the rate is told: the stepping's is the first heard)
+        if self.model is None:
+            edges = tu.edges_hz
+            top = int(sr / 2 / rate)
+            lines = {
+                i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in range(len(edges) - 1)
+            }
+            lines = {i: v for i, v in lines.items() if v}
+            if not lines:
+                return
+            ks = sorted({k for v in lines.values() for k in v})
+
+            def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
+                return _in_phase(y, sr, r, ks, p)
+
+            self.model = SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
+            self.model_hz, self.model_n = rate, x.size
+        level, share = self.model.levels(x)
+        self.pending = [*self.pending, (end / sr, level, share)]
+        while self.pending and self.pending[0][0] <= end / sr - p.model_lag_s:  # any fire over it judged by now
+            t, level, share = self.pending.pop(0)
+            if not float(np.mean(share)) >= p.model_min_share:
+                continue  # sound of another clock on the lines: not the stepping's alone
+            if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
+                self.model.add(level, share, t)
+
+    def model_ready(self) -> bool:
+        """Whether the model holds ``model_min_spans`` (weight) of stepping: until then the per-fire vetoes judge."""
+        return self.model is not None and self.model.weight >= self.p.model_min_spans
+
+    def model_vetoed(self, got: OnClock | None) -> bool:
+        """Whether the fire judged ``got`` was vetoed by the stepping's lines modelled (a piece within
+        ``model_max_z``)."""
+        return got is not None and not self.at_tuned_rate(got.rate_hz) and got.still_z < self.p.model_max_z
+
+    def model_z(self, after: FloatArray, a: float = math.nan) -> float:
+        """The lines after the fire against the stepping's modelled: RMS in spreads, the least over up to
+        ``window_pieces`` stretches as long as those modelled (NaN: no model, too little in it, under
+        ``min_after_s`` of window, or where the comb gave no verdict ``a`` and the stop predicted at the rate
+        moves the model's locked sub-bands under ``min_pred_moved_db``: as the per-fire vetoes, what the lines
+        cannot show is not read)."""
+        p, n = self.p, self.model_n
+        if self.model is None or n <= 0 or after.size < p.min_after_s * self.sample_rate:
+            return math.nan  # (a window cut by the stream's end is read whole: its level noisier, a veto rarer)
+        if not math.isfinite(a):  # no comb verdict: read only where the stop predicted at the rate moves the lines
+            pred = self.predicted_moved_db(self.model_hz, self.model.locked_bands())
+            if not (p.min_pred_moved_db > 0.0 and pred >= p.min_pred_moved_db):
+                return math.nan  # (a stop whose change lies off the lines read leaves them as the stepping's)
+        pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
+        return self.model.z(pieces, p.model_min_spans, p.model_floor_db)
 
     def hear_before(self, ref: FloatArray, margins: FloatArray, end: int | None = None) -> None:
         """The stepping before a fire (samples, ending at absolute sample ``end``) and its frames' margins over the
@@ -559,10 +691,13 @@ class ClockedCheck:
         (``affirm_window``). With the rate told and ``min_moved_db`` over 0, read there for a veto too, on how far
         the lines moved (``moved_db``; where the comb judged the tuned sub-bands) and nothing else."""
         sr, p, ref = self.sample_rate, self.p, self.ref
-        if not self.enabled or ref is None or ref.size < p.min_s * sr or after.size < p.min_after_s * sr:
+        if not self.enabled or after.size < p.min_after_s * sr:
             return None
-        if self.ref_stoplike > p.max_ref_stoplike:
-            return None  # the stop may have begun there, heard late: no stepping to compare with
+        modelled = not affirm and self.models_lines() and self.model_ready()  # against the stepping's lines modelled
+        if ref is None or ref.size < p.min_s * sr or self.ref_stoplike > p.max_ref_stoplike:
+            # too little stepping before the fire, or the stop may have begun there (heard late): the model only
+            z = self.model_z(after) if modelled else math.nan
+            return OnClock(math.nan, self.model_hz, 0, still_z=z) if math.isfinite(z) else None
         rate = self.rate(heard_hz, affirm or self.commanded_hz is not None)
         if not math.isfinite(rate) or not (affirm or self.at_tuned_rate(rate) or p.min_moved_db > 0.0):
             return None
@@ -579,6 +714,12 @@ class ClockedCheck:
         if len(got) > 1 and finite:
             a = float(np.median(finite))
         veto_off = not affirm and not self.at_tuned_rate(rate)  # read for the lines' moving alone
+        if veto_off and modelled:
+            reader = self.reader(rate) if math.isfinite(a) else None
+            locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
+            z = self.model_z(after, a)
+            on = OnClock(a, rate, used, self.ref_age_s, locked, still_z=z)
+            return on if math.isfinite(a) or math.isfinite(z) else None
         unjudged = veto_off and not math.isfinite(a)
         predicted = unjudged and p.min_pred_moved_db > 0.0 and self.predicted_moved_db(rate) >= p.min_pred_moved_db
         if unjudged and not predicted:
@@ -590,18 +731,21 @@ class ClockedCheck:
             moved = lines_moved_db(ref, pieces, sr, rate, tu.edges_hz, p)
         return OnClock(a, rate, used, self.ref_age_s, locked, moved)
 
-    def predicted_moved_db(self, rate_hz: float) -> float:
+    def predicted_moved_db(self, rate_hz: float, bands: Sequence[int] | None = None) -> float:
         """How far the stop, as predicted at ``rate_hz`` (Hz) from the tuning's fine continuum, moves the sub-bands
-        whose lines were locked in the reference: RMS of the predicted signature over them, dB (NaN: no prediction,
-        no reference or no sub-band locked)."""
+        ``bands`` (None: those whose lines were locked in the reference): RMS of the predicted signature over them,
+        dB (NaN: no prediction, no reference or no sub-band locked)."""
         tu, ref = self.tuning, self.ref
         start, width, stepping, stopped = tu.fine_start_hz, tu.fine_bin_hz, tu.fine_stepping_db, tu.fine_stopped_db
-        if ref is None or tu.step_rate_hz is None or start is None or width is None or stepping is None:
+        if tu.step_rate_hz is None or start is None or width is None or stepping is None:
             return math.nan
         if stopped is None or tu.edges_hz is None or tu.signature_db is None:
             return math.nan
-        lk = _locked_bands(ref, self.sample_rate, rate_hz, tu.edges_hz, range(len(tu.edges_hz) - 1), self.p)
-        if lk is None or not lk.keep:
+        if bands is None:
+            lk = None if ref is None else _locked_bands(ref, self.sample_rate, rate_hz, tu.edges_hz,
+                                                        range(len(tu.edges_hz) - 1), self.p)  # fmt: skip
+            bands = [] if lk is None else lk.keep
+        if not bands:
             return math.nan
         if self._predictor is None:
             sig = np.asarray(tu.signature_db, dtype=np.float64)
@@ -609,7 +753,7 @@ class ClockedCheck:
                 tu.sample_rate, tu.frame, tu.edges_hz, sig, tu.step_rate_hz, start, width, stepping, stopped
             )
         pred = self._predictor.predict(rate_hz)
-        return float(np.sqrt(np.mean(pred[lk.keep] ** 2)))
+        return float(np.sqrt(np.mean(pred[list(bands)] ** 2)))
 
     def reader(self, rate_hz: float) -> LockedReader | None:
         """The lines read in phase with the clock followed at ``rate_hz`` (Hz) against the reference (the chain's
@@ -654,7 +798,8 @@ class ClockedCheck:
         if not self.at_tuned_rate(got.rate_hz):
             # at another rate the tuned signature is not what the stop does on the lines: no veto on it; but lines
             # that did not move at all (the rate told: the clock is the controller's) are the stepping going on
-            return not got.moved_db < self.p.min_moved_db  # NaN (not read): no veto
+            # with the stepping's lines modelled: lines still within the model's spread are the stepping going on
+            return not got.moved_db < self.p.min_moved_db and not got.still_z < self.p.model_max_z  # NaN: no veto
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
 
     def affirms(self, got: OnClock | None) -> bool:

@@ -50,7 +50,7 @@ from .chain import Fire, FireChain
 from .checks import WindowChecks
 from .clocked import CLOCKED, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
-from .inside import INSIDE, InsideParams, stop_inside
+from .inside import INSIDE, InsideParams, stop_departed, stop_inside
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
 from .pause import PAUSE, PauseParams, Stopped
@@ -363,6 +363,7 @@ class ConfirmedStopDetector:
     def _holds(self, ev: StopEvent, fire: int, frames: int) -> bool:
         """The fire at frame ``fire`` persisted over ``frames`` and passed the other checks (:mod:`.checks`)."""
         now_s = self._t0 + self._fed / self._sr
+        self.checks.on_clock = None  # (judged below, if at all)
         m, hot = self._frames.window(fire, frames)
         if persisted(m, hot, self.w.gap, self.params.persistence):
             return self.checks.passed(ev, fire, frames, self.log, now_s)
@@ -400,6 +401,8 @@ class ConfirmedStopDetector:
         if x.size != end - start + lead:
             return None  # not all kept (the stream began inside the lead)
         got = stop_inside(x, lead, c, self.checks.pause.before_hz, p)
+        if got is None and c.p.model_inside and c.model_vetoed(self.checks.on_clock):  # the stepping's lines modelled
+            got = stop_departed(x, lead, c, p)
         if got is None or self.checks.pause.stopped(x[got.onset :]) is not None:
             return None
         onset_s = self._t0 + (start - lead + got.onset) / self._sr

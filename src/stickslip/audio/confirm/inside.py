@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from ..paramfield import param
 from .clocked import ClockedCheck, ClockedParams, OnClock, turned_frames
 
-__all__ = ["INSIDE", "Inside", "InsideParams", "onset_in_phase", "stop_inside"]
+__all__ = ["INSIDE", "Inside", "InsideParams", "onset_in_phase", "stop_departed", "stop_inside"]
 
 FloatArray = NDArray[np.float64]
 
@@ -122,6 +122,36 @@ def stop_inside(
         return None
     assert on is not None
     return Inside(lo + t, spread, on)
+
+
+def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsideParams = INSIDE) -> Inside | None:
+    """Off the tuning's rate, the stop that began inside a window ``x[lead:]`` whose fire the stepping's lines
+    modelled vetoed (``lines_model``; :meth:`~.clocked.ClockedCheck.model_z`), or None.
+
+    The window is read in the model's pieces (``span_s``); its fire was vetoed because a piece sat within
+    ``model_max_z`` of the stepping. Where the pieces after it, to the window's end, each depart from the model
+    (``model_max_z`` or more: the lines changed and stayed so, ``min_run_s`` at least), the joint stopped there:
+    its onset is fitted on the model's lines turned by its clock (:func:`onset_in_phase`, over the last piece
+    within and the first departed), as a stop found inside a rejected window (the caller checks it is not a pause).
+    A stop changes the lines at once; sound added over them drifts in and out. So the fit must place the change
+    within ``model_max_spread_s``, else none was found.
+    """
+    cp, sr, m, n = clocked.p, clocked.sample_rate, clocked.model, clocked.model_n
+    if m is None or n <= 0 or not (clocked.models_lines() and clocked.model_ready()):
+        return None
+    w = x[lead:]
+    k = min(cp.window_pieces, w.size // n)
+    zs = [m.z_of(m.levels(w[i * n : (i + 1) * n])[0], cp.model_min_spans, cp.model_floor_db) for i in range(k)]
+    j = k
+    while j > 0 and zs[j - 1] >= cp.model_max_z:  # NaN ends the run
+        j -= 1
+    if j == k or j == 0 or not zs[j - 1] < cp.model_max_z or (k - j) * n < p.min_run_s * sr:
+        return None  # no departure to the window's end, or none from stepping within it
+    lo = lead + (j - 1) * n
+    t, spread = onset_in_phase(x[lo : lead + (j + 1) * n], sr, clocked.model_hz, m.ks, cp, p)
+    if t < 0 or spread > cp.model_max_spread_s * sr or lead + k * n - (lo + t) < p.min_run_s * sr:
+        return None
+    return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
 
 
 def onset_in_phase(

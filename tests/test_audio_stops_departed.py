@@ -1,0 +1,51 @@
+"""A stop inside the window of a fire the stepping's lines modelled vetoed is found there (issue 35 item 6).
+
+The tenth generator's arm 1 (``tests/support/fan_sound.py``) steps at 1200 Hz, told (the tuning's
+rate: 1000 Hz), into its stop at 12 s under the hour's speech over the radio at +3 dB to the stepping
+(``tests/support/hour_sound.py``), as ``benchmarks/bench_audio_stops_noise.py`` renders it. With
+``ClockedParams.lines_model`` the fast path's fire at 11.46 s is vetoed: the first 0.48 s piece of its
+window sits within ``model_max_z`` of the stepping modelled. The stop comes in the second piece, and
+the pieces from it to the window's end depart from the model. Without ``model_inside`` the stop had no
+event at all: the window was dropped, and the stop's own fire, 16 ms after the window's end, was
+rejected by persistence at the stream's end (0.52 s of its window heard). With it, the stop is found
+inside the window, where the fit on the model's lines places the change within ``model_max_spread_s``
+(:func:`stickslip.audio.confirm.inside.stop_departed`); here within 20 ms. Asked to place it within
+10 ms, the fit cannot, and the window is dropped as before.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from fan_sound import SR, Arm, Scene, render, tuning_scene
+from hour_sound import RMS, _span_source
+from tuned import tune
+
+from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
+from stickslip.audio.confirm.clocked import ClockedParams
+from stickslip.audio.detector import detector_for
+from stickslip.audio.events import StopEvent
+
+STOP_S, RATE, ARM, KIND = 12.0, 1200.0, 1, "speech over the radio"
+
+
+def _heard(max_spread_s: float) -> tuple[list[StopEvent], list[tuple[float, float, float]]]:
+    tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
+    y = render(Scene(Arm(ARM), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + ARM + 77))
+    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
+    src = _span_source(KIND, np.random.default_rng(ARM * 100 + int(RATE) + 3))
+    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[KIND], dtype=np.float32)  # type: ignore[operator]
+    p = ConfirmParams(clocked=ClockedParams(lines_model=True, model_max_spread_s=max_spread_s))
+    det = ConfirmedStopDetector(detector_for(tu), params=p)
+    det.reset(0.0, step_rate_hz=RATE)
+    return det.feed(y) + det.finish(), det.log.inside
+
+
+def test_a_stop_in_the_window_of_a_fire_the_model_vetoed_is_found_there() -> None:
+    dropped, none = _heard(0.01)
+    assert none == [] and dropped == []  # the stop missed so (as without model_inside)
+    events, inside = _heard(ClockedParams().model_max_spread_s)
+    assert len(inside) == 1 and abs(inside[0][0] - 11.461) < 0.01 and 0.01 < inside[0][2] <= 0.025  # its window
+    at = [e for e in events if e.onset_s >= STOP_S - 0.025]
+    assert at and at[0].found_late and abs(at[0].onset_s - STOP_S) < 0.025  # within the bench's tolerance
+    assert at[0].detected_at_s == at[0].confirmed_at_s and abs(at[0].detected_at_s - 13.461) < 0.01  # window's end
+    assert all(e.onset_s >= STOP_S - 0.025 for e in events)  # and no false stop before it
