@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..features.fine import SignaturePredictor
+from ..features.fine import SignaturePredictor, signature_predictor
 from ..paramfield import param
 from .fit import FIT, FitParams, Fitter, masked_signature
 from .tuned import TunedTemplate
@@ -86,18 +86,8 @@ class RateFits:
     def predictor(self) -> SignaturePredictor:
         """The tuning's signature predictor (built at the first rate that needs it); needs :attr:`predicts`."""
         if self._predictor is None:
-            tu = self.tuned
-            assert (
-                tu.step_rate_hz is not None
-                and tu.fine_start_hz is not None
-                and tu.fine_bin_hz is not None
-                and tu.fine_stepping_db is not None
-                and tu.fine_stopped_db is not None
-            )
-            self._predictor = SignaturePredictor(
-                tu.sample_rate, tu.frame, tu.edges_hz, self.delta, tu.step_rate_hz,
-                tu.fine_start_hz, tu.fine_bin_hz, tu.fine_stepping_db, tu.fine_stopped_db,
-            )  # fmt: skip
+            self._predictor = signature_predictor(self.tuned)
+            assert self._predictor is not None  # :attr:`predicts` says the tuning holds what it needs
         return self._predictor
 
     def mask(self, added_db: FloatArray | None) -> None:

@@ -112,7 +112,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from ..features.fine import SignaturePredictor
+from ..features.fine import SignaturePredictor, signature_predictor
 from ..features.lockin import demodulate, follow_clock, locked_powers
 from ..features.stepclock import STEP_CLOCK, Periodogram, StepClockParams, line_powers, periodogram, rate_near_hz
 from ..paramfield import param
@@ -748,10 +748,8 @@ class ClockedCheck:
         if not bands:
             return math.nan
         if self._predictor is None:
-            sig = np.asarray(tu.signature_db, dtype=np.float64)
-            self._predictor = SignaturePredictor(
-                tu.sample_rate, tu.frame, tu.edges_hz, sig, tu.step_rate_hz, start, width, stepping, stopped
-            )
+            self._predictor = signature_predictor(tu)
+            assert self._predictor is not None  # its fields were checked above
         pred = self._predictor.predict(rate_hz)
         return float(np.sqrt(np.mean(pred[list(bands)] ** 2)))
 

@@ -29,7 +29,9 @@ See docs/audio.md, "Another step rate than the tuning's".
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,10 +42,12 @@ from ..paramfield import param
 __all__ = [
     "FINE",
     "FineParams",
+    "FineSignature",
     "SignaturePredictor",
     "fine_range_hz",
     "fine_segment",
     "fine_spectrum_db",
+    "signature_predictor",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -189,6 +193,43 @@ class SignaturePredictor:
         if float(rate_hz) == self.rate0:
             return self.delta.copy()
         return np.asarray(self.delta + self.correction_db(rate_hz), dtype=np.float64)
+
+
+class FineSignature(Protocol):
+    """What a predictor is built from: a tuning's sub-bands and signature, its step rate and fine spectra
+    (a :class:`~stickslip.audio.tuningfile.Tuning`, or the template detector's view of one)."""
+
+    @property
+    def sample_rate(self) -> int: ...
+    @property
+    def frame(self) -> int: ...
+    @property
+    def edges_hz(self) -> Sequence[float] | None: ...
+    @property
+    def signature_db(self) -> Sequence[float] | None: ...
+    @property
+    def step_rate_hz(self) -> float | None: ...
+    @property
+    def fine_start_hz(self) -> float | None: ...
+    @property
+    def fine_bin_hz(self) -> float | None: ...
+    @property
+    def fine_stepping_db(self) -> Sequence[float] | None: ...
+    @property
+    def fine_stopped_db(self) -> Sequence[float] | None: ...
+
+
+def signature_predictor(tu: FineSignature, p: FineParams = FINE) -> SignaturePredictor | None:
+    """The predictor of ``tu``'s signature at other step rates; None where ``tu`` lacks its step rate, fine
+    spectra, sub-bands or signature (tunings made before they were stored)."""
+    edges, sig, rate0 = tu.edges_hz, tu.signature_db, tu.step_rate_hz
+    start, width, stepping, stopped = tu.fine_start_hz, tu.fine_bin_hz, tu.fine_stepping_db, tu.fine_stopped_db
+    if edges is None or sig is None or rate0 is None or start is None or width is None:
+        return None
+    if stepping is None or stopped is None:
+        return None
+    return SignaturePredictor(tu.sample_rate, tu.frame, list(edges), list(sig), rate0, start, width,
+                              list(stepping), list(stopped), p)
 
 
 def _line_response(
