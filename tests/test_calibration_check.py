@@ -166,3 +166,14 @@ def test_suggest_check_writes_the_check_poses_in_both_directions(
     assert r.exit_code == 2 and "--check 21 is outside 1..20" in r.stderr
     r = runner.invoke(app, ["suggest", "-c", str(tmp_path / "c.json"), "--seed", "3"])
     assert r.exit_code == 2 and "give --check N too" in r.stderr
+
+
+def test_a_check_traverse_at_a_fitted_pose_is_refused() -> None:
+    # the fit's own pose shows its residual there, not its error between poses: it would narrow the intervals
+    from stickslip.calibration import CalibrationError
+
+    again = dataclasses.replace(DAY.calibration[5], steps=DAY.calibration[5].steps + 7)  # a repeat, other count
+    with pytest.raises(CalibrationError, match=r"check traverse 2 \(joint \d, [+-]\) is at a pose the calibration"):
+        calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], again])
+    moved = dataclasses.replace(again, psi=again.psi + 1e-6)  # a new pose, however near: taken
+    assert calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], moved]).selection

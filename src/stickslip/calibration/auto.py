@@ -7,11 +7,11 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
-from .check import apply_check
+from .check import apply_check, fitted_pose
 from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
-from .result import Calibration, Provenance, _day_of
+from .result import Calibration, CalibrationError, Provenance, _day_of
 from .selection import Progress
 
 _OLD_METHOD_NAMES = {"seed": "paper", "seed-quadratic": "paper-quadratic"}
@@ -65,10 +65,15 @@ def calibrate(
         Check traverses: at random poses (:func:`~.design.check_poses`), measured in the
         session after ``traverses`` and not fitted; each joint's intervals are scaled by how
         they erred (:func:`~.check.apply_check`, docs/models.md §4). The fit and its
-        predictions are those without them. Empty (the default): no check.
+        predictions are those without them. Empty (the default): no check. A check
+        traverse at a pose ``traverses`` measured is refused (:func:`~.check.fitted_pose`).
     """
     if check:
-        return apply_check(calibrate(traverses, method, day, source, model, progress, step_sizes), check)
+        grouped = group_traverses(traverses)  # once: the calibration below takes the groups
+        why = fitted_pose(check, grouped.traverses)
+        if why is not None:
+            raise CalibrationError(why)
+        return apply_check(calibrate(grouped, method, day, source, model, progress, step_sizes), check)
     if step_sizes:
         return calibrate_with_step_sizes(group_traverses(traverses).traverses, step_sizes, method, day, source, model,
                                          progress)

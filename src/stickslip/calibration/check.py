@@ -28,7 +28,7 @@ from ..measurements import Traverse
 from .intervals import relative_sd
 from .result import Calibration
 
-__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check"]
+__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose"]
 
 
 @dataclass(frozen=True)
@@ -61,6 +61,25 @@ class CheckScale:
     def as_dict(self) -> dict[str, object]:
         return {"traverses": self.traverses, "rms_error": self.rms_error, "rms_sd": self.rms_sd,
                 "rms_z": self.rms_z, "scale": self.scale}
+
+
+def _pose_key(t: Traverse) -> tuple[int, tuple[float, ...]]:
+    """The joint and the pose a traverse of it was measured at: every column but the joint's own (m, rad)."""
+    cols = (t.q1, t.q2, t.q3, t.theta, t.psi)
+    return t.joint, tuple(round(float(v), 9) for i, v in enumerate(cols) if i != t.joint - 1)
+
+
+def fitted_pose(check: Sequence[Traverse], fitted: Sequence[Traverse]) -> str | None:
+    """Why ``check`` cannot check a calibration fitted on ``fitted`` (None if it can): a check traverse at a
+    pose the fit measured (to 1e-9 in every coordinate but the joint's own) shows the fit's residual there,
+    not its error between poses, and would narrow the intervals."""
+    seen = {_pose_key(t) for t in fitted}
+    for i, t in enumerate(check, 1):
+        if _pose_key(t) in seen:
+            return (f"check traverse {i} (joint {t.joint}, {t.direction}) is at a pose the calibration's traverses "
+                    "measured: check traverses lie at new poses (stickslip suggest --check), else they show the "
+                    "fit's residual, not its error between poses (docs/models.md §4)")
+    return None
 
 
 def check_scales(cal: Calibration, check: Sequence[Traverse], params: CheckParams = CHECK) -> dict[int, CheckScale]:
