@@ -138,7 +138,8 @@ def apply_check(cal: Calibration, check: Sequence[Traverse], params: CheckParams
                      f"where the intervals expected {100 * c.rms_sd:.2g} %: intervals scaled by {c.scale:.2f} "
                      f"(docs/models.md §4)")
     for j in sorted({t.joint for t in check} - set(scales)):
-        notes.append(f"joint {j}: check traverses not used: the calibration has no error model for this joint")
+        why = "no error model for this joint" if j in cal.joints else f"no joint {j}"
+        notes.append(f"joint {j}: check traverses not used: the calibration has {why}")
     out = dataclasses.replace(cal, predictive=predictive, selection=selection,
                               provenance=dataclasses.replace(cal.provenance, notes=tuple(notes)))
     sigma = dict(cal.sigma_model)
