@@ -39,6 +39,7 @@ sys.path.insert(0, str(HERE.parent / "tests" / "support"))  # the generators
 import arrival_sound  # noqa: E402
 import drive_sound  # noqa: E402
 import modal_sound  # noqa: E402
+from bench_audio_stops_noise import details  # noqa: E402  (the detector's log near given times)
 from hour_sound import RMS, _span_source  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
@@ -137,24 +138,6 @@ def outcome(events: list[StopEvent]) -> tuple[str, int, int]:
     return judged(at[0] if at else None), counted, len(before) - counted
 
 
-def noted(det: ConfirmedStopDetector, times: list[float]) -> list[str]:
-    """What the detector noted within 0.5 s before to 2 s after any of ``times`` (its log)."""
-    log = det.log
-
-    def near(t: float) -> bool:
-        return any(u - 0.5 <= t <= u + 2.0 for u in times)
-
-    out = [
-        f"rejected fire at {e.detected_at_s:.3f} s (onset {e.onset_s:.3f})"
-        for e in log.rejected
-        if near(e.detected_at_s)
-    ]
-    out += [f"clocked at {t:.3f} s: {c}" for t, c in log.clocked if near(t)]
-    out += [f"stepping stopped at {t:.3f} s: {w}" for t, w in log.stopped if near(t)]
-    out += [f"inside at {t:.3f} s: onset {o:.3f}, spread {s:.3f}" for t, o, s in log.inside if near(t)]
-    return out
-
-
 def model_state(det: ConfirmedStopDetector) -> str:
     """What the stepping's lines model held at the end (weight, locked sub-bands) and the fires it read: when (s) and
     their lines' RMS off the model (``still_z``, spreads; under ``model_max_z`` = 3: vetoed)."""
@@ -200,7 +183,7 @@ def main(gens: tuple[str, ...], rates: tuple[float, ...], noises: tuple[str, ...
                         times = sorted({e.detected_at_s for e in ev_off + ev_on} | {STOP_S})
                         for sw, (ev, det) in got.items():
                             print(f"    {sw}: events {_fmt(ev)}")
-                            print("      " + "\n      ".join(noted(det, times) or ["(nothing noted)"]))
+                            print("      " + "\n      ".join(details(det, times) or ["(nothing noted)"]))
                             print(f"      {model_state(det)}")
     print("\n| generator, rate told | switch | " + " | ".join(OUTCOMES) + " | before (counted / flagged) |")
     print("| --- | --- |" + " --- |" * (len(OUTCOMES) + 1))

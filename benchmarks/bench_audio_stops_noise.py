@@ -98,12 +98,12 @@ def outcome(events: list[StopEvent]) -> tuple[str, str, float, int, int]:
     return (judged(events[0] if events else None), judged(at[0] if at else None), err, counted, len(before) - counted)
 
 
-def details(det: ConfirmedStopDetector) -> list[str]:
-    """What the confirming detector noted within 2 s of the stop (its log)."""
+def details(det: ConfirmedStopDetector, times: tuple[float, ...] | list[float] = (STOP_S,)) -> list[str]:
+    """What the confirming detector noted from 0.5 s before to 2 s after the stop, or any of ``times`` (its log)."""
     log = det.log
 
     def near(t: float) -> bool:
-        return STOP_S - 0.5 <= t <= STOP_S + 2.0
+        return any(u - 0.5 <= t <= u + 2.0 for u in times)
 
     out = [
         f"rejected fire at {e.detected_at_s:.3f} s (onset {e.onset_s:.3f})"
