@@ -736,10 +736,9 @@ class ClockedCheck:
         ``bands`` (None: those whose lines were locked in the reference): RMS of the predicted signature over them,
         dB (NaN: no prediction, no reference or no sub-band locked)."""
         tu, ref = self.tuning, self.ref
-        start, width, stepping, stopped = tu.fine_start_hz, tu.fine_bin_hz, tu.fine_stepping_db, tu.fine_stopped_db
-        if tu.step_rate_hz is None or start is None or width is None or stepping is None:
-            return math.nan
-        if stopped is None or tu.edges_hz is None or tu.signature_db is None:
+        if self._predictor is None:
+            self._predictor = signature_predictor(tu)  # None: the tuning holds no fine continuum (made before it)
+        if self._predictor is None or tu.edges_hz is None:
             return math.nan
         if bands is None:
             lk = None if ref is None else _locked_bands(ref, self.sample_rate, rate_hz, tu.edges_hz,
@@ -747,9 +746,6 @@ class ClockedCheck:
             bands = [] if lk is None else lk.keep
         if not bands:
             return math.nan
-        if self._predictor is None:
-            self._predictor = signature_predictor(tu)
-            assert self._predictor is not None  # its fields were checked above
         pred = self._predictor.predict(rate_hz)
         return float(np.sqrt(np.mean(pred[list(bands)] ** 2)))
 

@@ -43,6 +43,7 @@ class SteppingLines:
     ) -> None:
         #: per line ``ks`` of a stretch: power in phase, power in all (at the model's rate)
         self.in_phase, self.lines, self.ks = in_phase, lines, list(ks)
+        self._at = {k: j for j, k in enumerate(self.ks)}  # where each line is in ``in_phase``'s arrays
         self.tau_s, self.min_locked = tau_s, min_locked
         n = len(lines)
         self.bands = sorted(lines)
@@ -58,9 +59,8 @@ class SteppingLines:
     def levels(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Per sub-band: the level in phase of its lines over ``x`` (dB re 1; -inf: none) and its locked share."""
         l1, w1 = self.in_phase(x)
-        idx = {k: j for j, k in enumerate(self.ks)}
-        held = np.array([sum(float(l1[idx[k]]) for k in self.lines[i]) for i in self.bands])
-        whole = np.array([sum(float(w1[idx[k]]) for k in self.lines[i]) for i in self.bands])
+        held = np.array([sum(float(l1[self._at[k]]) for k in self.lines[i]) for i in self.bands])
+        whole = np.array([sum(float(w1[self._at[k]]) for k in self.lines[i]) for i in self.bands])
         with np.errstate(divide="ignore", invalid="ignore"):
             return 10.0 * np.log10(held), np.where(whole > 0.0, held / whole, 0.0)
 
