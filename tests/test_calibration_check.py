@@ -178,5 +178,9 @@ def test_a_check_traverse_at_a_fitted_pose_is_refused() -> None:
     again = dataclasses.replace(DAY.calibration[5], steps=DAY.calibration[5].steps + 7)  # a repeat, other count
     with pytest.raises(CalibrationError, match=r"check traverse 2 \(joint \d, [+-]\) is at a pose the calibration"):
         calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], again])
-    moved = dataclasses.replace(again, psi=again.psi + 1e-6)  # a new pose, however near: taken
+    # one pose as the fit's groups key it (POSE_DECIMALS): here 1 µrad off is the same pose, 1 mrad a new one
+    near = dataclasses.replace(again, psi=again.psi + 1e-6)
+    with pytest.raises(CalibrationError, match=r"check traverse 2 .* is at a pose the calibration"):
+        calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], near])
+    moved = dataclasses.replace(again, psi=again.psi + 1e-3)
     assert calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], moved]).selection

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..measurements import Traverse
+from .groups import pose_keys
 from .intervals import relative_sd
 from .result import Calibration
 
@@ -64,14 +65,14 @@ class CheckScale:
 
 
 def _pose_key(t: Traverse) -> tuple[int, tuple[float, ...]]:
-    """The joint and the pose a traverse of it was measured at: every column but the joint's own (m, rad)."""
-    cols = (t.q1, t.q2, t.q3, t.theta, t.psi)
-    return t.joint, tuple(round(float(v), 9) for i, v in enumerate(cols) if i != t.joint - 1)
+    """The joint and the pose a traverse of it was measured at, keyed as the calibration's groups key it."""
+    row = np.array([[t.q1, t.q2, t.q3, t.theta, t.psi]], dtype=float)
+    return t.joint, tuple(pose_keys(t.joint, row)[0].tolist())
 
 
 def fitted_pose(check: Sequence[Traverse], fitted: Sequence[Traverse]) -> str | None:
     """Why ``check`` cannot check a calibration fitted on ``fitted`` (None if it can): a check traverse at a
-    pose the fit measured (to 1e-9 in every coordinate but the joint's own) shows the fit's residual there,
+    pose the fit measured (one pose as :func:`~.groups.pose_keys` keys them) shows the fit's residual there,
     not its error between poses, and would narrow the intervals."""
     seen = {_pose_key(t) for t in fitted}
     for i, t in enumerate(check, 1):

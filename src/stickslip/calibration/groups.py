@@ -21,9 +21,23 @@ from .. import kinematics as kin
 from ..measurements import Traverse
 from ..models.families import FitBasis, features, fit_basis
 
-__all__ = ["JointData", "TraverseGroups", "group_traverses", "load_coordinates_of", "load_quantities", "nearest"]
+__all__ = ["POSE_DECIMALS", "JointData", "TraverseGroups", "group_traverses", "load_coordinates_of",
+           "load_quantities", "nearest", "pose_keys"]
 
 _COLS = ("start", "end", "q1", "q2", "q3", "theta", "psi")
+
+POSE_DECIMALS = 4
+"""Two traverses of a joint lie at one pose when their other joints and tilts agree to this many decimals
+(0.1 mm, 0.1 mrad): a pose read back from a table or a device carries float noise far below that, and
+no design places two poses that close."""
+
+
+def pose_keys(joint: int, poses: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The key of each pose of ``joint`` (rows ``q1, q2, q3, theta, psi`` in m and rad): the joint's own
+    column zeroed, the rest rounded to :data:`POSE_DECIMALS`. Equal rows are one pose."""
+    raw = np.array(poses, dtype=float, copy=True)
+    raw[:, joint - 1] = 0.0
+    return np.round(raw, POSE_DECIMALS)
 
 
 @dataclass(frozen=True)
@@ -218,7 +232,7 @@ def _joint_data(joint: int, by_dir: dict[str, list[Traverse]]) -> JointData:
     raw = np.concatenate([np.stack([cols[d][k] for k in ("q1", "q2", "q3", "theta", "psi")], axis=1)
                           for d in dirs]) if dirs else np.empty((0, 5))
     raw[:, joint - 1] = 0.0
-    keyed = np.round(raw, 4)
+    keyed = pose_keys(joint, raw)
     uniq, first, inverse = np.unique(keyed, axis=0, return_index=True, return_inverse=True)
     order = np.argsort(first)  # poses numbered in order of first appearance
     rank = np.empty_like(order)
