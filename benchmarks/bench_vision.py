@@ -39,6 +39,9 @@ edge their shaft leaves by, with a bead or without; ``FRAMES`` default 200).
 paths and events; default 0, the draw every number above was measured on), for the tracking, ``--refusals``
 and ``--scenes`` (the third generator's draw ``N`` only, tips 6 to 22 px).
 
+``--params NAME=VALUE,...`` tracks every mode with those of the tracker's constants changed
+(``TrackerParams``' fields, e.g. ``--params mismatch_floor=0.03``): a change measured side by side.
+
 ``--tracking-only --refusals`` sorts instead the second renderer's refused visible tips (the
 same frames as 1.): one row each (the sequence's look, background, tip width and photons,
 the frame's blur and room to the field's edge, the verdict before it), the rule that
@@ -104,6 +107,7 @@ import sys  # noqa: E402
 import textwrap  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Sequence  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -120,8 +124,22 @@ from stickslip.procedures.camera import calibrate_camera  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
-from stickslip.vision.template import TemplateError  # noqa: E402
+from stickslip.vision.template import TemplateError, TrackerParams  # noqa: E402
 from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal, _padded  # noqa: E402
+
+PARAMS = TrackerParams()
+"""The tracker's constants in every mode (``--params NAME=VALUE,...`` changes some: a change measured side by side)."""
+
+
+def _set_params(spec: str) -> None:
+    """``NAME=VALUE,...`` into :data:`PARAMS` (each value of its field's type)."""
+    global PARAMS
+    changes: dict[str, Any] = {}
+    for item in spec.split(","):
+        name, value = item.split("=")
+        kind = type(getattr(PARAMS, name))
+        changes[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    PARAMS = replace(PARAMS, **changes)
 
 
 def tracking(n_frames: int, seed: int = 0) -> dict[str, float]:
@@ -193,7 +211,7 @@ def _learnt(i: int, seq: Any, first: np.ndarray) -> TipTracker | None:
     """The tracker learnt from ``seq``'s first frame, or ``None`` with the refusal printed (the sequence is then
     left out of every count: no frame of it is tracked)."""
     try:
-        return TipTracker(first, seq.frames[0].tip)
+        return TipTracker(first, seq.frames[0].tip, PARAMS)
     except TemplateError as exc:
         n_vis = sum(f.kind == "visible" for f in seq.frames[1:])
         print(f"sequence {i} ({seq.look}, {seq.background}, tip {seq.width_px:.1f} px, {seq.photons:.0f} photons, "
@@ -603,7 +621,7 @@ def _unvouched(seqs: Sequence[object], group: str, border: bool = False
         frames = seq.frames  # type: ignore[attr-defined]
         images = [as_image(f.image) for f in frames]
         try:
-            tracker = TipTracker(images[0], frames[0].tip)
+            tracker = TipTracker(images[0], frames[0].tip, PARAMS)
         except TemplateError:
             continue
         fixes: list[tuple[int, float, float]] = [(0, *frames[0].tip)]
@@ -750,7 +768,7 @@ def _tally(seqs: Sequence[Any], what: Callable[[Any, Any], str], name: Callable[
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
         try:
-            tracker = TipTracker(images[0], seq.frames[0].tip)
+            tracker = TipTracker(images[0], seq.frames[0].tip, PARAMS)
         except TemplateError as exc:
             print(f"sequence {i} ({name(seq)}, tip {seq.width_px:.1f} px) not learnt: {exc}")
             continue
@@ -838,7 +856,7 @@ def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, 
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
         try:
-            tracker = TipTracker(images[0], seq.frames[0].tip)
+            tracker = TipTracker(images[0], seq.frames[0].tip, PARAMS)
         except TemplateError:
             continue
         b0 = seq.frames[0].blur
@@ -983,6 +1001,11 @@ _OWN_MODES: dict[str, tuple[str, int, dict[str, bool]]] = {
 
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
+    if "--params" in args:  # the tracker's constants changed, e.g. --params mismatch_floor=0.03
+        at = args.index("--params")
+        _set_params(args[at + 1])
+        print(f"tracker constants changed: {args[at + 1]}")
+        args = args[:at] + args[at + 2 :]
     seed: int | None = None
     if "--seed" in args:  # the held-out renderer's (or the third generator's) draw
         at = args.index("--seed")
