@@ -35,6 +35,13 @@ paraboloid-ended needle; a round, nearly opaque bead 0.6 to 1.5 tip widths in ra
 on its end for 1 to 4 frames, sharper than the needle; tips held 8 to 24 px inside the
 edge their shaft leaves by, with a bead or without; ``FRAMES`` default 200).
 
+``--seed N`` takes the second renderer's draw ``N`` (``peer_benchmark(seed=N)``: other looks, backgrounds,
+paths and events; default 0, the draw every number above was measured on), for the tracking, ``--refusals``
+and ``--scenes`` (the third generator's draw ``N`` only, tips 6 to 22 px).
+
+``--params NAME=VALUE,...`` tracks every mode with those of the tracker's constants changed
+(``TrackerParams``' fields, e.g. ``--params mismatch_floor=0.03``): a change measured side by side.
+
 ``--tracking-only --refusals`` sorts instead the second renderer's refused visible tips (the
 same frames as 1.): one row each (the sequence's look, background, tip width and photons,
 the frame's blur and room to the field's edge, the verdict before it), the rule that
@@ -43,7 +50,11 @@ far the fit it refused lay from the truth; the fit near the last fix, replayed f
 tracker's state before the frame (``TipTracker``'s own search and judgement, the same
 calls ``update`` makes; nothing in the tracker changed), and the nearest of the whole
 frame's candidates. Then the counts by rule (fits within 1 px, 1 to 3 px, more than
-3 px) and by sequence.
+3 px) and by sequence; every fix more than 2 px off with what took it (near the last fix or the
+whole frame's search, the blur copy, the signals the rules read: ``_judge`` wrapped on the
+instance, every decision unchanged); and the draw's numbers (visible, refused, median, 95th
+percentile, largest, fixes more than 3 px off, tips out of the field refused) with each
+sequence's conditions.
 
 ``--vouch-signals [FRAMES [OWN]]`` reads, on every candidate the "nothing vouches" rule refused
 (fewer than three width stations in the frame behind it; near the last fix or in the whole
@@ -96,6 +107,7 @@ import sys  # noqa: E402
 import textwrap  # noqa: E402
 import time  # noqa: E402
 from collections.abc import Callable, Sequence  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
@@ -112,12 +124,26 @@ from stickslip.procedures.camera import calibrate_camera  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.camera import SimCamera, SimCamSettings  # noqa: E402
 from stickslip.vision.frame import as_image  # noqa: E402
-from stickslip.vision.template import TemplateError  # noqa: E402
+from stickslip.vision.template import TemplateError, TrackerParams  # noqa: E402
 from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal, _padded  # noqa: E402
 
+PARAMS = TrackerParams()
+"""The tracker's constants in every mode (``--params NAME=VALUE,...`` changes some: a change measured side by side)."""
 
-def tracking(n_frames: int) -> dict[str, float]:
-    seqs = peer_benchmark(n_frames, 50, seed=0, size=512)
+
+def _set_params(spec: str) -> None:
+    """``NAME=VALUE,...`` into :data:`PARAMS` (each value of its field's type)."""
+    global PARAMS
+    changes: dict[str, Any] = {}
+    for item in spec.split(","):
+        name, value = item.split("=")
+        kind = type(getattr(PARAMS, name))
+        changes[name] = value.lower() in ("1", "true", "yes") if kind is bool else kind(value)
+    PARAMS = replace(PARAMS, **changes)
+
+
+def tracking(n_frames: int, seed: int = 0) -> dict[str, float]:
+    seqs = peer_benchmark(n_frames, 50, seed=seed, size=512)
     errors, worst, refused, visible, out_fixed, out_total, seconds, cpu, tracked = [], 0.0, 0, 0, 0, 0, 0.0, 0.0, 0
     kinds: dict[str, int] = {}
     verdicts: dict[tuple[str, str], int] = {}
@@ -125,7 +151,10 @@ def tracking(n_frames: int) -> dict[str, float]:
           f"{'max':>6} {'refused':>7} {'worst fix':>9}")
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
-        tracker = TipTracker(images[0], seq.frames[0].tip)
+        learnt = _learnt(i, seq, images[0])
+        if learnt is None:
+            continue
+        tracker = learnt
         errs, ref, seq_worst = [], 0, 0.0
         for f, img in zip(seq.frames[1:], images[1:], strict=True):
             t, c = time.perf_counter(), time.process_time()
@@ -176,6 +205,18 @@ def tracking(n_frames: int) -> dict[str, float]:
         met = v <= target if op == "<=" else v >= target
         print(f"{name:36} {v:>9.3f} {op}{target:>6g} {ratio:>7.2f}  {'yes' if met else 'NO'}")
     return out
+
+
+def _learnt(i: int, seq: Any, first: np.ndarray) -> TipTracker | None:
+    """The tracker learnt from ``seq``'s first frame, or ``None`` with the refusal printed (the sequence is then
+    left out of every count: no frame of it is tracked)."""
+    try:
+        return TipTracker(first, seq.frames[0].tip, PARAMS)
+    except TemplateError as exc:
+        n_vis = sum(f.kind == "visible" for f in seq.frames[1:])
+        print(f"sequence {i} ({seq.look}, {seq.background}, tip {seq.width_px:.1f} px, {seq.photons:.0f} photons, "
+              f"first frame's blur {seq.frames[0].blur:.1f} px; {n_vis} visible tips) not learnt: {exc}")
+        return None
 
 
 # the refusal's detail -> (the check that said it, its reason); the first match wins (track.py's strings)
@@ -270,19 +311,30 @@ def _in_reach(t: TipTracker, tip: tuple[float, float], w: int, h: int) -> bool:
     return cover >= t.params.min_coverage
 
 
-def refusals(n_frames: int) -> int:
+def refusals(n_frames: int, seed: int = 0) -> int:
     """Sort the second renderer's refused visible tips by the rule that refused them; the rows."""
-    seqs = peer_benchmark(n_frames, 50, seed=0, size=512)
+    seqs = peer_benchmark(n_frames, 50, seed=seed, size=512)
     rows: list[tuple[int, int, float, float, str, str, float, float, str, float, bool]] = []
     reasons: dict[str, str] = {}
     differ = visible = 0
+    taken: list[tuple[int, int, str, float, dict[str, Any] | None]] = []  # every fix: sequence, frame, kind, error
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
-        tracker = TipTracker(images[0], seq.frames[0].tip)
+        tracker = _learnt(i, seq, images[0])
+        if tracker is None:
+            continue
+        judged = _watch(tracker)
+        fixes: list[tuple[int, float, float]] = [(0, *seq.frames[0].tip)]
         before = "fix"
         for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
             pre = _state(tracker)
+            judged.clear()
             r = tracker.update(img)
+            if isinstance(r, Fix):
+                e = math.hypot(r.x - f.tip[0], r.y - f.tip[1])
+                taken.append((i, k, f.kind, e, _taken_by(tracker, pre, r, judged, fixes, k, f, img) if e > 2.0
+                              else None))
+                fixes.append((k, r.x, r.y))
             visible += f.kind == "visible"
             if isinstance(r, Lost) and f.kind == "visible":
                 post = _state(tracker)
@@ -309,6 +361,7 @@ def refusals(n_frames: int) -> int:
         print(f"{i:>3} {k:>2} {bl:>4.1f} {room:>4.0f} {bef:>7} {rule:<15} {gone:>5.1f} "
               f"{'yes' if reach else 'no':>3} {en:>4.1f} {eg:>5.1f} {vg}")
     print(f"{len(rows)} of {visible} visible tips refused; the replay refuses by another rule in {differ}")
+    _off_fixes(taken)
 
     def bands(es: list[float]) -> str:
         a = np.array([e for e in es if math.isfinite(e)])
@@ -342,7 +395,95 @@ def refusals(n_frames: int) -> int:
             f"{seq.photons:>3.0f}: {len(mine):>2} of {n_vis:>2}" + ("; " if tally else "")
             + ", ".join(f"{u} {n}" for u, n in sorted(tally.items(), key=lambda x: -x[1])),
             80, subsequent_indent=" " * 4))
+    _draw_summary(seqs, taken, rows)
     return len(rows)
+
+
+def _watch(tracker: TipTracker) -> list[tuple[bool, object, Any]]:
+    """Wrap ``tracker``'s ``_judge`` on the instance: each judgement (whole frame's or not, result, candidate) is
+    appended to the list returned; every decision unchanged."""
+    judged: list[tuple[bool, object, Any]] = []
+    judge = tracker._judge
+
+    def watched(cand: Any, image: np.ndarray, reacquire: bool = False) -> Any:
+        res, cand = judge(cand, image, reacquire)
+        judged.append((reacquire, res, cand))
+        return res, cand
+
+    tracker._judge = watched  # type: ignore[method-assign]
+    return judged
+
+
+def _taken_by(t: TipTracker, pre: dict[str, object], fix: Fix, judged: list[tuple[bool, object, Any]],
+              fixes: list[tuple[int, float, float]], k: int, f: Any, image: np.ndarray) -> dict[str, Any]:
+    """What took ``fix`` (a fix more than 2 px off): the path (near the last fix, or the whole frame's search),
+    the blur copy, and the signals the rules read, with the tracker's state before the frame (``pre``)."""
+    reacquire, cand = next((ra, c) for ra, res, c in judged if res is fix)
+    post = _state(t)
+    vars(t).update(pre)
+    _, sig = _signals(t, cand, fixes, k, f.tip)
+    vars(t).update(post)
+    h, w = image.shape
+    sh, wd = cand.shaft, cand.width
+    return {"path": "frame" if reacquire else "near", "blur": getattr(f, "blur", math.nan), "fit blur": fix.blur,
+            "copy": t._spec[cand.level][2],
+            "room": min(f.tip[0], f.tip[1], w - 1 - f.tip[0], h - 1 - f.tip[1]), **sig,
+            "back": sh.back if sh else math.nan, "shaft shape": sh.shape if sh else math.nan,
+            "along": sh.along if sh else math.nan, "stations": wd.n if wd else -1,
+            "disagree": wd.disagree if wd else -1,
+            "along err": _along(t, fix, f.tip)}
+
+
+def _along(t: TipTracker, fix: Fix, tip: tuple[float, float]) -> float:
+    """The fix's error along the needle's axis (px; positive: behind the tip, up the shaft)."""
+    a, _ = _split(fix, tip, t.template.shaft)
+    return a
+
+
+def _off_fixes(taken: list[tuple[int, int, str, float, dict[str, Any] | None]]) -> None:
+    """Every fix more than 2 px from the truth, with what took it (:func:`_taken_by`)."""
+    off = [r for r in taken if r[3] > 2.0]
+    print(f"\nfixes more than 2 px off: {len(off)} ({sum(r[3] > 3.0 for r in off)} more than 3 px)")
+    for i, k, kind, e, d in sorted(off, key=lambda r: -r[3]):
+        print(textwrap.fill(f"  seq {i} frame {k} ({kind}) {e:.2f} px: " + _details(d or {}), 100,
+                            subsequent_indent=" " * 6))
+
+
+def _details(d: dict[str, Any]) -> str:
+    """:func:`_taken_by`'s dictionary on one line."""
+    return ", ".join(f"{key} {v}" if isinstance(v, str) else f"{key} {v:.3g}" for key, v in d.items())
+
+
+def _draw_summary(seqs: Sequence[Any], taken: list[tuple[int, int, str, float, dict[str, Any] | None]],
+                  rows: Sequence[tuple[Any, ...]]) -> None:
+    """The draw's numbers: visible tips, refused, the visible fixes' median, 95th percentile, the largest error of
+    any fix, fixes more than 3 px off, tips out of the field refused; by sequence its conditions."""
+    vis = np.array([e for _, _, kind, e, _ in taken if kind == "visible"])
+    ids = {r[0] for r in taken} | {r[0] for r in rows}
+    learnt = [s for i, s in enumerate(seqs) if i in ids]
+    n_vis = sum(f.kind == "visible" for s in learnt for f in s.frames[1:])
+    n_out = sum(f.kind == "out" for s in learnt for f in s.frames[1:])
+    out_fixed = sum(kind == "out" for _, _, kind, _, _ in taken)
+    worst = max((e for *_, e, _ in taken), default=math.nan)
+    print(f"\ndraw: visible {n_vis}, refused {len(rows)} ({100 * len(rows) / max(n_vis, 1):.1f} %), median "
+          f"{np.median(vis):.3f} px, p95 {np.percentile(vis, 95):.3f}, largest {worst:.2f}, fixes > 3 px "
+          f"{sum(e > 3.0 for *_, e, _ in taken)}, > 2 px {sum(e > 2.0 for *_, e, _ in taken)}, out of the field "
+          f"refused {n_out - out_fixed} of {n_out}; fixes by kind: " + ", ".join(
+              f"{u} {sum(kind == u for _, _, kind, _, _ in taken)}" for u in ("visible", "occluded", "defocused")))
+    print("by sequence: look, background, tip px, photons, blur range of visible frames (px), refused, median, "
+          "largest fix")
+    for i, seq in enumerate(seqs):
+        bl = [f.blur for f in seq.frames[1:] if f.kind == "visible"]
+        if i not in ids:
+            print(f"{i:>2} {seq.look:>11} {seq.background:>7} {seq.width_px:>5.1f} {seq.photons:>4.0f} "
+                  f"{min(bl):>4.1f}-{max(bl):<4.1f} not learnt ({len(bl)} visible tips)")
+            continue
+        e = [x for j, _, _, x, _ in taken if j == i]
+        ev = [x for j, _, kind, x, _ in taken if j == i and kind == "visible"]
+        ref = sum(r[0] == i for r in rows)
+        print(f"{i:>2} {seq.look:>11} {seq.background:>7} {seq.width_px:>5.1f} {seq.photons:>4.0f} "
+              f"{min(bl):>4.1f}-{max(bl):<4.1f} {ref:>2}/{len(bl):<2} ({100 * ref / max(len(bl), 1):>4.1f} %) "
+              f"{np.median(ev) if ev else math.nan:>5.2f} {max(e, default=math.nan):>5.2f}")
 
 
 _SIGNALS: tuple[tuple[str, str], ...] = (
@@ -480,7 +621,7 @@ def _unvouched(seqs: Sequence[object], group: str, border: bool = False
         frames = seq.frames  # type: ignore[attr-defined]
         images = [as_image(f.image) for f in frames]
         try:
-            tracker = TipTracker(images[0], frames[0].tip)
+            tracker = TipTracker(images[0], frames[0].tip, PARAMS)
         except TemplateError:
             continue
         fixes: list[tuple[int, float, float]] = [(0, *frames[0].tip)]
@@ -617,21 +758,25 @@ def _lobed_class(f: OwnFrame, image_size: int) -> str:
 
 
 def _tally(seqs: Sequence[Any], what: Callable[[Any, Any], str], name: Callable[[Any], str]
-           ) -> tuple[dict[tuple[str, str], int], list[tuple[float, int, int, str, float]], list[float]]:
+           ) -> tuple[dict[tuple[str, str], int], list[tuple[float, int, int, str, float, str]], list[float]]:
     """Track every sequence from its first frame's tip: the verdicts tallied by ``what`` a frame is, the
     fixes more than 3 px off (error, sequence, frame, what, tip width) and the visible tips' errors, px;
     ``name`` names a sequence (its look) in messages."""
     tally: dict[tuple[str, str], int] = {}
-    bad: list[tuple[float, int, int, str, float]] = []
+    bad: list[tuple[float, int, int, str, float, str]] = []
     errors: list[float] = []
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
         try:
-            tracker = TipTracker(images[0], seq.frames[0].tip)
+            tracker = TipTracker(images[0], seq.frames[0].tip, PARAMS)
         except TemplateError as exc:
             print(f"sequence {i} ({name(seq)}, tip {seq.width_px:.1f} px) not learnt: {exc}")
             continue
+        judged = _watch(tracker)
+        fixes: list[tuple[int, float, float]] = [(0, *seq.frames[0].tip)]
         for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
+            pre = _state(tracker)
+            judged.clear()
             r = tracker.update(img)
             w = what(f, img)
             verdict = "fix" if isinstance(r, Fix) else r.reason
@@ -641,11 +786,14 @@ def _tally(seqs: Sequence[Any], what: Callable[[Any, Any], str], name: Callable[
                 if f.kind == "visible":
                     errors.append(e)
                 if e > 3.0:
-                    bad.append((e, i, k, w, seq.width_px))
+                    bad.append((e, i, k, w, seq.width_px, _details(_taken_by(tracker, pre, r, judged, fixes, k, f,
+                                                                                img))))
+                fixes.append((k, r.x, r.y))
     return tally, bad, errors
 
 
-def _print_tally(seqs: Sequence[Any], tally: dict[tuple[str, str], int], bad: list[tuple[float, int, int, str, float]],
+def _print_tally(seqs: Sequence[Any], tally: dict[tuple[str, str], int],
+                 bad: list[tuple[float, int, int, str, float, str]],
                  errors: list[float], name: Callable[[Any], str], refused: str = "") -> None:
     """:func:`_tally`'s counts by kind of frame, the visible tips' errors and every fix more than 3 px off."""
     print(f"{len(seqs)} sequences ({', '.join(f'{name(s)} {s.width_px:.1f} px' for s in seqs)})")
@@ -655,8 +803,9 @@ def _print_tally(seqs: Sequence[Any], tally: dict[tuple[str, str], int], bad: li
     e = np.array(errors) if errors else np.array([math.nan])
     print(f"visible tips: {refused}median error {np.median(e):.2f} px, 95th percentile {np.percentile(e, 95):.2f} px")
     print(f"fixes more than 3 px off: {len(bad)}" + (f", worst {max(bad)[0]:.1f} px" if bad else ""))
-    for err, i, k, what, w in sorted(bad, reverse=True):
+    for err, i, k, what, w, why in sorted(bad, reverse=True):
         print(f"  {err:6.1f} px  sequence {i} frame {k}: {what}, tip {w:.1f} px, {name(seqs[i])}")
+        print(textwrap.fill(why, 100, initial_indent=" " * 6, subsequent_indent=" " * 6))
 
 
 def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | None = None,
@@ -707,7 +856,7 @@ def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, 
     for i, seq in enumerate(seqs):
         images = [as_image(f.image) for f in seq.frames]
         try:
-            tracker = TipTracker(images[0], seq.frames[0].tip)
+            tracker = TipTracker(images[0], seq.frames[0].tip, PARAMS)
         except TemplateError:
             continue
         b0 = seq.frames[0].blur
@@ -852,6 +1001,16 @@ _OWN_MODES: dict[str, tuple[str, int, dict[str, bool]]] = {
 
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
+    if "--params" in args:  # the tracker's constants changed, e.g. --params mismatch_floor=0.03
+        at = args.index("--params")
+        _set_params(args[at + 1])
+        print(f"tracker constants changed: {args[at + 1]}")
+        args = args[:at] + args[at + 2 :]
+    seed: int | None = None
+    if "--seed" in args:  # the held-out renderer's (or the third generator's) draw
+        at = args.index("--seed")
+        seed = int(args[at + 1])
+        args = args[:at] + args[at + 2 :]
     numbers = [a for a in args if not a.startswith("--")]
     for flag, (what, default, kw) in _OWN_MODES.items():
         if flag in args:  # the mode on all tips, then on wide bright-field tips only
@@ -863,6 +1022,10 @@ def main(argv: list[str] | None = None) -> None:
             return
     if "--scenes" in args:
         n_sc = int(numbers[0]) if numbers else 300
+        if seed is not None:
+            print(f"tip tracking on the third generator's occlusions, seed {seed}")
+            scenes(n_sc, seed)
+            return
         for seed in (0, 1):
             print(f"tip tracking on the third generator's occlusions, seed {seed}")
             scenes(n_sc, seed)
@@ -892,10 +1055,10 @@ def main(argv: list[str] | None = None) -> None:
         return
     if "--refusals" in args:
         print("the second renderer's refused visible tips, by the rule that refused them")
-        refusals(n)
+        refusals(n, seed or 0)
         return
-    print("1. tip tracking on the second renderer's frames")
-    tracking(n)
+    print("1. tip tracking on the second renderer's frames" + (f", draw {seed}" if seed is not None else ""))
+    tracking(n, seed or 0)
     if "--tracking-only" in args:
         return
     print("\n2. step sizes measured by the camera (sim:// with simcam://, 0.5 um a pixel)")

@@ -19,6 +19,7 @@ from vision_own import own_sequence
 
 from stickslip.sim.camera import Droplet, SimCamSettings, SimScene
 from stickslip.vision.frame import as_image
+from stickslip.vision.template import TrackerParams
 from stickslip.vision.track import Fix, Lost, TipTracker
 
 
@@ -66,12 +67,14 @@ def test_the_droplet_mode_keeps_the_tip_and_the_motion() -> None:
     assert not any(f.cause == "droplet" for f in sem.frames)  # electrons are not refracted
 
 
-@lru_cache(maxsize=1)
-def _through_a_droplet() -> list[tuple[str, float | None]]:
+@lru_cache(maxsize=2)
+def _through_a_droplet(floor: float | None = None) -> list[tuple[str, float | None]]:
     """A 16.2 px bright-field tip with a droplet on it from frame 9 (the droplet set's seed 1, sequence 7):
-    each frame's cause and the fix's error (px; None: refused)."""
+    each frame's cause and the fix's error (px; None: refused); ``floor``: the mismatch floor, if not the
+    default's."""
     seq = own_sequence(1007, 13, 256, 3.0 + 7.0 * 17.0 / 9.0, "optical", droplet_rate=0.15)
-    tracker = TipTracker(as_image(seq.frames[0].image), seq.frames[0].tip)
+    params = TrackerParams() if floor is None else TrackerParams(mismatch_floor=floor)
+    tracker = TipTracker(as_image(seq.frames[0].image), seq.frames[0].tip, params)
     out: list[tuple[str, float | None]] = []
     for f in seq.frames[1:]:
         r = tracker.update(as_image(f.image))
@@ -85,11 +88,17 @@ def test_the_droplet_frames_are_where_the_set_had_them() -> None:
     assert causes[8:12] == ["droplet"] * 4 and not any(causes[:8])
 
 
-@pytest.mark.xfail(strict=True, reason="issue 30: a tip seen through a droplet is fixed 3.4 to 3.5 px off; no "
-                   "rule reads it yet (docs/vision-log.md, 'A tip seen through a droplet')")
 def test_no_fix_through_a_droplet_is_more_than_3_px_off() -> None:
-    errors = [e for _, e in _through_a_droplet() if e is not None]
+    # the four frames through the droplet match at 15 times the recent fixes' mismatch (0.031-0.036 against
+    # 0.002): with a mismatch floor of 0.03 they were fixed 3.4 to 3.5 px off, with 0.02 they are refused
+    # (docs/vision-log.md, "Unseen draws of the held-out renderer")
+    seen = _through_a_droplet()
+    errors = [e for _, e in seen if e is not None]
     assert errors and max(errors) <= 3.0
+    assert [e for c, e in seen if c == "droplet"] == [None] * 4
+    assert TrackerParams().mismatch_floor == 0.02
+    drops = [e for c, e in _through_a_droplet(0.03) if c == "droplet"]
+    assert all(e is not None and 3.0 < e < 4.0 for e in drops)  # what the floor of 0.03 fixed there
 
 
 @pytest.mark.parametrize(
