@@ -12,7 +12,8 @@ prints the model's weight at the end and the fires it read).
 Each arm is tuned on its generator's tuning recording at 1000 Hz, then steps at a told rate (900, 950, 1100, 1200
 Hz) for :data:`STOP_S` s into its stop (2 s of the stop after it), clean or with the hour's "music" (-3 dB) or
 "speech over the radio" (+3 dB) added re the stepping's RMS. The same samples are heard by two confirming
-detectors in one process: the switch off (``ClockedParams(lines_model=False)``) and on (the default).
+detectors in one process: the switch off (``ClockedParams(lines_model=False)``) and on (the default); ``--switch
+model_unjudged`` compares that switch instead (a stop the model could have judged and did not, flagged).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -29,6 +30,7 @@ import argparse
 import sys
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -62,7 +64,13 @@ NOISES: dict[str, tuple[str, float] | None] = {
     "speech over the radio +3": ("speech over the radio", 3.0),
 }
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
-SWITCH = {"off": ClockedParams(lines_model=False), "on": ClockedParams()}
+#: the ``ClockedParams`` switch compared: off (the field False) against on (the default)
+SWITCHES = ("lines_model", "model_unjudged")
+
+
+def switch(name: str) -> dict[str, ClockedParams]:
+    """The two detectors' clocked parameters: ``name`` False (off) and the default (on)."""
+    return {"off": replace(ClockedParams(), **{name: False}), "on": ClockedParams()}
 
 Render = Callable[[float, float | None, float, int], np.ndarray]  # rate, stop, dur, seed -> samples
 
@@ -154,7 +162,9 @@ def _fmt(ev: list[StopEvent]) -> str:
     return ", ".join(f"{e.onset_s:.3f}{'?' if e.onset_uncertain else ''}" for e in ev) or "none"
 
 
-def main(gens: tuple[str, ...], rates: tuple[float, ...], noises: tuple[str, ...]) -> dict[str, Counter[str]]:
+def main(
+    gens: tuple[str, ...], rates: tuple[float, ...], noises: tuple[str, ...], name: str = "lines_model"
+) -> dict[str, Counter[str]]:
     tally: dict[str, Counter[str]] = {}
     for gen in gens:
         for label, render in ARMS[gen]:
@@ -163,7 +173,7 @@ def main(gens: tuple[str, ...], rates: tuple[float, ...], noises: tuple[str, ...
                 for i, noise in enumerate(noises):
                     y = recording(render, rate, noise, int(rate) * 10 + i + 5)
                     got = {}
-                    for sw, cp in SWITCH.items():
+                    for sw, cp in switch(name).items():
                         det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=cp))
                         det.reset(0.0, step_rate_hz=rate)
                         got[sw] = (det.feed(y) + det.finish(), det)
@@ -204,9 +214,10 @@ if __name__ == "__main__":
     )
     ap.add_argument("--rates", default=",".join(f"{r:.0f}" for r in RATES), help="told rates, Hz, comma-separated")
     ap.add_argument("--noises", default=",".join(NOISES), help=f"added sound, comma-separated, of {list(NOISES)}")
+    ap.add_argument("--switch", default="lines_model", choices=SWITCHES, help="the ClockedParams switch compared")
     a = ap.parse_args()
     g = tuple(a.gens.split(","))
     ns = tuple(a.noises.split(","))
     if any(x not in ARMS for x in g) or any(x not in NOISES for x in ns):
         ap.error("unknown generator or noise")
-    main(g, tuple(float(s) for s in a.rates.split(",")), ns)
+    main(g, tuple(float(s) for s in a.rates.split(",")), ns, a.switch)

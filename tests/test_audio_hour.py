@@ -170,14 +170,17 @@ def test_music_that_smears_the_only_judged_lines_raises_no_stop() -> None:
 def test_20_percent_off_told_music_the_comb_cannot_judge_and_the_lines_do_not_move_for_is_no_stop() -> None:
     """Joint 2 stepping at 1200 Hz (20 % off the tuning's rate, told) under music from the first sample: its tuned
     stop's sub-bands hold no sharp line there, so the comb gives no verdict and nothing vetoed the fires (with
-    ``min_pred_moved_db`` 0: four flagged and one counted in 16 s). The signature predicted at 1200 Hz moves the
+    ``min_pred_moved_db`` 0 and ``model_unjudged`` off: four flagged and one counted in 16 s; with ``model_unjudged``,
+    the model never ready under the music, all five flagged). The signature predicted at 1200 Hz moves the
     locked lines 3 dB RMS or more; they moved under 1 dB (the stepping went on), or, once the stepping's lines are
     modelled (``lines_model``), sat within ``model_max_z`` of the model: no stop."""
     h = Hour(Arm(2), rate=1200.0, dur=16.0, seed=2)
     assert spans(h)[0][2] == "music"
     tu = joint_tuning(2)
-    before = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_pred_moved_db=0.0)))
+    before = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_pred_moved_db=0.0, model_unjudged=False)))
     assert [e.onset_uncertain for e in before] == [True, True, True, True, False]
+    unjudged = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_pred_moved_db=0.0)))  # the model never ready
+    assert [(e.onset_s, e.onset_uncertain) for e in unjudged] == [(e.onset_s, True) for e in before]
     det = ConfirmedStopDetector(detector_for(tu))
     det.reset(0.0, step_rate_hz=h.rate)
     assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []

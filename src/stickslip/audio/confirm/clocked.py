@@ -72,7 +72,12 @@ same reading conditions (a comb verdict, or the predicted move), a fire whose wi
 stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
 at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
-have begun there (``model_inside``; :func:`.inside.stop_departed`).
+have begun there (``model_inside``; :func:`.inside.stop_departed`). The per-fire vetoes only veto, and
+under speech or music they seldom can (the lines move with the added sound, or are not read): so once
+the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
+sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
+unless both readings affirm it against the stepping just before its fire (``model_unjudged``;
+:meth:`ClockedCheck.unjudged`, asked by :meth:`.checks.WindowChecks.onset_doubt`).
 
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
@@ -216,6 +221,12 @@ class ClockedParams:
         0.2,
         "s",
         "and the fit places that change within this (stops: 0.02-0.08 s; speech, music drifting: 0.34-0.82 s)",
+    )
+    model_unjudged: bool = param(
+        True,
+        "",
+        "rate told, off the tuning's: a stop the model did not read though it heard model_min_spans spans (their "
+        "lines not the joint's alone) is flagged unless both readings reach min_affirm (False: counted)",
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -584,6 +595,8 @@ class ClockedCheck:
         self.model_n = 0  # the samples of each stretch it modelled
         #: the spans read but not yet modelled (``model_lag_s``): their ends, s, levels and locked shares
         self.pending: list[tuple[float, FloatArray, FloatArray]] = []
+        #: where the first ``model_min_spans`` spans offered to the model ended (absolute samples)
+        self.offered: list[int] = []
 
     def keep(self, end: int, samples: FloatArray, margins: FloatArray) -> None:
         """A stretch of the stream ending at absolute sample ``end`` and its frames' margins: kept as stepping where
@@ -594,6 +607,8 @@ class ClockedCheck:
         if quiet:
             self.kept = [*self.kept[-7:], (end, np.array(samples, dtype=np.float64))]
         if self.models_lines():
+            if len(self.offered) < math.ceil(self.p.model_min_spans):
+                self.offered.append(end)
             self.model_stepping(end, np.asarray(samples, dtype=np.float64))
 
     def models_lines(self) -> bool:
@@ -641,6 +656,24 @@ class ClockedCheck:
                 continue  # sound of another clock on the lines: not the stepping's alone
             if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
                 self.model.add(level, share, t)
+
+    def unjudged(self, at: int, got: OnClock | None) -> bool:
+        """Whether a stop confirmed at absolute sample ``at`` (its onset), its fire judged ``got``, stands on the
+        levels alone off the tuning's rate (``model_unjudged``): the rate told, the model offered ``model_min_spans``
+        spans that ended ``model_lag_s`` before it (it could have been ready), yet it did not read the fire (not
+        ready: the lines held under ``model_min_share`` in phase, sound of another kind on them; or nothing read),
+        and the lines do not affirm it (:meth:`affirms`) against the stepping just before its fire (an affirmation
+        against stepping kept from long before says a stop, not that it began there). Earlier in the listening no
+        model can judge: not asked."""
+        p = self.p
+        n = math.ceil(p.model_min_spans)
+        if not (p.model_unjudged and self.models_lines()) or len(self.offered) < n:
+            return False
+        if self.offered[n - 1] > at - p.model_lag_s * self.sample_rate:
+            return False
+        if got is not None and math.isfinite(got.still_z):
+            return False  # the model read it (and let it through: it departs from the stepping's lines)
+        return not (self.affirms(got) and got is not None and not math.isfinite(got.kept_s))
 
     def model_ready(self) -> bool:
         """Whether the model holds ``model_min_spans`` (weight) of stepping: until then the per-fire vetoes judge."""
