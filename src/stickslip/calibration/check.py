@@ -25,8 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..measurements import Traverse
+from .errormodel import MAX_RELATIVE_SD, Predictive
 from .intervals import relative_sd
-from .result import Calibration
+from .result import Calibration, CalibrationError
 
 __all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose"]
 
@@ -41,6 +42,10 @@ class CheckParams:
     mean square of ``z`` over 128 validation traverses a joint and day) lay 0.42-3.13, 0.50 RMS about 1, over
     the three development arms' 108 joint-days: ``sqrt(2 / 8)`` (docs/models-log.md, issue 33, seventeenth
     round)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.prior_traverses) and self.prior_traverses >= 0.0):
+            raise ValueError(f"prior_traverses must be a finite count >= 0, got {self.prior_traverses!r}")
 
 
 CHECK = CheckParams()
@@ -146,6 +151,19 @@ def apply_check(cal: Calibration, check: Sequence[Traverse], params: CheckParams
     for key in predictive:
         if key[0] in scales:
             sigma[key] = workspace_sigma(out, *key)
+            _check_readable(scales[key[0]], predictive[key], sigma[key])
             if key in selection:
                 selection[key]["sigma_workspace"] = sigma[key]
     return dataclasses.replace(out, sigma_model=sigma)
+
+
+def _check_readable(c: CheckScale, scaled: Predictive, sigma: float) -> None:
+    """:class:`~.result.CalibrationError` where ``c``'s scale takes the intervals beyond what a calibration keeps
+    (:meth:`~.errormodel.Predictive.problem`, :data:`~.errormodel.MAX_RELATIVE_SD`): check traverses that far
+    from the predictions measured another joint, direction, unit or arm, not this calibration's error."""
+    if scaled.problem() is None and sigma < MAX_RELATIVE_SD:
+        return
+    raise CalibrationError(
+        f"joint {c.joint}: {c.traverses} check traverse(s) erred RMS {100 * c.rms_error:.3g} % where the intervals "
+        f"expected {100 * c.rms_sd:.2g} %: scaled by {c.scale:.3g} the intervals would exceed {MAX_RELATIVE_SD:g} "
+        "times the step; check the table's joints, directions, units and step counts (docs/models.md §4)")
