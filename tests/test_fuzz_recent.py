@@ -8,7 +8,8 @@ fix: the commit says what it measured) and a bounded, derandomized hypothesis ge
 
 Found and mended: ``observe --sigma 1e300m`` raised OverflowError, and the server kept a measured
 position of 1e297 m clamped onto the stop, an ``at_stop`` away from both stops, and ``"yes"`` as
-true; a server tip target of 1e300 m answered with Python's words; ``int16`` samples fed to a
+true; a server tip target of 1e300 m answered with Python's words; a body nested 5000 deep answered
+in FastAPI's shape, and on the WebSocket killed the receiver; ``int16`` samples fed to a
 band detector fired a stop in the first frame; a hand-edited error model of zeros gave intervals
 of zero width; ``calibrate --check`` with check traverses 1000 times off wrote a calibration that
 could not be read back.
@@ -353,6 +354,21 @@ def test_the_server_refuses_what_observe_and_reach_cannot_use(served: Any) -> No
     _refused(served.post("/api/reach", json={"to": [1e300, 0, 0]}), "to[0] = 1e+300 m is not a length within 1 m")
     r = served.post("/api/observe", json={"joint": 3, "q": "max", "at_stop": True})
     assert r.status_code == 200 and r.json()["q"] == 0.012, r.text
+
+
+def test_a_body_nested_thousands_deep_and_an_unknown_path_are_one_error_line(served: Any) -> None:
+    """JSON nested 5000 deep answered 400 ``{"detail": "There was an error parsing the body"}`` (FastAPI's own
+    shape), an unknown path ``{"detail": "Not Found"}``; on the WebSocket such a message killed the receiver
+    (RecursionError) and the socket closed without a word. Now: the documented ``{"error": one line}``."""
+    from stickslip.server.live import command
+
+    deep = "[" * 5000 + "]" * 5000
+    r = served.post("/api/move", content=deep, headers={"content-type": "application/json"})
+    _refused(r, "the body cannot be read as JSON (nested too deeply)")
+    r = served.get("/api/nowhere")
+    assert r.status_code == 404 and r.json() == {"error": "Not Found"}, r.text
+    assert command(served.app.state.room, deep)["error"].startswith("a message is a JSON object")
+    assert command(served.app.state.room, '{"type": "ping"}') == {"reply": "pong"}
 
 
 def _mutations() -> st.SearchStrategy[object]:

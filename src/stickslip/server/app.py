@@ -27,6 +27,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .. import __version__
@@ -171,6 +172,15 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
     @app.exception_handler(RequestValidationError)
     async def invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         return _error(422, _validation_line(exc))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        """An unknown path or method in the documented shape; FastAPI's 400 for a body it could not parse
+        (JSON nested thousands deep) as a value that cannot be used."""
+        if exc.status_code == 400:
+            why = "nested too deeply" if isinstance(exc.__cause__, RecursionError) else one_line(str(exc.detail))
+            return _error(422, f"the body cannot be read as JSON ({why})")
+        return _error(exc.status_code, one_line(str(exc.detail)))
 
     @app.exception_handler(Refused)
     async def refused(request: Request, exc: Refused) -> JSONResponse:
