@@ -11,7 +11,7 @@ position of 1e297 m clamped onto the stop, an ``at_stop`` away from both stops, 
 true; a server tip target of 1e300 m answered with Python's words; a body nested 5000 deep answered
 in FastAPI's shape, and on the WebSocket killed the receiver; ``int16`` samples fed to a
 band detector fired a stop in the first frame; a hand-edited error model of zeros gave intervals
-of zero width; ``calibrate --check`` with check traverses 1000 times off wrote a calibration that
+of zero width, and a negated covariance "math domain error"; ``calibrate --check`` with check traverses 1000 times off wrote a calibration that
 could not be read back.
 """
 
@@ -171,6 +171,29 @@ def test_an_error_model_of_zeros_is_refused(kit: dict[str, Any], tmp_path: Path)
         r = runner.invoke(app, ["predict", "-c", str(p), str(kit["poses"]), "--interval"])
         error_line(r, "uncertainty[0]", "exact prediction")
     assert Calibration.from_dict(_scaled(doc, 1e-100)).predictive  # tiny, but an interval
+
+
+def test_a_covariance_that_is_no_covariance_is_refused(kit: dict[str, Any], tmp_path: Path) -> None:
+    """``suggest`` inverts the parameters' covariance: a negated one ended in "error: joint 2: math domain error",
+    a zero, asymmetric or indefinite one was used as it stood. The file is refused, naming the entry."""
+    doc = kit["cal"].to_dict()
+
+    def edited(f: Any) -> Path:
+        out = copy.deepcopy(doc)
+        c = np.array(out["uncertainty"][0]["covariance"])
+        out["uncertainty"][0]["covariance"] = f(c).tolist()
+        p = tmp_path / "c.json"
+        p.write_text(json.dumps(out))
+        return p
+
+    d = np.sqrt(np.diag(np.array(doc["uncertainty"][0]["covariance"])))
+    for f, words in ((lambda c: -c, "positive variances"), (lambda c: 0 * c, "positive variances"),
+                     (lambda c: c + np.triu(np.outer(d, d), 1), "symmetric"),
+                     (lambda c: np.outer(d, d) * (2 * np.eye(len(d)) - 1), "positive semi-definite")):
+        error_line(runner.invoke(app, ["suggest", "-c", str(edited(f)), "--n", "1"]), "uncertainty[0].covariance",
+                   words)
+    r = runner.invoke(app, ["suggest", "-c", str(edited(lambda c: c * 1e6)), "--n", "1", "--json"])
+    assert r.exit_code == 0, r.output  # wide is allowed: less known
 
 
 @pytest.mark.slow

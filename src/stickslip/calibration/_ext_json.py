@@ -189,9 +189,27 @@ def _read_uncertainty(cal: ExtFields, unc: object) -> None:
             n = len(m.params.names()) if m is not None else -1
             if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
                 raise ValueError(f"uncertainty[{i}].covariance must be a finite {n}x{n} matrix")
+            bad = _covariance_problem(arr)
+            if bad is not None:
+                raise ValueError(f"uncertainty[{i}].covariance {bad}")
             cal.covariance[key] = arr
         if any(k in rec for k in ("floor", "slope", "poses")):
             cal.predictive[key] = _read_predictive(rec, f"uncertainty[{i}]")
+
+
+def _covariance_problem(c: NDArray[np.float64]) -> str | None:
+    """Why ``c`` is not a fit's covariance (symmetric, positive variances, no negative eigenvalue beyond
+    rounding), or None: ``suggest`` inverts it (a negated one ended in "math domain error", a zero one read
+    as nothing known)."""
+    scale = float(np.max(np.abs(c)))
+    if not np.all(np.diag(c) > 0.0):
+        return "must have positive variances on its diagonal"
+    if float(np.max(np.abs(c - c.T))) > 1e-9 * scale:
+        return "must be symmetric"
+    d = np.sqrt(np.diag(c))
+    if float(np.min(np.linalg.eigvalsh(c / np.outer(d, d)))) < -1e-9:  # as a correlation: units apart
+        return "must be positive semi-definite (a negative eigenvalue)"
+    return None
 
 
 def _read_members(
