@@ -11,8 +11,8 @@ position of 1e297 m clamped onto the stop, an ``at_stop`` away from both stops, 
 true; a server tip target of 1e300 m answered with Python's words; a body nested 5000 deep answered
 in FastAPI's shape, and on the WebSocket killed the receiver; ``int16`` samples fed to a
 band detector fired a stop in the first frame; a hand-edited error model of zeros gave intervals
-of zero width, and a negated covariance "math domain error"; ``calibrate --check`` with check traverses 1000 times off wrote a calibration that
-could not be read back.
+of zero width, and a negated covariance "math domain error"; ``calibrate --check`` with check
+traverses 1000 times off wrote a calibration that could not be read back.
 """
 
 from __future__ import annotations
