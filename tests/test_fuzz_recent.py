@@ -12,7 +12,7 @@ true; a server tip target of 1e300 m answered with Python's words; a body nested
 in FastAPI's shape, and on the WebSocket killed the receiver; ``int16`` samples fed to a
 band detector fired a stop in the first frame; a hand-edited error model of zeros gave intervals
 of zero width, and a negated covariance "math domain error"; ``calibrate --check`` with check
-traverses 1000 times off wrote a calibration that could not be read back.
+traverses 1000 times off wrote a calibration that could not be read back, and one listed twice counted twice.
 """
 
 from __future__ import annotations
@@ -81,6 +81,19 @@ def test_check_traverses_far_off_are_refused_not_written_unreadable(kit: dict[st
     assert not out.exists()
     slow = [dataclasses.replace(t, steps=t.steps * 2) for t in DAY.validation]  # far, but an interval still
     assert Calibration.from_dict(apply_check(kit["cal"], slow).to_dict()).predictive
+
+
+def test_a_check_traverse_listed_twice_is_refused(kit: dict[str, Any], tmp_path: Path) -> None:
+    """A check table appended to itself counted each traverse twice: joint 3's intervals scaled by 0.73 instead
+    of 0.82 (8000 copies: 0.47), as if measured again. Now refused before anything is fitted, naming the rows."""
+    twice = list(DAY.validation) + [DAY.validation[4]]
+    with pytest.raises(CalibrationError, match=r"check traverse 13 repeats check traverse 5 in every column"):
+        calibrate(DAY.calibration, model="auto", check=twice)
+    write_measurements(tmp_path / "twice.csv", twice)
+    out = tmp_path / "c.json"
+    r = runner.invoke(app, ["calibrate", str(kit["table"]), "--check", str(tmp_path / "twice.csv"), "-o", str(out)])
+    error_line(r, "repeats check traverse 5", "lists each traverse once")
+    assert not out.exists()
 
 
 def test_check_params_are_a_count() -> None:
