@@ -14,9 +14,10 @@ import math
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["StopDetector", "StopEvent", "check_step_rate"]
+__all__ = ["StopDetector", "StopEvent", "check_step_rate", "sample_block"]
 
 
 @dataclass(frozen=True)
@@ -84,6 +85,24 @@ def check_step_rate(step_rate_hz: float | None) -> float | None:
     if not (math.isfinite(hz) and hz > 0.0):
         raise ValueError(f"the commanded step rate must be a positive number of Hz, got {step_rate_hz!r}")
     return hz
+
+
+def sample_block(block: Any) -> NDArray[np.floating[Any]]:
+    """``block`` as a 1-D array of floats; ``ValueError`` (one line) for a block of another kind or shape.
+
+    A detector's samples are floats: sound at full scale 1, vibration in its sensor's unit. Integer PCM
+    fed as it is would be heard 90 dB (int16) louder than it was, and a band tuning's level in dBFS fires at
+    once; booleans and complex numbers are not samples. The detectors' ``feed`` check it first.
+    """
+    x = np.asarray(block)
+    if x.dtype.kind != "f":
+        half = 2.0 ** (8 * x.dtype.itemsize - 1)
+        hint = {"i": f": scale integer PCM to full scale 1 first (divide by {half:.0f})",
+                "u": f": scale unsigned PCM to full scale 1 first (subtract {half:.0f}, then divide by it)"}
+        raise ValueError(f"feed expects float samples, got an array of {x.dtype}{hint.get(x.dtype.kind, '')}")
+    if x.ndim != 1:
+        raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+    return x
 
 
 class StopDetector(Protocol):

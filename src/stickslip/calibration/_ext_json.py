@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from ..models import JointModel, direction_label
 from ..models.families import FamilyModel, FamilyParams, family_spec
 from ..records import finite_number
-from .errormodel import Predictive
+from .errormodel import MAX_RELATIVE_SD, Predictive
 
 __all__ = ["ExtFields", "ext_fields", "read_ext_fields"]
 
@@ -143,8 +143,6 @@ def _read_predictive(rec: dict[str, object], where: str) -> Predictive:
         raw = rec["poses"]
     except KeyError as e:
         raise ValueError(f"{where}: floor, slope and poses go together ({e} is missing)") from None
-    if not 0.0 <= floor < 10.0 or not 0.0 <= slope < 100.0:
-        raise ValueError(f"{where}: floor must be in [0, 10) and slope in [0, 100), got {floor!r}, {slope!r}")
     if not isinstance(raw, list) or not 0 < len(raw) <= MAX_POSES:
         raise ValueError(f"{where}.poses must be a list of 1 to {MAX_POSES} poses")
     if not all(isinstance(p, list) and len(p) == 5 for p in raw):
@@ -157,9 +155,11 @@ def _read_predictive(rec: dict[str, object], where: str) -> Predictive:
         raise ValueError(f"{where}.exponent must be 1 or 2 (how the error grows with the distance), got {exponent!r}")
     drift = finite_number(rec.get("drift", 0.0), f"{where}.drift")  # files before it: no drift term
     drift_sd = finite_number(rec.get("drift_sd", 0.0), f"{where}.drift_sd")
-    if not abs(drift) < 10.0 or not 0.0 <= drift_sd < 10.0:
-        raise ValueError(f"{where}: drift must be in (-10, 10) and drift_sd in [0, 10), got {drift!r}, {drift_sd!r}")
-    return Predictive(floor, slope, poses, exponent, drift, drift_sd)
+    out = Predictive(floor, slope, poses, exponent, drift, drift_sd)
+    bad = out.problem()
+    if bad is not None:
+        raise ValueError(f"{where}: {bad}")
+    return out
 
 
 def _read_uncertainty(cal: ExtFields, unc: object) -> None:
@@ -176,8 +176,8 @@ def _read_uncertainty(cal: ExtFields, unc: object) -> None:
         s = rec.get("sigma_model")
         if s is not None:
             sv = finite_number(s, f"uncertainty[{i}].sigma_model")
-            if not 0.0 <= sv < 10.0:
-                raise ValueError(f"uncertainty[{i}].sigma_model must be in [0, 10), got {sv!r}")
+            if not 0.0 <= sv < MAX_RELATIVE_SD:
+                raise ValueError(f"uncertainty[{i}].sigma_model must be in [0, {MAX_RELATIVE_SD:g}), got {sv!r}")
             cal.sigma_model[key] = sv
         c = rec.get("covariance")
         if c is not None:
@@ -189,9 +189,27 @@ def _read_uncertainty(cal: ExtFields, unc: object) -> None:
             n = len(m.params.names()) if m is not None else -1
             if arr.shape != (n, n) or not np.all(np.isfinite(arr)):
                 raise ValueError(f"uncertainty[{i}].covariance must be a finite {n}x{n} matrix")
+            bad = _covariance_problem(arr)
+            if bad is not None:
+                raise ValueError(f"uncertainty[{i}].covariance {bad}")
             cal.covariance[key] = arr
         if any(k in rec for k in ("floor", "slope", "poses")):
             cal.predictive[key] = _read_predictive(rec, f"uncertainty[{i}]")
+
+
+def _covariance_problem(c: NDArray[np.float64]) -> str | None:
+    """Why ``c`` is not a fit's covariance (symmetric, positive variances, no negative eigenvalue beyond
+    rounding), or None: ``suggest`` inverts it (a negated one ended in "math domain error", a zero one read
+    as nothing known)."""
+    scale = float(np.max(np.abs(c)))
+    if not np.all(np.diag(c) > 0.0):
+        return "must have positive variances on its diagonal"
+    if float(np.max(np.abs(c - c.T))) > 1e-9 * scale:
+        return "must be symmetric"
+    d = np.sqrt(np.diag(c))
+    if float(np.min(np.linalg.eigvalsh(c / np.outer(d, d)))) < -1e-9:  # as a correlation: units apart
+        return "must be positive semi-definite (a negative eigenvalue)"
+    return None
 
 
 def _read_members(

@@ -7,7 +7,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
-from .check import apply_check, fitted_pose
+from .check import apply_check, fitted_pose, repeated_row
 from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
@@ -66,11 +66,12 @@ def calibrate(
         session after ``traverses`` and not fitted; each joint's intervals are scaled by how
         they erred (:func:`~.check.apply_check`, docs/models.md §4). The fit and its
         predictions are those without them. Empty (the default): no check. A check
-        traverse at a pose ``traverses`` measured is refused (:func:`~.check.fitted_pose`).
+        traverse at a pose ``traverses`` measured is refused (:func:`~.check.fitted_pose`), and one
+        listed twice (:func:`~.check.repeated_row`).
     """
     if check:
         grouped = group_traverses(traverses)  # once: the calibration below takes the groups
-        why = fitted_pose(check, grouped.traverses)
+        why = fitted_pose(check, grouped.traverses) or repeated_row(check)
         if why is not None:
             raise CalibrationError(why)
         return apply_check(calibrate(grouped, method, day, source, model, progress, step_sizes), check)

@@ -25,11 +25,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..measurements import Traverse
+from .errormodel import MAX_RELATIVE_SD, Predictive
 from .groups import pose_keys
 from .intervals import relative_sd
-from .result import Calibration
+from .result import Calibration, CalibrationError
 
-__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose"]
+__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose", "repeated_row"]
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,10 @@ class CheckParams:
     mean square of ``z`` over 128 validation traverses a joint and day) lay 0.42-3.13, 0.50 RMS about 1, over
     the three development arms' 108 joint-days: ``sqrt(2 / 8)`` (docs/models-log.md, issue 33, seventeenth
     round)."""
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.prior_traverses) and self.prior_traverses >= 0.0):
+            raise ValueError(f"prior_traverses must be a finite count >= 0, got {self.prior_traverses!r}")
 
 
 CHECK = CheckParams()
@@ -80,6 +85,19 @@ def fitted_pose(check: Sequence[Traverse], fitted: Sequence[Traverse]) -> str | 
             return (f"check traverse {i} (joint {t.joint}, {t.direction}) is at a pose the calibration's traverses "
                     "measured: check traverses lie at new poses (stickslip suggest --check), else they show the "
                     "fit's residual, not its error between poses (docs/models.md §4)")
+    return None
+
+
+def repeated_row(check: Sequence[Traverse]) -> str | None:
+    """Why ``check`` cannot be used as it stands (None if it can): a check traverse listed twice, equal in every
+    column, would count as two measurements and narrow the intervals as if it had been traversed twice (a table
+    appended to itself: from 6 check traverses a joint's scale 0.82, the same rows twice 0.73)."""
+    first: dict[Traverse, int] = {}
+    for i, t in enumerate(check, 1):
+        j = first.setdefault(t, i)
+        if j != i:
+            return (f"check traverse {i} repeats check traverse {j} in every column (joint {t.joint}, {t.direction}, "
+                    f"{t.steps} steps): a check table lists each traverse once (docs/models.md §4)")
     return None
 
 
@@ -147,6 +165,19 @@ def apply_check(cal: Calibration, check: Sequence[Traverse], params: CheckParams
     for key in predictive:
         if key[0] in scales:
             sigma[key] = workspace_sigma(out, *key)
+            _check_readable(scales[key[0]], predictive[key], sigma[key])
             if key in selection:
                 selection[key]["sigma_workspace"] = sigma[key]
     return dataclasses.replace(out, sigma_model=sigma)
+
+
+def _check_readable(c: CheckScale, scaled: Predictive, sigma: float) -> None:
+    """:class:`~.result.CalibrationError` where ``c``'s scale takes the intervals beyond what a calibration keeps
+    (:meth:`~.errormodel.Predictive.problem`, :data:`~.errormodel.MAX_RELATIVE_SD`): check traverses that far
+    from the predictions measured another joint, direction, unit or arm, not this calibration's error."""
+    if scaled.problem() is None and sigma < MAX_RELATIVE_SD:
+        return
+    raise CalibrationError(
+        f"joint {c.joint}: {c.traverses} check traverse(s) erred RMS {100 * c.rms_error:.3g} % where the intervals "
+        f"expected {100 * c.rms_sd:.2g} %: scaled by {c.scale:.3g} the intervals would exceed {MAX_RELATIVE_SD:g} "
+        "times the step; check the table's joints, directions, units and step counts (docs/models.md §4)")

@@ -7,7 +7,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Predictive"]
+__all__ = ["MAX_RELATIVE_SD", "Predictive"]
+
+MAX_RELATIVE_SD = 10.0
+"""Largest relative standard deviation (1) an error model's terms and a calibration's ``sigma_model`` may hold:
+an interval ten times the step says nothing more; a file holding more is refused (``slope``: ten times this)."""
 
 
 @dataclass(frozen=True)
@@ -50,3 +54,17 @@ class Predictive:
     exponent: float = 1.0
     drift: float = 0.0
     drift_sd: float = 0.0
+
+    def problem(self) -> str | None:
+        """Why these terms cannot be an error model (one line), or None: a term beyond
+        :data:`MAX_RELATIVE_SD`, or none at a calibrated pose (an exact prediction claimed there)."""
+        lim = MAX_RELATIVE_SD
+        if not (0.0 <= self.floor < lim and 0.0 <= self.slope < 10 * lim):
+            return f"floor must be in [0, {lim:g}) and slope in [0, {10 * lim:g}), got {self.floor!r}, {self.slope!r}"
+        if not (abs(self.drift) < lim and 0.0 <= self.drift_sd < lim):
+            return (f"drift must be in (-{lim:g}, {lim:g}) and drift_sd in [0, {lim:g}), "
+                    f"got {self.drift!r}, {self.drift_sd!r}")
+        if not self.floor**2 + self.drift**2 + self.drift_sd**2 > 0.0:  # squared as relative_sd squares them
+            return ("floor, drift and drift_sd are all zero (or too small to square): the intervals would claim an "
+                    "exact prediction at the calibrated poses; a fitted model keeps its residual there")
+        return None

@@ -74,6 +74,24 @@ class Observation:
     at_stop: bool = False
     force: bool = False
 
+    def __post_init__(self) -> None:
+        """``ValueError`` (one line) for a measurement that cannot be used: ``q`` outside the joint's range (it
+        was clamped onto the stop and kept), ``sd`` not finite, negative or wider than the joint's whole range
+        (its square overflowed), ``at_stop`` away from both stops (an exact position where no stop is)."""
+        spec = JOINTS.get(self.joint)
+        if spec is None:
+            raise ValueError(f"joint {self.joint!r}: the MM3A's joints are 1, 2 and 3")
+        bad = spec.range_problem("the measured position", float(self.q))
+        if bad is not None:
+            raise ValueError(bad)
+        if self.sd is not None and not (math.isfinite(self.sd) and 0.0 <= self.sd <= spec.span):
+            raise ValueError(f"the measurement's standard deviation {self.sd:.6g} {spec.unit} is not 0 to the joint's "
+                             f"range ({spec.span:.6g} {spec.unit}): a wider one says nothing of where it is")
+        if self.at_stop and not any(abs(self.q - s) <= 1e-5 * spec.span for s in (spec.lower, spec.upper)):
+            raise ValueError(f"at_stop: the measured position {format_position(self.q, self.joint)} is not an end "
+                             f"stop of joint {self.joint} ({format_position(spec.lower, self.joint)} or "
+                             f"{format_position(spec.upper, self.joint)})")
+
     @property
     def sigma(self) -> float:
         """The standard deviation used, rad or m."""

@@ -27,6 +27,7 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .. import __version__
@@ -135,6 +136,17 @@ class _TooLarge(Exception):
 # ------------------------------------------------------------------------------ the app
 
 
+async def _http_error(request: Request, exc: Exception) -> JSONResponse:
+    """An unknown path or method in the documented shape; FastAPI's 400 for a body it could not parse (JSON
+    nested thousands deep) as a value that cannot be used."""
+    if not isinstance(exc, StarletteHTTPException):  # registered for it alone
+        raise exc
+    if exc.status_code == 400:
+        why = "nested too deeply" if isinstance(exc.__cause__, RecursionError) else one_line(str(exc.detail))
+        return _error(422, f"the body cannot be read as JSON ({why})")
+    return _error(exc.status_code, one_line(str(exc.detail)))
+
+
 def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = None) -> FastAPI:
     """The ASGI app of ``room``: the API, the WebSocket, the page; guarded by ``access``.
 
@@ -172,6 +184,7 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
     async def invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
         return _error(422, _validation_line(exc))
 
+    app.add_exception_handler(StarletteHTTPException, _http_error)
     @app.exception_handler(Refused)
     async def refused(request: Request, exc: Refused) -> JSONResponse:
         return _error(exc.status, one_line(exc))

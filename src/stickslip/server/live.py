@@ -113,7 +113,7 @@ async def _authenticated(ws: WebSocket, access: Access) -> bool:
         msg = json.loads(first)
         ok = isinstance(msg, dict) and msg.get("type") == "auth" and isinstance(msg.get("token"), str) \
             and access.accepts(msg["token"])
-    except (TimeoutError, ValueError, WebSocketDisconnect, RuntimeError):
+    except (TimeoutError, ValueError, RecursionError, WebSocketDisconnect, RuntimeError):
         ok = False
     if not ok:
         with contextlib.suppress(Exception):
@@ -180,7 +180,7 @@ def command(room: ControlRoom, text: str) -> dict[str, Any]:
     """One message from a WebSocket client: ``stop``, ``jog`` (a held direction), ``release``, ``ping``."""
     try:
         msg = json.loads(text)
-    except ValueError:
+    except (ValueError, RecursionError):  # not JSON, or nested thousands deep (the receiver died of it)
         return {"error": "a message is a JSON object: {\"type\": \"stop\" | \"jog\" | \"release\" | \"ping\"}"}
     if not isinstance(msg, dict):
         return {"error": "a message is a JSON object"}

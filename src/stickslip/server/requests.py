@@ -79,8 +79,8 @@ class ObserveBody(_Body):
     joint: int = Field(ge=1, le=3, strict=True)
     q: Amount
     sd: Amount | None = None
-    at_stop: bool = False
-    force: bool = False
+    at_stop: bool = Field(False, strict=True)
+    force: bool = Field(False, strict=True)
 
 
 class TraverseBody(_Body):
@@ -100,7 +100,7 @@ class DayBody(_Body):
     """Start the calibration day (or resume a stopped one)."""
 
     day: str | None = Field(None, pattern=r"^[0-9A-Za-z][0-9A-Za-z_.:+-]{0,39}$", description="session label")
-    resume: bool = False
+    resume: bool = Field(False, strict=True)
 
 
 # ------------------------------------------------------------------------------ parsing with units
@@ -142,7 +142,12 @@ def pose(body: WhereBody) -> PoseUpdate:
 
 
 def vector(values: list[Amount], what: str) -> tuple[float, float, float]:
+    """Three lengths of a tip target or displacement, m; each within 1 m, as ``stickslip reach`` takes them (a
+    target farther than any arm reaches overflowed the inverse kinematics)."""
     out = [value(v, "length", f"{what}[{i}]") for i, v in enumerate(values)]
+    for i, v in enumerate(out):
+        if abs(v) > 1.0:
+            raise Refused(f"{what}[{i}] = {v:.6g} m is not a length within 1 m")
     return (out[0], out[1], out[2])
 
 

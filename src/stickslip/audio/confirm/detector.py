@@ -43,7 +43,7 @@ from numpy.typing import NDArray
 
 from ..change import TemplateDetector
 from ..comparators import BandDetector
-from ..events import StopDetector, StopEvent, check_step_rate
+from ..events import StopDetector, StopEvent, check_step_rate, sample_block
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
 from .chain import Fire, FireChain
@@ -226,9 +226,7 @@ class ConfirmedStopDetector:
 
     def feed(self, block: NDArray[Any]) -> list[StopEvent]:
         """Consume a block of mono samples; return the stops confirmed in it."""
-        x = np.asarray(block)
-        if x.ndim != 1:
-            raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+        x = sample_block(block)
         if self.checks.after.waiting:
             return self._wait(x)
         out: list[StopEvent] = []

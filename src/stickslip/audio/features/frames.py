@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..events import sample_block
 from .spectra import SPECTRA, SpectraParams
 
 __all__ = ["FrameCutter", "HeadSamples", "RecentSamples", "bounded"]
@@ -23,10 +24,8 @@ FloatArray = NDArray[np.float64]
 
 
 def bounded(block: NDArray[Any], p: SpectraParams = SPECTRA) -> FloatArray:
-    """A mono block as float64, NaN and values beyond ``sample_limit`` clipped (``ValueError`` if not 1-D)."""
-    x = np.asarray(block, dtype=np.float64)
-    if x.ndim != 1:
-        raise ValueError(f"feed expects a 1-D mono block, got shape {x.shape}")
+    """A mono block as float64, NaN and values beyond ``sample_limit`` clipped (``ValueError`` if not 1-D floats)."""
+    x = np.asarray(sample_block(block), dtype=np.float64)
     lim = p.sample_limit
     # NaN, infinity or absurd values: bounded (the largest and the smallest sample: no array of magnitudes made)
     if x.size and not (float(x.max()) <= lim and float(x.min()) >= -lim):
