@@ -390,6 +390,9 @@ def test_the_server_refuses_what_observe_and_reach_cannot_use(served: Any) -> No
     _refused(served.post("/api/reach", json={"to": [1e300, 0, 0]}), "to[0] = 1e+300 m is not a length within 1 m")
     r = served.post("/api/observe", json={"joint": 3, "q": "max", "at_stop": True})
     assert r.status_code == 200 and r.json()["q"] == 0.012, r.text
+    # an exact measurement (sd 0) is one Observation takes, from the server as from `observe --sigma 0`
+    r = served.post("/api/observe", json={"joint": 3, "q": "6mm", "sd": "0um", "force": True})
+    assert r.status_code == 200 and r.json()["q"] == 0.006, r.text
 
 
 def test_a_body_nested_thousands_deep_and_an_unknown_path_are_one_error_line(served: Any) -> None:

@@ -197,7 +197,7 @@ def test_every_bad_request_is_one_line(client: TestClient) -> None:
     refused(client.post("/api/reach", json={"to": ["1m", "0m", "0m"]}), 422, "reach")
     refused(client.post("/api/jog", json={"direction": "up"}), 422, "direction")
     refused(client.post("/api/jog", json={"direction": "+x", "speed": 9}), 422, "speed")
-    refused(client.post("/api/observe", json={"joint": 3, "q": "1um", "sd": "-1um"}), 422, "sd must be > 0")
+    refused(client.post("/api/observe", json={"joint": 3, "q": "1um", "sd": "-1um"}), 422, "standard deviation")
     refused(client.post("/api/where", json={"set": {"3": "13mm"}}), 422, "outside joint 3's range")
     refused(client.post("/api/where", json={"set": {"4": "min"}}), 422, "set")
     refused(client.post("/api/positions", json={"name": "../etc"}), 422, "name")

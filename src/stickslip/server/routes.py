@@ -153,9 +153,7 @@ def motion_routes(room: ControlRoom) -> APIRouter:
     def observe(body: ObserveBody) -> JSONResponse:
         """A measured position into the joint's track (``stickslip observe``)."""
         q = joint_value(body.joint, body.q, "q", stops=True)
-        sd = None if body.sd is None else joint_value(body.joint, body.sd, "sd")
-        if sd is not None and not sd > 0:
-            raise Refused("sd must be > 0")
+        sd = None if body.sd is None else joint_value(body.joint, body.sd, "sd")  # Observation judges it, as the CLI's
         return JSONResponse(clean(room.observe(body.joint, q, sd, body.at_stop, body.force)))
 
     @router.post("/api/traverse", status_code=202, tags=["motion"])
