@@ -140,7 +140,7 @@ def test_a_stop_whose_onset_is_uncertain_is_refused() -> None:
 
     sim = SimulatedMM3A(seed=2, day=DAY)
     sim.set_pose(q3=0.0)
-    with pytest.raises(TraverseError, match="uncertain; nothing recorded"):
+    with pytest.raises(TraverseError, match="uncertain; nothing recorded") as refused:
         measure_traverse(
             sim,
             3,
@@ -151,3 +151,20 @@ def test_a_stop_whose_onset_is_uncertain_is_refused() -> None:
             day=DAY,
             predrive="none",
         )
+    assert "tuning recorded at" not in str(refused.value)  # a detector without a tuning's rate: no hint
+
+
+@pytest.mark.parametrize(("tuned_hz", "hint"), [(None, False), (1000.0, False), (1005.0, False), (1250.0, True)])
+def test_a_doubted_stop_off_the_tunings_rate_says_which_tuning_judges_it(tuned_hz: float | None, hint: bool) -> None:
+    """Off the tuning's rate (beyond ``max_rate_off``, 1 %), measuring again does not help where the lines are
+    not the joint's alone: the refusal says a tuning at the joint's own rate judges its stops."""
+    from types import SimpleNamespace
+
+    from stickslip.procedures.traverse import _rate_hint
+
+    detector: Any = SimpleNamespace(tuning=SimpleNamespace(step_rate_hz=tuned_hz))
+    said = _rate_hint(detector, 1000.0)
+    assert bool(said) is hint
+    if hint:
+        assert said == ("; the joint steps at 1000 Hz, -20 % from the tuning recording's 1250 Hz: a tuning "
+                        "recorded at 1000 Hz (stickslip tune) judges this rate's stops on its own")

@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S, ConfirmedStopDetector, confirming
+from ..audio.confirm.clocked import CLOCKED
 from ..audio.events import StopDetector, StopEvent
 from ..audio.sources.guard import NoSignalError, SignalGuard
 from ..clock import check_day_label
@@ -536,6 +537,7 @@ class _Run:
                 f"joint {self.joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed "
                 "by a sound that did not persist (interference near the stop), so when the stop began is uncertain; "
                 "nothing recorded: keep talk and other sounds away from the arm and measure again"
+                + _rate_hint(self.listener.detector, self.hz)
             )
         detected = float(event.detected_at_s)
         t_stop = {"onset": float(event.onset_s), "fixed": detected - float(self.listener.detector.latency_s)}.get(
@@ -563,3 +565,14 @@ class _Run:
             confirmed_at_s=event.confirmed_at_s,
             unconfirmed=tuple(t for t in self.listener.unconfirmed if t >= t_start),
         )
+
+
+def _rate_hint(detector: StopDetector, hz: float) -> str:
+    """Where the joint steps off its tuning's rate, what judges its stops better than measuring again: off the
+    rate the stepping's lines are often not the joint's alone under speech or music, and a stop the levels
+    alone heard is doubted (:mod:`stickslip.audio.confirm.clocked`)."""
+    tuned = getattr(getattr(detector, "tuning", None), "step_rate_hz", None)
+    if not (isinstance(tuned, float) and tuned > 0 and hz > 0) or abs(hz / tuned - 1.0) <= CLOCKED.max_rate_off:
+        return ""
+    return (f"; the joint steps at {hz:.4g} Hz, {100 * (hz / tuned - 1.0):+.0f} % from the tuning recording's "
+            f"{tuned:.4g} Hz: a tuning recorded at {hz:.4g} Hz (stickslip tune) judges this rate's stops on its own")
