@@ -812,11 +812,9 @@ class TipTracker:
     def _mismatch_limit(self, ratio: float) -> float:
         """Largest ``1 - score`` a fix may have: ``ratio`` times the recent fixes' median mismatch, plus the floor
         (before three fixes, the first frame's own: its noise against the template, plus ``first_mismatch_slack``)."""
-        usual = self._usual_mismatch()
-        p = self.params
-        if usual is None:
-            return ratio * self._first_mismatch + p.first_mismatch_slack
-        return ratio * usual + p.mismatch_floor
+        usual, p = self._usual_mismatch(), self.params
+        return ratio * (self._first_mismatch if usual is None else usual) + (
+            p.first_mismatch_slack if usual is None else p.mismatch_floor)
 
     def _accept(self, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
         self._last_edges, self._last_view = cand.edges, _View.keep(image, fix.x, fix.y, self.template.half)
