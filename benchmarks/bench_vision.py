@@ -35,6 +35,10 @@ paraboloid-ended needle; a round, nearly opaque bead 0.6 to 1.5 tip widths in ra
 on its end for 1 to 4 frames, sharper than the needle; tips held 8 to 24 px inside the
 edge their shaft leaves by, with a bead or without; ``FRAMES`` default 200).
 
+``--droplet`` does the same in the own renderer's droplet mode (``droplet_benchmark``: a
+transparent droplet clinging to the tip refracts it, bright field only; ``FRAMES`` default 200;
+the "wide" run is its seed 1, tips 14 to 18 px).
+
 ``--seed N`` takes the second renderer's draw ``N`` (``peer_benchmark(seed=N)``: other looks, backgrounds,
 paths and events; default 0, the draw every number above was measured on), for the tracking, ``--refusals``
 and ``--scenes`` (the third generator's draw ``N`` only, tips 6 to 22 px).
@@ -116,7 +120,14 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
 from occlusion_scenes import scene_benchmark  # noqa: E402
-from vision_own import OwnFrame, flake_benchmark, lobed_benchmark, own_benchmark, round_benchmark  # noqa: E402
+from vision_own import (  # noqa: E402
+    OwnFrame,
+    droplet_benchmark,
+    flake_benchmark,
+    lobed_benchmark,
+    own_benchmark,
+    round_benchmark,
+)
 from vision_peer import peer_benchmark  # noqa: E402
 
 from stickslip.devices.base import DeviceInfo  # noqa: E402
@@ -809,15 +820,16 @@ def _print_tally(seqs: Sequence[Any], tally: dict[tuple[str, str], int],
 
 
 def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | None = None,
-          bead: bool = False) -> int:
+          bead: bool = False, droplet: bool = False) -> int:
     """Track the own renderer's lobed-mode frames; the number of fixes more than 3 px off.
 
     ``wide``: bright field only, tips 14 to 18 px wide (seed 1), as the second renderer's
     worst fixes were; else tips 3 to 20 px, both looks (seed 0). ``flake``: the flake
-    mode's frames instead; ``bead``: the round mode's; ``plain``: the plain frames of that
-    seed instead.
+    mode's frames instead; ``bead``: the round mode's; ``droplet``: the droplet mode's; ``plain``: the plain
+    frames of that seed instead.
     """
-    make = flake_benchmark if flake else round_benchmark if bead else lobed_benchmark
+    make = (flake_benchmark if flake else round_benchmark if bead else droplet_benchmark if droplet
+            else lobed_benchmark)
     seqs = (own_benchmark(n_frames, 40, seed=plain, size=256) if plain is not None
             else make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
             else make(n_frames, 40, seed=0, size=256))
@@ -995,6 +1007,7 @@ _OWN_MODES: dict[str, tuple[str, int, dict[str, bool]]] = {
     "--lobed": ("frames with lobed grains and tips near the edge", 400, {}),
     "--flake": ("frames with flat chips stuck on the tip", 200, {"flake": True}),
     "--round": ("blunt needles with round beads and tips near the edge", 200, {"bead": True}),
+    "--droplet": ("transparent droplets clinging to the tip (bright field)", 200, {"droplet": True}),
 }
 """The own renderer's modes: what they show, their default number of frames, and :func:`lobed`'s options."""
 

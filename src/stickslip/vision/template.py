@@ -106,6 +106,12 @@ class TrackerParams:
         good fixes: at most 0.014); at 0.03 a tip seen through a droplet (own) and one
         under an opaque particle were fixed 3.2 to 3.5 px off at 14 to 19 times the
         recent mismatch, 0.022 to 0.026 beyond the ratio.
+    first_mismatch_slack : float
+        Before three fixes a fix's mismatch may be at most ``mismatch_ratio`` times the
+        first frame's (what its noise alone costs a perfect match) plus this, 1: the first
+        frame's noise does not say what motion, focus and background will cost (good
+        early fixes of the own sets stray up to 0.060 beyond the ratio, the third
+        generator's to 0.072; its one early fix 3.1 px off strays 0.050; docs/vision-log.md).
     recent : int
         Fixes that set the expected mismatch, 1.
     max_turn : float
@@ -234,6 +240,7 @@ class TrackerParams:
     template_blur: float = 1.0
     mismatch_ratio: float = 4.0
     mismatch_floor: float = 0.02
+    first_mismatch_slack: float = 0.1
     recent: int = 10
     max_turn: float = 0.2
     front_fraction: float = 0.3

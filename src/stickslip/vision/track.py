@@ -811,9 +811,10 @@ class TipTracker:
 
     def _mismatch_limit(self, ratio: float) -> float:
         """Largest ``1 - score`` a fix may have: ``ratio`` times the recent fixes' median mismatch, plus the floor
-        (before three fixes, the first frame's own: its noise against the template, with room for the rest)."""
-        usual = self._usual_mismatch()
-        return ratio * self._first_mismatch + 0.1 if usual is None else ratio * usual + self.params.mismatch_floor
+        (before three fixes, the first frame's own: its noise against the template, plus ``first_mismatch_slack``)."""
+        usual, p = self._usual_mismatch(), self.params
+        return ratio * (self._first_mismatch if usual is None else usual) + (
+            p.first_mismatch_slack if usual is None else p.mismatch_floor)
 
     def _accept(self, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
         self._last_edges, self._last_view = cand.edges, _View.keep(image, fix.x, fix.y, self.template.half)
