@@ -9,6 +9,7 @@ reference count is the simulator's own (the steps issued before its first at-sto
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -168,3 +169,23 @@ def test_a_doubted_stop_off_the_tunings_rate_says_which_tuning_judges_it(tuned_h
     if hint:
         assert said == ("; the joint steps at 1000 Hz, -20 % from the tuning recording's 1250 Hz: a tuning "
                         "recorded at 1000 Hz (stickslip tune) judges this rate's stops on its own")
+
+
+@pytest.mark.parametrize(("q3_mm", "refused"), [(11.7, True), (0.0, False)])
+def test_a_stop_heard_after_fewer_steps_than_the_range_takes_is_refused(q3_mm: float, refused: bool) -> None:
+    """A joint that starts 0.3 mm from the stop it moves to reaches it in about 300 steps, fewer than the 1200 the
+    range takes at the largest plausible step (MAX_STEP_PRIOR, 10 µm): not a traverse, nothing recorded."""
+    from stickslip.procedures.traverse import MAX_STEP_PRIOR, TraverseError, _fewest_steps
+    from stickslip.sim.oracle import OracleStopDetector
+
+    assert _fewest_steps(3) == 1200 and _fewest_steps(1) == math.ceil(4.1887902047863905 / MAX_STEP_PRIOR[1])
+    sim = SimulatedMM3A(seed=2, day=DAY)
+    sim.set_pose(q3=q3_mm * 1e-3)
+    kw: dict[str, Any] = dict(detector=OracleStopDetector(sim, 3, delay_s=0.03),
+                              audio_blocks=sim.microphone(silent=True), pose=sim.pose, day=DAY, predrive="none")
+    if refused:
+        with pytest.raises(TraverseError, match=r"a stop was heard after \d+ steps, fewer than the 1200 its range "
+                                                r"takes at the largest plausible step \(10 µm\)"):
+            measure_traverse(sim, 3, "+", **kw)
+    else:
+        assert measure_traverse(sim, 3, "+", **kw).steps > 1200

@@ -54,13 +54,19 @@ from ..measurements import Traverse
 from ..models import direction_label, direction_sign
 from ..units import step_scale
 
-__all__ = ["TraverseError", "TraverseResult", "measure_traverse", "MIN_STEP_PRIOR", "LATENCY_MODES"]
+__all__ = ["TraverseError", "TraverseResult", "measure_traverse", "MIN_STEP_PRIOR", "MAX_STEP_PRIOR", "LATENCY_MODES"]
 
 LATENCY_MODES = ("onset", "fixed", "none")
 
 MIN_STEP_PRIOR = {1: 15e-6, 2: 15e-6, 3: 300e-9}
 """A lower bound on a joint's step size (rad, rad, m), used to size overdrives and the
 give-up limit: no MM3A-type joint steps less than this in any pose."""
+
+MAX_STEP_PRIOR = {1: 1e-3, 2: 1e-3, 3: 10e-6}
+"""An upper bound on a joint's step size (rad, rad, m): ten times the largest the paper and the stick-slip
+makers report (about 1 µm and tens of µrad a step). A stop heard after fewer than the range over this many
+steps cannot be the end stop: the joint could not have crossed its range (4 s of stepping at 1000 Hz on a
+rotary joint of the MM3A, 1.2 s on its prismatic one)."""
 
 
 class TraverseError(RuntimeError):
@@ -549,6 +555,13 @@ class _Run:
                 f"joint {self.joint}: the stop was heard at once ({steps} steps before it): the joint did not "
                 "start from the opposite stop, or the detector fired on the start stop's sound"
             )
+        fewest = _fewest_steps(self.joint)
+        if steps < fewest:
+            raise TraverseError(
+                f"joint {self.joint}: a stop was heard after {steps} steps, fewer than the {fewest} its range takes at "
+                f"the largest plausible step ({_largest_step(self.joint)}): not the end "
+                "stop (interference, or the joint did not start from the opposite stop); nothing recorded"
+            )
         return TraverseResult(
             traverse=_row(kin.joint_spec(self.joint), self.sign, pose, day, steps),
             steps=int(steps),
@@ -576,3 +589,14 @@ def _rate_hint(detector: StopDetector, hz: float) -> str:
         return ""
     return (f"; the joint steps at {hz:.4g} Hz, {100 * (hz / tuned - 1.0):+.0f} % from the tuning recording's "
             f"{tuned:.4g} Hz: a tuning recorded at {hz:.4g} Hz (stickslip tune) judges this rate's stops on its own")
+
+
+def _fewest_steps(joint: int) -> int:
+    """The fewest steps a traverse of ``joint`` can take: its range over :data:`MAX_STEP_PRIOR`."""
+    return int(math.ceil(kin.joint_spec(joint).span / MAX_STEP_PRIOR[joint]))
+
+
+def _largest_step(joint: int) -> str:
+    """:data:`MAX_STEP_PRIOR` of ``joint`` for a person (µm or mrad)."""
+    v = MAX_STEP_PRIOR[joint]
+    return f"{v * 1e6:g} µm" if kin.joint_spec(joint).kind == "prismatic" else f"{v * 1e3:g} mrad"
