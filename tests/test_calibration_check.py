@@ -184,3 +184,15 @@ def test_a_check_traverse_at_a_fitted_pose_is_refused() -> None:
         calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], near])
     moved = dataclasses.replace(again, psi=again.psi + 1e-3)
     assert calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], moved]).selection
+
+
+def test_a_check_traverse_of_another_day_is_refused() -> None:
+    # another session's traverse measures the step's drift between sessions too, not only the fit's error
+    from stickslip.calibration import CalibrationError
+
+    later = dataclasses.replace(DAY.validation[2], day="2026-09-03")
+    with pytest.raises(CalibrationError, match=r"check traverse 3 \(joint \d, [+-]\) is of day '2026-09-03', the "
+                                               r"calibration of day '2026-09-02'"):
+        calibrate(DAY.calibration, model="auto", check=[DAY.validation[0], DAY.validation[1], later])
+    # the calibration's day given: the check is of that session
+    assert calibrate(DAY.calibration, model="auto", day="2026-09-03", check=[later]).day == "2026-09-03"

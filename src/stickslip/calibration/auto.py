@@ -7,7 +7,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
-from .check import apply_check, fitted_pose, repeated_row
+from .check import apply_check, fitted_pose, other_day, repeated_row
 from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
@@ -66,15 +66,20 @@ def calibrate(
         session after ``traverses`` and not fitted; each joint's intervals are scaled by how
         they erred (:func:`~.check.apply_check`, docs/models.md §4). The fit and its
         predictions are those without them. Empty (the default): no check. A check
-        traverse at a pose ``traverses`` measured is refused (:func:`~.check.fitted_pose`), and one
-        listed twice (:func:`~.check.repeated_row`).
+        traverse at a pose ``traverses`` measured is refused (:func:`~.check.fitted_pose`), one
+        listed twice (:func:`~.check.repeated_row`), and one of another day than the calibration's
+        (:func:`~.check.other_day`).
     """
     if check:
         grouped = group_traverses(traverses)  # once: the calibration below takes the groups
         why = fitted_pose(check, grouped.traverses) or repeated_row(check)
         if why is not None:
             raise CalibrationError(why)
-        return apply_check(calibrate(grouped, method, day, source, model, progress, step_sizes), check)
+        cal = calibrate(grouped, method, day, source, model, progress, step_sizes)
+        why = other_day(check, cal.day)
+        if why is not None:
+            raise CalibrationError(why)
+        return apply_check(cal, check)
     if step_sizes:
         return calibrate_with_step_sizes(group_traverses(traverses).traverses, step_sizes, method, day, source, model,
                                          progress)

@@ -30,7 +30,8 @@ from .groups import pose_keys
 from .intervals import relative_sd
 from .result import Calibration, CalibrationError
 
-__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose", "repeated_row"]
+__all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose", "repeated_row",
+           "other_day"]
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,16 @@ def repeated_row(check: Sequence[Traverse]) -> str | None:
         if j != i:
             return (f"check traverse {i} repeats check traverse {j} in every column (joint {t.joint}, {t.direction}, "
                     f"{t.steps} steps): a check table lists each traverse once (docs/models.md §4)")
+    return None
+
+
+def other_day(check: Sequence[Traverse], day: str) -> str | None:
+    """Why ``check`` cannot check a calibration of session ``day`` (None if it can): a check traverse of another
+    day measures the step's drift between sessions as well as the fit's error between poses."""
+    for i, t in enumerate(check, 1):
+        if t.day != day:
+            return (f"check traverse {i} (joint {t.joint}, {t.direction}) is of day {t.day!r}, the calibration of day "
+                    f"{day!r}: check traverses are measured in the calibration's session (docs/models.md §4)")
     return None
 
 
