@@ -13,7 +13,9 @@ Each arm is tuned on its generator's tuning recording at 1000 Hz, then steps at 
 Hz) for :data:`STOP_S` s into its stop (2 s of the stop after it), clean or with the hour's "music" (-3 dB) or
 "speech over the radio" (+3 dB) added re the stepping's RMS. The same samples are heard by two confirming
 detectors in one process: the switch off (``ClockedParams(lines_model=False)``) and on (the default); ``--switch
-model_unjudged`` compares that switch instead (a stop the model could have judged and did not, flagged).
+model_unjudged`` compares that switch instead (a stop the model could have judged and did not, flagged), ``--switch
+model_expect`` the model's span gate expecting the jittered clock's loss (off: the default; ``arrival-2%``: the fifth
+generator at 2 % jitter).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -65,12 +67,12 @@ NOISES: dict[str, tuple[str, float] | None] = {
 }
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
 #: the ``ClockedParams`` switch compared: off (the field False) against on (the default)
-SWITCHES = ("lines_model", "model_unjudged")
+SWITCHES = ("lines_model", "model_unjudged", "model_expect")
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
-    """The two detectors' clocked parameters: ``name`` False (off) and the default (on)."""
-    return {"off": replace(ClockedParams(), **{name: False}), "on": ClockedParams()}
+    """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults."""
+    return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
 
 Render = Callable[[float, float | None, float, int], np.ndarray]  # rate, stop, dur, seed -> samples
 
@@ -113,6 +115,7 @@ def _modal(seed: int, kind: str) -> Render:
 ARMS: dict[str, tuple[tuple[str, Render], ...]] = {
     "arrival": (("arm 1 stiff", _arrival(1, "stiff", 0.004)), ("arm 2 damped", _arrival(2, "damped", 0.004))),
     "arrival-1%": (("arm 1 stiff", _arrival(1, "stiff", 0.01)), ("arm 2 damped", _arrival(2, "damped", 0.01))),
+    "arrival-2%": (("arm 1 stiff", _arrival(1, "stiff", 0.02)), ("arm 2 damped", _arrival(2, "damped", 0.02))),
     "drive": (("arm 1 blocked", _drive(1, "blocked")), ("arm 2 spectral", _drive(2, "spectral"))),
     "modal": (("joint 1 spectral", _modal(1, "spectral")), ("joint 2 duller", _modal(2, "duller"))),
 }

@@ -209,6 +209,18 @@ class ClockedParams:
         "",
         "a span is modelled where its lines held this share in phase (stepping alone: 0.97-1; speech, music less)",
     )
+    model_expect: bool = param(
+        False,
+        "",
+        "a span whose lines held under model_min_share in phase is modelled too where each line kept the share the "
+        "followed clock's own wander predicts (a jittered clock; False: off, not measured to help)",
+    )
+    model_expect_min: float = param(
+        0.9, "", "each line's share in phase over the share predicted from the clock's wander, at least this"
+    )
+    model_expect_c: float = param(
+        0.2, "", "line k keeps exp(-c (2 pi k)^2 var) in phase, var the wander per frame (random walk within: 1/6)"
+    )
     model_max_z: float = param(
         3.0, "spreads", "a fire whose lines after it sit within this RMS of the model is not a stop (the stepping's)"
     )
@@ -415,6 +427,25 @@ def _in_phase(
     return locked_powers(z, ks, off)
 
 
+def expected_held(x: FloatArray, sr: float, rate_hz: float, ks: list[int], p: ClockedParams) -> float:
+    """The least over the lines ``ks`` of the share of each line's power held in phase over ``x`` against the share a
+    clock wandering as the followed one did would leave it: ``exp(-c (2 pi k)^2 var)``, ``var`` the variance of the
+    followed clock's offset from frame to frame (cycles^2; robust: the median square over 0.455), ``c``
+    ``model_expect_c``. Stepping alone on a jittered clock: about 1; sound of another kind on a line lowers it
+    (NaN: no frames or no power)."""
+    z, off = _followed(x, sr, rate_hz, ks, p)
+    if off.size < 2:
+        return math.nan
+    held, whole = locked_powers(z, ks, off)
+    d = (np.diff(off) + 0.5) % 1.0 - 0.5
+    var = float(np.median(d**2)) / 0.455
+    k = np.asarray(ks, dtype=np.float64)
+    expected = np.exp(-p.model_expect_c * (2.0 * np.pi * k) ** 2 * var)
+    if not np.all(whole > 0.0):
+        return math.nan
+    return float(np.min(held / whole / np.maximum(expected, 1e-9)))
+
+
 def locked_stop_likeness(
     before: FloatArray,
     pieces: Sequence[FloatArray],
@@ -594,7 +625,7 @@ class ClockedCheck:
         self.model_hz = math.nan  # the step rate the model reads the lines at, Hz
         self.model_n = 0  # the samples of each stretch it modelled
         #: the spans read but not yet modelled (``model_lag_s``): their ends, s, levels and locked shares
-        self.pending: list[tuple[float, FloatArray, FloatArray]] = []
+        self.pending: list[tuple[float, FloatArray, FloatArray, bool]] = []
         #: where the first ``model_min_spans`` spans offered to the model ended (absolute samples)
         self.offered: list[int] = []
 
@@ -623,7 +654,8 @@ class ClockedCheck:
         """A span of the stream, ``x`` ending at absolute sample ``end``, into the model of the stepping's lines where
         it is stepping accepted, ``model_lag_s`` after it ended (a fire over it is judged against the model as it
         stood before): its lines held ``model_min_share`` of their power in phase (the joint's clicks alone; sound
-        of another clock lowers it) and, once the model judges, sat within ``model_max_z`` of it (the stepping going
+        of another clock lowers it), or with ``model_expect`` each line the share the clock's own wander leaves it
+        (:func:`expected_held`), and, once the model judges, sat within ``model_max_z`` of it (the stepping going
         on; a stop moves them). Not one heard at another rate than the model's first."""
         sr, p, tu = self.sample_rate, self.p, self.tuning
         assert self.commanded_hz is not None and tu.edges_hz is not None
@@ -649,10 +681,13 @@ class ClockedCheck:
             self.model = SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
             self.model_hz, self.model_n = rate, x.size
         level, share = self.model.levels(x)
-        self.pending = [*self.pending, (end / sr, level, share)]
+        alone = float(np.mean(share)) >= p.model_min_share or (
+            p.model_expect and expected_held(x, sr, self.model_hz, self.model.ks, p) >= p.model_expect_min
+        )
+        self.pending = [*self.pending, (end / sr, level, share, alone)]
         while self.pending and self.pending[0][0] <= end / sr - p.model_lag_s:  # any fire over it judged by now
-            t, level, share = self.pending.pop(0)
-            if not float(np.mean(share)) >= p.model_min_share:
+            t, level, share, alone = self.pending.pop(0)
+            if not alone:
                 continue  # sound of another clock on the lines: not the stepping's alone
             if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
                 self.model.add(level, share, t)
