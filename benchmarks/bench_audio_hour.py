@@ -86,8 +86,8 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: window read in four spans, the median kept; both (``spans``, the round before); and with them the lines read in
 #: phase with the clock followed from the sound, as a veto only (``veto``); and those lines also affirming a fire the
 #: levels hold but not hot, and read from each stop's onset (the default); the default without a stop the lines model
-#: could have judged and did not flagged (``unjudged-off``); the model's span gate expecting a jittered clock's
-#: loss (``model-expect``)
+#: could have judged and did not flagged (``unjudged-off``); the default without the model's span gate expecting a
+#: jittered clock's loss (``expect-off``)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -102,7 +102,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "model": ClockedParams(lines_model=True),
     "per-fire": ClockedParams(lines_model=False),
     "unjudged-off": ClockedParams(model_unjudged=False),
-    "model-expect": ClockedParams(model_expect=True),
+    "expect-off": ClockedParams(model_expect=False),
     "off": None,
 }
 

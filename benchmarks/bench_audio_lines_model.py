@@ -14,7 +14,7 @@ Hz) for :data:`STOP_S` s into its stop (2 s of the stop after it), clean or with
 "speech over the radio" (+3 dB) added re the stepping's RMS. The same samples are heard by two confirming
 detectors in one process: the switch off (``ClockedParams(lines_model=False)``) and on (the default); ``--switch
 model_unjudged`` compares that switch instead (a stop the model could have judged and did not, flagged), ``--switch
-model_expect`` the model's span gate expecting the jittered clock's loss (off: the default; ``arrival-2%``: the fifth
+model_expect`` the model's span gate expecting the jittered clock's loss (``arrival-2%``: the fifth
 generator at 2 % jitter).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right

@@ -72,7 +72,10 @@ same reading conditions (a comb verdict, or the predicted move), a fire whose wi
 stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
 at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
-have begun there (``model_inside``; :func:`.inside.stop_departed`). The per-fire vetoes only veto, and
+have begun there (``model_inside``; :func:`.inside.stop_departed`). A jittered step clock turns each
+line's phase within a frame, so its share in phase falls under ``model_min_share`` with no other sound:
+such a span is taken too where each line holds what the followed clock's own wander leaves it
+(``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
 under speech or music they seldom can (the lines move with the added sound, or are not read): so once
 the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
 sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
@@ -210,10 +213,10 @@ class ClockedParams:
         "a span is modelled where its lines held this share in phase (stepping alone: 0.97-1; speech, music less)",
     )
     model_expect: bool = param(
-        False,
+        True,
         "",
         "a span whose lines held under model_min_share in phase is modelled too where each line kept the share the "
-        "followed clock's own wander predicts (a jittered clock; False: off, not measured to help)",
+        "followed clock's own wander predicts (a jittered clock; False: only the in-phase share gates)",
     )
     model_expect_min: float = param(
         0.9, "", "each line's share in phase over the share predicted from the clock's wander, at least this"
