@@ -62,6 +62,8 @@ _CAL_HELP = "Calibration JSON (from `stickslip calibrate`; default: calibration 
 
 def parse_point(text: str, what: str) -> tuple[float, float, float]:
     """``"X,Y,Z"`` lengths with their units (``20um,-10um,5um``; 0 needs none) to metres."""
+    from ..procedures.reach import MAX_TIP_M
+
     parts = text.split(",")
     if len(parts) != 3:
         fail(f"{what} {text!r}: write three lengths X,Y,Z, e.g. 20um,-10um,5um")
@@ -74,8 +76,8 @@ def parse_point(text: str, what: str) -> tuple[float, float, float]:
             v = parse_length(part)
         except (UnitError, ArithmeticError, ValueError) as e:
             fail(f"{what} {axis} = {part.strip()!r}: {e}")
-        if not math.isfinite(v) or abs(v) > 1.0:
-            fail(f"{what} {axis} = {part.strip()!r} is not a length within 1 m")
+        if not math.isfinite(v) or abs(v) > MAX_TIP_M:
+            fail(f"{what} {axis} = {part.strip()!r} is not a length within {MAX_TIP_M:g} m")
         out.append(v)
     return (out[0], out[1], out[2])
 

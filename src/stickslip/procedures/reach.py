@@ -45,6 +45,7 @@ from .move import (
 
 __all__ = [
     "BORROWED_JOINT1",
+    "MAX_TIP_M",
     "ReachOutcome",
     "ReachRequest",
     "ReachResult",
@@ -57,6 +58,10 @@ __all__ = [
 ]
 
 Vec3 = tuple[float, float, float]
+
+MAX_TIP_M = 1.0
+"""The largest tip target or displacement a reach takes, per axis, m: a thousand times any arm's reach, so a
+value beyond it is a typing error (a target farther overflowed the inverse kinematics)."""
 
 BORROWED_JOINT1 = (
     "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "

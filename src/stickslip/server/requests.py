@@ -15,6 +15,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from ..joints import joint_spec
 from ..procedures.move import PoseUpdate
 from ..procedures.named import NAME_PATTERN
+from ..procedures.reach import MAX_TIP_M
 from ..units import UnitError, bare_number_problem, parse_angle, parse_length
 from .slot import Motion, Refused, one_line
 
@@ -142,12 +143,12 @@ def pose(body: WhereBody) -> PoseUpdate:
 
 
 def vector(values: list[Amount], what: str) -> tuple[float, float, float]:
-    """Three lengths of a tip target or displacement, m; each within 1 m, as ``stickslip reach`` takes them (a
-    target farther than any arm reaches overflowed the inverse kinematics)."""
+    """Three lengths of a tip target or displacement, m; each within :data:`~stickslip.procedures.reach.MAX_TIP_M`,
+    as ``stickslip reach`` takes them."""
     out = [value(v, "length", f"{what}[{i}]") for i, v in enumerate(values)]
     for i, v in enumerate(out):
-        if abs(v) > 1.0:
-            raise Refused(f"{what}[{i}] = {v:.6g} m is not a length within 1 m")
+        if abs(v) > MAX_TIP_M:
+            raise Refused(f"{what}[{i}] = {v:.6g} m is not a length within {MAX_TIP_M:g} m")
     return (out[0], out[1], out[2])
 
 
