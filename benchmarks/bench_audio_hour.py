@@ -49,7 +49,7 @@ from hour_sound import KINDS, RMS, Hour, _Band, _Filter, _span_source, _Stepping
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams  # noqa: E402
 from stickslip.audio.confirm.checks import Verdicts, WindowChecks  # noqa: E402
-from stickslip.audio.confirm.clocked import CLOCKED, ClockedCheck, ClockedParams, lines_stop_likeness  # noqa: E402
+from stickslip.audio.confirm.clocked import CLOCKED, ClockedCheck, ClockedParams, OnClock, lines_stop_likeness  # noqa: E402
 from stickslip.audio.confirm.detector import ConfirmLog  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
 from stickslip.audio.events import StopEvent  # noqa: E402
@@ -57,6 +57,44 @@ from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
 FloatArray = np.ndarray
+
+
+#: per model z read at a fire (the value ``OnClock.still_z`` carries): the model's weight then, each piece's z, and
+#: the pieces' share of the locked sub-bands' lines in phase (``--details`` only; filled by :func:`_record_model`)
+MODEL_READ: dict[float, tuple[float, list[float], list[float]]] = {}
+
+
+def _record_model() -> None:
+    """Have ``ClockedCheck.model_z`` note, per value it returns, the model's weight and the window's pieces read
+    (each piece's z and its locked sub-bands' share in phase). The same arithmetic as the check; nothing changes."""
+    inner = ClockedCheck.model_z
+
+    def noted(self: ClockedCheck, after: FloatArray, a: float = math.nan) -> float:
+        z = inner(self, after, a)
+        m, n = self.model, self.model_n
+        if m is not None and n > 0 and math.isfinite(z):
+            pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(self.p.window_pieces, after.size // n)))]
+            read = [m.levels(x) for x in pieces]
+            on = m.locked >= m.min_locked
+            zs = [m.z_of(lv, self.p.model_min_spans, self.p.model_floor_db) for lv, _ in read]
+            shares = [float(np.mean(sh[on])) if on.any() else math.nan for _, sh in read]
+            MODEL_READ[z] = (m.weight, zs, shares)
+        return z
+
+    ClockedCheck.model_z = noted  # type: ignore[method-assign]
+
+
+def _model_line(on: OnClock) -> str:
+    """The model's reading at a fire (``--details``): z, weight, each piece's z and share in phase."""
+    if not math.isfinite(on.still_z):
+        return "model not read"
+    if on.still_z not in MODEL_READ:
+        return f"the departed pieces' least z {on.still_z:.2f}"
+    w, zs, shares = MODEL_READ[on.still_z]
+    return (
+        f"model z {on.still_z:.2f} at weight {w:.1f}; pieces z {', '.join(f'{v:.2f}' for v in zs)};"
+        f" in phase {', '.join(f'{v:.2f}' for v in shares)}"
+    )
 
 
 def details(e: StopEvent, log: ConfirmLog) -> str:
@@ -67,16 +105,26 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
         + (f", against the stepping kept {got[0].kept_s:.2f} s before" if got[0].kept_s == got[0].kept_s else "")
         + (f"; in phase {got[0].locked:.2f}" if got[0].locked == got[0].locked else "")
         + (f"; its lines moved {got[0].moved_db:.2f} dB" if got[0].moved_db == got[0].moved_db else "")
+        + f"; {_model_line(got[0])}"
         if got
         else "not judged (reference stop-like, too little heard or rate off)"
     )
     doubt = [why for t, why in log.onset if t == e.detected_at_s]
     before = [r.detected_at_s for r in log.rejected if e.detected_at_s - 30.0 < r.detected_at_s < e.detected_at_s]
     last = f", the last {e.detected_at_s - before[-1]:.2f} s before" if before else ""
+    path = [
+        f"inside the window of the fire at {t:.2f} s (spread {sp:.3f} s); that fire on the clock: "
+        + " / ".join(f"a_L {c.a:.2f}, in phase {c.locked:.2f}, {_model_line(c)}" for u, c in log.clocked if u == t)
+        for t, o, sp in log.inside
+        if o == e.onset_s
+    ]
+    path += [f"onset taken back from {a:.2f} s" for t, a, _ in log.retime if t == e.detected_at_s]
+    path += [f"rise {r:.3f} s" for t, r in log.rise if t == e.detected_at_s]
     return (
         f"      stop-likeness {e.level_db:.3f}, window {e.confirmed_s or 0.0:.2f} s; onset doubted:"
         f" {doubt[0] if doubt else 'no'}\n      clocked check: {clocked}\n"
         f"      {len(before)} fires rejected in the 30 s before{last}"
+        + (f"\n      path: {'; '.join(path)}" if path else "")
     )
 
 
@@ -667,4 +715,6 @@ if __name__ == "__main__":
         sys.exit(0)
     if a.seed < 0:
         ap.error(f"--seed: a draw, 0 or more (got {a.seed})")
+    if a.details:
+        _record_model()
     main(tuple(int(x) for x in a.arms.split(",")), a.minutes, a.rate, a.details, vs, a.seed)
