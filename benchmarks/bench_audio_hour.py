@@ -18,7 +18,8 @@ minutes per joint on a shared machine, the generator about as costly as the dete
 ``--rate 1150`` to step (and tell) another rate than the tuning's, ``--seed 1`` for another draw of the
 same joints (the seed the arm + 1000; 0, the default, is the hour as measured), ``--details`` to print under each
 false stop what the confirming detector noted (``ConfirmLog``): the clocked check's verdict, the
-onset's doubt, the rejected fires before it. ``docs/audio-log.md`` ("Diagnosis of the hour's false
+onset's doubt, the rejected fires before it, the stepping's lines model's reading (z, weight, each piece's z and
+share in phase) and the path (inside a vetoed fire's window). ``docs/audio-log.md`` ("Diagnosis of the hour's false
 stops") reads those lines. ``--variants in-step,default`` hears the same samples with
 each variant of the clocked check (``VARIANTS``) side by side, one table each. ``--arms 3
 --explain 968.82,988.24,2423.50`` reads those fires on the step clock instead (the detector
