@@ -37,7 +37,15 @@ from typing import TYPE_CHECKING, Any, Protocol
 from .. import kinematics as kin
 from .. import plotting
 from ..audio.confirm import CONFIRM_S, check_confirm_s
-from ..calibration import Calibration, Parameter, ValidationResult, calibrate, validate
+from ..calibration import (
+    PRISMATIC_PAPER_POSES,
+    ROTARY_PAPER_POSES,
+    Calibration,
+    Parameter,
+    ValidationResult,
+    calibrate,
+    validate,
+)
 from ..clock import check_day_label, today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
@@ -74,16 +82,11 @@ by at most 5 steps (0.04 %), its largest parameter error 0.22 -> 0.20 %."""
 TraversePlan = tuple[tuple[int, dict[str, float]], ...]
 """Traverses to measure: (joint, pose of the other joints and the tilt), each in + and -."""
 
-CALIBRATION_PLAN: TraversePlan = (
-    (3, {"q1": 0.0, "q2": -PI / 2, "theta": 0.0, "psi": 0.0}),
-    (3, {"q1": 0.0, "q2": 0.0, "theta": -PI / 2, "psi": 0.0}),
-    (3, {"q1": 0.0, "q2": 0.0, "theta": 0.0, "psi": 0.0}),
-    (2, {"q1": 0.0, "q3": 0.0, "theta": 0.0, "psi": 0.0}),
-    (2, {"q1": 0.0, "q3": kin.Q3_MAX, "theta": 0.0, "psi": 0.0}),
-    (2, {"q1": 0.0, "q3": kin.Q3_MAX, "theta": -PI / 2, "psi": 0.0}),
-    (2, {"q1": 0.0, "q3": 0.0, "theta": -PI / 2, "psi": 0.0}),
-)
-"""The paper's calibration poses (Eqs. 4-6 and Fig. 7): rad and m."""
+CALIBRATION_PLAN: TraversePlan = tuple(
+    (3, {"q1": 0.0, "q2": q2, "theta": th, "psi": ps}) for q2, th, ps in PRISMATIC_PAPER_POSES.values()
+) + tuple((2, {"q1": 0.0, "q3": q3, "theta": th, "psi": ps}) for q3, th, ps in ROTARY_PAPER_POSES)
+"""The paper's calibration poses (Eqs. 4-6 and Fig. 7; their one home is
+:mod:`stickslip.calibration.paper`): rad and m."""
 
 VALIDATION_PLAN: TraversePlan = (
     (3, {"q1": 0.0, "q2": -PI / 4, "theta": 0.0, "psi": 0.0}),
