@@ -80,6 +80,23 @@ def test_wild_check_traverses_widen(day: tuple[Calibration, list[Traverse]]) -> 
     assert set(check_scales(cal, slow)) == {3}
 
 
+def test_repeats_at_one_pose_count_once(day: tuple[Calibration, list[Traverse]]) -> None:
+    """Three traverses at one pose and direction share its model error: one term, their z^2 averaged."""
+    cal, val = day
+    ts = [t for t in val if t.joint == 3]
+    again = [dataclasses.replace(ts[0], steps=ts[0].steps + k) for k in (3, -5)]  # the pose traversed twice more
+    z2 = _z2(cal, ts)
+    z2_rep = _z2(cal, [ts[0], *again])
+    c = check_scales(cal, ts + again)[3]
+    nu = CHECK.prior_traverses
+    want = math.sqrt((nu + z2[1:].sum() + z2_rep.mean()) / (nu + len(ts)))
+    assert (c.traverses, c.poses) == (len(ts) + 2, len(ts))
+    assert c.scale == pytest.approx(want, rel=1e-12)
+    assert c.scale != pytest.approx(math.sqrt((nu + z2.sum() + z2_rep[1:].sum()) / (nu + len(ts) + 2)), rel=1e-6)
+    notes = apply_check(cal, ts + again).provenance.notes
+    assert any(f"joint 3: {len(ts) + 2} check traverse(s) at new poses ({len(ts)} counted" in n for n in notes)
+
+
 @settings(max_examples=30, deadline=None)
 @given(nu=st.floats(0.0, 100.0), keep=st.lists(st.booleans(), min_size=12, max_size=12))
 def test_the_scale_lies_between_one_and_the_checks(day: tuple[Calibration, list[Traverse]], nu: float,

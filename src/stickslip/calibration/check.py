@@ -10,9 +10,12 @@ made), the intervals' standard deviation is multiplied by ``s`` with
 
     s^2 = (nu_0 + sum z^2) / (nu_0 + m)
 
-over the ``m`` check traverses: the mean square of ``z`` pooled with the error model's own
-(1) counted as ``nu_0`` traverses (:attr:`CheckParams.prior_traverses`). A few traverses say
-little, so the scale moves only part of the way.
+over the ``m`` poses checked in a direction: the mean square of ``z`` pooled with the error
+model's own (1) counted as ``nu_0`` traverses (:attr:`CheckParams.prior_traverses`). A few
+traverses say little, so the scale moves only part of the way. Repeats at one pose in one
+direction share that pose's model error, which is most of ``z`` between poses: they count
+once, their ``z^2`` averaged (three repeats at a pose the model misses by 3 sd say what one
+says, not three times as much).
 """
 
 from __future__ import annotations
@@ -55,18 +58,20 @@ CHECK = CheckParams()
 
 @dataclass(frozen=True)
 class CheckScale:
-    """One joint's check: ``traverses`` used, the RMS of their relative errors and of the intervals'
-    ``sd`` there (1), the RMS of ``z``, and the scale ``s`` applied to the joint's intervals."""
+    """One joint's check: ``traverses`` used at ``poses`` poses and directions (repeats counted once), the RMS over
+    those poses of the relative errors and of the intervals' ``sd`` there (1), the RMS of ``z``, and the scale
+    ``s`` applied to the joint's intervals."""
 
     joint: int
     traverses: int
+    poses: int
     rms_error: float
     rms_sd: float
     rms_z: float
     scale: float
 
     def as_dict(self) -> dict[str, object]:
-        return {"traverses": self.traverses, "rms_error": self.rms_error, "rms_sd": self.rms_sd,
+        return {"traverses": self.traverses, "poses": self.poses, "rms_error": self.rms_error, "rms_sd": self.rms_sd,
                 "rms_z": self.rms_z, "scale": self.scale}
 
 
@@ -112,31 +117,43 @@ def other_day(check: Sequence[Traverse], day: str) -> str | None:
     return None
 
 
+def _pose_terms(cal: Calibration, ts: Sequence[Traverse]) -> tuple[int, list[tuple[float, float, float]]]:
+    """Check traverses ``ts`` of one joint and direction: how many have a finite error and ``sd``, and for each
+    pose among them (first met first) the mean over its repeats of ``e^2``, ``sd^2`` and ``z^2``."""
+    t0 = ts[0]
+    pred = cal.predict_many(ts)
+    cols = [np.array([getattr(t, k) for t in ts], dtype=float) for k in ("q1", "q2", "q3", "theta", "psi")]
+    sd = relative_sd(cal, t0.joint, t0.direction, *cols)
+    e = pred / np.array([t.gamma for t in ts]) - 1.0
+    ok = np.isfinite(e) & np.isfinite(sd) & (sd > 0)
+    e, sd = e[ok], sd[ok]
+    pose = [_pose_key(t) for t, good in zip(ts, ok, strict=True) if good]
+    terms = []
+    for key in dict.fromkeys(pose):
+        at = [i for i, p in enumerate(pose) if p == key]
+        terms.append((float(np.mean(e[at] ** 2)), float(np.mean(sd[at] ** 2)),
+                      float(np.mean(e[at] ** 2 / sd[at] ** 2))))
+    return len(pose), terms
+
+
 def check_scales(cal: Calibration, check: Sequence[Traverse], params: CheckParams = CHECK) -> dict[int, CheckScale]:
     """The scale of each joint's intervals from ``check`` (traverses not in ``cal``'s fit), for the joints
     with an error model (:class:`~.errormodel.Predictive`) in a direction checked and a finite prediction
-    at some check traverse."""
+    at some check traverse; repeats at one pose in one direction count once (the module's docstring)."""
     out: dict[int, CheckScale] = {}
     for j in sorted({t.joint for t in check}):
-        e2: list[float] = []
-        sd2: list[float] = []
+        n, terms = 0, list[tuple[float, float, float]]()
         for d in "+-":
             ts = [t for t in check if t.joint == j and t.direction == d]
-            if not ts or (j, d) not in cal.predictive:
-                continue
-            pred = cal.predict_many(ts)
-            cols = [np.array([getattr(t, k) for t in ts], dtype=float) for k in ("q1", "q2", "q3", "theta", "psi")]
-            sd = relative_sd(cal, j, d, *cols)
-            e = pred / np.array([t.gamma for t in ts]) - 1.0
-            ok = np.isfinite(e) & np.isfinite(sd) & (sd > 0)
-            e2 += (e[ok] ** 2).tolist()
-            sd2 += (sd[ok] ** 2).tolist()
-        m = len(e2)
-        if m == 0:
+            if ts and (j, d) in cal.predictive:
+                k, more = _pose_terms(cal, ts)
+                n, terms = n + k, terms + more
+        if not terms:
             continue
-        z2 = np.asarray(e2) / np.asarray(sd2)
+        e2, sd2, z2 = (np.array(c) for c in zip(*terms, strict=True))
+        m = len(terms)
         s = math.sqrt((params.prior_traverses + float(z2.sum())) / (params.prior_traverses + m))
-        out[j] = CheckScale(j, m, math.sqrt(float(np.mean(e2))), math.sqrt(float(np.mean(sd2))),
+        out[j] = CheckScale(j, n, m, math.sqrt(float(e2.mean())), math.sqrt(float(sd2.mean())),
                             math.sqrt(float(z2.mean())), s)
     return out
 
@@ -164,9 +181,10 @@ def apply_check(cal: Calibration, check: Sequence[Traverse], params: CheckParams
                                                      drift=pr.drift * c.scale, drift_sd=pr.drift_sd * c.scale)
             if (j, d) in selection:
                 selection[(j, d)]["check"] = c.as_dict()
-        notes.append(f"joint {j}: {c.traverses} check traverse(s) at new poses erred RMS {100 * c.rms_error:.2g} % "
-                     f"where the intervals expected {100 * c.rms_sd:.2g} %: intervals scaled by {c.scale:.2f} "
-                     f"(docs/models.md §4)")
+        counted = "" if c.poses == c.traverses else f" ({c.poses} counted: repeats at one pose count once)"
+        notes.append(f"joint {j}: {c.traverses} check traverse(s) at new poses{counted} erred RMS "
+                     f"{100 * c.rms_error:.2g} % where the intervals expected {100 * c.rms_sd:.2g} %: "
+                     f"intervals scaled by {c.scale:.2f} (docs/models.md §4)")
     for j in sorted({t.joint for t in check} - set(scales)):
         why = "no error model for this joint" if j in cal.joints else f"no joint {j}"
         notes.append(f"joint {j}: check traverses not used: the calibration has {why}")
