@@ -13,6 +13,8 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import ndimage
 
 from stickslip.sim.camera import SimCamSettings, SimScene
@@ -81,3 +83,26 @@ def test_when_every_region_stayed_with_the_ground_the_mask_is_kept() -> None:
     assert np.array_equal(conf.mask, t.mask)
     assert len(conf.regions) >= 2 and all(r.ground for r in conf.regions)
     assert all(r.at_old == pytest.approx(1.0, abs=1e-3) for r in conf.regions)  # the same pixels: a perfect match
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31), dx=st.floats(-40.0, 40.0), dy=st.floats(-40.0, 40.0),
+       theta=st.floats(-0.3, 0.3), edge=st.booleans())
+def test_any_mask_and_fix_give_a_part_of_the_mask_or_the_mask(seed: int, dx: float, dy: float, theta: float,
+                                                             edge: bool) -> None:
+    rng = np.random.default_rng(seed)
+    image = rng.random((64, 64))
+    window = ndimage.gaussian_filter(rng.random((41, 41)), 1.0)
+    mask = ndimage.gaussian_filter(rng.random((41, 41)), 2.0) > 0.55
+    inside = np.ones_like(mask)
+    if edge:  # a window hanging over the frame's edge
+        inside[:, :15] = False
+    tip = (20.0, 30.0)
+    conf = confirm_mask(window, mask, inside, (20.0, 20.0), tip, image, (tip[0] + dx, tip[1] + dy, theta), 1.0, 2,
+                        0.1)
+    assert conf.mask.shape == mask.shape and not (conf.mask & ~mask).any()  # only ever a part of the mask
+    assert conf.emptied == all(r.ground for r in conf.regions)  # nothing left: the mask kept as it was
+    assert not conf.emptied or np.array_equal(conf.mask, mask)
+    assert conf.dropped == (0 if conf.emptied else sum(r.ground for r in conf.regions))
+    assert all(-1.0 <= r.at_old <= 1.0 and -1.0 <= r.at_new <= 1.0 for r in conf.regions)
+    assert conf.mask.any() == mask.any()

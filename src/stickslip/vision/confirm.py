@@ -83,7 +83,9 @@ class Confirmation:
 
 
 def _ncc(a: FloatArray, b: FloatArray) -> float:
-    """The correlation of two equal-length samples (0 where either is flat), 1."""
+    """The correlation of two equal-length samples (0 where either is flat or has fewer than two values), 1."""
+    if a.size < 2:
+        return 0.0
     da, db = a - a.mean(), b - b.mean()
     den = math.sqrt(float((da * da).sum()) * float((db * db).sum()))
     return float((da * db).sum()) / den if den > 1e-300 else 0.0
