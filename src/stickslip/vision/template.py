@@ -218,6 +218,18 @@ class TrackerParams:
         Largest share of the half-ring in front of the tip that may look like the needle,
         1: where the needle seems to end at something as dark (or bright) as itself, the
         end seen is that thing's edge, not the tip (occluded).
+    confirm_move : float
+        Once a fix lies this far from the first frame's tip, px, each region of the template's
+        mask is compared with that frame where the first frame had it and where the fix puts it
+        (:mod:`.confirm`): one that stayed with the ground is dropped and the fix fitted again.
+        Twice the mask's growth (``edge_px``) and the 1 px smoothing: a region moved by less
+        overlaps its old place and the two readings do not differ. ``inf`` turns it off.
+    confirm_margin : float
+        A region is ground when it correlates at its old place better than at the fix's by this
+        much, 1: a piece of the shaft moving along the needle's axis looks alike at both places,
+        and a tie is kept (it matches where the needle is anyway). Own cases: bright cells learnt
+        beside a needle read 0.16 to 0.18 better at their old place, the own sets' needle pieces
+        0.26 or more worse (docs/vision-log.md).
     """
 
     half_window: int = 20
@@ -264,6 +276,8 @@ class TrackerParams:
     thin_blur: float = 2.2
     average_frames: int = 0
     anchor_limit: float = 1.0
+    confirm_move: float = 4.0
+    confirm_margin: float = 0.1
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:

@@ -64,12 +64,22 @@ from scipy import ndimage
 from scipy.fft import next_fast_len
 
 from .average import TemplateAverage, anchor
+from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
 from .refine import Refinement, Steepest, refine, steepest, warped
 from .sampling import Patch, median, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
-from .template import TemplateError, TipTemplate, TrackerParams, inside_ncc, masked_ncc, region_spectra
+from .template import (
+    TemplateError,
+    TipTemplate,
+    TrackerParams,
+    _level_weights,
+    _window,
+    inside_ncc,
+    masked_ncc,
+    region_spectra,
+)
 from .width import WidthCheck, WidthStations, check_width, learn_width
 
 __all__ = [
@@ -561,6 +571,7 @@ class TipTracker:
         self._fresh = True  # the last frame gave a fix
         self._since = 1  # frames since the last fix (1: the last frame gave one)
         self._mismatch: list[float] = []  # 1 - score of the recent fixes
+        self._mask_check: tuple[float, float] | Confirmation | None = _pending(tip, params)  # confirm.py's stage
         self._average = TemplateAverage(image, tip, t, params.average_frames) if params.average_frames else None
         s0 = params.template_blur
         # what noise alone costs a perfect match, until fixes say better: the frame's and the template's noise
@@ -775,7 +786,7 @@ class TipTracker:
             if cand is not None:
                 res, cand = self._judge(cand, image)
                 if isinstance(res, Fix):
-                    return self._accept(res, cand, image)
+                    return _take(self, res, cand, image, False)
                 first_refusal = res
                 if res.reason in ("lost", "out of focus") and cand.edges is not None and not cand.unvouched and (
                         _edge_refusal(cand.edges, self.params, cand.shaft) is None):
@@ -798,7 +809,7 @@ class TipTracker:
             elif refused is None or cand.ref.score > refused[0]:
                 refused = (cand.ref.score, res)
         if isinstance(best, Fix):
-            return self._accept(best, best_cand, image)
+            return _take(self, best, best_cand, image, True)
         self._fresh = False
         self._since += 1
         return first_refusal if first_refusal is not None else _not_found(refused)
@@ -827,6 +838,41 @@ class TipTracker:
         self._since = 1
         _averaged(self, cand, image)
         return fix
+
+
+def _pending(tip: tuple[float, float], params: TrackerParams) -> tuple[float, float] | None:
+    """The first frame's tip, while the mask awaits the move that confirms it (:mod:`.confirm`); ``None``: the
+    stage is off (``confirm_move`` infinite, or the template averaged: it is made again from later frames)."""
+    on = math.isfinite(params.confirm_move) and params.average_frames == 0
+    return (float(tip[0]), float(tip[1])) if on else None
+
+
+def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacquire: bool) -> Result:
+    """Accept ``fix``; the first fix ``confirm_move`` px or more from the first frame's tip first confirms the
+    template's mask (:func:`~.confirm.confirm_mask`): where a region stayed with the ground it is dropped, the
+    template's weights are made again from the mask confirmed, and the fix is fitted and judged again with them
+    (its verdict stands, a refusal too). Where every region read as ground the mask is kept
+    (:attr:`~.confirm.Confirmation.emptied`)."""
+    first, t, p = tr._mask_check, tr.template, tr.params
+    if not isinstance(first, tuple) or math.hypot(fix.x - first[0], fix.y - first[1]) < p.confirm_move:
+        return tr._accept(fix, cand, image)
+    inside = _window(np.zeros(tr.shape), int(round(first[0])), int(round(first[1])), t.half)[1]
+    conf = confirm_mask(t.bank[0], t.mask, inside, t.apex, first, image, (fix.x, fix.y, cand.ref.theta),
+                        p.template_blur, p.edge_px, p.confirm_margin)
+    tr._mask_check = conf
+    if conf.dropped == 0:
+        return tr._accept(fix, cand, image)
+    t.mask = conf.mask
+    t.level_weights = _level_weights(conf.mask, inside, t.apex, p)
+    t.weights = t.level_weights[0]
+    _fit_parts(tr, 1.0)
+    tr._coarse_w = _downsample(t.weights, p.coarse_factor)
+    res, refit = tr._judge(tr._try(image, fix.x, fix.y, cand.ref.theta, cand.level), image, reacquire)
+    if isinstance(res, Fix):
+        return tr._accept(res, refit, image)
+    tr._fresh = False
+    tr._since += 1
+    return res
 
 
 def _fit_parts(tr: TipTracker, share: float) -> None:
