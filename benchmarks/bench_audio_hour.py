@@ -92,9 +92,14 @@ def _model_line(on: OnClock) -> str:
     if on.still_z not in MODEL_READ:
         return f"the departed pieces' least z {on.still_z:.2f}"
     w, zs, shares = MODEL_READ[on.still_z]
+    step = (
+        f"; in step {on.in_step:.2f} of the model's {on.model_in_step:.2f}, out of phase {on.added_db:+.1f} dB"
+        if on.in_step == on.in_step
+        else ""
+    )
     return (
         f"model z {on.still_z:.2f} at weight {w:.1f}; pieces z {', '.join(f'{v:.2f}' for v in zs)};"
-        f" in phase {', '.join(f'{v:.2f}' for v in shares)}"
+        f" in phase {', '.join(f'{v:.2f}' for v in shares)}{step}"
     )
 
 
@@ -152,6 +157,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "per-fire": ClockedParams(lines_model=False),
     "unjudged-off": ClockedParams(model_unjudged=False),
     "expect-off": ClockedParams(model_expect=False),
+    "in-step-off": ClockedParams(model_in_step=0.0),
     "off": None,
 }
 

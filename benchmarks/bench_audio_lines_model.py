@@ -15,7 +15,8 @@ Hz) for :data:`STOP_S` s into its stop (2 s of the stop after it), clean or with
 detectors in one process: the switch off (``ClockedParams(lines_model=False)``) and on (the default); ``--switch
 model_unjudged`` compares that switch instead (a stop the model could have judged and did not, flagged), ``--switch
 model_expect`` the model's span gate expecting the jittered clock's loss (``arrival-2%``: the fifth
-generator at 2 % jitter).
+generator at 2 % jitter), ``--switch model_in_step`` the fire the model let through with its lines out of step
+(flagged; off: 0).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -67,12 +68,16 @@ NOISES: dict[str, tuple[str, float] | None] = {
 }
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
 #: the ``ClockedParams`` switch compared: off (the field False) against on (the default)
-SWITCHES = ("lines_model", "model_unjudged", "model_expect")
+SWITCHES = ("lines_model", "model_unjudged", "model_expect", "model_in_step")
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
-    """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults."""
+    """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults
+    (``model_in_step``, a share: 0 off, its default on)."""
+    if name == "model_in_step":
+        return {"off": replace(ClockedParams(), model_in_step=0.0), "on": ClockedParams()}
     return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
+
 
 Render = Callable[[float, float | None, float, int], np.ndarray]  # rate, stop, dur, seed -> samples
 
@@ -156,7 +161,12 @@ def model_state(det: ConfirmedStopDetector) -> str:
     if c is None or c.model is None:
         return "model none"
     m = c.model
-    reads = " ".join(f"{t:.2f}:{oc.still_z:.1f}" for t, oc in det.log.clocked if np.isfinite(oc.still_z))
+    reads = " ".join(
+        f"{t:.2f}:{oc.still_z:.1f}"
+        + (f" in step {oc.in_step:.2f}/{oc.model_in_step:.2f} {oc.added_db:+.1f} dB" if oc.in_step >= 0 else "")
+        for t, oc in det.log.clocked
+        if np.isfinite(oc.still_z)
+    )
     held = f"model weight {m.weight:.1f}, {len(m.locked_bands())}/{len(m.bands)} sub-bands locked"
     return f"{held}; read (s:z) {reads or '-'}"
 

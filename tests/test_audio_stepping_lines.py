@@ -88,6 +88,32 @@ def test_sub_bands_whose_lines_were_not_locked_are_not_read() -> None:
     assert m.z([x], 4.0, 0.1) == pytest.approx(0.0, abs=1e-9)
 
 
+def test_in_step_reads_the_share_in_phase_and_the_power_out_of_phase_against_the_stepping_modelled() -> None:
+    """Stretches given as each line's power in phase and in all: the stepping holds 0.9 in phase. A stop raising the
+    lines 6 dB in step keeps the share, its power out of phase rising with them; music adding power out of phase
+    halves the share and adds 10.4 dB there; a stop lowering the lines 10 dB into a floor that stays lowers the share
+    as far and adds nothing. The unlocked sub-band (0.2 in phase) is not read; none locked: NaN."""
+    m = SteppingLines(lambda x: (x[:5], x[5:]), LINES, KS, math.inf, 0.5)
+    unit = level(m, [0.0, 0.0, 0.0])  # each sub-band's lines: power 1 in all
+
+    def stretch(held: np.ndarray, whole: np.ndarray) -> np.ndarray:
+        return np.concatenate([held, whole])
+
+    mask = np.array([1.0, 1.0, 0.2 / 0.9, 1.0, 1.0])  # sub-band 1 (line 3) holds 0.2 in phase
+    for t in range(10):
+        m.add(*m.levels(stretch(0.9 * mask * unit, unit)), float(t))
+    assert m.locked == pytest.approx([0.9, 0.2, 0.9])
+    assert m.in_step(stretch(0.9 * mask * unit, unit)) == pytest.approx((0.9, 0.9, 0.0), abs=1e-9)
+    assert m.in_step(stretch(3.6 * mask * unit, 4.0 * unit)) == pytest.approx((0.9, 0.9, 10 * math.log10(4.0)))
+    music = m.in_step(stretch(0.9 * mask * unit, unit + 1.0 * unit))
+    assert music == pytest.approx((0.45, 0.9, 10 * math.log10(1.1 / 0.1)))
+    lowered = m.in_step(stretch(0.09 * mask * unit, 0.09 * mask * unit + 0.1 * unit))
+    assert lowered == pytest.approx((0.09 / 0.19, 0.9, 0.0), abs=1e-9)
+    none = SteppingLines(lambda x: (x[:5] * 0.1, x[5:]), LINES, KS, math.inf, 0.5)
+    none.add(*none.levels(stretch(unit, unit)), 0.0)
+    assert all(math.isnan(v) for v in none.in_step(stretch(unit, unit)))
+
+
 # The hour's generator (tests/support/hour_sound.py; the eleventh, never used to tune the detector), joint 2 (a
 # development joint) stepping at 1200 Hz (20 % off its tuning's rate, told), 24 s of spans of 4-12 s: draws whose
 # false fires the per-fire vetoes (`min_moved_db`, `min_pred_moved_db`) handle and miss.

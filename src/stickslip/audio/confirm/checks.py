@@ -140,7 +140,10 @@ class WindowChecks:
         stop, and the stop came in its window); or the stepping before the fire was over ``onset_ref_stoplike``
         stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; the
         stream began near it; not an onset at listening's start, which :mod:`~stickslip.audio.change.start`
-        judged): no stepping to place it by, it may have begun there; or, the rate told and off the tuning's, the
+        judged): no stepping to place it by, it may have begun there; or the stepping's lines modelled read its fire
+        and let it through, but its lines held under ``model_in_step`` of the model's share in phase and their power
+        out of phase rose ``model_added_db`` (not in step with the steps, as a stop's stay: sound of another kind
+        added on them); or, the rate told and off the tuning's, the
         stepping's lines modelled could have judged its fire and did not, nor do the lines affirm it
         (:meth:`~.clocked.ClockedCheck.unjudged`): the levels alone counted it. None: they do, or nothing was read."""
         if self.clocked is None:
@@ -152,6 +155,13 @@ class WindowChecks:
         short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
+        got = self.on_clock
+        low = got is not None and got.in_step < c.p.model_in_step * got.model_in_step  # (NaN: not read)
+        if c.enabled and got is not None and low and got.added_db >= c.p.model_added_db:  # and sound added on them
+            return (
+                f"lines {got.in_step:.2f} in phase at the fire, the stepping's {got.model_in_step:.2f}, power out of"
+                f" phase {got.added_db:+.1f} dB: not in step"
+            )
         if c.enabled and c.unjudged(onset, self.on_clock):  # off the tuning's rate: nothing but the levels counted it
             return "off the tuning's rate, neither the stepping's lines modelled nor the lines in phase affirm it"
         x = self.kept.get(onset, onset + int(round(c.p.onset_read_s * c.sample_rate)))

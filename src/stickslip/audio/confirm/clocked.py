@@ -72,7 +72,10 @@ same reading conditions (a comb verdict, or the predicted move), a fire whose wi
 stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
 at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
-have begun there (``model_inside``; :func:`.inside.stop_departed`). A jittered step clock turns each
+have begun there (``model_inside``; :func:`.inside.stop_departed`). A fire the model lets through whose
+lines held under ``model_in_step`` of the model's own share in phase is flagged (:meth:`ClockedCheck.model_in_step`,
+asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the joint steps on into it and its lines stay in
+step, only their level moves; music or speech on them moves it out of step. A jittered step clock turns each
 line's phase within a frame, so its share in phase falls under ``model_min_share`` with no other sound:
 such a span is taken too where each line holds what the followed clock's own wander leaves it
 (``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
@@ -227,6 +230,18 @@ class ClockedParams:
     model_max_z: float = param(
         3.0, "spreads", "a fire whose lines after it sit within this RMS of the model is not a stop (the stepping's)"
     )
+    model_in_step: float = param(
+        0.85,
+        "of the model's share",
+        "a fire the model let through whose lines held under this of the model's share in phase is flagged: the "
+        "lines out of step (true stops 0.92 of it and more; music, speech 0.84 and less; 0: not)",
+    )
+    model_added_db: float = param(
+        3.0,
+        "dB",
+        "and where their power out of phase rose this over the stepping's: added (music, speech +7.6 dB and more; "
+        "a stop lowering its lines into the room's noise lowers the share, adds nothing: -2.4 dB and less)",
+    )
     model_inside: bool = param(
         True,
         "",
@@ -312,6 +327,12 @@ class OnClock:
     #: the lines after the fire against the stepping's modelled across the listening: RMS, in spreads (NaN: not read;
     #: read only with ``lines_model``, the rate told, off the tuning's rate)
     still_z: float = math.nan
+    #: where the model read the fire and let it through (``still_z`` at least ``model_max_z``): the locked sub-bands'
+    #: mean share of their lines' power in phase over the window's first piece, and the model's own over the stepping
+    #: it modelled, and how far their power out of phase rose over the stepping's, dB (NaN: not read)
+    in_step: float = math.nan
+    model_in_step: float = math.nan
+    added_db: float = math.nan
 
 
 def lines_stop_likeness(
@@ -738,6 +759,13 @@ class ClockedCheck:
         pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
         return self.model.z(pieces, p.model_min_spans, p.model_floor_db)
 
+    def model_in_step(self, after: FloatArray, z: float) -> tuple[float, float, float]:
+        """Where the model read the fire and let it through (``z`` at least ``model_max_z``), the window's first piece
+        in step, the model's, and the power out of phase added (:meth:`.stepping_lines.SteppingLines.in_step`)."""
+        if self.model is None or not z >= self.p.model_max_z:
+            return math.nan, math.nan, math.nan
+        return self.model.in_step(after[: self.model_n])
+
     def hear_before(self, ref: FloatArray, margins: FloatArray, end: int | None = None) -> None:
         """The stepping before a fire (samples, ending at absolute sample ``end``) and its frames' margins over the
         threshold (NaN while learning). Where more than ``max_ref_stoplike`` of them were stop-like, the latest
@@ -768,7 +796,9 @@ class ClockedCheck:
         if ref is None or ref.size < p.min_s * sr or self.ref_stoplike > p.max_ref_stoplike:
             # too little stepping before the fire, or the stop may have begun there (heard late): the model only
             z = self.model_z(after) if modelled else math.nan
-            return OnClock(math.nan, self.model_hz, 0, still_z=z) if math.isfinite(z) else None
+            s, s0, added = self.model_in_step(after, z)
+            on = OnClock(math.nan, self.model_hz, 0, still_z=z, in_step=s, model_in_step=s0, added_db=added)
+            return on if math.isfinite(z) else None
         rate = self.rate(heard_hz, affirm or self.commanded_hz is not None)
         if not math.isfinite(rate) or not (affirm or self.at_tuned_rate(rate) or p.min_moved_db > 0.0):
             return None
@@ -789,7 +819,8 @@ class ClockedCheck:
             reader = self.reader(rate) if math.isfinite(a) else None
             locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
             z = self.model_z(after, a)
-            on = OnClock(a, rate, used, self.ref_age_s, locked, still_z=z)
+            s, s0, added = self.model_in_step(after, z)
+            on = OnClock(a, rate, used, self.ref_age_s, locked, math.nan, z, s, s0, added)  # (moved_db: not read)
             return on if math.isfinite(a) or math.isfinite(z) else None
         unjudged = veto_off and not math.isfinite(a)
         predicted = unjudged and p.min_pred_moved_db > 0.0 and self.predicted_moved_db(rate) >= p.min_pred_moved_db

@@ -56,13 +56,35 @@ class SteppingLines:
         """The sub-bands whose lines held ``min_locked`` of their power in phase over the stepping modelled."""
         return [b for b, share in zip(self.bands, self.locked, strict=True) if share >= self.min_locked]
 
-    def levels(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Per sub-band: the level in phase of its lines over ``x`` (dB re 1; -inf: none) and its locked share."""
+    def _powers(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Per sub-band: its lines' power in phase over ``x`` and their power in all."""
         l1, w1 = self.in_phase(x)
         held = np.array([sum(float(l1[self._at[k]]) for k in self.lines[i]) for i in self.bands])
         whole = np.array([sum(float(w1[self._at[k]]) for k in self.lines[i]) for i in self.bands])
+        return held, whole
+
+    def levels(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Per sub-band: the level in phase of its lines over ``x`` (dB re 1; -inf: none) and its locked share."""
+        held, whole = self._powers(x)
         with np.errstate(divide="ignore", invalid="ignore"):
             return 10.0 * np.log10(held), np.where(whole > 0.0, held / whole, 0.0)
+
+    def in_step(self, x: FloatArray) -> tuple[float, float, float]:
+        """Over the locked sub-bands: the mean share of their lines' power in phase over ``x``, the model's own mean
+        share over the stepping modelled, and how far their power out of phase over ``x`` rose over the stepping's
+        (dB; the model's from its mean level and share) (NaN: no sub-band locked). At an end stop the joint steps on
+        into it: its lines stay in step and only their level moves (a stop that lowers them into the room's noise
+        lowers the share, but adds nothing out of phase); sound of another kind on them adds power out of phase."""
+        on = self.locked >= self.min_locked
+        if not on.any():
+            return math.nan, math.nan, math.nan
+        held, whole = self._powers(x)
+        share = np.where(whole > 0.0, held / np.where(whole > 0.0, whole, 1.0), 0.0)
+        was = float(np.sum(10.0 ** (self.mean[on] / 10.0) * (1.0 - self.locked[on]) / self.locked[on]))
+        out = float(np.sum(whole[on] - held[on]))
+        with np.errstate(divide="ignore"):
+            added = 10.0 * math.log10(out / was) if was > 0.0 and out > 0.0 else (math.inf if out > 0.0 else -math.inf)
+        return float(np.mean(share[on])), float(np.mean(self.locked[on])), added
 
     def add(self, level: FloatArray, share: FloatArray, t_s: float) -> None:
         """A stretch's levels (dB) and locked shares, of stepping accepted that ended at ``t_s`` (s), into the model."""
