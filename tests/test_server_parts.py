@@ -226,7 +226,8 @@ def test_the_camera_panel_tracks_the_simulated_microscopes_tip(tmp_path: Path) -
         feed.frame()
         tip = feed.tip()
         (x1, y1), _ = feed.camera.true_tip()  # type: ignore[attr-defined]
-        assert tip is not None and math.hypot(tip[0] - x1, tip[1] - y1) < 1.5  # tracked to the true tip
+        # tracked to the true tip: 0.74 px; 1.39 before the first move confirmed the template's mask (a dust grain)
+        assert tip is not None and math.hypot(tip[0] - x1, tip[1] - y1) < 1.0
         assert math.hypot(x1 - x0, y1 - y0) > 2  # and the tip did move in the image
         assert feed.to_pixels([[0.0, 0.0, 0.0]]) is None  # no projection without a camera calibration
         with pytest.raises(ServeError, match="--camera"):
