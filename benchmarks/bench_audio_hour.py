@@ -158,6 +158,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "unjudged-off": ClockedParams(model_unjudged=False),
     "expect-off": ClockedParams(model_expect=False),
     "in-step-off": ClockedParams(model_in_step=0.0),
+    "edge-off": ClockedParams(model_edge_s=0.0),
     "off": None,
 }
 

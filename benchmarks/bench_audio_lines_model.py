@@ -16,7 +16,8 @@ detectors in one process: the switch off (``ClockedParams(lines_model=False)``) 
 model_unjudged`` compares that switch instead (a stop the model could have judged and did not, flagged), ``--switch
 model_expect`` the model's span gate expecting the jittered clock's loss (``arrival-2%``: the fifth
 generator at 2 % jitter), ``--switch model_in_step`` the fire the model let through with its lines out of step
-(flagged; off: 0).
+(flagged; off: 0), ``--switch model_edge_s`` a stop found inside a vetoed window whose onset fit split at the
+fitted stretch's end (dropped; off: 0).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -68,14 +69,14 @@ NOISES: dict[str, tuple[str, float] | None] = {
 }
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
 #: the ``ClockedParams`` switch compared: off (the field False) against on (the default)
-SWITCHES = ("lines_model", "model_unjudged", "model_expect", "model_in_step")
+SWITCHES = ("lines_model", "model_unjudged", "model_expect", "model_in_step", "model_edge_s")
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
     """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults
-    (``model_in_step``, a share: 0 off, its default on)."""
-    if name == "model_in_step":
-        return {"off": replace(ClockedParams(), model_in_step=0.0), "on": ClockedParams()}
+    (``model_in_step``, a share, and ``model_edge_s``, s: 0 off, its default on)."""
+    if name in ("model_in_step", "model_edge_s"):
+        return {"off": replace(ClockedParams(), **{name: 0.0}), "on": ClockedParams()}
     return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
 
 

@@ -252,6 +252,12 @@ class ClockedParams:
         "s",
         "and the fit places that change within this (stops: 0.02-0.08 s; speech, music drifting: 0.34-0.82 s)",
     )
+    model_edge_s: float = param(
+        0.06,
+        "s",
+        "and its best split leaves this much of the fitted stretch after it: nearer its end the change lies at or "
+        "past the end, not inside; dropped (stops found inside: 0.12 s and more; music, radio: 0.02-0.055 s; 0: not)",
+    )
     model_unjudged: bool = param(
         True,
         "",

@@ -134,7 +134,10 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     its onset is fitted on the model's lines turned by its clock (:func:`onset_in_phase`, over the last piece
     within and the first departed), as a stop found inside a rejected window (the caller checks it is not a pause).
     A stop changes the lines at once; sound added over them drifts in and out. So the fit must place the change
-    within ``model_max_spread_s``, else none was found.
+    within ``model_max_spread_s``, else none was found; and inside the stretch fitted, ``model_edge_s`` at least
+    before its end: a best split nearer the end is a boundary optimum (the change lies at or past the end, often with
+    no spread at all), not an onset found, and the window stays vetoed (a stop there still sounds after it and is
+    judged again).
     """
     cp, sr, m, n = clocked.p, clocked.sample_rate, clocked.model, clocked.model_n
     if m is None or n <= 0 or not (clocked.models_lines() and clocked.model_ready()):
@@ -151,6 +154,8 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     t, spread = onset_in_phase(x[lo : lead + (j + 1) * n], sr, clocked.model_hz, m.ks, cp, p)
     if t < 0 or spread > cp.model_max_spread_s * sr or lead + k * n - (lo + t) < p.min_run_s * sr:
         return None
+    if 2 * n - t < cp.model_edge_s * sr:
+        return None  # the best split at the stretch's end: the fit found no change inside it
     return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
 
 
