@@ -33,6 +33,7 @@ included. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -203,8 +204,9 @@ class ANC300:
             return call()
         except DeviceError as e:
             raise DeviceError(f"ANC300 on {self.transport.name}, {what!r}: {e}") from None
-        except ValueError as e:  # pymeasure: "Error after previous command with message ..."
-            raise DeviceError(f"ANC300 on {self.transport.name} refused {what!r}: {e}") from None
+        except ValueError as e:  # pymeasure: "Error after previous command with message ..." (the console's lines)
+            said = " / ".join(line.strip() for line in str(e).splitlines() if line.strip())
+            raise DeviceError(f"ANC300 on {self.transport.name} refused {what!r}: {said}") from None
 
     @contextmanager
     def _read_timeout(self, seconds: float) -> Iterator[None]:
@@ -227,7 +229,8 @@ class ANC300:
         """The stepping frequency of ``joint``, Hz (``getf``, cached after the first read)."""
         ax = self._axis(joint)
         if self._hz[int(joint)] is None:
-            self._hz[int(joint)] = float(self._device(lambda: ax.frequency, f"getf {ax.id}"))
+            answer = self._device(lambda: ax.frequency, f"getf {ax.id}")
+            self._hz[int(joint)] = self._reading(answer, f"getf {ax.id}", FREQUENCY_RANGE, "Hz")
         hz = self._hz[int(joint)]
         assert hz is not None  # read from the controller just above
         return float(hz)
@@ -242,7 +245,21 @@ class ANC300:
     def voltage(self, joint: int) -> float:
         """The step amplitude of ``joint``, V (``getv``)."""
         ax = self._axis(joint)
-        return float(self._device(lambda: ax.voltage, f"getv {ax.id}"))
+        return self._reading(self._device(lambda: ax.voltage, f"getv {ax.id}"), f"getv {ax.id}", VOLTAGE_RANGE, "V")
+
+    def _reading(self, answer: object, what: str, bounds: tuple[float, float], unit: str) -> float:
+        """A number the console answered ``what`` with, in ``bounds``; :class:`DeviceError` naming it if not."""
+        try:
+            value = float(answer)  # type: ignore[arg-type]  # pymeasure hands back what it parsed, or the text
+        except (TypeError, ValueError, OverflowError):
+            value = math.nan
+        lo, hi = bounds
+        if not lo <= value <= hi:  # NaN fails too
+            raise DeviceError(
+                f"ANC300 on {self.transport.name} answered {what!r} with {answer!r}: "
+                f"not a number in {lo:g}..{hi:g} {unit}"
+            )
+        return value
 
     # -- motion ---------------------------------------------------------------------------
     def step(self, joint: int, n: int) -> None:
