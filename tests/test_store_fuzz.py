@@ -88,3 +88,60 @@ def test_a_kept_position_outside_its_joints_range_is_uncertain_not_shown_as_know
     assert "inf" not in r.stdout and "286" not in r.stdout
     moved = invoke(["move", "-c", kit["cal"], "-j", "2", "--to", "-100deg", "--db", db])
     error_line(moved, "joint 2's position is uncertain")
+
+
+# -- a full disk at any point of a sequence of writes ------------------------------------------------------------
+
+
+def _filled(tmp_path, rows):
+    db = tmp_path / "full.db"
+    with Store.open(db) as st:
+        st.add_traverses(rows, device="sim://", how="imported")
+        st.set_state("sim://", "note", {"kept": 0})
+    return db
+
+
+@pytest.mark.slow
+@settings(HOSTILE, max_examples=12)
+@given(room=st.integers(0, 12), writes=st.lists(st.sampled_from(["one", "many", "state", "big state"]), min_size=1,
+                                                 max_size=6))
+def test_a_write_that_finds_the_disk_full_never_loses_what_was_there(tmp_path, monkeypatch, room, writes):
+    """The file may grow by ``room`` pages (SQLite's ``max_page_count``: "database or disk is full") while ``writes``
+    run: each is stored whole or refused in one line; the rows and state stored before stay, the file checks ok."""
+    from synth import paper_table
+
+    import stickslip.storage.sqlite as backend
+
+    rows = paper_table()
+    db = _filled(fresh(tmp_path), rows)
+    opened = backend._connect
+
+    def tight(path):
+        con = opened(path)
+        pages = con.execute("PRAGMA page_count").fetchone()[0]
+        con.execute(f"PRAGMA max_page_count = {pages + room}")
+        return con
+
+    expect_rows, expect_state = len(rows), {"kept": 0}
+    with monkeypatch.context() as m:
+        m.setattr(backend, "_connect", tight)
+        with Store.open(db) as store:
+            for i, what in enumerate(writes):
+                value = {"kept": i + 1, "pad": "x" * (20000 if what == "big state" else 10)}
+                try:
+                    if what == "one":
+                        store.add_traverse(rows[i % len(rows)], device="sim://")
+                    elif what == "many":
+                        store.add_traverses(rows * 3, device="sim://", how="imported")
+                    else:
+                        store.set_state("sim://", "note", value)
+                except StoreError as e:
+                    text = str(e)
+                    assert "\n" not in text and str(db) in text and "nothing of this change was stored" in text, text
+                    continue
+                expect_rows += {"one": 1, "many": 3 * len(rows)}.get(what, 0)
+                expect_state = value if "state" in what else expect_state
+    with Store.open(db) as store:
+        assert store.integrity_check() == "ok"
+        assert store.count_traverses() == expect_rows
+        assert store.get_state("sim://", "note") == expect_state
