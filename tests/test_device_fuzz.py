@@ -19,6 +19,7 @@ within about 3 s of CPU (the waits are the drivers' own short timeouts, asleep).
 from __future__ import annotations
 
 import collections
+import re
 from collections.abc import Callable
 from typing import Any
 
@@ -211,3 +212,27 @@ def test_anc300_a_frequency_answer_that_is_no_frequency_is_refused_naming_it(spo
     assert truth(2) == 0
     assert "getf 2" in str(e.value) and "not a number in 1..10000 Hz" in str(e.value)
     assert not isinstance(e.value, StepsUncertain) or e.value.made == 0
+
+
+@pytest.mark.parametrize(
+    ("url", "words"),
+    [
+        ("anc300://127.0.0.1:9?timeout=inf", "timeout must be a number in 0.001..3600 s"),  # was OverflowError
+        ("anc300://127.0.0.1:9?timeout=1e300", "timeout must be a number in 0.001..3600 s"),
+        ("anc300://127.0.0.1:9?delay=inf", "delay must be a number in 0..10 s"),
+        ("anc300://127.0.0.1:9?baud=x", "baud must be an integer"),  # was "invalid literal for int()"
+        ("mm3a+socket://127.0.0.1:9?timeout=inf", "timeout must be a number in 0.001..3600 s"),  # was OverflowError
+        ("mm3a+socket://127.0.0.1:9?profile=x", "profile (the scratch speed profile) must be an integer in 1..6"),
+        ("mm3a+socket://127.0.0.1:9?margin=nan", "margin must be a number in 0.001..10 s"),
+        ("mm3a:///dev/null?baud=0", "baud must be an integer in 50..921600"),
+    ],
+)
+def test_a_urls_timeout_delay_or_baud_out_of_range_is_refused_naming_it(url: str, words: str) -> None:
+    from test_hostile import error_line, invoke  # noqa: PLC0415 - the command line's one-line check
+
+    pytest.importorskip("pymeasure")
+    from stickslip.devices import open_device  # noqa: PLC0415
+
+    with pytest.raises(ValueError, match=re.escape(words)):
+        open_device(url)
+    error_line(invoke(["where", "--device", url]), words)

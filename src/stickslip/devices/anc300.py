@@ -40,6 +40,8 @@ from typing import Any, TypeVar
 from urllib.parse import unquote, urlsplit
 
 from .base import (
+    URL_BAUD,
+    URL_TIMEOUT_S,
     DeviceError,
     DeviceInfo,
     RedactSecrets,
@@ -396,12 +398,9 @@ def open_url(url: str) -> ANC300:
     """
     parts = urlsplit(url)
     opts = url_options(url, {"password", "axes", "timeout", "delay", "baud"})
-    try:
-        timeout = float(opts.get("timeout", 2.0))
-        delay = float(opts.get("delay", 0.05))
-        baud = int(opts.get("baud", 38400))
-    except ValueError as e:
-        raise ValueError(f"bad option in {redact_url(url)!r}: {e}") from None
+    timeout = check_setting("timeout", opts.get("timeout", 2.0), *URL_TIMEOUT_S, "s")
+    delay = check_setting("delay", opts.get("delay", 0.05), 0.0, 10.0, "s")
+    baud = int(check_setting("baud", opts.get("baud", 38400), *URL_BAUD, integer=True))
     axes = _parse_axes(opts.get("axes", "1,2,3"))
     password = unquote(opts.get("password") or secret_from_env(PASSWORD_ENV) or DEFAULT_PASSWORD)
     if parts.hostname:
