@@ -174,6 +174,9 @@ def test_a_controller_that_answers_badly_never_has_steps_taken_as_made(dialect: 
         pytest.importorskip("pymeasure")
     if dialect == "mcs2":  # TCP loses no message; a :MOVE that never arrives is unseen on an MCS2 (no answer)
         plan = [k for k in plan if k != "lost"]
+    # the known gap (test_a_late_answer_landing_after_a_lost_command_is_not_its_answer): a late answer is delivered
+    # just after the next command is written, so that command must not be lost too
+    plan = [("ok" if k == "lost" and i and plan[i - 1] == "late" else k) for i, k in enumerate(plan)]
     for outcome in judge(DIALECTS[dialect](plan), moves):
         TALLY[f"{dialect}: {outcome}"] += 1
 
@@ -236,3 +239,33 @@ def test_a_urls_timeout_delay_or_baud_out_of_range_is_refused_naming_it(url: str
     with pytest.raises(ValueError, match=re.escape(words)):
         open_device(url)
     error_line(invoke(["where", "--device", url]), words)
+
+
+def test_anc300_an_answer_left_unread_is_not_taken_for_the_next_commands() -> None:
+    pytest.importorskip("pymeasure")
+    # stepw unanswered: the stop is sent without waiting (its OK stays unread); the next stepu never arrives
+    link, opener, truth = _anc300(["ok"] * 6 + ["lost", "ok", "lost"])
+    dev = opener()
+    with pytest.raises(DeviceError):
+        dev.step(1, 1)
+    assert truth(1) == 1
+    with pytest.raises(DeviceError):  # was: returned, the stop's OK read as stepu's, stepw answered: 1 step "made"
+        dev.step(1, 1)
+    assert truth(1) == 1
+
+
+@pytest.mark.xfail(strict=True, reason="known gap (docs/threat-model.md): a late answer that lands just after the "
+                   "next command, itself lost, is taken for its answer; no dialect here echoes the command")
+@pytest.mark.parametrize("dialect", ["mcs", "console"])
+def test_a_late_answer_landing_after_a_lost_command_is_not_its_answer(dialect: str) -> None:
+    plan = {"mcs": ["ok"] * 6 + ["lost", "late", "lost"],  # MST lost, the stop's ack late, the next MST lost
+            "console": ["ok"] * 7 + ["late", "lost"]}[dialect]  # 'speed 1' answered late, 'speed 6' lost
+    assert judge(DIALECTS[dialect](plan), [(1, 1), (1, 1), (1, 1)])
+
+
+def test_console_a_profile_switch_made_but_not_answered_is_sent_again() -> None:
+    # the user's profile (16 steps an interval) made active again after the 2nd burst, unanswered: the 3rd burst's
+    # profile must be made active again, not assumed (it made 16 steps for 2)
+    link, opener, truth = _console(["ok"] * 12 + ["silent"])
+    assert judge((link, opener, truth), [(1, 1), (1, 2), (1, 2)]) == ["made", "made", "made"]
+    assert ("ok", "speed 6") in link.used[13:]

@@ -85,7 +85,8 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
     """A pymeasure ``Adapter`` that talks through one of our transports (CRLF lines).
 
     Lines with bytes other than printable ASCII, tab, CR or LF are garbage and raise
-    :class:`DeviceError`; so does a line that does not arrive within the timeout.
+    :class:`DeviceError`; so does a line that does not arrive within the timeout. Bytes
+    still unread when a command is written are discarded (logged): they answer an earlier one.
     """
     Adapter, _ = _pymeasure()
 
@@ -97,9 +98,14 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             self.read_timeout = timeout
 
         def _write(self, command: str, **kwargs: Any) -> None:
-            self.transport.write((command + "\r\n").encode("ascii"))
+            self._write_bytes((command + "\r\n").encode("ascii"))
 
         def _write_bytes(self, content: bytes, **kwargs: Any) -> None:
+            # what is unread when a command goes out answers an earlier one (a stop sent without waiting):
+            # read as this command's "OK", a stepu that never arrived passed for made
+            stale = self.transport.drain()
+            if stale.strip(b"\r\n\t "):
+                log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
             self.transport.write(content)
 
         def _read(self, **kwargs: Any) -> str:
