@@ -144,10 +144,13 @@ def test_a_rig_room_in_any_order_keeps_the_arm_in_its_envelope(rig_client, seque
 
 
 @pytest.mark.parametrize("partial", [0.5, 0.0])
-def test_a_manipulator_that_fails_on_its_first_command_leaves_the_joint_uncertain(tmp_path: Path, partial) -> None:
-    import faults
+def test_a_manipulator_that_fails_on_its_first_command_leaves_the_joint_uncertain(tmp_path: Path, monkeypatch,
+                                                                                    partial) -> None:
+    from faults import FaultyController
 
-    faults.install()
+    from stickslip.devices.base import BACKENDS
+
+    monkeypatch.setitem(BACKENDS, "faulty", FaultyController)  # for this test only: other tests refuse faulty://
     url = f"faulty://first?drop_after=0&partial={partial}"
     cal = tmp_path / "cal.json"
     calibration = true_calibration("sim://?realtime=0")
