@@ -404,9 +404,9 @@ def test_mcs_any_answer_to_a_burst_is_a_success_or_a_bounded_uncertainty(reply: 
     except StepsUncertain as e:
         assert e.made == 0 and e.at_most in (0, 1)
         assert "\n" not in str(e) and "SmarAct MCS on fuzz" in str(e)
-        if e.at_most == 0:  # refused: an error code from the channel or the system (-1), named
+        if e.at_most == 0:  # refused: a known error code from the channel or the system (-1), named
             code = int(re.match(rb"\s*:E(?:2|-1),(-?\d+)", reply).group(1))  # type: ignore[union-attr]
-            assert f"error {code} ({ERRORS.get(code, 'unknown error')})" in str(e)
+            assert f"error {code} ({ERRORS[code]})" in str(e)
     else:
         assert re.fullmatch(rb"\s*:E(2|-1),0\s*\n(.|\n)*", reply)
 

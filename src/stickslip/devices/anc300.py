@@ -33,12 +33,15 @@ included. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
 from urllib.parse import unquote, urlsplit
 
 from .base import (
+    URL_BAUD,
+    URL_TIMEOUT_S,
     DeviceError,
     DeviceInfo,
     RedactSecrets,
@@ -82,7 +85,8 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
     """A pymeasure ``Adapter`` that talks through one of our transports (CRLF lines).
 
     Lines with bytes other than printable ASCII, tab, CR or LF are garbage and raise
-    :class:`DeviceError`; so does a line that does not arrive within the timeout.
+    :class:`DeviceError`; so does a line that does not arrive within the timeout. Bytes
+    still unread when a command is written are discarded (logged): they answer an earlier one.
     """
     Adapter, _ = _pymeasure()
 
@@ -94,9 +98,14 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             self.read_timeout = timeout
 
         def _write(self, command: str, **kwargs: Any) -> None:
-            self.transport.write((command + "\r\n").encode("ascii"))
+            self._write_bytes((command + "\r\n").encode("ascii"))
 
         def _write_bytes(self, content: bytes, **kwargs: Any) -> None:
+            # what is unread when a command goes out answers an earlier one (a stop sent without waiting):
+            # read as this command's "OK", a stepu that never arrived passed for made
+            stale = self.transport.drain()
+            if stale.strip(b"\r\n\t "):
+                log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
             self.transport.write(content)
 
         def _read(self, **kwargs: Any) -> str:
@@ -203,8 +212,9 @@ class ANC300:
             return call()
         except DeviceError as e:
             raise DeviceError(f"ANC300 on {self.transport.name}, {what!r}: {e}") from None
-        except ValueError as e:  # pymeasure: "Error after previous command with message ..."
-            raise DeviceError(f"ANC300 on {self.transport.name} refused {what!r}: {e}") from None
+        except ValueError as e:  # pymeasure: "Error after previous command with message ..." (the console's lines)
+            said = " / ".join(line.strip() for line in str(e).splitlines() if line.strip())
+            raise DeviceError(f"ANC300 on {self.transport.name} refused {what!r}: {said}") from None
 
     @contextmanager
     def _read_timeout(self, seconds: float) -> Iterator[None]:
@@ -227,7 +237,8 @@ class ANC300:
         """The stepping frequency of ``joint``, Hz (``getf``, cached after the first read)."""
         ax = self._axis(joint)
         if self._hz[int(joint)] is None:
-            self._hz[int(joint)] = float(self._device(lambda: ax.frequency, f"getf {ax.id}"))
+            answer = self._device(lambda: ax.frequency, f"getf {ax.id}")
+            self._hz[int(joint)] = self._reading(answer, f"getf {ax.id}", FREQUENCY_RANGE, "Hz")
         hz = self._hz[int(joint)]
         assert hz is not None  # read from the controller just above
         return float(hz)
@@ -242,7 +253,21 @@ class ANC300:
     def voltage(self, joint: int) -> float:
         """The step amplitude of ``joint``, V (``getv``)."""
         ax = self._axis(joint)
-        return float(self._device(lambda: ax.voltage, f"getv {ax.id}"))
+        return self._reading(self._device(lambda: ax.voltage, f"getv {ax.id}"), f"getv {ax.id}", VOLTAGE_RANGE, "V")
+
+    def _reading(self, answer: object, what: str, bounds: tuple[float, float], unit: str) -> float:
+        """A number the console answered ``what`` with, in ``bounds``; :class:`DeviceError` naming it if not."""
+        try:
+            value = float(answer)  # type: ignore[arg-type]  # pymeasure hands back what it parsed, or the text
+        except (TypeError, ValueError, OverflowError):
+            value = math.nan
+        lo, hi = bounds
+        if not lo <= value <= hi:  # NaN fails too
+            raise DeviceError(
+                f"ANC300 on {self.transport.name} answered {what!r} with {answer!r}: "
+                f"not a number in {lo:g}..{hi:g} {unit}"
+            )
+        return value
 
     # -- motion ---------------------------------------------------------------------------
     def step(self, joint: int, n: int) -> None:
@@ -379,12 +404,9 @@ def open_url(url: str) -> ANC300:
     """
     parts = urlsplit(url)
     opts = url_options(url, {"password", "axes", "timeout", "delay", "baud"})
-    try:
-        timeout = float(opts.get("timeout", 2.0))
-        delay = float(opts.get("delay", 0.05))
-        baud = int(opts.get("baud", 38400))
-    except ValueError as e:
-        raise ValueError(f"bad option in {redact_url(url)!r}: {e}") from None
+    timeout = check_setting("timeout", opts.get("timeout", 2.0), *URL_TIMEOUT_S, "s")
+    delay = check_setting("delay", opts.get("delay", 0.05), 0.0, 10.0, "s")
+    baud = int(check_setting("baud", opts.get("baud", 38400), *URL_BAUD, integer=True))
     axes = _parse_axes(opts.get("axes", "1,2,3"))
     password = unquote(opts.get("password") or secret_from_env(PASSWORD_ENV) or DEFAULT_PASSWORD)
     if parts.hostname:

@@ -53,7 +53,15 @@ __all__ = [
     "RedactSecrets",
     "RedactText",
     "SECRET_OPTIONS",
+    "URL_TIMEOUT_S",
+    "URL_BAUD",
 ]
+
+URL_TIMEOUT_S = (0.001, 3600.0)
+"""A device URL's ``timeout`` option, s: below 1 ms nothing answers; beyond an hour a fault is a hang (and ``inf``
+overflowed the socket's own timeout)."""
+URL_BAUD = (50, 921_600)
+"""A device URL's ``baud`` option, an integer: the slowest and fastest rates serial adapters offer."""
 
 SECRET_OPTIONS = frozenset({"password", "passwd", "pw", "pass", "secret", "token"})
 """URL query options whose values are secrets: never stored, logged, printed or echoed."""

@@ -252,23 +252,69 @@ def load_state(store: StateStore, device: str, joints: JointSet | None = None) -
         raw = loads_json(raw, f"the stored positions of {device}")
     check_version(raw, f"the stored positions of {device}", "device state", STATE_VERSION)
     try:
-        for j, q in raw.get("positions", {}).items():
-            state.positions[int(j)] = float(q)
-        for j, s in raw.get("sources", {}).items():
-            state.sources[int(j)] = str(s)
-        state.theta = float(raw.get("theta", 0.0))
-        state.psi = float(raw.get("psi", 0.0))
-        for j, (lo, hi) in (raw.get("uncertain") or {}).items():
-            state.uncertain[int(j)] = (float(lo), float(hi))
-        for j, w in (raw.get("why") or {}).items():
-            state.why[int(j)] = str(w)
-        for j, t in (raw.get("track") or {}).items():
-            if not isinstance(t, dict):
-                raise ValueError(f"track of joint {j} is not an object")
-            state.track[int(j)] = t
-    except (TypeError, ValueError, AttributeError) as e:
+        _read_state(state, raw)
+    except (TypeError, ValueError, AttributeError, OverflowError) as e:
         raise ValueError(f"the stored positions of {device} are unreadable: {e}") from None
     return state
+
+
+def _read_state(state: DeviceState, raw: Any) -> None:
+    """Fill ``state`` from its stored JSON; ``ValueError`` naming the entry that is not what it must be.
+
+    A finite position outside its joint's range (kept by another arm's rig file, or written by hand) is not
+    used as if it were known: the joint is uncertain over its whole range until it is referenced again.
+    """
+    if not isinstance(raw, dict):
+        raise ValueError("not an object")
+    for j, q in _entries(raw, "positions"):
+        state.positions[_stored_joint(state, j)] = _stored_number(q, f"q{j}")
+    for j, src in _entries(raw, "sources"):
+        state.sources[_stored_joint(state, j)] = str(src)
+    state.set_tilt(_stored_number(raw.get("theta", 0.0), "theta"), _stored_number(raw.get("psi", 0.0), "psi"))
+    for j, b in _entries(raw, "uncertain"):
+        if not isinstance(b, list) or len(b) != 2:
+            raise ValueError(f"the uncertain bounds of joint {j} are {b!r}, not a pair of numbers")
+        state.uncertain[_stored_joint(state, j)] = (_stored_number(b[0], f"q{j}"), _stored_number(b[1], f"q{j}"))
+    for j, w in _entries(raw, "why"):
+        state.why[_stored_joint(state, j)] = str(w)
+    for j, t in _entries(raw, "track"):
+        if not isinstance(t, dict):
+            raise ValueError(f"track of joint {j} is not an object")
+        state.track[_stored_joint(state, j)] = t
+    for joint in sorted(state.positions):
+        spec = state.spec(joint)
+        for q in (state.positions[joint], *state.uncertain.get(joint, ())):
+            problem = spec.range_problem(f"q{joint}", q)
+            if problem:
+                state.positions[joint] = min(max(state.positions[joint], spec.lower), spec.upper)
+                state.mark_uncertain(joint, spec.lower, spec.upper, f"the stored {problem}")
+                break
+
+
+def _entries(raw: dict[str, Any], name: str) -> list[tuple[str, Any]]:
+    """The ``(joint, value)`` pairs of the object ``raw[name]`` (none if it is missing or null)."""
+    value = raw.get(name) or {}
+    if not isinstance(value, dict):
+        raise ValueError(f"{name} is {type(value).__name__}, not an object")
+    return list(value.items())
+
+
+def _stored_joint(state: DeviceState, key: str) -> int:
+    if not (str(key).isascii() and str(key).isdigit()):
+        raise ValueError(f"{key!r} is not a joint number")
+    return state.spec(int(key)).number
+
+
+def _stored_number(value: Any, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f"{name} is {value!r}, not a number")
+    try:
+        v = float(value)
+    except OverflowError:
+        v = math.inf
+    if not math.isfinite(v):
+        raise ValueError(f"{name} is {value!r}, not a finite number")
+    return v
 
 
 def save_state(store: StateStore, state: DeviceState) -> None:

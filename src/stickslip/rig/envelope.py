@@ -58,6 +58,7 @@ from ..kinematics import Geometry, tip_sd
 from .model import Arm, Box, Cylinder, HalfSpace, Rig
 
 __all__ = [
+    "SIGMA_MAX",
     "TOLERANCE",
     "EnvelopeViolation",
     "Refusal",
@@ -71,6 +72,10 @@ __all__ = [
 
 TOLERANCE = 1e-7
 """Shortest stretch of path (m of the arm's largest motion) the check cuts a path into: 0.1 µm."""
+
+SIGMA_MAX = 1e3
+"""Largest joint position σ a path is checked with, rad or m: any larger is no position's σ (and its square would
+overflow a float)."""
 
 _GOLDEN_STEPS = 40  # 0.618**40 ~ 4e-9 of a segment's length: nm for a link of tens of mm
 _SPLIT = 8
@@ -324,10 +329,21 @@ class SigmaGrowth:
     last_pose: tuple[tuple[float, float, float] | None, ...] = (None, None, None)
     bumped: tuple[bool, ...] = (False, False, False)
 
+    def __post_init__(self) -> None:
+        numbers = {"P": self.P, "step": self.step, "step_noise": self.step_noise, "scale_walk": self.scale_walk,
+                   "sigma_model": self.sigma_model, "correlation": self.correlation}
+        for name, value in numbers.items():  # a NaN σ would read as none, an infinite one as clear everywhere
+            if not np.all(np.isfinite(np.asarray(value, dtype=float))):
+                raise ValueError(f"the σ model's {name} must be finite, got {value!r}")
+
     @classmethod
     def constant(cls, q_sd: ArrayLike) -> SigmaGrowth:
-        """No growth: the σ ``q_sd`` (rad, rad, m) all along."""
-        sd = np.asarray(q_sd, dtype=float).reshape(3)
+        """No growth: the σ ``q_sd`` (rad, rad, m) all along; ``ValueError`` unless three finite numbers >= 0."""
+        sd = np.asarray(q_sd, dtype=float)
+        if sd.shape != (3,) or not np.all(np.isfinite(sd)) or np.any(sd < 0) or np.any(sd > SIGMA_MAX):
+            raise ValueError(
+                f"the joints' position σ must be three numbers in 0..{SIGMA_MAX:g} (rad, rad, m), got {q_sd!r}"
+            )
         z = (0.0, 0.0, 0.0)
         return cls(tuple(((float(v) ** 2, 0.0, 0.0), z, z) for v in sd), (1.0, 1.0, 1.0))
 

@@ -149,7 +149,14 @@ def check_database_file(path: Path, looks: int = 50) -> str:
 _DAMAGED = ("SQLITE_CORRUPT", "SQLITE_NOTADB")
 
 
-def _damaged(e: sqlite3.DatabaseError) -> bool:
+_UNREADABLE = (sqlite3.DatabaseError, UnicodeDecodeError)
+"""What reading a file can raise: SQLite's errors, and bytes that are not UTF-8 where text is kept (a damaged
+schema, whose text SQLite quotes in its error message, or a damaged text value)."""
+
+
+def _damaged(e: sqlite3.DatabaseError | UnicodeDecodeError) -> bool:
+    if isinstance(e, UnicodeDecodeError) or "Could not decode to UTF-8" in str(e):
+        return True
     name = str(getattr(e, "sqlite_errorname", "") or "")
     text = str(e)
     return name.startswith(_DAMAGED) or "malformed" in text or "not a database" in text
@@ -158,32 +165,32 @@ def _damaged(e: sqlite3.DatabaseError) -> bool:
 class _Cursor(sqlite3.Cursor):
     """A cursor whose reads turn a damaged file (``database disk image is malformed``) into :class:`StoreError`."""
 
-    def _problem(self, e: sqlite3.DatabaseError) -> BaseException:
+    def _problem(self, e: sqlite3.DatabaseError | UnicodeDecodeError) -> BaseException:
         con = self.connection
         return con._problem(e) if isinstance(con, _Connection) else e
 
     def fetchone(self) -> Any:
         try:
             return super().fetchone()
-        except sqlite3.DatabaseError as e:
+        except _UNREADABLE as e:
             raise self._problem(e) from None
 
     def fetchmany(self, size: int | None = None) -> list[Any]:
         try:
             return super().fetchmany(self.arraysize if size is None else size)
-        except sqlite3.DatabaseError as e:
+        except _UNREADABLE as e:
             raise self._problem(e) from None
 
     def fetchall(self) -> list[Any]:
         try:
             return super().fetchall()
-        except sqlite3.DatabaseError as e:
+        except _UNREADABLE as e:
             raise self._problem(e) from None
 
     def __next__(self) -> Any:
         try:
             return super().__next__()
-        except sqlite3.DatabaseError as e:
+        except _UNREADABLE as e:
             raise self._problem(e) from None
 
 
@@ -192,13 +199,14 @@ class _Connection(sqlite3.Connection):
 
     path: Path = Path()
 
-    def _problem(self, e: sqlite3.DatabaseError) -> BaseException:
+    def _problem(self, e: sqlite3.DatabaseError | UnicodeDecodeError) -> BaseException:
         if isinstance(e, sqlite3.IntegrityError):
             return ConstraintError(f"the database refused the value: {e}; nothing of this change was stored")
         if not _damaged(e):
             return e
+        why = "text that is not UTF-8" if isinstance(e, UnicodeDecodeError) else str(e)
         return StoreError(
-            f"the database {self.path} is damaged ({e}); nothing was changed: restore it from a backup, "
+            f"the database {self.path} is damaged ({why}); nothing was changed: restore it from a backup, "
             f"or see what `sqlite3 {self.path} .recover` can save"
         )
 
@@ -209,7 +217,7 @@ class _Connection(sqlite3.Connection):
         cur = self.cursor()  # sqlite3's own execute makes a plain cursor, whose reads we could not watch
         try:
             return cur.execute(sql, parameters)
-        except sqlite3.DatabaseError as e:
+        except _UNREADABLE as e:
             raise self._problem(e) from None
         except OverflowError as e:  # an integer past 64 bits: as PostgreSQL's "out of range"
             raise ConstraintError(f"the database refused the value: {e}; nothing of this change was stored") from None
@@ -218,7 +226,7 @@ class _Connection(sqlite3.Connection):
         cur = self.cursor()
         try:
             return cur.executemany(sql, parameters)
-        except sqlite3.DatabaseError as e:
+        except _UNREADABLE as e:
             raise self._problem(e) from None
         except OverflowError as e:
             raise ConstraintError(f"the database refused the value: {e}; nothing of this change was stored") from None

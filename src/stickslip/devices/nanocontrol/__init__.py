@@ -38,7 +38,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
-from ..base import DeviceError, url_options
+from ..base import URL_BAUD, URL_TIMEOUT_S, DeviceError, check_setting, url_options
 from ..transport import SerialTransport, SocketTransport, Transport
 from ._common import DEFAULT_CHANNELS, check_channels, log, parse_console_reply
 from .console import CONSOLE_BAUD, FREQUENCY_RANGE_HZ, MAX_BURST, PROFILES, NanoControlConsole, split_burst
@@ -233,23 +233,13 @@ def _url_settings(url: str) -> _UrlSettings:
         if dialect == "console":
             raise ValueError("ack=0 is a legacy-dialect option: the console always answers")
         dialect = "legacy"  # nothing answers, so nothing can be detected
-    try:
-        timeout = float(opts.get("timeout", 2.0))
-        baud = int(opts["baud"]) if "baud" in opts else None
-        hz_text = opts.get("hz")
-        profile = int(opts.get("profile", 6))
-        margin = float(opts.get("margin", 0.05))
-    except ValueError as e:
-        raise ValueError(f"bad option in {url!r}: {e}") from None
-    if not timeout > 0:
-        raise ValueError(f"timeout must be > 0 s, got {opts.get('timeout')!r}")
-    if baud is not None and baud <= 0:
-        raise ValueError(f"baud must be a positive integer, got {baud}")
+    timeout = check_setting("timeout", opts.get("timeout", 2.0), *URL_TIMEOUT_S, "s")
+    baud = int(check_setting("baud", opts["baud"], *URL_BAUD, integer=True)) if "baud" in opts else None
+    hz_text = opts.get("hz")
+    profile = int(check_setting("profile (the scratch speed profile)", opts.get("profile", 6), min(PROFILES),
+                                max(PROFILES), integer=True))
+    margin = check_setting("margin", opts.get("margin", 0.05), 1e-3, 10.0, "s")
     fwc = _fine_with_coarse(opts["finewithcoarse"]) if "finewithcoarse" in opts else None
-    if profile not in PROFILES:
-        raise ValueError(f"profile (the scratch speed profile) must be an integer in 1..6, got {profile}")
-    if not 1e-3 <= margin <= 10.0:
-        raise ValueError(f"margin must be in 0.001..10 s, got {margin!r}")
     if dialect == "console":
         _console_hz(hz_text)  # refuse a bad frequency before opening the port
     channels = check_channels({i + 1: c for i, c in enumerate(opts.get("channels", "ABC"))})

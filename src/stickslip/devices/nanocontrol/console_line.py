@@ -149,6 +149,7 @@ class SpeedProfiles(ConsoleLine):
 
     def _activate(self, number: int) -> None:
         if self._active != number:
+            self._active = None  # unknown until answered: a switch made but not answered must be sent again
             self.command(f"speed {number}")
             self._active = number
 
@@ -161,6 +162,7 @@ class SpeedProfiles(ConsoleLine):
         if new != self._scratch_values or self._active != self.scratch:
             if new != self._scratch_values:
                 self._profile_dirty = True
+                self._scratch_values = None  # unknown until answered (written or not), so written again next time
                 self.command(f"speed {self.scratch} " + " ".join(new))
                 self._scratch_values = new
             self._active = None  # written: activate it again (assumption, see docstring)
@@ -171,6 +173,7 @@ class SpeedProfiles(ConsoleLine):
         if self.user_profile is None or self.user_values is None:
             return
         if self.user_profile == self.scratch and self._scratch_values != self.user_values:
+            self._scratch_values = None
             self.command(f"speed {self.scratch} " + " ".join(self.user_values))
             self._scratch_values = self.user_values
             self._active = None

@@ -140,10 +140,11 @@ class SmarActMCS(SmarActBase):
         Raises
         ------
         Refused
-            On an ``:E<channel>,<code>`` answer with a code other than 0, naming the code
+            On an ``:E<channel>,<code>`` answer with a code of :data:`ERRORS`, naming the code
             (if ``channel`` is given: only from that channel or the system, ``-1``).
         DeviceError
-            On an error answer from another channel than ``channel`` (not this command's).
+            On an error answer from another channel than ``channel`` (not this command's), or
+            with a code not in :data:`ERRORS` (it may not be a refusal: the command may have run).
             On no complete answer within ``timeout`` (default :attr:`timeout`) or garbage;
             the message names the command and the port.
         """
@@ -170,9 +171,14 @@ class SmarActMCS(SmarActBase):
                     if channel is not None and source not in (channel, -1):
                         raise DeviceError(f"{self._where()}: unexpected reply {raw!r} to {text!r}")
                     where = "the system" if source == -1 else f"channel {source}"
+                    if code not in ERRORS:  # not a refusal we can read: whether it was carried out is unknown
+                        raise DeviceError(
+                            f"{self._where()} answered {text!r} with error {code} on {where}, a code this "
+                            "driver does not know: whether the command was carried out is not known"
+                        )
                     raise Refused(
                         f"{self._where()} refused {text!r}: error {code} "
-                        f"({ERRORS.get(code, 'unknown error')}) on {where}"
+                        f"({ERRORS[code]}) on {where}"
                     )
             return name, rest
 

@@ -154,12 +154,17 @@ class SmarActMCS2(SmarActBase):
             count = self.query_int(":SYST:ERR:COUN?")
             if count < 0:
                 raise DeviceError(f"{self._where()}: garbage reply {count!r} to ':SYST:ERR:COUN?'")
-            out = []
+            out: list[tuple[int, str]] = []
             for _ in range(min(count, _MAX_READ_ERRORS)):
                 answer = self.query(":SYST:ERR?")
                 m = _ERROR.fullmatch(answer)
                 if m is None:
                     raise DeviceError(f"{self._where()}: garbage reply {answer!r} to ':SYST:ERR?'")
+                if int(m.group(1)) == 0:  # "no error": the queue is empty, so the count was not its length
+                    raise DeviceError(
+                        f"{self._where()}: ':SYST:ERR:COUN?' answered {count} but error {len(out) + 1} of the "
+                        f"queue reads {answer!r} (no error): the count cannot be trusted"
+                    )
                 out.append((int(m.group(1)), (m.group(2) or "no text").strip()))
             if count > _MAX_READ_ERRORS:
                 out.append((0, f"{count - _MAX_READ_ERRORS} more error(s) not read"))
