@@ -153,8 +153,14 @@ def test_a_tuning_made_at_another_step_rate_is_warned_about_before_the_joint_mov
     other = tmp_path / "t1300.json"
     other.write_text(json.dumps({**tuned, "step_rate_hz": 1300.0}))
     r = runner.invoke(app, [*args, "--tuning", str(other)])
-    assert r.exit_code == 0, r.output
     assert "warning: joint 3 steps at 1000 Hz, -23 % from the 1300 Hz this tuning was made at" in r.stderr
+    # off the tuning's rate the simulator's stop is doubted: its lines go out of step at the stop (+15.5 dB out
+    # of phase), which the lines-out-of-step rule reads as sound added (ClockedParams.model_in_step): refused,
+    # nothing written, with the reason and the remedy
+    assert r.exit_code == 2 and r.stdout == "", r.output
+    line = r.stderr.strip().splitlines()[-1]
+    assert line.startswith("error: joint 3: the stop was heard at") and "not in step" in line, line
+    assert line.endswith("a tuning recorded at 1000 Hz (stickslip tune) judges this rate's stops on its own"), line
 
 
 @pytest.mark.slow
@@ -164,18 +170,20 @@ def test_the_library_traverse_warns_through_python_warnings_or_a_callback_before
     from stickslip.audio.detector import Tuning
     from stickslip.kinematics import Pose
     from stickslip.procedures.session import StepRateWarning, traverse_on_device
+    from stickslip.procedures.traverse import TraverseError
 
     other = dataclasses.replace(Tuning.load(tuning3), step_rate_hz=1300.0)
     pose = Pose(0.0, 0.0, 0.0, -math.pi / 2, 0.0)
     sim = SimulatedMM3A(seed=4, day="2026-11-20")
     heard: list[tuple[str, float]] = []
-    r = traverse_on_device(
-        sim, 3, "-", pose, "2026-11-20", other, progress=False, on_warning=lambda m: heard.append((m, sim.clock_s))
-    )
+    with pytest.raises(TraverseError, match="not in step"):  # the stop doubted off the rate (the test above)
+        traverse_on_device(
+            sim, 3, "-", pose, "2026-11-20", other, progress=False, on_warning=lambda m: heard.append((m, sim.clock_s))
+        )
     assert [m for m, _ in heard] == [
         "joint 3 steps at 1000 Hz, -23 % from the 1300 Hz this tuning was made at: a stop can be missed or heard "
         "late (a count too high); tune at this rate (stickslip record, then stickslip tune)"
     ]
-    assert heard[0][1] == 0.0 and r.steps > 0  # said before the simulated clock moved
-    with pytest.warns(StepRateWarning, match="-23 % from the 1300 Hz"):
+    assert heard[0][1] == 0.0 and sim.clock_s > 0  # said before the simulated clock moved
+    with pytest.warns(StepRateWarning, match="-23 % from the 1300 Hz"), pytest.raises(TraverseError):
         traverse_on_device(SimulatedMM3A(seed=4, day="2026-11-20"), 3, "-", pose, "2026-11-20", other, progress=False)

@@ -541,9 +541,9 @@ class _Run:
         if event.onset_uncertain:  # heard as the switch passed interference by: when did it begin?
             raise TraverseError(
                 f"joint {self.joint}: the stop was heard at {event.detected_at_s:.2f} s as the limit switch passed "
-                "by a sound that did not persist (interference near the stop), so when the stop began is uncertain; "
-                "nothing recorded: keep talk and other sounds away from the arm and measure again"
-                + _rate_hint(self.listener.detector, self.hz)
+                "by a sound that did not persist (interference near the stop), so when the stop began is uncertain"
+                f"{_doubt(self.listener.detector, event)}; nothing recorded: keep talk and other sounds away from the "
+                "arm and measure again" + _rate_hint(self.listener.detector, self.hz)
             )
         detected = float(event.detected_at_s)
         t_stop = {"onset": float(event.onset_s), "fixed": detected - float(self.listener.detector.latency_s)}.get(
@@ -578,6 +578,14 @@ class _Run:
             confirmed_at_s=event.confirmed_at_s,
             unconfirmed=tuple(t for t in self.listener.unconfirmed if t >= t_start),
         )
+
+
+def _doubt(detector: StopDetector, event: StopEvent) -> str:
+    """Why the detector doubted ``event``'s onset, as its log says (``" (lines 0.58 in phase ...)"``), or ``""``
+    where it keeps no log (:attr:`stickslip.audio.confirm.detector.ConfirmLog.onset`)."""
+    log = getattr(getattr(detector, "log", None), "onset", None)
+    why = [w for at, w in log if at == event.detected_at_s] if isinstance(log, list) else []
+    return f" ({why[-1]})" if why and isinstance(why[-1], str) else ""
 
 
 def _rate_hint(detector: StopDetector, hz: float) -> str:
