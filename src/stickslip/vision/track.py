@@ -857,8 +857,8 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     """Accept ``fix``; the first fix ``confirm_move`` px or more from the first frame's tip first confirms the
     template's mask (:func:`~.confirm.confirm_mask`): where a region stayed with the ground it is dropped, the
     template's weights and the models that vouch for a fix (:func:`_vouchers`, on the first frame) are made again
-    from the mask confirmed, and the fix is fitted and judged again with them (its verdict stands, a refusal too). Where every region read as ground the mask is kept
-    (:attr:`~.confirm.Confirmation.emptied`)."""
+    from the mask confirmed, and the fix is fitted and judged again with them (its verdict stands, a refusal too).
+    Where every region read as ground the mask is kept (:attr:`~.confirm.Confirmation.emptied`)."""
     awaiting, t, p = tr._mask_check, tr.template, tr.params
     if not isinstance(awaiting, tuple) or math.hypot(fix.x - awaiting[0][0], fix.y - awaiting[0][1]) < p.confirm_move:
         return tr._accept(fix, cand, image)
