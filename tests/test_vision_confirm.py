@@ -19,6 +19,8 @@ from scipy import ndimage
 
 from stickslip.sim.camera import SimCamSettings, SimScene
 from stickslip.vision.confirm import Confirmation, confirm_mask
+from stickslip.vision.edges import learn_edges
+from stickslip.vision.template import _surroundings
 from stickslip.vision.track import Fix, TipTracker, TrackerParams
 
 _SHAFT = np.array([1.0, 0.3]) / math.hypot(1.0, 0.3)  # from the tip back along the shaft
@@ -106,3 +108,26 @@ def test_any_mask_and_fix_give_a_part_of_the_mask_or_the_mask(seed: int, dx: flo
     assert conf.dropped == (0 if conf.emptied else sum(r.ground for r in conf.regions))
     assert all(-1.0 <= r.at_old <= 1.0 and -1.0 <= r.at_new <= 1.0 for r in conf.regions)
     assert conf.mask.any() == mask.any()
+
+
+def test_the_vouching_models_are_learnt_again_from_the_confirmed_mask() -> None:
+    # the grain's pixels were needle to the ring, shaft and edges the first frame learnt; after the drop they are
+    # ground, and every model that vouches for a fix is the one the first frame gives with the confirmed mask
+    first, again, moved = _frames(3)
+    tip = (float(_TIP[0]), float(_TIP[1]))
+    tr = TipTracker(first, tip)
+    ring_before, shaft_before = tr.template.ring[0].size, tr.template.shaft
+    tr.update(again)
+    tr.update(moved)
+    t, p = tr.template, tr.params
+    assert isinstance(tr._mask_check, Confirmation) and tr._mask_check.dropped >= 1
+    inside = np.ones_like(t.mask)  # the window lies wholly in the frame
+    shaft, core, ring, front = _surroundings(t.mask, inside, t.apex, p)
+    assert t.shaft == shaft and t.shaft != shaft_before
+    for got, want in ((t.core, core), (t.ring, ring), (t.front, front)):
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    assert ring[0].size > ring_before  # the grain and its grown edge are ground again
+    edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
+    assert tr._edges.shaft == shaft and np.array_equal(tr._edges.s, edges.s)
+    assert all(np.array_equal(a, b) for a, b in zip(tr._edges.expected, edges.expected, strict=True))
+    assert tr._shaft is not None and tr._shaft.shaft == shaft

@@ -75,6 +75,7 @@ from .template import (
     TipTemplate,
     TrackerParams,
     _level_weights,
+    _surroundings,
     _window,
     inside_ncc,
     masked_ncc,
@@ -571,7 +572,7 @@ class TipTracker:
         self._fresh = True  # the last frame gave a fix
         self._since = 1  # frames since the last fix (1: the last frame gave one)
         self._mismatch: list[float] = []  # 1 - score of the recent fixes
-        self._mask_check: tuple[float, float] | Confirmation | None = _pending(tip, params)  # confirm.py's stage
+        self._mask_check: _Awaiting | Confirmation | None = _pending(tip, image, params)  # confirm.py's stage
         self._average = TemplateAverage(image, tip, t, params.average_frames) if params.average_frames else None
         s0 = params.template_blur
         # what noise alone costs a perfect match, until fixes say better: the frame's and the template's noise
@@ -840,22 +841,28 @@ class TipTracker:
         return fix
 
 
-def _pending(tip: tuple[float, float], params: TrackerParams) -> tuple[float, float] | None:
-    """The first frame's tip, while the mask awaits the move that confirms it (:mod:`.confirm`); ``None``: the
-    stage is off (``confirm_move`` infinite, or the template averaged: it is made again from later frames)."""
+_Awaiting = tuple[tuple[float, float], FloatArray]
+"""The first frame's tip (px) and a copy of the frame, kept while the mask awaits its confirmation."""
+
+
+def _pending(tip: tuple[float, float], image: FloatArray, params: TrackerParams) -> _Awaiting | None:
+    """The first frame's tip and a copy of the frame (the vouching models are learnt again on it), while the mask
+    awaits the move that confirms it (:mod:`.confirm`); ``None``: the stage is off (``confirm_move`` infinite, or
+    the template averaged: it is made again from later frames)."""
     on = math.isfinite(params.confirm_move) and params.average_frames == 0
-    return (float(tip[0]), float(tip[1])) if on else None
+    return ((float(tip[0]), float(tip[1])), np.array(image, dtype=float)) if on else None
 
 
 def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacquire: bool) -> Result:
     """Accept ``fix``; the first fix ``confirm_move`` px or more from the first frame's tip first confirms the
     template's mask (:func:`~.confirm.confirm_mask`): where a region stayed with the ground it is dropped, the
-    template's weights are made again from the mask confirmed, and the fix is fitted and judged again with them
-    (its verdict stands, a refusal too). Where every region read as ground the mask is kept
-    (:attr:`~.confirm.Confirmation.emptied`)."""
-    first, t, p = tr._mask_check, tr.template, tr.params
-    if not isinstance(first, tuple) or math.hypot(fix.x - first[0], fix.y - first[1]) < p.confirm_move:
+    template's weights and the models that vouch for a fix (:func:`_vouchers`, on the first frame) are made again
+    from the mask confirmed, and the fix is fitted and judged again with them (its verdict stands, a refusal too).
+    Where every region read as ground the mask is kept (:attr:`~.confirm.Confirmation.emptied`)."""
+    awaiting, t, p = tr._mask_check, tr.template, tr.params
+    if not isinstance(awaiting, tuple) or math.hypot(fix.x - awaiting[0][0], fix.y - awaiting[0][1]) < p.confirm_move:
         return tr._accept(fix, cand, image)
+    first, first_frame = awaiting
     inside = _window(np.zeros(tr.shape), int(round(first[0])), int(round(first[1])), t.half)[1]
     conf = confirm_mask(t.bank[0], t.mask, inside, t.apex, first, image, (fix.x, fix.y, cand.ref.theta),
                         p.template_blur, p.edge_px, p.confirm_margin)
@@ -867,12 +874,25 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     t.weights = t.level_weights[0]
     _fit_parts(tr, 1.0)
     tr._coarse_w = _downsample(t.weights, p.coarse_factor)
+    _vouchers(tr, first_frame, first, inside)
     res, refit = tr._judge(tr._try(image, fix.x, fix.y, cand.ref.theta, cand.level), image, reacquire)
     if isinstance(res, Fix):
         return tr._accept(res, refit, image)
     tr._fresh = False
     tr._since += 1
     return res
+
+
+def _vouchers(tr: TipTracker, first_frame: FloatArray, first_tip: tuple[float, float],
+              inside: NDArray[np.bool_]) -> None:
+    """The models that vouch for a fix learnt again from the template's mask, on the first frame as at learning
+    (``first_tip`` its tip, px; ``inside`` which of the window's pixels lay in it): the shaft's direction and the
+    core, ring and front the occlusion check reads (:func:`~.template._surroundings`), the edges' profiles
+    (:func:`.edges.learn_edges`), the shaft's profiles and the width's stations (:func:`_learn_shaft`)."""
+    t, p = tr.template, tr.params
+    t.shaft, t.core, t.ring, t.front = _surroundings(t.mask, inside, t.apex, p)
+    tr._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
+    tr._shaft, tr._width = _learn_shaft(first_frame, first_tip, t, p, tr._spec)
 
 
 def _fit_parts(tr: TipTracker, share: float) -> None:
