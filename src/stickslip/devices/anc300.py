@@ -32,7 +32,8 @@ answer timed out, the next command is preceded by ``ver`` and every line before 
 answer is discarded (a late ``OK`` echoes no command: it would pass for the next
 command's; stops are sent at once, without it); no answer within the timeout refuses the
 command, naming ``ver``. Check: in a ``stickslip -vv`` log after a timeout, ``ver`` is
-answered by the version ``where`` shows, then ``OK``, before the next command. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
+answered by the version ``where`` shows, then ``OK``, before the next command. Every
+message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 """
 
 from __future__ import annotations
