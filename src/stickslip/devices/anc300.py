@@ -26,8 +26,14 @@ only carries its bytes over our transports (:class:`TransportAdapter`) and wraps
   first, naming the range; nothing is clipped);
 * ``stop AXIS`` stops; closing stops every axis and grounds it (mode ``gnd``).
 
-Assumption: the serial console speaks the same console as telnet, password prompt
-included. Every message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
+Assumptions: the serial console speaks the same console as telnet, password prompt
+included; ``ver`` answers the same line as on opening, then ``OK``, at any time. After an
+answer timed out, the next command is preceded by ``ver`` and every line before its
+answer is discarded (a late ``OK`` echoes no command: it would pass for the next
+command's; stops are sent at once, without it); no answer within the timeout refuses the
+command, naming ``ver``. Check: in a ``stickslip -vv`` log after a timeout, ``ver`` is
+answered by the version ``where`` shows, then ``OK``, before the next command. Every
+message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 """
 
 from __future__ import annotations
@@ -87,6 +93,9 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
     Lines with bytes other than printable ASCII, tab, CR or LF are garbage and raise
     :class:`DeviceError`; so does a line that does not arrive within the timeout. Bytes
     still unread when a command is written are discarded (logged): they answer an earlier one.
+    Once ``sync_answer`` is set (the answer to ``ver``, read on opening), a command written
+    after a reply timed out is preceded by ``ver``: lines are discarded until that answer and
+    its ``OK`` (:meth:`Transport.resync`), so a late ``OK`` is never read as the command's.
     """
     Adapter, _ = _pymeasure()
 
@@ -96,6 +105,7 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             self.transport = transport
             self.connection = transport
             self.read_timeout = timeout
+            self.sync_answer: str | None = None
 
         def _write(self, command: str, **kwargs: Any) -> None:
             self._write_bytes((command + "\r\n").encode("ascii"))
@@ -103,6 +113,10 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
         def _write_bytes(self, content: bytes, **kwargs: Any) -> None:
             # what is unread when a command goes out answers an earlier one (a stop sent without waiting):
             # read as this command's "OK", a stepu that never arrived passed for made
+            if self.sync_answer is not None and self.transport.silent:
+                where = f"ANC300 on {self.transport.name}"
+                self.transport.resync(b"ver\r\n", b"\r\n", _version_then_ok(self.sync_answer), where,
+                                      self.read_timeout)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
@@ -136,6 +150,20 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             return f"<TransportAdapter {self.transport.name}>"
 
     return _TransportAdapter()
+
+
+def _version_then_ok(version: str) -> Callable[[bytes], bool]:
+    """Tells the last line of ``ver``'s answer: ``OK`` right after the line ``version``."""
+    seen = [False]
+
+    def is_answer(line: bytes) -> bool:
+        text = line.decode("ascii", "replace").strip()
+        if seen[0] and text == "OK":
+            return True
+        seen[0] = text == version
+        return False
+
+    return is_answer
 
 
 class ANC300:
@@ -197,6 +225,7 @@ class ANC300:
         self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
         self._volt: dict[int, float | None] = dict.fromkeys(self.axes)
         self.version = self._device(lambda: str(self._ctrl.version), "ver")
+        self.adapter.sync_answer = self.version  # re-synchronises the line after a timeout (see TransportAdapter)
 
     # -- helpers --------------------------------------------------------------------------
     def _axis(self, joint: int) -> Any:

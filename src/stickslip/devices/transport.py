@@ -26,7 +26,7 @@ import os
 import select
 import socket
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 from .base import DeviceError
 
@@ -62,6 +62,9 @@ class Transport:
         self.timeout = float(timeout)
         self._buffer = b""
         self.closed = False
+        self.resyncs_failed = 0
+        """How many :meth:`resync` queries went unanswered: drivers alternate two queries of different answers,
+        so a late answer to a failed one is discarded by the next, not taken for it."""
         self.silent = False
         """True once a reply did not come within its timeout, until one does: the other end stopped answering,
         and best-effort commands (a stop, grounding on close) are then sent without waiting for answers."""
@@ -143,6 +146,31 @@ class Transport:
         except (OSError, DeviceError):
             pass
         return data
+
+    def resync(self, query: bytes, terminator: bytes, is_answer: Callable[[bytes], bool], who: str,
+               timeout: float | None = None) -> None:
+        """Put the line back in step after a reply timed out: send ``query``, discard lines until its answer.
+
+        A late answer to an earlier command would otherwise be read as the next one's (no dialect here
+        echoes the command it answers). ``is_answer`` tells the query's known answer (a line with its
+        terminator) from any other line; lines before it are discarded (logged). Raises
+        :class:`DeviceError` naming ``who`` and the query if the answer does not come within ``timeout`` s
+        (default :attr:`timeout`); the line then stays :attr:`silent`, so the next command syncs again.
+        """
+        wait = self.timeout if timeout is None else float(timeout)
+        deadline = time.monotonic() + wait
+        self.write(query)
+        while True:
+            try:
+                line = self.read_until(terminator, timeout=max(deadline - time.monotonic(), 0.0))
+            except DeviceError as e:
+                self.silent = True
+                self.resyncs_failed += 1
+                raise DeviceError(f"{who} did not answer {query!r}, sent to re-synchronise the line after "
+                                  f"a reply timed out: {e}") from None
+            if is_answer(line):
+                return
+            log.warning("%s: discarding %r while re-synchronising the line", self.name, line)
 
     def set_baudrate(self, baudrate: int) -> None:
         """Switch the line to ``baudrate`` (8N1). A link without a baud rate (TCP) ignores it."""

@@ -336,7 +336,7 @@ class NanoControlConsole(SpeedProfiles):
                 what + tail, made, made + sign * steps if acked else None
             ) from (None if isinstance(e, DeviceError) else e)
         try:
-            self.command("stop")
+            self.command("stop", sync=False)
         except DeviceError as e:
             self._emergency_stop()
             raise StepsUncertain(
@@ -380,7 +380,7 @@ class NanoControlConsole(SpeedProfiles):
                     log.warning("could not send stopnack to %s: %s", self.transport.name, e)
             return
         try:
-            self.command("stop")
+            self.command("stop", sync=False)
         except DeviceError as e:
             log.warning("stop: %s", e)
 

@@ -64,21 +64,31 @@ class ConsoleLine:
     _brief: float | None
     _driving: bool
 
-    def command(self, text: str, timeout: float | None = None) -> str:
+    def command(self, text: str, timeout: float | None = None, sync: bool = True) -> str:
         """Send ``text`` + CR and return the message of its answer (without the status).
 
-        An ``i`` answer is logged as a warning and returned.
+        An ``i`` answer is logged as a warning and returned. After a reply timed out, the line
+        is first re-synchronised (``version``, its answer awaited, anything before it discarded;
+        ``speed ?`` and its profile after an unanswered one) unless ``sync`` is false (a stop is
+        sent at once; its answer may be an earlier command's: the line stays out of step).
 
         Raises
         ------
         DeviceError
             On no answer within ``timeout`` (default :attr:`timeout`), an ``e`` answer,
-            or garbage; the message names the command and the port.
+            or garbage; the message names the command and the port. If the re-synchronising
+            ``version`` is not answered in time (``text`` is then not sent).
         """
         wait = self.timeout if timeout is None else timeout
         if self._brief is not None:  # best-effort after a timeout: the console may not answer at all
             wait = min(wait, self._brief)
         with self._lock:
+            unsynced = self.transport.silent and not sync
+            if sync and self.transport.silent:
+                where = f"NanoControl on {self.transport.name}"
+                query, is_answer = ((b"version\r", self._is_version), (b"speed ?\r", self._is_profile))[
+                    self.transport.resyncs_failed % 2]
+                self.transport.resync(query, b"\r", is_answer, where, wait)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
@@ -90,6 +100,7 @@ class ConsoleLine:
                     f"NanoControl on {self.transport.name} did not answer {text!r}: {e}"
                 ) from None
             log.debug("<- %r", raw)
+            self.transport.silent = unsynced  # an answer read unsynced may be an earlier command's
             status, message = parse_console_reply(raw[:-1], text, self.transport.name)
             if status == "info":
                 log.warning("NanoControl says: %s (after %s)", message, text)
@@ -98,6 +109,24 @@ class ConsoleLine:
                     f"NanoControl on {self.transport.name} refused {text!r}: {message}"
                 )
             return message
+
+    def _is_version(self, line: bytes) -> bool:
+        """Whether ``line`` is ``version``'s answer: ``o<TAB>`` and the version read on opening (if known)."""
+        try:
+            status, message = parse_console_reply(line[:-1], "version", self.transport.name)
+        except DeviceError:
+            return False
+        known = getattr(self, "version", None)
+        return status == "ok" and (message == known if known is not None else bool(message))
+
+    def _is_profile(self, line: bytes) -> bool:
+        """Whether ``line`` is ``speed ?``'s answer: ``o<TAB>P cNNN cNNN cNNN cNNN``."""
+        try:
+            status, message = parse_console_reply(line[:-1], "speed ?", self.transport.name)
+            parse_profile(message)
+        except (DeviceError, ValueError):
+            return False
+        return status == "ok"
 
     def _write(self, text: str) -> None:
         log.debug("-> %s<CR>", text)
@@ -115,7 +144,7 @@ class ConsoleLine:
             log.warning("could not send stopnack to %s: %s", self.transport.name, e)
             return "unsent"
         try:
-            self.command("stop", timeout=min(self.timeout, wait))
+            self.command("stop", timeout=min(self.timeout, wait), sync=False)
         except DeviceError as e:
             log.warning("no answer to stop from %s: %s", self.transport.name, e)
             return "unanswered"

@@ -134,8 +134,14 @@ class SmarActMCS(SmarActBase):
     MAX_STEPS = MAX_STEPS
 
     # -- the wire -------------------------------------------------------------------------
-    def command(self, text: str, timeout: float | None = None, channel: int | None = None) -> tuple[str, str]:
+    def command(self, text: str, timeout: float | None = None, channel: int | None = None,
+                sync: bool = True) -> tuple[str, str]:
         """Send ``:text`` + LF; return the answer as ``(name, rest)``, e.g. ``("S", "0,1")``.
+
+        After a reply timed out, the line is first re-synchronised (``:GNC``, its ``:N<channels>``
+        awaited, anything before it discarded; ``:GSI`` and its ``:ID<id>`` after an unanswered one) unless
+        ``sync`` is false (a stop is sent at once; its answer may be an earlier command's: the line stays
+        out of step).
 
         Raises
         ------
@@ -146,10 +152,16 @@ class SmarActMCS(SmarActBase):
             On an error answer from another channel than ``channel`` (not this command's), or
             with a code not in :data:`ERRORS` (it may not be a refusal: the command may have run).
             On no complete answer within ``timeout`` (default :attr:`timeout`) or garbage;
-            the message names the command and the port.
+            the message names the command and the port. If the re-synchronising ``:GNC`` is
+            not answered in time (``text`` is then not sent).
         """
         wait = self.timeout if timeout is None else timeout
         with self._lock:
+            unsynced = self.transport.silent and not sync
+            if sync and self.transport.silent:
+                query, is_answer = ((b":GNC\n", self._is_channel_count), (b":GSI\n", self._is_system_id))[
+                    self.transport.resyncs_failed % 2]
+                self.transport.resync(query, b"\n", is_answer, self._where(), wait)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
@@ -160,6 +172,7 @@ class SmarActMCS(SmarActBase):
             except DeviceError as e:
                 raise DeviceError(f"{self._where()} did not answer {text!r}: {e}") from None
             log.debug("<- %r", raw)
+            self.transport.silent = unsynced  # an answer read unsynced may be an earlier command's
             line = printable(raw.rstrip(b"\r\n"))
             m = _REPLY.fullmatch(line.strip()) if line is not None else None
             if m is None:
@@ -182,14 +195,26 @@ class SmarActMCS(SmarActBase):
                     )
             return name, rest
 
+    def _is_channel_count(self, line: bytes) -> bool:
+        """Whether ``line`` is ``:GNC``'s answer (``:N<count>``, the count read on opening if known)."""
+        known = getattr(self, "n_channels", None)
+        return re.fullmatch(rb":N(\d+)\r?\n", line) is not None and (
+            known is None or line.strip() == f":N{known}".encode())
+
+    def _is_system_id(self, line: bytes) -> bool:
+        """Whether ``line`` is ``:GSI``'s answer (``:ID<id>``, the id read on opening if known)."""
+        known = getattr(self, "system_id", "")
+        return re.fullmatch(rb":ID[^\r\n]*\r?\n", line) is not None and (
+            not known or line.strip() == f":ID{known}".encode())
+
     def _ints(self, rest: str, count: int, text: str, raw: bytes) -> list[int]:
         if not _INTS.fullmatch(rest) or len(rest.split(",")) != count:
             raise DeviceError(f"{self._where()}: garbage reply {raw!r} to {text!r}")
         return [int(v) for v in rest.split(",")]
 
-    def _ack(self, text: str, channel: int) -> None:
+    def _ack(self, text: str, channel: int, sync: bool = True) -> None:
         """Send a command that must be acknowledged by ``:E<channel>,0`` (or ``:E-1,0``)."""
-        name, rest = self.command(text, channel=channel)
+        name, rest = self.command(text, channel=channel, sync=sync)
         if name != "E" or self._ints(rest, 2, text, rest.encode())[0] not in (channel, -1):
             raise DeviceError(f"{self._where()}: unexpected reply ':{name}{rest}' to {text!r}")
 
@@ -230,7 +255,7 @@ class SmarActMCS(SmarActBase):
 
     def _stop_channel(self, channel: int) -> bool:
         try:
-            self._ack(f"S{channel}", channel)
+            self._ack(f"S{channel}", channel, sync=False)  # at once: a stop waits for no re-synchronisation
             return True
         except DeviceError as e:
             log.warning("%s: stop of channel %d: %s", self._where(), channel, e)
