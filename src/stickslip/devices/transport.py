@@ -147,7 +147,7 @@ class Transport:
             pass
         return data
 
-    def resync(self, query: bytes, terminator: bytes, is_answer: Callable[[bytes], bool], who: str,
+    def resync(self, query: bytes, terminator: bytes | Sequence[bytes], is_answer: Callable[[bytes], bool], who: str,
                timeout: float | None = None) -> None:
         """Put the line back in step after a reply timed out: send ``query``, discard lines until its answer.
 
@@ -170,7 +170,8 @@ class Transport:
                                   f"a reply timed out: {e}") from None
             if is_answer(line):
                 return
-            log.warning("%s: discarding %r while re-synchronising the line", self.name, line)
+            if line.strip(b"\r\n\t "):  # (the LF of a CR LF is no news)
+                log.warning("%s: discarding %r while re-synchronising the line", self.name, line)
 
     def set_baudrate(self, baudrate: int) -> None:
         """Switch the line to ``baudrate`` (8N1). A link without a baud rate (TCP) ignores it."""

@@ -112,6 +112,7 @@ def _probe_legacy(transport: Transport, timeout: float) -> tuple[str | None, str
         log.debug("<- %r (dropped)", flushed)
     except DeviceError:
         pass
+    transport.silent = False  # the console probe's timeouts are not this dialect's: the line was just flushed
     dev = NanoControl(transport, timeout=timeout, query_version=False)
     why = ""
     for _ in range(2):

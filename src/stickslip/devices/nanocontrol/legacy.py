@@ -30,6 +30,10 @@ these follow the NanoControl's documented newer console, and are lenient):
 * a printable line without the ``<status><TAB>`` prefix is taken as an ok answer
   whose message is the whole line, unless it starts with ``error``;
 * ``counterread`` answers with whitespace-separated integers, one per channel A, B, ...;
+* ``version`` answers the same text at any time as on opening: after an answer timed out,
+  ``version;`` (or ``counterread;`` after an unanswered one) is sent before the next command
+  and every line before its answer discarded, so a late answer is not taken for the next
+  command's (no answer echoes its command); ``stop;`` goes at once;
 * a reply with non-printable bytes is garbage: :class:`DeviceError`, and the joint is
   stopped;
 * a ``coarse`` answer arrives once the steps are done, so each burst waits up to
@@ -160,15 +164,24 @@ class NanoControl:
     def command(self, text: str, timeout: float | None = None) -> str:
         """Send ``text;`` and return the message of its answer (without the status).
 
+        After a reply timed out, the line is first re-synchronised (``version;``, or
+        ``counterread;`` after an unanswered one; their answers awaited, anything before
+        them discarded: :meth:`~stickslip.devices.transport.Transport.resync`).
+
         Raises
         ------
         DeviceError
             On no answer within ``timeout`` (default :attr:`timeout`), an ``e`` answer,
-            or garbage; the message says what was sent.
+            or garbage; the message says what was sent. If the re-synchronising query is
+            not answered in time (``text`` is then not sent).
         """
         wire = f"{text};".encode("ascii")
         wait = self.timeout if timeout is None else timeout
         with self._lock:
+            if self.ack and self.transport.silent:  # a reply timed out: its answer may still come, put the line in step
+                query, is_answer = ((b"version;", self._is_version), (b"counterread;", self._is_counters))[
+                    self.transport.resyncs_failed % 2]
+                self.transport.resync(query, (b"\r", b"\n"), is_answer, f"NanoControl on {self.transport.name}", wait)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):  # the LF of a CRLF answer is no news
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
@@ -197,6 +210,24 @@ class NanoControl:
                         f"NanoControl on {self.transport.name} refused {wire.decode()!r}: {message}"
                     )
                 return message
+
+    def _is_version(self, line: bytes) -> bool:
+        """Whether ``line`` is ``version;``'s answer: ok and the version read on opening (any ok message if
+        none was read)."""
+        try:
+            status, message = _parse_reply(line.rstrip(b"\r\n"), b"version;", self.transport.name)
+        except DeviceError:
+            return False
+        return status == "ok" and (message == self.version if self.version else bool(message))
+
+    def _is_counters(self, line: bytes) -> bool:
+        """Whether ``line`` is ``counterread;``'s answer: ok and one integer per channel."""
+        try:
+            status, message = _parse_reply(line.rstrip(b"\r\n"), b"counterread;", self.transport.name)
+            values = [int(w) for w in message.split()]
+        except (DeviceError, ValueError):
+            return False
+        return status == "ok" and len(values) >= len(self.channels)
 
     def _channel(self, joint: int) -> str:
         try:
