@@ -160,7 +160,7 @@ def test_a_manipulator_that_fails_on_its_first_command_leaves_the_joint_uncertai
         with TestClient(create_app(room, LOCAL), base_url="http://127.0.0.1:8765") as c:
             assert c.post("/api/where", json={"set": {"3": "min"}}).status_code == 200
             r = c.post("/api/move", json={"joint": 3, "by": "5um"})
-            assert r.status_code == 202, r.text
+            assert r.status_code in (200, 202), r.text  # 200: the motion had already ended as it was answered
             m = c.get(f"/api/motions/{r.json()['id']}", params={"wait": 10}).json()
             assert m["status"] == "failed" and "link dropped" in m["result"]["failure"]
             state = room.state()
