@@ -115,7 +115,7 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             # read as this command's "OK", a stepu that never arrived passed for made
             if self.sync_answer is not None and self.transport.silent:
                 where = f"ANC300 on {self.transport.name}"
-                self.transport.resync(b"ver\r\n", b"\r\n", _version_then_ok(self.sync_answer), where,
+                self.transport.resync([(b"ver\r\n", _version_then_ok(self.sync_answer))], b"\r\n", where,
                                       self.read_timeout)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):

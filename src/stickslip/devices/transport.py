@@ -147,16 +147,19 @@ class Transport:
             pass
         return data
 
-    def resync(self, query: bytes, terminator: bytes | Sequence[bytes], is_answer: Callable[[bytes], bool], who: str,
-               timeout: float | None = None) -> None:
-        """Put the line back in step after a reply timed out: send ``query``, discard lines until its answer.
+    def resync(self, queries: Sequence[tuple[bytes, Callable[[bytes], bool]]], terminator: bytes | Sequence[bytes],
+               who: str, timeout: float | None = None) -> None:
+        """Put the line back in step after a reply timed out: send a query, discard lines until its answer.
 
         A late answer to an earlier command would otherwise be read as the next one's (no dialect here
-        echoes the command it answers). ``is_answer`` tells the query's known answer (a line with its
-        terminator) from any other line; lines before it are discarded (logged). Raises
-        :class:`DeviceError` naming ``who`` and the query if the answer does not come within ``timeout`` s
-        (default :attr:`timeout`); the line then stays :attr:`silent`, so the next command syncs again.
+        echoes the command it answers). ``queries`` are ``(query, is_answer)`` pairs, taken in turn as
+        queries go unanswered (:attr:`resyncs_failed`: a late answer to one is then not the next one's);
+        ``is_answer`` tells the query's known answer (a line with its terminator) from any other line;
+        lines before it are discarded (logged). Raises :class:`DeviceError` naming ``who`` and the query
+        if the answer does not come within ``timeout`` s (default :attr:`timeout`); the line then stays
+        :attr:`silent`, so the next command syncs again.
         """
+        query, is_answer = queries[self.resyncs_failed % len(queries)]
         wait = self.timeout if timeout is None else float(timeout)
         deadline = time.monotonic() + wait
         self.write(query)

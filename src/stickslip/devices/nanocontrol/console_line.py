@@ -86,9 +86,8 @@ class ConsoleLine:
             unsynced = self.transport.silent and not sync
             if sync and self.transport.silent:
                 where = f"NanoControl on {self.transport.name}"
-                query, is_answer = ((b"version\r", self._is_version), (b"speed ?\r", self._is_profile))[
-                    self.transport.resyncs_failed % 2]
-                self.transport.resync(query, b"\r", is_answer, where, wait)
+                queries = ((b"version\r", self._is_version), (b"speed ?\r", self._is_profile))
+                self.transport.resync(queries, b"\r", where, wait)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)

@@ -179,9 +179,8 @@ class NanoControl:
         wait = self.timeout if timeout is None else timeout
         with self._lock:
             if self.ack and self.transport.silent:  # a reply timed out: its answer may still come, put the line in step
-                query, is_answer = ((b"version;", self._is_version), (b"counterread;", self._is_counters))[
-                    self.transport.resyncs_failed % 2]
-                self.transport.resync(query, (b"\r", b"\n"), is_answer, f"NanoControl on {self.transport.name}", wait)
+                queries = ((b"version;", self._is_version), (b"counterread;", self._is_counters))
+                self.transport.resync(queries, (b"\r", b"\n"), f"NanoControl on {self.transport.name}", wait)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):  # the LF of a CRLF answer is no news
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)

@@ -159,9 +159,8 @@ class SmarActMCS(SmarActBase):
         with self._lock:
             unsynced = self.transport.silent and not sync
             if sync and self.transport.silent:
-                query, is_answer = ((b":GNC\n", self._is_channel_count), (b":GSI\n", self._is_system_id))[
-                    self.transport.resyncs_failed % 2]
-                self.transport.resync(query, b"\n", is_answer, self._where(), wait)
+                queries = ((b":GNC\n", self._is_channel_count), (b":GSI\n", self._is_system_id))
+                self.transport.resync(queries, b"\n", self._where(), wait)
             stale = self.transport.drain()
             if stale.strip(b"\r\n\t "):
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
