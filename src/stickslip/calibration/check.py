@@ -127,7 +127,7 @@ def _pose_terms(cal: Calibration, ts: Sequence[Traverse]) -> tuple[int, list[tup
     e = pred / np.array([t.gamma for t in ts]) - 1.0
     ok = np.isfinite(e) & np.isfinite(sd) & (sd > 0)
     e, sd = e[ok], sd[ok]
-    pose = [_pose_key(t) for t, good in zip(ts, ok, strict=True) if good]
+    pose = [tuple(k.tolist()) for k in pose_keys(t0.joint, np.column_stack(cols))[ok]]  # as the fit's groups
     terms = []
     for key in dict.fromkeys(pose):
         at = [i for i, p in enumerate(pose) if p == key]
