@@ -288,3 +288,15 @@ def test_console_a_profile_switch_made_but_not_answered_is_sent_again() -> None:
     link, opener, truth = _console(["ok"] * 12 + ["silent"])
     assert judge((link, opener, truth), [(1, 1), (1, 2), (1, 2)]) == ["made", "made", "made"]
     assert ("ok", "speed 6") in link.used[13:]
+
+
+def test_console_a_go_answered_after_the_emergency_stop_was_sent_does_not_acknowledge_it() -> None:
+    # go's answer overdue, stopnack and stop lost, go's answer arriving after the stop was sent (past the drain):
+    # it was read as the stop's, "stop acknowledged", the bound one interval, while the channel drove on
+    link, opener, truth = _console(["ok"] * 5 + ["later", "lost", "lost"])
+    dev = opener()
+    with pytest.raises(StepsUncertain) as e:
+        dev.step(1, 3)
+    dev._sleep(1.0)  # a second later: a channel never stopped has made about 1000 steps more
+    assert e.value.made <= truth(1) <= e.value.at_most == 3
+    assert [m for _, m in link.used[8:10]] == ["version", "stop"]  # the stop sent again on a re-synchronised line

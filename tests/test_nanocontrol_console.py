@@ -211,7 +211,8 @@ def test_ctrl_c_with_an_unanswered_stop_becomes_an_open_bound() -> None:
     clock = Clock(interrupt_after=0)
     t, dev, _ = console(
         _burst("o\t\r", ("stopnack\r", None), ("stop\r", None), ("stopnack\r", None), ("stop\r", "o\t\r"),
-               OPEN[0], ("speed 3\r", "o\t\r")),  # the stop's answer may be an earlier one's: re-synchronised
+               # that answer may be the unanswered stop's: the stop is sent again on a re-synchronised line
+               OPEN[0], ("stop\r", "o\t\r"), ("speed 3\r", "o\t\r")),
         clock=clock,
     )
     with t:

@@ -17,6 +17,8 @@ the wire does with it:
 ``double``    carried out, the answer sent twice;
 ``late``      carried out, the answer held back until after the next message is sent
               (a reply to the previous command);
+``later``     carried out, the answer held back until after the second message after it is sent
+              (it lands after a stop sent at once has drained the line);
 ``nan``/``huge``/``negative``/``unknown``
               carried out, the first number of the answer replaced by ``nan``, ``1e308``,
               its negation, or the last one by ``977`` (an error code no driver knows);
@@ -35,7 +37,7 @@ from collections.abc import Callable, Sequence
 from stickslip.devices.base import DeviceError
 from stickslip.devices.transport import Transport
 
-KINDS = ("ok", "lost", "refuse", "silent", "truncate", "garble", "split", "extra", "double", "late",
+KINDS = ("ok", "lost", "refuse", "silent", "truncate", "garble", "split", "extra", "double", "late", "later",
          "nan", "huge", "negative", "unknown", "close")
 _NUMBER = re.compile(rb"-?\d+(?:\.\d+)?")
 
@@ -54,6 +56,7 @@ class HostileLink(Transport):
         self._rx = b""
         self._arrivals: list[bytes] = []
         self._late: list[bytes] = []
+        self._later: list[bytes] = []
         self.dead = False
         if on_connect is not None:
             on_connect(self._arrivals.append)
@@ -62,7 +65,7 @@ class HostileLink(Transport):
         if self.dead:
             raise OSError("the port is closed (the cable was pulled)")
         self._arrivals.extend(self._late)
-        self._late = []
+        self._late, self._later = self._later, []
         self._rx += data
         messages, self._rx = self.emu._split(self._rx)  # type: ignore[attr-defined]
         for message in messages:
@@ -83,8 +86,8 @@ class HostileLink(Transport):
             return
         if kind == "silent" or not reply and kind != "extra":
             return
-        if kind == "late":
-            self._late.append(reply)
+        if kind in ("late", "later"):
+            (self._late if kind == "late" else self._later).append(reply)
             return
         if kind == "split":
             self._arrivals.extend(reply[i : i + 2] for i in range(0, len(reply), 2))

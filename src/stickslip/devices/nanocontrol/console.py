@@ -54,7 +54,8 @@ steps; writing a profile does not change the active one until ``speed P`` is sen
 ``T`` may be as large as 65535 ms.
 
 Stops that hold: an error, a timeout or Ctrl-C while a channel may be driving sends
-``stopnack`` at once, then ``stop`` (its answer awaited at most 0.25 s);
+``stopnack`` at once, then ``stop`` (its answer awaited at most 0.25 s; sent again on a
+re-synchronised line when an earlier answer was overdue, which the first one's could be);
 :meth:`NanoControlConsole.close` does the same if a ``go`` was never confirmed stopped.
 """
 
@@ -326,14 +327,17 @@ class NanoControlConsole(SpeedProfiles):
             what = "interrupted (Ctrl-C)" if isinstance(e, KeyboardInterrupt) else str(e)
             if not isinstance(e, DeviceError) and acked:
                 raise  # Ctrl-C, stopped: the caller's journal covers this burst
+            # every T ms another interval may begin until the stop is acknowledged
+            intervals = max(1, math.ceil((self._clock() - t_sent) / (t_ms / 1000.0)))
             tail = {
-                "acknowledged": "; stopnack and stop were sent and the stop was acknowledged",
+                "acknowledged": "; stopnack and stop were sent and the stop was acknowledged"
+                + (f" (up to {intervals} intervals of {steps} steps)" if intervals > 1 else ""),
                 "unanswered": "; stopnack and stop were sent but the stop was not acknowledged: "
                 f"channel {ch} may still be driving",
                 "unsent": f"; no stop could be sent (the line is down): channel {ch} may still be driving",
             }[outcome]
             raise StepsUncertain(
-                what + tail, made, made + sign * steps if acked else None
+                what + tail, made, made + sign * steps * intervals if acked else None
             ) from (None if isinstance(e, DeviceError) else e)
         try:
             self.command("stop", sync=False)

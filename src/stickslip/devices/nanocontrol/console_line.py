@@ -135,8 +135,11 @@ class ConsoleLine:
         """``stopnack`` at once, then ``stop``, its answer awaited at most ``min(timeout, wait)`` s.
 
         Returns ``"acknowledged"``, ``"unanswered"`` or ``"unsent"`` (the line is down).
-        Never raises.
+        Never raises. Sent while an earlier answer is overdue, the first ``stop``'s answer may be that
+        answer, arrived late: ``stop`` is then sent again on a re-synchronised line, and only its
+        answer acknowledges the stop.
         """
+        overdue = self.transport.silent
         try:
             self._write("stopnack")
         except DeviceError as e:
@@ -144,6 +147,8 @@ class ConsoleLine:
             return "unsent"
         try:
             self.command("stop", timeout=min(self.timeout, wait), sync=False)
+            if overdue:
+                self.command("stop", timeout=min(self.timeout, wait))
         except DeviceError as e:
             log.warning("no answer to stop from %s: %s", self.transport.name, e)
             return "unanswered"
