@@ -169,6 +169,17 @@ class TrackerParams:
         measured; a fix is refused (occluded) where the stations' median difference is
         beyond that: behind the far end of something stuck on the tip the dark is wider
         (the thing) or narrower (the needle's own tip further back) than the needle.
+    outline_reach : float
+        How far behind a fit nothing else vouches for (fewer than ``width_stations`` in the frame) its
+        outline must be read on at least one edge for the outline to vouch for it, px (``inf``: never): a
+        bead over the tip taken for it shows its outline closing 8 to 22 px behind the fit on the own round
+        mode, and one beside the axis was vouched for at 10 px (docs/vision-log.md, "Vouching near the
+        edge from one edge of the outline").
+    outline_slack : float
+        How far each edge of that outline may move inward going back, and lie from the first frame's
+        (its median shift), px: behind a fix that is the tip an edge lies where the first frame had it
+        (the own sets' good fits: at most 1.6 px either way), behind a bead's rim taken for the tip the
+        outline closes (2.6 px or more) or stands out along the shaft (2.8 px or more).
     width_shift : float
         Largest outward shift of each edge tried when measuring a station's width, px: a
         station beyond it disagrees anyway, and a wider search would reach past the
@@ -269,6 +280,8 @@ class TrackerParams:
     along_sigmas: float = 3.0
     width_stations: int = 3
     trust_unchecked: bool = False
+    outline_reach: float = 16.0
+    outline_slack: float = 2.0
     width_shift: float = 5.0
     width_slack: float = 2.0
     extent_depth: float = 2.0
