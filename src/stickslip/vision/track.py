@@ -500,6 +500,13 @@ def _outline_vouches(t: TipTracker, cand: _Candidate, image: FloatArray) -> bool
     return reach >= p.outline_reach and closing < p.outline_slack and offset < p.outline_slack
 
 
+def _vouched(t: TipTracker, cand: _Candidate, image: FloatArray, sigma: float) -> bool:
+    """Whether a fit behind which too few width stations lie in the frame (its standard deviation ``sigma``, px) is
+    vouched for all the same: by the rules for a tip found again (:func:`_vouched_as_found`), else by its outline
+    (:func:`_outline_vouches`, read only then)."""
+    return _vouched_as_found(t, cand.ref, sigma) or _outline_vouches(t, cand, image)
+
+
 def _not_found(refused: tuple[float, Lost] | None) -> Lost:
     """The refusal of a frame with nothing near the last fix and no fix in the whole frame: what refused the
     frame's best-correlating candidate (``refused``: its correlation and refusal), or that there was none."""
@@ -741,8 +748,7 @@ class TipTracker:
         # the needle's width behind a fix every other rule takes; unchecked, a found-again tip's rules vouch (or not)
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
             self._width, p, cand, image, res.sigma if reacquire else None)
-        unvouched = unvouched and not (isinstance(res, Fix) and (
-            _vouched_as_found(self, cand.ref, res.sigma) or _outline_vouches(self, cand, image)))
+        unvouched = unvouched and not (isinstance(res, Fix) and _vouched(self, cand, image, res.sigma))
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
