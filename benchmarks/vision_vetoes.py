@@ -54,7 +54,9 @@ from stickslip.vision.track import (  # noqa: E402
     TipTracker,
     _as_usual,
     _front_share,
+    _outline_vouches,
     _pick_level,
+    _vouched_as_found,
     _width_of,
 )
 
@@ -123,6 +125,8 @@ def readings(t: TipTracker, cand: Any, image: np.ndarray, reacquire: bool) -> di
     d["shaft shape"] = nan if sc is None else _down(sc.shape, p.edge_shape)
     d["taper"] = nan if sc is None else _up(abs(sc.along), p.along_limit + p.along_sigmas * sc.along_sd)
     wc, unvouched = _width_of(t._width, p, cand, image, sigma if reacquire else None)
+    # as _judge: the found-again rules, then the outline, vouch where no station does
+    unvouched = unvouched and not (_vouched_as_found(t, r, sigma) or _outline_vouches(t, cand, image))
     d["nothing vouches"] = 1.0 if unvouched else -1.0
     if wc is None:
         d["width"] = d["extent"] = nan

@@ -202,6 +202,17 @@ class TrackerParams:
         the end's outline (its chord is as wide as the needle over about its radius), and
         only the shaft's width further back tells them apart, so a fix nothing vouches for
         is not given.
+    outline_reach : float
+        How far behind a fit nothing else vouches for (fewer than ``width_stations`` in the frame) its
+        outline must be read on at least one edge for the outline to vouch for it, px (``inf``: never): a
+        bead over the tip taken for it shows its outline closing 8 to 22 px behind the fit on the own round
+        mode; read to 10 px, a bead 7 px off was vouched for, from 12 px none (docs/vision-log.md,
+        "Vouching near the edge from one edge of the outline").
+    outline_slack : float
+        How far each edge of that outline may move inward going back, and lie from the first frame's
+        (its median shift), px: behind a fix that is the tip an edge lies where the first frame had it
+        (159 of the own sets' 163 good fits of this kind close by less), behind a bead's rim taken for
+        the tip the outline closes (2.6 px or more) or stands out along the shaft (2.8 px or more).
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -269,6 +280,8 @@ class TrackerParams:
     along_sigmas: float = 3.0
     width_stations: int = 3
     trust_unchecked: bool = False
+    outline_reach: float = 16.0
+    outline_slack: float = 2.0
     width_shift: float = 5.0
     width_slack: float = 2.0
     extent_depth: float = 2.0

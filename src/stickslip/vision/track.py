@@ -81,7 +81,7 @@ from .template import (
     masked_ncc,
     region_spectra,
 )
-from .width import WidthCheck, WidthStations, check_width, learn_width
+from .width import OutlineStations, WidthCheck, WidthStations, check_outline, check_width, learn_outline, learn_width
 
 __all__ = [
     "Fix",
@@ -423,15 +423,19 @@ def _noise_free_ncc(b: FloatArray, frame: tuple[float, FloatArray, float], w: Fl
 
 
 def _learn_shaft(image: FloatArray, tip: Sequence[float], t: TipTemplate, params: TrackerParams,
-                 spec: Sequence[tuple[int, float, float]]) -> tuple[ShaftProfiles, WidthStations | None]:
-    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`) and its edges there
-    (:func:`.width.learn_width`), smoothed as each blur copy is."""
+                 spec: Sequence[tuple[int, float, float]]
+                 ) -> tuple[ShaftProfiles, WidthStations | None, OutlineStations | None]:
+    """The first frame's shaft behind ``tip`` (:func:`.shaft.learn_shaft`), its edges there
+    (:func:`.width.learn_width`) and its outline's, every 2 px (:func:`.width.learn_outline`), smoothed as each
+    blur copy is."""
     s0 = params.template_blur
     smooth = [(math.hypot(s0, params.blur_bank[k]), math.hypot(s0, f)) for k, f, _ in spec]
     at = (float(tip[0]), float(tip[1]))
-    return (learn_shaft(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, smooth),
-            learn_width(image, at, t.shaft, t.ground[0], t.ground[1], params.contrast, t.noise, smooth,
-                        params.width_shift, params.width_slack, params.extent_depth))
+    g = (t.ground[0], t.ground[1], params.contrast)
+    return (learn_shaft(image, at, t.shaft, *g, smooth),
+            learn_width(image, at, t.shaft, *g, t.noise, smooth, params.width_shift, params.width_slack,
+                        params.extent_depth),
+            learn_outline(image, at, t.shaft, *g, smooth, params.width_shift))
 
 
 def _edge_refusal(ec: EdgeCheck | None, p: TrackerParams, sc: ShaftCheck | None = None) -> Lost | None:
@@ -481,6 +485,26 @@ def _vouched_as_found(t: TipTracker, r: Refinement, sigma: float) -> bool:
     p = t.params
     return sigma <= p.unvouched_sigma and r.score >= p.reacquire_score and (
         1.0 - r.score <= t._mismatch_limit(p.reacquire_ratio))
+
+
+def _outline_vouches(t: TipTracker, cand: _Candidate, image: FloatArray) -> bool:
+    """Whether the needle's outline vouches for a fit behind which too few width stations lie in the frame: read on
+    each edge alone (:func:`.width.check_outline`) as far as ``outline_reach`` px behind it, no edge moves inward
+    going back, nor lies from the first frame's (its median), by ``outline_slack`` px or more (docs/vision.md,
+    "Decision rules"). A sideways offset of the fit moves an edge alike at every station; a bead's far rim taken
+    for the tip has the outline close behind it (the needle narrower, its own tip further back) or stand out."""
+    p, r = t.params, cand.ref
+    if t._outline is None or not math.isfinite(p.outline_reach):
+        return False
+    reach, closing, offset = check_outline(t._outline, t._spec[cand.level][0], image, r.x, r.y, r.theta)
+    return reach >= p.outline_reach and closing < p.outline_slack and offset < p.outline_slack
+
+
+def _vouched(t: TipTracker, cand: _Candidate, image: FloatArray, sigma: float) -> bool:
+    """Whether a fit behind which too few width stations lie in the frame (its standard deviation ``sigma``, px) is
+    vouched for all the same: by the rules for a tip found again (:func:`_vouched_as_found`), else by its outline
+    (:func:`_outline_vouches`, read only then)."""
+    return _vouched_as_found(t, cand.ref, sigma) or _outline_vouches(t, cand, image)
 
 
 def _not_found(refused: tuple[float, Lost] | None) -> Lost:
@@ -563,7 +587,7 @@ class TipTracker:
         _fit_parts(self, 1.0)
         self._coarse_w = _downsample(t.weights, params.coarse_factor)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
-        self._shaft, self._width = _learn_shaft(image, tip, t, params, self._spec)
+        self._shaft, self._width, self._outline = _learn_shaft(image, tip, t, params, self._spec)
         self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last_view: _View | None = None  # the last fix's pixels, its blur re-read from them (_focus_reread)
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
@@ -724,7 +748,7 @@ class TipTracker:
         # the needle's width behind a fix every other rule takes; unchecked, a found-again tip's rules vouch (or not)
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
             self._width, p, cand, image, res.sigma if reacquire else None)
-        unvouched = unvouched and not (isinstance(res, Fix) and _vouched_as_found(self, cand.ref, res.sigma))
+        unvouched = unvouched and not (isinstance(res, Fix) and _vouched(self, cand, image, res.sigma))
         refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
@@ -892,7 +916,7 @@ def _vouchers(tr: TipTracker, first_frame: FloatArray, first_tip: tuple[float, f
     t, p = tr.template, tr.params
     t.shaft, t.core, t.ring, t.front = _surroundings(t.mask, inside, t.apex, p)
     tr._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
-    tr._shaft, tr._width = _learn_shaft(first_frame, first_tip, t, p, tr._spec)
+    tr._shaft, tr._width, tr._outline = _learn_shaft(first_frame, first_tip, t, p, tr._spec)
 
 
 def _fit_parts(tr: TipTracker, share: float) -> None:

@@ -60,6 +60,7 @@ from scipy import ndimage
 from .sampling import gaussian_weights, median
 from .shaft import (
     ALONG_STEP,
+    BACK_STEP,
     GROUND,
     LINES,
     REACH,
@@ -70,7 +71,8 @@ from .shaft import (
     station_profiles,
 )
 
-__all__ = ["WidthStations", "WidthCheck", "SHIFT_STEP", "FROM", "learn_width", "check_width"]
+__all__ = ["WidthStations", "WidthCheck", "OutlineStations", "SHIFT_STEP", "FROM", "learn_width", "check_width",
+           "learn_outline", "check_outline"]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.intp]
@@ -427,3 +429,123 @@ def check_width(ws: WidthStations, copy: int, image: FloatArray, x: float, y: fl
     # (tolist: the same Python floats as float() of each, in one call)
     return WidthCheck(int(ok.sum()), int(np.count_nonzero(np.abs(dw) > tol)), tuple(ws.s[ok].tolist()),
                       tuple(dw.tolist()), tuple(tol.tolist()), tuple(short.tolist()))
+
+
+OUTLINE_FROM = 4.0
+"""The outline's first station, px behind the tip (nearer, the blunt end's edges are too curved to register)."""
+
+OUTLINE_STEP = 2.0
+"""The outline's stations' spacing along the shaft, px."""
+
+OUTLINE_TO = 40.0
+"""The outline's last station, px behind the tip."""
+
+
+@dataclass(frozen=True)
+class OutlineStations:
+    """The first frame's two edges at dense stations behind the tip, each registered on its own
+    (:func:`learn_outline`): what vouches for a fit behind which the needle leaves the field.
+
+    Attributes
+    ----------
+    s : ndarray, shape (m,)
+        The stations, px behind the tip.
+    lines : ndarray, shape (2, m * q * len(LINES))
+        Every sample of every line, its offset from the tip (x, y; px, before a turn).
+    q : int
+        Samples across the shaft at a station.
+    refs, ref_ss : list of ndarray
+        For each blur copy, each station's two edge windows (:class:`WidthStations`'s).
+    shifted : _Shifted
+        The shifted windows' samples (:class:`WidthStations`'s).
+    sides : ndarray of bool, shape (2, m, q)
+        The samples each edge's registration reaches (left, right): they must lie in the frame.
+    smooth : list of float
+        For each blur copy, the smoothing of a frame's profiles across the shaft, px.
+    """
+
+    s: FloatArray
+    lines: FloatArray
+    q: int
+    refs: list[FloatArray]
+    ref_ss: list[FloatArray]
+    shifted: _Shifted
+    sides: NDArray[np.bool_]
+    smooth: list[float]
+
+
+def learn_outline(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, float], level: float,
+                  spread: float, contrast: float, smooth: list[tuple[float, float]], max_shift: float
+                  ) -> OutlineStations | None:
+    """The first frame's edges every :data:`OUTLINE_STEP` px from :data:`OUTLINE_FROM` to :data:`OUTLINE_TO` px
+    behind ``tip`` as far as it shows the needle (:func:`.shaft.follow_shaft`'s walk, begun at each offset);
+    ``None``: fewer than three stations. The arguments are :func:`learn_width`'s."""
+    half_q = int(round(REACH / STEP))
+    ts: FloatArray = (np.arange(2 * half_q + 1, dtype=np.float64) - half_q) * STEP
+    found: dict[float, tuple[FloatArray, FloatArray, float]] = {}
+    for start in np.arange(OUTLINE_FROM, OUTLINE_FROM + BACK_STEP - 1e-9, OUTLINE_STEP):
+        offs, raws, widths, kept = follow_shaft(image, tip, shaft, level, spread, contrast, ts, float(start))
+        for o, r, w, s in zip(offs, raws, widths, kept, strict=True):
+            if s <= OUTLINE_TO + 1e-9:
+                found[float(s)] = (o, r, w)
+    if len(found) < 3:
+        return None
+    s_all = np.array(sorted(found))
+    offs_l = [found[float(s)][0] for s in s_all]
+    raw = np.stack([found[float(s)][1] for s in s_all])
+    run = [found[float(s)][2] for s in s_all]
+    q = ts.size
+    windows = _windows(run, ts)
+    length = max(max(a.size, b.size) for a, b in windows)
+    shifted = _shifted(windows, q, np.arange(-max_shift, max_shift + 1e-9, SHIFT_STEP), length)
+    index, wmask = _gather(windows, q, length)
+    refs, ref_ss = [], []
+    for tsig, _ in smooth:
+        r, ss = _edges(ndimage.gaussian_filter1d(raw, tsig / STEP, axis=1, mode="nearest"), index, wmask)
+        refs.append(r)
+        ref_ss.append(ss)
+    reach = np.array([0.5 * w + GROUND + max_shift + 1.0 for w in run])
+    sides = np.stack([(ts[None, :] <= 0.0) & (-ts[None, :] <= reach[:, None]),
+                      (ts[None, :] >= 0.0) & (ts[None, :] <= reach[:, None])])
+    ux, uy = shaft
+    o = np.stack(offs_l)
+    d_lines = np.asarray(LINES)
+    lines = np.stack([(o[..., 0][..., None] + d_lines * ux).ravel(), (o[..., 1][..., None] + d_lines * uy).ravel()])
+    return OutlineStations(s_all, lines, q, refs, ref_ss, shifted, sides, [f for _, f in smooth])
+
+
+def check_outline(os_: OutlineStations, copy: int, image: FloatArray, x: float, y: float, theta: float
+                  ) -> tuple[float, float, float]:
+    """One edge at a time, the needle's outline behind a tip at ``(x, y)`` (frame px) turned by ``theta`` (rad)
+    against blur copy ``copy``'s: each edge's outward shift at every station whose registration lies in the frame
+    (:func:`_register`). Returns the furthest station read on either edge (px behind the tip; 0: none), the
+    largest inward move of an edge going back (an edge's shift at a station less the least shift at the stations
+    behind it, px), and the largest of the edges' median shifts in size (px).
+
+    A sideways offset of the fit moves an edge the same at every station, so neither the inward move nor (within
+    the fit's sideways error) the median shift reads it; behind a fit that is the tip an edge lies where the first
+    frame had it. Behind the far rim of a bead over the tip taken for it the outline closes: the needle there is
+    narrower than the first frame showed it as far behind its tip, its own tip being further back."""
+    m = os_.s.size
+    ct, st_ = math.cos(theta), math.sin(theta)
+    lx, ly = os_.lines
+    v, inside = sample_frame(image, ct * lx - st_ * ly + x, st_ * lx + ct * ly + y)
+    shape = (m, os_.q, len(LINES))
+    profiles = mean_lines(v.reshape(shape))
+    seen = np.asarray(inside.reshape(shape).all(axis=2), dtype=bool)
+    # (2, m): each edge's registration in the frame
+    valid = np.asarray((seen[None, :, :] | ~os_.sides).all(axis=2), dtype=bool)
+    if not valid.any():
+        return 0.0, 0.0, 0.0
+    f = os_.smooth[copy]
+    if f > 0:
+        profiles = ndimage.correlate1d(profiles, gaussian_weights(f / STEP), 1, mode="nearest")
+    shifts = _register(os_.refs[copy], os_.ref_ss[copy], profiles, os_.shifted)  # (m, 2)
+    closing, offset = 0.0, 0.0
+    for e in range(2):
+        d = shifts[valid[e], e]
+        if d.size:
+            behind = np.minimum.accumulate(d[::-1])[::-1]  # the least shift at each station and behind it
+            closing = max(closing, float(np.max(d[:-1] - behind[1:])) if d.size > 1 else 0.0)
+            offset = max(offset, abs(median(d)))
+    return float(os_.s[valid.any(axis=0)].max()), closing, offset
