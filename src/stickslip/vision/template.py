@@ -202,6 +202,13 @@ class TrackerParams:
         the end's outline (its chord is as wide as the needle over about its radius), and
         only the shaft's width further back tells them apart, so a fix nothing vouches for
         is not given.
+    weight_falloff : float
+        The Gaussian sigma of the weights' fall-off with the distance from the tip, as a share
+        of ``half_window``, 1 (``inf``: none): the shaft far behind the tip says little about
+        where the tip is, and much about a turn.
+    lap_blur : float
+        The template is smoothed by this Gaussian (sigma, px) more before its Laplacian, the
+        blur term's column: of the template itself the Laplacian would be mostly its noise.
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -273,6 +280,8 @@ class TrackerParams:
     width_slack: float = 2.0
     extent_depth: float = 2.0
     extent_slack: float = 5.0
+    weight_falloff: float = 0.5
+    lap_blur: float = 1.0
     thin_blur: float = 2.2
     average_frames: int = 0
     anchor_limit: float = 1.0
@@ -294,6 +303,8 @@ class TrackerParams:
             raise ValueError("extent_depth > 0 and extent_slack >= 0 px")
         if not (self.average_frames >= 0 and self.anchor_limit > 0):
             raise ValueError("average_frames >= 0 and anchor_limit > 0 px")
+        if not (self.weight_falloff > 0 and self.lap_blur > 0):
+            raise ValueError("weight_falloff > 0 (a share of half_window; inf: none) and lap_blur > 0 px")
         if self.edge_px < 0:
             raise ValueError(f"edge_px = {self.edge_px} px must be >= 0 (the mask is grown, never shrunk)")
 
@@ -477,7 +488,7 @@ def _level_weights(
     """The window's weights for each copy of the blur and sharpen banks: the needle, grown, near the tip."""
     h = params.half_window
     ox, oy = _offsets(h, apex)
-    radial = np.exp(-0.5 * (ox**2 + oy**2) / (h / 2.0) ** 2)
+    radial = np.exp(-0.5 * (ox**2 + oy**2) / (h * params.weight_falloff) ** 2)
     level_weights = []
     for b in (*params.blur_bank, *params.sharpen_bank):
         # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further
