@@ -205,10 +205,13 @@ class TrackerParams:
     weight_falloff : float
         The Gaussian sigma of the weights' fall-off with the distance from the tip, as a share
         of ``half_window``, 1 (``inf``: none): the shaft far behind the tip says little about
-        where the tip is, and much about a turn.
+        where the tip is, and much about a turn (0.7 and 1.0 refuse fewer own plain tips but
+        raise the medians and give fixes > 3 px off; docs/vision-log.md, "The fit's efficiency").
     lap_blur : float
         The template is smoothed by this Gaussian (sigma, px) more before its Laplacian, the
-        blur term's column: of the template itself the Laplacian would be mostly its noise.
+        blur term's column: of the template itself the Laplacian would be mostly its noise
+        (1.5 and 2 take part of the template noise's bias away, but refuse more own plain
+        tips and give fixes > 3 px off; the same section).
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
