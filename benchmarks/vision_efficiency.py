@@ -33,8 +33,13 @@ by 2 or 3 px more, not 1: ``TrackerParams.lap_blur``), ``redraw-nolap`` (no blur
 frame blurred 2 px beyond the first (copy 2), ``copy2`` (the chequerboard, as the tracker fits
 it) against ``copy2-full`` (every pixel). ``--only a,b`` runs those variants only.
 
+``--sequences SEED [FRAMES]`` measures instead the tracker itself on the own plain set's sequences with the
+shot noise alone (every frame's, the template's too; ``vision_ablation.py``'s ``only:noise+template-noise``):
+each visible fix's error against the bound at its frame, rms per sequence.
+
 Run: ``.venv/bin/python benchmarks/vision_efficiency.py [DRAWS] [--only a,b]`` (default 200 draws;
-about 10 minutes for every variant under load). Not a test: a measurement (docs/vision-log.md, "The fit's efficiency").
+about 10 minutes for every variant under load); ``... --sequences SEED [FRAMES]`` (400 frames: about 5 minutes).
+Not a test: a measurement (docs/vision-log.md, "The fit's efficiency").
 """
 
 from __future__ import annotations
@@ -93,7 +98,7 @@ class Needle:
     def clean(self, tip: F, blur: float | None = None, turn: float = 0.0) -> F:
         c, s = math.cos(turn), math.sin(turn)
         d = np.array([c * self.u[0] - s * self.u[1], s * self.u[0] + c * self.u[1]])
-        return self.scene.render(tip, d, self.blur if blur is None else blur)
+        return SimScene.render(self.scene, tip, d, self.blur if blur is None else blur)  # (not an ablated one's)
 
     def noisy(self, clean: F) -> F:
         counts = self.rng.poisson(np.clip(clean, 0.0, None) * self.photons).astype(float)
@@ -105,22 +110,25 @@ class Needle:
 def bound(nd: Needle, tip: F, blur: float, pick: NDArray[np.bool_] | None = None) -> F:
     """The Cramér-Rao covariance of the tip (x, y; px²) over the window around ``tip`` (``pick``: its pixels used)."""
     cx, cy = int(round(tip[0])), int(round(tip[1]))
-    sl = (slice(cy - H, cy + H + 1), slice(cx - H, cx + H + 1))
-    mu = nd.clean(tip, blur)[sl]
+    full = nd.clean(tip, blur)
+    y0, y1 = max(cy - H, 0), min(cy + H + 1, full.shape[0])  # the window, within the frame
+    x0, x1 = max(cx - H, 0), min(cx + H + 1, full.shape[1])
+    sl = (slice(y0, y1), slice(x0, x1))
+    mu = full[sl]
     h, dt, db = 0.1, 0.005, 0.1
     cols = [(nd.clean(tip + [h, 0], blur)[sl] - nd.clean(tip - [h, 0], blur)[sl]) / (2 * h),
             (nd.clean(tip + [0, h], blur)[sl] - nd.clean(tip - [0, h], blur)[sl]) / (2 * h),
             (nd.clean(tip, blur, dt)[sl] - nd.clean(tip, blur, -dt)[sl]) / (2 * dt),
             (nd.clean(tip, blur + db)[sl] - nd.clean(tip, blur - db)[sl]) / (2 * db)]
-    yy, xx = np.mgrid[-H : H + 1, -H : H + 1] / (2 * H + 1)
+    yy, xx = np.mgrid[y0 - cy : y1 - cy, x0 - cx : x1 - cx] / (2 * H + 1)
     cols += [mu, mu * xx, mu * yy, np.ones_like(mu), xx, yy]
     J = np.stack([c.ravel() for c in cols], axis=1)
     var = np.clip(mu, 1e-6, None).ravel() / nd.photons
     use = np.ones(mu.size, bool) if pick is None else pick.ravel()
     jit2 = 0.005**2 if nd.look == "sem" else 0.0
     Fi = np.zeros((J.shape[1], J.shape[1]))
-    n = 2 * H + 1
-    for r in range(n):  # a scan line's pixels share the SEM's jitter: one covariance block a line
+    n = x1 - x0
+    for r in range(y1 - y0):  # a scan line's pixels share the SEM's jitter: one covariance block a line
         idx = np.arange(r * n, (r + 1) * n)[use[r * n : (r + 1) * n]]
         if idx.size == 0:
             continue
@@ -268,7 +276,81 @@ def _tukey(c: float, run: Any) -> Any:
         refine_mod.TUKEY = kept
 
 
+def _bound_at(scene: SimScene, args: tuple[Any, ...], photons: float, look: str) -> F:
+    """:func:`bound` for a frame ``scene`` rendered with ``args`` (its tip, direction and blur)."""
+    tip, direction, sigma = np.asarray(args[0], dtype=float), np.asarray(args[1], dtype=float), float(args[2])
+    nd = Needle.__new__(Needle)
+    nd.scene, nd.look, nd.photons, nd.blur = scene, look, photons, sigma
+    nd.u = direction / float(np.hypot(*direction))
+    kept = scene.rng
+    scene.rng = va._NoNoise()  # type: ignore[assignment]
+    try:
+        return bound(nd, tip, max(sigma, 0.45))
+    finally:
+        scene.rng = kept
+
+
+def sequences(seed: int, n_frames: int) -> None:
+    """The own plain set's noise-only sequences (``vision_ablation``'s ``only:noise+template-noise``: the shot
+    noise in every frame, the template's too): each visible fix's error against the bound at its frame, per
+    sequence (rms along | across, px) and the efficiency (rms bound / rms error; a one-frame template's bound
+    is sqrt(2) times this one's)."""
+    seen: list[tuple[Any, tuple[Any, ...]]] = []
+    plain = SimScene.render
+
+    def recording(self: SimScene, *args: Any) -> F:
+        seen.append((self, args))
+        return plain(self, *args)
+
+    scene_cls = va.ablated(frozenset(va.FACTORS) - {"noise", "template-noise"})
+    setattr(va.vision_own, "SimScene", scene_cls)  # noqa: B010
+    SimScene.render = recording  # type: ignore[method-assign]
+    try:
+        seqs = va.vision_own.own_benchmark(n_frames, 40, seed=seed, size=256)
+    finally:
+        SimScene.render = plain  # type: ignore[method-assign]
+        setattr(va.vision_own, "SimScene", SimScene)  # noqa: B010
+    print(f"own plain set, seed {seed}, noise only: per sequence, rms along | across px (error; bound), efficiency")
+    all_e, all_b = [], []
+    for i, seq in enumerate(seqs):
+        calls = seen[i * 40 : (i + 1) * 40]
+        images = [f.image for f in seq.frames]
+        try:
+            tr = TipTracker(images[0], seq.frames[0].tip)
+        except ValueError:
+            continue
+        e, b = [], []
+        for f, img, (scene, args) in zip(seq.frames[1:], images[1:], calls[1:], strict=True):
+            r = tr.update(img)
+            if f.kind != "visible" or not hasattr(r, "x"):
+                continue
+            u = np.asarray(args[1], dtype=float)
+            u = u / float(np.hypot(*u))
+            v = np.array([-u[1], u[0]])
+            d = np.array([r.x - f.tip[0], r.y - f.tip[1]])
+            cov = _bound_at(scene, args, seq.photons, seq.look)
+            e.append((d @ u, d @ v))
+            b.append((u @ cov @ u, v @ cov @ v))
+        if len(e) < 3:
+            continue
+        ea, ba = np.array(e), np.array(b)
+        rms_e, rms_b = np.sqrt(np.mean(ea**2, axis=0)), np.sqrt(np.mean(ba, axis=0))
+        all_e += e
+        all_b += b
+        print(f"  seq {i} {seq.look[:3]} {seq.width_px:4.1f} px {seq.photons:3.0f} ph {len(e):>3} fixes: error "
+              f"{rms_e[0]:.3f} | {rms_e[1]:.3f}, bound {rms_b[0]:.3f} | {rms_b[1]:.3f}, efficiency "
+              f"{rms_b[0] / rms_e[0]:.2f} | {rms_b[1] / rms_e[1]:.2f}", flush=True)
+    ea, ba = np.array(all_e), np.array(all_b)
+    rms_e, rms_b = np.sqrt(np.mean(ea**2, axis=0)), np.sqrt(np.mean(ba, axis=0))
+    print(f"  all {len(ea)} fixes: error {rms_e[0]:.3f} | {rms_e[1]:.3f}, bound {rms_b[0]:.3f} | {rms_b[1]:.3f}, "
+          f"efficiency {rms_b[0] / rms_e[0]:.2f} | {rms_b[1] / rms_e[1]:.2f}")
+
+
 def main(argv: list[str]) -> None:
+    if "--sequences" in argv:
+        k = argv.index("--sequences")
+        sequences(int(argv[k + 1]), int(argv[k + 2]) if len(argv) > k + 2 else 400)
+        return
     only = None
     if "--only" in argv:
         k = argv.index("--only")
