@@ -213,7 +213,7 @@ def _refresh(t: TipTracker) -> None:
     """The fit's parts of ``t`` made again for its template's (moved) apex."""
     p, tpl = t.params, t.template
     s0 = p.template_blur
-    t._steep = [steepest(tpl.bank[k], tpl.apex, w, thin=math.hypot(s0, abs(b)) >= p.thin_blur)
+    t._steep = [steepest(tpl.bank[k], tpl.apex, w, thin=math.hypot(s0, abs(b)) >= p.thin_blur, lap_blur=p.lap_blur)
                 for (k, _, b), w in zip(t._spec, tpl.level_weights, strict=True)]
     widest = int(np.argmax([float(w.sum()) for w in tpl.level_weights]))
     t._select = t._steep[widest]

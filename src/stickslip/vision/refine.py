@@ -112,11 +112,13 @@ def _score_terms(t: FloatArray, w: FloatArray) -> tuple[float, float, FloatArray
     return sw, mt, w * (t - mt), float((w * (t - mt) ** 2).sum())
 
 
-def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray, thin: bool = False) -> Steepest:
+def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArray, thin: bool = False,
+             lap_blur: float = 1.0) -> Steepest:
     """The fixed parts of ``template`` (weighed by ``weights``) for a turn about ``apex`` (x, y, window px).
 
     ``thin`` keeps every second pixel (a chequerboard): for a template blurred by 2 px or
     more, neighbouring pixels carry nearly the same information and the fit costs half.
+    ``lap_blur`` (px): the template is smoothed by this Gaussian more before its Laplacian (the blur term's column).
     """
     grads: list[FloatArray] = list(np.gradient(template))
     gy, gx = grads[0], grads[1]
@@ -135,8 +137,8 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     sd = np.stack([gx[keep], gy[keep], -gx[keep] * rym + gy[keep] * rxm])
     bx, by = rxm / n, rym / n
     basis = np.stack([T, T * bx, T * by, np.ones_like(T), bx, by], axis=1)
-    # the Laplacian of the template smoothed by 1 px more: of the template itself it would be mostly its noise
-    lap_full = ndimage.gaussian_laplace(template, 1.0, mode="nearest")
+    # the Laplacian of the template smoothed by lap_blur more: of the template itself it would be mostly its noise
+    lap_full = ndimage.gaussian_laplace(template, lap_blur, mode="nearest")
     ly, lx = np.gradient(lap_full)
     sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
     return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap, density,

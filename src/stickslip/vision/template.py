@@ -213,6 +213,16 @@ class TrackerParams:
         (its median shift), px: behind a fix that is the tip an edge lies where the first frame had it
         (159 of the own sets' 163 good fits of this kind close by less), behind a bead's rim taken for
         the tip the outline closes (2.6 px or more) or stands out along the shaft (2.8 px or more).
+    weight_falloff : float
+        The Gaussian sigma of the weights' fall-off with the distance from the tip, as a share
+        of ``half_window``, 1 (``inf``: none): the shaft far behind the tip says little about
+        where the tip is, and much about a turn (0.7 and 1.0 refuse fewer own plain tips but
+        raise the medians and give fixes > 3 px off; docs/vision-log.md, "The fit's efficiency").
+    lap_blur : float
+        The template is smoothed by this Gaussian (sigma, px) more before its Laplacian, the
+        blur term's column: of the template itself the Laplacian would be mostly its noise
+        (1.5 and 2 take part of the template noise's bias away, but refuse more own plain
+        tips and give fixes > 3 px off; the same section).
     thin_blur : float
         A blur copy as blurred as this or more (its blur and the smoothing every frame
         gets, Gaussian sigma, px) is fitted on every second pixel, a chequerboard.
@@ -286,6 +296,8 @@ class TrackerParams:
     width_slack: float = 2.0
     extent_depth: float = 2.0
     extent_slack: float = 5.0
+    weight_falloff: float = 0.5
+    lap_blur: float = 1.0
     thin_blur: float = 2.2
     average_frames: int = 0
     anchor_limit: float = 1.0
@@ -307,6 +319,8 @@ class TrackerParams:
             raise ValueError("extent_depth > 0 and extent_slack >= 0 px")
         if not (self.average_frames >= 0 and self.anchor_limit > 0):
             raise ValueError("average_frames >= 0 and anchor_limit > 0 px")
+        if not (self.weight_falloff > 0 and self.lap_blur > 0):
+            raise ValueError("weight_falloff > 0 (a share of half_window; inf: none) and lap_blur > 0 px")
         if self.edge_px < 0:
             raise ValueError(f"edge_px = {self.edge_px} px must be >= 0 (the mask is grown, never shrunk)")
 
@@ -490,7 +504,7 @@ def _level_weights(
     """The window's weights for each copy of the blur and sharpen banks: the needle, grown, near the tip."""
     h = params.half_window
     ox, oy = _offsets(h, apex)
-    radial = np.exp(-0.5 * (ox**2 + oy**2) / (h / 2.0) ** 2)
+    radial = np.exp(-0.5 * (ox**2 + oy**2) / (h * params.weight_falloff) ** 2)
     level_weights = []
     for b in (*params.blur_bank, *params.sharpen_bank):
         # a blurred tip spreads past the sharp one's edges and end: each copy's mask reaches 2 sigma further

@@ -926,7 +926,8 @@ def _fit_parts(tr: TipTracker, share: float) -> None:
     variance left in each copy: ``share`` of the first frame's (white noise smoothed by a Gaussian of sigma ``s``
     keeps ``1 / (4 pi s²)`` of its variance)."""
     t, p = tr.template, tr.params
-    tr._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(p.template_blur, abs(b)) >= p.thin_blur)
+    tr._steep = [steepest(t.bank[k], t.apex, w, thin=math.hypot(p.template_blur, abs(b)) >= p.thin_blur,
+                          lap_blur=p.lap_blur)
                  for (k, _, b), w in zip(tr._spec, t.level_weights, strict=True)]
     sel = tr._steep[int(np.argmax([float(w.sum()) for w in t.level_weights]))]
     tr._select = sel
