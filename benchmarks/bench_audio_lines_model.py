@@ -164,7 +164,7 @@ def model_state(det: ConfirmedStopDetector) -> str:
     m = c.model
     reads = " ".join(
         f"{t:.2f}:{oc.still_z:.1f}"
-        + (f" in step {oc.in_step:.2f}/{oc.model_in_step:.2f} {oc.added_db:+.1f} dB" if oc.in_step >= 0 else "")
+        + (f" in step {oc.in_step:.2f}/{oc.model_share:.2f} {oc.added_db:+.1f} dB" if oc.in_step >= 0 else "")
         for t, oc in det.log.clocked
         if np.isfinite(oc.still_z)
     )

@@ -73,7 +73,7 @@ stop-like. Until the model holds ``model_min_spans`` (the first seconds of liste
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
 at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
 have begun there (``model_inside``; :func:`.inside.stop_departed`). A fire the model lets through whose
-lines held under ``model_in_step`` of the model's own share in phase is flagged (:meth:`ClockedCheck.model_in_step`,
+lines held under ``model_in_step`` of the model's own share in phase is flagged (:meth:`ClockedCheck.in_step_reading`,
 asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the joint steps on into it and its lines stay in
 step, only their level moves; music or speech on them moves it out of step. A jittered step clock turns each
 line's phase within a frame, so its share in phase falls under ``model_min_share`` with no other sound:
@@ -337,7 +337,7 @@ class OnClock:
     #: mean share of their lines' power in phase over the window's first piece, and the model's own over the stepping
     #: it modelled, and how far their power out of phase rose over the stepping's, dB (NaN: not read)
     in_step: float = math.nan
-    model_in_step: float = math.nan
+    model_share: float = math.nan
     added_db: float = math.nan
 
 
@@ -765,9 +765,10 @@ class ClockedCheck:
         pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
         return self.model.z(pieces, p.model_min_spans, p.model_floor_db)
 
-    def model_in_step(self, after: FloatArray, z: float) -> tuple[float, float, float]:
-        """Where the model read the fire and let it through (``z`` at least ``model_max_z``), the window's first piece
-        in step, the model's, and the power out of phase added (:meth:`.stepping_lines.SteppingLines.in_step`)."""
+    def in_step_reading(self, after: FloatArray, z: float) -> tuple[float, float, float]:
+        """Where the model read the fire and let it through (``z`` at least ``model_max_z``): the window's first
+        piece's share in phase, the model's own mean share, and the power out of phase added, dB (``OnClock.in_step``,
+        ``model_share``, ``added_db``; :meth:`.stepping_lines.SteppingLines.in_step`; NaN: not read)."""
         if self.model is None or not z >= self.p.model_max_z:
             return math.nan, math.nan, math.nan
         return self.model.in_step(after[: self.model_n])
@@ -802,8 +803,8 @@ class ClockedCheck:
         if ref is None or ref.size < p.min_s * sr or self.ref_stoplike > p.max_ref_stoplike:
             # too little stepping before the fire, or the stop may have begun there (heard late): the model only
             z = self.model_z(after) if modelled else math.nan
-            s, s0, added = self.model_in_step(after, z)
-            on = OnClock(math.nan, self.model_hz, 0, still_z=z, in_step=s, model_in_step=s0, added_db=added)
+            s, s0, added = self.in_step_reading(after, z)
+            on = OnClock(math.nan, self.model_hz, 0, still_z=z, in_step=s, model_share=s0, added_db=added)
             return on if math.isfinite(z) else None
         rate = self.rate(heard_hz, affirm or self.commanded_hz is not None)
         if not math.isfinite(rate) or not (affirm or self.at_tuned_rate(rate) or p.min_moved_db > 0.0):
@@ -825,7 +826,7 @@ class ClockedCheck:
             reader = self.reader(rate) if math.isfinite(a) else None
             locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
             z = self.model_z(after, a)
-            s, s0, added = self.model_in_step(after, z)
+            s, s0, added = self.in_step_reading(after, z)
             on = OnClock(a, rate, used, self.ref_age_s, locked, math.nan, z, s, s0, added)  # (moved_db: not read)
             return on if math.isfinite(a) or math.isfinite(z) else None
         unjudged = veto_off and not math.isfinite(a)
