@@ -159,6 +159,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "expect-off": ClockedParams(model_expect=False),
     "in-step-off": ClockedParams(model_in_step=0.0),
     "edge-off": ClockedParams(model_edge_s=0.0),
+    "hold-off": ClockedParams(model_hold_s=0.0),
     "off": None,
 }
 

@@ -72,13 +72,14 @@ same reading conditions (a comb verdict, or the predicted move), a fire whose wi
 stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
 at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
-have begun there (``model_inside``; :func:`.inside.stop_departed`). A fire the model lets through whose
-lines held under ``model_in_step`` of the model's own share in phase is flagged (:meth:`ClockedCheck.in_step_reading`,
-asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the joint steps on into it and its lines stay in
-step, only their level moves; music or speech on them moves it out of step. A jittered step clock turns each
-line's phase within a frame, so its share in phase falls under ``model_min_share`` with no other sound:
-such a span is taken too where each line holds what the followed clock's own wander leaves it
-(``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
+have begun there (``model_inside``; :func:`.inside.stop_departed`), emitted once its lines still depart past the
+window's end (``model_hold_s``: a stop holds while the stepping goes on; music or speech changes back). A fire
+the model lets through whose lines held under ``model_in_step`` of the model's own share in phase is flagged
+(:meth:`ClockedCheck.in_step_reading`, asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the
+joint steps on into it and its lines stay in step, only their level moves; music or speech on them moves it out
+of step. A jittered step clock turns each line's phase within a frame, so its share in phase falls under
+``model_min_share`` with no other sound: such a span is taken too where each line holds what the followed clock's
+own wander leaves it (``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
 under speech or music they seldom can (the lines move with the added sound, or are not read): so once
 the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
 sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
@@ -257,6 +258,15 @@ class ClockedParams:
         "s",
         "and its best split leaves this much of the fitted stretch after it: nearer its end the change lies at or "
         "past the end, not inside; dropped (stops found inside: 0.12 s and more; music, radio: 0.02-0.055 s; 0: not)",
+    )
+    model_hold_s: float = param(
+        0.48,
+        "s",
+        "and its lines still depart from the model (model_max_z) in every piece over this long after the window's "
+        "end: a stop holds while stepping goes on (stops: 7.2+), sound changes back (0.3-1.8); held till then (0: not)",
+    )
+    model_hold_piece_s: float = param(
+        0.24, "s", "that hold is read in pieces this long, the least z kept (half a span: sound that changed back)"
     )
     model_unjudged: bool = param(
         True,
