@@ -93,7 +93,7 @@ def _model_line(on: OnClock) -> str:
         return f"the departed pieces' least z {on.still_z:.2f}"
     w, zs, shares = MODEL_READ[on.still_z]
     step = (
-        f"; in step {on.in_step:.2f} of the model's {on.model_in_step:.2f}, out of phase {on.added_db:+.1f} dB"
+        f"; in step {on.in_step:.2f} of the model's {on.model_share:.2f}, out of phase {on.added_db:+.1f} dB"
         if on.in_step == on.in_step
         else ""
     )
@@ -159,6 +159,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "expect-off": ClockedParams(model_expect=False),
     "in-step-off": ClockedParams(model_in_step=0.0),
     "edge-off": ClockedParams(model_edge_s=0.0),
+    "hold-off": ClockedParams(model_hold_s=0.0),
     "off": None,
 }
 

@@ -69,13 +69,13 @@ NOISES: dict[str, tuple[str, float] | None] = {
 }
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
 #: the ``ClockedParams`` switch compared: off (the field False) against on (the default)
-SWITCHES = ("lines_model", "model_unjudged", "model_expect", "model_in_step", "model_edge_s")
+SWITCHES = ("lines_model", "model_unjudged", "model_expect", "model_in_step", "model_edge_s", "model_hold_s")
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
     """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults
-    (``model_in_step``, a share, and ``model_edge_s``, s: 0 off, its default on)."""
-    if name in ("model_in_step", "model_edge_s"):
+    (``model_in_step``, a share, and ``model_edge_s``, ``model_hold_s``, s: 0 off, its default on)."""
+    if name in ("model_in_step", "model_edge_s", "model_hold_s"):
         return {"off": replace(ClockedParams(), **{name: 0.0}), "on": ClockedParams()}
     return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
 
@@ -164,7 +164,7 @@ def model_state(det: ConfirmedStopDetector) -> str:
     m = c.model
     reads = " ".join(
         f"{t:.2f}:{oc.still_z:.1f}"
-        + (f" in step {oc.in_step:.2f}/{oc.model_in_step:.2f} {oc.added_db:+.1f} dB" if oc.in_step >= 0 else "")
+        + (f" in step {oc.in_step:.2f}/{oc.model_share:.2f} {oc.added_db:+.1f} dB" if oc.in_step >= 0 else "")
         for t, oc in det.log.clocked
         if np.isfinite(oc.still_z)
     )

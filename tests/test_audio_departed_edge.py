@@ -9,7 +9,8 @@ music at -0.8 dB, no stop. The fast path fires at 12.24 s; the model vetoes it (
 the last piece within and the first departed (0.96 s, 48 frames of 20 ms) puts its best split at 0.930 s, 30 ms from
 the stretch's end, with no spread at all: a boundary optimum (the change lies at or past the end), not an onset.
 Without the rule that is counted, a false stop at 13.647 s (``found_late``); with it the window stays vetoed and
-nothing is counted (the sound there is heard again at the window's end, and flagged).
+nothing is counted (the sound there is heard again at the window's end, and flagged). The hold past the window
+(``model_hold_s``, ``tests/test_audio_departed_hold.py``) drops it too; the "before" turns both off.
 """
 
 from __future__ import annotations
@@ -28,16 +29,17 @@ from stickslip.audio.events import StopEvent
 
 
 @cache
-def _heard(edge_s: float) -> tuple[list[StopEvent], ConfirmedStopDetector]:
+def _heard(edge_s: float, hold_s: float = CLOCKED.model_hold_s) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     h = Hour(Arm(3), rate=1050.0, dur=14.5, seed=4003)
     tu = tune(render(tuning_scene(Arm(3))), SR, 2.0)
-    det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=replace(CLOCKED, model_edge_s=edge_s)))
+    clocked = replace(CLOCKED, model_edge_s=edge_s, model_hold_s=hold_s)
+    det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=clocked))
     det.reset(0.0, step_rate_hz=h.rate)
     return [e for block in stream(h) for e in det.feed(block)] + det.finish(), det
 
 
 def test_a_split_at_the_fitted_stretchs_end_is_not_counted_as_a_stop_found_inside() -> None:
-    off, det_off = _heard(0.0)
+    off, det_off = _heard(0.0, 0.0)  # (the hold past the window drops it too: off for the "before")
     assert [(round(e.onset_s, 3), e.onset_uncertain, e.found_late) for e in off] == [(13.647, False, True)]
     assert [(round(a, 2), round(b, 3), s) for a, b, s in det_off.log.inside] == [(12.24, 13.647, 0.0)]
     on, det_on = _heard(CLOCKED.model_edge_s)

@@ -45,7 +45,7 @@ def test_a_fire_the_model_let_through_with_its_lines_out_of_step_is_flagged_not_
     ]
     got = [g for t, g in det.log.clocked if math.isfinite(g.in_step)]
     assert len(got) == 1 and got[0].still_z >= CLOCKED.model_max_z  # read by the model, and let through
-    assert got[0].in_step < CLOCKED.model_in_step * got[0].model_in_step
+    assert got[0].in_step < CLOCKED.model_in_step * got[0].model_share
 
 
 def test_a_share_lowered_without_power_added_out_of_phase_is_not_flagged() -> None:
@@ -60,4 +60,4 @@ def test_the_share_is_read_only_where_the_model_let_the_fire_through() -> None:
     det = _heard(CLOCKED.model_in_step)[1]
     for _, g in det.log.clocked:
         assert math.isfinite(g.in_step) == (g.still_z >= CLOCKED.model_max_z)
-        assert math.isfinite(g.in_step) == math.isfinite(g.model_in_step)
+        assert math.isfinite(g.in_step) == math.isfinite(g.model_share)

@@ -156,10 +156,10 @@ class WindowChecks:
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
         got = self.on_clock
-        low = got is not None and got.in_step < c.p.model_in_step * got.model_in_step  # (NaN: not read)
+        low = got is not None and got.in_step < c.p.model_in_step * got.model_share  # (NaN: not read)
         if c.enabled and got is not None and low and got.added_db >= c.p.model_added_db:  # and sound added on them
             return (
-                f"lines {got.in_step:.2f} in phase at the fire, the stepping's {got.model_in_step:.2f}, power out of"
+                f"lines {got.in_step:.2f} in phase at the fire, the stepping's {got.model_share:.2f}, power out of"
                 f" phase {got.added_db:+.1f} dB: not in step"
             )
         if c.enabled and c.unjudged(onset, self.on_clock):  # off the tuning's rate: nothing but the levels counted it

@@ -72,13 +72,14 @@ same reading conditions (a comb verdict, or the predicted move), a fire whose wi
 stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
 at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
-have begun there (``model_inside``; :func:`.inside.stop_departed`). A fire the model lets through whose
-lines held under ``model_in_step`` of the model's own share in phase is flagged (:meth:`ClockedCheck.model_in_step`,
-asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the joint steps on into it and its lines stay in
-step, only their level moves; music or speech on them moves it out of step. A jittered step clock turns each
-line's phase within a frame, so its share in phase falls under ``model_min_share`` with no other sound:
-such a span is taken too where each line holds what the followed clock's own wander leaves it
-(``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
+have begun there (``model_inside``; :func:`.inside.stop_departed`), emitted once its lines still depart past the
+window's end (``model_hold_s``: a stop holds while the stepping goes on; music or speech changes back). A fire
+the model lets through whose lines held under ``model_in_step`` of the model's own share in phase is flagged
+(:meth:`ClockedCheck.in_step_reading`, asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the
+joint steps on into it and its lines stay in step, only their level moves; music or speech on them moves it out
+of step. A jittered step clock turns each line's phase within a frame, so its share in phase falls under
+``model_min_share`` with no other sound: such a span is taken too where each line holds what the followed clock's
+own wander leaves it (``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
 under speech or music they seldom can (the lines move with the added sound, or are not read): so once
 the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
 sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
@@ -258,6 +259,15 @@ class ClockedParams:
         "and its best split leaves this much of the fitted stretch after it: nearer its end the change lies at or "
         "past the end, not inside; dropped (stops found inside: 0.12 s and more; music, radio: 0.02-0.055 s; 0: not)",
     )
+    model_hold_s: float = param(
+        0.48,
+        "s",
+        "and its lines still depart from the model (model_max_z) in every piece over this long after the window's "
+        "end: a stop holds while stepping goes on (stops: 7.2+), sound changes back (0.3-1.8); held till then (0: not)",
+    )
+    model_hold_piece_s: float = param(
+        0.24, "s", "that hold is read in pieces this long, the least z kept (half a span: sound that changed back)"
+    )
     model_unjudged: bool = param(
         True,
         "",
@@ -337,7 +347,7 @@ class OnClock:
     #: mean share of their lines' power in phase over the window's first piece, and the model's own over the stepping
     #: it modelled, and how far their power out of phase rose over the stepping's, dB (NaN: not read)
     in_step: float = math.nan
-    model_in_step: float = math.nan
+    model_share: float = math.nan
     added_db: float = math.nan
 
 
@@ -765,9 +775,10 @@ class ClockedCheck:
         pieces = [after[k * n : (k + 1) * n] for k in range(max(1, min(p.window_pieces, after.size // n)))]
         return self.model.z(pieces, p.model_min_spans, p.model_floor_db)
 
-    def model_in_step(self, after: FloatArray, z: float) -> tuple[float, float, float]:
-        """Where the model read the fire and let it through (``z`` at least ``model_max_z``), the window's first piece
-        in step, the model's, and the power out of phase added (:meth:`.stepping_lines.SteppingLines.in_step`)."""
+    def in_step_reading(self, after: FloatArray, z: float) -> tuple[float, float, float]:
+        """Where the model read the fire and let it through (``z`` at least ``model_max_z``): the window's first
+        piece's share in phase, the model's own mean share, and the power out of phase added, dB (``OnClock.in_step``,
+        ``model_share``, ``added_db``; :meth:`.stepping_lines.SteppingLines.in_step`; NaN: not read)."""
         if self.model is None or not z >= self.p.model_max_z:
             return math.nan, math.nan, math.nan
         return self.model.in_step(after[: self.model_n])
@@ -802,8 +813,8 @@ class ClockedCheck:
         if ref is None or ref.size < p.min_s * sr or self.ref_stoplike > p.max_ref_stoplike:
             # too little stepping before the fire, or the stop may have begun there (heard late): the model only
             z = self.model_z(after) if modelled else math.nan
-            s, s0, added = self.model_in_step(after, z)
-            on = OnClock(math.nan, self.model_hz, 0, still_z=z, in_step=s, model_in_step=s0, added_db=added)
+            s, s0, added = self.in_step_reading(after, z)
+            on = OnClock(math.nan, self.model_hz, 0, still_z=z, in_step=s, model_share=s0, added_db=added)
             return on if math.isfinite(z) else None
         rate = self.rate(heard_hz, affirm or self.commanded_hz is not None)
         if not math.isfinite(rate) or not (affirm or self.at_tuned_rate(rate) or p.min_moved_db > 0.0):
@@ -825,7 +836,7 @@ class ClockedCheck:
             reader = self.reader(rate) if math.isfinite(a) else None
             locked = math.nan if reader is None else float(np.median([reader.read(x) for x in pieces]))
             z = self.model_z(after, a)
-            s, s0, added = self.model_in_step(after, z)
+            s, s0, added = self.in_step_reading(after, z)
             on = OnClock(a, rate, used, self.ref_age_s, locked, math.nan, z, s, s0, added)  # (moved_db: not read)
             return on if math.isfinite(a) or math.isfinite(z) else None
         unjudged = veto_off and not math.isfinite(a)

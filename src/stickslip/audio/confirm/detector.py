@@ -50,7 +50,7 @@ from .chain import Fire, FireChain
 from .checks import WindowChecks
 from .clocked import CLOCKED, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
-from .inside import INSIDE, InsideParams, stop_departed, stop_inside
+from .inside import INSIDE, Held, InsideParams, held_inside
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
 from .pause import PAUSE, PauseParams, Stopped
@@ -112,6 +112,18 @@ class ConfirmLog:
     #: per stop found inside a rejected fire's window (:mod:`.inside`): (the fire's ``detected_at_s``, the onset
     #: found, its spread; s)
     inside: list[tuple[float, float, float]] = field(default_factory=list)
+    #: per stop found departed from the stepping's lines modelled, held past its window (``model_hold_s``): (the
+    #: fire's ``detected_at_s``, the least z read after the window's end, NaN: none): a stop from ``model_max_z`` on
+    held: list[tuple[float, float]] = field(default_factory=list)
+
+    def note_held(self, h: Held, ev: StopEvent | None, z: float, sample_rate: float) -> None:
+        """The stop held inside ``h.fire``'s rejected window judged: ``ev`` the event emitted (None: none), ``z`` the
+        least z read past the window (NaN: none); ``sample_rate``, Hz."""
+        t = h.fire.ev.detected_at_s
+        self.held += [(t, z)] if h.until > h.end else []
+        if ev is not None:
+            self.clocked.append((t, h.found.on_clock))
+            self.inside.append((t, ev.onset_s, h.found.spread / sample_rate))
 
 
 class ConfirmedStopDetector:
@@ -184,6 +196,7 @@ class ConfirmedStopDetector:
         self.inner.evidence, self.inner.hot_evidence = [], []
         self._t0 = float(t0_s)
         self._fed = 0
+        self._held: Held | None = None  # a stop found inside a rejected window, until it may be emitted
         self._frames.reset(t0_s)
         self._chain.reset()
         self._kept.reset()
@@ -246,7 +259,7 @@ class ConfirmedStopDetector:
                 out, events = self._late_chunks(fed0, events, out)
             for ev in events:
                 out += self._fired(ev)
-            out += self._decide()
+            out += self._decide() + self._held_judged()
             if self.checks.after.waiting:  # a pause: what follows is heard once the stepping is back
                 return out + self._wait(x[pos:])
         return out
@@ -277,6 +290,7 @@ class ConfirmedStopDetector:
         else:
             end = pending.frame + pending.window  # the window's last frame
             room = max(1, end * self._H + self._F - self._fed)
+        room = room if self._held is None else min(room, max(1, self._held.until - self._fed))  # (at the hold's end)
         take = min(room, left)
         late = self.late
         idle = late is not None and pending is None and not self.inner.latched and self.inner.ready
@@ -321,7 +335,7 @@ class ConfirmedStopDetector:
         else a stop the late path found and held back while the fast path was deciding."""
         if self.checks.after.waiting:  # paused since the last pause was judged: nothing to hear
             return []
-        out = self._finish_fast()
+        out = self._held_judged(True) + self._finish_fast() + self._held_judged(True)
         if self.late is not None and not out:
             out = self._late_event(self.late.finish(), self._fed)
         return out
@@ -334,8 +348,8 @@ class ConfirmedStopDetector:
         if not self._holds(fire.ev, fire.frame, heard):
             self.log.rejected.append(fire.ev)
             self.checks.after.judged_s = None
-            found = self._inside(Fire(fire.ev, fire.frame, heard))  # what was heard of the window
-            return [] if found is None else [found]
+            self._inside(Fire(fire.ev, fire.frame, heard))  # what was heard of the window
+            return []
         return [self._confirmed(fire.ev, fire.frame, heard)]
 
     # --- internals ----------------------------------------------------------------------------
@@ -380,36 +394,41 @@ class ConfirmedStopDetector:
         self.log.rejected.append(fire.ev)
         if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back
             return []
-        found = self._inside(fire)
-        if found is not None:  # the stop began inside the window: the fast path stays latched on it
-            return [found]
+        self._inside(fire)  # a stop that began inside the window: the fast path stays latched on it
+        self.inner.hold(self._held is not None)  # (held, not re-armed, until its lines are read past the window)
+        return [] if self._held is not None else self._rejected(fire)
+
+    def _rejected(self, fire: Fire) -> list[StopEvent]:
+        """``fire``'s window held no stop: the fast path un-latched, the chain goes on from its end."""
         self.inner.unlatch()
         self._chain.rejected(fire)
         return []
 
-    def _inside(self, fire: Fire) -> StopEvent | None:
-        """A stop that began inside ``fire``'s rejected window, found on the joint's own clock (:mod:`.inside`)."""
-        c, p = self.checks.clocked, self.params.inside
+    def _held_judged(self, finishing: bool = False) -> list[StopEvent]:
+        """The stop held (:class:`.inside.Held`), judged at once, at its hold's end or the stream's (see there)."""
+        h = self._held
+        if h is None or self.checks.clocked is None or (self._fed < h.until and not finishing):
+            return []
+        self._held, x = None, self._kept.get(h.end, min(h.until, self._fed))
+        ev, z = h.judged(x, self._t0, self.checks.clocked)
+        self.inner.hold(False)
+        self.log.note_held(h, ev, z, self._sr)
+        if ev is None:  # its lines changed back: sound over the stepping, the window stays vetoed
+            return self._rejected(h.fire)
+        self._chain.confirmed()
+        return [ev]
+
+    def _inside(self, fire: Fire) -> None:
+        """A stop that began inside ``fire``'s rejected window (:func:`.inside.held_inside`), held until emitted."""
+        c, p, ch = self.checks.clocked, self.params.inside, self.checks
         if c is None or p is None:
-            return None
+            return
         start = fire.frame * self._H + self._F  # the window's first sample
         end = min((fire.frame + fire.window) * self._H + self._F, self._fed)
         lead = int(round(p.piece_s * self._sr))
         x = self._kept.get(start - lead, end)
-        if x.size != end - start + lead:
-            return None  # not all kept (the stream began inside the lead)
-        got = stop_inside(x, lead, c, self.checks.pause.before_hz, p)
-        if got is None and c.p.model_inside and c.model_vetoed(self.checks.on_clock):  # the stepping's lines modelled
-            got = stop_departed(x, lead, c, p)
-        if got is None or self.checks.pause.stopped(x[got.onset :]) is not None:
-            return None
-        onset_s = self._t0 + (start - lead + got.onset) / self._sr
-        found_s = self._t0 + end / self._sr
-        self.log.clocked.append((fire.ev.detected_at_s, got.on_clock))
-        self.log.inside.append((fire.ev.detected_at_s, onset_s, got.spread / self._sr))
-        self._chain.confirmed()
-        uncertain = got.spread > p.max_onset_off_s * self._sr
-        return StopEvent(found_s, onset_s, fire.ev.level_db, found_s, found_s - onset_s, uncertain, found_late=True)
+        if x.size == end - start + lead:  # (else not all kept: the stream began inside the lead)
+            self._held = held_inside(x, lead, fire, (start, self._t0, self._sr), c, ch.pause, ch.on_clock, p)
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""

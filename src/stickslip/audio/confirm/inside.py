@@ -38,15 +38,28 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 
+from ..events import StopEvent
 from ..paramfield import param
+from .chain import Fire
 from .clocked import ClockedCheck, ClockedParams, OnClock, turned_frames
+from .pause import PauseCheck
 
-__all__ = ["INSIDE", "Inside", "InsideParams", "onset_in_phase", "stop_departed", "stop_inside"]
+__all__ = [
+    "INSIDE",
+    "Held",
+    "Inside",
+    "InsideParams",
+    "held_inside",
+    "onset_in_phase",
+    "still_departed",
+    "stop_departed",
+    "stop_inside",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -137,7 +150,8 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     within ``model_max_spread_s``, else none was found; and inside the stretch fitted, ``model_edge_s`` at least
     before its end: a best split nearer the end is a boundary optimum (the change lies at or past the end, often with
     no spread at all), not an onset found, and the window stays vetoed (a stop there still sounds after it and is
-    judged again).
+    judged again). A find is held until its lines were read past the window's end (``model_hold_s``;
+    :func:`still_departed`, :class:`Held`): sound over the stepping departs too, and changes back.
     """
     cp, sr, m, n = clocked.p, clocked.sample_rate, clocked.model, clocked.model_n
     if m is None or n <= 0 or not (clocked.models_lines() and clocked.model_ready()):
@@ -157,6 +171,77 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     if 2 * n - t < cp.model_edge_s * sr:
         return None  # the best split at the stretch's end: the fit found no change inside it
     return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
+
+
+def still_departed(x: FloatArray, clocked: ClockedCheck) -> float:
+    """After a window a stop was found departed in (:func:`stop_departed`), the samples ``x`` that followed it read
+    against the stepping's lines modelled in pieces of ``model_hold_piece_s``: the least z over them, spreads (NaN:
+    no model, or not one whole piece). At an end stop the joint steps on into it until the traverse stops commanding:
+    its lines stay departed; music, speech or a radio over the stepping change and change back (``model_hold_s``)."""
+    cp, m = clocked.p, clocked.model
+    n = int(round(cp.model_hold_piece_s * clocked.sample_rate))
+    if m is None or n <= 0 or x.size < n:
+        return math.nan
+    pieces = [x[i * n : (i + 1) * n] for i in range(x.size // n)]
+    return float(np.min([m.z_of(m.levels(v)[0], cp.model_min_spans, cp.model_floor_db) for v in pieces]))
+
+
+@dataclass(frozen=True)
+class Held:
+    """A stop found departed from the stepping's lines modelled (:func:`stop_departed`), held, its fast path latched,
+    until its lines are read ``model_hold_s`` past the window's end (:func:`still_departed`)."""
+
+    #: the rejected fire whose window held it
+    fire: Fire
+    #: the event it is, as found at the window's end
+    event: StopEvent
+    found: Inside
+    #: the window's end and the hold's, samples fed
+    end: int
+    until: int
+
+    def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
+        """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
+        when its hold was heard (None: its lines changed back, not a stop), and the least z read (NaN: none read,
+        the stream ended: the event flagged). No hold (:attr:`until` at :attr:`end`): the event as found."""
+        if self.until <= self.end:
+            return self.event, math.nan
+        z = still_departed(x, clocked)
+        if z < clocked.p.model_max_z:
+            return None, z
+        t = t0_s + (self.end + x.size) / clocked.sample_rate
+        e = self.event
+        flag = e.onset_uncertain or not math.isfinite(z)
+        return replace(e, detected_at_s=t, confirmed_at_s=t, confirmed_s=t - e.onset_s, onset_uncertain=flag), z
+
+
+def held_inside(
+    x: FloatArray,
+    lead: int,
+    fire: Fire,
+    at: tuple[int, float, float],
+    clocked: ClockedCheck,
+    pause: PauseCheck,
+    on_clock: OnClock | None,
+    p: InsideParams = INSIDE,
+) -> Held | None:
+    """The stop that began inside ``fire``'s rejected window ``x[lead:]`` (``x[:lead]`` before it; ``at``: the
+    absolute sample of ``x[lead]``, the stream's start time, s, and the sample rate, Hz), held until it may be emitted:
+    found on the joint's clock (:func:`stop_inside`: at once), else, where the stepping's lines modelled vetoed the fire
+    (``on_clock``), departed from them (:func:`stop_departed`: once its lines were read ``model_hold_s`` past the
+    window); none where the stepping stopped from its onset (``pause``) or nothing was found."""
+    start, t0_s, sr = at
+    cp = clocked.p
+    got, hold = stop_inside(x, lead, clocked, pause.before_hz, p), 0
+    if got is None and cp.model_inside and clocked.model_vetoed(on_clock):  # the stepping's lines modelled
+        got, hold = stop_departed(x, lead, clocked, p), int(round(cp.model_hold_s * sr))
+    if got is None or pause.stopped(x[got.onset :]) is not None:
+        return None
+    end = start - lead + x.size
+    onset_s, found_s = t0_s + (start - lead + got.onset) / sr, t0_s + end / sr
+    uncertain = got.spread > p.max_onset_off_s * sr
+    ev = StopEvent(found_s, onset_s, fire.ev.level_db, found_s, found_s - onset_s, uncertain, found_late=True)
+    return Held(fire, ev, got, end, end + hold)
 
 
 def onset_in_phase(
