@@ -380,3 +380,37 @@ def test_a_negative_edge_growth_is_refused() -> None:
     with pytest.raises(ValueError, match="edge_px = -1 px must be >= 0"):
         TrackerParams(edge_px=-1)
     assert TrackerParams(edge_px=0).edge_px == 0
+
+
+def _needle_frame(size: int = 96, seed: int = 3) -> np.ndarray:
+    """A dark needle pointing left, its tip at (50.3, 48.7), on a noisy ground."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size].astype(float)
+    along, across = xx - 50.3, yy - 48.7
+    needle = (along >= 0) & (np.abs(across) <= 2.0 + 0.2 * along)
+    return ndimage.gaussian_filter(np.where(needle, 0.2, 0.8), 1.0) + rng.normal(0.0, 0.01, (size, size))
+
+
+def test_blur_samples_share_cells_and_are_warpeds_bit_for_bit() -> None:
+    """:func:`_blur_samples` (the patches of one place sharing their points' cells) against each blur's patch
+    warped on its own: within the frame, cut by its edge, beyond it (an empty patch), and with a patch made
+    elsewhere before (a group of its own)."""
+    from stickslip.vision.track import TipTracker, _blur_samples, _frame_stats
+
+    image = _needle_frame()
+    tr = TipTracker(image, (50.3, 48.7))
+    for x, y, theta, early in ((50.3, 48.7, 0.0, None), (51.1, 47.9, 0.12, (49.0, 50.0)), (3.2, 90.4, -0.3, None),
+                               (-60.0, 40.0, 0.05, None), (94.6, 1.2, 0.0, (50.0, 48.0))):
+        mine: dict[float, Patch] = {}
+        plain: dict[float, Patch] = {}
+        if early is not None:  # the sharp frame's patch made around the fit's start, as _try makes it
+            mine[0.0] = plain[0.0] = tr._patch({}, image, early[0], early[1], 0.0)
+        got = _blur_samples(tr, mine, image, x, y, theta)
+        assert sorted(got) == sorted({f for _, f, _ in tr._spec})
+        for f, (w, stats, all_in) in got.items():
+            v, inside = warped(tr._patch(plain, image, x, y, f), tr._select, x, y, theta)
+            w0 = tr._select.w * inside
+            s0 = _frame_stats(v, w0)
+            assert np.array_equal(w, w0) and all_in == bool(inside.all())
+            assert stats[0] == s0[0] and np.array_equal(stats[1], s0[1]) and stats[2] == s0[2]
+

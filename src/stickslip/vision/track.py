@@ -67,8 +67,8 @@ from .average import TemplateAverage, anchor
 from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
-from .refine import Refinement, Steepest, refine, steepest, warped
-from .sampling import Patch, median, patch, sample_value
+from .refine import Refinement, Steepest, _turned, refine, steepest
+from .sampling import Patch, _corners, bilinear, median, neighbours, patch, sample_value
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import (
     TemplateError,
@@ -399,6 +399,37 @@ def _frame_stats(Iw: FloatArray, w: FloatArray) -> tuple[float, FloatArray, floa
     return sw, di, vi
 
 
+_Samples = tuple[FloatArray, tuple[float, FloatArray, float], bool]
+"""A frame blur's samples at the template's weighted pixels: the weights in the frame, :func:`_frame_stats` of the
+samples under them, and whether every sample lies in the frame."""
+
+
+def _blur_samples(t: TipTracker, patches: dict[float, Patch], image: FloatArray, x: float, y: float, theta: float
+                  ) -> dict[float, _Samples]:
+    """For each frame blur of ``t``'s levels, the frame sampled at the widest mask's pixels for a tip at ``(x, y)``
+    turned by ``theta`` (:func:`~.refine.warped`'s values, bit for bit), as :meth:`TipTracker._levels` reads them.
+
+    The patches of one place and size (the blurs' patches made around one fit: the same corner, the same shape)
+    share the points' cells, fractions and in-frame flags and the weights in the frame; only the values gathered
+    differ, so each is worked out once.
+    """
+    out: dict[float, _Samples] = {}
+    cells: dict[tuple[int, int, int, int], tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray, bool]] = {}
+    for _, f, _ in t._spec:
+        if f in out:
+            continue
+        p = t._patch(patches, image, x, y, f)
+        _, ch, cw = p.data.shape
+        key = (p.x0, p.y0, ch, cw)
+        c = cells.get(key)
+        if c is None:
+            i00, fx, fy, inside = _corners(p, _turned(t._select, x, y, theta))
+            c = cells[key] = (neighbours(i00, ch, cw), fx, fy, t._select.w * inside, bool(inside.all()))
+        at, fx, fy, w, all_in = c
+        out[f] = (w, _frame_stats(bilinear(p.data[0].reshape(-1).take(at), fx, fy), w), all_in)
+    return out
+
+
 def _copy_terms(b: FloatArray, w: FloatArray, sw: float) -> tuple[FloatArray, float]:
     """Copy ``b``'s part of :func:`_noise_free_ncc` under the weights ``w`` (their sum ``sw``): ``w`` times ``b``
     less its weighted mean, and its weighted sum of squares (made once for the samples all in the frame)."""
@@ -613,13 +644,10 @@ class TipTracker:
         (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
         """
         out = []
-        # copies of one blur share samples; all in the frame, the copies' terms made at learning (w * True is w)
-        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float], bool]] = {}
+        # copies of one blur share samples (:func:`_blur_samples`); all in the frame, the copies' terms made at
+        # learning (w * True is w)
+        seen = _blur_samples(self, patches, image, x, y, theta)
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
-            if f not in seen:
-                Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
-                w = self._select.w * inside
-                seen[f] = (w, _frame_stats(Iw, w), bool(inside.all()))
             w, stats, all_in = seen[f]
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
             out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(
