@@ -414,3 +414,53 @@ def test_blur_samples_share_cells_and_are_warpeds_bit_for_bit() -> None:
             assert np.array_equal(w, w0) and all_in == bool(inside.all())
             assert stats[0] == s0[0] and np.array_equal(stats[1], s0[1]) and stats[2] == s0[2]
 
+
+def _front_share_before(t: object, cand: object, blur: float) -> float:
+    """The share in front of the tip as it was written before (the offsets gathered at every call)."""
+    from stickslip.vision.sampling import sample_value
+
+    r = cand.ref  # type: ignore[attr-defined]
+    core, ring, (fx, fy) = t.core, t.ring, t.front  # type: ignore[attr-defined]
+    if core[0].size < 3 or ring[0].size < 8:
+        return 0.0
+    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur
+    ox = np.concatenate([core[0], ring[0], fx[far]])
+    oy = np.concatenate([core[1], ring[1], fy[far]])
+    ct, st_ = math.cos(r.theta), math.sin(r.theta)
+    v, _ = sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)  # type: ignore[attr-defined]
+    nc, nr = core[0].size, ring[0].size
+    needle, ground = float(np.median(v[:nc])), float(np.median(v[nc : nc + nr]))
+    if abs(needle - ground) < 1e-12:
+        return 1.0
+    if int(far.sum()) < 6:
+        return 0.0
+    return float(np.mean((v[nc + nr :] - ground) / (needle - ground) > 0.5))
+
+
+def test_front_share_with_kept_offsets_is_the_plain_one() -> None:
+    """:func:`_front_share` with its offsets kept (made again when the template's are) against the plain one: fits
+    on the tip, off it, near and beyond the frame's edge, every blur; a flat frame (needle and ground alike)."""
+    from dataclasses import replace
+
+    from stickslip.vision.track import TipTracker, _front_share
+
+    image = _needle_frame()
+    tr = TipTracker(image, (50.3, 48.7))
+    t = tr.template
+    cache: dict[object, object] = {}
+    n = 0
+    for x, y, theta in ((50.3, 48.7, 0.0), (52.0, 47.1, 0.15), (40.0, 48.7, -0.2), (2.5, 93.0, 0.0),
+                        (-30.0, 10.0, 0.3)):
+        cand = tr._try(image, 50.3, 48.7, 0.0, 0)
+        cand = replace(cand, ref=replace(cand.ref, x=x, y=y, theta=theta), patch=patch(image, x, y, 40.0, 1.0))
+        for blur in (0.0, 1.0, 2.5, 6.0):
+            got, want = _front_share(t, cand, blur, cache), _front_share_before(t, cand, blur)
+            assert got == want
+            n += 0.0 < want < 1.0
+    assert n > 0  # some fit reads a share between none and all
+    flat = replace(cand, patch=patch(np.full((96, 96), 0.5), 50.3, 48.7, 40.0, 1.0),
+                   ref=replace(cand.ref, x=50.3, y=48.7, theta=0.0))
+    assert _front_share(t, flat, 0.0, cache) == _front_share_before(t, flat, 0.0) == 1.0
+    t.core = (t.core[0].copy(), t.core[1] + 1.0)  # the template's core made again: the offsets too
+    assert _front_share(t, cand, 1.0, cache) == _front_share_before(t, cand, 1.0)
+

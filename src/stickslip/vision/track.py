@@ -68,7 +68,7 @@ from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
 from .refine import Refinement, Steepest, _turned, refine, steepest
-from .sampling import Patch, _corners, bilinear, median, neighbours, patch, sample_value
+from .sampling import Patch, _corners, bilinear, median, neighbours, patch, sample_value_xy
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import (
     TemplateError,
@@ -278,28 +278,47 @@ def _look(image: FloatArray, t: TipTemplate, p: TrackerParams, cache: dict[objec
     return ncc, rx0, ry0
 
 
-def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
+def _front_offsets(t: TipTemplate, blur: float, cache: dict[object, object] | None
+                   ) -> tuple[FloatArray, FloatArray, int]:
+    """The template's core, ring and front offsets (the front's only those ahead of a tip blurred by ``blur`` px)
+    as one array (px, shape (2, n)), the same turned a quarter (``(-y, x)``), and how many of the front's are
+    kept; kept in ``cache`` for the template's core, ring and front (made again when they are)."""
+    kept = cache.get(("front", blur)) if cache is not None else None
+    if isinstance(kept, tuple) and kept[0] is t.core and kept[1] is t.ring and kept[2] is t.front:
+        return kept[3], kept[4], kept[5]
+    fx, fy = t.front
+    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+    o = np.stack((np.concatenate([t.core[0], t.ring[0], fx[far]]), np.concatenate([t.core[1], t.ring[1], fy[far]])))
+    out = (o, np.stack((-o[1], o[0])), int(far.sum()))
+    if cache is not None:
+        cache[("front", blur)] = (t.core, t.ring, t.front, *out)
+    return out
+
+
+def _front_share(t: TipTemplate, cand: _Candidate, blur: float, cache: dict[object, object] | None = None) -> float:
     """Share of the half-ring in front of the tip whose grey level is nearer the needle's than the background's.
 
     The template's core, ring and front offsets are turned and moved to the candidate's fit
     and sampled in its patch; ``blur`` (px) keeps the ground a blurred tip spreads over out.
+    ``cache``: where the offsets are kept (:func:`_front_offsets`).
     """
     r = cand.ref
     if t.core[0].size < 3 or t.ring[0].size < 8:
         return 0.0
-    fx, fy = t.front
-    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
-    # the core, the ring and the front ahead of a blurred tip, sampled in one go
-    ox = np.concatenate([t.core[0], t.ring[0], fx[far]])
-    oy = np.concatenate([t.core[1], t.ring[1], fy[far]])
-    ct, st_ = math.cos(r.theta), math.sin(r.theta)
-    v, _ = sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+    # the core, the ring and the front ahead of a blurred tip, sampled in one go: cos o + sin (-y, x) is, bit for
+    # bit, (cos x - sin y, sin x + cos y)
+    o, perp, n_far = _front_offsets(t, blur, cache)
+    xy = o * math.cos(r.theta)
+    xy += perp * math.sin(r.theta)
+    xy[0] += r.x
+    xy[1] += r.y
+    v, _ = sample_value_xy(cand.patch, xy)
     nc, nr = t.core[0].size, t.ring[0].size
     needle = median(v[:nc])  # numpy.median's, bit for bit
     ground = median(v[nc : nc + nr])
     if abs(needle - ground) < 1e-12:
         return 1.0
-    if int(far.sum()) < 6:
+    if n_far < 6:
         return 0.0
     like = (v[nc + nr :] - ground) / (needle - ground) > 0.5
     return float(np.mean(like))
@@ -799,7 +818,7 @@ class TipTracker:
         sigma = max(p.sigma_floor, p.sigma_factor * r.sigma)
         if r.outliers > p.occluded_fraction:
             return Lost("occluded", f"{100 * r.outliers:.0f} % of the tip's template disagrees with the frame")
-        front = _front_share(self.template, cand, max(blur, 0.0))
+        front = _front_share(self.template, cand, max(blur, 0.0), self._fft)
         if front > p.front_fraction:
             return Lost("occluded", f"{100 * front:.0f} % of the ground in front of the tip looks like the needle")
         if cand.level == self._top or blur > p.max_blur:
