@@ -464,3 +464,22 @@ def test_front_share_with_kept_offsets_is_the_plain_one() -> None:
     t.core = (t.core[0].copy(), t.core[1] + 1.0)  # the template's core made again: the offsets too
     assert _front_share(t, cand, 1.0, cache) == _front_share_before(t, cand, 1.0)
 
+
+@settings(max_examples=40, deadline=None)
+@given(sizes=st.lists(st.integers(0, 60), min_size=0, max_size=4), seed=st.integers(0, 2**32 - 1))
+def test_peaks_by_rank_are_the_sorted_tuples(sizes: list[int], seed: int) -> None:
+    """:func:`_by_rank` against ``sorted(..., reverse=True)`` of the tuples the search sorted before: several
+    copies, equal significances (the row, column and copy then decide), none at all."""
+    from stickslip.vision.track import _by_rank
+
+    rng = np.random.default_rng(seed)
+    peaks, tuples = [], []
+    for k, n in enumerate(sizes):
+        cells = rng.choice(30 * 30, n, replace=False)
+        z = rng.choice([0.0, 0.31, 0.5, 1.2], n) if seed % 2 else rng.uniform(0.0, 3.0, n)
+        ii, jj = cells // 30, cells % 30
+        peaks.append((z, ii.astype(np.intp), jj.astype(np.intp), np.full(n, k, dtype=np.intp)))
+        tuples += list(zip(z.tolist(), ii.tolist(), jj.tolist(), [k] * n, strict=True))
+    got = list(_by_rank(peaks))
+    assert got == sorted(tuples, reverse=True)
+    assert all(type(v) is int for t in got for v in t[1:])

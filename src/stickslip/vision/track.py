@@ -247,7 +247,11 @@ def _padded(image: FloatArray, f: int, half: int, cache: dict[object, object]
     return out, inside, pad
 
 
-def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int, int, int]]:
+_Peaks = tuple[FloatArray, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
+"""Peaks of the whole-frame correlation: their significance, rows, columns and blur copies."""
+
+
+def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> _Peaks:
     """The peaks (:func:`_peak_cells`) of the whole-frame correlation ``ncc`` of copy ``k``, each ranked by its
     significance: Fisher's ``atanh(r)`` times the square root of the share ``cover`` of the template's weight
     inside the frame.
@@ -258,7 +262,17 @@ def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int
     """
     ii, jj = _peak_cells(ncc, 0.3)
     z = np.arctanh(np.minimum(ncc[ii, jj], 1.0 - 1e-12)) * np.sqrt(np.minimum(cover[ii, jj], 1.0))
-    return list(zip(z.tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
+    return z, ii, jj, np.full(ii.size, k, dtype=np.intp)
+
+
+def _by_rank(peaks: Sequence[_Peaks]) -> Iterator[tuple[float, int, int, int]]:
+    """Every copy's peaks (:func:`_ranked`) as ``(significance, row, column, copy)``, the largest first (ties: the
+    larger row, column, copy first): ``sorted(..., reverse=True)`` of those tuples, made one at a time as they are
+    read (the search reads a few of a thousand or more)."""
+    z, ii, jj, kk = (np.concatenate([q[n] for q in peaks]) if peaks else np.zeros(0) for n in range(4))
+    order = np.lexsort((kk, jj, ii, z))[::-1]  # the tuples' order, none the same (one peak per cell and copy)
+    zl, il, jl, kl = (a[order].tolist() for a in (z, ii, jj, kk))
+    yield from zip(zl, il, jl, kl, strict=True)
 
 
 def _look(image: FloatArray, t: TipTemplate, p: TrackerParams, cache: dict[object, object], x: float, y: float,
@@ -743,17 +757,16 @@ class TipTracker:
         p, t = self.params, self.template
         f = p.coarse_factor
         small, inside, pad = _padded(image, f, t.half, self._fft)
-        best: list[tuple[float, int, int, int]] = []
+        peaks: list[_Peaks] = []
         spectra = region_spectra(small)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
-            best += _ranked(*inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
-                                        spectra, p.min_coverage), k)
-        best.sort(reverse=True)
+            peaks.append(_ranked(*inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
+                                             spectra, p.min_coverage), k))
         out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
-        for _s, i, j, k in best:
+        for _s, i, j, k in _by_rank(peaks):
             if len(out) >= p.candidates:
                 break
             x, y = (j - pad) * f + t.apex[0], (i - pad) * f + t.apex[1]
