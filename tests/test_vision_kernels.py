@@ -380,3 +380,106 @@ def test_a_negative_edge_growth_is_refused() -> None:
     with pytest.raises(ValueError, match="edge_px = -1 px must be >= 0"):
         TrackerParams(edge_px=-1)
     assert TrackerParams(edge_px=0).edge_px == 0
+
+
+def _needle_frame(size: int = 96, seed: int = 3) -> np.ndarray:
+    """A dark needle pointing left, its tip at (50.3, 48.7), on a noisy ground."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size].astype(float)
+    along, across = xx - 50.3, yy - 48.7
+    needle = (along >= 0) & (np.abs(across) <= 2.0 + 0.2 * along)
+    return ndimage.gaussian_filter(np.where(needle, 0.2, 0.8), 1.0) + rng.normal(0.0, 0.01, (size, size))
+
+
+def test_blur_samples_share_cells_and_are_warpeds_bit_for_bit() -> None:
+    """:func:`_blur_samples` (the patches of one place sharing their points' cells) against each blur's patch
+    warped on its own: within the frame, cut by its edge, beyond it (an empty patch), and with a patch made
+    elsewhere before (a group of its own)."""
+    from stickslip.vision.track import TipTracker, _blur_samples, _frame_stats
+
+    image = _needle_frame()
+    tr = TipTracker(image, (50.3, 48.7))
+    for x, y, theta, early in ((50.3, 48.7, 0.0, None), (51.1, 47.9, 0.12, (49.0, 50.0)), (3.2, 90.4, -0.3, None),
+                               (-60.0, 40.0, 0.05, None), (94.6, 1.2, 0.0, (50.0, 48.0))):
+        mine: dict[float, Patch] = {}
+        plain: dict[float, Patch] = {}
+        if early is not None:  # the sharp frame's patch made around the fit's start, as _try makes it
+            mine[0.0] = plain[0.0] = tr._patch({}, image, early[0], early[1], 0.0)
+        got = _blur_samples(tr, mine, image, x, y, theta)
+        assert sorted(got) == sorted({f for _, f, _ in tr._spec})
+        for f, (w, stats, all_in) in got.items():
+            v, inside = warped(tr._patch(plain, image, x, y, f), tr._select, x, y, theta)
+            w0 = tr._select.w * inside
+            s0 = _frame_stats(v, w0)
+            assert np.array_equal(w, w0) and all_in == bool(inside.all())
+            assert stats[0] == s0[0] and np.array_equal(stats[1], s0[1]) and stats[2] == s0[2]
+
+
+def _front_share_before(t: object, cand: object, blur: float) -> float:
+    """The share in front of the tip as it was written before (the offsets gathered at every call)."""
+    from stickslip.vision.sampling import sample_value
+
+    r = cand.ref  # type: ignore[attr-defined]
+    core, ring, (fx, fy) = t.core, t.ring, t.front  # type: ignore[attr-defined]
+    if core[0].size < 3 or ring[0].size < 8:
+        return 0.0
+    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur
+    ox = np.concatenate([core[0], ring[0], fx[far]])
+    oy = np.concatenate([core[1], ring[1], fy[far]])
+    ct, st_ = math.cos(r.theta), math.sin(r.theta)
+    v, _ = sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)  # type: ignore[attr-defined]
+    nc, nr = core[0].size, ring[0].size
+    needle, ground = float(np.median(v[:nc])), float(np.median(v[nc : nc + nr]))
+    if abs(needle - ground) < 1e-12:
+        return 1.0
+    if int(far.sum()) < 6:
+        return 0.0
+    return float(np.mean((v[nc + nr :] - ground) / (needle - ground) > 0.5))
+
+
+def test_front_share_with_kept_offsets_is_the_plain_one() -> None:
+    """:func:`_front_share` with its offsets kept (made again when the template's are) against the plain one: fits
+    on the tip, off it, near and beyond the frame's edge, every blur; a flat frame (needle and ground alike)."""
+    from dataclasses import replace
+
+    from stickslip.vision.track import TipTracker, _front_share
+
+    image = _needle_frame()
+    tr = TipTracker(image, (50.3, 48.7))
+    t = tr.template
+    cache: dict[object, object] = {}
+    n = 0
+    for x, y, theta in ((50.3, 48.7, 0.0), (52.0, 47.1, 0.15), (40.0, 48.7, -0.2), (2.5, 93.0, 0.0),
+                        (-30.0, 10.0, 0.3)):
+        cand = tr._try(image, 50.3, 48.7, 0.0, 0)
+        cand = replace(cand, ref=replace(cand.ref, x=x, y=y, theta=theta), patch=patch(image, x, y, 40.0, 1.0))
+        for blur in (0.0, 1.0, 2.5, 6.0):
+            got, want = _front_share(t, cand, blur, cache), _front_share_before(t, cand, blur)
+            assert got == want
+            n += 0.0 < want < 1.0
+    assert n > 0  # some fit reads a share between none and all
+    flat = replace(cand, patch=patch(np.full((96, 96), 0.5), 50.3, 48.7, 40.0, 1.0),
+                   ref=replace(cand.ref, x=50.3, y=48.7, theta=0.0))
+    assert _front_share(t, flat, 0.0, cache) == _front_share_before(t, flat, 0.0) == 1.0
+    t.core = (t.core[0].copy(), t.core[1] + 1.0)  # the template's core made again: the offsets too
+    assert _front_share(t, cand, 1.0, cache) == _front_share_before(t, cand, 1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(sizes=st.lists(st.integers(0, 60), min_size=0, max_size=4), seed=st.integers(0, 2**32 - 1))
+def test_peaks_by_rank_are_the_sorted_tuples(sizes: list[int], seed: int) -> None:
+    """:func:`_by_rank` against ``sorted(..., reverse=True)`` of the tuples the search sorted before: several
+    copies, equal significances (the row, column and copy then decide), none at all."""
+    from stickslip.vision.track import _by_rank
+
+    rng = np.random.default_rng(seed)
+    peaks, tuples = [], []
+    for k, n in enumerate(sizes):
+        cells = rng.choice(30 * 30, n, replace=False)
+        z = rng.choice([0.0, 0.31, 0.5, 1.2], n) if seed % 2 else rng.uniform(0.0, 3.0, n)
+        ii, jj = cells // 30, cells % 30
+        peaks.append((z, ii.astype(np.intp), jj.astype(np.intp), np.full(n, k, dtype=np.intp)))
+        tuples += list(zip(z.tolist(), ii.tolist(), jj.tolist(), [k] * n, strict=True))
+    got = list(_by_rank(peaks))
+    assert got == sorted(tuples, reverse=True)
+    assert all(type(v) is int for t in got for v in t[1:])

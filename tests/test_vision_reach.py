@@ -19,7 +19,7 @@ import pytest
 
 from stickslip.sim.camera import SimCamSettings, SimScene
 from stickslip.vision.template import inside_ncc, masked_ncc
-from stickslip.vision.track import Fix, Lost, TipTracker, _ranked
+from stickslip.vision.track import Fix, Lost, TipTracker, _by_rank, _ranked
 
 SIZE = 160
 
@@ -88,7 +88,7 @@ def test_a_peak_over_part_of_the_template_ranks_by_its_significance():
     cover = np.ones((20, 20))
     ncc[5, 5], ncc[14, 14], ncc[5, 14] = 0.84, 0.87, 0.80  # the tip in the middle; junk at the border
     cover[14, 14], cover[5, 14] = 0.80, 1.0
-    ranked = sorted(_ranked(ncc, cover, 2), reverse=True)
+    ranked = list(_by_rank([_ranked(ncc, cover, 2)]))
     assert [(i, j) for _, i, j, _ in ranked] == [(5, 5), (14, 14), (5, 14)]
     assert ranked[0][0] == pytest.approx(math.atanh(0.84))
     assert ranked[1][0] == pytest.approx(math.atanh(0.87) * math.sqrt(0.80))

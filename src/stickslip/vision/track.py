@@ -67,8 +67,8 @@ from .average import TemplateAverage, anchor
 from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
-from .refine import Refinement, Steepest, refine, steepest, warped
-from .sampling import Patch, median, patch, sample_value
+from .refine import Refinement, Steepest, _turned, refine, steepest
+from .sampling import Patch, _corners, bilinear, median, neighbours, patch, sample_value_xy
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import (
     TemplateError,
@@ -247,7 +247,11 @@ def _padded(image: FloatArray, f: int, half: int, cache: dict[object, object]
     return out, inside, pad
 
 
-def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int, int, int]]:
+_Peaks = tuple[FloatArray, NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
+"""Peaks of the whole-frame correlation: their significance, rows, columns and blur copies."""
+
+
+def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> _Peaks:
     """The peaks (:func:`_peak_cells`) of the whole-frame correlation ``ncc`` of copy ``k``, each ranked by its
     significance: Fisher's ``atanh(r)`` times the square root of the share ``cover`` of the template's weight
     inside the frame.
@@ -258,7 +262,17 @@ def _ranked(ncc: FloatArray, cover: FloatArray, k: int) -> list[tuple[float, int
     """
     ii, jj = _peak_cells(ncc, 0.3)
     z = np.arctanh(np.minimum(ncc[ii, jj], 1.0 - 1e-12)) * np.sqrt(np.minimum(cover[ii, jj], 1.0))
-    return list(zip(z.tolist(), ii.tolist(), jj.tolist(), [k] * len(ii), strict=True))
+    return z, ii, jj, np.full(ii.size, k, dtype=np.intp)
+
+
+def _by_rank(peaks: Sequence[_Peaks]) -> Iterator[tuple[float, int, int, int]]:
+    """Every copy's peaks (:func:`_ranked`) as ``(significance, row, column, copy)``, the largest first (ties: the
+    larger row, column, copy first): ``sorted(..., reverse=True)`` of those tuples, made one at a time as they are
+    read (the search reads a few of a thousand or more)."""
+    z, ii, jj, kk = (np.concatenate([q[n] for q in peaks]) if peaks else np.zeros(0) for n in range(4))
+    order = np.lexsort((kk, jj, ii, z))[::-1]  # the tuples' order, none the same (one peak per cell and copy)
+    zl, il, jl, kl = (a[order].tolist() for a in (z, ii, jj, kk))
+    yield from zip(zl, il, jl, kl, strict=True)
 
 
 def _look(image: FloatArray, t: TipTemplate, p: TrackerParams, cache: dict[object, object], x: float, y: float,
@@ -278,28 +292,47 @@ def _look(image: FloatArray, t: TipTemplate, p: TrackerParams, cache: dict[objec
     return ncc, rx0, ry0
 
 
-def _front_share(t: TipTemplate, cand: _Candidate, blur: float) -> float:
+def _front_offsets(t: TipTemplate, blur: float, cache: dict[object, object] | None
+                   ) -> tuple[FloatArray, FloatArray, int]:
+    """The template's core, ring and front offsets (the front's only those ahead of a tip blurred by ``blur`` px)
+    as one array (px, shape (2, n)), the same turned a quarter (``(-y, x)``), and how many of the front's are
+    kept; kept in ``cache`` for the template's core, ring and front (made again when they are)."""
+    kept = cache.get(("front", blur)) if cache is not None else None
+    if isinstance(kept, tuple) and kept[0] is t.core and kept[1] is t.ring and kept[2] is t.front:
+        return kept[3], kept[4], kept[5]
+    fx, fy = t.front
+    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
+    o = np.stack((np.concatenate([t.core[0], t.ring[0], fx[far]]), np.concatenate([t.core[1], t.ring[1], fy[far]])))
+    out = (o, np.stack((-o[1], o[0])), int(far.sum()))
+    if cache is not None:
+        cache[("front", blur)] = (t.core, t.ring, t.front, *out)
+    return out
+
+
+def _front_share(t: TipTemplate, cand: _Candidate, blur: float, cache: dict[object, object] | None = None) -> float:
     """Share of the half-ring in front of the tip whose grey level is nearer the needle's than the background's.
 
     The template's core, ring and front offsets are turned and moved to the candidate's fit
     and sampled in its patch; ``blur`` (px) keeps the ground a blurred tip spreads over out.
+    ``cache``: where the offsets are kept (:func:`_front_offsets`).
     """
     r = cand.ref
     if t.core[0].size < 3 or t.ring[0].size < 8:
         return 0.0
-    fx, fy = t.front
-    far = np.hypot(fx, fy) >= 2.0 + 2.0 * blur  # a blurred tip spreads ahead of itself
-    # the core, the ring and the front ahead of a blurred tip, sampled in one go
-    ox = np.concatenate([t.core[0], t.ring[0], fx[far]])
-    oy = np.concatenate([t.core[1], t.ring[1], fy[far]])
-    ct, st_ = math.cos(r.theta), math.sin(r.theta)
-    v, _ = sample_value(cand.patch, ct * ox - st_ * oy + r.x, st_ * ox + ct * oy + r.y)
+    # the core, the ring and the front ahead of a blurred tip, sampled in one go: cos o + sin (-y, x) is, bit for
+    # bit, (cos x - sin y, sin x + cos y)
+    o, perp, n_far = _front_offsets(t, blur, cache)
+    xy = o * math.cos(r.theta)
+    xy += perp * math.sin(r.theta)
+    xy[0] += r.x
+    xy[1] += r.y
+    v, _ = sample_value_xy(cand.patch, xy)
     nc, nr = t.core[0].size, t.ring[0].size
     needle = median(v[:nc])  # numpy.median's, bit for bit
     ground = median(v[nc : nc + nr])
     if abs(needle - ground) < 1e-12:
         return 1.0
-    if int(far.sum()) < 6:
+    if n_far < 6:
         return 0.0
     like = (v[nc + nr :] - ground) / (needle - ground) > 0.5
     return float(np.mean(like))
@@ -397,6 +430,37 @@ def _frame_stats(Iw: FloatArray, w: FloatArray) -> tuple[float, FloatArray, floa
     di = Iw - mi
     vi = float((w * di * di).sum())
     return sw, di, vi
+
+
+_Samples = tuple[FloatArray, tuple[float, FloatArray, float], bool]
+"""A frame blur's samples at the template's weighted pixels: the weights in the frame, :func:`_frame_stats` of the
+samples under them, and whether every sample lies in the frame."""
+
+
+def _blur_samples(t: TipTracker, patches: dict[float, Patch], image: FloatArray, x: float, y: float, theta: float
+                  ) -> dict[float, _Samples]:
+    """For each frame blur of ``t``'s levels, the frame sampled at the widest mask's pixels for a tip at ``(x, y)``
+    turned by ``theta`` (:func:`~.refine.warped`'s values, bit for bit), as :meth:`TipTracker._levels` reads them.
+
+    The patches of one place and size (the blurs' patches made around one fit: the same corner, the same shape)
+    share the points' cells, fractions and in-frame flags and the weights in the frame; only the values gathered
+    differ, so each is worked out once.
+    """
+    out: dict[float, _Samples] = {}
+    cells: dict[tuple[int, int, int, int], tuple[NDArray[np.intp], FloatArray, FloatArray, FloatArray, bool]] = {}
+    for _, f, _ in t._spec:
+        if f in out:
+            continue
+        p = t._patch(patches, image, x, y, f)
+        _, ch, cw = p.data.shape
+        key = (p.x0, p.y0, ch, cw)
+        c = cells.get(key)
+        if c is None:
+            i00, fx, fy, inside = _corners(p, _turned(t._select, x, y, theta))
+            c = cells[key] = (neighbours(i00, ch, cw), fx, fy, t._select.w * inside, bool(inside.all()))
+        at, fx, fy, w, all_in = c
+        out[f] = (w, _frame_stats(bilinear(p.data[0].reshape(-1).take(at), fx, fy), w), all_in)
+    return out
 
 
 def _copy_terms(b: FloatArray, w: FloatArray, sw: float) -> tuple[FloatArray, float]:
@@ -613,13 +677,10 @@ class TipTracker:
         (``sqrt(1 - noise² / variance)`` each): the smoother copies would otherwise win on noise alone.
         """
         out = []
-        # copies of one blur share samples; all in the frame, the copies' terms made at learning (w * True is w)
-        seen: dict[float, tuple[FloatArray, tuple[float, FloatArray, float], bool]] = {}
+        # copies of one blur share samples (:func:`_blur_samples`); all in the frame, the copies' terms made at
+        # learning (w * True is w)
+        seen = _blur_samples(self, patches, image, x, y, theta)
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
-            if f not in seen:
-                Iw, inside = warped(self._patch(patches, image, x, y, f), self._select, x, y, theta)
-                w = self._select.w * inside
-                seen[f] = (w, _frame_stats(Iw, w), bool(inside.all()))
             w, stats, all_in = seen[f]
             n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
             out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(
@@ -696,17 +757,16 @@ class TipTracker:
         p, t = self.params, self.template
         f = p.coarse_factor
         small, inside, pad = _padded(image, f, t.half, self._fft)
-        best: list[tuple[float, int, int, int]] = []
+        peaks: list[_Peaks] = []
         spectra = region_spectra(small)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
-            best += _ranked(*inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
-                                        spectra, p.min_coverage), k)
-        best.sort(reverse=True)
+            peaks.append(_ranked(*inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
+                                             spectra, p.min_coverage), k))
         out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
-        for _s, i, j, k in best:
+        for _s, i, j, k in _by_rank(peaks):
             if len(out) >= p.candidates:
                 break
             x, y = (j - pad) * f + t.apex[0], (i - pad) * f + t.apex[1]
@@ -771,7 +831,7 @@ class TipTracker:
         sigma = max(p.sigma_floor, p.sigma_factor * r.sigma)
         if r.outliers > p.occluded_fraction:
             return Lost("occluded", f"{100 * r.outliers:.0f} % of the tip's template disagrees with the frame")
-        front = _front_share(self.template, cand, max(blur, 0.0))
+        front = _front_share(self.template, cand, max(blur, 0.0), self._fft)
         if front > p.front_fraction:
             return Lost("occluded", f"{100 * front:.0f} % of the ground in front of the tip looks like the needle")
         if cand.level == self._top or blur > p.max_blur:
