@@ -160,6 +160,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "in-step-off": ClockedParams(model_in_step=0.0),
     "edge-off": ClockedParams(model_edge_s=0.0),
     "hold-off": ClockedParams(model_hold_s=0.0),
+    "in-step-hold-off": ClockedParams(model_in_step_hold_z=0.0),
     "off": None,
 }
 

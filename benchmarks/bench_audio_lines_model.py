@@ -17,7 +17,8 @@ model_unjudged`` compares that switch instead (a stop the model could have judge
 model_expect`` the model's span gate expecting the jittered clock's loss (``arrival-2%``: the fifth
 generator at 2 % jitter), ``--switch model_in_step`` the fire the model let through with its lines out of step
 (flagged; off: 0), ``--switch model_edge_s`` a stop found inside a vetoed window whose onset fit split at the
-fitted stretch's end (dropped; off: 0).
+fitted stretch's end (dropped; off: 0), ``--switch model_in_step_hold_z`` a fire flagged out of step whose lines
+stay departed past its window counted (off: 0).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -69,13 +70,22 @@ NOISES: dict[str, tuple[str, float] | None] = {
 }
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
 #: the ``ClockedParams`` switch compared: off (the field False) against on (the default)
-SWITCHES = ("lines_model", "model_unjudged", "model_expect", "model_in_step", "model_edge_s", "model_hold_s")
+SWITCHES = (
+    "lines_model",
+    "model_unjudged",
+    "model_expect",
+    "model_in_step",
+    "model_edge_s",
+    "model_hold_s",
+    "model_in_step_hold_z",
+)
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
     """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults
-    (``model_in_step``, a share, and ``model_edge_s``, ``model_hold_s``, s: 0 off, its default on)."""
-    if name in ("model_in_step", "model_edge_s", "model_hold_s"):
+    (``model_in_step``, a share, ``model_edge_s``, ``model_hold_s``, s, and ``model_in_step_hold_z``, spreads: 0 off,
+    its default on)."""
+    if name in ("model_in_step", "model_edge_s", "model_hold_s", "model_in_step_hold_z"):
         return {"off": replace(ClockedParams(), **{name: 0.0}), "on": ClockedParams()}
     return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
 

@@ -229,6 +229,8 @@ class _Listener:
             block = np.asarray(block, dtype=np.float32)
             if block.ndim > 1:
                 block = block.mean(axis=1)
+            if self.guard is not None and getattr(self.detector, "latched", False):
+                self.guard.restart_stepping_check()  # a stop being heard (a window, a hold): its line may sink there
             try:
                 alive = self.guard is None or self.guard.check(block)
             except NoSignalError as e:

@@ -28,6 +28,10 @@ class Fire:
     frame: int
     window: int
 
+    def end(self, hop: int, frame: int) -> int:
+        """The sample after the window's last frame, counted from the stream's start (``hop``, ``frame``: samples)."""
+        return (self.frame + self.window) * hop + frame
+
 
 class FireChain:
     """The pending fire and the rejection history since the last confirmed stop (see the module docstring)."""

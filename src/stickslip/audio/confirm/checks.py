@@ -21,9 +21,10 @@ from numpy.typing import NDArray
 from ..events import StopEvent
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
+from .chain import Fire
 from .clocked import ClockedCheck, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
-from .inside import InsideParams, onset_in_phase
+from .inside import Held, InsideParams, held_out_of_step, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
 from .resume import AfterPause
 from .sync import SyncCheck, SyncParams, step_clock_verdict
@@ -134,7 +135,7 @@ class WindowChecks:
     def _others(self, ev: StopEvent, fire: int, frames: int, log: Verdicts, now_s: float) -> bool:
         return self._in_step(ev, fire, frames, log) and not self._stepping_stopped(ev, fire, frames, log, now_s)
 
-    def onset_doubt(self, onset: int) -> str | None:
+    def onset_doubt(self, onset: int, hold_in_step: bool = False) -> str | None:
         """Why a confirmed stop whose onset is at absolute sample ``onset`` may not have begun there: its lines, read
         in phase over ``onset_read_s`` from it, do not show the stop (under ``min_a``: the fire came before the
         stop, and the stop came in its window); or the stepping before the fire was over ``onset_ref_stoplike``
@@ -143,7 +144,8 @@ class WindowChecks:
         judged): no stepping to place it by, it may have begun there; or the stepping's lines modelled read its fire
         and let it through, but its lines held under ``model_in_step`` of the model's share in phase and their power
         out of phase rose ``model_added_db`` (not in step with the steps, as a stop's stay: sound of another kind
-        added on them); or, the rate told and off the tuning's, the
+        added on them; :meth:`out_of_step`, not asked with ``hold_in_step``: the caller reads it past the window);
+        or, the rate told and off the tuning's, the
         stepping's lines modelled could have judged its fire and did not, nor do the lines affirm it
         (:meth:`~.clocked.ClockedCheck.unjudged`): the levels alone counted it. None: they do, or nothing was read."""
         if self.clocked is None:
@@ -155,13 +157,9 @@ class WindowChecks:
         short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
-        got = self.on_clock
-        low = got is not None and got.in_step < c.p.model_in_step * got.model_share  # (NaN: not read)
-        if c.enabled and got is not None and low and got.added_db >= c.p.model_added_db:  # and sound added on them
-            return (
-                f"lines {got.in_step:.2f} in phase at the fire, the stepping's {got.model_share:.2f}, power out of"
-                f" phase {got.added_db:+.1f} dB: not in step"
-            )
+        step = self.out_of_step()
+        if step is not None and not (hold_in_step and c.p.model_in_step_hold_z > 0.0 and c.p.model_hold_s > 0.0):
+            return step
         if c.enabled and c.unjudged(onset, self.on_clock):  # off the tuning's rate: nothing but the levels counted it
             return "off the tuning's rate, neither the stepping's lines modelled nor the lines in phase affirm it"
         x = self.kept.get(onset, onset + int(round(c.p.onset_read_s * c.sample_rate)))
@@ -169,6 +167,26 @@ class WindowChecks:
         if math.isfinite(a) and a < c.p.min_a:
             return f"the stop not in phase with the steps at its onset (a {a:.2f})"
         return self._step_elsewhere(onset)
+
+    def held_out_of_step(self, fire: Fire, ev: StopEvent, end: int) -> Held | None:
+        """``ev``, confirmed on ``fire`` (its window ended at sample ``end``; onset doubts asked with ``hold_in_step``),
+        held where its lines out of step alone doubt it (:func:`.inside.held_out_of_step`). None: emitted now."""
+        return held_out_of_step(fire, ev, None if ev.onset_uncertain else self.out_of_step(), end, self.clocked)
+
+    def out_of_step(self) -> str | None:
+        """Why the fire last judged may be sound added on the stepping's lines, not a stop: the stepping's lines
+        modelled read it and let it through, but its lines held under ``model_in_step`` of the model's share in phase
+        and their power out of phase rose ``model_added_db``. None: they did not, or nothing was read."""
+        c, got = self.clocked, self.on_clock
+        if c is None or not c.enabled or got is None:
+            return None
+        low = got.in_step < c.p.model_in_step * got.model_share  # (NaN: not read)
+        if low and got.added_db >= c.p.model_added_db:  # and sound added on them
+            return (
+                f"lines {got.in_step:.2f} in phase at the fire, the stepping's {got.model_share:.2f}, power out of"
+                f" phase {got.added_db:+.1f} dB: not in step"
+            )
+        return None
 
     def _step_elsewhere(self, onset: int) -> str | None:
         """Why the stop at absolute sample ``onset`` may have begun elsewhere: the joint's lines, turned by the clock

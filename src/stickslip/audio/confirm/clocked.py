@@ -77,7 +77,9 @@ window's end (``model_hold_s``: a stop holds while the stepping goes on; music o
 the model lets through whose lines held under ``model_in_step`` of the model's own share in phase is flagged
 (:meth:`ClockedCheck.in_step_reading`, asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the
 joint steps on into it and its lines stay in step, only their level moves; music or speech on them moves it out
-of step. A jittered step clock turns each line's phase within a frame, so its share in phase falls under
+of step. Not where its lines still depart from the model by ``model_in_step_hold_z`` past the window (read as the
+hold above, the event held till then): a stop that rattles out of step stays changed, music changes back. A jittered
+step clock turns each line's phase within a frame, so its share in phase falls under
 ``model_min_share`` with no other sound: such a span is taken too where each line holds what the followed clock's
 own wander leaves it (``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
 under speech or music they seldom can (the lines move with the added sound, or are not read): so once
@@ -267,6 +269,12 @@ class ClockedParams:
     )
     model_hold_piece_s: float = param(
         0.24, "s", "that hold is read in pieces this long, the least z kept (half a span: sound that changed back)"
+    )
+    model_in_step_hold_z: float = param(
+        8.0,
+        "spreads",
+        "a fire flagged out of step (model_in_step) whose lines depart from the model by this in every piece over "
+        "model_hold_s after its window is a stop, not flagged (held till then: the simulator's stops 16.9+; music 4.4)",
     )
     model_unjudged: bool = param(
         True,

@@ -61,6 +61,8 @@ __all__ = ["ConfirmLog", "ConfirmParams", "ConfirmedStopDetector", "FastPath", "
 
 #: the detectors whose fires can be confirmed: they keep per-frame evidence
 FastPath = TemplateDetector | BandDetector
+#: the stops a piece of the stream gave
+Events = list[StopEvent]
 
 
 @dataclass(frozen=True)
@@ -121,7 +123,9 @@ class ConfirmLog:
         least z read past the window (NaN: none); ``sample_rate``, Hz."""
         t = h.fire.ev.detected_at_s
         self.held += [(t, z)] if h.until > h.end else []
-        if ev is not None:
+        if h.doubt is not None and ev is not None and ev.onset_uncertain:  # (its lines changed back, or none read)
+            self.onset.append((ev.detected_at_s, h.doubt))
+        if ev is not None and h.found is not None:
             self.clocked.append((t, h.found.on_clock))
             self.inside.append((t, ev.onset_s, h.found.spread / sample_rate))
 
@@ -298,9 +302,7 @@ class ConfirmedStopDetector:
             take = min(take, late.next_stop(self._fed) - self._fed)
         return take
 
-    def _late_chunks(
-        self, fed0: int, events: list[StopEvent], out: list[StopEvent]
-    ) -> tuple[list[StopEvent], list[StopEvent]]:
+    def _late_chunks(self, fed0: int, events: Events, out: Events) -> tuple[Events, Events]:
         """The late path's chunk ends in the piece just fed, each judged after the fires that came before it."""
         late = self.late
         assert late is not None
@@ -389,8 +391,10 @@ class ConfirmedStopDetector:
         if fire is None:
             return []
         self.inner.hold(False)
-        if self._holds(fire.ev, fire.frame, fire.window):
-            return [self._confirmed(fire.ev, fire.frame, fire.window)]
+        if self._holds(fire.ev, fire.frame, fire.window):  # (held where only its lines out of step doubt it)
+            ev = self._confirmed(fire.ev, fire.frame, fire.window, True)
+            self._held = self.checks.held_out_of_step(fire, ev, min(fire.end(self._H, self._F), self._fed))
+            return [ev] if self._held is None else []
         self.log.rejected.append(fire.ev)
         if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back
             return []
@@ -430,7 +434,7 @@ class ConfirmedStopDetector:
         if x.size == end - start + lead:  # (else not all kept: the stream began inside the lead)
             self._held = held_inside(x, lead, fire, (start, self._t0, self._sr), c, ch.pause, ch.on_clock, p)
 
-    def _confirmed(self, ev: StopEvent, fire: int, frames: int) -> StopEvent:
+    def _confirmed(self, ev: StopEvent, fire: int, frames: int, hold: bool = False) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""
         if self.late is not None:  # the fast path gave this stop: the late path judges nothing before it
             self.late.note_busy((fire + frames) * self._H + self._F)
@@ -440,7 +444,7 @@ class ConfirmedStopDetector:
             verdict = self._onset.doubt(ev, fire, frames, ch.covered_at, ch.rejected_fire, self.inner.relearned)
             if verdict.why is None:  # the lines in phase from the onset on (the retimed one, where taken back)
                 at = ev.onset_s if verdict.retimed is None else verdict.retimed
-                verdict.why = self.checks.onset_doubt(int(round((at - self._t0) * self._sr)))
+                verdict.why = self.checks.onset_doubt(int(round((at - self._t0) * self._sr)), hold)
             if verdict.climb is not None:
                 self.log.rise.append((ev.detected_at_s, verdict.climb))
         self._chain.confirmed()

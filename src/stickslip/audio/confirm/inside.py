@@ -189,30 +189,47 @@ def still_departed(x: FloatArray, clocked: ClockedCheck) -> float:
 @dataclass(frozen=True)
 class Held:
     """A stop found departed from the stepping's lines modelled (:func:`stop_departed`), held, its fast path latched,
-    until its lines are read ``model_hold_s`` past the window's end (:func:`still_departed`)."""
+    until its lines are read ``model_hold_s`` past the window's end (:func:`still_departed`); or a stop confirmed
+    whose lines were out of step at its fire (``doubt``: :meth:`.checks.WindowChecks.out_of_step`), held so too: a
+    stop where they depart by ``model_in_step_hold_z`` past the window, else emitted flagged for that doubt."""
 
-    #: the rejected fire whose window held it
+    #: the fire whose window held it (rejected; confirmed, with a ``doubt``)
     fire: Fire
     #: the event it is, as found at the window's end
     event: StopEvent
-    found: Inside
+    #: how it was found inside the window (None: the fire's own stop, confirmed)
+    found: Inside | None
     #: the window's end and the hold's, samples fed
     end: int
     until: int
+    #: why the confirmed stop is doubted unless its lines stay departed past the window (None: found inside)
+    doubt: str | None = None
 
     def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
         """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
         when its hold was heard (None: its lines changed back, not a stop), and the least z read (NaN: none read,
-        the stream ended: the event flagged). No hold (:attr:`until` at :attr:`end`): the event as found."""
+        the stream ended: the event flagged). No hold (:attr:`until` at :attr:`end`): the event as found. With a
+        :attr:`doubt`: the event, flagged unless the least z reached ``model_in_step_hold_z``."""
         if self.until <= self.end:
             return self.event, math.nan
         z = still_departed(x, clocked)
-        if z < clocked.p.model_max_z:
+        need = clocked.p.model_max_z if self.doubt is None else clocked.p.model_in_step_hold_z
+        if z < need and self.doubt is None:
             return None, z
         t = t0_s + (self.end + x.size) / clocked.sample_rate
         e = self.event
-        flag = e.onset_uncertain or not math.isfinite(z)
+        flag = e.onset_uncertain or not z >= need  # (NaN: none read)
         return replace(e, detected_at_s=t, confirmed_at_s=t, confirmed_s=t - e.onset_s, onset_uncertain=flag), z
+
+
+def held_out_of_step(fire: Fire, ev: StopEvent, why: str | None, end: int, clocked: ClockedCheck | None) -> Held | None:
+    """``ev``, confirmed on ``fire`` whose window ended at sample ``end``, held where its lines out of step with the
+    steps (``why``: :meth:`.checks.WindowChecks.out_of_step`) alone doubt it: a stop once they still depart from the
+    stepping's lines modelled by ``model_in_step_hold_z`` over ``model_hold_s`` past the window (an end stop stays
+    changed while the joint steps on into it, even one that rattles out of step; music changes back). None: not held."""
+    if why is None or clocked is None:
+        return None
+    return Held(fire, ev, None, end, end + int(round(clocked.p.model_hold_s * clocked.sample_rate)), why)
 
 
 def held_inside(
