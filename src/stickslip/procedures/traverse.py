@@ -229,8 +229,9 @@ class _Listener:
             block = np.asarray(block, dtype=np.float32)
             if block.ndim > 1:
                 block = block.mean(axis=1)
-            if self.guard is not None and getattr(self.detector, "latched", False):
-                self.guard.restart_stepping_check()  # a stop being heard (a window, a hold): its line may sink there
+            if self.guard is not None and getattr(self.detector, "holding", False):
+                # a stop found and held (a bounded wait, model_hold_s): its stepping line may sink there
+                self.guard.restart_stepping_check()
             try:
                 alive = self.guard is None or self.guard.check(block)
             except NoSignalError as e:

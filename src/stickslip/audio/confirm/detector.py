@@ -157,14 +157,8 @@ class ConfirmedStopDetector:
     #: the no-signal guard applies: this detector listens to samples
     uses_audio = True
 
-    def __init__(
-        self,
-        inner: FastPath,
-        confirm_s: float | None = None,
-        step_clock: bool = False,
-        late: bool = False,
-        params: ConfirmParams | None = None,
-    ) -> None:
+    def __init__(self, inner: FastPath, confirm_s: float | None = None, step_clock: bool = False, late: bool = False,
+                 params: ConfirmParams | None = None) -> None:
         self.params = p = params or ConfirmParams()
         c = check_confirm_s(p.persistence.confirm_s if confirm_s is None else confirm_s, p.persistence)
         if c <= 0.0:
@@ -230,6 +224,11 @@ class ConfirmedStopDetector:
     def latched(self) -> bool:
         """True while a stop is being heard (provisional or confirmed)."""
         return self.inner.latched
+
+    @property
+    def holding(self) -> bool:
+        """True while a stop found is held until its lines are read past its window (at most ``model_hold_s``)."""
+        return self._held is not None
 
     @property
     def sync_bands(self) -> list[tuple[float, float]]:
