@@ -23,6 +23,7 @@ from functools import cache
 import numpy as np
 import pytest
 from fan_sound import Arm
+from hour_heard import joint_tuning
 from hour_sound import Hour, stream
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -33,7 +34,6 @@ from stickslip.audio.change.fit import Fitter
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
-from test_audio_hour import joint_tuning
 
 pytestmark = pytest.mark.xdist_group("audio_hour")  # one worker tunes joint 3 once for both files
 

@@ -18,24 +18,19 @@ from __future__ import annotations
 from dataclasses import replace
 from functools import cache
 
-from fan_sound import SR, Arm, render, tuning_scene
-from hour_sound import Hour, stream
-from tuned import tune
+from fan_sound import Arm
+from hour_heard import heard_by, joint_tuning
+from hour_sound import Hour
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.confirm.clocked import CLOCKED
-from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
 
 
 @cache
 def _heard(edge_s: float, hold_s: float = CLOCKED.model_hold_s) -> tuple[list[StopEvent], ConfirmedStopDetector]:
-    h = Hour(Arm(3), rate=1050.0, dur=14.5, seed=4003)
-    tu = tune(render(tuning_scene(Arm(3))), SR, 2.0)
     clocked = replace(CLOCKED, model_edge_s=edge_s, model_hold_s=hold_s)
-    det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=clocked))
-    det.reset(0.0, step_rate_hz=h.rate)
-    return [e for block in stream(h) for e in det.feed(block)] + det.finish(), det
+    return heard_by(Hour(Arm(3), rate=1050.0, dur=14.5, seed=4003), joint_tuning(3), ConfirmParams(clocked=clocked))
 
 
 def test_a_split_at_the_fitted_stretchs_end_is_not_counted_as_a_stop_found_inside() -> None:

@@ -24,9 +24,9 @@ from dataclasses import replace
 from functools import cache
 
 import numpy as np
-from fan_sound import SR, Arm, Scene, render, tuning_scene
-from hour_sound import RMS, Hour, _span_source, stream
-from tuned import tune
+from fan_sound import SR, Arm, Scene, render
+from hour_heard import heard_by, joint_tuning
+from hour_sound import RMS, Hour, _span_source
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.confirm.clocked import CLOCKED
@@ -38,10 +38,7 @@ from stickslip.audio.tuningfile import Tuning
 @cache
 def _heard(hold_s: float) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     h = Hour(Arm(3), rate=1100.0, dur=16.0, seed=1003)
-    tu = tune(render(tuning_scene(Arm(3))), SR, 2.0)
-    det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=replace(CLOCKED, model_hold_s=hold_s)))
-    det.reset(0.0, step_rate_hz=h.rate)
-    return [e for block in stream(h) for e in det.feed(block)] + det.finish(), det
+    return heard_by(h, joint_tuning(3), ConfirmParams(clocked=replace(CLOCKED, model_hold_s=hold_s)))
 
 
 def test_a_stop_found_departed_whose_lines_change_back_past_the_window_is_not_counted() -> None:
@@ -59,7 +56,7 @@ def test_a_stop_found_departed_whose_lines_change_back_past_the_window_is_not_co
 def _stop() -> tuple[Tuning, np.ndarray]:
     """The true stop's tuning and recording (as ``bench_audio_stops_noise.py`` renders arm 1, 1200 Hz, +3 dB)."""
     arm, rate, kind = 1, 1200.0, "speech over the radio"
-    tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
+    tu = joint_tuning(arm)
     y = render(Scene(Arm(arm), rate=rate, stop_at=12.0, dur=14.0, seed=int(rate) + arm + 77))
     rms = float(np.sqrt(np.mean(y[: int(12.0 * SR)] ** 2)))
     src = _span_source(kind, np.random.default_rng(arm * 100 + int(rate) + 3))

@@ -15,21 +15,18 @@ and stops several times (marked slow), and the stream's own properties.
 from __future__ import annotations
 
 from dataclasses import replace
-from functools import cache
 from pathlib import Path
 
 import numpy as np
 import pytest
 import soundfile
-from fan_sound import SR, Arm, render, tuning_scene
+from fan_sound import SR, Arm
+from hour_heard import hear, heard_by, joint_tuning
 from hour_sound import KINDS, Hour, spans, stream
-from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.confirm.clocked import CLOCKED
 from stickslip.audio.detector import detector_for
-from stickslip.audio.events import StopEvent
-from stickslip.audio.tuningfile import Tuning
 
 #: 3.6 s of the hour's joint 1 (its own draw, seed 1) from 2643.0 s, as 16-bit samples (full scale 32767): music at
 #: -0.6 dB re the stepping since 2625.0 s, the counted false stop at 2646.01 s (docs/audio-log.md, "Diagnosis of the
@@ -48,20 +45,6 @@ JOINTS = (1, 2, 3)
 KNOWN: dict[int, str] = {}
 
 
-@cache
-def joint_tuning(arm: int) -> Tuning:
-    """Joint ``arm`` tuned on its own quiet 1000 Hz recording (once per process)."""
-    return tune(render(tuning_scene(Arm(arm))), SR, 2.0)
-
-
-def hear(h: Hour, tu: Tuning, params: ConfirmParams | None = None) -> list[StopEvent]:
-    """The confirmed events of ``h`` streamed block by block, the commanded rate told."""
-    det = ConfirmedStopDetector(detector_for(tu), params=params)
-    det.reset(0.0, step_rate_hz=h.rate)
-    events = [e for block in stream(h) for e in det.feed(block)]
-    return events + det.finish()
-
-
 def test_a_radio_that_fits_a_stop_that_only_rises_is_off_the_step_clock() -> None:
     """Joint 3's stop only rises (2.5-8.6 dB): a radio as loud as the stepping fits it, and persists.
 
@@ -76,9 +59,8 @@ def test_a_radio_that_fits_a_stop_that_only_rises_is_off_the_step_clock() -> Non
     assert min(tu.signature_db or (0.0,)) > 2.0  # a stop that only rises
     before = hear(h, tu, ConfirmParams(clocked=None))
     assert [(round(e.onset_s, 2), e.onset_uncertain) for e in before] == [(0.40, False)]
-    det = ConfirmedStopDetector(detector_for(tu))
-    det.reset(0.0, step_rate_hz=h.rate)
-    assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
+    events, det = heard_by(h, tu)
+    assert events == []
     judged = [g for _, g in det.log.clocked]
     assert judged and all(abs(g.a) < 0.2 and g.bands == 2 for g in judged)
 
@@ -92,9 +74,8 @@ def test_at_another_rate_told_a_radio_the_lines_do_not_move_for_is_no_stop(rate:
     tu = joint_tuning(3)
     before = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_moved_db=0.0)))
     assert [e.onset_uncertain for e in before] == [False] and before[0].onset_s < 0.5
-    det = ConfirmedStopDetector(detector_for(tu))
-    det.reset(0.0, step_rate_hz=h.rate)
-    assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
+    events, det = heard_by(h, tu)
+    assert events == []
     judged = [g for _, g in det.log.clocked]
     assert judged and all(g.rate_hz == pytest.approx(rate, rel=0.01) and g.moved_db < 0.5 for g in judged)
 
@@ -181,9 +162,8 @@ def test_20_percent_off_told_music_the_comb_cannot_judge_and_the_lines_do_not_mo
     assert [e.onset_uncertain for e in before] == [True, True, True, True, False]
     unjudged = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_pred_moved_db=0.0)))  # the model never ready
     assert [(e.onset_s, e.onset_uncertain) for e in unjudged] == [(e.onset_s, True) for e in before]
-    det = ConfirmedStopDetector(detector_for(tu))
-    det.reset(0.0, step_rate_hz=h.rate)
-    assert [e for block in stream(h) for e in det.feed(block)] + det.finish() == []
+    events, det = heard_by(h, tu)
+    assert events == []
     judged = [g for _, g in det.log.clocked]
     assert judged and all(g.rate_hz == pytest.approx(1200.0, rel=0.01) for g in judged)
     vetoed = [g for g in judged if np.isnan(g.a)]

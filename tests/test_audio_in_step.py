@@ -16,24 +16,20 @@ import math
 from dataclasses import replace
 from functools import cache
 
-from fan_sound import SR, Arm, render, tuning_scene
-from hour_sound import Hour, stream
-from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
+from fan_sound import Arm
+from hour_heard import heard_by, joint_tuning
+from hour_sound import Hour
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.confirm.clocked import CLOCKED
-from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
 
 
 @cache
 def _heard(in_step: float, added_db: float = CLOCKED.model_added_db) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     h = Hour(Arm(3), rate=1100.0, dur=26.0, seed=227, span_s=(4.0, 12.0), kinds=("nothing", "music"))
-    tu = tune(render(tuning_scene(Arm(3))), SR, 2.0)
     clocked = replace(CLOCKED, model_in_step=in_step, model_added_db=added_db)
-    det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=clocked))
-    det.reset(0.0, step_rate_hz=h.rate)
-    return [e for block in stream(h) for e in det.feed(block)] + det.finish(), det
+    return heard_by(h, joint_tuning(3), ConfirmParams(clocked=clocked))
 
 
 def test_a_fire_the_model_let_through_with_its_lines_out_of_step_is_flagged_not_counted() -> None:

@@ -8,16 +8,15 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from fan_sound import SR, Arm, render, tuning_scene
-from hour_sound import Hour, stream
+from fan_sound import Arm
+from hour_heard import heard_by, joint_tuning
+from hour_sound import Hour
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
-from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
+from stickslip.audio.confirm import ConfirmParams
 from stickslip.audio.confirm.clocked import CLOCKED, OnClock
 from stickslip.audio.confirm.stepping_lines import SteppingLines
-from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
 
 LINES = {0: [1, 2], 1: [3], 2: [4, 5]}
@@ -121,10 +120,7 @@ def test_in_step_reads_the_share_in_phase_and_the_power_out_of_phase_against_the
 
 def _hear(seed: int, model: bool) -> tuple[list[StopEvent], list[OnClock]]:
     h = Hour(Arm(2), rate=1200.0, dur=24.0, seed=seed, span_s=(4.0, 12.0))
-    tu = tune(render(tuning_scene(Arm(2))), SR, 2.0)
-    det = ConfirmedStopDetector(detector_for(tu), params=ConfirmParams(clocked=replace(CLOCKED, lines_model=model)))
-    det.reset(0.0, step_rate_hz=h.rate)
-    events = [e for block in stream(h) for e in det.feed(block)] + det.finish()
+    events, det = heard_by(h, joint_tuning(2), ConfirmParams(clocked=replace(CLOCKED, lines_model=model)))
     return events, [g for _, g in det.log.clocked]
 
 
