@@ -229,7 +229,8 @@ class _Listener:
             block = np.asarray(block, dtype=np.float32)
             if block.ndim > 1:
                 block = block.mean(axis=1)
-            if self.guard is not None and getattr(self.detector, "holding", False):
+            confirming = self.detector if isinstance(self.detector, ConfirmedStopDetector) else None
+            if self.guard is not None and confirming is not None and confirming.holding:
                 # a stop found and held (a bounded wait, model_hold_s): its stepping line may sink there
                 self.guard.restart_stepping_check()
             try:
@@ -237,7 +238,7 @@ class _Listener:
             except NoSignalError as e:
                 raise TraverseError(str(e)) from None
             self.t_s += block.shape[0] / self.sample_rate
-            dropped = self.detector.log.rejected if isinstance(self.detector, ConfirmedStopDetector) else None
+            dropped = confirming.log.rejected if confirming is not None else None
             before = len(dropped) if dropped is not None else 0
             events = self.detector.feed(block)
             if dropped is not None:
