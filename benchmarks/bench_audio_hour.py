@@ -141,7 +141,8 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: phase with the clock followed from the sound, as a veto only (``veto``); and those lines also affirming a fire the
 #: levels hold but not hot, and read from each stop's onset (the default); the default without a stop the lines model
 #: could have judged and did not flagged (``unjudged-off``); the default without the model's span gate expecting a
-#: jittered clock's loss (``expect-off``)
+#: jittered clock's loss (``expect-off``); without a fire the levels rejected whose lines departed in every span
+#: flagged (``rejected-off``)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -161,6 +162,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "edge-off": ClockedParams(model_edge_s=0.0),
     "hold-off": ClockedParams(model_hold_s=0.0),
     "in-step-hold-off": ClockedParams(model_in_step_hold_z=0.0),
+    "rejected-off": ClockedParams(model_rejected=False),
     "off": None,
 }
 

@@ -7,8 +7,9 @@ rate: 1000 Hz), into its stop at 12 s under the hour's speech over the radio at 
 window sits within ``model_max_z`` of the stepping modelled. The stop comes in the second piece, and
 the pieces from it to the window's end depart from the model. Without ``model_inside`` the stop had no
 event at all: the window was dropped, and the stop's own fire, 16 ms after the window's end, was
-rejected by persistence at the stream's end (0.52 s of its window heard). With it, the stop is found
-inside the window, where the fit on the model's lines places the change within ``model_max_spread_s``
+rejected by persistence at the stream's end (0.52 s of its window heard); since ``model_rejected`` that window, its
+lines departed from the model in every span, gives a flagged event (the fire's onset, 13.45 s). With ``model_inside``,
+the stop is found inside the window, where the fit on the model's lines places the change within ``model_max_spread_s``
 (:func:`stickslip.audio.confirm.inside.stop_departed`); here within 20 ms. It is emitted 0.48 s after the window's
 end, once its lines were read still departed there (``model_hold_s``). Asked to place it within
 10 ms, the fit cannot, and the window is dropped as before.
@@ -29,21 +30,25 @@ from stickslip.audio.events import StopEvent
 STOP_S, RATE, ARM, KIND = 12.0, 1200.0, 1, "speech over the radio"
 
 
-def _heard(max_spread_s: float) -> tuple[list[StopEvent], list[tuple[float, float, float]]]:
+def _heard(max_spread_s: float, rejected: bool = True) -> tuple[list[StopEvent], list[tuple[float, float, float]]]:
     tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
     y = render(Scene(Arm(ARM), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + ARM + 77))
     rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
     src = _span_source(KIND, np.random.default_rng(ARM * 100 + int(RATE) + 3))
     y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[KIND], dtype=np.float32)  # type: ignore[operator]
-    p = ConfirmParams(clocked=ClockedParams(lines_model=True, model_max_spread_s=max_spread_s))
+    p = ConfirmParams(clocked=ClockedParams(model_max_spread_s=max_spread_s, model_rejected=rejected))
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)
     return det.feed(y) + det.finish(), det.log.inside
 
 
 def test_a_stop_in_the_window_of_a_fire_the_model_vetoed_is_found_there() -> None:
-    dropped, none = _heard(0.01)
+    dropped, none = _heard(0.01, rejected=False)
     assert none == [] and dropped == []  # the stop missed so (as without model_inside)
+    flagged, none = _heard(0.01)  # its own fire's window, rejected at the stream's end, departed in every span
+    assert none == [] and [(round(e.onset_s, 3), e.onset_uncertain, e.detected_at_s) for e in flagged] == [
+        (13.453, True, 14.0)
+    ]  # (model_rejected: heard, flagged: a traverse refuses it)
     events, inside = _heard(ClockedParams().model_max_spread_s)
     assert len(inside) == 1 and abs(inside[0][0] - 11.461) < 0.01 and 0.01 < inside[0][2] <= 0.025  # its window
     at = [e for e in events if e.onset_s >= STOP_S - 0.025]

@@ -81,7 +81,10 @@ of step. Not where its lines still depart from the model by ``model_in_step_hold
 hold above, the event held till then): a stop that rattles out of step stays changed, music changes back. A jittered
 step clock turns each line's phase within a frame, so its share in phase falls under
 ``model_min_share`` with no other sound: such a span is taken too where each line holds what the followed clock's
-own wander leaves it (``model_expect``; :func:`expected_held`). The per-fire vetoes only veto, and
+own wander leaves it (``model_expect``; :func:`expected_held`). A fire the levels rejected (it did not persist:
+music masking a stop's drops) whose window departs from the model by ``model_max_z`` in every span, and whose lines
+still depart past the window (the hold above), is a stop, flagged: its onset, the fire's, is not known
+(``model_rejected``; :func:`.inside.departed_throughout`). The per-fire vetoes only veto, and
 under speech or music they seldom can (the lines move with the added sound, or are not read): so once
 the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
 sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
@@ -275,6 +278,12 @@ class ClockedParams:
         "spreads",
         "a fire flagged out of step (model_in_step) whose lines depart from the model by this in every piece over "
         "model_hold_s after its window is a stop, not flagged (held till then: the simulator's stops 16.9+; music 4.4)",
+    )
+    model_rejected: bool = param(
+        True,
+        "",
+        "a fire the levels rejected whose window departs from the model (model_max_z) in every span, and still past "
+        "it (model_hold_s), is a stop, flagged: its onset unknown (stops under music 6.6+; the hour's rejected none)",
     )
     model_unjudged: bool = param(
         True,

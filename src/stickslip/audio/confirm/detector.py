@@ -123,8 +123,9 @@ class ConfirmLog:
         least z read past the window (NaN: none); ``sample_rate``, Hz."""
         t = h.fire.ev.detected_at_s
         self.held += [(t, z)] if h.until > h.end else []
-        if h.doubt is not None and ev is not None and ev.onset_uncertain:  # (its lines changed back, or none read)
-            self.onset.append((ev.detected_at_s, h.doubt))
+        why = h.doubt if h.doubt is not None else h.flagged  # (its lines changed back, none read, or levels rejected)
+        if why is not None and ev is not None and ev.onset_uncertain:
+            self.onset.append((ev.detected_at_s, why))
         if ev is not None and h.found is not None:
             self.clocked.append((t, h.found.on_clock))
             self.inside.append((t, ev.onset_s, h.found.spread / sample_rate))

@@ -26,6 +26,10 @@ stop began inside it where
   in phase, reach ``min_affirm`` (a fire the levels cannot confirm is affirmed so) and the
   stepping went on (not a pause: :mod:`.pause`, checked by the caller).
 
+Off the tuning's rate, the rate told, the stepping's lines modelled (:mod:`.stepping_lines`) read a window too:
+inside one whose fire they vetoed (:func:`stop_departed`), and, where the levels rejected the fire and the model
+did not, over all of it (:func:`departed_throughout`: a stop whose drops music masked; flagged, its onset not known).
+
 The event then carries ``found_late`` (``detected_at_s`` the window's end, when it was found)
 and, where the fit's spread exceeds ``max_onset_off_s`` (it does not pin where the stop
 began), ``onset_uncertain``. It runs only at a rejected window's end (or the stream's, while
@@ -54,6 +58,7 @@ __all__ = [
     "Held",
     "Inside",
     "InsideParams",
+    "departed_throughout",
     "held_inside",
     "onset_in_phase",
     "still_departed",
@@ -173,6 +178,20 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
 
 
+def departed_throughout(w: FloatArray, clocked: ClockedCheck) -> float:
+    """The least z over the spans of a window ``w`` (samples) the levels rejected, read against the stepping's lines
+    modelled as :func:`stop_departed` reads them (up to ``window_pieces`` spans of the model's length), spreads (NaN:
+    no model ready, or not one whole span). At or over ``model_max_z`` the lines departed from the stepping in every
+    span: a stop the levels did not hold (music masking its drops; ``model_rejected``), held until its lines are read
+    past the window (:func:`still_departed`) and emitted flagged, its onset (the fire's) not known."""
+    cp, m, n = clocked.p, clocked.model, clocked.model_n
+    if m is None or n <= 0 or w.size < n or not (clocked.models_lines() and clocked.model_ready()):
+        return math.nan
+    k = min(cp.window_pieces, w.size // n)
+    return float(np.min([m.z_of(m.levels(w[i * n : (i + 1) * n])[0], cp.model_min_spans, cp.model_floor_db)
+                         for i in range(k)]))  # fmt: skip
+
+
 def still_departed(x: FloatArray, clocked: ClockedCheck) -> float:
     """After a window a stop was found departed in (:func:`stop_departed`), the samples ``x`` that followed it read
     against the stepping's lines modelled in pieces of ``model_hold_piece_s``: the least z over them, spreads (NaN:
@@ -191,7 +210,9 @@ class Held:
     """A stop found departed from the stepping's lines modelled (:func:`stop_departed`), held, its fast path latched,
     until its lines are read ``model_hold_s`` past the window's end (:func:`still_departed`); or a stop confirmed
     whose lines were out of step at its fire (``doubt``: :meth:`.checks.WindowChecks.out_of_step`), held so too: a
-    stop where they depart by ``model_in_step_hold_z`` past the window, else emitted flagged for that doubt."""
+    stop where they depart by ``model_in_step_hold_z`` past the window, else emitted flagged for that doubt; or a fire
+    the levels rejected whose lines departed in every span of its window (``flagged``: ``model_rejected``), held so too
+    and emitted flagged where they still depart by ``model_max_z``."""
 
     #: the fire whose window held it (rejected; confirmed, with a ``doubt``)
     fire: Fire
@@ -204,6 +225,8 @@ class Held:
     until: int
     #: why the confirmed stop is doubted unless its lines stay departed past the window (None: found inside)
     doubt: str | None = None
+    #: why the stop found is flagged whatever is read past the window (``model_rejected``; None: not so)
+    flagged: str | None = None
 
     def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
         """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
@@ -246,19 +269,42 @@ def held_inside(
     absolute sample of ``x[lead]``, the stream's start time, s, and the sample rate, Hz), held until it may be emitted:
     found on the joint's clock (:func:`stop_inside`: at once), else, where the stepping's lines modelled vetoed the fire
     (``on_clock``), departed from them (:func:`stop_departed`: once its lines were read ``model_hold_s`` past the
-    window); none where the stepping stopped from its onset (``pause``) or nothing was found."""
+    window); else, where the model did not veto it, a window departed from them in every span (``model_rejected``:
+    :func:`_rejected_departed`, held so too, flagged); none where the stepping stopped from its onset (``pause``) or
+    nothing was found."""
     start, t0_s, sr = at
     cp = clocked.p
     got, hold = stop_inside(x, lead, clocked, pause.before_hz, p), 0
     if got is None and cp.model_inside and clocked.model_vetoed(on_clock):  # the stepping's lines modelled
         got, hold = stop_departed(x, lead, clocked, p), int(round(cp.model_hold_s * sr))
+    end = start - lead + x.size
+    if got is None and cp.model_rejected and cp.model_hold_s > 0.0 and not clocked.model_vetoed(on_clock):
+        return _rejected_departed(x[lead:], fire, (end, t0_s, sr), clocked, pause)
     if got is None or pause.stopped(x[got.onset :]) is not None:
         return None
-    end = start - lead + x.size
     onset_s, found_s = t0_s + (start - lead + got.onset) / sr, t0_s + end / sr
     uncertain = got.spread > p.max_onset_off_s * sr
     ev = StopEvent(found_s, onset_s, fire.ev.level_db, found_s, found_s - onset_s, uncertain, found_late=True)
     return Held(fire, ev, got, end, end + hold)
+
+
+def _rejected_departed(
+    w: FloatArray, fire: Fire, at: tuple[int, float, float], clocked: ClockedCheck, pause: PauseCheck
+) -> Held | None:
+    """``fire``'s window ``w`` (the levels rejected it; ``at``: the absolute sample after it, the stream's start time,
+    s, and the sample rate, Hz), held as a stop, flagged, where its lines departed from the stepping's modelled in every
+    span (:func:`departed_throughout`) and the stepping went on (not a pause). None: not so. Not asked whether its
+    lines stayed in step (``model_in_step``): a stop that lowers them into the room's noise under music reads out of
+    step (the fifth generator's damped arm, 1 % jitter, 1100 Hz: 0.35 of the model's 0.81, +4.8 dB)."""
+    end, t0_s, sr = at
+    z = departed_throughout(w, clocked)
+    if not z >= clocked.p.model_max_z or pause.stopped(w) is not None:  # (NaN: not read)
+        return None
+    found_s = t0_s + end / sr
+    on = fire.ev.onset_s
+    ev = StopEvent(found_s, on, fire.ev.level_db, found_s, found_s - on, True, found_late=True)
+    why = f"the levels did not hold it; its lines departed from the stepping's in every span (z {z:.1f}): onset unknown"
+    return Held(fire, ev, None, end, end + int(round(clocked.p.model_hold_s * sr)), flagged=why)
 
 
 def onset_in_phase(
