@@ -791,14 +791,17 @@ class TipTracker:
 
         A candidate that correlates well enough to be taken is checked by the needle's edges
         behind it (:mod:`.edges`); a fix the template's rules take stands only if the edges'
-        rules take it too.
+        rules take it too. A refusal by the template's rules stands without them: its edges
+        (and shaft) are read only for a fit near the last fix refused as lost or out of focus,
+        where :meth:`update` reads them to decide whether to search the whole frame.
         """
         p = self.params
         res = _focus_reread(self, cand, image, reacquire)
         r = cand.ref
         # the edges only for a fit that correlates well enough to be taken (the template's rules refuse the others)
-        if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged:
-            return res, cand
+        if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged or isinstance(res, Lost) and (
+                reacquire or res.reason not in ("lost", "out of focus")):
+            return res, cand  # a refusal stands; only update's check of a fit near the last fix reads its edges
         patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
         ec = self._edge_check(patches, image, cand.ref, cand.level)
         # the shaft further back only where the edges near the tip hold (their refusal stands without it)
