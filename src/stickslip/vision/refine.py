@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .sampling import Patch, _limits, bilinear, median, sample_value_xy, sample_xy
+from .sampling import Patch, _corners, _limits, bilinear, median, neighbours, sample_value_xy
 
 __all__ = ["Refinement", "refine", "Steepest", "steepest", "warped"]
 
@@ -217,23 +217,23 @@ def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[Fl
     return sample_value_xy(p, _turned(st, x, y, theta))
 
 
-def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_] | None]:
-    """:func:`~.sampling.sample_xy` of the patch at :func:`_turned`'s points, bit for bit; which lie in the frame, or
-    ``None`` when every one does.
+def _window_cells(p: Patch, st: Steepest, x: float, y: float, theta: float
+                  ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_] | None]:
+    """:func:`~.sampling._corners` of the patch at :func:`_turned`'s points, bit for bit: each point's cell, its
+    fractions, and which points lie in the frame, or ``None`` when every one does.
 
     When the window, turned anyhow, lies strictly inside a patch within the frame (its reach
     about the tip, :attr:`Steepest.reach`, from the patch's first and last pixel: nearly
-    always), the points need no test: the same cells, fractions and gather, in fewer
-    operations (the tip's place and then the patch's corner added to the turned offsets as
-    two rows at once, ``(v + x) - x0`` as :func:`~.sampling.sample_xy` makes it).
+    always), the points need no test: the same cells and fractions in fewer operations (the
+    tip's place and then the patch's corner added to the turned offsets as two rows at once,
+    ``(v + x) - x0`` as :func:`~.sampling._corners` makes it).
     """
     H, W = p.shape
     _, ch, cw = p.data.shape
     lx, ly = x - p.x0, y - p.y0
-    lo, hi = min(lx, ly) - st.reach, max(lx, ly) + st.reach
-    if not (lo > 0.0 and hi < min(cw, ch) - 1.000001 and p.x0 >= 0 and p.y0 >= 0 and p.x0 + cw <= W
-            and p.y0 + ch <= H):  # (a NaN tip, too): every point tested
-        return sample_xy(p, _turned(st, x, y, theta))
+    if not (min(lx, ly) - st.reach > 0.0 and max(lx, ly) + st.reach < min(cw, ch) - 1.000001 and p.x0 >= 0
+            and p.y0 >= 0 and p.x0 + cw <= W and p.y0 + ch <= H):  # (a NaN tip, too): every point tested
+        return _corners(p, _turned(st, x, y, theta))
     xy = st.r * math.cos(theta)
     xy += st.r_perp * math.sin(theta)
     xy += np.array(((x,), (y,)))
@@ -243,8 +243,15 @@ def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[
     i00 = ixy[1]
     i00 *= cw
     i00 += ixy[0]
-    v = p.data.reshape(-1).take(np.add(_limits(ch, cw)[3], i00))
-    return bilinear(v, xy[0], xy[1]), None
+    return i00, xy[0], xy[1], None
+
+
+def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_] | None]:
+    """:func:`~.sampling.sample_xy` of the patch at :func:`_turned`'s points, bit for bit; which lie in the frame, or
+    ``None`` when every one does (:func:`_window_cells`)."""
+    i00, fx, fy, inside = _window_cells(p, st, x, y, theta)
+    v = p.data.reshape(-1).take(np.add(_limits(*p.data.shape[1:])[3], i00))
+    return bilinear(v, fx, fy), inside
 
 
 def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
@@ -550,13 +557,36 @@ def _covariance(
     D = np.concatenate([st.basis, g * st.lap[:, None], (g * last_jac).T], axis=1)
     M = (D * omega[:, None]).T @ D
     s2 = float((omega * (g * e) ** 2).sum()) / max(float(omega.sum()) - 10.0, 1.0)
-    try:
-        cov_win = (np.linalg.inv(M) * s2)[_NL : _NL + 2, _NL : _NL + 2]
-    except np.linalg.LinAlgError:
-        cov_win = np.full((2, 2), np.inf)
+    inv = _inverse(M)
+    cov_win = np.full((2, 2), np.inf) if inv is None else (inv * s2)[_NL : _NL + 2, _NL : _NL + 2]
     R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
     cov_win = cov_win * st.density  # the pixels left out said what their kept neighbours say
     return np.asarray(R @ cov_win @ R.T if np.all(np.isfinite(cov_win)) else cov_win)
+
+
+_INV = getattr(getattr(np.linalg, "_umath_linalg", None), "inv", None)
+"""The gufunc behind :func:`numpy.linalg.inv` (the same LAPACK call without the wrapper's checks; see
+:data:`_SOLVE1`)."""
+
+
+def _inverse(M: FloatArray) -> FloatArray | None:
+    """:func:`numpy.linalg.inv` of the square matrix ``M``, bit for bit; ``None`` where it is singular.
+
+    An inverse that is not finite everywhere (a singular matrix gives NaN) is made again by
+    :func:`numpy.linalg.inv`, which tells a singular matrix from one that gives NaN.
+    """
+    if _INV is not None:
+        try:  # a private numpy function: a numpy that changed it falls back to the public inverse
+            with np.errstate(invalid="ignore"):
+                out = np.asarray(_INV(M, signature="d->d"), dtype=float)
+        except (TypeError, ValueError):
+            out = np.full(M.shape, np.nan)
+        if out.shape == M.shape and np.isfinite(out).all():
+            return out
+    try:
+        return np.asarray(np.linalg.inv(M), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
 
 
 def _score(
@@ -579,7 +609,8 @@ def _score(
     score = 0.0
     outliers = 1.0
     if swi > 1e-9 and math.isfinite(tx) and math.isfinite(ty):
-        Iw, _ = warped(image, st, tx, ty, theta)
+        i00, fx, fy, _ = _window_cells(image, st, tx, ty, theta)  # warped()'s values
+        Iw = bilinear(image.data[0].reshape(-1).take(neighbours(i00, *image.data.shape[1:])), fx, fy)
         if terms is not None:
             _, mt, wtc, stt = terms
         else:

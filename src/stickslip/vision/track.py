@@ -67,8 +67,8 @@ from .average import TemplateAverage, anchor
 from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
-from .refine import Refinement, Steepest, _turned, refine, steepest
-from .sampling import Patch, _corners, bilinear, median, neighbours, patch, sample_value_xy
+from .refine import Refinement, Steepest, _window_cells, refine, steepest
+from .sampling import Patch, bilinear, median, neighbours, patch, sample_value_xy
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import (
     TemplateError,
@@ -456,8 +456,9 @@ def _blur_samples(t: TipTracker, patches: dict[float, Patch], image: FloatArray,
         key = (p.x0, p.y0, ch, cw)
         c = cells.get(key)
         if c is None:
-            i00, fx, fy, inside = _corners(p, _turned(t._select, x, y, theta))
-            c = cells[key] = (neighbours(i00, ch, cw), fx, fy, t._select.w * inside, bool(inside.all()))
+            i00, fx, fy, inside = _window_cells(p, t._select, x, y, theta)  # (None: every one in, w * True is w)
+            c = cells[key] = (neighbours(i00, ch, cw), fx, fy, t._select.w if inside is None else t._select.w * inside,
+                              inside is None or bool(inside.all()))
         at, fx, fy, w, all_in = c
         out[f] = (w, _frame_stats(bilinear(p.data[0].reshape(-1).take(at), fx, fy), w), all_in)
     return out
