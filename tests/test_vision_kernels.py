@@ -637,3 +637,23 @@ def test_fit_inverse_is_numpys_and_refuses_a_singular_matrix() -> None:
     with np.errstate(invalid="ignore"):
         nan = _inverse(np.full((3, 3), np.nan))  # not singular to LAPACK: NaN, as numpy gives it
     assert nan is not None and np.isnan(nan).all()
+
+
+@pytest.mark.parametrize(("cx", "cy"), [(30.3, 20.7), (2.0, 57.5), (-40.0, 10.0)])  # inside, cut by the edge, beyond
+def test_patch_made_without_its_slopes_gets_the_same_ones_later(cx: float, cy: float) -> None:
+    from stickslip.vision.refine import refine
+    from stickslip.vision.sampling import with_slopes
+
+    rng = np.random.default_rng(15)
+    image = rng.normal(0.5, 0.1, (60, 80))
+    full = patch(image, cx, cy, 15.0, 1.8027756377319946)
+    bare = patch(image, cx, cy, 15.0, 1.8027756377319946, slopes=False)
+    assert np.array_equal(bare.data[0], full.data[0]) and (not bare.slopes or bare.data.shape == (3, 4, 4))
+    if not bare.slopes:
+        assert np.isnan(bare.data[1:]).all()  # never read as slopes by mistake: NaN
+        t = ndimage.gaussian_filter(rng.normal(size=(9, 9)), 1.5)
+        with pytest.raises(ValueError, match="derivatives"):
+            refine(bare, steepest(t, (4.0, 4.0), np.ones((9, 9))), (cx, cy))
+    made = with_slopes(bare)
+    assert made.slopes and np.array_equal(made.data, full.data) and (made.x0, made.y0) == (full.x0, full.y0)
+    assert with_slopes(made) is made

@@ -368,9 +368,7 @@ def refine(
     it, e = 0, np.zeros_like(T)
     inside: NDArray[np.bool_] | None = None  # which samples lie in the frame (None: every one)
     kept: _Kept | None = None
-    # the brightness planes' columns, then each iteration's blur and motion; column-major (see _joint)
-    D = np.empty((T.size, 10), order="F")
-    D[:, :6] = basis
+    D = _design(image, basis)
     bx, by = st.bx, st.by  # the position across the window, x and y: contiguous
     with np.errstate(invalid="ignore"):  # the solve's (a singular system gives NaN, told apart there): once a fit
         for it in range(1, max_iter + 1):
@@ -413,6 +411,17 @@ def refine(
     cov = _covariance(st, g, last_jac, omega, e, theta)
     score, outliers, coverage = _score(image, st, tx, ty, theta, inside, robust_w)
     return Refinement(tx, ty, theta, g, c, cov, score, outliers, coverage, it, converged, 2.0 * blur_c)
+
+
+def _design(image: Patch, basis: FloatArray) -> FloatArray:
+    """The fit's design matrix with the brightness planes' columns ``basis`` in place; each step's blur and motion
+    columns are filled in by the step; column-major (see :func:`_joint`). Raises ``ValueError`` for a patch
+    ``image`` made without its derivatives (:func:`~.sampling.with_slopes`): the fit reads them."""
+    if not image.slopes:
+        raise ValueError("the fit needs the patch's derivatives: made without them (sampling.with_slopes makes them)")
+    D = np.empty((basis.shape[0], 10), order="F")
+    D[:, :6] = basis
+    return D
 
 
 _Kept = tuple[FloatArray, FloatArray, float]
