@@ -46,10 +46,10 @@ from stickslip.vision.track import TipTracker  # noqa: E402
 BEFORE = "e5a6c35"
 """The last commit with the tracker as it was before the speed-ups."""
 
-MODULES = ("frame", "sampling", "template", "refine", "edges", "shaft", "width", "average", "track")
+MODULES = ("frame", "sampling", "template", "refine", "edges", "shaft", "width", "average", "confirm", "track")
 """The modules the tracker is made of (they import one another relatively)."""
 
-LATER = ("sampling", "shaft", "width", "average")
+LATER = ("sampling", "shaft", "width", "average", "confirm")
 """Modules added after :data:`BEFORE`: skipped at a commit that lacks them (its tracker does not import them)."""
 
 FIELDS = ("x", "y", "score", "sigma", "blur", "angle")

@@ -483,3 +483,176 @@ def test_peaks_by_rank_are_the_sorted_tuples(sizes: list[int], seed: int) -> Non
     got = list(_by_rank(peaks))
     assert got == sorted(tuples, reverse=True)
     assert all(type(v) is int for t in got for v in t[1:])
+
+
+@settings(max_examples=40, deadline=None)
+@given(cx=st.floats(-20.0, 90.0) | st.floats(20.0, 50.0), cy=st.floats(-20.0, 80.0) | st.floats(20.0, 50.0),
+       dx=st.floats(-12.0, 12.0), dy=st.floats(-12.0, 12.0), theta=st.floats(-3.2, 3.2), seed=st.integers(0, 2**32 - 1))
+def test_fit_window_sampled_untested_inside_its_patch_is_the_tested_one_bit_for_bit(
+        cx: float, cy: float, dx: float, dy: float, theta: float, seed: int) -> None:
+    # the fit's sampling (refine._warped3) against the sampling that tests every point: a window well inside its
+    # patch, reaching past it (the tip moved from the patch's centre), cut by the frame's edge, beyond it
+    from stickslip.vision.refine import _warped3
+    from stickslip.vision.sampling import sample_xy
+
+    rng = np.random.default_rng(seed)
+    t = ndimage.gaussian_filter(rng.normal(size=(15, 15)), 1.5)
+    st_ = steepest(t, (7.2, 6.9), rng.uniform(0.0, 1.0, (15, 15)))
+    image = rng.normal(0.5, 0.1, (70, 80))
+    p = patch(image, cx, cy, 7.0 * math.sqrt(2.0) + 6.0, 1.0)
+    got, inside = _warped3(p, st_, cx + dx, cy + dy, theta)
+    want, want_inside = sample_xy(p, _turned(st_, cx + dx, cy + dy, theta))
+    assert np.array_equal(got, want)
+    assert bool(want_inside.all()) if inside is None else np.array_equal(inside, want_inside)
+    if inside is None:  # told untested only where every point lies strictly inside the patch, within the frame
+        _, ch, cw = p.data.shape
+        xy = _turned(st_, cx + dx, cy + dy, theta) - np.array(((p.x0,), (p.y0,)))
+        assert xy.min() > 0.0 and xy.max() < min(ch, cw) - 1.000001 and want_inside.all()
+
+
+def test_fit_window_sampled_at_a_nan_tip_or_with_no_pixel_is_tested() -> None:
+    from stickslip.vision.refine import _warped3
+    from stickslip.vision.sampling import sample_xy
+
+    rng = np.random.default_rng(12)
+    t = ndimage.gaussian_filter(rng.normal(size=(15, 15)), 1.5)
+    st_ = steepest(t, (7.0, 7.0), rng.uniform(0.0, 1.0, (15, 15)))
+    p = patch(rng.normal(size=(60, 60)), 30.0, 30.0, 16.0, 1.0)
+    # a NaN tip is not told inside: it goes the tested way, which has no cell for it (the fit stops before)
+    with np.errstate(invalid="ignore"), pytest.raises(IndexError):
+        _warped3(p, st_, math.nan, 30.0, 0.1)
+    with np.errstate(invalid="ignore"), pytest.raises(IndexError):
+        sample_xy(p, _turned(st_, math.nan, 30.0, 0.1))
+    none = steepest(t, (7.0, 7.0), np.zeros((15, 15)))  # no weighted pixel
+    v0, inside0 = _warped3(p, none, 30.0, 30.0, 0.0)
+    assert v0.shape == (3, 0) and (inside0 is None or inside0.shape == (0,))
+
+
+def _joint_before(D: np.ndarray, w: np.ndarray, y: np.ndarray, cols: np.ndarray, kappa: float, turn: float
+                  ) -> np.ndarray | None:
+    """refine._joint as it was: the ridge added as a matrix, numpy's own solve."""
+    Dc = D if cols is _ALL else D[:, cols]
+    Dw = Dc * w[:, None]
+    M = Dw.T @ Dc
+    rhs = Dw.T @ y
+    if kappa > 0:
+        M[-1, -1] += kappa
+        rhs[-1] += kappa * turn
+    try:
+        sol = np.linalg.solve(M + 1e-12 * M.trace() * np.eye(len(cols)), rhs)
+    except np.linalg.LinAlgError:
+        return None
+    out = np.zeros(D.shape[1])
+    out[cols] = sol
+    return out
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(12, 300), kappa=st.sampled_from([0.0, 1e-3, 5.0]),
+       plain=st.booleans(), held=st.booleans())
+def test_joint_solve_with_the_ridge_in_place_is_the_plain_one_bit_for_bit(seed: int, m: int, kappa: float,
+                                                                         plain: bool, held: bool) -> None:
+    from stickslip.vision.refine import _joint
+
+    rng = np.random.default_rng(seed)
+    D = np.asfortranarray(rng.normal(size=(m, 10)) * rng.choice([1e-3, 1.0, 40.0], 10))
+    w, y = rng.uniform(0.0, 1.0, m) * (rng.random(m) > 0.2), rng.normal(size=m)
+    cols = _NO_GAIN_PLANE if plain else _ALL
+    with np.errstate(invalid="ignore"):
+        got = _joint(D, w, y, cols, kappa, 0.03, held)
+    want = _joint_before(D, w, y, cols, kappa, 0.03)
+    assert got is not None and want is not None and np.array_equal(got, want)
+    # a singular system (a column of nothing, no ridge to hold it): None, as numpy's solve tells it
+    D[:, 8] = 0.0
+    with np.errstate(invalid="ignore"):
+        assert (_joint(D, w, y, cols, 0.0, 0.0, held) is None) == (_joint_before(D, w, y, cols, 0.0, 0.0) is None)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), theta=st.floats(-1.0, 1.0), g=st.floats(0.2, 5.0),
+       blur_c=st.floats(-2.0, 2.0))
+def test_fit_jacobian_is_the_plain_formula_bit_for_bit(seed: int, theta: float, g: float, blur_c: float) -> None:
+    from stickslip.vision.refine import _esm_jacobian
+
+    rng = np.random.default_rng(seed)
+    t = ndimage.gaussian_filter(rng.normal(size=(15, 15)), 1.5)
+    st_ = steepest(t, (7.4, 6.6), rng.uniform(0.0, 1.0, (15, 15)))
+    v3 = rng.normal(size=(3, st_.t.size)) * rng.choice([1e-4, 1.0, 300.0], (3, 1))
+    ct, s_ = math.cos(theta), math.sin(theta)
+    fgx = (v3[1] * ct + v3[2] * s_) / g
+    fgy = (v3[2] * ct + v3[1] * -s_) / g
+    fth = -fgx * st_.ry + fgy * st_.rx
+    want = (blur_c * st_.sd_lap + st_.sd + np.stack((fgx, fgy, fth))) * 0.5
+    assert np.array_equal(_esm_jacobian(st_, v3, theta, g, blur_c), want)
+
+
+def test_fit_weights_kept_while_the_robust_ones_stay_are_the_plain_product() -> None:
+    from stickslip.vision.refine import _weights
+
+    rng = np.random.default_rng(13)
+    w0, robust = rng.uniform(0.0, 1.0, 50), rng.uniform(0.0, 1.0, 50)
+    robust[:5] = 0.0
+    inside = rng.random(50) > 0.1
+    omega, sw, kept = _weights(w0, inside, robust, None)  # a sample out of the frame: nothing kept
+    assert kept is None and np.array_equal(omega, w0 * inside * robust) and sw == float((w0 * inside * robust).sum())
+    omega, sw, kept = _weights(w0, None, robust, None)  # every sample in
+    every = np.ones(50, dtype=bool)
+    assert kept is not None and np.array_equal(omega, w0 * every * robust) and sw == float((w0 * every * robust).sum())
+    again = _weights(w0, None, robust, kept)  # the same robust weights: the same arrays
+    assert again[0] is omega and again[1] == sw
+    other = robust.copy()  # new robust weights (equal or not): made again
+    assert _weights(w0, None, other, kept)[0] is not omega
+
+
+@settings(max_examples=30, deadline=None)
+@given(cx=st.floats(-20.0, 90.0) | st.floats(20.0, 50.0), cy=st.floats(-20.0, 80.0) | st.floats(20.0, 50.0),
+       dx=st.floats(-12.0, 12.0), dy=st.floats(-12.0, 12.0), theta=st.floats(-3.2, 3.2), seed=st.integers(0, 2**32 - 1))
+def test_fit_window_cells_are_the_tested_ones_bit_for_bit(cx: float, cy: float, dx: float, dy: float, theta: float,
+                                                         seed: int) -> None:
+    # the cells the fit's score and the blur copies' comparison read (refine._window_cells) against sampling._corners
+    from stickslip.vision.refine import _window_cells
+    from stickslip.vision.sampling import _corners
+
+    rng = np.random.default_rng(seed)
+    t = ndimage.gaussian_filter(rng.normal(size=(15, 15)), 1.5)
+    st_ = steepest(t, (6.8, 7.3), rng.uniform(0.0, 1.0, (15, 15)))
+    p = patch(rng.normal(0.5, 0.1, (70, 80)), cx, cy, 7.0 * math.sqrt(2.0) + 6.0, 1.0)
+    i00, fx, fy, inside = _window_cells(p, st_, cx + dx, cy + dy, theta)
+    j00, gx, gy, want_inside = _corners(p, _turned(st_, cx + dx, cy + dy, theta))
+    assert np.array_equal(i00, j00) and np.array_equal(fx, gx) and np.array_equal(fy, gy)
+    assert bool(want_inside.all()) if inside is None else np.array_equal(inside, want_inside)
+
+
+def test_fit_inverse_is_numpys_and_refuses_a_singular_matrix() -> None:
+    from stickslip.vision.refine import _inverse
+
+    rng = np.random.default_rng(14)
+    for _ in range(30):
+        A = rng.normal(size=(40, 10)) * rng.choice([1e-3, 1.0, 50.0], 10)
+        M = A.T @ A
+        got = _inverse(M)
+        assert got is not None and np.array_equal(got, np.linalg.inv(M))
+    assert _inverse(np.zeros((10, 10))) is None
+    with np.errstate(invalid="ignore"):
+        nan = _inverse(np.full((3, 3), np.nan))  # not singular to LAPACK: NaN, as numpy gives it
+    assert nan is not None and np.isnan(nan).all()
+
+
+@pytest.mark.parametrize(("cx", "cy"), [(30.3, 20.7), (2.0, 57.5), (-40.0, 10.0)])  # inside, cut by the edge, beyond
+def test_patch_made_without_its_slopes_gets_the_same_ones_later(cx: float, cy: float) -> None:
+    from stickslip.vision.refine import refine
+    from stickslip.vision.sampling import with_slopes
+
+    rng = np.random.default_rng(15)
+    image = rng.normal(0.5, 0.1, (60, 80))
+    full = patch(image, cx, cy, 15.0, 1.8027756377319946)
+    bare = patch(image, cx, cy, 15.0, 1.8027756377319946, slopes=False)
+    assert np.array_equal(bare.data[0], full.data[0]) and (not bare.slopes or bare.data.shape == (3, 4, 4))
+    if not bare.slopes:
+        assert np.isnan(bare.data[1:]).all()  # never read as slopes by mistake: NaN
+        t = ndimage.gaussian_filter(rng.normal(size=(9, 9)), 1.5)
+        with pytest.raises(ValueError, match="derivatives"):
+            refine(bare, steepest(t, (4.0, 4.0), np.ones((9, 9))), (cx, cy))
+    made = with_slopes(bare)
+    assert made.slopes and np.array_equal(made.data, full.data) and (made.x0, made.y0) == (full.x0, full.y0)
+    assert with_slopes(made) is made

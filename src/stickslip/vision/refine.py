@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .sampling import Patch, median, sample_value_xy, sample_xy
+from .sampling import Patch, _corners, _limits, bilinear, median, neighbours, sample_value_xy
 
 __all__ = ["Refinement", "refine", "Steepest", "steepest", "warped"]
 
@@ -82,6 +82,9 @@ class Steepest:
         The template's side of the fit's score (:func:`_score`) over all of its weights:
         the weights' sum, the weighted mean ``t_w``, ``w (t - t_w)`` and ``sum w (t -
         t_w)²``, made once.
+    reach : float
+        The largest distance of these pixels from the tip, px, with a margin for rounding
+        (:func:`_warped3` tells from it that a turned window lies inside its patch).
     """
 
     template: FloatArray
@@ -101,6 +104,7 @@ class Steepest:
     bx: FloatArray = field(default_factory=lambda: np.zeros(0))
     by: FloatArray = field(default_factory=lambda: np.zeros(0))
     score_terms: tuple[float, float, FloatArray, float] | None = None
+    reach: float = math.inf
 
 
 def _score_terms(t: FloatArray, w: FloatArray) -> tuple[float, float, FloatArray, float]:
@@ -141,8 +145,10 @@ def steepest(template: FloatArray, apex: tuple[float, float], weights: FloatArra
     lap_full = ndimage.gaussian_laplace(template, lap_blur, mode="nearest")
     ly, lx = np.gradient(lap_full)
     sd_lap = np.stack([lx[keep], ly[keep], -lx[keep] * rym + ly[keep] * rxm])
+    reach = float(np.sqrt((rxm * rxm + rym * rym).max())) + 1e-6 if T.size else 0.0
     return Steepest(template, apex, T, weights[keep], rxm, rym, sd, basis, keep, lap_full[keep], sd_lap, density,
-                    np.stack([rxm, rym]), np.stack([-rym, rxm]), bx.copy(), by.copy(), _score_terms(T, weights[keep]))
+                    np.stack([rxm, rym]), np.stack([-rym, rxm]), bx.copy(), by.copy(), _score_terms(T, weights[keep]),
+                    reach)
 
 
 @dataclass(frozen=True)
@@ -211,8 +217,41 @@ def warped(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[Fl
     return sample_value_xy(p, _turned(st, x, y, theta))
 
 
-def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_]]:
-    return sample_xy(p, _turned(st, x, y, theta))
+def _window_cells(p: Patch, st: Steepest, x: float, y: float, theta: float
+                  ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.bool_] | None]:
+    """:func:`~.sampling._corners` of the patch at :func:`_turned`'s points, bit for bit: each point's cell, its
+    fractions, and which points lie in the frame, or ``None`` when every one does.
+
+    When the window, turned anyhow, lies strictly inside a patch within the frame (its reach
+    about the tip, :attr:`Steepest.reach`, from the patch's first and last pixel: nearly
+    always), the points need no test: the same cells and fractions in fewer operations (the
+    tip's place and then the patch's corner added to the turned offsets as two rows at once,
+    ``(v + x) - x0`` as :func:`~.sampling._corners` makes it).
+    """
+    H, W = p.shape
+    _, ch, cw = p.data.shape
+    lx, ly = x - p.x0, y - p.y0
+    if not (min(lx, ly) - st.reach > 0.0 and max(lx, ly) + st.reach < min(cw, ch) - 1.000001 and p.x0 >= 0
+            and p.y0 >= 0 and p.x0 + cw <= W and p.y0 + ch <= H):  # (a NaN tip, too): every point tested
+        return _corners(p, _turned(st, x, y, theta))
+    xy = st.r * math.cos(theta)
+    xy += st.r_perp * math.sin(theta)
+    xy += np.array(((x,), (y,)))
+    xy -= np.array(((float(p.x0),), (float(p.y0),)))
+    ixy = xy.astype(np.intp)
+    xy -= ixy  # the fractions
+    i00 = ixy[1]
+    i00 *= cw
+    i00 += ixy[0]
+    return i00, xy[0], xy[1], None
+
+
+def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_] | None]:
+    """:func:`~.sampling.sample_xy` of the patch at :func:`_turned`'s points, bit for bit; which lie in the frame, or
+    ``None`` when every one does (:func:`_window_cells`)."""
+    i00, fx, fy, inside = _window_cells(p, st, x, y, theta)
+    v = p.data.reshape(-1).take(np.add(_limits(*p.data.shape[1:])[3], i00))
+    return bilinear(v, fx, fy), inside
 
 
 def _solve(A: FloatArray, w: FloatArray, y: FloatArray) -> FloatArray | None:
@@ -237,16 +276,21 @@ _SOLVE1 = getattr(getattr(np.linalg, "_umath_linalg", None), "solve1", None)
 wrapper's checks: 4 us against 10 us for a 10 x 10 system); ``None`` where numpy has it elsewhere."""
 
 
-def _solve_small(M: FloatArray, rhs: FloatArray) -> FloatArray | None:
+def _solve_small(M: FloatArray, rhs: FloatArray, held: bool = False) -> FloatArray | None:
     """:func:`numpy.linalg.solve` of the square system ``M x = rhs``, bit for bit; ``None`` where it is singular.
 
     A solution that is not finite everywhere (a singular matrix gives NaN) is solved again
     by :func:`numpy.linalg.solve`, which tells a singular matrix (``None``) from one that gives NaN.
+    ``held``: the caller holds ``numpy.errstate(invalid="ignore")`` already (the fit's loop: entered
+    once, not at every step).
     """
     if _SOLVE1 is not None:
         try:  # a private numpy function: a numpy that changed it falls back to the public solve
-            with np.errstate(invalid="ignore"):
+            if held:
                 sol = np.asarray(_SOLVE1(M, rhs, signature="dd->d"), dtype=float)
+            else:
+                with np.errstate(invalid="ignore"):
+                    sol = np.asarray(_SOLVE1(M, rhs, signature="dd->d"), dtype=float)
         except (TypeError, ValueError):
             sol = np.full(len(rhs), np.nan)
         if sol.shape == rhs.shape and np.isfinite(sol).all():
@@ -258,11 +302,12 @@ def _solve_small(M: FloatArray, rhs: FloatArray) -> FloatArray | None:
 
 
 def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], kappa: float,
-           turn: float) -> FloatArray | None:
+           turn: float, held: bool = False) -> FloatArray | None:
     """Weighted least squares of ``y`` on the columns ``cols`` of ``D`` (10: 6 brightness, blur, 3 motion).
 
     ``kappa`` weighs a prior that pulls the turn's step towards ``turn`` (the current turn's
-    distance from its prior). The columns left out are 0 in the result.
+    distance from its prior). The columns left out are 0 in the result. ``held``: as
+    :func:`_solve_small`'s.
     """
     # D is column-major, as indexing its columns makes them: the products come out the same either way
     Dc = D if cols is _ALL else D[:, cols]
@@ -272,7 +317,11 @@ def _joint(D: FloatArray, w: FloatArray, y: FloatArray, cols: NDArray[np.intp], 
     if kappa > 0:
         M[-1, -1] += kappa
         rhs[-1] += kappa * turn
-    sol = _solve_small(M + 1e-12 * M.trace() * _EYE[len(cols)], rhs)
+    # M + 1e-12 trace(M) I: the diagonal's sums, in place (M is new and C-contiguous: its diagonal a view); off it,
+    # x + 0.0 is x
+    diag = M.ravel()[:: len(cols) + 1]
+    diag += 1e-12 * M.trace()
+    sol = _solve_small(M, rhs, held)
     if sol is None:
         return None
     if cols is _ALL:
@@ -317,51 +366,84 @@ def refine(
     converged, step, blur_c = False, math.inf, 0.0
     scale: float | None = None
     it, e = 0, np.zeros_like(T)
-    inside = np.ones(T.shape, dtype=bool)
-    # the brightness planes' columns, then each iteration's blur and motion; column-major (see _joint)
-    D = np.empty((T.size, 10), order="F")
-    D[:, :6] = basis
+    inside: NDArray[np.bool_] | None = None  # which samples lie in the frame (None: every one)
+    kept: _Kept | None = None
+    D = _design(image, basis)
     bx, by = st.bx, st.by  # the position across the window, x and y: contiguous
-    for it in range(1, max_iter + 1):
-        v3, inside = _warped3(image, st, tx, ty, theta)
-        Iw = v3[0]
-        omega = w0 * inside * robust_w
-        sw = float(omega.sum())
-        if sw <= 1e-9:
-            break
-        jac = _esm_jacobian(st, v3, theta, g, blur_c)
-        # one linear least squares for the brightness planes and the motion together: apart, the planes
-        # would soak up half of every edge's shift at each step, and the motion would creep
-        np.multiply(st.lap, g, out=D[:, 6])
-        np.multiply(jac, g, out=D[:, _NL:].T)
-        if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
-            r0 = Iw - basis @ beta_prev
-            kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(sw, 1e-12) / theta_sd**2
-        sol, gain, model = _solve_positive_gain(D, omega, Iw, bx, by, model, kappa or 0.0, theta - theta_prior)
-        if sol is None or gain is None:  # contrast reversed, or no solution: not this template
-            converged = False
-            break
-        beta_prev = sol[:6]
-        sl = sol.tolist()  # (the same Python floats as float() of each; blur_c: half the blur variance the
-        g, c, blur_c = sl[0], sl[3], sl[6] / sl[0]  # frame has beyond the template's, px²)
-        e = _residual(Iw, sl[3:6], bx, by, gain, T, blur_c, st.lap)
-        if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
-            robust_w, scale = _tukey_weights(e, omega, scale)
-        dp, dp_norm = _damped(sol[_NL:], prev_dp, dp_norm)  # (a view: nothing else reads sol's motion)
-        prev_dp = dp
-        tx, ty, theta, step = _moved(tx, ty, theta, dp)
-        last_jac = jac
-        if step < tol:
-            converged = True
-            break
-        if not (math.isfinite(tx) and math.isfinite(ty)) or abs(theta) > 1.0:
-            break
+    with np.errstate(invalid="ignore"):  # the solve's (a singular system gives NaN, told apart there): once a fit
+        for it in range(1, max_iter + 1):
+            v3, inside = _warped3(image, st, tx, ty, theta)
+            Iw = v3[0]
+            omega, sw, kept = _weights(w0, inside, robust_w, kept)
+            if sw <= 1e-9:
+                break
+            jac = _esm_jacobian(st, v3, theta, g, blur_c)
+            # one linear least squares for the brightness planes and the motion together: apart, the planes
+            # would soak up half of every edge's shift at each step, and the motion would creep
+            np.multiply(st.lap, g, out=D[:, 6])
+            np.multiply(jac, g, out=D[:, _NL:].T)
+            if theta_sd is not None and (kappa is None or it <= 2):  # the needle turns little: a prior on the turn
+                r0 = Iw - basis @ beta_prev
+                kappa = correlation**2 * float((omega * r0 * r0).sum()) / max(sw, 1e-12) / theta_sd**2
+            sol, gain, model = _solve_positive_gain(D, omega, Iw, bx, by, model, kappa or 0.0, theta - theta_prior,
+                                                    True)
+            if sol is None or gain is None:  # contrast reversed, or no solution: not this template
+                converged = False
+                break
+            beta_prev = sol[:6]
+            sl = sol.tolist()  # (the same Python floats as float() of each; blur_c: half the blur variance the
+            g, c, blur_c = sl[0], sl[3], sl[6] / sl[0]  # frame has beyond the template's, px²)
+            e = _residual(Iw, sl[3:6], bx, by, gain, T, blur_c, st.lap)
+            if robust and 2 <= it <= ROBUST_ITERATIONS:  # then the weights are kept: ones that flip never settle
+                robust_w, scale = _tukey_weights(e, omega, scale)
+            dp, dp_norm = _damped(sol[_NL:], prev_dp, dp_norm)  # (a view: nothing else reads sol's motion)
+            prev_dp = dp
+            tx, ty, theta, step = _moved(tx, ty, theta, dp)
+            last_jac = jac
+            if step < tol:
+                converged = True
+                break
+            if not (math.isfinite(tx) and math.isfinite(ty)) or abs(theta) > 1.0:
+                break
     if not converged and step < 5 * tol:  # still creeping by less than a twentieth of a pixel: settled
         converged = True
-    omega = w0 * inside * robust_w
+    omega = w0 * robust_w if inside is None else w0 * inside * robust_w
     cov = _covariance(st, g, last_jac, omega, e, theta)
     score, outliers, coverage = _score(image, st, tx, ty, theta, inside, robust_w)
     return Refinement(tx, ty, theta, g, c, cov, score, outliers, coverage, it, converged, 2.0 * blur_c)
+
+
+def _design(image: Patch, basis: FloatArray) -> FloatArray:
+    """The fit's design matrix with the brightness planes' columns ``basis`` in place; each step's blur and motion
+    columns are filled in by the step; column-major (see :func:`_joint`). Raises ``ValueError`` for a patch
+    ``image`` made without its derivatives (:func:`~.sampling.with_slopes`): the fit reads them."""
+    if not image.slopes:
+        raise ValueError("the fit needs the patch's derivatives: made without them (sampling.with_slopes makes them)")
+    D = np.empty((basis.shape[0], 10), order="F")
+    D[:, :6] = basis
+    return D
+
+
+_Kept = tuple[FloatArray, FloatArray, float]
+"""The fit's weights made with every sample in the frame: the robust weights they were made from, the weights and
+their sum."""
+
+
+def _weights(w0: FloatArray, inside: NDArray[np.bool_] | None, robust_w: FloatArray, kept: _Kept | None
+             ) -> tuple[FloatArray, float, _Kept | None]:
+    """The fit's weights ``w0 * inside * robust_w`` and their sum, bit for bit, and what to keep for the next step.
+
+    With every sample in the frame (``inside`` ``None``) ``w0 * True`` is ``w0``: ``w0 * robust_w``, made again only
+    when the robust weights changed (``kept``: the last ones made so).
+    """
+    if inside is not None:
+        omega = w0 * inside * robust_w
+        return omega, float(omega.sum()), None
+    if kept is not None and kept[0] is robust_w:
+        return kept[1], kept[2], kept
+    omega = w0 * robust_w
+    sw = float(omega.sum())
+    return omega, sw, (robust_w, omega, sw)
 
 
 def _residual(Iw: FloatArray, c: list[float], bx: FloatArray, by: FloatArray, gain: FloatArray, T: FloatArray,
@@ -393,14 +475,13 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
     """
     ct, st_ = math.cos(theta), math.sin(theta)
     f = np.empty_like(st.sd)  # the frame's: fgx, fgy and the turn's, made in place
-    fgx, fgy, fth = f[0], f[1], f[2]
+    fth = f[2]
     # (gx cos + gy sin, gy cos - gx sin) / g, both rows at once
     np.multiply(v3[1:], ct, out=f[:2])
     f[:2] += v3[2:0:-1] * (_SIGNS * st_)
     f[:2] /= g
-    np.negative(fgx, out=fth)
-    fth *= st.ry
-    fth += fgy * st.rx
+    turn = f[:2] * st.r[::-1]  # (fgx ry, fgy rx)
+    np.subtract(turn[1], turn[0], out=fth)  # fgy rx - fgx ry is, bit for bit, -fgx ry + fgy rx
     model = blur_c * st.sd_lap
     model += st.sd
     model += f
@@ -410,7 +491,7 @@ def _esm_jacobian(st: Steepest, v3: FloatArray, theta: float, g: float, blur_c: 
 
 def _solve_positive_gain(
     D: FloatArray, omega: FloatArray, Iw: FloatArray, bx: FloatArray, by: FloatArray,
-    model: NDArray[np.intp] | None, kappa: float, turn: float,
+    model: NDArray[np.intp] | None, kappa: float, turn: float, held: bool = False,
 ) -> tuple[FloatArray | None, FloatArray | None, NDArray[np.intp] | None]:
     """The joint solution (:func:`_joint`), its contrast across the window and the columns used.
 
@@ -418,11 +499,11 @@ def _solve_positive_gain(
     somewhere): a plain contrast, and that for good (``model``: a model that changed back
     and forth between iterations would never settle). ``(None, None, model)`` when no
     solution has a positive contrast. ``bx``, ``by``: each pixel's place across the window
-    (the basis's x and y columns).
+    (the basis's x and y columns). ``held``: as :func:`_solve_small`'s.
     """
     choices = (_ALL, _NO_GAIN_PLANE) if model is None or model is _ALL else (_NO_GAIN_PLANE,)
     for cols in choices:  # once plain, plain to the end
-        sol = _joint(D, omega, Iw, cols, kappa, turn)
+        sol = _joint(D, omega, Iw, cols, kappa, turn, held)
         if sol is None:
             break
         s0, s1, s2 = sol[:3].tolist()  # (Python floats: numpy's scalars cost more against an array)
@@ -485,34 +566,60 @@ def _covariance(
     D = np.concatenate([st.basis, g * st.lap[:, None], (g * last_jac).T], axis=1)
     M = (D * omega[:, None]).T @ D
     s2 = float((omega * (g * e) ** 2).sum()) / max(float(omega.sum()) - 10.0, 1.0)
-    try:
-        cov_win = (np.linalg.inv(M) * s2)[_NL : _NL + 2, _NL : _NL + 2]
-    except np.linalg.LinAlgError:
-        cov_win = np.full((2, 2), np.inf)
+    inv = _inverse(M)
+    cov_win = np.full((2, 2), np.inf) if inv is None else (inv * s2)[_NL : _NL + 2, _NL : _NL + 2]
     R = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])
     cov_win = cov_win * st.density  # the pixels left out said what their kept neighbours say
     return np.asarray(R @ cov_win @ R.T if np.all(np.isfinite(cov_win)) else cov_win)
 
 
+_INV = getattr(getattr(np.linalg, "_umath_linalg", None), "inv", None)
+"""The gufunc behind :func:`numpy.linalg.inv` (the same LAPACK call without the wrapper's checks; see
+:data:`_SOLVE1`)."""
+
+
+def _inverse(M: FloatArray) -> FloatArray | None:
+    """:func:`numpy.linalg.inv` of the square matrix ``M``, bit for bit; ``None`` where it is singular.
+
+    An inverse that is not finite everywhere (a singular matrix gives NaN) is made again by
+    :func:`numpy.linalg.inv`, which tells a singular matrix from one that gives NaN.
+    """
+    if _INV is not None:
+        try:  # a private numpy function: a numpy that changed it falls back to the public inverse
+            with np.errstate(invalid="ignore"):
+                out = np.asarray(_INV(M, signature="d->d"), dtype=float)
+        except (TypeError, ValueError):
+            out = np.full(M.shape, np.nan)
+        if out.shape == M.shape and np.isfinite(out).all():
+            return out
+    try:
+        return np.asarray(np.linalg.inv(M), dtype=float)
+    except np.linalg.LinAlgError:
+        return None
+
+
 def _score(
-    image: Patch, st: Steepest, tx: float, ty: float, theta: float, inside: NDArray[np.bool_], robust_w: FloatArray
+    image: Patch, st: Steepest, tx: float, ty: float, theta: float, inside: NDArray[np.bool_] | None,
+    robust_w: FloatArray,
 ) -> tuple[float, float, float]:
     """The fit's score, outlier share and coverage.
 
     The score is the correlation over the template's own weights inside the frame; the
     outliers are the share of those weights the robust fit set to zero; the coverage is
-    the share of the template's weight inside the frame.
+    the share of the template's weight inside the frame (``inside`` ``None``: every sample).
     """
     T, w0 = st.t, st.w
-    terms = st.score_terms if st.score_terms is not None and bool(inside.all()) else None
+    every = inside is None or bool(inside.all())
+    terms = st.score_terms if st.score_terms is not None and every else None
     # all inside (nearly always): the template's side made once (w0 * True is w0, bit for bit)
-    wi = w0 if terms is not None else w0 * inside
+    wi = w0 if terms is not None or inside is None else w0 * inside
     swi = terms[0] if terms is not None else float(wi.sum())
     wsum = float(w0.sum())
     score = 0.0
     outliers = 1.0
     if swi > 1e-9 and math.isfinite(tx) and math.isfinite(ty):
-        Iw, _ = warped(image, st, tx, ty, theta)
+        i00, fx, fy, _ = _window_cells(image, st, tx, ty, theta)  # warped()'s values
+        Iw = bilinear(image.data[0].reshape(-1).take(neighbours(i00, *image.data.shape[1:])), fx, fy)
         if terms is not None:
             _, mt, wtc, stt = terms
         else:

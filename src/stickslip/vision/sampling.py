@@ -11,14 +11,14 @@ convention: x to the right, y down, the centre of the top-left pixel at (0, 0).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-__all__ = ["Patch", "patch", "sample", "sample_value", "sample_xy", "sample_value_xy", "cells", "neighbours",
-           "bilinear", "median", "gaussian_weights"]
+__all__ = ["Patch", "patch", "with_slopes", "sample", "sample_value", "sample_xy", "sample_value_xy", "cells",
+           "neighbours", "bilinear", "median", "gaussian_weights"]
 
 FloatArray = NDArray[np.float64]
 
@@ -35,20 +35,27 @@ class Patch:
         The crop's top-left pixel in the frame.
     shape : tuple of int
         The frame's ``(height, width)``.
+    slopes : bool
+        Whether ``data[1:]`` hold the derivatives (made without them, NaN: :func:`with_slopes`
+        makes them).
     """
 
     data: FloatArray
     x0: int
     y0: int
     shape: tuple[int, int]
+    slopes: bool = True
 
 
-def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float = 0.0) -> Patch:
+def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float = 0.0, slopes: bool = True
+          ) -> Patch:
     """The patch of ``image`` holding every pixel within ``radius`` (px) of ``(cx, cy)``.
 
     ``smooth`` (px) blurs the crop first (Gaussian sigma), as the template was: what a
     camera under-samples (aliasing) then weighs little in the fit, and bilinear
-    interpolation of the smoothed crop is exact to a hundredth of a pixel.
+    interpolation of the smoothed crop is exact to a hundredth of a pixel. ``slopes``:
+    with its derivatives (else NaN until :func:`with_slopes` makes them; what reads only
+    the values needs none).
     """
     H, W = image.shape
     x0 = max(0, int(math.floor(cx - radius)) - 3)
@@ -65,8 +72,20 @@ def patch(image: FloatArray, cx: float, cy: float, radius: float, smooth: float 
         ndimage.correlate1d(crop, w, 1, crop, "nearest")
     else:
         crop[...] = image[y0:y1, x0:x1]
-    _gradient(crop, data[1], data[2])
-    return Patch(data, x0, y0, (H, W))
+    if slopes:
+        _gradient(crop, data[1], data[2])
+    else:
+        data[1:] = np.nan
+    return Patch(data, x0, y0, (H, W), slopes)
+
+
+def with_slopes(p: Patch) -> Patch:
+    """``p`` with its derivatives: made now, in place in its data, when it was made without them (the values the
+    patch would have had with them, bit for bit)."""
+    if p.slopes:
+        return p
+    _gradient(p.data[0], p.data[1], p.data[2])
+    return replace(p, slopes=True)
 
 
 _CACHED = 256

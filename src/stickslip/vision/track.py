@@ -67,8 +67,8 @@ from .average import TemplateAverage, anchor
 from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
-from .refine import Refinement, Steepest, _turned, refine, steepest
-from .sampling import Patch, _corners, bilinear, median, neighbours, patch, sample_value_xy
+from .refine import Refinement, Steepest, _window_cells, refine, steepest
+from .sampling import Patch, bilinear, median, neighbours, patch, sample_value_xy, with_slopes
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
 from .template import (
     TemplateError,
@@ -451,16 +451,30 @@ def _blur_samples(t: TipTracker, patches: dict[float, Patch], image: FloatArray,
     for _, f, _ in t._spec:
         if f in out:
             continue
-        p = t._patch(patches, image, x, y, f)
+        p = t._patch(patches, image, x, y, f, slopes=False)  # (values only)
         _, ch, cw = p.data.shape
         key = (p.x0, p.y0, ch, cw)
         c = cells.get(key)
         if c is None:
-            i00, fx, fy, inside = _corners(p, _turned(t._select, x, y, theta))
-            c = cells[key] = (neighbours(i00, ch, cw), fx, fy, t._select.w * inside, bool(inside.all()))
+            i00, fx, fy, inside = _window_cells(p, t._select, x, y, theta)  # (None: every one in, w * True is w)
+            c = cells[key] = (neighbours(i00, ch, cw), fx, fy, t._select.w if inside is None else t._select.w * inside,
+                              inside is None or bool(inside.all()))
         at, fx, fy, w, all_in = c
         out[f] = (w, _frame_stats(bilinear(p.data[0].reshape(-1).take(at), fx, fy), w), all_in)
     return out
+
+
+def _frame_patch(t: TipTracker, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float,
+                 slopes: bool = True) -> Patch:
+    """The frame's patch around ``(x, y)`` smoothed like ``t``'s template plus ``f`` px, made once per frame (kept in
+    ``patches``); with its derivatives (the fit's) unless ``slopes`` is false (made then when asked for)."""
+    pt = patches.get(f)
+    if pt is None:
+        s = math.hypot(t.params.template_blur, f)
+        pt = patches[f] = patch(image, x, y, t.template.half * math.sqrt(2.0) + 12.0, s, slopes)
+    elif slopes and not pt.slopes:
+        pt = patches[f] = with_slopes(pt)
+    return pt
 
 
 def _copy_terms(b: FloatArray, w: FloatArray, sw: float) -> tuple[FloatArray, float]:
@@ -687,14 +701,10 @@ class TipTracker:
                 self._bank_sel[k], stats, w, n_t2, n_f2, self._bank_terms[k] if all_in else None))
         return out
 
-    def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float) -> Patch:
-        """The frame's patch around ``(x, y)`` smoothed like the template plus ``f`` px (made once per frame)."""
-        pt = patches.get(f)
-        if pt is None:
-            s = math.hypot(self.params.template_blur, f)
-            pt = patch(image, x, y, self.template.half * math.sqrt(2.0) + 12.0, s)
-            patches[f] = pt
-        return pt
+    def _patch(self, patches: dict[float, Patch], image: FloatArray, x: float, y: float, f: float,
+               slopes: bool = True) -> Patch:
+        """The frame's patch around ``(x, y)`` smoothed like the template plus ``f`` px (:func:`_frame_patch`)."""
+        return _frame_patch(self, patches, image, x, y, f, slopes)
 
     def _try(self, image: FloatArray, x: float, y: float, theta: float, level: int,
              worth: float = -1.0) -> _Candidate:
@@ -791,14 +801,17 @@ class TipTracker:
 
         A candidate that correlates well enough to be taken is checked by the needle's edges
         behind it (:mod:`.edges`); a fix the template's rules take stands only if the edges'
-        rules take it too.
+        rules take it too. A refusal by the template's rules stands without them: its edges
+        (and shaft) are read only for a fit near the last fix refused as lost or out of focus,
+        where :meth:`update` reads them to decide whether to search the whole frame.
         """
         p = self.params
         res = _focus_reread(self, cand, image, reacquire)
         r = cand.ref
         # the edges only for a fit that correlates well enough to be taken (the template's rules refuse the others)
-        if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged:
-            return res, cand
+        if r.score < (p.reacquire_score if reacquire else p.min_score) or not r.converged or isinstance(res, Lost) and (
+                reacquire or res.reason not in ("lost", "out of focus")):
+            return res, cand  # a refusal stands; only update's check of a fit near the last fix reads its edges
         patches: dict[float, Patch] = {self._spec[cand.level][1]: cand.patch}
         ec = self._edge_check(patches, image, cand.ref, cand.level)
         # the shaft further back only where the edges near the tip hold (their refusal stands without it)
