@@ -587,14 +587,15 @@ def _kernel_fft(t: FloatArray, w: FloatArray, shape: tuple[int, int], single: bo
     return _KernelFFT(shape, fw, fwt, sw, float((w * tc * tc).sum()))
 
 
-def region_spectra(region: FloatArray, inside: FloatArray | None = None, single: bool = False
-                   ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+def region_spectra(region: FloatArray, inside: FloatArray | None = None, single: bool = False,
+                   shape: tuple[int, int] | None = None) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """The transforms of ``region`` and of its square that :func:`masked_ncc` needs (made once for several
     templates over the same region): both in one call, each the values it has alone.
 
     ``single``: in single precision (complex64, about half the work), of the region less its mean over
     ``inside`` (its pixels where ``inside`` is 1; all without it) there: the correlation is the same for any
     level added to the pixels it sums over, and the sums of squares about the mean lose less to rounding.
+    ``shape``: the transforms' size (the region padded with zeros below and to the right; its own without).
     """
     if single:
         if inside is None:
@@ -602,7 +603,7 @@ def region_spectra(region: FloatArray, inside: FloatArray | None = None, single:
         else:
             level = float((region * inside).sum() / max(float(inside.sum()), 1.0))
             r = (region - level * inside).astype(np.float32)
-        f = fft.rfft2(np.stack((r, r * r)), workers=1)
+        f = fft.rfft2(np.stack((r, r * r)), shape, workers=1)
     else:
         f = fft.rfft2(np.stack((region, region * region)), workers=1)
     return f[0], f[1]
@@ -653,12 +654,12 @@ def _variance_and_sums(region: FloatArray, k: _KernelFFT, n: int, shape: tuple[i
     """:func:`_variance` of ``region`` and its correlation with the template's centred weights (``sum w (T -
     T_w) I``), the region's two transforms and the three inverse ones stacked: each the values it has made
     alone (pocketfft transforms each line by itself), in fewer calls."""
-    fi, fi2 = region_spectra(region, single=single)
+    fi, fi2 = region_spectra(region, single=single, shape=None if shape == region.shape else shape)
     prod = np.empty((3, *fi.shape), dtype=fi.dtype)
     np.multiply(fi, k.w, out=prod[0])
     np.multiply(fi2, k.w, out=prod[1])
     np.multiply(fi, k.wt, out=prod[2])
-    sums = _inverse(prod, shape, n - 1)
+    sums = _inverse(prod, shape, n - 1)[..., : region.shape[0] - n + 1, : region.shape[1] - n + 1]
     return _spread(sums[0], sums[1], k.sw), sums[2]
 
 
@@ -679,19 +680,21 @@ def masked_ncc(
     with the same ``spectra`` and ``weights`` objects (neither changed in place between calls).
     ``single``: the transforms in single precision (:func:`region_spectra`; ``spectra`` then made so), the
     values within about 1e-6 of double precision's where the window's spread is that of the region, within
-    about ``1e-7 (region's / window's)²`` where it is smaller (a flat window: near 0, not 0).
+    about ``1e-7 (region's / window's)²`` where it is smaller (a flat window: near 0, not 0); with the region's
+    own transforms, at sizes pocketfft is quick at (:func:`scipy.fft.next_fast_len`, the region padded).
     """
     n = template.shape[0]
     rh, rw = region.shape
     shape = (rh, rw)
-    ck = (key, rh, rw, single)
+    tshape = (fft.next_fast_len(rh, True), fft.next_fast_len(rw, True)) if single and spectra is None else shape
+    ck = (key, *tshape, single)
     k = cache.get(ck) if cache is not None else None
     if not isinstance(k, _KernelFFT):
-        k = _kernel_fft(template, weights, shape, single)
+        k = _kernel_fft(template, weights, tshape, single)
         if cache is not None:
             cache[ck] = k
     if spectra is None:  # the region's own: its two transforms and the three inverse ones each in one call
-        var, c = _variance_and_sums(region, k, n, shape, single)
+        var, c = _variance_and_sums(region, k, n, tshape, single)
     else:
         fi, fi2 = spectra
         # the region's weighted variance under the window depends on the weights, not the template: templates with
