@@ -656,3 +656,53 @@ def test_patch_made_without_its_slopes_gets_the_same_ones_later(cx: float, cy: f
     made = with_slopes(bare)
     assert made.slopes and np.array_equal(made.data, full.data) and (made.x0, made.y0) == (full.x0, full.y0)
     assert with_slopes(made) is made
+
+
+def _spread(region: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The weighted spread of ``region`` under the window ``w`` at every offset, summed directly."""
+    n = w.shape[0]
+    out = np.zeros((region.shape[0] - n + 1, region.shape[1] - n + 1))
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            im = region[i : i + n, j : j + n]
+            out[i, j] = math.sqrt((w * (im - (w * im).sum() / w.sum()) ** 2).sum())
+    return out
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), level=st.sampled_from([0.0, 1.0, 1e3, -5e4]),
+       rows=st.integers(12, 40), cols=st.integers(12, 40), cut=st.integers(0, 8))
+def test_single_precision_correlation_is_doubles_to_a_few_millionths(seed: int, level: float, rows: int, cols: int,
+                                                                     cut: int) -> None:
+    """The tracker's correlations in single precision (the region less its level, complex64 transforms, the
+    region's own padded to a quick size) against double precision's of the frame at level 0 (at a level of 5e4
+    double precision's sums of squares lose more than single's about the mean), alone, with the region's spectra
+    given (the whole-frame search's copies) and over the part inside the frame: within 2e-6 where the window's
+    spread is at least a tenth of the largest, within 1e-6 (largest / spread)² elsewhere (a flat window: near 0)."""
+    from stickslip.vision.template import inside_ncc
+
+    rng = np.random.default_rng(seed)
+    n = 9
+    region = level + rng.normal(size=(rows, cols)) * rng.uniform(0.01, 10.0)
+    region[: rows // 3, : cols // 3] = level  # flat: no correlation there
+    t, w = rng.normal(size=(n, n)), rng.uniform(0.0, 1.0, (n, n))
+    spread = _spread(region - level, w)
+    bound = np.minimum(1e-6 * (spread.max() / np.maximum(spread, 1e-30)) ** 2, 2.0)
+    bound[spread >= 0.1 * spread.max()] = 2e-6
+    double = masked_ncc(region - level, t, w)
+    single = masked_ncc(region, t, w, single=True)
+    assert single.dtype == np.float64 and single.shape == double.shape
+    assert np.all(np.abs(single - double) <= bound) and np.abs(single).max() <= 1.0
+    cache: dict[object, object] = {}
+    given_ = masked_ncc(region, t, w, cache, ("coarse", 0), region_spectra(region, single=True), single=True)
+    assert np.all(np.abs(given_ - double) <= bound)  # the region's spectra at its own size
+    inside = np.ones_like(region)
+    inside[:, :cut] = 0.0  # the frame's left columns lie outside
+    d, dc = inside_ncc((region - level) * inside, inside, t, w, least=0.3)
+    s, sc = inside_ncc(region * inside, inside, t, w, least=0.3, single=True)
+    assert np.array_equal(sc, dc)  # the share inside: double precision either way
+    assert np.all(np.abs(s - d)[:, cut:] <= bound[:, cut:])  # the windows all inside; the others over fewer pixels
+    assert np.abs(s).max() <= 1.0 and np.all(s[dc < 0.3] == 0.0) and np.all(d[dc < 0.3] == 0.0)  # too little in
+    spectra = region_spectra(region * inside, inside, single=True)
+    s2, _ = inside_ncc(region * inside, inside, t, w, {}, ("coarse", 0), spectra, 0.3, single=True)
+    assert np.array_equal(s2, s)

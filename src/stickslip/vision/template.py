@@ -576,19 +576,36 @@ class _KernelFFT:
     st2: float
 
 
-def _kernel_fft(t: FloatArray, w: FloatArray, shape: tuple[int, int]) -> _KernelFFT:
+def _kernel_fft(t: FloatArray, w: FloatArray, shape: tuple[int, int], single: bool = False) -> _KernelFFT:
     sw = float(w.sum())
     tc = t - float((w * t).sum() / sw)
     wt = w * tc
     fw = fft.rfft2(w[::-1, ::-1], shape, workers=1)
     fwt = fft.rfft2(wt[::-1, ::-1], shape, workers=1)
+    if single:  # made in double precision, kept in single
+        fw, fwt = fw.astype(np.complex64), fwt.astype(np.complex64)
     return _KernelFFT(shape, fw, fwt, sw, float((w * tc * tc).sum()))
 
 
-def region_spectra(region: FloatArray) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+def region_spectra(region: FloatArray, inside: FloatArray | None = None, single: bool = False,
+                   shape: tuple[int, int] | None = None) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """The transforms of ``region`` and of its square that :func:`masked_ncc` needs (made once for several
-    templates over the same region): both in one call, each the values it has alone."""
-    f = fft.rfft2(np.stack((region, region * region)), workers=1)
+    templates over the same region): both in one call, each the values it has alone.
+
+    ``single``: in single precision (complex64, about half the work), of the region less its mean over
+    ``inside`` (its pixels where ``inside`` is 1; all without it) there: the correlation is the same for any
+    level added to the pixels it sums over, and the sums of squares about the mean lose less to rounding.
+    ``shape``: the transforms' size (the region padded with zeros below and to the right; its own without).
+    """
+    if single:
+        if inside is None:
+            r = (region - float(region.mean())).astype(np.float32)
+        else:
+            level = float((region * inside).sum() / max(float(inside.sum()), 1.0))
+            r = (region - level * inside).astype(np.float32)
+        f = fft.rfft2(np.stack((r, r * r)), shape, workers=1)
+    else:
+        f = fft.rfft2(np.stack((region, region * region)), workers=1)
     return f[0], f[1]
 
 
@@ -632,23 +649,24 @@ def _spread(a: FloatArray, b: FloatArray, sw: float) -> FloatArray:
     return var
 
 
-def _variance_and_sums(region: FloatArray, k: _KernelFFT, n: int, shape: tuple[int, int]
+def _variance_and_sums(region: FloatArray, k: _KernelFFT, n: int, shape: tuple[int, int], single: bool = False
                        ) -> tuple[FloatArray, FloatArray]:
     """:func:`_variance` of ``region`` and its correlation with the template's centred weights (``sum w (T -
     T_w) I``), the region's two transforms and the three inverse ones stacked: each the values it has made
     alone (pocketfft transforms each line by itself), in fewer calls."""
-    fi, fi2 = region_spectra(region)
+    fi, fi2 = region_spectra(region, single=single, shape=None if shape == region.shape else shape)
     prod = np.empty((3, *fi.shape), dtype=fi.dtype)
     np.multiply(fi, k.w, out=prod[0])
     np.multiply(fi2, k.w, out=prod[1])
     np.multiply(fi, k.wt, out=prod[2])
-    sums = _inverse(prod, shape, n - 1)
+    sums = _inverse(prod, shape, n - 1)[..., : region.shape[0] - n + 1, : region.shape[1] - n + 1]
     return _spread(sums[0], sums[1], k.sw), sums[2]
 
 
 def masked_ncc(
     region: FloatArray, template: FloatArray, weights: FloatArray, cache: dict[object, object] | None = None,
     key: object = None, spectra: tuple[NDArray[np.complex128], NDArray[np.complex128]] | None = None,
+    single: bool = False,
 ) -> FloatArray:
     """Weighted normalised cross-correlation of ``template`` at every offset inside ``region``.
 
@@ -660,18 +678,23 @@ def masked_ncc(
     are the region's own (:func:`region_spectra`) when the caller has them. With both, the
     region's variance under the weights is kept in ``cache`` and used again by the next call
     with the same ``spectra`` and ``weights`` objects (neither changed in place between calls).
+    ``single``: the transforms in single precision (:func:`region_spectra`; ``spectra`` then made so), the
+    values within about 1e-6 of double precision's where the window's spread is that of the region, within
+    about ``1e-7 (region's / window's)²`` where it is smaller (a flat window: near 0, not 0); with the region's
+    own transforms, at sizes pocketfft is quick at (:func:`scipy.fft.next_fast_len`, the region padded).
     """
     n = template.shape[0]
     rh, rw = region.shape
     shape = (rh, rw)
-    ck = (key, rh, rw)
+    tshape = (fft.next_fast_len(rh, True), fft.next_fast_len(rw, True)) if single and spectra is None else shape
+    ck = (key, *tshape, single)
     k = cache.get(ck) if cache is not None else None
     if not isinstance(k, _KernelFFT):
-        k = _kernel_fft(template, weights, shape)
+        k = _kernel_fft(template, weights, tshape, single)
         if cache is not None:
             cache[ck] = k
     if spectra is None:  # the region's own: its two transforms and the three inverse ones each in one call
-        var, c = _variance_and_sums(region, k, n, shape)
+        var, c = _variance_and_sums(region, k, n, tshape, single)
     else:
         fi, fi2 = spectra
         # the region's weighted variance under the window depends on the weights, not the template: templates with
@@ -703,13 +726,18 @@ class _InsideKernels:
     wt: NDArray[np.complex128]
     wt2: NDArray[np.complex128]
     sw: float
+    w_region: NDArray[np.complex128]  # ``w`` and ``wt`` as the region's spectra are multiplied by (single or double)
+    wt_region: NDArray[np.complex128]
 
 
-def _inside_kernels(t: FloatArray, w: FloatArray, shape: tuple[int, int]) -> _InsideKernels:
+def _inside_kernels(t: FloatArray, w: FloatArray, shape: tuple[int, int], single: bool = False) -> _InsideKernels:
     sw = float(w.sum())
     tc = t - float((w * t).sum() / sw)
     spectra = [fft.rfft2(a[::-1, ::-1], shape, workers=1) for a in (w, w * tc, w * tc * tc)]
-    return _InsideKernels(spectra[0], spectra[1], spectra[2], sw)
+    fw, fwt = spectra[0], spectra[1]
+    if single:
+        fw, fwt = fw.astype(np.complex64), fwt.astype(np.complex64)
+    return _InsideKernels(spectra[0], spectra[1], spectra[2], sw, fw, fwt)
 
 
 _SHARED_INSIDE = ("shared inside sums",)
@@ -720,6 +748,7 @@ def inside_ncc(
     region: FloatArray, inside: FloatArray, template: FloatArray, weights: FloatArray,
     cache: dict[object, object] | None = None, key: object = None,
     spectra: tuple[NDArray[np.complex128], NDArray[np.complex128]] | None = None, least: float = 0.0,
+    single: bool = False,
 ) -> tuple[FloatArray, FloatArray]:
     """:func:`masked_ncc` over the pixels of ``region`` that lie in the frame (``inside`` 1, else 0), and the
     share of the template's weight there at each offset.
@@ -733,7 +762,8 @@ def inside_ncc(
     the same for every frame of a size, kept in ``cache`` with the ``inside`` they were
     made for (``inside`` not changed in place between calls). Offsets where less than
     ``least`` of the weight lies inside get 0. All inside, the values are
-    :func:`masked_ncc`'s to rounding.
+    :func:`masked_ncc`'s to rounding. ``single`` as :func:`masked_ncc`'s (the region's level taken
+    over ``inside``; the template's sums over the part inside stay in double precision).
 
     Returns
     -------
@@ -744,10 +774,10 @@ def inside_ncc(
     n = template.shape[0]
     rh, rw = region.shape
     shape = (rh, rw)
-    ck = (key, rh, rw, "inside")
+    ck = (key, rh, rw, "inside", single)
     k = cache.get(ck) if cache is not None else None
     if not isinstance(k, _InsideKernels):
-        k = _inside_kernels(template, weights, shape)
+        k = _inside_kernels(template, weights, shape, single)
         if cache is not None:
             cache[ck] = k
     # the template's sums over the part inside: kept with the inside they were made for (one per key)
@@ -764,19 +794,21 @@ def inside_ncc(
         coverage = np.clip(m0 / k.sw, 0.0, 1.0)
         if cache is not None:
             cache[tk] = (inside, inside.copy(), inv_m0, ratio, vt, coverage)
-    fi, fi2 = region_spectra(region) if spectra is None else spectra
+    fi, fi2 = region_spectra(region, inside, single) if spectra is None else spectra
     shared = cache.get(_SHARED_INSIDE) if cache is not None and spectra is not None else None
     if (isinstance(shared, tuple) and shared[0] is spectra and shared[1] is weights and shared[5] is inside
             and shared[2] == (n, rh, rw)):
         a, var = shared[3], shared[4]
     else:
-        a = _inverse(fi * k.w, shape, n - 1)  # the sum of w I over the part inside (I is 0 outside)
-        var = _inverse(fi2 * k.w, shape, n - 1)
+        # the sum of w I over the part inside (I is 0 outside); in double precision from here (the template's sums'
+        # reciprocals are large where little of it lies inside)
+        a = _inverse(fi * k.w_region, shape, n - 1).astype(np.float64, copy=False)
+        var = _inverse(fi2 * k.w_region, shape, n - 1).astype(np.float64, copy=False)
         var -= a * a * inv_m0
         np.maximum(var, 0.0, out=var)
         if cache is not None and spectra is not None:
             cache[_SHARED_INSIDE] = (spectra, weights, (n, rh, rw), a, var, inside)
-    cov = _inverse(fi * k.wt, shape, n - 1)
+    cov = _inverse(fi * k.wt_region, shape, n - 1).astype(np.float64, copy=False)
     cov -= a * ratio
     denom = var * vt
     np.sqrt(denom, out=denom)

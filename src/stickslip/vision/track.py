@@ -284,11 +284,11 @@ def _look(image: FloatArray, t: TipTemplate, p: TrackerParams, cache: dict[objec
     H, W = image.shape
     n = region.shape[0]
     if rx0 >= 0 and ry0 >= 0 and rx0 + n <= W and ry0 + n <= H:
-        return masked_ncc(region, t.bank[k], t.level_weights[k], cache, ("local", k)), rx0, ry0
+        return masked_ncc(region, t.bank[k], t.level_weights[k], cache, ("local", k), single=True), rx0, ry0
     yy, xx = np.arange(ry0, ry0 + n), np.arange(rx0, rx0 + n)
     inside = (((yy >= 0) & (yy < H))[:, None] & ((xx >= 0) & (xx < W))[None, :]).astype(float)
     ncc, _ = inside_ncc(region * inside, inside, t.bank[k], t.level_weights[k], cache, ("look", k),
-                        least=p.min_coverage)
+                        least=p.min_coverage, single=True)
     return ncc, rx0, ry0
 
 
@@ -753,7 +753,7 @@ class TipTracker:
         region, x0, y0 = _region(image, self.template.half, self._last[0], self._last[1], p.search_radius)
         t = self.template
         k = self._spec[self._level][0]
-        ncc = masked_ncc(region, t.bank[k], t.level_weights[k], self._fft, ("local", k))
+        ncc = masked_ncc(region, t.bank[k], t.level_weights[k], self._fft, ("local", k), single=True)
         i, j = np.unravel_index(int(np.argmax(ncc)), ncc.shape)
         if ncc[i, j] < 0.5 * p.min_score:
             return None
@@ -768,12 +768,12 @@ class TipTracker:
         f = p.coarse_factor
         small, inside, pad = _padded(image, f, t.half, self._fft)
         peaks: list[_Peaks] = []
-        spectra = region_spectra(small)  # the same for every copy
+        spectra = region_spectra(small, inside, single=True)  # the same for every copy
         # the last fix's blur copy and its neighbours, and the sharp one (the tip comes back as it left, or as
         # it was learnt)
         for k in sorted({0, *(min(max(self._spec[self._level][0] + d, 0), self._top) for d in (-1, 0, 1))}):
             peaks.append(_ranked(*inside_ncc(small, inside, self._coarse[k], self._coarse_w, self._fft, ("coarse", k),
-                                             spectra, p.min_coverage), k))
+                                             spectra, p.min_coverage, single=True), k))
         out: list[_Candidate | None] = []
         seen: list[tuple[float, float]] = []
         for _s, i, j, k in _by_rank(peaks):
