@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from cli_flags import check_flags  # noqa: E402
 from numpy.typing import NDArray
 from scipy import ndimage
 
@@ -286,6 +287,7 @@ AVERAGE = (0, False)
 
 def main(argv: list[str]) -> None:
     global BY_SEQUENCE, PARAMS, AVERAGE
+    check_flags(argv, ["--by-sequence", "--params", "--average", "--only"], __doc__)
     BY_SEQUENCE = "--by-sequence" in argv
     argv = [a for a in argv if a != "--by-sequence"]
     if "--params" in argv:  # the tracker's parameters changed: name=value,name=value

@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from cli_flags import check_flags  # noqa: E402
 from numpy.typing import NDArray
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -347,6 +348,7 @@ def sequences(seed: int, n_frames: int) -> None:
 
 
 def main(argv: list[str]) -> None:
+    check_flags(argv, ["--sequences", "--only"], __doc__)
     if "--sequences" in argv:
         k = argv.index("--sequences")
         sequences(int(argv[k + 1]), int(argv[k + 2]) if len(argv) > k + 2 else 400)

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from cli_flags import check_flags  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "benchmarks"), str(ROOT / "tests" / "support"), str(ROOT / "src")]
@@ -150,6 +151,7 @@ def _sigmas(recs: list[Any]) -> dict[int, float]:
 
 def main(argv: list[str]) -> None:
     global PARAMS
+    check_flags(argv, ["--params"], __doc__)
     if "--params" in argv:
         k = argv.index("--params")
         PARAMS = replace(PARAMS, **{n: type(getattr(PARAMS, n))(v) for n, v in

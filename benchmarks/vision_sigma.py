@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from cli_flags import check_flags  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests" / "support"), str(ROOT / "src")]
@@ -106,6 +107,7 @@ def table(rows: list[tuple[float, float, float]]) -> None:
 
 
 def main(argv: list[str]) -> None:
+    check_flags(argv, ["--scenes", "--lift"], __doc__)
     n = next((int(a) for a in argv if a.isdigit()), 300 if "--scenes" in argv else 400)
     params = TrackerParams()
     if "--lift" in argv:
