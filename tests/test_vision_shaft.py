@@ -73,3 +73,31 @@ def test_the_taper_says_how_far_along_the_axis_a_candidate_lies_from_the_tip(loo
     p = TrackerParams()
     assert abs(behind.along) > p.along_limit + p.along_sigmas * behind.along_sd
     assert abs(at.along) < p.along_limit + p.along_sigmas * at.along_sd
+
+
+def test_the_taper_reads_a_frame_sharper_than_the_first_at_a_sharpen_copy_in_full():
+    """A frame 3 px sharper than the first (blur 0.5 px against 3 px), fitted at the sharpest copy (the frame
+    smoothed by hypot(1, 3) px across the shaft). The taper's basis is smoothed as the frame is: 5 px behind the
+    tip reads 5.5 to 6.8 px (with the basis at the first frame's 1 px it read 3.6 +- 0.2, under the limit of
+    3.6), 5 px ahead -5.3 to -6.8 (it read -3.2); at the tip within 1 px (+0.35 with that basis, -0.69 now)."""
+    scene = SimScene(SimCamSettings(look="optical", width=160, height=160, photons=200.0, seed=5,
+                                    tip_radius_m=0.25e-6 * 10.0, pixel_size_m=0.5e-6))
+    first = scene.render(np.array(TIP), SHAFT, 3.0)
+    p = TrackerParams()
+    t = TipTemplate.learn(first, TIP, p)
+    s0 = p.template_blur
+    smooth = ([(math.hypot(s0, b), s0) for b in p.blur_bank]
+              + [(s0, math.hypot(s0, f)) for f in p.sharpen_bank])  # as the tracker's copies are
+    sp = learn_shaft(first, TIP, t.shaft, t.ground[0], t.ground[1], p.contrast, smooth)
+    frame = scene.render(np.array(TIP), SHAFT, 0.5)
+    copy = len(p.blur_bank) + p.sharpen_bank.index(3.0)
+    u = SHAFT / np.hypot(*SHAFT)
+    at = check_shaft(sp, copy, frame, *TIP, 0.0)
+    behind = check_shaft(sp, copy, frame, TIP[0] + 5.0 * u[0], TIP[1] + 5.0 * u[1], 0.0)
+    ahead = check_shaft(sp, copy, frame, TIP[0] - 5.0 * u[0], TIP[1] - 5.0 * u[1], 0.0)
+    assert at is not None and abs(at.along) <= 1.0, at
+    assert behind is not None and 5.5 <= behind.along <= 6.8, behind
+    assert ahead is not None and -6.8 <= ahead.along <= -5.3, ahead
+    assert abs(behind.along) > p.along_limit + p.along_sigmas * behind.along_sd
+    assert abs(ahead.along) > p.along_limit + p.along_sigmas * ahead.along_sd
+    assert abs(at.along) < p.along_limit + p.along_sigmas * at.along_sd

@@ -22,7 +22,10 @@ the axis is the first frame's at ``s - d``. At each station the frame's profile 
 its second derivative across the shaft (a blur's change; the heat equation), ``a e + b
 de/ds + c e''``; ``b / a`` is the displacement (minus ``d``), and the stations' median is
 compared with :attr:`~.template.TrackerParams.along_limit` plus ``along_sigmas`` standard
-deviations (:func:`~.track._edge_refusal`). It sees
+deviations (:func:`~.track._edge_refusal`). The basis is the first frame's profiles smoothed
+by the larger of the copy's two smoothings (a sharpen copy smooths the frame more than the
+first frame: a basis less smooth than the frame reads the widening at about half its gain).
+It sees
 a fix the shaft's position cannot: one moved along the needle's axis (a grain as dark as
 the needle prolonging it, its end taken for the tip).
 
@@ -134,9 +137,10 @@ class ShaftProfiles:
     valid_f, invalid : ndarray, shape (m, 1, n)
         :attr:`valid` as 1 and 0, and its negation, shaped as the gathered samples.
     basis : list of ndarray, shape (m, 3, n)
-        For each blur copy, what a station's profile is fitted with for the taper: :attr:`e`,
-        its derivative along the shaft (per px behind the tip) and its second derivative
-        across the shaft (px⁻²), level and slope taken out.
+        For each blur copy, what a station's profile is fitted with for the taper: the first
+        frame's profiles smoothed by the larger of the copy's two smoothings, their derivative
+        along the shaft (per px behind the tip) and their second derivative across the shaft
+        (px⁻²), level and slope taken out.
     gram_inv : list of ndarray, shape (m, 3, 3)
         The inverses of their Gram matrices (NaN where singular).
     """
@@ -352,11 +356,14 @@ def _assemble(shaft: tuple[float, float], ts: FloatArray, offs: list[FloatArray]
         return np.asarray(e - (e * tc).sum(axis=1, keepdims=True) * tc)
 
     es, ves, bases, grams = [], [], [], []
-    for tsig, _ in smooth:
+    for tsig, fsig in smooth:
         e = flat(np.stack(raws[0]), tsig)
         es.append(e)
         ves.append((e * e).sum(axis=1))
-        de = (flat(np.stack(raws[2]), tsig) - flat(np.stack(raws[1]), tsig)) / (2.0 * ALONG_STEP)
+        # the taper's basis smoothed as much as the smoother of the two profiles compared (a sharpen copy's frame)
+        bsig = max(tsig, fsig)
+        e = e if bsig == tsig else flat(np.stack(raws[0]), bsig)
+        de = (flat(np.stack(raws[2]), bsig) - flat(np.stack(raws[1]), bsig)) / (2.0 * ALONG_STEP)
         ett = np.where(valid, np.gradient(np.gradient(e, STEP, axis=1), STEP, axis=1), 0.0)
         ett = ett - np.where(valid, ett.sum(axis=1, keepdims=True) / lengths[:, None], 0.0)
         basis = np.stack([e, de, ett - (ett * tc).sum(axis=1, keepdims=True) * tc], axis=1)
