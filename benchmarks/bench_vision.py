@@ -119,7 +119,6 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"))
 
-from cli_flags import check_flags  # noqa: E402
 from occlusion_scenes import scene_benchmark  # noqa: E402
 from vision_own import (  # noqa: E402
     OwnFrame,
@@ -1015,6 +1014,8 @@ _OWN_MODES: dict[str, tuple[str, int, dict[str, bool]]] = {
 
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
+    from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
+
     check_flags(args, ["--params", "--seed", "--scenes", "--plain", "--vouch-signals", "--error-split",
                        "--border-signals", "--refusals", "--tracking-only", *_OWN_MODES], __doc__)
     if "--params" in args:  # the tracker's constants changed, e.g. --params mismatch_floor=0.03

@@ -44,7 +44,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from cli_flags import check_flags  # noqa: E402
 from numpy.typing import NDArray
 from scipy import ndimage
 
@@ -287,6 +286,8 @@ AVERAGE = (0, False)
 
 def main(argv: list[str]) -> None:
     global BY_SEQUENCE, PARAMS, AVERAGE
+    from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
+
     check_flags(argv, ["--by-sequence", "--params", "--average", "--only"], __doc__)
     BY_SEQUENCE = "--by-sequence" in argv
     argv = [a for a in argv if a != "--by-sequence"]

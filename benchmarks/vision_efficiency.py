@@ -52,7 +52,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from cli_flags import check_flags  # noqa: E402
 from numpy.typing import NDArray
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -348,6 +347,8 @@ def sequences(seed: int, n_frames: int) -> None:
 
 
 def main(argv: list[str]) -> None:
+    from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
+
     check_flags(argv, ["--sequences", "--only"], __doc__)
     if "--sequences" in argv:
         k = argv.index("--sequences")

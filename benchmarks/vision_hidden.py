@@ -28,7 +28,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "support"
 
 import numpy as np  # noqa: E402
 from bench_vision import _state, _taken_by, _watch  # noqa: E402
-from cli_flags import check_flags  # noqa: E402
 from occlusion_scenes import scene_benchmark  # noqa: E402
 from vision_own import (  # noqa: E402
     droplet_benchmark,
@@ -154,6 +153,8 @@ def _textured(scale: float) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
+    from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
+
     check_flags(args, ["--average", "--texture"], __doc__)
     n_average = 8
     if "--average" in args:

@@ -28,7 +28,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from cli_flags import check_flags  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests" / "support"), str(ROOT / "src")]
@@ -107,6 +106,8 @@ def table(rows: list[tuple[float, float, float]]) -> None:
 
 
 def main(argv: list[str]) -> None:
+    from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
+
     check_flags(argv, ["--scenes", "--lift"], __doc__)
     n = next((int(a) for a in argv if a.isdigit()), 300 if "--scenes" in argv else 400)
     params = TrackerParams()

@@ -40,7 +40,6 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-from cli_flags import check_flags  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "tests" / "support"), str(ROOT / "src")]
@@ -238,6 +237,8 @@ def _q(v: list[float]) -> str:
 
 
 def main(argv: list[str]) -> None:
+    from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
+
     check_flags(argv, ["--save", "--only", "--no-record"], __doc__)
     n = next((int(a) for a in argv if a.isdigit()), 400)
     save = argv[argv.index("--save") + 1] if "--save" in argv else None
