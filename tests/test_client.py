@@ -108,6 +108,7 @@ def test_a_day_over_the_api_stops_and_resumes(rig: Rig, room: ControlRoom, tmp_p
     assert rig.day()["day"]["result"] is None
 
 
+@pytest.mark.slow  # a documentation example run whole (make test runs it; make test-fast leaves it)
 def test_the_example_of_docs_serve_runs(url: str, room: ControlRoom) -> None:
     import re
 
