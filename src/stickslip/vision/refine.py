@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from .sampling import Patch, _corners, _limits, bilinear, median, neighbours, sample_value_xy
+from .sampling import Patch, _corners, _limits, bilinear, flat_cells, median, neighbours, sample_value_xy
 
 __all__ = ["Refinement", "refine", "Steepest", "steepest", "warped"]
 
@@ -238,12 +238,7 @@ def _window_cells(p: Patch, st: Steepest, x: float, y: float, theta: float
     xy += st.r_perp * math.sin(theta)
     xy += np.array(((x,), (y,)))
     xy -= np.array(((float(p.x0),), (float(p.y0),)))
-    ixy = xy.astype(np.intp)
-    xy -= ixy  # the fractions
-    i00 = ixy[1]
-    i00 *= cw
-    i00 += ixy[0]
-    return i00, xy[0], xy[1], None
+    return (*flat_cells(xy, cw), None)
 
 
 def _warped3(p: Patch, st: Steepest, x: float, y: float, theta: float) -> tuple[FloatArray, NDArray[np.bool_] | None]:

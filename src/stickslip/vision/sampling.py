@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 __all__ = ["Patch", "patch", "with_slopes", "sample", "sample_value", "sample_xy", "sample_value_xy", "cells",
-           "neighbours", "bilinear", "median", "gaussian_weights"]
+           "flat_cells", "neighbours", "bilinear", "median", "gaussian_weights"]
 
 FloatArray = NDArray[np.float64]
 
@@ -160,12 +160,18 @@ def cells(xy: FloatArray, ch: int, cw: int) -> tuple[NDArray[np.intp], FloatArra
         ok &= xy <= last
         inside = ok[0] & ok[1]
         np.minimum(np.maximum(xy, 0.0, out=xy), clip, out=xy)  # numpy.clip's values, in place
+    return (*flat_cells(xy, cw), inside)
+
+
+def flat_cells(xy: FloatArray, cw: int) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
+    """For points ``xy`` (shape (2, m), x then y, px; overwritten by their fractions) within an array ``cw`` px
+    wide, none negative: the flat index of the pixel up and left of each and its fractions to the right and down."""
     ixy = xy.astype(np.intp)
     xy -= ixy  # the fractions
     i00 = ixy[1]
     i00 *= cw
     i00 += ixy[0]
-    return i00, xy[0], xy[1], inside
+    return i00, xy[0], xy[1]
 
 
 _LIMITS: dict[tuple[int, int], tuple[FloatArray, FloatArray, NDArray[np.intp], NDArray[np.intp]]] = {}
