@@ -24,7 +24,7 @@ from ..tuningfile import Tuning
 from .chain import Fire
 from .clocked import ClockedCheck, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
-from .inside import Held, InsideParams, held_out_of_step, onset_in_phase
+from .inside import Held, InsideParams, held_out_of_step, held_refired, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
 from .resume import AfterPause
 from .sync import SyncCheck, SyncParams, step_clock_verdict
@@ -172,6 +172,18 @@ class WindowChecks:
         """``ev``, confirmed on ``fire`` (its window ended at sample ``end``; onset doubts asked with ``hold_in_step``),
         held where its lines out of step alone doubt it (:func:`.inside.held_out_of_step`). None: emitted now."""
         return held_out_of_step(fire, ev, None if ev.onset_uncertain else self.out_of_step(), end, self.clocked)
+
+    def held_refired(self, fire: Fire, refire: int, t0_s: float) -> Held | None:
+        """``fire``'s window, cut short where the fast path fired again at frame ``refire`` (``t0_s``: the stream's
+        start, s), held as a stop whose lines departed from the stepping's modelled in every span, the fire that cut it
+        dropped and the fast path kept latched until the hold is judged (:func:`.inside.held_refired`). None: not so,
+        no clocked check or no inside search (``ConfirmParams.inside``), or its samples not all kept."""
+        cut = Fire(fire.ev, fire.frame, refire - fire.frame)
+        c, start, end = self.clocked, cut.frame * self._H + self._F, cut.end(self._H, self._F)
+        x = self.kept.get(start, end)
+        if c is None or self.inside is None or x.size != end - start:
+            return None
+        return held_refired(x, cut, (end, t0_s, c.sample_rate), c, self.pause)
 
     def out_of_step(self) -> str | None:
         """Why the fire last judged may be sound added on the stepping's lines, not a stop: the stepping's lines

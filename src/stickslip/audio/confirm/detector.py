@@ -319,9 +319,8 @@ class ConfirmedStopDetector:
         Where ``at`` is inside the piece just fed (an idle fast path), the fast path was idle there unless it had
         fired since: held, not stopped, ready."""
         held = self._chain.pending is not None
-        if at != self._fed:
-            return self._late_event(late.step(at, held, False, True), at)
-        return self._late_event(late.step(at, held, self.inner.latched and not held, self.inner.ready), at)
+        latched, ready = (False, True) if at != self._fed else (self.inner.latched and not held, self.inner.ready)
+        return self._late_event(late.step(at, held, latched, ready), at)
 
     def _late_event(self, got: tuple[float, float, bool] | None, when: int) -> list[StopEvent]:
         """The late path's stop as an event, emitted at sample count ``when`` (None: no event)."""
@@ -368,6 +367,9 @@ class ConfirmedStopDetector:
         prev = self._chain.refired(fire)  # the fast path released and fired again inside the window: no persistence
         if prev is not None:
             self.log.rejected.append(prev.ev)
+            if self._held is None and (cut := self.checks.held_refired(prev, fire, self._t0)) is not None:
+                self._held = cut  # its window held as a stop (model_refired): the hold decides, this fire dropped
+                return []
         ev = self._chain.flagged(ev, fire)
         recent = self._chain.recent(fire)
         self.checks.hear_before(fire, recent, self._frames)  # the stepping before it is each check's reference
@@ -417,10 +419,9 @@ class ConfirmedStopDetector:
         ev, z = h.judged(x, self._t0, self.checks.clocked)
         self.inner.hold(False)
         self.log.note_held(h, ev, z, self._sr)
-        if ev is None:  # its lines changed back: sound over the stepping, the window stays vetoed
-            return self._rejected(h.fire)
-        self._chain.confirmed()
-        return [ev]
+        if ev is not None:
+            self._chain.confirmed()
+        return [ev] if ev is not None else self._rejected(h.fire)  # (None: its lines changed back, sound over them)
 
     def _inside(self, fire: Fire) -> None:
         """A stop that began inside ``fire``'s rejected window (:func:`.inside.held_inside`), held until emitted."""
