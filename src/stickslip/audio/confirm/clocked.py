@@ -290,7 +290,7 @@ class ClockedParams:
         True,
         "",
         "a window cut short by a refire is read as model_rejected reads a rejected one (stops under music 5.9+, past "
-        "it 6.1+; the hour's joint 3: 7 of 134 departed, 3.1-7.2, all back past it, 0.3-1.7)",
+        "it 6.1+; the hour's joint 3: 7 of 109 departed, 3.1-7.2, all back past it, 0.3-1.7)",
     )
     model_unjudged: bool = param(
         True,
