@@ -229,6 +229,9 @@ class Held:
     doubt: str | None = None
     #: why the stop found is flagged whatever is read past the window (``model_rejected``; None: not so)
     flagged: str | None = None
+    #: the window was cut short by a fire that stays pending beside the hold (``model_refired``): dropped if the hold
+    #: emits a stop, judged as it comes if not
+    beside: bool = False
 
     def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
         """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
@@ -321,14 +324,16 @@ def held_refired(
     """``fire``'s window ``w``, cut short where the fast path fired again inside it (``at``: the absolute sample after
     it, the stream's start time, s, and the sample rate, Hz), held as :func:`_rejected_departed` holds a window the
     levels rejected (``model_refired``): where its lines departed from the stepping's modelled in every span (one
-    span at least) and still depart past it, a stop, flagged. Persistence never judges such a window, and under music
-    that fires again every half second or so a stop can lie in nothing but such windows (the tenth generator's arm 3,
-    950 Hz, music +3 dB: two windows across the stop, 11.3 and 13.5 spreads off). None: not so, or not read (no model
-    ready, the rate at the tuning's, under one span)."""
+    span at least) and still depart past it, a stop, flagged. The fire that cut it stays pending beside the hold
+    (:attr:`Held.beside`): a hold that does not emit changes nothing else. Persistence never judges such a window,
+    and under music that fires again every half second or so a stop can lie in nothing but such windows (the tenth
+    generator's arm 3, 950 Hz, music +3 dB: two windows across the stop, 11.3 and 13.5 spreads off). None: not so, or
+    not read (no model ready, the rate at the tuning's, under one span)."""
     cp = clocked.p
     if not (cp.model_refired and cp.model_hold_s > 0.0):
         return None
-    return _rejected_departed(w, fire, at, clocked, pause, "cut short by a fire inside it")
+    got = _rejected_departed(w, fire, at, clocked, pause, "cut short by a fire inside it")
+    return None if got is None else replace(got, beside=True)
 
 
 def onset_in_phase(
