@@ -163,6 +163,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "hold-off": ClockedParams(model_hold_s=0.0),
     "in-step-hold-off": ClockedParams(model_in_step_hold_z=0.0),
     "rejected-off": ClockedParams(model_rejected=False),
+    "refired-off": ClockedParams(model_refired=False),
     "off": None,
 }
 

@@ -19,7 +19,8 @@ generator at 2 % jitter), ``--switch model_in_step`` the fire the model let thro
 (flagged; off: 0), ``--switch model_edge_s`` a stop found inside a vetoed window whose onset fit split at the
 fitted stretch's end (dropped; off: 0), ``--switch model_in_step_hold_z`` a fire flagged out of step whose lines
 stay departed past its window counted (off: 0), ``--switch model_rejected`` a fire the levels rejected whose window
-departs from the model in every span and past it, emitted flagged.
+departs from the model in every span and past it, emitted flagged, ``--switch model_refired`` the same reading of a
+window cut short by a fire inside it.
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -80,6 +81,7 @@ SWITCHES = (
     "model_hold_s",
     "model_in_step_hold_z",
     "model_rejected",
+    "model_refired",
 )
 
 

@@ -24,7 +24,7 @@ from ..tuningfile import Tuning
 from .chain import Fire
 from .clocked import ClockedCheck, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
-from .inside import Held, InsideParams, held_out_of_step, onset_in_phase
+from .inside import Held, InsideParams, held_inside, held_out_of_step, held_refired, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
 from .resume import AfterPause
 from .sync import SyncCheck, SyncParams, step_clock_verdict
@@ -172,6 +172,33 @@ class WindowChecks:
         """``ev``, confirmed on ``fire`` (its window ended at sample ``end``; onset doubts asked with ``hold_in_step``),
         held where its lines out of step alone doubt it (:func:`.inside.held_out_of_step`). None: emitted now."""
         return held_out_of_step(fire, ev, None if ev.onset_uncertain else self.out_of_step(), end, self.clocked)
+
+    def held_inside(self, fire: Fire, fed: int, t0_s: float, held: Held | None) -> Held | None:
+        """A stop that began inside ``fire``'s rejected window (:func:`.inside.held_inside`; ``fed``: the samples
+        heard, ``t0_s``: the stream's start, s), held until emitted; None: none; ``held`` where not read (not all kept:
+        the stream began inside the lead), or no clocked check or no inside search."""
+        c, p = self.clocked, self.inside
+        if c is None or p is None:
+            return held
+        start = fire.frame * self._H + self._F  # the window's first sample
+        end = min((fire.frame + fire.window) * self._H + self._F, fed)
+        lead = int(round(p.piece_s * c.sample_rate))
+        x = self.kept.get(start - lead, end)
+        if x.size != end - start + lead:
+            return held
+        return held_inside(x, lead, fire, (start, t0_s, c.sample_rate), c, self.pause, self.on_clock, p)
+
+    def held_refired(self, fire: Fire, refire: int, t0_s: float) -> Held | None:
+        """``fire``'s window, cut short where the fast path fired again at frame ``refire`` (``t0_s``: the stream's
+        start, s), held as a stop whose lines departed from the stepping's modelled in every span, beside the fire
+        that cut it, which stays pending (:func:`.inside.held_refired`). None: not so, no clocked check or no inside
+        search (``ConfirmParams.inside``), or its samples not all kept."""
+        cut = Fire(fire.ev, fire.frame, refire - fire.frame)
+        c, start, end = self.clocked, cut.frame * self._H + self._F, cut.end(self._H, self._F)
+        x = self.kept.get(start, end)
+        if c is None or self.inside is None or x.size != end - start:
+            return None
+        return held_refired(x, cut, (end, t0_s, c.sample_rate), c, self.pause)
 
     def out_of_step(self) -> str | None:
         """Why the fire last judged may be sound added on the stepping's lines, not a stop: the stepping's lines

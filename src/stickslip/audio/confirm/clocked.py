@@ -84,7 +84,8 @@ step clock turns each line's phase within a frame, so its share in phase falls u
 own wander leaves it (``model_expect``; :func:`expected_held`). A fire the levels rejected (it did not persist:
 music masking a stop's drops) whose window departs from the model by ``model_max_z`` in every span, and whose lines
 still depart past the window (the hold above), is a stop, flagged: its onset, the fire's, is not known
-(``model_rejected``; :func:`.inside.departed_throughout`). The per-fire vetoes only veto, and
+(``model_rejected``; :func:`.inside.departed_throughout`); so is a window cut short by a fire inside it, which
+persistence never judges (``model_refired``; :func:`.inside.held_refired`). The per-fire vetoes only veto, and
 under speech or music they seldom can (the lines move with the added sound, or are not read): so once
 the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
 sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
@@ -284,6 +285,12 @@ class ClockedParams:
         "",
         "a fire the levels rejected whose window departs from the model (model_max_z) in every span, and still past "
         "it (model_hold_s), is a stop, flagged: its onset unknown (stops under music 6.6+; the hour's rejected none)",
+    )
+    model_refired: bool = param(
+        True,
+        "",
+        "a window cut short by a refire is read as model_rejected reads a rejected one (stops under music 5.9+, past "
+        "it 6.1+; the hour's joint 3: 7 of 109 departed, 3.1-7.2, all back past it, 0.3-1.7)",
     )
     model_unjudged: bool = param(
         True,

@@ -50,7 +50,7 @@ from .chain import Fire, FireChain
 from .checks import WindowChecks
 from .clocked import CLOCKED, ClockedParams, OnClock
 from .evidence import FrameLog, KeptSamples
-from .inside import INSIDE, Held, InsideParams, held_inside
+from .inside import INSIDE, Held, InsideParams
 from .late import LATE, LateParams, LatePath, late_event
 from .onset import ONSET, OnsetJudge, OnsetParams
 from .pause import PAUSE, PauseParams, Stopped
@@ -319,9 +319,8 @@ class ConfirmedStopDetector:
         Where ``at`` is inside the piece just fed (an idle fast path), the fast path was idle there unless it had
         fired since: held, not stopped, ready."""
         held = self._chain.pending is not None
-        if at != self._fed:
-            return self._late_event(late.step(at, held, False, True), at)
-        return self._late_event(late.step(at, held, self.inner.latched and not held, self.inner.ready), at)
+        latched, ready = (False, True) if at != self._fed else (self.inner.latched and not held, self.inner.ready)
+        return self._late_event(late.step(at, held, latched, ready), at)
 
     def _late_event(self, got: tuple[float, float, bool] | None, when: int) -> list[StopEvent]:
         """The late path's stop as an event, emitted at sample count ``when`` (None: no event)."""
@@ -350,7 +349,7 @@ class ConfirmedStopDetector:
         if not self._holds(fire.ev, fire.frame, heard):
             self.log.rejected.append(fire.ev)
             self.checks.after.judged_s = None
-            self._inside(Fire(fire.ev, fire.frame, heard))  # what was heard of the window
+            self._held = self.checks.held_inside(Fire(fire.ev, fire.frame, heard), self._fed, self._t0, self._held)
             return []
         return [self._confirmed(fire.ev, fire.frame, heard)]
 
@@ -368,6 +367,8 @@ class ConfirmedStopDetector:
         prev = self._chain.refired(fire)  # the fast path released and fired again inside the window: no persistence
         if prev is not None:
             self.log.rejected.append(prev.ev)
+            if self._held is None:  # its window read as a rejected one's (model_refired), held beside this fire
+                self._held = self.checks.held_refired(prev, fire, self._t0)
         ev = self._chain.flagged(ev, fire)
         recent = self._chain.recent(fire)
         self.checks.hear_before(fire, recent, self._frames)  # the stepping before it is each check's reference
@@ -390,6 +391,7 @@ class ConfirmedStopDetector:
         fire = self._chain.due(self.inner.frames_seen)
         if fire is None:
             return []
+        self._held = None if self._held is not None and self._held.beside else self._held  # (the window judges)
         self.inner.hold(False)
         if self._holds(fire.ev, fire.frame, fire.window):  # (held where only its lines out of step doubt it)
             ev = self._confirmed(fire.ev, fire.frame, fire.window, True)
@@ -398,7 +400,7 @@ class ConfirmedStopDetector:
         self.log.rejected.append(fire.ev)
         if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back
             return []
-        self._inside(fire)  # a stop that began inside the window: the fast path stays latched on it
+        self._held = self.checks.held_inside(fire, self._fed, self._t0, self._held)  # (latched on a stop inside)
         self.inner.hold(self._held is not None)  # (held, not re-armed, until its lines are read past the window)
         return [] if self._held is not None else self._rejected(fire)
 
@@ -415,24 +417,15 @@ class ConfirmedStopDetector:
             return []
         self._held, x = None, self._kept.get(h.end, min(h.until, self._fed))
         ev, z = h.judged(x, self._t0, self.checks.clocked)
-        self.inner.hold(False)
         self.log.note_held(h, ev, z, self._sr)
-        if ev is None:  # its lines changed back: sound over the stepping, the window stays vetoed
-            return self._rejected(h.fire)
-        self._chain.confirmed()
-        return [ev]
-
-    def _inside(self, fire: Fire) -> None:
-        """A stop that began inside ``fire``'s rejected window (:func:`.inside.held_inside`), held until emitted."""
-        c, p, ch = self.checks.clocked, self.params.inside, self.checks
-        if c is None or p is None:
-            return
-        start = fire.frame * self._H + self._F  # the window's first sample
-        end = min((fire.frame + fire.window) * self._H + self._F, self._fed)
-        lead = int(round(p.piece_s * self._sr))
-        x = self._kept.get(start - lead, end)
-        if x.size == end - start + lead:  # (else not all kept: the stream began inside the lead)
-            self._held = held_inside(x, lead, fire, (start, self._t0, self._sr), c, ch.pause, ch.on_clock, p)
+        if h.beside:  # (model_refired) the fire pending beside it: judged as it comes, or dropped with this stop
+            if ev is None:
+                return []
+            self._chain.pending = None
+        self.inner.hold(False)
+        if ev is not None:
+            self._chain.confirmed()
+        return [ev] if ev is not None else self._rejected(h.fire)  # (None: its lines changed back, sound over them)
 
     def _confirmed(self, ev: StopEvent, fire: int, frames: int, hold: bool = False) -> StopEvent:
         """The event of the fire at frame ``fire`` confirmed over ``frames``; flagged where its onset is doubted."""

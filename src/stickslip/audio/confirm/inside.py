@@ -28,7 +28,8 @@ stop began inside it where
 
 Off the tuning's rate, the rate told, the stepping's lines modelled (:mod:`.stepping_lines`) read a window too:
 inside one whose fire they vetoed (:func:`stop_departed`), and, where the levels rejected the fire and the model
-did not, over all of it (:func:`departed_throughout`: a stop whose drops music masked; flagged, its onset not known).
+did not, over all of it (:func:`departed_throughout`: a stop whose drops music masked; flagged, its onset not known);
+so too a window cut short where the fast path fired again inside it (:func:`held_refired`).
 
 The event then carries ``found_late`` (``detected_at_s`` the window's end, when it was found)
 and, where the fit's spread exceeds ``max_onset_off_s`` (it does not pin where the stop
@@ -60,6 +61,7 @@ __all__ = [
     "InsideParams",
     "departed_throughout",
     "held_inside",
+    "held_refired",
     "onset_in_phase",
     "still_departed",
     "stop_departed",
@@ -227,6 +229,9 @@ class Held:
     doubt: str | None = None
     #: why the stop found is flagged whatever is read past the window (``model_rejected``; None: not so)
     flagged: str | None = None
+    #: the window was cut short by a fire that stays pending beside the hold (``model_refired``): dropped if the hold
+    #: emits a stop, judged as it comes if not
+    beside: bool = False
 
     def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
         """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
@@ -289,13 +294,19 @@ def held_inside(
 
 
 def _rejected_departed(
-    w: FloatArray, fire: Fire, at: tuple[int, float, float], clocked: ClockedCheck, pause: PauseCheck
+    w: FloatArray,
+    fire: Fire,
+    at: tuple[int, float, float],
+    clocked: ClockedCheck,
+    pause: PauseCheck,
+    why: str = "the levels did not hold it",
 ) -> Held | None:
     """``fire``'s window ``w`` (the levels rejected it; ``at``: the absolute sample after it, the stream's start time,
-    s, and the sample rate, Hz), held as a stop, flagged, where its lines departed from the stepping's modelled in every
-    span (:func:`departed_throughout`) and the stepping went on (not a pause). None: not so. Not asked whether its
-    lines stayed in step (``model_in_step``): a stop that lowers them into the room's noise under music reads out of
-    step (the fifth generator's damped arm, 1 % jitter, 1100 Hz: 0.35 of the model's 0.81, +4.8 dB)."""
+    s, and the sample rate, Hz), held as a stop, flagged (``why`` the window was not confirmed), where its lines
+    departed from the stepping's modelled in every span (:func:`departed_throughout`) and the stepping went on (not a
+    pause). None: not so. Not asked whether its lines stayed in step (``model_in_step``): a stop that lowers them into
+    the room's noise under music reads out of step (the fifth generator's damped arm, 1 % jitter, 1100 Hz: 0.35 of the
+    model's 0.81, +4.8 dB)."""
     end, t0_s, sr = at
     z = departed_throughout(w, clocked)
     if not z >= clocked.p.model_max_z or pause.stopped(w) is not None:  # (NaN: not read)
@@ -303,8 +314,26 @@ def _rejected_departed(
     found_s = t0_s + end / sr
     on = fire.ev.onset_s
     ev = StopEvent(found_s, on, fire.ev.level_db, found_s, found_s - on, True, found_late=True)
-    why = f"the levels did not hold it; its lines departed from the stepping's in every span (z {z:.1f}): onset unknown"
+    why = f"{why}; its lines departed from the stepping's in every span (z {z:.1f}): onset unknown"
     return Held(fire, ev, None, end, end + int(round(clocked.p.model_hold_s * sr)), flagged=why)
+
+
+def held_refired(
+    w: FloatArray, fire: Fire, at: tuple[int, float, float], clocked: ClockedCheck, pause: PauseCheck
+) -> Held | None:
+    """``fire``'s window ``w``, cut short where the fast path fired again inside it (``at``: the absolute sample after
+    it, the stream's start time, s, and the sample rate, Hz), held as :func:`_rejected_departed` holds a window the
+    levels rejected (``model_refired``): where its lines departed from the stepping's modelled in every span (one
+    span at least) and still depart past it, a stop, flagged. The fire that cut it stays pending beside the hold
+    (:attr:`Held.beside`): a hold that does not emit changes nothing else. Persistence never judges such a window,
+    and under music that fires again every half second or so a stop can lie in nothing but such windows (the tenth
+    generator's arm 3, 950 Hz, music +3 dB: two windows across the stop, 11.3 and 13.5 spreads off). None: not so, or
+    not read (no model ready, the rate at the tuning's, under one span)."""
+    cp = clocked.p
+    if not (cp.model_refired and cp.model_hold_s > 0.0):
+        return None
+    got = _rejected_departed(w, fire, at, clocked, pause, "cut short by a fire inside it")
+    return None if got is None else replace(got, beside=True)
 
 
 def onset_in_phase(
