@@ -164,6 +164,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "in-step-hold-off": ClockedParams(model_in_step_hold_z=0.0),
     "rejected-off": ClockedParams(model_rejected=False),
     "refired-off": ClockedParams(model_refired=False),
+    "onset-off": ClockedParams(model_onset=False),
     "off": None,
 }
 

@@ -20,7 +20,7 @@ generator at 2 % jitter), ``--switch model_in_step`` the fire the model let thro
 fitted stretch's end (dropped; off: 0), ``--switch model_in_step_hold_z`` a fire flagged out of step whose lines
 stay departed past its window counted (off: 0), ``--switch model_rejected`` a fire the levels rejected whose window
 departs from the model in every span and past it, emitted flagged, ``--switch model_refired`` the same reading of a
-window cut short by a fire inside it.
+window cut short by a fire inside it, ``--switch model_onset`` an onset the model's lines place elsewhere, flagged.
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -82,6 +82,7 @@ SWITCHES = (
     "model_in_step_hold_z",
     "model_rejected",
     "model_refired",
+    "model_onset",
 )
 
 

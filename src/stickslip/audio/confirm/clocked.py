@@ -292,6 +292,13 @@ class ClockedParams:
         "a window cut short by a refire is read as model_rejected reads a rejected one (stops under music 5.9+, past "
         "it 6.1+; the hour's joint 3: 7 of 109 departed, 3.1-7.2, all back past it, 0.3-1.7)",
     )
+    model_onset: bool = param(
+        True,
+        "",
+        "rate told, off the tuning's, the model's lines place an onset as max_onset_off_s does at the rate: a stop "
+        "found departed refitted over every departed piece, a confirmed stop the model read over two pieces either "
+        "side; a change farther than that and its spread flags it (music's 0.49, drive's 0.15 s; stops 0-15 ms)",
+    )
     model_unjudged: bool = param(
         True,
         "",

@@ -153,6 +153,9 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     (``model_max_z`` or more: the lines changed and stayed so, ``min_run_s`` at least), the joint stopped there:
     its onset is fitted on the model's lines turned by its clock (:func:`onset_in_phase`, over the last piece
     within and the first departed), as a stop found inside a rejected window (the caller checks it is not a pause).
+    Sound over the stepping can depart before the stop does (music 3.04 spreads in the piece before the stop's):
+    with ``model_onset`` the fit is repeated over every departed piece to the window's end, and where it places the
+    lasting change more than ``max_onset_off_s`` and its spread away, the find's spread is that distance (flagged).
     A stop changes the lines at once; sound added over them drifts in and out. So the fit must place the change
     within ``model_max_spread_s``, else none was found; and inside the stretch fitted, ``model_edge_s`` at least
     before its end: a best split nearer the end is a boundary optimum (the change lies at or past the end, often with
@@ -177,6 +180,10 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
         return None
     if 2 * n - t < cp.model_edge_s * sr:
         return None  # the best split at the stretch's end: the fit found no change inside it
+    if cp.model_onset and k - j > 1:  # the lasting change fitted over every departed piece: elsewhere, uncertain
+        u, s = onset_in_phase(x[lo : lead + k * n], sr, clocked.model_hz, m.ks, cp, p)
+        if u >= 0 and abs(u - t) > max(p.max_onset_off_s * sr, s):
+            spread = max(spread, abs(u - t))
     return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
 
 
