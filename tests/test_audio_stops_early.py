@@ -30,7 +30,8 @@ def _heard(onset_short_ref: bool) -> tuple[list[StopEvent], list[tuple[float, st
     rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
     src = _span_source("music", np.random.default_rng(ARM * 100 + int(RATE) + 3))
     y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS["music"], dtype=np.float32)  # type: ignore[operator]
-    p = ConfirmParams(clocked=ClockedParams(onset_short_ref=onset_short_ref))
+    # (the before-case turns ``model_unjudged_early`` off too: it flags this fire as well, nothing read its lines)
+    p = ConfirmParams(clocked=ClockedParams(onset_short_ref=onset_short_ref, model_unjudged_early=onset_short_ref))
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)
     return det.feed(y) + det.finish(), det.log.onset

@@ -59,7 +59,12 @@ def test_the_rule_waits_for_the_model_to_have_heard_enough_and_yields_to_its_rea
     span = round(0.48 * SR)  # the spans offered: every span_s of the stream from its start
     assert c.offered == [span * (k + 1) for k in range(n)]
     ready_at = c.offered[-1] + round(CLOCKED.model_lag_s * SR)  # the model could have been ready from here on
+    low = OnClock(0.1, RATE, 1, locked=0.1)  # read by a per-fire veto, not affirmed
+    assert not c.unjudged(ready_at - 1, low) and c.unjudged(ready_at, low) and c.unjudged(ready_at, None)
+    assert c.unjudged(ready_at - 1, None)  # before it, a stop nothing read at all (``model_unjudged_early``)
+    c.p = replace(c.p, model_unjudged_early=False)
     assert not c.unjudged(ready_at - 1, None) and c.unjudged(ready_at, None)
+    c.p = CLOCKED
     read = OnClock(math.nan, RATE, 0, still_z=5.0)  # the model read the fire: it judged
     affirmed = OnClock(0.6, RATE, 1, locked=0.6)  # both readings at min_affirm, against its own stepping
     assert not c.unjudged(ready_at, read) and not c.unjudged(ready_at, affirmed)

@@ -90,7 +90,9 @@ under speech or music they seldom can (the lines move with the added sound, or a
 the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
 sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
 unless both readings affirm it against the stepping just before its fire (``model_unjudged``;
-:meth:`ClockedCheck.unjudged`, asked by :meth:`.checks.WindowChecks.onset_doubt`).
+:meth:`ClockedCheck.unjudged`, asked by :meth:`.checks.WindowChecks.onset_doubt`). Before then, a stop no
+reading of the lines judged at all (the per-fire vetoes gave no verdict) stands on the levels alone: flagged too
+(``model_unjudged_early``).
 
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
@@ -304,6 +306,12 @@ class ClockedParams:
         "",
         "rate told, off the tuning's: a stop the model did not read though it heard model_min_spans spans (their "
         "lines not the joint's alone) is flagged unless both readings reach min_affirm (False: counted)",
+    )
+    model_unjudged_early: bool = param(
+        True,
+        "",
+        "model_unjudged before the model could be ready too, for a stop no reading of the lines judged at all (the "
+        "per-fire vetoes gave no verdict): the levels alone counted it (False: not asked then)",
     )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
@@ -770,13 +778,14 @@ class ClockedCheck:
         ready: the lines held under ``model_min_share`` in phase, sound of another kind on them; or nothing read),
         and the lines do not affirm it (:meth:`affirms`) against the stepping just before its fire (an affirmation
         against stepping kept from long before says a stop, not that it began there). Earlier in the listening no
-        model can judge: not asked."""
+        model can judge: there (``model_unjudged_early``) only a stop no reading of the lines judged at all
+        (``got`` None: the per-fire vetoes gave no verdict) is flagged, not one at the start of listening."""
         p = self.p
         n = math.ceil(p.model_min_spans)
-        if not (p.model_unjudged and self.models_lines()) or len(self.offered) < n:
+        if not (p.model_unjudged and self.models_lines()):
             return False
-        if self.offered[n - 1] > at - p.model_lag_s * self.sample_rate:
-            return False
+        if len(self.offered) < n or self.offered[n - 1] > at - p.model_lag_s * self.sample_rate:
+            return p.model_unjudged_early and got is None and at > 0  # too early for a model: nothing read the lines
         if got is not None and math.isfinite(got.still_z):
             return False  # the model read it (and let it through: it departs from the stepping's lines)
         return not (self.affirms(got) and got is not None and not math.isfinite(got.kept_s))
