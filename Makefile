@@ -33,25 +33,28 @@ COMPILE := env -u PYTHONDONTWRITEBYTECODE $(PY) -m compileall -q src tests/suppo
 # One xdist worker more than the cores: about a fifth of a worker's time is waiting (real-time
 # emulators, servers, the browser, subprocesses), which the extra worker fills; on two cores the
 # suite took 419 s with three workers against 454-499 s with two, for the same CPU time.
+WORKERS := $(PY) -c 'import os; n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(); print(min(5, (n or 1) + 1))'
+
 test: $(STAMP)
 	@bash .ci/postgres
 	$(VENV)/bin/ruff check src tests benchmarks
 	$(VENV)/bin/lint-imports
 	@$(COMPILE)
 	@echo "$(PY) -m mypy (beside the tests)"; $(PY) -m mypy > .mypy.log 2>&1 & types=$$!; \
-	workers=$$($(PY) -c 'import os; n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count(); print(min(5, (n or 1) + 1))'); \
+	workers=$$($(WORKERS)); \
 	echo "$(PYTEST) -q -n $$workers --dist loadgroup --durations=15"; \
 	$(PYTEST) -q -n $$workers --dist loadgroup --durations=15; tests=$$?; \
 	wait $$types; typed=$$?; echo "mypy:"; cat .mypy.log; rm -f .mypy.log; \
 	test $$tests -eq 0 && test $$typed -eq 0
 
 # Day-to-day: the suite without the tests marked slow (long batteries, documentation pages run as
-# written, subprocesses); under 90 s on two cores. CI runs `make test`, which runs everything.
+# written, subprocesses); under 90 s on two cores. CI runs `make test`, which runs everything. The same
+# workers as `make test` (one more than the cores: the waits of servers, emulators and the browser).
 test-fast: $(STAMP)
 	@bash .ci/postgres
 	$(VENV)/bin/ruff check src tests benchmarks
 	@$(COMPILE)
-	$(PYTEST) -q -n auto --maxprocesses 4 --dist loadgroup -m "not slow" --durations=10
+	workers=$$($(WORKERS)); $(PYTEST) -q -n $$workers --dist loadgroup -m "not slow" --durations=10
 
 # The suite with fresh hypothesis draws (make test draws the same examples every run, so CI never
 # fails on a lucky draw): run it now and then; pin a draw that breaks something as an @example.
