@@ -282,13 +282,15 @@ def test_a_real_ctrl_c_in_a_terminal_session(tmp_path, cal_path):
 
     env = {**os.environ, "STICKSLIP_DB": str(tmp_path / "s.db")}
     main = "import sys; from stickslip.cli import main; sys.argv[0] = 'stickslip'; main()"
-    with NanoControlEmulator(realtime=1.0) as emu:  # a real-time legacy controller: 1000 steps per second
+    # a legacy controller five times slower than real time (200 steps per second): the test waits for two bursts
+    # (0.5 s), but the 10 mm move would take about 50 s, so the signal lands mid-move even when the machine is slow
+    # to send it (at real time, 4 mm and then 10 mm, about 4 and 10 s, each once ended before a starved test sent
+    # it: exit 0)
+    with NanoControlEmulator(realtime=5.0) as emu:
         url = emu.url + "?dialect=legacy"
         cal = calibration_of(cal_path, url, tmp_path)
         subprocess.run([sys.executable, "-c", main, "where", "-d", url, "--set", "3=min", "--offline"], env=env,
                        check=True, capture_output=True, timeout=60)  # fmt: skip
-        # 10 mm: about 10 s of stepping, so the signal lands mid-move even when the machine is slow to send it
-        # (4 mm, about 4 s, once ended before a starved test sent it: exit 0)
         argv = [sys.executable, "-c", main, "move", "-d", url, "-c", str(cal), "-j", "3", "--by", "10mm"]
         argv += ["--burst", "50"]
         p = subprocess.Popen(argv, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
