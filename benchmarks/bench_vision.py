@@ -110,7 +110,7 @@ import math  # noqa: E402
 import sys  # noqa: E402
 import textwrap  # noqa: E402
 import time  # noqa: E402
-from collections.abc import Callable, Sequence  # noqa: E402
+from collections.abc import Callable, Iterable, Iterator, Sequence  # noqa: E402
 from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
@@ -216,6 +216,19 @@ def tracking(n_frames: int, seed: int = 0) -> dict[str, float]:
         met = v <= target if op == "<=" else v >= target
         print(f"{name:36} {v:>9.3f} {op}{target:>6g} {ratio:>7.2f}  {'yes' if met else 'NO'}")
     return out
+
+
+def learnt_sequences(seqs: Iterable[Any], params: TrackerParams) -> Iterator[tuple[int, Any, TipTracker, list[Any]]]:
+    """Each sequence of ``seqs`` whose first frame teaches a tracker (``params``): its index, the sequence, the tracker
+    and its frames read as images. One whose first frame does not is left out without a word (no frame of it in any
+    count; :func:`_learnt` prints why)."""
+    for i, seq in enumerate(seqs):
+        images = [as_image(f.image) for f in seq.frames]
+        try:
+            tracker = TipTracker(images[0], seq.frames[0].tip, params)
+        except TemplateError:
+            continue
+        yield i, seq, tracker, images
 
 
 def _learnt(i: int, seq: Any, first: np.ndarray) -> TipTracker | None:
@@ -865,12 +878,7 @@ def _split_rows(seqs: Sequence[Any], label: str) -> list[tuple[str, int, float, 
     """Every visible tip's fix: (set, sequence, along, across, the frame's blur against the first frame's (signed
     sigma, px), the copy's blur, px, the error, px, the fix's turn, deg)."""
     rows = []
-    for i, seq in enumerate(seqs):
-        images = [as_image(f.image) for f in seq.frames]
-        try:
-            tracker = TipTracker(images[0], seq.frames[0].tip, PARAMS)
-        except TemplateError:
-            continue
+    for i, seq, tracker, images in learnt_sequences(seqs, PARAMS):
         b0 = seq.frames[0].blur
         for f, img in zip(seq.frames[1:], images[1:], strict=True):
             r = tracker.update(img)

@@ -41,12 +41,11 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "benchmarks"), str(ROOT / "tests" / "support"), str(ROOT / "src")]
 
-from bench_vision import _rule, _split  # noqa: E402
+from bench_vision import _rule, _split, learnt_sequences  # noqa: E402
 from vision_own import flake_benchmark, lobed_benchmark, own_benchmark, round_benchmark  # noqa: E402
 from vision_vetoes import readings  # noqa: E402
 
-from stickslip.vision.frame import as_image  # noqa: E402
-from stickslip.vision.template import TemplateError, TrackerParams  # noqa: E402
+from stickslip.vision.template import TrackerParams  # noqa: E402
 from stickslip.vision.track import FOCUS_STEP, Fix, Lost, TipTracker  # noqa: E402
 
 JUDGED: list[dict[str, Any]] = []
@@ -96,12 +95,7 @@ def _reported(res: Lost, judged: list[dict[str, Any]]) -> dict[str, Any] | None:
 def run(name: str, seqs: Any, params: TrackerParams) -> list[dict[str, Any]]:
     """Track one set; a row for every visible tip (fixed or refused)."""
     rows: list[dict[str, Any]] = []
-    for i, seq in enumerate(seqs):
-        images = [as_image(f.image) for f in seq.frames]
-        try:
-            t = TipTracker(images[0], seq.frames[0].tip, params)
-        except TemplateError:
-            continue
+    for i, seq, t, images in learnt_sequences(seqs, params):
         for k, (f, img) in enumerate(zip(seq.frames[1:], images[1:], strict=True), start=1):
             JUDGED.clear()
             res = t.update(img)
