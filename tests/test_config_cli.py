@@ -275,6 +275,14 @@ def test_a_password_in_the_files_device_stops_the_command_and_is_never_printed(c
     assert "hunter2" not in r.output and "hunter2" not in r.stderr
 
 
+def test_a_password_with_a_slash_in_the_files_device_is_refused_as_a_password_not_quoted_as_a_port(cfg):
+    """urllib reads `pa` of `pa/ss` as the port, and its message quoted it; the file's password is refused first."""
+    path = cfg('device = "anc300://admin:pa/ss@10.0.0.2:7230"\n')
+    r = run("where")
+    assert one_error(r).startswith(f"error: {path}:1: device: a password in the device URL is refused")
+    assert "pa/ss" not in r.output + r.stderr and "'pa'" not in r.output + r.stderr
+
+
 def test_a_password_on_the_command_line_is_redacted_by_config_show(cfg):
     r = ok("config", "show", "-d", "anc300://u:hunter2@h?password=hunter2")
     assert "hunter2" not in r.stdout and "anc300://u:***@h?password=***" in r.stdout

@@ -82,11 +82,32 @@ def redact_url(url: str) -> str:
     'anc300://admin:***@10.0.0.2:7230?password=***&axes=1,2,3'
     >>> redact_url("admin:hunter2@10.0.0.2")
     'admin:***@10.0.0.2'
+
+    A password written unencoded may hold ``@``, ``/``, ``?`` or ``#``: it runs to the URL's last ``@``
+    (a path or option holding an ``@`` after a ``host:port`` is redacted with it, the safe side):
+
+    >>> redact_url("anc300://admin:pa/ss@word@10.0.0.2:7230")
+    'anc300://admin:***@10.0.0.2:7230'
     """
-    text = str(url)
-    # user:PASSWORD@ after the scheme's "//", or at the start of a URL written without a scheme
-    text = re.sub(r"(://|^)([^/@?#:]*):([^/@?#]*)@", r"\1\2:***@", text)
+    text = _USERINFO_AFTER_SCHEME.sub(r"\1:***@", str(url))
+    text = _USERINFO_NO_SCHEME.sub(r"\1:***@", text)
     return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}{m.group(2)}=***", text)
+
+
+_USERINFO_AFTER_SCHEME = re.compile(r"(://[^/@?#:\s]*):\S*@")
+"""``user:PASSWORD@`` after a scheme's ``//``: the password to the last ``@`` before a space."""
+_USERINFO_NO_SCHEME = re.compile(r"^([^/@?#:\\\s]*):(?![/\\])\S*@")
+"""``user:PASSWORD@`` at the start of a URL written without a scheme; not a Windows path (``C:\\data\\a@b.csv``,
+``C:/data/a@b.csv``: a drive letter's colon is followed by a slash)."""
+
+
+def _malformed(url: str, why: str) -> str:
+    """The message for a device URL that cannot be read: ``why`` (urllib's reason, which may quote a piece of
+    the URL's user part, e.g. a password's first characters read as a port) only where the URL holds no secret."""
+    if _USERINFO_AFTER_SCHEME.search(url) or _USERINFO_NO_SCHEME.search(url):
+        why = ("its user:password@ part hides the host (a password holding @ / ? # must be percent-encoded: "
+               "/ as %2F, @ as %40)")
+    return f"malformed device URL {redact_url(url)!r}: {why}"
 
 
 _URL_IN_TEXT = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*:(?://|[^\s'\"<>]*@)[^\s'\"<>]*")
@@ -353,7 +374,7 @@ def check_device_url(url: str) -> str:
         port = parts.port
         host = parts.hostname
     except ValueError:
-        raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535") from None
+        raise ValueError(_malformed(url, "the port must be a number in 1..65535")) from None
     if port == 0:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
     query_options(parts.query, url)
@@ -422,7 +443,7 @@ def url_scheme(url: str) -> str:
     try:
         scheme = urlsplit(url).scheme
     except ValueError as e:
-        raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
+        raise ValueError(_malformed(url, str(e))) from None
     if scheme in BACKENDS and "://" not in url:  # sim: or mm3a:/dev/ttyUSB0: the // is missing
         rest = url.split(":", 1)[1]
         rest = rest if rest.startswith("/") else rest.lstrip("/")  # a path keeps its own slash: mm3a:///dev/...
@@ -469,7 +490,7 @@ def device_key(url: str) -> str:
             host = f"[{host}]"
         port = f":{parts.port}" if parts.port is not None else ""
     except ValueError as e:
-        raise ValueError(f"malformed device URL {redact_url(url)!r}: {e}") from None
+        raise ValueError(_malformed(url, str(e))) from None
     return f"{scheme}://{host}{port}{parts.path}"
 
 
