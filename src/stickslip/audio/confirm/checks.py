@@ -22,7 +22,7 @@ from ..events import StopEvent
 from ..features.stepclock import LineChange
 from ..tuningfile import Tuning
 from .chain import Fire
-from .clocked import ClockedCheck, ClockedParams, OnClock
+from .clocked import ClockedCheck, ClockedParams, OnClock, model_thin
 from .evidence import FrameLog, KeptSamples
 from .inside import Held, InsideParams, held_inside, held_out_of_step, held_refired, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
@@ -142,6 +142,8 @@ class WindowChecks:
         stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; the
         stream began near it; not an onset at listening's start, which :mod:`~stickslip.audio.change.start`
         judged): no stepping to place it by, it may have begun there; or the stepping's lines modelled read its fire
+        within ``model_max_z`` on fewer than ``model_min_bands`` locked sub-bands (too few to veto it:
+        :func:`~.clocked.model_thin`); or the stepping's lines modelled read its fire
         and let it through, but its lines held under ``model_in_step`` of the model's share in phase and their power
         out of phase rose ``model_added_db`` (not in step with the steps, as a stop's stay: sound of another kind
         added on them; :meth:`out_of_step`, not asked with ``hold_in_step``: the caller reads it past the window);
@@ -157,6 +159,12 @@ class WindowChecks:
         short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
+        if c.enabled and model_thin(c, self.on_clock):  # the model read it within on one line: it cannot veto
+            assert self.on_clock is not None
+            return (
+                f"the stepping's lines modelled on {len(c.model.locked_bands()) if c.model else 0} locked sub-band(s)"
+                f" read it within (z {self.on_clock.still_z:.2f}): too few to veto"
+            )
         step = self.out_of_step()
         if step is not None and not (hold_in_step and c.p.model_in_step_hold_z > 0.0 and c.p.model_hold_s > 0.0):
             return step

@@ -71,7 +71,10 @@ same reading conditions (a comb verdict, or the predicted move), a fire whose wi
 ``model_max_z`` spreads of the model is not a stop; read also where the fire's own reference was
 stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
 and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
-at 0.4 s). Where the pieces after the one within depart from the model to the window's end, the stop may
+at 0.4 s). A model whose lines were locked in fewer than ``model_min_bands`` sub-bands reads one line's level,
+no RMS over the stop's signature: sound on that line scatters it either way, so its reading within does not veto,
+it flags the stop (:func:`model_thin`). Where the pieces after the one within depart from the model to
+the window's end, the stop may
 have begun there (``model_inside``; :func:`.inside.stop_departed`), emitted once its lines still depart past the
 window's end (``model_hold_s``: a stop holds while the stepping goes on; music or speech changes back). A fire
 the model lets through whose lines held under ``model_in_step`` of the model's own share in phase is flagged
@@ -238,6 +241,12 @@ class ClockedParams:
     )
     model_max_z: float = param(
         3.0, "spreads", "a fire whose lines after it sit within this RMS of the model is not a stop (the stepping's)"
+    )
+    model_min_bands: int = param(
+        2,
+        "sub-bands",
+        "a fire the model reads within model_max_z on fewer locked sub-bands is not vetoed but flagged: one line's "
+        "level, no RMS over the stop's signature (speech on it: a stop's pieces 0.6-7.3 spreads) (0: every veto)",
     )
     model_in_step: float = param(
         0.85,
@@ -952,7 +961,8 @@ class ClockedCheck:
             # at another rate the tuned signature is not what the stop does on the lines: no veto on it; but lines
             # that did not move at all (the rate told: the clock is the controller's) are the stepping going on
             # with the stepping's lines modelled: lines still within the model's spread are the stepping going on
-            return not got.moved_db < self.p.min_moved_db and not got.still_z < self.p.model_max_z  # NaN: no veto
+            within = got.still_z < self.p.model_max_z and not model_thin(self, got)  # (thin: flagged, not vetoed)
+            return not got.moved_db < self.p.min_moved_db and not within  # NaN: no veto
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
 
     def affirms(self, got: OnClock | None) -> bool:
@@ -972,3 +982,14 @@ class ClockedCheck:
             return math.nan
         reader = self.reader(got.rate_hz)
         return math.nan if reader is None else reader.read(x)
+
+
+def model_thin(check: ClockedCheck, got: OnClock | None) -> bool:
+    """Whether ``check``'s model of the stepping's lines read the fire ``got`` within ``model_max_z`` on fewer than
+    ``model_min_bands`` locked sub-bands: a veto it cannot carry (one line's level, not an RMS over the stop's
+    signature; sound on that line scatters it either way), so the fire is not vetoed but flagged
+    (:meth:`.checks.WindowChecks.onset_doubt`)."""
+    m, p = check.model, check.p
+    if m is None or got is None or check.at_tuned_rate(got.rate_hz) or not got.still_z < p.model_max_z:
+        return False
+    return len(m.locked_bands()) < p.model_min_bands
