@@ -142,7 +142,7 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: levels hold but not hot, and read from each stop's onset (the default); the default without a stop the lines model
 #: could have judged and did not flagged (``unjudged-off``); the default without the model's span gate expecting a
 #: jittered clock's loss (``expect-off``); without a fire the levels rejected whose lines departed in every span
-#: flagged (``rejected-off``)
+#: flagged (``rejected-off``); without the lines read at the told rate once the clock was heard there (``held-off``)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -165,6 +165,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "rejected-off": ClockedParams(model_rejected=False),
     "refired-off": ClockedParams(model_refired=False),
     "onset-off": ClockedParams(model_onset=False),
+    "held-off": ClockedParams(told_held_tol=0.0),
     "off": None,
 }
 

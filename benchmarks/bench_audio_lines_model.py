@@ -20,7 +20,8 @@ generator at 2 % jitter), ``--switch model_in_step`` the fire the model let thro
 fitted stretch's end (dropped; off: 0), ``--switch model_in_step_hold_z`` a fire flagged out of step whose lines
 stay departed past its window counted (off: 0), ``--switch model_rejected`` a fire the levels rejected whose window
 departs from the model in every span and past it, emitted flagged, ``--switch model_refired`` the same reading of a
-window cut short by a fire inside it, ``--switch model_onset`` an onset the model's lines place elsewhere, flagged.
+window cut short by a fire inside it, ``--switch model_onset`` an onset the model's lines place elsewhere, flagged,
+``--switch told_held_tol`` the lines read at the told rate once the clock was heard there (off: 0).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -83,14 +84,15 @@ SWITCHES = (
     "model_rejected",
     "model_refired",
     "model_onset",
+    "told_held_tol",
 )
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
     """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults
-    (``model_in_step``, a share, ``model_edge_s``, ``model_hold_s``, s, and ``model_in_step_hold_z``, spreads: 0 off,
-    its default on)."""
-    if name in ("model_in_step", "model_edge_s", "model_hold_s", "model_in_step_hold_z"):
+    (``model_in_step``, a share, ``model_edge_s``, ``model_hold_s``, s, ``model_in_step_hold_z``, spreads, and
+    ``told_held_tol``, a share: 0 off, its default on)."""
+    if name in ("model_in_step", "model_edge_s", "model_hold_s", "model_in_step_hold_z", "told_held_tol"):
         return {"off": replace(ClockedParams(), **{name: 0.0}), "on": ClockedParams()}
     return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
 

@@ -753,20 +753,9 @@ class ClockedCheck:
         if self.model is not None and (abs(rate / self.model_hz - 1.0) > p.max_rate_off or x.size != self.model_n):
             return  # not stepping at the model's rate (the rate is told: the stepping's is the first heard)
         if self.model is None:
-            edges = tu.edges_hz
-            top = int(sr / 2 / rate)
-            lines = {
-                i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in range(len(edges) - 1)
-            }
-            lines = {i: v for i, v in lines.items() if v}
-            if not lines:
+            self.model = self.lines_at(rate)
+            if self.model is None:
                 return
-            ks = sorted({k for v in lines.values() for k in v})
-
-            def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
-                return _in_phase(y, sr, r, ks, p)
-
-            self.model = SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
             self.model_hz, self.model_n = rate, x.size
         level, share = self.model.levels(x)
         alone = float(np.mean(share)) >= p.model_min_share or (
@@ -780,17 +769,37 @@ class ClockedCheck:
             if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
                 self.model.add(level, share, t)
 
+    def lines_at(self, rate: float) -> SteppingLines | None:
+        """An empty model of the stepping's lines read at ``rate`` (Hz): per tuned sub-band, the lines in it (None:
+        none in any)."""
+        sr, p, edges = self.sample_rate, self.p, self.tuning.edges_hz
+        assert edges is not None
+        top = int(sr / 2 / rate)
+        bands = range(len(edges) - 1)
+        lines = {i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in bands}
+        lines = {i: v for i, v in lines.items() if v}
+        if not lines:
+            return None
+        ks = sorted({k for v in lines.values() for k in v})
+
+        def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
+            return _in_phase(y, sr, r, ks, p)
+
+        return SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
+
     def hear_held(self, x: FloatArray) -> float:
         """The step rate of a span of stepping ``x`` offered to the model, Hz (NaN: none): the told rate once the
-        clock was heard within ``told_held_tol`` of it in this span or an earlier one (:attr:`held`; a model built
-        before at a rate pulled off it is dropped, built again there), else the line heard near it."""
-        told, tol = self.commanded_hz, self.p.told_held_tol
+        clock was heard within ``told_held_tol`` of it, its lines read there holding ``model_min_share`` in phase
+        (stepping alone on a clock in step with the told one), in this span or an earlier one (:attr:`held`; a model
+        built before at a rate pulled off it is dropped, built again there), else the line heard near it."""
+        told, tol, p = self.commanded_hz, self.p.told_held_tol, self.p
         assert told is not None
-        rate = rate_near_hz(x, self.sample_rate, told, self.p.commanded_tol)
+        rate = rate_near_hz(x, self.sample_rate, told, p.commanded_tol)
         if tol > 0.0 and not self.held and abs(rate / told - 1.0) <= tol:
-            self.held = True
-            if self.model is not None and abs(self.model_hz / told - 1.0) > tol:
-                self.model, self.model_hz, self.model_n, self.pending = None, math.nan, 0, []
+            at = self.lines_at(told)
+            self.held = at is not None and float(np.mean(at.levels(x)[1])) >= p.model_min_share
+        if self.held and self.model is not None and abs(self.model_hz / told - 1.0) > tol:
+            self.model, self.model_hz, self.model_n, self.pending = None, math.nan, 0, []
         return told if self.held else rate
 
     def unjudged(self, at: int, got: OnClock | None) -> bool:
