@@ -188,9 +188,10 @@ class ClockedParams:
     told_held_tol: float = param(
         0.002,
         "of the told rate",
-        "rate told: once a span of stepping offered to the model is heard this near it, the clock is the told rate; "
-        "the lines are read there, not at a line found nearer a fire (a 0.48 s span resolves 0.19 % at 1100 Hz; "
-        "stepping alone heard 0.08 % off at most; music, a stop in the reference pulled it 0.7-3.2 %; 0: not)",
+        "rate told: once a span offered to the model is heard this near it, its lines holding model_min_share in "
+        "phase there (a clean clock), the clock is the told rate: the lines are read there, not at a line found "
+        "nearer a fire (a 0.48 s span resolves 0.19 % at 1100 Hz; a crystal's stepping heard 0.08 % off at most; "
+        "music, a stop in the reference pulled it 0.7-3.2 %; 0: not)",
     )
     max_rate_off: float = param(
         0.01, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere (as the fit)"
@@ -681,6 +682,31 @@ def _comb_read(
     return out
 
 
+def lines_at(tuning: Tuning, rate: float, p: ClockedParams) -> SteppingLines | None:
+    """An empty model of the stepping's lines read at ``rate`` (Hz): per tuned sub-band, the lines in it (None: none
+    in any)."""
+    sr, edges = float(tuning.sample_rate), tuning.edges_hz
+    assert edges is not None
+    top, bands = int(sr / 2 / rate), range(len(edges) - 1)
+    lines = {i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in bands}
+    lines = {i: v for i, v in lines.items() if v}
+    if not lines:
+        return None
+    ks = sorted({k for v in lines.values() for k in v})
+
+    def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
+        return _in_phase(y, sr, r, ks, p)
+
+    return SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
+
+
+def in_step_at(x: FloatArray, tuning: Tuning, rate: float, p: ClockedParams) -> bool:
+    """Whether the lines of ``x`` read at ``rate`` (Hz) held ``model_min_share`` of their power in phase, over the
+    tuned sub-bands (stepping alone on a clock in step with that rate; a rough clock smears them, 0.5-0.6)."""
+    m = lines_at(tuning, rate, p)
+    return m is not None and float(np.mean(m.levels(x)[1])) >= p.model_min_share
+
+
 class ClockedCheck:
     """The check over a stream: the stepping before a chain of fires, then each window (see the module)."""
 
@@ -714,8 +740,7 @@ class ClockedCheck:
         self.pending: list[tuple[float, FloatArray, FloatArray, bool]] = []
         #: where the first ``model_min_spans`` spans offered to the model ended (absolute samples)
         self.offered: list[int] = []
-        #: whether a span offered was heard within ``told_held_tol`` of the told rate: the clock is the told rate
-        self.held = False
+        self.held = False  #: the clock heard at the told rate (``told_held_tol``): the lines read there
 
     def keep(self, end: int, samples: FloatArray, margins: FloatArray) -> None:
         """A stretch of the stream ending at absolute sample ``end`` and its frames' margins: kept as stepping where
@@ -753,7 +778,7 @@ class ClockedCheck:
         if self.model is not None and (abs(rate / self.model_hz - 1.0) > p.max_rate_off or x.size != self.model_n):
             return  # not stepping at the model's rate (the rate is told: the stepping's is the first heard)
         if self.model is None:
-            self.model = self.lines_at(rate)
+            self.model = lines_at(tu, rate, p)
             if self.model is None:
                 return
             self.model_hz, self.model_n = rate, x.size
@@ -769,37 +794,16 @@ class ClockedCheck:
             if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
                 self.model.add(level, share, t)
 
-    def lines_at(self, rate: float) -> SteppingLines | None:
-        """An empty model of the stepping's lines read at ``rate`` (Hz): per tuned sub-band, the lines in it (None:
-        none in any)."""
-        sr, p, edges = self.sample_rate, self.p, self.tuning.edges_hz
-        assert edges is not None
-        top = int(sr / 2 / rate)
-        bands = range(len(edges) - 1)
-        lines = {i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in bands}
-        lines = {i: v for i, v in lines.items() if v}
-        if not lines:
-            return None
-        ks = sorted({k for v in lines.values() for k in v})
-
-        def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
-            return _in_phase(y, sr, r, ks, p)
-
-        return SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
-
     def hear_held(self, x: FloatArray) -> float:
-        """The step rate of a span of stepping ``x`` offered to the model, Hz (NaN: none): the told rate once the
-        clock was heard within ``told_held_tol`` of it, its lines read there holding ``model_min_share`` in phase
-        (stepping alone on a clock in step with the told one), in this span or an earlier one (:attr:`held`; a model
-        built before at a rate pulled off it is dropped, built again there), else the line heard near it."""
+        """A span of stepping ``x``'s rate, Hz (NaN: none): the told one once heard within ``told_held_tol`` of it,
+        in step there (:func:`in_step_at`; :attr:`held`: a model built off it is built again), else the line heard."""
         told, tol, p = self.commanded_hz, self.p.told_held_tol, self.p
         assert told is not None
         rate = rate_near_hz(x, self.sample_rate, told, p.commanded_tol)
         if tol > 0.0 and not self.held and abs(rate / told - 1.0) <= tol:
-            at = self.lines_at(told)
-            self.held = at is not None and float(np.mean(at.levels(x)[1])) >= p.model_min_share
-        if self.held and self.model is not None and abs(self.model_hz / told - 1.0) > tol:
-            self.model, self.model_hz, self.model_n, self.pending = None, math.nan, 0, []
+            self.held = in_step_at(x, self.tuning, told, p)
+            if self.held and self.model is not None and abs(self.model_hz / told - 1.0) > tol:
+                self.model, self.model_hz, self.model_n, self.pending = None, math.nan, 0, []
         return told if self.held else rate
 
     def unjudged(self, at: int, got: OnClock | None) -> bool:
@@ -963,8 +967,8 @@ class ClockedCheck:
         p, ref, told = self.p, self.ref, self.commanded_hz
         if ref is None:
             return math.nan
-        if self.held and told is not None:
-            rate = told  # the clock was heard at the told rate: a line found off it near a fire is sound's
+        if self.held and told is not None:  # the clock heard at the told rate: a line found off it is sound's
+            rate = told
         elif math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
             rate = heard_hz
         else:
