@@ -21,7 +21,8 @@ fitted stretch's end (dropped; off: 0), ``--switch model_in_step_hold_z`` a fire
 stay departed past its window counted (off: 0), ``--switch model_rejected`` a fire the levels rejected whose window
 departs from the model in every span and past it, emitted flagged, ``--switch model_refired`` the same reading of a
 window cut short by a fire inside it, ``--switch model_onset`` an onset the model's lines place elsewhere, flagged,
-``--switch model_min_bands`` a veto on one locked sub-band, flagged instead (off: 0).
+``--switch model_min_bands`` a veto on one locked sub-band, flagged instead (off: 0),
+``--switch told_held_tol`` the lines read at the told rate once the clock was heard there (off: 0).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -85,16 +86,16 @@ SWITCHES = (
     "model_refired",
     "model_onset",
     "model_min_bands",
+    "told_held_tol",
 )
 
 
 def switch(name: str) -> dict[str, ClockedParams]:
     """The two detectors' clocked parameters: ``name`` False (off) and True (on), the others their defaults
-    (``model_in_step``, a share, ``model_edge_s``, ``model_hold_s``, s, and ``model_in_step_hold_z``, spreads: 0 off,
-    its default on; ``model_min_bands``, sub-bands: 0 off, every veto standing)."""
-    if name == "model_min_bands":
-        return {"off": replace(ClockedParams(), model_min_bands=0), "on": ClockedParams()}
-    if name in ("model_in_step", "model_edge_s", "model_hold_s", "model_in_step_hold_z"):
+    (``model_in_step``, a share, ``model_edge_s``, ``model_hold_s``, s, ``model_in_step_hold_z``, spreads,
+    ``told_held_tol``, a share, and ``model_min_bands``, sub-bands: 0 off, its default on)."""
+    if name in ("model_in_step", "model_edge_s", "model_hold_s", "model_in_step_hold_z", "told_held_tol",
+                "model_min_bands"):
         return {"off": replace(ClockedParams(), **{name: 0.0}), "on": ClockedParams()}
     return {"off": replace(ClockedParams(), **{name: False}), "on": replace(ClockedParams(), **{name: True})}
 

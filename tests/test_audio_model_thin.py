@@ -8,6 +8,11 @@ model's five sub-bands only one holds ``min_locked`` of its lines' power in phas
 spreads off that one line, within ``model_max_z`` (3): before ``ClockedParams.model_min_bands`` it was vetoed and the
 stop missed. One line's level is no RMS over the stop's signature (speech on it scatters a stop's pieces 0.6-7.3
 spreads), so such a model cannot veto: the stop is emitted, flagged (a traverse refuses it, never counts it).
+
+The model is built here where the clock was first heard, not at the told rate (``told_held_tol`` 0): with the clock
+held at the told rate (the default) the radio no longer pulls it, the model locks all five sub-bands and the stop is
+heard without this rule (flagged at the same onset); the rule stays for a clock the detector cannot hold (a rough
+one, or before a clean span was heard).
 """
 
 from __future__ import annotations
@@ -35,7 +40,7 @@ def _heard(min_bands: int) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     kind = "speech over the radio"
     src = _span_source(kind, np.random.default_rng(ARM * 100 + int(RATE) + 3))
     y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[kind], dtype=np.float32)  # type: ignore[operator]
-    p = ConfirmParams(clocked=ClockedParams(model_min_bands=min_bands))
+    p = ConfirmParams(clocked=ClockedParams(model_min_bands=min_bands, told_held_tol=0.0))
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)
     return det.feed(y) + det.finish(), det

@@ -188,6 +188,14 @@ class ClockedParams:
     )
     floor_share: float = param(0.01, "", "each side of a change is floored at this share of the larger (+-20 dB)")
     commanded_tol: float = param(0.03, "", "the rate is heard within this share of the commanded one (else taken)")
+    told_held_tol: float = param(
+        0.002,
+        "of the told rate",
+        "rate told: once a span offered to the model is heard this near it, its lines holding model_min_share in "
+        "phase there (a clean clock), the clock is the told rate: the lines are read there, not at a line found "
+        "nearer a fire (a 0.48 s span resolves 0.19 % at 1100 Hz; a crystal's stepping heard 0.08 % off at most; "
+        "music, a stop in the reference pulled it 0.7-3.2 %; 0: not)",
+    )
     max_rate_off: float = param(
         0.01, "", "not judged this far from the tuning's rate: the lines sample the arm's modes elsewhere (as the fit)"
     )
@@ -689,6 +697,31 @@ def _comb_read(
     return out
 
 
+def lines_at(tuning: Tuning, rate: float, p: ClockedParams) -> SteppingLines | None:
+    """An empty model of the stepping's lines read at ``rate`` (Hz): per tuned sub-band, the lines in it (None: none
+    in any)."""
+    sr, edges = float(tuning.sample_rate), tuning.edges_hz
+    assert edges is not None
+    top, bands = int(sr / 2 / rate), range(len(edges) - 1)
+    lines = {i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in bands}
+    lines = {i: v for i, v in lines.items() if v}
+    if not lines:
+        return None
+    ks = sorted({k for v in lines.values() for k in v})
+
+    def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
+        return _in_phase(y, sr, r, ks, p)
+
+    return SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
+
+
+def in_step_at(x: FloatArray, tuning: Tuning, rate: float, p: ClockedParams) -> bool:
+    """Whether the lines of ``x`` read at ``rate`` (Hz) held ``model_min_share`` of their power in phase, over the
+    tuned sub-bands (stepping alone on a clock in step with that rate; a rough clock smears them, 0.5-0.6)."""
+    m = lines_at(tuning, rate, p)
+    return m is not None and float(np.mean(m.levels(x)[1])) >= p.model_min_share
+
+
 class ClockedCheck:
     """The check over a stream: the stepping before a chain of fires, then each window (see the module)."""
 
@@ -722,6 +755,7 @@ class ClockedCheck:
         self.pending: list[tuple[float, FloatArray, FloatArray, bool]] = []
         #: where the first ``model_min_spans`` spans offered to the model ended (absolute samples)
         self.offered: list[int] = []
+        self.held = False  #: the clock heard at the told rate (``told_held_tol``): the lines read there
 
     def keep(self, end: int, samples: FloatArray, margins: FloatArray) -> None:
         """A stretch of the stream ending at absolute sample ``end`` and its frames' margins: kept as stepping where
@@ -753,26 +787,15 @@ class ClockedCheck:
         on; a stop moves them). Not one heard at another rate than the model's first."""
         sr, p, tu = self.sample_rate, self.p, self.tuning
         assert self.commanded_hz is not None and tu.edges_hz is not None
-        rate = rate_near_hz(x, sr, self.commanded_hz, p.commanded_tol)
+        rate = self.hear_held(x)
         if not math.isfinite(rate):
             return
         if self.model is not None and (abs(rate / self.model_hz - 1.0) > p.max_rate_off or x.size != self.model_n):
             return  # not stepping at the model's rate (the rate is told: the stepping's is the first heard)
         if self.model is None:
-            edges = tu.edges_hz
-            top = int(sr / 2 / rate)
-            lines = {
-                i: [k for k in range(1, top + 1) if edges[i] <= k * rate < edges[i + 1]] for i in range(len(edges) - 1)
-            }
-            lines = {i: v for i, v in lines.items() if v}
-            if not lines:
+            self.model = lines_at(tu, rate, p)
+            if self.model is None:
                 return
-            ks = sorted({k for v in lines.values() for k in v})
-
-            def in_phase(y: FloatArray, r: float = rate, ks: list[int] = ks) -> tuple[FloatArray, FloatArray]:
-                return _in_phase(y, sr, r, ks, p)
-
-            self.model = SteppingLines(in_phase, lines, ks, p.model_tau_s, p.min_locked)
             self.model_hz, self.model_n = rate, x.size
         level, share = self.model.levels(x)
         alone = float(np.mean(share)) >= p.model_min_share or (
@@ -785,6 +808,18 @@ class ClockedCheck:
                 continue  # sound of another clock on the lines: not the stepping's alone
             if not self.model_ready() or self.model.z_of(level, p.model_min_spans, p.model_floor_db) < p.model_max_z:
                 self.model.add(level, share, t)
+
+    def hear_held(self, x: FloatArray) -> float:
+        """A span of stepping ``x``'s rate, Hz (NaN: none): the told one once heard within ``told_held_tol`` of it,
+        in step there (:func:`in_step_at`; :attr:`held`: a model built off it is built again), else the line heard."""
+        told, tol, p = self.commanded_hz, self.p.told_held_tol, self.p
+        assert told is not None
+        rate = rate_near_hz(x, self.sample_rate, told, p.commanded_tol)
+        if tol > 0.0 and not self.held and abs(rate / told - 1.0) <= tol:
+            self.held = in_step_at(x, self.tuning, told, p)
+            if self.held and self.model is not None and abs(self.model_hz / told - 1.0) > tol:
+                self.model, self.model_hz, self.model_n, self.pending = None, math.nan, 0, []
+        return told if self.held else rate
 
     def unjudged(self, at: int, got: OnClock | None) -> bool:
         """Whether a stop confirmed at absolute sample ``at`` (its onset), its fire judged ``got``, stands on the
@@ -941,12 +976,15 @@ class ClockedCheck:
     def rate(self, heard_hz: float = math.nan, affirm: bool = False) -> float:
         """The step rate the lines are read at, Hz (NaN: not judged): ``heard_hz`` (the step rate already heard in the
         reference, Hz) where it is within ``commanded_tol`` of the commanded rate or none was commanded, else heard
-        again near it; not judged where that is more than ``max_rate_off`` from the tuning's rate or unknown (with
-        ``affirm`` and the rate told, ``affirm_window``: an affirmation only)."""
+        again near it (the told rate itself once the clock was heard there: :attr:`held`); not judged where that is
+        more than ``max_rate_off`` from the tuning's rate or unknown (with ``affirm`` and the rate told,
+        ``affirm_window``: an affirmation only)."""
         p, ref, told = self.p, self.ref, self.commanded_hz
         if ref is None:
             return math.nan
-        if math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
+        if self.held and told is not None:  # the clock heard at the told rate: a line found off it is sound's
+            rate = told
+        elif math.isfinite(heard_hz) and (told is None or abs(heard_hz / told - 1.0) <= p.commanded_tol):
             rate = heard_hz
         else:
             rate = rate_near_hz(ref, self.sample_rate, told, p.commanded_tol)
@@ -964,9 +1002,8 @@ class ClockedCheck:
         if got is None:
             return True
         if not self.at_tuned_rate(got.rate_hz):
-            # at another rate the tuned signature is not what the stop does on the lines: no veto on it; but lines
-            # that did not move at all (the rate told: the clock is the controller's) are the stepping going on
-            # with the stepping's lines modelled: lines still within the model's spread are the stepping going on
+            # at another rate the tuned signature is not what the stop does on the lines: no veto on it; but lines that
+            # did not move (the rate told: the controller's clock) or stay within the model's spread are the stepping's
             within = got.still_z < self.p.model_max_z and not model_thin(self, got)  # (thin: flagged, not vetoed)
             return not got.moved_db < self.p.min_moved_db and not within  # NaN: no veto
         return all(not math.isfinite(a) or a >= self.p.min_a for a in (got.a, got.locked))
