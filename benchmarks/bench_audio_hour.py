@@ -143,7 +143,8 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: could have judged and did not flagged (``unjudged-off``); the default without the model's span gate expecting a
 #: jittered clock's loss (``expect-off``); without a fire the levels rejected whose lines departed in every span
 #: flagged (``rejected-off``); with every veto of the lines model standing, also one on a single locked sub-band
-#: (``bands-off``); without the lines read at the told rate once the clock was heard there (``held-off``)
+#: (``bands-off``); without the lines read at the told rate once the clock was heard there (``held-off``); without a
+#: rejected window read against the spans heard before the model is ready (``early-off``)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -168,6 +169,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "onset-off": ClockedParams(model_onset=False),
     "bands-off": ClockedParams(model_min_bands=0),
     "held-off": ClockedParams(told_held_tol=0.0),
+    "early-off": ClockedParams(model_rejected_early=False),
     "off": None,
 }
 

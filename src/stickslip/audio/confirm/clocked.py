@@ -311,6 +311,12 @@ class ClockedParams:
         "a window cut short by a refire is read as model_rejected reads a rejected one (stops under music 5.9+, past "
         "it 6.1+; the hour's joint 3: 7 of 109 departed, 3.1-7.2, all back past it, 0.3-1.7)",
     )
+    model_rejected_early: bool = param(
+        True,
+        "",
+        "before the model is ready, model_rejected reads a rejected window against the spans of stepping already "
+        "offered that ended before its fire, model_min_spans of them counted (the lag: the rates bench's stops at 2 s)",
+    )
     model_onset: bool = param(
         True,
         "",

@@ -41,6 +41,7 @@ where the lines changed more than ``max_onset_off_s`` and more than the spread a
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -53,6 +54,7 @@ from ..paramfield import param
 from .chain import Fire
 from .clocked import ClockedCheck, ClockedParams, OnClock, turned_frames
 from .pause import PauseCheck
+from .stepping_lines import SteppingLines
 
 __all__ = [
     "INSIDE",
@@ -60,6 +62,7 @@ __all__ = [
     "Inside",
     "InsideParams",
     "departed_throughout",
+    "early_model",
     "held_inside",
     "held_refired",
     "onset_in_phase",
@@ -187,31 +190,53 @@ def stop_departed(x: FloatArray, lead: int, clocked: ClockedCheck, p: InsidePara
     return Inside(lo + t, spread, OnClock(math.nan, clocked.model_hz, 0, still_z=float(min(zs[j:]))))
 
 
-def departed_throughout(w: FloatArray, clocked: ClockedCheck) -> float:
+def departed_throughout(w: FloatArray, clocked: ClockedCheck, early: SteppingLines | None = None) -> float:
     """The least z over the spans of a window ``w`` (samples) the levels rejected, read against the stepping's lines
     modelled as :func:`stop_departed` reads them (up to ``window_pieces`` spans of the model's length), spreads (NaN:
     no model ready, or not one whole span). At or over ``model_max_z`` the lines departed from the stepping in every
     span: a stop the levels did not hold (music masking its drops; ``model_rejected``), held until its lines are read
-    past the window (:func:`still_departed`) and emitted flagged, its onset (the fire's) not known."""
-    cp, m, n = clocked.p, clocked.model, clocked.model_n
-    if m is None or n <= 0 or w.size < n or not (clocked.models_lines() and clocked.model_ready()):
+    past the window (:func:`still_departed`) and emitted flagged, its onset (the fire's) not known. ``early``: read
+    against that model instead, the spans offered before the model was ready (:func:`early_model`)."""
+    cp, m, n = clocked.p, clocked.model if early is None else early, clocked.model_n
+    ready = clocked.model_ready() or early is not None
+    if m is None or n <= 0 or w.size < n or not (clocked.models_lines() and ready):
         return math.nan
     k = min(cp.window_pieces, w.size // n)
-    return float(np.min([m.z_of(m.levels(w[i * n : (i + 1) * n])[0], cp.model_min_spans, cp.model_floor_db)
-                         for i in range(k)]))  # fmt: skip
+    need = 0.0 if early is not None else cp.model_min_spans  # (early: the spans counted by early_model)
+    return float(np.min([m.z_of(m.levels(w[i * n : (i + 1) * n])[0], need, cp.model_floor_db) for i in range(k)]))
 
 
-def still_departed(x: FloatArray, clocked: ClockedCheck) -> float:
+def early_model(clocked: ClockedCheck, before: int) -> SteppingLines | None:
+    """Before the stepping's lines modelled are ready (``model_lag_s``: a span is modelled only once any fire over it
+    was judged), the model with every span already offered that ended by absolute sample ``before`` (a fire's onset:
+    stepping, as the fire's own reference is) and was stepping accepted, where ``model_min_spans`` spans are counted
+    so (``model_rejected_early``; the tuning's stops in the rates bench come 2 s into listening, the model ready at
+    about 5 s). None: not so, the model ready, or the lines not modelled (:meth:`.ClockedCheck.models_lines`)."""
+    cp, m, sr = clocked.p, clocked.model, clocked.sample_rate
+    if not cp.model_rejected_early or m is None or clocked.model_ready() or not clocked.models_lines():
+        return None
+    got = [(t, level, share) for t, level, share, alone in clocked.pending if alone and t * sr <= before]
+    if math.ceil(m.weight) + len(got) < math.ceil(cp.model_min_spans):
+        return None
+    early = copy.deepcopy(m)
+    for t, level, share in got:
+        early.add(level, share, t)
+    return early
+
+
+def still_departed(x: FloatArray, clocked: ClockedCheck, early: SteppingLines | None = None) -> float:
     """After a window a stop was found departed in (:func:`stop_departed`), the samples ``x`` that followed it read
     against the stepping's lines modelled in pieces of ``model_hold_piece_s``: the least z over them, spreads (NaN:
     no model, or not one whole piece). At an end stop the joint steps on into it until the traverse stops commanding:
-    its lines stay departed; music, speech or a radio over the stepping change and change back (``model_hold_s``)."""
-    cp, m = clocked.p, clocked.model
+    its lines stay departed; music, speech or a radio over the stepping change and change back (``model_hold_s``).
+    ``early``: against that model instead (:func:`early_model`)."""
+    cp, m = clocked.p, clocked.model if early is None else early
     n = int(round(cp.model_hold_piece_s * clocked.sample_rate))
     if m is None or n <= 0 or x.size < n:
         return math.nan
+    need = 0.0 if early is not None else cp.model_min_spans
     pieces = [x[i * n : (i + 1) * n] for i in range(x.size // n)]
-    return float(np.min([m.z_of(m.levels(v)[0], cp.model_min_spans, cp.model_floor_db) for v in pieces]))
+    return float(np.min([m.z_of(m.levels(v)[0], need, cp.model_floor_db) for v in pieces]))
 
 
 @dataclass(frozen=True)
@@ -239,6 +264,9 @@ class Held:
     #: the window was cut short by a fire that stays pending beside the hold (``model_refired``): dropped if the hold
     #: emits a stop, judged as it comes if not
     beside: bool = False
+    #: the model the window was read against where the stepping's modelled was not yet ready (:func:`early_model`;
+    #: None: the stepping's modelled)
+    early: SteppingLines | None = None
 
     def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
         """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
@@ -247,7 +275,7 @@ class Held:
         :attr:`doubt`: the event, flagged unless the least z reached ``model_in_step_hold_z``."""
         if self.until <= self.end:
             return self.event, math.nan
-        z = still_departed(x, clocked)
+        z = still_departed(x, clocked, self.early)
         need = clocked.p.model_max_z if self.doubt is None else clocked.p.model_in_step_hold_z
         if z < need and self.doubt is None:
             return None, z
@@ -315,14 +343,16 @@ def _rejected_departed(
     the room's noise under music reads out of step (the fifth generator's damped arm, 1 % jitter, 1100 Hz: 0.35 of the
     model's 0.81, +4.8 dB)."""
     end, t0_s, sr = at
-    z = departed_throughout(w, clocked)
+    on = fire.ev.onset_s
+    early = early_model(clocked, int(round((on - t0_s) * sr)))  # (None: the model ready, or too few spans)
+    z = departed_throughout(w, clocked, early)
     if not z >= clocked.p.model_max_z or pause.stopped(w) is not None:  # (NaN: not read)
         return None
     found_s = t0_s + end / sr
-    on = fire.ev.onset_s
     ev = StopEvent(found_s, on, fire.ev.level_db, found_s, found_s - on, True, found_late=True)
-    why = f"{why}; its lines departed from the stepping's in every span (z {z:.1f}): onset unknown"
-    return Held(fire, ev, None, end, end + int(round(clocked.p.model_hold_s * sr)), flagged=why)
+    read = "the stepping's" if early is None else "the stepping's heard before it"
+    why = f"{why}; its lines departed from {read} in every span (z {z:.1f}): onset unknown"
+    return Held(fire, ev, None, end, end + int(round(clocked.p.model_hold_s * sr)), flagged=why, early=early)
 
 
 def held_refired(
