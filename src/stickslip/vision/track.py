@@ -615,7 +615,8 @@ def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 
     if by > narrow:
         return Lost("occluded", f"the needle's registered width {wc.s[j]:.0f} px behind the fit's tip is narrower "
                                 f"than the first frame's by {by:.1f} px more than the station allows (at most "
-                                f"{narrow:g}): the far end of something over the tip, the needle's own end further back")
+                                f"{narrow:g}): the far end of something over the tip, the needle's own end further "
+                                f"back")
     k = int(np.argmax(wc.short)) if wc.short else -1
     if k < 0 or not wc.short[k] > slack:
         return None
