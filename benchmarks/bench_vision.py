@@ -265,6 +265,7 @@ _RULES = (
     ("edges fade right behind", "edges near"),
     ("nothing vouches", "nothing vouches"),
     ("not as wide as the first frame", "width"),
+    ("registered width", "width narrow"),
     ("not found near the last fix", "not found"),
 )
 

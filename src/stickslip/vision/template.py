@@ -192,6 +192,15 @@ class TrackerParams:
         station behind a fix, px: whole samples on either edge and their jitter (up to 3.5
         px behind the own frames' good fixes). Behind an occluder's far end taken for the
         tip the needle, past the occluder, is its own further back: narrower, or to the side.
+    width_narrow : float
+        How much narrower than what each width station allows (``along_limit`` px of the taper plus
+        ``along_sigmas`` standard deviations) the registered width ``dw`` may be at any one station behind a
+        fix, px (``inf``: no such rule, the stations' median alone): anything beside the needle only widens
+        it, so one station suffices, as for the extent; but on a structured ground (a real micrograph) the
+        extent's threshold takes the ground for needle and reads wider, where the registration still reads
+        the needle's own edges. The registration's error beyond its matched-filter deviation (the ground's
+        structure is not pixel noise): up to 2.3 px behind the own sets' good fixes, 1.4 px over own
+        micrograph grounds (docs/vision-log.md, "An occluded tip on a real micrograph").
     width_stations : int
         Least number of the width's stations (:mod:`.width`) that must lie in the frame
         behind a fix for the width to be checked, 1: the check is a median over them.
@@ -202,6 +211,15 @@ class TrackerParams:
         the end's outline (its chord is as wide as the needle over about its radius), and
         only the shaft's width further back tells them apart, so a fix nothing vouches for
         is not given.
+    vouch_unlearnt : bool
+        Whether a fix is to be vouched for (as one behind which too few stations lie in the frame: the
+        found-again rules or the outline) also where the first frame itself showed fewer than
+        ``width_stations`` width stations (``True``), or is taken unchecked there (``False``, the
+        default): a needle whose shaft the ground's structure cuts short in the first frame (a real
+        micrograph's dark band across it) is otherwise vouched for by nothing behind its tip, and an
+        occluder's far rim is taken for the tip; but on the own sets it refuses 22 good fixes (0.05 to
+        2.7 px off) for that one wrong fix, most of a sequence whose first frame learns no station
+        (docs/vision-log.md, "An occluded tip on a real micrograph").
     outline_reach : float
         How far behind a fit nothing else vouches for (fewer than ``width_stations`` in the frame) its
         outline must be read on at least one edge for the outline to vouch for it, px (``inf``: never): a
@@ -296,6 +314,8 @@ class TrackerParams:
     width_slack: float = 2.0
     extent_depth: float = 2.0
     extent_slack: float = 5.0
+    width_narrow: float = 3.0
+    vouch_unlearnt: bool = False
     weight_falloff: float = 0.5
     lap_blur: float = 1.0
     thin_blur: float = 2.2

@@ -547,11 +547,12 @@ def _width_of(ws: WidthStations | None, p: TrackerParams, cand: _Candidate,
     fit near the last fix. A tip found again (its standard deviation ``found_sigma``, px) has passed the
     stricter rules for one (its correlation, its mismatch against the recent fixes'): they vouch for it
     instead when its standard deviation is at most ``p.unvouched_sigma`` (docs/vision.md, "Decision rules")."""
+    vouched = found_sigma is not None and found_sigma <= p.unvouched_sigma
     if ws is None:
-        return None, False
+        # the first frame showed fewer than width_stations: nothing behind the tip can be checked
+        return None, p.vouch_unlearnt and not p.trust_unchecked and not vouched
     r = cand.ref
     wc = check_width(ws, cand.level, image, r.x, r.y, r.theta, p.along_limit, p.along_sigmas, p.width_stations)
-    vouched = found_sigma is not None and found_sigma <= p.unvouched_sigma
     return wc, wc is None and not p.trust_unchecked and not vouched
 
 
@@ -595,7 +596,7 @@ def _not_found(refused: tuple[float, Lost] | None) -> Lost:
 
 
 def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3,
-                   slack: float = math.inf) -> Lost | None:
+                   slack: float = math.inf, narrow: float = math.inf) -> Lost | None:
     """The refusal of a fix behind which the needle is not as wide as the first frame showed it
     (:mod:`.width`; ``None``: it is, or was not checked): most stations' widths differ, or at one
     station the needle's extent across the shaft is narrower by more than ``slack`` px beyond what
@@ -603,13 +604,19 @@ def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 
     fix behind which fewer than ``least`` of the stations the first frame showed lie in the frame."""
     if wc is None and unvouched:
         return Lost("lost", f"fewer than {least} of the needle's width stations behind the fit's tip lie in the "
-                            f"field: nothing vouches that the end seen is the tip")
+                            f"field (or the first frame showed fewer): nothing vouches that the end seen is the tip")
     if wc is None:
         return None
     if wc.excess > 0.0:
         return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
                                 f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px off): "
                                 f"the end of something over the tip")
+    j, by = wc.narrow
+    if by > narrow:
+        return Lost("occluded", f"the needle's registered width {wc.s[j]:.0f} px behind the fit's tip is narrower "
+                                f"than the first frame's by {by:.1f} px more than the station allows (at most "
+                                f"{narrow:g}): the far end of something over the tip, the needle's own end further "
+                                f"back")
     k = int(np.argmax(wc.short)) if wc.short else -1
     if k < 0 or not wc.short[k] > slack:
         return None
@@ -822,7 +829,7 @@ class TipTracker:
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
             self._width, p, cand, image, res.sigma if reacquire else None)
         unvouched = unvouched and not (isinstance(res, Fix) and _vouched(self, cand, image, res.sigma))
-        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack)
+        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack, p.width_narrow)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool, last: int) -> Result:

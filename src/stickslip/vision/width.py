@@ -196,6 +196,13 @@ class WidthCheck:
         """The stations' median of ``|dw|`` less what each allows, px (positive: most disagree)."""
         return median(np.abs(np.asarray(self.dw)) - np.asarray(self.tolerance))  # numpy.median's, bit for bit
 
+    @property
+    def narrow(self) -> tuple[int, float]:
+        """The station (its index) whose width is narrower than it allows by the most, and by how much, px
+        (``-dw`` less the tolerance; negative: no station is)."""
+        k = int(np.argmax(-np.asarray(self.dw) - np.asarray(self.tolerance)))
+        return k, -self.dw[k] - self.tolerance[k]
+
 
 def _windows(widths: Sequence[float], ts: FloatArray) -> list[tuple[IntArray, IntArray]]:
     """Each station's left and right edge windows: sample indices from the needle's middle out to
