@@ -132,8 +132,8 @@ def test_peer_frames_what_the_tracker_reaches(peer_results):
 @pytest.mark.slow
 @pytest.mark.xfail(
     strict=True,
-    reason="not met yet on the peer renderer (bench_vision, 500 frames, after one edge of the outline vouches "
-    "near the field's edge: median 0.58 px, p95 1.18 px, largest 2.30 px, 7.7 % of visible tips refused); "
+    reason="not met yet on the peer renderer (bench_vision, 500 frames, after one width station too narrow "
+    "refuses: median 0.58 px, p95 1.17 px, largest 2.30 px, 7.9 % of visible tips refused); "
     "docs/vision-log.md",
 )
 def test_peer_frames_meet_the_issues_numbers(peer_results):
