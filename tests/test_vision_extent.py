@@ -18,10 +18,11 @@ from functools import lru_cache
 import numpy as np
 import pytest
 from occlusion_scenes import SUB, _down, _grid, _needle, scene_sequence
+from width_learnt import learnt_width
 
-from stickslip.vision.template import TipTemplate, TrackerParams
+from stickslip.vision.template import TrackerParams
 from stickslip.vision.track import _width_refusal
-from stickslip.vision.width import WidthStations, check_width, learn_width, runs
+from stickslip.vision.width import WidthStations, check_width, runs
 
 SIZE = 160
 ANGLE = math.radians(200.0)  # from the tip up the shaft: to the left, a little up
@@ -46,13 +47,7 @@ def _render(tip: tuple[float, float], bead: tuple[float, float, float] | None, s
 @lru_cache(maxsize=1)
 def _learnt() -> tuple[WidthStations, TrackerParams]:
     p = TrackerParams()
-    first = _render(TIP, None, 1)
-    t = TipTemplate.learn(first, TIP, p)
-    smooth = [(math.hypot(p.template_blur, b), p.template_blur) for b in p.blur_bank]
-    ws = learn_width(first, TIP, t.shaft, t.ground[0], t.ground[1], p.contrast, t.noise, smooth, p.width_shift,
-                     p.width_slack, p.extent_depth)
-    assert ws is not None
-    return ws, p
+    return learnt_width(_render(TIP, None, 1), TIP, p), p
 
 
 def test_a_clean_tip_is_as_wide_as_first_seen_at_every_station() -> None:

@@ -29,10 +29,11 @@ import numpy as np
 import pytest
 from occlusion_scenes import _down, _grid, _needle
 from scipy import ndimage
+from width_learnt import learnt_width
 
-from stickslip.vision.template import TipTemplate, TrackerParams
+from stickslip.vision.template import TrackerParams
 from stickslip.vision.track import Fix, TipTracker, _width_refusal
-from stickslip.vision.width import WidthCheck, WidthStations, check_width, learn_width
+from stickslip.vision.width import WidthCheck, WidthStations, check_width
 
 SIZE = 160
 ANGLE = math.radians(200.0)
@@ -63,13 +64,7 @@ def _render(tip: tuple[float, float], bead: bool, seed: int) -> np.ndarray:
 @lru_cache(maxsize=1)
 def _learnt() -> tuple[WidthStations, TrackerParams]:
     p = TrackerParams()
-    first = _render(TIP, False, 1)
-    t = TipTemplate.learn(first, TIP, p)
-    smooth = [(math.hypot(p.template_blur, b), p.template_blur) for b in p.blur_bank]
-    ws = learn_width(first, TIP, t.shaft, t.ground[0], t.ground[1], p.contrast, t.noise, smooth, p.width_shift,
-                     p.width_slack, p.extent_depth)
-    assert ws is not None
-    return ws, p
+    return learnt_width(_render(TIP, False, 1), TIP, p), p
 
 
 def _subset(wc: WidthCheck, keep: list[int]) -> WidthCheck:

@@ -14,10 +14,11 @@ from functools import lru_cache
 
 import numpy as np
 import pytest
+from width_learnt import learnt_width
 
 from stickslip.sim.camera import SimCamSettings, SimScene
-from stickslip.vision.template import TipTemplate, TrackerParams
-from stickslip.vision.width import FROM, WidthStations, _on_the_taper, check_width, learn_width
+from stickslip.vision.template import TrackerParams
+from stickslip.vision.width import FROM, WidthStations, _on_the_taper, check_width
 
 SHAFT = np.array([-1.0, 0.15])
 TIP = (60.0, 80.0)
@@ -28,13 +29,7 @@ GROWTH = 2.0 * math.tan(math.radians(8.0))  # the cone's full width, px per px a
 def _learnt(look: str) -> tuple[np.ndarray, WidthStations]:
     scene = SimScene(SimCamSettings(look=look, width=160, height=160, photons=200.0, seed=5,
                                     tip_radius_m=0.25e-6 * 10.0, pixel_size_m=0.5e-6, taper=math.radians(8.0)))
-    first = scene.render(np.array(TIP), SHAFT, 1.0)
-    p = TrackerParams()
-    t = TipTemplate.learn(first, TIP, p)
-    smooth = [(math.hypot(p.template_blur, b), p.template_blur) for b in p.blur_bank]
-    ws = learn_width(first, TIP, t.shaft, t.ground[0], t.ground[1], p.contrast, t.noise, smooth, p.width_shift,
-                     p.width_slack)
-    assert ws is not None
+    ws = learnt_width(scene.render(np.array(TIP), SHAFT, 1.0), TIP, extent=False)
     return scene.render(np.array(TIP), SHAFT, 1.0), ws
 
 
