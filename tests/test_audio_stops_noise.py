@@ -19,6 +19,8 @@ that fire's onset, inside the stop (``model_onset``): it flags the late count to
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from fan_sound import SR, Arm, Scene, render, tuning_scene
 from hour_sound import RMS, _span_source
@@ -26,6 +28,7 @@ from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.confirm.clocked import ClockedParams
+from stickslip.audio.confirm.onset import ONSET
 from stickslip.audio.detector import detector_for
 from stickslip.audio.events import StopEvent
 
@@ -47,7 +50,7 @@ def _heard(
     clocked = ClockedParams(
         onset_ref_stoplike=onset_ref_stoplike, model_in_step=in_step, model_hold_s=0.0, model_onset=onset
     )
-    p = ConfirmParams(clocked=clocked)
+    p = ConfirmParams(clocked=clocked, onset=replace(ONSET, break_check=False))  # (it flags the late one too)
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)
     return det.feed(y) + det.finish(), det.log.onset

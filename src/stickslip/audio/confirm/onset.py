@@ -12,6 +12,11 @@ traverse counts its steps to the onset, so an onset the evidence doubts is flagg
 * *a template learned anew since a rejected fire*: it may have learned the stop;
 * *a gap after the fire*: in the window's first half the frames were not stop-like for as
   long as the hold: the sound that fired went away (a knock or a drift just before the stop);
+* *a break before the fire*: between the onset's crossing and the fire, more frames running were
+  not stop-like than the hold's ``max_dips`` (a stop's own dips, tuned), over a stepping that was
+  hot by itself in the ``base_s`` before the crossing: the run the onset began may be one of its
+  flickers, not the one that fired (off the tuning's rate the stepping flickers hot for a few
+  frames; the hold keeps such a flicker's crossing when the stop's frames follow within its window);
 * *a fire weaker than the stop*: the stop-likeness over the fire's hold was under
   ``fire_level`` of that over the window's second half;
 * *a stop heard late*: the stop-like run that ends in the fire (dips of ``back_dips``
@@ -77,6 +82,9 @@ class OnsetParams:
         0.5, "", "... never above this share of the way to the stop (another rate flickers to 0.5-1.4 thresholds)"
     )
     held_dips: int = param(1, "frames", "a hot frame after which the climb held: no run under its level longer")
+    break_check: bool = param(
+        True, "", "doubt an onset whose stop-like run broke (over max_dips) before the fire, the stepping hot by itself"
+    )
 
 
 ONSET = OnsetParams()
@@ -122,6 +130,7 @@ class OnsetJudge:
     def __init__(self, tuning: Tuning, log: FrameLog, window_frames: int, look: int, p: OnsetParams = ONSET) -> None:
         self.log, self.window_frames, self.look, self.p = log, window_frames, look, p
         self.hold_frames = int(tuning.hold_frames) + int(tuning.max_dips)
+        self.max_dips = int(tuning.max_dips)
         self.lag = float(tuning.onset_lag_s)
         self.levels = tuning.method == "template"  # margins + 1 are a / threshold (a band tuning's are dB)
         self.threshold = float(tuning.threshold_db)
@@ -162,6 +171,12 @@ class OnsetJudge:
         half = m[: max(1, min(m.size, self.window_frames // 2))]
         if longest_gap(half >= 0.0) >= self.hold_frames:
             return OnsetVerdict("a gap after the fire")
+        broke = self._break_before(ev, fire)
+        if broke is not None:
+            return OnsetVerdict(
+                f"a break before the fire ({broke[0]} frames not stop-like after the onset; the stepping before it"
+                f" hot in {broke[1]} frames)"
+            )
         if not self.levels:
             return OnsetVerdict()
         win = m[: self.window_frames] + 1.0
@@ -188,6 +203,25 @@ class OnsetJudge:
             if any(lo_s < end <= fire * log.hop + log.frame - 1 for end in relearned):
                 return "a template learned anew since a rejected fire"
         return None
+
+    def _break_before(self, ev: StopEvent, fire: int) -> tuple[int, int] | None:
+        """The longest run of frames not stop-like between the onset's crossing and the fire, where longer than the
+        tuning's ``max_dips``, and the hot frames of the stepping before the crossing (``base_s`` ending ``base_gap_s``
+        before it), where it had any: it flickers hot by itself, and the run the onset began may be a flicker (None:
+        no such break, a stepping never hot, the check off, or the frames not kept)."""
+        log = self.log
+        if not self.p.break_check:
+            return None
+        cross = ev.onset_s + self.lag
+        c = int(math.floor(((cross - log.t0) * log.sample_rate - log.frame + 1) / log.hop)) + 1  # first frame after
+        lo = max(c, log.base, fire - self.look)
+        base = self._base(c, fire)
+        if lo >= fire or base is None:
+            return None
+        run = longest_gap(np.array([log.margin(i) >= 0.0 for i in range(lo, fire + 1)], dtype=bool))
+        base_n = max(1, int(round(self.p.base_s * log.sample_rate / log.hop)))
+        hot = sum(log.hot(i) for i in range(base.lo, base.lo + base_n))
+        return (run, hot) if run > self.max_dips and hot > 0 else None
 
     def _weak_fire(self, fire: int, late: FloatArray) -> bool:
         """Was the stop-likeness over the fire's hold under ``fire_level`` of the window's second half?"""
