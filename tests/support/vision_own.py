@@ -29,7 +29,8 @@ from numpy.typing import NDArray
 from stickslip.sim.camera import Droplet, Flake, LobedParticle, SimCamSettings, SimScene
 
 __all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "flake_benchmark",
-           "round_benchmark", "droplet_benchmark", "micrograph", "micrograph_benchmark", "KINDS", "MICROGRAPHS"]
+           "round_benchmark", "droplet_benchmark", "micrograph", "micrograph_benchmark",
+           "micrograph_sequence", "KINDS", "MICROGRAPHS"]
 
 KINDS = ("visible", "out", "occluded", "defocused")
 
@@ -556,13 +557,17 @@ def micrograph_benchmark(ground: str, seed: int, n_seq: int = 40, per_sequence: 
     """The micrograph mode: ``n_seq`` bright-field sequences over the micrograph ``ground`` (:data:`MICROGRAPHS`),
     tips 10 to 18 px, 50 to 120 photons (drawn per sequence), events at 0.15 a frame; empty without
     scikit-image."""
+    if micrograph(ground) is None:
+        return []
+    return [micrograph_sequence(ground, seed, s, per_sequence, size) for s in range(n_seq)]
+
+
+def micrograph_sequence(ground: str, seed: int, index: int, per_sequence: int = 40, size: int = 256) -> OwnSequence:
+    """Sequence ``index`` of :func:`micrograph_benchmark`'s set (``ground``, ``seed``); scikit-image needed."""
     src = micrograph(ground)
     if src is None:
-        return []
-    out = []
-    for s in range(n_seq):
-        rng = np.random.default_rng([seed, s, 99])
-        width, photons = float(rng.uniform(10.0, 18.0)), float(rng.uniform(50.0, 120.0))
-        out.append(own_sequence(seed * 1000 + s, per_sequence, size, width_px=width, look="optical",
-                                photons=photons, event_rate=0.15, ground=src))
-    return out
+        raise RuntimeError("the micrograph mode needs scikit-image (the dev extra: it ships the files)")
+    rng = np.random.default_rng([seed, index, 99])
+    width, photons = float(rng.uniform(10.0, 18.0)), float(rng.uniform(50.0, 120.0))
+    return own_sequence(seed * 1000 + index, per_sequence, size, width_px=width, look="optical", photons=photons,
+                        event_rate=0.15, ground=src)
