@@ -256,6 +256,7 @@ _RULES = (
     ("of the tip's window is outside", "coverage"),
     ("of the tip's template disagrees", "outliers"),
     ("of the ground in front of the tip", "front share"),
+    ("that copy matches as well", "top copy read"),
     ("or more against the first frame", "top blur copy"),
     ("worse than this sequence's fixes", "mismatch"),
     ("correlation ", "min score"),
@@ -273,6 +274,7 @@ _RULES = (
     ("nothing vouches", "nothing vouches"),
     ("not as wide as the first frame", "width"),
     ("registered width", "width narrow"),
+    ("wider than the first frame's by", "width near wide"),
     ("not found near the last fix", "not found"),
 )
 

@@ -57,16 +57,17 @@ def _track_to(seq, last: int, params):  # type: ignore[no-untyped-def]
     return res
 
 
-@pytest.mark.parametrize(("index", "frame", "off", "change", "detail"), [
-    (1, 34, 4.8, {"focus_top_read": False}, "that copy matches as well"),
-    (30, 32, 4.6, {"width_near_wide": float("inf")}, "wider than the first frame's"),
+@pytest.mark.parametrize(("index", "frame", "off", "on", "change", "detail"), [
+    (1, 34, 4.8, {}, {"focus_top_read": False}, "that copy matches as well"),
+    (30, 32, 4.6, {"width_near_wide": 1.0}, {}, "wider than the first frame's"),
 ])
-def test_the_retina_sets_wrong_fixes_are_refused(index, frame, off, change, detail):
+def test_the_retina_sets_wrong_fixes_are_refused(index, frame, off, on, change, detail):
     """The micrograph mode's two wrong fixes on main (retina, seed 3): sequence 1 frame 34, a tip blurred 7.1 px past
     the first frame's fitted with the 4.5 px copy 4.6 px behind it, where the 6 px copy matches as well (0.9682 against
-    0.9673; the hysteresis kept the 4.5 px copy); sequence 30 frame 32, a disc over the tip taken 4.1 px ahead, the two
-    stations nearest it 4.8 px wider (1.8 and 2.3 px beyond what they allow), outvoted by eight further back. Each is
-    refused by its rule and fixed without it."""
+    0.9673; the hysteresis kept the 4.5 px copy): refused by default (``focus_top_read``); sequence 30 frame 32, a disc
+    over the tip taken 4.1 px ahead, the two stations nearest it 4.8 px wider (1.8 and 2.3 px beyond what they allow),
+    outvoted by eight further back: refused with ``width_near_wide=1`` (off by default). Each is fixed without its
+    rule."""
     from dataclasses import replace
 
     from vision_own import micrograph_sequence
@@ -76,7 +77,7 @@ def test_the_retina_sets_wrong_fixes_are_refused(index, frame, off, change, deta
 
     seq = micrograph_sequence("retina", 3, index)
     truth = seq.frames[frame].tip
-    got = _track_to(seq, frame, TrackerParams())
+    got = _track_to(seq, frame, replace(TrackerParams(), **on))
     assert isinstance(got, Lost) and detail in got.detail
     without = _track_to(seq, frame, replace(TrackerParams(), **change))
     assert isinstance(without, Fix)

@@ -210,9 +210,11 @@ class TrackerParams:
         match about equally (docs/vision-log.md, "The own renderer over real micrographs").
     width_near_wide : float
         How much wider than they allow (``width_narrow``'s allowance) the two width stations nearest a fix may
-        both be, px (``inf``: no such rule): an occluder over the tip about as wide as the needle widens the
-        stations it covers, the nearest ones, and on a long shaft the stations further back outvote them in
-        the median (docs/vision-log.md, "The own renderer over real micrographs").
+        both be, px (``inf``, the default: no such rule): an occluder over the tip about as wide as the needle
+        widens the stations it covers, the nearest ones, and on a long shaft the stations further back outvote
+        them in the median. 1 px refuses the own micrograph mode's one such fix (1.8 px) and no good own fix
+        (at most 0.2 px), but one good fix (1.2 px off) of the second renderer's and no wrong one: off
+        (docs/vision-log.md, "The own renderer over real micrographs").
     width_stations : int
         Least number of the width's stations (:mod:`.width`) that must lie in the frame
         behind a fix for the width to be checked, 1: the check is a median over them.
@@ -329,7 +331,7 @@ class TrackerParams:
     width_narrow: float = 3.0
     vouch_unlearnt: bool = False
     focus_top_read: bool = True
-    width_near_wide: float = 1.0
+    width_near_wide: float = math.inf
     weight_falloff: float = 0.5
     lap_blur: float = 1.0
     thin_blur: float = 2.2
