@@ -39,6 +39,12 @@ edge their shaft leaves by, with a bead or without; ``FRAMES`` default 200).
 transparent droplet clinging to the tip refracts it, bright field only; ``FRAMES`` default 200;
 the "wide" run is its seed 1, tips 14 to 18 px).
 
+``--micrograph [SEQUENCES]`` does the same over real micrographs (``micrograph_benchmark``: the own renderer's
+bright-field frames with scikit-image's ``microaneurysms.png`` zoomed 4 times or ``retina.jpg``'s green channel
+as the substrate, files the second renderer does not use; tips 10 to 18 px, 50 to 120 photons, events at 0.15 a
+frame; seeds 1 to 3 of each ground, ``SEQUENCES`` of 40 frames each, default 40); without scikit-image (the dev
+extra) it says so and measures nothing.
+
 ``--seed N`` takes the second renderer's draw ``N`` (``peer_benchmark(seed=N)``: other looks, backgrounds,
 paths and events; default 0, the draw every number above was measured on), for the tracking, ``--refusals``
 and ``--scenes`` (the third generator's draw ``N`` only, tips 6 to 22 px).
@@ -125,6 +131,7 @@ from vision_own import (  # noqa: E402
     droplet_benchmark,
     flake_benchmark,
     lobed_benchmark,
+    micrograph_benchmark,
     own_benchmark,
     round_benchmark,
 )
@@ -249,6 +256,7 @@ _RULES = (
     ("of the tip's window is outside", "coverage"),
     ("of the tip's template disagrees", "outliers"),
     ("of the ground in front of the tip", "front share"),
+    ("that copy matches as well", "top copy read"),
     ("or more against the first frame", "top blur copy"),
     ("worse than this sequence's fixes", "mismatch"),
     ("correlation ", "min score"),
@@ -266,6 +274,7 @@ _RULES = (
     ("nothing vouches", "nothing vouches"),
     ("not as wide as the first frame", "width"),
     ("registered width", "width narrow"),
+    ("wider than the first frame's by", "width near wide"),
     ("not found near the last fix", "not found"),
 )
 
@@ -852,6 +861,32 @@ def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | N
     return len(bad)
 
 
+def micrographs(n_seq: int) -> dict[str, tuple[int, int, int]]:
+    """Track the micrograph mode's six sets; per set the visible tips refused, the visible tips and the wrong
+    fixes (more than 3 px off or on a hidden tip). Empty without scikit-image."""
+    out: dict[str, tuple[int, int, int]] = {}
+    for ground in ("micro", "retina"):
+        for seed in (1, 2, 3):
+            seqs = micrograph_benchmark(ground, seed, n_seq)
+            if not seqs:
+                print("the micrograph mode skipped: scikit-image (the dev extra, which ships the files) is missing")
+                return out
+            print(f"\n{ground} {seed}: the own renderer over {ground}'s ground, seed {seed}")
+            tally, bad, errors = _tally(seqs, lambda f, img: _lobed_class(f, img.shape[1]),
+                                        lambda s: f"{s.photons:.0f} photons")
+            visible = sum(n for (w, _), n in tally.items() if w.startswith("visible"))
+            refused = sum(n for (w, v), n in tally.items() if w.startswith("visible") and v != "fix")
+            hidden = sum(n for (w, v), n in tally.items() if not w.startswith("visible") and v == "fix")
+            wrong = hidden + sum(1 for b in bad if b[3].startswith("visible"))
+            _print_tally(seqs, tally, bad, errors, lambda s: f"{s.photons:.0f} photons",
+                         f"{refused} of {visible} refused; ")
+            out[f"{ground} {seed}"] = (refused, visible, wrong)
+    print("\nset: visible tips refused / visible, wrong fixes (more than 3 px off or on a hidden tip)")
+    for name, (refused, visible, wrong) in out.items():
+        print(f"  {name:<9} {refused:>4} / {visible:>4}, {wrong}")
+    return out
+
+
 def scenes(n_frames: int, seed: int = 0, widths: tuple[float, float] = (6.0, 22.0)) -> tuple[int, int, int]:
     """Track the third generator's frames (:mod:`occlusion_scenes`); the fixes more than 3 px off, the visible
     tips refused and the visible tips."""
@@ -1026,7 +1061,7 @@ def main(argv: list[str] | None = None) -> None:
     from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
 
     check_flags(args, ["--params", "--seed", "--scenes", "--plain", "--vouch-signals", "--error-split",
-                       "--border-signals", "--refusals", "--tracking-only", *_OWN_MODES], __doc__)
+                       "--border-signals", "--refusals", "--tracking-only", "--micrograph", *_OWN_MODES], __doc__)
     if "--params" in args:  # the tracker's constants changed, e.g. --params mismatch_floor=0.03
         at = args.index("--params")
         _set_params(args[at + 1])
@@ -1046,6 +1081,10 @@ def main(argv: list[str] | None = None) -> None:
             print("\nthe same, bright field only, tips 14 to 18 px wide")
             lobed(n_own, wide=True, **kw)
             return
+    if "--micrograph" in args:
+        print("tip tracking on the own renderer's frames over real micrographs (bright field)")
+        micrographs(int(numbers[0]) if numbers else 40)
+        return
     if "--scenes" in args:
         n_sc = int(numbers[0]) if numbers else 300
         if seed is not None:

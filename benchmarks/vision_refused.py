@@ -16,8 +16,9 @@ percentile; then for the sigma (near the last fix / found again) and focus-step 
 error (within 1 px, 1-3 px, beyond), along and across, and how many every other rule takes.
 
 Run: ``PYTHONPATH=tests/support .venv/bin/python benchmarks/vision_refused.py [FRAMES] [--only NAME,NAME]
-[--save FILE] [--params NAME=VALUE,...]`` (``FRAMES`` default 400; set names have a space: ``--only "plain 0,lobed"``;
-``--load FILE,FILE`` reports saved runs).
+[--save FILE] [--params NAME=VALUE,...] [--micrograph]`` (``FRAMES`` default 400; set names have a space:
+``--only "plain 0,lobed"``; ``--load FILE,FILE`` reports saved runs; ``--micrograph``: the micrograph mode's six
+sets instead, ``micro 1`` to ``retina 3``, 1600 frames each for track51's table; they need scikit-image).
 """
 
 from __future__ import annotations
@@ -42,7 +43,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT / "benchmarks"), str(ROOT / "tests" / "support"), str(ROOT / "src")]
 
 from bench_vision import _rule, _split, learnt_sequences  # noqa: E402
-from vision_own import flake_benchmark, lobed_benchmark, own_benchmark, round_benchmark  # noqa: E402
+from vision_own import (  # noqa: E402
+    flake_benchmark,
+    lobed_benchmark,
+    micrograph_benchmark,
+    own_benchmark,
+    round_benchmark,
+)
 from vision_vetoes import readings  # noqa: E402
 
 from stickslip.vision.template import TrackerParams  # noqa: E402
@@ -81,6 +88,12 @@ def own_sets(n: int) -> dict[str, Callable[[], Any]]:
         out[name] = lambda make=make: make(n, 40, seed=0, size=256)
         out[f"{name} wide"] = lambda make=make: make(n, 40, seed=1, **wide)
     return out
+
+
+def micrograph_sets(n: int) -> dict[str, Callable[[], Any]]:
+    """The micrograph mode's six sets (``bench_vision.py --micrograph``): ``n`` frames each, in sequences of 40."""
+    return {f"{g} {s}": (lambda g=g, s=s: micrograph_benchmark(g, s, max(1, n // 40)))
+            for g in ("micro", "retina") for s in (1, 2, 3)}
 
 
 def _reported(res: Lost, judged: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -181,6 +194,7 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--save", metavar="FILE", help="keep the refused rows (pickle) for --load")
     ap.add_argument("--load", metavar="FILE,FILE", help="report saved runs instead of tracking")
     ap.add_argument("--params", metavar="NAME=VALUE,...", help="TrackerParams fields to set (floats)")
+    ap.add_argument("--micrograph", action="store_true", help="the micrograph mode's six sets instead")
     a = ap.parse_args(argv)
     rows: list[dict[str, Any]] = []
     if a.load:
@@ -189,7 +203,7 @@ def main(argv: list[str]) -> None:
                 rows += pickle.load(fh)
         report(rows)
         return
-    sets = own_sets(a.frames)
+    sets = micrograph_sets(a.frames) if a.micrograph else own_sets(a.frames)
     only = a.only.split(",") if a.only else list(sets)
     unknown = [name for name in only if name not in sets]
     if unknown:
@@ -203,7 +217,11 @@ def main(argv: list[str]) -> None:
         params = replace(params, **{key: float(value)})
     TipTracker._judge = _judge  # type: ignore[method-assign]
     for name in only:
-        rows += run(name, sets[name](), params)
+        seqs = sets[name]()
+        if not seqs:
+            print(f"{name} skipped: scikit-image (the dev extra, which ships the micrographs) is missing")
+            continue
+        rows += run(name, seqs, params)
         print(f"{name} done", flush=True)
     report(rows)
     if a.save:

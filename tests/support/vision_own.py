@@ -17,8 +17,11 @@ walk, a blur that wanders.
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -26,7 +29,8 @@ from numpy.typing import NDArray
 from stickslip.sim.camera import Droplet, Flake, LobedParticle, SimCamSettings, SimScene
 
 __all__ = ["OwnFrame", "OwnSequence", "own_sequence", "own_benchmark", "lobed_benchmark", "flake_benchmark",
-           "round_benchmark", "droplet_benchmark", "KINDS"]
+           "round_benchmark", "droplet_benchmark", "micrograph", "micrograph_benchmark",
+           "micrograph_sequence", "KINDS", "MICROGRAPHS"]
 
 KINDS = ("visible", "out", "occluded", "defocused")
 
@@ -65,7 +69,8 @@ class OwnSequence:
 def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None = None, look: str | None = None,
                  photons: float | None = None, max_blur: float = 3.0, events: bool = True,
                  event_rate: float = 0.08, lobed_rate: float = 0.0, flake_rate: float = 0.0,
-                 round_rate: float = 0.0, droplet_rate: float = 0.0) -> OwnSequence:
+                 round_rate: float = 0.0, droplet_rate: float = 0.0,
+                 ground: NDArray[np.float64] | None = None) -> OwnSequence:
     """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
 
     ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
@@ -88,6 +93,9 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     untouched by the other events starts, with that probability, a transparent droplet
     clinging to the tip for 1 to 4 frames: the tip stays visible, seen through it,
     displaced and magnified (its own stream too).
+    With ``ground`` (the micrograph mode, :func:`micrograph`), the substrate is a crop of that
+    real micrograph (:func:`_ground`) instead of the simulator's smooth texture with dust; every
+    other draw stays as without it.
     """
     rng = np.random.default_rng([seed, 31337])
     look = look or ("optical", "sem")[int(rng.integers(0, 2))]
@@ -97,6 +105,8 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     scene = SimScene(SimCamSettings(look=look, width=size, height=size, photons=ph, seed=int(seed) + 1,
                                     tip_radius_m=0.5 * W * 0.5e-6, taper=taper, pixel_size_m=0.5e-6,
                                     end="paraboloid" if round_rate > 0 else "cone"))
+    if ground is not None:  # the scene's own substrate stream, so the crop is the same for a seed
+        scene.substrate = _ground(ground, scene.substrate.shape, look, np.random.default_rng([int(seed) + 1, 7]))
     phi0 = float(rng.uniform(-math.pi, math.pi))  # the shaft's direction from the tip
     pivot = float(rng.uniform(100.0, 1000.0))
     extras = _Extras(seed, lobed_rate, W, look, size) if lobed_rate > 0 else None
@@ -497,3 +507,67 @@ def droplet_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0
                       looks: tuple[str, ...] = ("optical",)) -> list[OwnSequence]:
     """:func:`own_benchmark`'s sequences in the droplet mode (transparent droplets on the tip; bright field only)."""
     return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, droplet_rate=droplet_rate)
+
+
+MICROGRAPHS = {"micro": "microaneurysms.png", "retina": "retina.jpg"}
+"""The micrograph mode's grounds: scikit-image's shipped files the second renderer does not use (it takes
+``cell.png`` and ``ihc.png``): ``microaneurysms.png`` zoomed 4 times (cubic), and the middle 800 x 800 px of
+``retina.jpg``'s green channel (its vessels: needle-scale dark lines)."""
+
+GROUND_CONTRAST = 0.145
+"""The micrograph ground's contrast in bright field (SEM: 0.35 of it): 0.145 times the ground scaled to a spread
+of 0.5, about 8.5 % of the 0.85 mean brightness."""
+
+
+@functools.cache
+def micrograph(name: str) -> NDArray[np.float64] | None:
+    """The micrograph ``name`` (a key of :data:`MICROGRAPHS`) as a grey float image in [0, 1]; ``None``
+    without scikit-image (the dev extra: it ships the files)."""
+    spec = importlib.util.find_spec("skimage")
+    if spec is None or not spec.submodule_search_locations:
+        return None
+    from PIL import Image
+    from scipy import ndimage
+
+    path = Path(list(spec.submodule_search_locations)[0]) / "data" / MICROGRAPHS[name]
+    if not path.exists():
+        return None
+    with Image.open(path) as im:
+        if name == "retina":
+            return np.asarray(im, dtype=float)[300:1100, 300:1100, 1] / 255.0
+        return np.asarray(ndimage.zoom(np.asarray(im.convert("L"), dtype=float) / 255.0, 4, order=3), dtype=float)
+
+
+def _ground(src: NDArray[np.float64], shape: tuple[int, ...], look: str,
+            rng: np.random.Generator) -> NDArray[np.float64]:
+    """A ``shape`` crop of ``src`` (mirrored past its edges) at a corner drawn from ``rng``, as a substrate:
+    zero mean over the crop, :data:`GROUND_CONTRAST` times the micrograph scaled to a spread of 0.5."""
+    h, w = shape
+    big = np.pad(src, ((0, h), (0, w)), mode="symmetric")
+    y0, x0 = int(rng.integers(0, src.shape[0])), int(rng.integers(0, src.shape[1]))
+    img = (big[y0 : y0 + h, x0 : x0 + w] - float(np.mean(src))) / (np.std(src) * 2.0 + 1e-9)
+    img = img - img.mean()
+    if look == "optical":
+        return np.asarray(0.85 + GROUND_CONTRAST * img, dtype=float)
+    return np.asarray(0.25 + GROUND_CONTRAST * 0.35 * img, dtype=float)
+
+
+def micrograph_benchmark(ground: str, seed: int, n_seq: int = 40, per_sequence: int = 40,
+                         size: int = 256) -> list[OwnSequence]:
+    """The micrograph mode: ``n_seq`` bright-field sequences over the micrograph ``ground`` (:data:`MICROGRAPHS`),
+    tips 10 to 18 px, 50 to 120 photons (drawn per sequence), events at 0.15 a frame; empty without
+    scikit-image."""
+    if micrograph(ground) is None:
+        return []
+    return [micrograph_sequence(ground, seed, s, per_sequence, size) for s in range(n_seq)]
+
+
+def micrograph_sequence(ground: str, seed: int, index: int, per_sequence: int = 40, size: int = 256) -> OwnSequence:
+    """Sequence ``index`` of :func:`micrograph_benchmark`'s set (``ground``, ``seed``); scikit-image needed."""
+    src = micrograph(ground)
+    if src is None:
+        raise RuntimeError("the micrograph mode needs scikit-image (the dev extra: it ships the files)")
+    rng = np.random.default_rng([seed, index, 99])
+    width, photons = float(rng.uniform(10.0, 18.0)), float(rng.uniform(50.0, 120.0))
+    return own_sequence(seed * 1000 + index, per_sequence, size, width_px=width, look="optical", photons=photons,
+                        event_rate=0.15, ground=src)

@@ -201,6 +201,20 @@ class TrackerParams:
         the needle's own edges. The registration's error beyond its matched-filter deviation (the ground's
         structure is not pixel noise): up to 2.3 px behind the own sets' good fixes, 1.4 px over own
         micrograph grounds (docs/vision-log.md, "An occluded tip on a real micrograph").
+    focus_top_read : bool
+        Whether a fit with the copy next to the most blurred is refused as out of focus when the most blurred
+        copy matches it at least as well there (``True``), or only when the fit chose the most blurred copy
+        (``False``). The copy a fit settles on keeps the one it was found with unless another matches better by
+        ``level_hysteresis``, a choice meant to keep the copy steady between near-equal neighbours; and a tip
+        blurred past the bank, fitted with too little blur, sits behind the tip, where the two top copies
+        match about equally (docs/vision-log.md, "The own renderer over real micrographs").
+    width_near_wide : float
+        How much wider than they allow (``width_narrow``'s allowance) the two width stations nearest a fix may
+        both be, px (``inf``, the default: no such rule): an occluder over the tip about as wide as the needle
+        widens the stations it covers, the nearest ones, and on a long shaft the stations further back outvote
+        them in the median. 1 px refuses the own micrograph mode's one such fix (1.8 px) and no good own fix
+        (at most 0.2 px), but one good fix (1.2 px off) of the second renderer's and no wrong one: off
+        (docs/vision-log.md, "The own renderer over real micrographs").
     width_stations : int
         Least number of the width's stations (:mod:`.width`) that must lie in the frame
         behind a fix for the width to be checked, 1: the check is a median over them.
@@ -316,6 +330,8 @@ class TrackerParams:
     extent_slack: float = 5.0
     width_narrow: float = 3.0
     vouch_unlearnt: bool = False
+    focus_top_read: bool = True
+    width_near_wide: float = math.inf
     weight_falloff: float = 0.5
     lap_blur: float = 1.0
     thin_blur: float = 2.2

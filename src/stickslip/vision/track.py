@@ -412,6 +412,16 @@ def _focus_reread(t: TipTracker, cand: _Candidate, image: FloatArray, reacquire:
     return res if read == t._level else t._rules(cand, image, reacquire, last=read)
 
 
+def _top_matches(t: TipTracker, cand: _Candidate, image: FloatArray) -> bool:
+    """Whether the most blurred copy matches a fit with the copy next to it at least as well, at the fit
+    (:attr:`~.template.TrackerParams.focus_top_read`; no hysteresis: the copy is read, not kept)."""
+    if not t.params.focus_top_read or cand.level != t._top - 1:
+        return False
+    r = cand.ref
+    scores = t._levels({}, image, r.x, r.y, r.theta)
+    return scores[t._top] >= scores[cand.level]
+
+
 def _pick_level(scores: list[float], current: int, hysteresis: float) -> int:
     """The blur copy that matches best; the ``current`` one unless another beats it by ``hysteresis``."""
     best = int(np.argmax(scores))
@@ -596,11 +606,13 @@ def _not_found(refused: tuple[float, Lost] | None) -> Lost:
 
 
 def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 3,
-                   slack: float = math.inf, narrow: float = math.inf) -> Lost | None:
+                   slack: float = math.inf, narrow: float = math.inf, near_wide: float = math.inf) -> Lost | None:
     """The refusal of a fix behind which the needle is not as wide as the first frame showed it
     (:mod:`.width`; ``None``: it is, or was not checked): most stations' widths differ, or at one
     station the needle's extent across the shaft is narrower by more than ``slack`` px beyond what
-    the along-axis limit changes it by (:attr:`~.width.WidthCheck.short`); with ``unvouched``, of a
+    the along-axis limit changes it by (:attr:`~.width.WidthCheck.short`), or the two stations nearest the tip are
+    both wider than they allow by more than ``near_wide`` px (:attr:`~.width.WidthCheck.near_wide`); with
+    ``unvouched``, of a
     fix behind which fewer than ``least`` of the stations the first frame showed lie in the frame."""
     if wc is None and unvouched:
         return Lost("lost", f"fewer than {least} of the needle's width stations behind the fit's tip lie in the "
@@ -611,6 +623,10 @@ def _width_refusal(wc: WidthCheck | None, unvouched: bool = False, least: int = 
         return Lost("occluded", f"the needle behind the fit's tip is not as wide as the first frame showed it at "
                                 f"{wc.disagree} of {wc.n} stations (up to {max(abs(d) for d in wc.dw):.1f} px off): "
                                 f"the end of something over the tip")
+    if wc.near_wide > near_wide:
+        return Lost("occluded", f"the needle {wc.s[0]:.0f} and {wc.s[1]:.0f} px behind the fit's tip is wider than the "
+                                f"first frame's by {wc.near_wide:.1f} px more than the stations allow (at most "
+                                f"{near_wide:g}): something over the tip, the stations further back outvoting them")
     j, by = wc.narrow
     if by > narrow:
         return Lost("occluded", f"the needle's registered width {wc.s[j]:.0f} px behind the fit's tip is narrower "
@@ -829,7 +845,8 @@ class TipTracker:
         wc, unvouched = (None, False) if refusal or not isinstance(res, Fix) else _width_of(
             self._width, p, cand, image, res.sigma if reacquire else None)
         unvouched = unvouched and not (isinstance(res, Fix) and _vouched(self, cand, image, res.sigma))
-        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack, p.width_narrow)
+        refusal = refusal or _width_refusal(wc, unvouched, p.width_stations, p.extent_slack, p.width_narrow,
+                                                p.width_near_wide)
         return (refusal or res), replace(cand, edges=ec, shaft=sc, width=wc, unvouched=unvouched)
 
     def _rules(self, cand: _Candidate, image: FloatArray, reacquire: bool, last: int) -> Result:
@@ -856,6 +873,9 @@ class TipTracker:
             return Lost("occluded", f"{100 * front:.0f} % of the ground in front of the tip looks like the needle")
         if cand.level == self._top or blur > p.max_blur:
             return Lost("out of focus", f"blurred by {blur:g} px or more against the first frame")
+        if _top_matches(self, cand, image):
+            return Lost("out of focus", f"blurred by {self._spec[self._top][2]:g} px or more against the first frame "
+                                        "(that copy matches as well)")
         if r.score < min_score:
             return Lost("lost", f"correlation {r.score:.2f} < {min_score:.2f}")
         limit = self._mismatch_limit(p.reacquire_ratio if reacquire else p.mismatch_ratio)

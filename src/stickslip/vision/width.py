@@ -197,6 +197,14 @@ class WidthCheck:
         return median(np.abs(np.asarray(self.dw)) - np.asarray(self.tolerance))  # numpy.median's, bit for bit
 
     @property
+    def near_wide(self) -> float:
+        """How much wider than they allow the two stations nearest the candidate tip both are, px (the smaller
+        of their ``dw`` less the tolerance; negative: one of them is not; ``-inf`` with fewer than two)."""
+        if len(self.dw) < 2:
+            return -math.inf
+        return min(self.dw[0] - self.tolerance[0], self.dw[1] - self.tolerance[1])
+
+    @property
     def narrow(self) -> tuple[int, float]:
         """The station (its index) whose width is narrower than it allows by the most, and by how much, px
         (``-dw`` less the tolerance; negative: no station is)."""
