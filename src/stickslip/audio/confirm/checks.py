@@ -24,7 +24,7 @@ from ..tuningfile import Tuning
 from .chain import Fire
 from .clocked import ClockedCheck, ClockedParams, OnClock, model_thin
 from .evidence import FrameLog, KeptSamples
-from .inside import Held, InsideParams, held_inside, held_out_of_step, held_refired, onset_in_phase
+from .inside import Held, InsideParams, held_early, held_inside, held_out_of_step, held_refired, onset_in_phase
 from .pause import PauseCheck, PauseParams, Stopped
 from .resume import AfterPause
 from .sync import SyncCheck, SyncParams, step_clock_verdict
@@ -176,10 +176,13 @@ class WindowChecks:
             return f"the stop not in phase with the steps at its onset (a {a:.2f})"
         return self._step_elsewhere(onset)
 
-    def held_out_of_step(self, fire: Fire, ev: StopEvent, end: int) -> Held | None:
+    def held_out_of_step(self, fire: Fire, ev: StopEvent, end: int, t0_s: float = 0.0) -> Held | None:
         """``ev``, confirmed on ``fire`` (its window ended at sample ``end``; onset doubts asked with ``hold_in_step``),
-        held where its lines out of step alone doubt it (:func:`.inside.held_out_of_step`). None: emitted now."""
-        return held_out_of_step(fire, ev, None if ev.onset_uncertain else self.out_of_step(), end, self.clocked)
+        held where its lines out of step alone doubt it (:func:`.inside.held_out_of_step`), or, before the model is
+        ready, to read them past the window (:func:`.inside.held_early`; ``t0_s``: the stream's start). None: now."""
+        got = held_out_of_step(fire, ev, None if ev.onset_uncertain else self.out_of_step(), end, self.clocked)
+        on = int(round((ev.onset_s - t0_s) * self.clocked.sample_rate)) if self.clocked is not None else 0
+        return got if got is not None else held_early(fire, ev, (end, on), self.clocked)
 
     def held_inside(self, fire: Fire, fed: int, t0_s: float, held: Held | None) -> Held | None:
         """A stop that began inside ``fire``'s rejected window (:func:`.inside.held_inside`; ``fed``: the samples

@@ -317,6 +317,13 @@ class ClockedParams:
         "before the model is ready, model_rejected reads a rejected window against the spans of stepping already "
         "offered that ended before its fire, model_min_spans of them counted (the lag: the rates bench's stops at 2 s)",
     )
+    model_confirmed_early: bool = param(
+        True,
+        "",
+        "before the model is ready, a stop confirmed is held model_hold_s past its window and read against every span "
+        "offered before its onset (the stepping as heard, sound and all; model_min_spans counted): flagged where its "
+        "lines came back within model_max_z (speech over the radio 0.80; the rates bench's right stops 5.0+)",
+    )
     model_onset: bool = param(
         True,
         "",

@@ -395,7 +395,7 @@ class ConfirmedStopDetector:
         self.inner.hold(False)
         if self._holds(fire.ev, fire.frame, fire.window):  # (held where only its lines out of step doubt it)
             ev = self._confirmed(fire.ev, fire.frame, fire.window, True)
-            self._held = self.checks.held_out_of_step(fire, ev, min(fire.end(self._H, self._F), self._fed))
+            self._held = self.checks.held_out_of_step(fire, ev, min(fire.end(self._H, self._F), self._fed), self._t0)
             return [ev] if self._held is None else []
         self.log.rejected.append(fire.ev)
         if self.checks.after.wait():  # the stepping stopped: listen afresh where it comes back

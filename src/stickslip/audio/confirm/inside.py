@@ -206,16 +206,19 @@ def departed_throughout(w: FloatArray, clocked: ClockedCheck, early: SteppingLin
     return float(np.min([m.z_of(m.levels(w[i * n : (i + 1) * n])[0], need, cp.model_floor_db) for i in range(k)]))
 
 
-def early_model(clocked: ClockedCheck, before: int) -> SteppingLines | None:
+def early_model(clocked: ClockedCheck, before: int, every: bool = False) -> SteppingLines | None:
     """Before the stepping's lines modelled are ready (``model_lag_s``: a span is modelled only once any fire over it
     was judged), the model with every span already offered that ended by absolute sample ``before`` (a fire's onset:
     stepping, as the fire's own reference is) and was stepping accepted, where ``model_min_spans`` spans are counted
     so (``model_rejected_early``; the tuning's stops in the rates bench come 2 s into listening, the model ready at
-    about 5 s). None: not so, the model ready, or the lines not modelled (:meth:`.ClockedCheck.models_lines`)."""
+    about 5 s). None: not so, the model ready, or the lines not modelled (:meth:`.ClockedCheck.models_lines`).
+    ``every``: every span offered, accepted or not (the stepping as heard, sound on it and all;
+    ``model_confirmed_early``, :func:`held_early`)."""
     cp, m, sr = clocked.p, clocked.model, clocked.sample_rate
-    if not cp.model_rejected_early or m is None or clocked.model_ready() or not clocked.models_lines():
+    on = cp.model_confirmed_early if every else cp.model_rejected_early
+    if not on or m is None or clocked.model_ready() or not clocked.models_lines():
         return None
-    got = [(t, level, share) for t, level, share, alone in clocked.pending if alone and t * sr <= before]
+    got = [(t, level, share) for t, level, share, alone in clocked.pending if (alone or every) and t * sr <= before]
     if math.ceil(m.weight) + len(got) < math.ceil(cp.model_min_spans):
         return None
     early = copy.deepcopy(m)
@@ -267,6 +270,9 @@ class Held:
     #: the model the window was read against where the stepping's modelled was not yet ready (:func:`early_model`;
     #: None: the stepping's modelled)
     early: SteppingLines | None = None
+    #: with a :attr:`doubt`: flagged only where its lines read back within ``model_max_z`` (not where none was read;
+    #: :func:`held_early`), not unless they reach ``model_in_step_hold_z``
+    back: bool = False
 
     def judged(self, x: FloatArray, t0_s: float, clocked: ClockedCheck) -> tuple[StopEvent | None, float]:
         """Read on ``x``, the samples fed from :attr:`end` (to :attr:`until`, or the stream's end): the event, emitted
@@ -276,12 +282,12 @@ class Held:
         if self.until <= self.end:
             return self.event, math.nan
         z = still_departed(x, clocked, self.early)
-        need = clocked.p.model_max_z if self.doubt is None else clocked.p.model_in_step_hold_z
+        need = clocked.p.model_max_z if self.doubt is None or self.back else clocked.p.model_in_step_hold_z
         if z < need and self.doubt is None:
             return None, z
         t = t0_s + (self.end + x.size) / clocked.sample_rate
         e = self.event
-        flag = e.onset_uncertain or not z >= need  # (NaN: none read)
+        flag = e.onset_uncertain or (z < need if self.back else not z >= need)  # (NaN: none read)
         return replace(e, detected_at_s=t, confirmed_at_s=t, confirmed_s=t - e.onset_s, onset_uncertain=flag), z
 
 
@@ -293,6 +299,25 @@ def held_out_of_step(fire: Fire, ev: StopEvent, why: str | None, end: int, clock
     if why is None or clocked is None:
         return None
     return Held(fire, ev, None, end, end + int(round(clocked.p.model_hold_s * clocked.sample_rate)), why)
+
+
+def held_early(fire: Fire, ev: StopEvent, at: tuple[int, int], clocked: ClockedCheck | None) -> Held | None:
+    """``ev``, confirmed on ``fire`` before the stepping's lines modelled were ready (``at``: its window's end and its
+    onset, absolute samples), held ``model_hold_s`` past the window and read there against every span offered before
+    its onset (:func:`early_model` with ``every``: the stepping as heard, the sound on it too; the model's own reading
+    needs a few seconds of stepping accepted, and speech or music from the first seconds leaves too few). At an end
+    stop the joint steps on into it and its lines stay changed; speech or music over the stepping changes them and
+    changes back: where the pieces past the window read within ``model_max_z`` of that stepping (the model's own bar
+    for "the stepping's"), the stop is flagged, never dropped (``model_confirmed_early``). None: not held (flagged
+    already, no such model, or the hold off)."""
+    if clocked is None or ev.onset_uncertain or clocked.p.model_hold_s <= 0.0:
+        return None
+    early = early_model(clocked, at[1], every=True)
+    if early is None:
+        return None
+    why = "confirmed before the stepping's lines modelled were ready; its lines came back to the stepping's past it"
+    end, hold = at[0], int(round(clocked.p.model_hold_s * clocked.sample_rate))
+    return Held(fire, ev, None, end, end + hold, why, early=early, back=True)
 
 
 def held_inside(
