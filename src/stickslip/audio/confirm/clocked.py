@@ -64,38 +64,37 @@ changes the lines read there at all: the same veto holds where the signature pre
 ``min_pred_moved_db`` RMS or more (:meth:`ClockedCheck.predicted_moved_db`); where it predicts less
 (a stop whose change at this rate lies off those lines) or cannot predict, no veto.
 
-**The stepping's lines as one model** (``lines_model``). In place of the half second before each
-fire, the stepping's lines modelled across the listening (:mod:`.stepping_lines`,
-:meth:`ClockedCheck.model_stepping`) are the reference off the tuning's rate, the rate told: under the
-same reading conditions (a comb verdict, or the predicted move), a fire whose window has a piece within
-``model_max_z`` spreads of the model is not a stop; read also where the fire's own reference was
-stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening), ``min_moved_db``
-and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a stop
-at 0.4 s). A model whose lines were locked in fewer than ``model_min_bands`` sub-bands reads one line's level,
-no RMS over the stop's signature: sound on that line scatters it either way, so its reading within does not veto,
-it flags the stop (:func:`model_thin`). Where the pieces after the one within depart from the model to
-the window's end, the stop may
-have begun there (``model_inside``; :func:`.inside.stop_departed`), emitted once its lines still depart past the
-window's end (``model_hold_s``: a stop holds while the stepping goes on; music or speech changes back). A fire
-the model lets through whose lines held under ``model_in_step`` of the model's own share in phase is flagged
-(:meth:`ClockedCheck.in_step_reading`, asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the
-joint steps on into it and its lines stay in step, only their level moves; music or speech on them moves it out
-of step. Not where its lines still depart from the model by ``model_in_step_hold_z`` past the window (read as the
-hold above, the event held till then): a stop that rattles out of step stays changed, music changes back. A jittered
-step clock turns each line's phase within a frame, so its share in phase falls under
-``model_min_share`` with no other sound: such a span is taken too where each line holds what the followed clock's
-own wander leaves it (``model_expect``; :func:`expected_held`). A fire the levels rejected (it did not persist:
-music masking a stop's drops) whose window departs from the model by ``model_max_z`` in every span, and whose lines
-still depart past the window (the hold above), is a stop, flagged: its onset, the fire's, is not known
-(``model_rejected``; :func:`.inside.departed_throughout`); so is a window cut short by a fire inside it, which
-persistence never judges (``model_refired``; :func:`.inside.held_refired`). The per-fire vetoes only veto, and
-under speech or music they seldom can (the lines move with the added sound, or are not read): so once
-the model could have been ready and was not (its spans' lines held under ``model_min_share`` in phase:
-sound of another kind on them, or a jittered clock), a stop it did not read is flagged, not counted,
-unless both readings affirm it against the stepping just before its fire (``model_unjudged``;
-:meth:`ClockedCheck.unjudged`, asked by :meth:`.checks.WindowChecks.onset_doubt`). Before then, a stop no
-reading of the lines judged at all (the per-fire vetoes gave no verdict) stands on the levels alone: flagged too
-(``model_unjudged_early``).
+**The stepping's lines as one model** (``lines_model``). In place of the half second before each fire, the
+stepping's lines modelled across the listening (:mod:`.stepping_lines`, :meth:`ClockedCheck.model_stepping`) are the
+reference off the tuning's rate, the rate told: under the same reading conditions (a comb verdict, or the predicted
+move), a fire whose window has a piece within ``model_max_z`` spreads of the model is not a stop; read also where
+the fire's own reference was stop-like. Until the model holds ``model_min_spans`` (the first seconds of listening),
+``min_moved_db`` and ``min_pred_moved_db`` judge as above (without them a radio from the first sample is counted a
+stop at 0.4 s). A model whose lines were locked in fewer than ``model_min_bands`` sub-bands reads one line's level,
+no RMS over the stop's signature: sound on that line scatters it either way, so its reading within does not veto, it
+flags the stop (:func:`model_thin`). Told the rate, once a span is heard within ``told_held_tol`` of it and in step
+there (a clean clock), the lines are read at the told rate, not at a line music pulled off it
+(:meth:`ClockedCheck.hear_held`). Where the pieces after the one within depart from the model to the window's end,
+the stop may have begun there (``model_inside``; :func:`.inside.stop_departed`), emitted once its lines still depart
+past the window's end (``model_hold_s``: a stop holds while the stepping goes on; music or speech changes back). A
+fire the model lets through whose lines held under ``model_in_step`` of the model's own share in phase is flagged
+(:meth:`ClockedCheck.in_step_reading`, asked by :meth:`.checks.WindowChecks.onset_doubt`): at an end stop the joint
+steps on into it and its lines stay in step, only their level moves; music or speech on them moves it out of step.
+Not where its lines still depart from the model by ``model_in_step_hold_z`` past the window (read as the hold above,
+the event held till then): a stop that rattles out of step stays changed, music changes back. A jittered step clock
+turns each line's phase within a frame, so its share in phase falls under ``model_min_share`` with no other sound:
+such a span is taken too where each line holds what the followed clock's own wander leaves it (``model_expect``;
+:func:`expected_held`). A fire the levels rejected (it did not persist: music masking a stop's drops) whose window
+departs from the model by ``model_max_z`` in every span, and whose lines still depart past the window (the hold
+above), is a stop, flagged: its onset, the fire's, is not known (``model_rejected``;
+:func:`.inside.departed_throughout`); so is a window cut short by a fire inside it, which persistence never judges
+(``model_refired``; :func:`.inside.held_refired`). The per-fire vetoes only veto, and under speech or music they
+seldom can (the lines move with the added sound, or are not read): so once the model could have been ready and was
+not (its spans' lines held under ``model_min_share`` in phase: sound of another kind on them, or a jittered clock),
+a stop it did not read is flagged, not counted, unless both readings affirm it against the stepping just before its
+fire (``model_unjudged``; :meth:`ClockedCheck.unjudged`, asked by :meth:`.checks.WindowChecks.onset_doubt`). Before
+then, a stop no reading of the lines judged at all (the per-fire vetoes gave no verdict) stands on the levels alone:
+flagged too (``model_unjudged_early``).
 
 **The stepping kept.** Music that lifts the stop's sub-bands for half a second before a fire
 makes that reference stop-like too, and the check could not judge it. So every ``span_s``
