@@ -42,8 +42,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests" / "support"))  # the generators
 
-from fan_sound import SR, Arm, Scene, render, tuning_scene  # noqa: E402
-from hour_sound import RMS, _span_source  # noqa: E402
+from fan_sound import SR, Arm, render, tuning_scene  # noqa: E402
+from noise_bench import STOP_S, recording  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.detector import detector_for  # noqa: E402
@@ -51,8 +51,6 @@ from stickslip.audio.events import StopEvent  # noqa: E402
 from stickslip.audio.tuning import tune  # noqa: E402
 from stickslip.audio.tuningfile import Tuning  # noqa: E402
 
-#: the stop, s into the recording
-STOP_S = 12.0
 #: an onset within this of the stop is right, s (as ``bench_audio.py``'s ``TOL_S``)
 TOL_S = 0.025
 #: the development arms (the tenth generator's)
@@ -69,15 +67,6 @@ RATES: tuple[tuple[float, bool], ...] = (
 SOURCES = ("speech over the radio", "music")
 LEVELS_DB = (-3.0, 3.0)
 OUTCOMES = ("right", "flagged", "early", "late", "missed")
-
-
-def recording(arm: int, rate_hz: float, kind: str, level_db: float) -> np.ndarray:
-    """The arm stepping at ``rate_hz`` into its stop at :data:`STOP_S`, the source added at ``level_db``."""
-    y = render(Scene(Arm(arm), rate=rate_hz, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(rate_hz) + arm + 77))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    src = _span_source(kind, np.random.default_rng(arm * 100 + int(rate_hz) + int(level_db)))
-    add = src(y.size) * rms * 10 ** (level_db / 20) / RMS[kind]  # type: ignore[operator]
-    return np.asarray(y + add, dtype=np.float32)
 
 
 def judged(e: StopEvent | None) -> str:

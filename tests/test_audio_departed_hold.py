@@ -24,9 +24,10 @@ from dataclasses import replace
 from functools import cache
 
 import numpy as np
-from fan_sound import SR, Arm, Scene, render
+from fan_sound import SR, Arm
 from hour_heard import heard_by, joint_tuning
-from hour_sound import RMS, Hour, _span_source
+from hour_sound import Hour
+from noise_bench import recording
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
 from stickslip.audio.confirm.clocked import CLOCKED
@@ -58,10 +59,7 @@ def _stop() -> tuple[Tuning, np.ndarray]:
     """The true stop's tuning and recording (as ``bench_audio_stops_noise.py`` renders arm 1, 1200 Hz, +3 dB)."""
     arm, rate, kind = 1, 1200.0, "speech over the radio"
     tu = joint_tuning(arm)
-    y = render(Scene(Arm(arm), rate=rate, stop_at=12.0, dur=14.0, seed=int(rate) + arm + 77))
-    rms = float(np.sqrt(np.mean(y[: int(12.0 * SR)] ** 2)))
-    src = _span_source(kind, np.random.default_rng(arm * 100 + int(rate) + 3))
-    return tu, np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[kind], dtype=np.float32)  # type: ignore[operator]
+    return tu, recording(arm, rate, kind, 3.0)
 
 
 def _stop_heard(until_s: float, block: int | None = None) -> tuple[list[tuple[float, float, bool]], list[float]]:

@@ -20,9 +20,8 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import numpy as np
-from fan_sound import SR, Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from fan_sound import SR, Arm, render, tuning_scene
+from noise_bench import recording
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -35,11 +34,7 @@ STOP_S, RATE, ARM = 12.0, 1050.0, 3
 
 def _heard(min_bands: int) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
-    y = render(Scene(Arm(ARM), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + ARM + 77))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    kind = "speech over the radio"
-    src = _span_source(kind, np.random.default_rng(ARM * 100 + int(RATE) + 3))
-    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[kind], dtype=np.float32)  # type: ignore[operator]
+    y = recording(ARM, RATE, "speech over the radio", 3.0)
     p = ConfirmParams(clocked=ClockedParams(model_min_bands=min_bands, told_held_tol=0.0))
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)

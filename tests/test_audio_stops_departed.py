@@ -17,9 +17,8 @@ end, once its lines were read still departed there (``model_hold_s``). Asked to 
 
 from __future__ import annotations
 
-import numpy as np
-from fan_sound import SR, Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from fan_sound import SR, Arm, render, tuning_scene
+from noise_bench import recording
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -32,10 +31,7 @@ STOP_S, RATE, ARM, KIND = 12.0, 1200.0, 1, "speech over the radio"
 
 def _heard(max_spread_s: float, rejected: bool = True) -> tuple[list[StopEvent], list[tuple[float, float, float]]]:
     tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
-    y = render(Scene(Arm(ARM), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + ARM + 77))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    src = _span_source(KIND, np.random.default_rng(ARM * 100 + int(RATE) + 3))
-    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[KIND], dtype=np.float32)  # type: ignore[operator]
+    y = recording(ARM, RATE, KIND, 3.0)
     p = ConfirmParams(clocked=ClockedParams(model_max_spread_s=max_spread_s, model_rejected=rejected))
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)

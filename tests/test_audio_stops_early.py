@@ -11,9 +11,8 @@ confirms it; without ``ClockedParams.onset_short_ref`` it was a stop counted 11.
 
 from __future__ import annotations
 
-import numpy as np
-from fan_sound import SR, Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from fan_sound import SR, Arm, render, tuning_scene
+from noise_bench import recording
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -26,10 +25,7 @@ STOP_S, RATE, ARM = 12.0, 1050.0, 2
 
 def _heard(onset_short_ref: bool) -> tuple[list[StopEvent], list[tuple[float, str]]]:
     tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
-    y = render(Scene(Arm(ARM), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + ARM + 77))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    src = _span_source("music", np.random.default_rng(ARM * 100 + int(RATE) + 3))
-    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS["music"], dtype=np.float32)  # type: ignore[operator]
+    y = recording(ARM, RATE, "music", 3.0)
     # (the before-case turns ``model_unjudged_early`` off too: it flags this fire as well, nothing read its lines)
     p = ConfirmParams(clocked=ClockedParams(onset_short_ref=onset_short_ref, model_unjudged_early=onset_short_ref))
     det = ConfirmedStopDetector(detector_for(tu), params=p)

@@ -21,9 +21,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import numpy as np
-from fan_sound import SR, Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from fan_sound import SR, Arm, render, tuning_scene
+from noise_bench import recording
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -40,11 +39,7 @@ def _heard(
 ) -> tuple[list[StopEvent], list[tuple[float, str]]]:
     arm = 1
     tu = tune(render(tuning_scene(Arm(arm))), SR, 2.0)
-    y = render(Scene(Arm(arm), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(RATE) + arm + 77))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    kind = "speech over the radio"
-    src = _span_source(kind, np.random.default_rng(arm * 100 + int(RATE) + 3))
-    y = np.asarray(y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[kind], dtype=np.float32)  # type: ignore[operator]
+    y = recording(arm, RATE, "speech over the radio", 3.0)
     # (model_hold_s off: with it the fast path is held on the stop found inside until its lines are read past the
     # window, 13.94 s, and the fire at 13.48 s these rules judge is not heard)
     clocked = ClockedParams(
