@@ -17,6 +17,8 @@ traverse counts its steps to the onset, so an onset the evidence doubts is flagg
   hot by itself in the ``base_s`` before the crossing: the run the onset began may be one of its
   flickers, not the one that fired (off the tuning's rate the stepping flickers hot for a few
   frames; the hold keeps such a flicker's crossing when the stop's frames follow within its window);
+  with ``break_past_fire`` *a break within a hold after the fire* too: the fire itself on such a
+  flicker, the stop's frames after the break (shorter than the hold: no *gap after the fire*);
 * *a fire weaker than the stop*: the stop-likeness over the fire's hold was under
   ``fire_level`` of that over the window's second half;
 * *a stop heard late*: the stop-like run that ends in the fire (dips of ``back_dips``
@@ -84,6 +86,9 @@ class OnsetParams:
     held_dips: int = param(1, "frames", "a hot frame after which the climb held: no run under its level longer")
     break_check: bool = param(
         True, "", "doubt an onset whose stop-like run broke (over max_dips) before the fire, the stepping hot by itself"
+    )
+    break_past_fire: bool = param(
+        True, "", "ask the break also over one hold past the fire (a fire on a flicker, the stop after its break)"
     )
 
 
@@ -171,10 +176,10 @@ class OnsetJudge:
         half = m[: max(1, min(m.size, self.window_frames // 2))]
         if longest_gap(half >= 0.0) >= self.hold_frames:
             return OnsetVerdict("a gap after the fire")
-        broke = self._break_before(ev, fire)
+        broke = self._break_before(ev, fire, frames)
         if broke is not None:
             return OnsetVerdict(
-                f"a break before the fire ({broke[0]} frames not stop-like after the onset; the stepping before it"
+                f"a break {broke[2]} the fire ({broke[0]} frames not stop-like after the onset; the stepping before it"
                 f" hot in {broke[1]} frames)"
             )
         if not self.levels:
@@ -204,11 +209,13 @@ class OnsetJudge:
                 return "a template learned anew since a rejected fire"
         return None
 
-    def _break_before(self, ev: StopEvent, fire: int) -> tuple[int, int] | None:
-        """The longest run of frames not stop-like between the onset's crossing and the fire, where longer than the
-        tuning's ``max_dips``, and the hot frames of the stepping before the crossing (``base_s`` ending ``base_gap_s``
-        before it), where it had any: it flickers hot by itself, and the run the onset began may be a flicker (None:
-        no such break, a stepping never hot, the check off, or the frames not kept)."""
+    def _break_before(self, ev: StopEvent, fire: int, frames: int) -> tuple[int, int, str] | None:
+        """The longest run of frames not stop-like between the onset's crossing and the fire (``break_past_fire``: to
+        one hold past it, within the ``frames`` that persisted), where longer than the tuning's ``max_dips``, and the
+        hot frames of the stepping before the crossing (``base_s`` ending ``base_gap_s`` before it), where it had any:
+        it flickers hot by itself, and the run the onset began may be a flicker; and where the break lies ("before",
+        or "within a hold after": the fire itself on the flicker). None: no such break, a stepping never hot, the check
+        off, or the frames not kept."""
         log = self.log
         if not self.p.break_check:
             return None
@@ -218,10 +225,13 @@ class OnsetJudge:
         base = self._base(c, fire)
         if lo >= fire or base is None:
             return None
-        run = longest_gap(np.array([log.margin(i) >= 0.0 for i in range(lo, fire + 1)], dtype=bool))
+        hi = fire + (min(self.hold_frames, frames) if self.p.break_past_fire else 0)
+        held = np.array([log.margin(i) >= 0.0 for i in range(lo, hi + 1)], dtype=bool)
+        run = longest_gap(held)
         base_n = max(1, int(round(self.p.base_s * log.sample_rate / log.hop)))
         hot = sum(log.hot(i) for i in range(base.lo, base.lo + base_n))
-        return (run, hot) if run > self.max_dips and hot > 0 else None
+        where = "before" if longest_gap(held[: fire + 1 - lo]) > self.max_dips else "within a hold after"
+        return (run, hot, where) if run > self.max_dips and hot > 0 else None
 
     def _weak_fire(self, fire: int, late: FloatArray) -> bool:
         """Was the stop-likeness over the fire's hold under ``fire_level`` of the window's second half?"""
