@@ -24,8 +24,8 @@ window cut short by a fire inside it, ``--switch model_onset`` an onset the mode
 ``--switch model_min_bands`` a veto on one locked sub-band, flagged instead (off: 0),
 ``--switch told_held_tol`` the lines read at the told rate once the clock was heard there (off: 0),
 ``--switch model_rejected_early`` a rejected window read so before the model is ready, against the spans before it,
-``--switch model_unjudged_first`` a stop the per-fire checks did not affirm, confirmed before the first spans were
-offered, flagged.
+``--switch onset_short_span`` a stop whose fire's reference the stream's start cut short (under
+``SyncParams.span_s``), flagged (off: under ``min_s``).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -91,7 +91,7 @@ SWITCHES = (
     "model_min_bands",
     "told_held_tol",
     "model_rejected_early",
-    "model_unjudged_first",
+    "onset_short_span",
 )
 
 

@@ -139,7 +139,8 @@ class WindowChecks:
         """Why a confirmed stop whose onset is at absolute sample ``onset`` may not have begun there: its lines, read
         in phase over ``onset_read_s`` from it, do not show the stop (under ``min_a``: the fire came before the
         stop, and the stop came in its window); or the stepping before the fire was over ``onset_ref_stoplike``
-        stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; the
+        stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; with
+        ``onset_short_span``, under the reference's own ``span_s``: the stream's start cut it short; the
         stream began near it; not an onset at listening's start, which :mod:`~stickslip.audio.change.start`
         judged): no stepping to place it by, it may have begun there; or the stepping's lines modelled read its fire
         within ``model_max_z`` on fewer than ``model_min_bands`` locked sub-bands (too few to veto it:
@@ -156,7 +157,8 @@ class WindowChecks:
         if c.enabled and c.ref_stoplike > c.p.onset_ref_stoplike:  # no stepping heard before it to place it by
             return f"the stepping before it {100 * c.ref_stoplike:.0f} % stop-like, none kept: it may have begun there"
         heard = 0 if c.ref is None else c.ref.size
-        short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
+        need = self.span if c.p.onset_short_span else c.p.min_s * c.sample_rate  # (span: the reference whole)
+        short = c.p.onset_short_ref and heard < need  # too little to know the stepping
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
         if c.enabled and model_thin(c, self.on_clock):  # the model read it within on one line: it cannot veto

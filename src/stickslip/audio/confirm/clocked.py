@@ -342,13 +342,6 @@ class ClockedParams:
         "model_unjudged before the model could be ready too, for a stop no reading of the lines judged at all (the "
         "per-fire vetoes gave no verdict): the levels alone counted it (False: not asked then)",
     )
-    model_unjudged_first: bool = param(
-        True,
-        "",
-        "model_unjudged_early also for a stop the per-fire checks read but did not affirm, confirmed before "
-        "model_min_spans spans were offered by its onset (no stepping's spread yet, not even model_confirmed_early's "
-        "copy: speech or music changing 0.2-1.5 s into listening, 8 counted on the lines-model bench; False: not)",
-    )
     max_ref_stoplike: float = param(
         0.5, "", "not judged where more of the reference's frames were stop-like: a stop heard late began there"
     )
@@ -357,6 +350,13 @@ class ClockedParams:
     )
     onset_short_ref: bool = param(
         True, "", "a stop confirmed with under min_s of stepping heard before its fire is flagged (False: not)"
+    )
+    onset_short_span: bool = param(
+        True,
+        "",
+        "onset_short_ref's bar the reference's own span (SyncParams.span_s): a stop whose fire's reference the "
+        "stream's start cut short is flagged (sound changing 0.2-0.4 s into listening, 6 counted on the lines-model "
+        "bench; False: min_s)",
     )
     kept_age_s: float = param(
         30.0, "s", "a reference stop-like to the levels is replaced by stepping kept no longer ago (0: none kept)"
@@ -848,7 +848,7 @@ class ClockedCheck:
         if not (p.model_unjudged and self.models_lines()):
             return False
         if len(self.offered) < n or self.offered[n - 1] > at - p.model_lag_s * self.sample_rate:
-            return unjudged_early(self, at, got)  # too early for a model: nothing read the lines, or none affirmed
+            return p.model_unjudged_early and got is None and at > 0  # too early for a model: nothing read the lines
         if got is not None and math.isfinite(got.still_z):
             return False  # the model read it (and let it through: it departs from the stepping's lines)
         return not (self.affirms(got) and got is not None and not math.isfinite(got.kept_s))
@@ -1038,24 +1038,6 @@ class ClockedCheck:
             return math.nan
         reader = self.reader(got.rate_hz)
         return math.nan if reader is None else reader.read(x)
-
-
-def unjudged_early(check: ClockedCheck, at: int, got: OnClock | None) -> bool:
-    """Whether a stop confirmed at absolute sample ``at`` (its onset), its fire judged ``got``, before ``check``'s model
-    could be ready, stands on the levels alone (:meth:`ClockedCheck.unjudged`, ``model_unjudged_early``): no reading of
-    the lines judged it at all (``got`` None); or (``model_unjudged_first``) it came before ``model_min_spans`` spans
-    had been offered by its onset, so that no stepping's spread exists to read it against (neither the model nor the
-    copy :func:`.inside.held_early` reads past the window), and the per-fire reading did not affirm it (both readings
-    at ``min_affirm``, against the stepping just before the fire): a fire on speech or music changing in the first
-    second of listening. Not a stop at the start of listening (``at`` 0: the warm-up judged it began there)."""
-    p = check.p
-    if not (p.model_unjudged_early and at > 0):
-        return False
-    if got is None:
-        return True
-    n = math.ceil(p.model_min_spans)
-    first = len(check.offered) < n or check.offered[n - 1] > at  # (held_early's copy: spans ended by the onset)
-    return p.model_unjudged_first and first and not (check.affirms(got) and not math.isfinite(got.kept_s))
 
 
 def model_thin(check: ClockedCheck, got: OnClock | None) -> bool:
