@@ -79,7 +79,7 @@ class WindowChecks:
         self.inside = inside
         #: what the clocked check measured on the fire last judged (None: not judged)
         self.on_clock: OnClock | None = None
-        #: where the reference before the fire last heard began, absolute sample (under 0: cut by the stream's start)
+        #: where the fire last heard's own reference began, absolute sample (under 0: the stream's start cut it)
         self.ref_start = 0
 
     def reset(self, step_rate_hz: float | None) -> None:
@@ -103,6 +103,7 @@ class WindowChecks:
     def hear_before(self, fire: int, recent: bool, frames: FrameLog) -> None:
         """The stepping before the fire at frame ``fire`` is each check's reference (``recent``: a fire soon after
         a rejected one, which keeps its chain's reference where there is one)."""
+        self.ref_start = fire * self._H + self._F - self.gap - self.span  # (under 0: this fire's, cut by the start)
         if not recent or not math.isfinite(self.pause.before_power):
             self.pause.hear_before(self.before(fire), self.min_before)
         if self.sync.bands and (not recent or self.sync.ref is None):
@@ -110,7 +111,6 @@ class WindowChecks:
         if self.clocked is not None and (not recent or self.clocked.ref is None):
             g, sp = self.gap // self._H, self.span // self._H
             end = fire * self._H + self._F - self.gap
-            self.ref_start = end - self.span  # (under 0: the stream's start cut the reference short)
             self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g), end)
 
     def keep_stepping(self, fed: int, frames: FrameLog) -> None:
