@@ -144,7 +144,8 @@ def details(e: StopEvent, log: ConfirmLog) -> str:
 #: jittered clock's loss (``expect-off``); without a fire the levels rejected whose lines departed in every span
 #: flagged (``rejected-off``); with every veto of the lines model standing, also one on a single locked sub-band
 #: (``bands-off``); without the lines read at the told rate once the clock was heard there (``held-off``); without a
-#: rejected window read against the spans heard before the model is ready (``early-off``)
+#: rejected window read against the spans heard before the model is ready (``early-off``); with ``onset_short_ref``'s
+#: bar ``min_s`` even where the stream's start cut the fire's reference (``short-span-off``)
 ROUND_BEFORE = ClockedParams(kept_age_s=0.0, window_pieces=1, locked_frame_s=0.0)
 VARIANTS: dict[str, ClockedParams | None] = {
     "before": replace(ROUND_BEFORE, combs=(0.004,)),
@@ -170,6 +171,7 @@ VARIANTS: dict[str, ClockedParams | None] = {
     "bands-off": ClockedParams(model_min_bands=0),
     "held-off": ClockedParams(told_held_tol=0.0),
     "early-off": ClockedParams(model_rejected_early=False),
+    "short-span-off": ClockedParams(onset_short_span=False),
     "off": None,
 }
 

@@ -23,7 +23,9 @@ departs from the model in every span and past it, emitted flagged, ``--switch mo
 window cut short by a fire inside it, ``--switch model_onset`` an onset the model's lines place elsewhere, flagged,
 ``--switch model_min_bands`` a veto on one locked sub-band, flagged instead (off: 0),
 ``--switch told_held_tol`` the lines read at the told rate once the clock was heard there (off: 0),
-``--switch model_rejected_early`` a rejected window read so before the model is ready, against the spans before it.
+``--switch model_rejected_early`` a rejected window read so before the model is ready, against the spans before it,
+``--switch onset_short_span`` a stop whose fire's reference the stream's start cut short (under
+``SyncParams.span_s``), flagged (off: under ``min_s``).
 
 The first event at or after the stop (less 25 ms) is counted as ``bench_audio_stops_noise.py`` counts it: right
 (within 25 ms, not flagged), flagged (``onset_uncertain``), early / late (more than 25 ms off, not flagged: a
@@ -89,6 +91,7 @@ SWITCHES = (
     "model_min_bands",
     "told_held_tol",
     "model_rejected_early",
+    "onset_short_span",
 )
 
 

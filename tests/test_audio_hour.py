@@ -73,8 +73,10 @@ def test_at_another_rate_told_a_radio_the_lines_do_not_move_for_is_no_stop(rate:
     (under ``min_moved_db``: the stepping went on), and that is no stop."""
     h = Hour(Arm(3), rate=rate, dur=3.0, seed=3)
     tu = joint_tuning(3)
-    # (the before-case turns ``model_unjudged_early`` off too: with nothing read, it flags this fire as well)
-    before = hear(h, tu, ConfirmParams(clocked=replace(CLOCKED, min_moved_db=0.0, model_unjudged_early=False)))
+    # (the before-case turns ``model_unjudged_early`` off too: with nothing read, it flags this fire as well; and
+    # ``onset_short_span``: the fire came before one whole reference of stepping was heard, which flags it too)
+    off = replace(CLOCKED, min_moved_db=0.0, model_unjudged_early=False, onset_short_span=False)
+    before = hear(h, tu, ConfirmParams(clocked=off))
     assert [e.onset_uncertain for e in before] == [False] and before[0].onset_s < 0.5
     events, det = heard_by(h, tu)
     assert events == []

@@ -79,9 +79,12 @@ class WindowChecks:
         self.inside = inside
         #: what the clocked check measured on the fire last judged (None: not judged)
         self.on_clock: OnClock | None = None
+        #: where the fire last heard's own reference began, absolute sample (under 0: the stream's start cut it)
+        self.ref_start = 0
 
     def reset(self, step_rate_hz: float | None) -> None:
         self._next_keep = 0  # the next stretch offered to the clocked check as stepping to keep begins here
+        self.ref_start = 0
         for part in (self.pause, self.after, self.sync):
             part.reset()
         if self.clocked is not None:
@@ -100,6 +103,7 @@ class WindowChecks:
     def hear_before(self, fire: int, recent: bool, frames: FrameLog) -> None:
         """The stepping before the fire at frame ``fire`` is each check's reference (``recent``: a fire soon after
         a rejected one, which keeps its chain's reference where there is one)."""
+        self.ref_start = fire * self._H + self._F - self.gap - self.span  # (under 0: this fire's, cut by the start)
         if not recent or not math.isfinite(self.pause.before_power):
             self.pause.hear_before(self.before(fire), self.min_before)
         if self.sync.bands and (not recent or self.sync.ref is None):
@@ -139,7 +143,8 @@ class WindowChecks:
         """Why a confirmed stop whose onset is at absolute sample ``onset`` may not have begun there: its lines, read
         in phase over ``onset_read_s`` from it, do not show the stop (under ``min_a``: the fire came before the
         stop, and the stop came in its window); or the stepping before the fire was over ``onset_ref_stoplike``
-        stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; the
+        stop-like with none kept, or under ``min_s`` of stepping was heard before it (``onset_short_ref``; with
+        ``onset_short_span``, under its own ``span_s`` where the stream's start cut it short; the
         stream began near it; not an onset at listening's start, which :mod:`~stickslip.audio.change.start`
         judged): no stepping to place it by, it may have begun there; or the stepping's lines modelled read its fire
         within ``model_max_z`` on fewer than ``model_min_bands`` locked sub-bands (too few to veto it:
@@ -156,7 +161,8 @@ class WindowChecks:
         if c.enabled and c.ref_stoplike > c.p.onset_ref_stoplike:  # no stepping heard before it to place it by
             return f"the stepping before it {100 * c.ref_stoplike:.0f} % stop-like, none kept: it may have begun there"
         heard = 0 if c.ref is None else c.ref.size
-        short = c.p.onset_short_ref and heard < c.p.min_s * c.sample_rate  # too little to know the stepping
+        cut = c.p.onset_short_span and self.ref_start < 0 and math.isnan(c.ref_age_s)  # (not a kept span)
+        short = c.p.onset_short_ref and heard < (self.span if cut else c.p.min_s * c.sample_rate)  # too little known
         if c.enabled and short and onset > 0:  # (at the start of listening: the warm-up judged it began at the stop)
             return f"only {heard / c.sample_rate:.2f} s of stepping heard before it: it may have begun there"
         if c.enabled and model_thin(c, self.on_clock):  # the model read it within on one line: it cannot veto

@@ -351,6 +351,13 @@ class ClockedParams:
     onset_short_ref: bool = param(
         True, "", "a stop confirmed with under min_s of stepping heard before its fire is flagged (False: not)"
     )
+    onset_short_span: bool = param(
+        True,
+        "",
+        "onset_short_ref's bar the reference's own span (SyncParams.span_s) where the stream's start cut it short: "
+        "a stop whose fire came before a whole reference was heard is flagged (sound changing 0.2-0.4 s into "
+        "listening, 6 counted on the lines-model bench; False: min_s)",
+    )
     kept_age_s: float = param(
         30.0, "s", "a reference stop-like to the levels is replaced by stepping kept no longer ago (0: none kept)"
     )
