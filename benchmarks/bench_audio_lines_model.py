@@ -54,7 +54,7 @@ import arrival_sound  # noqa: E402
 import drive_sound  # noqa: E402
 import modal_sound  # noqa: E402
 from bench_audio_stops_noise import details  # noqa: E402  (the detector's log near given times)
-from hour_sound import RMS, _span_source  # noqa: E402
+from hour_sound import over_stepping  # noqa: E402
 
 from stickslip.audio.confirm import ConfirmedStopDetector  # noqa: E402
 from stickslip.audio.confirm.clocked import ClockedParams  # noqa: E402
@@ -158,9 +158,7 @@ def recording(render: Render, rate: float, noise: str, seed: int) -> np.ndarray:
     add = NOISES[noise]
     if add is not None:
         kind, db = add
-        rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-        src = _span_source(kind, np.random.default_rng(seed + int(db)))
-        y = y + src(y.size) * rms * 10 ** (db / 20) / RMS[kind]  # type: ignore[operator]
+        y = over_stepping(y, kind, db, np.random.default_rng(seed + int(db)), int(STOP_S * SR))
     return np.asarray(y, dtype=np.float32)
 
 

@@ -20,7 +20,7 @@ from arrival_sound import Scene as ArrivalScene
 from arrival_sound import render as arrival_render
 from arrival_sound import tuning_scene as arrival_tuning
 from fan_sound import SR, Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -43,10 +43,7 @@ def _speech() -> tuple[Tuning, np.ndarray]:
     """The noise bench's run, its first 5.5 s (the stop at 12 s is not heard)."""
     tu = tune(render(tuning_scene(Arm(ARM))), SR, 2.0)
     y = render(Scene(Arm(ARM), rate=RATE, stop_at=12.0, dur=14.0, seed=int(RATE) + ARM + 77))
-    rms = float(np.sqrt(np.mean(y[: int(12.0 * SR)] ** 2)))
-    kind = "speech over the radio"
-    src = _span_source(kind, np.random.default_rng(ARM * 100 + int(RATE) + 3))
-    y = y + src(y.size) * rms * 10 ** (3.0 / 20) / RMS[kind]  # type: ignore[operator]
+    y = over_stepping(y, "speech over the radio", 3.0, np.random.default_rng(ARM * 100 + int(RATE) + 3), 12 * SR)
     return tu, y[: int(5.5 * SR)]
 
 

@@ -25,7 +25,7 @@ import crystal_sound as cs
 import drive_sound as ds
 import fan_sound as fs
 import numpy as np
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -44,9 +44,7 @@ def _heard(tu: Tuning, y: np.ndarray, rate: float, on: bool) -> list[StopEvent]:
 
 def _with(y: np.ndarray, stop_s: float, kind: str, db: float, seed: int) -> np.ndarray:
     """``y`` with the hour's ``kind`` added at ``db`` re the stepping's RMS before ``stop_s``."""
-    rms = float(np.sqrt(np.mean(y[: int(stop_s * ds.SR)] ** 2)))
-    src = _span_source(kind, np.random.default_rng(seed))
-    return np.asarray(y + src(y.size) * rms * 10 ** (db / 20) / RMS[kind], dtype=np.float64)  # type: ignore[operator]
+    return np.asarray(over_stepping(y, kind, db, np.random.default_rng(seed), int(stop_s * ds.SR)), dtype=np.float64)
 
 
 def test_a_stop_found_departed_whose_change_lies_past_the_fit_is_flagged() -> None:

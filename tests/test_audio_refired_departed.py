@@ -21,7 +21,7 @@ from functools import cache
 
 import numpy as np
 from arrival_sound import Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector
@@ -39,9 +39,7 @@ ARM = Arm(2, "damped")
 def _recording() -> np.ndarray:
     y = render(Scene(arm=ARM, rate=RATE, stop_at=STOP_S, dur=STOP_S + 1.0, jitter=0.004, seed=SEED))
     y = y.astype(np.float64)
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))  # the stepping's RMS before the stop
-    music = _span_source("music", np.random.default_rng(SEED - 3))
-    return y + music(y.size) * rms * 10 ** (-3 / 20) / RMS["music"]  # type: ignore[no-any-return]
+    return over_stepping(y, "music", -3, np.random.default_rng(SEED - 3), int(STOP_S * SR))  # re the stepping's RMS
 
 
 @cache

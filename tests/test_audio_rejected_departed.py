@@ -19,7 +19,7 @@ from functools import cache
 
 import numpy as np
 from arrival_sound import Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -36,9 +36,8 @@ RATE, STOP_S, SEED = 1100.0, 20.0, 11006  # (the bench's seed for this rate and 
 def _recording() -> np.ndarray:
     y = render(Scene(arm=Arm(2, "damped"), rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, jitter=0.01, seed=SEED))
     y = y.astype(np.float64)
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))  # (as the bench: the stepping's RMS before the stop)
-    music = _span_source("music", np.random.default_rng(SEED - 3))
-    return np.asarray(y + music(y.size) * rms * 10 ** (-3 / 20) / RMS["music"], dtype=np.float32)  # type: ignore[operator]
+    music = over_stepping(y, "music", -3, np.random.default_rng(SEED - 3), int(STOP_S * SR))  # (as the bench)
+    return np.asarray(music, dtype=np.float32)
 
 
 @cache

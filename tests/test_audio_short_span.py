@@ -17,7 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 from arrival_sound import Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 from tuned import tune
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -33,9 +33,7 @@ def _heard(span: bool) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     arm = Arm(2, "damped")
     tu = tune(render(tuning_scene(arm)), SR, 2.0)
     y = render(Scene(arm=arm, rate=RATE, stop_at=STOP_S, dur=STOP_S + 2.0, jitter=0.004, seed=9007))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    src = _span_source(KIND, np.random.default_rng(9007 + int(DB)))
-    y = (y + src(y.size) * rms * 10 ** (DB / 20) / RMS[KIND])[: int(1.2 * SR)]  # type: ignore[operator]
+    y = over_stepping(y, KIND, DB, np.random.default_rng(9007 + int(DB)), int(STOP_S * SR))[: int(1.2 * SR)]
     p = ConfirmParams(clocked=replace(CLOCKED, onset_short_span=span))
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)

@@ -17,7 +17,7 @@ from functools import cache
 
 import numpy as np
 from arrival_sound import Arm, Scene, render, tuning_scene
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
 
 from stickslip.audio.confirm import ConfirmedStopDetector, ConfirmParams
@@ -34,9 +34,7 @@ def _heard(unjudged: bool) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     arm = Arm(2, "damped")
     tu = tune(np.asarray(render(tuning_scene(arm)), dtype=np.float32), SR, 2.0)
     y = render(Scene(arm=arm, rate=RATE, stop_at=20.0, dur=22.0, jitter=0.01, seed=9506)).astype(np.float64)
-    rms = float(np.sqrt(np.mean(y[: 20 * SR] ** 2)))  # (as the bench: the stepping's RMS before the stop)
-    music = _span_source("music", np.random.default_rng(9506 - 3))
-    y = y + music(y.size) * rms * 10 ** (-3 / 20) / RMS["music"]  # type: ignore[operator]
+    y = over_stepping(y, "music", -3, np.random.default_rng(9506 - 3), 20 * SR)  # (as the bench)
     params = ConfirmParams(clocked=replace(CLOCKED, model_unjudged=unjudged))
     det = ConfirmedStopDetector(detector_for(tu), params=params)
     det.reset(0.0, step_rate_hz=RATE)

@@ -257,6 +257,15 @@ def _span_source(kind: str, rng: np.random.Generator) -> object:
     return None
 
 
+def over_stepping(y: np.ndarray, kind: str, db: float, rng: np.random.Generator, before: int) -> np.ndarray:
+    """``y`` with the hour's ``kind`` (a key of :data:`RMS`) added over its whole length at ``db`` re the RMS of its
+    first ``before`` samples (the stepping's before its stop), drawn from ``rng``: as the noise bench, the lines-model
+    bench and the tests built on them add it (the sum in ``y``'s precision or float64, not cast)."""
+    rms = float(np.sqrt(np.mean(y[:before] ** 2)))
+    src = _span_source(kind, rng)
+    return y + src(y.size) * rms * 10 ** (db / 20) / RMS[kind]  # type: ignore[operator,no-any-return]
+
+
 def spans(h: Hour) -> list[tuple[float, float, str, float]]:
     """The hour's spans: (start s, end s, what is added, its level dB re the stepping's RMS)."""
     rng = np.random.default_rng(h.seed + 7)

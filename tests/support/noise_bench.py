@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 from fan_sound import SR, Arm, Scene, render
-from hour_sound import RMS, _span_source
+from hour_sound import over_stepping
 
 #: the stop, s into the recording
 STOP_S = 12.0
@@ -15,7 +15,5 @@ def recording(arm: int, rate_hz: float, kind: str, level_db: float) -> np.ndarra
     """Arm ``arm`` stepping at ``rate_hz`` into its stop at :data:`STOP_S` (2 s more after it), ``kind`` added at
     ``level_db`` to the stepping's RMS before the stop (float32 samples at :data:`fan_sound.SR`)."""
     y = render(Scene(Arm(arm), rate=rate_hz, stop_at=STOP_S, dur=STOP_S + 2.0, seed=int(rate_hz) + arm + 77))
-    rms = float(np.sqrt(np.mean(y[: int(STOP_S * SR)] ** 2)))
-    src = _span_source(kind, np.random.default_rng(arm * 100 + int(rate_hz) + int(level_db)))
-    add = src(y.size) * rms * 10 ** (level_db / 20) / RMS[kind]  # type: ignore[operator]
-    return np.asarray(y + add, dtype=np.float32)
+    rng = np.random.default_rng(arm * 100 + int(rate_hz) + int(level_db))
+    return np.asarray(over_stepping(y, kind, level_db, rng, int(STOP_S * SR)), dtype=np.float32)
