@@ -21,7 +21,9 @@ the piezo's drive tone through the mount, unchanged at the stop) at 950-1050 Hz,
 ``tests/test_audio_drive.py``'s property (``--seed`` picks the draws).
 
 Run: ``.venv/bin/python benchmarks/bench_audio_rates.py`` (about 10 minutes on 2 cores);
-``--sets battery,modal`` for some sets; ``--drive 160 --sets none`` for the drive draws alone.
+``--sets battery,modal`` for some sets; ``--drive 160 --sets none`` for the drive draws alone;
+``--stop-scale arm`` renders the beams' stop at a loudness fixed per arm (``beam_sound``'s docstring) in place of
+each recording's own (the default).
 Measured on main at session 27's end (``daa96af``), with ``--drive 160``: right 366, flagged 16,
 missed 25, silently wrong 1 (the fifth generator's arm 3, shifted stop, early at 1100 Hz), no fire on
 stepping alone; the drive draws (seed 1): right 134, flagged 7, missed 16, refused 3, none silently
@@ -61,8 +63,11 @@ OUTCOMES = ("right", "flagged", "early", "late", "missed")
 Case = tuple[str, np.ndarray, float, Callable[[float], tuple[np.ndarray, float]]]
 
 
-def cases(which: str) -> Iterator[Case]:
-    """The tunings of one set, each with a maker of its test recording at a step rate."""
+def cases(which: str, stop_scale: str = "recording") -> Iterator[Case]:
+    """The tunings of one set, each with a maker of its test recording at a step rate.
+
+    ``stop_scale``: the beams' stop loudness, per recording or fixed per arm (``beam_sound.Scene.stop_scale``).
+    """
     if which == "battery":
         for joint, seed in (("P", 1), ("Q", 2)):
             for kind in ("louder", "quieter", "duller", "brighter", "spectral"):
@@ -95,7 +100,7 @@ def cases(which: str) -> Iterator[Case]:
             beam = bm.Beam(b)
 
             def make_bm(r: float, beam: bm.Beam = beam) -> tuple[np.ndarray, float]:
-                return bm.render(bm.Scene(beam=beam, rate=r, seed=int(r))), 2.0
+                return bm.render(bm.Scene(beam=beam, rate=r, seed=int(r), stop_scale=stop_scale)), 2.0
 
             yield f"beam {b}", bm.render(bm.tuning_scene(beam)), 2.0, make_bm
     else:
@@ -121,7 +126,9 @@ def outcome(tu: Tuning, y: np.ndarray, stop_s: float | None, commanded_hz: float
     return "early" if err < -TOL_S else "late" if err > TOL_S else "right"
 
 
-def run_sets(sets: list[str], rates: tuple[float, ...] = RATES_HZ, commanded: bool = False) -> None:
+def run_sets(
+    sets: list[str], rates: tuple[float, ...] = RATES_HZ, commanded: bool = False, stop_scale: str = "recording"
+) -> None:
     print("| set | rates | n | right | flagged | early | late | missed | stepping alone fired |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     total: Counter[str] = Counter()
@@ -130,7 +137,7 @@ def run_sets(sets: list[str], rates: tuple[float, ...] = RATES_HZ, commanded: bo
         near: Counter[str] = Counter()
         far: Counter[str] = Counter()
         t0 = time.perf_counter()
-        for name, train, stop_s, make in cases(which):
+        for name, train, stop_s, make in cases(which, stop_scale):
             try:
                 tu = tune(train, SR, stop_s, seed=0)
             except TuningError:
@@ -218,11 +225,17 @@ def _cli() -> None:
         action="store_true",
         help="tell the detector the commanded rate, as a traverse and listen --rate do",
     )
+    ap.add_argument(
+        "--stop-scale",
+        choices=bm.STOP_SCALES,
+        default="recording",
+        help="the beams' stop loudness: scaled to each recording's stepping (default) or fixed per arm",
+    )
     args = ap.parse_args()
     sets = [] if args.sets == "none" else [s.strip() for s in args.sets.split(",") if s.strip()]
     rates = tuple(float(r) for r in args.rates.split(",")) if args.rates else RATES_HZ
     if sets:
-        run_sets(sets, rates, args.commanded)
+        run_sets(sets, rates, args.commanded, args.stop_scale)
     if args.drive > 0:
         run_drive(args.drive, args.seed)
 

@@ -14,20 +14,34 @@ moved up by one factor) and never used to tune the detector:
   mode ``n`` moves up by ``((4n + 1) / (4n - 2))**2 - 1``, about ``1.5 / n`` (9 % at
   order 16, 3 % at order 50) - a shift that *falls with frequency*, not one factor
   for all; the mode shapes change with it, so how strongly the slip excites each mode
-  and the microphone hears it changes too. The stop is scaled to sound as loud as the
-  stepping (its RMS at the microphone): only the spectrum changes;
+  and the microphone hears it changes too. How loud the stop is: ``Scene.stop_scale``
+  (below);
 * **a slip is an impulse** (a tap) at a point ``x_e`` along the arm, heard as the
   velocity at ``x_m``; every mode rings with the same Q (15-60); modes under 200 Hz
   (the arm's slow sway) are left out;
 * **the clock** jitters per step (``jitter``, a fraction of the period), the slips'
   strength varies +-20 %, pink noise at ``snr_db``; no room, no interference.
 
-Levels: the stepping sound before the stop is -30 dBFS RMS.
+Levels: the stepping sound before the stop is -30 dBFS RMS. The stop's loudness against it, ``Scene.stop_scale``:
+
+* ``"recording"`` (the default; the convention the generator was written with): each recording's stop is scaled to
+  sound as loud as *that recording's* stepping (their RMS at the microphone), so that at the tuning's rate only the
+  spectrum changes. At another step rate the stepping's and the stop's lines fall on the modes differently, so this
+  factor moves with the rate: a gain on the stop of -7 to +11 dB against the tuning recording's (audio49) that no
+  property of the arm sets;
+* ``"arm"`` (the physical view): the stop's factor is fixed per arm, the one the arm's tuning recording
+  (:func:`tuning_scene`) gives, and every recording of the arm uses it. A stop's loudness is set by its source (the
+  same slips through the pinned arm's modes), not by how loud the stepping happens to be at the rate; the stop's
+  RMS against the stepping then follows the two sets of modes at the rate's lines. At the tuning recording the two
+  modes render the same samples.
+
+Every random draw is the same in both modes.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -39,6 +53,8 @@ STEP_DB = -30.0
 #: modes below this are left out (the arm's slow sway: below the detector's 300 Hz floor, and, ringing long, they
 #: would hold most of a slip's energy)
 F_LOW_HZ = 200.0
+#: how the stop's loudness is set (module docstring): per recording (the default) or fixed per arm
+STOP_SCALES = ("recording", "arm")
 
 
 @dataclass(frozen=True)
@@ -60,6 +76,8 @@ class Scene:
     snr_db: float = 35.0
     seed: int = 0
     sr: int = SR
+    #: one of :data:`STOP_SCALES`: the stop scaled to this recording's stepping RMS, or by the arm's fixed factor
+    stop_scale: str = "recording"
 
 
 def _free(b: float) -> float:
@@ -130,10 +148,9 @@ def _kernel(f: np.ndarray, g: np.ndarray, q: float, sr: int, length_s: float = 0
     return np.asarray(np.sum(g[:, None] * np.exp(-w / (2 * q) * t) * np.cos(w * t), axis=0))
 
 
-def render(s: Scene) -> np.ndarray:
-    """The scene's samples (mono, float32)."""
+def _parts(s: Scene, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The stepping's and the stop's sound, unscaled (the clock, jitter and slip strengths drawn from ``rng``)."""
     sr, n = s.sr, int(round(s.dur * s.sr))
-    rng = np.random.default_rng(s.seed)
     m = beam_modes(s.beam, sr)
     q = float(m["q"])
     k_step = _kernel(m["step_f"], m["step_g"], q, sr)
@@ -151,11 +168,43 @@ def render(s: Scene) -> np.ndarray:
         train = np.zeros(n)
         np.add.at(train, idx[sel], amp[sel])
         parts.append(fftconvolve(train, kern)[:n])
-    x_step, x_stop = parts
-    if s.stop_at is not None and stopped.any():  # as loud as the stepping: only the spectrum changes
-        i0 = int(s.stop_at * sr)
-        i_step, i_stop = slice(int(0.2 * sr), max(int(0.2 * sr) + 1, i0 - int(0.05 * sr))), slice(i0 + int(0.1 * sr), n)
-        x_stop *= np.sqrt(np.mean(x_step[i_step] ** 2) / (np.mean(x_stop[i_stop] ** 2) + 1e-30))
+    return parts[0], parts[1]
+
+
+def _own_scale(s: Scene, x_step: np.ndarray, x_stop: np.ndarray) -> float:
+    """The factor that makes this recording's stop as loud as its stepping (RMS, 0.2 s on to 0.05 s before the stop
+    against 0.1 s after it to the end)."""
+    assert s.stop_at is not None
+    sr, n = s.sr, x_step.size
+    i0 = int(s.stop_at * sr)
+    i_step, i_stop = slice(int(0.2 * sr), max(int(0.2 * sr) + 1, i0 - int(0.05 * sr))), slice(i0 + int(0.1 * sr), n)
+    return float(np.sqrt(np.mean(x_step[i_step] ** 2) / (np.mean(x_stop[i_stop] ** 2) + 1e-30)))
+
+
+@lru_cache(maxsize=64)
+def arm_stop_scale(beam: Beam, sr: int = SR) -> float:
+    """The arm's fixed stop factor (``stop_scale="arm"``): the one its tuning recording's own stepping gives."""
+    s = replace(tuning_scene(beam), sr=sr)
+    x_step, x_stop = _parts(s, np.random.default_rng(s.seed))
+    return _own_scale(s, x_step, x_stop)
+
+
+def stop_factor(s: Scene, x_step: np.ndarray, x_stop: np.ndarray) -> float:
+    """The factor on the scene's unscaled stop, as ``s.stop_scale`` sets it (module docstring)."""
+    if s.stop_scale not in STOP_SCALES:
+        raise ValueError(f"stop_scale {s.stop_scale!r}: choose from {', '.join(STOP_SCALES)}")
+    if s.stop_scale == "arm":
+        return arm_stop_scale(s.beam, s.sr)
+    return _own_scale(s, x_step, x_stop)
+
+
+def render(s: Scene) -> np.ndarray:
+    """The scene's samples (mono, float32)."""
+    sr, n = s.sr, int(round(s.dur * s.sr))
+    rng = np.random.default_rng(s.seed)
+    x_step, x_stop = _parts(s, rng)
+    if s.stop_at is not None and np.any(x_stop):  # the stop's loudness: Scene.stop_scale
+        x_stop *= stop_factor(s, x_step, x_stop)
     x = x_step + x_stop
     end = n if s.stop_at is None else int(max(s.stop_at - 0.05, 0.2) * sr)
     rms = 10 ** (STEP_DB / 20)
