@@ -31,8 +31,10 @@ def _heard(check: bool) -> tuple[list[StopEvent], ConfirmedStopDetector]:
     tu = tune(render(tuning_scene(arm)), SR, 2.0, seed=0)
     y = render(Scene(arm=arm, rate=RATE, seed=int(RATE)))
     # (model_confirmed_early off: held past its window, this stop's lines read 1.91 against the spans before it, within
-    # model_max_z, and that stage would flag it too; this test pins the break)
-    p = ConfirmParams(onset=replace(ONSET, break_check=check), clocked=ClockedParams(model_confirmed_early=False))
+    # model_max_z, and that stage would flag it too; so would model_onset_early, the lines placing the change 65 ms
+    # after the onset; this test pins the break)
+    off = ClockedParams(model_confirmed_early=False, model_onset_early=False)
+    p = ConfirmParams(onset=replace(ONSET, break_check=check), clocked=off)
     det = ConfirmedStopDetector(detector_for(tu), params=p)
     det.reset(0.0, step_rate_hz=RATE)
     return det.feed(np.asarray(y, dtype=np.float32)) + det.finish(), det

@@ -238,7 +238,8 @@ class WindowChecks:
         (:func:`.inside.onset_in_phase`, over two pieces either side; read where the comb judged the fire, as
         :meth:`~.clocked.ClockedCheck.at_onset`; off the tuning's rate, ``model_onset``, on the stepping's lines
         modelled where the model read the fire: the seventh generator's spectral arm under music, 1100 Hz, a fire
-        0.14 s into the stop, the lines changed 145 ms before its onset). None: they did not, or it was not read."""
+        0.14 s into the stop, the lines changed 145 ms before its onset; with ``model_onset_early`` also before the
+        model is ready). None: they did not, or it was not read."""
         c, p, got = self.clocked, self.inside, self.on_clock
         if c is None or p is None or p.max_onset_off_s <= 0.0 or got is None:
             return None
@@ -252,7 +253,11 @@ class WindowChecks:
             if reader is None:
                 return None
             rate, lines = got.rate_hz, reader.lines
-        elif c.p.model_onset and c.model is not None and math.isfinite(got.still_z):  # the model read the fire
+        elif (
+            c.p.model_onset
+            and c.model is not None
+            and (math.isfinite(got.still_z) or (c.p.model_onset_early and not c.model_ready()))
+        ):  # the model read the fire, or (``model_onset_early``) it is not ready yet: its lines are known
             rate, lines = c.model_hz, tuple(c.model.ks)
         else:
             return None  # an affirmation at another rate: the tuned signature places no onset there

@@ -330,6 +330,12 @@ class ClockedParams:
         "found departed refitted over every departed piece, a confirmed stop the model read over two pieces either "
         "side; a change farther than that and its spread flags it (music's 0.49, drive's 0.15 s; stops 0-15 ms)",
     )
+    model_onset_early: bool = param(
+        True,
+        "",
+        "model_onset before the model is ready too (it has not read the fire): its lines, known from the first span, "
+        "place the onset (the rates bench's stops come 2 s in, the model ready at about 5 s: never asked there)",
+    )
     model_unjudged: bool = param(
         True,
         "",
