@@ -90,9 +90,14 @@ class WindowChecks:
         if self.clocked is not None:
             self.clocked.reset(step_rate_hz)
 
+    def _ref_end(self, fire: int) -> int:
+        """Where the reference before the fire at frame ``fire`` ends, absolute sample: ``gap_s`` before the fire's
+        first sample (it begins ``span_s`` earlier, under 0 where the stream's start cut it)."""
+        return fire * self._H + self._F - self.gap
+
     def before(self, fire: int) -> NDArray[np.float64]:
         """The stepping before the fire at frame ``fire``: ``span_s`` ending ``gap_s`` before it (as kept)."""
-        end = fire * self._H + self._F - self.gap
+        end = self._ref_end(fire)
         return self.kept.get(end - self.span, end)
 
     def after_fire(self, fire: int, n: int) -> NDArray[np.float64]:
@@ -103,14 +108,14 @@ class WindowChecks:
     def hear_before(self, fire: int, recent: bool, frames: FrameLog) -> None:
         """The stepping before the fire at frame ``fire`` is each check's reference (``recent``: a fire soon after
         a rejected one, which keeps its chain's reference where there is one)."""
-        self.ref_start = fire * self._H + self._F - self.gap - self.span  # (under 0: this fire's, cut by the start)
+        end = self._ref_end(fire)
+        self.ref_start = end - self.span  # (under 0: this fire's, cut by the start)
         if not recent or not math.isfinite(self.pause.before_power):
             self.pause.hear_before(self.before(fire), self.min_before)
         if self.sync.bands and (not recent or self.sync.ref is None):
             self.sync.ref = self.before(fire)
         if self.clocked is not None and (not recent or self.clocked.ref is None):
             g, sp = self.gap // self._H, self.span // self._H
-            end = fire * self._H + self._F - self.gap
             self.clocked.hear_before(self.before(fire), frames.between(fire - g - sp, fire - g), end)
 
     def keep_stepping(self, fed: int, frames: FrameLog) -> None:

@@ -230,8 +230,9 @@ class OnsetJudge:
         run = longest_gap(held)
         base_n = max(1, int(round(self.p.base_s * log.sample_rate / log.hop)))
         hot = sum(log.hot(i) for i in range(base.lo, base.lo + base_n))
-        where = "before" if longest_gap(held[: fire + 1 - lo]) > self.max_dips else "within a hold after"
-        return (run, hot, where) if run > self.max_dips and hot > 0 else None
+        if run <= self.max_dips or hot == 0:
+            return None
+        return run, hot, "before" if longest_gap(held[: fire + 1 - lo]) > self.max_dips else "within a hold after"
 
     def _weak_fire(self, fire: int, late: FloatArray) -> bool:
         """Was the stop-likeness over the fire's hold under ``fire_level`` of the window's second half?"""
