@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from scipy import fft, ndimage
 
 __all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "inside_ncc", "region_spectra",
-           "noise_sigma", "blurred_copy", "copy_noise_share", "disc_kernel", "disc_blurred", "BLUR_KERNELS"]
+           "noise_sigma", "blurred_copy", "copy_noise_share", "disc_kernel", "BLUR_KERNELS"]
 
 FloatArray = NDArray[np.float64]
 
@@ -504,31 +504,15 @@ def disc_kernel(sigma: float) -> FloatArray:
     return np.asarray(inside / inside.sum(), dtype=float)
 
 
-def disc_blurred(image: FloatArray, sigma: float) -> FloatArray:
-    """``image`` convolved with :func:`disc_kernel` of ``sigma`` (px), its edges extended as ``mode="nearest"``
-    extends them (by FFT: ``scipy.ndimage.convolve``'s result to 1e-12)."""
-    h = disc_kernel(sigma).shape[0] // 2
-    padded = np.pad(image, h, mode="edge")
-    shape = (fft.next_fast_len(padded.shape[0], True), fft.next_fast_len(padded.shape[1], True))
-    full = fft.irfft2(fft.rfft2(padded, shape) * _disc_spectrum(sigma, shape), shape)
-    return np.asarray(full[2 * h : padded.shape[0], 2 * h : padded.shape[1]], dtype=float)
-
-
-@functools.lru_cache(maxsize=256)
-def _disc_spectrum(sigma: float, shape: tuple[int, int]) -> NDArray[np.complex128]:
-    """:func:`disc_kernel`'s transform at ``shape`` (kept for each blur and patch size)."""
-    return np.asarray(fft.rfft2(disc_kernel(sigma), shape), dtype=complex)
-
-
 def blurred_copy(win: FloatArray, s0: float, b: float, kernel: str = "gaussian") -> FloatArray:
     """``win`` smoothed by ``s0`` (Gaussian sigma, px) as every frame is, and blurred by ``b`` more (px): by a
     Gaussian of sigma ``b``, or (``kernel="disc"``) by the uniform disc of the same variance (:func:`disc_kernel`)."""
     if kernel == "disc" and b > 0.0:
-        return np.asarray(ndimage.gaussian_filter(disc_blurred(win, b), s0, mode="nearest"), dtype=float)
+        return np.asarray(ndimage.gaussian_filter(ndimage.convolve(win, disc_kernel(b), mode="nearest"), s0,
+                                                  mode="nearest"), dtype=float)
     return np.asarray(ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest"), dtype=float)
 
 
-@functools.lru_cache(maxsize=64)
 def copy_noise_share(s0: float, b: float, kernel: str = "gaussian") -> float:
     """The share of white noise's variance a copy made by :func:`blurred_copy` keeps (the sum of its kernel's
     squares): ``1 / (4 pi (s0² + b²))`` for a Gaussian."""

@@ -60,6 +60,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import ndimage
 from scipy.fft import next_fast_len
 
 from .average import TemplateAverage, anchor
@@ -78,7 +79,7 @@ from .template import (
     _window,
     blurred_copy,
     copy_noise_share,
-    disc_blurred,
+    disc_kernel,
     inside_ncc,
     masked_ncc,
     region_spectra,
@@ -483,7 +484,7 @@ def _frame_patch(t: TipTracker, patches: dict[float, Patch], image: FloatArray, 
     pt = patches.get(f)
     if pt is None and f > 0.0 and t.params.blur_kernel == "disc":  # the frame blurred by the disc of f's variance
         pt = patch(image, x, y, t.template.half * math.sqrt(2.0) + 12.0, t.params.template_blur, False)
-        pt.data[0] = disc_blurred(pt.data[0], f)
+        pt.data[0] = ndimage.convolve(pt.data[0], disc_kernel(f), mode="nearest")
         pt = patches[f] = with_slopes(pt) if slopes else pt
     elif pt is None:
         s = math.hypot(t.params.template_blur, f)
