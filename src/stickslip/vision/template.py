@@ -21,7 +21,6 @@ frame's border, the part outside left out of the sums.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 
@@ -30,12 +29,9 @@ from numpy.typing import NDArray
 from scipy import fft, ndimage
 
 __all__ = ["TrackerParams", "TipTemplate", "TemplateError", "masked_ncc", "inside_ncc", "region_spectra",
-           "noise_sigma", "blurred_copy", "copy_noise_share", "disc_kernel", "BLUR_KERNELS"]
+           "noise_sigma"]
 
 FloatArray = NDArray[np.float64]
-
-BLUR_KERNELS = ("gaussian", "disc")
-"""The shapes of the template copies' extra blur (:attr:`TrackerParams.blur_kernel`)."""
 
 
 class TemplateError(ValueError):
@@ -58,13 +54,6 @@ class TrackerParams:
     blur_bank : tuple of float
         Extra Gaussian blur of the template's copies, px (sigma): matched against a tip
         out of focus.
-    blur_kernel : str
-        The shape of that extra blur: ``"gaussian"`` (the default) or ``"disc"``, geometric
-        optics' blur circle of the same variance (radius about twice the sigma: a uniform disc
-        of radius ``R`` has the variance ``R² / 4`` along a line; :func:`blurred_copy`), the
-        defocus of a bright-field objective; the frame's extra blur (``sharpen_bank``)
-        alike. The shaft's and edges' profiles across the needle (:mod:`.shaft`,
-        :mod:`.width`) stay Gaussian-smoothed of that variance.
     sharpen_bank : tuple of float
         Extra Gaussian blur of the *frame*, px (sigma), matched against the sharp
         template: a tip in better focus than in the first frame.
@@ -300,7 +289,6 @@ class TrackerParams:
     contrast: float = 3.0
     edge_px: int = 2
     blur_bank: tuple[float, ...] = (0.0, 1.0, 2.0, 3.0, 4.5, 6.0)
-    blur_kernel: str = "gaussian"
     sharpen_bank: tuple[float, ...] = (1.5, 3.0)
     search_radius: int = 32
     coarse_factor: int = 4
@@ -361,8 +349,6 @@ class TrackerParams:
             raise ValueError("0 < min_score <= reacquire_score <= 1")
         if not self.blur_bank or self.blur_bank[0] != 0.0 or list(self.blur_bank) != sorted(self.blur_bank):
             raise ValueError("blur_bank must start at 0 px and increase")
-        if self.blur_kernel not in BLUR_KERNELS:
-            raise ValueError(f"blur_kernel = {self.blur_kernel!r} must be one of {', '.join(BLUR_KERNELS)}")
         if not (self.width_shift >= 1 and self.width_slack >= 0 and self.width_stations >= 1):
             raise ValueError("width_shift >= 1 px, width_slack >= 0 px and width_stations >= 1")
         if not (self.extent_depth > 0 and self.extent_slack >= 0):
@@ -473,7 +459,7 @@ class TipTemplate:
         weights = level_weights[0]
         shaft, core, ring_off, front = _surroundings(mask, inside, apex, params)
         s0 = params.template_blur
-        bank = [blurred_copy(win, s0, b, params.blur_kernel) for b in params.blur_bank]
+        bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in params.blur_bank]
         # the frames are smoothed by s0 alike before the fit (sampling.patch): copy k then matches a frame
         # blurred by blur_bank[k] more than the first
         contrast = _trackable_contrast(win, weights, noise, (x, y))
@@ -486,43 +472,6 @@ class TipTemplate:
 
 
 Offsets = tuple[FloatArray, FloatArray]
-
-
-@functools.lru_cache(maxsize=64)
-def disc_kernel(sigma: float) -> FloatArray:
-    """The uniform disc of the variance ``sigma²`` (px²) along a line, each pixel weighted by the share of it inside
-    (8 x 8 samples), normalised to a sum of 1: the radius ``2 sqrt(sigma² - 1/12)`` px, as the pixels' shares add a
-    pixel's variance (1/12 px²) to the disc's ``R² / 4``."""
-    r = 2.0 * math.sqrt(max(sigma * sigma - 1.0 / 12.0, 0.0))
-    half, k = int(math.ceil(r)), 8
-    sub = (np.arange(k) + 0.5) / k - 0.5
-    ax = (np.arange(-half, half + 1)[:, None] + sub[None, :]).ravel()
-    n = 2 * half + 1
-    inside = (np.hypot(ax[:, None], ax[None, :]) <= r).astype(float).reshape(n, k, n, k).mean(axis=(1, 3))
-    if inside.sum() <= 0.0:  # a disc smaller than a sample: a point
-        inside[half, half] = 1.0
-    return np.asarray(inside / inside.sum(), dtype=float)
-
-
-def blurred_copy(win: FloatArray, s0: float, b: float, kernel: str = "gaussian") -> FloatArray:
-    """``win`` smoothed by ``s0`` (Gaussian sigma, px) as every frame is, and blurred by ``b`` more (px): by a
-    Gaussian of sigma ``b``, or (``kernel="disc"``) by the uniform disc of the same variance (:func:`disc_kernel`)."""
-    if kernel == "disc" and b > 0.0:
-        return np.asarray(ndimage.gaussian_filter(ndimage.convolve(win, disc_kernel(b), mode="nearest"), s0,
-                                                  mode="nearest"), dtype=float)
-    return np.asarray(ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest"), dtype=float)
-
-
-def copy_noise_share(s0: float, b: float, kernel: str = "gaussian") -> float:
-    """The share of white noise's variance a copy made by :func:`blurred_copy` keeps (the sum of its kernel's
-    squares): ``1 / (4 pi (s0² + b²))`` for a Gaussian."""
-    if kernel == "disc" and b > 0.0:
-        half = int(math.ceil(2.0 * b + 4.0 * s0)) + 1
-        point = np.zeros((2 * half + 1, 2 * half + 1))
-        point[half, half] = 1.0
-        k = blurred_copy(point, s0, b, kernel)
-        return float(np.sum(k * k))
-    return 1.0 / (4.0 * math.pi * (s0 * s0 + b * b))
 
 
 def _check_tip(shape: tuple[int, ...], x: float, y: float) -> None:

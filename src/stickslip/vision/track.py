@@ -77,9 +77,6 @@ from .template import (
     _level_weights,
     _surroundings,
     _window,
-    blurred_copy,
-    copy_noise_share,
-    disc_kernel,
     inside_ncc,
     masked_ncc,
     region_spectra,
@@ -482,25 +479,12 @@ def _frame_patch(t: TipTracker, patches: dict[float, Patch], image: FloatArray, 
     """The frame's patch around ``(x, y)`` smoothed like ``t``'s template plus ``f`` px, made once per frame (kept in
     ``patches``); with its derivatives (the fit's) unless ``slopes`` is false (made then when asked for)."""
     pt = patches.get(f)
-    if pt is None and f > 0.0 and t.params.blur_kernel == "disc":  # the frame blurred by the disc of f's variance
-        pt = patch(image, x, y, t.template.half * math.sqrt(2.0) + 12.0, t.params.template_blur, False)
-        pt.data[0] = ndimage.convolve(pt.data[0], disc_kernel(f), mode="nearest")
-        pt = patches[f] = with_slopes(pt) if slopes else pt
-    elif pt is None:
+    if pt is None:
         s = math.hypot(t.params.template_blur, f)
         pt = patches[f] = patch(image, x, y, t.template.half * math.sqrt(2.0) + 12.0, s, slopes)
     elif slopes and not pt.slopes:
         pt = patches[f] = with_slopes(pt)
     return pt
-
-
-def _frame_noise2(t: TipTracker, f: float) -> float:
-    """The noise variance a sample of the frame blurred by ``f`` px more than the template keeps (the first frame's
-    noise, :func:`~.template.copy_noise_share`)."""
-    p = t.params
-    if p.blur_kernel == "gaussian":
-        return t.template.noise**2 / (4.0 * math.pi * (p.template_blur**2 + f * f))
-    return t.template.noise**2 * copy_noise_share(p.template_blur, f, p.blur_kernel)
 
 
 def _copy_terms(b: FloatArray, w: FloatArray, sw: float) -> tuple[FloatArray, float]:
@@ -735,7 +719,7 @@ class TipTracker:
         seen = _blur_samples(self, patches, image, x, y, theta)
         for (k, f, _), n_t2 in zip(self._spec, self._spec_noise2, strict=True):
             w, stats, all_in = seen[f]
-            n_f2 = _frame_noise2(self, f)
+            n_f2 = self.template.noise**2 / (4.0 * math.pi * (self.params.template_blur**2 + f * f))
             out.append(-1.0 if stats[0] <= 1e-9 else _noise_free_ncc(
                 self._bank_sel[k], stats, w, n_t2, n_f2, self._bank_terms[k] if all_in else None))
         return out
@@ -1052,8 +1036,7 @@ def _fit_parts(tr: TipTracker, share: float) -> None:
     tr._coarse = [_downsample(b, p.coarse_factor) for b in t.bank]
     tr._fft.clear()
     s0 = p.template_blur
-    tr._bank_noise2 = [share * t.noise**2 / (4.0 * math.pi * (s0 * s0 + b * b)) if p.blur_kernel == "gaussian"
-                       else share * t.noise**2 * copy_noise_share(s0, b, p.blur_kernel) for b in p.blur_bank]
+    tr._bank_noise2 = [share * t.noise**2 / (4.0 * math.pi * (s0 * s0 + b * b)) for b in p.blur_bank]
     tr._spec_noise2 = [tr._bank_noise2[k] for k, _, _ in tr._spec]
 
 
@@ -1073,7 +1056,7 @@ def _averaged(tr: TipTracker, cand: _Candidate, image: FloatArray) -> None:
     t, p = tr.template, tr.params
     kept = t.bank
     s0 = p.template_blur
-    t.bank = [blurred_copy(win, s0, b, p.blur_kernel) for b in p.blur_bank]
+    t.bank = [ndimage.gaussian_filter(win, math.hypot(s0, b), mode="nearest") for b in p.blur_bank]
     share = 1.0 / (avg.count + 1)
     _fit_parts(tr, share)
     first = patch(avg.first, avg.tip[0], avg.tip[1], t.half * math.sqrt(2.0) + 12.0, s0)
