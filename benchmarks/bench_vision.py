@@ -49,6 +49,9 @@ extra) it says so and measures nothing.
 paths and events; default 0, the draw every number above was measured on), for the tracking, ``--refusals``
 and ``--scenes`` (the third generator's draw ``N`` only, tips 6 to 22 px).
 
+``--defocus disc`` draws the own renderer's modes (and ``--micrograph``, ``--plain``) with geometric optics'
+blur circle of the same variance instead of the Gaussian defocus (``SimCamSettings(defocus="disc")``).
+
 ``--params NAME=VALUE,...`` tracks every mode with those of the tracker's constants changed
 (``TrackerParams``' fields, e.g. ``--params mismatch_floor=0.03``): a change measured side by side.
 
@@ -147,6 +150,9 @@ from stickslip.vision.track import Fix, Lost, TipTracker, _edge_refusal, _padded
 
 PARAMS = TrackerParams()
 """The tracker's constants in every mode (``--params NAME=VALUE,...`` changes some: a change measured side by side)."""
+
+DEFOCUS = "gaussian"
+"""The own renderer's defocus in its modes (``--defocus disc``: geometric optics' blur circle of the same variance)."""
 
 
 def _set_params(spec: str) -> None:
@@ -853,9 +859,9 @@ def lobed(n_frames: int, wide: bool = False, flake: bool = False, plain: int | N
     """
     make = (flake_benchmark if flake else round_benchmark if bead else droplet_benchmark if droplet
             else lobed_benchmark)
-    seqs = (own_benchmark(n_frames, 40, seed=plain, size=256) if plain is not None
-            else make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",)) if wide
-            else make(n_frames, 40, seed=0, size=256))
+    seqs = (own_benchmark(n_frames, 40, seed=plain, size=256, defocus=DEFOCUS) if plain is not None
+            else make(n_frames, 40, seed=1, size=256, widths=(14.0, 18.0), looks=("optical",), defocus=DEFOCUS)
+            if wide else make(n_frames, 40, seed=0, size=256, defocus=DEFOCUS))
     tally, bad, errors = _tally(seqs, lambda f, img: _lobed_class(f, img.shape[1]), lambda s: str(s.look))
     _print_tally(seqs, tally, bad, errors, lambda s: str(s.look))
     return len(bad)
@@ -867,7 +873,7 @@ def micrographs(n_seq: int) -> dict[str, tuple[int, int, int]]:
     out: dict[str, tuple[int, int, int]] = {}
     for ground in ("micro", "retina"):
         for seed in (1, 2, 3):
-            seqs = micrograph_benchmark(ground, seed, n_seq)
+            seqs = micrograph_benchmark(ground, seed, n_seq, defocus=DEFOCUS)
             if not seqs:
                 print("the micrograph mode skipped: scikit-image (the dev extra, which ships the files) is missing")
                 return out
@@ -1061,11 +1067,18 @@ def main(argv: list[str] | None = None) -> None:
     from cli_flags import check_flags  # the benchmarks folder: on the path when run as a script
 
     check_flags(args, ["--params", "--seed", "--scenes", "--plain", "--vouch-signals", "--error-split",
-                       "--border-signals", "--refusals", "--tracking-only", "--micrograph", *_OWN_MODES], __doc__)
+                       "--border-signals", "--refusals", "--tracking-only", "--micrograph", "--defocus", *_OWN_MODES],
+                __doc__)
     if "--params" in args:  # the tracker's constants changed, e.g. --params mismatch_floor=0.03
         at = args.index("--params")
         _set_params(args[at + 1])
         print(f"tracker constants changed: {args[at + 1]}")
+        args = args[:at] + args[at + 2 :]
+    if "--defocus" in args:  # the own renderer's defocus in its modes: gaussian (default) or disc
+        global DEFOCUS
+        at = args.index("--defocus")
+        DEFOCUS = args[at + 1]
+        print(f"the own renderer's defocus: {DEFOCUS}")
         args = args[:at] + args[at + 2 :]
     seed: int | None = None
     if "--seed" in args:  # the held-out renderer's (or the third generator's) draw

@@ -16,9 +16,10 @@ percentile; then for the sigma (near the last fix / found again) and focus-step 
 error (within 1 px, 1-3 px, beyond), along and across, and how many every other rule takes.
 
 Run: ``PYTHONPATH=tests/support .venv/bin/python benchmarks/vision_refused.py [FRAMES] [--only NAME,NAME]
-[--save FILE] [--params NAME=VALUE,...] [--micrograph]`` (``FRAMES`` default 400; set names have a space:
-``--only "plain 0,lobed"``; ``--load FILE,FILE`` reports saved runs; ``--micrograph``: the micrograph mode's six
-sets instead, ``micro 1`` to ``retina 3``, 1600 frames each for track51's table; they need scikit-image).
+[--save FILE] [--params NAME=VALUE,...] [--micrograph] [--defocus disc]`` (``FRAMES`` default 400; set names have
+a space: ``--only "plain 0,lobed"``; ``--load FILE,FILE`` reports saved runs; ``--micrograph``: the micrograph
+mode's six sets instead, ``micro 1`` to ``retina 3``, 1600 frames each for track51's table; they need
+scikit-image; ``--defocus disc``: the own renderer's needle blurred by the blur circle instead of the Gaussian).
 """
 
 from __future__ import annotations
@@ -75,24 +76,25 @@ def _judge(self: TipTracker, cand: Any, image: Any, reacquire: bool = False) -> 
     return res, c2
 
 
-def own_sets(n: int) -> dict[str, Callable[[], Any]]:
-    """The 13 own sets (development data) the outline's round measured."""
-    wide = {"size": 256, "widths": (14.0, 18.0), "looks": ("optical",)}
+def own_sets(n: int, defocus: str = "gaussian") -> dict[str, Callable[[], Any]]:
+    """The 13 own sets (development data) the outline's round measured; ``defocus``: the needle's blur's shape."""
+    wide = {"size": 256, "widths": (14.0, 18.0), "looks": ("optical",), "defocus": defocus}
+    d = defocus
     out: dict[str, Callable[[], Any]] = {
-        f"plain {s}": (lambda s=s: own_benchmark(n, 40, seed=s, size=256)) for s in (0, 1, 2)}
+        f"plain {s}": (lambda s=s: own_benchmark(n, 40, seed=s, size=256, defocus=d)) for s in (0, 1, 2)}
     for s in (0, 2, 4):
-        out[f"round {s}"] = lambda s=s: round_benchmark(n, 40, seed=s, size=256)
+        out[f"round {s}"] = lambda s=s: round_benchmark(n, 40, seed=s, size=256, defocus=d)
     for s in (1, 3, 5):
         out[f"round wide {s}"] = lambda s=s: round_benchmark(n, 40, seed=s, **wide)  # type: ignore[arg-type]
     for name, make in (("lobed", lobed_benchmark), ("flake", flake_benchmark)):
-        out[name] = lambda make=make: make(n, 40, seed=0, size=256)
+        out[name] = lambda make=make: make(n, 40, seed=0, size=256, defocus=d)
         out[f"{name} wide"] = lambda make=make: make(n, 40, seed=1, **wide)
     return out
 
 
-def micrograph_sets(n: int) -> dict[str, Callable[[], Any]]:
+def micrograph_sets(n: int, defocus: str = "gaussian") -> dict[str, Callable[[], Any]]:
     """The micrograph mode's six sets (``bench_vision.py --micrograph``): ``n`` frames each, in sequences of 40."""
-    return {f"{g} {s}": (lambda g=g, s=s: micrograph_benchmark(g, s, max(1, n // 40)))
+    return {f"{g} {s}": (lambda g=g, s=s: micrograph_benchmark(g, s, max(1, n // 40), defocus=defocus))
             for g in ("micro", "retina") for s in (1, 2, 3)}
 
 
@@ -116,6 +118,8 @@ def run(name: str, seqs: Any, params: TrackerParams) -> list[dict[str, Any]]:
                                    "fixed": isinstance(res, Fix)}
             if isinstance(res, Fix):
                 row["error"] = math.hypot(res.x - f.tip[0], res.y - f.tip[1])
+                row["along"], row["across"] = _split(res, f.tip, t.template.shaft)
+                row["blur truth"], row["blur first"] = f.blur, seq.frames[0].blur
             elif f.kind == "visible":
                 row["rule"] = _rule(res)
                 row["detail"] = res.detail
@@ -193,7 +197,9 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--only", help=f"sets, comma-separated, of {list(own_sets(1))}")
     ap.add_argument("--save", metavar="FILE", help="keep the refused rows (pickle) for --load")
     ap.add_argument("--load", metavar="FILE,FILE", help="report saved runs instead of tracking")
-    ap.add_argument("--params", metavar="NAME=VALUE,...", help="TrackerParams fields to set (floats)")
+    ap.add_argument("--params", metavar="NAME=VALUE,...", help="TrackerParams fields to set (floats; a word: a string)")
+    ap.add_argument("--defocus", choices=("gaussian", "disc"), default="gaussian",
+                    help="the own renderer's defocus: Gaussian (default) or the blur circle of the same variance")
     ap.add_argument("--micrograph", action="store_true", help="the micrograph mode's six sets instead")
     a = ap.parse_args(argv)
     rows: list[dict[str, Any]] = []
@@ -203,7 +209,7 @@ def main(argv: list[str]) -> None:
                 rows += pickle.load(fh)
         report(rows)
         return
-    sets = micrograph_sets(a.frames) if a.micrograph else own_sets(a.frames)
+    sets = micrograph_sets(a.frames, a.defocus) if a.micrograph else own_sets(a.frames, a.defocus)
     only = a.only.split(",") if a.only else list(sets)
     unknown = [name for name in only if name not in sets]
     if unknown:
@@ -214,7 +220,10 @@ def main(argv: list[str]) -> None:
         key, _, value = item.partition("=")
         if key not in names:
             ap.error(f"--params: {key!r} is not a TrackerParams field")
-        params = replace(params, **{key: float(value)})
+        try:
+            params = replace(params, **{key: float(value)})
+        except ValueError:
+            params = replace(params, **{key: value})
     TipTracker._judge = _judge  # type: ignore[method-assign]
     for name in only:
         seqs = sets[name]()

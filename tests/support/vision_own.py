@@ -70,7 +70,7 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
                  photons: float | None = None, max_blur: float = 3.0, events: bool = True,
                  event_rate: float = 0.08, lobed_rate: float = 0.0, flake_rate: float = 0.0,
                  round_rate: float = 0.0, droplet_rate: float = 0.0,
-                 ground: NDArray[np.float64] | None = None) -> OwnSequence:
+                 ground: NDArray[np.float64] | None = None, defocus: str = "gaussian") -> OwnSequence:
     """``n`` frames of one needle moving in a ``size`` x ``size`` field, with the truth.
 
     ``width_px`` (default drawn in 3..20) is the apex's diameter, ``photons`` (default
@@ -96,6 +96,9 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     With ``ground`` (the micrograph mode, :func:`micrograph`), the substrate is a crop of that
     real micrograph (:func:`_ground`) instead of the simulator's smooth texture with dust; every
     other draw stays as without it.
+    With ``defocus="disc"`` the needle's blur is geometric optics' blur circle of the same variance
+    (:func:`stickslip.sim.camera.defocus_kernel`, radius ``2 sigma`` softened by a 0.5 px rim) instead of the
+    Gaussian; every draw stays as without it (the blur's truth is still the Gaussian's sigma).
     """
     rng = np.random.default_rng([seed, 31337])
     look = look or ("optical", "sem")[int(rng.integers(0, 2))]
@@ -104,7 +107,7 @@ def own_sequence(seed: int, n: int = 40, size: int = 256, width_px: float | None
     taper = math.radians(float(rng.uniform(4.0, 15.0)))
     scene = SimScene(SimCamSettings(look=look, width=size, height=size, photons=ph, seed=int(seed) + 1,
                                     tip_radius_m=0.5 * W * 0.5e-6, taper=taper, pixel_size_m=0.5e-6,
-                                    end="paraboloid" if round_rate > 0 else "cone"))
+                                    end="paraboloid" if round_rate > 0 else "cone", defocus=defocus))
     if ground is not None:  # the scene's own substrate stream, so the crop is the same for a seed
         scene.substrate = _ground(ground, scene.substrate.shape, look, np.random.default_rng([int(seed) + 1, 7]))
     phi0 = float(rng.uniform(-math.pi, math.pi))  # the shaft's direction from the tip
@@ -469,44 +472,44 @@ def _depth(corners: tuple[tuple[float, float], ...], rounding: float) -> float:
 def own_benchmark(n_frames: int = 400, per_sequence: int = 40, seed: int = 0, size: int = 256,
                   widths: tuple[float, float] = (3.0, 20.0), looks: tuple[str, ...] = ("optical", "sem"),
                   lobed_rate: float = 0.0, flake_rate: float = 0.0, round_rate: float = 0.0,
-                  droplet_rate: float = 0.0) -> list[OwnSequence]:
+                  droplet_rate: float = 0.0, defocus: str = "gaussian") -> list[OwnSequence]:
     """Sequences of ``per_sequence`` frames, tip widths spread over ``widths`` (px), the looks taken in turn;
     ``lobed_rate``, ``flake_rate``, ``round_rate``, ``droplet_rate``: :func:`own_sequence`'s modes (0: the plain
-    frames)."""
+    frames); ``defocus``: its blur's shape."""
     n_seq = max(1, n_frames // per_sequence)
     ws = np.linspace(widths[0], widths[1], n_seq)
     return [own_sequence(seed * 1000 + i, per_sequence, size, float(ws[i]), looks[i % len(looks)],
                          lobed_rate=lobed_rate, flake_rate=flake_rate, round_rate=round_rate,
-                         droplet_rate=droplet_rate) for i in range(n_seq)]
+                         droplet_rate=droplet_rate, defocus=defocus) for i in range(n_seq)]
 
 
 def lobed_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
                     lobed_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
-                    looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
+                    looks: tuple[str, ...] = ("optical", "sem"), defocus: str = "gaussian") -> list[OwnSequence]:
     """:func:`own_benchmark`'s sequences in the lobed mode (lobed grains, tips near the edge)."""
-    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, lobed_rate=lobed_rate)
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, lobed_rate=lobed_rate, defocus=defocus)
 
 
 def flake_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
                     flake_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
-                    looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
+                    looks: tuple[str, ...] = ("optical", "sem"), defocus: str = "gaussian") -> list[OwnSequence]:
     """:func:`own_benchmark`'s sequences in the flake mode (flat chips stuck on the tip)."""
-    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, flake_rate=flake_rate)
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, flake_rate=flake_rate, defocus=defocus)
 
 
 def round_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
                     round_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
-                    looks: tuple[str, ...] = ("optical", "sem")) -> list[OwnSequence]:
+                    looks: tuple[str, ...] = ("optical", "sem"), defocus: str = "gaussian") -> list[OwnSequence]:
     """:func:`own_benchmark`'s sequences in the round mode (blunt needles, beads stuck on the tip, tips near the
     edge their shaft leaves by)."""
-    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, round_rate=round_rate)
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, round_rate=round_rate, defocus=defocus)
 
 
 def droplet_benchmark(n_frames: int = 200, per_sequence: int = 40, seed: int = 0, size: int = 256,
                       droplet_rate: float = 0.15, widths: tuple[float, float] = (3.0, 20.0),
-                      looks: tuple[str, ...] = ("optical",)) -> list[OwnSequence]:
+                      looks: tuple[str, ...] = ("optical",), defocus: str = "gaussian") -> list[OwnSequence]:
     """:func:`own_benchmark`'s sequences in the droplet mode (transparent droplets on the tip; bright field only)."""
-    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, droplet_rate=droplet_rate)
+    return own_benchmark(n_frames, per_sequence, seed, size, widths, looks, droplet_rate=droplet_rate, defocus=defocus)
 
 
 MICROGRAPHS = {"micro": "microaneurysms.png", "retina": "retina.jpg"}
@@ -553,16 +556,17 @@ def _ground(src: NDArray[np.float64], shape: tuple[int, ...], look: str,
 
 
 def micrograph_benchmark(ground: str, seed: int, n_seq: int = 40, per_sequence: int = 40,
-                         size: int = 256) -> list[OwnSequence]:
+                         size: int = 256, defocus: str = "gaussian") -> list[OwnSequence]:
     """The micrograph mode: ``n_seq`` bright-field sequences over the micrograph ``ground`` (:data:`MICROGRAPHS`),
     tips 10 to 18 px, 50 to 120 photons (drawn per sequence), events at 0.15 a frame; empty without
     scikit-image."""
     if micrograph(ground) is None:
         return []
-    return [micrograph_sequence(ground, seed, s, per_sequence, size) for s in range(n_seq)]
+    return [micrograph_sequence(ground, seed, s, per_sequence, size, defocus) for s in range(n_seq)]
 
 
-def micrograph_sequence(ground: str, seed: int, index: int, per_sequence: int = 40, size: int = 256) -> OwnSequence:
+def micrograph_sequence(ground: str, seed: int, index: int, per_sequence: int = 40, size: int = 256,
+                        defocus: str = "gaussian") -> OwnSequence:
     """Sequence ``index`` of :func:`micrograph_benchmark`'s set (``ground``, ``seed``); scikit-image needed."""
     src = micrograph(ground)
     if src is None:
@@ -570,4 +574,4 @@ def micrograph_sequence(ground: str, seed: int, index: int, per_sequence: int = 
     rng = np.random.default_rng([seed, index, 99])
     width, photons = float(rng.uniform(10.0, 18.0)), float(rng.uniform(50.0, 120.0))
     return own_sequence(seed * 1000 + index, per_sequence, size, width_px=width, look="optical", photons=photons,
-                        event_rate=0.15, ground=src)
+                        event_rate=0.15, ground=src, defocus=defocus)

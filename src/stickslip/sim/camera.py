@@ -13,7 +13,8 @@ pose) through the tip's forward kinematics (:func:`stickslip.kinematics.tip`) an
   needle bright, brightest at its edges where the surface turns away from the beam, a
   brightness gradient across the field and line-by-line scan noise);
 * focus: the needle's image is blurred by a Gaussian whose width grows with its distance
-  from the focal plane (``dof``: the defocus that adds one pixel of blur);
+  from the focal plane (``dof``: the defocus that adds one pixel of blur); or, with
+  ``defocus="disc"``, by geometric optics' blur circle of the same variance (:func:`defocus_kernel`);
 * a textured substrate with debris, in the focal plane, drifting slowly across the field
   (``drift``, px/s on the arm's virtual clock, plus a small random walk);
 * shot noise: Poisson counts with ``photons`` at full brightness.
@@ -33,7 +34,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
+from scipy import ndimage, signal, special
 
 from .. import kinematics as kin
 from ..devices.base import Controller, KnowsTruePosition, VirtualClock, redact_url
@@ -42,13 +43,17 @@ from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_optio
 from ..vision.frame import Frame
 from ..vision.view import View, project
 
-__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "Droplet", "open_url", "LOOKS", "ENDS"]
+__all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "Droplet", "open_url", "LOOKS", "ENDS",
+           "DEFOCUS", "defocus_kernel"]
 
 LOOKS = ("optical", "sem")
 """The simulated microscope's looks."""
 
 ENDS = ("cone", "paraboloid")
 """The simulated needle's ends (:class:`SimCamSettings`'s ``end``)."""
+
+DEFOCUS = ("gaussian", "disc")
+"""The simulated needle's defocus blurs (:class:`SimCamSettings`'s ``defocus``)."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +85,14 @@ class SimCamSettings:
         ``tip_radius``, the default) or ``"paraboloid"`` (a blunt, etched end: a paraboloid
         whose apex has the radius of curvature ``tip_radius``, so its radius grows as
         ``sqrt(2 R s)`` at ``s`` behind the apex, joining the cone where their slopes meet).
+    defocus : str
+        The shape of the needle's blur: ``"gaussian"`` (the default; an SEM's beam out of focus
+        is close to one) or ``"disc"`` (bright field: geometric optics images a point out of
+        focus as a uniform blur circle; :func:`defocus_kernel`, of the same variance as the
+        Gaussian it replaces, its rim softened by ``rim_px``).
+    rim_px : float
+        With ``defocus="disc"``: the Gaussian (sigma, px) that softens the blur circle's rim
+        (diffraction, the lens's aberrations); part of the blur's variance.
     drift_px_s : float
         Speed of the slow drift of the whole image, pixels per second (of the arm's clock).
     debris : int
@@ -99,6 +112,8 @@ class SimCamSettings:
     tip_radius_m: float = 1.0e-6
     taper: float = math.radians(8.0)
     end: str = "cone"
+    defocus: str = "gaussian"
+    rim_px: float = 0.5
     drift_px_s: float = 0.02
     debris: int = 40
     seed: int = 0
@@ -348,6 +363,9 @@ class SimScene:
             raise ValueError(f"look={s.look!r}: the simulated microscope has the looks {', '.join(LOOKS)}")
         if s.end not in ENDS:
             raise ValueError(f"end={s.end!r}: the simulated needle ends in one of {', '.join(ENDS)}")
+        if s.defocus not in DEFOCUS or not s.rim_px >= 0.0:
+            raise ValueError(f"defocus={s.defocus!r}, rim_px={s.rim_px!r}: the needle's blur is one of "
+                             f"{', '.join(DEFOCUS)}, its rim >= 0 px")
         self.settings = s
         rng = np.random.default_rng([s.seed, 7])
         self.rng = np.random.default_rng([s.seed, 8])
@@ -377,7 +395,8 @@ class SimScene:
         direction : array_like
             From the tip back along the shaft (any length), px.
         sigma : float
-            The needle's blur (Gaussian sigma), px.
+            The needle's blur (Gaussian sigma), px; with ``defocus="disc"`` the blur circle of the same
+            variance (:func:`defocus_kernel`).
         shift : array_like, optional
             The substrate's drift, px ``(x, y)`` (default none).
         foreshortening : float
@@ -399,7 +418,10 @@ class SimScene:
         bg = ndimage.shift(self.substrate, (float(shift[1]), float(shift[0])), order=1, mode="nearest")
         bg = bg[m : m + s.height, m : m + s.width]
         cover, edge = self._needle(tip_px, np.asarray(direction, dtype=float), foreshortening)
-        if sigma > 0.3:
+        if s.defocus == "disc" and sigma > max(s.rim_px, 0.3):
+            kernel = defocus_kernel(sigma, s.rim_px)
+            cover, edge = _convolved(cover, kernel), _convolved(edge, kernel)
+        elif sigma > 0.3:
             cover = ndimage.gaussian_filter(cover, sigma, truncate=3.0)
             edge = ndimage.gaussian_filter(edge, sigma, truncate=3.0)
         if s.look == "optical":
@@ -524,6 +546,59 @@ class SimScene:
         inside = np.clip(across / np.maximum(radius, 1e-6), 0.0, 1.0)
         edge = cover * inside**6  # secondary-electron yield rises where the surface turns from the beam
         return cover, edge
+
+
+def defocus_kernel(sigma: float, rim: float = 0.0) -> NDArray[np.float64]:
+    """Geometric optics' blur circle of a point out of focus, of the variance of a Gaussian of ``sigma`` (px).
+
+    A bright-field objective of numerical aperture NA images a point a distance ``dz`` out of
+    its focal plane as a nearly uniform disc (the blur circle) of radius about ``dz NA`` in the
+    object plane, its rim softened by diffraction. A uniform disc of radius ``R`` has the
+    variance ``R² / 4`` along any line (``R² / 2`` in the plane), so the disc of the variance
+    ``sigma²`` of the Gaussian it replaces has ``R = 2 sigma`` (not ``sqrt(2) sigma``: that
+    disc has half the Gaussian's variance). The disc is anti-aliased (each pixel its share of
+    it, 8 x 8 samples a pixel: the disc integrated over a pixel, which adds a pixel's 1/12 px²)
+    and its edge softened by a Gaussian ``rim`` (px; the edge falls as an error function of
+    the distance from the circle); both variances add to the disc's, so
+    ``R = 2 sqrt(sigma² - rim² - 1/12)`` to first order, made exact (to 0.1 %) by two
+    corrections of ``R²`` by the kernel's own variance. Normalised to a sum of 1.
+    """
+    r2 = 4.0 * max(sigma * sigma - rim * rim - 1.0 / 12.0, 0.0)
+    disc = _soft_disc(math.sqrt(r2), rim)
+    for _ in range(2):
+        if r2 <= 0.0:
+            break
+        h = disc.shape[0] // 2
+        x = np.arange(-h, h + 1)
+        r2 = max(r2 + 4.0 * (sigma * sigma - float((disc.sum(axis=0) * x * x).sum())), 0.0)
+        disc = _soft_disc(math.sqrt(r2), rim)
+    return disc
+
+
+def _soft_disc(r: float, rim: float) -> NDArray[np.float64]:
+    """A disc of radius ``r`` px, its edge falling as an error function of width ``rim`` px, each pixel its mean over
+    8 x 8 samples; normalised to a sum of 1."""
+    half = int(math.ceil(r + 4.0 * rim + 1.0))
+    k = 8
+    sub = (np.arange(k) + 0.5) / k - 0.5
+    ax = (np.arange(-half, half + 1)[:, None] + sub[None, :]).ravel()
+    rho = np.hypot(ax[:, None], ax[None, :])
+    n = 2 * half + 1
+    if rim > 0.0:  # the rim's fall across the circle (the disc's edge, softened)
+        inside = 0.5 * special.erfc((rho - r) / (math.sqrt(2.0) * rim))
+    else:
+        inside = (rho <= r).astype(float)
+    disc = inside.reshape(n, k, n, k).mean(axis=(1, 3))
+    if disc.sum() <= 0.0:  # a disc smaller than a sample: a point
+        disc[half, half] = 1.0
+    return np.asarray(disc / disc.sum(), dtype=float)
+
+
+def _convolved(image: NDArray[np.float64], kernel: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``image`` convolved with the (odd, symmetric) ``kernel``, its edges mirrored as ``gaussian_filter``'s; by FFT."""
+    h = kernel.shape[0] // 2
+    padded = np.pad(image, h, mode="symmetric")
+    return np.asarray(signal.fftconvolve(padded, kernel, mode="valid"), dtype=float)
 
 
 def _paraboloid(s: NDArray[np.float64], c: NDArray[np.float64], r0: float,
