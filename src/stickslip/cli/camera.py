@@ -86,7 +86,11 @@ def locate_cmd(
     frames: list[str] = typer.Argument(
         ..., help="Frames: image files (PNG, TIFF; 8 or 16 bit; grey or colour), folders, globs, or one video file."
     ),
-    tip: str = typer.Option(..., "--tip", help="The tip in the first frame, X,Y in pixels. " + PIXELS),
+    tip: str = typer.Option(
+        ..., "--tip",
+        help="The tip in the first frame, X,Y in pixels; the needle is learnt there, so start with a frame in focus. "
+        + PIXELS,
+    ),
     json_out: bool = typer.Option(False, "--json", help="Print a JSON list: one object per frame, in order."),
 ) -> None:
     """Find the tip in every frame, from where it is in the first.
