@@ -69,3 +69,15 @@ def test_a_straight_edge_blurred_by_the_disc_stops_at_its_radius() -> None:
     assert gauss[edge - 9, 60] == pytest.approx(0.012, abs=0.006)
     # both halve the coverage at the edge
     assert disc[edge, 60] == pytest.approx(gauss[edge, 60], abs=0.08)
+
+
+def test_the_simcam_url_takes_the_defocus_shape() -> None:
+    """``simcam://?defocus=disc`` renders with the blur circle; an unknown shape is refused with the choices."""
+    from stickslip.devices import open_device
+    from stickslip.sim.camera import open_url
+
+    arm = open_device("sim://")
+    assert open_url("simcam://?size=64x48", arm).settings.defocus == "gaussian"
+    assert open_url("simcam://?size=64x48&defocus=Disc", arm).settings.defocus == "disc"
+    with pytest.raises(ValueError, match=r"simcam:// defocus='pillbox': the blur's shape is one of gaussian, disc"):
+        open_url("simcam://?defocus=pillbox", arm)

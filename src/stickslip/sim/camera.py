@@ -639,7 +639,7 @@ def _substrate(h: int, w: int, look: str, debris: int, rng: np.random.Generator)
 
 
 _OPTIONS = frozenset(
-    {"look", "seed", "pixel", "size", "photons", "dof", "blur", "tip", "taper", "drift", "debris",
+    {"look", "seed", "pixel", "size", "photons", "dof", "defocus", "blur", "tip", "taper", "drift", "debris",
      "tilt", "azimuth", "roll", "centre", "geometry"}
 )
 
@@ -649,8 +649,9 @@ def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCam
 
     Options: ``look`` (optical, sem), ``seed``, ``pixel`` (pixel size, e.g. 0.5um), ``size``
     (``WxH`` pixels), ``photons`` (at full brightness), ``dof`` (defocus adding one pixel
-    of blur, e.g. 4um), ``blur`` (in-focus blur, pixels), ``tip`` (apex radius, e.g.
-    0.4um), ``taper`` (cone half-angle, e.g. 8deg), ``drift`` (px/s), ``debris`` (count),
+    of blur, e.g. 4um), ``defocus`` (gaussian, disc: the blur's shape), ``blur`` (in-focus
+    blur, pixels), ``tip`` (apex radius, e.g. 0.4um), ``taper`` (cone half-angle, e.g.
+    8deg), ``drift`` (px/s), ``debris`` (count),
     ``tilt``, ``azimuth``, ``roll`` (the view, angles), ``centre`` (``tip``, or ``X,Y,Z`` in
     the base frame, lengths), ``geometry`` (``OFFSET,LENGTH`` of the arm). ``device`` is the arm.
     """
@@ -663,6 +664,10 @@ def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCam
     try:
         if "look" in opts:
             kw["look"] = opts["look"].strip().lower()
+        if "defocus" in opts:
+            kw["defocus"] = opts["defocus"].strip().lower()
+            if kw["defocus"] not in DEFOCUS:
+                raise ValueError(f"defocus={opts['defocus']!r}: the blur's shape is one of {', '.join(DEFOCUS)}")
         if "seed" in opts:
             kw["seed"] = _int(opts["seed"], "seed", 0, 2**31)
         px = pixel_option(opts, url)
