@@ -488,6 +488,9 @@ def _check_tip(shape: tuple[int, ...], x: float, y: float) -> None:
         )
 
 
+_WHAT_TO_DO = "put the tip on the needle's very end, or start with a frame in focus where the needle stands out more"
+
+
 def _offsets(h: int, apex: tuple[float, float]) -> Offsets:
     """Each pixel's offset from the tip ``apex`` (x, y; px) in the window of half-width ``h`` (px)."""
     yy, xx = np.mgrid[0 : 2 * h + 1, 0 : 2 * h + 1]
@@ -526,11 +529,14 @@ def _needle_mask(
     if not touching:
         raise TemplateError(
             f"nothing stands out from the background at the tip ({x:g}, {y:g}): no needle within 8 px "
-            f"(it must stand {params.contrast:g} background spreads from the background level)"
+            f"(it must stand {params.contrast:g} background spreads from the background level; the most there "
+            f"stands {float(dev[near].max()):.1f}): {_WHAT_TO_DO}"
         )
     mask = np.isin(labels, list(touching))
     if mask.sum() < 12:
-        raise TemplateError(f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out")
+        raise TemplateError(
+            f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out: {_WHAT_TO_DO}"
+        )
     return np.asarray(mask), (level, spread)
 
 
@@ -598,7 +604,8 @@ def _trackable_contrast(win: FloatArray, weights: FloatArray, noise: float, tip:
     if snr < 10.0:
         raise TemplateError(
             f"the needle at ({x:g}, {y:g}) stands out by {contrast / max(noise, 1e-12):.2g} times the pixel noise "
-            f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track"
+            f"over {sw:.0f} px (signal to noise {snr:.1f} < 10): too faint to track; start with a frame in focus, "
+            f"with more light or a longer exposure"
         )
     return contrast
 
