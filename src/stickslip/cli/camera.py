@@ -118,7 +118,7 @@ def locate_cmd(
 
     at = _pixel(tip, "--tip")
     with Progress(TextColumn("locating"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                  console=err_console, transient=True) as bar:
+                  console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
         task = bar.add_task("locate", total=None)
 
         def progress(done: int, total: int) -> None:
@@ -358,7 +358,7 @@ def _with_device_and_camera(
             fail(str(e))
         try:
             columns = (TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}"))
-            with Progress(*columns, console=err_console, transient=True) as bar:
+            with Progress(*columns, console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
                 task = bar.add_task("camera", total=None)
 
                 def progress(done: int, total: int) -> None:

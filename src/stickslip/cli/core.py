@@ -416,9 +416,10 @@ def _progress_bar(what: str, after_s: float = 1.0) -> Iterator[Callable[[float, 
         if bar is None and time.monotonic() - start < after_s:
             return
         if bar is None:
+            console = Console(stderr=True)  # in a pipe or a log no bar: its close would leave a blank line
             bar = Progress(TextColumn(what), BarColumn(), TextColumn("{task.percentage:>3.0f} %"),
                            TextColumn("{task.description}"), TimeElapsedColumn(),
-                           console=Console(stderr=True), transient=True)
+                           console=console, transient=True, disable=not console.is_terminal)
             bar.start()
             task = bar.add_task(text, total=1.0)
         assert task is not None
