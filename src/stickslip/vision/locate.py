@@ -3,6 +3,8 @@
 :func:`locate` reads every frame (so a bad file is refused before anything is reported),
 tracks the tip through them (:class:`~.track.TipTracker`) and returns one
 :class:`Located` per frame, in order: a fix with its score, or a refusal with its reason.
+The first frame's answer also carries how blurred the needle is there (:attr:`Located.focus`,
+:func:`~.focus.first_frame_focus`): a tip learnt out of focus is tracked worse in every later frame.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 
 from .camera import CameraEnded
 from .files import open_frames
+from .focus import Focus, first_frame_focus
 from .frame import Frame, ImageError
 from .track import Fix, Lost, TipTracker, TrackerParams
 
@@ -33,12 +36,17 @@ class Located:
         Why there is no fix (one of :data:`~.track.REASONS`).
     detail : str
         What the tracker saw.
+    focus : Focus or None
+        The first frame only: how blurred the needle's shaft edges are there (``focus.sigma``, px;
+        :func:`~.focus.first_frame_focus`), ``None`` where they cannot be read (and on every later frame).
+        Above :attr:`~.template.TrackerParams.focus_warn` px, ``camera locate`` warns. Not in :meth:`as_dict`.
     """
 
     frame: str
     fix: Fix | None = None
     lost: str | None = None
     detail: str = ""
+    focus: Focus | None = None
 
     def as_dict(self) -> dict[str, object]:
         """``{"frame", "x", "y", "score"}`` for a fix (px, 0..1), ``{"frame", "lost"}`` for a refusal."""
@@ -58,7 +66,7 @@ def locate_frames(
     if not frames:
         raise ImageError("no frames")
     tracker = TipTracker(frames[0], tip, params)
-    out = [Located(frames[0].source, Fix(float(tip[0]), float(tip[1]), 1.0, 0.0))]
+    out = [_first(frames[0], tip, tracker)]
     for k, f in enumerate(frames[1:], start=1):
         r = tracker.update(f)
         if isinstance(r, Lost):
@@ -102,7 +110,7 @@ def locate(
     try:
         first = camera.grab()
         tracker = TipTracker(first, tip, params)
-        out = [Located(first.source, Fix(float(tip[0]), float(tip[1]), 1.0, 0.0))]
+        out = [_first(first, tip, tracker)]
         for k in range(1, n):
             f = camera.grab()
             r = tracker.update(f)
@@ -112,3 +120,12 @@ def locate(
     finally:
         camera.close()
     return out
+
+
+def _first(first: Frame, tip: tuple[float, float], tracker: TipTracker) -> Located:
+    """The first frame's answer: the tip given (score 1) and the needle's focus there (read beside the tracker,
+    which never sees it)."""
+    p = tracker.params
+    focus = first_frame_focus(first.image, (float(tip[0]), float(tip[1])), tracker.template.shaft,
+                              p.focus_from, p.focus_length)
+    return Located(first.source, Fix(float(tip[0]), float(tip[1]), 1.0, 0.0), focus=focus)

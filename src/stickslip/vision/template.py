@@ -283,6 +283,19 @@ class TrackerParams:
         and a tie is kept (it matches where the needle is anyway). Own cases: bright cells learnt
         beside a needle read 0.16 to 0.18 better at their old place, the own sets' needle pieces
         0.26 or more worse (docs/vision-log.md).
+    focus_from : float
+        Where the shaft whose two edges say how blurred the first frame is starts behind the tip,
+        px (:func:`~.focus.first_frame_focus`): past the apex's cap of the own needles up to 20 px
+        wide. Read for ``camera locate``'s warning only; the tracker never uses it.
+    focus_length : float
+        Length of that shaft, px: 40 px of two edges read own bright-field first frames' blur
+        unbiased (Gaussian defocus, within 0.08 px) with a spread of 0.05-0.17 px (track73).
+    focus_warn : float
+        The first frame's blur read there (the edges' sigma, px) over which ``camera locate``
+        warns that it looks out of focus: on own bright-field sequences the fixes' median error
+        doubles past a first frame blurred 1.6 px (0.26 px under 0.8 px, 0.52 px over 1.6 px),
+        and at 1.6 px the reading warned on none of 66 sharp first frames (< 0.8 px) and
+        missed none of 142 blurred ones (> 1.6 px) (track73). SEM edges read about 0.5 px low.
     """
 
     half_window: int = 20
@@ -339,6 +352,9 @@ class TrackerParams:
     anchor_limit: float = 1.0
     confirm_move: float = 4.0
     confirm_margin: float = 0.1
+    focus_from: float = 10.0
+    focus_length: float = 40.0
+    focus_warn: float = 1.6
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:
