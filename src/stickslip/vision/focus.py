@@ -24,6 +24,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage, optimize, special
 
+from .shaft import station_profiles
+
 FloatArray = NDArray[np.float64]
 
 MARGIN = 8.0
@@ -160,11 +162,9 @@ def _coarse(image: FloatArray, tip: tuple[float, float], shaft: tuple[float, flo
     sm = 0.5 * (s0 + s1)
     found: dict[int, list[tuple[float, float, float]]] = {-1: [], 1: []}
     for s in np.arange(s0, s1 + 1e-9, STATION_STEP):
-        lines = [s + d for d in (-1.0, 0.0, 1.0)]
-        xs = np.array([tip[0] + t * ux - us * uy for t in lines])
-        ys = np.array([tip[1] + t * uy + us * ux for t in lines])
-        prof = ndimage.map_coordinates(image, [ys.ravel(), xs.ravel()], order=1, mode="nearest")
-        g = np.gradient(ndimage.gaussian_filter1d(prof.reshape(3, -1).mean(axis=0), 2.0))
+        # the profile across the shaft, averaged over the shaft's station lines (its edge clipped, as there)
+        prof = station_profiles(image, tip[0] + s * ux, tip[1] + s * uy, -us * uy, us * ux, ux, uy)[0]
+        g = np.gradient(ndimage.gaussian_filter1d(prof, 2.0))
         for side in (-1, 1):
             i = int(np.argmax(np.abs(g) * (us * side > 0.5)))
             found[side].append((float(s - sm), float(us[i]), float(g[i])))
