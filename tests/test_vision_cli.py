@@ -123,3 +123,17 @@ def test_calibrate_measures_joint_3_and_calibrate_takes_its_rows(tmp_path):
 def test_joint_2_from_above_is_refused_with_the_reason(tmp_path):
     _bad(["camera", "calibrate", "-d", "sim://", "--camera", CAM, "--joints", "2", "--tip", "307.2,256"],
          "along the camera's optical axis")
+
+
+def test_locate_on_a_terminal_shows_its_bar_and_prints_the_json(frames, monkeypatch):
+    """On a terminal the bar's Live points sys.stderr at a rich proxy of our console, whose stream reads
+    sys.stderr at each write: the console once wrote into itself (RecursionError, megabytes of traceback)."""
+    from stickslip.cli import camera as camera_cli
+    from stickslip.cli._output import SafeConsole
+
+    monkeypatch.setattr(camera_cli, "err_console", SafeConsole(stderr=True, force_terminal=True, width=80))
+    folder, tips = frames
+    r = runner.invoke(app, ["camera", "locate", str(folder), "--tip", f"{tips[0][0]},{tips[0][1]}", "--json"])
+    assert r.exit_code == 0 and r.exception is None, repr(r.exception)
+    assert [o["frame"] for o in json.loads(r.stdout)] == [str(folder / f"f{k}.png") for k in range(3)]
+    assert "locating" in r.stderr and "Traceback" not in r.stderr and len(r.stderr) < 10_000
