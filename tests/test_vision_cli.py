@@ -137,3 +137,4 @@ def test_locate_on_a_terminal_shows_its_bar_and_prints_the_json(frames, monkeypa
     assert r.exit_code == 0 and r.exception is None, repr(r.exception)
     assert [o["frame"] for o in json.loads(r.stdout)] == [str(folder / f"f{k}.png") for k in range(3)]
     assert "locating" in r.stderr and "Traceback" not in r.stderr and len(r.stderr) < 10_000
+    assert "None" not in r.stderr  # the count before the frames are read: 0/?, not 0/None
