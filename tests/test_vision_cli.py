@@ -138,3 +138,21 @@ def test_locate_on_a_terminal_shows_its_bar_and_prints_the_json(frames, monkeypa
     assert [o["frame"] for o in json.loads(r.stdout)] == [str(folder / f"f{k}.png") for k in range(3)]
     assert "locating" in r.stderr and "Traceback" not in r.stderr and len(r.stderr) < 10_000
     assert "None" not in r.stderr  # the count before the frames are read: 0/?, not 0/None
+
+
+@pytest.mark.parametrize(("query", "words"), [
+    ("pixel=", "pixel='' is empty"),  # was taken as no pixel size at all: simcam:// drew 0.5 um pixels
+    ("dof=", "dof='': cannot read"),  # the option was not named: "simcam:// cannot read '' as a number ..."
+    ("tip=nan", "tip='nan': cannot read"),
+    ("taper=", "taper='': cannot read"),
+    ("tilt=up", "tilt='up': cannot read"),
+    ("centre=1mm,x,0", "centre='x': cannot read"),
+])
+def test_a_simcam_option_that_cannot_be_read_is_named(tmp_path, query: str, words: str) -> None:
+    _bad(["camera", "grab", "-d", "sim://", "--camera", f"simcam://?{query}", "-o", str(tmp_path / "g.png")], words)
+    assert not (tmp_path / "g.png").exists()
+
+
+def test_an_empty_pixel_size_is_refused_for_files_too(frames) -> None:
+    folder, _ = frames
+    _bad(["camera", "grab", "--camera", f"files://{folder}?pixel=", "-o", str(folder / "g.png")], "pixel='' is empty")
