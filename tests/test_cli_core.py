@@ -170,3 +170,13 @@ def test_python_dash_m_runs_the_same_command_line(tmp_path):
                          cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error:")
     assert "python -m stickslip where --help" in bad.stderr
+
+
+def test_plan_help_says_a_position_takes_its_unit() -> None:
+    """--from/--to once read 'rad / m, or with units' while a bare number (0 excepted) is refused."""
+    r = CliRunner().invoke(app, ["plan", "--help"], terminal_width=200)
+    assert r.exit_code == 0
+    text = " ".join(r.output.split())
+    assert "rad / m" not in text and "a bare number other than 0 is refused" in text
+    r = CliRunner().invoke(app, ["plan", "-j", "3", "--from", "0.002", "--to", "2.03mm"])
+    assert r.exit_code == 2 and "--from: 0.002 has no unit" in r.output
