@@ -156,3 +156,12 @@ def test_a_simcam_option_that_cannot_be_read_is_named(tmp_path, query: str, word
 def test_an_empty_pixel_size_is_refused_for_files_too(frames) -> None:
     folder, _ = frames
     _bad(["camera", "grab", "--camera", f"files://{folder}?pixel=", "-o", str(folder / "g.png")], "pixel='' is empty")
+
+
+@pytest.mark.parametrize("name", ["g.tif", "g.jpg", "g.png.bak"])
+def test_grab_refuses_a_file_name_that_is_not_a_png(tmp_path, name: str) -> None:
+    """grab writes a 16-bit PNG: under a .tif or .jpg name it was written all the same (PNG data, a TIFF reader
+    refuses it: 'not a TIFF file: header=b'\\x89PNG'')."""
+    _bad(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / name)], "name it .png")
+    assert not (tmp_path / name).exists()
+    _ok(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / "G.PNG")])

@@ -419,7 +419,7 @@ def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> 
 @camera_app.command("grab")
 def grab_cmd(
     camera: str = typer.Option(..., "--camera", help=_CAMERA_HELP),
-    output: Path = typer.Option(..., "--output", "-o", help="Write the frame here (PNG, 16-bit grey)."),
+    output: Path = typer.Option(..., "--output", "-o", help="Write the frame here (a .png file, 16-bit grey)."),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP + " Only simcam:// needs it."),
     db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the frame's size, time and pixel size as JSON."),
@@ -435,6 +435,8 @@ def grab_cmd(
     from ..vision.frame import ImageError
     from ..vision.images import write_png
 
+    if output.suffix.lower() != ".png":  # PNG data under a .tif or .jpg name misleads every other reader
+        fail(f"-o {output}: camera grab writes a 16-bit grey PNG: name it .png")
     with user_errors():
         scheme = camera_scheme(camera)
     dev = None
