@@ -170,3 +170,27 @@ def test_python_dash_m_runs_the_same_command_line(tmp_path):
                          cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.strip().splitlines()[-1].startswith("error:")
     assert "python -m stickslip where --help" in bad.stderr
+
+
+def test_plan_help_says_a_position_takes_its_unit() -> None:
+    """--from/--to once read 'rad / m, or with units' while a bare number (0 excepted) is refused."""
+    r = CliRunner().invoke(app, ["plan", "--help"], terminal_width=200)
+    assert r.exit_code == 0
+    text = " ".join(r.output.split())
+    assert "rad / m" not in text and "a bare number other than 0 is refused" in text
+    r = CliRunner().invoke(app, ["plan", "-j", "3", "--from", "0.002", "--to", "2.03mm"])
+    assert r.exit_code == 2 and "--from: 0.002 has no unit" in r.output
+
+
+@pytest.mark.parametrize("json_out", [False, True])
+def test_predict_for_a_joint_the_calibration_lacks_says_why_and_prints_nothing(files, json_out: bool) -> None:
+    """The reason was lost ('error: poses.csv: row 2:' and nothing after it: min() of (row, '') and (row, why)
+    took the empty one), and the CSV's header was already on standard output."""
+    tmp, meas = files
+    cal_path = _cal(tmp, meas)
+    poses = tmp / "poses.csv"
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi\n3,+,0,0,0,0,0\n1,+,0,0,0,0,0\n")
+    args = ["predict", "-c", str(cal_path), str(poses), "--interval", *(["--json"] if json_out else [])]
+    r = runner.invoke(app, args)
+    _bad(r, f"{poses}: row 2: ", "joint 1")
+    assert r.stderr.count("\n") == 1 and r.stdout == ""

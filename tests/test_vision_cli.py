@@ -123,3 +123,45 @@ def test_calibrate_measures_joint_3_and_calibrate_takes_its_rows(tmp_path):
 def test_joint_2_from_above_is_refused_with_the_reason(tmp_path):
     _bad(["camera", "calibrate", "-d", "sim://", "--camera", CAM, "--joints", "2", "--tip", "307.2,256"],
          "along the camera's optical axis")
+
+
+def test_locate_on_a_terminal_shows_its_bar_and_prints_the_json(frames, monkeypatch):
+    """On a terminal the bar's Live points sys.stderr at a rich proxy of our console, whose stream reads
+    sys.stderr at each write: the console once wrote into itself (RecursionError, megabytes of traceback)."""
+    from stickslip.cli import camera as camera_cli
+    from stickslip.cli._output import SafeConsole
+
+    monkeypatch.setattr(camera_cli, "err_console", SafeConsole(stderr=True, force_terminal=True, width=80))
+    folder, tips = frames
+    r = runner.invoke(app, ["camera", "locate", str(folder), "--tip", f"{tips[0][0]},{tips[0][1]}", "--json"])
+    assert r.exit_code == 0 and r.exception is None, repr(r.exception)
+    assert [o["frame"] for o in json.loads(r.stdout)] == [str(folder / f"f{k}.png") for k in range(3)]
+    assert "locating" in r.stderr and "Traceback" not in r.stderr and len(r.stderr) < 10_000
+    assert "None" not in r.stderr  # the count before the frames are read: 0/?, not 0/None
+
+
+@pytest.mark.parametrize(("query", "words"), [
+    ("pixel=", "pixel='' is empty"),  # was taken as no pixel size at all: simcam:// drew 0.5 um pixels
+    ("dof=", "dof='': cannot read"),  # the option was not named: "simcam:// cannot read '' as a number ..."
+    ("tip=nan", "tip='nan': cannot read"),
+    ("taper=", "taper='': cannot read"),
+    ("tilt=up", "tilt='up': cannot read"),
+    ("centre=1mm,x,0", "centre='x': cannot read"),
+])
+def test_a_simcam_option_that_cannot_be_read_is_named(tmp_path, query: str, words: str) -> None:
+    _bad(["camera", "grab", "-d", "sim://", "--camera", f"simcam://?{query}", "-o", str(tmp_path / "g.png")], words)
+    assert not (tmp_path / "g.png").exists()
+
+
+def test_an_empty_pixel_size_is_refused_for_files_too(frames) -> None:
+    folder, _ = frames
+    _bad(["camera", "grab", "--camera", f"files://{folder}?pixel=", "-o", str(folder / "g.png")], "pixel='' is empty")
+
+
+@pytest.mark.parametrize("name", ["g.tif", "g.jpg", "g.png.bak"])
+def test_grab_refuses_a_file_name_that_is_not_a_png(tmp_path, name: str) -> None:
+    """grab writes a 16-bit PNG: under a .tif or .jpg name it was written all the same (PNG data, a TIFF reader
+    refuses it: 'not a TIFF file: header=b'\\x89PNG'')."""
+    _bad(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / name)], "name it .png")
+    assert not (tmp_path / name).exists()
+    _ok(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / "G.PNG")])

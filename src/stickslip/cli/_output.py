@@ -180,7 +180,11 @@ class _Stream(io.TextIOBase):
 
     @property
     def _raw(self) -> Any:
-        return getattr(sys, self._name)
+        # A progress bar on a terminal points sys.stdout/stderr at a rich proxy that prints through the bar's
+        # console, whose file is this stream: writing to the proxy would feed the console into itself
+        # (RecursionError). The stream under the proxy is the one to write to, as rich's own Console.file does.
+        raw = getattr(sys, self._name)
+        return getattr(raw, "rich_proxied_file", raw)
 
     @property
     def encoding(self) -> str:  # type: ignore[override]  # io.TextIOBase declares it read-only

@@ -115,7 +115,7 @@ def locate_cmd(
 
     Example: stickslip camera locate frames/*.png --tip 307,256 --json
     """
-    from rich.progress import BarColumn, Progress, TextColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from ..vision.camera import CameraError
     from ..vision.frame import ImageError
@@ -123,7 +123,7 @@ def locate_cmd(
     from ..vision.template import TemplateError
 
     at = _pixel(tip, "--tip")
-    with Progress(TextColumn("locating"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+    with Progress(TextColumn("locating"), BarColumn(), MofNCompleteColumn(),  # 0/? until the frames are counted
                   console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
         task = bar.add_task("locate", total=None)
 
@@ -354,7 +354,7 @@ def _with_device_and_camera(
     measure: Callable[[Controller, Camera, Callable[[int, int], None]], CameraCalibrationResult],
 ) -> CameraCalibrationResult:
     """Open the device (a simulator placed at ``pose``) and the camera, ``measure`` with a progress bar, close both."""
-    from rich.progress import BarColumn, Progress, TextColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from ..vision.acquire import AcquireError
     from ..vision.camera import CameraError, open_camera
@@ -374,7 +374,7 @@ def _with_device_and_camera(
         except (CameraError, ValueError) as e:
             fail(str(e))
         try:
-            columns = (TextColumn("moving and tracking"), BarColumn(), TextColumn("{task.completed}/{task.total}"))
+            columns = (TextColumn("moving and tracking"), BarColumn(), MofNCompleteColumn())
             with Progress(*columns, console=err_console, transient=True, disable=not err_console.is_terminal) as bar:
                 task = bar.add_task("camera", total=None)
 
@@ -419,7 +419,7 @@ def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> 
 @camera_app.command("grab")
 def grab_cmd(
     camera: str = typer.Option(..., "--camera", help=_CAMERA_HELP),
-    output: Path = typer.Option(..., "--output", "-o", help="Write the frame here (PNG, 16-bit grey)."),
+    output: Path = typer.Option(..., "--output", "-o", help="Write the frame here (a .png file, 16-bit grey)."),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP + " Only simcam:// needs it."),
     db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the frame's size, time and pixel size as JSON."),
@@ -435,6 +435,8 @@ def grab_cmd(
     from ..vision.frame import ImageError
     from ..vision.images import write_png
 
+    if output.suffix.lower() != ".png":  # PNG data under a .tif or .jpg name misleads every other reader
+        fail(f"-o {output}: camera grab writes a 16-bit grey PNG: name it .png")
     with user_errors():
         scheme = camera_scheme(camera)
     dev = None

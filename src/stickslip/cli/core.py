@@ -621,8 +621,11 @@ def validate_cmd(
 @app.command("plan")
 def plan_cmd(
     joint: Annotated[int, typer.Option("--joint", "-j", help="Joint to move: 1, 2 (rotary) or 3 (prismatic).")],
-    q_from: Annotated[str, typer.Option("--from", help="Start position: rad / m, or with units (-30deg, 2mm).")],
-    q_to: Annotated[str, typer.Option("--to", help="Target position: rad / m, or with units (-60deg, 2.03mm).")],
+    q_from: Annotated[str, typer.Option("--from", help=(
+        "Start position with its unit: -30deg (joints 1, 2), 2mm (joint 3); a bare number other than 0 is "
+        "refused."))],
+    q_to: Annotated[str, typer.Option("--to", help=(
+        "Target position with its unit: -60deg, 2.03mm (a bare number other than 0 is refused)."))],
     calibration: CalibrationOpt = None,
     q1: Annotated[str, typer.Option(help="Joint 1 angle (ignored when moving joint 1).")] = "0",
     q2: Annotated[

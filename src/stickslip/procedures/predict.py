@@ -137,8 +137,7 @@ def _predict(cal: Calibration, table: PoseTable, source: str, offset: int) -> ND
             try:
                 m = cal.model(j, d)
             except KeyError as e:
-                first = int(np.flatnonzero(group)[0])
-                first_error = min(first_error or (first, ""), (first, str(e.args[0])))
+                first_error = _earlier(first_error, (int(np.flatnonzero(group)[0]), str(e.args[0])))
                 continue
             for kind in (True, False):
                 idx = np.flatnonzero(group & (trav == kind))
@@ -158,11 +157,16 @@ def _predict(cal: Calibration, table: PoseTable, source: str, offset: int) -> ND
                             else:
                                 m.gamma(*v)
                         except NonPhysicalError as e:
-                            first_error = min(first_error or (i, ""), (i, str(e)))
+                            first_error = _earlier(first_error, (i, str(e)))
                             break
     if first_error is not None:
         raise PredictionError(f"{source}: row {first_error[0] + offset + 1}: {first_error[1]}")
     return out
+
+
+def _earlier(known: tuple[int, str] | None, found: tuple[int, str]) -> tuple[int, str]:
+    """The problem of the earlier row (of one row: the one known first), with its reason."""
+    return found if known is None or found[0] < known[0] else known
 
 
 def _interval(cal: Calibration, table: PoseTable, gamma: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -204,9 +208,10 @@ def write_csv(header: list[str], chunks: Iterator[PredictedChunk], f: TextIO, in
     safe_header = not any(map(needs_guard, header))
     w = csv.writer(f, lineterminator="\n")
     head = [guard_cell(unguard_cell(h)) for h in out_header]
+    first = next(chunks, None)  # a table whose first chunk fails leaves nothing written, not a lone header
     w.writerow([*head, "gamma_pi95"] if interval else head)
     n = 0
-    for ch in chunks:
+    for ch in itertools.chain([first] if first is not None else [], chunks):
         n += len(ch.table)
         texts = _texts(ch.gamma)
         safe = safe_header and not (own and any(needs_guard(cs[i]) for cs in ch.cells for i in own))

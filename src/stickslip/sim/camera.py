@@ -726,14 +726,20 @@ def _float(text: str, key: str, lo: float, hi: float) -> float:
 
 
 def _length(text: str, key: str, lo: float, hi: float) -> float:
-    v = parse_length(text)
+    try:
+        v = parse_length(text)
+    except (UnitError, ValueError, ArithmeticError) as e:  # the option named: which one could not be read
+        raise ValueError(f"{key}={text!r}: {e}") from None
     if not (math.isfinite(v) and lo <= v <= hi):
         raise ValueError(f"{key}={text!r} must be a length in [{lo:g}, {hi:g}] m")
     return v
 
 
 def _angle(text: str, key: str, lo: float, hi: float) -> float:
-    v = parse_angle(text)
+    try:
+        v = parse_angle(text)
+    except (UnitError, ValueError, ArithmeticError) as e:
+        raise ValueError(f"{key}={text!r}: {e}") from None
     if not (math.isfinite(v) and lo <= v <= hi):
         raise ValueError(f"{key}={text!r} must be an angle in [{math.degrees(lo):g}, {math.degrees(hi):g}] deg")
     return v

@@ -159,10 +159,12 @@ def camera_options(url: str, known: set[str] | frozenset[str]) -> tuple[str, dic
 
 
 def pixel_option(opts: dict[str, str], url: str) -> float | None:
-    """The ``pixel=`` option (``0.5um``, ``20nm``; a bare number is metres), m; ``None`` if absent."""
+    """The ``pixel=`` option (``0.5um``, ``20nm``; a bare number is metres), m; ``None`` if absent (empty: refused)."""
     text = opts.get("pixel")
-    if text is None or text == "":
+    if text is None:
         return None
+    if not text.strip():  # not "no pixel size": simcam:// would draw its default, a file camera have none
+        raise ValueError(f"pixel={text!r} is empty in {redact_url(url)!r}: write e.g. pixel=0.5um, or leave it out")
     try:
         v = parse_length(text)
     except (UnitError, ValueError, ArithmeticError) as e:
