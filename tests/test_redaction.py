@@ -57,3 +57,15 @@ def test_a_password_with_a_slash_is_named_as_the_cause_not_the_port(password):
 @pytest.mark.parametrize("path", ["C:/Users/lab/run@2.csv", "C:\\Users\\lab\\run@2.csv", "D:/a:b@c"])
 def test_a_windows_path_with_an_at_is_left_as_it_is(path):
     assert redact_text(f"cannot read {path}") == f"cannot read {path}"
+
+
+@pytest.mark.parametrize("url", ["files://a.png?pixel=1um&token=hunter2", "files://a.png?token=hunter2"])
+def test_a_camera_urls_message_keeps_its_end_with_the_secret_hidden(url):
+    """A message is redacted URL by URL: the secret hidden, the rest of the line (the known options) kept."""
+    from stickslip.vision.camera import open_camera
+
+    with pytest.raises(ValueError) as e:
+        open_camera(url)
+    text = str(e.value)
+    assert "hunter2" not in text
+    assert "token=***'" in text and text.endswith("'pixel'])")

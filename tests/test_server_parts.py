@@ -234,3 +234,10 @@ def test_the_camera_panel_tracks_the_simulated_microscopes_tip(tmp_path: Path) -
             open_camera_feed("nocam://x", room.owned)
     finally:
         room.close()
+
+
+def test_a_clients_message_hides_the_secret_and_keeps_the_rest_of_the_line() -> None:
+    from stickslip.server.slot import one_line
+
+    text = one_line(ValueError("cannot open 'anc300://H:7230?password=hunter2' (timed out after 2 s)"))
+    assert text == "cannot open 'anc300://H:7230?password=***' (timed out after 2 s)"

@@ -31,7 +31,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .. import __version__
-from ..devices.base import redact_url
+from ..devices.base import redact_text
 from .camera import CameraFeed
 from .live import RATE_HZ, Live, live_routes
 from .room import ControlRoom, Refused, one_line
@@ -61,7 +61,7 @@ def _validation_line(exc: RequestValidationError) -> str:
     where = ".".join(str(p) for p in e.get("loc", ()) if p not in ("body",)) or "body"
     msg = str(e.get("msg", "invalid"))
     more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-    return redact_url(" ".join(f"{where}: {msg}{more}".split()))
+    return redact_text(" ".join(f"{where}: {msg}{more}".split()))
 
 
 # ------------------------------------------------------------------------------ the guard (ASGI middleware)

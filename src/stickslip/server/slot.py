@@ -24,7 +24,7 @@ from .. import kinematics as kin
 from ..audio.detector import Tuning
 from ..calibration import Calibration
 from ..clock import now_utc
-from ..devices.base import Controller, DeviceError, DeviceInfo, redact_url
+from ..devices.base import Controller, DeviceError, DeviceInfo, redact_text
 from ..devices.positions import DeviceState
 from ..motion.reach import borrow_joint1
 from ..procedures.arms import guard_for
@@ -74,7 +74,7 @@ def one_line(e: BaseException | str) -> str:
     """An exception's message as one line, without secrets (a ``KeyError``'s quotes removed)."""
     text = str(e.args[0]) if isinstance(e, KeyError) and e.args else str(e)
     text = " ".join(text.split()) or type(e).__name__
-    return redact_url(text)
+    return redact_text(text)
 
 
 class Refused(ValueError):
@@ -247,7 +247,7 @@ class MotionSlot:
     def event(self, level: str, text: str) -> dict[str, Any]:
         """Record an event (``info``, ``warning``, ``error``) for the live view and the log."""
         e = {"id": next(self._event_ids), "at": now_utc().isoformat(timespec="seconds"), "level": level,
-             "text": redact_url(text)}
+             "text": redact_text(text)}
         with self._lock:
             self._events.append(e)
         getattr(log, "warning" if level == "warning" else "error" if level == "error" else "info")(e["text"])
@@ -340,7 +340,7 @@ class MotionSlot:
         except Exception as e:  # noqa: BLE001 - never a traceback to a client: one line, the log has the rest
             m.error = f"internal error: {one_line(e)}"
             m.status = "failed" if m.status != "starting" else "refused"
-            log.exception("motion %d (%s) failed", m.id, redact_url(m.what))
+            log.exception("motion %d (%s) failed", m.id, redact_text(m.what))
         finally:
             m.t_end = time.monotonic()
             if m.stop_requested is not None:

@@ -23,7 +23,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
-from ..devices.base import Controller, query_options, redact_url
+from ..devices.base import Controller, query_options, redact_text, redact_url
 from ..units import UnitError, parse_length
 from .frame import PIXEL_SIZE_RANGE, Frame
 
@@ -140,7 +140,7 @@ def open_camera(url: str, device: Controller | None = None) -> Camera:
     try:
         return factory(url, device)
     except (CameraError, ValueError) as e:
-        raise type(e)(redact_url(str(e))) from None
+        raise type(e)(redact_text(str(e))) from None  # a message: each URL in it redacted
 
 
 def camera_options(url: str, known: set[str] | frozenset[str]) -> tuple[str, dict[str, str]]:
