@@ -131,6 +131,29 @@ def test_calibrate_takes_the_check(day: tuple[Calibration, list[Traverse]]) -> N
     np.testing.assert_array_equal(via.predict_many(val), cal.predict_many(val))
 
 
+def test_a_check_that_checks_nothing_is_refused(tmp_path: Path) -> None:
+    """Asked for and used nowhere (the paper's method has no intervals; a joint the table lacks), a check must
+    not pass for one: the calibration is refused with the reason, and nothing is written."""
+    from typer.testing import CliRunner
+
+    from stickslip.calibration import CalibrationError
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    with pytest.raises(CalibrationError, match=rf"none of the {len(DAY.validation)} check traverse\(s\) can check this "
+                       r"calibration: they are of 2\+, 2-, 3\+, 3-; the joints and directions with intervals to "
+                       r"scale are none"):
+        calibrate(DAY.paper14, method="paper", check=DAY.validation)
+    stray = [dataclasses.replace(t, joint=1, q1=0.0) for t in DAY.validation[:2]]
+    meas, chk, out = tmp_path / "m.csv", tmp_path / "check.csv", tmp_path / "c.json"
+    write_measurements(meas, DAY.calibration)
+    write_measurements(chk, stray)
+    r = CliRunner().invoke(app, ["calibrate", str(meas), "--check", str(chk), "-o", str(out)])
+    assert r.exit_code == 2, r.output
+    assert "none of the 2 check traverse(s) can check this calibration: they are of 1" in " ".join(r.stderr.split())
+    assert not out.exists()
+
+
 def test_check_poses_are_their_own_stream() -> None:
     a, b = check_poses(3, 4, 11), check_poses(3, 4, 11)
     assert a == b and len(a) == 4 and check_poses(2, 0, 11) == []

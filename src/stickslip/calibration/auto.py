@@ -7,7 +7,7 @@ import dataclasses
 from collections.abc import Mapping, Sequence
 
 from ..measurements import StepSize, Traverse
-from .check import apply_check, fitted_pose, other_day, repeated_row
+from .check import apply_check, fitted_pose, other_day, repeated_row, unusable
 from .groups import TraverseGroups, group_traverses
 from .lsq import calibrate_lsq
 from .paper import calibrate_paper, paper_applicable
@@ -67,8 +67,9 @@ def calibrate(
         they erred (:func:`~.check.apply_check`, docs/models.md §4). The fit and its
         predictions are those without them. Empty (the default): no check. A check
         traverse at a pose ``traverses`` measured is refused (:func:`~.check.fitted_pose`), one
-        listed twice (:func:`~.check.repeated_row`), and one of another day than the calibration's
-        (:func:`~.check.other_day`).
+        listed twice (:func:`~.check.repeated_row`), one of another day than the calibration's
+        (:func:`~.check.other_day`), and a check none of whose traverses has intervals to scale
+        (:func:`~.check.unusable`).
     """
     if check:
         grouped = group_traverses(traverses)  # once: the calibration below takes the groups
@@ -76,7 +77,7 @@ def calibrate(
         if why is not None:
             raise CalibrationError(why)
         cal = calibrate(grouped, method, day, source, model, progress, step_sizes)
-        why = other_day(check, cal.day)
+        why = other_day(check, cal.day) or unusable(cal, check)
         if why is not None:
             raise CalibrationError(why)
         return apply_check(cal, check)

@@ -34,7 +34,7 @@ from .intervals import relative_sd
 from .result import Calibration, CalibrationError
 
 __all__ = ["CheckParams", "CHECK", "CheckScale", "check_scales", "apply_check", "fitted_pose", "repeated_row",
-           "other_day"]
+           "other_day", "unusable"]
 
 
 @dataclass(frozen=True)
@@ -156,6 +156,18 @@ def check_scales(cal: Calibration, check: Sequence[Traverse], params: CheckParam
         out[j] = CheckScale(j, n, m, math.sqrt(float(e2.mean())), math.sqrt(float(sd2.mean())),
                             math.sqrt(float(z2.mean())), s)
     return out
+
+
+def unusable(cal: Calibration, check: Sequence[Traverse], params: CheckParams = CHECK) -> str | None:
+    """Why no traverse of ``check`` can check ``cal`` (None if one can): a check asked for and used nowhere
+    (every traverse of a joint or direction without an error model, e.g. ``--method paper``, or of a joint the
+    calibration lacks) must not pass for a check."""
+    if not check or check_scales(cal, check, params):
+        return None
+    asked = ", ".join(f"{j}{d}" for j, d in sorted({(t.joint, t.direction) for t in check}))
+    have = ", ".join(f"{j}{d}" for j, d in sorted(cal.predictive)) or "none (a calibration by the paper's method)"
+    return (f"none of the {len(check)} check traverse(s) can check this calibration: they are of {asked}; the "
+            f"joints and directions with intervals to scale are {have} (docs/models.md §4)")
 
 
 def apply_check(cal: Calibration, check: Sequence[Traverse], params: CheckParams | None = None) -> Calibration:
