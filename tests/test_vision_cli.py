@@ -165,3 +165,24 @@ def test_grab_refuses_a_file_name_that_is_not_a_png(tmp_path, name: str) -> None
     _bad(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / name)], "name it .png")
     assert not (tmp_path / name).exists()
     _ok(["camera", "grab", "-d", "sim://", "--camera", CAM, "-o", str(tmp_path / "G.PNG")])
+
+
+@pytest.mark.parametrize(("query", "words"), [
+    ("tilt=0.5", "tilt='0.5': 0.5 has no unit: did you mean 0.5deg?"),  # was 0.5 rad, 28.6 deg, silently
+    ("taper=0.1", "taper='0.1': 0.1 has no unit"),
+    ("tip=0.4", "tip='0.4': 0.4 has no unit: did you mean 0.4um or 0.4mm?"),
+    ("pixel=5e-7", "pixel='5e-7' in 'simcam://?pixel=5e-7': 5e-7 has no unit"),
+])
+def test_a_bare_length_or_angle_in_a_camera_url_is_refused_as_on_the_command_line(tmp_path, query: str,
+                                                                                    words: str) -> None:
+    _bad(["camera", "grab", "-d", "sim://", "--camera", f"simcam://?{query}", "-o", str(tmp_path / "g.png")], words)
+    assert not (tmp_path / "g.png").exists()
+
+
+def test_a_bare_view_angle_is_refused_and_zero_needs_no_unit(tmp_path) -> None:
+    _bad(["camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=1um", "--view-tilt", "0.5"],
+         "--view-tilt 0.5 has no unit: did you mean 0.5deg?")
+    r = CliRunner().invoke(app, ["camera", "grab", "-d", "sim://", "--camera", "simcam://?pixel=1um&tilt=0&roll=0deg",
+                                 "-o", str(tmp_path / "g.png")])
+    assert r.exit_code == 0, r.output
+    assert (tmp_path / "g.png").exists()

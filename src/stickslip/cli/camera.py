@@ -169,7 +169,7 @@ def _print_located(found: list[Located]) -> None:
 
 
 def _view(tilt: str | None, azimuth: str | None, roll: str | None) -> Any:
-    from ..units import UnitError, parse_angle
+    from ..units import UnitError, bare_number_problem, parse_angle
     from ..vision.view import View
 
     vals = []
@@ -177,10 +177,13 @@ def _view(tilt: str | None, azimuth: str | None, roll: str | None) -> Any:
         if text is None:
             vals.append(0.0)
             continue
+        bare = bare_number_problem(text, "angle")
+        if bare is not None:
+            fail(f"{name} {bare}")
         try:
             vals.append(parse_angle(text))
         except (UnitError, ValueError, ArithmeticError) as e:
-            fail(f"{name} {text!r}: {e} (an angle: 30deg, 0.5)")
+            fail(f"{name} {text!r}: {e} (an angle: 30deg, -pi/6)")
     try:
         return View(*vals)
     except ValueError as e:

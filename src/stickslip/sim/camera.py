@@ -38,7 +38,7 @@ from scipy import ndimage, signal, special
 
 from .. import kinematics as kin
 from ..devices.base import Controller, KnowsTruePosition, VirtualClock, redact_url
-from ..units import UnitError, parse_angle, parse_length
+from ..units import UnitError, bare_number_problem, parse_angle, parse_length
 from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_option
 from ..vision.frame import Frame
 from ..vision.view import View, project
@@ -726,6 +726,9 @@ def _float(text: str, key: str, lo: float, hi: float) -> float:
 
 
 def _length(text: str, key: str, lo: float, hi: float) -> float:
+    bare = bare_number_problem(text, "length")  # as on the command line: tip=0.4 could be µm or m
+    if bare is not None:
+        raise ValueError(f"{key}={text!r}: {bare}")
     try:
         v = parse_length(text)
     except (UnitError, ValueError, ArithmeticError) as e:  # the option named: which one could not be read
@@ -736,6 +739,9 @@ def _length(text: str, key: str, lo: float, hi: float) -> float:
 
 
 def _angle(text: str, key: str, lo: float, hi: float) -> float:
+    bare = bare_number_problem(text, "angle")  # tilt=30 would be 30 rad, tilt=0.5 28.6 deg
+    if bare is not None:
+        raise ValueError(f"{key}={text!r}: {bare}")
     try:
         v = parse_angle(text)
     except (UnitError, ValueError, ArithmeticError) as e:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 from ..devices.base import Controller, query_options, redact_text, redact_url
-from ..units import UnitError, parse_length
+from ..units import UnitError, bare_number_problem, parse_length
 from .frame import PIXEL_SIZE_RANGE, Frame
 
 __all__ = [
@@ -159,12 +159,16 @@ def camera_options(url: str, known: set[str] | frozenset[str]) -> tuple[str, dic
 
 
 def pixel_option(opts: dict[str, str], url: str) -> float | None:
-    """The ``pixel=`` option (``0.5um``, ``20nm``; a bare number is metres), m; ``None`` if absent (empty: refused)."""
+    """The ``pixel=`` option (``0.5um``, ``20nm``), m; ``None`` if absent (empty, or a bare number: refused, as on the
+    command line: ``pixel=0.5`` could be µm or m)."""
     text = opts.get("pixel")
     if text is None:
         return None
     if not text.strip():  # not "no pixel size": simcam:// would draw its default, a file camera have none
         raise ValueError(f"pixel={text!r} is empty in {redact_url(url)!r}: write e.g. pixel=0.5um, or leave it out")
+    bare = bare_number_problem(text, "length")
+    if bare is not None:
+        raise ValueError(f"pixel={text!r} in {redact_url(url)!r}: {bare}")
     try:
         v = parse_length(text)
     except (UnitError, ValueError, ArithmeticError) as e:
