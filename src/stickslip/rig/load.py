@@ -492,7 +492,8 @@ class _Reader(_Values):
         if not given:
             raise self.fail(key, "a position needs at least one of q1, q2, q3")
         order_raw = doc.get("order", given)
-        if not isinstance(order_raw, list) or sorted(order_raw) != given or any(isinstance(o, bool) for o in order_raw):
+        if (not isinstance(order_raw, list) or any(isinstance(o, bool) or not isinstance(o, int) for o in order_raw)
+                or sorted(order_raw) != given):  # whole numbers first: sorted() of [3, "2"] raises TypeError
             raise self.fail(key + ("order",), f"must list each joint the position gives ({given}) once")
         return NamedPosition(name, arm_name, (q[0], q[1], q[2]), tuple(int(o) for o in order_raw))
 
