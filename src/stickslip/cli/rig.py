@@ -196,7 +196,7 @@ def _problems(rig: Rig, poses: dict[str, tuple[float, float, float]]) -> list[st
 @rig_app.command("go")
 def go(
     name: str = typer.Argument(
-        ..., help="The named position: a [[position]] of the rig file, else one saved for the arm (stickslip serve).",
+        ..., help="The named position: a position table of the rig file, else one saved for the arm (stickslip serve).",
         metavar="NAME",
     ),
     rig_file: Path = typer.Option(..., "--rig", help=RIG_HELP),
