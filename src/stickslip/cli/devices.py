@@ -315,6 +315,10 @@ def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
     n = int(m.group(1)) if m else steps
     if n == 0:
         fail("--steps: 0 steps moves nothing")
+    from ..measurements.rows import MAX_STEPS
+
+    if n is not None and abs(n) > MAX_STEPS:  # 1e22 steps ran for ever (the simulator: 2e6 steps/s)
+        fail(f"--steps: {n:+d} is more than {MAX_STEPS:.0e} steps (over any joint's full range)")
     return n
 
 
