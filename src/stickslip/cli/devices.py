@@ -459,6 +459,7 @@ def where(
             joints = rig.arm(arm).joint_specs()
             key = rig.state_key(arm)
         db = str(rig_database(db, rig)) if db is None and rig.database else db
+    from ..procedures.move import DeviceBusy
     from ..procedures.where import DeviceUnreachable, ReferenceRefused
     from ..procedures.where import where as kept_positions
 
@@ -467,11 +468,11 @@ def where(
         device_key(device)
     items = list(set_ or [])
     references = [_reference(item, joints) for item in items]
-    with open_store(db) as store, user_errors(DeviceUnreachable):
+    with open_store(db) as store, user_errors(DeviceUnreachable, DeviceBusy):
         try:
             result = kept_positions(
                 store, device, references=references, pose=PoseUpdate(q1, q2, q3, theta, psi), offline=offline,
-                unlock=unlock, joints=joints, key=key,
+                unlock=unlock, joints=joints, key=key, hold_lock=True,
             )
         except ReferenceRefused as e:
             fail(f"--set {items[e.index]}: {e}")
