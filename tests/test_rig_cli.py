@@ -242,8 +242,12 @@ def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, post
 def test_rig_options_are_checked(tmp_path):
     rig = tmp_path / "rig.toml"
     rig.write_text(RIG.format(nano="sim://", smaract="sim://?seed=2"), encoding="utf-8")
-    r = run("move", "--rig", rig, "--arm", "nobody", "--joint", 3, "--by", "1mm", "-c", tmp_path / "x.json")
-    assert r.exit_code == 2 and "no arm named 'nobody'" in r.output
+    # one line as written, not a KeyError's repr in double quotes ('error: "rig.toml: no arm named ..."')
+    line = f"error: {rig}: no arm named 'nobody' (the arms: probe, gripper)"
+    for cmd in (["move", "--joint", 3, "--by", "1mm", "-c", tmp_path / "x.json"], ["where"], ["rig", "go", "park"],
+                ["reach", "--by", "0,0,1um", "-c", tmp_path / "x.json"]):
+        r = run(*cmd, "--rig", rig, "--arm", "nobody")
+        assert r.exit_code == 2 and r.stderr.strip() == line, (cmd, r.stderr)
     r = run("move", "--rig", rig, "-d", "sim://", "--joint", 3, "--by", "1mm")
     assert r.exit_code == 2 and "not both" in r.output
     r = run("move", "--arm", "probe", "--joint", 3, "--by", "1mm")
