@@ -140,6 +140,8 @@ def check(
     """
     from ..procedures.arms import arm_states
 
+    if out is not None and out.suffix.lower() != ".png":  # matplotlib added .png, or drew another format
+        fail(f"-o {out}: rig check draws a PNG: name it .png")
     rig = load(path)
     say(f"rig {rig.name!r}: {len(rig.arms)} arm(s), {len(rig.volumes)} volume(s), "
         f"{len(rig.positions)} named position(s); arms kept {rig.arm_distance * 1e6:.0f} µm apart, "
