@@ -410,3 +410,14 @@ def test_the_documented_output_columns_are_there(tmp_path, monkeypatch):
     monkeypatch.setenv("STICKSLIP_CONFIG", str(cfg))
     r = run("config", "show")  # docs/config.md: a configured file that cannot be used exits 2
     assert r.exit_code == 2 and "gone.json does not exist" in r.stderr and "calibration:" in r.stdout
+
+
+@pytest.mark.parametrize("args", [["--steps", "9999999999999999999999"], ["--by", "-9999999999999999999999steps"]])
+def test_raw_steps_beyond_any_joints_range_are_refused_before_the_device_is_opened(tmp_path, args):
+    """--steps 1e22 on sim:// stepped for ever (9.5 min at 100% CPU, then killed); now one line, exit 2."""
+    db = tmp_path / "s.db"
+    line = one_error(run("move", "-d", "sim://", "--db", db, "--joint", 3, *args), "is more than 1e+12 steps")
+    assert "9999999999999999999999" in line
+    assert not db.exists()  # nothing opened, nothing stored
+    r = run("move", "-d", "sim://", "--db", db, "--joint", 3, "--steps", -1000)
+    assert r.exit_code == 0, r.output

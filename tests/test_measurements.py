@@ -120,3 +120,18 @@ def test_a_table_saved_with_semicolons_or_tabs_says_so(tmp_path):
         p.write_text(sep.join(HEADER) + "\n" + sep.join(row) + "\n")
         with pytest.raises(TableError, match=words + ": save the table with commas"):
             read_measurements(p)
+
+
+def test_a_spreadsheets_empty_columns_at_the_end_are_named_as_such(tmp_path):
+    # 'day,...,steps,,' (a spreadsheet that saved two empty columns) said '(unexpected , )'
+    from stickslip.measurements import HEADER, read_measurements
+
+    p = tmp_path / "m.csv"
+    p.write_text(",".join(HEADER) + ",,\n" + "d,3,+,0,0,0,0,0,0,0.012,9,,\n")
+    with pytest.raises(TableError) as e:
+        read_measurements(p)
+    assert e.value.problems == [f"{p}:1: header must be exactly {','.join(HEADER)} (2 columns without a name: "
+                                "delete the empty columns at the end)"]
+    p.write_text(",".join(HEADER) + ",note,\n" + "d,3,+,0,0,0,0,0,0,0.012,9,x,\n")
+    with pytest.raises(TableError, match=r"\(unexpected note; 1 column without a name: delete the empty"):
+        read_measurements(p)

@@ -69,3 +69,17 @@ def test_a_camera_urls_message_keeps_its_end_with_the_secret_hidden(url):
     text = str(e.value)
     assert "hunter2" not in text
     assert "token=***'" in text and text.endswith("'pixel'])")
+
+
+@pytest.mark.parametrize("url", ["anc300://127.0.0.1:1?hz=abc&password=hunter2",
+                                 "smaract-mcs2://127.0.0.1:1?x=1&password=hunter2"])
+def test_a_device_urls_message_keeps_its_end_with_the_secret_hidden(url):
+    """open_device redacted a driver's message as one URL: 'where -d anc300://H?hz=abc&password=...' said
+    "unknown option(s) ['hz'] in 'anc300://H?hz=abc&password=***" and nothing of the known options."""
+    from stickslip.devices.base import open_device
+
+    with pytest.raises(ValueError) as e:
+        open_device(url)
+    text = str(e.value)
+    assert "hunter2" not in text
+    assert "password=***' (known: [" in text and text.endswith("])"), text

@@ -707,6 +707,25 @@ def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path,
         "--db", db, "-j", 3, "--by", "1um").exit_code == 0  # fmt: skip
 
 
+@pytest.mark.parametrize("record", [["--set", "3=min"], ["--q2", "-60deg"], ["--theta", "2deg"]])
+def test_where_records_nothing_while_another_process_drives_the_device(tmp_path, record):
+    """`where --set 1=max` while a move (or `stickslip serve`) held sim://'s lock was taken (exit 0): a joint
+    referenced while it moved, the kept position silently wrong; now refused as a move is, nothing written."""
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        assert st.acquire_lock("sim://", {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"}) is None
+    one_error(run("where", "-d", "sim://", "--db", db, *record), "being driven by another stickslip process",
+              "pid 4242 on bench-pc", "--unlock")  # fmt: skip
+    r = run("where", "-d", "sim://", "--db", db, "--offline", "--json")  # looking needs no lock
+    assert r.exit_code == 0, r.output
+    w = json.loads(r.stdout)
+    assert [j["source"] for j in w["joints"]] == ["default"] * 3 and w["theta"] == 0.0
+    r = run("where", "-d", "sim://", "--db", db, "--unlock", *record)  # the holder is gone: unlock, then record
+    assert r.exit_code == 0, r.output
+
+
 @pytest.mark.parametrize("cmd", [["plan", "-j", "3", "--from", "2mm", "--to", "2.03mm"], ["where", "--offline"]])
 def test_a_bare_angle_beyond_a_turn_suggests_degrees(tmp_path, cal_path, cmd):
     extra = ["-c", cal_path] if cmd[0] == "plan" else ["--db", tmp_path / "s.db"]

@@ -142,6 +142,8 @@ BAD = [
     ('arm = "left"\nq2', 'arm = "middle"\nq2', "middle", "no arm named 'middle'"),
     ('q2 = "-90deg"', 'q2 = "-300deg"', "q2", "outside joint 2's limits"),
     ("order = [3, 2]", "order = [3, 1]", "order", "each joint the position gives"),
+    ("order = [3, 2]", 'order = [3, "2"]', "order", "each joint the position gives"),  # sorted() raised TypeError
+    ("order = [3, 2]", "order = [[3], 2]", "order", "each joint the position gives"),
     ('password_env = "RIG_TEST_PASSWORD"', 'password_env = "not a name"', "password_env", "environment variable"),
     ('tool = ["0mm", "0mm", "-10mm"]', 'tool = ["0mm", "-10mm"]', "tool", "array of 3"),
     ('tilt = "10deg"', 'tilt = "10deg"\n[[volume]]\nname = "far"\nshape = "box"\nlower = [0, 0, 0]\n'

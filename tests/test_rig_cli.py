@@ -242,8 +242,12 @@ def test_two_arms_from_the_command_line_with_a_postgresql_history(tmp_path, post
 def test_rig_options_are_checked(tmp_path):
     rig = tmp_path / "rig.toml"
     rig.write_text(RIG.format(nano="sim://", smaract="sim://?seed=2"), encoding="utf-8")
-    r = run("move", "--rig", rig, "--arm", "nobody", "--joint", 3, "--by", "1mm", "-c", tmp_path / "x.json")
-    assert r.exit_code == 2 and "no arm named 'nobody'" in r.output
+    # one line as written, not a KeyError's repr in double quotes ('error: "rig.toml: no arm named ..."')
+    line = f"error: {rig}: no arm named 'nobody' (the arms: probe, gripper)"
+    for cmd in (["move", "--joint", 3, "--by", "1mm", "-c", tmp_path / "x.json"], ["where"], ["rig", "go", "park"],
+                ["reach", "--by", "0,0,1um", "-c", tmp_path / "x.json"]):
+        r = run(*cmd, "--rig", rig, "--arm", "nobody")
+        assert r.exit_code == 2 and r.stderr.strip() == line, (cmd, r.stderr)
     r = run("move", "--rig", rig, "-d", "sim://", "--joint", 3, "--by", "1mm")
     assert r.exit_code == 2 and "not both" in r.output
     r = run("move", "--arm", "probe", "--joint", 3, "--by", "1mm")
@@ -306,3 +310,25 @@ def test_two_arms_on_one_controller_keep_their_own_positions(tmp_path):
             assert st.acquire_lock(emu.url, {"pid": 1, "host": "elsewhere", "since": "then"}) is None
         r = run("move", *common, "--arm", "right", "--joint", 2, "--by", "10um")
         assert r.exit_code == 2 and "being driven by another stickslip process (pid 1 on elsewhere" in r.output
+
+
+def test_rig_check_draws_a_png_where_it_says_or_refuses(tmp_path):
+    """-o rig wrote rig.png but said 'drawn: rig'; -o FOLDER wrote FOLDER.png; -o /dev/full wrote /dev/full.png
+    (as root); -o x.jpg a JPEG though --help says PNG. Now -o must name a .png file; it is written whole or not
+    at all (atomic_write), and the earlier drawing is kept when the new one cannot be written."""
+    rig = tmp_path / "rig.toml"
+    rig.write_text("[[arm]]\nname = 'a'\ncontroller = 'sim://'\n", encoding="utf-8")
+    folder = tmp_path / "pics"
+    folder.mkdir()
+    for out, words in ((tmp_path / "rig", "name it .png"), (tmp_path / "rig.jpg", "name it .png"),
+                       (folder, "name it .png"), (tmp_path / "pics.png" / "x.png", "x.png")):
+        r = run("rig", "check", rig, "-o", out)
+        assert r.exit_code == 2, (out, r.output)
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and lines[0].startswith("error:") and words in lines[0], (out, r.stderr)
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(("rig.", "pics.", ".rig"))
+                and p.name != "rig.toml"] and not any(folder.iterdir())
+    png = tmp_path / "R.PNG"
+    r = run("rig", "check", rig, "-o", png)
+    assert r.exit_code == 0 and f"drawn: {png}" in " ".join(r.stdout.split()), r.output  # lines wrap
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -281,6 +281,13 @@ def test_cli_import_history_export_round_trip(tmp_path, db):
     assert r.exit_code == 0 and read_measurements(out) == rows[:2]
     r = runner.invoke(app, ["export", "--db", str(db), "--day", "2020-01-01", "-o", str(out)])
     assert r.exit_code == 2 and "stored days: 2026-11-20, 2026-11-21" in r.output
+    # a device with no traverses: the database is not empty ('(the database is empty)' was said), nothing written
+    r = runner.invoke(app, ["export", "--db", str(db), "-d", "sim://?realtime=1", "-o", str(tmp_path / "n.csv")])
+    assert r.exit_code == 2 and not (tmp_path / "n.csv").exists()
+    assert r.stderr.strip() == ("error: no traverses match device sim://?realtime=1 (the devices with traverses: "
+                                "sim://; a URL's options make another device)"), r.stderr
+    r = runner.invoke(app, ["export", "--db", str(db), "-d", "sim://", "-j", "2", "-o", str(tmp_path / "n.csv")])
+    assert r.stderr.strip() == "error: no traverses match device sim://, joint 2 (stored days: 2026-11-20, 2026-11-21)"
 
 
 def test_cli_import_reports_every_bad_row_and_stores_nothing(tmp_path, db):

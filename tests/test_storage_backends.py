@@ -600,6 +600,11 @@ def test_backup_copies_either_backend_into_an_sqlite_file_every_command_reads(db
         assert copy.latest_calibration("sim://?seed=4").to_dict() == cal.to_dict()
     r = CliRunner().invoke(app, ["backup", str(out), "--db", str(db)])  # never over an existing file
     assert r.exit_code == 2 and "exists" in r.stderr and r.stderr.count("\n") == 1
+    missing = tmp_path / "no such folder" / "copy.db"  # said 'cannot write the backup .../.copy.db.part: unable
+    r = CliRunner().invoke(app, ["backup", str(missing), "--db", str(db)])  # to open database file'
+    assert r.exit_code == 2 and not missing.parent.exists()
+    assert r.stderr.strip() == (f"error: cannot write the backup {missing}: its folder {missing.parent} does not "
+                                "exist; nothing was written"), r.stderr
 
 
 def _calibration_and_rows():

@@ -254,9 +254,12 @@ def user_errors(*types: type[BaseException]) -> Iterator[None]:
 
 
 def describe(e: BaseException) -> str:
-    """An exception as a person reads it: an ``OSError`` as ``path: reason`` (not ``[Errno 28] ...: 'path'``)."""
+    """An exception as a person reads it: an ``OSError`` as ``path: reason`` (not ``[Errno 28] ...: 'path'``),
+    a ``KeyError`` as its message (not in quotes)."""
     if isinstance(e, OSError) and type(e).__str__ is OSError.__str__ and e.strerror:
         return f"{e.filename}: {e.strerror}" if e.filename else str(e.strerror)
+    if isinstance(e, KeyError) and len(e.args) == 1 and isinstance(e.args[0], str):
+        return e.args[0]  # str() of a KeyError is the repr of its message: "'...'" in quotes
     return str(e)
 
 

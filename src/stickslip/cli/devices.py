@@ -315,6 +315,10 @@ def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
     n = int(m.group(1)) if m else steps
     if n == 0:
         fail("--steps: 0 steps moves nothing")
+    from ..measurements.rows import MAX_STEPS
+
+    if n is not None and abs(n) > MAX_STEPS:  # 1e22 steps ran for ever (the simulator: 2e6 steps/s)
+        fail(f"--steps: {n:+d} is more than {MAX_STEPS:.0e} steps (over any joint's full range)")
     return n
 
 
@@ -455,6 +459,7 @@ def where(
             joints = rig.arm(arm).joint_specs()
             key = rig.state_key(arm)
         db = str(rig_database(db, rig)) if db is None and rig.database else db
+    from ..procedures.move import DeviceBusy
     from ..procedures.where import DeviceUnreachable, ReferenceRefused
     from ..procedures.where import where as kept_positions
 
@@ -463,11 +468,11 @@ def where(
         device_key(device)
     items = list(set_ or [])
     references = [_reference(item, joints) for item in items]
-    with open_store(db) as store, user_errors(DeviceUnreachable):
+    with open_store(db) as store, user_errors(DeviceUnreachable, DeviceBusy):
         try:
             result = kept_positions(
                 store, device, references=references, pose=PoseUpdate(q1, q2, q3, theta, psi), offline=offline,
-                unlock=unlock, joints=joints, key=key,
+                unlock=unlock, joints=joints, key=key, hold_lock=True,
             )
         except ReferenceRefused as e:
             fail(f"--set {items[e.index]}: {e}")

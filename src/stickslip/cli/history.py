@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import typer
 from rich.table import Table
@@ -124,9 +124,7 @@ def export(
         rows = st.iter_traverses(device=device, day=day, joint=joint)  # streamed: any size in bounded memory
         first = next(rows, None)
         if first is None:
-            days = st.days(device)
-            hint = f" (stored days: {', '.join(days)})" if days else " (the database is empty)"
-            fail("no traverses match" + (f" day {day!r}" if day else "") + hint)
+            fail(_no_match(st, device, day, joint))
         count = [0]
 
         def counted(it: Iterator[Traverse]) -> Iterator[Traverse]:
@@ -137,6 +135,20 @@ def export(
         with user_errors():
             write_measurements(out, counted(itertools.chain([first], rows)))
     console.print(f"wrote {count[0]} traverses to {out}")
+
+
+def _no_match(st: Any, device: str | None, day: str | None, joint: int | None) -> str:
+    """Why ``export`` found nothing: what was asked, and what is stored (days, or the devices with traverses)."""
+    asked = [a for a in (f"device {redact_url(device)}" if device else "", f"day {day!r}" if day else "",
+                         f"joint {joint}" if joint else "") if a]
+    what = "no traverses match" + (" " + ", ".join(asked) if asked else "")
+    days = st.days(device)
+    if days:
+        return f"{what} (stored days: {', '.join(days)})"
+    stored = list(dict.fromkeys(e["device"] for e in st.history() if e["traverses"]))
+    if device is None or not stored:
+        return f"{what} (the database holds no traverses)"
+    return f"{what} (the devices with traverses: {', '.join(stored)}; a URL's options make another device)"
 
 
 @app.command("import")

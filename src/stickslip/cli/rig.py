@@ -140,6 +140,8 @@ def check(
     """
     from ..procedures.arms import arm_states
 
+    if out is not None and out.suffix.lower() != ".png":  # matplotlib added .png, or drew another format
+        fail(f"-o {out}: rig check draws a PNG: name it .png")
     rig = load(path)
     say(f"rig {rig.name!r}: {len(rig.arms)} arm(s), {len(rig.volumes)} volume(s), "
         f"{len(rig.positions)} named position(s); arms kept {rig.arm_distance * 1e6:.0f} µm apart, "
@@ -196,7 +198,7 @@ def _problems(rig: Rig, poses: dict[str, tuple[float, float, float]]) -> list[st
 @rig_app.command("go")
 def go(
     name: str = typer.Argument(
-        ..., help="The named position: a [[position]] of the rig file, else one saved for the arm (stickslip serve).",
+        ..., help="The named position: a position table of the rig file, else one saved for the arm (stickslip serve).",
         metavar="NAME",
     ),
     rig_file: Path = typer.Option(..., "--rig", help=RIG_HELP),

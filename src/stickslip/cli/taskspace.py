@@ -55,7 +55,7 @@ _DEVICE_HELP = (
 )
 _GEOMETRY_HELP = (
     "OFFSET,LENGTH of the arm: joint-1 axis to joint-2 axis, joint-2 axis to the tip at q3 = 0 "
-    "(default: [geometry] in the config file, else 0mm,21mm; measure yours, see docs/taskspace.md)."
+    "(default: the geometry table of the config file, else 0mm,21mm; measure yours, see docs/taskspace.md)."
 )
 _CAL_HELP = "Calibration JSON (from `stickslip calibrate`; default: calibration in the config file)."
 

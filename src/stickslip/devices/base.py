@@ -430,7 +430,7 @@ def open_device(url: str = "sim://") -> Controller:
     try:
         return factory(url)
     except (DeviceError, ValueError) as e:
-        raise type(e)(redact_url(str(e))) from None
+        raise type(e)(redact_text(str(e))) from None  # URL by URL: the text after a secret option is kept
 
 
 def url_scheme(url: str) -> str:

@@ -155,8 +155,11 @@ def _check_header(header: list[str] | None, source: str) -> None:
         detail = []
         if missing:
             detail.append("missing " + ", ".join(missing))
-        if extra:
-            detail.append("unexpected " + ", ".join(extra))
+        if [h for h in extra if h]:
+            detail.append("unexpected " + ", ".join(h for h in extra if h))
+        if "" in extra:  # a spreadsheet's trailing commas: 'unexpected , ' said nothing
+            n = extra.count("")
+            detail.append(f"{n} column{'s' if n > 1 else ''} without a name: delete the empty columns at the end")
         if not detail:
             detail.append("columns out of order")
         if len(header) == 1 and any(sep in header[0] for sep in ";\t"):  # a European spreadsheet's export

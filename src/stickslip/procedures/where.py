@@ -9,6 +9,7 @@ answers (:func:`probe_device`) unless told not to.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -16,7 +17,7 @@ from ..devices.base import DeviceError, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..joints import JointSet
 from ..units import format_position
-from .move import PoseUpdate, track_fields
+from .move import LockStore, PoseUpdate, device_lock, track_fields
 
 __all__ = ["DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "probe_device", "state_rows", "where"]
 
@@ -33,7 +34,7 @@ class ReferenceRefused(ValueError):
         self.index = index
 
 
-class WhereStore(StateStore, Protocol):
+class WhereStore(StateStore, LockStore, Protocol):
     """What :func:`where` needs of a store (``stickslip.storage.Store`` implements it)."""
 
 
@@ -120,6 +121,7 @@ def where(
     probe: Callable[[str], dict[str, Any]] = probe_device,
     joints: JointSet | None = None,
     key: str | None = None,
+    hold_lock: bool = False,
 ) -> WhereResult:
     """The kept state of ``device``, after recording ``pose`` and ``references`` (``(joint, q)``, rad or m).
 
@@ -130,21 +132,26 @@ def where(
     a process that is gone. :class:`ReferenceRefused` names a reference that cannot be kept.
     ``joints``: the arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`),
     the MM3A's by default; ``key`` where they are kept (:meth:`stickslip.rig.Rig.state_key`:
-    two arms on one controller), the device's key by default.
+    two arms on one controller), the device's key by default. ``hold_lock``: record under the
+    device's lock (:func:`~.move.device_lock`; :class:`~.move.DeviceBusy` while another
+    process drives the device), as a command does; the server, which holds the lock, does not.
     """
     lock = device_key(device)
     key = key or lock
     if unlock:
         store.set_state(lock, "lock", "null")
-    state = load_state(store, key, joints)
-    changed = pose.apply(state)
-    for i, (joint, q) in enumerate(references):
-        try:
-            state.set_position(joint, q, "set")
-        except ValueError as e:
-            raise ReferenceRefused(i, str(e)) from None
-        changed.append(f"q{joint}")
-    if changed:
-        save_state(store, state)
+    records = bool(references) or pose != PoseUpdate()
+    held: AbstractContextManager[object] = device_lock(store, lock) if hold_lock and records else nullcontext()
+    with held:  # a joint referenced while another process moves it would be kept where it no longer is
+        state = load_state(store, key, joints)
+        changed = pose.apply(state)
+        for i, (joint, q) in enumerate(references):
+            try:
+                state.set_position(joint, q, "set")
+            except ValueError as e:
+                raise ReferenceRefused(i, str(e)) from None
+            changed.append(f"q{joint}")
+        if changed:
+            save_state(store, state)
     info = None if (changed or offline) else probe(device)
     return WhereResult(key, state, tuple(changed), info)

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..plotting import pyplot
+from ..records import atomic_write
 from .model import Box, Cylinder, HalfSpace, Rig
 
 __all__ = ["draw"]
@@ -81,6 +82,7 @@ def draw(rig: Rig, poses: Mapping[str, Sequence[float]], path: str | Path) -> No
             ax.set_title(title)
         fig.suptitle(f"rig {rig.name}")
         fig.tight_layout()
-        fig.savefig(path, dpi=100)
+        # whole or not at all, never into a folder or a device (records.atomic_write: every output file)
+        atomic_write(path, lambda f: fig.savefig(f, dpi=100, format="png"), mode="wb")
     finally:
         plt.close(fig)

@@ -492,13 +492,18 @@ class _Reader(_Values):
         if not given:
             raise self.fail(key, "a position needs at least one of q1, q2, q3")
         order_raw = doc.get("order", given)
-        if not isinstance(order_raw, list) or sorted(order_raw) != given or any(isinstance(o, bool) for o in order_raw):
+        if not isinstance(order_raw, list) or not _orders(order_raw, given):
             raise self.fail(key + ("order",), f"must list each joint the position gives ({given}) once")
         return NamedPosition(name, arm_name, (q[0], q[1], q[2]), tuple(int(o) for o in order_raw))
 
 
 _EXAMPLE = {"angle": "\"-90deg\"", "length": "\"12mm\""}
 _NOUN = {"angle": "an angle", "length": "a length"}
+
+
+def _orders(order: list[Any], given: list[int]) -> bool:
+    """Whether ``order`` lists each joint of ``given`` once (whole numbers first: sorted() of [3, "2"] raises)."""
+    return all(isinstance(o, int) and not isinstance(o, bool) for o in order) and sorted(order) == given
 
 
 def _vec(a: Any) -> Vec:

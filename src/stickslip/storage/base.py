@@ -289,6 +289,9 @@ class _Base:
         dest = Path(path).expanduser()
         if dest.exists():
             raise FileExistsError(f"{dest} exists: give a new file for the backup")
+        if not dest.parent.is_dir():  # else SQLite's 'unable to open database file', naming the .part file
+            raise FileNotFoundError(f"cannot write the backup {dest}: its folder {dest.parent} does not exist; "
+                                    "nothing was written")
         tmp = dest.with_name(f".{dest.name}.part")
         try:
             if not self._con.online_copy(tmp):
