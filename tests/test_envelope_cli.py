@@ -32,7 +32,9 @@ def test_an_arm_inside_a_margin_moves_out_and_not_deeper(tmp_path):
         rig = tmp_path / "rig.toml"
         rig.write_text(RIG.format(nano=nano.url), encoding="utf-8")
         common = ("--rig", rig, "--from-unreferenced", "--trust-calibration")
-        r = run("rig", "check", rig)  # the pose alone: inside the margin, reported
+        r = run("rig", "check", rig)  # the pose alone: inside the margin, reported, exit 2 (a check that found one)
+        assert r.exit_code == 2, r.output
+        assert r.stderr.strip() == f"error: {rig}: the drawn poses break the envelope (1 problem(s) above)"
         assert "40.00 µm from 'sample', closer than the 100.00 µm allowed" in " ".join(r.output.split()), r.output
         # joint 2 down by 0.1 deg lowers the 21 mm tip by 37 µm: deeper, refused, nothing sent
         r = run("move", *common, "--joint", 2, "--by", "-0.1deg")

@@ -134,7 +134,9 @@ def check(
     """List what a rig file holds (arms, joints, volumes, named positions) and draw it.
 
     Each arm is drawn at its kept pose when --db is given, else at its home pose.
-    A file with a problem exits 2 with one line naming the file, line and key.
+    A file with a problem exits 2 with one line naming the file, line and key; so does
+    a file whose drawn poses break the envelope (an arm within a volume's margin or too
+    near another arm), after listing each problem and drawing the rig.
 
     Example: stickslip rig check lab.toml -o rig.png
     """
@@ -179,6 +181,8 @@ def check(
         with user_errors():
             draw(rig, poses, out)
         say(f"drawn: {out}")
+    if problems:  # a check that found something says so to a script too (after drawing it: the picture shows where)
+        fail(f"{path}: the drawn poses break the envelope ({len(problems)} problem(s) above)")
 
 
 def _problems(rig: Rig, poses: dict[str, tuple[float, float, float]]) -> list[str]:
