@@ -537,9 +537,13 @@ def _from_dict(d: dict[str, Any]) -> Tuning:
         raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
     version = d.get("version", 1)
     if isinstance(version, bool) or version not in (1, 2):
+        newer = isinstance(version, int) and not isinstance(version, bool) and version > 2
         raise TuningFileError(
             f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
             "upgrade stickslip or re-tune with 'stickslip tune'"
+            if newer
+            else f"tuning version {version!r} is not a version stickslip writes (the whole numbers 1 or 2): "
+            "re-tune with 'stickslip tune'"
         )
     for key in ("band_hz", "threshold_db"):
         if key not in d:
