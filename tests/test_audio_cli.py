@@ -52,6 +52,8 @@ def test_tune_then_listen_json(wavs):
     assert r.exit_code == 0, r.output
     # the report names the template's span, the stop's strongest sub-band and the self-check
     assert "spectral template over" in r.output and "Hz" in r.output and "false alarms per hour" in r.output
+    # the self-check's line is named so (it began 't-check with knocks' before audit25)
+    assert "\nself-check with knocks, babble, +-20 dB gain and a second click train: " in r.output
     saved = json.loads(out.read_text())
     assert saved["joint"] == 3 and saved["version"] == 2 and saved["method"] == "template"
     k = max(range(len(saved["signature_db"])), key=lambda i: saved["signature_db"][i])

@@ -655,7 +655,7 @@ def _template_report(t: Tuning) -> str:
     c = t.checks or {}
     if "false_alarms_per_hour" in c:
         lines.append(
-            f"t-check with knocks, babble, +-20 dB gain and a second click train: "
+            f"self-check with knocks, babble, +-20 dB gain and a second click train: "
             f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
             f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
             f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"
