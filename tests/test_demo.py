@@ -181,7 +181,14 @@ def test_demo_device_takes_a_sim_url_and_refuses_real_controllers(tmp_path):
     assert r.exit_code == 2 and "stickslip traverse --device mm3a:///dev/ttyUSB0" in r.stderr
     r = runner.invoke(app, ["demo", "--device", "sim://?seed=2&day=2026-11-19&noise=1", "--no-db"])
     assert r.exit_code == 2 and "not noise" in r.stderr
+    # an earlier run's validation.csv in the folder is kept as it was and named (audit25: it sat beside this run's
+    # results, unsaid, and read as this draw's validation)
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "validation.csv").write_text("an earlier run's\n")
     r = runner.invoke(app, ["demo", "--device", "sim://?seed=2&day=2026-11-19", "--no-db", "--no-validation",
                             "--json", "--out", str(tmp_path / "o")])
     assert r.exit_code == 0, r.output
+    assert r.stderr == (f"warning: {tmp_path / 'o' / 'validation.csv'} is from an earlier run, not this one (this "
+                        "run wrote none): delete it or use another --out\n")
+    assert (tmp_path / "o" / "validation.csv").read_text() == "an earlier run's\n"
     _check_summary(json.loads(r.stdout), seed=2, day="2026-11-19", out=tmp_path / "o")  # another draw

@@ -86,7 +86,7 @@ def demo(
     """  # noqa: E501
     from ..audio.confirm import CONFIRM_S, check_confirm_s
     from ..calibration import CalibrationError
-    from ..procedures.demo import run_demo
+    from ..procedures.demo import left_from_earlier, run_demo
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
 
@@ -115,6 +115,8 @@ def demo(
         finally:
             if store is not None:
                 store.close()
+    for path in left_from_earlier(result, out):
+        warn(f"{path} is from an earlier run, not this one (this run wrote none): delete it or use another --out")
     if json_out:
         print_json(result.to_dict())
         return

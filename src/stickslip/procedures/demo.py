@@ -545,6 +545,17 @@ def save_results(result: DemoResult, out: str | Path) -> dict[str, str]:
     return files
 
 
+_OUTPUTS = ("measurements.csv", "validation.csv", "repeats.csv", "calibration.json", "tuning-joint1.json",
+            "tuning-joint2.json", "tuning-joint3.json", "summary.json")  # fmt: skip
+
+
+def left_from_earlier(result: DemoResult, out: str | Path) -> list[Path]:
+    """The files of ``out`` named as a demo's results that this run did not write (an earlier run's, kept as they
+    were: ``--no-validation`` writes no validation.csv), which a reader would take for this run's."""
+    written = {Path(f).name for f in result.files.values()}
+    return [Path(out) / n for n in _OUTPUTS if n not in written and (Path(out) / n).is_file()]
+
+
 def _write_summary(result: DemoResult, folder: Path) -> None:
     def clean(o: object) -> object:
         if isinstance(o, float):
