@@ -361,6 +361,26 @@ def test_clipping_is_judged_at_the_signal_s_own_rails():
     assert non_finite(x) == (0, None) and non_finite(np.r_[x, np.nan, 1.0, -np.inf]) == (2, 4096)
 
 
+def test_record_and_tune_refuse_an_output_they_cannot_write_before_starting(tmp_path):
+    """audit25: 'record FOLDER', 'record x.wav --tune FOLDER' and 'tune ... -o FOLDER' were a ValueError traceback
+    (exit 1; record had written x.wav first), and 'record r.json' wrote the recording and then its label over it."""
+    folder = tmp_path / "res"
+    folder.mkdir()
+    sim = ["--joint", "2", "--device", "sim://?seed=3"]
+    r = runner.invoke(app, ["record", str(folder), *sim])
+    _one_line_error(r, f"{folder}: record writes a WAV file: name it .wav (its label is written beside it, as .json)")
+    r = runner.invoke(app, ["record", str(tmp_path / "r.json"), *sim])
+    _one_line_error(r, "r.json: record writes a WAV file: name it .wav")
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), *sim, "--tune", str(folder)])
+    _one_line_error(r, f"{folder}: is a folder, not a file; give the path of a file to write the tuning to")
+    (tmp_path / "y.json").mkdir()
+    r = runner.invoke(app, ["record", str(tmp_path / "y.wav"), *sim])
+    _one_line_error(r, "y.json: is a folder, not a file; give the path of a file to write the label to")
+    r = runner.invoke(app, ["tune", str(tmp_path / "missing.wav"), "--stop-at", "2", "-o", str(folder)])
+    _one_line_error(r, f"{folder}: is a folder, not a file; give the path of a file to write the tuning to")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["res", "y.json"]  # nothing written
+
+
 def test_a_recording_that_cannot_be_written_is_one_line_and_keeps_the_old_file(tmp_path, monkeypatch):
     # record into a folder that is not there: one line, exit 2 (was a soundfile traceback)
     r = runner.invoke(app, ["record", str(tmp_path / "no" / "such" / "r.wav"), "--joint", "3", "--device", "sim://"])

@@ -147,6 +147,7 @@ def tune(
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
     _check_step_rate(step_rate)
+    _writable(out, "tuning")
     samples, rate = _load_recording(recording, sample_rate, channel)
     duration = samples.size / rate
     if samples.size == 0:
@@ -521,6 +522,12 @@ def record(
         sign_label = direction_label(direction)
     except ValueError as e:
         fail(str(e))
+    if out.suffix.lower() != ".wav":
+        fail(f"{out}: record writes a WAV file: name it .wav (its label is written beside it, as .json)")
+    _writable(out, "recording")
+    _writable(out.with_suffix(".json"), "label")
+    if tune_out is not None:
+        _writable(tune_out, "tuning")
     with user_errors(DeviceError, AudioSourceError):
         ctrl = open_device(device_url(device))
         try:
@@ -554,6 +561,16 @@ def record(
         finally:
             ctrl.close()
     _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out, hz)
+
+
+def _writable(path: Path, what: str) -> None:
+    """Refuse (one line, exit 2) an output path where a folder, FIFO or device stands, before anything is done."""
+    from ..records import writable_target
+
+    try:
+        writable_target(path, what)
+    except ValueError as e:
+        fail(str(e))
 
 
 def _finish_recording(
