@@ -139,6 +139,19 @@ def test_listen_mic_without_portaudio_is_one_line(wavs, monkeypatch):
     _one_line_error(r, "libportaudio2")
 
 
+def test_listen_mic_input_names_a_sound_card_not_a_device_url(wavs, monkeypatch):
+    """audit25: 'listen --mic --input 2' was refused as a controller URL ("device URL '2' has no scheme: write
+    mm3a://2 ..."): the option's parameter was named like --device, whose check it got."""
+    def opened(self):
+        raise AudioSourceError(f"opened sound card {self.device!r}")
+
+    monkeypatch.setattr(Microphone, "start", opened)
+    runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")])
+    for given, device in (("2", 2), ("USB Audio", "USB Audio")):
+        r = runner.invoke(app, ["listen", "--mic", "--input", given, "--tuning", str(wavs / "m.json")])
+        _one_line_error(r, f"error: opened sound card {device!r}")
+
+
 def test_help_names_units():
     for cmd in ("tune", "listen"):
         r = runner.invoke(app, [cmd, "--help"])

@@ -185,7 +185,7 @@ def listen(
     ),
     tuning_path: Path = typer.Option(..., "--tuning", help="Tuning JSON written by 'stickslip tune'."),
     mic: bool = typer.Option(False, "--mic", help="Listen live to the microphone until Ctrl-C."),
-    device: str = typer.Option(
+    audio_input: str = typer.Option(
         None,
         "--input",
         help="Audio input device (index or name) for --mic; `python -m sounddevice` lists them.",
@@ -280,7 +280,7 @@ def listen(
     if channel is not None and recording is None:
         fail("--channel reads one channel of a recording (a live input is read as one channel)")
     if mic:
-        _listen_live(tuning, device, json_out, confirm_s, step_clock, late, step_rate)
+        _listen_live(tuning, audio_input, json_out, confirm_s, step_clock, late, step_rate)
         return
     if serial_port is not None:
         _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock, late, step_rate)
