@@ -152,6 +152,23 @@ def test_listen_mic_input_names_a_sound_card_not_a_device_url(wavs, monkeypatch)
         _one_line_error(r, f"error: opened sound card {device!r}")
 
 
+def test_tune_min_band_is_checked(wavs):
+    """audit25: --min-band -5 was taken (a 987 Hz band chosen, under the 1400 Hz default's floor), and --min-band with
+    the template method (the default) was dropped unsaid."""
+    out = wavs / "mb.json"
+    args = ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--no-self-check"]
+    r = runner.invoke(app, [*args, "--method", "band", "--min-band", "-5"])
+    _one_line_error(r, "--min-band is a band's width, 0 Hz or more, got -5 Hz")
+    assert not out.exists()
+    r = runner.invoke(app, [*args, "--min-band", "3000"])
+    assert r.exit_code == 0 and r.stderr == ("warning: --min-band 3000 Hz is for --method band; the template detector "
+                                             "chooses its sub-bands itself\n"), r.output
+    r = runner.invoke(app, [*args, "--method", "band"])
+    assert r.exit_code == 0 and r.stderr == "", r.output
+    lo, hi = json.loads(out.read_text())["band_hz"]
+    assert hi - lo >= 1400.0  # the band detector's own default floor
+
+
 def test_help_names_units():
     for cmd in ("tune", "listen"):
         r = runner.invoke(app, [cmd, "--help"])

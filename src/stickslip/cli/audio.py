@@ -11,7 +11,7 @@ from typing import Any
 import typer
 
 from . import app
-from ._common import console, device_url, err_console, fail, print_json, say, user_errors
+from ._common import console, device_url, err_console, fail, print_json, say, user_errors, warn
 from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
@@ -97,10 +97,12 @@ def tune(
         help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB).",
     ),
     joint: int = typer.Option(None, "--joint", "-j", help="Joint 1, 2 or 3 the recording belongs to."),
-    min_band: float = typer.Option(
-        1400.0,
+    min_band: float | None = typer.Option(
+        None,
         "--min-band",
-        help="--method band only: narrowest band considered, Hz; keep it above your highest step rate.",
+        help="--method band only: narrowest band considered, Hz (default 1400); keep it above your highest step "
+        "rate.",
+        show_default=False,
     ),
     method: str = typer.Option(
         "template",
@@ -146,6 +148,10 @@ def tune(
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
+    if min_band is not None and min_band < 0:
+        fail(f"--min-band is a band's width, 0 Hz or more, got {min_band:g} Hz")
+    if method == "template" and min_band is not None:
+        warn(f"--min-band {min_band:g} Hz is for --method band; the template detector chooses its sub-bands itself")
     _check_step_rate(step_rate)
     _writable(out, "tuning")
     samples, rate = _load_recording(recording, sample_rate, channel)
@@ -159,7 +165,10 @@ def tune(
         )
     try:
         if method == "band":
-            tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
+            if min_band is None:
+                tuning = tune_band(samples, rate, stop_at, joint=joint)
+            else:
+                tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
         else:
             tuning = tune_(samples, rate, stop_at, joint=joint, self_check=self_check, step_rate_hz=step_rate)
     except TuningError as e:
