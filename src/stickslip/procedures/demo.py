@@ -50,7 +50,7 @@ from ..clock import check_day_label, today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
 from ..models import JointModel
-from ..records import atomic_write_text
+from ..records import atomic_write_text, writable_target
 from ..sim.arm import NOMINAL, SimulatedMM3A
 from ..sim.oracle import OracleStopDetector
 from ..units import param_scale
@@ -547,6 +547,15 @@ def save_results(result: DemoResult, out: str | Path) -> dict[str, str]:
 
 _OUTPUTS = ("measurements.csv", "validation.csv", "repeats.csv", "calibration.json", "tuning-joint1.json",
             "tuning-joint2.json", "tuning-joint3.json", "summary.json")  # fmt: skip
+
+
+def check_outputs(out: str | Path) -> None:
+    """Refuse (``ValueError`` naming it) a results file of ``out`` that cannot be replaced by a file (a folder, a FIFO),
+    before the demo runs: found at the end, it left the files written before it replaced and the rest not."""
+    if not Path(out).is_dir():
+        return  # a folder still to make (or a file in its way: the run says so when it makes it)
+    for name in _OUTPUTS:
+        writable_target(Path(out) / name, "results")
 
 
 def left_from_earlier(result: DemoResult, out: str | Path) -> list[Path]:
