@@ -52,6 +52,8 @@ def test_tune_then_listen_json(wavs):
     assert r.exit_code == 0, r.output
     # the report names the template's span, the stop's strongest sub-band and the self-check
     assert "spectral template over" in r.output and "Hz" in r.output and "false alarms per hour" in r.output
+    # the self-check's line is named so (it began 't-check with knocks' before audit25)
+    assert "\nself-check with knocks, babble, +-20 dB gain and a second click train: " in r.output
     saved = json.loads(out.read_text())
     assert saved["joint"] == 3 and saved["version"] == 2 and saved["method"] == "template"
     k = max(range(len(saved["signature_db"])), key=lambda i: saved["signature_db"][i])
@@ -135,6 +137,36 @@ def test_listen_mic_without_portaudio_is_one_line(wavs, monkeypatch):
     r = runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")])
     r = runner.invoke(app, ["listen", "--mic", "--tuning", str(wavs / "m.json")])
     _one_line_error(r, "libportaudio2")
+
+
+def test_listen_mic_input_names_a_sound_card_not_a_device_url(wavs, monkeypatch):
+    """audit25: 'listen --mic --input 2' was refused as a controller URL ("device URL '2' has no scheme: write
+    mm3a://2 ..."): the option's parameter was named like --device, whose check it got."""
+    def opened(self):
+        raise AudioSourceError(f"opened sound card {self.device!r}")
+
+    monkeypatch.setattr(Microphone, "start", opened)
+    runner.invoke(app, ["tune", str(wavs / "tune.wav"), "--stop-at", "2", "-o", str(wavs / "m.json")])
+    for given, device in (("2", 2), ("USB Audio", "USB Audio")):
+        r = runner.invoke(app, ["listen", "--mic", "--input", given, "--tuning", str(wavs / "m.json")])
+        _one_line_error(r, f"error: opened sound card {device!r}")
+
+
+def test_tune_min_band_is_checked(wavs):
+    """audit25: --min-band -5 was taken (a 987 Hz band chosen, under the 1400 Hz default's floor), and --min-band with
+    the template method (the default) was dropped unsaid."""
+    out = wavs / "mb.json"
+    args = ["tune", str(wavs / "tune.wav"), "--stop-at", "2.0", "-o", str(out), "--no-self-check"]
+    r = runner.invoke(app, [*args, "--method", "band", "--min-band", "-5"])
+    _one_line_error(r, "--min-band is a band's width, 0 Hz or more, got -5 Hz")
+    assert not out.exists()
+    r = runner.invoke(app, [*args, "--min-band", "3000"])
+    assert r.exit_code == 0 and r.stderr == ("warning: --min-band 3000 Hz is for --method band; the template detector "
+                                             "chooses its sub-bands itself\n"), r.output
+    r = runner.invoke(app, [*args, "--method", "band"])
+    assert r.exit_code == 0 and r.stderr == "", r.output
+    lo, hi = json.loads(out.read_text())["band_hz"]
+    assert hi - lo >= 1400.0  # the band detector's own default floor
 
 
 def test_help_names_units():
@@ -357,6 +389,26 @@ def test_clipping_is_judged_at_the_signal_s_own_rails():
     assert block_problem(np.clip(x, -0.05, 0.05)) == "clipping"  # an analog stage clipping below full scale
     assert block_problem(np.clip(0.3 * x, -1.0, 1.0)) is None
     assert non_finite(x) == (0, None) and non_finite(np.r_[x, np.nan, 1.0, -np.inf]) == (2, 4096)
+
+
+def test_record_and_tune_refuse_an_output_they_cannot_write_before_starting(tmp_path):
+    """audit25: 'record FOLDER', 'record x.wav --tune FOLDER' and 'tune ... -o FOLDER' were a ValueError traceback
+    (exit 1; record had written x.wav first), and 'record r.json' wrote the recording and then its label over it."""
+    folder = tmp_path / "res"
+    folder.mkdir()
+    sim = ["--joint", "2", "--device", "sim://?seed=3"]
+    r = runner.invoke(app, ["record", str(folder), *sim])
+    _one_line_error(r, f"{folder}: record writes a WAV file: name it .wav (its label is written beside it, as .json)")
+    r = runner.invoke(app, ["record", str(tmp_path / "r.json"), *sim])
+    _one_line_error(r, "r.json: record writes a WAV file: name it .wav")
+    r = runner.invoke(app, ["record", str(tmp_path / "x.wav"), *sim, "--tune", str(folder)])
+    _one_line_error(r, f"{folder}: is a folder, not a file; give the path of a file to write the tuning to")
+    (tmp_path / "y.json").mkdir()
+    r = runner.invoke(app, ["record", str(tmp_path / "y.wav"), *sim])
+    _one_line_error(r, "y.json: is a folder, not a file; give the path of a file to write the label to")
+    r = runner.invoke(app, ["tune", str(tmp_path / "missing.wav"), "--stop-at", "2", "-o", str(folder)])
+    _one_line_error(r, f"{folder}: is a folder, not a file; give the path of a file to write the tuning to")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["res", "y.json"]  # nothing written
 
 
 def test_a_recording_that_cannot_be_written_is_one_line_and_keeps_the_old_file(tmp_path, monkeypatch):

@@ -172,7 +172,12 @@ def test_tuning_round_trip(tmp_path):
         ({"band_hz": [5000, 7000], "threshold_db": -40, "contrast_db": [3]}, "contrast_db must be a finite number"),
         ({"band_hz": [5000, 7000], "threshold_db": -40, "joint": 7}, "joint 7 must be 1, 2 or 3"),
         ({"band_hz": [5000, 7000], "threshold_db": -40, "joint": "x"}, "joint must be an integer"),
-        ({"band_hz": [5000, 7000], "threshold_db": -40, "version": True}, "newer than this stickslip"),
+        ({"band_hz": [5000, 7000], "threshold_db": -40, "version": True}, "version True is not a version stickslip"),
+        ({"band_hz": [5000, 7000], "threshold_db": -40, "version": 0}, r"version 0 is not a version stickslip writes "
+         r"\(the whole numbers 1 or 2\): re-tune"),
+        ({"band_hz": [5000, 7000], "threshold_db": -40, "version": "2"}, "version '2' is not a version stickslip"),
+        ({"band_hz": [5000, 7000], "threshold_db": -40, "version": 2.5}, "version 2.5 is not a version stickslip"),
+        ({"band_hz": [5000, 7000], "threshold_db": -40, "version": 3}, "version 3 is newer than this stickslip"),
         ({"kind": "calibration", "band_hz": [1, 2], "threshold_db": 0}, "not a stop-detector"),
         ([1, 2], "JSON object"),
     ],

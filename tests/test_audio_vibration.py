@@ -93,6 +93,35 @@ def test_read_vibration_refuses_what_it_cannot_use(tmp_path):
         read_vibration(tmp_path / "missing.csv")
 
 
+def test_read_vibration_checks_the_time_column(tmp_path):
+    """audit25: a header 'time_ms,value' over times in seconds was read (its name skipped), 'volts,time_s' said the
+    times were not uniformly spaced, and a --sample-rate other than the times' was taken over them, silently."""
+    body = "".join(f"{k / 10000:.4f},{(-1) ** k * 0.1}\n" for k in range(50))
+    p = tmp_path / "v.csv"
+    p.write_text("time_s,value\n" + body)
+    assert read_vibration(p)[1] == 10000 and read_vibration(p, sample_rate=10000)[1] == 10000
+    for name in ("time_ms", "t [us]", "Time(min)"):
+        p.write_text(f"{name},accel\n" + body)
+        with pytest.raises(AudioSourceError) as e:
+            read_vibration(p)
+        assert str(e.value) == (f"{p}: the time column is named {name!r}: times are read in seconds: convert them "
+                                "and name the column time_s")
+    p.write_text("volts,time_s\n" + body)
+    with pytest.raises(AudioSourceError) as e:
+        read_vibration(p)
+    assert str(e.value) == f"{p}: the header names 'volts','time_s': the time column comes first (time_s,value)"
+    p.write_text("time_s,value\n" + body)
+    with pytest.raises(AudioSourceError) as e:
+        read_vibration(p, sample_rate=25000)
+    assert str(e.value) == (f"{p}: its times say 10000 Hz but 25000 Hz is given (--sample-rate or a sample_rate_hz "
+                            "line): keep the one that is right")
+    runner, app = _cli()
+    r = runner.invoke(app, ["tune", str(p), "--stop-at", "0.002", "-o", str(tmp_path / "t.json"), "--sample-rate",
+                            "25000"])
+    assert r.exit_code == 2 and r.stderr.startswith("error: ") and "its times say 10000 Hz" in r.stderr, r.output
+    assert not (tmp_path / "t.json").exists()
+
+
 def test_read_vibration_odd_encodings_and_rate_lines(tmp_path):
     """Found by tests/test_fuzz_files.py: a traceback, Python's codec words, a BOM that hid the rate, a second rate."""
     body = "".join(f"{float(v)!r}\n" for v in np.random.default_rng(1).normal(0.0, 0.1, 50))

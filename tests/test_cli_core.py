@@ -109,6 +109,26 @@ def test_show(files):
     assert r.exit_code == 0 and "gamma0" in r.stdout and "constant-step comparator" in r.stdout
 
 
+def test_a_parameter_given_twice_is_refused(files):
+    """A hand-edited calibration that gives one parameter twice was read with the last value, silently (audit25:
+    a second joint 2+ gamma0 at q3 = 0 of 1e-3 rad made predict answer 0.001 rad); now one line, exit 2."""
+    tmp, meas = files
+    data = json.loads(_cal(tmp, meas).read_text())
+    first = next(p for p in data["parameters"] if p["joint"] == 2 and p["name"] == "gamma0")
+    i = data["parameters"].index(first)
+    twice = tmp / "twice.json"
+    twice.write_text(json.dumps({**data, "parameters": [*data["parameters"], {**first, "value": 1e-3}]}))
+    n = len(data["parameters"])
+    for cmd in (["show", str(twice)], ["predict", str(meas), "-c", str(twice)]):
+        _bad(runner.invoke(app, cmd), f"parameters[{n}] gives joint 2{first['direction']} gamma0 at q3 = "
+             f"{first['q3']:g} m again (parameters[{i}] gives it too): keep one")
+    const = data["constant_steps"][0]
+    twice.write_text(json.dumps({**data, "constant_steps": [*data["constant_steps"], const]}))
+    k = len(data["constant_steps"])
+    _bad(runner.invoke(app, ["show", str(twice)]),
+         f"constant_steps[{k}] gives joint {const['joint']}{const['direction']}'s constant step again")
+
+
 def test_bad_inputs_give_one_line_reasons(files):
     tmp, meas = files
     bad = tmp / "bad.csv"

@@ -124,6 +124,18 @@ def test_cli_demo_bad_output_folder_is_one_line_error(tmp_path):
     assert text.startswith("error:") and "Traceback" not in text
 
 
+def test_cli_demo_refuses_a_results_file_it_could_not_write_before_running(tmp_path):
+    """audit25: a folder named calibration.json in --out was found after the run, measurements.csv and repeats.csv
+    already replaced (a mixed folder: this run's tables beside an earlier calibration)."""
+    (tmp_path / "calibration.json").mkdir()
+    (tmp_path / "measurements.csv").write_text("an earlier run's\n")
+    r = runner.invoke(app, ["demo", "--out", str(tmp_path), "--no-db", "--no-validation"])
+    assert r.exit_code == 2 and r.stderr == (f"error: {tmp_path / 'calibration.json'}: is a folder, not a file; give "
+                                             "the path of a file to write the results to\n"), r.output
+    assert (tmp_path / "measurements.csv").read_text() == "an earlier run's\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calibration.json", "measurements.csv"]
+
+
 def test_cli_demo_negative_seed_is_one_line_error(tmp_path):
     r = runner.invoke(app, ["demo", "--seed", "-3", "--out", str(tmp_path)])
     assert r.exit_code == 2
@@ -181,7 +193,14 @@ def test_demo_device_takes_a_sim_url_and_refuses_real_controllers(tmp_path):
     assert r.exit_code == 2 and "stickslip traverse --device mm3a:///dev/ttyUSB0" in r.stderr
     r = runner.invoke(app, ["demo", "--device", "sim://?seed=2&day=2026-11-19&noise=1", "--no-db"])
     assert r.exit_code == 2 and "not noise" in r.stderr
+    # an earlier run's validation.csv in the folder is kept as it was and named (audit25: it sat beside this run's
+    # results, unsaid, and read as this draw's validation)
+    (tmp_path / "o").mkdir()
+    (tmp_path / "o" / "validation.csv").write_text("an earlier run's\n")
     r = runner.invoke(app, ["demo", "--device", "sim://?seed=2&day=2026-11-19", "--no-db", "--no-validation",
                             "--json", "--out", str(tmp_path / "o")])
     assert r.exit_code == 0, r.output
+    assert r.stderr == (f"warning: {tmp_path / 'o' / 'validation.csv'} is from an earlier run, not this one (this "
+                        "run wrote none): delete it or use another --out\n")
+    assert (tmp_path / "o" / "validation.csv").read_text() == "an earlier run's\n"
     _check_summary(json.loads(r.stdout), seed=2, day="2026-11-19", out=tmp_path / "o")  # another draw

@@ -122,6 +122,30 @@ def test_a_table_saved_with_semicolons_or_tabs_says_so(tmp_path):
             read_measurements(p)
 
 
+def test_a_table_whose_top_was_cut_says_so(tmp_path):
+    """audit25: a table whose first line(s) were cut (mid-row, or at a row's end) said 'missing day, joint, ...;
+    unexpected 23, 3, +, 0.0, ...'; now it says line 1 is data and the header is missing. Exit 2 on the CLI."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import HEADER, read_measurements
+
+    rows = "".join(f"2026-11-23,3,+,0.0,0.0,0.0,{t},0.0,0.0,0.012,{9000 + k}\n" for k, t in enumerate((0.0, -1.5)))
+    want = (f"header must be exactly {','.join(HEADER)} (line 1 is a row of numbers, not the header: the table's "
+            "first line is missing (was the top of the file cut?); put the header line back)")
+    p = tmp_path / "m.csv"
+    for text in (rows, rows[7:]):
+        p.write_text(text)
+        with pytest.raises(TableError) as e:
+            read_measurements(p)
+        assert e.value.problems == [f"{p}:1: {want}"]
+    r = CliRunner().invoke(app, ["fit", str(p)])
+    assert r.exit_code == 2 and r.stderr == f"error: {p}:1: {want}\n"
+    p.write_text("a,b\n1,2\n")  # other names: named as before
+    with pytest.raises(TableError, match=r"\(missing day, joint, .*; unexpected a, b\)"):
+        read_measurements(p)
+
+
 def test_a_spreadsheets_empty_columns_at_the_end_are_named_as_such(tmp_path):
     # 'day,...,steps,,' (a spreadsheet that saved two empty columns) said '(unexpected , )'
     from stickslip.measurements import HEADER, read_measurements

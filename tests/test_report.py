@@ -370,3 +370,19 @@ def test_cli_report_says_in_sample_for_the_fitted_table_and_out_of_sample_for_an
         app, ["report", "-c", str(calp), str(meas), "--validate-on", str(broken), "-o", str(tmp_path / "y")]
     )
     assert r.exit_code == 2 and "header must be exactly" in r.output and "Traceback" not in r.output
+
+
+@pytest.mark.parametrize("blocked", ["validation.png", "index.html", "fig4_prismatic_validation.png"])
+def test_cli_report_refuses_a_folder_in_a_files_place_before_replacing_any(tmp_path, cal, table, blocked):
+    """audit25: a folder named validation.png in -o was found after fig4..fig9 had been replaced (each whole, the
+    set mixed: this report's figures beside an earlier page); now one line, exit 2, before any file is written."""
+    meas, calp, out = tmp_path / "meas.csv", tmp_path / "cal.json", tmp_path / "rep"
+    write_measurements(meas, table)
+    cal.save(calp)
+    (out / blocked).mkdir(parents=True)
+    (out / "fig4_prismatic.png").write_bytes(b"an earlier report's")
+    r = runner.invoke(app, ["report", "-c", str(calp), str(meas), "--validate-on", str(meas), "-o", str(out)])
+    assert r.exit_code == 2 and r.stderr == (f"error: {out / blocked}: is a folder, not a file; give the path of a "
+                                             "file to write the report to\n"), r.output
+    assert (out / "fig4_prismatic.png").read_bytes() == b"an earlier report's"
+    assert sorted(p.name for p in out.iterdir()) == sorted([blocked, "fig4_prismatic.png"])

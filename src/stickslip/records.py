@@ -341,6 +341,20 @@ def _check_parameter(rec_: object, i: int) -> None:
             raise ValueError(f"{where} q3 = {q3!r} m is outside 0..0.1 m")
 
 
+def _check_once(rec: dict[str, Any], i: int, seen: dict[tuple[object, ...], int]) -> None:
+    """Refuse a parameter given twice (the same joint, direction, name and q3): the model would take one silently."""
+    joint = rec["joint"]
+    q3 = float(rec["q3"]) if joint_spec(joint).rotary else None
+    key = (joint, rec["direction"], rec["name"], q3)
+    if key in seen:
+        at = "" if q3 is None else f" at q3 = {q3:g} m"
+        raise ValueError(
+            f"parameters[{i}] gives joint {joint}{rec['direction']} {rec['name']}{at} again "
+            f"(parameters[{seen[key]}] gives it too): keep one"
+        )
+    seen[key] = i
+
+
 def check_calibration_dict(data: object) -> None:
     """Check a calibration document's structure and physical ranges before it is used.
 
@@ -372,11 +386,19 @@ def check_calibration_dict(data: object) -> None:
     for key in ("day", "method", "created"):
         if data.get(key) is not None and not isinstance(data[key], str):
             raise ValueError(f"{key} must be a string, got {data[key]!r}")
+    seen: dict[tuple[object, ...], int] = {}
     for i, rec in enumerate(data.get("parameters") or []):
         _check_parameter(rec, i)
+        _check_once(rec, i, seen)
+    steps: dict[tuple[int, str], int] = {}
     for i, rec in enumerate(data.get("constant_steps") or []):
         where = f"constant_steps[{i}]"
         step, joint = _record_joint(rec, where)
+        if (k := steps.setdefault((joint, step["direction"]), i)) != i:
+            raise ValueError(
+                f"{where} gives joint {joint}{step['direction']}'s constant step again "
+                f"(constant_steps[{k}] gives it too): keep one"
+            )
         v = finite_number(step.get("value"), f"{where} (joint {joint})")
         unit = step.get("unit")  # a stage's joints 1 and 2 are prismatic: their steps in m (the file says)
         if unit not in ("m", "rad"):

@@ -537,9 +537,13 @@ def _from_dict(d: dict[str, Any]) -> Tuning:
         raise TuningFileError(f"not a stop-detector tuning (kind {d.get('kind')!r})")
     version = d.get("version", 1)
     if isinstance(version, bool) or version not in (1, 2):
+        newer = isinstance(version, int) and not isinstance(version, bool) and version > 2
         raise TuningFileError(
             f"tuning version {version!r} is newer than this stickslip understands (1 or 2); "
             "upgrade stickslip or re-tune with 'stickslip tune'"
+            if newer
+            else f"tuning version {version!r} is not a version stickslip writes (the whole numbers 1 or 2): "
+            "re-tune with 'stickslip tune'"
         )
     for key in ("band_hz", "threshold_db"):
         if key not in d:
@@ -651,7 +655,7 @@ def _template_report(t: Tuning) -> str:
     c = t.checks or {}
     if "false_alarms_per_hour" in c:
         lines.append(
-            f"t-check with knocks, babble, +-20 dB gain and a second click train: "
+            f"self-check with knocks, babble, +-20 dB gain and a second click train: "
             f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
             f"({c['false_alarms']} in {c['checked_s']:.0f} s), stop found in {c['stops_found']}/{c['stops']} "
             f"cases, latency median {1e3 * c['latency_median_s']:.1f} ms"

@@ -11,7 +11,7 @@ from typing import Any
 import typer
 
 from . import app
-from ._common import console, device_url, err_console, fail, print_json, say, user_errors
+from ._common import console, device_url, err_console, fail, print_json, say, user_errors, warn
 from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
@@ -97,10 +97,12 @@ def tune(
         help="Where to write the tuning (JSON: sub-band edges in Hz, the stop's signature in dB).",
     ),
     joint: int = typer.Option(None, "--joint", "-j", help="Joint 1, 2 or 3 the recording belongs to."),
-    min_band: float = typer.Option(
-        1400.0,
+    min_band: float | None = typer.Option(
+        None,
         "--min-band",
-        help="--method band only: narrowest band considered, Hz; keep it above your highest step rate.",
+        help="--method band only: narrowest band considered, Hz (default 1400); keep it above your highest step "
+        "rate.",
+        show_default=False,
     ),
     method: str = typer.Option(
         "template",
@@ -146,7 +148,12 @@ def tune(
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     if method not in ("template", "band"):
         fail(f"--method must be 'template' or 'band', got {method!r}")
+    if min_band is not None and min_band < 0:
+        fail(f"--min-band is a band's width, 0 Hz or more, got {min_band:g} Hz")
+    if method == "template" and min_band is not None:
+        warn(f"--min-band {min_band:g} Hz is for --method band; the template detector chooses its sub-bands itself")
     _check_step_rate(step_rate)
+    _writable(out, "tuning")
     samples, rate = _load_recording(recording, sample_rate, channel)
     duration = samples.size / rate
     if samples.size == 0:
@@ -158,7 +165,10 @@ def tune(
         )
     try:
         if method == "band":
-            tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
+            if min_band is None:
+                tuning = tune_band(samples, rate, stop_at, joint=joint)
+            else:
+                tuning = tune_band(samples, rate, stop_at, joint=joint, min_band_hz=min_band)
         else:
             tuning = tune_(samples, rate, stop_at, joint=joint, self_check=self_check, step_rate_hz=step_rate)
     except TuningError as e:
@@ -184,7 +194,7 @@ def listen(
     ),
     tuning_path: Path = typer.Option(..., "--tuning", help="Tuning JSON written by 'stickslip tune'."),
     mic: bool = typer.Option(False, "--mic", help="Listen live to the microphone until Ctrl-C."),
-    device: str = typer.Option(
+    audio_input: str = typer.Option(
         None,
         "--input",
         help="Audio input device (index or name) for --mic; `python -m sounddevice` lists them.",
@@ -279,7 +289,7 @@ def listen(
     if channel is not None and recording is None:
         fail("--channel reads one channel of a recording (a live input is read as one channel)")
     if mic:
-        _listen_live(tuning, device, json_out, confirm_s, step_clock, late, step_rate)
+        _listen_live(tuning, audio_input, json_out, confirm_s, step_clock, late, step_rate)
         return
     if serial_port is not None:
         _listen_serial(tuning, serial_port, sample_rate, json_out, confirm_s, step_clock, late, step_rate)
@@ -521,6 +531,12 @@ def record(
         sign_label = direction_label(direction)
     except ValueError as e:
         fail(str(e))
+    if out.suffix.lower() != ".wav":
+        fail(f"{out}: record writes a WAV file: name it .wav (its label is written beside it, as .json)")
+    _writable(out, "recording")
+    _writable(out.with_suffix(".json"), "label")
+    if tune_out is not None:
+        _writable(tune_out, "tuning")
     with user_errors(DeviceError, AudioSourceError):
         ctrl = open_device(device_url(device))
         try:
@@ -554,6 +570,16 @@ def record(
         finally:
             ctrl.close()
     _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out, hz)
+
+
+def _writable(path: Path, what: str) -> None:
+    """Refuse (one line, exit 2) an output path where a folder, FIFO or device stands, before anything is done."""
+    from ..records import writable_target
+
+    try:
+        writable_target(path, what)
+    except ValueError as e:
+        fail(str(e))
 
 
 def _finish_recording(

@@ -86,7 +86,7 @@ def demo(
     """  # noqa: E501
     from ..audio.confirm import CONFIRM_S, check_confirm_s
     from ..calibration import CalibrationError
-    from ..procedures.demo import run_demo
+    from ..procedures.demo import check_outputs, left_from_earlier, run_demo
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
 
@@ -96,6 +96,10 @@ def demo(
         fail(f"--confirm-s: {e}")
     if device is not None:
         seed, day, physics = _sim_seed_day(device, seed, day, physics)
+    try:
+        check_outputs(out)
+    except ValueError as e:
+        fail(str(e))
     with user_errors(CalibrationError, TraverseError, StoreError):
         store = Store.open(db_path(db)) if use_db and not physics else None
         if store is not None and not allow_duplicates and _already_recorded(store, seed, day or today_label()):
@@ -115,6 +119,8 @@ def demo(
         finally:
             if store is not None:
                 store.close()
+    for path in left_from_earlier(result, out):
+        warn(f"{path} is from an earlier run, not this one (this run wrote none): delete it or use another --out")
     if json_out:
         print_json(result.to_dict())
         return

@@ -145,6 +145,14 @@ def _parse_measurement_columns(text: str, source: str, joints: JointSet | None =
     return table
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def _check_header(header: list[str] | None, source: str) -> None:
     if header is None:
         raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"])
@@ -162,6 +170,9 @@ def _check_header(header: list[str] | None, source: str) -> None:
             detail.append(f"{n} column{'s' if n > 1 else ''} without a name: delete the empty columns at the end")
         if not detail:
             detail.append("columns out of order")
+        if not set(header) & set(HEADER) and sum(_is_number(h) for h in header) >= 3:  # a table whose top was cut
+            detail = ["line 1 is a row of numbers, not the header: the table's first line is missing (was the top "
+                      "of the file cut?); put the header line back"]
         if len(header) == 1 and any(sep in header[0] for sep in ";\t"):  # a European spreadsheet's export
             sep = "';'" if ";" in header[0] else "a tab"
             detail = [f"the columns are separated by {sep}: save the table with commas (CSV)"]

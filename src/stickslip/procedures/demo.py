@@ -50,7 +50,7 @@ from ..clock import check_day_label, today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
 from ..models import JointModel
-from ..records import atomic_write_text
+from ..records import atomic_write_text, writable_target
 from ..sim.arm import NOMINAL, SimulatedMM3A
 from ..sim.oracle import OracleStopDetector
 from ..units import param_scale
@@ -543,6 +543,26 @@ def save_results(result: DemoResult, out: str | Path) -> dict[str, str]:
         files[f"tuning_joint{joint}"] = str(path)
     files["summary"] = str(folder / "summary.json")
     return files
+
+
+_OUTPUTS = ("measurements.csv", "validation.csv", "repeats.csv", "calibration.json", "tuning-joint1.json",
+            "tuning-joint2.json", "tuning-joint3.json", "summary.json")  # fmt: skip
+
+
+def check_outputs(out: str | Path) -> None:
+    """Refuse (``ValueError`` naming it) a results file of ``out`` that cannot be replaced by a file (a folder, a FIFO),
+    before the demo runs: found at the end, it left the files written before it replaced and the rest not."""
+    if not Path(out).is_dir():
+        return  # a folder still to make (or a file in its way: the run says so when it makes it)
+    for name in _OUTPUTS:
+        writable_target(Path(out) / name, "results")
+
+
+def left_from_earlier(result: DemoResult, out: str | Path) -> list[Path]:
+    """The files of ``out`` named as a demo's results that this run did not write (an earlier run's, kept as they
+    were: ``--no-validation`` writes no validation.csv), which a reader would take for this run's."""
+    written = {Path(f).name for f in result.files.values()}
+    return [Path(out) / n for n in _OUTPUTS if n not in written and (Path(out) / n).is_file()]
 
 
 def _write_summary(result: DemoResult, folder: Path) -> None:

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from ..records import atomic_write, atomic_write_text
+from ..records import atomic_write, atomic_write_text, writable_target
 from . import html as pagehtml
 from .d_relation import DRelation, d_relation_data
 from .prismatic import prismatic_data
@@ -73,6 +73,11 @@ class _Figures:
         self.written.append((path, caption))
 
 
+_FILES = ("index.html", "fig4_prismatic.png", "fig6_rotary_intervals.png", "fig6_rotary_joint1.png",
+          "fig8_simulated_steps.png", "fig9_d_relation.png", "validation.png")  # fmt: skip
+"""The files a report may write (figures of a separate validation table end in _validation.png), checked first."""
+
+
 def build_report(
     calibration: Calibration,
     traverses: Sequence[Traverse],
@@ -105,6 +110,8 @@ def build_report(
     """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
+    for name in (*_FILES, *(n.replace(".png", "_validation.png") for n in _FILES[1:4] if validation is not None)):
+        writable_target(out / name, "report")  # a folder in a file's place: refused before any is replaced
     ts = list(traverses)
     val_ts = ts if validation is None else list(validation)
     separate = validation is not None

@@ -88,14 +88,21 @@ def read_vibration(
     p = Path(path)
     if p.suffix.lower() == ".wav":
         return read_wav(p)
-    rows, rate = _csv_rows(p, sample_rate)
+    rows, rate, names = _csv_rows(p, sample_rate)
     data = np.asarray(rows, dtype=np.float64)
     if data.shape[1] == 2:
+        _check_time_name(p, names)
         t, x = data[:, 0], data[:, 1]
         dt = np.diff(t)
         if dt.size == 0 or not np.all(dt > 0) or float(np.ptp(dt)) > 1e-3 * float(np.mean(dt)):
             raise AudioSourceError(f"{p}: the times are not uniformly spaced (resample first)")
-        rate = rate or 1.0 / float(np.mean(dt))
+        said = 1.0 / float(np.mean(dt))
+        if rate is not None and abs(said - rate) > 1e-3 * rate:
+            raise AudioSourceError(
+                f"{p}: its times say {said:.6g} Hz but {rate:g} Hz is given (--sample-rate or a sample_rate_hz line): "
+                "keep the one that is right"
+            )
+        rate = rate or said
     else:
         x = data[:, 0]
     if rate is None:
@@ -113,8 +120,34 @@ def read_vibration(
     return y.astype(np.float32), int(round(rate))
 
 
-def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], float | None]:
-    """The rows of numbers of a CSV of samples, and its rate (``sample_rate``, or its ``# sample_rate_hz=`` line)."""
+_TIME_NAME = re.compile(r"(?:time|t)(?:\s*[_\[(]\s*(?P<unit>[^\])\s]*)\s*[\])]?)?", re.IGNORECASE)
+
+
+def _check_time_name(p: Path, names: list[str] | None) -> None:
+    """Refuse a header whose time column is second, or whose times are not in seconds (``time_ms``, ``t [us]``)."""
+    if names is None or len(names) != 2:
+        return
+    first, second = (_TIME_NAME.fullmatch(n.strip()) for n in names)
+    if first is None and second is not None:
+        raise AudioSourceError(
+            f"{p}: the header names {names[0]!r},{names[1]!r}: the time column comes first (time_s,value)"
+        )
+    if first is not None and (first.group("unit") or "s").lower() not in ("s", "sec", "seconds"):
+        raise AudioSourceError(
+            f"{p}: the time column is named {names[0]!r}: times are read in seconds: convert them and name the "
+            "column time_s"
+        )
+
+
+def _names(line: str) -> list[str]:
+    """A header row's column names: split at its commas, semicolons or tabs (a name may hold a space: 'time (ms)')."""
+    sep = r"[,;\t]" if re.search(r"[,;\t]", line) else r"\s+"
+    return [n.strip() for n in re.split(sep, line) if n.strip()]
+
+
+def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], float | None, list[str] | None]:
+    """The rows of numbers of a CSV of samples, its rate (``sample_rate``, or its ``# sample_rate_hz=`` line) and its
+    header row's names (None without one)."""
     try:
         if p.exists():
             regular_file(p, "CSV of samples")  # a folder, FIFO or device is never opened
@@ -131,6 +164,7 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
     rate = sample_rate
     said: float | None = None
     rows: list[list[float]] = []
+    names: list[str] | None = None
     for lineno, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s:
@@ -143,7 +177,8 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
             rows.append([float(x) for x in parts])
         except ValueError:
             if not rows:
-                continue  # a header row of column names
+                names = names or _names(s)  # a header row of column names
+                continue
             raise AudioSourceError(f"{p}:{lineno}: not a number in {s!r}") from None
     if not rows:
         raise AudioSourceError(f"{p}: no samples")
@@ -151,7 +186,7 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
     width = {len(r) for r in rows}
     if len(width) != 1 or width.pop() not in (1, 2):
         raise AudioSourceError(f"{p}: every row must hold 'value' or 'time_s,value'")
-    return rows, rate
+    return rows, rate, names
 
 
 def _rate_comment(p: Path, lineno: int, line: str, said: float | None) -> float | None:
