@@ -732,3 +732,20 @@ def test_a_bare_angle_beyond_a_turn_suggests_degrees(tmp_path, cal_path, cmd):
     one_error(run(*cmd, *extra, "--q2", "-60"), "did you mean -60deg?")
     r = run(*cmd, *extra, "--q2", "-60deg")
     assert r.exit_code == 0, r.output
+
+
+@pytest.mark.parametrize(
+    "url, line",
+    [
+        ("anc300://127.0.0.1:1?axes=1,1,2", "error: two joints share an axis: {1: 1, 2: 1, 3: 2}"),
+        ("smaract-mcs2://127.0.0.1:1?timeout=nan", "error: timeout must be a number in 0.001..3600 s, got 'nan'"),
+        ("smaract-mcs2://127.0.0.1:1?channels=0,0,1", "error: two joints share a channel in channels='0,0,1'"),
+    ],
+)
+def test_where_names_a_bad_url_option_not_a_silent_device(tmp_path, url, line):
+    """where -d URL with an option the driver refuses said 'the device does not answer: two joints share an
+    axis ... (use --offline to see the kept positions only)': nothing was asked (move says the option alone).
+    Port 1 refuses connections: a URL that got as far as connecting would say 'cannot connect'."""
+    r = run("where", "-d", url, "--db", tmp_path / "s.db")
+    one_error(r)
+    assert r.stderr.strip().splitlines()[-1] == line
