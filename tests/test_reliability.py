@@ -749,3 +749,22 @@ def test_where_names_a_bad_url_option_not_a_silent_device(tmp_path, url, line):
     r = run("where", "-d", url, "--db", tmp_path / "s.db")
     one_error(r)
     assert r.stderr.strip().splitlines()[-1] == line
+
+
+@pytest.mark.parametrize(
+    "url, option",
+    [
+        ("anc300://127.0.0.1:1?axes=", "axes"),
+        ("anc300://127.0.0.1:1?password=", "password"),
+        ("smaract-mcs2://127.0.0.1:1?hz=", "hz"),
+        ("smaract-mcs2://127.0.0.1:1?channels=%20", "channels"),
+        ("mm3a+socket://127.0.0.1:1?timeout=", "timeout"),
+    ],
+)
+def test_an_empty_device_url_option_is_refused(tmp_path, url, option):
+    """An empty option of a controller's URL was dropped unsaid (parse_qs) and its default used: 'where -d
+    smaract-mcs2://H?hz=' stepped at 1000 Hz, '?axes=' drove axes 1,2,3, '?password=' sent the default password
+    (sim:// and camera URLs already refused an empty option). Port 1 refuses: before, 'cannot connect'."""
+    r = run("where", "-d", url, "--db", tmp_path / "s.db")
+    one_error(r, f"the option '{option}' is empty: give its value or leave it out")
+    assert "does not answer" not in r.stderr
