@@ -768,3 +768,14 @@ def test_an_empty_device_url_option_is_refused(tmp_path, url, option):
     r = run("where", "-d", url, "--db", tmp_path / "s.db")
     one_error(r, f"the option '{option}' is empty: give its value or leave it out")
     assert "does not answer" not in r.stderr
+
+
+def test_raw_steps_to_a_device_that_cannot_be_opened_leave_the_joint_as_it_was(tmp_path):
+    """move --steps 3000 to a controller that refuses the connection said 'cannot connect' (exit 2) but had
+    already journalled joint 3 as uncertain over its whole range, '+3000 raw steps were sent': the arm had to
+    be referenced again for steps never sent (a calibrated move to it kept the position, as it should)."""
+    db, url = tmp_path / "s.db", "smaract-mcs2://127.0.0.1:1"
+    assert run("where", "-d", url, "--db", db, "--offline", "--set", "3=min").exit_code == 0
+    one_error(run("move", "-d", url, "--db", db, "-j", "3", "--steps", "3000"), "cannot connect to 127.0.0.1:1")
+    j3 = _where(db, url)["joints"][2]
+    assert (j3["source"], j3["q"]) == ("set", 0.0), j3
