@@ -206,3 +206,35 @@ def test_screenshots_show_the_controls(page: Any, tmp_path: Path, name: str, wid
         box = page.query_selector(sel).bounding_box()
         assert box is not None and box["width"] > 0 and box["x"] >= 0 and box["x"] + box["width"] <= width, sel
     page.set_viewport_size({"width": 1366, "height": 768})
+
+
+def test_a_lost_camera_is_said_and_its_last_frame_greyed(page: Any, room: ControlRoom) -> None:
+    """The camera panel kept the last frame and its 'tip at (x, y) px' as if live when the camera stopped
+    delivering (a 503 from /api/camera/frame was ignored): now it says why, greys the frame and marks no tip."""
+
+    class TwoFrames:
+        grabs = 0
+
+        def grab(self) -> Any:
+            self.grabs += 1
+            if self.grabs > 2:
+                from stickslip.vision.camera import CameraEnded
+
+                raise CameraEnded("the 2 frames of files://f/*.png are used up")
+            return type("Frame", (), {"image": np.full((40, 60), 0.5)})()
+
+        def close(self) -> None:
+            pass
+
+    feed = FrameFeed(TwoFrames(), tip_of=lambda frame: (30.0, 20.0, 0.5))
+    with served(create_app(room, Access(None, True), feed)) as base:
+        pg = page.context.new_page()
+        try:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#camera-tip").startswith("no new frame"), 15, "the camera's loss shown")
+            assert pg.inner_text("#camera-tip") == (
+                "no new frame: camera: the 2 frames of files://f/*.png are used up "
+                "(the frame shown is the last one received)")
+            assert pg.evaluate("document.getElementById('frame').classList.contains('stale')")
+        finally:
+            pg.close()

@@ -550,12 +550,24 @@ function startCamera() {
         const url = URL.createObjectURL(blob);
         img.onload = () => URL.revokeObjectURL(url);
         img.src = url;
+        img.classList.remove("stale");
         const info = await api("GET", "/api/camera");
         drawOverlay(info, Number(r.headers.get("X-Frame-Width")), Number(r.headers.get("X-Frame-Height")));
+      } else {
+        let data = null;
+        try { data = await r.json(); } catch (e) { data = null; }
+        cameraLost((data && data.error) || ("HTTP " + r.status));
       }
-    } catch (e) { /* the next frame tries again */ }
+    } catch (e) { cameraLost("the server does not answer"); }  // the next frame tries again
     busy = false;
   }, 500);
+}
+
+function cameraLost(why) {  // no new frame: the last one stays, greyed, and says it is old; no tip is marked on it
+  $("frame").classList.add("stale");
+  const c = $("overlay");
+  c.getContext("2d").clearRect(0, 0, c.width, c.height);
+  $("camera-tip").textContent = "no new frame: " + why + " (the frame shown is the last one received)";
 }
 
 function drawOverlay(info, fw, fh) {
