@@ -238,3 +238,36 @@ def test_a_lost_camera_is_said_and_its_last_frame_greyed(page: Any, room: Contro
             assert pg.evaluate("document.getElementById('frame').classList.contains('stale')")
         finally:
             pg.close()
+
+
+def test_a_restarted_server_s_events_are_shown(page: Any, tmp_path: Path) -> None:
+    """A page left open while its server restarted hid the new server's events: their ids count from 1 again
+    and the page skipped every id it had already shown (here 'STOP (nothing was moving)' of the new server)."""
+    from server_support import free_port
+
+    port = free_port()
+    first, second = room_on(tmp_path / "a", calibrated=False), None
+    (tmp_path / "b").mkdir()
+    pg = page.context.new_page()
+    try:
+        with served(create_app(first, Access(None, True)), port) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.evaluate("document.querySelectorAll('#joints .joint').length") == 3, 15, "the joints")
+            for _ in range(3):
+                first.event("info", "an event of the first server")
+            until(lambda: pg.inner_text("#events").count("first server") == 3, 15, "the first server's events")
+        first.close()
+        until(lambda: pg.inner_text("#status") == "offline", 15, "the page to see the server gone")
+        second = room_on(tmp_path / "b", calibrated=False)
+        with served(create_app(second, Access(None, True)), port):
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page to reconnect")
+            second.event("warning", "an event of the second server")
+            until(lambda: "second server" in pg.inner_text("#events"), 15, "the second server's event")
+            lines = [ln[9:] if ln[:2].isdigit() else ln for ln in pg.inner_text("#events").splitlines()]  # newest first
+            cut = lines.index("the server was restarted; its events follow")
+            assert "an event of the second server" in lines[:cut]
+            assert lines[cut + 1:cut + 4] == ["an event of the first server"] * 3
+    finally:
+        pg.close()
+        if second is not None:
+            second.close()

@@ -264,7 +264,10 @@ class Rig:
         return dict(self._call("GET", "/api/calibration"))
 
     def live(self, messages: int | None = None) -> Iterator[dict[str, Any]]:
-        """The live state as it comes (20 a second): ``{"seq", "t", "state", "events"}``; ``messages`` then stop."""
+        """The live state as it comes (20 a second): ``{"seq", "run", "t", "state", "events"}``; ``messages`` then stop.
+
+        ``run`` names the server's run (another after a restart, its event ids from 1 again).
+        """
         from websockets.sync.client import connect
 
         if messages is not None and (isinstance(messages, bool) or _plain("messages", messages) < 0):

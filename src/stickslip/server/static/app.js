@@ -17,12 +17,14 @@ if (location.hash.startsWith("#token=")) {  // the part after # never reaches a 
 let ws = null;
 let state = null;
 let lastSeq = 0;
+let lastRun = null;
 let pathHistory = [];
 let jogDir = null;
 let jogTimer = null;
 let jogSource = null;
 let cameraTimer = null;
 let shownEvents = 0;
+let heldEvents = null;  // while the events of a restarted server are fetched: the live ones that came meanwhile
 
 // ------------------------------------------------------------------ talking to the server
 
@@ -52,6 +54,8 @@ function connect() {
   ws.onmessage = (ev) => {
     const m = JSON.parse(ev.data);
     if (m.seq !== undefined) {
+      if (lastRun !== null && m.run !== lastRun) restarted();  // a new server counts its events from 1 again
+      lastRun = m.run;
       lastSeq = m.seq;
       state = m.state;
       render(state);
@@ -71,6 +75,19 @@ function connect() {
     if (ev.code === 4401) { showToken(); return; }
     setTimeout(connect, 1000);
   };
+}
+
+async function restarted() {  // the events shown are the earlier server's: take the new one's from its first
+  shownEvents = 0;
+  heldEvents = [];
+  const li = document.createElement("li");
+  li.className = "warning";
+  li.textContent = "the server was restarted; its events follow";
+  $("events").insertBefore(li, $("events").firstChild);
+  try { showEvents((await api("GET", "/api/events?after=0")).events); } catch (e) { /* the live ones still come */ }
+  const held = heldEvents;
+  heldEvents = null;
+  showEvents(held);
 }
 
 function showToken() {
@@ -186,6 +203,11 @@ function escapeHtml(s) {
 }
 
 function addEvents(events) {
+  if (heldEvents) heldEvents.push(...events);
+  else showEvents(events);
+}
+
+function showEvents(events) {
   const list = $("events");
   for (const e of events) {
     if (e.id <= shownEvents) continue;
