@@ -271,3 +271,23 @@ def test_a_restarted_server_s_events_are_shown(page: Any, tmp_path: Path) -> Non
         pg.close()
         if second is not None:
             second.close()
+
+
+def test_the_tip_boxes_take_a_bare_number_in_um_or_an_amount_as_typed(page: Any, room: ControlRoom) -> None:
+    """The 'tip by (µm)' boxes appended 'um' to whatever was typed: '2um' was refused as "unknown length unit
+    'umum' in '2umum'", 'abc' as "cannot read 'abcum'" (text the user never typed)."""
+    idle(room)
+    page.evaluate("document.getElementById('move-msg').textContent = ''")
+    for box, value in (("#reach-x", "abc"), ("#reach-y", "0"), ("#reach-z", "0")):
+        page.fill(box, value)
+    page.click("#reach-form button")
+    until(lambda: page.inner_text("#move-msg") != "", 10, "the refusal")
+    assert page.inner_text("#move-msg") == "by[0]: cannot read 'abc' as a number with an optional unit"
+    page.fill("#reach-x", "2um")
+    page.fill("#reach-z", "0.001mm")
+    page.click("#reach-form button")
+    until(lambda: page.inner_text("#move-msg").startswith("tip move"), 10, "the tip move")
+    assert page.inner_text("#move-msg").startswith("tip move by (+2.0, +0.0, +1.0) µm")
+    idle(room)
+    for box, value in (("#reach-x", "0"), ("#reach-y", "0"), ("#reach-z", "10")):
+        page.fill(box, value)

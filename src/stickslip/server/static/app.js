@@ -409,7 +409,10 @@ $("move-form").addEventListener("submit", async (e) => {
 
 $("reach-form").addEventListener("submit", async (e) => {
   e.preventDefault();
-  const by = ["reach-x", "reach-y", "reach-z"].map((id) => $(id).value.trim() + "um");
+  const by = ["reach-x", "reach-y", "reach-z"].map((id) => {  // a bare number is in the boxes' µm; "1mm" as typed
+    const v = $(id).value.trim();
+    return /^[-+]?(\d+\.?\d*|\.\d+)(e[-+]?\d+)?$/i.test(v) ? v + "um" : v;
+  });
   try {
     const m = await api("POST", "/api/reach", { by });
     note(m.what + ": " + m.status);
