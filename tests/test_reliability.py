@@ -779,3 +779,12 @@ def test_raw_steps_to_a_device_that_cannot_be_opened_leave_the_joint_as_it_was(t
     one_error(run("move", "-d", url, "--db", db, "-j", "3", "--steps", "3000"), "cannot connect to 127.0.0.1:1")
     j3 = _where(db, url)["joints"][2]
     assert (j3["source"], j3["q"]) == ("set", 0.0), j3
+
+
+@pytest.mark.parametrize("letters", ["A,B,C", "A B", "A-C"])
+def test_nanocontrol_channels_written_with_commas_say_how_to_write_them(tmp_path, letters):
+    """mm3a://...?channels=A,B said "channel of joint 2 must be one of A, B, C, D, got ','" (the comma read as
+    joint 2's letter): SmarAct's channels and the ANC300's axes are written with commas, the NanoControl's not."""
+    r = run("where", "-d", f"mm3a+socket://127.0.0.1:1?channels={letters}", "--db", tmp_path / "s.db")
+    one_error(r, f"channels is the channel letters of joints 1, 2, 3 written together, e.g. ABC or CBA; got "
+                 f"{letters!r}")
