@@ -121,3 +121,31 @@ def test_the_example_of_docs_serve_runs(url: str, room: ControlRoom) -> None:
     exec(compile(code, "docs/serve.md", "exec"), {"print": lambda *a: None})
     with Rig(url, token=TOKEN) as rig:
         assert "above the cell" in [p["name"] for p in rig.positions()]
+
+
+def test_a_bad_argument_is_refused_by_name_before_anything_is_sent() -> None:
+    """NaN, inf, a negative jog and numpy values: NaN said 'Out of range float values are not JSON compliant'
+    (no argument named), jog(seconds=nan or -1) held the direction once and returned 'done', numpy.int64 and
+    a 0-d array were 'not JSON serializable'. Port 9 (discard) has no server: nothing may be sent."""
+    import numpy as np
+
+    from stickslip.client import _plain
+
+    with Rig("http://127.0.0.1:9") as rig:
+        for call, line in [
+            (lambda: rig.move(3, by=float("nan")), "by: nan is not a finite number"),
+            (lambda: rig.move(3, to=float("-inf")), "to: -inf is not a finite number"),
+            (lambda: rig.reach(by=(0.0, float("nan"), 0.0)), "by[1]: nan is not a finite number"),
+            (lambda: rig.observe(3, 1e-4, sd=np.float64("inf")), "sd: inf is not a finite number"),
+            (lambda: rig.jog("+z", seconds=float("nan")), "seconds: nan is not a finite number"),
+            (lambda: rig.jog("+z", seconds=-1), "seconds: how long to hold the direction, 0 s or more, got -1"),
+            (lambda: list(rig.live(messages=-1)), "messages: how many messages to take, 0 or more"),
+        ]:
+            with pytest.raises(ValueError) as e:
+                call()
+            assert str(e.value).startswith(line)
+        with pytest.raises(TypeError, match=r"^by: a number or a string with its unit, got object"):
+            rig.move(3, by=object())  # type: ignore[arg-type]
+    body = {"joint": np.int64(3), "by": np.array(2e-6), "to": [np.float32(0.5), "1um"]}
+    assert _plain("", body) == {"joint": 3, "by": 2e-6, "to": [0.5, "1um"]}
+    assert type(_plain("", body)["joint"]) is int

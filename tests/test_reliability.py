@@ -732,3 +732,59 @@ def test_a_bare_angle_beyond_a_turn_suggests_degrees(tmp_path, cal_path, cmd):
     one_error(run(*cmd, *extra, "--q2", "-60"), "did you mean -60deg?")
     r = run(*cmd, *extra, "--q2", "-60deg")
     assert r.exit_code == 0, r.output
+
+
+@pytest.mark.parametrize(
+    "url, line",
+    [
+        ("anc300://127.0.0.1:1?axes=1,1,2", "error: two joints share an axis: {1: 1, 2: 1, 3: 2}"),
+        ("smaract-mcs2://127.0.0.1:1?timeout=nan", "error: timeout must be a number in 0.001..3600 s, got 'nan'"),
+        ("smaract-mcs2://127.0.0.1:1?channels=0,0,1", "error: two joints share a channel in channels='0,0,1'"),
+    ],
+)
+def test_where_names_a_bad_url_option_not_a_silent_device(tmp_path, url, line):
+    """where -d URL with an option the driver refuses said 'the device does not answer: two joints share an
+    axis ... (use --offline to see the kept positions only)': nothing was asked (move says the option alone).
+    Port 1 refuses connections: a URL that got as far as connecting would say 'cannot connect'."""
+    r = run("where", "-d", url, "--db", tmp_path / "s.db")
+    one_error(r)
+    assert r.stderr.strip().splitlines()[-1] == line
+
+
+@pytest.mark.parametrize(
+    "url, option",
+    [
+        ("anc300://127.0.0.1:1?axes=", "axes"),
+        ("anc300://127.0.0.1:1?password=", "password"),
+        ("smaract-mcs2://127.0.0.1:1?hz=", "hz"),
+        ("smaract-mcs2://127.0.0.1:1?channels=%20", "channels"),
+        ("mm3a+socket://127.0.0.1:1?timeout=", "timeout"),
+    ],
+)
+def test_an_empty_device_url_option_is_refused(tmp_path, url, option):
+    """An empty option of a controller's URL was dropped unsaid (parse_qs) and its default used: 'where -d
+    smaract-mcs2://H?hz=' stepped at 1000 Hz, '?axes=' drove axes 1,2,3, '?password=' sent the default password
+    (sim:// and camera URLs already refused an empty option). Port 1 refuses: before, 'cannot connect'."""
+    r = run("where", "-d", url, "--db", tmp_path / "s.db")
+    one_error(r, f"the option '{option}' is empty: give its value or leave it out")
+    assert "does not answer" not in r.stderr
+
+
+def test_raw_steps_to_a_device_that_cannot_be_opened_leave_the_joint_as_it_was(tmp_path):
+    """move --steps 3000 to a controller that refuses the connection said 'cannot connect' (exit 2) but had
+    already journalled joint 3 as uncertain over its whole range, '+3000 raw steps were sent': the arm had to
+    be referenced again for steps never sent (a calibrated move to it kept the position, as it should)."""
+    db, url = tmp_path / "s.db", "smaract-mcs2://127.0.0.1:1"
+    assert run("where", "-d", url, "--db", db, "--offline", "--set", "3=min").exit_code == 0
+    one_error(run("move", "-d", url, "--db", db, "-j", "3", "--steps", "3000"), "cannot connect to 127.0.0.1:1")
+    j3 = _where(db, url)["joints"][2]
+    assert (j3["source"], j3["q"]) == ("set", 0.0), j3
+
+
+@pytest.mark.parametrize("letters", ["A,B,C", "A B", "A-C"])
+def test_nanocontrol_channels_written_with_commas_say_how_to_write_them(tmp_path, letters):
+    """mm3a://...?channels=A,B said "channel of joint 2 must be one of A, B, C, D, got ','" (the comma read as
+    joint 2's letter): SmarAct's channels and the ANC300's axes are written with commas, the NanoControl's not."""
+    r = run("where", "-d", f"mm3a+socket://127.0.0.1:1?channels={letters}", "--db", tmp_path / "s.db")
+    one_error(r, f"channels is the channel letters of joints 1, 2, 3 written together, e.g. ABC or CBA; got "
+                 f"{letters!r}")

@@ -410,3 +410,34 @@ def test_jog_limit_and_speed_preset_checks() -> None:
 
     assert set(DIRECTIONS.values()) <= set(DIRECTION_KEYS)
     assert JOINTS[3].upper == 0.012
+
+
+def test_a_lost_camera_is_503_and_its_tip_is_forgotten(room: ControlRoom) -> None:
+    """A camera that stops delivering (files:// used up, a camera unplugged) was a 500 'internal error: ...' with a
+    traceback in the server's log, and /api/camera kept the tip of the last frame as if it were current."""
+    import numpy as np
+
+    from stickslip.server.camera import FrameFeed
+    from stickslip.vision.camera import CameraEnded
+
+    class OneFrame:
+        grabs = 0
+
+        def grab(self) -> Any:
+            self.grabs += 1
+            if self.grabs > 1:
+                raise CameraEnded("the 1 frames of files://f/*.png are used up")
+            return type("Frame", (), {"image": np.full((4, 6), 0.5)})()
+
+        def close(self) -> None:
+            pass
+
+    feed = FrameFeed(OneFrame(), tip_of=lambda frame: (3.0, 2.0, 0.5))
+    with TestClient(create_app(room, LOCAL, feed), base_url="http://127.0.0.1:8765") as c:
+        ok = c.get("/api/camera/frame")
+        assert ok.status_code == 200 and ok.headers["X-Frame-Width"] == "6"
+        assert c.get("/api/camera").json()["tip"] == {"x": 3.0, "y": 2.0, "sd": 0.5}
+        lost = c.get("/api/camera/frame")
+        assert lost.status_code == 503
+        assert lost.json()["error"] == "camera: the 1 frames of files://f/*.png are used up"
+        assert c.get("/api/camera").json()["tip"] is None

@@ -206,3 +206,88 @@ def test_screenshots_show_the_controls(page: Any, tmp_path: Path, name: str, wid
         box = page.query_selector(sel).bounding_box()
         assert box is not None and box["width"] > 0 and box["x"] >= 0 and box["x"] + box["width"] <= width, sel
     page.set_viewport_size({"width": 1366, "height": 768})
+
+
+def test_a_lost_camera_is_said_and_its_last_frame_greyed(page: Any, room: ControlRoom) -> None:
+    """The camera panel kept the last frame and its 'tip at (x, y) px' as if live when the camera stopped
+    delivering (a 503 from /api/camera/frame was ignored): now it says why, greys the frame and marks no tip."""
+
+    class TwoFrames:
+        grabs = 0
+
+        def grab(self) -> Any:
+            self.grabs += 1
+            if self.grabs > 2:
+                from stickslip.vision.camera import CameraEnded
+
+                raise CameraEnded("the 2 frames of files://f/*.png are used up")
+            return type("Frame", (), {"image": np.full((40, 60), 0.5)})()
+
+        def close(self) -> None:
+            pass
+
+    feed = FrameFeed(TwoFrames(), tip_of=lambda frame: (30.0, 20.0, 0.5))
+    with served(create_app(room, Access(None, True), feed)) as base:
+        pg = page.context.new_page()
+        try:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#camera-tip").startswith("no new frame"), 15, "the camera's loss shown")
+            assert pg.inner_text("#camera-tip") == (
+                "no new frame: camera: the 2 frames of files://f/*.png are used up "
+                "(the frame shown is the last one received)")
+            assert pg.evaluate("document.getElementById('frame').classList.contains('stale')")
+        finally:
+            pg.close()
+
+
+def test_a_restarted_server_s_events_are_shown(page: Any, tmp_path: Path) -> None:
+    """A page left open while its server restarted hid the new server's events: their ids count from 1 again
+    and the page skipped every id it had already shown (here 'STOP (nothing was moving)' of the new server)."""
+    from server_support import free_port
+
+    port = free_port()
+    first, second = room_on(tmp_path / "a", calibrated=False), None
+    (tmp_path / "b").mkdir()
+    pg = page.context.new_page()
+    try:
+        with served(create_app(first, Access(None, True)), port) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.evaluate("document.querySelectorAll('#joints .joint').length") == 3, 15, "the joints")
+            for _ in range(3):
+                first.event("info", "an event of the first server")
+            until(lambda: pg.inner_text("#events").count("first server") == 3, 15, "the first server's events")
+        first.close()
+        until(lambda: pg.inner_text("#status") == "offline", 15, "the page to see the server gone")
+        second = room_on(tmp_path / "b", calibrated=False)
+        with served(create_app(second, Access(None, True)), port):
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page to reconnect")
+            second.event("warning", "an event of the second server")
+            until(lambda: "second server" in pg.inner_text("#events"), 15, "the second server's event")
+            lines = [ln[9:] if ln[:2].isdigit() else ln for ln in pg.inner_text("#events").splitlines()]  # newest first
+            cut = lines.index("the server was restarted; its events follow")
+            assert "an event of the second server" in lines[:cut]
+            assert lines[cut + 1:cut + 4] == ["an event of the first server"] * 3
+    finally:
+        pg.close()
+        if second is not None:
+            second.close()
+
+
+def test_the_tip_boxes_take_a_bare_number_in_um_or_an_amount_as_typed(page: Any, room: ControlRoom) -> None:
+    """The 'tip by (µm)' boxes appended 'um' to whatever was typed: '2um' was refused as "unknown length unit
+    'umum' in '2umum'", 'abc' as "cannot read 'abcum'" (text the user never typed)."""
+    idle(room)
+    page.evaluate("document.getElementById('move-msg').textContent = ''")
+    for box, value in (("#reach-x", "abc"), ("#reach-y", "0"), ("#reach-z", "0")):
+        page.fill(box, value)
+    page.click("#reach-form button")
+    until(lambda: page.inner_text("#move-msg") != "", 10, "the refusal")
+    assert page.inner_text("#move-msg") == "by[0]: cannot read 'abc' as a number with an optional unit"
+    page.fill("#reach-x", "2um")
+    page.fill("#reach-z", "0.001mm")
+    page.click("#reach-form button")
+    until(lambda: page.inner_text("#move-msg").startswith("tip move"), 10, "the tip move")
+    assert page.inner_text("#move-msg").startswith("tip move by (+2.0, +0.0, +1.0) µm")
+    idle(room)
+    for box, value in (("#reach-x", "0"), ("#reach-y", "0"), ("#reach-z", "10")):
+        page.fill(box, value)

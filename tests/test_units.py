@@ -27,3 +27,21 @@ def test_kinds_are_enforced():
 def test_format_step():
     assert format_step(972e-9, 3) == "972 nm"
     assert format_step(38.41e-6, 2) == "38.41 µrad"
+
+
+@pytest.mark.parametrize(
+    "value, kind, line",
+    [
+        (float("nan"), "length", "nan is not a finite length (NaN, infinite, or beyond a float)"),
+        (float("-inf"), "angle", "-inf is not a finite angle (NaN, infinite, or beyond a float)"),
+        ("1e400um", "length", "'1e400um' is not a finite length (NaN, infinite, or beyond a float)"),
+        ("-1e400deg", "angle", "'-1e400deg' is not a finite angle (NaN, infinite, or beyond a float)"),
+        ("1e999", None, "'1e999' is not a finite amount (NaN, infinite, or beyond a float)"),
+    ],
+)
+def test_a_quantity_that_is_not_finite_is_refused(value, kind, line):
+    """parse_length(float('nan')) returned nan, parse_length('1e400um') inf and parse_angle('-1e400deg') -inf
+    (the text 'nan um' was refused): every front end checked after it, a script calling the API got inf."""
+    with pytest.raises(UnitError) as e:
+        parse_quantity(value, kind)
+    assert str(e.value) == line

@@ -25,6 +25,7 @@ Needs ``httpx`` (``pip install 'stickslip[client]'``); :meth:`Rig.live` also ``w
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Iterator, Sequence
 from types import TracebackType
@@ -34,6 +35,25 @@ __all__ = ["MotionFailed", "Rig", "RigError"]
 
 Amount = float | str
 """SI (m or rad) as a number, or a string with its unit."""
+
+
+def _plain(name: str, value: Any) -> Any:
+    """``value`` as JSON the server reads: numpy scalars and 0-d arrays as Python numbers, lists and dicts inside.
+
+    A NaN or infinite number is a ValueError naming the argument, a value JSON cannot carry a
+    TypeError naming it (both before anything is sent).
+    """
+    if getattr(value, "shape", None) == () and hasattr(value, "item"):
+        value = value.item()  # numpy.float64(1e-6), numpy.int64(3), numpy.array(1e-6)
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError(f"{name}: {value} is not a finite number")
+    if isinstance(value, dict):
+        return {k: _plain(f"{name}.{k}" if name else str(k), v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(f"{name}[{i}]", v) for i, v in enumerate(value)]
+    if value is None or isinstance(value, (str, int, float)):
+        return value
+    raise TypeError(f"{name}: a number or a string with its unit, got {type(value).__name__} {value!r}")
 
 
 class RigError(RuntimeError):
@@ -91,6 +111,7 @@ class Rig:
     def _call(self, method: str, path: str, body: dict[str, Any] | None = None, **params: Any) -> Any:
         import httpx
 
+        body = None if body is None else _plain("", body)
         try:
             r = self._http.request(method, path, json=body, params=params or None)
         except httpx.HTTPError as e:
@@ -179,6 +200,9 @@ class Rig:
         ``speed``: preset 1-7 (0.1 to 100 µm/s). Returns the jog session's record once it has
         ended (what was sent per joint).
         """
+        seconds = _plain("seconds", seconds)
+        if isinstance(seconds, bool) or not isinstance(seconds, (int, float)) or seconds < 0:
+            raise ValueError(f"seconds: how long to hold the direction, 0 s or more, got {seconds!r}")
         end = time.monotonic() + float(seconds)
         body: dict[str, Any] = {"direction": direction}
         if speed is not None:
@@ -240,9 +264,14 @@ class Rig:
         return dict(self._call("GET", "/api/calibration"))
 
     def live(self, messages: int | None = None) -> Iterator[dict[str, Any]]:
-        """The live state as it comes (20 a second): ``{"seq", "t", "state", "events"}``; ``messages`` then stop."""
+        """The live state as it comes (20 a second): ``{"seq", "run", "t", "state", "events"}``; ``messages`` then stop.
+
+        ``run`` names the server's run (another after a restart, its event ids from 1 again).
+        """
         from websockets.sync.client import connect
 
+        if messages is not None and (isinstance(messages, bool) or _plain("messages", messages) < 0):
+            raise ValueError(f"messages: how many messages to take, 0 or more (None: until closed), got {messages!r}")
         ws_url = "ws" + self.url[len("http"):] + "/api/live"
         headers = {"Authorization": f"Bearer {self._token}"} if self._token else None
         with connect(ws_url, additional_headers=headers) as ws:

@@ -80,8 +80,16 @@ def parse_quantity(text: str | float, kind: str | None = None) -> float:
     Raises
     ------
     UnitError
-        If the text is not a number with a known unit of the right kind.
+        If the text is not a number with a known unit of the right kind, or the value is
+        not finite (NaN, infinite, or beyond a float: ``"1e400um"``).
     """
+    value = _read_quantity(text, kind)
+    if not math.isfinite(value):  # nan, inf, or digits beyond a float ('1e400um'): no position or step is that
+        raise UnitError(f"{text!r} is not a finite {kind or 'amount'} (NaN, infinite, or beyond a float)")
+    return value
+
+
+def _read_quantity(text: str | float, kind: str | None) -> float:
     if isinstance(text, (int, float)):
         return float(text)
     m = _QUANTITY.match(str(text).replace("−", "-"))

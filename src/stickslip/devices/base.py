@@ -533,14 +533,18 @@ def check_setting(what: str, value: object, lo: float, hi: float, unit: str = ""
 def url_options(url: str, known: set[str] | frozenset[str]) -> dict[str, str]:
     """The ``?key=value`` options of a device URL (last one wins); unknown keys are refused.
 
-    Raises ``ValueError`` naming the unknown option(s) and the known ones.
+    Raises ``ValueError`` naming the unknown option(s) and the known ones, or an option
+    given empty (``?hz=`` was dropped unsaid, its default taken: not what was written).
     """
-    opts = {k: v[-1] for k, v in parse_qs(urlsplit(url).query).items()}
+    opts = {k: v[-1] for k, v in parse_qs(urlsplit(url).query, keep_blank_values=True).items()}
     unknown = sorted(set(opts) - set(known))
     if unknown:
         raise ValueError(
             f"unknown option(s) {unknown} in {redact_url(url)!r} (known: {sorted(known)})"
         )
+    empty = sorted(k for k, v in opts.items() if not v.strip())
+    if empty:
+        raise ValueError(f"{redact_url(url)!r}: the option {empty[0]!r} is empty: give its value or leave it out")
     return opts
 
 

@@ -868,7 +868,8 @@ def step_joint(
 
     Without a model the steps move the joint by an unknown amount, so the joint is kept
     *uncertain*: from where it may have been (its bounds, :meth:`DeviceState.bounds`) to
-    its end stop in the direction stepped, journalled before the first burst. Reference it
+    its end stop in the direction stepped, journalled before the first burst (once the device
+    has opened: one that cannot be opened leaves the joint as it was). Reference it
     afterwards (``stickslip where --set J=min`` at the lower stop).
     """
     if steps == 0:
@@ -878,13 +879,13 @@ def step_joint(
         state = load_state(store, key, joints)
         spec = state.spec(joint)
         try:
-            lo, hi = state.bounds(joint)
-            after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)
-            state.mark_uncertain(joint, *after, f"{steps:+d} raw steps were sent")
-            save_state(store, state)  # write-ahead: uncertain before anything is sent
-            ready()
-            dev = (opener or open_device)(device)
+            dev = (opener or open_device)(device)  # one that cannot be opened was sent nothing: the state stays
             try:
+                lo, hi = state.bounds(joint)
+                after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)
+                state.mark_uncertain(joint, *after, f"{steps:+d} raw steps were sent")
+                save_state(store, state)  # write-ahead: uncertain before anything is sent
+                ready()
                 if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
                     dev.set_pose(*state.pose)
                 out = _send_raw(dev, joint, steps, burst)

@@ -41,13 +41,15 @@ class WhereStore(StateStore, LockStore, Protocol):
 def probe_device(url: str, opener: Callable[[str], Any] = open_device) -> dict[str, Any]:
     """Open ``url`` and close it again: what it says about itself; :class:`DeviceUnreachable` if it does not answer.
 
+    A URL whose options the driver refuses raises its ``ValueError`` as it is (nothing was asked).
+
     ``{"model": ..., **info.extra}``: for a NanoControl the dialect, firmware version,
     stepping frequencies and active speed profile (docs/devices/nanocontrol.md).
     """
     hint = "(use --offline to see the kept positions only)"
     try:
-        dev = opener(url)
-    except (DeviceError, ValueError, OSError) as e:
+        dev = opener(url)  # a ValueError here is the URL's options (axes=1,1,2, timeout=nan): not the device's silence
+    except (DeviceError, OSError) as e:
         raise DeviceUnreachable(f"the device does not answer: {e} {hint}") from None
     try:
         info = dev.info

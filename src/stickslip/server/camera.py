@@ -98,9 +98,17 @@ class FrameFeed:
         self._tip: TipPixel | None = None
 
     def frame(self) -> tuple[bytes, str, tuple[int, int]]:
-        """Grab a frame, track the tip in it, and encode it as PNG."""
+        """Grab a frame, track the tip in it, and encode it as PNG.
+
+        A camera that fails (lost, or a recording used up) raises its error and forgets the
+        tip it tracked: :meth:`tip` then says ``None``, not where the tip was.
+        """
         with self._lock:
-            f = self.camera.grab()
+            try:
+                f = self.camera.grab()
+            except BaseException:
+                self._tip = None
+                raise
             image = np.asarray(f.image)
             self._tip = self._tip_of(f) if self._tip_of is not None else None
         return png_grey(image), "image/png", (int(image.shape[1]), int(image.shape[0]))

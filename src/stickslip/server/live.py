@@ -12,6 +12,7 @@ import contextlib
 import json
 import logging
 import math
+import secrets
 import time
 from typing import Any
 
@@ -53,19 +54,22 @@ class Live:
         self.room = room
         self.camera = camera
         self.seq = 0
+        self.run_id = secrets.token_hex(4)  # this server's run: a page that sees another knows it was restarted
         self.clients: set[Client] = set()
         self._last_event = max(0, room.last_event_id - 20)
         self.sent = 0
 
     def message(self) -> str:
-        """The next state message (JSON): ``seq``, ``t`` (UTC epoch s), ``state``, the new ``events``."""
+        """The next state message (JSON): ``seq``, ``run`` (this server's run), ``t`` (UTC epoch s), ``state``,
+        the new ``events``."""
         self.seq += 1
         snap = self.room.snapshot()
         snap["camera"] = self.camera
         events = self.room.events_after(self._last_event)
         if events:
             self._last_event = events[-1]["id"]
-        return json.dumps(clean({"seq": self.seq, "t": time.time(), "state": snap, "events": events}),
+        return json.dumps(clean({"seq": self.seq, "run": self.run_id, "t": time.time(), "state": snap,
+                                 "events": events}),
                           allow_nan=False, default=str)
 
     def publish(self, text: str) -> None:

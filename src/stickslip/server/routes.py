@@ -30,7 +30,7 @@ from .requests import (
     vector,
 )
 from .room import ControlRoom
-from .slot import NotFound, Refused
+from .slot import NotFound, Refused, Unavailable, one_line
 
 __all__ = ["routers"]
 
@@ -267,7 +267,12 @@ def camera_routes(room: ControlRoom, camera: CameraFeed | None) -> APIRouter:
         """The newest frame (PNG)."""
         if camera is None:
             raise NotFound("no camera (start the server with --camera URL)")
-        data, media, size = camera.frame()
+        from ..vision.camera import CameraError  # the vision layer only where a camera is served
+
+        try:
+            data, media, size = camera.frame()
+        except (CameraError, OSError) as e:  # the camera lost or used up: the device's condition, not a bug
+            raise Unavailable(f"camera: {one_line(e)}") from None
         return Response(data, media_type=media, headers={
             "Cache-Control": "no-store", "X-Frame-Width": str(size[0]), "X-Frame-Height": str(size[1])})
 

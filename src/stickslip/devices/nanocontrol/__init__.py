@@ -243,7 +243,11 @@ def _url_settings(url: str) -> _UrlSettings:
     fwc = _fine_with_coarse(opts["finewithcoarse"]) if "finewithcoarse" in opts else None
     if dialect == "console":
         _console_hz(hz_text)  # refuse a bad frequency before opening the port
-    channels = check_channels({i + 1: c for i, c in enumerate(opts.get("channels", "ABC"))})
+    letters = opts.get("channels", "ABC")
+    if not letters.isalpha():  # 'A,B,C' (as SmarAct's channels and the ANC300's axes are written) read ',' as one
+        raise ValueError(f"channels is the channel letters of joints 1, 2, 3 written together, e.g. ABC or CBA; "
+                         f"got {letters!r}")
+    channels = check_channels({i + 1: c for i, c in enumerate(letters)})
     return _UrlSettings(dialect, ack, timeout, baud, hz_text, profile, margin, fwc, channels)
 
 

@@ -17,12 +17,14 @@ if (location.hash.startsWith("#token=")) {  // the part after # never reaches a 
 let ws = null;
 let state = null;
 let lastSeq = 0;
+let lastRun = null;
 let pathHistory = [];
 let jogDir = null;
 let jogTimer = null;
 let jogSource = null;
 let cameraTimer = null;
 let shownEvents = 0;
+let heldEvents = null;  // while the events of a restarted server are fetched: the live ones that came meanwhile
 
 // ------------------------------------------------------------------ talking to the server
 
@@ -52,6 +54,8 @@ function connect() {
   ws.onmessage = (ev) => {
     const m = JSON.parse(ev.data);
     if (m.seq !== undefined) {
+      if (lastRun !== null && m.run !== lastRun) restarted();  // a new server counts its events from 1 again
+      lastRun = m.run;
       lastSeq = m.seq;
       state = m.state;
       render(state);
@@ -71,6 +75,19 @@ function connect() {
     if (ev.code === 4401) { showToken(); return; }
     setTimeout(connect, 1000);
   };
+}
+
+async function restarted() {  // the events shown are the earlier server's: take the new one's from its first
+  shownEvents = 0;
+  heldEvents = [];
+  const li = document.createElement("li");
+  li.className = "warning";
+  li.textContent = "the server was restarted; its events follow";
+  $("events").insertBefore(li, $("events").firstChild);
+  try { showEvents((await api("GET", "/api/events?after=0")).events); } catch (e) { /* the live ones still come */ }
+  const held = heldEvents;
+  heldEvents = null;
+  showEvents(held);
 }
 
 function showToken() {
@@ -186,6 +203,11 @@ function escapeHtml(s) {
 }
 
 function addEvents(events) {
+  if (heldEvents) heldEvents.push(...events);
+  else showEvents(events);
+}
+
+function showEvents(events) {
   const list = $("events");
   for (const e of events) {
     if (e.id <= shownEvents) continue;
@@ -387,7 +409,10 @@ $("move-form").addEventListener("submit", async (e) => {
 
 $("reach-form").addEventListener("submit", async (e) => {
   e.preventDefault();
-  const by = ["reach-x", "reach-y", "reach-z"].map((id) => $(id).value.trim() + "um");
+  const by = ["reach-x", "reach-y", "reach-z"].map((id) => {  // a bare number is in the boxes' µm; "1mm" as typed
+    const v = $(id).value.trim();
+    return /^[-+]?(\d+\.?\d*|\.\d+)(e[-+]?\d+)?$/i.test(v) ? v + "um" : v;
+  });
   try {
     const m = await api("POST", "/api/reach", { by });
     note(m.what + ": " + m.status);
@@ -550,12 +575,24 @@ function startCamera() {
         const url = URL.createObjectURL(blob);
         img.onload = () => URL.revokeObjectURL(url);
         img.src = url;
+        img.classList.remove("stale");
         const info = await api("GET", "/api/camera");
         drawOverlay(info, Number(r.headers.get("X-Frame-Width")), Number(r.headers.get("X-Frame-Height")));
+      } else {
+        let data = null;
+        try { data = await r.json(); } catch (e) { data = null; }
+        cameraLost((data && data.error) || ("HTTP " + r.status));
       }
-    } catch (e) { /* the next frame tries again */ }
+    } catch (e) { cameraLost("the server does not answer"); }  // the next frame tries again
     busy = false;
   }, 500);
+}
+
+function cameraLost(why) {  // no new frame: the last one stays, greyed, and says it is old; no tip is marked on it
+  $("frame").classList.add("stale");
+  const c = $("overlay");
+  c.getContext("2d").clearRect(0, 0, c.width, c.height);
+  $("camera-tip").textContent = "no new frame: " + why + " (the frame shown is the last one received)";
 }
 
 function drawOverlay(info, fw, fh) {
