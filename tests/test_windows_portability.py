@@ -57,3 +57,36 @@ def test_drivers_open_a_windows_com_port_named_in_their_url(
     with pytest.raises(Opened) as e:
         (module.open_mcs if module is smaract else module.open_url)(url)
     assert str(e.value) == port
+
+
+@pytest.mark.parametrize(
+    ("location", "windows", "path"),
+    [
+        ("/C:/frames/*.png", True, "C:/frames/*.png"),  # files:///C:/frames/*.png, as file:/// URLs write a drive
+        ("/d:\\frames\\*.png", True, "d:\\frames\\*.png"),
+        ("C:\\frames\\*.png", True, "C:\\frames\\*.png"),  # files://C:\frames\*.png: as written
+        ("frames/*.png", True, "frames/*.png"),
+        ("/C:/frames", False, "/C:/frames"),  # a POSIX path is taken as written
+        ("/data/frames", True, "/data/frames"),
+    ],
+)
+def test_a_camera_url_location_names_a_windows_drive(location: str, windows: bool, path: str) -> None:
+    from stickslip.vision.files import location_path
+
+    assert location_path(location, windows=windows) == path
+
+
+def test_a_camera_url_location_expands_the_home_folder(monkeypatch: pytest.MonkeyPatch, tmp_path: Any) -> None:
+    """files://~/frames/*.png named a folder called '~' (no shell expands '~' inside a URL)."""
+    from stickslip.vision.files import open_files_url
+    from stickslip.vision.images import write_png
+
+    np = pytest.importorskip("numpy")
+    monkeypatch.setenv("HOME", str(tmp_path))
+    monkeypatch.setenv("USERPROFILE", str(tmp_path))
+    (tmp_path / "frames").mkdir()
+    for k in range(2):
+        write_png(tmp_path / "frames" / f"f{k}.png", np.full((8, 8), 0.5))
+    cam = open_files_url("files://~/frames/*.png?fps=2")
+    assert len(cam) == 2
+    cam.close()
