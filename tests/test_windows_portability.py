@@ -90,3 +90,67 @@ def test_a_camera_url_location_expands_the_home_folder(monkeypatch: pytest.Monke
     cam = open_files_url("files://~/frames/*.png?fps=2")
     assert len(cam) == 2
     cam.close()
+
+
+def _text_opens_without_encoding() -> list[str]:
+    """Every call in src/ that opens a text file without naming its encoding, as 'file:line call'."""
+    import ast
+    from pathlib import Path
+
+    def mode_of(call: ast.Call, at: int) -> object:
+        for k in call.keywords:
+            if k.arg == "mode":
+                return k.value.value if isinstance(k.value, ast.Constant) else None
+        if len(call.args) > at:
+            a = call.args[at]
+            return a.value if isinstance(a, ast.Constant) else None
+        return "r"
+
+    found = []
+    root = Path(__file__).resolve().parents[1] / "src"
+    for path in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.Call):
+                continue
+            f = node.func
+            name = f.id if isinstance(f, ast.Name) else f.attr if isinstance(f, ast.Attribute) else ""
+            owner = f.value.id if isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) else ""
+            if name in ("read_text", "write_text"):
+                mode: object = "r"
+            elif name == "open" and (isinstance(f, ast.Name) or owner == "io"):
+                mode = mode_of(node, 1)
+            elif name == "fdopen" and owner == "os":
+                mode = mode_of(node, 1)
+            elif name == "open" and isinstance(f, ast.Attribute) and node.args and isinstance(
+                node.args[0], ast.Constant
+            ) and isinstance(node.args[0].value, str):  # Path(...).open("w")
+                mode = node.args[0].value
+            else:
+                continue
+            if isinstance(mode, str) and "b" in mode:
+                continue
+            if any(k.arg == "encoding" or k.arg is None for k in node.keywords):  # named, or passed on (**kwargs)
+                continue
+            found.append(f"{path.relative_to(root)}:{node.lineno} {ast.unparse(node)[:80]}")
+    return found
+
+
+def test_every_text_file_src_opens_names_its_encoding() -> None:
+    """Windows' default text encoding is the ANSI code page (cp1252), not UTF-8: a file opened without
+    encoding= reads 'µm' written elsewhere as 'Âµm' and cannot write 'σ' at all."""
+    assert _text_opens_without_encoding() == []
+
+
+def test_the_encoding_check_finds_an_unnamed_encoding(tmp_path: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The check above can fail: a module with ``open(p)`` and ``p.write_text(s)`` is reported, twice."""
+    import ast
+
+    tree = ast.parse("open(p)\np.write_text(s)\nopen(p, 'rb')\np.read_text(encoding='utf-8')\n")
+    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "bad.py").write_text(ast.unparse(tree), encoding="utf-8")
+    fake = tmp_path / "tests" / "test_x.py"
+    monkeypatch.setitem(globals(), "__file__", str(fake))
+    assert len(calls) == 4
+    assert [x.split(" ")[0] for x in _text_opens_without_encoding()] == ["bad.py:1", "bad.py:2"]
