@@ -291,3 +291,28 @@ def test_the_tip_boxes_take_a_bare_number_in_um_or_an_amount_as_typed(page: Any,
     idle(room)
     for box, value in (("#reach-x", "0"), ("#reach-y", "0"), ("#reach-z", "10")):
         page.fill(box, value)
+
+
+def test_the_move_message_follows_the_motion_to_its_end(page: Any, room: ControlRoom) -> None:
+    """'#move-msg' kept "...: running" (the POST's answer) after the move had ended (audit26); it follows the live
+    state of that motion now: done, stopped (STOP), and a refusal's reason."""
+    idle(room)
+    page.select_option("#move-joint", "1")
+    page.select_option("#move-mode", "by")
+    page.fill("#move-amount", "2deg")
+    page.click("#move-form button[type=submit]")
+    until(lambda: page.inner_text("#move-msg").startswith("move"), 10, "the move's message")
+    idle(room)
+    until(lambda: page.inner_text("#move-msg").endswith(": done"), 5, "the message to say the move is done")
+    assert page.eval_on_selector("#move-msg", "e => e.className") == "msg ok"
+    page.select_option("#move-mode", "to")
+    page.fill("#move-amount", "min")
+    page.click("#move-form button[type=submit]")
+    until(lambda: room.current() is not None and room.current().status == "running", 10, "the move")  # type: ignore[union-attr]
+    page.click("h2#h-joints")
+    page.keyboard.press("Escape")
+    idle(room)
+    until(lambda: ": running" not in page.inner_text("#move-msg"), 5, "the message to say the move ended")
+    said = page.inner_text("#move-msg")
+    assert said.startswith("move of joint 1 to -120 deg: stopped — stopped: joint 1 made "), said
+    assert page.eval_on_selector("#move-msg", "e => e.className") == "msg ok"  # a STOP asked for is no failure

@@ -5,6 +5,7 @@ URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`):
     anc300://192.168.1.2                 the telnet console, port 7230
     anc300://192.168.1.2:7230?password=123456&axes=1,2,3&timeout=2
     anc300:///dev/ttyUSB0                the USB/serial console, 38400 baud 8N1
+    anc300:///COM3 (or anc300://COM3)    the same on Windows
 
 The console password comes from the environment variable ``STICKSLIP_ANC300_PASSWORD``
 (default ``123456``, the factory default); a ``password`` option in the URL is still
@@ -57,7 +58,7 @@ from .base import (
     secret_from_env,
     url_options,
 )
-from .transport import SerialTransport, SocketTransport, Transport
+from .transport import SerialTransport, SocketTransport, Transport, serial_port_name, windows_com_port
 
 PASSWORD_ENV = "STICKSLIP_ANC300_PASSWORD"
 """Environment variable holding the ANC300 console password."""
@@ -438,10 +439,11 @@ def open_url(url: str) -> ANC300:
     baud = int(check_setting("baud", opts.get("baud", 38400), *URL_BAUD, integer=True))
     axes = _parse_axes(opts.get("axes", "1,2,3"))
     password = unquote(opts.get("password") or secret_from_env(PASSWORD_ENV) or DEFAULT_PASSWORD)
-    if parts.hostname:
+    com = windows_com_port(parts.netloc)  # anc300://COM3: Windows' serial port where a host would stand
+    if parts.hostname and not com:
         transport: Transport = SocketTransport(parts.hostname, parts.port or DEFAULT_PORT, timeout)
-    elif parts.path:
-        transport = SerialTransport(parts.path, baudrate=baud, timeout=timeout)
+    elif com or parts.path:
+        transport = SerialTransport(com or serial_port_name(parts.path), baudrate=baud, timeout=timeout)
     else:
         raise ValueError(
             f"{redact_url(url)!r}: give a host (anc300://192.168.1.2) or a port (anc300:///dev/ttyUSB0)"

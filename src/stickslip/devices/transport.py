@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import select
 import socket
 import time
@@ -36,6 +37,8 @@ __all__ = [
     "SocketTransport",
     "FakeTransport",
     "TranscriptError",
+    "serial_port_name",
+    "windows_com_port",
 ]
 
 log = logging.getLogger("stickslip.devices.transport")
@@ -197,6 +200,25 @@ class Transport:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name}>"
+
+
+_WINDOWS_COM = re.compile(r"/?(COM[0-9]+)", re.IGNORECASE)
+
+
+def serial_port_name(path: str) -> str:
+    """The serial port a device URL's path names: ``/COM3`` (of ``mm3a:///COM3``) is Windows' ``COM3``.
+
+    A URL's path starts with ``/`` (``mm3a:///dev/ttyUSB0``); written the same way on Windows
+    (``mm3a:///COM3``) it reached pyserial as ``/COM3``, which Windows cannot open. Any other
+    path (``/dev/ttyUSB0``, ``/dev/pts/4``) is given back as it is.
+    """
+    return windows_com_port(path) or path
+
+
+def windows_com_port(text: str) -> str | None:
+    """``COM3`` of ``COM3`` or ``/COM3`` (any case), else ``None``."""
+    m = _WINDOWS_COM.fullmatch(text)
+    return m.group(1) if m else None
 
 
 def _first_terminator(buffer: bytes, terms: Iterable[bytes]) -> int | None:

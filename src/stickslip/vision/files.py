@@ -16,6 +16,7 @@ from __future__ import annotations
 import glob
 import math
 import os
+import re
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ __all__ = [
     "is_video",
     "open_frames",
     "open_files_url",
+    "location_path",
     "open_video_url",
     "open_opencv_url",
 ]
@@ -272,12 +274,26 @@ def _number(opts: dict[str, str], key: str, url: str, default: float) -> float:
     return v
 
 
+_DRIVE = re.compile(r"/([A-Za-z]:[/\\].*)", re.DOTALL)
+
+
+def location_path(location: str, windows: bool = os.name == "nt") -> str:
+    """The path a ``files://`` or ``video://`` location names: ``~`` expanded; on Windows
+    ``/C:/frames`` (of ``files:///C:/frames``, as ``file:///`` URLs write a drive) is ``C:/frames``.
+
+    ``files://C:\\frames\\*.png`` and a relative ``files://frames/*.png`` are taken as written.
+    """
+    m = _DRIVE.fullmatch(location) if windows else None
+    text = m.group(1) if m else location
+    return os.path.expanduser(text) if text.startswith("~") else text
+
+
 def open_files_url(url: str, device: Controller | None = None) -> FileCamera:
     """``files://PATTERN[?fps=F&pixel=SIZE]``: a folder, a glob or a file (several joined by ``,``)."""
     location, opts = camera_options(url, {"fps", "pixel"})
     if not location:
         raise ValueError(f"{redact_url(url)!r} names no files: write files://FOLDER or files://frames/*.png")
-    names: Iterable[str] = location.split(",")
+    names: Iterable[str] = (location_path(n) for n in location.split(","))
     return FileCamera(frame_paths(list(names)), _number(opts, "fps", url, 1.0), pixel_option(opts, url), url)
 
 
@@ -286,7 +302,7 @@ def open_video_url(url: str, device: Controller | None = None) -> VideoCamera:
     location, opts = camera_options(url, {"pixel"})
     if not location:
         raise ValueError(f"{redact_url(url)!r} names no file: write video://run.avi")
-    return VideoCamera(location, pixel_option(opts, url), url)
+    return VideoCamera(location_path(location), pixel_option(opts, url), url)
 
 
 def open_opencv_url(url: str, device: Controller | None = None) -> OpenCVCamera:

@@ -6,6 +6,7 @@ URLs (opened by :func:`open_url` through :func:`stickslip.devices.open_device`):
     mm3a:///dev/ttyUSB0?dialect=console      the current console, 115200 baud
     mm3a:///dev/ttyUSB0?dialect=legacy       the 2002-2015 command set, 19200 baud
     mm3a:///dev/ttyUSB0?timeout=5&channels=CBA
+    mm3a:///COM3 (or mm3a://COM3)            a serial port on Windows
     mm3a+socket://192.168.1.20:4001          a serial-over-network adapter (raw TCP)
 
 Two dialects (docs/devices/nanocontrol.md lists the commands of each):
@@ -39,7 +40,7 @@ from dataclasses import dataclass
 from urllib.parse import urlsplit
 
 from ..base import URL_BAUD, URL_TIMEOUT_S, DeviceError, check_setting, url_options
-from ..transport import SerialTransport, SocketTransport, Transport
+from ..transport import SerialTransport, SocketTransport, Transport, serial_port_name
 from ._common import DEFAULT_CHANNELS, check_channels, log, parse_console_reply
 from .console import CONSOLE_BAUD, FREQUENCY_RANGE_HZ, MAX_BURST, PROFILES, NanoControlConsole, split_burst
 from .legacy import (
@@ -259,7 +260,7 @@ def _open_transport(url: str, o: _UrlSettings) -> Transport:
             raise ValueError(f"{url!r}: give host and port, e.g. mm3a+socket://192.168.1.20:4001")
         return SocketTransport(parts.hostname, parts.port, timeout=o.timeout)
     if parts.scheme == "mm3a":
-        port = parts.path or parts.netloc
+        port = serial_port_name(parts.path or parts.netloc)
         if not port:
             raise ValueError(f"{url!r}: give the serial port, e.g. mm3a:///dev/ttyUSB0")
         first = o.baud or (LEGACY_BAUD if o.dialect == "legacy" else CONSOLE_BAUD)

@@ -31,7 +31,7 @@ from __future__ import annotations
 from urllib.parse import urlsplit
 
 from ..base import redact_url, url_options
-from ..transport import SerialTransport, SocketTransport, Transport
+from ..transport import SerialTransport, SocketTransport, Transport, serial_port_name
 from . import mcs, mcs2
 from ._common import OPTIONS, ChannelMap, SmarActBase, float_option, int_option, parse_channels
 from .mcs import SmarActMCS
@@ -99,7 +99,7 @@ def open_mcs(url: str) -> SmarActMCS:
         transport: Transport = SocketTransport(parts.hostname, _port(url, mcs.TCP_PORT), timeout)
     elif parts.scheme == "smaract-mcs":
         baud = int_option(opts, "baud", mcs.BAUD, *mcs.BAUD_RANGE, "baud")
-        port = parts.path or parts.netloc
+        port = serial_port_name(parts.path or parts.netloc)
         if not port:
             raise ValueError(f"{redact_url(url)!r}: give the serial port, e.g. smaract-mcs:///dev/ttyUSB0")
         transport = SerialTransport(port, baudrate=baud, timeout=timeout)

@@ -129,6 +129,7 @@ function render(st) {
   renderJoints(st);
   renderTip(st);
   renderMotion(m);
+  followMotion(m);
   const planBusy = running && m.kind !== "jog";
   for (const b of document.querySelectorAll("#pad button")) b.disabled = planBusy;
   const jogNote = $("jog-note");
@@ -395,6 +396,29 @@ function note(text, error, where = "move-msg") {
   const el = $(where);
   el.textContent = text;
   el.className = "msg " + (error ? "err" : "ok");
+  delete followed[where];  // the box says something else now: no motion's news overwrites it
+}
+
+// the motion each message box last started (its id): the box follows it from the live state to its end
+const followed = {};
+const FAILED = ["failed", "refused"];
+
+function started(m, where = "move-msg") {  // a motion the server took: say so, and follow it
+  motionNote(m, where);
+  followed[where] = m.id;
+}
+
+function motionNote(m, where) {
+  note(m.what + ": " + m.status + (m.error ? " — " + m.error : ""), FAILED.includes(m.status), where);
+}
+
+function followMotion(m) {  // a followed motion's box says where it got: running, then done / stopped / failed
+  if (!m) return;
+  for (const where of Object.keys(followed)) {
+    if (followed[where] !== m.id) continue;
+    motionNote(m, where);
+    if (m.status === "running" || m.status === "starting") followed[where] = m.id;  // its end is said once
+  }
 }
 
 $("move-form").addEventListener("submit", async (e) => {
@@ -403,7 +427,7 @@ $("move-form").addEventListener("submit", async (e) => {
   body[$("move-mode").value] = $("move-amount").value.trim();
   try {
     const m = await api("POST", "/api/move", body);
-    note(m.what + ": " + m.status);
+    started(m);
   } catch (err) { note(err.message, true); }
 });
 
@@ -415,7 +439,7 @@ $("reach-form").addEventListener("submit", async (e) => {
   });
   try {
     const m = await api("POST", "/api/reach", { by });
-    note(m.what + ": " + m.status);
+    started(m);
   } catch (err) { note(err.message, true); }
 });
 
@@ -434,7 +458,7 @@ async function refreshPositions() {
     li.querySelector(".pq").textContent = p.display.join(", ");
     if (p.source === "rig") li.querySelector(".del").remove();  // changed in the rig file, not here
     li.querySelector(".go").addEventListener("click", async () => {
-      try { const m = await api("POST", "/api/positions/" + encodeURIComponent(p.name) + "/go"); note(m.what + ": " + m.status, false, "pos-msg"); }
+      try { const m = await api("POST", "/api/positions/" + encodeURIComponent(p.name) + "/go"); started(m, "pos-msg"); }
       catch (err) { note(err.message, true, "pos-msg"); }
     });
     if (p.source !== "rig") li.querySelector(".del").addEventListener("click", async () => {
