@@ -13,6 +13,7 @@ import re
 from .joints import JointSpec, joint_spec
 
 __all__ = [
+    "parse_typed",
     "LENGTH_UNITS",
     "ANGLE_UNITS",
     "UnitError",
@@ -204,6 +205,15 @@ def format_spread(sd: float, joint: int | JointSpec) -> str:
     if not joint_spec(joint).rotary:
         return f"{sd * 1e6:.3g} µm"
     return f"{sd * 1e6:.3g} µrad" if abs(sd) < 1e-3 else f"{math.degrees(sd):.3g} deg"
+
+
+def parse_typed(text: str, kind: str) -> float:
+    """A length (m) or angle (rad), ``kind``, as a person types it: :func:`parse_length` / :func:`parse_angle`, and a
+    bare number other than 0 refused with :func:`bare_number_problem`'s did-you-mean (:class:`UnitError`)."""
+    bare = bare_number_problem(text, kind)
+    if bare is not None:
+        raise UnitError(bare)
+    return parse_angle(text) if kind == "angle" else parse_length(text)
 
 
 _SUGGEST = {"angle": ("deg",), "length": ("um", "mm")}

@@ -38,7 +38,7 @@ from scipy import ndimage, signal, special
 
 from .. import kinematics as kin
 from ..devices.base import Controller, KnowsTruePosition, VirtualClock, redact_url
-from ..units import UnitError, bare_number_problem, parse_angle, parse_length
+from ..units import UnitError, parse_typed
 from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_option
 from ..vision.frame import Frame
 from ..vision.view import View, project
@@ -685,10 +685,11 @@ def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCam
             kw["debris"] = _int(opts["debris"], "debris", 0, 10_000)
         for key, name, lo, hi in (("dof", "dof_m", 1e-8, 1e-2), ("tip", "tip_radius_m", 0.0, 1e-4)):
             if key in opts:
-                kw[name] = _length(opts[key], key, lo, hi)
+                kw[name] = _amount(opts[key], key, "length", lo, hi)
         if "taper" in opts:
-            kw["taper"] = _angle(opts["taper"], "taper", math.radians(0.5), math.radians(45.0))
-        view = View(*(_angle(opts.get(k, "0"), k, -2 * math.pi, 2 * math.pi) for k in ("tilt", "azimuth", "roll")))
+            kw["taper"] = _amount(opts["taper"], "taper", "angle", math.radians(0.5), math.radians(45.0))
+        view = View(*(_amount(opts.get(k, "0"), k, "angle", -2 * math.pi, 2 * math.pi)
+                      for k in ("tilt", "azimuth", "roll")))
         kw["view"] = view
         centre: Any = None
         if opts.get("centre", "").strip().lower() == "tip":
@@ -697,7 +698,7 @@ def open_url(url: str = "simcam://", device: Controller | None = None) -> SimCam
             parts = opts["centre"].split(",")
             if len(parts) != 3:
                 raise ValueError("centre: write X,Y,Z with units, e.g. centre=21mm,0,0")
-            centre = np.array([_length(p, "centre", -1.0, 1.0) for p in parts])
+            centre = np.array([_amount(p, "centre", "length", -1.0, 1.0) for p in parts])
         geometry = kin.Geometry.parse(opts["geometry"]) if "geometry" in opts else kin.DEFAULT_GEOMETRY
         settings = SimCamSettings(**kw)
     except (UnitError, ValueError) as e:
@@ -725,27 +726,15 @@ def _float(text: str, key: str, lo: float, hi: float) -> float:
     return v
 
 
-def _length(text: str, key: str, lo: float, hi: float) -> float:
-    bare = bare_number_problem(text, "length")  # as on the command line: tip=0.4 could be µm or m
-    if bare is not None:
-        raise ValueError(f"{key}={text!r}: {bare}")
+def _amount(text: str, key: str, kind: str, lo: float, hi: float) -> float:
+    """Option ``key``'s length (m) or angle (rad), ``kind``, within ``[lo, hi]``; its unit given, as on the command
+    line (``tip=0.4`` could be µm or m, ``tilt=0.5`` would be 28.6 deg): ``ValueError`` naming the option."""
     try:
-        v = parse_length(text)
+        v = parse_typed(text, kind)
     except (UnitError, ValueError, ArithmeticError) as e:  # the option named: which one could not be read
         raise ValueError(f"{key}={text!r}: {e}") from None
-    if not (math.isfinite(v) and lo <= v <= hi):
-        raise ValueError(f"{key}={text!r} must be a length in [{lo:g}, {hi:g}] m")
-    return v
-
-
-def _angle(text: str, key: str, lo: float, hi: float) -> float:
-    bare = bare_number_problem(text, "angle")  # tilt=30 would be 30 rad, tilt=0.5 28.6 deg
-    if bare is not None:
-        raise ValueError(f"{key}={text!r}: {bare}")
-    try:
-        v = parse_angle(text)
-    except (UnitError, ValueError, ArithmeticError) as e:
-        raise ValueError(f"{key}={text!r}: {e}") from None
-    if not (math.isfinite(v) and lo <= v <= hi):
+    if math.isfinite(v) and lo <= v <= hi:
+        return v
+    if kind == "angle":
         raise ValueError(f"{key}={text!r} must be an angle in [{math.degrees(lo):g}, {math.degrees(hi):g}] deg")
-    return v
+    raise ValueError(f"{key}={text!r} must be a length in [{lo:g}, {hi:g}] m")
