@@ -576,10 +576,8 @@ def _writable(path: Path, what: str) -> None:
     """Refuse (one line, exit 2) an output path where a folder, FIFO or device stands, before anything is done."""
     from ..records import writable_target
 
-    try:
+    with user_errors():
         writable_target(path, what)
-    except ValueError as e:
-        fail(str(e))
 
 
 def _finish_recording(
