@@ -561,3 +561,21 @@ def test_tables_unreadable_while_another_process_writes_the_file_are_looked_at_a
     with pytest.raises(StoreError, match="damaged"):  # nothing wrote it: damaged, after one look
         backend.check_database_file(p)
     assert len(calls) == 1
+
+
+def test_cli_empty_db_option_is_refused_not_taken_for_the_default(tmp_path, monkeypatch):
+    """``--db ""`` (an unset shell variable) must not record into $STICKSLIP_DB's database."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    env_db = tmp_path / "env.db"
+    monkeypatch.setenv("STICKSLIP_DB", str(env_db))
+    meas = tmp_path / "m.csv"
+    meas.write_text("joint,direction,steps\n1,+,1000\n", encoding="utf-8")
+    for value in ("", "  "):
+        for args in (["history"], ["import", str(meas)]):
+            r = CliRunner().invoke(app, [*args, "--db", value])
+            assert r.exit_code == 2, (args, r.output)
+            assert "--db is empty" in r.output and "Traceback" not in r.output, r.output
+    assert not env_db.exists()

@@ -532,13 +532,19 @@ def db_option(help_extra: str = "") -> Any:
 def database_setting(option: str | os.PathLike[str] | None, flag: str = "--db") -> Setting[Path | str]:
     """The database: ``option``, else ``$STICKSLIP_DB``, else the file's ``database``, else the data folder.
 
+    An empty ``option`` is refused, not taken for "not given".
+
     A file is a ``Path``; a PostgreSQL database is its URL (``str``, shown only through
     :func:`stickslip.storage.describe_database`). Another ``scheme://`` is one ``error:`` line.
     """
     from ..storage import StoreError, default_db_path, resolve_database
     from ..storage.schema import ENV_VAR
 
-    if option is not None and str(option) != "":
+    if option is not None and not str(option).strip():
+        # An empty --db (often an unset shell variable, --db "$LABDB") would otherwise
+        # fall through to $STICKSLIP_DB or the default and record into the wrong database.
+        fail(f"{flag} is empty: give a database file or a postgresql:// URL, or leave {flag} out for the default")
+    if option is not None:
         with user_errors(StoreError):
             return Setting(resolve_database(option), "option", flag)
     env = os.environ.get(ENV_VAR)
