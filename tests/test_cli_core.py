@@ -214,3 +214,33 @@ def test_predict_for_a_joint_the_calibration_lacks_says_why_and_prints_nothing(f
     r = runner.invoke(app, args)
     _bad(r, f"{poses}: row 2: ", "joint 1")
     assert r.stderr.count("\n") == 1 and r.stdout == ""
+
+
+def test_a_parameter_in_another_unit_is_refused(files):
+    """A hand-edited calibration labelling a value in another unit was read in SI regardless (joint 2+ gamma0
+    labelled 'um' was shown and used as rad: a factor 1e6 silently); now one line naming both units, exit 2."""
+    tmp, meas = files
+    data = json.loads(_cal(tmp, meas).read_text())
+    i = next(k for k, p in enumerate(data["parameters"]) if p["joint"] == 2 and p["name"] == "gamma0")
+    j = next(k for k, p in enumerate(data["parameters"]) if p["joint"] == 3 and p["name"] == "a")
+    bad = tmp / "unit.json"
+    for k, unit, right in ((i, "um", "rad"), (j, "nm", "m")):
+        params = [dict(p) for p in data["parameters"]]
+        params[k]["unit"] = unit
+        bad.write_text(json.dumps({**data, "parameters": params}))
+        p = params[k]
+        for cmd in (["show", str(bad)], ["predict", str(meas), "-c", str(bad)]):
+            _bad(runner.invoke(app, cmd), f"joint {p['joint']}{p['direction']} {p['name']}: unit '{unit}', "
+                 f"but the value is read in '{right}'")
+    fam = tmp / "fam.json"
+    r = runner.invoke(app, ["calibrate", str(meas), "--model", "constant", "-o", str(fam)])
+    assert r.exit_code == 0, r.output
+    data = json.loads(fam.read_text())
+    entry = next(e for e in data["families"] if e["family"] == "constant")
+    entry["parameters"][0]["unit"] = "mm"
+    bad.write_text(json.dumps(data))
+    name = entry["parameters"][0]["name"]
+    _bad(runner.invoke(app, ["show", str(bad)]), f"{name}: unit 'mm', but the value is read in")
+    del entry["parameters"][0]["unit"]  # no unit: read in SI, as files written by hand
+    bad.write_text(json.dumps(data))
+    assert runner.invoke(app, ["show", str(bad)]).exit_code == 0

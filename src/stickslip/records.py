@@ -294,6 +294,16 @@ def finite_number(value: object, where: str) -> float:
     return x
 
 
+def check_unit(given: object, expected: str | None, where: str) -> None:
+    """Refuse a stored value whose ``unit`` is not the one stickslip writes (its value would be read in SI anyway).
+
+    A missing unit (a hand-written file) is taken as SI. ``ValueError`` names ``where`` and both units.
+    """
+    if given is not None and expected is not None and given != expected:
+        raise ValueError(f"{where}: unit {given!r:.40}, but the value is read in {expected!r} (values are SI: "
+                         f"convert it and write {expected!r})")
+
+
 def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
     lo, hi = STEP_RANGE[unit]
     size = abs(v) if signed else v

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from ..models import JointModel, direction_label
 from ..models.families import FamilyModel, FamilyParams, family_spec
-from ..records import finite_number
+from ..records import check_unit, finite_number
 from .errormodel import MAX_RELATIVE_SD, Predictive
 
 __all__ = ["ExtFields", "ext_fields", "read_ext_fields"]
@@ -132,7 +132,10 @@ def _read_family(rec: dict[str, object], j: int, where: str) -> tuple[FamilyPara
     scale = finite_number(rec.get("scale", 1.0), f"{where} scale")
     if not scale > 0:
         raise ValueError(f"{where}: scale must be > 0, got {scale!r}")
-    return FamilyParams(spec.name, j, tuple(values), scale), ses
+    fp = FamilyParams(spec.name, j, tuple(values), scale)
+    for name, q3 in spec.names:
+        check_unit(by_name[(name, None if q3 is None else round(q3, 9))].get("unit"), fp.unit(name), f"{where} {name}")
+    return fp, ses
 
 
 def _read_predictive(rec: dict[str, object], where: str) -> Predictive:

@@ -32,7 +32,7 @@ from ..models import (
     direction_label,
 )
 from ..models.families import FamilyParams
-from ..records import finite_number
+from ..records import check_unit, finite_number
 from ..units import param_scale, step_scale
 from .errormodel import Predictive
 
@@ -473,6 +473,8 @@ class Calibration:
                         (vals[names[2]][0], vals[names[3]][0]),
                         (knots[0], knots[1]),
                     )
+                for r in recs:
+                    check_unit(r.get("unit"), UNITS.get((params.kind, str(r["name"]))), f"joint {j}{d} {r['name']}")
                 models[(j, d)] = JointModel(j, d, params)
                 se = [vals[n][1] for n in names]
                 stderr[(j, d)] = (
