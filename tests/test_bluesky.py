@@ -431,7 +431,7 @@ def test_a_device_error_fails_the_status_with_what_was_sent_and_an_uncertain_tru
         RE(bps.mv(axis, 3e-3))
     text = str(e.value.__cause__)
     # bursts of 500 asked, cut to 200 (1000 Hz x max_burst_s = 0.2 s): two bursts made, the third refused
-    assert "no answer from the controller within 2 s; sent 400 of" in text
+    assert "no answer from the controller within 2 s; 400 of" in text
     assert "uncertain" in text and "re-reference" in text
     with Store.open() as store:
         state = load_state(store, "sim://")

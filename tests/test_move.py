@@ -241,7 +241,8 @@ def test_device_failing_mid_move_keeps_the_dead_reckoned_position(tmp_path, cal_
                 "--by", "100um", "--burst", 10, "--trust-calibration", "--from-unreferenced")  # fmt: skip
         url = emu.url
     assert r.exit_code == 2
-    assert "did not answer" in r.output and "sent 30 of" in r.output
+    assert "did not answer" in r.output and "; 30 of" in r.output
+    assert "steps confirmed (the burst under way may have moved" in r.output
     w = where_json(db, url)
     expected = planning.dead_reckon(cal, 3, 0.0, 30, kin.Pose())
     assert w["joints"][2]["q"] == pytest.approx(float(np.asarray(expected)), abs=1e-15)

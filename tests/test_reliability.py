@@ -273,7 +273,8 @@ def test_link_drop_mid_move_marks_uncertain_with_bounds(tmp_path, cal_path, faul
     assert run("where", "-d", url, "--db", db, "--set", "3=min").exit_code == 0
     r = run("move", "--trust-calibration", "-d", url, "-c", cal_path, "--db", db, "--joint", 3, "--by", "100um",
             "--burst", 10)  # fmt: skip
-    one_error(r, "link dropped", "sent 30 of", "uncertain")
+    one_error(r, "link dropped", "; 30 of", "steps confirmed (the burst under way may have moved the joint in part)",
+              "uncertain")
     moved = sum(int(x) for x in log.read_text().split())
     assert moved == 35  # 3 bursts of 10 and half of the 4th: the truth the database cannot know
     w = _where(db, "faulty://arm")
@@ -788,3 +789,16 @@ def test_nanocontrol_channels_written_with_commas_say_how_to_write_them(tmp_path
     r = run("where", "-d", f"mm3a+socket://127.0.0.1:1?channels={letters}", "--db", tmp_path / "s.db")
     one_error(r, f"channels is the channel letters of joints 1, 2, 3 written together, e.g. ABC or CBA; got "
                  f"{letters!r}")
+
+
+def test_raw_steps_cut_by_a_device_error_say_what_is_confirmed_not_sent(tmp_path, faulty):
+    """A link that dropped during move --steps said 'sent 30 of +100 raw steps' (audit26): the burst under way
+    was sent too, and may have moved the joint; only 30 are confirmed. The kept bounds always covered it."""
+    db, log = tmp_path / "s.db", tmp_path / "moved.txt"
+    url = f"faulty://arm?drop_after=3&partial=0.5&log={log}"
+    assert run("where", "-d", url, "--db", db, "--set", "3=min").exit_code == 0
+    r = run("move", "-d", url, "--db", db, "-j", "3", "--steps", "100", "--burst", "10")
+    one_error(r, "link dropped", "; 30 of +100 raw steps confirmed (the burst under way may have moved the joint "
+              "in part); joint 3 is uncertain")
+    assert "sent 30" not in r.stderr
+    assert sum(int(x) for x in log.read_text().split()) == 35  # the truth: half of the 4th burst was made

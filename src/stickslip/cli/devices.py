@@ -324,14 +324,14 @@ def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
 
 def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, json_out: bool) -> None:
     """``move --steps N``: raw steps through the procedure, then what is known about the joint now."""
-    from ..procedures.move import DeviceBusy, step_joint
+    from ..procedures.move import DeviceBusy, sent_text, step_joint
 
     with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
         result = step_joint(store, device, joint, steps, burst=burst, ready=flush_warnings)
     lo, hi = result.state.bounds(joint)
     if result.outcome.error is not None:
         fail(
-            f"{result.outcome.error}; sent {result.outcome.sent} of {steps:+d} raw steps; joint {joint} is "
+            f"{result.outcome.error}; {sent_text(result.outcome.sent, steps, 'raw steps')}; joint {joint} is "
             f"uncertain, {format_position(lo, joint)} to {format_position(hi, joint)}"
         )
     if json_out:

@@ -534,6 +534,13 @@ def reference_problem(
     )
 
 
+def sent_text(sent: int, steps: int, what: str = "steps", unknown: bool = True) -> str:
+    """How much of a move a device error let through: the confirmed count, and (``unknown``) that the burst under
+    way when it failed may have moved the joint in part (its steps are not counted, the kept bounds cover them)."""
+    return f"{sent} of {steps:+d} {what} confirmed" + (" (the burst under way may have moved the joint in part)"
+                                                     if unknown else "")
+
+
 def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: int) -> str:
     """One line for a move a device error stopped: what was sent, and what the kept position now is."""
     spec = state.spec(joint)
@@ -546,7 +553,7 @@ def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: i
         )
     else:
         kept = f"joint {joint}'s dead-reckoned position {format_position(state.positions[joint], spec)} is kept"
-    return f"{error}; sent {sent} of {steps} steps; {kept}"
+    return f"{error}; {sent_text(sent, steps, unknown=joint in state.uncertain)}; {kept}"
 
 
 def track_fields(state: DeviceState, joint: int) -> dict[str, float | None]:
