@@ -296,7 +296,7 @@ def _rule(res: Lost) -> str:
 def _state(t: TipTracker) -> dict[str, object]:
     """What ``TipTracker.update`` changes between frames (the caches aside)."""
     return {k: (list(v) if isinstance(v, list) else v) for k, v in vars(t).items()
-            if k in ("_last", "_theta", "_level", "_fresh", "_since", "_mismatch", "_last_edges")}
+            if k in ("_last", "_theta", "_level", "_fresh", "_since", "_mismatch")}
 
 
 def _replay(t: TipTracker, image: np.ndarray, tip: tuple[float, float]

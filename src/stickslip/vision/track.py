@@ -689,7 +689,6 @@ class TipTracker:
         self._coarse_w = _downsample(t.weights, params.coarse_factor)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
         self._shaft, self._width, self._outline = _learn_shaft(image, tip, t, params, self._spec)
-        self._last_edges: EdgeCheck | None = None  # what the edges behind the last fix showed
         self._last_view: _View | None = None  # the last fix's pixels, its blur re-read from them (_focus_reread)
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
@@ -953,7 +952,7 @@ class TipTracker:
             p.first_mismatch_slack if usual is None else p.mismatch_floor)
 
     def _accept(self, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
-        self._last_edges, self._last_view = cand.edges, _View.keep(image, fix.x, fix.y, self.template.half)
+        self._last_view = _View.keep(image, fix.x, fix.y, self.template.half)
         self._mismatch.append(1.0 - fix.score)
         del self._mismatch[: -self.params.recent]
         self._last = (fix.x, fix.y)
