@@ -458,28 +458,7 @@ class Calibration:
             models: dict[tuple[int, str], JointModel] = {}
             stderr: dict[tuple[int, str], NDArray[np.float64] | None] = {}
             for (j, d), recs in by_key.items():
-                vals = {(r["name"], r.get("q3")): (float(r["value"]), r.get("stderr")) for r in recs}
-                names: list[tuple[str, float | None]]
-                if kin.joint_spec(j).prismatic:
-                    names = [("a", None), ("b", None), ("c", None)]
-                    params: Params = PrismaticParams(*(vals[n][0] for n in names))
-                else:
-                    knots = sorted({float(q3) for (n, q3) in vals if n == "gamma0" and q3 is not None})
-                    if len(knots) != 2:
-                        raise ValueError(f"joint {j}{d}: expected gamma0 at two q3 values, found {len(knots)}")
-                    names = [("gamma0", knots[0]), ("gamma0", knots[1]), ("d", knots[0]), ("d", knots[1])]
-                    params = RotaryParams(
-                        (vals[names[0]][0], vals[names[1]][0]),
-                        (vals[names[2]][0], vals[names[3]][0]),
-                        (knots[0], knots[1]),
-                    )
-                for r in recs:
-                    check_unit(r.get("unit"), UNITS.get((params.kind, str(r["name"]))), f"joint {j}{d} {r['name']}")
-                models[(j, d)] = JointModel(j, d, params)
-                se = [vals[n][1] for n in names]
-                stderr[(j, d)] = (
-                    None if all(s is None for s in se) else np.array([np.nan if s is None else s for s in se])
-                )
+                models[(j, d)], stderr[(j, d)] = _paper_model(j, d, recs)
             consts = {
                 (int(c["joint"]), direction_label(c["direction"])): float(c["value"]) for c in data["constant_steps"]
             }
@@ -654,6 +633,35 @@ def _mm3a_kind(joint: int) -> str:
     """The MM3A's kind of ``joint`` (what a calibration's joint is unless it says otherwise)."""
     spec = kin.JOINTS.get(joint)
     return spec.kind if spec is not None else "prismatic"
+
+
+def _paper_model(j: int, d: str, recs: list[dict[str, Any]]) -> tuple[JointModel, NDArray[np.float64] | None]:
+    """One joint and direction's model (Eqs. 3-4) and standard errors from its ``parameters`` records.
+
+    ``KeyError`` for a missing parameter; ``ValueError`` for rotary knots that are not two, or a
+    ``unit`` other than the one stickslip writes (:func:`~stickslip.records.check_unit`).
+    """
+    vals = {(r["name"], r.get("q3")): (float(r["value"]), r.get("stderr")) for r in recs}
+    names: list[tuple[str, float | None]]
+    if kin.joint_spec(j).prismatic:
+        names = [("a", None), ("b", None), ("c", None)]
+        params: Params = PrismaticParams(*(vals[n][0] for n in names))
+    else:
+        knots = sorted({float(q3) for (n, q3) in vals if n == "gamma0" and q3 is not None})
+        if len(knots) != 2:
+            raise ValueError(f"joint {j}{d}: expected gamma0 at two q3 values, found {len(knots)}")
+        names = [("gamma0", knots[0]), ("gamma0", knots[1]), ("d", knots[0]), ("d", knots[1])]
+        params = RotaryParams(
+            (vals[names[0]][0], vals[names[1]][0]),
+            (vals[names[2]][0], vals[names[3]][0]),
+            (knots[0], knots[1]),
+        )
+    for r in recs:
+        check_unit(r.get("unit"), UNITS.get((params.kind, str(r["name"]))), f"joint {j}{d} {r['name']}")
+    se = [vals[n][1] for n in names]
+    return JointModel(j, d, params), (
+        None if all(s is None for s in se) else np.array([np.nan if s is None else s for s in se])
+    )
 
 
 def _constant_records(
