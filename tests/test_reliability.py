@@ -707,6 +707,59 @@ def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path,
         "--db", db, "-j", 3, "--by", "1um").exit_code == 0  # fmt: skip
 
 
+@pytest.fixture()
+def running_here():
+    """A process running on this host (POSIX: `sleep`), and a lock holder naming it, taken after it started."""
+    import socket
+
+    from stickslip.clock import now_utc
+
+    if not Path("/proc/self/stat").is_file():
+        pytest.skip("a holder is known to run from its start time in Linux's /proc; elsewhere --unlock releases any")
+    proc = subprocess.Popen(["sleep", "60"])
+    yield {"pid": proc.pid, "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
+    proc.kill()
+    proc.wait()
+
+
+def test_unlock_refuses_a_holder_still_running_on_this_host(tmp_path, cal_path, faulty, running_here):
+    """`where --unlock` beside a running `stickslip serve` (or a move) released its lock (exit 0), and a CLI move then
+    drove the device the server held; now refused naming the holder, and the lock stays."""
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        assert st.acquire_lock("faulty://arm", running_here) is None
+    one_error(run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline"),
+              f"pid {running_here['pid']} on this computer", "still running")  # fmt: skip
+    one_error(
+        run("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um"),  # fmt: skip
+        "being driven by another stickslip process", f"pid {running_here['pid']}",
+    )
+    with Store.open(db) as st:
+        assert st.get_state("faulty://arm", "lock") == running_here
+
+
+def test_unlock_still_releases_a_lock_whose_process_number_was_reused(tmp_path, cal_path, faulty, running_here):
+    """After a restart the process numbers begin again: a lock left before it names a number another program may
+    now run under. Its process started after the lock was taken, so it is not known to be the holder: the move is
+    refused (the lock is not taken over on a start time: a clock stepped forward would make a running holder look
+    so), and `--unlock` releases it, not refused as a running holder's."""
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    reused = {**running_here, "since": "2026-11-22T10:00:00+00:00"}  # taken before `sleep` started
+    with Store.open(db) as st:
+        assert st.acquire_lock("faulty://arm", reused) is None
+    move = ("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um")  # fmt: skip
+    one_error(run(*move), "being driven by another stickslip process", "--unlock")
+    assert run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline").exit_code == 0
+    r = run(*move)
+    assert r.exit_code == 0, r.output
+
+
 @pytest.mark.parametrize("record", [["--set", "3=min"], ["--q2", "-60deg"], ["--theta", "2deg"]])
 def test_where_records_nothing_while_another_process_drives_the_device(tmp_path, record):
     """`where --set 1=max` while a move (or `stickslip serve`) held sim://'s lock was taken (exit 0): a joint

@@ -16,8 +16,9 @@ from typing import Any, Protocol
 from ..devices.base import DeviceError, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..joints import JointSet
+from ..processes import holder_running
 from ..units import format_position
-from .move import LockStore, PoseUpdate, device_lock, track_fields
+from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, track_fields
 
 __all__ = ["DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "probe_device", "state_rows", "where"]
 
@@ -131,7 +132,8 @@ def where(
     source becomes ``"set"`` and an interrupted move's uncertainty is cleared. Without
     anything recorded and unless ``offline``, the device is asked whether it answers
     (:func:`probe_device`; :class:`DeviceUnreachable`). ``unlock`` releases a lock left by
-    a process that is gone. :class:`ReferenceRefused` names a reference that cannot be kept.
+    a process that is gone (:class:`~.move.DeviceBusy` if it is running on this host).
+    :class:`ReferenceRefused` names a reference that cannot be kept.
     ``joints``: the arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`),
     the MM3A's by default; ``key`` where they are kept (:meth:`stickslip.rig.Rig.state_key`:
     two arms on one controller), the device's key by default. ``hold_lock``: record under the
@@ -141,6 +143,7 @@ def where(
     lock = device_key(device)
     key = key or lock
     if unlock:
+        refuse_unlocking_a_running_holder(store.get_state(lock, "lock"), lock)
         store.set_state(lock, "lock", "null")
     records = bool(references) or pose != PoseUpdate()
     held: AbstractContextManager[object] = device_lock(store, lock) if hold_lock and records else nullcontext()
@@ -157,3 +160,21 @@ def where(
             save_state(store, state)
     info = None if (changed or offline) else probe(device)
     return WhereResult(key, state, tuple(changed), info)
+
+
+def refuse_unlocking_a_running_holder(holder: object, device: str) -> None:
+    """:class:`~.move.DeviceBusy` if the lock's ``holder`` is a process running on this host.
+
+    ``--unlock`` is for a lock whose process is gone; one that runs here (a ``move``, or
+    ``stickslip serve`` holding the device) keeps it: unlocking it let a second process
+    drive the device while the first still did. A holder that is gone is taken over
+    without ``--unlock``; one on another host, or not known to run (its number reused
+    after a restart: :func:`~stickslip.processes.holder_running`), is the user's to release.
+    """
+    if not holder_running(holder) or not isinstance(holder, dict):
+        return
+    raise DeviceBusy(
+        f"{device} is locked by pid {holder.get('pid')} on this computer ({holder.get('host')}, since "
+        f"{holder.get('since')}), which is still running: --unlock is for a lock whose process is gone; "
+        "stop that process (Ctrl-C in its terminal), and its lock goes with it"
+    )
