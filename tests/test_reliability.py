@@ -841,3 +841,39 @@ def test_nanocontrol_channels_written_with_commas_say_how_to_write_them(tmp_path
     r = run("where", "-d", f"mm3a+socket://127.0.0.1:1?channels={letters}", "--db", tmp_path / "s.db")
     one_error(r, f"channels is the channel letters of joints 1, 2, 3 written together, e.g. ABC or CBA; got "
                  f"{letters!r}")
+
+
+def test_camera_calibrate_stopped_midway_leaves_its_joints_uncertain(tmp_path, monkeypatch):
+    """`camera calibrate` steps its joints out and back (and --auto-joint to find the tip) and wrote their ends only
+    after the measurement: a link drop (or Ctrl-C, a kill) midway kept the positions from before, as if nothing had
+    moved. Now the joints it steps are uncertain over their range from before the first step; a whole run writes
+    where they ended, and a joint it did not step stays as it was."""
+    import stickslip.procedures.camera as camera_procedures
+    from stickslip.devices.base import DeviceError
+
+    db = tmp_path / "s.db"
+    assert run("where", "-d", "sim://", "--db", db, "--set", "3=min", "--q1", "10deg").exit_code == 0
+    sent = []
+
+    def drop_midway(dev, cam, pose, joints, **kwargs):
+        dev.step(3, 50)
+        sent.append(50)
+        raise DeviceError("sim://: link dropped")
+
+    measure = camera_procedures.calibrate_camera
+    monkeypatch.setattr(camera_procedures, "calibrate_camera", drop_midway)
+    one_error(run("camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=1um", "--tip", "100,100",
+                  "--joints", "3", "--db", db), "link dropped")  # fmt: skip
+    assert sent == [50]
+    j1, j2, j3 = _where(tmp_path / "s.db", "sim://")["joints"]
+    assert j3["source"] == "uncertain" and j3["uncertain"] == pytest.approx([0.0, kin.JOINTS[3].upper])
+    assert j1["source"] == "set" and j1["q"] == pytest.approx(math.radians(10)) and j2["source"] == "default"
+    monkeypatch.setattr(camera_procedures, "calibrate_camera", measure)
+    assert run("where", "-d", "sim://", "--db", db, "--set", "3=min", "--q1", "0").exit_code == 0
+    r = run("camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=1um", "--joints", "3",
+            "--max-steps", "40", "--db", db)  # fmt: skip
+    assert r.exit_code == 0, r.output
+    j1, j2, j3 = _where(tmp_path / "s.db", "sim://")["joints"]
+    assert j3["source"] == "dead-reckoned" and 0 < j3["q"] < 20e-6  # out and back: a few µm from the stop
+    assert j1["source"] == "set" and j1["uncertain"] is None  # stepped to find the tip and back: as it was
+    assert j2["source"] == "default"
