@@ -877,3 +877,37 @@ def test_camera_calibrate_stopped_midway_leaves_its_joints_uncertain(tmp_path, m
     assert j3["source"] == "dead-reckoned" and 0 < j3["q"] < 20e-6  # out and back: a few µm from the stop
     assert j1["source"] == "set" and j1["uncertain"] is None  # stepped to find the tip and back: as it was
     assert j2["source"] == "default"
+
+
+def test_where_does_not_ask_a_device_another_process_drives(tmp_path, faulty):
+    """`where` (without --offline) opened the device and asked it what it is while a move in another terminal (or
+    `stickslip serve`) drove it: on a serial line or a controller's one connection, a second talker beside the
+    move's bursts. Now, while another process holds the device's lock, the kept positions are shown and one
+    warning names the holder; nothing is opened (the lock is read, not taken)."""
+    from stickslip.devices.base import register_backend
+    from stickslip.storage import Store
+
+    opened = []
+
+    class Counted(faults.FaultyController):
+        def __init__(self, url):
+            opened.append(url)
+            super().__init__(url)
+
+    register_backend("counted", Counted)
+    db = tmp_path / "s.db"
+    holder = {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"}
+    with Store.open(db) as st:
+        assert st.acquire_lock("counted://arm", holder) is None
+    r = run("where", "-d", "counted://arm", "--db", db)
+    assert r.exit_code == 0, r.output
+    assert opened == [] and "joint 3:" in r.stdout
+    assert r.stderr.startswith("warning: not asked whether it answers") and "pid 4242 on bench-pc" in r.stderr
+    w = json.loads(run("where", "-d", "counted://arm", "--db", db, "--json").stdout)
+    assert w["info"] is None and "pid 4242 on bench-pc" in w["busy"] and opened == []
+    with Store.open(db) as st:
+        st.release_lock("counted://arm", 4242)
+    w = json.loads(run("where", "-d", "counted://arm", "--db", db, "--json").stdout)
+    assert w["answers"] == "fault injector" and w["busy"] is None and opened == ["counted://arm"]
+    with Store.open(db) as st:
+        assert st.get_state("counted://arm", "lock") is None  # asking took no lock
