@@ -496,6 +496,43 @@ def test_record_on_a_controller_labels_from_the_step_count_or_a_key(tmp_path, mo
         assert 0.0 <= label["stop_at_s"] < 1.0
 
 
+def test_record_on_a_controller_keeps_the_joint_uncertain_and_waits_for_no_other_driver(tmp_path, monkeypatch):
+    """`record` on a real controller stepped joint 2 400 steps into its upper stop with no device lock and left
+    the kept position where it was (-90 deg, "set"): the next `move` planned from a place the joint had left, and a
+    `move` in another terminal (or `serve`) drove the same joint meanwhile. Now: uncertain from -90 deg to the
+    upper stop, saved before the first step; refused, nothing sent, while another process holds the device."""
+    import math
+
+    import stickslip.audio.sources as sources
+    import stickslip.devices as devices
+    from stickslip.devices.positions import load_state
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    monkeypatch.setenv("STICKSLIP_DB", str(db))  # where record keeps it (as --db would)
+    url = "mm3a:///dev/fake"
+    assert runner.invoke(app, ["where", "-d", url, "--set", "2=-90deg", "--offline"]).exit_code == 0
+    ctrl = _FakeController()
+    monkeypatch.setattr(devices, "open_device", lambda url: ctrl)
+    monkeypatch.setattr(sources, "Microphone", _FakeMic)
+    args = ["record", str(tmp_path / "r.wav"), "-j", "2", "-d", url, "--steps", "400", "--stop-at-step", "300"]
+    with Store.open(db) as st:
+        assert st.acquire_lock(url, {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00+00:00"}) is None
+    r = runner.invoke(app, args)
+    _one_line_error(r, "being driven by another stickslip process", "pid 4242 on bench-pc")
+    assert ctrl.steps == [] and not (tmp_path / "r.wav").exists()
+    with Store.open(db) as st:
+        st.release_lock(url, 4242)
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert sum(n for _, n in ctrl.steps) == 400
+    with Store.open(db) as st:
+        state = load_state(st, url)
+        lo, hi = state.uncertain[2]
+        assert lo == pytest.approx(-math.pi / 2) and hi == pytest.approx(state.spec(2).upper)
+        assert st.get_state(url, "lock") is None
+
+
 def test_record_on_a_controller_needs_steps_and_a_label(tmp_path, monkeypatch):
     import stickslip.devices as devices
 

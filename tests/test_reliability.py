@@ -708,6 +708,59 @@ def test_a_held_lock_names_its_holder_and_unlock_releases_it(tmp_path, cal_path,
         "--db", db, "-j", 3, "--by", "1um").exit_code == 0  # fmt: skip
 
 
+@pytest.fixture()
+def running_here():
+    """A process running on this host (POSIX: `sleep`), and a lock holder naming it, taken after it started."""
+    import socket
+
+    from stickslip.clock import now_utc
+
+    if not Path("/proc/self/stat").is_file():
+        pytest.skip("a holder is known to run from its start time in Linux's /proc; elsewhere --unlock releases any")
+    proc = subprocess.Popen(["sleep", "60"])
+    yield {"pid": proc.pid, "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
+    proc.kill()
+    proc.wait()
+
+
+def test_unlock_refuses_a_holder_still_running_on_this_host(tmp_path, cal_path, faulty, running_here):
+    """`where --unlock` beside a running `stickslip serve` (or a move) released its lock (exit 0), and a CLI move then
+    drove the device the server held; now refused naming the holder, and the lock stays."""
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        assert st.acquire_lock("faulty://arm", running_here) is None
+    one_error(run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline"),
+              f"pid {running_here['pid']} on this computer", "still running")  # fmt: skip
+    one_error(
+        run("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um"),  # fmt: skip
+        "being driven by another stickslip process", f"pid {running_here['pid']}",
+    )
+    with Store.open(db) as st:
+        assert st.get_state("faulty://arm", "lock") == running_here
+
+
+def test_unlock_still_releases_a_lock_whose_process_number_was_reused(tmp_path, cal_path, faulty, running_here):
+    """After a restart the process numbers begin again: a lock left before it names a number another program may
+    now run under. Its process started after the lock was taken, so it is not known to be the holder: the move is
+    refused (the lock is not taken over on a start time: a clock stepped forward would make a running holder look
+    so), and `--unlock` releases it, not refused as a running holder's."""
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    reused = {**running_here, "since": "2026-11-22T10:00:00+00:00"}  # taken before `sleep` started
+    with Store.open(db) as st:
+        assert st.acquire_lock("faulty://arm", reused) is None
+    move = ("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um")  # fmt: skip
+    one_error(run(*move), "being driven by another stickslip process", "--unlock")
+    assert run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline").exit_code == 0
+    r = run(*move)
+    assert r.exit_code == 0, r.output
+
+
 @pytest.mark.parametrize("record", [["--set", "3=min"], ["--q2", "-60deg"], ["--theta", "2deg"]])
 def test_where_records_nothing_while_another_process_drives_the_device(tmp_path, record):
     """`where --set 1=max` while a move (or `stickslip serve`) held sim://'s lock was taken (exit 0): a joint
@@ -802,3 +855,73 @@ def test_raw_steps_cut_by_a_device_error_say_what_is_confirmed_not_sent(tmp_path
               "in part); joint 3 is uncertain")
     assert "sent 30" not in r.stderr
     assert sum(int(x) for x in log.read_text().split()) == 35  # the truth: half of the 4th burst was made
+
+
+def test_camera_calibrate_stopped_midway_leaves_its_joints_uncertain(tmp_path, monkeypatch):
+    """`camera calibrate` steps its joints out and back (and --auto-joint to find the tip) and wrote their ends only
+    after the measurement: a link drop (or Ctrl-C, a kill) midway kept the positions from before, as if nothing had
+    moved. Now the joints it steps are uncertain over their range from before the first step; a whole run writes
+    where they ended, and a joint it did not step stays as it was."""
+    import stickslip.procedures.camera as camera_procedures
+    from stickslip.devices.base import DeviceError
+
+    db = tmp_path / "s.db"
+    assert run("where", "-d", "sim://", "--db", db, "--set", "3=min", "--q1", "10deg").exit_code == 0
+    sent = []
+
+    def drop_midway(dev, cam, pose, joints, **kwargs):
+        dev.step(3, 50)
+        sent.append(50)
+        raise DeviceError("sim://: link dropped")
+
+    measure = camera_procedures.calibrate_camera
+    monkeypatch.setattr(camera_procedures, "calibrate_camera", drop_midway)
+    one_error(run("camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=1um", "--tip", "100,100",
+                  "--joints", "3", "--db", db), "link dropped")  # fmt: skip
+    assert sent == [50]
+    j1, j2, j3 = _where(tmp_path / "s.db", "sim://")["joints"]
+    assert j3["source"] == "uncertain" and j3["uncertain"] == pytest.approx([0.0, kin.JOINTS[3].upper])
+    assert j1["source"] == "set" and j1["q"] == pytest.approx(math.radians(10)) and j2["source"] == "default"
+    monkeypatch.setattr(camera_procedures, "calibrate_camera", measure)
+    assert run("where", "-d", "sim://", "--db", db, "--set", "3=min", "--q1", "0").exit_code == 0
+    r = run("camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=1um", "--joints", "3",
+            "--max-steps", "40", "--db", db)  # fmt: skip
+    assert r.exit_code == 0, r.output
+    j1, j2, j3 = _where(tmp_path / "s.db", "sim://")["joints"]
+    assert j3["source"] == "dead-reckoned" and 0 < j3["q"] < 20e-6  # out and back: a few µm from the stop
+    assert j1["source"] == "set" and j1["uncertain"] is None  # stepped to find the tip and back: as it was
+    assert j2["source"] == "default"
+
+
+def test_where_does_not_ask_a_device_another_process_drives(tmp_path, faulty):
+    """`where` (without --offline) opened the device and asked it what it is while a move in another terminal (or
+    `stickslip serve`) drove it: on a serial line or a controller's one connection, a second talker beside the
+    move's bursts. Now, while another process holds the device's lock, the kept positions are shown and one
+    warning names the holder; nothing is opened (the lock is read, not taken)."""
+    from stickslip.devices.base import register_backend
+    from stickslip.storage import Store
+
+    opened = []
+
+    class Counted(faults.FaultyController):
+        def __init__(self, url):
+            opened.append(url)
+            super().__init__(url)
+
+    register_backend("counted", Counted)
+    db = tmp_path / "s.db"
+    holder = {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"}
+    with Store.open(db) as st:
+        assert st.acquire_lock("counted://arm", holder) is None
+    r = run("where", "-d", "counted://arm", "--db", db)
+    assert r.exit_code == 0, r.output
+    assert opened == [] and "joint 3:" in r.stdout
+    assert r.stderr.startswith("warning: not asked whether it answers") and "pid 4242 on bench-pc" in r.stderr
+    w = json.loads(run("where", "-d", "counted://arm", "--db", db, "--json").stdout)
+    assert w["info"] is None and "pid 4242 on bench-pc" in w["busy"] and opened == []
+    with Store.open(db) as st:
+        st.release_lock("counted://arm", 4242)
+    w = json.loads(run("where", "-d", "counted://arm", "--db", db, "--json").stdout)
+    assert w["answers"] == "fault injector" and w["busy"] is None and opened == ["counted://arm"]
+    with Store.open(db) as st:
+        assert st.get_state("counted://arm", "lock") is None  # asking took no lock

@@ -590,7 +590,7 @@ def test_backup_copies_either_backend_into_an_sqlite_file_every_command_reads(db
     r = CliRunner().invoke(app, ["backup", str(out), "--db", str(db)])
     assert r.exit_code == 0, r.output
     assert f"copied {len(rows) + 1} traverse(s)" in r.stdout and out.is_file()
-    assert not list(tmp_path.glob(".copy.db.part*"))
+    assert not list(tmp_path.glob(".copy.db.*"))
     with Store.open(out) as copy:
         assert copy.backend == "sqlite" and copy.integrity_check() == "ok"
         assert copy.schema_version == storage.SCHEMA_VERSION
@@ -605,6 +605,35 @@ def test_backup_copies_either_backend_into_an_sqlite_file_every_command_reads(db
     assert r.exit_code == 2 and not missing.parent.exists()
     assert r.stderr.strip() == (f"error: cannot write the backup {missing}: its folder {missing.parent} does not "
                                 "exist; nothing was written"), r.stderr
+
+
+@pytest.mark.parametrize("left", ["half", "whole"])
+def test_a_backup_killed_before_its_rename_does_not_fail_the_next(db, tmp_path, left):
+    """A backup killed (SIGKILL, a power cut) mid-copy leaves half a file, after the copy and before the rename a
+    whole one, under the temporary name. The next backup to that name failed on it ('file is not a database';
+    from PostgreSQL 'UNIQUE constraint failed: devices.id', leaving -wal and -shm files); now it writes its own
+    copy and never touches the leftover (which may be another backup's, running now)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    with Store.open(db) as st:
+        st.add_traverse(ROW, device="sim://?seed=5")
+    out = tmp_path / "copy.db"
+    leftover = tmp_path / ".copy.db.part"  # the name every backup to copy.db used
+    if left == "whole":
+        assert CliRunner().invoke(app, ["backup", str(out), "--db", str(db)]).exit_code == 0
+        out.rename(leftover)
+    else:
+        leftover.write_bytes(b"SQLite format 3\x00" + bytes(84))  # the header, then nothing: half a copy
+    before = leftover.read_bytes()
+    r = CliRunner().invoke(app, ["backup", str(out), "--db", str(db)])
+    assert r.exit_code == 0, r.output
+    assert "copied 1 traverse(s)" in r.stdout
+    with Store.open(out) as copy:
+        assert copy.integrity_check() == "ok" and len(copy.traverses()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".copy")) == [".copy.db.part"]
+    assert leftover.read_bytes() == before
 
 
 def _calibration_and_rows():

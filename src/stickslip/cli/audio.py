@@ -5,13 +5,14 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import typer
 
 from . import app
-from ._common import console, device_url, err_console, fail, print_json, say, user_errors, warn
+from ._common import console, db_option, device_url, err_console, fail, open_store, print_json, say, user_errors, warn
 from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
@@ -507,6 +508,9 @@ def record(
     after: float = typer.Option(1.0, "--after", help="Simulator: seconds against the stop."),
     tune_out: Path = typer.Option(None, "--tune", help="Also tune from the recording and write the tuning here."),
     json_out: bool = typer.Option(False, "--json", help="Print the label (and tuning) as JSON."),
+    db: str | None = db_option(
+        " A real controller's joint is kept there as uncertain (between where it was and its stop) until referenced."
+    ),
 ) -> None:
     """Record a joint stepping into its end stop, labelled, for 'stickslip tune'.
 
@@ -555,21 +559,39 @@ def record(
                 if (serial_port is None) != (sample_rate is None):
                     fail("--serial and --sample-rate go together (the sensor's samples carry no clock)")
                 _check_sample_rate(sample_rate)
-                samples, rate, stop_at, how = _record_real(
-                    ctrl,
-                    joint,
-                    sign_label,
-                    steps,
-                    stop_at_step,
-                    key,
-                    audio_input,
-                    serial_port,
-                    int(round(sample_rate)) if sample_rate is not None else None,
-                )
+                with _driving(db, device_url(device), joint, sign_label):
+                    samples, rate, stop_at, how = _record_real(
+                        ctrl,
+                        joint,
+                        sign_label,
+                        steps,
+                        stop_at_step,
+                        key,
+                        audio_input,
+                        serial_port,
+                        int(round(sample_rate)) if sample_rate is not None else None,
+                    )
             hz = float(ctrl.frequency(joint))  # the rate commanded while recording
         finally:
             ctrl.close()
     _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out, hz)
+
+
+@contextmanager
+def _driving(db: str | None, device: str, joint: int, sign_label: str) -> Iterator[None]:
+    """Under ``device``'s lock, with ``joint`` kept uncertain towards the stop ``record`` drives it into.
+
+    ``record`` stepped a real controller's joint into its stop with no lock (beside a
+    ``move`` in another terminal, or under ``stickslip serve``) and left the kept position
+    where it was before: the next ``move`` planned from a place the joint had left.
+    """
+    from ..procedures.move import DeviceBusy, driven_towards_stop
+
+    stop = "upper" if sign_label == "+" else "lower"
+    why = f"'stickslip record' drove it towards its {stop} stop"
+    with open_store(db) as store, user_errors(DeviceBusy):
+        with driven_towards_stop(store, device, joint, 1 if sign_label == "+" else -1, why):
+            yield
 
 
 def _writable(path: Path, what: str) -> None:

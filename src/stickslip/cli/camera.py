@@ -33,11 +33,12 @@ from ._common import (
 from ._output import styled
 
 if TYPE_CHECKING:
-    from collections.abc import Callable
+    from collections.abc import Callable, Sequence
 
     from ..devices.base import Controller
     from ..kinematics import Pose
     from ..procedures.camera import CameraCalibrationResult
+    from ..storage import Store
     from ..vision.camera import Camera
     from ..vision.locate import Located
 
@@ -265,6 +266,7 @@ def calibrate_cmd(
         with device_lock(store, key):
             with user_errors():
                 state = load_state(store, key)
+                _journal_camera_calibration(store, key, order if at is not None else (*order, auto_joint))
 
             def measure(dev: Controller, cam: Camera, progress: Callable[[int, int], None]) -> CameraCalibrationResult:
                 return calibrate_camera(
@@ -350,6 +352,23 @@ def _joint_order(joints: str) -> list[int]:
     except ValueError:
         fail(f"--joints {joints!r}: write the joints to measure, e.g. 3,1 (each of 1, 2, 3 once)")
     return order
+
+
+def _journal_camera_calibration(store: Store, key: str, joints: Sequence[int]) -> None:
+    """Keep ``joints`` uncertain over their range while the calibration steps them, saved before the first step.
+
+    Its end is written after the measurement (each joint where the camera saw it end);
+    a device error, Ctrl-C or a kill before that left the positions from before it kept,
+    as if the joints had not moved (some hundreds of steps out and back, the tip found
+    by stepping ``--auto-joint``).
+    """
+    from ..devices.positions import load_state, save_state
+
+    journal = load_state(store, key)
+    for j in sorted(set(joints)):
+        spec = journal.spec(j)
+        journal.mark_uncertain(j, spec.lower, spec.upper, "a camera calibration was interrupted")
+    save_state(store, journal)
 
 
 def _with_device_and_camera(

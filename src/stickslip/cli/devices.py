@@ -42,6 +42,7 @@ from ._common import (
     print_json,
     say,
     user_errors,
+    warn,
     warn_later,
 )
 from .camera import CAMERA_CALIBRATION_HELP, CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
@@ -499,6 +500,8 @@ def _print_where(result: WhereResult) -> None:
     state, info = result.state, result.info
     answers = info["model"] if info else None
     say(f"{result.device}" + (f" (answers: {answers})" if answers else ""))
+    if result.busy:
+        warn(f"not asked whether it answers: {result.busy}")
     line = _info_line(info) if info else None
     if line:
         say(f"  {line}")

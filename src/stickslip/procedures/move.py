@@ -921,3 +921,24 @@ def _send_raw(dev: Controller, joint: int, steps: int, burst: int) -> MoveOutcom
         out.sent += n
         out.bursts.append(n)
     return out
+
+
+@contextmanager
+def driven_towards_stop(
+    store: MoveStore, device: str, joint: int, sign: int, why: str, joints: JointSet | None = None
+) -> Iterator[DeviceState]:
+    """Hold ``device``'s lock while the caller steps ``joint`` towards its end stop (``sign`` +1: upper) unplanned.
+
+    What ``stickslip record`` needs on a real controller: the joint is driven by an unknown
+    amount (into its stop, or short of it), so it is kept *uncertain* from where it may have
+    been to that stop, saved before the caller sends a step (``why`` is what ``where`` says),
+    as :func:`step_joint` does; :class:`DeviceBusy` while another process drives the device.
+    """
+    key = device_key(device)
+    with device_lock(store, key):
+        state = load_state(store, key, joints)
+        spec = state.spec(joint)
+        lo, hi = state.bounds(joint)
+        state.mark_uncertain(joint, *((lo, spec.upper) if sign > 0 else (spec.lower, hi)), why)
+        save_state(store, state)  # write-ahead: uncertain before anything is sent
+        yield state

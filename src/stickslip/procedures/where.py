@@ -16,8 +16,9 @@ from typing import Any, Protocol
 from ..devices.base import DeviceError, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..joints import JointSet
+from ..processes import holder_running, process_gone
 from ..units import format_position
-from .move import LockStore, PoseUpdate, device_lock, track_fields
+from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, track_fields
 
 __all__ = ["DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "probe_device", "state_rows", "where"]
 
@@ -95,12 +96,15 @@ class WhereResult:
         What was recorded (``"q3"``, ``"theta"``, ...).
     info : dict or None
         What the device said about itself (``model`` and more), ``None`` if it was not asked.
+    busy : str or None
+        Why the device was not asked: another process drives it (the :class:`~.move.DeviceBusy` message).
     """
 
     device: str
     state: DeviceState
     changed: tuple[str, ...] = ()
     info: dict[str, Any] | None = field(default=None)
+    busy: str | None = None
 
     def as_dict(self) -> dict[str, object]:
         """The JSON shape of ``stickslip where --json``."""
@@ -108,7 +112,7 @@ class WhereResult:
         answers = self.info["model"] if self.info else None
         return {
             "device": self.device, "joints": state_rows(s), "theta": s.theta, "psi": s.psi, "answers": answers,
-            "info": self.info,
+            "info": self.info, "busy": self.busy,
         }
 
 
@@ -130,8 +134,10 @@ def where(
     A reference puts a joint at a known point (an end stop, a measured position): its
     source becomes ``"set"`` and an interrupted move's uncertainty is cleared. Without
     anything recorded and unless ``offline``, the device is asked whether it answers
-    (:func:`probe_device`; :class:`DeviceUnreachable`). ``unlock`` releases a lock left by
-    a process that is gone. :class:`ReferenceRefused` names a reference that cannot be kept.
+    (:func:`probe_device`; :class:`DeviceUnreachable`), unless another process holds its
+    lock (``busy`` says who). ``unlock`` releases a lock left by
+    a process that is gone (:class:`~.move.DeviceBusy` if it is running on this host).
+    :class:`ReferenceRefused` names a reference that cannot be kept.
     ``joints``: the arm's joints (a rig file's arm: :meth:`stickslip.rig.Arm.joint_specs`),
     the MM3A's by default; ``key`` where they are kept (:meth:`stickslip.rig.Rig.state_key`:
     two arms on one controller), the device's key by default. ``hold_lock``: record under the
@@ -141,6 +147,7 @@ def where(
     lock = device_key(device)
     key = key or lock
     if unlock:
+        refuse_unlocking_a_running_holder(store.get_state(lock, "lock"), lock)
         store.set_state(lock, "lock", "null")
     records = bool(references) or pose != PoseUpdate()
     held: AbstractContextManager[object] = device_lock(store, lock) if hold_lock and records else nullcontext()
@@ -155,5 +162,37 @@ def where(
             changed.append(f"q{joint}")
         if changed:
             save_state(store, state)
-    info = None if (changed or offline) else probe(device)
-    return WhereResult(key, state, tuple(changed), info)
+    info, busy = None, None
+    if not (changed or offline):
+        busy = _driven_by(store.get_state(lock, "lock"), lock)
+        if busy is None:  # a probe beside a move would talk on the link the move is driving
+            info = probe(device)
+    return WhereResult(key, state, tuple(changed), info, busy)
+
+
+def _driven_by(holder: object, lock: str) -> str | None:
+    """Who holds ``lock`` (read, not taken: a read-only database still shows), ``None`` if nobody or a process gone."""
+    if not isinstance(holder, dict) or process_gone(holder):
+        return None
+    return (
+        f"{lock} is being driven by another stickslip process (pid {holder.get('pid')} on {holder.get('host')} "
+        f"since {holder.get('since')})"
+    )
+
+
+def refuse_unlocking_a_running_holder(holder: object, device: str) -> None:
+    """:class:`~.move.DeviceBusy` if the lock's ``holder`` is a process running on this host.
+
+    ``--unlock`` is for a lock whose process is gone; one that runs here (a ``move``, or
+    ``stickslip serve`` holding the device) keeps it: unlocking it let a second process
+    drive the device while the first still did. A holder that is gone is taken over
+    without ``--unlock``; one on another host, or not known to run (its number reused
+    after a restart: :func:`~stickslip.processes.holder_running`), is the user's to release.
+    """
+    if not holder_running(holder) or not isinstance(holder, dict):
+        return
+    raise DeviceBusy(
+        f"{device} is locked by pid {holder.get('pid')} on this computer ({holder.get('host')}, since "
+        f"{holder.get('since')}), which is still running: --unlock is for a lock whose process is gone; "
+        "stop that process (Ctrl-C in its terminal), and its lock goes with it"
+    )

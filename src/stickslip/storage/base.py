@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import secrets
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from itertools import islice
@@ -292,13 +293,13 @@ class _Base:
         if not dest.parent.is_dir():  # else SQLite's 'unable to open database file', naming the .part file
             raise FileNotFoundError(f"cannot write the backup {dest}: its folder {dest.parent} does not exist; "
                                     "nothing was written")
-        tmp = dest.with_name(f".{dest.name}.part")
+        tmp = _part_file(dest)
         try:
             if not self._con.online_copy(tmp):
                 self._copy_rows_into(tmp)
             os.replace(tmp, dest)
         except BaseException:
-            tmp.unlink(missing_ok=True)
+            _remove_part(tmp)
             raise
         return dest
 
@@ -313,6 +314,23 @@ class _Base:
                 rows = self._con.stream(f"SELECT {names} FROM {table}", (), 5000)
                 while chunk := list(islice(rows, 5000)):
                     out.executemany(f"INSERT INTO {table} ({names}) VALUES ({marks})", [tuple(r) for r in chunk])
+
+
+def _part_file(dest: Path) -> Path:
+    """A name beside ``dest`` for this backup's copy alone, not yet a file.
+
+    Not a fixed ``.NAME.part``: one left by a backup killed before its rename (SIGKILL, a
+    power cut) made the next backup to ``dest`` fail (``file is not a database``, or a
+    copy of a shared database ``UNIQUE constraint failed``), and two backups to one name at
+    once wrote into the same file.
+    """
+    return dest.with_name(f".{dest.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+
+
+def _remove_part(tmp: Path) -> None:
+    """A failed backup's copy and what SQLite made beside it (``-wal``, ``-shm``, ``-journal``)."""
+    for p in (tmp, *(tmp.with_name(tmp.name + end) for end in ("-wal", "-shm", "-journal"))):
+        p.unlink(missing_ok=True)
 
 
 _COPY_ORDER = ("devices", "sessions", "traverses", "calibrations", "calibration_traverses", "device_state")

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import json
-import os
 from typing import TYPE_CHECKING, Any
 
 from ..devices.base import redact_text, redact_url
+from ..processes import process_gone
 from ..records import loads_json
 from .base import _Base
 from .schema import StoreError, _now
@@ -75,8 +75,8 @@ class StateStore(_Base):
         On PostgreSQL it is also a session-level advisory lock, which the server frees
         when the holder's connection ends: a lock left by a process that died, on any
         host, is taken over. On SQLite a lock whose holder is a process on this host
-        that no longer exists (POSIX only; elsewhere a lock is released only by its
-        holder, or by ``where --unlock``) is taken over.
+        that no longer exists (:func:`~stickslip.processes.process_gone`, POSIX only;
+        elsewhere a lock is released only by its holder, or by ``where --unlock``) is taken over.
         """
         name = f"device {redact_url(device)}"
         claimed: bool | None = None
@@ -121,17 +121,6 @@ class StateStore(_Base):
 
 def _alive(holder: dict[str, Any]) -> bool:
     """Whether a lock holder may still be running (unknown counts as running)."""
-    import socket
-
-    pid = holder.get("pid")
-    if not isinstance(pid, int) or holder.get("host") != socket.gethostname() or os.name != "posix":
-        return True
-    try:
-        os.kill(pid, 0)  # POSIX: signal 0 only checks that the process exists
-    except ProcessLookupError:
-        return False
-    except OSError:
-        return True
-    return True
+    return not process_gone(holder)
 
 
