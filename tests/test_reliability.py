@@ -733,11 +733,14 @@ def test_unlock_refuses_a_holder_still_running_on_this_host(tmp_path, cal_path, 
         assert st.acquire_lock("faulty://arm", running_here) is None
     one_error(run("where", "-d", "faulty://arm", "--db", db, "--unlock", "--offline"),
               f"pid {running_here['pid']} on this computer", "still running")  # fmt: skip
+    move = ("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um")  # fmt: skip
     one_error(
-        run("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
-            "-j", 3, "--by", "1um"),  # fmt: skip
+        run(*move),
         "being driven by another stickslip process", f"pid {running_here['pid']}",
+        "still running on this computer: wait for it to finish, or end it",
     )
+    assert "--unlock" not in run(*move).stderr  # the way out --unlock refuses is not advised
     with Store.open(db) as st:
         assert st.get_state("faulty://arm", "lock") == running_here
 

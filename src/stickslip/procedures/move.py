@@ -58,6 +58,7 @@ from ..motion.tracking import (
     scaled_calibration,
     track_for,
 )
+from ..processes import holder_running
 from ..rig.envelope import EnvelopeViolation, SigmaGrowth
 from ..rig.guard import Guard
 from ..units import format_position, position_display_unit
@@ -161,10 +162,14 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     me: dict[str, Any] = {"pid": pid, "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
     holder = store.acquire_lock(device, me)
     if holder is not None:
+        way_out = (  # --unlock refuses a holder known to run here (stickslip.processes): do not advise it
+            "it is still running on this computer: wait for it to finish, or end it" if holder_running(holder)
+            else f"wait for it to finish, or if that process is gone, release the lock with "
+                 f"`stickslip where -d {device} --unlock`"
+        )
         raise DeviceBusy(
             f"{device} is being driven by another stickslip process (pid {holder.get('pid')} on "
-            f"{holder.get('host')} since {holder.get('since')}); wait for it to finish, or if that "
-            f"process is gone, release the lock with `stickslip where -d {device} --unlock`"
+            f"{holder.get('host')} since {holder.get('since')}); {way_out}"
         )
     try:
         yield me
