@@ -114,6 +114,20 @@ def test_plots_return_axes_and_show_nothing() -> None:
         assert all(plt.figure(n) is not ax.figure for n in plt.get_fignums())
 
 
+def test_a_plot_of_a_joint_the_calibration_lacks_is_refused_not_drawn_empty() -> None:
+    """cal.plot(1) of a calibration of joints 2 and 3 (the paper's), or plot("3"), was an empty figure titled as if
+    it showed the joint; now the error use_calibration gives."""
+    pytest.importorskip("matplotlib")
+    full = _cal()
+    cal = dataclasses.replace(full, models={k: m for k, m in full.models.items() if k[0] != 1})
+    assert cal.joints == [2, 3]
+    for joint in (1, "3", 3.0, True):
+        with pytest.raises(ValueError, match=r"is not in this calibration \(it has joints \[2, 3\]\)"):
+            cal.plot(joint)  # type: ignore[arg-type]
+    assert len(cal.plot(2).lines) == 4  # each direction at q3 = 0 and 12 mm
+    assert len(cal.plot(3).lines) == 6  # each direction at three tilts
+
+
 @pytest.mark.slow
 def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """docs/bluesky.md's example runs as written (docs/style.md: examples run)."""
