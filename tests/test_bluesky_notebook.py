@@ -136,12 +136,19 @@ def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[s
     from pathlib import Path
 
     page = (Path(__file__).resolve().parents[1] / "docs" / "bluesky.md").read_text(encoding="utf-8")
-    (code,) = re.findall(r"```python\n(.*?)```", page, re.S)
+    example, tip_block = re.findall(r"```python\n(.*?)```", page, re.S)
     ns: dict[str, object] = {"__name__": "docs_bluesky"}
-    exec(compile(code, "docs/bluesky.md", "exec"), ns)
+    exec(compile(example, "docs/bluesky.md", "exec"), ns)
     out = capsys.readouterr().out
     assert "Calibration(day=" in out
     sim = ns["sim"]
     assert isinstance(sim, SimulatedMM3A)
     assert abs(sim.position(3) - 1.5e-3) < 15e-6  # the calibrated model on the simulator: within 1 %
     assert abs(sim.position(2) + math.pi / 3) < 0.01 * (math.pi / 6)
+    q3 = re.search(r"q3: ([0-9.]+) µm \(dead-reckoned\), truth ([0-9.]+) µm", out)
+    assert q3 and abs(float(q3.group(1)) - 1500) < 1.0 and abs(float(q3.group(2)) - 1500) < 15  # the line as printed
+    with pytest.warns(UserWarning, match="joint 1 is not in this calibration"):  # the page says a tip move warns so
+        exec(compile(tip_block, "docs/bluesky.md", "exec"), ns)
+    tip = re.search(r"tip \(µm\): ([-0-9.]+), ([-0-9.]+), ([-0-9.]+)", capsys.readouterr().out)
+    assert tip and abs(float(tip.group(2)) - 1000) < 1.0  # y moved to 1 mm (the readback: within a step)
+    assert abs(float(tip.group(3)) - 11250) < 2.0  # rel_scan put z back where it was (q2 = -60 deg, q3 = 1.5 mm)
