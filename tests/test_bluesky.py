@@ -487,3 +487,21 @@ def test_a_bluesky_move_plans_with_the_step_scale_observe_taught(RE: Any, sim: S
     r = CliRunner().invoke(app, ["move", "-d", sim.info.url, "-c", cal_path, "--joint", "3", "--to", to, "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["steps_signed"] == steps
+
+
+def test_an_event_shows_the_kept_position_after_another_process_moved_the_joint(RE: Any, sim: SimulatedMM3A) -> None:
+    """bp.count after `stickslip where --set` (another process) records the new position for the joint and the tip;
+    before, read() gave the signals as last set here (q3 0 µm, tip x 21 mm: silently stale in the documents)."""
+    from stickslip.devices.positions import save_state
+
+    with init_devices():
+        arm = StickSlipManipulator(sim, true_calibration(sim), name="arm")
+    docs = collect(RE)
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+        state.set_position(3, 5e-3)
+        save_state(store, state)
+    RE(bp.count([arm]))
+    (event,) = [d["data"] for name, d in docs if name == "event"]
+    assert event["arm-q3"] == 5e-3
+    assert event["arm-tip-x"] == pytest.approx(0.021 + 5e-3, abs=1e-12)  # outstretched: the tip along x

@@ -161,3 +161,19 @@ def test_a_garbage_motion_record_fails_the_move_with_one_line(motion: Any) -> No
 
     with pytest.raises(MoveError, match="not a stickslip server"):
         asyncio.run(move())
+
+
+def test_a_read_before_any_move_gives_the_servers_position_not_nan() -> None:
+    """bp.count of a served axis before any move recorded NaN (the readback was read in only by set and locate)."""
+    import asyncio
+
+    where = {"joints": [_row(1), _row(2), _row(3, q=2e-3)]}
+    axis = ServedAxis(_answering({"/api/where": where}), 3, name="q3")
+
+    async def read() -> float:
+        await axis.connect()
+        return float((await axis.read())["q3"]["value"])
+
+    assert asyncio.run(read()) == 2e-3
+    where["joints"][2]["q"] = 3e-3  # the page moved it
+    assert asyncio.run(read()) == 3e-3

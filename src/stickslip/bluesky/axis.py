@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
-from bluesky.protocols import Checkable, Locatable, Location, Stoppable
+from bluesky.protocols import Checkable, Locatable, Location, Reading, Stoppable
 from ophyd_async.core import (
     Array1D,
     Device,
@@ -437,6 +437,11 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         if math.isnan(await self.setpoint.get_value()):
             self._set_setpoint(float(state.positions[self.joint]))
         return state
+
+    async def read(self) -> dict[str, Reading[Any]]:
+        """The signals, the kept position read in first (the CLI may have moved the joint): no stale event."""
+        await self.refresh()
+        return await super().read()
 
     async def locate(self) -> Location[float]:
         """Setpoint (the last target) and readback (the dead-reckoned position), m or rad."""

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import asyncio
 import math
+from typing import Any
 
-from bluesky.protocols import Locatable, Location, Stoppable
+from bluesky.protocols import Locatable, Location, Reading, Stoppable
 from ophyd_async.core import AsyncStatus, StandardReadable, soft_signal_r_and_setter
 from ophyd_async.core import StandardReadableFormat as Format
 
@@ -79,6 +80,11 @@ class ServedAxis(StandardReadable, Locatable[float], Stoppable):
         if math.isnan(await self.setpoint.get_value()):
             self._set_setpoint(q)
         return q
+
+    async def read(self) -> dict[str, Reading[Any]]:
+        """The signals, the kept position read in first (the page may have moved it): no stale event."""
+        await self.refresh()
+        return await super().read()
 
     async def locate(self) -> Location[float]:
         """Setpoint (the last target) and readback (the server's kept position), m or rad."""

@@ -27,9 +27,10 @@ import threading
 import warnings
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from bluesky.protocols import Checkable, Locatable, Location, Stoppable
+from bluesky.protocols import Checkable, Locatable, Location, Reading, Stoppable
 from ophyd_async.core import (
     StandardReadable,
     WatchableAsyncStatus,
@@ -255,6 +256,11 @@ class TipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[float]):
         if math.isnan(await self.setpoint.get_value()):
             self._set_setpoint(self._driver.base(state)[self.index])
         return state
+
+    async def read(self) -> dict[str, Reading[Any]]:
+        """The signals, the kept position read in first (another process may have moved a joint): no stale event."""
+        await self.refresh()
+        return await super().read()
 
     async def locate(self) -> Location[float]:
         """Setpoint (the last target's coordinate) and readback (of the dead-reckoned joints), m."""
