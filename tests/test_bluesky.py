@@ -505,3 +505,19 @@ def test_an_event_shows_the_kept_position_after_another_process_moved_the_joint(
     (event,) = [d["data"] for name, d in docs if name == "event"]
     assert event["arm-q3"] == 5e-3
     assert event["arm-tip-x"] == pytest.approx(0.021 + 5e-3, abs=1e-12)  # outstretched: the tip along x
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"burst_steps": True}, "burst_steps must be an integer"),  # was taken as 1: the day measured in 1-step bursts
+    ({"burst_steps": 0}, "burst_steps must be an integer"),
+    ({"poses": []}, "poses is empty"),  # was a run opened, nothing measured, then "no traverses to calibrate from"
+])
+def test_calibration_day_refuses_bad_arguments_before_a_step_or_a_run(
+    RE: Any, sim: SimulatedMM3A, kwargs: dict[str, Any], message: str
+) -> None:
+    with init_devices():
+        arm = StickSlipManipulator(sim, name="arm")
+    docs = collect(RE)
+    with pytest.raises(ValueError, match=message):
+        RE(calibration_day(arm, **{"poses": [(3, {"q2": -math.pi / 2})], "detector": "oracle", **kwargs}))
+    assert sim.steps_simulated == 0 and not docs

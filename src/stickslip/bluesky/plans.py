@@ -166,6 +166,10 @@ def calibration_day(
     plan = [(int(j), dict(p)) for j, p in poses]
     for j, _ in plan:
         kin.joint_spec(j)
+    if not plan:
+        raise ValueError("poses is empty: give (joint, pose) pairs to traverse (default: PAPER_POSES)")
+    if isinstance(burst_steps, bool) or not isinstance(burst_steps, int) or not 1 <= burst_steps <= 1_000_000:
+        raise ValueError(f"burst_steps must be an integer number of steps in 1..1000000, got {burst_steps!r}")
     ctrl: Controller = yield from _call(link, link.controller)
     if not isinstance(ctrl, PoseSettable):
         raise ValueError(
