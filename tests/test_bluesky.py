@@ -162,6 +162,21 @@ def test_a_lock_held_by_another_process_fails_the_move_naming_it(RE: Any, sim: S
     assert sim.steps_simulated == before
 
 
+def test_a_lock_held_by_this_process_says_so_not_another_process_to_unlock(RE: Any, sim: SimulatedMM3A) -> None:
+    """Two axes on one URL, each with its own link, in one notebook: the second was told 'another stickslip process
+    (pid <its own>) ... if that process is gone, release the lock with --unlock', an unlock of a live move."""
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3")
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "since": "2026-11-22T10:00:00+00:00"}
+    with Store.open() as store:
+        assert store.acquire_lock("sim://", me) is None
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 1e-3))
+    text = str(e.value.__cause__)
+    assert "by this same process" in text and "--unlock" not in text and "another stickslip process" not in text
+    assert sim.steps_simulated == 0
+
+
 def test_no_calibration_refuses_to_move(RE: Any, sim: SimulatedMM3A) -> None:
     with init_devices():
         axis = StickSlipAxis(sim, 3, None, name="q3")

@@ -160,6 +160,12 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     pid = os.getpid()
     me: dict[str, Any] = {"pid": pid, "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
     holder = store.acquire_lock(device, me)
+    if holder is not None and holder.get("pid") == pid and holder.get("host") == me["host"]:
+        raise DeviceBusy(
+            f"{device} is being driven by this same process, through another link to it (since "
+            f"{holder.get('since')}; two StickSlipAxis on one URL?): give the arm's axes one DeviceLink "
+            f"(StickSlipManipulator does); do not unlock it while that move runs"
+        )
     if holder is not None:
         raise DeviceBusy(
             f"{device} is being driven by another stickslip process (pid {holder.get('pid')} on "
