@@ -152,3 +152,17 @@ def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[s
     tip = re.search(r"tip \(µm\): ([-0-9.]+), ([-0-9.]+), ([-0-9.]+)", capsys.readouterr().out)
     assert tip and abs(float(tip.group(2)) - 1000) < 1.0  # y moved to 1 mm (the readback: within a step)
     assert abs(float(tip.group(3)) - 11250) < 2.0  # rel_scan put z back where it was (q2 = -60 deg, q3 = 1.5 mm)
+
+
+@pytest.mark.parametrize("rows", [None, 3, "day1.csv", [1, 2], [{"joint": 3}]])
+def test_notebook_tables_refuse_what_is_not_traverses_at_once(rows: object) -> None:
+    """TraverseTable([1, 2]) was made, then failed in its repr with "'int' object has no attribute 'joint'"."""
+    for make in (TraverseTable, to_pandas):
+        with pytest.raises(TypeError, match="Traverse"):
+            make(rows)  # type: ignore[arg-type]
+
+
+def test_from_pandas_refuses_what_is_not_a_frame() -> None:
+    with pytest.raises(TypeError, match="takes a pandas DataFrame, got list"):
+        from_pandas([1, 2])
+    assert TraverseTable() == [] and TraverseTable(_rows()) == _rows()
