@@ -177,6 +177,15 @@ def test_a_lock_held_by_this_process_says_so_not_another_process_to_unlock(RE: A
     assert sim.steps_simulated == 0
 
 
+@pytest.mark.parametrize("url", ["/dev/ttyUSB0", "nonsense", "COM3", "sim:"])
+def test_a_url_without_a_scheme_is_refused_when_the_device_is_made(url: str) -> None:
+    """StickSlipAxis("/dev/ttyUSB0", ...) was made with the key sim:// (repr device='sim://'): its reads and
+    describe_move before a connect took the simulator's kept positions; now refused as open_device refuses it."""
+    for make in (lambda: StickSlipAxis(url, 3, None), lambda: StickSlipManipulator(url)):
+        with pytest.raises(ValueError, match="has no scheme|lacks the //"):
+            make()
+
+
 def test_no_calibration_refuses_to_move(RE: Any, sim: SimulatedMM3A) -> None:
     with init_devices():
         axis = StickSlipAxis(sim, 3, None, name="q3")

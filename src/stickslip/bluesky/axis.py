@@ -53,7 +53,16 @@ from ophyd_async.core import StandardReadableFormat as Format
 
 from .. import kinematics as kin
 from ..calibration import Calibration
-from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, VirtualClock, device_key, open_device
+from ..devices.base import (
+    Controller,
+    DeviceError,
+    DeviceInfo,
+    PoseSettable,
+    VirtualClock,
+    check_device_url,
+    device_key,
+    open_device,
+)
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.planning import Planner
 from ..procedures.closed_loop import CameraLoop, move_seen
@@ -119,6 +128,7 @@ class DeviceLink:
 
     def __init__(self, device: str | Controller, db: str | os.PathLike[str] | None = None):
         if isinstance(device, str):
+            check_device_url(device)  # a URL without a scheme is never the simulator (its key was sim://)
             self.url = device
             self._ctrl: Controller | None = None
         else:
