@@ -545,3 +545,24 @@ def test_calibration_day_refuses_bad_arguments_before_a_step_or_a_run(
     with pytest.raises(ValueError, match=message):
         RE(calibration_day(arm, **{"poses": [(3, {"q2": -math.pi / 2})], "detector": "oracle", **kwargs}))
     assert sim.steps_simulated == 0 and not docs
+
+
+def test_a_pause_during_the_calibration_day_aborts_it_instead_of_measuring_again(RE: Any, sim: SimulatedMM3A) -> None:
+    """A pause (RE.request_pause, Ctrl-C) after the first traverse's event left the plan paused and resumable: resume
+    replayed the messages since the run opened (traverses measured and kept twice) and the plan got None for its
+    result (TypeError). Now the pause aborts: no paused state to resume, and no traverse kept twice."""
+    from bluesky.utils import RunEngineInterrupted
+
+    with init_devices():
+        arm = StickSlipManipulator(sim, name="arm")
+    first = threading.Event()
+    RE.subscribe(lambda name, doc: first.set() if name == "event" else None)
+    pauser = threading.Thread(target=lambda: (first.wait(60), RE.request_pause(defer=False)))
+    pauser.start()
+    with pytest.raises(RunEngineInterrupted):
+        RE(calibration_day(arm, detector="oracle"))
+    pauser.join()
+    assert RE.state == "idle"  # aborted, not paused
+    with Store.open() as store:
+        rows = [(t.joint, t.direction, t.q2, t.q3, t.theta) for t in store.traverses("sim://")]
+    assert 1 <= len(rows) < 14 and len(set(rows)) == len(rows)

@@ -160,6 +160,9 @@ def calibration_day(
     Events: one per traverse in ``primary`` (``traverse-steps``, ``traverse-gamma`` in m
     or rad, joint, direction, start, end, pose); one in ``calibration``
     (``calibration-json``, the calibration file's JSON).
+
+    The plan cannot be resumed: a pause (Ctrl-C) aborts it, the traverses measured so far
+    kept; run it again for the day.
     """
     link = manipulator.link
     day = check_day_label(day) if day is not None else today_label()
@@ -182,6 +185,9 @@ def calibration_day(
     made: list[Calibration] = []
 
     def inner() -> Generator[Msg, Any, None]:
+        # a pause aborts (a traverse moved the arm and is kept: replaying it on resume measured it twice and
+        # handed the plan None for its result)
+        yield from bps.clear_checkpoint()
         rows: list[Traverse] = []
         ids: list[int] = []
         for joint, given in plan:
