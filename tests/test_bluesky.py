@@ -162,6 +162,30 @@ def test_a_lock_held_by_another_process_fails_the_move_naming_it(RE: Any, sim: S
     assert sim.steps_simulated == before
 
 
+def test_a_lock_held_by_this_process_says_so_not_another_process_to_unlock(RE: Any, sim: SimulatedMM3A) -> None:
+    """Two axes on one URL, each with its own link, in one notebook: the second was told 'another stickslip process
+    (pid <its own>) ... if that process is gone, release the lock with --unlock', an unlock of a live move."""
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, true_calibration(sim), name="q3")
+    me = {"pid": os.getpid(), "host": socket.gethostname(), "since": "2026-11-22T10:00:00+00:00"}
+    with Store.open() as store:
+        assert store.acquire_lock("sim://", me) is None
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 1e-3))
+    text = str(e.value.__cause__)
+    assert "by this same process" in text and "--unlock" not in text and "another stickslip process" not in text
+    assert sim.steps_simulated == 0
+
+
+@pytest.mark.parametrize("url", ["/dev/ttyUSB0", "nonsense", "COM3", "sim:"])
+def test_a_url_without_a_scheme_is_refused_when_the_device_is_made(url: str) -> None:
+    """StickSlipAxis("/dev/ttyUSB0", ...) was made with the key sim:// (repr device='sim://'): its reads and
+    describe_move before a connect took the simulator's kept positions; now refused as open_device refuses it."""
+    for make in (lambda: StickSlipAxis(url, 3, None), lambda: StickSlipManipulator(url)):
+        with pytest.raises(ValueError, match="has no scheme|lacks the //"):
+            make()
+
+
 def test_no_calibration_refuses_to_move(RE: Any, sim: SimulatedMM3A) -> None:
     with init_devices():
         axis = StickSlipAxis(sim, 3, None, name="q3")
@@ -487,3 +511,58 @@ def test_a_bluesky_move_plans_with_the_step_scale_observe_taught(RE: Any, sim: S
     r = CliRunner().invoke(app, ["move", "-d", sim.info.url, "-c", cal_path, "--joint", "3", "--to", to, "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["steps_signed"] == steps
+
+
+def test_an_event_shows_the_kept_position_after_another_process_moved_the_joint(RE: Any, sim: SimulatedMM3A) -> None:
+    """bp.count after `stickslip where --set` (another process) records the new position for the joint and the tip;
+    before, read() gave the signals as last set here (q3 0 µm, tip x 21 mm: silently stale in the documents)."""
+    from stickslip.devices.positions import save_state
+
+    with init_devices():
+        arm = StickSlipManipulator(sim, true_calibration(sim), name="arm")
+    docs = collect(RE)
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+        state.set_position(3, 5e-3)
+        save_state(store, state)
+    RE(bp.count([arm]))
+    (event,) = [d["data"] for name, d in docs if name == "event"]
+    assert event["arm-q3"] == 5e-3
+    assert event["arm-tip-x"] == pytest.approx(0.021 + 5e-3, abs=1e-12)  # outstretched: the tip along x
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [
+    ({"burst_steps": True}, "burst_steps must be an integer"),  # was taken as 1: the day measured in 1-step bursts
+    ({"burst_steps": 0}, "burst_steps must be an integer"),
+    ({"poses": []}, "poses is empty"),  # was a run opened, nothing measured, then "no traverses to calibrate from"
+])
+def test_calibration_day_refuses_bad_arguments_before_a_step_or_a_run(
+    RE: Any, sim: SimulatedMM3A, kwargs: dict[str, Any], message: str
+) -> None:
+    with init_devices():
+        arm = StickSlipManipulator(sim, name="arm")
+    docs = collect(RE)
+    with pytest.raises(ValueError, match=message):
+        RE(calibration_day(arm, **{"poses": [(3, {"q2": -math.pi / 2})], "detector": "oracle", **kwargs}))
+    assert sim.steps_simulated == 0 and not docs
+
+
+def test_a_pause_during_the_calibration_day_aborts_it_instead_of_measuring_again(RE: Any, sim: SimulatedMM3A) -> None:
+    """A pause (RE.request_pause, Ctrl-C) after the first traverse's event left the plan paused and resumable: resume
+    replayed the messages since the run opened (traverses measured and kept twice) and the plan got None for its
+    result (TypeError). Now the pause aborts: no paused state to resume, and no traverse kept twice."""
+    from bluesky.utils import RunEngineInterrupted
+
+    with init_devices():
+        arm = StickSlipManipulator(sim, name="arm")
+    first = threading.Event()
+    RE.subscribe(lambda name, doc: first.set() if name == "event" else None)
+    pauser = threading.Thread(target=lambda: (first.wait(60), RE.request_pause(defer=False)))
+    pauser.start()
+    with pytest.raises(RunEngineInterrupted):
+        RE(calibration_day(arm, detector="oracle"))
+    pauser.join()
+    assert RE.state == "idle"  # aborted, not paused
+    with Store.open() as store:
+        rows = [(t.joint, t.direction, t.q2, t.q3, t.theta) for t in store.traverses("sim://")]
+    assert 1 <= len(rows) < 14 and len(set(rows)) == len(rows)

@@ -114,6 +114,20 @@ def test_plots_return_axes_and_show_nothing() -> None:
         assert all(plt.figure(n) is not ax.figure for n in plt.get_fignums())
 
 
+def test_a_plot_of_a_joint_the_calibration_lacks_is_refused_not_drawn_empty() -> None:
+    """cal.plot(1) of a calibration of joints 2 and 3 (the paper's), or plot("3"), was an empty figure titled as if
+    it showed the joint; now the error use_calibration gives."""
+    pytest.importorskip("matplotlib")
+    full = _cal()
+    cal = dataclasses.replace(full, models={k: m for k, m in full.models.items() if k[0] != 1})
+    assert cal.joints == [2, 3]
+    for joint in (1, "3", 3.0, True):
+        with pytest.raises(ValueError, match=r"is not in this calibration \(it has joints \[2, 3\]\)"):
+            cal.plot(joint)  # type: ignore[arg-type]
+    assert len(cal.plot(2).lines) == 4  # each direction at q3 = 0 and 12 mm
+    assert len(cal.plot(3).lines) == 6  # each direction at three tilts
+
+
 @pytest.mark.slow
 def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[str]) -> None:
     """docs/bluesky.md's example runs as written (docs/style.md: examples run)."""
@@ -122,12 +136,33 @@ def test_the_python_example_in_docs_bluesky_runs(capsys: pytest.CaptureFixture[s
     from pathlib import Path
 
     page = (Path(__file__).resolve().parents[1] / "docs" / "bluesky.md").read_text(encoding="utf-8")
-    (code,) = re.findall(r"```python\n(.*?)```", page, re.S)
+    example, tip_block = re.findall(r"```python\n(.*?)```", page, re.S)
     ns: dict[str, object] = {"__name__": "docs_bluesky"}
-    exec(compile(code, "docs/bluesky.md", "exec"), ns)
+    exec(compile(example, "docs/bluesky.md", "exec"), ns)
     out = capsys.readouterr().out
     assert "Calibration(day=" in out
     sim = ns["sim"]
     assert isinstance(sim, SimulatedMM3A)
     assert abs(sim.position(3) - 1.5e-3) < 15e-6  # the calibrated model on the simulator: within 1 %
     assert abs(sim.position(2) + math.pi / 3) < 0.01 * (math.pi / 6)
+    q3 = re.search(r"q3: ([0-9.]+) µm \(dead-reckoned\), truth ([0-9.]+) µm", out)
+    assert q3 and abs(float(q3.group(1)) - 1500) < 1.0 and abs(float(q3.group(2)) - 1500) < 15  # the line as printed
+    with pytest.warns(UserWarning, match="joint 1 is not in this calibration"):  # the page says a tip move warns so
+        exec(compile(tip_block, "docs/bluesky.md", "exec"), ns)
+    tip = re.search(r"tip \(µm\): ([-0-9.]+), ([-0-9.]+), ([-0-9.]+)", capsys.readouterr().out)
+    assert tip and abs(float(tip.group(2)) - 1000) < 1.0  # y moved to 1 mm (the readback: within a step)
+    assert abs(float(tip.group(3)) - 11250) < 2.0  # rel_scan put z back where it was (q2 = -60 deg, q3 = 1.5 mm)
+
+
+@pytest.mark.parametrize("rows", [None, 3, "day1.csv", [1, 2], [{"joint": 3}]])
+def test_notebook_tables_refuse_what_is_not_traverses_at_once(rows: object) -> None:
+    """TraverseTable([1, 2]) was made, then failed in its repr with "'int' object has no attribute 'joint'"."""
+    for make in (TraverseTable, to_pandas):
+        with pytest.raises(TypeError, match="Traverse"):
+            make(rows)  # type: ignore[arg-type]
+
+
+def test_from_pandas_refuses_what_is_not_a_frame() -> None:
+    with pytest.raises(TypeError, match="takes a pandas DataFrame, got list"):
+        from_pandas([1, 2])
+    assert TraverseTable() == [] and TraverseTable(_rows()) == _rows()

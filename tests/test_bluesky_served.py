@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from typing import Any
 
@@ -81,3 +82,98 @@ def test_a_served_rig_refuses_a_path_through_a_volume_for_the_client_and_bluesky
             assert room.owned.dev.steps_simulated == before  # nothing sent
     finally:
         room.close()
+
+
+def _answering(answers: dict[str, Any]) -> Rig:
+    """A client whose server answers each path with a fixed body (bytes: as is; else JSON), status 200."""
+    import httpx
+
+    def handle(request: httpx.Request) -> httpx.Response:
+        body = answers[request.url.path]
+        if isinstance(body, bytes):
+            return httpx.Response(200, content=body)
+        return httpx.Response(200, json=body)
+
+    rig = Rig("http://garbage.invalid")
+    rig._http = httpx.Client(base_url=rig.url, transport=httpx.MockTransport(handle))
+    return rig
+
+
+def _row(joint: int, **kw: Any) -> dict[str, Any]:
+    return {"joint": joint, "q": 1e-3, "unit": "m", "sd": None, "uncertain": None, **kw}
+
+
+def test_the_served_axis_says_when_the_server_keeps_the_position_uncertain() -> None:
+    """An axis reports its position as uncertain when the server does (a cut burst, raw steps): as StickSlipAxis."""
+    import asyncio
+
+    where = {"joints": [_row(1), _row(2), _row(3, q=2e-3, uncertain=[1.5e-3, 2e-3])]}
+    axis = ServedAxis(_answering({"/api/where": where}), 3, name="q3")
+
+    async def read() -> tuple[float, bool]:
+        await axis.connect()
+        await axis.refresh()
+        return await axis.readback.get_value(), await axis.uncertain.get_value()
+
+    assert asyncio.run(read()) == (2e-3, True)
+    assert "q3-uncertain" in asyncio.run(axis.read())
+    where["joints"][2]["uncertain"] = None
+    assert asyncio.run(read()) == (2e-3, False)
+
+
+@pytest.mark.parametrize(
+    "where",
+    [
+        b"<html>502 Bad Gateway</html>",
+        {},
+        {"joints": "none"},
+        {"joints": [_row(1), _row(2)]},
+        {"joints": [_row(1), _row(2), _row(3, q=None)]},
+        {"joints": [_row(1), _row(2), _row(3, q="1e-3")]},
+        b'{"joints": [{"joint": 1, "q": 0}, {"joint": 2, "q": 0}, {"joint": 3, "q": NaN}]}',
+        {"joints": [_row(1), _row(2), _row(2)]},
+    ],
+)
+def test_a_garbage_answer_is_one_line_not_a_position(where: Any) -> None:
+    """A server (or proxy) answering garbage fails the read with a MoveError, never a KeyError or a made-up position."""
+    import asyncio
+
+    from stickslip.bluesky import MoveError
+
+    axis = ServedAxis(_answering({"/api/where": where}), 3, name="q3")
+    with pytest.raises(MoveError, match="not a stickslip server"):
+        asyncio.run(axis.refresh())
+    assert math.isnan(asyncio.run(axis.readback.get_value()))
+
+
+@pytest.mark.parametrize("motion", [b"OK", {}, {"id": "7", "status": "running"}, {"id": 7}])
+def test_a_garbage_motion_record_fails_the_move_with_one_line(motion: Any) -> None:
+    import asyncio
+
+    from stickslip.bluesky import MoveError
+
+    where = {"joints": [_row(1), _row(2), _row(3)]}
+    axis = ServedAxis(_answering({"/api/where": where, "/api/move": motion}), 3, name="q3")
+
+    async def move() -> None:
+        await axis.connect()
+        await axis.set(2e-3)
+
+    with pytest.raises(MoveError, match="not a stickslip server"):
+        asyncio.run(move())
+
+
+def test_a_read_before_any_move_gives_the_servers_position_not_nan() -> None:
+    """bp.count of a served axis before any move recorded NaN (the readback was read in only by set and locate)."""
+    import asyncio
+
+    where = {"joints": [_row(1), _row(2), _row(3, q=2e-3)]}
+    axis = ServedAxis(_answering({"/api/where": where}), 3, name="q3")
+
+    async def read() -> float:
+        await axis.connect()
+        return float((await axis.read())["q3"]["value"])
+
+    assert asyncio.run(read()) == 2e-3
+    where["joints"][2]["q"] = 3e-3  # the page moved it
+    assert asyncio.run(read()) == 3e-3

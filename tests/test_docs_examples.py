@@ -52,13 +52,21 @@ def _bash(lines: list[str], cwd: Path, env: dict[str, str], timeout: float = 600
 
 
 def test_every_docs_page_with_console_blocks_is_listed_here():
-    """A new page with shell examples must be run by a test: this list names the pages that have them."""
-    pages = sorted(p.name for p in DOCS.glob("*.md") if console_lines(p.read_text(encoding="utf-8")))
-    assert pages == sorted([*RUN_PAGES, *RUN_IN_README]), f"pages with console blocks: {pages}; run them in this module"
+    """A new page with shell examples must be run by a test: this list names the pages that have them.
+
+    Every folder of docs/ counts (docs/howto/ too: a guide there is what a newcomer copies first)."""
+    pages = sorted(
+        p.relative_to(DOCS).as_posix() for p in DOCS.rglob("*.md") if console_lines(p.read_text(encoding="utf-8"))
+    )
+    listed = sorted([*RUN_PAGES, *RUN_IN_README, *RUN_ELSEWHERE])
+    assert pages == listed, f"pages with console blocks: {pages}; run them in this module"
+    for page, test in RUN_ELSEWHERE.items():  # the test named runs that page's file
+        assert page in (ROOT / "tests" / test).read_text(encoding="utf-8").replace('" / "', "/"), (page, test)
 
 
 RUN_PAGES = ["tutorial.md", "config.md", "rig.md"]  # config.md names its own $STICKSLIP_CONFIG
 RUN_IN_README = ["vision.md"]  # its one block is the README's camera block, which tests/test_readme.py runs
+RUN_ELSEWHERE = {"howto/day-one.md": "test_day_one.py"}  # against the NanoControl console emulator
 
 
 def test_the_vision_page_runs_as_the_readme_camera_block(tmp_path):

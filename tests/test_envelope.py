@@ -266,6 +266,35 @@ def test_a_bluesky_axis_checks_the_rig_envelope(tmp_path):
     assert sim.steps_simulated == before
 
 
+def test_a_bluesky_manipulator_checks_the_rig_envelope_for_its_joints_and_its_tip(tmp_path):
+    """StickSlipManipulator(guard=...) gives the guard to its joints and its tip: a tip move whose path enters a
+    volume fails before a step is sent (before, the manipulator took no guard and the tip checked none)."""
+    pytest.importorskip("ophyd_async")
+    import asyncio
+
+    from stickslip.bluesky import MoveError, StickSlipManipulator
+    from stickslip.rig.guard import Guard
+    from stickslip.sim.arm import SimulatedMM3A
+    from test_bluesky import true_calibration
+
+    sim = SimulatedMM3A(seed=0)
+    wall = HalfSpace("wall", (0.030, 0.0, 0.0), (1.0, 0.0, 0.0))  # x >= 30 mm: the tip may go to x = 30 mm - margin
+    rig = Rig("r", "r", (mm3a(),), (wall,))
+    arm = StickSlipManipulator(sim, true_calibration(sim), db=tmp_path / "s.db", guard=Guard(rig, "a"))
+
+    async def move(axis, target: float) -> None:
+        await arm.connect()
+        await axis.set(target)
+
+    asyncio.run(move(arm.tip.x, 25e-3))  # outstretched along x: joint 3 out by 4 mm
+    assert sim.position(3) == pytest.approx(4e-3, abs=2e-5)
+    before = sim.steps_simulated
+    for axis, target in ((arm.tip.x, 32e-3), (arm.q3, 11e-3)):
+        with pytest.raises(MoveError, match="'wall'"):
+            asyncio.run(move(axis, target))
+        assert sim.steps_simulated == before
+
+
 # ---------------------------------------------------------------- the σ margin grows along the path
 
 

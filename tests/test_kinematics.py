@@ -3,6 +3,7 @@
 import math
 
 import numpy as np
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -78,3 +79,14 @@ def test_ranges_from_the_paper():
     assert kin.JOINTS[2].lower == -7 * math.pi / 6 and kin.JOINTS[2].upper == math.pi / 6
     assert kin.JOINTS[3].span == 0.012
     assert math.isclose(float(kin.zeta(-math.pi / 2, 0.0)), math.pi / 2)
+
+
+@pytest.mark.parametrize("joint", [True, False, 2.5, 3.7, float("nan"), float("inf"), None, "x", 4, 0])
+def test_joint_spec_refuses_what_is_not_a_joint_number(joint):
+    """True was joint 1 and 2.5 joint 2 (int() of them): StickSlipAxis(url, True, cal) moved joint 1."""
+    with pytest.raises(ValueError, match="unknown joint"):
+        kin.joint_spec(joint)
+
+
+def test_joint_spec_takes_a_whole_number_however_written():
+    assert [kin.joint_spec(j).number for j in (1, 2.0, "3", np.int64(3))] == [1, 2, 3, 3]

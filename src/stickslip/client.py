@@ -123,10 +123,12 @@ class Rig:
         if r.status_code >= 400:
             message = data.get("error") if isinstance(data, dict) else None
             raise RigError(message or f"HTTP {r.status_code}", r.status_code)
+        if data is None and r.content:
+            raise RigError(f"{self.url}: {method} {path} answered with what is not JSON (not a stickslip server?)")
         return data
 
     def _motion(self, path: str, body: dict[str, Any] | None, wait: bool, timeout: float | None) -> dict[str, Any]:
-        m: dict[str, Any] = self._call("POST", path, body)
+        m: dict[str, Any] = _motion_record(self._call("POST", path, body), path)
         return self.wait(int(m["id"]), timeout) if wait else m
 
     def wait(self, motion: int, timeout: float | None = None) -> dict[str, Any]:
@@ -141,7 +143,7 @@ class Rig:
                 left = 25.0 if deadline is None else min(25.0, deadline - time.monotonic())
                 if left <= 0:
                     raise RigError(f"motion {motion} has not ended after {timeout} s (it goes on; rig.stop() ends it)")
-                m: dict[str, Any] = self._call("GET", f"/api/motions/{motion}", wait=round(left, 3))
+                m = _motion_record(self._call("GET", f"/api/motions/{motion}", wait=round(left, 3)), "/api/motions")
                 if m["status"] not in ("starting", "running"):
                     if m["status"] in ("failed", "stopped", "refused"):
                         raise MotionFailed(m)
@@ -281,3 +283,13 @@ class Rig:
                 if "seq" in m:
                     n += 1
                     yield m
+
+
+def _motion_record(data: object, path: str) -> dict[str, Any]:
+    """``data`` as a motion's record (an integer ``id`` and a ``status``); :class:`RigError` if it is not one."""
+    if (
+        not isinstance(data, dict) or not isinstance(data.get("id"), int) or isinstance(data.get("id"), bool)
+        or not isinstance(data.get("status"), str)
+    ):
+        raise RigError(f"{path} answered {str(data)[:80]!r}, not a motion's record (not a stickslip server?)")
+    return data

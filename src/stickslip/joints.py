@@ -167,6 +167,8 @@ def joint_spec(joint: int | JointSpec, joints: JointSet | None = None) -> JointS
     if isinstance(joint, JointSpec):
         return joint
     try:
+        if isinstance(joint, bool) or (not isinstance(joint, str) and int(joint) != joint):
+            raise TypeError  # True is not joint 1, nor 2.5 joint 2
         return (JOINTS if joints is None else joints)[int(joint)]
-    except (KeyError, ValueError, TypeError):
+    except (KeyError, ValueError, TypeError, OverflowError):
         raise ValueError(f"unknown joint {joint!r}: joints are 1, 2 (rotary) and 3 (prismatic)") from None

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any, cast
 
 import numpy as np
-from bluesky.protocols import Checkable, Locatable, Location, Stoppable
+from bluesky.protocols import Checkable, Locatable, Location, Reading, Stoppable
 from ophyd_async.core import (
     Array1D,
     Device,
@@ -53,7 +53,16 @@ from ophyd_async.core import StandardReadableFormat as Format
 
 from .. import kinematics as kin
 from ..calibration import Calibration
-from ..devices.base import Controller, DeviceError, DeviceInfo, PoseSettable, VirtualClock, device_key, open_device
+from ..devices.base import (
+    Controller,
+    DeviceError,
+    DeviceInfo,
+    PoseSettable,
+    VirtualClock,
+    check_device_url,
+    device_key,
+    open_device,
+)
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.planning import Planner
 from ..procedures.closed_loop import CameraLoop, move_seen
@@ -119,6 +128,7 @@ class DeviceLink:
 
     def __init__(self, device: str | Controller, db: str | os.PathLike[str] | None = None):
         if isinstance(device, str):
+            check_device_url(device)  # a URL without a scheme is never the simulator (its key was sim://)
             self.url = device
             self._ctrl: Controller | None = None
         else:
@@ -437,6 +447,11 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         if math.isnan(await self.setpoint.get_value()):
             self._set_setpoint(float(state.positions[self.joint]))
         return state
+
+    async def read(self) -> dict[str, Reading[Any]]:
+        """The signals, the kept position read in first (the CLI may have moved the joint): no stale event."""
+        await self.refresh()
+        return await super().read()
 
     async def locate(self) -> Location[float]:
         """Setpoint (the last target) and readback (the dead-reckoned position), m or rad."""

@@ -24,6 +24,7 @@ from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller
 from ..measurements import Traverse
+from ..rig.guard import Guard
 from .axis import MAX_BURST_S, DeviceLink, StickSlipAxis
 from .tip import Tip
 
@@ -106,6 +107,9 @@ class StickSlipManipulator(StandardReadable):
         21 mm, no offset: measure yours, docs/taskspace.md).
     max_burst_s : float
         Longest burst on a controller stepping in real time, s (bounds how long a stop takes).
+    guard : Guard, optional
+        A rig's envelope (:func:`stickslip.procedures.arms.guard_for`): every joint move and
+        every tip move's whole path is checked against it before a step is sent.
     """
 
     def __init__(
@@ -118,6 +122,7 @@ class StickSlipManipulator(StandardReadable):
         db: str | os.PathLike[str] | None = None,
         geometry: kin.Geometry = kin.DEFAULT_GEOMETRY,
         max_burst_s: float = MAX_BURST_S,
+        guard: Guard | None = None,
     ) -> None:
         cal = None if calibration is None else _load(calibration)
         self.link = DeviceLink(device, db)
@@ -125,11 +130,14 @@ class StickSlipManipulator(StandardReadable):
         with self.add_children_as_readables():
             self.q1, self.q2, self.q3 = (
                 StickSlipAxis(
-                    self.link, j, cal if cal is None or j in cal.joints else None, burst=burst, max_burst_s=max_burst_s
+                    self.link, j, cal if cal is None or j in cal.joints else None, burst=burst,
+                    max_burst_s=max_burst_s, guard=guard,
                 )
                 for j in (1, 2, 3)
             )
-            self.tip = Tip(self.link, lambda: self.calibration, geometry, burst=burst, max_burst_s=max_burst_s)
+            self.tip = Tip(
+                self.link, lambda: self.calibration, geometry, burst=burst, max_burst_s=max_burst_s, guard=guard
+            )
         for axis in (self.q1, self.q2, self.q3):
             axis.observers.append(self.tip.observe)  # a joint's move moves the tip's readbacks
             self.tip._driver.observers.append(axis.show)  # a tip move moves the joints' readbacks

@@ -160,12 +160,13 @@ def calibration_day(
     Events: one per traverse in ``primary`` (``traverse-steps``, ``traverse-gamma`` in m
     or rad, joint, direction, start, end, pose); one in ``calibration``
     (``calibration-json``, the calibration file's JSON).
+
+    The plan cannot be resumed: a pause (Ctrl-C) aborts it, the traverses measured so far
+    kept; run it again for the day.
     """
     link = manipulator.link
     day = check_day_label(day) if day is not None else today_label()
-    plan = [(int(j), dict(p)) for j, p in poses]
-    for j, _ in plan:
-        kin.joint_spec(j)
+    plan = _checked_plan(poses, burst_steps)
     ctrl: Controller = yield from _call(link, link.controller)
     if not isinstance(ctrl, PoseSettable):
         raise ValueError(
@@ -178,6 +179,9 @@ def calibration_day(
     made: list[Calibration] = []
 
     def inner() -> Generator[Msg, Any, None]:
+        # a pause aborts (a traverse moved the arm and is kept: replaying it on resume measured it twice and
+        # handed the plan None for its result)
+        yield from bps.clear_checkpoint()
         rows: list[Traverse] = []
         ids: list[int] = []
         for joint, given in plan:
@@ -216,6 +220,19 @@ def calibration_day(
 
     yield from bpp.run_wrapper(inner(), md=metadata)  # type: ignore[no-untyped-call]  # bluesky leaves it untyped
     return made[0]
+
+
+def _checked_plan(
+    poses: Sequence[tuple[int, Mapping[str, float]]], burst_steps: object
+) -> list[tuple[int, dict[str, float]]]:
+    """``poses`` as ``[(joint, pose)]``; ``ValueError`` before anything moves for an unknown joint, no pose, or a
+    ``burst_steps`` that is not a whole number of steps in 1..1000000 (``True`` is not 1)."""
+    plan = [(kin.joint_spec(j).number, dict(p)) for j, p in poses]
+    if not plan:
+        raise ValueError("poses is empty: give (joint, pose) pairs to traverse (default: PAPER_POSES)")
+    if isinstance(burst_steps, bool) or not isinstance(burst_steps, int) or not 1 <= burst_steps <= 1_000_000:
+        raise ValueError(f"burst_steps must be an integer number of steps in 1..1000000, got {burst_steps!r}")
+    return plan
 
 
 def _day_metadata(

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import asyncio
 import math
+from typing import Any
 
-from bluesky.protocols import Locatable, Location, Stoppable
+from bluesky.protocols import Locatable, Location, Reading, Stoppable
 from ophyd_async.core import AsyncStatus, StandardReadable, soft_signal_r_and_setter
 from ophyd_async.core import StandardReadableFormat as Format
 
@@ -44,6 +45,8 @@ class ServedAxis(StandardReadable, Locatable[float], Stoppable):
         The last target.
     sd : m or rad
         The kept position's standard deviation (NaN before a tracked move).
+    uncertain : bool
+        The server keeps the position as uncertain (a burst cut short, raw steps): re-reference the joint.
     """
 
     def __init__(self, rig: Rig, joint: int, name: str = "") -> None:
@@ -56,6 +59,7 @@ class ServedAxis(StandardReadable, Locatable[float], Stoppable):
         with self.add_children_as_readables(Format.UNCACHED_SIGNAL):
             self.setpoint, self._set_setpoint = soft_signal_r_and_setter(float, math.nan, units=unit)
             self.sd, self._set_sd = soft_signal_r_and_setter(float, math.nan, units=unit)
+            self.uncertain, self._set_uncertain = soft_signal_r_and_setter(bool, False)
         self._stop_success = False
         super().__init__(name=name)
 
@@ -69,14 +73,18 @@ class ServedAxis(StandardReadable, Locatable[float], Stoppable):
             where = await asyncio.to_thread(self.rig.where)
         except RigError as e:
             raise MoveError(str(e)) from None
-        row = where["joints"][self.joint - 1]
-        q = float(row["q"])
+        q, sd, uncertain = _kept(where, self.joint)
         self._set_readback(q)
-        sd = row.get("sd")
-        self._set_sd(float(sd) if isinstance(sd, (int, float)) else math.nan)
+        self._set_sd(sd)
+        self._set_uncertain(uncertain)
         if math.isnan(await self.setpoint.get_value()):
             self._set_setpoint(q)
         return q
+
+    async def read(self) -> dict[str, Reading[Any]]:
+        """The signals, the kept position read in first (the page may have moved it): no stale event."""
+        await self.refresh()
+        return await super().read()
 
     async def locate(self) -> Location[float]:
         """Setpoint (the last target) and readback (the server's kept position), m or rad."""
@@ -114,3 +122,22 @@ class ServedAxis(StandardReadable, Locatable[float], Stoppable):
             await asyncio.to_thread(self.rig.stop)
         except RigError as e:
             raise MoveError(str(e)) from None
+
+
+def _kept(where: object, joint: int) -> tuple[float, float, bool]:
+    """``(q, sd, uncertain)`` of ``joint`` in the server's ``/api/where`` answer; :class:`MoveError` if it has none.
+
+    A position that is not a finite number, or a row for another joint, is not taken as
+    the joint's position (a proxy's error page, another program on the port).
+    """
+    rows = where.get("joints") if isinstance(where, dict) else None
+    row = rows[joint - 1] if isinstance(rows, list) and len(rows) >= joint else None
+    q = row.get("q") if isinstance(row, dict) else None
+    if (
+        not isinstance(row, dict) or row.get("joint") != joint or isinstance(q, bool)
+        or not isinstance(q, (int, float)) or not math.isfinite(q)
+    ):
+        raise MoveError(f"the server's answer has no position for joint {joint} (not a stickslip server's /api/where)")
+    sd = row.get("sd")
+    sd_value = float(sd) if isinstance(sd, (int, float)) and not isinstance(sd, bool) else math.nan
+    return float(q), sd_value, row.get("uncertain") is not None

@@ -27,9 +27,10 @@ import threading
 import warnings
 from collections.abc import AsyncIterator, Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from bluesky.protocols import Checkable, Locatable, Location, Stoppable
+from bluesky.protocols import Checkable, Locatable, Location, Reading, Stoppable
 from ophyd_async.core import (
     StandardReadable,
     WatchableAsyncStatus,
@@ -43,8 +44,16 @@ from ..calibration import Calibration
 from ..devices.base import DeviceError, VirtualClock
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.reach import ReachPlan, borrow_joint1
-from ..procedures.move import DeviceBusy, MoveRefused, device_lock
-from ..procedures.reach import BORROWED_JOINT1, ReachRequest, check_referenced, drive_reach, plan_from_state
+from ..procedures.move import DeviceBusy, MoveRefused, check_envelope_path, device_lock
+from ..procedures.reach import (
+    BORROWED_JOINT1,
+    ReachRequest,
+    check_referenced,
+    drive_reach,
+    joint_path,
+    plan_from_state,
+)
+from ..rig.guard import Guard
 from ..storage import StoreError
 from .axis import DeviceLink, MoveError, _Interruptible, _Stopped, bounded_burst, check_burst, check_max_burst_s, halt
 
@@ -80,8 +89,10 @@ class _TipDriver:
         burst: int,
         max_burst_s: float,
         segment: float,
+        guard: Guard | None = None,
     ) -> None:
         self.link = link
+        self.guard = guard  # a rig's envelope: every tip move's whole path checked first, as `stickslip reach --rig`
         self.calibration = calibration
         self.geometry = geometry
         self.burst = burst
@@ -149,6 +160,10 @@ class _TipDriver:
         with link.store() as store, device_lock(store, link.key):
             state = load_state(store, link.key)
             plan, cal = self.plan(state, goal)
+            try:
+                check_envelope_path(self.guard, state, joint_path(plan), cal)
+            except MoveRefused as e:
+                raise MoveError(str(e)) from None
             publish(state)
             if not any(plan.total_steps):
                 self.target, self.q_after = goal, _positions(state)
@@ -241,6 +256,11 @@ class TipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[float]):
         if math.isnan(await self.setpoint.get_value()):
             self._set_setpoint(self._driver.base(state)[self.index])
         return state
+
+    async def read(self) -> dict[str, Reading[Any]]:
+        """The signals, the kept position read in first (another process may have moved a joint): no stale event."""
+        await self.refresh()
+        return await super().read()
 
     async def locate(self) -> Location[float]:
         """Setpoint (the last target's coordinate) and readback (of the dead-reckoned joints), m."""
@@ -389,11 +409,12 @@ class Tip(StandardReadable):
         max_burst_s: float = 0.2,
         segment: float = 10e-6,
         name: str = "",
+        guard: Guard | None = None,
     ) -> None:
         if not isinstance(geometry, kin.Geometry):
             raise ValueError(f"geometry must be a stickslip.kinematics.Geometry, got {geometry!r}")
         self._driver = _TipDriver(
-            link, calibration, geometry, check_burst(burst), check_max_burst_s(max_burst_s), float(segment)
+            link, calibration, geometry, check_burst(burst), check_max_burst_s(max_burst_s), float(segment), guard
         )
         with self.add_children_as_readables():
             self.x = TipAxis(self._driver, 0)

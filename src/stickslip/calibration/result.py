@@ -572,6 +572,8 @@ class Calibration:
         Joint 3: one curve per direction and tilt ``theta`` (nm). Rotary joints: one curve
         per direction at q3 = 0 and 12 mm, theta = 0 (µrad). Returns the matplotlib Axes.
         """
+        if isinstance(joint, bool) or not isinstance(joint, int) or joint not in self.joints:
+            raise ValueError(f"joint {joint!r} is not in this calibration (it has joints {self.joints})")
         ax = plotting.axes(ax, (6, 4))
         spec = kin.JOINTS[2]
         q2 = np.linspace(spec.lower, spec.upper, 400)

@@ -53,7 +53,7 @@ def _pandas() -> Any:
 def to_pandas(traverses: Iterable[Traverse]) -> Any:
     """A ``pandas.DataFrame`` of ``traverses``: the measurement table's columns plus ``gamma`` (SI)."""
     pd = _pandas()
-    rows = [{**t.as_row(), "gamma": t.gamma} for t in traverses]
+    rows = [{**t.as_row(), "gamma": t.gamma} for t in _traverses(traverses)]
     df = pd.DataFrame(rows, columns=[*HEADER, "gamma"])
     df = df.astype({"joint": "int64", "steps": "int64"})
     df.attrs["units"] = dict(UNITS)
@@ -66,6 +66,8 @@ def from_pandas(df: Any, source: str = "<DataFrame>") -> list[Traverse]:
     Raises :class:`stickslip.measurements.TableError` listing every bad row (line 1 is
     the header, so the frame's first row is line 2), ``ValueError`` for missing columns.
     """
+    if not hasattr(df, "columns") or not hasattr(df, "itertuples"):
+        raise TypeError(f"from_pandas takes a pandas DataFrame, got {type(df).__name__}")
     missing = [c for c in HEADER if c not in df.columns]
     if missing:
         raise ValueError(f"{source}: missing column(s) {missing}; a measurement table has {list(HEADER)}")
@@ -83,8 +85,22 @@ def _cell(v: object) -> str:
     return text.replace(",", " ").replace("\n", " ")  # a cell never splits a row; the parser judges the value
 
 
+def _traverses(rows: Iterable[Traverse]) -> list[Traverse]:
+    """``rows`` as a list; ``TypeError`` naming the first that is not a :class:`Traverse` (a number, a dict, a path)."""
+    if isinstance(rows, (str, bytes)) or not isinstance(rows, Iterable):
+        raise TypeError(f"expected traverses (a list of Traverse), got {type(rows).__name__}")
+    out = list(rows)
+    for i, t in enumerate(out):
+        if not isinstance(t, Traverse):
+            raise TypeError(f"item {i} is a {type(t).__name__}, not a Traverse (read a table with parse_measurements)")
+    return out
+
+
 class TraverseTable(list[Traverse]):
     """Traverses that show themselves as a table in Jupyter (and as a summary in a console)."""
+
+    def __init__(self, rows: Iterable[Traverse] = ()) -> None:
+        super().__init__(_traverses(rows))
 
     def to_pandas(self) -> Any:
         """:func:`to_pandas` of this table."""

@@ -161,6 +161,12 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     pid = os.getpid()
     me: dict[str, Any] = {"pid": pid, "host": socket.gethostname(), "since": now_utc().isoformat(timespec="seconds")}
     holder = store.acquire_lock(device, me)
+    if holder is not None and holder.get("pid") == pid and holder.get("host") == me["host"]:
+        raise DeviceBusy(
+            f"{device} is being driven by this same process, through another link to it (since "
+            f"{holder.get('since')}; two StickSlipAxis on one URL?): give the arm's axes one DeviceLink "
+            f"(StickSlipManipulator does); do not unlock it while that move runs"
+        )
     if holder is not None:
         way_out = (  # --unlock refuses a holder known to run here (stickslip.processes): do not advise it
             "it is still running on this computer: wait for it to finish, or end it" if holder_running(holder)

@@ -420,7 +420,7 @@ def _check_options(latency: str, predrive: str, burst_steps: int, listen_after_s
         raise ValueError(f"latency must be one of {', '.join(LATENCY_MODES)}, got {latency!r}")
     if predrive not in ("listen", "overdrive", "none"):
         raise ValueError(f"predrive must be 'listen', 'overdrive' or 'none', got {predrive!r}")
-    if not (isinstance(burst_steps, int) and 1 <= burst_steps <= 1_000_000):
+    if isinstance(burst_steps, bool) or not (isinstance(burst_steps, int) and 1 <= burst_steps <= 1_000_000):
         raise ValueError(f"burst_steps = {burst_steps!r} is outside [1, 1000000]")
     if not (isinstance(listen_after_steps, int) and listen_after_steps >= 0):
         raise ValueError(f"listen_after_steps = {listen_after_steps!r} must be an integer >= 0")
