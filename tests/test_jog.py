@@ -346,3 +346,46 @@ def test_run_jog_over_the_emulated_anc300():
     ups = [int(m.split()[2]) for m in sent if m.startswith("stepu 2 ")]
     assert sum(ups) == c.sent[1]
     assert not any(m.startswith(("stepu 1", "stepu 3", "stepd")) for m in sent), sent
+
+
+class _Keys:
+    def __init__(self, ticks: list[list[str]]) -> None:
+        self.ticks = ticks
+
+    def read(self, timeout: float) -> list[str]:
+        return self.ticks.pop(0) if self.ticks else ["q"]
+
+    def close(self) -> None:
+        pass
+
+
+def test_a_jog_steps_and_dead_reckons_with_the_tracked_step_scale(tmp_path):
+    """A jog dead-reckoned with the bare calibration after `observe` had taught a joint's step scale, so its kept
+    position was off by the scale (audit28: reach and tip moves too). A calibration whose joint-1 steps are 25 %
+    long, with a track that learnt 0.8, must keep joint 1 where the simulator (whose truth is CAL) put it; the
+    track is kept, not restarted at scale 1."""
+    from stickslip.devices.base import device_key, open_device
+    from stickslip.devices.positions import load_state, save_state
+    from stickslip.motion.tracking import JointTrack, scaled_calibration
+    from stickslip.procedures.jog import JogRequest, jog
+    from stickslip.storage import Store
+    from test_reach import DAY
+
+    dev = f"sim://?seed=4&day={DAY}"
+    wrong = scaled_calibration(CAL, 1, 1.25)
+    clock = iter(np.arange(0.0, 1000.0, 0.05))
+    keys = _Keys([["6", "s"]] + [[]] * 40 + [["space"]] + [[]] * 3 + [["q"]])  # -y at 30 µm/s for 2 s: joint 1
+    sim = open_device(dev)
+    with Store.open(tmp_path / "s.db") as store:
+        state = load_state(store, device_key(dev))
+        track = JointTrack.fresh(wrong, 1)
+        track.log_scale[:] = math.log(0.8)
+        state.track[1] = track.to_json()
+        save_state(store, state)
+        result = jog(store, JogRequest(dev, speed=6, hold=0.0), wrong, keys=lambda: keys, show=lambda s: None,
+                     clock=lambda: float(next(clock)), opener=lambda _url: sim)
+        kept = load_state(store, device_key(dev))
+    true_q1 = float(sim.position(1))
+    assert result.error is None and true_q1 < -1e-3
+    assert abs(kept.positions[1] - true_q1) < 0.02 * abs(true_q1)  # bare calibration: about 20 % off
+    assert JointTrack.from_json(kept.track[1]).scale_of("-") == pytest.approx(0.8, rel=1e-9)

@@ -395,3 +395,40 @@ def test_a_miss_is_shown_in_units_a_person_reads():
     from stickslip.cli.taskspace import _miss
 
     assert _miss(3.58e-7) == "358 nm" and _miss(3.914e-4) == "391 µm" and _miss(2.5e-3) == "2.5 mm"
+
+
+def test_a_reach_plans_and_dead_reckons_with_the_tracked_step_scale(tmp_path):
+    """`observe` teaches a joint's step scale and `move` plans with it; a reach (and a Bluesky tip move, through the
+    same procedure) planned and dead-reckoned with the bare calibration, so after the scale was learnt its joint
+    moved the calibration's distance short and was kept where it was not (audit28). A calibration whose joint-3
+    steps are 25 % long, with a track that learnt the scale 0.8, must plan as the true calibration does."""
+    from stickslip.devices.base import device_key
+    from stickslip.devices.positions import load_state, save_state
+    from stickslip.motion.tracking import JointTrack, scaled_calibration
+    from stickslip.storage import Store
+
+    wrong = scaled_calibration(CAL, 3, 1.25)
+    wrong_path, true_path = tmp_path / "wrong.json", tmp_path / "true.json"
+    wrong.save(wrong_path)
+    CAL.save(true_path)
+    dev = f"sim://?seed=4&day={DAY}"
+    move = ("-d", dev, "--by", "60um,-40um,25um", "--q2", "-60deg", "--q3", "4mm", "--json", "--burst", "5")
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        state = load_state(st, device_key(dev))
+        track = JointTrack.fresh(wrong, 3)
+        track.log_scale[:] = math.log(0.8)
+        state.track[3] = track.to_json()
+        save_state(st, state)
+    r = run("reach", "-c", wrong_path, "--db", db, *move)
+    assert r.exit_code == 0, r.output
+    got = json.loads(r.stdout)
+    ref = json.loads(run("reach", "-c", true_path, "--db", tmp_path / "ref.db", *move, "--dry-run").stdout)
+    steps = [s["steps"] for s in got["segments"]]
+    assert steps == [s["steps"] for s in ref["segments"]] and any(n[2] for n in steps)
+    assert got["end"]["q"] == pytest.approx(ref["end"]["q"], abs=1e-12)
+    w = json.loads(run("where", "--db", db, "-d", dev, "--offline", "--json").stdout)
+    assert [j["q"] for j in w["joints"]] == pytest.approx(got["end"]["q"], abs=1e-15)  # kept as planned
+    assert w["joints"][2]["step_scale"] == pytest.approx(0.8, rel=1e-9)  # the track is kept, not restarted
+    L = math.dist(got["start"]["tip"], got["target"])
+    assert math.dist(got["sim_true"]["tip"], got["target"]) < 0.05 * L

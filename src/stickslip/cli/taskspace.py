@@ -151,8 +151,9 @@ def reach(
 
     The line is cut into segments (at most --segment, and at most 2 % of the move);
     each segment's joint increments come from the inverse kinematics and its steps from
-    the calibrated models in the current pose, joints 1, 2, 3 in that order, rounding
-    remainders carried to the next segment.
+    the calibrated models in the current pose, scaled by each joint's step scale learned
+    from measured positions (stickslip observe), as move plans, joints 1, 2, 3 in that
+    order, rounding remainders carried to the next segment.
 
     A target out of reach or a line near joint 1's axis (a singular pose) is refused
     before any step is sent. Without --dry-run the positions are kept after every burst,

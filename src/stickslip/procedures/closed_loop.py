@@ -777,7 +777,7 @@ def reach_seen(
                     k += 1
                 part = replace(plan, segments=plan.segments[:k])
                 check_leg(run, request.guard, joint_path(part))
-                out = drive_reach(dev, run.state, part, cal, run.save, request.burst)
+                out = drive_reach(dev, run.state, part, cal, run.save, request.burst, scale_tracks=False)
                 s = out.sent
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)
 

@@ -69,6 +69,7 @@ from .move import (
     grow_track,
     sigma_growth,
     simulates,
+    tracked_calibration,
 )
 from .reach import referenced_state
 
@@ -504,6 +505,7 @@ def run_jog(
     clock: Callable[[], float],
     tick: float = 0.05,
     eyes: JogEyes | None = None,
+    tracks: Calibration | None = None,
 ) -> str | None:
     """The jog loop: keys, the law, steps through the move journal, the status; until ``q``.
 
@@ -513,9 +515,12 @@ def run_jog(
     (no lurch after a stall). Returns the device error that ended the session, if any.
     The device is told to stop when the loop ends, however it ends. With ``eyes`` (a
     camera, :class:`~stickslip.procedures.closed_loop.JogEyes`) the tip is looked at as
-    it moves and the positions shown are the seen ones.
+    it moves and the positions shown are the seen ones. ``tracks``: the calibration the kept
+    tracks were learnt with, when the controller steps with a scaled one
+    (:func:`~.move.tracked_calibration`); the controller's by default.
     """
     t_prev = clock()
+    tracks = tracks or controller.calibration
     show(controller.status())
     seen: set[int] = set()  # the joints whose track has had the new pose's model error
     try:
@@ -545,7 +550,7 @@ def run_jog(
                 out = drive(dev, state, j, n, max(abs(n), 1), reckon, save, source)
                 controller.sent_steps(j, out.sent)
                 if eyes is None and out.error is None and grow_track(  # (a camera's jog keeps its own tracks)
-                        state, j, q_from, out.sent, controller.calibration, pose, assumed, seen):
+                        state, j, q_from, out.sent, tracks, pose, assumed, seen):
                     save(state)  # the σ grown as a move's (docs/models.md §7)
                 if out.error is not None:
                     controller.stop()
@@ -720,8 +725,9 @@ def jog(
             if simulates(dev, state):  # the simulator: start where the positions say
                 assert isinstance(dev, PoseSettable)
                 dev.set_pose(*state.pose)
-            ctl = JogController(
-                calibration, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
+            stepping = calibration if request.camera is not None else tracked_calibration(calibration, state)
+            ctl = JogController(  # steps with each joint's tracked scale, as a move of it plans (a camera's its own)
+                stepping, [state.positions[j] for j in (1, 2, 3)], state.theta, state.psi, request.geometry,
                 max_rates(dev, request.max_rate), request.image_angle, request.hold, request.speed - 1,
                 guard=request.guard, guard_sd=sigma_growth(state, calibration), joints=request.joints,
                 stage=request.stage,
@@ -734,7 +740,7 @@ def jog(
                 eyes = _open_eyes(store, dev, state, calibration, request, ctl)
             keys_in = keys()
             try:
-                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock, eyes=eyes)
+                error = run_jog(dev, state, ctl, keys_in.read, show, save, clock, eyes=eyes, tracks=calibration)
             except KeyboardInterrupt:
                 error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
         finally:

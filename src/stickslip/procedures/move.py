@@ -95,6 +95,7 @@ __all__ = [
     "simulates",
     "target_of",
     "track_fields",
+    "tracked_calibration",
     "where_line",
     "within_stops",
 ]
@@ -409,6 +410,21 @@ def plan_tracked(
         assumed=state.sources[joint] in ("default", "assumed") if assumed is None else assumed,
         from_uncertain=state.uncertain.get(joint), spec=own,
     )
+
+
+def tracked_calibration(calibration: Calibration, state: DeviceState) -> Calibration:
+    """``calibration`` with each joint's steps scaled by its kept track's step scale, as :func:`plan_tracked` plans one.
+
+    For the moves of several joints at once (a reach, a tip move): planned and dead-reckoned
+    with the scale ``observe`` taught, as a ``move`` of each joint would be. A joint without a
+    track, or whose track was learnt with another calibration (:func:`track_for`), keeps scale 1.
+    ``ValueError`` if a kept track is unreadable.
+    """
+    scaled = calibration
+    for joint in sorted(state.track):
+        track, _ = track_for(state.track.get(joint), calibration, joint)
+        scaled = scaled_calibration(scaled, joint, {d: track.scale_of(d) for d in "+-"})
+    return scaled
 
 
 def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:

@@ -41,6 +41,7 @@ from .move import (
     kept_after_interrupt,
     reference_problem,
     simulates,
+    tracked_calibration,
 )
 
 __all__ = [
@@ -100,26 +101,32 @@ def drive_reach(
     save: Callable[[DeviceState], None],
     burst: int = 1000,
     on_segment: Callable[[int, DeviceState], None] | None = None,
+    *,
+    scale_tracks: bool = True,
 ) -> ReachOutcome:
     """Send ``plan``'s segments to ``dev``, joint 1, then 2, then 3 in each, journalling every burst.
 
-    ``state`` must hold the plan's start (its positions are updated as the arm moves);
+    ``state`` must hold the plan's start (its positions are updated as the arm moves, dead-reckoned with each
+    joint's tracked step scale as :func:`plan_from_state` planned);
     ``save(state)`` stores it (one transaction); ``on_segment(k, state)`` is called
     after segment ``k`` (0-based) is done. A :class:`~stickslip.devices.base.DeviceError`
     stops the move and is returned in the outcome; any other exception propagates with
-    the journal saved.
+    the journal saved. ``scale_tracks=False``: ``calibration`` already holds the step scales the
+    plan was made with (the closed loop's camera-corrected one), it is stepped as it is.
     """
     start = tuple(state.positions[j] for j in (1, 2, 3))
     if any(abs(a - b) > 1e-12 * max(1.0, abs(b)) for a, b in zip(start, plan.q_start, strict=True)):
         raise ValueError(f"the device's kept positions {start} are not the plan's start {plan.q_start}")
     out = ReachOutcome()
     seen: set[int] = set()  # the joints whose track has had the new pose's model error
+    # as plan_from_state planned: the kept positions are the plan's
+    stepping = tracked_calibration(calibration, state) if scale_tracks else calibration
     for k, seg in enumerate(plan.segments):
         for j in (1, 2, 3):
             n = seg.steps[j - 1]
             if n == 0:
                 continue
-            stepper = JointStepper(calibration, state.spec(j), state.pose, plan.step_model)
+            stepper = JointStepper(stepping, state.spec(j), state.pose, plan.step_model)
             q_from = state.positions[j]
 
             def reckon(m: int, stepper: JointStepper = stepper, q_from: float = q_from) -> float:
@@ -292,12 +299,15 @@ def plan_from_state(
 ) -> ReachPlan:
     """The straight line of ``request`` from the kept pose; ``warn`` says when joint 1 borrows joint 2's parameters.
 
-    ``KeyError`` if a joint or direction the line needs is not calibrated; ``ValueError``
+    Each joint's steps are planned with its kept track's step scale (:func:`~.move.tracked_calibration`:
+    what ``observe`` taught), as :func:`drive_reach` dead-reckons them. ``KeyError`` if a joint or direction
+    the line needs is not calibrated; ``ValueError``
     (:class:`~stickslip.kinematics.OutOfReach`, :class:`~stickslip.kinematics.SingularPose`)
     if the line cannot be made.
     """
     geom, seg = request.geometry, request.segment
     stage, joints = request.stage, request.joints
+    calibration = tracked_calibration(calibration, state)  # each joint's step scale, as a move of it plans
     if request.to is not None:
         plan = plan_reach(calibration, state.pose, to=request.to, geometry=geom, segment=seg, stage=stage,
                           joints=joints)
