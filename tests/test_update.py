@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -11,7 +12,7 @@ from synth import PAPER_PRISMATIC, paper_table, random_poses, traverse_from_mode
 from typer.testing import CliRunner
 
 from stickslip import kinematics as kin
-from stickslip.calibration import Calibration, CalibrationError, calibrate
+from stickslip.calibration import Calibration, CalibrationError, Conditions, calibrate
 from stickslip.calibration.design import workspace_poses
 from stickslip.calibration.update import (
     LOAD_PRIOR,
@@ -184,3 +185,25 @@ def test_an_update_at_a_pose_without_load_keeps_the_load_sensitivity_uncertain()
     err = np.abs(np.log(np.array([t.gamma for t in val]) / cal.predict_many(val)))
     sd = np.array([cal.sigma_model[(3, t.direction)] for t in val])
     assert np.count_nonzero(err > 1.96 * sd) == 0, (err, sd)
+
+
+def test_cli_prior_of_another_arm_or_a_later_day_is_warned_about(tmp_path):
+    # the update keeps the prior's shape: another arm's (or a later session's) is named, one line each
+    runner = CliRunner()
+    prior, later = tmp_path / "arm7.json", tmp_path / "later.json"
+    cal = calibrate(paper_table(day="2026-11-22"))
+    dataclasses.replace(cal, conditions=Conditions("sim://?seed=7", 1000.0)).save(prior)
+    dataclasses.replace(cal, day="2026-11-25").save(later)
+    new = tmp_path / "new.csv"
+    new.write_text(measurements_to_csv([t for t in paper_table(day="2026-11-23") if t.q2 == -math.pi / 2]))
+    r = runner.invoke(app, ["calibrate", str(new), "--prior", str(prior), "--device", "sim://?seed=3"])
+    assert r.exit_code == 0, r.output
+    assert ("warning: the prior calibration was made under other conditions (made on sim://?seed=7, this is "
+            "sim://?seed=3)") in " ".join(r.stderr.split())
+    r = runner.invoke(app, ["calibrate", str(new), "--prior", str(prior), "--device", "sim://?seed=7",
+                            "--frequency", "1000"])
+    assert r.exit_code == 0 and "warning" not in r.stderr, r.stderr
+    r = runner.invoke(app, ["calibrate", str(new), "--prior", str(later)])
+    assert r.exit_code == 0, r.output
+    assert ("warning: the prior calibration is of 2026-11-25, 2 days after these traverses' 2026-11-23"
+            in " ".join(r.stderr.split()))

@@ -14,7 +14,7 @@ import typer
 from rich.table import Table
 
 if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --help starts fast
-    from ..calibration import Calibration
+    from ..calibration import Calibration, Conditions
     from ..measurements import Traverse
 
 from ..clock import stale_message
@@ -249,7 +249,7 @@ def calibrate_cmd(
 
     Example: stickslip calibrate stack.csv --rig lab.toml --arm gripper -o cal/gripper.json
     """
-    from ..calibration import Calibration, CalibrationError, Conditions, calibrate
+    from ..calibration import CalibrationError, Conditions, calibrate
     from ..measurements import StepSize
     from ..models import NonPhysicalError
 
@@ -278,11 +278,7 @@ def calibrate_cmd(
     try:
         conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
         if prior is not None:
-            from ..calibration.update import update_calibration
-
-            with user_errors():
-                old = Calibration.load(prior)
-            cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
+            cal = _updated(prior, traverses, drift, day, source, steps, conditions)
         else:
             with _progress_bar("calibrating") as progress:  # shown once it has taken a second
                 cal = calibrate(traverses, method=method, day=day, source=source, model=model, step_sizes=steps,
@@ -309,6 +305,44 @@ def calibrate_cmd(
         say(f"saved to {output}")
     if kept is not None:
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
+
+
+def _updated(prior: Path, traverses: list[Traverse], drift: float, day: str | None, source: str, steps: list[Any],
+             conditions: Conditions) -> Calibration:
+    """``calibrate --prior``: the calibration in ``prior`` brought up to date (:mod:`stickslip.calibration.update`),
+    with a warning queued for each :func:`_prior_problems`."""
+    from ..calibration import Calibration
+    from ..calibration.update import update_calibration
+
+    with user_errors():
+        old = Calibration.load(prior)
+    cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
+    for w in _prior_problems(old, conditions, cal.day):
+        warn_later(w)
+    return cal
+
+
+def _prior_problems(old: Calibration, now: Conditions, day: str) -> list[str]:
+    """Why ``calibrate --prior`` may be bringing the wrong calibration up to date, one line each: the prior was made
+    on another device or setting than the new traverses (``now``, :class:`~stickslip.calibration.Conditions`), or on
+    a later session than theirs (``day``). The update keeps the prior's shape, which is that arm's."""
+    from ..clock import age_days
+
+    out: list[str] = []
+    then = old.conditions
+    if then.device:
+        with contextlib.suppress(ValueError):  # a malformed key compares as written
+            then = dataclasses.replace(then, device=device_key(then.device))
+    diffs = then.differences(now)
+    if diffs:
+        out.append("the prior calibration was made under other conditions (" + "; ".join(diffs) + "): the update "
+                   "keeps its model's shape, which is that arm's and setting's; calibrate this one from scratch")
+    age = age_days(old.day, day)
+    if age is not None and age < 0:
+        out.append(f"the prior calibration is of {old.day}, {-age} day{'s' if age != -1 else ''} after these "
+                   f"traverses' {day}: an update brings an earlier calibration forward; check which file is the "
+                   "prior (and --day)")
+    return out
 
 
 def _stage_table(measurements: Path | None, mm3a_only: bool, db: str | None) -> Path:
