@@ -207,3 +207,18 @@ def test_cli_prior_of_another_arm_or_a_later_day_is_warned_about(tmp_path):
     assert r.exit_code == 0, r.output
     assert ("warning: the prior calibration is of 2026-11-25, 2 days after these traverses' 2026-11-23"
             in " ".join(r.stderr.split()))
+
+
+def test_cli_a_table_of_several_sessions_is_warned_about(tmp_path):
+    # the fit pools the days (the day-to-day change becomes model error) and dates the result by the latest
+    runner = CliRunner()
+    table = tmp_path / "two-days.csv"
+    table.write_text(measurements_to_csv(paper_table(day="2026-11-22") + paper_table(day="2026-11-23")))
+    r = runner.invoke(app, ["calibrate", str(table)])
+    assert r.exit_code == 0, r.output
+    assert ("warning: the table holds traverses of 2 sessions (2026-11-22, 2026-11-23), fitted as one and dated "
+            "2026-11-23") in " ".join(r.stderr.split())
+    one = tmp_path / "one-day.csv"
+    one.write_text(measurements_to_csv(paper_table(day="2026-11-23")))
+    r = runner.invoke(app, ["calibrate", str(one)])
+    assert r.exit_code == 0 and "warning" not in r.stderr, r.stderr

@@ -286,6 +286,7 @@ def calibrate_cmd(
     except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
         fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
+    _warn_if_pooled(traverses, cal.day)
     if output is not None:
         with user_errors():
             cal.save(output)
@@ -305,6 +306,16 @@ def calibrate_cmd(
         say(f"saved to {output}")
     if kept is not None:
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
+
+
+def _warn_if_pooled(traverses: list[Traverse], day: str) -> None:
+    """Queue a warning when ``traverses`` span several sessions: one fit pools them, dated ``day``."""
+    days = sorted({t.day for t in traverses})
+    if len(days) > 1:
+        shown = ", ".join(days) if len(days) <= 4 else f"{days[0]} ... {days[-1]}"
+        warn_later(f"the table holds traverses of {len(days)} sessions ({shown}), fitted as one and dated {day}: "
+                   "a day's change of step size is taken for model error (the paper found it significant); "
+                   "calibrate each session from its own traverses, or today's with --prior yesterday's calibration")
 
 
 def _updated(prior: Path, traverses: list[Traverse], drift: float, day: str | None, source: str, steps: list[Any],
