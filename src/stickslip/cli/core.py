@@ -663,6 +663,17 @@ def validate_cmd(
     console.print(validation_table(rows, title))
 
 
+def _with_day_drift(cal: Calibration, sd: float) -> tuple[float, float]:
+    """``sd`` (relative) with a day's change of step scale added for a calibration not made today, as ``move``'s
+    dead reckoning starts it (:meth:`~stickslip.motion.tracking.JointTrack.fresh`), and that change (0 for today's).
+    """
+    from ..calibration.update import DRIFT_PRIOR
+    from ..clock import age_days
+
+    drift = 0.0 if age_days(cal.day) == 0 else DRIFT_PRIOR
+    return math.hypot(sd, drift), drift
+
+
 @app.command("plan")
 def plan_cmd(
     joint: Annotated[int, typer.Option("--joint", "-j", help="Joint to move: 1, 2 (rotary) or 3 (prismatic).")],
@@ -716,11 +727,13 @@ def plan_cmd(
 
     sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1), pose=tuple(pose),
                                 span=(plan.q_from, plan.q_end_predicted))
+    sd, drift = _with_day_drift(cal, sd)
     half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
         d = plan.as_dict()
         d["pi95"] = half
         d["pi95_assumed"] = assumed
+        d["pi95_day_drift"] = drift
         print_json(d)
         return
     err = plan.q_end_predicted - plan.q_to
@@ -737,7 +750,8 @@ def plan_cmd(
     say(
         f"  the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
         f"± {format_position(half, joint, 3)} (95 % prediction interval)"
-        + (" (model error assumed: the calibration has none)" if assumed else ""),
+        + (" (model error assumed: the calibration has none)" if assumed else "")
+        + (f" (with a day's change of step, {drift:.0%}: the calibration is from another day)" if drift else ""),
         indent="    ",
     )
     if math.isclose(plan.q_from, plan.q_to):
