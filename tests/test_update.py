@@ -70,6 +70,13 @@ def test_prior_without_the_joint_is_refused():
         update_calibration(prior, [t for t in paper_table() if t.joint == 2][:1])
 
 
+def test_a_stage_calibration_as_prior_is_refused_by_what_it_is():
+    # a stage's file holds mean steps, no models: the message said "(it has: )"
+    prior = Calibration({}, {}, {(3, "+"): 1e-6, (3, "-"): 1e-6}, "2026-11-22", "stage-mean")
+    with pytest.raises(CalibrationError, match=r"the prior calibration \(stage-mean\) has no step-size model"):
+        update_calibration(prior, [t for t in paper_table() if t.joint == 3][:1])
+
+
 def test_prediction_interval_grows_for_short_moves():
     cal = calibrate(paper_table())
     long, assumed = prediction_sd(cal, 3, "+", 10_000)

@@ -281,6 +281,11 @@ def _with_step_sizes(
 
 def _check_prior_has(prior: Calibration, groups: dict[tuple[int, str], list[Traverse]]) -> None:
     """:class:`CalibrationError` naming each joint and direction with new traverses but no prior model."""
+    if not prior.models:
+        raise CalibrationError(
+            f"the prior calibration ({prior.method or 'no method'}) has no step-size model to update (a stage's "
+            "mean steps are recalibrated from their traverses: stickslip calibrate TABLE --rig RIG --arm NAME)"
+        )
     missing = sorted(k for k in groups if k not in prior.models)
     if missing:
         have = ", ".join(f"{j}{d}" for j, d in sorted(prior.models))
