@@ -93,6 +93,25 @@ def test_plan_json_matches_library(files):
     assert r.exit_code == 0 and "steps in direction +" in r.stdout and "µm" in r.stdout
 
 
+def test_plan_interval_of_an_older_calibration_adds_a_days_change_as_move_does(files, monkeypatch):
+    # move's dead reckoning starts a calibration from another day with a day's change of step scale (15 %,
+    # DRIFT_PRIOR); plan gave the same move the calibration's model error alone, 100x narrower (issue: audit31)
+    tmp, meas = files
+    cal_path = _cal(tmp, meas)  # the pinned day, 2026-11-22
+    args = ["plan", "-c", str(cal_path), "--joint", "3", "--from", "2mm", "--to", "4mm", "--json"]
+    today = json.loads(runner.invoke(app, args).stdout)
+    monkeypatch.setenv("STICKSLIP_TODAY", "2026-11-23")
+    r = runner.invoke(app, args)
+    later = json.loads(r.stdout)
+    assert today["pi95_day_drift"] == 0.0 and later["pi95_day_drift"] == 0.15
+    distance = abs(today["end_predicted"] - today["from"])
+    sd_today = today["pi95"] / (1.96 * distance)
+    assert later["pi95"] == pytest.approx(1.96 * distance * math.hypot(sd_today, 0.15), rel=1e-9)
+    assert later["pi95"] > 1.9 * today["pi95"]  # 7.5 % assumed model error: the interval doubles
+    r = runner.invoke(app, args[:-1])
+    assert "with a day's change of step, 15%: the calibration is from another day" in " ".join(r.stdout.split())
+
+
 def test_validate(files):
     tmp, meas = files
     cal_path = _cal(tmp, meas)

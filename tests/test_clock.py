@@ -66,6 +66,19 @@ def test_stale_message_uses_the_pinned_today(monkeypatch):
     msg = clock.stale_message(_day(-400))
     assert msg.startswith(f"calibration is from {_day(-400)}, today is 2099-12-31 (400 days old): recalibrate")
     assert clock.stale_message(_day(+1)) is None  # a calibration dated ahead of today is not stale
+    assert clock.stale_message(_day(+2)) is None  # ... up to the two days time zones can differ by
+
+
+def test_a_calibration_dated_further_ahead_than_time_zones_explain_is_warned_about(monkeypatch):
+    # a machine whose clock is a year behind (a dead RTC battery) sees every calibration made elsewhere in its
+    # future: never stale before, however old it really is
+    monkeypatch.setenv(clock.ENV_TODAY, "2025-11-22")
+    msg = clock.stale_message("2026-11-22", max_age_days=7)
+    assert msg is not None and msg.startswith(
+        "calibration is from 2026-11-22, today is 2025-11-22 (365 days ahead, more than time zones explain): "
+        "this machine's clock or the label is wrong"
+    )
+    assert clock.stale_message("2025-11-25") is not None and clock.stale_message("2025-11-24") is None
 
 
 # ---------------------------------------------------------------- commands at a pinned far-future date

@@ -14,7 +14,10 @@ Definitions (stated once, used by every warning that compares dates):
 
 The paper recalibrates every session because day-to-day changes are significant, so
 a calibration is *stale* when its age exceeds ``max_age_days`` (default 0: any
-earlier day).
+earlier day). A calibration dated *ahead* of today by up to :data:`MAX_DAYS_AHEAD`
+days was made on a machine in another time zone; further ahead, a clock (this
+machine's or that one's) or the label is wrong, its age is unknown, and it is
+warned about as well.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import re
 
 __all__ = [
     "max_age_days",
+    "MAX_DAYS_AHEAD",
     "ENV_TODAY",
     "today",
     "today_label",
@@ -160,6 +164,11 @@ def max_age_days(value: int | None = None) -> int:
     return days
 
 
+MAX_DAYS_AHEAD = 2
+"""Most calendar days a label written elsewhere can be ahead of today: the local dates of two time zones
+(UTC+14 and UTC-12) differ by at most two at any instant."""
+
+
 def stale_message(cal_day: str | None, today: str | None = None, max_age_days: int = 0) -> str | None:
     """The recalibration warning for a calibration made on ``cal_day``, or ``None`` if it is fresh.
 
@@ -175,13 +184,19 @@ def stale_message(cal_day: str | None, today: str | None = None, max_age_days: i
     Notes
     -----
     When both labels are ISO dates the warning comes only if the calibration is more
-    than ``max_age_days`` older; other labels warn whenever they differ from today's,
-    since their order is unknown.
+    than ``max_age_days`` older, or more than :data:`MAX_DAYS_AHEAD` days newer; other
+    labels warn whenever they differ from today's, since their order is unknown.
     """
     if not cal_day:
         return None
     label = today_label() if today is None else today
     age = age_days(cal_day, label)
+    if age is not None and age < -MAX_DAYS_AHEAD:
+        return (
+            f"calibration is from {cal_day}, today is {label} ({-age} days ahead, more than time zones "
+            "explain): this machine's clock or the label is wrong, so its age is unknown; check the date "
+            f"(or pin it with ${ENV_TODAY}=YYYY-MM-DD)"
+        )
     stale = age > max_age_days if age is not None else cal_day.strip() != label.strip()
     if not stale:
         return None

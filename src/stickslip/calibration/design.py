@@ -25,9 +25,9 @@ from ..models import PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams, average_from_features, traverse_features
 from .family_fit import unit_scale
 from .groups import load_coordinates_of, load_quantities
+from .intervals import model_sigma
 from .paper import PRISMATIC_PAPER_POSES, ROTARY_PAPER_POSES
 from .result import Calibration
-from .update import model_sigma
 
 __all__ = ["Suggestion", "suggest_poses", "workspace_poses", "spread_poses", "check_poses", "load_coordinates"]
 

@@ -23,8 +23,10 @@ pair pins it down.
 
 Everything the new traverses cannot identify (the shape parameters, the joints and
 directions without a new traverse) is kept from the prior; the uncertainty that
-follows is carried into ``sigma_model`` (``sqrt(sigma_model^2 + var(log s))``; a joint
-and direction with no new traverse gets ``drift`` added the same way).
+follows is carried into ``sigma_model``: ``sqrt(sigma_model^2 + v)``, ``v`` the posterior
+variance of ``log s + g lambda`` (``g`` a full-range traverse's load gradient) averaged over
+random workspace poses, so a load sensitivity the new traverses left at its prior widens it
+(a joint and direction with no new traverse gets ``drift`` added instead).
 """
 
 from __future__ import annotations
@@ -37,10 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .. import kinematics as kin
 from ..measurements import StepSize, Traverse
-from ..models import JointModel, PrismaticParams, RotaryParams
+from ..models import JointModel, NonPhysicalError, PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams
 from ..units import DIMENSIONLESS_PARAMETERS
+from .design import workspace_poses
 from .intervals import DEFAULT_SIGMA, STEP_NOISE, model_sigma, prediction_sd
 from .result import Calibration, CalibrationError, Provenance, _constant_step, _day_of, _group
 
@@ -128,6 +132,38 @@ def load_scaled(model: JointModel, factor: float) -> JointModel:
             model.joint, model.direction, RotaryParams(p.gamma0, (p.d[0] * factor, p.d[1] * factor), p.knots)
         )
     raise TypeError(f"cannot scale a model with parameters {type(p).__name__}")
+
+
+WORKSPACE_POSES = 64
+"""Random workspace poses (:func:`~.design.workspace_poses`, seed 0) over which an update's uncertainty is
+averaged into the constant ``sigma_model``: the load sensitivity's part of it differs from pose to pose."""
+
+
+def _load_gradients(model: JointModel, poses: Sequence[kin.Pose]) -> NDArray[np.float64]:
+    """``d log gamma_avg / d lambda`` of full-range traverses of ``model`` at ``poses`` (poses where the model
+    stalls are left out)."""
+    spec = kin.JOINTS[model.joint]
+    ends = (spec.lower, spec.upper) if model.direction == "+" else (spec.upper, spec.lower)
+    loaded = load_scaled(model, 1.0 + 1e-4)
+    out: list[float] = []
+    for p in poses:
+        try:
+            a, b = (float(m.average_gamma(*ends, *p)) for m in (model, loaded))
+        except NonPhysicalError:
+            continue
+        out.append((math.log(b) - math.log(a)) / 1e-4)
+    return np.array(out)
+
+
+def _workspace_variance(model: JointModel, k: int, post_cov: NDArray[np.float64]) -> float:
+    """Mean over :data:`WORKSPACE_POSES` random poses of the posterior variance of ``log gamma`` of direction
+    ``k``'s full-range traverse: its log step scale's, its load sensitivity's times the pose's load gradient
+    squared, and their covariance (at a pose without load only the first remains)."""
+    g = _load_gradients(model, workspace_poses(model.joint, WORKSPACE_POSES))
+    if g.size == 0:
+        return float(post_cov[k, k])
+    var = post_cov[k, k] + g**2 * post_cov[-1, -1] + 2.0 * g * post_cov[k, -1]
+    return float(np.mean(np.maximum(var, 0.0)))
 
 
 def _average(model: JointModel, ts: Sequence[Traverse]) -> np.ndarray:
@@ -245,6 +281,11 @@ def _with_step_sizes(
 
 def _check_prior_has(prior: Calibration, groups: dict[tuple[int, str], list[Traverse]]) -> None:
     """:class:`CalibrationError` naming each joint and direction with new traverses but no prior model."""
+    if not prior.models:
+        raise CalibrationError(
+            f"the prior calibration ({prior.method or 'no method'}) has no step-size model to update (a stage's "
+            "mean steps are recalibrated from their traverses: stickslip calibrate TABLE --rig RIG --arm NAME)"
+        )
     missing = sorted(k for k in groups if k not in prior.models)
     if missing:
         have = ", ".join(f"{j}{d}" for j, d in sorted(prior.models))
@@ -314,7 +355,7 @@ def _update_joint(
             continue
         state.models[key] = scaled_model(load_scaled(prior.models[key], 1.0 + lam), factor)
         state.rescale_errors(key, factor)
-        state.sigma[key] = math.hypot(s0, sd)
+        state.sigma[key] = math.sqrt(s0**2 + _workspace_variance(prior.models[key], k, post_cov))
         if n_new:
             state.updates.append(ScaleUpdate(j, d, n_new, factor, sd))
         state.notes.append(

@@ -14,7 +14,7 @@ import typer
 from rich.table import Table
 
 if TYPE_CHECKING:  # numpy and the library load inside the commands, so that --help starts fast
-    from ..calibration import Calibration
+    from ..calibration import Calibration, Conditions
     from ..measurements import Traverse
 
 from ..clock import stale_message
@@ -249,7 +249,7 @@ def calibrate_cmd(
 
     Example: stickslip calibrate stack.csv --rig lab.toml --arm gripper -o cal/gripper.json
     """
-    from ..calibration import Calibration, CalibrationError, Conditions, calibrate
+    from ..calibration import CalibrationError, Conditions, calibrate
     from ..measurements import StepSize
     from ..models import NonPhysicalError
 
@@ -278,11 +278,7 @@ def calibrate_cmd(
     try:
         conditions = Conditions(device_key(device) if device else None, frequency, amplitude, temperature)
         if prior is not None:
-            from ..calibration.update import update_calibration
-
-            with user_errors():
-                old = Calibration.load(prior)
-            cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
+            cal = _updated(prior, traverses, drift, day, source, steps, conditions)
         else:
             with _progress_bar("calibrating") as progress:  # shown once it has taken a second
                 cal = calibrate(traverses, method=method, day=day, source=source, model=model, step_sizes=steps,
@@ -290,6 +286,7 @@ def calibrate_cmd(
     except (CalibrationError, NonPhysicalError, ValueError, KeyError) as e:
         fail(str(e.args[0]) if isinstance(e, KeyError) else str(e))
     cal = dataclasses.replace(cal, conditions=conditions)
+    _warn_if_pooled(traverses, cal.day)
     if output is not None:
         with user_errors():
             cal.save(output)
@@ -309,6 +306,54 @@ def calibrate_cmd(
         say(f"saved to {output}")
     if kept is not None:
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
+
+
+def _warn_if_pooled(traverses: list[Traverse], day: str) -> None:
+    """Queue a warning when ``traverses`` span several sessions: one fit pools them, dated ``day``."""
+    days = sorted({t.day for t in traverses})
+    if len(days) > 1:
+        shown = ", ".join(days) if len(days) <= 4 else f"{days[0]} ... {days[-1]}"
+        warn_later(f"the table holds traverses of {len(days)} sessions ({shown}), fitted as one and dated {day}: "
+                   "a day's change of step size is taken for model error (the paper found it significant); "
+                   "calibrate each session from its own traverses, or today's with --prior yesterday's calibration")
+
+
+def _updated(prior: Path, traverses: list[Traverse], drift: float, day: str | None, source: str, steps: list[Any],
+             conditions: Conditions) -> Calibration:
+    """``calibrate --prior``: the calibration in ``prior`` brought up to date (:mod:`stickslip.calibration.update`),
+    with a warning queued for each :func:`_prior_problems`."""
+    from ..calibration import Calibration
+    from ..calibration.update import update_calibration
+
+    with user_errors():
+        old = Calibration.load(prior)
+    cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
+    for w in _prior_problems(old, conditions, cal.day):
+        warn_later(w)
+    return cal
+
+
+def _prior_problems(old: Calibration, now: Conditions, day: str) -> list[str]:
+    """Why ``calibrate --prior`` may be bringing the wrong calibration up to date, one line each: the prior was made
+    on another device or setting than the new traverses (``now``, :class:`~stickslip.calibration.Conditions`), or on
+    a later session than theirs (``day``). The update keeps the prior's shape, which is that arm's."""
+    from ..clock import age_days
+
+    out: list[str] = []
+    then = old.conditions
+    if then.device:
+        with contextlib.suppress(ValueError):  # a malformed key compares as written
+            then = dataclasses.replace(then, device=device_key(then.device))
+    diffs = then.differences(now)
+    if diffs:
+        out.append("the prior calibration was made under other conditions (" + "; ".join(diffs) + "): the update "
+                   "keeps its model's shape, which is that arm's and setting's; calibrate this one from scratch")
+    age = age_days(old.day, day)
+    if age is not None and age < 0:
+        out.append(f"the prior calibration is of {old.day}, {-age} day{'s' if age != -1 else ''} after these "
+                   f"traverses' {day}: an update brings an earlier calibration forward; check which file is the "
+                   "prior (and --day)")
+    return out
 
 
 def _stage_table(measurements: Path | None, mm3a_only: bool, db: str | None) -> Path:
@@ -618,6 +663,17 @@ def validate_cmd(
     console.print(validation_table(rows, title))
 
 
+def _with_day_drift(cal: Calibration, sd: float) -> tuple[float, float]:
+    """``sd`` (relative) with a day's change of step scale added for a calibration not made today, as ``move``'s
+    dead reckoning starts it (:meth:`~stickslip.motion.tracking.JointTrack.fresh`), and that change (0 for today's).
+    """
+    from ..calibration.update import DRIFT_PRIOR
+    from ..clock import age_days
+
+    drift = 0.0 if age_days(cal.day) == 0 else DRIFT_PRIOR
+    return math.hypot(sd, drift), drift
+
+
 @app.command("plan")
 def plan_cmd(
     joint: Annotated[int, typer.Option("--joint", "-j", help="Joint to move: 1, 2 (rotary) or 3 (prismatic).")],
@@ -671,11 +727,13 @@ def plan_cmd(
 
     sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1), pose=tuple(pose),
                                 span=(plan.q_from, plan.q_end_predicted))
+    sd, drift = _with_day_drift(cal, sd)
     half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
         d = plan.as_dict()
         d["pi95"] = half
         d["pi95_assumed"] = assumed
+        d["pi95_day_drift"] = drift
         print_json(d)
         return
     err = plan.q_end_predicted - plan.q_to
@@ -692,7 +750,8 @@ def plan_cmd(
     say(
         f"  the move: {format_position(abs(plan.q_end_predicted - plan.q_from), joint)} "
         f"± {format_position(half, joint, 3)} (95 % prediction interval)"
-        + (" (model error assumed: the calibration has none)" if assumed else ""),
+        + (" (model error assumed: the calibration has none)" if assumed else "")
+        + (f" (with a day's change of step, {drift:.0%}: the calibration is from another day)" if drift else ""),
         indent="    ",
     )
     if math.isclose(plan.q_from, plan.q_to):
