@@ -609,7 +609,7 @@ def _parse_numbers(kwargs: dict[str, Any]) -> None:
             continue
         if k in kwargs:
             v = kwargs[k]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v != int(v):
                 raise TuningFileError(f"{k} must be an integer, got {v!r}")
             kwargs[k] = int(v)
 

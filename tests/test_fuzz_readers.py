@@ -1,0 +1,164 @@
+"""Fuzz the readers through their own API: a valid file mutated deep inside, loaded, and what loads is used.
+
+The command-line batteries (``test_fuzz_cli``, ``test_fuzz_files``, ``test_hostile``) write
+documents drawn from scratch; these start from a document stickslip wrote (a tuning from the
+simulator's own recording, the simulator's true calibration) and change one to three things
+anywhere in it (a value of the wrong type or size, a key deleted, a list entry doubled, a value
+nested one deeper). The contract: the reader returns a value, or raises its documented error
+(a ``ValueError`` subclass naming the field); and a value it returns can be used (a tuning
+builds a detector that hears a block, reports and writes itself back; a calibration predicts
+finite steps and reports). Derandomized, a modest fixed example count each.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from stickslip import kinematics as kin
+from stickslip.audio.detector import detector_for
+from stickslip.audio.tuningfile import Tuning, TuningFileError
+from stickslip.calibration import Calibration
+
+READERS = settings(  # derandomized by the profile in tests/conftest.py
+    max_examples=40, deadline=None, database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
+
+#: what a hand edit or a damaged file puts where a value was
+HOSTILE: list[Any] = [None, True, False, 0, -1, 1, 2**63, 10**30, 1e308, -1e308, 1e-320, 0.5, "", "x", "nan", "1e999",
+                      [], {}, [1], [None], {"a": 1}, "\u202e", "\uff19", [1e308, 1e308], [0, 0], [-1, 1], "2026-11-22",
+                      "+", "-", [[[[1]]]]]
+
+
+def _paths(doc: Any, pre: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    """Every place in ``doc`` (the first six entries of a list), the document itself left out."""
+    out = [pre] if pre else []
+    if isinstance(doc, dict):
+        for k, v in doc.items():
+            out += _paths(v, (*pre, k))
+    elif isinstance(doc, list):
+        for i, v in enumerate(doc[:6]):
+            out += _paths(v, (*pre, i))
+    return out
+
+
+@st.composite
+def mutated(draw: st.DrawFn, base: dict[str, Any]) -> dict[str, Any]:
+    """``base`` with one to three places changed: a hostile value or any number, deleted, doubled or nested."""
+    doc = copy.deepcopy(base)
+    for _ in range(draw(st.integers(1, 3))):
+        places = _paths(doc)
+        if not places:
+            break
+        place = draw(st.sampled_from(places))
+        holder = doc
+        for k in place[:-1]:
+            holder = holder[k]
+        key = place[-1]
+        op = draw(st.sampled_from(["set"] * 5 + ["number", "delete", "double", "nest"]))
+        if op == "set":
+            holder[key] = copy.deepcopy(draw(st.sampled_from(HOSTILE)))
+        elif op == "number":
+            holder[key] = draw(st.floats(allow_nan=False, allow_infinity=False) | st.integers(-(10**20), 10**20))
+        elif op == "nest":
+            holder[key] = [holder[key]]
+        elif op == "double" and isinstance(holder, list):
+            holder.append(copy.deepcopy(holder[key]))
+        else:
+            del holder[key]
+    return doc
+
+
+# -- tunings ---------------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def tuning_doc() -> dict[str, Any]:
+    """A template tuning of the simulator's joint 3, as ``stickslip tune`` writes it (with its self-check)."""
+    from stickslip.procedures.day import simulator_tunings
+
+    doc = simulator_tunings("sim://?seed=3", joints=(3,))[3].to_dict()
+    assert doc["checks"]["false_alarms_per_hour"] >= 0  # the self-check record the report reads
+    return json.loads(json.dumps(doc))
+
+
+def _use_tuning(t: Tuning) -> None:
+    """What the commands do with a loaded tuning: hear a block, report, write it back."""
+    det = detector_for(t)
+    det.feed((np.random.default_rng(0).standard_normal(9600) * 0.01).astype(np.float32))
+    assert t.report()
+    assert Tuning.from_dict(json.loads(json.dumps(t.to_dict()))) == t
+
+
+def _load_tuning(path: Path, doc: dict[str, Any]) -> Tuning | None:
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    try:
+        return Tuning.load(path)
+    except TuningFileError as e:
+        assert "\n" not in str(e) and str(path) in str(e)
+        return None
+
+
+def test_a_whole_number_field_that_is_infinite_is_refused_naming_it(tuning_doc: dict[str, Any]) -> None:
+    """``Tuning.from_dict`` with an infinite frame raised OverflowError; a NaN one said Python's words."""
+    for v in (math.inf, -math.inf, math.nan):
+        doc = {**tuning_doc, "frame": v}
+        with pytest.raises(TuningFileError, match="frame must be an integer"):
+            Tuning.from_dict(doc)
+
+
+def test_the_tuning_tune_wrote_loads_and_is_used(tmp_path: Path, tuning_doc: dict[str, Any]) -> None:
+    t = _load_tuning(tmp_path / "t.json", tuning_doc)
+    assert t is not None
+    _use_tuning(t)
+
+
+def _write(path: Path, doc: Any) -> Path:
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    return path
+
+
+# -- calibrations ----------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def calibration_doc() -> dict[str, Any]:
+    from test_reach import true_calibration
+
+    return json.loads(json.dumps(true_calibration().to_dict()))
+
+
+def _use_calibration(cal: Calibration) -> None:
+    """Every step it predicts is a finite number; it reports and writes itself back."""
+    pose = kin.Pose(q2=-1.5, q3=0.005)
+    for j in cal.joints:
+        for d in "+-":
+            try:
+                g, c = cal.gamma(j, d, pose), cal.constant_step(j, d)
+            except KeyError:  # a direction the file does not hold
+                continue
+            assert math.isfinite(g) and math.isfinite(c), (j, d, g, c)
+    assert cal.report()
+    Calibration.from_dict(json.loads(json.dumps(cal.to_dict())))
+
+
+@READERS
+@given(data=st.data())
+def test_a_mutated_calibration_loads_to_one_that_predicts_or_is_refused(tmp_path: Path, calibration_doc: dict[str, Any],
+                                                                         data: st.DataObject) -> None:
+    doc = data.draw(mutated(calibration_doc))
+    p = _write(tmp_path / "c.json", doc)
+    try:
+        cal = Calibration.load(p)
+    except ValueError as e:
+        assert str(p) in str(e)
+        return
+    _use_calibration(cal)
+
