@@ -107,6 +107,21 @@ def _load_tuning(path: Path, doc: dict[str, Any]) -> Tuning | None:
         return None
 
 
+@pytest.mark.parametrize("value", [None, "12", [1], True, -1])
+def test_a_self_check_that_is_no_record_is_refused_naming_it(tmp_path: Path, tuning_doc: dict[str, Any],
+                                                             value: object) -> None:
+    """The report read the self-check's numbers as numbers: a string, a list or null there was a TypeError."""
+    for key in ("false_alarms_per_hour", "checked_s", "latency_median_s", "stops"):
+        doc = copy.deepcopy(tuning_doc)
+        doc["checks"][key] = value
+        with pytest.raises(TuningFileError, match=f"checks.{key}"):
+            Tuning.load(_write(tmp_path / "t.json", doc))
+    doc = copy.deepcopy(tuning_doc)
+    doc["checks"]["warnings"] = [value] if not isinstance(value, str) else value  # a text where a list of them goes
+    with pytest.raises(TuningFileError, match="checks.warnings"):
+        Tuning.load(_write(tmp_path / "t.json", doc))
+
+
 def test_a_whole_number_field_that_is_infinite_is_refused_naming_it(tuning_doc: dict[str, Any]) -> None:
     """``Tuning.from_dict`` with an infinite frame raised OverflowError; a NaN one said Python's words."""
     for v in (math.inf, -math.inf, math.nan):
@@ -124,6 +139,16 @@ def test_the_tuning_tune_wrote_loads_and_is_used(tmp_path: Path, tuning_doc: dic
 def _write(path: Path, doc: Any) -> Path:
     path.write_text(json.dumps(doc), encoding="utf-8")
     return path
+
+
+@READERS
+@given(data=st.data())
+def test_a_mutated_tuning_loads_to_one_that_works_or_is_refused(tmp_path: Path, tuning_doc: dict[str, Any],
+                                                                data: st.DataObject) -> None:
+    doc = data.draw(mutated(tuning_doc))
+    t = _load_tuning(tmp_path / "t.json", doc)
+    if t is not None:
+        _use_tuning(t)
 
 
 # -- calibrations ----------------------------------------------------------------------------------------------------
@@ -162,3 +187,12 @@ def test_a_mutated_calibration_loads_to_one_that_predicts_or_is_refused(tmp_path
         return
     _use_calibration(cal)
 
+
+def test_a_self_check_with_a_number_left_out_reports_without_it(tmp_path: Path, tuning_doc: dict[str, Any]) -> None:
+    """A self-check record without its ``stops`` was a KeyError in the report; now the report leaves the line out."""
+    doc = copy.deepcopy(tuning_doc)
+    del doc["checks"]["stops"]
+    t = _load_tuning(tmp_path / "t.json", doc)
+    assert t is not None
+    assert "false alarms per hour" not in t.report()
+    assert "false alarms per hour" in Tuning.from_dict(tuning_doc).report()

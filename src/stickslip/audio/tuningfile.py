@@ -554,8 +554,7 @@ def _from_dict(d: dict[str, Any]) -> Tuning:
         _parse_bands(kwargs)
         _parse_lists(kwargs)
         _parse_optional(kwargs, _RATES)
-        if kwargs.get("checks") is not None and not isinstance(kwargs["checks"], dict):
-            raise TuningFileError("checks must be an object or null")
+        _parse_checks(kwargs)
         _parse_numbers(kwargs)
         return Tuning(**kwargs)
     except TuningFileError:
@@ -596,6 +595,25 @@ def _parse_optional(kwargs: dict[str, Any], keys: tuple[str, ...]) -> None:
     for k in keys:
         if kwargs.get(k) is not None:
             kwargs[k] = _number(k, kwargs[k])
+
+
+_CHECK_NUMBERS = ("false_alarms_per_hour", "false_alarms", "checked_s", "stops_found", "stops", "latency_median_s")
+"""The self-check's numbers that :meth:`Tuning.report` and ``tune`` read (each finite and >= 0 when given)."""
+
+
+def _parse_checks(kwargs: dict[str, Any]) -> None:
+    """The self-check record: an object whose numbers are numbers and whose warnings are text (the rest is kept)."""
+    checks = kwargs.get("checks")
+    if checks is None:
+        return
+    if not isinstance(checks, dict):
+        raise TuningFileError("checks must be an object or null")
+    for k in _CHECK_NUMBERS:
+        if k in checks and not (_number(f"checks.{k}", checks[k]) >= 0):
+            raise TuningFileError(f"checks.{k} must be a number >= 0, got {checks[k]!r}")
+    warnings = checks.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise TuningFileError("checks.warnings must be a list of texts")
 
 
 def _parse_numbers(kwargs: dict[str, Any]) -> None:
@@ -653,7 +671,7 @@ def _template_report(t: Tuning) -> str:
         )
     lines.append(f"latency {1e3 * t.latency_s:.1f} ms, onset lag {1e3 * t.onset_lag_s:.1f} ms")
     c = t.checks or {}
-    if "false_alarms_per_hour" in c:
+    if all(k in c for k in _CHECK_NUMBERS):  # (a record with one of them left out is not reported in part)
         lines.append(
             f"self-check with knocks, babble, +-20 dB gain and a second click train: "
             f"{c['false_alarms_per_hour']:.0f} false alarms per hour expected "
