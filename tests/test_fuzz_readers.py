@@ -196,3 +196,22 @@ def test_a_self_check_with_a_number_left_out_reports_without_it(tmp_path: Path, 
     assert t is not None
     assert "false alarms per hour" not in t.report()
     assert "false alarms per hour" in Tuning.from_dict(tuning_doc).report()
+
+
+@pytest.mark.parametrize("how", ["left out", "null"])
+def test_a_calibration_without_a_day_reads_as_none_known_and_writes_back_readable(
+        tmp_path: Path, calibration_doc: dict[str, Any], how: str) -> None:
+    """A null day was read as the session label 'None'; a file without one loaded, but what it wrote back
+    (``"day": ""``) was refused ('the session label is empty'). Now both read as no day known, written as null."""
+    doc = copy.deepcopy(calibration_doc)
+    if how == "null":
+        doc["day"] = doc["method"] = doc["created"] = None
+    else:
+        del doc["day"]
+    cal = Calibration.load(_write(tmp_path / "c.json", doc))
+    assert cal.day == ""
+    assert "None" not in (cal.day, cal.method, cal.created)
+    assert "day ?" in cal.report()
+    cal.save(tmp_path / "again.json")
+    again = Calibration.load(tmp_path / "again.json")
+    assert again.day == "" and json.loads((tmp_path / "again.json").read_text())["day"] is None

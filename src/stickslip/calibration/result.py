@@ -427,7 +427,7 @@ class Calibration:
         base = {
             "format": FORMAT,
             "version": FORMAT_VERSION if not ext.get("families") else 2,
-            "day": self.day,
+            "day": self.day or None,  # no day known: null, which reads back as such ("" is no session label)
             "method": self.method,
             "created": self.created,
             "units": "SI: prismatic steps in m, rotary steps in rad, q3 in m; b is dimensionless",
@@ -470,10 +470,10 @@ class Calibration:
             models,
             stderr,
             consts,
-            str(data.get("day", "")),
-            str(data.get("method", "")),
+            data.get("day") or "",  # null or left out: no day known (str(None) was the label 'None')
+            data.get("method") or "",
             Provenance.from_dict(data.get("provenance")),
-            str(data.get("created", "")),
+            data.get("created") or "",
             conditions,
             kinds=kinds,
             constant_stderr=const_se,
