@@ -215,3 +215,16 @@ def test_a_calibration_without_a_day_reads_as_none_known_and_writes_back_readabl
     cal.save(tmp_path / "again.json")
     again = Calibration.load(tmp_path / "again.json")
     assert again.day == "" and json.loads((tmp_path / "again.json").read_text())["day"] is None
+
+
+@pytest.mark.parametrize("method", ["template", "band"])
+def test_a_tuning_with_some_of_the_levels_it_saw_reports_without_them(tuning_doc: dict[str, Any], method: str) -> None:
+    """``stepping_db`` null beside a contrast was a TypeError in the report (each of the four is optional)."""
+    doc = copy.deepcopy(tuning_doc)
+    if method == "band":
+        doc = {k: doc[k] for k in ("band_hz", "threshold_db", "sample_rate", "frame", "hop", "contrast_db", "margin_db",
+                                   "stepping_db", "stopped_db")}
+    assert "margin" in Tuning.from_dict(doc).report()
+    doc["stepping_db"] = None
+    t = Tuning.from_dict(doc)
+    assert t.method == method and "margin" not in t.report()

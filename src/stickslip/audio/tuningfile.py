@@ -632,6 +632,11 @@ def _parse_numbers(kwargs: dict[str, Any]) -> None:
             kwargs[k] = int(v)
 
 
+def _saw_levels(t: Tuning) -> bool:
+    """Whether ``t`` holds all four levels tuning saw (a hand-edited file may hold some, each optional)."""
+    return None not in (t.contrast_db, t.margin_db, t.stepping_db, t.stopped_db)
+
+
 def _report(t: Tuning) -> str:
     """A band tuning's report: band, threshold, contrast and margin."""
     lines = [
@@ -640,7 +645,7 @@ def _report(t: Tuning) -> str:
         f"hop {t.hop} ({1e3 * t.hop / t.sample_rate:.2f} ms), "
         f"hold {1e3 * t.hold_s:.1f} ms, hysteresis {t.hysteresis_db:.1f} dB",
     ]
-    if t.contrast_db is not None:
+    if _saw_levels(t):
         lines.append(
             f"stepping <= {t.stepping_db:.1f} {t.level_unit}, stopped >= {t.stopped_db:.1f} "
             f"{t.level_unit}: "
@@ -664,7 +669,7 @@ def _template_report(t: Tuning) -> str:
         f"{1e3 * t.hold_s:.1f} ms, residual <= {t.residual_max:.1f}; frame "
         f"{t.frame} samples ({1e3 * t.frame / t.sample_rate:.1f} ms), hop {t.hop}",
     ]
-    if t.contrast_db is not None:
+    if _saw_levels(t):
         lines.append(
             f"worst stepping frame {t.stepping_db:.2f}, stop's low {t.stopped_db:.2f}: "
             f"margin {t.margin_db:.2f} (stop-likeness), stop departure {t.contrast_db:.1f} dB"
