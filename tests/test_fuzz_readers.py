@@ -27,6 +27,9 @@ from stickslip import kinematics as kin
 from stickslip.audio.detector import detector_for
 from stickslip.audio.tuningfile import Tuning, TuningFileError
 from stickslip.calibration import Calibration
+from stickslip.config import ConfigError, parse_config
+from stickslip.rig.load import RigError, parse_rig
+from stickslip.units import UnitError, parse_quantity
 
 READERS = settings(  # derandomized by the profile in tests/conftest.py
     max_examples=40, deadline=None, database=None,
@@ -228,3 +231,20 @@ def test_a_tuning_with_some_of_the_levels_it_saw_reports_without_them(tuning_doc
     doc["stepping_db"] = None
     t = Tuning.from_dict(doc)
     assert t.method == method and "margin" not in t.report()
+
+
+# -- quantities in TOML files ----------------------------------------------------------------------------------------
+
+def test_a_whole_number_beyond_a_float_is_refused_as_not_finite(tmp_path: Path) -> None:
+    """TOML carries integers of any length: a rig's ``arm_distance = 999...`` (400 digits) raised OverflowError."""
+    from test_fuzz_files import _RIG
+
+    for v in (10**400, -(10**400)):
+        with pytest.raises(UnitError, match="not a finite"):
+            parse_quantity(v, "length")
+    text = "\n".join(f"arm_distance = {'9' * 400}" if ln.startswith("arm_distance") else ln
+                      for ln in _RIG.splitlines())
+    with pytest.raises(RigError, match="arm_distance"):
+        parse_rig(text, "lab.toml")
+    with pytest.raises(ConfigError, match="offset"):
+        parse_config(f"[geometry]\noffset = {'9' * 400}\n", tmp_path / "config.toml")

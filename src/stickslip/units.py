@@ -92,7 +92,10 @@ def parse_quantity(text: str | float, kind: str | None = None) -> float:
 
 def _read_quantity(text: str | float, kind: str | None) -> float:
     if isinstance(text, (int, float)):
-        return float(text)
+        try:
+            return float(text)
+        except OverflowError:  # an integer beyond a float (a TOML file's 400 digits): not finite, refused as such
+            return math.inf
     m = _QUANTITY.match(str(text).replace("−", "-"))
     if not m:
         raise UnitError(f"cannot read {text!r} as a number with an optional unit")
