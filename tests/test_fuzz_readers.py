@@ -248,3 +248,30 @@ def test_a_whole_number_beyond_a_float_is_refused_as_not_finite(tmp_path: Path) 
         parse_rig(text, "lab.toml")
     with pytest.raises(ConfigError, match="offset"):
         parse_config(f"[geometry]\noffset = {'9' * 400}\n", tmp_path / "config.toml")
+
+
+# -- the server's token file -----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("content", [b"", b"\n", b"  \r\n", b"\xef\xbb\xbf", "é" * 40, b"\xff" * 40, b"a" * 5000])
+def test_a_token_file_that_holds_no_token_is_refused_not_recursed_on(tmp_path: Path, content: bytes | str) -> None:
+    """An empty token file (a server killed between creating and writing it) recursed until RecursionError:
+    it was read as no file, creating it met the file, and reading it again found it empty."""
+    from stickslip.server.security import load_or_create_token
+
+    p = tmp_path / "serve-token"
+    p.write_bytes(content.encode() if isinstance(content, str) else content)
+    with pytest.raises(ValueError, match="delete it"):
+        load_or_create_token(p)
+    assert p.read_bytes() == (content.encode() if isinstance(content, str) else content)  # left for the user
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "mkfifo"), reason="FIFOs are POSIX")
+def test_a_token_path_that_is_a_pipe_is_refused_not_waited_on(tmp_path: Path) -> None:
+    import os
+
+    from stickslip.server.security import load_or_create_token
+
+    p = tmp_path / "serve-token"
+    os.mkfifo(p)
+    with pytest.raises(ValueError, match="delete it"):
+        load_or_create_token(p)

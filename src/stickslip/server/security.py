@@ -24,9 +24,12 @@ import hmac
 import ipaddress
 import os
 import secrets
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
+
+from .. import records
 
 __all__ = [
     "TOKEN_FILE",
@@ -59,35 +62,67 @@ def is_loopback(host: str) -> bool:
         return False
 
 
+TOKEN_WAIT_S = 1.0
+"""How long a server waits for the token file another one has just created to be written, s (44 bytes: at once)."""
+MAX_TOKEN_BYTES = 1024
+"""A token file larger than this is no token file, bytes (a token is 43 characters)."""
+
+
 def load_or_create_token(path: Path | None = None) -> tuple[str, bool]:
     """The server's token and whether it was made just now (then print it, once).
 
     The file holds the token alone. A new one is created with owner-only permissions
     (``O_EXCL``, mode 0600: never readable by another user, even for a moment). Raises
     ``OSError`` with the path when the folder cannot be written, ``ValueError`` when the
-    file holds no usable token.
+    file holds no usable token (an empty one too, once :data:`TOKEN_WAIT_S` has passed
+    without another server writing its token into it) or is no regular file.
     """
     p = path or default_token_path()
+    text = _token_text(p)
+    if text is None:
+        token = _create_token(p)
+        if token is not None:
+            return token, True
+    if not text:  # created by another server a moment ago (or left empty by one killed before it wrote)
+        text = _written_token(p)
+    if len(text) < 32 or not text.isascii() or not text.replace("-", "").replace("_", "").isalnum():
+        what = "a usable token" if text else "a token (it is empty)"
+        raise ValueError(f"{p} does not hold {what} (delete it: a new one is made)")
+    return text, False
+
+
+def _token_text(p: Path) -> str | None:
+    """The token file's text, stripped; ``None`` when there is no file (``ValueError`` for one that is no token's)."""
+    if not os.path.lexists(p):
+        return None
     try:
-        text = p.read_text(encoding="ascii").strip()
-    except FileNotFoundError:
-        text = ""
-    except UnicodeDecodeError:
-        raise ValueError(f"{p} does not hold a token (delete it: a new one is made)") from None
-    if text:
-        if len(text) < 32 or not text.replace("-", "").replace("_", "").isalnum():
-            raise ValueError(f"{p} does not hold a usable token (delete it: a new one is made)")
-        return text, False
+        return records.read_text_bounded(p, "token", MAX_TOKEN_BYTES).strip()
+    except ValueError as e:
+        raise ValueError(f"{e} (delete it: a new one is made)") from None
+
+
+def _written_token(p: Path) -> str:
+    """The token another server is writing into ``p``, once written ("" if none is within :data:`TOKEN_WAIT_S`)."""
+    end = time.monotonic() + TOKEN_WAIT_S
+    while True:
+        text = _token_text(p) or ""
+        if text or time.monotonic() > end:
+            return text
+        time.sleep(0.02)
+
+
+def _create_token(p: Path) -> str | None:
+    """A new token written to ``p`` (mode 0600, ``O_EXCL``); ``None`` if another server created the file first."""
     p.parent.mkdir(parents=True, exist_ok=True)
     token = secrets.token_urlsafe(32)
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0)
     try:
         fd = os.open(p, flags, 0o600)
     except FileExistsError:  # another server made it a moment ago: use that one
-        return load_or_create_token(p)
+        return None
     with os.fdopen(fd, "w", encoding="ascii") as f:
         f.write(token + "\n")
-    return token, True
+    return token
 
 
 def origin_problem(origin: str | None, host: str | None) -> str | None:
