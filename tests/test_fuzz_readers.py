@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import json
 import math
+import re
 from pathlib import Path
 from typing import Any
 
@@ -253,10 +254,14 @@ def test_a_whole_number_beyond_a_float_is_refused_as_not_finite(tmp_path: Path) 
 # -- the server's token file -----------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("content", [b"", b"\n", b"  \r\n", b"\xef\xbb\xbf", "é" * 40, b"\xff" * 40, b"a" * 5000])
-def test_a_token_file_that_holds_no_token_is_refused_not_recursed_on(tmp_path: Path, content: bytes | str) -> None:
+def test_a_token_file_that_holds_no_token_is_refused_not_recursed_on(tmp_path: Path, content: bytes | str,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     """An empty token file (a server killed between creating and writing it) recursed until RecursionError:
     it was read as no file, creating it met the file, and reading it again found it empty."""
+    from stickslip.server import security
     from stickslip.server.security import load_or_create_token
+
+    monkeypatch.setattr(security, "TOKEN_WAIT_S", 0.0)  # no other server is writing it
 
     p = tmp_path / "serve-token"
     p.write_bytes(content.encode() if isinstance(content, str) else content)
@@ -275,3 +280,152 @@ def test_a_token_path_that_is_a_pipe_is_refused_not_waited_on(tmp_path: Path) ->
     os.mkfifo(p)
     with pytest.raises(ValueError, match="delete it"):
         load_or_create_token(p)
+
+
+# -- text files: byte flips, truncation, BOM, CRLF, lines doubled or dropped, numbers replaced ------------------------
+
+_ODD = ["\ufeff", "\r\n", "\r", "\x00", "\u202e", "\uff19", "x" * 5000, "9" * 400, ",", '"', "\n", "nan", "inf", "-",
+        "1e999", "\u00e9", "\t", "#", "=", "[", "]", "'", "\\"]
+_NUMBERS = ["nan", "inf", "-inf", "1e308", "-1e308", "1e-320", "0", "-0", "", "9" * 400, "1e999", '""', "true", "[]",
+            "0x10", "1_0"]
+
+
+@st.composite
+def mutated_text(draw: st.DrawFn, base: str) -> str:
+    """``base`` with one to three changes a hand, an editor or a damaged disk makes."""
+    t = base
+    for _ in range(draw(st.integers(1, 3))):
+        op = draw(st.sampled_from(["flip", "flip", "insert", "truncate", "bom", "crlf", "double", "drop", "number"]))
+        i = draw(st.integers(0, len(t)))
+        lines = t.split("\n")
+        k = draw(st.integers(0, len(lines) - 1))
+        if op == "flip" and t:
+            i = min(i, len(t) - 1)
+            t = t[:i] + draw(st.characters(exclude_categories=["Cs"]) | st.sampled_from(_ODD)) + t[i + 1:]
+        elif op == "insert":
+            t = t[:i] + draw(st.sampled_from(_ODD)) + t[i:]
+        elif op == "truncate":
+            t = t[:i]
+        elif op == "bom":
+            t = "\ufeff" + t
+        elif op == "crlf":
+            t = t.replace("\n", "\r\n")
+        elif op in ("double", "drop"):
+            lines[k:k + 1] = [lines[k]] * (2 if op == "double" else 0)
+            t = "\n".join(lines)
+        elif op == "number":
+            spots = list(re.finditer(r"[-0-9.e]+|\"[^\"]*\"", t))
+            if spots:
+                m = spots[draw(st.integers(0, len(spots) - 1))]
+                t = t[:m.start()] + draw(st.sampled_from(_NUMBERS)) + t[m.end():]
+    return t
+
+
+_MEASUREMENTS = """day,joint,direction,q1,q2,q3,theta,psi,start,end,steps
+2026-11-22,3,+,0,-1.5,0.005,0,0,0.001,0.002,1000
+2026-11-22,2,-,0,-1.5,0.005,0,0,-1.0,-1.2,4000
+2026-11-22,1,+,0.1,-1.5,0.005,0,0,0.1,0.3,4000
+"""
+_STEP_SIZES = """day,joint,direction,q1,q2,q3,theta,psi,gamma,sigma,steps,method
+2026-11-22,3,+,0,-1.5,0.005,0,0,1e-6,1e-8,1000,traverse
+2026-11-22,2,-,0,-1.5,0.005,0,0,5e-5,1e-6,4000,traverse
+"""
+_POSES = """joint,direction,q1,q2,q3,theta,psi,start,end
+3,+,0,-1.5,0.005,0,0,,
+2,-,0,-1.5,0.005,0,0,-1.0,-1.2
+"""
+_VIBRATION = "# sample_rate_hz=25000\ntime_s,value\n" + "".join(
+    f"{i / 25000},{math.sin(i / 5):.4f}\n" for i in range(64))
+_CONFIG = 'device = "sim://?seed=3"\nmax_age_days = 30\n[geometry]\noffset = "0mm"\nlength = "21mm"\n'
+
+
+def _refused_or(path: Path, read: Any, errors: tuple[type[Exception], ...] = (ValueError,)) -> Any:
+    """What ``read(path)`` returns, or ``None`` when it refuses with one of ``errors`` naming the file."""
+    try:
+        return read(path)
+    except errors as e:
+        assert path.name in str(e), e
+        return None
+
+
+def _finite(obj: Any, fields: str) -> None:
+    for f in fields.split():
+        assert math.isfinite(getattr(obj, f)), (f, obj)
+
+
+@READERS
+@given(text=mutated_text(_MEASUREMENTS))
+def test_a_mutated_measurement_table_gives_usable_traverses_or_is_refused(tmp_path: Path, text: str) -> None:
+    from stickslip.measurements.table import as_arrays, read_measurements
+
+    p = tmp_path / "m.csv"
+    p.write_bytes(text.encode("utf-8"))
+    ts = _refused_or(p, read_measurements) or []
+    for t in ts:
+        _finite(t, "q1 q2 q3 theta psi start end")
+        assert t.steps > 0 and t.start != t.end and t.direction in "+-", t
+    if ts:
+        assert np.all(np.isfinite(as_arrays(ts)["start"]))
+
+
+@READERS
+@given(text=mutated_text(_STEP_SIZES))
+def test_a_mutated_step_size_table_gives_step_sizes_or_is_refused(tmp_path: Path, text: str) -> None:
+    from stickslip.measurements.steps import read_step_sizes
+
+    p = tmp_path / "s.csv"
+    p.write_bytes(text.encode("utf-8"))
+    for s in _refused_or(p, read_step_sizes) or []:
+        _finite(s, "q1 q2 q3 theta psi gamma")
+        assert s.gamma > 0 and s.direction in "+-", s
+
+
+@READERS
+@given(text=mutated_text(_POSES))
+def test_a_mutated_pose_table_gives_poses_or_is_refused(tmp_path: Path, text: str) -> None:
+    from stickslip.measurements.poses import read_pose_table
+
+    p = tmp_path / "p.csv"
+    p.write_bytes(text.encode("utf-8"))
+    got = _refused_or(p, read_pose_table)
+    for q in got[2] if got else []:
+        _finite(q, "q1 q2 q3 theta psi")
+
+
+@READERS
+@given(text=mutated_text(_VIBRATION))
+def test_a_mutated_vibration_csv_gives_finite_samples_or_is_refused(tmp_path: Path, text: str) -> None:
+    from stickslip.audio.sources.files import AudioSourceError
+    from stickslip.audio.sources.vibration import read_vibration, sample_rate_ok
+
+    p = tmp_path / "v.csv"
+    p.write_bytes(text.encode("utf-8"))
+    got = _refused_or(p, read_vibration, (ValueError, AudioSourceError))
+    if got is not None:
+        samples, rate = got
+        assert np.all(np.isfinite(samples)) and sample_rate_ok(rate), rate
+
+
+@READERS
+@given(text=mutated_text(_CONFIG))
+def test_a_mutated_config_file_loads_or_is_refused(tmp_path: Path, text: str) -> None:
+    from stickslip.config import load_config
+
+    p = tmp_path / "config.toml"
+    p.write_bytes(text.encode("utf-8"))
+    c = _refused_or(p, load_config, (ConfigError,))
+    if c is not None:
+        assert c.geometry_offset is None or math.isfinite(c.geometry_offset)
+        assert c.geometry_length is None or 0 < c.geometry_length <= 1
+        assert c.max_age_days is None or c.max_age_days >= 0
+
+
+@READERS
+@given(data=st.data())
+def test_a_mutated_rig_file_loads_or_is_refused(tmp_path: Path, data: st.DataObject) -> None:
+    from stickslip.rig.load import load_rig
+    from test_fuzz_files import _RIG
+
+    p = tmp_path / "lab.toml"
+    p.write_bytes(data.draw(mutated_text(_RIG)).encode("utf-8"))
+    _refused_or(p, load_rig, (RigError,))
