@@ -429,3 +429,17 @@ def test_a_mutated_rig_file_loads_or_is_refused(tmp_path: Path, data: st.DataObj
     p = tmp_path / "lab.toml"
     p.write_bytes(data.draw(mutated_text(_RIG)).encode("utf-8"))
     _refused_or(p, load_rig, (RigError,))
+
+
+# -- camera URLs -----------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("number", ["9" * 400, "2147483648", "0000000000009999999999999", "\u0663", "\u00b2"],
+                         ids=["400 nines", "2**31", "zeros then 13 digits", "arabic-indic 3", "superscript 2"])
+def test_a_camera_number_opencv_cannot_take_is_refused_naming_it(number: str) -> None:
+    """``opencv://`` + 400 nines reached ``cv2.VideoCapture``, whose overload error was a traceback in the CLI."""
+    from stickslip.vision.camera import open_camera
+    from test_fuzz_cli import check
+
+    with pytest.raises(ValueError, match="the camera number"):
+        open_camera(f"opencv://{number}")
+    check(["camera", "calibrate", "-d", "sim://", "--camera", f"opencv://{number}", "-o", "/nonexistent/x.csv"])

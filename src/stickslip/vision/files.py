@@ -305,12 +305,18 @@ def open_video_url(url: str, device: Controller | None = None) -> VideoCamera:
     return VideoCamera(location_path(location), pixel_option(opts, url), url)
 
 
+MAX_CAMERA_INDEX = 2**31 - 1
+"""The largest camera number OpenCV's ``VideoCapture`` takes (a C ``int``; a larger one was its overload error)."""
+
+
 def open_opencv_url(url: str, device: Controller | None = None) -> OpenCVCamera:
     """``opencv://N[?pixel=SIZE&width=W&height=H]``: camera number ``N`` (default 0)."""
     location, opts = camera_options(url, {"pixel", "width", "height"})
     text = location.strip("/") or "0"
-    if not text.isdigit():
-        raise ValueError(f"{redact_url(url)!r}: the camera number {text!r} must be 0, 1, ...")
+    digits = text.lstrip("0") or "0"
+    if not (text.isascii() and text.isdigit()) or len(digits) > 10 or int(digits) > MAX_CAMERA_INDEX:
+        raise ValueError(f"{redact_url(url)[:80]!r}: the camera number {text[:20]!r} must be 0, 1, ... "
+                         f"(at most {MAX_CAMERA_INDEX})")
     w = int(_number(opts, "width", url, 0)) if "width" in opts else None
     h = int(_number(opts, "height", url, 0)) if "height" in opts else None
     return OpenCVCamera(int(text), pixel_option(opts, url), url, w, h)
