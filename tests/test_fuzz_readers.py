@@ -31,6 +31,7 @@ from stickslip.calibration import Calibration
 from stickslip.config import ConfigError, parse_config
 from stickslip.rig.load import RigError, parse_rig
 from stickslip.units import UnitError, parse_quantity
+from test_fuzz_files import _RIG  # the documented rig example (at the top: an import inside @given nests its @givens)
 
 READERS = settings(  # derandomized by the profile in tests/conftest.py
     max_examples=40, deadline=None, database=None,
@@ -238,8 +239,6 @@ def test_a_tuning_with_some_of_the_levels_it_saw_reports_without_them(tuning_doc
 
 def test_a_whole_number_beyond_a_float_is_refused_as_not_finite(tmp_path: Path) -> None:
     """TOML carries integers of any length: a rig's ``arm_distance = 999...`` (400 digits) raised OverflowError."""
-    from test_fuzz_files import _RIG
-
     for v in (10**400, -(10**400)):
         with pytest.raises(UnitError, match="not a finite"):
             parse_quantity(v, "length")
@@ -424,7 +423,6 @@ def test_a_mutated_config_file_loads_or_is_refused(tmp_path: Path, text: str) ->
 @given(data=st.data())
 def test_a_mutated_rig_file_loads_or_is_refused(tmp_path: Path, data: st.DataObject) -> None:
     from stickslip.rig.load import load_rig
-    from test_fuzz_files import _RIG
 
     p = tmp_path / "lab.toml"
     p.write_bytes(data.draw(mutated_text(_RIG)).encode("utf-8"))
@@ -443,3 +441,15 @@ def test_a_camera_number_opencv_cannot_take_is_refused_naming_it(number: str) ->
     with pytest.raises(ValueError, match="the camera number"):
         open_camera(f"opencv://{number}")
     check(["camera", "calibrate", "-d", "sim://", "--camera", f"opencv://{number}", "-o", "/nonexistent/x.csv"])
+
+
+def test_frames_named_by_a_name_the_system_refuses_are_an_image_error(tmp_path: Path) -> None:
+    """``files://`` + a 400-character name raised OSError (File name too long) from ``Path.is_dir``."""
+    from stickslip.vision.camera import open_camera
+    from stickslip.vision.frame import ImageError
+    from test_fuzz_cli import check
+
+    for name in ("9" * 400, f"{tmp_path}/{'x' * 300}/*.png"):
+        with pytest.raises(ImageError, match="cannot look at it"):
+            open_camera(f"files://{name}")
+    check(["camera", "calibrate", "-d", "sim://", "--camera", f"files://{'9' * 400}", "-o", tmp_path / "x.csv"])

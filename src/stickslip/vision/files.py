@@ -58,25 +58,31 @@ def frame_paths(names: Sequence[str | os.PathLike[str]]) -> list[Path]:
     """
     out: list[Path] = []
     for name in names:
-        text = os.fspath(name)
-        p = Path(text)
-        if p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES and q.is_file())
-            if not found:
-                raise ImageError(f"{p}: the folder has no image files ({', '.join(IMAGE_SUFFIXES)})")
-            out += found
-        elif p.exists() or not any(c in text for c in "*?["):
-            out.append(p)
-        else:
-            matches = sorted(Path(m) for m in glob.glob(text) if Path(m).is_file())
-            if not matches:
-                raise ImageError(f"{text}: no file matches the pattern")
-            out += matches
+        try:
+            out += _named_frames(os.fspath(name))
+        except OSError as e:  # a name the system refuses (too long, a loop of links): no frame it could name
+            raise ImageError(f"{os.fspath(name)[:80]!r}: cannot look at it ({e.strerror or e})") from None
         if len(out) > MAX_FILES:
             raise ImageError(f"more than {MAX_FILES} frames named")
     if not out:
         raise ImageError("no frames named")
     return out
+
+
+def _named_frames(text: str) -> list[Path]:
+    """The image files one name means (:func:`frame_paths`)."""
+    p = Path(text)
+    if p.is_dir():
+        found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES and q.is_file())
+        if not found:
+            raise ImageError(f"{p}: the folder has no image files ({', '.join(IMAGE_SUFFIXES)})")
+        return found
+    if p.exists() or not any(c in text for c in "*?["):
+        return [p]
+    matches = sorted(Path(m) for m in glob.glob(text) if Path(m).is_file())
+    if not matches:
+        raise ImageError(f"{text}: no file matches the pattern")
+    return matches
 
 
 class FileCamera:
