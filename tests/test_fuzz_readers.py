@@ -591,3 +591,47 @@ def test_amounts_reach_the_commands_with_a_calibration_that_works(tmp_path: Path
     check(["observe", "-d", "sim://", "-j", joint, "--at", value, "--db", db])
     check(["reach", "-d", "sim://", "-c", cal, "--to", f"{value},0,0", "--db", db])
     check(["reach", "-d", "sim://", "-c", cal, "--by", f"0,{value},{value}", "--db", db])
+
+
+# -- the kept step-scale state (a joint's track in the store) --------------------------------------------------------
+
+_TRACK = {"log_scale": [0.0, 0.0], "P": [[7e-06, 4e-04, 2e-04], [4e-04, 0.0229, 0.01145], [2e-04, 0.01145, 0.0229]],
+          "calibration": "2026-11-22|paper|2026-12-01T00:41:59+00:00", "pose": [0.0, 0.0, 9.73e-06, 0.0, 0.0]}
+_RAW = ("could not convert", "float() argument", "NoneType", "setting an array", "int too large", "inhomogeneous")
+
+
+@pytest.mark.parametrize(("key", "value", "named"), [
+    ("pose", [0.0, 0.0, 9.73e-06, None, 0.0], "'pose'"), ("pose", [0, 0, 0, "\u202e", 0], "'pose'"),
+    ("log_scale", [10**400, 0], "'log_scale'"), ("P", [[1, 2], [3]], "'P'"), ("P", None, "'P'"),
+    ("log_scale", "<delete>", "no 'log_scale'"), ("<whole>", [1, 2], "not an object")])
+def test_a_kept_track_that_is_no_track_is_refused_in_words(tmp_path: Path, calibration_file: Path, key: str,
+                                                            value: object, named: str) -> None:
+    """A hand-edited (or damaged) track said Python's words ('float() argument must be ... not NoneType') or, for an
+    integer of 400 digits, raised OverflowError; each is now refused naming the field, in move's one error line."""
+    import sqlite3
+
+    from stickslip.cli import app
+    from stickslip.motion.tracking import JointTrack
+    from test_fuzz_cli import check, runner
+
+    raw: Any = copy.deepcopy(_TRACK)
+    if key == "<whole>":
+        raw = value
+    elif value == "<delete>":
+        del raw[key]
+    else:
+        raw[key] = value
+    with pytest.raises(ValueError, match=re.escape(named)) as e:
+        JointTrack.from_json(raw)
+    assert not any(w in str(e.value) for w in _RAW), e.value
+    db = tmp_path / "s.db"
+    assert runner.invoke(app, ["move", "-d", "sim://", "-c", calibration_file, "-j", "3", "--by", "10um",
+                               "--db", db]).exit_code == 0
+    con = sqlite3.connect(db)
+    (text,) = con.execute("select value from device_state where key = 'positions'").fetchone()
+    state = json.loads(text)
+    state["track"]["3"] = raw
+    con.execute("update device_state set value = ? where key = 'positions'", (json.dumps(state),))
+    con.commit()
+    con.close()
+    check(["move", "-d", "sim://", "-c", calibration_file, "-j", "3", "--by", "1um", "--db", db])

@@ -245,14 +245,11 @@ class JointTrack:
     @classmethod
     def from_json(cls, raw: Any) -> JointTrack:
         """Read :meth:`to_json`'s shape; ``ValueError`` for anything else (non-finite, not a covariance)."""
-        try:
-            s = np.array(raw["log_scale"], dtype=float)
-            P = np.array(raw["P"], dtype=float)
-            cal = str(raw.get("calibration", ""))
-            pose_raw = raw.get("pose")
-            pose = None if pose_raw is None else tuple(float(v) for v in pose_raw)
-        except (TypeError, ValueError, KeyError, AttributeError) as e:
-            raise ValueError(f"the kept step-scale state is unreadable: {e}") from None
+        if not isinstance(raw, dict):
+            raise ValueError(f"the kept step-scale state is not an object of scales and covariance: {raw!r:.40}")
+        s, P = _numbers(raw, "log_scale", "two numbers"), _numbers(raw, "P", "a 3 x 3 matrix of numbers")
+        cal = str(raw.get("calibration", ""))
+        pose = None if raw.get("pose") is None else tuple(float(v) for v in _numbers(raw, "pose", "five numbers").flat)
         ok = (
             s.shape == (2,) and P.shape == (3, 3) and bool(np.all(np.isfinite(P)))
             and bool(np.all(np.isfinite(s))) and bool(np.all(np.abs(s) < 5.0))
@@ -265,6 +262,19 @@ class JointTrack:
         if not ok:
             raise ValueError("the kept step-scale state is not a valid (scales, covariance) pair")
         return cls(s, P, cal, pose)
+
+
+def _numbers(raw: dict[str, Any], key: str, what: str) -> NDArray[np.float64]:
+    """``raw[key]`` as an array of floats; ``ValueError`` naming the key and what it should be (not Python's words)."""
+    if key not in raw:
+        raise ValueError(f"the kept step-scale state has no {key!r}")
+    try:
+        a = np.array(raw[key], dtype=float)  # (null is read as NaN: refused below with the rest)
+    except (TypeError, ValueError, OverflowError):
+        a = np.array([np.nan])
+    if a.ndim == 0 or not np.all(np.isfinite(a)):
+        raise ValueError(f"the kept step-scale state's {key!r} is not {what}: {raw[key]!r:.60}")
+    return a
 
 
 @dataclass
