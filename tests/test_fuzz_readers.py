@@ -635,3 +635,18 @@ def test_a_kept_track_that_is_no_track_is_refused_in_words(tmp_path: Path, calib
     con.commit()
     con.close()
     check(["move", "-d", "sim://", "-c", calibration_file, "-j", "3", "--by", "1um", "--db", db])
+
+
+@pytest.mark.parametrize("P", [[[0, 1e10, 0], [1e10, 0, 0], [0, 0, 0]],
+                               [[1e308, 1e308, 0], [1e308, 1e308, 0], [0, 0, 1]]],
+                         ids=["tiny variances, huge covariance", "entries near the float's end"])
+def test_a_kept_covariance_beyond_a_float_is_refused_without_a_warning(P: list[list[float]]) -> None:
+    """Normalising it overflowed: 'RuntimeWarning: overflow encountered in divide' printed above move's error line."""
+    import warnings
+
+    from stickslip.motion.tracking import JointTrack
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match="not a valid"):
+            JointTrack.from_json({**_TRACK, "P": P})

@@ -255,9 +255,12 @@ class JointTrack:
             and bool(np.all(np.isfinite(s))) and bool(np.all(np.abs(s) < 5.0))
         )
         if ok:
-            P = 0.5 * (P + P.T)
-            scale = np.sqrt(np.maximum(np.diag(P), 1e-300))
-            ok = bool(np.all(np.diag(P) >= 0)) and float(np.min(np.linalg.eigvalsh(P / np.outer(scale, scale)))) > -1e-6
+            with np.errstate(over="ignore", invalid="ignore"):  # entries near 1e308, or a covariance of a tiny
+                P = 0.5 * (P + P.T)                              # variance and a huge one: not finite, refused
+                scale = np.sqrt(np.maximum(np.diag(P), 1e-300))
+                R = P / np.outer(scale, scale)
+            ok = bool(np.all(np.isfinite(R)) and np.all(np.diag(P) >= 0))
+            ok = ok and float(np.min(np.linalg.eigvalsh(R))) > -1e-6
         ok = ok and (pose is None or (len(pose) == 5 and all(math.isfinite(v) for v in pose)))
         if not ok:
             raise ValueError("the kept step-scale state is not a valid (scales, covariance) pair")
