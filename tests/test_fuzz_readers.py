@@ -650,3 +650,25 @@ def test_a_kept_covariance_beyond_a_float_is_refused_without_a_warning(P: list[l
         warnings.simplefilter("error")
         with pytest.raises(ValueError, match="not a valid"):
             JointTrack.from_json({**_TRACK, "P": P})
+
+
+@pytest.mark.parametrize(("where", "value", "said"), [
+    ("parameters[0]", None, "parameters[0] must be an object, got null"),
+    ("parameters", {"a": 1}, "parameters must be a list, got an object"),
+    ("provenance", [1], "provenance must be an object, got a list"),
+    ("conditions", "x", "conditions must be an object, got a text"),
+])
+def test_a_calibration_field_of_the_wrong_kind_is_named_in_jsons_words(tmp_path: Path, calibration_doc: dict[str, Any],
+                                                                        where: str, value: object, said: str) -> None:
+    """'parameters[0] must be an object, got NoneType' (Python's name for null) in every command's error line."""
+    from test_fuzz_cli import check
+
+    doc = copy.deepcopy(calibration_doc)
+    if where == "parameters[0]":
+        doc["parameters"][0] = value
+    else:
+        doc[where] = value
+    p = _write(tmp_path / "c.json", doc)
+    with pytest.raises(ValueError, match=re.escape(said)):
+        Calibration.load(p)
+    check(["plan", "-c", p, "-j", "3", "--from", "0", "--to", "1um"])

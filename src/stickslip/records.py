@@ -280,6 +280,25 @@ _PRISMATIC = {"a": "step", "c": "term", "b": "ratio"}
 _ROTARY = {"gamma0": "step", "d": "term"}
 
 
+def json_kind(value: object) -> str:
+    """What a JSON value is, in JSON's words (a message's "got ..."; Python's ``NoneType`` or ``dict`` tell nobody).
+
+    >>> json_kind(None), json_kind([1]), json_kind("x"), json_kind(True), json_kind(3), json_kind({})
+    ('null', 'a list', 'a text', 'true or false', 'a number', 'an object')
+    """
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a text"
+    if isinstance(value, (list, tuple)):
+        return "a list"
+    return "an object" if isinstance(value, dict) else type(value).__name__
+
+
 def finite_number(value: object, where: str) -> float:
     """A JSON number as a float, or ``ValueError`` naming ``where``: a string, a boolean, null, NaN or infinity."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -317,7 +336,7 @@ def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
 def _record_joint(rec: object, where: str) -> tuple[dict[str, Any], int]:
     """The record (an object) and its joint (1, 2 or 3), or ``ValueError`` naming ``where``."""
     if not isinstance(rec, dict):
-        raise ValueError(f"{where} must be an object, got {type(rec).__name__}")
+        raise ValueError(f"{where} must be an object, got {json_kind(rec)}")
     joint = rec.get("joint")
     if joint not in (1, 2, 3) or isinstance(joint, bool):
         raise ValueError(f"{where}.joint must be 1, 2 or 3, got {joint!r}")
@@ -376,12 +395,12 @@ def check_calibration_dict(data: object) -> None:
     caller's (``Calibration.from_dict``).
     """
     if not isinstance(data, dict):
-        raise ValueError(f"a calibration must be a JSON object, got {type(data).__name__}")
+        raise ValueError(f"a calibration must be a JSON object, got {json_kind(data)}")
     for key in ("parameters", "constant_steps"):
         if key in data and not isinstance(data[key], list):
-            raise ValueError(f"{key} must be a list, got {type(data[key]).__name__}")
+            raise ValueError(f"{key} must be a list, got {json_kind(data[key])}")
     if data.get("provenance") is not None and not isinstance(data["provenance"], dict):
-        raise ValueError(f"provenance must be an object, got {type(data['provenance']).__name__}")
+        raise ValueError(f"provenance must be an object, got {json_kind(data['provenance'])}")
     prov = data.get("provenance") or {}
     for key in ("rows", "rows_used"):
         n = prov.get(key)
@@ -425,7 +444,7 @@ def check_tuning_dict(data: object) -> None:
     Raises ``ValueError`` naming the field. Structure (names, kinds) is the caller's.
     """
     if not isinstance(data, dict):
-        raise ValueError(f"a tuning must be a JSON object, got {type(data).__name__}")
+        raise ValueError(f"a tuning must be a JSON object, got {json_kind(data)}")
     rate = data.get("sample_rate", 48000)
     for k in ("sample_rate", "frame", "hop", "max_dips"):
         if k in data:

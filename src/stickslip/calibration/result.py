@@ -109,7 +109,7 @@ class Conditions:
         if data is None:
             return cls()
         if not isinstance(data, dict):
-            raise ValueError(f"conditions must be an object, got {type(data).__name__}")
+            raise ValueError(f"conditions must be an object, got {records.json_kind(data)}")
         unknown = sorted(set(data) - {"device", "frequency_hz", "amplitude_v", "temperature_c"})
         if unknown:
             raise ValueError(f"conditions: unknown field(s) {', '.join(map(str, unknown))}")
@@ -246,7 +246,7 @@ class Provenance:
         if data is None:
             return cls()
         if not isinstance(data, dict):
-            raise ValueError(f"provenance must be an object, got {type(data).__name__}")
+            raise ValueError(f"provenance must be an object, got {records.json_kind(data)}")
         known = {"source", "sha256", "rows_sha256", "rows", "rows_used", "days", "notes"}
 
         def text(key: str) -> str | None:

@@ -41,7 +41,7 @@ from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..joints import JointSet, JointSpec
-from ..records import atomic_write_text, check_version, loads_json, read_json
+from ..records import atomic_write_text, check_version, json_kind, loads_json, read_json
 from ..units import format_position
 from .base import device_key
 
@@ -295,7 +295,7 @@ def _entries(raw: dict[str, Any], name: str) -> list[tuple[str, Any]]:
     """The ``(joint, value)`` pairs of the object ``raw[name]`` (none if it is missing or null)."""
     value = raw.get(name) or {}
     if not isinstance(value, dict):
-        raise ValueError(f"{name} is {type(value).__name__}, not an object")
+        raise ValueError(f"{name} is {json_kind(value)}, not an object")
     return list(value.items())
 
 
