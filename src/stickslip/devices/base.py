@@ -55,6 +55,7 @@ __all__ = [
     "SECRET_OPTIONS",
     "URL_TIMEOUT_S",
     "URL_BAUD",
+    "NO_HOST_FORMS",
 ]
 
 URL_TIMEOUT_S = (0.001, 3600.0)
@@ -338,6 +339,20 @@ BACKENDS: dict[str, str | Factory] = {
 }
 
 
+NO_HOST_FORMS: dict[str, str] = {
+    # scheme -> what a URL of it names, for one that names nothing (a scheme not here gets the general advice)
+    "mm3a": "give the serial port: mm3a:///dev/ttyUSB0 (mm3a://COM3 on Windows; a serial-over-network adapter is "
+    "mm3a+socket://host:port)",
+    "mm3a+socket": "give the adapter's network address and port: mm3a+socket://192.168.1.20:4001",
+    "anc300": "give its network address (anc300://192.168.1.2) or its serial port (anc300:///dev/ttyUSB0)",
+    "smaract-mcs": "give the serial port: smaract-mcs:///dev/ttyUSB0 (smaract-mcs://COM3 on Windows; an MCS's "
+    "network interface is smaract-mcs+socket://host)",
+    "smaract-mcs+socket": "give its network address: smaract-mcs+socket://192.168.1.5",
+    "smaract-mcs2": "give its network address: smaract-mcs2://192.168.1.200 (the MCS2 is reached over TCP only)",
+}
+"""The form each scheme's URL takes, said to a URL of that scheme that names no host and no port."""
+
+
 def register_backend(scheme: str, factory: str | Factory) -> None:
     """Make ``scheme://...`` URLs open with ``factory(url)`` (a callable or ``"module:function"``)."""
     BACKENDS[scheme] = factory
@@ -379,10 +394,11 @@ def check_device_url(url: str) -> str:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
     query_options(parts.query, url)
     if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
-        raise ValueError(
-            f"device URL {redact_url(url)!r} names no host and no port: give the serial port "
-            f"({scheme}:///dev/ttyUSB0) or, where the controller has one, its network address"
+        form = NO_HOST_FORMS.get(
+            scheme, f"give the serial port ({scheme}:///dev/ttyUSB0) or, where the controller has one, its network "
+            "address"
         )
+        raise ValueError(f"device URL {redact_url(url)!r} names no host and no port: {form}")
     if host and not (host.startswith("[") or ":" in host):  # a name (or IPv4 address), not an IPv6 address
         labels = host.rstrip(".").split(".")
         if len(host) > 253 or any(not 1 <= len(label) <= 63 for label in labels):
