@@ -56,6 +56,7 @@ __all__ = [
     "URL_TIMEOUT_S",
     "URL_BAUD",
     "NO_HOST_FORMS",
+    "URL_CHECKS",
 ]
 
 URL_TIMEOUT_S = (0.001, 3600.0)
@@ -339,6 +340,17 @@ BACKENDS: dict[str, str | Factory] = {
 }
 
 
+URL_CHECKS: dict[str, str | Callable[[str], object]] = {
+    # scheme -> its driver's check of a URL's options (ValueError), nothing opened; imported on first use
+    "mm3a": "stickslip.devices.nanocontrol:check_url",
+    "mm3a+socket": "stickslip.devices.nanocontrol:check_url",
+    "anc300": "stickslip.devices.anc300:check_url",
+    "smaract-mcs": "stickslip.devices.smaract:check_mcs_url",
+    "smaract-mcs+socket": "stickslip.devices.smaract:check_mcs_url",
+    "smaract-mcs2": "stickslip.devices.smaract:check_mcs2_url",
+}
+"""Each scheme's check of its URL's options, run by :func:`check_device_url` (a scheme not here: at opening)."""
+
 NO_HOST_FORMS: dict[str, str] = {
     # scheme -> what a URL of it names, for one that names nothing (a scheme not here gets the general advice)
     "mm3a": "give the serial port: mm3a:///dev/ttyUSB0 (mm3a://COM3 on Windows; a serial-over-network adapter is "
@@ -364,8 +376,8 @@ def check_device_url(url: str) -> str:
     Checked without opening anything: a scheme with ``//`` (:func:`url_scheme`) that a
     backend is registered for, a URL that parses, a port in 1..65535, a host name DNS
     could carry (labels of 1 to 63 characters, at most 253 in all), a host or a
-    port for anything but the simulator, and no option given twice (which one would
-    the device take?). A URL that
+    port for anything but the simulator, no option given twice (which one would
+    the device take?), and each option as its driver takes it (:data:`URL_CHECKS`). A URL that
     passes may still fail to open (nothing answers there); one that fails never would,
     and is neither opened nor stored.
 
@@ -407,7 +419,25 @@ def check_device_url(url: str) -> str:
                 f"characters between its dots, at most 253 in all (this one: {len(host)}, its longest label "
                 f"{max(map(len, labels))})"
             )
+    _check_options(scheme, url)
     return url
+
+
+def _check_options(scheme: str, url: str) -> None:
+    """The driver's check of ``url``'s options (:data:`URL_CHECKS`): its ``ValueError``, without a secret."""
+    check = URL_CHECKS.get(scheme)
+    if check is None:
+        return
+    if isinstance(check, str):
+        mod_name, func_name = check.split(":")
+        try:
+            check = getattr(importlib.import_module(mod_name), func_name)
+        except ImportError:  # said when the device is opened (the backend could not be loaded)
+            return
+    try:
+        check(url)
+    except ValueError as e:
+        raise ValueError(redact_text(str(e))) from None
 
 
 def query_options(query: str, url: str, kind: str = "device") -> dict[str, str]:
