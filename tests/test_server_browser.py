@@ -316,3 +316,20 @@ def test_the_move_message_follows_the_motion_to_its_end(page: Any, room: Control
     said = page.inner_text("#move-msg")
     assert said.startswith("move of joint 1 to -120 deg: stopped — stopped: joint 1 made "), said
     assert page.eval_on_selector("#move-msg", "e => e.className") == "msg ok"  # a STOP asked for is no failure
+
+
+def test_one_stop_press_shows_one_event(page: Any, room: ControlRoom, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The STOP button sends the press on the socket and as POST /api/stop (the socket is the quicker path; the
+    POST also gets through on a socket that is closed or dead, and its failure is said): one press showed
+    'STOP (nothing was moving)' twice in the events (audit26). Both still reach the room; one event is shown."""
+    idle(room)
+    calls: list[int] = []
+    stop = room.stop
+    monkeypatch.setattr(room, "stop", lambda *a, **k: calls.append(1) or stop(*a, **k))
+    said = "STOP (nothing was moving)"
+    before = page.inner_text("#events").count(said)
+    page.click("#stop")
+    until(lambda: len(calls) == 2, 10, "the press on both paths")
+    room.event("info", "after the one press")  # the page has shown every event before this one once it shows it
+    until(lambda: "after the one press" in page.inner_text("#events"), 10, "the events to reach the page")
+    assert page.inner_text("#events").count(said) == before + 1

@@ -281,10 +281,18 @@ $("clear-path").addEventListener("click", () => { pathHistory = []; drawPlot(); 
 
 // ------------------------------------------------------------------ STOP
 
+// One press goes both ways. The socket is the quicker (open already: no connection to make), but a socket the
+// browser still takes for open may be dead (a server restarted, a link dropped) and sends nothing; the POST makes
+// its own connection, gets through while the socket reconnects, and its failure is said. The press's id lets the
+// server say the STOP once.
+let presses = 0;
+
 async function stopAll() {
   releaseJogLocally();
-  wsSend({ type: "stop" });
-  try { await api("POST", "/api/stop"); } catch (e) { note("STOP: " + e.message, true); }
+  const press = Date.now().toString(36) + "-" + (++presses) + "-" + Math.random().toString(36).slice(2, 8);
+  wsSend({ type: "stop", press });
+  try { await api("POST", "/api/stop?press=" + encodeURIComponent(press)); }
+  catch (e) { note("STOP: " + e.message, true); }
 }
 
 $("stop").addEventListener("click", stopAll);
