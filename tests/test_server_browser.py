@@ -257,7 +257,7 @@ def test_a_restarted_server_s_events_are_shown(page: Any, tmp_path: Path) -> Non
                 first.event("info", "an event of the first server")
             until(lambda: pg.inner_text("#events").count("first server") == 3, 15, "the first server's events")
         first.close()
-        until(lambda: pg.inner_text("#status") == "offline", 15, "the page to see the server gone")
+        until(lambda: pg.inner_text("#status").startswith("offline since "), 15, "the page to see the server gone")
         second = room_on(tmp_path / "b", calibrated=False)
         with served(create_app(second, Access(None, True)), port):
             until(lambda: pg.inner_text("#status") == "idle", 15, "the page to reconnect")
@@ -333,3 +333,62 @@ def test_one_stop_press_shows_one_event(page: Any, room: ControlRoom, monkeypatc
     room.event("info", "after the one press")  # the page has shown every event before this one once it shows it
     until(lambda: "after the one press" in page.inner_text("#events"), 10, "the events to reach the page")
     assert page.inner_text("#events").count(said) == before + 1
+
+
+def _greyed(pg: Any) -> dict[str, str]:
+    """Each live value's computed opacity and filter, by its selector."""
+    return dict(pg.evaluate("""() => Object.fromEntries(
+        ["#joints", ".tip", "#motion", "#plot", "#day-now", ".meter", "#device"].map((s) => {
+            const c = getComputedStyle(document.querySelector(s));
+            return [s, c.opacity + " " + c.filter];
+        }))"""))
+
+
+def test_an_offline_page_greys_every_live_value_until_fresh_state_comes(page: Any, tmp_path: Path) -> None:
+    """While the server was down the page said 'offline' in the status pill only: the joints, the tip and the
+    motion stayed as last received, not greyed, as if live (audit26). Now every live value is greyed with the time
+    of the last update, as a lost camera's last frame is, and is live again only once a fresh state comes: a
+    reconnected socket whose server sends no state yet leaves them greyed."""
+    from server_support import free_port
+
+    port = free_port()
+    first, second = room_on(tmp_path / "a", calibrated=False), None
+    (tmp_path / "b").mkdir()
+    pg = page.context.new_page()
+    try:
+        with served(create_app(first, Access(None, True)), port) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page's first state")
+            assert set(_greyed(pg).values()) == {"1 none"}
+            assert not pg.is_visible("#stale-note")
+            shown = joint_text(pg, 3)
+        first.close()
+        until(lambda: pg.inner_text("#status").startswith("offline since "), 15, "the page to see the server gone")
+        assert set(_greyed(pg).values()) == {"0.35 grayscale(1)"}  # as img.stale, the lost camera's frame
+        note = pg.inner_text("#stale-note")
+        assert note.startswith("offline since ") and " UTC: the greyed values are the last received, at " in note
+        assert note.endswith(" UTC, and may no longer be true; they are live again when the server sends fresh ones")
+        assert joint_text(pg, 3) == shown  # the last value stays, to be read as the last one
+        second = room_on(tmp_path / "b", calibrated=False)
+        held = True
+        snapshot = second.snapshot
+
+        def no_state_yet() -> dict[str, Any]:
+            if held:
+                raise RuntimeError("no state yet")  # the live stream sends nothing while this holds
+            return snapshot()
+
+        second.snapshot = no_state_yet  # type: ignore[method-assign]
+        app = create_app(second, Access(None, True))
+        with served(app, port):
+            until(lambda: pg.inner_text("#status") == "reconnected; waiting for the state", 15, "the reconnection")
+            until(lambda: app.state.live.clients, 5, "the socket among the live clients")  # open, and no state
+            assert set(_greyed(pg).values()) == {"0.35 grayscale(1)"} and pg.is_visible("#stale-note")
+            held = False
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the fresh state")
+            assert set(_greyed(pg).values()) == {"1 none"}
+            assert not pg.is_visible("#stale-note")
+    finally:
+        pg.close()
+        if second is not None:
+            second.close()

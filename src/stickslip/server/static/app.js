@@ -25,6 +25,10 @@ let jogSource = null;
 let cameraTimer = null;
 let shownEvents = 0;
 let heldEvents = null;  // while the events of a restarted server are fetched: the live ones that came meanwhile
+let lastStateAt = 0;  // Date.now() when the last state message came
+let lastStateT = null;  // its server time, epoch s
+let staleSince = null;  // Date.now() from when the values shown are no longer live; null while they are
+const STALE_AFTER_MS = 3000;  // an open socket silent this long (60 state messages at 20 a second) is not live
 
 // ------------------------------------------------------------------ talking to the server
 
@@ -49,6 +53,7 @@ function connect() {
   ws = new WebSocket(scheme + location.host + "/api/live");
   ws.onopen = async () => {
     if (token) ws.send(JSON.stringify({ type: "auth", token }));
+    if (staleSince !== null) setStatus("reconnected; waiting for the state", "offline");  // still greyed
     try { addEvents((await api("GET", "/api/events?after=" + shownEvents)).events); } catch (e) { /* shown as they come */ }
   };
   ws.onmessage = (ev) => {
@@ -57,6 +62,9 @@ function connect() {
       if (lastRun !== null && m.run !== lastRun) restarted();  // a new server counts its events from 1 again
       lastRun = m.run;
       lastSeq = m.seq;
+      lastStateAt = Date.now();
+      lastStateT = m.t;
+      if (staleSince !== null) live();  // fresh values: live again (a reconnection alone is not enough)
       state = m.state;
       render(state);
       addEvents(m.events || []);
@@ -70,7 +78,7 @@ function connect() {
     }
   };
   ws.onclose = (ev) => {
-    setStatus("offline", "offline");
+    wentStale("offline since", Date.now());
     releaseJogLocally();
     if (ev.code === 4401) { showToken(); return; }
     setTimeout(connect, 1000);
@@ -89,6 +97,32 @@ async function restarted() {  // the events shown are the earlier server's: take
   heldEvents = null;
   showEvents(held);
 }
+
+// ------------------------------------------------------------------ values no longer live
+
+function clock(ms) { return new Date(ms).toISOString().slice(11, 19); }  // UTC, as the events' times
+
+function wentStale(what, since) {  // grey every live value and say since when, and what they are
+  if (staleSince === null) staleSince = since;
+  document.body.classList.add("stale");
+  setStatus(what + " " + clock(staleSince), "offline");
+  const shown = lastStateT === null ? "none received yet" :
+    "the last received, at " + clock(lastStateT * 1000) + " UTC, and may no longer be true";
+  $("stale-note").textContent = what + " " + clock(staleSince) + " UTC: the greyed values are " + shown +
+    "; they are live again when the server sends fresh ones";
+  $("stale-note").classList.remove("hidden");
+}
+
+function live() {
+  staleSince = null;
+  document.body.classList.remove("stale");
+  $("stale-note").classList.add("hidden");
+}
+
+setInterval(() => {  // a socket the browser takes for open, with nothing coming: the values are not live either
+  if (staleSince === null && lastStateAt && ws && ws.readyState === WebSocket.OPEN &&
+      Date.now() - lastStateAt > STALE_AFTER_MS) wentStale("no update since", lastStateAt);
+}, 500);
 
 function showToken() {
   $("token-box").classList.remove("hidden");
@@ -192,11 +226,11 @@ function renderTip(st) {
 
 function renderMotion(m) {
   const box = $("motion");
-  if (!m) { box.textContent = "idle"; box.className = "motion idle"; return; }
+  if (!m) { box.textContent = "idle"; box.className = "motion live idle"; return; }
   let text = m.what + ": " + m.status + " (" + m.elapsed_s.toFixed(1) + " s)";
   if (m.error) text += " — " + m.error;
   box.textContent = text;
-  box.className = "motion " + m.status;
+  box.className = "motion live " + m.status;
 }
 
 function escapeHtml(s) {
