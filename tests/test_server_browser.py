@@ -392,3 +392,34 @@ def test_an_offline_page_greys_every_live_value_until_fresh_state_comes(page: An
         pg.close()
         if second is not None:
             second.close()
+
+
+def test_a_socket_open_with_nothing_coming_greys_the_values(page: Any, tmp_path: Path) -> None:
+    """A server whose live stream stops while its socket stays open (the browser cannot tell a dead link from a
+    quiet one): after 3 s with no state the values are greyed with 'no update since', and live again with the
+    next state."""
+    room = room_on(tmp_path, calibrated=False)
+    quiet = False
+    snapshot = room.snapshot
+
+    def stream() -> dict[str, Any]:
+        if quiet:
+            raise RuntimeError("the stream stalls")
+        return snapshot()
+
+    room.snapshot = stream  # type: ignore[method-assign]
+    pg = page.context.new_page()
+    try:
+        with served(create_app(room, Access(None, True))) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page's first state")
+            quiet = True
+            until(lambda: pg.inner_text("#status").startswith("no update since "), 15, "the page to see no update")
+            assert set(_greyed(pg).values()) == {"0.35 grayscale(1)"}
+            assert pg.inner_text("#stale-note").startswith("no update since ")
+            quiet = False
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the next state")
+            assert set(_greyed(pg).values()) == {"1 none"} and not pg.is_visible("#stale-note")
+    finally:
+        pg.close()
+        room.close()
