@@ -369,6 +369,9 @@ def test_an_offline_page_greys_every_live_value_until_fresh_state_comes(page: An
         assert note.startswith("offline since ") and " UTC: the greyed values are the last received, at " in note
         assert note.endswith(" UTC, and may no longer be true; they are live again when the server sends fresh ones")
         assert joint_text(pg, 3) == shown  # the last value stays, to be read as the last one
+        pg.click("#stop")  # said 'STOP: Failed to fetch' (the browser's words)
+        until(lambda: pg.inner_text("#move-msg").startswith("STOP"), 10, "the STOP's failure said")
+        assert pg.inner_text("#move-msg") == "STOP: the server does not answer: this STOP did not reach it"
         second = room_on(tmp_path / "b", calibrated=False)
         held = True
         snapshot = second.snapshot

@@ -32,10 +32,14 @@ const STALE_AFTER_MS = 3000;  // an open socket silent this long (60 state messa
 
 // ------------------------------------------------------------------ talking to the server
 
+const UNANSWERED = "the server does not answer";
+
 async function api(method, path, body) {
   const headers = { "Content-Type": "application/json" };
   if (token) headers.Authorization = "Bearer " + token;
-  const r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  let r;
+  try { r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) }); }
+  catch (e) { throw new Error(UNANSWERED); }  // no answer at all (the browser says "Failed to fetch")
   let data = null;
   try { data = await r.json(); } catch (e) { data = null; }
   if (r.status === 401) showToken();
@@ -324,9 +328,11 @@ let presses = 0;
 async function stopAll() {
   releaseJogLocally();
   const press = Date.now().toString(36) + "-" + (++presses) + "-" + Math.random().toString(36).slice(2, 8);
-  wsSend({ type: "stop", press });
-  try { await api("POST", "/api/stop?press=" + encodeURIComponent(press)); }
-  catch (e) { note("STOP: " + e.message, true); }
+  const onSocket = wsSend({ type: "stop", press });
+  try { await api("POST", "/api/stop?press=" + encodeURIComponent(press)); } catch (e) {
+    const lost = onSocket ? ": it went on the live socket too, which may be as dead" : ": this STOP did not reach it";
+    note("STOP: " + e.message + (e.message === UNANSWERED ? lost : ""), true);
+  }
 }
 
 $("stop").addEventListener("click", stopAll);
@@ -649,7 +655,7 @@ function startCamera() {
         try { data = await r.json(); } catch (e) { data = null; }
         cameraLost((data && data.error) || ("HTTP " + r.status));
       }
-    } catch (e) { cameraLost("the server does not answer"); }  // the next frame tries again
+    } catch (e) { cameraLost(UNANSWERED); }  // the next frame tries again
     busy = false;
   }, 500);
 }
