@@ -426,3 +426,41 @@ def test_a_socket_open_with_nothing_coming_greys_the_values(page: Any, tmp_path:
     finally:
         pg.close()
         room.close()
+
+
+def test_a_move_followed_across_a_restart_is_not_left_running(page: Any, tmp_path: Path) -> None:
+    """The move's message box follows its motion to the end; a server gone mid-move left it saying '...: running'
+    for good after the restart (the new server has no such motion, and its motion ids count from 1 again, so
+    its first motion could have been taken for it). It says now that the end was not seen."""
+    from server_support import free_port
+
+    port = free_port()
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    first, second = room_on(tmp_path / "a", "sim://?realtime=1&speed=1"), None
+    pg = page.context.new_page()
+    try:
+        with served(create_app(first, Access(None, True)), port) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page's first state")
+            pg.select_option("#move-joint", "2")
+            pg.select_option("#move-mode", "to")
+            pg.fill("#move-amount", "min")
+            pg.click("#move-form button[type=submit]")
+            until(lambda: pg.inner_text("#move-msg").endswith(": running"), 10, "the move running")
+        until(lambda: pg.inner_text("#status").startswith("offline since "), 15, "the page to see the server gone")
+        first.close()
+        assert pg.inner_text("#move-msg").endswith(": running")  # the last it heard, greyed with the values
+        assert pg.eval_on_selector("#move-msg", "e => getComputedStyle(e).opacity") == "0.35"
+        second = room_on(tmp_path / "b", calibrated=False)
+        with served(create_app(second, Access(None, True)), port):
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page to reconnect")
+            until(lambda: not pg.inner_text("#move-msg").endswith(": running"), 5, "the message to change")
+            said = pg.inner_text("#move-msg")
+            assert said.startswith("move of joint 2 to ")
+            assert said.endswith(": the server was restarted while it ran; its end was not seen (the joints say "
+                                 "what is kept)"), said
+    finally:
+        pg.close()
+        if second is not None:
+            second.close()

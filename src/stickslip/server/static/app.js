@@ -96,6 +96,10 @@ async function restarted() {  // the events shown are the earlier server's: take
   li.className = "warning";
   li.textContent = "the server was restarted; its events follow";
   $("events").insertBefore(li, $("events").firstChild);
+  for (const where of Object.keys(followed)) {  // a motion of the earlier server: its end was never seen
+    note($(where).textContent.replace(/: (running|starting)$/, "") + ": the server was restarted while it ran; " +
+      "its end was not seen (the joints say what is kept)", true, where);
+  }
   try { showEvents((await api("GET", "/api/events?after=0")).events); } catch (e) { /* the live ones still come */ }
   const held = heldEvents;
   heldEvents = null;
@@ -456,8 +460,9 @@ function started(m, where = "move-msg") {  // a motion the server took: say so, 
   followed[where] = m.id;
 }
 
-function motionNote(m, where) {
+function motionNote(m, where) {  // a motion under way is a live value (greyed when not live); its end is not
   note(m.what + ": " + m.status + (m.error ? " — " + m.error : ""), FAILED.includes(m.status), where);
+  $(where).classList.toggle("live", m.status === "running" || m.status === "starting");
 }
 
 function followMotion(m) {  // a followed motion's box says where it got: running, then done / stopped / failed
