@@ -372,6 +372,12 @@ def test_an_offline_page_greys_every_live_value_until_fresh_state_comes(page: An
         pg.click("#stop")  # said 'STOP: Failed to fetch' (the browser's words)
         until(lambda: pg.inner_text("#move-msg").startswith("STOP"), 10, "the STOP's failure said")
         assert pg.inner_text("#move-msg") == "STOP: the server does not answer: this STOP did not reach it"
+        pg.click("h2#h-joints")
+        pg.keyboard.down("ArrowUp")  # a jog key held while offline: let go at once, and nothing was said
+        until(lambda: pg.inner_text("#jog-note") != "", 5, "the jog's refusal said")
+        pg.keyboard.up("ArrowUp")
+        assert pg.inner_text("#jog-note") == "jog: the server does not answer; nothing was sent"
+        assert not pg.eval_on_selector('#pad button[data-dir="+y"]', "b => b.classList.contains('held')")
         second = room_on(tmp_path / "b", calibrated=False)
         held = True
         snapshot = second.snapshot
@@ -391,6 +397,7 @@ def test_an_offline_page_greys_every_live_value_until_fresh_state_comes(page: An
             until(lambda: pg.inner_text("#status") == "idle", 15, "the fresh state")
             assert set(_greyed(pg).values()) == {"1 none"}
             assert not pg.is_visible("#stale-note")
+            assert pg.inner_text("#jog-note") == ""  # live again: the jog may be tried again
     finally:
         pg.close()
         if second is not None:

@@ -33,6 +33,7 @@ const STALE_AFTER_MS = 3000;  // an open socket silent this long (60 state messa
 // ------------------------------------------------------------------ talking to the server
 
 const UNANSWERED = "the server does not answer";
+const NO_JOG = "jog: " + UNANSWERED + "; nothing was sent";  // a jog key held while the socket is closed
 
 async function api(method, path, body) {
   const headers = { "Content-Type": "application/json" };
@@ -123,6 +124,7 @@ function wentStale(what, since) {  // grey every live value and say since when, 
 
 function live() {
   staleSince = null;
+  if ($("jog-note").textContent === NO_JOG) $("jog-note").textContent = "";
   document.body.classList.remove("stale");
   $("stale-note").classList.add("hidden");
 }
@@ -355,7 +357,10 @@ function jogStart(dir, source) {
 
 function sendJog() {
   if (!jogDir) return;
-  if (!wsSend({ type: "jog", direction: jogDir, speed: Number($("speed").value) })) releaseJogLocally();
+  if (!wsSend({ type: "jog", direction: jogDir, speed: Number($("speed").value) })) {
+    releaseJogLocally();
+    $("jog-note").textContent = NO_JOG;
+  }
 }
 
 function jogStop() {
