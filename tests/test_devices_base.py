@@ -101,3 +101,21 @@ def test_a_url_without_host_or_port_suggests_its_own_scheme_s_form(url, form, no
     assert str(e.value) == f"device URL {url!r} names no host and no port: {form}"
     if not_said:
         assert not_said not in str(e.value)
+
+
+def test_a_backend_registered_with_its_check_has_its_urls_checked_before_use(monkeypatch):
+    """A backend added with register_backend got only the URL's shape checked: its options were first read when
+    the device opened (audit30's question). With check= they are refused before anything is used or stored."""
+    monkeypatch.setattr(base, "BACKENDS", dict(base.BACKENDS))
+    monkeypatch.setattr(base, "URL_CHECKS", dict(base.URL_CHECKS))
+
+    def check(url: str) -> None:
+        if "rate=0" in url:
+            raise ValueError("rate must be > 0 Hz")
+
+    base.register_backend("labstage", lambda url: None, check=check)
+    assert base.check_device_url("labstage://10.0.0.9?rate=5") == "labstage://10.0.0.9?rate=5"
+    with pytest.raises(ValueError, match="rate must be > 0 Hz"):
+        base.check_device_url("labstage://10.0.0.9?rate=0")
+    base.register_backend("plainstage", lambda url: None)  # no check: the shape only, as before
+    assert base.check_device_url("plainstage://10.0.0.9?rate=0") == "plainstage://10.0.0.9?rate=0"

@@ -365,9 +365,18 @@ NO_HOST_FORMS: dict[str, str] = {
 """The form each scheme's URL takes, said to a URL of that scheme that names no host and no port."""
 
 
-def register_backend(scheme: str, factory: str | Factory) -> None:
-    """Make ``scheme://...`` URLs open with ``factory(url)`` (a callable or ``"module:function"``)."""
+def register_backend(
+    scheme: str, factory: str | Factory, check: str | Callable[[str], object] | None = None
+) -> None:
+    """Make ``scheme://...`` URLs open with ``factory(url)`` (a callable or ``"module:function"``).
+
+    ``check(url)``: the driver's check of a URL's options that opens nothing (``ValueError``
+    with the reason), run by :func:`check_device_url` before a URL is used or stored
+    (:data:`URL_CHECKS`); without one only the URL's shape is checked.
+    """
     BACKENDS[scheme] = factory
+    if check is not None:
+        URL_CHECKS[scheme] = check
 
 
 def check_device_url(url: str) -> str:
