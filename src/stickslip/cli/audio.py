@@ -50,8 +50,12 @@ _CHANNEL_HELP = (
 
 
 def _channels(path: Path, channel: int | None) -> int | None:
-    """The 0-based channel to read from ``path`` (None: the mean); warns when the mean loses the stepping."""
-    from ..audio.sources import AudioSourceError, channel_problem
+    """The 0-based channel to read from ``path`` (None: the mean); warns when the mean loses the stepping, and when
+    the file holds less than its header says (:func:`~stickslip.audio.sources.files.truncation`)."""
+    from ..audio.sources import AudioSourceError, channel_problem, truncation
+
+    if not _is_csv(path) and (cut := truncation(path)) is not None:
+        err_console.print(f"warning: {cut}", highlight=False, soft_wrap=True)
 
     if channel is not None:
         if _is_csv(path):

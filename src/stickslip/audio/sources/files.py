@@ -5,6 +5,7 @@ soundfile (libsndfile) is imported lazily; a missing one is named with the extra
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,7 @@ __all__ = [
     "open_error",
     "read_wav",
     "load_soundfile",
+    "truncation",
     "wav_blocks",
     "wav_info",
     "write_wav",
@@ -72,6 +74,41 @@ def wav_info(path: str | Path) -> tuple[int, int, float]:
     return int(info.samplerate), int(info.channels), float(info.frames) / info.samplerate
 
 
+def truncation(path: str | Path) -> str | None:
+    """Why a WAV file holds less than its header says (a recorder stopped before closing it), or ``None``.
+
+    libsndfile reads what a truncated WAV holds without a word: a recording cut short looked
+    whole, its stop (if after the cut) never heard. The RIFF chunks are walked to the
+    ``data`` chunk, whose declared length is compared with the bytes after it; a length of 0
+    or 0xFFFFFFFF (what a streaming recorder writes before it knows) claims nothing. Other
+    formats (FLAC, RF64, ...) and a header that cannot be read say ``None``: read as before.
+    """
+    try:
+        with open(path, "rb") as f:
+            size = f.seek(0, 2)
+            f.seek(0)
+            head = f.read(12)
+            if head[:4] != b"RIFF" or head[8:] != b"WAVE":
+                return None
+            pos, byte_rate = 12, 0
+            while pos + 8 <= size:
+                f.seek(pos)
+                cid, n = struct.unpack("<4sI", f.read(8))
+                if cid == b"fmt " and n >= 12:
+                    byte_rate = struct.unpack("<8xI", f.read(12))[0]
+                elif cid == b"data":
+                    held = size - pos - 8
+                    if n in (0, 0xFFFFFFFF) or n <= held or byte_rate <= 0:
+                        return None
+                    return (f"{path}: the header says {n / byte_rate:.3f} s of sound but the file holds "
+                            f"{held / byte_rate:.3f} s: it was cut short (a recorder that stopped before closing "
+                            "the file, a copy not finished); only what it holds is read")
+                pos += 8 + n + (n & 1)
+    except (OSError, struct.error):
+        return None
+    return None
+
+
 def _check_channel(p: Path, channel: int | None, channels: int) -> None:
     if channel is not None and not 0 <= int(channel) < channels:
         have = "1 channel" if channels == 1 else f"{channels} channels (1 to {channels})"
@@ -96,7 +133,15 @@ def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) 
     with f:
         rate = int(f.samplerate)
         _check_channel(p, channel, int(f.channels))
-        for data in f.blocks(blocksize=int(block), dtype="float32", always_2d=True):
+        blocks, done = f.blocks(blocksize=int(block), dtype="float32", always_2d=True), 0
+        while True:
+            try:
+                data = next(blocks)
+            except StopIteration:
+                break
+            except (RuntimeError, ValueError) as e:  # libsndfile's decoder errors (LibsndfileError) are RuntimeErrors
+                raise AudioSourceError(f"{p}: damaged or cut short: not readable past {done / rate:.3f} s ({e})") from None
+            done += len(data)
             if channel is not None:
                 yield data[:, int(channel)].copy(), rate
             else:

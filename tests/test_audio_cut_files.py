@@ -1,0 +1,68 @@
+"""Audio files a recorder left cut short: a WAV whose header claims more than it holds, a FLAC that stops mid-frame.
+
+Both are made here from a second of noise (audit33): libsndfile reads a truncated WAV's
+samples without a word, and raises mid-read on a cut FLAC.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+import soundfile as sf
+from typer.testing import CliRunner
+
+from stickslip.audio.sources import AudioSourceError, read_wav, truncation, wav_blocks
+from stickslip.cli import app
+
+runner = CliRunner()
+RATE = 8000
+
+
+def _noise(seconds: float) -> np.ndarray:
+    return (0.1 * np.random.default_rng(0).standard_normal(int(seconds * RATE))).astype(np.float32)
+
+
+def _cut(path: Path, keep: int) -> None:
+    path.write_bytes(path.read_bytes()[:keep])
+
+
+def test_a_wav_cut_short_is_said_with_what_its_header_claims_and_what_it_holds(tmp_path):
+    whole = tmp_path / "whole.wav"
+    sf.write(whole, _noise(2.0), RATE, subtype="PCM_16")  # 44-byte header, 32000 bytes of sound
+    assert truncation(whole) is None
+    cut = tmp_path / "cut.wav"
+    cut.write_bytes(whole.read_bytes()[: 44 + 16000])
+    why = truncation(cut)
+    assert why is not None and "the header says 2.000 s of sound but the file holds 1.000 s" in why
+    x, rate = read_wav(cut)  # read as before: what it holds
+    assert (x.size, rate) == (8000, RATE)
+    # a streaming recorder's placeholder length (0xFFFFFFFF) claims nothing; neither does a file that is not a WAV
+    raw = bytearray(whole.read_bytes())
+    raw[40:44] = struct.pack("<I", 0xFFFFFFFF)
+    (tmp_path / "stream.wav").write_bytes(bytes(raw))
+    (tmp_path / "text.wav").write_text("not audio\n")
+    assert truncation(tmp_path / "stream.wav") is None and truncation(tmp_path / "text.wav") is None
+    # the commands say it before anything else (before this warning: only "lasts 1.000 s")
+    r = runner.invoke(app, ["tune", str(cut), "--stop-at", "1.5", "-o", str(tmp_path / "t.json"), "--rate", "1000"])
+    assert r.exit_code == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert lines[0].startswith("warning: ") and "holds 1.000 s: it was cut short" in lines[0], r.stderr
+    assert lines[-1].startswith("error: --stop-at 1.5 s is not inside the recording, which lasts 1.000 s"), r.stderr
+
+
+def test_a_flac_cut_mid_frame_is_one_line_not_a_traceback(tmp_path):
+    f = tmp_path / "cut.flac"
+    sf.write(f, _noise(3.0), RATE, subtype="PCM_16")
+    _cut(f, f.stat().st_size // 2)
+    with pytest.raises(AudioSourceError, match=r"cut\.flac: damaged or cut short: not readable past \d+\.\d+ s"):
+        for _ in wav_blocks(f, block=1024):
+            pass
+    out = tmp_path / "t.json"
+    r = runner.invoke(app, ["tune", str(f), "--stop-at", "0.5", "-o", str(out), "--rate", "1000"])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "damaged or cut short" in lines[0], r.stderr
+    assert not out.exists()
