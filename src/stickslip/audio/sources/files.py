@@ -140,7 +140,8 @@ def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) 
             except StopIteration:
                 break
             except (RuntimeError, ValueError) as e:  # libsndfile's decoder errors (LibsndfileError) are RuntimeErrors
-                raise AudioSourceError(f"{p}: damaged or cut short: not readable past {done / rate:.3f} s ({e})") from None
+                cut = f"not readable past {done / rate:.3f} s"
+                raise AudioSourceError(f"{p}: damaged or cut short: {cut} ({e})") from None
             done += len(data)
             if channel is not None:
                 yield data[:, int(channel)].copy(), rate
