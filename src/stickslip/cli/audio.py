@@ -83,9 +83,21 @@ def _load_recording(path: Path, sample_rate: float | None, channel: int | None =
         fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
     ch = _channels(path, channel)  # refuses --channel for a CSV
     try:
-        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path, ch)
+        if _is_csv(path):
+            return read_vibration(path, sample_rate)
+        samples, rate = read_wav(path, ch)
     except AudioSourceError as e:
         fail(str(e))
+    _warn_shortfall(path, samples.size)
+    return samples, rate
+
+
+def _warn_shortfall(path: Path, frames_read: int) -> None:
+    """One warning line when ``path`` gave fewer frames than its header claims (not a CSV)."""
+    from ..audio.sources import shortfall
+
+    if not _is_csv(path) and (short := shortfall(path, frames_read)) is not None:
+        err_console.print(f"warning: {short}", highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -340,6 +352,7 @@ def _listen_file(
         fail(str(err))
     if report.samples == 0:  # an empty or truncated file
         fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
+    _warn_shortfall(recording, report.samples)
     for t_s, why in report.stopped:
         _note_stopped(t_s, why)
     for line in report.warnings(str(recording), tuning):

@@ -10,7 +10,7 @@ The simulator's virtual microphone lives with the simulator (:mod:`stickslip.sim
 """
 
 from .channels import channel_problem
-from .files import AudioSourceError, read_wav, truncation, wav_blocks, wav_info, write_wav
+from .files import AudioSourceError, read_wav, shortfall, truncation, wav_blocks, wav_info, write_wav
 from .microphone import Microphone
 
 __all__ = [
@@ -18,6 +18,7 @@ __all__ = [
     "Microphone",
     "channel_problem",
     "read_wav",
+    "shortfall",
     "truncation",
     "wav_blocks",
     "wav_info",

@@ -20,6 +20,7 @@ __all__ = [
     "open_error",
     "read_wav",
     "load_soundfile",
+    "shortfall",
     "truncation",
     "wav_blocks",
     "wav_info",
@@ -109,6 +110,25 @@ def truncation(path: str | Path) -> str | None:
     return None
 
 
+def shortfall(path: str | Path, frames_read: int) -> str | None:
+    """Why a file gave fewer frames than its header claims (an MP3 cut after its Xing header), or ``None``.
+
+    The complement of :func:`truncation`, for the formats whose claimed length libsndfile
+    reports as the header says it (for a WAV it reports what the file holds). A length it
+    does not know (0, or the largest count) claims nothing.
+    """
+    try:
+        info = load_soundfile().info(str(path))
+    except Exception:  # noqa: BLE001  - read before: a file that cannot be opened now says nothing more
+        return None
+    claimed, rate = int(info.frames), float(info.samplerate)
+    if not (0 < int(frames_read) < claimed < 2**62 and rate > 0):
+        return None
+    return (f"{path}: the header says {claimed / rate:.3f} s of sound but only {int(frames_read) / rate:.3f} s "
+            "could be read: it was cut short (a recorder that stopped before closing the file, a copy not "
+            "finished); only what it holds is read")
+
+
 def _check_channel(p: Path, channel: int | None, channels: int) -> None:
     if channel is not None and not 0 <= int(channel) < channels:
         have = "1 channel" if channels == 1 else f"{channels} channels (1 to {channels})"
@@ -133,15 +153,18 @@ def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) 
     with f:
         rate = int(f.samplerate)
         _check_channel(p, channel, int(f.channels))
-        blocks, done = f.blocks(blocksize=int(block), dtype="float32", always_2d=True), 0
+        # read until the decoder gives nothing, not SoundFile.blocks: that counts to the header's length and, for a
+        # file that holds less (an MP3 cut after its Xing header), yields its buffer unfilled - the last block
+        # again, or uninitialised memory (1.8e18), for the rest of the claimed length
+        done = 0
         while True:
             try:
-                data = next(blocks)
-            except StopIteration:
-                break
+                data = f.read(int(block), dtype="float32", always_2d=True)
             except (RuntimeError, ValueError) as e:  # libsndfile's decoder errors (LibsndfileError) are RuntimeErrors
                 cut = f"not readable past {done / rate:.3f} s"
                 raise AudioSourceError(f"{p}: damaged or cut short: {cut} ({e})") from None
+            if len(data) == 0:
+                break
             done += len(data)
             if channel is not None:
                 yield data[:, int(channel)].copy(), rate
