@@ -89,3 +89,15 @@ def test_an_mp3_cut_after_its_header_is_read_as_far_as_it_goes_and_said(tmp_path
     assert shortfall(whole, full.size) is None
     r = runner.invoke(app, ["tune", str(cut), "--stop-at", "3.5", "-o", str(tmp_path / "t.json"), "--rate", "1000"])
     assert r.exit_code == 2 and "could be read: it was cut short" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("fmt", ["RF64", "AIFF"])
+def test_an_rf64_or_aiff_cut_short_is_said_too(tmp_path, fmt):
+    """RF64 (a WAV over 4 GB: its length in the ds64 chunk) and AIFF (big-endian, the sound in SSND): cut in half."""
+    whole = tmp_path / f"whole.{fmt.lower()}"
+    sf.write(whole, _noise(2.0), RATE, format=fmt, subtype="PCM_16")
+    assert truncation(whole) is None
+    cut = tmp_path / f"cut.{fmt.lower()}"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size // 2])
+    why = truncation(cut)
+    assert why is not None and "the header says 2.00" in why and "but the file holds 0.99" in why, why

@@ -76,37 +76,53 @@ def wav_info(path: str | Path) -> tuple[int, int, float]:
 
 
 def truncation(path: str | Path) -> str | None:
-    """Why a WAV file holds less than its header says (a recorder stopped before closing it), or ``None``.
+    """Why a WAV, RF64 or AIFF file holds less than its header says (a recorder stopped before closing it), or ``None``.
 
-    libsndfile reads what a truncated WAV holds without a word: a recording cut short looked
-    whole, its stop (if after the cut) never heard. The RIFF chunks are walked to the
-    ``data`` chunk, whose declared length is compared with the bytes after it; a length of 0
-    or 0xFFFFFFFF (what a streaming recorder writes before it knows) claims nothing. Other
-    formats (FLAC, RF64, ...) and a header that cannot be read say ``None``: read as before.
+    libsndfile reads what a truncated file holds without a word: a recording cut short
+    looked whole, its stop (if after the cut) never heard. The chunks are walked to the
+    sound's (``data``; ``SSND`` in an AIFF), whose declared length (an RF64's in its ``ds64``
+    chunk) is compared with the bytes after it; a length of 0 or 0xFFFFFFFF (what a
+    streaming recorder writes before it knows) claims nothing. The lengths in seconds scale
+    what libsndfile reads by the two byte counts. Other formats (FLAC, W64, ...) and a header
+    that cannot be read say ``None``: read as before (an MP3: :func:`shortfall`).
     """
     try:
         with open(path, "rb") as f:
-            size = f.seek(0, 2)
-            f.seek(0)
-            head = f.read(12)
-            if head[:4] != b"RIFF" or head[8:] != b"WAVE":
-                return None
-            pos, byte_rate = 12, 0
-            while pos + 8 <= size:
-                f.seek(pos)
-                cid, n = struct.unpack("<4sI", f.read(8))
-                if cid == b"fmt " and n >= 12:
-                    byte_rate = struct.unpack("<8xI", f.read(12))[0]
-                elif cid == b"data":
-                    held = size - pos - 8
-                    if n in (0, 0xFFFFFFFF) or n <= held or byte_rate <= 0:
-                        return None
-                    return (f"{path}: the header says {n / byte_rate:.3f} s of sound but the file holds "
-                            f"{held / byte_rate:.3f} s: it was cut short (a recorder that stopped before closing "
-                            "the file, a copy not finished); only what it holds is read")
-                pos += 8 + n + (n & 1)
+            sizes = _sound_bytes(f, f.seek(0, 2))
     except (OSError, struct.error):
         return None
+    if sizes is None:
+        return None
+    declared, held = sizes
+    if declared in (0, 0xFFFFFFFF) or declared <= held or held <= 0:
+        return None
+    try:
+        held_s = wav_info(path)[2]
+    except AudioSourceError:
+        return None  # said where the file is read
+    return (f"{path}: the header says {held_s * declared / held:.3f} s of sound but the file holds {held_s:.3f} s: "
+            "it was cut short (a recorder that stopped before closing the file, a copy not finished); only what it "
+            "holds is read")
+
+
+def _sound_bytes(f: Any, size: int) -> tuple[int, int] | None:
+    """(bytes the header declares, bytes the file holds) of the sound chunk of a RIFF/RF64/AIFF file, else None."""
+    f.seek(0)
+    head = f.read(12)
+    little = head[:4] in (b"RIFF", b"RF64") and head[8:] == b"WAVE"
+    if not little and not (head[:4] == b"FORM" and head[8:] in (b"AIFF", b"AIFC")):
+        return None
+    fmt, sound, pos, ds64 = ("<4sI", b"data", 12, None) if little else (">4sI", b"SSND", 12, None)
+    while pos + 8 <= size:
+        f.seek(pos)
+        cid, n = struct.unpack(fmt, f.read(8))
+        if cid == b"ds64" and n >= 16:
+            ds64 = struct.unpack("<8xQ", f.read(16))[0]  # riff size, then the data chunk's 64-bit size
+        elif cid == sound:
+            declared = ds64 if (head[:4] == b"RF64" and n == 0xFFFFFFFF and ds64 is not None) else n
+            skip = 0 if little else 8  # an SSND chunk opens with its offset and block size
+            return max(declared - skip, 0), size - pos - 8 - skip
+        pos += 8 + n + (n & 1)
     return None
 
 
