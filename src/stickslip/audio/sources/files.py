@@ -87,9 +87,9 @@ def truncation(path: str | Path) -> str | None:
     that cannot be read say ``None``: read as before (an MP3: :func:`shortfall`).
     """
     try:
-        with open(path, "rb") as f:
+        with open(regular(path), "rb") as f:  # a FIFO or device is never opened: refused where the file is read
             sizes = _sound_bytes(f, f.seek(0, 2))
-    except (OSError, struct.error):
+    except (OSError, struct.error, AudioSourceError):
         return None
     if sizes is None:
         return None
