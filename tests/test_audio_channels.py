@@ -202,3 +202,21 @@ def test_a_few_damaged_samples_in_a_wide_file_are_damage_not_a_dead_input(files:
     assert "100 samples are not numbers" in r.stderr and "carries no signal" not in r.stderr, r.stderr
     r = runner.invoke(app, ["listen", str(files / "eight.wav"), "--tuning", str(files / "t.json"), "--channel", "9"])
     assert r.exit_code == 2 and "has 8 channels (1 to 8): there is no channel 9" in r.stderr, r.output
+
+
+def test_one_loud_channel_of_six_is_said_to_be_diluted_not_cancelled(tmp_path: Path) -> None:
+    """A 6-channel recorder with the microphone on channel 4 and quiet noise on the others (audit33): the mean is
+    -16 dB under channel 4 and was said to "carry the sound in opposite polarity and cancel"."""
+    y, sr = render(variant(P, seed=3, stop_at=None, dur=2.5, rate=1000.0))
+    rms = float(np.sqrt(np.mean(y**2)))
+    six = 0.03 * rms * np.random.default_rng(3).standard_normal((y.size, 6))
+    six[:, 3] = y
+    sf.write(tmp_path / "six.wav", six, sr, subtype="FLOAT")
+    why = channel_problem(tmp_path / "six.wav")
+    assert why is not None and "-16 dB below channel 4" in why and "--channel 4" in why, why
+    assert "dilutes" in why and "opposite polarity" not in why, why
+    # the same recorder with channel 5 wired in opposite polarity to channel 4: that one cancels
+    six[:, 4] = -y
+    sf.write(tmp_path / "anti6.wav", six, sr, subtype="FLOAT")
+    anti = channel_problem(tmp_path / "anti6.wav")
+    assert anti is not None and "opposite polarity" in anti, anti

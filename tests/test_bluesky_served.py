@@ -90,6 +90,8 @@ def _answering(answers: dict[str, Any]) -> Rig:
 
     def handle(request: httpx.Request) -> httpx.Response:
         body = answers[request.url.path]
+        if isinstance(body, Exception):  # the server gone
+            raise body
         if isinstance(body, bytes):
             return httpx.Response(200, content=body)
         return httpx.Response(200, json=body)
@@ -177,3 +179,31 @@ def test_a_read_before_any_move_gives_the_servers_position_not_nan() -> None:
     assert asyncio.run(read()) == 2e-3
     where["joints"][2]["q"] = 3e-3  # the page moved it
     assert asyncio.run(read()) == 3e-3
+
+
+def test_a_served_axis_that_lost_its_server_mid_move_says_its_position_is_uncertain() -> None:
+    """The server gone during a move failed the status, but the axis kept its last readback with uncertain False
+    (audit28's question 8): a subscriber to the signals read a position the move may have left. Now uncertain."""
+    import asyncio
+
+    import httpx
+
+    from stickslip.bluesky import MoveError
+
+    answers: dict[str, Any] = {"/api/where": {"joints": [_row(1), _row(2), _row(3, q=2e-3)]}}
+    axis = ServedAxis(_answering(answers), 3, name="q3")
+
+    async def move() -> None:
+        await axis.connect()
+        await axis.refresh()
+        gone = httpx.ConnectError("connection refused")
+        answers["/api/move"] = answers["/api/where"] = gone
+        await axis.set(3e-3)
+
+    with pytest.raises(MoveError):
+        asyncio.run(move())
+    assert asyncio.run(axis.uncertain.get_value()) is True
+    assert asyncio.run(axis.readback.get_value()) == 2e-3  # the last the server said, flagged
+    answers["/api/where"] = {"joints": [_row(1), _row(2), _row(3, q=2.5e-3)]}  # back: the server's word again
+    asyncio.run(axis.refresh())
+    assert (asyncio.run(axis.readback.get_value()), asyncio.run(axis.uncertain.get_value())) == (2.5e-3, False)

@@ -76,3 +76,46 @@ def test_a_url_missing_its_slashes_is_refused_with_the_url_it_meant(url, hint):
     with pytest.raises(ValueError, match="lacks the //") as e:
         base.open_device(url)
     assert str(e.value).endswith(hint)
+
+
+@pytest.mark.parametrize(
+    ("url", "form", "not_said"),
+    [
+        ("smaract-mcs2://", "give its network address: smaract-mcs2://192.168.1.200 (the MCS2 is reached over TCP "
+         "only)", "/dev/"),
+        ("smaract-mcs+socket://", "give its network address: smaract-mcs+socket://192.168.1.5", "/dev/"),
+        ("mm3a+socket://", "give the adapter's network address and port: mm3a+socket://192.168.1.20:4001", "/dev/"),
+        ("smaract-mcs://", "give the serial port: smaract-mcs:///dev/ttyUSB0 (smaract-mcs://COM3 on Windows; an "
+         "MCS's network interface is smaract-mcs+socket://host)", None),
+        ("mm3a://", "give the serial port: mm3a:///dev/ttyUSB0 (mm3a://COM3 on Windows; a serial-over-network "
+         "adapter is mm3a+socket://host:port)", None),
+        ("anc300://", "give its network address (anc300://192.168.1.2) or its serial port (anc300:///dev/ttyUSB0)",
+         None),
+    ],
+)
+def test_a_url_without_host_or_port_suggests_its_own_scheme_s_form(url, form, not_said):
+    """'smaract-mcs2://' suggested 'smaract-mcs2:///dev/ttyUSB0', but the MCS2 is TCP only (audit26): each scheme's
+    message names the form that scheme takes."""
+    with pytest.raises(ValueError) as e:
+        base.check_device_url(url)
+    assert str(e.value) == f"device URL {url!r} names no host and no port: {form}"
+    if not_said:
+        assert not_said not in str(e.value)
+
+
+def test_a_backend_registered_with_its_check_has_its_urls_checked_before_use(monkeypatch):
+    """A backend added with register_backend got only the URL's shape checked: its options were first read when
+    the device opened (audit30's question). With check= they are refused before anything is used or stored."""
+    monkeypatch.setattr(base, "BACKENDS", dict(base.BACKENDS))
+    monkeypatch.setattr(base, "URL_CHECKS", dict(base.URL_CHECKS))
+
+    def check(url: str) -> None:
+        if "rate=0" in url:
+            raise ValueError("rate must be > 0 Hz")
+
+    base.register_backend("labstage", lambda url: None, check=check)
+    assert base.check_device_url("labstage://10.0.0.9?rate=5") == "labstage://10.0.0.9?rate=5"
+    with pytest.raises(ValueError, match="rate must be > 0 Hz"):
+        base.check_device_url("labstage://10.0.0.9?rate=0")
+    base.register_backend("plainstage", lambda url: None)  # no check: the shape only, as before
+    assert base.check_device_url("plainstage://10.0.0.9?rate=0") == "plainstage://10.0.0.9?rate=0"

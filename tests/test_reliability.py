@@ -805,7 +805,43 @@ def test_where_names_a_bad_url_option_not_a_silent_device(tmp_path, url, line):
     Port 1 refuses connections: a URL that got as far as connecting would say 'cannot connect'."""
     r = run("where", "-d", url, "--db", tmp_path / "s.db")
     one_error(r)
-    assert r.stderr.strip().splitlines()[-1] == line
+    said = r.stderr.strip().splitlines()[-1]  # checked with the URL since audit30: "Invalid value for '--device'"
+    said = said.replace("Invalid value for '--device' / '-d': ", "")
+    assert said.removesuffix(" (see stickslip where --help)") == line
+    assert "does not answer" not in said
+
+
+@pytest.mark.parametrize(
+    "url, line",
+    [
+        ("anc300://127.0.0.1:1?axes=1,1,2", "error: --device: two joints share an axis: {1: 1, 2: 1, 3: 2}"),
+        ("smaract-mcs2://127.0.0.1:1?hz=1000.5", "error: --device: hz must be an integer in 1..20000 Hz, got '1000.5'"),
+        ("smaract-mcs:///dev/ttyS99?baud=12",
+         "error: --device: baud must be an integer in 9600..115200 baud, got '12'"),
+        ("mm3a+socket://127.0.0.1:1?channels=A,B", "error: --device: channels is the channel letters of joints 1, 2, 3 "
+         "written together, e.g. ABC or CBA; got 'A,B'"),
+    ],
+)
+def test_move_checks_the_url_before_advising_to_reference_with_it(tmp_path, cal_path, url, line):
+    """move -d anc300://H?axes=1,1,2 on a joint never referenced advised 'reference it: stickslip move -d
+    anc300://H?axes=1,1,2 --joint 3 --steps -16000 ...', repeating a URL that can never open (audit26): the URL's
+    options are checked first (before the database, the calibration or the kept positions are read)."""
+    for cmd in (["move", "-j", "3", "--by", "10um"], ["reach", "--by", "0,0,10um"]):
+        r = run(*cmd, "-d", url, "-c", cal_path, "--trust-calibration", "--db", tmp_path / "s.db")
+        one_error(r)
+        assert "never referenced" not in r.stderr
+        said = r.stderr.strip().splitlines()[-1].replace("Invalid value for '--device' / '-d'", "--device")
+        assert said == f"{line} (see stickslip {cmd[0]} --help)"
+
+
+def test_advice_to_reference_never_names_a_url_that_cannot_open():
+    """The advice is built from the URL it is given (a config file's device, the Python API): a URL with an option
+    its driver refuses raises that refusal rather than being written into a command to type."""
+    from stickslip.procedures.move import reference_commands
+
+    assert "anc300://H?axes=1,2,3 --joint 3 --steps -" in reference_commands("anc300://H?axes=1,2,3", 3)
+    with pytest.raises(ValueError, match=r"^two joints share an axis: \{1: 1, 2: 1, 3: 2\}$"):
+        reference_commands("anc300://H?axes=1,1,2", 3)
 
 
 @pytest.mark.parametrize(

@@ -341,6 +341,34 @@ def test_stop_on_the_socket_and_bad_messages(client: TestClient, room: ControlRo
     assert replies[3]["reply"] == "stop" and replies[3]["stopped"] is None
 
 
+def test_one_stop_press_sent_both_ways_is_one_event(
+    client: TestClient, room: ControlRoom, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The page sends each STOP press on the socket and as POST /api/stop (belt and braces): one press showed
+    'STOP (nothing was moving)' twice (audit26). The press's id makes the second arrival silent; it still halts."""
+    def stops() -> list[str]:
+        return [e["text"] for e in room.events_after(0) if e["text"].startswith("STOP")]
+
+    before = len(stops())
+    with client.websocket_connect("ws://127.0.0.1:8765/api/live") as ws:
+        ws.receive_text()
+        ws.send_text(json.dumps({"type": "stop", "press": "p-1"}))
+        while "seq" in (msg := json.loads(ws.receive_text())):
+            pass
+    assert msg["reply"] == "stop" and msg["stopped"] is None
+    assert client.post("/api/stop?press=p-1").json() == {"stopped": None, "motion": None}
+    assert stops()[before:] == ["STOP (nothing was moving)"]
+    halt, halts = room.owned.halt, []
+    monkeypatch.setattr(room.owned, "halt", lambda: halts.append(1) or halt())
+    client.post("/api/stop?press=p-1")  # the same press again: halted again, said once
+    client.post("/api/stop?press=p-2")  # another press: said
+    client.post("/api/stop")  # no press id (the Python client, curl): said each time
+    assert stops()[before:] == ["STOP (nothing was moving)"] * 3
+    assert len(halts) == 3  # the controller was told to stop each time, the repeated press too
+    long = client.post("/api/stop?press=" + "x" * 5000)  # a STOP is never refused for its id
+    assert long.status_code == 200 and stops()[before:] == ["STOP (nothing was moving)"] * 4
+
+
 def test_observe_and_where(client: TestClient, room: ControlRoom) -> None:
     assert wait(client, client.post("/api/move", json={"joint": 3, "by": "100um"}).json())["status"] == "done"
     kept = room.state().positions[3]

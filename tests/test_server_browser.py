@@ -257,7 +257,7 @@ def test_a_restarted_server_s_events_are_shown(page: Any, tmp_path: Path) -> Non
                 first.event("info", "an event of the first server")
             until(lambda: pg.inner_text("#events").count("first server") == 3, 15, "the first server's events")
         first.close()
-        until(lambda: pg.inner_text("#status") == "offline", 15, "the page to see the server gone")
+        until(lambda: pg.inner_text("#status").startswith("offline since "), 15, "the page to see the server gone")
         second = room_on(tmp_path / "b", calibrated=False)
         with served(create_app(second, Access(None, True)), port):
             until(lambda: pg.inner_text("#status") == "idle", 15, "the page to reconnect")
@@ -316,3 +316,158 @@ def test_the_move_message_follows_the_motion_to_its_end(page: Any, room: Control
     said = page.inner_text("#move-msg")
     assert said.startswith("move of joint 1 to -120 deg: stopped — stopped: joint 1 made "), said
     assert page.eval_on_selector("#move-msg", "e => e.className") == "msg ok"  # a STOP asked for is no failure
+
+
+def test_one_stop_press_shows_one_event(page: Any, room: ControlRoom, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The STOP button sends the press on the socket and as POST /api/stop (the socket is the quicker path; the
+    POST also gets through on a socket that is closed or dead, and its failure is said): one press showed
+    'STOP (nothing was moving)' twice in the events (audit26). Both still reach the room; one event is shown."""
+    idle(room)
+    calls: list[int] = []
+    stop = room.stop
+    monkeypatch.setattr(room, "stop", lambda *a, **k: calls.append(1) or stop(*a, **k))
+    said = "STOP (nothing was moving)"
+    before = page.inner_text("#events").count(said)
+    page.click("#stop")
+    until(lambda: len(calls) == 2, 10, "the press on both paths")
+    room.event("info", "after the one press")  # the page has shown every event before this one once it shows it
+    until(lambda: "after the one press" in page.inner_text("#events"), 10, "the events to reach the page")
+    assert page.inner_text("#events").count(said) == before + 1
+
+
+def _greyed(pg: Any) -> dict[str, str]:
+    """Each live value's computed opacity and filter, by its selector."""
+    return dict(pg.evaluate("""() => Object.fromEntries(
+        ["#joints", ".tip", "#motion", "#plot", "#day-now", ".meter", "#device"].map((s) => {
+            const c = getComputedStyle(document.querySelector(s));
+            return [s, c.opacity + " " + c.filter];
+        }))"""))
+
+
+def test_an_offline_page_greys_every_live_value_until_fresh_state_comes(page: Any, tmp_path: Path) -> None:
+    """While the server was down the page said 'offline' in the status pill only: the joints, the tip and the
+    motion stayed as last received, not greyed, as if live (audit26). Now every live value is greyed with the time
+    of the last update, as a lost camera's last frame is, and is live again only once a fresh state comes: a
+    reconnected socket whose server sends no state yet leaves them greyed."""
+    from server_support import free_port
+
+    port = free_port()
+    first, second = room_on(tmp_path / "a", calibrated=False), None
+    (tmp_path / "b").mkdir()
+    pg = page.context.new_page()
+    try:
+        with served(create_app(first, Access(None, True)), port) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page's first state")
+            assert set(_greyed(pg).values()) == {"1 none"}
+            assert not pg.is_visible("#stale-note")
+            shown = joint_text(pg, 3)
+        first.close()
+        until(lambda: pg.inner_text("#status").startswith("offline since "), 15, "the page to see the server gone")
+        assert set(_greyed(pg).values()) == {"0.35 grayscale(1)"}  # as img.stale, the lost camera's frame
+        note = pg.inner_text("#stale-note")
+        assert note.startswith("offline since ") and " UTC: the greyed values are the last received, at " in note
+        assert note.endswith(" UTC, and may no longer be true; they are live again when the server sends fresh ones")
+        assert joint_text(pg, 3) == shown  # the last value stays, to be read as the last one
+        pg.click("#stop")  # said 'STOP: Failed to fetch' (the browser's words)
+        until(lambda: pg.inner_text("#move-msg").startswith("STOP"), 10, "the STOP's failure said")
+        assert pg.inner_text("#move-msg") == "STOP: the server does not answer: this STOP did not reach it"
+        pg.click("h2#h-joints")
+        pg.keyboard.down("ArrowUp")  # a jog key held while offline: let go at once, and nothing was said
+        until(lambda: pg.inner_text("#jog-note") != "", 5, "the jog's refusal said")
+        pg.keyboard.up("ArrowUp")
+        assert pg.inner_text("#jog-note") == "jog: the server does not answer; nothing was sent"
+        assert not pg.eval_on_selector('#pad button[data-dir="+y"]', "b => b.classList.contains('held')")
+        second = room_on(tmp_path / "b", calibrated=False)
+        held = True
+        snapshot = second.snapshot
+
+        def no_state_yet() -> dict[str, Any]:
+            if held:
+                raise RuntimeError("no state yet")  # the live stream sends nothing while this holds
+            return snapshot()
+
+        second.snapshot = no_state_yet  # type: ignore[method-assign]
+        app = create_app(second, Access(None, True))
+        with served(app, port):
+            until(lambda: pg.inner_text("#status") == "reconnected; waiting for the state", 15, "the reconnection")
+            until(lambda: app.state.live.clients, 5, "the socket among the live clients")  # open, and no state
+            assert set(_greyed(pg).values()) == {"0.35 grayscale(1)"} and pg.is_visible("#stale-note")
+            held = False
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the fresh state")
+            assert set(_greyed(pg).values()) == {"1 none"}
+            assert not pg.is_visible("#stale-note")
+            assert pg.inner_text("#jog-note") == ""  # live again: the jog may be tried again
+    finally:
+        pg.close()
+        if second is not None:
+            second.close()
+
+
+def test_a_socket_open_with_nothing_coming_greys_the_values(page: Any, tmp_path: Path) -> None:
+    """A server whose live stream stops while its socket stays open (the browser cannot tell a dead link from a
+    quiet one): after 3 s with no state the values are greyed with 'no update since', and live again with the
+    next state."""
+    room = room_on(tmp_path, calibrated=False)
+    quiet = False
+    snapshot = room.snapshot
+
+    def stream() -> dict[str, Any]:
+        if quiet:
+            raise RuntimeError("the stream stalls")
+        return snapshot()
+
+    room.snapshot = stream  # type: ignore[method-assign]
+    pg = page.context.new_page()
+    try:
+        with served(create_app(room, Access(None, True))) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page's first state")
+            quiet = True
+            until(lambda: pg.inner_text("#status").startswith("no update since "), 15, "the page to see no update")
+            assert set(_greyed(pg).values()) == {"0.35 grayscale(1)"}
+            assert pg.inner_text("#stale-note").startswith("no update since ")
+            quiet = False
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the next state")
+            assert set(_greyed(pg).values()) == {"1 none"} and not pg.is_visible("#stale-note")
+    finally:
+        pg.close()
+        room.close()
+
+
+def test_a_move_followed_across_a_restart_is_not_left_running(page: Any, tmp_path: Path) -> None:
+    """The move's message box follows its motion to the end; a server gone mid-move left it saying '...: running'
+    for good after the restart (the new server has no such motion, and its motion ids count from 1 again, so
+    its first motion could have been taken for it). It says now that the end was not seen."""
+    from server_support import free_port
+
+    port = free_port()
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    first, second = room_on(tmp_path / "a", "sim://?realtime=1&speed=1"), None
+    pg = page.context.new_page()
+    try:
+        with served(create_app(first, Access(None, True)), port) as base:
+            pg.goto(base + "/")
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page's first state")
+            pg.select_option("#move-joint", "2")
+            pg.select_option("#move-mode", "to")
+            pg.fill("#move-amount", "min")
+            pg.click("#move-form button[type=submit]")
+            until(lambda: pg.inner_text("#move-msg").endswith(": running"), 10, "the move running")
+        until(lambda: pg.inner_text("#status").startswith("offline since "), 15, "the page to see the server gone")
+        first.close()
+        assert pg.inner_text("#move-msg").endswith(": running")  # the last it heard, greyed with the values
+        assert pg.eval_on_selector("#move-msg", "e => getComputedStyle(e).opacity") == "0.35"
+        second = room_on(tmp_path / "b", calibrated=False)
+        with served(create_app(second, Access(None, True)), port):
+            until(lambda: pg.inner_text("#status") == "idle", 15, "the page to reconnect")
+            until(lambda: not pg.inner_text("#move-msg").endswith(": running"), 5, "the message to change")
+            said = pg.inner_text("#move-msg")
+            assert said.startswith("move of joint 2 to ")
+            assert said.endswith(": the server was restarted while it ran; its end was not seen (the joints say "
+                                 "what is kept)"), said
+    finally:
+        pg.close()
+        if second is not None:
+            second.close()

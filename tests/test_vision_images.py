@@ -230,3 +230,22 @@ def test_scikit_image_micrographs_read(tmp_path):
     folder = Path(sk.__file__).parent / "data"
     cell = read_image(folder / "cell.png")
     assert cell.shape == (660, 550) and 0.0 <= cell.min() < cell.max() <= 1.0
+
+
+def test_frames_numbered_without_leading_zeros_are_taken_in_number_order(tmp_path):
+    """f1 ... f12 (a camera or script that does not pad): f2 before f10, from a folder and a glob (audit33: the
+    name sort gave f1, f10, f11, f12, f2, ..., each frame tracked with another one's time)."""
+    for k in range(1, 13):
+        PIL.fromarray(np.full((20, 30), k, np.uint8)).save(tmp_path / f"f{k}.png")
+    (tmp_path / "f07b.png").write_bytes((tmp_path / "f7.png").read_bytes())
+    want = [f"f{k}.png" for k in range(1, 8)] + ["f07b.png"] + [f"f{k}.png" for k in range(8, 13)]
+    assert [p.name for p in frame_paths([tmp_path])] == want
+    assert [p.name for p in frame_paths([str(tmp_path / "f*.png")])] == want
+    cam = FileCamera(frame_paths([tmp_path]), fps=10.0)
+    seen = [round(float(cam.grab().image[0, 0]) * 255) for _ in range(3)]
+    assert seen == [1, 2, 3]
+    # zero-padded names keep their order; names equal as numbers fall back to their text
+    for name in ("g001.png", "g01.png", "g002.png", "g010.png", "g1.png"):
+        PIL.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / name)
+    assert [p.name for p in frame_paths([str(tmp_path / "g*.png")])] == [
+        "g001.png", "g01.png", "g1.png", "g002.png", "g010.png"]

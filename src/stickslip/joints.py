@@ -137,9 +137,11 @@ class JointSpec:
         return self.lower - tol <= q <= self.upper + tol
 
     def range_problem(self, name: str, q: float) -> str | None:
-        """``"name = q unit is outside joint j's range [lo, hi] unit"``, or ``None`` if ``q`` is within it."""
+        """``"name = q unit is outside joint j's range [lo, hi] unit"`` (or not finite), else ``None``."""
         if math.isfinite(q) and self.contains(q):
             return None
+        if not math.isfinite(q):
+            return f"{name} must be a finite number in {self.unit}, got {q!r}"
         return (
             f"{name} = {q:.6g} {self.unit} is outside joint {self.number}'s range "
             f"[{self.lower:.6g}, {self.upper:.6g}] {self.unit}"

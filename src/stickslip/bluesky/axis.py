@@ -465,9 +465,11 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
             return f"the target of joint {self.joint} must be a number in {self.spec.unit}, got {value!r}"
         q = float(value)
-        if not math.isfinite(q) or not self.spec.contains(q):
+        if not math.isfinite(q):
+            return f"the target of joint {self.joint} must be a finite number in {self.spec.unit}, got {q!r}"
+        if not self.spec.contains(q):
             lo, hi = self.spec.lower, self.spec.upper
-            shown = format_position(q, self.joint) if math.isfinite(q) else repr(q)
+            shown = format_position(q, self.joint)
             return (
                 f"the target {shown} ({q:.6g} {self.spec.unit}) is outside joint {self.joint}'s range "
                 f"[{format_position(lo, self.joint)}, {format_position(hi, self.joint)}]; "

@@ -111,9 +111,10 @@ class ServedAxis(StandardReadable, Locatable[float], Stoppable):
             if not (self._stop_success and e.motion.get("status") == "stopped"):
                 raise MoveError(str(e)) from None
         except RigError as e:
+            self._set_uncertain(True)  # the move's end unknown (the server gone?): until the server says again
             raise MoveError(str(e)) from None
         finally:
-            await self.refresh()
+            await self.refresh()  # a server gone fails here too (the flag stays): the same MoveError
 
     async def stop(self, success: bool = False) -> None:
         """The server's STOP (every axis of the rig: there is one STOP); ``success``: the move's status completes."""

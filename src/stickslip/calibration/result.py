@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 from .. import kinematics as kin
 from .. import plotting, records
-from ..clock import day_label_problem, now_utc
+from ..clock import day_label_problem, day_order, now_utc
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
     DIRECTIONS,
@@ -223,7 +223,7 @@ class Provenance:
             rows_sha256=rows,
             rows=len(traverses),
             rows_used=used,
-            days=tuple(sorted({t.day for t in traverses})),
+            days=tuple(sorted({t.day for t in traverses}, key=day_order)),
             notes=tuple(notes),
         )
 
@@ -731,7 +731,7 @@ def _constant_step(joint: int, direction: str, model: JointModel) -> float:
 def _day_of(traverses: Sequence[Traverse], day: str | None) -> str:
     if day:
         return day
-    days = sorted({t.day for t in traverses})
+    days = sorted({t.day for t in traverses}, key=day_order)  # day10 after day9
     return days[-1] if days else ""
 
 

@@ -50,8 +50,12 @@ _CHANNEL_HELP = (
 
 
 def _channels(path: Path, channel: int | None) -> int | None:
-    """The 0-based channel to read from ``path`` (None: the mean); warns when the mean loses the stepping."""
-    from ..audio.sources import AudioSourceError, channel_problem
+    """The 0-based channel to read from ``path`` (None: the mean); warns when the mean loses the stepping, and when
+    the file holds less than its header says (:func:`~stickslip.audio.sources.files.truncation`)."""
+    from ..audio.sources import AudioSourceError, channel_problem, truncation
+
+    if not _is_csv(path) and (cut := truncation(path)) is not None:
+        err_console.print(f"warning: {cut}", highlight=False, soft_wrap=True)
 
     if channel is not None:
         if _is_csv(path):
@@ -79,9 +83,21 @@ def _load_recording(path: Path, sample_rate: float | None, channel: int | None =
         fail(f"--sample-rate is for a CSV of samples; {path} carries its own rate")
     ch = _channels(path, channel)  # refuses --channel for a CSV
     try:
-        return read_vibration(path, sample_rate) if _is_csv(path) else read_wav(path, ch)
+        if _is_csv(path):
+            return read_vibration(path, sample_rate)
+        samples, rate = read_wav(path, ch)
     except AudioSourceError as e:
         fail(str(e))
+    _warn_shortfall(path, samples.size)
+    return samples, rate
+
+
+def _warn_shortfall(path: Path, frames_read: int) -> None:
+    """One warning line when ``path`` gave fewer frames than its header claims (not a CSV)."""
+    from ..audio.sources import shortfall
+
+    if not _is_csv(path) and (short := shortfall(path, frames_read)) is not None:
+        err_console.print(f"warning: {short}", highlight=False, soft_wrap=True)
 
 
 @app.command()
@@ -336,6 +352,7 @@ def _listen_file(
         fail(str(err))
     if report.samples == 0:  # an empty or truncated file
         fail(f"{recording} holds no samples (an empty or truncated recording): nothing to listen to")
+    _warn_shortfall(recording, report.samples)
     for t_s, why in report.stopped:
         _note_stopped(t_s, why)
     for line in report.warnings(str(recording), tuning):

@@ -63,7 +63,7 @@ from .transport import SerialTransport, SocketTransport, Transport, serial_port_
 PASSWORD_ENV = "STICKSLIP_ANC300_PASSWORD"
 """Environment variable holding the ANC300 console password."""
 
-__all__ = ["ANC300", "TransportAdapter", "open_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
+__all__ = ["ANC300", "TransportAdapter", "open_url", "check_url", "FREQUENCY_RANGE", "VOLTAGE_RANGE"]
 
 log = logging.getLogger("stickslip.devices.anc300")
 
@@ -426,6 +426,20 @@ def _parse_axes(text: str) -> dict[int, int]:
     return _check_axes({i + 1: a for i, a in enumerate(numbers)})
 
 
+def _url_settings(url: str) -> tuple[dict[str, str], float, float, int, dict[int, int]]:
+    """The options of ``url``, each checked, nothing opened: (the options, timeout s, delay s, baud, axes)."""
+    opts = url_options(url, {"password", "axes", "timeout", "delay", "baud"})
+    timeout = check_setting("timeout", opts.get("timeout", 2.0), *URL_TIMEOUT_S, "s")
+    delay = check_setting("delay", opts.get("delay", 0.05), 0.0, 10.0, "s")
+    baud = int(check_setting("baud", opts.get("baud", 38400), *URL_BAUD, integer=True))
+    return opts, timeout, delay, baud, _parse_axes(opts.get("axes", "1,2,3"))
+
+
+def check_url(url: str) -> None:
+    """``ValueError`` naming an option of ``url`` the driver would refuse; nothing is opened or asked."""
+    _url_settings(url)
+
+
 def open_url(url: str) -> ANC300:
     """Open ``anc300://host[:7230][?options]`` or ``anc300:///dev/ttyUSB0[?options]``.
 
@@ -433,11 +447,7 @@ def open_url(url: str) -> ANC300:
     console cannot be reached or refuses the password, ``ValueError`` for a bad URL.
     """
     parts = urlsplit(url)
-    opts = url_options(url, {"password", "axes", "timeout", "delay", "baud"})
-    timeout = check_setting("timeout", opts.get("timeout", 2.0), *URL_TIMEOUT_S, "s")
-    delay = check_setting("delay", opts.get("delay", 0.05), 0.0, 10.0, "s")
-    baud = int(check_setting("baud", opts.get("baud", 38400), *URL_BAUD, integer=True))
-    axes = _parse_axes(opts.get("axes", "1,2,3"))
+    opts, timeout, delay, baud, axes = _url_settings(url)
     password = unquote(opts.get("password") or secret_from_env(PASSWORD_ENV) or DEFAULT_PASSWORD)
     com = windows_com_port(parts.netloc)  # anc300://COM3: Windows' serial port where a host would stand
     if parts.hostname and not com:

@@ -55,6 +55,8 @@ __all__ = [
     "SECRET_OPTIONS",
     "URL_TIMEOUT_S",
     "URL_BAUD",
+    "NO_HOST_FORMS",
+    "URL_CHECKS",
 ]
 
 URL_TIMEOUT_S = (0.001, 3600.0)
@@ -338,9 +340,43 @@ BACKENDS: dict[str, str | Factory] = {
 }
 
 
-def register_backend(scheme: str, factory: str | Factory) -> None:
-    """Make ``scheme://...`` URLs open with ``factory(url)`` (a callable or ``"module:function"``)."""
+URL_CHECKS: dict[str, str | Callable[[str], object]] = {
+    # scheme -> its driver's check of a URL's options (ValueError), nothing opened; imported on first use
+    "mm3a": "stickslip.devices.nanocontrol:check_url",
+    "mm3a+socket": "stickslip.devices.nanocontrol:check_url",
+    "anc300": "stickslip.devices.anc300:check_url",
+    "smaract-mcs": "stickslip.devices.smaract:check_mcs_url",
+    "smaract-mcs+socket": "stickslip.devices.smaract:check_mcs_url",
+    "smaract-mcs2": "stickslip.devices.smaract:check_mcs2_url",
+}
+"""Each scheme's check of its URL's options, run by :func:`check_device_url` (a scheme not here: at opening)."""
+
+NO_HOST_FORMS: dict[str, str] = {
+    # scheme -> what a URL of it names, for one that names nothing (a scheme not here gets the general advice)
+    "mm3a": "give the serial port: mm3a:///dev/ttyUSB0 (mm3a://COM3 on Windows; a serial-over-network adapter is "
+    "mm3a+socket://host:port)",
+    "mm3a+socket": "give the adapter's network address and port: mm3a+socket://192.168.1.20:4001",
+    "anc300": "give its network address (anc300://192.168.1.2) or its serial port (anc300:///dev/ttyUSB0)",
+    "smaract-mcs": "give the serial port: smaract-mcs:///dev/ttyUSB0 (smaract-mcs://COM3 on Windows; an MCS's "
+    "network interface is smaract-mcs+socket://host)",
+    "smaract-mcs+socket": "give its network address: smaract-mcs+socket://192.168.1.5",
+    "smaract-mcs2": "give its network address: smaract-mcs2://192.168.1.200 (the MCS2 is reached over TCP only)",
+}
+"""The form each scheme's URL takes, said to a URL of that scheme that names no host and no port."""
+
+
+def register_backend(
+    scheme: str, factory: str | Factory, check: str | Callable[[str], object] | None = None
+) -> None:
+    """Make ``scheme://...`` URLs open with ``factory(url)`` (a callable or ``"module:function"``).
+
+    ``check(url)``: the driver's check of a URL's options that opens nothing (``ValueError``
+    with the reason), run by :func:`check_device_url` before a URL is used or stored
+    (:data:`URL_CHECKS`); without one only the URL's shape is checked.
+    """
     BACKENDS[scheme] = factory
+    if check is not None:
+        URL_CHECKS[scheme] = check
 
 
 def check_device_url(url: str) -> str:
@@ -349,8 +385,8 @@ def check_device_url(url: str) -> str:
     Checked without opening anything: a scheme with ``//`` (:func:`url_scheme`) that a
     backend is registered for, a URL that parses, a port in 1..65535, a host name DNS
     could carry (labels of 1 to 63 characters, at most 253 in all), a host or a
-    port for anything but the simulator, and no option given twice (which one would
-    the device take?). A URL that
+    port for anything but the simulator, no option given twice (which one would
+    the device take?), and each option as its driver takes it (:data:`URL_CHECKS`). A URL that
     passes may still fail to open (nothing answers there); one that fails never would,
     and is neither opened nor stored.
 
@@ -379,10 +415,11 @@ def check_device_url(url: str) -> str:
         raise ValueError(f"malformed device URL {redact_url(url)!r}: the port must be a number in 1..65535")
     query_options(parts.query, url)
     if not scheme.startswith("sim") and not (host or parts.path.strip("/")):
-        raise ValueError(
-            f"device URL {redact_url(url)!r} names no host and no port: give the serial port "
-            f"({scheme}:///dev/ttyUSB0) or, where the controller has one, its network address"
+        form = NO_HOST_FORMS.get(
+            scheme, f"give the serial port ({scheme}:///dev/ttyUSB0) or, where the controller has one, its network "
+            "address"
         )
+        raise ValueError(f"device URL {redact_url(url)!r} names no host and no port: {form}")
     if host and not (host.startswith("[") or ":" in host):  # a name (or IPv4 address), not an IPv6 address
         labels = host.rstrip(".").split(".")
         if len(host) > 253 or any(not 1 <= len(label) <= 63 for label in labels):
@@ -391,7 +428,25 @@ def check_device_url(url: str) -> str:
                 f"characters between its dots, at most 253 in all (this one: {len(host)}, its longest label "
                 f"{max(map(len, labels))})"
             )
+    _check_options(scheme, url)
     return url
+
+
+def _check_options(scheme: str, url: str) -> None:
+    """The driver's check of ``url``'s options (:data:`URL_CHECKS`): its ``ValueError``, without a secret."""
+    check = URL_CHECKS.get(scheme)
+    if check is None:
+        return
+    if isinstance(check, str):
+        mod_name, func_name = check.split(":")
+        try:
+            check = getattr(importlib.import_module(mod_name), func_name)
+        except ImportError:  # said when the device is opened (the backend could not be loaded)
+            return
+    try:
+        check(url)
+    except ValueError as e:
+        raise ValueError(redact_text(str(e))) from None
 
 
 def query_options(query: str, url: str, kind: str = "device") -> dict[str, str]:

@@ -42,6 +42,7 @@ from ..devices.base import (
     KnowsTruePosition,
     PoseSettable,
     StepsUncertain,
+    check_device_url,
     device_key,
     open_device,
     redact_url,
@@ -518,7 +519,12 @@ def is_simulator(url: str) -> bool:
 def reference_commands(
     device: str, joint: int, calibration: Calibration | None = None, spec: JointSpec | None = None
 ) -> str:
-    """The two commands that reference ``joint``: raw steps into its lower stop, then ``where --set J=min``."""
+    """The two commands that reference ``joint``: raw steps into its lower stop, then ``where --set J=min``.
+
+    ``ValueError`` for a URL that could never open (:func:`~stickslip.devices.base.check_device_url`): advice
+    to type a command with it would only fail next (``anc300://H?axes=1,1,2``).
+    """
+    check_device_url(device)
     url = redact_url(device)
     n = steps_to_stop(joint, calibration, spec)
     return (

@@ -190,8 +190,9 @@ def command(room: ControlRoom, text: str) -> dict[str, Any]:
         return {"error": "a message is a JSON object"}
     kind = msg.get("type")
     try:
-        if kind == "stop":
-            return {**room.stop(), "reply": "stop"}
+        if kind == "stop":  # "press": the id of the press, sent as POST /api/stop?press= too: said once
+            press = msg.get("press")
+            return {**room.stop(press if isinstance(press, str) else None), "reply": "stop"}
         if kind == "jog":
             body = JogBody.model_validate({k: v for k, v in msg.items() if k != "type"})
             return room.jog_hold(body.direction, body.speed)

@@ -65,6 +65,7 @@ from .slot import (
     Conflict,
     Motion,
     NotFound,
+    Presses,
     Refused,
     RoomOptions,
     Unavailable,
@@ -135,6 +136,7 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         self._day_pose = threading.Event()
         self._level = None
         self.stops = []
+        self._presses = Presses()
         self._tunings = dict(options.tunings)
         self._holder: dict[str, Any] | None = None
         self._lock_cm: Any = None
@@ -191,8 +193,9 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
 
     # ------------------------------------------------------------ the verbs
 
-    def stop(self) -> dict[str, Any]:
-        """STOP: no further burst, the controller told to stop now, a jog or a day ended. Never refused."""
+    def stop(self, press: str | None = None) -> dict[str, Any]:
+        """STOP: no further burst, the controller told to stop now, a jog or a day ended. Never refused; said once
+        per ``press`` (:class:`~.slot.Presses`)."""
         t = time.monotonic()
         self.owned.halt()
         with self._lock:
@@ -205,7 +208,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         if pad is not None:
             pad.end()
         what = m.what if running and m is not None else None
-        self.event("warning", f"STOP: {what} stopped" if what else "STOP (nothing was moving)")
+        if self._presses.first(press):
+            self.event("warning", f"STOP: {what} stopped" if what else "STOP (nothing was moving)")
         return {"stopped": what, "motion": m.id if running and m is not None else None}
 
     def where(

@@ -138,9 +138,10 @@ def drive_routes(room: ControlRoom) -> APIRouter:
         return JSONResponse(room.jog_release(end))
 
     @router.post("/api/stop", tags=["motion"])
-    async def stop() -> JSONResponse:
-        """STOP: every axis, now. Nothing further is sent; a jog or the calibration day ends."""
-        return JSONResponse(room.stop())
+    async def stop(press: str | None = None) -> JSONResponse:
+        """STOP: every axis, now. Nothing further is sent; a jog or the calibration day ends. ``press``: the id of
+        the press (a page sends each on its socket too): the event is said once per press."""
+        return JSONResponse(room.stop(press))
 
     return router
 

@@ -39,7 +39,7 @@ from .owned import HeldStore, OwnedController
 from .pad import HOLD_S, IDLE_END_S, PadKeys
 
 __all__ = [
-    "MAX_BURST_S", "START_TIMEOUT_S", "Busy", "Conflict", "Motion", "MotionSlot", "NotFound", "Refused",
+    "MAX_BURST_S", "START_TIMEOUT_S", "Busy", "Conflict", "Motion", "MotionSlot", "NotFound", "Presses", "Refused",
     "RoomOptions", "Unavailable", "one_line", "refusal", "refusals",
 ]
 
@@ -75,6 +75,26 @@ def one_line(e: BaseException | str) -> str:
     text = str(e.args[0]) if isinstance(e, KeyError) and e.args else str(e)
     text = " ".join(text.split()) or type(e).__name__
     return redact_text(text)
+
+
+class Presses:
+    """The STOP presses seen, by the id a page gives each (the last 16): a page sends a press both on its socket
+    and as ``POST /api/stop``, and the room says it once. A STOP without an id is always said."""
+
+    def __init__(self) -> None:
+        self._seen: collections.deque[str] = collections.deque(maxlen=16)
+        self._lock = threading.Lock()
+
+    def first(self, press: str | None) -> bool:
+        """Whether ``press`` is a press not seen before (then it is remembered); ``None`` is always new."""
+        if press is None:
+            return True
+        press = press[:64]  # an id, not a payload: a STOP is never refused for it
+        with self._lock:
+            if press in self._seen:
+                return False
+            self._seen.append(press)
+            return True
 
 
 class Refused(ValueError):

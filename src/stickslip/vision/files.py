@@ -31,6 +31,7 @@ __all__ = [
     "VideoCamera",
     "OpenCVCamera",
     "frame_paths",
+    "name_order",
     "is_video",
     "open_frames",
     "open_files_url",
@@ -52,9 +53,10 @@ def frame_paths(names: Sequence[str | os.PathLike[str]]) -> list[Path]:
     """The image files that ``names`` mean, in order.
 
     Each name is a file (taken as it is), a folder (its image files,
-    :data:`~.images.IMAGE_SUFFIXES`, sorted by name) or a glob pattern (``*``, ``?``,
-    ``[``: its matches, sorted). :class:`ImageError` for a name that is nothing, an empty
-    folder or a pattern matching no file.
+    :data:`~.images.IMAGE_SUFFIXES`, in name order) or a glob pattern (``*``, ``?``,
+    ``[``: its matches, in name order). Name order reads runs of digits as numbers
+    (:func:`name_order`: ``f2.png`` before ``f10.png``). :class:`ImageError` for a name
+    that is nothing, an empty folder or a pattern matching no file.
     """
     out: list[Path] = []
     for name in names:
@@ -70,19 +72,35 @@ def frame_paths(names: Sequence[str | os.PathLike[str]]) -> list[Path]:
 
 
 def _named_frames(text: str) -> list[Path]:
-    """The image files one name means (:func:`frame_paths`)."""
+    """The image files one name means (:func:`frame_paths`), in name order (:func:`name_order`)."""
     p = Path(text)
     if p.is_dir():
-        found = sorted(q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES and q.is_file())
+        found = sorted((q for q in p.iterdir() if q.suffix.lower() in IMAGE_SUFFIXES and q.is_file()), key=name_order)
         if not found:
             raise ImageError(f"{p}: the folder has no image files ({', '.join(IMAGE_SUFFIXES)})")
         return found
     if p.exists() or not any(c in text for c in "*?["):
         return [p]
-    matches = sorted(Path(m) for m in glob.glob(text) if Path(m).is_file())
+    matches = sorted((Path(m) for m in glob.glob(text) if Path(m).is_file()), key=name_order)
     if not matches:
         raise ImageError(f"{text}: no file matches the pattern")
     return matches
+
+
+_DIGITS = re.compile(r"(\d+)")
+
+
+def name_order(path: Path) -> tuple[tuple[tuple[int, int, str], ...], str]:
+    """The sort key of a frame's path: runs of digits compare as numbers (``f2`` before ``f10``), the rest as text.
+
+    A camera or script that numbers its frames without leading zeros (``f1.png`` ... ``f10.png``)
+    would otherwise be tracked out of order (``f1, f10, f11, f2``) with each frame given
+    another frame's time. Zero-padded names keep their order; two names equal as numbers
+    (``f01``, ``f1``) fall back to the path's text.
+    """
+    parts = _DIGITS.split(str(path))
+    key = tuple((1, int(t), "") if k % 2 else (0, 0, t) for k, t in enumerate(parts) if t)
+    return key, str(path)
 
 
 class FileCamera:

@@ -10,7 +10,17 @@ The simulator's virtual microphone lives with the simulator (:mod:`stickslip.sim
 """
 
 from .channels import channel_problem
-from .files import AudioSourceError, read_wav, wav_blocks, wav_info, write_wav
+from .files import AudioSourceError, read_wav, shortfall, truncation, wav_blocks, wav_info, write_wav
 from .microphone import Microphone
 
-__all__ = ["AudioSourceError", "Microphone", "channel_problem", "read_wav", "wav_blocks", "wav_info", "write_wav"]
+__all__ = [
+    "AudioSourceError",
+    "Microphone",
+    "channel_problem",
+    "read_wav",
+    "shortfall",
+    "truncation",
+    "wav_blocks",
+    "wav_info",
+    "write_wav",
+]

@@ -4,7 +4,9 @@ Judged on the first ``seconds`` of the file, two ways (:func:`channel_problem`):
 
 * *cancellation*: the mean's RMS is ``cancel_db`` or more below the loudest channel's:
   the channels carry the same sound in opposite polarity (a balanced microphone wired to
-  both inputs of a stereo card) and their mean is near silence;
+  both inputs of a stereo card) and their mean is near silence - or, when the mean is not
+  as far below what channels sharing nothing would give, the sound is on one channel of
+  many (a 6-channel recorder with one microphone: -16 dB) and the mean dilutes it;
 * *drowned*: in some channel the step-rate line of the envelope stands at least the
   no-signal guard's ``min_line_db`` clear, and ``drowned_db`` or more clearer than in the
   mean, whose line stands less than ``weak_line_db`` clear: another channel (an open input
@@ -80,9 +82,15 @@ def channel_problem(path: str | Path, seconds: float | None = None, p: ChannelPa
         return None
     mix_db = 20.0 * np.log10(max(mix_rms, 1e-300) / float(rms[loud]))
     if mix_db <= p.cancel_db:
+        # below what channels that share nothing would give (the RMS of their sum over n) by as much: they cancel;
+        # else the sound is on few of them and the mean dilutes it (one loud channel of 6: -16 dB)
+        apart = float(np.sqrt(np.sum(rms**2))) / n
+        cancel = 20.0 * np.log10(max(mix_rms, 1e-300) / apart) <= p.cancel_db
+        why = "they carry the sound in opposite polarity and cancel" if cancel else (
+            "the other channels carry little of its sound, and the mean dilutes it")
         return (
             f"{path_}: the mean of its {n} channels is {max(mix_db, -200.0):.0f} dB below channel {loud + 1}: "
-            f"they carry the sound in opposite polarity and cancel; read one channel with --channel {loud + 1}"
+            f"{why}; read one channel with --channel {loud + 1}"
         )
     # a noise floor 80 dB under each channel: a synthetic pure tone's envelope has no noise between its lines, and
     # any bin there would stand "clear" of a median that is only rounding error

@@ -5,6 +5,7 @@ soundfile (libsndfile) is imported lazily; a missing one is named with the extra
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,8 @@ __all__ = [
     "open_error",
     "read_wav",
     "load_soundfile",
+    "shortfall",
+    "truncation",
     "wav_blocks",
     "wav_info",
     "write_wav",
@@ -72,6 +75,76 @@ def wav_info(path: str | Path) -> tuple[int, int, float]:
     return int(info.samplerate), int(info.channels), float(info.frames) / info.samplerate
 
 
+def truncation(path: str | Path) -> str | None:
+    """Why a WAV, RF64 or AIFF file holds less than its header says (a recorder stopped before closing it), or ``None``.
+
+    libsndfile reads what a truncated file holds without a word: a recording cut short
+    looked whole, its stop (if after the cut) never heard. The chunks are walked to the
+    sound's (``data``; ``SSND`` in an AIFF), whose declared length (an RF64's in its ``ds64``
+    chunk) is compared with the bytes after it; a length of 0 or 0xFFFFFFFF (what a
+    streaming recorder writes before it knows) claims nothing. The lengths in seconds scale
+    what libsndfile reads by the two byte counts. Other formats (FLAC, W64, ...) and a header
+    that cannot be read say ``None``: read as before (an MP3: :func:`shortfall`).
+    """
+    try:
+        with open(regular(path), "rb") as f:  # a FIFO or device is never opened: refused where the file is read
+            sizes = _sound_bytes(f, f.seek(0, 2))
+    except (OSError, struct.error, AudioSourceError):
+        return None
+    if sizes is None:
+        return None
+    declared, held = sizes
+    if declared in (0, 0xFFFFFFFF) or declared <= held or held <= 0:
+        return None
+    try:
+        held_s = wav_info(path)[2]
+    except AudioSourceError:
+        return None  # said where the file is read
+    return (f"{path}: the header says {held_s * declared / held:.3f} s of sound but the file holds {held_s:.3f} s: "
+            "it was cut short (a recorder that stopped before closing the file, a copy not finished); only what it "
+            "holds is read")
+
+
+def _sound_bytes(f: Any, size: int) -> tuple[int, int] | None:
+    """(bytes the header declares, bytes the file holds) of the sound chunk of a RIFF/RF64/AIFF file, else None."""
+    f.seek(0)
+    head = f.read(12)
+    little = head[:4] in (b"RIFF", b"RF64") and head[8:] == b"WAVE"
+    if not little and not (head[:4] == b"FORM" and head[8:] in (b"AIFF", b"AIFC")):
+        return None
+    fmt, sound, pos, ds64 = ("<4sI", b"data", 12, None) if little else (">4sI", b"SSND", 12, None)
+    while pos + 8 <= size:
+        f.seek(pos)
+        cid, n = struct.unpack(fmt, f.read(8))
+        if cid == b"ds64" and n >= 16:
+            ds64 = struct.unpack("<8xQ", f.read(16))[0]  # riff size, then the data chunk's 64-bit size
+        elif cid == sound:
+            declared = ds64 if (head[:4] == b"RF64" and n == 0xFFFFFFFF and ds64 is not None) else n
+            skip = 0 if little else 8  # an SSND chunk opens with its offset and block size
+            return max(declared - skip, 0), size - pos - 8 - skip
+        pos += 8 + n + (n & 1)
+    return None
+
+
+def shortfall(path: str | Path, frames_read: int) -> str | None:
+    """Why a file gave fewer frames than its header claims (an MP3 cut after its Xing header), or ``None``.
+
+    The complement of :func:`truncation`, for the formats whose claimed length libsndfile
+    reports as the header says it (for a WAV it reports what the file holds). A length it
+    does not know (0, or the largest count) claims nothing.
+    """
+    try:
+        info = load_soundfile().info(str(path))
+    except Exception:  # noqa: BLE001  - read before: a file that cannot be opened now says nothing more
+        return None
+    claimed, rate = int(info.frames), float(info.samplerate)
+    if not (0 < int(frames_read) < claimed < 2**62 and rate > 0):
+        return None
+    return (f"{path}: the header says {claimed / rate:.3f} s of sound but only {int(frames_read) / rate:.3f} s "
+            "could be read: it was cut short (a recorder that stopped before closing the file, a copy not "
+            "finished); only what it holds is read")
+
+
 def _check_channel(p: Path, channel: int | None, channels: int) -> None:
     if channel is not None and not 0 <= int(channel) < channels:
         have = "1 channel" if channels == 1 else f"{channels} channels (1 to {channels})"
@@ -96,7 +169,19 @@ def wav_blocks(path: str | Path, block: int = 1024, channel: int | None = None) 
     with f:
         rate = int(f.samplerate)
         _check_channel(p, channel, int(f.channels))
-        for data in f.blocks(blocksize=int(block), dtype="float32", always_2d=True):
+        # read until the decoder gives nothing, not SoundFile.blocks: that counts to the header's length and, for a
+        # file that holds less (an MP3 cut after its Xing header), yields its buffer unfilled - the last block
+        # again, or uninitialised memory (1.8e18), for the rest of the claimed length
+        done = 0
+        while True:
+            try:
+                data = f.read(int(block), dtype="float32", always_2d=True)
+            except (RuntimeError, ValueError) as e:  # libsndfile's decoder errors (LibsndfileError) are RuntimeErrors
+                cut = f"not readable past {done / rate:.3f} s"
+                raise AudioSourceError(f"{p}: damaged or cut short: {cut} ({e})") from None
+            if len(data) == 0:
+                break
+            done += len(data)
             if channel is not None:
                 yield data[:, int(channel)].copy(), rate
             else:

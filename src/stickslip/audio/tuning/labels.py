@@ -35,8 +35,9 @@ def recording(
         raise TuningError(problem)
     bad = np.flatnonzero(~np.isfinite(x))
     if bad.size:
+        what = "samples that are not numbers" if bad.size != 1 else "sample that is not a number"
         raise TuningError(
-            f"the recording holds {bad.size} sample{'s' if bad.size != 1 else ''} that are not numbers (NaN or "
+            f"the recording holds {bad.size} {what} (NaN or "
             f"infinity), the first at {bad[0] / sample_rate:.4f} s: the file is damaged there; tune on an undamaged "
             "recording"
         )

@@ -56,6 +56,7 @@ __all__ = [
     "NanoControl",
     "NanoControlConsole",
     "open_url",
+    "check_url",
     "detect_dialect",
     "DIALECTS",
     "SPEED_HZ",
@@ -250,6 +251,11 @@ def _url_settings(url: str) -> _UrlSettings:
                          f"got {letters!r}")
     channels = check_channels({i + 1: c for i, c in enumerate(letters)})
     return _UrlSettings(dialect, ack, timeout, baud, hz_text, profile, margin, fwc, channels)
+
+
+def check_url(url: str) -> None:
+    """``ValueError`` naming an option of ``url`` the driver would refuse; nothing is opened or asked."""
+    _url_settings(url)
 
 
 def _open_transport(url: str, o: _UrlSettings) -> Transport:

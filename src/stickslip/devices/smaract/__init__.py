@@ -45,6 +45,8 @@ __all__ = [
     "parse_channels",
     "open_mcs",
     "open_mcs2",
+    "check_mcs_url",
+    "check_mcs2_url",
     "DEFAULT_CHANNELS",
     "TIMEOUT_RANGE_S",
 ]
@@ -80,6 +82,36 @@ def _build(cls: type[SmarActBase], transport: Transport, **kwargs: object) -> Sm
         raise
 
 
+_Settings = tuple[dict[str, str], ChannelMap, float, int, int]
+"""A SmarAct URL's options, each checked: (the options, channels, timeout s, hz, amplitude)."""
+
+
+def _mcs_settings(url: str) -> _Settings:
+    opts, channels, timeout = _common(url, OPTIONS | {"baud"})
+    hz = int_option(opts, "hz", 1000, *mcs.FREQUENCY_RANGE_HZ, "Hz")
+    amplitude = int_option(opts, "amplitude", mcs.AMPLITUDE_FULL, *mcs.AMPLITUDE_RANGE)
+    if "baud" in opts and urlsplit(url).scheme == "smaract-mcs":
+        int_option(opts, "baud", mcs.BAUD, *mcs.BAUD_RANGE, "baud")
+    return opts, channels, timeout, hz, amplitude
+
+
+def _mcs2_settings(url: str) -> _Settings:
+    opts, channels, timeout = _common(url, OPTIONS)
+    hz = int_option(opts, "hz", 1000, *mcs2.FREQUENCY_RANGE_HZ, "Hz")
+    amplitude = int_option(opts, "amplitude", mcs2.AMPLITUDE_FULL, *mcs2.AMPLITUDE_RANGE)
+    return opts, channels, timeout, hz, amplitude
+
+
+def check_mcs_url(url: str) -> None:
+    """``ValueError`` naming an option of an MCS URL the driver would refuse; nothing is opened or asked."""
+    _mcs_settings(url)
+
+
+def check_mcs2_url(url: str) -> None:
+    """``ValueError`` naming an option of an MCS2 URL the driver would refuse; nothing is opened or asked."""
+    _mcs2_settings(url)
+
+
 def open_mcs(url: str) -> SmarActMCS:
     """Open ``smaract-mcs:///dev/ttyUSB0[?options]`` or ``smaract-mcs+socket://host[:5000][?options]``.
 
@@ -88,9 +120,7 @@ def open_mcs(url: str) -> SmarActMCS:
     if the port cannot be opened or the controller does not answer.
     """
     parts = urlsplit(url)
-    opts, channels, timeout = _common(url, OPTIONS | {"baud"})
-    hz = int_option(opts, "hz", 1000, *mcs.FREQUENCY_RANGE_HZ, "Hz")
-    amplitude = int_option(opts, "amplitude", mcs.AMPLITUDE_FULL, *mcs.AMPLITUDE_RANGE)
+    opts, channels, timeout, hz, amplitude = _mcs_settings(url)
     if parts.scheme == "smaract-mcs+socket":
         if "baud" in opts:
             raise ValueError(f"{redact_url(url)!r}: baud is an option of a serial port, not of a network link")
@@ -98,7 +128,7 @@ def open_mcs(url: str) -> SmarActMCS:
             raise ValueError(f"{redact_url(url)!r}: give the host, e.g. smaract-mcs+socket://192.168.1.5")
         transport: Transport = SocketTransport(parts.hostname, _port(url, mcs.TCP_PORT), timeout)
     elif parts.scheme == "smaract-mcs":
-        baud = int_option(opts, "baud", mcs.BAUD, *mcs.BAUD_RANGE, "baud")
+        baud = int_option(opts, "baud", mcs.BAUD, *mcs.BAUD_RANGE, "baud")  # checked by _mcs_settings
         port = serial_port_name(parts.path or parts.netloc)
         if not port:
             raise ValueError(f"{redact_url(url)!r}: give the serial port, e.g. smaract-mcs:///dev/ttyUSB0")
@@ -121,9 +151,7 @@ def open_mcs2(url: str) -> SmarActMCS2:
     controller cannot be reached within the timeout or does not answer.
     """
     parts = urlsplit(url)
-    opts, channels, timeout = _common(url, OPTIONS)
-    hz = int_option(opts, "hz", 1000, *mcs2.FREQUENCY_RANGE_HZ, "Hz")
-    amplitude = int_option(opts, "amplitude", mcs2.AMPLITUDE_FULL, *mcs2.AMPLITUDE_RANGE)
+    _, channels, timeout, hz, amplitude = _mcs2_settings(url)
     if parts.scheme != "smaract-mcs2":
         raise ValueError(f"not a SmarAct MCS2 URL: {redact_url(url)!r} (use smaract-mcs2://host)")
     port = _port(url, mcs2.TCP_PORT)

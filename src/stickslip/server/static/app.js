@@ -25,13 +25,22 @@ let jogSource = null;
 let cameraTimer = null;
 let shownEvents = 0;
 let heldEvents = null;  // while the events of a restarted server are fetched: the live ones that came meanwhile
+let lastStateAt = 0;  // Date.now() when the last state message came
+let lastStateT = null;  // its server time, epoch s
+let staleSince = null;  // Date.now() from when the values shown are no longer live; null while they are
+const STALE_AFTER_MS = 3000;  // an open socket silent this long (60 state messages at 20 a second) is not live
 
 // ------------------------------------------------------------------ talking to the server
+
+const UNANSWERED = "the server does not answer";
+const NO_JOG = "jog: " + UNANSWERED + "; nothing was sent";  // a jog key held while the socket is closed
 
 async function api(method, path, body) {
   const headers = { "Content-Type": "application/json" };
   if (token) headers.Authorization = "Bearer " + token;
-  const r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) });
+  let r;
+  try { r = await fetch(path, { method, headers, body: body === undefined ? undefined : JSON.stringify(body) }); }
+  catch (e) { throw new Error(UNANSWERED); }  // no answer at all (the browser says "Failed to fetch")
   let data = null;
   try { data = await r.json(); } catch (e) { data = null; }
   if (r.status === 401) showToken();
@@ -49,6 +58,7 @@ function connect() {
   ws = new WebSocket(scheme + location.host + "/api/live");
   ws.onopen = async () => {
     if (token) ws.send(JSON.stringify({ type: "auth", token }));
+    if (staleSince !== null) setStatus("reconnected; waiting for the state", "offline");  // still greyed
     try { addEvents((await api("GET", "/api/events?after=" + shownEvents)).events); } catch (e) { /* shown as they come */ }
   };
   ws.onmessage = (ev) => {
@@ -57,6 +67,9 @@ function connect() {
       if (lastRun !== null && m.run !== lastRun) restarted();  // a new server counts its events from 1 again
       lastRun = m.run;
       lastSeq = m.seq;
+      lastStateAt = Date.now();
+      lastStateT = m.t;
+      if (staleSince !== null) live();  // fresh values: live again (a reconnection alone is not enough)
       state = m.state;
       render(state);
       addEvents(m.events || []);
@@ -70,7 +83,7 @@ function connect() {
     }
   };
   ws.onclose = (ev) => {
-    setStatus("offline", "offline");
+    wentStale("offline since", Date.now());
     releaseJogLocally();
     if (ev.code === 4401) { showToken(); return; }
     setTimeout(connect, 1000);
@@ -84,11 +97,42 @@ async function restarted() {  // the events shown are the earlier server's: take
   li.className = "warning";
   li.textContent = "the server was restarted; its events follow";
   $("events").insertBefore(li, $("events").firstChild);
+  for (const where of Object.keys(followed)) {  // a motion of the earlier server: its end was never seen
+    note($(where).textContent.replace(/: (running|starting)$/, "") + ": the server was restarted while it ran; " +
+      "its end was not seen (the joints say what is kept)", true, where);
+  }
   try { showEvents((await api("GET", "/api/events?after=0")).events); } catch (e) { /* the live ones still come */ }
   const held = heldEvents;
   heldEvents = null;
   showEvents(held);
 }
+
+// ------------------------------------------------------------------ values no longer live
+
+function clock(ms) { return new Date(ms).toISOString().slice(11, 19); }  // UTC, as the events' times
+
+function wentStale(what, since) {  // grey every live value and say since when, and what they are
+  if (staleSince === null) staleSince = since;
+  document.body.classList.add("stale");
+  setStatus(what + " " + clock(staleSince), "offline");
+  const shown = lastStateT === null ? "none received yet" :
+    "the last received, at " + clock(lastStateT * 1000) + " UTC, and may no longer be true";
+  $("stale-note").textContent = what + " " + clock(staleSince) + " UTC: the greyed values are " + shown +
+    "; they are live again when the server sends fresh ones";
+  $("stale-note").classList.remove("hidden");
+}
+
+function live() {
+  staleSince = null;
+  if ($("jog-note").textContent === NO_JOG) $("jog-note").textContent = "";
+  document.body.classList.remove("stale");
+  $("stale-note").classList.add("hidden");
+}
+
+setInterval(() => {  // a socket the browser takes for open, with nothing coming: the values are not live either
+  if (staleSince === null && lastStateAt && ws && ws.readyState === WebSocket.OPEN &&
+      Date.now() - lastStateAt > STALE_AFTER_MS) wentStale("no update since", lastStateAt);
+}, 500);
 
 function showToken() {
   $("token-box").classList.remove("hidden");
@@ -192,11 +236,11 @@ function renderTip(st) {
 
 function renderMotion(m) {
   const box = $("motion");
-  if (!m) { box.textContent = "idle"; box.className = "motion idle"; return; }
+  if (!m) { box.textContent = "idle"; box.className = "motion live idle"; return; }
   let text = m.what + ": " + m.status + " (" + m.elapsed_s.toFixed(1) + " s)";
   if (m.error) text += " — " + m.error;
   box.textContent = text;
-  box.className = "motion " + m.status;
+  box.className = "motion live " + m.status;
 }
 
 function escapeHtml(s) {
@@ -281,10 +325,20 @@ $("clear-path").addEventListener("click", () => { pathHistory = []; drawPlot(); 
 
 // ------------------------------------------------------------------ STOP
 
+// One press goes both ways. The socket is the quicker (open already: no connection to make), but a socket the
+// browser still takes for open may be dead (a server restarted, a link dropped) and sends nothing; the POST makes
+// its own connection, gets through while the socket reconnects, and its failure is said. The press's id lets the
+// server say the STOP once.
+let presses = 0;
+
 async function stopAll() {
   releaseJogLocally();
-  wsSend({ type: "stop" });
-  try { await api("POST", "/api/stop"); } catch (e) { note("STOP: " + e.message, true); }
+  const press = Date.now().toString(36) + "-" + (++presses) + "-" + Math.random().toString(36).slice(2, 8);
+  const onSocket = wsSend({ type: "stop", press });
+  try { await api("POST", "/api/stop?press=" + encodeURIComponent(press)); } catch (e) {
+    const lost = onSocket ? ": it went on the live socket too, which may be as dead" : ": this STOP did not reach it";
+    note("STOP: " + e.message + (e.message === UNANSWERED ? lost : ""), true);
+  }
 }
 
 $("stop").addEventListener("click", stopAll);
@@ -303,7 +357,10 @@ function jogStart(dir, source) {
 
 function sendJog() {
   if (!jogDir) return;
-  if (!wsSend({ type: "jog", direction: jogDir, speed: Number($("speed").value) })) releaseJogLocally();
+  if (!wsSend({ type: "jog", direction: jogDir, speed: Number($("speed").value) })) {
+    releaseJogLocally();
+    $("jog-note").textContent = NO_JOG;
+  }
 }
 
 function jogStop() {
@@ -408,8 +465,9 @@ function started(m, where = "move-msg") {  // a motion the server took: say so, 
   followed[where] = m.id;
 }
 
-function motionNote(m, where) {
+function motionNote(m, where) {  // a motion under way is a live value (greyed when not live); its end is not
   note(m.what + ": " + m.status + (m.error ? " — " + m.error : ""), FAILED.includes(m.status), where);
+  $(where).classList.toggle("live", m.status === "running" || m.status === "starting");
 }
 
 function followMotion(m) {  // a followed motion's box says where it got: running, then done / stopped / failed
@@ -607,7 +665,7 @@ function startCamera() {
         try { data = await r.json(); } catch (e) { data = null; }
         cameraLost((data && data.error) || ("HTTP " + r.status));
       }
-    } catch (e) { cameraLost("the server does not answer"); }  // the next frame tries again
+    } catch (e) { cameraLost(UNANSWERED); }  // the next frame tries again
     busy = false;
   }, 500);
 }
