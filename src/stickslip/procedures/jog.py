@@ -520,7 +520,7 @@ def run_jog(
     (:func:`~.move.tracked_calibration`); the controller's by default.
     """
     t_prev = clock()
-    tracks = tracks or controller.calibration
+    tracks = controller.calibration if tracks is None else tracks
     show(controller.status())
     seen: set[int] = set()  # the joints whose track has had the new pose's model error
     try:
