@@ -1,0 +1,43 @@
+"""The API as a careless script or a hostile client uses it: a body sent without a length."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("fastapi", reason="the serve extra (fastapi) is not installed")
+
+from fastapi.testclient import TestClient  # noqa: E402
+from server_support import room_on  # noqa: E402
+
+from stickslip.server.app import MAX_BODY, create_app  # noqa: E402
+from stickslip.server.security import Access  # noqa: E402
+
+
+@pytest.fixture()
+def client(tmp_path: Path) -> Iterator[TestClient]:
+    room = room_on(tmp_path, "sim://?realtime=0")
+    try:
+        with TestClient(create_app(room, Access(None, True)), base_url="http://127.0.0.1:8765",
+                        raise_server_exceptions=False) as c:
+            yield c
+    finally:
+        room.close()
+
+
+def test_a_body_too_large_sent_without_a_length_is_413_not_unreadable_json(client: TestClient) -> None:
+    """Before: 100 MB sent chunked (no Content-Length) to /api/move was stopped at 64 kB but answered 422 "the body
+    cannot be read as JSON (There was an error parsing the body)": FastAPI wrapped the guard's refusal."""
+    def chunks() -> Iterator[bytes]:
+        for _ in range(100):  # 1.6 MB in 16 kB chunks (uvicorn stops reading after the fifth; the test client
+            yield b" " * 16384  # sends them all)
+
+    r = client.post("/api/move", content=chunks(), headers={"content-type": "application/json"})
+    assert r.status_code == 413, r.text
+    assert r.json() == {"error": f"the request body is larger than {MAX_BODY // 1024} kB"}
+    small = client.post("/api/move", content=iter([b'{"joint": 3, ', b'"by": "1e300mm"}']),
+                        headers={"content-type": "application/json"})
+    assert small.status_code == 422 and "outside joint 3's range" in small.json()["error"], small.text
+
