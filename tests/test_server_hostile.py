@@ -1,7 +1,8 @@
-"""The API as a careless script or a hostile client uses it: a body sent without a length."""
+"""The API as a careless script or a hostile client uses it: a body sent without a length, a binary frame."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -41,3 +42,18 @@ def test_a_body_too_large_sent_without_a_length_is_413_not_unreadable_json(clien
                         headers={"content-type": "application/json"})
     assert small.status_code == 422 and "outside joint 3's range" in small.json()["error"], small.text
 
+
+def test_a_binary_frame_on_the_websocket_is_answered_and_the_socket_stays(client: TestClient) -> None:
+    """Before: a binary frame (even one holding a JSON stop) closed the socket with 1000 and no word."""
+    with client.websocket_connect("ws://127.0.0.1:8765/api/live") as ws:
+        assert "seq" in json.loads(ws.receive_text())
+        ws.send_bytes(b'{"type": "stop"}')
+        replies = [json.loads(ws.receive_text()) for _ in range(3)]
+        errors = [r for r in replies if "error" in r]
+        assert errors and "text frame" in errors[0]["error"], replies
+        ws.send_text('{"type": "ping"}')
+        for _ in range(200):
+            reply = json.loads(ws.receive_text())
+            if "reply" in reply:
+                break
+        assert reply == {"reply": "pong"}

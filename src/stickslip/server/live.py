@@ -125,6 +125,19 @@ async def _authenticated(ws: WebSocket, access: Access) -> bool:
     return ok
 
 
+BINARY = "a message is a text frame holding JSON, not a binary frame: {\"type\": \"stop\" | \"jog\" | ...}"
+
+
+async def _text(ws: WebSocket) -> str | None:
+    """The next message's text; ``None`` for a binary frame (answered, not taken for a text or let close the
+    socket: ``receive_text`` failed on one, and the socket closed without a word)."""
+    message = await ws.receive()
+    if message["type"] == "websocket.disconnect":
+        raise WebSocketDisconnect(message.get("code", 1000), message.get("reason"))
+    text = message.get("text")
+    return text if isinstance(text, str) else None
+
+
 def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
     """The WebSocket ``/api/live``: the token first (a browser's), then the state out and commands in."""
     router = APIRouter()
@@ -155,7 +168,10 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
         async def receiver() -> None:
             nonlocal holding
             while True:
-                text = await ws.receive_text()
+                text = await _text(ws)
+                if text is None:
+                    await ws.send_text(json.dumps({"error": BINARY, "status": 422}))
+                    continue
                 if '"jog"' in text:
                     holding = True  # before it is carried out: a socket that closes now lets go
                 reply = await asyncio.to_thread(command, room, text)
