@@ -57,3 +57,44 @@ def test_a_binary_frame_on_the_websocket_is_answered_and_the_socket_stays(client
             if "reply" in reply:
                 break
         assert reply == {"reply": "pong"}
+
+
+def test_a_websocket_message_larger_than_64_kb_closes_the_socket_on_a_real_server(tmp_path: Path) -> None:
+    """Before: uvicorn took messages up to 16 MiB; ten clients each sending one held 420 MB of the server (RSS
+    226 -> 646 MB, 307 MB after). Now a message over :data:`MAX_MESSAGE` closes its socket (1009), a command fits."""
+    import asyncio
+    import threading
+
+    import uvicorn
+    import websockets
+
+    from stickslip.server.live import MAX_MESSAGE
+    from stickslip.server.run import server_config
+
+    room = room_on(tmp_path, "sim://?realtime=0")
+    config = server_config(create_app(room, Access(None, True)), "127.0.0.1", 0)
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        while not server.started:
+            thread.join(0.02)
+        port = server.servers[0].sockets[0].getsockname()[1]
+
+        async def talk(size: int) -> str:
+            async with websockets.connect(f"ws://127.0.0.1:{port}/api/live", max_size=None) as ws:
+                await ws.send(json.dumps({"type": "ping", "pad": "a" * size}))
+                try:
+                    while "reply" not in (text := str(await ws.recv())):
+                        pass
+                except websockets.ConnectionClosed as e:
+                    return f"closed {e.rcvd.code if e.rcvd else None}"
+                return text
+
+        assert asyncio.run(talk(MAX_MESSAGE - 100)) == '{"reply": "pong"}'
+        assert asyncio.run(talk(MAX_MESSAGE + 1)) == "closed 1009"
+        assert config.ws_max_size == MAX_MESSAGE == 65536
+    finally:
+        server.should_exit = True
+        thread.join(10)
+        room.close()

@@ -23,12 +23,15 @@ from .room import ControlRoom
 from .security import Access
 from .slot import Refused, one_line
 
-__all__ = ["QUEUE", "RATE_HZ", "Client", "Live", "clean", "command", "live_routes"]
+__all__ = ["MAX_MESSAGE", "QUEUE", "RATE_HZ", "Client", "Live", "clean", "command", "live_routes"]
 
 log = logging.getLogger("stickslip.server")
 
 RATE_HZ = 20.0
 """Live-state messages per second on the WebSocket."""
+
+MAX_MESSAGE = 64 * 1024
+"""Largest WebSocket message a client may send, bytes (a command is under 100; a larger one closes the socket, 1009)."""
 
 QUEUE = 100
 """State messages a WebSocket client may fall behind (5 s at 20 Hz) before it is closed as too slow."""
