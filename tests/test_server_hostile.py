@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import json
+import threading
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -62,10 +66,6 @@ def test_a_binary_frame_on_the_websocket_is_answered_and_the_socket_stays(client
 def test_a_websocket_message_larger_than_64_kb_closes_the_socket_on_a_real_server(tmp_path: Path) -> None:
     """Before: uvicorn took messages up to 16 MiB; ten clients each sending one held 420 MB of the server (RSS
     226 -> 646 MB, 307 MB after). Now a message over :data:`MAX_MESSAGE` closes its socket (1009), a command fits."""
-    import asyncio
-    import threading
-
-    import uvicorn
     import websockets
 
     from stickslip.server.live import MAX_MESSAGE
@@ -73,13 +73,7 @@ def test_a_websocket_message_larger_than_64_kb_closes_the_socket_on_a_real_serve
 
     room = room_on(tmp_path, "sim://?realtime=0")
     config = server_config(create_app(room, Access(None, True)), "127.0.0.1", 0)
-    server = uvicorn.Server(config)
-    thread = threading.Thread(target=server.run, daemon=True)
-    thread.start()
-    try:
-        while not server.started:
-            thread.join(0.02)
-        port = server.servers[0].sockets[0].getsockname()[1]
+    with _uvicorn(config) as (_, port):
 
         async def talk(size: int) -> str:
             async with websockets.connect(f"ws://127.0.0.1:{port}/api/live", max_size=None) as ws:
@@ -94,7 +88,66 @@ def test_a_websocket_message_larger_than_64_kb_closes_the_socket_on_a_real_serve
         assert asyncio.run(talk(MAX_MESSAGE - 100)) == '{"reply": "pong"}'
         assert asyncio.run(talk(MAX_MESSAGE + 1)) == "closed 1009"
         assert config.ws_max_size == MAX_MESSAGE == 65536
+    room.close()
+
+
+@contextlib.contextmanager
+def _uvicorn(config: Any) -> Iterator[tuple[asyncio.AbstractEventLoop, int]]:
+    """A real uvicorn server in a thread: its loop and port."""
+    import uvicorn
+
+    server = uvicorn.Server(config)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        while not server.started:
+            thread.join(0.02)
+        yield server.servers[0].get_loop(), server.servers[0].sockets[0].getsockname()[1]
     finally:
         server.should_exit = True
         thread.join(10)
-        room.close()
+
+
+def test_a_stop_on_the_websocket_is_not_queued_behind_work_that_holds_every_thread(tmp_path: Path) -> None:
+    """Before: a WebSocket message was carried out in the loop's default executor (6 threads on 2 cores), which
+    eight ``GET /api/motions/ID?wait=30`` filled: a stop sent during a 12 mm move was answered after the move ended
+    by itself (8.8 s, "stopped": null). Now a stop is carried out on the loop, and ``?wait`` holds no thread."""
+    import httpx
+    import websockets
+
+    from stickslip.server.run import server_config
+
+    room = room_on(tmp_path, "sim://?realtime=1")
+    held = threading.Event()
+    with _uvicorn(server_config(create_app(room, Access(None, True)), "127.0.0.1", 0)) as (loop, port):
+        async def fill() -> None:  # every worker of the default executor busy until the test ends
+            for _ in range(64):
+                loop.run_in_executor(None, held.wait)
+
+        asyncio.run_coroutine_threadsafe(fill(), loop).result(5)
+
+        async def talk() -> tuple[dict[str, Any], dict[str, Any]]:
+            async with httpx.AsyncClient(base_url=f"http://127.0.0.1:{port}", timeout=5) as c:
+                started = (await c.post("/api/step", json={"joint": 3, "steps": 20000})).json()
+                waited = (await c.get(f"/api/motions/{started['id']}?wait=0.05")).json()
+                async with websockets.connect(f"ws://127.0.0.1:{port}/api/live", close_timeout=1) as ws:
+                    await ws.send(json.dumps({"type": "stop"}))
+                    async def answer() -> dict[str, Any]:  # the state messages (20 a second) passed over
+                        while "reply" not in (reply := json.loads(await ws.recv())):
+                            pass
+                        return reply
+
+                    try:
+                        reply = await asyncio.wait_for(answer(), 5)
+                    except TimeoutError:
+                        held.set()  # the stop waits for a thread: let them go, so that the server can end
+                        raise
+                return waited, reply
+
+        try:
+            waited, reply = asyncio.run(talk())
+        finally:
+            held.set()
+    room.close()
+    assert waited["status"] == "running", waited
+    assert reply["reply"] == "stop" and reply["motion"] == waited["id"] and reply["stopped"] == waited["what"], reply

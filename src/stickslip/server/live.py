@@ -23,7 +23,7 @@ from .room import ControlRoom
 from .security import Access
 from .slot import Refused, one_line
 
-__all__ = ["MAX_MESSAGE", "QUEUE", "RATE_HZ", "Client", "Live", "clean", "command", "live_routes"]
+__all__ = ["MAX_MESSAGE", "QUEUE", "RATE_HZ", "Client", "Live", "clean", "command", "is_stop", "live_routes"]
 
 log = logging.getLogger("stickslip.server")
 
@@ -177,7 +177,9 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
                     continue
                 if '"jog"' in text:
                     holding = True  # before it is carried out: a socket that closes now lets go
-                reply = await asyncio.to_thread(command, room, text)
+                # a stop is carried out here, on the loop (as POST /api/stop), never queued behind the threads'
+                # work: eight GET /api/motions/ID?wait held every worker, and a stop waited for the move's end
+                reply = command(room, text) if is_stop(text) else await asyncio.to_thread(command, room, text)
                 if reply.get("jog") in ("released", "idle") or "stopped" in reply:
                     holding = False
                 if "error" in reply or reply.get("reply"):
@@ -197,6 +199,17 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
                 await ws.close()
 
     return router
+
+
+def is_stop(text: str) -> bool:
+    """Whether the message ``text`` is ``{"type": "stop", ...}``."""
+    if '"stop"' not in text:
+        return False
+    try:
+        msg = json.loads(text)
+    except (ValueError, RecursionError):
+        return False
+    return isinstance(msg, dict) and msg.get("type") == "stop"
 
 
 def command(room: ControlRoom, text: str) -> dict[str, Any]:
