@@ -151,3 +151,17 @@ def test_a_stop_on_the_websocket_is_not_queued_behind_work_that_holds_every_thre
     room.close()
     assert waited["status"] == "running", waited
     assert reply["reply"] == "stop" and reply["motion"] == waited["id"] and reply["stopped"] == waited["what"], reply
+
+
+def test_a_value_quoted_back_in_an_error_is_cut(client: TestClient) -> None:
+    """Before: ``{"by": "x" * 60000}`` was answered with a 60 kB error line quoting it whole (the page shows it);
+    on the WebSocket an unknown type of 60 000 characters too."""
+    from stickslip.server.live import command
+
+    max_line = 600  # slot.MAX_LINE
+    r = client.post("/api/move", json={"joint": 3, "by": "x" * 60000})
+    line = r.json()["error"]
+    assert r.status_code == 422 and line.startswith("by: cannot read 'xxx") and len(line) <= max_line, len(line)
+    assert " ...[59488 characters cut]... " in line and line.endswith("xxx' as a number with an optional unit"), line
+    reply = command(client.app.state.room, json.dumps({"type": "y" * 60000}))  # type: ignore[attr-defined]
+    assert reply["error"].startswith("unknown message type 'yyy") and len(reply["error"]) <= max_line

@@ -238,5 +238,5 @@ def command(room: ControlRoom, text: str) -> dict[str, Any]:
         return {"error": one_line(e), "status": e.status}
     except ValueError as e:  # a pydantic ValidationError
         return {"error": one_line(e).split(" For further information")[0], "status": 422}
-    return {"error": f"unknown message type {kind!r} (stop, jog, release, ping)"}
+    return {"error": one_line(f"unknown message type {kind!r} (stop, jog, release, ping)")}
 
