@@ -179,7 +179,11 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
                     holding = True  # before it is carried out: a socket that closes now lets go
                 # a stop is carried out here, on the loop (as POST /api/stop), never queued behind the threads'
                 # work: eight GET /api/motions/ID?wait held every worker, and a stop waited for the move's end
-                reply = command(room, text) if is_stop(text) else await asyncio.to_thread(command, room, text)
+                if is_stop(text):
+                    reply = command(room, text)
+                    await asyncio.sleep(0)  # a flood of stops already read would never let the loop go otherwise
+                else:
+                    reply = await asyncio.to_thread(command, room, text)
                 if reply.get("jog") in ("released", "idle") or "stopped" in reply:
                     holding = False
                 if "error" in reply or reply.get("reply"):
