@@ -172,6 +172,7 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
             nonlocal holding
             while True:
                 text = await _text(ws)
+                await asyncio.sleep(0)  # let the loop go: a flood of frames already read never suspends otherwise
                 if text is None:
                     await ws.send_text(json.dumps({"error": BINARY, "status": 422}))
                     continue
@@ -181,7 +182,6 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
                 # work: eight GET /api/motions/ID?wait held every worker, and a stop waited for the move's end
                 if is_stop(text):
                     reply = command(room, text)
-                    await asyncio.sleep(0)  # a flood of stops already read would never let the loop go otherwise
                 else:
                     reply = await asyncio.to_thread(command, room, text)
                 if reply.get("jog") in ("released", "idle") or "stopped" in reply:
