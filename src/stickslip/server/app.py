@@ -138,9 +138,12 @@ class _TooLarge(Exception):
 
 async def _http_error(request: Request, exc: Exception) -> JSONResponse:
     """An unknown path or method in the documented shape; FastAPI's 400 for a body it could not parse (JSON
-    nested thousands deep) as a value that cannot be used."""
+    nested thousands deep) as a value that cannot be used, and for a body the guard cut (:class:`_TooLarge`,
+    which FastAPI wraps) as 413."""
     if not isinstance(exc, StarletteHTTPException):  # registered for it alone
         raise exc
+    if exc.status_code == 400 and isinstance(exc.__cause__, _TooLarge):  # sent without a length, cut by the guard
+        return _error(413, f"the request body is larger than {MAX_BODY // 1024} kB")
     if exc.status_code == 400:
         why = "nested too deeply" if isinstance(exc.__cause__, RecursionError) else one_line(str(exc.detail))
         return _error(422, f"the body cannot be read as JSON ({why})")

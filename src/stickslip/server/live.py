@@ -23,12 +23,15 @@ from .room import ControlRoom
 from .security import Access
 from .slot import Refused, one_line
 
-__all__ = ["QUEUE", "RATE_HZ", "Client", "Live", "clean", "command", "live_routes"]
+__all__ = ["MAX_MESSAGE", "QUEUE", "RATE_HZ", "Client", "Live", "clean", "command", "is_stop", "live_routes"]
 
 log = logging.getLogger("stickslip.server")
 
 RATE_HZ = 20.0
 """Live-state messages per second on the WebSocket."""
+
+MAX_MESSAGE = 64 * 1024
+"""Largest WebSocket message a client may send, bytes (a command is under 100; a larger one closes the socket, 1009)."""
 
 QUEUE = 100
 """State messages a WebSocket client may fall behind (5 s at 20 Hz) before it is closed as too slow."""
@@ -125,6 +128,19 @@ async def _authenticated(ws: WebSocket, access: Access) -> bool:
     return ok
 
 
+BINARY = "a message is a text frame holding JSON, not a binary frame: {\"type\": \"stop\" | \"jog\" | ...}"
+
+
+async def _text(ws: WebSocket) -> str | None:
+    """The next message's text; ``None`` for a binary frame (answered, not taken for a text or let close the
+    socket: ``receive_text`` failed on one, and the socket closed without a word)."""
+    message = await ws.receive()
+    if message["type"] == "websocket.disconnect":
+        raise WebSocketDisconnect(message.get("code", 1000), message.get("reason"))
+    text = message.get("text")
+    return text if isinstance(text, str) else None
+
+
 def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
     """The WebSocket ``/api/live``: the token first (a browser's), then the state out and commands in."""
     router = APIRouter()
@@ -155,10 +171,19 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
         async def receiver() -> None:
             nonlocal holding
             while True:
-                text = await ws.receive_text()
+                text = await _text(ws)
+                await asyncio.sleep(0)  # let the loop go: a flood of frames already read never suspends otherwise
+                if text is None:
+                    await ws.send_text(json.dumps({"error": BINARY, "status": 422}))
+                    continue
                 if '"jog"' in text:
                     holding = True  # before it is carried out: a socket that closes now lets go
-                reply = await asyncio.to_thread(command, room, text)
+                # a stop is carried out here, on the loop (as POST /api/stop), never queued behind the threads'
+                # work: eight GET /api/motions/ID?wait held every worker, and a stop waited for the move's end
+                if is_stop(text):
+                    reply = command(room, text)
+                else:
+                    reply = await asyncio.to_thread(command, room, text)
                 if reply.get("jog") in ("released", "idle") or "stopped" in reply:
                     holding = False
                 if "error" in reply or reply.get("reply"):
@@ -178,6 +203,17 @@ def live_routes(live: Live, room: ControlRoom, access: Access) -> APIRouter:
                 await ws.close()
 
     return router
+
+
+def is_stop(text: str) -> bool:
+    """Whether the message ``text`` is ``{"type": "stop", ...}``."""
+    if '"stop"' not in text:
+        return False
+    try:
+        msg = json.loads(text)
+    except (ValueError, RecursionError):
+        return False
+    return isinstance(msg, dict) and msg.get("type") == "stop"
 
 
 def command(room: ControlRoom, text: str) -> dict[str, Any]:
@@ -206,5 +242,5 @@ def command(room: ControlRoom, text: str) -> dict[str, Any]:
         return {"error": one_line(e), "status": e.status}
     except ValueError as e:  # a pydantic ValidationError
         return {"error": one_line(e).split(" For further information")[0], "status": 422}
-    return {"error": f"unknown message type {kind!r} (stop, jog, release, ping)"}
+    return {"error": one_line(f"unknown message type {kind!r} (stop, jog, release, ping)")}
 

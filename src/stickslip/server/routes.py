@@ -4,6 +4,7 @@ calibration day, the camera. Each endpoint parses its input and calls one verb o
 from __future__ import annotations
 
 import asyncio
+import time
 from importlib import resources
 from typing import Annotated
 
@@ -32,7 +33,10 @@ from .requests import (
 from .room import ControlRoom
 from .slot import NotFound, Refused, Unavailable, one_line
 
-__all__ = ["routers"]
+__all__ = ["WAIT_POLL_S", "routers"]
+
+WAIT_POLL_S = 0.02
+"""How often ``GET /api/motions/{id}?wait=S`` looks whether the motion ended, s (the answer is at most this late)."""
 
 
 def routers(room: ControlRoom, camera: CameraFeed | None) -> list[APIRouter]:
@@ -168,8 +172,9 @@ def motion_routes(room: ControlRoom) -> APIRouter:
     ) -> JSONResponse:
         """A motion's state and result; ``wait`` (s) waits for it to end first."""
         m = room.motion(ident)
-        if wait > 0 and m.active:
-            await asyncio.to_thread(m.finished.wait, wait)
+        end = time.monotonic() + wait
+        while m.active and time.monotonic() < end:  # polled: a thread per waiter filled the executor that
+            await asyncio.sleep(WAIT_POLL_S)  # the WebSocket's commands run in
         return JSONResponse(clean(m.as_dict()))
 
     @router.get("/api/motion", tags=["motion"])

@@ -11,10 +11,11 @@ from typing import Any
 from ..devices.base import redact_url
 from .app import create_app
 from .camera import CameraFeed, FrameFeed
+from .live import MAX_MESSAGE
 from .room import ControlRoom, RoomOptions
 from .security import Access, default_token_path, is_loopback, load_or_create_token
 
-__all__ = ["ServeError", "access_for", "open_camera_feed", "port_problem", "serve"]
+__all__ = ["ServeError", "access_for", "open_camera_feed", "port_problem", "serve", "server_config"]
 
 
 class ServeError(RuntimeError):
@@ -89,6 +90,15 @@ def open_camera_feed(url: str, device: Any, tip: tuple[float, float] | None = No
     return FrameFeed(cam, tip_of=tip_of)
 
 
+def server_config(app: Any, host: str, port: int) -> Any:
+    """uvicorn's settings for ``app``: no access log, and a WebSocket message at most :data:`~.live.MAX_MESSAGE`
+    bytes (uvicorn's default, 16 MiB, let ten clients each send one and hold 420 MB of the server's memory)."""
+    import uvicorn
+
+    return uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False, lifespan="on",
+                          ws_max_size=MAX_MESSAGE)
+
+
 def serve(
     options: RoomOptions,
     host: str = "127.0.0.1",
@@ -120,8 +130,7 @@ def serve(
         echo(f"open http://{shown}:{port}/ in a browser; Ctrl-C stops")
         if room.calibration is None:
             echo("no calibration yet: run the calibration day on the page")
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", access_log=False, lifespan="on")
-        uvicorn.Server(config).run()
+        uvicorn.Server(server_config(app, host, port)).run()
     finally:
         if camera is not None:
             camera.close()

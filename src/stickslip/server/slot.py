@@ -39,8 +39,8 @@ from .owned import HeldStore, OwnedController
 from .pad import HOLD_S, IDLE_END_S, PadKeys
 
 __all__ = [
-    "MAX_BURST_S", "START_TIMEOUT_S", "Busy", "Conflict", "Motion", "MotionSlot", "NotFound", "Presses", "Refused",
-    "RoomOptions", "Unavailable", "one_line", "refusal", "refusals",
+    "MAX_BURST_S", "MAX_LINE", "START_TIMEOUT_S", "Busy", "Conflict", "Motion", "MotionSlot", "NotFound", "Presses",
+    "Refused", "RoomOptions", "Unavailable", "one_line", "refusal", "refusals",
 ]
 
 log = logging.getLogger("stickslip.server")
@@ -58,6 +58,10 @@ KEEP_MOTIONS = 50
 KEEP_EVENTS = 500
 """Events kept for the live view."""
 
+MAX_LINE = 600
+"""Longest error line, characters (the longest the server makes, the envelope's, is about 300): a longer one
+quotes back a client's value and is cut."""
+
 
 @contextlib.contextmanager
 def refusals() -> Iterator[None]:
@@ -73,8 +77,11 @@ def refusals() -> Iterator[None]:
 def one_line(e: BaseException | str) -> str:
     """An exception's message as one line, without secrets (a ``KeyError``'s quotes removed)."""
     text = str(e.args[0]) if isinstance(e, KeyError) and e.args else str(e)
-    text = " ".join(text.split()) or type(e).__name__
-    return redact_text(text)
+    text = redact_text(" ".join(text.split()) or type(e).__name__)
+    if len(text) > MAX_LINE:  # a value quoted back whole: 60 kB of a client's junk in an error line
+        keep = (MAX_LINE - 40) // 2  # the start and the end (the reason often follows the value)
+        text = f"{text[:keep]} ...[{len(text) - 2 * keep} characters cut]... {text[-keep:]}"
+    return text
 
 
 class Presses:
