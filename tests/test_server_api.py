@@ -291,6 +291,34 @@ def test_jog_moves_while_held_and_stops_on_release(held_client: TestClient, held
     assert kept == pytest.approx(moved[1], rel=0.1)
 
 
+def test_stop_latches_a_jog_until_its_key_is_let_go(held_client: TestClient, held_room: ControlRoom) -> None:
+    """A script that kept sending jog keep-alives started a new jog session 40 ms after STOP and the arm moved on
+    (audit34). STOP now latches a jog it ended, as an emergency stop does: refused until the key is let go."""
+    client, room = held_client, held_room
+    arm = room.owned.dev
+    r = client.post("/api/jog", json={"direction": "+z", "speed": 7})
+    assert r.status_code == 200 and r.json()["jog"] == "started", r.text
+    until(lambda: arm.position(2) != -math.pi / 2, 10, "the arm to move")
+    assert client.post("/api/stop").status_code == 200
+    assert wait(client, {"id": r.json()["motion"]})["status"] in ("done", "stopped")
+    stopped_at = arm.position(2)
+    for _ in range(3):  # the key still held: its keep-alives
+        refused(client.post("/api/jog", json={"direction": "+z", "speed": 7}), 409, "STOP ended the jog",
+                "let go of the jog key")
+    assert arm.position(2) == stopped_at and room.current() is None
+    assert client.post("/api/jog/release").status_code == 200  # let go: the next press jogs again
+    r = client.post("/api/jog", json={"direction": "+z", "speed": 7})
+    assert r.status_code == 200 and r.json()["jog"] == "started", r.text
+    client.post("/api/jog/release")
+    wait(client, {"id": r.json()["motion"]})
+    # a STOP with no jog running latches nothing
+    assert client.post("/api/stop").status_code == 200
+    r = client.post("/api/jog", json={"direction": "-z", "speed": 7})
+    assert r.status_code == 200 and r.json()["jog"] == "started", r.text
+    client.post("/api/jog/release")
+    wait(client, {"id": r.json()["motion"]})
+
+
 def test_a_jog_whose_client_stops_sending_is_stopped_by_the_dead_man(client: TestClient, room: ControlRoom) -> None:
     r = client.post("/api/jog", json={"direction": "-x", "speed": 6})
     assert r.status_code == 200, r.text

@@ -131,6 +131,7 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         self._motions = collections.OrderedDict()
         self._motion = None
         self._pad = None
+        self._jog_latched = False  # STOP ended a jog: no new one until its key is let go (an e-stop latches)
         self._jog_status = None
         self._day = None  # the day's progress, rows done, waiting for a pose
         self._day_pose = threading.Event()
@@ -205,6 +206,8 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
             if running and m is not None and m.stop_requested is None:
                 m.stop_requested = t
             self._day_pose.set()  # a day waiting for a pose wakes up to find the STOP
+            if pad is not None:  # the key still held (its keep-alives) must not start the jog again
+                self._jog_latched = True
         if pad is not None:
             pad.end()
         what = m.what if running and m is not None else None
@@ -309,13 +312,16 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         """A jog key held (or its keep-alive); starts a session if none runs (:func:`~stickslip.procedures.jog.jog`).
 
         Jog is refused while another motion runs (:class:`Busy`: "jog is disabled while a
-        plan runs").
+        plan runs"), and after a STOP that ended a jog until its key is let go (:meth:`jog_release`):
+        a script's keep-alives, or a key still held, do not start the arm again.
         """
         with self._lock:
-            pad = self._pad
+            pad, latched = self._pad, self._jog_latched
         if pad is not None:
             pad.hold(direction, speed)
             return {"jog": "held", "direction": direction}
+        if latched:
+            raise Busy("STOP ended the jog: let go of the jog key (release) before jogging again")
         cur = self.current()
         if cur is not None:
             raise Busy(f"jog is disabled while a plan runs: {cur.what} (motion {cur.id}); wait for it or press STOP")
@@ -355,10 +361,14 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         return {"jog": "started", "direction": direction, "motion": m.id}
 
     def jog_release(self, end: bool = False) -> dict[str, Any]:
-        """Let go of the jog key: the tip stops at once; the session ends soon after by itself, or now if ``end``."""
+        """Let go of the jog key: the tip stops at once; the session ends soon after by itself, or now if ``end``.
+
+        It also unlatches a jog STOP ended (:meth:`stop`): the next press starts a jog again.
+        """
         with self._lock:
             pad = self._pad
             m = self._motion
+            self._jog_latched = False
         if pad is not None:
             pad.end() if end else pad.release()
         out: dict[str, Any] = {"jog": "released" if pad is not None else "idle"}
