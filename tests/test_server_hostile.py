@@ -165,3 +165,25 @@ def test_a_value_quoted_back_in_an_error_is_cut(client: TestClient) -> None:
     assert " ...[59488 characters cut]... " in line and line.endswith("xxx' as a number with an optional unit"), line
     reply = command(client.app.state.room, json.dumps({"type": "y" * 60000}))  # type: ignore[attr-defined]
     assert reply["error"].startswith("unknown message type 'yyy") and len(reply["error"]) <= max_line
+
+
+def test_a_body_or_message_giving_a_key_twice_is_refused_not_read_with_the_last(tmp_path: Path) -> None:
+    """{"joint": 1, "joint": 3, "by": "10um"} moved joint 3 (JSON readers keep the last key; audit34's question 2).
+    Now 422 naming the key; a WebSocket message alike; a STOP is never refused for its body or message."""
+    from stickslip.server.live import command
+
+    room = room_on(tmp_path)
+    try:
+        with TestClient(create_app(room, Access(None, True)), base_url="http://127.0.0.1:8765") as c:
+            before = room.state().positions[3]
+            r = c.post("/api/move", content=b'{"joint": 1, "joint": 3, "by": "10um"}',
+                       headers={"content-type": "application/json"})
+            assert r.status_code == 422 and "the key 'joint' twice" in r.json()["error"], r.text
+            assert room.current() is None and room.state().positions[3] == before
+            r = c.post("/api/stop", content=b'{"a": 1, "a": 2}', headers={"content-type": "application/json"})
+            assert r.status_code == 200, r.text
+        reply = command(room, '{"type": "jog", "direction": "+x", "direction": "-x"}')
+        assert "the key 'direction' twice" in reply["error"] and room.current() is None
+        assert command(room, '{"type": "jog", "type": "stop"}')["reply"] == "stop"
+    finally:
+        room.close()

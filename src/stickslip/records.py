@@ -223,6 +223,32 @@ def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any
     return pairs
 
 
+class _KeyTwice(Exception):
+    pass
+
+
+def repeated_key(text: str | bytes) -> str | None:
+    """The first key given twice in one object of the JSON document ``text``, else ``None`` (also for text that is
+    not JSON, or nested too deeply to read: the reader that follows says why). Python's ``json`` keeps the last
+    of two silently; a request's body or message naming ``"joint"`` twice would move the joint named last."""
+
+    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, v in items:
+            if k in out:
+                raise _KeyTwice(k)
+            out[k] = v
+        return out
+
+    try:
+        json.loads(text, object_pairs_hook=pairs)
+    except _KeyTwice as e:
+        return str(e.args[0])
+    except (ValueError, RecursionError, TypeError):
+        return None
+    return None
+
+
 def loads_json(text: str, where: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
     """The JSON document in ``text``, read strictly; ``ValueError`` ``"<where>: <reason>"`` otherwise.
 

@@ -32,6 +32,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .. import __version__
 from ..devices.base import redact_text
+from ..records import repeated_key
 from .camera import CameraFeed
 from .live import RATE_HZ, Live, live_routes
 from .room import ControlRoom, Refused, one_line
@@ -102,7 +103,8 @@ class Guard:
             if length is not None and (not length.isdigit() or int(length) > MAX_BODY):
                 problem, status = f"the request body is larger than {MAX_BODY // 1024} kB", 413
         if problem is None:
-            await self.app(scope, receive if scope["type"] != "http" else _limited(receive), send)
+            limited = _limited(receive, keys=scope.get("path") != "/api/stop")  # a STOP is never refused for its body
+            await self.app(scope, receive if scope["type"] != "http" else limited, send)
             return
         if scope["type"] == "websocket":
             await send({"type": "websocket.close", "code": 4401 if status == 401 else 4403, "reason": problem})
@@ -113,17 +115,23 @@ class Guard:
         await send({"type": "http.response.body", "body": body})
 
 
-def _limited(receive: Receive) -> Receive:
-    """``receive`` that stops a body (sent without a length) at :data:`MAX_BODY` bytes."""
+def _limited(receive: Receive, keys: bool = True) -> Receive:
+    """``receive`` that stops a body (sent without a length) at :data:`MAX_BODY` bytes, and (``keys``) one that
+    gives a key twice in one object (:func:`~stickslip.records.repeated_key`)."""
     seen = 0
+    chunks: list[bytes] = []
 
     async def inner() -> MutableMapping[str, Any]:
         nonlocal seen
         message = await receive()
         if message["type"] == "http.request":
-            seen += len(message.get("body", b""))
+            body = message.get("body", b"")
+            seen += len(body)
             if seen > MAX_BODY:
                 raise _TooLarge()
+            chunks.append(body)
+            if keys and not message.get("more_body", False) and (key := repeated_key(b"".join(chunks))) is not None:
+                raise _KeyTwice(key)
         return message
 
     return inner
@@ -131,6 +139,13 @@ def _limited(receive: Receive) -> Receive:
 
 class _TooLarge(Exception):
     pass
+
+
+class _KeyTwice(Exception):
+    """A body giving one key twice (``{"joint": 3, "joint": 1}``): JSON readers keep the last silently."""
+
+    def line(self) -> str:
+        return f"the body gives the key {self.args[0]!r:.60} twice in one object (which one is meant?)"
 
 
 # ------------------------------------------------------------------------------ the app
@@ -144,6 +159,8 @@ async def _http_error(request: Request, exc: Exception) -> JSONResponse:
         raise exc
     if exc.status_code == 400 and isinstance(exc.__cause__, _TooLarge):  # sent without a length, cut by the guard
         return _error(413, f"the request body is larger than {MAX_BODY // 1024} kB")
+    if exc.status_code == 400 and isinstance(exc.__cause__, _KeyTwice):
+        return _error(422, exc.__cause__.line())
     if exc.status_code == 400:
         why = "nested too deeply" if isinstance(exc.__cause__, RecursionError) else one_line(str(exc.detail))
         return _error(422, f"the body cannot be read as JSON ({why})")
@@ -195,6 +212,10 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
     @app.exception_handler(_TooLarge)
     async def too_large(request: Request, exc: _TooLarge) -> JSONResponse:
         return _error(413, f"the request body is larger than {MAX_BODY // 1024} kB")
+
+    @app.exception_handler(_KeyTwice)
+    async def key_twice(request: Request, exc: _KeyTwice) -> JSONResponse:
+        return _error(422, exc.line())
 
     @app.exception_handler(json.JSONDecodeError)
     async def bad_json(request: Request, exc: json.JSONDecodeError) -> JSONResponse:

@@ -18,6 +18,7 @@ from typing import Any
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 
+from ..records import repeated_key
 from .requests import JogBody
 from .room import ControlRoom
 from .security import Access
@@ -229,6 +230,8 @@ def command(room: ControlRoom, text: str) -> dict[str, Any]:
         if kind == "stop":  # "press": the id of the press, sent as POST /api/stop?press= too: said once
             press = msg.get("press")
             return {**room.stop(press if isinstance(press, str) else None), "reply": "stop"}
+        if (twice := repeated_key(text)) is not None:  # json keeps the last: {"joint": 3, "joint": 1}; never a STOP
+            return {"error": f"the message gives the key {twice!r:.60} twice (which one is meant?)"}
         if kind == "jog":
             body = JogBody.model_validate({k: v for k, v in msg.items() if k != "type"})
             return room.jog_hold(body.direction, body.speed)
