@@ -53,6 +53,10 @@ def test_the_token_is_printed_once_and_never_again(tmp_path: Path) -> None:
     access = access_for("0.0.0.0", path, lines.append)
     assert access.token is not None and not access.loopback
     assert any(access.token in line for line in lines)
+    from stickslip.devices.base import redact_text
+
+    hint = next(line for line in lines if "#token" in line)
+    assert redact_text(hint) == hint  # the instruction is not shown as '#token=***' (audit34)
     lines.clear()
     assert access_for("0.0.0.0", path, lines.append).token == access.token
     assert lines and not any(access.token in line for line in lines)

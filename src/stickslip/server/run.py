@@ -34,7 +34,8 @@ def access_for(host: str, token_path: Path | None, echo: Callable[[str], None]) 
     if new:
         echo(f"new token (shown this once): {token}")
         echo(f"kept in {path}, readable by you only;")
-        echo("the page asks for it (or add #token=TOKEN to its address);")
+        # (written without 'token=': the console shows any 'token=...' as a secret, '#token=***')
+        echo("the page asks for it (or add it to the page's address after '#token' and an equals sign);")
         echo("scripts send 'Authorization: Bearer TOKEN'")
     else:
         echo(f"this address needs the token kept in {path}")
@@ -127,7 +128,10 @@ def serve(
         if options.rig is not None:
             echo(f"arm {options.rig.arm(options.arm).name!r} of the rig {options.rig.name!r}: every move is "
                  "checked against its envelope")
-        echo(f"open http://{shown}:{port}/ in a browser; Ctrl-C stops")
+        if host in ("0.0.0.0", "::"):  # every address of this computer: not one a browser can open
+            echo(f"open http://<this computer's name or address>:{port}/ in a browser; Ctrl-C stops")
+        else:
+            echo(f"open http://{shown}:{port}/ in a browser; Ctrl-C stops")
         if room.calibration is None:
             echo("no calibration yet: run the calibration day on the page")
         uvicorn.Server(server_config(app, host, port)).run()
