@@ -136,6 +136,7 @@ def locate_cmd(
         except (ImageError, CameraError, TemplateError) as e:
             fail(str(e))
     _warn_focus(found)
+    _warn_stated(found)
     if json_out:
         print_json([f.as_dict() for f in found])
         return
@@ -150,6 +151,22 @@ def _warn_focus(found: list[Located]) -> None:
     if focus is not None and focus.sigma > TrackerParams().focus_warn:
         warn(f"the first frame looks out of focus (the needle's edge blurred by about {focus.sigma:.1f} px): "
              "the tip is tracked best from a frame in focus; start the frames there")
+
+
+_ORIENTATIONS = {2: "mirrored left to right", 3: "turned 180°", 4: "mirrored top to bottom",
+                 5: "mirrored and turned 90°", 6: "turned 90° clockwise", 7: "mirrored and turned 90°",
+                 8: "turned 90° counter-clockwise"}
+
+
+def _warn_stated(found: list[Located]) -> None:
+    """One warning line for a frame whose file states an orientation other than 1 (pixels are read as stored)."""
+    turned = found[0].turned if found else None
+    if turned is not None:
+        name, stated = turned
+        how = _ORIENTATIONS.get(stated.orientation, "turned")
+        warn(f"{name} states orientation {stated.orientation} (a viewer shows it {how}): the frames are read as "
+             "stored, so --tip and every answer are in stored pixels (x right, y down from the stored top-left "
+             "pixel), not as a viewer that turns the image shows them")
 
 
 def _print_located(found: list[Located]) -> None:

@@ -24,7 +24,7 @@ from typing import Any
 from ..devices.base import Controller, redact_url
 from .camera import CameraEnded, CameraError, CameraInfo, camera_options, pixel_option
 from .frame import Frame, ImageError, as_image
-from .images import IMAGE_SUFFIXES, VIDEO_SUFFIXES, _check_file, read_image
+from .images import IMAGE_SUFFIXES, VIDEO_SUFFIXES, Stated, _check_file, read_image_stated
 
 __all__ = [
     "FileCamera",
@@ -132,6 +132,11 @@ class FileCamera:
         self._url = url
         self._next = 0
         self._shape: tuple[int, int] | None = None
+        self.turned: tuple[str, Stated] | None = None
+        """The first frame read whose file states an orientation other than 1 (its name, what it states):
+        its pixels are read as stored, not turned as a viewer shows them."""
+        self.stated_pixel: tuple[str, Stated] | None = None
+        """Without ``pixel_size_m``: the first frame read whose file states a pixel size (not used)."""
 
     @property
     def info(self) -> CameraInfo:
@@ -150,7 +155,11 @@ class FileCamera:
         k = self._next
         self._next += 1
         p = self.paths[k]
-        image = read_image(p)
+        image, stated = read_image_stated(p)
+        if stated.orientation != 1 and self.turned is None:
+            self.turned = (str(p), stated)
+        if stated.pixel_m is not None and self.pixel_size_m is None and self.stated_pixel is None:
+            self.stated_pixel = (str(p), stated)
         shape = (int(image.shape[0]), int(image.shape[1]))
         if self._shape is None:
             self._shape = shape

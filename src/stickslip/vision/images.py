@@ -18,9 +18,11 @@ stack). Any failure is an :class:`~.frame.ImageError` naming the file and the re
 from __future__ import annotations
 
 import os
+import re
 import stat
 import struct
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +31,10 @@ from numpy.typing import NDArray
 
 from .frame import MAX_PIXELS, ImageError, as_image
 
-__all__ = ["MAX_FILE_BYTES", "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "read_image", "write_png", "missing_extra"]
+__all__ = [
+    "MAX_FILE_BYTES", "IMAGE_SUFFIXES", "VIDEO_SUFFIXES", "Stated", "read_image", "read_image_stated", "write_png",
+    "missing_extra",
+]
 
 MAX_FILE_BYTES = 1024 * 1024 * 1024
 """Largest image file read, bytes (1 GiB)."""
@@ -67,6 +72,27 @@ def _check_file(p: Path) -> int:
     return int(st.st_size)
 
 
+@dataclass(frozen=True)
+class Stated:
+    """What an image file states about its pixels that :func:`read_image` does not apply.
+
+    Attributes
+    ----------
+    orientation : int
+        The EXIF (or TIFF) orientation tag, 1..8; 1 (also when absent) means "as stored". The pixels
+        are always read as stored: a viewer that applies another orientation shows other coordinates.
+    pixel_m : tuple of float or None
+        The pixel size (x, y) the file states, m: TIFF resolution tags with a unit (inch, cm) or OME
+        ``PhysicalSizeX/Y``; ``None`` when it states none. Never used as the frame's pixel size.
+    pixel_from : str
+        Where ``pixel_m`` comes from: ``"TIFF resolution tags"`` or ``"OME metadata"``.
+    """
+
+    orientation: int = 1
+    pixel_m: tuple[float, float] | None = None
+    pixel_from: str = ""
+
+
 def read_image(path: str | os.PathLike[str]) -> NDArray[np.float64]:
     """The grey ``float64`` image in a file (see :func:`~.frame.as_image` for the conversion).
 
@@ -74,6 +100,11 @@ def read_image(path: str | os.PathLike[str]) -> NDArray[np.float64]:
     stack of images, NaN in a float image, or a missing optional package (the message says
     which to install).
     """
+    return read_image_stated(path)[0]
+
+
+def read_image_stated(path: str | os.PathLike[str]) -> tuple[NDArray[np.float64], Stated]:
+    """:func:`read_image`'s image and what the file states about its pixels (:class:`Stated`), pixels as stored."""
     p = Path(path)
     _check_file(p)
     try:
@@ -84,7 +115,7 @@ def read_image(path: str | os.PathLike[str]) -> NDArray[np.float64]:
     if head[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
         return _read_tiff(p)
     if head.startswith(_PNG_MAGIC) and _png_is_16bit_colour(head):
-        return _read_with_opencv(p, "a 16-bit colour PNG (Pillow would cut it to 8 bits)")
+        return _read_with_opencv(p, "a 16-bit colour PNG (Pillow would cut it to 8 bits)"), Stated()
     return _read_with_pillow(p)
 
 
@@ -96,7 +127,7 @@ def _png_is_16bit_colour(head: bytes) -> bool:
     return bit_depth == 16 and colour_type in (2, 4, 6)
 
 
-def _read_tiff(p: Path) -> NDArray[np.float64]:
+def _read_tiff(p: Path) -> tuple[NDArray[np.float64], Stated]:
     try:
         import tifffile
     except ImportError:
@@ -107,6 +138,7 @@ def _read_tiff(p: Path) -> NDArray[np.float64]:
             if pages > 1:
                 raise ImageError(f"{p}: a stack of {pages} images (a multi-page TIFF): give one image per file")
             page: Any = tif.pages[0]
+            stated = _tiff_stated(tif, page)
             shape = tuple(int(v) for v in page.shape)
             if not shape or int(np.prod(shape, dtype=np.int64)) > 4 * MAX_PIXELS:
                 raise ImageError(f"{p}: {shape} pixels is more than a frame may have")
@@ -114,7 +146,7 @@ def _read_tiff(p: Path) -> NDArray[np.float64]:
                 data = page.asarray()
             except ValueError as e:
                 if "imagecodecs" in str(e):  # LZW, JPEG, ...: Pillow has them built in
-                    return _read_with_pillow(p)
+                    return _read_with_pillow(p)[0], stated
                 raise
     except ImageError:
         raise
@@ -124,10 +156,10 @@ def _read_tiff(p: Path) -> NDArray[np.float64]:
         raise ImageError(f"{p}: not a readable TIFF ({_reason(e)})") from None
     if data.ndim == 3 and data.shape[0] in (3, 4) and data.shape[2] not in (1, 2, 3, 4):
         data = np.moveaxis(data, 0, -1)  # planar colour (samples first)
-    return as_image(data, str(p))
+    return as_image(data, str(p)), stated
 
 
-def _read_with_pillow(p: Path) -> NDArray[np.float64]:
+def _read_with_pillow(p: Path) -> tuple[NDArray[np.float64], Stated]:
     try:
         from PIL import Image
     except ImportError:
@@ -146,13 +178,74 @@ def _read_with_pillow(p: Path) -> NDArray[np.float64]:
                     raise ImageError(f"{p}: a stack of {n} images (pages or an animation): give one image per file")
                 im.load()
                 data = _pillow_array(im)
+                stated = Stated(_orientation(im.getexif().get(0x0112)))
     except ImageError:
         raise
     except MemoryError:
         raise ImageError(f"{p}: not a readable image (it asks for more memory than there is)") from None
     except Exception as e:  # noqa: BLE001  - Pillow raises many kinds (OSError, SyntaxError, struct.error, ...)
         raise ImageError(f"{p}: not a readable image ({_reason(e)})") from None
-    return as_image(data, str(p))
+    return as_image(data, str(p)), stated
+
+
+def _orientation(value: Any) -> int:
+    """An orientation tag's value, 1..8; 1 for an absent or meaningless one."""
+    try:
+        v = int(value)
+    except (TypeError, ValueError):
+        return 1
+    return v if 1 <= v <= 8 else 1
+
+
+_INCH_M, _CM_M = 0.0254, 0.01
+_OME_UNITS = {"m": 1.0, "mm": 1e-3, "µm": 1e-6, "um": 1e-6, "\u03bcm": 1e-6, "nm": 1e-9, "pm": 1e-12, "cm": 1e-2}
+_OME_PHYSICAL = re.compile(r'PhysicalSize([XY])(Unit)?="([^"]*)"')
+
+
+def _tiff_stated(tif: Any, page: Any) -> Stated:
+    """A TIFF's orientation tag and the pixel size it states: OME ``PhysicalSizeX/Y`` first, else resolution
+    tags with a unit (ResolutionUnit 2 inch, 3 cm; 1 "no unit" states no size)."""
+    tags = page.tags
+    orientation = _orientation(tags["Orientation"].value) if "Orientation" in tags else 1
+    ome = getattr(tif, "ome_metadata", None)
+    if isinstance(ome, str):
+        found = {(axis, bool(unit)): text for axis, unit, text in _OME_PHYSICAL.findall(ome)}
+        sizes = []
+        for axis in "XY":
+            value, unit = found.get((axis, False)), found.get((axis, True), "µm")
+            scale = _OME_UNITS.get(unit)
+            size = _positive(value, scale)
+            if size is not None:
+                sizes.append(size)
+        if len(sizes) == 2:
+            return Stated(orientation, (sizes[0], sizes[1]), "OME metadata")
+    unit_tag = tags["ResolutionUnit"].value if "ResolutionUnit" in tags else 2  # TIFF's default is inch
+    unit = {2: _INCH_M, 3: _CM_M}.get(int(unit_tag))
+    if unit is not None and "XResolution" in tags and "YResolution" in tags:
+        x, y = (_per_unit(tags[k].value) for k in ("XResolution", "YResolution"))
+        if x and y:
+            return Stated(orientation, (unit / x, unit / y), "TIFF resolution tags")
+    return Stated(orientation)
+
+
+def _positive(text: str | None, scale: float | None) -> float | None:
+    """``float(text) * scale`` when both are given and the result is a positive finite number."""
+    if text is None or scale is None:
+        return None
+    try:
+        v = float(text) * scale
+    except ValueError:
+        return None
+    return v if np.isfinite(v) and v > 0 else None
+
+
+def _per_unit(value: Any) -> float:
+    """A TIFF RATIONAL tag's value (a (numerator, denominator) pair or a number); 0 when unusable."""
+    try:
+        v = float(value[0]) / float(value[1]) if isinstance(value, tuple) else float(value)
+    except (TypeError, ValueError, ZeroDivisionError, IndexError):
+        return 0.0
+    return v if np.isfinite(v) and v > 0 else 0.0
 
 
 def _pillow_array(im: Any) -> NDArray[Any]:

@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .camera import CameraEnded
 from .files import open_frames
 from .focus import Focus, first_frame_focus
 from .frame import Frame, ImageError
+from .images import Stated
 from .track import Fix, Lost, TipTracker, TrackerParams
 
 __all__ = ["Located", "locate", "locate_frames"]
@@ -40,6 +41,13 @@ class Located:
         The first frame only: how blurred the needle's shaft edges are there (``focus.sigma``, px;
         :func:`~.focus.first_frame_focus`), ``None`` where they cannot be read (and on every later frame).
         Above :attr:`~.template.TrackerParams.focus_warn` px, ``camera locate`` warns. Not in :meth:`as_dict`.
+    turned : tuple of (str, Stated) or None
+        The first frame only: the first file of the sequence that states an EXIF/TIFF orientation other
+        than 1 (its name, what it states). Its pixels (and ``fix``) are as stored, not as a viewer turns
+        them. Not in :meth:`as_dict`.
+    stated_pixel : tuple of (str, Stated) or None
+        The first frame only: the first file that states a pixel size (TIFF resolution tags with a unit,
+        OME ``PhysicalSizeX/Y``), which is not used. Not in :meth:`as_dict`.
     """
 
     frame: str
@@ -47,6 +55,8 @@ class Located:
     lost: str | None = None
     detail: str = ""
     focus: Focus | None = None
+    turned: tuple[str, Stated] | None = None
+    stated_pixel: tuple[str, Stated] | None = None
 
     def as_dict(self) -> dict[str, object]:
         """``{"frame", "x", "y", "score"}`` for a fix (px, 0..1), ``{"frame", "lost"}`` for a refusal."""
@@ -93,6 +103,7 @@ def locate(
     """
     n = 0
     camera = open_frames(names)
+    turned = stated_pixel = None
     try:
         while True:
             try:
@@ -102,6 +113,7 @@ def locate(
             n += 1
             if progress is not None:
                 progress(n, 0)
+        turned, stated_pixel = getattr(camera, "turned", None), getattr(camera, "stated_pixel", None)
     finally:
         camera.close()
     if n == 0:
@@ -110,7 +122,7 @@ def locate(
     try:
         first = camera.grab()
         tracker = TipTracker(first, tip, params)
-        out = [_first(first, tip, tracker)]
+        out = [replace(_first(first, tip, tracker), turned=turned, stated_pixel=stated_pixel)]
         for k in range(1, n):
             f = camera.grab()
             r = tracker.update(f)

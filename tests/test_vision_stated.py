@@ -1,0 +1,52 @@
+"""What an image file states that the frames are not read with (EXIF orientation, a TIFF's pixel size):
+``camera locate`` says so in one warning line instead of ignoring it without a word (audit35)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from stickslip.cli import app
+from stickslip.sim.camera import SimCamSettings, SimScene
+
+PIL = pytest.importorskip("PIL.Image")
+TIP = (70.3, 80.6)
+
+
+def _frame(k: int) -> np.ndarray:
+    """A sharp bright-field needle, its tip moved (1.5, -0.8) px per frame ``k``, as 8-bit grey."""
+    scene = SimScene(SimCamSettings(look="optical", width=160, height=160, photons=150.0, seed=k + 1,
+                                    tip_radius_m=2e-6, taper=math.radians(8.0), pixel_size_m=0.5e-6))
+    img = scene.render(np.array((TIP[0] + 1.5 * k, TIP[1] - 0.8 * k)), np.array([math.cos(0.5), math.sin(0.5)]), 0.5)
+    return np.asarray(np.clip(img * 255, 0, 255), dtype=np.uint8)
+
+
+def _locate(pattern: str) -> tuple[list[dict[str, object]], list[str]]:
+    r = CliRunner().invoke(app, ["camera", "locate", pattern, "--tip", f"{TIP[0]},{TIP[1]}", "--json"])
+    assert r.exit_code == 0, r.output
+    return json.loads(r.stdout), r.stderr.splitlines()
+
+
+def test_an_exif_orientation_gets_one_warning_line_naming_the_frame_and_the_answer_is_as_stored(tmp_path):
+    plain, turned = tmp_path / "plain", tmp_path / "turned"
+    plain.mkdir()
+    turned.mkdir()
+    for k in range(3):
+        im = PIL.fromarray(_frame(k))
+        im.save(plain / f"f{k}.jpg", quality=95)
+        exif = PIL.Exif()
+        if k >= 1:
+            exif[0x0112] = 6  # a camera held sideways: a viewer shows it turned 90° clockwise
+        im.save(turned / f"f{k}.jpg", quality=95, exif=exif)
+    out_plain, err_plain = _locate(str(plain / "f*.jpg"))
+    assert err_plain == []
+    out, err = _locate(str(turned / "f*.jpg"))
+    assert len(err) == 1, err  # once per sequence, though two frames state it
+    assert err[0].startswith("warning: ") and "f1.jpg states orientation 6" in err[0] and "stored pixels" in err[0]
+    # read as stored: the same answers as the untagged files, to the last digit
+    assert [(o["x"], o["y"]) for o in out] == [(o["x"], o["y"]) for o in out_plain]
+    assert abs(float(out[2]["x"]) - (TIP[0] + 3.0)) < 0.5 and abs(float(out[2]["y"]) - (TIP[1] - 1.6)) < 0.5
