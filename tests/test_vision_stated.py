@@ -50,3 +50,37 @@ def test_an_exif_orientation_gets_one_warning_line_naming_the_frame_and_the_answ
     # read as stored: the same answers as the untagged files, to the last digit
     assert [(o["x"], o["y"]) for o in out] == [(o["x"], o["y"]) for o in out_plain]
     assert abs(float(out[2]["x"]) - (TIP[0] + 3.0)) < 0.5 and abs(float(out[2]["y"]) - (TIP[1] - 1.6)) < 0.5
+
+
+@pytest.mark.parametrize(("tags", "words"), [
+    ({"resolution": (72, 72), "resolutionunit": 2}, "f0.tif states a pixel of 352.8 µm (TIFF resolution tags)"),
+    ({"resolution": (20000, 10000), "resolutionunit": 3},
+     "f0.tif states a pixel of 0.5 x 1 µm (not square: a frame's pixel size is one number) (TIFF resolution tags)"),
+    ({"metadata": {"PhysicalSizeX": 0.25, "PhysicalSizeY": 0.25}},
+     "f0.ome.tif states a pixel of 0.25 µm (OME metadata)"),
+    ({"resolution": (1, 1), "resolutionunit": 1}, None),  # no unit: no size stated (tifffile's default)
+])
+def test_a_tiff_that_states_a_pixel_size_gets_one_line_saying_it_is_not_used(tmp_path, tags, words):
+    tifffile = pytest.importorskip("tifffile")
+    for k in range(3):
+        ome = "metadata" in tags
+        tifffile.imwrite(tmp_path / f"f{k}.{'ome.tif' if ome else 'tif'}", _frame(k), ome=ome or None, **tags)
+    out, err = _locate(str(tmp_path / "f*.tif"))
+    assert len(out) == 3 and all("x" in o for o in out)
+    if words is None:
+        assert err == []
+        return
+    assert len(err) == 1 and err[0].startswith("warning: ") and words in err[0], err
+    assert "it is not used" in err[0] and "pixel=0.5um" in err[0]
+
+
+def test_a_stated_pixel_size_is_not_reported_when_the_url_gives_one(tmp_path):
+    tifffile = pytest.importorskip("tifffile")
+    from stickslip.vision.camera import open_camera
+
+    tifffile.imwrite(tmp_path / "f0.tif", _frame(0), resolution=(72, 72), resolutionunit=2)
+    cam = open_camera(f"files://{tmp_path}")
+    assert cam.grab().pixel_size_m is None and cam.stated_pixel is not None  # type: ignore[attr-defined]
+    assert cam.stated_pixel[1].pixel_m == pytest.approx((0.0254 / 72, 0.0254 / 72))  # type: ignore[attr-defined]
+    cam = open_camera(f"files://{tmp_path}?pixel=0.5um")
+    assert cam.grab().pixel_size_m == 0.5e-6 and cam.stated_pixel is None  # type: ignore[attr-defined]

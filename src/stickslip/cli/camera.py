@@ -159,7 +159,12 @@ _ORIENTATIONS = {2: "mirrored left to right", 3: "turned 180°", 4: "mirrored to
 
 
 def _warn_stated(found: list[Located]) -> None:
-    """One warning line for a frame whose file states an orientation other than 1 (pixels are read as stored)."""
+    """One warning line for a frame whose file states an orientation other than 1 (pixels are read as stored),
+    one for a file that states a pixel size (not used)."""
+    stated_pixel = found[0].stated_pixel if found else None
+    if stated_pixel is not None:
+        warn(stated_pixel_line(*stated_pixel) + ": camera locate answers in pixels; where a size is needed, "
+             "a camera URL takes it: files://FOLDER?pixel=0.5um")
     turned = found[0].turned if found else None
     if turned is not None:
         name, stated = turned
@@ -167,6 +172,15 @@ def _warn_stated(found: list[Located]) -> None:
         warn(f"{name} states orientation {stated.orientation} (a viewer shows it {how}): the frames are read as "
              "stored, so --tip and every answer are in stored pixels (x right, y down from the stored top-left "
              "pixel), not as a viewer that turns the image shows them")
+
+
+def stated_pixel_line(name: str, stated: Any) -> str:
+    """``NAME states a pixel of ... (where), not used``: the start of the line for a file's stated pixel size."""
+    x, y = stated.pixel_m
+    size = f"{x * 1e6:.4g} µm" if math.isclose(x, y, rel_tol=1e-6) else (
+        f"{x * 1e6:.4g} x {y * 1e6:.4g} µm (not square: a frame's pixel size is one number)")
+    return (f"{name} states a pixel of {size} ({stated.pixel_from}); it is not used (a scanner's 72 dpi is "
+            "not a microscope's pixel)")
 
 
 def _print_located(found: list[Located]) -> None:
