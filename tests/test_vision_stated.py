@@ -84,3 +84,24 @@ def test_a_stated_pixel_size_is_not_reported_when_the_url_gives_one(tmp_path):
     assert cam.stated_pixel[1].pixel_m == pytest.approx((0.0254 / 72, 0.0254 / 72))  # type: ignore[attr-defined]
     cam = open_camera(f"files://{tmp_path}?pixel=0.5um")
     assert cam.grab().pixel_size_m == 0.5e-6 and cam.stated_pixel is None  # type: ignore[attr-defined]
+
+
+def test_a_glob_takes_the_files_a_folder_takes(tmp_path):
+    from stickslip.vision.files import frame_paths
+    from stickslip.vision.frame import ImageError
+
+    for k in range(2):
+        PIL.fromarray(_frame(k)).save(tmp_path / f"f{k}.png")
+    (tmp_path / "Thumbs.db").write_bytes(b"\xd0\xcf\x11\xe0 not an image")
+    (tmp_path / "f1.png.txt").write_text("notes")
+    frames = [tmp_path / "f0.png", tmp_path / "f1.png"]
+    assert frame_paths([tmp_path]) == frames
+    assert frame_paths([str(tmp_path / "*")]) == frames  # was [f0.png, f1.png, f1.png.txt, Thumbs.db]
+    out, err = _locate(str(tmp_path / "*"))  # was: exit 2 naming Thumbs.db
+    assert [o["frame"] for o in out] == [str(p) for p in frames] and err == []
+    with pytest.raises(ImageError, match=r"matches 1 files \(Thumbs.db, ...\) but no image file"):
+        frame_paths([str(tmp_path / "T*")])
+    with pytest.raises(ImageError, match="Thumbs.db: not a readable image"):  # named on its own: read, refused
+        from stickslip.vision.images import read_image
+
+        read_image(frame_paths([tmp_path / "Thumbs.db"])[0])

@@ -52,9 +52,11 @@ def is_video(path: str | os.PathLike[str]) -> bool:
 def frame_paths(names: Sequence[str | os.PathLike[str]]) -> list[Path]:
     """The image files that ``names`` mean, in order.
 
-    Each name is a file (taken as it is), a folder (its image files,
+    Each name is a file (taken as it is, whatever its name ends in), a folder (its image files,
     :data:`~.images.IMAGE_SUFFIXES`, in name order) or a glob pattern (``*``, ``?``,
-    ``[``: its matches, in name order). Name order reads runs of digits as numbers
+    ``[``: its matching image files, in name order). A folder and a glob take the same files:
+    those named like images; anything else they hold or match (``Thumbs.db``, ``.DS_Store``,
+    ``notes.txt``) is skipped, and one that leaves nothing is refused. Name order reads runs of digits as numbers
     (:func:`name_order`: ``f2.png`` before ``f10.png``). :class:`ImageError` for a name
     that is nothing, an empty folder or a pattern matching no file.
     """
@@ -84,7 +86,11 @@ def _named_frames(text: str) -> list[Path]:
     matches = sorted((Path(m) for m in glob.glob(text) if Path(m).is_file()), key=name_order)
     if not matches:
         raise ImageError(f"{text}: no file matches the pattern")
-    return matches
+    images = [m for m in matches if m.suffix.lower() in IMAGE_SUFFIXES]  # as a folder: Thumbs.db is not a frame
+    if not images:
+        raise ImageError(f"{text}: the pattern matches {len(matches)} files ({matches[0].name}, ...) but no image "
+                         f"file ({', '.join(IMAGE_SUFFIXES)}); name a file to read it whatever its name ends in")
+    return images
 
 
 _DIGITS = re.compile(r"(\d+)")
