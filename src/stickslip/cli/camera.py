@@ -114,6 +114,9 @@ def locate_cmd(
     frame, and one out of focus costs every later fix; start the frames where the tip is in
     focus. The frames are tracked as without it (same output, exit 0).
 
+    Frames are read as stored: a file whose EXIF orientation is not 1 (a viewer turns it) gets
+    one warning line, as does a TIFF that states a pixel size (not used: the answers are pixels).
+
     Example: stickslip camera locate frames/*.png --tip 307,256 --json
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
