@@ -267,19 +267,19 @@ def test_traverse_and_demo_refuse_an_impossible_day_before_anything_moves(tmp_pa
 
 
 @given(st.dates(), st.dates())
-def test_day_order_sorts_iso_dates_as_dates(a, b):
-    from stickslip.clock import day_order
+def test_natural_order_sorts_iso_dates_as_dates(a, b):
+    from stickslip.records import natural_order
 
-    assert (day_order(a.isoformat()) < day_order(b.isoformat())) == (a < b)
+    assert (natural_order(a.isoformat()) < natural_order(b.isoformat())) == (a < b)
 
 
 def test_a_calibration_of_sessions_day9_and_day10_is_dated_day10():
     """The calibration's day is its table's latest session: labels were compared as text, so of day9 and day10
     the calibration was dated day9 (audit31)."""
     from stickslip.calibration import calibrate
-    from stickslip.clock import day_order
+    from stickslip.records import natural_order
 
-    assert sorted(["day10", "day9", "day1"], key=day_order) == ["day1", "day9", "day10"]
+    assert sorted(["day10", "day9", "day1"], key=natural_order) == ["day1", "day9", "day10"]
     rows = paper_table()
     half = len(rows) // 2
     table = [dataclasses.replace(t, day="day9") for t in rows[:half]] + [

@@ -36,7 +36,6 @@ __all__ = [
     "parse_day",
     "day_label_problem",
     "check_day_label",
-    "day_order",
     "age_days",
     "stale_message",
 ]
@@ -117,15 +116,6 @@ def day_label_problem(label: str) -> str | None:
         if shaped.group(0) != date.isoformat():
             return f"the session label {text!r}: write the date as {date.isoformat()} (YYYY-MM-DD)"
     return None
-
-
-def day_order(label: str) -> tuple[tuple[int, int | str], ...]:
-    """A sort key putting session labels in their order: ISO dates by date, ``day9`` before ``day10``.
-
-    The label's runs of digits compare as numbers, the rest as text (so ``2026-11-22`` sorts
-    as its date, ``2026-11-22 am`` before ``2026-11-22 pm``).
-    """
-    return tuple((0, int(part)) if part.isdigit() else (1, part) for part in re.split(r"(\d+)", label) if part)
 
 
 def check_day_label(label: str) -> str:

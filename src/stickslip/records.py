@@ -223,6 +223,19 @@ def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any
     return pairs
 
 
+def natural_order(text: str) -> tuple[tuple[int, int | str], ...]:
+    """A sort key putting names and labels in the order people number them: runs of digits compare as numbers.
+
+    ``day9`` before ``day10``, ``f2.png`` before ``f10.png``; an ISO date sorts as its date and
+    ``2026-11-22 am`` before ``2026-11-22 pm``. Names equal as numbers (``f01``, ``f1``) tie: a
+    caller that needs a total order adds the text itself (:func:`stickslip.vision.files.name_order`).
+    """
+    return tuple((0, int(part)) if part.isdigit() else (1, part) for part in _DIGIT_RUNS.split(text) if part)
+
+
+_DIGIT_RUNS = re.compile(r"(\d+)")
+
+
 class _KeyTwice(Exception):
     pass
 

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 from .. import kinematics as kin
 from .. import plotting, records
-from ..clock import day_label_problem, day_order, now_utc
+from ..clock import day_label_problem, now_utc
 from ..measurements import Traverse, measurements_to_csv
 from ..models import (
     DIRECTIONS,
@@ -32,7 +32,7 @@ from ..models import (
     direction_label,
 )
 from ..models.families import FamilyParams
-from ..records import check_unit, finite_number
+from ..records import check_unit, finite_number, natural_order
 from ..units import param_scale, step_scale
 from .errormodel import Predictive
 
@@ -223,7 +223,7 @@ class Provenance:
             rows_sha256=rows,
             rows=len(traverses),
             rows_used=used,
-            days=tuple(sorted({t.day for t in traverses}, key=day_order)),
+            days=tuple(sorted({t.day for t in traverses}, key=natural_order)),
             notes=tuple(notes),
         )
 
@@ -731,7 +731,7 @@ def _constant_step(joint: int, direction: str, model: JointModel) -> float:
 def _day_of(traverses: Sequence[Traverse], day: str | None) -> str:
     if day:
         return day
-    days = sorted({t.day for t in traverses}, key=day_order)  # day10 after day9
+    days = sorted({t.day for t in traverses}, key=natural_order)  # day10 after day9
     return days[-1] if days else ""
 
 

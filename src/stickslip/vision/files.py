@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from ..devices.base import Controller, redact_url
+from ..records import natural_order
 from .camera import CameraEnded, CameraError, CameraInfo, camera_options, pixel_option
 from .frame import Frame, ImageError, as_image
 from .images import IMAGE_SUFFIXES, VIDEO_SUFFIXES, Stated, _check_file, read_image_stated
@@ -93,20 +94,15 @@ def _named_frames(text: str) -> list[Path]:
     return images
 
 
-_DIGITS = re.compile(r"(\d+)")
-
-
-def name_order(path: Path) -> tuple[tuple[tuple[int, int, str], ...], str]:
+def name_order(path: Path) -> tuple[tuple[tuple[int, int | str], ...], str]:
     """The sort key of a frame's path: runs of digits compare as numbers (``f2`` before ``f10``), the rest as text.
 
     A camera or script that numbers its frames without leading zeros (``f1.png`` ... ``f10.png``)
     would otherwise be tracked out of order (``f1, f10, f11, f2``) with each frame given
-    another frame's time. Zero-padded names keep their order; two names equal as numbers
-    (``f01``, ``f1``) fall back to the path's text.
+    another frame's time (:func:`stickslip.records.natural_order`). Zero-padded names keep their
+    order; two names equal as numbers (``f01``, ``f1``) fall back to the path's text.
     """
-    parts = _DIGITS.split(str(path))
-    key = tuple((1, int(t), "") if k % 2 else (0, 0, t) for k, t in enumerate(parts) if t)
-    return key, str(path)
+    return natural_order(str(path)), str(path)
 
 
 class FileCamera:
