@@ -55,7 +55,7 @@ def _channels(path: Path, channel: int | None) -> int | None:
     from ..audio.sources import AudioSourceError, channel_problem, truncation
 
     if not _is_csv(path) and (cut := truncation(path)) is not None:
-        err_console.print(f"warning: {cut}", highlight=False, soft_wrap=True)
+        warn(cut)
 
     if channel is not None:
         if _is_csv(path):
@@ -70,7 +70,7 @@ def _channels(path: Path, channel: int | None) -> int | None:
     except AudioSourceError as e:
         fail(str(e))
     if why is not None:
-        err_console.print(f"warning: {why}", highlight=False, soft_wrap=True)
+        warn(why)
     return None
 
 
@@ -97,7 +97,7 @@ def _warn_shortfall(path: Path, frames_read: int) -> None:
     from ..audio.sources import shortfall
 
     if not _is_csv(path) and (short := shortfall(path, frames_read)) is not None:
-        err_console.print(f"warning: {short}", highlight=False, soft_wrap=True)
+        warn(short)
 
 
 @app.command()
@@ -195,7 +195,7 @@ def tune(
     except OSError as e:
         fail(f"cannot write {out}: {e.strerror or e}")
     for w in (tuning.checks or {}).get("warnings", []):
-        err_console.print(f"warning: {w}", highlight=False, soft_wrap=True)
+        warn(w)
     if json_out:
         print_json(tuning.to_dict())
         return
@@ -356,7 +356,7 @@ def _listen_file(
     for t_s, why in report.stopped:
         _note_stopped(t_s, why)
     for line in report.warnings(str(recording), tuning):
-        err_console.print(f"warning: {line}", highlight=False, soft_wrap=True)
+        warn(line)
     if json_out:
         print_json([e.to_dict() for e in report.events])
         return
@@ -656,7 +656,7 @@ def _finish_recording(
             fail(f"cannot write {tune_out}: {e.strerror or e}")
         result["tuning"] = tuning.to_dict()
         for w in (tuning.checks or {}).get("warnings", []):
-            err_console.print(f"warning: {w}", highlight=False, soft_wrap=True)
+            warn(w)
     if json_out:
         print_json(result)
         return
