@@ -211,16 +211,22 @@ def _json_int(text: str) -> int:
     return int(text)
 
 
-def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any]]:
+def _once(twice: Callable[[str], Exception]) -> Callable[[list[tuple[str, Any]]], dict[str, Any]]:
+    """An ``object_pairs_hook`` that raises ``twice(key)`` for a key given twice in one object."""
+
     def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for k, v in items:
             if k in out:
-                raise ValueError(f"{where}: the key {k!r} is given twice in one object (which one is meant?)")
+                raise twice(k)
             out[k] = v
         return out
 
     return pairs
+
+
+def _no_key_twice(where: str) -> Callable[[list[tuple[str, Any]]], dict[str, Any]]:
+    return _once(lambda k: ValueError(f"{where}: the key {k!r} is given twice in one object (which one is meant?)"))
 
 
 def natural_order(text: str) -> tuple[tuple[int, int | str], ...]:
@@ -244,17 +250,8 @@ def repeated_key(text: str | bytes) -> str | None:
     """The first key given twice in one object of the JSON document ``text``, else ``None`` (also for text that is
     not JSON, or nested too deeply to read: the reader that follows says why). Python's ``json`` keeps the last
     of two silently; a request's body or message naming ``"joint"`` twice would move the joint named last."""
-
-    def pairs(items: list[tuple[str, Any]]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for k, v in items:
-            if k in out:
-                raise _KeyTwice(k)
-            out[k] = v
-        return out
-
     try:
-        json.loads(text, object_pairs_hook=pairs)
+        json.loads(text, object_pairs_hook=_once(_KeyTwice))
     except _KeyTwice as e:
         return str(e.args[0])
     except (ValueError, RecursionError, TypeError):

@@ -88,7 +88,7 @@ class StateStore(_Base):
                     if isinstance(current, dict):
                         return dict(current)
                     return {"pid": "?", "host": "another connection to the shared database", "since": "?"}
-                if claimed is None and isinstance(current, dict) and _alive(current):
+                if claimed is None and isinstance(current, dict) and not process_gone(current):  # unknown: running
                     return dict(current)
                 con.execute(
                     "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
@@ -117,10 +117,3 @@ class StateStore(_Base):
                     con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
         finally:
             self._con.release(f"device {redact_url(device)}")
-
-
-def _alive(holder: dict[str, Any]) -> bool:
-    """Whether a lock holder may still be running (unknown counts as running)."""
-    return not process_gone(holder)
-
-
