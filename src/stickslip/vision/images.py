@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..units import LENGTH_UNITS
 from .frame import MAX_PIXELS, ImageError, as_image
 
 __all__ = [
@@ -198,7 +199,7 @@ def _orientation(value: Any) -> int:
 
 
 _INCH_M, _CM_M = 0.0254, 0.01
-_OME_UNITS = {"m": 1.0, "mm": 1e-3, "µm": 1e-6, "um": 1e-6, "\u03bcm": 1e-6, "nm": 1e-9, "pm": 1e-12, "cm": 1e-2}
+_OME_UNITS = {**LENGTH_UNITS, "cm": _CM_M}  # OME's length units: ours, and a centimetre
 _OME_PHYSICAL = re.compile(r'PhysicalSize([XY])(Unit)?="([^"]*)"')
 
 
