@@ -917,13 +917,11 @@ def step_joint(
     key = device_key(device)
     with device_lock(store, key):
         state = load_state(store, key, joints)
-        spec = state.spec(joint)
+        state.spec(joint)  # an unknown joint is refused before the device opens
         try:
             dev = (opener or open_device)(device)  # one that cannot be opened was sent nothing: the state stays
             try:
-                lo, hi = state.bounds(joint)
-                after = (lo, spec.upper) if steps > 0 else (spec.lower, hi)
-                state.mark_uncertain(joint, *after, f"{steps:+d} raw steps were sent")
+                _towards_stop(state, joint, steps, f"{steps:+d} raw steps were sent")
                 save_state(store, state)  # write-ahead: uncertain before anything is sent
                 ready()
                 if isinstance(dev, PoseSettable):  # the simulator: start where the positions say
@@ -970,8 +968,14 @@ def driven_towards_stop(
     key = device_key(device)
     with device_lock(store, key):
         state = load_state(store, key, joints)
-        spec = state.spec(joint)
-        lo, hi = state.bounds(joint)
-        state.mark_uncertain(joint, *((lo, spec.upper) if sign > 0 else (spec.lower, hi)), why)
+        _towards_stop(state, joint, sign, why)
         save_state(store, state)  # write-ahead: uncertain before anything is sent
         yield state
+
+
+def _towards_stop(state: DeviceState, joint: int, sign: int, why: str) -> None:
+    """Keep ``joint`` uncertain from where it may be (its bounds) to its end stop on the side of ``sign`` (> 0: upper):
+    stepped by an amount no model gives (raw steps, a drive into the stop)."""
+    spec = state.spec(joint)
+    lo, hi = state.bounds(joint)
+    state.mark_uncertain(joint, *((lo, spec.upper) if sign > 0 else (spec.lower, hi)), why)
