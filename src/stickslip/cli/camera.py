@@ -389,19 +389,12 @@ def _joint_order(joints: str) -> list[int]:
 
 
 def _journal_camera_calibration(store: Store, key: str, joints: Sequence[int]) -> None:
-    """Keep ``joints`` uncertain over their range while the calibration steps them, saved before the first step.
-
-    Its end is written after the measurement (each joint where the camera saw it end);
-    a device error, Ctrl-C or a kill before that left the positions from before it kept,
-    as if the joints had not moved (some hundreds of steps out and back, the tip found
-    by stepping ``--auto-joint``).
-    """
+    """The joints the calibration steps, kept uncertain in the store first (procedures.camera.mark_stepped)."""
     from ..devices.positions import load_state, save_state
+    from ..procedures.camera import mark_stepped
 
     journal = load_state(store, key)
-    for j in sorted(set(joints)):
-        spec = journal.spec(j)
-        journal.mark_uncertain(j, spec.lower, spec.upper, "a camera calibration was interrupted")
+    mark_stepped(journal, joints)
     save_state(store, journal)
 
 

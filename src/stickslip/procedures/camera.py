@@ -43,6 +43,7 @@ __all__ = [
     "acquire_tip",
     "calibrate_camera",
     "dead_reckon",
+    "mark_stepped",
 ]
 
 
@@ -398,6 +399,18 @@ def _step_sizes(
         rows.append(StepSize(se.day, j, s.direction, p.q1, p.q2, p.q3, p.theta, p.psi, s.gamma, s.sigma,
                              s.steps, "camera"))
     return [plus, minus], rows
+
+
+def mark_stepped(state: DeviceState, joints: Sequence[int]) -> None:
+    """Keep ``joints`` uncertain over their range while a camera calibration steps them (saved before the first step).
+
+    Its end is written after the measurement (:func:`dead_reckon`); a device error, Ctrl-C or a
+    kill before that left the positions from before it kept, as if the joints had not moved
+    (some hundreds of steps out and back, the tip found by stepping the auto joint).
+    """
+    for j in sorted(set(joints)):
+        spec = state.spec(j)
+        state.mark_uncertain(j, spec.lower, spec.upper, "a camera calibration was interrupted")
 
 
 def dead_reckon(state: DeviceState, result: CameraCalibrationResult) -> None:
