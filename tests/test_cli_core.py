@@ -112,6 +112,32 @@ def test_plan_interval_of_an_older_calibration_adds_a_days_change_as_move_does(f
     assert "with a day's change of step, 15%: the calibration is from another day" in " ".join(r.stdout.split())
 
 
+def test_predict_interval_of_an_older_calibration_adds_a_days_change_as_plan_does(files, monkeypatch):
+    # plan and move add a day's change of step scale (15 %, DRIFT_PRIOR) to a calibration from another day;
+    # predict --interval gave the same pose the calibration's model error alone, 2x narrower (lead, stop 62)
+    tmp, meas = files
+    cal_path = _cal(tmp, meas)  # the pinned day, 2026-11-22
+    poses = tmp / "poses.csv"
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi\n3,+,0,-1.0,0.002,0,0\n2,-,0,-0.5,0,0,0.1\n")
+    args = ["predict", "-c", str(cal_path), str(poses), "--interval", "--json"]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0 and r.stderr == "", r.output
+    today = json.loads(r.stdout)
+    monkeypatch.setenv("STICKSLIP_TODAY", "2026-11-23")
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    later = json.loads(r.stdout)
+    assert "gamma_pi95 includes a day's change of step, 15%: the calibration is from 2026-11-22" in " ".join(
+        r.stderr.split())
+    for a, b in zip(today, later, strict=True):
+        assert b["gamma_pred"] == a["gamma_pred"]
+        sd = a["gamma_pi95"] / (1.96 * a["gamma_pred"])
+        assert b["gamma_pi95"] == pytest.approx(1.96 * a["gamma_pred"] * math.hypot(sd, 0.15), rel=1e-12)
+        assert b["gamma_pi95"] > 1.9 * a["gamma_pi95"]  # 7.5 % assumed model error: the interval doubles
+    plain = runner.invoke(app, args[:-2])  # without --interval: the stale calibration's warning only
+    assert plain.exit_code == 0 and "1 day old" in plain.stderr and "gamma_pi95" not in plain.stderr
+
+
 def test_validate(files):
     tmp, meas = files
     cal_path = _cal(tmp, meas)

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
+from ..clock import age_days
 from ..measurements import StepSize, Traverse
 from ..models import JointModel, NonPhysicalError, PrismaticParams, RotaryParams
 from ..models.families import FamilyModel, FamilyParams
@@ -50,11 +51,21 @@ from .result import Calibration, CalibrationError, Provenance, _constant_step, _
 
 __all__ = [
     "DRIFT_PRIOR", "DEFAULT_SIGMA", "STEP_NOISE", "ScaleUpdate", "update_calibration", "scaled_model", "model_sigma",
-    "prediction_sd",
+    "prediction_sd", "day_drift",
 ]
 
 DRIFT_PRIOR = 0.15
 """Default prior standard deviation of the day-to-day change of a joint's step scale (relative)."""
+
+
+def day_drift(cal: Calibration) -> float:
+    """The relative change of step scale a calibration carries into today: 0 for one made today
+    (:func:`stickslip.clock.today`), :data:`DRIFT_PRIOR` for one from another or an unknown day.
+
+    The one rule behind ``move``'s dead reckoning (:meth:`~stickslip.motion.tracking.JointTrack.fresh`),
+    ``plan``'s and ``predict --interval``'s intervals: they add it to the model's relative error in quadrature.
+    """
+    return 0.0 if age_days(cal.day) == 0 else DRIFT_PRIOR
 
 @dataclass(frozen=True)
 class ScaleUpdate:

@@ -41,6 +41,7 @@ from ._common import (
     say,
     user_errors,
     validation_table,
+    warn,
     warn_later,
 )
 from ._output import data_stream, styled
@@ -598,21 +599,24 @@ def predict_cmd(
     With --interval also gamma_pi95, the half-width of a 95 % prediction interval: 1.96
     times the relative error the calibration expects in that pose (it grows with the pose's
     distance from the calibrated poses; an assumed one for the paper's exactly determined
-    procedure) times gamma_pred.
+    procedure) times gamma_pred. A calibration from another day adds a day's change of step
+    (15 %), as plan and move do; a line on standard error says so.
 
     A row with start,end gets the average step over that traverse (exact integral);
     a row without them gets the step size at its pose (the moving joint at q1/q2/q3).
 
     Example: stickslip predict -c cal.json poses.csv -o predicted.csv
     """
+    from ..calibration.update import day_drift
     from ..measurements import TableError
     from ..procedures.predict import PredictionError, check_pose_file, predict_pose_file, write_csv, write_json
 
     cal = _load_calibration(calibration)
+    drift = day_drift(cal) if interval else 0.0
     rows = [0]
 
     def emit(f: TextIO) -> None:  # the table streams through, a chunk at a time (any length, bounded memory)
-        header, chunks = predict_pose_file(cal, poses, interval)
+        header, chunks = predict_pose_file(cal, poses, interval, drift)
         rows[0] = write_json(header, chunks, f) if json_out else write_csv(header, chunks, f, interval)
 
     try:
@@ -626,6 +630,9 @@ def predict_cmd(
         fail_table(e)
     except PredictionError as e:
         fail(str(e))
+    if drift:
+        warn(f"gamma_pi95 includes a day's change of step, {drift:.0%}: the calibration is from "
+             f"{cal.day or 'an unknown day'}, not today")  # on stderr: stdout may be the table
     if output is not None:
         console.print(f"wrote {rows[0]} rows to {output}")
 
@@ -661,17 +668,6 @@ def validate_cmd(
         return
     title = f"model vs constant step on {len(traverses)} traverses (relative error of the average step)"
     console.print(validation_table(rows, title))
-
-
-def _with_day_drift(cal: Calibration, sd: float) -> tuple[float, float]:
-    """``sd`` (relative) with a day's change of step scale added for a calibration not made today, as ``move``'s
-    dead reckoning starts it (:meth:`~stickslip.motion.tracking.JointTrack.fresh`), and that change (0 for today's).
-    """
-    from ..calibration.update import DRIFT_PRIOR
-    from ..clock import age_days
-
-    drift = 0.0 if age_days(cal.day) == 0 else DRIFT_PRIOR
-    return math.hypot(sd, drift), drift
 
 
 @app.command("plan")
@@ -727,7 +723,10 @@ def plan_cmd(
 
     sd, assumed = prediction_sd(cal, joint, plan.direction, max(plan.steps, 1), pose=tuple(pose),
                                 span=(plan.q_from, plan.q_end_predicted))
-    sd, drift = _with_day_drift(cal, sd)
+    from ..calibration.update import day_drift
+
+    drift = day_drift(cal)
+    sd = math.hypot(sd, drift)
     half = 1.96 * sd * abs(plan.q_end_predicted - plan.q_from)
     if json_out:
         d = plan.as_dict()

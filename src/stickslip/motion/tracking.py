@@ -42,8 +42,7 @@ from numpy.typing import NDArray
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..calibration.intervals import relative_sd
-from ..calibration.update import DRIFT_PRIOR, STEP_NOISE, model_sigma, scaled_model
-from ..clock import age_days
+from ..calibration.update import DRIFT_PRIOR, STEP_NOISE, day_drift, model_sigma, scaled_model
 from .planning import Planner
 
 __all__ = [
@@ -150,7 +149,7 @@ class JointTrack:
         to within its model error, not to a day's drift.
         """
         if drift is None:
-            drift = 0.0 if age_days(cal.day) == 0 else DRIFT_PRIOR
+            drift = day_drift(cal)
         if not (math.isfinite(q_sd) and q_sd >= 0 and math.isfinite(drift) and drift >= 0):
             raise ValueError("q_sd and drift must be finite and >= 0")
         sm = joint_sigma_model(cal, joint)

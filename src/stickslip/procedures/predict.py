@@ -87,21 +87,27 @@ def check_pose_file(path: str | Path) -> int:
 
 
 def predict_pose_file(
-    cal: Calibration, path: str | Path, interval: bool = False
+    cal: Calibration, path: str | Path, interval: bool = False, drift: float = 0.0
 ) -> tuple[list[str], Iterator[PredictedChunk]]:
     """A pose table's header and its predictions, a chunk at a time.
+
+    ``drift`` (relative) is added in quadrature to each row's relative error in ``gamma_pi95``:
+    a day's change of step scale for a calibration from another day
+    (:func:`stickslip.calibration.update.day_drift`), 0 for today's.
 
     A bad file or header raises :class:`TableError` here. The chunks raise (when the table
     has been read to its end) :class:`TableError` with every bad row, else
     :class:`PredictionError` for the first row the calibration cannot answer; no chunk is
     yielded after the first problem.
     """
+    if not (math.isfinite(drift) and drift >= 0):
+        raise ValueError(f"drift must be finite and >= 0, got {drift!r}")
     header, chunks = stream_pose_table(path)
-    return header, _predicted(cal, path, interval, header, chunks)
+    return header, _predicted(cal, path, interval, drift, header, chunks)
 
 
 def _predicted(
-    cal: Calibration, path: str | Path, interval: bool, header: list[str], chunks: Iterator[PoseChunk]
+    cal: Calibration, path: str | Path, interval: bool, drift: float, header: list[str], chunks: Iterator[PoseChunk]
 ) -> Iterator[PredictedChunk]:
     problems: list[tuple[int, str]] = []
     failure: PredictionError | None = None
@@ -111,7 +117,7 @@ def _predicted(
         if not problems and failure is None and len(ch.table):
             try:
                 gamma = _predict(cal, ch.table, str(path), done)
-                pi95 = _interval(cal, ch.table, gamma) if interval else None
+                pi95 = _interval(cal, ch.table, gamma, drift) if interval else None
             except PredictionError as e:
                 failure = e
             else:
@@ -169,8 +175,9 @@ def _earlier(known: tuple[int, str] | None, found: tuple[int, str]) -> tuple[int
     return found if known is None or found[0] < known[0] else known
 
 
-def _interval(cal: Calibration, table: PoseTable, gamma: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Half-width of each prediction's 95 % interval: 1.96 x its relative standard deviation in its pose."""
+def _interval(cal: Calibration, table: PoseTable, gamma: NDArray[np.float64], drift: float) -> NDArray[np.float64]:
+    """Half-width of each prediction's 95 % interval: 1.96 x its relative standard deviation in its pose, with
+    ``drift`` added in quadrature."""
     sd = np.zeros(len(table))
     for j in np.unique(table.joint).tolist():
         for d in ("+", "-"):
@@ -179,7 +186,7 @@ def _interval(cal: Calibration, table: PoseTable, gamma: NDArray[np.float64]) ->
                 ib = np.flatnonzero(group)[b : b + BLOCK]
                 sd[ib] = relative_sd(cal, int(j), d, table.q1[ib], table.q2[ib], table.q3[ib], table.theta[ib],
                                      table.psi[ib])
-    out: NDArray[np.float64] = 1.96 * sd * gamma
+    out: NDArray[np.float64] = 1.96 * np.hypot(sd, drift) * gamma
     return out
 
 
