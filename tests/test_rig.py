@@ -228,3 +228,34 @@ def test_a_direction_of_huge_or_tiny_components_is_a_unit_vector():
         rig = parse_rig(GOOD.replace("axis = [0, 0, 1]", f"axis = {axis}", 1), "rig.toml")
         got = next(v for v in rig.volumes if v.shape == "cylinder").axis
         assert got == pytest.approx(want, abs=1e-12)
+
+
+TWO_ARMS = '[[arm]]\nname = "a"\ncontroller = "{a}"\n\n[[arm]]\nname = "b"\ncontroller = "{b}"\n'
+
+
+@pytest.mark.parametrize("a, b", [
+    ("sim://", "sim://?seed=0"),  # one simulated arm (its device key): both arms were driving its channels 1-3
+    ("sim://", "sim://?timeout=5"),
+    ("mm3a://COM3", "mm3a://com3"),  # Windows' port names have no case
+    ("mm3a:///COM3", "mm3a://COM3?timeout=5"),  # one port, as serial_port_name opens it
+    ("mm3a:///dev/ttyS_REAL", "mm3a:///dev/ttyS_LINK"),  # a link to the device file (by-id) is the device
+])
+def test_one_controller_spelled_two_ways_is_one_controller(tmp_path, a, b):
+    real = tmp_path / "ttyS_REAL"
+    real.touch()
+    try:
+        (tmp_path / "ttyS_LINK").symlink_to(real)
+    except OSError:  # Windows without the right to make links
+        if "ttyS" in a:
+            pytest.skip("no symlinks here")
+    a, b = (u.replace("/dev/", f"{tmp_path.as_posix()}/") for u in (a, b))
+    with pytest.raises(RigError, match=r"^p.toml:7: arm\[2\]\.controller: arm 'a' drives channel 1 of this controller"):
+        parse_rig(TWO_ARMS.format(a=a, b=b), "p.toml")
+
+
+@pytest.mark.parametrize("a, b", [
+    ("sim://", "sim://?seed=2"), ("mm3a://COM3", "mm3a://COM4"),
+    ("mm3a://COM3?channels=ABC", "mm3a://com3?channels=DEF"),  # a channel map each: taken as theirs (docs/rig.md)
+])
+def test_two_controllers_or_two_channel_maps_are_two(a, b):
+    assert [x.name for x in parse_rig(TWO_ARMS.format(a=a, b=b), "p.toml").arms] == ["a", "b"]

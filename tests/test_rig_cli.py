@@ -262,7 +262,7 @@ def test_two_arms_on_one_controllers_channels_are_refused(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text(RIG.format(nano="sim://", smaract="sim://"), encoding="utf-8")
     r = run("rig", "check", bad)
-    assert r.exit_code == 2 and "arm 'probe' drives channel 1 of this controller already" in r.output, r.output
+    assert r.exit_code == 2 and "arm 'probe' drives channel 1 of this controller (sim://) already" in r.output, r.output
 
 
 TWO_ON_ONE = """\

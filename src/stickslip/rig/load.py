@@ -11,15 +11,18 @@ geometry it does not give from the MM3A's description shipped with the package
 from __future__ import annotations
 
 import math
+import os
 import re
 import tomllib
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
 from ..devices.base import SECRET_OPTIONS, device_key, redact_url
+from ..devices.transport import windows_com_port
 from ..joints import MM3A_FILE
 from ..kinematics import Geometry
 from ..records import read_text_bounded
@@ -211,24 +214,26 @@ class _Reader(_Values):
             raise self.fail(("arm",), "a rig needs at least one [[arm]]")
         arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
         seen: set[str] = set()
-        # (controller URL, channel) -> the arm it drives: a channel is the URL's joint number, so two
-        # arms on one controller differ in their channels, or in the URL's channel map (channels=...)
-        channels: dict[tuple[str, int], str] = {}
+        # (controller, channel map, channel) -> the arm it drives: a channel is the URL's joint number, so
+        # two arms on one controller differ in their channels, or in the URL's channel map (channels=...).
+        # The controller is the one its URL opens (_controller_identity): sim:// and sim://?seed=0, or
+        # mm3a:///COM3 and mm3a://com3?timeout=5, are one controller
+        channels: dict[tuple[str, str, int], str] = {}
         for i, a in enumerate(arms):
             if a.name in seen:
                 raise self.fail(("arm", i, "name"), f"a second arm named {a.name!r}")
             seen.add(a.name)
             try:
-                device_key(a.controller)
+                controller = (_controller_identity(a.controller), _channel_map(a.controller))
             except ValueError as e:
                 raise self.fail(("arm", i, "controller"), str(e)) from None
             for j in a.joints:
-                other = channels.get((a.controller, j.channel))
+                other = channels.get((*controller, j.channel))
                 if other is not None:
                     raise self.fail(("arm", i, "controller"), f"arm {other!r} drives channel {j.channel} of this "
-                                    f"controller already (joint {j.number} of {a.name!r}): two arms on one "
-                                    "controller need channels of their own")
-                channels[(a.controller, j.channel)] = a.name
+                                    f"controller ({controller[0]}) already (joint {j.number} of {a.name!r}): two "
+                                    "arms on one controller need channels of their own")
+                channels[(*controller, j.channel)] = a.name
         vols_raw = doc.get("volume", [])
         if not isinstance(vols_raw, list):
             raise self.fail(("volume",), "must be an array of tables ([[volume]])")
@@ -517,6 +522,28 @@ def _kind(value: object) -> str:
         if isinstance(value, t):
             return name
     return "a date or time"
+
+
+def _controller_identity(url: str) -> str:
+    """Which controller ``url`` drives, for the rig's channel check: its device key, a serial port's name as the
+    port is opened (``mm3a:///COM3``, ``mm3a://COM3`` and ``mm3a://com3`` are one port), and a device file
+    that exists here through its links (``/dev/serial/by-id/...`` is the ``/dev/ttyUSB0`` it points to)."""
+    key = device_key(url)
+    parts = urlsplit(key)
+    if key.startswith("sim") or (parts.port is not None):
+        return key
+    port = parts.path or parts.netloc
+    com = windows_com_port(port)
+    if com is not None:
+        return f"{parts.scheme}://{com.upper()}"
+    if port.startswith("/") and os.path.exists(port):
+        port = os.path.realpath(port)
+    return f"{parts.scheme}://{port}"
+
+
+def _channel_map(url: str) -> str:
+    """A controller URL's channel map (its last ``channels=`` option, as the backends read it), else ``""``."""
+    return parse_qs(urlsplit(url).query).get("channels", [""])[-1]
 
 
 def _has_secret(url: str) -> bool:
