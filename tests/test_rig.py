@@ -259,3 +259,14 @@ def test_one_controller_spelled_two_ways_is_one_controller(tmp_path, a, b):
 ])
 def test_two_controllers_or_two_channel_maps_are_two(a, b):
     assert [x.name for x in parse_rig(TWO_ARMS.format(a=a, b=b), "p.toml").arms] == ["a", "b"]
+
+
+def test_two_names_differing_only_in_case_are_refused():
+    """'Probe' and 'probe' are one name to whoever types --arm or a position's arm: refused, naming both."""
+    two = TWO_ARMS.format(a="sim://", b="sim://?seed=2").replace('"b"', '"A"')
+    with pytest.raises(RigError, match=r"^p.toml:6: arm\[2\]\.name: a second arm named 'A' \('a' differs only in case"):
+        parse_rig(two, "p.toml")
+    vols = "".join(f'\n[[volume]]\nname = "{n}"\nshape = "half-space"\npoint = [0, 0, -0.01]\nnormal = [0, 0, -1]\n'
+                   for n in ("Sample", "sample"))
+    with pytest.raises(RigError, match=r"^p.toml:16: volume\[2\]\.name: a second volume named 'sample'"):
+        parse_rig(TWO_ARMS.format(a="sim://", b="sim://?seed=2") + vols, "p.toml")

@@ -213,16 +213,17 @@ class _Reader(_Values):
         if not isinstance(arms_raw, list) or not arms_raw:
             raise self.fail(("arm",), "a rig needs at least one [[arm]]")
         arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
-        seen: set[str] = set()
+        seen: dict[str, str] = {}  # casefolded -> as written: "Probe" and "probe" are one name to a person
         # (controller, channel map, channel) -> the arm it drives: a channel is the URL's joint number, so
         # two arms on one controller differ in their channels, or in the URL's channel map (channels=...).
         # The controller is the one its URL opens (_controller_identity): sim:// and sim://?seed=0, or
         # mm3a:///COM3 and mm3a://com3?timeout=5, are one controller
         channels: dict[tuple[str, str, int], str] = {}
         for i, a in enumerate(arms):
-            if a.name in seen:
-                raise self.fail(("arm", i, "name"), f"a second arm named {a.name!r}")
-            seen.add(a.name)
+            if a.name.casefold() in seen:
+                raise self.fail(("arm", i, "name"), f"a second arm named {a.name!r}" + _case(seen[a.name.casefold()],
+                                                                                          a.name))
+            seen[a.name.casefold()] = a.name
             try:
                 controller = (_controller_identity(a.controller), _channel_map(a.controller))
             except ValueError as e:
@@ -238,11 +239,12 @@ class _Reader(_Values):
         if not isinstance(vols_raw, list):
             raise self.fail(("volume",), "must be an array of tables ([[volume]])")
         volumes = tuple(self.volume(v, ("volume", i), tilt) for i, v in enumerate(vols_raw))
-        vseen: set[str] = set()
+        vseen: dict[str, str] = {}
         for i, v in enumerate(volumes):
-            if v.name in vseen:
-                raise self.fail(("volume", i, "name"), f"a second volume named {v.name!r}")
-            vseen.add(v.name)
+            if v.name.casefold() in vseen:
+                raise self.fail(("volume", i, "name"), f"a second volume named {v.name!r}" + _case(
+                    vseen[v.name.casefold()], v.name))
+            vseen[v.name.casefold()] = v.name
         pos_raw = doc.get("position", [])
         if not isinstance(pos_raw, list):
             raise self.fail(("position",), "must be an array of tables ([[position]])")
@@ -539,6 +541,11 @@ def _controller_identity(url: str) -> str:
     if port.startswith("/") and os.path.exists(port):
         port = os.path.realpath(port)
     return f"{parts.scheme}://{port}"
+
+
+def _case(first: str, second: str) -> str:
+    """What a name repeated in another case adds to its message ("" for the same spelling)."""
+    return "" if first == second else f" ({first!r} differs only in case: a name means one thing however typed)"
 
 
 def _channel_map(url: str) -> str:
