@@ -194,25 +194,8 @@ class _Values:
             raise self.fail(key, "lower must be less than upper")
         return lo, hi
 
-
-class _Reader(_Values):
-    """Reads one document: the rig, its arms, joints, volumes and named positions."""
-
-    def rig(self, doc: dict[str, Any], base: Rig | None) -> Rig:
-        self.table(doc, (), ("name", "n_sigma", "arm_distance", "stage", "database", "arm", "volume", "position"))
-        name = self.string(doc.get("name", Path(self.path).stem), ("name",))
-        n_sigma = doc.get("n_sigma", 3.0)
-        if isinstance(n_sigma, bool) or not isinstance(n_sigma, (int, float)) or not 0 <= n_sigma <= 10:
-            raise self.fail(("n_sigma",), "must be a number from 0 to 10 (standard deviations)")
-        arm_distance = self.quantity(doc.get("arm_distance", 0.0), ("arm_distance",), "length", nonneg=True)
-        stage = self.table(doc.get("stage", {}), ("stage",), ("tilt",))
-        tilt = self.quantity(stage.get("tilt", 0.0), ("stage", "tilt"), "angle")
-        if abs(tilt) > math.pi / 2:
-            raise self.fail(("stage", "tilt"), "must be within ±90 deg")
-        arms_raw = doc.get("arm")
-        if not isinstance(arms_raw, list) or not arms_raw:
-            raise self.fail(("arm",), "a rig needs at least one [[arm]]")
-        arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
+    def arms_apart(self, arms: tuple[Arm, ...]) -> None:
+        """Each arm a name of its own (whatever its case) and, on a controller shared, channels of its own."""
         seen: dict[str, str] = {}  # casefolded -> as written: "Probe" and "probe" are one name to a person
         # (controller, channel map, channel) -> the arm it drives: a channel is the URL's joint number, so
         # two arms on one controller differ in their channels, or in the URL's channel map (channels=...).
@@ -235,6 +218,27 @@ class _Reader(_Values):
                                     f"controller ({controller[0]}) already (joint {j.number} of {a.name!r}): two "
                                     "arms on one controller need channels of their own")
                 channels[(*controller, j.channel)] = a.name
+
+
+class _Reader(_Values):
+    """Reads one document: the rig, its arms, joints, volumes and named positions."""
+
+    def rig(self, doc: dict[str, Any], base: Rig | None) -> Rig:
+        self.table(doc, (), ("name", "n_sigma", "arm_distance", "stage", "database", "arm", "volume", "position"))
+        name = self.string(doc.get("name", Path(self.path).stem), ("name",))
+        n_sigma = doc.get("n_sigma", 3.0)
+        if isinstance(n_sigma, bool) or not isinstance(n_sigma, (int, float)) or not 0 <= n_sigma <= 10:
+            raise self.fail(("n_sigma",), "must be a number from 0 to 10 (standard deviations)")
+        arm_distance = self.quantity(doc.get("arm_distance", 0.0), ("arm_distance",), "length", nonneg=True)
+        stage = self.table(doc.get("stage", {}), ("stage",), ("tilt",))
+        tilt = self.quantity(stage.get("tilt", 0.0), ("stage", "tilt"), "angle")
+        if abs(tilt) > math.pi / 2:
+            raise self.fail(("stage", "tilt"), "must be within ±90 deg")
+        arms_raw = doc.get("arm")
+        if not isinstance(arms_raw, list) or not arms_raw:
+            raise self.fail(("arm",), "a rig needs at least one [[arm]]")
+        arms = tuple(self.arm(a, ("arm", i), base) for i, a in enumerate(arms_raw))
+        self.arms_apart(arms)
         vols_raw = doc.get("volume", [])
         if not isinstance(vols_raw, list):
             raise self.fail(("volume",), "must be an array of tables ([[volume]])")
