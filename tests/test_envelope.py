@@ -549,3 +549,23 @@ def test_a_way_out_of_a_margin_never_goes_deeper(case):
     before = np.maximum.accumulate(c, axis=0)[:-1]
     floor = np.where(c[0] < 0, np.minimum(before, 0.0), 0.0) - TOLERANCE - 1e-8
     assert np.all(c[1:] >= floor)
+
+
+def test_a_volume_kept_no_distance_from_is_still_kept_out_of():
+    """No margin, links of no radius, no σ (a rig file's defaults at `rig check`): inside a volume was a clearance
+    of 0, not below 0, and a pose inside it, or a link through it, was reported as no problem."""
+    box = Box("holder", (0.005, 0.0, 0.0), (0.002, 0.002, 0.002))  # across the link from the base to the 21 mm tip
+    rig = Rig("r", "r", (mm3a(),), (box,), n_sigma=0.0)
+    q = np.array([0.0, -math.pi / 2, 0.0])
+    with pytest.raises(EnvelopeViolation, match="the path enters 'holder'") as e:
+        check_path(rig, None, [q])
+    assert e.value.refusal.distance == 0.0 and e.value.refusal.allowed == 0.0
+    for path in ([q, q + [0.0, 0.01, 0.0]], [q, q + [0.0, 0.0, 0.001]]):  # any move from there: a collision already
+        with pytest.raises(EnvelopeViolation, match="inside 'holder' already") as e:
+            check_path(rig, None, path)
+        assert e.value.refusal.start == "volume"
+    assert safe_fraction(rig, None, [q, q + [0.0, 0.01, 0.0]])[0] == 0.0
+    away = q + [1.0, 0.0, 0.0]  # turned 57 deg about z: 2.4 mm clear of the box
+    check_path(rig, None, [away])
+    with pytest.raises(EnvelopeViolation, match="the path enters 'holder'|reaches the edge"):
+        check_path(rig, None, [away, q])  # turning back into it

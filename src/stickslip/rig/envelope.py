@@ -150,6 +150,8 @@ class Refusal:
         how = (
             f"reaches the edge of the {self.allowed * 1e6:.2f} µm kept around {self.obstacle!r}"
             if self.undecided else
+            f"enters {self.obstacle!r} (touches or crosses it, {self.allowed * 1e6:.2f} µm kept)"
+            if self.distance <= 0.0 else
             f"comes {self.distance * 1e6:.2f} µm from {self.obstacle!r}, closer than the "
             f"{self.allowed * 1e6:.2f} µm allowed"
         )
@@ -666,6 +668,15 @@ def _node_clearances(
     return c, at
 
 
+def _bad(m: Array, c: Array, allowed: Array) -> NDArray[np.bool_]:
+    """Which poses break the envelope, from their clearances with (``m``) and without (``c``) the σ margin.
+
+    Inside (or touching) an obstacle is bad with nothing kept around it too: a volume of no
+    margin, links of no radius and no σ give a clearance of 0 there, which is not below 0.
+    """
+    return np.asarray(np.any((m < 0) | (c <= -allowed), axis=1), dtype=bool)
+
+
 def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins) -> tuple[float, Refusal | None]:
     """The fraction of the path shown clear from its start, and the refusal at its first problem (``None``: none)."""
     radii = np.asarray(arm.reach_radii())
@@ -676,6 +687,7 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margin
     seg = np.arange(n)
     first_bad: tuple[float, int, bool] | None = None  # (s, obstacle, undecided)
     extra = margins.largest
+    allowed = np.concatenate((obs.allowed_v, obs.allowed_o))[None, :]
 
     def pose(s: Array, k: Array) -> Array:
         return np.asarray(path[k] + (s - k)[:, None] * (path[k + 1] - path[k]), dtype=float)
@@ -693,7 +705,7 @@ def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margin
         i0, i1 = back[: len(s0)], back[len(s0):]
         c0, c1 = c[i0], c[i1]
         m0, m1 = c0 - at[i0][:, None], c1 - at[i1][:, None]
-        bad0, bad1 = np.any(m0 < 0, axis=1), np.any(m1 < 0, axis=1)
+        bad0, bad1 = _bad(m0, c0, allowed), _bad(m1, c1, allowed)
         for mask, s, cc in ((bad0, s0, m0), (bad1, s1, m1)):
             if np.any(mask):
                 i = int(np.argmin(np.where(mask, s, np.inf)))
@@ -762,15 +774,15 @@ def _escape(
     zero = np.zeros(1)
     at0 = margins.at(zero, path[:1])
     c = _link_clearances(arm, obs, path[:1], at0)[0] - at0[0]  # (L, C)
-    if np.all(c >= 0.0):
-        return 0.0, 0.0, None
     allowed = np.concatenate((obs.allowed_v, obs.allowed_o))
     dist = c + at0[0] + allowed[None, :]
-    hit = (dist <= obs.contact[None, :]) & (c < 0.0)
+    hit = (dist <= obs.contact[None, :]) & ((c < 0.0) | (dist <= 0.0))  # (inside one kept no distance from too)
     if np.any(hit):
         which = int(np.argmax(np.any(hit, axis=0)))
         r = _refusal(arm, obs, path[0], which, 0.0, False, float(at0[0]))
         return 0.0, 0.0, dataclasses.replace(r, allowed=float(obs.contact[which]), start="volume")
+    if np.all(c >= 0.0):
+        return 0.0, 0.0, None
     inside = c < 0.0
     best = c.copy()  # each pair's largest clearance so far
     rate = np.abs(np.diff(path, axis=0)) @ np.asarray(arm.reach_radii())
