@@ -270,3 +270,16 @@ def test_two_names_differing_only_in_case_are_refused():
                    for n in ("Sample", "sample"))
     with pytest.raises(RigError, match=r"^p.toml:16: volume\[2\]\.name: a second volume named 'sample'"):
         parse_rig(TWO_ARMS.format(a="sim://", b="sim://?seed=2") + vols, "p.toml")
+
+
+@pytest.mark.parametrize("value, shown", [("30", "30 rad (1719 deg)"), ('"-90"', "-90 rad (-5157 deg)"),
+                                          ("1e2", "100.0 rad (5730 deg)")])
+def test_a_bare_angle_of_more_than_a_turn_is_refused_as_degrees_without_their_unit(value, shown):
+    """A bare number is radians (docs/rig.md); the base turned by 30 rad where 30 deg was meant was accepted
+    (a mount 1719 deg about z: the arm drawn and checked 72 deg from where it stands)."""
+    text = TWO_ARMS.format(a="sim://", b="sim://?seed=2") + f"mount = {{ rotation = [0, 0, {value}] }}\n"
+    with pytest.raises(RigError, match=r"^p.toml:8: arm\[2\]\.mount\.rotation: .* has no unit, so it is "
+                       + shown.replace("(", r"\(").replace(")", r"\)") + ": more than a turn; write its unit"):
+        parse_rig(text, "p.toml")
+    ok = parse_rig(TWO_ARMS.format(a="sim://", b="sim://?seed=2") + "mount = { rotation = [0, 0, 3.1] }\n", "p.toml")
+    assert ok.arms[1].mount.rotation == (0.0, 0.0, 3.1)  # a bare angle within a turn is radians, as documented

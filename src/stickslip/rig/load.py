@@ -49,6 +49,7 @@ MAX_RIG_BYTES = 1_000_000
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9 _.\-]{0,39}$")
 _ENV_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]{0,63}$")
 _MAX_SIZE = 10.0  # m: no rig is 10 m across; catches unit slips
+_BARE = re.compile(r"^\s*[-+]?(?:\d[\d_]*\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*$")  # a number without a unit
 _MAX_ANGLE = 20.0 * math.pi  # rad: ten turns; beyond, a float angle's sine is noise (1e300 deg turns any way)
 
 
@@ -151,6 +152,9 @@ class _Values:
             raise self.fail(key, f"{value!r} is not finite")
         if kind == "length" and abs(v) > _MAX_SIZE:
             raise self.fail(key, f"{value!r} is {v:.3g} m: more than {_MAX_SIZE:g} m (a unit slip?)")
+        if kind == "angle" and abs(v) > 2.0 * math.pi and _BARE.match(str(value)):
+            raise self.fail(key, f"{value!r} has no unit, so it is {value} rad ({math.degrees(v):.4g} deg): more "
+                            f"than a turn; write its unit (\"{value}deg\" for degrees)")
         if kind == "angle" and abs(v) > _MAX_ANGLE:
             raise self.fail(key, f"{value!r} is {math.degrees(v):.3g} deg: more than ten turns (a unit slip?)")
         if positive and not v > 0:
