@@ -174,3 +174,21 @@ def test_serve_takes_a_rig_and_checks_its_options(tmp_path: Path) -> None:
                      + "[[arm.joint]]\nrange = ['-1mm', '1mm']\n" * 3, encoding="utf-8")
     r = runner.invoke(app, ["serve", "--rig", str(stage)])
     assert r.exit_code == 2 and "arm 's' is a stage (xyz)" in r.output, r.output
+
+
+@pytest.mark.parametrize("lid, words", [("30mm", None), ("-1mm", "enters 'lid'"), ("5um", "'lid'")])
+def test_serve_says_at_start_that_the_arm_stands_outside_its_envelope(tmp_path: Path, lid: str,
+                                                                     words: str | None) -> None:
+    """The arm inside a volume (the lid below the tip) or a margin (the lid 5 µm above it, 10 µm kept): the server
+    started with no word of it, every motion then refused; now a line at start says so, as rig check does."""
+    from stickslip.server.run import envelope_problem
+
+    room = rig_room_on(tmp_path, lid=lid)
+    try:
+        problem = envelope_problem(room)
+        if words is None:
+            assert problem is None
+        else:
+            assert problem is not None and words in problem and "arm 'probe'" in problem and "\n" not in problem
+    finally:
+        room.close()

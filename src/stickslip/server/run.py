@@ -15,7 +15,7 @@ from .live import MAX_MESSAGE
 from .room import ControlRoom, RoomOptions
 from .security import Access, default_token_path, is_loopback, load_or_create_token
 
-__all__ = ["ServeError", "access_for", "open_camera_feed", "port_problem", "serve", "server_config"]
+__all__ = ["ServeError", "access_for", "envelope_problem", "open_camera_feed", "port_problem", "serve", "server_config"]
 
 
 class ServeError(RuntimeError):
@@ -100,6 +100,24 @@ def server_config(app: Any, host: str, port: int) -> Any:
                           ws_max_size=MAX_MESSAGE)
 
 
+def envelope_problem(room: ControlRoom) -> str | None:
+    """Why the served arm, where its position is kept, breaks the rig's envelope (as ``rig check`` says), for a
+    line at start; ``None``: it does not, or no rig. Every motion says it again when refused."""
+    from ..procedures.arms import guard_for
+    from ..rig import EnvelopeViolation
+
+    rig = room.options.rig
+    if rig is None:
+        return None
+    st = room.state()
+    try:
+        guard_for(room.store, rig, room.options.arm).check([[st.positions[j] for j in (1, 2, 3)]])
+    except EnvelopeViolation as e:
+        return (f"where its position is kept, {e}: a planned move must take it out (docs/rig.md, "
+                "\"Starting inside a margin\"), or none is planned from there")
+    return None
+
+
 def serve(
     options: RoomOptions,
     host: str = "127.0.0.1",
@@ -128,6 +146,9 @@ def serve(
         if options.rig is not None:
             echo(f"arm {options.rig.arm(options.arm).name!r} of the rig {options.rig.name!r}: every move is "
                  "checked against its envelope")
+            stuck = envelope_problem(room)
+            if stuck:
+                echo(f"warning: {stuck}")
         if host in ("0.0.0.0", "::"):  # every address of this computer: not one a browser can open
             echo(f"open http://<this computer's name or address>:{port}/ in a browser; Ctrl-C stops")
         else:
