@@ -569,3 +569,15 @@ def test_a_volume_kept_no_distance_from_is_still_kept_out_of():
     check_path(rig, None, [away])
     with pytest.raises(EnvelopeViolation, match="the path enters 'holder'|reaches the edge"):
         check_path(rig, None, [away, q])  # turning back into it
+
+
+def test_two_arms_kept_no_distance_apart_still_may_not_overlap():
+    """Links of no radius, arms kept 0 apart: two arms facing each other along one line overlap by 12 mm, and
+    their links were 1e-18 m apart by rounding, so a clearance of 1e-18 m let it pass."""
+    a = mm3a("a", origin=(-0.015, 0.0, 0.0))
+    b = mm3a("b", origin=(0.015, 0.0, 0.0), rotation=(0.0, 0.0, math.pi))
+    rig = Rig("r", "r", (a, b), ())
+    q = np.array([0.0, -math.pi / 2, 0.0])
+    with pytest.raises(EnvelopeViolation, match="the path enters 'arm b'"):
+        check_path(rig, "a", [q], others={"b": q})
+    check_path(rig, "a", [q + [1.0, 0.0, 0.0]], others={"b": q})  # a turned 57 deg about z: 5 mm clear of b

@@ -151,7 +151,7 @@ class Refusal:
             f"reaches the edge of the {self.allowed * 1e6:.2f} µm kept around {self.obstacle!r}"
             if self.undecided else
             f"enters {self.obstacle!r} (touches or crosses it, {self.allowed * 1e6:.2f} µm kept)"
-            if self.distance <= 0.0 else
+            if self.distance <= _NOISE else
             f"comes {self.distance * 1e6:.2f} µm from {self.obstacle!r}, closer than the "
             f"{self.allowed * 1e6:.2f} µm allowed"
         )
@@ -672,9 +672,10 @@ def _bad(m: Array, c: Array, allowed: Array) -> NDArray[np.bool_]:
     """Which poses break the envelope, from their clearances with (``m``) and without (``c``) the σ margin.
 
     Inside (or touching) an obstacle is bad with nothing kept around it too: a volume of no
-    margin, links of no radius and no σ give a clearance of 0 there, which is not below 0.
+    margin, links of no radius and no σ give a clearance of 0 there, which is not below 0. Within
+    ``_NOISE`` is touching (the distances' rounding: two arms' links along one line were 1e-18 m apart).
     """
-    return np.asarray(np.any((m < 0) | (c <= -allowed), axis=1), dtype=bool)
+    return np.asarray(np.any((m < 0) | (c <= _NOISE - allowed), axis=1), dtype=bool)
 
 
 def _search(arm: Arm, obs: _Obstacles, path: Array, tol: float, margins: _Margins) -> tuple[float, Refusal | None]:
@@ -776,7 +777,7 @@ def _escape(
     c = _link_clearances(arm, obs, path[:1], at0)[0] - at0[0]  # (L, C)
     allowed = np.concatenate((obs.allowed_v, obs.allowed_o))
     dist = c + at0[0] + allowed[None, :]
-    hit = (dist <= obs.contact[None, :]) & ((c < 0.0) | (dist <= 0.0))  # (inside one kept no distance from too)
+    hit = ((dist <= obs.contact[None, :]) & (c < 0.0)) | (dist <= _NOISE)  # (inside one kept no distance from too)
     if np.any(hit):
         which = int(np.argmax(np.any(hit, axis=0)))
         r = _refusal(arm, obs, path[0], which, 0.0, False, float(at0[0]))
