@@ -308,6 +308,19 @@ def test_not_utf8_or_too_large_is_one_line(tmp_path, content):
     refused(p)
 
 
+def test_a_utf16_file_is_named_as_such(tmp_path):
+    """Windows Notepad's "Unicode" (UTF-16 with its byte-order mark) was 'not UTF-8 text (byte 0)'; the rig file too."""
+    from stickslip.rig import RigError, load_rig
+
+    p = tmp_path / "config.toml"
+    p.write_text('device = "sim://"\n', encoding="utf-16")
+    assert refused(p) == f"{p}: UTF-16 text, not UTF-8: save it as UTF-8 (in Notepad: Save as, Encoding UTF-8)"
+    rig = tmp_path / "rig.toml"
+    rig.write_text('[[arm]]\nname = "a"\ncontroller = "sim://"\n', encoding="utf-16")
+    with pytest.raises(RigError, match="UTF-16 text, not UTF-8"):
+        load_rig(rig)
+
+
 def test_a_folder_is_refused(tmp_path):
     (tmp_path / "config.toml").mkdir()
     assert "folder" in refused(tmp_path / "config.toml")

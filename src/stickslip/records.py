@@ -126,6 +126,9 @@ def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = 
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
+        if data[:2] in (b"\xff\xfe", b"\xfe\xff"):  # a UTF-16 byte-order mark: Windows Notepad's "Unicode"
+            raise ValueError(f"{p}: UTF-16 text, not UTF-8: save it as UTF-8 (in Notepad: Save as, "
+                             "Encoding UTF-8)") from None
         raise ValueError(f"{p}: not UTF-8 text (byte {e.start})") from None
 
 
