@@ -332,3 +332,37 @@ def test_rig_check_draws_a_png_where_it_says_or_refuses(tmp_path):
     r = run("rig", "check", rig, "-o", png)
     assert r.exit_code == 0 and f"drawn: {png}" in " ".join(r.stdout.split()), r.output  # lines wrap
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+WALL = """\
+[[arm]]
+name = "a"
+controller = "sim://"
+calibration = "cal.json"
+
+[[volume]]
+name = "wall"
+shape = "half-space"
+point = ["21.5mm", "0mm", "0mm"]
+normal = [1, 0, 0]
+"""
+
+
+def test_an_uncertain_joint_is_checked_where_it_may_be_not_where_it_was_last(tmp_path):
+    """Raw steps leave joint 3 uncertain (0 to 12 mm); --from-unreferenced plans from its last value, 0. The
+    envelope took it as there with no σ, and a move of 100 µm toward a wall 500 µm beyond the tip was accepted
+    though the tip may be 11.5 mm past the wall; now the farthest it may be is one σ of the margin."""
+    _cal(tmp_path / "cal.json")
+    rig = tmp_path / "rig.toml"
+    rig.write_text(WALL, encoding="utf-8")
+    db = tmp_path / "s.db"
+    r = run("move", "-d", "sim://", "--db", db, "--joint", 3, "--steps", 2000)
+    assert r.exit_code == 0 and "uncertain" in r.output, r.output
+    r = run("move", "--rig", rig, "--db", db, "--joint", 3, "--by", "100um", "--from-unreferenced", "--trust-calibration")
+    assert r.exit_code == 2 and "starts within the margin of 'wall'" in r.output, r.output
+    assert "36000.00 µm kept (36000.00 µm of it the position's σ)" in r.output  # 3 σ of 12 mm
+    # referenced, the same move is clear (the wall 500 µm away, the σ of 101 steps a few µm)
+    r = run("where", "-d", "sim://", "--db", db, "--set", "3=min")
+    assert r.exit_code == 0, r.output
+    r = run("move", "--rig", rig, "--db", db, "--joint", 3, "--by", "100um", "--trust-calibration")
+    assert r.exit_code == 0, r.output

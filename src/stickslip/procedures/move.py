@@ -611,6 +611,10 @@ def sigma_growth(state: DeviceState, calibration: Calibration | None = None) -> 
     fresh one where none is kept or it was learned with another calibration), its steps
     (the larger constant step of its two directions) and its model error. Without one, a
     joint with no track keeps σ 0 and its nominal step (:attr:`~stickslip.joints.JointSpec.small_step`).
+    A joint whose position is uncertain (``state.uncertain``: planned from its last value with
+    ``--from-unreferenced``) has the farthest it may be from that value added to its σ, so
+    ``n_sigma`` ≥ 1 σ margins cover where it may be (its tip σ is the Jacobian's, at least the
+    chord a rotary joint turns).
     """
     P, steps, models, poses = [], [], [], []
     for j in (1, 2, 3):
@@ -623,11 +627,13 @@ def sigma_growth(state: DeviceState, calibration: Calibration | None = None) -> 
                 track = JointTrack.from_json(raw)
         except ValueError:
             track = None
-        if track is None:
-            P.append(((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0)))
-        else:
-            r0, r1, r2 = ((float(r[0]), float(r[1]), float(r[2])) for r in track.P)
-            P.append((r0, r1, r2))
+        r0, r1, r2 = ((0.0, 0.0, 0.0),) * 3 if track is None else (
+            (float(r[0]), float(r[1]), float(r[2])) for r in track.P)
+        if j in state.uncertain:  # known only within bounds: the farthest it may be from its kept value is one σ
+            lo, hi = state.uncertain[j]
+            far = max(state.positions[j] - lo, hi - state.positions[j], 0.0)
+            r0 = (r0[0] + far * far, r0[1], r0[2])
+        P.append((r0, r1, r2))
         known = [v for (jj, _), v in (calibration.constant_steps.items() if calibration else ()) if jj == j and v > 0]
         steps.append(max(known) if known else state.spec(j).small_step)
         models.append(joint_sigma_model(calibration, j) if calibration is not None and track is not None else 0.0)
