@@ -358,7 +358,8 @@ def test_an_uncertain_joint_is_checked_where_it_may_be_not_where_it_was_last(tmp
     db = tmp_path / "s.db"
     r = run("move", "-d", "sim://", "--db", db, "--joint", 3, "--steps", 2000)
     assert r.exit_code == 0 and "uncertain" in r.output, r.output
-    r = run("move", "--rig", rig, "--db", db, "--joint", 3, "--by", "100um", "--from-unreferenced", "--trust-calibration")
+    r = run("move", "--rig", rig, "--db", db, "--joint", 3, "--by", "100um", "--from-unreferenced",
+            "--trust-calibration")
     assert r.exit_code == 2 and "starts within the margin of 'wall'" in r.output, r.output
     assert "36000.00 µm kept (36000.00 µm of it the position's σ)" in r.output  # 3 σ of 12 mm
     # referenced, the same move is clear (the wall 500 µm away, the σ of 101 steps a few µm)
