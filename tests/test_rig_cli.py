@@ -367,3 +367,28 @@ def test_an_uncertain_joint_is_checked_where_it_may_be_not_where_it_was_last(tmp
     assert r.exit_code == 0, r.output
     r = run("move", "--rig", rig, "--db", db, "--joint", 3, "--by", "100um", "--trust-calibration")
     assert r.exit_code == 0, r.output
+
+
+def test_move_and_where_in_a_rig_take_the_pose_and_the_references_they_are_given(tmp_path):
+    """With --rig, move dropped --q1 ... --psi and --max-age unsaid (planned from the kept pose, not the one given),
+    and where without --arm dropped --set: it listed the arms and exited 0, the joint not referenced."""
+    _cal(tmp_path / "cal.json")
+    rig = tmp_path / "rig.toml"
+    rig.write_text(WALL.replace('"21.5mm"', '"40mm"'), encoding="utf-8")
+    db = tmp_path / "s.db"
+    r = run("move", "--rig", rig, "--db", db, "--joint", 3, "--by", "10um", "--q2", "-80deg", "--q3", "2mm",
+            "--from-unreferenced", "--trust-calibration", "--max-age", 36500, "--json")
+    assert r.exit_code == 0, r.output
+    out = json.loads(r.stdout)
+    assert out["q_from"] == pytest.approx(2e-3) and out["q_end_predicted"] == pytest.approx(2.01e-3, abs=0.5e-6)
+    assert "days old" not in r.output  # --max-age taken (the calibration is of DAY)
+    r = run("where", "--rig", rig, "--db", db, "--json")
+    q = json.loads(r.stdout)["arms"][0]["q"]
+    assert q[1] == pytest.approx(math.radians(-80)) and q[2] == pytest.approx(2.01e-3, abs=0.5e-6)
+    r = run("where", "--rig", rig, "--db", db, "--set", "3=min", "--offline", "--json")  # one arm: that arm
+    assert r.exit_code == 0 and json.loads(r.stdout)["joints"][2]["q"] == 0.0, r.output
+    two = tmp_path / "two.toml"
+    two.write_text(WALL + WALL.replace('"a"', '"b"').replace('"sim://"', '"sim://?seed=2"').split("[[volume]]")[0],
+                   encoding="utf-8")
+    r = run("where", "--rig", two, "--db", db, "--set", "3=min")
+    assert r.exit_code == 2 and "give --arm NAME (the rig's arms: a, b)" in r.output, r.output

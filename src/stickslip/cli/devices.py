@@ -48,7 +48,7 @@ from ._common import (
 from .camera import CAMERA_CALIBRATION_HELP, CAMERA_LOOP_HELP, CAMERA_TIP_HELP, run_seen
 
 if TYPE_CHECKING:
-    from ..procedures.move import MoveResult
+    from ..procedures.move import MoveResult, PoseUpdate
     from ..procedures.where import WhereResult
 
 _Q1 = "Record q1 (angle: -30deg, -pi/6) first."
@@ -186,8 +186,11 @@ def move(
     if camera_calibration is not None and camera is None:
         fail("--camera-calibration goes with --camera")
     if rig_file is not None:
+        from ..procedures.move import PoseUpdate
+
         _move_in_rig(rig_file, arm, device, joint, by, to, raw, calibration, burst, db, json_out,
-                     from_unreferenced, trust_calibration, camera, camera_tip, camera_calibration)
+                     from_unreferenced, trust_calibration, camera, camera_tip, camera_calibration,
+                     pose=PoseUpdate(q1, q2, q3, theta, psi), max_age_days=max_age_setting(max_age).value)
         return
     if arm is not None:
         fail("--arm names an arm of a rig: give --rig FILE too")
@@ -231,14 +234,15 @@ def move(
 def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
                  raw: int | None, calibration: Path | None, burst: int | None, db: str | None, json_out: bool,
                  from_unreferenced: bool, trust_calibration: bool, camera: str | None = None,
-                 camera_tip: str | None = None, camera_calibration: Path | None = None) -> None:
+                 camera_tip: str | None = None, camera_calibration: Path | None = None, *,
+                 pose: PoseUpdate | None = None, max_age_days: int = 0) -> None:
     """``move --rig FILE --arm NAME``: the arm's device, calibration and envelope from the rig file.
 
     With ``--camera`` the closed loop checks the whole path and each leg against the envelope.
     """
     from ..calibration import Calibration
     from ..procedures.arms import guard_for, opener_for
-    from ..procedures.move import DeviceBusy, MoveRequest
+    from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate
     from ..procedures.move import move as move_joint
     from .rig import load, rig_database
 
@@ -261,7 +265,8 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
         seen = MoveRequest(
             a.controller, joint, by=None if by is None else _parse_joint_value(joint, by, "--by"),
             to=None if to is None else _position_or_stop(joint, to, "--to"), burst=burst or 1000,
-            from_unreferenced=from_unreferenced, trust_calibration=trust_calibration,
+            from_unreferenced=from_unreferenced, trust_calibration=trust_calibration, pose=pose or PoseUpdate(),
+            max_age_days=max_age_days,
         )
         ra = rig_arm(rig_file, a.name, None, None, cal_path, db)
         run_seen("move", seen, cal, camera, camera_tip, ra.database if ra else db, json_out, rig_arm=ra,
@@ -275,6 +280,7 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
             to=None if to is None else _position_or_stop(joint, to, "--to", joints),
             burst=burst or 1000, guard=guard_for(store, rig, a.name), from_unreferenced=from_unreferenced,
             trust_calibration=trust_calibration, joints=joints, state_key=rig.state_key(a.name),
+            pose=pose or PoseUpdate(), max_age_days=max_age_days,
         )
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings, opener=opener_for(rig, a.name))
     failure = result.failure()
@@ -452,7 +458,11 @@ def where(
         from .rig import load, rig_database
 
         rig = load(rig_file)
-        if arm is None:
+        acts = bool(set_) or unlock or any(v is not None for v in (q1, q2, q3, theta, psi))
+        if arm is None and acts and len(rig.arms) > 1:  # listing every arm, they were dropped unsaid
+            fail("--set, --q1 ... --psi and --unlock act on one arm's device: give --arm NAME (the rig's arms: "
+                 f"{', '.join(a.name for a in rig.arms)})")
+        if arm is None and not acts:
             _where_arms(rig_file, db, json_out)
             return
         with user_errors(KeyError):
