@@ -50,7 +50,7 @@ calibration = "stack.json"
 
 [[arm]]
 name = "probe"
-controller = "sim://"
+controller = "sim://?seed=2"  # not the stack's sim:// (a rig refuses two arms on one controller's channels)
 mount = {{ origin = ["-40mm", "0mm", "0mm"] }}
 """
 
