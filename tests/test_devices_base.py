@@ -41,6 +41,18 @@ def test_device_key_keeps_identity_and_drops_secrets():
     assert base.device_key("sim+physics://?seed=4&day=x") == "sim+physics://?seed=4"
 
 
+def test_a_windows_serial_port_is_one_key_however_it_is_written():
+    # mm3a://COM3 was kept as 'mm3a://com3' (urlsplit lowers a host) and mm3a:///COM3 as 'mm3a:///COM3': one port,
+    # two kept positions and two locks; a move through one spelling planned from the other's stale position
+    # (audit39's question)
+    keys = {base.device_key(u) for u in ("mm3a://COM3", "mm3a:///COM3", "mm3a://com3?timeout=5", "mm3a:///com3")}
+    assert keys == {"mm3a://com3"}
+    assert base.device_key("anc300:///COM12?password=x") == base.device_key("anc300://COM12") == "anc300://com12"
+    assert base.device_key("mm3a://COM3") != base.device_key("mm3a://COM13") != base.device_key("anc300://COM13")
+    assert base.device_key("mm3a:///dev/ttyUSB0") == "mm3a:///dev/ttyUSB0"  # a device file as written
+    assert base.device_key("mm3a:///COM3x") == "mm3a:///COM3x"  # not a port name: kept as it stands
+
+
 def test_step_counts():
     import numpy as np
 

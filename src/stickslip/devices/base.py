@@ -44,6 +44,7 @@ __all__ = [
     "open_device",
     "query_options",
     "device_key",
+    "windows_com_port",
     "check_setting",
     "check_device_url",
     "check_steps",
@@ -516,6 +517,15 @@ def _port_path(url: str) -> str:
     return redact_url(url).strip() or "/dev/ttyUSB0"
 
 
+_WINDOWS_COM = re.compile(r"/?(COM[0-9]+)", re.IGNORECASE)
+
+
+def windows_com_port(text: str) -> str | None:
+    """``COM3`` of ``COM3`` or ``/COM3`` (any case), else ``None``."""
+    m = _WINDOWS_COM.fullmatch(text)
+    return m.group(1) if m else None
+
+
 def device_key(url: str) -> str:
     """The name a device's data is kept under: its URL without options.
 
@@ -531,6 +541,13 @@ def device_key(url: str) -> str:
     ('sim://', 'sim+physics://?seed=2')
     >>> device_key("anc300://admin:secret@[fe80::1]:7230")
     'anc300://[fe80::1]:7230'
+    >>> device_key("mm3a:///COM3"), device_key("mm3a://COM3?timeout=5")
+    ('mm3a://com3', 'mm3a://com3')
+
+    A Windows serial port is one key however it is written (``COM3``, ``com3``, ``/COM3``:
+    Windows' port names know no case); a device file is kept as written (``/dev/ttyUSB0``
+    and a ``/dev/serial/by-id/`` link to it are two keys: the link is the one that names
+    the same controller after a reboot).
 
     A user name or password in the URL is dropped too. Raises ``ValueError`` (without the
     secret) for a malformed URL such as ``anc300://[::1``.
@@ -546,6 +563,9 @@ def device_key(url: str) -> str:
         port = f":{parts.port}" if parts.port is not None else ""
     except ValueError as e:
         raise ValueError(_malformed(url, str(e))) from None
+    com = windows_com_port(parts.path) if not host and not port else None
+    if com is not None:  # mm3a:///COM3 is mm3a://COM3, whose host urlsplit gives in lower case
+        return f"{scheme}://{com.lower()}"
     return f"{scheme}://{host}{port}{parts.path}"
 
 

@@ -23,13 +23,12 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 import select
 import socket
 import time
 from collections.abc import Callable, Iterable, Sequence
 
-from .base import DeviceError
+from .base import DeviceError, windows_com_port
 
 __all__ = [
     "Transport",
@@ -202,9 +201,6 @@ class Transport:
         return f"<{type(self).__name__} {self.name}>"
 
 
-_WINDOWS_COM = re.compile(r"/?(COM[0-9]+)", re.IGNORECASE)
-
-
 def serial_port_name(path: str) -> str:
     """The serial port a device URL's path names: ``/COM3`` (of ``mm3a:///COM3``) is Windows' ``COM3``.
 
@@ -213,12 +209,6 @@ def serial_port_name(path: str) -> str:
     path (``/dev/ttyUSB0``, ``/dev/pts/4``) is given back as it is.
     """
     return windows_com_port(path) or path
-
-
-def windows_com_port(text: str) -> str | None:
-    """``COM3`` of ``COM3`` or ``/COM3`` (any case), else ``None``."""
-    m = _WINDOWS_COM.fullmatch(text)
-    return m.group(1) if m else None
 
 
 def _first_terminator(buffer: bytes, terms: Iterable[bytes]) -> int | None:

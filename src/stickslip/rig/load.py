@@ -21,8 +21,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from ..devices.base import SECRET_OPTIONS, device_key, redact_url
-from ..devices.transport import windows_com_port
+from ..devices.base import SECRET_OPTIONS, device_key, redact_url, windows_com_port
 from ..joints import MM3A_FILE
 from ..kinematics import Geometry
 from ..records import read_text_bounded
