@@ -259,3 +259,29 @@ def test_observe_s_help_names_the_gate_the_procedure_applies():
     from stickslip.procedures import observe as procedure
 
     assert cli_observe.MAX_INNOVATION == procedure.MAX_INNOVATION
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=100, deadline=None)
+@given(moves=st.lists(st.tuples(st.floats(-1e-4, 1e-4).filter(lambda d: d == 0.0 or abs(d) > 1e-12),
+                                st.integers(1, 1000), st.sampled_from([0.0, 1e-9]) | st.floats(1e-9, 1e-5),
+                                st.floats(-3.0, 3.0)),
+                      min_size=1, max_size=20),
+       exact=st.booleans())
+def test_an_exact_or_sharp_reading_leaves_a_covariance_the_device_state_reads_back(moves, exact):
+    # an end stop (sd 0) after a move of 60 µm in 12 steps left the position's variance 0 beside covariances of
+    # ~1e-22 (the subtraction's rounding): a correlation of 1e129, and from_json refused the kept state
+    cal = _true_cal("d")
+    track, q = JointTrack.fresh(cal, 3, q_sd=1e-6), 0.0
+    for d, n, sd, u in moves:  # readings within the procedures' gate (5 sd of the innovation)
+        track.predict(d, n if d >= 0 else -n, None)
+        sd = 0.0 if exact else sd
+        q = track.observe(q + d, q + d + u * math.sqrt(track.sd**2 + sd**2), sd)
+        back = JointTrack.from_json(track.to_json())
+        assert np.array_equal(back.P, track.P)
+        assert float(np.min(np.linalg.eigvalsh(track.P))) >= -1e-12 * float(np.max(track.P))
+        if exact:
+            assert track.sd == 0.0 and not np.any(track.P[0, 1:])

@@ -217,14 +217,20 @@ class JointTrack:
         if not (math.isfinite(q_measured) and math.isfinite(q_predicted) and math.isfinite(sd) and sd >= 0):
             raise ValueError("a measured position must be finite with a standard deviation >= 0")
         S = float(self.P[0, 0]) + sd**2
-        if S <= 0.0:  # both exact: the measurement wins, nothing to learn
+        if S <= 0.0:  # both exact: the measurement wins, nothing to learn (and no covariance of an exact position:
+            self.P[0, :] = 0.0  # a move of 1e-300 leaves its variance 0 and its covariance 1e-302)
+            self.P[:, 0] = 0.0
             return float(q_measured)
         K = self.P[:, 0] / S
         innovation = q_measured - q_predicted
         self.log_scale = self.log_scale + K[1:] * innovation
-        self.P = self.P - np.outer(K, self.P[0, :])
-        self.P = 0.5 * (self.P + self.P.T)
-        self.P[0, 0] = max(float(self.P[0, 0]), 0.0)
+        # P - K P[0, :], with the position's row in the form that cannot cancel: (1 - P00 / S) = sd² / S, so an
+        # exact measurement leaves a row of exact zeros (the subtraction left ~1e-22 beside a variance of 0: a
+        # correlation of 1e129 that from_json refuses, the device state unreadable after an end stop)
+        P = self.P - np.outer(K, self.P[0, :])
+        P[0, :] = self.P[0, :] * (sd**2 / S)
+        P[:, 0] = P[0, :]
+        self.P = 0.5 * (P + P.T)
         return float(q_predicted + K[0] * innovation)
 
     def reset_position(self, q_sd: float = 0.0) -> None:
