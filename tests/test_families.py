@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from physics_scenarios import max_errors, paper14, random_pose, spread, well_spread
 from synth import paper_table
 
@@ -48,6 +50,22 @@ def test_tabulated_profile_plans_like_the_closed_form():
     end = tab.position_after(-1.0, 5000)
     assert end == pytest.approx(exact.position_after(-1.0, 5000), abs=1e-9)
     assert tab.exact_steps(-1.0, end) == pytest.approx(5000, rel=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(-0.2, 1.2), n=st.integers(-20000, 20000))
+def test_tabulated_profile_steps_and_dead_reckoning_invert_each_other_beyond_the_table(a, n):
+    # the table ends 5 % of the travel past each stop; dead reckoning went on past it at the edge's step but the
+    # step count stopped there (np.interp clips): 5405 steps out from the lower stop counted back as 5404.68
+    cal = calibrate(paper_table())
+    fam = Calibration({k: FamilyModel(k[0], k[1], FamilyParams("paper", k[0], tuple(m.params.as_vector())))
+                       for k, m in cal.models.items() if k[0] == 2}, {}, {}, "d", "families")
+    tab = Planner(fam, 2, kin.Pose(0.0, 0.0, 0.0, 0.0, 0.0))
+    spec = kin.JOINTS[2]
+    q0 = spec.lower + a * spec.span
+    end = tab.position_after(q0, n)
+    assert tab.exact_steps(q0, end) == pytest.approx(abs(n), rel=1e-9, abs=1e-6)
+    assert (end - q0) * n >= 0.0
 
 
 def test_paper_poses_still_give_the_paper_calibration():

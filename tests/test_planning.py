@@ -104,3 +104,29 @@ def test_steps_are_signed_so_dead_reckoning_lands_on_the_target(q_from, q_to):
     assert (n > 0) == (q_to > q_from)
     where = p.position_after(q_from, n)
     assert abs(where - q_to) <= 0.5 * p.gamma(q_to, "+" if n > 0 else "-")
+
+
+def test_a_step_that_is_negative_in_the_pose_is_refused_by_dead_reckoning_as_by_planning():
+    # a calibration file is read without the physical check calibrate makes: c = 2 µm > a makes the step of
+    # joint 3 negative with the arm up. The plan was refused there, but 100 steps + were dead-reckoned 7.5 µm back
+    from stickslip.calibration import Calibration
+    from stickslip.models import NonPhysicalError, StepProfile, position_after_steps
+
+    data = CAL.to_dict()
+    for r in data["parameters"]:
+        if r["joint"] == 3 and r["name"] == "c":
+            r["value"] = 2e-6
+    cal = Calibration.from_dict(data)
+    up, out = Planner(cal, 3, Pose(q2=0.0)), Planner(cal, 3, Pose(q2=-math.pi))
+    assert up.gamma(0.005, "+") < 0 < out.gamma(0.005, "+")
+    for n in (100, -100):
+        with pytest.raises(NonPhysicalError, match="cannot move"):
+            up.position_after(0.005, n)
+        with pytest.raises(NonPhysicalError, match="cannot move"):
+            up.plan(0.005, 0.005 + math.copysign(1e-4, n))
+        assert (out.position_after(0.005, n) - 0.005) * n > 0
+    for A in (0.0, -1e-6):
+        with pytest.raises(NonPhysicalError):
+            StepProfile(A).inverse(0.0, 10.0, 1)
+        with pytest.raises(NonPhysicalError):
+            position_after_steps(0.0, 10.0, 1, A)

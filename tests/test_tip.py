@@ -116,6 +116,20 @@ def test_inverse_round_trip(q, g):
     np.testing.assert_allclose(q_back, q, atol=1e-9)
 
 
+@settings(max_examples=300, deadline=None)
+@given(joint_q, joint_q, geometries)
+def test_inverse_reaches_every_pose_in_range_whatever_it_starts_near(q, near, g):
+    # the turn of joint 2 nearest `near` was the only one tried: from near q2 = -200 deg, a tip at q2 = +23 deg
+    # (reachable) was refused as "joint 2 would be at -337 deg"; the turn inside the 240 deg range is now found
+    q = np.array(q)
+    if float(distance_from_axis(q, g)) < 2 * kin.MIN_REACH:
+        return
+    p = tip(q, g)
+    q_back = inverse(p, g, near=np.array(near))
+    np.testing.assert_allclose(tip(q_back, g), p, atol=1e-12)
+    assert kin.limit_problem(q_back) is None
+
+
 class _nothing:
     def __enter__(self):
         return self

@@ -259,3 +259,65 @@ def test_observe_s_help_names_the_gate_the_procedure_applies():
     from stickslip.procedures import observe as procedure
 
     assert cli_observe.MAX_INNOVATION == procedure.MAX_INNOVATION
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=100, deadline=None)
+@given(moves=st.lists(st.tuples(st.floats(-1e-4, 1e-4).filter(lambda d: d == 0.0 or abs(d) > 1e-12),
+                                st.integers(1, 1000), st.sampled_from([0.0, 1e-9]) | st.floats(1e-9, 1e-5),
+                                st.floats(-3.0, 3.0)),
+                      min_size=1, max_size=20),
+       exact=st.booleans())
+def test_an_exact_or_sharp_reading_leaves_a_covariance_the_device_state_reads_back(moves, exact):
+    # an end stop (sd 0) after a move of 60 µm in 12 steps left the position's variance 0 beside covariances of
+    # ~1e-22 (the subtraction's rounding): a correlation of 1e129, and from_json refused the kept state
+    cal = _true_cal("d")
+    track, q = JointTrack.fresh(cal, 3, q_sd=1e-6), 0.0
+    for d, n, sd, u in moves:  # readings within the procedures' gate (5 sd of the innovation)
+        track.predict(d, n if d >= 0 else -n, None)
+        sd = 0.0 if exact else sd
+        q = track.observe(q + d, q + d + u * math.sqrt(track.sd**2 + sd**2), sd)
+        back = JointTrack.from_json(track.to_json())
+        assert np.array_equal(back.P, track.P)
+        assert float(np.min(np.linalg.eigvalsh(track.P))) >= -1e-12 * float(np.max(track.P))
+        if exact:
+            assert track.sd == 0.0 and not np.any(track.P[0, 1:])
+
+
+def test_a_forced_reading_far_off_is_refused_not_kept_as_a_scale_no_later_command_reads(tmp_path, monkeypatch):
+    # `observe --force` 73 sd from the kept position learned a step scale of x9590 and kept it; every later
+    # command then failed ("not a valid (scales, covariance) pair"): the reading is refused, the track unchanged
+    track = JointTrack.fresh(_true_cal("d"), 3, q_sd=0.0)
+    track.predict(60e-6, 60, None)
+    before = track.to_json()
+    with pytest.raises(ValueError, match=r"step scale x.*re-reference"):
+        track.observe(60e-6, 800e-6, 1e-6)
+    assert track.to_json() == before
+    track.observe(60e-6, 60e-6 + 3 * track.sd, 1e-6)  # within the gate: learned and kept
+    assert 1.0 < track.scale_of("+") < 148.0
+    JointTrack.from_json(track.to_json())
+
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.procedures import move as move_procedure
+
+    cal = _true_cal("2026-03-01")
+    path = tmp_path / "cal.json"
+    cal.save(path)
+    arm = SimulatedMM3A(seed=8, day="2026-03-09")
+    arm.set_pose(q2=-math.pi / 2, q3=0.0)
+    monkeypatch.setattr(move_procedure, "open_device", lambda url: _RealLike(arm))
+    db, runner = tmp_path / "s.db", CliRunner()
+    for args, code in (
+        (("where", "--db", db, "--set", "3=0", "--offline"), 0),
+        (("move", "--db", db, "-c", path, "--joint", 3, "--by", "60um"), 0),
+        (("observe", "--db", db, "--joint", 3, "--at", "800um", "--sigma", "1um", "--force"), 2),
+        (("move", "--db", db, "-c", path, "--joint", 3, "--by", "60um"), 0),
+    ):
+        r = runner.invoke(app, [str(a) for a in args])
+        assert r.exit_code == code, r.output
+    assert "step scale x" in r.output and "x1.0000" in r.output

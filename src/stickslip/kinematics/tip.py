@@ -228,17 +228,21 @@ def limit_problem(q: ArrayLike, joints: JointSet | None = None) -> str | None:
 
 
 def _candidates(p: NDArray[np.float64], geometry: Geometry, near: NDArray[np.float64]) -> list[NDArray[np.float64]]:
-    """Both IK branches (tip on either side of joint 1's axis), angles wrapped nearest ``near``."""
+    """Both IK branches (tip on either side of joint 1's axis), each angle wrapped nearest ``near`` and one turn
+    either side of it (joint 2's range is 240°: the turn inside it may be more than half a turn from ``near``)."""
     x, y, z = (float(c) for c in p)
     rho = math.hypot(x, y)
     phi = math.atan2(y, x) if rho > 0.0 else float(near[0])
     out = []
+    turn = 2.0 * math.pi
     for u, q1 in ((rho, phi), (-rho, phi + math.pi)):
         q2 = math.atan2(geometry.offset - u, z)
         r = math.hypot(geometry.offset - u, z)
-        q1 += 2.0 * math.pi * round((float(near[0]) - q1) / (2.0 * math.pi))
-        q2 += 2.0 * math.pi * round((float(near[1]) - q2) / (2.0 * math.pi))
-        out.append(np.array([q1, q2, r - geometry.length]))
+        q1 += turn * round((float(near[0]) - q1) / turn)
+        q2 += turn * round((float(near[1]) - q2) / turn)
+        for k1 in (0, -1, 1):
+            for k2 in (0, -1, 1):
+                out.append(np.array([q1 + k1 * turn, q2 + k2 * turn, r - geometry.length]))
     return out
 
 

@@ -766,7 +766,9 @@ class TabulatedProfile:
     """A step profile along a joint's travel from a table ``gamma(q)`` (planning; same interface as StepProfile).
 
     ``steps`` integrates ``1 / gamma`` with the trapezoidal rule on the table (4097
-    points over the travel: relative error ~1e-8 for the smooth steps of (F3)).
+    points over the travel: relative error ~1e-8 for the smooth steps of (F3)). Beyond the
+    table (5 % of the travel past each end stop) the step is the edge's, in ``steps`` and
+    ``inverse`` alike, so the two stay each other's inverse there.
     """
 
     def __init__(self, q: NDArray[np.float64], gamma: NDArray[np.float64]) -> None:
@@ -783,6 +785,11 @@ class TabulatedProfile:
         return float(np.interp(q, self.q, self.g))
 
     def _F(self, q: float) -> float:
+        """Steps from the table's start to ``q``; beyond the table, at the edge's step (as :meth:`inverse` goes)."""
+        if q < self.q[0]:
+            return float((q - self.q[0]) / self.g[0])
+        if q > self.q[-1]:
+            return float(self.cum[-1] + (q - self.q[-1]) / self.g[-1])
         return float(np.interp(q, self.q, self.cum))
 
     def steps(self, q0: float, q1: float) -> float:
@@ -792,7 +799,8 @@ class TabulatedProfile:
     def inverse(self, q0: float, n: float, sign: int) -> float:
         """Dead reckoning: where the joint is after ``n`` steps from ``q0`` in direction ``sign``."""
         target = self._F(q0) + sign * n
-        if self.cum[0] <= target <= self.cum[-1]:
-            return float(np.interp(target, self.cum, self.q))
-        edge = self.q[-1] if sign > 0 else self.q[0]
-        return float(edge + sign * (abs(target - self._F(edge))) * self.gamma(edge))
+        if target < self.cum[0]:  # beyond the table: at the edge's step, as _F counts there
+            return float(self.q[0] + (target - self.cum[0]) * self.g[0])
+        if target > self.cum[-1]:
+            return float(self.q[-1] + (target - self.cum[-1]) * self.g[-1])
+        return float(np.interp(target, self.cum, self.q))

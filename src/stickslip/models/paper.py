@@ -432,6 +432,8 @@ class StepProfile:
     def inverse(self, q0: float, n: float, sign: int) -> float:
         """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``)."""
         if self.kind == "const":
+            if not self.A > 0:  # (steps refuses the same; a negative step would dead-reckon backwards)
+                raise NonPhysicalError(f"step size {self.A:.3g} <= 0: the joint cannot move")
             return q0 + sign * n * self.A
         if self.kind != "atan":
             return position_after_steps(q0, n, sign, self.A, self.alpha, self.beta)
@@ -604,6 +606,8 @@ def position_after_steps(
         return start
     B = math.hypot(alpha, beta)
     if B <= 1e-13 * abs(A):  # no load variation along the way (to double precision)
+        if not A > 0:  # a negative step would dead-reckon backwards
+            raise NonPhysicalError(f"step size {A:.3g} <= 0: the joint cannot move")
         return float(start + direction * n_steps * A)
     from scipy.optimize import brentq
 

@@ -50,6 +50,7 @@ __all__ = [
     "PositionTracker",
     "SCALE_WALK",
     "SCALE_CORRELATION",
+    "MAX_LOG_SCALE",
     "calibration_id",
     "scaled_calibration",
     "joint_sigma_model",
@@ -61,6 +62,11 @@ SCALE_CORRELATION = 0.5
 
 SCALE_WALK = 1e-4
 """Random walk of the log step scale, per sqrt(step) (relative): 1 % over 10 000 steps."""
+
+MAX_LOG_SCALE = 5.0
+"""Largest magnitude of a log step scale a track keeps (1): steps x148 or /148 the calibration's are a slip or a
+wrong reading, not a day's drift; :meth:`JointTrack.observe` refuses to learn one, :meth:`JointTrack.from_json`
+refuses to read one."""
 
 _MIN_SCALE_VAR = 1e-6
 """Smallest prior variance of a log step scale (0.1 %²): an observation can always teach it."""
@@ -216,14 +222,29 @@ class JointTrack:
         if not (math.isfinite(q_measured) and math.isfinite(q_predicted) and math.isfinite(sd) and sd >= 0):
             raise ValueError("a measured position must be finite with a standard deviation >= 0")
         S = float(self.P[0, 0]) + sd**2
-        if S <= 0.0:  # both exact: the measurement wins, nothing to learn
+        if S <= 0.0:  # both exact: the measurement wins, nothing to learn (and no covariance of an exact position:
+            self.P[0, :] = 0.0  # a move of 1e-300 leaves its variance 0 and its covariance 1e-302)
+            self.P[:, 0] = 0.0
             return float(q_measured)
         K = self.P[:, 0] / S
         innovation = q_measured - q_predicted
-        self.log_scale = self.log_scale + K[1:] * innovation
-        self.P = self.P - np.outer(K, self.P[0, :])
-        self.P = 0.5 * (self.P + self.P.T)
-        self.P[0, 0] = max(float(self.P[0, 0]), 0.0)
+        log_scale = self.log_scale + K[1:] * innovation
+        if not bool(np.all(np.abs(log_scale) < MAX_LOG_SCALE)):  # (a --force past the gate: kept, no move read it)
+            worst = float(log_scale[np.argmax(np.abs(log_scale))])
+            raise ValueError(
+                f"this reading would make the step scale x{math.exp(min(worst, 700.0)):.4g}, beyond the "
+                f"x{math.exp(-MAX_LOG_SCALE):.3g} to x{math.exp(MAX_LOG_SCALE):.3g} a kept track holds: a slip or a "
+                "wrong reading, not a change of step; re-reference the joint's position instead "
+                "(stickslip where --set JOINT=VALUE)"
+            )
+        self.log_scale = log_scale
+        # P - K P[0, :], with the position's row in the form that cannot cancel: (1 - P00 / S) = sd² / S, so an
+        # exact measurement leaves a row of exact zeros (the subtraction left ~1e-22 beside a variance of 0: a
+        # correlation of 1e129 that from_json refuses, the device state unreadable after an end stop)
+        P = self.P - np.outer(K, self.P[0, :])
+        P[0, :] = self.P[0, :] * (sd**2 / S)
+        P[:, 0] = P[0, :]
+        self.P = 0.5 * (P + P.T)
         return float(q_predicted + K[0] * innovation)
 
     def reset_position(self, q_sd: float = 0.0) -> None:
@@ -251,7 +272,7 @@ class JointTrack:
         pose = None if raw.get("pose") is None else tuple(float(v) for v in _numbers(raw, "pose", "five numbers").flat)
         ok = (
             s.shape == (2,) and P.shape == (3, 3) and bool(np.all(np.isfinite(P)))
-            and bool(np.all(np.isfinite(s))) and bool(np.all(np.abs(s) < 5.0))
+            and bool(np.all(np.isfinite(s))) and bool(np.all(np.abs(s) < MAX_LOG_SCALE))
         )
         if ok:
             with np.errstate(over="ignore", invalid="ignore"):  # entries near 1e308, or a covariance of a tiny
