@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -287,9 +288,11 @@ def test_an_exact_or_sharp_reading_leaves_a_covariance_the_device_state_reads_ba
             assert track.sd == 0.0 and not np.any(track.P[0, 1:])
 
 
-def test_a_forced_reading_far_off_is_refused_not_kept_as_a_scale_no_later_command_reads(tmp_path, monkeypatch):
+def test_a_forced_reading_far_off_sets_the_position_and_teaches_no_scale(tmp_path, monkeypatch):
     # `observe --force` 73 sd from the kept position learned a step scale of x9590 and kept it; every later
-    # command then failed ("not a valid (scales, covariance) pair"): the reading is refused, the track unchanged
+    # command then failed ("not a valid (scales, covariance) pair"). The track refuses such a scale; a forced
+    # reading beyond the gate re-references the position and keeps the scale (a 23.8 sd reading taught x19.6:
+    # the steps did not take the joint there)
     track = JointTrack.fresh(_true_cal("d"), 3, q_sd=0.0)
     track.predict(60e-6, 60, None)
     before = track.to_json()
@@ -315,9 +318,17 @@ def test_a_forced_reading_far_off_is_refused_not_kept_as_a_scale_no_later_comman
     for args, code in (
         (("where", "--db", db, "--set", "3=0", "--offline"), 0),
         (("move", "--db", db, "-c", path, "--joint", 3, "--by", "60um"), 0),
-        (("observe", "--db", db, "--joint", 3, "--at", "800um", "--sigma", "1um", "--force"), 2),
-        (("move", "--db", db, "-c", path, "--joint", 3, "--by", "60um"), 0),
+        (("observe", "--db", db, "--joint", 3, "--at", "800um", "--sigma", "1um", "--force", "--json"), 0),
+        (("move", "--db", db, "-c", path, "--joint", 3, "--by", "60um", "--json"), 0),
     ):
         r = runner.invoke(app, [str(a) for a in args])
         assert r.exit_code == code, r.output
-    assert "step scale x" in r.output and "x1.0000" in r.output
+        if args[0] == "observe":
+            seen = json.loads(r.stdout)
+            assert seen["innovation_sigmas"] > 70 and not seen["re_referenced"]
+            assert seen["q"] == pytest.approx(800e-6, abs=1e-15) and seen["q_sd"] == pytest.approx(1e-6, rel=1e-12)
+            assert seen["step_scale"] == seen["step_scale_before"]
+    moved = json.loads(r.stdout)
+    assert moved["step_scale"] == pytest.approx(1.0, abs=1e-12), moved
+    r = runner.invoke(app, ["observe", "--db", str(db), "--joint", "3", "--at", "2mm", "--force"])
+    assert r.exit_code == 0 and "kept: a reading this far" in " ".join(r.stdout.split()), r.output

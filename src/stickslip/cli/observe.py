@@ -37,7 +37,8 @@ def observe(
     ),
     force: bool = typer.Option(
         False, "--force",
-        help=f"Use a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position.",
+        help=f"Take a measurement more than {MAX_INNOVATION:g} standard deviations from the kept position as the "
+        "position (re-referenced; the step scale is kept).",
     ),
     device: str | None = typer.Option(None, "--device", "-d", help=_DEVICE_HELP),
     db: str | None = db_option(),
@@ -50,8 +51,9 @@ def observe(
     measured value and corrects the day's step scale that the next `move` plans with.
     An end stop reached (--at min/max) is exact. A joint left uncertain by an
     interrupted move, or one no move has tracked yet, is re-referenced by the measurement.
-    A measurement more than 5 standard deviations from the kept position is refused
-    (--force uses it).
+    A measurement more than 5 standard deviations from the kept position is refused;
+    --force sets the position to it and keeps the step scale (a slip or a hand moved the
+    joint there, not its steps).
 
     Example: stickslip observe -d mm3a:///dev/ttyUSB0 --joint 3 --at 1.234mm --sigma 2um
     """
@@ -97,6 +99,10 @@ def observe(
     )
     say(f"now {format_position(r.q, joint)} (σ {format_spread(r.q_sd, joint)})")
     if r.re_referenced:
+        return
+    if r.forced:
+        say(f"step scale x{r.step_scale:.4f} kept: a reading this far from the kept position sets the position "
+            "and teaches no scale (the steps did not take the joint there)")
         return
     say(
         f"step scale x{r.step_scale_before:.4f} -> x{r.step_scale:.4f} (σ {100 * r.step_scale_sd:.2g} %)"

@@ -8,7 +8,8 @@ the next move plans with (docs/models.md §7).
 
 A measurement far from the kept position (more than :data:`MAX_INNOVATION` standard
 deviations of the difference) is refused unless forced: a wrong reading or a slipped
-joint would otherwise teach the filter a wrong step scale. A joint left uncertain by an
+joint would otherwise teach the filter a wrong step scale. Forced, it re-references the
+position and leaves the step scale as it was (the steps did not take the joint there). A joint left uncertain by an
 interrupted move, or one no move has tracked yet, is re-referenced by the measurement.
 """
 
@@ -188,7 +189,11 @@ def observe(store: ObserveStore, device: str, obs: Observation) -> ObserveResult
             q_new = obs.q
         else:
             sigmas = _gate(obs, q_before, sd_before)
-            q_new = track.observe(q_before, obs.q, obs.sigma)
+            if sigmas > MAX_INNOVATION:  # forced: a reading the filter cannot explain (a slip, a hand) sets the
+                track.reset_position(obs.sigma)  # position; the steps did not get it there: it teaches no scale
+                q_new = obs.q
+            else:
+                q_new = track.observe(q_before, obs.q, obs.sigma)
         q_new = min(max(q_new, spec.lower), spec.upper)
         state.set_position(joint, q_new, "observed")
         state.track[joint] = track.to_json()
