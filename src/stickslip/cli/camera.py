@@ -633,6 +633,9 @@ def _print_seen(result: Any) -> None:
     if result.looks:
         say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
              highlight=False)
+    elif result.reached:
+        say_(f"reached without moving: the kept positions are at the target (tolerance {tol:.2g} µm)",
+             highlight=False)
     else:
         say_(f"{state} before the first look (tolerance {tol:.2g} µm)", highlight=False)
     say_(f"  {len(result.looks)} leg(s) looked at, {result.corrections} correction(s)", highlight=False)

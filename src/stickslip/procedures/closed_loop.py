@@ -489,8 +489,11 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
         if error is not None:
             return False, f"{error} (a limit: the device stopped the move)"
         if not any(steps):
+            left = run._error(target)
+            if left <= tol:  # before any look (after one, the check above ends it): already there, nothing to move
+                return True, None
             return False, (
-                f"no progress: the tip is {run._error(target) * 1e6:.3g} µm from the target, less than a step "
+                f"no progress: the tip is {left * 1e6:.3g} µm from the target, less than a step "
                 f"makes (tolerance {tol * 1e6:.3g} µm)"
             )
         run.predict(before, steps)
