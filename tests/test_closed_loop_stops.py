@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from test_closed_loop import DEV, _run, _where, cal_off
 
 __all__ = ["cal_off"]
@@ -25,3 +27,21 @@ def test_a_move_to_where_the_joint_is_reaches_without_moving(cal_off):
     assert out["reached"] and out["reason"] is None and out["legs"] == 0
     assert out["sim_true"]["error"] < 1e-9
     assert _where()[3]["source"] == "default"  # nothing moved, nothing seen
+
+
+def test_an_opened_camera_object_is_refused_where_a_url_is_meant():
+    # before: CameraLoop(<SimCamera>) was accepted and the move failed later with AttributeError
+    # ("'SimCamera' object has no attribute 'camera'") inside the Bluesky status
+    from stickslip.procedures.closed_loop import CameraLoop
+    from stickslip.sim.arm import SimulatedMM3A
+    from stickslip.vision.camera import open_camera
+
+    cam = open_camera(CAM, SimulatedMM3A(seed=4))
+    cam.close()
+    with pytest.raises(TypeError, match="camera URL .* not a SimCamera"):
+        CameraLoop(cam)  # type: ignore[arg-type]
+    pytest.importorskip("ophyd_async")
+    from stickslip.bluesky import StickSlipAxis
+
+    with pytest.raises(TypeError, match="camera URL or a CameraLoop, not a SimCamera"):
+        StickSlipAxis(SimulatedMM3A(seed=4), 3, None, name="q3", camera=cam)  # type: ignore[arg-type]

@@ -367,6 +367,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         guard: Guard | None = None,
     ) -> None:
         self.from_unreferenced = bool(from_unreferenced)
+        if camera is not None and not isinstance(camera, (str, CameraLoop)):
+            raise TypeError(f"camera= is a camera URL or a CameraLoop, not a {type(camera).__name__}")
         self.camera = CameraLoop(camera) if isinstance(camera, str) else camera
         self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move (and leg) checked first
         self.spec = kin.joint_spec(joint)

@@ -144,6 +144,11 @@ class CameraLoop:
     jacobian: MeasuredJacobian | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.camera, str):  # an opened camera object: the loop opens its own, on the arm it drives
+            raise TypeError(
+                f"CameraLoop's camera is a camera URL (simcam://?pixel=1um, opencv://0?pixel=0.5um), not a "
+                f"{type(self.camera).__name__}: the loop opens the camera itself"
+            )
         for name in ("tolerance_px", "tolerance", "max_leg_px"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
