@@ -7,6 +7,7 @@ than calibrated); the camera is the simulated microscope, 1 µm pixels, the tip 
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -45,3 +46,33 @@ def test_an_opened_camera_object_is_refused_where_a_url_is_meant():
 
     with pytest.raises(TypeError, match="camera URL or a CameraLoop, not a SimCamera"):
         StickSlipAxis(SimulatedMM3A(seed=4), 3, None, name="q3", camera=cam)  # type: ignore[arg-type]
+
+
+def test_a_joint_the_camera_cannot_see_move_is_refused_before_anything_moves(cal_off):
+    # joint 2 of the outstretched arm moves the tip along a straight-down camera's line of sight; before, the
+    # whole move went in one leg, blind, and the loop then stopped 'the tip was lost (out of focus ...)', exit 2,
+    # saying 'stopped: the seen tip 0.25 µm from the target' while the true tip was 3.3 µm off (72 µm for 1 deg)
+    r = _run(["move", "-d", DEV, "-c", cal_off, "--joint", "2", "--by", "0.05deg", "--camera", CAM,
+              "--camera-tip", TIP])
+    assert r.exit_code == 2
+    lines = [ln for ln in r.output.splitlines() if ln.strip() and not ln.startswith("warning:")]
+    assert lines == [lines[0]] and lines[0].startswith("error: joint 2 moves the tip along the camera's line of sight")
+    assert "(0% of its motion in the image" in lines[0]
+    assert _where()[2]["source"] == "default"  # nothing moved
+
+
+def test_unseen_problem_is_the_share_of_the_joint_motion_in_the_image():
+    from stickslip import kinematics as kin
+    from stickslip.procedures.closed_loop import CameraLoop, unseen_problem
+    from stickslip.vision.view import View
+
+    loop = CameraLoop(CAM)
+    out = kin.Pose()  # outstretched: joint 2 moves the tip straight up
+    assert unseen_problem(loop, 1, out, kin.DEFAULT_GEOMETRY) is None
+    assert unseen_problem(loop, 3, out, kin.DEFAULT_GEOMETRY) is None
+    assert "joint 2" in (unseen_problem(loop, 2, out, kin.DEFAULT_GEOMETRY) or "")
+    # a camera leaning 60 deg about the arm's y axis sees 87 % of joint 2's motion (sin 60 deg)
+    assert unseen_problem(CameraLoop(CAM, view=View(tilt=math.radians(60.0))), 2, out, kin.DEFAULT_GEOMETRY) is None
+    # 15 deg: sin 15 deg = 26 % < 30 %
+    assert "(26% of its motion" in (unseen_problem(CameraLoop(CAM, view=View(tilt=math.radians(15.0))), 2, out,
+                                                   kin.DEFAULT_GEOMETRY) or "")

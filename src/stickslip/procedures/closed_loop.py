@@ -305,6 +305,25 @@ def image_calibration(
     return CameraCalibration(pose, reference_px, cols, pixel_size_m, view, geometry, range_px)
 
 
+def unseen_problem(loop: CameraLoop, joint: int, pose: kin.Pose, geometry: kin.Geometry) -> str | None:
+    """Why the camera cannot close a one-joint loop of ``joint`` at ``pose``, or ``None``.
+
+    The joint moves the tip mostly along the camera's line of sight: less than
+    :data:`~stickslip.vision.jacobian.MIN_VISIBILITY` of its motion lies in the image, as
+    :func:`image_calibration` leaves such a joint out (the view's, or the measured camera's).
+    """
+    s = loop.jacobian.pixel_size_m if loop.jacobian is not None else 1e-6  # the share does not depend on it
+    J = kin.jacobian((pose.q1, pose.q2, pose.q3), geometry)[:, joint - 1]
+    norm = float(np.linalg.norm(J))
+    share = float(np.linalg.norm(image_map(loop, s, pose, geometry) @ J)) * s / norm if norm > 0 else 0.0
+    if share >= MIN_VISIBILITY:
+        return None
+    return (
+        f"joint {joint} moves the tip along the camera's line of sight here ({share:.0%} of its motion in the "
+        f"image, at least {MIN_VISIBILITY:.0%} needed): the camera cannot see it move; move it without --camera"
+    )
+
+
 def observe_joints(
     cal: CameraCalibration, joints: Sequence[int], x: float, y: float, sigma_px: float
 ) -> dict[int, tuple[float, float]]:
@@ -680,6 +699,9 @@ def move_seen(
         if problem:
             raise MoveRefused(problem + " (a closed-loop move starts from a known position)")
         _, q_to = target_of(state, joint, request.by, request.to)
+        unseen = unseen_problem(loop, joint, state.pose, kin.DEFAULT_GEOMETRY)
+        if unseen:
+            raise MoveRefused(unseen)
         _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to))
         loop_geometry = kin.DEFAULT_GEOMETRY
         dev = (opener or open_device)(request.device)
