@@ -76,3 +76,13 @@ def test_unseen_problem_is_the_share_of_the_joint_motion_in_the_image():
     # 15 deg: sin 15 deg = 26 % < 30 %
     assert "(26% of its motion" in (unseen_problem(CameraLoop(CAM, view=View(tilt=math.radians(15.0))), 2, out,
                                                    kin.DEFAULT_GEOMETRY) or "")
+
+
+def test_a_reach_along_the_line_of_sight_is_refused_before_anything_moves(cal_off):
+    # before: 'reached: the seen tip 0.44 µm from the target' though the camera saw no joint move (joint 2 alone,
+    # dead-reckoned) and the true tip ended 1.56 µm off, beyond the 1 µm tolerance
+    r = _run(["reach", "-d", DEV, "-c", cal_off, "--by", "0,0,-5um", "--camera", CAM, "--camera-tip", TIP])
+    assert r.exit_code == 2
+    lines = [ln for ln in r.output.splitlines() if ln.strip() and not ln.startswith("warning:")]
+    assert len(lines) == 1 and lines[0].startswith("error: the tip would move along the camera's line of sight (0%")
+    assert _where()[2]["source"] == "default"

@@ -40,6 +40,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from .. import kinematics as kin
 from ..calibration import Calibration
@@ -305,17 +306,26 @@ def image_calibration(
     return CameraCalibration(pose, reference_px, cols, pixel_size_m, view, geometry, range_px)
 
 
+def seen_share(loop: CameraLoop, pose: kin.Pose, geometry: kin.Geometry, motion: npt.ArrayLike) -> float:
+    """The share of a base-frame tip ``motion`` that lies in the image (0..1; 0 for no motion).
+
+    Through the loop's image map at ``pose`` (the view's, or the measured camera's), as
+    :func:`image_calibration` judges a joint's column.
+    """
+    s = loop.jacobian.pixel_size_m if loop.jacobian is not None else 1e-6  # the share does not depend on it
+    v = np.asarray(motion, dtype=float)
+    norm = float(np.linalg.norm(v))
+    return float(np.linalg.norm(image_map(loop, s, pose, geometry) @ v)) * s / norm if norm > 0 else 0.0
+
+
 def unseen_problem(loop: CameraLoop, joint: int, pose: kin.Pose, geometry: kin.Geometry) -> str | None:
     """Why the camera cannot close a one-joint loop of ``joint`` at ``pose``, or ``None``.
 
     The joint moves the tip mostly along the camera's line of sight: less than
     :data:`~stickslip.vision.jacobian.MIN_VISIBILITY` of its motion lies in the image, as
-    :func:`image_calibration` leaves such a joint out (the view's, or the measured camera's).
+    :func:`image_calibration` leaves such a joint out (:func:`seen_share`).
     """
-    s = loop.jacobian.pixel_size_m if loop.jacobian is not None else 1e-6  # the share does not depend on it
-    J = kin.jacobian((pose.q1, pose.q2, pose.q3), geometry)[:, joint - 1]
-    norm = float(np.linalg.norm(J))
-    share = float(np.linalg.norm(image_map(loop, s, pose, geometry) @ J)) * s / norm if norm > 0 else 0.0
+    share = seen_share(loop, pose, geometry, kin.jacobian((pose.q1, pose.q2, pose.q3), geometry)[:, joint - 1])
     if share >= MIN_VISIBILITY:
         return None
     return (
@@ -781,6 +791,12 @@ def reach_seen(
         state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
         first = plan_reach(calibration, state.pose, to=request.to, by=request.by, geometry=geometry,
                            segment=request.segment)  # refused here when out of reach, before anything moves
+        share = seen_share(loop, state.pose, geometry, np.subtract(first.target, first.tip_start))
+        if first.length > 0 and share < MIN_VISIBILITY:
+            raise MoveRefused(
+                f"the tip would move along the camera's line of sight ({share:.0%} of the move in the image, at "
+                f"least {MIN_VISIBILITY:.0%} needed): the camera cannot see it; reach without --camera"
+            )
         _check_start(request.guard, state, calibration, loop, joint_path(first))
         target_v = first.target
         save_state(store, state)
