@@ -86,3 +86,14 @@ def test_a_reach_along_the_line_of_sight_is_refused_before_anything_moves(cal_of
     lines = [ln for ln in r.output.splitlines() if ln.strip() and not ln.startswith("warning:")]
     assert len(lines) == 1 and lines[0].startswith("error: the tip would move along the camera's line of sight (0%")
     assert _where()[2]["source"] == "default"
+
+
+def test_a_loop_that_lost_the_tip_does_not_call_its_last_position_seen(cal_off):
+    # before: 'stopped: the seen tip 84.59 µm from the target' after the tip had left the field
+    r = _run(["move", "-d", DEV, "-c", cal_off, "--joint", "3", "--by", "100um", "--camera",
+              "simcam://?pixel=1um&size=128x128", "--camera-tip", "76.8,64"])
+    assert r.exit_code == 2
+    first = r.stdout.splitlines()[0]
+    assert first.startswith("stopped: the tip, dead-reckoned (not seen at the last look),"), r.output
+    assert "seen tip" not in r.output
+    assert _where()[3]["source"] == "dead-reckoned"

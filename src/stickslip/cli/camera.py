@@ -631,7 +631,8 @@ def _print_seen(result: Any) -> None:
     tol = result.tolerance * 1e6
     state = "reached" if result.reached else "stopped"
     if result.looks:
-        say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
+        how = "the seen tip" if result.looks[-1].seen else "the tip, dead-reckoned (not seen at the last look),"
+        say_(f"{state}: {how} {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
              highlight=False)
     elif result.reached:
         say_(f"reached without moving: the kept positions are at the target (tolerance {tol:.2g} µm)",
