@@ -6,6 +6,7 @@ than calibrated); the camera is the simulated microscope, 1 µm pixels, the tip 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -97,3 +98,38 @@ def test_a_loop_that_lost_the_tip_does_not_call_its_last_position_seen(cal_off):
     assert first.startswith("stopped: the tip, dead-reckoned (not seen at the last look),"), r.output
     assert "seen tip" not in r.output
     assert _where()[3]["source"] == "dead-reckoned"
+
+
+class _Cropped:
+    """A camera whose frames shrink by 40 px from the ``at``-th grab on (a live camera's mode changed)."""
+
+    def __init__(self, cam, at: int):
+        self.cam, self.at, self.n = cam, at, 0
+        self.info = cam.info
+
+    def grab(self):
+        self.n += 1
+        f = self.cam.grab()
+        return dataclasses.replace(f, image=f.image[:-40, :-40]) if self.n >= self.at else f
+
+    def close(self) -> None:
+        self.cam.close()
+
+
+def test_a_frame_of_another_size_mid_loop_stops_it_with_the_reason(cal_off, tmp_path):
+    # before: the tracker's ValueError ('a frame of 472 x 472 px after frames of 512 x 512 px') left move_seen
+    # without its result (and would end a jog session); now a stop with the reason, the joint dead-reckoned
+    from stickslip.calibration import Calibration
+    from stickslip.procedures.closed_loop import CameraLoop, move_seen
+    from stickslip.procedures.move import MoveRequest
+    from stickslip.storage import Store
+    from stickslip.vision.camera import open_camera
+
+    with Store.open(tmp_path / "s.db") as store:
+        r = move_seen(store, MoveRequest(DEV, 3, by=60e-6), Calibration.load(cal_off),
+                      CameraLoop(CAM, tip=(307.2, 256.0)),
+                      camera_opener=lambda url, dev: _Cropped(open_camera(url, dev), 4))
+    assert not r.reached and r.reason is not None
+    assert r.reason.startswith("the camera failed (a frame of 472 x 472 px after frames of 512 x 512 px")
+    assert len(r.looks) == 2 and r.looks[-1].pixel is None and r.looks[0].seen  # one leg seen, then the failure
+    assert r.state.sources[3] == "dead-reckoned"

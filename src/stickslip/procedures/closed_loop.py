@@ -416,7 +416,7 @@ class _Run:
                 if isinstance(r, Fix):
                     break
                 r = self.tracker.update(self.cam.grab())
-        except CameraError as e:
+        except (CameraError, ValueError) as e:  # no frame, or one the tracker cannot take (another size: ImageError)
             self.looks.append(Look(steps, None, {}, self.q(), self._error(target), correction, self._scales()))
             return f"the camera failed ({e}); the positions are dead-reckoned, not seen"
         if not isinstance(r, Fix):
