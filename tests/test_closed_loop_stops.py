@@ -133,3 +133,32 @@ def test_a_frame_of_another_size_mid_loop_stops_it_with_the_reason(cal_off, tmp_
     assert r.reason.startswith("the camera failed (a frame of 472 x 472 px after frames of 512 x 512 px")
     assert len(r.looks) == 2 and r.looks[-1].pixel is None and r.looks[0].seen  # one leg seen, then the failure
     assert r.state.sources[3] == "dead-reckoned"
+
+
+def test_a_camera_that_disagrees_with_the_dead_reckoning_leaves_the_joint_uncertain_over_both(tmp_path):
+    # the day's steps three times the calibrated ones: the first leg's fix lies far beyond the gate (11.8 sd).
+    # Before, the joint stayed dead-reckoned at 15.9 µm with sd 2.67 µm, the truth 47.7 µm (the camera's 47.6),
+    # 11.9 sd away: silently wrong, and the next move planned from it
+    from stickslip.motion.tracking import scaled_calibration
+    from test_closed_loop import CAL_DAY
+    from test_reach import true_calibration
+
+    cal = true_calibration()
+    for j in (1, 2, 3):
+        cal = scaled_calibration(cal, j, 1.0 / 3.0)
+    path = tmp_path / "cal-3x.json"
+    dataclasses.replace(cal, day=CAL_DAY).save(path)
+    r = _run(["move", "-d", DEV, "-c", str(path), "--joint", "3", "--by", "100um", "--camera", CAM,
+              "--camera-tip", TIP, "--json"])
+    assert r.exit_code == 2
+    out = json.loads(r.stdout)["camera"]
+    assert "standard deviations from its dead reckoning" in out["reason"] and "kept uncertain" in out["reason"]
+    assert out["sources"]["3"] == "uncertain"
+    w = _where()[3]
+    assert w["source"] == "uncertain"
+    lo, hi = w["uncertain"]
+    true_q3 = out["sim_true"]["q"][2]
+    assert lo <= w["q"] <= hi and lo <= true_q3 <= hi  # the reckoning and the truth (the camera's) both inside
+    assert true_q3 - w["q"] > 10e-6  # a real disagreement, not noise
+    r = _run(["move", "-d", DEV, "-c", str(path), "--joint", "3", "--by", "10um"])
+    assert r.exit_code == 2 and "uncertain (the camera and the dead reckoning disagreed" in r.output

@@ -256,7 +256,7 @@ class LoopResult:
             "device": self.device, "reached": self.reached, "reason": self.reason, "corrections": self.corrections,
             "legs": len(self.looks), "error": self.error, "tolerance": self.tolerance, "target": list(self.target),
             "looks": [k.as_dict() for k in self.looks],
-            "sources": {str(j): self.state.sources[j] for j in (1, 2, 3)},
+            "sources": {str(j): "uncertain" if j in self.state.uncertain else self.state.sources[j] for j in (1, 2, 3)},
         }
         if self.sim_true is not None:
             out["sim_true"] = {"q": list(self.sim_true), "error": self.sim_true_error}
@@ -440,12 +440,15 @@ class _Run:
             q_before = self.state.positions[j]
             s_pred = math.hypot(track.sd, sd)
             if s_pred > 0 and abs(q_meas - q_before) > MAX_INNOVATION * s_pred:
+                self._disputed(j, q_before, q_meas, sd)
+                self.save(self.state)
                 self.looks.append(Look(steps, (r.x, r.y), seen, self.q(), self._error(target), correction,
                                        self._scales()))
                 return (
                     f"the camera sees joint {j} at {format_position(q_meas, j)}, "
                     f"{abs(q_meas - q_before) / s_pred:.3g} standard deviations from its dead reckoning "
-                    f"{format_position(q_before, j)}: a slip or a wrong fix; not used"
+                    f"{format_position(q_before, j)}: a slip or a wrong fix; not used, and joint {j} is kept uncertain "
+                    "over both until it is referenced again"
                 )
             q_new = track.observe(q_before, q_meas, sd)
             spec = kin.joint_spec(j)
@@ -454,6 +457,15 @@ class _Run:
         self.save(self.state)
         self.looks.append(Look(steps, (r.x, r.y), seen, self.q(), self._error(target), correction, self._scales()))
         return None
+
+    def _disputed(self, joint: int, q_reckoned: float, q_seen: float, sd_seen: float) -> None:
+        """The camera and the dead reckoning of ``joint`` disagree beyond the gate: a slip (the camera right) or
+        a wrong fix (the reckoning right). The joint is kept *uncertain* over both, each widened by 3 of its
+        standard deviations (the reckoning's with the start's own), until it is referenced again."""
+        sd_reckoned = math.hypot(self.tracks[joint].sd, self.sd0.get(joint, 0.0))
+        lo = min(q_reckoned - 3.0 * sd_reckoned, q_seen - 3.0 * sd_seen)
+        hi = max(q_reckoned + 3.0 * sd_reckoned, q_seen + 3.0 * sd_seen)
+        self.state.mark_uncertain(joint, lo, hi, "the camera and the dead reckoning disagreed: a slip or a wrong fix")
 
     def image_map(self) -> np.ndarray:
         """The image map at the kept pose (px per m of a base-frame displacement): :func:`image_map`."""
