@@ -623,13 +623,17 @@ def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]
 
 def _check_start(
     guard: Guard | None, state: DeviceState, calibration: Calibration, loop: CameraLoop,
-    path: Sequence[Sequence[float]],
+    path: Sequence[Sequence[float]], joint: int | None = None,
 ) -> None:
-    """Before anything moves: the whole planned path, and the steps out and back that may find the tip.
+    """Before anything moves: the camera sees ``joint`` (a one-joint move's: :func:`unseen_problem`), the whole
+    planned path, and the steps out and back that may find the tip.
 
     :class:`~.move.MoveRefused` naming the obstacle; each leg is checked again as it is
     planned (:func:`check_leg`).
     """
+    unseen = None if joint is None else unseen_problem(loop, joint, state.pose, kin.DEFAULT_GEOMETRY)
+    if unseen:
+        raise MoveRefused(unseen)
     if guard is None:
         return
     check_envelope_path(guard, state, path, calibration)
@@ -721,10 +725,7 @@ def move_seen(
         if problem:
             raise MoveRefused(problem + " (a closed-loop move starts from a known position)")
         _, q_to = target_of(state, joint, request.by, request.to)
-        unseen = unseen_problem(loop, joint, state.pose, kin.DEFAULT_GEOMETRY)
-        if unseen:
-            raise MoveRefused(unseen)
-        _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to))
+        _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to), joint)
         loop_geometry = kin.DEFAULT_GEOMETRY
         dev = (opener or open_device)(request.device)
         cam: Camera | None = None
