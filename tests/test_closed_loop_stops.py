@@ -162,3 +162,37 @@ def test_a_camera_that_disagrees_with_the_dead_reckoning_leaves_the_joint_uncert
     assert true_q3 - w["q"] > 10e-6  # a real disagreement, not noise
     r = _run(["move", "-d", DEV, "-c", str(path), "--joint", "3", "--by", "10um"])
     assert r.exit_code == 2 and "uncertain (the camera and the dead reckoning disagreed" in r.output
+
+
+def test_a_loop_interrupted_mid_way_keeps_the_start_s_own_sd(cal_off, tmp_path):
+    # the camera measures motion from the start, so a seen position is as uncertain as the start was; the loop
+    # puts the start's sd back at its end. Before, Ctrl-C (or a Bluesky stop) on the third leg skipped that:
+    # the open-loop move's 16.7 µm sd was kept as 0.34 µm
+    from stickslip.calibration import Calibration
+    from stickslip.devices.base import open_device
+    from stickslip.procedures.closed_loop import CameraLoop, move_seen
+    from stickslip.procedures.move import Interrupted, MoveRequest, move
+    from stickslip.storage import Store
+
+    cal = Calibration.load(cal_off)
+    sim = open_device(DEV)
+    calls = []
+    real_step = sim.step
+
+    def step(joint: int, n: int) -> None:
+        calls.append(n)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        real_step(joint, n)
+
+    sim.step = step  # type: ignore[method-assign]
+    with Store.open(tmp_path / "s.db") as store:
+        before = move(store, MoveRequest(DEV, 3, by=100e-6), cal).state
+        sd0 = math.sqrt(before.track[3]["P"][0][0])
+        assert sd0 > 10e-6
+        tip = (307.2 + before.positions[3] * 1e6, 256.0)  # the simulator is placed at the kept positions
+        with pytest.raises(Interrupted) as e:
+            move_seen(store, MoveRequest(DEV, 3, by=60e-6), cal, CameraLoop(CAM, tip=tip), opener=lambda _url: sim)
+    kept = e.value.state
+    assert kept.sources[3] == "seen"  # two legs were seen before the interrupt
+    assert math.sqrt(kept.track[3]["P"][0][0]) >= sd0

@@ -555,6 +555,21 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
     return False, "too many legs"  # pragma: no cover - a bound, not a path
 
 
+def _run_kept(run: _Run, target: Vec3, leg: Leg, what: str, key: str) -> tuple[bool, str | None]:
+    """:func:`_run_loop`, the start's own σ put back into the kept tracks (:meth:`_Run.finish`) however it
+    ends: reached, stopped, or by an exception (a front end's stop between bursts, a device's error, Ctrl-C:
+    :class:`~.move.Interrupted` with the state as stored)."""
+    try:
+        reached, reason = _run_loop(run, target, leg)
+    except BaseException as e:
+        run.finish()
+        if isinstance(e, KeyboardInterrupt):
+            raise Interrupted(what, kept_after_interrupt(run.store, key, run.state)) from None
+        raise
+    run.finish()
+    return reached, reason
+
+
 def _open(
     dev: Controller, state: DeviceState, loop: CameraLoop, camera_opener: CameraOpener,
     journal: Callable[[], Callable[[], None]],
@@ -763,11 +778,7 @@ def move_seen(
                 steps[joint - 1] = out.sent
                 return (steps[0], steps[1], steps[2]), out.error, last
 
-            try:
-                reached, reason = _run_loop(run, target_v, leg)
-                run.finish()
-            except KeyboardInterrupt:
-                raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
+            reached, reason = _run_kept(run, target_v, leg, f"move of joint {joint}", key)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
@@ -840,11 +851,7 @@ def reach_seen(
                 s = out.sent
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)
 
-            try:
-                reached, reason = _run_loop(run, target_v, leg)
-                run.finish()
-            except KeyboardInterrupt:
-                raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
+            reached, reason = _run_kept(run, target_v, leg, "a straight tip move", key)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
