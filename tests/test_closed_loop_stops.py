@@ -196,3 +196,38 @@ def test_a_loop_interrupted_mid_way_keeps_the_start_s_own_sd(cal_off, tmp_path):
     kept = e.value.state
     assert kept.sources[3] == "seen"  # two legs were seen before the interrupt
     assert math.sqrt(kept.track[3]["P"][0][0]) >= sd0
+
+
+def test_a_bluesky_stop_while_the_tip_is_being_found_leaves_the_joint_uncertain(RE):
+    # camera= a URL alone: each move first steps joint 3 out by 20 steps and back to find the tip. A stop between
+    # the two was taken as 'before a burst was sent' and cleared the journal: before, joint 3 was kept at 0 µm
+    # ('its dead-reckoned position is 0 µm') with the arm 19.6 µm out
+    pytest.importorskip("ophyd_async")
+    import bluesky.plan_stubs as bps
+    from bluesky.utils import FailedStatus
+    from ophyd_async.core import init_devices
+
+    from stickslip.bluesky import StickSlipAxis
+    from stickslip.calibration import Calibration
+    from stickslip.sim.arm import SimulatedMM3A
+    from test_reach import true_calibration
+
+    sim = SimulatedMM3A(seed=4, day="2026-11-22")
+    cal: Calibration = true_calibration()
+    real_step = sim.step
+    with init_devices():
+        axis = StickSlipAxis(sim, 3, cal, name="q3", camera=CAM)
+
+    def step(joint: int, n: int) -> None:
+        real_step(joint, n)
+        if n == 20:  # the steps out to find the tip are made: the user presses stop now
+            axis._stop_event.set()
+
+    sim.step = step  # type: ignore[method-assign]
+    with pytest.raises(FailedStatus) as e:
+        RE(bps.mv(axis, 40e-6))
+    assert "was stepped out and back to find the tip" in str(e.value.__cause__)
+    kept = axis.link.load()
+    assert 3 in kept.uncertain
+    lo, hi = kept.uncertain[3]
+    assert lo <= sim.position(3) <= hi and sim.position(3) > 15e-6

@@ -83,6 +83,7 @@ from .observe import MAX_INNOVATION
 from .reach import ReachRequest, drive_reach, joint_path, referenced_state
 
 __all__ = [
+    "FINDING_TIP",
     "CameraLoop",
     "JogEyes",
     "image_map",
@@ -102,6 +103,10 @@ LOOK_AGAIN = 2
 """Frames grabbed again, without moving, after a refused one before the tip counts as lost."""
 
 CameraOpener = Callable[[str, Controller], Camera]
+
+FINDING_TIP = "was stepped out and back to find the tip"
+"""What ``where`` says of the joint stepped to find the tip until it is back (its journal: the steps out may
+have been sent and the steps back not, so a front end's stop there leaves it uncertain)."""
 
 
 @dataclass(frozen=True)
@@ -615,7 +620,7 @@ def _out_and_back(state: DeviceState, calibration: Calibration, joint: int) -> C
     q_out = float(planner.position_after(q0, AUTO_STEPS))
     out = Planner(calibration, joint, pose._replace(**{f"q{joint}": q_out}))
     q_back = float(out.position_after(q_out, -AUTO_STEPS))
-    state.intend(joint, q0 + 1.5 * (q_out - q0), f"joint {joint} was stepped out and back to find the tip")
+    state.intend(joint, q0 + 1.5 * (q_out - q0), f"joint {joint} {FINDING_TIP}")
 
     def keep() -> None:
         state.set_position(joint, q_back, "dead-reckoned" if source != "assumed" else source)
