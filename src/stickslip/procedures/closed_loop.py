@@ -28,7 +28,8 @@ The loop ends when the tip is within the tolerance of the target (default: 1 px 
 since the last look stay dead-reckoned, their uncertainty grown, not seen), no progress
 (a correction that does not shrink the error by a fifth, or an error smaller than the
 steps can make), the camera disagreeing with the dead reckoning beyond the gate (a slip,
-a wrong fix), a limit (a target out of range or reach, a device error), or too many
+a wrong fix: the joint is kept uncertain over both), a limit (a target out of range or
+reach, a motion the camera cannot see, a device error), or too many
 corrections (a *correction* is a leg planned after the dead reckoning had reached the
 target: the open-loop move takes none).
 """
