@@ -231,3 +231,20 @@ def test_a_bluesky_stop_while_the_tip_is_being_found_leaves_the_joint_uncertain(
     assert 3 in kept.uncertain
     lo, hi = kept.uncertain[3]
     assert lo <= sim.position(3) <= hi and sim.position(3) > 15e-6
+
+
+def test_move_seen_given_a_url_string_says_what_it_takes(cal_off, tmp_path):
+    # before: AttributeError "'str' object has no attribute 'jacobian'" (StickSlipAxis takes a URL, move_seen not)
+    from stickslip.calibration import Calibration
+    from stickslip.procedures.closed_loop import move_seen
+    from stickslip.procedures.move import MoveRequest
+    from stickslip.storage import Store
+
+    with Store.open(tmp_path / "s.db") as store, pytest.raises(TypeError, match=r"CameraLoop\('simcam://"):
+        move_seen(store, MoveRequest(DEV, 3, by=10e-6), Calibration.load(cal_off), CAM)  # type: ignore[arg-type]
+    assert _where()[3]["source"] == "default"
+    from stickslip.procedures.closed_loop import reach_seen
+    from stickslip.procedures.reach import ReachRequest
+
+    with Store.open(tmp_path / "s.db") as store, pytest.raises(TypeError, match=r"CameraLoop\('simcam://"):
+        reach_seen(store, ReachRequest(DEV, by=(10e-6, 0.0, 0.0)), Calibration.load(cal_off), CAM)  # type: ignore[arg-type]

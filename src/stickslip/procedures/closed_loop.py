@@ -652,6 +652,8 @@ def _check_start(
     :class:`~.move.MoveRefused` naming the obstacle; each leg is checked again as it is
     planned (:func:`check_leg`).
     """
+    if not isinstance(loop, CameraLoop):  # a URL alone: the loop's settings are a CameraLoop
+        raise TypeError(f"the camera is a CameraLoop (CameraLoop({loop!r}, tip=...)), not a {type(loop).__name__}")
     unseen = None if joint is None else unseen_problem(loop, joint, state.pose, kin.DEFAULT_GEOMETRY)
     if unseen:
         raise MoveRefused(unseen)
@@ -821,13 +823,13 @@ def reach_seen(
         state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
         first = plan_reach(calibration, state.pose, to=request.to, by=request.by, geometry=geometry,
                            segment=request.segment)  # refused here when out of reach, before anything moves
+        _check_start(request.guard, state, calibration, loop, joint_path(first))
         share = seen_share(loop, state.pose, geometry, np.subtract(first.target, first.tip_start))
         if first.length > 0 and share < MIN_VISIBILITY:
             raise MoveRefused(
                 f"the tip would move along the camera's line of sight ({share:.0%} of the move in the image, at "
                 f"least {MIN_VISIBILITY:.0%} needed): the camera cannot see it; reach without --camera"
             )
-        _check_start(request.guard, state, calibration, loop, joint_path(first))
         target_v = first.target
         save_state(store, state)
         dev = (opener or open_device)(request.device)
