@@ -65,7 +65,7 @@ from ..devices.base import (
 )
 from ..devices.positions import DeviceState, load_state, save_state
 from ..motion.planning import Planner
-from ..procedures.closed_loop import CameraLoop, move_seen
+from ..procedures.closed_loop import FINDING_TIP, CameraLoop, move_seen
 from ..procedures.move import (
     DeviceBusy,
     MoveOutcome,
@@ -367,6 +367,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         guard: Guard | None = None,
     ) -> None:
         self.from_unreferenced = bool(from_unreferenced)
+        if camera is not None and not isinstance(camera, (str, CameraLoop)):
+            raise TypeError(f"camera= is a camera URL or a CameraLoop, not a {type(camera).__name__}")
         self.camera = CameraLoop(camera) if isinstance(camera, str) else camera
         self.guard = guard  # a rig's envelope (stickslip.procedures.arms.guard_for): every move (and leg) checked first
         self.spec = kin.joint_spec(joint)
@@ -547,7 +549,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                 result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))
             except _Stopped:  # before a burst was sent: the confirmed position stands
                 state = load_state(store, self.link.key)
-                state.set_position(self.joint, state.positions[self.joint], state.sources[self.joint])
+                if FINDING_TIP not in state.why.get(self.joint, ""):  # not after the steps out to find the tip
+                    state.set_position(self.joint, state.positions[self.joint], state.sources[self.joint])
                 save_state(store, state)
                 publish(state)
                 return _MoveResult(0, proxy.sent, True, state)
@@ -622,9 +625,10 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         state = result.state
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
+            why = state.why[j] if FINDING_TIP in state.why.get(j, "") else "a burst was cut short"
             where = (
                 f"its position is uncertain, between {format_position(lo, j)} and {format_position(hi, j)} "
-                f"(a burst was cut short); re-reference it (stickslip where --set {j}=min at the lower stop)"
+                f"({why}); re-reference it (stickslip where --set {j}=min at the lower stop)"
             )
         else:
             where = f"its dead-reckoned position is {format_position(state.positions[j], j)}"

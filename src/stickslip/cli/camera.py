@@ -631,13 +631,21 @@ def _print_seen(result: Any) -> None:
     tol = result.tolerance * 1e6
     state = "reached" if result.reached else "stopped"
     if result.looks:
-        say_(f"{state}: the seen tip {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
+        used = [j for j in result.looks[-1].seen if j not in result.state.uncertain]  # a disputed fix is not used
+        how = "the seen tip" if used else "the tip, dead-reckoned (not seen at the last look),"
+        say_(f"{state}: {how} {result.error * 1e6:.2f} µm from the target (tolerance {tol:.2g} µm)",
+             highlight=False)
+    elif result.reached:
+        say_(f"reached without moving: the kept positions are at the target (tolerance {tol:.2g} µm)",
              highlight=False)
     else:
         say_(f"{state} before the first look (tolerance {tol:.2g} µm)", highlight=False)
     say_(f"  {len(result.looks)} leg(s) looked at, {result.corrections} correction(s)", highlight=False)
     for j in (1, 2, 3):
         src = result.state.sources[j]
+        if j in result.state.uncertain:
+            lo, hi = result.state.uncertain[j]
+            src = f"uncertain: between {format_position(lo, j)} and {format_position(hi, j)}"
         say_(f"  joint {j} {format_position(result.state.positions[j], j)} ({src})", highlight=False)
     scales = result.looks[-1].step_scale if result.looks else {}
     if scales:

@@ -28,7 +28,8 @@ The loop ends when the tip is within the tolerance of the target (default: 1 px 
 since the last look stay dead-reckoned, their uncertainty grown, not seen), no progress
 (a correction that does not shrink the error by a fifth, or an error smaller than the
 steps can make), the camera disagreeing with the dead reckoning beyond the gate (a slip,
-a wrong fix), a limit (a target out of range or reach, a device error), or too many
+a wrong fix: the joint is kept uncertain over both), a limit (a target out of range or
+reach, a motion the camera cannot see, a device error), or too many
 corrections (a *correction* is a leg planned after the dead reckoning had reached the
 target: the open-loop move takes none).
 """
@@ -40,6 +41,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from .. import kinematics as kin
 from ..calibration import Calibration
@@ -82,6 +84,7 @@ from .observe import MAX_INNOVATION
 from .reach import ReachRequest, drive_reach, joint_path, referenced_state
 
 __all__ = [
+    "FINDING_TIP",
     "CameraLoop",
     "JogEyes",
     "image_map",
@@ -101,6 +104,10 @@ LOOK_AGAIN = 2
 """Frames grabbed again, without moving, after a refused one before the tip counts as lost."""
 
 CameraOpener = Callable[[str, Controller], Camera]
+
+FINDING_TIP = "was stepped out and back to find the tip"
+"""What ``where`` says of the joint stepped to find the tip until it is back (its journal: the steps out may
+have been sent and the steps back not, so a front end's stop there leaves it uncertain)."""
 
 
 @dataclass(frozen=True)
@@ -144,6 +151,11 @@ class CameraLoop:
     jacobian: MeasuredJacobian | None = None
 
     def __post_init__(self) -> None:
+        if not isinstance(self.camera, str):  # an opened camera object: the loop opens its own, on the arm it drives
+            raise TypeError(
+                f"CameraLoop's camera is a camera URL (simcam://?pixel=1um, opencv://0?pixel=0.5um), not a "
+                f"{type(self.camera).__name__}: the loop opens the camera itself"
+            )
         for name in ("tolerance_px", "tolerance", "max_leg_px"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -250,7 +262,7 @@ class LoopResult:
             "device": self.device, "reached": self.reached, "reason": self.reason, "corrections": self.corrections,
             "legs": len(self.looks), "error": self.error, "tolerance": self.tolerance, "target": list(self.target),
             "looks": [k.as_dict() for k in self.looks],
-            "sources": {str(j): self.state.sources[j] for j in (1, 2, 3)},
+            "sources": {str(j): "uncertain" if j in self.state.uncertain else self.state.sources[j] for j in (1, 2, 3)},
         }
         if self.sim_true is not None:
             out["sim_true"] = {"q": list(self.sim_true), "error": self.sim_true_error}
@@ -298,6 +310,34 @@ def image_calibration(
                 >= MIN_VISIBILITY * float(np.linalg.norm(J[:, j - 1])) > 0]
     cols = {j: (float(G[0, j - 1]), float(G[1, j - 1])) for j in seen}
     return CameraCalibration(pose, reference_px, cols, pixel_size_m, view, geometry, range_px)
+
+
+def seen_share(loop: CameraLoop, pose: kin.Pose, geometry: kin.Geometry, motion: npt.ArrayLike) -> float:
+    """The share of a base-frame tip ``motion`` that lies in the image (0..1; 0 for no motion).
+
+    Through the loop's image map at ``pose`` (the view's, or the measured camera's), as
+    :func:`image_calibration` judges a joint's column.
+    """
+    s = loop.jacobian.pixel_size_m if loop.jacobian is not None else 1e-6  # the share does not depend on it
+    v = np.asarray(motion, dtype=float)
+    norm = float(np.linalg.norm(v))
+    return float(np.linalg.norm(image_map(loop, s, pose, geometry) @ v)) * s / norm if norm > 0 else 0.0
+
+
+def unseen_problem(loop: CameraLoop, joint: int, pose: kin.Pose, geometry: kin.Geometry) -> str | None:
+    """Why the camera cannot close a one-joint loop of ``joint`` at ``pose``, or ``None``.
+
+    The joint moves the tip mostly along the camera's line of sight: less than
+    :data:`~stickslip.vision.jacobian.MIN_VISIBILITY` of its motion lies in the image, as
+    :func:`image_calibration` leaves such a joint out (:func:`seen_share`).
+    """
+    share = seen_share(loop, pose, geometry, kin.jacobian((pose.q1, pose.q2, pose.q3), geometry)[:, joint - 1])
+    if share >= MIN_VISIBILITY:
+        return None
+    return (
+        f"joint {joint} moves the tip along the camera's line of sight here ({share:.0%} of its motion in the "
+        f"image, at least {MIN_VISIBILITY:.0%} needed): the camera cannot see it move; move it without --camera"
+    )
 
 
 def observe_joints(
@@ -382,7 +422,7 @@ class _Run:
                 if isinstance(r, Fix):
                     break
                 r = self.tracker.update(self.cam.grab())
-        except CameraError as e:
+        except (CameraError, ValueError) as e:  # no frame, or one the tracker cannot take (another size: ImageError)
             self.looks.append(Look(steps, None, {}, self.q(), self._error(target), correction, self._scales()))
             return f"the camera failed ({e}); the positions are dead-reckoned, not seen"
         if not isinstance(r, Fix):
@@ -406,12 +446,15 @@ class _Run:
             q_before = self.state.positions[j]
             s_pred = math.hypot(track.sd, sd)
             if s_pred > 0 and abs(q_meas - q_before) > MAX_INNOVATION * s_pred:
+                self._disputed(j, q_before, q_meas, sd)
+                self.save(self.state)
                 self.looks.append(Look(steps, (r.x, r.y), seen, self.q(), self._error(target), correction,
                                        self._scales()))
                 return (
                     f"the camera sees joint {j} at {format_position(q_meas, j)}, "
                     f"{abs(q_meas - q_before) / s_pred:.3g} standard deviations from its dead reckoning "
-                    f"{format_position(q_before, j)}: a slip or a wrong fix; not used"
+                    f"{format_position(q_before, j)}: a slip or a wrong fix; not used, and joint {j} is kept uncertain "
+                    "over both until it is referenced again"
                 )
             q_new = track.observe(q_before, q_meas, sd)
             spec = kin.joint_spec(j)
@@ -420,6 +463,15 @@ class _Run:
         self.save(self.state)
         self.looks.append(Look(steps, (r.x, r.y), seen, self.q(), self._error(target), correction, self._scales()))
         return None
+
+    def _disputed(self, joint: int, q_reckoned: float, q_seen: float, sd_seen: float) -> None:
+        """The camera and the dead reckoning of ``joint`` disagree beyond the gate: a slip (the camera right) or
+        a wrong fix (the reckoning right). The joint is kept *uncertain* over both, each widened by 3 of its
+        standard deviations (the reckoning's with the start's own), until it is referenced again."""
+        sd_reckoned = math.hypot(self.tracks[joint].sd, self.sd0.get(joint, 0.0))
+        lo = min(q_reckoned - 3.0 * sd_reckoned, q_seen - 3.0 * sd_seen)
+        hi = max(q_reckoned + 3.0 * sd_reckoned, q_seen + 3.0 * sd_seen)
+        self.state.mark_uncertain(joint, lo, hi, "the camera and the dead reckoning disagreed: a slip or a wrong fix")
 
     def image_map(self) -> np.ndarray:
         """The image map at the kept pose (px per m of a base-frame displacement): :func:`image_map`."""
@@ -489,8 +541,11 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
         if error is not None:
             return False, f"{error} (a limit: the device stopped the move)"
         if not any(steps):
+            left = run._error(target)
+            if left <= tol:  # before any look (after one, the check above ends it): already there, nothing to move
+                return True, None
             return False, (
-                f"no progress: the tip is {run._error(target) * 1e6:.3g} µm from the target, less than a step "
+                f"no progress: the tip is {left * 1e6:.3g} µm from the target, less than a step "
                 f"makes (tolerance {tol * 1e6:.3g} µm)"
             )
         run.predict(before, steps)
@@ -504,6 +559,21 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
             arrived = True
             error_at_arrival = err
     return False, "too many legs"  # pragma: no cover - a bound, not a path
+
+
+def _run_kept(run: _Run, target: Vec3, leg: Leg, what: str, key: str) -> tuple[bool, str | None]:
+    """:func:`_run_loop`, the start's own σ put back into the kept tracks (:meth:`_Run.finish`) however it
+    ends: reached, stopped, or by an exception (a front end's stop between bursts, a device's error, Ctrl-C:
+    :class:`~.move.Interrupted` with the state as stored)."""
+    try:
+        reached, reason = _run_loop(run, target, leg)
+    except BaseException as e:
+        run.finish()
+        if isinstance(e, KeyboardInterrupt):
+            raise Interrupted(what, kept_after_interrupt(run.store, key, run.state)) from None
+        raise
+    run.finish()
+    return reached, reason
 
 
 def _open(
@@ -551,7 +621,7 @@ def _out_and_back(state: DeviceState, calibration: Calibration, joint: int) -> C
     q_out = float(planner.position_after(q0, AUTO_STEPS))
     out = Planner(calibration, joint, pose._replace(**{f"q{joint}": q_out}))
     q_back = float(out.position_after(q_out, -AUTO_STEPS))
-    state.intend(joint, q0 + 1.5 * (q_out - q0), f"joint {joint} was stepped out and back to find the tip")
+    state.intend(joint, q0 + 1.5 * (q_out - q0), f"joint {joint} {FINDING_TIP}")
 
     def keep() -> None:
         state.set_position(joint, q_back, "dead-reckoned" if source != "assumed" else source)
@@ -574,13 +644,19 @@ def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]
 
 def _check_start(
     guard: Guard | None, state: DeviceState, calibration: Calibration, loop: CameraLoop,
-    path: Sequence[Sequence[float]],
+    path: Sequence[Sequence[float]], joint: int | None = None,
 ) -> None:
-    """Before anything moves: the whole planned path, and the steps out and back that may find the tip.
+    """Before anything moves: the camera sees ``joint`` (a one-joint move's: :func:`unseen_problem`), the whole
+    planned path, and the steps out and back that may find the tip.
 
     :class:`~.move.MoveRefused` naming the obstacle; each leg is checked again as it is
     planned (:func:`check_leg`).
     """
+    if not isinstance(loop, CameraLoop):  # a URL alone: the loop's settings are a CameraLoop
+        raise TypeError(f"the camera is a CameraLoop (CameraLoop({loop!r}, tip=...)), not a {type(loop).__name__}")
+    unseen = None if joint is None else unseen_problem(loop, joint, state.pose, kin.DEFAULT_GEOMETRY)
+    if unseen:
+        raise MoveRefused(unseen)
     if guard is None:
         return
     check_envelope_path(guard, state, path, calibration)
@@ -672,7 +748,7 @@ def move_seen(
         if problem:
             raise MoveRefused(problem + " (a closed-loop move starts from a known position)")
         _, q_to = target_of(state, joint, request.by, request.to)
-        _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to))
+        _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to), joint)
         loop_geometry = kin.DEFAULT_GEOMETRY
         dev = (opener or open_device)(request.device)
         cam: Camera | None = None
@@ -710,11 +786,7 @@ def move_seen(
                 steps[joint - 1] = out.sent
                 return (steps[0], steps[1], steps[2]), out.error, last
 
-            try:
-                reached, reason = _run_loop(run, target_v, leg)
-                run.finish()
-            except KeyboardInterrupt:
-                raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
+            reached, reason = _run_kept(run, target_v, leg, f"move of joint {joint}", key)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
@@ -752,6 +824,12 @@ def reach_seen(
         first = plan_reach(calibration, state.pose, to=request.to, by=request.by, geometry=geometry,
                            segment=request.segment)  # refused here when out of reach, before anything moves
         _check_start(request.guard, state, calibration, loop, joint_path(first))
+        share = seen_share(loop, state.pose, geometry, np.subtract(first.target, first.tip_start))
+        if first.length > 0 and share < MIN_VISIBILITY:
+            raise MoveRefused(
+                f"the tip would move along the camera's line of sight ({share:.0%} of the move in the image, at "
+                f"least {MIN_VISIBILITY:.0%} needed): the camera cannot see it; reach without --camera"
+            )
         target_v = first.target
         save_state(store, state)
         dev = (opener or open_device)(request.device)
@@ -781,11 +859,7 @@ def reach_seen(
                 s = out.sent
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)
 
-            try:
-                reached, reason = _run_loop(run, target_v, leg)
-                run.finish()
-            except KeyboardInterrupt:
-                raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
+            reached, reason = _run_kept(run, target_v, leg, "a straight tip move", key)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
