@@ -45,6 +45,7 @@ import numpy.typing as npt
 
 from .. import kinematics as kin
 from ..calibration import Calibration
+from ..calibration.update import day_drift
 from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.planning import Planner
@@ -719,6 +720,29 @@ def _leg_px(run: _Run, joint: int) -> float:
     return float(np.linalg.norm(G[:, joint - 1])) or 1.0
 
 
+SCALE_WARN_SD = 3.0
+"""A step scale the camera taught more than this many prior standard deviations (a day's change of step and the
+calibration's model error, as the filter starts them) from the calibration's is said (1): the loop cannot tell
+steps that changed from a camera whose stated pixel size is wrong, and a wrong pixel size ends the move "reached"
+at a wrong place (a pixel stated half its size: seen at 60 µm, the tip at 118 µm)."""
+
+
+def scale_warnings(tracks: dict[int, JointTrack], calibration: Calibration) -> list[str]:
+    """One line per joint whose camera-taught step scale lies beyond :data:`SCALE_WARN_SD` prior standard deviations
+    of the calibration's (:func:`~stickslip.calibration.update.day_drift`, :func:`joint_sigma_model`)."""
+    out = []
+    for j, t in sorted(tracks.items()):
+        prior = math.hypot(day_drift(calibration), joint_sigma_model(calibration, j))
+        worst = max((t.scale_of(d) for d in "+-"), key=lambda v: abs(math.log(v)))
+        if prior > 0 and abs(math.log(worst)) > SCALE_WARN_SD * prior:
+            out.append(
+                f"joint {j}: the camera makes its steps x{worst:.3g} of the calibration's, more than "
+                f"{SCALE_WARN_SD:g} times the change expected ({prior:.0%}): check the camera's pixel size "
+                "(pixel=; a wrong one moves the tip to a wrong place the camera calls reached), else recalibrate"
+            )
+    return out
+
+
 def move_seen(
     store: MoveStore,
     request: MoveRequest,
@@ -787,6 +811,8 @@ def move_seen(
                 return (steps[0], steps[1], steps[2]), out.error, last
 
             reached, reason = _run_kept(run, target_v, leg, f"move of joint {joint}", key)
+            for w in scale_warnings(run.tracks, calibration):
+                warn(w)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
@@ -860,6 +886,8 @@ def reach_seen(
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)
 
             reached, reason = _run_kept(run, target_v, leg, "a straight tip move", key)
+            for w in scale_warnings(run.tracks, calibration):
+                warn(w)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
