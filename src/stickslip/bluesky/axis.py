@@ -34,7 +34,7 @@ import math
 import os
 import threading
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
 
@@ -548,6 +548,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             try:
                 result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))
             except _Stopped:  # before a burst was sent: the confirmed position stands
+                if proxy.sent:
+                    self._follow_tip(camera, None)
                 state = load_state(store, self.link.key)
                 if FINDING_TIP not in state.why.get(self.joint, ""):  # not after the steps out to find the tip
                     state.set_position(self.joint, state.positions[self.joint], state.sources[self.joint])
@@ -556,11 +558,22 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                 return _MoveResult(0, proxy.sent, True, state)
             except (MoveRefused, ValueError, RuntimeError) as e:
                 raise MoveError(str(e)) from None
+        if result.looks:
+            self._follow_tip(camera, result.looks[-1].pixel)
         publish(result.state)
         if not result.reached:
             raise MoveError(f"the closed loop stopped: {result.reason}")
         steps = sum(k.steps[self.joint - 1] for k in result.looks)
         return _MoveResult(steps, steps, False, result.state)
+
+    def _follow_tip(self, camera: CameraLoop, seen: tuple[float, float] | None) -> None:
+        """The next move's tip pixel: where this one last saw it, or found again (``None``) when it was not seen.
+
+        ``CameraLoop(tip=...)`` gives the tip's pixel *now*; after a move the tip is elsewhere and the first
+        move's pixel lies on the shaft (a scan's second point stopped "the fit did not settle").
+        """
+        if camera.tip is not None:
+            self.camera = replace(camera, tip=seen)
 
     def set(self, value: float) -> WatchableAsyncStatus[float]:
         """Move the joint to ``value`` (m or rad) in bursts; progress is reported after every burst.
