@@ -63,7 +63,7 @@ from ..devices.base import (
     device_key,
     open_device,
 )
-from ..devices.positions import DeviceState, load_state, save_state
+from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.planning import Planner
 from ..procedures.closed_loop import FINDING_TIP, CameraLoop, move_seen
 from ..procedures.move import (
@@ -300,6 +300,26 @@ class _AxisConnector(DeviceConnector):
         await super().connect_real(device, timeout, force_reconnect)
         if isinstance(device, StickSlipAxis):
             await device.refresh(open_controller=True)
+
+
+def _kept_after_stop(store: StateStore, key: str, joint: int) -> DeviceState:
+    """The kept state after a closed-loop move stopped before a burst: the confirmed position stands (not after the
+    steps out to find the tip, which leave the joint uncertain), saved."""
+    state = load_state(store, key)
+    if FINDING_TIP not in state.why.get(joint, ""):
+        state.set_position(joint, state.positions[joint], state.sources[joint])
+    save_state(store, state)
+    return state
+
+
+def _followed(camera: CameraLoop, seen: tuple[float, float] | None) -> CameraLoop:
+    """The camera loop of the next move: its tip pixel where this move last saw the tip, or found again (``None``)
+    when it was not seen at the end; a loop given no tip finds it at every move anyway.
+
+    ``CameraLoop(tip=...)`` gives the tip's pixel *now*; after a move the tip is elsewhere and the first move's
+    pixel lies on the shaft (a scan's second point stopped "the fit did not settle").
+    """
+    return replace(camera, tip=seen) if camera.tip is not None else camera
 
 
 class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[float]):
@@ -548,32 +568,18 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             try:
                 result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))
             except _Stopped:  # before a burst was sent: the confirmed position stands
-                if proxy.sent:
-                    self._follow_tip(camera, None)
-                state = load_state(store, self.link.key)
-                if FINDING_TIP not in state.why.get(self.joint, ""):  # not after the steps out to find the tip
-                    state.set_position(self.joint, state.positions[self.joint], state.sources[self.joint])
-                save_state(store, state)
+                self.camera = _followed(camera, None) if proxy.sent else camera
+                state = _kept_after_stop(store, self.link.key, self.joint)
                 publish(state)
                 return _MoveResult(0, proxy.sent, True, state)
             except (MoveRefused, ValueError, RuntimeError) as e:
                 raise MoveError(str(e)) from None
-        if result.looks:
-            self._follow_tip(camera, result.looks[-1].pixel)
+        self.camera = _followed(camera, result.looks[-1].pixel) if result.looks else camera
         publish(result.state)
         if not result.reached:
             raise MoveError(f"the closed loop stopped: {result.reason}")
         steps = sum(k.steps[self.joint - 1] for k in result.looks)
         return _MoveResult(steps, steps, False, result.state)
-
-    def _follow_tip(self, camera: CameraLoop, seen: tuple[float, float] | None) -> None:
-        """The next move's tip pixel: where this one last saw it, or found again (``None``) when it was not seen.
-
-        ``CameraLoop(tip=...)`` gives the tip's pixel *now*; after a move the tip is elsewhere and the first
-        move's pixel lies on the shaft (a scan's second point stopped "the fit did not settle").
-        """
-        if camera.tip is not None:
-            self.camera = replace(camera, tip=seen)
 
     def set(self, value: float) -> WatchableAsyncStatus[float]:
         """Move the joint to ``value`` (m or rad) in bursts; progress is reported after every burst.
