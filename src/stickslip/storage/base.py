@@ -298,6 +298,9 @@ class _Base:
             if not self._con.online_copy(tmp):
                 self._copy_rows_into(tmp)
             os.replace(tmp, dest)
+        except (OSError, StoreError) as e:  # a full disk, a read-only folder: said of the file asked for
+            _remove_part(tmp)
+            raise StoreError(_backup_problem(e, tmp, dest)) from None
         except BaseException:
             _remove_part(tmp)
             raise
@@ -325,6 +328,14 @@ def _part_file(dest: Path) -> Path:
     once wrote into the same file.
     """
     return dest.with_name(f".{dest.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+
+
+def _backup_problem(e: OSError | StoreError, tmp: Path, dest: Path) -> str:
+    """One line naming the backup asked for, never its temporary ``.part`` file (which is gone by then)."""
+    if isinstance(e, StoreError):
+        text = str(e).replace(str(tmp), str(dest))
+        return text if "nothing" in text else f"{text}; nothing was written"
+    return f"cannot write the backup {dest}: {e.strerror or e}; nothing was written"
 
 
 def _remove_part(tmp: Path) -> None:
