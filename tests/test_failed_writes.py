@@ -72,3 +72,72 @@ def test_a_backup_into_a_read_only_folder_names_the_backup_asked_for(tmp_path, m
     assert ".part" not in line and sorted(p.name for p in tmp_path.iterdir()) == ["s.db"]
     with Store.open(db) as st:
         assert st.count_traverses() == len(paper_table()) and st.integrity_check() == "ok"
+
+
+class _Filling:
+    """A file whose writes fail with ``code`` once ``limit`` bytes are written (a disk filling up)."""
+
+    def __init__(self, f, limit: int, code: int, seen: dict):
+        self._f, self._limit, self._code, self._seen = f, limit, code, seen
+
+    def write(self, data):
+        self._seen["n"] += len(data)
+        if self._seen["n"] > self._limit:
+            self._seen["failed"] = True
+            raise OSError(self._code, os.strerror(self._code))
+        return self._f.write(data)
+
+    def seek(self, *a):
+        if self._seen["failed"]:  # as a real full disk: the stream is broken once a write failed
+            raise OSError(self._code, os.strerror(self._code))
+        return self._f.seek(*a)
+
+    def __getattr__(self, name):
+        return getattr(self._f, name)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self._f.close()
+
+
+def disk_fills_after(monkeypatch, limit: int, code: int = errno.ENOSPC) -> dict:
+    """Every file opened for writing through ``os.fdopen`` (the atomic writes) fails after ``limit`` bytes."""
+    real = os.fdopen
+    seen = {"n": 0, "failed": False}
+
+    def fdopen(fd, mode="r", *a, **k):
+        f = real(fd, mode, *a, **k)
+        return _Filling(f, limit, code, seen) if ("w" in mode or "a" in mode) else f
+
+    monkeypatch.setattr(os, "fdopen", fdopen)
+    return seen
+
+
+def test_a_recording_on_a_full_disk_is_one_line_and_keeps_the_old_one(tmp_path, monkeypatch):
+    # libsndfile wrote the WAV into the temporary file itself: each write or seek that failed inside its cffi
+    # callbacks printed 'Exception ignored from cffi callback ... Traceback ... OSError: [Errno 28]' (8 of them
+    # on a full tmpfs) before the error line; a disk that filled mid-file ended `stickslip record` with
+    # soundfile's own AssertionError (a traceback, exit 1; seen on a 3 MB tmpfs with 336 kB free)
+    import sys
+
+    import numpy as np
+
+    from stickslip.audio.sources import write_wav
+
+    out = tmp_path / "j2.wav"
+    write_wav(out, np.zeros(4800), 48000)
+    before = out.read_bytes()
+    ignored: list[object] = []
+    monkeypatch.setattr(sys, "unraisablehook", ignored.append)
+    seen = disk_fills_after(monkeypatch, 1000)
+    try:
+        write_wav(out, np.ones(48000), 48000)
+    except OSError as e:
+        text = str(e)
+    else:
+        raise AssertionError("the write should have failed")
+    assert seen["failed"] and ignored == []
+    assert text == f"cannot write {out}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
+    assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["j2.wav"]
