@@ -141,3 +141,45 @@ def test_a_recording_on_a_full_disk_is_one_line_and_keeps_the_old_one(tmp_path, 
     assert seen["failed"] and ignored == []
     assert text == f"cannot write {out}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
     assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["j2.wav"]
+
+
+def _record(tmp_path, folder, *extra):
+    return run("record", folder / "r.wav", "--joint", "2", "--device", "sim://?seed=3", "--db", tmp_path / "s.db",
+               *extra)
+
+
+def test_a_recording_whose_label_or_tuning_cannot_be_written_says_which_and_what_was_kept(tmp_path, monkeypatch):
+    # record said 'cannot write r.wav: No space left on device' when r.wav had been written and its label r.json
+    # had not (the old label, of another recording, stayed beside the new WAV, unmentioned); a tuning that could not
+    # be written lost '; the old file is kept as it was'
+    sizes = tmp_path / "sizes"
+    sizes.mkdir()
+    assert _record(tmp_path, sizes, "--tune", sizes / "t.json").exit_code == 0
+    wav, label = (sizes / "r.wav").stat().st_size, (sizes / "r.json").stat().st_size
+    for name, limit in (("r.json", wav + 5), ("t.json", wav + label + 5)):
+        d = tmp_path / name
+        d.mkdir()
+        for old in ("r.wav", "r.json", "t.json"):
+            (d / old).write_text(f"the old {old}\n")
+        monkeypatch.undo()
+        seen = disk_fills_after(monkeypatch, limit)
+        line = one_error(_record(tmp_path, d, "--tune", d / "t.json"))
+        assert seen["failed"]
+        kept = f"cannot write {d / name}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
+        assert line.startswith(f"error: {kept}"), line
+        assert (d / name).read_text() == f"the old {name}\n"
+        if name == "r.json":
+            assert line.endswith(f"; the recording {d / 'r.wav'} was written (its stop is at 2.016 s)"), line
+        assert (d / "r.wav").stat().st_size == wav  # the new recording
+        assert sorted(p.name for p in d.iterdir()) == ["r.json", "r.wav", "t.json"]  # no temporary file left
+
+
+def test_config_init_on_a_full_disk_says_the_old_file_is_kept(tmp_path, monkeypatch):
+    # said 'cannot write .../config.toml: No space left on device' (whether the old file was kept, not said)
+    cfg = tmp_path / "config.toml"
+    cfg.write_text("# mine\n")
+    monkeypatch.setenv("STICKSLIP_CONFIG", str(cfg))
+    disk_fills_after(monkeypatch, 10)
+    line = one_error(run("config", "init", "--force"))
+    assert line == f"error: cannot write {cfg}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
+    assert cfg.read_text() == "# mine\n" and sorted(p.name for p in tmp_path.iterdir()) == ["config.toml"]
