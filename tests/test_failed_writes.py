@@ -183,3 +183,24 @@ def test_config_init_on_a_full_disk_says_the_old_file_is_kept(tmp_path, monkeypa
     line = one_error(run("config", "init", "--force"))
     assert line == f"error: cannot write {cfg}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
     assert cfg.read_text() == "# mine\n" and sorted(p.name for p in tmp_path.iterdir()) == ["config.toml"]
+
+
+def test_a_store_from_a_newer_stickslip_is_refused_without_a_byte_changed(tmp_path):
+    # refused, but only after opening it had switched its journal from DELETE to WAL (header bytes 18-19 from 1 to 2,
+    # the change counter bumped, -wal and -shm made beside it): a newer stickslip keeping its file in rollback mode
+    # (a network share, where WAL's shared memory does not work) found it in WAL mode
+    from stickslip.storage.schema import SCHEMA_VERSION
+
+    db = _store(tmp_path)
+    con = sqlite3.connect(db)
+    con.execute("PRAGMA journal_mode = DELETE")
+    con.execute(f"PRAGMA user_version = {SCHEMA_VERSION + 1}")
+    con.commit()
+    con.close()
+    before = db.read_bytes()
+    commands = (["history"], ["where", "--offline"], ["where", "--offline", "--set", "3=1mm"],
+                ["backup", tmp_path / "b.db"])
+    for cmd in commands:
+        line = one_error(run(*cmd, "--db", db))
+        assert f"schema version {SCHEMA_VERSION + 1}, newer than this stickslip understands" in line, line
+        assert db.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["s.db"], cmd

@@ -85,7 +85,8 @@ def check_database_file(path: Path, looks: int = 50) -> str:
     is damaged:
 
     * nothing there, an empty file, or an SQLite file without tables: ``"new"``;
-    * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``;
+    * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``, unless its
+      schema version is newer than this stickslip's (refused, the file not even opened);
     * no application id, and the tables and columns of a stickslip schema version
       (a database made before the id was set): ``"legacy"``, stamped when opened;
     * anything else is refused untouched, naming the file and why: a folder, FIFO or
@@ -112,6 +113,11 @@ def check_database_file(path: Path, looks: int = 50) -> str:
     user_version = int.from_bytes(head[60:64], "big", signed=True)
     app_id = int.from_bytes(head[68:72], "big", signed=True)
     if app_id == APPLICATION_ID:
+        if user_version > len(MIGRATIONS):  # refused here, before opening it switches its journal mode to WAL
+            raise StoreError(
+                f"{path} has schema version {user_version}, newer than this stickslip understands "
+                f"({len(MIGRATIONS)}): left untouched (upgrade stickslip)"
+            )
         return "ours"
     if app_id != 0:
         raise StoreError(
