@@ -204,3 +204,28 @@ def test_a_store_from_a_newer_stickslip_is_refused_without_a_byte_changed(tmp_pa
         line = one_error(run(*cmd, "--db", db))
         assert f"schema version {SCHEMA_VERSION + 1}, newer than this stickslip understands" in line, line
         assert db.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["s.db"], cmd
+
+
+def test_a_store_that_cannot_be_opened_on_a_full_disk_or_in_a_read_only_folder_says_why(tmp_path, monkeypatch):
+    # on a full disk every command, reading ones too, said only 'cannot open the database s.db: disk I/O error'; in a
+    # read-only folder (a share mounted read-only) 'unable to open database file' of a file that is there and readable
+    # (SQLite makes s.db-shm beside it to read a WAL database). The words are SQLite's, as it says them on Linux
+    # (a 6 MB tmpfs filled; a read-only bind mount)
+    db = _store(tmp_path)
+
+    def failing(text):
+        def connect(path):
+            raise sqlite3.OperationalError(text)
+        return connect
+
+    monkeypatch.setattr(sqlite_backend, "_connect", failing("disk I/O error"))
+    line = one_error(run("history", "--db", db))
+    assert line == f"error: cannot open the database {db}: disk I/O error (is the disk full? even reading needs room " \
+                   "for s.db-shm beside it)"
+    monkeypatch.setattr(sqlite_backend, "_connect", failing("unable to open database file"))
+    assert one_error(run("history", "--db", db)).endswith("unable to open database file")  # a writable folder
+    monkeypatch.setattr(sqlite_backend.os, "access", lambda path, mode: False)
+    line = one_error(run("where", "--offline", "--db", db))
+    assert line == (f"error: cannot open the database {db}: unable to open database file (its folder {tmp_path} is "
+                    "read-only: SQLite needs to make s.db-shm beside it, even to read; copy the file into a folder you "
+                    "can write, and give --db the copy)")

@@ -261,6 +261,22 @@ def _connect(path: Path) -> _Connection:
     return con
 
 
+def _open_hint(path: Path, e: sqlite3.DatabaseError) -> str:
+    """Why SQLite could not open an existing file, where its words do not say: a full disk, a read-only folder.
+
+    Even a reading command needs the write-ahead log's ``-shm`` file beside the database (SQLite makes it and
+    writes into it to read): on a full disk opening says only "disk I/O error", in a read-only folder (a share
+    mounted read-only) "unable to open database file".
+    """
+    text, shm = str(e), f"{path.name}-shm"
+    if text == "disk I/O error":
+        return f" (is the disk full? even reading needs room for {shm} beside it)"
+    if text == "unable to open database file" and path.exists() and not os.access(path.parent, os.W_OK):
+        return (f" (its folder {path.parent} is read-only: SQLite needs to make {shm} beside it, even to read; "
+                "copy the file into a folder you can write, and give --db the copy)")
+    return ""
+
+
 # ---------------------------------------------------------------- the backend
 
 
@@ -290,7 +306,7 @@ class SQLiteBackend:
         try:
             con = _connect(path)
         except sqlite3.DatabaseError as e:
-            raise StoreError(f"cannot open the database {path}: {e}") from None
+            raise StoreError(f"cannot open the database {path}: {e}{_open_hint(path, e)}") from None
         return cls(con, path)
 
     @property
