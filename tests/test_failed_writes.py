@@ -7,6 +7,7 @@ a read-only folder by the error the operating system gives, so nothing here need
 from __future__ import annotations
 
 import errno
+import json
 import os
 import sqlite3
 
@@ -229,3 +230,39 @@ def test_a_store_that_cannot_be_opened_on_a_full_disk_or_in_a_read_only_folder_s
     assert line == (f"error: cannot open the database {db}: unable to open database file (its folder {tmp_path} is "
                     "read-only: SQLite needs to make s.db-shm beside it, even to read; copy the file into a folder you "
                     "can write, and give --db the copy)")
+
+
+def test_a_move_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path, monkeypatch):
+    # said only 'cannot write to the database ...: database or disk is full (free some space); nothing of this change
+    # was stored', though bursts had been sent (97 um of joint 3 here): the kept state was honest (uncertain over the
+    # burst whose confirmation was lost) but the line read as if the joint had not moved; and with the disk still
+    # full, releasing the device lock failed too and its error replaced the first
+    from stickslip.measurements import measurements_to_csv
+
+    table = tmp_path / "t.csv"
+    table.write_text(measurements_to_csv(paper_table()))
+    cal = tmp_path / "cal.json"
+    assert run("calibrate", table, "-o", cal).exit_code == 0
+    real = sqlite_backend._Connection.execute
+    for first, kept in ((4, "joint 3 uncertain, 2000 µm to 2097.2 µm"), (5, "joint 3 2097.2 µm (dead-reckoned)")):
+        db = tmp_path / f"s{first}.db"
+        assert run("where", "--offline", "--db", db, "--set", "3=2mm").exit_code == 0
+        commits = {"n": 0}
+
+        def execute(self, sql, params=(), /, first=first, commits=commits):
+            if sql == "COMMIT":  # the disk fills before this write transaction and stays full
+                commits["n"] += 1
+                if commits["n"] >= first:
+                    raise sqlite3.OperationalError("database or disk is full")
+            return real(self, sql, params)
+
+        monkeypatch.setattr(sqlite_backend._Connection, "execute", execute)
+        line = one_error(run("move", "--db", db, "-c", cal, "-j", "3", "--by", "300um", "--burst", "100"))
+        monkeypatch.undo()
+        assert line.startswith(f"error: cannot write to the database {db}: database or disk is full"), line
+        assert line.endswith(f"the move of joint 3 stopped at that write; as kept now: joint 1 0 deg (default); "
+                             f"joint 2 -90 deg (default); {kept}"), line
+        j3 = json.loads(run("where", "--offline", "--db", db, "--json").stdout)["joints"][2]  # what the line says
+        want = ("uncertain", False) if first == 4 else ("dead-reckoned", True)
+        assert (j3["source"], j3["uncertain"] is None) == want
+        assert round(1e6 * (j3["uncertain"] or [j3["q"]])[-1], 1) == 2097.2
