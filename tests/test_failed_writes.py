@@ -266,3 +266,39 @@ def test_a_move_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path,
         want = ("uncertain", False) if first == 4 else ("dead-reckoned", True)
         assert (j3["source"], j3["uncertain"] is None) == want
         assert round(1e6 * (j3["uncertain"] or [j3["q"]])[-1], 1) == 2097.2
+
+
+def test_a_report_cut_short_by_a_full_disk_leaves_the_earlier_report_whole(tmp_path, monkeypatch):
+    # each figure was written atomically, but one after the other: a disk that filled after the first left the new
+    # fig4_prismatic.png beside the old index.html and the old other figures (a page describing one calibration
+    # showing another's figure), and the old fig4 lost
+    from stickslip.calibration import calibrate
+    from stickslip.records import WriteError
+    from stickslip.report import build_report
+
+    rows = paper_table()
+    cal = calibrate(rows)
+    out = tmp_path / "report"
+    first = build_report(cal, rows, out, dpi=30, seed_simulation="exact")
+    names = sorted(p.name for p in out.iterdir())
+    assert len(names) == len(first.figures) + 1 >= 5
+    size = first.figures[0].stat().st_size
+    for name in names:
+        (out / name).write_bytes(b"the earlier report's " + name.encode())
+    for limit in (size - 1, size + 1, 10**9):  # within the first figure, just after it, never
+        seen = disk_fills_after(monkeypatch, limit)
+        if limit < 10**9:
+            try:
+                build_report(cal, rows, out, dpi=30, seed_simulation="exact")
+            except WriteError as e:
+                assert "; the old file is kept as it was" in str(e)
+            else:
+                raise AssertionError("the write should have failed")
+            assert seen["failed"]
+            assert {n: (out / n).read_bytes() for n in names} == {n: b"the earlier report's " + n.encode()
+                                                                 for n in names}, limit
+        else:
+            build_report(cal, rows, out, dpi=30, seed_simulation="exact")
+            assert not seen["failed"] and b"<html" in (out / "index.html").read_bytes()[:200].lower()
+        assert sorted(p.name for p in out.iterdir()) == names  # no temporary file left
+        monkeypatch.undo()
