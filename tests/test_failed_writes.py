@@ -10,6 +10,7 @@ import errno
 import json
 import os
 import sqlite3
+from pathlib import Path
 
 from synth import paper_table
 from typer.testing import CliRunner
@@ -302,3 +303,27 @@ def test_a_report_cut_short_by_a_full_disk_leaves_the_earlier_report_whole(tmp_p
             assert not seen["failed"] and b"<html" in (out / "index.html").read_bytes()[:200].lower()
         assert sorted(p.name for p in out.iterdir()) == names  # no temporary file left
         monkeypatch.undo()
+
+
+def test_demo_results_cut_short_by_a_full_disk_leave_the_earlier_run_whole(tmp_path, monkeypatch):
+    # measurements.csv, calibration.json and summary.json were written one after the other: a disk that filled after
+    # the first left this run's measurements beside an earlier run's calibration and summary
+    from stickslip.procedures.demo import run_demo
+    from stickslip.records import WriteError
+
+    out = tmp_path / "results"
+    first = run_demo(seed=6, day="2026-11-22", out=out, switch="oracle", validation=False, repeats=0)
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["calibration.json", "measurements.csv", "summary.json"]
+    size = Path(first.files["measurements"]).stat().st_size
+    for name in names:
+        (out / name).write_text(f"an earlier run's {name}\n")
+    disk_fills_after(monkeypatch, size + 1)
+    try:
+        run_demo(seed=7, day="2026-11-23", out=out, switch="oracle", validation=False, repeats=0)
+    except WriteError as e:
+        assert str(e).startswith(f"cannot write {out / 'calibration.json'}: "), str(e)
+    else:
+        raise AssertionError("the write should have failed")
+    assert {n: (out / n).read_text() for n in names} == {n: f"an earlier run's {n}\n" for n in names}
+    assert sorted(p.name for p in out.iterdir()) == names
