@@ -327,3 +327,16 @@ def test_demo_results_cut_short_by_a_full_disk_leave_the_earlier_run_whole(tmp_p
         raise AssertionError("the write should have failed")
     assert {n: (out / n).read_text() for n in names} == {n: f"an earlier run's {n}\n" for n in names}
     assert sorted(p.name for p in out.iterdir()) == names
+
+
+def test_a_database_whose_folder_cannot_be_made_is_one_plain_line(tmp_path, monkeypatch):
+    # said "cannot create the directory for the database /share/new/s.db: [Errno 30] Read-only file system:
+    # '/share/new'" (Python's repr of the error; seen with STICKSLIP_DB in a folder to make on a read-only mount)
+    db = tmp_path / "new" / "s.db"
+
+    def refuse(self, *a, **k):
+        raise OSError(errno.EROFS, os.strerror(errno.EROFS), str(self))
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    line = one_error(run("where", "--offline", "--set", "3=1mm", "--db", db))
+    assert line == f"error: cannot create the folder {db.parent} for the database {db}: {os.strerror(errno.EROFS)}"

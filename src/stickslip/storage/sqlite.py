@@ -302,7 +302,8 @@ class SQLiteBackend:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise StoreError(f"cannot create the directory for the database {path}: {e}") from None
+            why = e.strerror or e
+            raise StoreError(f"cannot create the folder {path.parent} for the database {path}: {why}") from None
         try:
             con = _connect(path)
         except sqlite3.DatabaseError as e:
