@@ -10,8 +10,10 @@ import errno
 import json
 import os
 import sqlite3
+import sys
 from pathlib import Path
 
+import pytest
 from synth import paper_table
 from typer.testing import CliRunner
 
@@ -340,3 +342,24 @@ def test_a_database_whose_folder_cannot_be_made_is_one_plain_line(tmp_path, monk
     monkeypatch.setattr(Path, "mkdir", refuse)
     line = one_error(run("where", "--offline", "--set", "3=1mm", "--db", db))
     assert line == f"error: cannot create the folder {db.parent} for the database {db}: {os.strerror(errno.EROFS)}"
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="Windows limits the whole path to 260 characters unless long "
+                    "paths are enabled: a 250-character name in a temporary folder is over it")
+@pytest.mark.parametrize("stem", ["a" * 246, "µ" * 123])  # 250 and 250 bytes with '.csv' / '.db', under 255
+def test_a_file_name_near_the_limit_is_written(tmp_path, stem):
+    # its temporary file (.NAME.xxxxxxxx.tmp, 14 bytes more; a backup's .NAME.PID-xxxxxxxx.part, 23 more) was over
+    # the file system's 255: 'cannot write .../aaa...a.csv: File name too long; nothing was written' for a name
+    # `touch` makes
+    from stickslip.records import atomic_write_text
+
+    out = tmp_path / f"{stem}.csv"
+    assert len(out.name.encode()) == 250
+    atomic_write_text(out, "x\n")
+    assert out.read_text() == "x\n" and [p.name for p in tmp_path.iterdir()] == [out.name]
+    db = _store(tmp_path)
+    copy = tmp_path / f"{stem}.db"
+    r = run("backup", copy, "--db", db)
+    assert r.exit_code == 0, r.output
+    with Store.open(copy) as st:
+        assert st.count_traverses() == len(paper_table())

@@ -641,7 +641,7 @@ def _staged(asked: Path, write: Callable[[Any], None], mode: str) -> tuple[Path,
     mode_bits = _file_mode(p)
     kept = p.exists()
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=f".{temp_stem(p.name)}.", suffix=".tmp", dir=folder)
     except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
         raise WriteError(asked, e, kept) from None
     try:
@@ -657,6 +657,21 @@ def _staged(asked: Path, write: Callable[[Any], None], mode: str) -> tuple[Path,
             raise WriteError(asked, e, kept) from None
         raise
     return p, tmp
+
+
+TEMP_STEM_BYTES = 200
+"""Longest part of a file's name its temporary file's name repeats, bytes of UTF-8: the temporary adds up to 40
+(``.NAME.xxxxxxxx.tmp``; a backup's ``.NAME.PID-xxxxxxxx.part`` and SQLite's ``-journal`` beside it), and a file
+system's name limit is 255 (bytes on Linux and macOS, UTF-16 units on Windows)."""
+
+
+def temp_stem(name: str) -> str:
+    """``name``, cut to :data:`TEMP_STEM_BYTES` bytes at a character's end: what a temporary file beside it repeats.
+
+    A legal name of 242 to 255 bytes made its temporary file's name too long, and the write
+    failed ("File name too long") for a file a plain write could make.
+    """
+    return name.encode("utf-8")[:TEMP_STEM_BYTES].decode("utf-8", errors="ignore")
 
 
 def _rename(asked: Path, p: Path, tmp: str) -> None:

@@ -12,6 +12,7 @@ from typing import Any, Self
 
 from ..devices.base import redact_url
 from ..measurements import Traverse
+from ..records import temp_stem
 from .backend import Backend
 from .schema import (
     MIGRATIONS,
@@ -327,7 +328,7 @@ def _part_file(dest: Path) -> Path:
     copy of a shared database ``UNIQUE constraint failed``), and two backups to one name at
     once wrote into the same file.
     """
-    return dest.with_name(f".{dest.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    return dest.with_name(f".{temp_stem(dest.name)}.{os.getpid()}-{secrets.token_hex(4)}.part")
 
 
 def _backup_problem(e: OSError | StoreError, tmp: Path, dest: Path) -> str:
