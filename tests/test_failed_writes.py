@@ -363,3 +363,36 @@ def test_a_file_name_near_the_limit_is_written(tmp_path, stem):
     assert r.exit_code == 0, r.output
     with Store.open(copy) as st:
         assert st.count_traverses() == len(paper_table())
+
+
+def test_a_read_only_output_file_is_refused_not_replaced(tmp_path, monkeypatch):
+    # a calibration made read-only (chmod a-w) to keep it was replaced by 'calibrate -o cal.json': the atomic write
+    # renames a new file over it, which POSIX allows whenever the folder is writable (a plain open(..., 'w') is
+    # refused; Windows refuses the rename: the same command differed by platform). os.access reports the file
+    # read-only for this user (root may write anything, as with a plain write)
+    from stickslip.measurements import measurements_to_csv
+
+    table = tmp_path / "t.csv"
+    table.write_text(measurements_to_csv(paper_table()))
+    cal = tmp_path / "cal.json"
+    cal.write_text("kept\n")
+    real = os.access
+    def access(path, mode, **k):
+        return False if Path(path) == cal and mode & os.W_OK else real(path, mode, **k)
+
+    monkeypatch.setattr(os, "access", access)
+    line = one_error(run("calibrate", table, "-o", cal))
+    assert line == f"error: cannot write {cal}: the file is read-only; the old file is kept as it was"
+    assert cal.read_text() == "kept\n" and sorted(p.name for p in tmp_path.iterdir()) == ["cal.json", "t.csv"]
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="POSIX permission bits; root ignores them")
+def test_a_chmod_read_only_output_file_is_kept(tmp_path):
+    from stickslip.records import WriteError, atomic_write_text
+
+    out = tmp_path / "cal.json"
+    out.write_text("kept\n")
+    out.chmod(0o444)
+    with pytest.raises(WriteError, match="the file is read-only"):
+        atomic_write_text(out, "new\n")
+    assert out.read_text() == "kept\n"

@@ -21,6 +21,7 @@ This module imports only the standard library (it sits below every other layer).
 from __future__ import annotations
 
 import contextvars
+import errno
 import io
 import json
 import math
@@ -618,6 +619,8 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
       exception in ``write``) the temporary file is removed and the old ``path`` is left
       exactly as it was; an ``OSError`` is raised as :class:`WriteError` (one line naming
       the file, the reason and that the old file is kept), the writer's own exception as it is;
+    * a file that is read-only for this user (``chmod a-w``, the Windows read-only flag) is
+      refused as a plain write refuses it: a rename into its folder would replace it on POSIX;
     * inside :func:`atomic_group` the rename waits for the group's end, with every other file's.
 
     The file gets the permissions a plain ``open(path, "w")`` would give it (an existing
@@ -640,6 +643,8 @@ def _staged(asked: Path, write: Callable[[Any], None], mode: str) -> tuple[Path,
     folder = p.parent if str(p.parent) else Path(".")
     mode_bits = _file_mode(p)
     kept = p.exists()
+    if kept and not os.access(p, os.W_OK):  # a rename would replace it (POSIX): refused, as a plain write is
+        raise WriteError(asked, PermissionError(errno.EACCES, "the file is read-only"), kept)
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{temp_stem(p.name)}.", suffix=".tmp", dir=folder)
     except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
