@@ -396,3 +396,23 @@ def test_a_chmod_read_only_output_file_is_kept(tmp_path):
     with pytest.raises(WriteError, match="the file is read-only"):
         atomic_write_text(out, "new\n")
     assert out.read_text() == "kept\n"
+
+
+def test_a_server_token_that_could_not_be_written_leaves_no_empty_file(tmp_path, monkeypatch):
+    # on a full disk `stickslip serve` created the token file (O_EXCL) and failed writing it: the empty file stayed,
+    # and once space was freed every later serve waited 1 s and refused it ('does not hold a token (it is empty)
+    # (delete it: a new one is made)') until it was deleted by hand
+    from stickslip.server.security import load_or_create_token
+
+    p = tmp_path / "token"
+    disk_fills_after(monkeypatch, 0)
+    try:
+        load_or_create_token(p)
+    except OSError as e:
+        assert e.errno == errno.ENOSPC
+    else:
+        raise AssertionError("the write should have failed")
+    assert not p.exists()
+    monkeypatch.undo()
+    token, new = load_or_create_token(p)
+    assert new and len(token) >= 32 and p.read_text() == token + "\n"
