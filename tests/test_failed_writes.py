@@ -416,3 +416,34 @@ def test_a_server_token_that_could_not_be_written_leaves_no_empty_file(tmp_path,
     monkeypatch.undo()
     token, new = load_or_create_token(p)
     assert new and len(token) >= 32 and p.read_text() == token + "\n"
+
+
+def test_a_log_file_on_a_full_disk_is_one_warning_not_a_traceback_per_line(tmp_path, capsys):
+    # logging's FileHandler printed '--- Logging error ---', a traceback and 'Message: ...' on stderr for every record
+    # it could not write (-vv with a real controller: every message to and from it), while the command went on
+    import logging
+
+    from stickslip.cli import _logging
+
+    log = tmp_path / "run.log"
+    _logging(0, log)
+    try:
+        handler = next(h for h in logging.getLogger("stickslip").handlers if getattr(h, "_stickslip_cli", False))
+
+        class Full:
+            def write(self, text):
+                raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+            def flush(self):
+                pass
+
+        handler.stream.close()
+        handler.stream = Full()
+        for i in range(3):
+            logging.getLogger("stickslip.devices.transport").debug("sent %d", i)
+        err = capsys.readouterr().err
+    finally:
+        _logging(0, None)
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert lines == [f"warning: cannot write the log file {log}: {os.strerror(errno.ENOSPC)}; nothing more is logged "
+                     "to it"], err
