@@ -447,3 +447,47 @@ def test_a_log_file_on_a_full_disk_is_one_warning_not_a_traceback_per_line(tmp_p
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert lines == [f"warning: cannot write the log file {log}: {os.strerror(errno.ENOSPC)}; nothing more is logged "
                      "to it"], err
+
+
+def _paper_calibration(tmp_path) -> Path:
+    from stickslip.measurements import measurements_to_csv
+
+    table = tmp_path / "t.csv"
+    table.write_text(measurements_to_csv(paper_table()))
+    cal = tmp_path / "cal.json"
+    assert run("calibrate", table, "-o", cal).exit_code == 0
+    return cal
+
+
+def test_camera_calibrate_refuses_a_jacobian_calibration_without_a_measured_joint_before_moving(tmp_path):
+    # the paper's calibration has joints 2 and 3: measuring joint 1 too, the run drove every joint and ended in
+    # "KeyError: 'joint 1 is not in this calibration'" (a traceback, exit 1) after writing steps.csv and not j.json
+    cal = _paper_calibration(tmp_path)
+    db = tmp_path / "s.db"
+    before = run("where", "--offline", "--db", db, "--json").stdout
+    r = run("camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=0.5um", "--db", db,
+            "-o", tmp_path / "steps.csv", "--jacobian", tmp_path / "j.json", "-c", cal)
+    line = one_error(r)
+    assert line == ("error: --calibration models joint(s) 2, 3, not joint(s) 1 of --joints: --jacobian scales each "
+                    "measured joint by its steps (calibrate them, or measure --joints without them); nothing was moved")
+    assert run("where", "--offline", "--db", db, "--json").stdout == before
+    assert not (tmp_path / "steps.csv").exists() and not (tmp_path / "j.json").exists()
+
+
+def test_camera_calibrate_writes_its_step_sizes_and_jacobian_together(tmp_path, monkeypatch):
+    # steps.csv was written, then j.json: a disk that filled between them left this run's step sizes beside an
+    # earlier run's Jacobian
+    cal = _paper_calibration(tmp_path)
+    out = tmp_path / "out"
+    out.mkdir()
+    args = ["camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=0.5um", "--db", tmp_path / "s.db",
+            "-o", out / "steps.csv", "--jacobian", out / "j.json", "-c", cal, "--joints", "3,2"]
+    assert run(*args).exit_code == 0
+    size = (out / "steps.csv").stat().st_size
+    for name in ("steps.csv", "j.json"):
+        (out / name).write_text(f"an earlier run's {name}\n")
+    disk_fills_after(monkeypatch, size + 1)
+    line = one_error(run(*args))
+    assert line == f"error: cannot write {out / 'j.json'}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
+    assert {p.name: p.read_text() for p in out.iterdir()} == {n: f"an earlier run's {n}\n"
+                                                            for n in ("steps.csv", "j.json")}
