@@ -491,3 +491,37 @@ def test_camera_calibrate_writes_its_step_sizes_and_jacobian_together(tmp_path, 
     assert line == f"error: cannot write {out / 'j.json'}: {os.strerror(errno.ENOSPC)}; the old file is kept as it was"
     assert {p.name: p.read_text() for p in out.iterdir()} == {n: f"an earlier run's {n}\n"
                                                             for n in ("steps.csv", "j.json")}
+
+
+def test_an_older_store_that_cannot_be_upgraded_says_so_not_that_it_is_unusable(tmp_path, monkeypatch):
+    # every command, reading ones too, upgrades an older stickslip's database when it opens it: on a full disk (or a
+    # read-only file) that said 'X is not a usable stickslip database: cannot write to the database X: database or
+    # disk is full ...', of a sound database; a new one could not be made either, called the same
+    from stickslip.storage.schema import MIGRATIONS, SCHEMA_VERSION
+
+    old = tmp_path / "old.db"
+    con = sqlite3.connect(old)
+    con.executescript(MIGRATIONS[0])
+    con.execute("PRAGMA user_version = 1")
+    con.execute("INSERT INTO devices (url, model, created_at) VALUES ('sim://', NULL, 'x')")
+    con.commit()
+    con.execute("PRAGMA journal_mode = WAL")  # as every stickslip left its files
+    con.close()
+    before = old.read_bytes()
+    real = sqlite_backend._Connection.execute
+
+    def full(self, sql, params=(), /):
+        if sql == "COMMIT":
+            raise sqlite3.OperationalError("database or disk is full")
+        return real(self, sql, params)
+
+    monkeypatch.setattr(sqlite_backend._Connection, "execute", full)
+    line = one_error(run("history", "--db", old))
+    assert line == (f"error: cannot upgrade the database {old} from schema version 1 (an older stickslip's) to "
+                    f"{SCHEMA_VERSION}, which every command does before it reads: database or disk is full (free some "
+                    "space); it is left as it was")
+    assert old.read_bytes() == before
+    new = tmp_path / "new.db"
+    line = one_error(run("where", "--offline", "--set", "3=1mm", "--db", new))
+    assert line == f"error: cannot make the database {new}: database or disk is full (free some space); nothing was " \
+                   "written"

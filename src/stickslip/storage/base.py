@@ -68,7 +68,7 @@ class _Base:
             store._migrate()
         except StoreError as e:
             db.close()
-            if "newer than" in str(e) or "damaged" in str(e) or "untouched" in str(e):
+            if any(said in str(e) for said in _SAID_WHOLE):
                 raise
             raise StoreError(f"{db.where} is not a usable stickslip database: {e}") from None
         except BaseException:
@@ -113,6 +113,12 @@ class _Base:
             )
         if version == SCHEMA_VERSION and db.owned():
             return
+        try:
+            self._migrate_from(version)
+        except StoreError as e:
+            raise _cannot_migrate(e, self.path, version) from None
+
+    def _migrate_from(self, version: int) -> None:
         with self._write() as con:
             con.claim_ownership()
             version = con.schema_version()  # another process may have won
@@ -329,6 +335,31 @@ def _part_file(dest: Path) -> Path:
     once wrote into the same file.
     """
     return dest.with_name(f".{temp_stem(dest.name)}.{os.getpid()}-{secrets.token_hex(4)}.part")
+
+
+_SAID_WHOLE = ("newer than", "damaged", "untouched", "cannot make the database", "cannot upgrade the database")
+"""An error opening a database that says all there is (else it is prefixed "not a usable stickslip database")."""
+_MIGRATION_BLOCKED = ("disk I/O error", "database or disk is full", "readonly database", "database is locked")
+"""SQLite's words for a write the disk or the file refused (storage.sqlite.SQLiteBackend._write_problem's hints)."""
+
+
+def _cannot_migrate(e: StoreError, path: Path | str, version: int) -> StoreError:
+    """A migration the file or disk refused (full, read-only, busy), said as such: not "not a usable database".
+
+    Every command, reading ones too, upgrades an older stickslip's database when it opens it; one that cannot
+    be written then was called "not a usable stickslip database", which it is. Other errors are ``e``.
+    """
+    text = str(e)
+    if not any(why in text for why in _MIGRATION_BLOCKED):
+        return e
+    reason = text.removeprefix(f"cannot write to the database {path}: ").removesuffix(
+        "; nothing of this change was stored")
+    if version == 0:
+        return StoreError(f"cannot make the database {path}: {reason}; nothing was written")
+    return StoreError(
+        f"cannot upgrade the database {path} from schema version {version} (an older stickslip's) to "
+        f"{SCHEMA_VERSION}, which every command does before it reads: {reason}; it is left as it was"
+    )
 
 
 def _backup_problem(e: OSError | StoreError, tmp: Path, dest: Path) -> str:
