@@ -525,3 +525,47 @@ def test_an_older_store_that_cannot_be_upgraded_says_so_not_that_it_is_unusable(
     line = one_error(run("where", "--offline", "--set", "3=1mm", "--db", new))
     assert line == f"error: cannot make the database {new}: database or disk is full (free some space); nothing was " \
                    "written"
+
+
+def test_a_traverse_the_database_refuses_keeps_its_row(tmp_path, monkeypatch):
+    # the traverse was measured (minutes of a rig's time), then storing it failed on a full disk: the one line said
+    # 'cannot write to the database ...; nothing of this change was stored' and the row was gone, not even appended
+    # to the --append table it was asked into
+    from types import SimpleNamespace
+
+    from stickslip.audio.detector import Tuning
+    from stickslip.kinematics import Pose
+    from stickslip.measurements import read_measurements
+    from stickslip.procedures import session
+    from stickslip.storage import StoreError
+
+    row = paper_table()[0]
+    monkeypatch.setattr(session, "_measure", lambda *a, **k: SimpleNamespace(traverse=row))
+    db, table = tmp_path / "s.db", tmp_path / "day.csv"
+    request = session.TraverseRequest("sim://", row.joint, row.direction, Pose(0.0, -1.5707963, 0.0, 0.0, 0.0),
+                                      row.day, Tuning(band_hz=(5600, 7100), threshold_db=-40.0), append=table)
+    with Store.open(db) as st:
+        real = sqlite_backend._Connection.execute
+        commits = {"n": 0}
+
+        def full(self, sql, params=(), /):
+            if sql == "COMMIT":  # the lock and the journal are written; the disk fills before the row
+                commits["n"] += 1
+                if commits["n"] >= 3:
+                    raise sqlite3.OperationalError("database or disk is full")
+            return real(self, sql, params)
+
+        monkeypatch.setattr(sqlite_backend._Connection, "execute", full)
+        try:
+            session.traverse(st, request, progress=False)
+        except StoreError as e:
+            text = str(e)
+        else:
+            raise AssertionError("storing the row should have failed")
+        monkeypatch.undo()
+        assert st.count_traverses() == 0
+    line = text.split("its row: ")[-1]
+    assert text.startswith(f"cannot write to the database {db}: database or disk is full"), text
+    assert f"the traverse was measured but not stored, joint {row.joint} is kept uncertain" in text
+    assert f"it is appended to {table}; " in text and line.split(",")[:3] == [row.day, str(row.joint), row.direction]
+    assert read_measurements(table) == [row]
