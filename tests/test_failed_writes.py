@@ -569,3 +569,31 @@ def test_a_traverse_the_database_refuses_keeps_its_row(tmp_path, monkeypatch):
     assert f"the traverse was measured but not stored, joint {row.joint} is kept uncertain" in text
     assert f"it is appended to {table}; " in text and line.split(",")[:3] == [row.day, str(row.joint), row.direction]
     assert read_measurements(table) == [row]
+
+
+def test_a_reach_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path, monkeypatch):
+    # as a move's (above): 'nothing of this change was stored' after the first burst of joint 3 had been sent
+    from server_support import true_calibration
+
+    url = "sim://?seed=4&day=2026-11-22"
+    cal = tmp_path / "cal.json"
+    true_calibration(url).save(cal)
+    real = sqlite_backend._Connection.execute
+    commits = {"n": 0}
+
+    def execute(self, sql, params=(), /):
+        if sql == "COMMIT":  # the lock, the pose, the first burst's intent; the disk fills before its confirmation
+            commits["n"] += 1
+            if commits["n"] >= 5:
+                raise sqlite3.OperationalError("database or disk is full")
+        return real(self, sql, params)
+
+    monkeypatch.setattr(sqlite_backend._Connection, "execute", execute)
+    db = tmp_path / "s.db"
+    line = one_error(run("reach", "-c", cal, "--db", db, "--by", "20um,-10um,5um", "-d", url, "--burst", "20"))
+    monkeypatch.undo()
+    assert line.endswith("; nothing of this change was stored; the straight tip move stopped at that write; as kept "
+                         "now: joint 1 0 deg (default); joint 2 -90 deg (default); joint 3 uncertain, 0 µm to "
+                         "0.973038 µm"), line
+    j3 = json.loads(run("where", "--offline", "--db", db, "-d", url, "--json").stdout)["joints"][2]
+    assert j3["source"] == "uncertain" and j3["uncertain"][0] == 0.0 and round(j3["uncertain"][1] * 1e6, 6) == 0.973038

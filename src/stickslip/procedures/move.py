@@ -838,11 +838,11 @@ def move(
         except KeyboardInterrupt:
             raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
         except OSError as e:  # the store failed mid-move (a full disk): bursts may have been sent
-            raise with_kept_positions(e, store, key, joint) from None
+            raise with_kept_positions(e, store, key, f"the move of joint {joint}") from None
     return MoveResult(key, plan, outcome, state, true_end)
 
 
-def with_kept_positions(e: OSError, store: StateStore, key: str, joint: int) -> OSError:
+def with_kept_positions(e: OSError, store: StateStore, key: str, what: str) -> OSError:
     """``e`` (a store that could not be written mid-move) with where each joint stands as kept, read back.
 
     Its own words ("nothing of this change was stored") are of the one write that failed:
@@ -855,7 +855,7 @@ def with_kept_positions(e: OSError, store: StateStore, key: str, joint: int) -> 
         kept = where_line(load_state(store, key))
     except (OSError, ValueError):
         kept = "see `stickslip where`"
-    return type(e)(f"{e}; the move of joint {joint} stopped at that write; as kept now: {kept}")
+    return type(e)(f"{e}; {what} stopped at that write; as kept now: {kept}")
 
 
 def _drive_opened(
