@@ -336,7 +336,9 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(db
     with Store.open(p) as st:
         st.add_traverse(_t(steps=4242))
     future = (*storage.MIGRATIONS, "ALTER TABLE traverses ADD COLUMN note TEXT; CREATE TABLE extra (x INTEGER)")
-    for module in (storage.base, storage.schema):  # the store's, and the reference integrity_check compares to
+    # the store's, the SQLite file check's (which refuses a newer file before opening it), and the reference
+    # integrity_check compares to
+    for module in (storage.base, storage.sqlite, storage.schema):
         monkeypatch.setattr(module, "MIGRATIONS", future)
     monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(future))
     with Store.open(p) as st:
@@ -347,6 +349,7 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(db
     # a migration that fails leaves the file at its old version, untouched
     broken = (*future, "CREATE TABLE extra (x INTEGER)")  # 'extra' exists already
     monkeypatch.setattr(storage.base, "MIGRATIONS", broken)
+    monkeypatch.setattr(storage.sqlite, "MIGRATIONS", broken)
     monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(broken))
     with pytest.raises(StoreError, match="not a usable stickslip database"):
         Store.open(p)

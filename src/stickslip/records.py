@@ -20,6 +20,8 @@ This module imports only the standard library (it sits below every other layer).
 
 from __future__ import annotations
 
+import contextvars
+import errno
 import io
 import json
 import math
@@ -28,6 +30,7 @@ import re
 import stat
 import tempfile
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -615,19 +618,35 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
     * if anything fails (a full disk, a quota, an I/O error, a read-only folder, an
       exception in ``write``) the temporary file is removed and the old ``path`` is left
       exactly as it was; an ``OSError`` is raised as :class:`WriteError` (one line naming
-      the file, the reason and that the old file is kept), the writer's own exception as it is.
+      the file, the reason and that the old file is kept), the writer's own exception as it is;
+    * a file that is read-only for this user (``chmod a-w``, the Windows read-only flag) is
+      refused as a plain write refuses it: a rename into its folder would replace it on POSIX;
+    * inside :func:`atomic_group` the rename waits for the group's end, with every other file's.
 
     The file gets the permissions a plain ``open(path, "w")`` would give it (an existing
     file keeps its own; a new one 0666 less the umask), not the temporary file's 0600:
     colleagues who read a lab's shared results folder still can.
     """
     asked = Path(path)
+    p, tmp = _staged(asked, write, mode)
+    group = _GROUP.get()
+    if group is not None:
+        group.append((asked, p, tmp))
+        return p
+    _rename(asked, p, tmp)
+    return p
+
+
+def _staged(asked: Path, write: Callable[[Any], None], mode: str) -> tuple[Path, str]:
+    """The file to replace, and the temporary file beside it holding what ``write`` wrote (flushed, synced)."""
     p = writable_target(asked)
     folder = p.parent if str(p.parent) else Path(".")
     mode_bits = _file_mode(p)
     kept = p.exists()
+    if kept and not os.access(p, os.W_OK):  # a rename would replace it (POSIX): refused, as a plain write is
+        raise WriteError(asked, PermissionError(errno.EACCES, "the file is read-only"), kept)
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".tmp", dir=folder)
+        fd, tmp = tempfile.mkstemp(prefix=f".{temp_stem(p.name)}.", suffix=".tmp", dir=folder)
     except OSError as e:  # the folder is not there, or not writable: say so of the file asked for
         raise WriteError(asked, e, kept) from None
     try:
@@ -637,17 +656,78 @@ def atomic_write(path: str | os.PathLike[str], write: Callable[[Any], None], mod
             f.flush()
             os.fsync(f.fileno())
         os.chmod(tmp, mode_bits)  # mkstemp made it private (0600): the permissions a plain write would give
-        os.replace(tmp, p)
     except BaseException as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        _unlink(tmp)
         if isinstance(e, OSError) and not isinstance(e, WriteError):
             raise WriteError(asked, e, kept) from None
         raise
-    _sync_folder(folder)
-    return p
+    return p, tmp
+
+
+TEMP_STEM_BYTES = 200
+"""Longest part of a file's name its temporary file's name repeats, bytes of UTF-8: the temporary adds up to 40
+(``.NAME.xxxxxxxx.tmp``; a backup's ``.NAME.PID-xxxxxxxx.part`` and SQLite's ``-journal`` beside it), and a file
+system's name limit is 255 (bytes on Linux and macOS, UTF-16 units on Windows)."""
+
+
+def temp_stem(name: str) -> str:
+    """``name``, cut to :data:`TEMP_STEM_BYTES` bytes at a character's end: what a temporary file beside it repeats.
+
+    A legal name of 242 to 255 bytes made its temporary file's name too long, and the write
+    failed ("File name too long") for a file a plain write could make.
+    """
+    return name.encode("utf-8")[:TEMP_STEM_BYTES].decode("utf-8", errors="ignore")
+
+
+def _rename(asked: Path, p: Path, tmp: str) -> None:
+    kept = p.exists()
+    try:
+        os.replace(tmp, p)
+    except BaseException as e:
+        _unlink(tmp)
+        if isinstance(e, OSError):
+            raise WriteError(asked, e, kept) from None
+        raise
+    _sync_folder(p.parent if str(p.parent) else Path("."))
+
+
+def _unlink(tmp: str) -> None:
+    try:
+        os.unlink(tmp)
+    except OSError:
+        pass
+
+
+_GROUP: contextvars.ContextVar[list[tuple[Path, Path, str]] | None] = contextvars.ContextVar("_GROUP", default=None)
+
+
+@contextmanager
+def atomic_group() -> Iterator[None]:
+    """Files written together or not at all: every :func:`atomic_write` inside is renamed into place at the end.
+
+    Each file is written whole to its temporary file first; a write that fails (a disk that
+    fills half-way through a report) removes every temporary file of the group, and every
+    old file stays as it was: never a folder of new figures beside an old page. Only the
+    renames, which need no space, remain once all are written. A file written in the group
+    reads as its old self until the group ends.
+    """
+    staged: list[tuple[Path, Path, str]] = []
+    token = _GROUP.set(staged)
+    try:
+        yield
+    except BaseException:
+        for _, _, tmp in staged:
+            _unlink(tmp)
+        raise
+    finally:
+        _GROUP.reset(token)
+    for i, (asked, p, tmp) in enumerate(staged):
+        try:
+            _rename(asked, p, tmp)
+        except BaseException:
+            for _, _, left in staged[i + 1 :]:
+                _unlink(left)
+            raise
 
 
 def _sync_folder(folder: Path) -> None:

@@ -81,9 +81,10 @@ def _logging(verbose: int, log_file: Path | None) -> None:
         handlers.append(h)
     if log_file is not None:
         from ..records import writable_target
+        from ._logfile import LogFile
 
         try:
-            h = logging.FileHandler(writable_target(log_file, "log"), encoding="utf-8")  # never a FIFO: it would hang
+            h = LogFile(writable_target(log_file, "log"), encoding="utf-8")  # never a FIFO: it would hang
         except (OSError, ValueError) as e:
             raise typer.BadParameter(f"cannot write the log file: {describe(e)}", param_hint="--log-file") from None
         h.setLevel(logging.DEBUG)

@@ -263,6 +263,14 @@ def describe(e: BaseException) -> str:
     return str(e)
 
 
+def write_failure(path: object, e: OSError) -> str:
+    """One line for an output file that could not be written: an atomic write's own (naming the file, the reason,
+    and that the old file is kept or that nothing was written), else ``cannot write PATH: reason``."""
+    from ..records import WriteError
+
+    return str(e) if isinstance(e, WriteError) else f"cannot write {path}: {e.strerror or e}"
+
+
 def print_json(obj: object) -> None:
     """Print ``obj`` as JSON on stdout (NaN/inf become null; ASCII, so any stream can take it)."""
     data_stream().write(json.dumps(_clean(obj), indent=2) + "\n")

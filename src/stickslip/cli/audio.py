@@ -12,7 +12,19 @@ from typing import Any
 import typer
 
 from . import app
-from ._common import console, db_option, device_url, err_console, fail, open_store, print_json, say, user_errors, warn
+from ._common import (
+    console,
+    db_option,
+    device_url,
+    err_console,
+    fail,
+    open_store,
+    print_json,
+    say,
+    user_errors,
+    warn,
+    write_failure,
+)
 from ._output import CARRIAGE_RETURN, data_stream, styled
 
 #: file suffixes read as a CSV of vibration samples (stickslip.audio.sources.vibration); anything else is audio
@@ -193,7 +205,7 @@ def tune(
     try:
         tuning.save(out)
     except OSError as e:
-        fail(f"cannot write {out}: {e.strerror or e}")
+        fail(write_failure(out, e))
     for w in (tuning.checks or {}).get("warnings", []):
         warn(w)
     if json_out:
@@ -630,6 +642,9 @@ def _finish_recording(
 
     try:
         write_wav(out, samples, rate)
+    except OSError as e:
+        fail(write_failure(out, e))
+    try:
         label = {
             "recording": str(out),
             "stop_at_s": round(float(stop_at), 6),
@@ -640,8 +655,9 @@ def _finish_recording(
             "step_rate_hz": step_rate_hz,
         }
         atomic_write_text(out.with_suffix(".json"), json.dumps(label, indent=2) + "\n")
-    except OSError as e:
-        fail(f"cannot write {out}: {e.strerror or e}")
+    except OSError as e:  # the recording is new: its label (an older one, if kept) must not be taken for its own
+        fail(f"{write_failure(out.with_suffix('.json'), e)}; the recording {out} was written (its stop is at "
+             f"{float(stop_at):.6g} s)")
     result: dict[str, object] = {"label": label}
     if tune_out is not None:
         from ..audio.tuning import TuningError
@@ -653,7 +669,7 @@ def _finish_recording(
         except TuningError as e:
             fail(f"{out}: {e}")
         except OSError as e:
-            fail(f"cannot write {tune_out}: {e.strerror or e}")
+            fail(write_failure(tune_out, e))
         result["tuning"] = tuning.to_dict()
         for w in (tuning.checks or {}).get("warnings", []):
             warn(w)

@@ -287,13 +287,14 @@ def calibrate_cmd(
     from ..measurements import write_step_sizes
     from ..procedures.camera import calibrate_camera, dead_reckon
     from ..procedures.move import DeviceBusy, device_lock
+    from ..records import atomic_group
 
     url = device_url(device)
     at = _pixel(tip, "--tip") if tip is not None else None
     order = _joint_order(joints)
     view = _view(view_tilt, view_azimuth, view_roll)
     label = day if day is not None else today_label()
-    steps_cal = _jacobian_steps(jacobian, calibration)
+    steps_cal = _jacobian_steps(jacobian, calibration, order)
     with user_errors():
         key = device_key(url)
     with open_store(db) as store, user_errors(DeviceBusy):
@@ -315,12 +316,13 @@ def calibrate_cmd(
     if not result.rows:
         reasons = "; ".join(r.refused or f"joint {r.joint}: no step size" for r in result.joints)
         fail(f"no step size measured: {reasons}")
-    if output is not None:
-        with user_errors():
-            write_step_sizes(output, list(result.rows))
     against: dict[int, tuple[float, float]] = {}
-    if jacobian is not None and steps_cal is not None:
-        against = _write_jacobian(result, steps_cal, camera, jacobian, view)
+    with atomic_group():  # the step sizes and the Jacobian of one run, or neither (a full disk half-way)
+        if output is not None:
+            with user_errors():
+                write_step_sizes(output, list(result.rows))
+        if jacobian is not None and steps_cal is not None:
+            against = _write_jacobian(result, steps_cal, camera, jacobian, view)
     if json_out:
         extra: dict[str, object] = {}
         if jacobian is not None:
@@ -337,8 +339,12 @@ def calibrate_cmd(
         _print_against(jacobian, against)
 
 
-def _jacobian_steps(jacobian: Path | None, calibration: Path | None) -> Any:
-    """The step calibration that scales ``--jacobian`` (``-c``), with the output path checked first (or ``None``)."""
+def _jacobian_steps(jacobian: Path | None, calibration: Path | None, order: list[int]) -> Any:
+    """The step calibration that scales ``--jacobian`` (``-c``), with the output path checked first (or ``None``).
+
+    It must model every joint of ``order`` (each measured joint is scaled by its steps): refused before anything
+    moves. A calibration without joint 1 ended a whole run in a ``KeyError`` traceback (exit 1), after the step
+    sizes had been written and before the Jacobian was."""
     if jacobian is None:
         if calibration is not None:
             fail("--calibration goes with --jacobian (it scales the measured image Jacobian)")
@@ -349,7 +355,12 @@ def _jacobian_steps(jacobian: Path | None, calibration: Path | None) -> Any:
 
     with user_errors():
         writable_target(jacobian, "--jacobian")
-        return Calibration.load(calibration_file(calibration))
+        cal = Calibration.load(calibration_file(calibration))
+    if missing := [j for j in order if j not in cal.joints]:
+        fail(f"--calibration models joint(s) {', '.join(map(str, cal.joints))}, not joint(s) "
+             f"{', '.join(map(str, missing))} of --joints: --jacobian scales each measured joint by its steps "
+             "(calibrate them, or measure --joints without them); nothing was moved")
+    return cal
 
 
 def _write_jacobian(

@@ -31,6 +31,7 @@ from ._common import (
     print_json,
     say,
     user_config,
+    write_failure,
 )
 from ._output import data_stream
 
@@ -89,7 +90,7 @@ def init_cmd(
     try:
         written = write_template(None, force=force)
     except OSError as e:  # FileExistsError without --force; a read-only folder
-        fail(str(e) if isinstance(e, FileExistsError) else f"cannot write {config_path()}: {e.strerror or e}")
+        fail(str(e) if isinstance(e, FileExistsError) else write_failure(config_path(), e))
     console.print(
         f"wrote {written}: every key is commented out; edit it, then check it with stickslip config show",
         highlight=False,

@@ -59,7 +59,10 @@ the command line):
 * **Files:** every output file (`-o`, `--out`, `--append`, `record`) is written to a
   temporary file beside it, flushed and synced, then renamed over it: a full disk or any
   other failed write is one line (`cannot write OUT: No space left on device; the old file
-  is kept as it was`) and the old file is unchanged. A folder, FIFO or device is never
+  is kept as it was`) and the old file is unchanged. The files of one command (`report`,
+  `demo --out`, `camera calibrate -o ... --jacobian ...`) are renamed together once all are
+  written: a disk that fills half-way leaves every earlier file as it was. A file that is
+  read-only for you is refused, as a plain write refuses it. A folder, FIFO or device is never
   written to, read from or replaced: it is refused before it is opened.
 * **CSV cells a spreadsheet would run are guarded.** A cell beginning with `=`, `+`, `-`,
   `@`, a tab or a carriage return is written with a leading `'`, except a plain decimal

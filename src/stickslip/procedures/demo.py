@@ -50,7 +50,7 @@ from ..clock import check_day_label, today_label
 from ..devices.base import device_key
 from ..measurements import Traverse, write_measurements
 from ..models import JointModel
-from ..records import atomic_write_text, writable_target
+from ..records import atomic_group, atomic_write_text, writable_target
 from ..sim.arm import NOMINAL, SimulatedMM3A
 from ..sim.oracle import OracleStopDetector
 from ..units import param_scale
@@ -506,10 +506,12 @@ def run_demo(
     )
     if store is not None:
         result.files["store"] = str(getattr(store, "path", "store"))
-    if out is not None:
+    if out is None:
+        result.elapsed_s = time.perf_counter() - t_wall
+        return result
+    with atomic_group():  # every results file or none: a disk full half-way leaves an earlier run's whole
         result.files.update(save_results(result, out))
-    result.elapsed_s = time.perf_counter() - t_wall
-    if out is not None:
+        result.elapsed_s = time.perf_counter() - t_wall
         _write_summary(result, Path(out))
     return result
 

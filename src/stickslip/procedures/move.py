@@ -98,6 +98,7 @@ __all__ = [
     "track_fields",
     "tracked_calibration",
     "where_line",
+    "with_kept_positions",
     "within_stops",
 ]
 
@@ -181,8 +182,13 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
         )
     try:
         yield me
-    finally:
-        store.release_lock(device, pid)
+    except BaseException:
+        try:
+            store.release_lock(device, pid)
+        except OSError:  # the store failed already (a disk still full): its error, not this one, says what was kept
+            pass  # the row names this process; once it has ended it is taken over (where --unlock elsewhere)
+        raise
+    store.release_lock(device, pid)
 
 
 class MoveStore(LockStore, StateStore, Protocol):
@@ -831,7 +837,25 @@ def move(
             )
         except KeyboardInterrupt:
             raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
+        except OSError as e:  # the store failed mid-move (a full disk): bursts may have been sent
+            raise with_kept_positions(e, store, key, f"the move of joint {joint}") from None
     return MoveResult(key, plan, outcome, state, true_end)
+
+
+def with_kept_positions(e: OSError, store: StateStore, key: str, what: str) -> OSError:
+    """``e`` (a store that could not be written mid-move) with where each joint stands as kept, read back.
+
+    Its own words ("nothing of this change was stored") are of the one write that failed:
+    bursts sent before it moved the joint, and the journal (written before each burst) keeps
+    it exact or uncertain with bounds. A message that cannot be extended is ``e`` as it was.
+    """
+    if type(e).__init__ is not OSError.__init__ or len(e.args) != 1:
+        return e
+    try:
+        kept = where_line(load_state(store, key))
+    except (OSError, ValueError):
+        kept = "see `stickslip where`"
+    return type(e)(f"{e}; {what} stopped at that write; as kept now: {kept}")
 
 
 def _drive_opened(

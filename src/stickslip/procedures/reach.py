@@ -42,6 +42,7 @@ from .move import (
     reference_problem,
     simulates,
     tracked_calibration,
+    with_kept_positions,
 )
 
 __all__ = [
@@ -361,6 +362,8 @@ def reach(
             outcome, true_q = _drive_opened(store, request, calibration, state, plan, opener or open_device)
         except KeyboardInterrupt:
             raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
+        except OSError as e:  # the store failed mid-move (a full disk): bursts may have been sent
+            raise with_kept_positions(e, store, key, "the straight tip move") from None
     return ReachResult(key, plan, outcome, state, moved=True, sim_true=true_q)
 
 

@@ -268,7 +268,10 @@ def traverse(
             except KeyboardInterrupt:
                 what = f"traverse of joint {request.joint}{request.direction}"
                 raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
-            record_traverse(store, request.device, result.traverse, how="audio")
+            try:
+                record_traverse(store, request.device, result.traverse, how="audio")
+            except OSError as e:  # measured, and the database refused it (a full disk): the row is not lost
+                raise _measured_not_stored(e, request, result.traverse) from None
     if request.append is not None:
         try:
             append_row(request.append, result.traverse)
@@ -279,6 +282,25 @@ def traverse(
                 f"the traverse was measured but not appended to {request.append} ({e}); {stored}its row: {line}"
             ) from None
     return result
+
+
+def _measured_not_stored(e: OSError, request: TraverseRequest, row: Traverse) -> OSError:
+    """``e`` (the database refused a measured row: a full disk) with the row, appended to the table if one is asked.
+
+    The traverse took minutes of a rig's time: its row was lost with the one line that said the
+    write failed. The joint stays as journalled before it moved: uncertain between its stops.
+    """
+    line = measurements_to_csv([row]).split("\n")[1]
+    table = ""
+    if request.append is not None:
+        try:
+            append_row(request.append, row)
+            table = f"it is appended to {request.append}; "
+        except (OSError, ValueError) as a:
+            table = f"nor appended to {request.append} ({a}); "
+    text = (f"{e}; the traverse was measured but not stored, joint {request.joint} is kept uncertain between its "
+            f"stops (reference it: stickslip where --set); {table}its row: {line}")
+    return type(e)(text) if type(e).__init__ is OSError.__init__ and len(e.args) == 1 else OSError(text)
 
 
 def _measure(

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from ..records import atomic_write, atomic_write_text, writable_target
+from ..records import atomic_group, atomic_write, atomic_write_text, writable_target
 from . import html as pagehtml
 from .d_relation import DRelation, d_relation_data
 from .prismatic import prismatic_data
@@ -106,7 +106,8 @@ def build_report(
 
     The page labels the validation in-sample or out-of-sample
     (:func:`stickslip.report.sample.classify_sample`) in its heading and in every
-    figure title.
+    figure title. The files are written together (:func:`~stickslip.records.atomic_group`):
+    a write that fails (a full disk) leaves every file of an earlier report as it was.
     """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
@@ -114,7 +115,13 @@ def build_report(
         writable_target(out / name, "report")  # a folder in a file's place: refused before any is replaced
     ts = list(traverses)
     val_ts = ts if validation is None else list(validation)
-    separate = validation is not None
+    with atomic_group():  # every file or none: a disk full half-way leaves the earlier report whole
+        return _write_all(calibration, ts, val_ts, validation is not None, out, dpi, seed_simulation)
+
+
+def _write_all(calibration: Calibration, ts: list[Traverse], val_ts: list[Traverse], separate: bool, out: Path,
+               dpi: int, seed_simulation: str) -> Report:
+    """Every figure, then ``index.html`` (inside :func:`build_report`'s group: renamed into place at its end)."""
     sample = classify_sample(calibration, val_ts, separate)
     figs = _Figures(out, dpi, [])
     _model_figures(figs, calibration, ts, False, "")

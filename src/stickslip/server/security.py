@@ -120,8 +120,14 @@ def _create_token(p: Path) -> str | None:
         fd = os.open(p, flags, 0o600)
     except FileExistsError:  # another server made it a moment ago: use that one
         return None
-    with os.fdopen(fd, "w", encoding="ascii") as f:
-        f.write(token + "\n")
+    try:
+        with os.fdopen(fd, "w", encoding="ascii") as f:
+            f.write(token + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+    except BaseException:  # a full disk: no empty file left, which every later server refused as no token
+        p.unlink(missing_ok=True)
+        raise
     return token
 
 

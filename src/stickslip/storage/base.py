@@ -12,6 +12,7 @@ from typing import Any, Self
 
 from ..devices.base import redact_url
 from ..measurements import Traverse
+from ..records import temp_stem
 from .backend import Backend
 from .schema import (
     MIGRATIONS,
@@ -67,7 +68,7 @@ class _Base:
             store._migrate()
         except StoreError as e:
             db.close()
-            if "newer than" in str(e) or "damaged" in str(e) or "untouched" in str(e):
+            if any(said in str(e) for said in _SAID_WHOLE):
                 raise
             raise StoreError(f"{db.where} is not a usable stickslip database: {e}") from None
         except BaseException:
@@ -112,6 +113,12 @@ class _Base:
             )
         if version == SCHEMA_VERSION and db.owned():
             return
+        try:
+            self._migrate_from(version)
+        except StoreError as e:
+            raise _cannot_migrate(e, self.path, version) from None
+
+    def _migrate_from(self, version: int) -> None:
         with self._write() as con:
             con.claim_ownership()
             version = con.schema_version()  # another process may have won
@@ -298,6 +305,9 @@ class _Base:
             if not self._con.online_copy(tmp):
                 self._copy_rows_into(tmp)
             os.replace(tmp, dest)
+        except (OSError, StoreError) as e:  # a full disk, a read-only folder: said of the file asked for
+            _remove_part(tmp)
+            raise StoreError(_backup_problem(e, tmp, dest)) from None
         except BaseException:
             _remove_part(tmp)
             raise
@@ -324,7 +334,40 @@ def _part_file(dest: Path) -> Path:
     copy of a shared database ``UNIQUE constraint failed``), and two backups to one name at
     once wrote into the same file.
     """
-    return dest.with_name(f".{dest.name}.{os.getpid()}-{secrets.token_hex(4)}.part")
+    return dest.with_name(f".{temp_stem(dest.name)}.{os.getpid()}-{secrets.token_hex(4)}.part")
+
+
+_SAID_WHOLE = ("newer than", "damaged", "untouched", "cannot make the database", "cannot upgrade the database")
+"""An error opening a database that says all there is (else it is prefixed "not a usable stickslip database")."""
+_MIGRATION_BLOCKED = ("disk I/O error", "database or disk is full", "readonly database", "database is locked")
+"""SQLite's words for a write the disk or the file refused (storage.sqlite.SQLiteBackend._write_problem's hints)."""
+
+
+def _cannot_migrate(e: StoreError, path: Path | str, version: int) -> StoreError:
+    """A migration the file or disk refused (full, read-only, busy), said as such: not "not a usable database".
+
+    Every command, reading ones too, upgrades an older stickslip's database when it opens it; one that cannot
+    be written then was called "not a usable stickslip database", which it is. Other errors are ``e``.
+    """
+    text = str(e)
+    if not any(why in text for why in _MIGRATION_BLOCKED):
+        return e
+    reason = text.removeprefix(f"cannot write to the database {path}: ").removesuffix(
+        "; nothing of this change was stored")
+    if version == 0:
+        return StoreError(f"cannot make the database {path}: {reason}; nothing was written")
+    return StoreError(
+        f"cannot upgrade the database {path} from schema version {version} (an older stickslip's) to "
+        f"{SCHEMA_VERSION}, which every command does before it reads: {reason}; it is left as it was"
+    )
+
+
+def _backup_problem(e: OSError | StoreError, tmp: Path, dest: Path) -> str:
+    """One line naming the backup asked for, never its temporary ``.part`` file (which is gone by then)."""
+    if isinstance(e, StoreError):
+        text = str(e).replace(str(tmp), str(dest))
+        return text if "nothing" in text else f"{text}; nothing was written"
+    return f"cannot write the backup {dest}: {e.strerror or e}; nothing was written"
 
 
 def _remove_part(tmp: Path) -> None:

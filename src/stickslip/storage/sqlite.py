@@ -85,7 +85,8 @@ def check_database_file(path: Path, looks: int = 50) -> str:
     is damaged:
 
     * nothing there, an empty file, or an SQLite file without tables: ``"new"``;
-    * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``;
+    * ``PRAGMA application_id`` is stickslip's (:data:`~.schema.APPLICATION_ID`): ``"ours"``, unless its
+      schema version is newer than this stickslip's (refused, the file not even opened);
     * no application id, and the tables and columns of a stickslip schema version
       (a database made before the id was set): ``"legacy"``, stamped when opened;
     * anything else is refused untouched, naming the file and why: a folder, FIFO or
@@ -112,6 +113,11 @@ def check_database_file(path: Path, looks: int = 50) -> str:
     user_version = int.from_bytes(head[60:64], "big", signed=True)
     app_id = int.from_bytes(head[68:72], "big", signed=True)
     if app_id == APPLICATION_ID:
+        if user_version > len(MIGRATIONS):  # refused here, before opening it switches its journal mode to WAL
+            raise StoreError(
+                f"{path} has schema version {user_version}, newer than this stickslip understands "
+                f"({len(MIGRATIONS)}): left untouched (upgrade stickslip)"
+            )
         return "ours"
     if app_id != 0:
         raise StoreError(
@@ -255,6 +261,22 @@ def _connect(path: Path) -> _Connection:
     return con
 
 
+def _open_hint(path: Path, e: sqlite3.DatabaseError) -> str:
+    """Why SQLite could not open an existing file, where its words do not say: a full disk, a read-only folder.
+
+    Even a reading command needs the write-ahead log's ``-shm`` file beside the database (SQLite makes it and
+    writes into it to read): on a full disk opening says only "disk I/O error", in a read-only folder (a share
+    mounted read-only) "unable to open database file".
+    """
+    text, shm = str(e), f"{path.name}-shm"
+    if text == "disk I/O error":
+        return f" (is the disk full? even reading needs room for {shm} beside it)"
+    if text == "unable to open database file" and path.exists() and not os.access(path.parent, os.W_OK):
+        return (f" (its folder {path.parent} is read-only: SQLite needs to make {shm} beside it, even to read; "
+                "copy the file into a folder you can write, and give --db the copy)")
+    return ""
+
+
 # ---------------------------------------------------------------- the backend
 
 
@@ -280,11 +302,12 @@ class SQLiteBackend:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
-            raise StoreError(f"cannot create the directory for the database {path}: {e}") from None
+            why = e.strerror or e
+            raise StoreError(f"cannot create the folder {path.parent} for the database {path}: {why}") from None
         try:
             con = _connect(path)
         except sqlite3.DatabaseError as e:
-            raise StoreError(f"cannot open the database {path}: {e}") from None
+            raise StoreError(f"cannot open the database {path}: {e}{_open_hint(path, e)}") from None
         return cls(con, path)
 
     @property

@@ -5,6 +5,7 @@ soundfile (libsndfile) is imported lazily; a missing one is named with the extra
 
 from __future__ import annotations
 
+import io
 import struct
 from collections.abc import Iterator
 from pathlib import Path
@@ -200,16 +201,17 @@ def write_wav(path: str | Path, samples: np.ndarray, sample_rate: int) -> Path:
 
     The write goes through a temporary file in the same folder: a write that fails (a
     full disk, a folder that is not there or not writable) leaves an earlier file at
-    ``path`` as it was, and raises ``OSError``.
+    ``path`` as it was, and raises ``OSError`` (:class:`~stickslip.records.WriteError`).
+    The WAV is made in memory first (as large as ``samples`` in float32): libsndfile
+    writing into the file itself met a full disk inside its callbacks, where each failed
+    write printed a traceback ("Exception ignored from cffi callback") before the error.
     """
     sf = load_soundfile()
     p = Path(path)
     data = np.asarray(samples, dtype=np.float32)
-
-    def write(f: Any) -> None:
-        try:
-            sf.write(f, data, int(sample_rate), subtype="FLOAT", format="WAV")
-        except (RuntimeError, ValueError, TypeError) as e:  # libsndfile's errors are RuntimeErrors
-            raise OSError(f"cannot write a WAV file: {e}") from None
-
-    return atomic_write(p, write, mode="wb")
+    wav = io.BytesIO()
+    try:
+        sf.write(wav, data, int(sample_rate), subtype="FLOAT", format="WAV")
+    except (RuntimeError, ValueError, TypeError) as e:  # libsndfile's errors are RuntimeErrors
+        raise OSError(f"cannot write a WAV file: {e}") from None
+    return atomic_write(p, lambda f: f.write(wav.getbuffer()), mode="wb")
