@@ -236,7 +236,7 @@ def test_a_bluesky_stop_while_the_tip_is_being_found_leaves_the_joint_uncertain(
 def test_move_seen_given_a_url_string_says_what_it_takes(cal_off, tmp_path):
     # before: AttributeError "'str' object has no attribute 'jacobian'" (StickSlipAxis takes a URL, move_seen not)
     from stickslip.calibration import Calibration
-    from stickslip.procedures.closed_loop import CameraLoop, move_seen
+    from stickslip.procedures.closed_loop import move_seen
     from stickslip.procedures.move import MoveRequest
     from stickslip.storage import Store
 
