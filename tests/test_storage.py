@@ -335,6 +335,7 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(db
     p = db
     with Store.open(p) as st:
         st.add_traverse(_t(steps=4242))
+        assert st.upgraded_from is None  # made new: nothing upgraded
     future = (*storage.MIGRATIONS, "ALTER TABLE traverses ADD COLUMN note TEXT; CREATE TABLE extra (x INTEGER)")
     # the store's, the SQLite file check's (which refuses a newer file before opening it), and the reference
     # integrity_check compares to
@@ -342,10 +343,13 @@ def test_opening_an_older_file_runs_the_missing_migrations_and_keeps_the_data(db
         monkeypatch.setattr(module, "MIGRATIONS", future)
     monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(future))
     with Store.open(p) as st:
+        assert st.upgraded_from == len(future) - 1  # said once, by the command that upgraded it (the CLI: a line)
         assert st.schema_version == len(future)
         assert [t.steps for t in st.traverses()] == [4242]
         assert "note" in _columns(st, "traverses") and _columns(st, "extra") == ["x"]
         assert st.integrity_check() == "ok"
+    with Store.open(p) as st:
+        assert st.upgraded_from is None
     # a migration that fails leaves the file at its old version, untouched
     broken = (*future, "CREATE TABLE extra (x INTEGER)")  # 'extra' exists already
     monkeypatch.setattr(storage.base, "MIGRATIONS", broken)
@@ -582,3 +586,27 @@ def test_cli_empty_db_option_is_refused_not_taken_for_the_default(tmp_path, monk
             assert r.exit_code == 2, (args, r.output)
             assert "--db is empty" in r.output and "Traceback" not in r.output, r.output
     assert not env_db.exists()
+
+
+def test_the_command_that_upgrades_an_older_database_says_so_once(tmp_path, monkeypatch):
+    # an older store was upgraded in place without a word: an older stickslip sharing the file then refused it as
+    # newer, and nobody had been told why (audit37's question)
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    p = tmp_path / "old.db"
+    with Store.open(p) as st:
+        st.add_traverse(_t(steps=4242))
+    future = (*storage.MIGRATIONS, "CREATE TABLE extra (x INTEGER)")
+    for module in (storage.base, storage.sqlite, storage.schema):
+        monkeypatch.setattr(module, "MIGRATIONS", future)
+    monkeypatch.setattr(storage.base, "SCHEMA_VERSION", len(future))
+    runner = CliRunner()
+    first = runner.invoke(app, ["history", "--db", str(p)])
+    again = runner.invoke(app, ["history", "--db", str(p)])
+    assert first.exit_code == 0 and again.exit_code == 0, first.output
+    said = " ".join(first.stderr.split())
+    assert said.count("warning:") == 1 and (
+        f"upgraded the database {p} from schema version {len(future) - 1} to {len(future)}") in said
+    assert "upgraded" not in again.stderr

@@ -637,6 +637,9 @@ def open_store(db: str | os.PathLike[str] | None, must_exist: bool = False) -> I
                 f"no database at {describe_database(target)} (nothing recorded yet: run stickslip demo, "
                 "or stickslip import MEAS.csv)"
             )
+    if store.upgraded_from is not None:
+        warn(f"upgraded the database {describe_database(target)} from schema version {store.upgraded_from} to "
+             f"{store.schema_version} (docs/storage.md): an older stickslip now refuses it as newer")
     try:
         with store:
             yield store

@@ -44,6 +44,8 @@ class _Base:
     def __init__(self, db: Backend):
         self._con: Backend = db
         self.path: Path | str = db.where
+        self.upgraded_from: int | None = None
+        """The schema version this process upgraded the database from when it opened it (``None``: not upgraded)."""
 
     # -- opening / closing
 
@@ -117,6 +119,8 @@ class _Base:
             self._migrate_from(version)
         except StoreError as e:
             raise _cannot_migrate(e, self.path, version) from None
+        if 1 <= version < SCHEMA_VERSION:  # a stickslip database of an older release, not a new one
+            self.upgraded_from = version
 
     def _migrate_from(self, version: int) -> None:
         with self._write() as con:
