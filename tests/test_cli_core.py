@@ -261,6 +261,25 @@ def test_predict_for_a_joint_the_calibration_lacks_says_why_and_prints_nothing(f
     assert r.stderr.count("\n") == 1 and r.stdout == ""
 
 
+def test_a_hand_edited_calibration_whose_step_would_be_negative_is_refused_where_it_is_read(files):
+    # calibrate refuses a - |c| <= 0 (the step <= 0 at full axial load), a loaded file was not checked: a hand edit
+    # c = 2 um > a dead-reckoned +100 steps as 7.5 um backwards while its plan was refused (audit38's question)
+    tmp, meas = files
+    data = json.loads(_cal(tmp, meas).read_text())
+    params = [dict(p) for p in data["parameters"]]
+    a = next(p for p in params if p["joint"] == 3 and p["direction"] == "+" and p["name"] == "a")["value"]
+    c = next(p for p in params if p["joint"] == 3 and p["direction"] == "+" and p["name"] == "c")
+    c["value"] = 1.5 * a
+    bad = tmp / "negative.json"
+    bad.write_text(json.dumps({**data, "parameters": params}))
+    for cmd in (["show", str(bad)], ["predict", str(meas), "-c", str(bad)],
+                ["plan", "-c", str(bad), "--joint", "3", "--from", "0", "--to", "2mm"]):
+        _bad(runner.invoke(app, cmd), str(bad), "joint 3+: non-physical calibration refused: a - |c|")
+    c["value"] = 0.5 * a  # still physical: read as before
+    bad.write_text(json.dumps({**data, "parameters": params}))
+    assert runner.invoke(app, ["show", str(bad)]).exit_code == 0
+
+
 def test_a_parameter_in_another_unit_is_refused(files):
     """A hand-edited calibration labelling a value in another unit was read in SI regardless (joint 2+ gamma0
     labelled 'um' was shown and used as rad: a factor 1e6 silently); now one line naming both units, exit 2."""

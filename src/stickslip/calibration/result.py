@@ -490,16 +490,23 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
-        """Read a calibration JSON file; raises ``ValueError`` naming the file and the reason."""
+        """Read a calibration JSON file; raises ``ValueError`` naming the file and the reason.
+
+        The paper's parameters are checked as ``calibrate`` checks them (:meth:`PrismaticParams.check_physical`,
+        :meth:`RotaryParams.check_physical`: the step > 0 in every pose): a file whose step would be <= 0
+        somewhere is refused, naming the joint and direction.
+        """
         p = Path(path)
         try:
             data = records.read_json(p, "calibration")
         except FileNotFoundError:
             raise ValueError(f"{p}: no such calibration file") from None
         try:
-            return cls.from_dict(data)
+            cal = cls.from_dict(data)
+            _check_physical(cal.models)  # a hand edit (c > a) would step backwards where the plan refused to move
         except ValueError as e:
             raise ValueError(f"{p}: {e}") from None
+        return cal
 
     # -- people
     def report(self) -> str:
