@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 
@@ -123,8 +124,15 @@ MAX_STEPS = 10**12
 """Largest step count accepted in a table (a full traverse is ~1e4..1e7 steps; SQLite holds < 2**63)."""
 
 
+_GROUPED = re.compile(r"[+-]?\d{1,3}(?:\.\d{3})+|[+-]?\d{1,3}(?:,\d{3})+")
+"""A count written with thousands separators (12.000, 12,000): 12 or 12 000 steps cannot be told apart."""
+
+
 def _parse_steps(text: str) -> tuple[int | None, str | None]:
     t = text.strip()
+    if _GROUPED.fullmatch(t):  # a German spreadsheet's 12.000 is 12 000 steps; float() read it as 12
+        return None, (f"steps = {t!r} reads as a number written with a thousands separator: write the step "
+                      "count as a plain integer (12000, not 12.000 or 12,000)")
     try:
         v = int(t)
     except ValueError:
