@@ -9,6 +9,8 @@ from stickslip.measurements import (
     TableError,
     parse_measurement_table,
     parse_measurements,
+    parse_pose_table,
+    read_step_sizes,
 )
 
 HEAD = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
@@ -32,3 +34,64 @@ def test_step_count_with_thousands_separator_is_refused(cell):
 def test_step_counts_written_as_floats_are_read(cell, steps):
     (t,) = parse_measurements(HEAD + ROW.format(cell), "m.csv")
     assert t.steps == steps
+
+
+STEP_HEAD = "day,joint,direction,q1,q2,q3,theta,psi,gamma,sigma,steps,method"
+STEP_ROW = "2026-11-22,3,+,0.0,0.0,0.004,0.0,0.0,1e-06,5e-08,200,camera"
+SEMI = "the columns are separated by ';': save the table with commas between columns and '.' before decimals"
+
+
+def _step_header_problem(tmp_path, text):
+    p = tmp_path / "st.csv"
+    p.write_text(text)
+    with pytest.raises(TableError) as e:
+        read_step_sizes(p)
+    (problem,) = e.value.problems
+    return problem.removeprefix(f"{p}:1: header must be exactly {STEP_HEAD} ")
+
+
+def test_step_size_header_refusals_say_why(tmp_path):
+    # before, each of these said only 'header must be exactly day,joint,...,method'
+    semi = STEP_HEAD.replace(",", ";") + "\n" + STEP_ROW.replace(",", ";").replace(".", ",") + "\n"
+    assert _step_header_problem(tmp_path, semi) == f"({SEMI})"
+    tab = STEP_HEAD.replace(",", "\t") + "\n" + STEP_ROW.replace(",", "\t") + "\n"
+    assert _step_header_problem(tmp_path, tab).startswith("(the columns are separated by a tab: save the table")
+    index = "," + STEP_HEAD + "\n0," + STEP_ROW + "\n"
+    assert _step_header_problem(tmp_path, index) == (
+        "(the first column has no name: a row index (pandas: to_csv(..., index=False)); delete it)"
+    )
+    trailing = STEP_HEAD + ",,\n" + STEP_ROW + ",,\n"
+    assert _step_header_problem(tmp_path, trailing) == (
+        "(2 columns without a name: delete the empty columns at the end)"
+    )
+    renamed = STEP_HEAD.replace("gamma", "gamma [m]") + "\n" + STEP_ROW + "\n"
+    assert _step_header_problem(tmp_path, renamed) == "(missing gamma; unexpected gamma [m])"
+
+
+def test_measurement_header_names_a_pandas_index_column():
+    text = ",day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n0," + ROW.format(12000)
+    with pytest.raises(TableError) as e:
+        parse_measurements(text, "m.csv")
+    assert e.value.problems == [
+        f"m.csv:1: header must be exactly {HEAD.strip()} "
+        "(the first column has no name: a row index (pandas: to_csv(..., index=False)); delete it)"
+    ]
+
+
+@pytest.mark.parametrize("sep, words", [(";", SEMI), ("\t", "the columns are separated by a tab: save the table")])
+def test_a_pose_table_saved_with_semicolons_or_tabs_says_so(sep, words):
+    # before: 'header lacks joint, q1, q2, q3, theta, psi', of a header that holds every one of them
+    text = sep.join(["joint", "direction", "q1", "q2", "q3", "theta", "psi"]) + "\n" + sep.join("3+00000") + "\n"
+    with pytest.raises(TableError) as e:
+        parse_pose_table(text, "p.csv")
+    (problem,) = e.value.problems
+    assert problem.startswith(f"p.csv:1: {words}"), problem
+
+
+def test_a_blank_first_line_is_named():
+    # before: 'missing day, joint, direction, ... steps', every column, of a table whose header is on line 2
+    with pytest.raises(TableError) as e:
+        parse_measurements("\n" + HEAD + ROW.format(12000), "m.csv")
+    assert e.value.problems == [
+        f"m.csv:1: header must be exactly {HEAD.strip()} (line 1 is empty: the header must be the first line)"
+    ]

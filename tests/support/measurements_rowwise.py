@@ -269,8 +269,9 @@ def _parse_measurements(text: str, source: str) -> list[Traverse]:
         if not detail:
             detail.append("columns out of order")
         if len(header) == 1 and (";" in header[0] or "\t" in header[0]):  # the same message as the library's
-            detail = ["the columns are separated by " + ("';'" if ";" in header[0] else "a tab")
-                      + ": save the table with commas (CSV)"]
+            detail = ["the columns are separated by ';': save the table with commas between columns and '.' before "
+                      "decimals" if ";" in header[0] else "the columns are separated by a tab: save the table with "
+                      "commas (CSV)"]
         raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
     out: list[Traverse] = []
     problems: list[str] = []

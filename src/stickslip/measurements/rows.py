@@ -222,3 +222,51 @@ def _csv_problem(source: str, e: csv.Error) -> str:
         text = "a line ends in a bare carriage return (CR, an old Mac export): save the table with LF or CRLF ends"
     return f"{source}: not a readable CSV table ({text})"
 
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def separator_problem(header: Sequence[str]) -> str | None:
+    """What to do about a header record that is one cell holding ';' or tabs (a table not separated by commas)."""
+    if len(header) != 1 or not any(sep in header[0] for sep in ";\t"):
+        return None
+    if ";" in header[0]:  # a spreadsheet in a language with decimal commas (German, French, Dutch) writes ';'
+        return "the columns are separated by ';': save the table with commas between columns and '.' before decimals"
+    return "the columns are separated by a tab: save the table with commas (CSV)"
+
+
+def check_header(header: list[str] | None, source: str, expected: Sequence[str]) -> None:
+    """Raise :class:`TableError` unless ``header`` (a table's first record) is exactly ``expected``, saying why."""
+    if header is None:
+        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(expected)})"])
+    header = [h.strip() for h in header]
+    if tuple(header) == tuple(expected):
+        return
+    missing = [h for h in expected if h not in header]
+    extra = [h for h in header if h not in expected]
+    detail = []
+    if missing:
+        detail.append("missing " + ", ".join(missing))
+    if [h for h in extra if h]:
+        detail.append("unexpected " + ", ".join(h for h in extra if h))
+    if header and header[0] == "" and tuple(header[1:]) == tuple(expected):  # pandas' to_csv writes its index, unnamed
+        detail = ["the first column has no name: a row index (pandas: to_csv(..., index=False)); delete it"]
+    elif "" in extra:  # a spreadsheet's trailing commas: 'unexpected , ' said nothing
+        n = extra.count("")
+        detail.append(f"{n} column{'s' if n > 1 else ''} without a name: delete the empty columns at the end")
+    if not detail:
+        detail.append("columns out of order")
+    if not set(header) & set(expected) and sum(_is_number(h) for h in header) >= 3:  # a table whose top was cut
+        detail = ["line 1 is a row of numbers, not the header: the table's first line is missing (was the top "
+                  "of the file cut?); put the header line back"]
+    if (sep := separator_problem(header)) is not None:
+        detail = [sep]
+    if not any(header):  # a blank first line (a spreadsheet's title row left empty)
+        detail = ["line 1 is empty: the header must be the first line"]
+    raise TableError([f"{source}:1: header must be exactly {','.join(expected)} ({'; '.join(detail)})"])

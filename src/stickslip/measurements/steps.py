@@ -32,7 +32,7 @@ from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
 from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, guard_cell, read_text_bounded, unguard_cell
-from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_pose
+from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_header, check_pose
 
 __all__ = [
     "STEP_HEADER",
@@ -171,11 +171,7 @@ def parse_step_sizes(text: str, source: str = "<string>") -> list[StepSize]:
     """Parse step-size table CSV text. Raises :class:`TableError` listing every bad row (``file:line: reason``)."""
     try:
         reader = csv.reader(io.StringIO(text))
-        header = next(reader, None)
-        if header is None:
-            raise TableError([f"{source}:1: the file is empty (expected the header {','.join(STEP_HEADER)})"])
-        if tuple(h.strip() for h in header) != STEP_HEADER:
-            raise TableError([f"{source}:1: header must be exactly {','.join(STEP_HEADER)}"])
+        check_header(next(reader, None), source, STEP_HEADER)
         out: list[StepSize] = []
         problems: list[str] = []
         for lineno, cells in enumerate(reader, start=2):
