@@ -10,7 +10,11 @@ from stickslip.measurements import (
     parse_measurement_table,
     parse_measurements,
     parse_pose_table,
+    read_measurements,
+    read_pose_table,
     read_step_sizes,
+    stream_measurement_table,
+    stream_pose_table,
 )
 
 HEAD = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
@@ -95,3 +99,27 @@ def test_a_blank_first_line_is_named():
     assert e.value.problems == [
         f"m.csv:1: header must be exactly {HEAD.strip()} (line 1 is empty: the header must be the first line)"
     ]
+
+
+EXCEL_CSV = "save it as UTF-8 (a spreadsheet's 'CSV UTF-8'; its plain 'CSV' is Windows-1252)"
+
+
+def test_a_windows_1252_table_says_how_to_save_it(tmp_path):
+    # Excel's plain 'CSV' writes the µ of a unit in Windows-1252 (byte 0xb5); before: 'not UTF-8 text (byte 59)'
+    p = tmp_path / "p.csv"
+    p.write_bytes("joint,direction,q1,q2,q3,theta,psi,dq (µm)\n3,+,0,0,0,0,0,1\n".encode("cp1252"))
+    for read in (read_pose_table, lambda q: stream_pose_table(q)[0]):
+        with pytest.raises(TableError) as e:
+            read(p)
+        (problem,) = e.value.problems
+        assert problem.startswith(f"{p}: not UTF-8 text (") and problem.endswith(f"): {EXCEL_CSV}"), problem
+
+
+def test_a_utf16_table_is_named_when_streamed(tmp_path):
+    # the whole-file reader said 'UTF-16 text'; the streaming one (import, predict): 'not UTF-8 text (line 1, ...)'
+    p = tmp_path / "m.csv"
+    p.write_bytes(("\ufeff" + HEAD + ROW.format(12000)).encode("utf-16-le"))
+    for read in (read_measurements, lambda q: list(stream_measurement_table(q))):
+        with pytest.raises(TableError) as e:
+            read(p)
+        assert e.value.problems[0].startswith(f"{p}: UTF-16 text, not UTF-8: save it as UTF-8"), e.value.problems
