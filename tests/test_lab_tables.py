@@ -123,3 +123,42 @@ def test_a_utf16_table_is_named_when_streamed(tmp_path):
         with pytest.raises(TableError) as e:
             read(p)
         assert e.value.problems[0].startswith(f"{p}: UTF-16 text, not UTF-8: save it as UTF-8"), e.value.problems
+
+
+@pytest.mark.parametrize(
+    "day, fix",
+    [
+        ("22.11.2026", "write it as 2026-11-22"),
+        ("22-Nov-2026", "write it as 2026-11-22"),  # MATLAB's datetime in writetable
+        ("11/22/2026", "write the date as YYYY-MM-DD"),  # US or UK order: not guessed
+        ("22/11/2026 pm", "write the date as YYYY-MM-DD"),
+        ("22.11.26", "write the date as YYYY-MM-DD"),
+    ],
+)
+def test_a_day_a_spreadsheet_reformatted_is_refused(day, fix):
+    # before: read as a free label, so the table's 'latest day' was 30.10.2026 over 22.11.2026 (sorted by number)
+    # and a calibration of it never warned it was old (no date)
+    with pytest.raises(TableError) as e:
+        parse_measurements(HEAD + ROW.format(12000).replace("2026-11-22", day), "m.csv")
+    assert e.value.problems == [
+        f"m.csv:2: day: the session label {day!r} is a date as a spreadsheet writes it: {fix} (YYYY-MM-DD), so that "
+        "it has an age and sorts with its session"
+    ]
+
+
+@pytest.mark.parametrize("day", ["2026-11-22", "day1", "run 3.1", "11/22", "1.2.3 test", "22-Novel-2026"])
+def test_labels_that_are_not_dates_are_kept(day):
+    (t,) = parse_measurements(HEAD + ROW.format(12000).replace("2026-11-22", day), "m.csv")
+    assert t.day == day
+
+
+def test_a_calibration_made_before_with_a_spreadsheet_date_still_loads(tmp_path):
+    from synth import paper_table
+
+    from stickslip.calibration import calibrate
+    from stickslip.calibration.result import Calibration
+
+    cal = calibrate(paper_table())
+    data = cal.to_dict()
+    data["day"] = "22.11.2026"  # what a table of such labels gave before they were refused
+    assert Calibration.from_dict(data).day == "22.11.2026"
