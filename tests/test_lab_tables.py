@@ -162,3 +162,15 @@ def test_a_calibration_made_before_with_a_spreadsheet_date_still_loads(tmp_path)
     data = cal.to_dict()
     data["day"] = "22.11.2026"  # what a table of such labels gave before they were refused
     assert Calibration.from_dict(data).day == "22.11.2026"
+
+
+def test_a_quoted_decimal_comma_says_so():
+    # a spreadsheet that writes commas between columns but keeps decimal commas quotes them: "0,012"
+    text = HEAD + '2026-11-22,3,+,0,"-1,5707963",0,0,0,0,0.012,12000\n'
+    with pytest.raises(TableError) as e:
+        parse_measurements(text, "m.csv")
+    assert e.value.problems == ["m.csv:2: q2 must be a number in SI units, got '-1,5707963' (a decimal comma: "
+                                "write -1.5707963)"]
+    with pytest.raises(TableError) as e:
+        parse_pose_table('joint,direction,q1,q2,q3,theta,psi\n3,+,0,"0,3",0,0,0\n', "p.csv")
+    assert e.value.problems == ["p.csv:2: q2 must be a number in SI units, got '0,3' (a decimal comma: write 0.3)"]

@@ -110,11 +110,23 @@ def check_pose(joint: int, values: dict[str, float], joints: Mapping[int, kin.Jo
     return problems
 
 
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
+"""A number written with a decimal comma (0,0021; 1,5E-05), as a spreadsheet in German or French keeps it in quotes."""
+
+
+def number_problem(name: str, text: str) -> str:
+    """Why a cell is not a number, said for a decimal comma (with the number written right)."""
+    if _DECIMAL_COMMA.fullmatch(text.strip()):
+        right = text.strip().replace(",", ".")
+        return f"{name} must be a number in SI units, got {text!r} (a decimal comma: write {right})"
+    return f"{name} must be a number in SI units, got {text!r}"
+
+
 def _parse_float(name: str, text: str) -> tuple[float | None, str | None]:
     try:
         v = float(text)
     except ValueError:
-        return None, f"{name} must be a number in SI units, got {text!r}"
+        return None, number_problem(name, text)
     if not math.isfinite(v):
         return None, f"{name} must be finite, got {text!r}"
     return v, None

@@ -32,7 +32,7 @@ from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
 from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, guard_cell, read_text_bounded, unguard_cell
-from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_header, check_pose
+from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_header, check_pose, number_problem
 
 __all__ = [
     "STEP_HEADER",
@@ -130,7 +130,7 @@ def _problems(row: dict[str, str], where: str) -> tuple[StepSize | None, list[st
         try:
             v = float(text)
         except ValueError:
-            problems.append(f"{where}: {name} must be a number in SI units, got {text!r}")
+            problems.append(f"{where}: {number_problem(name, text)}")
             continue
         if not math.isfinite(v):
             problems.append(f"{where}: {name} must be finite, got {text!r}")
