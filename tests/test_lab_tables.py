@@ -174,3 +174,22 @@ def test_a_quoted_decimal_comma_says_so():
     with pytest.raises(TableError) as e:
         parse_pose_table('joint,direction,q1,q2,q3,theta,psi\n3,+,0,"0,3",0,0,0\n', "p.csv")
     assert e.value.problems == ["p.csv:2: q2 must be a number in SI units, got '0,3' (a decimal comma: write 0.3)"]
+
+
+@pytest.mark.parametrize("cell, steps", [("200", 200), ("200.0", 200), ("2e2", 200)])
+def test_step_sizes_read_step_counts_as_the_measurement_table_does(tmp_path, cell, steps):
+    # pandas writes an integer column that had an empty cell as floats (200.0); before, the step-size table refused
+    # 200.0 and 2e2 that the measurement table reads
+    p = tmp_path / "st.csv"
+    p.write_text(STEP_HEAD + "\n" + STEP_ROW.replace(",200,", f",{cell},") + "\n")
+    (s,) = read_step_sizes(p)
+    assert s.steps == steps
+
+
+def test_step_sizes_refuse_a_step_count_with_a_thousands_separator(tmp_path):
+    p = tmp_path / "st.csv"
+    p.write_text(STEP_HEAD + "\n" + STEP_ROW.replace(",200,", ",1.200,") + "\n")
+    with pytest.raises(TableError) as e:
+        read_step_sizes(p)
+    assert e.value.problems == [f"{p}:2: steps = '1.200' reads as a number written with a thousands separator: "
+                                "write the step count as a plain integer (12000, not 12.000 or 12,000)"]

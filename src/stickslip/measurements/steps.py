@@ -32,7 +32,7 @@ from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
 from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, guard_cell, read_text_bounded, unguard_cell
-from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_header, check_pose, number_problem
+from .rows import TableError, Traverse, _csv_problem, _parse_steps, check_header, check_pose, number_problem
 
 __all__ = [
     "STEP_HEADER",
@@ -136,15 +136,9 @@ def _problems(row: dict[str, str], where: str) -> tuple[StepSize | None, list[st
             problems.append(f"{where}: {name} must be finite, got {text!r}")
             continue
         nums[name] = v
-    steps = None
-    stext = (row.get("steps") or "").strip()
-    try:
-        steps = int(stext)
-        if not 0 < steps <= MAX_STEPS:
-            raise ValueError
-    except ValueError:
-        problems.append(f"{where}: steps must be a positive integer, got {stext!r}")
-        steps = None
+    steps, err = _parse_steps(row.get("steps") or "")  # as the measurement table reads them (12000.0, 1.2e4)
+    if err:
+        problems.append(f"{where}: {err}")
     method = (row.get("method") or "").strip()
     if method not in STEP_METHODS:
         problems.append(f"{where}: method must be {' or '.join(STEP_METHODS)}, got {method!r}")
