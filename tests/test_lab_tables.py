@@ -193,3 +193,21 @@ def test_step_sizes_refuse_a_step_count_with_a_thousands_separator(tmp_path):
         read_step_sizes(p)
     assert e.value.problems == [f"{p}:2: steps = '1.200' reads as a number written with a thousands separator: "
                                 "write the step count as a plain integer (12000, not 12.000 or 12,000)"]
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        ",,,rad,rad,m,rad,rad,m|rad,m|rad,",  # a unit line under the header (LabVIEW, Origin)
+        "Day,Joint,Direction,Q1,Q2,Q3,Theta,Psi,Start,End,Steps",  # Origin's long names
+        HEAD.strip(),  # two tables concatenated: the second's header
+    ],
+)
+def test_a_line_of_units_or_names_under_the_header_is_one_reason(line):
+    # before: eleven reasons for the one line (day is empty, unknown joint '', q1 must be a number, ...)
+    with pytest.raises(TableError) as e:
+        parse_measurements(HEAD + line + "\n" + ROW.format(12000), "m.csv")
+    assert e.value.problems == [
+        "m.csv:2: not a data row: no number in q1 to steps (a line of units or column names, as LabVIEW or Origin "
+        "write under the header, or a second header?): delete it"
+    ]

@@ -250,8 +250,20 @@ def _label_problem(text: str) -> str | None:
     return None
 
 
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
     """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
+    numeric = [(row.get(k) or "").strip() for k in ("joint", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")]
+    if any(numeric) and not any(_number(c) for c in numeric):
+        return None, [f"{where}: not a data row: no number in q1 to steps (a line of units or column names, as "
+                      "LabVIEW or Origin write under the header, or a second header?): delete it"]
     problems: list[str] = []
     day = (row.get("day") or "").strip()
     if not day:

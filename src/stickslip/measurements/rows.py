@@ -162,6 +162,18 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
     return v, None
 
 
+_NUMERIC = ("joint", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
+
+
+def _not_data(row: dict[str, str], where: str) -> str | None:
+    """The one reason for a row with text but not a number where the numbers go (a unit line, a second header)."""
+    cells = [(row.get(name) or "").strip() for name in _NUMERIC]
+    if not any(cells) or any(map(_is_number, cells)):
+        return None
+    return (f"{where}: not a data row: no number in q1 to steps (a line of units or column names, as LabVIEW or "
+            "Origin write under the header, or a second header?): delete it")
+
+
 def parse_row(
     row: dict[str, str], where: str, joints: Mapping[int, kin.JointSpec] | None = None
 ) -> tuple[Traverse | None, list[str]]:
@@ -170,6 +182,8 @@ def parse_row(
     ``joints``: the arm's own joints (their numbers, kinds and ranges) where the table is
     not the MM3A's, e.g. a rig file's stage (:meth:`stickslip.rig.Arm.joint_specs`).
     """
+    if (not_data := _not_data(row, where)) is not None:
+        return None, [not_data]
     problems: list[str] = []
     day = unguard_cell(row.get("day") or "").strip()  # a label written guarded against formulas
     if not day:
