@@ -284,3 +284,23 @@ def test_one_sample_rate_range_for_files_the_serial_listener_and_record(tmp_path
     (tmp_path / "slow.csv").write_text("# sample_rate_hz=10\n" + "0.1\n" * 50)
     with pytest.raises(AudioSourceError, match="outside 1000-1000000 Hz"):
         read_vibration(tmp_path / "slow.csv")
+
+
+@pytest.mark.parametrize("sep, header", [("\n", "# sample_rate_hz=25000\n"), (";", "time_s;value\n")])
+def test_read_vibration_decimal_commas_are_named(tmp_path, sep, header):
+    """audit41: samples a spreadsheet in a decimal-comma language wrote (0,0021; or 0,00004;0,0021 with ';').
+
+    Before: one column of them read as two (0 and 21), refused as 'the times are not uniformly spaced'; with ';'
+    as 'every row must hold ...'; neither said what was wrong."""
+    x = np.random.default_rng(2).normal(0.0, 0.1, 40)
+    if sep == "\n":
+        body = "".join(f"{v:.5f}\n".replace(".", ",") for v in x)
+    else:
+        body = "".join(f"{k / 25000:.6f};{v:.5f}\n".replace(".", ",") for k, v in enumerate(x))
+    p = tmp_path / "a.csv"
+    p.write_text(header + body)
+    with pytest.raises(AudioSourceError) as e:
+        read_vibration(p)
+    first = body.splitlines()[0]
+    assert str(e.value) == (f"{p}:2: {first!r} is written with decimal commas: save the samples with decimal points "
+                            "(0.0021, not 0,0021)")

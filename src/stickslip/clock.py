@@ -90,13 +90,15 @@ MAX_LABEL_CHARS = 64
 """The longest session label accepted (a label is a key in tables and the database, not a note)."""
 
 
-def day_label_problem(label: str) -> str | None:
+def day_label_problem(label: str, spreadsheet_dates: bool = True) -> str | None:
     """Why ``label`` cannot be a session label, or ``None`` if it can.
 
     A label is free text (``2026-11-22``, ``2026-11-22 pm``, ``day1``), but one that
     starts like a date must be a real ISO date: ``2026-13-45`` or ``2026-2-30`` is a
     typo, and would silently have no age (so no staleness warning) and sort apart from
-    its session. A label is one line of printable text, at most
+    its session; so is one that starts with a date as a spreadsheet or MATLAB writes it
+    (``22.11.2026``, ``11/22/2026``, ``22-Nov-2026``) unless ``spreadsheet_dates`` is False
+    (a file written before that rule). A label is one line of printable text, at most
     :data:`MAX_LABEL_CHARS` characters.
     """
     text = label.strip()
@@ -106,6 +108,8 @@ def day_label_problem(label: str) -> str | None:
         return f"the session label is {len(text)} characters long (at most {MAX_LABEL_CHARS})"
     if not text.isprintable():
         return f"the session label {text[:MAX_LABEL_CHARS]!r} holds a control character (a tab or a line break)"
+    if spreadsheet_dates and (why := _other_date_problem(text)) is not None:
+        return why
     shaped = _DATE_SHAPED.match(text)
     if shaped is not None:
         y, m, d = (int(x) for x in shaped.group(0).split("-"))
@@ -116,6 +120,35 @@ def day_label_problem(label: str) -> str | None:
         if shaped.group(0) != date.isoformat():
             return f"the session label {text!r}: write the date as {date.isoformat()} (YYYY-MM-DD)"
     return None
+
+
+_NUMERIC_DATE = re.compile(r"(\d{1,2})([./])(\d{1,2})\2(\d{4}|\d{2})(?!\d)", re.ASCII)
+_MONTH_DATE = re.compile(r"(\d{1,2})-([A-Za-z]{3})-(\d{4})(?!\d)", re.ASCII)
+_MONTHS = ("jan", "feb", "mar", "apr", "may", "jun", "jul", "aug", "sep", "oct", "nov", "dec")
+
+
+def _other_date_problem(text: str) -> str | None:
+    """Why a label that starts with a date as a spreadsheet or MATLAB writes it (22.11.2026, 11/22/2026,
+    22-Nov-2026) cannot be a session label: like an ISO typo it would have no age (no staleness warning) and sort
+    apart from its session (22.11.2026 before 30.10.2026). ``None`` for any other label."""
+    iso = None
+    if (m := _NUMERIC_DATE.match(text)) is not None:
+        if m.group(2) == "." and len(m.group(4)) == 4:  # day.month.year (German, Dutch): one reading
+            iso = _iso(int(m.group(4)), int(m.group(3)), int(m.group(1)))
+    elif (m := _MONTH_DATE.match(text)) is not None and m.group(2).lower() in _MONTHS:  # MATLAB's datetime
+        iso = _iso(int(m.group(3)), _MONTHS.index(m.group(2).lower()) + 1, int(m.group(1)))
+    else:
+        return None
+    as_iso = f"write it as {iso}" if iso else "write the date as YYYY-MM-DD"
+    return (f"the session label {text!r} is a date as a spreadsheet writes it: {as_iso} (YYYY-MM-DD), so that it "
+            "has an age and sorts with its session")
+
+
+def _iso(y: int, m: int, d: int) -> str | None:
+    try:
+        return _dt.date(y, m, d).isoformat()
+    except ValueError:
+        return None
 
 
 def check_day_label(label: str) -> str:

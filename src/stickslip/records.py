@@ -129,10 +129,20 @@ def read_text_bounded(path: str | os.PathLike[str], what: str, max_bytes: int = 
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
-        if data[:2] in (b"\xff\xfe", b"\xfe\xff"):  # a UTF-16 byte-order mark: Windows Notepad's "Unicode"
-            raise ValueError(f"{p}: UTF-16 text, not UTF-8: save it as UTF-8 (in Notepad: Save as, "
-                             "Encoding UTF-8)") from None
-        raise ValueError(f"{p}: not UTF-8 text (byte {e.start})") from None
+        raise ValueError(_not_utf8(p, what, data, f"byte {e.start}")) from None
+
+
+_UTF16 = (b"\xff\xfe", b"\xfe\xff")  # UTF-16 byte-order marks: Windows Notepad's "Unicode"
+
+
+def _not_utf8(p: Path, what: str, data: bytes, where: str) -> str:
+    """Why a file that is not UTF-8 is refused, and how to save it (``data``: its start; ``where``: the bad byte)."""
+    if data[:2] in _UTF16:
+        return f"{p}: UTF-16 text, not UTF-8: save it as UTF-8 (in Notepad: Save as, Encoding UTF-8)"
+    if what == "CSV" or "table" in what:  # Excel's plain "CSV" writes Windows-1252 (a unit's µ is byte 0xb5)
+        return f"{p}: not UTF-8 text ({where}): save it as UTF-8 (a spreadsheet's 'CSV UTF-8'; its plain 'CSV' is " \
+               "Windows-1252)"
+    return f"{p}: not UTF-8 text ({where})"
 
 
 def text_lines(path: str | os.PathLike[str], what: str) -> Iterator[str]:
@@ -148,16 +158,17 @@ def text_lines(path: str | os.PathLike[str], what: str) -> Iterator[str]:
         f = open(p, "rb")  # closed by the generator
     except OSError as e:
         raise ValueError(f"{p}: cannot read the {what} file ({e.strerror or e})") from None
-    return _decoded(f, p)
+    return _decoded(f, p, what)
 
 
-def _decoded(f: io.BufferedReader, p: Path) -> Iterator[str]:
+def _decoded(f: io.BufferedReader, p: Path, what: str) -> Iterator[str]:
     with f:
         for n, raw in enumerate(f, start=1):
             try:
                 line = raw.decode("utf-8-sig" if n == 1 else "utf-8")
             except UnicodeDecodeError as e:
-                raise ValueError(f"{p}: not UTF-8 text (line {n}, byte {e.start + 1} of the line)") from None
+                where = f"line {n}, byte {e.start + 1} of the line"
+                raise ValueError(_not_utf8(p, what, raw if n == 1 else b"", where)) from None
             yield line
 
 

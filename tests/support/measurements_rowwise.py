@@ -136,8 +136,22 @@ MAX_STEPS = 10**12
 """Largest step count accepted in a table (a full traverse is ~1e4..1e7 steps; SQLite holds < 2**63)."""
 
 
+def _grouped(t: str) -> bool:
+    """12.000 or 12,000 (a count with thousands separators), by hand (the peer of rows._GROUPED)."""
+    body = t[1:] if t[:1] in "+-" else t
+    for sep in ".,":
+        head, *groups = body.split(sep)
+        if groups and 1 <= len(head) <= 3 and all(len(g) == 3 for g in groups) and \
+                all(c.isascii() and c.isdigit() for c in head + "".join(groups)):
+            return True
+    return False
+
+
 def _parse_steps(text: str) -> tuple[int | None, str | None]:
     t = text.strip()
+    if _grouped(t):
+        return None, (f"steps = {t!r} reads as a number written with a thousands separator: write the step "
+                      "count as a plain integer (12000, not 12.000 or 12,000)")
     try:
         v = int(t)
     except ValueError:
@@ -155,12 +169,65 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
     return v, None
 
 
+def _digit_run(text: str, i: int) -> tuple[str, int]:
+    j = i
+    while j < len(text) and text[j].isascii() and text[j].isdigit():
+        j += 1
+    return text[i:j], j
+
+
+def _iso_or_none(y: int, m: int, d: int) -> str | None:
+    try:
+        return datetime.date(y, m, d).isoformat()
+    except ValueError:
+        return None
+
+
+_MONTH_NAMES = ["jan", "feb", "mar", "apr", "may", "jun", "jul", "aug", "sep", "oct", "nov", "dec"]
+
+
+def _sheet_date_problem(text: str) -> str | None:
+    """A label starting 22.11.2026, 11/22/26 or 22-Nov-2026 (the peer of clock._other_date_problem, by hand)."""
+    a, i = _digit_run(text, 0)
+    if not 1 <= len(a) <= 2 or i >= len(text):
+        return None
+    sep = text[i]
+    iso = None
+    if sep in "./":
+        b, j = _digit_run(text, i + 1)
+        if not (1 <= len(b) <= 2 and j < len(text) and text[j] == sep):
+            return None
+        c, _ = _digit_run(text, j + 1)
+        if len(c) not in (2, 4):
+            return None
+        if sep == "." and len(c) == 4:
+            iso = _iso_or_none(int(c), int(b), int(a))
+    elif sep == "-":
+        mon = text[i + 1 : i + 4]
+        if not (len(mon) == 3 and mon.isascii() and mon.isalpha() and text[i + 4 : i + 5] == "-"):
+            return None
+        if mon.lower() not in _MONTH_NAMES:
+            return None
+        c, _ = _digit_run(text, i + 5)
+        if len(c) != 4:
+            return None
+        iso = _iso_or_none(int(c), _MONTH_NAMES.index(mon.lower()) + 1, int(a))
+    else:
+        return None
+    as_iso = f"write it as {iso}" if iso else "write the date as YYYY-MM-DD"
+    return (f"the session label {text!r} is a date as a spreadsheet writes it: {as_iso} (YYYY-MM-DD), so that it "
+            "has an age and sorts with its session")
+
+
 def _label_problem(text: str) -> str | None:
     """The session-label rule written again without a regular expression (the peer of clock.day_label_problem)."""
     if len(text) > 64:
         return f"the session label is {len(text)} characters long (at most 64)"
     if any(not ch.isprintable() for ch in text):
         return f"the session label {text[:64]!r} holds a control character (a tab or a line break)"
+    sheet = _sheet_date_problem(text)
+    if sheet is not None:
+        return sheet
     head = text[:4]
     parts = text[5:].split("-", 1) if len(text) > 5 and head.isascii() and head.isdigit() and text[4] == "-" else []
     if len(parts) != 2:
@@ -183,8 +250,20 @@ def _label_problem(text: str) -> str | None:
     return None
 
 
+def _number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
 def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[str]]:
     """Validate one CSV row (a dict of strings). Returns the traverse or the problems."""
+    numeric = [(row.get(k) or "").strip() for k in ("joint", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")]
+    if any(numeric) and not any(_number(c) for c in numeric):
+        return None, [f"{where}: not a data row: no number in q1 to steps (a line of units or column names, as "
+                      "LabVIEW or Origin write under the header, or a second header?): delete it"]
     problems: list[str] = []
     day = (row.get("day") or "").strip()
     if not day:
@@ -269,8 +348,9 @@ def _parse_measurements(text: str, source: str) -> list[Traverse]:
         if not detail:
             detail.append("columns out of order")
         if len(header) == 1 and (";" in header[0] or "\t" in header[0]):  # the same message as the library's
-            detail = ["the columns are separated by " + ("';'" if ";" in header[0] else "a tab")
-                      + ": save the table with commas (CSV)"]
+            detail = ["the columns are separated by ';': save the table with commas between columns and '.' before "
+                      "decimals" if ";" in header[0] else "the columns are separated by a tab: save the table with "
+                      "commas (CSV)"]
         raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
     out: list[Traverse] = []
     problems: list[str] = []

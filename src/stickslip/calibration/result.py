@@ -445,7 +445,8 @@ class Calibration:
         if not isinstance(data, dict) or data.get("format") != FORMAT:
             raise ValueError(f'not a stickslip calibration (expected "format": "{FORMAT}")')
         records.check_calibration_dict(data)
-        if isinstance(data.get("day"), str) and (why := day_label_problem(data["day"])) is not None:
+        # a calibration made before spreadsheet dates (22.11.2026) were refused in tables stays readable
+        if isinstance(data.get("day"), str) and (why := day_label_problem(data["day"], False)) is not None:
             raise ValueError(f"day: {why}")
         if isinstance(data.get("version"), bool) or data.get("version") not in (FORMAT_VERSION, 2):
             raise ValueError(

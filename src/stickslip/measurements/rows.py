@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 
@@ -109,11 +110,23 @@ def check_pose(joint: int, values: dict[str, float], joints: Mapping[int, kin.Jo
     return problems
 
 
+_DECIMAL_COMMA = re.compile(r"[+-]?\d*,\d+(?:[eE][+-]?\d+)?")
+"""A number written with a decimal comma (0,0021; 1,5E-05), as a spreadsheet in German or French keeps it in quotes."""
+
+
+def number_problem(name: str, text: str) -> str:
+    """Why a cell is not a number, said for a decimal comma (with the number written right)."""
+    if _DECIMAL_COMMA.fullmatch(text.strip()):
+        right = text.strip().replace(",", ".")
+        return f"{name} must be a number in SI units, got {text!r} (a decimal comma: write {right})"
+    return f"{name} must be a number in SI units, got {text!r}"
+
+
 def _parse_float(name: str, text: str) -> tuple[float | None, str | None]:
     try:
         v = float(text)
     except ValueError:
-        return None, f"{name} must be a number in SI units, got {text!r}"
+        return None, number_problem(name, text)
     if not math.isfinite(v):
         return None, f"{name} must be finite, got {text!r}"
     return v, None
@@ -123,8 +136,15 @@ MAX_STEPS = 10**12
 """Largest step count accepted in a table (a full traverse is ~1e4..1e7 steps; SQLite holds < 2**63)."""
 
 
+_GROUPED = re.compile(r"[+-]?\d{1,3}(?:\.\d{3})+|[+-]?\d{1,3}(?:,\d{3})+")
+"""A count written with thousands separators (12.000, 12,000): 12 or 12 000 steps cannot be told apart."""
+
+
 def _parse_steps(text: str) -> tuple[int | None, str | None]:
     t = text.strip()
+    if _GROUPED.fullmatch(t):  # a German spreadsheet's 12.000 is 12 000 steps; float() read it as 12
+        return None, (f"steps = {t!r} reads as a number written with a thousands separator: write the step "
+                      "count as a plain integer (12000, not 12.000 or 12,000)")
     try:
         v = int(t)
     except ValueError:
@@ -142,6 +162,18 @@ def _parse_steps(text: str) -> tuple[int | None, str | None]:
     return v, None
 
 
+_NUMERIC = ("joint", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
+
+
+def _not_data(row: dict[str, str], where: str) -> str | None:
+    """The one reason for a row with text but not a number where the numbers go (a unit line, a second header)."""
+    cells = [(row.get(name) or "").strip() for name in _NUMERIC]
+    if not any(cells) or any(map(_is_number, cells)):
+        return None
+    return (f"{where}: not a data row: no number in q1 to steps (a line of units or column names, as LabVIEW or "
+            "Origin write under the header, or a second header?): delete it")
+
+
 def parse_row(
     row: dict[str, str], where: str, joints: Mapping[int, kin.JointSpec] | None = None
 ) -> tuple[Traverse | None, list[str]]:
@@ -150,6 +182,8 @@ def parse_row(
     ``joints``: the arm's own joints (their numbers, kinds and ranges) where the table is
     not the MM3A's, e.g. a rig file's stage (:meth:`stickslip.rig.Arm.joint_specs`).
     """
+    if (not_data := _not_data(row, where)) is not None:
+        return None, [not_data]
     problems: list[str] = []
     day = unguard_cell(row.get("day") or "").strip()  # a label written guarded against formulas
     if not day:
@@ -214,3 +248,51 @@ def _csv_problem(source: str, e: csv.Error) -> str:
         text = "a line ends in a bare carriage return (CR, an old Mac export): save the table with LF or CRLF ends"
     return f"{source}: not a readable CSV table ({text})"
 
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def separator_problem(header: Sequence[str]) -> str | None:
+    """What to do about a header record that is one cell holding ';' or tabs (a table not separated by commas)."""
+    if len(header) != 1 or not any(sep in header[0] for sep in ";\t"):
+        return None
+    if ";" in header[0]:  # a spreadsheet in a language with decimal commas (German, French, Dutch) writes ';'
+        return "the columns are separated by ';': save the table with commas between columns and '.' before decimals"
+    return "the columns are separated by a tab: save the table with commas (CSV)"
+
+
+def check_header(header: list[str] | None, source: str, expected: Sequence[str]) -> None:
+    """Raise :class:`TableError` unless ``header`` (a table's first record) is exactly ``expected``, saying why."""
+    if header is None:
+        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(expected)})"])
+    header = [h.strip() for h in header]
+    if tuple(header) == tuple(expected):
+        return
+    missing = [h for h in expected if h not in header]
+    extra = [h for h in header if h not in expected]
+    detail = []
+    if missing:
+        detail.append("missing " + ", ".join(missing))
+    if [h for h in extra if h]:
+        detail.append("unexpected " + ", ".join(h for h in extra if h))
+    if header and header[0] == "" and tuple(header[1:]) == tuple(expected):  # pandas' to_csv writes its index, unnamed
+        detail = ["the first column has no name: a row index (pandas: to_csv(..., index=False)); delete it"]
+    elif "" in extra:  # a spreadsheet's trailing commas: 'unexpected , ' said nothing
+        n = extra.count("")
+        detail.append(f"{n} column{'s' if n > 1 else ''} without a name: delete the empty columns at the end")
+    if not detail:
+        detail.append("columns out of order")
+    if not set(header) & set(expected) and sum(_is_number(h) for h in header) >= 3:  # a table whose top was cut
+        detail = ["line 1 is a row of numbers, not the header: the table's first line is missing (was the top "
+                  "of the file cut?); put the header line back"]
+    if (sep := separator_problem(header)) is not None:
+        detail = [sep]
+    if not any(header):  # a blank first line (a spreadsheet's title row left empty)
+        detail = ["line 1 is empty: the header must be the first line"]
+    raise TableError([f"{source}:1: header must be exactly {','.join(expected)} ({'; '.join(detail)})"])

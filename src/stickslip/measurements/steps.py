@@ -32,7 +32,7 @@ from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
 from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, guard_cell, read_text_bounded, unguard_cell
-from .rows import MAX_STEPS, TableError, Traverse, _csv_problem, check_pose
+from .rows import TableError, Traverse, _csv_problem, _parse_steps, check_header, check_pose, number_problem
 
 __all__ = [
     "STEP_HEADER",
@@ -130,21 +130,15 @@ def _problems(row: dict[str, str], where: str) -> tuple[StepSize | None, list[st
         try:
             v = float(text)
         except ValueError:
-            problems.append(f"{where}: {name} must be a number in SI units, got {text!r}")
+            problems.append(f"{where}: {number_problem(name, text)}")
             continue
         if not math.isfinite(v):
             problems.append(f"{where}: {name} must be finite, got {text!r}")
             continue
         nums[name] = v
-    steps = None
-    stext = (row.get("steps") or "").strip()
-    try:
-        steps = int(stext)
-        if not 0 < steps <= MAX_STEPS:
-            raise ValueError
-    except ValueError:
-        problems.append(f"{where}: steps must be a positive integer, got {stext!r}")
-        steps = None
+    steps, err = _parse_steps(row.get("steps") or "")  # as the measurement table reads them (12000.0, 1.2e4)
+    if err:
+        problems.append(f"{where}: {err}")
     method = (row.get("method") or "").strip()
     if method not in STEP_METHODS:
         problems.append(f"{where}: method must be {' or '.join(STEP_METHODS)}, got {method!r}")
@@ -171,11 +165,7 @@ def parse_step_sizes(text: str, source: str = "<string>") -> list[StepSize]:
     """Parse step-size table CSV text. Raises :class:`TableError` listing every bad row (``file:line: reason``)."""
     try:
         reader = csv.reader(io.StringIO(text))
-        header = next(reader, None)
-        if header is None:
-            raise TableError([f"{source}:1: the file is empty (expected the header {','.join(STEP_HEADER)})"])
-        if tuple(h.strip() for h in header) != STEP_HEADER:
-            raise TableError([f"{source}:1: header must be exactly {','.join(STEP_HEADER)}"])
+        check_header(next(reader, None), source, STEP_HEADER)
         out: list[StepSize] = []
         problems: list[str] = []
         for lineno, cells in enumerate(reader, start=2):

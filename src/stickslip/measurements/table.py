@@ -17,7 +17,7 @@ from ..clock import day_label_problem
 from ..joints import JointSet
 from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, text_lines, unguard_cell
 from .chunks import _Chunk, _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
-from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, parse_row
+from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, check_header, parse_row
 
 
 @dataclass(frozen=True, eq=False)
@@ -145,38 +145,8 @@ def _parse_measurement_columns(text: str, source: str, joints: JointSet | None =
     return table
 
 
-def _is_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
 def _check_header(header: list[str] | None, source: str) -> None:
-    if header is None:
-        raise TableError([f"{source}:1: the file is empty (expected the header {','.join(HEADER)})"])
-    header = [h.strip() for h in header]
-    if tuple(header) != HEADER:
-        missing = [h for h in HEADER if h not in header]
-        extra = [h for h in header if h not in HEADER]
-        detail = []
-        if missing:
-            detail.append("missing " + ", ".join(missing))
-        if [h for h in extra if h]:
-            detail.append("unexpected " + ", ".join(h for h in extra if h))
-        if "" in extra:  # a spreadsheet's trailing commas: 'unexpected , ' said nothing
-            n = extra.count("")
-            detail.append(f"{n} column{'s' if n > 1 else ''} without a name: delete the empty columns at the end")
-        if not detail:
-            detail.append("columns out of order")
-        if not set(header) & set(HEADER) and sum(_is_number(h) for h in header) >= 3:  # a table whose top was cut
-            detail = ["line 1 is a row of numbers, not the header: the table's first line is missing (was the top "
-                      "of the file cut?); put the header line back"]
-        if len(header) == 1 and any(sep in header[0] for sep in ";\t"):  # a European spreadsheet's export
-            sep = "';'" if ";" in header[0] else "a tab"
-            detail = [f"the columns are separated by {sep}: save the table with commas (CSV)"]
-        raise TableError([f"{source}:1: header must be exactly {','.join(HEADER)} ({'; '.join(detail)})"])
+    check_header(header, source, HEADER)
 
 
 def _measurement_parts(

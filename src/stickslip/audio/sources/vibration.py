@@ -88,14 +88,14 @@ def read_vibration(
     p = Path(path)
     if p.suffix.lower() == ".wav":
         return read_wav(p)
-    rows, rate, names = _csv_rows(p, sample_rate)
+    rows, rate, names, commas = _csv_rows(p, sample_rate)
     data = np.asarray(rows, dtype=np.float64)
     if data.shape[1] == 2:
         _check_time_name(p, names)
         t, x = data[:, 0], data[:, 1]
         dt = np.diff(t)
         if dt.size == 0 or not np.all(dt > 0) or float(np.ptp(dt)) > 1e-3 * float(np.mean(dt)):
-            raise AudioSourceError(f"{p}: the times are not uniformly spaced (resample first)")
+            raise AudioSourceError(commas or f"{p}: the times are not uniformly spaced (resample first)")
         said = 1.0 / float(np.mean(dt))
         if rate is not None and abs(said - rate) > 1e-3 * rate:
             raise AudioSourceError(
@@ -145,9 +145,16 @@ def _names(line: str) -> list[str]:
     return [n.strip() for n in re.split(sep, line) if n.strip()]
 
 
-def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], float | None, list[str] | None]:
-    """The rows of numbers of a CSV of samples, its rate (``sample_rate``, or its ``# sample_rate_hz=`` line) and its
-    header row's names (None without one)."""
+_DECIMAL_COMMA = re.compile(r"[+-]?\d+,\d+(?:[eE][+-]?\d+)?(?:[;\t ]+[+-]?\d+,\d+(?:[eE][+-]?\d+)?)*")
+"""A data line whose every number is written with a decimal comma (0,0021 or 0,00004;0,0021)."""
+
+
+def _csv_rows(
+    p: Path, sample_rate: float | None
+) -> tuple[list[list[float]], float | None, list[str] | None, str | None]:
+    """The rows of numbers of a CSV of samples, its rate (``sample_rate``, or its ``# sample_rate_hz=`` line), its
+    header row's names (None without one), and, when every data line is numbers written with decimal commas (a
+    spreadsheet in German or French), the refusal to give should the rows not read as samples (else None)."""
     try:
         if p.exists():
             regular_file(p, "CSV of samples")  # a folder, FIFO or device is never opened
@@ -165,6 +172,7 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
     said: float | None = None
     rows: list[list[float]] = []
     names: list[str] | None = None
+    commas: str | None = None  # the refusal for decimal commas, while every data line holds them
     for lineno, line in enumerate(text.splitlines(), 1):
         s = line.strip()
         if not s:
@@ -175,6 +183,11 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
         parts = [x for x in re.split(r"[,;\s]+", s) if x]
         try:
             rows.append([float(x) for x in parts])
+            if len(rows) == 1 and _DECIMAL_COMMA.fullmatch(s):
+                commas = (f"{p}:{lineno}: {s!r} is written with decimal commas: save the samples with decimal "
+                          "points (0.0021, not 0,0021)")
+            elif commas and not _DECIMAL_COMMA.fullmatch(s):
+                commas = None
         except ValueError:
             if not rows:
                 names = names or _names(s)  # a header row of column names
@@ -185,8 +198,8 @@ def _csv_rows(p: Path, sample_rate: float | None) -> tuple[list[list[float]], fl
     rate = rate if rate is not None else said
     width = {len(r) for r in rows}
     if len(width) != 1 or width.pop() not in (1, 2):
-        raise AudioSourceError(f"{p}: every row must hold 'value' or 'time_s,value'")
-    return rows, rate, names
+        raise AudioSourceError(commas or f"{p}: every row must hold 'value' or 'time_s,value'")
+    return rows, rate, names, commas
 
 
 def _rate_comment(p: Path, lineno: int, line: str, said: float | None) -> float | None:
