@@ -211,3 +211,18 @@ def test_a_line_of_units_or_names_under_the_header_is_one_reason(line):
         "m.csv:2: not a data row: no number in q1 to steps (a line of units or column names, as LabVIEW or Origin "
         "write under the header, or a second header?): delete it"
     ]
+
+
+def test_a_pose_row_one_cell_short_is_refused_not_read_shifted(tmp_path):
+    # header ...,psi,gamma_cam and the row 3,+,0,0.002,0,0,1e-8 (q1 lost): it was padded with an empty last cell
+    # and predicted at q2 = 0.002, q3 = 0, theta = 0, psi = 1e-8, a pose read wrong without a word (audit41's Q1)
+    from stickslip.measurements import TableError
+    from stickslip.procedures.predict import check_pose_file
+
+    poses = tmp_path / "poses.csv"
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi,gamma_cam\n3,+,0,-1.5,0.002,0,0,1e-8\n3,+,0,0.002,0,0,1e-8\n")
+    with pytest.raises(TableError) as e:
+        check_pose_file(poses)
+    assert str(e.value).count("\n") == 0 and f"{poses}:3: 7 cells, the header has 8 columns" in str(e.value)
+    poses.write_text("joint,direction,q1,q2,q3,theta,psi,gamma_cam\n3,+,0,-1.5,0.002,0,0,\n")  # the empty cell written
+    assert check_pose_file(poses) == 1

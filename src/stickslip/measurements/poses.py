@@ -83,16 +83,17 @@ def _pose_header(record: list[str] | None, source: str) -> list[str]:
 
 def _pose_records(
     chunks: Iterator[_Chunk], header: list[str]
-) -> Iterator[tuple[list[int], list[Sequence[str]], list[int], list[str] | None]]:
-    """Per chunk of a pose table: ``(lines, cols, overlong, raw)``, numbered by line in the file.
+) -> Iterator[tuple[list[int], list[Sequence[str]], list[tuple[int, str]], list[str] | None]]:
+    """Per chunk of a pose table: ``(lines, cols, ragged, raw)``, numbered by line in the file.
 
-    ``cols`` holds the data rows as columns, padded with empty cells to the header's
-    width; ``lines`` their line numbers. Empty records (blank lines) are skipped but
+    ``cols`` holds the data rows as columns; ``lines`` their line numbers. Empty records (blank lines) are skipped but
     counted, as in measurement tables, so ``file:line`` names the line; records
     whose cells are blank (of a repeated column name, the last cell) are counted and
-    skipped; ``overlong`` lists the lines of
-    records with more cells than the header. ``raw``: the chunk's text lines when
-    every one of them is a data row as it stands (for passing rows through), else None.
+    skipped; ``ragged`` lists ``(line, reason)`` of the records with more or fewer cells
+    than the header (fewer: a cell lost in the middle would shift every value after it into
+    the next column, a pose read wrong; a row leaving trailing cells empty writes their commas).
+    ``raw``: the chunk's text lines when every one of them is a data row as it stands (for
+    passing rows through), else None.
     """
     width = len(header)
     used = sorted({h: i for i, h in enumerate(header)}.values())
@@ -103,23 +104,26 @@ def _pose_records(
             lineno += chunk.n
             continue
         lines: list[int] = []
-        overlong: list[int] = []
+        ragged: list[tuple[int, str]] = []
         rows: list[list[str]] = []
         for cells in chunk.records or []:
             lineno += 1
             if not cells:
                 continue  # a blank line: not data, but counted, so file:line points at the line
             if len(cells) > width:
-                overlong.append(lineno)
+                ragged.append((lineno, "more cells than header columns"))
                 continue
             if all(i >= len(cells) or not cells[i].strip() for i in used):
                 continue
             if len(cells) < width:
-                cells = cells + [""] * (width - len(cells))
+                ragged.append((lineno, f"{len(cells)} cells, the header has {width} columns: a cell lost would "
+                                       "shift the values after it into the next column; write a comma for each "
+                                       "cell left empty"))
+                continue
             lines.append(lineno)
             rows.append(cells)
         cols: list[Sequence[str]] = list(zip(*rows, strict=True)) if rows else [()] * width
-        yield lines, cols, overlong, None
+        yield lines, cols, ragged, None
 
 
 def _pose_row(
@@ -228,7 +232,7 @@ class PoseTable:
         """Each row's cells, as many as the header has (missing cells empty), read again from the text."""
         _, chunks = _open_table(self.text)
         key = self.header.index("joint")
-        for _lines, cols, _overlong, _raw in _pose_records(chunks(len(self.header), key), self.header):
+        for _lines, cols, _ragged, _raw in _pose_records(chunks(len(self.header), key), self.header):
             yield from zip(*cols, strict=True)
 
     def queries(self) -> list[PoseQuery]:
@@ -267,8 +271,8 @@ def _parse_pose_columns(text: str, source: str) -> PoseTable:
     problems: list[tuple[int, str]] = []  # (line, reason), sorted by line at the end
     parts: list[tuple[NDArray[np.int64], NDArray[np.str_], dict[str, NDArray[np.float64]], NDArray[np.int64]]] = []
     raw: list[str] | None = []
-    for lines, cols, overlong, raw_part in _pose_records(chunks(len(header), header.index("joint")), header):
-        problems += [(n, f"{source}:{n}: more cells than header columns") for n in overlong]
+    for lines, cols, ragged, raw_part in _pose_records(chunks(len(header), header.index("joint")), header):
+        problems += [(n, f"{source}:{n}: {why}") for n, why in ragged]
         if raw is not None and raw_part is not None:
             raw += raw_part
         else:
@@ -432,8 +436,8 @@ def stream_pose_table(path: str | Path) -> tuple[list[str], Iterator[PoseChunk]]
                 raise TableError([_csv_problem(source, e) if isinstance(e, csv.Error) else str(e)]) from None
             if item is None:
                 return
-            lines, cols, overlong, raw_part = item
-            problems = [(n, f"{source}:{n}: more cells than header columns") for n in overlong]
+            lines, cols, ragged, raw_part = item
+            problems = [(n, f"{source}:{n}: {why}") for n, why in ragged]
             if not lines:
                 yield PoseChunk(_empty_pose_table(header), [], problems)
                 continue
