@@ -405,7 +405,7 @@ def fit(
             fail(f"the traverses come from several devices ({', '.join(devices)}): pick one with --device")
         device = device or devices[0]
         ids = [int(r["id"]) for r in recs]
-    with user_errors(CalibrationError):
+    with user_errors(CalibrationError, KeyError):  # KeyError: an unknown --model family, named
         cal = calibrate(
             ts, method="lsq" if model == "paper" else "auto", day=day, source=str(meas) if meas else where,
             model=model,
