@@ -25,3 +25,27 @@ def test_fit_with_an_unknown_model_family_is_one_line_naming_the_known_ones(tmp_
     meas = tmp_path / "meas.csv"
     meas.write_text(measurements_to_csv(paper_table()))
     _bad(runner.invoke(app, ["fit", str(meas), "--model", "foo", "--json"]), "no model family 'foo'", "torque2")
+
+
+def test_the_traverse_ids_delete_and_exclude_take_are_where_their_help_says(tmp_path):
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    db = str(tmp_path / "s.db")
+    r = runner.invoke(app, ["import", str(meas), "--device", "sim://", "--db", db, "--json"])
+    assert r.exit_code == 0, r.output
+    imported = json.loads(r.stdout)["ids"]
+    assert len(imported) == 14
+    r = runner.invoke(app, ["history", "--db", db, "--json"])
+    assert r.exit_code == 0, r.output
+    (entry,) = json.loads(r.stdout)
+    assert sorted(entry["traverse_ids"]) == sorted(imported)
+    first = str(entry["traverse_ids"][0])
+    r = runner.invoke(app, ["exclude", "-t", first, "--reason", "cable snagged", "--db", db])
+    assert r.exit_code == 0 and "excluded 1 traverse(s)" in r.stdout, r.output
+    (entry,) = json.loads(runner.invoke(app, ["history", "--db", db, "--json"]).stdout)
+    assert entry["excluded"] == 1 and len(entry["traverse_ids"]) == 14  # an excluded traverse keeps its id listed
+    r = runner.invoke(app, ["delete", "-t", first, "--yes", "--db", db, "--json"])
+    assert r.exit_code == 0 and json.loads(r.stdout)["traverses"] == 1, r.output
+    for cmd in ("delete", "exclude"):
+        text = runner.invoke(app, [cmd, "--help"], env={"COLUMNS": "200"}).stdout
+        assert "history --json" in text and "stickslip export" not in text

@@ -63,15 +63,23 @@ def _traverses_from(
 def history(
     device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
     db: str | None = db_option(),
-    json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per device and day."),
+    json_out: bool = typer.Option(
+        False, "--json", help="Print a JSON list, one object per device and day, with its traverse_ids."
+    ),
 ) -> None:
     """Show stored sessions: traverses per day and joint, and calibrations made.
+
+    With --json each device and day also lists its traverse_ids (excluded ones too): the ids
+    that exclude and delete take.
 
     Example: [bold]stickslip history --device sim://[/]
     """
     with open_store(db, must_exist=True) as st:
         entries = st.history(device)
         path = st.path
+        if json_out:  # the ids exclude -t and delete -t take (export's table has none)
+            for e in entries:
+                e["traverse_ids"] = st.traverse_ids(device=e["device"], day=e["day"])
     if json_out:
         print_json(entries)
         return
@@ -197,6 +205,9 @@ def exclude(
 ) -> None:
     """Exclude stored traverses from calibration and analyses (kept, with the reason), or --undo.
 
+    Ids are in `stickslip history --json` (traverse_ids of each device and day) and
+    `stickslip import --json`.
+
     Example: [bold]stickslip exclude -t 12 -t 13 --reason "arm touched the sample"[/]
     """
     if undo == (reason is not None):
@@ -219,7 +230,8 @@ def delete(
     """Delete stored traverses (by id, or a whole session day), after confirmation.
 
     Calibrations made from them keep their parameters; only their links to the rows go.
-    Ids are in `stickslip export` and `stickslip history --json`.
+    Ids are in `stickslip history --json` (traverse_ids of each device and day) and
+    `stickslip import --json`.
 
     Example: [bold]stickslip delete --day 2026-11-22 --device sim:// --yes[/]
     """
