@@ -49,3 +49,16 @@ def test_the_traverse_ids_delete_and_exclude_take_are_where_their_help_says(tmp_
     for cmd in ("delete", "exclude"):
         text = runner.invoke(app, [cmd, "--help"], env={"COLUMNS": "200"}).stdout
         assert "history --json" in text and "stickslip export" not in text
+
+
+def test_delete_without_yes_at_the_end_of_the_input_is_declined_exit_1_not_interrupted(tmp_path):
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    db = str(tmp_path / "s.db")
+    assert runner.invoke(app, ["import", str(meas), "--db", db]).exit_code == 0
+    r = runner.invoke(app, ["delete", "--day", "2026-11-22", "--db", db, "--json"], input="")
+    assert r.exit_code == 1, r.output  # docs/cli.md: 1 = declined at a confirmation; 130 is Ctrl-C
+    assert r.stdout == "" and "interrupted" not in r.stderr
+    assert "delete 14 traverse(s) of day 2026-11-22" in r.stderr and "nothing deleted (not confirmed" in r.stderr
+    r = runner.invoke(app, ["delete", "--day", "2026-11-22", "--db", db, "--json"], input="y\n")
+    assert r.exit_code == 0 and json.loads(r.stdout)["traverses"] == 14, r.output

@@ -27,7 +27,7 @@ from ._common import (
     warn,
     warn_later,
 )
-from ._output import styled, visible
+from ._output import err_console, styled, visible
 
 if TYPE_CHECKING:
     from ..analysis import AnovaResult
@@ -218,6 +218,22 @@ def exclude(
 
 
 
+def _confirmed(question: str) -> bool:
+    """Ask ``question [y/N]`` on stderr and read the answer from stdin: y or yes confirms.
+
+    The end of the input (a script without --yes, stdin not a terminal) is no answer, so
+    not confirmed (exit 1, as documented), never the "interrupted (Ctrl-C)" exit 130
+    typer's confirm made of it; Ctrl-C still ends in 130.
+    """
+    import sys
+
+    err_console.print(f"{question} [y/N]: ", end="", markup=False, highlight=False)
+    answer = sys.stdin.readline()
+    if not answer:
+        err_console.print()
+    return answer.strip().lower() in ("y", "yes")
+
+
 @app.command()
 def delete(
     traverse: list[int] = typer.Option(None, "--traverse", "-t", help="Id of a traverse to delete (repeatable)."),
@@ -244,7 +260,7 @@ def delete(
             if not ids:
                 fail(f"no stored traverses for day {day}" + (f" of {redact_url(device)}" if device else ""))
         what = f"{len(set(ids))} traverse(s)" + (f" of day {day}" if day else "")
-        if not yes and not typer.confirm(visible(f"delete {what} from {st.path}?"), default=False, err=True):
+        if not yes and not _confirmed(visible(f"delete {what} from {st.path}?")):
             fail("nothing deleted (not confirmed; --yes skips the question)", code=1)
         with user_errors():
             done = st.delete_traverses(ids)
