@@ -62,3 +62,41 @@ def test_delete_without_yes_at_the_end_of_the_input_is_declined_exit_1_not_inter
     assert "delete 14 traverse(s) of day 2026-11-22" in r.stderr and "nothing deleted (not confirmed" in r.stderr
     r = runner.invoke(app, ["delete", "--day", "2026-11-22", "--db", db, "--json"], input="y\n")
     assert r.exit_code == 0 and json.loads(r.stdout)["traverses"] == 14, r.output
+
+
+def test_record_refuses_a_real_controllers_options_on_the_simulator_where_they_did_nothing(tmp_path):
+    wav = tmp_path / "j2.wav"
+    sim = ["record", str(wav), "--joint", "2", "--device", "sim://?seed=3"]
+    _bad(runner.invoke(app, [*sim, "--steps", "5000", "--stop-at-step", "3000", "--json"]), "--steps, --stop-at-step")
+    _bad(runner.invoke(app, [*sim, "--key"]), "--key: a real controller option")
+    _bad(runner.invoke(app, [*sim, "--input", "3"]), "--input")
+    assert not wav.exists()
+    r = runner.invoke(app, [*sim, "--before", "1", "--json"])  # the simulator's own options still work
+    assert r.exit_code == 0, r.output
+    assert abs(json.loads(r.stdout)["label"]["stop_at_s"] - 1.0) < 0.05
+
+
+def test_record_refuses_the_simulators_before_and_after_on_a_real_controller(tmp_path, monkeypatch):
+    import stickslip.devices as devices
+
+    class _Ctrl:
+        def close(self) -> None:
+            pass
+
+    monkeypatch.setattr(devices, "open_device", lambda url: _Ctrl())
+    r = runner.invoke(app, ["record", str(tmp_path / "r.wav"), "--joint", "2", "--device", "mm3a:///dev/fake",
+                            "--steps", "400", "--stop-at-step", "300", "--before", "1"])  # fmt: skip
+    _bad(r, "--before and --after place the simulator's joint")
+
+
+def test_traverse_refuses_a_sound_card_input_on_the_simulator_which_hears_itself(tmp_path):
+    from tuned import tune  # the session's kept tunings (tests/support/tuned.py)
+
+    from stickslip.sim.arm import SimulatedMM3A
+
+    samples, rate, stop_at = SimulatedMM3A(seed=4, day="2026-11-20").labelled_recording(3, "+")
+    tuning = tmp_path / "t3.json"
+    tune(samples, rate, stop_at, joint=3).save(tuning)
+    r = runner.invoke(app, ["traverse", "-j", "3", "--direction", "+", "--tuning", str(tuning), "--input", "3",
+                            "--device", "sim://?seed=3", "--no-db", "--json"])  # fmt: skip
+    _bad(r, "--input 3: a sound card listens to a real controller; the simulator hears itself")

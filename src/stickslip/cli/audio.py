@@ -521,8 +521,13 @@ def record(
     key: bool = typer.Option(
         False, "--key", help="Real controller: label the stop by pressing Enter when you hear it."
     ),
-    before: float = typer.Option(2.0, "--before", help="Simulator: seconds of stepping before the stop."),
-    after: float = typer.Option(1.0, "--after", help="Simulator: seconds against the stop."),
+    before: float | None = typer.Option(
+        None, "--before", help="Simulator: seconds of stepping before the stop, 0.3-60 (default 2).",
+        show_default=False,
+    ),
+    after: float | None = typer.Option(
+        None, "--after", help="Simulator: seconds against the stop, 0.3-60 (default 1).", show_default=False
+    ),
     tune_out: Path = typer.Option(None, "--tune", help="Also tune from the recording and write the tuning here."),
     json_out: bool = typer.Option(False, "--json", help="Print the label (and tuning) as JSON."),
     db: str | None = db_option(
@@ -566,11 +571,17 @@ def record(
             if isinstance(ctrl, SimulatedMM3A):  # the simulator labels its own stop
                 if serial_port is not None:
                     fail("--serial records a sensor beside a real controller; the simulator renders its own sound")
+                _not_on_simulator(steps=steps, stop_at_step=stop_at_step, key=key or None, input=audio_input,
+                                  sample_rate=sample_rate)
+                before, after = 2.0 if before is None else before, 1.0 if after is None else after
                 if not (0.3 <= before <= 60 and 0.3 <= after <= 60):
                     fail("--before and --after must be 0.3-60 s")
                 samples, rate, stop_at = ctrl.labelled_recording(joint, sign_label, before_s=before, after_s=after)
                 how = "the simulator's stop time"
             else:
+                if before is not None or after is not None:
+                    fail("--before and --after place the simulator's joint; a real controller steps --steps steps, "
+                         "labelled by --stop-at-step or --key")
                 if serial_port is not None and audio_input is not None:
                     fail("give --input (a sound card) or --serial (a vibration sensor), not both")
                 if (serial_port is None) != (sample_rate is None):
@@ -592,6 +603,16 @@ def record(
         finally:
             ctrl.close()
     _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out, hz)
+
+
+def _not_on_simulator(**given: object) -> None:
+    """Refuse (one line, exit 2) a real controller's option given for the simulator, where it would do nothing."""
+    names = [f"--{k.replace('_', '-')}" for k, v in given.items() if v is not None]
+    if names:
+        fail(
+            f"{', '.join(names)}: {'a real controller option' if len(names) == 1 else 'real controller options'}; "
+            "the simulator places the joint --before seconds from its stop and labels the stop itself"
+        )
 
 
 @contextmanager

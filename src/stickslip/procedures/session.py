@@ -91,7 +91,8 @@ def traverse_on_device(
     tuning : Tuning
         The joint's limit-switch tuning.
     audio_input : str or int, optional
-        Sound-card input for a controller without a microphone of its own.
+        Sound-card input for a controller without a microphone of its own (``ValueError``
+        for the simulator, which hears itself: it would be taken and not used).
     progress : bool or callable
         ``True`` shows a progress bar; a callable gets ``(steps, device_s)`` after every
         burst (:func:`~.traverse.measure_traverse`).
@@ -109,6 +110,11 @@ def traverse_on_device(
         tuning was made at (:meth:`~stickslip.audio.tuningfile.Tuning.step_rate_problem`).
         Default: a :class:`StepRateWarning` (Python's ``warnings``).
     """
+    hears_itself = isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock)  # the simulator
+    if hears_itself and audio_input is not None:
+        raise ValueError(
+            f"--input {audio_input}: a sound card listens to a real controller; the simulator hears itself"
+        )
     rate_problem = tuning.step_rate_problem(float(ctrl.frequency(joint)), f"joint {joint} steps")
     if rate_problem is not None:
         on_warning(rate_problem)
@@ -123,7 +129,7 @@ def traverse_on_device(
         src = SerialSamples(serial_port, sample_rate=int(tuning.sample_rate))
         blocks: Any = src.blocks()
         close = src.close
-    elif isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):  # the simulator hears itself
+    elif hears_itself:
         t0 = float(ctrl.clock_s)
         blocks = ctrl.microphone()
     else:
