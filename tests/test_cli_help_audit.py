@@ -100,3 +100,21 @@ def test_traverse_refuses_a_sound_card_input_on_the_simulator_which_hears_itself
     r = runner.invoke(app, ["traverse", "-j", "3", "--direction", "+", "--tuning", str(tuning), "--input", "3",
                             "--device", "sim://?seed=3", "--no-db", "--json"])  # fmt: skip
     _bad(r, "--input 3: a sound card listens to a real controller; the simulator hears itself")
+
+
+def test_calibrate_refuses_drift_without_the_prior_it_belongs_to(tmp_path):
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    _bad(runner.invoke(app, ["calibrate", str(meas), "--drift", "0.3", "--json"]), "--drift", "--prior")
+    prior = tmp_path / "prior.json"
+    assert runner.invoke(app, ["calibrate", str(meas), "-o", str(prior)]).exit_code == 0
+    import dataclasses
+
+    today = tmp_path / "today.csv"  # steps 10 % shorter than the prior's: how far the update goes depends on --drift
+    today.write_text(measurements_to_csv([dataclasses.replace(t, steps=round(t.steps / 0.9)) for t in paper_table()]))
+    runs = {}
+    for drift in ([], ["--drift", "0.15"], ["--drift", "0.5"]):
+        r = runner.invoke(app, ["calibrate", str(today), "--prior", str(prior), *drift, "--json"])
+        assert r.exit_code == 0, r.output
+        runs[tuple(drift)] = json.loads(r.stdout)["parameters"]
+    assert runs[()] == runs[("--drift", "0.15")] != runs[("--drift", "0.5")]  # the default is 0.15, and it is used

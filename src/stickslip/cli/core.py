@@ -178,8 +178,13 @@ def calibrate_cmd(
         ),
     ] = None,
     drift: Annotated[
-        float, typer.Option(help="With --prior: prior standard deviation of a day's change of step scale (relative).")
-    ] = 0.15,
+        float | None,
+        typer.Option(
+            help="With --prior: prior standard deviation of a day's change of step scale (relative; default "
+            "0.15).",
+            show_default=False,
+        ),
+    ] = None,
     max_table_mb: Annotated[
         float,
         typer.Option(
@@ -258,6 +263,8 @@ def calibrate_cmd(
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
     if not (math.isfinite(max_table_mb) and max_table_mb > 0):
         fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
+    if drift is not None and prior is None:
+        fail("--drift is the prior's day-to-day change of step scale: it goes with --prior (else unused)")
     if check is not None and (prior is not None or step_sizes is not None):
         fail("--check scales the intervals of a calibration made from the table: not with --prior or --step-sizes")
     if rig_file is not None:
@@ -319,16 +326,18 @@ def _warn_if_pooled(traverses: list[Traverse], day: str) -> None:
                    "calibrate each session from its own traverses, or today's with --prior yesterday's calibration")
 
 
-def _updated(prior: Path, traverses: list[Traverse], drift: float, day: str | None, source: str, steps: list[Any],
-             conditions: Conditions) -> Calibration:
+def _updated(prior: Path, traverses: list[Traverse], drift: float | None, day: str | None, source: str,
+             steps: list[Any], conditions: Conditions) -> Calibration:
     """``calibrate --prior``: the calibration in ``prior`` brought up to date (:mod:`stickslip.calibration.update`),
     with a warning queued for each :func:`_prior_problems`."""
     from ..calibration import Calibration
-    from ..calibration.update import update_calibration
+    from ..calibration.update import DRIFT_PRIOR, update_calibration
 
     with user_errors():
         old = Calibration.load(prior)
-    cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
+    cal, _ = update_calibration(
+        old, traverses, drift=DRIFT_PRIOR if drift is None else drift, day=day, source=source, step_sizes=steps
+    )
     for w in _prior_problems(old, conditions, cal.day):
         warn_later(w)
     return cal
