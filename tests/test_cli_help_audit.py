@@ -118,3 +118,17 @@ def test_calibrate_refuses_drift_without_the_prior_it_belongs_to(tmp_path):
         assert r.exit_code == 0, r.output
         runs[tuple(drift)] = json.loads(r.stdout)["parameters"]
     assert runs[()] == runs[("--drift", "0.15")] != runs[("--drift", "0.5")]  # the default is 0.15, and it is used
+
+
+def test_the_reference_shows_what_help_shows_the_metavar_unit_and_no_default_help_hides():
+    from stickslip.cli.reference import render
+
+    page = render()
+    serve = page.split("## `stickslip serve`")[1].split("## `stickslip history`")[0]
+    assert "| `--max-age` `<days>` | option | Warn when the calibration is more than this many days old" in serve
+    assert "| `--tuning` `J=FILE` | option |" in serve and "`[]`" not in page  # a Python list is no default
+    assert "| `--geometry` `OFFSET,LENGTH` | option | OFFSET,LENGTH of the arm, lengths with their units" in serve
+    assert "| `--direction` `<+\\|->` | option |" in page  # a | inside a cell is escaped: the table keeps its columns
+    for line in page.splitlines():
+        if line.startswith("| `--"):
+            assert line.replace("\\|", "").count("|") == 4, line

@@ -20,9 +20,12 @@ def _param_line(p: Any) -> str:
         what = getattr(p, "help", None) or ""
         return f"| {name} | argument{'' if p.required else ', optional'} | {what} |"
     opts = ", ".join(f"`{o}`" for o in (*p.opts, *p.secondary_opts))
+    if p.metavar:  # what --help shows after the option: a unit (<days>) or a form (X,Y, J=FILE)
+        opts += " `" + p.metavar.replace("|", "\\|") + "`"
     what = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
     default = p.default if not callable(p.default) else None
-    shown = "" if default in (None, False, ()) or getattr(p, "is_flag", False) else f" (default: `{default}`)"
+    hidden = default in (None, False, (), []) or getattr(p, "is_flag", False) or p.show_default is False
+    shown = "" if hidden else f" (default: `{default}`)"  # as --help: a default its help states is not repeated
     return f"| {opts} | option | {what}{shown} |"
 
 
