@@ -132,3 +132,42 @@ def test_the_reference_shows_what_help_shows_the_metavar_unit_and_no_default_hel
     for line in page.splitlines():
         if line.startswith("| `--"):
             assert line.replace("\\|", "").count("|") == 4, line
+
+
+def _kept(db, device="sim://"):
+    r = runner.invoke(app, ["where", "-d", device, "--db", str(db), "--offline", "--json"])
+    assert r.exit_code == 0, r.output
+    return [j["source"] for j in json.loads(r.stdout)["joints"]]
+
+
+def test_a_camera_that_does_not_open_leaves_the_kept_positions_as_they_were(tmp_path):
+    db = tmp_path / "s.db"
+    assert runner.invoke(app, ["where", "-d", "sim://", "--db", str(db), "--set", "3=min"]).exit_code == 0
+    r = runner.invoke(app, ["camera", "calibrate", "-d", "sim://", "--camera", "simcam://?pixel=-1um", "--db", str(db),
+                            "--json"])  # fmt: skip
+    _bad(r, "pixel='-1um'")
+    assert _kept(db) == ["default", "default", "set"]  # nothing stepped: no joint uncertain
+
+
+def test_a_traverse_refused_before_it_moves_leaves_the_kept_position_as_it_was(tmp_path):
+    import pytest
+
+    from stickslip.devices.base import DeviceError
+    from stickslip.kinematics import Pose
+    from stickslip.procedures.session import TraverseRequest, traverse
+    from stickslip.storage import Store
+
+    def no_device(url):
+        raise DeviceError(f"{url}: cannot open serial port")
+
+    db = tmp_path / "s.db"
+    assert runner.invoke(app, ["where", "-d", "sim://", "--db", str(db), "--set", "3=min"]).exit_code == 0
+    pose = Pose(0.0, -1.5707963, 0.0, 0.0, 0.0)
+    with Store.open(db) as store:
+        with pytest.raises(ValueError, match="burst_steps = 0"):
+            traverse(store, TraverseRequest("sim://", 3, "+", pose, "2026-11-22", None, burst=0))  # type: ignore
+        with pytest.raises(DeviceError, match="cannot open serial port"):
+            traverse(store, TraverseRequest("sim://", 3, "+", pose, "2026-11-22", None), opener=no_device)  # type: ignore
+    assert _kept(db) == ["default", "default", "set"]  # nothing moved: joint 3 is still at its set stop
+    _bad(runner.invoke(app, ["traverse", "-j", "3", "--direction", "+", "--tuning", str(tmp_path / "t.json"),
+                             "--burst", "0", "--db", str(db)]), "--burst")  # fmt: skip

@@ -300,9 +300,10 @@ def calibrate_cmd(
         with device_lock(store, key):
             with user_errors():
                 state = load_state(store, key)
-                _journal_camera_calibration(store, key, order if at is not None else (*order, auto_joint))
 
             def measure(dev: Controller, cam: Camera, progress: Callable[[int, int], None]) -> CameraCalibrationResult:
+                with user_errors():  # both opened: the joints about to step are kept uncertain first
+                    _journal_camera_calibration(store, key, order if at is not None else (*order, auto_joint))
                 return calibrate_camera(
                     dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
                     auto_steps=auto_steps, max_steps=max_steps, progress=progress,

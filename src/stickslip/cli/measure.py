@@ -246,7 +246,9 @@ def traverse_cmd(
     append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
     db: str | None = db_option(),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
-    burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
+    burst: int = typer.Option(
+        2000, "--burst", min=1, max=1_000_000, help="Steps per burst between checks of the limit switch."
+    ),
     confirm_s: float | None = typer.Option(
         None,
         "--confirm-s",

@@ -28,7 +28,7 @@ from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
 from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 from .move import Interrupted, LockStore, device_lock, kept_after_interrupt
-from .traverse import TraverseError, TraverseResult, measure_traverse
+from .traverse import TraverseError, TraverseResult, check_burst_steps, measure_traverse
 
 __all__ = [
     "RowNotAppended",
@@ -260,6 +260,7 @@ def traverse(
     """
     if request.append is not None:
         check_append_target(request.append)  # before the joint moves: a traverse takes a while
+    check_burst_steps(request.burst)  # a bad burst is refused before the joint is journalled
     if store is None:
         result = _measure(request, progress, on_warning, opener)
     else:
@@ -267,10 +268,13 @@ def traverse(
         with device_lock(store, key):
             state = load_state(store, key)
             spec = kin.joint_spec(request.joint)
-            state.mark_uncertain(request.joint, spec.lower, spec.upper, "a traverse did not finish")
-            save_state(store, state)  # write-ahead: the joint may be anywhere until the stop is heard
+
+            def journal() -> None:  # write-ahead, once the device is open: the joint may be anywhere until the stop
+                state.mark_uncertain(request.joint, spec.lower, spec.upper, "a traverse did not finish")
+                save_state(store, state)
+
             try:
-                result = _measure(request, progress, on_warning, opener)
+                result = _measure(request, progress, on_warning, opener, journal)
             except KeyboardInterrupt:
                 what = f"traverse of joint {request.joint}{request.direction}"
                 raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
@@ -292,10 +296,14 @@ def _measure(
     progress: bool | Callable[[int, float], None],
     on_warning: Callable[[str], None],
     opener: Callable[[str], Controller] | None,
+    journal: Callable[[], None] | None = None,
 ) -> TraverseResult:
-    """Open the device, measure the traverse (:func:`traverse_on_device`), close it."""
+    """Open the device, ``journal()`` (the joint kept uncertain before it moves), measure the traverse
+    (:func:`traverse_on_device`), close it. A device that does not open leaves the kept position as it was."""
     ctrl = (opener or open_device)(request.device)
     try:
+        if journal is not None:
+            journal()
         return traverse_on_device(
             ctrl, request.joint, request.direction, request.pose, request.day, request.tuning,
             audio_input=request.audio_input, serial_port=request.serial_port, burst_steps=request.burst,
