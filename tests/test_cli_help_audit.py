@@ -171,3 +171,11 @@ def test_a_traverse_refused_before_it_moves_leaves_the_kept_position_as_it_was(t
     assert _kept(db) == ["default", "default", "set"]  # nothing moved: joint 3 is still at its set stop
     _bad(runner.invoke(app, ["traverse", "-j", "3", "--direction", "+", "--tuning", str(tmp_path / "t.json"),
                              "--burst", "0", "--db", str(db)]), "--burst")  # fmt: skip
+
+
+def test_jog_without_a_terminal_prints_its_one_error_and_no_warning_ahead_of_it(tmp_path):
+    meas, cal = tmp_path / "meas.csv", tmp_path / "cal.json"
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert runner.invoke(app, ["calibrate", str(meas), "--day", "2026-01-01", "-o", str(cal)]).exit_code == 0
+    r = runner.invoke(app, ["jog", "-c", str(cal), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+    _bad(r, "jog needs a terminal")  # before: the joint-1 and calibration-age warnings came first, then the error

@@ -247,6 +247,21 @@ def _print_plan(result: ReachResult, json_out: bool, arm: Arm | None = None) -> 
 # ---------------------------------------------------------------- jog: the terminal part
 
 
+def _need_terminal() -> None:
+    """Refuse jog (one line, exit 2) when stdin is no terminal (POSIX: Windows reads the console itself)."""
+    import sys
+
+    if sys.platform != "win32" and not sys.stdin.isatty():
+        fail("jog needs a terminal: its keys are read from stdin, which is not a terminal here")
+
+
+def _ready_to_jog() -> None:
+    """The input is checked and the session about to start: a missing terminal is its last refusal, so it comes
+    before the queued warnings (a command that fails prints only its error)."""
+    _need_terminal()
+    flush_warnings()
+
+
 class _Keys:
     """Raw key input from the terminal: POSIX ``termios``/``tty`` (cbreak) or Windows ``msvcrt``."""
 
@@ -260,8 +275,7 @@ class _Keys:
         import termios
         import tty
 
-        if not sys.stdin.isatty():
-            fail("jog needs a terminal: its keys are read from stdin, which is not a terminal here")
+        _need_terminal()
         self._fd = sys.stdin.fileno()
         self._saved = termios.tcgetattr(self._fd)
         tty.setcbreak(self._fd)  # keys at once, no echo; Ctrl-C still interrupts
@@ -471,7 +485,7 @@ def jog(
                 request = dataclasses.replace(request, guard=in_rig.guard(store), joints=in_rig.joints,
                                               stage=in_rig.stage, state_key=in_rig.state_key)
             result = jog_session(
-                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=_ready_to_jog,
                 opener=None if in_rig is None else in_rig.opener,
             )
     finally:
