@@ -179,3 +179,17 @@ def test_jog_without_a_terminal_prints_its_one_error_and_no_warning_ahead_of_it(
     assert runner.invoke(app, ["calibrate", str(meas), "--day", "2026-01-01", "-o", str(cal)]).exit_code == 0
     r = runner.invoke(app, ["jog", "-c", str(cal), "-d", "sim://", "--db", str(tmp_path / "s.db")])
     _bad(r, "jog needs a terminal")  # before: the joint-1 and calibration-age warnings came first, then the error
+
+
+def test_traverse_writes_its_result_alone_on_stdout_no_progress_bar_residue(tmp_path):
+    from tuned import tune
+
+    from stickslip.sim.arm import SimulatedMM3A
+
+    samples, rate, stop_at = SimulatedMM3A(seed=4, day="2026-11-20").labelled_recording(3, "+")
+    tuning = tmp_path / "t3.json"
+    tune(samples, rate, stop_at, joint=3).save(tuning)
+    r = runner.invoke(app, ["traverse", "-j", "3", "--direction", "+", "--tuning", str(tuning), "--no-db",
+                            "--device", "sim://?seed=4&day=2026-11-20"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert r.stdout.splitlines()[0].startswith("joint 3+: ") and len(r.stdout.splitlines()) == 1, repr(r.stdout)

@@ -270,8 +270,10 @@ def _progress_callback(
         return progress, lambda: None
     if not progress:
         return (lambda steps, t: None), lambda: None
+    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    screen = Console(stderr=True)  # stdout carries the result alone (a bar there left a blank line in a pipe)
     bar = Progress(
         TextColumn(f"joint {joint} {direction}"),
         BarColumn(),
@@ -279,6 +281,8 @@ def _progress_callback(
         TextColumn("{task.fields[device]:>6.1f} s on the device"),
         TimeElapsedColumn(),
         transient=True,
+        console=screen,
+        disable=not screen.is_terminal,
     )
     bar.start()
     task = bar.add_task("traverse", total=expected, device=0.0)
