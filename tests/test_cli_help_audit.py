@@ -193,3 +193,16 @@ def test_traverse_writes_its_result_alone_on_stdout_no_progress_bar_residue(tmp_
                             "--device", "sim://?seed=4&day=2026-11-20"])  # fmt: skip
     assert r.exit_code == 0, r.output
     assert r.stdout.splitlines()[0].startswith("joint 3+: ") and len(r.stdout.splitlines()) == 1, repr(r.stdout)
+
+
+def test_calibrate_prior_says_what_its_plus_minus_is(tmp_path):
+    import dataclasses
+
+    meas, prior, today = tmp_path / "meas.csv", tmp_path / "prior.json", tmp_path / "today.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    today.write_text(measurements_to_csv([dataclasses.replace(t, steps=round(t.steps / 0.9)) for t in paper_table()]))
+    assert runner.invoke(app, ["calibrate", str(meas), "-o", str(prior)]).exit_code == 0
+    r = runner.invoke(app, ["calibrate", str(today), "--prior", str(prior)], env={"COLUMNS": "250"})
+    assert r.exit_code == 0, r.output
+    scale = [ln for ln in r.stdout.splitlines() if "step scale x" in ln]
+    assert scale and all("(σ " in ln and "±" not in ln for ln in scale), scale  # docs/cli.md: a ± says what it is

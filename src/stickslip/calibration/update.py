@@ -370,6 +370,6 @@ def _update_joint(
         if n_new:
             state.updates.append(ScaleUpdate(j, d, n_new, factor, sd))
         state.notes.append(
-            f"joint {j}{d}: step scale x{factor:.4f} (± {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
+            f"joint {j}{d}: step scale x{factor:.4f} (σ {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
             f"from {n_new} traverse(s)" + (" (prior model error assumed)" if assumed else "")
         )
