@@ -206,3 +206,23 @@ def test_calibrate_prior_says_what_its_plus_minus_is(tmp_path):
     assert r.exit_code == 0, r.output
     scale = [ln for ln in r.stdout.splitlines() if "step scale x" in ln]
     assert scale and all("(σ " in ln and "±" not in ln for ln in scale), scale  # docs/cli.md: a ± says what it is
+
+
+def test_a_live_camera_that_does_not_open_is_one_error_line_without_opencvs_own_warnings(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    import pytest
+
+    pytest.importorskip("cv2")
+    env = {**os.environ, "STICKSLIP_DB": str(tmp_path / "s.db")}
+    code = "import sys; from stickslip.cli import app; sys.argv[0] = 'stickslip'; app()"
+    r = subprocess.run(
+        [sys.executable, "-c", code, "camera", "grab", "--camera", "opencv://99?pixel=1um",
+         "-o", str(tmp_path / "g.png"), "--json"],
+        capture_output=True, env=env, timeout=60, stdin=subprocess.DEVNULL,
+    )  # fmt: skip
+    assert r.returncode == 2 and r.stdout == b"", r
+    lines = r.stderr.decode().splitlines()
+    assert lines == ["error: camera 99 does not open (not connected, or in use by another program)"], lines
