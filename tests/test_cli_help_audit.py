@@ -226,3 +226,15 @@ def test_a_live_camera_that_does_not_open_is_one_error_line_without_opencvs_own_
     assert r.returncode == 2 and r.stdout == b"", r
     lines = r.stderr.decode().splitlines()
     assert lines == ["error: camera 99 does not open (not connected, or in use by another program)"], lines
+
+
+def test_camera_calibrates_view_options_say_they_are_angles_their_range_and_reference():
+    from stickslip.cli.reference import render
+
+    page = render().split("## `stickslip camera calibrate`")[1].split("## `stickslip camera grab`")[0]
+    rows = {ln.split("|")[1].strip(): ln.split("|")[3] for ln in page.splitlines() if ln.startswith("| `--view")}
+    assert "an angle in 0-90deg" in rows["`--view-tilt`"]
+    assert "an angle from the world x axis towards y" in rows["`--view-azimuth`"]
+    assert "an angle" in rows["`--view-roll`"]
+    r = runner.invoke(app, ["camera", "calibrate", "--camera", "simcam://?pixel=1um", "--view-tilt", "91deg"])
+    _bad(r, "view tilt = 91 deg must be in [0, 90] deg")  # the range the help says is the one checked

@@ -240,10 +240,16 @@ def calibrate_cmd(
         help="Most steps each way (fewer if the tip would leave a third of the field).",
     ),
     view_tilt: str | None = typer.Option(
-        None, "--view-tilt", help="Optical axis from the vertical: 0 (looking down), 52deg."
+        None, "--view-tilt",
+        help="Optical axis from the vertical, an angle in 0-90deg: 0 (looking down, the default), 52deg.",
     ),
-    view_azimuth: str | None = typer.Option(None, "--view-azimuth", help="Direction the optical axis leans to."),
-    view_roll: str | None = typer.Option(None, "--view-roll", help="The image's turn about the optical axis."),
+    view_azimuth: str | None = typer.Option(
+        None, "--view-azimuth",
+        help="Direction the optical axis leans to, an angle from the world x axis towards y (default 0).",
+    ),
+    view_roll: str | None = typer.Option(
+        None, "--view-roll", help="The image's turn about the optical axis, an angle (default 0)."
+    ),
     output: Path | None = typer.Option(
         None, "--output", "-o", help="Write the step sizes (CSV, for stickslip calibrate --step-sizes)."
     ),
