@@ -238,3 +238,11 @@ def test_camera_calibrates_view_options_say_they_are_angles_their_range_and_refe
     assert "an angle" in rows["`--view-roll`"]
     r = runner.invoke(app, ["camera", "calibrate", "--camera", "simcam://?pixel=1um", "--view-tilt", "91deg"])
     _bad(r, "view tilt = 91 deg must be in [0, 90] deg")  # the range the help says is the one checked
+
+
+def test_a_default_of_0_is_shown_in_help_and_the_reference_as_any_other():
+    from stickslip.cli.reference import render
+
+    text = " ".join(runner.invoke(app, ["demo", "--help"], env={"COLUMNS": "120"}).stdout.split())
+    assert "Simulator seed: drift of the true parameters, step noise, room sound. [default: 0]" in text  # 0 == False
+    assert "room sound. (default: `0`) |" in render()

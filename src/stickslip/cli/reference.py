@@ -11,6 +11,8 @@ from typing import Any
 
 import typer
 
+from ._help import shown_default
+
 __all__ = ["render"]
 
 
@@ -23,9 +25,8 @@ def _param_line(p: Any) -> str:
     if p.metavar:  # what --help shows after the option: a unit (<days>) or a form (X,Y, J=FILE)
         opts += " `" + p.metavar.replace("|", "\\|") + "`"
     what = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
-    default = p.default if not callable(p.default) else None
-    hidden = default in (None, False, (), []) or getattr(p, "is_flag", False) or p.show_default is False
-    shown = "" if hidden else f" (default: `{default}`)"  # as --help: a default its help states is not repeated
+    default = shown_default(p)  # as --help shows it
+    shown = "" if default is None else f" (default: `{default}`)"
     return f"| {opts} | option | {what}{shown} |"
 
 
