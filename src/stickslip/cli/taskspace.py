@@ -258,12 +258,15 @@ def _need_terminal() -> None:
 def _ready_to_jog() -> None:
     """The input is checked and the session about to start: a missing terminal is its last refusal, so it comes
     before the queued warnings (a command that fails prints only its error)."""
-    _need_terminal()
+    if getattr(_Keys, "reads_the_terminal", False):  # a key source that stands in for the terminal needs none
+        _need_terminal()
     flush_warnings()
 
 
 class _Keys:
     """Raw key input from the terminal: POSIX ``termios``/``tty`` (cbreak) or Windows ``msvcrt``."""
+
+    reads_the_terminal = True
 
     def __init__(self) -> None:
         import sys
