@@ -246,3 +246,19 @@ def test_a_default_of_0_is_shown_in_help_and_the_reference_as_any_other():
     text = " ".join(runner.invoke(app, ["demo", "--help"], env={"COLUMNS": "120"}).stdout.split())
     assert "Simulator seed: drift of the true parameters, step noise, room sound. [default: 0]" in text  # 0 == False
     assert "room sound. (default: `0`) |" in render()
+
+
+def test_calibrate_check_help_says_the_paper_procedure_alone_has_nothing_to_check(tmp_path):
+    from stickslip.cli.reference import render
+
+    page = render().split("## `stickslip calibrate`")[1].split("## `stickslip fit`")[0]
+    assert "Example: stickslip calibrate day1-and-sweep.csv --check check1.csv" in page
+    assert "more traverses than the paper's 14 poses: the paper's procedure alone has no intervals to scale" in page
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(paper_table()))  # the paper's 14 poses exactly
+    import dataclasses
+
+    check = tmp_path / "check.csv"  # new poses: psi 0.3 rad, which none of the paper's has
+    check.write_text(measurements_to_csv([dataclasses.replace(t, psi=0.3) for t in paper_table()]))
+    r = runner.invoke(app, ["calibrate", str(meas), "--check", str(check), "--json"])
+    _bad(r, "can check this calibration")  # as the help says: refused

@@ -125,7 +125,9 @@ def calibrate_cmd(
         typer.Option(
             "--check",
             help="Check traverses (a measurement table): at random poses (none of the calibration's), measured "
-            "after the table's and not fitted; how they erred scales each joint's intervals (docs/models.md §4).",
+            "after the table's and not fitted; how they erred scales each joint's intervals (docs/models.md §4). "
+            "The table needs more traverses than the paper's 14 poses: the paper's procedure alone has no "
+            "intervals to scale (refused).",
         ),
     ] = None,
     method: Annotated[
@@ -251,7 +253,7 @@ def calibrate_cmd(
 
     Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
 
-    Example: stickslip calibrate day1.csv --check check1.csv -o cal.json
+    Example: stickslip calibrate day1-and-sweep.csv --check check1.csv -o cal.json
 
     Example: stickslip calibrate stack.csv --rig lab.toml --arm gripper -o cal/gripper.json
     """
