@@ -262,3 +262,14 @@ def test_calibrate_check_help_says_the_paper_procedure_alone_has_nothing_to_chec
     check.write_text(measurements_to_csv([dataclasses.replace(t, psi=0.3) for t in paper_table()]))
     r = runner.invoke(app, ["calibrate", str(meas), "--check", str(check), "--json"])
     _bad(r, "can check this calibration")  # as the help says: refused
+
+
+def test_listen_refuses_input_without_mic_where_it_was_taken_and_not_used(tmp_path):
+    import numpy as np
+
+    from stickslip.audio.sources import write_wav
+
+    wav = tmp_path / "r.wav"
+    write_wav(wav, np.zeros(4800, np.float32), 48_000)
+    _bad(runner.invoke(app, ["listen", str(wav), "--tuning", str(tmp_path / "t.json"), "--input", "3", "--json"]),
+         "--input picks the sound card --mic listens to")  # fmt: skip

@@ -287,6 +287,8 @@ def listen(
 
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
+    if audio_input is not None and not mic:
+        fail("--input picks the sound card --mic listens to; a recording or --serial sensor has none")
     _check_sample_rate(sample_rate)
     _check_step_rate(step_rate)
     try:
