@@ -273,3 +273,20 @@ def test_listen_refuses_input_without_mic_where_it_was_taken_and_not_used(tmp_pa
     write_wav(wav, np.zeros(4800, np.float32), 48_000)
     _bad(runner.invoke(app, ["listen", str(wav), "--tuning", str(tmp_path / "t.json"), "--input", "3", "--json"]),
          "--input picks the sound card --mic listens to")  # fmt: skip
+
+
+def test_reach_segment_help_says_the_range_that_is_checked(tmp_path):
+    from stickslip.cli.reference import render
+
+    assert "| `--segment` | option | Longest segment of the line, a length from 10nm to 1mm. (default: `10um`) |" in (
+        render()
+    )
+    meas, cal = tmp_path / "meas.csv", tmp_path / "cal.json"
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert runner.invoke(app, ["calibrate", str(meas), "-o", str(cal)]).exit_code == 0
+    reach = ["reach", "-c", str(cal), "-d", "sim://", "--by", "1um,0,0", "--dry-run", "--db", str(tmp_path / "s.db")]
+    _bad(runner.invoke(app, [*reach, "--segment", "9nm", "--json"]), "between 10 nm and 1 mm")
+    _bad(runner.invoke(app, [*reach, "--segment", "1.1mm", "--json"]), "between 10 nm and 1 mm")
+    for ok in ("10nm", "1mm"):
+        r = runner.invoke(app, [*reach, "--segment", ok, "--json"])
+        assert r.exit_code == 0, r.output

@@ -116,7 +116,7 @@ def reach(
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help="Record the base tilt psi."),
     geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
     segment: float = typer.Option(
-        "10um", "--segment", parser=length_option, help="Longest segment of the line (length).",
+        "10um", "--segment", parser=length_option, help="Longest segment of the line, a length from 10nm to 1mm.",
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
@@ -149,7 +149,7 @@ def reach(
     q1 = 0, z up the joint-1 axis), from the positions kept for the device (see
     `stickslip where`); --q1 --q2 --q3 --theta --psi record a new pose first.
 
-    The line is cut into segments (at most --segment, and at most 2 % of the move);
+    The line is cut into segments (at most --segment, and at most 2 % of the move but not under 50 nm);
     each segment's joint increments come from the inverse kinematics and its steps from
     the calibrated models in the current pose, scaled by each joint's step scale learned
     from measured positions (stickslip observe), as move plans, joints 1, 2, 3 in that
