@@ -290,3 +290,14 @@ def test_reach_segment_help_says_the_range_that_is_checked(tmp_path):
     for ok in ("10nm", "1mm"):
         r = runner.invoke(app, [*reach, "--segment", ok, "--json"])
         assert r.exit_code == 0, r.output
+
+
+def test_the_reference_shows_the_range_help_shows_and_the_command_checks():
+    from stickslip.cli.reference import render
+
+    page = render()
+    assert "| `--hold` | option | Seconds a direction key keeps moving without a repeat (0: until space). " \
+           "(range: 0 to 10) (default: `0.5`) |" in page  # fmt: skip
+    text = " ".join(runner.invoke(app, ["jog", "--help"], env={"COLUMNS": "120"}).stdout.split())
+    assert "(0: until space). [0 to 10; default: 0.5]" in text
+    _bad(runner.invoke(app, ["jog", "--hold", "11"]), "--hold")

@@ -16,7 +16,7 @@ from typing import Any
 
 from typer.core import TyperCommand
 
-__all__ = ["HelpCommand", "help_width", "metavar_of", "shown_default", "wrap"]
+__all__ = ["HelpCommand", "help_width", "metavar_of", "range_of", "shown_default", "wrap"]
 
 MAX_WIDTH = 100
 """Help is laid out for the terminal's width, at most this many columns (long lines read badly)."""
@@ -89,7 +89,8 @@ def metavar_of(param: Any) -> str:
     return "<text>"
 
 
-def _range_of(param: Any) -> str:
+def range_of(param: Any) -> str:
+    """The range --help shows for a number option (its typer min and max): ``1 to 65535``, ``>= 0``, or ""."""
     lo, hi = getattr(param, "min", None), getattr(param, "max", None)
     if lo is None and hi is None:
         return ""
@@ -122,7 +123,7 @@ def shown_default(param: Any) -> object | None:
 def _description(param: Any) -> str:
     text = _plain(getattr(param, "help", None) or "")
     extras = []
-    rng = _range_of(param)
+    rng = range_of(param)
     if rng:
         extras.append(rng)
     default = shown_default(param)

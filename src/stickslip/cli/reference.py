@@ -11,7 +11,7 @@ from typing import Any
 
 import typer
 
-from ._help import shown_default
+from ._help import range_of, shown_default
 
 __all__ = ["render"]
 
@@ -25,8 +25,9 @@ def _param_line(p: Any) -> str:
     if p.metavar:  # what --help shows after the option: a unit (<days>) or a form (X,Y, J=FILE)
         opts += " `" + p.metavar.replace("|", "\\|") + "`"
     what = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
-    default = shown_default(p)  # as --help shows it
-    shown = "" if default is None else f" (default: `{default}`)"
+    default = shown_default(p)  # as --help shows them: the range checked, the default
+    rng = range_of(p)
+    shown = (f" (range: {rng})" if rng else "") + ("" if default is None else f" (default: `{default}`)")
     return f"| {opts} | option | {what}{shown} |"
 
 
