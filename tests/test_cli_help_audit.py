@@ -301,3 +301,17 @@ def test_the_reference_shows_the_range_help_shows_and_the_command_checks():
     text = " ".join(runner.invoke(app, ["jog", "--help"], env={"COLUMNS": "120"}).stdout.split())
     assert "(0: until space). [0 to 10; default: 0.5]" in text
     _bad(runner.invoke(app, ["jog", "--hold", "11"]), "--hold")
+
+
+def test_calibrates_conditions_are_refused_naming_the_option_with_the_recorded_range(tmp_path):
+    import typer.main
+
+    from stickslip.calibration.result import _CONDITION_RANGES
+
+    meas = tmp_path / "meas.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    r = runner.invoke(app, ["calibrate", str(meas), "--frequency", "-5", "--json"])
+    _bad(r, "'--frequency'", "0.001")  # was: conditions.frequency_hz must be ...
+    options = {p.name: p for p in typer.main.get_command(app).get_command(None, "calibrate").params}
+    for name, field in (("frequency", "frequency_hz"), ("amplitude", "amplitude_v"), ("temperature", "temperature_c")):
+        assert (options[name].min, options[name].max) == _CONDITION_RANGES[field]

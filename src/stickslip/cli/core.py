@@ -151,13 +151,19 @@ def calibrate_cmd(
         ),
     ] = None,
     db: str | None = db_option(),
-    frequency: Annotated[
-        float | None, typer.Option(help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).")
+    frequency: Annotated[  # the ranges are calibration.result's _CONDITION_RANGES (a test holds them equal)
+        float | None,
+        typer.Option(
+            help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).", min=0.001, max=1e6
+        ),
     ] = None,
     amplitude: Annotated[
-        float | None, typer.Option(help="Drive amplitude of the traverses, V (recorded; move warns on a change).")
+        float | None,
+        typer.Option(help="Drive amplitude of the traverses, V (recorded; move warns on a change).", min=0, max=1000),
     ] = None,
-    temperature: Annotated[float | None, typer.Option(help="Temperature during the traverses, °C (recorded).")] = None,
+    temperature: Annotated[
+        float | None, typer.Option(help="Temperature during the traverses, °C (recorded).", min=-273.15, max=500)
+    ] = None,
     model: Annotated[
         str,
         typer.Option(
