@@ -315,3 +315,19 @@ def test_calibrates_conditions_are_refused_naming_the_option_with_the_recorded_r
     options = {p.name: p for p in typer.main.get_command(app).get_command(None, "calibrate").params}
     for name, field in (("frequency", "frequency_hz"), ("amplitude", "amplitude_v"), ("temperature", "temperature_c")):
         assert (options[name].min, options[name].max) == _CONDITION_RANGES[field]
+
+
+def test_confirm_s_and_rate_help_say_the_ranges_that_are_checked(tmp_path):
+    from stickslip.cli.reference import render
+
+    page = render()
+    for cmd in ("demo", "traverse", "listen"):
+        section = page.split(f"## `stickslip {cmd}`")[1].split("\n## ")[0]
+        (row,) = [ln for ln in section.splitlines() if ln.startswith("| `--confirm-s`")]
+        assert "0-5 s" in row, row
+    for cmd in ("tune", "listen"):
+        section = page.split(f"## `stickslip {cmd}`")[1].split("\n## ")[0]
+        (row,) = [ln for ln in section.splitlines() if ln.startswith("| `--rate`")]
+        assert "1-100000 Hz" in row, row
+    _bad(runner.invoke(app, ["demo", "--confirm-s", "5.1", "--json"]), "outside [0, 5]")
+    _bad(runner.invoke(app, ["listen", str(tmp_path / "x.wav"), "--tuning", "t.json", "--rate", "100001"]), "1-100000")

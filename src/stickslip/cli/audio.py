@@ -138,7 +138,8 @@ def tune(
         None,
         "--rate",
         help=(
-            "The step rate the controller commanded while recording, Hz ('stickslip record' writes it in the label): "
+            "The step rate the controller commanded while recording, 1-100000 Hz ('stickslip record' writes it in the "
+            "label): "
             "where another instrument steps in bursts at another rate, its pieces are left out (without it, refused)."
         ),
         show_default=False,
@@ -228,7 +229,7 @@ def listen(
         None,
         "--confirm-s",
         help=(
-            "Report a stop only once it persisted this long after the detector fired, s (default 0.5: a real stop "
+            "Report a stop only once it persisted this long after the detector fired, 0-5 s (default 0.5: a real stop "
             "lasts, interference does not); events then appear this much later. 0: every fire, at once."
         ),
         show_default=False,
@@ -256,7 +257,8 @@ def listen(
         None,
         "--rate",
         help=(
-            "The step rate the controller commanded, Hz (a traverse tells the detector the same): the step clock is "
+            "The step rate the controller commanded, 1-100000 Hz (a traverse tells the detector the same): the step "
+            "clock is "
             "heard near it, and a stop is known at rates up to 25 % from the tuning's (without it, 12 %)."
         ),
         show_default=False,
