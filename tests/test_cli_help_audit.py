@@ -108,6 +108,8 @@ def test_calibrate_refuses_drift_without_the_prior_it_belongs_to(tmp_path):
     _bad(runner.invoke(app, ["calibrate", str(meas), "--drift", "0.3", "--json"]), "--drift", "--prior")
     prior = tmp_path / "prior.json"
     assert runner.invoke(app, ["calibrate", str(meas), "-o", str(prior)]).exit_code == 0
+    r = runner.invoke(app, ["calibrate", str(meas), "--prior", str(prior), "--drift", "0", "--json"])
+    _bad(r, "--drift must be above 0")  # named as the option, as its help says: above 0
     import dataclasses
 
     today = tmp_path / "today.csv"  # steps 10 % shorter than the prior's: how far the update goes depends on --drift

@@ -188,8 +188,8 @@ def calibrate_cmd(
     drift: Annotated[
         float | None,
         typer.Option(
-            help="With --prior: prior standard deviation of a day's change of step scale (relative; default "
-            "0.15).",
+            help="With --prior: prior standard deviation of a day's change of step scale (relative, above 0; "
+            "default 0.15).",
             show_default=False,
         ),
     ] = None,
@@ -271,8 +271,7 @@ def calibrate_cmd(
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
     if not (math.isfinite(max_table_mb) and max_table_mb > 0):
         fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
-    if drift is not None and prior is None:
-        fail("--drift is the prior's day-to-day change of step scale: it goes with --prior (else unused)")
+    _check_drift(drift, prior)
     if check is not None and (prior is not None or step_sizes is not None):
         fail("--check scales the intervals of a calibration made from the table: not with --prior or --step-sizes")
     if rig_file is not None:
@@ -332,6 +331,14 @@ def _warn_if_pooled(traverses: list[Traverse], day: str) -> None:
         warn_later(f"the table holds traverses of {len(days)} sessions ({shown}), fitted as one and dated {day}: "
                    "a day's change of step size is taken for model error (the paper found it significant); "
                    "calibrate each session from its own traverses, or today's with --prior yesterday's calibration")
+
+
+def _check_drift(drift: float | None, prior: Path | None) -> None:
+    """``--drift``: with --prior only (else it would be taken and not used), and above 0."""
+    if drift is not None and prior is None:
+        fail("--drift is the prior's day-to-day change of step scale: it goes with --prior (else unused)")
+    if drift is not None and not (math.isfinite(drift) and drift > 0):
+        fail(f"--drift must be above 0 (a relative standard deviation, 0.15 = 15 %), got {drift:g}")
 
 
 def _updated(prior: Path, traverses: list[Traverse], drift: float | None, day: str | None, source: str,
