@@ -112,7 +112,7 @@ def _names(param: Any) -> str:
 def shown_default(param: Any) -> object | None:
     """The default ``--help`` (and docs/cli.md) shows for ``param``, or ``None``: none for a flag, a computed
     default, ``show_default=False`` (its help says it), or an empty one; a default of 0 is shown (0 == False)."""
-    default = param.default
+    default: object = param.default
     if getattr(param, "show_default", True) is False or getattr(param, "is_flag", False) or callable(default):
         return None
     if default is None or default is False or (isinstance(default, (str, tuple, list)) and not default):
