@@ -333,3 +333,17 @@ def test_confirm_s_and_rate_help_say_the_ranges_that_are_checked(tmp_path):
         assert "1-100000 Hz" in row, row
     _bad(runner.invoke(app, ["demo", "--confirm-s", "5.1", "--json"]), "outside [0, 5]")
     _bad(runner.invoke(app, ["listen", str(tmp_path / "x.wav"), "--tuning", "t.json", "--rate", "100001"]), "1-100000")
+
+
+def test_move_to_max_is_planned_to_the_stops_position_as_its_help_says_not_referenced(tmp_path):
+    from stickslip.cli.reference import render
+
+    assert "'min'/'max' = an end stop's position, planned as any other (not driven into the stop" in render()
+    meas, cal, db = tmp_path / "meas.csv", tmp_path / "cal.json", str(tmp_path / "s.db")
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert runner.invoke(app, ["calibrate", str(meas), "-o", str(cal)]).exit_code == 0
+    r = runner.invoke(app, ["move", "-d", "sim://", "-c", str(cal), "-j", "3", "--to", "max", "--db", db, "--json"])
+    assert r.exit_code == 0, r.output
+    (j3,) = [j for j in json.loads(runner.invoke(app, ["where", "-d", "sim://", "--db", db, "--offline",
+                                                       "--json"]).stdout)["joints"] if j["joint"] == 3]  # fmt: skip
+    assert j3["source"] == "dead-reckoned" and j3["q"] == 0.012 and j3["sd"] > 1e-4  # planned (σ 0.9 mm)
