@@ -347,3 +347,19 @@ def test_move_to_max_is_planned_to_the_stops_position_as_its_help_says_not_refer
     (j3,) = [j for j in json.loads(runner.invoke(app, ["where", "-d", "sim://", "--db", db, "--offline",
                                                        "--json"]).stdout)["joints"] if j["joint"] == 3]  # fmt: skip
     assert j3["source"] == "dead-reckoned" and j3["q"] == 0.012 and j3["sd"] > 1e-4  # planned (σ 0.9 mm)
+
+
+def test_tunes_sample_rate_help_names_no_option_tune_lacks_and_says_the_checked_range(tmp_path):
+    from stickslip.cli.reference import render
+
+    page = render()
+    tune = page.split("## `stickslip tune`")[1].split("\n## ")[0]
+    (row,) = [ln for ln in tune.splitlines() if ln.startswith("| `--sample-rate`")]
+    assert "--serial" not in row and "the tuning's" not in row and "1000-1000000 Hz" in row, row
+    assert "| `--serial`" not in tune  # the option the old text named
+    listen = page.split("## `stickslip listen`")[1].split("\n## ")[0]
+    assert "1000-1000000 Hz" in [ln for ln in listen.splitlines() if ln.startswith("| `--sample-rate`")][0]
+    csv = tmp_path / "a.csv"
+    csv.write_text("0.1\n0.2\n")
+    r = runner.invoke(app, ["tune", str(csv), "--stop-at", "1", "--sample-rate", "999", "-o", str(tmp_path / "t.json")])
+    _bad(r, "sample rate 999 Hz is outside 1000-1000000 Hz")

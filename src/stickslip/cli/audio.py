@@ -19,8 +19,13 @@ from ._output import CARRIAGE_RETURN, data_stream, styled
 _CSV_SUFFIXES = (".csv", ".txt")
 
 _SAMPLE_RATE_HELP = (
-    "Samples per second, Hz, of a CSV of vibration samples that does not say it (a '# sample_rate_hz=...' line "
-    "or a time_s column), or of a --serial sensor (default: the tuning's). WAV files carry their own."
+    "Samples per second, 1000-1000000 Hz, of a CSV of vibration samples that does not say it (a "
+    "'# sample_rate_hz=...' line or a time_s column), or of a --serial sensor (default: the tuning's). WAV files "
+    "carry their own."
+)
+_TUNE_SAMPLE_RATE_HELP = (  # tune has no --serial, and no tuning yet to take a rate from
+    "Samples per second, 1000-1000000 Hz, of a CSV of vibration samples that does not say it (a "
+    "'# sample_rate_hz=...' line or a time_s column): needed for such a CSV. WAV files carry their own."
 )
 
 
@@ -131,7 +136,7 @@ def tune(
         "--self-check/--no-self-check",
         help="Check the tuning on the recording with knocks, babble, +-20 dB gain and a second click train added.",
     ),
-    sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
+    sample_rate: float = typer.Option(None, "--sample-rate", help=_TUNE_SAMPLE_RATE_HELP, show_default=False),
     channel: int = typer.Option(None, "--channel", help=_CHANNEL_HELP, show_default=False),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
     step_rate: float | None = typer.Option(
