@@ -363,3 +363,21 @@ def test_tunes_sample_rate_help_names_no_option_tune_lacks_and_says_the_checked_
     csv.write_text("0.1\n0.2\n")
     r = runner.invoke(app, ["tune", str(csv), "--stop-at", "1", "--sample-rate", "999", "-o", str(tmp_path / "t.json")])
     _bad(r, "sample rate 999 Hz is outside 1000-1000000 Hz")
+
+
+def test_step_sizes_of_a_joint_the_prior_lacks_are_refused_with_a_way_that_works(tmp_path):
+    from stickslip.measurements import StepSize, write_step_sizes
+
+    meas, prior, steps = tmp_path / "meas.csv", tmp_path / "prior.json", tmp_path / "steps.csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert runner.invoke(app, ["calibrate", str(meas), "-o", str(prior)]).exit_code == 0
+    pose = dict(q1=0.0, q2=-1.5707963267948966, q3=0.0, theta=0.0, psi=0.0)
+    rows = [StepSize(day="2026-11-22", joint=j, direction=d, gamma=g, sigma=g * 0.004, steps=87, method="camera",
+                     **pose) for j, g in ((3, 9.7e-7), (1, 4.8e-5)) for d in "+-"]  # fmt: skip
+    write_step_sizes(steps, rows)  # what camera calibrate writes with its default --joints 3,1,2 at this pose
+    cmd = ["calibrate", "--prior", str(prior), "--step-sizes", str(steps), "--json"]
+    _bad(runner.invoke(app, cmd), "no model for joint 1+, joint 1-", "camera calibrate --joints 3,2")
+    write_step_sizes(steps, [r for r in rows if r.joint != 1])  # as the message says: it works
+    assert runner.invoke(app, cmd).exit_code == 0
+    help_text = runner.invoke(app, ["calibrate", "--help"], env={"COLUMNS": "120"}).stdout
+    assert "measure with camera calibrate --joints 3,2" in " ".join(help_text.split())

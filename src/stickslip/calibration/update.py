@@ -303,7 +303,8 @@ def _check_prior_has(prior: Calibration, groups: dict[tuple[int, str], list[Trav
         raise CalibrationError(
             "the prior calibration has no model for "
             + ", ".join(f"joint {j}{d}" for j, d in missing)
-            + f" (it has: {have}); calibrate those from scratch"
+            + f" (it has: {have}); calibrate those from their own traverses, or leave their rows out (a camera's "
+            "step sizes: stickslip camera calibrate --joints 3,2 measures no joint 1)"
         )
 
 

@@ -117,7 +117,8 @@ def calibrate_cmd(
         typer.Option(
             "--step-sizes",
             help="Step sizes measured at poses (CSV from 'stickslip camera calibrate -o'): fitted beside the "
-            "traverses, each weighted by its uncertainty.",
+            "traverses, each weighted by its uncertainty. Each joint needs a model: with --prior the prior's "
+            "(an MM3A's has joints 2 and 3: measure with camera calibrate --joints 3,2), else traverses of it.",
         ),
     ] = None,
     check: Annotated[
