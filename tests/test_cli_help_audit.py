@@ -381,3 +381,25 @@ def test_step_sizes_of_a_joint_the_prior_lacks_are_refused_with_a_way_that_works
     assert runner.invoke(app, cmd).exit_code == 0
     help_text = runner.invoke(app, ["calibrate", "--help"], env={"COLUMNS": "120"}).stdout
     assert "measure with camera calibrate --joints 3,2" in " ".join(help_text.split())
+
+
+def test_calibrates_notes_wrap_at_spaces_with_later_lines_indented_as_results_do(tmp_path):
+    import dataclasses
+
+    meas = tmp_path / "meas.csv"  # more than the paper's poses: the families' notes
+    meas.write_text(measurements_to_csv([*paper_table(), *(dataclasses.replace(t, psi=0.3) for t in paper_table())]))
+    from stickslip.cli._output import console
+
+    r = runner.invoke(app, ["calibrate", str(meas)], env={"COLUMNS": "60"})
+    assert r.exit_code == 0, r.output
+    width = console.width  # the width it printed at (60, or what an earlier test left the shared console at)
+    notes = json.loads(runner.invoke(app, ["calibrate", str(meas), "--json"]).stdout)["provenance"]["notes"]
+    lines = r.stdout.splitlines()
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("note: ")]
+    assert len(starts) == len(notes) and any(len(n) + 6 > width for n in notes)
+    for i, note in zip(starts, notes, strict=True):
+        k = i + 1
+        while k < len(lines) and lines[k].startswith("  "):
+            k += 1
+        assert all(len(ln) <= width for ln in lines[i:k])  # within the width, later lines indented
+        assert " ".join(" ".join(lines[i:k]).split()) == " ".join(f"note: {note}".split())  # no word cut or lost

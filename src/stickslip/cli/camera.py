@@ -27,6 +27,7 @@ from ._common import (
     fail,
     open_store,
     print_json,
+    say,
     user_errors,
     warn,
 )
@@ -463,7 +464,7 @@ def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> 
                       f"{100 * s.sigma / s.gamma:.2f} %", str(s.steps), f"{100 * s.visibility:.0f} %")
     console.print(t)
     for n in result.notes:
-        console.print(styled("note:", "dim"), n, highlight=False)
+        say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     for jr in result.joints:
         if jr.refused:
             console.print(styled("refused:", "yellow"), jr.refused, highlight=False)

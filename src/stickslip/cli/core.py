@@ -44,7 +44,7 @@ from ._common import (
     warn,
     warn_later,
 )
-from ._output import data_stream, styled
+from ._output import data_stream
 
 CalibrationOpt = Annotated[
     Path | None,
@@ -317,7 +317,7 @@ def calibrate_cmd(
     if cal.selection:
         console.print(_selection_table(cal))
     for n in cal.provenance.notes:
-        console.print(styled("note:", "dim"), n, highlight=False)
+        say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     if output is not None:
         say(f"saved to {output}")
     if kept is not None:
@@ -429,7 +429,7 @@ def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output
                   str(cal.constant_traverses.get((j, d), "")), unit)
     console.print(t)
     for n in cal.provenance.notes:
-        console.print(styled("note:", "dim"), n, highlight=False)
+        say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     if output is not None:
         say(f"saved to {output}")
 
