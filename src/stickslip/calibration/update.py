@@ -303,7 +303,8 @@ def _check_prior_has(prior: Calibration, groups: dict[tuple[int, str], list[Trav
         raise CalibrationError(
             "the prior calibration has no model for "
             + ", ".join(f"joint {j}{d}" for j, d in missing)
-            + f" (it has: {have}); calibrate those from scratch"
+            + f" (it has: {have}); calibrate those from their own traverses, or leave their rows out (a camera's "
+            "step sizes: stickslip camera calibrate --joints 3,2 measures no joint 1)"
         )
 
 
@@ -370,6 +371,6 @@ def _update_joint(
         if n_new:
             state.updates.append(ScaleUpdate(j, d, n_new, factor, sd))
         state.notes.append(
-            f"joint {j}{d}: step scale x{factor:.4f} (± {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
+            f"joint {j}{d}: step scale x{factor:.4f} (σ {sd * 100:.2g} %), load sensitivity x{1 + lam:.4f}, "
             f"from {n_new} traverse(s)" + (" (prior model error assumed)" if assumed else "")
         )

@@ -16,7 +16,7 @@ from typing import Any
 
 from typer.core import TyperCommand
 
-__all__ = ["HelpCommand", "help_width", "metavar_of", "wrap"]
+__all__ = ["HelpCommand", "help_width", "metavar_of", "range_of", "shown_default", "wrap"]
 
 MAX_WIDTH = 100
 """Help is laid out for the terminal's width, at most this many columns (long lines read badly)."""
@@ -89,7 +89,8 @@ def metavar_of(param: Any) -> str:
     return "<text>"
 
 
-def _range_of(param: Any) -> str:
+def range_of(param: Any) -> str:
+    """The range --help shows for a number option (its typer min and max): ``1 to 65535``, ``>= 0``, or ""."""
     lo, hi = getattr(param, "min", None), getattr(param, "max", None)
     if lo is None and hi is None:
         return ""
@@ -108,18 +109,25 @@ def _names(param: Any) -> str:
     return f"{label} {meta}".rstrip()
 
 
+def shown_default(param: Any) -> object | None:
+    """The default ``--help`` (and docs/cli.md) shows for ``param``, or ``None``: none for a flag, a computed
+    default, ``show_default=False`` (its help says it), or an empty one; a default of 0 is shown (0 == False)."""
+    default: object = param.default
+    if getattr(param, "show_default", True) is False or getattr(param, "is_flag", False) or callable(default):
+        return None
+    if default is None or default is False or (isinstance(default, (str, tuple, list)) and not default):
+        return None
+    return default
+
+
 def _description(param: Any) -> str:
     text = _plain(getattr(param, "help", None) or "")
     extras = []
-    rng = _range_of(param)
+    rng = range_of(param)
     if rng:
         extras.append(rng)
-    default = param.default
-    show = getattr(param, "show_default", True)
-    if (
-        show is not False and default not in (None, False, (), "")
-        and not getattr(param, "is_flag", False) and not callable(default)
-    ):
+    default = shown_default(param)
+    if default is not None:
         extras.append(f"default: {default}")
     if param.required:
         extras.append("required")

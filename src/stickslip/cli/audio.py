@@ -31,8 +31,13 @@ from ._output import CARRIAGE_RETURN, data_stream, styled
 _CSV_SUFFIXES = (".csv", ".txt")
 
 _SAMPLE_RATE_HELP = (
-    "Samples per second, Hz, of a CSV of vibration samples that does not say it (a '# sample_rate_hz=...' line "
-    "or a time_s column), or of a --serial sensor (default: the tuning's). WAV files carry their own."
+    "Samples per second, 1000-1000000 Hz, of a CSV of vibration samples that does not say it (a "
+    "'# sample_rate_hz=...' line or a time_s column), or of a --serial sensor (default: the tuning's). WAV files "
+    "carry their own."
+)
+_TUNE_SAMPLE_RATE_HELP = (  # tune has no --serial, and no tuning yet to take a rate from
+    "Samples per second, 1000-1000000 Hz, of a CSV of vibration samples that does not say it (a "
+    "'# sample_rate_hz=...' line or a time_s column): needed for such a CSV. WAV files carry their own."
 )
 
 
@@ -143,14 +148,15 @@ def tune(
         "--self-check/--no-self-check",
         help="Check the tuning on the recording with knocks, babble, +-20 dB gain and a second click train added.",
     ),
-    sample_rate: float = typer.Option(None, "--sample-rate", help=_SAMPLE_RATE_HELP, show_default=False),
+    sample_rate: float = typer.Option(None, "--sample-rate", help=_TUNE_SAMPLE_RATE_HELP, show_default=False),
     channel: int = typer.Option(None, "--channel", help=_CHANNEL_HELP, show_default=False),
     json_out: bool = typer.Option(False, "--json", help="Print the tuning as JSON."),
     step_rate: float | None = typer.Option(
         None,
         "--rate",
         help=(
-            "The step rate the controller commanded while recording, Hz ('stickslip record' writes it in the label): "
+            "The step rate the controller commanded while recording, 1-100000 Hz ('stickslip record' writes it in the "
+            "label): "
             "where another instrument steps in bursts at another rate, its pieces are left out (without it, refused)."
         ),
         show_default=False,
@@ -240,7 +246,7 @@ def listen(
         None,
         "--confirm-s",
         help=(
-            "Report a stop only once it persisted this long after the detector fired, s (default 0.5: a real stop "
+            "Report a stop only once it persisted this long after the detector fired, 0-5 s (default 0.5: a real stop "
             "lasts, interference does not); events then appear this much later. 0: every fire, at once."
         ),
         show_default=False,
@@ -268,7 +274,8 @@ def listen(
         None,
         "--rate",
         help=(
-            "The step rate the controller commanded, Hz (a traverse tells the detector the same): the step clock is "
+            "The step rate the controller commanded, 1-100000 Hz (a traverse tells the detector the same): the step "
+            "clock is "
             "heard near it, and a stop is known at rates up to 25 % from the tuning's (without it, 12 %)."
         ),
         show_default=False,
@@ -299,6 +306,8 @@ def listen(
 
     if (recording is not None) + mic + (serial_port is not None) != 1:
         fail("give one of: a recording REC.wav, --mic, or --serial PORT")
+    if audio_input is not None and not mic:
+        fail("--input picks the sound card --mic listens to; a recording or --serial sensor has none")
     _check_sample_rate(sample_rate)
     _check_step_rate(step_rate)
     try:
@@ -533,8 +542,13 @@ def record(
     key: bool = typer.Option(
         False, "--key", help="Real controller: label the stop by pressing Enter when you hear it."
     ),
-    before: float = typer.Option(2.0, "--before", help="Simulator: seconds of stepping before the stop."),
-    after: float = typer.Option(1.0, "--after", help="Simulator: seconds against the stop."),
+    before: float | None = typer.Option(
+        None, "--before", help="Simulator: seconds of stepping before the stop, 0.3-60 (default 2).",
+        show_default=False,
+    ),
+    after: float | None = typer.Option(
+        None, "--after", help="Simulator: seconds against the stop, 0.3-60 (default 1).", show_default=False
+    ),
     tune_out: Path = typer.Option(None, "--tune", help="Also tune from the recording and write the tuning here."),
     json_out: bool = typer.Option(False, "--json", help="Print the label (and tuning) as JSON."),
     db: str | None = db_option(
@@ -578,11 +592,17 @@ def record(
             if isinstance(ctrl, SimulatedMM3A):  # the simulator labels its own stop
                 if serial_port is not None:
                     fail("--serial records a sensor beside a real controller; the simulator renders its own sound")
+                _not_on_simulator(steps=steps, stop_at_step=stop_at_step, key=key or None, input=audio_input,
+                                  sample_rate=sample_rate)
+                before, after = 2.0 if before is None else before, 1.0 if after is None else after
                 if not (0.3 <= before <= 60 and 0.3 <= after <= 60):
                     fail("--before and --after must be 0.3-60 s")
                 samples, rate, stop_at = ctrl.labelled_recording(joint, sign_label, before_s=before, after_s=after)
                 how = "the simulator's stop time"
             else:
+                if before is not None or after is not None:
+                    fail("--before and --after place the simulator's joint; a real controller steps --steps steps, "
+                         "labelled by --stop-at-step or --key")
                 if serial_port is not None and audio_input is not None:
                     fail("give --input (a sound card) or --serial (a vibration sensor), not both")
                 if (serial_port is None) != (sample_rate is None):
@@ -604,6 +624,16 @@ def record(
         finally:
             ctrl.close()
     _finish_recording(out, samples, rate, float(stop_at), how, joint, sign_label, tune_out, json_out, hz)
+
+
+def _not_on_simulator(**given: object) -> None:
+    """Refuse (one line, exit 2) a real controller's option given for the simulator, where it would do nothing."""
+    names = [f"--{k.replace('_', '-')}" for k, v in given.items() if v is not None]
+    if names:
+        fail(
+            f"{', '.join(names)}: {'a real controller option' if len(names) == 1 else 'real controller options'}; "
+            "the simulator places the joint --before seconds from its stop and labels the stop itself"
+        )
 
 
 @contextmanager

@@ -27,6 +27,7 @@ from ._common import (
     fail,
     open_store,
     print_json,
+    say,
     user_errors,
     warn,
 )
@@ -240,10 +241,16 @@ def calibrate_cmd(
         help="Most steps each way (fewer if the tip would leave a third of the field).",
     ),
     view_tilt: str | None = typer.Option(
-        None, "--view-tilt", help="Optical axis from the vertical: 0 (looking down), 52deg."
+        None, "--view-tilt",
+        help="Optical axis from the vertical, an angle in 0-90deg: 0 (looking down, the default), 52deg.",
     ),
-    view_azimuth: str | None = typer.Option(None, "--view-azimuth", help="Direction the optical axis leans to."),
-    view_roll: str | None = typer.Option(None, "--view-roll", help="The image's turn about the optical axis."),
+    view_azimuth: str | None = typer.Option(
+        None, "--view-azimuth",
+        help="Direction the optical axis leans to, an angle from the world x axis towards y (default 0).",
+    ),
+    view_roll: str | None = typer.Option(
+        None, "--view-roll", help="The image's turn about the optical axis, an angle (default 0)."
+    ),
     output: Path | None = typer.Option(
         None, "--output", "-o", help="Write the step sizes (CSV, for stickslip calibrate --step-sizes)."
     ),
@@ -301,9 +308,10 @@ def calibrate_cmd(
         with device_lock(store, key):
             with user_errors():
                 state = load_state(store, key)
-                _journal_camera_calibration(store, key, order if at is not None else (*order, auto_joint))
 
             def measure(dev: Controller, cam: Camera, progress: Callable[[int, int], None]) -> CameraCalibrationResult:
+                with user_errors():  # both opened: the joints about to step are kept uncertain first
+                    _journal_camera_calibration(store, key, order if at is not None else (*order, auto_joint))
                 return calibrate_camera(
                     dev, cam, state.pose, order, tip=at, view=view, day=label, auto_joint=auto_joint,
                     auto_steps=auto_steps, max_steps=max_steps, progress=progress,
@@ -467,7 +475,7 @@ def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> 
                       f"{100 * s.sigma / s.gamma:.2f} %", str(s.steps), f"{100 * s.visibility:.0f} %")
     console.print(t)
     for n in result.notes:
-        console.print(styled("note:", "dim"), n, highlight=False)
+        say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     for jr in result.joints:
         if jr.refused:
             console.print(styled("refused:", "yellow"), jr.refused, highlight=False)

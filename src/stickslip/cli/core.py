@@ -44,7 +44,7 @@ from ._common import (
     warn,
     warn_later,
 )
-from ._output import data_stream, styled
+from ._output import data_stream
 
 CalibrationOpt = Annotated[
     Path | None,
@@ -117,7 +117,8 @@ def calibrate_cmd(
         typer.Option(
             "--step-sizes",
             help="Step sizes measured at poses (CSV from 'stickslip camera calibrate -o'): fitted beside the "
-            "traverses, each weighted by its uncertainty.",
+            "traverses, each weighted by its uncertainty. Each joint needs a model: with --prior the prior's "
+            "(an MM3A's has joints 2 and 3: measure with camera calibrate --joints 3,2), else traverses of it.",
         ),
     ] = None,
     check: Annotated[
@@ -125,7 +126,9 @@ def calibrate_cmd(
         typer.Option(
             "--check",
             help="Check traverses (a measurement table): at random poses (none of the calibration's), measured "
-            "after the table's and not fitted; how they erred scales each joint's intervals (docs/models.md §4).",
+            "after the table's and not fitted; how they erred scales each joint's intervals (docs/models.md §4). "
+            "The table needs more traverses than the paper's 14 poses: the paper's procedure alone has no "
+            "intervals to scale (refused).",
         ),
     ] = None,
     method: Annotated[
@@ -149,13 +152,19 @@ def calibrate_cmd(
         ),
     ] = None,
     db: str | None = db_option(),
-    frequency: Annotated[
-        float | None, typer.Option(help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).")
+    frequency: Annotated[  # the ranges are calibration.result's _CONDITION_RANGES (a test holds them equal)
+        float | None,
+        typer.Option(
+            help="Stepping frequency of the traverses, Hz (recorded; move warns on a change).", min=0.001, max=1e6
+        ),
     ] = None,
     amplitude: Annotated[
-        float | None, typer.Option(help="Drive amplitude of the traverses, V (recorded; move warns on a change).")
+        float | None,
+        typer.Option(help="Drive amplitude of the traverses, V (recorded; move warns on a change).", min=0, max=1000),
     ] = None,
-    temperature: Annotated[float | None, typer.Option(help="Temperature during the traverses, °C (recorded).")] = None,
+    temperature: Annotated[
+        float | None, typer.Option(help="Temperature during the traverses, °C (recorded).", min=-273.15, max=500)
+    ] = None,
     model: Annotated[
         str,
         typer.Option(
@@ -178,8 +187,13 @@ def calibrate_cmd(
         ),
     ] = None,
     drift: Annotated[
-        float, typer.Option(help="With --prior: prior standard deviation of a day's change of step scale (relative).")
-    ] = 0.15,
+        float | None,
+        typer.Option(
+            help="With --prior: prior standard deviation of a day's change of step scale (relative, above 0; "
+            "default 0.15).",
+            show_default=False,
+        ),
+    ] = None,
     max_table_mb: Annotated[
         float,
         typer.Option(
@@ -246,7 +260,7 @@ def calibrate_cmd(
 
     Example: stickslip calibrate --prior yesterday.json --step-sizes camera.csv -o today.json
 
-    Example: stickslip calibrate day1.csv --check check1.csv -o cal.json
+    Example: stickslip calibrate day1-and-sweep.csv --check check1.csv -o cal.json
 
     Example: stickslip calibrate stack.csv --rig lab.toml --arm gripper -o cal/gripper.json
     """
@@ -258,6 +272,7 @@ def calibrate_cmd(
         fail("give a measurement table (MEASUREMENTS.csv); it may be left out only with --step-sizes and --prior")
     if not (math.isfinite(max_table_mb) and max_table_mb > 0):
         fail(f"--max-table-mb must be a positive number of MB, got {max_table_mb!r}")
+    _check_drift(drift, prior)
     if check is not None and (prior is not None or step_sizes is not None):
         fail("--check scales the intervals of a calibration made from the table: not with --prior or --step-sizes")
     if rig_file is not None:
@@ -302,7 +317,7 @@ def calibrate_cmd(
     if cal.selection:
         console.print(_selection_table(cal))
     for n in cal.provenance.notes:
-        console.print(styled("note:", "dim"), n, highlight=False)
+        say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     if output is not None:
         say(f"saved to {output}")
     if kept is not None:
@@ -319,16 +334,26 @@ def _warn_if_pooled(traverses: list[Traverse], day: str) -> None:
                    "calibrate each session from its own traverses, or today's with --prior yesterday's calibration")
 
 
-def _updated(prior: Path, traverses: list[Traverse], drift: float, day: str | None, source: str, steps: list[Any],
-             conditions: Conditions) -> Calibration:
+def _check_drift(drift: float | None, prior: Path | None) -> None:
+    """``--drift``: with --prior only (else it would be taken and not used), and above 0."""
+    if drift is not None and prior is None:
+        fail("--drift is the prior's day-to-day change of step scale: it goes with --prior (else unused)")
+    if drift is not None and not (math.isfinite(drift) and drift > 0):
+        fail(f"--drift must be above 0 (a relative standard deviation, 0.15 = 15 %), got {drift:g}")
+
+
+def _updated(prior: Path, traverses: list[Traverse], drift: float | None, day: str | None, source: str,
+             steps: list[Any], conditions: Conditions) -> Calibration:
     """``calibrate --prior``: the calibration in ``prior`` brought up to date (:mod:`stickslip.calibration.update`),
     with a warning queued for each :func:`_prior_problems`."""
     from ..calibration import Calibration
-    from ..calibration.update import update_calibration
+    from ..calibration.update import DRIFT_PRIOR, update_calibration
 
     with user_errors():
         old = Calibration.load(prior)
-    cal, _ = update_calibration(old, traverses, drift=drift, day=day, source=source, step_sizes=steps)
+    cal, _ = update_calibration(
+        old, traverses, drift=DRIFT_PRIOR if drift is None else drift, day=day, source=source, step_sizes=steps
+    )
     for w in _prior_problems(old, conditions, cal.day):
         warn_later(w)
     return cal
@@ -404,7 +429,7 @@ def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output
                   str(cal.constant_traverses.get((j, d), "")), unit)
     console.print(t)
     for n in cal.provenance.notes:
-        console.print(styled("note:", "dim"), n, highlight=False)
+        say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     if output is not None:
         say(f"saved to {output}")
 

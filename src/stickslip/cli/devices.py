@@ -110,7 +110,8 @@ def move(
     ),
     to: str | None = typer.Option(
         None, "--to", metavar="<length|angle>",
-        help="Move to this position (units as --by); 'min'/'max' = an end stop.",
+        help="Move to this position (units as --by); 'min'/'max' = an end stop's position, planned as any other "
+        "(not driven into the stop, nor referenced there: raw --steps and where --set do that).",
     ),
     steps: int | None = typer.Option(
         None, "--steps", metavar="<steps>",

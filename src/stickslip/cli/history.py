@@ -27,7 +27,7 @@ from ._common import (
     warn,
     warn_later,
 )
-from ._output import styled, visible
+from ._output import err_console, styled, visible
 
 if TYPE_CHECKING:
     from ..analysis import AnovaResult
@@ -63,15 +63,23 @@ def _traverses_from(
 def history(
     device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
     db: str | None = db_option(),
-    json_out: bool = typer.Option(False, "--json", help="Print a JSON list, one object per device and day."),
+    json_out: bool = typer.Option(
+        False, "--json", help="Print a JSON list, one object per device and day, with its traverse_ids."
+    ),
 ) -> None:
     """Show stored sessions: traverses per day and joint, and calibrations made.
+
+    With --json each device and day also lists its traverse_ids (excluded ones too): the ids
+    that exclude and delete take.
 
     Example: [bold]stickslip history --device sim://[/]
     """
     with open_store(db, must_exist=True) as st:
         entries = st.history(device)
         path = st.path
+        if json_out:  # the ids exclude -t and delete -t take (export's table has none)
+            for e in entries:
+                e["traverse_ids"] = st.traverse_ids(device=e["device"], day=e["day"])
     if json_out:
         print_json(entries)
         return
@@ -197,6 +205,9 @@ def exclude(
 ) -> None:
     """Exclude stored traverses from calibration and analyses (kept, with the reason), or --undo.
 
+    Ids are in `stickslip history --json` (traverse_ids of each device and day) and
+    `stickslip import --json`.
+
     Example: [bold]stickslip exclude -t 12 -t 13 --reason "arm touched the sample"[/]
     """
     if undo == (reason is not None):
@@ -205,6 +216,22 @@ def exclude(
         n = st.set_excluded(traverse, None if undo else reason)
     console.print(f"{'included' if undo else 'excluded'} {n} traverse(s)", highlight=False)
 
+
+
+def _confirmed(question: str) -> bool:
+    """Ask ``question [y/N]`` on stderr and read the answer from stdin: y or yes confirms.
+
+    The end of the input (a script without --yes, stdin not a terminal) is no answer, so
+    not confirmed (exit 1, as documented), never the "interrupted (Ctrl-C)" exit 130
+    typer's confirm made of it; Ctrl-C still ends in 130.
+    """
+    import sys
+
+    err_console.print(f"{question} [y/N]: ", end="", markup=False, highlight=False)
+    answer = sys.stdin.readline()
+    if not answer:
+        err_console.print()
+    return answer.strip().lower() in ("y", "yes")
 
 
 @app.command()
@@ -219,7 +246,8 @@ def delete(
     """Delete stored traverses (by id, or a whole session day), after confirmation.
 
     Calibrations made from them keep their parameters; only their links to the rows go.
-    Ids are in `stickslip export` and `stickslip history --json`.
+    Ids are in `stickslip history --json` (traverse_ids of each device and day) and
+    `stickslip import --json`.
 
     Example: [bold]stickslip delete --day 2026-11-22 --device sim:// --yes[/]
     """
@@ -232,7 +260,7 @@ def delete(
             if not ids:
                 fail(f"no stored traverses for day {day}" + (f" of {redact_url(device)}" if device else ""))
         what = f"{len(set(ids))} traverse(s)" + (f" of day {day}" if day else "")
-        if not yes and not typer.confirm(visible(f"delete {what} from {st.path}?"), default=False, err=True):
+        if not yes and not _confirmed(visible(f"delete {what} from {st.path}?")):
             fail("nothing deleted (not confirmed; --yes skips the question)", code=1)
         with user_errors():
             done = st.delete_traverses(ids)
@@ -405,7 +433,7 @@ def fit(
             fail(f"the traverses come from several devices ({', '.join(devices)}): pick one with --device")
         device = device or devices[0]
         ids = [int(r["id"]) for r in recs]
-    with user_errors(CalibrationError):
+    with user_errors(CalibrationError, KeyError):  # KeyError: an unknown --model family, named
         cal = calibrate(
             ts, method="lsq" if model == "paper" else "auto", day=day, source=str(meas) if meas else where,
             model=model,

@@ -73,7 +73,7 @@ def demo(
     confirm_s: float | None = typer.Option(
         None,
         "--confirm-s",
-        help="Audio switch: take a stop only once it persisted this long while the joint keeps stepping, s "
+        help="Audio switch: take a stop only once it persisted this long while the joint keeps stepping, 0-5 s "
         "(default 0.5; 0: the first fire). Costs this many seconds of stepping into each stop, not accuracy.",
         show_default=False,
     ),
@@ -246,11 +246,13 @@ def traverse_cmd(
     append: Path = typer.Option(None, "--append", "-a", help="Append the row to this measurement table (CSV)."),
     db: str | None = db_option(),
     use_db: bool = typer.Option(True, "--db-record/--no-db", help="Record the traverse into the database."),
-    burst: int = typer.Option(2000, "--burst", help="Steps per burst between checks of the limit switch."),
+    burst: int = typer.Option(
+        2000, "--burst", min=1, max=1_000_000, help="Steps per burst between checks of the limit switch."
+    ),
     confirm_s: float | None = typer.Option(
         None,
         "--confirm-s",
-        help="Take the stop only once it persisted this long while the joint keeps stepping, s (default 0.5: "
+        help="Take the stop only once it persisted this long while the joint keeps stepping, 0-5 s (default 0.5: "
         "interference that mimics the stop for a moment is passed by). Costs this many seconds x the step rate "
         "extra steps against the stop (2 s just after a fire that did not persist; harmless: the slider slips) and "
         "that much time, not accuracy: the count runs to the stop's onset. 0: the first fire is the stop.",

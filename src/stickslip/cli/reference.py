@@ -11,6 +11,8 @@ from typing import Any
 
 import typer
 
+from ._help import range_of, shown_default
+
 __all__ = ["render"]
 
 
@@ -20,9 +22,12 @@ def _param_line(p: Any) -> str:
         what = getattr(p, "help", None) or ""
         return f"| {name} | argument{'' if p.required else ', optional'} | {what} |"
     opts = ", ".join(f"`{o}`" for o in (*p.opts, *p.secondary_opts))
+    if p.metavar:  # what --help shows after the option: a unit (<days>) or a form (X,Y, J=FILE)
+        opts += " `" + p.metavar.replace("|", "\\|") + "`"
     what = (getattr(p, "help", None) or "").replace("|", "\\|").replace("\n", " ")
-    default = p.default if not callable(p.default) else None
-    shown = "" if default in (None, False, ()) or getattr(p, "is_flag", False) else f" (default: `{default}`)"
+    default = shown_default(p)  # as --help shows them: the range checked, the default
+    rng = range_of(p)
+    shown = (f" (range: {rng})" if rng else "") + ("" if default is None else f" (default: `{default}`)")
     return f"| {opts} | option | {what}{shown} |"
 
 

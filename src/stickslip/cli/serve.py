@@ -105,13 +105,17 @@ def serve(
     tuning: list[str] = typer.Option(  # noqa: B006 - typer's way to take a repeated option
         [], "--tuning", metavar="J=FILE",
         help="Limit-switch tuning of joint J (stickslip tune), for traverses and the calibration day; "
-        "repeat per joint. The simulator tunes itself.",
+        "repeat per joint. The simulator tunes itself.", show_default=False,
     ),
     geometry: str | None = typer.Option(
-        None, "--geometry", metavar="OFFSET,LENGTH", help="The arm's geometry (default: config file, else 0mm,21mm)."
+        None, "--geometry", metavar="OFFSET,LENGTH",
+        help="OFFSET,LENGTH of the arm, lengths with their units (as reach's --geometry; default: the config "
+        "file's, else 0mm,21mm).",
     ),
     max_age: int | None = typer.Option(
-        None, "--max-age", min=0, max=36500, metavar="<days>", help="Warn when the calibration is older."
+        None, "--max-age", min=0, max=36500, metavar="<days>",
+        help="Warn when the calibration is more than this many days old (default $STICKSLIP_MAX_AGE_DAYS, "
+        "else max_age_days in the config file, else 0).",
     ),
     token_file: Path | None = typer.Option(
         None, "--token-file", help="Where the token is kept (default: serve-token in your configuration folder)."

@@ -116,7 +116,7 @@ def reach(
     psi: float | None = typer.Option(None, "--psi", parser=angle_option, help="Record the base tilt psi."),
     geometry: str | None = typer.Option(None, "--geometry", help=_GEOMETRY_HELP),
     segment: float = typer.Option(
-        "10um", "--segment", parser=length_option, help="Longest segment of the line (length).",
+        "10um", "--segment", parser=length_option, help="Longest segment of the line, a length from 10nm to 1mm.",
     ),
     burst: int = typer.Option(1000, "--burst", min=1, max=65535, help="Most steps per burst."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Plan and print; send nothing, keep nothing."),
@@ -149,7 +149,7 @@ def reach(
     q1 = 0, z up the joint-1 axis), from the positions kept for the device (see
     `stickslip where`); --q1 --q2 --q3 --theta --psi record a new pose first.
 
-    The line is cut into segments (at most --segment, and at most 2 % of the move);
+    The line is cut into segments (at most --segment, and at most 2 % of the move but not under 50 nm);
     each segment's joint increments come from the inverse kinematics and its steps from
     the calibrated models in the current pose, scaled by each joint's step scale learned
     from measured positions (stickslip observe), as move plans, joints 1, 2, 3 in that
@@ -247,8 +247,26 @@ def _print_plan(result: ReachResult, json_out: bool, arm: Arm | None = None) -> 
 # ---------------------------------------------------------------- jog: the terminal part
 
 
+def _need_terminal() -> None:
+    """Refuse jog (one line, exit 2) when stdin is no terminal (POSIX: Windows reads the console itself)."""
+    import sys
+
+    if sys.platform != "win32" and not sys.stdin.isatty():
+        fail("jog needs a terminal: its keys are read from stdin, which is not a terminal here")
+
+
+def _ready_to_jog() -> None:
+    """The input is checked and the session about to start: a missing terminal is its last refusal, so it comes
+    before the queued warnings (a command that fails prints only its error)."""
+    if getattr(_Keys, "reads_the_terminal", False):  # a key source that stands in for the terminal needs none
+        _need_terminal()
+    flush_warnings()
+
+
 class _Keys:
     """Raw key input from the terminal: POSIX ``termios``/``tty`` (cbreak) or Windows ``msvcrt``."""
+
+    reads_the_terminal = True
 
     def __init__(self) -> None:
         import sys
@@ -260,8 +278,7 @@ class _Keys:
         import termios
         import tty
 
-        if not sys.stdin.isatty():
-            fail("jog needs a terminal: its keys are read from stdin, which is not a terminal here")
+        _need_terminal()
         self._fd = sys.stdin.fileno()
         self._saved = termios.tcgetattr(self._fd)
         tty.setcbreak(self._fd)  # keys at once, no echo; Ctrl-C still interrupts
@@ -471,7 +488,7 @@ def jog(
                 request = dataclasses.replace(request, guard=in_rig.guard(store), joints=in_rig.joints,
                                               stage=in_rig.stage, state_key=in_rig.state_key)
             result = jog_session(
-                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=flush_warnings,
+                store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=_ready_to_jog,
                 opener=None if in_rig is None else in_rig.opener,
             )
     finally:

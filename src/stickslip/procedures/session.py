@@ -28,7 +28,7 @@ from ..devices.positions import StateStore, load_state, save_state
 from ..measurements import Traverse, measurements_to_csv
 from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 from .move import Interrupted, LockStore, device_lock, kept_after_interrupt
-from .traverse import TraverseError, TraverseResult, measure_traverse
+from .traverse import TraverseError, TraverseResult, check_burst_steps, measure_traverse
 
 __all__ = [
     "RowNotAppended",
@@ -91,7 +91,8 @@ def traverse_on_device(
     tuning : Tuning
         The joint's limit-switch tuning.
     audio_input : str or int, optional
-        Sound-card input for a controller without a microphone of its own.
+        Sound-card input for a controller without a microphone of its own (``ValueError``
+        for the simulator, which hears itself: it would be taken and not used).
     progress : bool or callable
         ``True`` shows a progress bar; a callable gets ``(steps, device_s)`` after every
         burst (:func:`~.traverse.measure_traverse`).
@@ -109,6 +110,11 @@ def traverse_on_device(
         tuning was made at (:meth:`~stickslip.audio.tuningfile.Tuning.step_rate_problem`).
         Default: a :class:`StepRateWarning` (Python's ``warnings``).
     """
+    hears_itself = isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock)  # the simulator
+    if hears_itself and audio_input is not None:
+        raise ValueError(
+            f"--input {audio_input}: a sound card listens to a real controller; the simulator hears itself"
+        )
     rate_problem = tuning.step_rate_problem(float(ctrl.frequency(joint)), f"joint {joint} steps")
     if rate_problem is not None:
         on_warning(rate_problem)
@@ -123,7 +129,7 @@ def traverse_on_device(
         src = SerialSamples(serial_port, sample_rate=int(tuning.sample_rate))
         blocks: Any = src.blocks()
         close = src.close
-    elif isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):  # the simulator hears itself
+    elif isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock):  # hears_itself, narrowed for mypy
         t0 = float(ctrl.clock_s)
         blocks = ctrl.microphone()
     else:
@@ -254,6 +260,7 @@ def traverse(
     """
     if request.append is not None:
         check_append_target(request.append)  # before the joint moves: a traverse takes a while
+    check_burst_steps(request.burst)  # a bad burst is refused before the joint is journalled
     if store is None:
         result = _measure(request, progress, on_warning, opener)
     else:
@@ -261,10 +268,13 @@ def traverse(
         with device_lock(store, key):
             state = load_state(store, key)
             spec = kin.joint_spec(request.joint)
-            state.mark_uncertain(request.joint, spec.lower, spec.upper, "a traverse did not finish")
-            save_state(store, state)  # write-ahead: the joint may be anywhere until the stop is heard
+
+            def journal() -> None:  # write-ahead, once the device is open: the joint may be anywhere until the stop
+                state.mark_uncertain(request.joint, spec.lower, spec.upper, "a traverse did not finish")
+                save_state(store, state)
+
             try:
-                result = _measure(request, progress, on_warning, opener)
+                result = _measure(request, progress, on_warning, opener, journal)
             except KeyboardInterrupt:
                 what = f"traverse of joint {request.joint}{request.direction}"
                 raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
@@ -308,10 +318,14 @@ def _measure(
     progress: bool | Callable[[int, float], None],
     on_warning: Callable[[str], None],
     opener: Callable[[str], Controller] | None,
+    journal: Callable[[], None] | None = None,
 ) -> TraverseResult:
-    """Open the device, measure the traverse (:func:`traverse_on_device`), close it."""
+    """Open the device, ``journal()`` (the joint kept uncertain before it moves), measure the traverse
+    (:func:`traverse_on_device`), close it. A device that does not open leaves the kept position as it was."""
     ctrl = (opener or open_device)(request.device)
     try:
+        if journal is not None:
+            journal()
         return traverse_on_device(
             ctrl, request.joint, request.direction, request.pose, request.day, request.tuning,
             audio_input=request.audio_input, serial_port=request.serial_port, burst_steps=request.burst,

@@ -54,7 +54,10 @@ from ..measurements import Traverse
 from ..models import direction_label, direction_sign
 from ..units import step_scale
 
-__all__ = ["TraverseError", "TraverseResult", "measure_traverse", "MIN_STEP_PRIOR", "MAX_STEP_PRIOR", "LATENCY_MODES"]
+__all__ = [
+    "TraverseError", "TraverseResult", "check_burst_steps", "measure_traverse", "MIN_STEP_PRIOR", "MAX_STEP_PRIOR",
+    "LATENCY_MODES",
+]
 
 LATENCY_MODES = ("onset", "fixed", "none")
 
@@ -267,8 +270,10 @@ def _progress_callback(
         return progress, lambda: None
     if not progress:
         return (lambda steps, t: None), lambda: None
+    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
+    screen = Console(stderr=True)  # stdout carries the result alone (a bar there left a blank line in a pipe)
     bar = Progress(
         TextColumn(f"joint {joint} {direction}"),
         BarColumn(),
@@ -276,6 +281,8 @@ def _progress_callback(
         TextColumn("{task.fields[device]:>6.1f} s on the device"),
         TimeElapsedColumn(),
         transient=True,
+        console=screen,
+        disable=not screen.is_terminal,
     )
     bar.start()
     task = bar.add_task("traverse", total=expected, device=0.0)
@@ -415,13 +422,18 @@ def measure_traverse(
     return run.counted(event, t_start, latency, pose, day, predrive_steps, listen_after_steps)
 
 
+def check_burst_steps(burst_steps: object) -> None:
+    """``ValueError`` unless ``burst_steps`` is an integer in [1, 1000000] (steps per burst between listens)."""
+    if isinstance(burst_steps, bool) or not (isinstance(burst_steps, int) and 1 <= burst_steps <= 1_000_000):
+        raise ValueError(f"burst_steps = {burst_steps!r} is outside [1, 1000000]")
+
+
 def _check_options(latency: str, predrive: str, burst_steps: int, listen_after_steps: int) -> None:
     if latency not in LATENCY_MODES:
         raise ValueError(f"latency must be one of {', '.join(LATENCY_MODES)}, got {latency!r}")
     if predrive not in ("listen", "overdrive", "none"):
         raise ValueError(f"predrive must be 'listen', 'overdrive' or 'none', got {predrive!r}")
-    if isinstance(burst_steps, bool) or not (isinstance(burst_steps, int) and 1 <= burst_steps <= 1_000_000):
-        raise ValueError(f"burst_steps = {burst_steps!r} is outside [1, 1000000]")
+    check_burst_steps(burst_steps)
     if not (isinstance(listen_after_steps, int) and listen_after_steps >= 0):
         raise ValueError(f"listen_after_steps = {listen_after_steps!r} must be an integer >= 0")
 

@@ -184,7 +184,16 @@ def _cv2(what: str) -> Any:
             f"{what} needs OpenCV, which is not installed: pip install 'stickslip[opencv]' "
             "(the opencv-python-headless package)"
         ) from None
+    _quiet_opencv(cv2)
     return cv2
+
+
+def _quiet_opencv(cv2: Any) -> None:
+    """OpenCV's own warnings off stderr (``[ WARN:0] ... can't open camera by index`` before stickslip's one line
+    saying the same); its errors still show."""
+    log = getattr(getattr(cv2, "utils", None), "logging", None)
+    if log is not None and hasattr(log, "setLogLevel"):
+        log.setLogLevel(log.LOG_LEVEL_ERROR)
 
 
 class _CaptureCamera:
