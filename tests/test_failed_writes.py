@@ -546,13 +546,13 @@ def test_a_traverse_the_database_refuses_keeps_its_row(tmp_path, monkeypatch):
                                       row.day, Tuning(band_hz=(5600, 7100), threshold_db=-40.0), append=table)
     with Store.open(db) as st:
         real = sqlite_backend._Connection.execute
-        commits = {"n": 0}
+        row_written = {"yes": False}
 
         def full(self, sql, params=(), /):
-            if sql == "COMMIT":  # the lock and the journal are written; the disk fills before the row
-                commits["n"] += 1
-                if commits["n"] >= 3:
-                    raise sqlite3.OperationalError("database or disk is full")
+            if "INSERT INTO traverses" in sql:  # the lock and the journal were written; the disk fills with the row
+                row_written["yes"] = True
+            if sql == "COMMIT" and row_written["yes"]:
+                raise sqlite3.OperationalError("database or disk is full")
             return real(self, sql, params)
 
         monkeypatch.setattr(sqlite_backend._Connection, "execute", full)
