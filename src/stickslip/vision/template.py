@@ -471,6 +471,9 @@ class TipTemplate:
         apex = (x - cx + h, y - cy + h)
         noise = noise_sigma(image)
         mask, ground = _needle_mask(win, inside, apex, noise, params, (x, y))
+        through = _passes_through(mask, apex, h)
+        if through is not None:
+            raise TemplateError(f"the pixel ({x:g}, {y:g}) is on the needle's shaft, not at its end: {through}")
         level_weights = _level_weights(mask, inside, apex, params)
         weights = level_weights[0]
         shaft, core, ring_off, front = _surroundings(mask, inside, apex, params)
@@ -554,6 +557,34 @@ def _needle_mask(
             f"too little of a needle at the tip ({x:g}, {y:g}): {int(mask.sum())} px stand out: {_WHAT_TO_DO}"
         )
     return np.asarray(mask), (level, spread)
+
+
+def _passes_through(mask: NDArray[np.bool_], apex: tuple[float, float], h: int) -> str | None:
+    """Why the needle passes through the pixel given as its tip (it reaches the window's outer ring, 4 px wide, on
+    two opposite sides: directions more than 135 deg apart), or ``None``.
+
+    A pixel on the shaft learns a patch of two parallel edges: moved along its axis it looks the same, so every
+    later fix stays near the first while the tip moves on (4 px a frame tracked as 0.4 px, with the score of a
+    good fix). A tip's needle reaches the ring on one side only; blur and the rounded end stay within a few px.
+    """
+    ox, oy = _offsets(h, apex)
+    dist = np.hypot(ox, oy)
+    outer = mask & (dist >= h - 4) & (dist <= h)
+    if int(outer.sum()) < 2:
+        return None
+    u = np.stack([ox[outer], oy[outer]]) / dist[outer]
+    w, v = np.linalg.eigh(u @ u.T)  # the outer pixels' main direction through the pixel (either sense)
+    p = v[:, -1] @ u
+    lo, hi = float(p.min()), float(p.max())
+    if lo < -_OPPOSITE and hi > _OPPOSITE:
+        back = v[:, -1] * (1 if float(p.mean()) >= 0 else -1)
+        return (f"the needle continues beyond it, at least {h - 4} px towards ({-back[0]:+.2f}, {-back[1]:+.2f}) "
+                f"and back; {_WHAT_TO_DO}")
+    return None
+
+
+_OPPOSITE = math.cos(math.radians(22.5))
+"""Both senses of the outer pixels' main direction within 22.5 deg: the needle leaves on opposite sides (1)."""
 
 
 def _level_weights(
