@@ -159,26 +159,27 @@ class _Candidate:
     shaft: ShaftCheck | None = None
     width: WidthCheck | None = None
     unvouched: bool = False  # refused only because nothing vouches for it (too few width stations in the frame)
-    needle: tuple[float, float] | None = None  # the needle's tip, when the rules read the template's fit (track79)
 
 
 def _needled(t: TipTracker, image: FloatArray, ref: Refinement, lvl: int, patches: dict[float, Patch]
              ) -> _Candidate:
-    """The candidate of a fit at copy ``lvl``, its position and covariance the needle's (:func:`~.needle.refit`)
-    when :attr:`~.template.TrackerParams.needle` is on and the needle's fit holds."""
-    if t._needle is not None and math.isfinite(ref.x) and math.isfinite(ref.y):
+    """The candidate of a fit at copy ``lvl``; with :attr:`~.template.TrackerParams.needle` on and ``needle_judge``
+    off, its position and covariance are the needle's (:func:`~.needle.refit`) when the needle's fit holds (with
+    ``needle_judge`` on, the needle is fitted only for a fix the rules take: :func:`_placed`)."""
+    if t._needle is not None and not t.params.needle_judge and math.isfinite(ref.x) and math.isfinite(ref.y):
         got = refit(t._needle, image, ref.x, ref.y, ref.theta, t._spec[lvl][2], t.params)
-        if got is not None and t.params.needle_judge:  # the rules read the template's fit; the fix is placed
-            return _Candidate(ref, lvl, ref.score, t._patch(patches, image, ref.x, ref.y, t._spec[lvl][1]),
-                              needle=(got[0], got[1]))
         if got is not None:
             ref = replace(ref, x=got[0], y=got[1], cov=got[2] if t.params.needle_sigma else ref.cov)
     return _Candidate(ref, lvl, ref.score, t._patch(patches, image, ref.x, ref.y, t._spec[lvl][1]))
 
 
-def _placed(fix: Fix, cand: _Candidate) -> Fix:
-    """``fix`` at the needle's tip when the rules judged the template's fit (:attr:`_Candidate.needle`)."""
-    return fix if cand.needle is None else replace(fix, x=cand.needle[0], y=cand.needle[1])
+def _placed(t: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
+    """``fix`` at the needle's tip when the rules judged the template's fit (``needle_judge``) and the needle's fit
+    near it holds (:func:`~.needle.refit`)."""
+    if t._needle is None or not t.params.needle_judge:
+        return fix
+    got = refit(t._needle, image, cand.ref.x, cand.ref.y, cand.ref.theta, t._spec[cand.level][2], t.params)
+    return fix if got is None else replace(fix, x=got[0], y=got[1])
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -1006,14 +1007,14 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     Where every region read as ground the mask is kept (:attr:`~.confirm.Confirmation.emptied`)."""
     awaiting, t, p = tr._mask_check, tr.template, tr.params
     if not isinstance(awaiting, tuple) or math.hypot(fix.x - awaiting[0][0], fix.y - awaiting[0][1]) < p.confirm_move:
-        return tr._accept(_placed(fix, cand), cand, image)
+        return tr._accept(_placed(tr, fix, cand, image), cand, image)
     first, first_frame = awaiting
     inside = _window(np.zeros(tr.shape), int(round(first[0])), int(round(first[1])), t.half)[1]
     conf = confirm_mask(t.bank[0], t.mask, inside, t.apex, first, image, (fix.x, fix.y, cand.ref.theta),
                         p.template_blur, p.edge_px, p.confirm_margin)
     tr._mask_check = conf
     if conf.dropped == 0:
-        return tr._accept(_placed(fix, cand), cand, image)
+        return tr._accept(_placed(tr, fix, cand, image), cand, image)
     t.mask = conf.mask
     t.level_weights = _level_weights(conf.mask, inside, t.apex, p)
     t.weights = t.level_weights[0]
@@ -1022,7 +1023,7 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     _vouchers(tr, first_frame, first, inside)
     res, refit = tr._judge(tr._try(image, fix.x, fix.y, cand.ref.theta, cand.level), image, reacquire)
     if isinstance(res, Fix):
-        return tr._accept(_placed(res, refit), refit, image)
+        return tr._accept(_placed(tr, res, refit, image), refit, image)
     tr._fresh = False
     tr._since += 1
     return res
