@@ -79,15 +79,18 @@ def test_bright_needle_and_model_render() -> None:
 
 
 def test_tracker_with_the_stage() -> None:
-    """The tracker with ``needle`` on follows the drawn needle through a change of blur within 0.2 px; off, the
-    stage is not built."""
+    """The tracker with ``needle`` on follows the drawn needle through a change of blur within 0.2 px; its
+    decisions, scores and sigmas are the tracker's without the stage (the rules and the state read the template's
+    fit: ``needle_judge`` on, ``needle_state`` off); off, no needle is learnt."""
     phi = 0.3
     frames = [(40.0 + 0.7 * k, 45.0 + 0.4 * k, 1.0 + 0.3 * k) for k in range(7)]
     images = [draw((x, y), phi, b, seed=k, size=96) for k, (x, y, b) in enumerate(frames)]
-    assert TipTracker(images[0], frames[0][:2])._needle is None
+    plain = TipTracker(images[0], frames[0][:2])
+    assert plain._needle is None
     tr = TipTracker(images[0], frames[0][:2], TrackerParams(needle=True))
     assert tr._needle is not None
     for (x, y, _), img in zip(frames[1:], images[1:], strict=True):
-        res = tr.update(img)
-        assert isinstance(res, Fix)
+        res, ref = tr.update(img), plain.update(img)
+        assert isinstance(res, Fix) and isinstance(ref, Fix)
+        assert (res.score, res.sigma, res.blur, res.angle) == (ref.score, ref.sigma, ref.blur, ref.angle)
         assert math.hypot(res.x - x, res.y - y) < 0.2

@@ -316,6 +316,11 @@ class TrackerParams:
         With ``needle``, the decision rules read the template's fit (its place, sigma and copy, as without the
         stage) and a fix they take is then placed at the needle's tip; off, they read the needle's place (and
         took 6 more occluded tips of the own 13 sets, placed 2-3 px ahead of the grain's far side, track79).
+    needle_state : bool
+        With ``needle`` and ``needle_judge``, the tracker keeps the needle's tip as its last fix, where the next
+        frame's search starts (on: 3 more visible tips of the own 13 sets refused, one sequence's 44 px jump
+        at the search's reach, track79); off, it keeps the template's fit and every decision is as without the
+        stage: only the fixes' places change.
     """
 
     half_window: int = 20
@@ -381,6 +386,7 @@ class TrackerParams:
     needle_sigma: bool = False
     needle_along: bool = True
     needle_judge: bool = True
+    needle_state: bool = False
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:

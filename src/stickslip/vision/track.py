@@ -174,12 +174,16 @@ def _needled(t: TipTracker, image: FloatArray, ref: Refinement, lvl: int, patche
 
 
 def _placed(t: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
-    """``fix`` at the needle's tip when the rules judged the template's fit (``needle_judge``) and the needle's fit
-    near it holds (:func:`~.needle.refit`)."""
-    if t._needle is None or not t.params.needle_judge:
-        return fix
-    got = refit(t._needle, image, cand.ref.x, cand.ref.y, cand.ref.theta, t._spec[cand.level][2], t.params)
-    return fix if got is None else replace(fix, x=got[0], y=got[1])
+    """Accept ``fix`` (:meth:`TipTracker._accept`) and give it at the needle's tip when the rules judged the
+    template's fit (``needle_judge``) and the needle's fit near it holds (:func:`~.needle.refit`). With
+    ``needle_state`` the tracker keeps the needle's tip as its last fix (the next frame's search starts there);
+    without, the template's fit, so that every decision is the tracker's without the stage."""
+    got = None
+    if t._needle is not None and t.params.needle_judge:
+        got = refit(t._needle, image, cand.ref.x, cand.ref.y, cand.ref.theta, t._spec[cand.level][2], t.params)
+    placed = fix if got is None else replace(fix, x=got[0], y=got[1])
+    kept = t._accept(placed if t.params.needle_state else fix, cand, image)
+    return placed if got is not None else kept
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -1007,14 +1011,14 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     Where every region read as ground the mask is kept (:attr:`~.confirm.Confirmation.emptied`)."""
     awaiting, t, p = tr._mask_check, tr.template, tr.params
     if not isinstance(awaiting, tuple) or math.hypot(fix.x - awaiting[0][0], fix.y - awaiting[0][1]) < p.confirm_move:
-        return tr._accept(_placed(tr, fix, cand, image), cand, image)
+        return _placed(tr, fix, cand, image)
     first, first_frame = awaiting
     inside = _window(np.zeros(tr.shape), int(round(first[0])), int(round(first[1])), t.half)[1]
     conf = confirm_mask(t.bank[0], t.mask, inside, t.apex, first, image, (fix.x, fix.y, cand.ref.theta),
                         p.template_blur, p.edge_px, p.confirm_margin)
     tr._mask_check = conf
     if conf.dropped == 0:
-        return tr._accept(_placed(tr, fix, cand, image), cand, image)
+        return _placed(tr, fix, cand, image)
     t.mask = conf.mask
     t.level_weights = _level_weights(conf.mask, inside, t.apex, p)
     t.weights = t.level_weights[0]
@@ -1023,7 +1027,7 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     _vouchers(tr, first_frame, first, inside)
     res, refit = tr._judge(tr._try(image, fix.x, fix.y, cand.ref.theta, cand.level), image, reacquire)
     if isinstance(res, Fix):
-        return tr._accept(_placed(tr, res, refit, image), refit, image)
+        return _placed(tr, res, refit, image)
     tr._fresh = False
     tr._since += 1
     return res
