@@ -458,7 +458,10 @@ def _taken_by(t: TipTracker, pre: dict[str, object], fix: Fix, judged: list[tupl
               fixes: list[tuple[int, float, float]], k: int, f: Any, image: np.ndarray) -> dict[str, Any]:
     """What took ``fix`` (a fix more than 2 px off): the path (near the last fix, or the whole frame's search),
     the blur copy, and the signals the rules read, with the tracker's state before the frame (``pre``)."""
-    reacquire, cand = next((ra, c) for ra, res, c in judged if res is fix)
+    # the fix the rules took (with TrackerParams.needle_judge it is then placed at the needle's tip: another object,
+    # its score, sigma, blur and turn the same)
+    reacquire, cand = next((ra, c) for ra, res, c in judged if res is fix or isinstance(res, Fix) and (
+        res.score, res.sigma, res.blur, res.angle) == (fix.score, fix.sigma, fix.blur, fix.angle))
     post = _state(t)
     vars(t).update(pre)
     _, sig = _signals(t, cand, fixes, k, f.tip)

@@ -296,6 +296,31 @@ class TrackerParams:
         doubles past a first frame blurred 1.6 px (0.26 px under 0.8 px, 0.52 px over 1.6 px),
         and at 1.6 px the reading warned on none of 66 sharp first frames (< 0.8 px) and
         missed none of 142 blurred ones (> 1.6 px) (track73). SEM edges read about 0.5 px low.
+    needle : bool
+        Place each fix by a parametric needle fitted to the frame, its blur free (:mod:`.needle`; track79, off:
+        an experiment): the template's fit is its start, the needle's end (at the first frame's offset from the
+        tip) its position, its covariance the fix's sigma.
+    needle_half : int
+        The needle's fit reads the pixels within this distance of its start, px (the template's window: the
+        tip and ~20 px of its shaft).
+    needle_move : float
+        Largest distance between the needle's tip and the template's fix, px (beyond: the template's fix is
+        kept; a needle fitted to something else), and between the first frame's tip and the model's end there.
+    needle_sigma : bool
+        With ``needle``, the fix's covariance is the needle's fit's (off: the template's; on, the sigma rule
+        refused 370 more visible tips of the own 13 sets, track79).
+    needle_along : bool
+        With ``needle``, the fix moves only along the needle's axis to the needle's tip (the blur's error lies
+        along it), its place across kept as the template's fit put it.
+    needle_judge : bool
+        With ``needle``, the decision rules read the template's fit (its place, sigma and copy, as without the
+        stage) and a fix they take is then placed at the needle's tip; off, they read the needle's place (and
+        took 6 more occluded tips of the own 13 sets, placed 2-3 px ahead of the grain's far side, track79).
+    needle_state : bool
+        With ``needle`` and ``needle_judge``, the tracker keeps the needle's tip as its last fix, where the next
+        frame's search starts (on: 3 more visible tips of the own 13 sets refused, one sequence's 44 px jump
+        at the search's reach, track79); off, it keeps the template's fit and every decision is as without the
+        stage: only the fixes' places change.
     """
 
     half_window: int = 20
@@ -355,6 +380,13 @@ class TrackerParams:
     focus_from: float = 10.0
     focus_length: float = 40.0
     focus_warn: float = 1.6
+    needle: bool = False
+    needle_half: int = 20
+    needle_move: float = 4.0
+    needle_sigma: bool = False
+    needle_along: bool = True
+    needle_judge: bool = True
+    needle_state: bool = False
 
     def __post_init__(self) -> None:
         if not 6 <= self.half_window <= 128:

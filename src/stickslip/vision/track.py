@@ -67,6 +67,7 @@ from .average import TemplateAverage, anchor
 from .confirm import Confirmation, confirm_mask
 from .edges import EdgeCheck, check_edges, learn_edges
 from .frame import Frame, as_image
+from .needle import needle_for, refit
 from .refine import Refinement, Steepest, _window_cells, refine, steepest
 from .sampling import Patch, bilinear, median, neighbours, patch, sample_value_xy, with_slopes
 from .shaft import ShaftCheck, ShaftProfiles, check_shaft, learn_shaft
@@ -158,6 +159,31 @@ class _Candidate:
     shaft: ShaftCheck | None = None
     width: WidthCheck | None = None
     unvouched: bool = False  # refused only because nothing vouches for it (too few width stations in the frame)
+
+
+def _needled(t: TipTracker, image: FloatArray, ref: Refinement, lvl: int, patches: dict[float, Patch]
+             ) -> _Candidate:
+    """The candidate of a fit at copy ``lvl``; with :attr:`~.template.TrackerParams.needle` on and ``needle_judge``
+    off, its position and covariance are the needle's (:func:`~.needle.refit`) when the needle's fit holds (with
+    ``needle_judge`` on, the needle is fitted only for a fix the rules take: :func:`_placed`)."""
+    if t._needle is not None and not t.params.needle_judge and math.isfinite(ref.x) and math.isfinite(ref.y):
+        got = refit(t._needle, image, ref.x, ref.y, ref.theta, t._spec[lvl][2], t.params)
+        if got is not None:
+            ref = replace(ref, x=got[0], y=got[1], cov=got[2] if t.params.needle_sigma else ref.cov)
+    return _Candidate(ref, lvl, ref.score, t._patch(patches, image, ref.x, ref.y, t._spec[lvl][1]))
+
+
+def _placed(t: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray) -> Fix:
+    """Accept ``fix`` (:meth:`TipTracker._accept`) and give it at the needle's tip when the rules judged the
+    template's fit (``needle_judge``) and the needle's fit near it holds (:func:`~.needle.refit`). With
+    ``needle_state`` the tracker keeps the needle's tip as its last fix (the next frame's search starts there);
+    without, the template's fit, so that every decision is the tracker's without the stage."""
+    got = None
+    if t._needle is not None and t.params.needle_judge:
+        got = refit(t._needle, image, cand.ref.x, cand.ref.y, cand.ref.theta, t._spec[cand.level][2], t.params)
+    placed = fix if got is None else replace(fix, x=got[0], y=got[1])
+    kept = t._accept(placed if t.params.needle_state else fix, cand, image)
+    return placed if got is not None else kept
 
 
 def _downsample(a: FloatArray, f: int) -> FloatArray:
@@ -689,6 +715,7 @@ class TipTracker:
         self._coarse_w = _downsample(t.weights, params.coarse_factor)
         self._edges = learn_edges(t.bank, t.apex, t.mask, t.shaft)
         self._shaft, self._width, self._outline = _learn_shaft(image, tip, t, params, self._spec)
+        self._needle = needle_for(image, tip, t.mask, t.apex, t.shaft, params, t.noise)
         self._last_view: _View | None = None  # the last fix's pixels, its blur re-read from them (_focus_reread)
         self._last: tuple[float, float] | None = (float(tip[0]), float(tip[1]))
         self._theta = 0.0
@@ -755,7 +782,7 @@ class TipTracker:
             if not ref2.score >= ref.score - self.params.level_hysteresis or (ref.converged and not ref2.converged):
                 break
             ref, lvl = ref2, lvl2
-        return _Candidate(ref, lvl, ref.score, self._patch(patches, image, ref.x, ref.y, self._spec[lvl][1]))
+        return _needled(self, image, ref, lvl, patches)
 
     def _edge_check(self, patches: dict[float, Patch], image: FloatArray, ref: Refinement, level: int
                     ) -> EdgeCheck | None:
@@ -984,14 +1011,14 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     Where every region read as ground the mask is kept (:attr:`~.confirm.Confirmation.emptied`)."""
     awaiting, t, p = tr._mask_check, tr.template, tr.params
     if not isinstance(awaiting, tuple) or math.hypot(fix.x - awaiting[0][0], fix.y - awaiting[0][1]) < p.confirm_move:
-        return tr._accept(fix, cand, image)
+        return _placed(tr, fix, cand, image)
     first, first_frame = awaiting
     inside = _window(np.zeros(tr.shape), int(round(first[0])), int(round(first[1])), t.half)[1]
     conf = confirm_mask(t.bank[0], t.mask, inside, t.apex, first, image, (fix.x, fix.y, cand.ref.theta),
                         p.template_blur, p.edge_px, p.confirm_margin)
     tr._mask_check = conf
     if conf.dropped == 0:
-        return tr._accept(fix, cand, image)
+        return _placed(tr, fix, cand, image)
     t.mask = conf.mask
     t.level_weights = _level_weights(conf.mask, inside, t.apex, p)
     t.weights = t.level_weights[0]
@@ -1000,7 +1027,7 @@ def _take(tr: TipTracker, fix: Fix, cand: _Candidate, image: FloatArray, reacqui
     _vouchers(tr, first_frame, first, inside)
     res, refit = tr._judge(tr._try(image, fix.x, fix.y, cand.ref.theta, cand.level), image, reacquire)
     if isinstance(res, Fix):
-        return tr._accept(res, refit, image)
+        return _placed(tr, res, refit, image)
     tr._fresh = False
     tr._since += 1
     return res
