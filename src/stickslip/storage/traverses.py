@@ -81,16 +81,20 @@ class TraverseStore(_Base):
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
-        keys = _content_keys(traverses, device)
+        given = traverses if isinstance(traverses, Sequence) else list(traverses)
+        keys = _content_keys(given, device)
+        # a row with a -0.0 stored before zeros were unsigned in the key has its signed key
+        signed = _content_keys(given, device, signed_zeros=True)
+        asked = sorted({*keys, *signed})
         stored: set[str] = set()
         step = 500  # keys per query (SQLite allows 999 parameters in old builds)
-        for i in range(0, len(keys), step):
-            part = keys[i : i + step]
+        for i in range(0, len(asked), step):
+            part = asked[i : i + step]
             rows = self._con.execute(
                 f"SELECT DISTINCT content FROM traverses WHERE content IN ({','.join('?' * len(part))})", part
             )
             stored.update(r[0] for r in rows)
-        return [k for k, key in enumerate(keys) if key in stored]
+        return [k for k, (key, old) in enumerate(zip(keys, signed, strict=True)) if key in stored or old in stored]
 
     def device_holding(self, traverses: Iterable[Traverse]) -> tuple[str, list[int]] | None:
         """The one device whose stored traverses include every one of ``traverses`` (by content), and their ids.
@@ -106,7 +110,7 @@ class TraverseStore(_Base):
         holders = [url for url in urls if len(self.duplicates(rows, url)) == len(rows)]
         if len(holders) != 1:
             return None
-        keys = sorted(set(_content_keys(rows, holders[0])))
+        keys = sorted({*_content_keys(rows, holders[0]), *_content_keys(rows, holders[0], signed_zeros=True)})
         ids: list[int] = []
         for i in range(0, len(keys), 500):
             part = keys[i : i + 500]
