@@ -5,10 +5,11 @@ from __future__ import annotations
 import datetime as _dt
 import itertools
 from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from ..devices.base import redact_text, redact_url
-from ..measurements import Traverse
+from ..measurements import Traverse, traverse_problems
 from .backend import Backend
 from .base import _Base, _require_traverses
 from .schema import _COLUMNS, DEFAULT_DEVICE, _content_keys, _iso, content_key
@@ -23,11 +24,21 @@ class TraverseStore(_Base):
     # -- traverses
 
     @staticmethod
-    def _check(t: Traverse) -> None:
+    def _check(t: Traverse) -> Traverse:
+        """``t`` with its session label stripped, if it could be a table's row; else ``ValueError`` saying why.
+
+        What is stored is exported as a table that ``import`` reads again (the arm's joint
+        ranges aside: the store does not know the arm).
+        """
         if not isinstance(t, Traverse):
             raise TypeError(f"expected a Traverse, got {type(t).__name__}")
         if not str(t.day).strip():
             raise ValueError("traverse has an empty day (session label)")
+        problems = traverse_problems(t)
+        if problems:
+            raise ValueError(f"traverse {t.day!r} joint {t.joint} {t.direction}: {'; '.join(problems)}; nothing stored")
+        day = str(t.day).strip()
+        return t if day == t.day else replace(t, day=day)
 
     def _insert_traverse(
         self,
@@ -142,7 +153,7 @@ class TraverseStore(_Base):
         source : str, optional
             Provenance (e.g. the file it was imported from).
         """
-        self._check(traverse)
+        traverse = self._check(traverse)
         how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
@@ -172,8 +183,7 @@ class TraverseStore(_Base):
             sessions: dict[str, int] = {}  # one look-up per day, not per row
             ids: list[int] = []
             while batch := list(itertools.islice(it, 10_000)):
-                for t in batch:
-                    self._check(t)
+                batch = [self._check(t) for t in batch]
                 values = []
                 for t, key in zip(batch, _content_keys(batch, url), strict=True):
                     day = str(t.day)
