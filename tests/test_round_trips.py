@@ -133,3 +133,23 @@ def test_what_the_store_keeps_is_what_its_export_reads_back_bit_for_bit(db, rows
         assert a.day.strip() == b.day
         for name in ("q1", "q2", "q3", "theta", "psi", "start", "end"):
             assert struct.pack("<d", getattr(a, name) + 0.0) == struct.pack("<d", getattr(b, name) + 0.0), name
+
+
+def test_a_stored_calibration_is_shown_as_the_file_it_was_saved_as(db, tmp_path):
+    """`show N -o` writes the bytes `calibrate -o` wrote: the nested records (an update's prior, a family
+    selection) keep their order; stored sorted, they came back reordered (the same JSON, another file)."""
+    from synth import paper_table
+
+    from stickslip.calibration import Calibration, calibrate
+    from stickslip.calibration.update import update_calibration
+
+    rows = paper_table()
+    cal, _ = update_calibration(calibrate(rows), rows[:4])
+    assert list(cal.to_dict()["provenance"]["prior"]) == ["day", "method", "created"]  # not in sorted order
+    cal.save(tmp_path / "made.json")
+    with Store.open(db) as st:
+        ids = st.add_traverses(rows, device="sim://")
+        cid = st.add_calibration(cal, "sim://", ids)
+        st.calibration(cid).save(tmp_path / "shown.json")
+    assert (tmp_path / "shown.json").read_bytes() == (tmp_path / "made.json").read_bytes()
+    assert Calibration.load(tmp_path / "shown.json").to_dict() == cal.to_dict()

@@ -31,7 +31,9 @@ class CalibrationStore(_Base):
 
         Raises ``ValueError`` naming the ids that do not exist.
         """
-        doc = redact_text(json.dumps(cal.to_dict(), sort_keys=True))  # a URL or note in it: no secret stored
+        # a URL or note in it: no secret stored; in the calibration's own order, so that `show N -o` writes
+        # the bytes `calibrate -o` wrote (sorted, an update's prior and a family selection came back reordered)
+        doc = redact_text(json.dumps(cal.to_dict()))
         day = getattr(cal, "day", None)
         method = getattr(cal, "method", None)
         ids = [int(i) for i in (traverse_ids or [])]
