@@ -88,12 +88,22 @@ class JsonStateFile:
         return self._read().get(device, {}).get(key, default)
 
     def set_state(self, device: str, key: str, value_json: Any) -> None:
-        """Store ``value_json`` (JSON text or a JSON-serialisable object) for ``device``."""
+        """Store ``value_json`` (JSON text or a JSON-serialisable object) for ``device``.
+
+        A NaN or an infinity is refused (``ValueError``), the file left as it was: written, it
+        made the file, every device's state in it, unreadable.
+        """
         value = loads_json(value_json, f"the state {key!r} of {device}") if isinstance(value_json, str) else value_json
         data = self._read()
         data.setdefault(device, {})[key] = value
+        try:
+            text = json.dumps(data, indent=2, allow_nan=False)
+        except ValueError:
+            raise ValueError(
+                f"the state {key!r} of {device} holds NaN or Infinity: not a number a file may hold"
+            ) from None
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(self.path, json.dumps(data, indent=2))
+        atomic_write_text(self.path, text)
 
 
 @dataclass
