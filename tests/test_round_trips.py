@@ -10,6 +10,7 @@ import itertools
 import math
 import re
 import struct
+from dataclasses import replace
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -205,6 +206,56 @@ def test_a_device_state_its_reader_would_refuse_is_not_stored_and_the_old_one_is
     f = JsonStateFile(tmp_path / "state.json")
     save_state(f, good)
     before = (tmp_path / "state.json").read_bytes()
-    with pytest.raises(ValueError, match="NaN or Infinity"):
+    with pytest.raises(ValueError, match=r"track.3.P.1.1 is nan: NaN/Infinity"):
         save_state(f, bad)
     assert (tmp_path / "state.json").read_bytes() == before and load_state(f, "sim://") == good
+
+
+def test_a_file_or_stored_calibration_its_reader_would_refuse_is_not_written(db, tmp_path):
+    """json.dumps writes NaN and Infinity, which every reader refuses: a calibration with an infinite covariance
+    replaced the good file with one `-c` refused, and stored, made latest_calibration fail for the device."""
+    import numpy as np
+    from synth import paper_table
+
+    from stickslip.calibration import Calibration, calibrate
+
+    good = calibrate(paper_table())
+    good.save(tmp_path / "cal.json")
+    before = (tmp_path / "cal.json").read_bytes()
+    bad = calibrate(paper_table())
+    bad.covariance[(3, "+")] = np.full((3, 3), np.inf)
+    with pytest.raises(ValueError, match=r"covariance.0.0 is inf: NaN/Infinity .* nothing written"):
+        bad.save(tmp_path / "cal.json")
+    assert (tmp_path / "cal.json").read_bytes() == before and Calibration.load(tmp_path / "cal.json")
+    with Store.open(db) as st:
+        cid = st.add_calibration(good, "sim://")
+        with pytest.raises(ValueError, match="NaN/Infinity"):
+            st.add_calibration(bad, "sim://")
+        assert st.latest_calibration("sim://").to_dict() == good.to_dict() and len(st.calibrations()) == 1
+        assert st.calibrations()[0]["id"] == cid
+
+
+def test_a_camera_or_tuning_file_its_reader_would_refuse_is_not_written(tmp_path):
+    from stickslip import kinematics as kin
+    from stickslip.audio.tuning import tune
+    from stickslip.audio.tuningfile import Tuning
+    from stickslip.sim.sound import render_traverse_recording
+    from stickslip.vision.jacobian import MeasuredDirection, MeasuredJacobian
+
+    pose = kin.Pose(0.0, -0.5, 0.001, 0.0, 0.0)
+    ok = MeasuredDirection(3, "+", (1.0, 0.0), 0.01, 0.1, 40, 1e-6)
+    huge = MeasuredDirection(3, "-", (1.7e308, 0.0), 0.01, 0.1, 40, 1e-6)  # px per m = 1.7e314: inf
+    MeasuredJacobian("sim-camera://", 1e-6, pose, (10.0, 20.0), (ok,), "2026-11-20").save(tmp_path / "j.json")
+    before = (tmp_path / "j.json").read_bytes()
+    with pytest.raises(ValueError, match="directions.1.px_per_unit.0 is -inf"):
+        MeasuredJacobian("sim-camera://", 1e-6, pose, (10.0, 20.0), (ok, huge), "2026-11-20").save(tmp_path / "j.json")
+    assert (tmp_path / "j.json").read_bytes() == before
+    assert MeasuredJacobian.load(tmp_path / "j.json").to_dict()["directions"][0]["px_per_unit"] == [1e6, 0.0]
+
+    x, sr = render_traverse_recording(3, 1000.0, 2.0, 3.5, seed=11)
+    tuning = tune(x, sr, 2.0, joint=3)
+    tuning.save(tmp_path / "t.json")
+    before = (tmp_path / "t.json").read_bytes()
+    assert Tuning.load(tmp_path / "t.json").save(tmp_path / "t2.json") and (tmp_path / "t2.json").read_bytes() == before
+    with pytest.raises(ValueError, match="threshold_db nan must be within"):  # refused when made: never written
+        replace(tuning, threshold_db=math.nan)

@@ -32,7 +32,6 @@ object with ``set_state(device, key, value)`` / ``get_state(device, key, default
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -41,7 +40,7 @@ from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..joints import JointSet, JointSpec
-from ..records import atomic_write_text, check_version, json_kind, loads_json, read_json
+from ..records import atomic_write_text, check_version, dumps_json, json_kind, loads_json, read_json
 from ..units import format_position
 from .base import device_key
 
@@ -96,12 +95,7 @@ class JsonStateFile:
         value = loads_json(value_json, f"the state {key!r} of {device}") if isinstance(value_json, str) else value_json
         data = self._read()
         data.setdefault(device, {})[key] = value
-        try:
-            text = json.dumps(data, indent=2, allow_nan=False)
-        except ValueError:
-            raise ValueError(
-                f"the state {key!r} of {device} holds NaN or Infinity: not a number a file may hold"
-            ) from None
+        text = dumps_json(data, str(self.path), indent=2)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_text(self.path, text)
 
