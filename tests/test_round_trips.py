@@ -259,3 +259,37 @@ def test_a_camera_or_tuning_file_its_reader_would_refuse_is_not_written(tmp_path
     assert Tuning.load(tmp_path / "t.json").save(tmp_path / "t2.json") and (tmp_path / "t2.json").read_bytes() == before
     with pytest.raises(ValueError, match="threshold_db nan must be within"):  # refused when made: never written
         replace(tuning, threshold_db=math.nan)
+
+
+def test_a_backup_answers_every_query_as_the_database_it_was_taken_from(db, tmp_path):
+    """`stickslip backup` of either backend: the same rows (floats at the edges, labels in any script), the same
+    exclusions and their reasons, calibrations, kept state; the copy's export reads back as the original's."""
+    from synth import paper_table
+
+    from stickslip.calibration import calibrate
+    from stickslip.devices.positions import DeviceState, load_state, save_state
+
+    rows = [*_rows(), _row(day="Tag 2 – Überprüfung", q2=-1 / 3, start=5e-324, end=1.7e308, steps=10**12),
+            _row(day="日本 2", direction="-", start=0.1, end=2.2250738585072014e-308, theta=-math.pi)]
+    state = DeviceState.default("mm3a://com3")
+    state.set_position(3, 0.005)
+    state.mark_uncertain(2, -1.0, -0.5, "a move was interrupted – Ctrl-C")
+    with Store.open(db) as st:
+        ids = st.add_traverses(rows, device="mm3a://com3", how="audio", source="sha256:abc")
+        st.set_excluded(ids[-1:], "der Arm berührte die Probe \u2013 'x'")
+        cid = st.add_calibration(calibrate(paper_table()), "mm3a://com3", ids[:2])
+        save_state(st, state)
+        want = (st.history(), st.traverse_records(), st.calibrations(), st.days(), st.calibration_traverses(cid),
+                st.calibration(cid).to_dict(), load_state(st, "mm3a://com3"), st.has_source("sha256:abc"))
+        text = measurements_to_csv(st.iter_traverses())
+        st.backup(tmp_path / "copy.db")
+    with Store.open(tmp_path / "copy.db") as copy:
+        got = (copy.history(), copy.traverse_records(), copy.calibrations(), copy.days(),
+               copy.calibration_traverses(cid), copy.calibration(cid).to_dict(), load_state(copy, "mm3a://com3"),
+               copy.has_source("sha256:abc"))
+        assert got == want
+        anyarm = {j: _ANY for j in (1, 2, 3)}
+        assert parse_measurements(measurements_to_csv(copy.iter_traverses()), joints=anyarm) == parse_measurements(
+            text, joints=anyarm
+        )
+        assert copy.duplicates(rows, "mm3a://com3") == list(range(len(rows)))
