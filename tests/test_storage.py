@@ -65,15 +65,19 @@ def test_measured_at_is_stored_as_utc(db):
         assert st.traverse_records()[0]["measured_at"] == "2026-11-20T07:30:00.000000+00:00"
 
 
-def test_add_traverses_is_all_or_nothing(db):
+def test_add_traverses_is_all_or_nothing(db, monkeypatch):
     bad = Traverse("", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 10)
     with Store.open(db) as st:
         with pytest.raises(ValueError, match="empty day"):
             st.add_traverses([_t(), bad])
         assert st.count_traverses() == 0
+        with pytest.raises(ValueError, match="steps must be a whole number"):  # the store's own check comes first
+            st.add_traverses([_t(), Traverse("d", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 0)])
         # the database's own CHECK constraints hold too, and roll the batch back (one error type on both backends)
+        monkeypatch.setattr(type(st), "_check", staticmethod(lambda t: t))
         with pytest.raises(ConstraintError, match="steps"):
             st.add_traverses([_t(), Traverse("d", 3, "+", 0, 0, 0, 0, 0, 0, 0.012, 0)])
+        monkeypatch.undo()
         assert st.count_traverses() == 0 and st.days() == []  # nor the session it made on the way
         ids = st.add_traverses([_t(), _t(direction="-")], device="sim://", how="imported", source="abc")
         assert len(ids) == 2 and st.has_source("abc") and not st.has_source("xyz")

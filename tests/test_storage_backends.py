@@ -222,8 +222,11 @@ def test_a_value_postgresql_keeps_but_no_traverse_has_is_named_before_any_row_is
         st.traverses()
 
 
-def test_a_value_out_of_range_is_a_constraint_error_on_both(db):
+def test_a_value_out_of_range_is_a_constraint_error_on_both(db, monkeypatch):
     with Store.open(db) as st:
+        with pytest.raises(ValueError, match="steps must be a whole number"):  # the store's own check first
+            st.add_traverse(Traverse("d", 3, "+", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.012, 2**63))
+        monkeypatch.setattr(type(st), "_check", staticmethod(lambda t: t))  # the database's own limit holds too
         with pytest.raises(ConstraintError):
             st.add_traverse(Traverse("d", 3, "+", 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.012, 2**63))  # past 64 bits
         assert st.count_traverses() == 0 and st.days() == []

@@ -14,8 +14,9 @@ from stickslip.storage.schema import _content_keys
 
 
 def _key_as_defined(t: Traverse, device: str) -> str:
+    """The definition: floats to 12 digits, a negative zero as 0 (SQLite keeps no sign on a zero)."""
     values = [redact_url(str(device).strip()), str(t.day).strip(), str(int(t.joint)), t.direction]
-    values += [f"{float(getattr(t, c)):.12g}" for c in ("q1", "q2", "q3", "theta", "psi", "start", "end")]
+    values += [f"{float(getattr(t, c)) + 0.0:.12g}" for c in ("q1", "q2", "q3", "theta", "psi", "start", "end")]
     values.append(str(int(t.steps)))
     return "sha256:" + hashlib.sha256("\x1f".join(values).encode()).hexdigest()
 

@@ -29,7 +29,7 @@ import os
 import re
 import stat
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -305,6 +305,41 @@ def loads_json(text: str, where: str, max_depth: int = MAX_JSON_DEPTH) -> Any:
         raise ValueError(f"{where}: not valid JSON at line {e.lineno}, column {e.colno}: {reason}") from None
     except RecursionError:  # pragma: no cover - check_json_text bounds the depth first
         raise ValueError(f"{where}: JSON nested too deeply") from None
+
+
+def dumps_json(value: Any, where: str, indent: int | None = None) -> str:
+    """``value`` as JSON text :func:`loads_json` reads back; ``ValueError`` naming the first NaN or infinity.
+
+    ``json.dumps`` writes ``NaN`` and ``Infinity``, which no reader of the toolkit takes:
+    a file or stored document holding one is refused when read, so it is refused here,
+    before anything is written (the old file, or the stored value, is kept).
+
+    >>> dumps_json({"a": [1.0, float("nan")]}, "x.json")
+    Traceback (most recent call last):
+    ...
+    ValueError: x.json: a.1 is nan: NaN/Infinity are not numbers a file may hold; nothing written
+    """
+    try:
+        return json.dumps(value, indent=indent, allow_nan=False)
+    except ValueError:
+        at = _non_finite(value, "") or "a value"
+        raise ValueError(f"{where}: {at}: NaN/Infinity are not numbers a file may hold; nothing written") from None
+
+
+def _non_finite(value: Any, at: str) -> str:
+    """Where in ``value`` its first NaN or infinity is (``"a.1 is nan"``)."""
+    items: Iterable[tuple[object, Any]] = ()
+    if isinstance(value, float) and not math.isfinite(value):
+        return f"{at or 'the value'} is {value!r}"
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple)):
+        items = enumerate(value)
+    for k, v in items:
+        found = _non_finite(v, f"{at}.{k}" if at else str(k))
+        if found:
+            return found
+    return ""
 
 
 def read_json(path: str | os.PathLike[str], what: str, max_bytes: int = MAX_JSON_BYTES) -> Any:

@@ -304,9 +304,9 @@ class Tuning:
         d = self.to_dict()
         # the fine spectra (thousands of levels each) on one line apiece, not one line per level
         long = {k: d[k] for k in ("fine_stepping_db", "fine_stopped_db") if isinstance(d.get(k), list)}
-        text = json.dumps({**d, **{k: f"@{k}@" for k in long}}, indent=2)
+        text = records.dumps_json({**d, **{k: f"@{k}@" for k in long}}, str(p), indent=2)
         for k, v in long.items():
-            text = text.replace(f'"@{k}@"', json.dumps(v))
+            text = text.replace(f'"@{k}@"', records.dumps_json(v, f"{p}: {k}"))
         records.atomic_write_text(p, text + "\n")
         return p
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -487,7 +486,7 @@ class Calibration:
 
     def save(self, path: str | Path) -> None:
         """Write the calibration as JSON."""
-        records.atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
+        records.atomic_write_text(path, records.dumps_json(self.to_dict(), str(path), indent=2) + "\n")
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:

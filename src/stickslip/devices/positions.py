@@ -32,7 +32,6 @@ object with ``set_state(device, key, value)`` / ``get_state(device, key, default
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -41,7 +40,7 @@ from typing import Any, Protocol
 
 from .. import kinematics as kin
 from ..joints import JointSet, JointSpec
-from ..records import atomic_write_text, check_version, json_kind, loads_json, read_json
+from ..records import atomic_write_text, check_version, dumps_json, json_kind, loads_json, read_json
 from ..units import format_position
 from .base import device_key
 
@@ -88,12 +87,17 @@ class JsonStateFile:
         return self._read().get(device, {}).get(key, default)
 
     def set_state(self, device: str, key: str, value_json: Any) -> None:
-        """Store ``value_json`` (JSON text or a JSON-serialisable object) for ``device``."""
+        """Store ``value_json`` (JSON text or a JSON-serialisable object) for ``device``.
+
+        A NaN or an infinity is refused (``ValueError``), the file left as it was: written, it
+        made the file, every device's state in it, unreadable.
+        """
         value = loads_json(value_json, f"the state {key!r} of {device}") if isinstance(value_json, str) else value_json
         data = self._read()
         data.setdefault(device, {})[key] = value
+        text = dumps_json(data, str(self.path), indent=2)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(self.path, json.dumps(data, indent=2))
+        atomic_write_text(self.path, text)
 
 
 @dataclass

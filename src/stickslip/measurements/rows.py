@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import numbers
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
@@ -296,3 +297,41 @@ def check_header(header: list[str] | None, source: str, expected: Sequence[str])
     if not any(header):  # a blank first line (a spreadsheet's title row left empty)
         detail = ["line 1 is empty: the header must be the first line"]
     raise TableError([f"{source}:1: header must be exactly {','.join(expected)} ({'; '.join(detail)})"])
+
+
+def traverse_problems(t: Traverse) -> list[str]:
+    """Why ``t`` could not be a row of a measurement table, whatever the arm (empty if it can).
+
+    What :func:`parse_row` refuses that does not depend on the arm's joint ranges: the
+    session label, a number that is not finite, a step count that is not a whole number in
+    1 .. :data:`MAX_STEPS`, a traverse that does not move or moves against its direction,
+    a base tilt outside [-pi, pi]. The store refuses such a traverse, so that every stored
+    one is exported as a table that imports again.
+    """
+    problems = []
+    if (why := day_label_problem(str(t.day))) is not None:
+        problems.append(f"day: {why}")
+    nums = {name: getattr(t, name) for name in ("q1", "q2", "q3", "theta", "psi", "start", "end")}
+    bad = [k for k, v in nums.items() if not _finite_real(v)]
+    problems += [f"{k} must be a finite number in SI units, got {nums[k]!r}" for k in bad]
+    steps = t.steps
+    if not _finite_real(steps) or not float(steps).is_integer() or not 0 < steps <= MAX_STEPS:
+        problems.append(f"steps must be a whole number in 1 .. {MAX_STEPS:.0e}, got {steps!r}")
+    if bad:
+        return problems
+    start, end = float(t.start), float(t.end)
+    if end == start:
+        problems.append(f"start and end are equal ({start:.6g}): a traverse must move")
+    elif (end > start) != (t.direction == "+") and t.direction in ("+", "-"):
+        problems.append(
+            f"direction {t.direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
+        )
+    for name in ("theta", "psi"):
+        if not -_TILT_LIMIT <= float(nums[name]) <= _TILT_LIMIT:
+            problems.append(f"{name} = {nums[name]:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    return problems
+
+
+def _finite_real(v: object) -> bool:
+    """A finite real number (a Python or numpy int or float; not a bool, not text)."""
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
-from ..records import loads_json
+from ..records import dumps_json, loads_json
 from .base import _Base
 from .schema import DEFAULT_DEVICE, StoreError, _now
 
@@ -31,7 +30,9 @@ class CalibrationStore(_Base):
 
         Raises ``ValueError`` naming the ids that do not exist.
         """
-        doc = redact_text(json.dumps(cal.to_dict(), sort_keys=True))  # a URL or note in it: no secret stored
+        # a URL or note in it: no secret stored; in the calibration's own order, so that `show N -o` writes
+        # the bytes `calibrate -o` wrote (sorted, an update's prior and a family selection came back reordered)
+        doc = redact_text(dumps_json(cal.to_dict(), f"calibration of {redact_url(device)}"))
         day = getattr(cal, "day", None)
         method = getattr(cal, "method", None)
         ids = [int(i) for i in (traverse_ids or [])]

@@ -101,22 +101,30 @@ def content_key(t: Traverse, device: str) -> str:
     """A key equal for two traverses with the same device, day and row values (floats to 12 digits).
 
     Two real traverses can share it (a repeat that happened to take exactly as many steps);
-    commands that refuse duplicates therefore offer ``--allow-duplicates``.
+    commands that refuse duplicates therefore offer ``--allow-duplicates``. ``-0.0`` is
+    ``0.0`` here: SQLite stores a negative zero as 0, so a row exported from a file and
+    imported again must have the key it was stored with.
     """
     return _content_keys([t], device)[0]
 
 
-def _content_keys(traverses: Iterable[Traverse], device: str) -> list[str]:
-    """:func:`content_key` of many traverses of one device (the URL redacted once, not per row)."""
+def _content_keys(traverses: Iterable[Traverse], device: str, signed_zeros: bool = False) -> list[str]:
+    """:func:`content_key` of many traverses of one device (the URL redacted once, not per row).
+
+    ``signed_zeros``: the key as stored before zeros were unsigned (``-0`` for a ``-0.0``),
+    for finding rows stored then.
+    """
     url = redact_url(str(device).strip())
     fmt = "\x1f".join([url, "{}", "{}", "{}", *["{:.12g}"] * 7, "{}"]).format
     sha = hashlib.sha256
+    zero = -0.0 if signed_zeros else 0.0  # x + 0.0 is x, except -0.0 + 0.0 = 0.0; x + -0.0 is x for every x
     return [
         "sha256:"
         + sha(
             fmt(
-                str(t.day).strip(), int(t.joint), t.direction, float(t.q1), float(t.q2), float(t.q3),
-                float(t.theta), float(t.psi), float(t.start), float(t.end), int(t.steps),
+                str(t.day).strip(), int(t.joint), t.direction, float(t.q1) + zero, float(t.q2) + zero,
+                float(t.q3) + zero, float(t.theta) + zero, float(t.psi) + zero, float(t.start) + zero,
+                float(t.end) + zero, int(t.steps),
             ).encode()
         ).hexdigest()
         for t in traverses

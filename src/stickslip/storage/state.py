@@ -23,7 +23,9 @@ class StateStore(_Base):
     def set_state(self, device: str, key: str, value_json: Any) -> None:
         """Store a small JSON value under ``key`` for ``device`` (replaces the old one).
 
-        ``value_json`` is JSON text, or any JSON-serialisable object (it is dumped).
+        ``value_json`` is JSON text, or any JSON-serialisable object (it is dumped). A value
+        :meth:`get_state` would refuse (a NaN or an infinity, a key twice) is refused here,
+        ``ValueError``, and the old value kept: stored, it made the device's state unreadable.
         """
         if isinstance(value_json, str):
             try:
@@ -34,6 +36,7 @@ class StateStore(_Base):
         else:
             text = json.dumps(value_json)
         text = redact_text(text)  # no secret is stored
+        loads_json(text, f"the state {key!r} of {redact_url(device)}")  # read back as get_state reads it
         with self._write() as con:
             dev = self._device_id(con, device)
             con.execute(

@@ -5,10 +5,11 @@ from __future__ import annotations
 import datetime as _dt
 import itertools
 from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 from ..devices.base import redact_text, redact_url
-from ..measurements import Traverse
+from ..measurements import Traverse, traverse_problems
 from .backend import Backend
 from .base import _Base, _require_traverses
 from .schema import _COLUMNS, DEFAULT_DEVICE, _content_keys, _iso, content_key
@@ -23,11 +24,21 @@ class TraverseStore(_Base):
     # -- traverses
 
     @staticmethod
-    def _check(t: Traverse) -> None:
+    def _check(t: Traverse) -> Traverse:
+        """``t`` with its session label stripped, if it could be a table's row; else ``ValueError`` saying why.
+
+        What is stored is exported as a table that ``import`` reads again (the arm's joint
+        ranges aside: the store does not know the arm).
+        """
         if not isinstance(t, Traverse):
             raise TypeError(f"expected a Traverse, got {type(t).__name__}")
         if not str(t.day).strip():
             raise ValueError("traverse has an empty day (session label)")
+        problems = traverse_problems(t)
+        if problems:
+            raise ValueError(f"traverse {t.day!r} joint {t.joint} {t.direction}: {'; '.join(problems)}; nothing stored")
+        day = str(t.day).strip()
+        return t if day == t.day else replace(t, day=day)
 
     def _insert_traverse(
         self,
@@ -81,16 +92,20 @@ class TraverseStore(_Base):
 
     def duplicates(self, traverses: Iterable[Traverse], device: str = DEFAULT_DEVICE) -> list[int]:
         """Positions (0-based) of the given traverses whose content is already stored for ``device``."""
-        keys = _content_keys(traverses, device)
+        given = traverses if isinstance(traverses, Sequence) else list(traverses)
+        keys = _content_keys(given, device)
+        # a row with a -0.0 stored before zeros were unsigned in the key has its signed key
+        signed = _content_keys(given, device, signed_zeros=True)
+        asked = sorted({*keys, *signed})
         stored: set[str] = set()
         step = 500  # keys per query (SQLite allows 999 parameters in old builds)
-        for i in range(0, len(keys), step):
-            part = keys[i : i + step]
+        for i in range(0, len(asked), step):
+            part = asked[i : i + step]
             rows = self._con.execute(
                 f"SELECT DISTINCT content FROM traverses WHERE content IN ({','.join('?' * len(part))})", part
             )
             stored.update(r[0] for r in rows)
-        return [k for k, key in enumerate(keys) if key in stored]
+        return [k for k, (key, old) in enumerate(zip(keys, signed, strict=True)) if key in stored or old in stored]
 
     def device_holding(self, traverses: Iterable[Traverse]) -> tuple[str, list[int]] | None:
         """The one device whose stored traverses include every one of ``traverses`` (by content), and their ids.
@@ -106,7 +121,7 @@ class TraverseStore(_Base):
         holders = [url for url in urls if len(self.duplicates(rows, url)) == len(rows)]
         if len(holders) != 1:
             return None
-        keys = sorted(set(_content_keys(rows, holders[0])))
+        keys = sorted({*_content_keys(rows, holders[0]), *_content_keys(rows, holders[0], signed_zeros=True)})
         ids: list[int] = []
         for i in range(0, len(keys), 500):
             part = keys[i : i + 500]
@@ -138,7 +153,7 @@ class TraverseStore(_Base):
         source : str, optional
             Provenance (e.g. the file it was imported from).
         """
-        self._check(traverse)
+        traverse = self._check(traverse)
         how, source = redact_text(str(how)), _note(source)
         with self._write() as con:
             dev = self._device_id(con, device)
@@ -168,8 +183,7 @@ class TraverseStore(_Base):
             sessions: dict[str, int] = {}  # one look-up per day, not per row
             ids: list[int] = []
             while batch := list(itertools.islice(it, 10_000)):
-                for t in batch:
-                    self._check(t)
+                batch = [self._check(t) for t in batch]
                 values = []
                 for t, key in zip(batch, _content_keys(batch, url), strict=True):
                     day = str(t.day)

@@ -24,7 +24,6 @@ the dead reckoning's Kalman filter (:class:`stickslip.motion.tracking.JointTrack
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -555,7 +554,7 @@ class MeasuredJacobian:
         """Write the JSON file atomically (a failed write keeps the old file)."""
         from .. import records
 
-        records.atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
+        records.atomic_write_text(path, records.dumps_json(self.to_dict(), str(path), indent=2) + "\n")
 
     @classmethod
     def from_dict(cls, data: object, where: str = "the camera calibration") -> MeasuredJacobian:

@@ -1,0 +1,295 @@
+"""Round trips of the history: what goes out of a store (export, backup) and comes back in is the same, and is known.
+
+A table exported from one store and imported into another (docs/storage.md: a rig's file moved into the lab's
+PostgreSQL), or into the same one again, keeps every value and its rows are recognised as already stored.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import re
+import struct
+from dataclasses import replace
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from stickslip.clock import day_label_problem
+from stickslip.joints import JointSpec
+from stickslip.measurements import Traverse, measurements_to_csv, parse_measurements
+from stickslip.storage import Store
+from stickslip.storage.schema import _content_keys
+
+
+def _rows() -> list[Traverse]:
+    # np.round(-1e-9, 6) and -1 * 0.0 are -0.0: a table written by numpy or pandas holds negative zeros
+    return [
+        Traverse("2026-11-20", 3, "+", -0.0, -1.0, 0.0, -0.0, 0.0, -0.0, 0.01, 10),
+        Traverse("2026-11-20", 1, "-", 0.0, -0.5, 0.004, 0.0, -0.0, 0.3, -0.0, 1234),
+    ]
+
+
+def test_an_exported_table_with_negative_zeros_is_known_as_stored(db):
+    """SQLite stores -0.0 as 0: the export writes 0.0, and its rows must have the keys they were stored with."""
+    rows = _rows()
+    with Store.open(db) as st:
+        st.add_traverses(rows, device="sim://", how="imported")
+        exported = parse_measurements(measurements_to_csv(st.iter_traverses()))
+        assert exported == rows  # equal as numbers (-0.0 == 0.0)
+        assert st.duplicates(exported, "sim://") == [0, 1]
+        assert st.duplicates(rows, "sim://") == [0, 1]
+        assert st.device_holding(exported) is not None
+
+
+def test_a_row_stored_with_the_signed_zero_key_of_before_is_still_found(db):
+    rows = _rows()
+    with Store.open(db) as st:
+        (tid, _) = st.add_traverses(rows, device="sim://")
+        signed = _content_keys(rows[:1], "sim://", signed_zeros=True)[0]
+        with st._write() as con:  # the key a row with -0.0 was stored with before zeros were unsigned
+            con.execute("UPDATE traverses SET content = ? WHERE id = ?", (signed, tid))
+        assert st.duplicates(rows, "sim://") == [0, 1]
+        assert signed != _content_keys(rows[:1], "sim://")[0]
+        assert math.copysign(1.0, rows[0].q1) < 0
+
+
+def _row(**kw: object) -> Traverse:
+    values: dict[str, object] = dict(
+        day="2026-11-20", joint=3, direction="+", q1=0.0, q2=-1.0, q3=0.0, theta=0.0, psi=0.0, start=0.0, end=0.01,
+        steps=10,
+    )
+    values.update(kw)
+    return Traverse(**values)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    "bad, why",
+    [
+        (_row(day="a\nb"), "control character"),
+        (_row(day="2026-13-45"), "starts like a date but is not one"),
+        (_row(day="22.11.2026"), "22.11.2026"),
+        (_row(theta=9.0), "theta = 9 rad is outside"),
+        (_row(psi=-4.0), "psi = -4 rad is outside"),
+        (_row(start=0.01), "a traverse must move"),
+        (_row(direction="-"), "direction '-' disagrees"),
+        (_row(steps=2.5), "steps must be a whole number"),  # was stored as 2
+        (_row(steps=10**12 + 1), "steps must be a whole number"),
+        (_row(end=math.inf), "end must be a finite number"),  # was stored, then every read of the device refused
+    ],
+)
+def test_the_store_refuses_a_traverse_its_export_could_not_import_again(db, bad, why):
+    with Store.open(db) as st:
+        with pytest.raises(ValueError, match=re.escape(why)):
+            st.add_traverse(bad)
+        with pytest.raises(ValueError, match=re.escape(why)):
+            st.add_traverses([_row(), bad])
+        assert st.count_traverses() == 0 and st.days() == []
+
+
+def test_a_label_with_spaces_around_is_stored_as_the_table_reads_it(db):
+    """The table's reader strips a label: the store does too, so an exported row comes back in its session."""
+    with Store.open(db) as st:
+        st.add_traverse(_row(day=" day1 "))
+        st.add_traverses([_row(day="day1\u3000", steps=11)])  # an ideographic space is stripped too
+        assert st.days() == ["day1"]
+        assert [t.day for t in parse_measurements(measurements_to_csv(st.iter_traverses()))] == ["day1", "day1"]
+
+
+_ANY = JointSpec(1, "rotary", -math.inf, math.inf, "rad")
+"""A joint without stops: the store does not know the arm, and these rows are of any arm."""
+_examples = itertools.count()
+_finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+_edges = st.sampled_from([5e-324, -5e-324, 1.7e308, -1.7e308, -0.0, 0.0, 0.1, 1 / 3, 2.2250738585072014e-308])
+_labels = st.text(st.characters(codec="utf-8"), min_size=1, max_size=20).filter(lambda s: day_label_problem(s) is None)
+
+
+@st.composite
+def _traverses(draw: st.DrawFn) -> Traverse:
+    start, end = sorted(draw(st.lists(st.one_of(_edges, _finite), min_size=2, max_size=2, unique=True)))
+    direction = draw(st.sampled_from("+-"))
+    if direction == "-":
+        start, end = end, start
+    tilt = st.one_of(st.sampled_from([-0.0, 5e-324, 0.1, math.pi, -math.pi]), st.floats(-math.pi, math.pi))
+    return Traverse(
+        draw(_labels), draw(st.sampled_from([1, 2, 3])), direction, draw(st.one_of(_edges, _finite)),
+        draw(st.one_of(_edges, _finite)), draw(st.one_of(_edges, _finite)), draw(tilt), draw(tilt), start, end,
+        draw(st.integers(1, 10**12)),
+    )
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=st.lists(_traverses(), min_size=1, max_size=5))
+def test_what_the_store_keeps_is_what_its_export_reads_back_bit_for_bit(db, rows):
+    """Stored, exported, read: every float the same double (bar a zero's sign on SQLite), and the rows known."""
+    device = f"sim://{next(_examples)}"  # a device per example: one database for all of them
+    with Store.open(db) as st:
+        st.add_traverses(rows, device=device)
+        text = measurements_to_csv(st.iter_traverses(device=device))
+        back = parse_measurements(text, joints={j: _ANY for j in (1, 2, 3)})
+        assert st.duplicates(back, device) == list(range(len(rows)))
+    assert measurements_to_csv(back) == text  # out, in, out: the same bytes
+    for a, b in zip(rows, back, strict=True):
+        assert a.day.strip() == b.day
+        for name in ("q1", "q2", "q3", "theta", "psi", "start", "end"):
+            assert struct.pack("<d", getattr(a, name) + 0.0) == struct.pack("<d", getattr(b, name) + 0.0), name
+
+
+def test_a_stored_calibration_is_shown_as_the_file_it_was_saved_as(db, tmp_path):
+    """`show N -o` writes the bytes `calibrate -o` wrote: the nested records (an update's prior, a family
+    selection) keep their order; stored sorted, they came back reordered (the same JSON, another file)."""
+    from synth import paper_table
+
+    from stickslip.calibration import Calibration, calibrate
+    from stickslip.calibration.update import update_calibration
+
+    rows = paper_table()
+    cal, _ = update_calibration(calibrate(rows), rows[:4])
+    assert list(cal.to_dict()["provenance"]["prior"]) == ["day", "method", "created"]  # not in sorted order
+    cal.save(tmp_path / "made.json")
+    with Store.open(db) as st:
+        ids = st.add_traverses(rows, device="sim://")
+        cid = st.add_calibration(cal, "sim://", ids)
+        st.calibration(cid).save(tmp_path / "shown.json")
+    assert (tmp_path / "shown.json").read_bytes() == (tmp_path / "made.json").read_bytes()
+    assert Calibration.load(tmp_path / "shown.json").to_dict() == cal.to_dict()
+
+
+def test_a_history_moved_from_its_file_to_postgresql_and_back_is_the_same_table(tmp_path, postgres_url):
+    """docs/storage.md's move (export from the file, import into the lab's database), then back: the same bytes
+    out at every step, and the table taken back is known as stored (not imported twice)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    rows = [*_rows(), _row(day="2026-11-21 pm", q1=0.1, q2=-1 / 3, start=5e-324, end=1.2e-2, steps=10**12),
+            _row(day="Tag 2 – Überprüfung", direction="-", start=0.012, end=2.2250738585072014e-308, theta=-math.pi)]
+    run = CliRunner().invoke
+    lite, first, second, third = tmp_path / "rig.db", tmp_path / "a.csv", tmp_path / "b.csv", tmp_path / "c.csv"
+    with Store.open(lite) as st:
+        st.add_traverses(rows, device="mm3a:///dev/ttyUSB0", how="audio")
+    dev = ["-d", "mm3a:///dev/ttyUSB0"]
+    assert run(app, ["export", "--db", str(lite), *dev, "-o", str(first)]).exit_code == 0
+    r = run(app, ["import", str(first), "--db", postgres_url, *dev])
+    assert r.exit_code == 0, r.output
+    assert run(app, ["export", "--db", postgres_url, *dev, "-o", str(second)]).exit_code == 0
+    assert second.read_bytes() == first.read_bytes()
+    with Store.open(postgres_url) as pg:
+        assert pg.traverses() == rows
+    r = run(app, ["import", str(second), "--db", str(lite), *dev])  # back home: every row is there already
+    assert r.exit_code == 2 and f"{len(rows)} of {len(rows)} rows are already stored" in r.stderr, r.output
+    assert run(app, ["export", "--db", str(lite), *dev, "-o", str(third)]).exit_code == 0
+    assert third.read_bytes() == first.read_bytes()
+
+
+def test_a_device_state_its_reader_would_refuse_is_not_stored_and_the_old_one_is_kept(db, tmp_path):
+    """A NaN in a kept track was stored, and every later read of the device's positions refused it."""
+    from stickslip.devices.positions import DeviceState, JsonStateFile, load_state, save_state
+
+    good = DeviceState.default("sim://")
+    good.set_position(3, -0.0)
+    good.set_position(1, 5e-324)
+    good.set_position(2, -1 / 3)
+    bad = DeviceState.default("sim://")
+    bad.track[3] = {"P": [[0.0, 0.0], [0.0, math.nan]]}
+    with Store.open(db) as st:
+        save_state(st, good)
+        with pytest.raises(ValueError, match="NaN/Infinity"):
+            save_state(st, bad)
+        with pytest.raises(ValueError, match="NaN/Infinity"):
+            st.set_state("sim://", "journal", '{"q": Infinity}')
+        back = load_state(st, "sim://")
+        assert back == good and math.copysign(1.0, back.positions[3]) < 0  # bit for bit, the sign of 0 too
+        save_state(st, back)
+        assert st.get_state("sim://", "positions") == good.to_json()
+    f = JsonStateFile(tmp_path / "state.json")
+    save_state(f, good)
+    before = (tmp_path / "state.json").read_bytes()
+    with pytest.raises(ValueError, match=r"track.3.P.1.1 is nan: NaN/Infinity"):
+        save_state(f, bad)
+    assert (tmp_path / "state.json").read_bytes() == before and load_state(f, "sim://") == good
+
+
+def test_a_file_or_stored_calibration_its_reader_would_refuse_is_not_written(db, tmp_path):
+    """json.dumps writes NaN and Infinity, which every reader refuses: a calibration with an infinite covariance
+    replaced the good file with one `-c` refused, and stored, made latest_calibration fail for the device."""
+    import numpy as np
+    from synth import paper_table
+
+    from stickslip.calibration import Calibration, calibrate
+
+    good = calibrate(paper_table())
+    good.save(tmp_path / "cal.json")
+    before = (tmp_path / "cal.json").read_bytes()
+    bad = calibrate(paper_table())
+    bad.covariance[(3, "+")] = np.full((3, 3), np.inf)
+    with pytest.raises(ValueError, match=r"covariance.0.0 is inf: NaN/Infinity .* nothing written"):
+        bad.save(tmp_path / "cal.json")
+    assert (tmp_path / "cal.json").read_bytes() == before and Calibration.load(tmp_path / "cal.json")
+    with Store.open(db) as st:
+        cid = st.add_calibration(good, "sim://")
+        with pytest.raises(ValueError, match="NaN/Infinity"):
+            st.add_calibration(bad, "sim://")
+        assert st.latest_calibration("sim://").to_dict() == good.to_dict() and len(st.calibrations()) == 1
+        assert st.calibrations()[0]["id"] == cid
+
+
+def test_a_camera_or_tuning_file_its_reader_would_refuse_is_not_written(tmp_path):
+    from stickslip import kinematics as kin
+    from stickslip.audio.tuning import tune
+    from stickslip.audio.tuningfile import Tuning
+    from stickslip.sim.sound import render_traverse_recording
+    from stickslip.vision.jacobian import MeasuredDirection, MeasuredJacobian
+
+    pose = kin.Pose(0.0, -0.5, 0.001, 0.0, 0.0)
+    ok = MeasuredDirection(3, "+", (1.0, 0.0), 0.01, 0.1, 40, 1e-6)
+    huge = MeasuredDirection(3, "-", (1.7e308, 0.0), 0.01, 0.1, 40, 1e-6)  # px per m = 1.7e314: inf
+    MeasuredJacobian("sim-camera://", 1e-6, pose, (10.0, 20.0), (ok,), "2026-11-20").save(tmp_path / "j.json")
+    before = (tmp_path / "j.json").read_bytes()
+    with pytest.raises(ValueError, match="directions.1.px_per_unit.0 is -inf"):
+        MeasuredJacobian("sim-camera://", 1e-6, pose, (10.0, 20.0), (ok, huge), "2026-11-20").save(tmp_path / "j.json")
+    assert (tmp_path / "j.json").read_bytes() == before
+    assert MeasuredJacobian.load(tmp_path / "j.json").to_dict()["directions"][0]["px_per_unit"] == [1e6, 0.0]
+
+    x, sr = render_traverse_recording(3, 1000.0, 2.0, 3.5, seed=11)
+    tuning = tune(x, sr, 2.0, joint=3)
+    tuning.save(tmp_path / "t.json")
+    before = (tmp_path / "t.json").read_bytes()
+    assert Tuning.load(tmp_path / "t.json").save(tmp_path / "t2.json") and (tmp_path / "t2.json").read_bytes() == before
+    with pytest.raises(ValueError, match="threshold_db nan must be within"):  # refused when made: never written
+        replace(tuning, threshold_db=math.nan)
+
+
+def test_a_backup_answers_every_query_as_the_database_it_was_taken_from(db, tmp_path):
+    """`stickslip backup` of either backend: the same rows (floats at the edges, labels in any script), the same
+    exclusions and their reasons, calibrations, kept state; the copy's export reads back as the original's."""
+    from synth import paper_table
+
+    from stickslip.calibration import calibrate
+    from stickslip.devices.positions import DeviceState, load_state, save_state
+
+    rows = [*_rows(), _row(day="Tag 2 – Überprüfung", q2=-1 / 3, start=5e-324, end=1.7e308, steps=10**12),
+            _row(day="日本 2", direction="-", start=0.1, end=2.2250738585072014e-308, theta=-math.pi)]
+    state = DeviceState.default("mm3a://com3")
+    state.set_position(3, 0.005)
+    state.mark_uncertain(2, -1.0, -0.5, "a move was interrupted – Ctrl-C")
+    with Store.open(db) as st:
+        ids = st.add_traverses(rows, device="mm3a://com3", how="audio", source="sha256:abc")
+        st.set_excluded(ids[-1:], "der Arm berührte die Probe \u2013 'x'")
+        cid = st.add_calibration(calibrate(paper_table()), "mm3a://com3", ids[:2])
+        save_state(st, state)
+        want = (st.history(), st.traverse_records(), st.calibrations(), st.days(), st.calibration_traverses(cid),
+                st.calibration(cid).to_dict(), load_state(st, "mm3a://com3"), st.has_source("sha256:abc"))
+        text = measurements_to_csv(st.iter_traverses())
+        st.backup(tmp_path / "copy.db")
+    with Store.open(tmp_path / "copy.db") as copy:
+        got = (copy.history(), copy.traverse_records(), copy.calibrations(), copy.days(),
+               copy.calibration_traverses(cid), copy.calibration(cid).to_dict(), load_state(copy, "mm3a://com3"),
+               copy.has_source("sha256:abc"))
+        assert got == want
+        anyarm = {j: _ANY for j in (1, 2, 3)}
+        assert parse_measurements(measurements_to_csv(copy.iter_traverses()), joints=anyarm) == parse_measurements(
+            text, joints=anyarm
+        )
+        assert copy.duplicates(rows, "mm3a://com3") == list(range(len(rows)))
