@@ -287,3 +287,13 @@ def test_a_calibration_of_sessions_day9_and_day10_is_dated_day10():
     cal = calibrate(table)
     assert cal.day == "day10"
     assert cal.provenance.days == ("day9", "day10")
+
+
+def test_a_label_with_an_invisible_character_names_it():
+    # a zero-width space was called "a control character (a tab or a line break)" (audit42): the code point now
+    from stickslip.clock import day_label_problem
+
+    why = day_label_problem("2026-11-22\u200b")
+    assert why is not None and "U+200B" in why and "zero-width space" in why
+    assert "U+0009" in (day_label_problem("day\t1") or "")
+    assert day_label_problem("2026-11-22 pm") is None

@@ -107,7 +107,9 @@ def day_label_problem(label: str, spreadsheet_dates: bool = True) -> str | None:
     if len(text) > MAX_LABEL_CHARS:
         return f"the session label is {len(text)} characters long (at most {MAX_LABEL_CHARS})"
     if not text.isprintable():
-        return f"the session label {text[:MAX_LABEL_CHARS]!r} holds a control character (a tab or a line break)"
+        bad = next(c for c in text if not c.isprintable())
+        return (f"the session label {text[:MAX_LABEL_CHARS]!r} holds a control character or an invisible one "
+                f"(U+{ord(bad):04X}: a tab, a line break, a zero-width space)")
     if spreadsheet_dates and (why := _other_date_problem(text)) is not None:
         return why
     shaped = _DATE_SHAPED.match(text)

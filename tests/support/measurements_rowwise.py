@@ -223,8 +223,10 @@ def _label_problem(text: str) -> str | None:
     """The session-label rule written again without a regular expression (the peer of clock.day_label_problem)."""
     if len(text) > 64:
         return f"the session label is {len(text)} characters long (at most 64)"
-    if any(not ch.isprintable() for ch in text):
-        return f"the session label {text[:64]!r} holds a control character (a tab or a line break)"
+    for ch in text:
+        if not ch.isprintable():
+            return (f"the session label {text[:64]!r} holds a control character or an invisible "
+                    f"one (U+{ord(ch):04X}: a tab, a line break, a zero-width space)")
     sheet = _sheet_date_problem(text)
     if sheet is not None:
         return sheet
