@@ -331,3 +331,35 @@ def test_the_printed_eq9_is_stated_once_in_the_package() -> None:
     where = [p.relative_to(ROOT).as_posix() for p in sorted((ROOT / "src" / "stickslip").rglob("*.py"))
              if "6.42e-7" in p.read_text(encoding="utf-8")]
     assert where == ["src/stickslip/calibration/inversion.py"], where
+
+
+def top_keywords(call: str) -> list[str]:
+    """The keyword arguments of a call written ``f(a, k=...)``, not those of the calls inside it."""
+    depth, start, found = 0, 0, []
+    for i, ch in enumerate(call):
+        if ch in "([{":
+            depth += 1
+            start = i + 1 if depth == 1 else start
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == "," and depth == 1:
+            start = i + 1
+        if depth == 1 and ch == "=" and call[i + 1:i + 2] != "=" and re.fullmatch(r"\s*\w+\s*", call[start:i]):
+            found.append(call[start:i].strip())
+    return found
+
+
+def test_every_call_the_reference_writes_passes_keywords_the_code_takes() -> None:
+    """``ConfirmParams(clocked=None)``, ``plan_reach(..., step_model="constant")``: the keyword is a parameter."""
+    calls = cited(r"[A-Za-z_][\w.]*\(.*\w\s*=.*\)")
+    assert len(calls) > 15  # the pattern still finds them (22 at writing)
+    wrong = []
+    for call, pages in calls.items():
+        obj = resolve(call.split("(")[0])
+        if not callable(obj) or isinstance(obj, ModuleType):
+            continue
+        params = inspect.signature(obj).parameters
+        if any(p.kind == p.VAR_KEYWORD for p in params.values()):
+            continue
+        wrong += [f"{call} ({', '.join(pages)}): {k}" for k in top_keywords(call) if k not in params]
+    assert not wrong, wrong
