@@ -363,3 +363,11 @@ def test_every_call_the_reference_writes_passes_keywords_the_code_takes() -> Non
             continue
         wrong += [f"{call} ({', '.join(pages)}): {k}" for k in top_keywords(call) if k not in params]
     assert not wrong, wrong
+
+
+def test_the_exit_codes_the_threat_model_lists_are_the_codes() -> None:
+    from stickslip.cli._common import EXIT_CODES
+
+    text = (DOCS / "threat-model.md").read_text(encoding="utf-8")
+    table = {int(code) for code in re.findall(r"^\| (\d+) \|", text.split("## ")[0], flags=re.M)}
+    assert table == set(EXIT_CODES), (table, set(EXIT_CODES))
