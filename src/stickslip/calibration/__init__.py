@@ -12,7 +12,7 @@ Three ways in, one result object (:class:`Calibration`):
 * **paper-quadratic** — the paper's own Eq. 9 method, kept as a comparator
   (:func:`fit_paper_quadratic`): simulate many ``(gamma0, d)``, fit
   ``d = p2 D^2 + p1 D + p0`` with ``D = gamma(theta=0) - gamma0``, invert with it.
-  Eq. 9 *as printed* (``3.41 D^2 + 0.025 D + 6.42e-7``) cannot be right: for the
+  Eq. 9 *as printed* (:data:`EQ9_PRINTED`, :func:`eq9_printed`) cannot be right: for the
   ``|D| <= 9.2 µrad`` the paper quotes it gives ``d < 1 µrad``, while Fig. 10 reports
   ``d`` up to 24 µrad; the exact relation gives ``d ≈ 2.4 D`` for small ``D``.
 * **lsq** — nonlinear least squares on any set of traverses

@@ -2,8 +2,8 @@
 
 A rig file's ``xyz`` arm (docs/rig.md) is planned with a constant step per joint and
 direction, the pose does not enter. Each traverse gives the paper's average step
-(Eq. 1, ``gamma_ji = R_j / N_ji``, over the length it travelled rather than the whole
-range); :func:`calibrate_stage` averages them per joint and direction and writes the
+(Eq. 1, :attr:`~stickslip.measurements.Traverse.gamma`, over the length it travelled rather
+than the whole range); :func:`calibrate_stage` averages them per joint and direction and writes the
 constant-step calibration the stage planner reads (:class:`~stickslip.motion.planning.Planner`).
 """
 
@@ -49,8 +49,8 @@ class MeanStep:
 def mean_step(traverses: Sequence[Traverse]) -> MeanStep:
     """The mean step of traverses of one joint in one direction (the paper's Eq. 1, averaged).
 
-    Each traverse ``i`` gives the average step ``gamma_i = L_i / N_i`` (Eq. 1: the length
-    ``L_i = |end - start|`` travelled over the steps ``N_i`` counted). They are averaged with
+    Each traverse ``i`` gives its average step ``gamma_i`` (:attr:`~stickslip.measurements.Traverse.gamma`,
+    Eq. 1) over the length ``L_i = |end - start|`` it travelled. They are averaged with
     weights ``w_i = L_i``, the inverse of a traverse's variance when each step scatters
     independently (the variance of ``gamma_i`` is then proportional to ``1 / N_i``)::
 
@@ -67,7 +67,7 @@ def mean_step(traverses: Sequence[Traverse]) -> MeanStep:
     if not traverses:
         raise ValueError("no traverse to average")
     lengths = [abs(t.end - t.start) for t in traverses]
-    gammas = [L / t.steps for L, t in zip(lengths, traverses, strict=True)]
+    gammas = [t.gamma for t in traverses]
     total = math.fsum(lengths)
     value = math.fsum(w * g for w, g in zip(lengths, gammas, strict=True)) / total
     n = len(traverses)

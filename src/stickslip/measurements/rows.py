@@ -55,7 +55,7 @@ class Traverse:
 
     @property
     def gamma(self) -> float:
-        """Average step size ``|end - start| / steps`` (m or rad)."""
+        """Average step size ``|end - start| / steps`` (m or rad): the paper's Eq. 1."""
         return abs(self.end - self.start) / self.steps
 
     @property

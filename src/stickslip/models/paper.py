@@ -125,7 +125,7 @@ def gamma_prismatic(
 
 
 def gamma_rotary(load: ArrayLike, gamma0: ArrayLike, d: ArrayLike) -> NDArray[np.float64]:
-    """Mean step of a rotary joint, Eq. (8): ``gamma0 + d L``, rad.
+    """Mean step of a rotary joint, Eqs. (7), (8): ``gamma0 + d L``, rad.
 
     Parameters
     ----------
