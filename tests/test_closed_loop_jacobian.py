@@ -106,7 +106,7 @@ def test_a_tilted_microscope_misleads_the_kinematic_loop_and_not_the_measured_on
     vs = json.loads(r.stdout)["jacobian"]["against_view"]["3"]  # against straight down: shortened, not turned
     assert vs["length_ratio"] == pytest.approx(math.cos(math.radians(TILT)), abs=0.01) and vs["angle_deg"] < 0.5
     stored = json.loads(jac.read_text())
-    assert stored["version"] == JACOBIAN_VERSION and stored["camera"] == CAM
+    assert stored["version"] == JACOBIAN_VERSION and stored["camera"] == CAM and stored["device"] == "sim://?seed=4"
     assert [(d["joint"], d["direction"]) for d in stored["directions"]] == [(3, "+"), (3, "-")]
     for d in stored["directions"]:  # px per m of joint 3: cos 30 deg of 1 px per µm, along +x either way
         assert d["px_per_unit"][0] == pytest.approx(math.cos(math.radians(TILT)) * 1e6, rel=0.02)
@@ -262,3 +262,19 @@ def test_the_options_refuse_a_wrong_file_before_anything_moves(cals, tmp_path):
     assert all(j["q"] == pytest.approx(q) for j, q in zip(sorted(json.loads(r.stdout)["joints"],
                                                                   key=lambda j: j["joint"]),
                                                            (0.0, -math.pi / 2, 0.0), strict=True))
+
+
+def test_a_file_measured_on_another_arm_is_refused_before_anything_moves(cals, tmp_path):
+    # the file kept the camera and its pixel size, not the arm: a Jacobian measured on one arm was used on another
+    # arm under the same camera URL (audit36's question); a file without a device (written before) is not checked
+    _, yesterday = cals
+    theirs = dataclasses.replace(_measured(View(math.radians(30.0)), POSE), camera=CAM, device="sim://?seed=9")
+    p = tmp_path / "theirs.json"
+    theirs.save(p)
+    before = _where_q3()
+    r = _run(["move", "-d", DEV, "-c", yesterday, "--joint", "3", "--by", "40um", "--camera", CAM, "--camera-tip",
+              _true_tip(CAM), "--camera-calibration", str(p)])
+    assert r.exit_code == 2 and _where_q3() == before
+    assert "measured on sim://?seed=9, not on sim://?seed=4" in " ".join(r.stderr.split())
+    dataclasses.replace(theirs, device="").save(p)  # a file of before: read as it was
+    assert MeasuredJacobian.load(p).device == ""

@@ -330,7 +330,7 @@ def calibrate_cmd(
             with user_errors():
                 write_step_sizes(output, list(result.rows))
         if jacobian is not None and steps_cal is not None:
-            against = _write_jacobian(result, steps_cal, camera, jacobian, view)
+            against = _write_jacobian(result, steps_cal, camera, jacobian, view, key)
     if json_out:
         extra: dict[str, object] = {}
         if jacobian is not None:
@@ -372,7 +372,7 @@ def _jacobian_steps(jacobian: Path | None, calibration: Path | None, order: list
 
 
 def _write_jacobian(
-    result: CameraCalibrationResult, steps_cal: Any, camera: str, jacobian: Path, view: Any
+    result: CameraCalibrationResult, steps_cal: Any, camera: str, jacobian: Path, view: Any, device: str
 ) -> dict[int, tuple[float, float]]:
     """Write the measured image Jacobian; each joint's motion against the stated view's (length ratio, angle)."""
     from ..vision.jacobian import measured_jacobian
@@ -382,7 +382,8 @@ def _write_jacobian(
     if not result.pixel_size_m:
         fail("--jacobian needs the camera's pixel size (pixel= in its URL): nothing written")
     with user_errors():
-        measured = measured_jacobian(fits, result.pose, result.tip, steps_cal, camera, float(result.pixel_size_m))
+        measured = measured_jacobian(fits, result.pose, result.tip, steps_cal, camera, float(result.pixel_size_m),
+                                     device)
         measured.save(jacobian)
     pose = result.pose
     return measured.against(base_to_image(view, float(result.pixel_size_m), pose.theta, pose.psi))

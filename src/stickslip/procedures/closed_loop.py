@@ -685,6 +685,11 @@ def _start(
 
         return kept
 
+    measured_on = loop.jacobian.device if loop.jacobian is not None else ""
+    if measured_on and measured_on != device_key(state.device):  # before the camera opens or a step is sent
+        raise MoveRefused(f"the camera calibration (--camera-calibration) was measured on {measured_on}, not on "
+                          f"{device_key(state.device)}: each arm has its own image Jacobian (camera calibrate "
+                          "--jacobian on this arm)")
     cam, tracker, u0, sigma0 = _open(dev, state, loop, camera_opener, journal)
     tracks: dict[int, JointTrack] = {}
     sd0: dict[int, float] = {}

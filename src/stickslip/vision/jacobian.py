@@ -446,6 +446,9 @@ class MeasuredJacobian:
     directions : tuple of MeasuredDirection
     calibration_day : str
         The day of the step calibration whose steps scaled the fits.
+    device : str
+        The arm's device key (:func:`~stickslip.devices.base.device_key`) the joints were stepped on: the closed
+        loop refuses the file on another arm (``""``: a file written before, not checked).
     """
 
     camera: str
@@ -454,6 +457,7 @@ class MeasuredJacobian:
     tip_px: tuple[float, float]
     directions: tuple[MeasuredDirection, ...]
     calibration_day: str = ""
+    device: str = ""
 
     def px_per_unit(self) -> dict[int, tuple[float, float]]:
         """``{joint: (dx, dy)}``: each measured joint's image motion per unit (px per rad or m), its two
@@ -542,6 +546,7 @@ class MeasuredJacobian:
             "pose": dict(self.pose._asdict()),
             "tip_px": list(self.tip_px),
             "calibration_day": self.calibration_day,
+            "device": self.device,
             "directions": [
                 {"joint": d.joint, "direction": d.direction, "px_per_step": list(d.px_per_step),
                  "px_per_step_sd": d.px_per_step_sd, "residual_px": d.residual_px, "steps": d.steps,
@@ -617,8 +622,11 @@ class MeasuredJacobian:
         if len({(d.joint, d.direction) for d in dirs}) != len(dirs):
             raise JacobianError(f"{where}: a joint and direction is given twice")
         day = data.get("calibration_day", "")
+        device = data.get("device", "")
+        if not isinstance(device, str):
+            raise JacobianError(f"{where}: device must be the arm's device URL, got {device!r}")
         return cls(camera, num(data.get("pixel_size_m"), "pixel_size_m", positive=True), pose,
-                   pair(data.get("tip_px"), "tip_px"), tuple(dirs), day if isinstance(day, str) else "")
+                   pair(data.get("tip_px"), "tip_px"), tuple(dirs), day if isinstance(day, str) else "", device)
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> MeasuredJacobian:
@@ -646,9 +654,10 @@ def _check_per_unit(d: MeasuredDirection, where: str) -> None:
 
 def measured_jacobian(
     fits: Sequence[DirectionFit], pose: kin.Pose, tip_px: tuple[float, float], calibration: Calibration,
-    camera: str, pixel_size_m: float,
+    camera: str, pixel_size_m: float, device: str = "",
 ) -> MeasuredJacobian:
-    """The fits of ``camera calibrate`` as a :class:`MeasuredJacobian`, each scaled by ``calibration``'s steps.
+    """The fits of ``camera calibrate`` as a :class:`MeasuredJacobian`, each scaled by ``calibration``'s steps;
+    ``device``: the arm's device key, kept so that the closed loop refuses the file on another arm.
 
     The ``+`` fit of a joint starts at ``pose``; its ``-`` fit where the ``+`` steps
     ended (by the model). ``gamma`` is the model's mean step over each fit's steps: the
@@ -677,4 +686,4 @@ def measured_jacobian(
         out.append(MeasuredDirection(j, f.direction, (float(f.jacobian[0]), float(f.jacobian[1])), f.jacobian_sd,
                                      float(np.max(f.residuals)), n, gamma))
     return MeasuredJacobian(redact_url(camera), float(pixel_size_m), pose, (float(tip_px[0]), float(tip_px[1])),
-                            tuple(out), calibration.day)
+                            tuple(out), calibration.day, device)
