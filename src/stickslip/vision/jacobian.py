@@ -621,12 +621,8 @@ class MeasuredJacobian:
             _check_per_unit(dirs[-1], f"{where}: {name}")
         if len({(d.joint, d.direction) for d in dirs}) != len(dirs):
             raise JacobianError(f"{where}: a joint and direction is given twice")
-        day = data.get("calibration_day", "")
-        device = data.get("device", "")
-        if not isinstance(device, str):
-            raise JacobianError(f"{where}: device must be the arm's device URL, got {device!r}")
         return cls(camera, num(data.get("pixel_size_m"), "pixel_size_m", positive=True), pose,
-                   pair(data.get("tip_px"), "tip_px"), tuple(dirs), day if isinstance(day, str) else "", device)
+                   pair(data.get("tip_px"), "tip_px"), tuple(dirs), *_day_and_device(data, where))
 
     @classmethod
     def load(cls, path: str | os.PathLike[str]) -> MeasuredJacobian:
@@ -641,6 +637,15 @@ class MeasuredJacobian:
             text = str(e)
             raise JacobianError(text if str(path) in text else f"{path}: {text}") from None
         return cls.from_dict(data, str(path))
+
+
+def _day_and_device(data: dict[str, object], where: str) -> tuple[str, str]:
+    """The file's ``calibration_day`` (``""`` if not text) and ``device`` (``""`` in a file written before it was
+    kept; :class:`JacobianError` if not text)."""
+    day, device = data.get("calibration_day", ""), data.get("device", "")
+    if not isinstance(device, str):
+        raise JacobianError(f"{where}: device must be the arm's device URL, got {device!r}")
+    return (day if isinstance(day, str) else ""), device
 
 
 def _check_per_unit(d: MeasuredDirection, where: str) -> None:
