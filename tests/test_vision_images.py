@@ -131,6 +131,23 @@ def test_folders_globs_and_sequences(tmp_path):
         cam.grab()
 
 
+def test_a_glob_in_a_folder_named_with_brackets_takes_the_folder_as_written(tmp_path):
+    """'Messungen [2026]/*.png' matched nothing: the folder's '[2026]' was read as a character class."""
+    folder = tmp_path / "Lab #1 100% [2026]" / "run [a]"
+    folder.mkdir(parents=True)
+    for name in ("f2.png", "f10.png"):
+        PIL.fromarray(np.zeros((4, 4), np.uint8)).save(folder / name)
+    (folder / "notes.txt").write_text("x")
+    assert [p.name for p in frame_paths([str(folder / "*.png")])] == ["f2.png", "f10.png"]
+    assert [p.name for p in frame_paths([str(folder / "f1[0-9].png")])] == ["f10.png"]
+    assert [p.name for p in open_camera(f"files://{folder}/*.png").paths] == ["f2.png", "f10.png"]
+    (tmp_path / "b").mkdir()  # a class where no folder is named so is still a class
+    PIL.fromarray(np.zeros((4, 4), np.uint8)).save(tmp_path / "b" / "g.png")
+    assert [p.parent.name for p in frame_paths([str(tmp_path / "[ab]" / "*.png")])] == ["b"]
+    with pytest.raises(ImageError, match=r"run \[a\]/\*\.jpg: no file matches the pattern"):
+        frame_paths([str(folder / "*.jpg")])
+
+
 def test_camera_urls(tmp_path):
     PIL.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / "a.png")
     cam = open_camera(f"files://{tmp_path}?fps=5&pixel=0.25um")

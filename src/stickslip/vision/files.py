@@ -84,7 +84,7 @@ def _named_frames(text: str) -> list[Path]:
         return found
     if p.exists() or not any(c in text for c in "*?["):
         return [p]
-    matches = sorted((Path(m) for m in glob.glob(text) if Path(m).is_file()), key=name_order)
+    matches = sorted((Path(m) for m in _glob(text) if Path(m).is_file()), key=name_order)
     if not matches:
         raise ImageError(f"{text}: no file matches the pattern")
     images = [m for m in matches if m.suffix.lower() in IMAGE_SUFFIXES]  # as a folder: Thumbs.db is not a frame
@@ -92,6 +92,27 @@ def _named_frames(text: str) -> list[Path]:
         raise ImageError(f"{text}: the pattern matches {len(matches)} files ({matches[0].name}, ...) but no image "
                          f"file ({', '.join(IMAGE_SUFFIXES)}); name a file to read it whatever its name ends in")
     return images
+
+
+def _glob(text: str) -> list[str]:
+    """The names a glob ``text`` matches, its folders taken as written where they exist.
+
+    A lab's folder is often named ``Messungen [2026]``: ``Messungen [2026]/*.png`` globs the
+    frames in that folder (``[2026]`` read as a character class matched nothing). The longest
+    leading run of whole folder names that exists is escaped; only if that matches nothing is
+    ``text`` globbed as written (a ``[ab]`` meant as a class where no such folder is).
+    """
+    parts = text.replace(os.altsep or os.sep, os.sep).split(os.sep)
+    for k in range(len(parts) - 1, 0, -1):
+        folder = os.sep.join(parts[:k]) or os.sep
+        if not os.path.isdir(folder):
+            continue
+        if any(c in folder for c in "*?["):
+            found = glob.glob(os.path.join(glob.escape(folder), *parts[k:]))
+            if found:
+                return found
+        break
+    return glob.glob(text)
 
 
 def name_order(path: Path) -> tuple[tuple[tuple[int, int | str], ...], str]:
