@@ -10,6 +10,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -382,6 +383,30 @@ def _finite_option(value: float | None) -> float | None:
     return value
 
 
+_OPTION_LIKE = re.compile(r"--|--?[A-Za-z][A-Za-z0-9-]*")
+"""A value that reads as an option (``-j``, ``--json``) or the end of options (``--``), not as a file's name."""
+
+
+def path_option(value: str | Path | None) -> str | Path | None:
+    """A file option's value (``-o``, ``--db``, ``--log-file``), or ``typer.BadParameter`` if it reads as an option.
+
+    ``show 2 -o --json`` wrote the calibration to a file named ``--json`` and printed no JSON:
+    click takes the next word as the value whatever it looks like. A file of such a name is
+    still written, given with its folder (``results/--json``, the full path: pathlib reads ``./--json``
+    as ``--json``); ``-o.csv`` and ``--help.csv`` are names, taken as they are.
+    """
+    text = None if value is None else os.fspath(value)
+    if text is not None and _OPTION_LIKE.fullmatch(text):
+        try:
+            whole = os.path.join(os.getcwd(), text)  # ./--json reaches here as --json (pathlib drops ./)
+        except OSError:  # the working folder was removed
+            whole = os.path.join("FOLDER", text)
+        raise typer.BadParameter(
+            f"{text!r} reads as an option, not a file: was the file left out? (a file of that name: {whole})"
+        )
+    return value
+
+
 DEVICE_FILTERS = frozenset({"history", "export", "anova", "report", "delete"})
 """Commands whose ``--device`` only picks stored rows: any text may match a device stored by an older release."""
 
@@ -404,7 +429,7 @@ def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) 
     import inspect
     import typing
 
-    from typer.models import ParameterInfo
+    from typer.models import OptionInfo, ParameterInfo
 
     for p in inspect.signature(callback, eval_str=True).parameters.values():
         annotation, info = p.annotation, p.default
@@ -423,6 +448,8 @@ def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) 
             info.callback = day_option
         elif kinds == {str} and p.name == "device" and not device_is_filter:
             info.callback = device_option
+        elif isinstance(info, OptionInfo) and (kinds == {Path} or (kinds == {str} and p.name == "db")):
+            info.callback = path_option
 
 
 def device_option(value: str | None) -> str | None:

@@ -1,0 +1,81 @@
+"""Paths as labs have them (audit43): spaces, accents, ``#``, ``%``, ``[``, a leading ``-``, links.
+
+Each test failed before its fix; the commands were also run by hand on ``sim://`` with
+``HOME``, ``STICKSLIP_DB`` and the working folder under a 253-character folder named
+``-Zoë Müller's OneDrive - Lab #1 100% R&D [2026] ...`` (the report of audit43 lists them).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+from stickslip.cli import app
+
+
+def invoke(args: list[str]) -> Any:
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def path_options() -> list[tuple[tuple[str, ...], str]]:
+    """(command path, option) of every command's option that names a file (a ``Path``), and ``--db``."""
+
+    def takes_path(p: Any) -> bool:
+        descriptor = getattr(p, "type_descriptor", None)
+        annotation = getattr(descriptor, "annotation", None)
+        return annotation is Path or annotation == (Path | None) or p.opts[0] == "--db"
+
+    found: list[tuple[tuple[str, ...], str]] = []
+
+    def walk(cmd: Any, path: list[str]) -> None:
+        for name in getattr(cmd, "commands", {}):
+            walk(cmd.commands[name], [*path, name])
+        for p in cmd.params:
+            if path and p.opts[0].startswith("-") and not getattr(p, "is_flag", False) and takes_path(p):
+                found.append((tuple(path), p.opts[0]))
+
+    walk(typer.main.get_command(app), [])
+    return sorted(found)
+
+
+PATH_OPTIONS = path_options()
+
+
+def test_the_path_options_are_found() -> None:
+    assert (("show",), "--output") in PATH_OPTIONS and (("history",), "--db") in PATH_OPTIONS
+    assert len(PATH_OPTIONS) >= 30, PATH_OPTIONS
+
+
+@pytest.mark.parametrize("where", PATH_OPTIONS, ids=lambda w: " ".join([*w[0], w[1]]))
+@pytest.mark.parametrize("value", ["--json", "-j", "--"])
+def test_a_file_option_given_an_option_is_refused_not_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: tuple[tuple[str, ...], str], value: str
+) -> None:
+    """``show 2 -o --json`` wrote the calibration to a file named '--json' and printed no JSON."""
+    monkeypatch.chdir(tmp_path)
+    path, option = where
+    r = invoke([*path, option, value])
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and f"{value!r} reads as an option, not a file" in errors[0], r.stderr
+    assert str(tmp_path / value) in errors[0]  # how to name a file so called
+    assert not (tmp_path / value).exists()
+
+
+def test_a_log_file_given_an_option_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    r = invoke(["--log-file", "-v", "config", "path"])
+    assert r.exit_code == 2 and "--log-file: '-v' reads as an option" in r.stderr, r.stderr
+    assert not (tmp_path / "-v").exists()
+
+
+def test_names_that_begin_with_a_dash_but_are_files_are_taken(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """'-o.csv', '--help.csv' (a dot) and a name with its folder are names, not options."""
+    monkeypatch.chdir(tmp_path)
+    for name in ("-o.csv", "--help.csv", str(tmp_path / "--json")):
+        r = invoke(["suggest", "--n", "2", "--seed", "1", "-c", "none.json", "-o", name])
+        assert "reads as an option" not in r.stderr, r.stderr
