@@ -79,3 +79,23 @@ def test_names_that_begin_with_a_dash_but_are_files_are_taken(tmp_path: Path, mo
     for name in ("-o.csv", "--help.csv", str(tmp_path / "--json")):
         r = invoke(["suggest", "--n", "2", "--seed", "1", "-c", "none.json", "-o", name])
         assert "reads as an option" not in r.stderr, r.stderr
+
+
+def test_a_result_line_keeps_a_path_with_spaces_whole(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """'config show' and 'saved to' broke a path at its spaces, indenting the rest: no line could be copied back."""
+    folder = tmp_path / "Zoë Müller's OneDrive - Lab #1 100% R&D [2026]" / "Messungen 2026 Sehr langer Ordnername"
+    folder.mkdir(parents=True)
+    db = folder / "stickslip ü.db"
+    monkeypatch.setenv("STICKSLIP_DB", str(db))
+    r = CliRunner().invoke(app, ["config", "show"], env={"COLUMNS": "60"})
+    assert r.exit_code == 0, r.output
+    assert any(ln.strip().startswith(f"{db} (not there)") or ln.strip() == str(db) for ln in r.stdout.splitlines())
+    from synth import paper_table  # tests/support
+
+    from stickslip.measurements import measurements_to_csv
+
+    meas, out = folder / "meas ä.csv", folder / "cal é [1].json"
+    meas.write_text(measurements_to_csv(paper_table()))
+    r = CliRunner().invoke(app, ["calibrate", str(meas), "-o", str(out)], env={"COLUMNS": "60"})
+    assert r.exit_code == 0, r.output
+    assert str(out) in [ln.strip() for ln in r.stdout.splitlines()], r.stdout  # on a line of its own, whole

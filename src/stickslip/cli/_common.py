@@ -199,17 +199,25 @@ def one_line(message: object) -> str:
     return visible(redact_text("; ".join(parts)))
 
 
-def say(text: str, indent: str = "  ") -> None:
+_KEPT_SPACE = "\ue000"
+"""Stands for a space of a path while a line is wrapped (a private-use character no file name holds)."""
+
+
+def say(text: str, indent: str = "  ", keep: tuple[object, ...] = ()) -> None:
     """Print a result line on stdout, wrapped at the console's width at spaces only, later lines indented.
 
     A URL, a path or a number with its unit is never broken (rich's own wrapping folds a
-    long word), and what belongs together reads as one item.
+    long word), and what belongs together reads as one item. Each of ``keep`` (the paths
+    the line names) stays whole even where it holds spaces (``OneDrive - Lab/Messungen 2026``):
+    on a line of its own if it is longer than the rest of the line, so it can be copied whole.
     """
     from ._help import wrap
 
+    for k in sorted({str(k) for k in keep if " " in str(k)}, key=len, reverse=True):
+        text = text.replace(k, k.replace(" ", _KEPT_SPACE))
     lead = text[: len(text) - len(text.lstrip())]
     for line in wrap(text.strip(), console.width, lead + indent, first=lead):
-        console.print(line, soft_wrap=True)
+        console.print(line.replace(_KEPT_SPACE, " "), soft_wrap=True)
 
 
 def warn(message: str) -> None:

@@ -155,7 +155,7 @@ def show_cmd(
         _check_named_files(cal)
         return
     state = "found" if cfg.found else "not there: built-in defaults (stickslip config init writes a template)"
-    say(f"config file: {cfg.path} ({state})")
+    say(f"config file: {cfg.path} ({state})", keep=(cfg.path,))
 
     def origin(s: Setting[Any]) -> str:
         return s.source + (f" {s.where}" if s.where else "")
@@ -173,7 +173,7 @@ def show_cmd(
         ("max_age_days", f"{age.value} day{'s' if age.value != 1 else ''}", age),
         ("geometry", f"offset {g.offset * 1e3:g} mm, length {g.length * 1e3:g} mm", geom),
     ):
-        say(f"  {name}: {value} (from {origin(setting)})", indent="      ")
+        say(f"  {name}: {value} (from {origin(setting)})", indent="      ", keep=(setting.value, setting.where))
     _check_named_files(cal)
 
 

@@ -86,7 +86,7 @@ def history(
     if not entries:
         console.print(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""))
         return
-    say(f"stickslip history of {path}")
+    say(f"stickslip history of {path}", keep=(path,))
     for dev in dict.fromkeys(e["device"] for e in entries):  # one table per device: a URL is never folded
         say(f"device {dev}")
         table = Table(pad_edge=False)
@@ -296,7 +296,7 @@ def backup(
     with open_store(db, must_exist=True) as st, user_errors(StoreError):
         written = st.backup(out)
         n = st.count_traverses()
-    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}")
+    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}", keep=(written,))
 
 
 # ---------------------------------------------------------------- anova
