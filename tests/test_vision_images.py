@@ -148,6 +148,20 @@ def test_a_glob_in_a_folder_named_with_brackets_takes_the_folder_as_written(tmp_
         frame_paths([str(folder / "*.jpg")])
 
 
+def test_a_files_url_whose_folder_name_holds_a_comma_is_taken_whole(tmp_path):
+    """files://Messungen 1,2/*.png was split at the comma: 'Messungen 1: no such file'."""
+    folder = tmp_path / "Messungen 1,2"
+    folder.mkdir()
+    for name in ("a.png", "b.png"):
+        PIL.fromarray(np.zeros((4, 4), np.uint8)).save(folder / name)
+    for location in (str(folder), f"{folder}/*.png", f"{folder}/a.png"):
+        assert [p.name for p in open_camera(f"files://{location}").paths][0] == "a.png", location
+    for name in ("c.png", "d.png"):
+        PIL.fromarray(np.zeros((4, 4), np.uint8)).save(tmp_path / name)
+    joined = open_camera(f"files://{tmp_path}/d.png,{tmp_path}/c.png").paths  # a comma still joins names
+    assert [p.name for p in joined] == ["d.png", "c.png"]
+
+
 def test_camera_urls(tmp_path):
     PIL.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / "a.png")
     cam = open_camera(f"files://{tmp_path}?fps=5&pixel=0.25um")

@@ -358,8 +358,17 @@ def open_files_url(url: str, device: Controller | None = None) -> FileCamera:
     location, opts = camera_options(url, {"fps", "pixel"})
     if not location:
         raise ValueError(f"{redact_url(url)!r} names no files: write files://FOLDER or files://frames/*.png")
-    names: Iterable[str] = (location_path(n) for n in location.split(","))
+    names: Iterable[str] = (location_path(n) for n in _split_names(location))
     return FileCamera(frame_paths(list(names)), _number(opts, "fps", url, 1.0), pixel_option(opts, url), url)
+
+
+def _split_names(location: str) -> list[str]:
+    """The names a ``files://`` location joins with ``,``; the whole location if it names a file or folder as it
+    stands (``files://Messungen 1,2/*.png``: a folder whose name holds a comma, as labs name runs)."""
+    whole = location_path(location)
+    if "," in location and (os.path.exists(whole) or (any(c in whole for c in "*?[") and bool(_glob(whole)))):
+        return [location]
+    return location.split(",")
 
 
 def open_video_url(url: str, device: Controller | None = None) -> VideoCamera:
