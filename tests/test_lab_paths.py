@@ -99,3 +99,19 @@ def test_a_result_line_keeps_a_path_with_spaces_whole(tmp_path: Path, monkeypatc
     r = CliRunner().invoke(app, ["calibrate", str(meas), "-o", str(out)], env={"COLUMNS": "60"})
     assert r.exit_code == 0, r.output
     assert str(out) in [ln.strip() for ln in r.stdout.splitlines()], r.stdout  # on a line of its own, whole
+
+
+@pytest.mark.parametrize("url", ["file:lab.db", "FILE:lab.db", "file:{tmp}/lab.db", "file:lab.db?mode=ro"])
+def test_a_file_url_as_the_database_is_refused_not_made_a_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, url: str
+) -> None:
+    """--db file:lab.db made a file named 'file:lab.db' (on Windows: the stream 'lab.db' of a file named 'file')."""
+    from synth import paper_table  # tests/support
+
+    from stickslip.measurements import measurements_to_csv
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "meas.csv").write_text(measurements_to_csv(paper_table()))
+    r = invoke(["import", "meas.csv", "--db", url.format(tmp=tmp_path)])
+    assert r.exit_code == 2 and "a file: URL is not read" in r.stderr, r.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["meas.csv"]

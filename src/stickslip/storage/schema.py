@@ -202,6 +202,11 @@ def resolve_database(spec: str | os.PathLike[str] | None = None) -> Path | str:
     if isinstance(spec, os.PathLike):
         return Path(spec).expanduser()
     scheme = database_scheme(spec)
+    if scheme is None and spec.strip()[:5].lower() == "file:":  # SQLite's own URI form, RFC 8089's file:/path
+        raise StoreError(
+            f"{where}: a file: URL is not read (it would be a file named 'file:...', on Windows a hidden stream): "
+            "give the database file's path (docs/storage.md)"
+        )
     if scheme is None:
         return Path(spec).expanduser()
     if scheme in POSTGRES_SCHEMES:
