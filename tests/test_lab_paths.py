@@ -115,3 +115,19 @@ def test_a_file_url_as_the_database_is_refused_not_made_a_file(
     r = invoke(["import", "meas.csv", "--db", url.format(tmp=tmp_path)])
     assert r.exit_code == 2 and "a file: URL is not read" in r.stderr, r.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["meas.csv"]
+
+
+def test_written_files_are_named_whole_too(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """export's 'wrote N traverses to PATH' (rich's own wrapping) broke the path at its spaces too."""
+    from synth import paper_table  # tests/support
+
+    from stickslip.measurements import measurements_to_csv
+
+    folder = tmp_path / "Zoë Müller's OneDrive - Lab #1 100% R&D [2026]" / "Messungen 2026 Sehr langer Ordnername"
+    folder.mkdir(parents=True)
+    meas, out = folder / "meas ä.csv", folder / "export é [1].csv"
+    meas.write_text(measurements_to_csv(paper_table()))
+    assert invoke(["import", str(meas)]).exit_code == 0
+    r = CliRunner().invoke(app, ["export", "-o", str(out)], env={"COLUMNS": "60"})
+    assert r.exit_code == 0, r.output
+    assert str(out) in [ln.strip() for ln in r.stdout.splitlines()], r.stdout

@@ -659,7 +659,7 @@ def predict_cmd(
         warn(f"gamma_pi95 includes a day's change of step, {drift:.0%}: the calibration is from "
              f"{cal.day or 'an unknown day'}, not today")  # on stderr: stdout may be the table
     if output is not None:
-        console.print(f"wrote {rows[0]} rows to {output}")
+        say(f"wrote {rows[0]} rows to {output}", keep=(output,))
 
 
 @app.command("validate")
