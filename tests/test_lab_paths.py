@@ -131,3 +131,18 @@ def test_written_files_are_named_whole_too(tmp_path: Path, monkeypatch: pytest.M
     r = CliRunner().invoke(app, ["export", "-o", str(out)], env={"COLUMNS": "60"})
     assert r.exit_code == 0, r.output
     assert str(out) in [ln.strip() for ln in r.stdout.splitlines()], r.stdout
+
+
+def test_a_file_url_as_the_config_or_rig_files_database_is_refused(tmp_path: Path) -> None:
+    """database = "file:lab.db" in the config or a rig file was a file named 'file:lab.db' beside it."""
+    from stickslip.config import ConfigError, load_config
+    from stickslip.rig.load import RigError, load_rig
+
+    cfg = tmp_path / "config.toml"
+    cfg.write_text('database = "file:lab.db"\n')
+    with pytest.raises(ConfigError, match=r"config.toml:1: database: a file: URL is not read"):
+        load_config(cfg)
+    rig = tmp_path / "lab.toml"
+    rig.write_text('database = "File:/data/lab.db"\n[[arm]]\nname = "probe"\ncontroller = "sim://"\n')
+    with pytest.raises(RigError, match=r"lab.toml:1: database: a file: URL is not read"):
+        load_rig(rig)
