@@ -146,3 +146,39 @@ def test_a_file_url_as_the_config_or_rig_files_database_is_refused(tmp_path: Pat
     rig.write_text('database = "File:/data/lab.db"\n[[arm]]\nname = "probe"\ncontroller = "sim://"\n')
     with pytest.raises(RigError, match=r"lab.toml:1: database: a file: URL is not read"):
         load_rig(rig)
+
+
+def _arguments() -> list[tuple[tuple[str, ...], str]]:
+    """(command path, argument name) of every positional argument (tables, recordings, frames, rig files)."""
+    found: list[tuple[tuple[str, ...], str]] = []
+
+    def walk(cmd: Any, path: list[str]) -> None:
+        for name in getattr(cmd, "commands", {}):
+            walk(cmd.commands[name], [*path, name])
+        for p in cmd.params:
+            if path and not p.opts[0].startswith("-"):
+                found.append((tuple(path), str(p.name)))
+
+    walk(typer.main.get_command(app), [])
+    return sorted(found)
+
+
+_TOO_LONG = "ü" * 140  # 280 bytes: more than a file name may have (255 on ext4, NTFS, APFS)
+_RUNS = ("serve", "jog")  # they would run on (a server, a terminal loop), not a path's concern
+
+
+@pytest.mark.parametrize(
+    "args",
+    [[*p, o, _TOO_LONG + tail] for p, o in PATH_OPTIONS if p[0] not in _RUNS for tail in (".csv", "/x.csv")]
+    + [[*p, _TOO_LONG + tail] for p, _ in _arguments() if p[0] not in _RUNS for tail in (".csv", "/x.csv")],
+    ids=lambda a: " ".join(a[:-1]) + (" NAME/x" if "/" in a[-1] else " NAME"),
+)
+def test_a_name_too_long_for_the_file_system_is_one_line_never_a_traceback(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, args: list[str]
+) -> None:
+    """calibrate, fit, anova, report (a table), demo -o and config show --db/--calibration raised OSError
+    'File name too long' with a traceback: Path.exists and is_dir raise it on Python 3.11."""
+    monkeypatch.chdir(tmp_path)
+    r = invoke(args)
+    assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
+    assert "Traceback" not in r.output
