@@ -131,6 +131,37 @@ def test_folders_globs_and_sequences(tmp_path):
         cam.grab()
 
 
+def test_a_glob_in_a_folder_named_with_brackets_takes_the_folder_as_written(tmp_path):
+    """'Messungen [2026]/*.png' matched nothing: the folder's '[2026]' was read as a character class."""
+    folder = tmp_path / "Lab #1 100% [2026]" / "run [a]"
+    folder.mkdir(parents=True)
+    for name in ("f2.png", "f10.png"):
+        PIL.fromarray(np.zeros((4, 4), np.uint8)).save(folder / name)
+    (folder / "notes.txt").write_text("x")
+    assert [p.name for p in frame_paths([str(folder / "*.png")])] == ["f2.png", "f10.png"]
+    assert [p.name for p in frame_paths([str(folder / "f1[0-9].png")])] == ["f10.png"]
+    assert [p.name for p in open_camera(f"files://{folder}/*.png").paths] == ["f2.png", "f10.png"]
+    (tmp_path / "b").mkdir()  # a class where no folder is named so is still a class
+    PIL.fromarray(np.zeros((4, 4), np.uint8)).save(tmp_path / "b" / "g.png")
+    assert [p.parent.name for p in frame_paths([str(tmp_path / "[ab]" / "*.png")])] == ["b"]
+    with pytest.raises(ImageError, match=r"run \[a\]/\*\.jpg: no file matches the pattern"):
+        frame_paths([str(folder / "*.jpg")])
+
+
+def test_a_files_url_whose_folder_name_holds_a_comma_is_taken_whole(tmp_path):
+    """files://Messungen 1,2/*.png was split at the comma: 'Messungen 1: no such file'."""
+    folder = tmp_path / "Messungen 1,2"
+    folder.mkdir()
+    for name in ("a.png", "b.png"):
+        PIL.fromarray(np.zeros((4, 4), np.uint8)).save(folder / name)
+    for location in (str(folder), f"{folder}/*.png", f"{folder}/a.png"):
+        assert [p.name for p in open_camera(f"files://{location}").paths][0] == "a.png", location
+    for name in ("c.png", "d.png"):
+        PIL.fromarray(np.zeros((4, 4), np.uint8)).save(tmp_path / name)
+    joined = open_camera(f"files://{tmp_path}/d.png,{tmp_path}/c.png").paths  # a comma still joins names
+    assert [p.name for p in joined] == ["d.png", "c.png"]
+
+
 def test_camera_urls(tmp_path):
     PIL.fromarray(np.zeros((20, 30), np.uint8)).save(tmp_path / "a.png")
     cam = open_camera(f"files://{tmp_path}?fps=5&pixel=0.25um")

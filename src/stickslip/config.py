@@ -42,7 +42,7 @@ from pathlib import Path
 from urllib.parse import urlsplit
 
 from .devices.base import BACKENDS, redact_url
-from .records import atomic_write_text, read_text_bounded
+from .records import FILE_URL_DATABASE, atomic_write_text, is_file_url, read_text_bounded
 from .units import UnitError, parse_length
 
 __all__ = [
@@ -310,6 +310,8 @@ class _Reader:
             return None
         text = self._string("database", value, "a file path or a postgresql:// URL")
         head, sep, _ = text.partition("://")
+        if is_file_url(text) and not sep:
+            raise self.fail("database", FILE_URL_DATABASE)
         if not sep or len(head) < 2:  # a path (a one-letter "scheme" is a Windows drive)
             return self._path("database", text)
         if head.lower() not in DATABASE_SCHEMES:

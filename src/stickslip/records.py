@@ -52,6 +52,18 @@ STEP_RANGE = {"m": (1e-10, 1e-4), "rad": (1e-10, 1e-2)}
 """``unit -> (smallest, largest)`` magnitude accepted for a step size or a step-size term."""
 
 
+FILE_URL_DATABASE = (
+    "a file: URL is not read (it would be a file named 'file:...', on Windows a hidden stream): "
+    "give the database file's path"
+)
+"""Why ``--db file:lab.db`` (SQLite's URI form; RFC 8089's ``file:/data/lab.db``) is refused, wherever one is named."""
+
+
+def is_file_url(text: str) -> bool:
+    """Whether ``text`` is a ``file:`` URL (any case; ``file://`` too), not a path."""
+    return text.strip()[:5].lower() == "file:"
+
+
 def special_kind(mode: int) -> str | None:
     """What a file of ``st_mode`` ``mode`` is (``"a folder"``, ``"a FIFO ..."``), or ``None`` for a regular file."""
     if stat.S_ISREG(mode):

@@ -81,8 +81,13 @@ def _logging(verbose: int, log_file: Path | None) -> None:
         handlers.append(h)
     if log_file is not None:
         from ..records import writable_target
+        from ._common import path_option
         from ._logfile import LogFile
 
+        try:
+            path_option(log_file)  # --log-file -v: a value left out, not a log named '-v'
+        except typer.BadParameter as e:
+            raise typer.BadParameter(e.message, param_hint="--log-file") from None
         try:
             h = LogFile(writable_target(log_file, "log"), encoding="utf-8")  # never a FIFO: it would hang
         except (OSError, ValueError) as e:

@@ -10,6 +10,7 @@ import importlib.util
 import json
 import math
 import os
+import re
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -198,17 +199,25 @@ def one_line(message: object) -> str:
     return visible(redact_text("; ".join(parts)))
 
 
-def say(text: str, indent: str = "  ") -> None:
+_KEPT_SPACE = "\ue000"
+"""Stands for a space of a path while a line is wrapped (a private-use character no file name holds)."""
+
+
+def say(text: str, indent: str = "  ", keep: tuple[object, ...] = ()) -> None:
     """Print a result line on stdout, wrapped at the console's width at spaces only, later lines indented.
 
     A URL, a path or a number with its unit is never broken (rich's own wrapping folds a
-    long word), and what belongs together reads as one item.
+    long word), and what belongs together reads as one item. Each of ``keep`` (the paths
+    the line names) stays whole even where it holds spaces (``OneDrive - Lab/Messungen 2026``):
+    on a line of its own if it is longer than the rest of the line, so it can be copied whole.
     """
     from ._help import wrap
 
+    for k in sorted({str(k) for k in keep if " " in str(k)}, key=len, reverse=True):
+        text = text.replace(k, k.replace(" ", _KEPT_SPACE))
     lead = text[: len(text) - len(text.lstrip())]
     for line in wrap(text.strip(), console.width, lead + indent, first=lead):
-        console.print(line, soft_wrap=True)
+        console.print(line.replace(_KEPT_SPACE, " "), soft_wrap=True)
 
 
 def warn(message: str) -> None:
@@ -382,6 +391,30 @@ def _finite_option(value: float | None) -> float | None:
     return value
 
 
+_OPTION_LIKE = re.compile(r"--|--?[A-Za-z][A-Za-z0-9-]*")
+"""A value that reads as an option (``-j``, ``--json``) or the end of options (``--``), not as a file's name."""
+
+
+def path_option(value: str | Path | None) -> str | Path | None:
+    """A file option's value (``-o``, ``--db``, ``--log-file``), or ``typer.BadParameter`` if it reads as an option.
+
+    ``show 2 -o --json`` wrote the calibration to a file named ``--json`` and printed no JSON:
+    click takes the next word as the value whatever it looks like. A file of such a name is
+    still written, given with its folder (``results/--json``, the full path: pathlib reads ``./--json``
+    as ``--json``); ``-o.csv`` and ``--help.csv`` are names, taken as they are.
+    """
+    text = None if value is None else os.fspath(value)
+    if text is not None and _OPTION_LIKE.fullmatch(text):
+        try:
+            whole = os.path.join(os.getcwd(), text)  # ./--json reaches here as --json (pathlib drops ./)
+        except OSError:  # the working folder was removed
+            whole = os.path.join("FOLDER", text)
+        raise typer.BadParameter(
+            f"{text!r} reads as an option, not a file: was the file left out? (a file of that name: {whole})"
+        )
+    return value
+
+
 DEVICE_FILTERS = frozenset({"history", "export", "anova", "report", "delete"})
 """Commands whose ``--device`` only picks stored rows: any text may match a device stored by an older release."""
 
@@ -404,7 +437,7 @@ def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) 
     import inspect
     import typing
 
-    from typer.models import ParameterInfo
+    from typer.models import OptionInfo, ParameterInfo
 
     for p in inspect.signature(callback, eval_str=True).parameters.values():
         annotation, info = p.annotation, p.default
@@ -423,6 +456,8 @@ def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) 
             info.callback = day_option
         elif kinds == {str} and p.name == "device" and not device_is_filter:
             info.callback = device_option
+        elif isinstance(info, OptionInfo) and (kinds == {Path} or (kinds == {str} and p.name == "db")):
+            info.callback = path_option
 
 
 def device_option(value: str | None) -> str | None:

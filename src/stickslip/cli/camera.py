@@ -390,7 +390,7 @@ def _write_jacobian(
 
 
 def _print_against(jacobian: Path, against: dict[int, tuple[float, float]]) -> None:
-    console.print(f"image Jacobian written to {jacobian} (move, reach, jog --camera-calibration)", highlight=False)
+    say(f"image Jacobian written to {jacobian} (move, reach, jog --camera-calibration)", keep=(jacobian,))
     for j, (r, a) in against.items():
         seen = (f"{100 * r:.1f} % of the stated view's length, turned {a:.1f} deg" if math.isfinite(r)
                 else "seen where the stated view sees nothing")
@@ -481,8 +481,7 @@ def _print_calibration(result: CameraCalibrationResult, output: Path | None) -> 
         if jr.refused:
             console.print(styled("refused:", "yellow"), jr.refused, highlight=False)
     if output is not None:
-        console.print(f"{len(result.rows)} step sizes written to {output} (stickslip calibrate --step-sizes)",
-                      highlight=False)
+        say(f"{len(result.rows)} step sizes written to {output} (stickslip calibrate --step-sizes)", keep=(output,))
 
 
 @camera_app.command("grab")
@@ -547,7 +546,7 @@ def grab_cmd(
         print_json(info)
         return
     px = f", pixel {frame.pixel_size_m * 1e6:g} µm" if frame.pixel_size_m else ""
-    console.print(f"{w} x {h} px{px} at t = {frame.time_s:.3f} s -> {output}", highlight=False)
+    say(f"{w} x {h} px{px} at t = {frame.time_s:.3f} s -> {output}", keep=(output,))
     if truth is not None:
         console.print(f"simulator's true tip: {truth[0]:.2f}, {truth[1]:.2f} px", highlight=False)
 

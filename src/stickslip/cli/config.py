@@ -66,7 +66,7 @@ def path_cmd(
         print_json(
             {
                 "path": str(p),
-                "exists": p.is_file(),
+                "exists": os.path.isfile(p),
                 "source": "env" if from_env else "default",
                 "where": f"${ENV_CONFIG}" if from_env else "",
             }
@@ -140,12 +140,12 @@ def show_cmd(
                     "calibration": {
                         **_row(cal),
                         "value": None if cal.value is None else str(cal.value),
-                        "exists": None if cal.value is None else cal.value.is_file(),
+                        "exists": None if cal.value is None else os.path.isfile(cal.value),
                     },
                     "database": {
                         **_row(base),
                         "value": describe_database(base.value),
-                        "exists": base.value.is_file() if isinstance(base.value, Path) else None,
+                        "exists": os.path.isfile(base.value) if isinstance(base.value, Path) else None,
                     },
                     "max_age_days": _row(age),
                     "geometry": {**_row(geom), "value": geom.value.as_dict()},
@@ -155,7 +155,7 @@ def show_cmd(
         _check_named_files(cal)
         return
     state = "found" if cfg.found else "not there: built-in defaults (stickslip config init writes a template)"
-    say(f"config file: {cfg.path} ({state})")
+    say(f"config file: {cfg.path} ({state})", keep=(cfg.path,))
 
     def origin(s: Setting[Any]) -> str:
         return s.source + (f" {s.where}" if s.where else "")
@@ -163,7 +163,7 @@ def show_cmd(
     def path_text(p: Path | None) -> str:
         if p is None:
             return "none: give --calibration"
-        return str(p) + ("" if p.is_file() else " (not there)")
+        return str(p) + ("" if os.path.isfile(p) else " (not there)")  # never raises (a name too long)
 
     g = geom.value
     for name, value, setting in (
@@ -173,13 +173,13 @@ def show_cmd(
         ("max_age_days", f"{age.value} day{'s' if age.value != 1 else ''}", age),
         ("geometry", f"offset {g.offset * 1e3:g} mm, length {g.length * 1e3:g} mm", geom),
     ):
-        say(f"  {name}: {value} (from {origin(setting)})", indent="      ")
+        say(f"  {name}: {value} (from {origin(setting)})", indent="      ", keep=(setting.value, setting.where))
     _check_named_files(cal)
 
 
 def _check_named_files(cal: Setting[Path | None]) -> None:
     """Exit 2 naming the configuration file when the calibration it names is not there (every command would fail)."""
-    if cal.source == "file" and cal.value is not None and not cal.value.is_file():
+    if cal.source == "file" and cal.value is not None and not os.path.isfile(cal.value):
         fail(f"{cal.where}: calibration: {cal.value} does not exist (fix the config file, or give --calibration)")
 
 
@@ -188,5 +188,5 @@ def _database_text(where: Path | str) -> str:
     from ..storage import describe_database
 
     if isinstance(where, Path):
-        return str(where) + ("" if where.is_file() else " (not there yet)")
+        return str(where) + ("" if os.path.isfile(where) else " (not there yet)")
     return f"{describe_database(where)} (PostgreSQL)"

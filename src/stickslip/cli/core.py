@@ -319,7 +319,7 @@ def calibrate_cmd(
     for n in cal.provenance.notes:
         say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     if output is not None:
-        say(f"saved to {output}")
+        say(f"saved to {output}", keep=(output,))
     if kept is not None:
         say(f"kept in the database as calibration #{kept} of {stored[0] if stored else ''}".rstrip())
 
@@ -431,7 +431,7 @@ def _calibrate_stage(measurements: Path, rig_file: Path, arm: str | None, output
     for n in cal.provenance.notes:
         say(f"note: {n}")  # wrapped at spaces, later lines indented: a path or a number is never cut
     if output is not None:
-        say(f"saved to {output}")
+        say(f"saved to {output}", keep=(output,))
 
 
 def _stored_device(traverses: list[Any], db: str | None) -> tuple[str, list[int]] | None:
@@ -583,7 +583,7 @@ def show_cmd(
         s, u = (1e9, "nm") if cal.kind(j) == "prismatic" else step_scale(j)
         say(f"{'constant-step comparator' if cal.models else 'mean step'}, joint {j}{d}: {v * s:.5g} {u}")
     if output is not None:
-        say(f"saved to {output}")
+        say(f"saved to {output}", keep=(output,))
 
 
 def _calibration_to_show(text: str | None, db: str | None) -> tuple[Calibration, str]:
@@ -659,7 +659,7 @@ def predict_cmd(
         warn(f"gamma_pi95 includes a day's change of step, {drift:.0%}: the calibration is from "
              f"{cal.day or 'an unknown day'}, not today")  # on stderr: stdout may be the table
     if output is not None:
-        console.print(f"wrote {rows[0]} rows to {output}")
+        say(f"wrote {rows[0]} rows to {output}", keep=(output,))
 
 
 @app.command("validate")

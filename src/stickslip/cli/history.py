@@ -84,9 +84,9 @@ def history(
         print_json(entries)
         return
     if not entries:
-        console.print(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""))
+        say(f"no sessions stored in {path}" + (f" for device {redact_url(device)}" if device else ""), keep=(path,))
         return
-    say(f"stickslip history of {path}")
+    say(f"stickslip history of {path}", keep=(path,))
     for dev in dict.fromkeys(e["device"] for e in entries):  # one table per device: a URL is never folded
         say(f"device {dev}")
         table = Table(pad_edge=False)
@@ -142,7 +142,7 @@ def export(
 
         with user_errors():
             write_measurements(out, counted(itertools.chain([first], rows)))
-    console.print(f"wrote {count[0]} traverses to {out}")
+    say(f"wrote {count[0]} traverses to {out}", keep=(out,))
 
 
 def _no_match(st: Any, device: str | None, day: str | None, joint: int | None) -> str:
@@ -296,7 +296,7 @@ def backup(
     with open_store(db, must_exist=True) as st, user_errors(StoreError):
         written = st.backup(out)
         n = st.count_traverses()
-    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}")
+    say(f"copied {n} traverse(s), the calibrations and the kept positions into {written}", keep=(written,))
 
 
 # ---------------------------------------------------------------- anova
@@ -460,7 +460,7 @@ def fit(
     console.print(cal.report(), highlight=False)
     console.print(res.report(), highlight=False)
     if out is not None:
-        console.print(f"wrote {out}")
+        say(f"wrote {out}", keep=(out,))
     if cal_id is not None:
         console.print(f"stored as calibration #{cal_id}")
 
@@ -527,6 +527,6 @@ def report(
         )
         return
     for p in rep.figures:
-        console.print(f"wrote {p}")
+        say(f"wrote {p}", keep=(p,))
     console.print(f"validation {rep.sample.kind}: {rep.sample.reason}", highlight=False)
-    console.print(f"open {rep.html}")
+    say(f"open {rep.html}", keep=(rep.html,))

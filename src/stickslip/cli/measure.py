@@ -168,7 +168,7 @@ def _print_demo(result: Any) -> None:
         title = "Validation on other poses: |relative error| of the average step"
         console.print(validation_table(result.validation.rows(), title))
     for what, path in result.files.items():
-        say(f"saved {what}: {path}")
+        say(f"saved {what}: {path}", keep=(path,))
 
 
 def _already_recorded(store: Any, seed: int, day: str) -> bool:

@@ -11,7 +11,7 @@ from rich.table import Table
 
 from ..records import atomic_write_text
 from . import app
-from ._common import calibration_file, console, fail, print_json, user_errors
+from ._common import calibration_file, console, fail, print_json, say, user_errors
 
 if TYPE_CHECKING:
     from ..calibration.design import Suggestion
@@ -115,7 +115,7 @@ def suggest_cmd(
         )
     console.print(t)
     if output is not None:
-        console.print(f"wrote {output}")
+        say(f"wrote {output}", keep=(output,))
 
 
 

@@ -95,6 +95,9 @@ the command line):
 * **Options:** a number option of infinite size (`1e999`, `inf`, `nan`), a blank `--day`,
   or a `--device` URL that could never be opened (an unknown scheme, a port beyond 65535,
   a host name longer than DNS allows) is refused naming the option, before anything runs.
+  So is a file option given a word that reads as an option (`-o --json`, `--db -v`, `-o --`:
+  the file was left out); a file so named is given with its folder (`results/--json`).
+  `-o.csv` is a name; an argument that begins with `-` follows `--` (`calibrate -- -o.csv`).
 
 | exit code | meaning |
 | --- | --- |

@@ -180,7 +180,7 @@ def check(
 
         with user_errors():
             draw(rig, poses, out)
-        say(f"drawn: {out}")
+        say(f"drawn: {out}", keep=(out,))
     if problems:  # a check that found something says so to a script too (after drawing it: the picture shows where)
         fail(f"{path}: the drawn poses break the envelope ({len(problems)} problem(s) above)")
 

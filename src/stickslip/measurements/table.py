@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import operator
+import os
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -295,8 +296,12 @@ def _read_table_text(path: str | Path, max_bytes: int | None = None) -> str:
     ten times the file); :func:`stream_measurement_table` and ``predict`` stream instead.
     """
     p = Path(path)
-    if not p.exists():
-        raise TableError([f"{p}: no such file"])
+    try:
+        os.stat(p)
+    except FileNotFoundError:
+        raise TableError([f"{p}: no such file"]) from None
+    except OSError:  # a name too long (Path.exists raised it on 3.11): read_text_bounded says why in one line
+        pass
     limit = MAX_TABLE_BYTES if max_bytes is None else int(max_bytes)
     try:
         return read_text_bounded(p, "CSV", limit)

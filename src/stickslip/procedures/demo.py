@@ -28,6 +28,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
+import stat
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -554,8 +556,14 @@ _OUTPUTS = ("measurements.csv", "validation.csv", "repeats.csv", "calibration.js
 def check_outputs(out: str | Path) -> None:
     """Refuse (``ValueError`` naming it) a results file of ``out`` that cannot be replaced by a file (a folder, a FIFO),
     before the demo runs: found at the end, it left the files written before it replaced and the rest not."""
-    if not Path(out).is_dir():
-        return  # a folder still to make (or a file in its way: the run says so when it makes it)
+    try:
+        st = os.stat(out)
+    except FileNotFoundError:
+        return  # a folder still to make
+    except OSError as e:  # a name too long for the file system, a loop of links: raised by is_dir on 3.11
+        raise ValueError(f"{out}: cannot make the results folder ({e.strerror or e}); nothing was run") from None
+    if not stat.S_ISDIR(st.st_mode):
+        return  # a file in its way: the run says so when it makes it
     for name in _OUTPUTS:
         writable_target(Path(out) / name, "results")
 

@@ -24,7 +24,7 @@ import numpy as np
 from ..devices.base import SECRET_OPTIONS, device_key, redact_url, windows_com_port
 from ..joints import MM3A_FILE
 from ..kinematics import Geometry
-from ..records import read_text_bounded
+from ..records import FILE_URL_DATABASE, is_file_url, read_text_bounded
 from ..units import UnitError, parse_angle, parse_length
 from .model import (
     ARM_KINDS,
@@ -269,6 +269,8 @@ class _Reader(_Values):
         """The rig's history: an SQLite file (relative to the rig file's folder) or a postgresql:// URL, no password."""
         text = self.string(value, ("database",))
         head, sep, rest = text.partition("://")
+        if is_file_url(text) and not sep:
+            raise self.fail(("database",), FILE_URL_DATABASE)
         if not sep or len(head) < 2:  # a path (a one-letter "scheme" is a Windows drive)
             p = Path(text).expanduser()
             return str(p if p.is_absolute() else Path(self.path).parent / p)

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from ..clock import now_utc, stale_message
 from ..devices.base import redact_url
 from ..measurements import Traverse
+from ..records import FILE_URL_DATABASE, is_file_url
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..calibration import Calibration
@@ -210,6 +211,8 @@ def resolve_database(spec: str | os.PathLike[str] | None = None) -> Path | str:
     if isinstance(spec, os.PathLike):
         return Path(spec).expanduser()
     scheme = database_scheme(spec)
+    if scheme is None and is_file_url(spec):  # SQLite's own URI form, RFC 8089's file:/path
+        raise StoreError(f"{where}: {FILE_URL_DATABASE} (docs/storage.md)")
     if scheme is None:
         return Path(spec).expanduser()
     if scheme in POSTGRES_SCHEMES:

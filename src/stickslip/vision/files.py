@@ -84,7 +84,7 @@ def _named_frames(text: str) -> list[Path]:
         return found
     if p.exists() or not any(c in text for c in "*?["):
         return [p]
-    matches = sorted((Path(m) for m in glob.glob(text) if Path(m).is_file()), key=name_order)
+    matches = sorted((Path(m) for m in _glob(text) if Path(m).is_file()), key=name_order)
     if not matches:
         raise ImageError(f"{text}: no file matches the pattern")
     images = [m for m in matches if m.suffix.lower() in IMAGE_SUFFIXES]  # as a folder: Thumbs.db is not a frame
@@ -92,6 +92,27 @@ def _named_frames(text: str) -> list[Path]:
         raise ImageError(f"{text}: the pattern matches {len(matches)} files ({matches[0].name}, ...) but no image "
                          f"file ({', '.join(IMAGE_SUFFIXES)}); name a file to read it whatever its name ends in")
     return images
+
+
+def _glob(text: str) -> list[str]:
+    """The names a glob ``text`` matches, its folders taken as written where they exist.
+
+    A lab's folder is often named ``Messungen [2026]``: ``Messungen [2026]/*.png`` globs the
+    frames in that folder (``[2026]`` read as a character class matched nothing). The longest
+    leading run of whole folder names that exists is escaped; only if that matches nothing is
+    ``text`` globbed as written (a ``[ab]`` meant as a class where no such folder is).
+    """
+    parts = text.replace(os.altsep or os.sep, os.sep).split(os.sep)
+    for k in range(len(parts) - 1, 0, -1):
+        folder = os.sep.join(parts[:k]) or os.sep
+        if not os.path.isdir(folder):
+            continue
+        if any(c in folder for c in "*?["):
+            found = glob.glob(os.path.join(glob.escape(folder), *parts[k:]))
+            if found:
+                return found
+        break
+    return glob.glob(text)
 
 
 def name_order(path: Path) -> tuple[tuple[tuple[int, int | str], ...], str]:
@@ -337,8 +358,17 @@ def open_files_url(url: str, device: Controller | None = None) -> FileCamera:
     location, opts = camera_options(url, {"fps", "pixel"})
     if not location:
         raise ValueError(f"{redact_url(url)!r} names no files: write files://FOLDER or files://frames/*.png")
-    names: Iterable[str] = (location_path(n) for n in location.split(","))
+    names: Iterable[str] = (location_path(n) for n in _split_names(location))
     return FileCamera(frame_paths(list(names)), _number(opts, "fps", url, 1.0), pixel_option(opts, url), url)
+
+
+def _split_names(location: str) -> list[str]:
+    """The names a ``files://`` location joins with ``,``; the whole location if it names a file or folder as it
+    stands (``files://Messungen 1,2/*.png``: a folder whose name holds a comma, as labs name runs)."""
+    whole = location_path(location)
+    if "," in location and (os.path.exists(whole) or (any(c in whole for c in "*?[") and bool(_glob(whole)))):
+        return [location]
+    return location.split(",")
 
 
 def open_video_url(url: str, device: Controller | None = None) -> VideoCamera:
