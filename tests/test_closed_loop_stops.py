@@ -288,6 +288,7 @@ def test_a_camera_stating_a_wrong_pixel_size_is_said_not_silently_reached(tmp_pa
         assert "more than 3 times the change expected (8%)" in lines[0]
 
 
+@pytest.mark.slow  # seconds: in make test, out of the fast tier
 def test_a_bluesky_scan_with_the_tip_given_once_follows_the_tip_from_move_to_move(RE):
     # CameraLoop(tip=...) gives the tip's pixel now; every later move started from that pixel, on the shaft by
     # then: a 5-point bp.scan from 0 to 400 µm stopped at 116 µm, 'the fit did not settle' (audit36's question)

@@ -271,6 +271,7 @@ def test_a_move_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path,
         assert round(1e6 * (j3["uncertain"] or [j3["q"]])[-1], 1) == 2097.2
 
 
+@pytest.mark.slow  # seconds: in make test, out of the fast tier
 def test_a_report_cut_short_by_a_full_disk_leaves_the_earlier_report_whole(tmp_path, monkeypatch):
     # each figure was written atomically, but one after the other: a disk that filled after the first left the new
     # fig4_prismatic.png beside the old index.html and the old other figures (a page describing one calibration
@@ -474,6 +475,7 @@ def test_camera_calibrate_refuses_a_jacobian_calibration_without_a_measured_join
     assert not (tmp_path / "steps.csv").exists() and not (tmp_path / "j.json").exists()
 
 
+@pytest.mark.slow  # seconds: in make test, out of the fast tier
 def test_camera_calibrate_writes_its_step_sizes_and_jacobian_together(tmp_path, monkeypatch):
     # steps.csv was written, then j.json: a disk that filled between them left this run's step sizes beside an
     # earlier run's Jacobian

@@ -18,6 +18,8 @@ from stickslip.vision.needle import fit_needle, learn_needle, render_needle, sta
 from stickslip.vision.template import TrackerParams
 from stickslip.vision.track import Fix, TipTracker
 
+pytestmark = pytest.mark.slow  # a model fitted per frame, seconds a test: in make test, out of the fast tier
+
 
 def draw(tip: tuple[float, float], phi: float, sigma: float, radius: float = 2.0, slope: float = 0.15,
          level: float = 0.45, seed: int = 0, noise: float = 0.01, size: int = 96) -> NDArray[np.float64]:
