@@ -182,3 +182,25 @@ def test_a_name_too_long_for_the_file_system_is_one_line_never_a_traceback(
     r = invoke(args)
     assert r.exception is None or isinstance(r.exception, SystemExit), repr(r.exception)
     assert "Traceback" not in r.output
+
+
+def test_a_file_options_leading_tilde_is_the_home_folder_whatever_the_shell(tmp_path, monkeypatch):
+    # PowerShell and cmd pass ~ to a program as it stands: `-o ~/cal.json` wrote a folder named '~' in the working
+    # folder (or failed 'no such folder'); --db expanded it, the other file options did not (audit43's question)
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import measurements_to_csv
+
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.setenv("USERPROFILE", str(home))  # Path.expanduser on Windows
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "meas.csv").write_text(measurements_to_csv(paper_table()))
+    r = CliRunner().invoke(app, ["calibrate", "meas.csv", "-o", "~/cal.json"])
+    assert r.exit_code == 0, r.output
+    assert (home / "cal.json").is_file() and not (tmp_path / "~").exists()
+    r = CliRunner().invoke(app, ["predict", "meas.csv", "-c", "~/cal.json", "-o", "~/predicted.csv"])
+    assert r.exit_code == 0 and (home / "predicted.csv").is_file(), r.output

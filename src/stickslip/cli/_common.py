@@ -396,7 +396,8 @@ _OPTION_LIKE = re.compile(r"--|--?[A-Za-z][A-Za-z0-9-]*")
 
 
 def path_option(value: str | Path | None) -> str | Path | None:
-    """A file option's value (``-o``, ``--db``, ``--log-file``), or ``typer.BadParameter`` if it reads as an option.
+    """A file option's value (``-o``, ``--db``, ``--log-file``), or ``typer.BadParameter`` if it reads as an option;
+    a leading ``~/`` is the home folder (a POSIX shell expands it; PowerShell and cmd pass it as it stands).
 
     ``show 2 -o --json`` wrote the calibration to a file named ``--json`` and printed no JSON:
     click takes the next word as the value whatever it looks like. A file of such a name is
@@ -412,6 +413,9 @@ def path_option(value: str | Path | None) -> str | Path | None:
         raise typer.BadParameter(
             f"{text!r} reads as an option, not a file: was the file left out? (a file of that name: {whole})"
         )
+    if text is not None and (text == "~" or text.startswith(("~/", "~" + os.sep))):
+        # the home folder, as a POSIX shell would give it: PowerShell and cmd pass ~ to a program as it stands
+        return type(value)(os.path.expanduser(text)) if isinstance(value, Path) else os.path.expanduser(text)
     return value
 
 

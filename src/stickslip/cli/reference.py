@@ -98,6 +98,8 @@ the command line):
   So is a file option given a word that reads as an option (`-o --json`, `--db -v`, `-o --`:
   the file was left out); a file so named is given with its folder (`results/--json`).
   `-o.csv` is a name; an argument that begins with `-` follows `--` (`calibrate -- -o.csv`).
+  A file option's leading `~/` is your home folder wherever the command runs (PowerShell and
+  cmd pass `~` to a program as it stands).
 
 | exit code | meaning |
 | --- | --- |
