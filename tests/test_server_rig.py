@@ -192,3 +192,30 @@ def test_serve_says_at_start_that_the_arm_stands_outside_its_envelope(tmp_path: 
             assert problem is not None and words in problem and "arm 'probe'" in problem and "\n" not in problem
     finally:
         room.close()
+
+
+def test_a_move_is_refused_while_another_arm_of_the_rig_is_in_flight(client: TestClient, room: ControlRoom) -> None:
+    # audit46: two servers of one rig each checked their move against the other arm's confirmed pose while
+    # that arm moved, and both tips ended at (0, 0, 0). The other arm's journal says where it may be.
+    from stickslip.devices.positions import load_state, save_state
+
+    rig = room.options.rig
+    assert rig is not None
+    key, specs = rig.state_key("other"), rig.arm("other").joint_specs()
+    arm = room.owned.dev
+    before = arm.steps_simulated
+    other = load_state(room.store, key, specs)
+    assert other.positions[3] == 0.0  # its tip at (+9, 0, 0) mm: 18 mm from the probe's, 10 mm after the move
+    other.intend(3, 9e-3)  # its server's write-ahead mark: joint 3 in flight toward 9 mm (its tip to (0, 0, 0))
+    save_state(room.store, other)
+    refused(client.post("/api/move", json={"joint": 3, "by": "8mm"}), 409, "refused by the rig's envelope",
+            "arm 'other' may be anywhere", "between 0 µm and 9000 µm")
+    assert arm.steps_simulated == before  # nothing was sent
+    other.set_position(3, 9e-3, "dead-reckoned")  # its move ended there: the probe's move is checked against it
+    save_state(room.store, other)
+    refused(client.post("/api/move", json={"joint": 3, "by": "8mm"}), 409, "kept around 'arm other'")
+    other.set_position(3, 0.0, "dead-reckoned")  # back: 10 mm apart after the move, accepted
+    save_state(room.store, other)
+    r = client.post("/api/move", json={"joint": 3, "by": "8mm"})
+    assert r.status_code == 202, r.text
+    assert wait(client, r.json()["id"])["status"] == "done"

@@ -21,6 +21,7 @@ from ..devices.positions import DeviceState, StateStore, load_state
 from ..rig import NamedPosition, Rig
 from ..rig.guard import Guard, mapped
 from ..rig.secrets import controller_url
+from ..units import format_position
 from . import named
 from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, check_envelope_path, move
 from .named import once, safe_order
@@ -34,12 +35,16 @@ __all__ = [
 def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
     """The envelope of ``arm`` (the rig's first for ``None``): the rig, and every other arm's kept pose."""
     me = rig.arm(arm)
-    others = {}
+    others, unknown = {}, {}
     for other in rig.arms:
         if other.name != me.name:
             s = load_state(store, rig.state_key(other.name), other.joint_specs())
             others[other.name] = [s.positions[j] for j in (1, 2, 3)]
-    return Guard(rig, me.name, others)
+            if s.uncertain:  # a burst in flight (the journal's mark) or one interrupted: anywhere over its bounds
+                j = min(s.uncertain)
+                lo, hi = (format_position(v, s.spec(j)) for v in s.uncertain[j])
+                unknown[other.name] = f"its joint {j} is in flight or uncertain, between {lo} and {hi}"
+    return Guard(rig, me.name, others, unknown)
 
 
 def opener_for(

@@ -16,25 +16,47 @@ from typing import Any
 import numpy as np
 
 from ..devices.base import Controller, DeviceInfo
-from .envelope import SigmaGrowth, check_path, safe_fraction
+from .envelope import EnvelopeViolation, Refusal, SigmaGrowth, check_path, safe_fraction
 from .model import Arm, Rig
 
-__all__ = ["Guard", "mapped"]
+__all__ = ["ArmUnknown", "Guard", "mapped"]
+
+
+class ArmUnknown(EnvelopeViolation):
+    """Another arm of the rig may be anywhere over a range (a move in flight, or one interrupted): nothing
+    can be shown clear of it, so every path is refused until its move ends or it is re-referenced."""
+
+    def __init__(self, refusal: Refusal, text: str) -> None:
+        super().__init__(refusal)
+        self.args = (text,)
 
 
 @dataclass(frozen=True)
 class Guard:
-    """A rig's envelope for one arm: ``others`` are the other arms' kept poses (rad, rad, m) by name."""
+    """A rig's envelope for one arm: ``others`` are the other arms' kept poses (rad, rad, m) by name;
+    ``unknown`` the other arms whose kept pose is uncertain (in flight, or interrupted), with why."""
 
     rig: Rig
     arm: str
     others: Mapping[str, Sequence[float]] = field(default_factory=dict)
+    unknown: Mapping[str, str] = field(default_factory=dict)
+
+    def _known(self, q: Sequence[float]) -> None:
+        """Refuse (:class:`ArmUnknown`) any path from ``q`` while another arm's kept pose is uncertain."""
+        for name, why in self.unknown.items():
+            refusal = Refusal(arm=self.arm, obstacle=f"arm {name}", point=None, distance=0.0,
+                              allowed=self.rig.arm_distance, q=(float(q[0]), float(q[1]), float(q[2])), fraction=0.0,
+                              undecided=True)
+            raise ArmUnknown(refusal, f"arm {self.arm!r}: arm {name!r} may be anywhere along a move ({why}), so no "
+                             "path can be shown clear of it: wait for its move to end, or re-reference it")
 
     def check(self, path: Sequence[Sequence[float]], q_sd: Sequence[float] | SigmaGrowth = (0.0, 0.0, 0.0)) -> None:
         """Refuse ``path`` (poses, rad or m) if it leaves the envelope (:func:`~.envelope.check_path`).
 
         ``q_sd``: each joint's σ (rad, rad, m) all along, or as it grows along the path.
         """
+        if len(path):
+            self._known(path[0])
         check_path(self.rig, self.arm, np.asarray(path, dtype=float), q_sd=q_sd, others=dict(self.others))
 
     def check_joint(self, q: Sequence[float], joint: int, q_to: float, q_sd: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
@@ -45,6 +67,8 @@ class Guard:
 
     def reachable(self, q: Sequence[float], joint: int, q_to: float, q_sd: Sequence[float] = (0.0, 0.0, 0.0)) -> float:
         """How far toward ``q_to`` joint ``joint`` may go from ``q`` within the envelope (rad or m): a jog's stop."""
+        if self.unknown:
+            return float(q[joint - 1])
         end = list(q)
         end[joint - 1] = q_to
         frac, _ = safe_fraction(self.rig, self.arm, np.asarray([list(q), end], dtype=float), q_sd=q_sd,
