@@ -219,3 +219,17 @@ def test_a_move_is_refused_while_another_arm_of_the_rig_is_in_flight(client: Tes
     r = client.post("/api/move", json={"joint": 3, "by": "8mm"})
     assert r.status_code == 202, r.text
     assert wait(client, r.json()["id"])["status"] == "done"
+
+
+def test_a_request_naming_an_arm_in_its_query_is_refused(client: TestClient, room: ControlRoom) -> None:
+    # audit46: POST /api/move?arm=gripper to the probe's server moved the probe (the query was ignored)
+    arm = room.owned.dev
+    before = arm.steps_simulated
+    refused(client.post("/api/move", params={"arm": "other"}, json={"joint": 3, "by": "1um"}), 422,
+            "arm: this request takes no query parameter 'arm'", "serves one arm, 'probe'")
+    refused(client.get("/api/where", params={"arm": "Probe"}), 422, "'arm'")
+    refused(client.get("/api/motions/1", params={"wait": 0, "arm": "other"}), 422, "(it takes wait)")
+    assert arm.steps_simulated == before  # nothing was sent
+    assert client.post("/api/stop", params={"press": "p1"}).status_code == 200  # the declared ones still work
+    assert client.get("/api/events", params={"after": 0}).status_code == 200
+    assert client.get("/", params={"x": 1}).status_code == 200  # the page is not the API

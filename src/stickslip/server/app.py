@@ -24,9 +24,11 @@ import logging
 from collections.abc import AsyncIterator, MutableMapping
 from typing import Any
 
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
+from fastapi.dependencies.models import Dependant
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from fastapi.routing import APIRoute
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Receive, Scope, Send
 
@@ -151,6 +153,36 @@ class _KeyTwice(Exception):
 # ------------------------------------------------------------------------------ the app
 
 
+def _query_names(dependant: Dependant) -> set[str]:
+    """The query parameters a route takes (its own and its dependencies')."""
+    names = {str(p.alias) for p in dependant.query_params}
+    for d in dependant.dependencies:
+        names |= _query_names(d)
+    return names
+
+
+def _known_query(request: Request) -> None:
+    """Refuse (422) an API request with a query parameter its route does not take, as a body's unknown key is.
+
+    ``POST /api/move?arm=gripper`` sent to the probe's server moved the probe: a server serves one arm, and a
+    request naming another (or anything else it would ignore) must not be carried out as if it named none.
+    """
+    route = request.scope.get("route")
+    if not request.query_params or not isinstance(route, APIRoute) or not route.path.startswith("/api/"):
+        return
+    known = _query_names(route.dependant)
+    unknown = sorted(set(request.query_params) - known)
+    if not unknown:
+        return
+    line = f"{unknown[0]}: this request takes no query parameter {unknown[0]!r}"
+    line += f" (it takes {', '.join(sorted(known))})" if known else ""
+    if unknown[0].casefold() == "arm":
+        options = request.app.state.room.options
+        served = f"one arm, {options.arm or options.rig.arms[0].name!r}" if options.rig is not None else "one arm"
+        line += f"; this server serves {served}: another arm has a server of its own"
+    raise Refused(line)
+
+
 async def _http_error(request: Request, exc: Exception) -> JSONResponse:
     """An unknown path or method in the documented shape; FastAPI's 400 for a body it could not parse (JSON
     nested thousands deep) as a value that cannot be used, and for a body the guard cut (:class:`_TooLarge`,
@@ -227,6 +259,6 @@ def create_app(room: ControlRoom, access: Access, camera: CameraFeed | None = No
         return _error(500, f"internal error: {one_line(exc)}")
 
     for router in routers(room, camera):
-        app.include_router(router)
+        app.include_router(router, dependencies=[Depends(_known_query)])
     app.include_router(live_routes(live, room, access))
     return app
