@@ -293,9 +293,31 @@ def test_validation_figure_per_day_with_labels(cal, two_days):
     assert max(np.max(np.abs(c.constant_error)) for c in v.cells) > 0.2  # the constant step is far off
     axes = v.plot()
     assert axes.shape == (2, 2)
-    assert axes[0, 1].get_title() == f"validation, joint 3, day {DAY1} — in-sample"
-    assert axes[1, 0].get_title() == f"validation, joint 2, day {DAY2} — out-of-sample"
+    assert axes[0, 1].get_title() == f"validation, joint 3, day {DAY1}\nin-sample"
+    assert axes[1, 0].get_title() == f"validation, joint 2, day {DAY2}\nout-of-sample"
     assert axes[0, 1].get_xlabel() == "measured average step (nm)"
+
+
+def _inside_figure(artist) -> bool:
+    """Whether a drawn text's box lies within its figure (nothing clipped at the edge)."""
+    fig = artist.get_figure()
+    box = artist.get_window_extent(fig.canvas.get_renderer())
+    w, h = fig.bbox.width + 0.5, fig.bbox.height + 0.5
+    return bool(box.x0 >= -0.5 and box.y0 >= -0.5 and box.x1 <= w and box.y1 <= h)
+
+
+def test_validation_panel_of_one_traverse_reads_whole(cal, table):
+    one = [t for t in table if t.joint == 3][:1]
+    axes = validation_data(cal, one, {DAY1: "may overlap the calibration data"}).plot()
+    a = axes[0, 0]
+    a.get_figure().canvas.draw()
+    assert _inside_figure(a.title)  # the sample label ran off a one-panel figure
+    legend = a.get_legend()
+    assert legend.get_title().get_text() == "1 traverse"
+    c = validation_data(cal, one).cells[0]
+    model = legend.get_texts()[1].get_text()
+    assert model == f"model: max |error| {100 * abs(float(c.model_error[0])):.2f} %"  # as the page's table
+    assert model != "model: max |error| 0.0 %"
 
 
 # ---------------------------------------------------------------- the report
