@@ -17,6 +17,7 @@ import re
 import numpy as np
 import pytest
 from analysis_tables import simulated_table  # tests/support
+from figures import inside_figure  # tests/support
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate
@@ -298,20 +299,11 @@ def test_validation_figure_per_day_with_labels(cal, two_days):
     assert axes[0, 1].get_xlabel() == "measured average step (nm)"
 
 
-def _inside_figure(artist) -> bool:
-    """Whether a drawn text's box lies within its figure (nothing clipped at the edge)."""
-    fig = artist.get_figure()
-    box = artist.get_window_extent(fig.canvas.get_renderer())
-    w, h = fig.bbox.width + 0.5, fig.bbox.height + 0.5
-    return bool(box.x0 >= -0.5 and box.y0 >= -0.5 and box.x1 <= w and box.y1 <= h)
-
-
 def test_validation_panel_of_one_traverse_reads_whole(cal, table):
     one = [t for t in table if t.joint == 3][:1]
     axes = validation_data(cal, one, {DAY1: "may overlap the calibration data"}).plot()
     a = axes[0, 0]
-    a.get_figure().canvas.draw()
-    assert _inside_figure(a.title)  # the sample label ran off a one-panel figure
+    assert inside_figure(a.title)  # the sample label ran off a one-panel figure
     legend = a.get_legend()
     assert legend.get_title().get_text() == "1 traverse"
     c = validation_data(cal, one).cells[0]
