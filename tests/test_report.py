@@ -233,6 +233,20 @@ def test_fig9_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(cal):
         assert c.d == pytest.approx(ref, rel=1e-6)
 
 
+def test_series_are_told_apart_by_more_than_hue(cal, table):
+    # a grey print or a colour-blind reader: each pose's line its own style, each calibrated point its own marker
+    axes = rotary_interval_data(cal, table, 2).plot()
+    for a in axes.ravel():
+        lines = [ln for ln in a.get_lines() if ln.get_label().startswith("θ")]
+        assert len(lines) == 4 and len({ln.get_linestyle() for ln in lines}) == 4
+    axes = prismatic_data(cal, table).plot()
+    lines = [ln for ln in axes[0, 0].get_lines() if ln.get_label().startswith("θ")]
+    assert [ln.get_linestyle() for ln in lines] == ["-", "--", "-."]
+    ax = d_relation_data(cal, 2, gamma0_values=(40e-6,), n=5, simulate="exact").plot()
+    points = [ln for ln in ax.get_lines() if ln.get_label().startswith("this calibration")]
+    assert len(points) == 4 and len({ln.get_marker() for ln in points}) == 4
+
+
 # ---------------------------------------------------------------- in-sample / out-of-sample
 
 
