@@ -216,6 +216,7 @@ def test_plot_levels_draws_threshold_and_event():
     labels = [ln.get_label() for ln in ax.get_lines()]
     assert {"threshold", "detected", "true stop"} <= set(labels)
     assert ax.get_ylabel() == "band level (dBFS)"
+    assert ax.get_title() == "end-stop detector: 1 stop detected"
     assert inside_figure(ax.xaxis.label) and inside_figure(ax.yaxis.label)  # "time (s)" was cut at the bottom
 
 

@@ -260,6 +260,7 @@ def test_validation_plot_shows_relative_errors_in_percent():
     every_error = np.concatenate([res.model_error, res.constant_error]) * 100
     np.testing.assert_allclose(np.sort(plotted), np.sort(every_error), rtol=1e-12)
     assert "%" in ax.get_ylabel()
+    assert ax.get_title() == f"validation: model against constant step, {len(res.traverses)} traverses"
 
 
 def test_auto_uses_the_papers_procedure_wherever_its_poses_are():

@@ -170,8 +170,10 @@ def plot_levels(
     ax.plot(t, levels, lw=0.8, label=f"band {lo:.0f}-{hi:.0f} Hz")
     ax.axhline(tuning.threshold_db, color="C3", lw=1, label="threshold")
     ax.axhline(tuning.threshold_db - tuning.hysteresis_db, color="C3", lw=0.8, ls=":", label="re-arm level")
-    for i, ev in enumerate(detect(samples, tuning, t0_s=t0_s)):
+    events = detect(samples, tuning, t0_s=t0_s)
+    for i, ev in enumerate(events):
         ax.axvline(ev.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
+    ax.set_title(f"end-stop detector: {len(events)} stop{'' if len(events) == 1 else 's'} detected")
     if stop_at_s is not None:
         ax.axvline(stop_at_s, color="k", ls="--", lw=1, label="true stop")
     ax.set_xlabel("time (s)")
