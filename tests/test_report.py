@@ -351,6 +351,8 @@ def test_build_report_writes_labelled_figures_and_a_self_contained_page(cal, tab
     assert rep.sample.kind == "in-sample" and "Validation (in-sample)" in page
     assert "out-of-sample" not in page
     assert "model max" in page and "constant-step max" in page and "standard error" in page
+    # every sentence of a caption starts with a capital ("one row per day. these traverses are ..." did not)
+    assert [c for c in re.findall(r"<figcaption>(.*?)</figcaption>", page, re.S) if re.search(r"\. [a-z]", c)] == []
     other = [t for t in two_days if t.day == DAY2]
     rep2 = build_report(cal, table, tmp_path / "r2", dpi=40, seed_simulation="exact", validation=other)
     page2 = rep2.html.read_text()
