@@ -228,6 +228,8 @@ def test_plot_levels_of_a_template_tuning_labels_its_level_inside_the_figure():
     tuning, x = _template_case()
     ax = plot_levels(x[: tuning.sample_rate], tuning)
     assert ax.get_ylabel() == "stop-likeness\n(0 stepping, 1 the tuned stop)"
+    lo, hi = tuning.band_hz
+    assert ax.get_lines()[0].get_label() == f"stop-likeness over band {lo:.0f}-{hi:.0f} Hz"  # not "band ..." alone
     assert inside_figure(ax.yaxis.label)  # "band level ((stop-likeness: ...))" ran off both ends
 
 
