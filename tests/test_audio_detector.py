@@ -207,6 +207,8 @@ def test_feed_rejects_stereo():
 
 
 def test_plot_levels_draws_threshold_and_event():
+    from figures import inside_figure  # tests/support
+
     from stickslip.audio.detector import plot_levels
 
     x = _quiet_then((0.3, 0.0), (0.3, 0.1))
@@ -214,6 +216,21 @@ def test_plot_levels_draws_threshold_and_event():
     labels = [ln.get_label() for ln in ax.get_lines()]
     assert {"threshold", "detected", "true stop"} <= set(labels)
     assert ax.get_ylabel() == "band level (dBFS)"
+    assert ax.get_title() == "end-stop detector: 1 stop detected"
+    assert inside_figure(ax.xaxis.label) and inside_figure(ax.yaxis.label)  # "time (s)" was cut at the bottom
+
+
+def test_plot_levels_of_a_template_tuning_labels_its_level_inside_the_figure():
+    from figures import inside_figure  # tests/support
+
+    from stickslip.audio.detector import plot_levels
+
+    tuning, x = _template_case()
+    ax = plot_levels(x[: tuning.sample_rate], tuning)
+    assert ax.get_ylabel() == "stop-likeness\n(0 stepping, 1 the tuned stop)"
+    lo, hi = tuning.band_hz
+    assert ax.get_lines()[0].get_label() == f"stop-likeness over band {lo:.0f}-{hi:.0f} Hz"  # not "band ..." alone
+    assert inside_figure(ax.yaxis.label)  # "band level ((stop-likeness: ...))" ran off both ends
 
 
 _TEMPLATE: dict[str, object] = {}

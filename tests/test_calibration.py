@@ -245,6 +245,8 @@ def test_plot_draws_the_model_curves():
     assert "nm" in ax.get_ylabel() and len(ax.get_lines()) == 6
     ax2 = cal.plot(2)
     assert "µrad" in ax2.get_ylabel() and len(ax2.get_lines()) == 4
+    # the direction by line style as well as colour (grey print, colour-blind readers)
+    assert [ln.get_linestyle() for ln in ax2.get_lines()] == ["-", "-", "--", "--"]
 
 
 def test_validation_plot_shows_relative_errors_in_percent():
@@ -258,6 +260,7 @@ def test_validation_plot_shows_relative_errors_in_percent():
     every_error = np.concatenate([res.model_error, res.constant_error]) * 100
     np.testing.assert_allclose(np.sort(plotted), np.sort(every_error), rtol=1e-12)
     assert "%" in ax.get_ylabel()
+    assert ax.get_title() == f"validation: model against constant step, {len(res.traverses)} traverses"
 
 
 def test_auto_uses_the_papers_procedure_wherever_its_poses_are():

@@ -204,3 +204,21 @@ def test_demo_device_takes_a_sim_url_and_refuses_real_controllers(tmp_path):
                         "run wrote none): delete it or use another --out\n")
     assert (tmp_path / "o" / "validation.csv").read_text() == "an earlier run's\n"
     _check_summary(json.loads(r.stdout), seed=2, day="2026-11-19", out=tmp_path / "o")  # another draw
+
+
+def test_demo_plot_shows_every_parameter_name_whole():
+    import numpy as np
+    from figures import inside_figure  # tests/support
+    from synth import paper_table  # tests/support
+
+    from stickslip.calibration import calibrate
+    from stickslip.procedures.demo import DemoResult, compare_parameters
+
+    cal = calibrate(paper_table())
+    params = compare_parameters(cal.parameters(), cal.parameters())
+    r = DemoResult(3, "2026-11-22", {}, [], [], cal, None, cal.parameters(), params, 0.0, 0.0)
+    ax = r.plot()
+    ticks = ax.get_xticklabels()
+    assert len(ticks) == len(params) == 14
+    assert all(inside_figure(t) for t in ticks)  # the rotated names were cut at the bottom of the figure
+    np.testing.assert_allclose([ln.get_ydata()[0] for ln in ax.get_lines()[:1]], [0.0])

@@ -158,6 +158,19 @@ def test_constant_step_plan_differs_and_is_worse_on_the_simulator():
     assert np.linalg.norm(tm - model.target) < 0.01 * 200e-6 < np.linalg.norm(tc - model.target)
 
 
+def test_plot_says_what_it_shows_and_tells_true_from_predicted_by_style():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    plan = plan_reach(CAL, POSES[0], by=(20e-6, 10e-6, 0.0))
+    true = np.array([plan.tip_start] + [s.tip for s in plan.segments]) + 1e-7
+    ax = plan.plot(true_tips=true)
+    assert ax.get_title() == f"straight move of the tip in {len(plan.segments)} segments (x-y plane)"
+    pred, got = (next(ln for ln in ax.get_lines() if ln.get_label().startswith(w)) for w in ("predicted", "true"))
+    assert (pred.get_marker(), pred.get_linestyle()) != (got.get_marker(), got.get_linestyle())
+    assert ax.get_xlabel() == "x (µm)"
+
+
 def test_zero_move_and_bad_arguments():
     plan = plan_reach(CAL, POSES[0], by=(0.0, 0.0, 0.0))
     assert plan.segments == [] and plan.q_end == plan.q_start and plan.as_dict()["segments"] == []

@@ -17,6 +17,7 @@ import re
 import numpy as np
 import pytest
 from analysis_tables import simulated_table  # tests/support
+from figures import inside_figure  # tests/support
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import integrate
@@ -232,6 +233,20 @@ def test_fig9_matches_the_exact_inversion_and_shows_eq9_printed_is_wrong(cal):
         assert c.d == pytest.approx(ref, rel=1e-6)
 
 
+def test_series_are_told_apart_by_more_than_hue(cal, table):
+    # a grey print or a colour-blind reader: each pose's line its own style, each calibrated point its own marker
+    axes = rotary_interval_data(cal, table, 2).plot()
+    for a in axes.ravel():
+        lines = [ln for ln in a.get_lines() if ln.get_label().startswith("θ")]
+        assert len(lines) == 4 and len({ln.get_linestyle() for ln in lines}) == 4
+    axes = prismatic_data(cal, table).plot()
+    lines = [ln for ln in axes[0, 0].get_lines() if ln.get_label().startswith("θ")]
+    assert [ln.get_linestyle() for ln in lines] == ["-", "--", "-."]
+    ax = d_relation_data(cal, 2, gamma0_values=(40e-6,), n=5, simulate="exact").plot()
+    points = [ln for ln in ax.get_lines() if ln.get_label().startswith("this calibration")]
+    assert len(points) == 4 and len({ln.get_marker() for ln in points}) == 4
+
+
 # ---------------------------------------------------------------- in-sample / out-of-sample
 
 
@@ -293,9 +308,22 @@ def test_validation_figure_per_day_with_labels(cal, two_days):
     assert max(np.max(np.abs(c.constant_error)) for c in v.cells) > 0.2  # the constant step is far off
     axes = v.plot()
     assert axes.shape == (2, 2)
-    assert axes[0, 1].get_title() == f"validation, joint 3, day {DAY1} — in-sample"
-    assert axes[1, 0].get_title() == f"validation, joint 2, day {DAY2} — out-of-sample"
+    assert axes[0, 1].get_title() == f"validation, joint 3, day {DAY1}\nin-sample"
+    assert axes[1, 0].get_title() == f"validation, joint 2, day {DAY2}\nout-of-sample"
     assert axes[0, 1].get_xlabel() == "measured average step (nm)"
+
+
+def test_validation_panel_of_one_traverse_reads_whole(cal, table):
+    one = [t for t in table if t.joint == 3][:1]
+    axes = validation_data(cal, one, {DAY1: "may overlap the calibration data"}).plot()
+    a = axes[0, 0]
+    assert inside_figure(a.title)  # the sample label ran off a one-panel figure
+    legend = a.get_legend()
+    assert legend.get_title().get_text() == "1 traverse"
+    c = validation_data(cal, one).cells[0]
+    model = legend.get_texts()[1].get_text()
+    assert model == f"model: max |error| {100 * abs(float(c.model_error[0])):.2f} %"  # as the page's table
+    assert model != "model: max |error| 0.0 %"
 
 
 # ---------------------------------------------------------------- the report
@@ -323,6 +351,8 @@ def test_build_report_writes_labelled_figures_and_a_self_contained_page(cal, tab
     assert rep.sample.kind == "in-sample" and "Validation (in-sample)" in page
     assert "out-of-sample" not in page
     assert "model max" in page and "constant-step max" in page and "standard error" in page
+    # every sentence of a caption starts with a capital ("one row per day. these traverses are ..." did not)
+    assert [c for c in re.findall(r"<figcaption>(.*?)</figcaption>", page, re.S) if re.search(r"\. [a-z]", c)] == []
     other = [t for t in two_days if t.day == DAY2]
     rep2 = build_report(cal, table, tmp_path / "r2", dpi=40, seed_simulation="exact", validation=other)
     page2 = rep2.html.read_text()

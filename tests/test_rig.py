@@ -283,3 +283,31 @@ def test_a_bare_angle_of_more_than_a_turn_is_refused_as_degrees_without_their_un
         parse_rig(text, "p.toml")
     ok = parse_rig(TWO_ARMS.format(a="sim://", b="sim://?seed=2") + "mount = { rotation = [0, 0, 3.1] }\n", "p.toml")
     assert ok.arms[1].mount.rotation == (0.0, 0.0, 3.1)  # a bare angle within a turn is radians, as documented
+
+
+def test_the_drawing_names_a_half_space_where_its_edge_enters_the_view_not_on_another_volume():
+    """The docs' rig (an objective over the origin, a tilted sample plane through it): the top view wrote
+    "sample" on top of "objective" (both at the origin); the line's end would put it on the arm "probe"."""
+    pytest.importorskip("matplotlib")
+    from stickslip.rig.draw import figure
+
+    rig = parse_rig(
+        'name = "t"\n[stage]\ntilt = "52deg"\n'
+        '[[arm]]\nname = "probe"\nkind = "mm3a"\ncontroller = "sim://"\nmount = { origin = ["-30mm", "0mm", "0mm"] }\n'
+        '[[volume]]\nname = "objective"\nshape = "cylinder"\nbase = ["0mm", "0mm", "4mm"]\naxis = [0, 0, 1]\n'
+        'radius = "8mm"\nheight = "40mm"\n'
+        '[[volume]]\nname = "sample"\nshape = "half-space"\npoint = ["0mm", "0mm", "-0.5mm"]\nnormal = [0, 0, -1]\n'
+        "on_stage = true\n"
+    )
+    fig = figure(rig, {a.name: a.home for a in rig.arms})
+    try:
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        for ax in fig.axes:
+            boxes = {t.get_text(): t.get_window_extent(renderer) for t in ax.texts}
+            assert not any(boxes["sample"].overlaps(b) for t, b in boxes.items() if t != "sample"), ax.get_title()
+            assert ax.bbox.contains(*boxes["sample"].p0)  # inside its panel
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)

@@ -54,5 +54,6 @@ def axes(ax: Axes | None = None, figsize: tuple[float, float] = (6.0, 4.0)) -> A
         raise ImportError("plotting needs matplotlib: pip install 'stickslip[plot]'") from e
     # a Figure pyplot does not manage: returned, never shown implicitly (a notebook shows
     # ``ax.figure`` when asked; a script saves it with ``ax.figure.savefig``)
-    out: Axes = Figure(figsize=figsize).subplots()
+    # constrained: labels and rotated ticks fit inside the figure (the demo's parameter names were cut off)
+    out: Axes = Figure(figsize=figsize, layout="constrained").subplots()
     return out

@@ -165,16 +165,20 @@ def plot_levels(
     levels = frame_levels_db(samples, tuning)
     t = t0_s + (np.arange(levels.size) * tuning.hop + tuning.frame - 1) / tuning.sample_rate
     if ax is None:
-        _, ax = plt.subplots(figsize=(8, 3))
+        _, ax = plt.subplots(figsize=(8, 3), constrained_layout=True)  # the axis labels inside the figure
     lo, hi = tuning.band_hz
-    ax.plot(t, levels, lw=0.8, label=f"band {lo:.0f}-{hi:.0f} Hz")
+    template = tuning.method == "template"  # its level is a stop-likeness over the band, not the band's level
+    ax.plot(t, levels, lw=0.8, label=f"{'stop-likeness over ' if template else ''}band {lo:.0f}-{hi:.0f} Hz")
     ax.axhline(tuning.threshold_db, color="C3", lw=1, label="threshold")
     ax.axhline(tuning.threshold_db - tuning.hysteresis_db, color="C3", lw=0.8, ls=":", label="re-arm level")
-    for i, ev in enumerate(detect(samples, tuning, t0_s=t0_s)):
+    events = detect(samples, tuning, t0_s=t0_s)
+    for i, ev in enumerate(events):
         ax.axvline(ev.detected_at_s, color="C2", lw=1, label="detected" if i == 0 else None)
+    ax.set_title(f"end-stop detector: {len(events)} stop{'' if len(events) == 1 else 's'} detected")
     if stop_at_s is not None:
         ax.axvline(stop_at_s, color="k", ls="--", lw=1, label="true stop")
     ax.set_xlabel("time (s)")
-    ax.set_ylabel(f"band level ({tuning.level_unit})")
+    # a template tuning's level is a stop-likeness (its unit is a parenthesis): on two lines, to fit 3 inches
+    ax.set_ylabel("stop-likeness\n(0 stepping, 1 the tuned stop)" if template else f"band level ({tuning.level_unit})")
     ax.legend(loc="best", fontsize="small")
     return ax

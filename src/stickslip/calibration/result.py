@@ -577,7 +577,7 @@ class Calibration:
         """Model step size against zeta (psi = 0, q1 = 0), like the paper's Figs. 4 and 10.
 
         Joint 3: one curve per direction and tilt ``theta`` (nm). Rotary joints: one curve
-        per direction at q3 = 0 and 12 mm, theta = 0 (µrad). Returns the matplotlib Axes.
+        per direction at q3 = 0 and 12 mm, theta = 0 (µrad). Direction + solid, - dashed. Returns the Axes.
         """
         if isinstance(joint, bool) or not isinstance(joint, int) or joint not in self.joints:
             raise ValueError(f"joint {joint!r} is not in this calibration (it has joints {self.joints})")
@@ -589,10 +589,11 @@ class Calibration:
             if (joint, d) not in self.models:
                 continue
             m = self.models[(joint, d)]
+            ls = "-" if d == "+" else "--"  # the direction by line style, not by hue alone
             if kin.joint_spec(joint).prismatic:
                 for th in thetas:
                     g = m.gamma(0.0, q2, 0.0, th, 0.0)
-                    ax.plot(zeta_deg, g * step_scale(joint)[0], label=f"γ3{d}, θ = {math.degrees(th):.0f}°")
+                    ax.plot(zeta_deg, g * step_scale(joint)[0], ls=ls, label=f"γ3{d}, θ = {math.degrees(th):.0f}°")
             else:
                 for q3 in (0.0, kin.Q3_MAX):
                     qj = q2 if joint == 2 else np.linspace(kin.JOINTS[1].lower, kin.JOINTS[1].upper, 400)
@@ -600,6 +601,7 @@ class Calibration:
                     ax.plot(
                         zeta_deg if joint == 2 else np.degrees(qj),
                         m.gamma(*args) * step_scale(joint)[0],
+                        ls=ls,
                         label=f"γ{joint}{d}, q3 = {q3 * 1e3:g} mm",
                     )
         ax.set_xlabel("ζ = ψ − q2 (deg)" if joint != 1 else "q1 (deg)")

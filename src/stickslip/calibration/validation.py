@@ -110,6 +110,7 @@ class ValidationResult:
         ax.axhline(0.0, color="k", lw=0.8)
         ax.set_xlabel("traverse (grouped by joint)")
         ax.set_ylabel("predicted / measured average step − 1 (%)")
+        ax.set_title(f"validation: model against constant step, {len(self.traverses)} traverses")
         ax.legend(fontsize="small")
         return ax
 

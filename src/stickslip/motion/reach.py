@@ -187,7 +187,7 @@ class ReachPlan:
         import matplotlib.pyplot as plt
 
         if ax is None:
-            _, ax = plt.subplots()
+            _, ax = plt.subplots(constrained_layout=True)
         ix = ["xyz".index(c) for c in plane]
         line = np.array([self.tip_start, self.target]) * 1e6
         ax.plot(line[:, ix[0]], line[:, ix[1]], "k--", lw=1, label="straight line")
@@ -195,9 +195,10 @@ class ReachPlan:
         ax.plot(pred[:, ix[0]], pred[:, ix[1]], ".-", label=f"predicted ({self.step_model})")
         if true_tips is not None:
             tt = np.asarray(true_tips, dtype=float) * 1e6
-            ax.plot(tt[:, ix[0]], tt[:, ix[1]], ".-", label="true")
+            ax.plot(tt[:, ix[0]], tt[:, ix[1]], "x:", label="true")  # not the predicted path's style in another hue
         ax.set_xlabel(f"{plane[0]} (µm)")
         ax.set_ylabel(f"{plane[1]} (µm)")
+        ax.set_title(f"straight move of the tip in {len(self.segments)} segments ({plane[0]}-{plane[1]} plane)")
         ax.set_aspect("equal", adjustable="datalim")
         ax.legend()
         return ax

@@ -12,6 +12,9 @@ from ..plotting import pyplot
 if TYPE_CHECKING:  # pragma: no cover
     from matplotlib.axes import Axes
 
+LINE_STYLES = ("-", "--", "-.", ":")
+"""Line styles cycled beside the colours: series told apart by more than hue."""
+
 AxesArray = NDArray[np.object_]
 """A 2-D array of matplotlib Axes, ``[row, column]``."""
 

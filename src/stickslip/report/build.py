@@ -210,7 +210,7 @@ def _validation_sections(figs: _Figures, cal: Calibration, ts: list[Traverse], s
         vf,
         "validation.png",
         f"Validation, {sample.kind}: relative error of the model's prediction (o) and of the constant step (x) "
-        f"for every traverse, against the measured average step, one row per day. {sample.reason}.",
+        f"for every traverse, against the measured average step, one row per day. Data {sample.kind}: {sample.reason}.",
     )
     return (
         pagehtml.validation_section(vf, sample, by_day)

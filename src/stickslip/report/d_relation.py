@@ -106,11 +106,11 @@ class DRelation:
             label=f"paper's method: quadratic fit to simulations (max error {self.max_quadratic_error * k:.2f} {unit})",
         )
         ax.plot(self.delta * k, self.d_printed * k, "r:", lw=1.5, label="Eq. 9 as printed in the paper")
-        for p in self.calibrated:
+        for i, p in enumerate(self.calibrated):  # a marker each, not a hue alone
             ax.plot(
                 p.delta * k,
                 p.d * k,
-                "D",
+                "D^vP"[i % 4],
                 ms=6,
                 mfc="none",
                 label=f"this calibration: {p.direction}, q3 = {p.q3 * 1e3:.0f} mm",

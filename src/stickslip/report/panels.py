@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..plotting import pyplot
-from ._plotting import AxesArray, panel_grid
+from ._plotting import LINE_STYLES, AxesArray, panel_grid
 from ._units import step_scale
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -122,7 +122,7 @@ class StepFigure:
     def plot(self, ax: Axes | Sequence[Axes] | AxesArray | None = None) -> AxesArray:
         """Draw one row per day, one column per direction; returns the ``(days, directions)`` Axes array.
 
-        Lines: the model per pose (the legend names each pose by its colour); filled
+        Lines: the model per pose (the legend names each pose by its colour and line style); filled
         markers: measured averages (a horizontal bar spans a rotary traverse's
         interval); open squares: the model's prediction for the same traverse. Steps
         in nm or µrad, the coordinate in degrees.
@@ -131,7 +131,8 @@ class StepFigure:
         axes = panel_grid(len(days), len(dirs), ax, height=6.0)
         labels = list(dict.fromkeys(c.label for p in self.panels for c in p.curves))
         cmap = pyplot().get_cmap("tab10")
-        colour = {lab: cmap(i % 10) for i, lab in enumerate(labels)}
+        # each pose a colour and a line style: told apart in grey print and by a colour-blind reader
+        colour = {lab: (cmap(i % 10), LINE_STYLES[i % len(LINE_STYLES)]) for i, lab in enumerate(labels)}
         scale, unit = step_scale(self.joint)
         for r, day in enumerate(days):
             for c, d in enumerate(dirs):
@@ -149,11 +150,11 @@ class StepFigure:
         return axes
 
 
-def _draw_panel(a: Axes, panel: Panel, colour: dict[str, Any], scale: float) -> None:
+def _draw_panel(a: Axes, panel: Panel, colour: dict[str, tuple[Any, str]], scale: float) -> None:
     """The lines, measured points and predictions of one panel, with its legend."""
     for cv in panel.curves:
-        col = colour[cv.label]
-        a.plot(np.degrees(cv.x_model), cv.gamma_model * scale, "-", color=col, lw=1.3, label=cv.label)
+        col, ls = colour[cv.label]
+        a.plot(np.degrees(cv.x_model), cv.gamma_model * scale, ls=ls, color=col, lw=1.3, label=cv.label)
         if cv.gamma_data.size:
             xerr = np.degrees(cv.x_halfwidth) if np.any(cv.x_halfwidth > 0) else None
             a.errorbar(

@@ -79,7 +79,8 @@ class ValidationFigure:
 
 def _draw_cell(a: Axes, cell: ValidationCell | None, day: str, joint: int, sample: str) -> None:
     k, unit = step_scale(joint)
-    tag = f" — {sample}" if sample else ""
+    # the sample label on a line of its own: "may overlap the calibration data" ran off a one-panel figure
+    tag = f"\n{sample}" if sample else ""
     a.set_title(f"validation, joint {joint}, day {day}{tag}", fontsize=10)
     a.set_xlabel(f"measured average step ({unit})")
     a.set_ylabel("relative error of the prediction (%)")
@@ -90,9 +91,10 @@ def _draw_cell(a: Axes, cell: ValidationCell | None, day: str, joint: int, sampl
         return
     m = cell.measured * k
     ce, me = cell.constant_error * 100, cell.model_error * 100
-    a.plot(m, ce, "x", color="tab:red", ms=6, label=f"constant step: max |error| {np.max(np.abs(ce)):.1f} %")
-    a.plot(m, me, "o", color="tab:blue", ms=5, label=f"model: max |error| {np.max(np.abs(me)):.1f} %")
-    a.legend(fontsize=7, title=f"{cell.n} traverses", title_fontsize=7)
+    # two decimals, as the page's table (html.pct): one decimal read a 0.02 % model as "0.0 %"
+    a.plot(m, ce, "x", color="tab:red", ms=6, label=f"constant step: max |error| {np.max(np.abs(ce)):.2f} %")
+    a.plot(m, me, "o", color="tab:blue", ms=5, label=f"model: max |error| {np.max(np.abs(me)):.2f} %")
+    a.legend(fontsize=7, title=f"{cell.n} traverse{'' if cell.n == 1 else 's'}", title_fontsize=7)
 
 
 def validation_data(

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from ..plotting import pyplot
 from ..records import atomic_write
 from .model import Box, Cylinder, HalfSpace, Rig
 
-__all__ = ["draw"]
+__all__ = ["draw", "figure"]
 
 
 def _surface(v: Box | Cylinder) -> np.ndarray:
@@ -31,8 +32,32 @@ def _surface(v: Box | Cylinder) -> np.ndarray:
     return np.vstack((base + ring, base + ax * v.height + ring))
 
 
+def _label_at(p: np.ndarray, d: np.ndarray, n: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[float, float]:
+    """Where a half-space's name goes: inside it (nothing may be there), halfway to the view's edge, near the left.
+
+    ``p`` is on its edge line, ``d`` along the line, ``n`` into the half-space (the view's two axes). At ``p``, a
+    plane through the origin wrote "sample" on the objective's name; on the line's end, on an arm's.
+    """
+    a = 0 if abs(d[0]) >= abs(d[1]) else 1
+    q = p + (lo[a] + 0.03 * (hi[a] - lo[a]) - p[a]) / d[a] * d
+    u = n / np.linalg.norm(n)
+    reach = [((hi[b] if u[b] > 0 else lo[b]) - q[b]) / u[b] for b in (0, 1) if abs(u[b]) > 1e-9]
+    x, y = q + u * max(0.0, min(reach)) / 2
+    return float(x), float(y)
+
+
 def draw(rig: Rig, poses: Mapping[str, Sequence[float]], path: str | Path) -> None:
     """Draw ``rig`` with each arm at ``poses[name]`` (rad or m) into the PNG ``path`` (mm on the axes)."""
+    fig = figure(rig, poses)
+    try:
+        # whole or not at all, never into a folder or a device (records.atomic_write: every output file)
+        atomic_write(path, lambda f: fig.savefig(f, dpi=100, format="png"), mode="wb")
+    finally:
+        pyplot().close(fig)
+
+
+def figure(rig: Rig, poses: Mapping[str, Sequence[float]]) -> Any:
+    """The matplotlib Figure :func:`draw` saves: the side (x-z) and top (x-y) views, mm."""
     from scipy.spatial import ConvexHull
 
     plt = pyplot()
@@ -60,7 +85,8 @@ def draw(rig: Rig, poses: Mapping[str, Sequence[float]], path: str | Path) -> No
                     ax.plot(line[:, 0], line[:, 1], color="tab:red", lw=1)
                     ax.fill(np.r_[line[:, 0], line[::-1, 0] + n[i] * span],
                             np.r_[line[:, 1], line[::-1, 1] + n[k] * span], color="tab:red", alpha=0.12)
-                    ax.text(p[i], p[k], v.name, fontsize=8, color="tab:red")
+                    at = _label_at(p[[i, k]], d, n[[i, k]], lo[[i, k]], hi[[i, k]])
+                    ax.text(*at, v.name, fontsize=8, color="tab:red", va="center")
                     continue
                 flat = _surface(v)[:, [i, k]] * 1e3
                 hull = ConvexHull(flat, qhull_options="QJ")
@@ -82,7 +108,7 @@ def draw(rig: Rig, poses: Mapping[str, Sequence[float]], path: str | Path) -> No
             ax.set_title(title)
         fig.suptitle(f"rig {rig.name}")
         fig.tight_layout()
-        # whole or not at all, never into a folder or a device (records.atomic_write: every output file)
-        atomic_write(path, lambda f: fig.savefig(f, dpi=100, format="png"), mode="wb")
-    finally:
+    except BaseException:
         plt.close(fig)
+        raise
+    return fig
