@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from full_disk import filling_fdopen
 from synth import paper_table
 from typer.testing import CliRunner
 
@@ -78,44 +79,10 @@ def test_a_backup_into_a_read_only_folder_names_the_backup_asked_for(tmp_path, m
         assert st.count_traverses() == len(paper_table()) and st.integrity_check() == "ok"
 
 
-class _Filling:
-    """A file whose writes fail with ``code`` once ``limit`` bytes are written (a disk filling up)."""
-
-    def __init__(self, f, limit: int, code: int, seen: dict):
-        self._f, self._limit, self._code, self._seen = f, limit, code, seen
-
-    def write(self, data):
-        self._seen["n"] += len(data)
-        if self._seen["n"] > self._limit:
-            self._seen["failed"] = True
-            raise OSError(self._code, os.strerror(self._code))
-        return self._f.write(data)
-
-    def seek(self, *a):
-        if self._seen["failed"]:  # as a real full disk: the stream is broken once a write failed
-            raise OSError(self._code, os.strerror(self._code))
-        return self._f.seek(*a)
-
-    def __getattr__(self, name):
-        return getattr(self._f, name)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self._f.close()
-
-
 def disk_fills_after(monkeypatch, limit: int, code: int = errno.ENOSPC) -> dict:
     """Every file opened for writing through ``os.fdopen`` (the atomic writes) fails after ``limit`` bytes."""
-    real = os.fdopen
     seen = {"n": 0, "failed": False}
-
-    def fdopen(fd, mode="r", *a, **k):
-        f = real(fd, mode, *a, **k)
-        return _Filling(f, limit, code, seen) if ("w" in mode or "a" in mode) else f
-
-    monkeypatch.setattr(os, "fdopen", fdopen)
+    monkeypatch.setattr(os, "fdopen", filling_fdopen(limit, code, seen))
     return seen
 
 

@@ -34,6 +34,7 @@ import threading
 from pathlib import Path
 
 import pytest
+from full_disk import filling_fdopen
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from synth import paper_table  # tests/support, on pytest's pythonpath
@@ -491,40 +492,12 @@ def test_a_full_standard_output_is_one_error_line(kit, json_out):
 # ----------------------------------------------------------------- 5: an output file that cannot be written
 
 
-class Filling:
-    """A file that fails (errno) once more than ``limit`` characters or bytes were written to it."""
-
-    def __init__(self, f, limit: int, code: int, seen: dict) -> None:
-        self._f, self._limit, self._code, self._seen = f, limit, code, seen
-
-    def write(self, s):
-        self._seen["n"] += len(s)
-        if self._seen["n"] > self._limit:
-            self._seen["failed"] = True
-            raise OSError(self._code, os.strerror(self._code))
-        return self._f.write(s)
-
-    def __getattr__(self, name):
-        return getattr(self._f, name)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self._f.close()
-
-
 @contextlib.contextmanager
 def disk_fills_after(limit: int, code: int):
     """Every file opened for writing through ``os.fdopen`` (the atomic writes) fails after ``limit`` characters."""
     real = os.fdopen
     seen = {"n": 0, "failed": False}
-
-    def fdopen(fd, mode="r", *a, **k):
-        f = real(fd, mode, *a, **k)
-        return Filling(f, limit, code, seen) if ("w" in mode or "a" in mode) else f
-
-    os.fdopen = fdopen
+    os.fdopen = filling_fdopen(limit, code, seen)
     try:
         yield seen
     finally:
