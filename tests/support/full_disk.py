@@ -13,7 +13,7 @@ class Filling:
     """A file whose writes fail with ``code`` once ``limit`` characters or bytes were written (``seen`` counts them
     across files and notes ``failed``)."""
 
-    def __init__(self, f: Any, limit: int, code: int, seen: dict) -> None:
+    def __init__(self, f: Any, limit: int, code: int, seen: dict[str, Any]) -> None:
         self._f, self._limit, self._code, self._seen = f, limit, code, seen
 
     def write(self, data: Any) -> Any:
@@ -38,7 +38,7 @@ class Filling:
         self._f.close()
 
 
-def filling_fdopen(limit: int, code: int, seen: dict) -> Callable[..., Any]:
+def filling_fdopen(limit: int, code: int, seen: dict[str, Any]) -> Callable[..., Any]:
     """An ``os.fdopen`` whose files opened for writing fill after ``limit`` (``seen``: {"n": 0, "failed": False})."""
     real = os.fdopen
 
