@@ -174,13 +174,9 @@ class _RealLike:
         return self.arm.position(joint)
 
 
-@pytest.mark.slow
-def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
-    import json
-
-    from typer.testing import CliRunner
-
-    from stickslip.cli import app
+def _real_like_arm(tmp_path, monkeypatch):
+    """A simulated arm driven as a real controller (its positions never placed from the kept ones), the true
+    calibration of a week before saved, and a database: (arm, calibration, its file, database)."""
     from stickslip.procedures import move as move_procedure
 
     cal = _true_cal("2026-03-01")
@@ -189,7 +185,18 @@ def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
     arm = SimulatedMM3A(seed=8, day="2026-03-09")
     arm.set_pose(q2=-math.pi / 2, q3=0.0)
     monkeypatch.setattr(move_procedure, "open_device", lambda url: _RealLike(arm))
-    db = tmp_path / "s.db"
+    return arm, cal, path, tmp_path / "s.db"
+
+
+@pytest.mark.slow
+def test_cli_move_and_observe_follow_the_true_position(tmp_path, monkeypatch):
+    import json
+
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    arm, cal, path, db = _real_like_arm(tmp_path, monkeypatch)
     runner = CliRunner()
 
     def run(*args):
@@ -306,15 +313,9 @@ def test_a_forced_reading_far_off_sets_the_position_and_teaches_no_scale(tmp_pat
     from typer.testing import CliRunner
 
     from stickslip.cli import app
-    from stickslip.procedures import move as move_procedure
 
-    cal = _true_cal("2026-03-01")
-    path = tmp_path / "cal.json"
-    cal.save(path)
-    arm = SimulatedMM3A(seed=8, day="2026-03-09")
-    arm.set_pose(q2=-math.pi / 2, q3=0.0)
-    monkeypatch.setattr(move_procedure, "open_device", lambda url: _RealLike(arm))
-    db, runner = tmp_path / "s.db", CliRunner()
+    _, _, path, db = _real_like_arm(tmp_path, monkeypatch)
+    runner = CliRunner()
     for args, code in (
         (("where", "--db", db, "--set", "3=0", "--offline"), 0),
         (("move", "--db", db, "-c", path, "--joint", 3, "--by", "60um"), 0),
