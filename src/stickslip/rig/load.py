@@ -21,7 +21,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from ..devices.base import SECRET_OPTIONS, device_key, redact_url, windows_com_port
+from ..devices.base import SECRET_OPTIONS, device_key, redact_url
 from ..joints import MM3A_FILE
 from ..kinematics import Geometry
 from ..records import FILE_URL_DATABASE, is_file_url, read_text_bounded
@@ -536,17 +536,14 @@ def _kind(value: object) -> str:
 
 
 def _controller_identity(url: str) -> str:
-    """Which controller ``url`` drives, for the rig's channel check: its device key, a serial port's name as the
-    port is opened (``mm3a:///COM3``, ``mm3a://COM3`` and ``mm3a://com3`` are one port), and a device file
-    that exists here through its links (``/dev/serial/by-id/...`` is the ``/dev/ttyUSB0`` it points to)."""
+    """Which controller ``url`` drives, for the rig's channel check: its device key (one for a Windows serial port
+    however it is written: ``mm3a:///COM3``, ``mm3a://COM3``, ``mm3a://com3``), and a device file that exists here
+    through its links (``/dev/serial/by-id/...`` is the ``/dev/ttyUSB0`` it points to)."""
     key = device_key(url)
     parts = urlsplit(key)
     if key.startswith("sim") or (parts.port is not None):
         return key
     port = parts.path or parts.netloc
-    com = windows_com_port(port)
-    if com is not None:
-        return f"{parts.scheme}://{com.upper()}"
     if port.startswith("/") and os.path.exists(port):
         port = os.path.realpath(port)
     return f"{parts.scheme}://{port}"
