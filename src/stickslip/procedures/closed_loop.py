@@ -562,10 +562,13 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
     return False, "too many legs"  # pragma: no cover - a bound, not a path
 
 
-def _run_kept(run: _Run, target: Vec3, leg: Leg, what: str, key: str) -> tuple[bool, str | None]:
+def _run_kept(
+    run: _Run, target: Vec3, leg: Leg, what: str, key: str, warn: Callable[[str], None]
+) -> tuple[bool, str | None]:
     """:func:`_run_loop`, the start's own σ put back into the kept tracks (:meth:`_Run.finish`) however it
     ends: reached, stopped, or by an exception (a front end's stop between bursts, a device's error, Ctrl-C:
-    :class:`~.move.Interrupted` with the state as stored)."""
+    :class:`~.move.Interrupted` with the state as stored); at the end, a step scale the camera taught far from
+    the calibration's is said (:func:`scale_warnings`)."""
     try:
         reached, reason = _run_loop(run, target, leg)
     except BaseException as e:
@@ -574,6 +577,8 @@ def _run_kept(run: _Run, target: Vec3, leg: Leg, what: str, key: str) -> tuple[b
             raise Interrupted(what, kept_after_interrupt(run.store, key, run.state)) from None
         raise
     run.finish()
+    for w in scale_warnings(run.tracks, run.calibration):
+        warn(w)
     return reached, reason
 
 
@@ -815,9 +820,7 @@ def move_seen(
                 steps[joint - 1] = out.sent
                 return (steps[0], steps[1], steps[2]), out.error, last
 
-            reached, reason = _run_kept(run, target_v, leg, f"move of joint {joint}", key)
-            for w in scale_warnings(run.tracks, calibration):
-                warn(w)
+            reached, reason = _run_kept(run, target_v, leg, f"move of joint {joint}", key, warn)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
@@ -890,9 +893,7 @@ def reach_seen(
                 s = out.sent
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)
 
-            reached, reason = _run_kept(run, target_v, leg, "a straight tip move", key)
-            for w in scale_warnings(run.tracks, calibration):
-                warn(w)
+            reached, reason = _run_kept(run, target_v, leg, "a straight tip move", key, warn)
             true_q = _true(dev)
         finally:
             _close(dev, cam)
