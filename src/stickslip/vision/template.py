@@ -296,6 +296,11 @@ class TrackerParams:
         doubles past a first frame blurred 1.6 px (0.26 px under 0.8 px, 0.52 px over 1.6 px),
         and at 1.6 px the reading warned on none of 66 sharp first frames (< 0.8 px) and
         missed none of 142 blurred ones (> 1.6 px) (track73). SEM edges read about 0.5 px low.
+    shaft_start_deg : float
+        A tip given on the needle's shaft is refused when the needle found there reaches the window's outer
+        ring (its outer 4 px, where the background is read) in two directions within this angle of opposite,
+        deg: a patch of two parallel edges looks the same moved along its axis (a tip moving 4 px a frame was
+        tracked as 0.4 px, scores ~1.0; audit40). A needle's end reaches the ring on one side only.
     needle : bool
         Place each fix by a parametric needle fitted to the frame, its blur free (:mod:`.needle`; track79, off:
         an experiment): the template's fit is its start, the needle's end (at the first frame's offset from the
@@ -380,6 +385,7 @@ class TrackerParams:
     focus_from: float = 10.0
     focus_length: float = 40.0
     focus_warn: float = 1.6
+    shaft_start_deg: float = 22.5
     needle: bool = False
     needle_half: int = 20
     needle_move: float = 4.0
@@ -405,6 +411,8 @@ class TrackerParams:
             raise ValueError("average_frames >= 0 and anchor_limit > 0 px")
         if not (self.weight_falloff > 0 and self.lap_blur > 0):
             raise ValueError("weight_falloff > 0 (a share of half_window; inf: none) and lap_blur > 0 px")
+        if not 0.0 < self.shaft_start_deg < 90.0:
+            raise ValueError(f"shaft_start_deg = {self.shaft_start_deg} deg must be in (0, 90)")
         if self.edge_px < 0:
             raise ValueError(f"edge_px = {self.edge_px} px must be >= 0 (the mask is grown, never shrunk)")
 
@@ -503,7 +511,7 @@ class TipTemplate:
         apex = (x - cx + h, y - cy + h)
         noise = noise_sigma(image)
         mask, ground = _needle_mask(win, inside, apex, noise, params, (x, y))
-        through = _passes_through(mask, apex, h)
+        through = _passes_through(mask, apex, h, params.shaft_start_deg)
         if through is not None:
             raise TemplateError(f"the pixel ({x:g}, {y:g}) is on the needle's shaft, not at its end: {through}")
         level_weights = _level_weights(mask, inside, apex, params)
@@ -591,9 +599,10 @@ def _needle_mask(
     return np.asarray(mask), (level, spread)
 
 
-def _passes_through(mask: NDArray[np.bool_], apex: tuple[float, float], h: int) -> str | None:
+def _passes_through(mask: NDArray[np.bool_], apex: tuple[float, float], h: int, within_deg: float) -> str | None:
     """Why the needle passes through the pixel given as its tip (it reaches the window's outer ring, 4 px wide, on
-    two opposite sides: directions more than 135 deg apart), or ``None``.
+    two opposite sides: directions within ``within_deg`` of opposite, :attr:`TrackerParams.shaft_start_deg`), or
+    ``None``.
 
     A pixel on the shaft learns a patch of two parallel edges: moved along its axis it looks the same, so every
     later fix stays near the first while the tip moves on (4 px a frame tracked as 0.4 px, with the score of a
@@ -608,15 +617,12 @@ def _passes_through(mask: NDArray[np.bool_], apex: tuple[float, float], h: int) 
     w, v = np.linalg.eigh(u @ u.T)  # the outer pixels' main direction through the pixel (either sense)
     p = v[:, -1] @ u
     lo, hi = float(p.min()), float(p.max())
-    if lo < -_OPPOSITE and hi > _OPPOSITE:
+    opposite = math.cos(math.radians(within_deg))
+    if lo < -opposite and hi > opposite:
         back = v[:, -1] * (1 if float(p.mean()) >= 0 else -1)
         return (f"the needle continues beyond it, at least {h - 4} px towards ({-back[0]:+.2f}, {-back[1]:+.2f}) "
                 f"and back; {_WHAT_TO_DO}")
     return None
-
-
-_OPPOSITE = math.cos(math.radians(22.5))
-"""Both senses of the outer pixels' main direction within 22.5 deg: the needle leaves on opposite sides (1)."""
 
 
 def _level_weights(
