@@ -139,6 +139,12 @@ class CameraLoop:
         camera (``--camera-calibration``): the loop's image Jacobian is then the camera
         fitted to it (:meth:`~stickslip.vision.jacobian.MeasuredJacobian.image_map`),
         ``view`` filling in only what it did not measure. ``None``: the kinematic one of ``view``.
+    scale_warn_sd : float
+        A step scale the camera taught more than this many prior standard deviations (a day's change of step and
+        the calibration's model error, as the filter starts them) from the calibration's is said in a warning,
+        1: the loop cannot tell steps that changed from a camera whose stated pixel size is wrong, and a wrong
+        pixel size ends the move "reached" at a wrong place (a pixel stated 0.67 of its size: the tip at 89 µm
+        for 60 µm). 3: a day's change beyond it happens about once in 370 days.
     """
 
     camera: str
@@ -150,6 +156,7 @@ class CameraLoop:
     view: View = TOP_VIEW
     auto_joint: int = 3
     jacobian: MeasuredJacobian | None = None
+    scale_warn_sd: float = 3.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.camera, str):  # an opened camera object: the loop opens its own, on the arm it drives
@@ -157,7 +164,7 @@ class CameraLoop:
                 f"CameraLoop's camera is a camera URL (simcam://?pixel=1um, opencv://0?pixel=0.5um), not a "
                 f"{type(self.camera).__name__}: the loop opens the camera itself"
             )
-        for name in ("tolerance_px", "tolerance", "max_leg_px"):
+        for name in ("tolerance_px", "tolerance", "max_leg_px", "scale_warn_sd"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} = {v!r} must be finite and > 0")
@@ -577,7 +584,7 @@ def _run_kept(
             raise Interrupted(what, kept_after_interrupt(run.store, key, run.state)) from None
         raise
     run.finish()
-    for w in scale_warnings(run.tracks, run.calibration):
+    for w in scale_warnings(run.tracks, run.calibration, run.loop.scale_warn_sd):
         warn(w)
     return reached, reason
 
@@ -730,24 +737,18 @@ def _leg_px(run: _Run, joint: int) -> float:
     return float(np.linalg.norm(G[:, joint - 1])) or 1.0
 
 
-SCALE_WARN_SD = 3.0
-"""A step scale the camera taught more than this many prior standard deviations (a day's change of step and the
-calibration's model error, as the filter starts them) from the calibration's is said (1): the loop cannot tell
-steps that changed from a camera whose stated pixel size is wrong, and a wrong pixel size ends the move "reached"
-at a wrong place (a pixel stated half its size: seen at 60 µm, the tip at 118 µm)."""
-
-
-def scale_warnings(tracks: dict[int, JointTrack], calibration: Calibration) -> list[str]:
-    """One line per joint whose camera-taught step scale lies beyond :data:`SCALE_WARN_SD` prior standard deviations
-    of the calibration's (:func:`~stickslip.calibration.update.day_drift`, :func:`joint_sigma_model`)."""
+def scale_warnings(tracks: dict[int, JointTrack], calibration: Calibration, within_sd: float) -> list[str]:
+    """One line per joint whose camera-taught step scale lies beyond ``within_sd`` prior standard deviations
+    of the calibration's (:attr:`CameraLoop.scale_warn_sd`; :func:`~stickslip.calibration.update.day_drift`,
+    :func:`joint_sigma_model`)."""
     out = []
     for j, t in sorted(tracks.items()):
         prior = math.hypot(day_drift(calibration), joint_sigma_model(calibration, j))
         worst = max((t.scale_of(d) for d in "+-"), key=lambda v: abs(math.log(v)))
-        if prior > 0 and abs(math.log(worst)) > SCALE_WARN_SD * prior:
+        if prior > 0 and abs(math.log(worst)) > within_sd * prior:
             out.append(
                 f"joint {j}: the camera makes its steps x{worst:.3g} of the calibration's, more than "
-                f"{SCALE_WARN_SD:g} times the change expected ({prior:.0%}): check the camera's pixel size "
+                f"{within_sd:g} times the change expected ({prior:.0%}): check the camera's pixel size "
                 "(pixel=; a wrong one moves the tip to a wrong place the camera calls reached), else recalibrate"
             )
     return out
