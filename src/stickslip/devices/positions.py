@@ -19,6 +19,12 @@ sent since. This module keeps that per device URL:
   the joint *uncertain* with those bounds, never silently wrong, until it is
   re-referenced (:meth:`DeviceState.set_position` with source ``"set"``); ``why`` says
   what left it so (a move, a traverse or raw steps interrupted or sent);
+* ``claim``: the whole range a move of this arm is about to sweep (per joint, its bounds
+  over the planned path), journalled before the move reads the rig's other arms and kept
+  until it ends ("mark, then check": :func:`stickslip.procedures.move.claim_and_check`).
+  The other arms of a rig are refused while it is there; the arm's own planning ignores
+  it. A re-reference (:meth:`DeviceState.set_position` with ``"set"``) clears a claim left
+  by a process that ended without clearing it;
 * ``track``: per joint, the Kalman state of its dead reckoning (the day's step scale and
   the covariance of position and scale, :class:`stickslip.motion.tracking.JointTrack` as JSON),
   which ``stickslip move`` propagates and ``stickslip observe`` updates with a measured
@@ -126,6 +132,9 @@ class DeviceState:
     """``{joint: JointTrack JSON}``: step scale and position covariance (stickslip.motion.tracking)."""
     why: dict[int, str] = field(default_factory=dict)
     """``{joint: what left it uncertain}`` ("a move was interrupted", "a traverse was interrupted", ...)."""
+    claim: dict[int, tuple[float, float]] = field(default_factory=dict)
+    """``{joint: (lo, hi)}`` (rad or m): the range a move of this arm claimed before it read the other arms of its
+    rig, kept until it ends; the other arms are refused while it is there (see the module docstring)."""
     joints: JointSet = field(default_factory=lambda: kin.JOINTS, compare=False, repr=False)
     """The arm's joints (kinds, ranges): the MM3A's, or an arm's of a rig file. Not stored."""
 
@@ -161,8 +170,10 @@ class DeviceState:
         self.sources[spec.number] = source
         self.uncertain.pop(spec.number, None)
         self.why.pop(spec.number, None)
-        if source == "set" and spec.number in self.track:  # put there by hand: known exactly, scale kept
-            _exact_position(self.track[spec.number])
+        if source == "set":  # put there by hand: known exactly, scale kept; a claim a move left behind is gone
+            self.claim.clear()
+            if spec.number in self.track:
+                _exact_position(self.track[spec.number])
 
     def referenced(self, joint: int) -> bool:
         """Whether ``joint`` was put somewhere known (set, observed, or moved by the model since), not uncertain."""
@@ -186,6 +197,15 @@ class DeviceState:
         lo, hi = (min(max(float(v), spec.lower), spec.upper) for v in (lo, hi))
         self.uncertain[spec.number] = (min(lo, hi), max(lo, hi))
         self.why[spec.number] = why
+
+    def claim_path(self, path: list[list[float]]) -> None:
+        """Claim the range over ``path`` (poses, rad or m) of each joint it moves, with the joint's uncertain
+        bounds if it has them: where this arm may be until the move ends (:attr:`claim`)."""
+        for j in (1, 2, 3):
+            values = [float(p[j - 1]) for p in path]
+            if max(values) > min(values):
+                lo, hi = self.uncertain.get(j, (self.positions[j], self.positions[j]))
+                self.claim[j] = (min(lo, *values), max(hi, *values))
 
     def bounds(self, joint: int) -> tuple[float, float]:
         """Where ``joint`` may be (rad or m): its uncertain bounds, its position if referenced, else its whole range."""
@@ -229,7 +249,7 @@ class DeviceState:
             "uncertain": {str(j): list(b) for j, b in sorted(self.uncertain.items())},
             "why": {str(j): w for j, w in sorted(self.why.items()) if j in self.uncertain},
             "track": {str(j): t for j, t in sorted(self.track.items())},
-        }
+        } | ({"claim": {str(j): list(b) for j, b in sorted(self.claim.items())}} if self.claim else {})
 
 
 def _exact_position(track: dict[str, Any]) -> None:
@@ -279,6 +299,10 @@ def _read_state(state: DeviceState, raw: Any) -> None:
         if not isinstance(b, list) or len(b) != 2:
             raise ValueError(f"the uncertain bounds of joint {j} are {b!r}, not a pair of numbers")
         state.uncertain[_stored_joint(state, j)] = (_stored_number(b[0], f"q{j}"), _stored_number(b[1], f"q{j}"))
+    for j, b in _entries(raw, "claim"):
+        if not isinstance(b, list) or len(b) != 2:
+            raise ValueError(f"the claimed range of joint {j} is {b!r}, not a pair of numbers")
+        state.claim[_stored_joint(state, j)] = (_stored_number(b[0], f"q{j}"), _stored_number(b[1], f"q{j}"))
     for j, w in _entries(raw, "why"):
         state.why[_stored_joint(state, j)] = str(w)
     for j, t in _entries(raw, "track"):

@@ -33,7 +33,8 @@ __all__ = [
 
 
 def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
-    """The envelope of ``arm`` (the rig's first for ``None``): the rig, and every other arm's kept pose."""
+    """The envelope of ``arm`` (the rig's first for ``None``): the rig, and every other arm's kept pose; an arm
+    uncertain, in flight or claimed by a move is unknown (any path refused). Its ``fresh`` reads them again."""
     me = rig.arm(arm)
     others, unknown = {}, {}
     for other in rig.arms:
@@ -44,7 +45,11 @@ def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
                 j = min(s.uncertain)
                 lo, hi = (format_position(v, s.spec(j)) for v in s.uncertain[j])
                 unknown[other.name] = f"its joint {j} is in flight or uncertain, between {lo} and {hi}"
-    return Guard(rig, me.name, others, unknown)
+            elif s.claim:  # a move of it has claimed its range ("mark, then check"), from its start to its end
+                j = min(s.claim)
+                lo, hi = (format_position(v, s.spec(j)) for v in s.claim[j])
+                unknown[other.name] = f"a move of it claims its joint {j} between {lo} and {hi} until it ends"
+    return Guard(rig, me.name, others, unknown, fresh=lambda: guard_for(store, rig, me.name))
 
 
 def opener_for(

@@ -79,6 +79,8 @@ __all__ = [
     "TrackedPlan",
     "check_envelope",
     "check_envelope_path",
+    "claim_and_check",
+    "claimed",
     "device_lock",
     "drive",
     "exact_positions",
@@ -88,6 +90,7 @@ __all__ = [
     "plan_tracked",
     "reference_commands",
     "reference_problem",
+    "release_claim",
     "step_joint",
     "steps_to_stop",
     "settle",
@@ -660,12 +663,15 @@ def check_envelope(
     as its Kalman track predicts it along the move as the margin (:func:`sigma_growth`,
     :func:`stickslip.rig.envelope.check_path`); no guard, no check.
     """
-    if guard is None:
-        return
+    check_envelope_path(guard, state, _joint_line(state, joint, q_to), calibration)
+
+
+def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
+    """The path of a move of ``joint`` from the kept pose to ``q_to`` (rad or m): its two ends."""
     q = [state.positions[j] for j in (1, 2, 3)]
     end = list(q)
     end[joint - 1] = q_to
-    check_envelope_path(guard, state, [q, end], calibration)
+    return [q, end]
 
 
 def check_envelope_path(
@@ -682,6 +688,71 @@ def check_envelope_path(
         guard.check(path, sigma_growth(state, calibration))
     except EnvelopeViolation as e:
         raise MoveRefused(f"refused by the rig's envelope: {e}") from None
+
+
+@contextmanager
+def claimed(
+    store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
+    calibration: Calibration | None = None,
+) -> Iterator[None]:
+    """Check ``path`` against a rig's envelope by "mark, then check" (:func:`claim_and_check`), and keep the
+    claim for the ``with`` block (the move: every burst's save keeps it, so the gap between one burst's "done"
+    and the next one's mark is covered); it is cleared from the store when the block ends, however it ends."""
+    claim_and_check(store, state, guard, path, calibration)
+    try:
+        yield
+    finally:
+        if state.claim:
+            release_claim(store, state)
+
+
+def claim_and_check(
+    store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
+    calibration: Calibration | None = None,
+) -> None:
+    """A path of a rig's arm checked by "mark, then check": :class:`MoveRefused`, else the range claimed.
+
+    ``path`` is checked against ``guard`` as it is; then the range each joint sweeps along it is
+    journalled as this arm's claim (:meth:`DeviceState.claim_path`, one transaction, nothing else
+    of ``state`` written) *before* the other arms are read again (``guard.fresh``) and the path checked
+    against them. Of two moves of a rig started at once, each writes its claim before it reads,
+    so at least one sees the other's (both may be refused: safe). A refused path's claim is taken
+    back in one transaction, so it blocks nobody. No guard (or one with no ``fresh``): the plain check.
+    """
+    check_envelope_path(guard, state, path, calibration)
+    if guard is None or guard.fresh is None:
+        return
+    state.claim.clear()
+    state.claim_path([list(p) for p in path])
+    if not state.claim:
+        return
+    _store_claim(store, state)
+    try:
+        check_envelope_path(guard.fresh(), state, path, calibration)
+    except BaseException:
+        release_claim(store, state)
+        raise
+
+
+def _store_claim(store: StateStore, state: DeviceState) -> None:
+    """Write ``state``'s claim into the kept state (read back: what ``state`` changed but did not save stays
+    unsaved, e.g. a pose update of a move that may yet be refused)."""
+    kept = load_state(store, state.device, state.joints)
+    kept.claim = dict(state.claim)
+    save_state(store, kept)
+
+
+def release_claim(store: StateStore, state: DeviceState) -> None:
+    """Take back ``state``'s claim, in memory and in the store (one transaction). A store that cannot be written
+    leaves it there: the other arms stay refused (safe) until this arm moves again or is re-referenced."""
+    state.claim.clear()
+    try:
+        kept = load_state(store, state.device, state.joints)
+        if kept.claim:
+            kept.claim.clear()
+            save_state(store, kept)
+    except (OSError, ValueError):
+        pass
 
 
 # ---------------------------------------------------------------- the whole move
@@ -823,18 +894,18 @@ def move(
                 calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
                 assumed=problem is not None and joint not in state.uncertain,
             )
-            check_envelope(request.guard, state, joint, plan.q_to, calibration)
-            if plan.note:
-                warn(plan.note)
-            save_state(store, state)  # the recorded pose, even if nothing moves
-            if not plan.steps:
-                for w in usage_warnings(calibration, None, request.device, joint, request.max_age_days):
-                    warn(w)
-                ready()
-                return MoveResult(key, plan, MoveOutcome(), state)
-            outcome, true_end = _drive_opened(
-                store, request, calibration, state, plan, warn, ready, opener or open_device
-            )
+            with claimed(store, state, request.guard, _joint_line(state, joint, plan.q_to), calibration):
+                if plan.note:
+                    warn(plan.note)
+                save_state(store, state)  # the recorded pose, even if nothing moves
+                if not plan.steps:
+                    for w in usage_warnings(calibration, None, request.device, joint, request.max_age_days):
+                        warn(w)
+                    ready()
+                    return MoveResult(key, plan, MoveOutcome(), state)
+                outcome, true_end = _drive_opened(
+                    store, request, calibration, state, plan, warn, ready, opener or open_device
+                )
         except KeyboardInterrupt:
             raise Interrupted(f"move of joint {joint}", kept_after_interrupt(store, key, state)) from None
         except OSError as e:  # the store failed mid-move (a full disk): bursts may have been sent

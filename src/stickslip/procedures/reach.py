@@ -33,7 +33,7 @@ from .move import (
     MoveRefused,
     MoveStore,
     PoseUpdate,
-    check_envelope_path,
+    claimed,
     device_lock,
     drive,
     exact_positions,
@@ -351,19 +351,19 @@ def reach(
     with device_lock(store, lock):
         state = referenced_state(store, request.device, request.pose, *refs)
         plan = plan_from_state(calibration, borrowed, state, request, warn)
-        check_envelope_path(request.guard, state, joint_path(plan), calibration)
-        save_state(store, state)  # the recorded pose, even if nothing moves
-        for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
-            warn(w)
-        ready()
-        if not any(plan.total_steps):
-            return ReachResult(key, plan, ReachOutcome(), state, moved=True)
-        try:
-            outcome, true_q = _drive_opened(store, request, calibration, state, plan, opener or open_device)
-        except KeyboardInterrupt:
-            raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
-        except OSError as e:  # the store failed mid-move (a full disk): bursts may have been sent
-            raise with_kept_positions(e, store, key, "the straight tip move") from None
+        with claimed(store, state, request.guard, joint_path(plan), calibration):  # mark, then check
+            save_state(store, state)  # the recorded pose, even if nothing moves
+            for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
+                warn(w)
+            ready()
+            if not any(plan.total_steps):
+                return ReachResult(key, plan, ReachOutcome(), state, moved=True)
+            try:
+                outcome, true_q = _drive_opened(store, request, calibration, state, plan, opener or open_device)
+            except KeyboardInterrupt:
+                raise Interrupted("a straight tip move", kept_after_interrupt(store, key, state)) from None
+            except OSError as e:  # the store failed mid-move (a full disk): bursts may have been sent
+                raise with_kept_positions(e, store, key, "the straight tip move") from None
     return ReachResult(key, plan, outcome, state, moved=True, sim_true=true_q)
 
 

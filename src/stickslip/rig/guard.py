@@ -34,12 +34,16 @@ class ArmUnknown(EnvelopeViolation):
 @dataclass(frozen=True)
 class Guard:
     """A rig's envelope for one arm: ``others`` are the other arms' kept poses (rad, rad, m) by name;
-    ``unknown`` the other arms whose kept pose is uncertain (in flight, or interrupted), with why."""
+    ``unknown`` the other arms whose kept pose is uncertain (in flight, or interrupted) or claimed by a move, with
+    why."""
 
     rig: Rig
     arm: str
     others: Mapping[str, Sequence[float]] = field(default_factory=dict)
     unknown: Mapping[str, str] = field(default_factory=dict)
+    fresh: Callable[[], Guard] | None = field(default=None, compare=False, repr=False)
+    """Builds this guard again from the store (the other arms as kept now): what a move checks against once it has
+    claimed its own range (:func:`stickslip.procedures.move.claim_and_check`); ``None``: this one as it is."""
 
     def _known(self, q: Sequence[float]) -> None:
         """Refuse (:class:`ArmUnknown`) any path from ``q`` while another arm's kept pose is uncertain."""
@@ -48,7 +52,8 @@ class Guard:
                               allowed=self.rig.arm_distance, q=(float(q[0]), float(q[1]), float(q[2])), fraction=0.0,
                               undecided=True)
             raise ArmUnknown(refusal, f"arm {self.arm!r}: arm {name!r} may be anywhere along a move ({why}), so no "
-                             "path can be shown clear of it: wait for its move to end, or re-reference it")
+                             "path can be shown clear of it: wait for its move to end, then try again (two moves "
+                             "started at once are both refused), or re-reference it if no move runs on it")
 
     def check(self, path: Sequence[Sequence[float]], q_sd: Sequence[float] | SigmaGrowth = (0.0, 0.0, 0.0)) -> None:
         """Refuse ``path`` (poses, rad or m) if it leaves the envelope (:func:`~.envelope.check_path`).

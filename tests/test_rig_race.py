@@ -1,0 +1,192 @@
+"""Two arms of one rig moved at once: "mark, then check" (rig48).
+
+audit46 measured 12 of 12 simultaneous pairs of moves both accepted: each move read the other
+arms, then journalled its own first burst. Here the two moves' steps are interleaved by hand (a
+store that runs the other arm's move at the moment the first one writes its own state for the
+first time) and then raced in threads. The paths collide: the probe (mount -30 mm) and the other
+arm (+30 mm, turned 180°) each moving joint 3 by +9 mm bring both tips to (0, 0, 0). Collision is
+judged by the independent geometry of ``rig_geometry`` (points along the links), not by the
+envelope under test.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from rig_geometry import links, point_segment
+from server_support import RIG, true_calibration
+
+from stickslip.devices.positions import load_state
+from stickslip.procedures.arms import guard_for, opener_for
+from stickslip.procedures.move import MoveRefused, MoveRequest, MoveResult, move
+from stickslip.rig import Rig, load_rig
+from stickslip.storage import Store
+
+URLS = {"probe": "sim://", "other": "sim://?seed=2"}
+
+
+@pytest.fixture()
+def rig(tmp_path: Path) -> Rig:
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG.replace("{lid}", "30mm"), encoding="utf-8")
+    return load_rig(path)
+
+
+def arm_move(store: Any, rig: Rig, arm: str, by: float = 9e-3) -> MoveResult:
+    """``arm``'s joint 3 by ``by`` (m), as ``stickslip move --rig`` drives it (its guard read when it is called)."""
+    a = rig.arm(arm)
+    request = MoveRequest(URLS[arm], 3, by=by, burst=500, guard=guard_for(store, rig, arm), joints=a.joint_specs(),
+                          state_key=rig.state_key(arm))
+    return move(store, request, true_calibration(URLS[arm]), opener=opener_for(rig, arm))
+
+
+def apart(store: Any, rig: Rig) -> float:
+    """The two arms' least distance as kept now (links sampled, rig frame), m."""
+    segs = {}
+    for name in URLS:
+        s = load_state(store, rig.state_key(name), rig.arm(name).joint_specs())
+        segs[name] = links(rig.arm(name), np.asarray([s.positions[j] for j in (1, 2, 3)]))
+    u = np.linspace(0.0, 1.0, 200)[:, None]
+    pts = np.vstack([a + u * (b - a) for a, b in segs["probe"]])
+    return float(min(np.min(point_segment(pts, a, b)) for a, b in segs["other"]))
+
+
+class Interleaved:
+    """A store that runs ``then()`` once, at the first write of ``key`` (before or after it is written)."""
+
+    def __init__(self, inner: Store, key: str, then: Callable[[], None], after: bool = False):
+        self.inner, self.key, self.then, self.after, self.done = inner, key, then, after, False
+
+    def set_state(self, device: str, key: str, value_json: Any) -> None:
+        first = device == self.key and not self.done
+        self.done = self.done or first
+        if first and not self.after:
+            self.then()
+        self.inner.set_state(device, key, value_json)
+        if first and self.after:
+            self.then()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+
+def test_the_other_arm_moving_between_read_and_mark_is_seen(rig: Rig, tmp_path: Path) -> None:
+    # the other arm's whole move runs after the probe has read the rig but before its first write: before
+    # rig48 the probe checked against the other arm's old pose, and both moved (tips 0.28 µm apart)
+    store = Store.open(tmp_path / "rig.db")
+    other: list[MoveResult] = []
+    wrapped = Interleaved(store, rig.state_key("probe"), lambda: other.append(arm_move(store, rig, "other")))
+    with pytest.raises(MoveRefused) as e:
+        arm_move(wrapped, rig, "probe")
+    assert other and other[0].outcome.error is None and other[0].outcome.sent > 0  # the other arm moved
+    line = str(e.value)
+    assert "\n" not in line and "arm 'probe'" in line and "arm other" in line, line
+    kept = load_state(store, rig.state_key("probe"), rig.arm("probe").joint_specs())
+    assert kept.positions[3] == 0.0 and not kept.uncertain and not kept.claim  # not moved, no claim left
+    assert apart(store, rig) > 1e-3  # the arms are the rig's arm_distance (1 mm) apart or more
+
+
+def test_the_other_arm_starting_after_the_mark_is_refused(rig: Rig, tmp_path: Path) -> None:
+    # the other arm starts right after the probe's claim is written: it sees the claim, is refused, the probe moves
+    store = Store.open(tmp_path / "rig.db")
+    refused: list[str] = []
+
+    def other_move() -> None:
+        try:
+            arm_move(store, rig, "other")
+        except MoveRefused as e:
+            refused.append(str(e))
+
+    wrapped = Interleaved(store, rig.state_key("probe"), other_move, after=True)
+    r = arm_move(wrapped, rig, "probe")
+    assert r.outcome.error is None and r.outcome.sent > 0
+    assert len(refused) == 1, refused
+    assert "arm 'other': arm 'probe'" in refused[0] and "a move of it claims its joint 3 between 0 µm and" in refused[0]
+    assert "two moves started at once are both refused" in refused[0] and "\n" not in refused[0]
+    for name in URLS:  # no claim left by either; the refused arm did not move
+        kept = load_state(store, rig.state_key(name), rig.arm(name).joint_specs())
+        assert not kept.claim and not kept.uncertain
+    assert load_state(store, rig.state_key("other"), rig.arm("other").joint_specs()).positions[3] == 0.0
+    assert apart(store, rig) > 1e-3
+
+
+def test_a_claim_covers_the_gap_between_bursts(rig: Rig, tmp_path: Path) -> None:
+    # between one burst's "done" and the next one's mark the arm looked still; the claim keeps it claimed
+    store = Store.open(tmp_path / "rig.db")
+    seen: list[dict[str, Any]] = []
+
+    class Watch:
+        def set_state(self, device: str, key: str, value_json: Any) -> None:
+            store.set_state(device, key, value_json)
+            if device == rig.state_key("probe"):
+                seen.append(dict(store.get_state(device, key)))
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(store, name)
+
+    r = arm_move(Watch(), rig, "probe", by=2e-3)
+    assert len(r.outcome.bursts) >= 3
+    during = seen[1:-1]  # every save after the claim, before it is taken back
+    assert len(during) >= 2 * len(r.outcome.bursts)
+    assert all(s.get("claim", {}).get("3") == [0.0, 2e-3] for s in during), [s.get("claim") for s in seen]
+    assert any(not s.get("uncertain") for s in during)  # a "done" save: not in flight, still claimed
+    assert "claim" not in seen[-1] and not load_state(store, rig.state_key("probe")).claim
+
+
+def test_a_re_reference_clears_a_claim_left_behind(rig: Rig, tmp_path: Path) -> None:
+    from stickslip.devices.positions import save_state
+
+    store = Store.open(tmp_path / "rig.db")
+    key, specs = rig.state_key("other"), rig.arm("other").joint_specs()
+    s = load_state(store, key, specs)
+    s.claim_path([[0.0, -1.5, 0.0], [0.0, -1.5, 9e-3]])  # a process that ended without taking it back
+    save_state(store, s)
+    with pytest.raises(MoveRefused, match="a move of it claims its joint 3 between 0 µm and 9000 µm"):
+        arm_move(store, rig, "probe", by=1e-3)
+    s = load_state(store, key, specs)
+    s.set_position(3, 0.0, "set")
+    save_state(store, s)
+    assert arm_move(store, rig, "probe", by=1e-3).outcome.error is None
+
+
+def test_simultaneous_pairs_never_both_move_into_collision(rig: Rig, tmp_path: Path) -> None:
+    # N pairs started together (a barrier) in threads, each thread its own connection: both refused is allowed,
+    # both moved is not (the paths collide)
+    counts = {"both moved": 0, "one moved": 0, "both refused": 0}
+    for k in range(8):
+        db = tmp_path / f"pair{k}.db"
+        Store.open(db).close()
+        go = threading.Barrier(2)
+        moved: dict[str, bool] = {}
+
+        def run(name: str, db: Path = db, go: threading.Barrier = go, moved: dict[str, bool] = moved) -> None:
+            store = Store.open(db)
+            try:
+                go.wait(timeout=30)
+                moved[name] = arm_move(store, rig, name).outcome.sent > 0
+            except MoveRefused:
+                moved[name] = False
+            finally:
+                store.close()
+
+        threads = [threading.Thread(target=run, args=(name,)) for name in URLS]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(timeout=60)
+        assert set(moved) == set(URLS)
+        n = sum(moved.values())
+        counts[("both refused", "one moved", "both moved")[n]] += 1
+        store = Store.open(db)
+        try:
+            assert apart(store, rig) > 1e-3 or n < 2
+            for name in URLS:
+                assert not load_state(store, rig.state_key(name), rig.arm(name).joint_specs()).claim
+        finally:
+            store.close()
+    assert counts["both moved"] == 0, counts
