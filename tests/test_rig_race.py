@@ -190,3 +190,40 @@ def test_simultaneous_pairs_never_both_move_into_collision(rig: Rig, tmp_path: P
         finally:
             store.close()
     assert counts["both moved"] == 0, counts
+
+
+def test_a_command_driving_an_arm_stops_at_the_rigs_stop(rig: Rig, tmp_path: Path) -> None:
+    # `stickslip move --rig R --arm probe` opens its controller through rigstop.stoppable: the rig's STOP pressed
+    # for another arm (its page) while the move runs ends it before its next burst, its position kept exact
+    from stickslip.devices.base import open_device
+    from stickslip.procedures import rigstop
+
+    store = Store.open(tmp_path / "rig.db")
+    rigstop.press(store, rig, "other")  # pressed before the move began: does not stop it
+    sent: list[int] = []
+
+    class PressesDuringSecondBurst:
+        def __init__(self, url: str) -> None:
+            self.dev = open_device(url)
+
+        def step(self, joint: int, n: int) -> None:
+            self.dev.step(joint, n)
+            sent.append(n)
+            if len(sent) == 1:
+                rigstop.press(store, rig, "probe")  # its own arm's press: its process stopped itself already
+            if len(sent) == 2:
+                rigstop.press(store, rig, "other")
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.dev, name)
+
+    a = rig.arm("probe")
+    request = MoveRequest(URLS["probe"], 3, by=3e-3, burst=500, guard=guard_for(store, rig, "probe"),
+                          joints=a.joint_specs(), state_key=rig.state_key("probe"))
+    opener = rigstop.stoppable(opener_for(rig, "probe", PressesDuringSecondBurst), store, rig, "probe")
+    r = move(store, request, true_calibration(URLS["probe"]), opener=opener)
+    assert len(sent) == 2 and r.outcome.bursts == sent and abs(r.plan.steps) > 1000
+    assert r.outcome.error is not None and "stopped by the rig's STOP (pressed for arm 'other'" in r.outcome.error
+    kept = load_state(store, rig.state_key("probe"), a.joint_specs())
+    assert not kept.uncertain and not kept.claim and kept.positions[3] == r.plan.position_after(sum(sent))
+    assert rigstop.pressed(store, rig)["count"] == 3

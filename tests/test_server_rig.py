@@ -233,3 +233,52 @@ def test_a_request_naming_an_arm_in_its_query_is_refused(client: TestClient, roo
     assert client.post("/api/stop", params={"press": "p1"}).status_code == 200  # the declared ones still work
     assert client.get("/api/events", params={"after": 0}).status_code == 200
     assert client.get("/", params={"x": 1}).status_code == 200  # the page is not the API
+
+
+def test_stop_on_one_arms_server_stops_every_arm_of_the_rig(tmp_path: Path) -> None:
+    # audit46 (design question 3): STOP on the probe's page left the other arm's move running to its end. The
+    # two servers of one rig share only the store: a STOP on either is read by the other before its next burst.
+    from stickslip.devices.positions import load_state
+
+    room = rig_room_on(tmp_path, url="sim://?realtime=1&speed=2")  # moves of a few mm take seconds at 2x
+    other = rig_room_on(tmp_path, arm="other", url="sim://?seed=2&realtime=1&speed=2")
+    try:
+        with TestClient(create_app(other, LOCAL), base_url="http://127.0.0.1:8766") as theirs, \
+                TestClient(create_app(room, LOCAL), base_url="http://127.0.0.1:8765") as mine:
+            sim = other.owned.dev
+            r = theirs.post("/api/move", json={"joint": 3, "by": "3mm"})  # tips 15 mm apart after it
+            assert r.status_code == 202, r.text
+            until(lambda: sim.steps_simulated > 0, what="the other arm moving")
+            assert mine.post("/api/stop", params={"press": "p1"}).json()["stopped"] is None  # the probe was idle
+            m = wait(theirs, r.json()["id"])
+            assert m["status"] == "stopped", m
+            assert "stopped by the rig's STOP (pressed for arm 'probe'" in m["error"] and "\n" not in m["error"]
+            made = sim.steps_simulated
+            kept = load_state(room.store, room.options.rig.state_key("other"))  # type: ignore[union-attr]
+            assert not kept.uncertain and not kept.claim and 0.0 < kept.positions[3] < 3e-3  # exact, part-way
+            assert abs(kept.positions[3] - sim.position(3)) < 2e-6
+            texts = [e["text"] for e in theirs.get("/api/events").json()["events"]]
+            assert any("stopped by the rig's STOP" in t for t in texts), texts
+            texts = [e["text"] for e in mine.get("/api/events").json()["events"]]
+            assert "STOP sent to every arm of rig 'bench'" in texts, texts
+            # a move begun after the press is not stopped by it; the same press said again is not sent again
+            assert mine.post("/api/stop", params={"press": "p1"}).status_code == 200
+            r = theirs.post("/api/move", json={"joint": 3, "by": "10um"})
+            assert r.status_code == 202, r.text
+            assert wait(theirs, r.json()["id"])["status"] == "done"
+            assert sim.steps_simulated > made
+            # and the other way round: the other arm's STOP ends the probe's move
+            before = room.owned.dev.steps_simulated
+            r = mine.post("/api/move", json={"joint": 3, "by": "3mm"})
+            assert r.status_code == 202, r.text
+            until(lambda: room.owned.dev.steps_simulated > before, what="the probe moving")
+            theirs.post("/api/stop")
+            m = wait(mine, r.json()["id"])
+            assert m["status"] == "stopped" and "pressed for arm 'other'" in m["error"], m
+        other.close()  # closing a server stops its own arm only: no rig STOP pressed
+        from stickslip.procedures.rigstop import pressed
+
+        assert pressed(room.store, room.options.rig)["count"] == 2  # type: ignore[arg-type]
+    finally:
+        other.close()
+        room.close()

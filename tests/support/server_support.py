@@ -124,14 +124,16 @@ kept 60 mm away, an objective above the probe's tip, a lid (a half-space above, 
 position ``park``."""
 
 
-def rig_room_on(tmp_path: Path, lid: str = "30mm", **options: Any) -> ControlRoom:
-    """A control room serving the rig :data:`RIG`'s probe on the simulator in real time at 50x."""
+def rig_room_on(
+    tmp_path: Path, lid: str = "30mm", arm: str = "probe", url: str = "sim://?realtime=1&speed=50", **options: Any
+) -> ControlRoom:
+    """A control room serving the rig :data:`RIG`'s ``arm`` (its simulator in real time at 50x: the probe's
+    ``sim://``, the other's ``sim://?seed=2``); two rooms of one ``tmp_path`` share its database."""
     from stickslip.rig import load_rig
 
     path = tmp_path / "rig.toml"
     path.write_text(RIG.replace("{lid}", lid), encoding="utf-8")
-    url = "sim://?realtime=1&speed=50"
-    cal_path = tmp_path / "true-cal.json"
+    cal_path = tmp_path / f"true-cal-{arm}.json"
     true_calibration(url).save(cal_path)
     return ControlRoom(RoomOptions(device=url, db=tmp_path / "serve.db", calibration=cal_path, rig=load_rig(path),
-                                   arm="probe", **options))
+                                   arm=arm, **options))

@@ -245,6 +245,7 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
     from ..procedures.arms import guard_for, opener_for
     from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate
     from ..procedures.move import move as move_joint
+    from ..procedures.rigstop import stoppable
     from .rig import load, rig_database
 
     if device is not None:
@@ -283,7 +284,8 @@ def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int
             trust_calibration=trust_calibration, joints=joints, state_key=rig.state_key(a.name),
             pose=pose or PoseUpdate(), max_age_days=max_age_days,
         )
-        result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings, opener=opener_for(rig, a.name))
+        opener = stoppable(opener_for(rig, a.name), store, rig, a.name)  # the rig's STOP, pressed on a page
+        result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings, opener=opener)
     failure = result.failure()
     if failure is not None:
         fail(failure)

@@ -25,6 +25,7 @@ from ..units import format_position
 from . import named
 from .move import MoveRefused, MoveRequest, MoveResult, MoveStore, check_envelope_path, move
 from .named import once, safe_order
+from .rigstop import stoppable
 
 __all__ = [
     "ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "position_of",
@@ -159,7 +160,8 @@ def go_to_position(
 
     ``device`` is the URL the moves open, and ``opener`` then opens it as it is (a server
     gives its own URL and its controller, already mapped to the arm's channels); without
-    it, the arm's controller through :func:`opener_for`.
+    it, the arm's controller through :func:`opener_for`, which sends no further burst once the rig's STOP is
+    pressed on another arm's page (:func:`~.rigstop.stoppable`; a server's own controller reads it itself).
     """
     a = rig.arm(arm)
     name = target.name
@@ -185,7 +187,8 @@ def go_to_position(
                               trust_calibration=trust_calibration, joints=a.joint_specs(),
                               state_key=rig.state_key(a.name))
         result = move(store, request, calibration, warn=warn, ready=first,
-                      opener=opener if device is not None else opener_for(rig, a.name, opener))
+                      opener=opener if device is not None else stoppable(opener_for(rig, a.name, opener), store, rig,
+                                                                          a.name))
         results.append(result)
         if result.outcome.error is not None:
             break

@@ -57,6 +57,9 @@ class OwnedController:
         self.dev = dev
         self._halted = threading.Event()
         self._exact = isinstance(dev, KnowsTruePosition)  # a simulator: a burst that returned was made whole
+        self.before_burst: Callable[[], str | None] | None = None
+        """Called before each burst while not halted: a reason (the rig's STOP, pressed on another arm's page) ends
+        the motion there, no step made (the room halts this controller as for its own STOP)."""
 
     def __getattr__(self, name: str) -> Any:
         dev = self.__dict__.get("dev")
@@ -79,6 +82,8 @@ class OwnedController:
 
     def step(self, joint: int, n: int) -> None:
         """Send a burst, unless STOP was pressed since the motion began (see the class)."""
+        if self.before_burst is not None and not self._halted.is_set() and (why := self.before_burst()) is not None:
+            raise BurstStopped(why, 0)
         if self._halted.is_set():
             raise BurstStopped("stopped (STOP): no further burst sent", 0)
         try:

@@ -33,7 +33,6 @@ import itertools
 import logging
 import math
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -48,6 +47,7 @@ from ..procedures.jog import JogRequest, JogStatus, jog
 from ..procedures.move import DeviceBusy, MoveRequest, PoseUpdate, device_lock, move, step_joint
 from ..procedures.observe import Observation, observe
 from ..procedures.reach import BORROWED_JOINT1, ReachRequest, reach
+from ..procedures.rigstop import RigStopWatch
 from ..procedures.session import TraverseRequest, traverse
 from ..procedures.where import where
 from ..rig import Rig
@@ -73,6 +73,7 @@ from .slot import (
     refusal,
     refusals,
 )
+from .stopping import Stopping
 from .view import LiveView
 
 __all__ = [
@@ -99,7 +100,7 @@ def serve_problem(rig: Rig, arm: str | None) -> str | None:
     return None
 
 
-class ControlRoom(LiveView, CalibrationDay, NamedPositions):
+class ControlRoom(LiveView, CalibrationDay, NamedPositions, Stopping):
     """The manipulator, its store and its calibration, owned by one process (see the module docstring).
 
     Parameters
@@ -153,6 +154,10 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
             self._release_device_lock()
             raise
         self.owned = OwnedController(dev)
+        self._rig_watch = None
+        if options.rig is not None:  # the rig's STOP, pressed on any arm's page, read before each burst
+            self._rig_watch = RigStopWatch(options.rig, options.rig.arm(options.arm).name)
+            self.owned.before_burst = self._rig_poll
         self.info = dev.info
         if isinstance(dev, KnowsTruePosition) and hasattr(dev, "set_pose"):
             dev.set_pose(*self._state.pose)  # the simulator starts where the kept positions say
@@ -183,8 +188,9 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
                 log.warning("could not release the device lock: %s", one_line(e))
 
     def close(self) -> None:
-        """STOP, wait briefly for the motion to end, release the lock, close the controller and the store."""
-        self.stop()
+        """STOP (this arm's, not the rig's), wait briefly for the motion to end, release the lock, close the
+        controller and the store."""
+        self._stop_here(None)
         m = self._motion
         if m is not None:
             m.finished.wait(2.0)
@@ -193,27 +199,6 @@ class ControlRoom(LiveView, CalibrationDay, NamedPositions):
         self.store.close_all()
 
     # ------------------------------------------------------------ the verbs
-
-    def stop(self, press: str | None = None) -> dict[str, Any]:
-        """STOP: no further burst, the controller told to stop now, a jog or a day ended. Never refused; said once
-        per ``press`` (:class:`~.slot.Presses`)."""
-        t = time.monotonic()
-        self.owned.halt()
-        with self._lock:
-            m = self._motion
-            pad = self._pad
-            running = m is not None and m.active
-            if running and m is not None and m.stop_requested is None:
-                m.stop_requested = t
-            self._day_pose.set()  # a day waiting for a pose wakes up to find the STOP
-            if pad is not None:  # the key still held (its keep-alives) must not start the jog again
-                self._jog_latched = True
-        if pad is not None:
-            pad.end()
-        what = m.what if running and m is not None else None
-        if self._presses.first(press):
-            self.event("warning", f"STOP: {what} stopped" if what else "STOP (nothing was moving)")
-        return {"stopped": what, "motion": m.id if running and m is not None else None}
 
     def where(
         self, references: list[tuple[int, float]] | None = None, pose: PoseUpdate | None = None

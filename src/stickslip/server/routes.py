@@ -143,8 +143,9 @@ def drive_routes(room: ControlRoom) -> APIRouter:
 
     @router.post("/api/stop", tags=["motion"])
     async def stop(press: str | None = None) -> JSONResponse:
-        """STOP: every axis, now. Nothing further is sent; a jog or the calibration day ends. ``press``: the id of
-        the press (a page sends each on its socket too): the event is said once per press."""
+        """STOP: every axis, now (with a rig, every arm's server before its next burst). Nothing further is sent; a
+        jog or the calibration day ends. ``press``: the id of the press (a page sends each on its socket too): the
+        event is said once per press."""
         return JSONResponse(room.stop(press))
 
     return router

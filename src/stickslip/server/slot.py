@@ -31,6 +31,7 @@ from ..procedures.arms import guard_for
 from ..procedures.day import simulator_tunings
 from ..procedures.jog import JogStatus
 from ..procedures.move import DeviceBusy, MoveRefused, TargetOutOfRange, check_envelope_path, is_simulator
+from ..procedures.rigstop import RigStopWatch
 from ..procedures.traverse import TraverseError
 from ..rig import Rig
 from ..rig.guard import Guard
@@ -268,6 +269,8 @@ class MotionSlot:
     _level: dict[str, Any] | None
     _tunings: dict[int, Tuning]
     _state: DeviceState
+    _rig_watch: RigStopWatch | None
+    """The rig's STOP as the store keeps it (``None``: no rig), read before each burst."""
 
     # ------------------------------------------------------------ events and state
 
@@ -322,6 +325,9 @@ class MotionSlot:
         ends; a refusal before ``ready`` is raised as :class:`Refused` (the slot is free
         again). :class:`Busy` if another motion runs.
         """
+        if self._rig_watch is not None:  # the rig's STOPs pressed before this motion do not stop it
+            with refusals():
+                self._rig_watch.begin(self.store)
         with self._lock:
             cur = self._motion
             if cur is not None and cur.active:

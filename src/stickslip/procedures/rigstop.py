@@ -1,0 +1,123 @@
+"""The rig-wide STOP: one press stops every arm of a rig, whichever process drives it (docs/rig.md).
+
+Each arm of a rig may be driven by a process of its own (a ``stickslip serve --rig R --arm A``,
+a ``stickslip move --rig R --arm A``); what they share is the store. A STOP pressed for one arm
+(:func:`press`) counts up the rig's stop in the store, under the rig's name; every process that
+drives an arm of the rig reads it before each burst (:class:`RigStopWatch`, through
+:func:`stoppable`) and sends no further burst once it has changed since its motion began: the
+burst is refused with :class:`~stickslip.devices.base.BurstStopped` (no step made), so the
+move ends with its position kept exact. A motion begun after the press is not stopped by it.
+The latency is one burst (the one being sent when the press is read) plus one read of the store.
+
+The count is a small JSON value in the store's per-device state (portable: one SQLite or
+PostgreSQL transaction, no file lock), under the device name ``rig:NAME``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any
+
+from ..clock import now_utc
+from ..devices.base import BurstStopped, Controller, DeviceInfo
+from ..devices.positions import StateStore
+from ..rig import Rig
+
+__all__ = ["RigStopWatch", "press", "pressed", "stoppable"]
+
+_KEY = "stop"
+
+
+def _device(rig: Rig) -> str:
+    """The name the rig's stop is kept under in the store's per-device state."""
+    return f"rig:{rig.name}"
+
+
+def pressed(store: StateStore, rig: Rig) -> dict[str, Any]:
+    """The rig's last STOP as kept: ``{"count": N, "arm": name, "at": ISO time}`` (``count`` 0: never pressed)."""
+    raw = store.get_state(_device(rig), _KEY)
+    if not isinstance(raw, dict) or not isinstance(raw.get("count"), int):
+        return {"count": 0, "arm": None, "at": None}
+    return raw
+
+
+def press(store: StateStore, rig: Rig, arm: str) -> int:
+    """Press the rig's STOP for ``arm`` (where it was pressed): every arm's process stops before its next burst.
+    The new count. ``OSError`` (or the store's error) if the store cannot be written."""
+    count = int(pressed(store, rig)["count"]) + 1
+    store.set_state(_device(rig), _KEY, {"count": count, "arm": arm, "at": now_utc().isoformat(timespec="seconds"),
+                                         "pid": os.getpid()})
+    return count
+
+
+class RigStopWatch:
+    """Whether the rig's STOP was pressed since :meth:`begin` (a motion's start), by another arm than ``arm``."""
+
+    def __init__(self, rig: Rig, arm: str) -> None:
+        self.rig, self.arm = rig, arm
+        self._seen = 0
+
+    def begin(self, store: StateStore) -> None:
+        """A motion begins: presses before now do not stop it."""
+        self._seen = int(pressed(store, self.rig)["count"])
+
+    def stopped(self, store: StateStore) -> str | None:
+        """Why this arm must stop (one line), if the rig's STOP was pressed since :meth:`begin`; else ``None``.
+        A press for this same arm is its own STOP (its process stopped itself already): ``None``."""
+        p = pressed(store, self.rig)
+        if int(p["count"]) == self._seen:
+            return None
+        self._seen = int(p["count"])
+        if p.get("arm") == self.arm:
+            return None
+        return f"stopped by the rig's STOP (pressed for arm {p.get('arm')!r} at {p.get('at')}): no further burst sent"
+
+
+class _Stoppable:
+    """A controller that reads the rig's STOP before each burst (:func:`stoppable`)."""
+
+    def __init__(self, inner: Controller, store: StateStore, watch: RigStopWatch) -> None:
+        self._inner, self._store, self._watch = inner, store, watch
+
+    @property
+    def info(self) -> DeviceInfo:
+        return self._inner.info
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        self._inner.set_frequency(joint, hz)
+
+    def frequency(self, joint: int) -> float:
+        return self._inner.frequency(joint)
+
+    def step(self, joint: int, n: int) -> None:
+        why = self._watch.stopped(self._store)
+        if why is not None:
+            raise BurstStopped(why, 0)
+        self._inner.step(joint, n)
+
+    def stop(self, joint: int | None = None) -> None:
+        self._inner.stop(joint)
+
+    def settings(self) -> dict[str, object]:
+        return self._inner.settings()
+
+    def close(self) -> None:
+        self._inner.close()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._inner, name)
+
+
+def stoppable(
+    opener: Callable[[str], Controller], store: StateStore, rig: Rig, arm: str
+) -> Callable[[str], Controller]:
+    """An opener whose controllers send no further burst once the rig's STOP is pressed for another arm (what a
+    command driving one arm of a rig opens its controller with); a press before it opens does not count."""
+
+    def open_stoppable(url: str) -> Controller:
+        watch = RigStopWatch(rig, arm)
+        watch.begin(store)
+        return _Stoppable(opener(url), store, watch)
+
+    return open_stoppable
