@@ -227,3 +227,42 @@ def test_a_command_driving_an_arm_stops_at_the_rigs_stop(rig: Rig, tmp_path: Pat
     kept = load_state(store, rig.state_key("probe"), a.joint_specs())
     assert not kept.uncertain and not kept.claim and kept.positions[3] == r.plan.position_after(sum(sent))
     assert rigstop.pressed(store, rig)["count"] == 3
+
+
+@pytest.mark.parametrize("fault", ["ctrl-c", "device error"])
+def test_an_interrupted_move_takes_its_claim_back_and_stays_uncertain(rig: Rig, tmp_path: Path, fault: str) -> None:
+    # the claim is the move's, not the journal's: Ctrl-C or a device error mid-burst leaves the joint uncertain
+    # over that burst (as before), and the claim gone, so the other arm is refused for the uncertainty alone
+    from stickslip.devices.base import DeviceError, open_device
+    from stickslip.procedures.move import Interrupted
+
+    store = Store.open(tmp_path / "rig.db")
+
+    class FailsSecondBurst:
+        def __init__(self, url: str) -> None:
+            self.dev, self.n = open_device(url), 0
+
+        def step(self, joint: int, n: int) -> None:
+            self.n += 1
+            if self.n == 2:
+                raise KeyboardInterrupt if fault == "ctrl-c" else DeviceError("link dropped")
+            self.dev.step(joint, n)
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.dev, name)
+
+    a = rig.arm("probe")
+    request = MoveRequest(URLS["probe"], 3, by=3e-3, burst=500, guard=guard_for(store, rig, "probe"),
+                          joints=a.joint_specs(), state_key=rig.state_key("probe"))
+    if fault == "ctrl-c":
+        with pytest.raises(Interrupted):
+            move(store, request, true_calibration(URLS["probe"]), opener=opener_for(rig, "probe", FailsSecondBurst))
+    else:
+        r = move(store, request, true_calibration(URLS["probe"]), opener=opener_for(rig, "probe", FailsSecondBurst))
+        assert r.outcome.error == "link dropped" and r.outcome.sent > 0
+    kept = load_state(store, rig.state_key("probe"), a.joint_specs())
+    assert not kept.claim and 3 in kept.uncertain
+    lo, hi = kept.uncertain[3]
+    assert 0.0 < lo < hi < 3e-3  # the second burst's range only, not the whole move's
+    with pytest.raises(MoveRefused, match="its joint 3 is in flight or uncertain"):
+        arm_move(store, rig, "other", by=1e-3)
