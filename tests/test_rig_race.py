@@ -266,3 +266,33 @@ def test_an_interrupted_move_takes_its_claim_back_and_stays_uncertain(rig: Rig, 
     assert 0.0 < lo < hi < 3e-3  # the second burst's range only, not the whole move's
     with pytest.raises(MoveRefused, match="its joint 3 is in flight or uncertain"):
         arm_move(store, rig, "other", by=1e-3)
+
+
+def test_a_jog_stops_when_another_arm_starts_to_move() -> None:
+    # a jog's guard was the other arms as kept when the session began: a move of another arm started during the
+    # session was never seen. Each tick with steps to send now reads them again (Guard.fresh).
+    import math
+
+    from stickslip.procedures.jog import JogController
+    from stickslip.rig.guard import Guard
+    from stickslip.rig.model import Rig as RigModel
+    from test_envelope import mm3a
+    from test_reach import CAL
+
+    rig1 = RigModel("r", "r", (mm3a(),), ())
+    now = [Guard(rig1, "a")]
+    c = JogController(CAL, [0.0, -math.pi / 2, 0.002], speed_index=4, hold=0.0,
+                      guard=Guard(rig1, "a", fresh=lambda: now[0]))
+    c.press("a", 0.0)  # -x: joint 3 in
+    moved, t = [], 0.0
+    for k in range(40):
+        if k == 20:  # the other arm's move claims its range
+            now[0] = Guard(rig1, "a", unknown={"b": "a move of it claims its joint 3 between 0 µm and 9000 µm"})
+        steps = c.tick(t, 0.05)
+        moved.append(sum(abs(n) for n in steps))
+        for j, n in enumerate(steps, start=1):
+            if n:
+                c.sent_steps(j, n)
+        t += 0.05
+    assert sum(moved[:20]) > 0 and sum(moved[20:]) == 0
+    assert c.direction is None and c.message == "stopped at the rig's envelope (arm b): move another way"

@@ -433,7 +433,10 @@ class JogController:
                     side = "lower" if q[j - 1] < before else "upper"
                     return f"joint {j} is at its {side} limit: stopped (move the other way)"
                 path.append(list(q))
-        problem = envelope_stop(self.guard, path, self.guard_sd)
+        rig_guard = self.guard
+        if rig_guard is not None and rig_guard.fresh is not None and len(path) > 1:
+            rig_guard = rig_guard.fresh()  # the other arms as kept now: one that started to move stops this jog
+        problem = envelope_stop(rig_guard, path, self.guard_sd)
         if problem is None and isinstance(self.guard_sd, SigmaGrowth) and len(path) > 1:
             self.guard_sd = self.guard_sd.after(path)  # the σ the tick's steps leave, for the next tick
         return problem
