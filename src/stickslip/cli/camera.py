@@ -623,7 +623,7 @@ def run_seen(kind: str, request: Any, calibration: Any, camera: str, tip: str | 
         opener = None
         if rig_arm is not None:
             request = dataclasses.replace(request, guard=rig_arm.guard(store))
-            opener = rig_arm.opener
+            opener = rig_arm.stoppable(store)
         if kind == "move":
             result = move_seen(store, request, calibration, loop, warn=warn_later, ready=flush_warnings,
                                opener=opener)

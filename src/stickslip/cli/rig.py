@@ -98,6 +98,13 @@ class RigArm:
 
         return guard_for(store, self.rig, self.arm)
 
+    def stoppable(self, store: StateStore) -> Callable[[str], Controller]:
+        """The arm's opener, whose controllers send no further burst once the rig's STOP is pressed for another arm
+        (a server's page: :func:`stickslip.procedures.rigstop.stoppable`)."""
+        from ..procedures.rigstop import stoppable
+
+        return stoppable(self.opener, store, self.rig, self.arm)
+
 
 def rig_arm(rig_file: Path | None, arm: str | None, device: str | None, geometry: str | None,
             calibration: Path | None, db: str | None = None) -> RigArm | None:

@@ -204,7 +204,7 @@ def reach(
         if in_rig is not None:
             request = dataclasses.replace(request, guard=in_rig.guard(store))
         result = reach_line(store, request, cal, borrowed, warn=warn_later, ready=flush_warnings,
-                            opener=None if in_rig is None else in_rig.opener)
+                            opener=None if in_rig is None else in_rig.stoppable(store))
     failure = result.failure()
     if failure is not None:
         fail(failure)
@@ -489,7 +489,7 @@ def jog(
                                               stage=in_rig.stage, state_key=in_rig.state_key)
             result = jog_session(
                 store, request, cal, keys=_Keys, show=screen.show, warn=warn_later, ready=_ready_to_jog,
-                opener=None if in_rig is None else in_rig.opener,
+                opener=None if in_rig is None else in_rig.stoppable(store),
             )
     finally:
         screen.close()
