@@ -41,6 +41,7 @@ def demo(
         "--output",
         "-o",
         "--out",
+        metavar="FOLDER",
         help="Results folder: measurements.csv, calibration.json, tunings, summary.",
     ),
     validation: bool = typer.Option(
