@@ -379,6 +379,9 @@ def test_moves_and_a_kept_state_cap_the_sd_and_where_says_the_whole_range(tmp_pa
         assert grow_track(state, 3, q_from, 11000 if i % 2 == 0 else -11000, cal, pose, False, set())
     t = JointTrack.from_json(state.track[3])
     assert t.sd == kin.Q3_MAX and t.P[0, 1] == 0.0
+    from stickslip.procedures.move import sigma_growth
+
+    assert sigma_growth(state, cal).P[2][0] == (kin.Q3_MAX**2, 0.0, 0.0)  # the envelope's margin: the whole span
     # a state kept before the cap (σ 58 m) is read capped
     store = JsonStateFile(tmp_path / "state.json")
     state.track[3]["P"][0][0] = 58.0**2
