@@ -204,3 +204,39 @@ def test_a_file_options_leading_tilde_is_the_home_folder_whatever_the_shell(tmp_
     assert (home / "cal.json").is_file() and not (tmp_path / "~").exists()
     r = CliRunner().invoke(app, ["predict", "meas.csv", "-c", "~/cal.json", "-o", "~/predicted.csv"])
     assert r.exit_code == 0 and (home / "predicted.csv").is_file(), r.output
+
+
+FOLDER_OPTIONS = {(("demo",), "--output"), (("report",), "-o")}
+"""The path options that name a folder (metavar FOLDER): a trailing / is theirs."""
+
+
+@pytest.mark.parametrize("where", sorted(set(PATH_OPTIONS) - FOLDER_OPTIONS), ids=lambda w: " ".join([*w[0], w[1]]))
+def test_a_file_option_ending_with_a_slash_names_a_folder_and_is_refused(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, where: tuple[tuple[str, ...], str]
+) -> None:
+    """``show 2 -o neu/`` and ``export -o exp/`` wrote a *file* named neu / exp: pathlib dropped the slash (audit43)."""
+    monkeypatch.chdir(tmp_path)
+    path, option = where
+    r = invoke([*path, option, "neu/"])
+    assert r.exit_code == 2, (r.exit_code, r.output)
+    errors = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(errors) == 1 and "'neu/' ends with '/', so it names a folder" in errors[0], r.stderr
+    assert not (tmp_path / "neu").exists()
+
+
+def test_a_folder_option_takes_a_slash_and_a_log_file_refuses_one(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
+    from stickslip.cli._common import path_text
+
+    monkeypatch.chdir(tmp_path)
+    walked = {(tuple(p), o) for p, o in PATH_OPTIONS}
+    assert FOLDER_OPTIONS <= walked
+    cmds = typer.main.get_command(app).commands  # type: ignore[attr-defined]
+    for (name,), option in FOLDER_OPTIONS:
+        (param,) = [p for p in cmds[name].params if option in p.opts]
+        assert param.metavar == "FOLDER"
+    assert path_text(folder=True)("day1/") == Path("day1")
+    r = invoke(["--log-file", "lg/", "config", "path"])
+    assert r.exit_code == 2 and "'--log-file': 'lg/' ends with '/'" in r.stderr, r.stderr
+    assert not (tmp_path / "lg").exists()
+    r = invoke(["show", "1", "-o", "neu"])  # without the slash: a file, as before (no calibration #1 here)
+    assert "names a folder" not in r.stderr

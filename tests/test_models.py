@@ -106,6 +106,18 @@ def test_nonphysical_parameters():
     m.PrismaticParams(972e-9, 0.27, 372e-9).check_physical()
 
 
+def test_a_step_zero_to_rounding_is_a_stall_not_a_step():
+    """audit38 item 5: gamma0 - |d| = 1e-20 rad passed a strict > 0 (counts of 1e15 followed): a relative margin."""
+    g0 = 1e-5
+    for d in (g0 - 1e-20, g0 * (1 - 1e-9), g0 * (1 - 0.9e-6)):  # smallest step 1e-15 .. 4.5e-7 of the largest
+        with pytest.raises(m.NonPhysicalError, match="stall"):
+            m.RotaryParams((g0, g0), (d, -d)).check_physical()
+    m.RotaryParams((g0, g0), (g0 * (1 - 1e-5), g0 * (1 - 1e-5))).check_physical()  # 5e-6 of the largest: a step
+    with pytest.raises(m.NonPhysicalError, match="stall"):
+        m.PrismaticParams(972e-9, 0.27, 972e-9 * (1 - 1e-9)).check_physical()
+    m.PrismaticParams(972e-9, 0.27, 972e-9 * (1 - 1e-5)).check_physical()
+
+
 @settings(max_examples=200, deadline=None)
 @given(al=st.floats(-2, 2), be=st.floats(-2, 2), lo=st.floats(-8, 8), span=st.floats(0, 8))
 def test_sinusoid_range_equals_dense_sampling(al, be, lo, span):

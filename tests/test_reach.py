@@ -445,3 +445,33 @@ def test_a_reach_plans_and_dead_reckons_with_the_tracked_step_scale(tmp_path):
     assert w["joints"][2]["step_scale"] == pytest.approx(0.8, rel=1e-9)  # the track is kept, not restarted
     L = math.dist(got["start"]["tip"], got["target"])
     assert math.dist(got["sim_true"]["tip"], got["target"]) < 0.05 * L
+
+
+def test_the_borrowed_joint_1_advice_is_a_way_that_calibrates_joint_1():
+    """audit40 question 5: reach and jog said "calibrate joint 1", and no command named how. The advice's traverses
+    (joint 1 both ways, q2 -90 deg, θ 0 and -90 deg, q3 0 and 12 mm) calibrate it: on the physics arm its step at 40
+    random traverses is off by 2.6 % (median; at most 8.5 %) with its own parameters, 9.0 % (15.7 %) with joint 2's."""
+    from physics_scenarios import paper14
+
+    from stickslip.calibration import calibrate
+    from stickslip.procedures.reach import BORROWED_JOINT1
+    from stickslip.sim import physics as ph
+
+    assert "stickslip traverse --joint 1" in BORROWED_JOINT1 and "--theta 0 and -90deg" in BORROWED_JOINT1
+    arm = ph.PhysicsMM3A(seed=62, day="d")
+    rows = paper14(arm, "d")
+    joint1 = [ph.traverse(arm, 1, d, kin.Pose(0.0, -math.pi / 2, q3, th, 0.0), "d")
+              for th in (0.0, -math.pi / 2) for q3 in (0.0, kin.Q3_MAX) for d in "+-"]  # fmt: skip
+    own = calibrate(rows + joint1)
+    borrowed, was = borrow_joint1(calibrate(rows))
+    assert was and borrow_joint1(own) == (own, False) and {(1, "+"), (1, "-")} <= set(own.models)
+    rng = np.random.default_rng(0)
+    e_own, e_borrowed = [], []
+    for _ in range(20):
+        p = kin.Pose(0.0, rng.uniform(-2.5, 0.3), rng.uniform(0, 0.012), rng.uniform(-1.5, 1.5), rng.uniform(-1, 1))
+        for d in "+-":
+            t = ph.traverse(arm, 1, d, p, "d")
+            e_own.append(abs(own.predict(t) / t.gamma - 1))
+            e_borrowed.append(abs(borrowed.predict(t) / t.gamma - 1))
+    assert np.median(e_own) < 0.03 and max(e_own) < 0.09
+    assert np.median(e_borrowed) > 3 * np.median(e_own)

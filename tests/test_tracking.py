@@ -333,3 +333,69 @@ def test_a_forced_reading_far_off_sets_the_position_and_teaches_no_scale(tmp_pat
     assert moved["step_scale"] == pytest.approx(1.0, abs=1e-12), moved
     r = runner.invoke(app, ["observe", "--db", str(db), "--joint", "3", "--at", "2mm", "--force"])
     assert r.exit_code == 0 and "kept: a reading this far" in " ".join(r.stdout.split()), r.output
+
+
+# ----------------------------------------------------------------------------- the position's σ has a ceiling
+
+
+def test_the_position_sd_is_capped_at_the_joints_span_and_a_capped_sd_teaches_no_scale():
+    """audit38 items 3 and 5: 1e5 unobserved 1 mm moves gave σ 29.8 m on a 12 mm joint (the position clipped)."""
+    from stickslip.motion.tracking import _prior
+
+    def run(ceiling):
+        t = JointTrack(np.zeros(2), _prior(0.15**2), "x")
+        for i in range(100_000):
+            d = 1e-3 if (i // 6) % 2 == 0 else -1e-3
+            t.predict(d, 1000 if d > 0 else -1000, ceiling=ceiling)
+        return t
+
+    assert run(math.inf).sd == pytest.approx(29.83, rel=1e-3)  # what the filter said before the cap
+    t = run(kin.Q3_MAX)
+    assert t.sd == kin.Q3_MAX and t.P[0, 1] == 0.0 and t.P[0, 2] == 0.0  # the span, uncorrelated with the scales
+    assert JointTrack.from_json(json.loads(json.dumps(t.to_json()))).sd == kin.Q3_MAX
+    scales = t.log_scale.copy()
+    assert t.observe(0.006, 0.0031, 1e-6) == pytest.approx(0.0031, abs=1e-9)  # a reading re-references it ...
+    assert np.array_equal(t.log_scale, scales) and t.sd < 1.01e-6  # ... and teaches no scale
+    with pytest.raises(ValueError, match="ceiling"):
+        t.cap_position(0.0)
+
+
+def test_moves_and_a_kept_state_cap_the_sd_and_where_says_the_whole_range(tmp_path, monkeypatch):
+    """15 back-and-forth 11 mm moves with a week-old calibration pass the span (12.6 mm) before the cap."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.devices.positions import DeviceState, JsonStateFile, load_state, save_state
+    from stickslip.procedures.move import grow_track
+
+    cal = _true_cal("2026-03-01")
+    monkeypatch.setenv("STICKSLIP_TODAY", "2026-03-09")
+    state = DeviceState.default("sim://")
+    state.set_position(3, 0.0005, "set")
+    pose = state.pose
+    for i in range(15):
+        q_from = state.positions[3]
+        state.set_position(3, 0.0115 if i % 2 == 0 else 0.0005, "dead-reckoned")
+        assert grow_track(state, 3, q_from, 11000 if i % 2 == 0 else -11000, cal, pose, False, set())
+    t = JointTrack.from_json(state.track[3])
+    assert t.sd == kin.Q3_MAX and t.P[0, 1] == 0.0
+    from stickslip.procedures.move import sigma_growth
+
+    assert sigma_growth(state, cal).P[2][0] == (kin.Q3_MAX**2, 0.0, 0.0)  # the envelope's margin: the whole span
+    # a state kept before the cap (σ 58 m) is read capped
+    store = JsonStateFile(tmp_path / "state.json")
+    state.track[3]["P"][0][0] = 58.0**2
+    save_state(store, state)
+    assert JointTrack.from_json(load_state(store, "sim://").track[3]).sd == kin.Q3_MAX
+    db = tmp_path / "s.db"
+    runner = CliRunner()
+    r = runner.invoke(app, ["where", "--db", str(db), "--set", "3=0.5mm", "--offline"])
+    assert r.exit_code == 0, r.output
+    from stickslip.storage import Store
+
+    with Store.open(db) as s:
+        kept = load_state(s, "sim://")
+        kept.track[3] = state.track[3]
+        save_state(s, kept)
+    r = runner.invoke(app, ["where", "--db", str(db), "--offline"])
+    assert r.exit_code == 0 and "σ its whole range (lost: observe or set it)" in " ".join(r.output.split()), r.output

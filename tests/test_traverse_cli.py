@@ -102,6 +102,31 @@ def test_a_traverse_re_references_an_uncertain_joint(tuning3, tmp_path):
     assert state.positions[3] == pytest.approx(json.loads(r.stdout)["end"]) and state.positions[3] == 0.0
 
 
+def test_a_traverse_keeps_the_pose_it_was_told_and_no_default(tuning3, tmp_path):
+    """audit40 question 2: after `--q2 0 --theta -90deg` (the help's example) `where` showed q2 -90 deg and θ 0."""
+    from stickslip.devices.positions import load_state, save_state
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        state = load_state(st, "sim://?seed=4")
+        state.set_position(1, math.radians(10), "dead-reckoned")  # not given below: kept as it was
+        state.mark_uncertain(1, math.radians(5), math.radians(15), "a move was interrupted")
+        save_state(st, state)
+    args = ["traverse", "--joint", "3", "--direction", "+", "--tuning", str(tuning3), "--device", URL, "--q2", "0",
+            "--theta", "-90deg", "--q3", "5mm", "--day", "2026-11-20", "--db", str(db), "--json"]  # fmt: skip
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        state = load_state(st, "sim://?seed=4")
+    assert state.positions[2] == 0.0 and state.sources[2] == "set"  # told
+    assert state.theta == pytest.approx(-math.pi / 2) and state.psi == 0.0
+    assert state.positions[3] == pytest.approx(12e-3) and state.sources[3] == "set"  # the stop, not --q3
+    assert state.positions[1] == pytest.approx(math.radians(10)) and 1 in state.uncertain  # --q1 left at its default
+    r = runner.invoke(app, ["where", "--db", str(db), "-d", URL, "--offline", "--json"])
+    assert r.exit_code == 0, r.output
+    assert [j["source"] for j in json.loads(r.stdout)["joints"]][1:] == ["set", "set"]
+
+
 def test_demo_refuses_a_bad_confirmation_window(tmp_path):
     """demo traverses too: --confirm-s is checked before any work (nothing is written)."""
     r = runner.invoke(app, ["demo", "--confirm-s", "9", "--out", str(tmp_path / "res"), "--no-db"])

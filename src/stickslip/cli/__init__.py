@@ -34,7 +34,9 @@ app = typer.Typer(
         "Measure a joint's average step size between its end stops, calibrate the load-aware "
         "step-size model, and turn 'move 30 um' into the right number of steps in any pose.\n\n"
         "Files are SI (metres, radians); on the command line every length and angle takes its "
-        "unit: 12mm, 850nm, -90deg, 40urad, -pi/2 (a bare number other than 0 is refused)."
+        "unit: 12mm, 850nm, -90deg, 40urad, -pi/2 (a bare number other than 0 is refused). A file option "
+        "(-o, -c, --db) takes a file's name: one that ends with / names a folder and is refused, as curl -o "
+        "refuses it; an option shown as FOLDER (demo -o, report -o) takes a folder."
     ),
     no_args_is_help=True,
     add_completion=False,
@@ -103,6 +105,13 @@ def _logging(verbose: int, log_file: Path | None) -> None:
     log.setLevel(logging.DEBUG if handlers else logging.NOTSET)
 
 
+def _log_file_text(value: str | Path) -> Path:
+    """``--log-file`` as typed: ``lg/`` names a folder (pathlib would drop the ``/`` and write a file ``lg``)."""
+    from ._common import path_text
+
+    return path_text()(value)
+
+
 @app.callback(result_callback=_done)
 def _root(
     version: bool = typer.Option(
@@ -112,7 +121,8 @@ def _root(
         0, "--verbose", "-v", count=True, help="-v: progress messages; -vv: also every message to and from a device."
     ),
     log_file: Path | None = typer.Option(
-        None, "--log-file", help="Also write a DEBUG log (device traffic, passwords redacted) to this file."
+        None, "--log-file", help="Also write a DEBUG log (device traffic, passwords redacted) to this file.",
+        parser=_log_file_text,
     ),
 ) -> None:
     """stickslip: calibrate, predict and plan stick-slip steps (see the commands below)."""

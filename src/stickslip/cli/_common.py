@@ -413,10 +413,46 @@ def path_option(value: str | Path | None) -> str | Path | None:
         raise typer.BadParameter(
             f"{text!r} reads as an option, not a file: was the file left out? (a file of that name: {whole})"
         )
+    if isinstance(value, str) and "://" not in value:  # --db FILE (not a URL), --log-file: as a Path option's text
+        folder_problem(value)
     if text is not None and (text == "~" or text.startswith(("~/", "~" + os.sep))):
         # the home folder, as a POSIX shell would give it: PowerShell and cmd pass ~ to a program as it stands
         return type(value)(os.path.expanduser(text)) if isinstance(value, Path) else os.path.expanduser(text)
     return value
+
+
+FOLDER_METAVAR = "FOLDER"
+"""The metavar of a path option that names a folder (``demo -o``, ``report -o``): a trailing ``/`` is welcome there."""
+
+
+def folder_problem(text: str) -> None:
+    """``typer.BadParameter`` if a file option's text ends with a separator: it names a folder, not a file.
+
+    ``show 2 -o neu/`` wrote a *file* named ``neu``: pathlib drops the ``/`` before a callback sees it. As
+    ``curl -o neu/`` (which writes a file) it is refused, in one line; ``cp``'s "into that folder" would need a
+    name each command does not have (``show -o`` has no default file).
+    """
+    seps = tuple(s for s in (os.sep, os.altsep) if s)
+    if text.endswith(seps):
+        raise typer.BadParameter(
+            f"{text!r} ends with {text[-1]!r}, so it names a folder, and this option takes a file: "
+            f"give the file's name ({text}NAME)"
+        )
+
+
+def path_text(folder: bool = False) -> Callable[[str | Path], Path]:
+    """The parser of a path option: its text as typed (a trailing ``/`` kept, which pathlib drops) becomes a ``Path``.
+
+    A file option's text ending with a separator is refused (:func:`folder_problem`); a folder
+    option (metavar :data:`FOLDER_METAVAR`) takes it. A default (already a ``Path``) is taken as it is.
+    """
+
+    def parse(value: str | Path) -> Path:
+        if isinstance(value, str) and not folder:
+            folder_problem(value)
+        return Path(value)
+
+    return parse
 
 
 DEVICE_FILTERS = frozenset({"history", "export", "anova", "report", "delete"})
@@ -434,6 +470,9 @@ def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) 
       be opened (no scheme, an unknown one, a bad port, a host name DNS cannot carry) is
       refused before any command uses it, records it or stores anything with it (not
       where it only filters stored rows, ``device_is_filter``: :data:`DEVICE_FILTERS`).
+    * a path option (and ``--db``) is checked by :func:`path_option` (a value that reads as an
+      option, a leading ``~``), and a ``Path`` option's text is read by :func:`path_text` before
+      pathlib drops a trailing ``/``: a file option given a folder (``-o out/``) is refused.
 
     The check is set as the option's typer callback where it has none (an option with a
     callback of its own checks itself). Called on every command when the CLI is built.
@@ -462,6 +501,8 @@ def guard_options(callback: Callable[..., Any], device_is_filter: bool = False) 
             info.callback = device_option
         elif isinstance(info, OptionInfo) and (kinds == {Path} or (kinds == {str} and p.name == "db")):
             info.callback = path_option
+            if kinds == {Path}:  # typer's Path drops a trailing /: the parser sees the text as typed
+                info.parser = path_text(folder=info.metavar == FOLDER_METAVAR)
 
 
 def device_option(value: str | None) -> str | None:

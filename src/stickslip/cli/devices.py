@@ -522,7 +522,10 @@ def _print_where(result: WhereResult) -> None:
         extra = ""
         tf = track_fields(state, j)
         if tf["sd"] is not None and j not in state.uncertain:
-            extra = f", σ {format_spread(tf['sd'], state.spec(j))}, step scale x{tf['step_scale'] or 1.0:.4f}"
+            spread = format_spread(tf["sd"], state.spec(j))
+            if tf["sd"] >= state.spec(j).span:  # the ceiling (JointTrack.cap_position): lost, not a σ
+                spread = "its whole range (lost: observe or set it)"
+            extra = f", σ {spread}, step scale x{tf['step_scale'] or 1.0:.4f}"
         if j in state.uncertain:
             lo, hi = state.uncertain[j]
             extra = f", between {format_position(lo, state.spec(j))} and {format_position(hi, state.spec(j))}"

@@ -474,7 +474,9 @@ def report(
     calibration: Path | None = typer.Option(
         None, "--calibration", "-c", help="Calibration JSON (default: fit the table by least squares)."
     ),
-    out: Path = typer.Option(Path("stickslip-report"), "-o", "--output", help="Directory for the PNGs and index.html."),
+    out: Path = typer.Option(
+        Path("stickslip-report"), "-o", "--output", metavar="FOLDER", help="Directory for the PNGs and index.html."
+    ),
     db: str | None = db_option(" Used when MEAS.csv is not given."),
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
     validate_on: Path | None = typer.Option(

@@ -41,6 +41,7 @@ def demo(
         "--output",
         "-o",
         "--out",
+        metavar="FOLDER",
         help="Results folder: measurements.csv, calibration.json, tunings, summary.",
     ),
     validation: bool = typer.Option(
@@ -217,6 +218,7 @@ def _sim_seed_day(device: str, seed: int, day: str | None, physics: bool = False
 
 @app.command("traverse")
 def traverse_cmd(
+    ctx: typer.Context,
     joint: int = typer.Option(..., "--joint", "-j", help="Joint to traverse: 1, 2 (rotary) or 3 (prismatic)."),
     direction: str = typer.Option(
         ..., "--direction", metavar="<+|->", help="'+' (lower stop to upper) or '-'. (-d is the device.)"
@@ -266,7 +268,10 @@ def traverse_cmd(
     while the tuned audio limit switch listens; stops at the end stop and counts the
     steps that moved the joint (latency corrected). The pose options say how the arm
     and base are set (on a real manipulator you set them; the simulator is placed there).
-    The row goes to the database and, with --append, to a measurement table.
+    The row goes to the database and, with --append, to a measurement table. The joint
+    ends referenced at its stop, and the pose options you give are kept as the arm's pose
+    (stickslip where shows them, the next move plans from them); an option left at its
+    default is recorded in the row but does not change the kept pose.
 
     Example: stickslip traverse --joint 3 --direction + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
     """
@@ -306,7 +311,7 @@ def traverse_cmd(
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
         request = TraverseRequest(
             device, joint, label, pose, day or today_label(), tun, audio_input=audio_input, serial_port=serial_port,
-            burst=burst, confirm_s=confirm_s, append=append,
+            burst=burst, confirm_s=confirm_s, append=append, keep_pose=_given(ctx, ("q1", "q2", "q3", "theta", "psi")),
         )
         store = Store.open(db_path(db)) if use_db else None
         try:
@@ -323,3 +328,9 @@ def traverse_cmd(
         f"{JOINTS[joint].unit}: average step {format_step(row.gamma, joint)}",
         highlight=False,
     )
+
+
+def _given(ctx: typer.Context, names: tuple[str, ...]) -> tuple[str, ...]:
+    """Which of the options ``names`` the user gave (on the command line or from the environment), not defaults."""
+    sources = {n: ctx.get_parameter_source(n) for n in names}
+    return tuple(n for n, src in sources.items() if src is not None and src.name != "DEFAULT")

@@ -100,6 +100,9 @@ the command line):
   `-o.csv` is a name; an argument that begins with `-` follows `--` (`calibrate -- -o.csv`).
   A file option's leading `~/` is your home folder wherever the command runs (PowerShell and
   cmd pass `~` to a program as it stands).
+  A file option's value that ends with `/` names a folder and is refused in one line
+  (`show 2 -o out/`, as `curl -o out/`: name the file, `out/cal.json`); a folder option
+  (`demo -o`, `report -o`, shown as `FOLDER`) takes it.
 
 | exit code | meaning |
 | --- | --- |

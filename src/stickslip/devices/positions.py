@@ -261,6 +261,19 @@ def _exact_position(track: dict[str, Any]) -> None:
             p[k][0] = 0.0
 
 
+def _cap_position(track: dict[str, Any], ceiling: float) -> None:
+    """A kept track's JSON ``P`` with the position's σ capped at ``ceiling`` (the span), as the filter caps it.
+
+    :meth:`stickslip.motion.tracking.JointTrack.cap_position` on the JSON (this layer sits below the filter's).
+    """
+    p = track.get("P")
+    if isinstance(p, list) and p and all(isinstance(r, list) and len(r) == len(p) for r in p):
+        v = p[0][0]
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and v > ceiling * ceiling > 0.0:
+            _exact_position(track)
+            p[0][0] = ceiling * ceiling
+
+
 _KEY = "positions"
 STATE_VERSION = 1
 """Format of the stored positions: a state of a newer stickslip (a higher version) is refused, not guessed at."""
@@ -309,6 +322,7 @@ def _read_state(state: DeviceState, raw: Any) -> None:
         if not isinstance(t, dict):
             raise ValueError(f"track of joint {j} is not an object")
         state.track[_stored_joint(state, j)] = t
+        _cap_position(t, state.spec(int(j)).span)  # kept before the cap: 58 m on a 12 mm joint
     for joint in sorted(state.positions):
         spec = state.spec(joint)
         for q in (state.positions[joint], *state.uncertain.get(joint, ())):

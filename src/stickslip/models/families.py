@@ -55,7 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from .. import kinematics as kin
 from ..joints import joint_spec
 from ..units import DIMENSIONLESS_PARAMETERS
-from .paper import JointModel, NonPhysicalError, StepProfile
+from .paper import STALL_RATIO, JointModel, NonPhysicalError, StepProfile
 
 __all__ = [
     "FamilySpec",
@@ -628,11 +628,13 @@ class FamilyParams:
         return FamilyParams(self.family, self.joint, self.values, self.scale * float(factor))
 
     def check_physical(self) -> None:
-        """Raise :class:`NonPhysicalError` unless the step is > 0 over a grid of every pose."""
+        """Raise :class:`NonPhysicalError` unless the step is > 0 over a grid of every pose (more than
+        :data:`~stickslip.models.paper.STALL_RATIO` of its largest there: zero to rounding is a stall)."""
         g = _pose_grid_gamma(self)
-        if not np.all(np.isfinite(g)) or not float(np.min(g)) > 0.0:
+        if not np.all(np.isfinite(g)) or not float(np.min(g)) > STALL_RATIO * float(np.max(np.abs(g))):
             raise NonPhysicalError(
-                f"family {self.family}: the step would be <= 0 in some pose (smallest {float(np.nanmin(g)):.3g})"
+                f"family {self.family}: the step would be <= 0 (or stall) in some pose "
+                f"(smallest {float(np.nanmin(g)):.3g})"
             )
 
 
@@ -701,11 +703,13 @@ class FamilyModel(JointModel):
         return self._mix(features(self.joint, q1, q2, q3, theta, psi))
 
     def check_physical(self) -> None:
-        """Raise :class:`NonPhysicalError` unless the step is > 0 over a grid of every pose."""
+        """Raise :class:`NonPhysicalError` unless the step is > 0 over a grid of every pose (more than
+        :data:`~stickslip.models.paper.STALL_RATIO` of its largest there: zero to rounding is a stall)."""
         g = sum(w * _pose_grid_gamma(p) for w, p in self.parts())
-        if not np.all(np.isfinite(g)) or not float(np.min(g)) > 0.0:
+        if not np.all(np.isfinite(g)) or not float(np.min(g)) > STALL_RATIO * float(np.max(np.abs(g))):
             raise NonPhysicalError(
-                f"family {self.family}: the step would be <= 0 in some pose (smallest {float(np.nanmin(g)):.3g})"
+                f"family {self.family}: the step would be <= 0 (or stall) in some pose "
+                f"(smallest {float(np.nanmin(g)):.3g})"
             )
 
     def rotary_coefficients(

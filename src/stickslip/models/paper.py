@@ -39,6 +39,7 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     "DIRECTIONS",
+    "STALL_RATIO",
     "direction_sign",
     "direction_label",
     "eta",
@@ -61,6 +62,13 @@ __all__ = [
 ]
 
 DIRECTIONS = ("+", "-")
+
+STALL_RATIO = 1e-6
+"""Smallest ratio of a model's smallest step to its largest (1) that ``check_physical`` accepts. A step that is
+> 0 only to rounding (gamma0 - |d| = 1e-20 rad beside gamma0 = 1e-5 rad) passed a strict > 0 and then gave counts
+of 1e15 from the quadrature of 1/gamma instead of a stall refusal; below a millionth of its largest step the count
+to cross that pose is no step count a controller sends, and the difference is within a few thousand ulps of the
+parameters: a stall, said as one."""
 
 
 def direction_sign(direction: str | int) -> int:
@@ -182,12 +190,17 @@ class PrismaticParams:
         return cls(a, b, c)
 
     def check_physical(self) -> None:
-        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose."""
+        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose.
+
+        "> 0" with a relative margin: ``a - |c|`` more than :data:`STALL_RATIO` of ``a + |c|`` (a step zero to
+        rounding is a stall, not a count of 1e15).
+        """
         if not (0.0 <= self.b < 1.0) or not math.isfinite(self.b):
             raise NonPhysicalError(f"b = {self.b:.4g} is outside [0, 1): the efficiency 1 - b|cos q2| would be <= 0")
-        if not self.a - abs(self.c) > 0.0:
+        if not self.a - abs(self.c) > STALL_RATIO * (self.a + abs(self.c)):
             raise NonPhysicalError(
-                f"a - |c| = {(self.a - abs(self.c)) * 1e9:.4g} nm <= 0: the step would be <= 0 "
+                f"a - |c| = {(self.a - abs(self.c)) * 1e9:.4g} nm, not more than {STALL_RATIO:g} of a + |c|: "
+                "the step would be <= 0 (or stall) "
                 "when the axial load is "
                 f"{'+1' if self.c > 0 else '-1'} (cos(zeta) cos(theta) = {'1' if self.c > 0 else '-1'})"
             )
@@ -233,13 +246,15 @@ class RotaryParams:
         """Raise :class:`NonPhysicalError` unless the step is > 0 for every |load| <= ``load_bound``.
 
         ``gamma0 - |d|`` is concave in q3 between the knots, so checking the knots
-        covers the whole stroke.
+        covers the whole stroke. "> 0" with a relative margin: more than :data:`STALL_RATIO` of
+        ``gamma0 + |d|`` (a step zero to rounding is a stall, not a count of 1e15).
         """
         for k, g0, d in zip(self.knots, self.gamma0, self.d, strict=True):
-            if not g0 - abs(d) * load_bound > 0.0:
+            if not g0 - abs(d) * load_bound > STALL_RATIO * (abs(g0) + abs(d) * load_bound):
                 raise NonPhysicalError(
-                    f"at q3 = {k * 1e3:g} mm, gamma0 - |d| = {(g0 - abs(d) * load_bound) * 1e6:.4g} µrad <= 0: "
-                    "the step would be <= 0 where the gravity torque is largest"
+                    f"at q3 = {k * 1e3:g} mm, gamma0 - |d| = {(g0 - abs(d) * load_bound) * 1e6:.4g} µrad, not more "
+                    f"than {STALL_RATIO:g} of gamma0 + |d|: the step would be <= 0 (or stall) where the gravity "
+                    "torque is largest"
                 )
 
 

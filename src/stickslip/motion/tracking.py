@@ -26,7 +26,8 @@ the new pose is not the old one's.
 :class:`JointTrack` is the state a device keeps between commands (``stickslip move``,
 ``stickslip observe``, ``stickslip where``; JSON in the device state);
 :class:`PositionTracker` runs it for one joint in a Python session. The position's
-standard deviation is always available and only a measurement shrinks it.
+standard deviation is always available and only a measurement shrinks it; it never exceeds the joint's span
+(:meth:`JointTrack.cap_position`).
 """
 
 from __future__ import annotations
@@ -190,12 +191,14 @@ class JointTrack:
         sigma_model: float = 0.0,
         step_noise: float = STEP_NOISE,
         scale_walk: float = SCALE_WALK,
+        ceiling: float = math.inf,
     ) -> None:
         """Propagate the covariance over a move of ``n_steps`` signed steps that dead-reckoned ``delta`` (m or rad).
 
         ``delta`` is the displacement at the current scale of the direction moved. With
         ``pose`` given and different from the last move's (other joints, tilt),
         ``sigma_model²`` is added to the scales' variance first (the model's error in a new pose).
+        ``ceiling`` (m or rad, the joint's span): the position's σ is capped there (:meth:`cap_position`).
         """
         n = abs(int(n_steps))
         if n == 0:
@@ -213,6 +216,27 @@ class JointTrack:
         Q[0, 0] = n * (step_noise * gamma) ** 2
         Q[k, k] = scale_walk**2 * n
         self.P = F @ self.P @ F.T + Q
+        self.cap_position(ceiling)
+
+    def cap_position(self, ceiling: float) -> bool:
+        """Cap the position's σ at ``ceiling`` (m or rad: the joint's span); whether it was capped.
+
+        The kept position is clipped to the joint's range and the joint is within it, so the error is never more
+        than the span: a larger σ (58 m on a 12 mm joint after 1e5 unobserved moves) says nothing. The span, not
+        the range's uniform sd (span/sqrt(12)): a σ is used as a margin (the rig's envelope widens by n_sigma ≥ 1
+        σ, as it takes an uncertain joint's farthest bound as one σ), and a third of the span would cover less than
+        where the joint may be. At the cap the position is uncorrelated with the scales (their covariance set to 0):
+        a position clipped at a stop no longer follows the scale's error, so a reading re-references it and teaches
+        no scale (a capped σ is not knowledge). ``ValueError`` unless ``ceiling`` > 0.
+        """
+        if not ceiling > 0.0:
+            raise ValueError(f"a position's σ ceiling must be > 0, got {ceiling!r}")
+        if not float(self.P[0, 0]) > ceiling * ceiling:
+            return False
+        self.P[0, :] = 0.0
+        self.P[:, 0] = 0.0
+        self.P[0, 0] = ceiling * ceiling
+        return True
 
     def observe(self, q_predicted: float, q_measured: float, sd: float) -> float:
         """Kalman update with a measured position (m or rad) of standard deviation ``sd`` (0: exact).
@@ -370,7 +394,9 @@ class PositionTracker:
             return self.position
         factor = self.track.scale_of("+" if signed_steps > 0 else "-")
         delta = factor * (self._planner.position_after(self.q, signed_steps) - self.q)
-        self.track.predict(delta, signed_steps, step_noise=self.step_noise, scale_walk=self.scale_walk)
+        self.track.predict(
+            delta, signed_steps, step_noise=self.step_noise, scale_walk=self.scale_walk, ceiling=self._planner.spec.span
+        )
         self.q += delta
         return self.position
 

@@ -418,7 +418,8 @@ class _Run:
             n = steps[j - 1]
             if n and j in self.tracks and j not in self.state.uncertain:
                 delta = self.state.positions[j] - before[j - 1]
-                self.tracks[j].predict(delta, n, self.state.pose, j, joint_sigma_model(self.calibration, j))
+                self.tracks[j].predict(delta, n, self.state.pose, j, joint_sigma_model(self.calibration, j),
+                                       ceiling=self.state.spec(j).span)
                 self.state.track[j] = self.tracks[j].to_json()
 
     def look(self, steps: tuple[int, int, int], target: Vec3, correction: bool) -> str | None:
@@ -640,8 +641,9 @@ def _out_and_back(state: DeviceState, calibration: Calibration, joint: int) -> C
         state.set_position(joint, q_back, "dead-reckoned" if source != "assumed" else source)
         track, _ = track_for(state.track.get(joint), calibration, joint)
         sigma_model = joint_sigma_model(calibration, joint)
-        track.predict(q_out - q0, AUTO_STEPS, pose, joint, sigma_model)
-        track.predict(q_back - q_out, -AUTO_STEPS, pose, joint, sigma_model)
+        span = state.spec(joint).span
+        track.predict(q_out - q0, AUTO_STEPS, pose, joint, sigma_model, ceiling=span)
+        track.predict(q_back - q_out, -AUTO_STEPS, pose, joint, sigma_model, ceiling=span)
         state.track[joint] = track.to_json()
 
     return keep

@@ -455,7 +455,7 @@ def settle(state: DeviceState, plan: TrackedPlan, outcome: MoveOutcome) -> None:
         return
     if outcome.sent and joint not in state.uncertain and not plan.assumed:  # the uncertainty grows with the move
         delta = state.positions[joint] - plan.q_from
-        plan.track.predict(delta, outcome.sent, plan.pose, joint, plan.sigma_model)
+        plan.track.predict(delta, outcome.sent, plan.pose, joint, plan.sigma_model, ceiling=state.spec(joint).span)
         state.track[joint] = plan.track.to_json()
 
 
@@ -478,7 +478,7 @@ def grow_track(
     track, _ = track_for(state.track.get(joint), calibration, joint)
     model = 0.0 if joint in seen else joint_sigma_model(calibration, joint, pose)
     before = track.pose
-    track.predict(state.positions[joint] - q_from, sent, pose, joint, model)
+    track.predict(state.positions[joint] - q_from, sent, pose, joint, model, ceiling=state.spec(joint).span)
     if before is not None and track.pose != before:  # a new pose: its error was added now
         seen.add(joint)
     state.track[joint] = track.to_json()

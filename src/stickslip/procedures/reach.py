@@ -67,7 +67,9 @@ value beyond it is a typing error (a target farther overflowed the inverse kinem
 
 BORROWED_JOINT1 = (
     "joint 1 is not in this calibration: its steps are planned with joint 2's parameters and joint 1's own "
-    "gravity load (the paper: the same actuator); calibrate joint 1 for accurate moves across the arm's plane"
+    "gravity load (the paper: the same actuator); for accurate moves across the arm's plane calibrate joint 1: "
+    "stickslip traverse --joint 1 both ways with --q2 -90deg at --theta 0 and -90deg, each at --q3 0 and 12mm, "
+    "appended to the table (-a), then stickslip calibrate the table (docs/taskspace.md)"
 )
 """The warning of a move that steps joint 1 with joint 2's parameters (``motion.reach.borrow_joint1``)."""
 

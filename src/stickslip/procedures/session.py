@@ -9,7 +9,7 @@ the stop it reached, and appends the row to a table if asked.
 with the device's own microphone where it has one (the simulator) or the sound card
 otherwise, and counts the steps between the end stops (:func:`~.traverse.measure_traverse`).
 :func:`record_traverse` stores the row and, since the joint now rests at an end stop,
-re-references the joint's kept position there.
+re-references the joint's kept position there (and keeps the pose options the user gave as the arm's pose).
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ __all__ = [
     "append_row",
     "check_append_target",
     "record_traverse",
+    "POSE_NAMES",
     "traverse",
     "traverse_on_device",
 ]
@@ -157,11 +158,29 @@ def traverse_on_device(
     return result
 
 
-def record_traverse(store: TraverseStore, device_url: str, row: Traverse, how: str = "audio") -> int:
-    """Store ``row`` for the device and re-reference its joint at the end stop it reached; returns the id."""
+POSE_NAMES = ("q1", "q2", "q3", "theta", "psi")
+"""The names of a traverse's pose (:attr:`TraverseRequest.keep_pose` takes them)."""
+
+
+def record_traverse(
+    store: TraverseStore, device_url: str, row: Traverse, how: str = "audio", keep_pose: tuple[str, ...] = ()
+) -> int:
+    """Store ``row`` for the device and re-reference its joint at the end stop it reached; returns the id.
+
+    ``keep_pose``: the names of the row's pose (:data:`POSE_NAMES`) the user set the arm to for this traverse; each
+    is kept as the arm's pose (the other joints ``"set"`` there, the tilt), as ``stickslip where --set`` would. The
+    traversed joint's own entry is its start, not kept: the joint rests at the end stop.
+    """
     key = device_key(device_url)
     tid = store.add_traverse(row, device=key, how=how)
     state = load_state(store, key)
+    for name in keep_pose:
+        if name not in POSE_NAMES:
+            raise ValueError(f"keep_pose: {name!r} is not one of {POSE_NAMES}")
+        if name in ("theta", "psi"):
+            state.set_tilt(**{name: float(getattr(row, name))})
+        elif name != f"q{row.joint}":
+            state.set_position(int(name[1]), float(getattr(row, name)), "set")
     state.set_position(row.joint, row.end, "set")
     save_state(store, state)
     return tid
@@ -226,6 +245,9 @@ class TraverseRequest:
         How long a stop must persist before it is taken, s.
     append : Path or None
         Measurement table to append the row to.
+    keep_pose : tuple of str
+        The names of ``pose`` the user set the arm to (:data:`POSE_NAMES`): kept as the arm's pose after the
+        traverse (:func:`record_traverse`). Default none: the kept pose is left as it was.
     """
 
     device: str
@@ -239,6 +261,7 @@ class TraverseRequest:
     burst: int = 2000
     confirm_s: float = CONFIRM_S
     append: Path | None = None
+    keep_pose: tuple[str, ...] = ()
 
 
 def traverse(
@@ -279,7 +302,7 @@ def traverse(
                 what = f"traverse of joint {request.joint}{request.direction}"
                 raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
             try:
-                record_traverse(store, request.device, result.traverse, how="audio")
+                record_traverse(store, request.device, result.traverse, how="audio", keep_pose=request.keep_pose)
             except OSError as e:  # measured, and the database refused it (a full disk): the row is not lost
                 raise _measured_not_stored(e, request, result.traverse) from None
     if request.append is not None:
