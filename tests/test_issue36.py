@@ -108,6 +108,9 @@ def test_raw_steps_need_no_calibration_and_leave_the_joint_uncertain_to_its_stop
         assert r.exit_code == 0, r.output
         assert emu.steps["C"] == 100  # exactly the steps asked for
         assert "its position is uncertain: 0 µm to 12000 µm" in r.stdout  # never referenced: anywhere
+        # the reference it prints names this device: without -d it set the default device's (sim://) position
+        printed = " ".join(r.stdout.split())  # the console wraps long lines
+        assert printed.endswith(f"at the stop, reference it: stickslip where -d {url} --set 3=max"), printed
         r = run("move", "-d", url, "--db", db, "--joint", 3, "--by", "-100steps", "--json")
         assert r.exit_code == 0, r.output
         assert emu.steps["C"] == 0

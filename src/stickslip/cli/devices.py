@@ -347,7 +347,11 @@ def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, j
         return
     say(f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)")
     say(f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}")
-    say(f"at the stop, reference it: stickslip where --set {joint}={'min' if steps < 0 else 'max'}")
+    from ..devices.base import redact_url
+
+    # the device named: `where --set` without -d would set the config's default device (sim://), not this one
+    stop = "min" if steps < 0 else "max"
+    say(f"at the stop, reference it: stickslip where -d {redact_url(device)} --set {joint}={stop}")
 
 
 def _print_move(result: MoveResult) -> None:
