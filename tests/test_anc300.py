@@ -122,8 +122,11 @@ def test_wrong_password_is_a_device_error():
     t = FakeTransport(
         [LOGIN[0], (f"{PASSWORD}\r\n", "******\r\nAuthorization failed\r\n")], name="fake"
     )
-    with pytest.raises(DeviceError, match="Authorization failed"):
+    with pytest.raises(DeviceError, match="Authorization failed") as err:
         ANC300(t, password=PASSWORD, timeout=0.1, query_delay=0.0)
+    # what to do: the variable that holds the password, and what is sent without it (not the password tried)
+    assert "give the console's password in $STICKSLIP_ANC300_PASSWORD" in str(err.value)
+    assert "factory default 123456" in str(err.value) and PASSWORD not in str(err.value).replace("123456", "")
 
 
 # ---------------------------------------------------------------- the emulator

@@ -221,6 +221,9 @@ class ANC300:
             raise
         except Exception as e:  # pymeasure raises a bare Exception on a wrong password
             msg = str(e).replace(password, "***") if password else str(e)
+            if "authoriz" in msg.lower():  # say where the password comes from: a refusal alone left the user stuck
+                msg += (f"; give the console's password in ${PASSWORD_ENV} (not in the URL; without it the factory "
+                        f"default {DEFAULT_PASSWORD} is sent)")
             raise DeviceError(f"ANC300 on {transport.name}: {msg}") from None
         self._mode: dict[int, str | None] = dict.fromkeys(self.axes)
         self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
