@@ -83,7 +83,8 @@ def test_calibration_day_notebook(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     (steps,) = re.findall(r"(\d+) steps for 30 µm", text)
     # 30 µm at 0.5-1 µm a step (the prismatic step's size, Eq. 2: a ~ 1 µm shrunk by (1 - b |cos q2|) and the load)
     assert 30 <= int(steps) <= 60
-    assert "kept 14 traverses" in text
+    # this run's traverses, and all the database holds (a run of the notebook in a used folder said "kept 28")
+    assert "kept 14 traverses and the calibration in calibration-day.db (14 traverses there)" in text
     assert (tmp_path / "calibration-day.db").exists()
     assert "Calibration(" in text and "ValidationResult(" in text
     assert text.count("image/png") == 1  # the figure is shown
