@@ -109,5 +109,6 @@ def test_bluesky_scan_notebook(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     assert all(abs(tr - t) <= 0.01 * t for tr, t in zip(truths, targets, strict=True))
     (tip,) = re.findall(r"tip \(µm\): ([-\d.]+), ([-\d.]+), ([-\d.]+)", text)
     assert float(tip[1]) == pytest.approx(1000.0, abs=2.0)  # tip.y moved to 1 mm
+    assert text.count("UserWarning: joint 1 is not in this calibration") == 1  # the warning its markdown announces
     assert (tmp_path / "bluesky-scan.db").exists()
     assert text.count("image/png") == 1  # the figure is shown
