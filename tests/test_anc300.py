@@ -157,6 +157,16 @@ def test_end_to_end_on_the_emulator_steps_the_simulated_joint():
         assert emu.hz[3] == 2000
 
 
+def test_a_serial_console_still_logged_in_is_not_told_to_change_the_password():
+    """The pty emulator prompts once, like a serial line after power-up: a second session's password is taken as a
+    command (ERROR). The message said to set the password, which was right; it names the login kept instead."""
+    with ANC300Emulator(_sim(), password="right", transport="pty") as emu:
+        open_device(emu.url + "&delay=0.005").close()
+        with pytest.raises(DeviceError, match="authorization failed 'ERROR'") as err:
+            open_device(emu.url + "&delay=0.005")
+    assert "asked for no password" in str(err.value) and "STICKSLIP_ANC300_PASSWORD" not in str(err.value)
+
+
 def test_emulator_wrong_password():
     with ANC300Emulator(_sim(), password="right") as emu:
         url = emu.url.replace("password=right", "password=wrong") + "&delay=0.005"
