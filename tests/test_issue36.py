@@ -424,3 +424,19 @@ def test_raw_steps_beyond_any_joints_range_are_refused_before_the_device_is_open
     assert not db.exists()  # nothing opened, nothing stored
     r = run("move", "-d", "sim://", "--db", db, "--joint", 3, "--steps", -1000)
     assert r.exit_code == 0, r.output
+
+
+def test_every_re_reference_advice_names_the_device_it_is_about():
+    """`stickslip where --set 3=min` without -d sets the default device's joint (sim://, or the config's): the advice
+    after a failed or cut move, and for an uncertain joint, named no device, so following it left the controller's
+    joint uncertain and made the simulator's 'set'."""
+    from stickslip.devices.positions import DeviceState, where_set_command
+    from stickslip.procedures.move import failure_text
+
+    url = "anc300://lab:7230?password=hunter2"
+    state = DeviceState.default(url)
+    state.uncertain[3] = (1e-3, 2e-3)
+    line = "stickslip where -d anc300://lab:7230?password=*** --set 3=min"  # the device named, its secret redacted
+    assert where_set_command(url, 3) == line
+    for text in (state.uncertainty_problem(3), failure_text(state, 3, "no answer", 10, 100)):
+        assert text is not None and line in text, text

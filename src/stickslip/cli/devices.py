@@ -347,11 +347,9 @@ def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, j
         return
     say(f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)")
     say(f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}")
-    from ..devices.base import redact_url
+    from ..devices.positions import where_set_command
 
-    # the device named: `where --set` without -d would set the config's default device (sim://), not this one
-    stop = "min" if steps < 0 else "max"
-    say(f"at the stop, reference it: stickslip where -d {redact_url(device)} --set {joint}={stop}")
+    say(f"at the stop, reference it: {where_set_command(device, joint, 'min' if steps < 0 else 'max')}")
 
 
 def _print_move(result: MoveResult) -> None:
