@@ -53,6 +53,18 @@ def guide_commands() -> list[tuple[list[str], str]]:
     return out
 
 
+def _pose_set_by_hand(argv: list[str]) -> tuple[int, float] | None:
+    """``(joint, position)`` of a ``where --set J=VALUE`` line that states a pose the user made (not a stop)."""
+    from stickslip.units import parse_angle, parse_length
+
+    if argv[:1] != ["where"] or "--set" not in argv:
+        return None
+    joint, _, value = argv[argv.index("--set") + 1].partition("=")
+    if value in ("min", "max"):
+        return None
+    return int(joint), (parse_length(value) if joint == "3" else parse_angle(value))
+
+
 def _tuning(folder: Path) -> None:
     """joint3-tuning.json, as the guide assumes the user made it (tune on a rendered recording; the traverse
     warns that it was made at 1 kHz, not at the emulator's 20 kHz: the ear here does not listen anyway)."""
@@ -83,8 +95,11 @@ def test_the_day_one_guide_runs_on_the_console_emulator_without_a_move_from_a_ma
     planned: list[tuple[int, str]] = []
     plan_tracked = move_procedure.plan_tracked
 
+    kept_q2: list[float] = []
+
     def spy(cal: Any, state: Any, joint: int, q_to: float, **kw: Any) -> Any:
         planned.append((joint, "referenced" if state.referenced(joint) else state.sources[joint]))
+        kept_q2.append(state.positions[2])
         return plan_tracked(cal, state, joint, q_to, **kw)
 
     monkeypatch.setattr(move_procedure, "plan_tracked", spy)
@@ -102,11 +117,14 @@ def test_the_day_one_guide_runs_on_the_console_emulator_without_a_move_from_a_ma
             interrupted = "Ctrl-C" in comment
             ear.deaf = interrupted
             PacedSilence.interrupt_after = 60 if interrupted else None  # ~1.3 s of a stop that is never heard
+            hand_set = _pose_set_by_hand(argv)
+            if hand_set is not None:  # "set the pose": the user's hands (raw steps and an eye) put the joint there
+                sim.set_pose(**{f"q{hand_set[0]}": hand_set[1]})
             r = runner.invoke(app, argv)
             results.append(r)
             expected = 130 if interrupted else 0
             assert r.exit_code == expected, (argv, r.output)
-            if argv[:1] == ["where"] and "--set" in argv:  # a reference the guide makes: true at the stop
+            if argv[:1] == ["where"] and "--set" in argv and hand_set is None:  # a reference: true at the stop
                 j = int(argv[argv.index("--set") + 1][0])
                 assert sim.position(j) == pytest.approx(kin.JOINTS[j].lower, abs=1e-12), argv
             if argv[:1] == ["move"] and "--by" in argv:  # the planned move: where the emulated arm truly went
@@ -114,6 +132,8 @@ def test_the_day_one_guide_runs_on_the_console_emulator_without_a_move_from_a_ma
         PacedSilence.interrupt_after = None
     # no planned move started from a position that was not referenced (the guide's promise)
     assert planned and all(how == "referenced" for _, how in planned), planned
+    # ... in the pose the user set by hand: joint 2 outstretched, not where it was referenced (-210 deg)
+    assert kept_q2 == [pytest.approx(-math.pi / 2, abs=1e-12)] * len(planned), kept_q2
     # the traverses measured the emulated arm's steps, and the calibration records its device
     cal = json.loads((tmp_path / "cal-day1.json").read_text())
     assert cal["conditions"]["device"] == emu.url

@@ -108,6 +108,9 @@ def test_raw_steps_need_no_calibration_and_leave_the_joint_uncertain_to_its_stop
         assert r.exit_code == 0, r.output
         assert emu.steps["C"] == 100  # exactly the steps asked for
         assert "its position is uncertain: 0 µm to 12000 µm" in r.stdout  # never referenced: anywhere
+        # the reference it prints names this device: without -d it set the default device's (sim://) position
+        printed = " ".join(r.stdout.split())  # the console wraps long lines
+        assert printed.endswith(f"at the stop, reference it: stickslip where -d {url} --set 3=max"), printed
         r = run("move", "-d", url, "--db", db, "--joint", 3, "--by", "-100steps", "--json")
         assert r.exit_code == 0, r.output
         assert emu.steps["C"] == 0
@@ -421,3 +424,19 @@ def test_raw_steps_beyond_any_joints_range_are_refused_before_the_device_is_open
     assert not db.exists()  # nothing opened, nothing stored
     r = run("move", "-d", "sim://", "--db", db, "--joint", 3, "--steps", -1000)
     assert r.exit_code == 0, r.output
+
+
+def test_every_re_reference_advice_names_the_device_it_is_about():
+    """`stickslip where --set 3=min` without -d sets the default device's joint (sim://, or the config's): the advice
+    after a failed or cut move, and for an uncertain joint, named no device, so following it left the controller's
+    joint uncertain and made the simulator's 'set'."""
+    from stickslip.devices.positions import DeviceState, where_set_command
+    from stickslip.procedures.move import failure_text
+
+    url = "anc300://lab:7230?password=hunter2"
+    state = DeviceState.default(url)
+    state.uncertain[3] = (1e-3, 2e-3)
+    line = "stickslip where -d anc300://lab:7230?password=*** --set 3=min"  # the device named, its secret redacted
+    assert where_set_command(url, 3) == line
+    for text in (state.uncertainty_problem(3), failure_text(state, 3, "no answer", 10, 100)):
+        assert text is not None and line in text, text

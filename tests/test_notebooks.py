@@ -83,7 +83,8 @@ def test_calibration_day_notebook(tmp_path: Path, monkeypatch: pytest.MonkeyPatc
     (steps,) = re.findall(r"(\d+) steps for 30 µm", text)
     # 30 µm at 0.5-1 µm a step (the prismatic step's size, Eq. 2: a ~ 1 µm shrunk by (1 - b |cos q2|) and the load)
     assert 30 <= int(steps) <= 60
-    assert "kept 14 traverses" in text
+    # this run's traverses, and all the database holds (a run of the notebook in a used folder said "kept 28")
+    assert "kept 14 traverses and the calibration in calibration-day.db (14 traverses there)" in text
     assert (tmp_path / "calibration-day.db").exists()
     assert "Calibration(" in text and "ValidationResult(" in text
     assert text.count("image/png") == 1  # the figure is shown
@@ -108,5 +109,6 @@ def test_bluesky_scan_notebook(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     assert all(abs(tr - t) <= 0.01 * t for tr, t in zip(truths, targets, strict=True))
     (tip,) = re.findall(r"tip \(µm\): ([-\d.]+), ([-\d.]+), ([-\d.]+)", text)
     assert float(tip[1]) == pytest.approx(1000.0, abs=2.0)  # tip.y moved to 1 mm
+    assert text.count("UserWarning: joint 1 is not in this calibration") == 1  # the warning its markdown announces
     assert (tmp_path / "bluesky-scan.db").exists()
     assert text.count("image/png") == 1  # the figure is shown

@@ -63,7 +63,7 @@ from ..devices.base import (
     device_key,
     open_device,
 )
-from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..motion.planning import Planner
 from ..procedures.closed_loop import FINDING_TIP, CameraLoop, move_seen
 from ..procedures.move import (
@@ -647,7 +647,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             why = state.why[j] if FINDING_TIP in state.why.get(j, "") else "a burst was cut short"
             where = (
                 f"its position is uncertain, between {format_position(lo, j)} and {format_position(hi, j)} "
-                f"({why}); re-reference it (stickslip where --set {j}=min at the lower stop)"
+                f"({why}); re-reference it ({where_set_command(state.device, j)} at the lower stop)"
             )
         else:
             where = f"its dead-reckoned position is {format_position(state.positions[j], j)}"

@@ -42,7 +42,7 @@ from ophyd_async.core import StandardReadableFormat as Format
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import DeviceError, VirtualClock
-from ..devices.positions import DeviceState, load_state, save_state
+from ..devices.positions import DeviceState, load_state, save_state, where_set_command
 from ..motion.reach import ReachPlan, borrow_joint1
 from ..procedures.move import DeviceBusy, MoveRefused, check_envelope_path, device_lock
 from ..procedures.reach import (
@@ -202,7 +202,7 @@ class _TipDriver:
             unit = kin.joint_spec(j).unit
             kept = (
                 f"joint {j}'s position is now uncertain, between {lo:.9g} and {hi:.9g} {unit}; re-reference it "
-                f"(stickslip where --set {j}=min at the lower stop) before the next move"
+                f"({where_set_command(state.device, j)} at the lower stop) before the next move"
             )
         else:
             kept = "the dead-reckoned positions are kept"
@@ -370,7 +370,7 @@ def _where(state: DeviceState) -> str:
         j = min(state.uncertain)
         return (
             f"joint {j}'s position is uncertain (a burst was cut short); re-reference it "
-            f"(stickslip where --set {j}=min at the lower stop)"
+            f"({where_set_command(state.device, j)} at the lower stop)"
         )
     q = _positions(state)
     return f"the dead-reckoned joints are q1 = {q[0]:.6g} rad, q2 = {q[1]:.6g} rad, q3 = {q[2]:.6g} m"

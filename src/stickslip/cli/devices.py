@@ -349,7 +349,9 @@ def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, j
         return
     say(f"joint {joint}: {steps:+d} raw steps sent in {len(result.outcome.bursts)} burst(s)")
     say(f"its position is uncertain: {format_position(lo, joint)} to {format_position(hi, joint)}")
-    say(f"at the stop, reference it: stickslip where --set {joint}={'min' if steps < 0 else 'max'}")
+    from ..devices.positions import where_set_command
+
+    say(f"at the stop, reference it: {where_set_command(device, joint, 'min' if steps < 0 else 'max')}")
 
 
 def _print_move(result: MoveResult) -> None:

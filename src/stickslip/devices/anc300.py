@@ -28,12 +28,17 @@ only carries its bytes over our transports (:class:`TransportAdapter`) and wraps
 * ``stop AXIS`` stops; closing stops every axis and grounds it (mode ``gnd``).
 
 Assumptions: the serial console speaks the same console as telnet, password prompt
-included; ``ver`` answers the same line as on opening, then ``OK``, at any time. After an
-answer timed out, the next command is preceded by ``ver`` and every line before its
-answer is discarded (a late ``OK`` echoes no command: it would pass for the next
-command's; stops are sent at once, without it); no answer within the timeout refuses the
-command, naming ``ver``. Check: in a ``stickslip -vv`` log after a timeout, ``ver`` is
-answered by the version ``where`` shows, then ``OK``, before the next command. Every
+included (check: ``stickslip -vv where -d anc300:///dev/ttyUSB0`` logs ``READ:`` of the
+stars answering the password, then ``Authorization success``).
+A serial line has no connection to prompt on: if the console prompts once after power-up,
+as the emulator's pseudo-terminal does, a later session's password is taken as a command
+and opening fails, naming that (power the controller off and on; report it, with the log).
+``ver`` answers the same line as on opening, then ``OK``, at any time. After an answer
+timed out, the next command is preceded by ``ver`` and every line before its answer is
+discarded (a late ``OK`` echoes no command: it would pass for the next command's; stops
+are sent at once, without it); no answer within the timeout refuses the command, naming
+``ver``. Check: in a ``stickslip -vv`` log after a timeout, ``ver`` is answered by the
+version ``where`` shows, then ``OK``, before the next command. Every
 message is logged on ``"stickslip.devices.anc300"`` (DEBUG).
 """
 
@@ -86,6 +91,19 @@ def _pymeasure() -> tuple[Any, Any]:
             f"the ANC300 backend needs pymeasure: pip install 'stickslip[anc300]' ({e})"
         ) from e
     return Adapter, ANC300Controller
+
+
+def _login_advice(msg: str) -> str:
+    """What to do after pymeasure's login failed with ``msg`` (``Attocube authorization failed '<reply>'``)."""
+    if not msg.startswith("Attocube authorization failed"):
+        return ""
+    if msg.endswith("'Authorization failed'"):  # the console refused the password: say where it comes from
+        return (f"; give the console's password in ${PASSWORD_ENV} (not in the URL; without it the factory "
+                f"default {DEFAULT_PASSWORD} is sent)")
+    # another answer: the console took the password as a command, so it asked for none (a serial console still
+    # logged in from the program before: the emulator's pty does this to every session after the first)
+    return ("; the console asked for no password (still logged in from an earlier session?): power the controller "
+            "off and on, or use its network console")
 
 
 def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:  # noqa: N802
@@ -221,7 +239,7 @@ class ANC300:
             raise
         except Exception as e:  # pymeasure raises a bare Exception on a wrong password
             msg = str(e).replace(password, "***") if password else str(e)
-            raise DeviceError(f"ANC300 on {transport.name}: {msg}") from None
+            raise DeviceError(f"ANC300 on {transport.name}: {msg}{_login_advice(msg)}") from None
         self._mode: dict[int, str | None] = dict.fromkeys(self.axes)
         self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
         self._volt: dict[int, float | None] = dict.fromkeys(self.axes)

@@ -48,9 +48,10 @@ from .. import kinematics as kin
 from ..joints import JointSet, JointSpec
 from ..records import atomic_write_text, check_version, dumps_json, json_kind, loads_json, read_json
 from ..units import format_position
-from .base import device_key
+from .base import device_key, redact_url
 
 __all__ = [
+    "where_set_command",
     "StateStore",
     "JsonStateFile",
     "DeviceState",
@@ -225,7 +226,7 @@ class DeviceState:
         return (
             f"joint {joint}'s position is uncertain ({why}): between {format_position(lo, self.spec(joint))} and "
             f"{format_position(hi, self.spec(joint))}; re-reference it at an end stop first, e.g. "
-            f"`stickslip where --set {joint}=min` after driving it to the lower stop"
+            f"`{where_set_command(self.device, joint)}` after driving it to the lower stop"
         )
 
     def set_tilt(self, theta: float | None = None, psi: float | None = None) -> None:
@@ -363,3 +364,11 @@ def save_state(store: StateStore, state: DeviceState) -> None:
     """Store ``state`` under its device URL."""
     store.set_state(state.device, _KEY, state.to_json())
 
+
+def where_set_command(device: str, joint: int, value: str = "min") -> str:
+    """The ``stickslip where`` line that sets ``joint`` of ``device`` to ``value`` (a stop, or a position).
+
+    It names the device: without ``-d`` the line would set the default device's joint (the config's,
+    else ``sim://``), not the one a message is about.
+    """
+    return f"stickslip where -d {redact_url(device)} --set {joint}={value}"

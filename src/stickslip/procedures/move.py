@@ -48,7 +48,7 @@ from ..devices.base import (
     redact_url,
     url_scheme,
 )
-from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..joints import JointSet, JointSpec
 from ..motion.planning import Planner
 from ..motion.tracking import (
@@ -590,7 +590,7 @@ def failure_text(state: DeviceState, joint: int, error: str, sent: int, steps: i
         lo, hi = state.uncertain[joint]
         kept = (
             f"joint {joint}'s position is now uncertain, between {format_position(lo, spec)} "
-            f"and {format_position(hi, spec)}; re-reference it (stickslip where --set {joint}=min "
+            f"and {format_position(hi, spec)}; re-reference it ({where_set_command(state.device, joint)} "
             f"at the lower stop) before the next move"
         )
     else:

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from ..devices.base import device_key
-from ..devices.positions import StateStore, load_state, save_state
+from ..devices.positions import StateStore, load_state, save_state, where_set_command
 from ..joints import JOINTS
 from ..motion.tracking import JointTrack
 from ..units import format_position, format_spread
@@ -140,7 +140,7 @@ class ObserveResult:
         }
 
 
-def _gate(obs: Observation, q_before: float, sd_before: float) -> float:
+def _gate(obs: Observation, q_before: float, sd_before: float, device: str) -> float:
     """The innovation in standard deviations; :class:`InnovationTooLarge` beyond the gate unless forced."""
     joint, sd = obs.joint, obs.sigma
     s_pred = math.sqrt(sd_before**2 + sd**2)
@@ -153,7 +153,7 @@ def _gate(obs: Observation, q_before: float, sd_before: float) -> float:
                 f"the measured position {format_position(obs.q, joint)} is not the kept "
                 f"{format_position(q_before, joint)}, and both are exact (an end stop, or a position set): "
                 f"check the reading (units, which joint); if the joint was moved by hand, re-reference it "
-                f"(stickslip where --set {joint}=VALUE) or pass --force to use it"
+                f"({where_set_command(device, joint, 'VALUE')}) or pass --force to use it"
             )
         return math.inf
     sigmas = diff / s_pred
@@ -162,7 +162,7 @@ def _gate(obs: Observation, q_before: float, sd_before: float) -> float:
             f"the measured position {format_position(obs.q, joint)} is {sigmas:.3g} standard "
             f"deviations from the kept {format_position(q_before, joint)} (σ {format_spread(sd_before, joint)}): "
             "check the reading (units, which joint); if the joint slipped or was moved by hand, "
-            f"re-reference it (stickslip where --set {joint}=VALUE) or pass --force to use it"
+            f"re-reference it ({where_set_command(device, joint, 'VALUE')}) or pass --force to use it"
         )
     return sigmas
 
@@ -188,7 +188,7 @@ def observe(store: ObserveStore, device: str, obs: Observation) -> ObserveResult
             track.reset_position(obs.sigma)
             q_new = obs.q
         else:
-            sigmas = _gate(obs, q_before, sd_before)
+            sigmas = _gate(obs, q_before, sd_before, device)
             if sigmas > MAX_INNOVATION:  # forced: a reading the filter cannot explain (a slip, a hand) sets the
                 track.reset_position(obs.sigma)  # position; the steps did not get it there: it teaches no scale
                 q_new = obs.q

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
-from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..motion.reach import JointStepper, ReachPlan, plan_reach
 from ..rig.guard import Guard
 from .conditions import calibration_device_problem, usage_warnings
@@ -240,8 +240,8 @@ class ReachResult:
         j = out.joint or 0
         if j in self.state.uncertain:
             kept = (
-                f"joint {j}'s position is now uncertain; re-reference it (stickslip where --set {j}=min at the "
-                f"lower stop) before the next move"
+                f"joint {j}'s position is now uncertain; re-reference it "
+                f"({where_set_command(self.state.device, j)} at the lower stop) before the next move"
             )
         else:
             kept = "the dead-reckoned positions are kept"

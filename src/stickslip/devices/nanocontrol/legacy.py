@@ -41,6 +41,22 @@ these follow the NanoControl's documented newer console, and are lenient):
 * the speed levels' stepping frequencies are not published: :data:`SPEED_HZ` is a
   placeholder table (measure yours: time a burst of 10 000 steps) and can be passed in.
 
+How to check them on your controller (``stickslip -vv`` logs every message with its time):
+
+* answers, and their form: ``stickslip -vv where -d URL?dialect=legacy`` shows ``version;``
+  answered (``<- b'o\\t...\\r'``) and the version; if nothing answers within the timeout, the
+  firmware may never answer: ``?ack=0`` (fire and forget) opens it without answers;
+* a ``coarse`` answered once its steps are done: in ``stickslip -vv move -d URL --joint 3
+  --steps 2000``, ``<- b'o\\t\\r'`` follows ``-> coarse C +2000;`` by the burst's duration,
+  2000 / f (2 s at 1000 Hz, as on ``python -m stickslip.sim.emulators --realtime 1``), when
+  the stepping sound ends. An answer within milliseconds means the controller answers on
+  receipt: the next burst would go out while this one still steps, and a failure's bounds
+  and a stop's timing rest on the answer marking the end; report it before relying on moves;
+* ``counterread`` answering one integer per channel: ``stickslip -vv`` after a timeout
+  (``?timeout=0.001``) shows its answer when ``version;`` went unanswered;
+* ``stop;`` (best-effort): Ctrl-C a long ``--steps`` move: the sound ends with it on firmware
+  that knows ``stop;``; otherwise when the burst is done (the joint is left uncertain either way).
+
 Every message sent and received is logged on logger ``"stickslip.devices.nanocontrol"``
 (DEBUG level; ``logging.basicConfig(level=logging.DEBUG)`` shows it).
 """
