@@ -24,7 +24,7 @@ from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S
 from ..audio.detector import Tuning, detector_for
 from ..devices.base import Controller, DeviceError, HasMicrophone, PoseSettable, VirtualClock, device_key, open_device
-from ..devices.positions import StateStore, load_state, save_state
+from ..devices.positions import StateStore, load_state, save_state, where_set_command
 from ..measurements import Traverse, measurements_to_csv
 from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 from .move import Interrupted, LockStore, device_lock, kept_after_interrupt
@@ -332,7 +332,8 @@ def _measured_not_stored(e: OSError, request: TraverseRequest, row: Traverse) ->
         except (OSError, ValueError) as a:
             table = f"nor appended to {request.append} ({a}); "
     text = (f"{e}; the traverse was measured but not stored, joint {request.joint} is kept uncertain between its "
-            f"stops (reference it: stickslip where --set); {table}its row: {line}")
+            f"stops (reference it: {where_set_command(request.device, request.joint, 'min|max')}); {table}its row: "
+            f"{line}")
     return type(e)(text) if type(e).__init__ is OSError.__init__ and len(e.args) == 1 else OSError(text)
 
 
