@@ -175,6 +175,41 @@ def test_a_traverse_refused_before_it_moves_leaves_the_kept_position_as_it_was(t
                              "--burst", "0", "--db", str(db)]), "--burst")  # fmt: skip
 
 
+def test_a_sound_card_that_does_not_open_leaves_the_kept_position_as_it_was(tmp_path, monkeypatch):
+    # audit51: PortAudio missing, no step sent, yet joint 3 was kept "uncertain, a traverse did not finish" (0-12 mm)
+    import pytest
+
+    from stickslip.audio import sources
+    from stickslip.audio.detector import Tuning
+    from stickslip.audio.sources.files import AudioSourceError
+    from stickslip.kinematics import Pose
+    from stickslip.procedures.session import TraverseRequest, traverse
+    from stickslip.storage import Store
+
+    class Console:  # a real controller: no microphone of its own, so the traverse listens to a sound card
+        def frequency(self, joint):
+            return 1000.0
+
+        def close(self):
+            pass
+
+    class NoCard:
+        def __init__(self, **kw):
+            pass
+
+        def start(self):
+            raise AudioSourceError("PortAudio is not installed; apt-get install libportaudio2")
+
+    monkeypatch.setattr(sources, "Microphone", NoCard)
+    db = tmp_path / "s.db"
+    assert runner.invoke(app, ["where", "-d", "sim://", "--db", str(db), "--set", "3=min"]).exit_code == 0
+    request = TraverseRequest("sim://", 3, "+", Pose(0.0, -1.5707963, 0.0, 0.0, 0.0), "2026-11-22",
+                              Tuning(band_hz=(5600, 7100), threshold_db=-40.0), audio_input=2)
+    with Store.open(db) as store, pytest.raises(AudioSourceError, match="PortAudio"):
+        traverse(store, request, opener=lambda _url: Console())  # type: ignore[arg-type,return-value]
+    assert _kept(db) == ["default", "default", "set"]  # before: joint 3 "uncertain" though nothing moved
+
+
 def test_jog_without_a_terminal_prints_its_one_error_and_no_warning_ahead_of_it(tmp_path):
     meas, cal = tmp_path / "meas.csv", tmp_path / "cal.json"
     meas.write_text(measurements_to_csv(paper_table()))

@@ -80,6 +80,7 @@ def traverse_on_device(
     confirm_s: float = CONFIRM_S,
     serial_port: str | None = None,
     on_warning: Callable[[str], None] = _warn,
+    before_motion: Callable[[], None] | None = None,
 ) -> TraverseResult:
     """Measure one traverse of ``joint`` in ``direction`` on ``ctrl``, timed by the tuned limit switch.
 
@@ -110,6 +111,9 @@ def traverse_on_device(
         ``TuningFileParams.step_rate_tolerance`` away from the rate the
         tuning was made at (:meth:`~stickslip.audio.tuningfile.Tuning.step_rate_problem`).
         Default: a :class:`StepRateWarning` (Python's ``warnings``).
+    before_motion : callable, optional
+        Called once the listening source is open, before the first step (the write-ahead journal:
+        a sound card or sensor that does not open leaves the kept position as it was).
     """
     hears_itself = isinstance(ctrl, HasMicrophone) and isinstance(ctrl, VirtualClock)  # the simulator
     if hears_itself and audio_input is not None:
@@ -139,6 +143,8 @@ def traverse_on_device(
         mic = Microphone(sample_rate=int(tuning.sample_rate), device=audio_input).start()
         blocks, close = mic.blocks(), mic.stop
     try:
+        if before_motion is not None:
+            before_motion()
         result = measure_traverse(
             ctrl, joint, direction, detector=detector_for(tuning, t0), audio_blocks=blocks,
             pose=pose, day=day, burst_steps=burst_steps, progress=progress, confirm_s=confirm_s,
@@ -344,16 +350,15 @@ def _measure(
     opener: Callable[[str], Controller] | None,
     journal: Callable[[], None] | None = None,
 ) -> TraverseResult:
-    """Open the device, ``journal()`` (the joint kept uncertain before it moves), measure the traverse
-    (:func:`traverse_on_device`), close it. A device that does not open leaves the kept position as it was."""
+    """Open the device, measure the traverse (:func:`traverse_on_device`, which calls ``journal()`` once it
+    listens, before the first step: the joint kept uncertain before it moves), close it. A device or a sound card
+    that does not open leaves the kept position as it was."""
     ctrl = (opener or open_device)(request.device)
     try:
-        if journal is not None:
-            journal()
         return traverse_on_device(
             ctrl, request.joint, request.direction, request.pose, request.day, request.tuning,
             audio_input=request.audio_input, serial_port=request.serial_port, burst_steps=request.burst,
-            progress=progress, confirm_s=request.confirm_s, on_warning=on_warning,
+            progress=progress, confirm_s=request.confirm_s, on_warning=on_warning, before_motion=journal,
         )
     finally:
         try:
