@@ -536,7 +536,7 @@ def test_a_traverse_the_database_refuses_keeps_its_row(tmp_path, monkeypatch):
     line = text.split("its row: ")[-1]
     assert text.startswith(f"cannot write to the database {db}: database or disk is full"), text
     assert f"the traverse was measured but not stored, joint {row.joint} is kept uncertain" in text
-    assert f"(reference it: stickslip where -d {request.device} --set {row.joint}=min|max)" in text  # its device
+    assert f"stickslip where -d {request.device} --set {row.joint}=min at the lower, =max at the upper" in text
     assert f"it is appended to {table}; " in text and line.split(",")[:3] == [row.day, str(row.joint), row.direction]
     assert read_measurements(table) == [row]
 

@@ -13,6 +13,7 @@ import json
 import math
 import os
 import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -110,7 +111,7 @@ def test_raw_steps_need_no_calibration_and_leave_the_joint_uncertain_to_its_stop
         assert "its position is uncertain: 0 µm to 12000 µm" in r.stdout  # never referenced: anywhere
         # the reference it prints names this device: without -d it set the default device's (sim://) position
         printed = " ".join(r.stdout.split())  # the console wraps long lines
-        assert printed.endswith(f"at the stop, reference it: stickslip where -d {url} --set 3=max"), printed
+        assert printed.endswith(f'at the stop, reference it: stickslip where -d "{url}" --set 3=max'), printed
         r = run("move", "-d", url, "--db", db, "--joint", 3, "--by", "-100steps", "--json")
         assert r.exit_code == 0, r.output
         assert emu.steps["C"] == 0
@@ -135,7 +136,7 @@ def test_a_joint_never_referenced_is_refused_with_the_commands_that_reference_it
         commands = re.findall(r"`(stickslip [^`]+)`", line)
         assert [c.split()[1] for c in commands] == ["move", "where"]
         for c in commands:  # the user runs exactly what the refusal says
-            r = runner.invoke(app, [*c.split()[1:], "--db", str(db)])
+            r = runner.invoke(app, [*shlex.split(c)[1:], "--db", str(db)])  # as a shell reads the line
             assert r.exit_code == 0, (c, r.output)
         assert emu.sim.position(3) == 0.0  # at the lower stop, where the reference put it
         j3 = where(db, url)["joints"][2]
@@ -258,7 +259,8 @@ def test_ctrl_c_during_a_move_is_one_line_with_where_each_joint_stands_and_exit_
 def test_ctrl_c_during_a_traverse_leaves_no_made_up_position(tmp_path, monkeypatch):
     from stickslip.procedures import session
 
-    def interrupted(*_args: Any, **_kw: Any) -> Any:
+    def interrupted(*_args: Any, before_motion: Any = None, **_kw: Any) -> Any:
+        before_motion()  # listening, the joint journalled: Ctrl-C while it steps
         raise KeyboardInterrupt
 
     monkeypatch.setattr(session, "traverse_on_device", interrupted)
@@ -436,7 +438,24 @@ def test_every_re_reference_advice_names_the_device_it_is_about():
     url = "anc300://lab:7230?password=hunter2"
     state = DeviceState.default(url)
     state.uncertain[3] = (1e-3, 2e-3)
-    line = "stickslip where -d anc300://lab:7230?password=*** --set 3=min"  # the device named, its secret redacted
+    line = 'stickslip where -d "anc300://lab:7230?password=***" --set 3=min'  # named, its secret redacted, quoted
     assert where_set_command(url, 3) == line
     for text in (state.uncertainty_problem(3), failure_text(state, 3, "no answer", 10, 100)):
         assert text is not None and line in text, text
+
+
+def test_a_command_given_to_copy_is_one_word_per_argument_in_a_shell():
+    """A URL with `&` printed bare in advice ran `stickslip where -d sim://?seed=4` in the background in bash (the
+    rest a second command), and `***` globbed: a URL that holds a character a shell reads is printed quoted."""
+    import shlex
+
+    from stickslip.devices.base import command_url, redact_url
+    from stickslip.devices.positions import where_set_command
+
+    for url in ("sim://?seed=4&day=2026-11-22", "anc300://h:7230?password=x;axes=1,2 3", "mm3a:///dev/ttyUSB0",
+                "mm3a://COM3", "smaract+tcp://10.0.0.5:5000?channels=0,1,2"):
+        words = shlex.split(where_set_command(url, 2, "max"))
+        assert words[:3] == ["stickslip", "where", "-d"] and words[4:] == ["--set", "2=max"], words
+        assert words[3] == redact_url(url), words  # the shell gives back the URL whole, its secret redacted
+    assert command_url("mm3a:///dev/ttyUSB0") == "mm3a:///dev/ttyUSB0"  # nothing a shell reads: as typed
+    assert command_url("sim://?seed=4&day=1") == '"sim://?seed=4&day=1"'

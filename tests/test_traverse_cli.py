@@ -125,6 +125,17 @@ def test_a_traverse_keeps_the_pose_it_was_told_and_no_default(tuning3, tmp_path)
     r = runner.invoke(app, ["where", "--db", str(db), "-d", URL, "--offline", "--json"])
     assert r.exit_code == 0, r.output
     assert [j["source"] for j in json.loads(r.stdout)["joints"]][1:] == ["set", "set"]
+    # audit51: an option left out is recorded at its default although the arm is kept elsewhere: said, before it moves
+    again = ["traverse", "--joint", "3", "--direction", "-", "--tuning", str(tuning3), "--device", URL, "--day",
+             "2026-11-20", "--db", str(db), "--json"]  # fmt: skip
+    r2 = runner.invoke(app, again)
+    assert r2.exit_code == 0, r2.output
+    said = " ".join(r2.stderr.split())
+    assert "--q2 not given: the row records q2 = -90 deg (the default), but the arm is kept at 0 deg" in said
+    assert "--theta not given: the row records theta = 0 deg (the default), but the arm is kept at -90 deg" in said
+    assert "--q1 not given" not in said and "--psi" not in said  # q1 uncertain (nothing known), psi 0 as kept
+    assert "not given" not in " ".join(r.stderr.split())  # the first, told every option that differs: nothing said
+    assert json.loads(r2.stdout)["q2"] == pytest.approx(-math.pi / 2)  # the row is as the user asked
 
 
 def test_demo_refuses_a_bad_confirmation_window(tmp_path):

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..devices.base import DeviceError, device_key, redact_url
+from ..devices.base import DeviceError, command_url, device_key
 from ..units import UnitError, bare_number_problem, format_position, parse_length
 from . import app
 from ._common import (
@@ -502,5 +502,5 @@ def jog(
         joints = ", ".join(str(j) for j in sorted(result.state.uncertain))
         warn(
             f"joint(s) {joints} were interrupted mid-burst and are uncertain: re-reference them at the lower stop "
-            f"(stickslip where -d {redact_url(result.device)} --set J=min for each)"
+            f"(stickslip where -d {command_url(result.device)} --set J=min for each)"
         )

@@ -50,6 +50,7 @@ __all__ = [
     "check_steps",
     "url_options",
     "redact_url",
+    "command_url",
     "redact_text",
     "RedactSecrets",
     "RedactText",
@@ -95,6 +96,25 @@ def redact_url(url: str) -> str:
     text = _USERINFO_AFTER_SCHEME.sub(r"\1:***@", str(url))
     text = _USERINFO_NO_SCHEME.sub(r"\1:***@", text)
     return _SECRET_QUERY.sub(lambda m: f"{m.group(1)}{m.group(2)}=***", text)
+
+
+_SHELL_SAFE = re.compile(r"[A-Za-z0-9_@%+=:,./-]+")
+
+
+def command_url(url: str) -> str:
+    """``url``, its secrets redacted, as one word of a command a user copies into a shell.
+
+    As it is when it holds only characters no shell (bash, cmd, PowerShell) treats specially;
+    else in double quotes, which all three read as one word: ``sim://?seed=4&day=1`` unquoted
+    would run ``stickslip ... -d sim://?seed=4`` in the background in bash, and ``***`` would glob.
+
+    >>> command_url("mm3a:///dev/ttyUSB0")
+    'mm3a:///dev/ttyUSB0'
+    >>> command_url("sim://?seed=4&day=2026-11-22")
+    '"sim://?seed=4&day=2026-11-22"'
+    """
+    text = redact_url(url)
+    return text if _SHELL_SAFE.fullmatch(text) else '"' + text.replace('"', "%22") + '"'
 
 
 _USERINFO_AFTER_SCHEME = re.compile(r"(://[^/@?#:\s]*):\S*@")

@@ -48,7 +48,7 @@ from .. import kinematics as kin
 from ..joints import JointSet, JointSpec
 from ..records import atomic_write_text, check_version, dumps_json, json_kind, loads_json, read_json
 from ..units import format_position
-from .base import device_key, redact_url
+from .base import command_url, device_key
 
 __all__ = [
     "where_set_command",
@@ -371,4 +371,4 @@ def where_set_command(device: str, joint: int, value: str = "min") -> str:
     It names the device: without ``-d`` the line would set the default device's joint (the config's,
     else ``sim://``), not the one a message is about.
     """
-    return f"stickslip where -d {redact_url(device)} --set {joint}={value}"
+    return f"stickslip where -d {command_url(device)} --set {joint}={value}"

@@ -43,6 +43,7 @@ from ..devices.base import (
     PoseSettable,
     StepsUncertain,
     check_device_url,
+    command_url,
     device_key,
     open_device,
     redact_url,
@@ -177,7 +178,7 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
         way_out = (  # --unlock refuses a holder known to run here (stickslip.processes): do not advise it
             "it is still running on this computer: wait for it to finish, or end it" if holder_running(holder)
             else f"wait for it to finish, or if that process is gone, release the lock with "
-                 f"`stickslip where -d {device} --unlock`"
+                 f"`stickslip where -d {command_url(device)} --unlock`"
         )
         raise DeviceBusy(
             f"{device} is being driven by another stickslip process (pid {holder.get('pid')} on "
@@ -537,8 +538,8 @@ def reference_commands(
     url = redact_url(device)
     n = steps_to_stop(joint, calibration, spec)
     return (
-        f"`stickslip move -d {url} --joint {joint} --steps -{n}` (into its lower stop: more steps than its range; "
-        f"the slider slips at the stop), then `stickslip where -d {url} --set {joint}=min`"
+        f"`stickslip move -d {command_url(url)} --joint {joint} --steps -{n}` (into its lower stop: more steps than "
+        f"its range; the slider slips at the stop), then `{where_set_command(url, joint)}`"
     )
 
 

@@ -14,6 +14,7 @@ re-references the joint's kept position there (and keeps the pose options the us
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -24,10 +25,11 @@ from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S
 from ..audio.detector import Tuning, detector_for
 from ..devices.base import Controller, DeviceError, HasMicrophone, PoseSettable, VirtualClock, device_key, open_device
-from ..devices.positions import StateStore, load_state, save_state, where_set_command
+from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..measurements import Traverse, measurements_to_csv
 from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
-from .move import Interrupted, LockStore, device_lock, kept_after_interrupt
+from ..units import format_quantity, position_display_unit
+from .move import Interrupted, LockStore, device_lock, kept_after_interrupt, track_fields
 from .traverse import TraverseError, TraverseResult, check_burst_steps, measure_traverse
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "TraverseStore",
     "append_row",
     "check_append_target",
+    "pose_not_given",
     "record_traverse",
     "POSE_NAMES",
     "traverse",
@@ -192,6 +195,37 @@ def record_traverse(
     return tid
 
 
+POSE_TOLERANCE = {"rotary": math.radians(0.5), "prismatic": 10e-6}
+"""How far (rad, m) a pose option left at its default may be from the arm's kept pose before a traverse says so:
+finer than a pose set by hand or by eye, coarser than a kept position's rounding."""
+
+
+def pose_not_given(state: DeviceState, request: TraverseRequest) -> list[str]:
+    """A warning for each pose option the user left at its default (not in ``request.keep_pose``) whose default is
+    further than :data:`POSE_TOLERANCE` (and 3 σ of a tracked position) from where the arm is kept: the row would
+    record a pose the arm is not in. Joints kept ``default`` or uncertain say nothing (nothing is known of them)."""
+    lines = []
+    for name in POSE_NAMES:
+        if name in request.keep_pose or name == f"q{request.joint}":
+            continue
+        told = float(getattr(request.pose, name))
+        if name in ("theta", "psi"):
+            kept, tol, unit = float(getattr(state, name)), POSE_TOLERANCE["rotary"], "deg"
+        else:
+            j = int(name[1])
+            if state.sources.get(j) == "default" or j in state.uncertain:
+                continue
+            joint_spec = state.spec(j)
+            sd = track_fields(state, j)["sd"] or 0.0
+            kept, tol = state.positions[j], max(POSE_TOLERANCE[joint_spec.kind], 3.0 * sd)
+            unit = position_display_unit(joint_spec)
+        if abs(told - kept) > tol:
+            lines.append(f"--{name} not given: the row records {name} = {format_quantity(told, unit, 6)} (the "
+                         f"default), but the arm is kept at {format_quantity(kept, unit, 6)}: give --{name} with the "
+                         "pose the arm is in")
+    return lines
+
+
 def check_append_target(path: Path) -> str:
     """What is in the table ``row`` s will be appended to ("" if new or empty); ``ValueError`` if it is not one.
 
@@ -297,6 +331,8 @@ def traverse(
         with device_lock(store, key):
             state = load_state(store, key)
             spec = kin.joint_spec(request.joint)
+            for line in pose_not_given(state, request):
+                on_warning(line)
 
             def journal() -> None:  # write-ahead, once the device is open: the joint may be anywhere until the stop
                 state.mark_uncertain(request.joint, spec.lower, spec.upper, "a traverse did not finish")
@@ -338,8 +374,8 @@ def _measured_not_stored(e: OSError, request: TraverseRequest, row: Traverse) ->
         except (OSError, ValueError) as a:
             table = f"nor appended to {request.append} ({a}); "
     text = (f"{e}; the traverse was measured but not stored, joint {request.joint} is kept uncertain between its "
-            f"stops (reference it: {where_set_command(request.device, request.joint, 'min|max')}); {table}its row: "
-            f"{line}")
+            f"stops (reference it at the stop it rests on: {where_set_command(request.device, request.joint)} at the "
+            f"lower, =max at the upper); {table}its row: {line}")
     return type(e)(text) if type(e).__init__ is OSError.__init__ and len(e.args) == 1 else OSError(text)
 
 
