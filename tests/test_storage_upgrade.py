@@ -195,3 +195,28 @@ def test_an_upgrade_whose_copy_cannot_be_written_is_not_made(tmp_path, monkeypat
     with Store.open(other) as st:
         assert st.upgrade_copy == tmp_path / "again.v3-2.db"
     assert (tmp_path / "again.v3.db").read_bytes() == b"an earlier copy"
+
+
+def test_both_backends_merge_two_spellings_on_the_upgrade_to_4(db):
+    """The schema-3 store is made from SQL through the store's own connection (on PostgreSQL too)."""
+    with Store.open(db) as st, st._write() as con:
+        con.execute(con.ddl("DROP INDEX calibration_traverses_traverse"))  # what the upgrade to 4 adds
+        for url, rows in (("mm3a://com3", ROWS[:4]), ("mm3a:///COM3", ROWS[2:6]), ("sim://?seed=3&day=d", ROWS[:1])):
+            did = con.insert("INSERT INTO devices (url, created_at) VALUES (?, 'x')", (url,))
+            for t in rows:
+                sid = st._session_id(con, did, t.day)
+                st._insert_row(con, t, sid, "old", "x", None, _old_key(t, url))
+        con.set_schema_version(3)
+    with Store.open(db) as st:
+        assert st.upgraded_from == 3 and st.schema_version == SCHEMA_VERSION
+        assert (st.upgrade_copy is None) == isinstance(db, str)  # a server's database is not copied
+        assert st.upgrade_notes == [
+            "the devices mm3a:///COM3 and mm3a://com3 are one device now, mm3a://com3 (docs/storage.md): the 4 "
+            "traverse(s) and 0 calibration(s) of mm3a:///COM3 moved to it, none deleted",
+            "2 traverse(s) of mm3a://com3 were stored under both spellings (the same device, day, pose and steps): "
+            "kept; stickslip history --json lists their ids",
+        ]
+        assert [d["url"] for d in st.devices()] == ["mm3a://com3", "sim://?seed=3"]
+        assert st.count_traverses("mm3a:///COM3") == 8 and st.count_traverses("sim://?seed=3") == 1
+        assert st.duplicates(ROWS[:7], "mm3a://COM3") == list(range(6))
+        assert st.integrity_check() == "ok"
