@@ -149,7 +149,8 @@ def test_a_schema_3_store_is_copied_then_its_devices_get_their_names(tmp_path):
             f"the file as it was is kept as {copy}") in said, said
     assert ("note: the devices mm3a:///COM3 and mm3a://com3 are one device now, mm3a://com3 (docs/storage.md): "
             "the 5 traverse(s) and 0 calibration(s) of mm3a:///COM3 moved to it, none deleted") in said, said
-    assert "note: 2 traverse(s) of mm3a://com3 were stored under both spellings" in said, said
+    assert ("note: 2 traverse(s) of mm3a://com3 were stored under two spellings as well (the same day, pose and "
+            "steps), kept: ids 6, 7 (stickslip delete -t ID removes one)") in said, said  # ROWS[3:5], the later copies
     assert said.count("note:") == 3 and "hunter2" not in r.output
     history = json.loads(r.stdout)
     assert sorted({e["device"] for e in history}) == ["anc300://h:7230", "mm3a://com3", "sim://?seed=3",
@@ -201,11 +202,12 @@ def test_both_backends_merge_two_spellings_on_the_upgrade_to_4(db):
     """The schema-3 store is made from SQL through the store's own connection (on PostgreSQL too)."""
     with Store.open(db) as st, st._write() as con:
         con.execute(con.ddl("DROP INDEX calibration_traverses_traverse"))  # what the upgrade to 4 adds
+        ids = []
         for url, rows in (("mm3a://com3", ROWS[:4]), ("mm3a:///COM3", ROWS[2:6]), ("sim://?seed=3&day=d", ROWS[:1])):
             did = con.insert("INSERT INTO devices (url, created_at) VALUES (?, 'x')", (url,))
             for t in rows:
                 sid = st._session_id(con, did, t.day)
-                st._insert_row(con, t, sid, "old", "x", None, _old_key(t, url))
+                ids.append(st._insert_row(con, t, sid, "old", "x", None, _old_key(t, url)))
         con.set_schema_version(3)
     with Store.open(db) as st:
         assert st.upgraded_from == 3 and st.schema_version == SCHEMA_VERSION
@@ -213,8 +215,8 @@ def test_both_backends_merge_two_spellings_on_the_upgrade_to_4(db):
         assert st.upgrade_notes == [
             "the devices mm3a:///COM3 and mm3a://com3 are one device now, mm3a://com3 (docs/storage.md): the 4 "
             "traverse(s) and 0 calibration(s) of mm3a:///COM3 moved to it, none deleted",
-            "2 traverse(s) of mm3a://com3 were stored under both spellings (the same device, day, pose and steps): "
-            "kept; stickslip history --json lists their ids",
+            f"2 traverse(s) of mm3a://com3 were stored under two spellings as well (the same day, pose and steps), "
+            f"kept: ids {ids[4]}, {ids[5]} (stickslip delete -t ID removes one)",  # ROWS[2:4], their second copies
         ]
         assert [d["url"] for d in st.devices()] == ["mm3a://com3", "sim://?seed=3"]
         assert st.count_traverses("mm3a:///COM3") == 8 and st.count_traverses("sim://?seed=3") == 1

@@ -97,7 +97,7 @@ def key_devices(con: Backend) -> list[str]:
     owner = {url: did for did, url in rows if keys[did] == url}
     said: list[str] = []
     renamed: set[int] = set()
-    twice_before: dict[int, int] = {}  # of a device merged into: its rows stored twice before the merge
+    origin: dict[int, dict[int, int]] = {}  # of a device merged into: each of its traverses' device before
     for did, url in rows:
         key = keys[did]
         if key == url:
@@ -107,18 +107,19 @@ def key_devices(con: Backend) -> list[str]:
             owner[key] = did
         else:
             dst = owner[key]
-            if dst not in twice_before:
-                twice_before[dst] = _stored_twice(con, dst)
-            twice_before[dst] += _stored_twice(con, did)
+            if dst not in origin:
+                origin[dst] = dict.fromkeys(_traverse_ids(con, dst), dst)
+            origin[dst].update(dict.fromkeys(_traverse_ids(con, did), did))
             said.append(_merge(con, did, dst, url, key))
         renamed.add(owner[key])
     for did in sorted(renamed):
         _rekey_content(con, did)
-    for did, before in twice_before.items():
-        twice = _stored_twice(con, did) - before
-        if twice > 0:
-            said.append(f"{twice} traverse(s) of {_url(con, did)} were stored under both spellings (the same "
-                        "device, day, pose and steps): kept; stickslip history --json lists their ids")
+    for did, was in origin.items():
+        twice = _stored_under_both(con, did, was)
+        if twice:
+            shown = ", ".join(map(str, twice[:20])) + (f" and {len(twice) - 20} more" if len(twice) > 20 else "")
+            said.append(f"{len(twice)} traverse(s) of {_url(con, did)} were stored under two spellings as well (the "
+                        f"same day, pose and steps), kept: ids {shown} (stickslip delete -t ID removes one)")
     return said
 
 
@@ -173,10 +174,20 @@ def _rekey_content(con: Backend, did: int) -> None:
                     [(k, int(r["id"])) for k, r in zip(keys, rows, strict=True)])
 
 
-def _stored_twice(con: Backend, did: int) -> int:
-    """How many of device ``did``'s traverses repeat another's content key (0: none)."""
-    row = con.execute(
-        "SELECT COUNT(t.id) - COUNT(DISTINCT t.content) FROM traverses t JOIN sessions s ON s.id = t.session_id "
-        "WHERE s.device_id = ?", (did,),
-    ).fetchone()
-    return int(row[0] or 0)
+def _traverse_ids(con: Backend, did: int) -> list[int]:
+    sql = "SELECT t.id FROM traverses t JOIN sessions s ON s.id = t.session_id WHERE s.device_id = ?"
+    return [int(r[0]) for r in con.execute(sql, (did,))]
+
+
+def _stored_under_both(con: Backend, did: int, origin: dict[int, int]) -> list[int]:
+    """The ids of device ``did``'s traverses whose content an earlier one of another former spelling has."""
+    first: dict[str, tuple[int, int]] = {}  # content -> (the first id, its former device)
+    twice: list[int] = []
+    for tid, content in con.execute(
+        "SELECT t.id, t.content FROM traverses t JOIN sessions s ON s.id = t.session_id WHERE s.device_id = ? "
+        "ORDER BY t.id", (did,),
+    ):
+        seen = first.setdefault(str(content), (int(tid), origin.get(int(tid), did)))
+        if seen[0] != int(tid) and seen[1] != origin.get(int(tid), did):
+            twice.append(int(tid))
+    return twice
