@@ -22,8 +22,7 @@ from stickslip.cli import app
 from stickslip.devices.base import redact_url
 from stickslip.measurements import Traverse, read_measurements, write_measurements
 from stickslip.storage import APPLICATION_ID, MIGRATIONS, SCHEMA_VERSION, Store, StoreError
-from stickslip.storage import upgrade as upgrade_module
-from stickslip.storage.schema import _split_sql, device_filter, stored_device
+from stickslip.storage.schema import _split_sql
 
 ROWS = paper_table()
 
@@ -74,6 +73,8 @@ def _dump(path):
 
 
 def test_the_stored_name_of_a_device():
+    from stickslip.storage.schema import device_filter, stored_device
+
     assert stored_device("mm3a:///COM3") == stored_device("mm3a://COM3?timeout=5") == "mm3a://com3"
     assert stored_device("anc300://admin:hunter2@h:7230?password=hunter2") == "anc300://h:7230"
     assert stored_device("sim://?seed=3&realtime=1") == "sim://?seed=3" != stored_device("sim://?seed=4")
@@ -170,6 +171,8 @@ def test_a_schema_3_store_is_copied_then_its_devices_get_their_names(tmp_path):
 
 
 def test_an_upgrade_whose_copy_cannot_be_written_is_not_made(tmp_path, monkeypatch):
+    from stickslip.storage import upgrade as upgrade_module
+
     db = tmp_path / "lab.db"
     _schema_3_store(db, {"mm3a:///COM3": ROWS[:2]})
     before = db.read_bytes()
