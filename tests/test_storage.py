@@ -168,7 +168,7 @@ def test_stale_warning():
 def _writer(path: str, who: int, n: int) -> None:  # path: a file or a URL (its password in $PGPASSWORD)
     with Store.open(path) as st:
         for k in range(n):
-            st.add_traverse(_t(day=f"w{who}", steps=1000 * (who + 1) + k), device=f"sim://{who}")
+            st.add_traverse(_t(day=f"w{who}", steps=1000 * (who + 1) + k), device=f"sim://?seed={who + 1}")
 
 
 @pytest.mark.slow
@@ -186,7 +186,7 @@ def test_concurrent_writers_lose_no_rows(db):
     with Store.open(path) as st:
         assert st.count_traverses() == n_proc * n_rows
         for w in range(n_proc):
-            got = sorted(t.steps for t in st.traverses(device=f"sim://{w}"))
+            got = sorted(t.steps for t in st.traverses(device=f"sim://?seed={w + 1}"))
             assert got == [1000 * (w + 1) + k for k in range(n_rows)]
         assert st.integrity_check() == "ok"
         assert len(st.devices()) == n_proc and len(st.days()) == n_proc  # each made once, though all raced to

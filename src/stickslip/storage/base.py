@@ -136,10 +136,10 @@ class _Base:
 
     def _upgrade(self, version: int) -> None:
         with self._write() as con:
+            con.claim_ownership()  # first: on a server it is what makes two processes opening a new database wait
             version = con.schema_version()  # another process may have won
-            if 1 <= version < SCHEMA_VERSION and isinstance(self.path, Path):  # nothing written yet: the file as it was
+            if 1 <= version < SCHEMA_VERSION and isinstance(self.path, Path):  # the copy reads only what is committed
                 self.upgrade_copy = copy_before_upgrade(con, self.path, version, SCHEMA_VERSION)
-            con.claim_ownership()
             if version > SCHEMA_VERSION:
                 raise StoreError(
                     f"{self.path} has schema version {version}, newer than this stickslip understands "
