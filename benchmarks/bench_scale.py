@@ -362,7 +362,7 @@ def main(argv: Sequence[str] | None = None) -> list[dict[str, object]]:
                         "calibrate": ["calibrate", str(meas), "-o", str(d / f"cal{n}.json")],
                         "fit": ["fit", str(meas), "--json"],
                         "anova": ["anova", str(meas), "--json"],
-                        "import": ["import", str(meas), "--db", str(d / f"db{n}.sqlite"), "--json"],
+                        "import": ["import", str(meas), "-d", "sim://", "--db", str(d / f"db{n}.sqlite"), "--json"],
                     }[cmd]
                 r = run_child(argv_, env)
                 if cmd == "calibrate" and n == ns[-1] and not quick:  # the refit to convergence, side by side

@@ -55,7 +55,7 @@ def test_delete_without_yes_at_the_end_of_the_input_is_declined_exit_1_not_inter
     meas = tmp_path / "meas.csv"
     meas.write_text(measurements_to_csv(paper_table()))
     db = str(tmp_path / "s.db")
-    assert runner.invoke(app, ["import", str(meas), "--db", db]).exit_code == 0
+    assert runner.invoke(app, ["import", str(meas), "-d", "sim://", "--db", db]).exit_code == 0
     r = runner.invoke(app, ["delete", "--day", "2026-11-22", "--db", db, "--json"], input="")
     assert r.exit_code == 1, r.output  # docs/cli.md: 1 = declined at a confirmation; 130 is Ctrl-C
     assert r.stdout == "" and "interrupted" not in r.stderr

@@ -219,7 +219,7 @@ def test_tables(tmp_path, header, rows):
     p = tmp_path / "t.csv"
     p.write_text("\n".join(",".join(r) for r in [header, *rows]) + "\n")
     check(["calibrate", p, "-o", tmp_path / "c.json"])
-    check(["import", p, "--db", tmp_path / "s.db"])
+    check(["import", p, "-d", "sim://", "--db", tmp_path / "s.db"])
     check(["anova", p])
 
 

@@ -363,4 +363,4 @@ def test_import_encodings(tmp_path, bom, eol, encoding, huge, where):
         p.write_bytes(bom + text.replace("\n", eol).encode(encoding))
     except UnicodeEncodeError:
         p.write_bytes(bom + text.replace("\n", eol).encode("utf-8"))
-    check(["import", p, "--db", tmp_path / "s.db"])
+    check(["import", p, "-d", "sim://", "--db", tmp_path / "s.db"])

@@ -150,7 +150,7 @@ def kit(tmp_path_factory):
     poses = d / "poses.csv"
     poses.write_text("joint,direction,q1,q2,q3,theta,psi,note\n3,+,0,-1.5707963,0,0,0,a\n2,-,0,0,0.006,0,0,b\n")
     db = d / "s.db"
-    assert invoke(["import", table, "--db", db]).exit_code == 0
+    assert invoke(["import", table, "-d", "sim://", "--db", db]).exit_code == 0
     assert invoke(["where", "--offline", "--db", db, "--set", "3=min"]).exit_code == 0
     from stickslip.audio.detector import Tuning
 
@@ -260,7 +260,8 @@ def test_user_text_is_shown_not_interpreted(tmp_path, kit, text, role):
     shown: list[str] = []  # texts that must appear, as the output rules show them, when the command succeeds
     if role == "table-day":
         table = write_table(d / "t.csv", day=text)
-        runs = [["import", table, "--db", db], ["history", "--db", db], ["anova", table], ["calibrate", table]]
+        runs = [["import", table, "-d", "sim://", "--db", db], ["history", "--db", db], ["anova", table],
+                ["calibrate", table]]
         shown = [text.strip()]
     elif role == "option-day":
         runs = [["calibrate", kit["table"], "--day", text]]
@@ -293,7 +294,7 @@ blank = st.text(alphabet=" \t\u00a0\u2003\u3000", max_size=4)
 def test_a_blank_session_label_is_refused(tmp_path, kit, label, where):
     d = fresh(tmp_path)
     if where == "table":
-        r = invoke(["import", write_table(d / "t.csv", day=label), "--db", d / "s.db"])
+        r = invoke(["import", write_table(d / "t.csv", day=label), "-d", "sim://", "--db", d / "s.db"])
         error_line(r, "session label")
         assert not (d / "s.db").exists() or "traverses" not in invoke(["history", "--db", d / "s.db", "--json"]).stdout
         return
@@ -562,7 +563,7 @@ COMMANDS_ON_DB = [
     ["history", "--db", "{db}"],
     ["where", "--offline", "--db", "{db}"],
     ["where", "--offline", "--db", "{db}", "--set", "3=min"],
-    ["import", "{table}", "--db", "{db}"],
+    ["import", "{table}", "-d", "sim://", "--db", "{db}"],
     ["export", "--db", "{db}", "-o", "{out}"],
     ["anova", "--db", "{db}"],
     ["fit", "--db", "{db}"],
@@ -735,7 +736,7 @@ def test_exported_cells_never_start_a_formula_and_numbers_stay_numbers(tmp_path,
     rows = [dataclasses.replace(t, day=label, q1=q1 if t.joint != 1 else t.q1) for t in paper_table()]
     table = write_table(d / "t.csv", rows)
     db, out, again = d / "s.db", d / "out.csv", d / "again.csv"
-    r = invoke(["import", table, "--db", db])
+    r = invoke(["import", table, "-d", "sim://", "--db", db])
     if r.exit_code != 0:  # a label the session rules refuse (a date-shaped one): one line, and nothing to export
         error_line(r)
         return
@@ -744,7 +745,7 @@ def test_exported_cells_never_start_a_formula_and_numbers_stay_numbers(tmp_path,
     for c in cells:  # the rule (docs/cli.md): a plain number, or a lone direction sign, is left as it is
         assert not c.startswith(TRIGGERS) or is_number(c) or c in ("+", "-"), c
     # our own reader takes the guard off: the same labels and numbers come back, the export is a fixed point
-    assert invoke(["import", out, "--db", d / "s2.db"]).exit_code == 0
+    assert invoke(["import", out, "-d", "sim://", "--db", d / "s2.db"]).exit_code == 0
     assert invoke(["export", "--db", d / "s2.db", "-o", again]).exit_code == 0
     assert again.read_text() == out.read_text()
     from stickslip.measurements import read_measurements
@@ -812,7 +813,7 @@ ROLES = {
     "listen": (["listen", "{x}", "--tuning", "{tuning}"], "r"),
     "tune": (["tune", "{x}", "--stop-at", "0.5", "-o", "{out}"], "r"),
     "calibrate": (["calibrate", "{x}"], "r"),
-    "import": (["import", "{x}", "--db", "{db}"], "r"),
+    "import": (["import", "{x}", "-d", "sim://", "--db", "{db}"], "r"),
     "predict": (["predict", "-c", "{cal}", "{x}"], "r"),
     "show": (["show", "{x}"], "r"),
     "tuning": (["listen", "{wav}", "--tuning", "{x}"], "r"),
@@ -1185,7 +1186,7 @@ def test_a_table_with_bare_carriage_returns_is_refused_in_the_users_words(tmp_pa
     """Found by tests/test_fuzz_files.py: Python's "open the file in universal-newline mode" reached the user."""
     p = tmp_path / "mac.csv"
     p.write_bytes(b"day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\r2026-11-20,3,+,0,-1.5,0,0,0,0,0.004,4000\r")
-    for args in (["import", str(p), "--db", str(tmp_path / "s.db")],
+    for args in (["import", str(p), "-d", "sim://", "--db", str(tmp_path / "s.db")],
                  ["calibrate", str(p), "-o", str(tmp_path / "c.json")]):
         r = CliRunner().invoke(app, args)
         assert r.exit_code == 2 and r.stderr.strip() == (

@@ -374,7 +374,7 @@ def test_every_documented_exit_code_is_what_a_command_returns(tmp_path, cal_path
     assert run("where", "--db", db, "--offline").exit_code == 0
     meas = tmp_path / "m.csv"
     meas.write_text(measurements_to_csv(paper_table()))
-    assert run("import", meas, "--db", db).exit_code == 0
+    assert run("import", meas, "-d", "sim://", "--db", db).exit_code == 0
     r = runner.invoke(app, ["delete", "--day", DAY, "--db", str(db)], input="n\n")  # declined at the question
     assert r.exit_code == 1 and "nothing deleted" in r.stderr
     one_error(run("move", "-c", cal_path, "--db", db, "-j", 2, "--by", "1"), "did you mean 1deg?")

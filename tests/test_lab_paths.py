@@ -112,7 +112,7 @@ def test_a_file_url_as_the_database_is_refused_not_made_a_file(
 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "meas.csv").write_text(measurements_to_csv(paper_table()))
-    r = invoke(["import", "meas.csv", "--db", url.format(tmp=tmp_path)])
+    r = invoke(["import", "meas.csv", "-d", "sim://", "--db", url.format(tmp=tmp_path)])
     assert r.exit_code == 2 and "a file: URL is not read" in r.stderr, r.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["meas.csv"]
 
@@ -127,7 +127,7 @@ def test_written_files_are_named_whole_too(tmp_path: Path, monkeypatch: pytest.M
     folder.mkdir(parents=True)
     meas, out = folder / "meas ä.csv", folder / "export é [1].csv"
     meas.write_text(measurements_to_csv(paper_table()))
-    assert invoke(["import", str(meas)]).exit_code == 0
+    assert invoke(["import", str(meas), "-d", "sim://"]).exit_code == 0
     r = CliRunner().invoke(app, ["export", "-o", str(out)], env={"COLUMNS": "60"})
     assert r.exit_code == 0, r.output
     assert str(out) in [ln.strip() for ln in r.stdout.splitlines()], r.stdout

@@ -504,7 +504,7 @@ def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
     script = tmp_path / "fsize.py"
     script.write_text(_FSIZE)
     ok = subprocess.run(
-        [sys.executable, str(script), str(10**9), "import", str(small)],
+        [sys.executable, str(script), str(10**9), "import", str(small), "-d", "sim://"],
         env=env,
         capture_output=True,
         text=True,
@@ -515,7 +515,7 @@ def test_full_disk_fails_cleanly_and_the_database_keeps_its_rows(tmp_path):
         before = st.count_traverses()
     size = sum(f.stat().st_size for f in tmp_path.glob("s.db*"))
     r = subprocess.run(
-        [sys.executable, str(script), str(size + 8192), "import", str(big)],
+        [sys.executable, str(script), str(size + 8192), "import", str(big), "-d", "sim://"],
         env=env,
         capture_output=True,
         text=True,
@@ -580,10 +580,10 @@ def test_importing_twice_is_refused_and_anova_never_reports_infinite_f(tmp_path)
     a, b = tmp_path / "a.csv", tmp_path / "b.csv"
     a.write_text(measurements_to_csv(rows))
     b.write_text(measurements_to_csv(rows) + "\n")  # the same rows again, another file
-    assert run("import", a, "--db", db).exit_code == 0
-    one_error(run("import", a, "--db", db), "imported before")
-    one_error(run("import", b, "--db", db), "4 of 4 rows are already stored")  # same rows, another file
-    assert run("import", b, "--db", db, "--allow-duplicates").exit_code == 0  # genuine repeats, the user says
+    assert run("import", a, "-d", "sim://", "--db", db).exit_code == 0
+    one_error(run("import", a, "-d", "sim://", "--db", db), "imported before")
+    one_error(run("import", b, "-d", "sim://", "--db", db), "4 of 4 rows are already stored")  # same rows, another file
+    assert run("import", b, "-d", "sim://", "--db", db, "--allow-duplicates").exit_code == 0  # genuine repeats, said
     r = run("anova", "--db", db, "--json")
     assert r.exit_code == 0, r.output
     assert "exact copies" not in r.stderr and "no spread" in r.stderr  # every stored traverse counts
@@ -608,7 +608,7 @@ def test_one_hostile_cell_in_a_good_table(tmp_path, column, value):
     row = {**GOOD_ROW, column: value}
     p = tmp_path / "t.csv"
     p.write_text(",".join(GOOD_ROW) + "\n" + ",".join(row.values()) + "\n")
-    for cmd in (["import", p, "--db", tmp_path / "s.db"], ["calibrate", p], ["anova", p], ["fit", p]):
+    for cmd in (["import", p, "-d", "sim://", "--db", tmp_path / "s.db"], ["calibrate", p], ["anova", p], ["fit", p]):
         r = run(*cmd)
         assert r.exception is None or isinstance(r.exception, SystemExit), (cmd, column, repr(r.exception))
         if r.exit_code != 0:
@@ -618,7 +618,7 @@ def test_one_hostile_cell_in_a_good_table(tmp_path, column, value):
 def test_duplicated_column_is_refused(tmp_path):
     p = tmp_path / "t.csv"
     p.write_text(",".join([*GOOD_ROW, "steps"]) + "\n" + ",".join([*GOOD_ROW.values(), "5"]) + "\n")
-    one_error(run("import", p, "--db", tmp_path / "s.db"), "steps")
+    one_error(run("import", p, "-d", "sim://", "--db", tmp_path / "s.db"), "steps")
 
 
 def test_duplicated_column_in_a_pose_table_is_refused(tmp_path, cal_path):
@@ -639,7 +639,7 @@ def test_delete_traverses_and_sessions_with_confirmation(tmp_path):
     ts = paper_table()
     p = tmp_path / "a.csv"
     p.write_text(measurements_to_csv([*ts, *(dataclasses_replace(t, day="2026-11-21") for t in ts)]))
-    assert run("import", p, "--db", db).exit_code == 0
+    assert run("import", p, "-d", "sim://", "--db", db).exit_code == 0
     r = runner.invoke(app, ["delete", "--day", "2026-11-21", "--db", str(db)], input="n\n")
     assert r.exit_code == 1 and "nothing deleted" in r.stderr
     with Store.open(db) as st:
@@ -672,7 +672,7 @@ def test_exclude_keeps_rows_out_of_analyses_and_undo_brings_them_back(tmp_path):
     ts = paper_table()
     p = tmp_path / "a.csv"
     p.write_text(measurements_to_csv(ts))
-    assert run("import", p, "--db", db).exit_code == 0
+    assert run("import", p, "-d", "sim://", "--db", db).exit_code == 0
     with Store.open(db) as st:
         ids = st.traverse_ids()
     one_error(run("exclude", "-t", ids[0], "--db", db), "--reason")

@@ -148,7 +148,7 @@ def test_a_server_that_goes_away_mid_command_is_one_line_exit_2(
     args = {
         "history": ["history"],
         "export": ["export", "-o", str(tmp_path / "out.csv")],
-        "import": ["import", str(_table(tmp_path)), "--allow-duplicates"],
+        "import": ["import", str(_table(tmp_path)), "-d", "sim://", "--allow-duplicates"],
     }[command]
     with monkeypatch.context() as m:
         m.setattr(Store, "open", classmethod(open_then_lose_the_server))
@@ -247,7 +247,7 @@ def test_a_postgresql_schema_of_another_application_is_refused_untouched(postgre
     before = _admin(postgres_server, schema, snapshot)
     with pytest.raises(StoreError, match=r"another application's tables \(schema t\S+: photos\).*untouched"):
         Store.open(postgres_url)
-    for cmd in (["history"], ["import", "x.csv"], ["where", "--offline", "-d", "sim://"]):
+    for cmd in (["history"], ["import", "x.csv", "-d", "sim://"], ["where", "--offline", "-d", "sim://"]):
         r = CliRunner().invoke(app, [*cmd, "--db", postgres_url])
         assert r.exit_code == 2, (cmd, r.output)
     assert _admin(postgres_server, schema, snapshot) == before  # not a table, index or sequence more
@@ -313,7 +313,8 @@ def test_a_password_in_the_url_is_never_shown_logged_or_stored(
         "FROM stickslip_marker m",
     )
     seen += [str(dump)]
-    assert "sim://?password=***" in str(dump) and "by postgresql://rig:***@127.0.0.1" in str(dump)
+    # the device is stored under its key: no option, so not even the password's place (it was sim://?password=***)
+    assert "sim://" in str(dump) and "?password" not in str(dump) and "by postgresql://rig:***@127.0.0.1" in str(dump)
     for text in seen:
         for form in forms:
             assert form not in text
@@ -406,11 +407,12 @@ def test_a_lock_held_on_another_host_is_refused_and_on_postgresql_freed_when_its
 def test_one_store_cannot_hold_a_device_twice(db):
     me = {"pid": os.getpid(), "host": "h", "since": "s"}
     with Store.open(db) as st:
-        assert st.acquire_lock("sim://a", me) is None
-        assert st.acquire_lock("sim://a", {**me, "pid": 7}) == me
-        assert st.acquire_lock("sim://b", {**me, "pid": 7}) is None  # another device: its own lock
-        st.release_lock("sim://a", me["pid"])
-        assert st.acquire_lock("sim://a", {**me, "pid": 7}) is None
+        assert st.acquire_lock("sim://?seed=1", me) is None
+        assert st.acquire_lock("sim://?seed=1", {**me, "pid": 7}) == me
+        assert st.acquire_lock("sim://?realtime=1&seed=1", {**me, "pid": 7}) == me  # the same arm written otherwise
+        assert st.acquire_lock("sim://?seed=2", {**me, "pid": 7}) is None  # another device: its own lock
+        st.release_lock("sim://?seed=1", me["pid"])
+        assert st.acquire_lock("sim://?seed=1", {**me, "pid": 7}) is None
 
 
 # ---------------------------------------------------------------- the command line and the config file
@@ -427,7 +429,7 @@ def test_the_config_files_database_may_be_a_url_but_never_with_a_password(tmp_pa
     monkeypatch.delenv("STICKSLIP_DB")
     cfg.write_text(f"database = {json.dumps(postgres_url)}\n")
     runner = CliRunner()
-    r = runner.invoke(app, ["import", str(_table(tmp_path)), "--json"])
+    r = runner.invoke(app, ["import", str(_table(tmp_path)), "-d", "sim://", "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["db"] == describe_database(postgres_url)
     r = runner.invoke(app, ["config", "show", "--json"])

@@ -75,7 +75,7 @@ def test_import_streams_and_stores_all_or_nothing(tmp_path, monkeypatch):
     good = tmp_path / "h.csv"
     good.write_text(history_csv(120))
     db = tmp_path / "db.sqlite"
-    r = runner.invoke(app, ["import", str(good), "--db", str(db), "--json"])
+    r = runner.invoke(app, ["import", str(good), "-d", "sim://", "--db", str(db), "--json"])
     assert r.exit_code == 0, r.output
     assert json.loads(r.stdout)["imported"] == 120
     with Store.open(db) as st:
@@ -85,11 +85,11 @@ def test_import_streams_and_stores_all_or_nothing(tmp_path, monkeypatch):
     lines[55] = lines[55].replace(",3,", ",7,", 1) if ",3," in lines[55] else lines[55].replace(",2,", ",7,", 1)
     bad = tmp_path / "bad.csv"
     bad.write_text("\n".join(lines) + "\n")
-    r = runner.invoke(app, ["import", str(bad), "--db", str(db)])
+    r = runner.invoke(app, ["import", str(bad), "-d", "sim://", "--db", str(db)])
     assert r.exit_code == 2 and f"{bad}:56:" in r.stderr
     with Store.open(db) as st:
         assert st.count_traverses() == 120  # nothing of the bad table
-    r = runner.invoke(app, ["import", str(good), "--db", str(db)])
+    r = runner.invoke(app, ["import", str(good), "-d", "sim://", "--db", str(db)])
     assert r.exit_code == 2 and "imported before" in r.stderr
 
 

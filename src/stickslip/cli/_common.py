@@ -220,6 +220,11 @@ def say(text: str, indent: str = "  ", keep: tuple[object, ...] = ()) -> None:
         console.print(line.replace(_KEPT_SPACE, " "), soft_wrap=True)
 
 
+def note(message: str) -> None:
+    """Print ``note: message`` to stderr: something done that the user should know of, not a problem."""
+    _print_labelled("note:", "bold cyan", one_line(message))
+
+
 def warn(message: str) -> None:
     """Print ``warning: message`` to stderr (wrapped at spaces on a terminal: :func:`_print_labelled`)."""
     _print_labelled("warning:", "bold yellow", one_line(message))
@@ -715,11 +720,15 @@ def open_store(db: str | os.PathLike[str] | None, must_exist: bool = False) -> I
         except NoDatabase:
             fail(
                 f"no database at {describe_database(target)} (nothing recorded yet: run stickslip demo, "
-                "or stickslip import MEAS.csv)"
+                "or stickslip import MEAS.csv -d URL)"
             )
     if store.upgraded_from is not None:
-        warn(f"upgraded the database {describe_database(target)} from schema version {store.upgraded_from} to "
-             f"{store.schema_version} (docs/storage.md): an older stickslip now refuses it as newer")
+        kept = (f"the file as it was is kept as {store.upgrade_copy}, which an older stickslip still reads"
+                if store.upgrade_copy is not None else "a server's database is not copied (pg_dump keeps one)")
+        note(f"upgraded the database {describe_database(target)} from schema version {store.upgraded_from} to "
+             f"{store.schema_version} (docs/storage.md); {kept}; an older stickslip refuses the upgraded one as newer")
+        for line in store.upgrade_notes:  # two spellings of one device merged: said, never silently
+            note(line)
     try:
         with store:
             yield store

@@ -156,13 +156,17 @@ def _no_match(st: Any, device: str | None, day: str | None, joint: int | None) -
     stored = list(dict.fromkeys(e["device"] for e in st.history() if e["traverses"]))
     if device is None or not stored:
         return f"{what} (the database holds no traverses)"
-    return f"{what} (the devices with traverses: {', '.join(stored)}; a URL's options make another device)"
+    return (f"{what} (the devices with traverses: {', '.join(stored)}; a device is its URL without options, "
+            "but a simulator's seed picks another arm)")
 
 
 @app.command("import")
 def import_(
     meas: Path = typer.Argument(..., help="Measurement table (CSV) to store.", show_default=False),
-    device: str = typer.Option("sim://", "--device", "-d", help="Device URL the table was measured on."),
+    device: str = typer.Option(
+        ..., "--device", "-d", help="Device URL the table was measured on (required: a table's device is a fact "
+        "about it, no default guesses it), e.g. mm3a:///dev/ttyUSB0 or sim://.", show_default=False,
+    ),
     how: str = typer.Option("imported", "--how", help="How it was measured: imported, audio, simulated ..."),
     force: bool = typer.Option(False, "--force", help="Import even if this exact file was imported before."),
     allow_duplicates: bool = typer.Option(
@@ -177,19 +181,25 @@ def import_(
     steps) is taken for the same measurement stored twice, and the import is refused
     unless --allow-duplicates (a genuine repeat can take exactly as many steps).
 
+    The rows are stored under the device's name: its URL without options or secrets (a
+    simulator's seed kept), the name measuring uses, so mm3a:///COM3 and mm3a://com3 are
+    one device (docs/storage.md).
+
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
     from ..procedures.table_import import import_table
+    from ..storage.schema import stored_device
 
+    name = stored_device(device)  # what the rows are stored under (the URL was checked: it names a device)
     with open_store(db) as st:  # the table streams through twice: any length in bounded memory
         with user_errors():  # a bad row (every one listed), a file imported before, rows stored already
-            res = import_table(st, meas, device, how, force, allow_duplicates, shown_device=redact_url(device))
+            res = import_table(st, meas, device, how, force, allow_duplicates, shown_device=name)
         path = st.path
     if json_out:
         print_json({"imported": len(res.ids), "ids": res.ids, "db": str(path)})
     else:
         console.print(
-            f"imported {len(res.ids)} traverses ({', '.join(res.days)}) for {redact_url(device)} into {path}"
+            f"imported {len(res.ids)} traverses ({', '.join(res.days)}) for {name} into {path}"
         )
 
 

@@ -95,6 +95,8 @@ class Store(TraverseStore, CalibrationStore, StateStore):
         with Store.open("postgresql://rig1@labdb/stickslip") as store:   # the lab's shared history
             ...
 
-    Device URLs name a controller (``sim://``, ``serial:///dev/ttyUSB0`` ...); a device
-    row is created the first time a URL is used.
+    Device URLs name a controller (``sim://``, ``mm3a:///dev/ttyUSB0`` ...); a device is
+    stored under its key (:func:`.schema.stored_device`: ``mm3a:///COM3`` and
+    ``mm3a://com3?timeout=5`` are ``mm3a://com3``), on every write and in every filter, and
+    its row is created the first time it is used.
     """

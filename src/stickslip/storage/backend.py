@@ -135,6 +135,14 @@ class Backend(Protocol):
         """Reads that all see the database as it was at the first of them (no write inside)."""
         ...
 
+    def copy_as_read(self, dest: Path) -> None:
+        """Copy the database file, as another reader sees it now, into the new SQLite file ``dest``.
+
+        Inside a write transaction that has written nothing yet, the copy is the database
+        before it (an upgrade's copy, :mod:`.upgrade`). SQLite only: a server has no file.
+        """
+        ...
+
     def online_copy(self, dest: Path) -> bool:
         """Copy the database into the new SQLite file ``dest`` by the engine's own means.
 

@@ -3,16 +3,12 @@
 from __future__ import annotations
 
 import os
-import secrets
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from itertools import islice
 from pathlib import Path
 from typing import Any, Self
 
-from ..devices.base import redact_url
-from ..measurements import Traverse
-from ..records import temp_stem
 from .backend import Backend
 from .schema import (
     MIGRATIONS,
@@ -21,10 +17,13 @@ from .schema import (
     _now,
     _split_sql,
     content_key,
+    device_filter,
     resolve_database,
     schema_tables,
+    stored_device,
 )
 from .sqlite import SQLiteBackend, check_database_file
+from .upgrade import KEYED_AT, _part_file, _remove_part, copy_before_upgrade, key_devices, row_traverse
 
 __all__ = ["check_database_file", "open_backend"]
 
@@ -46,6 +45,10 @@ class _Base:
         self.path: Path | str = db.where
         self.upgraded_from: int | None = None
         """The schema version this process upgraded the database from when it opened it (``None``: not upgraded)."""
+        self.upgrade_copy: Path | None = None
+        """Where the file was copied before this process upgraded it (``None``: not upgraded, or not a file)."""
+        self.upgrade_notes: list[str] = []
+        """What the upgrade changed that a user should know (two spellings of a device merged), one line each."""
 
     # -- opening / closing
 
@@ -123,9 +126,20 @@ class _Base:
             self.upgraded_from = version
 
     def _migrate_from(self, version: int) -> None:
+        try:
+            self._upgrade(version)
+        except BaseException:
+            if self.upgrade_copy is not None:  # the file is left as it was: its copy says nothing new
+                _remove_part(self.upgrade_copy)
+                self.upgrade_copy = None
+            raise
+
+    def _upgrade(self, version: int) -> None:
         with self._write() as con:
-            con.claim_ownership()
+            con.claim_ownership()  # first: on a server it is what makes two processes opening a new database wait
             version = con.schema_version()  # another process may have won
+            if 1 <= version < SCHEMA_VERSION and isinstance(self.path, Path):  # the copy reads only what is committed
+                self.upgrade_copy = copy_before_upgrade(con, self.path, version, SCHEMA_VERSION)
             if version > SCHEMA_VERSION:
                 raise StoreError(
                     f"{self.path} has schema version {version}, newer than this stickslip understands "
@@ -137,6 +151,8 @@ class _Base:
                 con.set_schema_version(k + 1)
             if version < 3:
                 self._backfill_content(con)
+            if 1 <= version < KEYED_AT:
+                self.upgrade_notes = key_devices(con)
 
     def _backfill_content(self, con: Backend) -> None:
         rows = con.execute(
@@ -150,9 +166,7 @@ class _Base:
     # -- devices and sessions
 
     def _device_id(self, con: Backend, url: str, model: str | None = None) -> int:
-        url = redact_url(str(url).strip())  # a secret in a URL is never stored
-        if not url:
-            raise ValueError("device URL is empty (e.g. sim://)")
+        url = stored_device(url)  # one name however the URL is written; a secret in a URL is never stored
         row = con.execute("SELECT id, model FROM devices WHERE url = ?", (url,)).fetchone()
         if row is not None:
             if model and row["model"] != model:
@@ -227,7 +241,7 @@ class _Base:
         args: list[Any] = []
         if device is not None:
             sql += " AND d.url = ?"
-            args.append(redact_url(device))
+            args.append(device_filter(device))
         if day is not None:
             sql += " AND s.day = ?"
             args.append(day)
@@ -267,21 +281,7 @@ class _Base:
             f"nothing was read (fix or delete it: stickslip delete -t {tid})"
         )
 
-    @staticmethod
-    def _to_traverse(r: Any) -> Traverse:
-        return Traverse(
-            r["day"],
-            int(r["joint"]),
-            r["direction"],
-            r["q1"],
-            r["q2"],
-            r["q3"],
-            r["theta"],
-            r["psi"],
-            r["start"],
-            r["end"],
-            int(r["steps"]),
-        )
+    _to_traverse = staticmethod(row_traverse)
 
     def integrity_check(self) -> str:
         """``"ok"`` when the database is sound (SQLite: ``PRAGMA integrity_check``; PostgreSQL: every table there)."""
@@ -330,17 +330,6 @@ class _Base:
                     out.executemany(f"INSERT INTO {table} ({names}) VALUES ({marks})", [tuple(r) for r in chunk])
 
 
-def _part_file(dest: Path) -> Path:
-    """A name beside ``dest`` for this backup's copy alone, not yet a file.
-
-    Not a fixed ``.NAME.part``: one left by a backup killed before its rename (SIGKILL, a
-    power cut) made the next backup to ``dest`` fail (``file is not a database``, or a
-    copy of a shared database ``UNIQUE constraint failed``), and two backups to one name at
-    once wrote into the same file.
-    """
-    return dest.with_name(f".{temp_stem(dest.name)}.{os.getpid()}-{secrets.token_hex(4)}.part")
-
-
 _SAID_WHOLE = ("newer than", "damaged", "untouched", "cannot make the database", "cannot upgrade the database")
 """An error opening a database that says all there is (else it is prefixed "not a usable stickslip database")."""
 _MIGRATION_BLOCKED = ("disk I/O error", "database or disk is full", "readonly database", "database is locked")
@@ -354,7 +343,7 @@ def _cannot_migrate(e: StoreError, path: Path | str, version: int) -> StoreError
     be written then was called "not a usable stickslip database", which it is. Other errors are ``e``.
     """
     text = str(e)
-    if not any(why in text for why in _MIGRATION_BLOCKED):
+    if text.startswith("cannot upgrade the database") or not any(why in text for why in _MIGRATION_BLOCKED):
         return e
     reason = text.removeprefix(f"cannot write to the database {path}: ").removesuffix(
         "; nothing of this change was stored")
@@ -372,12 +361,6 @@ def _backup_problem(e: OSError | StoreError, tmp: Path, dest: Path) -> str:
         text = str(e).replace(str(tmp), str(dest))
         return text if "nothing" in text else f"{text}; nothing was written"
     return f"cannot write the backup {dest}: {e.strerror or e}; nothing was written"
-
-
-def _remove_part(tmp: Path) -> None:
-    """A failed backup's copy and what SQLite made beside it (``-wal``, ``-shm``, ``-journal``)."""
-    for p in (tmp, *(tmp.with_name(tmp.name + end) for end in ("-wal", "-shm", "-journal"))):
-        p.unlink(missing_ok=True)
 
 
 _COPY_ORDER = ("devices", "sessions", "traverses", "calibrations", "calibration_traverses", "device_state")

@@ -9,7 +9,7 @@ from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
 from ..records import dumps_json, loads_json
 from .base import _Base
-from .schema import DEFAULT_DEVICE, StoreError, _now
+from .schema import DEFAULT_DEVICE, StoreError, _now, device_filter
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..calibration import Calibration
@@ -86,7 +86,7 @@ class CalibrationStore(_Base):
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (redact_url(device),)
+            args = (device_filter(device),)
         row = self._con.execute(sql + " ORDER BY c.id DESC LIMIT 1", args).fetchone()
         return None if row is None else self._load_cal(row[0], row[1])
 
@@ -118,7 +118,7 @@ class CalibrationStore(_Base):
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (redact_url(device),)
+            args = (device_filter(device),)
         return [dict(r) for r in self._con.execute(sql + " ORDER BY c.id", args)]
 
     # -- history
@@ -140,7 +140,7 @@ class CalibrationStore(_Base):
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (redact_url(device),)
+            args = (device_filter(device),)
         sql += " GROUP BY d.url, s.day, t.joint, t.direction"
         entries: dict[tuple[str, str], dict[str, Any]] = {}
         for r in self._con.execute(sql, args):

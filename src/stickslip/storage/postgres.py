@@ -441,6 +441,10 @@ class PostgresBackend:
             except self._psycopg.Error:
                 pass  # the connection is gone, and with it the transaction (nothing was written)
 
+    def copy_as_read(self, dest: Path) -> None:
+        """A server's database is no file to copy (its administrator's ``pg_dump`` keeps one)."""
+        raise StoreError(f"{self.where} is on a server: no file to copy into {dest}")
+
     def online_copy(self, dest: Path) -> bool:
         """None on a server: the store copies the rows (``False``)."""
         return False

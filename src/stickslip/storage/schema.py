@@ -5,13 +5,14 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import os
+import re
 import sqlite3
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..clock import now_utc, stale_message
-from ..devices.base import redact_url
+from ..devices.base import device_key, redact_url, url_scheme
 from ..measurements import Traverse
 from ..records import FILE_URL_DATABASE, is_file_url
 
@@ -92,10 +93,52 @@ MIGRATIONS: tuple[str, ...] = (
     ALTER TABLE traverses ADD COLUMN content TEXT;
     CREATE INDEX traverses_content ON traverses(content)
     """,
+    # version 3 -> 4: every device is stored under its key (stored_device), however its URL was written; the
+    # rows of older spellings are renamed and merged by Store._key_devices, and their content keys recomputed.
+    # The index makes a traverse's calibration links quick to find (delete, and that merge).
+    """
+    CREATE INDEX calibration_traverses_traverse ON calibration_traverses(traverse_id)
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
 _COLUMNS = ("joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
+
+
+def stored_device(url: str) -> str:
+    """The name a device's rows are stored under: its key (:func:`~stickslip.devices.base.device_key`).
+
+    One name however the URL is written: ``mm3a:///COM3``, ``mm3a://COM3?timeout=5`` and
+    ``mm3a://com3`` are ``mm3a://com3``; options and secrets are dropped, except a simulator's
+    ``seed`` (another simulated arm). A rig arm sharing its controller keeps its ``#arm=NAME``.
+    Raises ``ValueError`` (without a secret) for an empty URL, one with no scheme (which
+    :func:`device_key` would read as ``sim://``) or a malformed one.
+
+    >>> stored_device("anc300://h:7230?password=x"), stored_device("sim://?seed=3&realtime=1")
+    ('anc300://h:7230', 'sim://?seed=3')
+    >>> stored_device("mm3a:///COM3#arm=left")
+    'mm3a://com3#arm=left'
+    """
+    text = str(url).strip()
+    if not text:
+        raise ValueError("device URL is empty (e.g. sim://)")
+    arm = _ARM.search(text)
+    base = text[: arm.start()] if arm else text
+    url_scheme(base)
+    return device_key(base) + (arm.group(0) if arm else "")
+
+
+_ARM = re.compile(r"#arm=[A-Za-z0-9][A-Za-z0-9 _.\-]{0,39}$")
+"""A rig arm's part of a state key (``rig.model.Rig.state_key``): an arm name as rig files allow it."""
+
+
+def device_filter(url: str) -> str:
+    """What a ``--device`` filter matches: :func:`stored_device`, or for a URL it refuses the URL redacted (an
+    older release's name kept as written; nothing else matches it). Never raises."""
+    try:
+        return stored_device(url)
+    except ValueError:
+        return redact_url(str(url).strip())
 
 
 def content_key(t: Traverse, device: str) -> str:
@@ -115,7 +158,7 @@ def _content_keys(traverses: Iterable[Traverse], device: str, signed_zeros: bool
     ``signed_zeros``: the key as stored before zeros were unsigned (``-0`` for a ``-0.0``),
     for finding rows stored then.
     """
-    url = redact_url(str(device).strip())
+    url = device_filter(device)  # the device's stored name: a row's key whichever way its URL was written
     fmt = "\x1f".join([url, "{}", "{}", "{}", *["{:.12g}"] * 7, "{}"]).format
     sha = hashlib.sha256
     zero = -0.0 if signed_zeros else 0.0  # x + 0.0 is x, except -0.0 + 0.0 = 0.0; x + -0.0 is x for every x

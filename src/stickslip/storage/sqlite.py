@@ -441,6 +441,22 @@ class SQLiteBackend:
             if con.in_transaction:
                 con.execute("COMMIT")
 
+    def copy_as_read(self, dest: Path) -> None:
+        """SQLite's online backup through a connection of its own (the store's may be in a write transaction)."""
+        try:
+            src = sqlite3.connect(f"{Path(self.path).resolve().as_uri()}?mode=ro", uri=True)
+            try:
+                out = sqlite3.connect(dest)
+                try:
+                    src.backup(out)
+                    out.commit()
+                finally:
+                    out.close()
+            finally:
+                src.close()
+        except sqlite3.Error as e:
+            raise StoreError(f"cannot write {dest}: {e}") from None
+
     def online_copy(self, dest: Path) -> bool:
         """SQLite's online backup into the new file ``dest`` (page by page, consistent, pragmas and all)."""
         try:

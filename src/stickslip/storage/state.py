@@ -9,7 +9,7 @@ from ..devices.base import redact_text, redact_url
 from ..processes import process_gone
 from ..records import loads_json
 from .base import _Base
-from .schema import StoreError, _now
+from .schema import StoreError, _now, device_filter
 
 if TYPE_CHECKING:  # pragma: no cover
     from .backend import Backend
@@ -55,7 +55,7 @@ class StateStore(_Base):
         row = self._con.execute(
             "SELECT s.value FROM device_state s JOIN devices d ON d.id = s.device_id "
             "WHERE d.url = ? AND s.key = ?",
-            (redact_url(device), key),
+            (device_filter(device), key),
         ).fetchone()
         return default if row is None else self._json(row[0], device, key)
 
@@ -81,7 +81,7 @@ class StateStore(_Base):
         that no longer exists (:func:`~stickslip.processes.process_gone`, POSIX only;
         elsewhere a lock is released only by its holder, or by ``where --unlock``) is taken over.
         """
-        name = f"device {redact_url(device)}"
+        name = f"device {device_filter(device)}"  # one lock however the URL is written
         claimed: bool | None = None
         try:
             with self._write() as con:
@@ -119,4 +119,4 @@ class StateStore(_Base):
                 if isinstance(current, dict) and current.get("pid") == pid:
                     con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
         finally:
-            self._con.release(f"device {redact_url(device)}")
+            self._con.release(f"device {device_filter(device)}")

@@ -8,11 +8,11 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_text, redact_url
+from ..devices.base import redact_text
 from ..measurements import Traverse, traverse_problems
 from .backend import Backend
 from .base import _Base, _require_traverses
-from .schema import _COLUMNS, DEFAULT_DEVICE, _content_keys, _iso, content_key
+from .schema import _COLUMNS, DEFAULT_DEVICE, _content_keys, _iso, content_key, device_filter
 
 if TYPE_CHECKING:  # pragma: no cover
     pass
@@ -227,7 +227,7 @@ class TraverseStore(_Base):
             self._con.execute(
                 "SELECT COUNT(*) FROM traverses t JOIN sessions s ON s.id = t.session_id "
                 "JOIN devices d ON d.id = s.device_id WHERE d.url = ?",
-                (redact_url(device),),
+                (device_filter(device),),
             ).fetchone()[0]
         )
 
@@ -246,7 +246,7 @@ class TraverseStore(_Base):
         args: tuple[Any, ...] = ()
         if device is not None:
             sql += " WHERE d.url = ?"
-            args = (redact_url(device),)
+            args = (device_filter(device),)
         days = {r[0] for r in self._con.execute(sql, args)}
         csql = (
             "SELECT DISTINCT c.day FROM calibrations c JOIN devices d ON d.id = c.device_id "
