@@ -18,6 +18,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from typing import Any
+from urllib.parse import quote
 
 from ..clock import now_utc
 from ..devices.base import BurstStopped, Controller, DeviceInfo
@@ -30,8 +31,9 @@ _KEY = "stop"
 
 
 def _device(rig: Rig) -> str:
-    """The name the rig's stop is kept under in the store's per-device state."""
-    return f"rig:{rig.name}"
+    """The name the rig's stop is kept under in the store's per-device state: a URL of its own scheme (the store
+    names every device by its URL's key), the rig's name percent-encoded (any text a rig file gives it)."""
+    return f"rig://{quote(rig.name, safe='')}"
 
 
 def pressed(store: StateStore, rig: Rig) -> dict[str, Any]:
