@@ -839,7 +839,7 @@ def test_advice_to_reference_never_names_a_url_that_cannot_open():
     its driver refuses raises that refusal rather than being written into a command to type."""
     from stickslip.procedures.move import reference_commands
 
-    assert "anc300://H?axes=1,2,3 --joint 3 --steps -" in reference_commands("anc300://H?axes=1,2,3", 3)
+    assert '"anc300://H?axes=1,2,3" --joint 3 --steps -' in reference_commands("anc300://H?axes=1,2,3", 3)
     with pytest.raises(ValueError, match=r"^two joints share an axis: \{1: 1, 2: 1, 3: 2\}$"):
         reference_commands("anc300://H?axes=1,1,2", 3)
 
