@@ -254,6 +254,7 @@ hostile_text = st.lists(
 )
 @example(text="[/]", role="table-day")
 @example(text="\x1b[2J\u202e", role="out-path")
+@example(text="a\rb", role="out-path")  # a fresh draw: the wrapping of `saved to` made the \r a space, unseen
 def test_user_text_is_shown_not_interpreted(tmp_path, kit, text, role):
     d = fresh(tmp_path)
     db = d / "s.db"

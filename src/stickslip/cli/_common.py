@@ -213,8 +213,9 @@ def say(text: str, indent: str = "  ", keep: tuple[object, ...] = ()) -> None:
     """
     from ._help import wrap
 
-    for k in sorted({str(k) for k in keep if " " in str(k)}, key=len, reverse=True):
-        text = text.replace(k, k.replace(" ", _KEPT_SPACE))
+    for k in sorted({str(k) for k in keep}, key=len, reverse=True):  # a name is one line, every control escaped:
+        shown = visible(k).replace("\n", "\\n").replace("\t", "\\t")  # wrapping made a \r, \n or tab a space
+        text = text.replace(k, shown.replace(" ", _KEPT_SPACE))
     lead = text[: len(text) - len(text.lstrip())]
     for line in wrap(text.strip(), console.width, lead + indent, first=lead):
         console.print(line.replace(_KEPT_SPACE, " "), soft_wrap=True)
