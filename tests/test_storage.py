@@ -18,7 +18,7 @@ import textwrap
 import pytest
 
 from stickslip import storage
-from stickslip.measurements import Traverse
+from stickslip.measurements import Traverse, measurements_to_csv
 from stickslip.storage import SCHEMA_VERSION, ConstraintError, Store, StoreError, stale_message, warn_if_stale
 
 
@@ -403,6 +403,25 @@ def test_cli_fit_record_from_the_database_links_the_traverses(db):
         assert st.calibrations()[0]["device"] == "mm3a:///dev/ttyUSB0"
         assert st.calibration_traverses(cid) == rows
         assert st.latest_calibration("mm3a:///dev/ttyUSB0").day == "2026-11-21"
+
+
+def test_cli_fit_record_of_a_table_needs_its_device(db, tmp_path):
+    """`fit TABLE --record` without -d filed the calibration under sim:// (a guess, as `import`'s default was)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    _cal, rows = _calibration("2026-11-21")
+    table = tmp_path / "t.csv"
+    table.write_text(measurements_to_csv(rows))
+    r = CliRunner().invoke(app, ["fit", str(table), "--db", str(db), "--record", "--json"])
+    assert r.exit_code == 2 and "fit TABLE --record needs --device" in " ".join(r.stderr.split()), r.output
+    with Store.open(db) as st:
+        assert not st.calibrations()  # nothing stored
+    r = CliRunner().invoke(app, ["fit", str(table), "--db", str(db), "--record", "-d", "mm3a://COM4", "--json"])
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as st:
+        assert [c["device"] for c in st.calibrations()] == ["mm3a://com4"]  # the device's one name
 
 
 # ---------------------------------------------------------------- duplicates

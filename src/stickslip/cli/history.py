@@ -412,7 +412,8 @@ def fit(
     day: str | None = typer.Option(None, "--day", help="Only traverses of this session day."),
     device: str | None = typer.Option(None, "--device", "-d", help="From the database: only this device."),
     record: bool = typer.Option(
-        False, "--record", help="Also store the calibration in the database (for --device, default sim://)."
+        False, "--record", help="Also store the calibration in the database: for the device of the traverses it "
+        "fitted, or with a table for --device (then required: a table does not say which device measured it)."
     ),
     db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print parameters and residuals as JSON."),
@@ -433,6 +434,9 @@ def fit(
     from ..analysis import residual_summary
     from ..calibration import CalibrationError, calibrate
 
+    if record and meas is not None and device is None:  # before: filed under sim://, a guess (as import's was)
+        fail("fit TABLE --record needs --device: the calibration is stored for the device that measured the table, "
+             "and a table does not say which (e.g. -d mm3a:///dev/ttyUSB0)")
     ts, where = _traverses_from(meas, db, device, day)
     ids: list[int] = []
     if record and meas is None:  # link the stored traverses the fit used
@@ -456,7 +460,7 @@ def fit(
     if record:
         with open_store(db) as st:
             with user_errors():
-                cal_id = st.add_calibration(cal, device=device or "sim://", traverse_ids=ids)
+                cal_id = st.add_calibration(cal, device=str(device), traverse_ids=ids)
     if json_out:
         print_json(
             {
