@@ -66,7 +66,10 @@ def test_every_docs_page_with_console_blocks_is_listed_here():
 
 RUN_PAGES = ["tutorial.md", "config.md", "rig.md"]  # config.md names its own $STICKSLIP_CONFIG
 RUN_IN_README = ["vision.md"]  # its one block is the README's camera block, which tests/test_readme.py runs
-RUN_ELSEWHERE = {"howto/day-one.md": "test_day_one.py"}  # against the NanoControl console emulator
+RUN_ELSEWHERE = {
+    "howto/day-one.md": "test_day_one.py",  # against the NanoControl console emulator
+    "taskspace.md": "test_docs_examples.py",  # its joint-1 loop: test_the_taskspace_joint_1_loop_runs_as_written
+}
 
 
 def test_the_vision_page_runs_as_the_readme_camera_block(tmp_path):
@@ -111,6 +114,36 @@ def test_docs_page_runs_as_written(page, tmp_path):
         # the tutorial's move: 2.03 mm, dead reckoning lands within half a step
         q3 = json.loads((tmp_path / "where.json").read_text())["joints"][2]["q"]
         assert abs(q3 - 0.00203) < 1e-6, q3
+
+
+@POSIX
+def test_the_taskspace_joint_1_loop_runs_as_written(tmp_path):
+    """docs/taskspace.md's joint-1 traverses on `sim://?seed=3` (the config file's device), appended to a day's table
+    of joints 2 and 3, calibrate joint 1 near the simulator's own model (the page: within 2.5 % for γ0)."""
+    from server_support import true_calibration
+    from synth import paper_table
+    from tuned import tune
+
+    from stickslip.calibration import Calibration
+    from stickslip.measurements import measurements_to_csv
+    from stickslip.sim.arm import SimulatedMM3A
+
+    env = _venv_folder(tmp_path)
+    url = "sim://?seed=3"
+    samples, rate, stop_at = SimulatedMM3A(seed=3).labelled_recording(1, "+")
+    tune(samples, rate, stop_at, joint=1).save(tmp_path / "tuning-joint1.json")
+    (tmp_path / "day1.csv").write_text(measurements_to_csv(paper_table()))  # the day's joints 2 and 3
+    (tmp_path / "config.toml").write_text(f'device = "{url}"\n')
+    env.update(STICKSLIP_CONFIG=str(tmp_path / "config.toml"), STICKSLIP_DB=str(tmp_path / "s.db"))
+    lines = console_lines((DOCS / "taskspace.md").read_text(encoding="utf-8"))
+    assert len(lines) == 1 and lines[0][0].startswith("for th in 0 -90deg")
+    r = _bash([". .venv/bin/activate", *lines[0]], tmp_path, env)
+    assert r.returncode == 0, f"{r.stdout[-3000:]}\n{r.stderr[-3000:]}"
+    cal, truth = Calibration.load(tmp_path / "cal.json"), true_calibration(url)
+    assert cal.joints == [1, 2, 3]
+    for d in "+-":  # gamma0 at q3 = 0 and 12 mm (Eq. 8), rad
+        for gamma0, true_gamma0 in zip(cal.model(1, d).params.gamma0, truth.model(1, d).params.gamma0, strict=True):
+            assert abs(gamma0 / true_gamma0 - 1) < 0.05, (d, gamma0, true_gamma0)
 
 
 TUTORIAL_WHERE = "stickslip where -d 'sim://?seed=3' --offline --json > where.json"
