@@ -368,11 +368,10 @@ def test_a_mutated_measurement_table_gives_usable_traverses_or_is_refused(tmp_pa
 
 
 _HISTORY = '{"format": "stickslip-history", "version": 1}\n' + "".join(
-    '{"day": "2026-11-20", "joint": 3, "direction": "%s", "q1": 0.0, "q2": -1.0, "q3": 0.0, "theta": 0.0, '
-    '"psi": 0.0, "start": %s, "end": %s, "steps": %d, "how": "audio", "source": "lab \\"A\\", run\\n2", '
-    '"measured_at": "2026-11-20T09:3%d:00.000000+00:00", "excluded": %s}\n'
-    % (d, a, b, 100 + k, k, '"cable, snagged"' if k == 1 else "null")
-    for k, (d, a, b) in enumerate([("+", 0.0, 0.01), ("-", 0.01, 0.0), ("+", 0.002, 0.004)]))
+    json.dumps({"day": "2026-11-20", "joint": 3, "direction": d, "q1": 0.0, "q2": -1.0, "q3": 0.0, "theta": 0.0,
+                "psi": 0.0, "start": a, "end": b, "steps": 100 + k, "how": "audio", "source": 'lab "A", run\n2',
+                "measured_at": f"2026-11-20T09:3{k}:00.000000+00:00", "excluded": "cable, snagged" if k else None})
+    + "\n" for k, (d, a, b) in enumerate([("+", 0.0, 0.01), ("-", 0.01, 0.0), ("+", 0.002, 0.004)]))
 
 
 @READERS
