@@ -367,6 +367,32 @@ def test_a_mutated_measurement_table_gives_usable_traverses_or_is_refused(tmp_pa
         assert np.all(np.isfinite(as_arrays(ts)["start"]))
 
 
+_HISTORY = '{"format": "stickslip-history", "version": 1}\n' + "".join(
+    json.dumps({"day": "2026-11-20", "joint": 3, "direction": d, "q1": 0.0, "q2": -1.0, "q3": 0.0, "theta": 0.0,
+                "psi": 0.0, "start": a, "end": b, "steps": 100 + k, "how": "audio", "source": 'lab "A", run\n2',
+                "measured_at": f"2026-11-20T09:3{k}:00.000000+00:00", "excluded": "cable, snagged" if k else None})
+    + "\n" for k, (d, a, b) in enumerate([("+", 0.0, 0.01), ("-", 0.01, 0.0), ("+", 0.002, 0.004)]))
+
+
+@READERS
+@given(text=mutated_text(_HISTORY))
+def test_a_mutated_history_file_gives_usable_traverses_or_is_refused(tmp_path: Path, text: str) -> None:
+    """export --json's file, damaged: rows the store would take, each with a time it can keep, or a refusal."""
+    import datetime as dt
+
+    from stickslip.measurements.history_file import read_history
+
+    p = tmp_path / "h.jsonl"
+    p.write_bytes(text.encode("utf-8"))
+    rows = _refused_or(p, lambda q: [r for batch in read_history(q) for r in batch]) or []
+    for t, prov in rows:
+        _finite(t, "q1 q2 q3 theta psi start end")
+        assert t.steps > 0 and t.start != t.end and t.direction in "+-", t
+        assert prov.how.strip() and (prov.excluded is None or prov.excluded.strip())
+        if prov.measured_at is not None:
+            assert dt.datetime.fromisoformat(prov.measured_at).utcoffset() == dt.timedelta(0)
+
+
 @READERS
 @given(text=mutated_text(_STEP_SIZES))
 def test_a_mutated_step_size_table_gives_step_sizes_or_is_refused(tmp_path: Path, text: str) -> None:

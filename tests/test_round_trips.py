@@ -6,7 +6,9 @@ PostgreSQL), or into the same one again, keeps every value and its rows are reco
 
 from __future__ import annotations
 
+import datetime as dt
 import itertools
+import json
 import math
 import re
 import struct
@@ -293,3 +295,117 @@ def test_a_backup_answers_every_query_as_the_database_it_was_taken_from(db, tmp_
             text, joints=anyarm
         )
         assert copy.duplicates(rows, "mm3a://com3") == list(range(len(rows)))
+
+
+# ---------------------------------------------------------------- a moved history is the same record (prov53)
+
+_TEXT = st.text(st.characters(codec="utf-8", exclude_characters="\x00"), min_size=1, max_size=30)
+"""Free text kept with a row: commas, quotes, line breaks, any script (PostgreSQL's text holds no NUL)."""
+
+
+def _history_of(db: object) -> tuple[object, list[tuple[Traverse, object]]]:
+    """``history --json`` of a database, and every traverse (excluded ones too) with its provenance."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    r = CliRunner().invoke(app, ["history", "--db", str(db), "--json"])
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as s:
+        return json.loads(r.stdout), list(s.iter_provenance())  # parsed: by_joint's order is the engine's collation
+
+
+def test_a_history_moved_with_export_json_is_the_same_record(db, tmp_path):
+    """Measured, imported and excluded rows, exported with --json and imported into an empty database: the same
+    history (its measurement times, not the import's) and every row's how, source, time and exclusion."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import read_measurements
+
+    run = CliRunner().invoke
+    home, moved, table = tmp_path / "rig.db", tmp_path / "rig.jsonl", tmp_path / "rig.csv"
+    with Store.open(home) as s:
+        s.add_traverse(_row(steps=11), "mm3a://com3", how="audio", measured_at=dt.datetime(2026, 11, 20, 9, 30,
+                                                                                         tzinfo=dt.UTC))
+        s.add_traverse(_row(steps=12, direction="-", start=0.01, end=0.0), "mm3a://com3", how="camera",
+                       measured_at=dt.datetime(2026, 11, 20, 17, 5, 1, 250, tzinfo=dt.UTC))
+        ids = s.add_traverses([_row(day="2026-11-21", steps=13), _row(day="2026-11-21", steps=14)], "mm3a://com3",
+                              how="imported", source='lab "B", run 2\nÜberprüfung')
+        s.set_excluded([ids[1]], 'cable snagged, "twice"\nsee log')
+    dev = ["-d", "mm3a:///COM3"]
+    r = run(app, ["export", "--db", str(home), *dev, "--json", "-o", str(moved)])
+    assert r.exit_code == 0 and "wrote 4 traverses with their provenance" in r.output, r.output
+    r = run(app, ["import", str(moved), "--db", str(db), *dev])
+    assert r.exit_code == 0 and "imported 4 traverses" in r.output, r.output
+    before, after = _history_of(home), _history_of(db)
+    assert after == before
+    assert [(p.how, p.excluded) for _, p in after[1]] == [
+        ("audio", None), ("camera", None), ("imported", None), ("imported", 'cable snagged, "twice"\nsee log')]
+    assert after[0][0]["first_measured_at"] == "2026-11-20T09:30:00.000000+00:00"  # not the import's time
+    assert after[0][0]["last_measured_at"] == "2026-11-20T17:05:01.000250+00:00"
+    assert after[0][1]["excluded"] == 1 and after[0][1]["traverse_ids"] == [3, 4]
+    # the CSV table is the contract's, unchanged: the used rows, the header exactly
+    assert run(app, ["export", "--db", str(db), *dev, "-o", str(table)]).exit_code == 0
+    assert table.read_text().splitlines()[0] == "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps"
+    assert [t.steps for t in read_measurements(table)] == [11, 12, 13]
+    r = run(app, ["import", str(moved), "--db", str(db), *dev])  # again: every row is there already
+    assert r.exit_code == 2 and "4 of 4 rows are already stored" in r.stderr, r.output
+
+
+def test_a_history_file_with_a_bad_time_is_refused_with_its_row_and_value(db, tmp_path):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    head = '{"format": "stickslip-history", "version": 1}\n'
+    row = ('{"day": "d1", "joint": 3, "direction": "+", "q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, '
+           '"start": 0, "end": 0.01, "steps": %d, "how": "audio", "measured_at": %s}\n')
+    bad = tmp_path / "h.jsonl"
+    bad.write_text(head + row % (10, '"2026-11-20T09:30:00+00:00"') + row % (11, '"2026-13-01T00:00:00+00:00"')
+                   + row % (12, '"2026-11-20T09:30:00"') + row % (13, "1764000000"))
+    run = CliRunner().invoke
+    r = run(app, ["import", str(bad), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert f'{bad}:3: measured_at "2026-13-01T00:00:00+00:00": not an ISO 8601 date and time' in r.stderr
+    assert f'{bad}:4: measured_at "2026-11-20T09:30:00": has no UTC offset' in r.stderr
+    assert f"{bad}:5: measured_at 1764000000: must be text" in r.stderr
+    assert f"{bad}:2:" not in r.stderr
+    r = run(app, ["import", str(bad), "-d", "sim://", "--db", str(db), "--how", "audio"])
+    assert r.exit_code == 2 and "history file: its rows keep their own 'how'" in r.stderr
+    # the fields left out mean what they mean for a table's row: imported, now, used
+    bad.write_text(head + row.replace(', "how": "audio", "measured_at": %s', "") % 10)
+    r = run(app, ["import", str(bad), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as s:
+        ((_, p),) = list(s.iter_provenance())
+        assert (p.how, p.source, p.excluded) == ("imported", None, None) and p.measured_at[:4] == "2026"
+
+
+@st.composite
+def _provenances(draw: st.DrawFn) -> object:
+    from stickslip.measurements.history_file import Provenance
+
+    when = draw(st.datetimes(timezones=st.just(dt.UTC)))
+    return Provenance(draw(_TEXT.filter(str.strip)), when.isoformat(timespec="microseconds"),
+                      draw(st.none() | _TEXT), draw(st.none() | _TEXT.filter(str.strip)))
+
+
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(rows=st.lists(st.tuples(_traverses(), _provenances()), min_size=1, max_size=4))
+def test_any_provenance_text_survives_the_move(db, tmp_path, rows):
+    """Any text in how, source and a reason (commas, quotes, line breaks, any script), any time: stored, written
+    as a history file, read, stored again: the same rows and provenance, as the store keeps them."""
+    from stickslip.measurements.history_file import read_history, write_history
+
+    n = next(_examples) + 1
+    with Store.open(db) as s:
+        s.add_with_provenance(rows, device=f"sim://?seed={n}")
+        kept = list(s.iter_provenance(device=f"sim://?seed={n}"))
+        write_history(tmp_path / f"{n}.jsonl", kept)
+        back = [r for batch in read_history(tmp_path / f"{n}.jsonl", {j: _ANY for j in (1, 2, 3)}) for r in batch]
+        assert back == kept
+        s.add_with_provenance(back, device=f"sim://?seed={n + 10**6}")  # another arm: not a duplicate
+        assert list(s.iter_provenance(device=f"sim://?seed={n + 10**6}")) == kept
+    for (t, p), (u, q) in zip(rows, kept, strict=True):
+        assert (u.steps, u.direction, q.measured_at) == (t.steps, t.direction, p.measured_at)

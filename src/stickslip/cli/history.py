@@ -116,8 +116,17 @@ def export(
     device: str | None = typer.Option(None, "--device", "-d", help="Only this device URL, e.g. sim://"),
     joint: int | None = typer.Option(None, "--joint", "-j", help="Only this joint (1, 2 or 3)."),
     db: str | None = db_option(),
+    json_out: bool = typer.Option(
+        False, "--json", help="Write a history file (JSON Lines) instead: every traverse, excluded ones too, with "
+        "how, source, measured_at and the exclusion's reason; import reads it back as the same record.",
+    ),
 ) -> None:
     """Write stored traverses to a measurement table (CSV, SI units).
+
+    The table holds the traverses used in analyses, the columns of the table contract
+    only. To move a history to another database as the same record (how and when each
+    traverse was measured, excluded ones with their reasons) write --json and import
+    that (docs/storage.md).
 
     Example: [bold]stickslip export --day 2026-11-21 -o meas.csv[/]
     """
@@ -125,10 +134,20 @@ def export(
     from collections.abc import Iterator
 
     from ..measurements import write_measurements
+    from ..measurements.history_file import write_history
 
     if joint is not None and joint not in (1, 2, 3):
         fail(f"--joint must be 1, 2 or 3, got {joint}")
     with open_store(db, must_exist=True) as st:
+        if json_out:  # streamed too; excluded rows included, each with its provenance
+            records = st.iter_provenance(device=device, day=day, joint=joint)
+            head = next(records, None)
+            if head is None:
+                fail(_no_match(st, device, day, joint))
+            with user_errors():
+                n = write_history(out, itertools.chain([head], records))
+            say(f"wrote {n} traverses with their provenance to {out}", keep=(out,))
+            return
         rows = st.iter_traverses(device=device, day=day, joint=joint)  # streamed: any size in bounded memory
         first = next(rows, None)
         if first is None:
@@ -162,12 +181,17 @@ def _no_match(st: Any, device: str | None, day: str | None, joint: int | None) -
 
 @app.command("import")
 def import_(
-    meas: Path = typer.Argument(..., help="Measurement table (CSV) to store.", show_default=False),
+    meas: Path = typer.Argument(
+        ..., help="Measurement table (CSV), or a history file (export --json), to store.", show_default=False
+    ),
     device: str = typer.Option(
         ..., "--device", "-d", help="Device URL the table was measured on (required: a table's device is a fact "
         "about it, no default guesses it), e.g. mm3a:///dev/ttyUSB0 or sim://.", show_default=False,
     ),
-    how: str = typer.Option("imported", "--how", help="How it was measured: imported, audio, simulated ..."),
+    how: str | None = typer.Option(
+        None, "--how", help="How it was measured: imported (the default), audio, simulated ... (a table only: "
+        "the rows of a history file keep their own).", show_default=False,
+    ),
     force: bool = typer.Option(False, "--force", help="Import even if this exact file was imported before."),
     allow_duplicates: bool = typer.Option(
         False, "--allow-duplicates", help="Store rows identical to stored ones (same device, day, pose, steps)."
@@ -175,7 +199,10 @@ def import_(
     db: str | None = db_option(),
     json_out: bool = typer.Option(False, "--json", help="Print the new traverse ids as JSON."),
 ) -> None:
-    """Store a measurement table; on any bad row nothing is stored.
+    """Store a measurement table, or a history file (export --json); on any bad row nothing is stored.
+
+    A history file's rows keep their provenance: how and when each was measured, its
+    source, and excluded rows stay excluded with their reasons.
 
     A row identical to a stored traverse of the same device (day, pose, interval and
     steps) is taken for the same measurement stored twice, and the import is refused

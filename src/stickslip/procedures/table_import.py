@@ -7,6 +7,11 @@ traverse of the same device is refused unless duplicates are allowed), then the 
 stored in one transaction, so that on any bad row nothing is stored. The file is
 recognised by the SHA-256 of its bytes (read a block at a time), so importing the same file
 twice is refused unless forced.
+
+A history file (``stickslip export --json``: :mod:`stickslip.measurements.history_file`)
+is imported the same way, each row with its own provenance (how, source, measured_at, its
+exclusion): the moved history is the same record. It is told from a table by its first
+character, ``{``.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from pathlib import Path
 from typing import Protocol
 
 from ..measurements import Traverse, stream_measurement_table
+from ..measurements.history_file import Provenance, is_history_file, read_history
 
 __all__ = ["ImportStore", "ImportRefused", "ImportResult", "file_digest", "import_table"]
 
@@ -32,6 +38,8 @@ class ImportStore(Protocol):
     def add_traverses(
         self, traverses: Iterable[Traverse], *, device: str = ..., how: str = ..., source: str | None = ...
     ) -> list[int]: ...
+
+    def add_with_provenance(self, rows: Iterable[tuple[Traverse, Provenance]], device: str = ...) -> list[int]: ...
 
 
 class ImportRefused(ValueError):
@@ -55,7 +63,11 @@ def file_digest(path: str | Path, block: int = 1 << 20) -> str:
     return "sha256:" + h.hexdigest()
 
 
-def _rows(path: str | Path) -> Iterator[Sequence[Traverse]]:
+def _rows(path: str | Path, history: bool = False) -> Iterator[Sequence[Traverse]]:
+    if history:
+        for batch in read_history(path):
+            yield [t for t, _ in batch]
+        return
     for part in stream_measurement_table(path):
         yield part.traverses()
 
@@ -64,7 +76,7 @@ def import_table(
     store: ImportStore,
     path: str | Path,
     device: str,
-    how: str = "imported",
+    how: str | None = None,
     force: bool = False,
     allow_duplicates: bool = False,
     shown_device: str | None = None,
@@ -74,15 +86,19 @@ def import_table(
     Raises :class:`~stickslip.measurements.TableError` listing every bad row, and
     :class:`ImportRefused` when the file was imported before (unless ``force``) or rows are
     stored already (unless ``allow_duplicates``; ``shown_device`` names the device in the
-    message, without secrets).
+    message, without secrets). ``how`` (default ``"imported"``) is for a table: a history
+    file's rows keep their own, and a ``how`` given with one is refused.
     """
+    history = is_history_file(path)
+    if history and how is not None:
+        raise ImportRefused(f"{path} is a history file: its rows keep their own 'how'; leave --how out")
     digest = file_digest(path)
     if store.has_source(digest) and not force:
         raise ImportRefused(f"{path} was imported before (same contents); use --force to import it again")
     days: set[str] = set()
     dup: list[int] = []
     n = 0
-    for rows in _rows(path):  # the first pass: every row checked, compared with the stored ones
+    for rows in _rows(path, history):  # the first pass: every row checked, compared with the stored ones
         days.update(t.day for t in rows)
         if not allow_duplicates:
             dup += [n + k for k in store.duplicates(rows, device)]
@@ -94,5 +110,10 @@ def import_table(
             f"(same day, pose, interval and steps; rows {listed}); nothing imported. "
             "Use --allow-duplicates if they are genuine repeats"
         )
-    ids = store.add_traverses((t for rows in _rows(path) for t in rows), device=device, how=how, source=digest)
+    if history:
+        ids = store.add_with_provenance((r for batch in read_history(path) for r in batch), device=device)
+    else:
+        ids = store.add_traverses(
+            (t for rows in _rows(path) for t in rows), device=device, how=how or "imported", source=digest
+        )
     return ImportResult(ids, sorted(days))

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 from ..clock import stale_message
 from .calibrations import CalibrationStore
+from .provenance import ProvenanceStore
 from .schema import (
     APPLICATION_ID,
     BUSY_TIMEOUT_MS,
@@ -59,7 +60,6 @@ from .schema import (
     warn_if_stale,
 )
 from .state import StateStore
-from .traverses import TraverseStore
 
 __all__ = [
     "APPLICATION_ID",
@@ -83,7 +83,7 @@ __all__ = [
 ]
 
 
-class Store(TraverseStore, CalibrationStore, StateStore):
+class Store(ProvenanceStore, CalibrationStore, StateStore):
     """The store of devices, sessions, traverses, calibrations and device state (SQLite or PostgreSQL).
 
     Open with :meth:`Store.open` (a context manager)::
