@@ -830,6 +830,7 @@ ROLES = {
 @given(role=st.sampled_from(sorted(ROLES)), kind=st.sampled_from(["fifo", "folder", "link-to-fifo", "device"]))
 @example(role="listen", kind="fifo")
 @example(role="calibrate -o", kind="fifo")
+@example(role="import", kind="fifo")  # prov53: file_digest opened it before any check (a hang)
 @pytest.mark.skipif(not hasattr(os, "mkfifo"), reason="FIFOs are POSIX")
 def test_special_files_are_refused_before_they_are_opened(tmp_path, kit, role, kind):
     d = fresh(tmp_path)

@@ -24,6 +24,7 @@ from typing import Protocol
 
 from ..measurements import Traverse, stream_measurement_table
 from ..measurements.history_file import Provenance, is_history_file, read_history
+from ..records import regular_file
 
 __all__ = ["ImportStore", "ImportRefused", "ImportResult", "file_digest", "import_table"]
 
@@ -89,6 +90,7 @@ def import_table(
     message, without secrets). ``how`` (default ``"imported"``) is for a table: a history
     file's rows keep their own, and a ``how`` given with one is refused.
     """
+    regular_file(path, "table")  # a FIFO or a device is refused before anything opens it (file_digest hung on one)
     history = is_history_file(path)
     if history and how is not None:
         raise ImportRefused(f"{path} is a history file: its rows keep their own 'how'; leave --how out")
