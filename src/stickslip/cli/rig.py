@@ -206,6 +206,29 @@ def _problems(rig: Rig, poses: dict[str, tuple[float, float, float]]) -> list[st
     return out
 
 
+@rig_app.command("stop")
+def stop(
+    rig_file: Path = typer.Option(..., "--rig", help=RIG_HELP),
+    db: str | None = db_option(),
+) -> None:
+    """Press the rig's STOP from a terminal: every arm's motion ends before its next burst.
+
+    The same STOP as an arm's page (docs/rig.md): every control room of the rig and every
+    `move`, `reach`, `jog` and `rig go` on one of its arms reads it before each burst (at most
+    0.2 s apart) and sends no further burst; the burst under way is finished, so each position
+    stays exact. A motion started after the press is not stopped by it. It needs the rig's
+    database (the rig file's `database`, or --db), which the motions read.
+
+    Example: stickslip rig stop --rig lab.toml
+    """
+    from ..procedures.rigstop import press
+
+    rig = load(rig_file)
+    with open_store(rig_database(db, rig)) as store, user_errors():
+        count = press(store, rig, None)
+    say(f"rig {rig.name!r}: STOP pressed (press {count}): every arm's motion ends before its next burst")
+
+
 @rig_app.command("go")
 def go(
     name: str = typer.Argument(

@@ -44,9 +44,10 @@ def pressed(store: StateStore, rig: Rig) -> dict[str, Any]:
     return raw
 
 
-def press(store: StateStore, rig: Rig, arm: str) -> int:
-    """Press the rig's STOP for ``arm`` (where it was pressed): every arm's process stops before its next burst.
-    The new count. ``OSError`` (or the store's error) if the store cannot be written."""
+def press(store: StateStore, rig: Rig, arm: str | None) -> int:
+    """Press the rig's STOP for ``arm`` (where it was pressed; ``None``: a terminal, ``stickslip rig stop``): every
+    arm's process stops before its next burst. The new count. ``OSError`` (or the store's error) if the store
+    cannot be written."""
     count = int(pressed(store, rig)["count"]) + 1
     store.set_state(_device(rig), _KEY, {"count": count, "arm": arm, "at": now_utc().isoformat(timespec="seconds"),
                                          "pid": os.getpid()})
@@ -73,7 +74,8 @@ class RigStopWatch:
         self._seen = int(p["count"])
         if p.get("arm") == self.arm:
             return None
-        return f"stopped by the rig's STOP (pressed for arm {p.get('arm')!r} at {p.get('at')}): no further burst sent"
+        where = "from a terminal" if p.get("arm") is None else f"for arm {p.get('arm')!r}"
+        return f"stopped by the rig's STOP (pressed {where} at {p.get('at')}): no further burst sent"
 
 
 class _Stoppable:
