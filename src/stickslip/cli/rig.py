@@ -207,7 +207,7 @@ def _problems(rig: Rig, poses: dict[str, tuple[float, float, float]]) -> list[st
 
 
 @rig_app.command("stop")
-def stop(
+def stop_rig(
     rig_file: Path = typer.Option(..., "--rig", help=RIG_HELP),
     db: str | None = db_option(),
 ) -> None:
