@@ -283,7 +283,7 @@ def traverse_cmd(
     from ..measurements import HEADER
     from ..models import direction_label
     from ..procedures.move import DeviceBusy
-    from ..procedures.session import TraverseRequest, check_append_target, traverse
+    from ..procedures.session import POSE_NAMES, TraverseRequest, check_append_target, traverse
     from ..procedures.traverse import TraverseError
     from ..storage import Store, StoreError
     from ..units import format_step
@@ -309,9 +309,11 @@ def traverse_cmd(
         tun = Tuning.load(tuning)
         if getattr(tun, "joint", None) not in (None, joint):
             fail(f"{tuning} is tuned for joint {tun.joint}, not joint {joint}")
+        given = _given(ctx, POSE_NAMES)
         request = TraverseRequest(
             device, joint, label, pose, day or today_label(), tun, audio_input=audio_input, serial_port=serial_port,
-            burst=burst, confirm_s=confirm_s, append=append, keep_pose=_given(ctx, ("q1", "q2", "q3", "theta", "psi")),
+            burst=burst, confirm_s=confirm_s, append=append, keep_pose=given,
+            defaulted=tuple(n for n in POSE_NAMES if n not in given),
         )
         store = Store.open(db_path(db)) if use_db else None
         try:

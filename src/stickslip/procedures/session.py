@@ -201,12 +201,12 @@ finer than a pose set by hand or by eye, coarser than a kept position's rounding
 
 
 def pose_not_given(state: DeviceState, request: TraverseRequest) -> list[str]:
-    """A warning for each pose option the user left at its default (not in ``request.keep_pose``) whose default is
+    """A warning for each pose option the user left at its default (``request.defaulted``) whose default is
     further than :data:`POSE_TOLERANCE` (and 3 σ of a tracked position) from where the arm is kept: the row would
     record a pose the arm is not in. Joints kept ``default`` or uncertain say nothing (nothing is known of them)."""
     lines = []
-    for name in POSE_NAMES:
-        if name in request.keep_pose or name == f"q{request.joint}":
+    for name in request.defaulted:
+        if name not in POSE_NAMES or name in request.keep_pose or name == f"q{request.joint}":
             continue
         told = float(getattr(request.pose, name))
         if name in ("theta", "psi"):
@@ -288,6 +288,10 @@ class TraverseRequest:
     keep_pose : tuple of str
         The names of ``pose`` the user set the arm to (:data:`POSE_NAMES`): kept as the arm's pose after the
         traverse (:func:`record_traverse`). Default none: the kept pose is left as it was.
+    defaulted : tuple of str
+        The names of ``pose`` left at a default the caller did not choose (a command's options not given): each
+        further from the kept pose than :data:`POSE_TOLERANCE` is warned about before the joint moves
+        (:func:`pose_not_given`). Default none: a caller that gives the whole pose (a day's design) is not warned.
     """
 
     device: str
@@ -302,6 +306,7 @@ class TraverseRequest:
     confirm_s: float = CONFIRM_S
     append: Path | None = None
     keep_pose: tuple[str, ...] = ()
+    defaulted: tuple[str, ...] = ()
 
 
 def traverse(
