@@ -11,6 +11,7 @@ the links, the other arm's sweep sampled densely), not against the envelope's ow
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -97,9 +98,12 @@ def test_the_sweep_between_the_ends_is_kept_from(rig: Rig) -> None:
         swing_guard(rig).check(probe_path(9.5e-3))
     line = str(e.value)
     assert line.startswith("arm 'probe': arm 'other' may be anywhere along a move (a move of it claims its joint 2)")
-    # its first problem: the tip 1 mm from the arc's middle (+1 mm), at joint 3 = 9 mm, 95% along the path
-    assert "the path reaches the edge of the 1000.0" in line and "95% along the path" in line, line
-    assert "q = (0.000 deg, -90.000 deg, 8999.9 µm)" in line, line
+    # named: a pose of the path just past its first problem (joint 3 at 9 mm: the tip 1 mm from the arc's middle,
+    # +1 mm), and its distance from a pose the other arm may take (closer than allowed: so refused)
+    m = re.search(r"the path comes ([0-9.]+) µm from 'arm other', closer than the 1000.00 µm allowed at .* "
+                  r"(9[0-9])% along the path, q = \(0.000 deg, -90.000 deg, ([0-9.]+) µm\)", line)
+    assert m is not None, line
+    assert float(m[1]) < 1000.0 and 9000.0 <= float(m[3]) <= 9100.0, line
 
 
 def independent_boundary(rig: Rig) -> float:

@@ -924,59 +924,68 @@ def _units(arm: Arm) -> tuple[str, str, str]:
 
 
 _SWEEP_ROUNDS = 200  # checks of one path against other arms' swept boxes, as they are cut finer
-_SWEEP_CELLS = 20000  # boxes at most: beyond, the coarser bound's refusal stands (refused: safe)
+_SWEEP_CELLS = 1000  # boxes at most (a check slows with their links): beyond, the refusal at the coarser bound
+# stands (refused: safe). A path starting near a swept set of two joints took 15794 links and 17 s to cut; 2.3 s here
+_WITNESSES = 65  # poses of the rest of a path tried against the boxes' centres after a refusal at a bound
 
 
 def _check_swept(rig: Rig, arm: Arm, cells: list[_Cell], path: Array, tol: float, margins: _Margins,
                  pose_only: bool = False) -> tuple[float, Refusal | None]:
     """:func:`_check` against other arms over boxes of poses (:class:`_Cell`), each box cut until the path is shown
-    clear of it or refused: a refusal whose pose comes within a box's bound, but not closer than allowed to the
-    pose at its centre, cuts every such box coarser than ``tol`` and checks again. One pose per arm: one check.
+    clear of it or refused: a refusal at a box's bound cuts every box coarser than ``tol`` the refused pose comes
+    near, and the path is checked again. One pose per arm: one check.
 
-    A refusal stands when its pose comes closer than allowed to a pose of a box (its centre; the refusal then
-    names that distance), or within ``tol`` of a box's swept set. Cutting never makes a path's first problem
-    come earlier (the cut boxes' bounds lie within the whole box's), so the refused pose is its first problem.
+    A refusal stands when the path comes closer than allowed to a pose of a box (its centre) at or after the
+    refused pose (:func:`_witness`: that pose and distance are named, and the fraction returned is the refused
+    pose's, where the path is shown clear up to), or within ``tol`` of a box's swept set. Cutting never makes a
+    path's first problem come earlier (the cut boxes' bounds lie within the whole box's).
     """
     frac, refusal = 1.0, None
     for _ in range(_SWEEP_ROUNDS):
         obs = _obstacles(rig, arm, cells)
         frac, refusal = _check(arm, obs, path, tol, margins, pose_only)
-        if refusal is None or refusal.point is None:
+        if refusal is None or refusal.point is None or not any(c.pad > 0.0 for c in cells):
             return frac, refusal
-        near, inside = _near_cells(arm, obs, cells, refusal, tol)
-        if inside is not None:  # closer than allowed to a pose the other arm may take: refused, that distance named
-            k, cell = inside
-            one = _obstacles(rig, arm, [_Cell(cell.arm, cell.centre, cell.centre)])
-            r = _refusal(arm, one, np.asarray(refusal.q, dtype=float), len(one.volumes) + k, refusal.fraction,
-                         False, refusal.sigma)
-            return frac, dataclasses.replace(r, start=refusal.start)
+        if not refusal.start:  # (a start in a margin: cut first, the way out is judged against the finer boxes)
+            seen = _witness(rig, arm, cells, path, refusal.fraction, margins)
+            if seen is not None:
+                return frac, seen
+        near = _near_cells(arm, obs, cells, refusal, tol)
         if not near or len(cells) + (_SPLIT - 1) * len(near) > _SWEEP_CELLS:
             return frac, refusal
         cells = [c for i, c in enumerate(cells) if i not in near] + [p for i in sorted(near) for p in cells[i].split()]
     return frac, refusal
 
 
-def _near_cells(
-    arm: Arm, obs: _Obstacles, cells: list[_Cell], refusal: Refusal, tol: float
-) -> tuple[set[int], tuple[int, _Cell] | None]:
-    """At the refused pose: the boxes to cut, and a box it is closer than allowed to the centre of (``None``: none).
+def _witness(rig: Rig, arm: Arm, cells: list[_Cell], path: Array, fraction: float,
+             margins: _Margins) -> Refusal | None:
+    """The first of ``_WITNESSES`` poses from ``fraction`` of the path to its end closer than allowed (σ margin
+    included) to another arm at a box's centre, refused there (``None``: none of them is)."""
+    n = len(path) - 1
+    s = np.linspace(fraction * n, float(n), _WITNESSES)
+    q = _pose(path, s)
+    at = margins.at(s, q)
+    obs = _obstacles(rig, arm, [_Cell(c.arm, c.centre, c.centre) for c in cells])
+    nv = len(obs.volumes)
+    c = _link_clearances(arm, obs, q, 0.0)[:, :, nv:].min(axis=1) - at[:, None]  # (poses, other arms' links)
+    bad = np.flatnonzero(np.any(c < 0.0, axis=1))
+    if not len(bad):
+        return None
+    i = int(bad[0])
+    return _refusal(arm, obs, q[i], nv + int(np.argmin(c[i])), float(s[i]) / n, False, float(at[i]))
 
-    A box is cut (if coarser than ``tol``) when the pose's clearance from its bound is less than the bound itself,
-    or than ``2 tol`` (an undecided stretch, whose σ margin is bounded over the stretch). The box found closer
-    than allowed comes with its link's index among that arm's links.
-    """
+
+def _near_cells(arm: Arm, obs: _Obstacles, cells: list[_Cell], refusal: Refusal, tol: float) -> set[int]:
+    """The boxes coarser than ``tol`` to cut at the refused pose: whose bound's clearance there is less than the
+    bound itself, or than ``2 tol`` (an undecided stretch, whose σ margin is bounded over the stretch)."""
     if not len(obs.others):
-        return set(), None
+        return set()
     q = np.asarray(refusal.q, dtype=float)[None, :]
     nv = len(obs.volumes)
     c = _link_clearances(arm, obs, q, np.inf)[0, :, nv:].min(axis=0) - refusal.sigma  # exact distances
     pads = np.array([cells[i].pad for i in obs.owner])
-    centre = c + pads  # the clearance from the links at the box's centre, allowed without the bound
-    if not refusal.start and np.any(pads > 0.0) and np.min(centre) < 0.0:  # (a start in a margin: cut first)
-        k = int(np.argmin(centre))
-        return set(), (k - obs.owner.index(obs.owner[k]), cells[obs.owner[k]])
-    near = c < np.maximum(pads, 2.0 * tol) + _NOISE  # within its bound's extra: cut, it may be clear when finer
-    return {obs.owner[k] for k in np.flatnonzero(near) if cells[obs.owner[k]].pad > tol}, None
+    near = c < np.maximum(pads, 2.0 * tol) + _NOISE
+    return {obs.owner[k] for k in np.flatnonzero(near) if cells[obs.owner[k]].pad > tol}
 
 
 def _prepare(
