@@ -146,8 +146,10 @@ def test_a_re_reference_clears_a_claim_left_behind(rig: Rig, tmp_path: Path) -> 
     s = load_state(store, key, specs)
     s.claim_path([[0.0, -1.5, 0.0], [0.0, -1.5, 9e-3]])  # a process that ended without taking it back
     save_state(store, s)
+    # rig52: the probe is kept from the claimed sweep (not refused outright), so the refused move is the one into
+    # it (9 mm: both tips at (0, 0, 0)); a 1 mm move, 8 mm clear of the sweep, was refused here before rig52
     with pytest.raises(MoveRefused, match="a move of it claims its joint 3 between 0 µm and 9000 µm"):
-        arm_move(store, rig, "probe", by=1e-3)
+        arm_move(store, rig, "probe", by=9e-3)
     s = load_state(store, key, specs)
     s.set_position(3, 0.0, "set")
     save_state(store, s)
@@ -264,8 +266,13 @@ def test_an_interrupted_move_takes_its_claim_back_and_stays_uncertain(rig: Rig, 
     assert not kept.claim and 3 in kept.uncertain
     lo, hi = kept.uncertain[3]
     assert 0.0 < lo < hi < 3e-3  # the second burst's range only, not the whole move's
-    with pytest.raises(MoveRefused, match="its joint 3 is in flight or uncertain"):
-        arm_move(store, rig, "other", by=1e-3)
+    # rig52: the other arm is kept from the probe's uncertain stretch, not from the whole claim (which is gone);
+    # its 1 mm move (its tip 14 mm or more from the probe's) was refused here before rig52, and goes now
+    guard = guard_for(store, rig, "other")
+    assert "its joint 3 is in flight or uncertain" in guard.unknown["probe"]
+    assert guard.swept["probe"][2] == (lo, hi)
+    assert [guard.swept["probe"][j] for j in (0, 1)] == [(kept.positions[j], kept.positions[j]) for j in (1, 2)]
+    assert arm_move(store, rig, "other", by=1e-3).outcome.error is None
 
 
 def test_a_jog_stops_when_another_arm_starts_to_move() -> None:

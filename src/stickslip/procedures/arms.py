@@ -35,22 +35,33 @@ __all__ = [
 
 def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
     """The envelope of ``arm`` (the rig's first for ``None``): the rig, and every other arm's kept pose; an arm
-    uncertain, in flight or claimed by a move is unknown (any path refused). Its ``fresh`` reads them again."""
+    uncertain, in flight or claimed by a move is unknown, and kept from over its box: each joint anywhere between
+    its kept value, its uncertain bounds and its claim. Its ``fresh`` reads them again."""
     me = rig.arm(arm)
-    others, unknown = {}, {}
+    others: dict[str, list[float]] = {}
+    unknown: dict[str, str] = {}
+    swept: dict[str, list[tuple[float, float]]] = {}
     for other in rig.arms:
         if other.name != me.name:
             s = load_state(store, rig.state_key(other.name), other.joint_specs())
             others[other.name] = [s.positions[j] for j in (1, 2, 3)]
-            if s.uncertain:  # a burst in flight (the journal's mark) or one interrupted: anywhere over its bounds
-                j = min(s.uncertain)
-                lo, hi = (format_position(v, s.spec(j)) for v in s.uncertain[j])
-                unknown[other.name] = f"its joint {j} is in flight or uncertain, between {lo} and {hi}"
-            elif s.claim:  # a move of it has claimed its range ("mark, then check"), from its start to its end
+            if s.claim:  # a move of it has claimed its range ("mark, then check"), from its start to its end
                 j = min(s.claim)
                 lo, hi = (format_position(v, s.spec(j)) for v in s.claim[j])
                 unknown[other.name] = f"a move of it claims its joint {j} between {lo} and {hi} until it ends"
-    return Guard(rig, me.name, others, unknown, fresh=lambda: guard_for(store, rig, me.name))
+            elif s.uncertain:  # a burst interrupted (or in flight): anywhere over its bounds
+                j = min(s.uncertain)
+                lo, hi = (format_position(v, s.spec(j)) for v in s.uncertain[j])
+                unknown[other.name] = f"its joint {j} is in flight or uncertain, between {lo} and {hi}"
+            if other.name in unknown:
+                swept[other.name] = [_hull(s.positions[j], s.uncertain.get(j), s.claim.get(j)) for j in (1, 2, 3)]
+    return Guard(rig, me.name, others, unknown, fresh=lambda: guard_for(store, rig, me.name), swept=swept)
+
+
+def _hull(q: float, *ranges: tuple[float, float] | None) -> tuple[float, float]:
+    """The least range (rad or m) holding ``q`` and each of ``ranges``."""
+    values = [q, *(v for r in ranges if r is not None for v in r)]
+    return min(values), max(values)
 
 
 def opener_for(
