@@ -27,6 +27,7 @@ The *average step over a traverse* from ``start`` to ``end`` is
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -278,6 +279,9 @@ class JointModel:
     direction: str
     params: Params
 
+    def __post_init__(self) -> None:
+        _check_joint_model(self.joint, self.direction, self.params)
+
     def gamma(
         self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
     ) -> NDArray[np.float64]:
@@ -324,6 +328,21 @@ class JointModel:
         n = steps_between(start, end, A, al, be)
         out: NDArray[np.float64] = np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)) / n
         return out
+
+
+def _check_joint_model(joint: object, direction: object, params: object) -> None:
+    """Refuse a joint, direction or parameter kind that the model would use silently (a rotary joint's
+    parameters on joint 3 gave a step in "m" from values in rad)."""
+    if isinstance(joint, bool) or not isinstance(joint, numbers.Integral) or joint not in (1, 2, 3):
+        raise ValueError(f"JointModel: joint = {joint!r} must be 1, 2 or 3")
+    if direction not in DIRECTIONS or not isinstance(direction, str):
+        raise ValueError(f"JointModel: direction = {direction!r} must be '+' or '-'")
+    want = PrismaticParams if joint == 3 else RotaryParams
+    if isinstance(params, PrismaticParams | RotaryParams) and not isinstance(params, want):
+        raise ValueError(
+            f"JointModel: joint {joint} takes {want.__name__} (its step in {'m' if joint == 3 else 'rad'}), "
+            f"got {type(params).__name__}"
+        )
 
 
 # ---------------------------------------------------------------- traverse integrals
