@@ -3,9 +3,12 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from pathlib import Path
 
 import pytest
 
+from stickslip.measurements import TableError, Traverse, measurements_to_csv, read_measurements, write_measurements
 from stickslip.models import JointModel, PrismaticParams, RotaryParams
 
 ROT = RotaryParams((52.0e-6, 47.0e-6), (-8.15e-6, -19.40e-6))
@@ -33,3 +36,33 @@ def test_joint_model_refuses_a_joint_direction_or_params_that_do_not_fit(
 def test_joint_model_accepts_the_paper_s_pairs() -> None:
     assert JointModel(3, "-", PRISM).gamma(0.0, -math.pi / 2, 0.0, 0.0, 0.0) == pytest.approx(972e-9 - 372e-9 * 0.0)
     assert JointModel(1, "+", ROT).joint == 1
+
+
+GOOD = Traverse("2026-11-30", 2, "+", 0.0, -1.0, 0.0, 0.0, 0.0, -1.5, 0.3, 1000)
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "named"),
+    [
+        ("theta", 30.0, "theta = 30 rad"),  # degrees: written, then refused by read_measurements
+        ("steps", 0, "steps"),
+        ("steps", -3, "steps"),  # gamma was -0.67 rad
+        ("direction", "x", "direction must be"),
+        ("joint", 5, "joint must be"),
+        ("start", math.nan, "start must be"),
+        ("day", "", "day"),
+    ],
+)
+def test_write_measurements_refuses_a_traverse_it_could_not_read_back(
+    tmp_path: Path, field: str, value: object, named: str
+) -> None:
+    path = tmp_path / "m.csv"
+    write_measurements(path, [GOOD])
+    before = path.read_text()
+    bad = replace(GOOD, **{field: value})
+    with pytest.raises(TableError, match=f"traverse 1: .*{named}"):
+        write_measurements(path, [GOOD, bad])
+    assert path.read_text() == before  # the old file is kept
+    with pytest.raises(TableError, match=named):
+        measurements_to_csv([bad])
+    assert read_measurements(path) == [GOOD]

@@ -18,7 +18,7 @@ from ..clock import day_label_problem
 from ..joints import JointSet
 from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, text_lines, unguard_cell
 from .chunks import _Chunk, _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
-from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, check_header, parse_row
+from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, _value_problems, check_header, parse_row
 
 
 @dataclass(frozen=True, eq=False)
@@ -332,14 +332,20 @@ def _csv_rows(traverses: Iterable[Traverse]) -> Iterator[tuple[Any, ...]]:
 
     A label such as ``=HYPERLINK(...)`` is written ``'=HYPERLINK(...)`` (records.guard_cell);
     every other cell is a number or a direction, left as it is. Labels are few: each is
-    guarded once.
+    guarded once. A traverse that could not be read back (:func:`~.rows.traverse_problems`:
+    steps 0, a tilt in degrees, a direction ``"x"``) raises :class:`TableError`.
     """
     rest = operator.attrgetter(*HEADER[1:])
     guarded: dict[str, str] = {}
-    for t in traverses:
+    for i, t in enumerate(traverses):
         day = guarded.get(t.day)
         if day is None:
+            # (a label from before the spreadsheet-date rule is still exported: the store may hold one)
+            if (why := day_label_problem(str(t.day), spreadsheet_dates=False)) is not None:
+                raise TableError([f"traverse {i}: day: {why} (nothing written)"])
             day = guarded[t.day] = guard_cell(str(t.day))
+        if problems := _value_problems(t):
+            raise TableError([f"traverse {i}: {p} (nothing written)" for p in problems])
         yield (day, *rest(t))
 
 
@@ -356,7 +362,9 @@ def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
     """Write a measurement table to a CSV file, row by row as ``traverses`` yields them.
 
     Streamed (an iterator of a million stored traverses is never held as text); the
-    file appears only when complete: a failed write keeps the old file.
+    file appears only when complete: a failed write keeps the old file. Raises
+    :class:`TableError` naming the first traverse that :func:`read_measurements` would refuse
+    whatever the arm (:func:`traverse_problems`), so every file written reads again.
     """
 
     def write(f: TextIO) -> None:
