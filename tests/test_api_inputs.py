@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import math
+import warnings
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from stickslip.measurements import TableError, Traverse, measurements_to_csv, read_measurements, write_measurements
-from stickslip.models import JointModel, PrismaticParams, RotaryParams
+from stickslip.models import JointModel, PrismaticParams, RotaryParams, StepProfile, position_after_steps, steps_between
 
 ROT = RotaryParams((52.0e-6, 47.0e-6), (-8.15e-6, -19.40e-6))
 PRISM = PrismaticParams(972e-9, 0.27, 372e-9)
@@ -66,3 +71,46 @@ def test_write_measurements_refuses_a_traverse_it_could_not_read_back(
     with pytest.raises(TableError, match=named):
         measurements_to_csv([bad])
     assert read_measurements(path) == [GOOD]
+
+
+@pytest.mark.parametrize(
+    ("call", "named"),
+    [
+        (lambda: steps_between(math.nan, 1.0, 1e-5), "start"),  # was array(nan)
+        (lambda: steps_between(0.0, math.inf, 1e-5), "end"),  # was array(inf)
+        (lambda: steps_between(0.0, 1.0, math.nan), "A"),
+        (lambda: steps_between(np.array([0.0, math.nan]), 1.0, 1e-5), "start"),  # was [1e5, nan]
+        (lambda: steps_between(0.0, 1.0, 5e-5, math.nan), "alpha"),
+        (lambda: position_after_steps(0.0, math.nan, 1, 1e-5), "n_steps"),  # was nan
+        (lambda: position_after_steps(0.0, -10, 1, 1e-5), "n_steps"),  # was -1e-4: backwards
+        (lambda: position_after_steps(math.inf, 10, 1, 1e-5), "start"),
+        (lambda: StepProfile(1e-5).inverse(0.0, 3, 5), "sign"),  # was 1.5e-4: five times as far
+        (lambda: StepProfile(1e-5).inverse(0.0, -3, 1), "n_steps"),
+        (lambda: StepProfile(1e-5).steps(0.0, math.nan), "end"),
+        (lambda: StepProfile(math.nan), "A"),
+    ],
+)
+def test_step_integrals_refuse_a_non_finite_value_or_a_bad_count(call: Callable[[], object], named: str) -> None:
+    with pytest.raises(ValueError, match=named):
+        call()
+
+
+_floats = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.sampled_from([0.0, 1e-5, -1e-5, 1.0]))
+
+
+@settings(deadline=None)  # the first call imports scipy
+@given(_floats, _floats, _floats, _floats, _floats, st.booleans())
+def test_steps_between_is_a_finite_count_or_a_value_error(
+    start: float, end: float, A: float, alpha: float, beta: float, arrays: bool
+) -> None:
+    """Found by this test: (0, 0, 4e-110, 0, 1) gave nan (a zero-length traverse at a near-stall), (0, 1, 4e-179,
+    0, 1) nan (the log form within rounding of a stall), (0, 4e156, 2e-152) inf."""
+    args = [np.asarray([x]) if arrays else x for x in (start, end, A, alpha, beta)]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # scipy's quadrature may warn on a huge interval
+            n = float(np.asarray(steps_between(*args)).ravel()[0])
+    except ValueError:
+        return
+    assert math.isfinite(n)
+    assert n >= 0.0

@@ -433,6 +433,8 @@ class StepProfile:
 
     def __init__(self, A: float, alpha: float = 0.0, beta: float = 0.0):
         self.A, self.alpha, self.beta = float(A), float(alpha), float(beta)
+        if not (math.isfinite(self.A) and math.isfinite(self.alpha) and math.isfinite(self.beta)):
+            _check_finite(A=self.A, alpha=self.alpha, beta=self.beta)
         self.B = math.hypot(alpha, beta)
         self.phi = math.atan2(alpha, beta)
         if self.B <= 1e-13 * abs(self.A):
@@ -455,6 +457,8 @@ class StepProfile:
 
     def steps(self, q0: float, q1: float) -> float:
         """Real-valued number of steps from ``q0`` to ``q1`` (>= 0)."""
+        if not (math.isfinite(q0) and math.isfinite(q1)):  # nan steps (or inf) for a position
+            _check_finite(start=q0, end=q1)
         if self.kind == "const":
             if not self.A > 0:
                 raise NonPhysicalError(f"step size {self.A:.3g} <= 0: the joint cannot move")
@@ -464,7 +468,12 @@ class StepProfile:
         return float(_steps_between_arrays(q0, q1, self.A, self.alpha, self.beta))
 
     def inverse(self, q0: float, n: float, sign: int) -> float:
-        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``)."""
+        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``).
+
+        ``n`` >= 0 steps, ``sign`` +1 or -1 (a sign of 5 went 5 times as far, n < 0 backwards).
+        """
+        if sign not in (1, -1) or not (n >= 0.0 and math.isfinite(n) and math.isfinite(q0)):
+            _check_steps(q0, n, sign)
         if self.kind == "const":
             if not self.A > 0:  # (steps refuses the same; a negative step would dead-reckon backwards)
                 raise NonPhysicalError(f"step size {self.A:.3g} <= 0: the joint cannot move")
@@ -494,6 +503,22 @@ class StepProfile:
         return q
 
 
+def _check_finite(**values: float) -> None:
+    """ValueError naming the first argument that is not a finite number (a nan gave nan steps, silently)."""
+    for name, v in values.items():
+        if not math.isfinite(v):
+            raise ValueError(f"{name} = {v!r} must be a finite number (m or rad)")
+
+
+def _check_steps(start: float, n_steps: float, sign: object) -> None:
+    """ValueError for a dead reckoning that is not ``n_steps >= 0`` steps from a finite ``start`` in ``sign``."""
+    if sign not in (1, -1):
+        raise ValueError(f"sign = {sign!r} must be +1 or -1")
+    if not (n_steps >= 0.0 and math.isfinite(n_steps)):
+        raise ValueError(f"n_steps = {n_steps!r} must be a finite number >= 0 (the direction gives the sign)")
+    _check_finite(start=start)
+
+
 def steps_between(
     start: ArrayLike,
     end: ArrayLike,
@@ -508,7 +533,8 @@ def steps_between(
     (``A > sqrt(alpha^2 + beta^2)``), the logarithmic one where it is positive only
     along the traverse. Raises :class:`NonPhysicalError` if the step is <= 0
     somewhere on the way (the joint would stall). Agrees with adaptive quadrature
-    (:func:`steps_between_quad`) to ~1e-12 relative. Scalars take a pure-``math`` path.
+    (:func:`steps_between_quad`) to ~1e-12 relative. Scalars take a pure-``math`` path. A value
+    that is not finite raises ``ValueError`` naming it (it gave nan steps).
     """
     if (
         isinstance(start, float | int)
@@ -517,7 +543,10 @@ def steps_between(
         and isinstance(alpha, float | int)
         and isinstance(beta, float | int)
     ):
-        return np.asarray(StepProfile(float(A), float(alpha), float(beta)).steps(float(start), float(end)))
+        n = StepProfile(float(A), float(alpha), float(beta)).steps(float(start), float(end))
+        if not math.isfinite(n):  # (the arrays' path refuses the same)
+            raise NonPhysicalError(f"{n} steps from {start!r} to {end!r} with a step of {A!r}: no count a float holds")
+        return np.asarray(n)
     return _steps_between_arrays(start, end, A, alpha, beta)
 
 
@@ -527,6 +556,10 @@ def _steps_between_arrays(
     start, end, A, alpha, beta = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta))
     )
+    for name, x in (("start", start), ("end", end), ("A", A), ("alpha", alpha), ("beta", beta)):
+        if not np.all(np.isfinite(x)):
+            bad = x[~np.isfinite(x)].ravel()[0]
+            raise ValueError(f"{name} holds {bad!r}: it must be finite (m or rad)")
     B = np.hypot(alpha, beta)
     out = np.empty(start.shape, dtype=float)
     closed = A > B * (1.0 + 1e-12)
@@ -551,6 +584,10 @@ def _steps_between_arrays(
         for i in np.nonzero(~logform)[0]:  # A == B to 1e-12: rare; quadrature
             vals[i] = steps_between_quad(float(lo[i]), float(hi[i]), float(a[i]), float(al[i]), float(be[i]))
         out[rest] = vals
+    out[start == end] = 0.0  # no travel: the log form gave -inf - -inf = nan where the step is near zero there
+    if not np.all(np.isfinite(out)):  # a step within rounding of zero on the way (1e-179 rad beside 1): a stall
+        raise NonPhysicalError("the step size comes within rounding of zero along the traverse (or the count "
+                               "overflows): the joint would stall")
     return out
 
 
@@ -632,10 +669,14 @@ def position_after_steps(
     """Dead reckoning: where a joint ends after ``n_steps`` steps from ``start`` in ``direction``.
 
     Solves ``integral_start^q dq / gamma = n_steps`` for ``q`` (monotone, so a bracketed
-    root find on the closed form). ``gamma(q) = A + alpha cos q + beta sin q`` > 0.
+    root find on the closed form). ``gamma(q) = A + alpha cos q + beta sin q`` > 0; ``start``,
+    ``A``, ``alpha``, ``beta`` in m (joint 3) or rad; ``n_steps`` >= 0 (``direction`` gives the
+    sign: ``"+"``/``"-"`` or +1/-1). A value that is not finite raises ``ValueError``.
     """
     start, n_steps, A, alpha, beta = (float(x) for x in (start, n_steps, A, alpha, beta))
     direction = direction_sign(direction)
+    _check_steps(start, n_steps, direction)
+    _check_finite(A=A, alpha=alpha, beta=beta)
     if n_steps == 0:
         return start
     B = math.hypot(alpha, beta)
