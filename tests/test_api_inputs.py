@@ -114,3 +114,16 @@ def test_steps_between_is_a_finite_count_or_a_value_error(
         return
     assert math.isfinite(n)
     assert n >= 0.0
+
+
+@pytest.mark.parametrize("knots", [(0.0, 12.0), (0.0, 0.0), (math.nan, 0.012), (0.0, math.inf)])
+def test_rotary_params_refuse_knots_in_mm_equal_or_not_finite(knots: tuple[float, float]) -> None:
+    # (0, 12): at q3 = 12 mm the model used the q3 = 0 values (0.1 % of the way); (0, 0): nan steps
+    with pytest.raises(ValueError, match=r"knots = \("):
+        RotaryParams((52.0e-6, 47.0e-6), (-8.15e-6, -19.40e-6), knots)
+
+
+def test_rotary_params_interpolate_between_the_paper_s_knots() -> None:
+    g0, d = ROT.at(0.006)
+    assert float(g0) == pytest.approx(49.5e-6)
+    assert float(d) == pytest.approx((-8.15e-6 - 19.40e-6) / 2)

@@ -86,6 +86,11 @@ def direction_label(sign: int | str) -> str:
     return "+" if direction_sign(sign) > 0 else "-"
 
 
+_MAX_KNOT = 1.0
+"""Largest |q3| of a rotary model's knot, m: no micromanipulator's joint 3 extends a metre, so a knot beyond it is
+a unit slip (knots (0, 12) for 0 and 12 mm interpolated as if 12 m: the q3 = 12 mm values were never reached)."""
+
+
 class NonPhysicalError(ValueError):
     """A parameter set that would give a step size <= 0 somewhere, or b outside [0, 1)."""
 
@@ -226,6 +231,18 @@ class RotaryParams:
     knots: tuple[float, float] = field(default=(0.0, kin.Q3_MAX))
 
     kind = "rotary"
+
+    def __post_init__(self) -> None:
+        k = self.knots
+        if (
+            len(k) != 2
+            or not all(isinstance(x, numbers.Real) and math.isfinite(x) and abs(x) <= _MAX_KNOT for x in k)
+            or k[0] == k[1]
+        ):
+            raise ValueError(
+                f"RotaryParams: knots = {k!r} must be two different q3 values in m within ±{_MAX_KNOT:g} m "
+                f"(the paper's are 0 and {kin.Q3_MAX:g} m; 12 is 12 m, not 12 mm)"
+            )
 
     def at(self, q3: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(gamma0, d)`` at extension ``q3`` (m), interpolated linearly."""
