@@ -14,7 +14,16 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from stickslip.measurements import TableError, Traverse, measurements_to_csv, read_measurements, write_measurements
-from stickslip.models import JointModel, PrismaticParams, RotaryParams, StepProfile, position_after_steps, steps_between
+from stickslip.models import (
+    JointModel,
+    NonPhysicalError,
+    PrismaticParams,
+    RotaryParams,
+    StepProfile,
+    position_after_steps,
+    steps_between,
+)
+from stickslip.sim.arm import NOMINAL
 
 ROT = RotaryParams((52.0e-6, 47.0e-6), (-8.15e-6, -19.40e-6))
 PRISM = PrismaticParams(972e-9, 0.27, 372e-9)
@@ -127,3 +136,21 @@ def test_rotary_params_interpolate_between_the_paper_s_knots() -> None:
     g0, d = ROT.at(0.006)
     assert float(g0) == pytest.approx(49.5e-6)
     assert float(d) == pytest.approx((-8.15e-6 - 19.40e-6) / 2)
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        PrismaticParams(972.0, 0.27, 372.0),  # nm written as m: accepted, every plan a billionth of its steps
+        PrismaticParams(0.972, 0.27, 0.372),  # mm written as m
+        RotaryParams((52.0, 47.0), (-8.15, -19.40)),  # µrad written as rad
+    ],
+)
+def test_check_physical_refuses_a_step_longer_than_the_joint_s_travel(params: PrismaticParams | RotaryParams) -> None:
+    with pytest.raises(NonPhysicalError, match="a step longer than"):
+        params.check_physical()
+
+
+def test_check_physical_accepts_the_simulator_s_nominal_parameters() -> None:
+    for params in NOMINAL.values():
+        params.check_physical()

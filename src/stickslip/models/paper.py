@@ -196,13 +196,19 @@ class PrismaticParams:
         return cls(a, b, c)
 
     def check_physical(self) -> None:
-        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose.
+        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose, and shorter than
+        joint 3's whole stroke (a step in nm or µm given as a number of m).
 
         "> 0" with a relative margin: ``a - |c|`` more than :data:`STALL_RATIO` of ``a + |c|`` (a step zero to
         rounding is a stall, not a count of 1e15).
         """
         if not (0.0 <= self.b < 1.0) or not math.isfinite(self.b):
             raise NonPhysicalError(f"b = {self.b:.4g} is outside [0, 1): the efficiency 1 - b|cos q2| would be <= 0")
+        if not self.a + abs(self.c) < kin.Q3_MAX:  # a = 972 meant as nm: every plan 1e-9 of its steps
+            raise NonPhysicalError(
+                f"a + |c| = {self.a + abs(self.c):.4g} m: a step longer than joint 3's whole stroke "
+                f"({kin.Q3_MAX * 1e3:g} mm); a and c are in m (972 nm is 972e-9)"
+            )
         if not self.a - abs(self.c) > STALL_RATIO * (self.a + abs(self.c)):
             raise NonPhysicalError(
                 f"a - |c| = {(self.a - abs(self.c)) * 1e9:.4g} nm, not more than {STALL_RATIO:g} of a + |c|: "
@@ -261,13 +267,20 @@ class RotaryParams:
         return cls((g00, g01), (d0, d1), knots)
 
     def check_physical(self, load_bound: float = 1.0) -> None:
-        """Raise :class:`NonPhysicalError` unless the step is > 0 for every |load| <= ``load_bound``.
+        """Raise :class:`NonPhysicalError` unless the step is > 0 for every |load| <= ``load_bound``, and shorter
+        than a rotary joint's whole range (a step in µrad given as a number of rad).
 
         ``gamma0 - |d|`` is concave in q3 between the knots, so checking the knots
         covers the whole stroke. "> 0" with a relative margin: more than :data:`STALL_RATIO` of
         ``gamma0 + |d|`` (a step zero to rounding is a stall, not a count of 1e15).
         """
         for k, g0, d in zip(self.knots, self.gamma0, self.d, strict=True):
+            if not g0 + abs(d) * load_bound < kin.ROTARY_SPAN:  # 52 meant as µrad: every plan 1e-6 of its steps
+                raise NonPhysicalError(
+                    f"at q3 = {k * 1e3:g} mm, gamma0 + |d| = {g0 + abs(d) * load_bound:.4g} rad: a step longer than "
+                    f"a rotary joint's whole range ({kin.ROTARY_SPAN:.4g} rad); gamma0 and d are in rad "
+                    "(52 µrad is 52e-6)"
+                )
             if not g0 - abs(d) * load_bound > STALL_RATIO * (abs(g0) + abs(d) * load_bound):
                 raise NonPhysicalError(
                     f"at q3 = {k * 1e3:g} mm, gamma0 - |d| = {(g0 - abs(d) * load_bound) * 1e6:.4g} µrad, not more "
