@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from stickslip.measurements import TableError, Traverse, measurements_to_csv, read_measurements, write_measurements
+from stickslip.measurements import TableError, Traverse, read_measurements, write_measurements
 from stickslip.models import (
     JointModel,
     NonPhysicalError,
@@ -77,8 +77,6 @@ def test_write_measurements_refuses_a_traverse_it_could_not_read_back(
     with pytest.raises(TableError, match=f"traverse 1: .*{named}"):
         write_measurements(path, [GOOD, bad])
     assert path.read_text() == before  # the old file is kept
-    with pytest.raises(TableError, match=named):
-        measurements_to_csv([bad])
     assert read_measurements(path) == [GOOD]
 
 
@@ -154,3 +152,23 @@ def test_check_physical_refuses_a_step_longer_than_the_joint_s_travel(params: Pr
 def test_check_physical_accepts_the_simulator_s_nominal_parameters() -> None:
     for params in NOMINAL.values():
         params.check_physical()
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "named"),
+    [
+        ("theta", -90.0, "traverse 1: theta = -90 rad"),  # a day in degrees was fitted, silently
+        ("steps", 0, "traverse 1: steps"),  # was a ZeroDivisionError 8 frames deep
+        ("end", math.nan, "traverse 1: end must be"),
+    ],
+)
+def test_calibrate_refuses_a_traverse_that_could_not_be_a_table_row(field: str, value: object, named: str) -> None:
+    from stickslip.calibration import calibrate
+    from stickslip.calibration.groups import TraverseGroups
+
+    rows = [GOOD, replace(GOOD, **{field: value})]
+    with pytest.raises(TableError, match=named) as e:
+        calibrate(rows, method="lsq")
+    assert "written" not in str(e.value)
+    with pytest.raises(TableError, match=named):
+        TraverseGroups(rows)  # what calibrate_paper / calibrate_lsq / the families take

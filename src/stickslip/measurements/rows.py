@@ -313,6 +313,28 @@ def traverse_problems(t: Traverse) -> list[str]:
     return ([f"day: {why}"] if why is not None else []) + _value_problems(t)
 
 
+def check_traverses(traverses: Sequence[Traverse], limit: int = 20) -> None:
+    """Raise :class:`TableError` naming each traverse (by its index) that :func:`traverse_problems` refuses.
+
+    What a calibration checks before it fits (a tilt in degrees, steps 0, a nan): rows built in
+    Python, not read from a table, were fitted as they were. The session label is checked once
+    per label, without the spreadsheet-date rule (a label stored before it is still fitted);
+    at most ``limit`` lines.
+    """
+    problems: list[str] = []
+    labels: dict[object, str | None] = {}
+    for i, t in enumerate(traverses):
+        if t.day not in labels:
+            labels[t.day] = day_label_problem(str(t.day), spreadsheet_dates=False)
+        why = labels[t.day]
+        for p in ([f"day: {why}"] if why is not None else []) + _value_problems(t):
+            problems.append(f"traverse {i}: {p}")
+        if len(problems) >= limit:
+            break
+    if problems:
+        raise TableError(problems[:limit])
+
+
 def _value_problems(t: Traverse) -> list[str]:
     """:func:`traverse_problems` but the session label's (checked once per label where a table is written)."""
     problems = []

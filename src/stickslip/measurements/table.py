@@ -327,13 +327,14 @@ def read_measurement_table(path: str | Path) -> TraverseTable:
     return parse_measurement_table(_read_table_text(path), str(path))
 
 
-def _csv_rows(traverses: Iterable[Traverse]) -> Iterator[tuple[Any, ...]]:
+def _csv_rows(traverses: Iterable[Traverse], checked: bool = False) -> Iterator[tuple[Any, ...]]:
     """The rows a table is written with: the session label guarded against spreadsheet formulas.
 
     A label such as ``=HYPERLINK(...)`` is written ``'=HYPERLINK(...)`` (records.guard_cell);
     every other cell is a number or a direction, left as it is. Labels are few: each is
-    guarded once. A traverse that could not be read back (:func:`~.rows.traverse_problems`:
-    steps 0, a tilt in degrees, a direction ``"x"``) raises :class:`TableError`.
+    guarded once. ``checked``: a traverse that could not be read back
+    (:func:`~.rows.traverse_problems`: steps 0, a tilt in degrees, a direction ``"x"``) raises
+    :class:`TableError`.
     """
     rest = operator.attrgetter(*HEADER[1:])
     guarded: dict[str, str] = {}
@@ -341,16 +342,20 @@ def _csv_rows(traverses: Iterable[Traverse]) -> Iterator[tuple[Any, ...]]:
         day = guarded.get(t.day)
         if day is None:
             # (a label from before the spreadsheet-date rule is still exported: the store may hold one)
-            if (why := day_label_problem(str(t.day), spreadsheet_dates=False)) is not None:
+            if checked and (why := day_label_problem(str(t.day), spreadsheet_dates=False)) is not None:
                 raise TableError([f"traverse {i}: day: {why} (nothing written)"])
             day = guarded[t.day] = guard_cell(str(t.day))
-        if problems := _value_problems(t):
+        if checked and (problems := _value_problems(t)):
             raise TableError([f"traverse {i}: {p} (nothing written)" for p in problems])
         yield (day, *rest(t))
 
 
 def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
-    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them)."""
+    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them).
+
+    Unchecked (a calibration's table hash, a test's hostile table): :func:`write_measurements` refuses
+    a traverse that would not read back.
+    """
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(HEADER)
@@ -370,7 +375,7 @@ def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
     def write(f: TextIO) -> None:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(HEADER)
-        w.writerows(_csv_rows(traverses))
+        w.writerows(_csv_rows(traverses, checked=True))
 
     atomic_write(path, write)
 
