@@ -13,6 +13,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from stickslip.calibration import Calibration
+from stickslip.kinematics import Pose
 from stickslip.measurements import TableError, Traverse, read_measurements, write_measurements
 from stickslip.models import (
     JointModel,
@@ -172,3 +174,40 @@ def test_calibrate_refuses_a_traverse_that_could_not_be_a_table_row(field: str, 
     assert "written" not in str(e.value)
     with pytest.raises(TableError, match=named):
         TraverseGroups(rows)  # what calibrate_paper / calibrate_lsq / the families take
+
+
+@pytest.fixture(scope="module")
+def paper_calibration() -> Calibration:
+    m = {(j, d): JointModel(j, d, p) for (j, d), p in NOMINAL.items()}
+    return Calibration(m, {k: None for k in m}, {}, "2026-11-30", "paper")
+
+
+@pytest.mark.parametrize(
+    ("pose", "q", "named"),
+    [
+        (Pose(q2=-90.0), None, "q2 = -90 rad"),  # degrees: gave 4.47e-5 rad on main, silently
+        (Pose(q2=-1.0, theta=30.0), None, "theta = 30 rad"),
+        (Pose(q2=math.nan), None, "q2 must be a finite"),  # gave nan
+        (Pose(q3=5.0), None, "q3 = 5 m"),  # mm as m: gave -6.7e-3 rad, a negative step
+        (Pose(), -90.0, "q2 = -90 rad"),
+    ],
+)
+def test_calibration_gamma_refuses_a_pose_in_degrees_or_not_finite(
+    paper_calibration: Calibration, pose: Pose, q: float | None, named: str
+) -> None:
+    with pytest.raises(ValueError, match=named):
+        paper_calibration.gamma(2, "+", pose, q)
+
+
+def test_calibration_gamma_takes_a_pose_as_five_numbers(paper_calibration: Calibration) -> None:
+    want = paper_calibration.gamma(2, "+", Pose(q2=-1.0))
+    assert paper_calibration.gamma(2, "+", (0.0, -1.0, 0.0, 0.0, 0.0)) == want  # was AttributeError: 'tuple' ... q1
+    assert want == pytest.approx(float(JointModel(2, "+", NOMINAL[(2, "+")]).gamma(0.0, -1.0, 0.0, 0.0, 0.0)))
+
+
+def test_calibration_predict_refuses_a_traverse_in_degrees(paper_calibration: Calibration) -> None:
+    bad = replace(GOOD, theta=30.0)
+    with pytest.raises(TableError, match="theta = 30 rad"):
+        paper_calibration.predict(bad)  # gave 5.14e-5 rad on main (4.78e-5 at theta 0), silently
+    with pytest.raises(TableError, match="traverse 1: theta = 30 rad"):
+        paper_calibration.predict_many([GOOD, bad])
