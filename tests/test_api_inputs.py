@@ -211,3 +211,17 @@ def test_calibration_predict_refuses_a_traverse_in_degrees(paper_calibration: Ca
         paper_calibration.predict(bad)  # gave 5.14e-5 rad on main (4.78e-5 at theta 0), silently
     with pytest.raises(TableError, match="traverse 1: theta = 30 rad"):
         paper_calibration.predict_many([GOOD, bad])
+
+
+@pytest.mark.parametrize(("name", "value"), [("roll", 90.0), ("azimuth", -45.0), ("roll", 7.0)])
+def test_view_refuses_an_angle_in_degrees(name: str, value: float) -> None:
+    from stickslip.vision import View
+
+    with pytest.raises(ValueError, match=f"view {name} = {value:g} rad is more than a full turn"):
+        View(**{name: value})  # roll 90 was a roll of 90 rad (116.6 deg), silently
+
+
+def test_view_keeps_an_angle_within_a_turn() -> None:
+    from stickslip.vision import View
+
+    assert View(roll=-2 * math.pi, azimuth=math.pi / 2).roll == pytest.approx(-2 * math.pi)

@@ -48,9 +48,10 @@ class View:
         straight down (an upright optical microscope); an SEM column over a tilted stage
         looks at the rig at the stage's tilt.
     azimuth : float
-        Direction the optical axis leans to, rad, from world x towards world y.
+        Direction the optical axis leans to, rad, from world x towards world y, in [-2 pi, 2 pi].
     roll : float
-        Rotation of the image about the optical axis, rad.
+        Rotation of the image about the optical axis, rad, in [-2 pi, 2 pi] (more than a full
+        turn is refused: an angle in degrees).
     """
 
     tilt: float = 0.0
@@ -65,6 +66,11 @@ class View:
             object.__setattr__(self, name, float(v))
         if not 0.0 <= self.tilt <= math.pi / 2 + 1e-12:
             raise ValueError(f"view tilt = {math.degrees(self.tilt):.4g} deg must be in [0, 90] deg")
+        for name in ("azimuth", "roll"):  # roll = 90 meant as degrees was 90 rad (a roll of 116.6 deg), silently
+            v = getattr(self, name)
+            if not -2.0 * math.pi <= v <= 2.0 * math.pi:
+                raise ValueError(f"view {name} = {v:.6g} rad is more than a full turn: radians, not degrees "
+                                 f"({v:.6g} deg is {math.radians(v):.6g} rad)")
 
     def axes(self) -> NDArray[np.float64]:
         """Rows: image ``x``, image ``y`` (down) and the optical axis ``v`` (away from the camera), world frame."""
