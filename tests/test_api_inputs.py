@@ -25,6 +25,7 @@ from stickslip.models import (
     position_after_steps,
     steps_between,
 )
+from stickslip.motion.planning import Planner
 from stickslip.sim.arm import NOMINAL
 
 ROT = RotaryParams((52.0e-6, 47.0e-6), (-8.15e-6, -19.40e-6))
@@ -225,3 +226,27 @@ def test_view_keeps_an_angle_within_a_turn() -> None:
     from stickslip.vision import View
 
     assert View(roll=-2 * math.pi, azimuth=math.pi / 2).roll == pytest.approx(-2 * math.pi)
+
+
+@pytest.mark.parametrize(
+    ("call", "named"),
+    [
+        (lambda p: p.steps(-60.0, -50.0), "q_from = -60 rad is more than a full turn"),  # was 139624 steps
+        (lambda p: p.exact_steps(-1.0, -50.0), "q_to = -50 rad"),
+        (lambda p: p.position_after(-90.0, 100), "q_start = -90 rad"),
+        (lambda p: p.steps(-1.0, math.nan), "q_to = nan must be a finite"),
+    ],
+)
+def test_planner_refuses_a_position_in_degrees(
+    paper_calibration: Calibration, call: Callable[[Planner], object], named: str
+) -> None:
+    with pytest.raises(ValueError, match=named):
+        call(Planner(paper_calibration, 2, Pose(q2=-1.0)))
+
+
+def test_planner_refuses_millimetres_for_joint_3(paper_calibration: Calibration) -> None:
+    planner = Planner(paper_calibration, 3, Pose())
+    with pytest.raises(ValueError, match="q_to = 5 m is more than a metre"):
+        planner.steps(0.0, 5.0)
+    assert planner.steps(0.0, 5e-6) == round(5e-6 / float(JointModel(3, "+", NOMINAL[(3, "+")]).gamma(0, -math.pi / 2,
+                                                                                                        0, 0, 0)))

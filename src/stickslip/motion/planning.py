@@ -161,6 +161,8 @@ class Planner:
     def __init__(self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose):
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
+        # |q| beyond a full turn (rotary) or a metre (prismatic) is no joint's position: degrees, or mm as m
+        self._bound = 2.0 * math.pi if self.spec.kind == "rotary" else 1.0
         self.pose = pose
         self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
         if self.spec.step_model == "constant":  # a stage: the calibration's constant step of each direction
@@ -207,6 +209,16 @@ class Planner:
             c = self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, self.pose))
         return c
 
+    def _unit_slip(self, **qs: float) -> ValueError:
+        """The error for a position that is not finite or beyond a full turn / a metre (the hot path's one check)."""
+        for name, q in qs.items():
+            if not math.isfinite(q):
+                return ValueError(f"{name} = {q!r} must be a finite position in {self.spec.unit}")
+            if abs(q) > self._bound:
+                what = "a full turn: radians, not degrees" if self._bound != 1.0 else "a metre: metres, not mm or µm"
+                return ValueError(f"{name} = {q:.6g} {self.spec.unit} is more than {what} (joint {self.joint})")
+        return ValueError(f"positions {qs!r}")  # (not reached: called only when one is out)
+
     def _check_range(self, q: float, what: str) -> None:
         problem = self.spec.range_problem(what, q)
         if problem:
@@ -214,6 +226,9 @@ class Planner:
 
     def exact_steps(self, q_from: float, q_to: float) -> float:
         """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""
+        b = self._bound
+        if not (-b <= q_from <= b and -b <= q_to <= b):
+            raise self._unit_slip(q_from=q_from, q_to=q_to)
         if q_to == q_from:
             return 0.0
         sign = 1 if q_to > q_from else -1
@@ -223,8 +238,13 @@ class Planner:
         """Signed steps to command to move from ``q_from`` to ``q_to``: negative when ``q_to < q_from``.
 
         The sign is the direction (docs/design.md §2), so the result can be handed to
-        :meth:`position_after` or to a controller's ``step`` as it is.
+        :meth:`position_after` or to a controller's ``step`` as it is. Not range-checked (the hot
+        path: :meth:`plan` checks the stops), but a position beyond a full turn (rotary, rad) or a
+        metre (prismatic, m), or not finite, raises ``ValueError``: -60 meant as degrees gave 139624 steps.
         """
+        b = self._bound
+        if not (-b <= q_from <= b and -b <= q_to <= b):
+            raise self._unit_slip(q_from=q_from, q_to=q_to)
         if q_to == q_from:
             return 0
         sign = 1 if q_to > q_from else -1
@@ -237,7 +257,9 @@ class Planner:
         return self._dir(direction_sign(direction)).gamma(q)
 
     def position_after(self, q_start: float, signed_steps: int | float) -> float:
-        """Dead reckoning: where the joint is after ``signed_steps`` steps from ``q_start``."""
+        """Dead reckoning: where the joint is after ``signed_steps`` steps from ``q_start`` (checked as ``steps``)."""
+        if not -self._bound <= q_start <= self._bound:
+            raise self._unit_slip(q_start=q_start)
         if signed_steps == 0:
             return float(q_start)
         sign = 1 if signed_steps > 0 else -1
