@@ -315,7 +315,11 @@ class JointModel:
     def gamma(
         self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
     ) -> NDArray[np.float64]:
-        """Mean step size in a pose (m or rad). The moving joint's own column matters for rotary joints."""
+        """Mean step size in a pose: m (joint 3) or rad (joints 1, 2), the paper's ``gamma``.
+
+        ``q1``, ``q2`` rad, ``q3`` m, ``theta``, ``psi`` rad (array_like, broadcast). The moving
+        joint's own column matters for rotary joints.
+        """
         p = self.params
         if isinstance(p, PrismaticParams):
             return gamma_prismatic(q2, theta, psi, p.a, p.b, p.c, q1=q1)
@@ -351,8 +355,10 @@ class JointModel:
     ) -> NDArray[np.float64]:
         """Average step over a traverse from ``start`` to ``end``: ``|end - start| / N`` (m or rad).
 
-        Exact: ``N`` is the closed-form integral of ``1 / gamma`` along the traverse.
-        The fixed joints are taken from ``q1, q2, q3``; the moving joint's column is ignored.
+        ``start``, ``end``: the moving joint's coordinate (m for joint 3, rad otherwise); the pose
+        ``q1``, ``q2`` rad, ``q3`` m, ``theta``, ``psi`` rad. Exact: ``N`` is the closed-form
+        integral of ``1 / gamma`` along the traverse. The fixed joints are taken from ``q1, q2, q3``;
+        the moving joint's column is ignored.
         """
         A, al, be = self.rotary_coefficients(q1, q2, q3, theta, psi)
         n = steps_between(start, end, A, al, be)
@@ -475,7 +481,7 @@ class StepProfile:
             self.kind, self.s = "other", 0.0
 
     def gamma(self, q: float) -> float:
-        """Mean step size at ``q``."""
+        """Mean step size at ``q`` (``A``'s unit: m or rad; ``q`` rad, or m where the step is constant)."""
         return self.A + self.alpha * math.cos(q) + self.beta * math.sin(q)
 
     def F(self, q: float) -> float:
