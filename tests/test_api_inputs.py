@@ -250,3 +250,22 @@ def test_planner_refuses_millimetres_for_joint_3(paper_calibration: Calibration)
         planner.steps(0.0, 5.0)
     assert planner.steps(0.0, 5e-6) == round(5e-6 / float(JointModel(3, "+", NOMINAL[(3, "+")]).gamma(0, -math.pi / 2,
                                                                                                         0, 0, 0)))
+
+
+@pytest.mark.parametrize(
+    ("kw", "error", "named"),
+    [
+        ({"by": "0.5deg"}, TypeError, "by = '0.5deg' must be a number in rad"),  # was 'could not convert string'
+        ({"by": "0.01"}, TypeError, "by = '0.01' must be a number"),  # was taken as 0.01 rad
+        ({"to": "-1.0"}, TypeError, "to = '-1.0' must be a number"),
+        ({"by": math.nan}, ValueError, "by = nan must be a finite"),  # was 'the target nan deg is outside ...'
+    ],
+)
+def test_move_refuses_a_displacement_that_is_not_a_number(
+    tmp_path: Path, paper_calibration: Calibration, kw: dict[str, object], error: type[Exception], named: str
+) -> None:
+    from stickslip.procedures.move import MoveRequest, move
+    from stickslip.storage import Store
+
+    with Store.open(tmp_path / "s.db") as store, pytest.raises(error, match=named):
+        move(store, MoveRequest(device="sim://", joint=2, **kw), paper_calibration)  # type: ignore[arg-type]
