@@ -269,3 +269,26 @@ def test_move_refuses_a_displacement_that_is_not_a_number(
 
     with Store.open(tmp_path / "s.db") as store, pytest.raises(error, match=named):
         move(store, MoveRequest(device="sim://", joint=2, **kw), paper_calibration)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize(
+    ("kw", "named"),
+    [
+        ({"taper": 8.0}, "taper = 8.0 must be"),  # degrees: a cone of 8 rad, rendered silently
+        ({"pixel_size_m": 0.5}, "pixel_size_m = 0.5 must be"),  # µm as m
+        ({"dof_m": 4.0}, "dof_m = 4.0"),
+        ({"tip_radius_m": math.nan}, "tip_radius_m = nan"),
+    ],
+)
+def test_sim_camera_settings_take_the_url_s_bounds_in_python_too(kw: dict[str, object], named: str) -> None:
+    from stickslip.sim.camera import SimCamSettings
+
+    with pytest.raises(ValueError, match=named):
+        SimCamSettings(**kw)  # type: ignore[arg-type]
+
+
+def test_sim_camera_default_settings_are_within_the_bounds() -> None:
+    from stickslip.sim.camera import SimCamSettings
+
+    assert SimCamSettings().taper == pytest.approx(math.radians(8.0))
+    assert SimCamSettings(look="sem", taper=math.radians(45.0)).look == "sem"
