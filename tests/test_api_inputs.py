@@ -292,3 +292,11 @@ def test_sim_camera_default_settings_are_within_the_bounds() -> None:
 
     assert SimCamSettings().taper == pytest.approx(math.radians(8.0))
     assert SimCamSettings(look="sem", taper=math.radians(45.0)).look == "sem"
+
+
+def test_planner_names_a_pose_of_three_numbers(paper_calibration: Calibration) -> None:
+    with pytest.raises(ValueError, match=r"pose = \[0.0, -1.0, 0.0\]: a Pose or its five numbers"):
+        Planner(paper_calibration, 2, [0.0, -1.0, 0.0])
+    five = Planner(paper_calibration, 2, (0.0, -1.0, 0.0, 0.0, 0.0))
+    assert five.pose == Pose(q2=-1.0)
+    assert five.steps(-1.0, -0.9) == Planner(paper_calibration, 2, Pose(q2=-1.0)).steps(-1.0, -0.9)

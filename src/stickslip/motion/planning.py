@@ -16,6 +16,7 @@ a few microseconds (pure ``math``, no numpy). :func:`plan_move` is the one-call 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .. import kinematics as kin
@@ -146,8 +147,9 @@ class Planner:
         A calibration that models such a joint the MM3A's way, or whose steps of it are of
         another kind (in rad for a prismatic stage: :meth:`Calibration.kind`), is refused
         (``ValueError``): its steps are another arm's (an MM3A's joint 1 in rad, not a stage's in m).
-    pose : Pose
-        The other joints and the tilt; the joint's own coordinate in it is ignored.
+    pose : Pose or sequence of 5 float
+        The other joints and the tilt (q1, q2 rad, q3 m, theta, psi rad); the joint's own
+        coordinate in it is ignored.
 
     Examples
     --------
@@ -158,11 +160,15 @@ class Planner:
     -32
     """
 
-    def __init__(self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose):
+    def __init__(self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose | Sequence[float]):
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         # |q| beyond a full turn (rotary) or a metre (prismatic) is no joint's position: degrees, or mm as m
         self._bound = 2.0 * math.pi if self.spec.kind == "rotary" else 1.0
+        if not isinstance(pose, kin.Pose):  # [0, -1, 0] was "zip() argument 2 is shorter than argument 1"
+            if len(pose) != len(kin.Pose._fields):
+                raise ValueError(f"pose = {pose!r}: a Pose or its five numbers (q1, q2 rad, q3 m, theta, psi rad)")
+            pose = kin.Pose(*pose)
         self.pose = pose
         self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
         if self.spec.step_model == "constant":  # a stage: the calibration's constant step of each direction
