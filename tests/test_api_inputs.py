@@ -300,3 +300,16 @@ def test_planner_names_a_pose_of_three_numbers(paper_calibration: Calibration) -
     five = Planner(paper_calibration, 2, (0.0, -1.0, 0.0, 0.0, 0.0))
     assert five.pose == Pose(q2=-1.0)
     assert five.steps(-1.0, -0.9) == Planner(paper_calibration, 2, Pose(q2=-1.0)).steps(-1.0, -0.9)
+
+
+@pytest.mark.parametrize(("kw", "named"), [({"q2": "a"}, "q2 = 'a' must be a number in rad"),
+                                           ({"q3": "5mm"}, "q3 = '5mm' must be a number in m"),
+                                           ({"theta": None, "psi": "0.1"}, "psi = '0.1' must be a number in rad")])
+def test_simulator_set_pose_names_an_argument_that_is_not_a_number(kw: dict[str, object], named: str) -> None:
+    from stickslip.sim.arm import open_url
+
+    arm = open_url("sim://")
+    with pytest.raises(TypeError, match=named):
+        arm.set_pose(**kw)  # type: ignore[arg-type]
+    arm.set_pose(q2=np.float64(-1.0))
+    assert arm.position(2) == -1.0
