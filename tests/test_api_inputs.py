@@ -313,3 +313,14 @@ def test_simulator_set_pose_names_an_argument_that_is_not_a_number(kw: dict[str,
         arm.set_pose(**kw)  # type: ignore[arg-type]
     arm.set_pose(q2=np.float64(-1.0))
     assert arm.position(2) == -1.0
+
+
+@pytest.mark.parametrize("pixel", [0.5, 0.0, math.nan, -1e-6])
+def test_projection_refuses_a_pixel_size_that_is_not_one(pixel: float) -> None:
+    from stickslip.vision.view import TOP_VIEW, base_to_image, project
+
+    with pytest.raises(ValueError, match="pixel_size_m = .* must be a pixel size"):
+        base_to_image(TOP_VIEW, pixel)  # 0.5 (µm as m) gave 2 px per m; 0 gave inf with a warning
+    with pytest.raises(ValueError, match="pixel_size_m"):
+        project(np.zeros(3), TOP_VIEW, pixel, np.zeros(3), (0.0, 0.0))
+    assert base_to_image(TOP_VIEW, 0.5e-6)[0, 0] == pytest.approx(2e6)
