@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
-from ..measurements import Traverse
+from ..measurements import Traverse, check_traverses
 from ..models.families import FitBasis, features, fit_basis
 
 __all__ = ["POSE_DECIMALS", "JointData", "TraverseGroups", "group_traverses", "load_coordinates_of",
@@ -167,10 +167,13 @@ class TraverseGroups:
     Parameters
     ----------
     traverses : sequence of Traverse
+        Refused (:class:`~stickslip.measurements.TableError`) where one could not be a row of a
+        measurement table whatever the arm (:func:`~stickslip.measurements.check_traverses`).
     """
 
     def __init__(self, traverses: Sequence[Traverse]) -> None:
         self.traverses: list[Traverse] = list(traverses)
+        check_traverses(self.traverses)  # a tilt in degrees was fitted; steps 0 a ZeroDivisionError
         idx: dict[tuple[int, str], list[int]] = {}
         for i, t in enumerate(self.traverses):
             idx.setdefault((t.joint, t.direction), []).append(i)

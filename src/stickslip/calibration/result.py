@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 from .. import kinematics as kin
 from .. import plotting, records
 from ..clock import day_label_problem, now_utc
-from ..measurements import Traverse, measurements_to_csv
+from ..measurements import Traverse, check_pose, check_traverses, measurements_to_csv
 from ..models import (
     DIRECTIONS,
     JointModel,
@@ -45,6 +45,19 @@ UNITS = {
     ("rotary", "gamma0"): "rad",
     ("rotary", "d"): "rad",
 }
+
+
+def checked_pose(pose: kin.Pose | Sequence[float], joint: int | None = None, q: float | None = None) -> kin.Pose:
+    """``pose`` (a Pose or its five numbers) with ``q{joint}`` set to ``q``, checked: within the MM3A's ranges
+    and finite, as :class:`~stickslip.motion.Planner` checks a pose, or ``ValueError`` naming the value
+    (``q2 = -90`` in degrees gave a step size, silently)."""
+    p = pose if isinstance(pose, kin.Pose) else kin.Pose(*pose)
+    if joint is not None and q is not None:
+        p = p._replace(**{f"q{joint}": q})
+    problems = check_pose(0, {k: float(v) for k, v in p._asdict().items()})  # (0: every joint checked)
+    if problems:
+        raise ValueError("pose: " + "; ".join(problems))
+    return p
 
 
 class CalibrationError(ValueError):
@@ -374,18 +387,27 @@ class Calibration:
         """The SI unit of ``joint``'s steps in this calibration: ``"m"`` (prismatic) or ``"rad"`` (rotary)."""
         return "m" if self.kind(joint) == "prismatic" else "rad"
 
-    def gamma(self, joint: int, direction: str | int, pose: kin.Pose, q: float | None = None) -> float:
-        """Mean step size (m or rad) of ``joint`` at ``pose``; ``q`` overrides the joint's own coordinate."""
-        p = pose._replace(**{f"q{joint}": q}) if q is not None else pose
+    def gamma(
+        self, joint: int, direction: str | int, pose: kin.Pose | Sequence[float], q: float | None = None
+    ) -> float:
+        """Mean step size (m or rad) of ``joint`` at ``pose``; ``q`` overrides the joint's own coordinate.
+
+        ``pose``: a :class:`~stickslip.kinematics.Pose` or ``(q1, q2, q3, theta, psi)`` (rad, rad, m,
+        rad, rad), within the MM3A's ranges (:func:`checked_pose`) or ``ValueError``.
+        """
+        p = checked_pose(pose, None if q is None else int(joint), q)
         return float(self.model(joint, direction).gamma(p.q1, p.q2, p.q3, p.theta, p.psi))
 
     def predict(self, traverse: Traverse) -> float:
-        """Predicted average step over a traverse (exact; m or rad)."""
+        """Predicted average step over a traverse (exact; m or rad); one that could not be a table row
+        (:func:`~stickslip.measurements.check_traverses`: a tilt in degrees, a nan) raises ``TableError``."""
+        check_traverses([traverse])
         t = traverse
         return float(self.model(t.joint, t.direction).average_gamma(t.start, t.end, t.q1, t.q2, t.q3, t.theta, t.psi))
 
     def predict_many(self, traverses: Sequence[Traverse]) -> NDArray[np.float64]:
-        """Predicted average steps for many traverses (vectorised per joint and direction)."""
+        """Predicted average steps for many traverses (vectorised per joint and direction; checked as by predict)."""
+        check_traverses(traverses)
         out = np.empty(len(traverses))
         groups: dict[tuple[int, str], list[int]] = {}
         for i, t in enumerate(traverses):

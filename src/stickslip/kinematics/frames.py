@@ -95,7 +95,7 @@ def _rz(a: float) -> NDArray[np.float64]:
 
 
 def rotation_base(theta: float, psi: float) -> NDArray[np.float64]:
-    """Orientation of the base frame in the world: ``Rx(theta) @ Ry(psi)``.
+    """Orientation of the base frame in the world: ``Rx(theta) @ Ry(psi)`` (the paper's base tilt, rad).
 
     Columns are the base axes x0, y0, z0 written in world coordinates.
     """
@@ -103,7 +103,7 @@ def rotation_base(theta: float, psi: float) -> NDArray[np.float64]:
 
 
 def gravity_base(theta: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:
-    """Unit gravity in the base frame, shape ``(..., 3)``.
+    """Unit gravity in the base frame, shape ``(..., 3)``, for the paper's base tilt ``theta``, ``psi`` (rad).
 
     ``g0 = (cos(theta) sin(psi), -sin(theta), -cos(theta) cos(psi))``; equal to
     ``rotation_base(theta, psi).T @ (0, 0, -1)``.
@@ -125,7 +125,7 @@ def _gravity_arm_frame(q1: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> NDArr
 
 
 def arm_axis(q1: ArrayLike, q2: ArrayLike) -> NDArray[np.float64]:
-    """Unit arm (joint-3) axis z2 in the base frame, shape ``(..., 3)``."""
+    """Unit arm (joint-3) axis z2 in the base frame, shape ``(..., 3)``, at joints ``q1``, ``q2`` (rad)."""
     q1 = np.asarray(q1, dtype=float)
     q2 = np.asarray(q2, dtype=float)
     s2 = np.sin(q2)
@@ -133,7 +133,7 @@ def arm_axis(q1: ArrayLike, q2: ArrayLike) -> NDArray[np.float64]:
 
 
 def joint2_axis(q1: ArrayLike) -> NDArray[np.float64]:
-    """Unit joint-2 axis z1 in the base frame (``-y0`` at ``q1 = 0``), shape ``(..., 3)``."""
+    """Unit joint-2 axis z1 in the base frame (``-y0`` at ``q1 = 0``; ``q1`` in rad), shape ``(..., 3)``."""
     q1 = np.asarray(q1, dtype=float)
     return np.stack(np.broadcast_arrays(np.sin(q1), -np.cos(q1), np.zeros_like(q1)), axis=-1)
 
@@ -181,7 +181,12 @@ def load_term(
     theta: ArrayLike,
     psi: ArrayLike,
 ) -> NDArray[np.float64]:
-    """The load term of ``joint`` in a pose (dimensionless); see the module table."""
+    """The load term of ``joint`` (1, 2 or 3) in a pose (dimensionless); see the module table.
+
+    ``q1``, ``q2`` rad, ``q3`` m, the base tilt ``theta``, ``psi`` rad (the paper's names); for
+    joint 3 at ``q1 = 0`` it is ``cos(zeta) cos(theta)`` with ``zeta = psi - q2``. An unknown
+    joint raises ``ValueError``.
+    """
     if joint == 3:
         return prismatic_load(q1, q2, theta, psi)
     if joint == 2:

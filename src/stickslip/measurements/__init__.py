@@ -30,7 +30,17 @@ from .poses import (
     read_pose_table,
     stream_pose_table,
 )
-from .rows import HEADER, MAX_STEPS, POSE_COLUMNS, TableError, Traverse, check_pose, parse_row, traverse_problems
+from .rows import (
+    HEADER,
+    MAX_STEPS,
+    POSE_COLUMNS,
+    TableError,
+    Traverse,
+    check_pose,
+    check_traverses,
+    parse_row,
+    traverse_problems,
+)
 from .steps import STEP_HEADER, StepSize, parse_step_sizes, read_step_sizes, step_sizes_to_csv, write_step_sizes
 from .table import (
     TraverseTable,
@@ -63,6 +73,7 @@ __all__ = [
     "MAX_STEPS",
     "parse_row",
     "traverse_problems",
+    "check_traverses",
     "CHUNK_ROWS",
     "as_arrays",
     "POSE_TABLE_REQUIRED",

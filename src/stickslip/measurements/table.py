@@ -18,7 +18,7 @@ from ..clock import day_label_problem
 from ..joints import JointSet
 from ..records import MAX_TABLE_BYTES, atomic_write, guard_cell, read_text_bounded, text_lines, unguard_cell
 from .chunks import _Chunk, _equal, _floats, _ints, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
-from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, check_header, parse_row
+from .rows import HEADER, MAX_STEPS, TableError, Traverse, _csv_problem, _value_problems, check_header, parse_row
 
 
 @dataclass(frozen=True, eq=False)
@@ -327,24 +327,35 @@ def read_measurement_table(path: str | Path) -> TraverseTable:
     return parse_measurement_table(_read_table_text(path), str(path))
 
 
-def _csv_rows(traverses: Iterable[Traverse]) -> Iterator[tuple[Any, ...]]:
+def _csv_rows(traverses: Iterable[Traverse], checked: bool = False) -> Iterator[tuple[Any, ...]]:
     """The rows a table is written with: the session label guarded against spreadsheet formulas.
 
     A label such as ``=HYPERLINK(...)`` is written ``'=HYPERLINK(...)`` (records.guard_cell);
     every other cell is a number or a direction, left as it is. Labels are few: each is
-    guarded once.
+    guarded once. ``checked``: a traverse that could not be read back
+    (:func:`~.rows.traverse_problems`: steps 0, a tilt in degrees, a direction ``"x"``) raises
+    :class:`TableError`.
     """
     rest = operator.attrgetter(*HEADER[1:])
     guarded: dict[str, str] = {}
-    for t in traverses:
+    for i, t in enumerate(traverses):
         day = guarded.get(t.day)
         if day is None:
+            # (a label from before the spreadsheet-date rule is still exported: the store may hold one)
+            if checked and (why := day_label_problem(str(t.day), spreadsheet_dates=False)) is not None:
+                raise TableError([f"traverse {i}: day: {why} (nothing written)"])
             day = guarded[t.day] = guard_cell(str(t.day))
+        if checked and (problems := _value_problems(t)):
+            raise TableError([f"traverse {i}: {p} (nothing written)" for p in problems])
         yield (day, *rest(t))
 
 
 def measurements_to_csv(traverses: Iterable[Traverse]) -> str:
-    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them)."""
+    """The CSV text of a measurement table (full float precision: floats as ``repr``, as csv writes them).
+
+    Unchecked (a calibration's table hash, a test's hostile table): :func:`write_measurements` refuses
+    a traverse that would not read back.
+    """
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(HEADER)
@@ -356,13 +367,15 @@ def write_measurements(path: str | Path, traverses: Iterable[Traverse]) -> None:
     """Write a measurement table to a CSV file, row by row as ``traverses`` yields them.
 
     Streamed (an iterator of a million stored traverses is never held as text); the
-    file appears only when complete: a failed write keeps the old file.
+    file appears only when complete: a failed write keeps the old file. Raises
+    :class:`TableError` naming the first traverse that :func:`read_measurements` would refuse
+    whatever the arm (:func:`traverse_problems`), so every file written reads again.
     """
 
     def write(f: TextIO) -> None:
         w = csv.writer(f, lineterminator="\n")
         w.writerow(HEADER)
-        w.writerows(_csv_rows(traverses))
+        w.writerows(_csv_rows(traverses, checked=True))
 
     atomic_write(path, write)
 

@@ -669,6 +669,7 @@ class FamilyModel(JointModel):
     members with the same ``params.family``); empty where not known (a file written before the labels)."""
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         if self.member_labels and len(self.member_labels) != len(self.members):
             raise ValueError(f"{len(self.member_labels)} member labels for {len(self.members)} members")
 

@@ -27,6 +27,7 @@ The *average step over a traverse* from ``start`` to ``end`` is
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -83,6 +84,11 @@ def direction_sign(direction: str | int) -> int:
 def direction_label(sign: int | str) -> str:
     """``"+"`` or ``"-"`` for a direction given as a sign or label."""
     return "+" if direction_sign(sign) > 0 else "-"
+
+
+_MAX_KNOT = 1.0
+"""Largest |q3| of a rotary model's knot, m: no micromanipulator's joint 3 extends a metre, so a knot beyond it is
+a unit slip (knots (0, 12) for 0 and 12 mm interpolated as if 12 m: the q3 = 12 mm values were never reached)."""
 
 
 class NonPhysicalError(ValueError):
@@ -190,13 +196,19 @@ class PrismaticParams:
         return cls(a, b, c)
 
     def check_physical(self) -> None:
-        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose.
+        """Raise :class:`NonPhysicalError` unless b in [0, 1) and the step > 0 in every pose, and shorter than
+        joint 3's whole stroke (a step in nm or µm given as a number of m).
 
         "> 0" with a relative margin: ``a - |c|`` more than :data:`STALL_RATIO` of ``a + |c|`` (a step zero to
         rounding is a stall, not a count of 1e15).
         """
         if not (0.0 <= self.b < 1.0) or not math.isfinite(self.b):
             raise NonPhysicalError(f"b = {self.b:.4g} is outside [0, 1): the efficiency 1 - b|cos q2| would be <= 0")
+        if not self.a + abs(self.c) < kin.Q3_MAX:  # a = 972 meant as nm: every plan 1e-9 of its steps
+            raise NonPhysicalError(
+                f"a + |c| = {self.a + abs(self.c):.4g} m: a step longer than joint 3's whole stroke "
+                f"({kin.Q3_MAX * 1e3:g} mm); a and c are in m (972 nm is 972e-9)"
+            )
         if not self.a - abs(self.c) > STALL_RATIO * (self.a + abs(self.c)):
             raise NonPhysicalError(
                 f"a - |c| = {(self.a - abs(self.c)) * 1e9:.4g} nm, not more than {STALL_RATIO:g} of a + |c|: "
@@ -226,6 +238,18 @@ class RotaryParams:
 
     kind = "rotary"
 
+    def __post_init__(self) -> None:
+        k = self.knots
+        if (
+            len(k) != 2
+            or not all(isinstance(x, numbers.Real) and math.isfinite(x) and abs(x) <= _MAX_KNOT for x in k)
+            or k[0] == k[1]
+        ):
+            raise ValueError(
+                f"RotaryParams: knots = {k!r} must be two different q3 values in m within ±{_MAX_KNOT:g} m "
+                f"(the paper's are 0 and {kin.Q3_MAX:g} m; 12 is 12 m, not 12 mm)"
+            )
+
     def at(self, q3: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """``(gamma0, d)`` at extension ``q3`` (m), interpolated linearly."""
         return interp_q3(q3, self.knots, self.gamma0), interp_q3(q3, self.knots, self.d)
@@ -243,13 +267,20 @@ class RotaryParams:
         return cls((g00, g01), (d0, d1), knots)
 
     def check_physical(self, load_bound: float = 1.0) -> None:
-        """Raise :class:`NonPhysicalError` unless the step is > 0 for every |load| <= ``load_bound``.
+        """Raise :class:`NonPhysicalError` unless the step is > 0 for every |load| <= ``load_bound``, and shorter
+        than a rotary joint's whole range (a step in µrad given as a number of rad).
 
         ``gamma0 - |d|`` is concave in q3 between the knots, so checking the knots
         covers the whole stroke. "> 0" with a relative margin: more than :data:`STALL_RATIO` of
         ``gamma0 + |d|`` (a step zero to rounding is a stall, not a count of 1e15).
         """
         for k, g0, d in zip(self.knots, self.gamma0, self.d, strict=True):
+            if not g0 + abs(d) * load_bound < kin.ROTARY_SPAN:  # 52 meant as µrad: every plan 1e-6 of its steps
+                raise NonPhysicalError(
+                    f"at q3 = {k * 1e3:g} mm, gamma0 + |d| = {g0 + abs(d) * load_bound:.4g} rad: a step longer than "
+                    f"a rotary joint's whole range ({kin.ROTARY_SPAN:.4g} rad); gamma0 and d are in rad "
+                    "(52 µrad is 52e-6)"
+                )
             if not g0 - abs(d) * load_bound > STALL_RATIO * (abs(g0) + abs(d) * load_bound):
                 raise NonPhysicalError(
                     f"at q3 = {k * 1e3:g} mm, gamma0 - |d| = {(g0 - abs(d) * load_bound) * 1e6:.4g} µrad, not more "
@@ -278,10 +309,17 @@ class JointModel:
     direction: str
     params: Params
 
+    def __post_init__(self) -> None:
+        _check_joint_model(self.joint, self.direction, self.params)
+
     def gamma(
         self, q1: ArrayLike, q2: ArrayLike, q3: ArrayLike, theta: ArrayLike, psi: ArrayLike
     ) -> NDArray[np.float64]:
-        """Mean step size in a pose (m or rad). The moving joint's own column matters for rotary joints."""
+        """Mean step size in a pose: m (joint 3) or rad (joints 1, 2), the paper's ``gamma``.
+
+        ``q1``, ``q2`` rad, ``q3`` m, ``theta``, ``psi`` rad (array_like, broadcast). The moving
+        joint's own column matters for rotary joints.
+        """
         p = self.params
         if isinstance(p, PrismaticParams):
             return gamma_prismatic(q2, theta, psi, p.a, p.b, p.c, q1=q1)
@@ -317,13 +355,30 @@ class JointModel:
     ) -> NDArray[np.float64]:
         """Average step over a traverse from ``start`` to ``end``: ``|end - start| / N`` (m or rad).
 
-        Exact: ``N`` is the closed-form integral of ``1 / gamma`` along the traverse.
-        The fixed joints are taken from ``q1, q2, q3``; the moving joint's column is ignored.
+        ``start``, ``end``: the moving joint's coordinate (m for joint 3, rad otherwise); the pose
+        ``q1``, ``q2`` rad, ``q3`` m, ``theta``, ``psi`` rad. Exact: ``N`` is the closed-form
+        integral of ``1 / gamma`` along the traverse. The fixed joints are taken from ``q1, q2, q3``;
+        the moving joint's column is ignored.
         """
         A, al, be = self.rotary_coefficients(q1, q2, q3, theta, psi)
         n = steps_between(start, end, A, al, be)
         out: NDArray[np.float64] = np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)) / n
         return out
+
+
+def _check_joint_model(joint: object, direction: object, params: object) -> None:
+    """Refuse a joint, direction or parameter kind that the model would use silently (a rotary joint's
+    parameters on joint 3 gave a step in "m" from values in rad)."""
+    if isinstance(joint, bool) or not isinstance(joint, numbers.Integral) or joint not in (1, 2, 3):
+        raise ValueError(f"JointModel: joint = {joint!r} must be 1, 2 or 3")
+    if direction not in DIRECTIONS or not isinstance(direction, str):
+        raise ValueError(f"JointModel: direction = {direction!r} must be '+' or '-'")
+    want = PrismaticParams if joint == 3 else RotaryParams
+    if isinstance(params, PrismaticParams | RotaryParams) and not isinstance(params, want):
+        raise ValueError(
+            f"JointModel: joint {joint} takes {want.__name__} (its step in {'m' if joint == 3 else 'rad'}), "
+            f"got {type(params).__name__}"
+        )
 
 
 # ---------------------------------------------------------------- traverse integrals
@@ -414,6 +469,8 @@ class StepProfile:
 
     def __init__(self, A: float, alpha: float = 0.0, beta: float = 0.0):
         self.A, self.alpha, self.beta = float(A), float(alpha), float(beta)
+        if not (math.isfinite(self.A) and math.isfinite(self.alpha) and math.isfinite(self.beta)):
+            _check_finite(A=self.A, alpha=self.alpha, beta=self.beta)
         self.B = math.hypot(alpha, beta)
         self.phi = math.atan2(alpha, beta)
         if self.B <= 1e-13 * abs(self.A):
@@ -424,7 +481,7 @@ class StepProfile:
             self.kind, self.s = "other", 0.0
 
     def gamma(self, q: float) -> float:
-        """Mean step size at ``q``."""
+        """Mean step size at ``q`` (``A``'s unit: m or rad; ``q`` rad, or m where the step is constant)."""
         return self.A + self.alpha * math.cos(q) + self.beta * math.sin(q)
 
     def F(self, q: float) -> float:
@@ -436,6 +493,8 @@ class StepProfile:
 
     def steps(self, q0: float, q1: float) -> float:
         """Real-valued number of steps from ``q0`` to ``q1`` (>= 0)."""
+        if not (math.isfinite(q0) and math.isfinite(q1)):  # nan steps (or inf) for a position
+            _check_finite(start=q0, end=q1)
         if self.kind == "const":
             if not self.A > 0:
                 raise NonPhysicalError(f"step size {self.A:.3g} <= 0: the joint cannot move")
@@ -445,7 +504,12 @@ class StepProfile:
         return float(_steps_between_arrays(q0, q1, self.A, self.alpha, self.beta))
 
     def inverse(self, q0: float, n: float, sign: int) -> float:
-        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``)."""
+        """Dead reckoning: solve ``sign (F(q) - F(q0)) = n`` for ``q`` (safeguarded Newton, ``F' = 1/gamma``).
+
+        ``n`` >= 0 steps, ``sign`` +1 or -1 (a sign of 5 went 5 times as far, n < 0 backwards).
+        """
+        if sign not in (1, -1) or not (n >= 0.0 and math.isfinite(n) and math.isfinite(q0)):
+            _check_steps(q0, n, sign)
         if self.kind == "const":
             if not self.A > 0:  # (steps refuses the same; a negative step would dead-reckon backwards)
                 raise NonPhysicalError(f"step size {self.A:.3g} <= 0: the joint cannot move")
@@ -475,6 +539,22 @@ class StepProfile:
         return q
 
 
+def _check_finite(**values: float) -> None:
+    """ValueError naming the first argument that is not a finite number (a nan gave nan steps, silently)."""
+    for name, v in values.items():
+        if not math.isfinite(v):
+            raise ValueError(f"{name} = {v!r} must be a finite number (m or rad)")
+
+
+def _check_steps(start: float, n_steps: float, sign: object) -> None:
+    """ValueError for a dead reckoning that is not ``n_steps >= 0`` steps from a finite ``start`` in ``sign``."""
+    if sign not in (1, -1):
+        raise ValueError(f"sign = {sign!r} must be +1 or -1")
+    if not (n_steps >= 0.0 and math.isfinite(n_steps)):
+        raise ValueError(f"n_steps = {n_steps!r} must be a finite number >= 0 (the direction gives the sign)")
+    _check_finite(start=start)
+
+
 def steps_between(
     start: ArrayLike,
     end: ArrayLike,
@@ -489,7 +569,8 @@ def steps_between(
     (``A > sqrt(alpha^2 + beta^2)``), the logarithmic one where it is positive only
     along the traverse. Raises :class:`NonPhysicalError` if the step is <= 0
     somewhere on the way (the joint would stall). Agrees with adaptive quadrature
-    (:func:`steps_between_quad`) to ~1e-12 relative. Scalars take a pure-``math`` path.
+    (:func:`steps_between_quad`) to ~1e-12 relative. Scalars take a pure-``math`` path. A value
+    that is not finite raises ``ValueError`` naming it (it gave nan steps).
     """
     if (
         isinstance(start, float | int)
@@ -498,7 +579,10 @@ def steps_between(
         and isinstance(alpha, float | int)
         and isinstance(beta, float | int)
     ):
-        return np.asarray(StepProfile(float(A), float(alpha), float(beta)).steps(float(start), float(end)))
+        n = StepProfile(float(A), float(alpha), float(beta)).steps(float(start), float(end))
+        if not math.isfinite(n):  # (the arrays' path refuses the same)
+            raise NonPhysicalError(f"{n} steps from {start!r} to {end!r} with a step of {A!r}: no count a float holds")
+        return np.asarray(n)
     return _steps_between_arrays(start, end, A, alpha, beta)
 
 
@@ -508,6 +592,10 @@ def _steps_between_arrays(
     start, end, A, alpha, beta = np.broadcast_arrays(
         *(np.asarray(x, dtype=float) for x in (start, end, A, alpha, beta))
     )
+    for name, x in (("start", start), ("end", end), ("A", A), ("alpha", alpha), ("beta", beta)):
+        if not np.all(np.isfinite(x)):
+            bad = x[~np.isfinite(x)].ravel()[0]
+            raise ValueError(f"{name} holds {bad!r}: it must be finite (m or rad)")
     B = np.hypot(alpha, beta)
     out = np.empty(start.shape, dtype=float)
     closed = A > B * (1.0 + 1e-12)
@@ -532,6 +620,10 @@ def _steps_between_arrays(
         for i in np.nonzero(~logform)[0]:  # A == B to 1e-12: rare; quadrature
             vals[i] = steps_between_quad(float(lo[i]), float(hi[i]), float(a[i]), float(al[i]), float(be[i]))
         out[rest] = vals
+    out[start == end] = 0.0  # no travel: the log form gave -inf - -inf = nan where the step is near zero there
+    if not np.all(np.isfinite(out)):  # a step within rounding of zero on the way (1e-179 rad beside 1): a stall
+        raise NonPhysicalError("the step size comes within rounding of zero along the traverse (or the count "
+                               "overflows): the joint would stall")
     return out
 
 
@@ -613,10 +705,14 @@ def position_after_steps(
     """Dead reckoning: where a joint ends after ``n_steps`` steps from ``start`` in ``direction``.
 
     Solves ``integral_start^q dq / gamma = n_steps`` for ``q`` (monotone, so a bracketed
-    root find on the closed form). ``gamma(q) = A + alpha cos q + beta sin q`` > 0.
+    root find on the closed form). ``gamma(q) = A + alpha cos q + beta sin q`` > 0; ``start``,
+    ``A``, ``alpha``, ``beta`` in m (joint 3) or rad; ``n_steps`` >= 0 (``direction`` gives the
+    sign: ``"+"``/``"-"`` or +1/-1). A value that is not finite raises ``ValueError``.
     """
     start, n_steps, A, alpha, beta = (float(x) for x in (start, n_steps, A, alpha, beta))
     direction = direction_sign(direction)
+    _check_steps(start, n_steps, direction)
+    _check_finite(A=A, alpha=alpha, beta=beta)
     if n_steps == 0:
         return start
     B = math.hypot(alpha, beta)

@@ -16,6 +16,7 @@ a few microseconds (pure ``math``, no numpy). :func:`plan_move` is the one-call 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from .. import kinematics as kin
@@ -146,8 +147,9 @@ class Planner:
         A calibration that models such a joint the MM3A's way, or whose steps of it are of
         another kind (in rad for a prismatic stage: :meth:`Calibration.kind`), is refused
         (``ValueError``): its steps are another arm's (an MM3A's joint 1 in rad, not a stage's in m).
-    pose : Pose
-        The other joints and the tilt; the joint's own coordinate in it is ignored.
+    pose : Pose or sequence of 5 float
+        The other joints and the tilt (q1, q2 rad, q3 m, theta, psi rad); the joint's own
+        coordinate in it is ignored.
 
     Examples
     --------
@@ -158,9 +160,15 @@ class Planner:
     -32
     """
 
-    def __init__(self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose):
+    def __init__(self, calibration: Calibration, joint: int | kin.JointSpec, pose: kin.Pose | Sequence[float]):
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
+        # |q| beyond a full turn (rotary) or a metre (prismatic) is no joint's position: degrees, or mm as m
+        self._bound = 2.0 * math.pi if self.spec.kind == "rotary" else 1.0
+        if not isinstance(pose, kin.Pose):  # [0, -1, 0] was "zip() argument 2 is shorter than argument 1"
+            if len(pose) != len(kin.Pose._fields):
+                raise ValueError(f"pose = {pose!r}: a Pose or its five numbers (q1, q2 rad, q3 m, theta, psi rad)")
+            pose = kin.Pose(*pose)
         self.pose = pose
         self._coeffs: dict[int, StepProfile | TabulatedProfile] = {}  # per direction, made on first use
         if self.spec.step_model == "constant":  # a stage: the calibration's constant step of each direction
@@ -207,6 +215,16 @@ class Planner:
             c = self._coeffs[sign] = StepProfile(*_scalar_coefficients(m, self.pose))
         return c
 
+    def _unit_slip(self, **qs: float) -> ValueError:
+        """The error for a position that is not finite or beyond a full turn / a metre (the hot path's one check)."""
+        for name, q in qs.items():
+            if not math.isfinite(q):
+                return ValueError(f"{name} = {q!r} must be a finite position in {self.spec.unit}")
+            if abs(q) > self._bound:
+                what = "a full turn: radians, not degrees" if self._bound != 1.0 else "a metre: metres, not mm or µm"
+                return ValueError(f"{name} = {q:.6g} {self.spec.unit} is more than {what} (joint {self.joint})")
+        return ValueError(f"positions {qs!r}")  # (not reached: called only when one is out)
+
     def _check_range(self, q: float, what: str) -> None:
         problem = self.spec.range_problem(what, q)
         if problem:
@@ -214,6 +232,9 @@ class Planner:
 
     def exact_steps(self, q_from: float, q_to: float) -> float:
         """The unrounded number of steps from ``q_from`` to ``q_to`` (>= 0)."""
+        b = self._bound
+        if not (-b <= q_from <= b and -b <= q_to <= b):
+            raise self._unit_slip(q_from=q_from, q_to=q_to)
         if q_to == q_from:
             return 0.0
         sign = 1 if q_to > q_from else -1
@@ -223,8 +244,13 @@ class Planner:
         """Signed steps to command to move from ``q_from`` to ``q_to``: negative when ``q_to < q_from``.
 
         The sign is the direction (docs/design.md §2), so the result can be handed to
-        :meth:`position_after` or to a controller's ``step`` as it is.
+        :meth:`position_after` or to a controller's ``step`` as it is. Not range-checked (the hot
+        path: :meth:`plan` checks the stops), but a position beyond a full turn (rotary, rad) or a
+        metre (prismatic, m), or not finite, raises ``ValueError``: -60 meant as degrees gave 139624 steps.
         """
+        b = self._bound
+        if not (-b <= q_from <= b and -b <= q_to <= b):
+            raise self._unit_slip(q_from=q_from, q_to=q_to)
         if q_to == q_from:
             return 0
         sign = 1 if q_to > q_from else -1
@@ -237,7 +263,9 @@ class Planner:
         return self._dir(direction_sign(direction)).gamma(q)
 
     def position_after(self, q_start: float, signed_steps: int | float) -> float:
-        """Dead reckoning: where the joint is after ``signed_steps`` steps from ``q_start``."""
+        """Dead reckoning: where the joint is after ``signed_steps`` steps from ``q_start`` (checked as ``steps``)."""
+        if not -self._bound <= q_start <= self._bound:
+            raise self._unit_slip(q_start=q_start)
         if signed_steps == 0:
             return float(q_start)
         sign = 1 if signed_steps > 0 else -1

@@ -25,6 +25,7 @@ that name. The lock is portable (SQLite transactions, no ``fcntl``).
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import socket
 from collections.abc import Callable, Iterator, Sequence
@@ -296,6 +297,13 @@ def target_of(state: DeviceState, joint: int, by: float | None = None, to: float
     if (by is None) == (to is None):
         raise ValueError("give exactly one of by and to")
     spec = state.spec(joint)
+    for name, v in (("by", by), ("to", to)):  # by="0.5deg" was "could not convert string to float", by="0.01" taken
+        if v is None:
+            continue
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise TypeError(f"{name} = {v!r} must be a number in {spec.unit} (SI; stickslip.units parses '0.5deg')")
+        if not math.isfinite(v):
+            raise ValueError(f"{name} = {v!r} must be a finite number in {spec.unit}")
     q_from = state.positions[joint]
     q_to = to if to is not None else q_from + float(by or 0.0)
     if not spec.contains(q_to):

@@ -32,6 +32,7 @@ so a 90 s rotary traverse takes a few milliseconds.
 from __future__ import annotations
 
 import math
+import numbers
 import threading
 import weakref
 import zlib
@@ -289,7 +290,7 @@ class SimulatedMM3A(TrueSteps, StepLog):
             if v is None:
                 continue
             spec = kin.JOINTS[j]
-            v = float(v)
+            v = _number(f"q{j}", v, spec.unit)
             problem = spec.range_problem(f"q{j}", v)
             if problem:
                 raise ValueError(problem)
@@ -297,7 +298,7 @@ class SimulatedMM3A(TrueSteps, StepLog):
         for name, v in (("theta", theta), ("psi", psi)):
             if v is None:
                 continue
-            v = float(v)
+            v = _number(name, v, "rad")
             if not -math.pi - 1e-9 <= v <= math.pi + 1e-9:
                 raise ValueError(f"{name} = {v:.6g} rad is outside [-pi, pi]")
             setattr(self, f"_{name}", v)
@@ -363,6 +364,13 @@ _URL_KEYS = {
     "rate": int,
     "gain_db": float,
 }
+
+
+def _number(name: str, v: object, unit: str) -> float:
+    """``v`` as a float, or a TypeError naming it (q2="a" was "could not convert string to float: 'a'")."""
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise TypeError(f"{name} = {v!r} must be a number in {unit}")
+    return float(v)
 
 
 def open_url(url: str = "sim://") -> SimulatedMM3A:

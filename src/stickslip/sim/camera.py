@@ -29,6 +29,7 @@ the base frame (with units). The truth is at hand for tests:
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from typing import Any
 
@@ -40,7 +41,7 @@ from .. import kinematics as kin
 from ..devices.base import Controller, KnowsTruePosition, VirtualClock, redact_url
 from ..units import UnitError, parse_typed
 from ..vision.camera import CameraError, CameraInfo, camera_options, pixel_option
-from ..vision.frame import Frame
+from ..vision.frame import PIXEL_SIZE_RANGE, Frame
 from ..vision.view import View, project
 
 __all__ = ["SimCamera", "SimCamSettings", "SimScene", "LobedParticle", "Flake", "Droplet", "open_url", "LOOKS", "ENDS",
@@ -117,6 +118,23 @@ class SimCamSettings:
     drift_px_s: float = 0.02
     debris: int = 40
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        """The simcam:// URL's bounds on the lengths and the angle, for settings made in Python too (a unit slip:
+        taper=8 meant as degrees was a cone of 8 rad, pixel_size_m=0.5 meant as µm a pixel of half a metre)."""
+        for name, (lo, hi, unit) in _UNIT_RANGES.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, numbers.Real) or not lo <= float(v) <= hi:
+                raise ValueError(f"SimCamSettings: {name} = {v!r} must be a number in [{lo:g}, {hi:g}] {unit}")
+
+
+_UNIT_RANGES: dict[str, tuple[float, float, str]] = {
+    "pixel_size_m": (PIXEL_SIZE_RANGE[0], PIXEL_SIZE_RANGE[1], "m"),
+    "dof_m": (1e-8, 1e-2, "m"),
+    "tip_radius_m": (0.0, 1e-4, "m"),
+    "taper": (math.radians(0.5), math.radians(45.0), "rad"),
+}
+"""What :func:`open_url` accepts for each length and angle of :class:`SimCamSettings` (SI)."""
 
 
 class SimCamera:
