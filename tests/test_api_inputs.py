@@ -324,3 +324,14 @@ def test_projection_refuses_a_pixel_size_that_is_not_one(pixel: float) -> None:
     with pytest.raises(ValueError, match="pixel_size_m"):
         project(np.zeros(3), TOP_VIEW, pixel, np.zeros(3), (0.0, 0.0))
     assert base_to_image(TOP_VIEW, 0.5e-6)[0, 0] == pytest.approx(2e6)
+
+
+@pytest.mark.parametrize("path", ["lab.db", Path("lab.db")])
+def test_a_store_made_from_a_path_says_to_open_it(path: str | Path, tmp_path: Path) -> None:
+    from stickslip.storage import Store
+
+    with pytest.raises(TypeError, match=r"open a database with Store\.open\('lab\.db'\)"):
+        Store(path)  # type: ignore[arg-type]  # before: AttributeError: 'str' object has no attribute 'where'
+    assert not (tmp_path / "lab.db").exists()
+    with Store.open(tmp_path / "lab.db") as store:
+        assert store.count_traverses() == 0

@@ -41,6 +41,8 @@ class _Base:
     """The backend, transactions, migrations, devices and sessions (shared by every part of ``Store``)."""
 
     def __init__(self, db: Backend):
+        if isinstance(db, (str, os.PathLike)):  # a notebook's first try: Store("lab.db")
+            raise TypeError(f"Store({str(db)!r}) takes an open backend; open a database with Store.open({str(db)!r})")
         self._con: Backend = db
         self.path: Path | str = db.where
         self.upgraded_from: int | None = None
