@@ -382,6 +382,27 @@ def test_a_history_file_with_a_bad_time_is_refused_with_its_row_and_value(db, tm
         assert (p.how, p.source, p.excluded) == ("imported", None, None) and p.measured_at[:4] == "2026"
 
 
+def test_a_history_time_outside_the_years_1_to_9999_in_utc_is_refused_with_its_row(tmp_path):
+    """A time whose offset takes it before year 1 or past 9999 in UTC was an OverflowError traceback (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    row = ('{"day": "d1", "joint": 3, "direction": "+", "q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, '
+           '"start": 0, "end": 0.01, "steps": %d, "measured_at": "%s"}\n')
+    bad = tmp_path / "h.jsonl"
+    bad.write_text('{"format": "stickslip-history", "version": 1}\n' + row % (10, "0001-01-01T00:00:00+01:00")
+                   + row % (11, "9999-12-31T23:59:59-01:00") + row % (12, "9999-12-31T23:59:59+00:00"))
+    db = tmp_path / "s.db"
+    r = CliRunner().invoke(app, ["import", str(bad), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert f'{bad}:2: measured_at "0001-01-01T00:00:00+01:00": is outside the years 1 to 9999' in r.stderr
+    assert f'{bad}:3: measured_at "9999-12-31T23:59:59-01:00": is outside the years 1 to 9999' in r.stderr
+    assert f"{bad}:4:" not in r.stderr and "Traceback" not in r.output
+    with Store.open(db) as s:
+        assert s.count_traverses() == 0
+
+
 @st.composite
 def _provenances(draw: st.DrawFn) -> object:
     from stickslip.measurements.history_file import Provenance

@@ -188,4 +188,7 @@ def _measured_at(value: object) -> tuple[str | None, str | None]:
         return None, "not an ISO 8601 date and time (e.g. 2026-11-21T09:30:00+00:00)"
     if t.tzinfo is None:
         return None, "has no UTC offset (add +00:00 for UTC): a local time is another instant on every PC"
-    return t.astimezone(_dt.UTC).isoformat(timespec="microseconds"), None
+    try:
+        return t.astimezone(_dt.UTC).isoformat(timespec="microseconds"), None
+    except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC, 9999-12-31T23:59-01:00 in year 10000
+        return None, "is outside the years 1 to 9999 once in UTC"
