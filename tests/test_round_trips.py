@@ -403,6 +403,48 @@ def test_a_history_time_outside_the_years_1_to_9999_in_utc_is_refused_with_its_r
         assert s.count_traverses() == 0
 
 
+@pytest.mark.parametrize("command", ["calibrate", "fit", "anova"])
+def test_a_history_file_given_where_a_table_is_read_says_what_it_is_and_what_to_do(tmp_path, command):
+    """The table readers said 'header must be exactly day,... (missing day, ..., unexpected {"format": ...})'
+    for export --json's file (audit56): one line naming it and the two ways on."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    h = tmp_path / "h.jsonl"
+    h.write_text('{"format": "stickslip-history", "version": 1}\n{"day": "d1", "joint": 3, "direction": "+", '
+                 '"q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, "start": 0, "end": 0.01, "steps": 10}\n')
+    r = CliRunner().invoke(app, [command, str(h)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip().splitlines() == [
+        f"error: {h}:1: a stickslip history file (export --json), not a table: import it (stickslip import {h} "
+        "-d URL) and read the store (--db, no table), or write a table (stickslip export -o TABLE.csv)"
+    ], r.stderr
+
+
+def test_a_history_file_given_as_poses_to_predict_says_what_it_is_and_what_to_do(tmp_path):
+    """predict said 'header lacks joint, q1, ...' for export --json's file (audit56)."""
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    write_measurements(tmp_path / "m.csv", paper_table())
+    cal = tmp_path / "cal.json"
+    run = CliRunner().invoke
+    assert run(app, ["calibrate", str(tmp_path / "m.csv"), "-o", str(cal)]).exit_code == 0
+    h = tmp_path / "h.jsonl"
+    h.write_text('{"format": "stickslip-history", "version": 1}\n{"day": "d1", "joint": 3, "direction": "+", '
+                 '"q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, "start": 0, "end": 0.01, "steps": 10}\n')
+    r = run(app, ["predict", str(h), "--calibration", str(cal)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip().splitlines() == [
+        f"error: {h}:1: a stickslip history file (export --json), not a pose table: write its rows as a table "
+        "(stickslip export -o TABLE.csv) and give that"
+    ], r.stderr
+
+
 @st.composite
 def _provenances(draw: st.DrawFn) -> object:
     from stickslip.measurements.history_file import Provenance
