@@ -403,6 +403,27 @@ def test_a_history_time_outside_the_years_1_to_9999_in_utc_is_refused_with_its_r
         assert s.count_traverses() == 0
 
 
+def test_a_history_line_giving_a_field_twice_is_refused_not_read_as_its_last(tmp_path):
+    """json keeps the last of two equal keys: q1 0.0 then 0.5 was stored as 0.5 without a word (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    row = ('{"day": "d1", "joint": 3, "direction": "+", "q1": 0.0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, '
+           '"start": 0, "end": 0.01, "steps": 10%s}\n')
+    h = tmp_path / "h.jsonl"
+    h.write_text('{"format": "stickslip-history", "version": 1}\n' + row % "" + row % ', "q1": 0.5'
+                 + row % ', "how": "audio", "how": "camera"')
+    db = tmp_path / "s.db"
+    r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert f"{h}:3: field 'q1' given twice (0.0 and 0.5): keep one" in r.stderr, r.stderr
+    assert f"""{h}:4: field 'how' given twice ("audio" and "camera"): keep one""" in r.stderr, r.stderr
+    assert f"{h}:2:" not in r.stderr
+    with Store.open(db) as s:
+        assert s.count_traverses() == 0
+
+
 @pytest.mark.parametrize("command", ["calibrate", "fit", "anova"])
 def test_a_history_file_given_where_a_table_is_read_says_what_it_is_and_what_to_do(tmp_path, command):
     """The table readers said 'header must be exactly day,... (missing day, ..., unexpected {"format": ...})'

@@ -124,7 +124,9 @@ def _check_format(first: tuple[int, str], source: str) -> None:
 def _parse_line(line: str, where: str, joints: JointSet | None) -> tuple[tuple[Traverse, Provenance] | None, list[str]]:
     """One line's traverse and provenance, or its problems."""
     try:
-        obj = json.loads(line, parse_constant=_no_constant)
+        obj = json.loads(line, parse_constant=_no_constant, object_pairs_hook=_once_each)
+    except _Twice as e:
+        return None, [f"{where}: {e}"]
     except ValueError as e:
         return None, [f"{where}: not a JSON object ({e})"]
     if not isinstance(obj, dict):
@@ -139,6 +141,21 @@ def _parse_line(line: str, where: str, joints: JointSet | None) -> tuple[tuple[T
     if problems or t is None or prov is None:
         return None, problems
     return (t, prov), []
+
+
+class _Twice(ValueError):
+    """A field given twice in one line."""
+
+
+def _once_each(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose fields are each given once: ``json`` keeps the last of two silently, so
+    ``{"q1": 0.1, ..., "q1": 0.5}`` (a hand edit, a merge) would store 0.5 without a word."""
+    obj: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in obj:
+            raise _Twice(f"field {k!r} given twice ({json.dumps(obj[k])} and {json.dumps(v)}): keep one")
+        obj[k] = v
+    return obj
 
 
 def _no_constant(name: str) -> float:
