@@ -225,3 +225,33 @@ def test_both_backends_merge_two_spellings_on_the_upgrade_to_4(db):
         assert st.count_traverses("mm3a:///COM3") == 8 and st.count_traverses("sim://?seed=3") == 1
         assert st.duplicates(ROWS[:7], "mm3a://COM3") == list(range(6))
         assert st.integrity_check() == "ok"
+
+
+def test_a_process_that_finds_the_upgrade_made_by_another_says_nothing_of_one(tmp_path, monkeypatch):
+    """Two processes opening one schema-3 file: the one that waited for the write lock found it upgraded already,
+    yet said 'upgraded ... from schema version 3; a server's database is not copied (pg_dump keeps one)' of an
+    SQLite file (audit56, two CLI processes on a 96 000-row store). Here the other process's upgrade is made
+    between this one's first look at the version (3) and its write lock."""
+    from stickslip.storage.sqlite import SQLiteBackend
+
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"mm3a:///COM3": ROWS[:2], "mm3a://com3": ROWS[:1]})
+    real = SQLiteBackend.schema_version
+    looks: list[int] = []
+
+    def first_look_before_the_other(self):
+        looks.append(real(self))
+        if len(looks) == 1:  # the other process upgrades now, before this one takes the write lock
+            with Store.open(db):
+                pass
+            return 3
+        return looks[-1]
+
+    monkeypatch.setattr(SQLiteBackend, "schema_version", first_look_before_the_other)
+    r = CliRunner().invoke(app, ["history", "--db", str(db)])
+    assert r.exit_code == 0, r.output
+    assert "note:" not in r.stderr and "pg_dump" not in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir() if ".v3" in p.name) == ["lab.v3.db"]  # the other's copy only
+    monkeypatch.undo()
+    with Store.open(db) as st:
+        assert st.upgraded_from is None and st.schema_version == SCHEMA_VERSION and st.count_traverses() == 3
