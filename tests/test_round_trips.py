@@ -424,6 +424,35 @@ def test_a_history_line_giving_a_field_twice_is_refused_not_read_as_its_last(tmp
         assert s.count_traverses() == 0
 
 
+def test_a_history_text_no_store_can_keep_is_refused_with_its_line_on_both_backends(db, tmp_path):
+    """A NUL in a source was stored by SQLite but refused by PostgreSQL ('the database refused the value: ...
+    cannot contain NUL'), and a lone surrogate escape (\\ud800) was "error: 'utf-8' codec can't encode character",
+    neither naming the file or line (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    row = {"day": "d1", "joint": 3, "direction": "+", "q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0,
+           "start": 0, "end": 0.01, "steps": 10}
+    h = tmp_path / "h.jsonl"
+    h.write_text("\n".join([json.dumps({"format": "stickslip-history", "version": 1}),
+                            json.dumps({**row, "source": "lab \"B\"\nrun 2"}),  # line breaks and quotes are kept
+                            json.dumps({**row, "steps": 11, "source": "x\x00y"}),
+                            json.dumps({**row, "steps": 12, "excluded": "r\ud800"}),
+                            json.dumps({**row, "steps": 13, "how": "\udc80"})]) + "\n")
+    r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip().removeprefix("error: ").split("; ") == [
+        f"{h}:3: source holds a NUL character (\\u0000), which a PostgreSQL store cannot keep: remove it",
+        f"{h}:4: excluded holds \\ud800, half of a UTF-16 pair and no character (not UTF-8): write the character "
+        "itself, or its pair",
+        f"{h}:5: how holds \\udc80, half of a UTF-16 pair and no character (not UTF-8): write the character itself, "
+        "or its pair",
+    ], r.stderr
+    with Store.open(db) as s:
+        assert s.count_traverses() == 0
+
+
 @pytest.mark.parametrize("command", ["calibrate", "fit", "anova"])
 def test_a_history_file_given_where_a_table_is_read_says_what_it_is_and_what_to_do(tmp_path, command):
     """The table readers said 'header must be exactly day,... (missing day, ..., unexpected {"format": ...})'

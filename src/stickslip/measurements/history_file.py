@@ -179,6 +179,8 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
         v = obj.get(k)
         if v is not None and not isinstance(v, str):
             problems.append(f"{where}: {k} must be text or null, got {json.dumps(v)}")
+        elif isinstance(v, str) and (why := _unstorable(v)):
+            problems.append(f"{where}: {k} {why}")
         texts[k] = v if isinstance(v, str) else None
     if texts["excluded"] is not None and not texts["excluded"].strip():
         problems.append(f"{where}: excluded is empty (give the reason, or null when the row is used)")
@@ -193,6 +195,19 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
     if problems:
         return None, problems
     return Provenance(texts["how"] or "imported", iso, texts["source"], texts["excluded"]), []
+
+
+def _unstorable(text: str) -> str | None:
+    """Why a store cannot keep ``text`` as it is, or None: a NUL (PostgreSQL refuses it; SQLite would keep it, so a
+    history could not move on), or a lone surrogate escape such as ``\\ud800`` (not a character: not UTF-8)."""
+    if "\x00" in text:
+        return "holds a NUL character (\\u0000), which a PostgreSQL store cannot keep: remove it"
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        return (f"holds \\u{ord(text[e.start]):04x}, half of a UTF-16 pair and no character (not UTF-8): write the "
+                "character itself, or its pair")
+    return None
 
 
 def _measured_at(value: object) -> tuple[str | None, str | None]:
