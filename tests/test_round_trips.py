@@ -453,6 +453,22 @@ def test_a_history_text_no_store_can_keep_is_refused_with_its_line_on_both_backe
         assert s.count_traverses() == 0
 
 
+def test_a_history_file_with_empty_lines_above_its_format_line_is_refused_saying_so(tmp_path):
+    """import took it for a history file (its first character past the blanks is '{') and then said 'not a stickslip
+    history file (line 1 must be ...)' of a file whose line 3 was that very line (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    h = tmp_path / "h.jsonl"
+    h.write_text('\n \n{"format": "stickslip-history", "version": 1}\n{"day": "d1", "joint": 3, "direction": "+", '
+                 '"q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, "start": 0, "end": 0.01, "steps": 10}\n')
+    r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip() == (f'error: {h}:1: line 1 is empty: a history file\'s first line is {{"format": '
+                                '"stickslip-history", "version": 1} (delete the empty lines above it)'), r.stderr
+
+
 @pytest.mark.parametrize("command", ["calibrate", "fit", "anova"])
 def test_a_history_file_given_where_a_table_is_read_says_what_it_is_and_what_to_do(tmp_path, command):
     """The table readers said 'header must be exactly day,... (missing day, ..., unexpected {"format": ...})'

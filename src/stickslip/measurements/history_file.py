@@ -110,6 +110,9 @@ def read_history(path: str | Path, joints: JointSet | None = None) -> Iterator[l
 
 
 def _check_format(first: tuple[int, str], source: str) -> None:
+    if not first[1].strip():  # is_history_file looks past blank lines: say what is wrong, not 'not a history file'
+        raise TableError([f"{source}:1: line 1 is empty: a history file's first line is {json.dumps(FORMAT)} "
+                          "(delete the empty lines above it)"])
     try:
         head = json.loads(first[1])
     except ValueError:
