@@ -285,3 +285,23 @@ def test_a_stored_name_is_its_own_stored_name_so_the_upgrade_never_collides(tmp_
     _schema_3_store(db, {"anc300://h ?password=x": ROWS[:2], "anc300://h ": ROWS[2:3], "anc300://h": ROWS[3:4]})
     with Store.open(db) as st_:
         assert [d["url"] for d in st_.devices()] == ["anc300://h"] and st_.count_traverses("anc300://h") == 4
+
+
+def test_states_of_spellings_redacted_alike_are_all_kept_by_the_upgrade(tmp_path):
+    """A store made before URLs were redacted (2026-11-24) holds 'anc300://h?password=a' and '...=b' as written;
+    both kept a position, so both were to be kept as 'position (from anc300://h?password=***)': the second was
+    'UNIQUE constraint failed: device_state.device_id, device_state.key' and the store could not be opened
+    (audit56)."""
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://h": ROWS[:1], "anc300://h?x=a": ROWS[1:2], "anc300://h?x=b": ROWS[2:3]})
+    con = sqlite3.connect(db)
+    con.execute("UPDATE devices SET url = replace(url, '?x=', '?password=')")  # as the code before redaction wrote
+    con.commit()
+    con.close()
+    with Store.open(db) as st:
+        assert [d["url"] for d in st.devices()] == ["anc300://h"] and st.count_traverses() == 3
+        assert st.get_state("anc300://h", "position") == {"from": "anc300://h"}
+        assert st.get_state("anc300://h", "position (from anc300://h?password=***)") == {"from": "anc300://h?x=a"}
+        assert st.get_state("anc300://h", "position (from anc300://h?password=***, 2)") == {"from": "anc300://h?x=b"}
+        assert len(st.upgrade_notes) == 2 and "password=a" not in " ".join(st.upgrade_notes)
+    assert b"password=a" not in db.read_bytes() and b"password=b" not in db.read_bytes()
