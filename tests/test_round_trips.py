@@ -469,6 +469,23 @@ def test_a_history_file_with_empty_lines_above_its_format_line_is_refused_saying
                                 '"stickslip-history", "version": 1} (delete the empty lines above it)'), r.stderr
 
 
+def test_a_table_whose_first_cell_starts_with_a_brace_is_refused_naming_both_formats(tmp_path):
+    """import reads a file starting with '{' as a history file; a CSV whose first cell is '{id}' was told only 'not
+    a stickslip history file (line 1 must be {"format": ...})', as if it had been meant as one (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    t = tmp_path / "m.csv"
+    t.write_text("{id},day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n1,d1,3,+,0,-1,0,0,0,0,0.01,10\n")
+    r = CliRunner().invoke(app, ["import", str(t), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip() == (
+        f'error: {t}:1: neither a stickslip history file (line 1 must be {{"format": "stickslip-history", '
+        "\"version\": 1}) nor a table (its first character is '{'; a table's line 1 is its header "
+        "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps)"), r.stderr
+
+
 @pytest.mark.parametrize("command", ["calibrate", "fit", "anova"])
 def test_a_history_file_given_where_a_table_is_read_says_what_it_is_and_what_to_do(tmp_path, command):
     """The table readers said 'header must be exactly day,... (missing day, ..., unexpected {"format": ...})'

@@ -118,7 +118,9 @@ def _check_format(first: tuple[int, str], source: str) -> None:
     except ValueError:
         head = None
     if not isinstance(head, dict) or head.get("format") != FORMAT["format"]:
-        raise TableError([f"{source}:1: not a stickslip history file (line 1 must be {json.dumps(FORMAT)})"])
+        raise TableError([f"{source}:1: neither a stickslip history file (line 1 must be {json.dumps(FORMAT)}) "
+                          f"nor a table (its first character is '{{'; a table's line 1 is its header "
+                          f"{','.join(HEADER)})"])
     if head.get("version") != FORMAT["version"]:
         raise TableError([f"{source}:1: history file version {head.get('version')!r}: this stickslip reads "
                           f"version {FORMAT['version']} (a newer stickslip wrote it?)"])
