@@ -382,6 +382,152 @@ def test_a_history_file_with_a_bad_time_is_refused_with_its_row_and_value(db, tm
         assert (p.how, p.source, p.excluded) == ("imported", None, None) and p.measured_at[:4] == "2026"
 
 
+def test_a_history_time_outside_the_years_1_to_9999_in_utc_is_refused_with_its_row(tmp_path):
+    """A time whose offset takes it before year 1 or past 9999 in UTC was an OverflowError traceback (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    row = ('{"day": "d1", "joint": 3, "direction": "+", "q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, '
+           '"start": 0, "end": 0.01, "steps": %d, "measured_at": "%s"}\n')
+    bad = tmp_path / "h.jsonl"
+    bad.write_text('{"format": "stickslip-history", "version": 1}\n' + row % (10, "0001-01-01T00:00:00+01:00")
+                   + row % (11, "9999-12-31T23:59:59-01:00") + row % (12, "9999-12-31T23:59:59+00:00"))
+    db = tmp_path / "s.db"
+    r = CliRunner().invoke(app, ["import", str(bad), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert f'{bad}:2: measured_at "0001-01-01T00:00:00+01:00": is outside the years 1 to 9999' in r.stderr
+    assert f'{bad}:3: measured_at "9999-12-31T23:59:59-01:00": is outside the years 1 to 9999' in r.stderr
+    assert f"{bad}:4:" not in r.stderr and "Traceback" not in r.output
+    with Store.open(db) as s:
+        assert s.count_traverses() == 0
+
+
+def test_a_history_line_giving_a_field_twice_is_refused_not_read_as_its_last(tmp_path):
+    """json keeps the last of two equal keys: q1 0.0 then 0.5 was stored as 0.5 without a word (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    row = ('{"day": "d1", "joint": 3, "direction": "+", "q1": 0.0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, '
+           '"start": 0, "end": 0.01, "steps": 10%s}\n')
+    h = tmp_path / "h.jsonl"
+    h.write_text('{"format": "stickslip-history", "version": 1}\n' + row % "" + row % ', "q1": 0.5'
+                 + row % ', "how": "audio", "how": "camera"')
+    db = tmp_path / "s.db"
+    r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert f"{h}:3: field 'q1' given twice (0.0 and 0.5): keep one" in r.stderr, r.stderr
+    assert f"""{h}:4: field 'how' given twice ("audio" and "camera"): keep one""" in r.stderr, r.stderr
+    assert f"{h}:2:" not in r.stderr
+    with Store.open(db) as s:
+        assert s.count_traverses() == 0
+
+
+def test_a_history_text_no_store_can_keep_is_refused_with_its_line_on_both_backends(db, tmp_path):
+    """A NUL in a source was stored by SQLite but refused by PostgreSQL ('the database refused the value: ...
+    cannot contain NUL'), and a lone surrogate escape (\\ud800) was "error: 'utf-8' codec can't encode character",
+    neither naming the file or line (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    row = {"day": "d1", "joint": 3, "direction": "+", "q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0,
+           "start": 0, "end": 0.01, "steps": 10}
+    h = tmp_path / "h.jsonl"
+    h.write_text("\n".join([json.dumps({"format": "stickslip-history", "version": 1}),
+                            json.dumps({**row, "source": "lab \"B\"\nrun 2"}),  # line breaks and quotes are kept
+                            json.dumps({**row, "steps": 11, "source": "x\x00y"}),
+                            json.dumps({**row, "steps": 12, "excluded": "r\ud800"}),
+                            json.dumps({**row, "steps": 13, "how": "\udc80"})]) + "\n")
+    r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(db)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip().removeprefix("error: ").split("; ") == [
+        f"{h}:3: source holds a NUL character (\\u0000), which a PostgreSQL store cannot keep: remove it",
+        f"{h}:4: excluded holds \\ud800, half of a UTF-16 pair and no character (not UTF-8): write the character "
+        "itself, or its pair",
+        f"{h}:5: how holds \\udc80, half of a UTF-16 pair and no character (not UTF-8): write the character itself, "
+        "or its pair",
+    ], r.stderr
+    with Store.open(db) as s:
+        assert s.count_traverses() == 0
+
+
+def test_a_history_file_with_empty_lines_above_its_format_line_is_refused_saying_so(tmp_path):
+    """import took it for a history file (its first character past the blanks is '{') and then said 'not a stickslip
+    history file (line 1 must be ...)' of a file whose line 3 was that very line (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    h = tmp_path / "h.jsonl"
+    h.write_text('\n \n{"format": "stickslip-history", "version": 1}\n{"day": "d1", "joint": 3, "direction": "+", '
+                 '"q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, "start": 0, "end": 0.01, "steps": 10}\n')
+    r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip() == (f'error: {h}:1: line 1 is empty: a history file\'s first line is {{"format": '
+                                '"stickslip-history", "version": 1} (delete the empty lines above it)'), r.stderr
+
+
+def test_a_table_whose_first_cell_starts_with_a_brace_is_refused_naming_both_formats(tmp_path):
+    """import reads a file starting with '{' as a history file; a CSV whose first cell is '{id}' was told only 'not
+    a stickslip history file (line 1 must be {"format": ...})', as if it had been meant as one (audit56)."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    t = tmp_path / "m.csv"
+    t.write_text("{id},day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n1,d1,3,+,0,-1,0,0,0,0,0.01,10\n")
+    r = CliRunner().invoke(app, ["import", str(t), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip() == (
+        f'error: {t}:1: neither a stickslip history file (line 1 must be {{"format": "stickslip-history", '
+        "\"version\": 1}) nor a table (its first character is '{'; a table's line 1 is its header "
+        "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps)"), r.stderr
+
+
+@pytest.mark.parametrize("command", ["calibrate", "fit", "anova"])
+def test_a_history_file_given_where_a_table_is_read_says_what_it_is_and_what_to_do(tmp_path, command):
+    """The table readers said 'header must be exactly day,... (missing day, ..., unexpected {"format": ...})'
+    for export --json's file (audit56): one line naming it and the two ways on."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    h = tmp_path / "h.jsonl"
+    h.write_text('{"format": "stickslip-history", "version": 1}\n{"day": "d1", "joint": 3, "direction": "+", '
+                 '"q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, "start": 0, "end": 0.01, "steps": 10}\n')
+    r = CliRunner().invoke(app, [command, str(h)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip().splitlines() == [
+        f"error: {h}:1: a stickslip history file (export --json), not a table: import it (stickslip import {h} "
+        "-d URL) and read the store (--db, no table), or write a table (stickslip export -o TABLE.csv)"
+    ], r.stderr
+
+
+def test_a_history_file_given_as_poses_to_predict_says_what_it_is_and_what_to_do(tmp_path):
+    """predict said 'header lacks joint, q1, ...' for export --json's file (audit56)."""
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.measurements import write_measurements
+
+    write_measurements(tmp_path / "m.csv", paper_table())
+    cal = tmp_path / "cal.json"
+    run = CliRunner().invoke
+    assert run(app, ["calibrate", str(tmp_path / "m.csv"), "-o", str(cal)]).exit_code == 0
+    h = tmp_path / "h.jsonl"
+    h.write_text('{"format": "stickslip-history", "version": 1}\n{"day": "d1", "joint": 3, "direction": "+", '
+                 '"q1": 0, "q2": -1, "q3": 0, "theta": 0, "psi": 0, "start": 0, "end": 0.01, "steps": 10}\n')
+    r = run(app, ["predict", str(h), "--calibration", str(cal)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.strip().splitlines() == [
+        f"error: {h}:1: a stickslip history file (export --json), not a pose table: write its rows as a table "
+        "(stickslip export -o TABLE.csv) and give that"
+    ], r.stderr
+
+
 @st.composite
 def _provenances(draw: st.DrawFn) -> object:
     from stickslip.measurements.history_file import Provenance

@@ -225,3 +225,83 @@ def test_both_backends_merge_two_spellings_on_the_upgrade_to_4(db):
         assert st.count_traverses("mm3a:///COM3") == 8 and st.count_traverses("sim://?seed=3") == 1
         assert st.duplicates(ROWS[:7], "mm3a://COM3") == list(range(6))
         assert st.integrity_check() == "ok"
+
+
+def test_a_process_that_finds_the_upgrade_made_by_another_says_nothing_of_one(tmp_path, monkeypatch):
+    """Two processes opening one schema-3 file: the one that waited for the write lock found it upgraded already,
+    yet said 'upgraded ... from schema version 3; a server's database is not copied (pg_dump keeps one)' of an
+    SQLite file (audit56, two CLI processes on a 96 000-row store). Here the other process's upgrade is made
+    between this one's first look at the version (3) and its write lock."""
+    from stickslip.storage.sqlite import SQLiteBackend
+
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"mm3a:///COM3": ROWS[:2], "mm3a://com3": ROWS[:1]})
+    real = SQLiteBackend.schema_version
+    looks: list[int] = []
+
+    def first_look_before_the_other(self):
+        looks.append(real(self))
+        if len(looks) == 1:  # the other process upgrades now, before this one takes the write lock
+            with Store.open(db):
+                pass
+            return 3
+        return looks[-1]
+
+    monkeypatch.setattr(SQLiteBackend, "schema_version", first_look_before_the_other)
+    r = CliRunner().invoke(app, ["history", "--db", str(db)])
+    assert r.exit_code == 0, r.output
+    assert "note:" not in r.stderr and "pg_dump" not in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir() if ".v3" in p.name) == ["lab.v3.db"]  # the other's copy only
+    monkeypatch.undo()
+    with Store.open(db) as st:
+        assert st.upgraded_from is None and st.schema_version == SCHEMA_VERSION and st.count_traverses() == 3
+
+
+def test_a_stored_name_is_its_own_stored_name_so_the_upgrade_never_collides(tmp_path):
+    """'anc300://h ?password=x' was stored as 'anc300://h ' (its host ending in a space), whose own name is
+    'anc300://h'; a schema-3 store holding both spellings could not be upgraded ('UNIQUE constraint failed:
+    devices.url'), so no command opened it (audit56, found by a hypothesis search over 20 000 URLs)."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    from stickslip.storage.schema import stored_device
+
+    for url in ("anc300://h ?password=x", "mm3a://COM3 #arm=x", "MM3A://x #a", "sim://?seed=3 "):
+        assert stored_device(stored_device(url)) == stored_device(url), url
+    assert stored_device("anc300://h ?password=x") == "anc300://h"
+
+    @settings(max_examples=300, deadline=None, suppress_health_check=list(HealthCheck))
+    @given(st.sampled_from(["mm3a", "anc300", "sim", "sim+physics"]),
+           st.text(alphabet="aC3:/?#=&@%.[]-_ +0seedarmCOM\\", max_size=16))
+    def name_of_a_name(scheme, rest):
+        try:
+            key = stored_device(f"{scheme}://{rest}")
+        except ValueError:
+            return
+        assert stored_device(key) == key
+
+    name_of_a_name()
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://h ?password=x": ROWS[:2], "anc300://h ": ROWS[2:3], "anc300://h": ROWS[3:4]})
+    with Store.open(db) as st_:
+        assert [d["url"] for d in st_.devices()] == ["anc300://h"] and st_.count_traverses("anc300://h") == 4
+
+
+def test_states_of_spellings_redacted_alike_are_all_kept_by_the_upgrade(tmp_path):
+    """A store made before URLs were redacted (2026-11-24) holds 'anc300://h?password=a' and '...=b' as written;
+    both kept a position, so both were to be kept as 'position (from anc300://h?password=***)': the second was
+    'UNIQUE constraint failed: device_state.device_id, device_state.key' and the store could not be opened
+    (audit56)."""
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://h": ROWS[:1], "anc300://h?x=a": ROWS[1:2], "anc300://h?x=b": ROWS[2:3]})
+    con = sqlite3.connect(db)
+    con.execute("UPDATE devices SET url = replace(url, '?x=', '?password=')")  # as the code before redaction wrote
+    con.commit()
+    con.close()
+    with Store.open(db) as st:
+        assert [d["url"] for d in st.devices()] == ["anc300://h"] and st.count_traverses() == 3
+        assert st.get_state("anc300://h", "position") == {"from": "anc300://h"}
+        assert st.get_state("anc300://h", "position (from anc300://h?password=***)") == {"from": "anc300://h?x=a"}
+        assert st.get_state("anc300://h", "position (from anc300://h?password=***, 2)") == {"from": "anc300://h?x=b"}
+        assert len(st.upgrade_notes) == 2 and "password=a" not in " ".join(st.upgrade_notes)
+    assert b"password=a" not in db.read_bytes() and b"password=b" not in db.read_bytes()

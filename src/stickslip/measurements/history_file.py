@@ -110,12 +110,17 @@ def read_history(path: str | Path, joints: JointSet | None = None) -> Iterator[l
 
 
 def _check_format(first: tuple[int, str], source: str) -> None:
+    if not first[1].strip():  # is_history_file looks past blank lines: say what is wrong, not 'not a history file'
+        raise TableError([f"{source}:1: line 1 is empty: a history file's first line is {json.dumps(FORMAT)} "
+                          "(delete the empty lines above it)"])
     try:
         head = json.loads(first[1])
     except ValueError:
         head = None
     if not isinstance(head, dict) or head.get("format") != FORMAT["format"]:
-        raise TableError([f"{source}:1: not a stickslip history file (line 1 must be {json.dumps(FORMAT)})"])
+        raise TableError([f"{source}:1: neither a stickslip history file (line 1 must be {json.dumps(FORMAT)}) "
+                          f"nor a table (its first character is '{{'; a table's line 1 is its header "
+                          f"{','.join(HEADER)})"])
     if head.get("version") != FORMAT["version"]:
         raise TableError([f"{source}:1: history file version {head.get('version')!r}: this stickslip reads "
                           f"version {FORMAT['version']} (a newer stickslip wrote it?)"])
@@ -124,7 +129,9 @@ def _check_format(first: tuple[int, str], source: str) -> None:
 def _parse_line(line: str, where: str, joints: JointSet | None) -> tuple[tuple[Traverse, Provenance] | None, list[str]]:
     """One line's traverse and provenance, or its problems."""
     try:
-        obj = json.loads(line, parse_constant=_no_constant)
+        obj = json.loads(line, parse_constant=_no_constant, object_pairs_hook=_once_each)
+    except _Twice as e:
+        return None, [f"{where}: {e}"]
     except ValueError as e:
         return None, [f"{where}: not a JSON object ({e})"]
     if not isinstance(obj, dict):
@@ -139,6 +146,21 @@ def _parse_line(line: str, where: str, joints: JointSet | None) -> tuple[tuple[T
     if problems or t is None or prov is None:
         return None, problems
     return (t, prov), []
+
+
+class _Twice(ValueError):
+    """A field given twice in one line."""
+
+
+def _once_each(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose fields are each given once: ``json`` keeps the last of two silently, so
+    ``{"q1": 0.1, ..., "q1": 0.5}`` (a hand edit, a merge) would store 0.5 without a word."""
+    obj: dict[str, Any] = {}
+    for k, v in pairs:
+        if k in obj:
+            raise _Twice(f"field {k!r} given twice ({json.dumps(obj[k])} and {json.dumps(v)}): keep one")
+        obj[k] = v
+    return obj
 
 
 def _no_constant(name: str) -> float:
@@ -162,6 +184,8 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
         v = obj.get(k)
         if v is not None and not isinstance(v, str):
             problems.append(f"{where}: {k} must be text or null, got {json.dumps(v)}")
+        elif isinstance(v, str) and (why := _unstorable(v)):
+            problems.append(f"{where}: {k} {why}")
         texts[k] = v if isinstance(v, str) else None
     if texts["excluded"] is not None and not texts["excluded"].strip():
         problems.append(f"{where}: excluded is empty (give the reason, or null when the row is used)")
@@ -178,6 +202,19 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
     return Provenance(texts["how"] or "imported", iso, texts["source"], texts["excluded"]), []
 
 
+def _unstorable(text: str) -> str | None:
+    """Why a store cannot keep ``text`` as it is, or None: a NUL (PostgreSQL refuses it; SQLite would keep it, so a
+    history could not move on), or a lone surrogate escape such as ``\\ud800`` (not a character: not UTF-8)."""
+    if "\x00" in text:
+        return "holds a NUL character (\\u0000), which a PostgreSQL store cannot keep: remove it"
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as e:
+        return (f"holds \\u{ord(text[e.start]):04x}, half of a UTF-16 pair and no character (not UTF-8): write the "
+                "character itself, or its pair")
+    return None
+
+
 def _measured_at(value: object) -> tuple[str | None, str | None]:
     """``value`` as the store keeps a time (UTC, microseconds), or why it cannot be one."""
     if not isinstance(value, str):
@@ -188,4 +225,7 @@ def _measured_at(value: object) -> tuple[str | None, str | None]:
         return None, "not an ISO 8601 date and time (e.g. 2026-11-21T09:30:00+00:00)"
     if t.tzinfo is None:
         return None, "has no UTC offset (add +00:00 for UTC): a local time is another instant on every PC"
-    return t.astimezone(_dt.UTC).isoformat(timespec="microseconds"), None
+    try:
+        return t.astimezone(_dt.UTC).isoformat(timespec="microseconds"), None
+    except OverflowError:  # 0001-01-01T00:00+01:00 is in year 0 in UTC, 9999-12-31T23:59-01:00 in year 10000
+        return None, "is outside the years 1 to 9999 once in UTC"

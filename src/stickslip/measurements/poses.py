@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 from .. import kinematics as kin
 from ..models import direction_label
 from .chunks import _Chunk, _equal, _floats, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
-from .rows import TableError, _csv_problem, _parse_float, check_pose, separator_problem
+from .rows import TableError, _csv_problem, _parse_float, check_pose, is_history_header, separator_problem
 from .table import _read_table_text
 
 POSE_TABLE_REQUIRED = ("joint", "q1", "q2", "q3", "theta", "psi")
@@ -69,6 +69,9 @@ def _pose_header(record: list[str] | None, source: str) -> list[str]:
     if not header:
         raise TableError([f"{source}:1: the file is empty (expected a header with {','.join(POSE_TABLE_REQUIRED)})"])
     missing = [c for c in POSE_TABLE_REQUIRED if c not in header]
+    if missing and is_history_header(header):
+        raise TableError([f"{source}:1: a stickslip history file (export --json), not a pose table: write its "
+                          "rows as a table (stickslip export -o TABLE.csv) and give that"])
     if missing and (sep := separator_problem(header)) is not None:
         raise TableError([f"{source}:1: {sep}"])
     if missing:

@@ -268,6 +268,11 @@ def separator_problem(header: Sequence[str]) -> str | None:
     return "the columns are separated by a tab: save the table with commas (CSV)"
 
 
+def is_history_header(header: Sequence[str]) -> bool:
+    """Whether a table's first record (as ``csv`` splits it) is a history file's first line (``export --json``)."""
+    return bool(header) and header[0].strip().startswith("{") and "stickslip-history" in ",".join(header)
+
+
 def check_header(header: list[str] | None, source: str, expected: Sequence[str]) -> None:
     """Raise :class:`TableError` unless ``header`` (a table's first record) is exactly ``expected``, saying why."""
     if header is None:
@@ -275,6 +280,10 @@ def check_header(header: list[str] | None, source: str, expected: Sequence[str])
     header = [h.strip() for h in header]
     if tuple(header) == tuple(expected):
         return
+    if is_history_header(header):
+        raise TableError([f"{source}:1: a stickslip history file (export --json), not a table: import it "
+                          f"(stickslip import {source} -d URL) and read the store (--db, no table), or write a "
+                          "table (stickslip export -o TABLE.csv)"])
     missing = [h for h in expected if h not in header]
     extra = [h for h in header if h not in expected]
     detail = []

@@ -121,22 +121,24 @@ class _Base:
         if version == SCHEMA_VERSION and db.owned():
             return
         try:
-            self._migrate_from(version)
+            version = self._migrate_from(version)
         except StoreError as e:
             raise _cannot_migrate(e, self.path, version) from None
         if 1 <= version < SCHEMA_VERSION:  # a stickslip database of an older release, not a new one
             self.upgraded_from = version
 
-    def _migrate_from(self, version: int) -> None:
+    def _migrate_from(self, version: int) -> int:
+        """The migrations from ``version``; returns the version they started from (another process may have
+        upgraded the database between the first look and the write lock: then none ran, and nothing is said)."""
         try:
-            self._upgrade(version)
+            return self._upgrade(version)
         except BaseException:
             if self.upgrade_copy is not None:  # the file is left as it was: its copy says nothing new
                 _remove_part(self.upgrade_copy)
                 self.upgrade_copy = None
             raise
 
-    def _upgrade(self, version: int) -> None:
+    def _upgrade(self, version: int) -> int:
         with self._write() as con:
             con.claim_ownership()  # first: on a server it is what makes two processes opening a new database wait
             version = con.schema_version()  # another process may have won
@@ -155,6 +157,7 @@ class _Base:
                 self._backfill_content(con)
             if 1 <= version < KEYED_AT:
                 self.upgrade_notes = key_devices(con)
+        return version
 
     def _backfill_content(self, con: Backend) -> None:
         rows = con.execute(

@@ -153,7 +153,11 @@ def _merge(con: Backend, src: int, dst: int, url: str, key: str) -> str:
                                            (src,))]
     con.execute("DELETE FROM device_state WHERE device_id = ?", (src,))
     for name, value, updated in state:
-        kept = name if name not in held else f"{name} (from {redact_url(url)})"
+        kept, again = name, 0
+        while kept in held:  # two spellings redacted alike (an old store's raw ?password=a and =b) keep both
+            again += 1
+            kept = f"{name} (from {redact_url(url)}{'' if again == 1 else f', {again}'})"
+        held.add(kept)
         con.execute("INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, ?, ?, ?)",
                     (dst, kept, value, updated))
     con.execute("UPDATE devices SET model = (SELECT model FROM devices WHERE id = ?) WHERE id = ? AND model IS NULL",
