@@ -34,3 +34,52 @@ def test_a_terminal_presses_the_rigs_stop_that_every_arm_reads(tmp_path: Path) -
         assert rigstop.pressed(store, rig)["count"] == 1 and rigstop.pressed(store, rig)["arm"] is None
     r = runner.invoke(app, ["rig", "stop", "--rig", str(tmp_path / "nope.toml"), "--db", str(db)])
     assert r.exit_code == 2 and r.stderr.count("error:") == 1  # a rig file that is not there: one line
+
+
+class _Stale:
+    """A store whose reads of the rig's STOP give what it held before (a press that read the count just before
+    another press wrote it: two presses at once)."""
+
+    def __init__(self, inner: Store, held: object) -> None:
+        self.inner, self.held = inner, held
+
+    def get_state(self, device: str, key: str, default: object = None) -> object:
+        return self.held
+
+    def set_state(self, device: str, key: str, value_json: object) -> None:
+        self.inner.set_state(device, key, value_json)
+
+
+def test_two_presses_at_once_both_stop_a_motion_begun_between_them(tmp_path: Path) -> None:
+    # the arm 'other' presses; a motion of 'probe' begins; a terminal's press, which read the count before the
+    # first was written, writes the same count 1: before audit55 the watch compared counts only and the second
+    # press was lost (the probe moved on)
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG.replace("{lid}", "30mm"), encoding="utf-8")
+    rig = load_rig(path)
+    with Store.open(tmp_path / "rig.db") as store:
+        before = store.get_state(rigstop._device(rig), "stop")
+        assert rigstop.press(store, rig, "other") == 1
+        watch = rigstop.RigStopWatch(rig, "probe")
+        watch.begin(store)
+        assert watch.stopped(store) is None
+        assert rigstop.press(_Stale(store, before), rig, None) == 1  # type: ignore[arg-type]
+        why = watch.stopped(store)
+        assert why is not None and "pressed from a terminal" in why, why
+        assert watch.stopped(store) is None  # said once
+
+
+def test_a_corrupted_stop_record_is_not_read_as_a_count(tmp_path: Path) -> None:
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG.replace("{lid}", "30mm"), encoding="utf-8")
+    rig = load_rig(path)
+    with Store.open(tmp_path / "rig.db") as store:
+        for bad in ({"count": True}, {"count": -3}, {"count": "7"}, {"count": 2.0}, [1], "x", {"count": 2, "arm": 5}):
+            store.set_state(rigstop._device(rig), "stop", bad)
+            assert rigstop.pressed(store, rig) == {"count": 0, "arm": None, "at": None}, bad
+            assert rigstop.press(store, rig, "probe") == 1  # counted again from 0
+        watch = rigstop.RigStopWatch(rig, "other")
+        watch.begin(store)
+        store.set_state(rigstop._device(rig), "stop", {"count": "9"})  # corrupted while a motion runs: it stops
+        why = watch.stopped(store)
+        assert why is not None and "removed or is unreadable" in why and "None" not in why, why
