@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 from server_support import RIG
 from typer.testing import CliRunner
 
@@ -83,3 +84,22 @@ def test_a_corrupted_stop_record_is_not_read_as_a_count(tmp_path: Path) -> None:
         store.set_state(rigstop._device(rig), "stop", {"count": "9"})  # corrupted while a motion runs: it stops
         why = watch.stopped(store)
         assert why is not None and "removed or is unreadable" in why and "None" not in why, why
+
+
+@pytest.mark.parametrize("names", [("Bench", "bench"), ("COM3", "com3"), ("a/b", "a%2Fb"), ("bänk 1", "BÄNK 1")])
+def test_rigs_whose_names_differ_only_by_case_have_stops_of_their_own(tmp_path: Path, names: tuple[str, str]) -> None:
+    # the STOP was kept under rig://NAME, whose host the store's key lowercases: rig 'Bench's STOP stopped rig
+    # 'bench' (and 'COM3' read as a serial port)
+    rigs = []
+    for k, name in enumerate(names):
+        path = tmp_path / f"rig{k}.toml"
+        path.write_text(RIG.replace("{lid}", "30mm").replace('name = "bench"', f"name = {name!r}"), encoding="utf-8")
+        rigs.append(load_rig(path))
+    assert [r.name for r in rigs] == list(names)
+    with Store.open(tmp_path / "rig.db") as store:
+        watch = rigstop.RigStopWatch(rigs[1], "probe")
+        watch.begin(store)
+        assert rigstop.press(store, rigs[0], None) == 1
+        assert watch.stopped(store) is None and rigstop.pressed(store, rigs[1])["count"] == 0
+        assert rigstop.press(store, rigs[1], None) == 1
+        assert watch.stopped(store) is not None

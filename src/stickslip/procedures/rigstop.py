@@ -36,8 +36,9 @@ _KEY = "stop"
 
 def _device(rig: Rig) -> str:
     """The name the rig's stop is kept under in the store's per-device state: a URL of its own scheme (the store
-    names every device by its URL's key), the rig's name percent-encoded (any text a rig file gives it)."""
-    return f"rig://{quote(rig.name, safe='')}"
+    names every device by its URL's key), the rig's name percent-encoded (any text a rig file gives it) in its
+    path, which the key keeps as written (a URL's host is lowercased: rigs 'Bench' and 'bench' shared one STOP)."""
+    return f"rig://stop/{quote(rig.name, safe='')}"
 
 
 def pressed(store: StateStore, rig: Rig) -> dict[str, Any]:
