@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -103,3 +104,32 @@ def test_rigs_whose_names_differ_only_by_case_have_stops_of_their_own(tmp_path: 
         assert watch.stopped(store) is None and rigstop.pressed(store, rigs[1])["count"] == 0
         assert rigstop.press(store, rigs[1], None) == 1
         assert watch.stopped(store) is not None
+
+
+def test_where_names_a_claim_a_killed_move_left_and_what_clears_it(tmp_path: Path) -> None:
+    # a move killed (SIGKILL) between two bursts leaves its claim and nothing uncertain: the other arms are refused
+    # ("a move of it claims its joint 3 ..."), but before audit55 `where` showed the arm as known and still
+    from stickslip.devices.positions import load_state, save_state
+
+    path = tmp_path / "rig.toml"
+    path.write_text(RIG.replace("{lid}", "30mm"), encoding="utf-8")
+    rig, db = load_rig(path), tmp_path / "rig.db"
+    with Store.open(db) as store:
+        state = load_state(store, rig.state_key("other"), rig.arm("other").joint_specs())
+        state.claim[3] = (0.0, 0.009)
+        save_state(store, state)
+    r = runner.invoke(app, ["where", "--rig", str(path), "--db", str(db)])
+    out = " ".join(r.stdout.split())
+    assert r.exit_code == 0, r.output
+    assert "arm 'other'" in out and "claimed by a move: joint 3 0 µm to 9000 µm" in out, out
+    assert "where --rig" in out and "--arm other --set 3=" in out, out
+    r = runner.invoke(app, ["where", "--rig", str(path), "--db", str(db), "--json"])
+    arms = {a["arm"]: a for a in json.loads(r.stdout)["arms"]}
+    assert arms["other"]["claim"] == {"3": [0.0, 0.009]} and arms["probe"]["claim"] == {}
+    r = runner.invoke(app, ["where", "--rig", str(path), "--db", str(db), "--arm", "other", "--offline"])
+    assert "claimed by a move: joint 3 0 µm to 9000 µm" in " ".join(r.stdout.split()), r.output
+    r = runner.invoke(app, ["where", "--rig", str(path), "--db", str(db), "--arm", "other", "--offline", "--set",
+                            "3=0"])
+    assert r.exit_code == 0, r.output
+    with Store.open(db) as store:
+        assert load_state(store, rig.state_key("other"), rig.arm("other").joint_specs()).claim == {}
