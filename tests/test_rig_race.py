@@ -303,3 +303,25 @@ def test_a_jog_stops_when_another_arm_starts_to_move() -> None:
         t += 0.05
     assert sum(moved[:20]) > 0 and sum(moved[20:]) == 0
     assert c.direction is None and c.message == "stopped at the rig's envelope (arm b): move another way"
+
+
+@pytest.mark.parametrize(("claim", "kept"), [
+    ([0.0, 1e300], (0.0, 0.012)),  # past the stop: the whole range, not a box 1e300 m wide
+    ([-1e300, 1e300], (0.0, 0.012)),
+    ([0.02, 0.03], (0.0, 0.012)),  # wholly past it: not a point at the stop
+    ([0.009, 0.0], (0.0, 0.009)),  # high to low: in order
+])
+def test_a_hand_edited_claim_is_kept_within_the_joints_stops(rig: Rig, tmp_path: Path, claim: list[float],
+                                                             kept: tuple[float, float]) -> None:
+    # before audit55 a claim of [0, 1e300] m was used as it was: the refusal named a distance of 300 digits
+    store = Store.open(tmp_path / "rig.db")
+    key, specs = rig.state_key("other"), rig.arm("other").joint_specs()
+    raw = load_state(store, key, specs).to_json() | {"claim": {"3": claim}}
+    store.set_state(key, "positions", raw)
+    assert load_state(store, key, specs).claim == {3: kept}
+    guard = guard_for(store, rig, "probe")
+    with pytest.raises(MoveRefused) as e:
+        arm_move(store, rig, "probe")
+    assert "claims its joint 3 between" in str(e.value) and "e+" not in str(e.value), str(e.value)
+    assert guard.swept["other"][2] == kept
+    store.close()

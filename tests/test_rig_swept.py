@@ -143,3 +143,49 @@ def test_an_arm_uncertain_over_its_whole_range_is_kept_from_over_all_of_it(rig: 
     guard.check(probe_path(1e-3))
     with pytest.raises(ArmUnknown, match="its joint 3 is in flight or uncertain, between 0 µm and 12000 µm"):
         guard.check(probe_path(6e-3))
+
+
+SLOW_RIG = """\
+name = "r"
+arm_distance = "1mm"
+
+[[arm]]
+name = "probe"
+controller = "sim://"
+mount = { origin = ["-10.3071mm", "0mm", "0mm"] }
+
+[[arm]]
+name = "other"
+controller = "sim://?seed=2"
+mount = { origin = ["10.3071mm", "-2.1870mm", "-1.6154mm"], rotation = ["0deg", "0deg", "125.9830deg"] }
+"""
+
+
+def test_a_start_inside_only_a_coarse_boxs_pad_is_not_walked_out_of(tmp_path: Path,
+                                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    # found by random rigs (audit55): the probe's start lies inside the bound of the other arm's whole box (its pad:
+    # joint 2 over 2.2 rad) but not near any pose of it; before, the way out of a margin was walked over the whole
+    # path, poses 1 µm of motion apart, against the coarse box (62 s for this one check). Now the box is cut at the
+    # start first, and the check never takes the way out
+    from stickslip.rig import envelope
+
+    path = tmp_path / "rig.toml"
+    path.write_text(SLOW_RIG, encoding="utf-8")
+    rig = load_rig(path)
+    box = [(1.3295152590627084, 2.0824456174366186), (-1.9204776002791681, 0.2585119277109649),
+           (0.0024164342941520238, 0.010522427319877868)]
+    kept = [1.927679389899452, -0.7310659063602332, 0.005633775366887818]
+    moves = [[1.8496594652608866, -2.381042675652152, 0.004744633098323784],
+             [0.042903659609476286, 0.03689313221213775, 0.008786679333831995]]
+    start = np.vstack([np.asarray(a) + np.linspace(0, 1, 60)[:, None] * (np.asarray(b) - np.asarray(a))
+                       for a, b in links(rig.arm("probe"), np.asarray(moves[0]))])
+    least = min(float(point_segment(start, a, b).min()) for q in np.stack(np.meshgrid(
+        *[np.linspace(lo, hi, 9) for lo, hi in box]), -1).reshape(-1, 3) for a, b in links(rig.arm("other"), q))
+    assert least > 1.5e-3  # the start is clear of every sampled pose of the box, by more than arm_distance
+
+    def no_way_out(*args: object, **kwargs: object) -> object:
+        raise AssertionError("walked the way out of a margin")
+
+    monkeypatch.setattr(envelope, "_escape", no_way_out)
+    Guard(rig, "probe", {"other": kept}, {"other": "a move of it claims its joint 2"}, swept={"other": box}).check(
+        moves)

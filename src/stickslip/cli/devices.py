@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import typer
 
-from ..devices.base import DeviceError, device_key
+from ..devices.base import DeviceError, command_url, device_key
 from ..joints import JointSet, joint_spec
 from ..units import (
     UnitError,
@@ -309,10 +309,17 @@ def _where_arms(rig_file: Path, db: str | None, json_out: bool) -> None:
         print_json({"rig": rig.name, "arms": [
             {"arm": s.arm, "device": s.device, "q": [s.state.positions[j] for j in (1, 2, 3)],
              "units": [s.state.spec(j).unit for j in (1, 2, 3)],
-             "sources": [s.state.sources[j] for j in (1, 2, 3)]} for s in states]})
+             "sources": [s.state.sources[j] for j in (1, 2, 3)],
+             "claim": {str(j): list(b) for j, b in sorted(s.state.claim.items())}} for s in states]})
         return
     for s in states:
         say(f"arm {s.arm!r} on {s.device}: {where_line(s.state)}")
+        if s.state.claim:  # the other arms are refused near it until the move ends or the arm is referenced
+            j = min(s.state.claim)
+            say(f"  the other arms are kept from its claim until its move ends; if none runs (its process was "
+                f"killed), reference it: stickslip where --rig {command_url(str(rig_file))} --arm {command_url(s.arm)} "
+                f"--set {j}=...",
+                indent="    ")
 
 
 def _raw_steps(by: str | None, to: str | None, steps: int | None) -> int | None:
@@ -534,4 +541,8 @@ def _print_where(result: WhereResult) -> None:
         say(f"  joint {j}: {r['display']:>14}  ({r['source']}{extra})", indent="    ")
         if j in state.uncertain and j in state.why:
             say(f"  {'':>25}{state.why[j]}")
+    for j, (lo, hi) in sorted(state.claim.items()):  # a rig's other arms are kept from it until the move ends
+        say(f"  claimed by a move: joint {j} {format_position(lo, state.spec(j))} to "
+            f"{format_position(hi, state.spec(j))} (a move running, or one killed: --set a joint clears it)",
+            indent="    ")
     say(f"  tilt: theta = {math.degrees(state.theta):.4g} deg, psi = {math.degrees(state.psi):.4g} deg")

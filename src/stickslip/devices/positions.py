@@ -300,7 +300,8 @@ def _read_state(state: DeviceState, raw: Any) -> None:
     """Fill ``state`` from its stored JSON; ``ValueError`` naming the entry that is not what it must be.
 
     A finite position outside its joint's range (kept by another arm's rig file, or written by hand) is not
-    used as if it were known: the joint is uncertain over its whole range until it is referenced again.
+    used as if it were known: the joint is uncertain over its whole range until it is referenced again; a
+    claim past a stop claims the joint's whole range, one given high to low is put in order.
     """
     if not isinstance(raw, dict):
         raise ValueError("not an object")
@@ -324,6 +325,10 @@ def _read_state(state: DeviceState, raw: Any) -> None:
             raise ValueError(f"track of joint {j} is not an object")
         state.track[_stored_joint(state, j)] = t
         _cap_position(t, state.spec(int(j)).span)  # kept before the cap: 58 m on a 12 mm joint
+    for joint, (lo, hi) in list(state.claim.items()):  # hand-edited: in order, and never past the joint's stops
+        spec = state.spec(joint)
+        inside = spec.contains(lo) and spec.contains(hi)
+        state.claim[joint] = (min(lo, hi), max(lo, hi)) if inside else (spec.lower, spec.upper)
     for joint in sorted(state.positions):
         spec = state.spec(joint)
         for q in (state.positions[joint], *state.uncertain.get(joint, ())):

@@ -144,6 +144,9 @@ def where_line(state: DeviceState) -> str:
                          f"{format_position(hi, state.spec(j))}")
         else:
             parts.append(f"joint {j} {format_position(state.positions[j], state.spec(j))} ({state.sources[j]})")
+    for j, (lo, hi) in sorted(state.claim.items()):  # kept until the move ends: a move running, or one killed
+        parts.append(f"claimed by a move: joint {j} {format_position(lo, state.spec(j))} to "
+                     f"{format_position(hi, state.spec(j))}")
     return "; ".join(parts)
 
 

@@ -8,6 +8,9 @@ drives an arm of the rig reads it before each burst (:class:`RigStopWatch`, thro
 burst is refused with :class:`~stickslip.devices.base.BurstStopped` (no step made), so the
 move ends with its position kept exact. A motion begun after the press is not stopped by it.
 The latency is one burst (the one being sent when the press is read) plus one read of the store.
+Each press is told apart by a token of its own, not by its count alone: two presses at once (from two
+servers, or a server and a terminal) both read count N and both write N + 1, and a motion begun
+between the two writes must still be stopped by the second.
 
 The count is a small JSON value in the store's per-device state (portable: one SQLite or
 PostgreSQL transaction, no file lock), under the device name ``rig:NAME``.
@@ -16,6 +19,7 @@ PostgreSQL transaction, no file lock), under the device name ``rig:NAME``.
 from __future__ import annotations
 
 import os
+import secrets
 from collections.abc import Callable
 from typing import Any
 from urllib.parse import quote
@@ -32,16 +36,31 @@ _KEY = "stop"
 
 def _device(rig: Rig) -> str:
     """The name the rig's stop is kept under in the store's per-device state: a URL of its own scheme (the store
-    names every device by its URL's key), the rig's name percent-encoded (any text a rig file gives it)."""
-    return f"rig://{quote(rig.name, safe='')}"
+    names every device by its URL's key), the rig's name percent-encoded (any text a rig file gives it) in its
+    path, which the key keeps as written (a URL's host is lowercased: rigs 'Bench' and 'bench' shared one STOP)."""
+    return f"rig://stop/{quote(rig.name, safe='')}"
 
 
 def pressed(store: StateStore, rig: Rig) -> dict[str, Any]:
     """The rig's last STOP as kept: ``{"count": N, "arm": name, "at": ISO time}`` (``count`` 0: never pressed)."""
     raw = store.get_state(_device(rig), _KEY)
-    if not isinstance(raw, dict) or not isinstance(raw.get("count"), int):
+    if not _readable(raw):  # hand-edited or corrupted (a string, a bool, a negative count): never pressed
         return {"count": 0, "arm": None, "at": None}
-    return raw
+    return dict(raw)
+
+
+def _readable(raw: object) -> bool:
+    """Whether ``raw`` is a STOP record as :func:`press` writes it (a count >= 0, an arm's name or none)."""
+    if not isinstance(raw, dict):
+        return False
+    count, arm = raw.get("count"), raw.get("arm")
+    return type(count) is int and count >= 0 and (arm is None or isinstance(arm, str))
+
+
+def _identity(p: dict[str, Any]) -> tuple[int, str | None]:
+    """What tells one press from another: its count and its token (two presses at once may write one count)."""
+    token = p.get("press")
+    return int(p["count"]), token if isinstance(token, str) else None
 
 
 def press(store: StateStore, rig: Rig, arm: str | None) -> int:
@@ -50,7 +69,7 @@ def press(store: StateStore, rig: Rig, arm: str | None) -> int:
     cannot be written."""
     count = int(pressed(store, rig)["count"]) + 1
     store.set_state(_device(rig), _KEY, {"count": count, "arm": arm, "at": now_utc().isoformat(timespec="seconds"),
-                                         "pid": os.getpid()})
+                                         "pid": os.getpid(), "press": secrets.token_hex(8)})
     return count
 
 
@@ -59,21 +78,23 @@ class RigStopWatch:
 
     def __init__(self, rig: Rig, arm: str) -> None:
         self.rig, self.arm = rig, arm
-        self._seen = 0
+        self._seen: tuple[int, str | None] = (0, None)
 
     def begin(self, store: StateStore) -> None:
         """A motion begins: presses before now do not stop it."""
-        self._seen = int(pressed(store, self.rig)["count"])
+        self._seen = _identity(pressed(store, self.rig))
 
     def stopped(self, store: StateStore) -> str | None:
         """Why this arm must stop (one line), if the rig's STOP was pressed since :meth:`begin`; else ``None``.
         A press for this same arm is its own STOP (its process stopped itself already): ``None``."""
         p = pressed(store, self.rig)
-        if int(p["count"]) == self._seen:
+        if _identity(p) == self._seen:
             return None
-        self._seen = int(p["count"])
+        self._seen = _identity(p)
         if p.get("arm") == self.arm:
             return None
+        if not p["count"]:  # the record gone or unreadable since the motion began: stopped, the safe side
+            return "stopped: the rig's STOP record in the store was removed or is unreadable; no further burst sent"
         where = "from a terminal" if p.get("arm") is None else f"for arm {p.get('arm')!r}"
         return f"stopped by the rig's STOP (pressed {where} at {p.get('at')}): no further burst sent"
 

@@ -941,6 +941,7 @@ def _check_swept(rig: Rig, arm: Arm, cells: list[_Cell], path: Array, tol: float
     path's first problem come earlier (the cut boxes' bounds lie within the whole box's).
     """
     frac, refusal = 1.0, None
+    cells = _cut_at_start(rig, arm, cells, path, tol, margins)
     for _ in range(_SWEEP_ROUNDS):
         obs = _obstacles(rig, arm, cells)
         frac, refusal = _check(arm, obs, path, tol, margins, pose_only)
@@ -955,6 +956,30 @@ def _check_swept(rig: Rig, arm: Arm, cells: list[_Cell], path: Array, tol: float
             return frac, refusal
         cells = [c for i, c in enumerate(cells) if i not in near] + [p for i in sorted(near) for p in cells[i].split()]
     return frac, refusal
+
+
+def _cut_at_start(rig: Rig, arm: Arm, cells: list[_Cell], path: Array, tol: float, margins: _Margins) -> list[_Cell]:
+    """``cells`` with every box coarser than ``tol`` whose bound the path's start is inside cut until it is not (one
+    pose a round): a start inside the margin of a box's pad only took the way out of a margin (:func:`_escape`,
+    poses ``tol`` of motion apart over the whole path) against the coarse box, 62 s for one check. The boxes as
+    given if that would need more than ``_SWEEP_CELLS``: the check then goes as before (the same boxes)."""
+    q0 = path[:1]
+    sigma = float(margins.at(np.zeros(1), q0)[0])
+    out = cells
+    for _ in range(_SWEEP_ROUNDS):
+        obs = _obstacles(rig, arm, out)
+        if not len(obs.others):
+            return out
+        nv = len(obs.volumes)
+        c = _link_clearances(arm, obs, q0, np.inf)[0, :, nv:].min(axis=0) - sigma  # exact, pad included in allowed
+        inside = {obs.owner[k] for k in np.flatnonzero(c < 0.0) if out[obs.owner[k]].pad > tol}
+        if not inside:
+            return out
+        if len(out) + (_SPLIT - 1) * len(inside) > _SWEEP_CELLS:
+            return cells
+        out = [cell for i, cell in enumerate(out) if i not in inside] + [
+            part for i in sorted(inside) for part in out[i].split()]
+    return cells
 
 
 def _witness(rig: Rig, arm: Arm, cells: list[_Cell], path: Array, fraction: float,
