@@ -189,3 +189,53 @@ def test_a_start_inside_only_a_coarse_boxs_pad_is_not_walked_out_of(tmp_path: Pa
     monkeypatch.setattr(envelope, "_escape", no_way_out)
     Guard(rig, "probe", {"other": kept}, {"other": "a move of it claims its joint 2"}, swept={"other": box}).check(
         moves)
+
+
+SLOW_RIG = """name = "r"
+arm_distance = "1mm"
+
+[[arm]]
+name = "probe"
+controller = "sim://"
+mount = { origin = ["-13.2834mm", "0mm", "0mm"] }
+
+[[arm]]
+name = "other"
+controller = "sim://?seed=2"
+mount = { origin = ["13.2834mm", "0.2994mm", "-0.5514mm"], rotation = ["0deg", "0deg", "215.8084deg"] }
+"""
+
+
+def test_a_start_within_the_distance_kept_from_a_sweep_is_refused_without_a_way_out(tmp_path: Path,
+                                                                                     monkeypatch) -> None:
+    """audit55's random rig (seed 1, trial 31): the probe's start passes within 1 mm of a pose of the other arm's box
+    (joint 1 swinging 143 deg), and the way out of a margin, walked against the boxes poses 0.1 µm of motion apart,
+    took over 400 s before refusing. It is refused at once, never walked."""
+    import stickslip.rig.envelope as envelope
+
+    (tmp_path / "rig.toml").write_text(SLOW_RIG, encoding="utf-8")
+    rig = load_rig(tmp_path / "rig.toml")
+    path = [[-0.5372037365931377, -3.1750929677074735, 0.006293982864365944],
+            [1.2530166523874318, 0.0675538233783235, 0.011737334252404964]]
+    box = [(-1.1833832609204327, 1.3157765946823776), (-1.515346985787787, -1.515346985787787),
+           (0.00355924080839708, 0.005708316649029406)]
+    # the independent geometry: the start is within the 1 mm kept from a pose of the box
+    start = [a + u * (b - a) for a, b in links(rig.arm("probe"), np.asarray(path[0]))
+             for u in np.linspace(0.0, 1.0, 200)]
+    least = min(float(point_segment(np.asarray(start), a, b).min())
+                for q1 in np.linspace(*box[0], 181) for q3 in np.linspace(*box[2], 5)
+                for a, b in links(rig.arm("other"), np.asarray([q1, box[1][0], q3])))
+    assert 0.9e-3 < least < rig.arm_distance
+
+    def no_walk(*_a: object, **_k: object) -> None:
+        raise AssertionError("the way out of a margin was walked against a swept box")
+
+    monkeypatch.setattr(envelope, "_escape", no_walk)
+    guard = Guard(rig, "probe", {"other": [0.05928, box[1][0], 0.0048046]}, {"other": "a move"},
+                  swept={"other": box})
+    with pytest.raises(ArmUnknown) as refused:
+        guard.check(path)
+    assert refused.value.refusal.start == "sweep" and refused.value.refusal.fraction == 0.0
+    text = str(refused.value)
+    assert "starts within the distance kept from the poses 'arm other' may take" in text
+    assert "wait for its move to end" in text and text.count("\n") == 0
