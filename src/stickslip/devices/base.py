@@ -31,6 +31,7 @@ from urllib.parse import parse_qs, urlsplit
 
 __all__ = [
     "Controller",
+    "ControllerProxy",
     "PoseSettable",
     "KnowsTruePosition",
     "VirtualClock",
@@ -294,6 +295,42 @@ class Controller(Protocol):
         """Stop everything and release the transport."""
         ...
 
+
+class ControllerProxy:
+    """A :class:`Controller` that hands every call to ``inner``: a wrapper overrides only what it changes (the
+    rig's STOP read before each burst, an arm's channel map), and whatever else the controller has (a pose to
+    set, a clock, a microphone) is the controller's own."""
+
+    def __init__(self, inner: Controller) -> None:
+        self._inner = inner
+
+    @property
+    def info(self) -> DeviceInfo:
+        return self._inner.info
+
+    def set_frequency(self, joint: int, hz: float) -> None:
+        self._inner.set_frequency(joint, hz)
+
+    def frequency(self, joint: int) -> float:
+        return self._inner.frequency(joint)
+
+    def step(self, joint: int, n: int) -> None:
+        self._inner.step(joint, n)
+
+    def stop(self, joint: int | None = None) -> None:
+        self._inner.stop(joint)
+
+    def settings(self) -> dict[str, object]:
+        return self._inner.settings()
+
+    def close(self) -> None:
+        self._inner.close()
+
+    def __getattr__(self, name: str) -> Any:
+        inner = self.__dict__.get("_inner")
+        if inner is None:
+            raise AttributeError(name)
+        return getattr(inner, name)
 
 # -- capabilities: what some controllers can do beyond the interface ---------------------------
 # Declared as protocols so that code asks ``isinstance(dev, PoseSettable)`` of a type the

@@ -25,7 +25,7 @@ from typing import Any
 from urllib.parse import quote
 
 from ..clock import now_utc
-from ..devices.base import BurstStopped, Controller, DeviceInfo
+from ..devices.base import BurstStopped, Controller, ControllerProxy
 from ..devices.positions import StateStore
 from ..rig import Rig
 
@@ -99,39 +99,18 @@ class RigStopWatch:
         return f"stopped by the rig's STOP (pressed {where} at {p.get('at')}): no further burst sent"
 
 
-class _Stoppable:
+class _Stoppable(ControllerProxy):
     """A controller that reads the rig's STOP before each burst (:func:`stoppable`)."""
 
     def __init__(self, inner: Controller, store: StateStore, watch: RigStopWatch) -> None:
-        self._inner, self._store, self._watch = inner, store, watch
-
-    @property
-    def info(self) -> DeviceInfo:
-        return self._inner.info
-
-    def set_frequency(self, joint: int, hz: float) -> None:
-        self._inner.set_frequency(joint, hz)
-
-    def frequency(self, joint: int) -> float:
-        return self._inner.frequency(joint)
+        super().__init__(inner)
+        self._store, self._watch = store, watch
 
     def step(self, joint: int, n: int) -> None:
         why = self._watch.stopped(self._store)
         if why is not None:
             raise BurstStopped(why, 0)
         self._inner.step(joint, n)
-
-    def stop(self, joint: int | None = None) -> None:
-        self._inner.stop(joint)
-
-    def settings(self) -> dict[str, object]:
-        return self._inner.settings()
-
-    def close(self) -> None:
-        self._inner.close()
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._inner, name)
 
 
 def stoppable(

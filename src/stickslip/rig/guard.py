@@ -11,11 +11,10 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from ..devices.base import Controller, DeviceInfo
+from ..devices.base import Controller, ControllerProxy
 from .envelope import EnvelopeViolation, Refusal, SigmaGrowth, check_path, safe_fraction
 from .model import Arm, Rig
 
@@ -104,16 +103,12 @@ class Guard:
         return float(q[joint - 1] + frac * (q_to - q[joint - 1]))
 
 
-class _Mapped:
+class _Mapped(ControllerProxy):
     """A controller whose joint ``j`` is the arm's channel with its sign."""
 
     def __init__(self, inner: Controller, arm: Arm) -> None:
-        self._inner = inner
+        super().__init__(inner)
         self._map = {j.number: (j.channel, j.sign) for j in arm.joints}
-
-    @property
-    def info(self) -> DeviceInfo:
-        return self._inner.info
 
     def set_frequency(self, joint: int, hz: float) -> None:
         self._inner.set_frequency(self._map[joint][0], hz)
@@ -127,15 +122,6 @@ class _Mapped:
 
     def stop(self, joint: int | None = None) -> None:
         self._inner.stop(None if joint is None else self._map[joint][0])
-
-    def settings(self) -> dict[str, object]:
-        return self._inner.settings()
-
-    def close(self) -> None:
-        self._inner.close()
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._inner, name)
 
 
 def mapped(opener: Callable[[str], Controller], arm: Arm) -> Callable[[str], Controller]:
