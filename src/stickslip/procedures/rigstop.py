@@ -13,7 +13,7 @@ servers, or a server and a terminal) both read count N and both write N + 1, and
 between the two writes must still be stopped by the second.
 
 The count is a small JSON value in the store's per-device state (portable: one SQLite or
-PostgreSQL transaction, no file lock), under the device name ``rig:NAME``.
+PostgreSQL transaction, no file lock), under the device name ``rig://stop/NAME`` (:func:`_device`).
 """
 
 from __future__ import annotations
