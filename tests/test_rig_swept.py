@@ -145,19 +145,22 @@ def test_an_arm_uncertain_over_its_whole_range_is_kept_from_over_all_of_it(rig: 
         guard.check(probe_path(6e-3))
 
 
-SLOW_RIG = """\
+def random_rig(x_mm: float, other: tuple[float, float], turn_deg: float) -> str:
+    """A rig of audit55's random rigs: the probe at -x on the x axis, the other arm at (x, y, z) mm turned about z."""
+    y, z = other
+    return f"""\
 name = "r"
 arm_distance = "1mm"
 
 [[arm]]
 name = "probe"
 controller = "sim://"
-mount = { origin = ["-10.3071mm", "0mm", "0mm"] }
+mount = {{ origin = ["{-x_mm}mm", "0mm", "0mm"] }}
 
 [[arm]]
 name = "other"
 controller = "sim://?seed=2"
-mount = { origin = ["10.3071mm", "-2.1870mm", "-1.6154mm"], rotation = ["0deg", "0deg", "125.9830deg"] }
+mount = {{ origin = ["{x_mm}mm", "{y}mm", "{z}mm"], rotation = ["0deg", "0deg", "{turn_deg}deg"] }}
 """
 
 
@@ -170,7 +173,7 @@ def test_a_start_inside_only_a_coarse_boxs_pad_is_not_walked_out_of(tmp_path: Pa
     from stickslip.rig import envelope
 
     path = tmp_path / "rig.toml"
-    path.write_text(SLOW_RIG, encoding="utf-8")
+    path.write_text(random_rig(10.3071, (-2.1870, -1.6154), 125.9830), encoding="utf-8")
     rig = load_rig(path)
     box = [(1.3295152590627084, 2.0824456174366186), (-1.9204776002791681, 0.2585119277109649),
            (0.0024164342941520238, 0.010522427319877868)]
@@ -191,21 +194,6 @@ def test_a_start_inside_only_a_coarse_boxs_pad_is_not_walked_out_of(tmp_path: Pa
         moves)
 
 
-SLOW_RIG = """name = "r"
-arm_distance = "1mm"
-
-[[arm]]
-name = "probe"
-controller = "sim://"
-mount = { origin = ["-13.2834mm", "0mm", "0mm"] }
-
-[[arm]]
-name = "other"
-controller = "sim://?seed=2"
-mount = { origin = ["13.2834mm", "0.2994mm", "-0.5514mm"], rotation = ["0deg", "0deg", "215.8084deg"] }
-"""
-
-
 def test_a_start_within_the_distance_kept_from_a_sweep_is_refused_without_a_way_out(tmp_path: Path,
                                                                                      monkeypatch) -> None:
     """audit55's random rig (seed 1, trial 31): the probe's start passes within 1 mm of a pose of the other arm's box
@@ -213,7 +201,7 @@ def test_a_start_within_the_distance_kept_from_a_sweep_is_refused_without_a_way_
     took over 400 s before refusing. It is refused at once, never walked."""
     import stickslip.rig.envelope as envelope
 
-    (tmp_path / "rig.toml").write_text(SLOW_RIG, encoding="utf-8")
+    (tmp_path / "rig.toml").write_text(random_rig(13.2834, (0.2994, -0.5514), 215.8084), encoding="utf-8")
     rig = load_rig(tmp_path / "rig.toml")
     path = [[-0.5372037365931377, -3.1750929677074735, 0.006293982864365944],
             [1.2530166523874318, 0.0675538233783235, 0.011737334252404964]]
