@@ -271,7 +271,9 @@ def traverse_cmd(
     The row goes to the database and, with --append, to a measurement table. The joint
     ends referenced at its stop, and the pose options you give are kept as the arm's pose
     (stickslip where shows them, the next move plans from them); an option left at its
-    default is recorded in the row but does not change the kept pose.
+    default is recorded in the row but does not change the kept pose, and a warning says so
+    before the joint moves when that default is more than 0.5 deg (10 µm for q3, or 3 σ of
+    a tracked position) from where the arm is kept.
 
     Example: stickslip traverse --joint 3 --direction + --tuning tuning-joint3.json --q2 0 --theta -90deg -a day.csv
     """
