@@ -47,7 +47,6 @@ from ..devices.base import (
     command_url,
     device_key,
     open_device,
-    redact_url,
     url_scheme,
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
@@ -546,11 +545,10 @@ def reference_commands(
     to type a command with it would only fail next (``anc300://H?axes=1,1,2``).
     """
     check_device_url(device)
-    url = redact_url(device)
-    n = steps_to_stop(joint, calibration, spec)
+    n = steps_to_stop(joint, calibration, spec)  # (command_url and where_set_command redact the URL)
     return (
-        f"`stickslip move -d {command_url(url)} --joint {joint} --steps -{n}` (into its lower stop: more steps than "
-        f"its range; the slider slips at the stop), then `{where_set_command(url, joint)}`"
+        f"`stickslip move -d {command_url(device)} --joint {joint} --steps -{n}` (into its lower stop: more steps "
+        f"than its range; the slider slips at the stop), then `{where_set_command(device, joint)}`"
     )
 
 
