@@ -88,6 +88,7 @@ def test_the_live_state_in_order(rig: Rig) -> None:
     assert messages[-1]["state"]["device"] == "sim://"
 
 
+@pytest.mark.slow
 def test_a_day_over_the_api_stops_and_resumes(rig: Rig, room: ControlRoom, tmp_path: Path) -> None:
     start = rig.calibration_day()
     assert start["kind"] == "day" and start["status"] == "running"

@@ -48,6 +48,7 @@ def _exact_row(sim: SimulatedMM3A, joint: int, direction: str, fixed: dict[str, 
                     end, round(spec.span / gamma))
 
 
+@pytest.mark.slow
 def test_a_resumed_day_measures_the_rest_and_calibrates_from_all_fourteen(tmp_path: Path) -> None:
     sim = open_device(URL)
     assert isinstance(sim, SimulatedMM3A)

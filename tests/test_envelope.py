@@ -266,6 +266,7 @@ def test_a_bluesky_axis_checks_the_rig_envelope(tmp_path):
     assert sim.steps_simulated == before
 
 
+@pytest.mark.slow
 def test_a_bluesky_manipulator_checks_the_rig_envelope_for_its_joints_and_its_tip(tmp_path):
     """StickSlipManipulator(guard=...) gives the guard to its joints and its tip: a tip move whose path enters a
     volume fails before a step is sent (before, the manipulator took no guard and the tip checked none)."""
@@ -526,6 +527,7 @@ def starts_in_a_margin(draw):
 
 @settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(starts_in_a_margin())
+@pytest.mark.slow
 def test_a_way_out_of_a_margin_never_goes_deeper(case):
     """Accepted from inside a margin: no (link, volume) pair's clearance falls while inside, none enters."""
     rig, path = case

@@ -54,6 +54,7 @@ def test_tabulated_profile_plans_like_the_closed_form():
 
 @settings(max_examples=60, deadline=None)
 @given(a=st.floats(-0.2, 1.2), n=st.integers(-20000, 20000))
+@pytest.mark.slow
 def test_tabulated_profile_steps_and_dead_reckoning_invert_each_other_beyond_the_table(a, n):
     # the table ends 5 % of the travel past each stop; dead reckoning went on past it at the edge's step but the
     # step count stopped there (np.interp clips): 5405 steps out from the lower stop counted back as 5404.68

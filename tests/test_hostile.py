@@ -869,6 +869,7 @@ def test_special_files_are_refused_before_they_are_opened(tmp_path, kit, role, k
 @settings(FEW, max_examples=4)  # timeouts of 0.2 s and more: a loaded machine answers a healthy command late
 @given(timeout=st.sampled_from([0.2, 0.3, 0.5]), after=st.integers(0, 2), burst=st.integers(5, 40))
 @example(timeout=0.2, after=1, burst=10)
+@pytest.mark.slow
 def test_a_silent_anc300_ends_within_the_urls_timeout(tmp_path, kit, timeout, after, burst):
     """Everything the driver waits for after the console falls silent stays within the URL's timeout.
 

@@ -119,6 +119,7 @@ def test_one_step_refit_lands_near_the_refit():
         np.testing.assert_allclose(a, b, rtol=2e-4)
 
 
+@pytest.mark.slow
 def test_a_long_table_is_chosen_on_a_sample_and_fitted_to_all(monkeypatch):
     ts = _table(3400)
     sampled = calibrate(ts, model="auto")

@@ -130,6 +130,7 @@ def test_the_rig_files_positions_and_the_saved_ones_are_one_set(client: TestClie
         position_of(room.store, rig, "probe", "nowhere")
 
 
+@pytest.mark.slow
 def test_a_jog_stops_at_the_envelope_with_its_margin(tmp_path: Path) -> None:
     room = rig_room_on(tmp_path, lid="0.2mm", jog_idle_end_s=0.3)
     try:

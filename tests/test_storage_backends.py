@@ -162,6 +162,7 @@ def test_a_server_that_goes_away_mid_command_is_one_line_exit_2(
         assert st.count_traverses() == 1
 
 
+@pytest.mark.slow
 def test_a_server_that_never_answers_is_one_line_after_the_connect_timeout(monkeypatch):
     """A host that accepts the connection and then says nothing (a hung server): no hang, one line."""
     pytest.importorskip("psycopg")
