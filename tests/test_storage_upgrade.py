@@ -303,5 +303,32 @@ def test_states_of_spellings_redacted_alike_are_all_kept_by_the_upgrade(tmp_path
         assert st.get_state("anc300://h", "position") == {"from": "anc300://h"}
         assert st.get_state("anc300://h", "position (from anc300://h?password=***)") == {"from": "anc300://h?x=a"}
         assert st.get_state("anc300://h", "position (from anc300://h?password=***, 2)") == {"from": "anc300://h?x=b"}
-        assert len(st.upgrade_notes) == 2 and "password=a" not in " ".join(st.upgrade_notes)
+        assert len(st.upgrade_notes) == 3 and "password=a" not in " ".join(st.upgrade_notes)
+        assert st.upgrade_notes[2].startswith("2 device name(s) of the old store held a password as written")
     assert b"password=a" not in db.read_bytes() and b"password=b" not in db.read_bytes()
+
+
+def test_an_upgrade_says_its_copy_keeps_the_passwords_a_store_made_before_redaction_held(tmp_path):
+    """The copy is the file as it was: a store made before URLs were redacted kept 'anc300://h?password=a' as
+    a device's name; the upgraded store holds no secret, the copy still does, and the user is told so (once,
+    naming the copy, never the password). A store whose names hold no secret gets no such line."""
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://h?x=a": ROWS[:1], "anc300://k:1?x=b": ROWS[1:2], "mm3a://com3": ROWS[2:3]})
+    con = sqlite3.connect(db)
+    con.execute("UPDATE devices SET url = replace(url, '?x=', '?password=')")  # as the code before redaction wrote
+    con.commit()
+    con.close()
+    r = CliRunner().invoke(app, ["history", "--db", str(db), "--json"])
+    assert r.exit_code == 0, r.output
+    said = " ".join(r.stderr.split())
+    copy = tmp_path / "lab.v3.db"
+    assert (f"note: 2 device name(s) of the old store held a password as written (stores made before 2026-11-24); "
+            f"the upgraded store holds none, but its copy {copy} still does: delete the copy once you no longer "
+            "need it, or keep it where only you can read it") in said, said
+    assert "password=a" not in r.output and "password=b" not in r.output
+    assert b"password=a" in copy.read_bytes() and b"password=a" not in db.read_bytes()
+
+    clean = tmp_path / "clean.db"
+    _schema_3_store(clean, {"anc300://h": ROWS[:1]})
+    r = CliRunner().invoke(app, ["history", "--db", str(clean), "--json"])
+    assert r.exit_code == 0 and "password" not in r.stderr and (tmp_path / "clean.v3.db").exists()

@@ -23,7 +23,15 @@ from .schema import (
     stored_device,
 )
 from .sqlite import SQLiteBackend, check_database_file
-from .upgrade import KEYED_AT, _part_file, _remove_part, copy_before_upgrade, key_devices, row_traverse
+from .upgrade import (
+    KEYED_AT,
+    _part_file,
+    _remove_part,
+    copy_before_upgrade,
+    key_devices,
+    row_traverse,
+    secret_names,
+)
 
 __all__ = ["check_database_file", "open_backend"]
 
@@ -156,7 +164,13 @@ class _Base:
             if version < 3:
                 self._backfill_content(con)
             if 1 <= version < KEYED_AT:
+                secrets = secret_names(con)
                 self.upgrade_notes = key_devices(con)
+                if secrets and self.upgrade_copy is not None:  # the copy is the file as it was, secrets and all
+                    self.upgrade_notes.append(
+                        f"{secrets} device name(s) of the old store held a password as written (stores made before "
+                        f"2026-11-24); the upgraded store holds none, but its copy {self.upgrade_copy} still does: "
+                        "delete the copy once you no longer need it, or keep it where only you can read it")
         return version
 
     def _backfill_content(self, con: Backend) -> None:

@@ -83,6 +83,15 @@ def copy_before_upgrade(con: Backend, path: Path, version: int, upgrading_to: in
     return dest
 
 
+def secret_names(con: Backend) -> int:
+    """How many device names hold a secret as written (``?password=...``, ``user:PASSWORD@``).
+
+    A store written before URLs were redacted (2026-11-24) kept them; the upgrade to schema 4
+    names every device by its key (no secret), but the copy made before it keeps the old names.
+    """
+    return sum(str(r["url"]) != redact_url(str(r["url"])) for r in con.execute("SELECT url FROM devices"))
+
+
 def key_devices(con: Backend) -> list[str]:
     """Rename every device to its stored name, merging two spellings of one device; one line per merge.
 
