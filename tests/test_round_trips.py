@@ -466,7 +466,7 @@ def test_a_history_file_with_empty_lines_above_its_format_line_is_refused_saying
     r = CliRunner().invoke(app, ["import", str(h), "-d", "sim://", "--db", str(tmp_path / "s.db")])
     assert r.exit_code == 2, r.output
     assert r.stderr.strip() == (f'error: {h}:1: line 1 is empty: a history file\'s first line is {{"format": '
-                                '"stickslip-history", "version": 1} (delete the empty lines above it)'), r.stderr
+                                '"stickslip-history", "version": 2} (delete the empty lines above it)'), r.stderr
 
 
 def test_a_table_whose_first_cell_starts_with_a_brace_is_refused_naming_both_formats(tmp_path):
@@ -482,7 +482,7 @@ def test_a_table_whose_first_cell_starts_with_a_brace_is_refused_naming_both_for
     assert r.exit_code == 2, r.output
     assert r.stderr.strip() == (
         f'error: {t}:1: neither a stickslip history file (line 1 must be {{"format": "stickslip-history", '
-        "\"version\": 1}) nor a table (its first character is '{'; a table's line 1 is its header "
+        "\"version\": 2}) nor a table (its first character is '{'; a table's line 1 is its header "
         "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps)"), r.stderr
 
 
@@ -551,7 +551,87 @@ def test_any_provenance_text_survives_the_move(db, tmp_path, rows):
         write_history(tmp_path / f"{n}.jsonl", kept)
         back = [r for batch in read_history(tmp_path / f"{n}.jsonl", {j: _ANY for j in (1, 2, 3)}) for r in batch]
         assert back == kept
-        s.add_with_provenance(back, device=f"sim://?seed={n + 10**6}")  # another arm: not a duplicate
-        assert list(s.iter_provenance(device=f"sim://?seed={n + 10**6}")) == kept
+        assert {p.device for _, p in back} == {f"sim://?seed={n}"}  # each row says whose it is
+        with pytest.raises(ValueError, match=f"a row names the device sim://\\?seed={n}, not "):
+            s.add_with_provenance(back, device=f"sim://?seed={n + 10**6}")  # never silently under another arm
+        other = [(t, replace(p, device=f"sim://?seed={n + 10**6}")) for t, p in back]  # another arm: no duplicate
+        s.add_with_provenance(other)
+        assert list(s.iter_provenance(device=f"sim://?seed={n + 10**6}")) == other
     for (t, p), (u, q) in zip(rows, kept, strict=True):
         assert (u.steps, u.direction, q.measured_at) == (t.steps, t.direction, p.measured_at)
+
+
+def _cli(*args):
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    return CliRunner().invoke(app, [str(a) for a in args])
+
+
+def test_a_history_of_two_devices_goes_back_to_each_and_never_under_one(tmp_path):
+    """A store of two arms exported whole (export --json) used to lose whose each row was: imported with -d
+    sim://, both arms' rows became sim://'s, and a calibration of sim:// mixed two arms' step sizes. Each row
+    now names its device; the import stores it there, or refuses a --device the rows contradict (nothing
+    stored), and a version-1 file (no device) still needs --device."""
+    from synth import paper_table
+
+    from stickslip.measurements import write_measurements
+
+    rows = paper_table()
+    write_measurements(tmp_path / "a.csv", rows[:5])
+    write_measurements(tmp_path / "b.csv", rows[5:9])
+    one, two, three = (tmp_path / f"{n}.db" for n in ("one", "two", "three"))
+    assert _cli("import", tmp_path / "a.csv", "-d", "anc300://h:7230?password=x", "--db", one).exit_code == 0
+    assert _cli("import", tmp_path / "b.csv", "-d", "mm3a:///COM3", "--db", one).exit_code == 0
+    h = tmp_path / "all.jsonl"
+    assert _cli("export", "--json", "--db", one, "-o", h).exit_code == 0
+    lines = h.read_text(encoding="utf-8").splitlines()
+    assert json.loads(lines[0]) == {"format": "stickslip-history", "version": 2}
+    assert [json.loads(x)["device"] for x in lines[1:]] == ["anc300://h:7230"] * 5 + ["mm3a://com3"] * 4
+
+    r = _cli("import", h, "--db", three, "-d", "sim://")
+    assert r.exit_code == 2 and " ".join(r.stderr.split()) == (
+        f"error: {h}: rows 2-6: the file names the device anc300://h:7230, not sim:// (--device): leave --device "
+        f"out to store each row under the device it names; {h}: rows 7-10: the file names the device mm3a://com3, "
+        "not sim:// (--device): leave --device out to store each row under the device it names"), r.stderr
+    with Store.open(three) as s:
+        assert s.count_traverses() == 0  # nothing stored
+
+    r = _cli("import", h, "--db", two)
+    assert r.exit_code == 0 and "for the devices the file names" in r.stdout, r.output
+    with Store.open(one) as a, Store.open(two) as b:
+        for url, n in (("anc300://h:7230", 5), ("mm3a://COM3", 4)):
+            assert b.count_traverses(url) == n
+            assert list(b.iter_provenance(device=url)) == list(a.iter_provenance(device=url))
+    assert _cli("import", h, "--db", two, "-d", "mm3a://com3").exit_code == 2  # anc300's rows are not mm3a's
+
+    v1 = tmp_path / "v1.jsonl"  # as export --json wrote it before: no device
+    v1.write_text("\n".join([json.dumps({"format": "stickslip-history", "version": 1}),
+                             *[json.dumps({k: v for k, v in json.loads(x).items() if k != "device"})
+                               for x in lines[6:]]]) + "\n", encoding="utf-8")
+    r = _cli("import", v1, "--db", three)
+    assert r.exit_code == 2 and " ".join(r.stderr.split()) == (
+        f"error: {v1}: rows 2-5: no device named (a history file of version 1): give it with --device URL"), r.stderr
+    assert _cli("import", v1, "--db", three, "-d", "sim://?seed=7").exit_code == 0
+    with Store.open(three) as s:
+        assert s.count_traverses("sim://?seed=7") == 4 and s.count_traverses() == 4
+
+    bad = tmp_path / "bad.jsonl"  # a device field in a version-1 file is as unknown as it was to version 1
+    bad.write_text("\n".join([json.dumps({"format": "stickslip-history", "version": 1}), lines[1]]) + "\n",
+                   encoding="utf-8")
+    r = _cli("import", bad, "--db", three, "-d", "sim://")
+    assert r.exit_code == 2 and "unknown field 'device'" in r.stderr, r.stderr
+
+
+def test_a_table_without_its_device_is_refused_before_a_store_is_made(tmp_path):
+    from synth import paper_table
+
+    from stickslip.measurements import write_measurements
+
+    write_measurements(tmp_path / "m.csv", paper_table()[:2])
+    r = _cli("import", tmp_path / "m.csv", "--db", tmp_path / "s.db")
+    assert r.exit_code == 2 and " ".join(r.stderr.split()) == (
+        f"error: {tmp_path / 'm.csv'} is a measurement table, which does not say its device: give the device it "
+        "was measured on (--device URL, e.g. mm3a:///dev/ttyUSB0 or sim://)"), r.stderr
+    assert not (tmp_path / "s.db").exists()

@@ -184,9 +184,10 @@ def import_(
     meas: Path = typer.Argument(
         ..., help="Measurement table (CSV), or a history file (export --json), to store.", show_default=False
     ),
-    device: str = typer.Option(
-        ..., "--device", "-d", help="Device URL the table was measured on (required: a table's device is a fact "
-        "about it, no default guesses it), e.g. mm3a:///dev/ttyUSB0 or sim://.", show_default=False,
+    device: str | None = typer.Option(
+        None, "--device", "-d", help="Device URL the table was measured on (required for a table: its device is "
+        "a fact about it, no default guesses it), e.g. mm3a:///dev/ttyUSB0 or sim://. A history file's rows "
+        "name their own device: leave it out, or give the same device.", show_default=False,
     ),
     how: str | None = typer.Option(
         None, "--how", help="How it was measured: imported (the default), audio, simulated ... (a table only: "
@@ -210,14 +211,20 @@ def import_(
 
     The rows are stored under the device's name: its URL without options or secrets (a
     simulator's seed kept), the name measuring uses, so mm3a:///COM3 and mm3a://com3 are
-    one device (docs/storage.md).
+    one device (docs/storage.md). A history file written by export --json names each
+    row's device (a history of several devices goes back to each); one written before
+    2026-12-01 does not, and needs --device.
 
     Example: [bold]stickslip import meas.csv --device sim://[/]
     """
+    from ..measurements.history_file import is_history_file
     from ..procedures.table_import import import_table
     from ..storage.schema import stored_device
 
-    name = stored_device(device)  # what the rows are stored under (the URL was checked: it names a device)
+    name = stored_device(device) if device is not None else None  # what the rows are stored under
+    if name is None and not is_history_file(meas):  # refused before a store is made or opened
+        fail(f"{meas} is a measurement table, which does not say its device: give the device it was measured on "
+             "(--device URL, e.g. mm3a:///dev/ttyUSB0 or sim://)")
     with open_store(db) as st:  # the table streams through twice: any length in bounded memory
         with user_errors():  # a bad row (every one listed), a file imported before, rows stored already
             res = import_table(st, meas, device, how, force, allow_duplicates, shown_device=name)
@@ -226,7 +233,8 @@ def import_(
         print_json({"imported": len(res.ids), "ids": res.ids, "db": str(path)})
     else:
         console.print(
-            f"imported {len(res.ids)} traverses ({', '.join(res.days)}) for {name} into {path}"
+            f"imported {len(res.ids)} traverses ({', '.join(res.days)}) for {name or 'the devices the file names'} "
+            f"into {path}"
         )
 
 

@@ -4,11 +4,13 @@ The measurement table (design.md §7) is a contract other tools read, header exa
 it has no place for how a traverse was measured, when, from what, or why it is excluded.
 A history file carries those too, so that a history moved with ``export --json`` and
 ``import`` is the same record (docs/storage.md). It is JSON Lines, UTF-8: line 1
-``{"format": "stickslip-history", "version": 1}``, then one object per traverse with the
+``{"format": "stickslip-history", "version": 2}``, then one object per traverse with the
 table's columns (numbers as JSON numbers) and ``how``, ``source``, ``measured_at`` (ISO
-8601 with its UTC offset) and ``excluded`` (the reason, or null when the row is used). A
-provenance field left out means what importing a table means: ``how`` imported, the import's
-time, no exclusion, no source. The store keeps no checksum of a history file: importing
+8601 with its UTC offset), ``excluded`` (the reason, or null when the row is used) and
+``device`` (the name the row was stored under: a history of several devices says whose
+each row is; version 1 had no ``device`` and is still read). A provenance field left out
+means what importing a table means: ``how`` imported, the import's time, no exclusion, no
+source, the device the import is told. The store keeps no checksum of a history file: importing
 one twice is refused by its rows (the same device, day, pose and steps), not by its bytes.
 Text in it (a source, a reason) may hold any character: JSON escapes it on one line.
 
@@ -31,20 +33,23 @@ from .rows import HEADER, TableError, Traverse, parse_row
 
 __all__ = ["FORMAT", "PROVENANCE", "Provenance", "is_history_file", "read_history", "write_history"]
 
-FORMAT = {"format": "stickslip-history", "version": 1}
-PROVENANCE = ("how", "source", "measured_at", "excluded")
+FORMAT = {"format": "stickslip-history", "version": 2}
+READS = (1, 2)  # version 1 (stop 63) had no "device" field
+PROVENANCE = ("how", "source", "measured_at", "excluded", "device")
 _BATCH = 10_000  # rows per yielded batch: memory bounded by a batch, whatever the file's length
 
 
 @dataclass(frozen=True)
 class Provenance:
-    """How a stored traverse came to be: ``how``, ``source`` (or None), ``measured_at`` (ISO, UTC offset), and
-    ``excluded`` (the reason it is left out of analyses, or None when used)."""
+    """How a stored traverse came to be: ``how``, ``source`` (or None), ``measured_at`` (ISO, UTC offset),
+    ``excluded`` (the reason it is left out of analyses, or None when used) and ``device`` (the name it was
+    stored under, or None: a history file of version 1, or a row that does not say)."""
 
     how: str
     measured_at: str | None = None  # None: now, when it is stored
     source: str | None = None
     excluded: str | None = None
+    device: str | None = None
 
 
 def is_history_file(path: str | Path) -> bool:
@@ -66,6 +71,8 @@ def write_history(path: str | Path, rows: Iterable[tuple[Traverse, Provenance]])
         for t, p in rows:
             obj: dict[str, Any] = {h: getattr(t, h) for h in HEADER}
             obj.update(how=p.how, source=p.source, measured_at=p.measured_at, excluded=p.excluded)
+            if p.device is not None:
+                obj["device"] = p.device
             f.write(json.dumps(obj, ensure_ascii=False, allow_nan=False) + "\n")
             count[0] += 1
 
@@ -82,14 +89,14 @@ def read_history(path: str | Path, joints: JointSet | None = None) -> Iterator[l
     source = str(path)
     try:
         lines = enumerate(text_lines(path, "history"), start=1)
-        _check_format(next(lines, (1, "")), source)
+        version = _check_format(next(lines, (1, "")), source)
         problems: list[str] = []
         batch: list[tuple[Traverse, Provenance]] = []
         n = 0
         for lineno, line in lines:
             if not line.strip():
                 continue
-            row, errs = _parse_line(line, f"{source}:{lineno}", joints)
+            row, errs = _parse_line(line, f"{source}:{lineno}", joints, version)
             problems += errs
             n += 1
             if row is not None and not problems:
@@ -109,7 +116,7 @@ def read_history(path: str | Path, joints: JointSet | None = None) -> Iterator[l
         yield batch
 
 
-def _check_format(first: tuple[int, str], source: str) -> None:
+def _check_format(first: tuple[int, str], source: str) -> int:
     if not first[1].strip():  # is_history_file looks past blank lines: say what is wrong, not 'not a history file'
         raise TableError([f"{source}:1: line 1 is empty: a history file's first line is {json.dumps(FORMAT)} "
                           "(delete the empty lines above it)"])
@@ -121,12 +128,16 @@ def _check_format(first: tuple[int, str], source: str) -> None:
         raise TableError([f"{source}:1: neither a stickslip history file (line 1 must be {json.dumps(FORMAT)}) "
                           f"nor a table (its first character is '{{'; a table's line 1 is its header "
                           f"{','.join(HEADER)})"])
-    if head.get("version") != FORMAT["version"]:
-        raise TableError([f"{source}:1: history file version {head.get('version')!r}: this stickslip reads "
-                          f"version {FORMAT['version']} (a newer stickslip wrote it?)"])
+    version = head.get("version")
+    if type(version) is not int or version not in READS:
+        raise TableError([f"{source}:1: history file version {version!r}: this stickslip reads versions "
+                          f"{' and '.join(map(str, READS))} (a newer stickslip wrote it?)"])
+    return version
 
 
-def _parse_line(line: str, where: str, joints: JointSet | None) -> tuple[tuple[Traverse, Provenance] | None, list[str]]:
+def _parse_line(
+    line: str, where: str, joints: JointSet | None, version: int = 2
+) -> tuple[tuple[Traverse, Provenance] | None, list[str]]:
     """One line's traverse and provenance, or its problems."""
     try:
         obj = json.loads(line, parse_constant=_no_constant, object_pairs_hook=_once_each)
@@ -137,7 +148,8 @@ def _parse_line(line: str, where: str, joints: JointSet | None) -> tuple[tuple[T
     if not isinstance(obj, dict):
         return None, [f"{where}: not a JSON object (a traverse is {{\"day\": ..., \"joint\": ..., ...}})"]
     problems = []
-    if unknown := [k for k in obj if k not in HEADER and k not in PROVENANCE]:
+    known = PROVENANCE if version >= 2 else PROVENANCE[:-1]  # version 1 had no device
+    if unknown := [k for k in obj if k not in HEADER and k not in known]:
         problems.append(f"{where}: unknown field{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}")
     cells = {h: _cell(obj.get(h)) for h in HEADER}
     t, errs = parse_row(cells, where, joints)
@@ -180,7 +192,7 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
     """The provenance fields of one line, checked: a missing one means what it means for a CSV row."""
     problems = []
     texts: dict[str, str | None] = {}
-    for k in ("how", "source", "excluded"):
+    for k in ("how", "source", "excluded", "device"):
         v = obj.get(k)
         if v is not None and not isinstance(v, str):
             problems.append(f"{where}: {k} must be text or null, got {json.dumps(v)}")
@@ -191,6 +203,8 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
         problems.append(f"{where}: excluded is empty (give the reason, or null when the row is used)")
     if texts["how"] is not None and not texts["how"].strip():
         problems.append(f"{where}: how is empty (e.g. audio, imported, camera)")
+    if texts["device"] is not None and not texts["device"].strip():
+        problems.append(f"{where}: device is empty (the URL it was measured on, e.g. sim://, or null)")
     when = obj.get("measured_at")
     iso = None
     if when is not None:  # missing: the time of the import, as for a table's row
@@ -199,7 +213,7 @@ def _provenance(obj: dict[str, Any], where: str) -> tuple[Provenance | None, lis
             problems.append(f"{where}: measured_at {json.dumps(when, ensure_ascii=False)}: {why}")
     if problems:
         return None, problems
-    return Provenance(texts["how"] or "imported", iso, texts["source"], texts["excluded"]), []
+    return Provenance(texts["how"] or "imported", iso, texts["source"], texts["excluded"], texts["device"]), []
 
 
 def _unstorable(text: str) -> str | None:
