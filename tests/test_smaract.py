@@ -281,10 +281,12 @@ def test_mcs2_refused_setting_or_move_is_certain_nothing(where: str) -> None:
 
 
 def test_mcs2_channel_already_moving_gets_no_burst() -> None:
-    dev, t = mcs2([(":CHAN2:STAT?\r\n", "1\r\n")])
+    # another program drives the channel: none of our steps made, the joint bounded only by its end stop (audit57)
+    dev, t = mcs2(_burst2(2, 100000) + [(":CHAN2:STAT?\r\n", "1\r\n")])
     with t, pytest.raises(StepsUncertain, match="channel 2 is already moving") as e:
-        dev.step(3, 10)
-    assert (e.value.made, e.value.at_most) == (0, 0)
+        dev.step(3, 100011)  # one burst of 100000 made, then the channel is found moving
+    assert (e.value.made, e.value.at_most) == (100000, None)
+    assert "nothing was sent of a burst of +11 steps on joint 3 (channel 2)" in str(e.value)
 
 
 def test_mcs2_trouble_that_appears_during_a_burst_ends_it_early(caplog: pytest.LogCaptureFixture) -> None:
