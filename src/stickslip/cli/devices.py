@@ -448,6 +448,13 @@ def where(
     after a traverse, a crash or a manual move, and on day one (raw steps into the stop
     first: stickslip move --steps). It clears an uncertainty and the position's σ.
 
+    The positions are kept, not measured: stickslip reads no joint sensor (a SmarAct
+    positioner's neither), so a kept position holds only while nothing else moves the
+    arm. After the controller's own software or hand control moved it between commands,
+    or another controller or arm was connected under this URL, reference the joints
+    again (--set): stickslip cannot tell. A controller switched off and on between two commands
+    changes nothing kept (the positions are stickslip's, not the controller's).
+
     Without --set or a pose option the device is opened to say whether it answers
     (--offline skips that); a device that does not answer exits 2. A NanoControl
     also reports its dialect (console or legacy), firmware version, stepping
