@@ -285,9 +285,10 @@ def test_a_late_answer_landing_after_a_lost_command_is_not_its_answer(dialect: s
 def test_console_a_profile_switch_made_but_not_answered_is_sent_again() -> None:
     # the user's profile (16 steps an interval) made active again after the 2nd burst, unanswered: the 3rd burst's
     # profile must be made active again, not assumed (it made 16 steps for 2)
-    link, opener, truth = _console(["ok"] * 12 + ["silent"])
+    link, opener, truth = _console(["ok"] * 13 + ["silent"])  # each step() sends frequency and the profile first
     assert judge((link, opener, truth), [(1, 1), (1, 2), (1, 2)]) == ["made", "made", "made"]
-    assert ("ok", "speed 6") in link.used[13:]
+    assert link.used[13] == ("silent", "speed 1")
+    assert ("ok", "speed 6") in link.used[14:]
 
 
 def test_console_a_go_answered_after_the_emergency_stop_was_sent_does_not_acknowledge_it() -> None:
