@@ -438,3 +438,18 @@ def test_calibrates_notes_wrap_at_spaces_with_later_lines_indented_as_results_do
             k += 1
         assert all(len(ln) <= width for ln in lines[i:k])  # within the width, later lines indented
         assert " ".join(" ".join(lines[i:k]).split()) == " ".join(f"note: {note}".split())  # no word cut or lost
+
+
+def test_where_says_a_kept_position_assumes_nothing_else_moved_the_arm():
+    """The arms have no sensors stickslip reads: a move by the vendor's software between commands, or another
+    controller under the same URL, cannot be told; `where` (and docs/cli.md) must say so and what to do (audit57)."""
+    from stickslip.cli.reference import render
+
+    r = runner.invoke(app, ["where", "--help"], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.stdout.replace("│", " ").split())
+    page = " ".join(render().split("## `stickslip where`")[1].split("## `stickslip reach`")[0].split())
+    for said in (text, page):
+        assert "The positions are kept, not measured" in said
+        assert "reference the joints again (--set): stickslip cannot tell" in said
+        assert "another controller or arm was connected under this URL" in said

@@ -182,7 +182,7 @@ def test_a_controller_that_answers_badly_never_has_steps_taken_as_made(dialect: 
 
 
 def test_mcs_an_error_code_it_does_not_know_is_not_read_as_nothing_made() -> None:
-    link, opener, truth = _mcs(["ok"] * 4 + ["unknown"])  # the :MST is answered ':E0,977'
+    link, opener, truth = _mcs(["ok"] * 5 + ["unknown"])  # the :MST (after :GS0) is answered ':E0,977'
     dev = opener()
     with pytest.raises(StepsUncertain) as e:
         dev.step(1, 20)
@@ -259,9 +259,9 @@ SYNC = {"mcs": (4, {"GNC", "GSI"}), "console": (2, {"version", "speed ?"}), "anc
 @pytest.mark.parametrize(
     ("dialect", "plan", "outcomes"),
     [  # the late answer lands on the re-synchronising query and is discarded (was: taken for the next command's)
-        ("mcs", ["ok"] * 6 + ["lost", "late", "lost"], ["made", "uncertain", "uncertain"]),  # MST, S0 late, GNC
-        ("mcs", ["ok"] * 6 + ["lost", "late", "ok", "lost"], ["made", "uncertain", "uncertain"]),  # ... MST lost
-        ("mcs", ["ok"] * 4 + ["late", "late", "lost"], ["uncertain", "uncertain", "made"]),  # S0 read MST's ack
+        ("mcs", ["ok"] * 8 + ["lost", "late", "lost"], ["made", "uncertain", "uncertain"]),  # MST, S0 late, GNC
+        ("mcs", ["ok"] * 8 + ["lost", "late", "ok", "lost"], ["made", "uncertain", "uncertain"]),  # ... MST lost
+        ("mcs", ["ok"] * 5 + ["late", "late", "lost"], ["uncertain", "uncertain", "made"]),  # S0 read MST's ack
         ("console", ["ok"] * 7 + ["late", "lost"], ["made", "uncertain", "made"]),  # 'speed 1' late
         ("console", ["ok"] * 7 + ["late", "ok", "lost"], ["made", "uncertain", "made"]),  # 'speed 6' lost
         ("console", ["ok"] * 3 + ["lost", "late", "late", "lost"], ["uncertain"] * 3),  # 'version' itself late
@@ -285,9 +285,10 @@ def test_a_late_answer_landing_after_a_lost_command_is_not_its_answer(dialect: s
 def test_console_a_profile_switch_made_but_not_answered_is_sent_again() -> None:
     # the user's profile (16 steps an interval) made active again after the 2nd burst, unanswered: the 3rd burst's
     # profile must be made active again, not assumed (it made 16 steps for 2)
-    link, opener, truth = _console(["ok"] * 12 + ["silent"])
+    link, opener, truth = _console(["ok"] * 13 + ["silent"])  # each step() sends frequency and the profile first
     assert judge((link, opener, truth), [(1, 1), (1, 2), (1, 2)]) == ["made", "made", "made"]
-    assert ("ok", "speed 6") in link.used[13:]
+    assert link.used[13] == ("silent", "speed 1")
+    assert ("ok", "speed 6") in link.used[14:]
 
 
 def test_console_a_go_answered_after_the_emergency_stop_was_sent_does_not_acknowledge_it() -> None:

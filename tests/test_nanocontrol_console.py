@@ -129,7 +129,8 @@ def test_a_burst_that_does_not_factor_takes_two_gos_and_negative_steps_reverse()
 def test_frequency_and_channel_map_are_used_for_timing() -> None:
     t, dev, clock = console(
         [
-            ("frequency 1000 1000 1000 20000\r", "o\t\r"),
+            ("frequency 1000 1000 1000 20000\r", "o\t\r"),  # set_frequency
+            ("frequency 1000 1000 1000 20000\r", "o\t\r"),  # step(): sent at every call
             ("speed 6 c01 c01 c01 c64\r", "o\t\r"),
             ("speed 6\r", "o\t\r"),
             (f"go 0 0 0 100 {T(6400, 20000)}\r", "o\t\r"),
@@ -520,6 +521,8 @@ def test_ctrl_c_in_the_move_loop_leaves_the_burst_journalled_and_nothing_driving
             (f"go 0 0 20 0 {T(1000)}\r", "o\t\r"),
             ("stop\r", "o\t\r"),
             ("speed 3\r", "o\t\r"),
+            FREQ,  # every step() sets the frequency and the scratch profile again (a power cycle between calls)
+            ("speed 6 c01 c01 c50 c01\r", "o\t\r"),
             ("speed 6\r", "o\t\r"),
             (f"go 0 0 20 0 {T(1000)}\r", "o\t\r"),
             ("stopnack\r", None),

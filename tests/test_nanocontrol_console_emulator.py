@@ -64,6 +64,38 @@ def test_the_emulator_also_serves_tcp() -> None:
         assert emu.steps["A"] == 64
 
 
+def _power_cycle(emu: ConsoleEmulator) -> None:
+    """The controller switched off and on, the serial line (a USB adapter on the PC's side) still open: nothing
+    drives, every channel at the power-on frequency, the power-on profiles, profile 1 active."""
+    emu._halt()
+    with emu._state:
+        emu.hz = dict.fromkeys("ABCD", POWER_ON_HZ)
+        emu.profiles = {p: ["c16"] * 4 for p in range(1, 7)}
+        emu.active = 1
+        emu.fine_with_coarse = dict.fromkeys("ABCD", False)
+
+
+@pty_only
+@pytest.mark.parametrize("then", [(3, 1009), (3, 49), (2, 64)])
+def test_a_controller_switched_off_and_on_between_two_steps_of_one_session_still_makes_them_exactly(
+    then: tuple[int, int],
+) -> None:
+    """`stickslip serve`, Bluesky and the Python API keep a device open across moves. A NanoControl switched off and
+    on between two of them comes back at its power-on frequency and profiles; a burst timed at the URL's frequency
+    but made at 700 Hz made a fraction of its steps, counted as all of them (audit57). The driver sets the
+    frequency (and writes its profile) again at every step(), as the MCS2 driver sends its settings before every
+    burst: a power cycle between two calls changes nothing counted."""
+    with ConsoleEmulator(_sim()) as emu:
+        with open_url(emu.url + "?hz=20000&timeout=0.5") as dev:
+            dev.step(3, 49)  # its scratch profile now holds c49 for channel C
+            _power_cycle(emu)
+            dev.step(*then)
+        made = {"A": 0, "B": 0, "C": 49}
+        made["BC"[then[0] - 2]] += then[1]
+        assert emu.steps == {**made, "D": 0}
+        assert emu.hz == dict.fromkeys("ABCD", 20000)
+
+
 @pty_only
 @pytest.mark.parametrize("fault, match", [("error", "refused 'go"), ("silent", "did not answer 'go"),
                                           ("garbage", "garbage reply")])

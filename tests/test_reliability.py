@@ -964,3 +964,42 @@ def test_where_does_not_ask_a_device_another_process_drives(tmp_path, faulty):
     assert w["answers"] == "fault injector" and w["busy"] is None and opened == ["counted://arm"]
     with Store.open(db) as st:
         assert st.get_state("counted://arm", "lock") is None  # asking took no lock
+
+
+def test_default_ports_are_the_ports_the_drivers_open():
+    from stickslip.devices import anc300
+    from stickslip.devices.base import DEFAULT_PORTS
+    from stickslip.devices.smaract import mcs, mcs2
+
+    assert DEFAULT_PORTS == {"anc300": anc300.DEFAULT_PORT, "smaract-mcs+socket": mcs.TCP_PORT,
+                             "smaract-mcs2": mcs2.TCP_PORT}
+
+
+@pytest.mark.parametrize("other", ["anc300://labnano:7230", "anc300://LABNANO/", "anc300://labnano:7230/"])
+def test_where_warns_of_positions_kept_under_another_spelling_of_the_controller(tmp_path, other):
+    """anc300://labnano and anc300://labnano:7230 are one ANC300 with two kept positions and two locks: a move made
+    under one is not in the other's positions, which still show 'set' or 'dead-reckoned' (audit57)."""
+    db = tmp_path / "s.db"
+    assert run("where", "-d", "anc300://labnano", "--db", db, "--offline", "--set", "3=min").exit_code == 0
+    r = run("where", "-d", other, "--db", db, "--offline")
+    assert r.exit_code == 0, r.output
+    warned = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
+    assert len(warned) == 1, r.stderr
+    assert "also kept under anc300://labnano, the same controller written another way" in warned[0]
+    assert _where(db, other)["also_kept"] == ["anc300://labnano"]
+    alone = run("where", "-d", "anc300://labnano", "--db", db, "--offline")  # the other has no positions kept
+    assert alone.exit_code == 0 and "warning" not in alone.stderr, alone.stderr
+    assert _where(db, "anc300://labnano")["also_kept"] == []
+    assert _where(db, "anc300://otherhost:7230")["also_kept"] == []
+
+
+def test_move_warns_of_positions_kept_under_another_spelling_of_the_controller(tmp_path, faulty, monkeypatch):
+    from stickslip.devices import base
+
+    monkeypatch.setitem(base.DEFAULT_PORTS, "faulty", 4000)  # a network controller that answers here
+    db = tmp_path / "s.db"
+    assert run("where", "-d", "faulty://arm", "--db", db, "--offline", "--set", "3=min").exit_code == 0
+    r = run("move", "-d", "faulty://arm:4000", "--db", db, "--joint", 3, "--steps", 10)
+    assert r.exit_code == 0, r.output
+    assert "warning: positions of this controller are also kept under faulty://arm," in r.stderr, r.stderr
+    assert "write the URL one way (faulty://arm:4000 here)" in r.stderr

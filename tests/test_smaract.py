@@ -115,7 +115,8 @@ def test_a_channel_map_round_trips_through_its_text(entries: list[tuple[int, boo
 
 def test_mcs_opens_steps_and_reports_with_exact_messages() -> None:
     clock = FakeClock()
-    dev, t = mcs([(":MST2,100,4095,1000\n", ":E2,0\n"), (":GS2\n", ":S2,1\n"), (":GS2\n", ":S2,0\n")], clock)
+    dev, t = mcs([(":GS2\n", ":S2,0\n"), (":MST2,100,4095,1000\n", ":E2,0\n"), (":GS2\n", ":S2,1\n"),
+                  (":GS2\n", ":S2,0\n")], clock)
     with t:
         dev.step(3, 100)
     # the first question after the burst's duration (0.1 s, in 50 ms slices), then 10 ms later
@@ -131,7 +132,7 @@ def test_mcs_opens_steps_and_reports_with_exact_messages() -> None:
 def test_mcs_reversed_channel_long_burst_split_and_zero_sends_nothing() -> None:
     transcript: list[tuple[str | None, str | None]] = []
     for k in (29999, 29999, 5002):  # 65000 steps of joint 1, reversed on channel 0
-        transcript += [(f":MST0,{-k},2000,18500\n", ":E0,0\n"), (":GS0\n", ":S0,0\n")]
+        transcript += [(":GS0\n", ":S0,0\n"), (f":MST0,{-k},2000,18500\n", ":E0,0\n"), (":GS0\n", ":S0,0\n")]
     dev, t = mcs(transcript, channels=parse_channels("-0,1,2"), hz=18500, amplitude=2000)
     with t:
         dev.step(1, 0)
@@ -139,7 +140,8 @@ def test_mcs_reversed_channel_long_burst_split_and_zero_sends_nothing() -> None:
 
 
 def test_mcs_settings_change_the_next_burst_and_bad_ones_send_nothing() -> None:
-    dev, t = mcs([(":MST1,-7,1,1\n", ":E-1,0\n"), (":GS1\n", ":S1,3\n")])  # holding counts as stopped
+    # holding counts as stopped
+    dev, t = mcs([(":GS1\n", ":S1,0\n"), (":MST1,-7,1,1\n", ":E-1,0\n"), (":GS1\n", ":S1,3\n")])
     with t:
         for call, words in [(lambda: dev.set_frequency(2, 18501), r"1\.\.18500 Hz"),
                             (lambda: dev.set_frequency(2, 0.5), r"1\.\.18500 Hz"),
@@ -156,8 +158,8 @@ def test_mcs_settings_change_the_next_burst_and_bad_ones_send_nothing() -> None:
 
 
 def test_mcs_refused_burst_is_certain_nothing_and_sends_no_stop() -> None:
-    dev, t = mcs([(":MST2,29999,4095,1000\n", ":E2,0\n"), (":GS2\n", ":S2,0\n"),
-                  (":MST2,1,4095,1000\n", ":E2,142\n")], hz=1000)
+    dev, t = mcs([(":GS2\n", ":S2,0\n"), (":MST2,29999,4095,1000\n", ":E2,0\n"), (":GS2\n", ":S2,0\n"),
+                  (":GS2\n", ":S2,0\n"), (":MST2,1,4095,1000\n", ":E2,142\n")], hz=1000)
     with t, pytest.raises(StepsUncertain) as e:
         dev.step(3, 30000)
     assert (e.value.made, e.value.at_most) == (29999, 29999)
@@ -173,7 +175,7 @@ def test_mcs_refused_burst_is_certain_nothing_and_sends_no_stop() -> None:
     (":E2,abc\n", "garbage reply"),
 ])
 def test_mcs_unanswered_or_garbled_start_is_bounded_and_stopped(reply: str | bytes | None, words: str) -> None:
-    dev, t = mcs([(":MST2,100,4095,1000\n", reply), (":S2\n", ":E2,0\n")], timeout=0.02)
+    dev, t = mcs([(":GS2\n", ":S2,0\n"), (":MST2,100,4095,1000\n", reply), (":S2\n", ":E2,0\n")], timeout=0.02)
     with t, pytest.raises(StepsUncertain) as e:
         dev.step(3, 100)
     assert (e.value.made, e.value.at_most) == (0, 100)
@@ -182,8 +184,18 @@ def test_mcs_unanswered_or_garbled_start_is_bounded_and_stopped(reply: str | byt
     dev.close()  # the stop was acknowledged: closing sends nothing more
 
 
+@pytest.mark.parametrize("status, words", [(1, "stepping"), (6, "calibrating"), (7, "finding the reference mark")])
+def test_mcs_channel_already_moving_gets_no_burst(status: int, words: str) -> None:
+    # another program drives the channel (a :MST would take it over): nothing sent, bounded by its end stop (audit57)
+    dev, t = mcs([(":GS2\n", f":S2,{status}\n")])
+    with t, pytest.raises(StepsUncertain, match=f"channel 2 is already moving \\(status {status}: {words}\\)") as e:
+        dev.step(3, 10)
+    assert (e.value.made, e.value.at_most) == (0, None)
+    assert "another program may be driving it; nothing was sent of a burst of +10 steps" in str(e.value)
+
+
 def test_mcs_locked_channel_ends_the_burst_early() -> None:
-    dev, t = mcs([(":MST2,-100,4095,1000\n", ":E2,0\n"), (":GS2\n", ":S2,9\n")])
+    dev, t = mcs([(":GS2\n", ":S2,0\n"), (":MST2,-100,4095,1000\n", ":E2,0\n"), (":GS2\n", ":S2,9\n")])
     with t, pytest.raises(StepsUncertain, match="locked") as e:
         dev.step(3, -100)
     assert (e.value.made, e.value.at_most) == (0, -100)
@@ -191,7 +203,7 @@ def test_mcs_locked_channel_ends_the_burst_early() -> None:
 
 def test_ctrl_c_mid_burst_stops_the_channel_and_propagates() -> None:
     clock = FakeClock()
-    dev, t = mcs([(":MST2,100,4095,1000\n", ":E2,0\n"), (":S2\n", ":E2,0\n")], clock)
+    dev, t = mcs([(":GS2\n", ":S2,0\n"), (":MST2,100,4095,1000\n", ":E2,0\n"), (":S2\n", ":E2,0\n")], clock)
 
     def sleep(s: float) -> None:
         raise KeyboardInterrupt
@@ -203,7 +215,8 @@ def test_ctrl_c_mid_burst_stops_the_channel_and_propagates() -> None:
 
 
 def test_closing_after_an_unacknowledged_stop_stops_the_channel_again() -> None:
-    dev, t = mcs([(":MST2,100,4095,1000\n", None), (":S2\n", None), (":S2\n", ":E2,0\n")], timeout=0.01)
+    dev, t = mcs([(":GS2\n", ":S2,0\n"), (":MST2,100,4095,1000\n", None), (":S2\n", None), (":S2\n", ":E2,0\n")],
+                 timeout=0.01)
     with t:
         with pytest.raises(StepsUncertain, match="not acknowledged"):
             dev.step(3, 100)
@@ -281,10 +294,12 @@ def test_mcs2_refused_setting_or_move_is_certain_nothing(where: str) -> None:
 
 
 def test_mcs2_channel_already_moving_gets_no_burst() -> None:
-    dev, t = mcs2([(":CHAN2:STAT?\r\n", "1\r\n")])
+    # another program drives the channel: none of our steps made, the joint bounded only by its end stop (audit57)
+    dev, t = mcs2(_burst2(2, 100000) + [(":CHAN2:STAT?\r\n", "1\r\n")])
     with t, pytest.raises(StepsUncertain, match="channel 2 is already moving") as e:
-        dev.step(3, 10)
-    assert (e.value.made, e.value.at_most) == (0, 0)
+        dev.step(3, 100011)  # one burst of 100000 made, then the channel is found moving
+    assert (e.value.made, e.value.at_most) == (100000, None)
+    assert "nothing was sent of a burst of +11 steps on joint 3 (channel 2)" in str(e.value)
 
 
 def test_mcs2_trouble_that_appears_during_a_burst_ends_it_early(caplog: pytest.LogCaptureFixture) -> None:
@@ -361,13 +376,18 @@ class Responder(Transport):
 
 
 def _mcs_answers(mst: bytes | None = b":E2,0\n", gs: bytes | None = b":S2,0\n") -> Callable[[bytes], bytes | None]:
+    """Answers of an MCS: ``mst`` to a burst, ``gs`` to a status question after it (before it: stopped)."""
     fixed = {b":SCM0\n": b":E-1,0\n", b":GNC\n": b":N3\n", b":GSI\n": b":ID1\n", b":GIV\n": b":IV1,0,0\n",
              b":S2\n": b":E2,0\n"}
+    started = {"mst": False}
 
     def answer(msg: bytes) -> bytes | None:
         if msg in fixed:
             return fixed[msg]
-        return mst if msg.startswith(b":MST") else gs
+        if msg.startswith(b":MST"):
+            started["mst"] = True
+            return mst
+        return gs if started["mst"] else b":S2,0\n"  # the channel is idle before the burst
 
     return answer
 

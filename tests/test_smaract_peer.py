@@ -11,6 +11,7 @@ uncertain over the failed burst only (or not at all if the controller refused it
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 from typing import Any
 
@@ -108,3 +109,29 @@ def test_each_fault_is_one_line_naming_the_port_and_bounds_the_position(
         assert lo == pytest.approx(2e-3, abs=1e-12) and 2.02e-3 < hi < 2.05e-3
     else:
         assert q3["source"] == "set" and q3["q"] == pytest.approx(2e-3, abs=1e-12)
+
+
+@pytest.mark.parametrize("kind", ["mcs", "mcs2"])
+def test_a_channel_another_program_drives_leaves_the_joint_uncertain_not_where_it_was_kept(
+    cal: Path, tmp_path: Path, kind: str
+) -> None:
+    """SmarAct's own software (or its hand control) is stepping the joint's channel when a move begins: the
+    controller says so (MCS: status 1 to :GS; MCS2: state bit 0x0001) and the burst is not sent (on the MCS a
+    :MST would have taken the channel over, the other program's steps so far unknown). The joint is then
+    wherever that program takes it, so it must not stay kept, referenced, where it was; it is kept uncertain up
+    to its end stop (audit57)."""
+    db = str(tmp_path / "s.db")
+    with SmarActPeer(kind) as peer:
+        url = peer.url + "?timeout=0.3&hz=5000"
+        assert _cli("where", "-d", url, "--offline", "--set", "3=2mm", "--db", db).exit_code == 0
+        peer._begin(2, 90000, 1000.0, time.monotonic())  # the vendor's program: 90 s of steps on channel 2
+        r = _cli("move", "-d", url, "-c", str(cal), "--joint", "3", "--by", "30um", "--q2", "-90deg",
+                 "--db", db, "--trust-calibration")
+        w = _cli("where", "-d", url, "--offline", "--db", db, "--json")
+        moves = [line for line in peer.log if line.startswith((":MOVE", ":MST"))]
+    assert r.exit_code == 2, r.output
+    assert "channel 2 is already moving" in r.stderr and "another program may be driving it" in r.stderr, r.stderr
+    assert moves == []  # nothing of ours was sent
+    q3 = json.loads(w.stdout)["joints"][2]
+    assert q3["source"] == "uncertain", q3  # before: "set" at 2 mm, as if nothing moved it
+    assert q3["uncertain"] == pytest.approx([2e-3, 12e-3], abs=1e-12)  # from where it was kept to the upper stop

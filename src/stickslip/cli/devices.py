@@ -222,6 +222,7 @@ def move(
         run_seen("move", request, cal, camera, camera_tip, db, json_out, camera_calibration=camera_calibration)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
+        _warn_if_also_kept(store, device)
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
     failure = result.failure()
     if failure is not None:
@@ -230,6 +231,16 @@ def move(
         print_json(result.as_dict())
         return
     _print_move(result)
+
+
+def _warn_if_also_kept(store: object, device: str) -> None:
+    """Queue the warning that ``device``'s controller has positions kept under another spelling too."""
+    from ..procedures.where import also_kept, also_kept_warning
+
+    key = device_key(device)
+    others = also_kept(store, key)
+    if others:
+        warn_later(also_kept_warning(key, others))
 
 
 def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
@@ -344,6 +355,7 @@ def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, j
     from ..procedures.move import DeviceBusy, sent_text, step_joint
 
     with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
+        _warn_if_also_kept(store, device)
         result = step_joint(store, device, joint, steps, burst=burst, ready=flush_warnings)
     lo, hi = result.state.bounds(joint)
     if result.outcome.error is not None:
@@ -448,6 +460,13 @@ def where(
     after a traverse, a crash or a manual move, and on day one (raw steps into the stop
     first: stickslip move --steps). It clears an uncertainty and the position's σ.
 
+    The positions are kept, not measured: stickslip reads no joint sensor (a SmarAct
+    positioner's neither), so a kept position holds only while nothing else moves the
+    arm. After the controller's own software or hand control moved it between commands,
+    or another controller or arm was connected under this URL, reference the joints
+    again (--set): stickslip cannot tell. A controller switched off and on between two commands
+    changes nothing kept (the positions are stickslip's, not the controller's).
+
     Without --set or a pose option the device is opened to say whether it answers
     (--offline skips that); a device that does not answer exits 2. A NanoControl
     also reports its dialect (console or legacy), firmware version, stepping
@@ -524,6 +543,10 @@ def _print_where(result: WhereResult) -> None:
     say(f"{result.device}" + (f" (answers: {answers})" if answers else ""))
     if result.busy:
         warn(f"not asked whether it answers: {result.busy}")
+    if result.others:
+        from ..procedures.where import also_kept_warning
+
+        warn(also_kept_warning(result.device, result.others))
     line = _info_line(info) if info else None
     if line:
         say(f"  {line}")

@@ -45,6 +45,8 @@ __all__ = [
     "open_device",
     "query_options",
     "device_key",
+    "controller_of",
+    "DEFAULT_PORTS",
     "windows_com_port",
     "check_setting",
     "check_device_url",
@@ -624,6 +626,32 @@ def device_key(url: str) -> str:
     if com is not None:  # mm3a:///COM3 is mm3a://COM3, whose host urlsplit gives in lower case
         return f"{scheme}://{com.lower()}"
     return f"{scheme}://{host}{port}{parts.path}"
+
+
+DEFAULT_PORTS: dict[str, int] = {"anc300": 7230, "smaract-mcs+socket": 5000, "smaract-mcs2": 55551}
+"""The TCP port each network scheme's driver opens when its URL gives none (``anc300.DEFAULT_PORT``,
+``smaract.mcs.TCP_PORT``, ``smaract.mcs2.TCP_PORT``)."""
+
+
+def controller_of(url: str) -> str:
+    """The controller a device URL (or key) reaches: its :func:`device_key` with the scheme's default port
+    written out and no ``/`` after a host.
+
+    Two keys with one ``controller_of`` are one controller written two ways; its kept positions
+    and its lock go by the key, so each spelling has its own (docs/storage.md). ``ValueError``
+    for a malformed URL.
+
+    >>> controller_of("anc300://h"), controller_of("anc300://H:7230/"), controller_of("anc300://COM3")
+    ('anc300://h:7230', 'anc300://h:7230', 'anc300://com3')
+    """
+    key = device_key(url)
+    parts = urlsplit(key)
+    host = parts.hostname
+    if not host or key.startswith("sim") or windows_com_port(host) is not None:
+        return key
+    port = parts.port or DEFAULT_PORTS.get(parts.scheme)
+    host = f"[{host}]" if ":" in host else host
+    return f"{parts.scheme}://{host}{'' if port is None else f':{port}'}{'' if parts.path == '/' else parts.path}"
 
 
 def _sim_key(scheme: str, query: dict[str, list[str]]) -> str:

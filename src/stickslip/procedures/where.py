@@ -11,16 +11,19 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
-from ..devices.base import DeviceError, device_key, open_device
+from ..devices.base import DeviceError, controller_of, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..joints import JointSet
 from ..processes import holder_running, process_gone
 from ..units import format_position
 from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, track_fields
 
-__all__ = ["DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "probe_device", "state_rows", "where"]
+__all__ = [
+    "DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "also_kept", "also_kept_warning",
+    "probe_device", "state_rows", "where",
+]
 
 
 class DeviceUnreachable(DeviceError):
@@ -37,6 +40,50 @@ class ReferenceRefused(ValueError):
 
 class WhereStore(StateStore, LockStore, Protocol):
     """What :func:`where` needs of a store (``stickslip.storage.Store`` implements it)."""
+
+
+@runtime_checkable
+class ListsDevices(Protocol):
+    """A store that lists the devices it keeps (``stickslip.storage.Store``)."""
+
+    def devices(self) -> list[dict[str, Any]]: ...
+
+    def get_state(self, device: str, key: str, default: Any = None) -> Any: ...
+
+
+def also_kept(store: object, key: str) -> tuple[str, ...]:
+    """The other keys of ``key``'s controller (:func:`~stickslip.devices.base.controller_of`: its default port
+    written out or left off, a ``/`` after the host) under which ``store`` keeps positions; ``()`` for a store
+    that lists no devices. Each key has positions and a lock of its own: a move made under one is not in the other.
+    """
+    if not isinstance(store, ListsDevices) or "#" in key:
+        return ()
+    try:
+        mine = controller_of(key)
+    except ValueError:
+        return ()
+    found = []
+    for row in store.devices():
+        url = str(row.get("url", ""))
+        if url == key or "#" in url:  # a rig arm's own key (#arm=NAME) is its rig's to name
+            continue
+        try:
+            same = controller_of(url) == mine
+        except ValueError:  # an older release's name that is no URL
+            continue
+        if same and store.get_state(url, "positions") is not None:
+            found.append(url)
+    return tuple(found)
+
+
+def also_kept_warning(key: str, others: Sequence[str]) -> str:
+    """The line that says ``key``'s controller has positions kept under ``others`` too (:func:`also_kept`)."""
+    return (
+        f"positions of this controller are also kept under {', '.join(others)}, the same controller written "
+        f"another way (its default port, or a / after the host): each spelling keeps positions and a lock of its "
+        f"own, so a move made under one is not in the other; write the URL one way ({key} here) and reference "
+        "the joints again under it (docs/storage.md)"
+    )
 
 
 def probe_device(url: str, opener: Callable[[str], Any] = open_device) -> dict[str, Any]:
@@ -98,6 +145,8 @@ class WhereResult:
         What the device said about itself (``model`` and more), ``None`` if it was not asked.
     busy : str or None
         Why the device was not asked: another process drives it (the :class:`~.move.DeviceBusy` message).
+    others : tuple of str
+        Other spellings of this controller under which positions are kept too (:func:`also_kept`).
     """
 
     device: str
@@ -105,6 +154,7 @@ class WhereResult:
     changed: tuple[str, ...] = ()
     info: dict[str, Any] | None = field(default=None)
     busy: str | None = None
+    others: tuple[str, ...] = ()
 
     def as_dict(self) -> dict[str, object]:
         """The JSON shape of ``stickslip where --json``."""
@@ -112,7 +162,7 @@ class WhereResult:
         answers = self.info["model"] if self.info else None
         return {
             "device": self.device, "joints": state_rows(s), "theta": s.theta, "psi": s.psi, "answers": answers,
-            "info": self.info, "busy": self.busy,
+            "info": self.info, "busy": self.busy, "also_kept": list(self.others),
         }
 
 
@@ -167,7 +217,7 @@ def where(
         busy = _driven_by(store.get_state(lock, "lock"), lock)
         if busy is None:  # a probe beside a move would talk on the link the move is driving
             info = probe(device)
-    return WhereResult(key, state, tuple(changed), info, busy)
+    return WhereResult(key, state, tuple(changed), info, busy, also_kept(store, key))
 
 
 def _driven_by(holder: object, lock: str) -> str | None:

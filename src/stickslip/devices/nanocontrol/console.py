@@ -11,7 +11,7 @@ or ``i`` (information). The commands this driver sends::
 
     version                          firmware identification (on opening)
     speed ?                          the active speed profile: "P cNNN cNNN cNNN cNNN"
-    frequency fA fB fC fD            stepping frequency per channel, 300..20000 Hz
+    frequency fA fB fC fD            stepping frequency per channel, 300..20000 Hz (at every step())
     speed P vA vB vC vD              set profile P (1..6); v = cNN (NN coarse steps
                                      per interval, 1..64) or fNN (fine; never sent here)
     speed P                          make profile P active
@@ -138,7 +138,8 @@ class NanoControlConsole(SpeedProfiles):
         Time to wait for an answer, s.
     hz : int or mapping of str to int
         Stepping frequency of every channel (or per channel letter), Hz, in 300..20000;
-        sent with ``frequency`` before the first burst.
+        sent with ``frequency`` at the start of every :meth:`step` (a controller switched off and on since the
+        last one steps at its power-on frequency).
     profile : int
         The scratch speed profile (1..6) whose values bursts overwrite.
     margin : float
@@ -236,7 +237,7 @@ class NanoControlConsole(SpeedProfiles):
         self._frequency_sent = True
 
     def frequency(self, joint: int) -> float:
-        """Stepping frequency of ``joint``'s channel, Hz (sent before the first burst)."""
+        """Stepping frequency of ``joint``'s channel, Hz (sent at the start of every :meth:`step`)."""
         return float(self._hz[self._channel(joint)])
 
     def set_fine_with_coarse(self, values: Mapping[str, bool]) -> None:
@@ -280,8 +281,10 @@ class NanoControlConsole(SpeedProfiles):
         with self._lock:
             self._in_step = True
             try:
-                if not self._frequency_sent:
-                    self._send_frequency()
+                # set again at every call, as if never sent: a controller switched off and on since the last call
+                # (a long session: serve, Bluesky) steps at its power-on frequency with its power-on profiles
+                self._scratch_values = None
+                self._send_frequency()
                 left = abs(n)
                 while left and not self._halt:
                     chunk = min(left, MAX_BURST)

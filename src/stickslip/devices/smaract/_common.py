@@ -24,6 +24,7 @@ from ..transport import Transport
 __all__ = [
     "log",
     "Refused",
+    "DrivenElsewhere",
     "ChannelMap",
     "parse_channels",
     "printable",
@@ -49,6 +50,11 @@ _MAX_CHANNEL = 255
 
 class Refused(DeviceError):
     """The controller answered a command with an error code: the command was not carried out."""
+
+
+class DrivenElsewhere(Refused):
+    """The joint's channel was moving before a burst was sent: another program drives it, so the burst is not sent,
+    and the joint goes wherever that program takes it (not where it was kept)."""
 
 
 @dataclass(frozen=True)
@@ -298,6 +304,9 @@ class SmarActBase:
             self._running = channel
             try:
                 self._start(channel, sign * k, hz, amplitude)
+            except DrivenElsewhere as e:  # nothing of ours sent; the joint moves as the other program drives it
+                self._running = None
+                raise StepsUncertain(f"{e}; nothing was sent of {what}", made, None) from None
             except Refused as e:
                 self._running = None
                 raise StepsUncertain(f"{e}; nothing was made of {what}", made, made) from None

@@ -17,6 +17,8 @@ this driver sends::
                            ends), amplitude a (0..4095, 4095 = 100 V), frequency f
                            (1..18500 Hz)                    -> :E<ch>,0
     :GS<ch>                channel status                   -> :S<ch>,<status>
+                           (before a burst too: a channel already moving, driven by
+                           another program, is sent no burst)
     :S<ch>                 stop the channel                 -> :E<ch>,0
 
 Status codes: 0 stopped, 1 stepping, 2 scanning, 3 holding, 4 targeting, 5 move delay,
@@ -33,7 +35,7 @@ from __future__ import annotations
 import re
 
 from ..base import DeviceError
-from ._common import Refused, SmarActBase, log, printable
+from ._common import DrivenElsewhere, Refused, SmarActBase, log, printable
 
 __all__ = [
     "SmarActMCS",
@@ -238,9 +240,16 @@ class SmarActMCS(SmarActBase):
 
     def _start(self, channel: int, steps: int, hz: int, amplitude: int) -> None:
         assert 0 < abs(steps) <= MAX_STEPS  # never 0 (a stop) nor +-30000 (an endless move)
+        status = self._status(channel)  # a :MST would take over a channel another program is driving
+        if status not in _STOPPED | _LOCKED:
+            raise DrivenElsewhere(
+                f"{self._where()}: channel {channel} is already moving (status {status}: {STATUS[status]}); "
+                "another program may be driving it"
+            )
         self._ack(f"MST{channel},{steps},{amplitude},{hz}", channel)
 
-    def _still_stepping(self, channel: int) -> tuple[bool, str | None]:
+    def _status(self, channel: int) -> int:
+        """``channel``'s status code (:data:`STATUS`), asked with ``:GS``."""
         text = f"GS{channel}"
         name, rest = self.command(text, channel=channel)
         if name != "S":
@@ -248,6 +257,10 @@ class SmarActMCS(SmarActBase):
         ch, status = self._ints(rest, 2, text, rest.encode())
         if ch != channel or status not in STATUS:
             raise DeviceError(f"{self._where()}: unexpected reply ':{name}{rest}' to {text!r}")
+        return status
+
+    def _still_stepping(self, channel: int) -> tuple[bool, str | None]:
+        status = self._status(channel)
         if status in _LOCKED:
             return False, f"channel {channel} is locked (status {status}: an emergency stop)"
         return status not in _STOPPED, None
