@@ -405,6 +405,51 @@ def test_a_lock_held_on_another_host_is_refused_and_on_postgresql_freed_when_its
             assert st.acquire_lock("sim://", me) is None
 
 
+_ALIAS_HOLDER = textwrap.dedent("""
+    import sys, time
+    from stickslip.storage import Store
+    st = Store.open(sys.argv[1])
+    print(st.acquire_lock("anc300://h", {"pid": 424242, "host": "rig-2.lab", "since": "09:00"}), flush=True)
+    time.sleep(600)
+""")
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_one_controller_written_two_ways_takes_one_lock(db):
+    """anc300://h and anc300://h:7230 are one controller (its default port) with two kept positions; each took
+    its own lock, so two processes drove the controller at once (audit57). Now the second is refused, told
+    which spelling holds it (for `where --unlock`); another controller, or another arm's channel, is not."""
+    proc = subprocess.Popen([sys.executable, "-c", _ALIAS_HOLDER, str(db)], stdout=subprocess.PIPE, text=True)
+    me = {"pid": os.getpid(), "host": "rig-1.lab", "since": "10:00"}
+    try:
+        assert proc.stdout.readline().strip() == "None"  # it took the lock
+        with Store.open(db) as st:
+            for spelling in ("anc300://h:7230", "anc300://H:7230/", "anc300://h/?password=x"):
+                assert st.acquire_lock(spelling, me) == {
+                    "pid": 424242, "host": "rig-2.lab", "since": "09:00", "device": "anc300://h"}, spelling
+            assert st.acquire_lock("anc300://h:7231", me) is None  # another controller
+            st.release_lock("anc300://h:7231", me["pid"])
+            assert st.acquire_lock("anc300://h:7230#arm=probe", me) is None  # a rig arm's lock is its own
+            st.release_lock("anc300://h:7230#arm=probe", me["pid"])
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+        proc.stdout.close()
+
+
+def test_a_move_refused_by_another_spelling_names_it_for_unlock(tmp_path):
+    from stickslip.procedures.move import DeviceBusy, device_lock
+
+    with Store.open(tmp_path / "s.db") as st:
+        assert st.acquire_lock("anc300://h", {"pid": 424242, "host": "rig-2.lab", "since": "09:00"}) is None
+        with pytest.raises(DeviceBusy) as e, device_lock(st, "anc300://h:7230"):
+            pass
+    assert str(e.value) == (
+        "anc300://h:7230 is being driven by another stickslip process through anc300://h (this controller written "
+        "another way) (pid 424242 on rig-2.lab since 09:00); wait for it to finish, or if that process is gone, "
+        "release the lock with `stickslip where -d anc300://h --unlock`")
+
+
 def test_one_store_cannot_hold_a_device_twice(db):
     me = {"pid": os.getpid(), "host": "h", "since": "s"}
     with Store.open(db) as st:

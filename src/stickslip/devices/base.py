@@ -638,7 +638,8 @@ def controller_of(url: str) -> str:
     written out and no ``/`` after a host.
 
     Two keys with one ``controller_of`` are one controller written two ways; its kept positions
-    and its lock go by the key, so each spelling has its own (docs/storage.md). ``ValueError``
+    go by the key, so each spelling has its own, but they take one lock
+    (:func:`stickslip.storage.schema.lock_name`; docs/storage.md). ``ValueError``
     for a malformed URL.
 
     >>> controller_of("anc300://h"), controller_of("anc300://H:7230/"), controller_of("anc300://COM3")

@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..clock import now_utc, stale_message
-from ..devices.base import device_key, redact_url, url_scheme
+from ..devices.base import controller_of, device_key, redact_url, url_scheme
 from ..measurements import Traverse
 from ..records import FILE_URL_DATABASE, is_file_url
 
@@ -141,6 +141,23 @@ def device_filter(url: str) -> str:
         return stored_device(url)
     except ValueError:
         return redact_url(str(url).strip())
+
+
+def lock_name(url: str) -> str:
+    """The name of the lock a device URL takes: its controller (:func:`~stickslip.devices.base.controller_of`,
+    the default port written out, no ``/`` after the host) and a rig arm's ``#arm=NAME``. Two spellings of one
+    controller (``anc300://h`` and ``anc300://h:7230``) keep two kept positions but take one lock, so two
+    processes never drive it at once. Never raises.
+
+    >>> lock_name("anc300://h"), lock_name("anc300://H:7230/?password=x"), lock_name("mm3a:///COM3#arm=left")
+    ('anc300://h:7230', 'anc300://h:7230', 'mm3a://com3#arm=left')
+    """
+    name = device_filter(url)
+    base, hash_, arm = name.partition("#")
+    try:
+        return controller_of(base) + hash_ + arm
+    except ValueError:
+        return name
 
 
 def content_key(t: Traverse, device: str) -> str:

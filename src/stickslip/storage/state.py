@@ -9,7 +9,7 @@ from ..devices.base import redact_text, redact_url
 from ..processes import process_gone
 from ..records import loads_json
 from .base import _Base
-from .schema import StoreError, _now, device_filter
+from .schema import StoreError, _now, device_filter, lock_name
 
 if TYPE_CHECKING:  # pragma: no cover
     from .backend import Backend
@@ -80,8 +80,12 @@ class StateStore(_Base):
         host, is taken over. On SQLite a lock whose holder is a process on this host
         that no longer exists (:func:`~stickslip.processes.process_gone`, POSIX only;
         elsewhere a lock is released only by its holder, or by ``where --unlock``) is taken over.
+
+        One controller written two ways (``anc300://h``, ``anc300://h:7230``: :func:`~.schema.lock_name`)
+        takes one lock: a holder of the other spelling is returned with its ``"device"`` (the
+        spelling whose row holds it, for the caller's ``--unlock`` advice).
         """
-        name = f"device {device_filter(device)}"  # one lock however the URL is written
+        name = f"device {lock_name(device)}"  # one lock however the URL is written, the controller's default port too
         claimed: bool | None = None
         try:
             with self._write() as con:
@@ -90,9 +94,13 @@ class StateStore(_Base):
                 if claimed is False:  # a live connection holds it (the server knows)
                     if isinstance(current, dict):
                         return dict(current)
+                    if (alias := self._alias_holder(con, device, dev)) is not None:
+                        return alias
                     return {"pid": "?", "host": "another connection to the shared database", "since": "?"}
                 if claimed is None and isinstance(current, dict) and not process_gone(current):  # unknown: running
                     return dict(current)
+                if claimed is None and (alias := self._alias_holder(con, device, dev)) is not None:
+                    return alias
                 con.execute(
                     "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
                     "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
@@ -103,6 +111,21 @@ class StateStore(_Base):
             if claimed:  # the row was not written: nor is the lock held
                 self._con.release(name)
             raise
+        return None
+
+    def _alias_holder(self, con: Backend, device: str, dev: int) -> dict[str, Any] | None:
+        """A running holder of the lock of another spelling of ``device``'s controller (SQLite: no advisory lock
+        names the controller), with the ``"device"`` whose row holds it; or None."""
+        mine = lock_name(device)
+        rows = con.execute(
+            "SELECT d.url AS url, s.value AS value FROM device_state s JOIN devices d ON d.id = s.device_id "
+            "WHERE s.key = 'lock' AND s.device_id <> ?", (dev,)
+        ).fetchall()
+        for r in rows:
+            if lock_name(str(r["url"])) == mine:
+                held = self._json(r["value"], str(r["url"]), "lock")
+                if isinstance(held, dict) and not process_gone(held):
+                    return {**held, "device": str(r["url"])}
         return None
 
     def _lock_row(self, con: Backend, device: str) -> tuple[int, Any]:
@@ -119,4 +142,4 @@ class StateStore(_Base):
                 if isinstance(current, dict) and current.get("pid") == pid:
                     con.execute("DELETE FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,))
         finally:
-            self._con.release(f"device {device_filter(device)}")
+            self._con.release(f"device {lock_name(device)}")
