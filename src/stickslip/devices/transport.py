@@ -103,17 +103,20 @@ class Transport:
         terms = [terminators] if isinstance(terminators, bytes) else list(terminators)
         timeout = self.timeout if timeout is None else float(timeout)
         deadline = time.monotonic() + timeout
+        last_look = False
         while True:
             cut = _first_terminator(self._buffer, terms)
             if cut is not None:
                 message, self._buffer = self._buffer[:cut], self._buffer[cut:]
                 self.silent = False
                 return message
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
+            if last_look:
                 self.silent = True
                 partial = f" (received so far: {self._buffer!r})" if self._buffer else ""
                 raise DeviceError(f"{self.name}: no complete reply within {timeout:g} s{partial}")
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:  # one look without waiting first: a reply that came while this process was not
+                last_look, remaining = True, 0.0  # running (a loaded PC, a pause) came in time
             if self.closed:
                 raise DeviceError(f"{self.name}: the connection is closed")
             try:
@@ -126,7 +129,9 @@ class Transport:
         limit = self.timeout if limit is None else limit
         deadline = time.monotonic() + limit
         data, self._buffer = self._buffer, b""
-        while time.monotonic() < deadline:
+        first = True  # one look at least, however late this process runs
+        while first or time.monotonic() < deadline:
+            first = False
             try:
                 chunk = self._recv(quiet)
             except (OSError, DeviceError):
