@@ -33,7 +33,8 @@ import asyncio
 import math
 import os
 import threading
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
@@ -65,16 +66,18 @@ from ..devices.base import (
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..motion.planning import Planner
+from ..procedures.arms import on_store
 from ..procedures.closed_loop import FINDING_TIP, CameraLoop, move_seen
 from ..procedures.move import (
     DeviceBusy,
     MoveOutcome,
     MoveRefused,
     MoveRequest,
-    check_envelope,
+    claimed,
     device_lock,
     drive,
     failure_text,
+    joint_line,
     plan_tracked,
     reference_problem,
     settle,
@@ -250,6 +253,19 @@ async def halt(link: DeviceLink, joint: int | None, task: asyncio.Future[Any] | 
 
     told = asyncio.ensure_future(asyncio.to_thread(tell))
     await asyncio.wait([task, told], timeout=STOP_RETURN_S)
+
+
+def hold_claim(
+    stack: ExitStack, store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
+    calibration: Calibration,
+) -> None:
+    """Check ``path`` against the rig's other arms as kept now and claim its range, as ``stickslip move --rig`` does
+    ("mark, then check": :func:`~stickslip.procedures.move.claimed`), until ``stack`` closes (the move ends, is
+    refused, stopped or fails); :class:`MoveError` if refused (nothing claimed, nothing sent)."""
+    try:
+        stack.enter_context(claimed(store, state, on_store(guard, store), path, calibration))
+    except MoveRefused as e:
+        raise MoveError(str(e)) from None
 
 
 class _Held:
@@ -514,7 +530,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         cal = self._calibration()
         if self.camera is not None:
             return self._move_seen(target, publish, cal, self.camera)
-        with self.link.store() as store, device_lock(store, self.link.key):
+        with self.link.store() as store, device_lock(store, self.link.key), ExitStack() as claim:
             state = load_state(store, self.link.key)
             unreferenced = self.from_unreferenced
             try:
@@ -525,9 +541,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
-                check_envelope(self.guard, state, joint, target, cal)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
+            hold_claim(claim, store, state, self.guard, joint_line(state, joint, plan.q_to), cal)
             publish(state)
             if plan.steps == 0:
                 return _MoveResult(0, 0, False, state)

@@ -82,6 +82,7 @@ __all__ = [
     "check_envelope_path",
     "claim_and_check",
     "claimed",
+    "joint_line",
     "device_lock",
     "drive",
     "exact_positions",
@@ -673,10 +674,10 @@ def check_envelope(
     as its Kalman track predicts it along the move as the margin (:func:`sigma_growth`,
     :func:`stickslip.rig.envelope.check_path`); no guard, no check.
     """
-    check_envelope_path(guard, state, _joint_line(state, joint, q_to), calibration)
+    check_envelope_path(guard, state, joint_line(state, joint, q_to), calibration)
 
 
-def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
+def joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
     """The path of a move of ``joint`` from the kept pose to ``q_to`` (rad or m): its two ends."""
     q = [state.positions[j] for j in (1, 2, 3)]
     end = list(q)
@@ -904,7 +905,7 @@ def move(
                 calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
                 assumed=problem is not None and joint not in state.uncertain,
             )
-            with claimed(store, state, request.guard, _joint_line(state, joint, plan.q_to), calibration):
+            with claimed(store, state, request.guard, joint_line(state, joint, plan.q_to), calibration):
                 if plan.note:
                     warn(plan.note)
                 save_state(store, state)  # the recorded pose, even if nothing moves
