@@ -24,11 +24,14 @@ from server_support import RIG, true_calibration  # noqa: E402
 
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator  # noqa: E402
-from stickslip.devices.positions import load_state  # noqa: E402
+from stickslip.devices.base import open_device  # noqa: E402
+from stickslip.devices.positions import load_state, save_state  # noqa: E402
 from stickslip.procedures.arms import guard_for  # noqa: E402
-from stickslip.procedures.move import MoveRefused  # noqa: E402
+from stickslip.procedures.closed_loop import CameraLoop, move_seen  # noqa: E402
+from stickslip.procedures.move import MoveRefused, MoveRequest  # noqa: E402
 from stickslip.rig import Rig, load_rig  # noqa: E402
 from stickslip.storage import Store  # noqa: E402
+from stickslip.vision.camera import open_camera  # noqa: E402
 from test_rig_race import URLS, apart, arm_move  # noqa: E402
 
 
@@ -160,3 +163,151 @@ def test_a_bluesky_tip_move_claims_its_range(rig: Rig, tmp_path: Path) -> None:
     other = kept(store, rig, "other")
     assert other.positions[3] == 0.0 and not other.claim and not other.uncertain
     assert apart(store, rig) > 1e-3
+
+
+# ---------------------------------------------------------------- the closed loop's legs
+
+
+def placed(store: Store, rig: Rig, probe: float, other: float) -> None:
+    """Both arms' joint 3 set (referenced) at ``probe`` and ``other`` (m): their tips 18 mm - probe - other apart."""
+    for arm, q in (("probe", probe), ("other", other)):
+        s = kept(store, rig, arm)
+        s.set_position(3, q, "set")
+        save_state(store, s)
+
+
+def probe_loop(store: Any, rig: Rig, by: float, opener: Any = None) -> Any:
+    """The probe's joint 3 moved by ``by`` (m) with the camera (``move --rig --camera``), 1 µm pixels, 16 px legs."""
+    url = "simcam://?pixel=1um&size=512x128&centre=tip"
+    dev = open_device(URLS["probe"])
+    dev.set_pose(*kept(store, rig, "probe").pose)
+    cam = open_camera(url, dev)
+    (x, y), _ = cam.true_tip()
+    cam.close()
+    request = MoveRequest(URLS["probe"], 3, by=by, burst=500, guard=guard_for(store, rig, "probe"),
+                          joints=rig.arm("probe").joint_specs(), state_key=rig.state_key("probe"))
+    return move_seen(store, request, true_calibration(URLS["probe"]), CameraLoop(url, tip=(float(x), float(y))),
+                     opener=opener)
+
+
+class AtFirstLook:
+    """A store that runs ``then()`` once, after the probe's first save of a position the camera has seen."""
+
+    def __init__(self, inner: Store, key: str, then: Callable[[], None]):
+        self.inner, self.key, self.then, self.done = inner, key, then, False
+
+    def set_state(self, device: str, key: str, value_json: Any) -> None:
+        self.inner.set_state(device, key, value_json)
+        if device == self.key and not self.done and "seen" in str(value_json.get("sources")):
+            self.done = True
+            self.then()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
+
+
+def test_a_move_started_between_two_legs_of_the_closed_loop_sees_its_claim(rig: Rig, tmp_path: Path) -> None:
+    # tips 1.35 mm apart; the probe's loop goes 200 µm towards the other arm (1.15 mm left, clear). After its first
+    # leg and look the other arm's move of 200 µm starts: before claim57 it saw the probe at rest 1.33 mm away and
+    # moved, and the loop's next legs (checked against the other arm as kept when the loop began) took the probe
+    # on: 0.95 mm apart at the end, inside the 1 mm kept. Now the loop's claim (8 to 8.2 mm) refuses that move.
+    store = Store.open(tmp_path / "rig.db")
+    placed(store, rig, 8e-3, 8.65e-3)
+    other: list[Any] = []
+
+    def other_move() -> None:
+        try:
+            other.append(arm_move(store, rig, "other", by=200e-6))
+        except MoveRefused as e:
+            other.append(str(e))
+
+    r = probe_loop(AtFirstLook(store, rig.state_key("probe"), other_move), rig, 200e-6)
+    assert r.reached and len(r.looks) > 2
+    assert len(other) == 1 and isinstance(other[0], str), other
+    assert "arm 'other': arm 'probe' may be anywhere along a move (a move of it claims its joint 3 between 8000 µm " \
+           "and 8200 µm until it ends)" in other[0]
+    assert kept(store, rig, "other").positions[3] == 8.65e-3 and not kept(store, rig, "probe").claim
+    assert apart(store, rig) > 1e-3
+
+
+def test_each_leg_reads_the_other_arms_again(rig: Rig, tmp_path: Path) -> None:
+    # the other arm moved without a claim (a jog claims none; a process of an older release) after the loop began:
+    # before claim57 each leg was checked against the other arm as kept when the loop began and the probe went on
+    # to 0.95 mm of it; now the next leg is refused, naming it, and the claim is taken back
+    store = Store.open(tmp_path / "rig.db")
+    placed(store, rig, 8e-3, 8.65e-3)
+
+    def jogged() -> None:
+        s = kept(store, rig, "other")
+        s.set_position(3, 8.85e-3, "dead-reckoned")
+        save_state(store, s)
+
+    r = probe_loop(AtFirstLook(store, rig.state_key("probe"), jogged), rig, 200e-6)
+    assert not r.reached and r.reason is not None
+    assert r.reason.startswith("the next leg was refused by the rig's envelope: ") and "arm other" in r.reason
+    probe = kept(store, rig, "probe")
+    assert not probe.claim and not probe.uncertain and 8e-3 < probe.positions[3] < 8.2e-3
+    assert apart(store, rig) > 1e-3
+
+
+def test_ctrl_c_in_the_closed_loop_takes_its_claim_back(rig: Rig, tmp_path: Path) -> None:
+    from stickslip.procedures.move import Interrupted
+
+    store = Store.open(tmp_path / "rig.db")
+    placed(store, rig, 8e-3, 8.65e-3)
+    steps: list[int] = []
+
+    class CtrlCOnThirdLeg:
+        def __init__(self, url: str) -> None:
+            self.dev = open_device(url)
+
+        def step(self, joint: int, n: int) -> None:
+            steps.append(n)
+            if len(steps) == 3:
+                raise KeyboardInterrupt
+            self.dev.step(joint, n)
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.dev, name)
+
+    with pytest.raises(Interrupted) as e:
+        probe_loop(store, rig, 200e-6, opener=CtrlCOnThirdLeg)
+    assert e.value.state is not None and not e.value.state.claim  # what it says is kept: no claim
+    probe = kept(store, rig, "probe")
+    assert not probe.claim and 3 in probe.uncertain  # the interrupted leg: uncertain over it, as before
+
+
+def test_a_leg_beyond_the_claim_widens_it_before_the_others_are_read() -> None:
+    # a correction may go past the planned end: its range is claimed (written) before the other arms are read again
+    from stickslip.procedures.move import claim_and_check
+    from stickslip.rig.guard import Guard
+    from stickslip.rig.model import Rig as RigModel
+    from test_envelope import mm3a
+
+    stored: list[dict[int, tuple[float, float]]] = []
+
+    class Kept:
+        def __init__(self) -> None:
+            self.raw: Any = None
+
+        def get_state(self, device: str, key: str) -> Any:
+            return self.raw
+
+        def set_state(self, device: str, key: str, value_json: Any) -> None:
+            self.raw = value_json
+
+    store = Kept()
+    rig1 = RigModel("r", "r", (mm3a(),), ())
+    state = load_state(store, "sim://")
+    state.claim[3] = (0.0, 2e-3)
+    save_state(store, state)
+
+    def read_again() -> Guard:
+        stored.append(load_state(store, "sim://").claim)
+        return Guard(rig1, "a")
+
+    guard = Guard(rig1, "a", fresh=read_again)
+    claim_and_check(store, state, guard, [[0.0, -1.5, 1.9e-3], [0.0, -1.5, 2.1e-3]], widen=True)
+    assert stored == [{3: (0.0, 2.1e-3)}] and state.claim == {3: (0.0, 2.1e-3)}
+    claim_and_check(store, state, guard, [[0.0, -1.5, 2.1e-3], [0.0, -1.5, 2.05e-3]], widen=True)
+    assert stored[-1] == {3: (0.0, 2.1e-3)} and len(stored) == 2  # within the claim: read again, nothing written

@@ -578,9 +578,10 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         """The closed-loop move (``move --camera``) through the link's controller, stop-aware between bursts."""
         dev = self.link.controller()
         proxy = _Interruptible(dev, self._stop_event, atomic=True)
-        request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
-            dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced, guard=self.guard)
         with self.link.store() as store:
+            request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
+                dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced,
+                guard=on_store(self.guard, store))  # the other arms as kept now; its legs claim (move_seen)
             try:
                 result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))
             except _Stopped:  # before a burst was sent: the confirmed position stands

@@ -704,12 +704,13 @@ def check_envelope_path(
 @contextmanager
 def claimed(
     store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
-    calibration: Calibration | None = None,
+    calibration: Calibration | None = None, *, check: Callable[[Guard | None], None] | None = None,
 ) -> Iterator[None]:
-    """Check ``path`` against a rig's envelope by "mark, then check" (:func:`claim_and_check`), and keep the
-    claim for the ``with`` block (the move: every burst's save keeps it, so the gap between one burst's "done"
-    and the next one's mark is covered); it is cleared from the store when the block ends, however it ends."""
-    claim_and_check(store, state, guard, path, calibration)
+    """Check ``path`` against a rig's envelope by "mark, then check" (:func:`claim_and_check`, ``check`` its
+    check), and keep the claim for the ``with`` block (the move: every burst's save keeps it, so the gap between
+    one burst's "done" and the next one's mark is covered); it is cleared from the store when the block ends,
+    however it ends."""
+    claim_and_check(store, state, guard, path, calibration, check=check)
     try:
         yield
     finally:
@@ -719,7 +720,8 @@ def claimed(
 
 def claim_and_check(
     store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
-    calibration: Calibration | None = None,
+    calibration: Calibration | None = None, *, check: Callable[[Guard | None], None] | None = None,
+    widen: bool = False,
 ) -> None:
     """A path of a rig's arm checked by "mark, then check": :class:`MoveRefused`, else the range claimed.
 
@@ -729,17 +731,35 @@ def claim_and_check(
     against them. Of two moves of a rig started at once, each writes its claim before it reads,
     so at least one sees the other's (both may be refused: safe). A refused path's claim is taken
     back in one transaction, so it blocks nobody. No guard (or one with no ``fresh``): the plain check.
+
+    ``check(guard)`` checks the path (default :func:`check_envelope_path`; the closed loop's legs give
+    their own margin and refusal). ``widen``: a part of a move that holds its claim already (a closed
+    loop's leg): the claim is widened to hold ``path`` too (written first when it grows), then the other
+    arms are read again and ``path`` checked against them; a refusal takes the whole claim back.
     """
-    check_envelope_path(guard, state, path, calibration)
+    def checked(g: Guard | None) -> None:
+        if check is None:
+            check_envelope_path(g, state, path, calibration)
+        else:
+            check(g)
+
     if guard is None or guard.fresh is None:
+        checked(guard)
         return
-    state.claim.clear()
+    before = dict(state.claim) if widen else {}
+    if not (widen and before):
+        checked(guard)
+        state.claim.clear()
     state.claim_path([list(p) for p in path])
+    for j, (lo, hi) in before.items():  # a leg's range added to the move's, never put in its place
+        a, b = state.claim.get(j, (lo, hi))
+        state.claim[j] = (min(a, lo), max(b, hi))
     if not state.claim:
         return
-    _store_claim(store, state)
     try:
-        check_envelope_path(guard.fresh(), state, path, calibration)
+        if state.claim != before:
+            _store_claim(store, state)
+        checked(guard.fresh())
     except BaseException:
         release_claim(store, state)
         raise
