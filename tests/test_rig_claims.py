@@ -311,3 +311,105 @@ def test_a_leg_beyond_the_claim_widens_it_before_the_others_are_read() -> None:
     assert stored == [{3: (0.0, 2.1e-3)}] and state.claim == {3: (0.0, 2.1e-3)}
     claim_and_check(store, state, guard, [[0.0, -1.5, 2.1e-3], [0.0, -1.5, 2.05e-3]], widen=True)
     assert stored[-1] == {3: (0.0, 2.1e-3)} and len(stored) == 2  # within the claim: read again, nothing written
+
+
+# ---------------------------------------------------------------- the rig's STOP
+
+
+class PressesAtSecondBurst:
+    """arm 'other''s simulator; the rig's STOP is pressed for arm 'probe' (its page) once its second burst is made."""
+
+    def __init__(self, db: Path, rig: Rig) -> None:
+        self.dev, self.db, self.rig, self.bursts = open_device(URLS["other"]), db, rig, []
+
+    def step(self, joint: int, n: int) -> None:
+        from stickslip.procedures import rigstop
+
+        self.dev.step(joint, n)
+        self.bursts.append(n)
+        if len(self.bursts) == 2:
+            with Store.open(self.db) as store:  # (the move's worker thread: a store of its own)
+                rigstop.press(store, self.rig, "probe")
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.dev, name)
+
+
+@pytest.mark.parametrize("axis", ["joint", "tip"])
+def test_a_bluesky_move_ends_at_the_rigs_stop_with_its_position_exact(rig: Rig, tmp_path: Path, axis: str) -> None:
+    # before claim57 a Bluesky axis did not read the rig's STOP: the move ran to its end (9 mm, 45 bursts)
+    from stickslip.procedures import rigstop
+
+    db = tmp_path / "rig.db"
+    store = Store.open(db)
+    rigstop.press(store, rig, "probe")  # pressed before the move began: does not stop it
+    dev = PressesAtSecondBurst(db, rig)
+    arm = StickSlipManipulator(dev, true_calibration(URLS["other"]), name="other", db=db, burst=200,
+                               guard=guard_for(store, rig, "other"))
+    q = kept(store, rig, "other").positions
+    moving = arm.q3 if axis == "joint" else arm.tip.x
+    target = 6e-3 if axis == "joint" else float(kin.tip((q[1], q[2], q[3]))[0]) + 6e-3
+    with pytest.raises(MoveError) as e:
+        asyncio.run(_set(moving, target))
+    line = str(e.value)
+    assert "stopped by the rig's STOP (pressed for arm 'probe'" in line and "\n" not in line, line
+    assert "uncertain" not in line, line
+    assert len(dev.bursts) == 2  # no further burst
+    other = kept(store, rig, "other")
+    assert not other.uncertain and not other.claim
+    assert other.positions[3] == pytest.approx(dev.dev.position(3), abs=2e-6)  # exact: where the arm is
+    assert 0.0 < other.positions[3] < 6e-3
+
+
+def test_the_closed_loop_ends_at_the_rigs_stop_with_its_position_exact(rig: Rig, tmp_path: Path) -> None:
+    # `move --rig --camera` opens its controller through rigstop.stoppable (the CLI): a press for another arm during
+    # the loop ends it before its next burst, exact, its claim taken back
+    from stickslip.procedures import rigstop
+    from stickslip.procedures.arms import opener_for
+
+    store = Store.open(tmp_path / "rig.db")
+    placed(store, rig, 8e-3, 6e-3)
+    bursts: list[int] = []
+
+    class PressesAtThirdLeg:
+        def __init__(self, url: str) -> None:
+            self.dev = open_device(url)
+
+        def step(self, joint: int, n: int) -> None:
+            self.dev.step(joint, n)
+            bursts.append(n)
+            if len(bursts) == 2:
+                rigstop.press(store, rig, "other")
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(self.dev, name)
+
+    opener = rigstop.stoppable(opener_for(rig, "probe", PressesAtThirdLeg), store, rig, "probe")
+    r = probe_loop(store, rig, 200e-6, opener=opener)
+    assert not r.reached and r.reason is not None and len(bursts) == 2
+    assert r.reason.startswith("stopped by the rig's STOP (pressed for arm 'other'"), r.reason
+    probe = kept(store, rig, "probe")
+    assert not probe.uncertain and not probe.claim
+    assert r.sim_true is not None and probe.positions[3] == pytest.approx(r.sim_true[2], abs=1e-6)
+
+
+def test_a_bluesky_axis_with_the_camera_ends_at_the_rigs_stop(rig: Rig, tmp_path: Path) -> None:
+    # the closed loop through a Bluesky axis (camera=) reads the rig's STOP too, and claims its legs
+    db = tmp_path / "rig.db"
+    store = Store.open(db)
+    placed(store, rig, 0.0, 8e-3)
+    dev = PressesAtSecondBurst(db, rig)
+    dev.dev.set_pose(*kept(store, rig, "other").pose)
+    url = "simcam://?pixel=1um&size=512x128&centre=tip"
+    cam = open_camera(url, dev.dev)
+    (x, y), _ = cam.true_tip()
+    cam.close()
+    axis = StickSlipAxis(dev, 3, true_calibration(URLS["other"]), name="q3", db=db, burst=200,
+                         camera=CameraLoop(url, tip=(float(x), float(y))), guard=guard_for(store, rig, "other"))
+    with pytest.raises(MoveError) as e:
+        asyncio.run(_set(axis, 8.2e-3))
+    assert "the closed loop stopped: stopped by the rig's STOP (pressed for arm 'probe'" in str(e.value), str(e.value)
+    assert len(dev.bursts) == 2
+    other = kept(store, rig, "other")
+    assert not other.uncertain and not other.claim
+    assert other.positions[3] == pytest.approx(dev.dev.position(3), abs=1e-6)

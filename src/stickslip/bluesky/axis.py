@@ -55,6 +55,7 @@ from ophyd_async.core import StandardReadableFormat as Format
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import (
+    BurstStopped,
     Controller,
     DeviceError,
     DeviceInfo,
@@ -82,6 +83,7 @@ from ..procedures.move import (
     reference_problem,
     settle,
 )
+from ..procedures.rigstop import RigStopWatch
 from ..rig.guard import Guard
 from ..storage import Store, StoreError, resolve_database
 from ..units import format_position, position_display_unit
@@ -177,13 +179,19 @@ class _Interruptible:
     """A :class:`Controller` that sends no burst once ``stop`` is set, and says whether one was cut short.
 
     ``atomic``: the controller completes a burst at once (a simulator on a virtual
-    clock), so a stop during its call never cuts it.
+    clock), so a stop during its call never cuts it. ``rig_stop()``: why the rig's STOP stops
+    this arm (:func:`rig_stop`), read before each burst; the burst is then refused with
+    :class:`~stickslip.devices.base.BurstStopped` (no step made: the position kept exact), as
+    ``stickslip move --rig`` refuses it.
     """
 
-    def __init__(self, dev: Controller, stop: threading.Event, atomic: bool):
+    def __init__(
+        self, dev: Controller, stop: threading.Event, atomic: bool, rig_stop: Callable[[], str | None] | None = None
+    ):
         self.dev = dev
         self.stop_event = stop
         self.atomic = atomic
+        self.rig_stop = rig_stop
         self.sent = 0
         self.joint = 0  # the joint of the last burst asked for
 
@@ -201,6 +209,9 @@ class _Interruptible:
         self.joint = joint
         if self.stop_event.is_set():
             raise _Stopped(partial=False)
+        why = None if self.rig_stop is None else self.rig_stop()
+        if why is not None:
+            raise BurstStopped(why, 0)
         self.dev.step(joint, n)
         if self.stop_event.is_set() and not self.atomic:
             raise _Stopped(partial=True)
@@ -214,6 +225,16 @@ class _Interruptible:
 
     def close(self) -> None:
         self.dev.close()
+
+
+def rig_stop(store: StateStore, guard: Guard | None) -> Callable[[], str | None] | None:
+    """For an arm of a rig (``guard``): why the rig's STOP, pressed for another arm since now, stops this move
+    (:class:`~stickslip.procedures.rigstop.RigStopWatch`), else ``None``; ``None`` without a rig."""
+    if guard is None:
+        return None
+    watch = RigStopWatch(guard.rig, guard.arm)
+    watch.begin(store)
+    return lambda: watch.stopped(store)
 
 
 def bounded_burst(dev: Controller, joint: int, burst: int, max_burst_s: float) -> int:
@@ -548,7 +569,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             if plan.steps == 0:
                 return _MoveResult(0, 0, False, state)
             dev = self.link.controller()
-            proxy = _Interruptible(dev, self._stop_event, atomic=isinstance(dev, VirtualClock))
+            proxy = _Interruptible(dev, self._stop_event, isinstance(dev, VirtualClock), rig_stop(store, self.guard))
             source = state.sources[joint]
 
             def save(st: DeviceState) -> None:
@@ -577,8 +598,8 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     ) -> _MoveResult:
         """The closed-loop move (``move --camera``) through the link's controller, stop-aware between bursts."""
         dev = self.link.controller()
-        proxy = _Interruptible(dev, self._stop_event, atomic=True)
         with self.link.store() as store:
+            proxy = _Interruptible(dev, self._stop_event, True, rig_stop(store, self.guard))  # and the rig's STOP
             request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
                 dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced,
                 guard=on_store(self.guard, store))  # the other arms as kept now; its legs claim (move_seen)

@@ -66,6 +66,7 @@ from .axis import (
     check_max_burst_s,
     halt,
     hold_claim,
+    rig_stop,
 )
 
 __all__ = ["Tip", "TipAxis", "BORROWED_JOINT1"]
@@ -177,7 +178,7 @@ class _TipDriver:
                 self.target, self.q_after = goal, _positions(state)
                 return _TipResult(plan, len(plan.segments), False, state)
             dev = link.controller()
-            proxy = _Interruptible(dev, self.stop_event, atomic=isinstance(dev, VirtualClock))
+            proxy = _Interruptible(dev, self.stop_event, isinstance(dev, VirtualClock), rig_stop(store, self.guard))
             burst = min(bounded_burst(dev, j, self.burst, self.max_burst_s) for j in (1, 2, 3))
             done = 0
 
