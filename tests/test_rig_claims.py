@@ -413,3 +413,16 @@ def test_a_bluesky_axis_with_the_camera_ends_at_the_rigs_stop(rig: Rig, tmp_path
     other = kept(store, rig, "other")
     assert not other.uncertain and not other.claim
     assert other.positions[3] == pytest.approx(dev.dev.position(3), abs=1e-6)
+
+
+def test_a_bluesky_axis_on_another_device_than_its_arms_is_refused(rig: Rig, tmp_path: Path) -> None:
+    # arm 'other''s guard given to an axis on the probe's controller: its claim would be kept under sim://, where
+    # the other arms read the probe, not arm 'other'; before claim57 it moved (checked as arm 'other' at rest)
+    db = tmp_path / "rig.db"
+    store = Store.open(db)
+    axis = StickSlipAxis(URLS["probe"], 3, true_calibration(URLS["probe"]), name="q3", db=db,
+                         guard=guard_for(store, rig, "other"))
+    with pytest.raises(MoveError, match="arm 'other' of the rig is kept under 'sim://\\?seed=2', and this axis's "
+                                        "device under 'sim://'"):
+        asyncio.run(_set(axis, 1e-3))
+    assert kept(store, rig, "probe").positions[3] == 0.0 and not kept(store, rig, "probe").claim

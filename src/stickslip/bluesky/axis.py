@@ -283,6 +283,12 @@ def hold_claim(
     """Check ``path`` against the rig's other arms as kept now and claim its range, as ``stickslip move --rig`` does
     ("mark, then check": :func:`~stickslip.procedures.move.claimed`), until ``stack`` closes (the move ends, is
     refused, stopped or fails); :class:`MoveError` if refused (nothing claimed, nothing sent)."""
+    if guard is not None and guard.fresh is not None and state.device != guard.rig.state_key(guard.arm):
+        raise MoveError(  # its claim would be kept where the other arms do not read it
+            f"arm {guard.arm!r} of the rig is kept under {guard.rig.state_key(guard.arm)!r}, and this axis's device "
+            f"under {state.device!r}: give the axis the arm's controller as the rig file names it "
+            "(an arm that shares its controller is not driven by a Bluesky axis)"
+        )
     try:
         stack.enter_context(claimed(store, state, on_store(guard, store), path, calibration))
     except MoveRefused as e:
