@@ -426,3 +426,42 @@ def test_a_bluesky_axis_on_another_device_than_its_arms_is_refused(rig: Rig, tmp
                                         "device under 'sim://'"):
         asyncio.run(_set(axis, 1e-3))
     assert kept(store, rig, "probe").positions[3] == 0.0 and not kept(store, rig, "probe").claim
+
+
+def test_a_bluesky_stop_takes_the_claim_back_and_a_killed_ones_says_so(rig: Rig, tmp_path: Path) -> None:
+    # stop() at the second burst: the claim (held over the bursts) is gone after, the position exact. A session
+    # killed there (its kept state put back as it was then) leaves the claim, and the other arms say so as for a
+    # move's, until the arm is re-referenced
+    from stickslip.procedures.move import where_line
+
+    db = tmp_path / "rig.db"
+    store = Store.open(db)
+    held: list[Any] = []
+    key = rig.state_key("other")
+
+    class StopsAtSecondBurst(PressesAtSecondBurst):
+        def step(self, joint: int, n: int) -> None:
+            self.dev.step(joint, n)
+            self.bursts.append(n)
+            if len(self.bursts) == 2:
+                with Store.open(self.db) as s:
+                    held.append(s.get_state(key, "positions"))
+                axis._stop_event.set()  # what stop() does first: no further burst
+
+    dev = StopsAtSecondBurst(db, rig)
+    axis = StickSlipAxis(dev, 3, true_calibration(URLS["other"]), name="q3", db=db, burst=200,
+                         guard=guard_for(store, rig, "other"))
+    with pytest.raises(RuntimeError, match="was stopped after 400 of"):
+        asyncio.run(_set(axis, 9e-3))
+    assert held and held[0]["claim"] == {"3": [0.0, pytest.approx(9e-3)]}  # claimed while it moved
+    other = kept(store, rig, "other")
+    assert not other.claim and not other.uncertain
+    assert other.positions[3] == pytest.approx(dev.dev.position(3), abs=2e-6)
+    store.set_state(key, "positions", held[0])  # killed at the second burst: its claim left behind
+    assert "claimed by a move: joint 3 0 µm to 9000 µm" in where_line(kept(store, rig, "other"))
+    with pytest.raises(MoveRefused, match="a move of it claims its joint 3 between 0 µm and 9000 µm until it ends"):
+        arm_move(store, rig, "probe")
+    s = kept(store, rig, "other")
+    s.set_position(3, s.positions[3], "set")  # re-referenced
+    save_state(store, s)
+    assert not kept(store, rig, "other").claim
