@@ -465,3 +465,37 @@ def test_a_bluesky_stop_takes_the_claim_back_and_a_killed_ones_says_so(rig: Rig,
     s.set_position(3, s.positions[3], "set")  # re-referenced
     save_state(store, s)
     assert not kept(store, rig, "other").claim
+
+
+# ---------------------------------------------------------------- the jog
+
+
+@pytest.mark.parametrize("single_step", [False, True])
+def test_a_jogs_single_steps_are_checked_against_the_rig_as_its_ticks_are(single_step: bool) -> None:
+    # single-step mode (a press moves the tip by the preset distance, sent as a straight move's segments): before
+    # claim57 its segments were sent without a look at the rig's envelope, 91 steps here where every path is
+    # refused (another arm claimed with no box); a held key's ticks were stopped, and are
+    import math
+
+    from stickslip.procedures.jog import JogController
+    from stickslip.rig.guard import Guard
+    from stickslip.rig.model import Rig as RigModel
+    from test_envelope import mm3a
+    from test_reach import CAL
+
+    rig1 = RigModel("r", "r", (mm3a(),), ())
+    refused = Guard(rig1, "a", unknown={"b": "a move of it claims its joint 3 between 0 µm and 9000 µm"})
+    c = JogController(CAL, [0.0, -math.pi / 2, 0.002], speed_index=6, hold=0.0, guard=refused,
+                      single_step=single_step)
+    c.press("a", 0.0)
+    sent = 0
+    for k in range(40):
+        steps = c.tick(0.05 * k, 0.05)
+        sent += sum(abs(n) for n in steps)
+        for j, n in enumerate(steps, start=1):
+            c.sent_steps(j, n)
+    assert sent == 0 and c.message == "stopped at the rig's envelope (arm b): move another way"
+    c = JogController(CAL, [0.0, -math.pi / 2, 0.002], speed_index=6, hold=0.0, guard=Guard(rig1, "a"),
+                      single_step=single_step)
+    c.press("a", 0.0)
+    assert sum(abs(n) for k in range(40) for n in c.tick(0.05 * k, 0.05)) > 0  # a clear rig: it moves

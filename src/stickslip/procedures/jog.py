@@ -386,8 +386,8 @@ class JogController:
         """
         if not self._pending and self._queued:
             self._single_step(self._queued.pop(0))
-        if self._pending:
-            return self._pending.pop(0)
+        if self._pending:  # a single step's segments: checked as a held key's ticks are
+            return self._checked(self._pending.pop(0))
         if self.direction is None:
             return (0, 0, 0)
         if self.hold > 0 and t - self._last_key_t > self.hold:
@@ -408,7 +408,11 @@ class JogController:
             n = int(self._acc[j - 1])  # whole steps now, the fraction carried
             self._acc[j - 1] -= n
             steps.append(n)
-        out = (steps[0], steps[1], steps[2])
+        return self._checked((steps[0], steps[1], steps[2]))
+
+    def _checked(self, out: tuple[int, int, int]) -> tuple[int, int, int]:
+        """``out``, or no steps and a stop with the message if they would pass a joint's limit or leave the rig's
+        envelope (:meth:`_limit_problem`)."""
         problem = self._limit_problem(out)
         if problem:
             self.stop()
