@@ -499,3 +499,48 @@ def test_a_jogs_single_steps_are_checked_against_the_rig_as_its_ticks_are(single
                       single_step=single_step)
     c.press("a", 0.0)
     assert sum(abs(n) for k in range(40) for n in c.tick(0.05 * k, 0.05)) > 0  # a clear rig: it moves
+
+
+def test_a_jogs_tick_claims_its_range_before_it_reads_the_other_arms(rig: Rig, tmp_path: Path) -> None:
+    # each tick read the other arms, then journalled its burst: a move of another arm started in between saw the
+    # jog's arm at rest where it was a tick before (before claim57, nothing of the jog at the first tick's journal).
+    # Now the tick's range is written first, so that move is kept from it; taken back once the jog stands still
+    from stickslip.procedures.arms import opener_for
+    from stickslip.procedures.jog import JogRequest, jog
+
+    store = Store.open(tmp_path / "rig.db")
+    key = rig.state_key("probe")
+    seen: list[dict[str, str]] = []
+    claims: list[Any] = []
+
+    class Journal:  # at the jog's burst journals (a joint in flight): what another arm's move reads of the probe
+        def set_state(self, device: str, k: str, value_json: Any) -> None:
+            if device == key and value_json.get("uncertain") and len(seen) < 3:
+                seen.append(dict(guard_for(store, rig, "other").unknown))
+            store.set_state(device, k, value_json)
+            if device == key:
+                claims.append(value_json.get("claim"))
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(store, name)
+
+    class Keys:
+        ticks = [["d"]] + [[]] * 5 + [["space"]] + [[]] * 3 + [["q"]]
+
+        def read(self, timeout: float) -> list[str]:
+            return self.ticks.pop(0) if self.ticks else ["q"]
+
+        def close(self) -> None:
+            pass
+
+    clock = iter(0.05 * k for k in range(1000))
+    request = JogRequest(URLS["probe"], speed=6, hold=0.0, guard=guard_for(store, rig, "probe"),
+                         joints=rig.arm("probe").joint_specs(), state_key=key)
+    r = jog(Journal(), request, true_calibration(URLS["probe"]), keys=Keys, show=lambda s: None,
+            clock=lambda: next(clock), opener=opener_for(rig, "probe"))
+    assert r.error is None and kept(store, rig, "probe").positions[3] > 0.0  # it moved
+    assert len(seen) == 3 and all("a move of it claims its joint" in u.get("probe", "") for u in seen), seen
+    assert claims[-1] is None and not kept(store, rig, "probe").claim  # taken back
+    held = [c for c in claims if c]
+    assert held and all(set(c) <= {"1", "2", "3"} for c in held)
+    assert max(hi - lo for c in held for lo, hi in c.values()) < 20e-6  # a tick's range (100 µm/s, 0.1 s at most)

@@ -88,6 +88,7 @@ __all__ = [
     "exact_positions",
     "failure_text",
     "kept_after_interrupt",
+    "mark_claim",
     "move",
     "plan_tracked",
     "reference_commands",
@@ -763,6 +764,16 @@ def claim_and_check(
     except BaseException:
         release_claim(store, state)
         raise
+
+
+def mark_claim(store: StateStore, state: DeviceState, path: Sequence[Sequence[float]]) -> None:
+    """Claim the range ``path`` (poses, rad or m) sweeps in place of the claim ``state`` holds, and write it (one
+    transaction) before the other arms are read: what a jog's tick does ("mark, then check", taken back by
+    :func:`release_claim`); a path that moves no joint claims nothing."""
+    state.claim.clear()
+    state.claim_path([list(p) for p in path])
+    if state.claim:
+        _store_claim(store, state)
 
 
 def _store_claim(store: StateStore, state: DeviceState) -> None:
