@@ -748,18 +748,19 @@ def claim_and_check(
         checked(guard)
         return
     before = dict(state.claim) if widen else {}
-    if not (widen and before):
-        checked(guard)
-        state.claim.clear()
-    state.claim_path([list(p) for p in path])
-    for j, (lo, hi) in before.items():  # a leg's range added to the move's, never put in its place
-        a, b = state.claim.get(j, (lo, hi))
-        state.claim[j] = (min(a, lo), max(b, hi))
-    if not state.claim:
-        return
-    try:
+    if before:  # a leg of a move that holds its claim: its range added to the claim, never put in its place
+        state.claim_path([list(p) for p in path])
+        for j, (lo, hi) in before.items():
+            a, b = state.claim.get(j, (lo, hi))
+            state.claim[j] = (min(a, lo), max(b, hi))
         if state.claim != before:
             _store_claim(store, state)
+    else:
+        checked(guard)
+        mark_claim(store, state, path)
+        if not state.claim:
+            return
+    try:
         checked(guard.fresh())
     except BaseException:
         release_claim(store, state)
