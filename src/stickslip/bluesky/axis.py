@@ -33,7 +33,8 @@ import asyncio
 import math
 import os
 import threading
-from collections.abc import AsyncIterator, Callable
+from collections.abc import AsyncIterator, Callable, Sequence
+from contextlib import ExitStack
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, cast
@@ -54,6 +55,7 @@ from ophyd_async.core import StandardReadableFormat as Format
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import (
+    BurstStopped,
     Controller,
     DeviceError,
     DeviceInfo,
@@ -65,20 +67,23 @@ from ..devices.base import (
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..motion.planning import Planner
+from ..procedures.arms import on_store
 from ..procedures.closed_loop import FINDING_TIP, CameraLoop, move_seen
 from ..procedures.move import (
     DeviceBusy,
     MoveOutcome,
     MoveRefused,
     MoveRequest,
-    check_envelope,
+    claimed,
     device_lock,
     drive,
     failure_text,
+    joint_line,
     plan_tracked,
     reference_problem,
     settle,
 )
+from ..procedures.rigstop import RigStopWatch
 from ..rig.guard import Guard
 from ..storage import Store, StoreError, resolve_database
 from ..units import format_position, position_display_unit
@@ -174,13 +179,19 @@ class _Interruptible:
     """A :class:`Controller` that sends no burst once ``stop`` is set, and says whether one was cut short.
 
     ``atomic``: the controller completes a burst at once (a simulator on a virtual
-    clock), so a stop during its call never cuts it.
+    clock), so a stop during its call never cuts it. ``rig_stop()``: why the rig's STOP stops
+    this arm (:func:`rig_stop`), read before each burst; the burst is then refused with
+    :class:`~stickslip.devices.base.BurstStopped` (no step made: the position kept exact), as
+    ``stickslip move --rig`` refuses it.
     """
 
-    def __init__(self, dev: Controller, stop: threading.Event, atomic: bool):
+    def __init__(
+        self, dev: Controller, stop: threading.Event, atomic: bool, rig_stop: Callable[[], str | None] | None = None
+    ):
         self.dev = dev
         self.stop_event = stop
         self.atomic = atomic
+        self.rig_stop = rig_stop
         self.sent = 0
         self.joint = 0  # the joint of the last burst asked for
 
@@ -198,6 +209,9 @@ class _Interruptible:
         self.joint = joint
         if self.stop_event.is_set():
             raise _Stopped(partial=False)
+        why = None if self.rig_stop is None else self.rig_stop()
+        if why is not None:
+            raise BurstStopped(why, 0)
         self.dev.step(joint, n)
         if self.stop_event.is_set() and not self.atomic:
             raise _Stopped(partial=True)
@@ -211,6 +225,16 @@ class _Interruptible:
 
     def close(self) -> None:
         self.dev.close()
+
+
+def rig_stop(store: StateStore, guard: Guard | None) -> Callable[[], str | None] | None:
+    """For an arm of a rig (``guard``): why the rig's STOP, pressed for another arm since now, stops this move
+    (:class:`~stickslip.procedures.rigstop.RigStopWatch`), else ``None``; ``None`` without a rig."""
+    if guard is None:
+        return None
+    watch = RigStopWatch(guard.rig, guard.arm)
+    watch.begin(store)
+    return lambda: watch.stopped(store)
 
 
 def bounded_burst(dev: Controller, joint: int, burst: int, max_burst_s: float) -> int:
@@ -250,6 +274,25 @@ async def halt(link: DeviceLink, joint: int | None, task: asyncio.Future[Any] | 
 
     told = asyncio.ensure_future(asyncio.to_thread(tell))
     await asyncio.wait([task, told], timeout=STOP_RETURN_S)
+
+
+def hold_claim(
+    stack: ExitStack, store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
+    calibration: Calibration,
+) -> None:
+    """Check ``path`` against the rig's other arms as kept now and claim its range, as ``stickslip move --rig`` does
+    ("mark, then check": :func:`~stickslip.procedures.move.claimed`), until ``stack`` closes (the move ends, is
+    refused, stopped or fails); :class:`MoveError` if refused (nothing claimed, nothing sent)."""
+    if guard is not None and guard.fresh is not None and state.device != guard.rig.state_key(guard.arm):
+        raise MoveError(  # its claim would be kept where the other arms do not read it
+            f"arm {guard.arm!r} of the rig is kept under {guard.rig.state_key(guard.arm)!r}, and this axis's device "
+            f"under {state.device!r}: give the axis the arm's controller as the rig file names it "
+            "(an arm that shares its controller is not driven by a Bluesky axis)"
+        )
+    try:
+        stack.enter_context(claimed(store, state, on_store(guard, store), path, calibration))
+    except MoveRefused as e:
+        raise MoveError(str(e)) from None
 
 
 class _Held:
@@ -514,7 +557,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         cal = self._calibration()
         if self.camera is not None:
             return self._move_seen(target, publish, cal, self.camera)
-        with self.link.store() as store, device_lock(store, self.link.key):
+        with self.link.store() as store, device_lock(store, self.link.key), ExitStack() as claim:
             state = load_state(store, self.link.key)
             unreferenced = self.from_unreferenced
             try:
@@ -525,14 +568,14 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                     cal, state, joint, target, from_unreferenced=unreferenced,
                     assumed=problem is not None and joint not in state.uncertain,
                 )
-                check_envelope(self.guard, state, joint, target, cal)
             except MoveRefused as e:
                 raise MoveError(str(e)) from None
+            hold_claim(claim, store, state, self.guard, joint_line(state, joint, plan.q_to), cal)
             publish(state)
             if plan.steps == 0:
                 return _MoveResult(0, 0, False, state)
             dev = self.link.controller()
-            proxy = _Interruptible(dev, self._stop_event, atomic=isinstance(dev, VirtualClock))
+            proxy = _Interruptible(dev, self._stop_event, isinstance(dev, VirtualClock), rig_stop(store, self.guard))
             source = state.sources[joint]
 
             def save(st: DeviceState) -> None:
@@ -561,10 +604,11 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
     ) -> _MoveResult:
         """The closed-loop move (``move --camera``) through the link's controller, stop-aware between bursts."""
         dev = self.link.controller()
-        proxy = _Interruptible(dev, self._stop_event, atomic=True)
-        request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
-            dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced, guard=self.guard)
         with self.link.store() as store:
+            proxy = _Interruptible(dev, self._stop_event, True, rig_stop(store, self.guard))  # and the rig's STOP
+            request = MoveRequest(self.link.url, self.joint, to=target, burst=bounded_burst(
+                dev, self.joint, self.burst, self.max_burst_s), from_unreferenced=self.from_unreferenced,
+                guard=on_store(self.guard, store))  # the other arms as kept now; its legs claim (move_seen)
             try:
                 result = move_seen(store, request, cal, camera, opener=lambda _url: cast(Controller, _Held(proxy, dev)))
             except _Stopped:  # before a burst was sent: the confirmed position stands

@@ -26,6 +26,7 @@ import math
 import threading
 import warnings
 from collections.abc import AsyncIterator, Callable
+from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,7 +45,7 @@ from ..calibration import Calibration
 from ..devices.base import DeviceError, VirtualClock
 from ..devices.positions import DeviceState, load_state, save_state, where_set_command
 from ..motion.reach import ReachPlan, borrow_joint1
-from ..procedures.move import DeviceBusy, MoveRefused, check_envelope_path, device_lock
+from ..procedures.move import DeviceBusy, MoveRefused, device_lock
 from ..procedures.reach import (
     BORROWED_JOINT1,
     ReachRequest,
@@ -55,7 +56,18 @@ from ..procedures.reach import (
 )
 from ..rig.guard import Guard
 from ..storage import StoreError
-from .axis import DeviceLink, MoveError, _Interruptible, _Stopped, bounded_burst, check_burst, check_max_burst_s, halt
+from .axis import (
+    DeviceLink,
+    MoveError,
+    _Interruptible,
+    _Stopped,
+    bounded_burst,
+    check_burst,
+    check_max_burst_s,
+    halt,
+    hold_claim,
+    rig_stop,
+)
 
 __all__ = ["Tip", "TipAxis", "BORROWED_JOINT1"]
 
@@ -157,19 +169,16 @@ class _TipDriver:
     def move_sync(self, goal: Vec3, publish: Callable[[DeviceState], None]) -> _TipResult:
         """The whole tip move, in a worker thread: lock, plan from the kept state, drive, record."""
         link = self.link
-        with link.store() as store, device_lock(store, link.key):
+        with link.store() as store, device_lock(store, link.key), ExitStack() as claim:
             state = load_state(store, link.key)
             plan, cal = self.plan(state, goal)
-            try:
-                check_envelope_path(self.guard, state, joint_path(plan), cal)
-            except MoveRefused as e:
-                raise MoveError(str(e)) from None
+            hold_claim(claim, store, state, self.guard, joint_path(plan), cal)  # mark, then check, as reach --rig
             publish(state)
             if not any(plan.total_steps):
                 self.target, self.q_after = goal, _positions(state)
                 return _TipResult(plan, len(plan.segments), False, state)
             dev = link.controller()
-            proxy = _Interruptible(dev, self.stop_event, atomic=isinstance(dev, VirtualClock))
+            proxy = _Interruptible(dev, self.stop_event, isinstance(dev, VirtualClock), rig_stop(store, self.guard))
             burst = min(bounded_burst(dev, j, self.burst, self.max_burst_s) for j in (1, 2, 3))
             done = 0
 

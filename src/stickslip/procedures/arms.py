@@ -29,7 +29,7 @@ from .rigstop import stoppable
 
 __all__ = [
     "ArmState", "arm_opener", "arm_states", "go_to", "go_to_position", "guard_for", "opener_for", "position_of",
-    "safe_order",
+    "on_store", "safe_order",
 ]
 
 
@@ -56,6 +56,15 @@ def guard_for(store: StateStore, rig: Rig, arm: str | None) -> Guard:
             if other.name in unknown:
                 swept[other.name] = [_hull(s.positions[j], s.uncertain.get(j), s.claim.get(j)) for j in (1, 2, 3)]
     return Guard(rig, me.name, others, unknown, fresh=lambda: guard_for(store, rig, me.name), swept=swept)
+
+
+def on_store(guard: Guard | None, store: StateStore) -> Guard | None:
+    """``guard`` built again from ``store`` (the other arms as kept now, its ``fresh`` reading ``store``): what a
+    front end that keeps a guard for many moves (a Bluesky axis, ``guard=``) checks each move with, in the
+    thread that moves (an SQLite store is per thread). A guard with no ``fresh`` (built by hand) as it is."""
+    if guard is None or guard.fresh is None:
+        return guard
+    return guard_for(store, guard.rig, guard.arm)
 
 
 def _hull(q: float, *ranges: tuple[float, float] | None) -> tuple[float, float]:

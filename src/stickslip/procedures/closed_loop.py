@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -74,10 +75,14 @@ from .move import (
     MoveRequest,
     MoveStore,
     check_envelope_path,
+    claim_and_check,
+    claimed,
     device_lock,
     drive,
+    joint_line,
     kept_after_interrupt,
     reference_problem,
+    release_claim,
     sigma_growth,
     target_of,
 )
@@ -582,6 +587,8 @@ def _run_kept(
     except BaseException as e:
         run.finish()
         if isinstance(e, KeyboardInterrupt):
+            if run.state.claim:  # taken back first: the state read back is what the next command reads
+                release_claim(run.store, run.state)
             raise Interrupted(what, kept_after_interrupt(run.store, key, run.state)) from None
         raise
     run.finish()
@@ -649,40 +656,47 @@ def _out_and_back(state: DeviceState, calibration: Calibration, joint: int) -> C
     return keep
 
 
-def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
-    """The kept pose and the pose with ``joint`` at ``q_to`` (rad or m): a one-joint move's path."""
-    q = [state.positions[j] for j in (1, 2, 3)]
-    end = list(q)
-    end[joint - 1] = q_to
-    return [q, end]
-
-
-def _check_start(
-    guard: Guard | None, state: DeviceState, calibration: Calibration, loop: CameraLoop,
-    path: Sequence[Sequence[float]], joint: int | None = None,
-) -> None:
-    """Before anything moves: the camera sees ``joint`` (a one-joint move's: :func:`unseen_problem`), the whole
-    planned path, and the steps out and back that may find the tip.
-
-    :class:`~.move.MoveRefused` naming the obstacle; each leg is checked again as it is
-    planned (:func:`check_leg`).
-    """
+def _check_start(state: DeviceState, loop: CameraLoop, joint: int | None = None) -> None:
+    """Before anything moves: the loop's settings, and the camera sees ``joint`` (a one-joint move's:
+    :func:`unseen_problem`); :class:`~.move.MoveRefused` if not. The rig's envelope: :func:`_claimed_start`."""
     if not isinstance(loop, CameraLoop):  # a URL alone: the loop's settings are a CameraLoop
         raise TypeError(f"the camera is a CameraLoop (CameraLoop({loop!r}, tip=...)), not a {type(loop).__name__}")
     unseen = None if joint is None else unseen_problem(loop, joint, state.pose, kin.DEFAULT_GEOMETRY)
     if unseen:
         raise MoveRefused(unseen)
-    if guard is None:
-        return
-    check_envelope_path(guard, state, path, calibration)
-    if loop.tip is None:  # the tip is found by stepping a joint out and back
+
+
+def _claimed_start(
+    store: StateStore, guard: Guard | None, state: DeviceState, calibration: Calibration, loop: CameraLoop,
+    path: Sequence[Sequence[float]],
+) -> AbstractContextManager[None]:
+    """The whole planned path, and the steps out and back that may find the tip, checked against a rig's
+    envelope and claimed for the ``with`` block, as ``move`` does ("mark, then check": :func:`~.move.claimed`);
+    :class:`~.move.MoveRefused` naming the obstacle. Each leg is checked again, against the other arms as kept
+    then, and widens the claim if it goes beyond it (:func:`claim_leg`)."""
+    paths = [[list(p) for p in path]]
+    if guard is not None and loop.tip is None:  # the tip is found by stepping a joint out and back
         j = loop.auto_joint
         q0 = state.positions[j]
         q_out = float(Planner(calibration, j, state.pose).position_after(q0, AUTO_STEPS))
         q = [state.positions[i] for i in (1, 2, 3)]
         out = list(q)
         out[j - 1] = q0 + 1.5 * (q_out - q0)  # as far as the journal allows
-        check_envelope_path(guard, state, [q, out, q], calibration)
+        paths.append([q, out, q])
+
+    def check(g: Guard | None) -> None:
+        for p in paths:
+            check_envelope_path(g, state, p, calibration)
+
+    return claimed(store, state, guard, [p for part in paths for p in part], calibration, check=check)
+
+
+def claim_leg(run: _Run, guard: Guard | None, path: Sequence[Sequence[float]]) -> None:
+    """A leg's planned path, checked against the other arms as kept now (:func:`check_leg`) once the move's claim
+    holds it ("mark, then check", widened first if the leg goes beyond it: :func:`~.move.claim_and_check`):
+    :class:`LegRefused` naming the obstacle, the claim taken back."""
+    claim_and_check(run.store, run.state, guard, path, run.calibration, check=lambda g: check_leg(run, g, path),
+                    widen=True)
 
 
 def _start(
@@ -778,15 +792,17 @@ def move_seen(
     made_on = calibration_device_problem(calibration, request.device)
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
-    with device_lock(store, key):
+    with device_lock(store, key), ExitStack() as claim:
         state = load_state(store, key)
         request.pose.apply(state)
         problem = reference_problem(state, joint, request.device, calibration) or state.uncertainty_problem(joint)
         if problem:
             raise MoveRefused(problem + " (a closed-loop move starts from a known position)")
         _, q_to = target_of(state, joint, request.by, request.to)
-        _check_start(request.guard, state, calibration, loop, _joint_line(state, joint, q_to), joint)
+        _check_start(state, loop, joint)
         loop_geometry = kin.DEFAULT_GEOMETRY
+        claim.enter_context(_claimed_start(store, request.guard, state, calibration, loop,
+                                           joint_line(state, joint, q_to)))  # mark, then check, as move does
         dev = (opener or open_device)(request.device)
         cam: Camera | None = None
         try:
@@ -817,7 +833,7 @@ def move_seen(
 
                 end = list(run.q())
                 end[joint - 1] = reckon(n)
-                check_leg(run, request.guard, [list(run.q()), end])
+                claim_leg(run, request.guard, [list(run.q()), end])
                 out = drive(dev, run.state, joint, n, request.burst, reckon, run.save)
                 steps = [0, 0, 0]
                 steps[joint - 1] = out.sent
@@ -856,17 +872,18 @@ def reach_seen(
     if made_on and not request.trust_calibration:
         raise MoveRefused(made_on)
     geometry = request.geometry
-    with device_lock(store, key):
+    with device_lock(store, key), ExitStack() as claim:
         state = referenced_state(store, request.device, request.pose, calibration, request.from_unreferenced)
         first = plan_reach(calibration, state.pose, to=request.to, by=request.by, geometry=geometry,
                            segment=request.segment)  # refused here when out of reach, before anything moves
-        _check_start(request.guard, state, calibration, loop, joint_path(first))
+        _check_start(state, loop)
         share = seen_share(loop, state.pose, geometry, np.subtract(first.target, first.tip_start))
         if first.length > 0 and share < MIN_VISIBILITY:
             raise MoveRefused(
                 f"the tip would move along the camera's line of sight ({share:.0%} of the move in the image, at "
                 f"least {MIN_VISIBILITY:.0%} needed): the camera cannot see it; reach without --camera"
             )
+        claim.enter_context(_claimed_start(store, request.guard, state, calibration, loop, joint_path(first)))
         target_v = first.target
         save_state(store, state)
         dev = (opener or open_device)(request.device)
@@ -891,7 +908,7 @@ def reach_seen(
                 while k < len(plan.segments) and np.linalg.norm(np.asarray(plan.segments[k].tip) - start) <= max_leg_m:
                     k += 1
                 part = replace(plan, segments=plan.segments[:k])
-                check_leg(run, request.guard, joint_path(part))
+                claim_leg(run, request.guard, joint_path(part))
                 out = drive_reach(dev, run.state, part, cal, run.save, request.burst, scale_tracks=False)
                 s = out.sent
                 return (s[0], s[1], s[2]), out.error, k == len(plan.segments)

@@ -47,6 +47,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import partial
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -67,6 +68,8 @@ from .move import (
     drive,
     exact_positions,
     grow_track,
+    mark_claim,
+    release_claim,
     sigma_growth,
     simulates,
     tracked_calibration,
@@ -280,6 +283,11 @@ class JogController:
     guard_sd: tuple[float, float, float] | SigmaGrowth = (0.0, 0.0, 0.0)
     joints: kin.JointSet | None = None
     stage: kin.Stage | None = None
+    mark: Callable[[list[list[float]]], None] | None = None
+    """Claims a tick's path (poses) in the store before the other arms are read again (:func:`~.move.mark_claim`)."""
+    unmark: Callable[[], None] | None = None
+    """Takes the tick's claim back once the jog stands still (:func:`~.move.release_claim`)."""
+    _marked: bool = False
 
     def _spec(self, joint: int) -> kin.JointSpec:
         return kin.joint_spec(joint, self.joints)
@@ -382,12 +390,22 @@ class JogController:
         """Advance by ``dt`` seconds at time ``t``; the signed steps to send now (joint 1, 2, 3).
 
         The caller sends them in that order and then calls :meth:`sent_steps` with what
-        the device confirmed (which updates the predicted joints).
+        the device confirmed (which updates the predicted joints). In a rig, a tick's range
+        is claimed before the other arms are read (``mark``), and the claim taken back once
+        the jog stands still (``unmark``).
         """
+        out = self._tick(t, dt)
+        if self._marked and self.direction is None and not self._pending and not any(out):
+            self._marked = False
+            if self.unmark is not None:
+                self.unmark()
+        return out
+
+    def _tick(self, t: float, dt: float) -> tuple[int, int, int]:
         if not self._pending and self._queued:
             self._single_step(self._queued.pop(0))
-        if self._pending:
-            return self._pending.pop(0)
+        if self._pending:  # a single step's segments: checked as a held key's ticks are
+            return self._checked(self._pending.pop(0))
         if self.direction is None:
             return (0, 0, 0)
         if self.hold > 0 and t - self._last_key_t > self.hold:
@@ -408,7 +426,11 @@ class JogController:
             n = int(self._acc[j - 1])  # whole steps now, the fraction carried
             self._acc[j - 1] -= n
             steps.append(n)
-        out = (steps[0], steps[1], steps[2])
+        return self._checked((steps[0], steps[1], steps[2]))
+
+    def _checked(self, out: tuple[int, int, int]) -> tuple[int, int, int]:
+        """``out``, or no steps and a stop with the message if they would pass a joint's limit or leave the rig's
+        envelope (:meth:`_limit_problem`)."""
         problem = self._limit_problem(out)
         if problem:
             self.stop()
@@ -435,6 +457,9 @@ class JogController:
                 path.append(list(q))
         rig_guard = self.guard
         if rig_guard is not None and rig_guard.fresh is not None and len(path) > 1:
+            if self.mark is not None:  # "mark, then check": the tick's range claimed before the others are read
+                self.mark(path)
+                self._marked = True
             rig_guard = rig_guard.fresh()  # the other arms as kept now: one that started to move stops this jog
         problem = envelope_stop(rig_guard, path, self.guard_sd)
         if problem is None and isinstance(self.guard_sd, SigmaGrowth) and len(path) > 1:
@@ -739,6 +764,7 @@ def jog(
             def save(st: DeviceState) -> None:
                 save_state(store, st)
 
+            ctl.mark, ctl.unmark = partial(mark_claim, store, state), partial(release_claim, store, state)
             if request.camera is not None:
                 eyes = _open_eyes(store, dev, state, calibration, request, ctl)
             keys_in = keys()
@@ -747,6 +773,8 @@ def jog(
             except KeyboardInterrupt:
                 error = None  # Ctrl-C ends the session like q: the device is stopped, positions kept
         finally:
+            if state.claim:  # a tick's claim, however the session ended
+                release_claim(store, state)
             if eyes is not None:
                 eyes.close()
             if keys_in is not None:

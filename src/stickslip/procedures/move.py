@@ -82,11 +82,13 @@ __all__ = [
     "check_envelope_path",
     "claim_and_check",
     "claimed",
+    "joint_line",
     "device_lock",
     "drive",
     "exact_positions",
     "failure_text",
     "kept_after_interrupt",
+    "mark_claim",
     "move",
     "plan_tracked",
     "reference_commands",
@@ -675,10 +677,10 @@ def check_envelope(
     as its Kalman track predicts it along the move as the margin (:func:`sigma_growth`,
     :func:`stickslip.rig.envelope.check_path`); no guard, no check.
     """
-    check_envelope_path(guard, state, _joint_line(state, joint, q_to), calibration)
+    check_envelope_path(guard, state, joint_line(state, joint, q_to), calibration)
 
 
-def _joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
+def joint_line(state: DeviceState, joint: int, q_to: float) -> list[list[float]]:
     """The path of a move of ``joint`` from the kept pose to ``q_to`` (rad or m): its two ends."""
     q = [state.positions[j] for j in (1, 2, 3)]
     end = list(q)
@@ -705,12 +707,13 @@ def check_envelope_path(
 @contextmanager
 def claimed(
     store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
-    calibration: Calibration | None = None,
+    calibration: Calibration | None = None, *, check: Callable[[Guard | None], None] | None = None,
 ) -> Iterator[None]:
-    """Check ``path`` against a rig's envelope by "mark, then check" (:func:`claim_and_check`), and keep the
-    claim for the ``with`` block (the move: every burst's save keeps it, so the gap between one burst's "done"
-    and the next one's mark is covered); it is cleared from the store when the block ends, however it ends."""
-    claim_and_check(store, state, guard, path, calibration)
+    """Check ``path`` against a rig's envelope by "mark, then check" (:func:`claim_and_check`, ``check`` its
+    check), and keep the claim for the ``with`` block (the move: every burst's save keeps it, so the gap between
+    one burst's "done" and the next one's mark is covered); it is cleared from the store when the block ends,
+    however it ends."""
+    claim_and_check(store, state, guard, path, calibration, check=check)
     try:
         yield
     finally:
@@ -720,7 +723,8 @@ def claimed(
 
 def claim_and_check(
     store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
-    calibration: Calibration | None = None,
+    calibration: Calibration | None = None, *, check: Callable[[Guard | None], None] | None = None,
+    widen: bool = False,
 ) -> None:
     """A path of a rig's arm checked by "mark, then check": :class:`MoveRefused`, else the range claimed.
 
@@ -730,20 +734,49 @@ def claim_and_check(
     against them. Of two moves of a rig started at once, each writes its claim before it reads,
     so at least one sees the other's (both may be refused: safe). A refused path's claim is taken
     back in one transaction, so it blocks nobody. No guard (or one with no ``fresh``): the plain check.
+
+    ``check(guard)`` checks the path (default :func:`check_envelope_path`; the closed loop's legs give
+    their own margin and refusal). ``widen``: a part of a move that holds its claim already (a closed
+    loop's leg): the claim is widened to hold ``path`` too (written first when it grows), then the other
+    arms are read again and ``path`` checked against them; a refusal takes the whole claim back.
     """
-    check_envelope_path(guard, state, path, calibration)
+    def checked(g: Guard | None) -> None:
+        if check is None:
+            check_envelope_path(g, state, path, calibration)
+        else:
+            check(g)
+
     if guard is None or guard.fresh is None:
+        checked(guard)
         return
-    state.claim.clear()
-    state.claim_path([list(p) for p in path])
-    if not state.claim:
-        return
-    _store_claim(store, state)
+    before = dict(state.claim) if widen else {}
+    if before:  # a leg of a move that holds its claim: its range added to the claim, never put in its place
+        state.claim_path([list(p) for p in path])
+        for j, (lo, hi) in before.items():
+            a, b = state.claim.get(j, (lo, hi))
+            state.claim[j] = (min(a, lo), max(b, hi))
+        if state.claim != before:
+            _store_claim(store, state)
+    else:
+        checked(guard)
+        mark_claim(store, state, path)
+        if not state.claim:
+            return
     try:
-        check_envelope_path(guard.fresh(), state, path, calibration)
+        checked(guard.fresh())
     except BaseException:
         release_claim(store, state)
         raise
+
+
+def mark_claim(store: StateStore, state: DeviceState, path: Sequence[Sequence[float]]) -> None:
+    """Claim the range ``path`` (poses, rad or m) sweeps in place of the claim ``state`` holds, and write it (one
+    transaction) before the other arms are read: what a jog's tick does ("mark, then check", taken back by
+    :func:`release_claim`); a path that moves no joint claims nothing."""
+    state.claim.clear()
+    state.claim_path([list(p) for p in path])
+    if state.claim:
+        _store_claim(store, state)
 
 
 def _store_claim(store: StateStore, state: DeviceState) -> None:
@@ -906,7 +939,7 @@ def move(
                 calibration, state, joint, q_to, from_unreferenced=request.from_unreferenced,
                 assumed=problem is not None and joint not in state.uncertain,
             )
-            with claimed(store, state, request.guard, _joint_line(state, joint, plan.q_to), calibration):
+            with claimed(store, state, request.guard, joint_line(state, joint, plan.q_to), calibration):
                 if plan.note:
                     warn(plan.note)
                 save_state(store, state)  # the recorded pose, even if nothing moves
