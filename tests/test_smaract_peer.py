@@ -118,8 +118,9 @@ def test_a_channel_another_program_drives_leaves_the_joint_uncertain_not_where_i
     """SmarAct's own software (or its hand control) is stepping the joint's channel when a move begins: the
     controller says so (MCS: status 1 to :GS; MCS2: state bit 0x0001) and the burst is not sent (on the MCS a
     :MST would have taken the channel over, the other program's steps so far unknown). The joint is then
-    wherever that program takes it, so it must not stay kept, referenced, where it was; it is kept uncertain up
-    to its end stop (audit57)."""
+    wherever that program takes it, either way, so it must not stay kept, referenced, where it was; it is kept
+    uncertain over its whole range (audit57; the lead: not only up to the stop of our burst's direction, since
+    the other program's is not known)."""
     db = str(tmp_path / "s.db")
     with SmarActPeer(kind) as peer:
         url = peer.url + "?timeout=0.3&hz=5000"
@@ -134,4 +135,4 @@ def test_a_channel_another_program_drives_leaves_the_joint_uncertain_not_where_i
     assert moves == []  # nothing of ours was sent
     q3 = json.loads(w.stdout)["joints"][2]
     assert q3["source"] == "uncertain", q3  # before: "set" at 2 mm, as if nothing moved it
-    assert q3["uncertain"] == pytest.approx([2e-3, 12e-3], abs=1e-12)  # from where it was kept to the upper stop
+    assert q3["uncertain"] == pytest.approx([0.0, 12e-3], abs=1e-12)  # was [2 mm, 12 mm]: only up from 2 mm

@@ -40,6 +40,7 @@ __all__ = [
     "DeviceError",
     "StepsUncertain",
     "BurstStopped",
+    "DrivenElsewhere",
     "BACKENDS",
     "register_backend",
     "open_device",
@@ -214,6 +215,19 @@ class StepsUncertain(DeviceError):
         super().__init__(message)
         self.made = int(made)
         self.at_most = None if at_most is None else int(at_most)
+
+
+class DrivenElsewhere(StepsUncertain):
+    """Another program drives the joint's channel (the vendor's software, hand control): nothing of ours was sent
+    of the failed burst, and the joint goes wherever that program takes it, either way.
+
+    :func:`stickslip.procedures.move.drive` keeps the ``made`` steps and marks the joint
+    uncertain over its whole range (not only up to the end stop of the burst's direction:
+    the other program's direction is not known).
+    """
+
+    def __init__(self, message: str, made: int):
+        super().__init__(message, made, None)
 
 
 class BurstStopped(StepsUncertain):

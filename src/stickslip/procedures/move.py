@@ -40,6 +40,7 @@ from ..clock import now_utc
 from ..devices.base import (
     Controller,
     DeviceError,
+    DrivenElsewhere,
     KnowsTruePosition,
     PoseSettable,
     StepsUncertain,
@@ -234,7 +235,8 @@ def drive(
     the failed burst; any other exception (Ctrl-C) propagates with the journal saved.
     A :class:`~stickslip.devices.base.StepsUncertain` narrows that: its ``made`` steps
     are kept as dead-reckoned, the joint is uncertain only up to ``at_most`` (up to its
-    end stop if ``None``: a channel may still be driving), or not at all if they agree.
+    end stop if ``None``: a channel may still be driving; over its whole range for a
+    :class:`~stickslip.devices.base.DrivenElsewhere`), or not at all if they agree.
     """
     out = MoveOutcome()
     if burst < 1:
@@ -254,7 +256,10 @@ def drive(
                 state.set_position(joint, reckon(out.sent), source)
             else:  # nothing certainly made: back to the confirmed position, then widen below
                 state.set_position(joint, state.positions[joint], state.sources[joint])
-            if e.at_most is None:
+            if isinstance(e, DrivenElsewhere):  # another program drives it, either way: anywhere in its range
+                spec = state.spec(joint)
+                state.mark_uncertain(joint, spec.lower, spec.upper, "another program drove it during a move")
+            elif e.at_most is None:
                 spec = state.spec(joint)
                 state.intend(joint, spec.upper if sign > 0 else spec.lower)
             elif e.at_most != e.made:

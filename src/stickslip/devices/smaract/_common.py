@@ -18,13 +18,13 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from ..base import DeviceError, DeviceInfo, StepsUncertain, check_setting, check_steps, redact_url
+from ..base import DeviceError, DeviceInfo, DrivenElsewhere, StepsUncertain, check_setting, check_steps, redact_url
 from ..transport import Transport
 
 __all__ = [
     "log",
     "Refused",
-    "DrivenElsewhere",
+    "ChannelMoving",
     "ChannelMap",
     "parse_channels",
     "printable",
@@ -52,7 +52,7 @@ class Refused(DeviceError):
     """The controller answered a command with an error code: the command was not carried out."""
 
 
-class DrivenElsewhere(Refused):
+class ChannelMoving(Refused):
     """The joint's channel was moving before a burst was sent: another program drives it, so the burst is not sent,
     and the joint goes wherever that program takes it (not where it was kept)."""
 
@@ -304,9 +304,9 @@ class SmarActBase:
             self._running = channel
             try:
                 self._start(channel, sign * k, hz, amplitude)
-            except DrivenElsewhere as e:  # nothing of ours sent; the joint moves as the other program drives it
+            except ChannelMoving as e:  # nothing of ours sent; the joint moves as the other program drives it
                 self._running = None
-                raise StepsUncertain(f"{e}; nothing was sent of {what}", made, None) from None
+                raise DrivenElsewhere(f"{e}; nothing was sent of {what}", made) from None
             except Refused as e:
                 self._running = None
                 raise StepsUncertain(f"{e}; nothing was made of {what}", made, made) from None

@@ -35,7 +35,7 @@ from __future__ import annotations
 import re
 
 from ..base import DeviceError
-from ._common import DrivenElsewhere, Refused, SmarActBase, log, printable
+from ._common import ChannelMoving, Refused, SmarActBase, log, printable
 
 __all__ = [
     "SmarActMCS",
@@ -242,7 +242,7 @@ class SmarActMCS(SmarActBase):
         assert 0 < abs(steps) <= MAX_STEPS  # never 0 (a stop) nor +-30000 (an endless move)
         status = self._status(channel)  # a :MST would take over a channel another program is driving
         if status not in _STOPPED | _LOCKED:
-            raise DrivenElsewhere(
+            raise ChannelMoving(
                 f"{self._where()}: channel {channel} is already moving (status {status}: {STATUS[status]}); "
                 "another program may be driving it"
             )

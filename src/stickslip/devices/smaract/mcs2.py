@@ -37,7 +37,7 @@ from __future__ import annotations
 import re
 
 from ..base import DeviceError
-from ._common import DrivenElsewhere, Refused, SmarActBase, log, printable
+from ._common import ChannelMoving, Refused, SmarActBase, log, printable
 
 __all__ = [
     "SmarActMCS2",
@@ -213,7 +213,7 @@ class SmarActMCS2(SmarActBase):
         assert 0 < abs(steps) <= MAX_STEPS
         before = self._state(channel)
         if before & _BUSY:
-            raise DrivenElsewhere(
+            raise ChannelMoving(
                 f"{self._where()}: channel {channel} is already moving (state {before:#x}); "
                 "another program may be driving it"
             )
