@@ -977,7 +977,7 @@ def test_default_ports_are_the_ports_the_drivers_open():
 
 @pytest.mark.parametrize("other", ["anc300://labnano:7230", "anc300://LABNANO/", "anc300://labnano:7230/"])
 def test_where_warns_of_positions_kept_under_another_spelling_of_the_controller(tmp_path, other):
-    """anc300://labnano and anc300://labnano:7230 are one ANC300 with two kept positions and two locks: a move made
+    """anc300://labnano and anc300://labnano:7230 are one ANC300 with two kept positions (and one lock): a move made
     under one is not in the other's positions, which still show 'set' or 'dead-reckoned' (audit57)."""
     db = tmp_path / "s.db"
     assert run("where", "-d", "anc300://labnano", "--db", db, "--offline", "--set", "3=min").exit_code == 0
@@ -1003,3 +1003,32 @@ def test_move_warns_of_positions_kept_under_another_spelling_of_the_controller(t
     assert r.exit_code == 0, r.output
     assert "warning: positions of this controller are also kept under faulty://arm," in r.stderr, r.stderr
     assert "write the URL one way (faulty://arm:4000 here)" in r.stderr
+
+
+@pytest.mark.parametrize("failure", [RuntimeError("driver bug"), OSError(5, "Input/output error"),
+                                     ValueError("bad answer 'x'")])
+def test_a_drivers_own_failure_mid_move_says_what_moved_and_what_is_uncertain(tmp_path, cal_path, failure):
+    """A driver that fails with something other than a DeviceError after two bursts (a third-party backend's
+    RuntimeError, an OSError of its port, a ValueError of a parser) ended the move with a traceback, or with
+    'error: Input/output error' that reads as if nothing moved; the journal was right (audit57). Now the move
+    ends as for a device error: the steps confirmed, the joint uncertain over the failed burst, how to
+    re-reference; exit 2."""
+    from stickslip.devices.base import register_backend
+
+    class Failing(faults.FaultyController):
+        def step(self, joint, n):
+            if self.bursts == 2:
+                self._record(n // 2)
+                raise failure
+            super().step(joint, n)
+
+    register_backend("failing", Failing)
+    db = tmp_path / "s.db"
+    assert run("where", "-d", "failing://x", "--db", db, "--offline", "--set", "3=min").exit_code == 0
+    r = run("move", "--trust-calibration", "-d", "failing://x", "-c", cal_path, "--db", db, "--joint", "3",
+            "--by", "100um", "--burst", "10")
+    line = one_error(r, f"the device's driver failed ({type(failure).__name__}: ", "20 of +", "steps confirmed",
+                     "joint 3's position is now uncertain", "re-reference it")
+    assert str(failure) in line
+    j3 = json.loads(run("where", "-d", "failing://x", "--db", db, "--offline", "--json").stdout)["joints"][2]
+    assert j3["source"] == "uncertain" and j3["uncertain"][0] < j3["uncertain"][1]

@@ -388,6 +388,7 @@ def test_the_closed_loop_ends_at_the_rigs_stop_with_its_position_exact(rig: Rig,
     r = probe_loop(store, rig, 200e-6, opener=opener)
     assert not r.reached and r.reason is not None and len(bursts) == 2
     assert r.reason.startswith("stopped by the rig's STOP (pressed for arm 'other'"), r.reason
+    assert r.reason.endswith("no further burst sent"), r.reason  # was: '... (a limit: the device stopped the move)'
     probe = kept(store, rig, "probe")
     assert not probe.uncertain and not probe.claim
     assert r.sim_true is not None and probe.positions[3] == pytest.approx(r.sim_true[2], abs=1e-6)

@@ -553,7 +553,7 @@ def _run_loop(run: _Run, target: Vec3, leg: Leg) -> tuple[bool, str | None]:
         except LegRefused as e:
             return False, str(e)
         if error is not None:
-            return False, f"{error} (a limit: the device stopped the move)"
+            return False, error  # the device's own words (a link, an end stop, the rig's STOP), not a guess at why
         if not any(steps):
             left = run._error(target)
             if left <= tol:  # before any look (after one, the check above ends it): already there, nothing to move

@@ -48,6 +48,7 @@ from ..devices.base import (
     command_url,
     device_key,
     open_device,
+    redact_text,
     url_scheme,
 )
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
@@ -216,6 +217,11 @@ class MoveOutcome:
     error: str | None = None
 
 
+DRIVER_FAILURES: tuple[type[Exception], ...] = (OSError, ValueError, RuntimeError, LookupError, ArithmeticError)
+"""What a driver's ``step`` may raise of its own, beside :class:`DeviceError` (a port's OSError, a parser's
+ValueError or IndexError, a third-party backend's RuntimeError): a failed burst, ended and said as one."""
+
+
 def drive(
     dev: Controller,
     state: DeviceState,
@@ -230,9 +236,10 @@ def drive(
 
     ``reckon(n)`` is the dead-reckoned position (rad or m) after ``n`` signed steps from
     the start, kept with ``source`` (``"assumed"`` for a start never referenced);
-    ``save(state)`` stores the state (one transaction). A :class:`DeviceError`
-    stops the loop and is returned in the outcome with the joint left *uncertain* over
-    the failed burst; any other exception (Ctrl-C) propagates with the journal saved.
+    ``save(state)`` stores the state (one transaction). A :class:`DeviceError`, or one of
+    :data:`DRIVER_FAILURES` from the driver's ``step`` (its own failure), stops the loop and
+    is returned in the outcome with the joint left *uncertain* over the failed burst; any
+    other exception (Ctrl-C, a front end's stop) propagates with the journal saved.
     A :class:`~stickslip.devices.base.StepsUncertain` narrows that: its ``made`` steps
     are kept as dead-reckoned, the joint is uncertain only up to ``at_most`` (up to its
     end stop if ``None``: a channel may still be driving; over its whole range for a
@@ -268,6 +275,12 @@ def drive(
             return out
         except DeviceError as e:
             out.error = str(e)
+            return out
+        except DRIVER_FAILURES as e:  # a driver's unforeseen failure (a third-party backend's RuntimeError, an
+            # OSError of its port, a parser's ValueError) after some bursts is a failed burst too: the move ends
+            # saying what moved and what is uncertain, not with a traceback or a bare "Input/output error" that
+            # reads as nothing moved. Other exceptions (a front end's stop signal, Ctrl-C) pass, journal saved.
+            out.error = f"the device's driver failed ({type(e).__name__}: {redact_text(str(e)) or 'no message'})"
             return out
         out.sent += n
         out.bursts.append(n)
