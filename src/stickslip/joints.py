@@ -142,10 +142,33 @@ class JointSpec:
             return None
         if not math.isfinite(q):
             return f"{name} must be a finite number in {self.unit}, got {q!r}"
+        slip = self.unit_slip(q)
         return (
             f"{name} = {q:.6g} {self.unit} is outside joint {self.number}'s range "
-            f"[{self.lower:.6g}, {self.upper:.6g}] {self.unit}"
+            f"[{self.lower:.6g}, {self.upper:.6g}] {self.unit}" + (f" ({slip})" if slip else "")
         )
+
+    def unit_slip(self, q: float) -> str | None:
+        """The likely unit slip of an SI value ``q`` outside the stops, if read in another unit it is inside.
+
+        Degrees for a rotary joint (``q2 = -90``: -90 deg is inside, -90 rad is not); mm or µm
+        for the prismatic joint (``q3 = 5``: 5 mm is inside). ``None`` when no such reading fits.
+
+        >>> JOINTS[2].unit_slip(-90.0)
+        'in degrees? -90 deg is -1.5708 rad: angles are in radians'
+        >>> JOINTS[3].unit_slip(5.0)
+        'in mm or µm? 5 mm is 0.005 m, 5 µm is 5e-06 m: lengths are in metres'
+        """
+        if not math.isfinite(q) or self.contains(q):
+            return None
+        if self.rotary:
+            r = math.radians(q)
+            return f"in degrees? {q:.6g} deg is {r:.6g} rad: angles are in radians" if self.contains(r) else None
+        fits = [(u, q * f) for u, f in (("mm", 1e-3), ("µm", 1e-6)) if self.contains(q * f)]
+        if not fits:
+            return None
+        said = ", ".join(f"{q:.6g} {u} is {v:.6g} m" for u, v in fits)
+        return f"in {' or '.join(u for u, _ in fits)}? {said}: lengths are in metres"
 
 
 # Joint 1's stops are not given by the paper; the shipped file takes the same span as
