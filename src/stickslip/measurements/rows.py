@@ -11,12 +11,13 @@ from dataclasses import asdict, dataclass, replace
 
 from .. import kinematics as kin
 from ..clock import day_label_problem
+from ..joints import TILT_LIMIT, coordinate_problem, tilt_problem
 from ..models import direction_label
 from ..records import unguard_cell
 
 HEADER = ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
 POSE_COLUMNS = ("q1", "q2", "q3", "theta", "psi")
-_TILT_LIMIT = math.pi + 1e-6
+_TILT_LIMIT = TILT_LIMIT
 
 
 @dataclass(frozen=True)
@@ -104,10 +105,7 @@ def check_pose(joint: int, values: dict[str, float], joints: Mapping[int, kin.Jo
         problem = specs[j].range_problem(f"q{j}", values[f"q{j}"])
         if problem:
             problems.append(problem)
-    for name in ("theta", "psi"):
-        v = values[name]
-        if not -_TILT_LIMIT <= v <= _TILT_LIMIT:
-            problems.append(f"{name} = {v:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    problems += [p for name in ("theta", "psi") if (p := tilt_problem(name, values[name]))]
     return problems
 
 
@@ -315,8 +313,9 @@ def traverse_problems(t: Traverse) -> list[str]:
     session label, a joint other than 1, 2, 3, a direction other than ``"+"``/``"-"``, a
     number that is not finite, a step count that is not a whole number in 1 ..
     :data:`MAX_STEPS`, a traverse that does not move or moves against its direction,
-    a base tilt outside [-pi, pi]. The store refuses such a traverse, so that every stored
-    one is exported as a table that imports again.
+    a position no arm's joint takes (:func:`~stickslip.joints.coordinate_problem`: beyond a full
+    turn, or a metre for joint 3: degrees, or mm as m), a base tilt outside [-pi, pi]. The store
+    refuses such a traverse, so that every stored one is exported as a table that imports again.
     """
     why = day_label_problem(str(t.day))
     return ([f"day: {why}"] if why is not None else []) + _value_problems(t)
@@ -325,7 +324,7 @@ def traverse_problems(t: Traverse) -> list[str]:
 def check_traverses(traverses: Sequence[Traverse], limit: int = 20) -> None:
     """Raise :class:`TableError` naming each traverse (by its index) that :func:`traverse_problems` refuses.
 
-    What a calibration checks before it fits (a tilt in degrees, steps 0, a nan): rows built in
+    What a calibration checks before it fits (a tilt or ``q2`` in degrees, steps 0, a nan): rows built in
     Python, not read from a table, were fitted as they were. The session label is checked once
     per label, without the spreadsheet-date rule (a label stored before it is still fitted);
     at most ``limit`` lines.
@@ -368,9 +367,10 @@ def _value_problems(t: Traverse) -> list[str]:
         problems.append(
             f"direction {t.direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
         )
-    for name in ("theta", "psi"):
-        if not -_TILT_LIMIT <= float(nums[name]) <= _TILT_LIMIT:
-            problems.append(f"{name} = {nums[name]:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    if t.joint in (1, 2, 3):  # no arm's position (arm-independent: an arm's stops are the table reader's)
+        at = {"q1": 1, "q2": 2, "q3": 3, "start": t.joint, "end": t.joint}
+        problems += [p for name, j in at.items() if (p := coordinate_problem(name, j, float(nums[name])))]
+    problems += [p for name in ("theta", "psi") if (p := tilt_problem(name, float(nums[name])))]
     return problems
 
 
