@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import pickle
 import re
 from dataclasses import replace
 from pathlib import Path
@@ -10,8 +11,12 @@ from pathlib import Path
 import pytest
 
 from stickslip.calibration import calibrate
-from stickslip.joints import JOINTS
+from stickslip.joints import JOINTS, MAX_STROKE, MAX_TURN
+from stickslip.joints import MM3A_FILE as JOINTS_FILE
+from stickslip.kinematics import Pose
 from stickslip.measurements import TableError, Traverse, check_traverses, parse_measurements, write_measurements
+from stickslip.rig import RigError, parse_rig
+from stickslip.sim.arm import SimulatedMM3A
 
 _HEADER = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
 
@@ -78,3 +83,68 @@ def test_a_stage_s_and_a_full_turn_s_positions_are_still_taken() -> None:
     stage = Traverse("2026-11-30", 1, "+", 0.0, 0.02, 0.01, 0.0, 0.0, 0.0, 0.05, 1000)  # an xyz stage, m
     turn = replace(GOOD, q1=-2 * math.pi, start=-6.0, end=6.0)  # within a turn either way
     check_traverses([GOOD, stage, turn])  # no error
+
+
+@pytest.mark.parametrize(
+    ("fields", "named"),
+    [
+        ({"q2": -90.0}, f"pose: q2 = -90 is no arm's position of joint 2: beyond a full turn (6.28319 rad) "
+         f"(in degrees? -90 deg is -1.5708 rad: {_DEG})"),  # was made, carried to a range check if any
+        ({"q3": 5.0}, "pose: q3 = 5 is no arm's position of joint 3: beyond a metre (1 m) (in mm or µm?"),
+        ({"theta": 30.0}, "pose: theta = 30 rad is outside [-pi, pi] (angles are in radians)"),
+        ({"psi": math.inf}, "pose: psi must be a finite number in SI units, got inf"),
+        ({"q1": math.nan, "q2": 1e9}, "pose: q1 must be a finite number in SI units, got nan; q2 = 1e+09 is no arm's"),
+    ],
+)
+def test_a_pose_no_arm_takes_is_refused_as_it_is_made(fields: dict[str, float], named: str) -> None:
+    with pytest.raises(ValueError, match=re.escape(named)):
+        Pose(**fields)
+    with pytest.raises(ValueError, match=re.escape(named)):
+        Pose()._replace(**fields)  # the named tuple's _make and _replace are checked too
+    with pytest.raises(ValueError, match=re.escape(named)):
+        Pose._make({**Pose()._asdict(), **fields}.values())
+
+
+def test_a_pose_any_arm_takes_is_made_as_before() -> None:
+    p = Pose(0.05, 0.02, 0.01)  # a stage's metres
+    assert p == (0.05, 0.02, 0.01, 0.0, 0.0) and p._replace(q3=0.0).q3 == 0.0
+    assert pickle.loads(pickle.dumps(p)) == p and type(pickle.loads(pickle.dumps(p))) is Pose
+    assert Pose(-MAX_TURN, MAX_TURN, -MAX_STROKE, math.pi, -math.pi) == (-MAX_TURN, MAX_TURN, -MAX_STROKE, math.pi,
+                                                                          -math.pi)
+    assert Pose() == (0.0, -math.pi / 2, 0.0, 0.0, 0.0) and Pose._fields == ("q1", "q2", "q3", "theta", "psi")
+
+
+def test_the_simulator_s_tilt_says_its_unit() -> None:
+    with pytest.raises(ValueError, match=re.escape("theta = 30 rad is outside [-pi, pi] (angles are in radians)")):
+        SimulatedMM3A().set_pose(theta=30.0)
+
+
+_MM3A_TEXT = (Path(JOINTS_FILE).read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "named"),
+    [
+        ('range = ["-120deg", "120deg"]', 'range = ["-400deg", "120deg"]',
+         "reaches 400 deg: beyond a full turn either way, no joint's position (a unit slip?)"),
+        ('range = ["0mm", "12mm"]', 'range = ["0mm", "2m"]', "reaches 2 m: beyond a metre either way"),
+    ],
+)
+def test_a_rig_s_joint_beyond_a_turn_or_a_metre_is_refused(old: str, new: str, named: str) -> None:
+    assert old in _MM3A_TEXT
+    with pytest.raises(RigError, match=re.escape(named)):  # its kept positions would be no Pose (units58)
+        parse_rig(_MM3A_TEXT.replace(old, new), "rig.toml")
+    parse_rig(_MM3A_TEXT, "rig.toml")  # the shipped one reads
+
+
+def test_plan_on_the_command_line_says_a_pose_no_arm_takes_in_one_line(tmp_path: Path) -> None:
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    calibrate(paper_table()).save(tmp_path / "cal.json")
+    r = CliRunner().invoke(app, ["plan", "-c", str(tmp_path / "cal.json"), "--joint", "3", "--from", "2mm", "--to",
+                                 "2.03mm", "--q2", "-90rad"])
+    assert r.exit_code == 2, r.output
+    assert "error: pose: q2 = -90 is no arm's position of joint 2" in r.output and "Traceback" not in r.output

@@ -22,7 +22,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from ..devices.base import SECRET_OPTIONS, device_key, redact_url
-from ..joints import MM3A_FILE
+from ..joints import MAX_STROKE, MAX_TURN, MM3A_FILE
 from ..kinematics import Geometry
 from ..records import FILE_URL_DATABASE, is_file_url, read_text_bounded
 from ..units import UnitError, parse_angle, parse_length
@@ -422,6 +422,11 @@ class _Reader(_Values):
             if "range" not in d:
                 raise self.fail(jk, "needs its range = [lower, upper]")
             lo, hi = self.pair(d["range"], jk + ("range",), unit)
+            if (far := max(abs(lo), abs(hi))) > (bound := MAX_TURN if jkind == "rotary" else MAX_STROKE):
+                what = f"{math.degrees(far):.6g} deg: beyond a full turn" if jkind == "rotary" else \
+                    f"{far:.6g} m: beyond a metre"
+                raise self.fail(jk + ("range",), f"reaches {what} either way, no joint's position (a unit slip?); "
+                                f"positions lie within ±{bound:.6g} {'rad' if jkind == 'rotary' else 'm'}")
             stops = d.get("stops", ["lower", "upper"])
             if (not isinstance(stops, list) or any(s not in ("lower", "upper") for s in stops)
                     or len(set(stops)) != len(stops)):
