@@ -36,7 +36,10 @@ def test_a_value_outside_the_stops_names_the_unit_it_fits_in(joint: int, q: floa
                                                     f"({slip}: lengths are in metres)")
 
 
-@pytest.mark.parametrize(("joint", "q"), [(2, -500.0), (2, 40.0), (3, -5.0), (3, -0.5)])
+@pytest.mark.parametrize(
+    ("joint", "q"),
+    [(2, -500.0), (2, 40.0), (3, -5.0), (3, -0.5), (2, 0.6), (3, 0.02), (3, -0.01)],  # the last three: near misses
+)
 def test_no_slip_is_named_where_no_other_unit_fits(joint: int, q: float) -> None:
     problem = JOINTS[joint].range_problem(f"q{joint}", q)
     assert problem is not None and "?" not in problem  # -500 deg and 40 deg are outside too; no negative length fits

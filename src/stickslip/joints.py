@@ -167,17 +167,19 @@ class JointSpec:
         )
 
     def unit_slip(self, q: float) -> str | None:
-        """The likely unit slip of an SI value ``q`` outside the stops, if read in another unit it is inside.
+        """The likely unit slip of an SI value ``q`` well outside the stops, if read in another unit it is inside.
 
         Degrees for a rotary joint (``q2 = -90``: -90 deg is inside, -90 rad is not); mm or µm
-        for the prismatic joint (``q3 = 5``: 5 mm is inside). ``None`` when no such reading fits.
+        for the prismatic joint (``q3 = 5``: 5 mm is inside). ``None`` when no such reading fits,
+        or for a near miss: ``q`` beyond a stop by less than the joint's span (``q2 = 0.6`` rad,
+        34 deg against the 30 deg stop; ``q3 = 0.02`` m) is a position too far, not in another unit.
 
         >>> JOINTS[2].unit_slip(-90.0)
         'in degrees? -90 deg is -1.5708 rad: angles are in radians'
         >>> JOINTS[3].unit_slip(5.0)
         'in mm or µm? 5 mm is 0.005 m, 5 µm is 5e-06 m: lengths are in metres'
         """
-        if not math.isfinite(q) or self.contains(q):
+        if not math.isfinite(q) or self.lower - self.span <= q <= self.upper + self.span:
             return None
         return _slip(q, self.rotary, self.contains)
 
