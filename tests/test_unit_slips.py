@@ -15,6 +15,9 @@ from stickslip.joints import JOINTS, MAX_STROKE, MAX_TURN
 from stickslip.joints import MM3A_FILE as JOINTS_FILE
 from stickslip.kinematics import Pose
 from stickslip.measurements import TableError, Traverse, check_traverses, parse_measurements, write_measurements
+from stickslip.measurements.poses import parse_pose_table
+from stickslip.measurements.rows import HEADER, unit_column_problem
+from stickslip.measurements.table import parse_measurement_table
 from stickslip.rig import RigError, parse_rig
 from stickslip.sim.arm import SimulatedMM3A
 
@@ -151,3 +154,29 @@ def test_plan_on_the_command_line_says_a_pose_no_arm_takes_in_one_line(tmp_path:
                                  "2.03mm", "--q2", "-90rad"])
     assert r.exit_code == 2, r.output
     assert "error: pose: q2 = -90 is no arm's position of joint 2" in r.output and "Traceback" not in r.output
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "named"),
+    [
+        ("q2,", "q2_deg,", "q2_deg names a unit: the columns are SI and named without one (write q2 in rad)"),
+        ("q3,", "q3 [mm],", "q3 [mm] names a unit: the columns are SI and named without one (write q3 in m)"),
+        ("theta,psi", "theta (degrees),psi (degrees)", "theta (degrees), psi (degrees) name a unit: the columns are SI "
+         "and named without one (write theta, psi in rad)"),
+        ("start,end", "start_um,end_um", "(write start, end in rad or m, the joint's unit)"),
+        ("q1,q2", "q1 [rad],q2 [deg]", "q1 [rad], q2 [deg] name a unit: the columns are SI and named without one "
+         "(write q2 in rad; call it q1)"),
+    ],
+)
+def test_a_column_named_with_its_unit_is_told_to_be_si(old: str, new: str, named: str) -> None:
+    header = _HEADER.replace(old, new)
+    for parse in (parse_measurements, parse_measurement_table):  # the row reader and the columnar one
+        with pytest.raises(TableError, match=re.escape(named)):  # said only "missing q2; unexpected q2_deg"
+            parse(header + "2026-11-22,3,+,0,-1.5,0,0,0,0,0.01,10000\n", "t.csv")
+
+
+def test_a_pose_table_s_column_named_with_its_unit_is_told_to_be_si() -> None:
+    with pytest.raises(TableError, match=re.escape("q2_deg names a unit: the columns are SI and named without one "
+                                                   "(write q2 in rad)")):
+        parse_pose_table("joint,direction,q1,q2_deg,q3,theta,psi\n3,+,0,-90,0,0,0\n", "p.csv")
+    assert unit_column_problem(["q2", "q2_note", "x_deg", "sample_um"], HEADER) is None  # no column with a unit
