@@ -17,6 +17,7 @@ from stickslip.kinematics import Pose
 from stickslip.measurements import TableError, Traverse, check_traverses, parse_measurements, write_measurements
 from stickslip.measurements.poses import parse_pose_table
 from stickslip.measurements.rows import HEADER, unit_column_problem
+from stickslip.measurements.steps import parse_step_sizes
 from stickslip.measurements.table import parse_measurement_table
 from stickslip.rig import RigError, parse_rig
 from stickslip.sim.arm import SimulatedMM3A
@@ -180,3 +181,18 @@ def test_a_pose_table_s_column_named_with_its_unit_is_told_to_be_si() -> None:
                                                    "(write q2 in rad)")):
         parse_pose_table("joint,direction,q1,q2_deg,q3,theta,psi\n3,+,0,-90,0,0,0\n", "p.csv")
     assert unit_column_problem(["q2", "q2_note", "x_deg", "sample_um"], HEADER) is None  # no column with a unit
+
+
+@pytest.mark.parametrize(
+    ("joint", "gamma", "slip"),
+    [
+        (3, "970", "in nm? 970 nm is 9.7e-07 m"),  # the unit `stickslip` shows steps of joint 3 in
+        (3, "0.97", "in nm or µm? 0.97 nm is 9.7e-10 m, 0.97 µm is 9.7e-07 m"),
+        (2, "40", "in µrad? 40 µrad is 4e-05 rad"),
+    ],
+)
+def test_a_step_size_in_nm_or_urad_is_refused_with_the_slip_named(joint: int, gamma: str, slip: str) -> None:
+    text = ("day,joint,direction,q1,q2,q3,theta,psi,gamma,sigma,steps,method\n"
+            f"2026-11-22,{joint},+,0,-1.5,0.005,0,0,{gamma},1e-8,100,camera\n")
+    with pytest.raises(TableError, match=re.escape(f"is not a step size of joint {joint} (") + ".*" + re.escape(slip)):
+        parse_step_sizes(text, "s.csv")  # said only "(1e-10..0.0001 m; SI units)"
