@@ -196,3 +196,11 @@ def test_a_step_size_in_nm_or_urad_is_refused_with_the_slip_named(joint: int, ga
             f"2026-11-22,{joint},+,0,-1.5,0.005,0,0,{gamma},1e-8,100,camera\n")
     with pytest.raises(TableError, match=re.escape(f"is not a step size of joint {joint} (") + ".*" + re.escape(slip)):
         parse_step_sizes(text, "s.csv")  # said only "(1e-10..0.0001 m; SI units)"
+
+
+def test_a_bare_length_beyond_a_metre_in_a_rig_file_is_refused_as_mm_without_its_unit() -> None:
+    thick = _MM3A_TEXT.replace('radius = "0.5mm"', 'radius = 2')  # 2 m: 2 mm meant (was taken)
+    named = 'arm[1].radius: 2 has no unit, so it is 2 m: more than a metre; write its unit ("2mm" for millimetres'
+    with pytest.raises(RigError, match=re.escape(named)):
+        parse_rig(thick, "rig.toml")
+    assert parse_rig(_MM3A_TEXT.replace('length = "21mm"', "length = 0.021"), "rig.toml")  # a bare metre's part

@@ -151,6 +151,9 @@ class _Values:
             raise self.fail(key, f"{value!r} is not finite")
         if kind == "length" and abs(v) > _MAX_SIZE:
             raise self.fail(key, f"{value!r} is {v:.3g} m: more than {_MAX_SIZE:g} m (a unit slip?)")
+        if kind == "length" and abs(v) > MAX_STROKE and _BARE.match(str(value)):  # tool = [0, 0, -5]: 5 mm meant
+            raise self.fail(key, f"{value!r} has no unit, so it is {value} m: more than a metre; write its unit "
+                            f"(\"{value}mm\" for millimetres, \"{value}m\" if metres are meant)")
         if kind == "angle" and abs(v) > 2.0 * math.pi and _BARE.match(str(value)):
             raise self.fail(key, f"{value!r} has no unit, so it is {value} rad ({math.degrees(v):.4g} deg): more "
                             f"than a turn; write its unit (\"{value}deg\" for degrees)")
