@@ -13,7 +13,7 @@ import pytest
 from stickslip.calibration import calibrate
 from stickslip.joints import JOINTS, MAX_STROKE, MAX_TURN
 from stickslip.joints import MM3A_FILE as JOINTS_FILE
-from stickslip.kinematics import Pose
+from stickslip.kinematics import Geometry, Pose
 from stickslip.measurements import TableError, Traverse, check_traverses, parse_measurements, write_measurements
 from stickslip.measurements.poses import parse_pose_table
 from stickslip.measurements.rows import HEADER, unit_column_problem
@@ -204,3 +204,15 @@ def test_a_bare_length_beyond_a_metre_in_a_rig_file_is_refused_as_mm_without_its
     with pytest.raises(RigError, match=re.escape(named)):
         parse_rig(thick, "rig.toml")
     assert parse_rig(_MM3A_TEXT.replace('length = "21mm"', "length = 0.021"), "rig.toml")  # a bare metre's part
+
+
+@pytest.mark.parametrize(("fields", "named"), [
+    ({"length": 23.5}, "geometry length = 23.5 m must be in (0, 1] m (in mm? 23.5 mm is 0.0235 m: lengths are in "
+     "metres)"),
+    ({"offset": -3.0}, "geometry offset = -3 m must be within ±1 m (in mm? -3 mm is -0.003 m: lengths are in metres)"),
+])
+def test_a_geometry_in_mm_is_refused_with_the_slip_named(fields: dict[str, float], named: str) -> None:
+    with pytest.raises(ValueError, match=re.escape(named)):  # a config file's bare 'length = 23.5' said only the range
+        Geometry(**fields)
+    with pytest.raises(ValueError, match=r"must be in \(0, 1\] m$"):
+        Geometry(length=-0.02)  # not a slip: no hint
