@@ -5,9 +5,11 @@ from __future__ import annotations
 import math
 import pickle
 import re
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from stickslip.calibration import calibrate
@@ -19,8 +21,9 @@ from stickslip.measurements.poses import parse_pose_table
 from stickslip.measurements.rows import HEADER, unit_column_problem
 from stickslip.measurements.steps import parse_step_sizes
 from stickslip.measurements.table import parse_measurement_table
+from stickslip.models import JointModel
 from stickslip.rig import RigError, parse_rig
-from stickslip.sim.arm import SimulatedMM3A
+from stickslip.sim.arm import NOMINAL, SimulatedMM3A
 
 _HEADER = "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
 
@@ -216,3 +219,24 @@ def test_a_geometry_in_mm_is_refused_with_the_slip_named(fields: dict[str, float
         Geometry(**fields)
     with pytest.raises(ValueError, match=r"must be in \(0, 1\] m$"):
         Geometry(length=-0.02)  # not a slip: no hint
+
+
+@pytest.mark.parametrize(
+    ("call", "named"),
+    [
+        (lambda m: m.gamma(0.0, -90.0, 0.0, 0.0, 0.0), "JointModel.gamma: q2 = -90 is no arm's position of joint 2: "
+         "beyond a full turn (6.28319 rad) (in degrees? -90 deg is -1.5708 rad"),  # gave 4.47e-5 rad, silently
+        (lambda m: m.gamma(0.0, -1.5, 5.0, 0.0, 0.0), "JointModel.gamma: q3 = 5 is no arm's position of joint 3"),
+        # (5 m: gave -6.7e-3 rad, a negative step)
+        (lambda m: m.gamma(0.0, np.array([-1.5, -1.0, np.nan]), 0.0, 0.0, 0.0), "q2 must be a finite number"),
+        (lambda m: m.average_gamma(-210.0, 30.0, 0.0, 0.0, 0.0, 0.0, 0.0), "JointModel.average_gamma: start = -210 "
+         "is no arm's position of joint 2"),
+        (lambda m: m.average_gamma(-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0), "psi = 5 rad is outside [-pi, pi]"),
+    ],
+)
+def test_a_joint_model_refuses_a_pose_no_arm_takes(call: Callable[[JointModel], object], named: str) -> None:
+    model = JointModel(2, "+", NOMINAL[(2, "+")])
+    with pytest.raises(ValueError, match=re.escape(named)):
+        call(model)
+    q2 = np.linspace(-3.6, 0.5, 5)
+    assert np.all(model.gamma(0.0, q2, 0.0, 0.0, 0.0) > 0)  # an array of poses any arm takes: as before
