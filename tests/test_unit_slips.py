@@ -240,3 +240,17 @@ def test_a_joint_model_refuses_a_pose_no_arm_takes(call: Callable[[JointModel], 
         call(model)
     q2 = np.linspace(-3.6, 0.5, 5)
     assert np.all(model.gamma(0.0, q2, 0.0, 0.0, 0.0) > 0)  # an array of poses any arm takes: as before
+
+
+def test_a_sample_rate_in_khz_is_refused_with_the_slip_named(tmp_path: Path) -> None:
+    from stickslip.audio.sources.files import AudioSourceError
+    from stickslip.audio.sources.vibration import read_vibration
+    from stickslip.audio.tuningfile import TUNING_FILE
+
+    (tmp_path / "v.csv").write_text("x\n0.1\n0.2\n", encoding="utf-8")
+    with pytest.raises(AudioSourceError, match=re.escape("sample rate 48 Hz is outside 1000-1000000 Hz (in kHz? "
+                                                         "48 kHz is 48000 Hz: rates are in Hz)")):
+        read_vibration(tmp_path / "v.csv", sample_rate=48.0)  # `stickslip tune --sample-rate 48`: said the range
+    assert TUNING_FILE.rate_problem(44.1) == ("sample rate 44.1 Hz is outside 2000-192000 Hz (in kHz? 44.1 kHz is "
+                                              "44100 Hz: rates are in Hz)")
+    assert TUNING_FILE.rate_problem(500.0) == "sample rate 500 Hz is outside 2000-192000 Hz"  # 500 kHz is no rate
