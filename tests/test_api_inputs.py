@@ -186,18 +186,19 @@ def paper_calibration() -> Calibration:
 @pytest.mark.parametrize(
     ("pose", "q", "named"),
     [
-        (Pose(q2=-90.0), None, "q2 = -90 rad"),  # degrees: gave 4.47e-5 rad on main, silently
-        (Pose(q2=-1.0, theta=30.0), None, "theta = 30 rad"),
-        (Pose(q2=math.nan), None, "q2 must be a finite"),  # gave nan
-        (Pose(q3=5.0), None, "q3 = 5 m"),  # mm as m: gave -6.7e-3 rad, a negative step
-        (Pose(), -90.0, "q2 = -90 rad"),
+        ((0.0, -90.0, 0.0, 0.0, 0.0), None, r"q2 = -90 .*\(in degrees\?"),  # gave 4.47e-5 rad on main, silently
+        ({"q2": -90.0}, None, r"q2 = -90 .*\(in degrees\?"),  # a Pose in degrees: refused as it is made (units58)
+        ({"q2": -1.0, "theta": 30.0}, None, "theta = 30 rad"),
+        ({"q2": math.nan}, None, "q2 must be a finite"),  # gave nan
+        ({"q3": 5.0}, None, r"q3 = 5 .*\(in mm or µm\?"),  # mm as m: gave -6.7e-3 rad, a negative step
+        ({}, -90.0, r"q2 = -90 .*\(in degrees\?"),
     ],
 )
 def test_calibration_gamma_refuses_a_pose_in_degrees_or_not_finite(
-    paper_calibration: Calibration, pose: Pose, q: float | None, named: str
+    paper_calibration: Calibration, pose: dict[str, float] | tuple[float, ...], q: float | None, named: str
 ) -> None:
     with pytest.raises(ValueError, match=named):
-        paper_calibration.gamma(2, "+", pose, q)
+        paper_calibration.gamma(2, "+", Pose(**pose) if isinstance(pose, dict) else pose, q)
 
 
 def test_calibration_gamma_takes_a_pose_as_five_numbers(paper_calibration: Calibration) -> None:

@@ -69,7 +69,10 @@ def test_step_size_header_refusals_say_why(tmp_path):
         "(2 columns without a name: delete the empty columns at the end)"
     )
     renamed = STEP_HEAD.replace("gamma", "gamma [m]") + "\n" + STEP_ROW + "\n"
-    assert _step_header_problem(tmp_path, renamed) == "(missing gamma; unexpected gamma [m])"
+    assert _step_header_problem(tmp_path, renamed) == (  # (units58: a column named with its unit is told so)
+        "(missing gamma; unexpected gamma [m]; gamma [m] names a unit: the columns are SI and named without one "
+        "(call it gamma))"
+    )
 
 
 def test_measurement_header_names_a_pandas_index_column():

@@ -19,7 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from stickslip.clock import day_label_problem
-from stickslip.joints import JointSpec
+from stickslip.joints import MAX_STROKE, JointSpec
 from stickslip.measurements import Traverse, measurements_to_csv, parse_measurements
 from stickslip.storage import Store
 from stickslip.storage.schema import _content_keys
@@ -102,8 +102,8 @@ def test_a_label_with_spaces_around_is_stored_as_the_table_reads_it(db):
 _ANY = JointSpec(1, "rotary", -math.inf, math.inf, "rad")
 """A joint without stops: the store does not know the arm, and these rows are of any arm."""
 _examples = itertools.count()
-_finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
-_edges = st.sampled_from([5e-324, -5e-324, 1.7e308, -1.7e308, -0.0, 0.0, 0.1, 1 / 3, 2.2250738585072014e-308])
+_finite = st.floats(-MAX_STROKE, MAX_STROKE, width=64)  # a position of any arm's joint (a metre is within a turn)
+_edges = st.sampled_from([5e-324, -5e-324, MAX_STROKE, -MAX_STROKE, -0.0, 0.0, 0.1, 1 / 3, 2.2250738585072014e-308])
 _labels = st.text(st.characters(codec="utf-8"), min_size=1, max_size=20).filter(lambda s: day_label_problem(s) is None)
 
 
@@ -271,7 +271,7 @@ def test_a_backup_answers_every_query_as_the_database_it_was_taken_from(db, tmp_
     from stickslip.calibration import calibrate
     from stickslip.devices.positions import DeviceState, load_state, save_state
 
-    rows = [*_rows(), _row(day="Tag 2 – Überprüfung", q2=-1 / 3, start=5e-324, end=1.7e308, steps=10**12),
+    rows = [*_rows(), _row(day="Tag 2 – Überprüfung", q2=-1 / 3, start=5e-324, end=MAX_STROKE, steps=10**12),
             _row(day="日本 2", direction="-", start=0.1, end=2.2250738585072014e-308, theta=-math.pi)]
     state = DeviceState.default("mm3a://com3")
     state.set_position(3, 0.005)

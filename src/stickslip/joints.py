@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -25,15 +25,20 @@ from typing import Any
 
 __all__ = [
     "JOINTS",
+    "MAX_STROKE",
+    "MAX_TURN",
     "MM3A_FILE",
     "MM3A_GEOMETRY",
     "NOMINAL_STEP",
     "Q3_MAX",
     "ROTARY_SPAN",
     "STEP_MODELS",
+    "TILT_LIMIT",
     "JointSet",
     "JointSpec",
+    "coordinate_problem",
     "joint_spec",
+    "tilt_problem",
 ]
 
 MM3A_FILE = Path(__file__).parent / "rig" / "mm3a.toml"
@@ -69,6 +74,13 @@ Q3_MAX = _RANGES[3][2]
 """Stroke of prismatic joint 3, m: 12 mm."""
 
 
+
+MAX_TURN = 2.0 * math.pi
+"""rad: no rotary joint's coordinate is beyond a full turn either way (beyond: degrees read as radians)."""
+MAX_STROKE = 1.0
+"""m: no prismatic joint's coordinate is beyond a metre either way (beyond: mm or µm read as metres)."""
+TILT_LIMIT = math.pi + 1e-6
+"""rad: a base tilt (``theta``, ``psi``) lies within [-pi, pi] (and a rounding's margin)."""
 
 NOMINAL_STEP = {"prismatic": 0.8e-6, "rotary": 40e-6}
 """A small step of each kind of joint (m, rad): what is assumed without a calibration or a rig file's ``step``."""
@@ -121,6 +133,12 @@ class JointSpec:
         return self.upper - self.lower
 
     @property
+    def bound(self) -> float:
+        """No position of a joint of this kind lies beyond ``±bound``: :data:`MAX_TURN` (rotary, rad) or
+        :data:`MAX_STROKE` (prismatic, m), whatever the arm; beyond, the value is in another unit."""
+        return MAX_TURN if self.rotary else MAX_STROKE
+
+    @property
     def rotary(self) -> bool:
         """True for a rotary joint (coordinate in rad), False for the prismatic one (m)."""
         return self.kind == "rotary"
@@ -142,10 +160,28 @@ class JointSpec:
             return None
         if not math.isfinite(q):
             return f"{name} must be a finite number in {self.unit}, got {q!r}"
+        slip = self.unit_slip(q)
         return (
             f"{name} = {q:.6g} {self.unit} is outside joint {self.number}'s range "
-            f"[{self.lower:.6g}, {self.upper:.6g}] {self.unit}"
+            f"[{self.lower:.6g}, {self.upper:.6g}] {self.unit}" + (f" ({slip})" if slip else "")
         )
+
+    def unit_slip(self, q: float) -> str | None:
+        """The likely unit slip of an SI value ``q`` well outside the stops, if read in another unit it is inside.
+
+        Degrees for a rotary joint (``q2 = -90``: -90 deg is inside, -90 rad is not); mm or µm
+        for the prismatic joint (``q3 = 5``: 5 mm is inside). ``None`` when no such reading fits,
+        or for a near miss: ``q`` beyond a stop by less than the joint's span (``q2 = 0.6`` rad,
+        34 deg against the 30 deg stop; ``q3 = 0.02`` m) is a position too far, not in another unit.
+
+        >>> JOINTS[2].unit_slip(-90.0)
+        'in degrees? -90 deg is -1.5708 rad: angles are in radians'
+        >>> JOINTS[3].unit_slip(5.0)
+        'in mm or µm? 5 mm is 0.005 m, 5 µm is 5e-06 m: lengths are in metres'
+        """
+        if not math.isfinite(q) or self.lower - self.span <= q <= self.upper + self.span:
+            return None
+        return _slip(q, self.rotary, self.contains)
 
 
 # Joint 1's stops are not given by the paper; the shipped file takes the same span as
@@ -174,3 +210,51 @@ def joint_spec(joint: int | JointSpec, joints: JointSet | None = None) -> JointS
         return (JOINTS if joints is None else joints)[int(joint)]
     except (KeyError, ValueError, TypeError, OverflowError):
         raise ValueError(f"unknown joint {joint!r}: joints are 1, 2 (rotary) and 3 (prismatic)") from None
+
+
+def _slip(q: float, rotary: bool, fits: Callable[[float], bool]) -> str | None:
+    """``"in degrees? ..."`` / ``"in mm or µm? ..."``: the readings of ``q`` in another unit that ``fits``
+    (else ``None``)."""
+    factors = (("degrees", "deg", math.pi / 180.0),) if rotary else (("mm", "mm", 1e-3), ("µm", "µm", 1e-6))
+    found = [(name, unit, q * f) for name, unit, f in factors if fits(q * f)]
+    if not found:
+        return None
+    si = "rad" if rotary else "m"
+    said = ", ".join(f"{q:.6g} {unit} is {v:.6g} {si}" for _, unit, v in found)
+    kind = "angles are in radians" if rotary else "lengths are in metres"
+    return f"in {' or '.join(name for name, _, _ in found)}? {said}: {kind}"
+
+
+def coordinate_problem(name: str, joint: int, q: float) -> str | None:
+    """Why ``q`` can be no arm's coordinate of joint ``joint`` (1, 2, 3), whatever the arm; ``None`` if it can.
+
+    Arm-independent (an arm's stops are checked by :meth:`JointSpec.range_problem`): ``q`` is a
+    finite real number, and joint 3, prismatic on every arm, lies within :data:`MAX_STROKE`;
+    joints 1 and 2, rotary on an MM3A (a stage's are prismatic, within a metre: within a turn
+    too), within :data:`MAX_TURN`. Beyond, the message names the likely unit slip
+    (``q2 = -90``: degrees).
+    """
+    if isinstance(q, bool) or not isinstance(q, (int, float)) and not hasattr(q, "__float__"):
+        return f"{name} must be a finite number in SI units, got {q!r}"
+    v = float(q)
+    if not math.isfinite(v):
+        return f"{name} must be a finite number in SI units, got {q!r}"
+    rotary = joint != 3
+    bound = MAX_TURN if rotary else MAX_STROKE
+    if abs(v) <= bound:
+        return None
+    slip = _slip(v, rotary, lambda r: abs(r) <= bound)
+    what = f"a full turn ({MAX_TURN:.6g} rad)" if rotary else f"a metre ({MAX_STROKE:g} m)"
+    return f"{name} = {v:.6g} is no arm's position of joint {joint}: beyond {what}" + (f" ({slip})" if slip else "")
+
+
+def tilt_problem(name: str, value: float) -> str | None:
+    """Why ``value`` is no base tilt (``theta``, ``psi``): not finite, or outside [-pi, pi] (degrees?)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(value, "__float__"):
+        return f"{name} must be a finite number in SI units, got {value!r}"
+    v = float(value)
+    if not math.isfinite(v):
+        return f"{name} must be a finite number in SI units, got {value!r}"
+    if -TILT_LIMIT <= v <= TILT_LIMIT:
+        return None
+    return f"{name} = {v:.6g} rad is outside [-pi, pi] (angles are in radians)"

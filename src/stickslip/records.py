@@ -423,6 +423,22 @@ def check_unit(given: object, expected: str | None, where: str) -> None:
                          f"convert it and write {expected!r})")
 
 
+_STEP_DISPLAY = {"m": (("nm", 1e-9), ("µm", 1e-6)), "rad": (("µrad", 1e-6), ("mrad", 1e-3))}
+
+
+def step_unit_slip(v: float, unit: str) -> str | None:
+    """``"in nm? 970 nm is 9.7e-07 m"``: the readings of a step size ``v`` beyond :data:`STEP_RANGE` of ``unit``
+    (``"m"`` or ``"rad"``) in the units people read steps in (nm and µm, µrad and mrad) that are step sizes."""
+    lo, hi = STEP_RANGE[unit]
+    if not math.isfinite(v) or abs(v) <= hi:
+        return None
+    fits = [(u, v * f) for u, f in _STEP_DISPLAY[unit] if lo <= abs(v * f) <= hi]
+    if not fits:
+        return None
+    said = ", ".join(f"{v:.6g} {u} is {x:.6g} {unit}" for u, x in fits)
+    return f"in {' or '.join(u for u, _ in fits)}? {said}"
+
+
 def _check_scale(v: float, unit: str, where: str, signed: bool) -> None:
     lo, hi = STEP_RANGE[unit]
     size = abs(v) if signed else v

@@ -31,6 +31,7 @@ __all__ = [
     "format_quantity",
     "format_spread",
     "bare_number_problem",
+    "khz_slip",
 ]
 
 LENGTH_UNITS: dict[str, float] = {
@@ -251,3 +252,15 @@ def bare_number_problem(text: str, kind: str, span: float | None = None) -> str 
     mean = " or ".join(f"{t}{u}" for u in options)
     takes = "an angle takes deg, rad, mrad or urad" if kind == "angle" else "a length takes m, mm, um or nm"
     return f"{t} has no unit: did you mean {mean}? ({takes})"
+
+
+def khz_slip(hz: float, lo: float, hi: float) -> str:
+    """`` (in kHz? 48 kHz is 48000 Hz: rates are in Hz)`` for a rate outside ``[lo, hi]`` Hz that is inside it
+    read in kHz (a sound card's 48 for 48 kHz), else ``""``.
+
+    >>> khz_slip(48, 1000, 1e6)
+    ' (in kHz? 48 kHz is 48000 Hz: rates are in Hz)'
+    """
+    if not math.isfinite(hz) or lo <= hz <= hi or not lo <= hz * 1e3 <= hi:
+        return ""
+    return f" (in kHz? {hz:g} kHz is {hz * 1e3:g} Hz: rates are in Hz)"

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from .. import records
+from ..units import khz_slip
 from .paramfield import param
 
 __all__ = ["TUNING_FILE", "Tuning", "TuningFileError", "TuningFileParams", "default_frame"]
@@ -44,7 +45,9 @@ class TuningFileParams:
     def rate_problem(self, sample_rate: float) -> str | None:
         """Why ``sample_rate`` (Hz) cannot be tuned or heard at, or None."""
         lo, hi = self.sample_rate_range
-        return None if lo <= sample_rate <= hi else f"sample rate {sample_rate:g} Hz is outside {lo}-{hi} Hz"
+        if lo <= sample_rate <= hi:
+            return None
+        return f"sample rate {sample_rate:g} Hz is outside {lo}-{hi} Hz{khz_slip(sample_rate, lo, hi)}"
 
 
 TUNING_FILE = TuningFileParams()

@@ -375,7 +375,10 @@ def pose_options(q1: str, q2: str, q3: str, theta: str, psi: str) -> Pose:
             values.append(parse(text))
         except typer.BadParameter as e:
             fail(f"{flag}: {e.message}")
-    return Pose(*values)
+    try:
+        return Pose(*values)
+    except ValueError as e:  # no arm's pose (-90rad: degrees?); an arm's own stops are its planner's to check
+        fail(str(e))
 
 
 def day_option(value: str | None) -> str | None:

@@ -33,15 +33,17 @@ so averages over a traverse have a closed form (see :mod:`stickslip.models`).
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from collections.abc import Iterable
+from typing import Any, NamedTuple, Self, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..joints import JOINTS, Q3_MAX, ROTARY_SPAN, JointSet, JointSpec, joint_spec
+from ..joints import JOINTS, Q3_MAX, ROTARY_SPAN, JointSet, JointSpec, coordinate_problem, joint_spec, tilt_problem
 
 __all__ = [
     "Pose",
+    "pose_problems",
     "JointSpec",
     "JointSet",
     "JOINTS",
@@ -60,18 +62,54 @@ __all__ = [
     "rotary_load_coefficients",
 ]
 
-class Pose(NamedTuple):
-    """A configuration of the arm and its base: joints (rad, rad, m) and tilt (rad).
-
-    For a traverse or a move of joint j, ``q{j}`` is ignored (the moving joint's own
-    coordinate comes separately).
-    """
-
+class _PoseFields(NamedTuple):
     q1: float = 0.0
     q2: float = -math.pi / 2
     q3: float = 0.0
     theta: float = 0.0
     psi: float = 0.0
+
+
+_P = TypeVar("_P", bound="Pose")
+
+
+class Pose(_PoseFields):
+    """A configuration of the arm and its base: joints (rad, rad, m) and tilt (rad).
+
+    For a traverse or a move of joint j, ``q{j}`` is ignored (the moving joint's own
+    coordinate comes separately).
+
+    Checked once, here, for what holds on every arm (:func:`pose_problems`): finite numbers,
+    ``q1``, ``q2`` within a full turn, ``q3`` within a metre, the tilt within [-pi, pi]; else
+    ``ValueError`` naming the value and its likely unit slip (``Pose(q2=-90)``: degrees). An
+    arm's own stops are checked where the arm is known (:meth:`JointSpec.range_problem`).
+    """
+
+    __slots__ = ()
+
+    def __new__(
+        cls, q1: float = 0.0, q2: float = -math.pi / 2, q3: float = 0.0, theta: float = 0.0, psi: float = 0.0
+    ) -> Self:
+        problems = pose_problems(q1, q2, q3, theta, psi)
+        if problems:
+            raise ValueError("pose: " + "; ".join(problems))
+        return super().__new__(cls, q1, q2, q3, theta, psi)
+
+    @classmethod
+    def _make(cls: type[_P], iterable: Iterable[Any]) -> _P:  # type: ignore[override]  # (mypy: NamedTuple _NT)
+        """As the named tuple's, but checked (so :meth:`_replace` is too)."""
+        return cls(*iterable)
+
+
+def pose_problems(q1: float, q2: float, q3: float, theta: float, psi: float) -> list[str]:
+    """Why ``(q1, q2, q3, theta, psi)`` is no arm's pose, whatever the arm (empty if it can be one).
+
+    :func:`~stickslip.joints.coordinate_problem` of each joint and
+    :func:`~stickslip.joints.tilt_problem` of the tilt: not finite, a joint beyond a full turn
+    (1, 2) or a metre (3), a tilt outside [-pi, pi].
+    """
+    problems = [p for j, q in ((1, q1), (2, q2), (3, q3)) if (p := coordinate_problem(f"q{j}", j, q))]
+    return problems + [p for name, v in (("theta", theta), ("psi", psi)) if (p := tilt_problem(name, v))]
 
 
 def zeta(q2: ArrayLike, psi: ArrayLike) -> NDArray[np.float64]:

@@ -71,6 +71,12 @@ class SingularPose(ValueError):
     """A pose or path too close to the singularity (the tip on joint 1's axis)."""
 
 
+def _mm_slip(v: float) -> str:
+    """`` (in mm? ...)`` for a geometry length beyond :data:`_MAX_SIZE` that is one in millimetres (a bare 21)."""
+    mm = v * 1e-3
+    return f" (in mm? {v:.6g} mm is {mm:.6g} m: lengths are in metres)" if abs(mm) <= _MAX_SIZE < abs(v) else ""
+
+
 @dataclass(frozen=True)
 class Geometry:
     """The two lengths that place the tip: ``offset`` and ``length``, m.
@@ -98,9 +104,11 @@ class Geometry:
                 raise ValueError(f"geometry {name} = {v!r} must be a finite length in metres")
             object.__setattr__(self, name, float(v))
         if not 0.0 < self.length <= _MAX_SIZE:
-            raise ValueError(f"geometry length = {self.length:.6g} m must be in (0, {_MAX_SIZE:g}] m")
+            raise ValueError(f"geometry length = {self.length:.6g} m must be in (0, {_MAX_SIZE:g}] m"
+                             + _mm_slip(self.length))
         if not abs(self.offset) <= _MAX_SIZE:
-            raise ValueError(f"geometry offset = {self.offset:.6g} m must be within ±{_MAX_SIZE:g} m")
+            raise ValueError(f"geometry offset = {self.offset:.6g} m must be within ±{_MAX_SIZE:g} m"
+                             + _mm_slip(self.offset))
 
     @classmethod
     def parse(cls, text: str) -> Geometry:

@@ -14,7 +14,15 @@ from numpy.typing import NDArray
 from .. import kinematics as kin
 from ..models import direction_label
 from .chunks import _Chunk, _equal, _floats, _joint_cells, _moving_within, _open_table, _pose_ok, stream_table
-from .rows import TableError, _csv_problem, _parse_float, check_pose, is_history_header, separator_problem
+from .rows import (
+    TableError,
+    _csv_problem,
+    _parse_float,
+    check_pose,
+    is_history_header,
+    separator_problem,
+    unit_column_problem,
+)
 from .table import _read_table_text
 
 POSE_TABLE_REQUIRED = ("joint", "q1", "q2", "q3", "theta", "psi")
@@ -75,10 +83,11 @@ def _pose_header(record: list[str] | None, source: str) -> list[str]:
     if missing and (sep := separator_problem(header)) is not None:
         raise TableError([f"{source}:1: {sep}"])
     if missing:
+        named = unit_column_problem(header, (*POSE_TABLE_REQUIRED, "start", "end"))
         raise TableError(
             [
                 f"{source}:1: header lacks {', '.join(missing)} (needs {','.join(POSE_TABLE_REQUIRED)}, "
-                "and direction and/or start,end)"
+                "and direction and/or start,end)" + (f"; {named}" if named else "")
             ]
         )
     return header

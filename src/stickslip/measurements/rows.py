@@ -11,12 +11,14 @@ from dataclasses import asdict, dataclass, replace
 
 from .. import kinematics as kin
 from ..clock import day_label_problem
+from ..joints import TILT_LIMIT, coordinate_problem, tilt_problem
 from ..models import direction_label
 from ..records import unguard_cell
+from ..units import ANGLE_UNITS, LENGTH_UNITS
 
 HEADER = ("day", "joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "end", "steps")
 POSE_COLUMNS = ("q1", "q2", "q3", "theta", "psi")
-_TILT_LIMIT = math.pi + 1e-6
+_TILT_LIMIT = TILT_LIMIT
 
 
 @dataclass(frozen=True)
@@ -104,10 +106,7 @@ def check_pose(joint: int, values: dict[str, float], joints: Mapping[int, kin.Jo
         problem = specs[j].range_problem(f"q{j}", values[f"q{j}"])
         if problem:
             problems.append(problem)
-    for name in ("theta", "psi"):
-        v = values[name]
-        if not -_TILT_LIMIT <= v <= _TILT_LIMIT:
-            problems.append(f"{name} = {v:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    problems += [p for name in ("theta", "psi") if (p := tilt_problem(name, values[name]))]
     return problems
 
 
@@ -273,6 +272,45 @@ def is_history_header(header: Sequence[str]) -> bool:
     return bool(header) and header[0].strip().startswith("{") and "stickslip-history" in ",".join(header)
 
 
+_JOINTS = "rad or m, the joint's unit"
+_SI_COLUMN = {"q1": "rad", "q2": "rad", "theta": "rad", "psi": "rad", "q3": "m", "start": _JOINTS, "end": _JOINTS,
+              "gamma": _JOINTS, "sigma": _JOINTS}
+_UNIT_NAMED = re.compile(r"(?P<col>[A-Za-z0-9]+)\s*(?:[_ ]\s*|\[\s*|\(\s*)(?P<unit>[^\s\])]+)\s*[\])]?")
+_UNIT_WORDS = {"degrees", "degree", "microns", "micron"}
+_SI_WORDS = {"radians", "radian", "metres", "meters", "metre", "meter"}
+
+
+def unit_column_problem(names: Sequence[str], expected: Sequence[str]) -> str | None:
+    """What the columns of ``names`` named with their unit (``q2_deg``, ``q2 [deg]``, ``start_um``) should be.
+
+    A table's columns are SI and carry no unit in their names: a column named with another
+    unit is in it more often than not, so the message says to convert it, not only to rename
+    it; one named with its SI unit (``gamma [m]``) is told its name. ``None`` when no name is
+    a column of ``expected`` with a unit.
+    """
+    named: dict[str, list[str]] = {}  # SI unit -> columns in another unit
+    renamed: list[str] = []  # columns named with their SI unit: the values may be right, the name is not
+    shown = []
+    for name in names:
+        m = _UNIT_NAMED.fullmatch(name.strip())
+        if m is None or m.group("col") not in expected or m.group("col") not in _SI_COLUMN:
+            continue
+        unit, col = m.group("unit"), m.group("col")
+        if unit in ("m", "rad") or unit.lower() in _SI_WORDS:
+            renamed.append(col)
+        elif unit in LENGTH_UNITS or unit in ANGLE_UNITS or unit.lower() in _UNIT_WORDS:
+            named.setdefault(_SI_COLUMN[col], []).append(col)
+        else:
+            continue
+        shown.append(name.strip())
+    if not shown:
+        return None
+    what = [f"write {', '.join(cols)} in {si}" for si, cols in named.items()]
+    what += [f"call it {', '.join(renamed)}"] if renamed else []
+    verb = "names" if len(shown) == 1 else "name"
+    return f"{', '.join(shown)} {verb} a unit: the columns are SI and named without one ({'; '.join(what)})"
+
+
 def check_header(header: list[str] | None, source: str, expected: Sequence[str]) -> None:
     """Raise :class:`TableError` unless ``header`` (a table's first record) is exactly ``expected``, saying why."""
     if header is None:
@@ -298,6 +336,8 @@ def check_header(header: list[str] | None, source: str, expected: Sequence[str])
         detail.append(f"{n} column{'s' if n > 1 else ''} without a name: delete the empty columns at the end")
     if not detail:
         detail.append("columns out of order")
+    if (named := unit_column_problem(extra, expected)) is not None:
+        detail.append(named)
     if not set(header) & set(expected) and sum(_is_number(h) for h in header) >= 3:  # a table whose top was cut
         detail = ["line 1 is a row of numbers, not the header: the table's first line is missing (was the top "
                   "of the file cut?); put the header line back"]
@@ -315,8 +355,9 @@ def traverse_problems(t: Traverse) -> list[str]:
     session label, a joint other than 1, 2, 3, a direction other than ``"+"``/``"-"``, a
     number that is not finite, a step count that is not a whole number in 1 ..
     :data:`MAX_STEPS`, a traverse that does not move or moves against its direction,
-    a base tilt outside [-pi, pi]. The store refuses such a traverse, so that every stored
-    one is exported as a table that imports again.
+    a position no arm's joint takes (:func:`~stickslip.joints.coordinate_problem`: beyond a full
+    turn, or a metre for joint 3: degrees, or mm as m), a base tilt outside [-pi, pi]. The store
+    refuses such a traverse, so that every stored one is exported as a table that imports again.
     """
     why = day_label_problem(str(t.day))
     return ([f"day: {why}"] if why is not None else []) + _value_problems(t)
@@ -325,7 +366,7 @@ def traverse_problems(t: Traverse) -> list[str]:
 def check_traverses(traverses: Sequence[Traverse], limit: int = 20) -> None:
     """Raise :class:`TableError` naming each traverse (by its index) that :func:`traverse_problems` refuses.
 
-    What a calibration checks before it fits (a tilt in degrees, steps 0, a nan): rows built in
+    What a calibration checks before it fits (a tilt or ``q2`` in degrees, steps 0, a nan): rows built in
     Python, not read from a table, were fitted as they were. The session label is checked once
     per label, without the spreadsheet-date rule (a label stored before it is still fitted);
     at most ``limit`` lines.
@@ -368,9 +409,10 @@ def _value_problems(t: Traverse) -> list[str]:
         problems.append(
             f"direction {t.direction!r} disagrees with end - start = {end - start:.6g} ('+' means end > start)"
         )
-    for name in ("theta", "psi"):
-        if not -_TILT_LIMIT <= float(nums[name]) <= _TILT_LIMIT:
-            problems.append(f"{name} = {nums[name]:.6g} rad is outside [-pi, pi] (angles are in radians)")
+    if t.joint in (1, 2, 3):  # no arm's position (arm-independent: an arm's stops are the table reader's)
+        at = {"q1": 1, "q2": 2, "q3": 3, "start": t.joint, "end": t.joint}
+        problems += [p for name, j in at.items() if (p := coordinate_problem(name, j, float(nums[name])))]
+    problems += [p for name in ("theta", "psi") if (p := tilt_problem(name, float(nums[name])))]
     return problems
 
 

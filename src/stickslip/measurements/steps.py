@@ -31,7 +31,15 @@ from typing import TextIO
 from .. import kinematics as kin
 from ..clock import day_label_problem
 from ..models import direction_label
-from ..records import MAX_TABLE_BYTES, STEP_RANGE, atomic_write, guard_cell, read_text_bounded, unguard_cell
+from ..records import (
+    MAX_TABLE_BYTES,
+    STEP_RANGE,
+    atomic_write,
+    guard_cell,
+    read_text_bounded,
+    step_unit_slip,
+    unguard_cell,
+)
 from .rows import TableError, Traverse, _csv_problem, _parse_steps, check_header, check_pose, number_problem
 
 __all__ = [
@@ -147,8 +155,9 @@ def _problems(row: dict[str, str], where: str) -> tuple[StepSize | None, list[st
     unit = kin.joint_spec(joint).unit
     lo, hi = STEP_RANGE[unit]
     if not lo <= nums["gamma"] <= hi:
+        slip = step_unit_slip(nums["gamma"], unit)
         problems.append(f"{where}: gamma = {nums['gamma']:.6g} {unit} is not a step size of joint {joint} "
-                        f"({lo:g}..{hi:g} {unit}; SI units)")
+                        f"({lo:g}..{hi:g} {unit}; SI units{f'; {slip}' if slip else ''})")
     if not 0 < nums["sigma"] <= nums["gamma"]:
         problems.append(f"{where}: sigma = {nums['sigma']:.6g} {unit} must be > 0 and at most gamma")
     problem = kin.JOINTS[joint].range_problem(f"q{joint}", nums[f"q{joint}"])

@@ -35,6 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import kinematics as kin
+from ..joints import MAX_STROKE, MAX_TURN, TILT_LIMIT, coordinate_problem, tilt_problem
 
 FloatArray = NDArray[np.float64]
 
@@ -320,6 +321,7 @@ class JointModel:
         ``q1``, ``q2`` rad, ``q3`` m, ``theta``, ``psi`` rad (array_like, broadcast). The moving
         joint's own column matters for rotary joints.
         """
+        _check_pose_arrays("gamma", {"q1": q1, "q2": q2, "q3": q3, "theta": theta, "psi": psi})
         p = self.params
         if isinstance(p, PrismaticParams):
             return gamma_prismatic(q2, theta, psi, p.a, p.b, p.c, q1=q1)
@@ -360,10 +362,33 @@ class JointModel:
         integral of ``1 / gamma`` along the traverse. The fixed joints are taken from ``q1, q2, q3``;
         the moving joint's column is ignored.
         """
+        _check_pose_arrays("average_gamma", {"q1": q1, "q2": q2, "q3": q3, "theta": theta, "psi": psi,
+                                             "start": start, "end": end}, self.joint)
         A, al, be = self.rotary_coefficients(q1, q2, q3, theta, psi)
         n = steps_between(start, end, A, al, be)
         out: NDArray[np.float64] = np.abs(np.asarray(end, dtype=float) - np.asarray(start, dtype=float)) / n
         return out
+
+
+def _check_pose_arrays(what: str, values: dict[str, ArrayLike], joint: int = 0) -> None:
+    """Refuse a pose no arm takes, element-wise (:func:`~stickslip.joints.coordinate_problem`, ``tilt_problem``):
+    ``ValueError`` naming the first such value and its likely unit slip (``q2 = -90``, degrees, gave a step)."""
+    for name, v in values.items():
+        j = joint if name in ("start", "end") else _POSE_JOINT[name]
+        bound = TILT_LIMIT if j == 0 else (MAX_STROKE if j == 3 else MAX_TURN)
+        if type(v) is float and -bound <= v <= bound:  # a scalar within: no array made (nan is not)
+            continue
+        a = np.asarray(v, dtype=float)
+        if a.size and -bound <= a.min() and a.max() <= bound:  # (a nan makes min and max nan: not within)
+            continue
+        bad = ~(np.abs(a) <= bound)
+        if bad.any():
+            x = float(a[bad].flat[0])
+            problem = tilt_problem(name, x) if j == 0 else coordinate_problem(name, j, x)
+            raise ValueError(f"JointModel.{what}: {problem}")
+
+
+_POSE_JOINT = {"q1": 1, "q2": 2, "q3": 3, "theta": 0, "psi": 0}
 
 
 def _check_joint_model(joint: object, direction: object, params: object) -> None:

@@ -164,7 +164,7 @@ class Planner:
         self.spec = kin.joint_spec(joint)
         self.joint = self.spec.number
         # |q| beyond a full turn (rotary) or a metre (prismatic) is no joint's position: degrees, or mm as m
-        self._bound = 2.0 * math.pi if self.spec.kind == "rotary" else 1.0
+        self._bound = self.spec.bound
         if not isinstance(pose, kin.Pose):  # [0, -1, 0] was "zip() argument 2 is shorter than argument 1"
             if len(pose) != len(kin.Pose._fields):
                 raise ValueError(f"pose = {pose!r}: a Pose or its five numbers (q1, q2 rad, q3 m, theta, psi rad)")
@@ -221,7 +221,7 @@ class Planner:
             if not math.isfinite(q):
                 return ValueError(f"{name} = {q!r} must be a finite position in {self.spec.unit}")
             if abs(q) > self._bound:
-                what = "a full turn: radians, not degrees" if self._bound != 1.0 else "a metre: metres, not mm or µm"
+                what = "a full turn: radians, not degrees" if self.spec.rotary else "a metre: metres, not mm or µm"
                 return ValueError(f"{name} = {q:.6g} {self.spec.unit} is more than {what} (joint {self.joint})")
         return ValueError(f"positions {qs!r}")  # (not reached: called only when one is out)
 

@@ -22,7 +22,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from ..devices.base import SECRET_OPTIONS, device_key, redact_url
-from ..joints import MM3A_FILE
+from ..joints import MAX_STROKE, MAX_TURN, MM3A_FILE
 from ..kinematics import Geometry
 from ..records import FILE_URL_DATABASE, is_file_url, read_text_bounded
 from ..units import UnitError, parse_angle, parse_length
@@ -151,6 +151,9 @@ class _Values:
             raise self.fail(key, f"{value!r} is not finite")
         if kind == "length" and abs(v) > _MAX_SIZE:
             raise self.fail(key, f"{value!r} is {v:.3g} m: more than {_MAX_SIZE:g} m (a unit slip?)")
+        if kind == "length" and abs(v) > MAX_STROKE and _BARE.match(str(value)):  # tool = [0, 0, -5]: 5 mm meant
+            raise self.fail(key, f"{value!r} has no unit, so it is {value} m: more than a metre; write its unit "
+                            f"(\"{value}mm\" for millimetres, \"{value}m\" if metres are meant)")
         if kind == "angle" and abs(v) > 2.0 * math.pi and _BARE.match(str(value)):
             raise self.fail(key, f"{value!r} has no unit, so it is {value} rad ({math.degrees(v):.4g} deg): more "
                             f"than a turn; write its unit (\"{value}deg\" for degrees)")
@@ -422,6 +425,11 @@ class _Reader(_Values):
             if "range" not in d:
                 raise self.fail(jk, "needs its range = [lower, upper]")
             lo, hi = self.pair(d["range"], jk + ("range",), unit)
+            if (far := max(abs(lo), abs(hi))) > (bound := MAX_TURN if jkind == "rotary" else MAX_STROKE):
+                what = f"{math.degrees(far):.6g} deg: beyond a full turn" if jkind == "rotary" else \
+                    f"{far:.6g} m: beyond a metre"
+                raise self.fail(jk + ("range",), f"reaches {what} either way, no joint's position (a unit slip?); "
+                                f"positions lie within ±{bound:.6g} {'rad' if jkind == 'rotary' else 'm'}")
             stops = d.get("stops", ["lower", "upper"])
             if (not isinstance(stops, list) or any(s not in ("lower", "upper") for s in stops)
                     or len(set(stops)) != len(stops)):

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from .. import kinematics as kin
 from ..devices.base import DeviceError, DeviceInfo, check_setting, check_steps
+from ..joints import tilt_problem
 from ..models import JointModel, PrismaticParams, RotaryParams, direction_sign
 from .step_log import StepLog
 from .true_steps import _CHUNK as _CHUNK  # sim.physics steps in the same chunks
@@ -299,8 +300,8 @@ class SimulatedMM3A(TrueSteps, StepLog):
             if v is None:
                 continue
             v = _number(name, v, "rad")
-            if not -math.pi - 1e-9 <= v <= math.pi + 1e-9:
-                raise ValueError(f"{name} = {v:.6g} rad is outside [-pi, pi]")
+            if (problem := tilt_problem(name, v)) is not None:
+                raise ValueError(problem)
             setattr(self, f"_{name}", v)
 
     def position(self, joint: int) -> float:

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ...records import regular_file
+from ...units import khz_slip
 from ..paramfield import param
 from .files import AudioSourceError, read_wav
 
@@ -108,7 +109,7 @@ def read_vibration(
     if rate is None:
         raise AudioSourceError(f"{p}: no sample rate: add a '# sample_rate_hz=...' line, or give it (--sample-rate)")
     if not sample_rate_ok(rate):
-        raise AudioSourceError(f"{p}: sample rate {rate:g} Hz is outside 1000-1000000 Hz")
+        raise AudioSourceError(f"{p}: sample rate {rate:g} Hz is outside 1000-1000000 Hz{khz_slip(rate, 1e3, 1e6)}")
     if not np.all(np.isfinite(x)):
         k = int(np.argmax(~np.isfinite(x)))
         raise AudioSourceError(f"{p}: data row {k + 1} holds {float(x[k])!r}, not a finite number")
