@@ -254,3 +254,37 @@ def test_a_sample_rate_in_khz_is_refused_with_the_slip_named(tmp_path: Path) -> 
     assert TUNING_FILE.rate_problem(44.1) == ("sample rate 44.1 Hz is outside 2000-192000 Hz (in kHz? 44.1 kHz is "
                                               "44100 Hz: rates are in Hz)")
     assert TUNING_FILE.rate_problem(500.0) == "sample rate 500 Hz is outside 2000-192000 Hz"  # 500 kHz is no rate
+
+
+def test_a_move_target_given_as_a_number_in_degrees_names_the_slip() -> None:
+    """The control room's HTTP API and Python take SI numbers: {"to": -60} meant as degrees was refused as 'the
+    target -3437.75 deg is outside ...; positions are in deg', which read as if -60 had been taken as degrees
+    (units58). Now it names the slip; a relative move (by) or a near miss gets no guess."""
+    from stickslip.devices.positions import DeviceState
+    from stickslip.procedures.move import TargetOutOfRange, target_of
+
+    state = DeviceState("sim://", {1: 0.0, 2: -math.pi / 2, 3: 0.0}, dict.fromkeys((1, 2, 3), "set"))
+    with pytest.raises(TargetOutOfRange) as e:
+        target_of(state, 2, to=-60.0)
+    assert "positions are in deg (in degrees? -60 deg is -1.0472 rad: angles are in radians)" in str(e.value)
+    with pytest.raises(TargetOutOfRange) as e:
+        target_of(state, 2, by=-60.0)
+    assert str(e.value).endswith("positions are in deg"), str(e.value)
+    with pytest.raises(TargetOutOfRange) as e:
+        target_of(state, 3, to=0.0121)  # 12.1 mm: a near miss, not a unit
+    assert str(e.value).endswith("positions are in µm"), str(e.value)
+
+
+def test_a_kept_position_or_tilt_set_from_python_in_degrees_names_the_slip() -> None:
+    """DeviceState.set_position / set_tilt (the Python API, `where --set` after parsing, a server's JSON) said only
+    'outside the range' for q2 = -90 meant as degrees (units58)."""
+    from stickslip.devices.positions import DeviceState
+
+    state = DeviceState("sim://", {1: 0.0, 2: -math.pi / 2, 3: 0.0}, dict.fromkeys((1, 2, 3), "set"))
+    with pytest.raises(ValueError, match=re.escape("(in degrees? -90 deg is -1.5708 rad: angles are in radians)")):
+        state.set_position(2, -90.0)
+    with pytest.raises(ValueError, match=re.escape("theta = 45 rad is outside [-pi, pi] (angles are in radians)")):
+        state.set_tilt(theta=45.0)
+    with pytest.raises(ValueError, match="outside joint 3's range") as e:
+        state.set_position(3, 0.0121)  # a near miss: no guess
+    assert "in mm" not in str(e.value) and state.positions[2] == -math.pi / 2 and state.theta == 0.0

@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from .. import kinematics as kin
-from ..joints import JointSet, JointSpec
+from ..joints import JointSet, JointSpec, tilt_problem
 from ..records import atomic_write_text, check_version, dumps_json, json_kind, loads_json, read_json
 from ..units import format_position
 from .base import command_url, device_key
@@ -161,9 +161,11 @@ class DeviceState:
         q = float(q)
         if spec.range_problem(f"q{spec.number}", q):
             shown = format_position(q, spec) if math.isfinite(q) else repr(q)
+            slip = spec.unit_slip(q)  # a Python or JSON number is SI: q2 = -90 meant as degrees
             raise ValueError(
                 f"q{spec.number} = {shown} is outside joint {spec.number}'s range "
                 f"[{format_position(spec.lower, spec)}, {format_position(spec.upper, spec)}]"
+                + (f" ({slip})" if slip else "")
             )
         if source not in SOURCES:
             raise ValueError(f"source must be one of {SOURCES}, got {source!r}")
@@ -234,10 +236,9 @@ class DeviceState:
         for name, v in (("theta", theta), ("psi", psi)):
             if v is None:
                 continue
-            v = float(v)
-            if not (math.isfinite(v) and -math.pi - 1e-12 <= v <= math.pi + 1e-12):
-                raise ValueError(f"{name} = {v:.6g} rad is outside [-pi, pi]")
-            setattr(self, name, v)
+            if problem := tilt_problem(name, v):
+                raise ValueError(problem)
+            setattr(self, name, float(v))
 
     def to_json(self) -> dict[str, Any]:
         """The JSON shape kept in the store (SI units), format :data:`STATE_VERSION`."""

@@ -331,10 +331,12 @@ def target_of(state: DeviceState, joint: int, by: float | None = None, to: float
     q_from = state.positions[joint]
     q_to = to if to is not None else q_from + float(by or 0.0)
     if not spec.contains(q_to):
+        slip = spec.unit_slip(q_to) if to is not None else None  # JSON and Python numbers are SI: -60 meant as deg
         raise TargetOutOfRange(
             f"the target {format_position(q_to, spec)} is outside joint {joint}'s range "
             f"[{format_position(spec.lower, spec)}, {format_position(spec.upper, spec)}] "
             f"(from {format_position(q_from, spec)}); positions are in {position_display_unit(spec)}"
+            + (f" ({slip})" if slip else "")
         )
     return q_from, min(max(q_to, spec.lower), spec.upper)
 
