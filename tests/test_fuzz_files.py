@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -364,3 +365,17 @@ def test_import_encodings(tmp_path, bom, eol, encoding, huge, where):
     except UnicodeEncodeError:
         p.write_bytes(bom + text.replace("\n", eol).encode("utf-8"))
     check(["import", p, "-d", "sim://", "--db", tmp_path / "s.db"])
+
+
+def test_a_camera_calibration_at_no_arms_pose_is_refused_naming_the_file(tmp_path):
+    """A Pose checks itself since units58; a camera calibration file whose pose is in degrees (q2 = -90) raised the
+    Pose's plain ValueError without the file's name (units58's report). Now it is the file's JacobianError."""
+    from stickslip.vision.jacobian import JacobianError, MeasuredJacobian
+
+    doc = json.loads(json.dumps(_JAC))
+    doc["pose"]["q2"] = -90.0
+    p = tmp_path / "cam.json"
+    p.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(JacobianError, match=re.escape(f"{p}: pose: ")) as e:
+        MeasuredJacobian.load(p)
+    assert "q2" in str(e.value)

@@ -595,7 +595,12 @@ class MeasuredJacobian:
         pose_d = data.get("pose")
         if not isinstance(pose_d, dict) or set(pose_d) != set(kin.Pose._fields):
             raise JacobianError(f"{where}: pose must have {', '.join(kin.Pose._fields)}")
-        pose = kin.Pose(**{k: num(pose_d[k], f"pose.{k}") for k in kin.Pose._fields})
+        try:
+            pose = kin.Pose(**{k: num(pose_d[k], f"pose.{k}") for k in kin.Pose._fields})
+        except ValueError as e:  # no arm's pose (a Pose checks itself): named with the file, as every other field
+            if isinstance(e, JacobianError):
+                raise
+            raise JacobianError(f"{where}: pose: {e}") from None
         raw = data.get("directions")
         if not isinstance(raw, list) or not raw:
             raise JacobianError(f"{where}: directions must be a non-empty list")
