@@ -195,6 +195,19 @@ def test_the_server_refuses_a_move_on_another_controller(tmp_path: Path) -> None
         room.close()
 
 
+@pytest.mark.parametrize("url, warned", [
+    ("mm3a:///dev/ttyUSB0", True), ("anc300:///dev/ttyACM1?password=x", True),
+    ("mm3a:///dev/serial/by-id/usb-FTDI_FT232R_A1B2C3-if00-port0", False), ("mm3a://COM3", False),
+    ("anc300://192.168.1.2", False), ("sim://", False),
+])
+def test_where_suggests_the_stable_name_of_a_port_named_by_its_order(url: str, warned: bool, tmp_path: Path) -> None:
+    r = runner.invoke(app, ["where", "-d", url, "--db", str(tmp_path / "s.db"), "--offline"])
+    assert r.exit_code == 0, r.output
+    text = " ".join(r.output.split())
+    assert ("named by the order the USB adapters were found" in text) is warned, text
+    assert ("/dev/serial/by-id/" in text) is (warned or "by-id" in url)
+
+
 def test_a_bluesky_move_on_another_controller_sends_nothing(RE: object) -> None:
     """The axis opens its controller once and moves it through `drive`: checked there too (bluesky/axis.py)."""
     pytest.importorskip("ophyd_async")
