@@ -230,3 +230,20 @@ def test_a_bluesky_move_on_another_controller_sends_nothing(RE: object) -> None:
     assert other.steps_simulated == 0
     with Store.open() as store:
         assert set(load_state(store, "sim://").why.values()) == {SWAPPED}
+
+
+def test_an_arm_sharing_its_controller_is_told_to_re_reference_with_its_rig(tmp_path: Path) -> None:
+    """A rig's arm on a shared controller keeps its positions (and its identity) under ``KEY#arm=NAME``: the advice
+    names the arm, not ``-d URL`` (which would re-reference the controller's own key, not the arm's)."""
+    from stickslip.devices.identity import check_controller
+    from stickslip.devices.positions import JsonStateFile, save_state
+
+    store = JsonStateFile(tmp_path / "state.json")
+    state = load_state(store, "sim://#arm=probe")
+    state.set_position(3, 2e-3)
+    save_state(store, state)
+    check_controller(store, "sim://", SimulatedMM3A(seed=0), [state])  # first opening: kept, nothing said
+    assert kept_identity(store, "sim://#arm=probe") == "simulator seed 0" and kept_identity(store, "sim://") is None
+    with pytest.raises(ControllerChanged, match=r"`stickslip where --rig RIG --arm probe --set J=min`"):
+        check_controller(store, "sim://", SimulatedMM3A(seed=2), [state])
+    assert load_state(store, "sim://#arm=probe").uncertain[3] == (0.0, kin.JOINTS[3].upper)

@@ -79,11 +79,13 @@ def check_controller(store: StateStore, url: str, dev: Controller, states: Seque
         _keep(store, state.device, identity)
     if changed:
         state, kept = changed[0]
+        _, arm_tag, arm = state.device.partition("#arm=")  # a rig's arm sharing its controller: its own key
+        where = f"--rig RIG --arm {arm}" if arm_tag else f"-d {command_url(url)}"
         raise ControllerChanged(
             f"another controller answers at {redact_url(url)}: {identity}, where the positions were kept for "
             f"{kept}; nothing was sent, and every joint of {redact_url(state.device)} is now uncertain over its "
-            f"whole range: re-reference each at an end stop (`stickslip where -d {command_url(url)} --set "
-            "J=min` after driving joint J to its lower stop), or open the URL that reaches the other controller"
+            f"whole range: re-reference each at an end stop (`stickslip where {where} --set J=min` after driving "
+            "joint J to its lower stop), or open the URL that reaches the other controller"
         )
 
 
