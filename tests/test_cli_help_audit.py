@@ -453,3 +453,5 @@ def test_where_says_a_kept_position_assumes_nothing_else_moved_the_arm():
         assert "The positions are kept, not measured" in said
         assert "reference the joints again (--set): stickslip cannot tell" in said
         assert "another controller or arm was connected under this URL" in said
+        assert "a SmarAct MCS2 says its serial number, an MCS its system id" in said  # those are compared (ident59)
+        assert "/dev/serial/by-id/" in said

@@ -214,7 +214,9 @@ def test_a_move_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path,
     cal = tmp_path / "cal.json"
     assert run("calibrate", table, "-o", cal).exit_code == 0
     real = sqlite_backend._Connection.execute
-    for first, kept in ((4, "joint 3 uncertain, 2000 µm to 2097.2 µm"), (5, "joint 3 2097.2 µm (dead-reckoned)")):
+    # the commits: the lock, the pose, the controller's identity kept at its first opening (devices.identity), then
+    # the first burst's intent (5) and its confirmation (6)
+    for first, kept in ((5, "joint 3 uncertain, 2000 µm to 2097.2 µm"), (6, "joint 3 2097.2 µm (dead-reckoned)")):
         db = tmp_path / f"s{first}.db"
         assert run("where", "--offline", "--db", db, "--set", "3=2mm").exit_code == 0
         commits = {"n": 0}
@@ -233,7 +235,7 @@ def test_a_move_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path,
         assert line.endswith(f"the move of joint 3 stopped at that write; as kept now: joint 1 0 deg (default); "
                              f"joint 2 -90 deg (default); {kept}"), line
         j3 = json.loads(run("where", "--offline", "--db", db, "--json").stdout)["joints"][2]  # what the line says
-        want = ("uncertain", False) if first == 4 else ("dead-reckoned", True)
+        want = ("uncertain", False) if first == 5 else ("dead-reckoned", True)
         assert (j3["source"], j3["uncertain"] is None) == want
         assert round(1e6 * (j3["uncertain"] or [j3["q"]])[-1], 1) == 2097.2
 
@@ -552,9 +554,9 @@ def test_a_reach_cut_short_by_a_full_disk_says_where_each_joint_is_kept(tmp_path
     commits = {"n": 0}
 
     def execute(self, sql, params=(), /):
-        if sql == "COMMIT":  # the lock, the pose, the first burst's intent; the disk fills before its confirmation
-            commits["n"] += 1
-            if commits["n"] >= 5:
+        if sql == "COMMIT":  # the lock, the pose, the identity kept, the first burst's intent; the disk fills before
+            commits["n"] += 1  # its confirmation
+            if commits["n"] >= 6:
                 raise sqlite3.OperationalError("database or disk is full")
         return real(self, sql, params)
 

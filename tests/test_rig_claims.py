@@ -132,7 +132,7 @@ def test_a_move_started_during_a_bluesky_move_sees_its_claim(rig: Rig, tmp_path:
     class Watch(_Opened):  # the probe's move at the axis's first write, once that write is made
         def set_state(self, device: str, key: str, value_json: Any) -> None:
             self.inner.set_state(device, key, value_json)
-            if device == rig.state_key("other"):
+            if device == rig.state_key("other") and key == "positions":  # not the controller's identity
                 seen.append(dict(self.inner.get_state(device, key)))
                 if len(seen) == 1:
                     probe_move()

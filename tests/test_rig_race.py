@@ -123,7 +123,7 @@ def test_a_claim_covers_the_gap_between_bursts(rig: Rig, tmp_path: Path) -> None
     class Watch:
         def set_state(self, device: str, key: str, value_json: Any) -> None:
             store.set_state(device, key, value_json)
-            if device == rig.state_key("probe"):
+            if device == rig.state_key("probe") and key == "positions":  # not the controller's identity
                 seen.append(dict(store.get_state(device, key)))
 
         def __getattr__(self, name: str) -> Any:

@@ -65,6 +65,7 @@ from ..devices.base import (
     device_key,
     open_device,
 )
+from ..devices.identity import ControllerChanged, check_controller
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..motion.planning import Planner
 from ..procedures.arms import on_store
@@ -163,6 +164,17 @@ class DeviceLink:
                     ctrl.set_pose(*self.load().pose)
                 self._ctrl = ctrl
             return self._ctrl
+
+    def checked(self, store: StateStore, state: DeviceState, publish: Callable[[DeviceState], None]) -> Controller:
+        """The open controller, if it is the one ``state``'s positions were kept for (devices.identity); else
+        every joint of ``state`` is left uncertain (saved, published) and :class:`MoveError` says so."""
+        dev = self.controller()
+        try:
+            check_controller(store, self.url, dev, [state])
+        except ControllerChanged as e:
+            publish(state)
+            raise MoveError(str(e)) from None
+        return dev
 
     def close(self) -> None:
         """Close the controller if this link opened it."""
@@ -574,7 +586,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
             publish(state)
             if plan.steps == 0:
                 return _MoveResult(0, 0, False, state)
-            dev = self.link.controller()
+            dev = self.link.checked(store, state, publish)
             proxy = _Interruptible(dev, self._stop_event, isinstance(dev, VirtualClock), rig_stop(store, self.guard))
             source = state.sources[joint]
 

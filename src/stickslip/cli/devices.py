@@ -463,9 +463,17 @@ def where(
     The positions are kept, not measured: stickslip reads no joint sensor (a SmarAct
     positioner's neither), so a kept position holds only while nothing else moves the
     arm. After the controller's own software or hand control moved it between commands,
-    or another controller or arm was connected under this URL, reference the joints
-    again (--set): stickslip cannot tell. A controller switched off and on between two commands
+    or, on a NanoControl or an ANC300 (which cannot say which controller they are),
+    another controller or arm was connected under this URL, reference the joints again
+    (--set): stickslip cannot tell. A controller switched off and on between two commands
     changes nothing kept (the positions are stickslip's, not the controller's).
+
+    The positions are kept for the controller that answered: a SmarAct MCS2 says its serial
+    number, an MCS its system id. A command that finds another one at the URL (two
+    controllers that swapped network addresses or serial ports) sends nothing, marks every
+    joint uncertain over its whole range ("another controller answers at this URL") and
+    asks for --set. Write a serial port as its /dev/serial/by-id/ link, which names the
+    same adapter after a reboot; for a /dev/ttyUSB0-style name where warns.
 
     Without --set or a pose option the device is opened to say whether it answers
     (--offline skips that); a device that does not answer exits 2. A NanoControl
@@ -547,6 +555,10 @@ def _print_where(result: WhereResult) -> None:
         from ..procedures.where import also_kept_warning
 
         warn(also_kept_warning(result.device, result.others))
+    from ..procedures.where import port_order_warning
+
+    if (ports := port_order_warning(result.device)) is not None:
+        warn(ports)
     line = _info_line(info) if info else None
     if line:
         say(f"  {line}")

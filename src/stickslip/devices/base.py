@@ -257,12 +257,20 @@ class DeviceInfo:
         The joints it drives (1, 2, 3 for an MM3A).
     extra : dict
         Backend-specific details (firmware version, channel map, ...).
+    identity : str or None
+        Which controller this is, as the controller itself tells it (``"MCS2 serial MCS2-00001234"``,
+        ``"MCS system id 3015"``, the simulator's ``"simulator seed 0"``); ``None``: it cannot tell (the
+        ANC300 and NanoControl drivers know only a firmware version). Compared with the one kept beside the
+        positions at every opening (:mod:`stickslip.devices.identity`): a field, not an ``extra`` entry,
+        because its absence must mean "cannot tell" for every backend, and wrappers that forward ``info``
+        carry it unchanged.
     """
 
     url: str
     model: str
     joints: tuple[int, ...] = (1, 2, 3)
     extra: dict[str, object] = field(default_factory=dict)
+    identity: str | None = None
 
 
 @runtime_checkable

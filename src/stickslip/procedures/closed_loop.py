@@ -48,6 +48,7 @@ from .. import kinematics as kin
 from ..calibration import Calibration
 from ..calibration.update import day_drift
 from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
+from ..devices.identity import open_checked
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
 from ..motion.planning import Planner
 from ..motion.reach import plan_reach
@@ -803,7 +804,7 @@ def move_seen(
         loop_geometry = kin.DEFAULT_GEOMETRY
         claim.enter_context(_claimed_start(store, request.guard, state, calibration, loop,
                                            joint_line(state, joint, q_to)))  # mark, then check, as move does
-        dev = (opener or open_device)(request.device)
+        dev = open_checked(store, request.device, opener or open_device, state)
         cam: Camera | None = None
         try:
             for w in usage_warnings(calibration, dev, request.device, joint, request.max_age_days):
@@ -886,7 +887,7 @@ def reach_seen(
         claim.enter_context(_claimed_start(store, request.guard, state, calibration, loop, joint_path(first)))
         target_v = first.target
         save_state(store, state)
-        dev = (opener or open_device)(request.device)
+        dev = open_checked(store, request.device, opener or open_device, state)
         cam: Camera | None = None
         try:
             for w in usage_warnings(calibration, dev, request.device, 3, request.max_age_days):

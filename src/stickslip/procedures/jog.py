@@ -55,6 +55,7 @@ import numpy as np
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, PoseSettable, device_key, open_device
+from ..devices.identity import open_checked
 from ..devices.positions import DeviceState, save_state
 from ..motion.reach import JointStepper, plan_reach
 from ..rig.envelope import EnvelopeViolation, SigmaGrowth
@@ -746,7 +747,7 @@ def jog(
         for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
             warn(w)
         ready()
-        dev = (opener or open_device)(request.device)
+        dev = open_checked(store, request.device, opener or open_device, state)
         keys_in: KeySource | None = None
         eyes: JogEyes | None = None
         try:

@@ -51,6 +51,7 @@ from ..devices.base import (
     redact_text,
     url_scheme,
 )
+from ..devices.identity import open_checked
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..joints import JointSet, JointSpec
 from ..motion.planning import Planner
@@ -1004,8 +1005,9 @@ def _drive_opened(
     ready: Callable[[], None],
     opener: Callable[[str], Controller],
 ) -> tuple[MoveOutcome, float | None]:
-    """Open the device, send ``plan`` in bursts, keep the state; the outcome and the simulator's true end."""
-    dev = opener(request.device)
+    """Open the device (its identity checked: :func:`~stickslip.devices.identity.open_checked`), send ``plan`` in
+    bursts, keep the state; the outcome and the simulator's true end."""
+    dev = open_checked(store, request.device, opener, state)
     try:
         for w in usage_warnings(calibration, dev, request.device, plan.joint, request.max_age_days):
             warn(w)
@@ -1085,7 +1087,7 @@ def step_joint(
         state = load_state(store, key, joints)
         state.spec(joint)  # an unknown joint is refused before the device opens
         try:
-            dev = (opener or open_device)(device)  # one that cannot be opened was sent nothing: the state stays
+            dev = open_checked(store, device, opener or open_device, state)  # one not opened was sent nothing
             try:
                 _towards_stop(state, joint, steps, f"{steps:+d} raw steps were sent")
                 save_state(store, state)  # write-ahead: uncertain before anything is sent

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from .. import kinematics as kin
 from ..calibration import Calibration
 from ..devices.base import Controller, DeviceError, KnowsTruePosition, PoseSettable, device_key, open_device
+from ..devices.identity import open_checked
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..motion.reach import JointStepper, ReachPlan, plan_reach
 from ..rig.guard import Guard
@@ -378,7 +379,7 @@ def _drive_opened(
     opener: Callable[[str], Controller],
 ) -> tuple[ReachOutcome, tuple[float, float, float] | None]:
     """Open the device, drive ``plan``, close; the outcome and the simulator's true joints."""
-    dev = opener(request.device)
+    dev = open_checked(store, request.device, opener, state)
     try:
         if simulates(dev, state):  # the simulator: start where the positions say
             assert isinstance(dev, PoseSettable)

@@ -25,6 +25,7 @@ from .. import kinematics as kin
 from ..audio.confirm import CONFIRM_S
 from ..audio.detector import Tuning, detector_for
 from ..devices.base import Controller, DeviceError, HasMicrophone, PoseSettable, VirtualClock, device_key, open_device
+from ..devices.identity import open_checked
 from ..devices.positions import DeviceState, StateStore, load_state, save_state, where_set_command
 from ..measurements import Traverse, measurements_to_csv
 from ..records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
@@ -344,7 +345,7 @@ def traverse(
                 save_state(store, state)
 
             try:
-                result = _measure(request, progress, on_warning, opener, journal)
+                result = _measure(request, progress, on_warning, _checked(store, opener, state), journal)
             except KeyboardInterrupt:
                 what = f"traverse of joint {request.joint}{request.direction}"
                 raise Interrupted(what, kept_after_interrupt(store, key, state)) from None
@@ -362,6 +363,17 @@ def traverse(
                 f"the traverse was measured but not appended to {request.append} ({e}); {stored}its row: {line}"
             ) from None
     return result
+
+
+def _checked(
+    store: StateStore, opener: Callable[[str], Controller] | None, state: DeviceState
+) -> Callable[[str], Controller]:
+    """``opener`` (default :func:`open_device`) with the controller's identity checked against ``state``'s kept one
+    (:func:`~stickslip.devices.identity.open_checked`): another controller at the URL is refused, nothing sent."""
+    def checked(url: str) -> Controller:
+        return open_checked(store, url, opener or open_device, state)
+
+    return checked
 
 
 def _measured_not_stored(e: OSError, request: TraverseRequest, row: Traverse) -> OSError:

@@ -8,10 +8,12 @@ answers (:func:`probe_device`) unless told not to.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
+from urllib.parse import urlsplit
 
 from ..devices.base import DeviceError, controller_of, device_key, open_device
 from ..devices.positions import DeviceState, StateStore, load_state, save_state
@@ -22,7 +24,7 @@ from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, track_fields
 
 __all__ = [
     "DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "also_kept", "also_kept_warning",
-    "probe_device", "state_rows", "where",
+    "port_order_warning", "probe_device", "state_rows", "where",
 ]
 
 
@@ -83,6 +85,33 @@ def also_kept_warning(key: str, others: Sequence[str]) -> str:
         f"another way (its default port, or a / after the host): each spelling keeps positions and a lock of its "
         f"own, so a move made under one is not in the other; write the URL one way ({key} here) and reference "
         "the joints again under it (docs/storage.md)"
+    )
+
+
+_ENUMERATED_PORT = re.compile(r"/dev/(tty(?:USB|ACM)\d+|cu\.usb\S*)$")
+"""A serial port named by the order the adapters were found (Linux ``ttyUSBn``/``ttyACMn``, a Mac's ``cu.usb...``)."""
+
+
+def port_order_warning(url: str) -> str | None:
+    """The line that says ``url``'s serial port is named by the order adapters were found, and what to write
+    instead; ``None`` for any other URL (a ``/dev/serial/by-id/`` link, a network address, ``COM3``).
+
+    Two adapters may swap ``/dev/ttyUSB0`` and ``/dev/ttyUSB1`` after a reboot: the positions kept for this
+    URL would be the other arm's. A SmarAct MCS says which controller it is (checked at every opening:
+    :mod:`stickslip.devices.identity`); an MM3A's NanoControl or an ANC300 cannot, so only the name can.
+    """
+    try:
+        path = urlsplit(device_key(url)).path
+    except ValueError:
+        return None
+    m = _ENUMERATED_PORT.search(path)
+    if m is None:
+        return None
+    return (
+        f"{m.group(0)} is named by the order the USB adapters were found: after a reboot it may reach another "
+        "controller, and its positions would be the other arm's (a NanoControl or an ANC300 cannot say which it "
+        "is); write the port as its stable link, e.g. /dev/serial/by-id/usb-FTDI_..._A1B2C3-if00-port0 "
+        "(`ls -l /dev/serial/by-id/` shows which), and reference the joints under that URL"
     )
 
 

@@ -25,6 +25,7 @@ from ..audio.detector import Tuning
 from ..calibration import Calibration
 from ..clock import now_utc
 from ..devices.base import Controller, DeviceError, DeviceInfo, redact_text
+from ..devices.identity import ControllerChanged
 from ..devices.positions import DeviceState
 from ..motion.reach import borrow_joint1
 from ..procedures.arms import guard_for
@@ -142,7 +143,7 @@ def refusal(e: BaseException) -> Refused:
     text = one_line(e)
     if isinstance(e, TargetOutOfRange):
         return Refused(text)
-    if isinstance(e, (MoveRefused, DeviceBusy, KeyError)):
+    if isinstance(e, (MoveRefused, DeviceBusy, KeyError, ControllerChanged)):  # another controller: the state's
         return Conflict(text)
     if isinstance(e, DeviceError):
         return Unavailable(text)

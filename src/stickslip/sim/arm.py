@@ -209,6 +209,7 @@ class SimulatedMM3A(TrueSteps, StepLog):
                 "drift": self.drift,
                 "sample_rate_hz": self.sample_rate,
             },
+            identity=f"simulator seed {self.seed}",
         )
 
     def set_frequency(self, joint: int, hz: float) -> None:

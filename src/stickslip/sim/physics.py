@@ -417,7 +417,7 @@ class PhysicsMM3A(SimulatedMM3A):
         base = super().info
         extra = dict(base.extra)
         extra.update({"physics": True, "warmup": self.warmup, "warmup_tau_s": self.warmup_tau})
-        return DeviceInfo(base.url, "simulated MM3A (physics)", base.joints, extra)
+        return DeviceInfo(base.url, "simulated MM3A (physics)", base.joints, extra, base.identity)
 
     # ------------------------------------------------------------ the truth
 

@@ -106,7 +106,7 @@ class RealtimeArm:
         """The arm's info, its model marked as running in real time (and how fast)."""
         inner = self.arm.info
         extra = {**inner.extra, "realtime": True, "speed": self.speed}
-        return DeviceInfo(self._url or inner.url, f"{inner.model}, real time", inner.joints, extra)
+        return DeviceInfo(self._url or inner.url, f"{inner.model}, real time", inner.joints, extra, inner.identity)
 
     def set_frequency(self, joint: int, hz: float) -> None:
         """Set the stepping frequency of ``joint``, Hz (the arm's range)."""

@@ -197,6 +197,7 @@ class SmarActBase:
         self._running: int | None = None  # channel a burst was started on and not confirmed ended
         self.version = ""
         self.model = self.name
+        self.identity: str | None = None  # which controller: the dialect's serial number or system id, if told
         self._open_session()
 
     # -- to implement ---------------------------------------------------------------------
@@ -401,6 +402,7 @@ class SmarActBase:
                     f"ch{c}": self._amplitude[j] for j, (c, _) in sorted(self.channel_map.channels.items())
                 },
             },
+            identity=self.identity,
         )
 
     def settings(self) -> dict[str, object]:

@@ -237,6 +237,7 @@ class SmarActMCS(SmarActBase):
         name, rest = self.command("GIV")
         self.version = rest.replace(",", ".") if name == "IV" else ""
         self.model = f"SmarAct MCS (system id {self.system_id})" if self.system_id else "SmarAct MCS"
+        self.identity = f"MCS system id {self.system_id}" if self.system_id.strip() else None
 
     def _start(self, channel: int, steps: int, hz: int, amplitude: int) -> None:
         assert 0 < abs(steps) <= MAX_STEPS  # never 0 (a stop) nor +-30000 (an endless move)

@@ -204,6 +204,7 @@ class SmarActMCS2(SmarActBase):
         self.serial_number = self.query(":DEV:SNUM?")
         self.version = ""
         self.model = f"SmarAct MCS2 (serial {self.serial_number})"
+        self.identity = f"MCS2 serial {self.serial_number}" if self.serial_number.strip() else None
         self._before: dict[int, int] = {}
 
     def _state(self, channel: int) -> int:
