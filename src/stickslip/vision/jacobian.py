@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -592,15 +592,7 @@ class MeasuredJacobian:
         camera = data.get("camera")
         if not isinstance(camera, str) or not camera:
             raise JacobianError(f"{where}: camera must be the camera's URL, got {camera!r}")
-        pose_d = data.get("pose")
-        if not isinstance(pose_d, dict) or set(pose_d) != set(kin.Pose._fields):
-            raise JacobianError(f"{where}: pose must have {', '.join(kin.Pose._fields)}")
-        try:
-            pose = kin.Pose(**{k: num(pose_d[k], f"pose.{k}") for k in kin.Pose._fields})
-        except ValueError as e:  # no arm's pose (a Pose checks itself): named with the file, as every other field
-            if isinstance(e, JacobianError):
-                raise
-            raise JacobianError(f"{where}: pose: {e}") from None
+        pose = _pose(data.get("pose"), where, num)
         raw = data.get("directions")
         if not isinstance(raw, list) or not raw:
             raise JacobianError(f"{where}: directions must be a non-empty list")
@@ -642,6 +634,17 @@ class MeasuredJacobian:
             text = str(e)
             raise JacobianError(text if str(path) in text else f"{path}: {text}") from None
         return cls.from_dict(data, str(path))
+
+
+def _pose(value: object, where: str, num: Callable[[object, str], float]) -> kin.Pose:
+    """A camera calibration's pose, each number read by ``num``; :class:`JacobianError` naming the file."""
+    if not isinstance(value, dict) or set(value) != set(kin.Pose._fields):
+        raise JacobianError(f"{where}: pose must have {', '.join(kin.Pose._fields)}")
+    numbers = {k: num(value[k], f"pose.{k}") for k in kin.Pose._fields}
+    try:
+        return kin.Pose(**numbers)
+    except ValueError as e:  # no arm's pose (a Pose checks itself): named with the file, as every other field
+        raise JacobianError(f"{where}: pose: {e}") from None
 
 
 def _day_and_device(data: dict[str, object], where: str) -> tuple[str, str]:
