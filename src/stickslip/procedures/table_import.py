@@ -156,7 +156,7 @@ def import_table(
     if history:  # every row was named above: one told by the file goes to its device, another to device
         ids = store.add_with_provenance((r for batch in read_history(path) for r in batch), device=device)
     else:
-        assert device is not None  # _named refused a table's row without one
+        assert device is not None  # a table without one was refused above
         ids = store.add_traverses(
             (t for _, rows in _rows(path, False, device) for t in rows), device=device, how=how or "imported",
             source=digest,
