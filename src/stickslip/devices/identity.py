@@ -92,7 +92,8 @@ def _keep(store: StateStore, key: str, identity: str) -> None:
 
 
 def check_controller(store: StateStore, url: str, dev: Controller, states: Sequence[DeviceState]) -> None:
-    """Compare ``dev``'s identity with the one kept for each of ``states`` (the positions the caller holds).
+    """Compare ``dev``'s identity with the one kept for each of ``states`` (the positions the caller holds, then
+    those of the rig's other arms on this controller: their positions too were kept for the one it was).
 
     A first opening keeps it; another one marks every joint of that state uncertain over its whole range
     (saved, and in memory: a later save of ``state`` keeps the marks), keeps the new identity, and raises
@@ -120,8 +121,9 @@ def check_controller(store: StateStore, url: str, dev: Controller, states: Seque
         where = f"--rig RIG --arm {arm}" if arm_tag else f"-d {command_url(url)}"
         raise ControllerChanged(
             f"another controller answers at {redact_url(url)}: {shown_identity(identity)}, where the positions were "
-            f"kept for {kept_text}; nothing was sent, and every joint of {redact_url(state.device)} is now uncertain "
-            f"over its whole range: re-reference each at an end stop (`stickslip where {where} --set J=min` after "
+            f"kept for {kept_text}; nothing was sent, and every joint of "
+            f"{' and of '.join(redact_url(st.device) for st, _ in changed)} is now uncertain over its whole range: "
+            f"re-reference each at an end stop (`stickslip where {where} --set J=min` after "
             "driving joint J to its lower stop), or open the URL that reaches the other controller"
         )
 
