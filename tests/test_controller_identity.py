@@ -286,3 +286,24 @@ def test_an_identity_of_any_text_is_the_same_controller_at_the_next_opening(iden
             move(store, req, cal, opener=lambda _url: other(seed=0))  # type: ignore[arg-type]
         line = str(e.value)
         assert line.isprintable() and len(line) < 700 and "A50285BI" not in line, line
+
+
+@pytest.mark.parametrize("row", ["not json{", '"simulator seed 0"', "[1, 2]", '{"identity": 7}'],
+                         ids=["not-json", "a-string", "a-list", "a-number"])
+def test_a_controller_row_that_cannot_be_read_is_kept_again_not_refused_for_ever(row: str, tmp_path: Path) -> None:
+    # a row that is not JSON (a hand edit, a bad sector) refused every move of the controller with the store's error,
+    # and nothing (a re-reference, where --set) wrote it again: blocked until it was deleted by hand. It is read as
+    # a row of another type is, as nothing kept: the identity kept again at this opening
+    import sqlite3
+
+    cal = _sim_cal()
+    req = MoveRequest("sim://", 3, by=1e-4, trust_calibration=True)
+    with Store.open(tmp_path / "s.db") as store:
+        move(store, req, cal)  # type: ignore[arg-type]
+    with sqlite3.connect(tmp_path / "s.db") as con:
+        assert con.execute("UPDATE device_state SET value = ? WHERE key = ?", (row, IDENTITY_KEY)).rowcount == 1
+    with Store.open(tmp_path / "s.db") as store:
+        r = move(store, req, cal)  # type: ignore[arg-type]
+        assert r.outcome.error is None and r.outcome.sent > 0
+        assert kept_identity(store, "sim://") == "simulator seed 0"
+        assert load_state(store, "sim://").uncertain == {}

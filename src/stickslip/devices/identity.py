@@ -64,8 +64,14 @@ def _digest(identity: str) -> str:
 
 
 def _kept(store: StateStore, key: str) -> tuple[str, str | None] | None:
-    """The kept identity's text and digest (``None``: a row written before digests, compared by its text)."""
-    raw: Any = store.get_state(key, IDENTITY_KEY)
+    """The kept identity's text and digest (``None``: a row written before digests, compared by its text); ``None``
+    for none, or a row that is not one: of another type, or not JSON at all (a hand edit, a bad sector: its error
+    refused every move of the controller, and nothing wrote the row again). Such a row is kept again at this
+    opening, as a first one is: a swap at the same time goes unseen (cannot tell)."""
+    try:
+        raw: Any = store.get_state(key, IDENTITY_KEY)
+    except (OSError, ValueError):
+        return None
     if not (isinstance(raw, dict) and isinstance(raw.get("identity"), str) and raw["identity"]):
         return None
     digest = raw.get("sha256")
