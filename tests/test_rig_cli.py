@@ -426,3 +426,4 @@ def test_another_controller_under_two_arms_sharing_it_leaves_both_arms_uncertain
                 st = load_state(store, model.state_key(name), model.arm(name).joint_specs())
                 assert set(st.uncertain) == {1, 2, 3} and set(st.why.values()) == {SWAPPED}, name
                 assert st.uncertain[1] == (-5e-3, 5e-3)
+                assert not st.claim  # the move's claim, held when the swap was found, taken back
