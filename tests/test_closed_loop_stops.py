@@ -309,3 +309,48 @@ def test_a_bluesky_scan_with_the_tip_given_once_follows_the_tip_from_move_to_mov
         assert abs(sim.position(3) - target) <= 1e-6  # the true joint, within the tolerance (1 px of 1 µm)
         tip = axis.camera.tip
         assert tip is not None and math.hypot(tip[0] - (307.2 + target * 1e6), tip[1] - 256.0) < 1.5
+
+
+def test_a_bluesky_stop_that_cuts_a_closed_loop_burst_short_leaves_the_joint_uncertain(RE):
+    # a controller that says nothing of a burst cut short by stop() (the ANC300: its stepw answers once the axis
+    # stops), not on a virtual clock: the closed loop's proxy counts the leg in full (atomic), but the look after
+    # the leg sees the tip short of it, and the joint is kept uncertain over both, the true position inside (audit60:
+    # what held; 8 of 16 steps made, uncertain 22.1-33.1 µm, true 23.5 µm)
+    pytest.importorskip("ophyd_async")
+    import bluesky.plan_stubs as bps
+    from bluesky.utils import FailedStatus
+    from ophyd_async.core import init_devices
+
+    from stickslip.bluesky import StickSlipAxis
+    from stickslip.procedures.closed_loop import CameraLoop
+    from stickslip.sim.arm import SimulatedMM3A
+    from test_reach import true_calibration
+
+    sim = SimulatedMM3A(seed=4, day="2026-11-22")
+    bursts: list[int] = []
+
+    class CutShort:  # real time (no clock_s): a stop during its burst is not known to have come after it
+        def step(self, joint: int, n: int) -> None:
+            bursts.append(n)
+            if len(bursts) == 2:  # stop() pressed during the second burst: half of it made, stepw answers
+                axis._stop_event.set()
+                sim.step(joint, n // 2)
+                return
+            sim.step(joint, n)
+
+        def __getattr__(self, name: str) -> object:
+            if name == "clock_s":
+                raise AttributeError(name)
+            return getattr(sim, name)
+
+    with init_devices():
+        axis = StickSlipAxis(CutShort(), 3, true_calibration(), name="q3", burst=200,  # type: ignore[arg-type]
+                             camera=CameraLoop(CAM, tip=(307.2, 256.0)))
+    with pytest.raises(FailedStatus):
+        RE(bps.mv(axis, 600e-6))
+    assert len(bursts) == 2 and abs(bursts[1]) > 10  # a leg of 16 steps: 8 made, 16 counted
+    kept = axis.link.load()
+    true_q3 = sim.position(3)
+    assert 3 in kept.uncertain, (kept.positions[3], true_q3)
+    lo, hi = kept.uncertain[3]
+    assert lo <= true_q3 <= hi

@@ -247,3 +247,63 @@ def test_an_arm_sharing_its_controller_is_told_to_re_reference_with_its_rig(tmp_
     with pytest.raises(ControllerChanged, match=r"`stickslip where --rig RIG --arm probe --set J=min`"):
         check_controller(store, "sim://", SimulatedMM3A(seed=2), [state])
     assert load_state(store, "sim://#arm=probe").uncertain[3] == (0.0, kin.JOINTS[3].upper)
+
+
+def _telling(identity: str) -> type[SimulatedMM3A]:
+    """A simulator that tells ``identity`` (a third-party backend's text: anything a controller answers)."""
+    from stickslip.devices.base import DeviceInfo
+
+    class Telling(SimulatedMM3A):
+        @property
+        def info(self) -> DeviceInfo:
+            base = super().info
+            return DeviceInfo(base.url, "telling", base.joints, base.extra, identity)
+
+    return Telling
+
+
+@pytest.mark.parametrize("identity", [
+    "FTDI token=A50285BI",  # a word the store's redaction takes for a secret: kept as 'token=***'
+    "usb:0403:6001@bus1",  # user:password@ to the redaction
+    "serial\x00A\nB\ud800",  # a NUL (PostgreSQL's jsonb refuses it), a line break, a lone surrogate (not printable)
+    "S" * 10_000,
+], ids=["token", "at", "control", "10kB"])
+def test_an_identity_of_any_text_is_the_same_controller_at_the_next_opening(identity: str, tmp_path: Path) -> None:
+    # the store redacts every text it keeps: an identity compared with what was kept of it differed at every
+    # opening, so the same controller was refused as another one, every joint made uncertain, for ever
+    cal = _sim_cal()
+    opener = _telling(identity)
+    with Store.open(tmp_path / "s.db") as store:
+        req = MoveRequest("sim://", 3, by=1e-4, trust_calibration=True)
+        for _ in range(2):
+            r = move(store, req, cal, opener=lambda _url: opener(seed=0))  # type: ignore[arg-type]
+            assert r.outcome.error is None and r.outcome.sent > 0
+        assert load_state(store, "sim://").uncertain == {}
+        kept = kept_identity(store, "sim://")
+        assert kept is not None and kept.isprintable() and len(kept) <= 120
+        other = _telling(identity[:-1] + "Z")
+        with pytest.raises(ControllerChanged) as e:
+            move(store, req, cal, opener=lambda _url: other(seed=0))  # type: ignore[arg-type]
+        line = str(e.value)
+        assert line.isprintable() and len(line) < 700 and "A50285BI" not in line, line
+
+
+@pytest.mark.parametrize("row", ["not json{", '"simulator seed 0"', "[1, 2]", '{"identity": 7}'],
+                         ids=["not-json", "a-string", "a-list", "a-number"])
+def test_a_controller_row_that_cannot_be_read_is_kept_again_not_refused_for_ever(row: str, tmp_path: Path) -> None:
+    # a row that is not JSON (a hand edit, a bad sector) refused every move of the controller with the store's error,
+    # and nothing (a re-reference, where --set) wrote it again: blocked until it was deleted by hand. It is read as
+    # a row of another type is, as nothing kept: the identity kept again at this opening
+    import sqlite3
+
+    cal = _sim_cal()
+    req = MoveRequest("sim://", 3, by=1e-4, trust_calibration=True)
+    with Store.open(tmp_path / "s.db") as store:
+        move(store, req, cal)  # type: ignore[arg-type]
+    with sqlite3.connect(tmp_path / "s.db") as con:
+        assert con.execute("UPDATE device_state SET value = ? WHERE key = ?", (row, IDENTITY_KEY)).rowcount == 1
+    with Store.open(tmp_path / "s.db") as store:
+        r = move(store, req, cal)  # type: ignore[arg-type]
+        assert r.outcome.error is None and r.outcome.sent > 0
+        assert kept_identity(store, "sim://") == "simulator seed 0"
+        assert load_state(store, "sim://").uncertain == {}

@@ -1032,3 +1032,25 @@ def test_a_drivers_own_failure_mid_move_says_what_moved_and_what_is_uncertain(tm
     assert str(failure) in line
     j3 = json.loads(run("where", "-d", "failing://x", "--db", db, "--offline", "--json").stdout)["joints"][2]
     assert j3["source"] == "uncertain" and j3["uncertain"][0] < j3["uncertain"][1]
+
+
+@pytest.mark.parametrize("spelling", ["faulty://arm", "faulty://arm/"])
+def test_unlock_releases_a_lock_row_that_cannot_be_read(tmp_path, cal_path, faulty, spelling):
+    # a lock row that is not JSON (a hand edit, a disk's bad sector) under this controller's key or another spelling
+    # of it refuses every move of the controller, naming it; `where --unlock` of that spelling (the way out for a
+    # lock) read the row to check its holder and failed the same way: blocked until the row was deleted by hand
+    import sqlite3
+
+    from stickslip.storage import Store
+
+    db = tmp_path / "s.db"
+    with Store.open(db) as st:
+        st.set_state(spelling, "lock", {"pid": 4242, "host": "bench-pc", "since": "2026-11-22T10:00:00"})
+    with sqlite3.connect(db) as con:
+        con.execute("UPDATE device_state SET value = 'not json{' WHERE key = 'lock'")
+    move = ("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
+            "-j", 3, "--by", "1um")
+    one_error(run(*move), f"the stored 'lock' of {spelling}")
+    r = run("where", "-d", spelling, "--db", db, "--unlock", "--offline")
+    assert r.exit_code == 0, r.output
+    assert run(*move).exit_code == 0

@@ -545,3 +545,22 @@ def test_a_jogs_tick_claims_its_range_before_it_reads_the_other_arms(rig: Rig, t
     held = [c for c in claims if c]
     assert held and all(set(c) <= {"1", "2", "3"} for c in held)
     assert max(hi - lo for c in held for lo, hi in c.values()) < 20e-6  # a tick's range (100 µm/s, 0.1 s at most)
+
+
+def test_a_bluesky_camera_axis_on_another_device_than_its_arms_is_refused(rig: Rig, tmp_path: Path) -> None:
+    # the same mismatch through the closed loop (camera=): its legs claimed under sim://, where the other arms read
+    # the probe, and it was checked as arm 'other' at rest; the joint move refused it (hold_claim), this one moved
+    db = tmp_path / "rig.db"
+    store = Store.open(db)
+    dev = open_device(URLS["probe"])
+    url = "simcam://?pixel=1um&size=512x128&centre=tip"
+    cam = open_camera(url, dev)
+    (x, y), _ = cam.true_tip()
+    cam.close()
+    axis = StickSlipAxis(dev, 3, true_calibration(URLS["probe"]), name="q3", db=db, burst=200,
+                         camera=CameraLoop(url, tip=(float(x), float(y))), guard=guard_for(store, rig, "other"))
+    with pytest.raises(MoveError, match="arm 'other' of the rig is kept under 'sim://\\?seed=2', and this axis's "
+                                        "device under 'sim://'"):
+        asyncio.run(_set(axis, 2e-4))
+    assert dev.steps_simulated == 0  # type: ignore[attr-defined]
+    assert kept(store, rig, "probe").positions[3] == 0.0 and not kept(store, rig, "probe").claim

@@ -392,3 +392,38 @@ def test_move_and_where_in_a_rig_take_the_pose_and_the_references_they_are_given
                    encoding="utf-8")
     r = run("where", "--rig", two, "--db", db, "--set", "3=min")
     assert r.exit_code == 2 and "give --arm NAME (the rig's arms: a, b)" in r.output, r.output
+
+
+def test_another_controller_under_two_arms_sharing_it_leaves_both_arms_uncertain(tmp_path):
+    """A swap found at one arm's move on a shared controller (two stacks on one MCS2: another MCS2 now answers at its
+    address) leaves the other arm's positions uncertain too: they were kept for the same controller, and this arm's
+    envelope is checked against them. Before, only the moving arm's were; the other's kept pose, another
+    controller's arm's, stayed 'dead-reckoned' for the envelope until that arm moved itself."""
+    from stickslip.devices.identity import SWAPPED
+    from stickslip.devices.positions import load_state
+    from stickslip.rig import load_rig
+    from stickslip.storage import Store
+
+    _stack_cal(tmp_path / "stack.json")
+    joints = "".join(f'\n  [[arm.joint]]\n  channel = {c}\n  range = ["-5mm", "5mm"]\n' for c in (1, 2, 3))
+    with MCS2Emulator() as emu:
+        arms = [STAGE.format(name="left", url=f"{emu.url}?channels=0,1,2&hz=20000", x="-20mm", joints=joints),
+                STAGE.format(name="right", url=f"{emu.url}?channels=3,4,5&hz=20000", x="20mm", joints=joints)]
+        rig = tmp_path / "rig.toml"
+        rig.write_text(TWO_ON_ONE.format(arms="".join(arms)), encoding="utf-8")
+        common = ("--rig", rig, "--db", tmp_path / "s.db", "--from-unreferenced", "--trust-calibration")
+        for name, by in (("left", "100um"), ("right", "-30um")):
+            assert run("move", *common, "--arm", name, "--joint", 1, "--by", by).exit_code == 0
+        emu.serial_number = "MCS2-00009999"  # another MCS2 answers at the address now
+        r = run("move", *common, "--arm", "left", "--joint", 1, "--by", "10um")
+        line = " ".join(r.output.split())
+        assert r.exit_code == 2 and "another controller answers at" in line, r.output
+        assert f"every joint of {emu.url}#arm=left and of {emu.url}#arm=right is now uncertain" in line, line
+        assert emu.steps[0] == 100 and emu.steps[3] == -30  # nothing sent
+        model = load_rig(rig)
+        with Store.open(tmp_path / "s.db") as store:
+            for name in ("left", "right"):
+                st = load_state(store, model.state_key(name), model.arm(name).joint_specs())
+                assert set(st.uncertain) == {1, 2, 3} and set(st.why.values()) == {SWAPPED}, name
+                assert st.uncertain[1] == (-5e-3, 5e-3)
+                assert not st.claim  # the move's claim, held when the swap was found, taken back

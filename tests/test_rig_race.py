@@ -325,3 +325,40 @@ def test_a_hand_edited_claim_is_kept_within_the_joints_stops(rig: Rig, tmp_path:
     assert "claims its joint 3 between" in str(e.value) and "e+" not in str(e.value), str(e.value)
     assert guard.swept["other"][2] == kept
     store.close()
+
+
+def test_a_rig_stop_that_cannot_be_read_mid_move_stops_it_exact_not_as_a_driver_failure(
+    rig: Rig, tmp_path: Path
+) -> None:
+    # the rig's STOP is read from the store before each burst, inside the controller's step: a store that cannot
+    # be read there (SQLite's "database is locked" under several arms' processes) is not the driver failing
+    # (procedures.move.DRIVER_FAILURES: 'the device's driver failed', the joint uncertain over a burst never
+    # sent); no further burst is sent, the position kept exact, as for a STOP record that is unreadable
+    from stickslip.procedures import rigstop
+    from stickslip.storage.schema import StoreError
+
+    inner = Store.open(tmp_path / "rig.db")
+    reads = {"n": 0}
+
+    class LockedAtTheThirdRead:
+        def get_state(self, device: str, key: str, default: Any = None) -> Any:
+            if device.startswith("rig://stop/"):
+                reads["n"] += 1
+                if reads["n"] == 3:  # begin, burst 1: read; burst 2: locked
+                    raise StoreError("database is locked")
+            return inner.get_state(device, key, default)
+
+        def __getattr__(self, name: str) -> Any:
+            return getattr(inner, name)
+
+    store: Any = LockedAtTheThirdRead()
+    a = rig.arm("probe")
+    request = MoveRequest(URLS["probe"], 3, by=3e-3, burst=500, guard=guard_for(inner, rig, "probe"),
+                          joints=a.joint_specs(), state_key=rig.state_key("probe"))
+    opener = rigstop.stoppable(opener_for(rig, "probe"), store, rig, "probe")
+    r = move(store, request, true_calibration(URLS["probe"]), opener=opener)
+    assert r.outcome.bursts == [500] and abs(r.plan.steps) > 1000
+    assert r.outcome.error is not None and "driver" not in r.outcome.error
+    assert "the rig's STOP could not be read (database is locked)" in r.outcome.error
+    kept = load_state(inner, rig.state_key("probe"), a.joint_specs())
+    assert not kept.uncertain and not kept.claim and kept.positions[3] == r.plan.position_after(500)

@@ -288,6 +288,18 @@ async def halt(link: DeviceLink, joint: int | None, task: asyncio.Future[Any] | 
     await asyncio.wait([task, told], timeout=STOP_RETURN_S)
 
 
+def check_arm_device(key: str, guard: Guard | None) -> None:
+    """:class:`MoveError` unless an axis kept under ``key`` is the arm its ``guard`` names (its key the rig's
+    :meth:`~stickslip.rig.Rig.state_key` of that arm): its claim would be kept where the other arms do not read it,
+    and it would be checked as that arm at rest. Joint and tip moves (:func:`hold_claim`) and the closed loop."""
+    if guard is not None and guard.fresh is not None and key != guard.rig.state_key(guard.arm):
+        raise MoveError(
+            f"arm {guard.arm!r} of the rig is kept under {guard.rig.state_key(guard.arm)!r}, and this axis's device "
+            f"under {key!r}: give the axis the arm's controller as the rig file names it "
+            "(an arm that shares its controller is not driven by a Bluesky axis)"
+        )
+
+
 def hold_claim(
     stack: ExitStack, store: StateStore, state: DeviceState, guard: Guard | None, path: Sequence[Sequence[float]],
     calibration: Calibration,
@@ -295,12 +307,7 @@ def hold_claim(
     """Check ``path`` against the rig's other arms as kept now and claim its range, as ``stickslip move --rig`` does
     ("mark, then check": :func:`~stickslip.procedures.move.claimed`), until ``stack`` closes (the move ends, is
     refused, stopped or fails); :class:`MoveError` if refused (nothing claimed, nothing sent)."""
-    if guard is not None and guard.fresh is not None and state.device != guard.rig.state_key(guard.arm):
-        raise MoveError(  # its claim would be kept where the other arms do not read it
-            f"arm {guard.arm!r} of the rig is kept under {guard.rig.state_key(guard.arm)!r}, and this axis's device "
-            f"under {state.device!r}: give the axis the arm's controller as the rig file names it "
-            "(an arm that shares its controller is not driven by a Bluesky axis)"
-        )
+    check_arm_device(state.device, guard)
     try:
         stack.enter_context(claimed(store, state, on_store(guard, store), path, calibration))
     except MoveRefused as e:
@@ -615,6 +622,7 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
         self, target: float, publish: Callable[[DeviceState], None], cal: Calibration, camera: CameraLoop
     ) -> _MoveResult:
         """The closed-loop move (``move --camera``) through the link's controller, stop-aware between bursts."""
+        check_arm_device(self.link.key, self.guard)
         dev = self.link.controller()
         with self.link.store() as store:
             proxy = _Interruptible(dev, self._stop_event, True, rig_stop(store, self.guard))  # and the rig's STOP

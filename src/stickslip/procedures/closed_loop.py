@@ -84,6 +84,7 @@ from .move import (
     kept_after_interrupt,
     reference_problem,
     release_claim,
+    sharing_controller,
     sigma_growth,
     target_of,
 )
@@ -804,7 +805,8 @@ def move_seen(
         loop_geometry = kin.DEFAULT_GEOMETRY
         claim.enter_context(_claimed_start(store, request.guard, state, calibration, loop,
                                            joint_line(state, joint, q_to)))  # mark, then check, as move does
-        dev = open_checked(store, request.device, opener or open_device, state)
+        dev = open_checked(store, request.device, opener or open_device, state,
+                           *sharing_controller(store, request.guard))
         cam: Camera | None = None
         try:
             for w in usage_warnings(calibration, dev, request.device, joint, request.max_age_days):
@@ -887,7 +889,8 @@ def reach_seen(
         claim.enter_context(_claimed_start(store, request.guard, state, calibration, loop, joint_path(first)))
         target_v = first.target
         save_state(store, state)
-        dev = open_checked(store, request.device, opener or open_device, state)
+        dev = open_checked(store, request.device, opener or open_device, state,
+                           *sharing_controller(store, request.guard))
         cam: Camera | None = None
         try:
             for w in usage_warnings(calibration, dev, request.device, 3, request.max_age_days):

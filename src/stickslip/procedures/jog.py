@@ -71,6 +71,7 @@ from .move import (
     grow_track,
     mark_claim,
     release_claim,
+    sharing_controller,
     sigma_growth,
     simulates,
     tracked_calibration,
@@ -747,7 +748,8 @@ def jog(
         for w in usage_warnings(calibration, None, request.device, 3, request.max_age_days):
             warn(w)
         ready()
-        dev = open_checked(store, request.device, opener or open_device, state)
+        dev = open_checked(store, request.device, opener or open_device, state,
+                           *sharing_controller(store, request.guard))
         keys_in: KeySource | None = None
         eyes: JogEyes | None = None
         try:

@@ -97,6 +97,7 @@ __all__ = [
     "reference_commands",
     "reference_problem",
     "release_claim",
+    "sharing_controller",
     "step_joint",
     "steps_to_stop",
     "settle",
@@ -821,6 +822,19 @@ def release_claim(store: StateStore, state: DeviceState) -> None:
         pass
 
 
+def sharing_controller(store: StateStore, guard: Guard | None) -> list[DeviceState]:
+    """The kept states of the rig's other arms on ``guard``'s arm's controller (a rig file's two stacks on one MCS2,
+    each under ``KEY#arm=NAME``), for :func:`~stickslip.devices.identity.open_checked`: another controller found
+    at that URL leaves theirs uncertain too, so this arm's envelope is not checked against positions another
+    controller's arms were kept at. None without a rig (the controller's lock, held, keeps them still)."""
+    if guard is None:
+        return []
+    me = guard.rig.arm(guard.arm)
+    key = device_key(me.controller)
+    return [load_state(store, guard.rig.state_key(o.name), o.joint_specs())
+            for o in guard.rig.arms if o.name != me.name and device_key(o.controller) == key]
+
+
 # ---------------------------------------------------------------- the whole move
 
 
@@ -1007,7 +1021,7 @@ def _drive_opened(
 ) -> tuple[MoveOutcome, float | None]:
     """Open the device (its identity checked: :func:`~stickslip.devices.identity.open_checked`), send ``plan`` in
     bursts, keep the state; the outcome and the simulator's true end."""
-    dev = open_checked(store, request.device, opener, state)
+    dev = open_checked(store, request.device, opener, state, *sharing_controller(store, request.guard))
     try:
         for w in usage_warnings(calibration, dev, request.device, plan.joint, request.max_age_days):
             warn(w)

@@ -41,6 +41,7 @@ from .move import (
     grow_track,
     kept_after_interrupt,
     reference_problem,
+    sharing_controller,
     simulates,
     tracked_calibration,
     with_kept_positions,
@@ -379,7 +380,7 @@ def _drive_opened(
     opener: Callable[[str], Controller],
 ) -> tuple[ReachOutcome, tuple[float, float, float] | None]:
     """Open the device, drive ``plan``, close; the outcome and the simulator's true joints."""
-    dev = open_checked(store, request.device, opener, state)
+    dev = open_checked(store, request.device, opener, state, *sharing_controller(store, request.guard))
     try:
         if simulates(dev, state):  # the simulator: start where the positions say
             assert isinstance(dev, PoseSettable)

@@ -86,8 +86,14 @@ class RigStopWatch:
 
     def stopped(self, store: StateStore) -> str | None:
         """Why this arm must stop (one line), if the rig's STOP was pressed since :meth:`begin`; else ``None``.
-        A press for this same arm is its own STOP (its process stopped itself already): ``None``."""
-        p = pressed(store, self.rig)
+        A press for this same arm is its own STOP (its process stopped itself already): ``None``. A store that
+        cannot be read (SQLite's "database is locked", a file gone bad) stops it too, the safe side: it is read
+        inside a controller's ``step``, where its ``OSError`` would read as the driver's own failure
+        (:data:`~stickslip.procedures.move.DRIVER_FAILURES`) and leave the joint uncertain over a burst never sent."""
+        try:
+            p = pressed(store, self.rig)
+        except (OSError, ValueError) as e:
+            return f"stopped: the rig's STOP could not be read ({e}); no further burst sent"
         if _identity(p) == self._seen:
             return None
         self._seen = _identity(p)

@@ -226,7 +226,11 @@ def where(
     lock = device_key(device)
     key = key or lock
     if unlock:
-        refuse_unlocking_a_running_holder(store.get_state(lock, "lock"), lock)
+        try:
+            holder = store.get_state(lock, "lock")
+        except (OSError, ValueError):  # a row that cannot be read (not JSON: a hand edit, a bad sector) names no
+            holder = None  # running holder; it refused every move of the controller, and --unlock is the way out
+        refuse_unlocking_a_running_holder(holder, lock)
         store.set_state(lock, "lock", "null")
     records = bool(references) or pose != PoseUpdate()
     held: AbstractContextManager[object] = device_lock(store, lock) if hold_lock and records else nullcontext()
