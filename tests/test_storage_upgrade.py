@@ -332,3 +332,25 @@ def test_an_upgrade_says_its_copy_keeps_the_passwords_a_store_made_before_redact
     _schema_3_store(clean, {"anc300://h": ROWS[:1]})
     r = CliRunner().invoke(app, ["history", "--db", str(clean), "--json"])
     assert r.exit_code == 0 and "password" not in r.stderr and (tmp_path / "clean.v3.db").exists()
+
+
+def test_an_old_name_that_names_no_device_loses_its_password_in_the_upgrade(tmp_path):
+    """A store made before redaction kept 'anc300://u:hunter2@h:xx' (a port that is no number) as written;
+    stored_device refuses it, so the upgrade kept the name, password and all, in the upgraded store, while its
+    note said the upgraded store holds none (and export --json wrote the password into the history file).
+    Now the name is kept redacted; its rows, state and the note are as for any other name."""
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://u:x@h:xx": ROWS[:2], "anc300://h?x=a": ROWS[2:3]})
+    con = sqlite3.connect(db)
+    con.execute("UPDATE devices SET url = 'anc300://u:hunter2@h:xx' WHERE url = 'anc300://u:***@h:xx'")
+    con.execute("UPDATE devices SET url = replace(url, '?x=', '?password=')")
+    con.commit()
+    con.close()
+    r = CliRunner().invoke(app, ["export", "--json", "--db", str(db), "-o", str(tmp_path / "h.json")])
+    assert r.exit_code == 0, r.output
+    assert "2 device name(s) of the old store held a password" in " ".join(r.stderr.split())
+    assert b"hunter2" not in db.read_bytes() and b"hunter2" in (tmp_path / "lab.v3.db").read_bytes()
+    assert b"hunter2" not in (tmp_path / "h.json").read_bytes()
+    with Store.open(db) as st:
+        assert sorted(d["url"] for d in st.devices()) == ["anc300://h", "anc300://u:***@h:xx"]
+        assert len(st.traverses(device="anc300://u:***@h:xx")) == 2
