@@ -288,3 +288,38 @@ def test_a_kept_position_or_tilt_set_from_python_in_degrees_names_the_slip() -> 
     with pytest.raises(ValueError, match="outside joint 3's range") as e:
         state.set_position(3, 0.0121)  # a near miss: no guess
     assert "in mm" not in str(e.value) and state.positions[2] == -math.pi / 2 and state.theta == 0.0
+
+
+def test_a_stored_traverse_a_fit_now_refuses_is_named_by_its_id(tmp_path: Path) -> None:
+    """A store written before traverses were checked (units58) may hold q3 = 5 (mm as m) or a tilt of 4 rad.
+    fit, report and export refused it as 'traverse 1', its place in a list from 0: the stored id 2, and
+    `stickslip delete -t 1` removed another row. They now name the stored id and how to go on; excluded, the
+    rest is exported (anova, which fits nothing, still runs)."""
+    import sqlite3
+
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.storage import Store
+
+    db = tmp_path / "lab.db"
+    with Store.open(db) as st:
+        st.add_traverses(paper_table()[:4], device="sim://")
+    con = sqlite3.connect(db)
+    con.execute("UPDATE traverses SET q3 = 5.0 WHERE id = 2")
+    con.execute("UPDATE traverses SET theta = 4.0 WHERE id = 3")
+    con.commit()
+    con.close()
+    runner = CliRunner()
+    for args in (["fit"], ["report"], ["export", "-o", str(tmp_path / "m.csv")]):
+        r = runner.invoke(app, [*args, "--db", str(db)])
+        said = " ".join(r.output.split())
+        assert r.exit_code == 2, (args, said)
+        assert "stored traverse 2 (sim://, 2026-11-22): q3 = 5 is no arm's position of joint 3" in said, said
+        assert "stored traverse 3 (sim://, 2026-11-22): theta = 4 rad is outside [-pi, pi]" in said, said
+        assert "traverse 1:" not in said and "stickslip exclude -t ID" in said
+    assert runner.invoke(app, ["anova", "--db", str(db)]).exit_code == 0
+    assert runner.invoke(app, ["exclude", "-t", "2", "-t", "3", "-r", "mm", "--db", str(db)]).exit_code == 0
+    r = runner.invoke(app, ["export", "-o", str(tmp_path / "m.csv"), "--db", str(db)])
+    assert r.exit_code == 0 and len(parse_measurements((tmp_path / "m.csv").read_text())) == 2, r.output
