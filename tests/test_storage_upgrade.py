@@ -131,6 +131,16 @@ def test_import_names_its_device_or_is_refused(tmp_path):
     assert r.exit_code == 2 and "--device" in r.stderr and not (tmp_path / "s.db").exists(), r.output
 
 
+@pytest.mark.parametrize("device", [[], ["-d", "sim://"]])
+def test_import_of_a_file_not_there_says_so_before_a_store_is_made(tmp_path, device):
+    """Without -d it said '... is a measurement table, which does not say its device' (is_history_file is False
+    for a file not there); with -d it made an empty store first."""
+    r = CliRunner().invoke(app, ["import", str(tmp_path / "h.json"), *device, "--db", str(tmp_path / "s.db")])
+    said = " ".join(r.stderr.split())
+    assert r.exit_code == 2 and f"cannot read table {tmp_path / 'h.json'}: no such table file" in said, said
+    assert "measurement table" not in said and not (tmp_path / "s.db").exists()
+
+
 def test_a_schema_3_store_is_copied_then_its_devices_get_their_names(tmp_path):
     db = tmp_path / "lab.db"
     _schema_3_store(db, {

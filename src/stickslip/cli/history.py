@@ -250,8 +250,11 @@ def import_(
     """
     from ..measurements.history_file import is_history_file
     from ..procedures.table_import import import_table
+    from ..records import regular_file
     from ..storage.schema import stored_device
 
+    with user_errors():  # a file not there is said so, before a store is made ('is a measurement table' it was not)
+        regular_file(meas, "table")
     name = stored_device(device) if device is not None else None  # what the rows are stored under
     if name is None and not is_history_file(meas):  # refused before a store is made or opened
         fail(f"{meas} is a measurement table, which does not say its device: give the device it was measured on "
