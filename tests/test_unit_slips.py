@@ -323,3 +323,19 @@ def test_a_stored_traverse_a_fit_now_refuses_is_named_by_its_id(tmp_path: Path) 
     assert runner.invoke(app, ["exclude", "-t", "2", "-t", "3", "-r", "mm", "--db", str(db)]).exit_code == 0
     r = runner.invoke(app, ["export", "-o", str(tmp_path / "m.csv"), "--db", str(db)])
     assert r.exit_code == 0 and len(parse_measurements((tmp_path / "m.csv").read_text())) == 2, r.output
+
+
+@pytest.mark.parametrize("field", ["q1", "q2", "q3", "theta", "psi"])
+def test_a_pose_of_an_int_too_large_for_a_float_is_refused_not_an_overflow(field: str) -> None:
+    """Pose(q2=10**400) (a notebook's int, a JSON integer) raised OverflowError from float(), not the ValueError a
+    Pose promises; the message does not write the 401 digits out."""
+    with pytest.raises(ValueError, match=f"{field} must be a finite number in SI units, got 1000") as e:
+        Pose(**{field: 10**400})
+    assert not isinstance(e.value, OverflowError) and len(str(e.value)) < 120
+
+
+def test_a_traverse_of_an_int_too_large_for_a_float_is_refused_not_an_overflow() -> None:
+    """check_traverses raised OverflowError (math.isfinite of 10**400) where it lists problems."""
+    t = Traverse("2026-11-22", 3, "+", 0.0, -1.0, 0.001, 0.0, 0.0, 0.0, 10**400, 10)
+    with pytest.raises(TableError, match="end must be a finite number"):
+        check_traverses([t])
