@@ -711,3 +711,22 @@ def test_a_history_of_rows_alternating_three_devices_imports_on_both_backends(db
     r = run(app, ["import", str(one), "--db", str(db), "-d", "sim://", "--force"])
     said = " ".join(r.stderr.split())
     assert r.exit_code == 2 and "rows 2-11: the file names the device mm3a://com3, not sim:// (--device)" in said, said
+
+
+@pytest.mark.parametrize(("device", "said"), [
+    ("#arm=x", "row 3: the device it names, \"#arm=x\", is none: device URL '' has no scheme"),
+    ("anc300://u:pw@h:xx", "row 3: the device it names, \"anc300://u:***@h:xx\", is none: malformed device URL"),
+])
+def test_a_history_row_naming_no_device_is_refused_with_the_name_it_gives(tmp_path, device, said):
+    """It said 'row 3: device device URL '' has no scheme' for '#arm=x' (the URL before the arm: empty), the name
+    the row gives not shown; now that name, its password redacted."""
+    from stickslip.measurements import HEADER, TableError
+    from stickslip.procedures.table_import import import_table
+
+    path = tmp_path / "h.jsonl"
+    rows = [json.dumps({**{h: getattr(_row(steps=10 + k), h) for h in HEADER}, "device": d})
+            for k, d in enumerate(["sim://", device])]
+    path.write_text(json.dumps({"format": "stickslip-history", "version": 2}) + "\n" + "\n".join(rows) + "\n")
+    with Store.open(tmp_path / "s.db") as s, pytest.raises(TableError) as e:
+        import_table(s, path, None)
+    assert said in str(e.value) and "pw" not in str(e.value), str(e.value)
