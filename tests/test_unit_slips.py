@@ -339,3 +339,34 @@ def test_a_traverse_of_an_int_too_large_for_a_float_is_refused_not_an_overflow()
     t = Traverse("2026-11-22", 3, "+", 0.0, -1.0, 0.001, 0.0, 0.0, 0.0, 10**400, 10)
     with pytest.raises(TableError, match="end must be a finite number"):
         check_traverses([t])
+
+
+_MOVING_OWN_Q = (
+    "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
+    "2026-11-22,3,+,0,-1,5,0,0,0,0.001,10\n"  # joint 3's own q3 in mm: ignored by the fit, refused by the store
+    "2026-11-22,2,+,0,-90,0.001,0,0,-0.5,0.2,10\n"  # joint 2's own q2 in degrees
+)
+
+
+@pytest.mark.parametrize("reader", ["rows", "columns", "import"])
+def test_a_moving_joint_s_own_coordinate_no_arm_takes_is_refused_by_the_reader_naming_its_line(
+    tmp_path: Path, reader: str
+) -> None:
+    """The readers skipped the moving joint's own q (ignored) while the store refuses it as no arm's position:
+    such a table read, then import failed with 'traverse '2026-11-22' joint 3 +: q3 = 5 ...' (no file, no line, the
+    second row unsaid) and fit with 'traverse 0: ...'. Now the reader names each line."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    path = tmp_path / "m.csv"
+    path.write_text(_MOVING_OWN_Q)
+    if reader == "import":
+        r = CliRunner().invoke(app, ["import", str(path), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+        said = " ".join(r.stderr.split())
+    else:
+        with pytest.raises(TableError) as e:
+            (parse_measurements if reader == "rows" else parse_measurement_table)(_MOVING_OWN_Q, str(path))
+        said = " ".join(str(e.value).split())
+    assert f"{path}:2: q3 = 5 is no arm's position of joint 3: beyond a metre" in said, said
+    assert f"{path}:3: q2 = -90 is no arm's position of joint 2: beyond a full turn" in said, said

@@ -232,6 +232,8 @@ def parse_row(
         if problem:
             problems.append(f"{where}: {problem}")
     problems += [f"{where}: {p}" for p in check_pose(joint, nums, joints)]
+    if own := coordinate_problem(f"q{joint}", joint, nums[f"q{joint}"]):  # the moving joint's: ignored, but the
+        problems.append(f"{where}: {own}")  # store refuses it (no arm's): a row read here was refused unnamed there
     if problems:
         return None, problems
     return Traverse(
