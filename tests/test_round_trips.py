@@ -612,7 +612,8 @@ def test_a_history_of_two_devices_goes_back_to_each_and_never_under_one(tmp_path
                                for x in lines[6:]]]) + "\n", encoding="utf-8")
     r = _cli("import", v1, "--db", three)
     assert r.exit_code == 2 and " ".join(r.stderr.split()) == (
-        f"error: {v1}: rows 2-5: no device named (a history file of version 1): give it with --device URL"), r.stderr
+        f"error: {v1}: rows 2-5: no device named (a history file of version 1, or a row that leaves it out): give it "
+        "with --device URL"), r.stderr
     assert _cli("import", v1, "--db", three, "-d", "sim://?seed=7").exit_code == 0
     with Store.open(three) as s:
         assert s.count_traverses("sim://?seed=7") == 4 and s.count_traverses() == 4
@@ -730,3 +731,19 @@ def test_a_history_row_naming_no_device_is_refused_with_the_name_it_gives(tmp_pa
     with Store.open(tmp_path / "s.db") as s, pytest.raises(TableError) as e:
         import_table(s, path, None)
     assert said in str(e.value) and "pw" not in str(e.value), str(e.value)
+
+
+def test_a_version_2_row_naming_no_device_is_not_called_a_version_1_file(tmp_path):
+    """A version-2 file whose rows leave "device" out (a hand-made file, another tool's) was told 'no device named
+    (a history file of version 1)'; it names the version it is not, now both cases."""
+    from stickslip.measurements import HEADER, TableError
+    from stickslip.procedures.table_import import import_table
+
+    path = tmp_path / "h.jsonl"
+    rows = [json.dumps({**{h: getattr(_row(steps=10 + k), h) for h in HEADER}, **({"device": "sim://"} if k else {})})
+            for k in range(2)]
+    path.write_text(json.dumps({"format": "stickslip-history", "version": 2}) + "\n" + "\n".join(rows) + "\n")
+    with Store.open(tmp_path / "s.db") as s, pytest.raises(TableError) as e:
+        import_table(s, path, None)
+    said = " ".join(str(e.value).split())
+    assert "row 2: no device named (a history file of version 1, or a row that leaves it out)" in said, said

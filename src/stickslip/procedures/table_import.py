@@ -89,7 +89,8 @@ def _named(store: ImportStore, given: str | None, device: str | None) -> tuple[s
     table or a version-1 history file, and no ``device``), a name that is no device, or another than ``device``
     (told with --device)."""
     if given is None:
-        return None, "no device named (a history file of version 1): give it with --device URL"
+        return None, ("no device named (a history file of version 1, or a row that leaves it out): give it with "
+                      "--device URL")
     try:
         name = store.device_name(given)
     except ValueError as e:  # said with the name as written (redacted): '#arm=x' was 'device device URL '' ...'
